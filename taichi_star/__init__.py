@@ -1,0 +1,10 @@
+"""taichi_star: a Taichi data-parallel batch simulator of the star-shaped soft swimming robot.
+
+Importing the package has no side effects (no `ti.init`); `simulate` initialises Taichi itself.
+"""
+
+from .actuation import PAPER_PROFILE, CurvatureProfile, parse_gait, symmetry_classes
+from .params import SolverConfig, StarParams
+
+__all__ = ["StarParams", "SolverConfig", "CurvatureProfile", "PAPER_PROFILE", "parse_gait",
+           "symmetry_classes"]

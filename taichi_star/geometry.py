@@ -1,0 +1,161 @@
+"""Topology and rest shape of the star robot (design §2.1), in NumPy.
+
+Node numbering: node 0 is the centre c; then, for each joint k = 0..7, a block of
+1 + n_limb + (n_arc - 1) nodes: the joint J_k, its limb nodes from the joint outwards (the tip
+last), and the interior nodes of actuator A_{k+1}'s arc from J_k towards J_{k+1}.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .actuation import N_ACTUATORS, PAPER_PROFILE
+from .params import StarParams
+
+SPOKE, LIMB, ARC = 0, 1, 2
+"""Edge kinds. Spokes (centre–joint) are stiff, massless and feel no drag."""
+LIMB_BEND, JOINT_BEND, ARC_BEND = 0, 1, 2
+"""Triplet kinds. Limb and joint triplets use E_limb; arc triplets use E and may be actuated."""
+
+
+def discrete_curvature(x_prev, x_mid, x_next, voronoi_length):
+    """Signed κ = 2 (e1 × e2) / ((|e1||e2| + e1·e2) Δl), 1/m; arrays of shape (..., 2)."""
+    e1 = x_mid - x_prev
+    e2 = x_next - x_mid
+    cross = e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0]
+    dot = (e1 * e2).sum(-1)
+    norms = np.linalg.norm(e1, axis=-1) * np.linalg.norm(e2, axis=-1)
+    return 2.0 * cross / ((norms + dot) * voronoi_length)
+
+
+@dataclass(frozen=True)
+class Topology:
+    """The shared structure of a batch. Shapes: N nodes, E edges, T triplets; lengths in m."""
+
+    rest_positions: np.ndarray
+    """(N, 2) rest shape, m."""
+    edges: np.ndarray
+    """(E, 2) int32 node pairs."""
+    edge_kind: np.ndarray
+    """(E,) SPOKE / LIMB / ARC."""
+    rest_length: np.ndarray
+    """(E,) Δl̄, m."""
+    triplets: np.ndarray
+    """(T, 3) int32 (i, j, k): the bending angle at node j."""
+    triplet_kind: np.ndarray
+    """(T,) LIMB_BEND / JOINT_BEND / ARC_BEND."""
+    triplet_actuator: np.ndarray
+    """(T,) actuator index m - 1 (0..7) of arc triplets that the actuation drives; -1 otherwise."""
+    rest_curvature: np.ndarray
+    """(T,) signed discrete rest curvature κ⁰, 1/m."""
+    voronoi_length: np.ndarray
+    """(T,) Δl_j = ½(|ē1| + |ē2|), m."""
+    jet_quads: np.ndarray
+    """(8, 4) int32 (J_k, tip_k, tip_{k+1}, J_{k+1}): inter-limb space of actuator A_{k+1}."""
+    joints: np.ndarray
+    """(8,) node of J_k."""
+    tips: np.ndarray
+    """(8,) node of limb k's tip."""
+    lumped_length: np.ndarray
+    """(N, 2) rest length lumped at each node from its arc edges [:, 0] and limb edges [:, 1]."""
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self.rest_positions)
+
+    @property
+    def n_edges(self) -> int:
+        return len(self.edges)
+
+    @property
+    def n_triplets(self) -> int:
+        return len(self.triplets)
+
+
+def build_topology(params: StarParams) -> Topology:
+    """Topology and rest shape for the geometric fields of `params` (design §2.1)."""
+    n_arc, n_limb = params.n_arc, params.n_limb
+    block = 1 + n_limb + (n_arc - 1)
+    joints = np.array([1 + k * block for k in range(N_ACTUATORS)])
+    limb_nodes = [[joints[k] + 1 + i for i in range(n_limb)] for k in range(N_ACTUATORS)]
+    arc_nodes = [[joints[k] + 1 + n_limb + i for i in range(n_arc - 1)] for k in range(N_ACTUATORS)]
+    positions = np.zeros((1 + N_ACTUATORS * block, 2))
+
+    joint_angle = np.radians(-22.5 + 45.0 * np.arange(N_ACTUATORS))
+    radial = np.stack([np.cos(joint_angle), np.sin(joint_angle)], axis=1)
+    positions[joints] = params.joint_radius * radial
+    for k in range(N_ACTUATORS):
+        radii = np.linspace(params.joint_radius, params.tip_radius, n_limb + 1)[1:]
+        positions[limb_nodes[k]] = radii[:, None] * radial[k]
+        positions[arc_nodes[k]] = _inward_arc(positions[joints[k]],
+                                              positions[joints[(k + 1) % N_ACTUATORS]],
+                                              PAPER_PROFILE.rest_curvature, n_arc)[1:-1]
+
+    edges, edge_kind = [], []
+    triplets, triplet_kind, triplet_actuator = [], [], []
+    for k in range(N_ACTUATORS):
+        joint, next_joint = joints[k], joints[(k + 1) % N_ACTUATORS]
+        limb = [joint] + limb_nodes[k]
+        arc = [joint] + arc_nodes[k] + [next_joint]
+        edges.append((0, joint))
+        edge_kind.append(SPOKE)
+        edges += list(zip(limb[:-1], limb[1:]))
+        edge_kind += [LIMB] * n_limb
+        edges += list(zip(arc[:-1], arc[1:]))
+        edge_kind += [ARC] * n_arc
+        triplets += [tuple(limb[i - 1:i + 2]) for i in range(1, n_limb)]
+        triplet_kind += [LIMB_BEND] * (n_limb - 1)
+        triplet_actuator += [-1] * (n_limb - 1)
+        incoming_arc_node = arc_nodes[(k - 1) % N_ACTUATORS][-1]
+        triplets += [(incoming_arc_node, joint, limb[1]), (arc_nodes[k][0], joint, limb[1])]
+        triplet_kind += [JOINT_BEND] * 2
+        triplet_actuator += [-1] * 2
+        triplets += [tuple(arc[i - 1:i + 2]) for i in range(1, n_arc)]
+        triplet_kind += [ARC_BEND] * (n_arc - 1)
+        triplet_actuator += [k] * (n_arc - 1)
+
+    edges = np.array(edges, dtype=np.int32)
+    edge_kind = np.array(edge_kind, dtype=np.int32)
+    triplets = np.array(triplets, dtype=np.int32)
+    rest_length = np.linalg.norm(positions[edges[:, 1]] - positions[edges[:, 0]], axis=1)
+    voronoi = 0.5 * (np.linalg.norm(positions[triplets[:, 1]] - positions[triplets[:, 0]], axis=1)
+                     + np.linalg.norm(positions[triplets[:, 2]] - positions[triplets[:, 1]], axis=1))
+    rest_curvature = discrete_curvature(positions[triplets[:, 0]], positions[triplets[:, 1]],
+                                        positions[triplets[:, 2]], voronoi)
+
+    lumped = np.zeros((len(positions), 2))
+    for (a, b), kind, length in zip(edges, edge_kind, rest_length):
+        if kind != SPOKE:
+            column = 0 if kind == ARC else 1
+            lumped[a, column] += 0.5 * length
+            lumped[b, column] += 0.5 * length
+
+    tips = np.array([limb_nodes[k][-1] for k in range(N_ACTUATORS)])
+    jet_quads = np.array([(joints[k], tips[k], tips[(k + 1) % N_ACTUATORS],
+                           joints[(k + 1) % N_ACTUATORS]) for k in range(N_ACTUATORS)],
+                         dtype=np.int32)
+    return Topology(
+        rest_positions=positions, edges=edges, edge_kind=edge_kind, rest_length=rest_length,
+        triplets=triplets, triplet_kind=np.array(triplet_kind, dtype=np.int32),
+        triplet_actuator=np.array(triplet_actuator, dtype=np.int32),
+        rest_curvature=rest_curvature, voronoi_length=voronoi, jet_quads=jet_quads,
+        joints=joints, tips=tips, lumped_length=lumped)
+
+
+def _inward_arc(start, end, curvature, n_edges):
+    """(n_edges + 1, 2) points of the circular arc of `curvature` from start to end whose bulge
+    points towards the origin (the minor arc, centre on the outer side of the chord)."""
+    radius = 1.0 / curvature
+    chord = end - start
+    half_chord = 0.5 * np.linalg.norm(chord)
+    midpoint = 0.5 * (start + end)
+    outward = midpoint / np.linalg.norm(midpoint)
+    centre = midpoint + math.sqrt(radius ** 2 - half_chord ** 2) * outward
+    angle_start = math.atan2(*(start - centre)[::-1])
+    sweep = math.atan2(*(end - centre)[::-1]) - angle_start
+    sweep = (sweep + math.pi) % (2 * math.pi) - math.pi
+    angles = angle_start + sweep * np.linspace(0.0, 1.0, n_edges + 1)
+    return centre + radius * np.stack([np.cos(angles), np.sin(angles)], axis=1)
