@@ -1,0 +1,16 @@
+"""Runnable studies over taichi_star: `python -m studies <name> [--arch cpu|gpu] [--out DIR]
+[--quick] ...`. Each study is a module with `main(argv)`: parameters -> one `simulate` batch
+(chunked when large) -> one DataFrame -> CSV -> plots drawn from that CSV.
+
+Studies: fig4c (the paper's Fig. 4c/4b), sweep (parameter sensitivity), gaits (all 255 gaits by
+symmetry class), calibrate (fit up to two parameters to the experiment), animate (GIF of a
+cycle).
+"""
+
+STUDIES = {
+    "fig4c": "the paper's Fig. 4c/4b: five gaits, simulation vs experiment",
+    "sweep": "sensitivity: Cartesian product of parameter lists/ranges",
+    "gaits": "all 255 gaits, one simulation per symmetry class, ranked",
+    "calibrate": "fit up to two parameters to the experimental speeds",
+    "animate": "GIF of the robot's shape over one cycle",
+}

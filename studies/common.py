@@ -1,0 +1,345 @@
+"""Shared pieces of the studies: value lists and ranges, parameter products, running a batch in
+chunks, per-cycle metrics, CSV writing.
+
+Everything here is public and usable from a notebook, e.g. a sensitivity sweep in five lines::
+
+    import taichi_star
+    from studies.common import param_product, run_batch
+    grid = param_product({"alpha": parse_values("0.2:1.2:6"), "gait": ["A1", "A1+A2"]})
+    result = run_batch(grid, cycles=3)
+    result.summary[["gait", "alpha", "speed_mm_s", "steady_speed_mm_s", "status"]]
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import math
+import typing
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Dict, Iterable, List, Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+
+import taichi_star
+from taichi_star.actuation import forward_direction
+from taichi_star.params import SolverConfig, StarParams
+
+DEFAULT_OUT = "results"
+
+DISCRETISATIONS = {"paper": {}, "converged": {"n_arc": 72}}
+"""`--discretisation`: "paper" = the paper's N = 193 (n_arc 18, n_limb 6); "converged" = n_arc 72
+(PROVISIONAL: design §2.7 measured ~1 % at n_arc 72 vs the extrapolated limit on an independent
+implementation; the work-precision study will name the final preset)."""
+
+DISCRETISATION_HELP = ("paper: the paper's N = 193 nodes (n_arc 18); converged: n_arc 72 "
+                       "(provisional preset, ~4x the nodes, pending the work-precision study)")
+
+QUICK_DURATION_S = 0.2
+QUICK_DT = 2e-3
+
+
+class StudyArgumentError(ValueError):
+    """A study argument is invalid; raised before any computation, naming the flag."""
+
+
+# --------------------------------------------------------------------------- values and ranges
+
+def _number(text: str, flag: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise StudyArgumentError(f"{flag}: {text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise StudyArgumentError(f"{flag}: {text!r} is not a finite number")
+    return value
+
+
+def parse_range(text: str, flag: str = "value") -> List[float]:
+    """"start:stop:n" -> n evenly spaced values from start to stop inclusive;
+    "start:stop:n:log" -> n geometrically spaced values (start, stop > 0)."""
+    parts = [p.strip() for p in text.split(":")]
+    if len(parts) not in (3, 4) or (len(parts) == 4 and parts[3].lower() != "log"):
+        raise StudyArgumentError(
+            f"{flag}: malformed range {text!r}; expected start:stop:n or start:stop:n:log "
+            f"(e.g. 0.2:1.2:11)")
+    start, stop = _number(parts[0], flag), _number(parts[1], flag)
+    try:
+        count = int(parts[2])
+    except ValueError:
+        raise StudyArgumentError(f"{flag}: malformed range {text!r}: the number of points "
+                                 f"{parts[2]!r} is not an integer") from None
+    if count < 1:
+        raise StudyArgumentError(f"{flag}: range {text!r} has {count} points; need at least 1")
+    if count == 1 and start != stop:
+        raise StudyArgumentError(f"{flag}: range {text!r} has one point but start != stop")
+    if len(parts) == 4:
+        if start <= 0 or stop <= 0:
+            raise StudyArgumentError(f"{flag}: log range {text!r} needs start, stop > 0")
+        values = np.geomspace(start, stop, count)
+    else:
+        values = np.linspace(start, stop, count)
+    return [float(v) for v in values]
+
+
+def parse_values(text: str, flag: str = "value", kind: type = float) -> list:
+    """A comma-separated list ("0,0.5,1", "contract,always") or, for numbers, a range
+    ("0.2:1.2:11", "1e6:1e7:5:log"). Raises StudyArgumentError naming `flag` when malformed or
+    empty."""
+    if text is None or not str(text).strip():
+        raise StudyArgumentError(f"{flag}: empty value list (the product would be empty)")
+    text = str(text).strip()
+    if kind is float and ":" in text:
+        return parse_range(text, flag)
+    items = [item.strip() for item in text.split(",")]
+    if any(not item for item in items):
+        raise StudyArgumentError(f"{flag}: malformed list {text!r} (an empty item)")
+    if kind is float:
+        return [_number(item, flag) for item in items]
+    if kind is int:
+        out = []
+        for item in items:
+            try:
+                out.append(int(item))
+            except ValueError:
+                raise StudyArgumentError(f"{flag}: {item!r} is not an integer") from None
+        return out
+    return items
+
+
+def field_kind(name: str) -> type:
+    """float, int or str: the type of a StarParams field."""
+    hints = typing.get_type_hints(StarParams)
+    if name not in hints:
+        raise StudyArgumentError(
+            f"unknown parameter {name!r}; StarParams fields: {', '.join(StarParams.field_names())}")
+    return hints[name]
+
+
+def parse_assignment(text: str, flag: str):
+    """"name=values" (e.g. "alpha=0.2:1.2:6") -> (field name, list of values)."""
+    if "=" not in text:
+        raise StudyArgumentError(f"{flag}: expected NAME=VALUES (e.g. alpha=0.2:1.2:6), got "
+                                 f"{text!r}")
+    name, values = text.split("=", 1)
+    name = name.strip().replace("-", "_")
+    kind = field_kind(name)
+    return name, parse_values(values, f"{flag} {name}", kind)
+
+
+def resolve_gaits(text: str, flag: str = "--gaits") -> List[str]:
+    """"paper" -> the five Fig. 4 gaits; "all" -> all 255 non-empty gaits; otherwise a comma
+    list of gait strings (validated)."""
+    from taichi_star.actuation import gait_name, parse_gait
+    from taichi_star.experiment import PAPER_GAITS
+    if text is None or not text.strip():
+        raise StudyArgumentError(f"{flag}: empty gait list (the product would be empty)")
+    key = text.strip().lower()
+    if key == "paper":
+        return list(PAPER_GAITS)
+    if key == "all":
+        return [gait_name(m + 1 for m in range(8) if bits >> m & 1) for bits in range(1, 256)]
+    gaits = []
+    for item in text.split(","):
+        try:
+            gaits.append(gait_name(parse_gait(item.strip())))
+        except ValueError as error:
+            raise StudyArgumentError(f"{flag}: {error}") from None
+    return gaits
+
+
+# --------------------------------------------------------------------------- parameter products
+
+def param_product(axes: Mapping[str, Sequence], base: StarParams = StarParams()) -> List[StarParams]:
+    """Every combination of the given StarParams field values (the last axis varies fastest),
+    on top of `base`. Validates every field name and value before returning; raises
+    StudyArgumentError naming the parameter for an unknown field, an invalid value or an empty
+    axis."""
+    names = list(axes)
+    for name in names:
+        field_kind(name)
+        if len(axes[name]) == 0:
+            raise StudyArgumentError(f"empty product: parameter {name!r} has no values")
+    combos = []
+    for values in itertools.product(*(axes[name] for name in names)):
+        try:
+            combos.append(base.replace(**dict(zip(names, values))))
+        except (ValueError, TypeError) as error:
+            raise StudyArgumentError(f"invalid parameter value: {error}") from None
+    if not combos:
+        raise StudyArgumentError("empty product: no parameter combinations")
+    return combos
+
+
+def solver_for(args) -> SolverConfig:
+    """SolverConfig from the common flags (--dt; --quick coarsens the default step)."""
+    dt = args.dt if args.dt is not None else (QUICK_DT if args.quick else 1e-3)
+    try:
+        return SolverConfig(dt=dt)
+    except ValueError as error:
+        raise StudyArgumentError(f"--dt: {error}") from None
+
+
+def base_params(args) -> StarParams:
+    """StarParams defaults with the chosen --discretisation."""
+    return StarParams().replace(**DISCRETISATIONS[args.discretisation])
+
+
+# --------------------------------------------------------------------------- running
+
+def steps_per_cycle(period: float, dt: float):
+    """Integer steps in one actuation cycle, or None when period/dt is not an integer."""
+    ratio = period / dt
+    steps = int(round(ratio))
+    return steps if steps >= 1 and abs(ratio - steps) <= 1e-9 * max(1.0, ratio) else None
+
+
+def run_batch(params: Sequence[StarParams], cycles: float = 3.0, duration_s: float = None,
+              solver: SolverConfig = SolverConfig(), arch: str = "cpu", chunk_size: int = 4096,
+              record_every: int = None, record_shapes: bool = False, progress: bool = False,
+              steady_from_cycle: int = 1):
+    """Simulate `params` and return (summary, trajectory, shapes, topologies) as a namespace.
+
+    Instances are grouped by what must be shared by one `simulate` call (topology, and the
+    duration = cycles × period when `duration_s` is None) and each group is run in chunks of at
+    most `chunk_size`; the summary comes back in input order with an `instance` column
+    (input index). When every cycle boundary is a recorded time (the default `record_every` =
+    steps per cycle), the summary also gets `steady_speed_mm_s` / `steady_signed_speed_mm_s`:
+    the speed over cycles [steady_from_cycle, cycles) (design §3), NaN where unavailable.
+    """
+    params = list(params)
+    if not params:
+        raise StudyArgumentError("empty product: no instances to simulate")
+    groups: Dict[tuple, List[int]] = {}
+    for index, p in enumerate(params):
+        duration = duration_s if duration_s is not None else cycles * p.period
+        groups.setdefault((p.topology_key, round(duration, 12)), []).append(index)
+
+    summaries, trajectories, shapes, topologies = [], [], {}, {}
+    chunks = [(key, members[i:i + chunk_size]) for key, members in groups.items()
+              for i in range(0, len(members), chunk_size)]
+    outer = None
+    if progress and len(chunks) > 1:
+        from tqdm.auto import tqdm
+        outer = tqdm(total=len(chunks), desc="batches", unit="batch")
+    for (_, duration), members in chunks:
+        period = params[members[0]].period
+        per_cycle = steps_per_cycle(period, solver.dt)
+        every = record_every
+        if every is None:
+            same_period = all(params[i].period == period for i in members)
+            every = per_cycle if (per_cycle and same_period and duration_s is None) else 0
+        result = taichi_star.simulate([params[i] for i in members], duration, solver=solver,
+                                      arch=arch, record_every=every, progress=progress,
+                                      record_shapes=record_shapes)
+        summary = result.summary.copy()
+        summary.insert(0, "instance", members)
+        summary["duration_s"] = duration
+        summary["dt_s"] = solver.dt
+        traj = result.trajectory.copy()
+        if len(traj):
+            traj["instance"] = np.asarray(members)[traj["instance"].to_numpy(dtype=int)]
+        _add_steady(summary, traj, [params[i] for i in members], duration, steady_from_cycle)
+        summaries.append(summary)
+        trajectories.append(traj)
+        if record_shapes and result.shapes is not None:
+            for local, index in enumerate(members):
+                shapes[index] = result.shapes[:, local]
+        for index in members:
+            topologies[index] = result.topology
+        if outer is not None:
+            outer.update(1)
+    if outer is not None:
+        outer.close()
+    summary = pd.concat(summaries).sort_values("instance").reset_index(drop=True)
+    trajectories = [t for t in trajectories if len(t)]
+    trajectory = (pd.concat(trajectories).sort_values(["instance", "t_s"]).reset_index(drop=True)
+                  if trajectories else pd.DataFrame(columns=["instance", "t_s", "x_mm", "y_mm"]))
+    return SimpleNamespace(summary=summary, trajectory=trajectory, shapes=shapes,
+                           topologies=topologies)
+
+
+def _add_steady(summary, trajectory, params, duration, first_cycle):
+    steady, steady_signed = [], []
+    for local, (instance, p) in enumerate(zip(summary["instance"], params)):
+        value = signed = math.nan
+        cycles = duration / p.period
+        last = int(round(cycles))
+        if (len(trajectory) and abs(cycles - last) < 1e-9 and last > first_cycle
+                and summary["status"].iloc[local] == "ok"):
+            rows = trajectory[trajectory["instance"] == instance]
+            times = rows["t_s"].to_numpy()
+            start = np.flatnonzero(np.isclose(times, first_cycle * p.period, atol=1e-9, rtol=0))
+            end = np.flatnonzero(np.isclose(times, last * p.period, atol=1e-9, rtol=0))
+            if len(start) and len(end):
+                xy = rows[["x_mm", "y_mm"]].to_numpy()
+                delta = xy[end[0]] - xy[start[0]]
+                span = (last - first_cycle) * p.period
+                value = float(np.hypot(*delta)) / span
+                forward = forward_direction(p.gait)
+                signed = float(delta @ forward) / span if forward is not None else math.nan
+        steady.append(value)
+        steady_signed.append(signed)
+    summary["steady_speed_mm_s"] = steady
+    summary["steady_signed_speed_mm_s"] = steady_signed
+    summary["steady_from_cycle"] = first_cycle
+
+
+# --------------------------------------------------------------------------- CLI and output
+
+def common_parser(prog: str, description: str) -> argparse.ArgumentParser:
+    """Parser with the flags every study takes."""
+    parser = argparse.ArgumentParser(prog=f"python -m studies {prog}", description=description)
+    parser.add_argument("--arch", choices=("cpu", "gpu"), default="cpu",
+                        help="Taichi backend (default cpu)")
+    parser.add_argument("--out", default=DEFAULT_OUT, help="output folder (default results/)")
+    parser.add_argument("--quick", action="store_true",
+                        help=f"small fast run for tests: {QUICK_DURATION_S} s simulated, "
+                             f"dt {QUICK_DT} s unless --dt is given")
+    parser.add_argument("--discretisation", choices=tuple(DISCRETISATIONS), default="paper",
+                        help=DISCRETISATION_HELP)
+    parser.add_argument("--dt", type=float, default=None, help="time step, s (default 1e-3)")
+    parser.add_argument("--chunk-size", type=int, default=None,
+                        help="instances per simulate call (default 2048 cpu, 16384 gpu)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    return parser
+
+
+def chunk_size_for(args) -> int:
+    size = args.chunk_size if args.chunk_size is not None else (16384 if args.arch == "gpu"
+                                                                 else 2048)
+    if size < 1:
+        raise StudyArgumentError(f"--chunk-size must be >= 1, got {size}")
+    return size
+
+
+def out_dir(args) -> Path:
+    path = Path(args.out)
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def write_csv(frame: pd.DataFrame, path) -> Path:
+    """Write a table (no index, full float precision) and return its path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    frame.to_csv(path, index=False, float_format="%.10g")
+    return path
+
+
+def use_agg():
+    """Select the non-interactive Agg backend and return pyplot."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def params_columns() -> List[str]:
+    return StarParams.field_names()
+
+
+def describe(paths: Iterable) -> str:
+    return "\n".join(f"  wrote {p}" for p in paths)

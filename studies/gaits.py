@@ -1,0 +1,190 @@
+"""Every gait: the 255 non-empty actuator sets, simulated once per symmetry class (29 classes
+under the octagon's 8 rotations and 8 reflections, design §3) and expanded back.
+
+    python -m studies gaits [--cycles 3] [--arch cpu|gpu] [--out results/] [--quick]
+                            [--set NAME=VALUE ...] [--discretisation paper|converged]
+
+Writes `gaits.csv` (one row per gait: gait, class_representative, class_size, rotation and
+reflection mapping the representative onto it, speed, signed speed, heading and heading relative
+to the gait's forward direction, status), `gaits_classes.csv` (the 29 simulated instances, full
+summary) and `gaits.png` (the classes ranked by speed, each bar with an actuator pictogram).
+
+From Python: `expand_classes(summary)` maps a summary of the class representatives onto all 255
+gaits; `symmetry_map(rep, gait)` gives the octagon symmetry taking one gait onto another.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from taichi_star.actuation import (N_ACTUATORS, forward_direction, parse_gait, symmetry_classes,
+                                   transform_gait)
+from taichi_star.params import StarParams
+
+from . import common
+from .fig4c import parse_overrides
+
+DESCRIPTION = "All 255 gaits, one simulation per octagon symmetry class (29), ranked by speed."
+
+GAITS_COLUMNS = ["gait", "class_representative", "class_size", "rotation", "reflected",
+                 "speed_mm_s", "signed_speed_mm_s", "steady_speed_mm_s",
+                 "steady_signed_speed_mm_s", "heading_deg", "heading_relative_deg",
+                 "n_actuators", "status"]
+
+
+def symmetry_map(source: str, target: str):
+    """(rotation, reflect) with transform_gait(source, rotation, reflect) == target (the first
+    in the order reflect False, True; rotation 0..7), or None if none exists."""
+    for reflect in (False, True):
+        for rotation in range(N_ACTUATORS):
+            if transform_gait(source, rotation, reflect) == target:
+                return rotation, reflect
+    return None
+
+
+def transform_heading(heading_deg: float, rotation: int, reflect: bool) -> float:
+    """Image of a heading angle under the symmetry of `transform_gait` (reflection across the
+    A1 axis, then rotation by rotation·45°), wrapped to (-180, 180]."""
+    angle = (-heading_deg if reflect else heading_deg) + 45.0 * rotation
+    return wrap_degrees(angle)
+
+
+def wrap_degrees(angle: float) -> float:
+    if not math.isfinite(angle):
+        return math.nan
+    wrapped = (angle + 180.0) % 360.0 - 180.0
+    return 180.0 if wrapped == -180.0 else wrapped
+
+
+def relative_heading(gait: str, heading_deg: float) -> float:
+    """Heading relative to the gait's forward direction, degrees in (-180, 180]; NaN where the
+    forward direction is undefined."""
+    forward = forward_direction(gait)
+    if forward is None or not math.isfinite(heading_deg):
+        return math.nan
+    return wrap_degrees(heading_deg - math.degrees(math.atan2(forward[1], forward[0])))
+
+
+def class_params(base: StarParams = StarParams()):
+    """One StarParams per symmetry class representative, and the classes themselves."""
+    classes = symmetry_classes()
+    return [base.replace(gait=rep) for rep, _ in classes], classes
+
+
+def expand_classes(summary: pd.DataFrame, classes=None) -> pd.DataFrame:
+    """All gaits from a summary of the class representatives (rows matched by gait): the same
+    speeds, the heading mapped by the symmetry. Columns GAITS_COLUMNS; 255 rows sorted by
+    (number of actuators, bitmask)."""
+    classes = classes if classes is not None else symmetry_classes()
+    by_gait = {row["gait"]: row for _, row in summary.iterrows()}
+    rows = []
+    for rep, members in classes:
+        source = by_gait[rep]
+        ok = source["status"] == "ok"
+        for gait in members:
+            rotation, reflect = symmetry_map(rep, gait)
+            heading = transform_heading(float(source["heading_deg"]), rotation, reflect) \
+                if ok else math.nan
+            rows.append({
+                "gait": gait, "class_representative": rep, "class_size": len(members),
+                "rotation": rotation, "reflected": reflect,
+                "speed_mm_s": source["speed_mm_s"] if ok else math.nan,
+                "signed_speed_mm_s": source["signed_speed_mm_s"] if ok else math.nan,
+                "steady_speed_mm_s": source.get("steady_speed_mm_s", math.nan) if ok else math.nan,
+                "steady_signed_speed_mm_s": (source.get("steady_signed_speed_mm_s", math.nan)
+                                             if ok else math.nan),
+                "heading_deg": heading,
+                "heading_relative_deg": relative_heading(gait, heading),
+                "n_actuators": len(parse_gait(gait)),
+                "status": source["status"],
+            })
+    table = pd.DataFrame(rows, columns=GAITS_COLUMNS)
+    table["_key"] = [sum(1 << (a - 1) for a in parse_gait(g)) + 256 * len(parse_gait(g))
+                     for g in table["gait"]]
+    return table.sort_values("_key").drop(columns="_key").reset_index(drop=True)
+
+
+def plot_gaits(csv_path, png_path):
+    """Classes ranked by speed, from a gaits CSV: one bar per class (coloured by the sign of the
+    signed speed), labelled with the representative, its class size and an actuator pictogram
+    (filled dots = fired actuators, A1 on the right, counter-clockwise)."""
+    plt = common.use_agg()
+    table = pd.read_csv(csv_path)
+    classes = table.drop_duplicates("class_representative").copy()
+    classes = classes.sort_values("speed_mm_s", ascending=True, na_position="first")
+    n = len(classes)
+    fig = plt.figure(figsize=(8, max(3.0, 0.3 * n + 1.0)))
+    grid = fig.add_gridspec(1, 2, width_ratios=[1, 9], wspace=0.02)
+    pict = fig.add_subplot(grid[0])
+    ax = fig.add_subplot(grid[1], sharey=pict)
+    y = np.arange(n)
+    speeds = classes["speed_mm_s"].to_numpy(dtype=float)
+    signed = classes["signed_speed_mm_s"].to_numpy(dtype=float)
+    colours = ["tab:blue" if s > 0 else "tab:orange" if s < 0 else "tab:gray" for s in signed]
+    ax.barh(y, np.nan_to_num(speeds), color=colours)
+    for i, (_, row) in enumerate(classes.iterrows()):
+        label = f"{row['class_representative']} (x{row['class_size']})"
+        if row["status"] != "ok":
+            label += f" [{row['status']}]"
+        ax.text(np.nan_to_num(speeds[i]), i, " " + label, va="center", fontsize=7)
+    angles = np.radians(45.0 * np.arange(N_ACTUATORS))
+    for i, rep in enumerate(classes["class_representative"]):
+        fired = set(parse_gait(rep))
+        px, py = 0.36 * np.cos(angles), i + 0.36 * np.sin(angles)
+        pict.plot(np.append(px, px[0]), np.append(py, py[0]), color="0.7", lw=0.6)
+        pict.scatter(px, py, s=9, c=["k" if m + 1 in fired else "white" for m in range(8)],
+                     edgecolors="k", linewidths=0.4, zorder=3)
+    ax.set_ylim(-0.7, n - 0.3)
+    box = pict.get_position()
+    inches_per_unit = box.height * fig.get_figheight() / n
+    half_width = 0.5 * box.width * fig.get_figwidth() / inches_per_unit
+    pict.set_xlim(-half_width, half_width)
+    pict.axis("off")
+    ax.set_yticks([])
+    finite = speeds[np.isfinite(speeds)]
+    ax.set_xlim(0, (finite.max() if len(finite) else 1.0) * 1.45)
+    ax.set_xlabel("speed (mm/s)   [blue: forward, orange: reverse, gray: no forward direction]")
+    duration = pd.read_csv(Path(csv_path).with_name("gaits_classes.csv"))["duration_s"].iloc[0] \
+        if Path(csv_path).with_name("gaits_classes.csv").exists() else math.nan
+    ax.set_title(f"{n} gait classes ranked by speed over {duration:g} s from rest", fontsize=9)
+    fig.savefig(png_path, dpi=130, bbox_inches="tight")
+    plt.close(fig)
+    return Path(png_path)
+
+
+def build_parser():
+    parser = common.common_parser("gaits", DESCRIPTION)
+    parser.add_argument("--cycles", type=float, default=3.0, help="cycles from rest (default 3)")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                        help="override a StarParams field for every gait, e.g. --set alpha=1.0")
+    return parser
+
+
+def main(argv=None):
+    args = build_parser().parse_args(argv)
+    if not (args.cycles > 0 and math.isfinite(args.cycles)):
+        raise common.StudyArgumentError(f"--cycles must be > 0, got {args.cycles}")
+    overrides = parse_overrides(args.set)
+    if "gait" in overrides:
+        raise common.StudyArgumentError("--set gait=...: the gaits study runs every gait")
+    try:
+        base = common.base_params(args).replace(**overrides)
+    except (ValueError, TypeError) as error:
+        raise common.StudyArgumentError(f"--set: {error}") from None
+    params, classes = class_params(base)
+    solver = common.solver_for(args)
+    out = common.out_dir(args)
+    duration = common.QUICK_DURATION_S if args.quick else None
+    result = common.run_batch(params, cycles=args.cycles, duration_s=duration, solver=solver,
+                              arch=args.arch, chunk_size=common.chunk_size_for(args),
+                              progress=not args.no_progress)
+    classes_csv = common.write_csv(result.summary, out / "gaits_classes.csv")
+    table = expand_classes(result.summary, classes)
+    csv = common.write_csv(table, out / "gaits.csv")
+    png = plot_gaits(csv, out / "gaits.png")
+    print(common.describe([csv, classes_csv, png]))
+    return table

@@ -1,0 +1,173 @@
+"""Parameter sensitivity: the Cartesian product of lists or ranges, all instances in one batch.
+
+    python -m studies sweep --alpha 0.2:1.2:11 --added-mass 0,0.5,1,2 --youngs-modulus 2e6,5e6,1e7
+                            [--jet-mode contract,always] [--gaits paper|all|A1,A1+A2] [--cycles 3]
+                            [--param NAME=VALUES ...] [--arch cpu|gpu] [--out results/] [--quick]
+
+Values: a comma list (`0,0.5,1`) or a range `start:stop:n` (n points, both ends included) or
+`start:stop:n:log` (geometric). `--param NAME=VALUES` sweeps any other StarParams field.
+Writes `sweep.csv` (one row per instance: every parameter, speeds over cycles [0, N) and
+[1, N), heading, Newton statistics, status) and `sweep_<parameter>.png` for every swept
+parameter: speed against the parameter, one line per gait, the other swept parameters held at
+the value closest to the paper's default.
+
+From Python::
+
+    from studies.common import param_product, run_batch, parse_values
+    grid = param_product({"gait": ["A1", "A1+A2"], "alpha": parse_values("0.2:1.2:6")})
+    summary = run_batch(grid, cycles=3).summary
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from taichi_star.params import StarParams
+
+from . import common
+
+DESCRIPTION = "Sensitivity study: Cartesian product of StarParams values, one batch."
+
+NAMED_FLAGS = {
+    "alpha": "alpha",
+    "added-mass": "added_mass_coeff",
+    "youngs-modulus": "youngs_modulus",
+    "limb-stiffness-ratio": "limb_stiffness_ratio",
+    "drag-parallel": "drag_parallel",
+    "drag-perpendicular": "drag_perpendicular",
+    "cylinder-drag": "cylinder_drag",
+    "cylinder-added-mass": "cylinder_added_mass_coeff",
+    "period": "period",
+    "jet-mode": "jet_mode",
+}
+"""Command-line flag -> StarParams field."""
+
+MAX_INSTANCES = 1_000_000
+
+
+def build_parser():
+    parser = common.common_parser("sweep", DESCRIPTION)
+    for flag, field in NAMED_FLAGS.items():
+        parser.add_argument(f"--{flag}", dest=field, default=None, metavar="VALUES",
+                            help=f"values of StarParams.{field} (list a,b,c or range "
+                                 f"start:stop:n[:log])")
+    parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUES",
+                        help="sweep any StarParams field, e.g. --param drag_parallel=0,0.01,0.1")
+    parser.add_argument("--gaits", default="paper",
+                        help="paper (the five Fig. 4 gaits, default), all (255), or a list "
+                             "A1,A1+A2")
+    parser.add_argument("--cycles", type=float, default=3.0,
+                        help="cycles from rest per instance (default 3)")
+    parser.add_argument("--max-instances", type=int, default=MAX_INSTANCES,
+                        help=f"refuse larger products (default {MAX_INSTANCES})")
+    return parser
+
+
+def sweep_axes(args) -> dict:
+    """The swept axes {field: values} from parsed arguments (validated, gait first)."""
+    axes = {"gait": common.resolve_gaits(args.gaits)}
+    for flag, field in NAMED_FLAGS.items():
+        text = getattr(args, field)
+        if text is not None:
+            axes[field] = common.parse_values(text, f"--{flag}", common.field_kind(field))
+    for item in args.param:
+        name, values = common.parse_assignment(item, "--param")
+        if name in axes:
+            raise common.StudyArgumentError(f"--param {name}: parameter given twice")
+        axes[name] = values
+    return axes
+
+
+def swept_parameters(table: pd.DataFrame):
+    """StarParams fields (other than gait) that take more than one value in a sweep table."""
+    return [name for name in StarParams.field_names()
+            if name != "gait" and name in table and table[name].nunique(dropna=False) > 1]
+
+
+def plot_sweep(csv_path, out_dir, prefix: str = "sweep"):
+    """One PNG per swept parameter from a sweep CSV: |speed| and signed speed against the
+    parameter, one line per gait, other swept parameters at the value nearest the default."""
+    plt = common.use_agg()
+    table = pd.read_csv(csv_path)
+    defaults = StarParams()
+    swept = swept_parameters(table)
+    paths = []
+    for name in swept:
+        selection = table
+        held = []
+        for other in swept:
+            if other == name:
+                continue
+            values = selection[other].unique()
+            default = getattr(defaults, other)
+            if isinstance(default, str):
+                pick = default if default in values else sorted(values)[0]
+            else:
+                pick = values[np.argmin(np.abs(values.astype(float) - default))]
+            selection = selection[selection[other] == pick]
+            held.append(f"{other}={pick:g}" if not isinstance(pick, str) else f"{other}={pick}")
+        fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+        categorical = not pd.api.types.is_numeric_dtype(selection[name])
+        categories = sorted(selection[name].unique()) if categorical else None
+        for gait, part in selection.groupby("gait", sort=False):
+            part = part.sort_values(name)
+            x = ([categories.index(v) for v in part[name]] if categorical
+                 else part[name].to_numpy(dtype=float))
+            ok = (part["status"] == "ok").to_numpy()
+            for ax, column in zip(axes, ("speed_mm_s", "signed_speed_mm_s")):
+                y = np.where(ok, part[column].to_numpy(dtype=float), np.nan)
+                ax.plot(x, y, "o-", label=gait, ms=3)
+                bad = ~ok
+                if bad.any():
+                    ax.plot(np.asarray(x)[bad], np.zeros(bad.sum()), "rx")
+        for ax, label in zip(axes, ("speed (mm/s)", "signed speed along forward (mm/s)")):
+            ax.set_xlabel(name)
+            ax.set_ylabel(label)
+            if categorical:
+                ax.set_xticks(range(len(categories)), categories)
+            else:
+                values = selection[name].to_numpy(dtype=float)
+                if values.min() > 0 and values.max() / values.min() >= 20:
+                    ax.set_xscale("log")
+            ax.grid(alpha=0.3)
+        axes[1].axhline(0.0, color="k", lw=0.6)
+        axes[0].legend(fontsize=7)
+        duration = table["duration_s"].iloc[0] if "duration_s" in table else math.nan
+        fig.suptitle(f"speed vs {name} over {duration:g} s from rest"
+                     + (f" ({', '.join(held)})" if held else "")
+                     + ("; x = failed" if (selection["status"] != "ok").any() else ""),
+                     fontsize=9)
+        fig.tight_layout()
+        path = Path(out_dir) / f"{prefix}_{name}.png"
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+        paths.append(path)
+    return paths
+
+
+def main(argv=None):
+    args = build_parser().parse_args(argv)
+    if not (args.cycles > 0 and math.isfinite(args.cycles)):
+        raise common.StudyArgumentError(f"--cycles must be > 0, got {args.cycles}")
+    axes = sweep_axes(args)
+    size = int(np.prod([len(v) for v in axes.values()]))
+    if size > args.max_instances:
+        raise common.StudyArgumentError(
+            f"the product has {size} instances, more than --max-instances {args.max_instances}")
+    grid = common.param_product(axes, base=common.base_params(args))
+    solver = common.solver_for(args)
+    chunk = common.chunk_size_for(args)
+    out = common.out_dir(args)
+    duration = common.QUICK_DURATION_S if args.quick else None
+    result = common.run_batch(grid, cycles=args.cycles, duration_s=duration, solver=solver,
+                              arch=args.arch, chunk_size=chunk, progress=not args.no_progress)
+    csv = common.write_csv(result.summary, out / "sweep.csv")
+    paths = [csv] + plot_sweep(csv, out)
+    print(common.describe(paths))
+    failed = (result.summary["status"] != "ok").sum()
+    print(f"{len(result.summary)} instances, {failed} not ok")
+    return result.summary
