@@ -1,0 +1,337 @@
+"""The batch engine: B robot instances advanced in lock-step by implicit Euler + Newton
+(paper Eq. 4, design §2.6), one Taichi thread per instance.
+
+One kernel launch advances every live instance by a chunk of steps; inside it each instance runs
+its own Newton loop (so converged instances stop iterating and failed ones are frozen at once),
+assembles its Jacobian into a fixed-pattern block-sparse store (`linsolve.BlockSystem`) and solves
+it by LU without pivoting. Terms that no instance of the batch uses are compiled out.
+"""
+
+import numpy as np
+import taichi as ti
+from taichi.lang.util import to_numpy_type
+
+from .actuation import N_ACTUATORS, PAPER_PROFILE
+from .geometry import SPOKE
+from .linsolve import BlockSystem, plan_elimination
+from .model import BatchModel
+from .params import SolverConfig
+from .physics import elastic, fluid
+
+STATUS_OK, STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_INACTIVE = 0, 1, 2, 3
+STATUS_NAMES = ("ok", "newton_failed", "non_finite", "inactive")
+"""Per-instance status; "inactive" marks the padding of a batch up to the engine's capacity."""
+CENTRE = 0
+FINITE_LIMIT = 1e30
+"""Updates larger than this (m) are treated as non-finite: no physical step moves a node 1e30 m."""
+TERM_ROD_DRAG, TERM_CYLINDER_DRAG, TERM_JET, TERM_ACTUATION = 1, 2, 4, 8
+"""Bits of the `terms` template argument: a term no instance uses is compiled out."""
+
+
+def terms_used(model: BatchModel) -> int:
+    """The `terms` bitmask of the force terms some instance of the batch uses."""
+    return (TERM_ROD_DRAG * model.uses_rod_drag + TERM_CYLINDER_DRAG * model.uses_cylinder_drag
+            + TERM_JET * model.uses_jet + TERM_ACTUATION * model.uses_actuation)
+
+
+def coupled_node_pairs(topology):
+    """Node pairs (i, j) whose 2×2 Jacobian block can be non-zero: edges, all pairs of a bending
+    triplet, and the hub's row against the jet quads' nodes."""
+    pairs = [tuple(edge) for edge in topology.edges]
+    for i, j, k in topology.triplets:
+        pairs += [(i, j), (j, k), (i, k)]
+    for quad in topology.jet_quads:
+        pairs += [(CENTRE, node) for node in quad]
+    return pairs
+
+
+def _field(dtype, shape, values=None):
+    """A field of `shape`, filled with `values` cast to its type (float = the runtime precision)."""
+    field = ti.field(dtype, shape=shape)
+    if values is not None:
+        _load(field, values)
+    return field
+
+
+def _load(field, values):
+    field.from_numpy(np.ascontiguousarray(values, dtype=to_numpy_type(field.dtype)))
+
+
+def _pad(values: np.ndarray, capacity: int) -> np.ndarray:
+    """Pad the batch axis up to capacity by repeating instance 0 (padding is inactive)."""
+    padding = np.repeat(values[:1], capacity - len(values), axis=0)
+    return np.concatenate([values, padding]) if len(padding) else values
+
+
+@ti.data_oriented
+class BatchEngine:
+    """Device state for up to `capacity` instances of one topology. Compiled once per process
+    and reused: the per-instance coefficients (shapes of `model.BatchModel`, padded to capacity)
+    and the solver settings are loaded by `load`, not baked into the kernels.
+    `positions`, `velocities`: (capacity, N) 2-vectors, m and m/s."""
+
+    def __init__(self, topology, capacity: int):
+        self.capacity = capacity
+        self.n_nodes = topology.n_nodes
+        self.n_edges = topology.n_edges
+        self.n_triplets = topology.n_triplets
+        self.plan = plan_elimination(topology.n_nodes, coupled_node_pairs(topology))
+        self.system = BlockSystem(self.plan, capacity)
+        slot = self.plan.slot
+        edges, triplets = topology.edges, topology.triplets
+        self.edges = _field(ti.i32, edges.shape, edges)
+        self.edge_is_spoke = _field(ti.i32, len(edges), topology.edge_kind == SPOKE)
+        self.edge_slot = _field(ti.i32, (len(edges), 4), np.array(
+            [[slot[i, i], slot[i, j], slot[j, i], slot[j, j]] for i, j in edges]))
+        self.triplets = _field(ti.i32, triplets.shape, triplets)
+        self.triplet_slot = _field(ti.i32, (len(triplets), 9), np.array(
+            [[slot[a, c] for a in nodes for c in nodes] for nodes in triplets]))
+        self.triplet_actuator = _field(ti.i32, len(triplets), topology.triplet_actuator)
+        self.jet_quads = _field(ti.i32, topology.jet_quads.shape, topology.jet_quads)
+        self.jet_slot = _field(ti.i32, (N_ACTUATORS, 5), np.array(
+            [[slot[CENTRE, CENTRE]] + [slot[CENTRE, n] for n in quad] for quad in topology.jet_quads]))
+        self.diagonal_slot = _field(ti.i32, self.n_nodes,
+                                    np.array([slot[n, n] for n in range(self.n_nodes)]))
+        self.profile = _field(float, 9, PAPER_PROFILE.as_array())
+        self.dt = _field(float, ())
+        self.newton_tol = _field(float, ())
+        self.max_newton = _field(ti.i32, ())
+
+        per_edge, per_triplet, per_node = ((capacity, n) for n in (self.n_edges, self.n_triplets,
+                                                                   self.n_nodes))
+        self.rest_length = _field(float, per_edge)
+        self.edge_stiffness = _field(float, per_edge)
+        self.drag_parallel_coeff = _field(float, per_edge)
+        self.drag_perpendicular_coeff = _field(float, per_edge)
+        self.voronoi_length = _field(float, per_triplet)
+        self.rest_curvature = _field(float, per_triplet)
+        self.bend_stiffness = _field(float, per_triplet)
+        self.mass = _field(float, per_node)
+        self.inertia = _field(float, per_node)
+        self.cylinder_drag_coeff = _field(float, capacity)
+        self.jet_alpha = _field(float, capacity)
+        self.fluid_density = _field(float, capacity)
+        self.jet_always = _field(ti.i32, capacity)
+        self.period = _field(float, capacity)
+        self.gait_mask = _field(ti.i32, (capacity, N_ACTUATORS))
+
+        self.positions = ti.Vector.field(2, float, shape=per_node)
+        self.previous = ti.Vector.field(2, float, shape=per_node)
+        self.velocities = ti.Vector.field(2, float, shape=per_node)
+        self.status = ti.field(ti.i32, shape=capacity)
+        self.failure_step = ti.field(ti.i32, shape=capacity)
+        self.newton_total = ti.field(ti.i64, shape=capacity)
+        self.newton_max = ti.field(ti.i32, shape=capacity)
+        self.steps_done = ti.field(ti.i32, shape=capacity)
+        self.centroids = ti.Vector.field(2, float, shape=capacity)
+
+    def load(self, model: BatchModel, solver: SolverConfig):
+        """Copy a batch (at most `capacity` instances) and the solver settings to the device and
+        put every instance at rest in its rest shape, status ok (padding: inactive)."""
+        if model.batch_size > self.capacity:
+            raise ValueError(f"batch of {model.batch_size} exceeds the engine capacity {self.capacity}")
+        for name in ("rest_length", "edge_stiffness", "drag_parallel_coeff",
+                     "drag_perpendicular_coeff", "voronoi_length", "rest_curvature",
+                     "bend_stiffness", "mass", "inertia", "cylinder_drag_coeff", "jet_alpha",
+                     "fluid_density", "jet_always", "period", "gait_mask"):
+            _load(getattr(self, name), _pad(getattr(model, name), self.capacity))
+        rest = _pad(model.rest_positions, self.capacity)
+        self.positions.from_numpy(rest.astype(to_numpy_type(self.positions.dtype)))
+        self.velocities.fill(0.0)
+        status = np.full(self.capacity, STATUS_INACTIVE, dtype=np.int32)
+        status[:model.batch_size] = STATUS_OK
+        self.status.from_numpy(status)
+        self.failure_step.fill(-1)
+        self.newton_total.fill(0)
+        self.newton_max.fill(0)
+        self.steps_done.fill(0)
+        self.dt[None] = solver.dt
+        self.newton_tol[None] = solver.newton_tol
+        self.max_newton[None] = solver.max_newton
+
+    # ---------------------------------------------------------------- assembly
+    @ti.func
+    def natural_curvature_target(self, b, time):
+        """K̄(τ) (Eq. 5) at τ = time mod T for instance b, 1/m."""
+        tau = time - self.period[b] * ti.floor(time / self.period[b])
+        c1, c2, c3, c4 = self.profile[0], self.profile[1], self.profile[2], self.profile[3]
+        if tau >= self.profile[8]:
+            c1, c2, c3, c4 = self.profile[4], self.profile[5], self.profile[6], self.profile[7]
+        return c1 / (1.0 + ti.exp(-c2 * (tau - c3))) + c4
+
+    @ti.func
+    def add_block(self, b, slot, value):
+        self.system.blocks[b, slot] += value
+
+    @ti.func
+    def add_edge_pair(self, b, e, i, j, gradient, hessian):
+        """Scatter a term that depends on e = x_j − x_i alone: ∂/∂x_i = −∂/∂e."""
+        self.system.rhs[b, i] -= gradient
+        self.system.rhs[b, j] += gradient
+        self.add_block(b, self.edge_slot[e, 0], hessian)
+        self.add_block(b, self.edge_slot[e, 1], -hessian)
+        self.add_block(b, self.edge_slot[e, 2], -hessian)
+        self.add_block(b, self.edge_slot[e, 3], hessian)
+
+    @ti.func
+    def assemble(self, b, target_curvature, terms: ti.template()):
+        """Residual r = M(q − q_k − h·v_k)/h² + ∇E − F_ext into rhs[b] and its Jacobian
+        M/h² + ∇²E − ∂F_ext/∂q into blocks[b], at the current iterate q = positions[b]."""
+        self.system.clear(b)
+        dt = self.dt[None]
+        identity = ti.Matrix.identity(float, 2)
+        # inertia with added mass, Eqs. 3-4: the diagonal mass matrix over h²
+        for n in range(self.n_nodes):
+            scaled_mass = self.inertia[b, n] / (dt * dt)
+            self.system.rhs[b, n] += scaled_mass * (
+                self.positions[b, n] - self.previous[b, n] - dt * self.velocities[b, n])
+            self.add_block(b, self.diagonal_slot[n], scaled_mass * identity)
+        # stretching, §III-A: E_s = ½ E r0 ε² Δl̄ on every edge
+        for e in range(self.n_edges):
+            i, j = self.edges[e, 0], self.edges[e, 1]
+            gradient, hessian = elastic.stretch_gradient_hessian(
+                self.positions[b, j] - self.positions[b, i], self.rest_length[b, e],
+                self.edge_stiffness[b, e])
+            self.add_edge_pair(b, e, i, j, gradient, hessian)
+        # bending, §III-A: E_b = ½ (E r0³/12)(κ − κ⁰)² Δl, κ⁰ driven by Eq. 5 on actuated arcs
+        for t in range(self.n_triplets):
+            self.add_bending(b, t, target_curvature, terms)
+        # rod drag, Eq. 1, per non-spoke edge on the mean implicit velocity
+        if ti.static(terms & TERM_ROD_DRAG):
+            for e in range(self.n_edges):
+                if self.edge_is_spoke[e] == 0:
+                    self.add_rod_drag(b, e, dt)
+        # cylinder drag, F^c of §III-A, on the centre
+        if ti.static(terms & TERM_CYLINDER_DRAG):
+            velocity = (self.positions[b, CENTRE] - self.previous[b, CENTRE]) / dt
+            force, d_velocity = fluid.cylinder_drag(velocity, self.cylinder_drag_coeff[b])
+            self.system.rhs[b, CENTRE] -= force
+            self.add_block(b, self.diagonal_slot[CENTRE], -d_velocity / dt)
+        # jet, Eq. 2, every inter-limb space pushing on the centre
+        if ti.static(terms & TERM_JET):
+            for k in range(N_ACTUATORS):
+                self.add_jet(b, k, dt)
+
+    @ti.func
+    def add_bending(self, b, t, target_curvature, terms: ti.template()):
+        i, j, k = self.triplets[t, 0], self.triplets[t, 1], self.triplets[t, 2]
+        natural = self.rest_curvature[b, t]
+        if ti.static(terms & TERM_ACTUATION):
+            actuator = self.triplet_actuator[t]
+            if actuator >= 0:
+                if self.gait_mask[b, actuator] != 0:
+                    natural = target_curvature if natural >= 0.0 else -target_curvature
+        g1, g2, h11, h12, h22 = elastic.bend_gradient_hessian(
+            self.positions[b, j] - self.positions[b, i], self.positions[b, k] - self.positions[b, j],
+            self.voronoi_length[b, t], natural, self.bend_stiffness[b, t])
+        # e1 = x_j − x_i, e2 = x_k − x_j: node derivatives by the incidence of the two edges
+        self.system.rhs[b, i] -= g1
+        self.system.rhs[b, j] += g1 - g2
+        self.system.rhs[b, k] += g2
+        h21 = h12.transpose()
+        self.add_block(b, self.triplet_slot[t, 0], h11)
+        self.add_block(b, self.triplet_slot[t, 1], h12 - h11)
+        self.add_block(b, self.triplet_slot[t, 2], -h12)
+        self.add_block(b, self.triplet_slot[t, 3], h21 - h11)
+        self.add_block(b, self.triplet_slot[t, 4], h11 - h12 - h21 + h22)
+        self.add_block(b, self.triplet_slot[t, 5], h12 - h22)
+        self.add_block(b, self.triplet_slot[t, 6], -h21)
+        self.add_block(b, self.triplet_slot[t, 7], h21 - h22)
+        self.add_block(b, self.triplet_slot[t, 8], h22)
+
+    @ti.func
+    def add_rod_drag(self, b, e, dt):
+        i, j = self.edges[e, 0], self.edges[e, 1]
+        velocity = (self.positions[b, i] + self.positions[b, j]
+                    - self.previous[b, i] - self.previous[b, j]) / (2.0 * dt)
+        force, d_velocity, d_edge = fluid.rod_drag(
+            velocity, self.positions[b, j] - self.positions[b, i],
+            self.drag_parallel_coeff[b, e], self.drag_perpendicular_coeff[b, e])
+        # half of F on each node; v is the mean of both, e = x_j − x_i
+        d_first = 0.5 * (d_velocity / (2.0 * dt) - d_edge)
+        d_second = 0.5 * (d_velocity / (2.0 * dt) + d_edge)
+        self.system.rhs[b, i] -= 0.5 * force
+        self.system.rhs[b, j] -= 0.5 * force
+        self.add_block(b, self.edge_slot[e, 0], -d_first)
+        self.add_block(b, self.edge_slot[e, 1], -d_second)
+        self.add_block(b, self.edge_slot[e, 2], -d_first)
+        self.add_block(b, self.edge_slot[e, 3], -d_second)
+
+    @ti.func
+    def add_jet(self, b, k, dt):
+        n1, n2 = self.jet_quads[k, 0], self.jet_quads[k, 1]
+        n3, n4 = self.jet_quads[k, 2], self.jet_quads[k, 3]
+        old_area = ti.abs(fluid.quad_signed_area(self.previous[b, n1], self.previous[b, n2],
+                                                 self.previous[b, n3], self.previous[b, n4]))
+        force, d_centre, d1, d2, d3, d4 = fluid.jet(
+            self.positions[b, CENTRE], self.positions[b, n1], self.positions[b, n2],
+            self.positions[b, n3], self.positions[b, n4], old_area, dt, self.jet_alpha[b],
+            self.fluid_density[b], self.jet_always[b])
+        self.system.rhs[b, CENTRE] -= force
+        self.add_block(b, self.jet_slot[k, 0], -d_centre)
+        self.add_block(b, self.jet_slot[k, 1], -d1)
+        self.add_block(b, self.jet_slot[k, 2], -d2)
+        self.add_block(b, self.jet_slot[k, 3], -d3)
+        self.add_block(b, self.jet_slot[k, 4], -d4)
+
+    # ---------------------------------------------------------------- time stepping
+    @ti.func
+    def newton_step(self, b, step_number, terms: ti.template()):
+        """Advance instance b from step_number − 1 to step_number (Eq. 4, natural curvature at
+        t_{k+1}, predictor q_k + h·v_k); on failure restore the last accepted state and set the
+        status and the failure step."""
+        dt = self.dt[None]
+        target_curvature = 0.0
+        if ti.static(terms & TERM_ACTUATION):
+            target_curvature = self.natural_curvature_target(b, step_number * dt)
+        for n in range(self.n_nodes):
+            self.previous[b, n] = self.positions[b, n]
+            self.positions[b, n] += dt * self.velocities[b, n]
+        iterations = 0
+        converged = 0
+        finite = 1
+        while iterations < self.max_newton[None] and converged == 0 and finite == 1:
+            self.assemble(b, target_curvature, terms)
+            self.system.factor(b)
+            self.system.solve(b)
+            largest_update = 0.0
+            for n in range(self.n_nodes):
+                update = self.system.rhs[b, n]
+                self.positions[b, n] -= update
+                largest_update = ti.max(largest_update, ti.abs(update[0]), ti.abs(update[1]))
+                if not (ti.abs(update[0]) < FINITE_LIMIT and ti.abs(update[1]) < FINITE_LIMIT):
+                    finite = 0
+            iterations += 1
+            if finite == 1 and largest_update <= self.newton_tol[None]:
+                converged = 1
+        self.newton_total[b] += iterations
+        self.newton_max[b] = ti.max(self.newton_max[b], iterations)
+        if converged == 1:
+            for n in range(self.n_nodes):
+                self.velocities[b, n] = (self.positions[b, n] - self.previous[b, n]) / dt
+            self.steps_done[b] = step_number
+        else:
+            self.status[b] = STATUS_NON_FINITE if finite == 0 else STATUS_NEWTON_FAILED
+            self.failure_step[b] = step_number
+            for n in range(self.n_nodes):
+                self.positions[b, n] = self.previous[b, n]
+
+    @ti.kernel
+    def advance(self, first_step: ti.i32, n_steps: ti.i32, terms: ti.template()):
+        """Advance every live instance from step first_step by n_steps steps in one launch;
+        `terms` is the TERM_* bitmask of the force terms to compile in."""
+        for b in range(self.capacity):
+            for s in range(n_steps):
+                if self.status[b] == STATUS_OK:
+                    self.newton_step(b, first_step + s + 1, terms)
+
+    @ti.kernel
+    def compute_centroids(self):
+        """centroids[b] = mass-weighted mean of the current node positions (design §3)."""
+        for b in range(self.capacity):
+            weighted = ti.Vector.zero(float, 2)
+            total = 0.0
+            for n in range(self.n_nodes):
+                weighted += self.mass[b, n] * self.positions[b, n]
+                total += self.mass[b, n]
+            self.centroids[b] = weighted / total

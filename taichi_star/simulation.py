@@ -1,0 +1,192 @@
+"""The public entry point: `simulate` a batch of StarParams and get pandas tables back."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Optional, Sequence
+
+import numpy as np
+import pandas as pd
+import taichi as ti
+from taichi.lang.util import to_numpy_type
+
+from .engine import STATUS_NAMES, STATUS_OK, BatchEngine, terms_used
+from .geometry import Topology
+from .metrics import METERS_TO_MM, swimming_metrics
+from .metrics import centroid as centroid_of
+from .model import build_model
+from .params import SolverConfig, StarParams
+
+ARCHS = {"cpu": "cpu", "gpu": "gpu", "cuda": "cuda", "vulkan": "vulkan", "metal": "metal"}
+STEPS_PER_LAUNCH = 50
+"""Steps fused into one kernel launch: enough to hide launch cost, few enough for a live
+progress bar."""
+
+_runtime = {"arch": None, "precision": None}
+_engines = {}
+"""Engines of this Taichi runtime by (n_arc, n_limb, capacity): each compiles once per process."""
+
+
+def available_archs():
+    """The arch names `simulate` accepts on this machine."""
+    names = ["cpu"]
+    for name in ("cuda", "vulkan", "metal"):
+        if ti.lang.misc.is_arch_supported(getattr(ti, name)):
+            names.append(name)
+    if len(names) > 1:
+        names.insert(1, "gpu")
+    return names
+
+
+def ensure_taichi(arch: str = "cpu", precision: str = "f64"):
+    """Initialise Taichi once per process, again only when arch or precision change.
+    Raises ValueError for an arch this machine does not have."""
+    if arch not in ARCHS:
+        raise ValueError(f"arch must be one of {sorted(ARCHS)}, got {arch!r}")
+    if _runtime["arch"] == arch and _runtime["precision"] == precision:
+        return
+    available = ["cpu"] if arch == "cpu" else available_archs()
+    if arch not in available:
+        raise ValueError(f"arch {arch!r} is not available on this machine; available: {available}")
+    ti.init(arch=getattr(ti, ARCHS[arch]), default_fp=ti.f64 if precision == "f64" else ti.f32,
+            fast_math=False, offline_cache=True, log_level=ti.WARN)
+    _runtime.update(arch=arch, precision=precision)
+    _engines.clear()
+
+
+def batch_capacity(batch_size: int) -> int:
+    """Engine capacity for a batch: the next power of two, so that batches of similar size share
+    one compiled engine (the padding instances are inactive and cost nothing)."""
+    return 1 << max(batch_size - 1, 0).bit_length()
+
+
+def get_engine(model) -> BatchEngine:
+    """The cached engine for this batch's topology and capacity (created on first use)."""
+    key = (*model.params[0].topology_key, batch_capacity(model.batch_size))
+    if key not in _engines:
+        _engines[key] = BatchEngine(model.topology, key[-1])
+    return _engines[key]
+
+
+@dataclass
+class SimulationResult:
+    summary: pd.DataFrame
+    """One row per instance, in input order: every StarParams field, the swimming metrics of
+    `metrics.swimming_metrics`, newton_iterations_mean/max, status and failure_time_s."""
+    trajectory: pd.DataFrame
+    """Long table (instance, t_s, x_mm, y_mm): the centroid relative to its start, every
+    record_every steps from t = 0 (NaN after a failure); empty when record_every = 0."""
+    shapes: Optional[np.ndarray]
+    """(n_records, B, N, 2) node positions in m at the trajectory's times, when requested."""
+    topology: Topology
+    solver: SolverConfig
+
+
+def _validate_call(params, duration_s, solver, record_every, record_shapes):
+    if isinstance(params, StarParams):
+        raise ValueError("params must be a sequence of StarParams (wrap a single one in a list)")
+    if isinstance(duration_s, bool) or not isinstance(duration_s, (int, float)) \
+            or not math.isfinite(duration_s) or duration_s <= 0:
+        raise ValueError(f"duration_s must be a finite number > 0 s, got {duration_s!r}")
+    if not isinstance(solver, SolverConfig):
+        raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
+    if isinstance(record_every, bool) or not isinstance(record_every, int) or record_every < 0:
+        raise ValueError(f"record_every must be an integer >= 0 (steps; 0 = off), got {record_every!r}")
+    if record_shapes and record_every == 0:
+        raise ValueError("record_shapes needs record_every > 0 (the stride of the shape records)")
+    n_steps = int(round(duration_s / solver.dt))
+    if n_steps < 1:
+        raise ValueError(f"duration_s must be at least one step (dt = {solver.dt} s), got {duration_s!r}")
+    return n_steps
+
+
+def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConfig = SolverConfig(),
+             arch: str = "cpu", record_every: int = 0, progress: bool = False,
+             record_shapes: bool = False) -> SimulationResult:
+    """Simulate a batch of robot instances from rest for duration_s seconds (rounded to whole
+    steps of solver.dt). Every instance may have its own parameters except the topology
+    (n_arc, n_limb). An instance whose Newton solve fails is frozen and reported in `summary`
+    (status, failure_time_s); the others are unaffected."""
+    n_steps = _validate_call(params, duration_s, solver, record_every, record_shapes)
+    model = build_model(params)
+    ensure_taichi(arch, solver.precision)
+    engine = get_engine(model)
+    engine.load(model, solver)
+    terms = terms_used(model)
+    centroids, shapes = [], []
+
+    def record():
+        engine.compute_centroids()
+        centroids.append(engine.centroids.to_numpy()[:model.batch_size])
+        if record_shapes:
+            shapes.append(engine.positions.to_numpy()[:model.batch_size])
+
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+        bar = tqdm(total=n_steps, unit="step", desc=f"{model.batch_size} robots")
+    if record_every:
+        record()
+    step = 0
+    while step < n_steps:
+        # a launch never runs past a record point, so records are taken between launches
+        count = min(STEPS_PER_LAUNCH, n_steps - step)
+        if record_every:
+            count = min(count, record_every - step % record_every)
+        engine.advance(step, count, terms)
+        step += count
+        if record_every and step % record_every == 0:
+            record()
+        if bar is not None:
+            bar.update(count)
+    if bar is not None:
+        bar.close()
+    return _collect(engine, model, solver, n_steps, record_every, centroids, shapes)
+
+
+def _collect(engine, model, solver, n_steps, record_every, centroids, shapes):
+    batch = model.batch_size
+    engine.compute_centroids()
+    final = engine.centroids.to_numpy()[:batch].astype(np.float64)
+    start = centroid_of(model.rest_positions, model.mass)
+    status = engine.status.to_numpy()[:batch]
+    failure_step = engine.failure_step.to_numpy()[:batch]
+    steps_done = engine.steps_done.to_numpy()[:batch]
+    newton_total = engine.newton_total.to_numpy()[:batch]
+    attempted = steps_done + (status != STATUS_OK)
+    duration = n_steps * solver.dt
+    rows = {name: [getattr(p, name) for p in model.params] for name in StarParams.field_names()}
+    rows.update(swimming_metrics(final - start, duration, [p.gait for p in model.params]))
+    rows["newton_iterations_mean"] = newton_total / np.maximum(attempted, 1)
+    rows["newton_iterations_max"] = engine.newton_max.to_numpy()[:batch]
+    rows["status"] = [STATUS_NAMES[s] for s in status]
+    failed = status != STATUS_OK
+    rows["failure_time_s"] = np.where(failed, failure_step * solver.dt, np.nan)
+    summary = pd.DataFrame(rows)
+    for column in ("displacement_x_mm", "displacement_y_mm", "speed_mm_s", "signed_speed_mm_s",
+                   "heading_deg"):
+        summary.loc[failed, column] = np.nan
+
+    trajectory = pd.DataFrame({"instance": pd.Series(dtype=int), "t_s": pd.Series(dtype=float),
+                               "x_mm": pd.Series(dtype=float), "y_mm": pd.Series(dtype=float)})
+    shape_array = None
+    if record_every:
+        n_records = len(centroids)
+        times = np.arange(n_records) * record_every * solver.dt
+        record_steps = np.arange(n_records) * record_every
+        # a frozen instance keeps its last good state: its records from the failure on are NaN
+        after_failure = failed[:, None] & (record_steps[None, :] >= failure_step[:, None])
+        relative = (np.stack(centroids, axis=1).astype(np.float64) - start[:, None, :]) * METERS_TO_MM
+        relative[after_failure] = np.nan
+        trajectory = pd.DataFrame({
+            "instance": np.repeat(np.arange(batch), n_records),
+            "t_s": np.tile(times, batch),
+            "x_mm": relative[:, :, 0].ravel(),
+            "y_mm": relative[:, :, 1].ravel(),
+        })
+        if shapes:
+            shape_array = np.stack(shapes).astype(np.float64)
+            shape_array[after_failure.T] = np.nan
+    return SimulationResult(summary=summary, trajectory=trajectory, shapes=shape_array,
+                            topology=model.topology, solver=solver)
