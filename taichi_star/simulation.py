@@ -14,7 +14,6 @@ from taichi.lang.util import to_numpy_type
 from .engine import STATUS_NAMES, STATUS_OK, BatchEngine, terms_used
 from .geometry import Topology
 from .metrics import METERS_TO_MM, swimming_metrics
-from .metrics import centroid as centroid_of
 from .model import build_model
 from .params import SolverConfig, StarParams
 
@@ -115,6 +114,8 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     engine.load(model, solver)
     terms = terms_used(model)
     centroids, shapes = [], []
+    engine.compute_centroids()
+    start = engine.centroids.to_numpy()[:model.batch_size].astype(np.float64)
 
     def record():
         engine.compute_centroids()
@@ -142,14 +143,13 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
             bar.update(count)
     if bar is not None:
         bar.close()
-    return _collect(engine, model, solver, n_steps, record_every, centroids, shapes)
+    return _collect(engine, model, solver, n_steps, record_every, start, centroids, shapes)
 
 
-def _collect(engine, model, solver, n_steps, record_every, centroids, shapes):
+def _collect(engine, model, solver, n_steps, record_every, start, centroids, shapes):
     batch = model.batch_size
     engine.compute_centroids()
     final = engine.centroids.to_numpy()[:batch].astype(np.float64)
-    start = centroid_of(model.rest_positions, model.mass)
     status = engine.status.to_numpy()[:batch]
     failure_step = engine.failure_step.to_numpy()[:batch]
     steps_done = engine.steps_done.to_numpy()[:batch]

@@ -7,9 +7,6 @@ node derivatives. Lengths in m, stiffnesses per unit height (N for E·r0, N·m²
 
 import taichi as ti
 
-vec2 = ti.math.vec2
-mat2 = ti.math.mat2
-
 
 @ti.func
 def stretch_energy(edge, rest_length, stiffness):
@@ -48,10 +45,10 @@ def bend_energy(edge1, edge2, voronoi_length, natural_curvature, bending_stiffne
 def angle_gradient_hessian(edge):
     """Gradient (2,) and Hessian (2, 2) of the edge's polar angle θ = atan2(e_y, e_x)."""
     squared = edge.dot(edge)
-    gradient = vec2(-edge[1], edge[0]) / squared
+    gradient = ti.Vector([-edge[1], edge[0]]) / squared
     xy = 2.0 * edge[0] * edge[1]
     diff = edge[1] * edge[1] - edge[0] * edge[0]
-    return gradient, mat2([[xy, diff], [diff, -xy]]) / (squared * squared)
+    return gradient, ti.Matrix([[xy, diff], [diff, -xy]]) / (squared * squared)
 
 
 @ti.func

@@ -7,9 +7,6 @@ lives in the engine's inertia term. Forces in N/m (per unit height), velocities 
 
 import taichi as ti
 
-vec2 = ti.math.vec2
-mat2 = ti.math.mat2
-
 
 @ti.func
 def rod_drag(velocity, edge, parallel_coeff, perpendicular_coeff):
@@ -18,15 +15,15 @@ def rod_drag(velocity, edge, parallel_coeff, perpendicular_coeff):
     edge's mean velocity and e its edge vector (the tangent's dependence on positions)."""
     length = edge.norm()
     tangent = edge / length
-    normal = vec2(-tangent[1], tangent[0])
+    normal = ti.Vector([-tangent[1], tangent[0]])
     along = velocity.dot(tangent)
     across = velocity.dot(normal)
     force = -(parallel_coeff * ti.abs(along) * along * tangent
               + perpendicular_coeff * ti.abs(across) * across * normal)
     d_velocity = -2.0 * (parallel_coeff * ti.abs(along) * tangent.outer_product(tangent)
                          + perpendicular_coeff * ti.abs(across) * normal.outer_product(normal))
-    rotation = mat2([[0.0, -1.0], [1.0, 0.0]])
-    rotated_velocity = vec2(velocity[1], -velocity[0])
+    rotation = ti.Matrix([[0.0, -1.0], [1.0, 0.0]])
+    rotated_velocity = ti.Vector([velocity[1], -velocity[0]])
     d_tangent = -(parallel_coeff * (2.0 * ti.abs(along) * tangent.outer_product(velocity)
                                     + ti.abs(along) * along * ti.Matrix.identity(float, 2))
                   + perpendicular_coeff * (2.0 * ti.abs(across) * normal.outer_product(rotated_velocity)
@@ -61,7 +58,7 @@ def jet(centre, x1, x2, x3, x4, old_area, dt, alpha, fluid_density, always):
     Returns f (2,) and ∂f/∂x_c, ∂f/∂x1, ∂f/∂x2, ∂f/∂x3, ∂f/∂x4 (2, 2)."""
     signed_area = quad_signed_area(x1, x2, x3, x4)
     area_rate = (ti.abs(signed_area) - old_area) / dt
-    force = vec2(0.0, 0.0)
+    force = ti.Vector([0.0, 0.0])
     d_centre = ti.Matrix.zero(float, 2, 2)
     d1 = ti.Matrix.zero(float, 2, 2)
     d2 = ti.Matrix.zero(float, 2, 2)
@@ -71,8 +68,8 @@ def jet(centre, x1, x2, x3, x4, old_area, dt, alpha, fluid_density, always):
         area_sign = 1.0 if signed_area >= 0.0 else -1.0
         diagonal13 = x3 - x1
         diagonal24 = x4 - x2
-        area_d3 = 0.5 * area_sign * vec2(diagonal24[1], -diagonal24[0])
-        area_d4 = 0.5 * area_sign * vec2(-diagonal13[1], diagonal13[0])
+        area_d3 = 0.5 * area_sign * ti.Vector([diagonal24[1], -diagonal24[0]])
+        area_d4 = 0.5 * area_sign * ti.Vector([-diagonal13[1], diagonal13[0]])
         squared_rate = alpha * alpha * area_rate * area_rate
         squared_rate_d_area = 2.0 * alpha * alpha * area_rate / dt
         opening = x2 - x3

@@ -1,0 +1,127 @@
+"""The batch engine (taichi_star.simulate) against the NumPy reference, exact invariants,
+batch independence, failure isolation and the gait directions of design §4."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import taichi_star as ts
+from taichi_star.reference import ReferenceSimulator
+
+MIXED_BATCH = [
+    ts.StarParams(gait="A1"),
+    ts.StarParams(gait="A1+A2", alpha=1.3, added_mass_coeff=0.5, jet_mode="always"),
+    ts.StarParams(gait="A1+A3+A5", youngs_modulus=8e6, limb_stiffness_ratio=50.0,
+                  drag_perpendicular=1.6, cylinder_drag=4.0, cylinder_added_mass_coeff=1.0),
+    ts.StarParams(gait="A2+A4", period=0.5, thickness=3.0e-3, joint_radius=0.022,
+                  tip_radius=0.05, drag_parallel=0.05),
+    ts.StarParams(gait="none", alpha=0.0),
+]
+
+
+def _final_shapes(params, n_steps, solver):
+    result = ts.simulate(params, n_steps * solver.dt, solver=solver, record_every=n_steps,
+                         record_shapes=True)
+    assert (result.summary.status == "ok").all()
+    return result.shapes[-1]
+
+
+def test_engine_matches_reference_after_200_steps():
+    """Design §6: ≤ 1e-8 relative on positions after 200 steps. Both sides converge Newton to
+    1e-12 m, so what remains is round-off accumulated over 200 steps (~1e-13 m), far inside
+    1e-8 × 5 cm; we also hold the error against the motion itself (the displacement from rest)."""
+    solver = ts.SolverConfig(newton_tol=1e-12)
+    engine = _final_shapes(MIXED_BATCH, 200, solver)
+    for index, params in enumerate(MIXED_BATCH):
+        reference = ReferenceSimulator(params, solver).run(200)
+        error = np.abs(engine[index] - reference[-1]).max()
+        assert error <= 1e-8 * np.abs(reference[-1]).max(), (params.gait, error)
+        motion = np.abs(reference[-1] - reference[0]).max()
+        if motion > 1e-9:  # the unactuated instance does not move; its motion is round-off
+            assert error <= 1e-6 * motion, (params.gait, error, motion)
+
+
+def test_instance_alone_equals_instance_in_batch_bitwise():
+    """One thread advances one instance with the same instructions whatever its neighbours,
+    so on the CPU the results must be identical to the last bit."""
+    batch = ts.simulate(MIXED_BATCH, 0.05, record_every=10).summary
+    for index, params in enumerate(MIXED_BATCH):
+        alone = ts.simulate([params], 0.05, record_every=10).summary
+        pd.testing.assert_frame_equal(alone.reset_index(drop=True),
+                                      batch.iloc[[index]].reset_index(drop=True),
+                                      check_exact=True)
+
+
+def test_rest_shape_stays_at_rest_without_actuation():
+    """Zero force at rest: an unactuated robot in its rest shape does not move (up to the
+    round-off of the rest curvatures, ~1e-13 1/m, which Newton resolves well below 1e-12 m)."""
+    result = ts.simulate([ts.StarParams(gait="none")], 0.05, record_every=50, record_shapes=True)
+    drift = np.abs(result.shapes[-1] - result.shapes[0]).max()
+    assert drift < 1e-12
+    assert result.summary.newton_iterations_max.iloc[0] <= 2
+
+
+def test_centroid_is_fixed_without_fluid():
+    """With every fluid term off, the actuation is internal: linear momentum stays zero, so the
+    mass-weighted centroid cannot move. Each step's Newton update zeroes the summed residual
+    exactly (it is linear in q), so the drift is round-off: ≪ 1e-9 mm over a cycle."""
+    dry = dict(alpha=0.0, added_mass_coeff=0.0, drag_parallel=0.0, drag_perpendicular=0.0,
+               cylinder_drag=0.0)
+    result = ts.simulate([ts.StarParams(gait=g, **dry) for g in ("A1", "A1+A2+A3")], 0.6,
+                         record_every=100)
+    assert (result.summary.status == "ok").all()
+    assert result.trajectory[["x_mm", "y_mm"]].abs().to_numpy().max() < 1e-9
+    wet = ts.simulate([ts.StarParams(gait="A1+A2+A3")], 0.6).summary
+    assert wet.speed_mm_s.iloc[0] > 1e-3, "the same gait in water must swim (test would be vacuous)"
+
+
+def test_paper_gaits_move_in_the_directions_of_design_section_4():
+    """One cycle from rest at the paper's parameters; an implementation of design §2 gives
+    A1, A1+A2, A1+A4 forward and A1+A3, A1+A3+A5 reverse, A1+A3+A5 the fastest."""
+    gaits = ["A1", "A1+A2", "A1+A3", "A1+A4", "A1+A3+A5"]
+    summary = ts.simulate([ts.StarParams(gait=g) for g in gaits], 3.15).summary
+    assert (summary.status == "ok").all()
+    signed = dict(zip(summary.gait, summary.signed_speed_mm_s))
+    assert signed["A1"] > 0 and signed["A1+A2"] > 0 and signed["A1+A4"] > 0
+    assert signed["A1+A3"] < 0 and signed["A1+A3+A5"] < 0
+    assert summary.speed_mm_s.idxmax() == gaits.index("A1+A3+A5")
+    # design §2.7: an independent implementation gives 1.5767 mm/s for A1+A2 at n_arc = 18
+    assert signed["A1+A2"] == pytest.approx(1.5767, abs=1e-4)
+
+
+def test_diverging_instance_is_flagged_and_isolated():
+    """dt = 0.5 s with E ×1000 cannot converge; it must be frozen with its failure time while
+    its neighbours give bitwise the results of a batch without it."""
+    solver = ts.SolverConfig(dt=0.5)
+    good = [ts.StarParams(gait="A1+A2"), ts.StarParams(gait="A1+A3")]
+    bad = ts.StarParams(gait="A1+A2", youngs_modulus=5e9)
+    with_bad = ts.simulate([good[0], bad, good[1]], 3.0, solver=solver, record_every=1)
+    without = ts.simulate(good, 3.0, solver=solver, record_every=1)
+    flagged = with_bad.summary.iloc[1]
+    assert flagged.status in ("newton_failed", "non_finite")
+    assert 0 < flagged.failure_time_s <= 3.0
+    assert np.isnan(flagged.speed_mm_s)
+    failed_rows = with_bad.trajectory[with_bad.trajectory.instance == 1]
+    assert failed_rows[failed_rows.t_s >= flagged.failure_time_s][["x_mm", "y_mm"]].isna().all().all()
+    pd.testing.assert_frame_equal(with_bad.summary.iloc[[0, 2]].reset_index(drop=True),
+                                  without.summary, check_exact=True)
+    assert (without.summary.status == "ok").all()
+
+
+def test_summary_and_trajectory_schema():
+    result = ts.simulate([ts.StarParams(gait="A1+A2")], 0.02, record_every=5)
+    expected = ts.StarParams.field_names() + [
+        "displacement_x_mm", "displacement_y_mm", "speed_mm_s", "signed_speed_mm_s",
+        "heading_deg", "newton_iterations_mean", "newton_iterations_max", "status",
+        "failure_time_s"]
+    assert list(result.summary.columns) == expected
+    assert list(result.trajectory.columns) == ["instance", "t_s", "x_mm", "y_mm"]
+    np.testing.assert_allclose(result.trajectory.t_s, [0, 0.005, 0.01, 0.015, 0.02])
+    assert result.trajectory.iloc[0][["x_mm", "y_mm"]].abs().max() == 0.0
+    assert ts.simulate([ts.StarParams()], 0.01).trajectory.empty
+
+
+def test_signed_speed_undefined_for_opposite_actuators():
+    summary = ts.simulate([ts.StarParams(gait="A1+A5")], 0.01).summary
+    assert np.isnan(summary.signed_speed_mm_s.iloc[0])
+    assert summary.status.iloc[0] == "ok"
