@@ -161,13 +161,14 @@ class BatchEngine:
 
     @ti.func
     def add_block(self, b, slot, value):
-        self.system.blocks[b, slot] += value
+        # load + store, not `+=` (an atomic in Taichi): one thread owns instance b
+        self.system.blocks[b, slot] = self.system.blocks[b, slot] + value
 
     @ti.func
     def add_edge_pair(self, b, e, i, j, gradient, hessian):
         """Scatter a term that depends on e = x_j − x_i alone: ∂/∂x_i = −∂/∂e."""
-        self.system.rhs[b, i] -= gradient
-        self.system.rhs[b, j] += gradient
+        self.system.rhs[b, i] = self.system.rhs[b, i] - gradient
+        self.system.rhs[b, j] = self.system.rhs[b, j] + gradient
         self.add_block(b, self.edge_slot[e, 0], hessian)
         self.add_block(b, self.edge_slot[e, 1], -hessian)
         self.add_block(b, self.edge_slot[e, 2], -hessian)
@@ -183,7 +184,7 @@ class BatchEngine:
         # inertia with added mass, Eqs. 3-4: the diagonal mass matrix over h²
         for n in range(self.n_nodes):
             scaled_mass = self.inertia[b, n] / (dt * dt)
-            self.system.rhs[b, n] += scaled_mass * (
+            self.system.rhs[b, n] = self.system.rhs[b, n] + scaled_mass * (
                 self.positions[b, n] - self.previous[b, n] - dt * self.velocities[b, n])
             self.add_block(b, self.diagonal_slot[n], scaled_mass * identity)
         # stretching, §III-A: E_s = ½ E r0 ε² Δl̄ on every edge
@@ -205,7 +206,7 @@ class BatchEngine:
         if ti.static(terms & TERM_CYLINDER_DRAG):
             velocity = (self.positions[b, CENTRE] - self.previous[b, CENTRE]) / dt
             force, d_velocity = fluid.cylinder_drag(velocity, self.cylinder_drag_coeff[b])
-            self.system.rhs[b, CENTRE] -= force
+            self.system.rhs[b, CENTRE] = self.system.rhs[b, CENTRE] - force
             self.add_block(b, self.diagonal_slot[CENTRE], -d_velocity / dt)
         # jet, Eq. 2, every inter-limb space pushing on the centre
         if ti.static(terms & TERM_JET):
@@ -225,9 +226,9 @@ class BatchEngine:
             self.positions[b, j] - self.positions[b, i], self.positions[b, k] - self.positions[b, j],
             self.voronoi_length[b, t], natural, self.bend_stiffness[b, t])
         # e1 = x_j − x_i, e2 = x_k − x_j: node derivatives by the incidence of the two edges
-        self.system.rhs[b, i] -= g1
-        self.system.rhs[b, j] += g1 - g2
-        self.system.rhs[b, k] += g2
+        self.system.rhs[b, i] = self.system.rhs[b, i] - g1
+        self.system.rhs[b, j] = self.system.rhs[b, j] + g1 - g2
+        self.system.rhs[b, k] = self.system.rhs[b, k] + g2
         h21 = h12.transpose()
         self.add_block(b, self.triplet_slot[t, 0], h11)
         self.add_block(b, self.triplet_slot[t, 1], h12 - h11)
@@ -250,8 +251,8 @@ class BatchEngine:
         # half of F on each node; v is the mean of both, e = x_j − x_i
         d_first = 0.5 * (d_velocity / (2.0 * dt) - d_edge)
         d_second = 0.5 * (d_velocity / (2.0 * dt) + d_edge)
-        self.system.rhs[b, i] -= 0.5 * force
-        self.system.rhs[b, j] -= 0.5 * force
+        self.system.rhs[b, i] = self.system.rhs[b, i] - 0.5 * force
+        self.system.rhs[b, j] = self.system.rhs[b, j] - 0.5 * force
         self.add_block(b, self.edge_slot[e, 0], -d_first)
         self.add_block(b, self.edge_slot[e, 1], -d_second)
         self.add_block(b, self.edge_slot[e, 2], -d_first)
@@ -267,7 +268,7 @@ class BatchEngine:
             self.positions[b, CENTRE], self.positions[b, n1], self.positions[b, n2],
             self.positions[b, n3], self.positions[b, n4], old_area, dt, self.jet_alpha[b],
             self.fluid_density[b], self.jet_always[b])
-        self.system.rhs[b, CENTRE] -= force
+        self.system.rhs[b, CENTRE] = self.system.rhs[b, CENTRE] - force
         self.add_block(b, self.jet_slot[k, 0], -d_centre)
         self.add_block(b, self.jet_slot[k, 1], -d1)
         self.add_block(b, self.jet_slot[k, 2], -d2)
@@ -286,7 +287,7 @@ class BatchEngine:
             target_curvature = self.natural_curvature_target(b, step_number * dt)
         for n in range(self.n_nodes):
             self.previous[b, n] = self.positions[b, n]
-            self.positions[b, n] += dt * self.velocities[b, n]
+            self.positions[b, n] = self.positions[b, n] + dt * self.velocities[b, n]
         iterations = 0
         converged = 0
         finite = 1
@@ -297,14 +298,14 @@ class BatchEngine:
             largest_update = 0.0
             for n in range(self.n_nodes):
                 update = self.system.rhs[b, n]
-                self.positions[b, n] -= update
+                self.positions[b, n] = self.positions[b, n] - update
                 largest_update = ti.max(largest_update, ti.abs(update[0]), ti.abs(update[1]))
                 if not (ti.abs(update[0]) < FINITE_LIMIT and ti.abs(update[1]) < FINITE_LIMIT):
                     finite = 0
             iterations += 1
             if finite == 1 and largest_update <= self.newton_tol[None]:
                 converged = 1
-        self.newton_total[b] += iterations
+        self.newton_total[b] = self.newton_total[b] + iterations
         self.newton_max[b] = ti.max(self.newton_max[b], iterations)
         if converged == 1:
             for n in range(self.n_nodes):

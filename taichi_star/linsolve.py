@@ -8,6 +8,10 @@ list of block operations of the factorisation. The numeric factorisation and the
 functions that replay that list for one instance; each entry of the pattern is a 2×2 block (one
 node's x, y against another's), stored in a field with a leading batch axis.
 
+Every update of a field element is written as an explicit load and store: Taichi turns `+=` on
+a global field into an atomic, which costs several times more on the CPU and is never needed
+here (one thread owns one instance).
+
 This is the "fixed-pattern sparse store" of design §5: a band is the special case of a chain
 order; measured against a bordered band in `BlockPattern.factor_flops`.
 """
@@ -170,7 +174,8 @@ class BlockSystem:
                 lower_block = self.blocks[b, self.lower_slot[start + a]]
                 for c in range(count):
                     target = self.update_slot[update + a * count + c]
-                    self.blocks[b, target] -= lower_block @ self.blocks[b, self.upper_slot[start + c]]
+                    upper_block = self.blocks[b, self.upper_slot[start + c]]
+                    self.blocks[b, target] = self.blocks[b, target] - lower_block @ upper_block
 
     @ti.func
     def solve(self, b):
@@ -180,7 +185,8 @@ class BlockSystem:
             start = self.neighbour_start[p]
             for a in range(start, self.neighbour_start[p + 1]):
                 neighbour = self.neighbour_node[a]
-                self.rhs[b, neighbour] -= self.blocks[b, self.lower_slot[a]] @ self.rhs[b, node]
+                lower_block = self.blocks[b, self.lower_slot[a]]
+                self.rhs[b, neighbour] = self.rhs[b, neighbour] - lower_block @ self.rhs[b, node]
         for reverse in range(self.n_nodes):
             p = self.n_nodes - 1 - reverse
             node = self.order[p]
