@@ -1,0 +1,101 @@
+"""Validation of the public parameters and of `simulate`'s arguments: every bad input is a
+ValueError naming the field, raised before any compute."""
+
+import math
+
+import numpy as np
+import pytest
+
+import taichi_star as ts
+from taichi_star.actuation import (forward_direction, gait_mask, parse_gait, symmetry_classes,
+                                   transform_gait)
+from taichi_star.geometry import build_topology
+
+
+@pytest.mark.parametrize("field,value", [
+    ("youngs_modulus", -5e6), ("youngs_modulus", 0.0), ("youngs_modulus", math.nan),
+    ("limb_stiffness_ratio", 0.0), ("period", math.inf), ("period", 0.1), ("thickness", -1e-3),
+    ("actuator_density", 0.0), ("foam_density", -1.0), ("fluid_density", math.nan),
+    ("cylinder_mass_per_height", 0.0), ("cylinder_diameter", -0.03), ("joint_radius", 0.0),
+    ("joint_radius", 0.03), ("tip_radius", 0.02), ("alpha", -0.1), ("alpha", math.nan),
+    ("added_mass_coeff", -1.0), ("drag_parallel", -0.01), ("drag_perpendicular", math.inf),
+    ("cylinder_drag", -10.0), ("cylinder_added_mass_coeff", -1.0), ("n_arc", 1),
+    ("n_arc", 18.0), ("n_limb", 0), ("jet_mode", "sometimes"), ("youngs_modulus", "5e6"),
+])
+def test_star_params_rejects_bad_values_naming_the_field(field, value):
+    with pytest.raises(ValueError, match=field):
+        ts.StarParams(**{field: value})
+
+
+@pytest.mark.parametrize("gait", ["A9", "A1+A1", "", "A1+", "B2", "A1 A2", "A0", 3])
+def test_unknown_gaits_are_rejected(gait):
+    with pytest.raises(ValueError, match="gait"):
+        ts.StarParams(gait=gait)
+
+
+@pytest.mark.parametrize("field,value", [
+    ("dt", 0.0), ("dt", -1e-3), ("dt", math.nan), ("dt", 2.0), ("newton_tol", 0.0),
+    ("newton_tol", math.inf), ("max_newton", 0), ("max_newton", 2.5), ("precision", "f16"),
+])
+def test_solver_config_rejects_bad_values(field, value):
+    with pytest.raises(ValueError, match=field):
+        ts.SolverConfig(**{field: value})
+
+
+def test_f32_needs_a_tolerance_it_can_resolve():
+    with pytest.raises(ValueError, match="newton_tol"):
+        ts.SolverConfig(precision="f32")
+    assert ts.SolverConfig(precision="f32", newton_tol=1e-7).precision == "f32"
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    (dict(params=[]), "empty"),
+    (dict(params=[ts.StarParams(), ts.StarParams(n_arc=36)]), "n_arc"),
+    (dict(params=ts.StarParams()), "sequence"),
+    (dict(params=[ts.StarParams(), "A1"]), r"params\[1\]"),
+    (dict(duration_s=0.0), "duration_s"),
+    (dict(duration_s=-1.0), "duration_s"),
+    (dict(duration_s=math.nan), "duration_s"),
+    (dict(duration_s=1e-5), "duration_s"),
+    (dict(record_every=-1), "record_every"),
+    (dict(record_shapes=True), "record_shapes"),
+    (dict(arch="tpu"), "arch"),
+    (dict(solver="fast"), "solver"),
+])
+def test_simulate_rejects_bad_arguments(kwargs, match):
+    arguments = dict(params=[ts.StarParams()], duration_s=0.01)
+    arguments.update(kwargs)
+    with pytest.raises(ValueError, match=match):
+        ts.simulate(**arguments)
+
+
+def test_gait_parsing_and_forward_direction():
+    assert parse_gait("A3+A1") == (1, 3)
+    assert parse_gait("none") == ()
+    assert gait_mask("A1+A8").tolist() == [1, 0, 0, 0, 0, 0, 0, 1]
+    np.testing.assert_allclose(forward_direction("A1+A3"), [np.sqrt(0.5), np.sqrt(0.5)])
+    assert forward_direction("A1+A5") is None
+    assert forward_direction("none") is None
+
+
+def test_symmetry_classes_partition_the_255_gaits():
+    classes = symmetry_classes()
+    members = [m for _, group in classes for m in group]
+    assert len(classes) == 29
+    assert len(members) == len(set(members)) == 255
+    for representative, group in classes:
+        assert representative in group
+        for rotation in range(8):
+            for reflect in (False, True):
+                assert transform_gait(representative, rotation, reflect) in group
+
+
+def test_default_topology_is_the_papers():
+    topology = build_topology(ts.StarParams())
+    assert (topology.n_nodes, topology.n_edges, topology.n_triplets) == (193, 200, 192)
+    radii = np.hypot(*topology.rest_positions.T)
+    assert radii.max() == pytest.approx(0.052)
+    # the arcs bulge inwards but stay outside the cylinder (radius 15 mm)
+    assert np.sort(radii)[1] > 0.015
+    arc = topology.triplet_actuator >= 0
+    assert np.all(topology.rest_curvature[arc] < 0)
