@@ -6,8 +6,9 @@ under the octagon's 8 rotations and 8 reflections, design §3) and expanded back
 
 Writes `gaits.csv` (one row per gait: gait, class_representative, class_size, rotation and
 reflection mapping the representative onto it, speed, signed speed, heading and heading relative
-to the gait's forward direction, status), `gaits_classes.csv` (the 29 simulated instances, full
-summary) and `gaits.png` (the classes ranked by speed, each bar with an actuator pictogram).
+to the gait's forward direction (NaN for a gait that does not move), status),
+`gaits_classes.csv` (the 29 simulated instances, full summary) and `gaits.png` (the classes
+ranked by speed, each bar with an actuator pictogram).
 
 From Python: `expand_classes(summary)` maps a summary of the class representatives onto all 255
 gaits; `symmetry_map(rep, gait)` gives the octagon symmetry taking one gait onto another.
@@ -29,6 +30,11 @@ from . import common
 from .fig4c import parse_overrides
 
 DESCRIPTION = "All 255 gaits, one simulation per octagon symmetry class (29), ranked by speed."
+
+ZERO_SPEED_MM_S = 1e-9
+"""Below this speed (mm/s; ~1e-8 mm over a few cycles, the solver's resolution) a gait is taken
+as not moving at all, as the symmetric gaits without a forward direction do, and its heading is
+reported as NaN rather than the direction of round-off."""
 
 GAITS_COLUMNS = ["gait", "class_representative", "class_size", "rotation", "reflected",
                  "speed_mm_s", "signed_speed_mm_s", "steady_speed_mm_s",
@@ -87,8 +93,9 @@ def expand_classes(summary: pd.DataFrame, classes=None) -> pd.DataFrame:
         ok = source["status"] == "ok"
         for gait in members:
             rotation, reflect = symmetry_map(rep, gait)
+            moving = ok and float(source["speed_mm_s"]) >= ZERO_SPEED_MM_S
             heading = transform_heading(float(source["heading_deg"]), rotation, reflect) \
-                if ok else math.nan
+                if moving else math.nan
             rows.append({
                 "gait": gait, "class_representative": rep, "class_size": len(members),
                 "rotation": rotation, "reflected": reflect,
