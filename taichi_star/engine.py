@@ -96,6 +96,7 @@ class BatchEngine:
         self.dt = _field(float, ())
         self.newton_tol = _field(float, ())
         self.max_newton = _field(ti.i32, ())
+        self.max_substep_halvings = _field(ti.i32, ())
 
         per_edge, per_triplet, per_node = ((capacity, n) for n in (self.n_edges, self.n_triplets,
                                                                    self.n_nodes))
@@ -118,6 +119,15 @@ class BatchEngine:
         self.positions = ti.Vector.field(2, float, shape=per_node)
         self.previous = ti.Vector.field(2, float, shape=per_node)
         self.velocities = ti.Vector.field(2, float, shape=per_node)
+        self.previous_velocities = ti.Vector.field(2, float, shape=per_node)
+        self.inertia_offset = ti.Vector.field(2, float, shape=per_node)
+        self.velocity_offset = ti.Vector.field(2, float, shape=per_node)
+        self.backup_positions = ti.Vector.field(2, float, shape=per_node)
+        self.backup_velocities = ti.Vector.field(2, float, shape=per_node)
+        self.previous_areas = _field(float, (capacity, N_ACTUATORS))
+        self.area_rate_offset = _field(float, (capacity, N_ACTUATORS))
+        self.history_valid = ti.field(ti.i32, shape=capacity)
+        self.substep_retries = ti.field(ti.i32, shape=capacity)
         self.status = ti.field(ti.i32, shape=capacity)
         self.failure_step = ti.field(ti.i32, shape=capacity)
         self.newton_total = ti.field(ti.i64, shape=capacity)
@@ -145,6 +155,9 @@ class BatchEngine:
         self.newton_total.fill(0)
         self.newton_max.fill(0)
         self.steps_done.fill(0)
+        self.history_valid.fill(0)
+        self.substep_retries.fill(0)
+        self.max_substep_halvings[None] = solver.max_substep_halvings
         self.dt[None] = solver.dt
         self.newton_tol[None] = solver.newton_tol
         self.max_newton[None] = solver.max_newton
@@ -175,17 +188,17 @@ class BatchEngine:
         self.add_block(b, self.edge_slot[e, 3], hessian)
 
     @ti.func
-    def assemble(self, b, target_curvature, terms: ti.template()):
-        """Residual r = M(q − q_k − h·v_k)/h² + ∇E − F_ext into rhs[b] and its Jacobian
-        M/h² + ∇²E − ∂F_ext/∂q into blocks[b], at the current iterate q = positions[b]."""
+    def assemble(self, b, target_curvature, inertia_scale, velocity_gain, terms: ti.template()):
+        """Residual r = scale·M·((q − q_k) − d) + ∇E − F_ext into rhs[b] and its Jacobian
+        scale·M + ∇²E − ∂F_ext/∂q into blocks[b], at the current iterate q = positions[b]
+        (for implicit Euler, Eq. 4: scale·M·((q − q_k) − d) = M(Δq − h·v_k)/h²)."""
         self.system.clear(b)
-        dt = self.dt[None]
         identity = ti.Matrix.identity(float, 2)
-        # inertia with added mass, Eqs. 3-4: the diagonal mass matrix over h²
+        # inertia with added mass, Eqs. 3-4: the integrator's diagonal mass term
         for n in range(self.n_nodes):
-            scaled_mass = self.inertia[b, n] / (dt * dt)
+            scaled_mass = inertia_scale * self.inertia[b, n]
             self.system.rhs[b, n] = self.system.rhs[b, n] + scaled_mass * (
-                self.positions[b, n] - self.previous[b, n] - dt * self.velocities[b, n])
+                (self.positions[b, n] - self.previous[b, n]) - self.inertia_offset[b, n])
             self.add_block(b, self.diagonal_slot[n], scaled_mass * identity)
         # stretching, §III-A: E_s = ½ E r0 ε² Δl̄ on every edge
         for e in range(self.n_edges):
@@ -201,17 +214,17 @@ class BatchEngine:
         if ti.static(terms & TERM_ROD_DRAG):
             for e in range(self.n_edges):
                 if self.edge_is_spoke[e] == 0:
-                    self.add_rod_drag(b, e, dt)
+                    self.add_rod_drag(b, e, velocity_gain)
         # cylinder drag, F^c of §III-A, on the centre
         if ti.static(terms & TERM_CYLINDER_DRAG):
-            velocity = (self.positions[b, CENTRE] - self.previous[b, CENTRE]) / dt
+            velocity = self.implicit_velocity(b, CENTRE, velocity_gain)
             force, d_velocity = fluid.cylinder_drag(velocity, self.cylinder_drag_coeff[b])
             self.system.rhs[b, CENTRE] = self.system.rhs[b, CENTRE] - force
-            self.add_block(b, self.diagonal_slot[CENTRE], -d_velocity / dt)
+            self.add_block(b, self.diagonal_slot[CENTRE], -velocity_gain * d_velocity)
         # jet, Eq. 2, every inter-limb space pushing on the centre
         if ti.static(terms & TERM_JET):
             for k in range(N_ACTUATORS):
-                self.add_jet(b, k, dt)
+                self.add_jet(b, k, velocity_gain)
 
     @ti.func
     def add_bending(self, b, t, target_curvature, terms: ti.template()):
@@ -241,16 +254,16 @@ class BatchEngine:
         self.add_block(b, self.triplet_slot[t, 8], h22)
 
     @ti.func
-    def add_rod_drag(self, b, e, dt):
+    def add_rod_drag(self, b, e, velocity_gain):
         i, j = self.edges[e, 0], self.edges[e, 1]
-        velocity = (self.positions[b, i] + self.positions[b, j]
-                    - self.previous[b, i] - self.previous[b, j]) / (2.0 * dt)
+        velocity = 0.5 * (self.implicit_velocity(b, i, velocity_gain)
+                          + self.implicit_velocity(b, j, velocity_gain))
         force, d_velocity, d_edge = fluid.rod_drag(
             velocity, self.positions[b, j] - self.positions[b, i],
             self.drag_parallel_coeff[b, e], self.drag_perpendicular_coeff[b, e])
         # half of F on each node; v is the mean of both, e = x_j − x_i
-        d_first = 0.5 * (d_velocity / (2.0 * dt) - d_edge)
-        d_second = 0.5 * (d_velocity / (2.0 * dt) + d_edge)
+        d_first = 0.5 * (0.5 * velocity_gain * d_velocity - d_edge)
+        d_second = 0.5 * (0.5 * velocity_gain * d_velocity + d_edge)
         self.system.rhs[b, i] = self.system.rhs[b, i] - 0.5 * force
         self.system.rhs[b, j] = self.system.rhs[b, j] - 0.5 * force
         self.add_block(b, self.edge_slot[e, 0], -d_first)
@@ -259,14 +272,13 @@ class BatchEngine:
         self.add_block(b, self.edge_slot[e, 3], -d_second)
 
     @ti.func
-    def add_jet(self, b, k, dt):
+    def add_jet(self, b, k, velocity_gain):
         n1, n2 = self.jet_quads[k, 0], self.jet_quads[k, 1]
         n3, n4 = self.jet_quads[k, 2], self.jet_quads[k, 3]
-        old_area = ti.abs(fluid.quad_signed_area(self.previous[b, n1], self.previous[b, n2],
-                                                 self.previous[b, n3], self.previous[b, n4]))
         force, d_centre, d1, d2, d3, d4 = fluid.jet(
             self.positions[b, CENTRE], self.positions[b, n1], self.positions[b, n2],
-            self.positions[b, n3], self.positions[b, n4], old_area, dt, self.jet_alpha[b],
+            self.positions[b, n3], self.positions[b, n4], self.previous_areas[b, k],
+            velocity_gain, self.area_rate_offset[b, k], self.jet_alpha[b],
             self.fluid_density[b], self.jet_always[b])
         self.system.rhs[b, CENTRE] = self.system.rhs[b, CENTRE] - force
         self.add_block(b, self.jet_slot[k, 0], -d_centre)
@@ -277,22 +289,68 @@ class BatchEngine:
 
     # ---------------------------------------------------------------- time stepping
     @ti.func
-    def newton_step(self, b, step_number, terms: ti.template()):
-        """Advance instance b from step_number − 1 to step_number (Eq. 4, natural curvature at
-        t_{k+1}, predictor q_k + h·v_k); on failure restore the last accepted state and set the
-        status and the failure step."""
-        dt = self.dt[None]
+    def prepare_step(self, b, h, second_order):
+        """Set the integrator's terms for a step of size h from the current state q_k, v_k and
+        save that state in `previous`. The inertia residual is scale·M·((q − q_k) − d) and the
+        implicit velocity v = gain·(q − q_k) + w (the jet's Ṡ likewise), with small offsets d, w
+        so that f32 keeps the digits of the motion.
+        Implicit Euler (Eq. 4): scale 1/h², gain 1/h, d = h·v_k, w = 0.
+        BDF2: scale 9/(4h²), gain 3/(2h), d = (q_k − q_{k−1})/3 + (2h/9)(4v_k − v_{k−1}),
+        w = −(q_k − q_{k−1})/(2h). Returns (scale, gain)."""
+        inertia_scale = 1.0 / (h * h)
+        velocity_gain = 1.0 / h
+        if second_order:
+            inertia_scale = 9.0 / (4.0 * h * h)
+            velocity_gain = 1.5 / h
+        for k in range(N_ACTUATORS):
+            area = self.quad_area(b, k)
+            rate_offset = 0.0
+            if second_order:
+                rate_offset = -(area - self.previous_areas[b, k]) / (2.0 * h)
+            self.area_rate_offset[b, k] = rate_offset
+            self.previous_areas[b, k] = area
+        for n in range(self.n_nodes):
+            position = self.positions[b, n]
+            velocity = self.velocities[b, n]
+            inertia_offset = h * velocity
+            velocity_offset = ti.Vector.zero(float, 2)
+            if second_order:
+                step_back = position - self.previous[b, n]
+                inertia_offset = step_back / 3.0 + (2.0 * h / 9.0) * (
+                    4.0 * velocity - self.previous_velocities[b, n])
+                velocity_offset = -step_back / (2.0 * h)
+            self.inertia_offset[b, n] = inertia_offset
+            self.velocity_offset[b, n] = velocity_offset
+            self.previous[b, n] = position
+            self.previous_velocities[b, n] = velocity
+            self.positions[b, n] = position + h * velocity
+        return inertia_scale, velocity_gain
+
+    @ti.func
+    def quad_area(self, b, k):
+        """Area S of inter-limb space k (jet quad k) at the current positions, m²."""
+        return ti.abs(fluid.quad_signed_area(
+            self.positions[b, self.jet_quads[k, 0]], self.positions[b, self.jet_quads[k, 1]],
+            self.positions[b, self.jet_quads[k, 2]], self.positions[b, self.jet_quads[k, 3]]))
+
+    @ti.func
+    def implicit_velocity(self, b, n, velocity_gain):
+        return velocity_gain * (self.positions[b, n] - self.previous[b, n]) + self.velocity_offset[b, n]
+
+    @ti.func
+    def solve_step(self, b, end_time, h, second_order, terms: ti.template()):
+        """One implicit step of size h for instance b ending at end_time (natural curvature at
+        t_{k+1}, predictor q_k + h·v_k). Returns (converged, finite); on failure the state is
+        restored to the start of the step."""
         target_curvature = 0.0
         if ti.static(terms & TERM_ACTUATION):
-            target_curvature = self.natural_curvature_target(b, step_number * dt)
-        for n in range(self.n_nodes):
-            self.previous[b, n] = self.positions[b, n]
-            self.positions[b, n] = self.positions[b, n] + dt * self.velocities[b, n]
+            target_curvature = self.natural_curvature_target(b, end_time)
+        inertia_scale, velocity_gain = self.prepare_step(b, h, second_order)
         iterations = 0
         converged = 0
         finite = 1
         while iterations < self.max_newton[None] and converged == 0 and finite == 1:
-            self.assemble(b, target_curvature, terms)
+            self.assemble(b, target_curvature, inertia_scale, velocity_gain, terms)
             self.system.factor(b)
             self.system.solve(b)
             largest_update = 0.0
@@ -307,24 +365,68 @@ class BatchEngine:
                 converged = 1
         self.newton_total[b] = self.newton_total[b] + iterations
         self.newton_max[b] = ti.max(self.newton_max[b], iterations)
+        for n in range(self.n_nodes):
+            if converged == 1:
+                self.velocities[b, n] = self.implicit_velocity(b, n, velocity_gain)
+            else:
+                self.positions[b, n] = self.previous[b, n]
+        return converged, finite
+
+    @ti.func
+    def retry_with_substeps(self, b, start_time, terms: ti.template()):
+        """After a failed step: redo it from the saved state as 2, 4, ... 2^max_halvings implicit
+        Euler substeps. Returns (converged, finite) of the last attempt; on failure the state is
+        that of the start of the step."""
+        dt = self.dt[None]
+        for n in range(self.n_nodes):
+            self.backup_positions[b, n] = self.positions[b, n]
+            self.backup_velocities[b, n] = self.velocities[b, n]
+        converged, finite = 0, 1
+        halvings = 1
+        while converged == 0 and halvings <= self.max_substep_halvings[None]:
+            substeps = 1 << halvings
+            h = dt / substeps
+            converged = 1
+            substep = 0
+            while converged == 1 and substep < substeps:
+                converged, finite = self.solve_step(b, start_time + (substep + 1) * h, h, False,
+                                                    terms)
+                substep += 1
+            if converged == 0:
+                for n in range(self.n_nodes):
+                    self.positions[b, n] = self.backup_positions[b, n]
+                    self.velocities[b, n] = self.backup_velocities[b, n]
+                halvings += 1
+        return converged, finite
+
+    @ti.func
+    def advance_instance(self, b, step_number, second_order, terms: ti.template()):
+        """Advance instance b to step_number: one step (BDF2 once it has a history of equal
+        steps, else implicit Euler), retried with substeps if it fails; frozen with its status
+        and failure step if the retries fail too."""
+        dt = self.dt[None]
+        use_bdf2 = second_order and self.history_valid[b] == 1
+        converged, finite = self.solve_step(b, step_number * dt, dt, use_bdf2, terms)
+        self.history_valid[b] = converged
+        if converged == 0:
+            converged, finite = self.retry_with_substeps(b, (step_number - 1) * dt, terms)
+            self.substep_retries[b] = self.substep_retries[b] + 1
         if converged == 1:
-            for n in range(self.n_nodes):
-                self.velocities[b, n] = (self.positions[b, n] - self.previous[b, n]) / dt
             self.steps_done[b] = step_number
         else:
             self.status[b] = STATUS_NON_FINITE if finite == 0 else STATUS_NEWTON_FAILED
             self.failure_step[b] = step_number
-            for n in range(self.n_nodes):
-                self.positions[b, n] = self.previous[b, n]
 
     @ti.kernel
-    def advance(self, first_step: ti.i32, n_steps: ti.i32, terms: ti.template()):
+    def advance(self, first_step: ti.i32, n_steps: ti.i32, second_order: ti.template(),
+                terms: ti.template()):
         """Advance every live instance from step first_step by n_steps steps in one launch;
-        `terms` is the TERM_* bitmask of the force terms to compile in."""
+        `terms` is the TERM_* bitmask of the force terms to compile in, `second_order` selects
+        BDF2 over implicit Euler."""
         for b in range(self.capacity):
             for s in range(n_steps):
                 if self.status[b] == STATUS_OK:
-                    self.newton_step(b, first_step + s + 1, terms)
+                    self.advance_instance(b, first_step + s + 1, second_order, terms)
 
     @ti.kernel
     def compute_centroids(self):

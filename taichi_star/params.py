@@ -15,6 +15,7 @@ from .actuation import PAPER_PROFILE, parse_gait
 
 JET_MODES = ("contract", "always")
 PRECISIONS = ("f64", "f32")
+INTEGRATORS = ("euler", "bdf2")
 
 
 def _check_finite(name, value):
@@ -152,6 +153,12 @@ class SolverConfig:
     """Newton iterations per step before the instance is declared newton_failed; >= 1."""
     precision: str = "f64"
     """Floating point type of the engine: "f64" or "f32"."""
+    integrator: str = "euler"
+    """"euler": implicit Euler (paper Eq. 4, first order); "bdf2": second-order BDF (its first
+    step, and the step after a retry, are implicit Euler)."""
+    max_substep_halvings: int = 4
+    """A failed step is retried as 2, 4, ... 2^max_substep_halvings substeps before the instance
+    is declared failed; 0 disables retries; >= 0."""
 
     def __post_init__(self):
         _check_positive("dt", self.dt)
@@ -160,6 +167,8 @@ class SolverConfig:
         _check_positive("newton_tol", self.newton_tol)
         _check_int_at_least("max_newton", self.max_newton, 1)
         _check_choice("precision", self.precision, PRECISIONS)
+        _check_choice("integrator", self.integrator, INTEGRATORS)
+        _check_int_at_least("max_substep_halvings", self.max_substep_halvings, 0)
         if self.precision == "f32" and self.newton_tol < 1e-7:
             raise ValueError(f"newton_tol must be >= 1e-7 m with precision 'f32' (its rounding "
                              f"of ~5 cm positions is ~4e-9 m), got {self.newton_tol!r}")

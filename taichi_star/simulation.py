@@ -72,7 +72,8 @@ def get_engine(model) -> BatchEngine:
 class SimulationResult:
     summary: pd.DataFrame
     """One row per instance, in input order: every StarParams field, the swimming metrics of
-    `metrics.swimming_metrics`, newton_iterations_mean/max, status and failure_time_s."""
+    `metrics.swimming_metrics`, newton_iterations_mean/max, substep_retries (failed steps
+    redone with substeps), status and failure_time_s."""
     trajectory: pd.DataFrame
     """Long table (instance, t_s, x_mm, y_mm): the centroid relative to its start, every
     record_every steps from t = 0 (NaN after a failure); empty when record_every = 0."""
@@ -135,7 +136,7 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
         count = min(STEPS_PER_LAUNCH, n_steps - step)
         if record_every:
             count = min(count, record_every - step % record_every)
-        engine.advance(step, count, terms)
+        engine.advance(step, count, solver.integrator == "bdf2", terms)
         step += count
         if record_every and step % record_every == 0:
             record()
@@ -160,6 +161,7 @@ def _collect(engine, model, solver, n_steps, record_every, start, centroids, sha
     rows.update(swimming_metrics(final - start, duration, [p.gait for p in model.params]))
     rows["newton_iterations_mean"] = newton_total / np.maximum(attempted, 1)
     rows["newton_iterations_max"] = engine.newton_max.to_numpy()[:batch]
+    rows["substep_retries"] = engine.substep_retries.to_numpy()[:batch]
     rows["status"] = [STATUS_NAMES[s] for s in status]
     failed = status != STATUS_OK
     rows["failure_time_s"] = np.where(failed, failure_step * solver.dt, np.nan)

@@ -71,7 +71,7 @@ def _jet(points: ti.types.ndarray(), old_area: float, dt: float, alpha: float, d
          always: ti.i32, out: ti.types.ndarray()):
     force, d0, d1, d2, d3, d4 = fluid.jet(
         ti.Vector([points[0], points[1]]), ti.Vector([points[2], points[3]]), ti.Vector([points[4], points[5]]),
-        ti.Vector([points[6], points[7]]), ti.Vector([points[8], points[9]]), old_area, dt, alpha, density, always)
+        ti.Vector([points[6], points[7]]), ti.Vector([points[8], points[9]]), old_area, 1.0 / dt, 0.0, alpha, density, always)
     for a in ti.static(range(2)):
         out[a] = force[a]
         for c in ti.static(range(2)):

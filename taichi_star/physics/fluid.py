@@ -51,13 +51,14 @@ def quad_signed_area(x1, x2, x3, x4):
 
 
 @ti.func
-def jet(centre, x1, x2, x3, x4, old_area, dt, alpha, fluid_density, always):
+def jet(centre, x1, x2, x3, x4, old_area, rate_gain, rate_offset, alpha, fluid_density, always):
     """Jet force of one inter-limb space on the centre (Eq. 2):
-    f = −(ρ_f/L)(α·Ṡ)²·t, Ṡ = (S − S_old)/h, L = |x2 − x3|, t = unit(½(x2 + x3) − x_c),
-    only while Ṡ < 0 unless `always` (design §2.5). x1, x4 are the joints, x2, x3 the tips.
+    f = −(ρ_f/L)(α·Ṡ)²·t, L = |x2 − x3|, t = unit(½(x2 + x3) − x_c), only while Ṡ < 0 unless
+    `always` (design §2.5). The integrator's Ṡ = rate_gain·(S − S_old) + rate_offset (implicit
+    Euler: (S − S_old)/h). x1, x4 are the joints, x2, x3 the tips; areas in m², gain in 1/s.
     Returns f (2,) and ∂f/∂x_c, ∂f/∂x1, ∂f/∂x2, ∂f/∂x3, ∂f/∂x4 (2, 2)."""
     signed_area = quad_signed_area(x1, x2, x3, x4)
-    area_rate = (ti.abs(signed_area) - old_area) / dt
+    area_rate = rate_gain * (ti.abs(signed_area) - old_area) + rate_offset
     force = ti.Vector([0.0, 0.0])
     d_centre = ti.Matrix.zero(float, 2, 2)
     d1 = ti.Matrix.zero(float, 2, 2)
@@ -71,7 +72,7 @@ def jet(centre, x1, x2, x3, x4, old_area, dt, alpha, fluid_density, always):
         area_d3 = 0.5 * area_sign * ti.Vector([diagonal24[1], -diagonal24[0]])
         area_d4 = 0.5 * area_sign * ti.Vector([-diagonal13[1], diagonal13[0]])
         squared_rate = alpha * alpha * area_rate * area_rate
-        squared_rate_d_area = 2.0 * alpha * alpha * area_rate / dt
+        squared_rate_d_area = 2.0 * alpha * alpha * area_rate * rate_gain
         opening = x2 - x3
         width = opening.norm()
         opening_unit = opening / width
