@@ -97,6 +97,7 @@ class BatchEngine:
         self.newton_tol = _field(float, ())
         self.max_newton = _field(ti.i32, ())
         self.max_substep_halvings = _field(ti.i32, ())
+        self.chord = _field(ti.i32, ())
 
         per_edge, per_triplet, per_node = ((capacity, n) for n in (self.n_edges, self.n_triplets,
                                                                    self.n_nodes))
@@ -158,6 +159,7 @@ class BatchEngine:
         self.history_valid.fill(0)
         self.substep_retries.fill(0)
         self.max_substep_halvings[None] = solver.max_substep_halvings
+        self.chord[None] = int(solver.jacobian == "chord")
         self.dt[None] = solver.dt
         self.newton_tol[None] = solver.newton_tol
         self.max_newton[None] = solver.max_newton
@@ -173,61 +175,63 @@ class BatchEngine:
         return c1 / (1.0 + ti.exp(-c2 * (tau - c3))) + c4
 
     @ti.func
-    def add_block(self, b, slot, value):
+    def add_block(self, b, slot, value, jacobian):
         # load + store, not `+=` (an atomic in Taichi): one thread owns instance b
-        self.system.blocks[b, slot] = self.system.blocks[b, slot] + value
+        if jacobian:
+            self.system.blocks[b, slot] = self.system.blocks[b, slot] + value
 
     @ti.func
-    def add_edge_pair(self, b, e, i, j, gradient, hessian):
+    def add_edge_pair(self, b, e, i, j, gradient, hessian, jacobian):
         """Scatter a term that depends on e = x_j − x_i alone: ∂/∂x_i = −∂/∂e."""
         self.system.rhs[b, i] = self.system.rhs[b, i] - gradient
         self.system.rhs[b, j] = self.system.rhs[b, j] + gradient
-        self.add_block(b, self.edge_slot[e, 0], hessian)
-        self.add_block(b, self.edge_slot[e, 1], -hessian)
-        self.add_block(b, self.edge_slot[e, 2], -hessian)
-        self.add_block(b, self.edge_slot[e, 3], hessian)
+        self.add_block(b, self.edge_slot[e, 0], hessian, jacobian)
+        self.add_block(b, self.edge_slot[e, 1], -hessian, jacobian)
+        self.add_block(b, self.edge_slot[e, 2], -hessian, jacobian)
+        self.add_block(b, self.edge_slot[e, 3], hessian, jacobian)
 
     @ti.func
-    def assemble(self, b, target_curvature, inertia_scale, velocity_gain, terms: ti.template()):
-        """Residual r = scale·M·((q − q_k) − d) + ∇E − F_ext into rhs[b] and its Jacobian
-        scale·M + ∇²E − ∂F_ext/∂q into blocks[b], at the current iterate q = positions[b]
-        (for implicit Euler, Eq. 4: scale·M·((q − q_k) − d) = M(Δq − h·v_k)/h²)."""
-        self.system.clear(b)
+    def assemble(self, b, target_curvature, inertia_scale, velocity_gain, jacobian,
+                 terms: ti.template()):
+        """Residual r = scale·M·((q − q_k) − d) + ∇E − F_ext into rhs[b] and, if `jacobian`,
+        its Jacobian scale·M + ∇²E − ∂F_ext/∂q into blocks[b], at the current iterate
+        q = positions[b] (for implicit Euler, Eq. 4: scale·M·((q − q_k) − d) = M(Δq − h·v_k)/h²)."""
+        self.system.clear(b, jacobian)
         identity = ti.Matrix.identity(float, 2)
         # inertia with added mass, Eqs. 3-4: the integrator's diagonal mass term
         for n in range(self.n_nodes):
             scaled_mass = inertia_scale * self.inertia[b, n]
             self.system.rhs[b, n] = self.system.rhs[b, n] + scaled_mass * (
                 (self.positions[b, n] - self.previous[b, n]) - self.inertia_offset[b, n])
-            self.add_block(b, self.diagonal_slot[n], scaled_mass * identity)
+            self.add_block(b, self.diagonal_slot[n], scaled_mass * identity, jacobian)
         # stretching, §III-A: E_s = ½ E r0 ε² Δl̄ on every edge
         for e in range(self.n_edges):
             i, j = self.edges[e, 0], self.edges[e, 1]
             gradient, hessian = elastic.stretch_gradient_hessian(
                 self.positions[b, j] - self.positions[b, i], self.rest_length[b, e],
                 self.edge_stiffness[b, e])
-            self.add_edge_pair(b, e, i, j, gradient, hessian)
+            self.add_edge_pair(b, e, i, j, gradient, hessian, jacobian)
         # bending, §III-A: E_b = ½ (E r0³/12)(κ − κ⁰)² Δl, κ⁰ driven by Eq. 5 on actuated arcs
         for t in range(self.n_triplets):
-            self.add_bending(b, t, target_curvature, terms)
+            self.add_bending(b, t, target_curvature, jacobian, terms)
         # rod drag, Eq. 1, per non-spoke edge on the mean implicit velocity
         if ti.static(terms & TERM_ROD_DRAG):
             for e in range(self.n_edges):
                 if self.edge_is_spoke[e] == 0:
-                    self.add_rod_drag(b, e, velocity_gain)
+                    self.add_rod_drag(b, e, velocity_gain, jacobian)
         # cylinder drag, F^c of §III-A, on the centre
         if ti.static(terms & TERM_CYLINDER_DRAG):
             velocity = self.implicit_velocity(b, CENTRE, velocity_gain)
             force, d_velocity = fluid.cylinder_drag(velocity, self.cylinder_drag_coeff[b])
             self.system.rhs[b, CENTRE] = self.system.rhs[b, CENTRE] - force
-            self.add_block(b, self.diagonal_slot[CENTRE], -velocity_gain * d_velocity)
+            self.add_block(b, self.diagonal_slot[CENTRE], -velocity_gain * d_velocity, jacobian)
         # jet, Eq. 2, every inter-limb space pushing on the centre
         if ti.static(terms & TERM_JET):
             for k in range(N_ACTUATORS):
-                self.add_jet(b, k, velocity_gain)
+                self.add_jet(b, k, velocity_gain, jacobian)
 
     @ti.func
-    def add_bending(self, b, t, target_curvature, terms: ti.template()):
+    def add_bending(self, b, t, target_curvature, jacobian, terms: ti.template()):
         i, j, k = self.triplets[t, 0], self.triplets[t, 1], self.triplets[t, 2]
         natural = self.rest_curvature[b, t]
         if ti.static(terms & TERM_ACTUATION):
@@ -243,18 +247,18 @@ class BatchEngine:
         self.system.rhs[b, j] = self.system.rhs[b, j] + g1 - g2
         self.system.rhs[b, k] = self.system.rhs[b, k] + g2
         h21 = h12.transpose()
-        self.add_block(b, self.triplet_slot[t, 0], h11)
-        self.add_block(b, self.triplet_slot[t, 1], h12 - h11)
-        self.add_block(b, self.triplet_slot[t, 2], -h12)
-        self.add_block(b, self.triplet_slot[t, 3], h21 - h11)
-        self.add_block(b, self.triplet_slot[t, 4], h11 - h12 - h21 + h22)
-        self.add_block(b, self.triplet_slot[t, 5], h12 - h22)
-        self.add_block(b, self.triplet_slot[t, 6], -h21)
-        self.add_block(b, self.triplet_slot[t, 7], h21 - h22)
-        self.add_block(b, self.triplet_slot[t, 8], h22)
+        self.add_block(b, self.triplet_slot[t, 0], h11, jacobian)
+        self.add_block(b, self.triplet_slot[t, 1], h12 - h11, jacobian)
+        self.add_block(b, self.triplet_slot[t, 2], -h12, jacobian)
+        self.add_block(b, self.triplet_slot[t, 3], h21 - h11, jacobian)
+        self.add_block(b, self.triplet_slot[t, 4], h11 - h12 - h21 + h22, jacobian)
+        self.add_block(b, self.triplet_slot[t, 5], h12 - h22, jacobian)
+        self.add_block(b, self.triplet_slot[t, 6], -h21, jacobian)
+        self.add_block(b, self.triplet_slot[t, 7], h21 - h22, jacobian)
+        self.add_block(b, self.triplet_slot[t, 8], h22, jacobian)
 
     @ti.func
-    def add_rod_drag(self, b, e, velocity_gain):
+    def add_rod_drag(self, b, e, velocity_gain, jacobian):
         i, j = self.edges[e, 0], self.edges[e, 1]
         velocity = 0.5 * (self.implicit_velocity(b, i, velocity_gain)
                           + self.implicit_velocity(b, j, velocity_gain))
@@ -266,13 +270,13 @@ class BatchEngine:
         d_second = 0.5 * (0.5 * velocity_gain * d_velocity + d_edge)
         self.system.rhs[b, i] = self.system.rhs[b, i] - 0.5 * force
         self.system.rhs[b, j] = self.system.rhs[b, j] - 0.5 * force
-        self.add_block(b, self.edge_slot[e, 0], -d_first)
-        self.add_block(b, self.edge_slot[e, 1], -d_second)
-        self.add_block(b, self.edge_slot[e, 2], -d_first)
-        self.add_block(b, self.edge_slot[e, 3], -d_second)
+        self.add_block(b, self.edge_slot[e, 0], -d_first, jacobian)
+        self.add_block(b, self.edge_slot[e, 1], -d_second, jacobian)
+        self.add_block(b, self.edge_slot[e, 2], -d_first, jacobian)
+        self.add_block(b, self.edge_slot[e, 3], -d_second, jacobian)
 
     @ti.func
-    def add_jet(self, b, k, velocity_gain):
+    def add_jet(self, b, k, velocity_gain, jacobian):
         n1, n2 = self.jet_quads[k, 0], self.jet_quads[k, 1]
         n3, n4 = self.jet_quads[k, 2], self.jet_quads[k, 3]
         force, d_centre, d1, d2, d3, d4 = fluid.jet(
@@ -281,11 +285,11 @@ class BatchEngine:
             velocity_gain, self.area_rate_offset[b, k], self.jet_alpha[b],
             self.fluid_density[b], self.jet_always[b])
         self.system.rhs[b, CENTRE] = self.system.rhs[b, CENTRE] - force
-        self.add_block(b, self.jet_slot[k, 0], -d_centre)
-        self.add_block(b, self.jet_slot[k, 1], -d1)
-        self.add_block(b, self.jet_slot[k, 2], -d2)
-        self.add_block(b, self.jet_slot[k, 3], -d3)
-        self.add_block(b, self.jet_slot[k, 4], -d4)
+        self.add_block(b, self.jet_slot[k, 0], -d_centre, jacobian)
+        self.add_block(b, self.jet_slot[k, 1], -d1, jacobian)
+        self.add_block(b, self.jet_slot[k, 2], -d2, jacobian)
+        self.add_block(b, self.jet_slot[k, 3], -d3, jacobian)
+        self.add_block(b, self.jet_slot[k, 4], -d4, jacobian)
 
     # ---------------------------------------------------------------- time stepping
     @ti.func
@@ -349,9 +353,12 @@ class BatchEngine:
         iterations = 0
         converged = 0
         finite = 1
+        refactor = 1
+        previous_update = 0.0
         while iterations < self.max_newton[None] and converged == 0 and finite == 1:
-            self.assemble(b, target_curvature, inertia_scale, velocity_gain, terms)
-            self.system.factor(b)
+            self.assemble(b, target_curvature, inertia_scale, velocity_gain, refactor, terms)
+            if refactor:
+                self.system.factor(b)
             self.system.solve(b)
             largest_update = 0.0
             for n in range(self.n_nodes):
@@ -363,6 +370,12 @@ class BatchEngine:
             iterations += 1
             if finite == 1 and largest_update <= self.newton_tol[None]:
                 converged = 1
+            # chord mode keeps the factorisation while it contracts the update at least 4×
+            # per iteration (then each kept iteration saves the Jacobian's assembly and LU)
+            refactor = 1
+            if self.chord[None] == 1 and (iterations == 1 or largest_update < 0.25 * previous_update):
+                refactor = 0
+            previous_update = largest_update
         self.newton_total[b] = self.newton_total[b] + iterations
         self.newton_max[b] = ti.max(self.newton_max[b], iterations)
         for n in range(self.n_nodes):
@@ -373,49 +386,50 @@ class BatchEngine:
         return converged, finite
 
     @ti.func
-    def retry_with_substeps(self, b, start_time, terms: ti.template()):
-        """After a failed step: redo it from the saved state as 2, 4, ... 2^max_halvings implicit
-        Euler substeps. Returns (converged, finite) of the last attempt; on failure the state is
-        that of the start of the step."""
+    def advance_instance(self, b, step_number, second_order, terms: ti.template()):
+        """Advance instance b to step_number: one step (BDF2 once it has a history of equal
+        steps, else implicit Euler); if it fails, redo it from the saved start state as 2, 4,
+        ... 2^max_substep_halvings implicit Euler substeps; if those fail too, freeze the
+        instance at the start state with its status and failure step. One call site of
+        `solve_step` keeps the kernel (and its compile time) small."""
         dt = self.dt[None]
-        for n in range(self.n_nodes):
-            self.backup_positions[b, n] = self.positions[b, n]
-            self.backup_velocities[b, n] = self.velocities[b, n]
         converged, finite = 0, 1
-        halvings = 1
+        halvings = 0
         while converged == 0 and halvings <= self.max_substep_halvings[None]:
+            if halvings == 1:
+                # a failed solve_step has restored the start state: keep it for later attempts
+                for n in range(self.n_nodes):
+                    self.backup_positions[b, n] = self.positions[b, n]
+                    self.backup_velocities[b, n] = self.velocities[b, n]
+            elif halvings > 1:
+                self.restore_backup(b)
             substeps = 1 << halvings
             h = dt / substeps
+            use_bdf2 = second_order and halvings == 0 and self.history_valid[b] == 1
             converged = 1
             substep = 0
             while converged == 1 and substep < substeps:
-                converged, finite = self.solve_step(b, start_time + (substep + 1) * h, h, False,
-                                                    terms)
+                end_time = ((step_number - 1) * substeps + substep + 1) * h
+                converged, finite = self.solve_step(b, end_time, h, use_bdf2, terms)
                 substep += 1
             if converged == 0:
-                for n in range(self.n_nodes):
-                    self.positions[b, n] = self.backup_positions[b, n]
-                    self.velocities[b, n] = self.backup_velocities[b, n]
                 halvings += 1
-        return converged, finite
-
-    @ti.func
-    def advance_instance(self, b, step_number, second_order, terms: ti.template()):
-        """Advance instance b to step_number: one step (BDF2 once it has a history of equal
-        steps, else implicit Euler), retried with substeps if it fails; frozen with its status
-        and failure step if the retries fail too."""
-        dt = self.dt[None]
-        use_bdf2 = second_order and self.history_valid[b] == 1
-        converged, finite = self.solve_step(b, step_number * dt, dt, use_bdf2, terms)
-        self.history_valid[b] = converged
-        if converged == 0:
-            converged, finite = self.retry_with_substeps(b, (step_number - 1) * dt, terms)
+        self.history_valid[b] = 1 if converged == 1 and halvings == 0 else 0
+        if halvings > 0:
             self.substep_retries[b] = self.substep_retries[b] + 1
         if converged == 1:
             self.steps_done[b] = step_number
         else:
+            if halvings > 1:
+                self.restore_backup(b)
             self.status[b] = STATUS_NON_FINITE if finite == 0 else STATUS_NEWTON_FAILED
             self.failure_step[b] = step_number
+
+    @ti.func
+    def restore_backup(self, b):
+        for n in range(self.n_nodes):
+            self.positions[b, n] = self.backup_positions[b, n]
+            self.velocities[b, n] = self.backup_velocities[b, n]
 
     @ti.kernel
     def advance(self, first_step: ti.i32, n_steps: ti.i32, second_order: ti.template(),

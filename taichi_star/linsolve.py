@@ -152,9 +152,11 @@ class BlockSystem:
         self.rhs = ti.Vector.field(2, float, shape=(batch_size, plan.n_nodes))
 
     @ti.func
-    def clear(self, b):
-        for s in range(self.n_slots):
-            self.blocks[b, s] = ti.Matrix.zero(float, 2, 2)
+    def clear(self, b, blocks):
+        """Zero rhs[b] and, if `blocks`, the matrix blocks of instance b."""
+        if blocks:
+            for s in range(self.n_slots):
+                self.blocks[b, s] = ti.Matrix.zero(float, 2, 2)
         for n in range(self.n_nodes):
             self.rhs[b, n] = ti.Vector.zero(float, 2)
 

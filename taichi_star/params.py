@@ -16,6 +16,7 @@ from .actuation import PAPER_PROFILE, parse_gait
 JET_MODES = ("contract", "always")
 PRECISIONS = ("f64", "f32")
 INTEGRATORS = ("euler", "bdf2")
+JACOBIANS = ("newton", "chord")
 
 
 def _check_finite(name, value):
@@ -156,6 +157,10 @@ class SolverConfig:
     integrator: str = "euler"
     """"euler": implicit Euler (paper Eq. 4, first order); "bdf2": second-order BDF (its first
     step, and the step after a retry, are implicit Euler)."""
+    jacobian: str = "newton"
+    """"newton": Newton–Raphson, a fresh Jacobian and LU every iteration (design §2.6);
+    "chord": the step's first Jacobian is reused while it contracts the update ≥ 4× per
+    iteration (same converged solution to newton_tol, fewer factorisations)."""
     max_substep_halvings: int = 4
     """A failed step is retried as 2, 4, ... 2^max_substep_halvings substeps before the instance
     is declared failed; 0 disables retries; >= 0."""
@@ -168,6 +173,7 @@ class SolverConfig:
         _check_int_at_least("max_newton", self.max_newton, 1)
         _check_choice("precision", self.precision, PRECISIONS)
         _check_choice("integrator", self.integrator, INTEGRATORS)
+        _check_choice("jacobian", self.jacobian, JACOBIANS)
         _check_int_at_least("max_substep_halvings", self.max_substep_halvings, 0)
         if self.precision == "f32" and self.newton_tol < 1e-7:
             raise ValueError(f"newton_tol must be >= 1e-7 m with precision 'f32' (its rounding "

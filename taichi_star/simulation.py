@@ -54,10 +54,14 @@ def ensure_taichi(arch: str = "cpu", precision: str = "f64"):
     _engines.clear()
 
 
+MIN_CAPACITY = 8
+
+
 def batch_capacity(batch_size: int) -> int:
-    """Engine capacity for a batch: the next power of two, so that batches of similar size share
-    one compiled engine (the padding instances are inactive and cost nothing)."""
-    return 1 << max(batch_size - 1, 0).bit_length()
+    """Engine capacity for a batch: the next power of two, at least MIN_CAPACITY, so that
+    batches of similar size share one compiled engine (padding instances are inactive and cost
+    nothing)."""
+    return max(MIN_CAPACITY, 1 << max(batch_size - 1, 0).bit_length())
 
 
 def get_engine(model) -> BatchEngine:
