@@ -85,8 +85,11 @@ def draw_gif(shapes_csv, centroid_csv, edges_csv, gait: str, gif_path, fps: int 
 
     fig, ax = plt.subplots(figsize=(5, 5))
     ax.set_aspect("equal")
-    ax.set_xlim(-65, 65)
-    ax.set_ylim(-65, 65)
+    low = np.minimum(shapes[["x_mm", "y_mm"]].min().to_numpy(), -60.0)
+    high = np.maximum(shapes[["x_mm", "y_mm"]].max().to_numpy(), 60.0)
+    centre, half = 0.5 * (low + high), 0.5 * float((high - low).max()) + 6.0
+    ax.set_xlim(centre[0] - half, centre[0] + half)
+    ax.set_ylim(centre[1] - half, centre[1] + half)
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
     lines = LineCollection([], colors=colours, linewidths=widths)
