@@ -4,7 +4,7 @@
 
 Studies: fig4c (the paper's Fig. 4c/4b), sweep (parameter sensitivity), gaits (all 255 gaits by
 symmetry class), calibrate (fit up to two parameters to the experiment), animate (GIF of a
-cycle).
+cycle), bench (engine throughput), work_precision (run time against error).
 """
 
 STUDIES = {
@@ -13,4 +13,6 @@ STUDIES = {
     "gaits": "all 255 gaits, one simulation per symmetry class, ranked",
     "calibrate": "fit up to two parameters to the experimental speeds",
     "animate": "GIF of the robot's shape over one cycle",
+    "bench": "engine throughput: robot-steps/s against batch size and precision",
+    "work_precision": "run time against error: h, precision, tolerance, discretisation, integrator",
 }
