@@ -123,7 +123,7 @@ def test_unknown_study_and_unknown_flag(no_compute, capsys):
     assert "unknown study 'fig4d'" in capsys.readouterr().err
     assert studies_main(["sweep", "--betta", "1"]) == 2
     assert "unrecognized arguments: --betta" in capsys.readouterr().err
-    assert set(STUDIES) == {"fig4c", "sweep", "gaits", "calibrate", "animate"}
+    assert {"fig4c", "sweep", "gaits", "calibrate", "animate"} <= set(STUDIES)
 
 
 # ----------------------------------------------------------------------------- studies, quick
