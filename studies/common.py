@@ -3,8 +3,7 @@ chunks, per-cycle metrics, CSV writing.
 
 Everything here is public and usable from a notebook, e.g. a sensitivity sweep in five lines::
 
-    import taichi_star
-    from studies.common import param_product, run_batch
+    from studies.common import param_product, parse_values, run_batch
     grid = param_product({"alpha": parse_values("0.2:1.2:6"), "gait": ["A1", "A1+A2"]})
     result = run_batch(grid, cycles=3)
     result.summary[["gait", "alpha", "speed_mm_s", "steady_speed_mm_s", "status"]]
