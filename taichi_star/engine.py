@@ -70,8 +70,9 @@ class BatchEngine:
     and the solver settings are loaded by `load`, not baked into the kernels.
     `positions`, `velocities`: (capacity, N) 2-vectors, m and m/s."""
 
-    def __init__(self, topology, capacity: int):
+    def __init__(self, topology, capacity: int, instances_per_block: int = 1):
         self.capacity = capacity
+        self.instances_per_block = instances_per_block
         self.n_nodes = topology.n_nodes
         self.n_edges = topology.n_edges
         self.n_triplets = topology.n_triplets
@@ -437,6 +438,9 @@ class BatchEngine:
         """Advance every live instance from step first_step by n_steps steps in one launch;
         `terms` is the TERM_* bitmask of the force terms to compile in, `second_order` selects
         BDF2 over implicit Euler."""
+        # one instance per task on the CPU (Taichi's default grain of 32 would run a small batch
+        # on one thread); a full block of instances per GPU block
+        ti.loop_config(block_dim=self.instances_per_block)
         for b in range(self.capacity):
             for s in range(n_steps):
                 if self.status[b] == STATUS_OK:

@@ -172,3 +172,11 @@ def test_chord_jacobian_reaches_the_same_solution():
     for mode in ("newton", "chord"):
         shapes[mode] = _final_shapes(params, 300, ts.SolverConfig(jacobian=mode))
     assert np.abs(shapes["chord"] - shapes["newton"]).max() < 1e-9
+
+
+def test_worker_processes_give_bitwise_the_in_process_result():
+    params = MIXED_BATCH[:4]
+    alone = ts.simulate(params, 0.03, record_every=10)
+    split = ts.simulate(params, 0.03, record_every=10, workers=2)
+    pd.testing.assert_frame_equal(split.summary, alone.summary, check_exact=True)
+    pd.testing.assert_frame_equal(split.trajectory, alone.trajectory, check_exact=True)

@@ -99,3 +99,9 @@ def test_default_topology_is_the_papers():
     assert np.sort(radii)[1] > 0.015
     arc = topology.triplet_actuator >= 0
     assert np.all(topology.rest_curvature[arc] < 0)
+
+
+@pytest.mark.parametrize("workers", [0, -1, 1.5, True])
+def test_simulate_rejects_bad_worker_counts(workers):
+    with pytest.raises(ValueError, match="workers"):
+        ts.simulate([ts.StarParams()], 0.01, workers=workers)
