@@ -23,6 +23,11 @@ divided by the instances processed (so they include the parallel speed-up over c
 profile repeats work on a state already in cache, so under noise or when bookkeeping is small
 `bookkeeping_us` can come out slightly negative.
 
+The B sweep runs for each Newton Jacobian mode (`jacobian`: "newton" refactors every
+iteration, "chord" reuses the step's first LU while it contracts). Section "processes": the
+end-to-end `simulate(..., workers=N)` throughput at one batch size, f64 (worker processes are
+how this machine's two cores are used: Taichi's own CPU threads gained only ~1.25× here).
+
 "Skip what a scene does not need": at one batch size, the same measurement with all terms and
 with α = 0 (no jet), C_a = 0 (no added mass), drag 0 (rod and cylinder drag off), gait "none"
 (no actuation); terms that no instance uses are compiled out (`terms` column, engine.TERM_*).
@@ -62,8 +67,9 @@ import taichi as ti
 
 from taichi_star.engine import STATUS_OK, terms_used
 from taichi_star.model import build_model
-from taichi_star.params import PRECISIONS, SolverConfig, StarParams
-from taichi_star.simulation import STEPS_PER_LAUNCH, available_archs, ensure_taichi, get_engine
+from taichi_star.params import JACOBIANS, PRECISIONS, SolverConfig, StarParams
+from taichi_star.simulation import (STEPS_PER_LAUNCH, available_archs, ensure_taichi, get_engine,
+                                    simulate)
 
 from . import common
 
@@ -78,6 +84,7 @@ DEFAULT_STEPS = 100
 DEFAULT_REPEATS = 3
 """Timed windows per measurement; the fastest counts (the others were disturbed)."""
 SCENARIO_BATCH = 64
+PROCESS_BATCH = 512
 QUICK_BATCH_SIZES = "2"
 QUICK_STEPS = 5
 QUICK_SCENARIO_BATCH = 2
@@ -102,7 +109,7 @@ SCENARIOS = {
 """Scenario name -> StarParams changes from the benchmark robot (gait A1+A3, paper values)."""
 
 COLUMNS = ["machine", "cpu_model", "cores", "gpu", "arch", "section", "scenario", "terms",
-           "batch_size", "precision", "n_nodes", "dt_s", "gait", "warmup_steps", "steps",
+           "batch_size", "precision", "jacobian", "workers", "n_nodes", "dt_s", "gait", "warmup_steps", "steps",
            "repeats", "commit", "timestamp", "import_s", "setup_s", "compile_s", "time_to_first_step_s",
            "robot_steps_per_s", "real_time_factor", "step_us", "newton_iterations_mean",
            "assembly_us", "factor_us", "solve_us", "bookkeeping_us", "factor_flops",
@@ -199,11 +206,16 @@ def advance(engine, first_step: int, n_steps: int, terms: int):
     ti.sync()
 
 
-def start_batch(params, arch: str, precision: str):
+def bench_solver(precision: str, jacobian: str = "newton") -> SolverConfig:
+    """The benchmark's solver: h = 1 ms, implicit Euler, the precision's tightest usable tol."""
+    return SolverConfig(dt=DT, precision=precision, jacobian=jacobian,
+                        newton_tol=1e-10 if precision == "f64" else 1e-7)
+
+
+def start_batch(params, arch: str, precision: str, jacobian: str = "newton"):
     """(engine, model, solver, terms, setup_s): Taichi initialised, the batch's engine built
     (or reused) and loaded at rest, as `simulate` does."""
-    solver = SolverConfig(dt=DT, precision=precision,
-                          newton_tol=1e-10 if precision == "f64" else 1e-7)
+    solver = bench_solver(precision, jacobian)
     start = time.perf_counter()
     model = build_model(params)
     ensure_taichi(arch, precision)
@@ -225,10 +237,10 @@ def first_launch(engine, terms):
 
 
 def measure(params, arch: str, precision: str, steps: int, repeats: int,
-            profile_seconds: float) -> dict:
+            profile_seconds: float, jacobian: str = "newton") -> dict:
     """Throughput and phase split of one batch (see the module docstring): the best of
     `repeats` timed windows, each from rest after the warm-up steps; times in s, µs."""
-    engine, model, solver, terms, setup = start_batch(params, arch, precision)
+    engine, model, solver, terms, setup = start_batch(params, arch, precision, jacobian)
     batch = model.batch_size
     compile_s, _ = first_launch(engine, terms)
     timed = math.inf
@@ -251,13 +263,37 @@ def measure(params, arch: str, precision: str, steps: int, repeats: int,
                         timed / (steps * iterations), profile_seconds)
     assembly, factor, solve = (iterations * phase[name] for name in ("assembly", "factor", "solve"))
     flops = engine.plan.factor_flops
-    return {"gait": params[0].gait, "terms": terms, "n_nodes": engine.n_nodes, "setup_s": setup,
+    return {"gait": params[0].gait, "jacobian": jacobian, "workers": 1, "terms": terms,
+            "n_nodes": engine.n_nodes, "setup_s": setup,
             "compile_s": compile_s,
             "robot_steps_per_s": robot_steps, "real_time_factor": robot_steps * DT,
             "step_us": step_us, "newton_iterations_mean": iterations, "assembly_us": assembly,
             "factor_us": factor, "solve_us": solve,
             "bookkeeping_us": step_us - assembly - factor - solve, "factor_flops": flops,
             "factor_gflops": flops / (phase["factor"] * 1e3) if phase["factor"] > 0 else math.nan}
+
+
+def measure_processes(batch: int, workers: int, jacobian: str, steps: int, repeats: int) -> dict:
+    """End-to-end throughput of `simulate(..., workers=workers)` (f64, CPU): the best of
+    `repeats` calls of WARMUP_STEPS + steps steps from rest, after one call that starts the
+    worker processes and compiles their engines; includes splitting the batch, the processes'
+    transfers and building the tables."""
+    params = [StarParams(gait=GAIT)] * batch
+    solver = bench_solver("f64", jacobian)
+    duration = (WARMUP_STEPS + steps) * DT
+    simulate(params, duration, solver, workers=workers)
+    timed = math.inf
+    for _ in range(repeats):
+        start = time.perf_counter()
+        result = simulate(params, duration, solver, workers=workers)
+        timed = min(timed, time.perf_counter() - start)
+    if (result.summary["status"] != "ok").any():
+        raise RuntimeError("an instance failed during the benchmark: its timing is not valid")
+    robot_steps = batch * (WARMUP_STEPS + steps) / timed
+    return {"gait": GAIT, "jacobian": jacobian, "workers": workers,
+            "newton_iterations_mean": float(result.summary["newton_iterations_mean"].mean()),
+            "robot_steps_per_s": robot_steps, "real_time_factor": robot_steps * DT,
+            "step_us": 1e6 / robot_steps}
 
 
 def phase_split(engine, terms, batch, time_s, iteration_s, profile_seconds) -> dict:
@@ -347,6 +383,14 @@ def build_parser():
                              f"B = {SCENARIO_BATCH} in the first precision; 'none' skips them")
     parser.add_argument("--scenario-batch", type=int, default=None,
                         help=f"batch size of the scenarios (default {SCENARIO_BATCH})")
+    parser.add_argument("--jacobians", default=None,
+                        help=f"comma list of {', '.join(JACOBIANS)} for the B sweep and the "
+                             f"processes section (default newton,chord; --quick newton)")
+    parser.add_argument("--workers", default=None,
+                        help="comma list of worker-process counts for the end-to-end "
+                             "`simulate(workers=...)` section (default 1,2; --quick none)")
+    parser.add_argument("--process-batch", type=int, default=None,
+                        help=f"batch size of the processes section (default {PROCESS_BATCH})")
     parser.add_argument("--no-cache-probe", action="store_true",
                         help="skip the cold/warm offline-cache compile probe (two subprocesses)")
     parser.add_argument("--no-progress", action="store_true", help="print no per-row lines")
@@ -390,6 +434,25 @@ def parse_args(argv):
     if args.scenario_batch < 1:
         raise common.StudyArgumentError(f"--scenario-batch must be >= 1, got "
                                         f"{args.scenario_batch}")
+    jacobian_text = args.jacobians if args.jacobians is not None else (
+        "newton" if args.quick else ",".join(JACOBIANS))
+    args.jacobians = common.parse_values(jacobian_text, "--jacobians", str)
+    unknown = [j for j in args.jacobians if j not in JACOBIANS]
+    if unknown:
+        raise common.StudyArgumentError(f"--jacobians: unknown Jacobian mode {unknown[0]!r}; "
+                                        f"choose from {', '.join(JACOBIANS)}")
+    worker_text = args.workers if args.workers is not None else ("none" if args.quick else "1,2")
+    args.workers = ([] if worker_text.strip().lower() == "none"
+                    else common.parse_values(worker_text, "--workers", int))
+    if any(w < 1 for w in args.workers):
+        raise common.StudyArgumentError(f"--workers: every count must be >= 1, got {worker_text!r}")
+    if args.workers and args.arch != "cpu":
+        raise common.StudyArgumentError("--workers: worker processes run on the CPU; use "
+                                        "--workers none with --arch gpu")
+    if args.process_batch is None:
+        args.process_batch = PROCESS_BATCH
+    if args.process_batch < 1:
+        raise common.StudyArgumentError(f"--process-batch must be >= 1, got {args.process_batch}")
     args.cache_probe = not (args.no_cache_probe or args.quick)
     check_arch(args.arch)
     return args
@@ -418,11 +481,12 @@ def run_bench(args) -> pd.DataFrame:
                   f"robot-steps/s, compile {row.get('compile_s', math.nan):6.2f} s", flush=True)
 
     for index, precision in enumerate(args.precisions):
-        for batch in args.batch_sizes:
-            figures = measure([StarParams(gait=GAIT)] * batch, args.arch, precision, args.steps,
-                              args.repeats, profile_seconds)
-            add({"section": "batch", "scenario": "all_terms", "batch_size": batch,
-                 "precision": precision, **figures})
+        for jacobian in args.jacobians:
+            for batch in args.batch_sizes:
+                figures = measure([StarParams(gait=GAIT)] * batch, args.arch, precision,
+                                  args.steps, args.repeats, profile_seconds, jacobian)
+                add({"section": "batch", "scenario": "all_terms", "batch_size": batch,
+                     "precision": precision, **figures})
         if index == 0:
             # while this precision's runtime is live (a precision switch re-initialises Taichi)
             for scenario in args.scenarios:
@@ -431,6 +495,12 @@ def run_bench(args) -> pd.DataFrame:
                                   profile_seconds)
                 add({"section": "skip", "scenario": scenario, "batch_size": args.scenario_batch,
                      "precision": precision, **figures})
+    for workers in args.workers:
+        for jacobian in args.jacobians:
+            figures = measure_processes(args.process_batch, workers, jacobian, args.steps,
+                                        args.repeats)
+            add({"section": "processes", "scenario": "all_terms",
+                 "batch_size": args.process_batch, "precision": "f64", **figures})
     if args.cache_probe:
         for precision in args.precisions:
             for label, figures in cache_probe(args.arch, precision, args.scenario_batch).items():
@@ -452,9 +522,14 @@ def plot_bench(csv_path, png_path):
     fig.get_layout_engine().set(wspace=0.12)  # room for the real-time factor axis
 
     ax = axes[0]
-    for precision, part in sweep.groupby("precision", sort=False):
+    for (precision, jacobian), part in sweep.groupby(["precision", "jacobian"], sort=False):
         part = part.sort_values("batch_size")
-        ax.plot(part["batch_size"], part["robot_steps_per_s"], "o-", label=precision)
+        ax.plot(part["batch_size"], part["robot_steps_per_s"], "o-",
+                label=f"{precision}, {jacobian}, in-process")
+    processes = table[table["section"] == "processes"]
+    for row in processes.to_dict("records"):
+        ax.plot(row["batch_size"], row["robot_steps_per_s"], "s", markersize=8,
+                label=f"simulate(workers={row['workers']}), {row['jacobian']}, f64")
     target = TARGETS["cpu" if arch == "cpu" else "gpu"]
     ax.axhline(target, color="k", ls="--", lw=1,
                label=f"design §6 target {target:,.0f}/s")
