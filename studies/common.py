@@ -24,17 +24,16 @@ import pandas as pd
 
 import taichi_star
 from taichi_star.actuation import forward_direction
-from taichi_star.params import SolverConfig, StarParams
+from taichi_star.params import CONVERGED_DISCRETISATION, SolverConfig, StarParams
 
 DEFAULT_OUT = "results"
 
-DISCRETISATIONS = {"paper": {}, "converged": {"n_arc": 72}}
-"""`--discretisation`: "paper" = the paper's N = 193 (n_arc 18, n_limb 6); "converged" = n_arc 72
-(PROVISIONAL: design §2.7 measured ~1 % at n_arc 72 vs the extrapolated limit on an independent
-implementation; the work-precision study will name the final preset)."""
+DISCRETISATIONS = {"paper": {}, "converged": dict(CONVERGED_DISCRETISATION)}
+"""`--discretisation`: "paper" = the paper's N = 193 (n_arc 18, n_limb 6, clamped ends);
+"converged" = `StarParams.converged()` (n_arc 192 with shared actuation ends, ≤ 1 % in speed)."""
 
-DISCRETISATION_HELP = ("paper: the paper's N = 193 nodes (n_arc 18); converged: n_arc 72 "
-                       "(provisional preset, ~4x the nodes, pending the work-precision study)")
+DISCRETISATION_HELP = ("paper: the paper's N = 193 nodes (n_arc 18); converged: n_arc 192 with "
+                       "shared actuation ends (StarParams.converged(), ~8x the nodes, <= 1 %)")
 
 QUICK_DURATION_S = 0.2
 QUICK_DT = 2e-3
@@ -195,64 +194,135 @@ def steps_per_cycle(period: float, dt: float):
     return steps if steps >= 1 and abs(ratio - steps) <= 1e-9 * max(1.0, ratio) else None
 
 
-def run_batch(params: Sequence[StarParams], cycles: float = 3.0, duration_s: float = None,
-              solver: SolverConfig = SolverConfig(), arch: str = "cpu", chunk_size: int = 4096,
-              record_every: int = None, record_shapes: bool = False, progress: bool = False,
-              steady_from_cycle: int = 1):
-    """Simulate `params` and return (summary, trajectory, shapes, topologies) as a namespace.
-
-    Instances are grouped by what must be shared by one `simulate` call (topology, and the
-    duration = cycles × period when `duration_s` is None) and each group is run in chunks of at
-    most `chunk_size`; the summary comes back in input order with an `instance` column
-    (input index). When every cycle boundary is a recorded time (the default `record_every` =
-    steps per cycle), the summary also gets `steady_speed_mm_s` / `steady_signed_speed_mm_s`:
-    the speed over cycles [steady_from_cycle, cycles) (design §3), NaN where unavailable.
-    """
-    params = list(params)
-    if not params:
-        raise StudyArgumentError("empty product: no instances to simulate")
+def plan_chunks(params: Sequence[StarParams], cycles: float = 3.0, duration_s: float = None,
+                chunk_size: int = 4096) -> List[tuple]:
+    """The chunks of a batch: [(duration, [input indices])], deterministic. Instances are grouped
+    by what one `simulate` call must share (topology, and the duration = cycles × period when
+    `duration_s` is None), groups in order of first appearance, each cut into runs of at most
+    `chunk_size` instances in input order."""
     groups: Dict[tuple, List[int]] = {}
     for index, p in enumerate(params):
         duration = duration_s if duration_s is not None else cycles * p.period
         groups.setdefault((p.topology_key, round(duration, 12)), []).append(index)
+    return [(key[1], members[i:i + chunk_size]) for key, members in groups.items()
+            for i in range(0, len(members), chunk_size)]
 
-    summaries, trajectories, shapes, topologies = [], [], {}, {}
-    chunks = [(key, members[i:i + chunk_size]) for key, members in groups.items()
-              for i in range(0, len(members), chunk_size)]
+
+def run_chunk(params: Sequence[StarParams], members: Sequence[int], duration: float,
+              solver: SolverConfig = SolverConfig(), arch: str = "cpu", record_every: int = None,
+              record_shapes: bool = False, progress: bool = False, steady_from_cycle: int = 1,
+              fixed_duration: bool = False):
+    """One `simulate` call for the instances `params` (input indices `members`): the summary
+    (with `instance`, `duration_s`, `dt_s` and the steady speeds), the trajectory (instances
+    renumbered to input indices), the shapes by input index and the topology. This is the unit
+    of work of a chunked run, in process or on a Dask worker."""
+    params = list(params)
+    period = params[0].period
+    per_cycle = steps_per_cycle(period, solver.dt)
+    every = record_every
+    if every is None:
+        same_period = all(p.period == period for p in params)
+        every = per_cycle if (per_cycle and same_period and not fixed_duration) else 0
+    result = taichi_star.simulate(params, duration, solver=solver, arch=arch, record_every=every,
+                                  progress=progress, record_shapes=record_shapes)
+    summary = result.summary.copy()
+    summary.insert(0, "instance", list(members))
+    summary["duration_s"] = duration
+    summary["dt_s"] = solver.dt
+    traj = result.trajectory.copy()
+    if len(traj):
+        traj["instance"] = np.asarray(members)[traj["instance"].to_numpy(dtype=int)]
+    _add_steady(summary, traj, params, duration, steady_from_cycle)
+    shapes = {}
+    if record_shapes and result.shapes is not None:
+        shapes = {index: result.shapes[:, local] for local, index in enumerate(members)}
+    return SimpleNamespace(summary=summary, trajectory=traj, shapes=shapes,
+                           topology=result.topology)
+
+
+class InProcess:
+    """Runs chunks one after the other in this process (the default executor)."""
+    n_workers = 1
+
+    def map(self, function, tasks):
+        """Yield (task index, result) for every task (a tuple of positional arguments)."""
+        for index, task in enumerate(tasks):
+            yield index, function(*task)
+
+
+def run_batch(params: Sequence[StarParams], cycles: float = 3.0, duration_s: float = None,
+              solver: SolverConfig = SolverConfig(), arch: str = "cpu", chunk_size: int = 4096,
+              record_every: int = None, record_shapes: bool = False, progress: bool = False,
+              steady_from_cycle: int = 1, executor=None, run_dir=None, resume: bool = False,
+              description: Mapping = None):
+    """Simulate `params` and return (summary, trajectory, shapes, topologies) as a namespace.
+
+    Instances are grouped by what must be shared by one `simulate` call (topology, and the
+    duration = cycles × period when `duration_s` is None) and each group is run in chunks of at
+    most `chunk_size` (`plan_chunks`); the summary comes back in input order with an `instance`
+    column (input index). When every cycle boundary is a recorded time (the default
+    `record_every` = steps per cycle), the summary also gets `steady_speed_mm_s` /
+    `steady_signed_speed_mm_s`: the speed over cycles [steady_from_cycle, cycles) (design §3),
+    NaN where unavailable.
+
+    `executor`: where the chunks run: None = in this process, one after the other; a
+    `studies.distributed.DaskExecutor` = on Dask workers (each chunk one task, retried when its
+    worker is lost). `run_dir`: a run folder (`studies.runs`): each finished chunk's summary is
+    written there atomically as it arrives, with a manifest of the run's definition; `resume`
+    skips the chunks already there (refusing a folder holding another definition), and the
+    summary is assembled from the chunk files. With a run folder the trajectory and shapes
+    cover only the chunks computed by this call. `description` (e.g. the sweep's axes) goes into
+    the manifest for the reader.
+    """
+    params = list(params)
+    if not params:
+        raise StudyArgumentError("empty product: no instances to simulate")
+    if isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1:
+        raise StudyArgumentError(f"--chunk-size must be an integer >= 1, got {chunk_size!r}")
+    executor = executor if executor is not None else InProcess()
+    chunks = plan_chunks(params, cycles, duration_s, chunk_size)
+    folder, done = None, set()
+    if run_dir is not None:
+        from . import runs
+        folder = runs.RunFolder(run_dir)
+        manifest = runs.build_manifest(params, [m for _, m in chunks], chunk_size, cycles,
+                                       duration_s, solver, record_every, steady_from_cycle,
+                                       description=dict(description or {}), arch=arch)
+        try:
+            done = set(folder.open(manifest, resume))
+        except runs.RunFolderError as error:
+            raise StudyArgumentError(str(error)) from None
+        if done:
+            print(f"resuming {folder.path}: {len(done)} of {len(chunks)} chunks already done")
+    todo = [i for i in range(len(chunks)) if i not in done]
+    in_process = isinstance(executor, InProcess)
+    tasks = [([params[j] for j in chunks[i][1]], chunks[i][1], chunks[i][0], solver, arch,
+              record_every, record_shapes, progress and in_process, steady_from_cycle,
+              duration_s is not None) for i in todo]
+
+    summaries, trajectories, shapes, topologies = {}, [], {}, {}
     outer = None
     if progress and len(chunks) > 1:
         from tqdm.auto import tqdm
-        outer = tqdm(total=len(chunks), desc="batches", unit="batch")
-    for (_, duration), members in chunks:
-        period = params[members[0]].period
-        per_cycle = steps_per_cycle(period, solver.dt)
-        every = record_every
-        if every is None:
-            same_period = all(params[i].period == period for i in members)
-            every = per_cycle if (per_cycle and same_period and duration_s is None) else 0
-        result = taichi_star.simulate([params[i] for i in members], duration, solver=solver,
-                                      arch=arch, record_every=every, progress=progress,
-                                      record_shapes=record_shapes)
-        summary = result.summary.copy()
-        summary.insert(0, "instance", members)
-        summary["duration_s"] = duration
-        summary["dt_s"] = solver.dt
-        traj = result.trajectory.copy()
-        if len(traj):
-            traj["instance"] = np.asarray(members)[traj["instance"].to_numpy(dtype=int)]
-        _add_steady(summary, traj, [params[i] for i in members], duration, steady_from_cycle)
-        summaries.append(summary)
-        trajectories.append(traj)
-        if record_shapes and result.shapes is not None:
-            for local, index in enumerate(members):
-                shapes[index] = result.shapes[:, local]
-        for index in members:
-            topologies[index] = result.topology
+        outer = tqdm(total=len(chunks), initial=len(done), desc="batches", unit="batch")
+    for position, result in executor.map(run_chunk, tasks):
+        index = todo[position]
+        if folder is not None:
+            folder.write(index, result.summary)
+        summaries[index] = result.summary
+        trajectories.append(result.trajectory)
+        shapes.update(result.shapes)
+        for member in chunks[index][1]:
+            topologies[member] = result.topology
         if outer is not None:
             outer.update(1)
     if outer is not None:
         outer.close()
-    summary = pd.concat(summaries).sort_values("instance").reset_index(drop=True)
+    if folder is not None:
+        summaries = {i: folder.read(i, members) for i, (_, members) in enumerate(chunks)}
+        folder.finish()
+    summary = pd.concat([summaries[i] for i in range(len(chunks))])
+    summary = summary.sort_values("instance", kind="stable").reset_index(drop=True)
     trajectories = [t for t in trajectories if len(t)]
     trajectory = (pd.concat(trajectories).sort_values(["instance", "t_s"]).reset_index(drop=True)
                   if trajectories else pd.DataFrame(columns=["instance", "t_s", "x_mm", "y_mm"]))

@@ -88,6 +88,7 @@ class BatchEngine:
         self.triplet_slot = _field(ti.i32, (len(triplets), 9), np.array(
             [[slot[a, c] for a in nodes for c in nodes] for nodes in triplets]))
         self.triplet_actuator = _field(ti.i32, len(triplets), topology.triplet_actuator)
+        self.joint_actuator = _field(ti.i32, len(triplets), topology.joint_actuator)
         self.jet_quads = _field(ti.i32, topology.jet_quads.shape, topology.jet_quads)
         self.jet_slot = _field(ti.i32, (N_ACTUATORS, 5), np.array(
             [[slot[CENTRE, CENTRE]] + [slot[CENTRE, n] for n in quad] for quad in topology.jet_quads]))
@@ -108,6 +109,7 @@ class BatchEngine:
         self.drag_perpendicular_coeff = _field(float, per_edge)
         self.voronoi_length = _field(float, per_triplet)
         self.rest_curvature = _field(float, per_triplet)
+        self.end_turning_length = _field(float, per_triplet)
         self.bend_stiffness = _field(float, per_triplet)
         self.mass = _field(float, per_node)
         self.inertia = _field(float, per_node)
@@ -143,7 +145,7 @@ class BatchEngine:
         if model.batch_size > self.capacity:
             raise ValueError(f"batch of {model.batch_size} exceeds the engine capacity {self.capacity}")
         for name in ("rest_length", "edge_stiffness", "drag_parallel_coeff",
-                     "drag_perpendicular_coeff", "voronoi_length", "rest_curvature",
+                     "drag_perpendicular_coeff", "voronoi_length", "rest_curvature", "end_turning_length",
                      "bend_stiffness", "mass", "inertia", "cylinder_drag_coeff", "jet_alpha",
                      "fluid_density", "jet_always", "period", "gait_mask"):
             _load(getattr(self, name), _pad(getattr(model, name), self.capacity))
@@ -240,6 +242,14 @@ class BatchEngine:
             if actuator >= 0:
                 if self.gait_mask[b, actuator] != 0:
                     natural = target_curvature if natural >= 0.0 else -target_curvature
+            clamped = self.joint_actuator[t]
+            if clamped >= 0 and self.end_turning_length[b, t] != 0.0:
+                if self.gait_mask[b, clamped] != 0:
+                    # turn the joint's natural angle φ⁰ = 2 atan(κ⁰Δl/2) by the arc's half-edge
+                    voronoi = self.voronoi_length[b, t]
+                    angle = 2.0 * ti.atan2(natural * voronoi, 2.0) + self.end_turning_length[b, t] * (
+                        target_curvature - self.natural_curvature_target(b, 0.0))
+                    natural = 2.0 * ti.tan(0.5 * angle) / voronoi
         g1, g2, h11, h12, h22 = elastic.bend_gradient_hessian(
             self.positions[b, j] - self.positions[b, i], self.positions[b, k] - self.positions[b, j],
             self.voronoi_length[b, t], natural, self.bend_stiffness[b, t])

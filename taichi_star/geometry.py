@@ -49,6 +49,12 @@ class Topology:
     """(T,) LIMB_BEND / JOINT_BEND / ARC_BEND."""
     triplet_actuator: np.ndarray
     """(T,) actuator index m - 1 (0..7) of arc triplets that the actuation drives; -1 otherwise."""
+    joint_actuator: np.ndarray
+    """(T,) for a joint triplet, the actuator index (0..7) whose arc end it clamps; -1 otherwise."""
+    end_turning_length: np.ndarray
+    """(T,) for a joint triplet, ±½ the rest length of the clamped arc's end edge, m, signed so
+    that a change ΔK of the arc's natural curvature turns the joint's natural angle by
+    end_turning_length·ΔK (the half-edge beside the joint: design §2.7); 0 otherwise."""
     rest_curvature: np.ndarray
     """(T,) signed discrete rest curvature κ⁰, 1/m."""
     voronoi_length: np.ndarray
@@ -95,7 +101,8 @@ def build_topology(params: StarParams) -> Topology:
                                               PAPER_PROFILE.rest_curvature, n_arc)[1:-1]
 
     edges, edge_kind = [], []
-    triplets, triplet_kind, triplet_actuator = [], [], []
+    triplets, triplet_kind, triplet_actuator, joint_actuator = [], [], [], []
+    clamped_end_edges = []
     for k in range(N_ACTUATORS):
         joint, next_joint = joints[k], joints[(k + 1) % N_ACTUATORS]
         limb = [joint] + limb_nodes[k]
@@ -109,13 +116,20 @@ def build_topology(params: StarParams) -> Topology:
         triplets += [tuple(limb[i - 1:i + 2]) for i in range(1, n_limb)]
         triplet_kind += [LIMB_BEND] * (n_limb - 1)
         triplet_actuator += [-1] * (n_limb - 1)
+        joint_actuator += [-1] * (n_limb - 1)
+        clamped_end_edges += [None] * (n_limb - 1)
         incoming_arc_node = arc_nodes[(k - 1) % N_ACTUATORS][-1]
         triplets += [(incoming_arc_node, joint, limb[1]), (arc_nodes[k][0], joint, limb[1])]
         triplet_kind += [JOINT_BEND] * 2
         triplet_actuator += [-1] * 2
+        # the incoming arc is traversed along its own direction, the outgoing one against it
+        joint_actuator += [(k - 1) % N_ACTUATORS, k]
+        clamped_end_edges += [(incoming_arc_node, joint, 1.0), (joint, arc_nodes[k][0], -1.0)]
         triplets += [tuple(arc[i - 1:i + 2]) for i in range(1, n_arc)]
         triplet_kind += [ARC_BEND] * (n_arc - 1)
         triplet_actuator += [k] * (n_arc - 1)
+        joint_actuator += [-1] * (n_arc - 1)
+        clamped_end_edges += [None] * (n_arc - 1)
 
     edges = np.array(edges, dtype=np.int32)
     edge_kind = np.array(edge_kind, dtype=np.int32)
@@ -125,6 +139,12 @@ def build_topology(params: StarParams) -> Topology:
                      + np.linalg.norm(positions[triplets[:, 2]] - positions[triplets[:, 1]], axis=1))
     rest_curvature = discrete_curvature(positions[triplets[:, 0]], positions[triplets[:, 1]],
                                         positions[triplets[:, 2]], voronoi)
+
+    triplet_actuator = np.array(triplet_actuator, dtype=np.int32)
+    arc_sign = np.sign(rest_curvature[triplet_actuator >= 0][0])
+    end_turning = np.array([0.0 if end is None else
+                            -end[2] * arc_sign * 0.5 * np.linalg.norm(positions[end[1]] - positions[end[0]])
+                            for end in clamped_end_edges])
 
     lumped = np.zeros((len(positions), 2))
     for (a, b), kind, length in zip(edges, edge_kind, rest_length):
@@ -140,7 +160,8 @@ def build_topology(params: StarParams) -> Topology:
     return Topology(
         rest_positions=positions, edges=edges, edge_kind=edge_kind, rest_length=rest_length,
         triplets=triplets, triplet_kind=np.array(triplet_kind, dtype=np.int32),
-        triplet_actuator=np.array(triplet_actuator, dtype=np.int32),
+        triplet_actuator=triplet_actuator,
+        joint_actuator=np.array(joint_actuator, dtype=np.int32), end_turning_length=end_turning,
         rest_curvature=rest_curvature, voronoi_length=voronoi, jet_quads=jet_quads,
         joints=joints, tips=tips, lumped_length=lumped)
 

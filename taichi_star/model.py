@@ -29,6 +29,8 @@ class BatchModel:
     """(B, T) m."""
     rest_curvature: np.ndarray
     """(B, T) 1/m."""
+    end_turning_length: np.ndarray
+    """(B, T) m: Topology.end_turning_length where actuation_ends is "shared", else 0."""
     edge_stiffness: np.ndarray
     """(B, E) E·r0, N/m·m = N per unit height."""
     bend_stiffness: np.ndarray
@@ -126,6 +128,8 @@ def build_model(params: Sequence[StarParams]) -> BatchModel:
         params=params, topology=topology,
         rest_positions=stack("rest_positions"), rest_length=rest_length,
         voronoi_length=stack("voronoi_length"), rest_curvature=stack("rest_curvature"),
+        end_turning_length=stack("end_turning_length") * np.array(
+            [p.actuation_ends == "shared" for p in params], dtype=np.float64)[:, None],
         edge_stiffness=modulus_edge * thickness,
         bend_stiffness=modulus_triplet * thickness ** 3 / 12.0,
         drag_parallel_coeff=wetted * per_instance(lambda p: p.drag_parallel)[:, None],

@@ -17,6 +17,11 @@ JET_MODES = ("contract", "always")
 PRECISIONS = ("f64", "f32")
 INTEGRATORS = ("euler", "bdf2")
 JACOBIANS = ("newton", "chord")
+ACTUATION_ENDS = ("clamped", "shared")
+CONVERGED_DISCRETISATION = {"n_arc": 192, "n_limb": 6, "actuation_ends": "shared"}
+"""The converged preset (design §2.7): A1+A2's one-cycle speed against n_arc with shared ends,
+1.7162 (18), 1.7925 (36), 1.8312 (72), 1.8504 (144) mm/s, first order with limit ≈ 1.870, so
+n_arc = 192 is within ≈ 0.8 % (the paper's N = 193 with clamped ends: 1.5766, ≈ 16 % low)."""
 
 
 def _check_finite(name, value):
@@ -88,6 +93,10 @@ class StarParams:
     """D_c = 2 R_c, m; > 0."""
     cylinder_added_mass_coeff: float = 0.0
     """Added-mass coefficient of the cylinder (-), mass ρ_f·C·π D_c²/4 [recon; paper: none]; >= 0."""
+    actuation_ends: str = "clamped"
+    """"clamped": only an actuator's interior triplets follow K̄(τ) (design §2.4 as written);
+    "shared": each joint triplet also turns by the curvature change of the arc's half-edge
+    beside the joint, removing the first-order end error of design §2.7."""
     joint_radius: float = 0.024
     """Radius of the eight joints from the centre, m [recon]."""
     tip_radius: float = 0.052
@@ -108,6 +117,7 @@ class StarParams:
                      "cylinder_drag", "cylinder_added_mass_coeff"):
             _check_non_negative(name, getattr(self, name))
         _check_choice("jet_mode", self.jet_mode, JET_MODES)
+        _check_choice("actuation_ends", self.actuation_ends, ACTUATION_ENDS)
         _check_int_at_least("n_arc", self.n_arc, 2)
         _check_int_at_least("n_limb", self.n_limb, 1)
         if self.period <= PAPER_PROFILE.switch_time:
@@ -122,6 +132,12 @@ class StarParams:
                 f"joint_radius must be < {largest_joint_radius:.6g} m: an actuator arc of rest "
                 f"curvature {PAPER_PROFILE.rest_curvature:.5g} 1/m cannot span joints further "
                 f"apart, got {self.joint_radius!r}")
+
+    @classmethod
+    def converged(cls, **fields) -> "StarParams":
+        """StarParams at the converged discretisation (CONVERGED_DISCRETISATION), other fields
+        as given."""
+        return cls(**{**CONVERGED_DISCRETISATION, **fields})
 
     @property
     def limb_modulus(self) -> float:

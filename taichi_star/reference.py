@@ -303,16 +303,27 @@ class ReferenceSimulator:
         mask = gait_mask(p.gait)
         actuator = topo.triplet_actuator
         self._actuated = (actuator >= 0) & (mask[np.maximum(actuator, 0)] == 1)
+        clamped = topo.joint_actuator
+        self._shared_ends = ((clamped >= 0) & (mask[np.maximum(clamped, 0)] == 1)
+                             & (p.actuation_ends == "shared"))
         self._rod_edges = np.flatnonzero(topo.edge_kind != SPOKE)
 
     # ---- elasticity ------------------------------------------------------------------------
 
     def natural_curvature(self, t):
         """κ⁰ (T,) in 1/m at time t (s): rest curvature, or ±K̄(t mod T) on actuated triplets."""
-        kappa0 = self.topology.rest_curvature.copy()
+        topo = self.topology
+        kappa0 = topo.rest_curvature.copy()
+        driven = PAPER_PROFILE.curvature(math.fmod(t, self.params.period))
         if self._actuated.any():
-            driven = PAPER_PROFILE.curvature(math.fmod(t, self.params.period))
             kappa0[self._actuated] = np.sign(kappa0[self._actuated]) * driven
+        if self._shared_ends.any():
+            # "shared" ends: the joint's natural turning angle follows the arc's end half-edge
+            ends = self._shared_ends
+            voronoi = topo.voronoi_length[ends]
+            angle = (2.0 * np.arctan(kappa0[ends] * voronoi / 2.0) + topo.end_turning_length[ends]
+                     * (driven - PAPER_PROFILE.rest_curvature))
+            kappa0[ends] = 2.0 * np.tan(angle / 2.0) / voronoi
         return kappa0
 
     def _elastic(self, q, t):

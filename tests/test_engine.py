@@ -16,6 +16,7 @@ MIXED_BATCH = [
     ts.StarParams(gait="A2+A4", period=0.5, thickness=3.0e-3, joint_radius=0.022,
                   tip_radius=0.05, drag_parallel=0.05),
     ts.StarParams(gait="none", alpha=0.0),
+    ts.StarParams(gait="A3+A4", actuation_ends="shared"),
 ]
 
 
@@ -180,3 +181,14 @@ def test_worker_processes_give_bitwise_the_in_process_result():
     split = ts.simulate(params, 0.03, record_every=10, workers=2)
     pd.testing.assert_frame_equal(split.summary, alone.summary, check_exact=True)
     pd.testing.assert_frame_equal(split.trajectory, alone.trajectory, check_exact=True)
+
+
+def test_shared_actuation_ends_halve_the_discretisation_error():
+    """Design §2.7: with the joints turning by their half-edge share, n_arc = 18 lands closer
+    to the finer clamped run than the clamped n_arc = 18 does (the measured speeds: clamped
+    1.577 / 1.729 at n_arc 18 / 36, shared 1.716 at 18); 0.3 s covers the heating pulse."""
+    params = [ts.StarParams(gait="A1+A2", n_arc=18, actuation_ends=ends)
+              for ends in ("clamped", "shared")]
+    coarse = ts.simulate(params, 0.3).summary.signed_speed_mm_s
+    fine = ts.simulate([ts.StarParams(gait="A1+A2", n_arc=36)], 0.3).summary.signed_speed_mm_s[0]
+    assert abs(coarse[1] - fine) < 0.6 * abs(coarse[0] - fine)

@@ -21,6 +21,7 @@ from taichi_star.geometry import build_topology
     ("added_mass_coeff", -1.0), ("drag_parallel", -0.01), ("drag_perpendicular", math.inf),
     ("cylinder_drag", -10.0), ("cylinder_added_mass_coeff", -1.0), ("n_arc", 1),
     ("n_arc", 18.0), ("n_limb", 0), ("jet_mode", "sometimes"), ("youngs_modulus", "5e6"),
+    ("actuation_ends", "free"),
 ])
 def test_star_params_rejects_bad_values_naming_the_field(field, value):
     with pytest.raises(ValueError, match=field):
