@@ -15,4 +15,6 @@ STUDIES = {
     "animate": "GIF of the robot's shape over one cycle",
     "bench": "engine throughput: robot-steps/s against batch size and precision",
     "work_precision": "run time against error: h, precision, tolerance, discretisation, integrator",
+    "convergence": "speed against n_arc, clamped vs shared actuation ends, the converged preset",
+    "stability": "stress grid: dt x stiffness x alpha x C_a x period x gait x precision; outcome maps",
 }
