@@ -30,10 +30,10 @@ DEFAULT_OUT = "results"
 
 DISCRETISATIONS = {"paper": {}, "converged": dict(CONVERGED_DISCRETISATION)}
 """`--discretisation`: "paper" = the paper's N = 193 (n_arc 18, n_limb 6, clamped ends);
-"converged" = `StarParams.converged()` (n_arc 192 with shared actuation ends, ≤ 1 % in speed)."""
+"converged" = `StarParams.converged()` (n_arc 320, N = 2609 nodes, ≈ 0.8 % in speed)."""
 
-DISCRETISATION_HELP = ("paper: the paper's N = 193 nodes (n_arc 18); converged: n_arc 192 with "
-                       "shared actuation ends (StarParams.converged(), ~8x the nodes, <= 1 %)")
+DISCRETISATION_HELP = ("paper: the paper's N = 193 nodes (n_arc 18, ~16 %% low in speed); "
+                       "converged: StarParams.converged(), n_arc 320, N = 2609, ~0.8 %%")
 
 QUICK_DURATION_S = 0.2
 QUICK_DT = 2e-3

@@ -18,10 +18,12 @@ PRECISIONS = ("f64", "f32")
 INTEGRATORS = ("euler", "bdf2")
 JACOBIANS = ("newton", "chord")
 ACTUATION_ENDS = ("clamped", "shared")
-CONVERGED_DISCRETISATION = {"n_arc": 192, "n_limb": 6, "actuation_ends": "shared"}
-"""The converged preset (design §2.7): A1+A2's one-cycle speed against n_arc with shared ends,
-1.7162 (18), 1.7925 (36), 1.8312 (72), 1.8504 (144) mm/s, first order with limit ≈ 1.870, so
-n_arc = 192 is within ≈ 0.8 % (the paper's N = 193 with clamped ends: 1.5766, ≈ 16 % low)."""
+CONVERGED_DISCRETISATION = {"n_arc": 320, "n_limb": 6, "actuation_ends": "clamped"}
+"""The converged preset (design §2.7), from `python -m studies convergence`: the five paper
+gaits' one-cycle speeds converge at first order in 1/n_arc (observed orders 1.04-1.24 with
+clamped ends), 15-16 % low at the paper's n_arc = 18 and ≈ 1.8 % at 144 against the
+extrapolated limit, so n_arc = 320 (N = 2609 nodes) is ≈ 0.8 % off. The "shared" ends halve the
+error of A1+A2 but enlarge it for the other paper gaits, so the preset keeps clamped ends."""
 
 
 def _check_finite(name, value):
@@ -96,7 +98,8 @@ class StarParams:
     actuation_ends: str = "clamped"
     """"clamped": only an actuator's interior triplets follow K̄(τ) (design §2.4 as written);
     "shared": each joint triplet also turns by the curvature change of the arc's half-edge
-    beside the joint, removing the first-order end error of design §2.7."""
+    beside the joint (design §2.7). Measured (`studies convergence`): still first order; it
+    halves A1+A2's discretisation error but enlarges that of A1+A3, A1+A4, A1+A3+A5."""
     joint_radius: float = 0.024
     """Radius of the eight joints from the centre, m [recon]."""
     tip_radius: float = 0.052
