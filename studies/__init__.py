@@ -17,4 +17,5 @@ STUDIES = {
     "work_precision": "run time against error: h, precision, tolerance, discretisation, integrator",
     "convergence": "speed against n_arc, clamped vs shared actuation ends, the converged preset",
     "stability": "stress grid: dt x stiffness x alpha x C_a x period x gait x precision; outcome maps",
+    "scaling": "wall time of one fixed sweep: in process against 1, 2, ... local Dask workers",
 }

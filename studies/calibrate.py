@@ -3,6 +3,7 @@
     python -m studies calibrate [--fit alpha=0.2:1.6:6] [--fit cylinder_drag=2:40:6:log]
                                 [--refine 3] [--objective speed|signed] [--cycles 3]
                                 [--arch cpu|gpu] [--out results/] [--quick]
+                                [--workers N | --scheduler tcp://HOST:PORT]
 
 A coarse grid (the Cartesian product of the `--fit` ranges; `:log` ranges are refined in log
 space) is followed by `--refine` rounds of a 3 × 3 (or 3-point) grid centred on the best point
@@ -29,7 +30,7 @@ import pandas as pd
 from taichi_star.experiment import PAPER_GAITS, compare_with_experiment
 from taichi_star.params import StarParams
 
-from . import common
+from . import common, distributed
 from .fig4c import parse_overrides, run_fig4c
 
 DESCRIPTION = ("Fit up to two parameters (default alpha and cylinder_drag) to the experimental "
@@ -241,6 +242,7 @@ def build_parser():
     parser.add_argument("--cycles", type=float, default=3.0, help="cycles from rest (default 3)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="fix another StarParams field, e.g. --set jet_mode=always")
+    distributed.add_arguments(parser)
     return parser
 
 
@@ -263,12 +265,20 @@ def main(argv=None):
     names = [a.name for a in axes]
     common.param_product({a.name: a.values for a in axes}, base=base)  # validate before compute
     solver = common.solver_for(args)
-    out = common.out_dir(args)
-    run_kwargs = dict(cycles=args.cycles,
-                      duration_s=common.QUICK_DURATION_S if args.quick else None,
-                      solver=solver, arch=args.arch, chunk_size=common.chunk_size_for(args),
-                      progress=not args.no_progress)
-    table = calibrate(axes, base=base, refine=refine, kind=args.objective, **run_kwargs)
+    common.chunk_size_for(args)  # validates --chunk-size
+    distributed.validate(args)
+    with distributed.executor_for(args) as executor:
+        out = common.out_dir(args)
+        # a refinement round has 3^k points x 5 gaits; chunks sized so that it still feeds
+        # every worker (the coarse round then simply has more chunks)
+        per_round = 3 ** len(axes) * len(PAPER_GAITS)
+        run_kwargs = dict(cycles=args.cycles,
+                          duration_s=common.QUICK_DURATION_S if args.quick else None,
+                          solver=solver, arch=args.arch, progress=not args.no_progress,
+                          executor=executor,
+                          chunk_size=distributed.default_chunk_size(args, per_round,
+                                                                    executor.n_workers))
+        table = calibrate(axes, base=base, refine=refine, kind=args.objective, **run_kwargs)
     csv = common.write_csv(table, out / "calibration.csv")
     table = pd.read_csv(csv)
     finite = table[np.isfinite(table["objective"].astype(float))]

@@ -3,6 +3,7 @@ under the octagon's 8 rotations and 8 reflections, design §3) and expanded back
 
     python -m studies gaits [--cycles 3] [--arch cpu|gpu] [--out results/] [--quick]
                             [--set NAME=VALUE ...] [--discretisation paper|converged]
+                            [--workers N | --scheduler tcp://HOST:PORT]
 
 Writes `gaits.csv` (one row per gait: gait, class_representative, class_size, rotation and
 reflection mapping the representative onto it, speed, signed speed, heading and heading relative
@@ -26,7 +27,7 @@ from taichi_star.actuation import (N_ACTUATORS, forward_direction, parse_gait, s
                                    transform_gait)
 from taichi_star.params import StarParams
 
-from . import common
+from . import common, distributed
 from .fig4c import parse_overrides
 
 DESCRIPTION = "All 255 gaits, one simulation per octagon symmetry class (29), ranked by speed."
@@ -168,6 +169,7 @@ def build_parser():
     parser.add_argument("--cycles", type=float, default=3.0, help="cycles from rest (default 3)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="override a StarParams field for every gait, e.g. --set alpha=1.0")
+    distributed.add_arguments(parser)
     return parser
 
 
@@ -184,11 +186,15 @@ def main(argv=None):
         raise common.StudyArgumentError(f"--set: {error}") from None
     params, classes = class_params(base)
     solver = common.solver_for(args)
-    out = common.out_dir(args)
+    common.chunk_size_for(args)  # validates --chunk-size
+    distributed.validate(args)
     duration = common.QUICK_DURATION_S if args.quick else None
-    result = common.run_batch(params, cycles=args.cycles, duration_s=duration, solver=solver,
-                              arch=args.arch, chunk_size=common.chunk_size_for(args),
-                              progress=not args.no_progress)
+    with distributed.executor_for(args) as executor:
+        out = common.out_dir(args)
+        result = common.run_batch(params, cycles=args.cycles, duration_s=duration, solver=solver,
+                                  arch=args.arch, progress=not args.no_progress, executor=executor,
+                                  chunk_size=distributed.default_chunk_size(
+                                      args, len(params), executor.n_workers))
     classes_csv = common.write_csv(result.summary, out / "gaits_classes.csv")
     table = expand_classes(result.summary, classes)
     csv = common.write_csv(table, out / "gaits.csv")

@@ -3,6 +3,7 @@
     python -m studies sweep --alpha 0.2:1.2:11 --added-mass 0,0.5,1,2 --youngs-modulus 2e6,5e6,1e7
                             [--jet-mode contract,always] [--gaits paper|all|A1,A1+A2] [--cycles 3]
                             [--param NAME=VALUES ...] [--arch cpu|gpu] [--out results/] [--quick]
+                            [--run-dir DIR] [--resume] [--workers N | --scheduler tcp://HOST:PORT]
 
 Values: a comma list (`0,0.5,1`) or a range `start:stop:n` (n points, both ends included) or
 `start:stop:n:log` (geometric). `--param NAME=VALUES` sweeps any other StarParams field.
@@ -10,6 +11,14 @@ Writes `sweep.csv` (one row per instance: every parameter, speeds over cycles [0
 [1, N), heading, Newton statistics, status) and `sweep_<parameter>.png` for every swept
 parameter: speed against the parameter, one line per gait, the other swept parameters held at
 the value closest to the paper's default.
+
+Resumable: the instances run in chunks (`--chunk-size`, default 256 on the CPU, 16384 on the
+GPU, fewer when there are several Dask workers); each finished chunk is written atomically to the
+run folder (`--run-dir`, default `<out>/sweep_run/`) with a manifest of the sweep's definition and
+the code version (`studies.runs`). After a crash or a kill, the same command with `--resume`
+skips the finished chunks (and refuses a folder holding a different sweep); `sweep.csv` is
+assembled from the chunk files in input order. `--workers N` / `--scheduler ADDRESS` run the
+chunks on Dask (`studies.distributed`).
 
 From Python::
 
@@ -28,7 +37,7 @@ import pandas as pd
 
 from taichi_star.params import StarParams
 
-from . import common
+from . import common, distributed, runs
 
 DESCRIPTION = "Sensitivity study: Cartesian product of StarParams values, one batch."
 
@@ -47,6 +56,9 @@ NAMED_FLAGS = {
 """Command-line flag -> StarParams field."""
 
 MAX_INSTANCES = 1_000_000
+CPU_CHUNK = 256
+"""Default chunk size on the CPU: small enough that a kill costs little, large enough to keep
+every core busy."""
 
 
 def build_parser():
@@ -64,6 +76,13 @@ def build_parser():
                         help="cycles from rest per instance (default 3)")
     parser.add_argument("--max-instances", type=int, default=MAX_INSTANCES,
                         help=f"refuse larger products (default {MAX_INSTANCES})")
+    parser.add_argument("--run-dir", default=None, metavar="DIR",
+                        help="run folder for the finished chunks and the manifest (default "
+                             "<out>/sweep_run)")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue the run in the run folder: skip its finished chunks "
+                             "(the sweep definition must be the same)")
+    distributed.add_arguments(parser)
     return parser
 
 
@@ -160,11 +179,25 @@ def main(argv=None):
             f"the product has {size} instances, more than --max-instances {args.max_instances}")
     grid = common.param_product(axes, base=common.base_params(args))
     solver = common.solver_for(args)
-    chunk = common.chunk_size_for(args)
-    out = common.out_dir(args)
+    distributed.validate(args)
+    run_dir = Path(args.run_dir) if args.run_dir is not None else Path(args.out) / "sweep_run"
+    previous = runs.previous_chunk_size(run_dir) if args.resume else None
+    if args.chunk_size is None and previous is not None:
+        args.chunk_size = previous  # resume with the run's own chunks
+    if args.chunk_size is not None and args.chunk_size < 1:
+        raise common.StudyArgumentError(f"--chunk-size must be >= 1, got {args.chunk_size}")
     duration = common.QUICK_DURATION_S if args.quick else None
-    result = common.run_batch(grid, cycles=args.cycles, duration_s=duration, solver=solver,
-                              arch=args.arch, chunk_size=chunk, progress=not args.no_progress)
+    description = {"axes": {name: list(values) for name, values in axes.items()},
+                   "discretisation": args.discretisation, "cycles": args.cycles,
+                   "quick": args.quick}
+    with distributed.executor_for(args) as executor:
+        chunk = distributed.default_chunk_size(args, len(grid), executor.n_workers,
+                                               cpu_default=CPU_CHUNK)
+        out = common.out_dir(args)
+        result = common.run_batch(grid, cycles=args.cycles, duration_s=duration, solver=solver,
+                                  arch=args.arch, chunk_size=chunk, progress=not args.no_progress,
+                                  executor=executor, run_dir=run_dir, resume=args.resume,
+                                  description=description)
     csv = common.write_csv(result.summary, out / "sweep.csv")
     paths = [csv] + plot_sweep(csv, out)
     print(common.describe(paths))

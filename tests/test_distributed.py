@@ -1,0 +1,125 @@
+"""Sweeps on Dask (issue 6): a 2-worker loopback cluster gives the in-process table bit for bit,
+and a worker process killed mid-sweep costs only its chunk: the sweep completes with every row
+exactly once. Also the distributed flags' validation before compute."""
+
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from distributed import Client, LocalCluster
+
+import taichi_star
+from studies import distributed, sweep
+from studies.__main__ import main as studies_main
+
+# 16 instances, 2 ms steps, 1.2 s each: in chunks of 2 about 0.2 s a chunk on one core
+SWEEP = ["--gaits", "A1,A1+A3", "--alpha", "0.4:1.2:8", "--period", "0.3", "--cycles", "4",
+         "--dt", "0.002", "--no-progress"]
+N_INSTANCES = 16
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """The in-process table (and its folder)."""
+    out = tmp_path_factory.mktemp("inprocess")
+    table = sweep.main([*SWEEP, "--out", str(out)])
+    table.attrs["out"] = out
+    return table
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=None) as local, Client(local) as client:
+        yield local, client
+
+
+def test_local_cluster_gives_the_in_process_table(reference, tmp_path):
+    table = sweep.main([*SWEEP, "--out", str(tmp_path), "--workers", "2"])
+    pd.testing.assert_frame_equal(table, reference, check_exact=True)
+    assert (tmp_path / "sweep.csv").read_bytes() == \
+        (reference.attrs["out"] / "sweep.csv").read_bytes()
+    # default chunking for 2 workers: about four chunks per worker
+    manifest = (tmp_path / "sweep_run" / "manifest.json").read_text()
+    assert '"n_chunks": 8' in manifest
+
+
+def test_killed_worker_costs_only_its_chunk(reference, cluster, tmp_path):
+    local, client = cluster
+    address = local.scheduler_address
+    run_dir = tmp_path / "run"
+    outcome = {}
+
+    def run():
+        try:
+            outcome["table"] = sweep.main([*SWEEP, "--out", str(tmp_path), "--chunk-size", "2",
+                                           "--scheduler", address, "--run-dir", str(run_dir)])
+        except BaseException as error:  # noqa: BLE001 - reported by the test thread
+            outcome["error"] = error
+
+    thread = threading.Thread(target=run)
+    thread.start()
+    deadline = time.monotonic() + 120
+    while not list(run_dir.glob("chunk_*.pkl")):
+        assert thread.is_alive(), outcome
+        assert time.monotonic() < deadline, "no chunk finished in 120 s"
+        time.sleep(0.005)
+    pids = client.run(os.getpid)
+    busy = [worker for worker, keys in client.processing().items() if keys]
+    assert busy, "no worker busy after the first chunk: the sweep is too short to test"
+    lost = client.processing()[busy[0]]
+    os.kill(pids[busy[0]], signal.SIGKILL)
+    thread.join(timeout=180)
+    assert not thread.is_alive(), "the sweep did not complete after a worker was killed"
+    assert "error" not in outcome, outcome.get("error")
+    table = outcome["table"]
+    # the killed worker is gone (its nanny started a new process)
+    assert pids[busy[0]] not in client.run(os.getpid).values()
+    assert lost and all(key.startswith("taichi_star-chunk-") for key in map(str, lost))
+    # every row exactly once, the same numbers as in process
+    assert table["instance"].tolist() == list(range(N_INSTANCES))
+    assert len(list(run_dir.glob("chunk_*.pkl"))) == N_INSTANCES // 2
+    pd.testing.assert_frame_equal(table, reference, check_exact=True)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--workers", "0"], "--workers must be >= 1"),
+    (["--workers", "2", "--scheduler", "tcp://127.0.0.1:8786"], "give one"),
+    (["--scheduler", "localhost"], "--scheduler: expected an address like tcp://HOST:PORT"),
+    (["--retries", "-1"], "--retries must be >= 0"),
+    (["--chunk-size", "0", "--workers", "2"], "--chunk-size must be >= 1"),
+])
+@pytest.mark.parametrize("study", ["sweep", "gaits", "calibrate"])
+def test_distributed_flags_fail_before_compute(monkeypatch, tmp_path, capsys, study, argv,
+                                               message):
+    def forbidden(*args, **kwargs):
+        raise AssertionError("simulate was called despite invalid arguments")
+    monkeypatch.setattr(taichi_star, "simulate", forbidden)
+    assert studies_main([study, *argv, "--out", str(tmp_path), "--quick", "--no-progress"]) == 2
+    assert message in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
+
+
+def test_default_chunk_size_feeds_every_worker():
+    class Args:
+        chunk_size, arch = None, "cpu"
+    assert distributed.default_chunk_size(Args, 29, 1) == 2048
+    assert distributed.default_chunk_size(Args, 29, 2) == 4  # 8 chunks for 2 workers
+    Args.chunk_size = 3
+    assert distributed.default_chunk_size(Args, 29, 2) == 3
+
+
+def test_scaling_quick(tmp_path):
+    from studies import scaling
+    table = scaling.main(["--quick", "--workers-list", "2", "--out", str(tmp_path)])
+    written = pd.read_csv(tmp_path / "scaling.csv")
+    assert written["mode"].tolist() == ["in-process", "dask-local"]
+    assert written["workers"].tolist() == [0, 2]
+    assert written["same_table_as_in_process"].all()
+    assert (written["wall_s"] > 0).all() and written["speedup_vs_in_process"].iloc[0] == 1.0
+    assert written["cores"].iloc[0] == os.cpu_count() and written["cpu_model"].iloc[0]
+    assert len(table) == 2
