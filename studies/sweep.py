@@ -82,6 +82,9 @@ def build_parser():
     parser.add_argument("--resume", action="store_true",
                         help="continue the run in the run folder: skip its finished chunks "
                              "(the sweep definition must be the same)")
+    parser._option_string_actions["--chunk-size"].help = (
+        f"instances per chunk (one simulate call, one resumable file, one Dask task; default "
+        f"{CPU_CHUNK} cpu, 16384 gpu, fewer with several Dask workers; with --resume, the run's)")
     distributed.add_arguments(parser)
     return parser
 
