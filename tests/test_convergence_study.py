@@ -16,13 +16,16 @@ def _synthetic(limit, constant, order, n_arcs, ends):
 def test_richardson_limit_and_order_are_exact_for_a_power_law(order):
     """S(n) = L − C/n^p: three doublings give p and L exactly (to round-off)."""
     summary = pd.DataFrame(_synthetic(1.87, 5.0, order, [18, 36, 72], "shared")
-                           + _synthetic(1.87, 9.0, 1.0, [18, 36, 72], "clamped"))
+                           + _synthetic(1.87, 9.0, 1.0, [18, 36, 72], "clamped")
+                           + _synthetic(1.87, 9.0, 1.0, [320], "clamped"))
     table = convergence.convergence_table(summary)
     shared = table[table.actuation_ends == "shared"]
     assert shared.observed_order.iloc[0] == pytest.approx(order, rel=1e-9)
     assert shared.limit_mm_s.iloc[0] == pytest.approx(1.87, rel=1e-12)
     expected = 5.0 / 18 ** order / 1.87
     assert shared.sort_values("n_arc").relative_error.iloc[0] == pytest.approx(expected, rel=1e-9)
+    preset = table[table.converged_preset]
+    assert len(preset) == 1 and preset.relative_error.iloc[0] == pytest.approx(9.0 / 320 / 1.87)
 
 
 def test_quick_run_writes_table_and_plot(tmp_path):
