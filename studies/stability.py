@@ -19,7 +19,10 @@ near 0.06 s / dt steps; the final shape is always a record) and checked:
 - `max_strain`: max |ε| = | |x_j − x_i| / Δl̄ − 1 | over all edges and records; `max_strain_final`
   the same on the final shape;
 - `limbs_cross`: two limb polylines (joint → tip, the `n_limb` LIMB edges of each limb) intersect
-  (a proper segment intersection between segments of different limbs), in any record;
+  (`segments_cross` between segments of different limbs: a proper crossing, or a collinear
+  overlap; near-parallel segments are tested for collinear overlap, since their intersection
+  parameters are rounding noise: opposite limbs of a symmetric gait are collinear), in any
+  record;
   `limbs_cross_final` on the final shape;
 - `arc_inverted`: an actuator arc's mean signed curvature (Σ κ_i Δl_i / Σ Δl_i over its interior
   ARC_BEND triplets, i.e. its total turning over its length) has the opposite sign to its rest
@@ -130,27 +133,52 @@ def limb_polylines(topology) -> np.ndarray:
     return np.array(lines)
 
 
-def _orientation(a, b, c):
-    """Sign-carrying cross product (b − a) × (c − a) over the last axis."""
-    return ((b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1])
-            - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0]))
+def _cross(a, b):
+    """2-D cross product a × b over the last axis."""
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+PARALLEL_TOLERANCE = 1e-9
+"""Segments whose directions differ by less than ~1e-9 rad are treated as parallel: the
+intersection parameters of (near-)parallel segments are rounding noise (opposite limbs of a
+symmetric shape are collinear, and a plain orientation test finds them 'crossing' by rounding)."""
+
+
+def segments_cross(p, q, r, s) -> np.ndarray:
+    """Segments p–q and r–s (arrays (..., 2)) -> (...) bool: they cross. Non-parallel segments
+    cross where both intersection parameters lie strictly inside (0, 1) (touching at an end is
+    not counted); (near-)parallel ones where they are collinear (distance ≤ 1e-9 of their
+    length) and their extents along the line overlap with positive length."""
+    d1, d2, offset = q - p, s - r, r - p
+    scale = np.linalg.norm(d1, axis=-1) * np.linalg.norm(d2, axis=-1)
+    denominator = _cross(d1, d2)
+    parallel = ~(np.abs(denominator) > PARALLEL_TOLERANCE * scale)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = _cross(offset, d2) / denominator
+        u = _cross(offset, d1) / denominator
+        proper = (t > 0) & (t < 1) & (u > 0) & (u < 1)
+        # parallel: collinear and overlapping along p–q
+        length1 = np.linalg.norm(d1, axis=-1)
+        distance = np.abs(_cross(offset, d1)) / length1
+        along_r = (offset * d1).sum(-1) / length1
+        along_s = ((s - p) * d1).sum(-1) / length1
+        low, high = np.minimum(along_r, along_s), np.maximum(along_r, along_s)
+        overlap = np.minimum(high, length1) - np.maximum(low, 0.0)
+        collinear = (distance <= PARALLEL_TOLERANCE * length1) & (overlap > 0)
+    return np.where(parallel, collinear, proper)
 
 
 def limbs_cross(positions: np.ndarray, topology) -> np.ndarray:
-    """positions (..., N, 2) -> (...) bool: some segment of one limb properly intersects a segment
-    of another limb (strictly opposite orientations on both segments; touching or collinear
-    overlap, a measure-zero event, is not counted)."""
+    """positions (..., N, 2) -> (...) bool: some segment of one limb crosses a segment of another
+    limb (`segments_cross`)."""
     lines = limb_polylines(topology)
     points = positions[..., lines, :]                   # (..., 8, L+1, 2)
     start, end = points[..., :-1, :], points[..., 1:, :]  # (..., 8, L, 2)
     n_limbs = lines.shape[0]
     first, second = np.triu_indices(n_limbs, k=1)
     # (..., pairs, L, 1, 2) against (..., pairs, 1, L, 2)
-    p, q = start[..., first, :, None, :], end[..., first, :, None, :]
-    r, s = start[..., second, None, :, :], end[..., second, None, :, :]
-    d1, d2 = _orientation(p, q, r), _orientation(p, q, s)
-    d3, d4 = _orientation(r, s, p), _orientation(r, s, q)
-    hit = (d1 * d2 < 0) & (d3 * d4 < 0)
+    hit = segments_cross(start[..., first, :, None, :], end[..., first, :, None, :],
+                         start[..., second, None, :, :], end[..., second, None, :, :])
     return hit.any(axis=(-3, -2, -1))
 
 
