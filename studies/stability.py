@@ -51,7 +51,7 @@ Writes
 - `stability_f32.csv`: f32 against f64 at identical parameters, per dt × stiffness factor:
   counts of cells where f32 is worse (f64 stable, f32 not) or retried, the median and max
   relative speed difference |v32 − v64| / max(|v64|, 0.01 mm/s) where both are stable (the
-  floor: the symmetric gaits do not move);
+  floor: the symmetric gaits do not move), and `f32_breaks_down` (see F32_SPEED_LIMIT);
 - `stability.png`: stable-region maps, dt against stiffness factor, one panel per precision × α,
   colour = the outcome colours mixed by their fractions among the cell's instances (C_a ×
   period × gait), text = counts ok / retried / insane / failed;
@@ -106,6 +106,11 @@ SPEED_FLOOR_MM_S = 0.01
 """Floor of the reference speed in f32-vs-f64 relative differences: the symmetric gaits (A1+A5,
 all eight) do not move (f64 speeds ~1e-13 mm/s), and 0.01 mm/s is far below any speed the studies
 report (the slowest measured gait swims 0.43 mm/s)."""
+
+F32_SPEED_LIMIT = 0.1
+"""A dt × stiffness cell where f32 is unstable where f64 is not, needs substep retries that f64
+does not, or whose median relative speed difference from f64 exceeds 10 % is where f32 "breaks
+down" (`f32_breaks_down` in stability_f32.csv)."""
 
 OUTCOMES = ("ok", "retried-then-ok", "insane", "failed")
 STABLE = ("ok", "retried-then-ok")
@@ -486,7 +491,11 @@ def f32_summary(table: pd.DataFrame) -> pd.DataFrame:
                      "median_rel_speed_diff": diff.median() if len(diff) else np.nan,
                      "max_rel_speed_diff": diff.max() if len(diff) else np.nan,
                      "max_speed_diff_mm_s": absolute.max() if len(absolute) else np.nan})
-    return pd.DataFrame(rows)
+    table = pd.DataFrame(rows)
+    table["f32_breaks_down"] = ((table["n_f32_worse"] > 0)
+                                | (table["n_f32_retried"] > table["n_f64_retried"])
+                                | (table["median_rel_speed_diff"] > F32_SPEED_LIMIT))
+    return table
 
 
 OUTCOME_COLOURS = {"ok": "#1a9850", "retried-then-ok": "#4575b4", "insane": "#fdae61",
@@ -566,6 +575,13 @@ def report(table, summary, paper, f32) -> str:
         for _, row in worse.iterrows():
             lines.append(f"  dt {row['dt_ms']:g} ms, stiffness x{row['stiffness_factor']:g}: "
                          f"{row['n_f32_worse']} of {row['n_pairs']}")
+        broken = f32[f32["f32_breaks_down"]]
+        lines.append(f"f32 breaks down (unstable or retried where f64 is not, or median speed "
+                     f"difference > {F32_SPEED_LIMIT:.0%}) in {len(broken)} of {len(f32)} "
+                     f"dt x stiffness cells:")
+        for factor, part in broken.groupby("stiffness_factor"):
+            lines.append(f"  stiffness x{factor:g}: dt "
+                         + ", ".join(f"{dt:g}" for dt in part["dt_ms"]) + " ms")
         lines.append("f32 by stiffness factor (over all dt): retried-then-ok f32 / f64, f32 "
                      "unstable where f64 stable, median and max |speed f32 - f64| / max(|speed "
                      f"f64|, {SPEED_FLOOR_MM_S} mm/s) where both stable:")
