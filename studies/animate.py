@@ -143,8 +143,7 @@ def build_parser():
 
 def main(argv=None):
     args = build_parser().parse_args(argv)
-    if not (args.cycles > 0 and math.isfinite(args.cycles)):
-        raise common.StudyArgumentError(f"--cycles must be > 0, got {args.cycles}")
+    common.check_positive(args.cycles, "--cycles")
     if args.frames < 2:
         raise common.StudyArgumentError(f"--frames must be >= 2, got {args.frames}")
     if args.fps < 1:

@@ -248,8 +248,7 @@ def build_parser():
 
 def main(argv=None):
     args = build_parser().parse_args(argv)
-    if not (args.cycles > 0 and math.isfinite(args.cycles)):
-        raise common.StudyArgumentError(f"--cycles must be > 0, got {args.cycles}")
+    common.check_positive(args.cycles, "--cycles")
     axes = parse_fit(args.fit if args.fit else (QUICK_FIT if args.quick else DEFAULT_FIT))
     refine = args.refine if args.refine is not None else (1 if args.quick else 3)
     if refine < 0:

@@ -376,6 +376,12 @@ def common_parser(prog: str, description: str) -> argparse.ArgumentParser:
     return parser
 
 
+def check_positive(value: float, flag: str):
+    """StudyArgumentError naming the flag unless value is a finite number > 0."""
+    if not (math.isfinite(value) and value > 0):
+        raise StudyArgumentError(f"{flag} must be > 0, got {value}")
+
+
 def chunk_size_for(args) -> int:
     size = args.chunk_size if args.chunk_size is not None else (16384 if args.arch == "gpu"
                                                                  else 2048)

@@ -54,8 +54,8 @@ def parse_args(argv):
         raise common.StudyArgumentError(
             f"--n-arc needs at least three values >= 2, each twice the previous (for the "
             f"observed order), got {text!r}")
-    if args.cycles is not None and not (math.isfinite(args.cycles) and args.cycles > 0):
-        raise common.StudyArgumentError(f"--cycles must be > 0, got {args.cycles}")
+    if args.cycles is not None:
+        common.check_positive(args.cycles, "--cycles")
     args.cycles = args.cycles or 1.0
     return args
 

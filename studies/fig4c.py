@@ -17,7 +17,6 @@ From Python: `run_fig4c(out_dir, overrides={"alpha": 1.0})` returns the Fig. 4c 
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -197,8 +196,7 @@ def parse_overrides(items, flag="--set"):
 
 def main(argv=None):
     args = build_parser().parse_args(argv)
-    if not (args.cycles > 0 and math.isfinite(args.cycles)):
-        raise common.StudyArgumentError(f"--cycles must be > 0, got {args.cycles}")
+    common.check_positive(args.cycles, "--cycles")
     overrides = parse_overrides(args.set)
     if "gait" in overrides:
         raise common.StudyArgumentError("--set gait=...: fig4c always runs the five paper gaits")

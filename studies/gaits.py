@@ -175,8 +175,7 @@ def build_parser():
 
 def main(argv=None):
     args = build_parser().parse_args(argv)
-    if not (args.cycles > 0 and math.isfinite(args.cycles)):
-        raise common.StudyArgumentError(f"--cycles must be > 0, got {args.cycles}")
+    common.check_positive(args.cycles, "--cycles")
     overrides = parse_overrides(args.set)
     if "gait" in overrides:
         raise common.StudyArgumentError("--set gait=...: the gaits study runs every gait")

@@ -297,8 +297,7 @@ def plan(args):
     if args.workers > 1 and args.arch != "cpu":
         raise common.StudyArgumentError("--workers > 1 runs CPU processes; use --workers 1 "
                                         "with --arch gpu")
-    if not (math.isfinite(args.cycles) and args.cycles > 0):
-        raise common.StudyArgumentError(f"--cycles must be > 0, got {args.cycles}")
+    common.check_positive(args.cycles, "--cycles")
     quick = args.quick
     dts = (common.parse_values(args.dts_ms, "--dts-ms") if args.dts_ms
            else list(QUICK_DTS_MS if quick else DTS_MS))

@@ -173,8 +173,7 @@ def plot_sweep(csv_path, out_dir, prefix: str = "sweep"):
 
 def main(argv=None):
     args = build_parser().parse_args(argv)
-    if not (args.cycles > 0 and math.isfinite(args.cycles)):
-        raise common.StudyArgumentError(f"--cycles must be > 0, got {args.cycles}")
+    common.check_positive(args.cycles, "--cycles")
     axes = sweep_axes(args)
     size = int(np.prod([len(v) for v in axes.values()]))
     if size > args.max_instances:

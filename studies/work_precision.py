@@ -290,8 +290,7 @@ def build_parser():
 
 def main(argv=None):
     args = build_parser().parse_args(argv)
-    if not (math.isfinite(args.cycles) and args.cycles > 0):
-        raise common.StudyArgumentError(f"--cycles must be > 0, got {args.cycles}")
+    common.check_positive(args.cycles, "--cycles")
     gaits = common.resolve_gaits(args.gaits if args.gaits is not None
                                  else ",".join(QUICK_GAITS) if args.quick else "paper")
     if len(set(gaits)) != len(gaits):

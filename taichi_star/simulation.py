@@ -11,7 +11,6 @@ from typing import Optional, Sequence
 import numpy as np
 import pandas as pd
 import taichi as ti
-from taichi.lang.util import to_numpy_type
 
 from .engine import STATUS_NAMES, STATUS_OK, BatchEngine, terms_used
 from .geometry import Topology
