@@ -514,7 +514,7 @@ def plot_bench(csv_path, png_path):
     the design §6 target dashed, real-time factor on the right axis); the phase split per
     instance-step of the B sweep; the scenarios' throughput."""
     plt = common.use_agg()
-    table = pd.read_csv(csv_path)
+    table = pd.read_csv(csv_path, dtype={"commit": str})  # a hash like 83e1667 reads as a float
     arch = str(table["arch"].iloc[0])
     sweep = table[table["section"] == "batch"]
     skip = table[table["section"] == "skip"]
@@ -545,7 +545,7 @@ def plot_bench(csv_path, png_path):
     ax.set_title(f"{table['machine'].iloc[0]}, {arch}, {table['commit'].iloc[0]}", fontsize=8)
 
     phases = ["assembly_us", "factor_us", "solve_us", "bookkeeping_us"]
-    for ax, part, label in ((axes[1], sweep, "B={batch_size} {precision}"),
+    for ax, part, label in ((axes[1], sweep, "B={batch_size} {precision} {jacobian}"),
                             (axes[2], skip, "{scenario}\nB={batch_size} {precision}")):
         names = [label.format(**row) for row in part.to_dict("records")]
         bottom = np.zeros(len(part))
