@@ -24,7 +24,8 @@ profile repeats work on a state already in cache, so under noise or when bookkee
 `bookkeeping_us` can come out slightly negative.
 
 The B sweep runs for each Newton Jacobian mode (`jacobian`: "newton" refactors every
-iteration, "chord" reuses the step's first LU while it contracts). Section "processes": the
+iteration, "chord" reuses the step's first LU while it contracts); the phase split assumes one
+factorisation per iteration, so only its "newton" rows are meaningful (and plotted). Section "processes": the
 end-to-end `simulate(..., workers=N)` throughput at one batch size, f64 (worker processes are
 how this machine's two cores are used: Taichi's own CPU threads gained only ~1.25× here).
 
@@ -529,7 +530,7 @@ def plot_bench(csv_path, png_path):
     processes = table[table["section"] == "processes"]
     for row in processes.to_dict("records"):
         ax.plot(row["batch_size"], row["robot_steps_per_s"], "s", markersize=8,
-                label=f"simulate(workers={row['workers']}), {row['jacobian']}, f64")
+                label=f"simulate(workers={int(row['workers'])}), {row['jacobian']}, f64")
     target = TARGETS["cpu" if arch == "cpu" else "gpu"]
     ax.axhline(target, color="k", ls="--", lw=1,
                label=f"design §6 target {target:,.0f}/s")
@@ -545,7 +546,8 @@ def plot_bench(csv_path, png_path):
     ax.set_title(f"{table['machine'].iloc[0]}, {arch}, {table['commit'].iloc[0]}", fontsize=8)
 
     phases = ["assembly_us", "factor_us", "solve_us", "bookkeeping_us"]
-    for ax, part, label in ((axes[1], sweep, "B={batch_size} {precision} {jacobian}"),
+    # the phase split assumes one factorisation per Newton iteration: the newton mode only
+    for ax, part, label in ((axes[1], sweep[sweep["jacobian"] == "newton"], "B={batch_size} {precision}"),
                             (axes[2], skip, "{scenario}\nB={batch_size} {precision}")):
         names = [label.format(**row) for row in part.to_dict("records")]
         bottom = np.zeros(len(part))
