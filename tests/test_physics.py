@@ -172,11 +172,18 @@ def _jet_points():
                      0.0221, 0.0091])
 
 
+def _quad_area(points):
+    """S = ½|(x3 − x1) × (x4 − x2)| of the quad in `_jet_points` layout, m²."""
+    x1, x2, x3, x4 = points[2:4], points[4:6], points[6:8], points[8:10]
+    diagonal13, diagonal24 = x3 - x1, x4 - x2
+    return 0.5 * abs(diagonal13[0] * diagonal24[1] - diagonal13[1] * diagonal24[0])
+
+
 @pytest.mark.parametrize("always", [0, 1])
 def test_jet_jacobian(taichi_cpu, always):
     points = _jet_points()
-    x1, x2, x3, x4 = points[2:4], points[4:6], points[6:8], points[8:10]
-    area = 0.5 * abs(np.cross(x3 - x1, x4 - x2))
+    x2, x3 = points[4:6], points[6:8]
+    area = _quad_area(points)
     old_area = area * 1.001  # shrinking: the jet is on in both modes
     args = (old_area, 1e-3, 0.8, 1000.0, always)
     evaluate = lambda x: _call(_jet, x, 22, *args)  # noqa: E731
@@ -192,8 +199,7 @@ def test_jet_jacobian(taichi_cpu, always):
 
 def test_jet_contract_mode_is_off_while_expanding(taichi_cpu):
     points = _jet_points()
-    x1, x2, x3, x4 = points[2:4], points[4:6], points[6:8], points[8:10]
-    area = 0.5 * abs(np.cross(x3 - x1, x4 - x2))
+    area = _quad_area(points)
     expanding = (area * 0.999, 1e-3, 0.8, 1000.0)
     assert np.all(_call(_jet, points, 22, *expanding, 0) == 0.0)
     assert np.linalg.norm(_call(_jet, points, 22, *expanding, 1)[:2]) > 0.0
