@@ -22,7 +22,6 @@ from taichi_star.actuation import parse_gait
 from taichi_star.geometry import ARC, LIMB, SPOKE
 
 from . import common
-from .fig4c import parse_overrides
 
 DESCRIPTION = "GIF of the robot's rod shape over one actuation cycle, for one or more gaits."
 
@@ -149,7 +148,7 @@ def main(argv=None):
     if args.fps < 1:
         raise common.StudyArgumentError(f"--fps must be >= 1, got {args.fps}")
     gaits = common.resolve_gaits(args.gait or ("A1+A2" if args.quick else "paper"), "--gait")
-    overrides = parse_overrides(args.set)
+    overrides = common.parse_overrides(args.set)
     if "gait" in overrides:
         raise common.StudyArgumentError("--set gait=...: use --gait")
     try:

@@ -31,7 +31,7 @@ from taichi_star.experiment import PAPER_GAITS, compare_with_experiment
 from taichi_star.params import StarParams
 
 from . import common, distributed
-from .fig4c import parse_overrides, run_fig4c
+from .fig4c import run_fig4c
 
 DESCRIPTION = ("Fit up to two parameters (default alpha and cylinder_drag) to the experimental "
                "speeds of the five paper gaits: coarse grid, then local refinement.")
@@ -253,7 +253,7 @@ def main(argv=None):
     refine = args.refine if args.refine is not None else (1 if args.quick else 3)
     if refine < 0:
         raise common.StudyArgumentError(f"--refine must be >= 0, got {refine}")
-    overrides = parse_overrides(args.set)
+    overrides = common.parse_overrides(args.set)
     clash = set(overrides) & ({a.name for a in axes} | {"gait"})
     if clash:
         raise common.StudyArgumentError(f"--set {sorted(clash)[0]}: fitted or fixed by the study")

@@ -127,6 +127,17 @@ def parse_assignment(text: str, flag: str):
     return name, parse_values(values, f"{flag} {name}", kind)
 
 
+def parse_overrides(items, flag="--set"):
+    """["alpha=1.0", "jet_mode=always"] -> {"alpha": 1.0, "jet_mode": "always"} (one value each)."""
+    overrides = {}
+    for item in items:
+        name, values = parse_assignment(item, flag)
+        if len(values) != 1:
+            raise StudyArgumentError(f"{flag} {name}: give exactly one value, got {values}")
+        overrides[name] = values[0]
+    return overrides
+
+
 def resolve_gaits(text: str, flag: str = "--gaits") -> List[str]:
     """"paper" -> the five Fig. 4 gaits; "all" -> all 255 non-empty gaits; otherwise a comma
     list of gait strings (validated)."""

@@ -183,21 +183,10 @@ def build_parser():
     return parser
 
 
-def parse_overrides(items, flag="--set"):
-    """["alpha=1.0", "jet_mode=always"] -> {"alpha": 1.0, "jet_mode": "always"} (one value each)."""
-    overrides = {}
-    for item in items:
-        name, values = common.parse_assignment(item, flag)
-        if len(values) != 1:
-            raise common.StudyArgumentError(f"{flag} {name}: give exactly one value, got {values}")
-        overrides[name] = values[0]
-    return overrides
-
-
 def main(argv=None):
     args = build_parser().parse_args(argv)
     common.check_positive(args.cycles, "--cycles")
-    overrides = parse_overrides(args.set)
+    overrides = common.parse_overrides(args.set)
     if "gait" in overrides:
         raise common.StudyArgumentError("--set gait=...: fig4c always runs the five paper gaits")
     base = common.base_params(args)

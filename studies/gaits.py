@@ -28,7 +28,6 @@ from taichi_star.actuation import (N_ACTUATORS, forward_direction, parse_gait, s
 from taichi_star.params import StarParams
 
 from . import common, distributed
-from .fig4c import parse_overrides
 
 DESCRIPTION = "All 255 gaits, one simulation per octagon symmetry class (29), ranked by speed."
 
@@ -176,7 +175,7 @@ def build_parser():
 def main(argv=None):
     args = build_parser().parse_args(argv)
     common.check_positive(args.cycles, "--cycles")
-    overrides = parse_overrides(args.set)
+    overrides = common.parse_overrides(args.set)
     if "gait" in overrides:
         raise common.StudyArgumentError("--set gait=...: the gaits study runs every gait")
     try:
