@@ -22,7 +22,7 @@ CONVERGED_DISCRETISATION = {"n_arc": 320, "n_limb": 6, "actuation_ends": "clampe
 """The converged preset (design §2.7), from `python -m studies convergence`: the five paper
 gaits' one-cycle speeds converge at first order in 1/n_arc (observed orders 1.04-1.24 with
 clamped ends), 8-19 % low at the paper's n_arc = 18 and 0.7-1.7 % at 144 against the
-extrapolated limit, so n_arc = 320 (N = 2609 nodes) is ≈ 0.8 % off. The "shared" ends halve the
+extrapolated limit; n_arc = 320 (N = 2609 nodes) measured 0.25-0.74 % off. The "shared" ends halve the
 error of A1+A2 but enlarge it for the other paper gaits, so the preset keeps clamped ends."""
 
 
