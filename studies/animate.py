@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from taichi_star.actuation import parse_gait
+from taichi_star.gait import Gait
 from taichi_star.geometry import ARC, LIMB, SPOKE
 
 from . import common
@@ -66,7 +66,7 @@ def draw_gif(shapes_csv, centroid_csv, edges_csv, gait: str, gif_path, fps: int 
     centroid = pd.read_csv(centroid_csv)
     centroid = centroid[centroid["gait"] == gait].sort_values("frame")
     edges = pd.read_csv(edges_csv)
-    fired = set(parse_gait(gait))
+    fired = set(Gait.parse(gait).actuators)
     colours, widths = [], []
     for _, edge in edges.iterrows():
         if edge["kind"] == "spoke":

@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 
 import taichi_star
-from taichi_star.actuation import forward_direction
+from taichi_star.gait import Gait
 from taichi_star.params import CONVERGED_DISCRETISATION, SolverConfig, StarParams
 
 DEFAULT_OUT = "results"
@@ -141,7 +141,6 @@ def parse_overrides(items, flag="--set"):
 def resolve_gaits(text: str, flag: str = "--gaits") -> List[str]:
     """"paper" -> the five Fig. 4 gaits; "all" -> all 255 non-empty gaits; otherwise a comma
     list of gait strings (validated)."""
-    from taichi_star.actuation import gait_name, parse_gait
     from taichi_star.experiment import PAPER_GAITS
     if text is None or not text.strip():
         raise StudyArgumentError(f"{flag}: empty gait list (the product would be empty)")
@@ -149,11 +148,11 @@ def resolve_gaits(text: str, flag: str = "--gaits") -> List[str]:
     if key == "paper":
         return list(PAPER_GAITS)
     if key == "all":
-        return [gait_name(m + 1 for m in range(8) if bits >> m & 1) for bits in range(1, 256)]
+        return [Gait.from_mask([bits >> m & 1 for m in range(8)]).name for bits in range(1, 256)]
     gaits = []
     for item in text.split(","):
         try:
-            gaits.append(gait_name(parse_gait(item.strip())))
+            gaits.append(Gait.parse(item.strip()).name)
         except ValueError as error:
             raise StudyArgumentError(f"{flag}: {error}") from None
     return gaits
@@ -358,7 +357,7 @@ def _add_steady(summary, trajectory, params, duration, first_cycle):
                 delta = xy[end[0]] - xy[start[0]]
                 span = (last - first_cycle) * p.period
                 value = float(np.hypot(*delta)) / span
-                forward = forward_direction(p.gait)
+                forward = Gait.parse(p.gait).forward
                 signed = float(delta @ forward) / span if forward is not None else math.nan
         steady.append(value)
         steady_signed.append(signed)

@@ -23,8 +23,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from taichi_star.actuation import (N_ACTUATORS, forward_direction, parse_gait, symmetry_classes,
-                                   transform_gait)
+from taichi_star.gait import N_ACTUATORS, Gait, symmetry_classes
 from taichi_star.params import StarParams
 
 from . import common, distributed
@@ -47,13 +46,13 @@ def symmetry_map(source: str, target: str):
     in the order reflect False, True; rotation 0..7), or None if none exists."""
     for reflect in (False, True):
         for rotation in range(N_ACTUATORS):
-            if transform_gait(source, rotation, reflect) == target:
+            if Gait.parse(source).transform(rotation, reflect).name == target:
                 return rotation, reflect
     return None
 
 
 def transform_heading(heading_deg: float, rotation: int, reflect: bool) -> float:
-    """Image of a heading angle under the symmetry of `transform_gait` (reflection across the
+    """Image of a heading angle under the symmetry of `Gait.transform` (reflection across the
     A1 axis, then rotation by rotation·45°), wrapped to (-180, 180]."""
     angle = (-heading_deg if reflect else heading_deg) + 45.0 * rotation
     return wrap_degrees(angle)
@@ -69,7 +68,7 @@ def wrap_degrees(angle: float) -> float:
 def relative_heading(gait: str, heading_deg: float) -> float:
     """Heading relative to the gait's forward direction, degrees in (-180, 180]; NaN where the
     forward direction is undefined."""
-    forward = forward_direction(gait)
+    forward = Gait.parse(gait).forward
     if forward is None or not math.isfinite(heading_deg):
         return math.nan
     return wrap_degrees(heading_deg - math.degrees(math.atan2(forward[1], forward[0])))
@@ -106,11 +105,11 @@ def expand_classes(summary: pd.DataFrame, classes=None) -> pd.DataFrame:
                                              if ok else math.nan),
                 "heading_deg": heading,
                 "heading_relative_deg": relative_heading(gait, heading),
-                "n_actuators": len(parse_gait(gait)),
+                "n_actuators": len(Gait.parse(gait).actuators),
                 "status": source["status"],
             })
     table = pd.DataFrame(rows, columns=GAITS_COLUMNS)
-    table["_key"] = [sum(1 << (a - 1) for a in parse_gait(g)) + 256 * len(parse_gait(g))
+    table["_key"] = [Gait.parse(g).bits + 256 * len(Gait.parse(g).actuators)
                      for g in table["gait"]]
     return table.sort_values("_key").drop(columns="_key").reset_index(drop=True)
 
@@ -140,7 +139,7 @@ def plot_gaits(csv_path, png_path):
         ax.text(np.nan_to_num(speeds[i]), i, " " + label, va="center", fontsize=7)
     angles = np.radians(45.0 * np.arange(N_ACTUATORS))
     for i, rep in enumerate(classes["class_representative"]):
-        fired = set(parse_gait(rep))
+        fired = set(Gait.parse(rep).actuators)
         px, py = 0.36 * np.cos(angles), i + 0.36 * np.sin(angles)
         pict.plot(np.append(px, px[0]), np.append(py, py[0]), color="0.7", lw=0.6)
         pict.scatter(px, py, s=9, c=["k" if m + 1 in fired else "white" for m in range(8)],

@@ -3,9 +3,10 @@
 Importing the package has no side effects (no `ti.init`); `simulate` initialises Taichi itself.
 """
 
-from .actuation import PAPER_PROFILE, CurvatureProfile, parse_gait, symmetry_classes
+from .actuation import CurvatureProfile
+from .gait import Gait, symmetry_classes
 from .params import SolverConfig, StarParams
 from .simulation import SimulationResult, available_archs, simulate
 
-__all__ = ["simulate", "SimulationResult", "available_archs", "StarParams", "SolverConfig", "CurvatureProfile", "PAPER_PROFILE", "parse_gait",
+__all__ = ["simulate", "SimulationResult", "available_archs", "StarParams", "SolverConfig", "CurvatureProfile", "Gait",
            "symmetry_classes"]

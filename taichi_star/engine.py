@@ -11,7 +11,8 @@ import numpy as np
 import taichi as ti
 from taichi.lang.util import to_numpy_type
 
-from .actuation import N_ACTUATORS, PAPER_PROFILE
+from .actuation import CurvatureProfile
+from .gait import N_ACTUATORS
 from .geometry import SPOKE
 from .linsolve import BlockSystem, plan_elimination
 from .model import BatchModel
@@ -94,7 +95,7 @@ class BatchEngine:
             [[slot[CENTRE, CENTRE]] + [slot[CENTRE, n] for n in quad] for quad in topology.jet_quads]))
         self.diagonal_slot = _field(ti.i32, self.n_nodes,
                                     np.array([slot[n, n] for n in range(self.n_nodes)]))
-        self.profile = _field(float, 9, PAPER_PROFILE.as_array())
+        self.profile = _field(float, 9, CurvatureProfile().as_array())
         self.dt = _field(float, ())
         self.newton_tol = _field(float, ())
         self.max_newton = _field(ti.i32, ())

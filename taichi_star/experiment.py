@@ -21,7 +21,7 @@ from importlib import resources
 import numpy as np
 import pandas as pd
 
-from .actuation import gait_name, parse_gait
+from .gait import canonical_gait
 
 PAPER_GAITS = ("A1", "A1+A2", "A1+A3", "A1+A4", "A1+A3+A5")
 """The five gaits of the paper's Fig. 4, in its order."""
@@ -45,7 +45,7 @@ def _data_dir():
 
 
 def _canonical(gait: str) -> str:
-    return gait_name(parse_gait(gait))
+    return canonical_gait(gait)
 
 
 def experimental_speeds() -> pd.DataFrame:

@@ -1,4 +1,4 @@
-"""Topology and rest shape of the star robot (design §2.1), in NumPy.
+"""Topology and rest shape of the star robot, in NumPy.
 
 Node numbering: node 0 is the centre c; then, for each joint k = 0..7, a block of
 1 + n_limb + (n_arc - 1) nodes: the joint J_k, its limb nodes from the joint outwards (the tip
@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .actuation import N_ACTUATORS, PAPER_PROFILE
+from .gait import N_ACTUATORS
 from .params import StarParams
 
 SPOKE, LIMB, ARC = 0, 1, 2
@@ -67,6 +67,10 @@ class Topology:
     """(8,) node of limb k's tip."""
     lumped_length: np.ndarray
     """(N, 2) rest length lumped at each node from its arc edges [:, 0] and limb edges [:, 1]."""
+    limbs: np.ndarray
+    """(8, n_limb + 1) nodes of limb k from its joint J_k to its tip."""
+    arcs: np.ndarray
+    """(8, n_arc + 1) nodes of actuator A_{k+1}'s arc from J_k to J_{k+1}."""
 
     @property
     def n_nodes(self) -> int:
@@ -82,7 +86,8 @@ class Topology:
 
 
 def build_topology(params: StarParams) -> Topology:
-    """Topology and rest shape for the geometric fields of `params` (design §2.1)."""
+    """Topology and rest shape for the geometric fields of `params` (n_arc, n_limb, the radii
+    and the actuators' rest curvature)."""
     n_arc, n_limb = params.n_arc, params.n_limb
     block = 1 + n_limb + (n_arc - 1)
     joints = np.array([1 + k * block for k in range(N_ACTUATORS)])
@@ -98,7 +103,7 @@ def build_topology(params: StarParams) -> Topology:
         positions[limb_nodes[k]] = radii[:, None] * radial[k]
         positions[arc_nodes[k]] = _inward_arc(positions[joints[k]],
                                               positions[joints[(k + 1) % N_ACTUATORS]],
-                                              PAPER_PROFILE.rest_curvature, n_arc)[1:-1]
+                                              params.actuator_profile.rest_curvature, n_arc)[1:-1]
 
     edges, edge_kind = [], []
     triplets, triplet_kind, triplet_actuator, joint_actuator = [], [], [], []
@@ -163,7 +168,10 @@ def build_topology(params: StarParams) -> Topology:
         triplet_actuator=triplet_actuator,
         joint_actuator=np.array(joint_actuator, dtype=np.int32), end_turning_length=end_turning,
         rest_curvature=rest_curvature, voronoi_length=voronoi, jet_quads=jet_quads,
-        joints=joints, tips=tips, lumped_length=lumped)
+        joints=joints, tips=tips, lumped_length=lumped,
+        limbs=np.array([[joints[k]] + limb_nodes[k] for k in range(N_ACTUATORS)], dtype=np.int32),
+        arcs=np.array([[joints[k]] + arc_nodes[k] + [joints[(k + 1) % N_ACTUATORS]]
+                       for k in range(N_ACTUATORS)], dtype=np.int32))
 
 
 def _inward_arc(start, end, curvature, n_edges):

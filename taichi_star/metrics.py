@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .actuation import forward_direction
+from .gait import Gait
 
 METERS_TO_MM = 1e3
 
@@ -23,7 +23,7 @@ def swimming_metrics(displacement_m: np.ndarray, duration_s: float, gaits) -> di
     counter-clockwise from +x, the bisector of A1).
     """
     displacement_mm = np.asarray(displacement_m, dtype=np.float64) * METERS_TO_MM
-    forward = [forward_direction(g) for g in gaits]
+    forward = [Gait.parse(g).forward for g in gaits]
     signed = np.array([np.nan if f is None else float(d @ f)
                        for d, f in zip(displacement_mm, forward)])
     return {

@@ -9,7 +9,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .actuation import N_ACTUATORS, gait_mask
+from .gait import N_ACTUATORS, Gait
 from .geometry import ARC, SPOKE, ARC_BEND, Topology, build_topology
 from .params import StarParams
 
@@ -92,10 +92,11 @@ def build_model(params: Sequence[StarParams]) -> BatchModel:
                          f"got (n_arc, n_limb) in {sorted(keys)}")
     shapes = {}
     for p in params:
-        key = (p.joint_radius, p.tip_radius)
+        key = (p.joint_radius, p.tip_radius, p.actuator_profile.rest_curvature)
         if key not in shapes:
             shapes[key] = build_topology(p)
-    topologies = [shapes[(p.joint_radius, p.tip_radius)] for p in params]
+    topologies = [shapes[(p.joint_radius, p.tip_radius, p.actuator_profile.rest_curvature)]
+                  for p in params]
     topology = topologies[0]
 
     def stack(name):
@@ -140,7 +141,7 @@ def build_model(params: Sequence[StarParams]) -> BatchModel:
         jet_alpha=per_instance(lambda p: p.alpha), fluid_density=fluid_density,
         jet_always=np.array([p.jet_mode == "always" for p in params], dtype=np.int32),
         period=per_instance(lambda p: p.period),
-        gait_mask=np.stack([gait_mask(p.gait) for p in params]).astype(np.int32).reshape(
+        gait_mask=np.stack([Gait.parse(p.gait).mask for p in params]).astype(np.int32).reshape(
             len(params), N_ACTUATORS),
     )
 

@@ -22,7 +22,7 @@ import numpy as np
 import scipy.sparse
 import scipy.sparse.linalg
 
-from .actuation import PAPER_PROFILE, gait_mask
+from .gait import Gait
 from .geometry import ARC, ARC_BEND, SPOKE, build_topology
 from .params import SolverConfig, StarParams
 
@@ -300,7 +300,7 @@ class ReferenceSimulator:
         self._stretch_stiffness = modulus * r0
         bend_modulus = np.where(topo.triplet_kind == ARC_BEND, p.youngs_modulus, p.limb_modulus)
         self._bend_stiffness = bend_modulus * r0 ** 3 / 12.0
-        mask = gait_mask(p.gait)
+        mask = Gait.parse(p.gait).mask
         actuator = topo.triplet_actuator
         self._actuated = (actuator >= 0) & (mask[np.maximum(actuator, 0)] == 1)
         clamped = topo.joint_actuator
@@ -314,7 +314,7 @@ class ReferenceSimulator:
         """κ⁰ (T,) in 1/m at time t (s): rest curvature, or ±K̄(t mod T) on actuated triplets."""
         topo = self.topology
         kappa0 = topo.rest_curvature.copy()
-        driven = PAPER_PROFILE.curvature(math.fmod(t, self.params.period))
+        driven = self.params.actuator_profile.curvature(math.fmod(t, self.params.period))
         if self._actuated.any():
             kappa0[self._actuated] = np.sign(kappa0[self._actuated]) * driven
         if self._shared_ends.any():
@@ -322,7 +322,7 @@ class ReferenceSimulator:
             ends = self._shared_ends
             voronoi = topo.voronoi_length[ends]
             angle = (2.0 * np.arctan(kappa0[ends] * voronoi / 2.0) + topo.end_turning_length[ends]
-                     * (driven - PAPER_PROFILE.rest_curvature))
+                     * (driven - self.params.actuator_profile.rest_curvature))
             kappa0[ends] = 2.0 * np.tan(angle / 2.0) / voronoi
         return kappa0
 

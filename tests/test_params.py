@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 
 import taichi_star as ts
-from taichi_star.actuation import (forward_direction, gait_mask, parse_gait, symmetry_classes,
-                                   transform_gait)
+from taichi_star.gait import Gait, symmetry_classes
 from taichi_star.geometry import build_topology
 
 
@@ -71,12 +70,13 @@ def test_simulate_rejects_bad_arguments(kwargs, match):
 
 
 def test_gait_parsing_and_forward_direction():
-    assert parse_gait("A3+A1") == (1, 3)
-    assert parse_gait("none") == ()
-    assert gait_mask("A1+A8").tolist() == [1, 0, 0, 0, 0, 0, 0, 1]
-    np.testing.assert_allclose(forward_direction("A1+A3"), [np.sqrt(0.5), np.sqrt(0.5)])
-    assert forward_direction("A1+A5") is None
-    assert forward_direction("none") is None
+    assert Gait.parse("A3+A1").actuators == (1, 3)
+    assert ts.StarParams(gait="a3+A1").gait == "A1+A3"
+    assert Gait.parse("none").actuators == ()
+    assert Gait.parse("A1+A8").mask.tolist() == [1, 0, 0, 0, 0, 0, 0, 1]
+    np.testing.assert_allclose(Gait.parse("A1+A3").forward, [np.sqrt(0.5), np.sqrt(0.5)])
+    assert Gait.parse("A1+A5").forward is None
+    assert Gait.parse("none").forward is None
 
 
 def test_symmetry_classes_partition_the_255_gaits():
@@ -88,7 +88,7 @@ def test_symmetry_classes_partition_the_255_gaits():
         assert representative in group
         for rotation in range(8):
             for reflect in (False, True):
-                assert transform_gait(representative, rotation, reflect) in group
+                assert Gait.parse(representative).transform(rotation, reflect).name in group
 
 
 def test_default_topology_is_the_papers():

@@ -24,7 +24,8 @@ from hypothesis import strategies as st
 
 import taichi_star as ts
 from taichi_star import params as params_module
-from taichi_star.actuation import PAPER_PROFILE, forward_direction
+from taichi_star.actuation import CurvatureProfile
+from taichi_star.gait import Gait
 
 SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow])
 FAST = settings(max_examples=60, **SETTINGS)
@@ -32,7 +33,7 @@ FAST = settings(max_examples=60, **SETTINGS)
 SLOW = settings(max_examples=12, **SETTINGS)
 
 STAR_FIELDS = {f.name for f in dataclasses.fields(ts.StarParams)}
-LARGEST_JOINT_RADIUS = 1.0 / (PAPER_PROFILE.rest_curvature * math.sin(math.pi / 8))
+LARGEST_JOINT_RADIUS = 1.0 / (CurvatureProfile().rest_curvature * math.sin(math.pi / 8))
 """≈ 25.6 mm: an arc of the rest curvature cannot span joints further apart (params.py)."""
 
 
@@ -146,7 +147,7 @@ def test_valid_batches_simulate_with_valid_status_and_finite_results(batch, dt, 
                    "newton_iterations_mean"):
         assert np.isfinite(summary.loc[ok, column]).all(), column
     # signed speed is defined where the gait has a forward direction (design §3)
-    has_forward = np.array([forward_direction(p.gait) is not None for p in batch])
+    has_forward = np.array([Gait.parse(p.gait).forward is not None for p in batch])
     assert np.isfinite(summary.loc[ok & has_forward, "signed_speed_mm_s"]).all()
     assert summary.loc[ok & ~has_forward, "signed_speed_mm_s"].isna().all()
     assert summary.loc[ok, "failure_time_s"].isna().all()
@@ -186,7 +187,7 @@ def test_inconsistent_geometry_names_the_field(joint_radius, data):
     with pytest.raises(ValueError, match="tip_radius"):
         ts.StarParams(joint_radius=0.02, tip_radius=tip)
     # the period must contain the heating phase
-    period = data.draw(st.floats(1e-6, PAPER_PROFILE.switch_time))
+    period = data.draw(st.floats(1e-6, CurvatureProfile().switch_time))
     with pytest.raises(ValueError, match="period"):
         ts.StarParams(period=period)
 

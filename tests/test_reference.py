@@ -15,7 +15,7 @@ import math
 import numpy as np
 import pytest
 
-from taichi_star.actuation import PAPER_PROFILE
+from taichi_star.actuation import CurvatureProfile
 from taichi_star.geometry import ARC_BEND, discrete_curvature
 from taichi_star.params import SolverConfig, StarParams
 from taichi_star.reference import (NewtonDidNotConverge, ReferenceSimulator, bend_element,
@@ -323,7 +323,7 @@ def test_actuated_run_converges_and_is_mirror_symmetric():
     kappa = discrete_curvature(q[topo.triplets[:, 0]], q[topo.triplets[:, 1]],
                                q[topo.triplets[:, 2]], topo.voronoi_length)
     rest_k = np.abs(topo.rest_curvature[topo.triplet_actuator == 0]).mean()
-    target = PAPER_PROFILE.curvature(steps * sim.solver.dt)
+    target = CurvatureProfile().curvature(steps * sim.solver.dt)
     mean_k = [np.abs(kappa[topo.triplet_actuator == m]).mean() for m in range(8)]
     assert target < mean_k[0] < rest_k - 0.1 * (rest_k - target)
     assert abs(mean_k[4] - rest_k) < 0.1 * (rest_k - mean_k[0])

@@ -9,7 +9,7 @@ import pytest
 
 import taichi_star
 from taichi_star import SolverConfig, StarParams
-from taichi_star.actuation import symmetry_classes, transform_gait
+from taichi_star.gait import Gait, symmetry_classes
 from taichi_star.experiment import (FIG4C_COLUMNS, PAPER_DIRECTIONS, PAPER_GAITS,
                                     compare_with_experiment, experimental_speed,
                                     experimental_speeds, experimental_trajectory)
@@ -212,7 +212,7 @@ def test_symmetry_reduction_is_exact():
     rotated / mirrored heading: the basis of simulating one gait per class."""
     source = "A1+A2+A4"  # no symmetry of its own: a class of 16
     images = [(0, False), (3, False), (0, True), (5, True)]
-    gaits = [transform_gait(source, r, f) for r, f in images]
+    gaits = [Gait.parse(source).transform(r, f).name for r, f in images]
     assert len(set(gaits)) == 4
     duration = 0.2
     result = taichi_star.simulate([StarParams(gait=g) for g in gaits], duration,
@@ -233,7 +233,7 @@ def test_symmetry_reduction_is_exact():
     assert set(gaits) <= set(rep_class[1])
     for gait, heading in zip(gaits, summary["heading_deg"]):
         mapping = gaits_study.symmetry_map(source, gait)
-        assert transform_gait(source, *mapping) == gait
+        assert Gait.parse(source).transform(*mapping).name == gait
         assert abs(gaits_study.wrap_degrees(
             gaits_study.transform_heading(summary["heading_deg"].iloc[0], *mapping)
             - heading)) < 1e-4
