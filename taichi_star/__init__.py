@@ -6,7 +6,10 @@ Importing the package has no side effects (no `ti.init`); `simulate` initialises
 from .actuation import CurvatureProfile
 from .gait import Gait, symmetry_classes
 from .params import SolverConfig, StarParams
-from .simulation import SimulationResult, available_archs, simulate
+from .runtime import available_archs
+from .simulation import SimulationResult, simulate
 
-__all__ = ["simulate", "SimulationResult", "available_archs", "StarParams", "SolverConfig", "CurvatureProfile", "Gait",
-           "symmetry_classes"]
+__version__ = "0.2.0"
+
+__all__ = ["simulate", "SimulationResult", "available_archs", "StarParams", "SolverConfig",
+           "CurvatureProfile", "Gait", "symmetry_classes", "__version__"]

@@ -15,6 +15,8 @@ import numpy as np
 from .gait import N_ACTUATORS
 from .params import StarParams
 
+CENTRE = 0
+"""Node number of the hub (the central cylinder)."""
 SPOKE, LIMB, ARC = 0, 1, 2
 """Edge kinds. Spokes (centre–joint) are stiff, massless and feel no drag."""
 LIMB_BEND, JOINT_BEND, ARC_BEND = 0, 1, 2

@@ -1,85 +1,55 @@
-"""The host model of a batch: every per-instance coefficient the kernels need, in NumPy arrays
-with a leading batch axis, built once from the StarParams and copied to the device once."""
+"""The host model of a batch: every per-instance coefficient the kernels need, NumPy arrays with
+a leading batch axis, built once from the StarParams by iterating the term registry and copied
+to the device once."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Dict, Sequence, Tuple
 
 import numpy as np
 
-from .gait import N_ACTUATORS, Gait
-from .geometry import ARC, SPOKE, ARC_BEND, Topology, build_topology
+from .geometry import CENTRE, Topology, build_topology
 from .params import StarParams
+from .physics import TERMS
 
 
 @dataclass(frozen=True)
 class BatchModel:
-    """Shapes: B instances, N nodes, E edges, T triplets. SI units throughout."""
+    """Shapes: B instances, N nodes. SI units throughout."""
 
-    params: tuple
+    params: Tuple[StarParams, ...]
     topology: Topology
     """Shared structure (from the first instance; per-instance rest geometry is below)."""
     rest_positions: np.ndarray
-    """(B, N, 2) m."""
-    rest_length: np.ndarray
-    """(B, E) m."""
-    voronoi_length: np.ndarray
-    """(B, T) m."""
-    rest_curvature: np.ndarray
-    """(B, T) 1/m."""
-    end_turning_length: np.ndarray
-    """(B, T) m: Topology.end_turning_length where actuation_ends is "shared", else 0."""
-    edge_stiffness: np.ndarray
-    """(B, E) E·r0, N/m·m = N per unit height."""
-    bend_stiffness: np.ndarray
-    """(B, T) E·r0³/12, N·m²."""
-    drag_parallel_coeff: np.ndarray
-    """(B, E) ½·ρ_f·Δl̄·C∥ (0 on spokes), kg/m² per unit height."""
-    drag_perpendicular_coeff: np.ndarray
-    """(B, E) ½·ρ_f·Δl̄·C⊥ (0 on spokes)."""
+    """(B, N, 2) rest shape, m."""
     mass: np.ndarray
-    """(B, N) lumped structural mass, kg/m (centroid weights)."""
+    """(B, N) lumped structural mass, kg/m (the centroid's weights)."""
     inertia: np.ndarray
-    """(B, N) mass + added mass, kg/m (the diagonal of M in Eq. 4)."""
-    cylinder_drag_coeff: np.ndarray
-    """(B,) ½·ρ_f·C_c·D_c, kg/m²."""
-    jet_alpha: np.ndarray
-    """(B,) α."""
-    fluid_density: np.ndarray
-    """(B,) ρ_f, kg/m³."""
-    jet_always: np.ndarray
-    """(B,) int32: 1 for jet_mode "always"."""
-    period: np.ndarray
-    """(B,) s."""
-    gait_mask: np.ndarray
-    """(B, 8) int32."""
+    """(B, N) mass plus the terms' added mass, kg/m (the diagonal mass of the inertia term)."""
+    coefficients: Dict[str, Dict[str, np.ndarray]]
+    """Per term name: its coefficients, name -> (B, ...) array."""
+    terms_used: Tuple
+    """(term class, configuration) of the terms some instance uses, in registry order."""
 
     @property
     def batch_size(self) -> int:
         return len(self.params)
 
     @property
-    def uses_jet(self) -> bool:
-        return bool((self.jet_alpha > 0).any())
-
-    @property
-    def uses_rod_drag(self) -> bool:
-        return bool((self.drag_parallel_coeff > 0).any() or (self.drag_perpendicular_coeff > 0).any())
-
-    @property
-    def uses_cylinder_drag(self) -> bool:
-        return bool((self.cylinder_drag_coeff > 0).any())
-
-    @property
-    def uses_actuation(self) -> bool:
-        return bool(self.gait_mask.any())
+    def engine_key(self) -> Tuple:
+        """What a compiled engine depends on: topology and the terms used with their switches."""
+        return (self.params[0].topology_key,
+                tuple((cls.name, configuration) for cls, configuration in self.terms_used))
 
 
-def build_model(params: Sequence[StarParams]) -> BatchModel:
-    """The host model of a batch. Raises ValueError for an empty batch, a non-StarParams entry or
+def validate_batch(params) -> Tuple[StarParams, ...]:
+    """The batch as a tuple. Raises ValueError for an empty batch, a non-StarParams entry or
     instances whose topology (n_arc, n_limb) differs."""
+    if isinstance(params, StarParams):
+        raise ValueError("params must be a sequence of StarParams (wrap a single one in a list)")
+    if params is None or isinstance(params, (str, bytes)) or not hasattr(params, "__iter__"):
+        raise ValueError(f"params must be a sequence of StarParams, got {type(params).__name__}")
     params = tuple(params)
     if not params:
         raise ValueError("params must hold at least one StarParams (the batch is empty)")
@@ -90,58 +60,41 @@ def build_model(params: Sequence[StarParams]) -> BatchModel:
     if len(keys) > 1:
         raise ValueError(f"all instances of a batch must share n_arc and n_limb (the topology); "
                          f"got (n_arc, n_limb) in {sorted(keys)}")
+    return params
+
+
+def rest_topologies(params: Sequence[StarParams]):
+    """One Topology per instance (shared between instances of the same rest geometry)."""
     shapes = {}
     for p in params:
         key = (p.joint_radius, p.tip_radius, p.actuator_profile.rest_curvature)
         if key not in shapes:
             shapes[key] = build_topology(p)
-    topologies = [shapes[(p.joint_radius, p.tip_radius, p.actuator_profile.rest_curvature)]
-                  for p in params]
+    return [shapes[(p.joint_radius, p.tip_radius, p.actuator_profile.rest_curvature)]
+            for p in params]
+
+
+def build_model(params: Sequence[StarParams]) -> BatchModel:
+    """The host model of a batch (see `validate_batch` for the errors it raises)."""
+    params = validate_batch(params)
+    topologies = rest_topologies(params)
     topology = topologies[0]
-
-    def stack(name):
-        return np.stack([getattr(t, name) for t in topologies])
-
-    def per_instance(function):
-        return np.array([function(p) for p in params], dtype=np.float64)
-
-    thickness = per_instance(lambda p: p.thickness)[:, None]
-    arc_edge = topology.edge_kind == ARC
-    arc_triplet = topology.triplet_kind == ARC_BEND
-    modulus_edge = np.where(arc_edge, per_instance(lambda p: p.youngs_modulus)[:, None],
-                            per_instance(lambda p: p.limb_modulus)[:, None])
-    modulus_triplet = np.where(arc_triplet, per_instance(lambda p: p.youngs_modulus)[:, None],
-                               per_instance(lambda p: p.limb_modulus)[:, None])
-    rest_length = stack("rest_length")
-    fluid_density = per_instance(lambda p: p.fluid_density)
-    wetted = (topology.edge_kind != SPOKE)[None, :] * 0.5 * fluid_density[:, None] * rest_length
-
-    lumped = stack("lumped_length")
-    mass = thickness * (per_instance(lambda p: p.actuator_density)[:, None] * lumped[:, :, 0]
-                        + per_instance(lambda p: p.foam_density)[:, None] * lumped[:, :, 1])
-    mass[:, 0] += per_instance(lambda p: p.cylinder_mass_per_height)
-    added = (fluid_density * per_instance(lambda p: p.added_mass_coeff))[:, None] * thickness \
-        * lumped.sum(axis=2)
-    added[:, 0] += fluid_density * per_instance(
-        lambda p: p.cylinder_added_mass_coeff * math.pi * p.cylinder_diameter ** 2 / 4)
-
-    return BatchModel(
-        params=params, topology=topology,
-        rest_positions=stack("rest_positions"), rest_length=rest_length,
-        voronoi_length=stack("voronoi_length"), rest_curvature=stack("rest_curvature"),
-        end_turning_length=stack("end_turning_length") * np.array(
-            [p.actuation_ends == "shared" for p in params], dtype=np.float64)[:, None],
-        edge_stiffness=modulus_edge * thickness,
-        bend_stiffness=modulus_triplet * thickness ** 3 / 12.0,
-        drag_parallel_coeff=wetted * per_instance(lambda p: p.drag_parallel)[:, None],
-        drag_perpendicular_coeff=wetted * per_instance(lambda p: p.drag_perpendicular)[:, None],
-        mass=mass, inertia=mass + added,
-        cylinder_drag_coeff=0.5 * fluid_density * per_instance(
-            lambda p: p.cylinder_drag * p.cylinder_diameter),
-        jet_alpha=per_instance(lambda p: p.alpha), fluid_density=fluid_density,
-        jet_always=np.array([p.jet_mode == "always" for p in params], dtype=np.int32),
-        period=per_instance(lambda p: p.period),
-        gait_mask=np.stack([Gait.parse(p.gait).mask for p in params]).astype(np.int32).reshape(
-            len(params), N_ACTUATORS),
-    )
-
+    thickness = np.array([p.thickness for p in params])[:, None]
+    lumped = np.stack([t.lumped_length for t in topologies])
+    mass = thickness * (np.array([p.actuator_density for p in params])[:, None] * lumped[:, :, 0]
+                        + np.array([p.foam_density for p in params])[:, None] * lumped[:, :, 1])
+    mass[:, CENTRE] += np.array([p.cylinder_mass_per_height for p in params])
+    inertia = mass
+    coefficients, used = {}, []
+    for cls in TERMS:
+        added = cls.added_inertia(params, topologies)
+        if added is not None:
+            inertia = inertia + added
+        coefficients[cls.name] = cls.coefficients(params, topologies, topology)
+        configuration = cls.configuration(coefficients[cls.name])
+        if configuration is not None:
+            used.append((cls, configuration))
+    return BatchModel(params=params, topology=topology,
+                      rest_positions=np.stack([t.rest_positions for t in topologies]),
+                      mass=mass, inertia=inertia, coefficients=coefficients,
+                      terms_used=tuple(used))

@@ -3,262 +3,231 @@
 from __future__ import annotations
 
 import math
-import multiprocessing
-from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+import numbers
+from dataclasses import dataclass, field
 from typing import Optional, Sequence
 
 import numpy as np
 import pandas as pd
-import taichi as ti
 
-from .engine import STATUS_NAMES, STATUS_OK, BatchEngine, terms_used
-from .geometry import Topology
-from .metrics import METERS_TO_MM, swimming_metrics
-from .model import build_model
+from . import metrics
+from .geometry import CENTRE, Topology
+from .model import build_model, validate_batch
 from .params import SolverConfig, StarParams
+from .runtime import Runtime, check_arch
+from .state import STATUS_NAMES, STATUS_OK
 
-ARCHS = {"cpu": "cpu", "gpu": "gpu", "cuda": "cuda", "vulkan": "vulkan", "metal": "metal"}
 STEPS_PER_LAUNCH = 50
 """Steps fused into one kernel launch: enough to hide launch cost, few enough for a live
 progress bar."""
-
-_runtime = {"arch": None, "precision": None, "cpu_threads": None, "log_level": ti.WARN}
-_engines = {}
-"""Engines of this Taichi runtime by (n_arc, n_limb, capacity): each compiles once per process."""
+STEP_TOLERANCE = 1e-9
+"""Relative tolerance within which a time is taken to be a whole number of steps."""
 
 
-def available_archs():
-    """The arch names `simulate` accepts on this machine."""
-    names = ["cpu"]
-    for name in ("cuda", "vulkan", "metal"):
-        if ti.lang.misc.is_arch_supported(getattr(ti, name)):
-            names.append(name)
-    if len(names) > 1:
-        names.insert(1, "gpu")
-    return names
-
-
-def ensure_taichi(arch: str = "cpu", precision: str = "f64"):
-    """Initialise Taichi once per process, again only when arch or precision change.
-    Raises ValueError for an arch this machine does not have."""
-    if arch not in ARCHS:
-        raise ValueError(f"arch must be one of {sorted(ARCHS)}, got {arch!r}")
-    if _runtime["arch"] == arch and _runtime["precision"] == precision:
-        return
-    available = ["cpu"] if arch == "cpu" else available_archs()
-    if arch not in available:
-        raise ValueError(f"arch {arch!r} is not available on this machine; available: {available}")
-    threads = {} if _runtime["cpu_threads"] is None else {"cpu_max_num_threads": _runtime["cpu_threads"]}
-    ti.init(arch=getattr(ti, ARCHS[arch]), default_fp=ti.f64 if precision == "f64" else ti.f32,
-            fast_math=False, offline_cache=True, log_level=_runtime["log_level"], **threads)
-    _runtime.update(arch=arch, precision=precision)
-    _engines.clear()
-
-
-MIN_CAPACITY = 8
-
-
-def batch_capacity(batch_size: int) -> int:
-    """Engine capacity for a batch: the next power of two, at least MIN_CAPACITY, so that
-    batches of similar size share one compiled engine (padding instances are inactive and cost
-    nothing)."""
-    return max(MIN_CAPACITY, 1 << max(batch_size - 1, 0).bit_length())
-
-
-def get_engine(model) -> BatchEngine:
-    """The cached engine for this batch's topology and capacity (created on first use)."""
-    key = (*model.params[0].topology_key, batch_capacity(model.batch_size))
-    if key not in _engines:
-        _engines[key] = BatchEngine(model.topology, key[-1],
-                                    instances_per_block=1 if _runtime["arch"] == "cpu" else 64)
-    return _engines[key]
+def whole_steps(time_s: float, dt: float) -> Optional[int]:
+    """time_s / dt as an integer if it is one (within STEP_TOLERANCE), else None."""
+    ratio = time_s / dt
+    steps = int(round(ratio))
+    return steps if abs(ratio - steps) <= STEP_TOLERANCE * max(1.0, ratio) else None
 
 
 @dataclass
 class SimulationResult:
+    """What `simulate` returns.
+
+    summary: one row per instance, in input order: every StarParams field; the whole-run
+        metrics displacement_x_mm, displacement_y_mm, speed_mm_s, signed_speed_mm_s (on the
+        gait's forward direction; NaN where it is undefined), travel_direction_deg (direction of
+        the displacement from +x); heading_deg (body rotation at the end, counter-clockwise);
+        steady_speed_mm_s and steady_signed_speed_mm_s (over cycles [steady_from_cycle, last
+        full cycle), NaN where the run has fewer cycles or the cycle boundaries are not whole
+        steps); newton_iterations_mean / newton_iterations_max (per step, over accepted and
+        failed attempts), substep_retries (steps redone with substeps), status ("ok",
+        "newton_failed", "non_finite") and failure_time_s (NaN when ok). Metrics of failed
+        instances are NaN.
+    trajectory: long table (instance, t_s, x_mm, y_mm, heading_deg): the centroid relative to its
+        start and the body rotation at every record time (NaN from a failure on); empty without
+        records.
+    shapes: (n_records, B, N, 2) node positions in m at the record times, when requested.
+    """
+
     summary: pd.DataFrame
-    """One row per instance, in input order: every StarParams field, the swimming metrics of
-    `metrics.swimming_metrics`, newton_iterations_mean/max, substep_retries (failed steps
-    redone with substeps), status and failure_time_s."""
     trajectory: pd.DataFrame
-    """Long table (instance, t_s, x_mm, y_mm): the centroid relative to its start, every
-    record_every steps from t = 0 (NaN after a failure); empty when record_every = 0."""
     shapes: Optional[np.ndarray]
-    """(n_records, B, N, 2) node positions in m at the trajectory's times, when requested."""
-    topology: Topology
-    solver: SolverConfig
+    topology: Topology = field(repr=False)
+    solver: SolverConfig = field(repr=False)
+
+    def __repr__(self) -> str:
+        status = self.summary["status"].value_counts().to_dict() if len(self.summary) else {}
+        return (f"SimulationResult({len(self.summary)} instances, status {status}, "
+                f"{self.trajectory['t_s'].nunique() if len(self.trajectory) else 0} records, "
+                f"shapes {'recorded' if self.shapes is not None else 'not recorded'})")
 
 
-def _validate_call(params, duration_s, solver, record_every, record_shapes, workers=1):
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise ValueError(f"workers must be an integer >= 1 (processes), got {workers!r}")
-    if isinstance(params, StarParams):
-        raise ValueError("params must be a sequence of StarParams (wrap a single one in a list)")
-    if isinstance(duration_s, bool) or not isinstance(duration_s, (int, float)) \
-            or not math.isfinite(duration_s) or duration_s <= 0:
-        raise ValueError(f"duration_s must be a finite number > 0 s, got {duration_s!r}")
+def _check_real(name, value, lowest, allow_equal=False):
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value) \
+            or value < lowest or (value == lowest and not allow_equal):
+        bound = f">= {lowest}" if allow_equal else f"> {lowest}"
+        raise ValueError(f"{name} must be a finite number {bound}, got {value!r}")
+    return float(value)
+
+
+def validate_call(params, duration_s, solver, record_interval_s, record_shapes, steady_from_cycle):
+    """Check simulate's arguments before any compute; returns (params tuple, n_steps,
+    record stride in steps or 0)."""
+    params = validate_batch(params)
+    duration_s = _check_real("duration_s", duration_s, 0.0)
     if not isinstance(solver, SolverConfig):
         raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
-    if isinstance(record_every, bool) or not isinstance(record_every, int) or record_every < 0:
-        raise ValueError(f"record_every must be an integer >= 0 (steps; 0 = off), got {record_every!r}")
-    if record_shapes and record_every == 0:
-        raise ValueError("record_shapes needs record_every > 0 (the stride of the shape records)")
     n_steps = int(round(duration_s / solver.dt))
     if n_steps < 1:
         raise ValueError(f"duration_s must be at least one step (dt = {solver.dt} s), got {duration_s!r}")
-    return n_steps
+    record_interval_s = _check_real("record_interval_s", record_interval_s, 0.0, allow_equal=True)
+    stride = 0
+    if record_interval_s > 0:
+        stride = whole_steps(record_interval_s, solver.dt)
+        if stride is None or stride < 1:
+            raise ValueError(f"record_interval_s must be a whole number of steps (dt = "
+                             f"{solver.dt} s), got {record_interval_s!r}")
+    if record_shapes and stride == 0:
+        raise ValueError("record_shapes needs record_interval_s > 0 (the spacing of the records)")
+    if isinstance(steady_from_cycle, bool) or not isinstance(steady_from_cycle, numbers.Integral) \
+            or steady_from_cycle < 0:
+        raise ValueError(f"steady_from_cycle must be an integer >= 0, got {steady_from_cycle!r}")
+    return params, n_steps, stride
 
 
 def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConfig = SolverConfig(),
-             arch: str = "cpu", record_every: int = 0, progress: bool = False,
-             record_shapes: bool = False, workers: int = 1) -> SimulationResult:
-    """Simulate a batch of robot instances from rest for duration_s seconds (rounded to whole
-    steps of solver.dt). Every instance may have its own parameters except the topology
-    (n_arc, n_limb). An instance whose Newton solve fails is frozen and reported in `summary`
-    (status, failure_time_s); the others are unaffected.
+             *, arch: str = "cpu", record_interval_s: float = 0.0, record_shapes: bool = False,
+             steady_from_cycle: int = 1, progress: bool = False) -> SimulationResult:
+    """Simulate a batch of robot instances from rest in their rest shape for duration_s seconds
+    (rounded to whole steps of solver.dt) and return a `SimulationResult` (see there for every
+    column, with units).
 
-    workers > 1 splits the batch over that many worker processes, each a single-threaded
-    Taichi CPU runtime (on the 2-core machines measured here, Taichi's own threads gained 1.25×
-    and two processes 2×); results are bitwise those of one process."""
-    n_steps = _validate_call(params, duration_s, solver, record_every, record_shapes, workers)
+    Every instance may have its own parameters except the topology (n_arc, n_limb). An
+    instance whose Newton solve fails even with substeps is frozen and reported (status,
+    failure_time_s); the others are unaffected. record_interval_s (s, a whole number of steps;
+    0 = none) sets the trajectory's spacing, record_shapes adds the node positions then. The
+    centroid is also taken at every cycle boundary that falls on a step, for the steady
+    (cycle-window) speeds from cycle `steady_from_cycle` on. Raises ValueError for any bad
+    argument before computing anything."""
+    params, n_steps, stride = validate_call(params, duration_s, solver, record_interval_s,
+                                            record_shapes, steady_from_cycle)
+    check_arch(arch)
     model = build_model(params)
-    if workers > 1 and model.batch_size > 1:
-        return _simulate_in_processes(model, duration_s, solver, arch, record_every, progress,
-                                      record_shapes, workers)
-    ensure_taichi(arch, solver.precision)
-    engine = get_engine(model)
-    engine.load(model, solver)
-    terms = terms_used(model)
+    runtime = Runtime.current()
+    runtime.ensure(arch, solver.precision)
+    engine = runtime.engine_for(model, solver)
+    batch = model.batch_size
+
+    record_steps = set(range(0, n_steps + 1, stride)) if stride else set()
+    boundary_steps = []
+    for p in params:
+        per_cycle = whole_steps(p.period, solver.dt)
+        boundary_steps.append([] if per_cycle is None else
+                              list(range(0, n_steps + 1, per_cycle)))
+    n_boundaries = max(len(steps) for steps in boundary_steps)
+    boundaries = np.full((batch, max(n_boundaries, 1), 2), np.nan)
+    by_step = {}
+    for b, steps in enumerate(boundary_steps):
+        for index, step in enumerate(steps):
+            by_step.setdefault(step, []).append((b, index))
+    stops = sorted(record_steps | set(by_step) | {n_steps})
+
     centroids, shapes = [], []
-    engine.compute_centroids()
-    start = engine.centroids.to_numpy()[:model.batch_size].astype(np.float64)
+    state = engine.state
 
-    def record():
-        engine.compute_centroids()
-        centroids.append(engine.centroids.to_numpy()[:model.batch_size])
-        if record_shapes:
-            shapes.append(engine.positions.to_numpy()[:model.batch_size])
+    def take(step):
+        now = engine.centroids_of(batch)
+        for b, index in by_step.get(step, ()):
+            boundaries[b, index] = now[b]
+        if step in record_steps:
+            positions = state.positions.to_numpy()[:batch]
+            centroids.append(now)
+            rotations.append(metrics.body_rotation(positions, model.rest_positions,
+                                                   model.topology.joints, CENTRE))
+            if record_shapes:
+                shapes.append(positions.astype(np.float64))
 
+    rotations = []
     bar = None
     if progress:
         from tqdm.auto import tqdm
-        bar = tqdm(total=n_steps, unit="step", desc=f"{model.batch_size} robots")
-    if record_every:
-        record()
+        bar = tqdm(total=n_steps, unit="step", desc=f"{batch} robots")
+    start = engine.centroids_of(batch)
+    take(0)
     step = 0
-    while step < n_steps:
-        # a launch never runs past a record point, so records are taken between launches
-        count = min(STEPS_PER_LAUNCH, n_steps - step)
-        if record_every:
-            count = min(count, record_every - step % record_every)
-        engine.advance(step, count, solver.integrator == "bdf2", terms)
-        step += count
-        if record_every and step % record_every == 0:
-            record()
-        if bar is not None:
-            bar.update(count)
+    for stop in stops:
+        while step < stop:
+            # a launch never runs past a stop, so records are taken between launches
+            count = min(STEPS_PER_LAUNCH, stop - step)
+            engine.advance(step, count)
+            step += count
+            if bar is not None:
+                bar.update(count)
+        if stop > 0:
+            take(stop)
     if bar is not None:
         bar.close()
-    return _collect(engine, model, solver, n_steps, record_every, start, centroids, shapes)
+    return _collect(engine, model, solver, n_steps, stride, start, centroids, rotations, shapes,
+                    boundaries, steady_from_cycle)
 
 
-def _collect(engine, model, solver, n_steps, record_every, start, centroids, shapes):
+def _collect(engine, model, solver, n_steps, stride, start, centroids, rotations, shapes,
+             boundaries, steady_from_cycle):
     batch = model.batch_size
-    engine.compute_centroids()
-    final = engine.centroids.to_numpy()[:batch].astype(np.float64)
-    status = engine.status.to_numpy()[:batch]
-    failure_step = engine.failure_step.to_numpy()[:batch]
-    steps_done = engine.steps_done.to_numpy()[:batch]
-    newton_total = engine.newton_total.to_numpy()[:batch]
+    state = engine.state
+    final = engine.centroids_of(batch)
+    status = state.status.to_numpy()[:batch]
+    failure_step = state.failure_step.to_numpy()[:batch]
+    steps_done = state.steps_done.to_numpy()[:batch]
+    newton_total = state.newton_total.to_numpy()[:batch]
     attempted = steps_done + (status != STATUS_OK)
     duration = n_steps * solver.dt
-    rows = {name: [getattr(p, name) for p in model.params] for name in StarParams.field_names()}
-    rows.update(swimming_metrics(final - start, duration, [p.gait for p in model.params]))
-    rows["newton_iterations_mean"] = newton_total / np.maximum(attempted, 1)
-    rows["newton_iterations_max"] = engine.newton_max.to_numpy()[:batch]
-    rows["substep_retries"] = engine.substep_retries.to_numpy()[:batch]
-    rows["status"] = [STATUS_NAMES[s] for s in status]
+    params = model.params
+    gaits = [p.gait for p in params]
     failed = status != STATUS_OK
+
+    rows = {name: [getattr(p, name) for p in params] for name in StarParams.field_names()}
+    rows.update(metrics.swimming_metrics(final - start, duration, gaits))
+    positions = state.positions.to_numpy()[:batch].astype(np.float64)
+    rows["heading_deg"] = np.degrees(metrics.body_rotation(
+        positions, model.rest_positions, model.topology.joints, CENTRE))
+    boundaries[failed] = np.nan
+    rows.update(metrics.cycle_window_speeds(boundaries, np.array([p.period for p in params]),
+                                            gaits, steady_from_cycle))
+    rows["newton_iterations_mean"] = newton_total / np.maximum(attempted, 1)
+    rows["newton_iterations_max"] = state.newton_max.to_numpy()[:batch]
+    rows["substep_retries"] = state.substep_retries.to_numpy()[:batch]
+    rows["status"] = [STATUS_NAMES[s] for s in status]
     rows["failure_time_s"] = np.where(failed, failure_step * solver.dt, np.nan)
     summary = pd.DataFrame(rows)
-    for column in ("displacement_x_mm", "displacement_y_mm", "speed_mm_s", "signed_speed_mm_s",
-                   "heading_deg"):
-        summary.loc[failed, column] = np.nan
+    metric_columns = [*metrics.SPEED_COLUMNS, "heading_deg", "steady_speed_mm_s",
+                      "steady_signed_speed_mm_s"]
+    summary.loc[failed, metric_columns] = np.nan
 
     trajectory = pd.DataFrame({"instance": pd.Series(dtype=int), "t_s": pd.Series(dtype=float),
-                               "x_mm": pd.Series(dtype=float), "y_mm": pd.Series(dtype=float)})
+                               "x_mm": pd.Series(dtype=float), "y_mm": pd.Series(dtype=float),
+                               "heading_deg": pd.Series(dtype=float)})
     shape_array = None
-    if record_every:
+    if stride:
         n_records = len(centroids)
-        times = np.arange(n_records) * record_every * solver.dt
-        record_steps = np.arange(n_records) * record_every
+        record_steps = np.arange(n_records) * stride
         # a frozen instance keeps its last good state: its records from the failure on are NaN
         after_failure = failed[:, None] & (record_steps[None, :] >= failure_step[:, None])
-        relative = (np.stack(centroids, axis=1).astype(np.float64) - start[:, None, :]) * METERS_TO_MM
+        relative = (np.stack(centroids, axis=1) - start[:, None, :]) * metrics.METERS_TO_MM
         relative[after_failure] = np.nan
+        heading = np.degrees(np.stack(rotations, axis=1))
+        heading[after_failure] = np.nan
         trajectory = pd.DataFrame({
             "instance": np.repeat(np.arange(batch), n_records),
-            "t_s": np.tile(times, batch),
+            "t_s": np.tile(record_steps * solver.dt, batch),
             "x_mm": relative[:, :, 0].ravel(),
             "y_mm": relative[:, :, 1].ravel(),
+            "heading_deg": heading.ravel(),
         })
         if shapes:
-            shape_array = np.stack(shapes).astype(np.float64)
+            shape_array = np.stack(shapes)
             shape_array[after_failure.T] = np.nan
     return SimulationResult(summary=summary, trajectory=trajectory, shapes=shape_array,
                             topology=model.topology, solver=solver)
-
-
-_pools = {}
-"""Worker pools by (workers, arch): started once per process, their engines stay compiled."""
-
-
-def _start_worker():
-    # one thread per worker process; workers share the offline cache, whose lock contention
-    # Taichi reports as warnings that mean nothing here
-    _runtime.update(cpu_threads=1, log_level=ti.ERROR)
-
-
-def _simulate_chunk(params, duration_s, solver, arch, record_every, record_shapes):
-    return simulate(params, duration_s, solver, arch, record_every, False, record_shapes)
-
-
-def _simulate_in_processes(model, duration_s, solver, arch, record_every, progress,
-                           record_shapes, workers):
-    """`simulate` with the batch cut into contiguous chunks run by a pool of processes; the
-    chunks' tables are joined back in input order."""
-    if arch != "cpu":
-        raise ValueError(f"workers > 1 runs CPU processes; arch must be 'cpu', got {arch!r}")
-    key = (workers, arch)
-    if key not in _pools:
-        _pools[key] = ProcessPoolExecutor(max_workers=workers, initializer=_start_worker,
-                                          mp_context=multiprocessing.get_context("spawn"))
-    params = list(model.params)
-    # a few chunks per worker for a live progress bar; equal sizes share one compiled engine
-    n_chunks = min(len(params), 4 * workers)
-    bounds = np.linspace(0, len(params), n_chunks + 1).round().astype(int)
-    futures = [_pools[key].submit(_simulate_chunk, params[start:stop], duration_s, solver, arch,
-                                  record_every, record_shapes)
-               for start, stop in zip(bounds[:-1], bounds[1:])]
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-        bar = tqdm(total=len(params), unit="robot", desc=f"{len(params)} robots, {workers} workers")
-    results = []
-    for future, start, stop in zip(futures, bounds[:-1], bounds[1:]):
-        results.append(future.result())
-        if bar is not None:
-            bar.update(stop - start)
-    if bar is not None:
-        bar.close()
-    trajectories = []
-    for result, start in zip(results, bounds[:-1]):
-        trajectory = result.trajectory.copy()
-        trajectory["instance"] += start
-        trajectories.append(trajectory)
-    return SimulationResult(
-        summary=pd.concat([r.summary for r in results], ignore_index=True),
-        trajectory=pd.concat(trajectories, ignore_index=True),
-        shapes=np.concatenate([r.shapes for r in results], axis=1) if record_shapes else None,
-        topology=model.topology, solver=solver)

@@ -1,2 +1,19 @@
-"""One module per physics term. Every element function is a `@ti.func` with explicit arguments
-that returns its energy or force and the exact derivatives the Newton Jacobian needs."""
+"""The force terms, one module each, and the registry that lists them.
+
+`TERMS` is the only list of terms: model building, loading to the device, compile-out and
+assembly all iterate it, in this order (which is also the order in which forces are summed, and
+the order of their `begin_step` hooks: the damping reads the natural curvatures the bending term
+sets). Adding a term is one module plus one line here.
+"""
+
+from .added_mass import AddedMass
+from .bending import Bending
+from .cylinder_drag import CylinderDrag
+from .damping import MaterialDamping
+from .jet import Jet
+from .rod_drag import RodDrag
+from .stretching import Stretching
+
+TERMS = (AddedMass, Stretching, Bending, RodDrag, CylinderDrag, Jet, MaterialDamping)
+
+__all__ = ["TERMS"]

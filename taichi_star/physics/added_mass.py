@@ -1,0 +1,31 @@
+"""Added mass (paper Eq. 3): f_a = −ρ_f·C_a·r0·Δl·ẍ on every rod node (Δl its lumped rest
+length), i.e. an extra diagonal mass; the cylinder gets ρ_f·C·π·D_c²/4 with its own coefficient
+(0 by default: the paper gives the cylinder none). It enters the integrator's inertia, so it has
+no assembly of its own."""
+
+import math
+
+import numpy as np
+import taichi as ti
+
+from ..geometry import CENTRE
+from .base import Term
+
+
+@ti.data_oriented
+class AddedMass(Term):
+    name = "added_mass"
+
+    @staticmethod
+    def configuration(coefficients):
+        return None
+
+    @staticmethod
+    def added_inertia(params, topologies):
+        fluid = np.array([p.fluid_density for p in params])
+        lumped = np.stack([t.lumped_length.sum(axis=1) for t in topologies])
+        added = (fluid * np.array([p.added_mass_coeff for p in params]))[:, None] \
+            * np.array([p.thickness for p in params])[:, None] * lumped
+        added[:, CENTRE] += fluid * np.array(
+            [p.cylinder_added_mass_coeff * math.pi * p.cylinder_diameter ** 2 / 4 for p in params])
+        return added

@@ -1,0 +1,117 @@
+"""The interface every force term implements.
+
+A term is one physical contribution to the residual of an implicit step and to its Jacobian.
+Its class owns everything about it:
+
+- `coefficients(params, topologies, topology)`: its per-instance coefficients on the host, NumPy
+  arrays with a leading batch axis, computed from the StarParams (and the per-instance rest
+  geometry);
+- `configuration(coefficients)`: whether a batch uses it (None: compiled out) and the static
+  switches of its kernel code (e.g. whether any instance is actuated);
+- `coupled_pairs(topology)`: the node pairs whose 2×2 Jacobian blocks it can fill;
+- `history(topology)`: per-instance state it carries from step to step (e.g. the previous area
+  of a jet space), saved and restored with the batch state;
+- on the device, an instance of the class (a `ti.data_oriented` object) holds those coefficients
+  and histories in fields with a leading batch axis and assembles itself in `assemble`.
+
+The engine never names a coefficient: it loads whatever `coefficients` returned into fields of
+the same names and shapes.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar, Dict, Optional, Sequence, Tuple
+
+import numpy as np
+import taichi as ti
+from taichi.lang.util import to_numpy_type
+
+
+def numpy_to_field_type(array: np.ndarray):
+    """The Taichi type of a field holding `array`: i32 for integers and booleans, else the
+    runtime's default float (f64 or f32)."""
+    return ti.i32 if array.dtype.kind in "biu" else float
+
+
+def load_field(field, values: np.ndarray):
+    """Copy `values` into `field`, cast to its type."""
+    field.from_numpy(np.ascontiguousarray(values, dtype=to_numpy_type(field.dtype)))
+
+
+def pad_batch(values: np.ndarray, capacity: int) -> np.ndarray:
+    """Pad the batch axis up to capacity by repeating instance 0 (padding instances are
+    inactive; repeating a real instance keeps every coefficient physical)."""
+    padding = np.repeat(values[:1], capacity - len(values), axis=0)
+    return np.concatenate([values, padding]) if len(padding) else values
+
+
+def index_field(values) -> ti.Field:
+    """An i32 field holding a (non-empty) integer table of the topology."""
+    values = np.asarray(values, dtype=np.int32)
+    field = ti.field(ti.i32, shape=values.shape)
+    field.from_numpy(values)
+    return field
+
+
+class Term:
+    """Base of the force terms; see the module docstring. Subclasses are `@ti.data_oriented`
+    and implement `assemble` as a `@ti.func`."""
+
+    name: ClassVar[str]
+
+    @staticmethod
+    def coefficients(params: Sequence, topologies: Sequence, topology) -> Dict[str, np.ndarray]:
+        """Per-instance coefficients: name -> array of shape (B, ...)."""
+        return {}
+
+    @staticmethod
+    def configuration(coefficients: Dict[str, np.ndarray]) -> Optional[Tuple]:
+        """None when no instance of the batch needs the term (it is compiled out), else a
+        hashable tuple of the static switches its kernel code takes."""
+        return ()
+
+    @staticmethod
+    def coupled_pairs(topology) -> Sequence[Tuple[int, int]]:
+        """Node pairs (i, j) whose Jacobian block the term can fill."""
+        return ()
+
+    @staticmethod
+    def history(topology) -> Dict[str, Tuple[int, ...]]:
+        """Per-instance state carried between steps: name -> per-instance shape."""
+        return {}
+
+    @staticmethod
+    def added_inertia(params: Sequence, topologies: Sequence) -> Optional[np.ndarray]:
+        """(B, N) diagonal mass the term adds to the nodes' inertia (kg/m), or None."""
+        return None
+
+    def __init__(self, engine, configuration: Tuple, coefficient_shapes: Dict[str, Tuple]):
+        """Device side: fields for the coefficients (shapes (capacity, ...)) and histories.
+        `engine` gives the shared pieces (topology, state, linear system, integrator)."""
+        self.engine = engine
+        self.configuration_switches = configuration
+        capacity = engine.capacity
+        self.coefficient_names = tuple(coefficient_shapes)
+        for name, (shape, dtype) in coefficient_shapes.items():
+            setattr(self, name, ti.field(dtype, shape=(capacity,) + tuple(shape)))
+        self.history_names = tuple(self.history(engine.topology))
+        for name, shape in self.history(engine.topology).items():
+            setattr(self, name, ti.field(float, shape=(capacity,) + tuple(shape)))
+        self.build(engine.topology)
+
+    def build(self, topology):
+        """Device tables of the topology the term needs (index fields, Jacobian slots)."""
+
+    def load(self, coefficients: Dict[str, np.ndarray]):
+        """Copy this batch's coefficients (padded to capacity) to the device."""
+        for name in self.coefficient_names:
+            load_field(getattr(self, name), pad_batch(coefficients[name], self.engine.capacity))
+
+    def history_fields(self) -> Dict[str, ti.Field]:
+        return {name: getattr(self, name) for name in self.history_names}
+
+    @ti.func
+    def begin_step(self, b, start_time, end_time, h, rate_gain, use_history):
+        """Update the term's history at the start of a step of size h (s) from start_time to
+        end_time, before the predictor moves the positions (a no-op by default)."""
+        pass

@@ -1,0 +1,202 @@
+"""Bending at every interior node of a limb or an arc and at the joints, driven by the actuation.
+
+E_b = ½·(E·r0³/12)·(κ − κ⁰)²·Δl with the discrete curvature κ = 2·tan(φ/2)/Δl of the turning
+angle φ between the triplet's two edges and Δl its rest Voronoi length. κ⁰ is the rest curvature
+except on fired actuators: their interior triplets follow ±K̄(τ) (the actuation profile at the
+time τ since the cycle started) and, with `actuation_ends="shared"`, the joint triplets clamping
+their ends turn by the curvature change of the arc's end half-edge. Joint triplets use E_limb
+("limb") or a half arc edge in series with a half limb edge ("series").
+"""
+
+import numpy as np
+import taichi as ti
+
+from ..gait import N_ACTUATORS, Gait
+from ..geometry import ARC_BEND, JOINT_BEND
+from .base import Term, index_field
+
+ACTUATED, SHARED_ENDS, RAMP_CLOSURE = "actuated", "shared_ends", "ramp_closure"
+
+
+@ti.func
+def turning_tangent(edge1, edge2):
+    """tan(φ/2) of the turning angle φ from edge1 to edge2 (signed, counter-clockwise > 0)."""
+    cross = edge1[0] * edge2[1] - edge1[1] * edge2[0]
+    return cross / (edge1.norm() * edge2.norm() + edge1.dot(edge2))
+
+
+@ti.func
+def bend_energy(edge1, edge2, voronoi_length, natural_curvature, bending_stiffness):
+    """E_b = ½·B·(κ − κ⁰)²·Δl, B = E·r0³/12 (N·m²), edges (2,) m. Returns J/m."""
+    curvature = 2.0 * turning_tangent(edge1, edge2) / voronoi_length
+    excess = curvature - natural_curvature
+    return 0.5 * bending_stiffness * excess * excess * voronoi_length
+
+
+@ti.func
+def angle_gradient_hessian(edge):
+    """Gradient (2,) and Hessian (2, 2) of the edge's polar angle θ = atan2(e_y, e_x)."""
+    squared = edge.dot(edge)
+    gradient = ti.Vector([-edge[1], edge[0]]) / squared
+    xy = 2.0 * edge[0] * edge[1]
+    diff = edge[1] * edge[1] - edge[0] * edge[0]
+    return gradient, ti.Matrix([[xy, diff], [diff, -xy]]) / (squared * squared)
+
+
+@ti.func
+def bend_gradient_hessian(edge1, edge2, voronoi_length, natural_curvature, bending_stiffness):
+    """Derivatives of `bend_energy` with respect to (e1, e2): gradients g1, g2 (2,) and Hessian
+    blocks H11, H12, H22 (2, 2) (H21 = H12ᵀ), by the chain rule through φ = θ(e2) − θ(e1):
+    dκ/dφ = (1 + tan²(φ/2))/Δl, d²κ/dφ² = tan(φ/2)(1 + tan²(φ/2))/Δl."""
+    half_tangent = turning_tangent(edge1, edge2)
+    curvature = 2.0 * half_tangent / voronoi_length
+    dcurv = (1.0 + half_tangent * half_tangent) / voronoi_length
+    d2curv = half_tangent * dcurv
+    scale = bending_stiffness * voronoi_length
+    excess = curvature - natural_curvature
+    energy_phi = scale * excess * dcurv
+    energy_phi_phi = scale * (dcurv * dcurv + excess * d2curv)
+    grad1, hess1 = angle_gradient_hessian(edge1)
+    grad2, hess2 = angle_gradient_hessian(edge2)
+    h11 = energy_phi_phi * grad1.outer_product(grad1) - energy_phi * hess1
+    h22 = energy_phi_phi * grad2.outer_product(grad2) + energy_phi * hess2
+    h12 = -energy_phi_phi * grad1.outer_product(grad2)
+    return -energy_phi * grad1, energy_phi * grad2, h11, h12, h22
+
+
+def triplet_modulus(params, topology) -> np.ndarray:
+    """(B, T) Young's modulus of every bending triplet, Pa: E on arcs, E_limb on limbs, and on
+    joints E_limb ("limb") or Δl_j / (½Δl_a/E + ½Δl_l/E_limb) ("series"; Δl_a, Δl_l the rest
+    lengths of the joint triplet's arc and limb edges, Δl_j their mean)."""
+    youngs = np.array([p.youngs_modulus for p in params])[:, None]
+    limb = np.array([p.limb_modulus for p in params])[:, None]
+    modulus = np.where(topology.triplet_kind == ARC_BEND, youngs, limb)
+    series = np.array([p.joint_stiffness == "series" for p in params])
+    if series.any():
+        joint = topology.triplet_kind == JOINT_BEND
+        nodes = topology.rest_positions[topology.triplets[joint]]
+        arc_length = np.linalg.norm(nodes[:, 1] - nodes[:, 0], axis=1)
+        limb_length = np.linalg.norm(nodes[:, 2] - nodes[:, 1], axis=1)
+        combined = (0.5 * (arc_length + limb_length)
+                    / (0.5 * arc_length / youngs + 0.5 * limb_length / limb))
+        modulus[:, joint] = np.where(series[:, None], combined, modulus[:, joint])
+    return modulus
+
+
+@ti.data_oriented
+class Bending(Term):
+    name = "bending"
+
+    @staticmethod
+    def coefficients(params, topologies, topology):
+        thickness = np.array([p.thickness for p in params])[:, None]
+        shared = np.array([p.actuation_ends == "shared" for p in params], dtype=np.float64)
+        profiles = [p.actuator_profile for p in params]
+        return {
+            "voronoi_length": np.stack([t.voronoi_length for t in topologies]),
+            "rest_curvature": np.stack([t.rest_curvature for t in topologies]),
+            "end_turning_length": np.stack([t.end_turning_length for t in topologies]) * shared[:, None],
+            "bend_stiffness": triplet_modulus(params, topology) * thickness ** 3 / 12.0,
+            "profile": np.stack([profile.as_array() for profile in profiles]),
+            "profile_rest": np.array([profile.rest_curvature for profile in profiles]),
+            "closure_rate": np.array([
+                p.actuator_profile.closure_gap(p.period) / p.period
+                if p.profile_closure == "ramp" else 0.0 for p in params]),
+            "period": np.array([p.period for p in params]),
+            "gait_mask": np.stack([Gait.parse(p.gait).mask for p in params]),
+        }
+
+    @staticmethod
+    def configuration(coefficients):
+        actuated = bool(coefficients["gait_mask"].any())
+        return (actuated,
+                actuated and bool((coefficients["end_turning_length"] != 0).any()),
+                actuated and bool((coefficients["closure_rate"] != 0).any()))
+
+    @staticmethod
+    def coupled_pairs(topology):
+        pairs = []
+        for i, j, k in topology.triplets:
+            pairs += [(i, j), (j, k), (i, k)]
+        return pairs
+
+    @staticmethod
+    def history(topology):
+        # K̄ of each actuator at the start and the end of the current step
+        return {"start_curvature": (N_ACTUATORS,), "end_curvature": (N_ACTUATORS,)}
+
+    def build(self, topology):
+        self.actuated, self.shared_ends, self.ramp_closure = self.configuration_switches
+        self.n_triplets = topology.n_triplets
+        self.triplets = index_field(topology.triplets)
+        self.triplet_slot = self.engine.triplet_slots(topology.triplets)
+        self.triplet_actuator = index_field(topology.triplet_actuator)
+        self.joint_actuator = index_field(topology.joint_actuator)
+
+    @ti.func
+    def profile_curvature(self, b, time):
+        """K̄ (1/m) of instance b's fired actuators at `time` (s): Eq. 5 at τ = time mod T, plus
+        the closure ramp where chosen."""
+        tau = time - self.period[b] * ti.floor(time / self.period[b])
+        c1, c2, c3, c4 = self.profile[b, 0], self.profile[b, 1], self.profile[b, 2], self.profile[b, 3]
+        if tau >= self.profile[b, 8]:
+            c1, c2, c3, c4 = self.profile[b, 4], self.profile[b, 5], self.profile[b, 6], self.profile[b, 7]
+        value = c1 / (1.0 + ti.exp(-c2 * (tau - c3))) + c4
+        if ti.static(self.ramp_closure):
+            value += self.closure_rate[b] * tau
+        return value
+
+    @ti.func
+    def begin_step(self, b, start_time, end_time, h, rate_gain, use_history):
+        if ti.static(self.actuated):
+            start = self.profile_curvature(b, start_time)
+            end = self.profile_curvature(b, end_time)
+            for m in range(N_ACTUATORS):
+                self.start_curvature[b, m] = start
+                self.end_curvature[b, m] = end
+
+    @ti.func
+    def natural_curvature(self, b, t, at_start):
+        """κ⁰ (1/m) of triplet t of instance b at the start (at_start = 1) or the end of the
+        current step."""
+        natural = self.rest_curvature[b, t]
+        if ti.static(self.actuated):
+            actuator = self.triplet_actuator[t]
+            if actuator >= 0:
+                if self.gait_mask[b, actuator] != 0:
+                    target = self.target_curvature(b, actuator, at_start)
+                    natural = target if natural >= 0.0 else -target
+            if ti.static(self.shared_ends):
+                clamped = self.joint_actuator[t]
+                if clamped >= 0 and self.end_turning_length[b, t] != 0.0:
+                    if self.gait_mask[b, clamped] != 0:
+                        # turn the joint's natural angle φ⁰ = 2 atan(κ⁰Δl/2) by the arc's half-edge
+                        voronoi = self.voronoi_length[b, t]
+                        angle = 2.0 * ti.atan2(natural * voronoi, 2.0) + self.end_turning_length[b, t] * (
+                            self.target_curvature(b, clamped, at_start) - self.profile_rest[b])
+                        natural = 2.0 * ti.tan(0.5 * angle) / voronoi
+        return natural
+
+    @ti.func
+    def target_curvature(self, b, actuator, at_start):
+        value = self.end_curvature[b, actuator]
+        if at_start:
+            value = self.start_curvature[b, actuator]
+        return value
+
+    @ti.func
+    def edges_of(self, b, t):
+        """(i, j, k, e1, e2) of triplet t at instance b's current positions."""
+        positions = ti.static(self.engine.state.positions)
+        i, j, k = self.triplets[t, 0], self.triplets[t, 1], self.triplets[t, 2]
+        return i, j, k, positions[b, j] - positions[b, i], positions[b, k] - positions[b, j]
+
+    @ti.func
+    def assemble(self, b, rate_gain, jacobian):
+        for t in range(self.n_triplets):
+            i, j, k, edge1, edge2 = self.edges_of(b, t)
+            g1, g2, h11, h12, h22 = bend_gradient_hessian(
+                edge1, edge2, self.voronoi_length[b, t], self.natural_curvature(b, t, 0),
+                self.bend_stiffness[b, t])
+            self.engine.scatter_triplet(b, self.triplet_slot, t, i, j, k, g1, g2, h11, h12, h22,
+                                        jacobian)

@@ -1,0 +1,41 @@
+"""Quadratic drag on the central cylinder: F = −½·ρ_f·C_c·D_c·|v|v on the hub node."""
+
+import numpy as np
+import taichi as ti
+
+from ..geometry import CENTRE
+from .base import Term
+
+
+@ti.func
+def cylinder_drag(velocity, coeff):
+    """F = −c|v|v (N/m) with c = ½·ρ_f·C_c·D_c (kg/m²), v (2,) m/s. Returns F and ∂F/∂v."""
+    speed = velocity.norm()
+    d_velocity = ti.Matrix.zero(float, 2, 2)
+    if speed > 0.0:
+        d_velocity = -coeff * (speed * ti.Matrix.identity(float, 2) + velocity.outer_product(velocity) / speed)
+    return -coeff * speed * velocity, d_velocity
+
+
+@ti.data_oriented
+class CylinderDrag(Term):
+    name = "cylinder_drag"
+
+    @staticmethod
+    def coefficients(params, topologies, topology):
+        return {"cylinder_drag_coeff": np.array(
+            [0.5 * p.fluid_density * p.cylinder_drag * p.cylinder_diameter for p in params])}
+
+    @staticmethod
+    def configuration(coefficients):
+        return () if (coefficients["cylinder_drag_coeff"] > 0).any() else None
+
+    def build(self, topology):
+        self.centre_slot = self.engine.plan.slot[CENTRE, CENTRE]
+
+    @ti.func
+    def assemble(self, b, rate_gain, jacobian):
+        velocity = self.engine.implicit_velocity(b, CENTRE, rate_gain)
+        force, d_velocity = cylinder_drag(velocity, self.cylinder_drag_coeff[b])
+        self.engine.add_residual(b, CENTRE, -force)
+        self.engine.add_block(b, self.centre_slot, -rate_gain * d_velocity, jacobian)

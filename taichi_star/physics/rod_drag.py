@@ -1,0 +1,89 @@
+"""Quadratic drag on every rod edge (paper Eq. 1), spokes excepted (they are inside the hub).
+
+Per edge, on the mean of its two nodes' implicit velocities v, with t its unit tangent:
+F = −½·ρ_f·Δl̄·(C∥|v∥|v∥ + C⊥|v⊥|v⊥), half to each node. The paper writes the drag per node; a
+joint has no single tangent, so we apply it per edge.
+"""
+
+import numpy as np
+import taichi as ti
+
+from ..geometry import SPOKE
+from .base import Term, index_field
+
+
+@ti.func
+def rod_drag(velocity, edge, parallel_coeff, perpendicular_coeff):
+    """Drag on one edge: F = −(c∥|a|a·t + c⊥|b|b·n), a = v·t, b = v·n, n = t rotated by +90°,
+    c = ½·ρ_f·Δl̄·C (kg/m² per unit height). Returns F (2,) N/m, ∂F/∂v and ∂F/∂e (2, 2) with v
+    the edge's mean velocity (m/s) and e its edge vector (m)."""
+    length = edge.norm()
+    tangent = edge / length
+    normal = ti.Vector([-tangent[1], tangent[0]])
+    along = velocity.dot(tangent)
+    across = velocity.dot(normal)
+    force = -(parallel_coeff * ti.abs(along) * along * tangent
+              + perpendicular_coeff * ti.abs(across) * across * normal)
+    d_velocity = -2.0 * (parallel_coeff * ti.abs(along) * tangent.outer_product(tangent)
+                         + perpendicular_coeff * ti.abs(across) * normal.outer_product(normal))
+    rotation = ti.Matrix([[0.0, -1.0], [1.0, 0.0]])
+    rotated_velocity = ti.Vector([velocity[1], -velocity[0]])
+    d_tangent = -(parallel_coeff * (2.0 * ti.abs(along) * tangent.outer_product(velocity)
+                                    + ti.abs(along) * along * ti.Matrix.identity(float, 2))
+                  + perpendicular_coeff * (2.0 * ti.abs(across) * normal.outer_product(rotated_velocity)
+                                           + ti.abs(across) * across * rotation))
+    tangent_d_edge = (ti.Matrix.identity(float, 2) - tangent.outer_product(tangent)) / length
+    return force, d_velocity, d_tangent @ tangent_d_edge
+
+
+def rod_edges(topology) -> np.ndarray:
+    """Indices of the edges that feel drag (every edge but the spokes)."""
+    return np.flatnonzero(topology.edge_kind != SPOKE)
+
+
+@ti.data_oriented
+class RodDrag(Term):
+    name = "rod_drag"
+
+    @staticmethod
+    def coefficients(params, topologies, topology):
+        rods = rod_edges(topology)
+        fluid = np.array([p.fluid_density for p in params])[:, None]
+        wetted = 0.5 * fluid * np.stack([t.rest_length[rods] for t in topologies])
+        return {"drag_parallel_coeff": wetted * np.array([p.drag_parallel for p in params])[:, None],
+                "drag_perpendicular_coeff": wetted * np.array([p.drag_perpendicular for p in params])[:, None]}
+
+    @staticmethod
+    def configuration(coefficients):
+        used = (coefficients["drag_parallel_coeff"] > 0).any() or (
+            coefficients["drag_perpendicular_coeff"] > 0).any()
+        return () if used else None
+
+    @staticmethod
+    def coupled_pairs(topology):
+        return [tuple(topology.edges[e]) for e in rod_edges(topology)]
+
+    def build(self, topology):
+        rods = rod_edges(topology)
+        self.n_rods = len(rods)
+        self.rods = index_field(topology.edges[rods])
+        self.rod_slot = self.engine.pair_slots(topology.edges[rods])
+
+    @ti.func
+    def assemble(self, b, rate_gain, jacobian):
+        for r in range(self.n_rods):
+            i, j = self.rods[r, 0], self.rods[r, 1]
+            velocity = 0.5 * (self.engine.implicit_velocity(b, i, rate_gain)
+                              + self.engine.implicit_velocity(b, j, rate_gain))
+            force, d_velocity, d_edge = rod_drag(
+                velocity, self.engine.state.positions[b, j] - self.engine.state.positions[b, i],
+                self.drag_parallel_coeff[b, r], self.drag_perpendicular_coeff[b, r])
+            # half of F on each node; v is the mean of both, e = x_j − x_i
+            d_first = 0.5 * (0.5 * rate_gain * d_velocity - d_edge)
+            d_second = 0.5 * (0.5 * rate_gain * d_velocity + d_edge)
+            self.engine.add_residual(b, i, -0.5 * force)
+            self.engine.add_residual(b, j, -0.5 * force)
+            self.engine.add_block(b, self.rod_slot[r, 0], -d_first, jacobian)
+            self.engine.add_block(b, self.rod_slot[r, 1], -d_second, jacobian)
+            self.engine.add_block(b, self.rod_slot[r, 2], -d_first, jacobian)
+            self.engine.add_block(b, self.rod_slot[r, 3], -d_second, jacobian)

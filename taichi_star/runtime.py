@@ -1,0 +1,117 @@
+"""The Taichi runtime of this process: initialisation, CPU threads and the engine cache.
+
+Taichi is initialised once per process (`ti.init` is process-wide), so there is one `Runtime` per
+process, reached through `Runtime.current()`. It initialises Taichi lazily on the first
+simulation (importing taichi_star does nothing), re-initialises only when the arch or the
+precision changes, and keeps one compiled engine per (topology, terms, integrator, capacity).
+"""
+
+from __future__ import annotations
+
+from typing import Dict, List, Optional
+
+import taichi as ti
+
+from .engine import BatchEngine
+from .integrators import INTEGRATORS
+from .model import BatchModel
+from .params import SolverConfig
+
+ARCHS = ("cpu", "gpu", "cuda", "vulkan", "metal")
+MIN_CAPACITY = 8
+
+
+def available_archs() -> List[str]:
+    """The arch names this machine can run ("cpu" always; "gpu" when one of the GPU backends
+    is available)."""
+    names = ["cpu"]
+    for name in ("cuda", "vulkan", "metal"):
+        if ti.lang.misc.is_arch_supported(getattr(ti, name)):
+            names.append(name)
+    if len(names) > 1:
+        names.insert(1, "gpu")
+    return names
+
+
+def check_arch(arch: str) -> str:
+    """`arch` if this machine has it; else ValueError naming the available ones."""
+    if arch not in ARCHS:
+        raise ValueError(f"arch must be one of {list(ARCHS)}, got {arch!r}")
+    if arch != "cpu":
+        available = available_archs()
+        if arch not in available:
+            raise ValueError(f"arch {arch!r} is not available on this machine; available: "
+                             f"{available}")
+    return arch
+
+
+def batch_capacity(batch_size: int) -> int:
+    """Engine capacity for a batch: the next power of two, at least MIN_CAPACITY, so that
+    batches of similar size share one compiled engine (padding instances are inactive and cost
+    nothing)."""
+    return max(MIN_CAPACITY, 1 << max(batch_size - 1, 0).bit_length())
+
+
+class Runtime:
+    """See the module docstring. `cpu_threads` (None: Taichi's default, all cores) and
+    `log_level` take effect at the next initialisation."""
+
+    _current: Optional["Runtime"] = None
+
+    def __init__(self):
+        self.arch: Optional[str] = None
+        self.precision: Optional[str] = None
+        self.cpu_threads: Optional[int] = None
+        self.log_level = ti.WARN
+        self.engines: Dict[tuple, BatchEngine] = {}
+
+    @classmethod
+    def current(cls) -> "Runtime":
+        """This process's runtime (created on first use)."""
+        if cls._current is None:
+            cls._current = cls()
+        return cls._current
+
+    def configure(self, cpu_threads: Optional[int] = None, log_level=None):
+        """Settings for the next initialisation (a Dask worker or a worker process calls this
+        before its first simulation); forces a re-initialisation if Taichi is up."""
+        self.cpu_threads = cpu_threads
+        if log_level is not None:
+            self.log_level = log_level
+        self.arch = None
+
+    def ensure(self, arch: str = "cpu", precision: str = "f64"):
+        """Initialise Taichi for arch and precision unless it already is (ValueError for an
+        arch this machine does not have)."""
+        check_arch(arch)
+        if self.arch == arch and self.precision == precision:
+            return
+        threads = {} if self.cpu_threads is None else {"cpu_max_num_threads": self.cpu_threads}
+        ti.init(arch=getattr(ti, arch), default_fp=ti.f64 if precision == "f64" else ti.f32,
+                fast_math=False, offline_cache=True, log_level=self.log_level, **threads)
+        self.arch, self.precision = arch, precision
+        self.engines.clear()
+
+    def engine_for(self, model: BatchModel, solver: SolverConfig) -> BatchEngine:
+        """The cached engine for this batch's topology, terms, integrator and capacity (created
+        on first use), loaded with the batch at rest. Taichi must be initialised (`ensure`)."""
+        capacity = batch_capacity(model.batch_size)
+        key = (model.engine_key, solver.integrator, capacity)
+        if key not in self.engines:
+            self.engines[key] = BatchEngine(
+                model, capacity, INTEGRATORS[solver.integrator](),
+                instances_per_block=1 if self.arch == "cpu" else 64)
+        engine = self.engines[key]
+        engine.load(model, solver)
+        return engine
+
+
+def prepare_engine(params, solver: SolverConfig = SolverConfig(), arch: str = "cpu") -> BatchEngine:
+    """For benchmarks and tools that drive the engine directly: Taichi initialised, the batch's
+    engine built (or reused from the cache) and loaded with the batch at rest."""
+    from .model import build_model
+
+    model = build_model(params)
+    runtime = Runtime.current()
+    runtime.ensure(arch, solver.precision)
+    return runtime.engine_for(model, solver)

@@ -1,0 +1,83 @@
+"""The state of a batch on the device: what changes as the instances advance.
+
+Positions and velocities, the integrator's history (the previous step's positions and
+velocities, whether that history is valid), each instance's status and counters, and the
+histories the force terms keep (see `physics.base.Term.history`). `save` copies all of it to
+NumPy and `restore` puts it back, bitwise.
+"""
+
+from __future__ import annotations
+
+from typing import Dict
+
+import numpy as np
+import taichi as ti
+from taichi.lang.field import Field
+from taichi.lang.util import to_numpy_type
+
+STATUS_OK, STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_INACTIVE = 0, 1, 2, 3
+STATUS_NAMES = ("ok", "newton_failed", "non_finite", "inactive")
+"""Per-instance status; "inactive" marks the padding of a batch up to the engine's capacity."""
+
+
+@ti.data_oriented
+class BatchState:
+    """Per-instance state of `capacity` instances of N nodes. Shapes (capacity, N) 2-vectors
+    for positions (m) and velocities (m/s); (capacity,) for the rest."""
+
+    def __init__(self, capacity: int, n_nodes: int):
+        per_node = (capacity, n_nodes)
+        self.positions = ti.Vector.field(2, float, shape=per_node)
+        self.velocities = ti.Vector.field(2, float, shape=per_node)
+        self.previous = ti.Vector.field(2, float, shape=per_node)
+        """Positions at the start of the current (or last) step, m."""
+        self.previous_velocities = ti.Vector.field(2, float, shape=per_node)
+        self.inertia_offset = ti.Vector.field(2, float, shape=per_node)
+        self.velocity_offset = ti.Vector.field(2, float, shape=per_node)
+        self.backup_positions = ti.Vector.field(2, float, shape=per_node)
+        self.backup_velocities = ti.Vector.field(2, float, shape=per_node)
+        self.history_valid = ti.field(ti.i32, shape=capacity)
+        """1 when the last step was a full, accepted step (BDF2 may use it)."""
+        self.status = ti.field(ti.i32, shape=capacity)
+        self.failure_step = ti.field(ti.i32, shape=capacity)
+        self.steps_done = ti.field(ti.i32, shape=capacity)
+        self.newton_total = ti.field(ti.i64, shape=capacity)
+        self.newton_max = ti.field(ti.i32, shape=capacity)
+        self.substep_retries = ti.field(ti.i32, shape=capacity)
+        self.term_histories: Dict[str, Field] = {}
+
+    def own_fields(self) -> Dict[str, Field]:
+        return {name: value for name, value in vars(self).items() if isinstance(value, Field)}
+
+    def fields(self) -> Dict[str, Field]:
+        """Every state field by name, the terms' histories as "<term>.<name>"."""
+        return {**self.own_fields(), **self.term_histories}
+
+    def reset(self, rest_positions: np.ndarray, batch_size: int):
+        """Every instance at rest in its rest shape (capacity, N, 2), status ok (padding:
+        inactive), counters and histories zero."""
+        for field in self.fields().values():
+            field.fill(0)
+        self.positions.from_numpy(np.ascontiguousarray(rest_positions, dtype=to_numpy_type(self.positions.dtype)))
+        status = np.full(self.status.shape[0], STATUS_INACTIVE, dtype=np.int32)
+        status[:batch_size] = STATUS_OK
+        self.status.from_numpy(status)
+        self.failure_step.fill(-1)
+
+    def save(self) -> Dict[str, np.ndarray]:
+        """A copy of the whole state (every field, padding included)."""
+        return {name: field.to_numpy() for name, field in self.fields().items()}
+
+    def restore(self, saved: Dict[str, np.ndarray]):
+        """Put back a state from `save` of an engine of the same layout, bitwise. Raises
+        ValueError naming the first field that does not match."""
+        fields = self.fields()
+        if set(saved) != set(fields):
+            raise ValueError(f"saved state has fields {sorted(saved)}, this engine "
+                             f"{sorted(fields)} (another topology or term set)")
+        for name, field in fields.items():
+            if saved[name].shape != field.to_numpy().shape:
+                raise ValueError(f"saved state field {name!r} has shape {saved[name].shape}, "
+                                 f"this engine {field.to_numpy().shape}")
+        for name, field in fields.items():
+            field.from_numpy(saved[name])
