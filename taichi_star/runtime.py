@@ -14,7 +14,7 @@ import taichi as ti
 
 from .engine import BatchEngine
 from .integrators import INTEGRATORS
-from .model import BatchModel
+from .model import BatchModel, build_model
 from .params import SolverConfig
 
 ARCHS = ("cpu", "gpu", "cuda", "vulkan", "metal")
@@ -109,8 +109,6 @@ class Runtime:
 def prepare_engine(params, solver: SolverConfig = SolverConfig(), arch: str = "cpu") -> BatchEngine:
     """For benchmarks and tools that drive the engine directly: Taichi initialised, the batch's
     engine built (or reused from the cache) and loaded with the batch at rest."""
-    from .model import build_model
-
     model = build_model(params)
     runtime = Runtime.current()
     runtime.ensure(arch, solver.precision)
