@@ -1,0 +1,84 @@
+"""The user documentation builds cleanly, and the licence and citation files are well formed."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+
+CFF_REQUIRED_KEYS = ("cff-version", "message", "title", "authors")
+CFF_REFERENCE_KEYS = ("type", "title", "authors")
+TEXT_SUFFIXES = {".md", ".yml", ".yaml", ".js", ".css", ".html", ".txt", ".cff", ".py"}
+
+
+@pytest.fixture(scope="module")
+def built_site(tmp_path_factory):
+    """`mkdocs build --strict` into a temporary folder: (completed process, site folder)."""
+    pytest.importorskip("mkdocs")
+    pytest.importorskip("material")
+    pytest.importorskip("mkdocstrings_handlers.python")
+    site = tmp_path_factory.mktemp("docs") / "site"
+    completed = subprocess.run(
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(site)],
+        cwd=REPO_ROOT, capture_output=True, text=True, timeout=600)
+    return completed, site
+
+
+def test_mkdocs_build_strict(built_site):
+    completed, site = built_site
+    assert completed.returncode == 0, completed.stdout + completed.stderr
+    for page in ("index", "model", "numerics", "performance", "studies", "reproducibility", "api"):
+        assert (site / page / "index.html").exists() or (site / f"{page}.html").exists(), page
+    api = (site / "api" / "index.html").read_text(encoding="utf-8")
+    # dataclass fields and their documented units reach the reference
+    assert "youngs_modulus" in api and "newton_tol" in api
+
+
+@pytest.mark.xfail(strict=False, reason="public docstrings (taichi_star/experiment.py) still cite "
+                                        "the internal design document; being removed")
+def test_rendered_site_does_not_cite_the_internal_design(built_site):
+    completed, site = built_site
+    assert completed.returncode == 0
+    offenders = [str(page.relative_to(site)) for page in site.rglob("*.html")
+                 if "design §" in page.read_text(encoding="utf-8")]
+    assert not offenders, offenders
+
+
+def test_citation_file_is_valid_cff():
+    yaml = pytest.importorskip("yaml")
+    data = yaml.safe_load((REPO_ROOT / "CITATION.cff").read_text(encoding="utf-8"))
+    for key in CFF_REQUIRED_KEYS:
+        assert key in data, key
+    assert data["cff-version"] == "1.2.0"
+    assert data["title"] == "taichi_star"
+    assert data["license"] == "MIT"
+    assert all(isinstance(author, dict) and author for author in data["authors"])
+    pyproject = (REPO_ROOT / "pyproject.toml").read_text(encoding="utf-8")
+    assert f'version = "{data["version"]}"' in pyproject
+    references = [data["preferred-citation"], *data.get("references", [])]
+    for reference in references:
+        for key in CFF_REFERENCE_KEYS:
+            assert key in reference, key
+        assert "Star-Shaped Swimming Robot" in reference["title"]
+        assert [a["family-names"] for a in reference["authors"]] == [
+            "Huang", "Huang", "Patterson", "Ren", "Jawed", "Majidi"]
+
+
+def test_licence_is_mit():
+    text = (REPO_ROOT / "LICENSE").read_text(encoding="utf-8")
+    assert text.startswith("MIT License")
+    assert "Copyright (c) 2026 the taichi_star developers" in text
+
+
+def _user_facing_text_files():
+    files = [path for path in (REPO_ROOT / "docs").rglob("*")
+             if path.is_file() and path.suffix in TEXT_SUFFIXES]
+    return files + [REPO_ROOT / "taichi_star" / "data" / "SOURCE.md"]
+
+
+def test_user_docs_do_not_cite_the_internal_design():
+    offenders = [str(path.relative_to(REPO_ROOT)) for path in _user_facing_text_files()
+                 if "design §" in path.read_text(encoding="utf-8")]
+    assert not offenders, offenders
