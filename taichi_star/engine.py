@@ -31,11 +31,13 @@ class BatchEngine:
     set of terms (`model.engine_key`). Compiled once per process and reused: the per-instance
     coefficients and the solver settings are loaded by `load`, not baked into the kernels."""
 
-    def __init__(self, model: BatchModel, capacity: int, integrator, instances_per_block: int = 1):
+    def __init__(self, model: BatchModel, capacity: int, integrator, instances_per_block: int = 1,
+                 loop_spread: int = 1):
         topology = model.topology
         self.topology = topology
         self.capacity = capacity
         self.instances_per_block = instances_per_block
+        self.loop_spread = loop_spread
         self.n_nodes = topology.n_nodes
         self.integrator = integrator
         pairs = [pair for cls, _ in model.terms_used for pair in cls.coupled_pairs(topology)]
@@ -269,12 +271,16 @@ class BatchEngine:
     def advance(self, first_step: ti.i32, n_steps: ti.i32):
         """Advance every live instance from step first_step by n_steps steps in one launch."""
         # one instance per task on the CPU (Taichi's default grain of 32 would run a small batch
-        # on one thread); a full block of instances per GPU block
+        # on one thread); a full block of instances per GPU block. Taichi's CPU backend runs a
+        # parallel loop of fewer than ~1,024 iterations on one thread, so on the CPU the
+        # instances are spread over `loop_spread` times as many iterations (the others idle).
         ti.loop_config(block_dim=self.instances_per_block)
-        for b in range(self.capacity):
-            for s in range(n_steps):
-                if self.state.status[b] == STATUS_OK:
-                    self.advance_instance(b, first_step + s + 1)
+        for slot in range(self.capacity * self.loop_spread):
+            if slot % self.loop_spread == 0:
+                b = slot // self.loop_spread
+                for s in range(n_steps):
+                    if self.state.status[b] == STATUS_OK:
+                        self.advance_instance(b, first_step + s + 1)
 
     @ti.kernel
     def compute_centroids(self):

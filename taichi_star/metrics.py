@@ -33,7 +33,14 @@ def body_rotation(positions: np.ndarray, rest_positions: np.ndarray, joints: np.
     now = positions[..., joints, :] - positions[..., hub:hub + 1, :]
     rest = rest_positions[..., joints, :] - rest_positions[..., hub:hub + 1, :]
     turn = (np.arctan2(now[..., 1], now[..., 0]) - np.arctan2(rest[..., 1], rest[..., 0]))
-    return np.arctan2(np.sin(turn).mean(-1), np.cos(turn).mean(-1))
+    # summed joint by joint, not by a reduction whose order depends on the batch's shape: an
+    # instance's heading must not depend on its neighbours to the last bit
+    sine, cosine = np.sin(turn), np.cos(turn)
+    sine_sum, cosine_sum = sine[..., 0], cosine[..., 0]
+    for joint in range(1, len(joints)):
+        sine_sum = sine_sum + sine[..., joint]
+        cosine_sum = cosine_sum + cosine[..., joint]
+    return np.arctan2(sine_sum, cosine_sum)
 
 
 def forward_directions(gaits: Sequence[str]) -> np.ndarray:

@@ -19,6 +19,8 @@ from .params import SolverConfig
 
 ARCHS = ("cpu", "gpu", "cuda", "vulkan", "metal")
 MIN_CAPACITY = 8
+PARALLEL_LOOP_MINIMUM = 1024
+"""Taichi 1.7's CPU backend parallelises a range-for only from about this many iterations."""
 
 
 def available_archs() -> List[str]:
@@ -92,6 +94,13 @@ class Runtime:
         self.arch, self.precision = arch, precision
         self.engines.clear()
 
+    def loop_spread(self, capacity: int) -> int:
+        """Iterations of the engine's parallel loop per instance: on the CPU enough to reach
+        PARALLEL_LOOP_MINIMUM iterations (below that Taichi runs the loop on one thread)."""
+        if self.arch != "cpu":
+            return 1
+        return max(1, -(-PARALLEL_LOOP_MINIMUM // capacity))
+
     def engine_for(self, model: BatchModel, solver: SolverConfig) -> BatchEngine:
         """The cached engine for this batch's topology, terms, integrator and capacity (created
         on first use), loaded with the batch at rest. Taichi must be initialised (`ensure`)."""
@@ -100,7 +109,8 @@ class Runtime:
         if key not in self.engines:
             self.engines[key] = BatchEngine(
                 model, capacity, INTEGRATORS[solver.integrator](),
-                instances_per_block=1 if self.arch == "cpu" else 64)
+                instances_per_block=1 if self.arch == "cpu" else 64,
+                loop_spread=self.loop_spread(capacity))
         engine = self.engines[key]
         engine.load(model, solver)
         return engine
