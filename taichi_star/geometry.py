@@ -154,8 +154,8 @@ def build_topology(params: StarParams) -> Topology:
     # joint, with c = +arc_sign·K on the incoming arc and −arc_sign·K on the outgoing one (walked
     # backwards); its turning angle from that chord to the limb must grow by ½Δl·Δc to keep the
     # limb's angle to the tangent.
-    end_turning = np.array([0.0 if end is None else
-                            end[2] * arc_sign * 0.5 * np.linalg.norm(positions[end[1]] - positions[end[0]])
+    end_turning = np.array([0.0 if end is None else end[2] * arc_sign * 0.5
+                            * np.linalg.norm(positions[end[1]] - positions[end[0]])
                             for end in clamped_end_edges])
 
     lumped = np.zeros((len(positions), 2))
