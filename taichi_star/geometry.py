@@ -56,7 +56,9 @@ class Topology:
     end_turning_length: np.ndarray
     """(T,) for a joint triplet, ±½ the rest length of the clamped arc's end edge, m, signed so
     that a change ΔK of the arc's natural curvature turns the joint's natural angle by
-    end_turning_length·ΔK (the half-edge beside the joint: design §2.7); 0 otherwise."""
+    end_turning_length·ΔK and the limb keeps its angle to the tangent of the arc's circle at
+    the joint (the end chord lies half an edge's turning, ½Δl·K, inside that tangent); 0 for
+    other triplets."""
     rest_curvature: np.ndarray
     """(T,) signed discrete rest curvature κ⁰, 1/m."""
     voronoi_length: np.ndarray
@@ -149,8 +151,13 @@ def build_topology(params: StarParams) -> Topology:
 
     triplet_actuator = np.array(triplet_actuator, dtype=np.int32)
     arc_sign = np.sign(rest_curvature[triplet_actuator >= 0][0])
-    end_turning = np.array([0.0 if end is None else
-                            -end[2] * arc_sign * 0.5 * np.linalg.norm(positions[end[1]] - positions[end[0]])
+    # Walking along an arc of signed curvature c, an edge's chord points half the edge's turning,
+    # ½Δl·c, behind the tangent at the edge's far end. A joint triplet walks the end edge into the
+    # joint, with c = +arc_sign·K on the incoming arc and −arc_sign·K on the outgoing one (walked
+    # backwards); its turning angle from that chord to the limb must grow by ½Δl·Δc to keep the
+    # limb's angle to the tangent.
+    end_turning = np.array([0.0 if end is None else end[2] * arc_sign * 0.5
+                            * np.linalg.norm(positions[end[1]] - positions[end[0]])
                             for end in clamped_end_edges])
 
     lumped = np.zeros((len(positions), 2))

@@ -1,9 +1,10 @@
-"""Single-instance NumPy reference implementation of the model of design §2, for tests.
+"""Single-instance NumPy reference implementation of the star swimmer model, for tests.
 
 It is written independently of the Taichi batch engine, from the specification alone, so that
-the two can check each other. Everything is double precision; each Newton iteration assembles
-the exact Jacobian of all forces as a scipy.sparse matrix and factors it with SuperLU (N = 193
-nodes, 386 degrees of freedom: ~3 ms per iteration).
+the two can check each other. Implicit Euler or BDF2 in time; elasticity, Kelvin–Voigt material
+damping, rod and cylinder drag, jets and added mass. Everything is double precision; each
+Newton iteration assembles the exact Jacobian of all forces as a scipy.sparse matrix and factors
+it with SuperLU (N = 193 nodes, 386 degrees of freedom: ~3 ms per iteration).
 
 Units are SI, per unit out-of-plane height H = 1 m: positions in m, forces in N/m, energies in
 J/m, masses in kg/m. A configuration `q` is an (N, 2) array; its flat degree-of-freedom vector is
@@ -17,13 +18,14 @@ one element (shape (2,)) for the tests or all elements of a kind at once for the
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse
 import scipy.sparse.linalg
 
 from .gait import Gait
-from .geometry import ARC, ARC_BEND, SPOKE, build_topology
+from .geometry import ARC, ARC_BEND, JOINT_BEND, SPOKE, build_topology
 from .params import SolverConfig, StarParams
 
 
@@ -57,30 +59,29 @@ def _blocks(rows):
 
 
 # --------------------------------------------------------------------------------------------
-# Elastic elements (design §2.2)
+# Elastic and material-damping elements
+#
+# Both elastic energies are quadratic in a strain s of the element: E = ½ k_s s², with
+# s = ε = |e|/Δl̄ − 1, k_s = E·r0·Δl̄ for a stretching edge and s = δ = κ − κ⁰,
+# k_s = (E·r0³/12)·Δl for a bending triplet. The strain functions give s with its gradient and
+# Hessian; `quadratic_strain_element` turns them into an energy, and `damping_element` into the
+# Kelvin–Voigt viscous force on the rate of the same strain.
 # --------------------------------------------------------------------------------------------
 
-def stretch_element(xi, xj, rest_length, stiffness):
-    """Stretching energy of one edge and its derivatives.
+def stretch_strain(xi, xj, rest_length):
+    """Axial strain ε = |xj − xi| / Δl̄ − 1 of one edge and its derivatives.
 
-    E = ½ k ε² Δl̄ with ε = |xj − xi| / Δl̄ − 1.
-
-    Args: xi, xj (..., 2) end positions, m; rest_length Δl̄ (...), m; stiffness k = E·r0 (...), N/m.
-    Returns: energy (...) J/m; gradient (..., 4) over (xi, xj), N/m; Hessian (..., 4, 4), N/m².
+    Args: xi, xj (..., 2) end positions, m; rest_length Δl̄ (...), m.
+    Returns: ε (...) (-); gradient (..., 4) over (xi, xj), 1/m; Hessian (..., 4, 4), 1/m².
     """
-    rest_length, stiffness = np.asarray(rest_length), np.asarray(stiffness)
+    rest_length = np.asarray(rest_length)
     d = xj - xi
     length = np.linalg.norm(d, axis=-1)
     strain = length / rest_length - 1.0
-    energy = 0.5 * stiffness * strain ** 2 * rest_length
     u = d / length[..., None]
-    g = (stiffness * strain)[..., None] * u
-    uu = _outer(u, u)
-    h = ((stiffness / rest_length)[..., None, None] * uu
-         + (stiffness * strain / length)[..., None, None] * (np.eye(2) - uu))
-    grad = np.concatenate([-g, g], axis=-1)
-    hess = _blocks([[h, -h], [-h, h]])
-    return energy, grad, hess
+    g = u / rest_length[..., None]
+    h = (np.eye(2) - _outer(u, u)) / (length * rest_length)[..., None, None]
+    return strain, np.concatenate([-g, g], axis=-1), _blocks([[h, -h], [-h, h]])
 
 
 def _angle_hessian(e):
@@ -92,19 +93,16 @@ def _angle_hessian(e):
                      np.stack([off, -2 * x * y / r4], -1)], -2)
 
 
-def bend_element(xi, xj, xk, voronoi_length, natural_curvature, bending_stiffness):
-    """Bending energy of one triplet (angle at xj) and its derivatives.
+def bend_strain(xi, xj, xk, voronoi_length, natural_curvature):
+    """Bending strain δ = κ − κ⁰ of one triplet (angle at xj) and its derivatives.
 
     κ = 2 (e1 × e2) / ((|e1||e2| + e1·e2) Δl) = 2 tan(φ/2) / Δl, e1 = xj − xi, e2 = xk − xj,
-    φ the signed turning angle; E = ½ B (κ − κ⁰)² Δl.
+    φ the signed turning angle.
 
-    Args: xi, xj, xk (..., 2), m; voronoi_length Δl (...), m; natural_curvature κ⁰ (...), 1/m;
-        bending_stiffness B = E·r0³/12 (...), N·m.
-    Returns: energy (...) J/m; gradient (..., 6) over (xi, xj, xk), N/m;
-        Hessian (..., 6, 6), N/m².
+    Args: xi, xj, xk (..., 2), m; voronoi_length Δl (...), m; natural_curvature κ⁰ (...), 1/m.
+    Returns: δ (...), 1/m; gradient (..., 6) over (xi, xj, xk), 1/m²; Hessian (..., 6, 6), 1/m³.
     """
     voronoi_length = np.asarray(voronoi_length)
-    bending_stiffness = np.asarray(bending_stiffness)
     e1 = xj - xi
     e2 = xk - xj
     n1 = _dot(e1, e1)
@@ -113,10 +111,8 @@ def bend_element(xi, xj, xk, voronoi_length, natural_curvature, bending_stiffnes
     # needs no atan2; the derivatives go through φ = angle(e2) − angle(e1).
     half_tan = _cross(e1, e2) / (np.sqrt(n1 * n2) + _dot(e1, e2))
     curvature = 2.0 * half_tan / voronoi_length
-    dk = (1.0 + half_tan ** 2) / voronoi_length
-    ddk = half_tan * (1.0 + half_tan ** 2) / voronoi_length
-    excess = curvature - natural_curvature
-    energy = 0.5 * bending_stiffness * excess ** 2 * voronoi_length
+    dk_dphi = (1.0 + half_tan ** 2) / voronoi_length
+    d2k_dphi2 = half_tan * (1.0 + half_tan ** 2) / voronoi_length
 
     g1 = -_perp(e1) / n1[..., None]
     g2 = _perp(e2) / n2[..., None]
@@ -124,17 +120,77 @@ def bend_element(xi, xj, xk, voronoi_length, natural_curvature, bending_stiffnes
     h1 = -_angle_hessian(e1)
     h2 = _angle_hessian(e2)
     hess_phi = _blocks([[h1, -h1, 0], [-h1, h1 + h2, -h2], [0, -h2, h2]])
+    grad = dk_dphi[..., None] * grad_phi
+    hess = (d2k_dphi2[..., None, None] * _outer(grad_phi, grad_phi)
+            + dk_dphi[..., None, None] * hess_phi)
+    return curvature - natural_curvature, grad, hess
 
-    scale = bending_stiffness * voronoi_length
-    grad = (scale * excess * dk)[..., None] * grad_phi
-    gg = _outer(grad_phi, grad_phi)
-    hess = (scale[..., None, None] * ((dk ** 2 + excess * ddk)[..., None, None] * gg
-                                      + (excess * dk)[..., None, None] * hess_phi))
+
+def quadratic_strain_element(strain, strain_gradient, strain_hessian, stiffness, offset=0.0):
+    """W = ½ k (s − s₀)² of a strain s with known derivatives, and the derivatives of W.
+
+    Args: strain s (...); strain_gradient (..., n); strain_hessian (..., n, n) (any units
+        [s], [s]/m, [s]/m²); stiffness k (...), J/m per [s]²; offset s₀ (...), [s].
+    Returns: W (...), J/m; gradient k (s − s₀) ∇s (..., n), N/m;
+        Hessian k (∇s ∇sᵀ + (s − s₀) ∇²s) (..., n, n), N/m².
+    """
+    stiffness = np.asarray(stiffness)
+    excess = strain - offset
+    energy = 0.5 * stiffness * excess ** 2
+    grad = (stiffness * excess)[..., None] * strain_gradient
+    hess = stiffness[..., None, None] * (_outer(strain_gradient, strain_gradient)
+                                         + excess[..., None, None] * strain_hessian)
     return energy, grad, hess
 
 
+def stretch_element(xi, xj, rest_length, stiffness):
+    """Stretching energy E = ½ k ε² Δl̄ of one edge and its derivatives.
+
+    Args: xi, xj (..., 2) end positions, m; rest_length Δl̄ (...), m; stiffness k = E·r0 (...), N/m.
+    Returns: energy (...) J/m; gradient (..., 4) over (xi, xj), N/m; Hessian (..., 4, 4), N/m².
+    """
+    return quadratic_strain_element(*stretch_strain(xi, xj, rest_length),
+                                    np.asarray(stiffness) * np.asarray(rest_length))
+
+
+def bend_element(xi, xj, xk, voronoi_length, natural_curvature, bending_stiffness):
+    """Bending energy E = ½ B (κ − κ⁰)² Δl of one triplet (see `bend_strain`) and its
+    derivatives.
+
+    Args: xi, xj, xk (..., 2), m; voronoi_length Δl (...), m; natural_curvature κ⁰ (...), 1/m;
+        bending_stiffness B = E·r0³/12 (...), N·m.
+    Returns: energy (...) J/m; gradient (..., 6) over (xi, xj, xk), N/m;
+        Hessian (..., 6, 6), N/m².
+    """
+    return quadratic_strain_element(
+        *bend_strain(xi, xj, xk, voronoi_length, natural_curvature),
+        np.asarray(bending_stiffness) * np.asarray(voronoi_length))
+
+
+def damping_element(strain, strain_gradient, strain_hessian, strain_anchor, rate_gain,
+                    strain_stiffness, damping_time):
+    """Kelvin–Voigt damping of one element's strain s over an implicit step.
+
+    The integrator's discrete strain rate is ṡ = γ (s − s*), with s* fixed by the history
+    (implicit Euler: γ = 1/h, s* = s_k; BDF2: γ = 3/(2h), s* = s_k + (s_k − s_{k−1})/3, so that
+    ṡ = (3 s_{k+1} − 4 s_k + s_{k−1})/(2h)). The viscous force f = −τ k_s ṡ ∇s is then minus
+    the gradient of the pseudo-potential P = ½ τ γ k_s (s − s*)², whose Hessian
+    τ k_s (γ ∇s ∇sᵀ + ṡ ∇²s) is the exact (symmetric) Jacobian.
+
+    Args: strain s (...), strain_gradient (..., n), strain_hessian (..., n, n): the element's
+        strain and its derivatives (`stretch_strain` or `bend_strain`); strain_anchor s* (...);
+        rate_gain γ, 1/s; strain_stiffness k_s (...), J/m per [s]² (the element's energy is
+        ½ k_s s²); damping_time τ, s.
+    Returns: P (...), J/m; gradient (..., n) = −f, N/m; Hessian (..., n, n), N/m².
+    """
+    return quadratic_strain_element(strain, strain_gradient, strain_hessian,
+                                    damping_time * rate_gain * np.asarray(strain_stiffness),
+                                    strain_anchor)
+
+
 # --------------------------------------------------------------------------------------------
-# Fluid elements (design §2.5); velocities are implicit, v = (x_new − x_old) / h
+# Fluid elements; velocities are implicit, v = (x_new − x_old) / h (BDF2 passes an effective
+# x_old and h, see ImplicitStep)
 # --------------------------------------------------------------------------------------------
 
 def rod_drag_element(xa, xb, xa_old, xb_old, dt, rest_length, fluid_density,
@@ -273,11 +329,44 @@ def _assemble_matrix(n_dof, terms):
                                    shape=(n_dof, n_dof))
 
 
+@dataclass(frozen=True)
+class ImplicitStep:
+    """What one implicit step to `time` knows before it is solved.
+
+    Every rate in the step is rate_gain·(value(q_new) − anchor): node velocities (drag),
+    inter-limb area rates (jet) and strain rates (damping); the inertia residual is
+    inertia_gain·M·(q_new − inertia_target).
+    - Implicit Euler: γ = 1/h, anchors = the values at t_k, inertia gain 1/h²,
+      target q_k + h v_k.
+    - BDF2: γ = 3/(2h) and the anchor of a value y is y_k + (y_k − y_{k−1})/3, so that
+      γ(y − anchor) = (3/(2h))(y − y_k) − (y_k − y_{k−1})/(2h); inertia gain 9/(4h²), target
+      q_k + (q_k − q_{k−1})/3 + (2h/9)(4v_k − v_{k−1}).
+    """
+
+    time: float
+    """t_{k+1}, s: the natural curvatures of the step are taken here."""
+    rate_gain: float
+    """γ, 1/s."""
+    position_anchor: np.ndarray
+    """(N, 2), m."""
+    area_anchor: np.ndarray
+    """(8,) inter-limb areas, m²."""
+    stretch_anchor: np.ndarray
+    """(E,) edge strains (-); zeros when the model has no damping."""
+    bend_anchor: np.ndarray
+    """(T,) bending strains κ − κ⁰, 1/m; zeros when the model has no damping."""
+    inertia_gain: float
+    """1/s²."""
+    inertia_target: np.ndarray
+    """(N, 2), m."""
+
+
 class ReferenceSimulator:
-    """One robot advanced by implicit Euler with an exact-Jacobian Newton solve (design §2.6).
+    """One robot advanced by implicit Euler or BDF2 with an exact-Jacobian Newton solve.
 
     Attributes: params, solver, topology; mass (N,) lumped mass without added mass, kg/m;
-    added_mass (N,) diagonal added mass, kg/m.
+    added_mass (N,) diagonal added mass, kg/m; stretch_modulus (E,) and bend_modulus (T,), Pa,
+    the Young's modulus of each edge and triplet (elasticity and damping alike).
     """
 
     def __init__(self, params: StarParams, solver: SolverConfig = SolverConfig()):
@@ -296,10 +385,23 @@ class ReferenceSimulator:
                                * math.pi * p.cylinder_diameter ** 2 / 4.0)
         self._inertia = np.repeat(self.mass + self.added_mass, 2)
 
-        modulus = np.where(topo.edge_kind == ARC, p.youngs_modulus, p.limb_modulus)
-        self._stretch_stiffness = modulus * r0
-        bend_modulus = np.where(topo.triplet_kind == ARC_BEND, p.youngs_modulus, p.limb_modulus)
-        self._bend_stiffness = bend_modulus * r0 ** 3 / 12.0
+        self.stretch_modulus = np.where(topo.edge_kind == ARC, p.youngs_modulus, p.limb_modulus)
+        self.bend_modulus = np.where(topo.triplet_kind == ARC_BEND, p.youngs_modulus,
+                                     p.limb_modulus)
+        if p.joint_stiffness == "series":
+            # A joint triplet spans half an arc edge (E) and half a limb edge (E_limb): their
+            # compliances add over its Voronoi length ½(Δl_a + Δl_l).
+            joint = topo.triplet_kind == JOINT_BEND
+            rest = topo.rest_positions
+            a, b, c = topo.triplets[joint].T
+            arc_edge = np.linalg.norm(rest[b] - rest[a], axis=1)
+            limb_edge = np.linalg.norm(rest[c] - rest[b], axis=1)
+            self.bend_modulus[joint] = topo.voronoi_length[joint] / (
+                0.5 * arc_edge / p.youngs_modulus + 0.5 * limb_edge / p.limb_modulus)
+        # k_s of each element's energy ½ k_s s²
+        self._stretch_strain_stiffness = self.stretch_modulus * r0 * topo.rest_length
+        self._bend_strain_stiffness = self.bend_modulus * r0 ** 3 / 12.0 * topo.voronoi_length
+
         mask = Gait.parse(p.gait).mask
         actuator = topo.triplet_actuator
         self._actuated = (actuator >= 0) & (mask[np.maximum(actuator, 0)] == 1)
@@ -308,17 +410,23 @@ class ReferenceSimulator:
                              & (p.actuation_ends == "shared"))
         self._rod_edges = np.flatnonzero(topo.edge_kind != SPOKE)
 
-    # ---- elasticity ------------------------------------------------------------------------
+    # ---- elasticity and damping ------------------------------------------------------------
+
+    def driven_curvature(self, t) -> float:
+        """K̄ (1/m) that fired actuators follow at time t (s), with the profile's closure."""
+        p = self.params
+        return float(p.actuator_profile.cycle_curvature(math.fmod(t, p.period), p.period,
+                                                        p.profile_closure))
 
     def natural_curvature(self, t):
-        """κ⁰ (T,) in 1/m at time t (s): rest curvature, or ±K̄(t mod T) on actuated triplets."""
+        """κ⁰ (T,) in 1/m at time t (s): rest curvature, or ±K̄(t mod T) on actuated triplets,
+        and with "shared" ends the joints turned with the arc's end half-edges."""
         topo = self.topology
         kappa0 = topo.rest_curvature.copy()
-        driven = self.params.actuator_profile.curvature(math.fmod(t, self.params.period))
+        driven = self.driven_curvature(t)
         if self._actuated.any():
             kappa0[self._actuated] = np.sign(kappa0[self._actuated]) * driven
         if self._shared_ends.any():
-            # "shared" ends: the joint's natural turning angle follows the arc's end half-edge
             ends = self._shared_ends
             voronoi = topo.voronoi_length[ends]
             angle = (2.0 * np.arctan(kappa0[ends] * voronoi / 2.0) + topo.end_turning_length[ends]
@@ -326,16 +434,37 @@ class ReferenceSimulator:
             kappa0[ends] = 2.0 * np.tan(angle / 2.0) / voronoi
         return kappa0
 
+    def strains(self, q, t, derivatives=False):
+        """Elastic strains of positions q (N, 2) m at time t (s): edge strains ε (E,) and bending
+        strains δ = κ − κ⁰(t) (T,) 1/m. With derivatives, each is the (s, ∇s, ∇²s) triple of
+        `stretch_strain` / `bend_strain`."""
+        topo = self.topology
+        q = np.asarray(q, dtype=np.float64)
+        i, j = topo.edges.T
+        stretch = stretch_strain(q[i], q[j], topo.rest_length)
+        a, b, c = topo.triplets.T
+        bend = bend_strain(q[a], q[b], q[c], topo.voronoi_length, self.natural_curvature(t))
+        return (stretch, bend) if derivatives else (stretch[0], bend[0])
+
     def _elastic(self, q, t):
         """Total energy and the terms (gradient, Hessian) of all stretch and bend elements."""
+        stretch, bend = self.strains(q, t, derivatives=True)
+        es, gs, hs = quadratic_strain_element(*stretch, self._stretch_strain_stiffness)
+        eb, gb, hb = quadratic_strain_element(*bend, self._bend_strain_stiffness)
         topo = self.topology
-        i, j = topo.edges.T
-        es, gs, hs = stretch_element(q[i], q[j], topo.rest_length, self._stretch_stiffness)
-        a, b, c = topo.triplets.T
-        eb, gb, hb = bend_element(q[a], q[b], q[c], topo.voronoi_length,
-                                  self.natural_curvature(t), self._bend_stiffness)
         terms = [(topo.edges, topo.edges, gs, hs), (topo.triplets, topo.triplets, gb, hb)]
         return es.sum() + eb.sum(), terms
+
+    def _damping(self, q_new, step: ImplicitStep):
+        """The terms (gradient of the pseudo-potential, Hessian) of the material damping."""
+        stretch, bend = self.strains(q_new, step.time, derivatives=True)
+        tau, gain = self.params.damping_time, step.rate_gain
+        _, gs, hs = damping_element(*stretch, step.stretch_anchor, gain,
+                                    self._stretch_strain_stiffness, tau)
+        _, gb, hb = damping_element(*bend, step.bend_anchor, gain,
+                                    self._bend_strain_stiffness, tau)
+        topo = self.topology
+        return [(topo.edges, topo.edges, gs, hs), (topo.triplets, topo.triplets, gb, hb)]
 
     def elastic_energy(self, q, t) -> float:
         """Total stretching + bending energy (J/m) of positions q (N, 2) m at time t (s)."""
@@ -348,8 +477,10 @@ class ReferenceSimulator:
 
     # ---- fluid -----------------------------------------------------------------------------
 
-    def _fluid(self, q_new, q_old, dt):
-        """The terms (force, Jacobian) of rod drag, cylinder drag and the eight jets."""
+    def _fluid(self, q_new, q_old, dt, area_old=None):
+        """The terms (force, Jacobian) of rod drag, cylinder drag and the eight jets for the
+        velocities (q_new − q_old)/dt and area rates (S(q_new) − area_old)/dt (area_old
+        defaults to the areas of q_old)."""
         p, topo = self.params, self.topology
         rods = topo.edges[self._rod_edges]
         a, b = rods.T
@@ -360,13 +491,19 @@ class ReferenceSimulator:
                                              p.cylinder_drag, p.cylinder_diameter)
         quads = topo.jet_quads
         centre = np.zeros((len(quads), 1), dtype=quads.dtype)
-        area_old = quad_area(*[q_old[quads[:, m]] for m in range(4)])
+        if area_old is None:
+            area_old = self.areas(q_old)
         f_jet, k_jet = jet_element(*[q_new[quads[:, m]] for m in range(4)], q_new[centre[:, 0]],
                                    area_old, dt, p.fluid_density, p.alpha,
                                    p.jet_mode == "contract")
         return [(rods, rods, f_rod, k_rod),
                 (centre[:1], centre[:1], f_cyl[None], k_cyl[None]),
                 (centre, np.concatenate([quads, centre], axis=1), f_jet, k_jet)]
+
+    def areas(self, q) -> np.ndarray:
+        """Areas S (8,), m², of the eight inter-limb spaces (jet quadrilaterals) of q (N, 2) m."""
+        q = np.asarray(q, dtype=np.float64)
+        return quad_area(*[q[self.topology.jet_quads[:, m]] for m in range(4)])
 
     def fluid_forces(self, q_new, q_old, dt) -> np.ndarray:
         """Rod drag + cylinder drag + jet (N, 2), N/m, for the step q_old -> q_new (m) of dt s."""
@@ -376,38 +513,80 @@ class ReferenceSimulator:
 
     # ---- time stepping ---------------------------------------------------------------------
 
-    def _force_jacobian(self, q_new, q_old, t_new, dt):
-        elastic = [(r, c, -g, -h) for r, c, g, h in self._elastic(q_new, t_new)[1]]
-        terms = elastic + self._fluid(q_new, q_old, dt)
+    def implicit_step(self, q, v, t, h, previous=None) -> ImplicitStep:
+        """The known part of a step of h s from state (q, v) at time t s: implicit Euler, or
+        BDF2 when `previous` = (q_prev, v_prev), the state at t − h, is given.
+        Args: q, v (N, 2) in m and m/s."""
+        q = np.asarray(q, dtype=np.float64)
+        v = np.asarray(v, dtype=np.float64)
+        damped = self.params.damping_time > 0.0
+        topo = self.topology
+        stretch, bend = (self.strains(q, t) if damped
+                         else (np.zeros(topo.n_edges), np.zeros(topo.n_triplets)))
+        areas = self.areas(q)
+        if previous is None:
+            return ImplicitStep(time=t + h, rate_gain=1.0 / h, position_anchor=q,
+                                area_anchor=areas, stretch_anchor=stretch, bend_anchor=bend,
+                                inertia_gain=1.0 / h ** 2, inertia_target=q + h * v)
+        q_prev, v_prev = (np.asarray(x, dtype=np.float64) for x in previous)
+        if damped:
+            stretch_prev, bend_prev = self.strains(q_prev, t - h)
+            stretch = stretch + (stretch - stretch_prev) / 3.0
+            bend = bend + (bend - bend_prev) / 3.0
+        step_back = q - q_prev
+        return ImplicitStep(
+            time=t + h, rate_gain=1.5 / h, position_anchor=q + step_back / 3.0,
+            area_anchor=areas + (areas - self.areas(q_prev)) / 3.0,
+            stretch_anchor=stretch, bend_anchor=bend, inertia_gain=9.0 / (4.0 * h ** 2),
+            inertia_target=q + step_back / 3.0 + (2.0 * h / 9.0) * (4.0 * v - v_prev))
+
+    def _step_forces(self, q_new, step: ImplicitStep):
+        """Total force (2N,) and its sparse Jacobian (2N, 2N) at q_new (N, 2) for `step`."""
+        elastic = self._elastic(q_new, step.time)[1]
+        if self.params.damping_time > 0.0:
+            elastic += self._damping(q_new, step)
+        terms = [(r, c, -g, -h) for r, c, g, h in elastic] + self._fluid(
+            q_new, step.position_anchor, 1.0 / step.rate_gain, step.area_anchor)
         return _assemble_vector(q_new.size, terms), _assemble_matrix(q_new.size, terms)
 
-    def force_jacobian(self, q_new, q_old, t_new, dt):
-        """Total force F = F_int(q_new; t_new) + F_fluid(q_new, q_old) and ∂F/∂q_new.
+    def force_jacobian(self, q_new, q_old, t_new, dt, q_older=None):
+        """Total force F = F_int(q_new; t_new) + F_damping + F_fluid and ∂F/∂q_new, with the rates
+        of implicit Euler from q_old at t_new − dt, or of BDF2 from q_old and q_older (at
+        t_new − 2 dt) when q_older is given. Positions (N, 2), m; times s.
 
         Returns: forces (N, 2), N/m; dense Jacobian (2N, 2N), N/m² (DOF order of
         q.reshape(-1)).
         """
         q_new = np.asarray(q_new, dtype=np.float64)
-        force, jac = self._force_jacobian(q_new, np.asarray(q_old, dtype=np.float64), t_new, dt)
+        q_old = np.asarray(q_old, dtype=np.float64)
+        previous = None if q_older is None else (q_older, np.zeros_like(q_old))
+        step = self.implicit_step(q_old, np.zeros_like(q_old), t_new - dt, dt, previous)
+        force, jac = self._step_forces(q_new, step)
         return force.reshape(q_new.shape), jac.toarray()
 
-    def step(self, q, v, t, dt=None):
-        """One implicit Euler step from time t to t + dt (default solver.dt).
+    def step(self, q, v, t, dt=None, previous=None):
+        """One implicit step from time t to t + dt (default solver.dt): BDF2 when the solver's
+        integrator is "bdf2" and `previous` = (q_prev, v_prev), the state at t − dt, is given;
+        implicit Euler otherwise.
 
-        Solves M (q_new − q − h v)/h² − F(q_new) = 0 with M = mass + added mass, starting
-        Newton from q + h v. Args: q (N, 2) m, v (N, 2) m/s, t s.
-        Returns: (q_new (N, 2), v_new (N, 2), Newton iterations).
+        Solves inertia_gain·M·(q_new − inertia_target) − F(q_new) = 0 (see `ImplicitStep`) with
+        M = mass + added mass, starting Newton from q + dt·v. Args: q (N, 2) m, v (N, 2) m/s,
+        t s. Returns: (q_new (N, 2), v_new (N, 2) the integrator's velocity at q_new, Newton
+        iterations).
         Raises NewtonDidNotConverge if max|Δq| > newton_tol after max_newton iterations, or if a
         non-finite value appears.
         """
         h = self.solver.dt if dt is None else dt
         q = np.asarray(q, dtype=np.float64)
         v = np.asarray(v, dtype=np.float64)
-        inertia = self._inertia / h ** 2
-        target = (q + h * v).reshape(-1)
-        q_new = target.copy()
+        if self.solver.integrator != "bdf2":
+            previous = None
+        step = self.implicit_step(q, v, t, h, previous)
+        inertia = step.inertia_gain * self._inertia
+        target = step.inertia_target.reshape(-1)
+        q_new = (q + h * v).reshape(-1)
         for iteration in range(1, self.solver.max_newton + 1):
-            force, jac = self._force_jacobian(q_new.reshape(q.shape), q, t + h, h)
+            force, jac = self._step_forces(q_new.reshape(q.shape), step)
             residual = inertia * (q_new - target) - force
             # Sparse LU (SuperLU) rather than a dense solve: it is fast, and it does not use the
             # threaded BLAS, whose threads thrash when other processes share the cores.
@@ -419,22 +598,28 @@ class ReferenceSimulator:
                 raise NewtonDidNotConverge(f"non-finite Newton update at t = {t + h:.6g} s")
             if change <= self.solver.newton_tol:
                 q_new = q_new.reshape(q.shape)
-                return q_new, (q_new - q) / h, iteration
+                return q_new, step.rate_gain * (q_new - step.position_anchor), iteration
         raise NewtonDidNotConverge(
             f"step to t = {t + h:.6g} s: max|Δq| = {change:.3g} m > newton_tol = "
             f"{self.solver.newton_tol:.3g} m after {self.solver.max_newton} iterations")
 
-    def run(self, n_steps) -> np.ndarray:
-        """Positions (n_steps + 1, N, 2), m, from rest in the rest shape at t = 0."""
+    def run(self, n_steps, q0=None, v0=None, return_velocities=False):
+        """Positions (n_steps + 1, N, 2), m, at t = 0, h, ..., n_steps·h (h = solver.dt), from
+        (q0, v0) (default: at rest in the rest shape) at t = 0; BDF2 steps after a first implicit
+        Euler step when the solver's integrator is "bdf2". With return_velocities, also the
+        velocities (n_steps + 1, N, 2), m/s."""
         h = self.solver.dt
-        q = self.topology.rest_positions.copy()
-        v = np.zeros_like(q)
-        out = np.empty((n_steps + 1,) + q.shape)
-        out[0] = q
+        q = self.topology.rest_positions.copy() if q0 is None else np.array(q0, dtype=np.float64)
+        v = np.zeros_like(q) if v0 is None else np.array(v0, dtype=np.float64)
+        positions = np.empty((n_steps + 1,) + q.shape)
+        velocities = np.empty_like(positions)
+        positions[0], velocities[0] = q, v
+        previous = None
         for k in range(n_steps):
-            q, v, _ = self.step(q, v, k * h, h)
-            out[k + 1] = q
-        return out
+            q_new, v_new, _ = self.step(q, v, k * h, h, previous)
+            previous, q, v = (q, v), q_new, v_new
+            positions[k + 1], velocities[k + 1] = q, v
+        return (positions, velocities) if return_velocities else positions
 
     def centroid(self, q) -> np.ndarray:
         """Mass-weighted mean (2,) of positions q (N, 2), m; added mass excluded."""
