@@ -19,7 +19,11 @@ from .linsolve import BlockSystem, plan_elimination
 from .model import BatchModel
 from .params import SolverConfig
 from .physics.base import index_field, load_field, pad_batch
-from .state import STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_OK, BatchState
+from .gait import N_ACTUATORS, Gait
+from .state import NEVER, STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_OK, BatchState
+
+STEP_TOLERANCE = 1e-9
+"""Relative tolerance within which a time is taken to be a whole number of steps."""
 
 FINITE_LIMIT = 1e30
 """Updates larger than this (m) are treated as non-finite: no physical step moves a node 1e30 m."""
@@ -81,9 +85,11 @@ class BatchEngine:
         slot = self.plan.slot
         return index_field([[slot[a, c] for a in nodes for c in nodes] for nodes in triplets])
 
-    def load(self, model: BatchModel, solver: SolverConfig):
+    def load(self, model: BatchModel, solver: SolverConfig, periodic_gaits: bool = True):
         """Copy a batch (at most `capacity` instances) and the solver settings to the device and
-        put every instance at rest in its rest shape, status ok (padding: inactive)."""
+        put every instance at rest in its rest shape, status ok (padding: inactive). With
+        `periodic_gaits`, each instance fires its gait at t = 0 and every period after;
+        otherwise nothing fires until commanded (`fire`)."""
         if model.batch_size > self.capacity:
             raise ValueError(f"batch of {model.batch_size} exceeds the engine capacity {self.capacity}")
         load_field(self.mass, pad_batch(model.mass, self.capacity))
@@ -91,6 +97,15 @@ class BatchEngine:
         for term in self.terms:
             term.load(model.coefficients[term.name])
         self.state.reset(pad_batch(model.rest_positions, self.capacity), model.batch_size)
+        if periodic_gaits:
+            masks = pad_batch(np.stack([Gait.parse(p.gait).mask for p in model.params]), self.capacity)
+            periods = pad_batch(np.array([p.period for p in model.params]), self.capacity)
+            ratio = periods / solver.dt
+            whole = np.abs(ratio - np.round(ratio)) <= STEP_TOLERANCE * np.maximum(1.0, ratio)
+            load_field(self.state.schedule_mask, masks)
+            load_field(self.state.schedule_period, periods)
+            load_field(self.state.schedule_cycle_steps, np.where(whole, np.round(ratio), 0))
+            load_field(self.state.fire_time, np.where(masks != 0, 0.0, NEVER))
         self.dt[None] = solver.dt
         self.newton_tol[None] = solver.newton_tol
         self.max_newton[None] = solver.max_newton
@@ -228,6 +243,7 @@ class BatchEngine:
         2^max_substep_halvings substeps without history; if those fail too, freeze the instance
         at the start state with its status and failure step. One call site of `solve_step`
         keeps the kernel (and its compile time) small."""
+        self.fire_schedule(b, step_number)
         dt = self.dt[None]
         converged, finite = 0, 1
         halvings = 0
@@ -262,14 +278,37 @@ class BatchEngine:
             self.state.failure_step[b] = step_number
 
     @ti.func
+    def fire_schedule(self, b, step_number):
+        """Fire instance b's scheduled actuators when the step ending at step_number·dt reaches
+        a new cycle: exactly at that step when the period is a whole number of steps (so a
+        command at the same step gives the same bits), else at the exact time k·T inside it."""
+        step_end = step_number * self.dt[None]
+        fire_at = -1.0
+        if self.state.schedule_cycle_steps[b] > 0:
+            if step_number % self.state.schedule_cycle_steps[b] == 0:
+                fire_at = step_end
+        else:
+            period = self.state.schedule_period[b]
+            cycle = ti.cast(ti.floor(step_end / period), ti.i32)
+            if cycle > self.state.schedule_cycles[b]:
+                self.state.schedule_cycles[b] = cycle
+                fire_at = period * cycle
+        if fire_at >= 0.0:
+            for m in range(N_ACTUATORS):
+                if self.state.schedule_mask[b, m] != 0:
+                    self.state.previous_fire_time[b, m] = self.state.fire_time[b, m]
+                    self.state.fire_time[b, m] = fire_at
+
+    @ti.func
     def restore_backup(self, b):
         for n in range(self.n_nodes):
             self.state.positions[b, n] = self.state.backup_positions[b, n]
             self.state.velocities[b, n] = self.state.backup_velocities[b, n]
 
     @ti.kernel
-    def advance(self, first_step: ti.i32, n_steps: ti.i32):
-        """Advance every live instance from step first_step by n_steps steps in one launch."""
+    def advance(self, n_steps: ti.i32):
+        """Advance every live instance by n_steps steps (from its own step count) in one
+        launch."""
         # one instance per task on the CPU (Taichi's default grain of 32 would run a small batch
         # on one thread); a full block of instances per GPU block. Taichi's CPU backend runs a
         # parallel loop of fewer than ~1,024 iterations on one thread, so on the CPU the
@@ -278,9 +317,9 @@ class BatchEngine:
         for slot in range(self.capacity * self.loop_spread):
             if slot % self.loop_spread == 0:
                 b = slot // self.loop_spread
-                for s in range(n_steps):
+                for _ in range(n_steps):
                     if self.state.status[b] == STATUS_OK:
-                        self.advance_instance(b, first_step + s + 1)
+                        self.advance_instance(b, self.state.steps_done[b] + 1)
 
     @ti.kernel
     def compute_centroids(self):

@@ -161,7 +161,7 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
         while step < stop:
             # a launch never runs past a stop, so records are taken between launches
             count = min(STEPS_PER_LAUNCH, stop - step)
-            engine.advance(step, count)
+            engine.advance(count)
             step += count
             if bar is not None:
                 bar.update(count)

@@ -15,8 +15,12 @@ import taichi as ti
 from taichi.lang.field import Field
 from taichi.lang.util import to_numpy_type
 
+from .gait import N_ACTUATORS
+
 STATUS_OK, STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_INACTIVE = 0, 1, 2, 3
 STATUS_NAMES = ("ok", "newton_failed", "non_finite", "inactive")
+NEVER = -1.0
+"""fire_time of an actuator that has not fired."""
 """Per-instance status; "inactive" marks the padding of a batch up to the engine's capacity."""
 
 
@@ -44,6 +48,18 @@ class BatchState:
         self.newton_total = ti.field(ti.i64, shape=capacity)
         self.newton_max = ti.field(ti.i32, shape=capacity)
         self.substep_retries = ti.field(ti.i32, shape=capacity)
+        self.fire_time = ti.field(float, shape=(capacity, N_ACTUATORS))
+        """Time (s) each actuator last fired; NEVER when it has not."""
+        self.previous_fire_time = ti.field(float, shape=(capacity, N_ACTUATORS))
+        """The firing before that (it still applies to times before `fire_time`)."""
+        self.schedule_mask = ti.field(ti.i32, shape=(capacity, N_ACTUATORS))
+        """Actuators the periodic schedule fires (a gait every period; none for commands)."""
+        self.schedule_period = ti.field(float, shape=capacity)
+        """Period of the schedule, s."""
+        self.schedule_cycle_steps = ti.field(ti.i32, shape=capacity)
+        """Steps per period when the period is a whole number of steps, else 0."""
+        self.schedule_cycles = ti.field(ti.i32, shape=capacity)
+        """Cycles the schedule has begun."""
         self.term_histories: Dict[str, Field] = {}
 
     def own_fields(self) -> Dict[str, Field]:
@@ -63,6 +79,8 @@ class BatchState:
         status[:batch_size] = STATUS_OK
         self.status.from_numpy(status)
         self.failure_step.fill(-1)
+        self.fire_time.fill(NEVER)
+        self.previous_fire_time.fill(NEVER)
 
     def save(self) -> Dict[str, np.ndarray]:
         """A copy of the whole state (every field, padding included)."""

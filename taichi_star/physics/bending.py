@@ -3,7 +3,7 @@
 E_b = ½·(E·r0³/12)·(κ − κ⁰)²·Δl with the discrete curvature κ = 2·tan(φ/2)/Δl of the turning
 angle φ between the triplet's two edges and Δl its rest Voronoi length. κ⁰ is the rest curvature
 except on fired actuators: their interior triplets follow ±K̄(τ) (the actuation profile at the
-time τ since the cycle started) and, with `actuation_ends="shared"`, the joint triplets clamping
+time τ since the actuator last fired) and, with `actuation_ends="shared"`, the joint triplets clamping
 their ends turn by the curvature change of the arc's end half-edge. Joint triplets use E_limb
 ("limb") or a half arc edge in series with a half limb edge ("series").
 """
@@ -15,7 +15,8 @@ from ..gait import N_ACTUATORS, Gait
 from ..geometry import ARC_BEND, JOINT_BEND
 from .base import Term, index_field
 
-ACTUATED, SHARED_ENDS, RAMP_CLOSURE = "actuated", "shared_ends", "ramp_closure"
+NOT_FIRED = -1.0
+"""Marks an actuator that has not fired (K̄ is positive whenever it is defined)."""
 
 
 @ti.func
@@ -105,6 +106,8 @@ class Bending(Term):
             "period": np.array([p.period for p in params]),
             "gait_mask": np.stack([Gait.parse(p.gait).mask for p in params]),
         }
+    """gait_mask (B, 8): the actuators an instance fires (its gait, or all eight for a
+    commanded batch); the firing itself is in the batch state (fire times)."""
 
     @staticmethod
     def configuration(coefficients):
@@ -134,10 +137,12 @@ class Bending(Term):
         self.joint_actuator = index_field(topology.joint_actuator)
 
     @ti.func
-    def profile_curvature(self, b, time):
-        """K̄ (1/m) of instance b's fired actuators at `time` (s): Eq. 5 at τ = time mod T, plus
-        the closure ramp where chosen."""
-        tau = time - self.period[b] * ti.floor(time / self.period[b])
+    def profile_curvature(self, b, tau):
+        """K̄ (1/m) of instance b's actuators at τ (s) since firing: Eq. 5, and with the "ramp"
+        closure the gap K̄(0) − K̄(T) spread over the period, back at K̄(0) from τ = T on."""
+        if ti.static(self.ramp_closure):
+            if self.closure_rate[b] != 0.0:
+                tau = ti.min(tau, self.period[b])
         c1, c2, c3, c4 = self.profile[b, 0], self.profile[b, 1], self.profile[b, 2], self.profile[b, 3]
         if tau >= self.profile[b, 8]:
             c1, c2, c3, c4 = self.profile[b, 4], self.profile[b, 5], self.profile[b, 6], self.profile[b, 7]
@@ -147,13 +152,23 @@ class Bending(Term):
         return value
 
     @ti.func
+    def actuator_curvature(self, b, m, time):
+        """K̄ (1/m) of actuator m of instance b at `time` (s) by the firing that applies then,
+        or NOT_FIRED when it has never fired by then."""
+        fired = self.engine.state.fire_time[b, m]
+        if time < fired:
+            fired = self.engine.state.previous_fire_time[b, m]
+        value = NOT_FIRED
+        if fired >= 0.0:
+            value = self.profile_curvature(b, time - fired)
+        return value
+
+    @ti.func
     def begin_step(self, b, start_time, end_time, h, rate_gain, use_history):
         if ti.static(self.actuated):
-            start = self.profile_curvature(b, start_time)
-            end = self.profile_curvature(b, end_time)
             for m in range(N_ACTUATORS):
-                self.start_curvature[b, m] = start
-                self.end_curvature[b, m] = end
+                self.start_curvature[b, m] = self.actuator_curvature(b, m, start_time)
+                self.end_curvature[b, m] = self.actuator_curvature(b, m, end_time)
 
     @ti.func
     def natural_curvature(self, b, t, at_start):
@@ -163,17 +178,18 @@ class Bending(Term):
         if ti.static(self.actuated):
             actuator = self.triplet_actuator[t]
             if actuator >= 0:
-                if self.gait_mask[b, actuator] != 0:
-                    target = self.target_curvature(b, actuator, at_start)
+                target = self.target_curvature(b, actuator, at_start)
+                if target != NOT_FIRED:
                     natural = target if natural >= 0.0 else -target
             if ti.static(self.shared_ends):
                 clamped = self.joint_actuator[t]
                 if clamped >= 0 and self.end_turning_length[b, t] != 0.0:
-                    if self.gait_mask[b, clamped] != 0:
+                    target = self.target_curvature(b, clamped, at_start)
+                    if target != NOT_FIRED:
                         # turn the joint's natural angle φ⁰ = 2 atan(κ⁰Δl/2) by the arc's half-edge
                         voronoi = self.voronoi_length[b, t]
                         angle = 2.0 * ti.atan2(natural * voronoi, 2.0) + self.end_turning_length[b, t] * (
-                            self.target_curvature(b, clamped, at_start) - self.profile_rest[b])
+                            target - self.profile_rest[b])
                         natural = 2.0 * ti.tan(0.5 * angle) / voronoi
         return natural
 
