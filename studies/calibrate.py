@@ -276,8 +276,9 @@ def plot_cross_validation(csv_path, png_path) -> Path:
         ax.errorbar(row["measured_signed_mm_s"], row["predicted_signed_mm_s"],
                     xerr=row["cycle_std_mm_s"], fmt="o", ms=7, capsize=3,
                     label=f"{row['gait']} held out")
-    values = table[["measured_signed_mm_s", "predicted_signed_mm_s"]].to_numpy(dtype=float)
-    limit = 1.1 * np.nanmax(np.abs(values)) if np.isfinite(values).any() else 1.0
+    reach = np.concatenate([table["measured_signed_mm_s"].abs() + table["cycle_std_mm_s"],
+                            table["predicted_signed_mm_s"].abs()]).astype(float)
+    limit = 1.1 * np.nanmax(reach) if np.isfinite(reach).any() else 1.0  # error bars included
     ax.plot([-limit, limit], [-limit, limit], "k--", lw=0.8)
     ax.fill_between([0, limit], -limit, 0, color="red", alpha=0.06, lw=0)
     ax.fill_between([-limit, 0], 0, limit, color="red", alpha=0.06, lw=0)
