@@ -3,7 +3,8 @@
 (chunked when large) -> one DataFrame -> CSV -> plots drawn from that CSV.
 
 Studies: fig4c (the paper's Fig. 4c/4b), sweep (parameter sensitivity), gaits (all 255 gaits by
-symmetry class), calibrate (fit up to two parameters to the experiment), animate (GIF of a
+symmetry class), calibrate (CMA-ES fit of any parameters to the experiment, leave-one-gait-out
+cross-validation), sensitivity (Sobol indices of each gait's speed), animate (GIF of a
 cycle), bench (engine throughput), work_precision (run time against error).
 """
 
@@ -11,7 +12,8 @@ STUDIES = {
     "fig4c": "the paper's Fig. 4c/4b: five gaits, simulation vs experiment",
     "sweep": "sensitivity: Cartesian product of parameter lists/ranges",
     "gaits": "all 255 gaits, one simulation per symmetry class, ranked",
-    "calibrate": "fit up to two parameters to the experimental speeds",
+    "calibrate": "CMA-ES fit of StarParams fields to the measured speeds; --cross-validate",
+    "sensitivity": "Sobol indices (Saltelli sampling) of each gait's signed speed",
     "animate": "GIF of the robot's shape over one cycle",
     "bench": "engine throughput: robot-steps/s against batch size and precision",
     "work_precision": "run time against error: h, precision, tolerance, discretisation, integrator",

@@ -1,247 +1,331 @@
-"""Calibration: fit up to two StarParams fields to the measured speeds of the five Fig. 4 gaits.
+"""Calibration: fit StarParams fields to the measured speeds of the paper's gaits with CMA-ES.
 
-    python -m studies calibrate [--fit alpha=0.2:1.6:6] [--fit cylinder_drag=2:40:6:log]
-                                [--refine 3] [--objective speed|signed] [--cycles 3]
+    python -m studies calibrate [--fit NAME=LOW:HIGH[:log] ...] [--set NAME=VALUE ...]
+                                [--gaits paper|A1,A1+A2,...] [--weights experimental|uniform]
+                                [--popsize P] [--max-generations G] [--restarts R] [--seed S]
+                                [--sigma0 0.25] [--cycles 3] [--cross-validate]
                                 [--arch cpu|gpu] [--out results/] [--quick]
                                 [--workers N | --scheduler tcp://HOST:PORT]
 
-A coarse grid (the Cartesian product of the `--fit` ranges; `:log` ranges are refined in log
-space) is followed by `--refine` rounds of a 3 × 3 (or 3-point) grid centred on the best point
-so far, with half the previous spacing. Each round is one batch (every point × five gaits).
-Objective: sum over the gaits of ((v_sim − v_exp)/v_exp)², v = |speed| over the cycles from rest
-(`--objective signed` uses the signed speed against the paper's direction instead, so a wrong
-direction costs more). Direction mismatches against the paper are counted for every point.
+CMA-ES (`cma.CMAEvolutionStrategy`, ask/tell) searches the box of the `--fit` ranges in unit
+coordinates: every axis is mapped to [0, 1] (`:log` axes in the logarithm), the optimiser keeps
+its candidates inside [0, 1] (cma's bound transformation) and a parameter value is always
+computed from its unit coordinate (`studies.identify.ParameterRange.values`), so every value
+tried lies in its range. Each generation is one batched run: all candidates × all gaits. The
+first run starts at the `--set`/default model's coordinates (clipped into the box) with step
+`--sigma0`; each of `--restarts` further runs starts at a uniformly random point with twice the
+previous population (IPOP), seeded from `--seed`. The objective is the weighted mean squared
+relative signed-speed error against the measured speeds with the paper's directions as signs
+(`studies.identify`); a candidate whose simulation fails scores inf (CMA-ES is told
+`FAILED_PENALTY`).
 
-Writes `calibration.csv` (every point tried), `calibration_fit.csv` (the fitted values),
-`calibration.png` (error surface and optimum), then reruns fig4c with the fitted values as
-`fig4c_calibrated.csv/.png` (and `fig4b_calibrated.csv/.png`).
+Writes `calibration.csv` (every evaluation, rewritten after each generation), the best point
+`calibration_best.csv` (its values, objective, the five gaits' signed speeds, speed ratios and
+directions at the best point, and the run's settings as provenance), `calibration.png`
+(convergence), and Fig. 4c/4b at the best point (`fig4c_calibrated.*`, `fig4b_calibrated.*`).
+
+`--cross-validate`: for every gait, fit on the others and predict it: `crossval.csv` (every fold ×
+gait: measured and predicted signed speed, role held_out / fitted), `crossval_evaluations.csv`,
+`crossval.png` (predicted against measured).
 """
 
 from __future__ import annotations
 
-import itertools
 import math
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, List, Sequence
+from typing import Callable, List, Optional, Sequence
 
 import numpy as np
 import pandas as pd
 
-from taichi_star.experiment import PAPER_GAITS, compare_with_experiment
 from taichi_star.params import StarParams
 
-from . import common, distributed
+from . import common, distributed, identify
 from .fig4c import run_fig4c
 
-DESCRIPTION = ("Fit up to two parameters (default alpha and cylinder_drag) to the experimental "
-               "speeds of the five paper gaits: coarse grid, then local refinement.")
+DESCRIPTION = ("Fit StarParams fields to the measured speeds and directions of the paper's gaits "
+               "with CMA-ES (one batched simulation per generation); --cross-validate: "
+               "leave-one-gait-out.")
 
-DEFAULT_FIT = ["alpha=0.2:1.6:6", "cylinder_drag=2:40:6:log"]
-QUICK_FIT = ["alpha=0.4:1.2:2", "cylinder_drag=5:20:2:log"]
-OBJECTIVES = ("speed", "signed")
-
-
-def objective(table: pd.DataFrame, kind: str = "speed") -> float:
-    """Sum of squared relative speed errors over the rows of a Fig. 4c table (inf if any
-    simulation failed). kind "signed": the simulated signed speed is compared with the measured
-    speed times +1 (paper forward) or −1 (paper reverse)."""
-    if (table["status"] != "ok").any():
-        return math.inf
-    if kind == "signed":
-        sign = np.where(table["paper_direction"] == "reverse", -1.0, 1.0)
-        sim = table["sim_signed_speed_mm_s"].to_numpy(dtype=float)
-        exp = sign * table["exp_speed_mm_s"].to_numpy(dtype=float)
-    else:
-        sim = table["sim_speed_mm_s"].to_numpy(dtype=float)
-        exp = table["exp_speed_mm_s"].to_numpy(dtype=float)
-    value = float(np.sum(((sim - exp) / exp) ** 2))
-    return value if math.isfinite(value) else math.inf
+DEFAULT_FIT = ["alpha=0.2:1.5", "added_mass_coeff=0:3", "drag_perpendicular=0.3:3:log",
+               "drag_parallel=0.001:0.1:log", "cylinder_drag=1:100:log",
+               "limb_stiffness_ratio=10:1000:log"]
+"""The default six axes: jet ratio, added mass, rod drag (both), cylinder drag, limb stiffness,
+each spanning the paper's value by about a factor of 3-10 either way."""
+QUICK_FIT = ["alpha=0.2:1.5", "cylinder_drag=1:100:log"]
+DEFAULT_MAX_GENERATIONS = 20
+QUICK_POPSIZE, QUICK_MAX_GENERATIONS = 4, 2
+FAILED_PENALTY = 1e6
+"""Objective told to CMA-ES for a failed candidate (it needs finite values; the CSV keeps inf)."""
 
 
-class Axis:
-    """One fitted parameter: name, bounds implied by the coarse range, log or linear spacing."""
+@dataclass(frozen=True)
+class CMASettings:
+    """CMA-ES settings: popsize None = cma's default 4 + ⌊3 ln D⌋ (doubled at each restart),
+    sigma0 = initial step in unit coordinates, seed ≥ 0 (the run is reproducible)."""
+    popsize: Optional[int] = None
+    max_generations: int = DEFAULT_MAX_GENERATIONS
+    restarts: int = 0
+    seed: int = 1
+    sigma0: float = 0.25
 
-    def __init__(self, name: str, text: str):
-        self.name = name
-        self.log = text.strip().lower().endswith(":log")
-        self.values = common.parse_values(text, f"--fit {name}", float)
-        self.spacing = self._step(self.values)
+    def validate(self):
+        """StudyArgumentError naming the flag of an invalid setting."""
+        if self.popsize is not None and self.popsize < 2:
+            raise common.StudyArgumentError(f"--popsize must be >= 2, got {self.popsize}")
+        if self.max_generations < 1:
+            raise common.StudyArgumentError(f"--max-generations must be >= 1, got "
+                                            f"{self.max_generations}")
+        if self.restarts < 0:
+            raise common.StudyArgumentError(f"--restarts must be >= 0, got {self.restarts}")
+        if self.seed < 0:
+            raise common.StudyArgumentError(f"--seed must be >= 0, got {self.seed}")
+        if not (math.isfinite(self.sigma0) and 0 < self.sigma0 <= 1):
+            raise common.StudyArgumentError(f"--sigma0 must be in (0, 1] (unit coordinates), got "
+                                            f"{self.sigma0}")
 
-    def _step(self, values):
-        if len(values) < 2:
-            return 0.0
-        coords = np.log(values) if self.log else np.asarray(values)
-        return float(abs(coords[1] - coords[0]))
-
-    def around(self, centre: float, spacing: float) -> List[float]:
-        if spacing == 0.0:
-            return [centre]
-        if self.log:
-            coords = math.log(centre) + spacing * np.array([-1.0, 0.0, 1.0])
-            return [float(v) for v in np.exp(coords)]
-        return [float(v) for v in centre + spacing * np.array([-1.0, 0.0, 1.0])]
-
-
-def parse_fit(items: Sequence[str]) -> List[Axis]:
-    """`--fit NAME=RANGE` items -> Axis list (1 or 2; real-valued StarParams fields only)."""
-    if len(items) > 2:
-        raise common.StudyArgumentError(f"--fit: at most two parameters, got {len(items)}")
-    axes = []
-    for item in items:
-        if "=" not in item:
-            raise common.StudyArgumentError(
-                f"--fit: expected NAME=RANGE (e.g. alpha=0.2:1.6:6), got {item!r}")
-        name, text = item.split("=", 1)
-        name = name.strip().replace("-", "_")
-        if name == "gait":
-            raise common.StudyArgumentError("--fit gait: the gaits are fixed (the paper's five)")
-        if common.field_kind(name) is not float:
-            raise common.StudyArgumentError(f"--fit {name}: only real-valued parameters can be "
-                                            f"fitted")
-        if any(a.name == name for a in axes):
-            raise common.StudyArgumentError(f"--fit {name}: given twice")
-        axes.append(Axis(name, text))
-    return axes
+    def population(self, dimension: int, restart: int) -> int:
+        return (self.popsize or 4 + int(3 * math.log(dimension))) * 2 ** restart
 
 
-def points_params(points: Sequence[Dict], base: StarParams):
-    """All (point, gait) StarParams; raises StudyArgumentError on an invalid coarse point."""
-    params = []
-    for point in points:
-        for gait in PAPER_GAITS:
-            try:
-                params.append(base.replace(gait=gait, **point))
-            except (ValueError, TypeError) as error:
-                raise common.StudyArgumentError(f"--fit: invalid value: {error}") from None
-    return params
+def _cma_seed(seed: int, restart: int) -> int:
+    # cma treats seed 0 as "randomise": derive a positive seed per (seed, restart)
+    return int(np.random.SeedSequence([seed, restart]).generate_state(1)[0]) % (2 ** 31 - 2) + 1
 
 
-def evaluate(points, base, run_kwargs, kind, round_index):
-    """Simulate every point (one batch) and return one calibration row per point."""
-    params = points_params(points, base)
-    summary = common.run_batch(params, **run_kwargs).summary
-    rows = []
-    for index, point in enumerate(points):
-        part = summary.iloc[index * len(PAPER_GAITS):(index + 1) * len(PAPER_GAITS)]
-        table = compare_with_experiment(part)
-        bad = table[table["status"] != "ok"]
-        mismatched = table[(table["status"] == "ok") & ~table["direction_matches"]]
-        row = {"round": round_index, **point,
-               "objective": objective(table, kind),
-               "n_direction_mismatches": int(len(mismatched)),
-               "mismatched_gaits": " ".join(mismatched["gait"]),
-               "status": "ok" if bad.empty else bad["status"].iloc[0]}
-        for _, gait_row in table.iterrows():
-            row[f"speed_{gait_row['gait']}"] = gait_row["sim_speed_mm_s"]
-            row[f"signed_speed_{gait_row['gait']}"] = gait_row["sim_signed_speed_mm_s"]
-        rows.append(row)
-    return rows
+def fit_cmaes(box: Sequence[identify.ParameterRange], base: StarParams,
+              measurements: pd.DataFrame, settings: CMASettings = CMASettings(),
+              run_kwargs: dict = None, progress: bool = False,
+              on_generation: Callable[[pd.DataFrame], None] = None) -> pd.DataFrame:
+    """Minimise `identify.objective_values` over the box with CMA-ES and return every evaluation:
+    columns evaluation, restart, generation, candidate, then those of `identify.evaluate_points`.
+    `on_generation(table so far)` is called after each generation (e.g. to write the CSV)."""
+    import cma
+    identify.check_box(box, base)
+    settings.validate()
+    run_kwargs = dict(run_kwargs or {})
+    dimension = len(box)
+    start = np.array([spec.unit(getattr(base, spec.name)) for spec in box])
+    parts: List[pd.DataFrame] = []
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+        bar = tqdm(total=settings.max_generations * (settings.restarts + 1), unit="generation",
+                   desc="CMA-ES")
+    for restart in range(settings.restarts + 1):
+        rng = np.random.default_rng([settings.seed, restart])
+        x0 = start if restart == 0 else rng.uniform(0.0, 1.0, dimension)
+        es = cma.CMAEvolutionStrategy(list(x0), settings.sigma0, {
+            "bounds": [0.0, 1.0], "popsize": settings.population(dimension, restart),
+            "seed": _cma_seed(settings.seed, restart), "maxiter": settings.max_generations,
+            "verbose": -9})
+        generation = 0
+        while not es.stop():
+            candidates = es.ask()
+            table = identify.evaluate_points(box, candidates, base, measurements, run_kwargs)
+            values = table["objective"].to_numpy()
+            es.tell(candidates, list(np.where(np.isfinite(values), values, FAILED_PENALTY)))
+            table.insert(0, "candidate", np.arange(len(table)))
+            table.insert(0, "generation", generation)
+            table.insert(0, "restart", restart)
+            parts.append(table)
+            generation += 1
+            if bar is not None:
+                bar.update(1)
+                bar.set_postfix(best=f"{min(p['objective'].min() for p in parts):.4g}")
+            if on_generation is not None:
+                on_generation(_numbered(parts))
+        if bar is not None:  # an early stop leaves generations of this run unused
+            bar.total -= settings.max_generations - generation
+            bar.refresh()
+    if bar is not None:
+        bar.close()
+    return _numbered(parts)
 
 
-def valid(point, base) -> bool:
-    try:
-        base.replace(**point)
-        return True
-    except (ValueError, TypeError):
-        return False
+def _numbered(parts: List[pd.DataFrame]) -> pd.DataFrame:
+    table = pd.concat(parts, ignore_index=True)
+    table.insert(0, "evaluation", np.arange(len(table)))
+    return table
 
 
-def calibrate(axes: Sequence[Axis], base: StarParams = StarParams(), refine: int = 3,
-              kind: str = "speed", **run_kwargs) -> pd.DataFrame:
-    """Coarse grid then `refine` rounds of local 3-point-per-axis grids; returns every point
-    tried (columns: round, the fitted parameters, objective, n_direction_mismatches,
-    mismatched_gaits, status, speed_<gait>, signed_speed_<gait>)."""
-    names = [a.name for a in axes]
-    common.param_product({a.name: a.values for a in axes}, base=base)  # validates the grid
-    points = [dict(zip(names, combo)) for combo in
-              itertools.product(*[a.values for a in axes])]
-    rows = evaluate(points, base, run_kwargs, kind, 0)
-    spacing = [a.spacing for a in axes]
-    tried = {tuple(round(p[n], 12) for n in names) for p in points}
-    for round_index in range(1, refine + 1):
-        best = min(rows, key=lambda r: r["objective"])
-        if not math.isfinite(best["objective"]):
-            break
-        spacing = [s / 2.0 for s in spacing]
-        candidates = [{}]
-        for axis, step in zip(axes, spacing):
-            candidates = [dict(c, **{axis.name: v}) for c in candidates
-                          for v in axis.around(best[axis.name], step)]
-        candidates = [c for c in candidates if valid(c, base)
-                      and tuple(round(c[n], 12) for n in names) not in tried]
-        if not candidates:
+def best_row(evaluations: pd.DataFrame) -> Optional[pd.Series]:
+    """The evaluation with the smallest finite objective (the first of ties), or None."""
+    finite = evaluations[np.isfinite(evaluations["objective"].astype(float))]
+    return None if finite.empty else finite.loc[finite["objective"].idxmin()]
+
+
+def best_units(evaluations: pd.DataFrame, box) -> np.ndarray:
+    """Unit coordinates (D,) of the best evaluation."""
+    row = best_row(evaluations)
+    return np.array([row[f"u_{spec.name}"] for spec in box], dtype=float)
+
+
+# --------------------------------------------------------------------------- cross-validation
+
+def cross_validate(box, base: StarParams, gaits: Sequence[str], weights: str,
+                   settings: CMASettings, run_kwargs: dict, progress: bool = False):
+    """Leave one gait out: for each gait, fit on the others (`fit_cmaes`), then simulate every
+    fold's best point on all `gaits` in one batch. Returns (predictions, evaluations):
+    predictions has one row per fold × gait (held_out_gait, gait, role "held_out" or "fitted",
+    measured_signed_mm_s, cycle_std_mm_s, predicted_signed_mm_s, predicted_over_measured,
+    direction_matches, status, fit_objective, the fitted values); evaluations is every
+    evaluation of every fold with a held_out_gait column."""
+    gaits = list(gaits)
+    if len(gaits) < 2:
+        raise common.StudyArgumentError("--cross-validate: needs at least two gaits in --gaits")
+    folds, units, objectives = [], [], []
+    for held_out in gaits:
+        fitted = [g for g in gaits if g != held_out]
+        evaluations = fit_cmaes(box, base, identify.measurement_table(fitted, weights), settings,
+                                run_kwargs, progress=progress)
+        evaluations.insert(0, "held_out_gait", held_out)
+        folds.append(evaluations)
+        row = best_row(evaluations)
+        if row is None:  # every candidate failed: predict nothing for this fold
+            units.append(np.full(len(box), np.nan))
+            objectives.append(math.inf)
             continue
-        tried |= {tuple(round(c[n], 12) for n in names) for c in candidates}
-        rows += evaluate(candidates, base, run_kwargs, kind, round_index)
-    return pd.DataFrame(rows)
+        units.append(best_units(evaluations, box))
+        objectives.append(float(row["objective"]))
+    measured = identify.measurement_table(gaits, weights)
+    runnable = [i for i, u in enumerate(units) if np.isfinite(u).all()]
+    predicted = (identify.evaluate_points(box, [units[i] for i in runnable], base, measured,
+                                          run_kwargs) if runnable else None)
+    rows = []
+    for position, held_out in enumerate(gaits):
+        point = (predicted.iloc[runnable.index(position)] if position in runnable else None)
+        for gait in gaits:
+            target = float(measured.loc[gait, "target_signed_mm_s"])
+            value = float(point[f"signed_speed_{gait}"]) if point is not None else math.nan
+            rows.append({
+                "held_out_gait": held_out, "gait": gait,
+                "role": "held_out" if gait == held_out else "fitted",
+                "measured_signed_mm_s": target,
+                "cycle_std_mm_s": float(measured.loc[gait, "cycle_std_mm_s"]),
+                "predicted_signed_mm_s": value, "predicted_over_measured": value / target,
+                "direction_matches": bool(np.sign(value) == np.sign(target)),
+                "status": point["status"] if point is not None else "fit_failed",
+                "fit_objective": objectives[position],
+                **{spec.name: (float(point[spec.name]) if point is not None else math.nan)
+                   for spec in box}})
+    return pd.DataFrame(rows), pd.concat(folds, ignore_index=True)
 
 
-def best_point(table: pd.DataFrame, names: Sequence[str]) -> Dict:
-    row = table.loc[table["objective"].astype(float).idxmin()]
-    return {n: float(row[n]) for n in names}
+# --------------------------------------------------------------------------- plots (from CSVs)
+
+def draw_convergence(evaluations: pd.DataFrame, names: Sequence[str]):
+    """Figure of a calibration run: top, the objective of every evaluation (dots, coloured by
+    restart) and the best so far (line), log scale, against evaluation number; bottom, the
+    best-so-far point's unit coordinates, one line per fitted parameter (axis [0, 1])."""
+    plt = common.use_agg()
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(7.5, 6.5), sharex=True)
+    objective = evaluations["objective"].astype(float).to_numpy()
+    finite = np.isfinite(objective)
+    best_so_far = np.minimum.accumulate(np.where(finite, objective, np.inf))
+    top.scatter(evaluations["evaluation"][finite], objective[finite],
+                c=evaluations["restart"][finite], cmap="viridis", s=10, label="evaluation")
+    top.step(evaluations["evaluation"], best_so_far, where="post", color="tab:red",
+             label="best so far")
+    positive = objective[finite & (objective > 0)]
+    if len(positive):
+        top.set_yscale("log")
+        top.set_ylim(positive.min() / 1.5, positive.max() * 1.5)
+    top.set_ylabel("objective (weighted mean r²)")
+    top.legend(fontsize=8)
+    # unit coordinates of the incumbent after each evaluation
+    best_index = np.zeros(len(objective), dtype=int)
+    for i in range(1, len(objective)):
+        best_index[i] = i if objective[i] < objective[best_index[i - 1]] else best_index[i - 1]
+    for name in names:
+        bottom.plot(evaluations["evaluation"], evaluations[f"u_{name}"].to_numpy()[best_index],
+                    label=name)
+    bottom.set_ylim(-0.02, 1.02)
+    bottom.set_ylabel("best point, unit coordinate")
+    bottom.set_xlabel("evaluation")
+    bottom.legend(fontsize=7, ncol=2)
+    if finite.any():
+        row = best_row(evaluations)
+        fitted = ", ".join(f"{n} = {row[n]:.4g}" for n in names)
+        top.set_title(f"CMA-ES calibration: best {fitted}\nobjective {row['objective']:.4g}, "
+                      f"direction mismatches {int(row['n_direction_mismatches'])}", fontsize=8)
+    fig.tight_layout()
+    return fig
 
 
-def plot_calibration(csv_path, png_path, names: Sequence[str]):
-    """Error surface from a calibration CSV: the coarse grid as filled contours of log10
-    objective (two parameters) or a curve (one), every point tried as a dot, the optimum a star."""
+def plot_convergence(csv_path, png_path, names: Sequence[str]) -> Path:
+    fig = draw_convergence(pd.read_csv(csv_path), names)
+    fig.savefig(png_path, dpi=130)
+    common.use_agg().close(fig)
+    return Path(png_path)
+
+
+def plot_cross_validation(csv_path, png_path) -> Path:
+    """Predicted against measured signed speed from a crossval CSV: each fold's held-out gait
+    (large, x error bar = per-cycle std of the measurement) and its fitted gaits (small, grey);
+    the diagonal is a perfect prediction, the shaded quadrants a wrong direction."""
     plt = common.use_agg()
     table = pd.read_csv(csv_path)
-    finite = table[np.isfinite(table["objective"].astype(float))]
-    best = finite.loc[finite["objective"].idxmin()] if len(finite) else None
-    fig, ax = plt.subplots(figsize=(6.5, 5))
-    if len(names) == 2:
-        x, y = names
-        coarse = finite[finite["round"] == 0]
-        logx = (table[x] > 0).all() and table[x].max() / max(table[x].min(), 1e-300) >= 20
-        logy = (table[y] > 0).all() and table[y].max() / max(table[y].min(), 1e-300) >= 20
-        if len(coarse) >= 4 and coarse[x].nunique() >= 2 and coarse[y].nunique() >= 2:
-            grid = coarse.pivot_table(index=y, columns=x, values="objective")
-            contour = ax.contourf(grid.columns, grid.index, np.log10(grid.to_numpy()), levels=20,
-                                  cmap="viridis")
-            fig.colorbar(contour, ax=ax, label="log10 objective (coarse grid)")
-        dots = ax.scatter(finite[x], finite[y], c=finite["round"], cmap="autumn", s=14,
-                          edgecolors="k", linewidths=0.3, zorder=3)
-        fig.colorbar(dots, ax=ax, label="round (0 = coarse grid)")
-        if best is not None:
-            ax.plot(best[x], best[y], "*", color="white", mec="k", ms=16, zorder=4)
-        ax.set_xlabel(x)
-        ax.set_ylabel(y)
-        if logx:
-            ax.set_xscale("log")
-        if logy:
-            ax.set_yscale("log")
-    else:
-        x = names[0]
-        part = finite.sort_values(x)
-        ax.semilogy(part[x], part["objective"], "o-", ms=3)
-        if best is not None:
-            ax.semilogy([best[x]], [best["objective"]], "*", ms=14, color="tab:red")
-        ax.set_xlabel(x)
-        ax.set_ylabel("objective")
-    if best is not None:
-        fitted = ", ".join(f"{n} = {best[n]:.4g}" for n in names)
-        ax.set_title(f"calibration: best {fitted}\nobjective {best['objective']:.3g}; "
-                     f"direction mismatches {int(best['n_direction_mismatches'])}", fontsize=8)
+    fig, ax = plt.subplots(figsize=(6.2, 5.6))
+    fitted = table[table["role"] == "fitted"]
+    ax.scatter(fitted["measured_signed_mm_s"], fitted["predicted_signed_mm_s"], s=12,
+               color="0.6", label="fitted gaits (in sample)")
+    held = table[table["role"] == "held_out"]
+    for _, row in held.iterrows():
+        ax.errorbar(row["measured_signed_mm_s"], row["predicted_signed_mm_s"],
+                    xerr=row["cycle_std_mm_s"], fmt="o", ms=7, capsize=3,
+                    label=f"{row['gait']} held out")
+    reach = np.concatenate([table["measured_signed_mm_s"].abs() + table["cycle_std_mm_s"],
+                            table["predicted_signed_mm_s"].abs()]).astype(float)
+    limit = 1.1 * np.nanmax(reach) if np.isfinite(reach).any() else 1.0  # error bars included
+    ax.plot([-limit, limit], [-limit, limit], "k--", lw=0.8)
+    ax.fill_between([0, limit], -limit, 0, color="red", alpha=0.06, lw=0)
+    ax.fill_between([-limit, 0], 0, limit, color="red", alpha=0.06, lw=0)
+    ax.set_xlim(-limit, limit)
+    ax.set_ylim(-limit, limit)
+    ax.axhline(0, color="k", lw=0.5)
+    ax.axvline(0, color="k", lw=0.5)
+    ax.set_xlabel("measured signed speed (mm/s; sign = paper's direction)")
+    ax.set_ylabel("predicted signed speed (mm/s)")
+    ax.set_title("leave-one-gait-out: fit on the others, predict the held-out gait\n"
+                 "(red quadrants: wrong direction)", fontsize=9)
+    ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(png_path, dpi=130)
     plt.close(fig)
     return Path(png_path)
 
 
+# --------------------------------------------------------------------------- CLI
+
 def build_parser():
     parser = common.common_parser("calibrate", DESCRIPTION)
-    parser.add_argument("--fit", action="append", default=None, metavar="NAME=RANGE",
-                        help="a StarParams field and its coarse range start:stop:n[:log] or list; "
-                             "at most two (default: alpha=0.2:1.6:6 and "
-                             "cylinder_drag=2:40:6:log)")
-    parser.add_argument("--refine", type=int, default=None,
-                        help="local refinement rounds (default 3; 1 with --quick)")
-    parser.add_argument("--objective", choices=OBJECTIVES, default="speed",
-                        help="speed: |speed| errors (default); signed: signed speed vs the "
-                             "paper's direction")
-    parser.add_argument("--cycles", type=float, default=3.0, help="cycles from rest (default 3)")
+    parser.add_argument("--fit", action="append", default=None, metavar="NAME=LOW:HIGH[:log]",
+                        help="a real-valued StarParams field and its bounds, repeatable (default: "
+                             + " ".join(DEFAULT_FIT) + "; with --quick: " + " ".join(QUICK_FIT)
+                             + ")")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="fix another StarParams field, e.g. --set jet_mode=always")
+    parser.add_argument("--gaits", default="paper",
+                        help="measured gaits to fit: paper (all five, default) or a comma list")
+    parser.add_argument("--weights", choices=identify.WEIGHT_SCHEMES, default="experimental",
+                        help="experimental: gait weight ∝ (speed / per-cycle std)² (default); "
+                             "uniform: all 1")
+    parser.add_argument("--popsize", type=int, default=None,
+                        help=f"CMA-ES population (default 4 + 3 ln D; {QUICK_POPSIZE} with "
+                             f"--quick); doubled at each restart")
+    parser.add_argument("--max-generations", type=int, default=None,
+                        help=f"generations per CMA-ES run (default {DEFAULT_MAX_GENERATIONS}; "
+                             f"{QUICK_MAX_GENERATIONS} with --quick)")
+    parser.add_argument("--restarts", type=int, default=0,
+                        help="extra CMA-ES runs from random points, population doubled (IPOP)")
+    parser.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
+    parser.add_argument("--sigma0", type=float, default=0.25,
+                        help="initial CMA-ES step in unit coordinates (default 0.25)")
+    parser.add_argument("--cycles", type=float, default=3.0, help="cycles from rest (default 3)")
+    parser.add_argument("--cross-validate", action="store_true",
+                        help="leave one gait out: fit on the others, predict it, for every gait")
     distributed.add_arguments(parser)
     return parser
 
@@ -249,61 +333,105 @@ def build_parser():
 def main(argv=None):
     args = build_parser().parse_args(argv)
     common.check_positive(args.cycles, "--cycles")
-    axes = parse_fit(args.fit if args.fit else (QUICK_FIT if args.quick else DEFAULT_FIT))
-    refine = args.refine if args.refine is not None else (1 if args.quick else 3)
-    if refine < 0:
-        raise common.StudyArgumentError(f"--refine must be >= 0, got {refine}")
+    settings = CMASettings(
+        popsize=args.popsize if args.popsize is not None else (QUICK_POPSIZE if args.quick
+                                                               else None),
+        max_generations=(args.max_generations if args.max_generations is not None else
+                         QUICK_MAX_GENERATIONS if args.quick else DEFAULT_MAX_GENERATIONS),
+        restarts=args.restarts, seed=args.seed, sigma0=args.sigma0)
+    settings.validate()
+    gaits = identify.measured_gaits(args.gaits)
+    if args.cross_validate and len(gaits) < 2:
+        raise common.StudyArgumentError("--cross-validate: needs at least two gaits in --gaits")
+    box = [identify.parse_range_spec(text) for text in
+           (args.fit if args.fit else (QUICK_FIT if args.quick else DEFAULT_FIT))]
     overrides = common.parse_overrides(args.set)
-    clash = set(overrides) & ({a.name for a in axes} | {"gait"})
+    clash = set(overrides) & ({spec.name for spec in box} | {"gait"})
     if clash:
         raise common.StudyArgumentError(f"--set {sorted(clash)[0]}: fitted or fixed by the study")
     try:
         base = common.base_params(args).replace(**overrides)
     except (ValueError, TypeError) as error:
         raise common.StudyArgumentError(f"--set: {error}") from None
-    names = [a.name for a in axes]
-    common.param_product({a.name: a.values for a in axes}, base=base)  # validate before compute
+    identify.check_box(box, base)
+    measurements = identify.measurement_table(gaits, args.weights)
     solver = common.solver_for(args)
     common.chunk_size_for(args)  # validates --chunk-size
     distributed.validate(args)
+    out = common.out_dir(args)
     with distributed.executor_for(args) as executor:
-        out = common.out_dir(args)
-        # a refinement round has 3^k points x 5 gaits; chunks sized so that it still feeds
-        # every worker (the coarse round then simply has more chunks)
-        per_round = 3 ** len(axes) * len(PAPER_GAITS)
+        generation_size = settings.population(len(box), 0) * len(gaits)
         run_kwargs = dict(cycles=args.cycles,
                           duration_s=common.QUICK_DURATION_S if args.quick else None,
-                          solver=solver, arch=args.arch, progress=not args.no_progress,
-                          executor=executor,
-                          chunk_size=distributed.default_chunk_size(args, per_round,
+                          solver=solver, arch=args.arch, progress=False, executor=executor,
+                          chunk_size=distributed.default_chunk_size(args, generation_size,
                                                                     executor.n_workers))
-        table = calibrate(axes, base=base, refine=refine, kind=args.objective, **run_kwargs)
-    csv = common.write_csv(table, out / "calibration.csv")
-    table = pd.read_csv(csv)
-    finite = table[np.isfinite(table["objective"].astype(float))]
-    if finite.empty:
-        print("calibration: every point failed; no fit")
-        return table
-    best = best_point(finite, names)
-    best_row = finite.loc[finite["objective"].idxmin()]
-    fit = pd.DataFrame({"parameter": names, "value": [best[n] for n in names]})
-    fit["objective"] = best_row["objective"]
-    fit["objective_kind"] = args.objective
-    fit["n_direction_mismatches"] = int(best_row["n_direction_mismatches"])
-    fit["mismatched_gaits"] = best_row["mismatched_gaits"] if isinstance(
-        best_row["mismatched_gaits"], str) else ""
-    fit_csv = common.write_csv(fit, out / "calibration_fit.csv")
-    png = plot_calibration(csv, out / "calibration.png", names)
-    print(common.describe([csv, fit_csv, png]))
-    print("fitted: " + ", ".join(f"{n} = {best[n]:.6g}" for n in names)
-          + f" (objective {best_row['objective']:.4g}, direction mismatches "
-            f"{int(best_row['n_direction_mismatches'])})")
-    note = "calibrated (" + ", ".join(f"{n}={best[n]:.3g}" for n in names) + ")"
+        if args.cross_validate:
+            return _cross_validation_outputs(out, box, base, gaits, args, settings, run_kwargs)
+        csv = out / "calibration.csv"
+        evaluations = fit_cmaes(box, base, measurements, settings, run_kwargs,
+                                progress=not args.no_progress,
+                                on_generation=lambda table: common.write_csv(table, csv))
+    evaluations = pd.read_csv(csv)
+    names = [spec.name for spec in box]
+    png = plot_convergence(csv, out / "calibration.png", names)
+    row = best_row(evaluations)
+    if row is None:
+        print(common.describe([csv, png]) + "\ncalibration: every candidate failed; no fit")
+        return evaluations
+    best = {name: float(row[name]) for name in names}
+    note = "calibrated (" + ", ".join(f"{n}={v:.3g}" for n, v in best.items()) + ")"
     table4c = run_fig4c(out, base=base, overrides=best, cycles=args.cycles, solver=solver,
                         arch=args.arch, quick=args.quick, prefix="fig4c_calibrated",
                         progress=not args.no_progress, title_note=note)
-    still = table4c[~table4c["direction_matches"].astype(bool)]["gait"].tolist()
+    best_csv = common.write_csv(best_point_table(row, box, table4c, args, settings, base,
+                                                 overrides, gaits, len(evaluations)),
+                                out / "calibration_best.csv")
+    print(common.describe([csv, best_csv, png]))
+    print("best: " + ", ".join(f"{n} = {v:.6g}" for n, v in best.items())
+          + f" (objective {row['objective']:.4g} on {', '.join(gaits)})")
     print(table4c.to_string(index=False))
-    print("gaits whose direction still disagrees with the paper: "
-          + (", ".join(still) if still else "none"))
-    return table
+    wrong = table4c[~table4c["direction_matches"].astype(bool)]["gait"].tolist()
+    print("gaits whose direction disagrees with the paper at the best point: "
+          + (", ".join(wrong) if wrong else "none (all five match)"))
+    return evaluations
+
+
+def best_point_table(row: pd.Series, box, table4c: pd.DataFrame, args, settings: CMASettings,
+                     base: StarParams, overrides: dict, gaits: Sequence[str],
+                     n_evaluations: int) -> pd.DataFrame:
+    """One row: the best point (values, objective, where it was found), the five paper gaits at
+    that point (signed speed, speed ratio, direction match) and the run's settings."""
+    record = {"evaluation": int(row["evaluation"]), "restart": int(row["restart"]),
+              "generation": int(row["generation"]), "objective": float(row["objective"]),
+              **{spec.name: float(row[spec.name]) for spec in box}}
+    for _, gait_row in table4c.iterrows():
+        gait = gait_row["gait"]
+        record[f"signed_speed_{gait}"] = gait_row["sim_signed_speed_mm_s"]
+        record[f"speed_ratio_{gait}"] = gait_row["speed_ratio"]
+        record[f"direction_matches_{gait}"] = bool(gait_row["direction_matches"])
+    record["all_directions_match"] = bool(table4c["direction_matches"].astype(bool).all())
+    record.update({
+        "fit_box": " ".join(spec.spec for spec in box),
+        "fixed": " ".join(f"{k}={v}" for k, v in overrides.items()),
+        "gaits": " ".join(gaits), "weights": args.weights, "cycles": args.cycles,
+        "duration_s": common.QUICK_DURATION_S if args.quick else args.cycles * base.period,
+        "dt_s": common.solver_for(args).dt, "discretisation": args.discretisation,
+        "seed": settings.seed, "popsize": settings.population(len(box), 0),
+        "restarts": settings.restarts, "max_generations": settings.max_generations,
+        "sigma0": settings.sigma0, "n_evaluations": n_evaluations})
+    return pd.DataFrame([record])
+
+
+def _cross_validation_outputs(out, box, base, gaits, args, settings, run_kwargs):
+    predictions, evaluations = cross_validate(box, base, gaits, args.weights, settings,
+                                              run_kwargs, progress=not args.no_progress)
+    paths = [common.write_csv(predictions, out / "crossval.csv"),
+             common.write_csv(evaluations, out / "crossval_evaluations.csv")]
+    paths.append(plot_cross_validation(paths[0], out / "crossval.png"))
+    print(common.describe(paths))
+    held = predictions[predictions["role"] == "held_out"]
+    print(held[["gait", "measured_signed_mm_s", "predicted_signed_mm_s",
+                "predicted_over_measured", "direction_matches", "fit_objective"]]
+          .to_string(index=False))
+    return predictions

@@ -5,7 +5,8 @@
 
 Writes (prefix `fig4c` by default):
 - `fig4c.csv`: gait, sim_speed_mm_s, sim_signed_speed_mm_s, sim_direction, exp_speed_mm_s,
-  paper_direction, direction_matches, speed_ratio, status (experiment: full-trial speeds);
+  exp_cycle_speed_std_mm_s, paper_direction, direction_matches, speed_ratio, status (experiment:
+  full-trial speeds, and the spread of its per-cycle speeds drawn as error bars);
 - `fig4c_summary.csv`: the full simulation summary (every parameter, speeds over cycles 0-3 and
   1-3, Newton statistics, status);
 - `fig4b.csv`: centroid displacement against time, simulation and experiment (long form);
@@ -76,15 +77,19 @@ def fig4b_table(summary: pd.DataFrame, trajectory: pd.DataFrame, duration_s: flo
 
 
 def plot_fig4c(csv_path, png_path, title: str = None):
-    """Grouped bars from a fig4c CSV: simulated |speed| next to the experiment, per gait; the
-    simulated direction is written on each bar (red when it disagrees with the paper)."""
+    """Grouped bars from a fig4c CSV: simulated |speed| next to the experiment (error bar: the
+    std of its per-cycle speeds), per gait; the simulated direction is written on each bar (red
+    when it disagrees with the paper)."""
     plt = common.use_agg()
     table = pd.read_csv(csv_path)
     x = np.arange(len(table))
     width = 0.38
     fig, ax = plt.subplots(figsize=(7.5, 4.2))
     ax.bar(x - width / 2, table["sim_speed_mm_s"], width, label="simulation", color="tab:blue")
-    ax.bar(x + width / 2, table["exp_speed_mm_s"], width, label="experiment", color="tab:gray")
+    # error bars: the spread (± 1 std) of the measured per-cycle speeds (older CSVs lack it)
+    spread = table["exp_cycle_speed_std_mm_s"] if "exp_cycle_speed_std_mm_s" in table else None
+    ax.bar(x + width / 2, table["exp_speed_mm_s"], width, yerr=spread, capsize=3,
+           label="experiment (± per-cycle std)", color="tab:gray")
     for i, row in table.iterrows():
         height = row["sim_speed_mm_s"]
         if isinstance(row["status"], str) and row["status"] != "ok":
@@ -96,8 +101,8 @@ def plot_fig4c(csv_path, png_path, title: str = None):
         ax.text(i - width / 2, (height if np.isfinite(height) else 0.0), label, ha="center",
                 va="bottom", fontsize=8, color=colour)
         paper = {"forward": "fwd", "reverse": "rev"}.get(row["paper_direction"], "?")
-        exp = row["exp_speed_mm_s"]
-        ax.text(i + width / 2, exp if np.isfinite(exp) else 0.0, paper, ha="center",
+        top = row["exp_speed_mm_s"] + (spread[i] if spread is not None else 0.0)
+        ax.text(i + width / 2, top if np.isfinite(top) else 0.0, paper, ha="center",
                 va="bottom", fontsize=8)
     ax.set_xticks(x, [g.replace("+", "&") for g in table["gait"]])
     ax.set_ylabel("speed (mm/s)")
@@ -164,7 +169,7 @@ def run_fig4c(out, base: StarParams = StarParams(), overrides: Mapping = None,
                               out / f"{fig4b_prefix}.csv")]
     note = f" {title_note}" if title_note else ""
     paths.append(plot_fig4c(paths[0], out / f"{prefix}.png",
-                            title=(f"Fig. 4c{note}: speed over {duration:g} s from rest "
+                            title=(f"Fig. 4c{note}: speed over {duration:g} s from rest\n"
                                    f"(labels: direction; red = disagrees with the paper)")))
     paths.append(plot_fig4b(paths[2], out / f"{fig4b_prefix}.png",
                             title=f"Fig. 4b{note}: centroid displacement (simulation solid, "

@@ -8,6 +8,7 @@ it. Camera axes are not robot axes: compare speeds and path shapes, not headings
     >>> experiment.experimental_speeds().loc["A1+A2", "speed_mm_s"]
     2.85
     >>> experiment.experimental_trajectory("A1+A3").head()      # t_s, x_mm, y_mm
+    >>> experiment.experimental_cycle_speeds()    # per-cycle mean, std, n_cycles of each gait
 
 `compare_with_experiment(summary)` turns a `simulate(...).summary` of the paper gaits into the
 Fig. 4c table (simulated vs measured speed, direction against the paper's).
@@ -15,6 +16,7 @@ Fig. 4c table (simulated vs measured speed, direction against the paper's).
 
 from __future__ import annotations
 
+import functools
 import math
 from importlib import resources
 
@@ -31,11 +33,14 @@ PAPER_DIRECTIONS = {"A1": "forward", "A1+A2": "forward", "A1+A3": "reverse",
 """Swimming direction of each Fig. 4 gait stated in the paper's text (design §4): "forward" is
 along the gait's forward direction (the sum of its actuators' bisectors), "reverse" against it."""
 
+EXPERIMENT_PERIOD_S = 3.15
+"""Actuation period of the physical robot's trials, s (150 ms heating pulse + 3 s rest)."""
+
 PAPER_TEXT_SPEEDS_MM_S = {"A1": 0.49, "A1+A2": 2.83}
 """The only two speeds the paper's text states (mm/s, experiment)."""
 
 FIG4C_COLUMNS = ["gait", "sim_speed_mm_s", "sim_signed_speed_mm_s", "sim_direction",
-                 "exp_speed_mm_s", "paper_direction", "direction_matches", "speed_ratio",
+                 "exp_speed_mm_s", "exp_cycle_speed_std_mm_s", "paper_direction", "direction_matches", "speed_ratio",
                  "status"]
 """Columns of the Fig. 4c table, in order."""
 
@@ -87,6 +92,57 @@ def experimental_trajectory(gait: str) -> pd.DataFrame:
     return table
 
 
+def cycle_speeds(t_s: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray,
+                 period_s: float = EXPERIMENT_PERIOD_S) -> np.ndarray:
+    """Speed of each complete cycle of a tracked path, mm/s: shape (n_cycles,).
+
+    Cycles are cut as windows of one period from the first sample: [kT, (k+1)T) for
+    k = 0 .. floor((t_end − t_0)/T) − 1 (the incomplete tail is dropped). The position at a window
+    edge is linearly interpolated between the two video frames around it (frames are 1/59.94 s
+    apart, under 1 % of a period). A cycle's speed is |p((k+1)T) − p(kT)| / T: a magnitude,
+    because camera axes are not robot axes. The phase of the actuation within a window does not
+    matter for a steadily repeating stroke, since every window spans exactly one period."""
+    t_s, x_mm, y_mm = (np.asarray(a, dtype=np.float64) for a in (t_s, x_mm, y_mm))
+    if not (len(t_s) == len(x_mm) == len(y_mm)) or len(t_s) < 2 or np.any(np.diff(t_s) <= 0):
+        raise ValueError("cycle_speeds needs equal-length t, x, y with t strictly increasing")
+    if not (math.isfinite(period_s) and period_s > 0):
+        raise ValueError(f"period_s must be > 0, got {period_s!r}")
+    # a path of exactly n periods (up to the rounding of its time stamps) has n cycles
+    n_cycles = int(np.floor((t_s[-1] - t_s[0]) / period_s + 1e-9))
+    edges = t_s[0] + period_s * np.arange(n_cycles + 1)
+    x_edges, y_edges = np.interp(edges, t_s, x_mm), np.interp(edges, t_s, y_mm)
+    return np.hypot(np.diff(x_edges), np.diff(y_edges)) / period_s
+
+
+def experimental_cycle_speeds(period_s: float = EXPERIMENT_PERIOD_S) -> pd.DataFrame:
+    """Per-cycle speeds of each measured gait (`cycle_speeds` of its trajectory), indexed by
+    gait in `PAPER_GAITS` order.
+
+    Columns: n_cycles, cycle_speed_mean_mm_s, cycle_speed_std_mm_s (sample standard deviation,
+    ddof = 1), cycle_speed_min_mm_s, cycle_speed_max_mm_s. The spread is that of the cycles of
+    one trial: it includes the robot's speed-up from rest over the first cycles and any slow-down
+    at the end (A1+A3's last cycle), and is used as the measurement's uncertainty. It is not
+    divided by √n: successive cycles of one trial are strongly correlated (a trend, not noise).
+    By the triangle inequality the mean per-cycle speed is at least the net speed over the same
+    whole cycles; it exceeds the full-trial speed when the path wanders sideways (A1, slow)."""
+    return _cycle_speed_table(float(period_s)).copy()
+
+
+@functools.lru_cache(maxsize=4)
+def _cycle_speed_table(period_s: float) -> pd.DataFrame:
+    # cached: the Fig. 4c table of every calibration candidate needs the error bars
+    rows = []
+    for gait in PAPER_GAITS:
+        path = experimental_trajectory(gait)
+        speeds = cycle_speeds(path["t_s"], path["x_mm"], path["y_mm"], period_s)
+        rows.append({"gait": gait, "n_cycles": len(speeds),
+                     "cycle_speed_mean_mm_s": float(np.mean(speeds)),
+                     "cycle_speed_std_mm_s": float(np.std(speeds, ddof=1)),
+                     "cycle_speed_min_mm_s": float(np.min(speeds)),
+                     "cycle_speed_max_mm_s": float(np.max(speeds))})
+    return pd.DataFrame(rows).set_index("gait")
+
+
 def direction_of(signed_speed: float) -> str:
     """"forward" (> 0), "reverse" (< 0), or "undefined" (zero, NaN: no forward direction)."""
     if signed_speed is None or not math.isfinite(signed_speed) or signed_speed == 0.0:
@@ -101,10 +157,13 @@ def compare_with_experiment(summary: pd.DataFrame,
     were not measured get NaN experimental speed and "unknown" paper direction).
 
     Columns `FIG4C_COLUMNS`: sim_direction from the sign of the signed speed, direction_matches
-    against `PAPER_DIRECTIONS`, speed_ratio = sim_speed / exp_speed, status of the simulation.
+    against `PAPER_DIRECTIONS`, exp_cycle_speed_std_mm_s = the spread of the measured per-cycle
+    speeds (`experimental_cycle_speeds`, the error bar), speed_ratio = sim_speed / exp_speed,
+    status of the simulation.
     Speeds of instances whose status is not "ok" are reported as NaN, never as numbers.
     """
     speeds = experimental_speeds()
+    spread = experimental_cycle_speeds()["cycle_speed_std_mm_s"]
     rows = []
     for _, row in summary.iterrows():
         gait = _canonical(row["gait"])
@@ -120,6 +179,7 @@ def compare_with_experiment(summary: pd.DataFrame,
             "sim_signed_speed_mm_s": sim_signed,
             "sim_direction": sim_direction,
             "exp_speed_mm_s": exp_speed,
+            "exp_cycle_speed_std_mm_s": float(spread[gait]) if gait in spread.index else math.nan,
             "paper_direction": paper_direction,
             "direction_matches": bool(sim_direction == paper_direction),
             "speed_ratio": sim_speed / exp_speed if exp_speed else math.nan,

@@ -1,0 +1,243 @@
+"""Model identification shared by `calibrate` and `sensitivity`: parameter boxes mapped from the
+unit cube, and the calibration objective against the measured speeds of the paper's gaits.
+
+A box is a list of `ParameterRange` (a StarParams field, its bounds, linear or log). Optimisers
+and samplers work in unit coordinates u ∈ [0, 1] per axis; a parameter value is always computed
+from u by `ParameterRange.values` (an interpolation between the bounds, clipped to them), never
+as a leftover of a subtraction, so a value is in its range by construction::
+
+    from studies.identify import parse_range_spec, objective_values
+    box = [parse_range_spec("alpha=0.2:1.5"), parse_range_spec("cylinder_drag=1:100:log")]
+    box[1].values([0.0, 0.5, 1.0])          # -> [1, 10, 100]
+
+Objective (`objective_values`): for gait g with measured full-trial speed v_g > 0 and the paper's
+direction s_g = ±1, the relative signed error of a simulated signed speed u_g is
+r_g = (u_g − s_g v_g) / v_g, so r_g = 0 at the measurement and r_g ≤ −1 (forward gait) or
+≥ +1 (reverse gait) whenever the direction is wrong. The objective is the weighted mean of r_g²
+over the gaits, with weights w_g ∝ (v_g / σ_g)² normalised to mean 1, σ_g the spread of the
+measured per-cycle speeds (`experimental_cycle_speeds`): the squared error in units of the
+measurement's own relative spread. `weights="uniform"` gives every gait weight 1.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import List, Sequence
+
+import numpy as np
+import pandas as pd
+
+from taichi_star.experiment import (PAPER_DIRECTIONS, PAPER_GAITS, experimental_cycle_speeds,
+                                    experimental_speeds)
+from taichi_star.params import STAR_RANGES, StarParams
+
+from . import common
+
+WEIGHT_SCHEMES = ("experimental", "uniform")
+TOPOLOGY_FIELDS = ("n_arc", "n_limb")
+"""Integer fields fixing the topology (shared by a batch): not fittable."""
+
+
+@dataclass(frozen=True)
+class ParameterRange:
+    """One StarParams field varied over [low, high], uniformly in the value or (log) in its
+    logarithm. Unit coordinate u = 0 is `low`, u = 1 is `high`."""
+
+    name: str
+    low: float
+    high: float
+    log: bool = False
+
+    def values(self, unit) -> np.ndarray:
+        """Parameter values at unit coordinates (any shape; clipped to [0, 1]): the weighted
+        mean (1 − u)·low + u·high (of the logarithms when `log`). The bounds themselves are
+        returned exactly at u = 0 and 1 (exp(log(x)) need not round back to x) and rounding
+        in between is clipped into [low, high]."""
+        unit = np.clip(np.asarray(unit, dtype=np.float64), 0.0, 1.0)
+        if self.log:
+            value = np.exp((1.0 - unit) * math.log(self.low) + unit * math.log(self.high))
+        else:
+            value = (1.0 - unit) * self.low + unit * self.high
+        value = np.where(unit == 0.0, self.low, np.where(unit == 1.0, self.high, value))
+        return np.clip(value, self.low, self.high)
+
+    def unit(self, value: float) -> float:
+        """The unit coordinate of a value, clipped to [0, 1] (a value outside the box maps to
+        its nearest bound)."""
+        if self.log:
+            u = (math.log(value) - math.log(self.low)) / (math.log(self.high) - math.log(self.low)) \
+                if value > 0 else 0.0
+        else:
+            u = (value - self.low) / (self.high - self.low)
+        return float(min(1.0, max(0.0, u)))
+
+    @property
+    def spec(self) -> str:
+        """The range as written on the command line, e.g. "cylinder_drag=1:100:log"."""
+        return f"{self.name}={self.low:g}:{self.high:g}" + (":log" if self.log else "")
+
+
+def parse_range_spec(text: str, flag: str = "--fit") -> ParameterRange:
+    """"NAME=LOW:HIGH" or "NAME=LOW:HIGH:log" -> ParameterRange, checked against the field's valid
+    range (`check_field_range`). StudyArgumentError naming the flag and field when malformed."""
+    if "=" not in str(text):
+        raise common.StudyArgumentError(f"{flag}: expected NAME=LOW:HIGH[:log] (e.g. "
+                                        f"alpha=0.2:1.5), got {text!r}")
+    name, bounds = text.split("=", 1)
+    name = name.strip().replace("-", "_")
+    parts = [p.strip() for p in bounds.split(":")]
+    if len(parts) not in (2, 3) or (len(parts) == 3 and parts[2].lower() != "log"):
+        raise common.StudyArgumentError(f"{flag} {name}: malformed bounds {bounds!r}; expected "
+                                        f"LOW:HIGH or LOW:HIGH:log (e.g. 1:100:log)")
+    low = common._number(parts[0], f"{flag} {name}")
+    high = common._number(parts[1], f"{flag} {name}")
+    spec = ParameterRange(name, low, high, log=len(parts) == 3)
+    check_field_range(spec, flag)
+    return spec
+
+
+def check_field_range(spec: ParameterRange, flag: str):
+    """StudyArgumentError naming `flag` and the field unless the field is a real-valued
+    StarParams field, LOW < HIGH, both finite and inside the field's valid range, and LOW > 0 for
+    a log axis."""
+    kind = common.field_kind(spec.name)  # unknown field -> error naming it
+    where = f"{flag} {spec.name}"
+    if kind is not float or spec.name in TOPOLOGY_FIELDS or spec.name not in STAR_RANGES:
+        numeric = [n for n in StarParams.numeric_field_names() if n not in TOPOLOGY_FIELDS]
+        raise common.StudyArgumentError(f"{where}: not a real-valued numeric field (fix it with "
+                                        f"--set); fittable fields: {', '.join(numeric)}")
+    if not (math.isfinite(spec.low) and math.isfinite(spec.high)):
+        raise common.StudyArgumentError(f"{where}: bounds must be finite, got "
+                                        f"{spec.low}:{spec.high}")
+    if not spec.low < spec.high:
+        raise common.StudyArgumentError(f"{where}: reversed or empty bounds {spec.low:g}:"
+                                        f"{spec.high:g} (need LOW < HIGH)")
+    if spec.log and spec.low <= 0:
+        raise common.StudyArgumentError(f"{where}: a log axis needs LOW > 0, got {spec.low:g}")
+    lowest, highest, included = STAR_RANGES[spec.name]
+    if spec.low < lowest or (spec.low == lowest and not included) or spec.high > highest:
+        span = f"[{lowest:g}, {highest:g}]" if included else f"({lowest:g}, {highest:g}]"
+        raise common.StudyArgumentError(f"{where}: bounds {spec.low:g}:{spec.high:g} leave the "
+                                        f"field's valid range {span}")
+
+
+def check_box(box: Sequence[ParameterRange], base: StarParams, flag: str = "--fit"):
+    """Check a whole box before any compute: at least one axis, each a valid range of a
+    real-valued field (`check_field_range`), no field twice, and every corner
+    a valid StarParams on top of `base` (catches limits between fields, e.g. tip_radius >
+    joint_radius). StudyArgumentError naming the flag and the field."""
+    if not box:
+        raise common.StudyArgumentError(f"{flag}: no parameters to vary")
+    names = [spec.name for spec in box]
+    for spec in box:
+        check_field_range(spec, flag)
+        if names.count(spec.name) > 1:
+            raise common.StudyArgumentError(f"{flag} {spec.name}: given twice")
+    for corner in range(2 ** len(box)):
+        point = {spec.name: (spec.high if corner >> axis & 1 else spec.low)
+                 for axis, spec in enumerate(box)}
+        try:
+            base.replace(**point)
+        except (ValueError, TypeError) as error:
+            raise common.StudyArgumentError(f"{flag}: the corner {point} of the box is not a "
+                                            f"valid robot: {error}") from None
+
+
+def box_values(box: Sequence[ParameterRange], unit_points) -> np.ndarray:
+    """Unit points (P, D) -> parameter values (P, D), column d from box[d]."""
+    unit_points = np.atleast_2d(np.asarray(unit_points, dtype=np.float64))
+    return np.column_stack([spec.values(unit_points[:, d]) for d, spec in enumerate(box)])
+
+
+def box_params(box: Sequence[ParameterRange], values, base: StarParams,
+               gaits: Sequence[str]) -> List[StarParams]:
+    """One StarParams per (point, gait), point-major: values (P, D) -> P × len(gaits) robots."""
+    names = [spec.name for spec in box]
+    return [base.replace(gait=gait, **{n: float(v) for n, v in zip(names, point)})
+            for point in np.atleast_2d(values) for gait in gaits]
+
+
+# --------------------------------------------------------------------------- the objective
+
+def measured_gaits(text: str, flag: str = "--gaits") -> List[str]:
+    """`--gaits` ("paper" or a comma list) -> canonical gait names, each one of the measured
+    `PAPER_GAITS`; StudyArgumentError naming the flag for an empty list or an unmeasured gait."""
+    gaits = common.resolve_gaits(text, flag)
+    for gait in gaits:
+        if gait not in PAPER_GAITS:
+            raise common.StudyArgumentError(f"{flag} {gait}: not measured; the measured gaits are "
+                                            f"{', '.join(PAPER_GAITS)}")
+    if len(set(gaits)) != len(gaits):
+        raise common.StudyArgumentError(f"{flag}: a gait is listed twice in {text!r}")
+    return gaits
+
+
+def measurement_table(gaits: Sequence[str] = PAPER_GAITS,
+                      weights: str = "experimental") -> pd.DataFrame:
+    """What the objective compares with, indexed by gait: exp_speed_mm_s (full trial),
+    paper_sign (+1 forward, −1 reverse), target_signed_mm_s = sign × speed, cycle_std_mm_s
+    (spread of the per-cycle speeds), weight (mean 1 over `gaits`)."""
+    if weights not in WEIGHT_SCHEMES:
+        raise ValueError(f"weights must be one of {list(WEIGHT_SCHEMES)}, got {weights!r}")
+    gaits = list(gaits)
+    if not gaits:
+        raise ValueError("gaits: empty gait list")
+    unknown = [g for g in gaits if g not in PAPER_GAITS]
+    if unknown:
+        raise ValueError(f"gaits: {unknown[0]!r} was not measured; measured: {list(PAPER_GAITS)}")
+    speed = experimental_speeds().loc[gaits, "speed_mm_s"].to_numpy(dtype=float)
+    spread = experimental_cycle_speeds().loc[gaits, "cycle_speed_std_mm_s"].to_numpy(dtype=float)
+    sign = np.array([1.0 if PAPER_DIRECTIONS[g] == "forward" else -1.0 for g in gaits])
+    raw = (speed / spread) ** 2 if weights == "experimental" else np.ones(len(gaits))
+    return pd.DataFrame({"exp_speed_mm_s": speed, "paper_sign": sign,
+                         "target_signed_mm_s": sign * speed, "cycle_std_mm_s": spread,
+                         "weight": raw / raw.mean()}, index=pd.Index(gaits, name="gait"))
+
+
+def relative_signed_errors(signed_speeds, measurements: pd.DataFrame) -> np.ndarray:
+    """(u_g − s_g v_g) / v_g for simulated signed speeds (..., G) in mm/s, G = the rows of
+    `measurements` in order."""
+    signed_speeds = np.asarray(signed_speeds, dtype=np.float64)
+    target = measurements["target_signed_mm_s"].to_numpy()
+    return (signed_speeds - target) / measurements["exp_speed_mm_s"].to_numpy()
+
+
+def objective_values(signed_speeds, measurements: pd.DataFrame) -> np.ndarray:
+    """Weighted mean squared relative signed error, one value per point: signed speeds (P, G)
+    -> (P,); inf for a point with any non-finite speed (a failed simulation)."""
+    errors = np.atleast_2d(relative_signed_errors(signed_speeds, measurements))
+    weights = measurements["weight"].to_numpy()
+    values = (errors ** 2 * weights).sum(axis=1) / weights.sum()
+    return np.where(np.isfinite(values), values, np.inf)
+
+
+def evaluate_points(box: Sequence[ParameterRange], unit_points, base: StarParams,
+                    measurements: pd.DataFrame, run_kwargs: dict) -> pd.DataFrame:
+    """Simulate every point of the box on every gait of `measurements` in one batched run
+    (`common.run_batch`) and return one row per point: u_<name> (unit coordinates), <name>
+    (values), objective, n_direction_mismatches, mismatched_gaits, status (the first non-ok
+    status, else "ok"), then signed_speed_<gait> and speed_<gait> in mm/s."""
+    unit_points = np.atleast_2d(np.asarray(unit_points, dtype=np.float64))
+    gaits = list(measurements.index)
+    values = box_values(box, unit_points)
+    summary = common.run_batch(box_params(box, values, base, gaits), **run_kwargs).summary
+    shape = (len(unit_points), len(gaits))
+    status = summary["status"].to_numpy().reshape(shape)
+    ok = status == "ok"
+    signed = np.where(ok, summary["signed_speed_mm_s"].to_numpy(dtype=float).reshape(shape),
+                      np.nan)
+    speed = np.where(ok, summary["speed_mm_s"].to_numpy(dtype=float).reshape(shape), np.nan)
+    wrong = ok & (np.sign(signed) != measurements["paper_sign"].to_numpy())
+    table = pd.DataFrame({f"u_{s.name}": unit_points[:, d] for d, s in enumerate(box)})
+    for d, spec in enumerate(box):
+        table[spec.name] = values[:, d]
+    table["objective"] = objective_values(signed, measurements)
+    table["n_direction_mismatches"] = wrong.sum(axis=1)
+    table["mismatched_gaits"] = [" ".join(np.asarray(gaits)[row]) for row in wrong]
+    table["status"] = [next((s for s in row if s != "ok"), "ok") for row in status]
+    for g, gait in enumerate(gaits):
+        table[f"signed_speed_{gait}"] = signed[:, g]
+    for g, gait in enumerate(gaits):
+        table[f"speed_{gait}"] = speed[:, g]
+    return table

@@ -1,0 +1,295 @@
+"""Model identification: per-cycle experimental speeds, the calibration objective, parameter
+boxes (values from unit coordinates), argument validation before compute, and the calibrate /
+cross-validation / sensitivity studies in --quick mode with value checks."""
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import taichi_star
+from taichi_star import SolverConfig, StarParams
+from taichi_star.experiment import (EXPERIMENT_PERIOD_S, PAPER_GAITS, cycle_speeds,
+                                    experimental_cycle_speeds, experimental_speeds,
+                                    experimental_trajectory)
+
+from studies import calibrate, common, identify, sensitivity
+from studies.__main__ import main as studies_main
+
+QUICK = ["--quick", "--no-progress"]
+T = EXPERIMENT_PERIOD_S
+
+
+# ----------------------------------------------------------------------------- per-cycle speeds
+
+def test_cycle_speeds_by_hand():
+    # x: 1 mm/s in the first cycle, 3 mm/s in the second, then still; y: a wiggle of one period
+    # (zero at every cycle edge, so a window cut at the wrong phase would see it). Frames every
+    # T/190 hit the edges; the half cycle at the end is incomplete and dropped.
+    t = np.arange(0, 476) * (T / 190)
+    x = np.where(t < T, t, np.where(t < 2 * T, T + 3 * (t - T), 4 * T))
+    y = 0.2 * np.sin(2 * np.pi * t / T)
+    speeds = cycle_speeds(t, x, y, T)
+    assert speeds == pytest.approx([1.0, 3.0], rel=1e-9)  # rounding of sin(2πk) only
+    # frames that miss the edges (59.94 fps): the edge positions are interpolated, exactly for a
+    # straight path at constant velocity (1.5, -2) mm/s: |v| = 2.5 mm/s in each of 3 cycles
+    t = np.arange(0, 600) / 59.94
+    speeds = cycle_speeds(t, 1.5 * t, -2.0 * t, T)
+    assert len(speeds) == math.floor(t[-1] / T) == 3
+    assert speeds == pytest.approx([2.5] * 3, rel=1e-12)
+    with pytest.raises(ValueError, match="period_s"):
+        cycle_speeds(t, t, t, 0.0)
+
+
+def test_experimental_cycle_speeds_against_trial_speeds():
+    table = experimental_cycle_speeds()
+    trials = experimental_speeds()
+    assert list(table.index) == list(PAPER_GAITS)
+    for gait in PAPER_GAITS:
+        path = experimental_trajectory(gait)
+        row = table.loc[gait]
+        assert row["n_cycles"] == math.floor(path["t_s"].iloc[-1] / T)
+        assert 0 < row["cycle_speed_std_mm_s"] < row["cycle_speed_mean_mm_s"]
+        # triangle inequality: the summed chords of the cycles cover at least the net
+        # displacement over those whole cycles
+        end = row["n_cycles"] * T
+        net = math.hypot(np.interp(end, path["t_s"], path["x_mm"]),
+                         np.interp(end, path["t_s"], path["y_mm"]))
+        assert row["cycle_speed_mean_mm_s"] * end >= net * (1 - 1e-12)
+        # plausibility against the full-trial speed: the four fast gaits swim straight at the
+        # scale of a cycle (≥ 4 mm per cycle), within 5 %; A1 moves 1.4 mm per cycle with a
+        # sideways wander of the same size, so its chords add up to more: within 25 %
+        tolerance = 0.25 if gait == "A1" else 0.05
+        assert row["cycle_speed_mean_mm_s"] == pytest.approx(trials.loc[gait, "speed_mm_s"],
+                                                             rel=tolerance)
+
+
+# ----------------------------------------------------------------------------- objective
+
+def test_objective_zero_at_measurement_and_grows_when_a_direction_flips():
+    table = identify.measurement_table(PAPER_GAITS)
+    assert table["weight"].mean() == pytest.approx(1.0)
+    # the best-measured gait (smallest relative spread) weighs most: A1+A4
+    assert table["weight"].idxmax() == "A1+A4"
+    target = table["target_signed_mm_s"].to_numpy()
+    assert list(np.sign(target)) == [1, 1, -1, -1, -1]
+    assert identify.objective_values(target[None, :], table)[0] == 0.0
+    for g, gait in enumerate(PAPER_GAITS):
+        flipped = target.copy()
+        flipped[g] = -flipped[g]
+        # r_g = -2 for the flipped gait, 0 elsewhere: objective = 4 w_g / sum(w)
+        value = identify.objective_values(flipped[None, :], table)[0]
+        assert value == pytest.approx(4 * table["weight"].iloc[g] / table["weight"].sum())
+        # a flipped direction costs more than any speed error of the right sign up to ×2
+        half, double = target.copy(), target.copy()
+        half[g] *= 0.5
+        double[g] *= 2.0
+        assert value > identify.objective_values(np.stack([half, double]), table).max()
+    failed = target.copy()
+    failed[0] = np.nan
+    assert identify.objective_values(failed[None, :], table)[0] == math.inf
+    uniform = identify.measurement_table(["A1", "A1+A4"], weights="uniform")
+    assert list(uniform["weight"]) == [1.0, 1.0]
+    with pytest.raises(ValueError, match="empty gait list"):
+        identify.measurement_table([])
+
+
+# ----------------------------------------------------------------------------- boxes
+
+def test_parameter_values_come_from_unit_coordinates_and_stay_in_range():
+    linear = identify.parse_range_spec("alpha=0.4:1.2")
+    log = identify.parse_range_spec("cylinder_drag=1:100:log")
+    assert linear.values([0.0, 1.0]).tolist() == [0.4, 1.2]  # exactly, no 0.4 − 0.4 leftovers
+    assert log.values([0.0, 1.0]).tolist() == [1.0, 100.0]
+    assert log.values(0.5) == pytest.approx(10.0)
+    unit = np.random.default_rng(0).uniform(-0.1, 1.1, 10_000)  # clipped outside [0, 1]
+    for spec in (linear, log):
+        values = spec.values(unit)
+        assert values.min() >= spec.low and values.max() <= spec.high
+        inside = (unit > 0) & (unit < 1)
+        assert np.array([spec.unit(v) for v in values[inside][:100]]) == pytest.approx(
+            unit[inside][:100], abs=1e-12)
+    assert linear.unit(0.0) == 0.0 and linear.unit(5.0) == 1.0  # outside the box: clipped
+
+
+@pytest.fixture
+def no_compute(monkeypatch):
+    """Any call to simulate fails the test: argument errors must come before compute."""
+    def forbidden(*args, **kwargs):
+        raise AssertionError("simulate was called despite invalid arguments")
+    monkeypatch.setattr(taichi_star, "simulate", forbidden)
+
+
+@pytest.mark.parametrize("study, argv, message", [
+    ("calibrate", ["--fit", "alpha=1.5:0.2"], "--fit alpha: reversed or empty bounds"),
+    ("calibrate", ["--fit", "alpha=0.5:0.5"], "--fit alpha: reversed or empty bounds"),
+    ("calibrate", ["--fit", "alpha=0:inf"], "--fit alpha: 'inf' is not a finite number"),
+    ("calibrate", ["--fit", "alpha=nan:1"], "--fit alpha: 'nan' is not a finite number"),
+    ("calibrate", ["--fit", "alpha=0.2"], "--fit alpha: malformed bounds"),
+    ("calibrate", ["--fit", "beta=0:1"], "unknown parameter 'beta'"),
+    ("calibrate", ["--fit", "jet_mode=0:1"], "--fit jet_mode: not a real-valued numeric field"),
+    ("calibrate", ["--fit", "n_arc=10:20"], "--fit n_arc: not a real-valued numeric field"),
+    ("calibrate", ["--fit", "alpha=0:20"], "--fit alpha: bounds 0:20 leave the field's valid "
+                                           "range [0, 10]"),
+    ("calibrate", ["--fit", "period=0:5"], "--fit period: bounds 0:5 leave the field's valid "
+                                           "range (0, 1000]"),
+    ("calibrate", ["--fit", "cylinder_drag=0:100:log"], "--fit cylinder_drag: a log axis needs"),
+    ("calibrate", ["--fit", "joint_radius=0.02:0.03"], "joint_radius must be in"),
+    ("calibrate", ["--fit", "alpha=0.2:1", "--fit", "alpha=0.3:1"], "--fit alpha: given twice"),
+    ("calibrate", ["--gaits", ""], "--gaits: empty gait list"),
+    ("calibrate", ["--gaits", "A1,A1+A6"], "--gaits A1+A6: not measured"),
+    ("calibrate", ["--gaits", "A1", "--cross-validate"], "--cross-validate: needs at least two"),
+    ("calibrate", ["--set", "alpha=1", "--fit", "alpha=0.2:1"], "--set alpha: fitted"),
+    ("calibrate", ["--popsize", "1"], "--popsize must be >= 2"),
+    ("calibrate", ["--max-generations", "0"], "--max-generations must be >= 1"),
+    ("calibrate", ["--restarts", "-1"], "--restarts must be >= 0"),
+    ("calibrate", ["--sigma0", "0"], "--sigma0 must be in (0, 1]"),
+    ("sensitivity", ["--vary", "alpha=1:0.2"], "--vary alpha: reversed or empty bounds"),
+    ("sensitivity", ["--vary", "gait=0:1"], "--vary gait: not a real-valued numeric field"),
+    ("sensitivity", ["--base-samples", "6"], "--base-samples must be a power of 2"),
+    ("sensitivity", ["--gaits", ""], "--gaits: empty gait list"),
+])
+def test_invalid_arguments_fail_before_compute(no_compute, tmp_path, capsys, study, argv,
+                                               message):
+    assert studies_main([study, *argv, "--out", str(tmp_path), *QUICK]) == 2
+    error = capsys.readouterr().err
+    assert message in error, error
+    assert error.count("\n") == 1 and "Traceback" not in error  # one line, no traceback
+    assert not any(tmp_path.iterdir())  # nothing written
+
+
+def test_api_bad_input_raises_value_error(no_compute):
+    base = StarParams()
+    with pytest.raises(ValueError, match="alpha: reversed"):
+        identify.parse_range_spec("alpha=2:1")
+    with pytest.raises(ValueError, match="no parameters to vary"):
+        calibrate.fit_cmaes([], base, identify.measurement_table(["A1"]))
+    with pytest.raises(ValueError, match="tip_radius must be in"):
+        identify.check_box([identify.ParameterRange("tip_radius", 0.01, 0.06)], base)
+    with pytest.raises(ValueError, match="--popsize must be >= 2"):
+        calibrate.fit_cmaes([identify.ParameterRange("alpha", 0.2, 1.0)], base,
+                            identify.measurement_table(["A1"]), calibrate.CMASettings(popsize=1))
+
+
+# ----------------------------------------------------------------------------- studies, quick
+
+def quick_speeds(points, gaits):
+    """Direct `simulate` of {field: value} points on gaits, --quick settings: signed speeds
+    (points, gaits)."""
+    params = [StarParams(gait=g, **p) for p in points for g in gaits]
+    summary = taichi_star.simulate(params, common.QUICK_DURATION_S,
+                                   SolverConfig(dt=common.QUICK_DT)).summary
+    return summary["signed_speed_mm_s"].to_numpy().reshape(len(points), len(gaits))
+
+
+def test_calibrate_quick_against_a_direct_simulation(tmp_path):
+    calibrate.main(["--out", str(tmp_path), *QUICK])
+    evaluations = pd.read_csv(tmp_path / "calibration.csv")
+    box = [identify.parse_range_spec(text) for text in calibrate.QUICK_FIT]
+    assert len(evaluations) == calibrate.QUICK_POPSIZE * calibrate.QUICK_MAX_GENERATIONS
+    assert evaluations["evaluation"].tolist() == list(range(len(evaluations)))
+    for spec in box:  # every value in its range, computed from its unit coordinate
+        unit = evaluations[f"u_{spec.name}"].to_numpy()
+        assert ((unit >= 0) & (unit <= 1)).all()
+        values = evaluations[spec.name].to_numpy()
+        assert ((values >= spec.low) & (values <= spec.high)).all()
+        assert values == pytest.approx(spec.values(unit), rel=1e-9)  # CSV keeps 10 digits
+
+    best = pd.read_csv(tmp_path / "calibration_best.csv").iloc[0]
+    assert best["objective"] == pytest.approx(evaluations["objective"].min(), rel=1e-9)
+    point = {spec.name: float(best[spec.name]) for spec in box}
+    # the same robots simulated directly (results do not depend on the batch; values written
+    # with 10 significant digits change the speeds far below 1e-6)
+    direct = quick_speeds([point], PAPER_GAITS)[0]
+    stored = [best[f"signed_speed_{g}"] for g in PAPER_GAITS]
+    assert direct == pytest.approx(stored, rel=1e-6)
+    measurements = identify.measurement_table(PAPER_GAITS)
+    assert identify.objective_values(direct[None, :], measurements)[0] == pytest.approx(
+        best["objective"], rel=1e-6)
+    assert best["all_directions_match"] == all(
+        np.sign(direct) == measurements["paper_sign"].to_numpy())
+    assert best["fit_box"] == " ".join(spec.spec for spec in box) and best["seed"] == 1
+
+    figure = calibrate.draw_convergence(evaluations, [spec.name for spec in box])
+    top, bottom = figure.axes[:2]
+    low, high = top.get_ylim()  # a log axis around the objectives, not down to 1e-16
+    finite = evaluations["objective"][np.isfinite(evaluations["objective"])]
+    assert top.get_yscale() == "log"
+    assert finite.min() / 2 <= low < finite.min() and finite.max() < high <= finite.max() * 2
+    assert bottom.get_ylim() == pytest.approx((-0.02, 1.02))
+    calibrated = pd.read_csv(tmp_path / "fig4c_calibrated.csv")
+    assert calibrated["sim_signed_speed_mm_s"].to_numpy() == pytest.approx(direct, rel=1e-6)
+    for name in ("calibration.png", "fig4c_calibrated.png"):
+        assert (tmp_path / name).stat().st_size > 1000
+
+
+def test_cross_validation_quick(tmp_path):
+    gaits = ["A1", "A1+A2", "A1+A4"]
+    calibrate.main(["--out", str(tmp_path), "--cross-validate", "--gaits", ",".join(gaits),
+                    "--popsize", "3", "--max-generations", "1", *QUICK])
+    predictions = pd.read_csv(tmp_path / "crossval.csv")
+    evaluations = pd.read_csv(tmp_path / "crossval_evaluations.csv")
+    assert len(predictions) == len(gaits) ** 2
+    for held_out in gaits:
+        fold = evaluations[evaluations["held_out_gait"] == held_out]
+        rows = predictions[predictions["held_out_gait"] == held_out].set_index("gait")
+        assert len(fold) == 3
+        assert fold[f"signed_speed_{held_out}"].isna().all()  # never fitted on it
+        assert rows.loc[held_out, "role"] == "held_out"
+        assert (rows.drop(index=held_out)["role"] == "fitted").all()
+        best = fold.loc[fold["objective"].idxmin()]
+        assert rows["fit_objective"].iloc[0] == pytest.approx(best["objective"], rel=1e-9)
+        # the prediction batch reproduces the fit's speeds at the best point
+        for gait in rows.index.drop(held_out):
+            assert rows.loc[gait, "predicted_signed_mm_s"] == pytest.approx(
+                best[f"signed_speed_{gait}"], rel=1e-9)
+        # and the held-out prediction is that point simulated directly
+        point = {"alpha": float(best["alpha"]), "cylinder_drag": float(best["cylinder_drag"])}
+        assert rows.loc[held_out, "predicted_signed_mm_s"] == pytest.approx(
+            quick_speeds([point], [held_out])[0, 0], rel=1e-6)
+    assert (tmp_path / "crossval.png").stat().st_size > 1000
+
+
+def test_sobol_indices_of_the_ishigami_function():
+    # the analysis code path of the study on a function with known indices (a = 7, b = 0.1 on
+    # [-π, π]³): S1 = (0.3139, 0.4424, 0), ST = (0.5576, 0.4424, 0.2437). Each exact index must
+    # lie inside the estimate's 95 % confidence interval (deterministic seed; the half-widths
+    # are 0.03-0.09 at N = 1024, the errors ≤ 0.023 for seeds 1-3), and those intervals must be
+    # narrow enough to tell the three inputs apart.
+    box = [identify.ParameterRange(f"x{i}", -math.pi, math.pi) for i in range(3)]
+    x = identify.box_values(box, sensitivity.saltelli_units(3, 1024, seed=1))
+    y = np.sin(x[:, 0]) + 7 * np.sin(x[:, 1]) ** 2 + 0.1 * x[:, 2] ** 4 * np.sin(x[:, 0])
+    table = sensitivity.sobol_indices(["x0", "x1", "x2"], {"ishigami": y}, seed=1)
+    for key, exact in (("S1", [0.3139, 0.4424, 0.0]), ("ST", [0.5576, 0.4424, 0.2437])):
+        error = np.abs(table[key].to_numpy() - exact)
+        assert (error <= table[f"{key}_conf"]).all(), (key, error)
+        assert (table[f"{key}_conf"] < 0.1).all()
+    failed = sensitivity.sobol_indices(["x0", "x1", "x2"], {"f": np.where(x[:, 0] > 3, np.nan, y)})
+    assert failed["S1"].isna().all() and failed["n_failed"].iloc[0] > 0
+
+
+def test_sensitivity_quick(tmp_path):
+    argv = ["--vary", "alpha=0.4:1.2", "--vary", "cylinder_drag=3:30:log", "--gaits",
+            "A1,A1+A4", "--base-samples", "4", "--out", str(tmp_path), *QUICK]
+    sensitivity.main(argv)
+    samples = pd.read_csv(tmp_path / "sensitivity_samples.csv")
+    runs = pd.read_csv(tmp_path / "sensitivity_runs.csv")
+    indices = pd.read_csv(tmp_path / "sensitivity.csv")
+    assert len(samples) == 4 * (2 + 2) and len(runs) == 2 * len(samples)
+    assert (runs["status"] == "ok").all()
+    assert set(indices["gait"]) == {"A1", "A1+A4"} and len(indices) == 4
+    assert (indices["n_instances"] == len(runs)).all()
+    # the runs are the sampled robots: two points simulated directly
+    points = [{n: float(samples.loc[i, n]) for n in ("alpha", "cylinder_drag")} for i in (0, 5)]
+    direct = quick_speeds(points, ["A1", "A1+A4"])
+    stored = runs.set_index(["point", "gait"])["signed_speed_mm_s"]
+    assert direct[1, 1] == pytest.approx(stored[(5, "A1+A4")], rel=1e-6)
+    assert direct[0, 0] == pytest.approx(stored[(0, "A1")], rel=1e-6)
+    # the indices are those of the runs CSV
+    again = sensitivity.sobol_indices(
+        ["alpha", "cylinder_drag"],
+        {g: runs.loc[runs["gait"] == g, "signed_speed_mm_s"].to_numpy() for g in ("A1", "A1+A4")},
+        seed=1)
+    assert indices["ST"].to_numpy() == pytest.approx(again["ST"].to_numpy(), rel=1e-6)
+    assert (tmp_path / "sensitivity.png").stat().st_size > 1000
