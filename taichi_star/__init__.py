@@ -8,8 +8,9 @@ from .gait import Gait, symmetry_classes
 from .params import SolverConfig, StarParams
 from .runtime import available_archs
 from .simulation import SimulationResult, simulate
+from .simulator import Simulator, SimulatorSnapshot
 
 __version__ = "0.2.0"
 
-__all__ = ["simulate", "SimulationResult", "available_archs", "StarParams", "SolverConfig",
+__all__ = ["simulate", "SimulationResult", "Simulator", "SimulatorSnapshot", "available_archs", "StarParams", "SolverConfig",
            "CurvatureProfile", "Gait", "symmetry_classes", "__version__"]

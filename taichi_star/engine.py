@@ -279,25 +279,32 @@ class BatchEngine:
 
     @ti.func
     def fire_schedule(self, b, step_number):
-        """Fire instance b's scheduled actuators when the step ending at step_number·dt reaches
-        a new cycle: exactly at that step when the period is a whole number of steps (so a
-        command at the same step gives the same bits), else at the exact time k·T inside it."""
+        """Fire instance b's due actuators for the step ending at step_number·dt (Eq. 5 is
+        right-continuous: a firing at t sets K̄(0) at t, so that step already sees it):
+        commanded firings scheduled for this step, and the periodic gait when the step reaches
+        a new cycle, exactly at that step when the period is a whole number of steps (so a
+        command for the same step gives the same bits), else at the exact time k·T inside it."""
         step_end = step_number * self.dt[None]
-        fire_at = -1.0
+        periodic_at = -1.0
         if self.state.schedule_cycle_steps[b] > 0:
             if step_number % self.state.schedule_cycle_steps[b] == 0:
-                fire_at = step_end
-        else:
+                periodic_at = step_end
+        elif self.state.schedule_period[b] > 0.0:
             period = self.state.schedule_period[b]
             cycle = ti.cast(ti.floor(step_end / period), ti.i32)
             if cycle > self.state.schedule_cycles[b]:
                 self.state.schedule_cycles[b] = cycle
-                fire_at = period * cycle
-        if fire_at >= 0.0:
-            for m in range(N_ACTUATORS):
-                if self.state.schedule_mask[b, m] != 0:
-                    self.state.previous_fire_time[b, m] = self.state.fire_time[b, m]
-                    self.state.fire_time[b, m] = fire_at
+                periodic_at = period * cycle
+        for m in range(N_ACTUATORS):
+            fire_at = -1.0
+            if self.state.schedule_mask[b, m] != 0:
+                fire_at = periodic_at
+            if self.state.scheduled_fire_step[b, m] == step_number:
+                fire_at = step_end
+                self.state.scheduled_fire_step[b, m] = -1
+            if fire_at >= 0.0:
+                self.state.previous_fire_time[b, m] = self.state.fire_time[b, m]
+                self.state.fire_time[b, m] = fire_at
 
     @ti.func
     def restore_backup(self, b):

@@ -74,8 +74,10 @@ def rest_topologies(params: Sequence[StarParams]):
             for p in params]
 
 
-def build_model(params: Sequence[StarParams]) -> BatchModel:
-    """The host model of a batch (see `validate_batch` for the errors it raises)."""
+def build_model(params: Sequence[StarParams], commanded: bool = False) -> BatchModel:
+    """The host model of a batch (see `validate_batch` for the errors it raises). With
+    `commanded`, the instances fire whatever they are commanded to (every actuator can fire),
+    not their gait."""
     params = validate_batch(params)
     topologies = rest_topologies(params)
     topology = topologies[0]
@@ -91,6 +93,8 @@ def build_model(params: Sequence[StarParams]) -> BatchModel:
         if added is not None:
             inertia = inertia + added
         coefficients[cls.name] = cls.coefficients(params, topologies, topology)
+        if commanded and "gait_mask" in coefficients[cls.name]:
+            coefficients[cls.name]["gait_mask"][:] = 1
         configuration = cls.configuration(coefficients[cls.name])
         if configuration is not None:
             used.append((cls, configuration))

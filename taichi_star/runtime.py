@@ -8,7 +8,8 @@ precision changes, and keeps one compiled engine per (topology, terms, integrato
 
 from __future__ import annotations
 
-from typing import Dict, List, Optional
+import weakref
+from typing import Dict, List, Optional, Tuple
 
 import taichi as ti
 
@@ -66,6 +67,7 @@ class Runtime:
         self.cpu_threads: Optional[int] = None
         self.log_level = ti.WARN
         self.engines: Dict[tuple, BatchEngine] = {}
+        self.leases: Dict[tuple, List[Tuple[BatchEngine, weakref.ref]]] = {}
 
     @classmethod
     def current(cls) -> "Runtime":
@@ -93,6 +95,7 @@ class Runtime:
                 fast_math=False, offline_cache=True, log_level=self.log_level, **threads)
         self.arch, self.precision = arch, precision
         self.engines.clear()
+        self.leases.clear()
 
     def loop_spread(self, capacity: int) -> int:
         """Iterations of the engine's parallel loop per instance: on the CPU enough to reach
@@ -101,16 +104,33 @@ class Runtime:
             return 1
         return max(1, -(-PARALLEL_LOOP_MINIMUM // capacity))
 
+    def new_engine(self, model: BatchModel, solver: SolverConfig) -> BatchEngine:
+        """A new engine (its own device state) for this batch. Taichi must be initialised
+        (`ensure`)."""
+        capacity = batch_capacity(model.batch_size)
+        return BatchEngine(model, capacity, INTEGRATORS[solver.integrator](),
+                           instances_per_block=1 if self.arch == "cpu" else 64,
+                           loop_spread=self.loop_spread(capacity))
+
+    def lease_engine(self, model: BatchModel, solver: SolverConfig, owner) -> BatchEngine:
+        """An engine of its own for `owner` (a Simulator) while the owner lives: one whose
+        previous owner is gone is reused (no recompilation), else a new one."""
+        key = (model.engine_key, solver.integrator, batch_capacity(model.batch_size))
+        leases = self.leases.setdefault(key, [])
+        for index, (engine, holder) in enumerate(leases):
+            if holder() is None:
+                leases[index] = (engine, weakref.ref(owner))
+                return engine
+        engine = self.new_engine(model, solver)
+        leases.append((engine, weakref.ref(owner)))
+        return engine
+
     def engine_for(self, model: BatchModel, solver: SolverConfig) -> BatchEngine:
         """The cached engine for this batch's topology, terms, integrator and capacity (created
-        on first use), loaded with the batch at rest. Taichi must be initialised (`ensure`)."""
-        capacity = batch_capacity(model.batch_size)
-        key = (model.engine_key, solver.integrator, capacity)
+        on first use), loaded with the batch at rest, its gaits firing every period."""
+        key = (model.engine_key, solver.integrator, batch_capacity(model.batch_size))
         if key not in self.engines:
-            self.engines[key] = BatchEngine(
-                model, capacity, INTEGRATORS[solver.integrator](),
-                instances_per_block=1 if self.arch == "cpu" else 64,
-                loop_spread=self.loop_spread(capacity))
+            self.engines[key] = self.new_engine(model, solver)
         engine = self.engines[key]
         engine.load(model, solver)
         return engine

@@ -52,6 +52,8 @@ class BatchState:
         """Time (s) each actuator last fired; NEVER when it has not."""
         self.previous_fire_time = ti.field(float, shape=(capacity, N_ACTUATORS))
         """The firing before that (it still applies to times before `fire_time`)."""
+        self.scheduled_fire_step = ti.field(ti.i32, shape=(capacity, N_ACTUATORS))
+        """Step number at whose end a commanded firing is due (-1: none)."""
         self.schedule_mask = ti.field(ti.i32, shape=(capacity, N_ACTUATORS))
         """Actuators the periodic schedule fires (a gait every period; none for commands)."""
         self.schedule_period = ti.field(float, shape=capacity)
@@ -80,6 +82,7 @@ class BatchState:
         self.status.from_numpy(status)
         self.failure_step.fill(-1)
         self.fire_time.fill(NEVER)
+        self.scheduled_fire_step.fill(-1)
         self.previous_fire_time.fill(NEVER)
 
     def save(self) -> Dict[str, np.ndarray]:

@@ -1,0 +1,302 @@
+"""`Simulator`: a batch of robots that stays in memory and is driven by commands.
+
+Where `simulate` runs every instance's gait from rest to the end, a Simulator holds the batch's
+state and advances it piecewise: `fire` actuators (per instance, any subset of the eight, now or
+at a later step), `advance` by a duration, read `state()` (position, heading, velocities, time
+since each actuator fired, status), `reset` instances, `save` and `load` the whole state. The
+StarParams' `gait` field is not used: an actuator fires only when commanded.
+
+Firing. An actuator fired at time t_f follows the actuation profile K̄(τ), τ = t − t_f: heating
+to its smallest curvature at τ = t0, then cooling. Firing an actuator that is still hot restarts
+its profile at τ = 0 (K̄ jumps back to K̄(0), as at every cycle start of a periodic gait). The
+profile is right-continuous: a firing scheduled for a future step sets K̄(0) at that step's end,
+exactly as `simulate` starts each cycle of a periodic gait, while `fire(commands)` now acts on
+the steps after now (the state at the current time has already been computed). With the
+"jump" closure an actuator that is not fired again stays at the fit's cooled curvature
+K̄(∞) ≈ 99.2 1/m (the fit does not return to K̄(0) = 102.1 1/m); with "ramp" it returns exactly
+to K̄(0) at τ = T (its `period`) and stays there.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import numbers
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Dict, Optional, Sequence, Union
+
+import numpy as np
+import pandas as pd
+
+from . import metrics
+from .gait import N_ACTUATORS, Gait
+from .geometry import CENTRE
+from .model import build_model, validate_batch
+from .params import SolverConfig, StarParams
+from .runtime import Runtime, check_arch
+from .state import NEVER, STATUS_NAMES, STATUS_OK
+
+STEPS_PER_LAUNCH = 50
+ACTUATOR_COLUMNS = tuple(f"since_A{m + 1}_s" for m in range(N_ACTUATORS))
+STATE_COLUMNS = ("instance", "t_s", "centroid_x_mm", "centroid_y_mm", "heading_deg",
+                 "velocity_x_mm_s", "velocity_y_mm_s", "angular_velocity_deg_s",
+                 *ACTUATOR_COLUMNS, "status")
+"""Columns of `Simulator.state()`."""
+
+
+@dataclass(frozen=True)
+class SimulatorSnapshot:
+    """The whole state of a Simulator's batch (from `Simulator.save`): every device field as a
+    NumPy array (padding included) and what the state belongs to."""
+
+    fields: Dict[str, np.ndarray]
+    engine_key: str
+    n_instances: int
+    dt: float
+
+    def write(self, path) -> Path:
+        """Save to an .npz file (arrays plus a JSON header)."""
+        path = Path(path)
+        header = json.dumps({"engine_key": self.engine_key, "n_instances": self.n_instances,
+                             "dt": self.dt})
+        np.savez(path, __header__=np.array(header), **self.fields)
+        return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
+
+    @classmethod
+    def read(cls, path) -> "SimulatorSnapshot":
+        with np.load(Path(path), allow_pickle=False) as archive:
+            header = json.loads(str(archive["__header__"]))
+            fields = {name: archive[name] for name in archive.files if name != "__header__"}
+        return cls(fields=fields, engine_key=header["engine_key"],
+                   n_instances=header["n_instances"], dt=header["dt"])
+
+
+class Simulator:
+    """A batch of robot instances driven by commands (see the module docstring).
+
+    params: a sequence of StarParams sharing n_arc and n_limb (their `gait` is ignored);
+    solver: the SolverConfig of the batch; arch: "cpu" or a GPU arch. The robots start at rest
+    in their rest shape at t = 0 with no actuator fired."""
+
+    def __init__(self, params: Sequence[StarParams], solver: SolverConfig = SolverConfig(),
+                 *, arch: str = "cpu"):
+        params = validate_batch(params)
+        if not isinstance(solver, SolverConfig):
+            raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
+        check_arch(arch)
+        self.params = params
+        self.solver = solver
+        self.model = build_model(params, commanded=True)
+        runtime = Runtime.current()
+        runtime.ensure(arch, solver.precision)
+        self.engine = runtime.lease_engine(self.model, solver, self)
+        self.engine.load(self.model, solver, periodic_gaits=False)
+        self._initial = self.engine.save_state()
+        self._start_centroids = self.engine.centroids_of(self.n_instances)
+        self._float = self.engine.state.fire_time.to_numpy().dtype.type
+
+    # ---------------------------------------------------------------- properties
+    @property
+    def n_instances(self) -> int:
+        return len(self.params)
+
+    @property
+    def engine_key(self) -> tuple:
+        return (self.model.engine_key, self.solver.integrator, self.engine.capacity)
+
+    def _steps(self) -> np.ndarray:
+        return self.engine.state.steps_done.to_numpy()[:self.n_instances].astype(np.int64)
+
+    @property
+    def time_s(self) -> np.ndarray:
+        """(B,) each instance's current time, s."""
+        return self._steps() * self.solver.dt
+
+    # ---------------------------------------------------------------- commands
+    def _command_mask(self, commands) -> np.ndarray:
+        """(B, 8) bool from a (B, 8) boolean (or 0/1 integer) array or a list of B gait texts."""
+        batch = self.n_instances
+        if isinstance(commands, (list, tuple)) and all(isinstance(c, (str, Gait)) for c in commands):
+            if len(commands) != batch:
+                raise ValueError(f"commands must hold one gait per instance ({batch}), got "
+                                 f"{len(commands)}")
+            return np.stack([Gait.parse(c).mask.astype(bool) for c in commands])
+        array = np.asarray(commands)
+        if array.shape != (batch, N_ACTUATORS):
+            raise ValueError(f"commands must be a ({batch}, {N_ACTUATORS}) boolean array or a list "
+                             f"of {batch} gaits, got shape {array.shape}")
+        if array.dtype == bool:
+            return array
+        if array.dtype.kind in "iu" and np.isin(array, (0, 1)).all():
+            return array.astype(bool)
+        raise ValueError(f"commands must be boolean (or 0/1 integers), got dtype {array.dtype}")
+
+    def fire(self, commands, at_s: Optional[float] = None):
+        """Fire actuators: `commands` is a (B, 8) boolean array (column m = actuator A(m+1)) or
+        a list of B gait texts ("A1+A3", "none"). With at_s None they fire now (each instance
+        at its own current time) and act on the steps after now; with at_s (s, not before an
+        instance's current time, a whole number of steps ahead) they fire at that time, so the
+        step ending then already sees K̄(0). Failed instances ignore commands. Raises ValueError
+        (state unchanged) for a bad shape, dtype, gait or time."""
+        mask = self._command_mask(commands)
+        state = self.engine.state
+        steps = self._steps()
+        rows = np.flatnonzero(mask.any(axis=1))
+        if at_s is None:
+            fire_time = state.fire_time.to_numpy()
+            previous = state.previous_fire_time.to_numpy()
+            # the kernel's own product (f64 or f32): a firing now equals one scheduled for now
+            now = steps.astype(self._float) * self._float(self.solver.dt)
+            for b in rows:
+                previous[b, mask[b]] = fire_time[b, mask[b]]
+                fire_time[b, mask[b]] = now[b]
+            state.previous_fire_time.from_numpy(previous)
+            state.fire_time.from_numpy(fire_time)
+            return
+        if isinstance(at_s, bool) or not isinstance(at_s, numbers.Real) or not math.isfinite(at_s):
+            raise ValueError(f"at_s must be a finite time in s, got {at_s!r}")
+        step = int(round(at_s / self.solver.dt))
+        if abs(step * self.solver.dt - at_s) > 1e-9 * max(1.0, abs(at_s)):
+            raise ValueError(f"at_s must be a whole number of steps (dt = {self.solver.dt} s), "
+                             f"got {at_s!r}")
+        late = rows[steps[rows] >= step]
+        if len(late):
+            raise ValueError(f"at_s = {at_s!r} s is not after the current time of instance "
+                             f"{int(late[0])} ({steps[late[0]] * self.solver.dt:.6g} s); fire "
+                             f"without at_s to fire now")
+        scheduled = state.scheduled_fire_step.to_numpy()
+        for b in rows:
+            scheduled[b, mask[b]] = step
+        state.scheduled_fire_step.from_numpy(scheduled)
+
+    def advance(self, duration_s: float, record_interval_s: float = 0.0,
+                progress: bool = False) -> pd.DataFrame:
+        """Advance every live instance by duration_s (rounded to whole steps). Returns the
+        `state()` rows at every multiple of record_interval_s after now (s, a whole number of
+        steps; 0 = none), with a `record` column; empty without records."""
+        if isinstance(duration_s, bool) or not isinstance(duration_s, numbers.Real) \
+                or not math.isfinite(duration_s) or duration_s <= 0:
+            raise ValueError(f"duration_s must be a finite number > 0 s, got {duration_s!r}")
+        n_steps = int(round(duration_s / self.solver.dt))
+        if n_steps < 1:
+            raise ValueError(f"duration_s must be at least one step (dt = {self.solver.dt} s), "
+                             f"got {duration_s!r}")
+        stride = 0
+        if record_interval_s:
+            if isinstance(record_interval_s, bool) or not isinstance(record_interval_s, numbers.Real) \
+                    or not record_interval_s > 0:
+                raise ValueError(f"record_interval_s must be a number > 0 s (or 0: no records), "
+                                 f"got {record_interval_s!r}")
+            stride = int(round(record_interval_s / self.solver.dt))
+            if stride < 1 or abs(stride * self.solver.dt - record_interval_s) > 1e-9 * record_interval_s:
+                raise ValueError(f"record_interval_s must be a whole number of steps (dt = "
+                                 f"{self.solver.dt} s), got {record_interval_s!r}")
+        bar = None
+        if progress:
+            from tqdm.auto import tqdm
+            bar = tqdm(total=n_steps, unit="step", desc=f"{self.n_instances} robots")
+        records = []
+        done = 0
+        while done < n_steps:
+            target = n_steps if not stride else min(n_steps, (done // stride + 1) * stride)
+            while done < target:
+                count = min(STEPS_PER_LAUNCH, target - done)
+                self.engine.advance(count)
+                done += count
+                if bar is not None:
+                    bar.update(count)
+            if stride and done % stride == 0:
+                records.append(self.state().assign(record=done // stride))
+        if bar is not None:
+            bar.close()
+        return pd.concat(records, ignore_index=True) if records else pd.DataFrame(
+            columns=[*STATE_COLUMNS, "record"])
+
+    def reset(self, instances: Optional[Sequence[int]] = None):
+        """Put instances (all by default) back at rest in their rest shape at t = 0, nothing
+        fired, status ok; the others are untouched."""
+        rows = np.arange(self.n_instances) if instances is None else np.asarray(instances)
+        if rows.ndim != 1 or rows.dtype.kind not in "iu" or (
+                len(rows) and (rows.min() < 0 or rows.max() >= self.n_instances)):
+            raise ValueError(f"instances must be integers in [0, {self.n_instances}), got "
+                             f"{instances!r}")
+        fields = self.engine.save_state()
+        for name, values in fields.items():
+            values[rows] = self._initial[name][rows]
+        self.engine.restore_state(fields)
+
+    # ---------------------------------------------------------------- observations
+    def shapes(self) -> np.ndarray:
+        """(B, N, 2) node positions now, m."""
+        return self.engine.state.positions.to_numpy()[:self.n_instances].astype(np.float64)
+
+    def state(self) -> pd.DataFrame:
+        """One row per instance now (columns `STATE_COLUMNS`): t_s; the centroid relative to
+        its start (mm, the frame of `simulate`'s displacement); heading_deg (body rotation,
+        counter-clockwise); the centroid's velocity (mm/s) and the body's angular velocity
+        (deg/s); since_A1_s..since_A8_s, the time since each actuator last fired (NaN: never);
+        status."""
+        batch = self.n_instances
+        state = self.engine.state
+        positions = self.shapes()
+        velocities = state.velocities.to_numpy()[:batch].astype(np.float64)
+        mass = self.model.mass
+        centroid = self.engine.centroids_of(batch)
+        velocity = metrics.centroid(velocities, mass)
+        joints = self.model.topology.joints
+        arm = positions[:, joints] - positions[:, CENTRE:CENTRE + 1]
+        arm_velocity = velocities[:, joints] - velocities[:, CENTRE:CENTRE + 1]
+        spin = (arm[..., 0] * arm_velocity[..., 1] - arm[..., 1] * arm_velocity[..., 0]) \
+            / (arm ** 2).sum(-1)
+        times = self.time_s
+        fired = state.fire_time.to_numpy()[:batch].astype(np.float64)
+        since = np.where(fired == NEVER, np.nan, times[:, None] - fired)
+        frame = pd.DataFrame({
+            "instance": np.arange(batch), "t_s": times,
+            "centroid_x_mm": (centroid[:, 0] - self._start_centroids[:, 0]) * metrics.METERS_TO_MM,
+            "centroid_y_mm": (centroid[:, 1] - self._start_centroids[:, 1]) * metrics.METERS_TO_MM,
+            "heading_deg": np.degrees(metrics.body_rotation(positions, self.model.rest_positions,
+                                                            joints, CENTRE)),
+            "velocity_x_mm_s": velocity[:, 0] * metrics.METERS_TO_MM,
+            "velocity_y_mm_s": velocity[:, 1] * metrics.METERS_TO_MM,
+            "angular_velocity_deg_s": np.degrees(spin.mean(axis=1)),
+        })
+        for m, column in enumerate(ACTUATOR_COLUMNS):
+            frame[column] = since[:, m]
+        frame["status"] = [STATUS_NAMES[s] for s in state.status.to_numpy()[:batch]]
+        return frame
+
+    @property
+    def ok(self) -> np.ndarray:
+        """(B,) bool: instances still running."""
+        return self.engine.state.status.to_numpy()[:self.n_instances] == STATUS_OK
+
+    # ---------------------------------------------------------------- save / load
+    def save(self, path=None) -> Union[SimulatorSnapshot, Path]:
+        """The whole batch state as a SimulatorSnapshot; with `path`, written to an .npz file
+        (returns its path)."""
+        snapshot = SimulatorSnapshot(fields=self.engine.save_state(), engine_key=repr(self.engine_key),
+                                     n_instances=self.n_instances, dt=self.solver.dt)
+        return snapshot.write(path) if path is not None else snapshot
+
+    def load(self, snapshot: Union[SimulatorSnapshot, str, Path]):
+        """Continue from a saved state (bitwise). Raises ValueError, state unchanged, for a
+        state of another topology, term set, integrator, batch size or step."""
+        if not isinstance(snapshot, SimulatorSnapshot):
+            snapshot = SimulatorSnapshot.read(snapshot)
+        if snapshot.engine_key != repr(self.engine_key):
+            raise ValueError(f"the saved state belongs to another engine (topology, terms, "
+                             f"integrator or capacity): {snapshot.engine_key} vs "
+                             f"{self.engine_key!r}")
+        if snapshot.n_instances != self.n_instances or snapshot.dt != self.solver.dt:
+            raise ValueError(f"the saved state has {snapshot.n_instances} instances at dt = "
+                             f"{snapshot.dt} s; this simulator {self.n_instances} at "
+                             f"{self.solver.dt} s")
+        self.engine.restore_state(snapshot.fields)
+
+    def __repr__(self) -> str:
+        times = self.time_s
+        return (f"Simulator({self.n_instances} instances, t = {times.min():.4g}"
+                f"{'' if times.min() == times.max() else f'..{times.max():.4g}'} s, "
+                f"{int(self.ok.sum())} running)")
