@@ -57,6 +57,9 @@ class BatchEngine:
         self.max_newton = ti.field(ti.i32, shape=())
         self.max_substep_halvings = ti.field(ti.i32, shape=())
         self.chord = ti.field(ti.i32, shape=())
+        self.error_tol = ti.field(float, shape=())
+        self.dt_min = ti.field(float, shape=())
+        self.dt_max = ti.field(float, shape=())
         self.terms = []
         for cls, configuration in model.terms_used:
             coefficients = model.coefficients[cls.name]
@@ -111,6 +114,10 @@ class BatchEngine:
         self.max_newton[None] = solver.max_newton
         self.max_substep_halvings[None] = solver.max_substep_halvings
         self.chord[None] = int(solver.jacobian == "chord")
+        self.error_tol[None] = solver.error_tol
+        self.dt_min[None] = solver.dt_min
+        self.dt_max[None] = solver.dt_max
+        self.state.step_size.fill(solver.dt)
 
     # ---------------------------------------------------------------- assembly
     @ti.func
@@ -176,31 +183,31 @@ class BatchEngine:
 
     # ---------------------------------------------------------------- time stepping
     @ti.func
-    def prepare_step(self, b, start_time, end_time, h, use_history):
+    def prepare_step(self, b, start_time, end_time, h, ratio, use_history):
         """Start a step of size h from the current state q_k, v_k: the terms' histories, the
         integrator's offsets, `previous` = q_k, and the predictor q_k + h·v_k. Returns the
         integrator's (inertia scale, rate gain)."""
-        inertia_scale, rate_gain = self.integrator.weights(h, use_history)
+        inertia_scale, rate_gain = self.integrator.weights(h, ratio, use_history)
         for term in ti.static(self.terms):
-            term.begin_step(b, start_time, end_time, h, rate_gain, use_history)
+            term.begin_step(b, start_time, end_time, h, ratio, rate_gain, use_history)
         for n in range(self.n_nodes):
             position = self.state.positions[b, n]
             velocity = self.state.velocities[b, n]
             self.state.inertia_offset[b, n] = self.integrator.inertia_offset(
-                position, self.state.previous[b, n], velocity, self.state.previous_velocities[b, n], h,
-                use_history)
-            self.state.velocity_offset[b, n] = self.integrator.rate_offset(position, self.state.previous[b, n], h,
-                                                                 use_history)
+                position, self.state.previous[b, n], velocity, self.state.previous_velocities[b, n],
+                h, ratio, use_history)
+            self.state.velocity_offset[b, n] = self.integrator.rate_offset(
+                position, self.state.previous[b, n], h, ratio, use_history)
             self.state.previous[b, n] = position
             self.state.previous_velocities[b, n] = velocity
             self.state.positions[b, n] = position + h * velocity
         return inertia_scale, rate_gain
 
     @ti.func
-    def solve_step(self, b, start_time, end_time, h, use_history):
+    def solve_step(self, b, start_time, end_time, h, ratio, use_history):
         """One implicit step of size h for instance b from start_time to end_time. Returns
         (converged, finite); on failure the positions are restored to the start of the step."""
-        inertia_scale, rate_gain = self.prepare_step(b, start_time, end_time, h, use_history)
+        inertia_scale, rate_gain = self.prepare_step(b, start_time, end_time, h, ratio, use_history)
         iterations = 0
         converged = 0
         finite = 1
@@ -262,7 +269,7 @@ class BatchEngine:
             substep = 0
             while converged == 1 and substep < substeps:
                 first = (step_number - 1) * substeps + substep
-                converged, finite = self.solve_step(b, first * h, (first + 1) * h, h, use_history)
+                converged, finite = self.solve_step(b, first * h, (first + 1) * h, h, 1.0, use_history)
                 substep += 1
             if converged == 0:
                 halvings += 1
@@ -271,11 +278,13 @@ class BatchEngine:
             self.state.substep_retries[b] = self.state.substep_retries[b] + 1
         if converged == 1:
             self.state.steps_done[b] = step_number
+            self.state.time[b] = step_number * dt
         else:
             if halvings > 1:
                 self.restore_backup(b)
             self.state.status[b] = STATUS_NON_FINITE if finite == 0 else STATUS_NEWTON_FAILED
             self.state.failure_step[b] = step_number
+            self.state.failure_time[b] = step_number * dt
 
     @ti.func
     def fire_schedule(self, b, step_number):
@@ -305,6 +314,95 @@ class BatchEngine:
             if fire_at >= 0.0:
                 self.state.previous_fire_time[b, m] = self.state.fire_time[b, m]
                 self.state.fire_time[b, m] = fire_at
+
+    @ti.func
+    def fire_at(self, b, m, time):
+        """Actuator m of instance b fires at `time` (s) unless it already fired then."""
+        if self.state.fire_time[b, m] != time:
+            self.state.previous_fire_time[b, m] = self.state.fire_time[b, m]
+            self.state.fire_time[b, m] = time
+
+    @ti.func
+    def adaptive_instance(self, b, stop_time, max_steps):
+        """Advance instance b towards stop_time (s) by steps of its own size, at most max_steps
+        attempts. Each step ends exactly on stop_time or on the next cycle start of its periodic
+        gait if it would pass it (then the gait fires there: the step ending at k·T sees K̄(0));
+        a converged step is accepted when its local error estimate ½·max|q − q_k − h·v_k| (m,
+        implicit Euler's leading term, an upper bound for BDF2's) is within error_tol, else
+        redone from the start state with the step shrunk; the next step grows or shrinks by
+        0.9·√(tol/error) within [0.2, 2] and [dt_min, dt_max]. A step that fails to converge is
+        retried at a quarter of its size down to dt_min, then the instance fails."""
+        attempts = 0
+        tol = self.error_tol[None]
+        dt_min, dt_max = self.dt_min[None], self.dt_max[None]
+        while self.state.status[b] == STATUS_OK and self.state.time[b] < stop_time and attempts < max_steps:
+            attempts += 1
+            start = self.state.time[b]
+            proposed = ti.min(self.state.step_size[b], dt_max)
+            end = start + proposed
+            remaining = stop_time - start
+            if end >= stop_time or remaining < 1.25 * proposed:
+                end = stop_time
+            cycle_start = -1.0
+            if self.state.schedule_period[b] > 0.0:
+                boundary = self.state.schedule_period[b] * (self.state.schedule_cycles[b] + 1)
+                if end >= boundary or boundary - start < 1.25 * proposed:
+                    end = ti.min(end, boundary)
+                    if end == boundary:
+                        cycle_start = boundary
+            h = end - start
+            if cycle_start >= 0.0:
+                for m in range(N_ACTUATORS):
+                    if self.state.schedule_mask[b, m] != 0:
+                        self.fire_at(b, m, cycle_start)
+            use_history = self.state.history_valid[b]
+            ratio = 1.0
+            if use_history == 1:
+                ratio = h / self.state.previous_step_size[b]
+            converged, finite = self.solve_step(b, start, end, h, ratio, use_history)
+            error = 0.0
+            if converged == 1:
+                for n in range(self.n_nodes):
+                    drift = self.state.positions[b, n] - self.state.previous[b, n] \
+                        - h * self.state.previous_velocities[b, n]
+                    error = ti.max(error, 0.5 * ti.abs(drift[0]), 0.5 * ti.abs(drift[1]))
+            if converged == 1 and (error <= tol or h <= dt_min):
+                self.state.time[b] = end
+                self.state.steps_done[b] = self.state.steps_done[b] + 1
+                self.state.previous_step_size[b] = h
+                self.state.history_valid[b] = 1
+                if cycle_start >= 0.0:
+                    self.state.schedule_cycles[b] = self.state.schedule_cycles[b] + 1
+                growth = 2.0
+                if error > 0.0:
+                    growth = ti.min(2.0, ti.max(0.2, 0.9 * ti.sqrt(tol / error)))
+                # a step cut short to land on a stop says little about the size that fits
+                basis = h
+                if h < proposed and growth >= 1.0:
+                    basis = proposed
+                self.state.step_size[b] = ti.min(dt_max, ti.max(dt_min, basis * growth))
+            else:
+                self.state.rejected_steps[b] = self.state.rejected_steps[b] + 1
+                self.state.history_valid[b] = 0
+                if converged == 1:
+                    for n in range(self.n_nodes):
+                        self.state.positions[b, n] = self.state.previous[b, n]
+                        self.state.velocities[b, n] = self.state.previous_velocities[b, n]
+                    self.state.step_size[b] = ti.max(dt_min, h * ti.max(0.2, 0.9 * ti.sqrt(tol / error)))
+                elif h > dt_min:
+                    self.state.step_size[b] = ti.max(dt_min, 0.25 * h)
+                else:
+                    self.state.status[b] = STATUS_NON_FINITE if finite == 0 else STATUS_NEWTON_FAILED
+                    self.state.failure_time[b] = end
+
+    @ti.kernel
+    def advance_adaptive(self, stop_time: float, max_steps: ti.i32):
+        """Adaptive stepping: advance every live instance towards stop_time (s), at most
+        max_steps step attempts each in this launch (the host calls again until all are there)."""
+        ti.loop_config(block_dim=self.instances_per_block)
+        for slot in range(self.capacity * self.loop_spread):
+            if slot % self.loop_spread == 0:
+                self.adaptive_instance(slot // self.loop_spread, stop_time, max_steps)
 
     @ti.func
     def restore_backup(self, b):
@@ -359,9 +457,9 @@ class BatchEngine:
         for b in range(self.capacity):
             if self.state.status[b] == STATUS_OK:
                 h = self.dt[None]
-                inertia_scale, rate_gain = self.integrator.weights(h, 0)
+                inertia_scale, rate_gain = self.integrator.weights(h, 1.0, 0)
                 for term in ti.static(self.terms):
-                    term.begin_step(b, time_s - h, time_s, h, rate_gain, 0)
+                    term.begin_step(b, time_s - h, time_s, h, 1.0, rate_gain, 0)
                 for _ in range(calls):
                     self.assemble(b, inertia_scale, rate_gain, 1)
                     if phases >= 2:

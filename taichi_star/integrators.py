@@ -8,7 +8,9 @@ integrator's gain and offset. Nothing outside this module knows the formulas.
 - `ImplicitEuler` (the paper's Eq. 4): scale 1/h², d = h·v_k, gain 1/h, rate offset 0.
 - `BDF2`: scale 9/(4h²), d = (q_k − q_{k−1})/3 + (2h/9)(4v_k − v_{k−1}), gain 3/(2h), rate offset
   −(value_k − value_{k−1})/(2h); without a valid history (the first step, after a retry) it is
-  implicit Euler.
+  implicit Euler. With a step ratio ω = h/h_prev ≠ 1 (adaptive steps) it is the variable-step
+  BDF2: gain γ = (1 + 2ω)/((1 + ω)h), rate offset −c·(value_k − value_{k−1}) with
+  c = ω²/((1 + ω)h), scale γ² and d = (v_k + c(q_k − q_{k−1}))/γ + c(v_k − v_{k−1})/γ².
 Small offsets rather than absolute targets keep the digits of the motion in f32.
 """
 
@@ -21,18 +23,19 @@ class ImplicitEuler:
     order = 1
 
     @ti.func
-    def weights(self, h, use_history):
-        """(inertia scale 1/s², rate gain 1/s) of a step of size h (s)."""
+    def weights(self, h, ratio, use_history):
+        """(inertia scale 1/s², rate gain 1/s) of a step of size h (s), ratio = h / (the
+        previous step's size)."""
         return 1.0 / (h * h), 1.0 / h
 
     @ti.func
-    def rate_offset(self, value, previous, h, use_history):
+    def rate_offset(self, value, previous, h, ratio, use_history):
         """Offset of the discrete rate of a quantity whose value at the step's start is `value`
         and one step earlier `previous` (scalar or vector)."""
         return value * 0.0
 
     @ti.func
-    def inertia_offset(self, position, previous, velocity, previous_velocity, h, use_history):
+    def inertia_offset(self, position, previous, velocity, previous_velocity, h, ratio, use_history):
         """d of the inertia term, m, from q_k, q_{k−1}, v_k, v_{k−1}."""
         return h * velocity
 
@@ -42,25 +45,41 @@ class BDF2:
     name = "bdf2"
     order = 2
 
+    # the constant-step formulas are kept apart from the variable-step ones (ω = 1 gives the same
+    # values, not the same rounding): fixed-step results stay bitwise reproducible
+
     @ti.func
-    def weights(self, h, use_history):
+    def weights(self, h, ratio, use_history):
         scale, gain = 1.0 / (h * h), 1.0 / h
         if use_history:
-            scale, gain = 9.0 / (4.0 * h * h), 1.5 / h
+            if ratio == 1.0:
+                scale, gain = 9.0 / (4.0 * h * h), 1.5 / h
+            else:
+                gain = (1.0 + 2.0 * ratio) / ((1.0 + ratio) * h)
+                scale = gain * gain
         return scale, gain
 
     @ti.func
-    def rate_offset(self, value, previous, h, use_history):
+    def rate_offset(self, value, previous, h, ratio, use_history):
         offset = value * 0.0
         if use_history:
-            offset = -(value - previous) / (2.0 * h)
+            if ratio == 1.0:
+                offset = -(value - previous) / (2.0 * h)
+            else:
+                offset = -(ratio * ratio / ((1.0 + ratio) * h)) * (value - previous)
         return offset
 
     @ti.func
-    def inertia_offset(self, position, previous, velocity, previous_velocity, h, use_history):
+    def inertia_offset(self, position, previous, velocity, previous_velocity, h, ratio, use_history):
         offset = h * velocity
         if use_history:
-            offset = (position - previous) / 3.0 + (2.0 * h / 9.0) * (4.0 * velocity - previous_velocity)
+            if ratio == 1.0:
+                offset = (position - previous) / 3.0 + (2.0 * h / 9.0) * (4.0 * velocity - previous_velocity)
+            else:
+                gain = (1.0 + 2.0 * ratio) / ((1.0 + ratio) * h)
+                c = ratio * ratio / ((1.0 + ratio) * h)
+                offset = (velocity + c * (position - previous)) / gain \
+                    + c * (velocity - previous_velocity) / (gain * gain)
         return offset
 
 

@@ -18,6 +18,8 @@ import numbers
 from dataclasses import dataclass, field, fields
 from typing import Dict, Tuple
 
+import numpy as np
+
 from .actuation import PROFILE_CLOSURES, CurvatureProfile
 from .gait import Gait
 
@@ -247,7 +249,16 @@ class SolverConfig:
     newton_tol, fewer factorisations)."""
     max_substep_halvings: int = 4
     """A failed step is retried as 2, 4, ... 2^max_substep_halvings substeps before the instance
-    is declared failed; 0 disables retries; [0, 10]."""
+    is declared failed; 0 disables retries; [0, 10]. (Fixed steps only.)"""
+    adaptive: bool = False
+    """Adaptive stepping: each instance chooses its own step size from a local error estimate
+    (dt is then the first step's size); steps land exactly on record times and cycle starts."""
+    error_tol: float = 1e-7
+    """Adaptive stepping: largest local error per step of any node position, m; [1e-12, 1e-3]."""
+    dt_min: float = 1e-6
+    """Adaptive stepping: smallest step, s; (0, dt]."""
+    dt_max: float = 0.05
+    """Adaptive stepping: largest step, s; [dt, 0.05]."""
 
     def __post_init__(self):
         object.__setattr__(self, "dt", _check_number("dt", self.dt, 0.0, MAX_DT, False))
@@ -257,6 +268,17 @@ class SolverConfig:
                                                              200, integer=True))
         object.__setattr__(self, "max_substep_halvings", _check_number(
             "max_substep_halvings", self.max_substep_halvings, 0, 10, integer=True))
+        if not isinstance(self.adaptive, (bool, np.bool_)):
+            raise ValueError(f"adaptive must be True or False, got {self.adaptive!r}")
+        object.__setattr__(self, "adaptive", bool(self.adaptive))
+        object.__setattr__(self, "error_tol", _check_number("error_tol", self.error_tol, 1e-12, 1e-3))
+        object.__setattr__(self, "dt_min", _check_number("dt_min", self.dt_min, 0.0, MAX_DT, False))
+        object.__setattr__(self, "dt_max", _check_number("dt_max", self.dt_max, 0.0, MAX_DT, False))
+        if self.dt_min > self.dt_max:
+            raise ValueError(f"dt_min must be <= dt_max = {self.dt_max:g} s, got {self.dt_min!r}")
+        if self.adaptive and not self.dt_min <= self.dt <= self.dt_max:
+            raise ValueError(f"dt (the first adaptive step) must be in [dt_min, dt_max] = "
+                             f"[{self.dt_min:g}, {self.dt_max:g}] s, got {self.dt!r}")
         _check_choice("precision", self.precision, PRECISIONS)
         _check_choice("integrator", self.integrator, INTEGRATORS)
         _check_choice("jacobian", self.jacobian, JACOBIANS)

@@ -41,7 +41,7 @@ class SimulationResult:
         the displacement from +x); heading_deg (body rotation at the end, counter-clockwise);
         steady_speed_mm_s and steady_signed_speed_mm_s (over cycles [steady_from_cycle, last
         full cycle), NaN where the run has fewer cycles or the cycle boundaries are not whole
-        steps); newton_iterations_mean / newton_iterations_max (per step, over accepted and
+        steps); steps (accepted) and rejected_steps (adaptive stepping); newton_iterations_mean / newton_iterations_max (per step, over accepted and
         failed attempts), substep_retries (steps redone with substeps), status ("ok",
         "newton_failed", "non_finite") and failure_time_s (NaN when ok). Metrics of failed
         instances are NaN.
@@ -73,75 +73,123 @@ def _check_real(name, value, lowest, allow_equal=False):
 
 
 def validate_call(params, duration_s, solver, record_interval_s, record_shapes, steady_from_cycle):
-    """Check simulate's arguments before any compute; returns (params tuple, n_steps,
-    record stride in steps or 0)."""
+    """Check simulate's arguments before any compute; returns (params tuple, duration in s,
+    record interval in s or 0). With fixed steps the duration is rounded to whole steps and the
+    record interval must be a whole number of steps."""
     params = validate_batch(params)
     duration_s = _check_real("duration_s", duration_s, 0.0)
     if not isinstance(solver, SolverConfig):
         raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
-    n_steps = int(round(duration_s / solver.dt))
-    if n_steps < 1:
-        raise ValueError(f"duration_s must be at least one step (dt = {solver.dt} s), got {duration_s!r}")
     record_interval_s = _check_real("record_interval_s", record_interval_s, 0.0, allow_equal=True)
-    stride = 0
-    if record_interval_s > 0:
-        stride = whole_steps(record_interval_s, solver.dt)
-        if stride is None or stride < 1:
+    if not solver.adaptive:
+        n_steps = int(round(duration_s / solver.dt))
+        if n_steps < 1:
+            raise ValueError(f"duration_s must be at least one step (dt = {solver.dt} s), got "
+                             f"{duration_s!r}")
+        if record_interval_s > 0 and whole_steps(record_interval_s, solver.dt) in (None, 0):
             raise ValueError(f"record_interval_s must be a whole number of steps (dt = "
                              f"{solver.dt} s), got {record_interval_s!r}")
-    if record_shapes and stride == 0:
+    if record_shapes and record_interval_s == 0:
         raise ValueError("record_shapes needs record_interval_s > 0 (the spacing of the records)")
     if isinstance(steady_from_cycle, bool) or not isinstance(steady_from_cycle, numbers.Integral) \
             or steady_from_cycle < 0:
         raise ValueError(f"steady_from_cycle must be an integer >= 0, got {steady_from_cycle!r}")
-    return params, n_steps, stride
+    return params, duration_s, record_interval_s
+
+
+ADAPTIVE_ATTEMPTS_PER_LAUNCH = 200
+"""Step attempts per instance per kernel launch in adaptive mode (a live progress bar)."""
+
+
+class _Clock:
+    """Where the run stops and how it gets there: with fixed steps a stop is a step number
+    (time = step·dt, the engine's own product); with adaptive steps it is a time."""
+
+    def __init__(self, engine, solver, duration_s):
+        self.engine, self.solver = engine, solver
+        self.adaptive = solver.adaptive
+        self.end = duration_s if self.adaptive else int(round(duration_s / solver.dt))
+
+    def stops_every(self, interval_s):
+        """Stops at 0, interval, 2·interval, ... up to the end."""
+        if self.adaptive:
+            count = int(math.floor(self.end / interval_s * (1 + STEP_TOLERANCE)))
+            return [k * interval_s for k in range(count + 1)]
+        return list(range(0, self.end + 1, whole_steps(interval_s, self.solver.dt)))
+
+    def time_of(self, stop) -> float:
+        return stop if self.adaptive else stop * self.solver.dt
+
+    def advance_to(self, start, stop, batch, bar):
+        """Advance every live instance from stop `start` to stop `stop`."""
+        if self.adaptive:
+            state = self.engine.state
+            while True:
+                times = state.time.to_numpy()[:batch]
+                live = state.status.to_numpy()[:batch] == STATUS_OK
+                if not (live & (times < stop)).any():
+                    break
+                self.engine.advance_adaptive(stop, ADAPTIVE_ATTEMPTS_PER_LAUNCH)
+            if bar is not None:
+                bar.update(stop - start)
+            return
+        step = start
+        while step < stop:
+            count = min(STEPS_PER_LAUNCH, stop - step)
+            self.engine.advance(count)
+            step += count
+            if bar is not None:
+                bar.update(count * self.solver.dt)
 
 
 def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConfig = SolverConfig(),
              *, arch: str = "cpu", record_interval_s: float = 0.0, record_shapes: bool = False,
              steady_from_cycle: int = 1, progress: bool = False) -> SimulationResult:
     """Simulate a batch of robot instances from rest in their rest shape for duration_s seconds
-    (rounded to whole steps of solver.dt) and return a `SimulationResult` (see there for every
-    column, with units).
+    and return a `SimulationResult` (see there for every column, with units).
 
-    Every instance may have its own parameters except the topology (n_arc, n_limb). An
-    instance whose Newton solve fails even with substeps is frozen and reported (status,
-    failure_time_s); the others are unaffected. record_interval_s (s, a whole number of steps;
-    0 = none) sets the trajectory's spacing, record_shapes adds the node positions then. The
-    centroid is also taken at every cycle boundary that falls on a step, for the steady
-    (cycle-window) speeds from cycle `steady_from_cycle` on. Raises ValueError for any bad
-    argument before computing anything."""
-    params, n_steps, stride = validate_call(params, duration_s, solver, record_interval_s,
-                                            record_shapes, steady_from_cycle)
+    Every instance may have its own parameters except the topology (n_arc, n_limb), and fires
+    its gait at t = 0 and at the start of every period. An instance whose Newton solve fails
+    (even with substeps, or at the smallest adaptive step) is frozen and reported (status,
+    failure_time_s); the others are unaffected. With fixed steps (the default) the duration is
+    rounded to whole steps of solver.dt and record_interval_s (s; 0 = no records) must be a whole
+    number of steps; with `solver.adaptive` every instance chooses its own steps, which land
+    exactly on the records, the cycle starts and the end. record_shapes adds the node positions
+    at the records. The centroid is also taken at every cycle start (with fixed steps: those
+    that fall on a step) for the steady speeds from cycle `steady_from_cycle` on. Raises
+    ValueError for any bad argument before computing anything."""
+    params, duration_s, record_interval_s = validate_call(params, duration_s, solver,
+                                                          record_interval_s, record_shapes,
+                                                          steady_from_cycle)
     check_arch(arch)
     model = build_model(params)
     runtime = Runtime.current()
     runtime.ensure(arch, solver.precision)
     engine = runtime.engine_for(model, solver)
     batch = model.batch_size
+    clock = _Clock(engine, solver, duration_s)
 
-    record_steps = set(range(0, n_steps + 1, stride)) if stride else set()
-    boundary_steps = []
-    for p in params:
-        per_cycle = whole_steps(p.period, solver.dt)
-        boundary_steps.append([] if per_cycle is None else
-                              list(range(0, n_steps + 1, per_cycle)))
-    n_boundaries = max(len(steps) for steps in boundary_steps)
-    boundaries = np.full((batch, max(n_boundaries, 1), 2), np.nan)
-    by_step = {}
-    for b, steps in enumerate(boundary_steps):
-        for index, step in enumerate(steps):
-            by_step.setdefault(step, []).append((b, index))
-    stops = sorted(record_steps | set(by_step) | {n_steps})
+    record_stops = clock.stops_every(record_interval_s) if record_interval_s else []
+    by_stop = {}
+    n_boundaries = 1
+    for b, p in enumerate(params):
+        if clock.adaptive or whole_steps(p.period, solver.dt) is not None:
+            boundary_stops = clock.stops_every(p.period)
+            n_boundaries = max(n_boundaries, len(boundary_stops))
+            for index, stop in enumerate(boundary_stops):
+                by_stop.setdefault(stop, []).append((b, index))
+    boundaries = np.full((batch, n_boundaries, 2), np.nan)
+    stops = sorted(set(record_stops) | set(by_stop) | {clock.end})
+    record_set = set(record_stops)
 
-    centroids, shapes = [], []
+    centroids, rotations, shapes = [], [], []
     state = engine.state
 
-    def take(step):
+    def take(stop):
         now = engine.centroids_of(batch)
-        for b, index in by_step.get(step, ()):
+        for b, index in by_stop.get(stop, ()):
             boundaries[b, index] = now[b]
-        if step in record_steps:
+        if stop in record_set:
             positions = state.positions.to_numpy()[:batch]
             centroids.append(now)
             rotations.append(metrics.body_rotation(positions, model.rest_positions,
@@ -149,41 +197,36 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
             if record_shapes:
                 shapes.append(positions.astype(np.float64))
 
-    rotations = []
     bar = None
     if progress:
         from tqdm.auto import tqdm
-        bar = tqdm(total=n_steps, unit="step", desc=f"{batch} robots")
-    start = engine.centroids_of(batch)
-    take(0)
-    step = 0
+        bar = tqdm(total=clock.time_of(clock.end), unit="s", desc=f"{batch} robots")
+    start_centroids = engine.centroids_of(batch)
+    previous = stops[0] * 0
+    take(previous)
     for stop in stops:
-        while step < stop:
-            # a launch never runs past a stop, so records are taken between launches
-            count = min(STEPS_PER_LAUNCH, stop - step)
-            engine.advance(count)
-            step += count
-            if bar is not None:
-                bar.update(count)
-        if stop > 0:
+        if stop != previous:
+            clock.advance_to(previous, stop, batch, bar)
             take(stop)
+            previous = stop
     if bar is not None:
         bar.close()
-    return _collect(engine, model, solver, n_steps, stride, start, centroids, rotations, shapes,
-                    boundaries, steady_from_cycle)
+    record_times = np.array([clock.time_of(stop) for stop in record_stops])
+    return _collect(engine, model, solver, clock.time_of(clock.end), record_times, start_centroids,
+                    centroids, rotations, shapes, boundaries, steady_from_cycle)
 
 
-def _collect(engine, model, solver, n_steps, stride, start, centroids, rotations, shapes,
+def _collect(engine, model, solver, duration, record_times, start, centroids, rotations, shapes,
              boundaries, steady_from_cycle):
     batch = model.batch_size
     state = engine.state
     final = engine.centroids_of(batch)
     status = state.status.to_numpy()[:batch]
-    failure_step = state.failure_step.to_numpy()[:batch]
+    failure_time = state.failure_time.to_numpy()[:batch].astype(np.float64)
     steps_done = state.steps_done.to_numpy()[:batch]
+    rejected = state.rejected_steps.to_numpy()[:batch]
     newton_total = state.newton_total.to_numpy()[:batch]
-    attempted = steps_done + (status != STATUS_OK)
-    duration = n_steps * solver.dt
+    attempted = steps_done + rejected + (status != STATUS_OK)
     params = model.params
     gaits = [p.gait for p in params]
     failed = status != STATUS_OK
@@ -196,11 +239,13 @@ def _collect(engine, model, solver, n_steps, stride, start, centroids, rotations
     boundaries[failed] = np.nan
     rows.update(metrics.cycle_window_speeds(boundaries, np.array([p.period for p in params]),
                                             gaits, steady_from_cycle))
+    rows["steps"] = steps_done
+    rows["rejected_steps"] = rejected
     rows["newton_iterations_mean"] = newton_total / np.maximum(attempted, 1)
     rows["newton_iterations_max"] = state.newton_max.to_numpy()[:batch]
     rows["substep_retries"] = state.substep_retries.to_numpy()[:batch]
     rows["status"] = [STATUS_NAMES[s] for s in status]
-    rows["failure_time_s"] = np.where(failed, failure_step * solver.dt, np.nan)
+    rows["failure_time_s"] = np.where(failed, failure_time, np.nan)
     summary = pd.DataFrame(rows)
     metric_columns = [*metrics.SPEED_COLUMNS, "heading_deg", "steady_speed_mm_s",
                       "steady_signed_speed_mm_s"]
@@ -210,18 +255,17 @@ def _collect(engine, model, solver, n_steps, stride, start, centroids, rotations
                                "x_mm": pd.Series(dtype=float), "y_mm": pd.Series(dtype=float),
                                "heading_deg": pd.Series(dtype=float)})
     shape_array = None
-    if stride:
+    if len(record_times):
         n_records = len(centroids)
-        record_steps = np.arange(n_records) * stride
         # a frozen instance keeps its last good state: its records from the failure on are NaN
-        after_failure = failed[:, None] & (record_steps[None, :] >= failure_step[:, None])
+        after_failure = failed[:, None] & (record_times[None, :] >= failure_time[:, None])
         relative = (np.stack(centroids, axis=1) - start[:, None, :]) * metrics.METERS_TO_MM
         relative[after_failure] = np.nan
         heading = np.degrees(np.stack(rotations, axis=1))
         heading[after_failure] = np.nan
         trajectory = pd.DataFrame({
             "instance": np.repeat(np.arange(batch), n_records),
-            "t_s": np.tile(record_steps * solver.dt, batch),
+            "t_s": np.tile(record_times, batch),
             "x_mm": relative[:, :, 0].ravel(),
             "y_mm": relative[:, :, 1].ravel(),
             "heading_deg": heading.ravel(),

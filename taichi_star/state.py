@@ -45,6 +45,17 @@ class BatchState:
         self.status = ti.field(ti.i32, shape=capacity)
         self.failure_step = ti.field(ti.i32, shape=capacity)
         self.steps_done = ti.field(ti.i32, shape=capacity)
+        """Accepted steps."""
+        self.time = ti.field(float, shape=capacity)
+        """The instance's current time, s."""
+        self.failure_time = ti.field(float, shape=capacity)
+        """End time of the step that failed, s."""
+        self.step_size = ti.field(float, shape=capacity)
+        """Adaptive stepping: the size of the next step to try, s."""
+        self.previous_step_size = ti.field(float, shape=capacity)
+        """Adaptive stepping: the size of the last accepted step, s."""
+        self.rejected_steps = ti.field(ti.i32, shape=capacity)
+        """Adaptive stepping: steps rejected by the error estimate or a failed Newton solve."""
         self.newton_total = ti.field(ti.i64, shape=capacity)
         self.newton_max = ti.field(ti.i32, shape=capacity)
         self.substep_retries = ti.field(ti.i32, shape=capacity)

@@ -111,7 +111,7 @@ class Term:
         return {name: getattr(self, name) for name in self.history_names}
 
     @ti.func
-    def begin_step(self, b, start_time, end_time, h, rate_gain, use_history):
+    def begin_step(self, b, start_time, end_time, h, ratio, rate_gain, use_history):
         """Update the term's history at the start of a step of size h (s) from start_time to
         end_time, before the predictor moves the positions (a no-op by default)."""
         pass

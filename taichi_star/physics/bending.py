@@ -164,7 +164,7 @@ class Bending(Term):
         return value
 
     @ti.func
-    def begin_step(self, b, start_time, end_time, h, rate_gain, use_history):
+    def begin_step(self, b, start_time, end_time, h, ratio, rate_gain, use_history):
         if ti.static(self.actuated):
             for m in range(N_ACTUATORS):
                 self.start_curvature[b, m] = self.actuator_curvature(b, m, start_time)

@@ -42,7 +42,7 @@ class MaterialDamping(Term):
         self.bending = self.engine.term("bending")
 
     @ti.func
-    def begin_step(self, b, start_time, end_time, h, rate_gain, use_history):
+    def begin_step(self, b, start_time, end_time, h, ratio, rate_gain, use_history):
         """Record every element's strain at the step's start (with κ⁰ at the start time) and
         the target of the pseudo-energy. Runs after the bending term's begin_step, which sets
         the natural curvatures of this step."""
@@ -50,14 +50,14 @@ class MaterialDamping(Term):
         for e in range(self.stretching.n_edges):
             i, j = self.stretching.edges[e, 0], self.stretching.edges[e, 1]
             strain = (positions[b, j] - positions[b, i]).norm() / self.stretching.rest_length[b, e] - 1.0
-            offset = self.engine.integrator.rate_offset(strain, self.previous_strain[b, e], h, use_history)
+            offset = self.engine.integrator.rate_offset(strain, self.previous_strain[b, e], h, ratio, use_history)
             self.strain_target[b, e] = strain - offset / rate_gain
             self.previous_strain[b, e] = strain
         for t in range(self.bending.n_triplets):
             i, j, k, edge1, edge2 = self.bending.edges_of(b, t)
             curvature = 2.0 * turning_tangent(edge1, edge2) / self.bending.voronoi_length[b, t]
             excess = curvature - self.bending.natural_curvature(b, t, 1)
-            offset = self.engine.integrator.rate_offset(excess, self.previous_bend[b, t], h, use_history)
+            offset = self.engine.integrator.rate_offset(excess, self.previous_bend[b, t], h, ratio, use_history)
             self.bend_target[b, t] = excess - offset / rate_gain
             self.previous_bend[b, t] = excess
 

@@ -103,11 +103,11 @@ class Jet(Term):
             positions[b, self.jet_quads[k, 2]], positions[b, self.jet_quads[k, 3]]))
 
     @ti.func
-    def begin_step(self, b, start_time, end_time, h, rate_gain, use_history):
+    def begin_step(self, b, start_time, end_time, h, ratio, rate_gain, use_history):
         for k in range(N_ACTUATORS):
             area = self.area(b, k)
             self.area_rate_offset[b, k] = self.engine.integrator.rate_offset(
-                area, self.previous_areas[b, k], h, use_history)
+                area, self.previous_areas[b, k], h, ratio, use_history)
             self.previous_areas[b, k] = area
 
     @ti.func
