@@ -2,7 +2,7 @@
 
     python -m studies calibrate [--fit alpha=0.2:1.6:6] [--fit cylinder_drag=2:40:6:log]
                                 [--refine 3] [--objective speed|signed] [--cycles 3]
-                                [--arch cpu|gpu] [--out results/] [--quick]
+                                [--arch cpu|gpu] [--out DIR] [--quick]
                                 [--workers N | --scheduler tcp://HOST:PORT]
 
 A coarse grid (the Cartesian product of the `--fit` ranges; `:log` ranges are refined in log
@@ -13,8 +13,8 @@ Objective: sum over the gaits of ((v_sim − v_exp)/v_exp)², v = |speed| over t
 direction costs more). Direction mismatches against the paper are counted for every point.
 
 Writes `calibration.csv` (every point tried), `calibration_fit.csv` (the fitted values),
-`calibration.png` (error surface and optimum), then reruns fig4c with the fitted values as
-`fig4c_calibrated.csv/.png` (and `fig4b_calibrated.csv/.png`).
+`calibration.png` (error surface and optimum), and `fig4c_calibrated.csv`: the Fig. 4c table
+at the fitted values.
 """
 
 from __future__ import annotations
@@ -27,11 +27,11 @@ from typing import Dict, List, Sequence
 import numpy as np
 import pandas as pd
 
+from taichi_star import StarParams
+from taichi_star.batch import run_batch
 from taichi_star.experiment import PAPER_GAITS, compare_with_experiment
-from taichi_star.params import StarParams
 
-from . import common, distributed
-from .fig4c import run_fig4c
+from . import cli
 
 DESCRIPTION = ("Fit up to two parameters (default alpha and cylinder_drag) to the experimental "
                "speeds of the five paper gaits: coarse grid, then local refinement.")
@@ -64,7 +64,7 @@ class Axis:
     def __init__(self, name: str, text: str):
         self.name = name
         self.log = text.strip().lower().endswith(":log")
-        self.values = common.parse_values(text, f"--fit {name}", float)
+        self.values = cli.parse_values(text, f"--fit {name}", float)
         self.spacing = self._step(self.values)
 
     def _step(self, values):
@@ -85,21 +85,21 @@ class Axis:
 def parse_fit(items: Sequence[str]) -> List[Axis]:
     """`--fit NAME=RANGE` items -> Axis list (1 or 2; real-valued StarParams fields only)."""
     if len(items) > 2:
-        raise common.StudyArgumentError(f"--fit: at most two parameters, got {len(items)}")
+        raise cli.StudyArgumentError(f"--fit: at most two parameters, got {len(items)}")
     axes = []
     for item in items:
         if "=" not in item:
-            raise common.StudyArgumentError(
+            raise cli.StudyArgumentError(
                 f"--fit: expected NAME=RANGE (e.g. alpha=0.2:1.6:6), got {item!r}")
         name, text = item.split("=", 1)
         name = name.strip().replace("-", "_")
         if name == "gait":
-            raise common.StudyArgumentError("--fit gait: the gaits are fixed (the paper's five)")
-        if common.field_kind(name) is not float:
-            raise common.StudyArgumentError(f"--fit {name}: only real-valued parameters can be "
+            raise cli.StudyArgumentError("--fit gait: the gaits are fixed (the paper's five)")
+        if cli.field_kind(name) is not float:
+            raise cli.StudyArgumentError(f"--fit {name}: only real-valued parameters can be "
                                             f"fitted")
         if any(a.name == name for a in axes):
-            raise common.StudyArgumentError(f"--fit {name}: given twice")
+            raise cli.StudyArgumentError(f"--fit {name}: given twice")
         axes.append(Axis(name, text))
     return axes
 
@@ -112,14 +112,14 @@ def points_params(points: Sequence[Dict], base: StarParams):
             try:
                 params.append(base.replace(gait=gait, **point))
             except (ValueError, TypeError) as error:
-                raise common.StudyArgumentError(f"--fit: invalid value: {error}") from None
+                raise cli.StudyArgumentError(f"--fit: invalid value: {error}") from None
     return params
 
 
 def evaluate(points, base, run_kwargs, kind, round_index):
     """Simulate every point (one batch) and return one calibration row per point."""
     params = points_params(points, base)
-    summary = common.run_batch(params, **run_kwargs).summary
+    summary = run_batch(params, **run_kwargs).summary
     rows = []
     for index, point in enumerate(points):
         part = summary.iloc[index * len(PAPER_GAITS):(index + 1) * len(PAPER_GAITS)]
@@ -152,7 +152,7 @@ def calibrate(axes: Sequence[Axis], base: StarParams = StarParams(), refine: int
     tried (columns: round, the fitted parameters, objective, n_direction_mismatches,
     mismatched_gaits, status, speed_<gait>, signed_speed_<gait>)."""
     names = [a.name for a in axes]
-    common.param_product({a.name: a.values for a in axes}, base=base)  # validates the grid
+    cli.param_product({a.name: a.values for a in axes}, base=base)  # validates the grid
     points = [dict(zip(names, combo)) for combo in
               itertools.product(*[a.values for a in axes])]
     rows = evaluate(points, base, run_kwargs, kind, 0)
@@ -184,7 +184,7 @@ def best_point(table: pd.DataFrame, names: Sequence[str]) -> Dict:
 def plot_calibration(csv_path, png_path, names: Sequence[str]):
     """Error surface from a calibration CSV: the coarse grid as filled contours of log10
     objective (two parameters) or a curve (one), every point tried as a dot, the optimum a star."""
-    plt = common.use_agg()
+    plt = cli.use_agg()
     table = pd.read_csv(csv_path)
     finite = table[np.isfinite(table["objective"].astype(float))]
     best = finite.loc[finite["objective"].idxmin()] if len(finite) else None
@@ -229,62 +229,53 @@ def plot_calibration(csv_path, png_path, names: Sequence[str]):
 
 
 def build_parser():
-    parser = common.common_parser("calibrate", DESCRIPTION)
+    parser = cli.StudyParser("calibrate", DESCRIPTION)
     parser.add_argument("--fit", action="append", default=None, metavar="NAME=RANGE",
                         help="a StarParams field and its coarse range start:stop:n[:log] or list; "
                              "at most two (default: alpha=0.2:1.6:6 and "
                              "cylinder_drag=2:40:6:log)")
-    parser.add_argument("--refine", type=int, default=None,
-                        help="local refinement rounds (default 3; 1 with --quick)")
+    parser.add_argument("--refine", type=int, default=3, quick=1,
+                        help="local refinement rounds")
     parser.add_argument("--objective", choices=OBJECTIVES, default="speed",
                         help="speed: |speed| errors (default); signed: signed speed vs the "
                              "paper's direction")
-    parser.add_argument("--cycles", type=float, default=3.0, help="cycles from rest (default 3)")
-    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                        help="fix another StarParams field, e.g. --set jet_mode=always")
-    distributed.add_arguments(parser)
+    cli.add_model_flags(parser, fixed=("gait",))
+    cli.add_dt_flag(parser)
+    cli.add_cycles_flag(parser)
+    cli.add_execution_flags(parser)
     return parser
 
 
 def main(argv=None):
-    args = build_parser().parse_args(argv)
-    common.check_positive(args.cycles, "--cycles")
+    args = cli.parse(build_parser(), argv)
     axes = parse_fit(args.fit if args.fit else (QUICK_FIT if args.quick else DEFAULT_FIT))
-    refine = args.refine if args.refine is not None else (1 if args.quick else 3)
-    if refine < 0:
-        raise common.StudyArgumentError(f"--refine must be >= 0, got {refine}")
-    overrides = common.parse_overrides(args.set)
-    clash = set(overrides) & ({a.name for a in axes} | {"gait"})
+    if args.refine < 0:
+        raise cli.StudyArgumentError(f"--refine must be >= 0, got {args.refine}")
+    base = cli.base_params(args)
+    clash = {a.name for a in axes} & {item.split("=", 1)[0].strip() for item in args.set}
     if clash:
-        raise common.StudyArgumentError(f"--set {sorted(clash)[0]}: fitted or fixed by the study")
-    try:
-        base = common.base_params(args).replace(**overrides)
-    except (ValueError, TypeError) as error:
-        raise common.StudyArgumentError(f"--set: {error}") from None
+        raise cli.StudyArgumentError(f"--set {sorted(clash)[0]}: fitted by the study")
     names = [a.name for a in axes]
-    common.param_product({a.name: a.values for a in axes}, base=base)  # validate before compute
-    solver = common.solver_for(args)
-    common.chunk_size_for(args)  # validates --chunk-size
-    distributed.validate(args)
-    with distributed.executor_for(args) as executor:
-        out = common.out_dir(args)
+    cli.param_product({a.name: a.values for a in axes}, base=base)  # validate before compute
+    solver = cli.solver(args)
+    out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
+                     solver=solver)
+    with cli.executor(args) as executor:
         # a refinement round has 3^k points x 5 gaits; chunks sized so that it still feeds
         # every worker (the coarse round then simply has more chunks)
         per_round = 3 ** len(axes) * len(PAPER_GAITS)
-        run_kwargs = dict(cycles=args.cycles,
-                          duration_s=common.QUICK_DURATION_S if args.quick else None,
-                          solver=solver, arch=args.arch, progress=not args.no_progress,
-                          executor=executor,
-                          chunk_size=distributed.default_chunk_size(args, per_round,
-                                                                    executor.n_workers))
-        table = calibrate(axes, base=base, refine=refine, kind=args.objective, **run_kwargs)
-    csv = common.write_csv(table, out / "calibration.csv")
-    table = pd.read_csv(csv)
-    finite = table[np.isfinite(table["objective"].astype(float))]
-    if finite.empty:
+        run_kwargs = dict(**cli.run_length(args), solver=solver, arch=args.arch,
+                          progress=not args.no_progress, executor=executor,
+                          chunk_size=cli.chunk_size(args, per_round, executor.n_workers))
+        table = calibrate(axes, base=base, refine=args.refine, kind=args.objective, **run_kwargs)
+        finite = table[np.isfinite(table["objective"].astype(float))]
+        best = best_point(finite, names) if len(finite) else None
+        fitted = (run_batch(points_params([best], base), **run_kwargs).summary
+                  if best is not None else None)
+    csv = out.write_csv(table, "calibration.csv")
+    if best is None:
         print("calibration: every point failed; no fit")
         return table
-    best = best_point(finite, names)
     best_row = finite.loc[finite["objective"].idxmin()]
     fit = pd.DataFrame({"parameter": names, "value": [best[n] for n in names]})
     fit["objective"] = best_row["objective"]
@@ -292,16 +283,14 @@ def main(argv=None):
     fit["n_direction_mismatches"] = int(best_row["n_direction_mismatches"])
     fit["mismatched_gaits"] = best_row["mismatched_gaits"] if isinstance(
         best_row["mismatched_gaits"], str) else ""
-    fit_csv = common.write_csv(fit, out / "calibration_fit.csv")
-    png = plot_calibration(csv, out / "calibration.png", names)
-    print(common.describe([csv, fit_csv, png]))
+    out.write_csv(fit, "calibration_fit.csv")
+    table4c = compare_with_experiment(fitted)
+    out.write_csv(table4c, "fig4c_calibrated.csv")
+    out.wrote(plot_calibration(csv, out.path("calibration.png"), names))
+    out.report()
     print("fitted: " + ", ".join(f"{n} = {best[n]:.6g}" for n in names)
           + f" (objective {best_row['objective']:.4g}, direction mismatches "
             f"{int(best_row['n_direction_mismatches'])})")
-    note = "calibrated (" + ", ".join(f"{n}={best[n]:.3g}" for n in names) + ")"
-    table4c = run_fig4c(out, base=base, overrides=best, cycles=args.cycles, solver=solver,
-                        arch=args.arch, quick=args.quick, prefix="fig4c_calibrated",
-                        progress=not args.no_progress, title_note=note)
     still = table4c[~table4c["direction_matches"].astype(bool)]["gait"].tolist()
     print(table4c.to_string(index=False))
     print("gaits whose direction still disagrees with the paper: "
