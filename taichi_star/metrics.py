@@ -36,7 +36,17 @@ def body_rotation(positions: np.ndarray, rest_positions: np.ndarray, joints: np.
     now = positions[..., joints, :] - positions[..., hub:hub + 1, :]
     rest = rest_positions[..., joints, :] - rest_positions[..., hub:hub + 1, :]
     turn = (np.arctan2(now[..., 1], now[..., 0]) - np.arctan2(rest[..., 1], rest[..., 0]))
-    return np.arctan2(np.sin(turn).mean(-1), np.cos(turn).mean(-1))
+    return np.arctan2(_ordered_sum(np.sin(turn)), _ordered_sum(np.cos(turn)))
+
+
+def _ordered_sum(values: np.ndarray) -> np.ndarray:
+    """Sum over the last axis in index order: NumPy's reductions sum in an order that depends on
+    the array's shape, so an instance's metrics would change in the last bit with the size of
+    its batch."""
+    total = values[..., 0].copy()
+    for k in range(1, values.shape[-1]):
+        total += values[..., k]
+    return total
 
 
 def forward_directions(gaits: Sequence[str]) -> np.ndarray:
