@@ -327,7 +327,7 @@ def solver_choices(text: str, flag: str, field: str):
     values = cli.parse_values(text, flag, str)
     for value in values:
         try:
-            bench_solver(**{field: value})
+            bench_solver(**{"precision": "f64", field: value})
         except ValueError as error:
             raise cli.StudyArgumentError(f"{flag}: {error}") from None
     return values

@@ -59,7 +59,8 @@ class StudyParser(argparse.ArgumentParser):
     --quick; both defaults are shown in its help."""
 
     def __init__(self, study: str, description: str, archs=("cpu", "gpu")):
-        super().__init__(prog=f"python -m studies {study}", description=description)
+        super().__init__(prog=f"python -m studies {study}", description=description,
+                         allow_abbrev=False)
         self.quick_defaults: Dict[str, tuple] = {}
         self.set_defaults(study=study)
         super().add_argument("--out", default=None, metavar="DIR",
