@@ -31,9 +31,6 @@ PAPER_DIRECTIONS = {"A1": "forward", "A1+A2": "forward", "A1+A3": "reverse",
 """Swimming direction of each Fig. 4 gait stated in the paper's text (design §4): "forward" is
 along the gait's forward direction (the sum of its actuators' bisectors), "reverse" against it."""
 
-PAPER_TEXT_SPEEDS_MM_S = {"A1": 0.49, "A1+A2": 2.83}
-"""The only two speeds the paper's text states (mm/s, experiment)."""
-
 FIG4C_COLUMNS = ["gait", "sim_speed_mm_s", "sim_signed_speed_mm_s", "sim_direction",
                  "exp_speed_mm_s", "paper_direction", "direction_matches", "speed_ratio",
                  "status"]
