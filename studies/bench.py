@@ -410,7 +410,7 @@ def run_bench(args) -> pd.DataFrame:
 
 def plot_bench(csv_path, png_path):
     """Three panels from a bench CSV: throughput against B (log-log, one line per precision,
-    the design §6 target dashed, real-time factor on the right axis); the phase split per
+    the target dashed, real-time factor on the right axis); the phase split per
     instance-step of the B sweep; the scenarios' throughput."""
     plt = cli.use_agg()
     table = pd.read_csv(csv_path, dtype={"commit": str})  # a hash like 83e1667 reads as a float

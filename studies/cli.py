@@ -290,7 +290,8 @@ def resolve_gaits(text: str, flag: str = "--gaits") -> List[str]:
     return gaits
 
 
-def param_product(axes: Mapping[str, Sequence], base: StarParams = StarParams()) -> List[StarParams]:
+def param_product(axes: Mapping[str, Sequence],
+                  base: StarParams = StarParams()) -> List[StarParams]:
     """Every combination of the given StarParams field values (the last axis varies fastest),
     on top of `base`; StudyArgumentError naming the parameter for an unknown field, an invalid
     value or an empty axis."""

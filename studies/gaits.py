@@ -90,8 +90,8 @@ def class_params(base: StarParams = StarParams()):
 
 def expand_classes(summary: pd.DataFrame, classes=None) -> pd.DataFrame:
     """All gaits from a summary of the class representatives (rows matched by gait): the same
-    speeds, the travel direction and the heading mapped by the symmetry. Columns GAITS_COLUMNS; 255 rows sorted by
-    (number of actuators, bitmask)."""
+    speeds, the travel direction and the heading mapped by the symmetry. Columns GAITS_COLUMNS;
+    255 rows sorted by (number of actuators, bitmask)."""
     classes = classes if classes is not None else symmetry_classes()
     by_gait = {row["gait"]: row for _, row in summary.iterrows()}
     rows = []

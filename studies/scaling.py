@@ -68,9 +68,8 @@ def main(argv=None):
     solver = cli.solver(args)
     params = sweep_params(args.quick)
     duration = cli.QUICK_DURATION_S if args.quick else params[0].period
-    out = cli.Output(args, argv or [], model={"sweep": {"gait": sorted({p.gait for p in params}),
-                                                        "alpha": sorted({p.alpha for p in params})}},
-                     solver=solver)
+    sweep = {"gait": sorted({p.gait for p in params}), "alpha": sorted({p.alpha for p in params})}
+    out = cli.Output(args, argv or [], model={"sweep": sweep}, solver=solver)
     run_kwargs = dict(solver=solver, chunk_size=args.chunk_size)
     steps = int(round(duration / solver.dt))
     rows, reference = [], None

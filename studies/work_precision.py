@@ -1,4 +1,4 @@
-"""Run time against error (issue 4): the five paper gaits' speeds over 3 cycles from rest for
+"""Run time against error: the five paper gaits' speeds over 3 cycles from rest for
 time step, precision, Newton tolerance, discretisation and integrator, against a reference run.
 
     python -m studies work_precision [--arch cpu|gpu] [--out DIR] [--quick]

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
-from pathlib import Path
-from typing import Mapping, Optional, Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 import pandas as pd

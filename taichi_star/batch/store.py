@@ -128,8 +128,9 @@ def _encode(frame: pd.DataFrame):
     """(frame with value-object columns as JSON text, {column: type name})."""
     encoded, types = frame.copy(), {}
     for name in frame.columns:
-        if frame[name].dtype == object and len(frame) and dataclasses.is_dataclass(frame[name].iloc[0]):
-            types[name] = type(frame[name].iloc[0]).__name__
+        first = frame[name].iloc[0] if len(frame) else None
+        if frame[name].dtype == object and dataclasses.is_dataclass(first):
+            types[name] = type(first).__name__
             encoded[name] = [_canonical(dataclasses.asdict(v)) for v in frame[name]]
     return encoded, types
 

@@ -12,7 +12,7 @@ import taichi_star
 from taichi_star import SolverConfig, StarParams
 from taichi_star.metrics import shape_checks
 
-from studies import cli, stability
+from studies import stability
 from studies.__main__ import main as studies_main
 
 
