@@ -151,7 +151,7 @@ def main(argv=None):
     solver = cli.solver(args)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver)
-    duration = cli.QUICK_DURATION_S if args.quick else args.cycles * base.period
+    duration = cli.duration_s(args, base.period)
     stride = max(1, int(round(duration / solver.dt)) // args.frames)
     result = run_batch(params, duration, solver=solver, arch=args.arch,
                        record_interval_s=stride * solver.dt, record_shapes=True,

@@ -341,6 +341,12 @@ def run_length(args) -> Dict[str, float]:
     return {"duration_s": QUICK_DURATION_S} if args.quick else {"cycles": args.cycles}
 
 
+def duration_s(args, period: float) -> float:
+    """Simulated time of a batch sharing one period, s: 0.2 s under --quick, else --cycles
+    periods."""
+    return QUICK_DURATION_S if args.quick else args.cycles * period
+
+
 def chunk_size(args, n_instances: int, n_workers: int) -> int:
     """--chunk-size, else the study's default (larger on a GPU), cut so that every worker gets
     about four chunks."""

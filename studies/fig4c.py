@@ -142,7 +142,7 @@ def main(argv=None):
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver)
     params = fig4c_params(base)
-    duration = cli.QUICK_DURATION_S if args.quick else args.cycles * base.period
+    duration = cli.duration_s(args, base.period)
     result = run_batch(params, duration, solver=solver, arch=args.arch,
                        record_interval_s=record_interval(duration, solver.dt),
                        progress=not args.no_progress)
