@@ -39,6 +39,9 @@ QUICK_DURATION_S = 0.2
 QUICK_DT = 2e-3
 """--quick: time step, s, unless --dt is given."""
 GPU_CHUNK_SIZE = 16384
+QUICK_CHUNK_SIZE = 8
+"""--quick: instances per chunk, the smallest engine capacity, so that quick runs of different
+sizes share one compiled engine instead of compiling one per batch size."""
 RUNS_FOLDER = Path("runs")
 """Default parent of the output folders: runs/<study>/<timestamp>/ (git-ignored)."""
 COMMITTED_RESULTS = Path(__file__).resolve().parent.parent / "results"
@@ -348,11 +351,13 @@ def duration_s(args, period: float) -> float:
 
 
 def chunk_size(args, n_instances: int, n_workers: int) -> int:
-    """--chunk-size, else the study's default (larger on a GPU), cut so that every worker gets
-    about four chunks."""
+    """--chunk-size, else the study's default (larger on a GPU; QUICK_CHUNK_SIZE under
+    --quick), cut so that every worker gets about four chunks."""
     if args.chunk_size is not None:
         return args.chunk_size
     size = GPU_CHUNK_SIZE if args.arch != "cpu" else args.default_chunk_size
+    if args.quick:
+        size = QUICK_CHUNK_SIZE
     if n_workers > 1:
         size = min(size, max(1, math.ceil(n_instances / (4 * n_workers))))
     return size

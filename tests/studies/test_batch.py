@@ -53,9 +53,9 @@ def test_local_worker_processes_give_the_in_process_tables(direct):
 
 
 def test_instances_of_several_topologies_and_periods_are_grouped_in_input_order():
-    # n_arc 18 (the default) and 8: engines the other tests compile too
+    # n_arc 18 (the default) and 8 with shared ends: engines the other tests compile too
     params = [ts.StarParams(gait="A1", period=0.3),
-              ts.StarParams(gait="A1", n_arc=8, period=0.3),
+              ts.StarParams(gait="A1", n_arc=8, actuation_ends="shared", period=0.3),
               ts.StarParams(gait="A1", period=0.4),
               ts.StarParams(gait="A1+A2", period=0.3)]
     tasks = plan_chunks(params, cycles=1, chunk_size=8, solver=SOLVER)

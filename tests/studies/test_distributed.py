@@ -1,6 +1,7 @@
-"""Sweeps on worker processes and on Dask: two local worker processes give the in-process table
-bit for bit, and a Dask worker process killed mid-sweep costs only its chunk: the sweep
-completes with every row exactly once. Also the execution flags' validation before compute."""
+"""Sweeps on Dask: a Dask worker process killed mid-sweep costs only its chunk, and the sweep
+completes with every row exactly once, bitwise the in-process table (local worker processes:
+tests/studies/test_batch.py and the scaling study below). Also the execution flags' validation
+before compute."""
 
 import json
 import os
@@ -15,9 +16,10 @@ from distributed import Client, LocalCluster
 from studies import cli, sweep
 from studies.__main__ import main as studies_main
 
-# 16 instances, 2 ms steps, 1.2 s each: in chunks of 2 about 0.2 s a chunk on one core
+# 16 instances, 2 ms steps, 1.2 s each: in chunks of 2 about 0.2 s a chunk on one core (and
+# the engine of capacity 8 the other tests compile)
 SWEEP = ["--gaits", "A1,A1+A3", "--alpha", "0.4:1.2:8", "--period", "0.3", "--cycles", "4",
-         "--dt", "0.002", "--no-progress"]
+         "--dt", "0.002", "--chunk-size", "2", "--no-progress"]
 N_INSTANCES = 16
 
 
@@ -38,17 +40,6 @@ def cluster():
 
 
 @pytest.mark.slow
-def test_local_worker_processes_give_the_in_process_table(reference, tmp_path):
-    table = sweep.main([*SWEEP, "--out", str(tmp_path), "--workers", "2"])
-    pd.testing.assert_frame_equal(table, reference, check_exact=True)
-    assert (tmp_path / "sweep.csv").read_bytes() == \
-        (reference.attrs["out"] / "sweep.csv").read_bytes()
-    # default chunking for 2 workers: about four chunks per worker
-    manifest = (tmp_path / "chunks" / "manifest.json").read_text()
-    assert '"n_chunks": 8' in manifest
-
-
-@pytest.mark.slow
 def test_killed_dask_worker_costs_only_its_chunk(reference, cluster, tmp_path):
     local, client = cluster
     address = local.scheduler_address
@@ -57,8 +48,8 @@ def test_killed_dask_worker_costs_only_its_chunk(reference, cluster, tmp_path):
 
     def run():
         try:
-            outcome["table"] = sweep.main([*SWEEP, "--out", str(tmp_path), "--chunk-size", "2",
-                                           "--scheduler", address, "--run-dir", str(run_dir)])
+            outcome["table"] = sweep.main([*SWEEP, "--out", str(tmp_path), "--scheduler", address,
+                                           "--run-dir", str(run_dir)])
         except BaseException as error:  # noqa: BLE001 - reported by the test thread
             outcome["error"] = error
 
@@ -108,7 +99,7 @@ def test_distributed_flags_fail_before_compute(monkeypatch, tmp_path, capsys, st
 
 def test_default_chunk_size_feeds_every_worker():
     class Args:
-        chunk_size, arch, default_chunk_size = None, "cpu", 2048
+        chunk_size, arch, default_chunk_size, quick = None, "cpu", 2048, False
     assert cli.chunk_size(Args, 29, 1) == 2048
     assert cli.chunk_size(Args, 29, 2) == 4  # 8 chunks for 2 workers
     Args.chunk_size = 3
@@ -118,14 +109,14 @@ def test_default_chunk_size_feeds_every_worker():
 @pytest.mark.slow
 def test_scaling_quick(tmp_path):
     from studies import scaling
-    table = scaling.main(["--quick", "--workers-list", "2", "--out", str(tmp_path),
+    table = scaling.main(["--quick", "--workers-list", "2", "--no-dask", "--out", str(tmp_path),
                           "--no-progress"])
     written = pd.read_csv(tmp_path / "scaling.csv")
-    assert written["mode"].tolist() == ["in-process", "processes", "dask-local"]
-    assert written["workers"].tolist() == [0, 2, 2]
+    assert written["mode"].tolist() == ["in-process", "processes"]
+    assert written["workers"].tolist() == [0, 2]
     # the modes' tables are bitwise the in-process one (the study checks it itself)
     assert written["same_table_as_in_process"].all()
     assert (written["wall_s"] > 0).all()
     sidecar = json.loads((tmp_path / "scaling.csv.json").read_text())
     assert sidecar["machine"]["cores"] == os.cpu_count() and sidecar["machine"]["cpu_model"]
-    assert len(table) == 3
+    assert len(table) == 2
