@@ -1,23 +1,19 @@
-"""Runnable studies over taichi_star: `python -m studies <name> [--arch cpu|gpu] [--out DIR]
-[--quick] ...`. Each study is a module with `main(argv)`: parameters -> one `simulate` batch
-(chunked when large) -> one DataFrame -> CSV -> plots drawn from that CSV.
+"""Command-line studies over taichi_star: `python -m studies <name> [--out DIR] [--quick] ...`
+(`python -m studies` lists them, `python -m studies <name> --help` gives a study's flags).
 
-Studies: fig4c (the paper's Fig. 4c/4b), sweep (parameter sensitivity), gaits (all 255 gaits by
-symmetry class), calibrate (CMA-ES fit of any parameters to the experiment, leave-one-gait-out
-cross-validation), sensitivity (Sobol indices of each gait's speed), animate (GIF of a
-cycle), bench (engine throughput), work_precision (run time against error).
+Each study is a module of this package with a `DESCRIPTION` and a `main(argv)`: parameters ->
+`taichi_star.batch.run_batch` -> tables (CSV, each with a JSON provenance sidecar) -> plots drawn
+from those tables. Studies use only the public API of taichi_star; what they share is in
+`studies.cli` (flags, output folders) and `studies.provenance`.
 """
 
-STUDIES = {
-    "fig4c": "the paper's Fig. 4c/4b: five gaits, simulation vs experiment",
-    "sweep": "sensitivity: Cartesian product of parameter lists/ranges",
-    "gaits": "all 255 gaits, one simulation per symmetry class, ranked",
-    "calibrate": "CMA-ES fit of StarParams fields to the measured speeds; --cross-validate",
-    "sensitivity": "Sobol indices (Saltelli sampling) of each gait's signed speed",
-    "animate": "GIF of the robot's shape over one cycle",
-    "bench": "engine throughput: robot-steps/s against batch size and precision",
-    "work_precision": "run time against error: h, precision, tolerance, discretisation, integrator",
-    "convergence": "speed against n_arc, clamped vs shared actuation ends, the converged preset",
-    "stability": "stress grid: dt x stiffness x alpha x C_a x period x gait x precision; outcome maps",
-    "scaling": "wall time of one fixed sweep: in process against 1, 2, ... local Dask workers",
-}
+import pkgutil
+
+HELPERS = ("cli", "provenance", "__main__")
+"""Modules of this package that are not studies."""
+
+
+def study_names():
+    """The studies: every module of this package but the helpers, sorted."""
+    return sorted(module.name for module in pkgutil.iter_modules(__path__)
+                  if module.name not in HELPERS)

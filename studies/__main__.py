@@ -3,14 +3,18 @@
 import importlib
 import sys
 
-from . import STUDIES
-from .common import StudyArgumentError
+from taichi_star.batch import RunStoreError
+
+from . import study_names
+from .cli import StudyArgumentError, configure_logging
 
 
 def usage() -> str:
-    lines = ["usage: python -m studies <name> [--arch cpu|gpu] [--out DIR] [--quick] ...",
+    lines = ["usage: python -m studies <name> [--out DIR] [--quick] [--arch cpu|gpu] ...",
              "", "studies:"]
-    lines += [f"  {name:<10} {text}" for name, text in STUDIES.items()]
+    for name in study_names():
+        description = importlib.import_module(f"studies.{name}").DESCRIPTION
+        lines.append(f"  {name:<15} {description.splitlines()[0]}")
     return "\n".join(lines)
 
 
@@ -20,14 +24,15 @@ def main(argv=None) -> int:
         print(usage())
         return 0 if argv else 2
     name, rest = argv[0], argv[1:]
-    if name not in STUDIES:
+    if name not in study_names():
         print(f"python -m studies: error: unknown study {name!r}; choose one of "
-              f"{', '.join(STUDIES)}", file=sys.stderr)
+              f"{', '.join(study_names())}", file=sys.stderr)
         return 2
+    configure_logging()
     module = importlib.import_module(f"studies.{name}")
     try:
         module.main(rest)
-    except StudyArgumentError as error:
+    except (StudyArgumentError, RunStoreError) as error:
         print(f"python -m studies {name}: error: {error}", file=sys.stderr)
         return 2
     except SystemExit as exit_:  # argparse: --help, or an unknown / malformed flag

@@ -1,7 +1,7 @@
 """Animation: a GIF of the robot's rod shape over one actuation cycle, per gait.
 
-    python -m studies animate [--gait A1+A2 | --gait paper] [--cycles 1] [--frames 90]
-                              [--arch cpu|gpu] [--out results/] [--quick]
+    python -m studies animate [--gait A1+A2 | --gait paper] [--cycles 1] [--frames 60]
+                              [--preset paper|accurate] [--set NAME=VALUE] [--out DIR] [--quick]
 
 All requested gaits run in one batch. Writes, under `<out>/animations/`: `shapes.csv` (gait,
 frame, t_s, node, x_mm, y_mm: every node at every frame), `centroid.csv` (gait, frame, t_s,
@@ -18,25 +18,25 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from taichi_star.batch import run_batch
 from taichi_star.gait import Gait
-from taichi_star.geometry import ARC, LIMB, SPOKE
 
-from . import common
+from . import cli
 
 DESCRIPTION = "GIF of the robot's rod shape over one actuation cycle, for one or more gaits."
 
-KIND_NAMES = {SPOKE: "spoke", LIMB: "limb", ARC: "arc"}
-
 
 def edges_table(topology) -> pd.DataFrame:
-    """The batch topology's edges: node_a, node_b, kind (spoke/limb/arc), actuator (1..8 for arc
-    edges, 0 otherwise), from the node numbering of `geometry.build_topology`."""
-    block = (topology.n_nodes - 1) // 8
-    kinds = [KIND_NAMES[int(k)] for k in topology.edge_kind]
-    actuator = [int((a - 1) // block) + 1 if k == ARC else 0
-                for (a, _), k in zip(topology.edges, topology.edge_kind)]
-    return pd.DataFrame({"node_a": topology.edges[:, 0], "node_b": topology.edges[:, 1],
-                         "kind": kinds, "actuator": actuator})
+    """The robot's edges from its limb and arc node chains: node_a, node_b, kind (spoke from the
+    hub to a joint, limb, arc), actuator (1..8 for arc edges, 0 otherwise)."""
+    chained = set(topology.limbs.ravel()) | set(topology.arcs.ravel())
+    hub = next(n for n in range(topology.n_nodes) if n not in chained)
+    rows = []
+    for number, (limb, arc) in enumerate(zip(topology.limbs, topology.arcs), start=1):
+        rows.append((hub, limb[0], "spoke", 0))
+        rows += [(a, b, "limb", 0) for a, b in zip(limb[:-1], limb[1:])]
+        rows += [(a, b, "arc", number) for a, b in zip(arc[:-1], arc[1:])]
+    return pd.DataFrame(rows, columns=["node_a", "node_b", "kind", "actuator"])
 
 
 def shapes_table(gaits, shapes, times) -> pd.DataFrame:
@@ -56,7 +56,7 @@ def shapes_table(gaits, shapes, times) -> pd.DataFrame:
 
 def draw_gif(shapes_csv, centroid_csv, edges_csv, gait: str, gif_path, fps: int = 15):
     """Render one gait's GIF from the three CSVs."""
-    plt = common.use_agg()
+    plt = cli.use_agg()
     from matplotlib.animation import FuncAnimation, PillowWriter
     from matplotlib.collections import LineCollection
     from matplotlib.patches import Circle
@@ -128,57 +128,47 @@ def draw_gif(shapes_csv, centroid_csv, edges_csv, gait: str, gif_path, fps: int 
 
 
 def build_parser():
-    parser = common.common_parser("animate", DESCRIPTION)
-    parser.add_argument("--gait", default=None,
-                        help="gait(s): A1+A2, a comma list, or paper (the five Fig. 4 gaits; "
-                             "default; A1+A2 with --quick)")
-    parser.add_argument("--cycles", type=float, default=1.0, help="cycles to show (default 1)")
+    parser = cli.StudyParser("animate", DESCRIPTION)
+    parser.add_argument("--gait", default="paper", quick="A1+A2",
+                        help="gait(s): A1+A2, a comma list, or paper (the five Fig. 4 gaits)")
     parser.add_argument("--frames", type=int, default=60, help="frames per GIF (about; default 60)")
     parser.add_argument("--fps", type=int, default=15, help="GIF frame rate (default 15)")
-    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                        help="override a StarParams field, e.g. --set alpha=1.0")
+    cli.add_model_flags(parser, fixed=("gait",))
+    cli.add_dt_flag(parser)
+    cli.add_cycles_flag(parser, default=1.0)
     return parser
 
 
 def main(argv=None):
-    args = build_parser().parse_args(argv)
-    common.check_positive(args.cycles, "--cycles")
+    args = cli.parse(build_parser(), argv)
     if args.frames < 2:
-        raise common.StudyArgumentError(f"--frames must be >= 2, got {args.frames}")
+        raise cli.StudyArgumentError(f"--frames must be >= 2, got {args.frames}")
     if args.fps < 1:
-        raise common.StudyArgumentError(f"--fps must be >= 1, got {args.fps}")
-    gaits = common.resolve_gaits(args.gait or ("A1+A2" if args.quick else "paper"), "--gait")
-    overrides = common.parse_overrides(args.set)
-    if "gait" in overrides:
-        raise common.StudyArgumentError("--set gait=...: use --gait")
-    try:
-        base = common.base_params(args).replace(**overrides)
-    except (ValueError, TypeError) as error:
-        raise common.StudyArgumentError(f"--set: {error}") from None
+        raise cli.StudyArgumentError(f"--fps must be >= 1, got {args.fps}")
+    gaits = cli.resolve_gaits(args.gait, "--gait")
+    base = cli.base_params(args)
     params = [base.replace(gait=g) for g in gaits]
-    solver = common.solver_for(args)
-    duration = common.QUICK_DURATION_S if args.quick else args.cycles * base.period
-    steps = int(round(duration / solver.dt))
-    stride = max(1, steps // args.frames)
-    out = common.out_dir(args) / "animations"
-    out.mkdir(parents=True, exist_ok=True)
-    result = common.run_batch(params, duration_s=duration, solver=solver, arch=args.arch,
-                              record_every=stride, record_shapes=True,
-                              progress=not args.no_progress)
-    topology = result.topologies[0]
+    solver = cli.solver(args)
+    out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
+                     solver=solver)
+    duration = cli.duration_s(args, base.period)
+    stride = max(1, int(round(duration / solver.dt)) // args.frames)
+    result = run_batch(params, duration, solver=solver, arch=args.arch,
+                       record_interval_s=stride * solver.dt, record_shapes=True,
+                       progress=not args.no_progress)
     times = sorted(result.trajectory[result.trajectory["instance"] == 0]["t_s"])
-    shapes = shapes_table(gaits, [result.shapes[i] for i in range(len(gaits))], times)
+    shapes = shapes_table(gaits, [result.shapes[:, i] for i in range(len(gaits))], times)
     centroid = result.trajectory.copy()
     centroid["frame"] = centroid.groupby("instance").cumcount()
     centroid["gait"] = [gaits[i] for i in centroid["instance"]]
-    paths = [common.write_csv(shapes, out / "shapes.csv"),
-             common.write_csv(centroid[["gait", "frame", "t_s", "x_mm", "y_mm"]],
-                              out / "centroid.csv"),
-             common.write_csv(edges_table(topology), out / "edges.csv")]
+    tables = [out.write_csv(shapes, "animations/shapes.csv"),
+              out.write_csv(centroid[["gait", "frame", "t_s", "x_mm", "y_mm"]],
+                            "animations/centroid.csv"),
+              out.write_csv(edges_table(result.topology), "animations/edges.csv")]
     for gait, status in zip(gaits, result.summary["status"]):
-        gif = out / f"{gait.replace('+', '_')}.gif"
-        paths.append(draw_gif(paths[0], paths[1], paths[2], gait, gif, fps=args.fps))
+        gif = out.path(f"animations/{gait.replace('+', '_')}.gif")
+        out.wrote(draw_gif(*tables, gait, gif, fps=args.fps))
         if status != "ok":
             print(f"  warning: {gait} ended with status {status}")
-    print(common.describe(paths))
-    return paths
+    out.report()
+    return out.written

@@ -1,9 +1,9 @@
-"""Throughput of the batch engine (design §6, issue 4): robot-steps per second against batch size.
+"""Throughput of the batch engine: robot-steps per second against batch size.
 
-    python -m studies bench [--arch cpu|gpu] [--out results/] [--quick]
+    python -m studies bench [--arch cpu|gpu] [--out DIR] [--quick]
                             [--batch-sizes 1,8,64,512,2048,8192] [--precisions f64,f32]
                             [--steps 100] [--repeats 3] [--scenarios all_terms,alpha_0,...|none]
-                            [--scenario-batch 64] [--no-cache-probe] [--no-progress]
+                            [--scenario-batch 64] [--workers-list 1,2] [--no-cache-probe]
 
 Gait A1+A3, the paper's discretisation (N = 193 nodes), h = 1 ms, implicit Euler. For every batch
 size B and precision: a fresh engine is compiled (its first launch, timed apart as `compile_s`),
@@ -13,7 +13,7 @@ t = 10 ms, inside the 150 ms heating pulse, where Newton needs the most iteratio
 are conservative against a whole-cycle average (`newton_iterations_mean` says how hard the
 window was).
 
-Phase split: after the timed windows, one profiling kernel per engine repeats, for every instance
+Phase split: after the timed windows, the engine's profiling kernel repeats, for every instance
 at its current state, the assembly alone, assembly + factorisation, and assembly +
 factorisation + solve (the factorisation is in place, so it always needs a fresh assembly); the
 differences give each phase's time per Newton iteration, times the window's mean iterations per
@@ -25,13 +25,15 @@ profile repeats work on a state already in cache, so under noise or when bookkee
 
 The B sweep runs for each Newton Jacobian mode (`jacobian`: "newton" refactors every
 iteration, "chord" reuses the step's first LU while it contracts); the phase split assumes one
-factorisation per iteration, so only its "newton" rows are meaningful (and plotted). Section "processes": the
-end-to-end `simulate(..., workers=N)` throughput at one batch size, f64 (worker processes are
-how this machine's two cores are used: Taichi's own CPU threads gained only ~1.25× here).
+factorisation per iteration, so only its "newton" rows are meaningful (and plotted). Section
+"processes": the end-to-end throughput of `run_batch` on N local worker processes (one chunk
+per worker) at one batch size, f64 (worker processes are how a machine with few cores is used:
+Taichi's own CPU threads gained only ~1.25× on two cores).
 
 "Skip what a scene does not need": at one batch size, the same measurement with all terms and
 with α = 0 (no jet), C_a = 0 (no added mass), drag 0 (rod and cylinder drag off), gait "none"
-(no actuation); terms that no instance uses are compiled out (`terms` column, engine.TERM_*).
+(no actuation); terms that no instance uses are compiled out (`terms`: the force terms the
+engine was compiled with).
 
 Compile time with a cold and a warm Taichi offline cache: two fresh Python processes that share
 an empty temporary cache folder (`TI_OFFLINE_CACHE_FILE_PATH`), the first compiles from scratch,
@@ -46,15 +48,13 @@ time_to_first_step_s, robot_steps_per_s, real_time_factor (= robot_steps_per_s �
 robot-seconds per wall second), step_us, newton_iterations_mean, assembly_us, factor_us,
 solve_us, bookkeeping_us (µs per instance-step), factor_flops (per factorisation),
 factor_gflops (achieved by the factorisation). And `bench.png` (`bench_gpu.png`): throughput
-against B (log-log, one line per precision, the design §6 target dashed), the phase split and
+against B (log-log, one line per precision, the design target dashed), the phase split and
 the scenarios.
 """
 
-import argparse
 import json
 import math
 import os
-import platform
 import subprocess
 import sys
 import tempfile
@@ -66,13 +66,11 @@ import numpy as np
 import pandas as pd
 import taichi as ti
 
-from taichi_star.engine import STATUS_OK, terms_used
-from taichi_star.model import build_model
-from taichi_star.params import JACOBIANS, PRECISIONS, SolverConfig, StarParams
-from taichi_star.simulation import (STEPS_PER_LAUNCH, available_archs, ensure_taichi, get_engine,
-                                    simulate)
+from taichi_star import SolverConfig, StarParams
+from taichi_star.batch import LocalProcesses, run_batch
+from taichi_star.runtime import prepare_engine
 
-from . import common
+from . import cli, provenance
 
 DESCRIPTION = ("Engine throughput: robot-steps/s against batch size and precision (gait A1+A3, "
                "N = 193, h = 1 ms), compile time apart, phase split, terms compiled out.")
@@ -80,6 +78,10 @@ DESCRIPTION = ("Engine throughput: robot-steps/s against batch size and precisio
 GAIT = "A1+A3"
 DT = 1e-3
 WARMUP_STEPS = 10
+STEPS_PER_LAUNCH = 50
+"""Steps per kernel launch, as `simulate` launches them."""
+STATUS_OK = 0
+"""An engine's per-instance status while the instance is live."""
 DEFAULT_BATCH_SIZES = "1,8,64,512,2048,8192"
 DEFAULT_STEPS = 100
 DEFAULT_REPEATS = 3
@@ -98,7 +100,7 @@ QUICK_PROFILE_SECONDS = 0.02
 PROFILE_LAUNCHES = 3
 """Each phase is timed as the best of this many launches."""
 TARGETS = {"cpu": 20_000.0, "gpu": 2_000_000.0}
-"""Design §6 throughput goals, robot-steps/s (2-core CPU at B >= 512, H100/H200 at B >= 8192)."""
+"""Throughput goals, robot-steps/s (2-core CPU at B >= 512, H100/H200 at B >= 8192)."""
 
 SCENARIOS = {
     "all_terms": {},
@@ -110,99 +112,25 @@ SCENARIOS = {
 """Scenario name -> StarParams changes from the benchmark robot (gait A1+A3, paper values)."""
 
 COLUMNS = ["machine", "cpu_model", "cores", "gpu", "arch", "section", "scenario", "terms",
-           "batch_size", "precision", "jacobian", "workers", "n_nodes", "dt_s", "gait", "warmup_steps", "steps",
-           "repeats", "commit", "timestamp", "import_s", "setup_s", "compile_s", "time_to_first_step_s",
-           "robot_steps_per_s", "real_time_factor", "step_us", "newton_iterations_mean",
-           "assembly_us", "factor_us", "solve_us", "bookkeeping_us", "factor_flops",
-           "factor_gflops"]
-
-
-# --------------------------------------------------------------------------- provenance
-
-def cpu_model() -> str:
-    """The CPU model name from /proc/cpuinfo (platform.processor() elsewhere)."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.lower().startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
-
-
-def gpu_name() -> str:
-    """The first GPU's name from nvidia-smi, or "unknown" where nvidia-smi is missing."""
-    try:
-        output = subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"],
-                                capture_output=True, text=True, timeout=30, check=True).stdout
-        return output.strip().splitlines()[0] if output.strip() else "unknown"
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-
-
-def machine_info(arch: str) -> dict:
-    """machine, cpu_model, cores, gpu ("" for the CPU arch) of this machine."""
-    model = cpu_model()
-    cores = os.cpu_count() or 0
-    gpu = gpu_name() if arch != "cpu" else ""
-    machine = f"{model} ({cores} cores)" + (f" + {gpu}" if gpu else "")
-    return {"machine": machine, "cpu_model": model, "cores": cores, "gpu": gpu}
-
-
-def git_commit() -> str:
-    """Short hash of HEAD, "-dirty" when tracked files differ from it; "unknown" outside git."""
-    root = Path(__file__).resolve().parents[1]
-    try:
-        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, check=True,
-                              capture_output=True, text=True).stdout.strip()
-        changes = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
-                                 cwd=root, check=True, capture_output=True, text=True).stdout
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-    return head + ("-dirty" if changes.strip() else "")
+           "batch_size", "precision", "jacobian", "workers", "n_nodes", "dt_s", "gait",
+           "warmup_steps", "steps", "repeats", "commit", "timestamp", "import_s", "setup_s",
+           "compile_s", "time_to_first_step_s", "robot_steps_per_s", "real_time_factor",
+           "step_us", "newton_iterations_mean", "assembly_us", "factor_us", "solve_us",
+           "bookkeeping_us", "factor_flops", "factor_gflops"]
 
 
 def timestamp() -> str:
     return datetime.now(timezone.utc).isoformat(timespec="seconds")
 
 
-def check_arch(arch: str, flag: str = "--arch"):
-    """Raise StudyArgumentError, listing the available archs, when `arch` is missing here."""
-    if arch == "cpu":
-        return
-    available = available_archs()
-    if arch not in available:
-        raise common.StudyArgumentError(
-            f"{flag} {arch}: no such backend on this machine; available archs: "
-            f"{', '.join(available)}")
-
-
 # --------------------------------------------------------------------------- measurement
 
-@ti.kernel
-def profile_phases(engine: ti.template(), phases: ti.i32, calls: ti.i32, time_s: float,
-                   terms: ti.template()):
-    """For every live instance, `calls` times: assemble at the current state (time_s, s),
-    then factor when phases >= 2, then solve when phases >= 3."""
-    for b in range(engine.capacity):
-        if engine.status[b] == STATUS_OK:
-            h = engine.dt[None]
-            target = engine.natural_curvature_target(b, time_s)
-            for _ in range(calls):
-                # implicit Euler's inertia scale 1/h² and velocity gain 1/h; with the Jacobian
-                engine.assemble(b, target, 1.0 / (h * h), 1.0 / h, 1, terms)
-                if phases >= 2:
-                    engine.system.factor(b)
-                if phases >= 3:
-                    engine.system.solve(b)
-
-
-def advance(engine, first_step: int, n_steps: int, terms: int):
-    """Implicit Euler steps in launches of simulate's size, finished when this returns."""
+def advance(engine, first_step: int, n_steps: int):
+    """Steps in launches of simulate's size, finished when this returns."""
     step = first_step
     while step < first_step + n_steps:
         count = min(STEPS_PER_LAUNCH, first_step + n_steps - step)
-        engine.advance(step, count, False, terms)
+        engine.advance(step, count)
         step += count
     ti.sync()
 
@@ -214,25 +142,27 @@ def bench_solver(precision: str, jacobian: str = "newton") -> SolverConfig:
 
 
 def start_batch(params, arch: str, precision: str, jacobian: str = "newton"):
-    """(engine, model, solver, terms, setup_s): Taichi initialised, the batch's engine built
-    (or reused) and loaded at rest, as `simulate` does."""
+    """(engine, solver, setup_s): Taichi initialised, the batch's engine built (or reused) and
+    loaded at rest, as `simulate` does."""
     solver = bench_solver(precision, jacobian)
     start = time.perf_counter()
-    model = build_model(params)
-    ensure_taichi(arch, precision)
-    engine = get_engine(model)
-    engine.load(model, solver)
+    engine = prepare_engine(params, solver, arch)
     ti.sync()
-    return engine, model, solver, terms_used(model), time.perf_counter() - start
+    return engine, solver, time.perf_counter() - start
 
 
-def first_launch(engine, terms):
+def terms_of(engine) -> str:
+    """The force terms an engine was compiled with, "+"-joined."""
+    return "+".join(term.name for term in engine.terms)
+
+
+def first_launch(engine):
     """(compile_s, first_s): the first one-step launch (compile + step) less a second one."""
     first = time.perf_counter()
-    advance(engine, 0, 1, terms)
+    advance(engine, 0, 1)
     first = time.perf_counter() - first
     again = time.perf_counter()
-    advance(engine, 1, 1, terms)
+    advance(engine, 1, 1)
     again = time.perf_counter() - again
     return max(first - again, 0.0), first
 
@@ -241,30 +171,31 @@ def measure(params, arch: str, precision: str, steps: int, repeats: int,
             profile_seconds: float, jacobian: str = "newton") -> dict:
     """Throughput and phase split of one batch (see the module docstring): the best of
     `repeats` timed windows, each from rest after the warm-up steps; times in s, µs."""
-    engine, model, solver, terms, setup = start_batch(params, arch, precision, jacobian)
-    batch = model.batch_size
-    compile_s, _ = first_launch(engine, terms)
+    engine, solver, setup = start_batch(params, arch, precision, jacobian)
+    batch = len(params)
+    compile_s, _ = first_launch(engine)
     timed = math.inf
     for _ in range(repeats):
-        engine.load(model, solver)
-        advance(engine, 0, WARMUP_STEPS, terms)
-        iterations_before = engine.newton_total.to_numpy()[:batch].sum()
+        engine = prepare_engine(params, solver, arch)  # the cached engine, back at rest
+        advance(engine, 0, WARMUP_STEPS)
+        iterations_before = engine.state.newton_total.to_numpy()[:batch].sum()
         start = time.perf_counter()
-        advance(engine, WARMUP_STEPS, steps, terms)
+        advance(engine, WARMUP_STEPS, steps)
         timed = min(timed, time.perf_counter() - start)
-        if (engine.status.to_numpy()[:batch] != STATUS_OK).any():
+        if (engine.state.status.to_numpy()[:batch] != STATUS_OK).any():
             raise RuntimeError("an instance failed during the benchmark: its timing is not valid")
         # the same every repeat: the simulation is deterministic
-        iterations = ((engine.newton_total.to_numpy()[:batch].sum() - iterations_before)
+        iterations = ((engine.state.newton_total.to_numpy()[:batch].sum() - iterations_before)
                       / (batch * steps))
 
     robot_steps = batch * steps / timed
     step_us = 1e6 / robot_steps
-    phase = phase_split(engine, terms, batch, (WARMUP_STEPS + steps) * DT,
+    phase = phase_split(engine, batch, (WARMUP_STEPS + steps) * DT,
                         timed / (steps * iterations), profile_seconds)
     assembly, factor, solve = (iterations * phase[name] for name in ("assembly", "factor", "solve"))
     flops = engine.plan.factor_flops
-    return {"gait": params[0].gait, "jacobian": jacobian, "workers": 1, "terms": terms,
+    return {"gait": params[0].gait, "jacobian": jacobian, "workers": 1,
+            "terms": terms_of(engine),
             "n_nodes": engine.n_nodes, "setup_s": setup,
             "compile_s": compile_s,
             "robot_steps_per_s": robot_steps, "real_time_factor": robot_steps * DT,
@@ -275,19 +206,22 @@ def measure(params, arch: str, precision: str, steps: int, repeats: int,
 
 
 def measure_processes(batch: int, workers: int, jacobian: str, steps: int, repeats: int) -> dict:
-    """End-to-end throughput of `simulate(..., workers=workers)` (f64, CPU): the best of
-    `repeats` calls of WARMUP_STEPS + steps steps from rest, after one call that starts the
-    worker processes and compiles their engines; includes splitting the batch, the processes'
-    transfers and building the tables."""
+    """End-to-end throughput of `run_batch` on `workers` local worker processes, one chunk each
+    (f64, CPU): the best of `repeats` calls of WARMUP_STEPS + steps steps from rest, after one
+    call that starts the processes and compiles their engines; includes splitting the batch,
+    the transfers and building the tables."""
     params = [StarParams(gait=GAIT)] * batch
     solver = bench_solver("f64", jacobian)
     duration = (WARMUP_STEPS + steps) * DT
-    simulate(params, duration, solver, workers=workers)
+    chunk = math.ceil(batch / workers)
     timed = math.inf
-    for _ in range(repeats):
-        start = time.perf_counter()
-        result = simulate(params, duration, solver, workers=workers)
-        timed = min(timed, time.perf_counter() - start)
+    with LocalProcesses(workers) as executor:
+        run_batch(params, duration, solver=solver, chunk_size=chunk, executor=executor)
+        for _ in range(repeats):
+            start = time.perf_counter()
+            result = run_batch(params, duration, solver=solver, chunk_size=chunk,
+                               executor=executor)
+            timed = min(timed, time.perf_counter() - start)
     if (result.summary["status"] != "ok").any():
         raise RuntimeError("an instance failed during the benchmark: its timing is not valid")
     robot_steps = batch * (WARMUP_STEPS + steps) / timed
@@ -297,12 +231,12 @@ def measure_processes(batch: int, workers: int, jacobian: str, steps: int, repea
             "step_us": 1e6 / robot_steps}
 
 
-def phase_split(engine, terms, batch, time_s, iteration_s, profile_seconds) -> dict:
+def phase_split(engine, batch, time_s, iteration_s, profile_seconds) -> dict:
     """µs per instance and Newton iteration of assembly, factorisation and solve, from launches
     of `calls` assemblies, assembly + factor, and assembly + factor + solve per instance;
     `iteration_s` (one Newton iteration of the batch, s) sizes `calls`."""
     calls = int(min(max(round(profile_seconds / iteration_s), 1), 10_000))
-    profile_phases(engine, 3, 1, time_s, terms)  # compile outside the timings
+    engine.profile_phases(3, 1, time_s)  # compile outside the timings
     ti.sync()
     cumulative = []
     for phases in (1, 2, 3):
@@ -310,7 +244,7 @@ def phase_split(engine, terms, batch, time_s, iteration_s, profile_seconds) -> d
         best = math.inf
         for _ in range(PROFILE_LAUNCHES):
             start = time.perf_counter()
-            profile_phases(engine, phases, calls, time_s, terms)
+            engine.profile_phases(phases, calls, time_s)
             ti.sync()
             best = min(best, time.perf_counter() - start)
         cumulative.append(best * 1e6 / (batch * calls))
@@ -331,9 +265,8 @@ print("BENCH_PROBE " + json.dumps(bench.first_step_probe(sys.argv[1], sys.argv[2
 def first_step_probe(arch: str, precision: str, batch_size: int, import_s: float) -> dict:
     """In a fresh process: setup (Taichi init, engine, load) and the first launch of a batch,
     split into compile and step by timing a second launch. Times in s."""
-    engine, _, _, terms, setup = start_batch([StarParams(gait=GAIT)] * batch_size, arch,
-                                             precision)
-    compile_s, first = first_launch(engine, terms)
+    engine, _, setup = start_batch([StarParams(gait=GAIT)] * batch_size, arch, precision)
+    compile_s, first = first_launch(engine)
     return {"gait": GAIT, "import_s": import_s, "setup_s": setup, "compile_s": compile_s,
             "time_to_first_step_s": import_s + setup + first}
 
@@ -361,115 +294,80 @@ def cache_probe(arch: str, precision: str, batch_size: int) -> dict:
 # --------------------------------------------------------------------------- CLI
 
 def build_parser():
-    parser = argparse.ArgumentParser(prog="python -m studies bench", description=DESCRIPTION)
-    parser.add_argument("--arch", choices=("cpu", "gpu"), default="cpu",
-                        help="Taichi backend (default cpu); gpu writes bench_gpu.csv/png")
-    parser.add_argument("--out", default=common.DEFAULT_OUT, help="output folder (default results/)")
-    parser.add_argument("--quick", action="store_true",
-                        help=f"small fast run for tests: B {QUICK_BATCH_SIZES}, f64, "
-                             f"{QUICK_STEPS} steps, scenarios {QUICK_SCENARIOS} at "
-                             f"B = {QUICK_SCENARIO_BATCH}, no cache probe")
-    parser.add_argument("--batch-sizes", default=None,
-                        help=f"comma list of batch sizes B >= 1 (default {DEFAULT_BATCH_SIZES})")
-    parser.add_argument("--precisions", default=None,
-                        help=f"comma list of {', '.join(PRECISIONS)} (default f64,f32)")
-    parser.add_argument("--steps", type=int, default=None,
-                        help=f"timed steps per measurement, after {WARMUP_STEPS} warm-up steps "
-                             f"(default {DEFAULT_STEPS})")
-    parser.add_argument("--repeats", type=int, default=None,
-                        help=f"timed windows per measurement, the best counts (default "
-                             f"{DEFAULT_REPEATS}; --quick 1)")
-    parser.add_argument("--scenarios", default=None,
-                        help=f"comma list of {', '.join(SCENARIOS)} (default all), measured at "
-                             f"B = {SCENARIO_BATCH} in the first precision; 'none' skips them")
-    parser.add_argument("--scenario-batch", type=int, default=None,
-                        help=f"batch size of the scenarios (default {SCENARIO_BATCH})")
-    parser.add_argument("--jacobians", default=None,
-                        help=f"comma list of {', '.join(JACOBIANS)} for the B sweep and the "
-                             f"processes section (default newton,chord; --quick newton)")
-    parser.add_argument("--workers", default=None,
-                        help="comma list of worker-process counts for the end-to-end "
-                             "`simulate(workers=...)` section (default 1,2; --quick none)")
-    parser.add_argument("--process-batch", type=int, default=None,
+    parser = cli.StudyParser("bench", DESCRIPTION)
+    parser.add_argument("--batch-sizes", default=DEFAULT_BATCH_SIZES, quick=QUICK_BATCH_SIZES,
+                        help="comma list of batch sizes B >= 1")
+    parser.add_argument("--precisions", default="f64,f32", quick="f64",
+                        help="comma list of f64, f32")
+    parser.add_argument("--steps", type=int, default=DEFAULT_STEPS, quick=QUICK_STEPS,
+                        help=f"timed steps per measurement, after {WARMUP_STEPS} warm-up steps")
+    parser.add_argument("--repeats", type=int, default=DEFAULT_REPEATS, quick=1,
+                        help="timed windows per measurement, the best counts")
+    parser.add_argument("--scenarios", default=",".join(SCENARIOS), quick=QUICK_SCENARIOS,
+                        help=f"comma list of {', '.join(SCENARIOS)} measured at the scenario "
+                             f"batch size in the first precision, or none")
+    parser.add_argument("--scenario-batch", type=int, default=SCENARIO_BATCH,
+                        quick=QUICK_SCENARIO_BATCH, help="batch size of the scenarios")
+    parser.add_argument("--jacobians", default="newton,chord", quick="newton",
+                        help="comma list of newton, chord for the B sweep and the processes "
+                             "section")
+    parser.add_argument("--workers-list", default="1,2", quick="none",
+                        help="comma list of worker-process counts for the end-to-end processes "
+                             "section, or none")
+    parser.add_argument("--process-batch", type=int, default=PROCESS_BATCH,
                         help=f"batch size of the processes section (default {PROCESS_BATCH})")
     parser.add_argument("--no-cache-probe", action="store_true",
-                        help="skip the cold/warm offline-cache compile probe (two subprocesses)")
-    parser.add_argument("--no-progress", action="store_true", help="print no per-row lines")
+                        help="skip the cold/warm offline-cache compile probe (two subprocesses; "
+                             "skipped by --quick)")
     return parser
+
+
+def solver_choices(text: str, flag: str, field: str):
+    """A comma list of SolverConfig values of `field`, each checked by SolverConfig itself."""
+    values = cli.parse_values(text, flag, str)
+    for value in values:
+        try:
+            bench_solver(**{"precision": "f64", field: value})
+        except ValueError as error:
+            raise cli.StudyArgumentError(f"{flag}: {error}") from None
+    return values
+
+
+def optional_list(text: str, flag: str, parse):
+    return [] if text.strip().lower() == "none" else parse(text, flag)
 
 
 def parse_args(argv):
     """Parsed and validated arguments (StudyArgumentError before any computation)."""
-    args = build_parser().parse_args(argv)
-    batch_text = args.batch_sizes if args.batch_sizes is not None else (
-        QUICK_BATCH_SIZES if args.quick else DEFAULT_BATCH_SIZES)
-    args.batch_sizes = common.parse_values(batch_text, "--batch-sizes", int)
-    if any(b < 1 for b in args.batch_sizes):
-        raise common.StudyArgumentError(f"--batch-sizes: every batch size must be >= 1, got "
-                                        f"{batch_text!r}")
-    precision_text = args.precisions if args.precisions is not None else (
-        "f64" if args.quick else "f64,f32")
-    args.precisions = common.parse_values(precision_text, "--precisions", str)
-    unknown = [p for p in args.precisions if p not in PRECISIONS]
-    if unknown:
-        raise common.StudyArgumentError(f"--precisions: unknown precision {unknown[0]!r}; "
-                                        f"choose from {', '.join(PRECISIONS)}")
-    if args.steps is None:
-        args.steps = QUICK_STEPS if args.quick else DEFAULT_STEPS
-    if args.steps < 1:
-        raise common.StudyArgumentError(f"--steps must be >= 1, got {args.steps}")
-    if args.repeats is None:
-        args.repeats = 1 if args.quick else DEFAULT_REPEATS
-    if args.repeats < 1:
-        raise common.StudyArgumentError(f"--repeats must be >= 1, got {args.repeats}")
-    scenario_text = args.scenarios if args.scenarios is not None else (
-        QUICK_SCENARIOS if args.quick else ",".join(SCENARIOS))
-    args.scenarios = ([] if scenario_text.strip().lower() == "none"
-                      else common.parse_values(scenario_text, "--scenarios", str))
-    unknown = [s for s in args.scenarios if s not in SCENARIOS]
-    if unknown:
-        raise common.StudyArgumentError(f"--scenarios: unknown scenario {unknown[0]!r}; choose "
-                                        f"from {', '.join(SCENARIOS)} or none")
-    if args.scenario_batch is None:
-        args.scenario_batch = QUICK_SCENARIO_BATCH if args.quick else SCENARIO_BATCH
-    if args.scenario_batch < 1:
-        raise common.StudyArgumentError(f"--scenario-batch must be >= 1, got "
-                                        f"{args.scenario_batch}")
-    jacobian_text = args.jacobians if args.jacobians is not None else (
-        "newton" if args.quick else ",".join(JACOBIANS))
-    args.jacobians = common.parse_values(jacobian_text, "--jacobians", str)
-    unknown = [j for j in args.jacobians if j not in JACOBIANS]
-    if unknown:
-        raise common.StudyArgumentError(f"--jacobians: unknown Jacobian mode {unknown[0]!r}; "
-                                        f"choose from {', '.join(JACOBIANS)}")
-    worker_text = args.workers if args.workers is not None else ("none" if args.quick else "1,2")
-    args.workers = ([] if worker_text.strip().lower() == "none"
-                    else common.parse_values(worker_text, "--workers", int))
-    if any(w < 1 for w in args.workers):
-        raise common.StudyArgumentError(f"--workers: every count must be >= 1, got {worker_text!r}")
-    if args.workers and args.arch != "cpu":
-        raise common.StudyArgumentError("--workers: worker processes run on the CPU; use "
-                                        "--workers none with --arch gpu")
-    if args.process_batch is None:
-        args.process_batch = PROCESS_BATCH
-    if args.process_batch < 1:
-        raise common.StudyArgumentError(f"--process-batch must be >= 1, got {args.process_batch}")
+    args = cli.parse(build_parser(), argv)
+    args.batch_sizes = cli.parse_counts(args.batch_sizes, "--batch-sizes")
+    args.precisions = solver_choices(args.precisions, "--precisions", "precision")
+    args.jacobians = solver_choices(args.jacobians, "--jacobians", "jacobian")
+    args.scenarios = optional_list(args.scenarios, "--scenarios",
+                                   lambda text, flag: cli.parse_choices(text, flag, SCENARIOS))
+    args.workers_list = optional_list(args.workers_list, "--workers-list", cli.parse_counts)
+    for flag in ("steps", "repeats", "scenario_batch", "process_batch"):
+        if getattr(args, flag) < 1:
+            raise cli.StudyArgumentError(f"--{flag.replace('_', '-')} must be >= 1, got "
+                                         f"{getattr(args, flag)}")
+    if args.workers_list and args.arch != "cpu":
+        raise cli.StudyArgumentError("--workers-list: worker processes run on the CPU; use "
+                                     "--workers-list none with --arch gpu")
     args.cache_probe = not (args.no_cache_probe or args.quick)
-    check_arch(args.arch)
     return args
 
 
-def output_paths(out: Path, arch: str):
-    """(csv, png) for the arch: bench.* on the CPU, bench_gpu.* on a GPU."""
+def output_names(arch: str):
+    """(csv, png) names for the arch: bench.* on the CPU, bench_gpu.* on a GPU."""
     stem = "bench" if arch == "cpu" else "bench_gpu"
-    return out / f"{stem}.csv", out / f"{stem}.png"
+    return f"{stem}.csv", f"{stem}.png"
 
 
 def run_bench(args) -> pd.DataFrame:
     """Every measurement of the parsed arguments as one table (columns `COLUMNS`)."""
-    base = {**machine_info(args.arch), "arch": args.arch, "dt_s": DT,
+    base = {**provenance.machine_columns(args.arch), "arch": args.arch, "dt_s": DT,
             "warmup_steps": WARMUP_STEPS, "steps": args.steps,
-            "repeats": args.repeats, "commit": git_commit()}
+            "repeats": args.repeats, "commit": provenance.short_commit()}
     profile_seconds = QUICK_PROFILE_SECONDS if args.quick else PROFILE_SECONDS
     rows = []
 
@@ -496,7 +394,7 @@ def run_bench(args) -> pd.DataFrame:
                                   profile_seconds)
                 add({"section": "skip", "scenario": scenario, "batch_size": args.scenario_batch,
                      "precision": precision, **figures})
-    for workers in args.workers:
+    for workers in args.workers_list:
         for jacobian in args.jacobians:
             figures = measure_processes(args.process_batch, workers, jacobian, args.steps,
                                         args.repeats)
@@ -512,9 +410,9 @@ def run_bench(args) -> pd.DataFrame:
 
 def plot_bench(csv_path, png_path):
     """Three panels from a bench CSV: throughput against B (log-log, one line per precision,
-    the design §6 target dashed, real-time factor on the right axis); the phase split per
+    the target dashed, real-time factor on the right axis); the phase split per
     instance-step of the B sweep; the scenarios' throughput."""
-    plt = common.use_agg()
+    plt = cli.use_agg()
     table = pd.read_csv(csv_path, dtype={"commit": str})  # a hash like 83e1667 reads as a float
     arch = str(table["arch"].iloc[0])
     sweep = table[table["section"] == "batch"]
@@ -530,10 +428,10 @@ def plot_bench(csv_path, png_path):
     processes = table[table["section"] == "processes"]
     for row in processes.to_dict("records"):
         ax.plot(row["batch_size"], row["robot_steps_per_s"], "s", markersize=8,
-                label=f"simulate(workers={int(row['workers'])}), {row['jacobian']}, f64")
+                label=f"{int(row['workers'])} worker processes, {row['jacobian']}, f64")
     target = TARGETS["cpu" if arch == "cpu" else "gpu"]
     ax.axhline(target, color="k", ls="--", lw=1,
-               label=f"design §6 target {target:,.0f}/s")
+               label=f"target {target:,.0f}/s")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("batch size B (instances)")
@@ -571,10 +469,11 @@ def plot_bench(csv_path, png_path):
 
 def main(argv=None):
     args = parse_args(argv)
-    out = common.out_dir(args)
-    csv_path, png_path = output_paths(out, args.arch)
+    out = cli.Output(args, argv or [], model={"gait": GAIT, "scenarios": SCENARIOS},
+                     solver={precision: bench_solver(precision) for precision in args.precisions})
+    csv_name, png_name = output_names(args.arch)
     table = run_bench(args)
-    common.write_csv(table, csv_path)
-    plot_bench(csv_path, png_path)
-    print(common.describe([csv_path, png_path]))
+    csv_path = out.write_csv(table, csv_name)
+    out.wrote(plot_bench(csv_path, out.path(png_name)))
+    out.report()
     return table

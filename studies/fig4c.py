@@ -1,56 +1,47 @@
 """Fig. 4c and 4b of the paper: the five gaits at the paper's parameters, 3 cycles from rest.
 
-    python -m studies fig4c [--arch cpu|gpu] [--out results/] [--quick]
-                            [--discretisation paper|converged] [--cycles 3] [--set NAME=VALUE ...]
+    python -m studies fig4c [--out DIR] [--quick] [--arch cpu|gpu] [--preset paper|accurate]
+                            [--set NAME=VALUE ...] [--cycles 3] [--dt S] [--prefix fig4c]
 
-Writes (prefix `fig4c` by default):
+Writes (prefix `fig4c` by default), each table with its provenance sidecar (`.csv.json`):
 - `fig4c.csv`: gait, sim_speed_mm_s, sim_signed_speed_mm_s, sim_direction, exp_speed_mm_s,
-  exp_cycle_speed_std_mm_s, paper_direction, direction_matches, speed_ratio, status (experiment:
-  full-trial speeds, and the spread of its per-cycle speeds drawn as error bars);
-- `fig4c_summary.csv`: the full simulation summary (every parameter, speeds over cycles 0-3 and
-  1-3, Newton statistics, status);
+  exp_cycle_speed_std_mm_s, paper_direction, direction_matches, speed_ratio, status
+  (experiment: full-trial speeds, and the spread of its per-cycle speeds, drawn as error bars);
+- `fig4c_summary.csv`: the full simulation summary (every parameter, whole-run and steady
+  speeds, Newton statistics, status);
 - `fig4b.csv`: centroid displacement against time, simulation and experiment (long form);
 - `fig4c.png` (grouped bars, simulation next to experiment) and `fig4b.png` (displacement
   against time, simulation solid, experiment dashed), drawn from the CSVs above.
-
-From Python: `run_fig4c(out_dir, overrides={"alpha": 1.0})` returns the Fig. 4c table.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Sequence
 
 import numpy as np
 import pandas as pd
 
-from taichi_star.experiment import (PAPER_GAITS, compare_with_experiment,
-                                    experimental_trajectory)
-from taichi_star.params import SolverConfig, StarParams
+from taichi_star import StarParams
+from taichi_star.batch import run_batch
+from taichi_star.experiment import PAPER_GAITS, compare_with_experiment, experimental_trajectory
 
-from . import common
+from . import cli
 
 DESCRIPTION = ("The paper's Fig. 4c/4b: speed of the five gaits (A1, A1+A2, A1+A3, A1+A4, "
                "A1+A3+A5), simulation vs experiment, 3 cycles from rest.")
+RECORDS = 150
+"""About this many centroid records per run (for Fig. 4b)."""
 
 
-def fig4c_params(base: StarParams = StarParams(), gaits: Sequence[str] = PAPER_GAITS):
+def fig4c_params(base: StarParams, gaits: Sequence[str] = PAPER_GAITS):
     """One StarParams per gait, on top of `base`."""
     return [base.replace(gait=g) for g in gaits]
 
 
-def fig4c_table(summary: pd.DataFrame) -> pd.DataFrame:
-    """The Fig. 4c table from a simulate summary (see taichi_star.experiment)."""
-    return compare_with_experiment(summary)
-
-
-def record_stride(total_steps: int, per_cycle=None, frames_per_cycle: int = 60) -> int:
-    """A recording stride that hits every cycle boundary (when `per_cycle` is an integer) with
-    about `frames_per_cycle` records per cycle; otherwise ~150 records in all."""
-    if per_cycle:
-        target = max(1, per_cycle // frames_per_cycle)
-        return max(d for d in range(1, target + 1) if per_cycle % d == 0)
-    return max(1, total_steps // 150)
+def record_interval(duration_s: float, dt: float) -> float:
+    """A record interval (s, a whole number of steps) giving about RECORDS records."""
+    return max(1, int(round(duration_s / dt)) // RECORDS) * dt
 
 
 def fig4b_table(summary: pd.DataFrame, trajectory: pd.DataFrame, duration_s: float) -> pd.DataFrame:
@@ -77,10 +68,9 @@ def fig4b_table(summary: pd.DataFrame, trajectory: pd.DataFrame, duration_s: flo
 
 
 def plot_fig4c(csv_path, png_path, title: str = None):
-    """Grouped bars from a fig4c CSV: simulated |speed| next to the experiment (error bar: the
-    std of its per-cycle speeds), per gait; the simulated direction is written on each bar (red
-    when it disagrees with the paper)."""
-    plt = common.use_agg()
+    """Grouped bars from a fig4c CSV: simulated |speed| next to the experiment, per gait; the
+    simulated direction is written on each bar (red when it disagrees with the paper)."""
+    plt = cli.use_agg()
     table = pd.read_csv(csv_path)
     x = np.arange(len(table))
     width = 0.38
@@ -118,7 +108,7 @@ def plot_fig4c(csv_path, png_path, title: str = None):
 def plot_fig4b(csv_path, png_path, title: str = None):
     """Displacement against time from a fig4b CSV: simulation solid, experiment dashed, one
     colour per gait."""
-    plt = common.use_agg()
+    plt = cli.use_agg()
     table = pd.read_csv(csv_path)
     fig, ax = plt.subplots(figsize=(7.5, 4.2))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
@@ -140,68 +130,38 @@ def plot_fig4b(csv_path, png_path, title: str = None):
     return Path(png_path)
 
 
-def run_fig4c(out, base: StarParams = StarParams(), overrides: Mapping = None,
-              cycles: float = 3.0, solver: SolverConfig = SolverConfig(), arch: str = "cpu",
-              quick: bool = False, prefix: str = "fig4c", progress: bool = True,
-              title_note: str = "") -> pd.DataFrame:
-    """Run the five gaits, write `<prefix>.csv`, `<prefix>_summary.csv`, the fig4b CSV and both
-    plots into `out`, and return the Fig. 4c table."""
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    if overrides:
-        try:
-            base = base.replace(**dict(overrides))
-        except (ValueError, TypeError) as error:
-            raise common.StudyArgumentError(f"invalid parameter value: {error}") from None
-    params = fig4c_params(base)
-    duration = common.QUICK_DURATION_S if quick else cycles * base.period
-    total_steps = int(round(duration / solver.dt))
-    per_cycle = None if quick else common.steps_per_cycle(base.period, solver.dt)
-    stride = record_stride(total_steps, per_cycle)
-    result = common.run_batch(params, duration_s=duration, solver=solver, arch=arch,
-                              record_every=stride, progress=progress)
-    summary = result.summary
-
-    fig4b_prefix = prefix.replace("fig4c", "fig4b") if "fig4c" in prefix else prefix + "_fig4b"
-    paths = [common.write_csv(fig4c_table(summary), out / f"{prefix}.csv"),
-             common.write_csv(summary, out / f"{prefix}_summary.csv"),
-             common.write_csv(fig4b_table(summary, result.trajectory, duration),
-                              out / f"{fig4b_prefix}.csv")]
-    note = f" {title_note}" if title_note else ""
-    paths.append(plot_fig4c(paths[0], out / f"{prefix}.png",
-                            title=(f"Fig. 4c{note}: speed over {duration:g} s from rest\n"
-                                   f"(labels: direction; red = disagrees with the paper)")))
-    paths.append(plot_fig4b(paths[2], out / f"{fig4b_prefix}.png",
-                            title=f"Fig. 4b{note}: centroid displacement (simulation solid, "
-                                  f"experiment dashed)"))
-    print(common.describe(paths))
-    return pd.read_csv(paths[0])
-
-
 def build_parser():
-    parser = common.common_parser("fig4c", DESCRIPTION)
-    parser.add_argument("--cycles", type=float, default=3.0,
-                        help="actuation cycles from rest (default 3, as the paper)")
-    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                        help="override one StarParams field for all gaits, e.g. --set alpha=1.0")
+    parser = cli.StudyParser("fig4c", DESCRIPTION)
+    cli.add_model_flags(parser, fixed=("gait",))
+    cli.add_dt_flag(parser)
+    cli.add_cycles_flag(parser)
     parser.add_argument("--prefix", default="fig4c", help="output file prefix (default fig4c)")
     return parser
 
 
 def main(argv=None):
-    args = build_parser().parse_args(argv)
-    common.check_positive(args.cycles, "--cycles")
-    overrides = common.parse_overrides(args.set)
-    if "gait" in overrides:
-        raise common.StudyArgumentError("--set gait=...: fig4c always runs the five paper gaits")
-    base = common.base_params(args)
-    try:
-        base.replace(**overrides)
-    except (ValueError, TypeError) as error:
-        raise common.StudyArgumentError(f"--set: {error}") from None
-    table = run_fig4c(args.out, base=base, overrides=overrides, cycles=args.cycles,
-                      solver=common.solver_for(args), arch=args.arch, quick=args.quick,
-                      prefix=args.prefix, progress=not args.no_progress)
+    args = cli.parse(build_parser(), argv)
+    base = cli.base_params(args)
+    solver = cli.solver(args)
+    out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
+                     solver=solver)
+    params = fig4c_params(base)
+    duration = cli.duration_s(args, base.period)
+    result = run_batch(params, duration, solver=solver, arch=args.arch,
+                       record_interval_s=record_interval(duration, solver.dt),
+                       progress=not args.no_progress)
+    prefix = args.prefix
+    fig4b_prefix = prefix.replace("fig4c", "fig4b") if "fig4c" in prefix else prefix + "_fig4b"
+    table_csv = out.write_csv(compare_with_experiment(result.summary), f"{prefix}.csv")
+    out.write_csv(result.summary, f"{prefix}_summary.csv")
+    curves_csv = out.write_csv(fig4b_table(result.summary, result.trajectory, duration),
+                               f"{fig4b_prefix}.csv")
+    out.wrote(plot_fig4c(table_csv, out.path(f"{prefix}.png"),
+                         title=f"Fig. 4c: speed over {duration:g} s from rest (labels: "
+                               f"direction; red = disagrees with the paper)"),
+              plot_fig4b(curves_csv, out.path(f"{fig4b_prefix}.png")))
+    out.report()
+    table = pd.read_csv(table_csv)
     with pd.option_context("display.width", 160, "display.max_columns", 20):
         print(table.to_string(index=False))
     return table

@@ -1,13 +1,14 @@
 """Every gait: the 255 non-empty actuator sets, simulated once per symmetry class (29 classes
-under the octagon's 8 rotations and 8 reflections, design §3) and expanded back.
+under the octagon's 8 rotations and 8 reflections) and expanded back.
 
-    python -m studies gaits [--cycles 3] [--arch cpu|gpu] [--out results/] [--quick]
-                            [--set NAME=VALUE ...] [--discretisation paper|converged]
+    python -m studies gaits [--cycles 3] [--arch cpu|gpu] [--out DIR] [--quick]
+                            [--preset paper|accurate] [--set NAME=VALUE ...]
                             [--workers N | --scheduler tcp://HOST:PORT]
 
 Writes `gaits.csv` (one row per gait: gait, class_representative, class_size, rotation and
-reflection mapping the representative onto it, speed, signed speed, heading and heading relative
-to the gait's forward direction (NaN for a gait that does not move), status),
+reflection mapping the representative onto it, whole-run and steady speeds, travel direction
+and travel direction relative to the gait's forward direction (NaN for a gait that does not
+move), heading (body rotation at the end), status),
 `gaits_classes.csv` (the 29 simulated instances, full summary) and `gaits.png` (the classes
 ranked by speed, each bar with an actuator pictogram).
 
@@ -23,22 +24,23 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from taichi_star import StarParams
+from taichi_star.batch import run_batch
 from taichi_star.gait import N_ACTUATORS, Gait, symmetry_classes
-from taichi_star.params import StarParams
 
-from . import common, distributed
+from . import cli
 
 DESCRIPTION = "All 255 gaits, one simulation per octagon symmetry class (29), ranked by speed."
 
 ZERO_SPEED_MM_S = 1e-9
 """Below this speed (mm/s; ~1e-8 mm over a few cycles, the solver's resolution) a gait is taken
-as not moving at all, as the symmetric gaits without a forward direction do, and its heading is
-reported as NaN rather than the direction of round-off."""
+as not moving at all, as the symmetric gaits without a forward direction do, and its travel
+direction is reported as NaN rather than the direction of round-off."""
 
 GAITS_COLUMNS = ["gait", "class_representative", "class_size", "rotation", "reflected",
                  "speed_mm_s", "signed_speed_mm_s", "steady_speed_mm_s",
-                 "steady_signed_speed_mm_s", "heading_deg", "heading_relative_deg",
-                 "n_actuators", "status"]
+                 "steady_signed_speed_mm_s", "travel_direction_deg",
+                 "travel_direction_relative_deg", "heading_deg", "n_actuators", "status"]
 
 
 def symmetry_map(source: str, target: str):
@@ -51,11 +53,17 @@ def symmetry_map(source: str, target: str):
     return None
 
 
-def transform_heading(heading_deg: float, rotation: int, reflect: bool) -> float:
-    """Image of a heading angle under the symmetry of `Gait.transform` (reflection across the
-    A1 axis, then rotation by rotation·45°), wrapped to (-180, 180]."""
-    angle = (-heading_deg if reflect else heading_deg) + 45.0 * rotation
+def transform_direction(direction_deg: float, rotation: int, reflect: bool) -> float:
+    """Image of a direction (degrees from +x) under the symmetry of `Gait.transform` (reflection
+    across the A1 axis, then rotation by rotation·45°), wrapped to (-180, 180]."""
+    angle = (-direction_deg if reflect else direction_deg) + 45.0 * rotation
     return wrap_degrees(angle)
+
+
+def transform_rotation(rotation_deg: float, reflect: bool) -> float:
+    """Image of a body rotation (counter-clockwise, degrees) under the symmetry: a rotation of
+    the gait leaves it unchanged, a reflection reverses it."""
+    return -rotation_deg if reflect else rotation_deg
 
 
 def wrap_degrees(angle: float) -> float:
@@ -65,13 +73,13 @@ def wrap_degrees(angle: float) -> float:
     return 180.0 if wrapped == -180.0 else wrapped
 
 
-def relative_heading(gait: str, heading_deg: float) -> float:
-    """Heading relative to the gait's forward direction, degrees in (-180, 180]; NaN where the
-    forward direction is undefined."""
+def relative_direction(gait: str, direction_deg: float) -> float:
+    """A direction relative to the gait's forward direction, degrees in (-180, 180]; NaN where
+    the forward direction is undefined."""
     forward = Gait.parse(gait).forward
-    if forward is None or not math.isfinite(heading_deg):
+    if forward is None or not math.isfinite(direction_deg):
         return math.nan
-    return wrap_degrees(heading_deg - math.degrees(math.atan2(forward[1], forward[0])))
+    return wrap_degrees(direction_deg - math.degrees(math.atan2(forward[1], forward[0])))
 
 
 def class_params(base: StarParams = StarParams()):
@@ -82,8 +90,8 @@ def class_params(base: StarParams = StarParams()):
 
 def expand_classes(summary: pd.DataFrame, classes=None) -> pd.DataFrame:
     """All gaits from a summary of the class representatives (rows matched by gait): the same
-    speeds, the heading mapped by the symmetry. Columns GAITS_COLUMNS; 255 rows sorted by
-    (number of actuators, bitmask)."""
+    speeds, the travel direction and the heading mapped by the symmetry. Columns GAITS_COLUMNS;
+    255 rows sorted by (number of actuators, bitmask)."""
     classes = classes if classes is not None else symmetry_classes()
     by_gait = {row["gait"]: row for _, row in summary.iterrows()}
     rows = []
@@ -93,18 +101,20 @@ def expand_classes(summary: pd.DataFrame, classes=None) -> pd.DataFrame:
         for gait in members:
             rotation, reflect = symmetry_map(rep, gait)
             moving = ok and float(source["speed_mm_s"]) >= ZERO_SPEED_MM_S
-            heading = transform_heading(float(source["heading_deg"]), rotation, reflect) \
-                if moving else math.nan
+            direction = (transform_direction(float(source["travel_direction_deg"]), rotation,
+                                             reflect) if moving else math.nan)
             rows.append({
                 "gait": gait, "class_representative": rep, "class_size": len(members),
                 "rotation": rotation, "reflected": reflect,
                 "speed_mm_s": source["speed_mm_s"] if ok else math.nan,
                 "signed_speed_mm_s": source["signed_speed_mm_s"] if ok else math.nan,
-                "steady_speed_mm_s": source.get("steady_speed_mm_s", math.nan) if ok else math.nan,
-                "steady_signed_speed_mm_s": (source.get("steady_signed_speed_mm_s", math.nan)
-                                             if ok else math.nan),
-                "heading_deg": heading,
-                "heading_relative_deg": relative_heading(gait, heading),
+                "steady_speed_mm_s": source["steady_speed_mm_s"] if ok else math.nan,
+                "steady_signed_speed_mm_s": (source["steady_signed_speed_mm_s"] if ok
+                                             else math.nan),
+                "travel_direction_deg": direction,
+                "travel_direction_relative_deg": relative_direction(gait, direction),
+                "heading_deg": (transform_rotation(float(source["heading_deg"]), reflect)
+                                if ok else math.nan),
                 "n_actuators": len(Gait.parse(gait).actuators),
                 "status": source["status"],
             })
@@ -118,7 +128,7 @@ def plot_gaits(csv_path, png_path):
     """Classes ranked by speed, from a gaits CSV: one bar per class (coloured by the sign of the
     signed speed), labelled with the representative, its class size and an actuator pictogram
     (filled dots = fired actuators, A1 on the right, counter-clockwise)."""
-    plt = common.use_agg()
+    plt = cli.use_agg()
     table = pd.read_csv(csv_path)
     classes = table.drop_duplicates("class_representative").copy()
     classes = classes.sort_values("speed_mm_s", ascending=True, na_position="first")
@@ -163,38 +173,28 @@ def plot_gaits(csv_path, png_path):
 
 
 def build_parser():
-    parser = common.common_parser("gaits", DESCRIPTION)
-    parser.add_argument("--cycles", type=float, default=3.0, help="cycles from rest (default 3)")
-    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                        help="override a StarParams field for every gait, e.g. --set alpha=1.0")
-    distributed.add_arguments(parser)
+    parser = cli.StudyParser("gaits", DESCRIPTION)
+    cli.add_model_flags(parser, fixed=("gait",))
+    cli.add_dt_flag(parser)
+    cli.add_cycles_flag(parser)
+    cli.add_execution_flags(parser)
     return parser
 
 
 def main(argv=None):
-    args = build_parser().parse_args(argv)
-    common.check_positive(args.cycles, "--cycles")
-    overrides = common.parse_overrides(args.set)
-    if "gait" in overrides:
-        raise common.StudyArgumentError("--set gait=...: the gaits study runs every gait")
-    try:
-        base = common.base_params(args).replace(**overrides)
-    except (ValueError, TypeError) as error:
-        raise common.StudyArgumentError(f"--set: {error}") from None
+    args = cli.parse(build_parser(), argv)
+    base = cli.base_params(args)
     params, classes = class_params(base)
-    solver = common.solver_for(args)
-    common.chunk_size_for(args)  # validates --chunk-size
-    distributed.validate(args)
-    duration = common.QUICK_DURATION_S if args.quick else None
-    with distributed.executor_for(args) as executor:
-        out = common.out_dir(args)
-        result = common.run_batch(params, cycles=args.cycles, duration_s=duration, solver=solver,
-                                  arch=args.arch, progress=not args.no_progress, executor=executor,
-                                  chunk_size=distributed.default_chunk_size(
-                                      args, len(params), executor.n_workers))
-    classes_csv = common.write_csv(result.summary, out / "gaits_classes.csv")
+    solver = cli.solver(args)
+    out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
+                     solver=solver)
+    with cli.executor(args) as executor:
+        result = run_batch(params, **cli.run_length(args), solver=solver, arch=args.arch,
+                           chunk_size=cli.chunk_size(args, len(params), executor.n_workers),
+                           executor=executor, progress=not args.no_progress)
+    out.write_csv(result.summary, "gaits_classes.csv")
     table = expand_classes(result.summary, classes)
-    csv = common.write_csv(table, out / "gaits.csv")
-    png = plot_gaits(csv, out / "gaits.png")
-    print(common.describe([csv, classes_csv, png]))
+    csv = out.write_csv(table, "gaits.csv")
+    out.wrote(plot_gaits(csv, out.path("gaits.png")))
+    out.report()
     return table

@@ -1,7 +1,7 @@
-"""Numerical stability stress test (issue 5, design §6 "no NaN, no silent non-convergence, on
-every stress case; failures isolated per instance").
+"""Numerical stability stress test: no NaN, no silent non-convergence on any stress case, and
+failures isolated per instance.
 
-    python -m studies stability [--quick] [--arch cpu|gpu] [--out results/] [--workers N]
+    python -m studies stability [--quick] [--arch cpu|gpu] [--out DIR] [--workers N]
                                 [--dts-ms 0.5,1,2,5,10,20] [--stiffness 0.01,0.1,1,10,100]
                                 [--alphas 0,0.8,1.5] [--added-mass 0,1,5] [--periods 0.3,3.15]
                                 [--gaits A1,A1+...+A8,A1+A5] [--precisions f64,f32] [--cycles 2]
@@ -14,25 +14,10 @@ instances. One `simulate` batch per (precision, dt, period); other settings are 
 (implicit Euler, Newton Jacobian, max_newton 25, up to 4 substep halvings).
 
 Per instance, node positions are recorded about every 0.06 s (a divisor of the run's step count
-near 0.06 s / dt steps; the final shape is always a record) and checked:
-
-- `max_strain`: max |ε| = | |x_j − x_i| / Δl̄ − 1 | over all edges and records; `max_strain_final`
-  the same on the final shape;
-- `limbs_cross`: two limb polylines (joint → tip, the `n_limb` LIMB edges of each limb) intersect
-  (`segments_cross` between segments of different limbs: a proper crossing, or a collinear
-  overlap; near-parallel segments are tested for collinear overlap, since their intersection
-  parameters are rounding noise: opposite limbs of a symmetric gait are collinear), in any
-  record;
-  `limbs_cross_final` on the final shape;
-- `arc_inverted`: an actuator arc's mean signed curvature (Σ κ_i Δl_i / Σ Δl_i over its interior
-  ARC_BEND triplets, i.e. its total turning over its length) has the opposite sign to its rest
-  value, in any record (the actuation only ever lowers |κ⁰| from 102 to ≈ 14 1/m, never through
-  zero, so an inversion is never asked for); `arc_inverted_final` on the final shape;
-- `sane` = finite positions and no crossing and no inversion in any record and max_strain ≤
-  `STRAIN_LIMIT` (0.5: the linear rod model of design §2.2 means nothing past 50 % strain).
-
-Records of a failed instance are NaN from its failure on; the checks use its finite records
-(so max_strain of a failed instance is the largest before its failure).
+near 0.06 s / dt steps; the final shape is always a record) and checked with
+`taichi_star.metrics.shape_checks`: max_strain (and _final), limbs_cross (and _final),
+arc_inverted (and _final), finite, sane (finite, no crossing, no inversion, |ε| ≤ 0.5). Records
+of a failed instance are NaN from its failure on; the checks use its finite records.
 
 `outcome`: `failed` (status newton_failed / non_finite), `insane` (status ok but not `sane`),
 `retried-then-ok` (ok and sane after ≥ 1 substep retry), `ok` (ok, sane, no retry).
@@ -67,11 +52,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-import taichi_star
-from taichi_star.geometry import ARC_BEND, LIMB, discrete_curvature
-from taichi_star.params import SolverConfig, StarParams
+from taichi_star import SolverConfig, StarParams
+from taichi_star.batch import run_batch
+from taichi_star.metrics import shape_checks
 
-from . import common
+from . import cli
 
 DESCRIPTION = ("Numerical stability stress grid: dt x stiffness x alpha x C_a x period x gait x "
                "precision; status, retries, strain and shape sanity per instance; stable-region "
@@ -96,11 +81,9 @@ QUICK_GAITS = ("A1",)
 QUICK_DURATION_S = 0.05
 
 RECORD_SPACING_S = 0.06
-STRAIN_LIMIT = 0.5
-"""|ε| above this is insane: the linear stretching energy of design §2.2 is a small-strain model."""
 
 PAPER = {"stiffness_factor": 1.0, "alpha": 0.8, "added_mass_coeff": 1.0, "period": 3.15}
-"""The paper's parameters within the grid (design §2)."""
+"""The paper's parameters within the grid."""
 
 SPEED_FLOOR_MM_S = 0.01
 """Floor of the reference speed in f32-vs-f64 relative differences: the symmetric gaits (A1+A5,
@@ -116,141 +99,7 @@ OUTCOMES = ("ok", "retried-then-ok", "insane", "failed")
 STABLE = ("ok", "retried-then-ok")
 
 
-# --------------------------------------------------------------------------- shape checks
-
-def limb_polylines(topology) -> np.ndarray:
-    """(8, n_limb + 1) node indices of each limb from its joint to its tip (LIMB edges)."""
-    limb_edges = topology.edges[topology.edge_kind == LIMB]
-    following = {}
-    for a, b in limb_edges:
-        following.setdefault(int(a), []).append(int(b))
-        following.setdefault(int(b), []).append(int(a))
-    lines = []
-    for joint, tip in zip(topology.joints, topology.tips):
-        line, previous = [int(joint)], None
-        while line[-1] != int(tip):
-            nxt = [n for n in following[line[-1]] if n != previous]
-            if len(nxt) != 1:
-                raise ValueError(f"limb from joint {joint} is not a chain to its tip {tip}")
-            previous = line[-1]
-            line.append(nxt[0])
-        lines.append(line)
-    return np.array(lines)
-
-
-def _cross(a, b):
-    """2-D cross product a × b over the last axis."""
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-
-
-PARALLEL_TOLERANCE = 1e-9
-"""Segments whose directions differ by less than ~1e-9 rad are treated as parallel: the
-intersection parameters of (near-)parallel segments are rounding noise (opposite limbs of a
-symmetric shape are collinear, and a plain orientation test finds them 'crossing' by rounding)."""
-
-
-def segments_cross(p, q, r, s) -> np.ndarray:
-    """Segments p–q and r–s (arrays (..., 2)) -> (...) bool: they cross. Non-parallel segments
-    cross where both intersection parameters lie strictly inside (0, 1) (touching at an end is
-    not counted); (near-)parallel ones where they are collinear (distance ≤ 1e-9 of their
-    length) and their extents along the line overlap with positive length."""
-    d1, d2, offset = q - p, s - r, r - p
-    scale = np.linalg.norm(d1, axis=-1) * np.linalg.norm(d2, axis=-1)
-    denominator = _cross(d1, d2)
-    parallel = ~(np.abs(denominator) > PARALLEL_TOLERANCE * scale)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = _cross(offset, d2) / denominator
-        u = _cross(offset, d1) / denominator
-        proper = (t > 0) & (t < 1) & (u > 0) & (u < 1)
-        # parallel: collinear and overlapping along p–q
-        length1 = np.linalg.norm(d1, axis=-1)
-        distance = np.abs(_cross(offset, d1)) / length1
-        along_r = (offset * d1).sum(-1) / length1
-        along_s = ((s - p) * d1).sum(-1) / length1
-        low, high = np.minimum(along_r, along_s), np.maximum(along_r, along_s)
-        overlap = np.minimum(high, length1) - np.maximum(low, 0.0)
-        collinear = (distance <= PARALLEL_TOLERANCE * length1) & (overlap > 0)
-    return np.where(parallel, collinear, proper)
-
-
-def limbs_cross(positions: np.ndarray, topology) -> np.ndarray:
-    """positions (..., N, 2) -> (...) bool: some segment of one limb crosses a segment of another
-    limb (`segments_cross`)."""
-    lines = limb_polylines(topology)
-    points = positions[..., lines, :]                   # (..., 8, L+1, 2)
-    start, end = points[..., :-1, :], points[..., 1:, :]  # (..., 8, L, 2)
-    n_limbs = lines.shape[0]
-    first, second = np.triu_indices(n_limbs, k=1)
-    # (..., pairs, L, 1, 2) against (..., pairs, 1, L, 2)
-    hit = segments_cross(start[..., first, :, None, :], end[..., first, :, None, :],
-                         start[..., second, None, :, :], end[..., second, None, :, :])
-    return hit.any(axis=(-3, -2, -1))
-
-
-def arc_mean_curvature(positions: np.ndarray, topology) -> np.ndarray:
-    """positions (..., N, 2) -> (..., 8): each actuator arc's mean signed curvature, 1/m:
-    Σ κ_i Δl_i / Σ Δl_i over its interior (ARC_BEND) triplets, Δl_i the rest Voronoi lengths."""
-    arc = topology.triplet_kind == ARC_BEND
-    tri = topology.triplets[arc]
-    voronoi = topology.voronoi_length[arc]
-    owner = topology.triplet_actuator[arc]
-    kappa = discrete_curvature(positions[..., tri[:, 0], :], positions[..., tri[:, 1], :],
-                               positions[..., tri[:, 2], :], voronoi)
-    n_arcs = int(owner.max()) + 1
-    weights = np.zeros((len(owner), n_arcs))
-    weights[np.arange(len(owner)), owner] = voronoi
-    return (kappa @ weights) / weights.sum(axis=0)
-
-
-def arcs_inverted(positions: np.ndarray, topology) -> np.ndarray:
-    """positions (..., N, 2) -> (...) bool: some arc's mean curvature has the opposite sign to
-    its rest value (or is not finite)."""
-    rest = np.sign(arc_mean_curvature(topology.rest_positions, topology))
-    current = arc_mean_curvature(positions, topology)
-    return (~(current * rest > 0)).any(axis=-1)
-
-
-def edge_strain(positions: np.ndarray, topology) -> np.ndarray:
-    """positions (..., N, 2) -> (..., E) ε = |x_j − x_i| / Δl̄ − 1."""
-    edges = topology.edges
-    length = np.linalg.norm(positions[..., edges[:, 1], :] - positions[..., edges[:, 0], :],
-                            axis=-1)
-    return length / topology.rest_length - 1.0
-
-
-def shape_checks(shapes: np.ndarray, topology) -> pd.DataFrame:
-    """shapes (R, B, N, 2) records of B instances (the last record is the final shape) ->
-    one row per instance: max_strain, max_strain_final, limbs_cross, limbs_cross_final,
-    arc_inverted, arc_inverted_final, finite, sane (see the module docstring)."""
-    shapes = np.asarray(shapes, dtype=np.float64)
-    n_records, batch = shapes.shape[:2]
-    finite = np.isfinite(shapes).all(axis=(0, 2, 3))
-    strain_max = np.full(batch, -np.inf)
-    cross_any = np.zeros(batch, dtype=bool)
-    inverted_any = np.zeros(batch, dtype=bool)
-    # one record at a time keeps the pairwise segment test small; records of a failed instance
-    # are NaN from its failure on: the checks use its finite records only
-    for r in range(n_records):
-        valid = np.isfinite(shapes[r]).all(axis=(1, 2))
-        strain = np.abs(edge_strain(shapes[r], topology)).max(axis=-1)
-        strain_max = np.where(valid, np.fmax(strain_max, strain), strain_max)
-        cross_any |= limbs_cross(shapes[r], topology) & valid
-        inverted_any |= arcs_inverted(shapes[r], topology) & valid
-    final = shapes[-1]
-    final_valid = np.isfinite(final).all(axis=(1, 2))
-    table = pd.DataFrame({
-        "max_strain": np.where(np.isfinite(strain_max), strain_max, np.nan),
-        "max_strain_final": np.abs(edge_strain(final, topology)).max(axis=-1),
-        "limbs_cross": cross_any,
-        "limbs_cross_final": limbs_cross(final, topology) & final_valid,
-        "arc_inverted": inverted_any,
-        "arc_inverted_final": arcs_inverted(final, topology) & final_valid,
-        "finite": finite,
-    })
-    table["sane"] = (finite & ~table["limbs_cross"] & ~table["arc_inverted"]
-                     & (table["max_strain"] <= STRAIN_LIMIT))
-    return table
-
+# --------------------------------------------------------------------------- outcomes
 
 def classify(status, substep_retries, sane) -> np.ndarray:
     """Outcome per instance: failed (status not ok) > insane > retried-then-ok > ok."""
@@ -281,7 +130,7 @@ def grid_params(gaits, stiffness, alphas, added_mass, period, base: StarParams):
                         params.append(base.replace(gait=gait, youngs_modulus=factor * BASE_MODULUS,
                                                    alpha=alpha, added_mass_coeff=ca, period=period))
                     except ValueError as error:
-                        raise common.StudyArgumentError(f"invalid grid value: {error}") from None
+                        raise cli.StudyArgumentError(f"invalid grid value: {error}") from None
                     factors.append(factor)
     return params, factors
 
@@ -289,38 +138,22 @@ def grid_params(gaits, stiffness, alphas, added_mass, period, base: StarParams):
 def plan(args):
     """Validated batches: a list of dicts (precision, dt_s, period, duration_s, n_steps, params,
     factors, solver). Raises StudyArgumentError before any compute."""
-    if args.dt is not None:
-        raise common.StudyArgumentError("--dt: the stability grid sets the time steps; use "
-                                        "--dts-ms")
-    if args.workers < 1:
-        raise common.StudyArgumentError(f"--workers must be >= 1, got {args.workers}")
-    if args.workers > 1 and args.arch != "cpu":
-        raise common.StudyArgumentError("--workers > 1 runs CPU processes; use --workers 1 "
-                                        "with --arch gpu")
-    common.check_positive(args.cycles, "--cycles")
     quick = args.quick
-    dts = (common.parse_values(args.dts_ms, "--dts-ms") if args.dts_ms
-           else list(QUICK_DTS_MS if quick else DTS_MS))
-    stiffness = (common.parse_values(args.stiffness, "--stiffness") if args.stiffness
-                 else list(QUICK_STIFFNESS if quick else STIFFNESS))
-    alphas = (common.parse_values(args.alphas, "--alphas") if args.alphas
-              else [PAPER["alpha"]] if quick else list(ALPHAS))
-    added = (common.parse_values(args.added_mass, "--added-mass") if args.added_mass
-             else [PAPER["added_mass_coeff"]] if quick else list(ADDED_MASS))
-    periods = (common.parse_values(args.periods, "--periods") if args.periods
-               else [PAPER["period"]] if quick else list(PERIODS))
-    gaits = (common.resolve_gaits(args.gaits) if args.gaits
-             else list(QUICK_GAITS if quick else GAITS))
-    precisions = (common.parse_values(args.precisions, "--precisions", str) if args.precisions
-                  else ["f64"] if quick else list(PRECISIONS))
+    dts = cli.parse_values(args.dts_ms, "--dts-ms")
+    stiffness = cli.parse_values(args.stiffness, "--stiffness")
+    alphas = cli.parse_values(args.alphas, "--alphas")
+    added = cli.parse_values(args.added_mass, "--added-mass")
+    periods = cli.parse_values(args.periods, "--periods")
+    gaits = cli.resolve_gaits(args.gaits)
+    precisions = cli.parse_values(args.precisions, "--precisions", str)
     for name, values in (("--dts-ms", dts), ("--stiffness", stiffness)):
         if any(v <= 0 for v in values):
-            raise common.StudyArgumentError(f"{name}: every value must be > 0, got {values}")
+            raise cli.StudyArgumentError(f"{name}: every value must be > 0, got {values}")
     for precision in precisions:
         if precision not in TOLERANCE:
-            raise common.StudyArgumentError(f"--precisions: {precision!r} is not one of "
+            raise cli.StudyArgumentError(f"--precisions: {precision!r} is not one of "
                                             f"{list(TOLERANCE)}")
-    base = common.base_params(args)
+    base = cli.base_params(args)
     batches = []
     for precision in precisions:          # one precision after the other: one Taichi re-init
         for period in periods:
@@ -332,10 +165,10 @@ def plan(args):
                     solver = SolverConfig(dt=dt, precision=precision,
                                           newton_tol=TOLERANCE[precision])
                 except ValueError as error:
-                    raise common.StudyArgumentError(f"--dts-ms: {error}") from None
+                    raise cli.StudyArgumentError(f"--dts-ms: {error}") from None
                 n_steps = int(round(duration / dt))
                 if n_steps < 1 or abs(n_steps * dt - duration) > 1e-9 * max(1.0, duration):
-                    raise common.StudyArgumentError(
+                    raise cli.StudyArgumentError(
                         f"--dts-ms: dt {dt_ms} ms does not divide the duration {duration:g} s "
                         f"(period {period:g} s)")
                 batches.append(dict(precision=precision, dt_s=dt, period=period,
@@ -344,7 +177,7 @@ def plan(args):
     return batches
 
 
-def run_grid(batches, arch="cpu", workers=1, progress=True) -> pd.DataFrame:
+def run_grid(batches, arch="cpu", executor=None, chunk_size=None, progress=True) -> pd.DataFrame:
     """Simulate every batch with shape records and return the per-instance table."""
     total = sum(len(b["params"]) * b["n_steps"] for b in batches)
     bar = None
@@ -359,12 +192,13 @@ def run_grid(batches, arch="cpu", workers=1, progress=True) -> pd.DataFrame:
                                 f"T {batch['period']:g} s")
         stride = record_stride(batch["n_steps"], batch["dt_s"])
         started = time.perf_counter()
-        result = taichi_star.simulate(batch["params"], batch["duration_s"], solver=batch["solver"],
-                                      arch=arch, record_every=stride, record_shapes=True,
-                                      workers=workers)
+        result = run_batch(batch["params"], batch["duration_s"], solver=batch["solver"],
+                           arch=arch, record_interval_s=stride * batch["dt_s"],
+                           record_shapes=True, executor=executor,
+                           chunk_size=chunk_size or len(batch["params"]))
         wall = time.perf_counter() - started
         checks = shape_checks(result.shapes, result.topology)
-        summary = result.summary.reset_index(drop=True)
+        summary = result.summary.drop(columns=["instance", "duration_s"])
         front = pd.DataFrame({
             "instance": np.arange(first_instance, first_instance + len(summary)),
             "stiffness_factor": batch["factors"],
@@ -505,7 +339,7 @@ def plot_maps(table: pd.DataFrame, path) -> Path:
     """Stable-region maps: one panel per precision × α, dt (x) against stiffness factor (y);
     each cell's colour is the mix of the outcome colours weighted by their fractions among the
     cell's instances (C_a × period × gait), its text the counts ok/retried/insane/failed."""
-    plt = common.use_agg()
+    plt = cli.use_agg()
     from matplotlib.colors import to_rgb
     from matplotlib.patches import Patch
     precisions = list(dict.fromkeys(table["precision"]))
@@ -595,48 +429,58 @@ def report(table, summary, paper, f32) -> str:
 
 # --------------------------------------------------------------------------- CLI
 
+def numbers(values) -> str:
+    """A flag's text for a tuple of numbers: "0.5,1,2"."""
+    return ",".join(f"{v:g}" for v in values)
+
+
 def build_parser():
-    parser = common.common_parser("stability", DESCRIPTION)
-    parser.add_argument("--workers", type=int, default=1,
-                        help="worker processes for simulate (CPU; default 1, use 2 on 2 cores)")
-    parser.add_argument("--dts-ms", default=None,
-                        help=f"time steps, ms (default {','.join(f'{d:g}' for d in DTS_MS)}; "
-                             f"--quick {','.join(f'{d:g}' for d in QUICK_DTS_MS)})")
-    parser.add_argument("--stiffness", default=None,
-                        help=f"stiffness factors on E = 5 MPa (default "
-                             f"{','.join(f'{s:g}' for s in STIFFNESS)})")
-    parser.add_argument("--alphas", default=None, help="jet ratios (default 0,0.8,1.5)")
-    parser.add_argument("--added-mass", default=None, help="C_a values (default 0,1,5)")
-    parser.add_argument("--periods", default=None, help="periods, s (default 0.3,3.15)")
-    parser.add_argument("--gaits", default=None,
-                        help="gaits (default A1, A1+...+A8, A1+A5; --quick A1)")
-    parser.add_argument("--precisions", default=None, help="f64,f32 (default both; --quick f64)")
-    parser.add_argument("--cycles", type=float, default=CYCLES,
-                        help=f"cycles from rest per instance (default {CYCLES:g}; --quick runs "
-                             f"{QUICK_DURATION_S} s)")
+    parser = cli.StudyParser("stability", DESCRIPTION)
+    parser.add_argument("--dts-ms", default=numbers(DTS_MS), quick=numbers(QUICK_DTS_MS),
+                        help="time steps, ms")
+    parser.add_argument("--stiffness", default=numbers(STIFFNESS), quick=numbers(QUICK_STIFFNESS),
+                        help="stiffness factors on E = 5 MPa")
+    parser.add_argument("--alphas", default=numbers(ALPHAS), quick=numbers([PAPER["alpha"]]),
+                        help="jet ratios")
+    parser.add_argument("--added-mass", default=numbers(ADDED_MASS),
+                        quick=numbers([PAPER["added_mass_coeff"]]), help="C_a values")
+    parser.add_argument("--periods", default=numbers(PERIODS), quick=numbers([PAPER["period"]]),
+                        help="periods, s")
+    parser.add_argument("--gaits", default=",".join(GAITS), quick=",".join(QUICK_GAITS),
+                        help="gaits")
+    parser.add_argument("--precisions", default=",".join(PRECISIONS), quick="f64",
+                        help="f64 and/or f32")
+    cli.add_model_flags(parser, fixed=("gait", "youngs_modulus", "alpha", "added_mass_coeff",
+                                       "period"))
+    cli.add_cycles_flag(parser, default=CYCLES)
+    cli.add_execution_flags(parser)
     return parser
 
 
 def main(argv=None):
-    args = build_parser().parse_args(argv)
+    args = cli.parse(build_parser(), argv)
     batches = plan(args)
-    out = common.out_dir(args)
-    table = run_grid(batches, arch=args.arch, workers=args.workers,
-                     progress=not args.no_progress)
+    out = cli.Output(args, argv or [], model={"preset": args.preset,
+                                              "params": cli.base_params(args)},
+                     solver={precision: {"newton_tol": tolerance} for precision, tolerance
+                             in TOLERANCE.items()})
+    with cli.executor(args) as executor:
+        table = run_grid(batches, arch=args.arch, executor=executor, chunk_size=args.chunk_size,
+                         progress=not args.no_progress)
     summary = outcome_summary(table)
     paper = paper_summary(table)
     f32 = f32_summary(table)
-    paths = [common.write_csv(table, out / "stability.csv"),
-             common.write_csv(summary, out / "stability_summary.csv")]
+    out.write_csv(table, "stability.csv")
+    out.write_csv(summary, "stability_summary.csv")
     if len(paper):
-        paths.append(common.write_csv(paper, out / "stability_paper.csv"))
+        out.write_csv(paper, "stability_paper.csv")
     if len(f32):
-        paths.append(common.write_csv(f32, out / "stability_f32.csv"))
-    paths.append(plot_maps(table, out / "stability.png"))
+        out.write_csv(f32, "stability_f32.csv")
+    out.wrote(plot_maps(table, out.path("stability.png")))
     text = report(table, summary, paper, f32)
-    notes = out / "stability_notes.txt"
+    notes = out.path("stability_notes.txt")
     notes.write_text(text + "\n")
-    paths.append(notes)
+    out.wrote(notes)
     print(text)
-    print(common.describe(paths))
+    out.report()
     return table

@@ -1,45 +1,37 @@
-"""Parameter sensitivity: the Cartesian product of lists or ranges, all instances in one batch.
+"""Parameter sensitivity: the Cartesian product of lists or ranges, run as one chunked batch.
 
     python -m studies sweep --alpha 0.2:1.2:11 --added-mass 0,0.5,1,2 --youngs-modulus 2e6,5e6,1e7
                             [--jet-mode contract,always] [--gaits paper|all|A1,A1+A2] [--cycles 3]
-                            [--param NAME=VALUES ...] [--arch cpu|gpu] [--out results/] [--quick]
-                            [--run-dir DIR] [--resume] [--workers N | --scheduler tcp://HOST:PORT]
+                            [--param NAME=VALUES ...] [--preset paper|accurate] [--set NAME=VALUE]
+                            [--out DIR] [--quick] [--resume] [--run-dir DIR]
+                            [--workers N | --scheduler tcp://HOST:PORT] [--chunk-size N]
 
 Values: a comma list (`0,0.5,1`) or a range `start:stop:n` (n points, both ends included) or
 `start:stop:n:log` (geometric). `--param NAME=VALUES` sweeps any other StarParams field.
-Writes `sweep.csv` (one row per instance: every parameter, speeds over cycles [0, N) and
-[1, N), heading, Newton statistics, status) and `sweep_<parameter>.png` for every swept
-parameter: speed against the parameter, one line per gait, the other swept parameters held at
-the value closest to the paper's default.
+Writes `sweep.csv` (one row per instance: every parameter, whole-run and steady speeds, heading,
+Newton statistics, status) and `sweep_<parameter>.png` for every swept parameter: speed against
+the parameter, one line per gait, the other swept parameters held at the value closest to the
+default.
 
-Resumable: the instances run in chunks (`--chunk-size`, default 256 on the CPU, 16384 on the
-GPU, fewer when there are several Dask workers); each finished chunk is written atomically to the
-run folder (`--run-dir`, default `<out>/sweep_run/`) with a manifest of the sweep's definition and
-the code version (`studies.runs`). After a crash or a kill, the same command with `--resume`
-skips the finished chunks (and refuses a folder holding a different sweep); `sweep.csv` is
-assembled from the chunk files in input order. `--workers N` / `--scheduler ADDRESS` run the
-chunks on Dask (`studies.distributed`).
-
-From Python::
-
-    from studies.common import param_product, run_batch, parse_values
-    grid = param_product({"gait": ["A1", "A1+A2"], "alpha": parse_values("0.2:1.2:6")})
-    summary = run_batch(grid, cycles=3).summary
+Resumable: every finished chunk is stored, verified, in the run store (`--run-dir`, default
+`<out>/chunks/`). After a crash or a kill, the same command with `--out` of the killed run and
+`--resume` skips the finished chunks (damaged ones are recomputed; a store holding a different
+sweep is refused); `sweep.csv` is assembled from the store in input order.
 """
 
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from taichi_star.params import StarParams
+from taichi_star import StarParams
+from taichi_star.batch import run_batch, stored_chunk_size
 
-from . import common, distributed, runs
+from . import cli
 
-DESCRIPTION = "Sensitivity study: Cartesian product of StarParams values, one batch."
+DESCRIPTION = "Sensitivity study: Cartesian product of StarParams values, one chunked batch."
 
 NAMED_FLAGS = {
     "alpha": "alpha",
@@ -62,7 +54,7 @@ every core busy."""
 
 
 def build_parser():
-    parser = common.common_parser("sweep", DESCRIPTION)
+    parser = cli.StudyParser("sweep", DESCRIPTION)
     for flag, field in NAMED_FLAGS.items():
         parser.add_argument(f"--{flag}", dest=field, default=None, metavar="VALUES",
                             help=f"values of StarParams.{field} (list a,b,c or range "
@@ -72,34 +64,31 @@ def build_parser():
     parser.add_argument("--gaits", default="paper",
                         help="paper (the five Fig. 4 gaits, default), all (255), or a list "
                              "A1,A1+A2")
-    parser.add_argument("--cycles", type=float, default=3.0,
-                        help="cycles from rest per instance (default 3)")
     parser.add_argument("--max-instances", type=int, default=MAX_INSTANCES,
                         help=f"refuse larger products (default {MAX_INSTANCES})")
     parser.add_argument("--run-dir", default=None, metavar="DIR",
-                        help="run folder for the finished chunks and the manifest (default "
-                             "<out>/sweep_run)")
+                        help="run store of the finished chunks (default <out>/chunks)")
     parser.add_argument("--resume", action="store_true",
-                        help="continue the run in the run folder: skip its finished chunks "
-                             "(the sweep definition must be the same)")
-    parser._option_string_actions["--chunk-size"].help = (
-        f"instances per chunk (one simulate call, one resumable file, one Dask task; default "
-        f"{CPU_CHUNK} cpu, 16384 gpu, fewer with several Dask workers; with --resume, the run's)")
-    distributed.add_arguments(parser)
+                        help="continue the run in the run store (needs --out or --run-dir): "
+                             "skip its finished chunks (the sweep definition must be the same)")
+    cli.add_model_flags(parser)
+    cli.add_dt_flag(parser)
+    cli.add_cycles_flag(parser)
+    cli.add_execution_flags(parser, chunk_size=CPU_CHUNK)
     return parser
 
 
 def sweep_axes(args) -> dict:
     """The swept axes {field: values} from parsed arguments (validated, gait first)."""
-    axes = {"gait": common.resolve_gaits(args.gaits)}
+    axes = {"gait": cli.resolve_gaits(args.gaits)}
     for flag, field in NAMED_FLAGS.items():
         text = getattr(args, field)
         if text is not None:
-            axes[field] = common.parse_values(text, f"--{flag}", common.field_kind(field))
+            axes[field] = cli.parse_values(text, f"--{flag}", cli.field_kind(field))
     for item in args.param:
-        name, values = common.parse_assignment(item, "--param")
+        name, values = cli.parse_assignment(item, "--param")
         if name in axes:
-            raise common.StudyArgumentError(f"--param {name}: parameter given twice")
+            raise cli.StudyArgumentError(f"--param {name}: parameter given twice")
         axes[name] = values
     return axes
 
@@ -110,10 +99,10 @@ def swept_parameters(table: pd.DataFrame):
             if name != "gait" and name in table and table[name].nunique(dropna=False) > 1]
 
 
-def plot_sweep(csv_path, out_dir, prefix: str = "sweep"):
+def plot_sweep(csv_path, out: cli.Output, prefix: str = "sweep"):
     """One PNG per swept parameter from a sweep CSV: |speed| and signed speed against the
     parameter, one line per gait, other swept parameters at the value nearest the default."""
-    plt = common.use_agg()
+    plt = cli.use_agg()
     table = pd.read_csv(csv_path)
     defaults = StarParams()
     swept = swept_parameters(table)
@@ -164,7 +153,7 @@ def plot_sweep(csv_path, out_dir, prefix: str = "sweep"):
                      + ("; x = failed" if (selection["status"] != "ok").any() else ""),
                      fontsize=9)
         fig.tight_layout()
-        path = Path(out_dir) / f"{prefix}_{name}.png"
+        path = out.path(f"{prefix}_{name}.png")
         fig.savefig(path, dpi=120)
         plt.close(fig)
         paths.append(path)
@@ -172,37 +161,31 @@ def plot_sweep(csv_path, out_dir, prefix: str = "sweep"):
 
 
 def main(argv=None):
-    args = build_parser().parse_args(argv)
-    common.check_positive(args.cycles, "--cycles")
+    args = cli.parse(build_parser(), argv)
     axes = sweep_axes(args)
     size = int(np.prod([len(v) for v in axes.values()]))
     if size > args.max_instances:
-        raise common.StudyArgumentError(
+        raise cli.StudyArgumentError(
             f"the product has {size} instances, more than --max-instances {args.max_instances}")
-    grid = common.param_product(axes, base=common.base_params(args))
-    solver = common.solver_for(args)
-    distributed.validate(args)
-    run_dir = Path(args.run_dir) if args.run_dir is not None else Path(args.out) / "sweep_run"
-    previous = runs.previous_chunk_size(run_dir) if args.resume else None
-    if args.chunk_size is None and previous is not None:
-        args.chunk_size = previous  # resume with the run's own chunks
-    if args.chunk_size is not None and args.chunk_size < 1:
-        raise common.StudyArgumentError(f"--chunk-size must be >= 1, got {args.chunk_size}")
-    duration = common.QUICK_DURATION_S if args.quick else None
-    description = {"axes": {name: list(values) for name, values in axes.items()},
-                   "discretisation": args.discretisation, "cycles": args.cycles,
-                   "quick": args.quick}
-    with distributed.executor_for(args) as executor:
-        chunk = distributed.default_chunk_size(args, len(grid), executor.n_workers,
-                                               cpu_default=CPU_CHUNK)
-        out = common.out_dir(args)
-        result = common.run_batch(grid, cycles=args.cycles, duration_s=duration, solver=solver,
-                                  arch=args.arch, chunk_size=chunk, progress=not args.no_progress,
-                                  executor=executor, run_dir=run_dir, resume=args.resume,
-                                  description=description)
-    csv = common.write_csv(result.summary, out / "sweep.csv")
-    paths = [csv] + plot_sweep(csv, out)
-    print(common.describe(paths))
+    if args.resume and args.out is None and args.run_dir is None:
+        raise cli.StudyArgumentError("--resume: give --out (the folder of the run to continue) "
+                                     "or --run-dir")
+    base = cli.base_params(args)
+    grid = cli.param_product(axes, base=base)
+    solver = cli.solver(args)
+    out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
+                     solver=solver, extra={"axes": axes})
+    run_dir = args.run_dir if args.run_dir is not None else out.folder / "chunks"
+    if args.resume and args.chunk_size is None:
+        args.chunk_size = stored_chunk_size(run_dir)  # the run's own chunks
+    with cli.executor(args) as executor:
+        result = run_batch(grid, **cli.run_length(args), solver=solver, arch=args.arch,
+                           chunk_size=cli.chunk_size(args, len(grid), executor.n_workers),
+                           executor=executor, run_dir=run_dir, resume=args.resume,
+                           progress=not args.no_progress)
+    csv = out.write_csv(result.summary, "sweep.csv")
+    out.wrote(*plot_sweep(csv, out))
+    out.report()
     failed = (result.summary["status"] != "ok").sum()
     print(f"{len(result.summary)} instances, {failed} not ok")
     return result.summary

@@ -1,12 +1,11 @@
-"""Run time against error (issue 4): the five paper gaits' speeds over 3 cycles from rest for
+"""Run time against error: the five paper gaits' speeds over 3 cycles from rest for
 time step, precision, Newton tolerance, discretisation and integrator, against a reference run.
 
-    python -m studies work_precision [--arch cpu|gpu] [--out results/] [--quick]
+    python -m studies work_precision [--arch cpu|gpu] [--out DIR] [--quick]
                                      [--gaits paper|A1,A1+A2,...] [--cycles 3] [--no-progress]
 
 Reference: h = 0.125 ms, f64, newton_tol 1e-12 m, 2× the paper's discretisation (n_arc 36,
-n_limb 12), with the most accurate integrator available (BDF2 when `SolverConfig` has an
-`integrator` field, else implicit Euler). Configurations (not the full Cartesian product): one
+n_limb 12), BDF2. Configurations (not the full Cartesian product): one
 axis at a time around the default (h = 1 ms, f64, tol 1e-10 m, 1× = n_arc 18 / n_limb 6, implicit
 Euler), i.e. f32 (tol 1e-7 and 1e-6 m: f32 cannot resolve less), tol 1e-6 and 1e-8 m, ½× (n_arc
 9, n_limb 3); and the h axis h ∈ {0.25, 0.5, 1, 2, 4, 8} ms for every integrator, both at 1× and at
@@ -16,7 +15,7 @@ call after a one-step call has compiled its kernels. With a handful of instances
 cannot fill many cores: these run times rank the settings, `studies bench` measures throughput.
 
 Error of a gait: |speed − reference speed| / |reference speed| of `speed_mm_s` (3 cycles from
-rest, design §3); a configuration's error is the largest over the gaits (NaN if an instance
+rest); a configuration's error is the largest over the gaits (NaN if an instance
 failed). h values that do not divide the duration simulate the nearest whole number of steps.
 
 Writes
@@ -24,8 +23,7 @@ Writes
   "reference"): config, label, varied (the settings that differ from the default), integrator,
   dt_s, precision, newton_tol, discretisation, n_arc, n_limb, gait, duration_s, steps,
   speed_mm_s, signed_speed_mm_s, reference_speed_mm_s, rel_error, max_rel_error, run_time_s,
-  robot_steps_per_s, robot_seconds_per_wall_s (simulated robot-seconds per wall second, the
-  design §6 end-to-end figure), newton_iterations_mean, status, pareto (on the front of max
+  robot_steps_per_s, robot_seconds_per_wall_s (simulated robot-seconds per wall second), newton_iterations_mean, status, pareto (on the front of max
   error against run time), reference, arch, machine, commit, timestamp;
 - `work_precision_orders.csv`: observed convergence order in h of each integrator at each
   discretisation, per gait and for the max over gaits: slope of log error against log h over all
@@ -36,7 +34,6 @@ Writes
 
 from __future__ import annotations
 
-import argparse
 import math
 import time
 from dataclasses import dataclass, replace
@@ -45,10 +42,9 @@ import numpy as np
 import pandas as pd
 
 import taichi_star
-from taichi_star import params as params_module
-from taichi_star.params import SolverConfig, StarParams
+from taichi_star import SolverConfig, StarParams
 
-from . import bench, common
+from . import cli, provenance
 
 DESCRIPTION = ("Run time against error: h, precision, Newton tolerance, discretisation and "
                "integrator, five gaits' 3-cycle speeds against a refined reference.")
@@ -62,10 +58,8 @@ F32_TOLERANCES = (1e-7, 1e-6)
 QUICK_DURATION_S = 0.1
 QUICK_GAITS = ("A1+A2", "A1+A3")
 
-HAS_INTEGRATOR = "integrator" in SolverConfig.__dataclass_fields__
-INTEGRATORS = getattr(params_module, "INTEGRATORS", ("euler", "bdf2")) if HAS_INTEGRATOR \
-    else ("euler",)
-"""The integrator axis: only where SolverConfig has an `integrator` field (else "euler")."""
+INTEGRATORS = ("euler", "bdf2")
+"""The integrator axis."""
 
 ORDER_COLUMNS = ["integrator", "discretisation", "n_arc", "n_limb", "gait", "n_points",
                  "h_min_ms", "h_max_ms", "order_fit", "order_fine", "order_coarse"]
@@ -82,9 +76,8 @@ class Config:
     integrator: str = "euler"
 
     def solver(self) -> SolverConfig:
-        extra = {"integrator": self.integrator} if HAS_INTEGRATOR else {}
         return SolverConfig(dt=self.dt_s, precision=self.precision, newton_tol=self.newton_tol,
-                            **extra)
+                            integrator=self.integrator)
 
     def params(self, gaits):
         n_arc, n_limb = DISCRETISATIONS[self.discretisation]
@@ -214,7 +207,7 @@ def convergence_orders(table: pd.DataFrame) -> pd.DataFrame:
 
 def plot_work_precision(csv_path, orders_csv_path, png_path):
     """Error against run time (log-log, Pareto front, labels) and error against h."""
-    plt = common.use_agg()
+    plt = cli.use_agg()
     table = pd.read_csv(csv_path)
     orders = pd.read_csv(orders_csv_path)
     configs = table[table["varied"] != "reference"].groupby("config", sort=False).first()
@@ -231,7 +224,7 @@ def plot_work_precision(csv_path, orders_csv_path, png_path):
     left.step(front["run_time_s"], front["max_rel_error"], "r-", where="post", lw=1.2,
               label="Pareto front")
     left.plot(front["run_time_s"], front["max_rel_error"], "o", mfc="none", mec="r", ms=10)
-    left.axhline(0.01, color="k", ls=":", lw=1, label="1 % (design §6)")
+    left.axhline(0.01, color="k", ls=":", lw=1, label="1 %")
     failed = configs[~np.isfinite(configs["max_rel_error"])]
     title = "max relative speed error over gaits vs run time"
     if len(failed):
@@ -271,37 +264,26 @@ def plot_work_precision(csv_path, orders_csv_path, png_path):
 
 
 def build_parser():
-    parser = argparse.ArgumentParser(prog="python -m studies work_precision",
-                                     description=DESCRIPTION)
-    parser.add_argument("--arch", choices=("cpu", "gpu"), default="cpu",
-                        help="Taichi backend (default cpu)")
-    parser.add_argument("--out", default=common.DEFAULT_OUT, help="output folder (default results/)")
-    parser.add_argument("--quick", action="store_true",
-                        help=f"small fast run for tests: {QUICK_DURATION_S} s simulated, gaits "
-                             f"{','.join(QUICK_GAITS)}, h {QUICK_H_MS} ms per integrator, tol "
-                             f"1e-6 (three compiled engines: reference, Euler, BDF2)")
-    parser.add_argument("--gaits", default=None,
-                        help="paper (the five Fig. 4 gaits, default) or a list A1,A1+A2")
+    parser = cli.StudyParser("work_precision", DESCRIPTION)
+    parser.add_argument("--gaits", default="paper", quick=",".join(QUICK_GAITS),
+                        help="paper (the five Fig. 4 gaits) or a list A1,A1+A2")
     parser.add_argument("--cycles", type=float, default=3.0,
-                        help="cycles from rest (default 3; --quick simulates 0.1 s)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+                        help=f"cycles from rest (default 3; --quick simulates "
+                             f"{QUICK_DURATION_S} s)")
     return parser
 
 
 def main(argv=None):
-    args = build_parser().parse_args(argv)
-    common.check_positive(args.cycles, "--cycles")
-    gaits = common.resolve_gaits(args.gaits if args.gaits is not None
-                                 else ",".join(QUICK_GAITS) if args.quick else "paper")
-    if len(set(gaits)) != len(gaits):
-        raise common.StudyArgumentError(f"--gaits: a gait is listed twice: {args.gaits}")
-    bench.check_arch(args.arch)
+    args = cli.parse(build_parser(), argv)
+    gaits = cli.resolve_gaits(args.gaits)
     duration = QUICK_DURATION_S if args.quick else None
     configs = configurations(args.quick)
-    out = common.out_dir(args)
-    provenance = {"arch": args.arch, "machine": bench.machine_info(args.arch)["machine"],
-                  "commit": bench.git_commit(), "timestamp": bench.timestamp(),
-                  "reference": REFERENCE.label()}
+    out = cli.Output(args, argv or [], model={"gaits": gaits, "discretisations": DISCRETISATIONS},
+                     solver={"reference": REFERENCE, "configurations": configs})
+    provenance_columns = {"arch": args.arch,
+                          "machine": provenance.machine_columns(args.arch)["machine"],
+                          "commit": provenance.short_commit(), "timestamp": out.provenance["date"],
+                          "reference": REFERENCE.label()}
 
     def steps_of(config):
         length = duration if duration is not None else args.cycles * StarParams().period
@@ -340,15 +322,15 @@ def main(argv=None):
     front[candidates] = pareto_front(per_config["run_time_s"][candidates],
                                      per_config["max_rel_error"][candidates])
     table["pareto"] = front[table["config"].to_numpy()]
-    for name, value in provenance.items():
+    for name, value in provenance_columns.items():
         table[name] = value
 
-    csv_path = common.write_csv(table, out / "work_precision.csv")
+    csv_path = out.write_csv(table, "work_precision.csv")
     orders = convergence_orders(table)
-    orders_path = common.write_csv(orders, out / "work_precision_orders.csv")
-    png_path = plot_work_precision(csv_path, orders_path, out / "work_precision.png")
+    orders_path = out.write_csv(orders, "work_precision_orders.csv")
+    out.wrote(plot_work_precision(csv_path, orders_path, out.path("work_precision.png")))
     report(table, orders)
-    print(common.describe([csv_path, orders_path, png_path]))
+    out.report()
     return table
 
 

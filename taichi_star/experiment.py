@@ -36,9 +36,6 @@ along the gait's forward direction (the sum of its actuators' bisectors), "rever
 EXPERIMENT_PERIOD_S = 3.15
 """Actuation period of the physical robot's trials, s (150 ms heating pulse + 3 s rest)."""
 
-PAPER_TEXT_SPEEDS_MM_S = {"A1": 0.49, "A1+A2": 2.83}
-"""The only two speeds the paper's text states (mm/s, experiment)."""
-
 FIG4C_COLUMNS = ["gait", "sim_speed_mm_s", "sim_signed_speed_mm_s", "sim_direction",
                  "exp_speed_mm_s", "exp_cycle_speed_std_mm_s", "paper_direction", "direction_matches", "speed_ratio",
                  "status"]

@@ -1,4 +1,5 @@
-"""Swimming metrics: centroid, body rotation, whole-run and cycle-window speeds, shape checks.
+"""Swimming metrics: centroid, body rotation, whole-run and cycle-window speeds; shape checks
+(limb crossing, arc inversion, strain).
 
 Conventions: the centroid is the mass-weighted mean of the node positions (added mass excluded);
 "forward" is the unit sum of the fired actuators' bisectors; a signed speed is the displacement
@@ -11,8 +12,10 @@ from __future__ import annotations
 from typing import Dict, Sequence
 
 import numpy as np
+import pandas as pd
 
 from .gait import Gait
+from .geometry import Topology, discrete_curvature
 
 METERS_TO_MM = 1e3
 SPEED_COLUMNS = ("displacement_x_mm", "displacement_y_mm", "speed_mm_s", "signed_speed_mm_s",
@@ -33,14 +36,17 @@ def body_rotation(positions: np.ndarray, rest_positions: np.ndarray, joints: np.
     now = positions[..., joints, :] - positions[..., hub:hub + 1, :]
     rest = rest_positions[..., joints, :] - rest_positions[..., hub:hub + 1, :]
     turn = (np.arctan2(now[..., 1], now[..., 0]) - np.arctan2(rest[..., 1], rest[..., 0]))
-    # summed joint by joint, not by a reduction whose order depends on the batch's shape: an
-    # instance's heading must not depend on its neighbours to the last bit
-    sine, cosine = np.sin(turn), np.cos(turn)
-    sine_sum, cosine_sum = sine[..., 0], cosine[..., 0]
-    for joint in range(1, len(joints)):
-        sine_sum = sine_sum + sine[..., joint]
-        cosine_sum = cosine_sum + cosine[..., joint]
-    return np.arctan2(sine_sum, cosine_sum)
+    return np.arctan2(_ordered_sum(np.sin(turn)), _ordered_sum(np.cos(turn)))
+
+
+def _ordered_sum(values: np.ndarray) -> np.ndarray:
+    """Sum over the last axis in index order: NumPy's reductions sum in an order that depends on
+    the array's shape, so an instance's metrics would change in the last bit with the size of
+    its batch."""
+    total = values[..., 0].copy()
+    for k in range(1, values.shape[-1]):
+        total += values[..., k]
+    return total
 
 
 def forward_directions(gaits: Sequence[str]) -> np.ndarray:
@@ -90,3 +96,124 @@ def cycle_window_speeds(boundary_centroids_m: np.ndarray, periods: np.ndarray, g
         speed[rows] = np.hypot(delta[:, 0], delta[:, 1]) / span
         signed[rows] = (delta * forward_directions([gaits[r] for r in rows])).sum(axis=1) / span
     return {"steady_speed_mm_s": speed, "steady_signed_speed_mm_s": signed}
+
+
+# --------------------------------------------------------------------------- shape checks
+
+STRAIN_LIMIT = 0.5
+"""|ε| above this is not sane: the linear stretching energy is a small-strain model."""
+PARALLEL_TOLERANCE = 1e-9
+"""Segments whose directions differ by less than ~1e-9 rad are treated as parallel: the
+intersection parameters of (near-)parallel segments are rounding noise (opposite limbs of a
+symmetric shape are collinear, and a plain orientation test finds them 'crossing' by rounding)."""
+
+
+def _cross(a, b):
+    """2-D cross product a × b over the last axis."""
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def segments_cross(p, q, r, s) -> np.ndarray:
+    """Segments p–q and r–s (arrays (..., 2)) -> (...) bool: they cross. Non-parallel segments
+    cross where both intersection parameters lie strictly inside (0, 1) (touching at an end is
+    not counted); (near-)parallel ones where they are collinear (distance ≤ 1e-9 of their
+    length) and their extents along the line overlap with positive length."""
+    d1, d2, offset = q - p, s - r, r - p
+    scale = np.linalg.norm(d1, axis=-1) * np.linalg.norm(d2, axis=-1)
+    denominator = _cross(d1, d2)
+    parallel = ~(np.abs(denominator) > PARALLEL_TOLERANCE * scale)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = _cross(offset, d2) / denominator
+        u = _cross(offset, d1) / denominator
+        proper = (t > 0) & (t < 1) & (u > 0) & (u < 1)
+        length1 = np.linalg.norm(d1, axis=-1)
+        distance = np.abs(_cross(offset, d1)) / length1
+        along_r = (offset * d1).sum(-1) / length1
+        along_s = ((s - p) * d1).sum(-1) / length1
+        low, high = np.minimum(along_r, along_s), np.maximum(along_r, along_s)
+        overlap = np.minimum(high, length1) - np.maximum(low, 0.0)
+        collinear = (distance <= PARALLEL_TOLERANCE * length1) & (overlap > 0)
+    return np.where(parallel, collinear, proper)
+
+
+def limbs_cross(positions: np.ndarray, topology: Topology) -> np.ndarray:
+    """positions (..., N, 2) -> (...) bool: a segment of one limb (`Topology.limbs`) crosses a
+    segment of another (`segments_cross`)."""
+    points = positions[..., topology.limbs, :]              # (..., 8, L+1, 2)
+    start, end = points[..., :-1, :], points[..., 1:, :]    # (..., 8, L, 2)
+    first, second = np.triu_indices(len(topology.limbs), k=1)
+    # (..., pairs, L, 1, 2) against (..., pairs, 1, L, 2)
+    hit = segments_cross(start[..., first, :, None, :], end[..., first, :, None, :],
+                         start[..., second, None, :, :], end[..., second, None, :, :])
+    return hit.any(axis=(-3, -2, -1))
+
+
+def arc_mean_curvature(positions: np.ndarray, topology: Topology) -> np.ndarray:
+    """positions (..., N, 2) -> (..., 8): each actuator arc's (`Topology.arcs`) mean signed
+    curvature Σ κ_i Δl_i / Σ Δl_i over its interior nodes, 1/m (its total turning over its
+    length), Δl_i the rest Voronoi lengths."""
+    arcs = topology.arcs
+    rest = topology.rest_positions[arcs]                    # (8, n_arc + 1, 2)
+    edge = np.linalg.norm(np.diff(rest, axis=1), axis=-1)   # (8, n_arc)
+    voronoi = 0.5 * (edge[:, :-1] + edge[:, 1:])            # (8, n_arc - 1)
+    points = positions[..., arcs, :]
+    kappa = discrete_curvature(points[..., :-2, :], points[..., 1:-1, :], points[..., 2:, :],
+                               voronoi)
+    return (kappa * voronoi).sum(-1) / voronoi.sum(-1)
+
+
+def arcs_inverted(positions: np.ndarray, topology: Topology) -> np.ndarray:
+    """positions (..., N, 2) -> (...) bool: some arc's mean curvature has the opposite sign to
+    its rest value (or is not finite)."""
+    rest = np.sign(arc_mean_curvature(topology.rest_positions, topology))
+    return (~(arc_mean_curvature(positions, topology) * rest > 0)).any(axis=-1)
+
+
+def edge_strain(positions: np.ndarray, topology: Topology) -> np.ndarray:
+    """positions (..., N, 2) -> (..., E): ε = |x_j − x_i| / Δl̄ − 1 of every edge."""
+    edges = topology.edges
+    length = np.linalg.norm(positions[..., edges[:, 1], :] - positions[..., edges[:, 0], :],
+                            axis=-1)
+    return length / topology.rest_length - 1.0
+
+
+def shape_checks(shapes: np.ndarray, topology: Topology) -> pd.DataFrame:
+    """Sanity of recorded shapes: shapes (R, B, N, 2) m, R records of B instances (the last
+    record is taken as the final shape; NaN records, e.g. after a failure, are skipped) -> one
+    row per instance:
+
+    - max_strain: max |ε| over all edges and finite records (`edge_strain`), max_strain_final on
+      the final shape;
+    - limbs_cross: two limbs cross in some record (`limbs_cross`), limbs_cross_final;
+    - arc_inverted: an arc's mean curvature changed sign in some record (`arcs_inverted`; the
+      actuation only lowers |κ⁰|, never through zero), arc_inverted_final;
+    - finite: every record finite;
+    - sane: finite, no crossing, no inversion and max_strain ≤ STRAIN_LIMIT.
+    """
+    shapes = np.asarray(shapes, dtype=np.float64)
+    n_records, batch = shapes.shape[:2]
+    finite = np.isfinite(shapes).all(axis=(0, 2, 3))
+    strain_max = np.full(batch, -np.inf)
+    cross_any = np.zeros(batch, dtype=bool)
+    inverted_any = np.zeros(batch, dtype=bool)
+    # one record at a time keeps the pairwise segment test small
+    for record in shapes:
+        valid = np.isfinite(record).all(axis=(1, 2))
+        strain = np.abs(edge_strain(record, topology)).max(axis=-1)
+        strain_max = np.where(valid, np.fmax(strain_max, strain), strain_max)
+        cross_any |= limbs_cross(record, topology) & valid
+        inverted_any |= arcs_inverted(record, topology) & valid
+    final = shapes[-1]
+    final_valid = np.isfinite(final).all(axis=(1, 2))
+    table = pd.DataFrame({
+        "max_strain": np.where(np.isfinite(strain_max), strain_max, np.nan),
+        "max_strain_final": np.abs(edge_strain(final, topology)).max(axis=-1),
+        "limbs_cross": cross_any,
+        "limbs_cross_final": limbs_cross(final, topology) & final_valid,
+        "arc_inverted": inverted_any,
+        "arc_inverted_final": arcs_inverted(final, topology) & final_valid,
+        "finite": finite,
+    })
+    table["sane"] = (finite & ~table["limbs_cross"] & ~table["arc_inverted"]
+                     & (table["max_strain"] <= STRAIN_LIMIT))
+    return table

@@ -5,6 +5,6 @@ import pytest
 def taichi_cpu():
     """Taichi on the CPU in f64, initialised once for the tests that call kernels directly
     (the same runtime `simulate` uses, so it does not re-initialise)."""
-    from taichi_star.simulation import ensure_taichi
+    from taichi_star.runtime import Runtime
 
-    ensure_taichi("cpu", "f64")
+    Runtime.current().ensure("cpu", "f64")

@@ -1,8 +1,9 @@
-"""Resumable sweeps (issue 5 item 4): a sweep killed with SIGKILL after its first chunks and then
-resumed gives, row for row and bit for bit, the table of an uninterrupted run; a run folder
-refuses a different sweep definition and an unfinished run without --resume."""
+"""Resumable sweeps: a sweep killed with SIGKILL after its first chunks and then resumed gives,
+row for row and bit for bit, the table of an uninterrupted run; a run store refuses a different
+sweep definition and an unfinished run without --resume, before any compute."""
 
 import json
+import logging
 import os
 import signal
 import subprocess
@@ -13,11 +14,10 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-import taichi_star
-from studies import runs, sweep
+from studies import sweep
 from studies.__main__ import main as studies_main
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 # 16 instances in 8 chunks of 2 (one compiled engine), 1.2 s of 2 ms steps each (~0.2 s a
 # chunk here: the kill, 5 ms after the first chunk file appears, lands well before the last)
 SWEEP = ["--gaits", "A1,A1+A3", "--alpha", "0.4:1.2:8", "--period", "0.3", "--cycles", "4",
@@ -26,10 +26,11 @@ N_INSTANCES, N_CHUNKS = 16, 8
 
 
 def chunk_files(folder):
-    return sorted(Path(folder).glob("chunk_*.pkl"))
+    return sorted(Path(folder).glob("chunk_*.parquet"))
 
 
-def test_killed_sweep_resumes_to_the_uninterrupted_table(tmp_path, capsys, monkeypatch):
+@pytest.mark.slow
+def test_killed_sweep_resumes_to_the_uninterrupted_table(tmp_path, capsys, caplog, monkeypatch):
     killed_out = tmp_path / "killed"
     run_dir = tmp_path / "run"
     process = subprocess.Popen(
@@ -53,33 +54,34 @@ def test_killed_sweep_resumes_to_the_uninterrupted_table(tmp_path, capsys, monke
     done = chunk_files(run_dir)
     assert 1 <= len(done) < N_CHUNKS, f"{len(done)} chunks done: the kill came too late"
     manifest = json.loads((run_dir / "manifest.json").read_text())
-    assert manifest["complete"] is False and manifest["n_chunks"] == N_CHUNKS
-    assert manifest["n_instances"] == N_INSTANCES and manifest["code_version"]
+    assert manifest["complete"] is False and manifest["definition"]["n_chunks"] == N_CHUNKS
+    assert manifest["definition"]["n_instances"] == N_INSTANCES and manifest["code"]["version"]
     assert not (killed_out / "sweep.csv").exists()
 
     # before any compute: no mixing in of another definition, no silent restart
     def forbidden(*args, **kwargs):
         raise AssertionError("simulate was called despite a refused run folder")
     with monkeypatch.context() as patch:
-        patch.setattr(taichi_star, "simulate", forbidden)
+        patch.setattr("taichi_star.batch.tasks.simulate", forbidden)
         other = [a if a != "0.4:1.2:8" else "0.4:1.2:7" for a in SWEEP]
         assert studies_main(["sweep", *other, "--out", str(killed_out), "--run-dir", str(run_dir),
                              "--resume"]) == 2
         error = capsys.readouterr().err
-        assert "--resume" in error and "another definition" in error and "n_instances" in error
+        assert "another definition" in error and "n_instances" in error
         assert studies_main(["sweep", *SWEEP, "--out", str(killed_out),
                              "--run-dir", str(run_dir)]) == 2
         error = capsys.readouterr().err
-        assert "unfinished run" in error and "--resume" in error
+        assert "unfinished run" in error and "resume" in error
         assert studies_main(["sweep", *SWEEP, "--dt", "0.001", "--out", str(killed_out),
                              "--run-dir", str(run_dir), "--resume"]) == 2
         assert "solver.dt: 0.002 -> 0.001" in capsys.readouterr().err
     assert chunk_files(run_dir) == done  # nothing touched
     before = {path.name: path.stat().st_mtime_ns for path in done}
 
-    resumed = sweep.main([*SWEEP, "--out", str(killed_out), "--run-dir", str(run_dir),
-                          "--resume"])
-    assert f"{len(done)} of {N_CHUNKS} chunks already done" in capsys.readouterr().out
+    with caplog.at_level(logging.WARNING, logger="taichi_star.batch"):
+        resumed = sweep.main([*SWEEP, "--out", str(killed_out), "--run-dir", str(run_dir),
+                              "--resume"])
+    assert f"{len(done)} of {N_CHUNKS} chunks already done" in caplog.text
     # the finished chunks were not recomputed
     assert {p.name: p.stat().st_mtime_ns for p in done} == before
     assert len(chunk_files(run_dir)) == N_CHUNKS
@@ -92,24 +94,4 @@ def test_killed_sweep_resumes_to_the_uninterrupted_table(tmp_path, capsys, monke
     resumed_csv = pd.read_csv(killed_out / "sweep.csv")
     pd.testing.assert_frame_equal(resumed_csv, pd.read_csv(tmp_path / "whole" / "sweep.csv"),
                                   check_exact=True)
-    # a finished run folder is replaced by a fresh run without --resume
-    assert (tmp_path / "whole" / "sweep_run" / "manifest.json").exists()
-
-
-def test_run_folder_write_is_atomic_and_checked(tmp_path):
-    folder = runs.RunFolder(tmp_path / "run")
-    manifest = {"n_chunks": 2, "code_version": "x", "created": "now", "format": 1}
-    assert folder.open(manifest, resume=False) == []
-    frame = pd.DataFrame({"instance": [0, 1], "speed_mm_s": [0.1, 1 / 3]})
-    folder.write(0, frame)
-    # no temporary file left beside the chunk
-    assert sorted(p.name for p in (tmp_path / "run").iterdir()) == ["chunk_000000.pkl",
-                                                                    "manifest.json"]
-    pd.testing.assert_frame_equal(folder.read(0, [0, 1]), frame, check_exact=True)
-    with pytest.raises(runs.RunFolderError, match="other than its chunk"):
-        folder.read(0, [2, 3])
-    not_a_run = tmp_path / "other"
-    not_a_run.mkdir()
-    (not_a_run / "notes.txt").write_text("mine")
-    with pytest.raises(runs.RunFolderError, match="not a run folder"):
-        runs.RunFolder(not_a_run).open(manifest, resume=True)
+    assert (tmp_path / "whole" / "chunks" / "manifest.json").exists()

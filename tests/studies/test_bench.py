@@ -1,9 +1,13 @@
-"""The benchmark and work-precision studies in --quick mode (CSV schema, row counts, plots) and
-their argument errors, raised before any computation. No timing is asserted."""
+"""The benchmark and work-precision studies in --quick mode (what they measure against direct
+simulations, row counts, plots) and their argument errors, raised before any computation. No
+timing is asserted."""
 
 import numpy as np
 import pandas as pd
 import pytest
+
+import taichi_star
+from taichi_star import StarParams
 
 from studies import bench, work_precision
 from studies.__main__ import main as studies_main
@@ -19,17 +23,22 @@ def test_bench_quick(tmp_path):
     assert list(batch["batch_size"]) == [int(b) for b in bench.QUICK_BATCH_SIZES.split(",")]
     assert list(skip["scenario"]) == bench.QUICK_SCENARIOS.split(",")
     assert (table["arch"] == "cpu").all() and (table["precision"] == "f64").all()
-    assert (table["n_nodes"] == 193).all() and (table["cores"] >= 1).all()
-    assert table["commit"].str.len().min() >= 7
-    for column in ("robot_steps_per_s", "step_us", "newton_iterations_mean", "assembly_us",
-                   "factor_flops"):
+    assert (table["n_nodes"] == 193).all()
+    # the Newton iterations of the timed window are those of the same steps simulated directly
+    steps = int(table["steps"].iloc[0])
+    solver = bench.bench_solver("f64")
+    params = [StarParams(gait=bench.GAIT)]
+    before = taichi_star.simulate(params, bench.WARMUP_STEPS * solver.dt, solver).summary
+    after = taichi_star.simulate(params, (bench.WARMUP_STEPS + steps) * solver.dt,
+                                 solver).summary
+    window = (after["newton_iterations_mean"].iloc[0] * (bench.WARMUP_STEPS + steps)
+              - before["newton_iterations_mean"].iloc[0] * bench.WARMUP_STEPS) / steps
+    assert batch["newton_iterations_mean"].iloc[0] == pytest.approx(window, rel=1e-9)
+    # added mass is inertia, not a force term: both quick scenarios share one compiled engine
+    terms = dict(zip(skip["scenario"], skip["terms"].str.split("+")))
+    assert terms["added_mass_0"] == terms["all_terms"] and "stretching" in terms["all_terms"]
+    for column in ("robot_steps_per_s", "assembly_us", "factor_flops"):
         assert (table[column] > 0).all(), column
-    # factor and solve are differences of timings: finite, of either sign under noise
-    assert np.isfinite(table[["factor_us", "solve_us", "bookkeeping_us"]]).all().all()
-    assert np.allclose(table["real_time_factor"], table["robot_steps_per_s"] * table["dt_s"])
-    # the phases and the bookkeeping add up to the measured step
-    parts = table[["assembly_us", "factor_us", "solve_us", "bookkeeping_us"]].sum(axis=1)
-    assert np.allclose(parts, table["step_us"])
     assert (tmp_path / "bench.png").stat().st_size > 1000
 
 
@@ -45,10 +54,18 @@ def test_work_precision_quick(tmp_path):
     assert (reference["dt_s"] == 1.25e-4).all() and (reference["discretisation"] == "2x").all()
     rest = table[table["varied"] != "reference"]
     assert (rest["status"] == "ok").all()
-    assert (rest["rel_error"] > 0).all() and (rest["run_time_s"] > 0).all()
     per_config = rest.groupby("config").agg(largest=("rel_error", "max"),
                                             reported=("max_rel_error", "first"))
     assert np.allclose(per_config["largest"], per_config["reported"])
+    # one configuration simulated directly: its speeds and its error against the reference
+    config = configs[0]
+    direct = taichi_star.simulate(config.params(gaits), work_precision.QUICK_DURATION_S,
+                                  config.solver()).summary
+    rows = rest[rest["label"] == config.label()]
+    assert rows["speed_mm_s"].to_numpy() == pytest.approx(direct["speed_mm_s"], rel=1e-9)
+    assert rows["rel_error"].to_numpy() == pytest.approx(
+        np.abs(direct["speed_mm_s"].to_numpy() - reference["speed_mm_s"].to_numpy())
+        / reference["speed_mm_s"].to_numpy(), rel=1e-6)
     assert rest["pareto"].any() and not reference["pareto"].any()
     assert set(rest["integrator"]) == set(work_precision.INTEGRATORS)
     orders = pd.read_csv(tmp_path / "work_precision_orders.csv")
@@ -76,14 +93,16 @@ def test_convergence_order_of_a_power_law():
 
 
 @pytest.mark.parametrize("study, argv, message", [
-    ("bench", ["--batch-sizes", "0"], "--batch-sizes: every batch size must be >= 1"),
+    ("bench", ["--batch-sizes", "0"], "--batch-sizes: every value must be >= 1"),
     ("bench", ["--batch-sizes", "8,x"], "--batch-sizes: 'x' is not an integer"),
     ("bench", ["--batch-sizes", ""], "--batch-sizes: empty"),
-    ("bench", ["--precisions", "f16"], "--precisions: unknown precision 'f16'"),
+    ("bench", ["--precisions", "f16"], "--precisions: precision must be one of"),
+    ("bench", ["--jacobians", "broyden"], "--jacobians: jacobian must be one of"),
     ("bench", ["--steps", "0"], "--steps must be >= 1"),
     ("bench", ["--repeats", "0"], "--repeats must be >= 1"),
-    ("bench", ["--scenarios", "no_jet"], "--scenarios: unknown scenario 'no_jet'"),
+    ("bench", ["--scenarios", "no_jet"], "--scenarios: unknown value 'no_jet'"),
     ("bench", ["--scenario-batch", "-1"], "--scenario-batch must be >= 1"),
+    ("bench", ["--workers-list", "0"], "--workers-list: every value must be >= 1"),
     ("work_precision", ["--cycles", "0"], "--cycles must be > 0"),
     ("work_precision", ["--gaits", "A1,A9"], "unknown actuator 'A9'"),
     ("work_precision", ["--gaits", "A1,A1"], "listed twice"),
@@ -102,7 +121,7 @@ def test_invalid_arguments_fail_before_compute(monkeypatch, tmp_path, capsys, st
 
 
 def test_gpu_arch_without_a_gpu_lists_the_available_archs(monkeypatch, tmp_path, capsys):
-    monkeypatch.setattr(bench, "available_archs", lambda: ["cpu"])
+    monkeypatch.setattr("taichi_star.runtime.available_archs", lambda: ["cpu"])
     for study in ("bench", "work_precision"):
         assert studies_main([study, "--arch", "gpu", "--quick", "--out", str(tmp_path)]) == 2
         error = capsys.readouterr().err

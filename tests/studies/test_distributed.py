@@ -1,7 +1,9 @@
-"""Sweeps on Dask (issue 6): a 2-worker loopback cluster gives the in-process table bit for bit,
-and a worker process killed mid-sweep costs only its chunk: the sweep completes with every row
-exactly once. Also the distributed flags' validation before compute."""
+"""Sweeps on Dask: a Dask worker process killed mid-sweep costs only its chunk, and the sweep
+completes with every row exactly once, bitwise the in-process table (local worker processes:
+tests/studies/test_batch.py and the scaling study below). Also the execution flags' validation
+before compute."""
 
+import json
 import os
 import signal
 import threading
@@ -11,13 +13,13 @@ import pandas as pd
 import pytest
 from distributed import Client, LocalCluster
 
-import taichi_star
-from studies import distributed, sweep
+from studies import cli, sweep
 from studies.__main__ import main as studies_main
 
-# 16 instances, 2 ms steps, 1.2 s each: in chunks of 2 about 0.2 s a chunk on one core
+# 16 instances, 2 ms steps, 1.2 s each: in chunks of 2 about 0.2 s a chunk on one core (and
+# the engine of capacity 8 the other tests compile)
 SWEEP = ["--gaits", "A1,A1+A3", "--alpha", "0.4:1.2:8", "--period", "0.3", "--cycles", "4",
-         "--dt", "0.002", "--no-progress"]
+         "--dt", "0.002", "--chunk-size", "2", "--no-progress"]
 N_INSTANCES = 16
 
 
@@ -37,17 +39,8 @@ def cluster():
         yield local, client
 
 
-def test_local_cluster_gives_the_in_process_table(reference, tmp_path):
-    table = sweep.main([*SWEEP, "--out", str(tmp_path), "--workers", "2"])
-    pd.testing.assert_frame_equal(table, reference, check_exact=True)
-    assert (tmp_path / "sweep.csv").read_bytes() == \
-        (reference.attrs["out"] / "sweep.csv").read_bytes()
-    # default chunking for 2 workers: about four chunks per worker
-    manifest = (tmp_path / "sweep_run" / "manifest.json").read_text()
-    assert '"n_chunks": 8' in manifest
-
-
-def test_killed_worker_costs_only_its_chunk(reference, cluster, tmp_path):
+@pytest.mark.slow
+def test_killed_dask_worker_costs_only_its_chunk(reference, cluster, tmp_path):
     local, client = cluster
     address = local.scheduler_address
     run_dir = tmp_path / "run"
@@ -55,15 +48,15 @@ def test_killed_worker_costs_only_its_chunk(reference, cluster, tmp_path):
 
     def run():
         try:
-            outcome["table"] = sweep.main([*SWEEP, "--out", str(tmp_path), "--chunk-size", "2",
-                                           "--scheduler", address, "--run-dir", str(run_dir)])
+            outcome["table"] = sweep.main([*SWEEP, "--out", str(tmp_path), "--scheduler", address,
+                                           "--run-dir", str(run_dir)])
         except BaseException as error:  # noqa: BLE001 - reported by the test thread
             outcome["error"] = error
 
     thread = threading.Thread(target=run)
     thread.start()
     deadline = time.monotonic() + 120
-    while not list(run_dir.glob("chunk_*.pkl")):
+    while not list(run_dir.glob("chunk_*.parquet")):
         assert thread.is_alive(), outcome
         assert time.monotonic() < deadline, "no chunk finished in 120 s"
         time.sleep(0.005)
@@ -81,7 +74,7 @@ def test_killed_worker_costs_only_its_chunk(reference, cluster, tmp_path):
     assert lost and all(key.startswith("taichi_star-chunk-") for key in map(str, lost))
     # every row exactly once, the same numbers as in process
     assert table["instance"].tolist() == list(range(N_INSTANCES))
-    assert len(list(run_dir.glob("chunk_*.pkl"))) == N_INSTANCES // 2
+    assert len(list(run_dir.glob("chunk_*.parquet"))) == N_INSTANCES // 2
     pd.testing.assert_frame_equal(table, reference, check_exact=True)
 
 
@@ -97,28 +90,33 @@ def test_distributed_flags_fail_before_compute(monkeypatch, tmp_path, capsys, st
                                                message):
     def forbidden(*args, **kwargs):
         raise AssertionError("simulate was called despite invalid arguments")
-    monkeypatch.setattr(taichi_star, "simulate", forbidden)
-    assert studies_main([study, *argv, "--out", str(tmp_path), "--quick", "--no-progress"]) == 2
+    monkeypatch.setattr("taichi_star.batch.tasks.simulate", forbidden)
+    out = tmp_path / "out"
+    assert studies_main([study, *argv, "--out", str(out), "--quick", "--no-progress"]) == 2
     assert message in capsys.readouterr().err
-    assert not any(tmp_path.iterdir())
+    assert not out.exists()
 
 
 def test_default_chunk_size_feeds_every_worker():
     class Args:
-        chunk_size, arch = None, "cpu"
-    assert distributed.default_chunk_size(Args, 29, 1) == 2048
-    assert distributed.default_chunk_size(Args, 29, 2) == 4  # 8 chunks for 2 workers
+        chunk_size, arch, default_chunk_size, quick = None, "cpu", 2048, False
+    assert cli.chunk_size(Args, 29, 1) == 2048
+    assert cli.chunk_size(Args, 29, 2) == 4  # 8 chunks for 2 workers
     Args.chunk_size = 3
-    assert distributed.default_chunk_size(Args, 29, 2) == 3
+    assert cli.chunk_size(Args, 29, 2) == 3
 
 
+@pytest.mark.slow
 def test_scaling_quick(tmp_path):
     from studies import scaling
-    table = scaling.main(["--quick", "--workers-list", "2", "--out", str(tmp_path)])
+    table = scaling.main(["--quick", "--workers-list", "2", "--no-dask", "--out", str(tmp_path),
+                          "--no-progress"])
     written = pd.read_csv(tmp_path / "scaling.csv")
-    assert written["mode"].tolist() == ["in-process", "dask-local"]
+    assert written["mode"].tolist() == ["in-process", "processes"]
     assert written["workers"].tolist() == [0, 2]
+    # the modes' tables are bitwise the in-process one (the study checks it itself)
     assert written["same_table_as_in_process"].all()
-    assert (written["wall_s"] > 0).all() and written["speedup_vs_in_process"].iloc[0] == 1.0
-    assert written["cores"].iloc[0] == os.cpu_count() and written["cpu_model"].iloc[0]
+    assert (written["wall_s"] > 0).all()
+    sidecar = json.loads((tmp_path / "scaling.csv.json").read_text())
+    assert sidecar["machine"]["cores"] == os.cpu_count() and sidecar["machine"]["cpu_model"]
     assert len(table) == 2

@@ -1,0 +1,454 @@
+"""What every study's command line shares: the flags, their validation, the output folder.
+
+Shared flags (each study adds the ones it takes): `--out` (default a fresh
+`runs/<study>/<timestamp>/`), `--quick` (a small fast run; never into results/), `--arch`,
+`--no-progress`, `--preset paper|accurate` and `--set NAME=VALUE` (the model), `--dt`,
+`--cycles`, `--workers N` (local worker processes) or `--scheduler tcp://HOST:PORT` (a Dask
+cluster), `--retries`, `--chunk-size`. Bad input is a `StudyArgumentError` naming the flag,
+raised before any compute; `python -m studies` prints it on one line and exits with 2.
+
+A flag may have a different default under --quick: `parser.add_argument(..., quick=VALUE)`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import datetime
+import itertools
+import logging
+import math
+import tempfile
+import typing
+from pathlib import Path
+from typing import Dict, List, Mapping, Optional, Sequence
+
+import numpy as np
+import pandas as pd
+
+from taichi_star import SolverConfig, StarParams
+from taichi_star.batch import DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, executor_for
+from taichi_star.experiment import PAPER_GAITS
+from taichi_star.gait import Gait
+
+from . import provenance
+
+PRESETS = ("paper", "accurate")
+QUICK_DURATION_S = 0.2
+"""--quick: simulated time of every instance, s (instead of whole cycles)."""
+QUICK_DT = 2e-3
+"""--quick: time step, s, unless --dt is given."""
+GPU_CHUNK_SIZE = 16384
+QUICK_CHUNK_SIZE = 8
+"""--quick: instances per chunk, the smallest engine capacity, so that quick runs of different
+sizes share one compiled engine instead of compiling one per batch size."""
+RUNS_FOLDER = Path("runs")
+"""Default parent of the output folders: runs/<study>/<timestamp>/ (git-ignored)."""
+COMMITTED_RESULTS = Path(__file__).resolve().parent.parent / "results"
+"""The committed results, written only by full runs (`python -m studies reproduce`)."""
+
+_UNSET = object()
+
+
+class StudyArgumentError(ValueError):
+    """A study argument is invalid; raised before any computation, naming the flag."""
+
+
+# --------------------------------------------------------------------------- the parser
+
+class StudyParser(argparse.ArgumentParser):
+    """The parser of one study, with the flags every study takes (--out, --quick, --arch,
+    --no-progress). `add_argument(..., quick=VALUE)` gives a flag another default under
+    --quick; both defaults are shown in its help."""
+
+    def __init__(self, study: str, description: str, archs=("cpu", "gpu")):
+        super().__init__(prog=f"python -m studies {study}", description=description,
+                         allow_abbrev=False)
+        self.quick_defaults: Dict[str, tuple] = {}
+        self.set_defaults(study=study)
+        super().add_argument("--out", default=None, metavar="DIR",
+                             help=f"output folder (default: a fresh {RUNS_FOLDER}/{study}/"
+                                  f"<timestamp>/)")
+        super().add_argument("--quick", action="store_true",
+                             help="a small fast run (smoke test); never writes into results/")
+        super().add_argument("--arch", choices=archs, default="cpu",
+                             help="Taichi backend (default cpu)")
+        super().add_argument("--no-progress", action="store_true", help="no progress bars")
+
+    def add_argument(self, *names, quick=_UNSET, **kwargs):
+        if quick is _UNSET:
+            return super().add_argument(*names, **kwargs)
+        full = kwargs.pop("default", None)
+        kwargs["help"] = (kwargs.get("help", "") + f" (default {_shown(full)}; --quick "
+                          f"{_shown(quick)})").replace("%", "%%")
+        action = super().add_argument(*names, default=None, **kwargs)
+        self.quick_defaults[action.dest] = (full, quick)
+        return action
+
+    def parse_args(self, args=None, namespace=None):
+        parsed = super().parse_args(args, namespace)
+        for dest, (full, quick) in self.quick_defaults.items():
+            if getattr(parsed, dest) is None:
+                setattr(parsed, dest, quick if parsed.quick else full)
+        return parsed
+
+
+def _shown(value) -> str:
+    return "none" if value is None else str(value)
+
+
+def add_model_flags(parser: StudyParser, fixed: Sequence[str] = ()):
+    """--preset and --set; `fixed`: fields the study sets itself (refused in --set)."""
+    parser.add_argument("--preset", choices=PRESETS, default="paper",
+                        help="paper: the model as published (N = 193 nodes, implicit Euler at "
+                             "1 ms); accurate: damping, series joints, shared ends, n_arc 36, "
+                             "BDF2 at 2 ms (StarParams/SolverConfig.preset)")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                        help="change one StarParams field for every instance, e.g. --set "
+                             "alpha=1.0 (repeatable)")
+    parser.set_defaults(fixed_fields=tuple(fixed))
+
+
+def add_dt_flag(parser: StudyParser):
+    parser.add_argument("--dt", type=float, quick=QUICK_DT,
+                        help="time step, s (none: the preset's)")
+
+
+def add_cycles_flag(parser: StudyParser, default: float = 3.0):
+    parser.add_argument("--cycles", type=float, default=default,
+                        help=f"actuation cycles from rest per instance (default {default:g}; "
+                             f"--quick simulates {QUICK_DURATION_S} s)")
+
+
+def add_execution_flags(parser: StudyParser, chunk_size: int = DEFAULT_CHUNK_SIZE):
+    """--workers / --scheduler / --retries / --chunk-size."""
+    parser.add_argument("--workers", type=int, default=None, metavar="N",
+                        help="run the chunks on N local worker processes, each a "
+                             "single-threaded Taichi runtime (default: in this process)")
+    parser.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                        help="run the chunks on an existing Dask cluster (see the README)")
+    parser.add_argument("--retries", type=int, default=DEFAULT_RETRIES,
+                        help=f"extra tries of a chunk whose worker died or whose Dask task "
+                             f"failed (default {DEFAULT_RETRIES})")
+    parser.add_argument("--chunk-size", type=int, default=None,
+                        help=f"instances per chunk: one simulate call, one task (default "
+                             f"{chunk_size} cpu, {GPU_CHUNK_SIZE} gpu, fewer to give every "
+                             f"worker about four)")
+    parser.set_defaults(default_chunk_size=chunk_size)
+
+
+def parse(parser: StudyParser, argv) -> argparse.Namespace:
+    """Parse and check the shared flags (StudyArgumentError naming the flag)."""
+    args = parser.parse_args(argv)
+    if hasattr(args, "cycles"):
+        check_positive(args.cycles, "--cycles")
+    if getattr(args, "dt", None) is not None:
+        check_positive(args.dt, "--dt")
+    for flag in ("workers", "chunk_size"):
+        value = getattr(args, flag, None)
+        if value is not None and value < 1:
+            raise StudyArgumentError(f"--{flag.replace('_', '-')} must be >= 1, got {value}")
+    if getattr(args, "retries", 0) < 0:
+        raise StudyArgumentError(f"--retries must be >= 0, got {args.retries}")
+    if getattr(args, "workers", None) is not None and args.scheduler is not None:
+        raise StudyArgumentError("--workers and --scheduler: give one (local worker processes "
+                                 "or a Dask cluster), not both")
+    if getattr(args, "scheduler", None) is not None:
+        try:
+            from taichi_star.batch.dask_cluster import ADDRESS
+        except ImportError:
+            raise StudyArgumentError("--scheduler needs Dask: pip install "
+                                     "'taichi_star[dask]'") from None
+        if not ADDRESS.match(args.scheduler.strip()):
+            raise StudyArgumentError(f"--scheduler: expected an address like tcp://HOST:PORT, "
+                                     f"got {args.scheduler!r}")
+    if args.arch != "cpu":
+        from taichi_star.runtime import available_archs
+        if args.arch not in available_archs():
+            raise StudyArgumentError(f"--arch {args.arch}: no such backend on this machine; "
+                                     f"available archs: {', '.join(available_archs())}")
+    return args
+
+
+def check_positive(value: float, flag: str):
+    """StudyArgumentError naming the flag unless value is a finite number > 0."""
+    if not (math.isfinite(value) and value > 0):
+        raise StudyArgumentError(f"{flag} must be > 0, got {value}")
+
+
+# --------------------------------------------------------------------------- values
+
+def _number(text: str, flag: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise StudyArgumentError(f"{flag}: {text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise StudyArgumentError(f"{flag}: {text!r} is not a finite number")
+    return value
+
+
+def parse_range(text: str, flag: str = "value") -> List[float]:
+    """"start:stop:n" -> n evenly spaced values from start to stop inclusive;
+    "start:stop:n:log" -> n geometrically spaced values (start, stop > 0)."""
+    parts = [p.strip() for p in text.split(":")]
+    if len(parts) not in (3, 4) or (len(parts) == 4 and parts[3].lower() != "log"):
+        raise StudyArgumentError(
+            f"{flag}: malformed range {text!r}; expected start:stop:n or start:stop:n:log "
+            f"(e.g. 0.2:1.2:11)")
+    start, stop = _number(parts[0], flag), _number(parts[1], flag)
+    try:
+        count = int(parts[2])
+    except ValueError:
+        raise StudyArgumentError(f"{flag}: malformed range {text!r}: the number of points "
+                                 f"{parts[2]!r} is not an integer") from None
+    if count < 1:
+        raise StudyArgumentError(f"{flag}: range {text!r} has {count} points; need at least 1")
+    if count == 1 and start != stop:
+        raise StudyArgumentError(f"{flag}: range {text!r} has one point but start != stop")
+    if len(parts) == 4:
+        if start <= 0 or stop <= 0:
+            raise StudyArgumentError(f"{flag}: log range {text!r} needs start, stop > 0")
+        return [float(v) for v in np.geomspace(start, stop, count)]
+    return [float(v) for v in np.linspace(start, stop, count)]
+
+
+def parse_values(text: str, flag: str = "value", kind: type = float) -> list:
+    """A comma-separated list ("0,0.5,1", "contract,always") or, for numbers, a range
+    ("0.2:1.2:11", "1e6:1e7:5:log"). StudyArgumentError naming `flag` when malformed or empty."""
+    if text is None or not str(text).strip():
+        raise StudyArgumentError(f"{flag}: empty value list")
+    text = str(text).strip()
+    if kind is float and ":" in text:
+        return parse_range(text, flag)
+    items = [item.strip() for item in text.split(",")]
+    if any(not item for item in items):
+        raise StudyArgumentError(f"{flag}: malformed list {text!r} (an empty item)")
+    if kind is float:
+        return [_number(item, flag) for item in items]
+    if kind is int:
+        try:
+            return [int(item) for item in items]
+        except ValueError as error:
+            bad = str(error).rsplit(": ", 1)[-1]
+            raise StudyArgumentError(f"{flag}: {bad} is not an integer") from None
+    return items
+
+
+def parse_counts(text: str, flag: str) -> List[int]:
+    """A comma list of integers >= 1 ("1,8,64")."""
+    values = parse_values(text, flag, int)
+    if any(v < 1 for v in values):
+        raise StudyArgumentError(f"{flag}: every value must be >= 1, got {text!r}")
+    return values
+
+
+def parse_choices(text: str, flag: str, choices: Sequence[str]) -> List[str]:
+    """A comma list of names from `choices`."""
+    values = parse_values(text, flag, str)
+    unknown = [v for v in values if v not in choices]
+    if unknown:
+        raise StudyArgumentError(f"{flag}: unknown value {unknown[0]!r}; choose from "
+                                 f"{', '.join(choices)}")
+    return values
+
+
+def field_kind(name: str) -> type:
+    """float, int or str: the type of a StarParams field (StudyArgumentError if unknown)."""
+    hints = typing.get_type_hints(StarParams)
+    if name not in hints:
+        raise StudyArgumentError(
+            f"unknown parameter {name!r}; StarParams fields: {', '.join(StarParams.field_names())}")
+    return hints[name]
+
+
+def parse_assignment(text: str, flag: str):
+    """"name=values" (e.g. "alpha=0.2:1.2:6") -> (field name, list of values)."""
+    if "=" not in text:
+        raise StudyArgumentError(f"{flag}: expected NAME=VALUES (e.g. alpha=0.2:1.2:6), got "
+                                 f"{text!r}")
+    name, values = text.split("=", 1)
+    name = name.strip().replace("-", "_")
+    return name, parse_values(values, f"{flag} {name}", field_kind(name))
+
+
+def resolve_gaits(text: str, flag: str = "--gaits") -> List[str]:
+    """"paper" -> the five Fig. 4 gaits; "all" -> all 255 non-empty gaits; otherwise a comma
+    list of gaits (validated, canonical names)."""
+    if text is None or not text.strip():
+        raise StudyArgumentError(f"{flag}: empty gait list")
+    key = text.strip().lower()
+    if key == "paper":
+        return list(PAPER_GAITS)
+    if key == "all":
+        return [Gait.from_mask([bits >> m & 1 for m in range(8)]).name for bits in range(1, 256)]
+    gaits = []
+    for item in text.split(","):
+        try:
+            gaits.append(Gait.parse(item.strip()).name)
+        except ValueError as error:
+            raise StudyArgumentError(f"{flag}: {error}") from None
+    if len(set(gaits)) != len(gaits):
+        raise StudyArgumentError(f"{flag}: a gait is listed twice: {text}")
+    return gaits
+
+
+def param_product(axes: Mapping[str, Sequence],
+                  base: StarParams = StarParams()) -> List[StarParams]:
+    """Every combination of the given StarParams field values (the last axis varies fastest),
+    on top of `base`; StudyArgumentError naming the parameter for an unknown field, an invalid
+    value or an empty axis."""
+    names = list(axes)
+    for name in names:
+        field_kind(name)
+        if len(axes[name]) == 0:
+            raise StudyArgumentError(f"empty product: parameter {name!r} has no values")
+    combos = []
+    for values in itertools.product(*(axes[name] for name in names)):
+        try:
+            combos.append(base.replace(**dict(zip(names, values))))
+        except (ValueError, TypeError) as error:
+            raise StudyArgumentError(f"invalid parameter value: {error}") from None
+    return combos
+
+
+# --------------------------------------------------------------------------- model, solver, runs
+
+def base_params(args) -> StarParams:
+    """StarParams of --preset with the --set changes (StudyArgumentError naming --set)."""
+    overrides = {}
+    for item in args.set:
+        name, values = parse_assignment(item, "--set")
+        if len(values) != 1:
+            raise StudyArgumentError(f"--set {name}: give exactly one value, got {values}")
+        if name in args.fixed_fields:
+            raise StudyArgumentError(f"--set {name}: set by the {args.study} study itself")
+        overrides[name] = values[0]
+    try:
+        return StarParams.preset(args.preset, **overrides)
+    except (ValueError, TypeError) as error:
+        raise StudyArgumentError(f"--set: {error}") from None
+
+
+def solver(args) -> SolverConfig:
+    """SolverConfig of --preset with --dt (StudyArgumentError naming --dt)."""
+    try:
+        changes = {} if args.dt is None else {"dt": args.dt}
+        return SolverConfig.preset(getattr(args, "preset", "paper"), **changes)
+    except ValueError as error:
+        raise StudyArgumentError(f"--dt: {error}") from None
+
+
+def run_length(args) -> Dict[str, float]:
+    """run_batch's length arguments: 0.2 s under --quick, else --cycles of each period."""
+    return {"duration_s": QUICK_DURATION_S} if args.quick else {"cycles": args.cycles}
+
+
+def duration_s(args, period: float) -> float:
+    """Simulated time of a batch sharing one period, s: 0.2 s under --quick, else --cycles
+    periods."""
+    return QUICK_DURATION_S if args.quick else args.cycles * period
+
+
+def chunk_size(args, n_instances: int, n_workers: int) -> int:
+    """--chunk-size, else the study's default (larger on a GPU; QUICK_CHUNK_SIZE under
+    --quick), cut so that every worker gets about four chunks."""
+    if args.chunk_size is not None:
+        return args.chunk_size
+    size = GPU_CHUNK_SIZE if args.arch != "cpu" else args.default_chunk_size
+    if args.quick:
+        size = QUICK_CHUNK_SIZE
+    if n_workers > 1:
+        size = min(size, max(1, math.ceil(n_instances / (4 * n_workers))))
+    return size
+
+
+@contextlib.contextmanager
+def executor(args):
+    """The executor --workers / --scheduler ask for (in process without either)."""
+    with contextlib.ExitStack() as stack:
+        try:
+            chosen = stack.enter_context(executor_for(
+                workers=args.workers, scheduler=args.scheduler, retries=args.retries))
+        except ValueError as error:  # an unreachable scheduler
+            raise StudyArgumentError(f"--{error}") from None
+        yield chosen
+
+
+# --------------------------------------------------------------------------- output
+
+class Output:
+    """The output folder of one study run, checked before any compute: --out or a fresh
+    runs/<study>/<timestamp>/. `write_csv` writes a table and its provenance sidecar."""
+
+    def __init__(self, args, argv: Sequence[str], model=None, solver=None, extra=None):
+        study = args.study
+        self.folder = Path(args.out) if args.out is not None else _fresh_run_folder(study)
+        check_output_folder(self.folder, args.quick)
+        self.provenance = provenance.record(study, list(argv), model=model, solver=solver,
+                                            extra=extra)
+        self.written: List[Path] = []
+
+    def path(self, name: str) -> Path:
+        """A file of this run (its folder created)."""
+        path = self.folder / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return path
+
+    def write_csv(self, frame: pd.DataFrame, name: str, extra: Optional[Mapping] = None) -> Path:
+        """Write a table (no index, full float precision) and its JSON sidecar."""
+        path = self.path(name)
+        frame.to_csv(path, index=False, float_format="%.10g")
+        details = {**self.provenance.get("details", {}), **(extra or {})}
+        provenance.write_sidecar(path, {**self.provenance,
+                                        **({"details": details} if details else {})})
+        self.written.append(path)
+        return path
+
+    def wrote(self, *paths) -> None:
+        """Note files written otherwise (plots, notes)."""
+        self.written += [Path(p) for p in paths]
+
+    def report(self):
+        print("\n".join(f"  wrote {p}" for p in self.written))
+
+
+def _fresh_run_folder(study: str) -> Path:
+    stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
+    folder = RUNS_FOLDER / study / stamp
+    for suffix in itertools.count(1):
+        if not folder.exists():
+            return folder
+        folder = RUNS_FOLDER / study / f"{stamp}-{suffix}"
+
+
+def check_output_folder(folder: Path, quick: bool):
+    """Create the output folder or fail with a StudyArgumentError naming --out: not a folder,
+    cannot be created, not writable; --quick into the committed results/."""
+    if quick and folder.resolve() == COMMITTED_RESULTS:
+        raise StudyArgumentError(f"--out {folder}: --quick runs never write into the committed "
+                                 f"results/ (give another folder)")
+    if folder.exists() and not folder.is_dir():
+        raise StudyArgumentError(f"--out {folder}: exists and is not a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise StudyArgumentError(f"--out {folder}: cannot create it ({error.strerror})") from None
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as error:
+        raise StudyArgumentError(f"--out {folder}: not writable ({error.strerror})") from None
+
+
+def use_agg():
+    """Select the non-interactive Agg backend and return pyplot."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def configure_logging():
+    """Show the batch layer's notes (resuming, a damaged chunk recomputed) on stderr."""
+    logging.basicConfig(level=logging.WARNING, format="%(message)s")

@@ -1,0 +1,115 @@
+"""Provenance of a study's tables: what produced them, written as a JSON sidecar beside each.
+
+The sidecar of `fig4c.csv` is `fig4c.csv.json`: the study and its command line, the package
+version, git commit and dirty flag, the model (preset and every StarParams field) and solver
+configuration, Taichi and Python versions, the machine (CPU model, cores, GPU) and the date.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import json
+import os
+import platform
+import shlex
+import subprocess
+from pathlib import Path
+from typing import Dict, Mapping, Optional, Sequence
+
+from taichi_star.batch import code_version
+
+
+def cpu_model() -> str:
+    """The CPU model name from /proc/cpuinfo (platform.processor() elsewhere)."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.lower().startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown"
+
+
+def gpu_names() -> list:
+    """The names of the NVIDIA GPUs nvidia-smi lists (empty without nvidia-smi)."""
+    try:
+        output = subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"],
+                                capture_output=True, text=True, timeout=30, check=True).stdout
+    except (OSError, subprocess.SubprocessError):
+        return []
+    return [line.strip() for line in output.splitlines() if line.strip()]
+
+
+def machine() -> Dict[str, object]:
+    """cpu_model, cores, gpus, platform of this machine."""
+    return {"cpu_model": cpu_model(), "cores": os.cpu_count(), "gpus": gpu_names(),
+            "platform": platform.platform()}
+
+
+def machine_columns(arch: str) -> Dict[str, object]:
+    """Table columns naming the machine: machine (one line), cpu_model, cores, gpu ("" on the
+    CPU arch)."""
+    facts = machine()
+    gpu = ", ".join(facts["gpus"]) if arch != "cpu" else ""
+    label = f"{facts['cpu_model']} ({facts['cores']} cores)" + (f" + {gpu}" if gpu else "")
+    return {"machine": label, "cpu_model": facts["cpu_model"], "cores": facts["cores"],
+            "gpu": gpu}
+
+
+def short_commit() -> str:
+    """Short hash of HEAD, "-dirty" when tracked files differ from it; "unknown" outside git."""
+    code = code_version()
+    if code["commit"] is None:
+        return "unknown"
+    return code["commit"][:7] + ("-dirty" if code["dirty"] else "")
+
+
+def taichi_version() -> str:
+    import taichi
+    version = taichi.__version__
+    return ".".join(map(str, version)) if isinstance(version, (tuple, list)) else str(version)
+
+
+def record(study: str, argv: Sequence[str], model: Optional[Mapping] = None,
+           solver=None, extra: Optional[Mapping] = None) -> Dict[str, object]:
+    """The provenance of one study run. `model`: the preset name and the base StarParams (or
+    any description of the instances); `solver`: a SolverConfig (or a description)."""
+    code = code_version()
+    return {
+        "study": study,
+        "command": " ".join(["python -m studies", study, *map(shlex.quote, argv)]),
+        "taichi_star_version": code["version"],
+        "git_commit": code["commit"],
+        "git_dirty": code["dirty"],
+        "model": _plain(model),
+        "solver": _plain(solver),
+        "taichi_version": taichi_version(),
+        "python_version": platform.python_version(),
+        "machine": machine(),
+        "date": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
+        **({"details": _plain(extra)} if extra else {}),
+    }
+
+
+def _plain(value):
+    """JSON-ready copy: dataclasses as dicts, tuples as lists."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return _plain(dataclasses.asdict(value))
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
+def sidecar_path(table_path) -> Path:
+    return Path(f"{table_path}.json")
+
+
+def write_sidecar(table_path, provenance: Mapping) -> Path:
+    """Write `<table>.json` beside a table and return its path."""
+    path = sidecar_path(table_path)
+    path.write_text(json.dumps(provenance, indent=2, default=repr) + "\n")
+    return path
+

@@ -1,0 +1,64 @@
+"""Regenerate the committed results: every study in full, with the flags the README quotes,
+written into results/ (or --into DIR).
+
+    python -m studies reproduce [--only fig4c,sweep] [--into results] [--dry-run]
+
+Each study runs as its own `python -m studies <name> ... --out <into>` process, one after the
+other, and the first failure stops the run. The whole set takes hours on a 2-core machine;
+`--dry-run` prints the commands.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+from .cli import COMMITTED_RESULTS, StudyArgumentError
+
+DESCRIPTION = "Regenerate the committed results/ with every study's full run (hours)."
+
+COMMANDS = {
+    "fig4c": [],
+    "fig4c_accurate": ["fig4c", "--preset", "accurate", "--prefix", "fig4c_accurate"],
+    "convergence": [],
+    "gaits": ["--workers", "2"],
+    "sweep": ["--alpha", "0.2:1.2:6", "--added-mass", "0,0.5,1,2",
+              "--youngs-modulus", "2e6,5e6,1e7", "--workers", "2"],
+    "calibrate": ["--workers", "2"],
+    "animate": [],
+    "bench": ["--batch-sizes", "1,8,64,512,2048", "--repeats", "2"],
+    "work_precision": [],
+    "stability": ["--workers", "2"],
+    "scaling": [],
+}
+"""Result name -> the study's flags (the study is the name unless the flags start with it)."""
+
+
+def command(name: str, into: Path):
+    flags = COMMANDS[name]
+    study, flags = (flags[0], flags[1:]) if flags and not flags[0].startswith("-") \
+        else (name, flags)
+    return [sys.executable, "-m", "studies", study, *flags, "--no-progress", "--out", str(into)]
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog="python -m studies reproduce", description=DESCRIPTION)
+    parser.add_argument("--only", default=None,
+                        help=f"comma list of {', '.join(COMMANDS)} (default all)")
+    parser.add_argument("--into", default=str(COMMITTED_RESULTS),
+                        help="output folder (default the repository's results/)")
+    parser.add_argument("--dry-run", action="store_true", help="print the commands only")
+    args = parser.parse_args(argv)
+    names = list(COMMANDS) if args.only is None else [n.strip() for n in args.only.split(",")]
+    unknown = [n for n in names if n not in COMMANDS]
+    if unknown:
+        raise StudyArgumentError(f"--only: unknown result {unknown[0]!r}; choose from "
+                                 f"{', '.join(COMMANDS)}")
+    for name in names:
+        line = command(name, Path(args.into))
+        print(" ".join(map(shlex.quote, line[1:])), flush=True)
+        if not args.dry_run:
+            subprocess.run(line, check=True)

@@ -1,0 +1,24 @@
+"""Batches of any size: chunks, executors, the resumable run store.
+
+    from taichi_star.batch import run_batch
+    result = run_batch(params, cycles=3, workers=2)        # two local worker processes
+    result.summary                                          # one row per instance, input order
+
+- `run_batch`: cut a batch into chunks (`plan_chunks`, `ChunkTask`), run them (`run_chunk`)
+  on an executor and gather one `SimulationResult`.
+- Executors: `InProcess` (default), `LocalProcesses(n)`, and on Dask `DaskExecutor`
+  (`taichi_star.batch.dask_cluster`, with the worker preload `taichi_star.batch.dask_worker`);
+  `executor_for(workers=..., scheduler=...)` picks one.
+- `RunStore`: resumable runs (verified Parquet chunks and a manifest); `RunStoreError`.
+
+Dask is imported only when a scheduler is used.
+"""
+
+from .executors import DEFAULT_RETRIES, Executor, InProcess, LocalProcesses
+from .run import DEFAULT_CHUNK_SIZE, executor_for, run_batch
+from .store import RunStore, RunStoreError, code_version, stored_chunk_size
+from .tasks import ChunkResult, ChunkTask, plan_chunks, run_chunk
+
+__all__ = ["run_batch", "plan_chunks", "run_chunk", "ChunkTask", "ChunkResult", "Executor",
+           "InProcess", "LocalProcesses", "executor_for", "RunStore", "RunStoreError",
+           "code_version", "stored_chunk_size", "DEFAULT_CHUNK_SIZE", "DEFAULT_RETRIES"]

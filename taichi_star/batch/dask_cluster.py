@@ -1,0 +1,119 @@
+"""Chunks as Dask tasks (`pip install "taichi_star[dask]"`).
+
+A worker runs one whole chunk (a Taichi batch) per task and sends its tables back; the client
+writes them to the run store, so resuming works across distributed runs, and a worker lost
+mid-chunk costs only that chunk: the scheduler reruns it elsewhere. Workers are started with
+``--nthreads 1 --preload taichi_star.batch.dask_worker`` (see there); without the preload, the
+`TaichiWorkerSetup` plugin that `DaskExecutor` registers configures them the same way.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import re
+import threading
+import uuid
+from typing import Iterator, Sequence
+
+from distributed import Client, LocalCluster, as_completed, get_worker
+from distributed.diagnostics.plugin import WorkerPlugin
+
+from .executors import DEFAULT_RETRIES, configure_worker_process
+from .tasks import ChunkResult, ChunkTask, run_chunk
+
+ADDRESS = re.compile(r"^[a-z][a-z0-9+.-]*://\S+$", re.IGNORECASE)
+"""A scheduler address such as tcp://HOST:PORT."""
+
+
+def prepare_worker(worker, arch=None, cpu_threads: int = 1):
+    """Configure a Dask worker process once: its Taichi runtime (CPU threads, quiet logs), the
+    arch its chunks run on (None: the client's) and a lock so that it runs one Taichi batch at a
+    time even when started with several threads. Kept on the worker object."""
+    if getattr(worker, "taichi_star_lock", None) is not None:
+        return
+    import taichi as ti
+
+    from ..runtime import Runtime
+    if cpu_threads == 1:
+        configure_worker_process()
+    else:
+        Runtime.current().configure(cpu_threads=cpu_threads, log_level=ti.ERROR)
+    worker.taichi_star_arch = arch
+    worker.taichi_star_lock = threading.Lock()
+
+
+class TaichiWorkerSetup(WorkerPlugin):
+    """Configures every worker of the cluster (current and future, restarted ones included)
+    that was not started with the preload."""
+
+    name = "taichi_star-setup"
+    idempotent = True
+
+    def setup(self, worker):
+        prepare_worker(worker)
+
+
+def run_on_worker(task: ChunkTask) -> ChunkResult:
+    """Run one chunk on this Dask worker, on the worker's own arch when it was started with
+    one."""
+    worker = get_worker()
+    prepare_worker(worker)
+    if worker.taichi_star_arch is not None:
+        task = task.on(worker.taichi_star_arch)
+    with worker.taichi_star_lock:
+        return run_chunk(task)
+
+
+class DaskExecutor:
+    """Runs the chunks as Dask tasks on `client`'s cluster; results arrive as they complete. A
+    chunk whose worker dies is rerun by the scheduler; one that raises is retried `retries`
+    times, then its error is raised here (the chunks stored before stay stored)."""
+
+    def __init__(self, client: Client, retries: int = DEFAULT_RETRIES):
+        self.client = client
+        self.retries = retries
+        client.register_plugin(TaichiWorkerSetup())
+
+    @property
+    def n_workers(self) -> int:
+        return max(1, len(self.client.scheduler_info().get("workers", {})))
+
+    def run(self, tasks: Sequence[ChunkTask], progress: bool = False) -> Iterator[ChunkResult]:
+        run = uuid.uuid4().hex[:12]
+        futures = [self.client.submit(run_on_worker, task, retries=self.retries, pure=False,
+                                      key=f"taichi_star-chunk-{task.index}-{run}")
+                   for task in tasks]
+        try:
+            for future in as_completed(futures):
+                yield future.result()
+        finally:
+            for future in futures:
+                future.cancel()
+
+
+@contextlib.contextmanager
+def local_executor(n_workers: int, retries: int = DEFAULT_RETRIES, silence_logs=logging.ERROR):
+    """A DaskExecutor on a fresh loopback LocalCluster of `n_workers` single-threaded worker
+    processes, closed on exit."""
+    with LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                      host="127.0.0.1", dashboard_address=None, silence_logs=silence_logs) \
+            as cluster, Client(cluster) as client:
+        yield DaskExecutor(client, retries)
+
+
+@contextlib.contextmanager
+def remote_executor(address: str, retries: int = DEFAULT_RETRIES, timeout: float = 30):
+    """A DaskExecutor on the existing cluster whose scheduler listens at `address`. ValueError
+    for a malformed or unreachable address."""
+    address = address.strip()
+    if not ADDRESS.match(address):
+        raise ValueError(f"scheduler: expected an address like tcp://HOST:PORT, got {address!r}")
+    try:
+        client = Client(address, timeout=timeout)
+    except (OSError, TimeoutError) as error:
+        raise ValueError(f"scheduler: cannot reach {address}: {error}") from None
+    try:
+        yield DaskExecutor(client, retries)
+    finally:
+        client.close()

@@ -1,0 +1,148 @@
+"""Where the chunks of a batch run: one protocol, three executors.
+
+- `InProcess`: one chunk after the other in this process (the default; no worker processes, so
+  scripts need no `if __name__ == "__main__":` guard).
+- `LocalProcesses(n)`: n worker processes on this machine ("spawn" start method), each a
+  single-threaded Taichi runtime: on CPUs where Taichi's own threads scale poorly, processes use
+  the cores. `--workers N` of every study means this.
+- `DaskExecutor` (`taichi_star.batch.dask_cluster`): the chunks as tasks of a Dask cluster.
+
+An executor runs `run_chunk` on every task and yields the `ChunkResult`s as they complete (in any
+order; `ChunkResult.index` says which chunk).
+"""
+
+from __future__ import annotations
+
+import ast
+import atexit
+import concurrent.futures
+import multiprocessing
+import numbers
+import sys
+from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
+from typing import Iterator, Optional, Protocol, Sequence
+
+from .tasks import ChunkResult, ChunkTask, run_chunk
+
+DEFAULT_RETRIES = 2
+"""Extra tries of a chunk whose worker process died (a chunk that raises is not retried: its
+error is deterministic)."""
+
+
+class Executor(Protocol):
+    """Runs chunk tasks somewhere and yields their results as they complete."""
+
+    n_workers: int
+
+    def run(self, tasks: Sequence[ChunkTask], progress: bool = False) -> Iterator[ChunkResult]:
+        ...
+
+
+class InProcess:
+    """Runs the chunks one after the other in this process."""
+
+    n_workers = 1
+
+    def run(self, tasks: Sequence[ChunkTask], progress: bool = False) -> Iterator[ChunkResult]:
+        for task in tasks:
+            yield run_chunk(task, progress=progress)
+
+
+def configure_worker_process():
+    """Initialiser of a worker process: Taichi capped at one CPU thread, quiet logs (the cap
+    takes effect at the worker's first simulation)."""
+    import taichi as ti
+
+    from ..runtime import Runtime
+    Runtime.current().configure(cpu_threads=1, log_level=ti.ERROR)
+
+
+def _is_main_test(test: ast.expr) -> bool:
+    """`__name__ == "__main__"` (either order)."""
+    if not (isinstance(test, ast.Compare) and len(test.ops) == 1
+            and isinstance(test.ops[0], ast.Eq)):
+        return False
+    sides = [test.left, test.comparators[0]]
+    names = [s.id for s in sides if isinstance(s, ast.Name)]
+    texts = [s.value for s in sides if isinstance(s, ast.Constant)]
+    return names == ["__name__"] and texts == ["__main__"]
+
+
+def check_main_guard():
+    """RuntimeError unless worker processes can be started from this program: a "spawn" worker
+    re-imports the main script, so a script without an `if __name__ == "__main__":` guard would
+    run its own top-level code (and start a pool) again in every worker. Interactive sessions and
+    notebooks have no main script and need no guard."""
+    path = getattr(sys.modules.get("__main__"), "__file__", None)
+    if path is None or not str(path).endswith(".py") or not Path(path).is_file():
+        return
+    try:
+        tree = ast.parse(Path(path).read_text())
+    except (OSError, SyntaxError, ValueError):
+        return
+    if not any(isinstance(node, ast.If) and _is_main_test(node.test) for node in tree.body):
+        raise RuntimeError(
+            f"worker processes re-import the main script {path}, which has no "
+            f"'if __name__ == \"__main__\":' guard, so its top-level code would run again in "
+            f"every worker: put the code that runs the batch under that guard, or run in this "
+            f"process (workers=None)")
+
+
+class LocalProcesses:
+    """`n_workers` worker processes on this machine, started on first use with the "spawn" start
+    method (a fresh interpreter: no Taichi state is inherited), each configured by
+    `configure_worker_process`. A worker that dies costs only the chunks it was running: the
+    pool is restarted and the unfinished chunks resubmitted, up to `retries` times. Shut down by
+    `shutdown`, at the end of a `with` block, or at interpreter exit."""
+
+    def __init__(self, n_workers: int, retries: int = DEFAULT_RETRIES):
+        for name, value, lowest in (("workers", n_workers, 1), ("retries", retries, 0)):
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < lowest:
+                raise ValueError(f"{name} must be an integer >= {lowest}, got {value!r}")
+        self.n_workers = int(n_workers)
+        self.retries = int(retries)
+        self._pool: Optional[concurrent.futures.ProcessPoolExecutor] = None
+
+    def _start(self):
+        check_main_guard()
+        self._pool = concurrent.futures.ProcessPoolExecutor(
+            self.n_workers, mp_context=multiprocessing.get_context("spawn"),
+            initializer=configure_worker_process)
+        atexit.register(self.shutdown)
+
+    def run(self, tasks: Sequence[ChunkTask], progress: bool = False) -> Iterator[ChunkResult]:
+        pending = {task.index: task for task in tasks}
+        tries = 0
+        while pending:
+            if self._pool is None:
+                self._start()
+            futures = {self._pool.submit(run_chunk, task): index for index, task in pending.items()}
+            try:
+                for future in concurrent.futures.as_completed(futures):
+                    result = future.result()
+                    del pending[futures[future]]
+                    yield result
+            except BrokenProcessPool:
+                self.shutdown()
+                tries += 1
+                if tries > self.retries:
+                    raise RuntimeError(f"a worker process died {tries} times while running "
+                                       f"{len(pending)} chunk(s) (out of memory or killed?); "
+                                       f"giving up") from None
+            finally:
+                for future in futures:
+                    future.cancel()
+
+    def shutdown(self):
+        """Stop the worker processes (if started)."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+            atexit.unregister(self.shutdown)
+
+    def __enter__(self) -> "LocalProcesses":
+        return self
+
+    def __exit__(self, *exc_info):
+        self.shutdown()

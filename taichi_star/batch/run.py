@@ -1,0 +1,139 @@
+"""`run_batch`: a batch of any size, cut into chunks, run by an executor, optionally stored."""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from typing import Optional, Sequence
+
+import numpy as np
+import pandas as pd
+
+from ..geometry import build_topology
+from ..params import SolverConfig, StarParams
+from ..simulation import SimulationResult
+from .executors import DEFAULT_RETRIES, Executor, InProcess, LocalProcesses
+from .store import RunStore, run_definition
+from .tasks import plan_chunks
+
+DEFAULT_CHUNK_SIZE = 2048
+"""Instances per chunk on the CPU: one compiled engine's worth, large enough to keep a process
+busy, small enough that a lost chunk costs little."""
+
+TRAJECTORY_COLUMNS = ["instance", "t_s", "x_mm", "y_mm", "heading_deg"]
+
+log = logging.getLogger("taichi_star.batch")
+
+
+def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, *,
+              cycles: Optional[float] = None, solver: SolverConfig = SolverConfig(),
+              arch: str = "cpu", chunk_size: int = DEFAULT_CHUNK_SIZE,
+              record_interval_s: float = 0.0, record_shapes: bool = False,
+              steady_from_cycle: int = 1, workers: Optional[int] = None,
+              executor: Optional[Executor] = None, run_dir=None, resume: bool = False,
+              progress: bool = False) -> SimulationResult:
+    """Simulate any number of instances, each from rest, for `duration_s` seconds or for
+    `cycles` of its own actuation period, and return one `SimulationResult`.
+
+    Unlike `simulate`, the instances may differ in topology (n_arc, n_limb) and period: they are
+    grouped and cut into chunks of at most `chunk_size` (`plan_chunks`), each one `simulate`
+    call. The summary has simulate's columns plus `instance` (position in `params`) first and
+    `duration_s`, in input order; the trajectory's instances are positions in `params`; shapes
+    (n_records, B, N, 2), m, need one topology and one duration for the whole batch. `topology`
+    is the batch's when it has one, else None. Results are bitwise those of `simulate` on the
+    same instances, whatever the chunking and the executor (on one arch).
+
+    Where the chunks run: in this process (default), on `workers` local worker processes
+    (`LocalProcesses`, started and stopped by this call), or on an `executor` you keep across
+    calls (`LocalProcesses`, `executor_for`, a `DaskExecutor`).
+
+    `run_dir`: a run store (`RunStore`): every finished chunk's summary is written there as it
+    arrives; with `resume`, verified chunks already there are not recomputed (damaged or foreign
+    ones are reported and recomputed), and the summary is read back from the store. The
+    trajectory then covers only the chunks computed by this call.
+
+    Raises ValueError (RunStoreError for the run folder) naming the argument before any
+    compute."""
+    if workers is not None and executor is not None:
+        raise ValueError("give workers (local processes for this call) or executor, not both")
+    params = list(params)
+    tasks = plan_chunks(params, duration_s, cycles=cycles, chunk_size=chunk_size, solver=solver,
+                        arch=arch, record_interval_s=record_interval_s,
+                        record_shapes=record_shapes, steady_from_cycle=steady_from_cycle)
+    topology_keys = {p.topology_key for p in params}
+    if record_shapes and (len(topology_keys) > 1 or len({t.duration_s for t in tasks}) > 1):
+        raise ValueError("record_shapes needs one topology (n_arc, n_limb) and one duration for "
+                         "the whole batch")
+    if record_shapes and run_dir is not None:
+        raise ValueError("record_shapes cannot be combined with run_dir (shapes are not stored)")
+    store, done = None, []
+    if run_dir is not None:
+        store = RunStore(run_dir, run_definition(params, tasks, chunk_size, cycles, duration_s))
+        done = store.open(tasks, resume)
+        if done:
+            log.warning("resuming %s: %d of %d chunks already done", store.path, len(done),
+                        len(tasks))
+    todo = [task for task in tasks if task.index not in set(done)]
+
+    owned = None
+    if workers is not None:
+        owned = executor = LocalProcesses(workers)
+    executor = executor if executor is not None else InProcess()
+    summaries, trajectories, shapes = {}, [], {}
+    outer = None
+    if progress and len(tasks) > 1:
+        from tqdm.auto import tqdm
+        outer = tqdm(total=len(tasks), initial=len(done), desc="chunks", unit="chunk")
+    try:
+        for result in executor.run(todo, progress=progress and isinstance(executor, InProcess)):
+            task = tasks[result.index]
+            if store is not None:
+                store.write(task, result.summary)
+            summaries[result.index] = result.summary
+            trajectories.append(result.trajectory)
+            if result.shapes is not None:
+                shapes[result.index] = result.shapes
+            if outer is not None:
+                outer.update(1)
+    finally:
+        if outer is not None:
+            outer.close()
+        if owned is not None:
+            owned.shutdown()
+    if store is not None:
+        summaries = {task.index: store.read(task) for task in tasks}
+        store.finish()
+
+    summary = pd.concat([summaries[task.index] for task in tasks], ignore_index=True)
+    order = np.argsort(summary["instance"].to_numpy(), kind="stable")
+    summary = summary.iloc[order].reset_index(drop=True)
+    trajectory = (pd.concat(trajectories, ignore_index=True) if trajectories
+                  else pd.DataFrame(columns=TRAJECTORY_COLUMNS))
+    trajectory = trajectory.sort_values(["instance", "t_s"], kind="stable").reset_index(drop=True)
+    shape_array = None
+    if record_shapes:
+        stacked = np.concatenate([shapes[task.index] for task in tasks], axis=1)
+        members = np.concatenate([task.members for task in tasks])
+        shape_array = stacked[:, np.argsort(members, kind="stable")]
+    topology = build_topology(params[0]) if len(topology_keys) == 1 else None
+    return SimulationResult(summary=summary, trajectory=trajectory, shapes=shape_array,
+                            topology=topology, solver=solver)
+
+
+@contextlib.contextmanager
+def executor_for(workers: Optional[int] = None, scheduler: Optional[str] = None,
+                 retries: int = DEFAULT_RETRIES):
+    """The executor asked for: `InProcess` (neither), `LocalProcesses(workers)`, or a
+    `DaskExecutor` on the cluster whose scheduler listens at `scheduler` (tcp://HOST:PORT);
+    closed on exit."""
+    if workers is not None and scheduler is not None:
+        raise ValueError("give workers (local processes) or scheduler (a Dask cluster), not both")
+    if scheduler is not None:
+        from .dask_cluster import remote_executor
+        with remote_executor(scheduler, retries) as executor:
+            yield executor
+    elif workers is not None:
+        with LocalProcesses(workers, retries) as executor:
+            yield executor
+    else:
+        yield InProcess()

@@ -1,0 +1,310 @@
+"""The run store: a folder holding one verified file per finished chunk and a manifest, so a
+long batch can be resumed after a crash or a kill.
+
+- `manifest.json`: the run's *definition* (instance count, SHA-256 of every instance's
+  parameters, the chunk plan, duration or cycles, solver, arch, records, steady window), its
+  SHA-256, and for information the code version and the times.
+- `chunk_<index>.parquet`: one finished chunk's summary table (Parquet: a portable format that
+  keeps every float bit and dtype). Its schema metadata carries the definition's SHA-256, the
+  chunk index, its instances and a SHA-256 of the table's content.
+- Every file is written to a temporary name, flushed and renamed (`os.replace`): a kill leaves
+  whole files or none.
+
+On resume, a chunk file that is unreadable, truncated, empty, from another run or whose content
+does not match its checksum is reported (a warning on the `taichi_star.batch` logger), deleted
+and recomputed, never loaded. A damaged manifest is an error (`RunStoreError`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import hashlib
+import json
+import logging
+import os
+import subprocess
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from ..actuation import CurvatureProfile
+from .tasks import ChunkTask
+
+MANIFEST = "manifest.json"
+FORMAT = 2
+"""Version of the store's layout (2: Parquet chunks with checksums)."""
+METADATA_KEY = b"taichi_star.chunk"
+VALUE_TYPES = {"CurvatureProfile": CurvatureProfile}
+"""Value objects a summary column may hold; stored as JSON of their fields."""
+
+log = logging.getLogger("taichi_star.batch")
+
+
+class RunStoreError(ValueError):
+    """The run folder cannot be used as asked (another definition, an unfinished run without
+    resume, not a run folder, a damaged manifest); one line, naming the folder."""
+
+
+def code_version() -> Dict[str, object]:
+    """{"version": the package version, "commit": git HEAD of the source checkout or None,
+    "dirty": whether tracked files differ from it (None outside git)}."""
+    from .. import __version__
+    root = Path(__file__).resolve().parents[2]
+    commit = dirty = None
+    try:
+        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True,
+                              text=True, timeout=10)
+        if head.returncode == 0 and head.stdout.strip():
+            commit = head.stdout.strip()
+            status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+                                    cwd=root, capture_output=True, text=True, timeout=10)
+            dirty = bool(status.stdout.strip()) if status.returncode == 0 else None
+    except (OSError, subprocess.SubprocessError):
+        pass
+    return {"version": __version__, "commit": commit, "dirty": dirty}
+
+
+def _canonical(value) -> str:
+    return json.dumps(value, sort_keys=True, separators=(",", ":"), default=repr)
+
+
+def _sha256(text: str) -> str:
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def run_definition(params: Sequence, tasks: Sequence[ChunkTask], chunk_size: int,
+                   cycles: Optional[float], duration_s: Optional[float]) -> Dict:
+    """What defines a run: a resumed run must match it exactly. JSON-ready."""
+    first = tasks[0]
+    return {
+        "format": FORMAT,
+        "n_instances": len(params),
+        "params_sha256": _sha256("\n".join(_canonical(dataclasses.asdict(p)) for p in params)),
+        "chunk_size": int(chunk_size),
+        "n_chunks": len(tasks),
+        "chunks_sha256": _sha256(_canonical([list(map(int, t.members)) for t in tasks])),
+        "cycles": None if cycles is None else float(cycles),
+        "duration_s": None if duration_s is None else float(duration_s),
+        "solver": dataclasses.asdict(first.solver),
+        "arch": first.arch,
+        "record_interval_s": float(first.record_interval_s),
+        "steady_from_cycle": int(first.steady_from_cycle),
+    }
+
+
+def definition_differences(old: Dict, new: Dict) -> List[str]:
+    """Human-readable differences between two definitions ("solver.dt: 0.002 -> 0.001")."""
+    differences = []
+    for key in sorted(set(old) | set(new)):
+        a, b = old.get(key), new.get(key)
+        if isinstance(a, dict) and isinstance(b, dict):
+            differences += [f"{key}.{k}: {a.get(k)!r} -> {b.get(k)!r}"
+                            for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
+        elif a != b:
+            differences.append("the instance parameters differ" if key == "params_sha256"
+                               else f"{key}: {a!r} -> {b!r}")
+    return differences
+
+
+def table_checksum(frame: pd.DataFrame) -> str:
+    """SHA-256 of a table's column names, dtypes and values (bitwise for numbers)."""
+    digest = hashlib.sha256()
+    for name in frame.columns:
+        column = frame[name]
+        digest.update(f"{name}\0{column.dtype}\0".encode())
+        if pd.api.types.is_numeric_dtype(column) or pd.api.types.is_bool_dtype(column):
+            digest.update(np.ascontiguousarray(column.to_numpy()).tobytes())
+        else:
+            digest.update(_canonical([None if pd.isna(v) else str(v) for v in column]).encode())
+    return digest.hexdigest()
+
+
+def _encode(frame: pd.DataFrame):
+    """(frame with value-object columns as JSON text, {column: type name})."""
+    encoded, types = frame.copy(), {}
+    for name in frame.columns:
+        first = frame[name].iloc[0] if len(frame) else None
+        if frame[name].dtype == object and dataclasses.is_dataclass(first):
+            types[name] = type(first).__name__
+            encoded[name] = [_canonical(dataclasses.asdict(v)) for v in frame[name]]
+    return encoded, types
+
+
+def _decode(frame: pd.DataFrame, types: Dict[str, str]) -> pd.DataFrame:
+    for name, type_name in types.items():
+        frame[name] = pd.Series([VALUE_TYPES[type_name](**json.loads(v)) for v in frame[name]],
+                                dtype=object, index=frame.index)
+    return frame
+
+
+def _write_atomic(path: Path, data: bytes):
+    temporary = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        with open(temporary, "wb") as handle:
+            handle.write(data)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(temporary, path)
+    finally:
+        if temporary.exists():
+            temporary.unlink()
+
+
+class RunStore:
+    """A run folder for one run definition. `open` it (it returns the chunks already finished
+    and verified), `write` each finished chunk, `read` them back, `finish` marks it complete.
+    `flag` names the folder in error messages (a study's --run-dir)."""
+
+    def __init__(self, path, definition: Dict, flag: str = "run_dir"):
+        self.path = Path(path)
+        self.definition = definition
+        self.definition_sha256 = _sha256(_canonical(definition))
+        self.flag = flag
+        self.manifest: Dict = {}
+
+    def chunk_path(self, index: int) -> Path:
+        return self.path / f"chunk_{index:06d}.parquet"
+
+    def _chunk_files(self) -> List[Path]:
+        return sorted(self.path.glob("chunk_*.parquet"))
+
+    def read_manifest(self) -> Optional[Dict]:
+        """The folder's manifest, None if it has none; RunStoreError if it is damaged."""
+        path = self.path / MANIFEST
+        if not path.exists():
+            return None
+        try:
+            manifest = json.loads(path.read_text())
+            if not isinstance(manifest, dict) or not isinstance(manifest.get("definition"), dict):
+                raise ValueError("no run definition in it")
+        except (OSError, UnicodeDecodeError, ValueError) as error:
+            reason = str(error).splitlines()[0] if str(error) else type(error).__name__
+            raise RunStoreError(f"{self.flag} {self.path}: {MANIFEST} is damaged ({reason}); "
+                                f"delete the folder or choose another {self.flag}") from None
+        return manifest
+
+    def open(self, tasks: Sequence[ChunkTask], resume: bool) -> List[int]:
+        """Prepare the folder for this run; return the indices of the chunks already finished
+        and verified (only when resuming). Raises RunStoreError, before any compute, for a
+        folder that is not a run folder, holds another definition (resume) or an unfinished
+        run (no resume)."""
+        if self.path.exists() and not self.path.is_dir():
+            raise RunStoreError(f"{self.flag} {self.path}: exists and is not a folder")
+        old = self.read_manifest() if self.path.exists() else None
+        if old is None and self.path.exists() and any(self.path.iterdir()):
+            raise RunStoreError(f"{self.flag} {self.path}: not empty and has no {MANIFEST}; not "
+                                f"a run folder (choose another {self.flag})")
+        version = code_version()
+        now = datetime.datetime.now().isoformat(timespec="seconds")
+        done: List[int] = []
+        history: Dict = {}
+        if old is not None:
+            finished = self._chunk_files()
+            if resume:
+                differences = definition_differences(old["definition"], self.definition)
+                if differences:
+                    raise RunStoreError(
+                        f"{self.flag} {self.path} holds a run with another definition; refusing "
+                        f"to resume it ({'; '.join(differences)}): use another {self.flag} or "
+                        f"delete the folder")
+                done = [task.index for task in tasks if self._verified(task)]
+                if old.get("code") != version:
+                    log.warning("resuming a run started with code %s; now %s", old.get("code"),
+                                version)
+                history = {"created": old.get("created", now),
+                           "resumed": list(old.get("resumed", [])) + [now]}
+            elif not old.get("complete") and finished:
+                raise RunStoreError(
+                    f"{self.flag} {self.path} holds an unfinished run ({len(finished)} of "
+                    f"{old['definition'].get('n_chunks')} chunks done): resume it, or delete the "
+                    f"folder / choose another {self.flag} to start over")
+            else:  # a finished (or empty) run is replaced by a fresh one
+                for path in finished:
+                    path.unlink()
+        try:
+            self.path.mkdir(parents=True, exist_ok=True)
+        except OSError as error:
+            raise RunStoreError(f"{self.flag} {self.path}: cannot create it ({error.strerror})") \
+                from None
+        for stale in self.path.glob(".*.tmp-*"):  # left by a killed run
+            stale.unlink()
+        self.manifest = {"definition": self.definition,
+                         "definition_sha256": self.definition_sha256, "code": version,
+                         "created": now, "complete": False, **history}
+        self._write_manifest()
+        return done
+
+    def _write_manifest(self):
+        _write_atomic(self.path / MANIFEST,
+                      json.dumps(self.manifest, indent=2, sort_keys=True).encode())
+
+    def write(self, task: ChunkTask, summary: pd.DataFrame) -> Path:
+        """Store one finished chunk's summary (atomically)."""
+        encoded, types = _encode(summary)
+        table = pa.Table.from_pandas(encoded, preserve_index=False)
+        stamp = {"definition_sha256": self.definition_sha256, "chunk": task.index,
+                 "members": list(map(int, task.members)), "sha256": table_checksum(encoded),
+                 "value_types": types}
+        table = table.replace_schema_metadata({**(table.schema.metadata or {}),
+                                               METADATA_KEY: _canonical(stamp).encode()})
+        sink = pa.BufferOutputStream()
+        pq.write_table(table, sink)
+        path = self.chunk_path(task.index)
+        _write_atomic(path, sink.getvalue().to_pybytes())
+        return path
+
+    def _load(self, task: ChunkTask) -> pd.DataFrame:
+        """The chunk's table; ValueError saying why it cannot be trusted."""
+        path = self.chunk_path(task.index)
+        try:
+            table = pq.read_table(path)
+        except (OSError, pa.ArrowException) as error:
+            raise ValueError(f"unreadable ({str(error).splitlines()[0]})") from None
+        raw = (table.schema.metadata or {}).get(METADATA_KEY)
+        if raw is None:
+            raise ValueError("no taichi_star chunk metadata")
+        stamp = json.loads(raw)
+        if stamp.get("definition_sha256") != self.definition_sha256:
+            raise ValueError("from another run (its definition differs)")
+        if stamp.get("chunk") != task.index or stamp.get("members") != list(map(int, task.members)):
+            raise ValueError("holds another chunk's instances")
+        frame = table.to_pandas()
+        if table_checksum(frame) != stamp.get("sha256"):
+            raise ValueError("its content does not match its checksum")
+        return _decode(frame, stamp.get("value_types", {}))
+
+    def _verified(self, task: ChunkTask) -> bool:
+        path = self.chunk_path(task.index)
+        if not path.exists():
+            return False
+        try:
+            self._load(task)
+        except ValueError as error:
+            log.warning("%s: %s; recomputing it", path, error)
+            path.unlink()
+            return False
+        return True
+
+    def read(self, task: ChunkTask) -> pd.DataFrame:
+        """A stored chunk's summary, verified (RunStoreError if it changed since `open`)."""
+        try:
+            return self._load(task)
+        except ValueError as error:
+            raise RunStoreError(f"{self.chunk_path(task.index)}: {error}") from None
+
+    def finish(self):
+        self.manifest["complete"] = True
+        self.manifest["finished"] = datetime.datetime.now().isoformat(timespec="seconds")
+        self._write_manifest()
+
+
+def stored_chunk_size(path) -> Optional[int]:
+    """The chunk size recorded in the manifest of the run in `path` (to resume it without
+    repeating it), None when there is none."""
+    manifest = RunStore(path, {}).read_manifest() if Path(path).is_dir() else None
+    return None if manifest is None else manifest["definition"].get("chunk_size")

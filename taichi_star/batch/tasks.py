@@ -1,0 +1,119 @@
+"""Chunks of a batch: the unit of work of every executor.
+
+A batch of instances is cut into chunks (`plan_chunks`), each one `simulate` call: instances
+that share a topology (n_arc, n_limb) and a duration, in input order. `run_chunk` runs one chunk
+wherever it is sent (this process, a worker process, a Dask worker) and returns its tables with
+the instances numbered by their position in the whole batch.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import numbers
+from dataclasses import dataclass
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+import pandas as pd
+
+from ..geometry import Topology
+from ..params import SolverConfig, StarParams
+from ..runtime import check_arch
+from ..simulation import simulate, validate_call
+
+
+@dataclass(frozen=True)
+class ChunkTask:
+    """One `simulate` call of a chunked batch. `members`: the positions in the whole batch of
+    the instances `params` (same length, same order); durations and intervals in s."""
+
+    index: int
+    members: Tuple[int, ...]
+    params: Tuple[StarParams, ...]
+    duration_s: float
+    solver: SolverConfig
+    arch: str = "cpu"
+    record_interval_s: float = 0.0
+    record_shapes: bool = False
+    steady_from_cycle: int = 1
+
+    def on(self, arch: str) -> "ChunkTask":
+        """The same task on another arch (a Dask worker started for one)."""
+        return dataclasses.replace(self, arch=arch)
+
+
+@dataclass
+class ChunkResult:
+    """What `run_chunk` returns. summary: simulate's summary with `instance` (position in the
+    whole batch) first and `duration_s` added; trajectory: its instance column renumbered the
+    same way; shapes: (n_records, len(members), N, 2) m or None."""
+
+    index: int
+    summary: pd.DataFrame
+    trajectory: pd.DataFrame
+    shapes: Optional[np.ndarray]
+    topology: Topology
+
+
+def _check_duration(duration_s, cycles):
+    if (duration_s is None) == (cycles is None):
+        raise ValueError("give exactly one of duration_s (s, the same for every instance) and "
+                         "cycles (actuation periods of each instance)")
+    name, value = ("duration_s", duration_s) if duration_s is not None else ("cycles", cycles)
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not value > 0 \
+            or not np.isfinite(value):
+        raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+
+
+def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None, *,
+                cycles: Optional[float] = None, chunk_size: int = 2048,
+                solver: SolverConfig = SolverConfig(), arch: str = "cpu",
+                record_interval_s: float = 0.0, record_shapes: bool = False,
+                steady_from_cycle: int = 1) -> List[ChunkTask]:
+    """The chunks of a batch, deterministic: instances grouped by topology and duration
+    (`duration_s`, or `cycles` × the instance's period), groups in order of first appearance,
+    each cut into runs of at most `chunk_size` in input order. Every chunk's arguments are
+    validated here, so a bad batch fails before any chunk is computed (ValueError naming the
+    argument)."""
+    params = list(params)
+    if not params:
+        raise ValueError("params must hold at least one StarParams (the batch is empty)")
+    if isinstance(chunk_size, bool) or not isinstance(chunk_size, numbers.Integral) \
+            or chunk_size < 1:
+        raise ValueError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")
+    _check_duration(duration_s, cycles)
+    check_arch(arch)
+    groups: Dict[tuple, List[int]] = {}
+    for position, p in enumerate(params):
+        if not isinstance(p, StarParams):
+            raise ValueError(f"params[{position}] must be a StarParams, got {type(p).__name__}")
+        duration = duration_s if duration_s is not None else cycles * p.period
+        groups.setdefault((p.topology_key, round(float(duration), 12)), []).append(position)
+    tasks = []
+    for (_, duration), positions in groups.items():
+        for start in range(0, len(positions), chunk_size):
+            members = tuple(positions[start:start + chunk_size])
+            chunk = tuple(params[m] for m in members)
+            validate_call(chunk, duration, solver, record_interval_s, record_shapes,
+                          steady_from_cycle)
+            tasks.append(ChunkTask(index=len(tasks), members=members, params=chunk,
+                                   duration_s=duration, solver=solver, arch=arch,
+                                   record_interval_s=record_interval_s,
+                                   record_shapes=record_shapes,
+                                   steady_from_cycle=steady_from_cycle))
+    return tasks
+
+
+def run_chunk(task: ChunkTask, progress: bool = False) -> ChunkResult:
+    """Simulate one chunk (in whatever process calls it) and number its rows by `members`."""
+    result = simulate(list(task.params), task.duration_s, task.solver, arch=task.arch,
+                      record_interval_s=task.record_interval_s, record_shapes=task.record_shapes,
+                      steady_from_cycle=task.steady_from_cycle, progress=progress)
+    members = np.asarray(task.members)
+    summary = result.summary
+    summary.insert(0, "instance", members)
+    summary.insert(summary.columns.get_loc("displacement_x_mm"), "duration_s", task.duration_s)
+    trajectory = result.trajectory
+    trajectory["instance"] = members[trajectory["instance"].to_numpy(dtype=int)]
+    return ChunkResult(index=task.index, summary=summary, trajectory=trajectory,
+                       shapes=result.shapes, topology=result.topology)

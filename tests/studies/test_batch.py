@@ -1,0 +1,116 @@
+"""run_batch: chunked, on worker processes, with shapes, it gives bitwise the tables of one
+`simulate` call; its arguments are checked before any compute; a process pool started from a
+script without a main guard fails with an error that explains the guard."""
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import taichi_star as ts
+from taichi_star.batch import LocalProcesses, plan_chunks, run_batch
+
+REPO = Path(__file__).resolve().parents[2]
+SOLVER = ts.SolverConfig(dt=2e-3)
+PARAMS = [ts.StarParams(gait=g, alpha=a, period=0.3) for g in ("A1", "A1+A3") for a in (0.4, 1.2)]
+DURATION = 0.6  # two cycles of 0.3 s
+
+
+@pytest.fixture(scope="module")
+def direct():
+    return ts.simulate(PARAMS, DURATION, SOLVER, record_interval_s=0.1, record_shapes=True)
+
+
+def test_chunked_batch_equals_one_simulate_call(direct):
+    result = run_batch(PARAMS, cycles=2, solver=SOLVER, chunk_size=3, record_interval_s=0.1,
+                       record_shapes=True)
+    assert result.summary["instance"].tolist() == list(range(len(PARAMS)))
+    assert (result.summary["duration_s"] == DURATION).all()
+    pd.testing.assert_frame_equal(result.summary.drop(columns=["instance", "duration_s"]),
+                                  direct.summary, check_exact=True)
+    pd.testing.assert_frame_equal(result.trajectory, direct.trajectory, check_exact=True)
+    np.testing.assert_array_equal(result.shapes, direct.shapes)
+    assert result.topology.n_nodes == direct.topology.n_nodes
+    assert np.isfinite(result.summary["steady_speed_mm_s"]).all()  # cycle 1 of 2 is whole
+
+
+@pytest.mark.slow
+def test_local_worker_processes_give_the_in_process_tables(direct):
+    with LocalProcesses(2) as executor:
+        result = run_batch(PARAMS, DURATION, solver=SOLVER, chunk_size=1,
+                           record_interval_s=0.1, executor=executor)
+        again = run_batch(PARAMS[:1], DURATION, solver=SOLVER, executor=executor)
+    pd.testing.assert_frame_equal(result.summary.drop(columns=["instance", "duration_s"]),
+                                  direct.summary, check_exact=True)
+    pd.testing.assert_frame_equal(result.trajectory, direct.trajectory, check_exact=True)
+    pd.testing.assert_frame_equal(again.summary.drop(columns=["instance", "duration_s"]),
+                                  direct.summary.iloc[:1], check_exact=True)
+
+
+def test_instances_of_several_topologies_and_periods_are_grouped_in_input_order():
+    # n_arc 18 (the default) and 8 with shared ends: engines the other tests compile too
+    params = [ts.StarParams(gait="A1", period=0.3),
+              ts.StarParams(gait="A1", n_arc=8, actuation_ends="shared", period=0.3),
+              ts.StarParams(gait="A1", period=0.4),
+              ts.StarParams(gait="A1+A2", period=0.3)]
+    tasks = plan_chunks(params, cycles=1, chunk_size=8, solver=SOLVER)
+    assert [t.members for t in tasks] == [(0, 3), (1,), (2,)]
+    assert [t.duration_s for t in tasks] == pytest.approx([0.3, 0.3, 0.4])
+    result = run_batch(params, cycles=1, solver=SOLVER)
+    assert result.summary["instance"].tolist() == [0, 1, 2, 3]
+    assert result.summary["n_arc"].tolist() == [18, 8, 18, 18]
+    assert result.topology is None  # no single topology
+    alone = ts.simulate([params[2]], 0.4, SOLVER).summary
+    pd.testing.assert_frame_equal(result.summary.iloc[[2]].drop(columns=["instance", "duration_s"])
+                                  .reset_index(drop=True), alone, check_exact=True)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(duration_s=0.1, cycles=1), "exactly one of duration_s"),
+    (dict(), "exactly one of duration_s"),
+    (dict(cycles=0), "cycles must be a finite number > 0"),
+    (dict(cycles=1, chunk_size=0), "chunk_size must be an integer >= 1"),
+    (dict(cycles=1, record_interval_s=0.0011), "record_interval_s must be a whole number"),
+    (dict(cycles=1, workers=0), "workers must be an integer >= 1"),
+    (dict(cycles=1, arch="tpu"), "arch must be one of"),
+])
+def test_bad_arguments_fail_before_compute(monkeypatch, kwargs, message):
+    monkeypatch.setattr("taichi_star.batch.tasks.simulate", _forbidden)
+    with pytest.raises(ValueError, match=message):
+        run_batch(PARAMS, solver=SOLVER, **kwargs)
+
+
+def test_shapes_need_one_topology_and_duration(monkeypatch):
+    monkeypatch.setattr("taichi_star.batch.tasks.simulate", _forbidden)
+    with pytest.raises(ValueError, match="record_shapes needs one topology"):
+        run_batch([ts.StarParams(period=0.3), ts.StarParams(period=0.4)], cycles=1,
+                  solver=SOLVER, record_interval_s=0.1, record_shapes=True)
+
+
+def _forbidden(*args, **kwargs):
+    raise AssertionError("simulate was called despite invalid arguments")
+
+
+@pytest.mark.slow
+def test_a_script_without_main_guard_gets_an_error_explaining_it(tmp_path):
+    script = tmp_path / "unguarded.py"
+    script.write_text(textwrap.dedent("""
+        import taichi_star as ts
+        from taichi_star.batch import run_batch
+        run_batch([ts.StarParams()], 0.01, workers=2)
+    """))
+    run = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True,
+                         text=True, timeout=300, env=dict(os.environ, PYTHONPATH=str(REPO)))
+    assert run.returncode != 0
+    assert "if __name__ == \"__main__\":" in run.stderr and "guard" in run.stderr
+    assert "BrokenProcessPool" not in run.stderr
+    # the in-process default needs no guard
+    script.write_text(script.read_text().replace(", workers=2", ""))
+    run = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True,
+                         text=True, timeout=300, env=dict(os.environ, PYTHONPATH=str(REPO)))
+    assert run.returncode == 0, run.stderr[-2000:]

@@ -1,0 +1,148 @@
+"""The run store: a resumed run recomputes (never loads) chunks that are truncated, random bytes,
+empty or from another run, and ends with the table of an uninterrupted run; a damaged manifest
+is a one-line error (exit 2 from the command line); a store refuses another definition."""
+
+import json
+import logging
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+import taichi_star as ts
+from taichi_star.batch import RunStore, RunStoreError, run_batch
+
+from studies.__main__ import main as studies_main
+
+SOLVER = ts.SolverConfig(dt=2e-3)
+PARAMS = [ts.StarParams(gait=g, alpha=a) for g in ("A1", "A1+A3") for a in (0.4, 0.8, 1.2)]
+DURATION = 0.1
+CHUNK = 2  # three chunks
+
+
+def run(run_dir, resume=False, params=PARAMS):
+    return run_batch(params, DURATION, solver=SOLVER, chunk_size=CHUNK, run_dir=run_dir,
+                     resume=resume).summary
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory):
+    """(run folder, its summary) of an uninterrupted run."""
+    folder = tmp_path_factory.mktemp("store") / "run"
+    return folder, run(folder)
+
+
+def test_stored_run_equals_a_plain_run(finished):
+    folder, summary = finished
+    plain = run_batch(PARAMS, DURATION, solver=SOLVER, chunk_size=CHUNK).summary
+    pd.testing.assert_frame_equal(summary, plain, check_exact=True)
+    manifest = json.loads((folder / "manifest.json").read_text())
+    assert manifest["complete"] is True
+    definition = manifest["definition"]
+    assert definition["n_chunks"] == 3 and definition["duration_s"] == DURATION
+    assert definition["solver"]["dt"] == SOLVER.dt and definition["arch"] == "cpu"
+    assert manifest["code"]["version"] == ts.__version__
+    assert sorted(p.name for p in folder.iterdir()) == [
+        "chunk_000000.parquet", "chunk_000001.parquet", "chunk_000002.parquet", "manifest.json"]
+
+
+def damage_truncated(path, other):
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+
+
+def damage_random(path, other):
+    path.write_bytes(bytes(range(256)) * 8)
+
+
+def damage_empty(path, other):
+    path.write_bytes(b"")
+
+
+def damage_foreign(path, other):
+    path.write_bytes((other / path.name).read_bytes())
+
+
+def damage_tampered(path, other):
+    """A value changed in the last bit, the chunk's metadata (and checksum) kept."""
+    table = pq.read_table(path)
+    frame = table.to_pandas()
+    frame.loc[0, "speed_mm_s"] = np.nextafter(frame.loc[0, "speed_mm_s"], np.inf)
+    changed = pa.Table.from_pandas(frame, preserve_index=False)
+    pq.write_table(changed.replace_schema_metadata(table.schema.metadata), path)
+
+
+@pytest.mark.parametrize("damage", [damage_truncated, damage_random, damage_empty, damage_foreign,
+                                    damage_tampered])
+def test_damaged_chunk_is_reported_and_recomputed(finished, tmp_path, damage, caplog,
+                                                  monkeypatch):
+    source, summary = finished
+    folder = tmp_path / "run"
+    folder.mkdir()
+    for path in source.iterdir():
+        (folder / path.name).write_bytes(path.read_bytes())
+    manifest = json.loads((folder / "manifest.json").read_text())
+    manifest["complete"] = False
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    other = tmp_path / "other"  # same chunking, other parameters
+    run(other, params=[p.replace(cylinder_drag=20.0) for p in PARAMS])
+    damage(folder / "chunk_000001.parquet", other)
+
+    computed = []
+    original = ts.batch.tasks.run_chunk
+
+    def counting(task, progress=False):
+        computed.append(task.index)
+        return original(task, progress)
+    monkeypatch.setattr(ts.batch.executors, "run_chunk", counting)
+    with caplog.at_level(logging.WARNING, logger="taichi_star.batch"):
+        resumed = run(folder, resume=True)
+    assert computed == [1]
+    assert "chunk_000001.parquet" in caplog.text and "recomputing" in caplog.text
+    pd.testing.assert_frame_equal(resumed, summary, check_exact=True)
+
+
+@pytest.mark.parametrize("text", ["{", "", "[]", '{"definition": 3}', "\x00\x01"])
+def test_damaged_manifest_is_a_one_line_error(finished, tmp_path, text, monkeypatch, capsys):
+    source, _ = finished
+    folder = tmp_path / "run"
+    folder.mkdir()
+    (folder / "manifest.json").write_text(text)
+    with pytest.raises(RunStoreError) as error:
+        run(folder, resume=True)
+    message = str(error.value)
+    assert "manifest.json is damaged" in message and "\n" not in message
+    # from the command line: exit 2, one line, nothing computed
+    monkeypatch.setattr("taichi_star.batch.tasks.simulate", _forbidden)
+    code = studies_main(["sweep", "--gaits", "A1", "--quick", "--no-progress", "--out",
+                         str(tmp_path / "out"), "--run-dir", str(folder), "--resume"])
+    assert code == 2
+    err = capsys.readouterr().err.strip()
+    assert "manifest.json is damaged" in err and len(err.splitlines()) == 1
+
+
+def test_another_definition_or_an_unfinished_run_is_refused(finished, tmp_path, monkeypatch):
+    source, _ = finished
+    folder = tmp_path / "run"
+    folder.mkdir()
+    for path in source.iterdir():
+        (folder / path.name).write_bytes(path.read_bytes())
+    monkeypatch.setattr("taichi_star.batch.tasks.simulate", _forbidden)
+    with pytest.raises(RunStoreError, match=r"another definition.*solver.dt: 0.002 -> 0.001"):
+        run_batch(PARAMS, DURATION, solver=SOLVER.replace(dt=1e-3), chunk_size=CHUNK,
+                  run_dir=folder, resume=True)
+    manifest = json.loads((folder / "manifest.json").read_text())
+    manifest["complete"] = False
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(RunStoreError, match="unfinished run"):
+        run(folder)
+    not_a_run = tmp_path / "mine"
+    not_a_run.mkdir()
+    (not_a_run / "notes.txt").write_text("mine")
+    with pytest.raises(RunStoreError, match="not a run folder"):
+        RunStore(not_a_run, {}).open([], resume=True)
+
+
+def _forbidden(*args, **kwargs):
+    raise AssertionError("simulate was called despite a refused run folder")

@@ -1,0 +1,360 @@
+"""The studies on the command line: every study in --quick mode into tmp_path with its values
+checked against a direct `simulate` of the same instances, argument and output-folder errors
+before any compute, provenance sidecars, the gait-symmetry basis of the gaits study, and the
+packaged experiment data."""
+
+import json
+import math
+import os
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import taichi_star
+from taichi_star import SolverConfig, StarParams
+from taichi_star.gait import Gait, symmetry_classes
+from taichi_star.experiment import (FIG4C_COLUMNS, PAPER_DIRECTIONS, PAPER_GAITS,
+                                    compare_with_experiment, experimental_speed,
+                                    experimental_speeds, experimental_trajectory)
+
+from studies import cli, gaits as gaits_study, study_names
+from studies.__main__ import main as studies_main
+
+QUICK = ["--quick", "--no-progress"]
+QUICK_SOLVER = SolverConfig(dt=cli.QUICK_DT)
+
+
+def quick_simulation(params):
+    """What a --quick study simulates for these instances, run directly."""
+    return taichi_star.simulate(params, cli.QUICK_DURATION_S, QUICK_SOLVER)
+
+
+def pngs_written(*paths):
+    for path in paths:
+        assert path.exists() and path.stat().st_size > 1000, path
+
+
+# ----------------------------------------------------------------------------- experiment data
+
+def test_experiment_data_is_packaged():
+    speeds = experimental_speeds()
+    assert list(speeds.index) == list(PAPER_GAITS)
+    assert experimental_speed("A1+A2") == pytest.approx(2.85)
+    assert experimental_speed("A2+A1") == pytest.approx(2.85)  # canonical gait names
+    assert math.isnan(experimental_speed("A1+A6"))
+    for gait in PAPER_GAITS:
+        trajectory = experimental_trajectory(gait)
+        assert list(trajectory.columns) == ["t_s", "x_mm", "y_mm", "displacement_mm"]
+        assert trajectory["t_s"].iloc[0] == 0.0 and len(trajectory) > 1000
+    with pytest.raises(ValueError, match="no experimental trajectory"):
+        experimental_trajectory("A1+A6")
+
+
+def test_compare_with_experiment_directions_and_failures():
+    summary = pd.DataFrame({
+        "gait": list(PAPER_GAITS),
+        "speed_mm_s": [0.5, 2.0, 3.0, 1.0, 4.0],
+        "signed_speed_mm_s": [0.5, 2.0, -3.0, 1.0, -4.0],
+        "status": ["ok", "ok", "ok", "ok", "newton_failed"]})
+    table = compare_with_experiment(summary)
+    assert list(table.columns) == FIG4C_COLUMNS
+    assert list(table["paper_direction"]) == [PAPER_DIRECTIONS[g] for g in PAPER_GAITS]
+    assert list(table["sim_direction"][:4]) == ["forward", "forward", "reverse", "forward"]
+    assert list(table["direction_matches"][:4]) == [True, True, True, False]
+    assert table["speed_ratio"].iloc[1] == pytest.approx(2.0 / 2.85)
+    # a failed instance never reports a speed
+    assert math.isnan(table["sim_speed_mm_s"].iloc[4]) and table["status"].iloc[4] == "newton_failed"
+
+
+# ----------------------------------------------------------------------------- argument parsing
+
+def test_parse_values_and_ranges():
+    assert cli.parse_values("0.2:1.2:11", "--alpha") == pytest.approx(
+        [0.2 + 0.1 * i for i in range(11)])
+    assert cli.parse_values("0,0.5,1", "--added-mass") == [0.0, 0.5, 1.0]
+    assert cli.parse_values("1e6:1e8:3:log", "--youngs-modulus") == pytest.approx([1e6, 1e7, 1e8])
+    assert cli.parse_values("contract,always", "--jet-mode", str) == ["contract", "always"]
+    for bad in ("0.2:1.2", "a:1:3", "0:1:x", "0:1:0", "1,,2", "1:2:3:lin", "nan"):
+        with pytest.raises(cli.StudyArgumentError, match="--alpha"):
+            cli.parse_values(bad, "--alpha")
+
+
+def test_param_product_order_and_validation():
+    grid = cli.param_product({"gait": ["A1", "A1+A2"], "alpha": [0.5, 1.0]})
+    assert [(p.gait, p.alpha) for p in grid] == [("A1", 0.5), ("A1", 1.0), ("A1+A2", 0.5),
+                                                 ("A1+A2", 1.0)]
+    with pytest.raises(cli.StudyArgumentError, match="unknown parameter 'beta'"):
+        cli.param_product({"beta": [1.0]})
+    with pytest.raises(cli.StudyArgumentError, match="empty product"):
+        cli.param_product({"alpha": []})
+    with pytest.raises(cli.StudyArgumentError, match="alpha must be"):
+        cli.param_product({"alpha": [-1.0]})
+
+
+def test_quick_defaults_and_presets():
+    parser = cli.StudyParser("probe", "a test parser")
+    parser.add_argument("--frames", type=int, default=60, quick=5, help="frames")
+    cli.add_model_flags(parser, fixed=("gait",))
+    cli.add_dt_flag(parser)
+    assert cli.parse(parser, []).frames == 60
+    assert cli.parse(parser, ["--quick"]).frames == 5
+    assert cli.parse(parser, ["--quick", "--frames", "60"]).frames == 60  # given beats quick
+    args = cli.parse(parser, ["--preset", "accurate", "--set", "alpha=1.0"])
+    assert cli.base_params(args) == StarParams.preset("accurate", alpha=1.0)
+    assert cli.solver(args) == SolverConfig.preset("accurate")
+    assert cli.solver(cli.parse(parser, ["--quick"])).dt == cli.QUICK_DT
+    with pytest.raises(cli.StudyArgumentError, match="--set gait: set by the probe study"):
+        cli.base_params(cli.parse(parser, ["--set", "gait=A1"]))
+
+
+@pytest.fixture
+def no_compute(monkeypatch):
+    """Any simulation fails the test: argument errors must come before compute."""
+    def forbidden(*args, **kwargs):
+        raise AssertionError("simulate was called despite invalid arguments")
+    monkeypatch.setattr("taichi_star.batch.tasks.simulate", forbidden)
+    monkeypatch.setattr(taichi_star, "simulate", forbidden)
+
+
+@pytest.mark.parametrize("study, argv, message", [
+    ("sweep", ["--alpha", "0.2:1.2"], "--alpha: malformed range"),
+    ("sweep", ["--alpha", "0.2:1.2:zero"], "--alpha: malformed range"),
+    ("sweep", ["--param", "beta=1,2"], "unknown parameter 'beta'"),
+    ("sweep", ["--gaits", ""], "empty"),
+    ("sweep", ["--alpha", ""], "empty"),
+    ("sweep", ["--gaits", "A1,A9"], "unknown actuator 'A9'"),
+    ("sweep", ["--alpha=-1,1"], "alpha must be"),
+    ("sweep", ["--jet-mode", "sometimes"], "jet_mode must be one of"),
+    ("fig4c", ["--set", "gamma=1"], "unknown parameter 'gamma'"),
+    ("fig4c", ["--set", "alpha=1,2"], "exactly one value"),
+    ("fig4c", ["--set", "gait=A1"], "--set gait"),
+    ("fig4c", ["--dt", "0.5"], "--dt: dt must be"),
+    ("fig4c", ["--cycles", "nan"], "--cycles must be > 0"),
+    ("calibrate", ["--fit", "alpha=1:2"], "malformed range"),
+    ("calibrate", ["--fit", "jet_mode=contract,always"], "only real-valued"),
+    ("calibrate", ["--fit", "alpha=0:1:2", "--fit", "period=3:4:2",
+                   "--fit", "cylinder_drag=1:2:2"], "at most two"),
+    ("gaits", ["--cycles", "0"], "--cycles must be > 0"),
+    ("animate", ["--gait", "A0"], "--gait"),
+    ("animate", ["--frames", "1"], "--frames must be >= 2"),
+    ("convergence", ["--n-arc", "18,30,60"], "--n-arc"),
+    ("convergence", ["--n-arc", "18,36"], "--n-arc"),
+    ("scaling", ["--workers-list", "0"], "--workers-list"),
+])
+def test_invalid_arguments_fail_before_compute(no_compute, tmp_path, capsys, study, argv,
+                                               message):
+    out = tmp_path / "out"
+    code = studies_main([study, *argv, "--out", str(out), *QUICK])
+    assert code == 2
+    error = capsys.readouterr().err
+    assert message in error and len(error.strip().splitlines()) == 1, error
+    assert not out.exists()  # nothing written
+
+
+def test_resume_needs_the_folder_of_the_run(no_compute, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert studies_main(["sweep", "--resume", *QUICK]) == 2
+    assert "--resume: give --out" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
+
+
+def test_unknown_study_and_unknown_flag(no_compute, capsys):
+    assert studies_main(["fig4d"]) == 2
+    assert "unknown study 'fig4d'" in capsys.readouterr().err
+    assert studies_main(["sweep", "--betta", "1"]) == 2
+    assert "unrecognized arguments: --betta" in capsys.readouterr().err
+
+
+def test_every_study_has_help(capsys):
+    for name in study_names():
+        assert studies_main([name, "--help"]) == 0
+        assert f"python -m studies {name}" in capsys.readouterr().out
+
+
+# ----------------------------------------------------------------------------- output folders
+
+@pytest.mark.parametrize("target, message", [
+    ("/proc/taichi_star_out", "cannot create it"),
+    ("a_file", "exists and is not a folder"),
+])
+def test_bad_output_folder_fails_before_compute(no_compute, tmp_path, capsys, target, message):
+    (tmp_path / "a_file").write_text("mine")
+    out = target if target.startswith("/") else str(tmp_path / target)
+    assert studies_main(["fig4c", "--out", out, *QUICK]) == 2
+    error = capsys.readouterr().err
+    assert f"--out {out}: {message}" in error and len(error.strip().splitlines()) == 1
+    assert (tmp_path / "a_file").read_text() == "mine"
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
+def test_read_only_output_folder_fails_before_compute(no_compute, tmp_path, capsys):
+    folder = tmp_path / "locked"
+    folder.mkdir()
+    folder.chmod(0o555)
+    try:
+        assert studies_main(["fig4c", "--out", str(folder), *QUICK]) == 2
+        assert "not writable" in capsys.readouterr().err
+    finally:
+        folder.chmod(0o755)
+
+
+def test_quick_never_writes_into_the_committed_results(no_compute, capsys):
+    assert studies_main(["fig4c", "--out", str(cli.COMMITTED_RESULTS), *QUICK]) == 2
+    assert "never write into the committed results/" in capsys.readouterr().err
+
+
+def test_reproduce_lists_one_command_per_committed_result(capsys):
+    assert studies_main(["reproduce", "--dry-run", "--into", "elsewhere"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[0] == "-m studies fig4c --no-progress --out elsewhere"
+    assert all("--quick" not in line for line in lines)
+    assert any(line.startswith("-m studies fig4c --preset accurate") for line in lines)
+
+
+# ----------------------------------------------------------------------------- studies, quick
+
+def test_fig4c_quick_into_a_fresh_run_folder(tmp_path, monkeypatch):
+    from studies import fig4c
+    monkeypatch.chdir(tmp_path)
+    fig4c.main(QUICK)
+    (folder,) = (tmp_path / "runs" / "fig4c").iterdir()  # runs/fig4c/<timestamp>/
+    table = pd.read_csv(folder / "fig4c.csv")
+    assert list(table.columns) == FIG4C_COLUMNS
+    direct = quick_simulation([StarParams(gait=g) for g in PAPER_GAITS]).summary
+    assert table["gait"].tolist() == list(PAPER_GAITS)
+    assert table["sim_speed_mm_s"].to_numpy() == pytest.approx(direct["speed_mm_s"], rel=1e-9)
+    assert table["sim_signed_speed_mm_s"].to_numpy() == pytest.approx(
+        direct["signed_speed_mm_s"], rel=1e-9)
+    assert table["exp_speed_mm_s"].tolist() == pytest.approx([0.428, 2.85, 3.37, 3.349, 2.748])
+    summary = pd.read_csv(folder / "fig4c_summary.csv")
+    assert summary["newton_iterations_max"].tolist() == direct["newton_iterations_max"].tolist()
+    curves = pd.read_csv(folder / "fig4b.csv")
+    assert set(curves["source"]) == {"simulation", "experiment"}
+    simulated = curves[curves["source"] == "simulation"]
+    assert simulated["t_s"].max() == pytest.approx(cli.QUICK_DURATION_S)
+    final = simulated.groupby("gait", sort=False)["displacement_mm"].last()
+    assert final[list(PAPER_GAITS)].to_numpy() == pytest.approx(
+        np.hypot(direct["displacement_x_mm"], direct["displacement_y_mm"]), rel=1e-9)
+    pngs_written(folder / "fig4c.png", folder / "fig4b.png")
+    sidecar = json.loads((folder / "fig4c.csv.json").read_text())
+    for key in ("taichi_star_version", "git_commit", "git_dirty", "model", "solver", "command",
+                "taichi_version", "machine", "date"):
+        assert key in sidecar, key
+    assert sidecar["taichi_star_version"] == taichi_star.__version__
+    assert sidecar["command"] == "python -m studies fig4c --quick --no-progress"
+    assert sidecar["model"]["preset"] == "paper" and sidecar["solver"]["dt"] == cli.QUICK_DT
+    assert sidecar["model"]["params"]["alpha"] == StarParams().alpha
+    assert {"cpu_model", "cores", "gpus"} <= set(sidecar["machine"])
+
+
+def test_sweep_quick(tmp_path):
+    from studies import sweep
+    sweep.main(["--out", str(tmp_path), "--alpha", "0.4:1.2:3", "--jet-mode", "contract,always",
+                "--gaits", "A1,A1+A3", *QUICK])
+    table = pd.read_csv(tmp_path / "sweep.csv")
+    grid = cli.param_product({"gait": ["A1", "A1+A3"], "alpha": [0.4, 0.8, 1.2],
+                              "jet_mode": ["contract", "always"]})
+    assert table["instance"].tolist() == list(range(len(grid)))
+    assert [(g, a, j) for g, a, j in zip(table.gait, table.alpha, table.jet_mode)] == \
+        [(p.gait, p.alpha, p.jet_mode) for p in grid]
+    direct = quick_simulation(grid).summary
+    for column in ("speed_mm_s", "signed_speed_mm_s", "heading_deg", "newton_iterations_mean"):
+        assert table[column].to_numpy() == pytest.approx(direct[column].to_numpy(), rel=1e-9,
+                                                         abs=1e-12), column
+    pngs_written(tmp_path / "sweep_alpha.png", tmp_path / "sweep_jet_mode.png")
+    assert json.loads((tmp_path / "sweep.csv.json").read_text())["details"]["axes"]["alpha"] \
+        == pytest.approx([0.4, 0.8, 1.2])
+
+
+def test_gaits_quick(tmp_path):
+    gaits_study.main(["--out", str(tmp_path), *QUICK])
+    table = pd.read_csv(tmp_path / "gaits.csv")
+    assert list(table.columns) == gaits_study.GAITS_COLUMNS
+    assert len(table) == 255 and table["gait"].is_unique
+    assert table["class_representative"].nunique() == 29
+    assert table.groupby("class_representative")["class_size"].first().sum() == 255
+    classes = pd.read_csv(tmp_path / "gaits_classes.csv")
+    assert len(classes) == 29
+    # three classes simulated directly: same speeds, every member of a class the same
+    representatives = classes["gait"].tolist()[::12]
+    direct = quick_simulation([StarParams(gait=g) for g in representatives]).summary
+    for gait, speed in zip(representatives, direct["speed_mm_s"]):
+        members = table[table["class_representative"] == gait]
+        assert members["speed_mm_s"].to_numpy() == pytest.approx(speed, rel=1e-9)
+    pngs_written(tmp_path / "gaits.png")
+
+
+def test_calibrate_quick(tmp_path):
+    from studies import calibrate
+    calibrate.main(["--out", str(tmp_path), *QUICK])
+    table = pd.read_csv(tmp_path / "calibration.csv")
+    assert len(table) >= 4 and set(table["round"]) == {0, 1}
+    fit = pd.read_csv(tmp_path / "calibration_fit.csv")
+    assert list(fit["parameter"]) == ["alpha", "cylinder_drag"]
+    assert fit["objective"].iloc[0] == pytest.approx(table["objective"].min())
+    # the best point's speeds, simulated directly, give its objective
+    best = dict(zip(fit["parameter"], fit["value"]))
+    direct = quick_simulation([StarParams(gait=g, **best) for g in PAPER_GAITS]).summary
+    assert calibrate.objective(compare_with_experiment(direct)) == pytest.approx(
+        fit["objective"].iloc[0], rel=1e-9)
+    calibrated = pd.read_csv(tmp_path / "fig4c_calibrated.csv")
+    assert calibrated["sim_speed_mm_s"].to_numpy() == pytest.approx(direct["speed_mm_s"],
+                                                                    rel=1e-9)
+    pngs_written(tmp_path / "calibration.png")
+
+
+def test_animate_quick(tmp_path):
+    from PIL import Image
+    from studies import animate
+    animate.main(["--out", str(tmp_path), "--frames", "5", *QUICK])
+    folder = tmp_path / "animations"
+    with Image.open(folder / "A1_A2.gif") as gif:
+        assert gif.n_frames >= 5
+    shapes = pd.read_csv(folder / "shapes.csv")
+    assert list(shapes.columns) == ["gait", "frame", "t_s", "node", "x_mm", "y_mm"]
+    last = shapes[shapes["frame"] == shapes["frame"].max()].sort_values("node")
+    direct = taichi_star.simulate([StarParams(gait="A1+A2")], cli.QUICK_DURATION_S, QUICK_SOLVER,
+                                  record_interval_s=cli.QUICK_DURATION_S, record_shapes=True)
+    assert last[["x_mm", "y_mm"]].to_numpy() == pytest.approx(1e3 * direct.shapes[-1, 0],
+                                                              abs=1e-5)
+    edges = pd.read_csv(folder / "edges.csv")
+    assert len(edges) == direct.topology.n_edges and set(edges["actuator"]) == set(range(9))
+    assert sorted(map(tuple, np.sort(edges[["node_a", "node_b"]].to_numpy(), axis=1))) == \
+        sorted(map(tuple, np.sort(direct.topology.edges, axis=1)))
+
+
+# ----------------------------------------------------------------------------- symmetry
+
+def test_symmetry_reduction_is_exact():
+    """A rotated or mirrored gait swims at the same speed (to solver tolerance) along the
+    rotated / mirrored heading: the basis of simulating one gait per class."""
+    source = "A1+A2+A4"  # no symmetry of its own: a class of 16
+    images = [(0, False), (3, False), (0, True), (5, True)]
+    gaits = [Gait.parse(source).transform(r, f).name for r, f in images]
+    assert len(set(gaits)) == 4
+    duration = 0.2
+    result = taichi_star.simulate([StarParams(gait=g) for g in gaits], duration,
+                                  solver=SolverConfig(dt=2e-3))
+    summary = result.summary
+    assert (summary["status"] == "ok").all()
+    speed = summary["speed_mm_s"].to_numpy()
+    assert speed[0] > 0.05  # it moves: the comparison is not trivial
+    assert np.allclose(speed, speed[0], rtol=1e-6, atol=1e-9)
+    assert np.allclose(summary["signed_speed_mm_s"], summary["signed_speed_mm_s"].iloc[0],
+                       rtol=1e-6, atol=1e-9)
+    # tolerance on the direction: displacement ~ speed*duration mm, resolved to ~1e-9 mm
+    travel = summary["travel_direction_deg"]
+    for (rotation, reflect), direction, heading in zip(images, travel, summary["heading_deg"]):
+        expected = gaits_study.transform_direction(travel.iloc[0], rotation, reflect)
+        assert abs(gaits_study.wrap_degrees(direction - expected)) < 1e-4
+        assert heading == pytest.approx(
+            gaits_study.transform_rotation(summary["heading_deg"].iloc[0], reflect), abs=1e-9)
+    # and the class expansion agrees with these direct simulations
+    rep_class = next(c for c in symmetry_classes() if source in c[1])
+    assert set(gaits) <= set(rep_class[1])
+    for gait, direction in zip(gaits, travel):
+        mapping = gaits_study.symmetry_map(source, gait)
+        assert Gait.parse(source).transform(*mapping).name == gait
+        assert abs(gaits_study.wrap_degrees(
+            gaits_study.transform_direction(travel.iloc[0], *mapping) - direction)) < 1e-4

@@ -1,0 +1,134 @@
+"""Shape checks of taichi_star.metrics on hand-made shapes: limb crossing, arc inversion,
+strain, failed records; and the segment-crossing test they rest on."""
+
+import numpy as np
+import pytest
+
+from taichi_star import StarParams
+from taichi_star import metrics
+from taichi_star.geometry import build_topology
+
+
+@pytest.fixture(scope="module")
+def topology():
+    return build_topology(StarParams())
+
+
+def test_limb_and_arc_chains_run_joint_to_tip_and_joint_to_joint(topology):
+    assert topology.limbs.shape == (8, StarParams().n_limb + 1)
+    assert list(topology.limbs[:, 0]) == list(topology.joints)
+    assert list(topology.limbs[:, -1]) == list(topology.tips)
+    radii = np.linalg.norm(topology.rest_positions[topology.limbs], axis=-1)
+    assert (np.diff(radii, axis=1) > 0).all()  # straight radial limbs, outwards
+    assert list(topology.arcs[:, -1]) == list(np.roll(topology.joints, -1))
+
+
+def test_rest_shape_is_sane(topology):
+    rest = topology.rest_positions
+    row = metrics.shape_checks(rest[None, None], topology).iloc[0]
+    assert not row["limbs_cross"] and not row["arc_inverted"] and row["finite"] and row["sane"]
+    assert row["max_strain"] < 1e-12  # the rest shape defines the rest lengths
+    # every arc bulges the same way at rest, with the actuators' rest curvature 102.12 1/m up
+    # to the discrete curvature of the chords (n_arc 18: well within 1 %)
+    mean = metrics.arc_mean_curvature(rest, topology)
+    assert np.allclose(np.abs(mean), 102.12, rtol=1e-2)
+    assert len(set(np.sign(mean))) == 1
+
+
+def test_crossed_limbs_are_detected_in_any_record(topology):
+    shape = topology.rest_positions.copy()
+    limb0, limb1 = topology.limbs[0], topology.limbs[1]
+    # swing limb 0's last segment through the middle of a segment of limb 1
+    middle = 0.5 * (shape[limb1[2]] + shape[limb1[3]])
+    before_tip = shape[limb0[-2]]
+    shape[limb0[-1]] = before_tip + 2.0 * (middle - before_tip)
+    assert metrics.limbs_cross(shape, topology)
+    assert not metrics.limbs_cross(topology.rest_positions, topology)
+    final = metrics.shape_checks(np.stack([topology.rest_positions, shape])[:, None],
+                                 topology).iloc[0]
+    assert final["limbs_cross"] and final["limbs_cross_final"] and not final["sane"]
+    earlier = metrics.shape_checks(np.stack([shape, topology.rest_positions])[:, None],
+                                   topology).iloc[0]
+    assert earlier["limbs_cross"] and not earlier["limbs_cross_final"] and not earlier["sane"]
+
+
+def test_limbs_bent_towards_each_other_without_touching_do_not_cross(topology):
+    shape = topology.rest_positions.copy()
+    limb0, limb1 = topology.limbs[0], topology.limbs[1]
+    middle = 0.5 * (shape[limb1[2]] + shape[limb1[3]])
+    before_tip = shape[limb0[-2]]
+    shape[limb0[-1]] = before_tip + 0.9 * (middle - before_tip)  # stops short of limb 1
+    assert not metrics.limbs_cross(shape, topology)
+
+
+def test_an_inverted_arc_is_detected(topology):
+    shape = topology.rest_positions.copy()
+    interior = topology.arcs[0, 1:-1]
+    a, b = shape[topology.arcs[0, 0]], shape[topology.arcs[0, -1]]
+    # reflect the arc's interior nodes across its chord: lengths are kept, the bulge flips
+    # outwards, so the strain check cannot be what flags it
+    direction = (b - a) / np.linalg.norm(b - a)
+    offset = shape[interior] - a
+    shape[interior] = a + 2.0 * (offset @ direction)[:, None] * direction - offset
+    mean = metrics.arc_mean_curvature(shape, topology)
+    rest = metrics.arc_mean_curvature(topology.rest_positions, topology)
+    assert mean[0] * rest[0] < 0 and (mean[1:] * rest[1:] > 0).all()
+    row = metrics.shape_checks(shape[None, None], topology).iloc[0]
+    assert row["arc_inverted"] and not row["limbs_cross"] and not row["sane"]
+    assert row["max_strain"] < 1e-12
+
+
+def test_large_strain_alone_is_not_sane(topology):
+    # a uniform 1.6x blow-up: nothing crosses, no arc inverts, every edge has ε = 0.6
+    row = metrics.shape_checks((1.6 * topology.rest_positions)[None, None], topology).iloc[0]
+    assert not row["limbs_cross"] and not row["arc_inverted"]
+    assert row["max_strain"] == pytest.approx(0.6, rel=1e-9)
+    assert not row["sane"]
+
+
+def test_records_after_a_failure_are_skipped(topology):
+    rest = topology.rest_positions
+    failed = np.full_like(rest, np.nan)
+    checks = metrics.shape_checks(np.stack([np.stack([rest, rest]), np.stack([rest, failed])]),
+                                  topology)
+    assert checks["sane"].tolist() == [True, False]
+    assert checks["finite"].tolist() == [True, False]
+    assert not checks["limbs_cross"].iloc[1] and not checks["arc_inverted"].iloc[1]
+    assert not checks["arc_inverted_final"].iloc[1]
+    assert checks["max_strain"].iloc[1] < 1e-12
+
+
+P = np.array
+
+
+@pytest.mark.parametrize("p,q,r,s,expected", [
+    (P([0, 0]), P([1, 1]), P([0, 1]), P([1, 0]), True),          # an X
+    (P([0, 0]), P([1, 0]), P([0.5, 0]), P([0.5, 1]), False),     # T: touching is not crossing
+    (P([0, 0]), P([1, 0]), P([0.5, 0.1]), P([0.5, 1]), False),   # stops short
+    (P([0, 0]), P([1, 0]), P([2, 0]), P([3, 0]), False),         # collinear, disjoint
+    (P([0, 0]), P([1, 0]), P([-1, 0]), P([-2, 0]), False),       # collinear, opposite sides
+    (P([0, 0]), P([1, 0]), P([0.5, 0]), P([2, 0]), True),        # collinear, overlapping
+    (P([0, 0]), P([1, 0]), P([0, 1e-3]), P([1, 1e-3]), False),   # parallel, offset
+])
+def test_segments_cross(p, q, r, s, expected):
+    p, q, r, s = (np.asarray(v, dtype=float) for v in (p, q, r, s))
+    assert bool(metrics.segments_cross(p, q, r, s)) == expected
+    # symmetric in the two segments and in their directions
+    assert bool(metrics.segments_cross(r, s, p, q)) == expected
+    assert bool(metrics.segments_cross(q, p, s, r)) == expected
+
+
+def test_point_symmetric_collinear_segments_do_not_cross(topology):
+    # Opposite limbs of the symmetric all-eight gait stay straight and point-symmetric, so they
+    # are collinear; a plain orientation-sign test flags such pairs as crossed by rounding
+    # (±1e-20 orientations of alternating sign). 5000 random such pairs:
+    rng = np.random.default_rng(1)
+    angle = rng.uniform(0, 2 * np.pi, 5000)
+    direction = np.stack([np.cos(angle), np.sin(angle)], axis=-1)
+    inner = rng.uniform(0.024, 0.05, 5000)[:, None]
+    outer = inner + rng.uniform(0.002, 0.006, 5000)[:, None]
+    p, q = inner * direction, outer * direction
+    assert not metrics.segments_cross(p, q, -p, -q).any()
+    symmetric = topology.rest_positions.copy()
+    symmetric[topology.limbs[4:]] = -symmetric[topology.limbs[:4]]
+    assert not metrics.limbs_cross(symmetric, topology)
