@@ -18,6 +18,7 @@ from .geometry import CENTRE
 from .linsolve import BlockSystem, plan_elimination
 from .model import BatchModel
 from .params import SolverConfig
+from .physics import coupled_node_pairs
 from .physics.base import index_field, load_field, pad_batch
 from .gait import N_ACTUATORS, Gait
 from .state import NEVER, STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_OK, BatchState
@@ -44,8 +45,8 @@ class BatchEngine:
         self.loop_spread = loop_spread
         self.n_nodes = topology.n_nodes
         self.integrator = integrator
-        pairs = [pair for cls, _ in model.terms_used for pair in cls.coupled_pairs(topology)]
-        self.plan = plan_elimination(topology.n_nodes, pairs)
+        self.plan = plan_elimination(topology.n_nodes, coupled_node_pairs(
+            topology, [cls for cls, _ in model.terms_used]))
         self.system = BlockSystem(self.plan, capacity)
         self.state = BatchState(capacity, topology.n_nodes)
         self.diagonal_slot = index_field([self.plan.slot[n, n] for n in range(self.n_nodes)])

@@ -1,4 +1,4 @@
-"""The physical robot's measurements, packaged with the library (design §4).
+"""The physical robot's measurements, packaged with the library.
 
 The data are the authors' public thesis recordings of the five gaits of the paper's Fig. 4
 (see `taichi_star/data/SOURCE.md`); they are read from the installed package, never from outside
@@ -30,7 +30,7 @@ PAPER_GAITS = ("A1", "A1+A2", "A1+A3", "A1+A4", "A1+A3+A5")
 
 PAPER_DIRECTIONS = {"A1": "forward", "A1+A2": "forward", "A1+A3": "reverse",
                     "A1+A4": "reverse", "A1+A3+A5": "reverse"}
-"""Swimming direction of each Fig. 4 gait stated in the paper's text (design §4): "forward" is
+"""Swimming direction of each Fig. 4 gait stated in the paper's text: "forward" is
 along the gait's forward direction (the sum of its actuators' bisectors), "reverse" against it."""
 
 EXPERIMENT_PERIOD_S = 3.15

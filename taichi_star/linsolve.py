@@ -12,8 +12,9 @@ Every update of a field element is written as an explicit load and store: Taichi
 a global field into an atomic, which costs several times more on the CPU and is never needed
 here (one thread owns one instance).
 
-This is the "fixed-pattern sparse store" of design §5: a band is the special case of a chain
-order; measured against a bordered band in `BlockPattern.factor_flops`.
+A band is the special case of a chain order; at the default topology (N = 193) this order costs
+about 61 kFLOP per factorisation (`EliminationPlan.factor_flops`), against about 280 kFLOP for the
+hub-bordered band of a reverse Cuthill–McKee order.
 """
 
 

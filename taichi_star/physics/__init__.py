@@ -16,4 +16,10 @@ from .stretching import Stretching
 
 TERMS = (AddedMass, Stretching, Bending, RodDrag, CylinderDrag, Jet, MaterialDamping)
 
-__all__ = ["TERMS"]
+
+def coupled_node_pairs(topology, term_classes=TERMS):
+    """Node pairs (i, j) whose 2×2 Jacobian block the given terms (default: all) can fill."""
+    return [pair for cls in term_classes for pair in cls.coupled_pairs(topology)]
+
+
+__all__ = ["TERMS", "coupled_node_pairs"]

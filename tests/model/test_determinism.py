@@ -1,4 +1,4 @@
-"""Determinism (issue 5): the same inputs give bitwise-identical summaries on the CPU, run to
+"""Determinism: the same inputs give bitwise-identical summaries on the CPU, run to
 run, whatever the instance's position in the batch and the batch size."""
 
 import pandas as pd

@@ -1,4 +1,4 @@
-"""Property-based input hardening tests (issue 5 item 3), with hypothesis.
+"""Property-based input hardening tests, with hypothesis.
 
 - Random valid StarParams batches (physically reasonable ranges, the paper's topology so that
   every example reuses one compiled engine) simulate a few steps without an exception, with a
@@ -6,7 +6,7 @@
 - Random invalid values of every StarParams / SolverConfig field (NaN, ±inf, negative, zero
   where not allowed, wrong types, unknown or repeated gait actuators, non-integer n_arc/n_limb)
   raise a ValueError whose message names the field.
-- Invalid `simulate` arguments (duration ≤ 0 or not finite, record_every < 0 or not an integer,
+- Invalid `simulate` arguments (duration ≤ 0 or not finite, record_interval_s < 0 or not finite,
   an empty batch, mixed topologies, unknown arch, bad worker counts) raise a ValueError naming
   the argument.
 
@@ -14,7 +14,6 @@ Few examples each (the simulations dominate: ~10 batches of ≤ 8 robots × ≤ 
 deadline (the first example compiles the engine).
 """
 
-import dataclasses
 import math
 
 import numpy as np
@@ -32,7 +31,6 @@ FAST = settings(max_examples=60, **SETTINGS)
 """The invalid-input properties raise before any compute: cheap, so more examples."""
 SLOW = settings(max_examples=12, **SETTINGS)
 
-STAR_FIELDS = {f.name for f in dataclasses.fields(ts.StarParams)}
 LARGEST_JOINT_RADIUS = 1.0 / (CurvatureProfile().rest_curvature * math.sin(math.pi / 8))
 """≈ 25.6 mm: an arc of the rest curvature cannot span joints further apart (params.py)."""
 
@@ -77,9 +75,11 @@ def valid_params(draw):
         joint_radius=joint_radius,
         tip_radius=joint_radius + draw(st.floats(0.015, 0.04)),
     )
-    if "actuation_ends" in STAR_FIELDS and hasattr(params_module, "ACTUATION_ENDS"):
-        values["actuation_ends"] = draw(st.sampled_from(params_module.ACTUATION_ENDS))
-    return ts.StarParams(**{k: v for k, v in values.items() if k in STAR_FIELDS})
+    values["actuation_ends"] = draw(st.sampled_from(params_module.ACTUATION_ENDS))
+    values["joint_stiffness"] = draw(st.sampled_from(params_module.JOINT_STIFFNESSES))
+    values["profile_closure"] = draw(st.sampled_from(("jump", "ramp")))
+    values["damping_time"] = draw(st.one_of(st.just(0.0), st.floats(1e-5, 5e-3)))
+    return ts.StarParams(**values)
 
 
 POSITIVE = ["youngs_modulus", "limb_stiffness_ratio", "period", "thickness", "actuator_density",
@@ -93,8 +93,14 @@ NOT_A_REAL = st.sampled_from([math.nan, math.inf, -math.inf, "1.0", None, True, 
 @st.composite
 def invalid_star_field(draw):
     """(field, value) with a value StarParams must reject, naming the field."""
-    kind = draw(st.sampled_from(["positive", "non_negative", "gait", "jet_mode", "int"]))
-    if kind == "positive":
+    kind = draw(st.sampled_from(["positive", "non_negative", "gait", "jet_mode", "int",
+                                 "above_range"]))
+    if kind == "above_range":
+        # orders of magnitude beyond any real robot: refused with the range named
+        field = draw(st.sampled_from(sorted(set(params_module.STAR_RANGES) - {"n_arc", "n_limb"})))
+        highest = params_module.STAR_RANGES[field][1]
+        value = draw(st.floats(highest * 1.001, 1e300))
+    elif kind == "positive":
         field = draw(st.sampled_from(POSITIVE))
         value = draw(st.one_of(NOT_A_REAL, st.just(0.0), st.just(0),
                                st.floats(max_value=0.0, allow_nan=False, allow_infinity=False)))
@@ -137,7 +143,7 @@ def test_valid_batches_simulate_with_valid_status_and_finite_results(batch, dt, 
                                                                       integrator, jacobian):
     solver = ts.SolverConfig(dt=dt, integrator=integrator, jacobian=jacobian)
     duration = steps * dt
-    result = ts.simulate(batch, duration, solver=solver, record_every=1, record_shapes=True)
+    result = ts.simulate(batch, duration, solver=solver, record_interval_s=dt, record_shapes=True)
     summary = result.summary
     assert len(summary) == len(batch)
     assert list(summary["gait"]) == [p.gait for p in batch]  # input order, parameters echoed
@@ -146,7 +152,7 @@ def test_valid_batches_simulate_with_valid_status_and_finite_results(batch, dt, 
     for column in ("displacement_x_mm", "displacement_y_mm", "speed_mm_s", "heading_deg",
                    "newton_iterations_mean"):
         assert np.isfinite(summary.loc[ok, column]).all(), column
-    # signed speed is defined where the gait has a forward direction (design §3)
+    # signed speed is defined where the gait has a forward direction
     has_forward = np.array([Gait.parse(p.gait).forward is not None for p in batch])
     assert np.isfinite(summary.loc[ok & has_forward, "signed_speed_mm_s"]).all()
     assert summary.loc[ok & ~has_forward, "signed_speed_mm_s"].isna().all()
@@ -234,17 +240,17 @@ def invalid_simulate_call(draw):
     """(keyword arguments of simulate, the argument name its error must mention)."""
     base = dict(params=[ts.StarParams()], duration_s=0.002,
                 solver=ts.SolverConfig(dt=1e-3))
-    kind = draw(st.sampled_from(["duration", "record_every", "empty", "topology", "arch",
-                                 "workers", "params", "shapes"]))
+    kind = draw(st.sampled_from(["duration", "record_interval_s", "empty", "topology", "arch",
+                                 "params", "shapes"]))
     if kind == "duration":
         base["duration_s"] = draw(st.one_of(
             st.floats(max_value=0.0, allow_nan=False), st.sampled_from([math.nan, math.inf,
                                                                          "1", None])))
         return base, "duration_s"
-    if kind == "record_every":
-        base["record_every"] = draw(st.one_of(st.integers(max_value=-1),
-                                              st.floats(allow_nan=True), st.just("10")))
-        return base, "record_every"
+    if kind == "record_interval_s":
+        base["record_interval_s"] = draw(st.one_of(
+            st.floats(max_value=-1e-9), st.sampled_from([math.nan, math.inf, "10", 0.0015])))
+        return base, "record_interval_s"
     if kind == "empty":
         base["params"] = draw(st.sampled_from([[], ()]))
         return base, "empty"
@@ -261,9 +267,6 @@ def invalid_simulate_call(draw):
         base["arch"] = draw(st.text(max_size=8).filter(
             lambda a: a not in ts.available_archs()))
         return base, "arch"
-    if kind == "workers":
-        base["workers"] = draw(st.one_of(st.integers(max_value=0), st.just(1.5), st.just(True)))
-        return base, "workers"
     if kind == "params":
         base["params"] = draw(st.sampled_from([ts.StarParams(), [ts.StarParams(), "A1"],
                                                [ts.StarParams(), None]]))

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import taichi as ti
 
-from taichi_star.engine import coupled_node_pairs
+from taichi_star.physics import coupled_node_pairs
 from taichi_star.geometry import build_topology
 from taichi_star.linsolve import BlockSystem, minimum_degree_order, plan_elimination
 from taichi_star.params import StarParams
@@ -65,7 +65,7 @@ def test_minimum_degree_eliminates_chains_without_fill():
 
 
 def test_plan_is_cheaper_than_a_bordered_band():
-    """The default star's factorisation costs less than the bordered band of design §5 (node
+    """The default star's factorisation costs less than a bordered band (node
     half-bandwidth 9 under RCM, 19 DOFs: 2 flops × 2N DOFs × 19² ≈ 0.28 MFLOP)."""
     topology = build_topology(StarParams())
     plan = plan_elimination(topology.n_nodes, coupled_node_pairs(topology))

@@ -34,8 +34,11 @@ def test_unknown_gaits_are_rejected(gait):
 
 
 @pytest.mark.parametrize("field,value", [
-    ("dt", 0.0), ("dt", -1e-3), ("dt", math.nan), ("dt", 2.0), ("newton_tol", 0.0),
-    ("newton_tol", math.inf), ("max_newton", 0), ("max_newton", 2.5), ("precision", "f16"),
+    ("dt", 0.0), ("dt", -1e-3), ("dt", math.nan), ("dt", 2.0), ("dt", 0.2), ("newton_tol", 0.0),
+    ("newton_tol", math.inf), ("newton_tol", 1.0), ("max_newton", 0), ("max_newton", 2.5),
+    ("max_newton", 10_000), ("precision", "f16"), ("max_substep_halvings", 27),
+    ("error_tol", 0.0), ("error_tol", -1e-7), ("dt_min", 0.0), ("dt_max", 1.0),
+    ("adaptive", "yes"),
 ])
 def test_solver_config_rejects_bad_values(field, value):
     with pytest.raises(ValueError, match=field):
@@ -57,7 +60,10 @@ def test_f32_needs_a_tolerance_it_can_resolve():
     (dict(duration_s=-1.0), "duration_s"),
     (dict(duration_s=math.nan), "duration_s"),
     (dict(duration_s=1e-5), "duration_s"),
-    (dict(record_every=-1), "record_every"),
+    (dict(record_interval_s=-1.0), "record_interval_s"),
+    (dict(record_interval_s=0.0015), "record_interval_s"),
+    (dict(steady_from_cycle=-1), "steady_from_cycle"),
+    (dict(params=None), "params"),
     (dict(record_shapes=True), "record_shapes"),
     (dict(arch="tpu"), "arch"),
     (dict(solver="fast"), "solver"),
@@ -102,7 +108,36 @@ def test_default_topology_is_the_papers():
     assert np.all(topology.rest_curvature[arc] < 0)
 
 
-@pytest.mark.parametrize("workers", [0, -1, 1.5, True])
-def test_simulate_rejects_bad_worker_counts(workers):
-    with pytest.raises(ValueError, match="workers"):
-        ts.simulate([ts.StarParams()], 0.01, workers=workers)
+def test_adaptive_step_bounds_must_be_ordered():
+    with pytest.raises(ValueError, match="dt_min"):
+        ts.SolverConfig(adaptive=True, dt_min=0.01, dt_max=0.005)
+    with pytest.raises(ValueError, match="dt"):
+        ts.SolverConfig(adaptive=True, dt=0.02, dt_max=0.01)
+
+
+@pytest.mark.parametrize("field,value", [
+    ("damping_time", -1e-3), ("damping_time", math.nan), ("damping_time", 2.0),
+    ("joint_stiffness", "rigid"), ("profile_closure", "smooth"), ("alpha", 1e6),
+    ("cylinder_diameter", 1e300), ("youngs_modulus", 1e-300), ("actuator_profile", "paper"),
+])
+def test_new_physics_fields_and_extreme_values_are_refused_naming_the_field(field, value):
+    with pytest.raises(ValueError, match=field):
+        ts.StarParams(**{field: value})
+
+
+def test_numpy_scalars_are_accepted_as_numbers():
+    params = ts.StarParams(n_arc=np.int64(24), alpha=np.float32(0.5), damping_time=np.float64(1e-3))
+    assert params.n_arc == 24 and type(params.n_arc) is int
+    assert params.alpha == pytest.approx(0.5) and type(params.alpha) is float
+    assert ts.SolverConfig(dt=np.float64(2e-3), max_newton=np.int32(10)).max_newton == 10
+
+
+def test_presets_are_named_models_with_overrides():
+    assert ts.StarParams.preset("paper") == ts.StarParams()
+    accurate = ts.StarParams.preset("accurate", gait="A1+A2")
+    assert (accurate.damping_time, accurate.joint_stiffness, accurate.actuation_ends) == (
+        pytest.approx(0.94e-3), "series", "shared")
+    assert accurate.gait == "A1+A2"
+    assert ts.SolverConfig.preset("paper") == ts.SolverConfig()
+    with pytest.raises(ValueError, match="preset"):
+        ts.StarParams.preset("fast")
