@@ -1,28 +1,30 @@
 """Calibration: fit StarParams fields to the measured speeds of the paper's gaits with CMA-ES.
 
-    python -m studies calibrate [--fit NAME=LOW:HIGH[:log] ...] [--set NAME=VALUE ...]
-                                [--gaits paper|A1,A1+A2,...] [--weights experimental|uniform]
-                                [--popsize P] [--max-generations G] [--restarts R] [--seed S]
-                                [--sigma0 0.25] [--cycles 3] [--cross-validate]
-                                [--arch cpu|gpu] [--out results/] [--quick]
-                                [--workers N | --scheduler tcp://HOST:PORT]
+    python -m studies calibrate [--fit NAME=LOW:HIGH[:log] ...] [--preset paper|accurate]
+                                [--set NAME=VALUE ...] [--gaits paper|A1,A1+A2,...]
+                                [--weights experimental|uniform] [--popsize P]
+                                [--max-generations G] [--restarts R] [--seed S] [--sigma0 0.25]
+                                [--cycles 3] [--dt S] [--cross-validate] [--arch cpu|gpu]
+                                [--out DIR] [--quick] [--workers N | --scheduler tcp://HOST:PORT]
 
 CMA-ES (`cma.CMAEvolutionStrategy`, ask/tell) searches the box of the `--fit` ranges in unit
 coordinates: every axis is mapped to [0, 1] (`:log` axes in the logarithm), the optimiser keeps
 its candidates inside [0, 1] (cma's bound transformation) and a parameter value is always
 computed from its unit coordinate (`studies.identify.ParameterRange.values`), so every value
-tried lies in its range. Each generation is one batched run: all candidates × all gaits. The
-first run starts at the `--set`/default model's coordinates (clipped into the box) with step
-`--sigma0`; each of `--restarts` further runs starts at a uniformly random point with twice the
-previous population (IPOP), seeded from `--seed`. The objective is the weighted mean squared
-relative signed-speed error against the measured speeds with the paper's directions as signs
-(`studies.identify`); a candidate whose simulation fails scores inf (CMA-ES is told
-`FAILED_PENALTY`).
+tried lies in its range. Each generation is one batched run (`taichi_star.batch.run_batch`): all
+candidates × all gaits. The first run starts at the `--preset`/`--set` model's coordinates
+(clipped into the box) with step `--sigma0`; each of `--restarts` further runs starts at a
+uniformly random point with twice the previous population (IPOP), seeded from `--seed`. The
+objective is the weighted mean squared relative signed-speed error against the measured speeds
+with the paper's directions as signs (`studies.identify`); a candidate whose simulation fails
+scores inf (CMA-ES is told `FAILED_PENALTY`).
 
-Writes `calibration.csv` (every evaluation, rewritten after each generation), the best point
-`calibration_best.csv` (its values, objective, the five gaits' signed speeds, speed ratios and
-directions at the best point, and the run's settings as provenance), `calibration.png`
-(convergence), and Fig. 4c/4b at the best point (`fig4c_calibrated.*`, `fig4b_calibrated.*`).
+Writes into `--out` (default a fresh `runs/calibrate/<timestamp>/`), each table with its
+provenance sidecar (`.csv.json`): `calibration.csv` (every evaluation, rewritten after each
+generation), `calibration_best.csv` (the best point: its values and objective, the five gaits'
+signed speeds, speed ratios and directions there, `all_directions_match`, and the run's
+settings), `calibration.png` (convergence), and Fig. 4c/4b at the best point
+(`fig4c_calibrated.*`, `fig4b_calibrated.*`).
 
 `--cross-validate`: for every gait, fit on the others and predict it: `crossval.csv` (every fold ×
 gait: measured and predicted signed speed, role held_out / fitted), `crossval_evaluations.csv`,
@@ -31,18 +33,17 @@ gait: measured and predicted signed speed, role held_out / fitted), `crossval_ev
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, List, Optional, Sequence
 
 import numpy as np
 import pandas as pd
 
-from taichi_star.params import StarParams
+from taichi_star import SolverConfig, StarParams
 
-from . import common, distributed, identify
-from .fig4c import run_fig4c
+from . import cli, figures, identify
 
 DESCRIPTION = ("Fit StarParams fields to the measured speeds and directions of the paper's gaits "
                "with CMA-ES (one batched simulation per generation); --cross-validate: "
@@ -55,12 +56,15 @@ DEFAULT_FIT = ["alpha=0.2:1.5", "added_mass_coeff=0:3", "drag_perpendicular=0.3:
 each spanning the paper's value by about a factor of 3-10 either way."""
 QUICK_FIT = ["alpha=0.2:1.5", "cylinder_drag=1:100:log"]
 DEFAULT_MAX_GENERATIONS = 20
+DEFAULT_CYCLES = 3.0
+"""Cycles from rest of every evaluation of `fit_cmaes` when its run_kwargs give no run length
+(the Fig. 4c metric)."""
 QUICK_POPSIZE, QUICK_MAX_GENERATIONS = 4, 2
 FAILED_PENALTY = 1e6
 """Objective told to CMA-ES for a failed candidate (it needs finite values; the CSV keeps inf)."""
 
 
-@dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True)
 class CMASettings:
     """CMA-ES settings: popsize None = cma's default 4 + ⌊3 ln D⌋ (doubled at each restart),
     sigma0 = initial step in unit coordinates, seed ≥ 0 (the run is reproducible)."""
@@ -73,16 +77,16 @@ class CMASettings:
     def validate(self):
         """StudyArgumentError naming the flag of an invalid setting."""
         if self.popsize is not None and self.popsize < 2:
-            raise common.StudyArgumentError(f"--popsize must be >= 2, got {self.popsize}")
+            raise cli.StudyArgumentError(f"--popsize must be >= 2, got {self.popsize}")
         if self.max_generations < 1:
-            raise common.StudyArgumentError(f"--max-generations must be >= 1, got "
+            raise cli.StudyArgumentError(f"--max-generations must be >= 1, got "
                                             f"{self.max_generations}")
         if self.restarts < 0:
-            raise common.StudyArgumentError(f"--restarts must be >= 0, got {self.restarts}")
+            raise cli.StudyArgumentError(f"--restarts must be >= 0, got {self.restarts}")
         if self.seed < 0:
-            raise common.StudyArgumentError(f"--seed must be >= 0, got {self.seed}")
+            raise cli.StudyArgumentError(f"--seed must be >= 0, got {self.seed}")
         if not (math.isfinite(self.sigma0) and 0 < self.sigma0 <= 1):
-            raise common.StudyArgumentError(f"--sigma0 must be in (0, 1] (unit coordinates), got "
+            raise cli.StudyArgumentError(f"--sigma0 must be in (0, 1] (unit coordinates), got "
                                             f"{self.sigma0}")
 
     def population(self, dimension: int, restart: int) -> int:
@@ -100,11 +104,13 @@ def fit_cmaes(box: Sequence[identify.ParameterRange], base: StarParams,
               on_generation: Callable[[pd.DataFrame], None] = None) -> pd.DataFrame:
     """Minimise `identify.objective_values` over the box with CMA-ES and return every evaluation:
     columns evaluation, restart, generation, candidate, then those of `identify.evaluate_points`.
+    `run_kwargs`: keyword arguments of `taichi_star.batch.run_batch` (run length, solver, arch,
+    executor, chunk size; default DEFAULT_CYCLES cycles from rest in this process).
     `on_generation(table so far)` is called after each generation (e.g. to write the CSV)."""
     import cma
     identify.check_box(box, base)
     settings.validate()
-    run_kwargs = dict(run_kwargs or {})
+    run_kwargs = dict(run_kwargs or {"cycles": DEFAULT_CYCLES})
     dimension = len(box)
     start = np.array([spec.unit(getattr(base, spec.name)) for spec in box])
     parts: List[pd.DataFrame] = []
@@ -174,7 +180,7 @@ def cross_validate(box, base: StarParams, gaits: Sequence[str], weights: str,
     evaluation of every fold with a held_out_gait column."""
     gaits = list(gaits)
     if len(gaits) < 2:
-        raise common.StudyArgumentError("--cross-validate: needs at least two gaits in --gaits")
+        raise cli.StudyArgumentError("--cross-validate: needs at least two gaits in --gaits")
     folds, units, objectives = [], [], []
     for held_out in gaits:
         fitted = [g for g in gaits if g != held_out]
@@ -219,7 +225,7 @@ def draw_convergence(evaluations: pd.DataFrame, names: Sequence[str]):
     """Figure of a calibration run: top, the objective of every evaluation (dots, coloured by
     restart) and the best so far (line), log scale, against evaluation number; bottom, the
     best-so-far point's unit coordinates, one line per fitted parameter (axis [0, 1])."""
-    plt = common.use_agg()
+    plt = cli.use_agg()
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(7.5, 6.5), sharex=True)
     objective = evaluations["objective"].astype(float).to_numpy()
     finite = np.isfinite(objective)
@@ -257,7 +263,7 @@ def draw_convergence(evaluations: pd.DataFrame, names: Sequence[str]):
 def plot_convergence(csv_path, png_path, names: Sequence[str]) -> Path:
     fig = draw_convergence(pd.read_csv(csv_path), names)
     fig.savefig(png_path, dpi=130)
-    common.use_agg().close(fig)
+    cli.use_agg().close(fig)
     return Path(png_path)
 
 
@@ -265,7 +271,7 @@ def plot_cross_validation(csv_path, png_path) -> Path:
     """Predicted against measured signed speed from a crossval CSV: each fold's held-out gait
     (large, x error bar = per-cycle std of the measurement) and its fitted gaits (small, grey);
     the diagonal is a perfect prediction, the shaded quadrants a wrong direction."""
-    plt = common.use_agg()
+    plt = cli.use_agg()
     table = pd.read_csv(csv_path)
     fig, ax = plt.subplots(figsize=(6.2, 5.6))
     fitted = table[table["role"] == "fitted"]
@@ -300,94 +306,79 @@ def plot_cross_validation(csv_path, png_path) -> Path:
 # --------------------------------------------------------------------------- CLI
 
 def build_parser():
-    parser = common.common_parser("calibrate", DESCRIPTION)
-    parser.add_argument("--fit", action="append", default=None, metavar="NAME=LOW:HIGH[:log]",
-                        help="a real-valued StarParams field and its bounds, repeatable (default: "
-                             + " ".join(DEFAULT_FIT) + "; with --quick: " + " ".join(QUICK_FIT)
-                             + ")")
-    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                        help="fix another StarParams field, e.g. --set jet_mode=always")
+    parser = cli.StudyParser("calibrate", DESCRIPTION)
+    parser.add_argument("--fit", action="append", metavar="NAME=LOW:HIGH[:log]",
+                        default=DEFAULT_FIT, quick=QUICK_FIT,
+                        help="a real-valued StarParams field and its bounds, repeatable")
     parser.add_argument("--gaits", default="paper",
                         help="measured gaits to fit: paper (all five, default) or a comma list")
     parser.add_argument("--weights", choices=identify.WEIGHT_SCHEMES, default="experimental",
                         help="experimental: gait weight ∝ (speed / per-cycle std)² (default); "
                              "uniform: all 1")
-    parser.add_argument("--popsize", type=int, default=None,
-                        help=f"CMA-ES population (default 4 + 3 ln D; {QUICK_POPSIZE} with "
-                             f"--quick); doubled at each restart")
-    parser.add_argument("--max-generations", type=int, default=None,
-                        help=f"generations per CMA-ES run (default {DEFAULT_MAX_GENERATIONS}; "
-                             f"{QUICK_MAX_GENERATIONS} with --quick)")
+    parser.add_argument("--popsize", type=int, default=None, quick=QUICK_POPSIZE,
+                        help="CMA-ES population (none: cma's 4 + 3 ln D), doubled at each "
+                             "restart")
+    parser.add_argument("--max-generations", type=int, default=DEFAULT_MAX_GENERATIONS,
+                        quick=QUICK_MAX_GENERATIONS, help="generations per CMA-ES run")
     parser.add_argument("--restarts", type=int, default=0,
                         help="extra CMA-ES runs from random points, population doubled (IPOP)")
     parser.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
     parser.add_argument("--sigma0", type=float, default=0.25,
                         help="initial CMA-ES step in unit coordinates (default 0.25)")
-    parser.add_argument("--cycles", type=float, default=3.0, help="cycles from rest (default 3)")
     parser.add_argument("--cross-validate", action="store_true",
                         help="leave one gait out: fit on the others, predict it, for every gait")
-    distributed.add_arguments(parser)
+    cli.add_model_flags(parser, fixed=("gait",))
+    cli.add_dt_flag(parser)
+    cli.add_cycles_flag(parser)
+    cli.add_execution_flags(parser)
     return parser
 
 
 def main(argv=None):
-    args = build_parser().parse_args(argv)
-    common.check_positive(args.cycles, "--cycles")
-    settings = CMASettings(
-        popsize=args.popsize if args.popsize is not None else (QUICK_POPSIZE if args.quick
-                                                               else None),
-        max_generations=(args.max_generations if args.max_generations is not None else
-                         QUICK_MAX_GENERATIONS if args.quick else DEFAULT_MAX_GENERATIONS),
-        restarts=args.restarts, seed=args.seed, sigma0=args.sigma0)
+    args = cli.parse(build_parser(), argv)
+    settings = CMASettings(popsize=args.popsize, max_generations=args.max_generations,
+                           restarts=args.restarts, seed=args.seed, sigma0=args.sigma0)
     settings.validate()
     gaits = identify.measured_gaits(args.gaits)
     if args.cross_validate and len(gaits) < 2:
-        raise common.StudyArgumentError("--cross-validate: needs at least two gaits in --gaits")
-    box = [identify.parse_range_spec(text) for text in
-           (args.fit if args.fit else (QUICK_FIT if args.quick else DEFAULT_FIT))]
-    overrides = common.parse_overrides(args.set)
-    clash = set(overrides) & ({spec.name for spec in box} | {"gait"})
-    if clash:
-        raise common.StudyArgumentError(f"--set {sorted(clash)[0]}: fitted or fixed by the study")
-    try:
-        base = common.base_params(args).replace(**overrides)
-    except (ValueError, TypeError) as error:
-        raise common.StudyArgumentError(f"--set: {error}") from None
-    identify.check_box(box, base)
+        raise cli.StudyArgumentError("--cross-validate: needs at least two gaits in --gaits")
+    box = [identify.parse_range_spec(text, "--fit") for text in args.fit]
+    base = identify.model_with_box(args, box, "--fit")
     measurements = identify.measurement_table(gaits, args.weights)
-    solver = common.solver_for(args)
-    common.chunk_size_for(args)  # validates --chunk-size
-    distributed.validate(args)
-    out = common.out_dir(args)
-    with distributed.executor_for(args) as executor:
+    solver = cli.solver(args)
+    out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
+                     solver=solver, extra={"fit": [spec.spec for spec in box], "gaits": gaits,
+                                           "weights": args.weights,
+                                           "cma": dataclasses.asdict(settings)})
+    progress = not args.no_progress
+    with cli.executor(args) as executor:
         generation_size = settings.population(len(box), 0) * len(gaits)
-        run_kwargs = dict(cycles=args.cycles,
-                          duration_s=common.QUICK_DURATION_S if args.quick else None,
-                          solver=solver, arch=args.arch, progress=False, executor=executor,
-                          chunk_size=distributed.default_chunk_size(args, generation_size,
-                                                                    executor.n_workers))
+        run_kwargs = dict(**cli.run_length(args), solver=solver, arch=args.arch,
+                          executor=executor,
+                          chunk_size=cli.chunk_size(args, generation_size, executor.n_workers))
         if args.cross_validate:
-            return _cross_validation_outputs(out, box, base, gaits, args, settings, run_kwargs)
-        csv = out / "calibration.csv"
-        evaluations = fit_cmaes(box, base, measurements, settings, run_kwargs,
-                                progress=not args.no_progress,
-                                on_generation=lambda table: common.write_csv(table, csv))
-    evaluations = pd.read_csv(csv)
+            return _cross_validation_outputs(out, box, base, gaits, args.weights, settings,
+                                             run_kwargs, progress)
+        evaluations = fit_cmaes(box, base, measurements, settings, run_kwargs, progress=progress,
+                                on_generation=lambda table: out.write_csv(table,
+                                                                          "calibration.csv"))
+    csv = out.path("calibration.csv")
     names = [spec.name for spec in box]
-    png = plot_convergence(csv, out / "calibration.png", names)
+    out.wrote(plot_convergence(csv, out.path("calibration.png"), names))
     row = best_row(evaluations)
     if row is None:
-        print(common.describe([csv, png]) + "\ncalibration: every candidate failed; no fit")
+        out.report()
+        print("calibration: every candidate failed; no fit")
         return evaluations
     best = {name: float(row[name]) for name in names}
+    calibrated = base.replace(**best)
+    duration = cli.duration_s(args, calibrated.period)
     note = "calibrated (" + ", ".join(f"{n}={v:.3g}" for n, v in best.items()) + ")"
-    table4c = run_fig4c(out, base=base, overrides=best, cycles=args.cycles, solver=solver,
-                        arch=args.arch, quick=args.quick, prefix="fig4c_calibrated",
-                        progress=not args.no_progress, title_note=note)
-    best_csv = common.write_csv(best_point_table(row, box, table4c, args, settings, base,
-                                                 overrides, gaits, len(evaluations)),
-                                out / "calibration_best.csv")
-    print(common.describe([csv, best_csv, png]))
+    table4c = figures.run_fig4c(out, calibrated, solver, duration_s=duration, arch=args.arch,
+                                prefix="fig4c_calibrated", progress=progress, title_note=note)
+    out.write_csv(best_point_table(row, box, table4c, args, settings, solver, duration, gaits,
+                                   len(evaluations)), "calibration_best.csv")
+    out.report()
     print("best: " + ", ".join(f"{n} = {v:.6g}" for n, v in best.items())
           + f" (objective {row['objective']:.4g} on {', '.join(gaits)})")
     print(table4c.to_string(index=False))
@@ -398,10 +389,11 @@ def main(argv=None):
 
 
 def best_point_table(row: pd.Series, box, table4c: pd.DataFrame, args, settings: CMASettings,
-                     base: StarParams, overrides: dict, gaits: Sequence[str],
+                     solver: SolverConfig, duration_s: float, gaits: Sequence[str],
                      n_evaluations: int) -> pd.DataFrame:
     """One row: the best point (values, objective, where it was found), the five paper gaits at
-    that point (signed speed, speed ratio, direction match) and the run's settings."""
+    that point (signed speed in mm/s, speed ratio to the experiment, direction match, and
+    all_directions_match) and the run's settings (duration_s and dt_s in s)."""
     record = {"evaluation": int(row["evaluation"]), "restart": int(row["restart"]),
               "generation": int(row["generation"]), "objective": float(row["objective"]),
               **{spec.name: float(row[spec.name]) for spec in box}}
@@ -412,24 +404,24 @@ def best_point_table(row: pd.Series, box, table4c: pd.DataFrame, args, settings:
         record[f"direction_matches_{gait}"] = bool(gait_row["direction_matches"])
     record["all_directions_match"] = bool(table4c["direction_matches"].astype(bool).all())
     record.update({
-        "fit_box": " ".join(spec.spec for spec in box),
-        "fixed": " ".join(f"{k}={v}" for k, v in overrides.items()),
+        "fit_box": " ".join(spec.spec for spec in box), "fixed": " ".join(args.set),
         "gaits": " ".join(gaits), "weights": args.weights, "cycles": args.cycles,
-        "duration_s": common.QUICK_DURATION_S if args.quick else args.cycles * base.period,
-        "dt_s": common.solver_for(args).dt, "discretisation": args.discretisation,
+        "duration_s": duration_s, "dt_s": solver.dt, "preset": args.preset,
         "seed": settings.seed, "popsize": settings.population(len(box), 0),
         "restarts": settings.restarts, "max_generations": settings.max_generations,
         "sigma0": settings.sigma0, "n_evaluations": n_evaluations})
     return pd.DataFrame([record])
 
 
-def _cross_validation_outputs(out, box, base, gaits, args, settings, run_kwargs):
-    predictions, evaluations = cross_validate(box, base, gaits, args.weights, settings,
-                                              run_kwargs, progress=not args.no_progress)
-    paths = [common.write_csv(predictions, out / "crossval.csv"),
-             common.write_csv(evaluations, out / "crossval_evaluations.csv")]
-    paths.append(plot_cross_validation(paths[0], out / "crossval.png"))
-    print(common.describe(paths))
+def _cross_validation_outputs(out: cli.Output, box, base: StarParams, gaits: Sequence[str],
+                              weights: str, settings: CMASettings, run_kwargs: dict,
+                              progress: bool) -> pd.DataFrame:
+    predictions, evaluations = cross_validate(box, base, gaits, weights, settings, run_kwargs,
+                                              progress=progress)
+    csv = out.write_csv(predictions, "crossval.csv")
+    out.write_csv(evaluations, "crossval_evaluations.csv")
+    out.wrote(plot_cross_validation(csv, out.path("crossval.png")))
+    out.report()
     held = predictions[predictions["role"] == "held_out"]
     print(held[["gait", "measured_signed_mm_s", "predicted_signed_mm_s",
                 "predicted_over_measured", "direction_matches", "fit_objective"]]

@@ -4,8 +4,9 @@ Shared flags (each study adds the ones it takes): `--out` (default a fresh
 `runs/<study>/<timestamp>/`), `--quick` (a small fast run; never into results/), `--arch`,
 `--no-progress`, `--preset paper|accurate` and `--set NAME=VALUE` (the model), `--dt`,
 `--cycles`, `--workers N` (local worker processes) or `--scheduler tcp://HOST:PORT` (a Dask
-cluster), `--retries`, `--chunk-size`. Bad input is a `StudyArgumentError` naming the flag,
-raised before any compute; `python -m studies` prints it on one line and exits with 2.
+cluster), `--retries`, `--chunk-size`, `--run-dir` and `--resume` (a resumable run store). Bad
+input is a `StudyArgumentError` naming the flag, raised before any compute; `python -m studies`
+prints it on one line and exits with 2.
 
 A flag may have a different default under --quick: `parser.add_argument(..., quick=VALUE)`.
 """
@@ -27,7 +28,8 @@ import numpy as np
 import pandas as pd
 
 from taichi_star import SolverConfig, StarParams
-from taichi_star.batch import DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, executor_for
+from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, executor_for,
+                               stored_chunk_size)
 from taichi_star.experiment import PAPER_GAITS
 from taichi_star.gait import Gait
 
@@ -94,6 +96,8 @@ class StudyParser(argparse.ArgumentParser):
 
 
 def _shown(value) -> str:
+    if isinstance(value, (list, tuple)):
+        return " ".join(map(str, value))
     return "none" if value is None else str(value)
 
 
@@ -137,6 +141,15 @@ def add_execution_flags(parser: StudyParser, chunk_size: int = DEFAULT_CHUNK_SIZ
     parser.set_defaults(default_chunk_size=chunk_size)
 
 
+def add_resume_flags(parser: StudyParser):
+    """--run-dir and --resume: the run store of the finished chunks (`run_store`)."""
+    parser.add_argument("--run-dir", default=None, metavar="DIR",
+                        help="run store of the finished chunks (default <out>/chunks)")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue the run in the run store (needs --out or --run-dir): "
+                             "skip its finished chunks (the run's definition must be the same)")
+
+
 def parse(parser: StudyParser, argv) -> argparse.Namespace:
     """Parse and check the shared flags (StudyArgumentError naming the flag)."""
     args = parser.parse_args(argv)
@@ -150,6 +163,9 @@ def parse(parser: StudyParser, argv) -> argparse.Namespace:
             raise StudyArgumentError(f"--{flag.replace('_', '-')} must be >= 1, got {value}")
     if getattr(args, "retries", 0) < 0:
         raise StudyArgumentError(f"--retries must be >= 0, got {args.retries}")
+    if getattr(args, "resume", False) and args.out is None and args.run_dir is None:
+        raise StudyArgumentError("--resume: give --out (the folder of the run to continue) "
+                                 "or --run-dir")
     if getattr(args, "workers", None) is not None and args.scheduler is not None:
         raise StudyArgumentError("--workers and --scheduler: give one (local worker processes "
                                  "or a Dask cluster), not both")
@@ -178,7 +194,8 @@ def check_positive(value: float, flag: str):
 
 # --------------------------------------------------------------------------- values
 
-def _number(text: str, flag: str) -> float:
+def parse_number(text: str, flag: str) -> float:
+    """A finite number (StudyArgumentError naming the flag otherwise)."""
     try:
         value = float(text)
     except ValueError:
@@ -196,7 +213,7 @@ def parse_range(text: str, flag: str = "value") -> List[float]:
         raise StudyArgumentError(
             f"{flag}: malformed range {text!r}; expected start:stop:n or start:stop:n:log "
             f"(e.g. 0.2:1.2:11)")
-    start, stop = _number(parts[0], flag), _number(parts[1], flag)
+    start, stop = parse_number(parts[0], flag), parse_number(parts[1], flag)
     try:
         count = int(parts[2])
     except ValueError:
@@ -225,7 +242,7 @@ def parse_values(text: str, flag: str = "value", kind: type = float) -> list:
     if any(not item for item in items):
         raise StudyArgumentError(f"{flag}: malformed list {text!r} (an empty item)")
     if kind is float:
-        return [_number(item, flag) for item in items]
+        return [parse_number(item, flag) for item in items]
     if kind is int:
         try:
             return [int(item) for item in items]
@@ -363,6 +380,15 @@ def chunk_size(args, n_instances: int, n_workers: int) -> int:
     return size
 
 
+def run_store(args, out: "Output") -> Path:
+    """The run store of --run-dir, else `<out>/chunks`; when resuming without --chunk-size,
+    sets args.chunk_size to the stored run's own (its chunks must be cut the same way)."""
+    run_dir = Path(args.run_dir) if args.run_dir is not None else out.folder / "chunks"
+    if args.resume and args.chunk_size is None:
+        args.chunk_size = stored_chunk_size(run_dir)
+    return run_dir
+
+
 @contextlib.contextmanager
 def executor(args):
     """The executor --workers / --scheduler ask for (in process without either)."""
@@ -402,12 +428,12 @@ class Output:
         details = {**self.provenance.get("details", {}), **(extra or {})}
         provenance.write_sidecar(path, {**self.provenance,
                                         **({"details": details} if details else {})})
-        self.written.append(path)
+        self.wrote(path)
         return path
 
     def wrote(self, *paths) -> None:
-        """Note files written otherwise (plots, notes)."""
-        self.written += [Path(p) for p in paths]
+        """Note files written otherwise (plots, notes); a file rewritten is listed once."""
+        self.written += [Path(p) for p in paths if Path(p) not in self.written]
 
     def report(self):
         print("\n".join(f"  wrote {p}" for p in self.written))

@@ -16,118 +16,12 @@ Writes (prefix `fig4c` by default), each table with its provenance sidecar (`.cs
 
 from __future__ import annotations
 
-from pathlib import Path
-from typing import Sequence
-
-import numpy as np
 import pandas as pd
 
-from taichi_star import StarParams
-from taichi_star.batch import run_batch
-from taichi_star.experiment import PAPER_GAITS, compare_with_experiment, experimental_trajectory
-
-from . import cli
+from . import cli, figures
 
 DESCRIPTION = ("The paper's Fig. 4c/4b: speed of the five gaits (A1, A1+A2, A1+A3, A1+A4, "
                "A1+A3+A5), simulation vs experiment, 3 cycles from rest.")
-RECORDS = 150
-"""About this many centroid records per run (for Fig. 4b)."""
-
-
-def fig4c_params(base: StarParams, gaits: Sequence[str] = PAPER_GAITS):
-    """One StarParams per gait, on top of `base`."""
-    return [base.replace(gait=g) for g in gaits]
-
-
-def record_interval(duration_s: float, dt: float) -> float:
-    """A record interval (s, a whole number of steps) giving about RECORDS records."""
-    return max(1, int(round(duration_s / dt)) // RECORDS) * dt
-
-
-def fig4b_table(summary: pd.DataFrame, trajectory: pd.DataFrame, duration_s: float) -> pd.DataFrame:
-    """Long table of centroid displacement against time: gait, source ("simulation" or
-    "experiment"), t_s, x_mm, y_mm, displacement_mm (distance from the start); the experiment
-    is cut at `duration_s` and aligned at t = 0."""
-    parts = []
-    for _, row in summary.iterrows():
-        sim = trajectory[trajectory["instance"] == row["instance"]]
-        parts.append(pd.DataFrame({
-            "gait": row["gait"], "source": "simulation", "t_s": sim["t_s"].to_numpy(),
-            "x_mm": sim["x_mm"].to_numpy(), "y_mm": sim["y_mm"].to_numpy()}))
-        try:
-            exp = experimental_trajectory(row["gait"])
-        except ValueError:
-            continue
-        exp = exp[exp["t_s"] <= duration_s + 1e-9]
-        parts.append(pd.DataFrame({
-            "gait": row["gait"], "source": "experiment", "t_s": exp["t_s"].to_numpy(),
-            "x_mm": exp["x_mm"].to_numpy(), "y_mm": exp["y_mm"].to_numpy()}))
-    table = pd.concat(parts, ignore_index=True)
-    table["displacement_mm"] = np.hypot(table["x_mm"], table["y_mm"])
-    return table
-
-
-def plot_fig4c(csv_path, png_path, title: str = None):
-    """Grouped bars from a fig4c CSV: simulated |speed| next to the experiment, per gait; the
-    simulated direction is written on each bar (red when it disagrees with the paper)."""
-    plt = cli.use_agg()
-    table = pd.read_csv(csv_path)
-    x = np.arange(len(table))
-    width = 0.38
-    fig, ax = plt.subplots(figsize=(7.5, 4.2))
-    ax.bar(x - width / 2, table["sim_speed_mm_s"], width, label="simulation", color="tab:blue")
-    # error bars: the spread (± 1 std) of the measured per-cycle speeds (older CSVs lack it)
-    spread = table["exp_cycle_speed_std_mm_s"] if "exp_cycle_speed_std_mm_s" in table else None
-    ax.bar(x + width / 2, table["exp_speed_mm_s"], width, yerr=spread, capsize=3,
-           label="experiment (± per-cycle std)", color="tab:gray")
-    for i, row in table.iterrows():
-        height = row["sim_speed_mm_s"]
-        if isinstance(row["status"], str) and row["status"] != "ok":
-            label, colour, height = row["status"], "red", 0.0
-        else:
-            short = {"forward": "fwd", "reverse": "rev"}.get(row["sim_direction"], "?")
-            label = short
-            colour = "black" if bool(row["direction_matches"]) else "red"
-        ax.text(i - width / 2, (height if np.isfinite(height) else 0.0), label, ha="center",
-                va="bottom", fontsize=8, color=colour)
-        paper = {"forward": "fwd", "reverse": "rev"}.get(row["paper_direction"], "?")
-        top = row["exp_speed_mm_s"] + (spread[i] if spread is not None else 0.0)
-        ax.text(i + width / 2, top if np.isfinite(top) else 0.0, paper, ha="center",
-                va="bottom", fontsize=8)
-    ax.set_xticks(x, [g.replace("+", "&") for g in table["gait"]])
-    ax.set_ylabel("speed (mm/s)")
-    ax.set_title(title or "Fig. 4c: swimming speed, 3 cycles from rest "
-                          "(labels: direction; red = disagrees with the paper)", fontsize=9)
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(png_path, dpi=130)
-    plt.close(fig)
-    return Path(png_path)
-
-
-def plot_fig4b(csv_path, png_path, title: str = None):
-    """Displacement against time from a fig4b CSV: simulation solid, experiment dashed, one
-    colour per gait."""
-    plt = cli.use_agg()
-    table = pd.read_csv(csv_path)
-    fig, ax = plt.subplots(figsize=(7.5, 4.2))
-    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    for i, gait in enumerate(dict.fromkeys(table["gait"])):
-        colour = colours[i % len(colours)]
-        for source, style in (("simulation", "-"), ("experiment", "--")):
-            part = table[(table["gait"] == gait) & (table["source"] == source)]
-            if len(part):
-                ax.plot(part["t_s"], part["displacement_mm"], style, color=colour,
-                        label=f"{gait.replace('+', '&')} ({source[:3]}.)")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("centroid displacement (mm)")
-    ax.set_title(title or "Fig. 4b: centroid displacement (simulation solid, experiment dashed)",
-                 fontsize=9)
-    ax.legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    fig.savefig(png_path, dpi=130)
-    plt.close(fig)
-    return Path(png_path)
 
 
 def build_parser():
@@ -145,23 +39,9 @@ def main(argv=None):
     solver = cli.solver(args)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver)
-    params = fig4c_params(base)
-    duration = cli.duration_s(args, base.period)
-    result = run_batch(params, duration, solver=solver, arch=args.arch,
-                       record_interval_s=record_interval(duration, solver.dt),
-                       progress=not args.no_progress)
-    prefix = args.prefix
-    fig4b_prefix = prefix.replace("fig4c", "fig4b") if "fig4c" in prefix else prefix + "_fig4b"
-    table_csv = out.write_csv(compare_with_experiment(result.summary), f"{prefix}.csv")
-    out.write_csv(result.summary, f"{prefix}_summary.csv")
-    curves_csv = out.write_csv(fig4b_table(result.summary, result.trajectory, duration),
-                               f"{fig4b_prefix}.csv")
-    out.wrote(plot_fig4c(table_csv, out.path(f"{prefix}.png"),
-                         title=f"Fig. 4c: speed over {duration:g} s from rest (labels: "
-                               f"direction; red = disagrees with the paper)"),
-              plot_fig4b(curves_csv, out.path(f"{fig4b_prefix}.png")))
+    table = figures.run_fig4c(out, base, solver, duration_s=cli.duration_s(args, base.period),
+                              arch=args.arch, prefix=args.prefix, progress=not args.no_progress)
     out.report()
-    table = pd.read_csv(table_csv)
     with pd.option_context("display.width", 160, "display.max_columns", 20):
         print(table.to_string(index=False))
     return table

@@ -28,11 +28,12 @@ from typing import List, Sequence
 import numpy as np
 import pandas as pd
 
+from taichi_star import STAR_RANGES, StarParams
+from taichi_star.batch import run_batch
 from taichi_star.experiment import (PAPER_DIRECTIONS, PAPER_GAITS, experimental_cycle_speeds,
                                     experimental_speeds)
-from taichi_star.params import STAR_RANGES, StarParams
 
-from . import common
+from . import cli
 
 WEIGHT_SCHEMES = ("experimental", "uniform")
 TOPOLOGY_FIELDS = ("n_arc", "n_limb")
@@ -82,16 +83,16 @@ def parse_range_spec(text: str, flag: str = "--fit") -> ParameterRange:
     """"NAME=LOW:HIGH" or "NAME=LOW:HIGH:log" -> ParameterRange, checked against the field's valid
     range (`check_field_range`). StudyArgumentError naming the flag and field when malformed."""
     if "=" not in str(text):
-        raise common.StudyArgumentError(f"{flag}: expected NAME=LOW:HIGH[:log] (e.g. "
-                                        f"alpha=0.2:1.5), got {text!r}")
+        raise cli.StudyArgumentError(f"{flag}: expected NAME=LOW:HIGH[:log] (e.g. "
+                                     f"alpha=0.2:1.5), got {text!r}")
     name, bounds = text.split("=", 1)
     name = name.strip().replace("-", "_")
     parts = [p.strip() for p in bounds.split(":")]
     if len(parts) not in (2, 3) or (len(parts) == 3 and parts[2].lower() != "log"):
-        raise common.StudyArgumentError(f"{flag} {name}: malformed bounds {bounds!r}; expected "
-                                        f"LOW:HIGH or LOW:HIGH:log (e.g. 1:100:log)")
-    low = common._number(parts[0], f"{flag} {name}")
-    high = common._number(parts[1], f"{flag} {name}")
+        raise cli.StudyArgumentError(f"{flag} {name}: malformed bounds {bounds!r}; expected "
+                                     f"LOW:HIGH or LOW:HIGH:log (e.g. 1:100:log)")
+    low = cli.parse_number(parts[0], f"{flag} {name}")
+    high = cli.parse_number(parts[1], f"{flag} {name}")
     spec = ParameterRange(name, low, high, log=len(parts) == 3)
     check_field_range(spec, flag)
     return spec
@@ -101,25 +102,25 @@ def check_field_range(spec: ParameterRange, flag: str):
     """StudyArgumentError naming `flag` and the field unless the field is a real-valued
     StarParams field, LOW < HIGH, both finite and inside the field's valid range, and LOW > 0 for
     a log axis."""
-    kind = common.field_kind(spec.name)  # unknown field -> error naming it
+    kind = cli.field_kind(spec.name)  # unknown field -> error naming it
     where = f"{flag} {spec.name}"
     if kind is not float or spec.name in TOPOLOGY_FIELDS or spec.name not in STAR_RANGES:
         numeric = [n for n in StarParams.numeric_field_names() if n not in TOPOLOGY_FIELDS]
-        raise common.StudyArgumentError(f"{where}: not a real-valued numeric field (fix it with "
-                                        f"--set); fittable fields: {', '.join(numeric)}")
+        raise cli.StudyArgumentError(f"{where}: not a real-valued numeric field (fix it with "
+                                     f"--set); fittable fields: {', '.join(numeric)}")
     if not (math.isfinite(spec.low) and math.isfinite(spec.high)):
-        raise common.StudyArgumentError(f"{where}: bounds must be finite, got "
-                                        f"{spec.low}:{spec.high}")
+        raise cli.StudyArgumentError(f"{where}: bounds must be finite, got "
+                                     f"{spec.low}:{spec.high}")
     if not spec.low < spec.high:
-        raise common.StudyArgumentError(f"{where}: reversed or empty bounds {spec.low:g}:"
-                                        f"{spec.high:g} (need LOW < HIGH)")
+        raise cli.StudyArgumentError(f"{where}: reversed or empty bounds {spec.low:g}:"
+                                     f"{spec.high:g} (need LOW < HIGH)")
     if spec.log and spec.low <= 0:
-        raise common.StudyArgumentError(f"{where}: a log axis needs LOW > 0, got {spec.low:g}")
+        raise cli.StudyArgumentError(f"{where}: a log axis needs LOW > 0, got {spec.low:g}")
     lowest, highest, included = STAR_RANGES[spec.name]
     if spec.low < lowest or (spec.low == lowest and not included) or spec.high > highest:
         span = f"[{lowest:g}, {highest:g}]" if included else f"({lowest:g}, {highest:g}]"
-        raise common.StudyArgumentError(f"{where}: bounds {spec.low:g}:{spec.high:g} leave the "
-                                        f"field's valid range {span}")
+        raise cli.StudyArgumentError(f"{where}: bounds {spec.low:g}:{spec.high:g} leave the "
+                                     f"field's valid range {span}")
 
 
 def check_box(box: Sequence[ParameterRange], base: StarParams, flag: str = "--fit"):
@@ -128,20 +129,35 @@ def check_box(box: Sequence[ParameterRange], base: StarParams, flag: str = "--fi
     a valid StarParams on top of `base` (catches limits between fields, e.g. tip_radius >
     joint_radius). StudyArgumentError naming the flag and the field."""
     if not box:
-        raise common.StudyArgumentError(f"{flag}: no parameters to vary")
+        raise cli.StudyArgumentError(f"{flag}: no parameters to vary")
     names = [spec.name for spec in box]
     for spec in box:
         check_field_range(spec, flag)
         if names.count(spec.name) > 1:
-            raise common.StudyArgumentError(f"{flag} {spec.name}: given twice")
+            raise cli.StudyArgumentError(f"{flag} {spec.name}: given twice")
     for corner in range(2 ** len(box)):
         point = {spec.name: (spec.high if corner >> axis & 1 else spec.low)
                  for axis, spec in enumerate(box)}
         try:
             base.replace(**point)
         except (ValueError, TypeError) as error:
-            raise common.StudyArgumentError(f"{flag}: the corner {point} of the box is not a "
-                                            f"valid robot: {error}") from None
+            raise cli.StudyArgumentError(f"{flag}: the corner {point} of the box is not a "
+                                         f"valid robot: {error}") from None
+
+
+def model_with_box(args, box: Sequence[ParameterRange], flag: str) -> StarParams:
+    """The model of --preset and --set on which the box (given by `flag`, e.g. --fit) is varied,
+    checked with the box (`check_box`). StudyArgumentError naming --set for a field that is
+    both set and in the box, or for a field the study sets itself."""
+    in_box = {spec.name for spec in box}
+    for item in args.set:
+        name, _ = cli.parse_assignment(item, "--set")
+        if name in in_box:
+            raise cli.StudyArgumentError(f"--set {name}: fitted or varied by {flag} as well "
+                                         f"(fix it or vary it, not both)")
+    base = cli.base_params(args)
+    check_box(box, base, flag)
+    return base
 
 
 def box_values(box: Sequence[ParameterRange], unit_points) -> np.ndarray:
@@ -162,14 +178,13 @@ def box_params(box: Sequence[ParameterRange], values, base: StarParams,
 
 def measured_gaits(text: str, flag: str = "--gaits") -> List[str]:
     """`--gaits` ("paper" or a comma list) -> canonical gait names, each one of the measured
-    `PAPER_GAITS`; StudyArgumentError naming the flag for an empty list or an unmeasured gait."""
-    gaits = common.resolve_gaits(text, flag)
+    `PAPER_GAITS`; StudyArgumentError naming the flag for an empty list, an unmeasured gait or a
+    gait listed twice."""
+    gaits = cli.resolve_gaits(text, flag)
     for gait in gaits:
         if gait not in PAPER_GAITS:
-            raise common.StudyArgumentError(f"{flag} {gait}: not measured; the measured gaits are "
-                                            f"{', '.join(PAPER_GAITS)}")
-    if len(set(gaits)) != len(gaits):
-        raise common.StudyArgumentError(f"{flag}: a gait is listed twice in {text!r}")
+            raise cli.StudyArgumentError(f"{flag} {gait}: not measured; the measured gaits are "
+                                         f"{', '.join(PAPER_GAITS)}")
     return gaits
 
 
@@ -215,13 +230,14 @@ def objective_values(signed_speeds, measurements: pd.DataFrame) -> np.ndarray:
 def evaluate_points(box: Sequence[ParameterRange], unit_points, base: StarParams,
                     measurements: pd.DataFrame, run_kwargs: dict) -> pd.DataFrame:
     """Simulate every point of the box on every gait of `measurements` in one batched run
-    (`common.run_batch`) and return one row per point: u_<name> (unit coordinates), <name>
+    (`taichi_star.batch.run_batch` with `run_kwargs`: run length, solver, arch, executor,
+    chunk size) and return one row per point: u_<name> (unit coordinates), <name>
     (values), objective, n_direction_mismatches, mismatched_gaits, status (the first non-ok
     status, else "ok"), then signed_speed_<gait> and speed_<gait> in mm/s."""
     unit_points = np.atleast_2d(np.asarray(unit_points, dtype=np.float64))
     gaits = list(measurements.index)
     values = box_values(box, unit_points)
-    summary = common.run_batch(box_params(box, values, base, gaits), **run_kwargs).summary
+    summary = run_batch(box_params(box, values, base, gaits), **run_kwargs).summary
     shape = (len(unit_points), len(gaits))
     status = summary["status"].to_numpy().reshape(shape)
     ok = status == "ok"

@@ -1,27 +1,32 @@
 """Global sensitivity: Sobol indices of each gait's signed speed to the model's parameters.
 
-    python -m studies sensitivity [--vary NAME=LOW:HIGH[:log] ...] [--set NAME=VALUE ...]
-                                  [--gaits paper|A1,...] [--base-samples 128] [--cycles 3]
-                                  [--seed 1] [--run-dir DIR] [--resume]
-                                  [--arch cpu|gpu] [--out results/] [--quick]
-                                  [--workers N | --scheduler tcp://HOST:PORT]
+    python -m studies sensitivity [--vary NAME=LOW:HIGH[:log] ...] [--preset paper|accurate]
+                                  [--set NAME=VALUE ...] [--gaits paper|A1,...]
+                                  [--base-samples 128] [--cycles 3] [--dt 3.15e-3] [--seed 1]
+                                  [--out DIR] [--run-dir DIR] [--resume] [--quick]
+                                  [--arch cpu|gpu] [--workers N | --scheduler tcp://HOST:PORT]
 
 Saltelli sampling (`SALib.sample.sobol`, first-order and total indices only) of N base samples
 in the unit cube of the `--vary` box gives N (D + 2) parameter points; each point is simulated
-on every gait (N (D + 2) × gaits instances, in resumable chunks of one `simulate` call each, with
-a progress bar), and `SALib.analyze.sobol` turns each gait's signed speed (over `--cycles` cycles
-from rest, the Fig. 4c metric) into S1 (first-order: the share of the variance explained by the
+on every gait (N (D + 2) × gaits instances, one `taichi_star.batch.run_batch` in resumable
+chunks with a progress bar), and `SALib.analyze.sobol` turns each gait's signed speed (over
+`--cycles` cycles from rest, the Fig. 4c metric) into S1 (first-order: the share of the variance explained by the
 parameter alone) and ST (total: including all its interactions), with bootstrap 95 % confidence
 half-widths. Log axes are sampled uniformly in the logarithm, so the indices are those of a
 log-uniform parameter. The default box (`DEFAULT_BOX`) spans each fluid and material
 coefficient a factor of about 2-3 either side of the paper's value, damping from none to 2 ms and
 the measured radii by a few millimetres and the thickness and masses by 10-30 %.
 
-Writes `sensitivity_samples.csv` (every point: unit coordinates and values),
+Writes into `--out` (default a fresh `runs/sensitivity/<timestamp>/`), each table with its
+provenance sidecar: `sensitivity_samples.csv` (every point: unit coordinates and values),
 `sensitivity_runs.csv` (every instance: point, gait, signed speed, status), `sensitivity.csv`
 (gait, parameter, its range, S1, S1_conf, ST, ST_conf, n_failed) and `sensitivity.png` (bars
 drawn from `sensitivity.csv`). A failed instance makes its gait's indices NaN (Saltelli's
 estimators need every point); the count is in n_failed.
+
+Resumable: every finished chunk is stored, verified, in the run store (`--run-dir`, default
+`<out>/chunks/`); after a kill, the same command with `--out` of that run and `--resume` skips
+the finished chunks (a store holding another sample is refused).
 """
 
 from __future__ import annotations
@@ -32,9 +37,10 @@ from typing import Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from taichi_star.params import SolverConfig
+from taichi_star import SolverConfig
+from taichi_star.batch import run_batch
 
-from . import common, distributed, identify, runs
+from . import cli, identify
 
 DESCRIPTION = ("Sobol indices (SALib, Saltelli sampling) of each paper gait's signed speed to "
                "the fluid, material, damping and geometry parameters.")
@@ -60,6 +66,7 @@ DEFAULT_BASE_SAMPLES = 128
 """With the 14 default parameters: 128 × 16 points × 5 gaits = 10,240 instances."""
 QUICK_BASE_SAMPLES = 4
 CHUNK = 256
+"""Instances per chunk on the CPU: a kill loses little of a run of thousands."""
 DEFAULT_DT = 3.15e-3
 """Time step, s: 1000 steps per 3.15-s cycle. Implicit Euler's speeds sit on a plateau from
 h = 8 ms down to 0.25 ms (the work-precision study), so this costs a third of the paper's 1 ms
@@ -109,7 +116,7 @@ def sobol_indices(names: Sequence[str], outputs: Mapping[str, np.ndarray],
 def plot_sensitivity(csv_path, png_path) -> Path:
     """One panel per gait from a sensitivity CSV: S1 and ST bars per parameter with their 95 %
     confidence half-widths."""
-    plt = common.use_agg()
+    plt = cli.use_agg()
     table = pd.read_csv(csv_path)
     gaits = list(dict.fromkeys(table["gait"]))
     fig, axes = plt.subplots(len(gaits), 1, figsize=(8.5, 2.2 * len(gaits) + 0.8), sharex=True,
@@ -133,100 +140,73 @@ def plot_sensitivity(csv_path, png_path) -> Path:
     return Path(png_path)
 
 
-def solver_for(args) -> SolverConfig:
-    """The study's solver: implicit Euler with the chord Jacobian (the same converged steps to
-    newton_tol as Newton, faster) at `--dt`, default DEFAULT_DT (QUICK_DT with --quick)."""
-    dt = args.dt if args.dt is not None else (common.QUICK_DT if args.quick else DEFAULT_DT)
-    try:
-        return SolverConfig(dt=dt, jacobian="chord")
-    except ValueError as error:
-        raise common.StudyArgumentError(f"--dt: {error}") from None
+def solver(args) -> SolverConfig:
+    """The study's solver: the --preset's with the chord Jacobian (the same converged steps to
+    newton_tol as Newton, faster) at --dt (default DEFAULT_DT, QUICK_DT under --quick)."""
+    return cli.solver(args).replace(jacobian="chord")
 
 
 def build_parser():
-    parser = common.common_parser("sensitivity", DESCRIPTION)
-    parser._option_string_actions["--dt"].help = f"time step, s (default {DEFAULT_DT})"
+    parser = cli.StudyParser("sensitivity", DESCRIPTION)
     parser.add_argument("--vary", action="append", default=None, metavar="NAME=LOW:HIGH[:log]",
                         help="a real-valued StarParams field and its range, repeatable "
                              "(default: the 14 of DEFAULT_BOX: " + " ".join(DEFAULT_BOX) + ")")
-    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                        help="fix another StarParams field, e.g. --set jet_mode=always")
     parser.add_argument("--gaits", default="paper",
                         help="gaits: paper (the five, default) or a comma list")
-    parser.add_argument("--base-samples", type=int, default=None,
-                        help=f"Saltelli base samples N, a power of 2 (default "
-                             f"{DEFAULT_BASE_SAMPLES}; {QUICK_BASE_SAMPLES} with --quick); "
-                             f"instances = N (D + 2) × gaits")
-    parser.add_argument("--cycles", type=float, default=3.0,
-                        help="cycles from rest per instance (default 3, as Fig. 4c)")
+    parser.add_argument("--base-samples", type=int, default=DEFAULT_BASE_SAMPLES,
+                        quick=QUICK_BASE_SAMPLES,
+                        help="Saltelli base samples N, a power of 2; instances = N (D + 2) × "
+                             "gaits")
     parser.add_argument("--seed", type=int, default=1, help="sampling and bootstrap seed")
-    parser.add_argument("--run-dir", default=None, metavar="DIR",
-                        help="run folder for the finished chunks (default <out>/sensitivity_run)")
-    parser.add_argument("--resume", action="store_true",
-                        help="continue the run in the run folder, skipping finished chunks")
-    distributed.add_arguments(parser)
+    cli.add_model_flags(parser, fixed=("gait",))
+    parser.add_argument("--dt", type=float, default=DEFAULT_DT, quick=cli.QUICK_DT,
+                        help="time step, s, with either preset")
+    cli.add_cycles_flag(parser)
+    cli.add_resume_flags(parser)
+    cli.add_execution_flags(parser, chunk_size=CHUNK)
     return parser
 
 
 def main(argv=None):
-    args = build_parser().parse_args(argv)
-    common.check_positive(args.cycles, "--cycles")
-    samples = args.base_samples if args.base_samples is not None else (
-        QUICK_BASE_SAMPLES if args.quick else DEFAULT_BASE_SAMPLES)
+    args = cli.parse(build_parser(), argv)
+    samples = args.base_samples
     if samples < 2 or samples & (samples - 1):
-        raise common.StudyArgumentError(f"--base-samples must be a power of 2 >= 2 (Sobol' "
-                                        f"sequence balance), got {samples}")
+        raise cli.StudyArgumentError(f"--base-samples must be a power of 2 >= 2 (Sobol' "
+                                     f"sequence balance), got {samples}")
     if args.seed < 0:
-        raise common.StudyArgumentError(f"--seed must be >= 0, got {args.seed}")
-    gaits = common.resolve_gaits(args.gaits)
+        raise cli.StudyArgumentError(f"--seed must be >= 0, got {args.seed}")
+    gaits = cli.resolve_gaits(args.gaits)
     box = [identify.parse_range_spec(text, "--vary") for text in (args.vary or DEFAULT_BOX)]
-    overrides = common.parse_overrides(args.set)
-    clash = set(overrides) & ({spec.name for spec in box} | {"gait"})
-    if clash:
-        raise common.StudyArgumentError(f"--set {sorted(clash)[0]}: varied or fixed by the study")
-    try:
-        base = common.base_params(args).replace(**overrides)
-    except (ValueError, TypeError) as error:
-        raise common.StudyArgumentError(f"--set: {error}") from None
-    identify.check_box(box, base, "--vary")
-    solver = solver_for(args)
-    distributed.validate(args)
-    run_dir = Path(args.run_dir) if args.run_dir is not None else Path(args.out) / "sensitivity_run"
-    previous = runs.previous_chunk_size(run_dir) if args.resume else None
-    if args.chunk_size is None and previous is not None:
-        args.chunk_size = previous  # resume with the run's own chunks
-    if args.chunk_size is not None and args.chunk_size < 1:
-        raise common.StudyArgumentError(f"--chunk-size must be >= 1, got {args.chunk_size}")
+    base = identify.model_with_box(args, box, "--vary")
+    solver_config = solver(args)
+    out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
+                     solver=solver_config,
+                     extra={"box": [spec.spec for spec in box], "gaits": gaits,
+                            "base_samples": samples, "seed": args.seed})
+    run_dir = cli.run_store(args, out)
 
     units = saltelli_units(len(box), samples, args.seed)
     values = identify.box_values(box, units)
     params = identify.box_params(box, values, base, gaits)
-    out = common.out_dir(args)
     names = [spec.name for spec in box]
     sample_table = pd.DataFrame({f"u_{n}": units[:, d] for d, n in enumerate(names)})
     for d, name in enumerate(names):
         sample_table[name] = values[:, d]
     sample_table.insert(0, "point", np.arange(len(units)))
-    paths = [common.write_csv(sample_table, out / "sensitivity_samples.csv")]
-    description = {"box": [spec.spec for spec in box], "fixed": {k: str(v) for k, v in
-                                                                  overrides.items()},
-                   "gaits": gaits, "base_samples": samples, "seed": args.seed,
-                   "cycles": args.cycles, "quick": args.quick}
-    with distributed.executor_for(args) as executor:
-        chunk = distributed.default_chunk_size(args, len(params), executor.n_workers,
-                                               cpu_default=CHUNK)
-        summary = common.run_batch(
-            params, cycles=args.cycles,
-            duration_s=common.QUICK_DURATION_S if args.quick else None, solver=solver,
-            arch=args.arch, chunk_size=chunk, progress=not args.no_progress, executor=executor,
-            run_dir=run_dir, resume=args.resume, description=description).summary
+    out.write_csv(sample_table, "sensitivity_samples.csv")
+    with cli.executor(args) as executor:
+        summary = run_batch(params, **cli.run_length(args), solver=solver_config,
+                            arch=args.arch,
+                            chunk_size=cli.chunk_size(args, len(params), executor.n_workers),
+                            executor=executor, run_dir=run_dir, resume=args.resume,
+                            progress=not args.no_progress).summary
     ok = (summary["status"] == "ok").to_numpy()
     run_table = pd.DataFrame({
         "point": np.repeat(np.arange(len(units)), len(gaits)),
         "gait": summary["gait"], "status": summary["status"],
         "signed_speed_mm_s": np.where(ok, summary["signed_speed_mm_s"], np.nan),
         "speed_mm_s": np.where(ok, summary["speed_mm_s"], np.nan)})
-    paths.append(common.write_csv(run_table, out / "sensitivity_runs.csv"))
+    out.write_csv(run_table, "sensitivity_runs.csv")
 
     outputs = {gait: run_table.loc[run_table["gait"] == gait, "signed_speed_mm_s"].to_numpy()
                for gait in gaits}
@@ -239,9 +219,9 @@ def main(argv=None):
     indices["n_instances"] = len(params)
     indices["cycles"] = args.cycles
     indices["quick"] = args.quick  # --quick: QUICK_DURATION_S from rest instead of the cycles
-    csv = common.write_csv(indices, out / "sensitivity.csv")
-    paths += [csv, plot_sensitivity(csv, out / "sensitivity.png")]
-    print(common.describe(paths))
+    csv = out.write_csv(indices, "sensitivity.csv")
+    out.wrote(plot_sensitivity(csv, out.path("sensitivity.png")))
+    out.report()
     failed = int((~ok).sum())
     print(f"{len(params)} instances ({len(units)} points × {len(gaits)} gaits), {failed} not ok")
     with pd.option_context("display.width", 160, "display.max_rows", 200):

@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 
 from taichi_star import StarParams
-from taichi_star.batch import run_batch, stored_chunk_size
+from taichi_star.batch import run_batch
 
 from . import cli
 
@@ -66,11 +66,7 @@ def build_parser():
                              "A1,A1+A2")
     parser.add_argument("--max-instances", type=int, default=MAX_INSTANCES,
                         help=f"refuse larger products (default {MAX_INSTANCES})")
-    parser.add_argument("--run-dir", default=None, metavar="DIR",
-                        help="run store of the finished chunks (default <out>/chunks)")
-    parser.add_argument("--resume", action="store_true",
-                        help="continue the run in the run store (needs --out or --run-dir): "
-                             "skip its finished chunks (the sweep definition must be the same)")
+    cli.add_resume_flags(parser)
     cli.add_model_flags(parser)
     cli.add_dt_flag(parser)
     cli.add_cycles_flag(parser)
@@ -167,17 +163,12 @@ def main(argv=None):
     if size > args.max_instances:
         raise cli.StudyArgumentError(
             f"the product has {size} instances, more than --max-instances {args.max_instances}")
-    if args.resume and args.out is None and args.run_dir is None:
-        raise cli.StudyArgumentError("--resume: give --out (the folder of the run to continue) "
-                                     "or --run-dir")
     base = cli.base_params(args)
     grid = cli.param_product(axes, base=base)
     solver = cli.solver(args)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"axes": axes})
-    run_dir = args.run_dir if args.run_dir is not None else out.folder / "chunks"
-    if args.resume and args.chunk_size is None:
-        args.chunk_size = stored_chunk_size(run_dir)  # the run's own chunks
+    run_dir = cli.run_store(args, out)
     with cli.executor(args) as executor:
         result = run_batch(grid, **cli.run_length(args), solver=solver, arch=args.arch,
                            chunk_size=cli.chunk_size(args, len(grid), executor.n_workers),

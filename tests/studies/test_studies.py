@@ -131,10 +131,10 @@ def no_compute(monkeypatch):
     ("fig4c", ["--set", "gait=A1"], "--set gait"),
     ("fig4c", ["--dt", "0.5"], "--dt: dt must be"),
     ("fig4c", ["--cycles", "nan"], "--cycles must be > 0"),
-    ("calibrate", ["--fit", "alpha=1:2"], "malformed range"),
-    ("calibrate", ["--fit", "jet_mode=contract,always"], "only real-valued"),
-    ("calibrate", ["--fit", "alpha=0:1:2", "--fit", "period=3:4:2",
-                   "--fit", "cylinder_drag=1:2:2"], "at most two"),
+    # identification (calibrate, sensitivity): more cases in test_identify.py
+    ("calibrate", ["--fit", "alpha=1:2:3"], "--fit alpha: malformed bounds"),
+    ("calibrate", ["--fit", "jet_mode=0:1"], "--fit jet_mode: not a real-valued numeric field"),
+    ("sensitivity", ["--vary", "alpha=0.2"], "--vary alpha: malformed bounds"),
     ("gaits", ["--cycles", "0"], "--cycles must be > 0"),
     ("animate", ["--gait", "A0"], "--gait"),
     ("animate", ["--frames", "1"], "--frames must be >= 2"),
@@ -283,25 +283,6 @@ def test_gaits_quick(tmp_path):
         members = table[table["class_representative"] == gait]
         assert members["speed_mm_s"].to_numpy() == pytest.approx(speed, rel=1e-9)
     pngs_written(tmp_path / "gaits.png")
-
-
-def test_calibrate_quick(tmp_path):
-    from studies import calibrate
-    calibrate.main(["--out", str(tmp_path), *QUICK])
-    table = pd.read_csv(tmp_path / "calibration.csv")
-    assert len(table) >= 4 and set(table["round"]) == {0, 1}
-    fit = pd.read_csv(tmp_path / "calibration_fit.csv")
-    assert list(fit["parameter"]) == ["alpha", "cylinder_drag"]
-    assert fit["objective"].iloc[0] == pytest.approx(table["objective"].min())
-    # the best point's speeds, simulated directly, give its objective
-    best = dict(zip(fit["parameter"], fit["value"]))
-    direct = quick_simulation([StarParams(gait=g, **best) for g in PAPER_GAITS]).summary
-    assert calibrate.objective(compare_with_experiment(direct)) == pytest.approx(
-        fit["objective"].iloc[0], rel=1e-9)
-    calibrated = pd.read_csv(tmp_path / "fig4c_calibrated.csv")
-    assert calibrated["sim_speed_mm_s"].to_numpy() == pytest.approx(direct["speed_mm_s"],
-                                                                    rel=1e-9)
-    pngs_written(tmp_path / "calibration.png")
 
 
 def test_animate_quick(tmp_path):

@@ -2,6 +2,7 @@
 boxes (values from unit coordinates), argument validation before compute, and the calibrate /
 cross-validation / sensitivity studies in --quick mode with value checks."""
 
+import json
 import math
 
 import numpy as np
@@ -14,7 +15,7 @@ from taichi_star.experiment import (EXPERIMENT_PERIOD_S, PAPER_GAITS, cycle_spee
                                     experimental_cycle_speeds, experimental_speeds,
                                     experimental_trajectory)
 
-from studies import calibrate, common, identify, sensitivity
+from studies import calibrate, cli, identify, sensitivity
 from studies.__main__ import main as studies_main
 
 QUICK = ["--quick", "--no-progress"]
@@ -118,6 +119,7 @@ def no_compute(monkeypatch):
     """Any call to simulate fails the test: argument errors must come before compute."""
     def forbidden(*args, **kwargs):
         raise AssertionError("simulate was called despite invalid arguments")
+    monkeypatch.setattr("taichi_star.batch.tasks.simulate", forbidden)
     monkeypatch.setattr(taichi_star, "simulate", forbidden)
 
 
@@ -178,8 +180,8 @@ def quick_speeds(points, gaits):
     """Direct `simulate` of {field: value} points on gaits, --quick settings: signed speeds
     (points, gaits)."""
     params = [StarParams(gait=g, **p) for p in points for g in gaits]
-    summary = taichi_star.simulate(params, common.QUICK_DURATION_S,
-                                   SolverConfig(dt=common.QUICK_DT)).summary
+    summary = taichi_star.simulate(params, cli.QUICK_DURATION_S,
+                                   SolverConfig(dt=cli.QUICK_DT)).summary
     return summary["signed_speed_mm_s"].to_numpy().reshape(len(points), len(gaits))
 
 
@@ -210,6 +212,9 @@ def test_calibrate_quick_against_a_direct_simulation(tmp_path):
     assert best["all_directions_match"] == all(
         np.sign(direct) == measurements["paper_sign"].to_numpy())
     assert best["fit_box"] == " ".join(spec.spec for spec in box) and best["seed"] == 1
+    sidecar = json.loads((tmp_path / "calibration_best.csv.json").read_text())
+    assert sidecar["study"] == "calibrate" and sidecar["solver"]["dt"] == cli.QUICK_DT
+    assert sidecar["details"]["fit"] == calibrate.QUICK_FIT
 
     figure = calibrate.draw_convergence(evaluations, [spec.name for spec in box])
     top, bottom = figure.axes[:2]
@@ -269,7 +274,7 @@ def test_sobol_indices_of_the_ishigami_function():
     assert failed["S1"].isna().all() and failed["n_failed"].iloc[0] > 0
 
 
-def test_sensitivity_quick(tmp_path):
+def test_sensitivity_quick_and_resumed(tmp_path, monkeypatch):
     argv = ["--vary", "alpha=0.4:1.2", "--vary", "cylinder_drag=3:30:log", "--gaits",
             "A1,A1+A4", "--base-samples", "4", "--out", str(tmp_path), *QUICK]
     sensitivity.main(argv)
@@ -293,3 +298,10 @@ def test_sensitivity_quick(tmp_path):
         seed=1)
     assert indices["ST"].to_numpy() == pytest.approx(again["ST"].to_numpy(), rel=1e-6)
     assert (tmp_path / "sensitivity.png").stat().st_size > 1000
+    # resumed from its run store (<out>/chunks): nothing simulated again, the same tables
+    def forbidden(*args, **kwargs):
+        raise AssertionError("the resumed run simulated a stored chunk again")
+    monkeypatch.setattr("taichi_star.batch.tasks.simulate", forbidden)
+    sensitivity.main([*argv, "--resume"])
+    pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "sensitivity_runs.csv"), runs)
+    pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "sensitivity.csv"), indices)
