@@ -111,10 +111,10 @@ class Bending(Term):
 
     @staticmethod
     def configuration(coefficients):
-        actuated = bool(coefficients["gait_mask"].any())
-        return (actuated,
-                actuated and bool((coefficients["end_turning_length"] != 0).any()),
-                actuated and bool((coefficients["closure_rate"] != 0).any()))
+        # only the actuation as a whole is compiled out: the shared ends and the ramp closure
+        # are per-instance branches that cost nothing measurable, and each static switch would
+        # multiply the engines a batch of mixed options compiles
+        return (bool(coefficients["gait_mask"].any()),)
 
     @staticmethod
     def coupled_pairs(topology):
@@ -129,7 +129,7 @@ class Bending(Term):
         return {"start_curvature": (N_ACTUATORS,), "end_curvature": (N_ACTUATORS,)}
 
     def build(self, topology):
-        self.actuated, self.shared_ends, self.ramp_closure = self.configuration_switches
+        (self.actuated,) = self.configuration_switches
         self.n_triplets = topology.n_triplets
         self.triplets = index_field(topology.triplets)
         self.triplet_slot = self.engine.triplet_slots(topology.triplets)
@@ -140,14 +140,13 @@ class Bending(Term):
     def profile_curvature(self, b, tau):
         """K̄ (1/m) of instance b's actuators at τ (s) since firing: Eq. 5, and with the "ramp"
         closure the gap K̄(0) − K̄(T) spread over the period, back at K̄(0) from τ = T on."""
-        if ti.static(self.ramp_closure):
-            if self.closure_rate[b] != 0.0:
-                tau = ti.min(tau, self.period[b])
+        if self.closure_rate[b] != 0.0:
+            tau = ti.min(tau, self.period[b])
         c1, c2, c3, c4 = self.profile[b, 0], self.profile[b, 1], self.profile[b, 2], self.profile[b, 3]
         if tau >= self.profile[b, 8]:
             c1, c2, c3, c4 = self.profile[b, 4], self.profile[b, 5], self.profile[b, 6], self.profile[b, 7]
         value = c1 / (1.0 + ti.exp(-c2 * (tau - c3))) + c4
-        if ti.static(self.ramp_closure):
+        if self.closure_rate[b] != 0.0:
             value += self.closure_rate[b] * tau
         return value
 
@@ -181,16 +180,15 @@ class Bending(Term):
                 target = self.target_curvature(b, actuator, at_start)
                 if target != NOT_FIRED:
                     natural = target if natural >= 0.0 else -target
-            if ti.static(self.shared_ends):
-                clamped = self.joint_actuator[t]
-                if clamped >= 0 and self.end_turning_length[b, t] != 0.0:
-                    target = self.target_curvature(b, clamped, at_start)
-                    if target != NOT_FIRED:
-                        # turn the joint's natural angle φ⁰ = 2 atan(κ⁰Δl/2) by the arc's half-edge
-                        voronoi = self.voronoi_length[b, t]
-                        angle = 2.0 * ti.atan2(natural * voronoi, 2.0) + self.end_turning_length[b, t] * (
-                            target - self.profile_rest[b])
-                        natural = 2.0 * ti.tan(0.5 * angle) / voronoi
+            clamped = self.joint_actuator[t]
+            if clamped >= 0 and self.end_turning_length[b, t] != 0.0:
+                target = self.target_curvature(b, clamped, at_start)
+                if target != NOT_FIRED:
+                    # turn the joint's natural angle φ⁰ = 2 atan(κ⁰Δl/2) by the arc's half-edge
+                    voronoi = self.voronoi_length[b, t]
+                    angle = 2.0 * ti.atan2(natural * voronoi, 2.0) + self.end_turning_length[b, t] * (
+                        target - self.profile_rest[b])
+                    natural = 2.0 * ti.tan(0.5 * angle) / voronoi
         return natural
 
     @ti.func
