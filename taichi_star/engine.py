@@ -340,17 +340,23 @@ class BatchEngine:
             attempts += 1
             start = self.state.time[b]
             proposed = ti.min(self.state.step_size[b], dt_max)
-            end = start + proposed
-            remaining = stop_time - start
-            if end >= stop_time or remaining < 1.25 * proposed:
-                end = stop_time
+            # the next stop: stop_time, or the next cycle start of the periodic gait
+            target = stop_time
             cycle_start = -1.0
             if self.state.schedule_period[b] > 0.0:
                 boundary = self.state.schedule_period[b] * (self.state.schedule_cycles[b] + 1)
-                if end >= boundary or boundary - start < 1.25 * proposed:
-                    end = ti.min(end, boundary)
-                    if end == boundary:
-                        cycle_start = boundary
+                if boundary <= target:
+                    target = boundary
+                    cycle_start = boundary
+            # land on it exactly; never leave a sliver under a quarter step before it (split
+            # the rest in two instead): a rejected step then always shrinks
+            end = start + proposed
+            if end >= target:
+                end = target
+            elif target - end < 0.25 * proposed:
+                end = start + 0.5 * (target - start)
+            if end != target:
+                cycle_start = -1.0
             h = end - start
             if cycle_start >= 0.0:
                 for m in range(N_ACTUATORS):
