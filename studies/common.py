@@ -428,3 +428,31 @@ def params_columns() -> List[str]:
 
 def describe(paths: Iterable) -> str:
     return "\n".join(f"  wrote {p}" for p in paths)
+
+
+def fresh_output(args, study: str) -> Path:
+    """The output folder of a study whose --out defaults to None: --out, or a fresh
+    runs/<study>/<timestamp>/. --quick may not write into results/ (the committed results)."""
+    import datetime
+    if args.out is None:
+        stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S-%f")
+        return out_dir(SimpleNamespace(out=Path("runs") / study / stamp))
+    if args.quick and Path(args.out).resolve().parts[-1:] == (DEFAULT_OUT,):
+        raise StudyArgumentError(f"--out {args.out}: a --quick run does not write into "
+                                 f"{DEFAULT_OUT}/")
+    return out_dir(args)
+
+
+def write_table(frame: pd.DataFrame, path, study: str, argv: Sequence[str],
+                details: Mapping = None) -> Path:
+    """`write_csv` plus a JSON sidecar `<path>.json`: the study, its command line, the package
+    version, the date and `details`."""
+    import datetime
+    import json
+    path = write_csv(frame, path)
+    sidecar = {"study": study, "command": ["python", "-m", "studies", study, *argv],
+               "taichi_star_version": taichi_star.__version__,
+               "date": datetime.datetime.now().isoformat(timespec="seconds"),
+               "details": dict(details or {})}
+    Path(f"{path}.json").write_text(json.dumps(sidecar, indent=2, default=str) + "\n")
+    return path

@@ -5,12 +5,14 @@ reset_mask, info masks); a value check of the reward; bad input."""
 
 import gymnasium as gym
 import numpy as np
+import pandas as pd
 import pytest
 from gymnasium.utils.env_checker import check_env
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 from gymnasium.vector.utils import batch_space
 
 import taichi_star as ts
+from studies.__main__ import main as studies_main
 from taichi_star.envs import ENV_ID, OBSERVATION_NAMES, StarSwimmerEnv, StarSwimmerVectorEnv
 
 # the paper's actuation period at a coarse step: 630 steps per control period
@@ -38,7 +40,8 @@ def test_forward_gait_toward_a_goal_ahead_is_rewarded(single):
     observation, reward, terminated, truncated, info = single.step(FORWARD)
     assert 5.0 < reward < 12.0 and not terminated and not truncated
     assert observation[0] < 30.0 - 5.0 and info["position_mm"][0] > 5.0
-    np.testing.assert_array_equal(observation[7:], np.float32([3.15, 3.15, 10, 10, 10, 10, 10, 3.15]))
+    fired_ago = np.float32([3.15, 3.15, 10, 10, 10, 10, 10, 3.15])  # 10 s: the never-fired cap
+    np.testing.assert_array_equal(observation[7:], fired_ago)
     single.reset(options={"goal": (30.0, 0.0)})
     assert single.step(BACKWARD)[1] < -5.0
 
@@ -149,3 +152,11 @@ def test_bad_input_raises_value_error_and_changes_nothing():
     after = envs.batch.simulator.save()
     for name, values in before.fields.items():
         np.testing.assert_array_equal(values, after.fields[name], err_msg=name)
+
+
+def test_env_bench_quick(tmp_path):
+    assert studies_main(["env_bench", "--quick", "--presets", "paper", "--out",
+                         str(tmp_path)]) == 0
+    table = pd.read_csv(tmp_path / "env_bench.csv")
+    assert list(table["preset"]) == ["paper"] and (table["robot_seconds_per_s"] > 0).all()
+    assert studies_main(["env_bench", "--quick", "--presets", "fast"]) == 2

@@ -45,6 +45,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from ..gait import N_ACTUATORS
+from ..metrics import rotate
 from ..params import SolverConfig, StarParams
 from ..simulation import whole_steps
 from ..simulator import ACTUATOR_COLUMNS, Simulator
@@ -133,13 +134,6 @@ def goal_from_options(options, count: int) -> Optional[np.ndarray]:
         raise ValueError(f"options['goal'] must be within {MAX_GOAL_MM:g} mm of the start, got "
                          f"{options['goal']!r}")
     return goal
-
-
-def _rotate(vectors: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
-    """(B, 2) vectors turned counter-clockwise by (B,) angles."""
-    cos, sin = np.cos(angle_rad), np.sin(angle_rad)
-    return np.stack([cos * vectors[:, 0] - sin * vectors[:, 1],
-                     sin * vectors[:, 0] + cos * vectors[:, 1]], axis=1)
 
 
 class GoalReachingBatch:
@@ -232,8 +226,8 @@ class GoalReachingBatch:
         since = state[list(ACTUATOR_COLUMNS)].to_numpy()
         since = np.where(np.isnan(since), self.task.since_fired_cap_s, since)
         columns = np.column_stack([
-            _rotate(self.goals - position, -heading), np.sin(heading), np.cos(heading),
-            _rotate(velocity, -heading), state["angular_velocity_deg_s"].to_numpy(), since])
+            rotate(self.goals - position, -heading), np.sin(heading), np.cos(heading),
+            rotate(velocity, -heading), state["angular_velocity_deg_s"].to_numpy(), since])
         # a failed (frozen) robot may hold non-finite values; the observation must stay in space
         columns = np.nan_to_num(columns, nan=0.0)
         observation = np.clip(columns, space.low, space.high).astype(np.float32)
