@@ -14,7 +14,8 @@ Goals: --directions points at --distance mm in every direction (0°, 45°, ... f
 
 Writes into --out (default a fresh runs/plan/<timestamp>/), each CSV with a JSON sidecar:
 - `plan.csv`: per goal and controller (`taichi_star.planner.PLAN_COLUMNS`): reached,
-  cycles_to_goal, cycles_fired, final_error_mm, status;
+  cycles_to_goal, cycles_fired, final_error_mm (when the controller stopped), end_error_mm
+  (when the batch stopped: the robot glides on after its last firing), status;
 - `plan_gain.csv`: open against closed loop: goals reached, mean and largest final error,
   mean cycles to the goal where both reached it;
 - `plan_cycles.csv`: the state at each cycle boundary, the gait fired and the model's
@@ -43,8 +44,9 @@ QUICK = {"dt": 5e-3, "cycles": 2, "max_cycles": 2}
 
 
 def plot_paths(paths_csv, plan_csv, png_path):
-    """The centroid paths of both controllers (open dashed, closed solid; where each ended: o
-    reached, x not) and the goals (stars), from plan_paths.csv and plan.csv."""
+    """The centroid paths of both controllers (open dashed, closed solid; where each stopped:
+    o reached, x not; then the glide, dotted) and the goals (stars), from plan_paths.csv and
+    plan.csv."""
     plt = common.use_agg()
     paths = pd.read_csv(paths_csv)
     plan = pd.read_csv(plan_csv)
@@ -56,17 +58,22 @@ def plot_paths(paths_csv, plan_csv, png_path):
         for mode, style in (("open", "--"), ("closed", "-")):
             path = paths[(paths["goal"] == goal.goal) & (paths["mode"] == mode)]
             row = plan[(plan["goal"] == goal.goal) & (plan["mode"] == mode)].iloc[0]
-            ax.plot(path["x_mm"], path["y_mm"], style, color=colour, lw=1.1,
+            controlled = path[path["controlled"]]
+            ax.plot(controlled["x_mm"], controlled["y_mm"], style, color=colour, lw=1.1,
                     label=None if i else f"{mode} loop")
-            ax.plot(path["x_mm"].iloc[-1], path["y_mm"].iloc[-1], "o" if row["reached"] else "x",
-                    color=colour, ms=4)
+            ax.plot(controlled["x_mm"].iloc[-1], controlled["y_mm"].iloc[-1],
+                    "o" if row["reached"] else "x", color=colour, ms=4)
+            gliding = path[path["t_s"] >= controlled["t_s"].iloc[-1]]
+            ax.plot(gliding["x_mm"], gliding["y_mm"], ":", color=colour, lw=0.7, alpha=0.6,
+                    label=None if i or mode == "open" else "gliding after the stop")
         ax.plot(goal.goal_x_mm, goal.goal_y_mm, "*", color=colour, ms=11, mec="k", mew=0.5)
     ax.plot(0, 0, "k+", ms=10)
     ax.set_aspect("equal")
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
     gain = plan.groupby("mode")["final_error_mm"].mean()
-    ax.set_title(f"Paths to {len(goals)} goals (stars): open loop dashed, closed loop solid\n"
+    ax.set_title(f"Paths to {len(goals)} goals (stars): open loop dashed, closed loop solid, "
+                 f"gliding dotted\n"
                  f"mean final error: open {gain.get('open', np.nan):.1f} mm, closed "
                  f"{gain.get('closed', np.nan):.1f} mm; o = reached, x = not", fontsize=9)
     ax.legend(fontsize=8)

@@ -30,13 +30,16 @@ from .simulator import Simulator
 MODES = ("open", "closed")
 
 PLAN_COLUMNS = ["goal", "goal_x_mm", "goal_y_mm", "goal_distance_mm", "mode", "reached",
-                "cycles_to_goal", "cycles_fired", "final_error_mm", "status"]
+                "cycles_to_goal", "cycles_fired", "final_error_mm", "end_error_mm", "run_cycles",
+                "status"]
 """Columns of `drive`'s summary: reached (within the tolerance at a cycle boundary while its
 controller ran, the boundary where it stopped included); cycles_to_goal (the first such
 boundary, in cycles; NaN if never); cycles_fired (cycles with a firing); final_error_mm
 (distance to the goal when the controller stopped: closed loop at the first boundary within
 the tolerance, open loop at the end of its plan, either at the end of the cycle budget
-otherwise); status of the instance."""
+otherwise); end_error_mm (distance to the goal when the whole batch stopped, after
+run_cycles cycles: a robot that stopped earlier has glided on meanwhile, as it does for
+several cycles after its last firing); status of the instance."""
 
 CYCLE_COLUMNS = ["goal", "mode", "cycle", "gait", "x_mm", "y_mm", "heading_deg",
                  "distance_mm", "predicted_x_mm", "predicted_y_mm"]
@@ -133,7 +136,8 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
 
     goals_mm: (G, 2) goal points relative to the start (the robot starts at rest, heading 0).
     Returns (summary, cycles, path): `PLAN_COLUMNS`, `CYCLE_COLUMNS` and the centroid path
-    (goal, mode, t_s, x_mm, y_mm) recorded frames_per_cycle times per cycle. ValueError for
+    (goal, mode, t_s, controlled (False once the controller has stopped), x_mm, y_mm)
+    recorded frames_per_cycle times per cycle. ValueError for
     bad arguments."""
     goals = np.asarray(goals_mm, dtype=np.float64)
     if goals.ndim != 2 or goals.shape[1] != 2 or not len(goals) or not np.isfinite(goals).all():
@@ -158,6 +162,7 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
 
     simulator = Simulator([params.replace(gait=NO_GAIT)] * len(target), solver, arch=arch)
     stopped = np.zeros(len(target), dtype=bool)
+    stop_cycle = np.full(len(target), max_cycles)
     final_error = np.full(len(target), np.nan)
     reached_at = np.full(len(target), np.nan)
     fired = np.zeros(len(target), dtype=np.int64)
@@ -180,6 +185,7 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
         # loop: its plan is done) or the budget is spent; its error is taken then
         stopping = ~stopped & ((choice == 0) | (cycle == max_cycles) | ~simulator.ok)
         final_error[stopping] = distance[stopping]
+        stop_cycle[stopping] = cycle
         stopped |= stopping
         choice[stopped] = 0
         cycle_rows.append(pd.DataFrame({
@@ -203,14 +209,16 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
         "goal": goal_index, "goal_x_mm": target[:, 0], "goal_y_mm": target[:, 1],
         "goal_distance_mm": np.hypot(*target.T), "mode": modes,
         "reached": ~np.isnan(reached_at), "cycles_to_goal": reached_at,
-        "cycles_fired": fired, "final_error_mm": final_error,
+        "cycles_fired": fired, "final_error_mm": final_error, "end_error_mm": distance,
+        "run_cycles": cycle,
         "status": state["status"].to_numpy()})[PLAN_COLUMNS]
     start = pd.DataFrame({"instance": np.arange(len(target)), "t_s": 0.0, "centroid_x_mm": 0.0,
                           "centroid_y_mm": 0.0})
     path = pd.concat([start, *paths], ignore_index=True)
     instance = path["instance"].to_numpy(dtype=int)
-    path = pd.DataFrame({"goal": goal_index[instance], "mode": modes[instance],
-                         "t_s": path["t_s"].to_numpy(dtype=float),
+    times = path["t_s"].to_numpy(dtype=float)
+    path = pd.DataFrame({"goal": goal_index[instance], "mode": modes[instance], "t_s": times,
+                         "controlled": times <= stop_cycle[instance] * period + solver.dt / 2,
                          "x_mm": path["centroid_x_mm"].to_numpy(dtype=float),
                          "y_mm": path["centroid_y_mm"].to_numpy(dtype=float)})
     path = path.sort_values(["goal", "mode", "t_s"], kind="stable").reset_index(drop=True)
@@ -219,13 +227,15 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
 
 def closed_loop_gain(summary: pd.DataFrame) -> dict:
     """Open against closed loop over a `drive` summary: goals reached, mean and largest final
-    error (mm), mean cycles to the goal over the goals both reached."""
+    error (mm), mean error at the end of the run (mm), mean cycles to the goal over the goals
+    both reached."""
     result = {}
     for mode in MODES:
         part = summary[summary["mode"] == mode]
         result[f"{mode}_reached"] = int(part["reached"].sum())
         result[f"{mode}_mean_error_mm"] = float(part["final_error_mm"].mean())
         result[f"{mode}_max_error_mm"] = float(part["final_error_mm"].max())
+        result[f"{mode}_mean_end_error_mm"] = float(part["end_error_mm"].mean())
     both = summary.groupby("goal")["reached"].transform("all")
     cycles = summary[both].groupby("mode")["cycles_to_goal"].mean()
     for mode in MODES:

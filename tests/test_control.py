@@ -123,6 +123,7 @@ def test_drive_open_and_closed_loop(primitives_run):
                    & np.isclose(path["t_s"], 3.15)]
     np.testing.assert_allclose(on_path[["x_mm", "y_mm"]].to_numpy(),
                                row[["x_mm", "y_mm"]].to_numpy())
+    assert path.groupby(["goal", "mode"])["controlled"].first().all()
     with pytest.raises(ValueError, match="goals_mm"):
         drive(model, [[np.nan, 0.0]], solver=SOLVER)
 
