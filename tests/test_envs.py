@@ -13,7 +13,8 @@ from gymnasium.vector.utils import batch_space
 
 import taichi_star as ts
 from studies.__main__ import main as studies_main
-from taichi_star.envs import ENV_ID, OBSERVATION_NAMES, StarSwimmerEnv, StarSwimmerVectorEnv
+from taichi_star.envs import (DEFAULT_MAX_EPISODE_STEPS, ENV_ID, OBSERVATION_NAMES,
+                              StarSwimmerEnv, StarSwimmerVectorEnv)
 
 # the paper's actuation period at a coarse step: 630 steps per control period
 KWARGS = dict(solver=ts.SolverConfig(dt=5e-3))
@@ -68,6 +69,16 @@ def test_make_vec_builds_the_native_vector_env():
     assert isinstance(envs, StarSwimmerVectorEnv)
     assert envs.batch.simulator.n_instances == 2  # one engine for all robots, not copies
     assert envs.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP
+    assert envs.batch.task.max_episode_steps == DEFAULT_MAX_EPISODE_STEPS
+
+
+def test_make_and_make_vec_take_the_step_budget():
+    single = gym.make(ENV_ID, max_episode_steps=1, **KWARGS)
+    single.reset(seed=0)
+    assert single.step(np.zeros(8, dtype=np.int8))[3]
+    envs = gym.make_vec(ENV_ID, num_envs=2, max_episode_steps=1, **KWARGS)
+    envs.reset(seed=0)
+    assert envs.step(np.zeros((2, 8), dtype=np.int8))[3].all()
 
 
 def actions_schedule(steps, num_envs):

@@ -21,7 +21,11 @@ the space's bounds (a robot 10 m from its goal) are clipped to them.
 Reward per step: progress toward the goal (mm: distance before the step minus distance after)
 minus `firing_cost_mm` per actuator fired. Terminated when the centroid is within
 `goal_tolerance_mm` of the goal; truncated after `max_episode_steps` steps, or when the
-instance's solver failed (its robot is frozen; `info["status"]` says why).
+instance's solver failed (its robot is frozen; `info["status"]` says why). Made through
+`gymnasium.make`, the single env gets its step budget as gymnasium's TimeLimit wrapper
+(`DEFAULT_MAX_EPISODE_STEPS` unless `gymnasium.make(..., max_episode_steps=N)`), and
+`gymnasium.make_vec` hands the same budget to the vector env; built directly, either env has
+no budget unless given `max_episode_steps`.
 
 The vector env autoresets in gymnasium's NEXT_STEP mode: the step after an episode ends
 resets that robot, ignores its action and returns its first observation with reward 0 (and
@@ -63,6 +67,8 @@ ANGULAR_VELOCITY_BOUND_DEG_S = 1e4
 """Bound of the angular velocity entry, deg/s."""
 MAX_GOAL_MM = 1e3
 """Largest goal distance a task may ask for, mm."""
+DEFAULT_MAX_EPISODE_STEPS = 40
+"""The registered step budget (control periods) of StarSwimmer-v0."""
 
 
 @dataclass(frozen=True)
@@ -72,14 +78,14 @@ class SwimmerTask:
     goal_distance_mm: distance of a randomly drawn goal from the start, mm, (0, 1000];
     goal_tolerance_mm: the episode terminates within this distance of the goal, mm, > 0;
     firing_cost_mm: reward subtracted per fired actuator, mm of progress, >= 0;
-    max_episode_steps: control periods before truncation, >= 1;
+    max_episode_steps: control periods before truncation, >= 1, or None (no budget);
     since_fired_cap_s: the largest time-since-fired observed (and that of a never-fired
     actuator), s, > 0."""
 
     goal_distance_mm: float = 50.0
     goal_tolerance_mm: float = 5.0
     firing_cost_mm: float = 0.1
-    max_episode_steps: int = 40
+    max_episode_steps: Optional[int] = None
     since_fired_cap_s: float = 10.0
 
     def __post_init__(self):
@@ -97,9 +103,11 @@ class SwimmerTask:
                                  f"got {value!r}")
             object.__setattr__(self, name, float(value))
         steps = self.max_episode_steps
-        if isinstance(steps, bool) or not isinstance(steps, numbers.Integral) or steps < 1:
-            raise ValueError(f"max_episode_steps must be an integer >= 1, got {steps!r}")
-        object.__setattr__(self, "max_episode_steps", int(steps))
+        if steps is not None:
+            if isinstance(steps, bool) or not isinstance(steps, numbers.Integral) or steps < 1:
+                raise ValueError(f"max_episode_steps must be an integer >= 1 or None, got "
+                                 f"{steps!r}")
+            object.__setattr__(self, "max_episode_steps", int(steps))
 
 
 def observation_space(task: SwimmerTask) -> spaces.Box:
@@ -212,8 +220,9 @@ class GoalReachingBatch:
         self.episode_steps += 1
         rewards = before - self.distances - self.task.firing_cost_mm * fire.sum(axis=1)
         terminated = self.distances <= self.task.goal_tolerance_mm
-        truncated = ~terminated & ((self.episode_steps >= self.task.max_episode_steps)
-                                   | ~self.simulator.ok)
+        out_of_steps = (self.episode_steps >= self.task.max_episode_steps
+                        if self.task.max_episode_steps is not None else False)
+        truncated = ~terminated & (out_of_steps | ~self.simulator.ok)
         return rewards, terminated, truncated
 
     def observe(self, space: spaces.Box):
@@ -243,7 +252,7 @@ class StarSwimmerEnv(gym.Env):
     reward and episode ends). Keyword arguments: params (a StarParams; default the paper
     preset), solver (SolverConfig; default the paper preset), control_period_s, arch, and the
     SwimmerTask fields (goal_distance_mm=50, goal_tolerance_mm=5, firing_cost_mm=0.1,
-    max_episode_steps=40, since_fired_cap_s=10)."""
+    max_episode_steps=None, since_fired_cap_s=10)."""
 
     metadata = {"render_modes": []}
 
