@@ -160,6 +160,8 @@ class GoalReachingBatch:
         params = StarParams.preset("paper") if params is None else params
         if isinstance(params, StarParams):
             params = [params] * n_robots
+        if not all(isinstance(p, StarParams) for p in params):
+            raise ValueError(f"params must be a StarParams or a sequence of {n_robots}")
         params = [p.replace(gait="none") for p in params]
         if len(params) != n_robots:
             raise ValueError(f"params must be one StarParams or {n_robots}, got {len(params)}")
