@@ -28,6 +28,14 @@ def centroid(positions: np.ndarray, mass: np.ndarray) -> np.ndarray:
     return (positions * mass[..., None]).sum(-2) / mass.sum(-1)[..., None]
 
 
+def rotate(vectors: np.ndarray, angle_rad) -> np.ndarray:
+    """(..., 2) vectors turned counter-clockwise by angle_rad (rad; a scalar or an array that
+    broadcasts against the vectors' leading axes)."""
+    cos, sin = np.cos(angle_rad), np.sin(angle_rad)
+    return np.stack([cos * vectors[..., 0] - sin * vectors[..., 1],
+                     sin * vectors[..., 0] + cos * vectors[..., 1]], axis=-1)
+
+
 def body_rotation(positions: np.ndarray, rest_positions: np.ndarray, joints: np.ndarray,
                   hub: int = 0) -> np.ndarray:
     """Heading: rotation (rad, counter-clockwise, in (−π, π]) of the body from its rest

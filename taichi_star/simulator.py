@@ -249,6 +249,11 @@ class Simulator:
         arm_velocity = velocities[:, joints] - velocities[:, CENTRE:CENTRE + 1]
         spin = (arm[..., 0] * arm_velocity[..., 1] - arm[..., 1] * arm_velocity[..., 0]) \
             / (arm ** 2).sum(-1)
+        # summed joint by joint: NumPy's reduction along a contiguous axis may group the terms
+        # differently with the batch's size, and an instance must not depend on its neighbours
+        spin_sum = spin[:, 0]
+        for joint in range(1, spin.shape[1]):
+            spin_sum = spin_sum + spin[:, joint]
         times = self.time_s
         fired = state.fire_time.to_numpy()[:batch].astype(np.float64)
         since = np.where(fired == NEVER, np.nan, times[:, None] - fired)
@@ -260,7 +265,7 @@ class Simulator:
                                                             joints, CENTRE)),
             "velocity_x_mm_s": velocity[:, 0] * metrics.METERS_TO_MM,
             "velocity_y_mm_s": velocity[:, 1] * metrics.METERS_TO_MM,
-            "angular_velocity_deg_s": np.degrees(spin.mean(axis=1)),
+            "angular_velocity_deg_s": np.degrees(spin_sum / spin.shape[1]),
         })
         for m, column in enumerate(ACTUATOR_COLUMNS):
             frame[column] = since[:, m]

@@ -1,0 +1,26 @@
+"""Gymnasium environments of the star robot. Importing this module registers them:
+
+- ``gymnasium.make("StarSwimmer-v0", **kwargs)``: one robot swimming to a goal point
+  (`StarSwimmerEnv`);
+- ``gymnasium.make_vec("StarSwimmer-v0", num_envs=64, **kwargs)``: 64 robots in one engine
+  (`StarSwimmerVectorEnv`, the registered vector entry point).
+
+Both stop an episode after DEFAULT_MAX_EPISODE_STEPS (40) control periods unless given
+`max_episode_steps=N`. The keyword arguments, spaces and reward are described in
+`taichi_star.envs.swimmer`.
+"""
+
+import gymnasium
+
+from .swimmer import (DEFAULT_MAX_EPISODE_STEPS, OBSERVATION_NAMES, GoalReachingBatch,
+                      StarSwimmerEnv, StarSwimmerVectorEnv, SwimmerTask)
+
+ENV_ID = "StarSwimmer-v0"
+
+if ENV_ID not in gymnasium.registry:
+    gymnasium.register(id=ENV_ID, entry_point="taichi_star.envs.swimmer:StarSwimmerEnv",
+                       vector_entry_point="taichi_star.envs.swimmer:StarSwimmerVectorEnv",
+                       max_episode_steps=DEFAULT_MAX_EPISODE_STEPS)
+
+__all__ = ["DEFAULT_MAX_EPISODE_STEPS", "ENV_ID", "OBSERVATION_NAMES", "GoalReachingBatch", "StarSwimmerEnv",
+           "StarSwimmerVectorEnv", "SwimmerTask"]

@@ -1,0 +1,358 @@
+"""Reach-a-goal environments for the star robot: `StarSwimmerEnv` (one robot, `gymnasium.Env`)
+and `StarSwimmerVectorEnv` (num_envs robots advanced together in ONE `Simulator`, a
+`gymnasium.vector.VectorEnv`). Both are built on `GoalReachingBatch`, so a robot behaves the
+same (to the last bit) alone or as one instance of the vector env.
+
+Task. A robot starts at rest at the origin with heading 0; a goal point is drawn at
+`goal_distance_mm` in a uniformly random direction from the environment's seeded generator
+(or given by `reset(options={"goal": (x_mm, y_mm)})`).
+
+Action: `MultiBinary(8)`, column m = actuator A(m+1): the actuators fired at the start of the
+control period (`control_period_s`, default one actuation period of the StarParams). Then the
+robot swims for the whole period without further commands.
+
+Observation (`Box` float32, `OBSERVATION_NAMES`): the goal relative to the robot's centroid in
+the body frame (mm; the body frame is the world frame turned by the heading, x along the rest
+direction of A1's bisector); sin and cos of the heading; the centroid's velocity in the body
+frame (mm/s) and the angular velocity (deg/s); the time since each actuator last fired (s),
+capped at `since_fired_cap_s`, which is also what a never-fired actuator reads. Values beyond
+the space's bounds (a robot 10 m from its goal) are clipped to them.
+
+Reward per step: progress toward the goal (mm: distance before the step minus distance after)
+minus `firing_cost_mm` per actuator fired. Terminated when the centroid is within
+`goal_tolerance_mm` of the goal; truncated after `max_episode_steps` steps, or when the
+instance's solver failed (its robot is frozen; `info["status"]` says why). Made through
+`gymnasium.make`, the single env gets its step budget as gymnasium's TimeLimit wrapper
+(`DEFAULT_MAX_EPISODE_STEPS` unless `gymnasium.make(..., max_episode_steps=N)`), and
+`gymnasium.make_vec` hands the same budget to the vector env; built directly, either env has
+no budget unless given `max_episode_steps`.
+
+The vector env autoresets in gymnasium's NEXT_STEP mode: the step after an episode ends
+resets that robot, ignores its action and returns its first observation with reward 0 (and
+terminated = truncated = False). `reset(seed=s)` seeds robot b with s + b, as
+`gymnasium.vector.SyncVectorEnv` does, so robot b of the vector env reproduces
+`StarSwimmerEnv` reset with seed s + b.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import dataclass
+from typing import Optional, Sequence
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from ..gait import N_ACTUATORS
+from ..metrics import rotate
+from ..params import SolverConfig, StarParams
+from ..simulation import whole_steps
+from ..simulator import ACTUATOR_COLUMNS, Simulator
+
+OBSERVATION_NAMES = ("goal_x_body_mm", "goal_y_body_mm", "heading_sin", "heading_cos",
+                     "velocity_x_body_mm_s", "velocity_y_body_mm_s", "angular_velocity_deg_s",
+                     *ACTUATOR_COLUMNS)
+"""The observation's entries, in order."""
+
+GOAL_BOUND_MM = 1e4
+"""Bound of the body-frame goal entries, mm (10 m: ~100 robot diameters)."""
+VELOCITY_BOUND_MM_S = 1e3
+"""Bound of the velocity entries, mm/s (the robot swims at < 10 mm/s, its limbs at < 100)."""
+ANGULAR_VELOCITY_BOUND_DEG_S = 1e4
+"""Bound of the angular velocity entry, deg/s."""
+MAX_GOAL_MM = 1e3
+"""Largest goal distance a task may ask for, mm."""
+DEFAULT_MAX_EPISODE_STEPS = 40
+"""The registered step budget (control periods) of StarSwimmer-v0."""
+
+
+@dataclass(frozen=True)
+class SwimmerTask:
+    """The goal-reaching task's settings (validated; ValueError names the field).
+
+    goal_distance_mm: distance of a randomly drawn goal from the start, mm, (0, 1000];
+    goal_tolerance_mm: the episode terminates within this distance of the goal, mm, > 0;
+    firing_cost_mm: reward subtracted per fired actuator, mm of progress, >= 0;
+    max_episode_steps: control periods before truncation, >= 1, or None (no budget);
+    since_fired_cap_s: the largest time-since-fired observed (and that of a never-fired
+    actuator), s, > 0."""
+
+    goal_distance_mm: float = 50.0
+    goal_tolerance_mm: float = 5.0
+    firing_cost_mm: float = 0.1
+    max_episode_steps: Optional[int] = None
+    since_fired_cap_s: float = 10.0
+
+    def __post_init__(self):
+        for name, lowest, highest, lowest_allowed in (
+                ("goal_distance_mm", 0.0, MAX_GOAL_MM, False),
+                ("goal_tolerance_mm", 0.0, MAX_GOAL_MM, False),
+                ("firing_cost_mm", 0.0, MAX_GOAL_MM, True),
+                ("since_fired_cap_s", 0.0, 1e6, False)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, numbers.Real) \
+                    or not math.isfinite(value) or value > highest or value < lowest \
+                    or (value == lowest and not lowest_allowed):
+                bracket = "[" if lowest_allowed else "("
+                raise ValueError(f"{name} must be a number in {bracket}{lowest:g}, {highest:g}], "
+                                 f"got {value!r}")
+            object.__setattr__(self, name, float(value))
+        steps = self.max_episode_steps
+        if steps is not None:
+            if isinstance(steps, bool) or not isinstance(steps, numbers.Integral) or steps < 1:
+                raise ValueError(f"max_episode_steps must be an integer >= 1 or None, got "
+                                 f"{steps!r}")
+            object.__setattr__(self, "max_episode_steps", int(steps))
+
+
+def observation_space(task: SwimmerTask) -> spaces.Box:
+    """The Box of one robot's observation (`OBSERVATION_NAMES`), float32."""
+    high = np.array([GOAL_BOUND_MM, GOAL_BOUND_MM, 1.0, 1.0, VELOCITY_BOUND_MM_S,
+                     VELOCITY_BOUND_MM_S, ANGULAR_VELOCITY_BOUND_DEG_S,
+                     *[task.since_fired_cap_s] * N_ACTUATORS], dtype=np.float32)
+    low = -high
+    low[-N_ACTUATORS:] = 0.0
+    return spaces.Box(low=low, high=high, dtype=np.float32)
+
+
+def goal_from_options(options, count: int) -> Optional[np.ndarray]:
+    """(count, 2) goals (mm) from `options["goal"]` ((2,) for every robot or (count, 2)), or
+    None without one. ValueError naming "goal" for a bad shape, a non-finite value or a goal
+    further than MAX_GOAL_MM."""
+    if options is None or "goal" not in options:
+        return None
+    try:
+        goal = np.asarray(options["goal"], dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"options['goal'] must be (x_mm, y_mm) numbers, got "
+                         f"{options['goal']!r}") from None
+    if goal.shape == (2,):
+        goal = np.tile(goal, (count, 1))
+    if goal.shape != (count, 2):
+        raise ValueError(f"options['goal'] must have shape (2,) or ({count}, 2), got "
+                         f"{goal.shape}")
+    if not np.isfinite(goal).all():
+        raise ValueError(f"options['goal'] must be finite, got {options['goal']!r}")
+    if (np.hypot(goal[:, 0], goal[:, 1]) > MAX_GOAL_MM).any():
+        raise ValueError(f"options['goal'] must be within {MAX_GOAL_MM:g} mm of the start, got "
+                         f"{options['goal']!r}")
+    return goal
+
+
+class GoalReachingBatch:
+    """The task on B robots of one Simulator: goals, observations, rewards, episode ends.
+
+    params: one StarParams (every robot) or B of them sharing a topology (their gait is
+    ignored); solver: SolverConfig; control_period_s: s, a whole number of solver steps
+    (default the first robot's actuation period); task: SwimmerTask."""
+
+    def __init__(self, n_robots: int, params=None, solver: Optional[SolverConfig] = None,
+                 control_period_s: Optional[float] = None, task: SwimmerTask = SwimmerTask(),
+                 arch: str = "cpu"):
+        if isinstance(n_robots, bool) or not isinstance(n_robots, numbers.Integral) \
+                or n_robots < 1:
+            raise ValueError(f"num_envs must be an integer >= 1, got {n_robots!r}")
+        params = StarParams.preset("paper") if params is None else params
+        if isinstance(params, StarParams):
+            params = [params] * n_robots
+        if not all(isinstance(p, StarParams) for p in params):
+            raise ValueError(f"params must be a StarParams or a sequence of {n_robots}")
+        params = [p.replace(gait="none") for p in params]
+        if len(params) != n_robots:
+            raise ValueError(f"params must be one StarParams or {n_robots}, got {len(params)}")
+        solver = SolverConfig.preset("paper") if solver is None else solver
+        if not isinstance(task, SwimmerTask):
+            raise ValueError(f"task must be a SwimmerTask, got {type(task).__name__}")
+        period = params[0].period if control_period_s is None else control_period_s
+        if isinstance(period, bool) or not isinstance(period, numbers.Real) \
+                or not math.isfinite(period) or period <= 0 \
+                or whole_steps(period, solver.dt) is None:
+            raise ValueError(f"control_period_s must be a positive whole number of steps "
+                             f"(dt = {solver.dt} s), got {control_period_s!r}")
+        self.task = task
+        self.control_period_s = float(period)
+        self.simulator = Simulator(params, solver, arch=arch)
+        self.n_robots = n_robots
+        self.goals = np.zeros((n_robots, 2))
+        self.distances = np.zeros(n_robots)
+        self.episode_steps = np.zeros(n_robots, dtype=np.int64)
+
+    def reset(self, rows: np.ndarray, generators: Sequence[np.random.Generator],
+              goals: Optional[np.ndarray] = None):
+        """Put robots `rows` back at the start with new goals: `goals` (len(rows), 2) mm, or
+        one drawn per robot from its generator (uniform direction, the task's distance)."""
+        rows = np.asarray(rows, dtype=np.int64)
+        if goals is None:
+            angles = np.array([generator.uniform(-math.pi, math.pi) for generator in generators])
+            goals = self.task.goal_distance_mm * np.stack([np.cos(angles), np.sin(angles)], 1)
+        self.simulator.reset(rows)
+        self.goals[rows] = goals
+        self.distances[rows] = np.hypot(goals[:, 0], goals[:, 1])
+        self.episode_steps[rows] = 0
+
+    @staticmethod
+    def firing_mask(actions, shape) -> np.ndarray:
+        """Bool mask of `actions`: exactly `shape`, boolean or 0/1 integers; ValueError naming
+        the action otherwise."""
+        array = np.asarray(actions)
+        if array.shape != shape:
+            raise ValueError(f"action must have shape {shape} (one 0/1 per actuator A1..A8), "
+                             f"got {array.shape}")
+        if array.dtype == bool:
+            return array.copy()
+        if array.dtype.kind in "iu" and np.isin(array, (0, 1)).all():
+            return array.astype(bool)
+        raise ValueError(f"action must be boolean or 0/1 integers, got dtype {array.dtype} "
+                         f"with values {np.unique(array)[:4]}")
+
+    def step(self, fire: np.ndarray):
+        """Fire `fire` ((B, 8) bool) now and advance one control period. Returns rewards (B,)
+        float64, terminated (B,), truncated (B,)."""
+        self.simulator.fire(fire)
+        self.simulator.advance(self.control_period_s)
+        before = self.distances.copy()
+        state = self.simulator.state()
+        position = state[["centroid_x_mm", "centroid_y_mm"]].to_numpy()
+        self.distances = np.hypot(*(self.goals - position).T)
+        self.episode_steps += 1
+        rewards = before - self.distances - self.task.firing_cost_mm * fire.sum(axis=1)
+        terminated = self.distances <= self.task.goal_tolerance_mm
+        out_of_steps = (self.episode_steps >= self.task.max_episode_steps
+                        if self.task.max_episode_steps is not None else False)
+        truncated = ~terminated & (out_of_steps | ~self.simulator.ok)
+        return rewards, terminated, truncated
+
+    def observe(self, space: spaces.Box):
+        """(B, 15) float32 observations (clipped to `space`) and the info dict of arrays:
+        position_mm (B, 2), goal_mm (B, 2), heading_deg, distance_mm, time_s, status."""
+        state = self.simulator.state()
+        heading = np.radians(state["heading_deg"].to_numpy())
+        position = state[["centroid_x_mm", "centroid_y_mm"]].to_numpy()
+        velocity = state[["velocity_x_mm_s", "velocity_y_mm_s"]].to_numpy()
+        since = state[list(ACTUATOR_COLUMNS)].to_numpy()
+        since = np.where(np.isnan(since), self.task.since_fired_cap_s, since)
+        columns = np.column_stack([
+            rotate(self.goals - position, -heading), np.sin(heading), np.cos(heading),
+            rotate(velocity, -heading), state["angular_velocity_deg_s"].to_numpy(), since])
+        # a failed (frozen) robot may hold non-finite values; the observation must stay in space
+        columns = np.nan_to_num(columns, nan=0.0)
+        observation = np.clip(columns, space.low, space.high).astype(np.float32)
+        info = {"position_mm": position, "goal_mm": self.goals.copy(),
+                "heading_deg": state["heading_deg"].to_numpy(),
+                "distance_mm": self.distances.copy(), "time_s": state["t_s"].to_numpy(),
+                "status": state["status"].to_numpy()}
+        return observation, info
+
+
+class StarSwimmerEnv(gym.Env):
+    """One star robot swimming to a goal point (see the module docstring for the spaces,
+    reward and episode ends). Keyword arguments: params (a StarParams; default the paper
+    preset), solver (SolverConfig; default the paper preset), control_period_s, arch, and the
+    SwimmerTask fields (goal_distance_mm=50, goal_tolerance_mm=5, firing_cost_mm=0.1,
+    max_episode_steps=None, since_fired_cap_s=10)."""
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, params: Optional[StarParams] = None,
+                 solver: Optional[SolverConfig] = None,
+                 control_period_s: Optional[float] = None, arch: str = "cpu", **task):
+        if params is not None and not isinstance(params, StarParams):
+            raise ValueError(f"params must be a StarParams, got {type(params).__name__}")
+        self.batch = GoalReachingBatch(1, params, solver, control_period_s, SwimmerTask(**task),
+                                       arch)
+        self.observation_space = observation_space(self.batch.task)
+        self.action_space = spaces.MultiBinary(N_ACTUATORS)
+
+    def _observe(self):
+        observation, info = self.batch.observe(self.observation_space)
+        return observation[0], {key: value[0] for key, value in info.items()}
+
+    def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
+        super().reset(seed=seed)
+        self.batch.reset([0], [self.np_random], goal_from_options(options, 1))
+        return self._observe()
+
+    def step(self, action):
+        fire = self.batch.firing_mask(action, (N_ACTUATORS,))[None]
+        rewards, terminated, truncated = self.batch.step(fire)
+        observation, info = self._observe()
+        return observation, float(rewards[0]), bool(terminated[0]), bool(truncated[0]), info
+
+
+class StarSwimmerVectorEnv(VectorEnv):
+    """num_envs star robots in one Simulator, each with its own goal and episode (NEXT_STEP
+    autoreset; see the module docstring). Keyword arguments as `StarSwimmerEnv`, except that
+    params may also be a sequence of num_envs StarParams sharing a topology."""
+
+    metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(self, num_envs: int = 1, params=None, solver: Optional[SolverConfig] = None,
+                 control_period_s: Optional[float] = None, arch: str = "cpu", **task):
+        self.batch = GoalReachingBatch(num_envs, params, solver, control_period_s,
+                                       SwimmerTask(**task), arch)
+        self.num_envs = num_envs
+        self.single_observation_space = observation_space(self.batch.task)
+        self.single_action_space = spaces.MultiBinary(N_ACTUATORS)
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        self._generators = [seeding.np_random(None)[0] for _ in range(num_envs)]
+        self._autoreset = np.zeros(num_envs, dtype=bool)
+
+    def reset(self, *, seed=None, options: Optional[dict] = None):
+        """Reset every robot, or those of `options["reset_mask"]` ((num_envs,) bool). seed:
+        None, an int s (robot b gets s + b) or a list of num_envs ints/None. options["goal"]:
+        (2,) for every reset robot or (num_envs, 2) mm."""
+        # the vector env's own generator takes an int seed only; the robots' are set below
+        super().reset(seed=seed if isinstance(seed, numbers.Integral) else None)
+        options = dict(options or {})
+        mask = np.ones(self.num_envs, dtype=bool)
+        if "reset_mask" in options:
+            mask = np.asarray(options.pop("reset_mask"))
+            if mask.shape != (self.num_envs,) or mask.dtype != bool:
+                raise ValueError(f"options['reset_mask'] must be a ({self.num_envs},) bool "
+                                 f"array, got {mask.dtype} {mask.shape}")
+        if seed is None:
+            seeds = [None] * self.num_envs
+        elif isinstance(seed, numbers.Integral) and not isinstance(seed, bool):
+            seeds = [int(seed) + b for b in range(self.num_envs)]
+        elif isinstance(seed, (list, tuple)) and len(seed) == self.num_envs:
+            seeds = list(seed)
+        else:
+            raise ValueError(f"seed must be None, an int or a list of {self.num_envs} seeds, "
+                             f"got {seed!r}")
+        goals = goal_from_options(options, self.num_envs)
+        rows = np.flatnonzero(mask)
+        for b in rows:
+            if seeds[b] is not None:  # as Env.reset: no seed keeps the robot's generator going
+                self._generators[b] = seeding.np_random(seeds[b])[0]
+        self.batch.reset(rows, [self._generators[b] for b in rows],
+                         None if goals is None else goals[rows])
+        self._autoreset[rows] = False
+        return self._observe()
+
+    def _observe(self):
+        observation, info = self.batch.observe(self.single_observation_space)
+        # gymnasium's vector info convention: every key has a "_key" mask of the robots it holds
+        info.update({f"_{key}": np.ones(self.num_envs, dtype=bool) for key in list(info)})
+        return observation, info
+
+    def step(self, actions):
+        fire = self.batch.firing_mask(actions, (self.num_envs, N_ACTUATORS))
+        restarting = np.flatnonzero(self._autoreset)
+        fire[restarting] = False
+        rewards, terminated, truncated = self.batch.step(fire)
+        if len(restarting):
+            # these robots swam this period from their finished episode's end; putting them
+            # back at the start afterwards gives exactly the first observation of a new episode
+            self.batch.reset(restarting, [self._generators[b] for b in restarting])
+            rewards[restarting] = 0.0
+            terminated[restarting] = False
+            truncated[restarting] = False
+        self._autoreset = terminated | truncated
+        observation, info = self._observe()
+        return observation, rewards, terminated, truncated, info

@@ -1,0 +1,244 @@
+"""Drive robots to goal points by choosing a gait every actuation cycle from a primitive table.
+
+The model: a cycle of gait g moves the centroid by its mean body-frame step s_g (turned into
+the world by the heading θ at the cycle's start) and turns the body by its mean turn ω_g:
+p' = p + R(θ)·s_g, θ' = θ + ω_g (`PrimitiveModel.predict`). The choice
+(`PrimitiveModel.choose`) is a two-cycle lookahead: fire nothing once within the tolerance; else the gait that lands
+within it now, if one does (the closest such); else the first gait of the pair of cycles
+predicted to end closest to the goal.
+
+Two controllers run in one Simulator (`drive`): open loop plans every cycle from the model at
+the start and fires that plan blindly; closed loop re-plans each cycle from the simulated
+position and heading and stops firing once within the tolerance.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from typing import Optional, Sequence
+
+import numpy as np
+import pandas as pd
+
+from .gait import NO_GAIT, Gait
+from .metrics import rotate
+from .params import SolverConfig, StarParams
+from .simulation import whole_steps
+from .simulator import Simulator
+
+MODES = ("open", "closed")
+
+PLAN_COLUMNS = ["goal", "goal_x_mm", "goal_y_mm", "goal_distance_mm", "mode", "reached",
+                "cycles_to_goal", "cycles_fired", "final_error_mm", "end_error_mm", "run_cycles",
+                "status"]
+"""Columns of `drive`'s summary: reached (within the tolerance at a cycle boundary while its
+controller ran, the boundary where it stopped included); cycles_to_goal (the first such
+boundary, in cycles; NaN if never); cycles_fired (cycles with a firing); final_error_mm
+(distance to the goal when the controller stopped: closed loop at the first boundary within
+the tolerance, open loop at the end of its plan, either at the end of the cycle budget
+otherwise); end_error_mm (distance to the goal when the whole batch stopped, after
+run_cycles cycles: a robot that stopped earlier has glided on meanwhile, as it does for
+several cycles after its last firing); status of the instance."""
+
+CYCLE_COLUMNS = ["goal", "mode", "cycle", "gait", "x_mm", "y_mm", "heading_deg",
+                 "distance_mm", "predicted_x_mm", "predicted_y_mm"]
+"""Columns of `drive`'s per-cycle table: the state at the start of cycle `cycle` (so cycle
+c's row holds the result of the c cycles before), the gait fired in it ("none" after the
+controller stopped) and the position the model predicted for this boundary (open loop: from
+the start; closed loop: from the previous boundary)."""
+
+
+class PrimitiveModel:
+    """The gaits a planner may fire, with their mean per-cycle body-frame step (mm) and turn
+    (deg), plus "none" (no step, no turn).
+
+    gaits: G names; steps_mm: (G, 2); turns_deg: (G,)."""
+
+    def __init__(self, gaits: Sequence[str], steps_mm, turns_deg):
+        steps = np.asarray(steps_mm, dtype=np.float64)
+        turns = np.asarray(turns_deg, dtype=np.float64)
+        names = [Gait.parse(g).name for g in gaits]
+        if steps.shape != (len(names), 2) or turns.shape != (len(names),):
+            raise ValueError(f"steps_mm must be ({len(names)}, 2) and turns_deg "
+                             f"({len(names)},), got {steps.shape} and {turns.shape}")
+        if not (np.isfinite(steps).all() and np.isfinite(turns).all()):
+            raise ValueError("steps_mm and turns_deg must be finite")
+        keep = [i for i, name in enumerate(names) if name != NO_GAIT]
+        self.gaits = [NO_GAIT] + [names[i] for i in keep]
+        self.steps_mm = np.vstack([np.zeros((1, 2)), steps[keep]])
+        self.turns_rad = np.radians(np.concatenate([[0.0], turns[keep]]))
+        self.masks = np.stack([Gait.parse(g).mask.astype(bool) for g in self.gaits])
+
+    @classmethod
+    def from_table(cls, table: pd.DataFrame) -> "PrimitiveModel":
+        """From a primitive table (`taichi_star.primitives`): its ok gaits' step_x_mm,
+        step_y_mm and turn_deg."""
+        usable = table[(table["status"] == "ok") & np.isfinite(table["step_x_mm"])
+                       & np.isfinite(table["turn_deg"])]
+        return cls(list(usable["gait"]), usable[["step_x_mm", "step_y_mm"]].to_numpy(),
+                   usable["turn_deg"].to_numpy())
+
+    def predict(self, position_mm: np.ndarray, heading_rad: np.ndarray, choice: np.ndarray):
+        """The model's (position (B, 2) mm, heading (B,) rad) after one cycle of gait index
+        `choice` (B,) from position (B, 2) and heading (B,)."""
+        return (position_mm + rotate(self.steps_mm[choice], heading_rad),
+                heading_rad + self.turns_rad[choice])
+
+    def choose(self, position_mm: np.ndarray, heading_rad: np.ndarray, goal_mm: np.ndarray,
+               tolerance_mm: float) -> np.ndarray:
+        """(B,) gait indices (0 = "none") for robots at position (B, 2) mm with heading (B,)
+        rad and goals (B, 2) mm (see the module docstring)."""
+        choice = np.zeros(len(position_mm), dtype=np.int64)
+        for b in range(len(position_mm)):
+            to_goal = goal_mm[b] - position_mm[b]
+            if math.hypot(*to_goal) <= tolerance_mm:
+                continue
+            # one cycle: (G, 2) world steps; two cycles: (G, G, 2)
+            first = rotate(self.steps_mm, heading_rad[b])
+            after_first = np.hypot(*(to_goal - first).T)
+            if after_first.min() <= tolerance_mm:
+                choice[b] = int(np.argmin(after_first))
+                continue
+            second = rotate(self.steps_mm[None, :, :],
+                             (heading_rad[b] + self.turns_rad)[:, None])
+            after_second = np.hypot(*np.moveaxis(to_goal - first[:, None, :] - second, -1, 0))
+            choice[b] = int(np.unravel_index(np.argmin(after_second), after_second.shape)[0])
+        return choice
+
+    def plan(self, goal_mm: np.ndarray, tolerance_mm: float, max_cycles: int) -> np.ndarray:
+        """Open-loop plans from the start (origin, heading 0): (B, max_cycles) gait indices,
+        0 once the model says the goal is reached."""
+        count = len(goal_mm)
+        position, heading = np.zeros((count, 2)), np.zeros(count)
+        plans = np.zeros((count, max_cycles), dtype=np.int64)
+        for cycle in range(max_cycles):
+            plans[:, cycle] = self.choose(position, heading, goal_mm, tolerance_mm)
+            position, heading = self.predict(position, heading, plans[:, cycle])
+        return plans
+
+
+def default_goals(distance_mm: float = 50.0, count: int = 8,
+                  far_mm: Optional[float] = 150.0) -> np.ndarray:
+    """(count [+1], 2) goals, mm: `count` at distance_mm in directions 0, 360/count, ... deg,
+    then one far_mm straight behind the robot (-x), unless far_mm is None."""
+    angles = np.radians(np.arange(count) * 360.0 / count)
+    goals = distance_mm * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    return goals if far_mm is None else np.vstack([goals, [[-far_mm, 0.0]]])
+
+
+def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
+          solver: SolverConfig = SolverConfig(), tolerance_mm: float = 5.0,
+          max_cycles: int = 25, frames_per_cycle: int = 10, arch: str = "cpu",
+          progress: bool = False):
+    """Drive one robot per (goal, mode) in one Simulator, a gait per actuation cycle of
+    `params.period`, until every controller has stopped or max_cycles have run.
+
+    goals_mm: (G, 2) goal points relative to the start (the robot starts at rest, heading 0).
+    Returns (summary, cycles, path): `PLAN_COLUMNS`, `CYCLE_COLUMNS` and the centroid path
+    (goal, mode, t_s, controlled (False once the controller has stopped), x_mm, y_mm)
+    recorded frames_per_cycle times per cycle. ValueError for
+    bad arguments."""
+    goals = np.asarray(goals_mm, dtype=np.float64)
+    if goals.ndim != 2 or goals.shape[1] != 2 or not len(goals) or not np.isfinite(goals).all():
+        raise ValueError(f"goals_mm must be a finite (G, 2) array, got {goals_mm!r}")
+    if isinstance(max_cycles, bool) or not isinstance(max_cycles, int) or max_cycles < 1:
+        raise ValueError(f"max_cycles must be an integer >= 1, got {max_cycles!r}")
+    if isinstance(tolerance_mm, bool) or not isinstance(tolerance_mm, numbers.Real) \
+            or not math.isfinite(tolerance_mm) or tolerance_mm <= 0:
+        raise ValueError(f"tolerance_mm must be a number > 0, got {tolerance_mm!r}")
+    period = params.period
+    if whole_steps(period, solver.dt) is None or \
+            whole_steps(period / frames_per_cycle, solver.dt) is None:
+        raise ValueError(f"period / frames_per_cycle must be a whole number of steps (dt = "
+                         f"{solver.dt} s), got period {period!r} and {frames_per_cycle!r} frames")
+    goal_index = np.repeat(np.arange(len(goals)), len(MODES))
+    modes = np.tile(MODES, len(goals))
+    closed = modes == "closed"
+    target = goals[goal_index]
+    plans = model.plan(target, tolerance_mm, max_cycles)
+    open_predicted = np.zeros((len(target), 2))
+    open_heading = np.zeros(len(target))
+
+    simulator = Simulator([params.replace(gait=NO_GAIT)] * len(target), solver, arch=arch)
+    stopped = np.zeros(len(target), dtype=bool)
+    stop_cycle = np.full(len(target), max_cycles)
+    final_error = np.full(len(target), np.nan)
+    reached_at = np.full(len(target), np.nan)
+    fired = np.zeros(len(target), dtype=np.int64)
+    predicted = np.zeros((len(target), 2))
+    cycle_rows, paths = [], []
+    for cycle in range(max_cycles + 1):
+        state = simulator.state()
+        position = state[["centroid_x_mm", "centroid_y_mm"]].to_numpy()
+        heading = np.radians(state["heading_deg"].to_numpy())
+        distance = np.hypot(*(target - position).T)
+        # only while its controller runs: a robot that has stopped may still coast in
+        newly = ~stopped & np.isnan(reached_at) & (distance <= tolerance_mm)
+        reached_at[newly] = cycle
+        if cycle == max_cycles:
+            choice = np.zeros(len(target), dtype=np.int64)
+        else:
+            choice = np.where(closed, model.choose(position, heading, target, tolerance_mm),
+                              plans[:, cycle])
+        # a controller stops when it chooses nothing (closed loop: within the tolerance; open
+        # loop: its plan is done) or the budget is spent; its error is taken then
+        stopping = ~stopped & ((choice == 0) | (cycle == max_cycles) | ~simulator.ok)
+        final_error[stopping] = distance[stopping]
+        stop_cycle[stopping] = cycle
+        stopped |= stopping
+        choice[stopped] = 0
+        cycle_rows.append(pd.DataFrame({
+            "goal": goal_index, "mode": modes, "cycle": cycle,
+            "gait": np.asarray(model.gaits)[choice], "x_mm": position[:, 0],
+            "y_mm": position[:, 1], "heading_deg": np.degrees(heading),
+            "distance_mm": distance, "predicted_x_mm": predicted[:, 0],
+            "predicted_y_mm": predicted[:, 1]}))
+        if stopped.all():
+            break
+        fired += choice != 0
+        closed_next, _ = model.predict(position, heading, choice)
+        open_predicted, open_heading = model.predict(open_predicted, open_heading, choice)
+        predicted = np.where(closed[:, None], closed_next, open_predicted)
+        simulator.fire(model.masks[choice])
+        frames = simulator.advance(period, record_interval_s=period / frames_per_cycle,
+                                   progress=progress)
+        paths.append(frames[["instance", "t_s", "centroid_x_mm", "centroid_y_mm"]])
+
+    summary = pd.DataFrame({
+        "goal": goal_index, "goal_x_mm": target[:, 0], "goal_y_mm": target[:, 1],
+        "goal_distance_mm": np.hypot(*target.T), "mode": modes,
+        "reached": ~np.isnan(reached_at), "cycles_to_goal": reached_at,
+        "cycles_fired": fired, "final_error_mm": final_error, "end_error_mm": distance,
+        "run_cycles": cycle,
+        "status": state["status"].to_numpy()})[PLAN_COLUMNS]
+    start = pd.DataFrame({"instance": np.arange(len(target)), "t_s": 0.0, "centroid_x_mm": 0.0,
+                          "centroid_y_mm": 0.0})
+    path = pd.concat([start, *paths], ignore_index=True)
+    instance = path["instance"].to_numpy(dtype=int)
+    times = path["t_s"].to_numpy(dtype=float)
+    path = pd.DataFrame({"goal": goal_index[instance], "mode": modes[instance], "t_s": times,
+                         "controlled": times <= stop_cycle[instance] * period + solver.dt / 2,
+                         "x_mm": path["centroid_x_mm"].to_numpy(dtype=float),
+                         "y_mm": path["centroid_y_mm"].to_numpy(dtype=float)})
+    path = path.sort_values(["goal", "mode", "t_s"], kind="stable").reset_index(drop=True)
+    return summary, pd.concat(cycle_rows, ignore_index=True)[CYCLE_COLUMNS], path
+
+
+def closed_loop_gain(summary: pd.DataFrame) -> dict:
+    """Open against closed loop over a `drive` summary: goals reached, mean and largest final
+    error (mm), mean error at the end of the run (mm), mean cycles to the goal over the goals
+    both reached."""
+    result = {}
+    for mode in MODES:
+        part = summary[summary["mode"] == mode]
+        result[f"{mode}_reached"] = int(part["reached"].sum())
+        result[f"{mode}_mean_error_mm"] = float(part["final_error_mm"].mean())
+        result[f"{mode}_max_error_mm"] = float(part["final_error_mm"].max())
+        result[f"{mode}_mean_end_error_mm"] = float(part["end_error_mm"].mean())
+    both = summary.groupby("goal")["reached"].transform("all")
+    cycles = summary[both].groupby("mode")["cycles_to_goal"].mean()
+    for mode in MODES:
+        result[f"{mode}_mean_cycles_both_reached"] = float(cycles.get(mode, math.nan))
+    result["goals"] = int(summary["goal"].nunique())
+    return result

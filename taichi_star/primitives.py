@@ -1,0 +1,178 @@
+"""Motion primitives: what one actuation cycle of each gait does to the robot, in its own frame.
+
+A primitive is the steady per-cycle displacement of the centroid in the body frame (the world
+frame turned by the heading at the cycle's start; x along the rest direction of A1's
+bisector) and the rotation of the body per cycle, with their spread over cycles. Because the
+octagon's 16 symmetries map gaits onto gaits (255 gaits in 29 classes), only one gait per
+class is simulated; an image gait's per-cycle displacement is the representative's turned by
+the symmetry's rotation (after mirroring across the x axis for a reflection, which also
+reverses the body's rotation).
+
+    table, cycles = measure_primitives(StarParams.preset("paper"), cycles=5, first_cycle=1)
+    table.loc[table.gait == "A1+A2+A8", ["step_x_mm", "step_y_mm", "turn_deg"]]
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Dict, Sequence, Tuple
+
+import numpy as np
+import pandas as pd
+
+from .gait import N_ACTUATORS, Gait, symmetry_classes
+from .metrics import rotate
+from .params import SolverConfig, StarParams
+from .simulation import simulate, whole_steps
+
+CYCLE_COLUMNS = ["gait", "class_representative", "symmetry_rotation", "reflected", "cycle",
+                 "dx_body_mm", "dy_body_mm", "rotation_deg", "status"]
+"""Columns of the per-cycle table: cycle k (0-based) runs from k·T to (k+1)·T; dx/dy_body_mm
+is the centroid's displacement over it in the body frame at k·T; rotation_deg the heading
+change over it (counter-clockwise)."""
+
+PRIMITIVE_COLUMNS = ["gait", "class_representative", "class_size", "symmetry_rotation",
+                     "reflected", "n_actuators", "step_x_mm", "step_y_mm", "step_x_std_mm",
+                     "step_y_std_mm", "step_mm", "direction_deg", "turn_deg", "turn_std_deg",
+                     "first_cycle", "cycles", "period_s", "dt_s", "status"]
+"""Columns of the primitive table (one row per gait): step_x/step_y_mm, the mean body-frame
+displacement per cycle over cycles first_cycle..cycles-1 (0-based; the default 1..4 is the
+paper's "cycles 2-5"), and its sample standard deviation (*_std_mm); step_mm its length and
+direction_deg its direction in the body frame (NaN below ZERO_STEP_MM); turn_deg the mean
+rotation per cycle and turn_std_deg its sample standard deviation."""
+
+ZERO_STEP_MM = 1e-6
+"""Below this mean step (mm per cycle; the symmetric gaits' round-off is ~1e-10) a gait does
+not move and has no direction."""
+
+
+def class_symmetries() -> Dict[str, Tuple[str, int, bool, int]]:
+    """For every one of the 255 gaits: (representative, rotation, reflect, class size) with
+    representative.transform(rotation, reflect) == gait (the first such symmetry in the order
+    rotation 0..7 without, then with, reflection)."""
+    mapping = {}
+    for representative, members in symmetry_classes():
+        gait = Gait.parse(representative)
+        for reflect in (False, True):
+            for rotation in range(N_ACTUATORS):
+                image = gait.transform(rotation, reflect).name
+                mapping.setdefault(image, (representative, rotation, reflect, len(members)))
+    return mapping
+
+
+def transform_vectors(vectors: np.ndarray, rotation: int, reflect: bool) -> np.ndarray:
+    """(..., 2) body-frame vectors under the symmetry of `Gait.transform`: mirrored across the
+    x axis (y -> -y) when `reflect`, then turned by rotation·45°."""
+    mirrored = vectors * np.array([1.0, -1.0]) if reflect else vectors
+    return rotate(mirrored, math.radians(45.0 * rotation))
+
+
+def wrap_degrees(angle):
+    """Angles (deg) wrapped to [-180, 180)."""
+    return (np.asarray(angle) + 180.0) % 360.0 - 180.0
+
+
+def cycle_displacements(trajectory: pd.DataFrame, period: float) -> pd.DataFrame:
+    """Per-cycle body-frame displacement and rotation of every instance from a trajectory
+    recorded at every cycle boundary (columns instance, t_s, x_mm, y_mm, heading_deg). Returns
+    instance, cycle, dx_body_mm, dy_body_mm, rotation_deg (NaN after a failure)."""
+    rows = []
+    for instance, part in trajectory.groupby("instance", sort=True):
+        part = part.sort_values("t_s")
+        cycle_of = np.rint(part["t_s"].to_numpy() / period).astype(int)
+        on_boundary = np.isclose(part["t_s"].to_numpy(), cycle_of * period, rtol=0, atol=1e-9)
+        part, cycle_of = part[on_boundary], cycle_of[on_boundary]
+        xy = part[["x_mm", "y_mm"]].to_numpy()
+        heading = np.radians(part["heading_deg"].to_numpy())
+        # the displacement in the frame the body had when the cycle began
+        body = rotate(np.diff(xy, axis=0), -heading[:-1])
+        rows.append(pd.DataFrame({
+            "instance": instance, "cycle": cycle_of[:-1], "dx_body_mm": body[:, 0],
+            "dy_body_mm": body[:, 1],
+            "rotation_deg": wrap_degrees(np.degrees(np.diff(heading)))}))
+    return pd.concat(rows, ignore_index=True)
+
+
+def expand_cycles(representatives: pd.DataFrame) -> pd.DataFrame:
+    """The per-cycle table (CYCLE_COLUMNS) of all 255 gaits from that of the 29 class
+    representatives (columns gait, cycle, dx_body_mm, dy_body_mm, rotation_deg, status)."""
+    by_gait = {gait: part for gait, part in representatives.groupby("gait", sort=False)}
+    parts = []
+    for gait, (representative, rotation, reflect, _) in class_symmetries().items():
+        source = by_gait[representative]
+        step = transform_vectors(source[["dx_body_mm", "dy_body_mm"]].to_numpy(), rotation,
+                                 reflect)
+        turn = source["rotation_deg"].to_numpy()
+        parts.append(pd.DataFrame({
+            "gait": gait, "class_representative": representative, "symmetry_rotation": rotation,
+            "reflected": reflect, "cycle": source["cycle"].to_numpy(),
+            "dx_body_mm": step[:, 0], "dy_body_mm": step[:, 1],
+            "rotation_deg": -turn if reflect else turn, "status": source["status"].to_numpy()}))
+    return sort_gaits(pd.concat(parts, ignore_index=True), extra=["cycle"])[CYCLE_COLUMNS]
+
+
+def sort_gaits(table: pd.DataFrame, extra: Sequence[str] = ()) -> pd.DataFrame:
+    """Rows sorted by (number of actuators, actuator bits) of their gait, then `extra`."""
+    key = table["gait"].map(lambda g: len(Gait.parse(g).actuators) * 256 + Gait.parse(g).bits)
+    return (table.assign(_key=key).sort_values(["_key", *extra], kind="stable")
+            .drop(columns="_key").reset_index(drop=True))
+
+
+def summarise_cycles(cycles: pd.DataFrame, first_cycle: int) -> pd.DataFrame:
+    """The primitive table (PRIMITIVE_COLUMNS but the run's period_s/dt_s) from a per-cycle
+    table: mean and sample standard deviation over cycles >= first_cycle."""
+    sizes = {gait: size for gait, (_, _, _, size) in class_symmetries().items()}
+    steady = cycles[cycles["cycle"] >= first_cycle]
+    rows = []
+    for gait, part in steady.groupby("gait", sort=False):
+        step = part[["dx_body_mm", "dy_body_mm"]].to_numpy()
+        turn = part["rotation_deg"].to_numpy()
+        mean = step.mean(axis=0)
+        length = float(np.hypot(*mean))
+        first = part.iloc[0]
+        rows.append({
+            "gait": gait, "class_representative": first["class_representative"],
+            "class_size": sizes[gait], "symmetry_rotation": first["symmetry_rotation"],
+            "reflected": first["reflected"], "n_actuators": len(Gait.parse(gait).actuators),
+            "step_x_mm": mean[0], "step_y_mm": mean[1],
+            "step_x_std_mm": step[:, 0].std(ddof=1) if len(step) > 1 else math.nan,
+            "step_y_std_mm": step[:, 1].std(ddof=1) if len(step) > 1 else math.nan,
+            "step_mm": length,
+            "direction_deg": (math.degrees(math.atan2(mean[1], mean[0]))
+                              if length >= ZERO_STEP_MM else math.nan),
+            "turn_deg": turn.mean(),
+            "turn_std_deg": turn.std(ddof=1) if len(turn) > 1 else math.nan,
+            "first_cycle": first_cycle, "cycles": int(cycles["cycle"].max()) + 1,
+            "status": first["status"]})
+    return sort_gaits(pd.DataFrame(rows))
+
+
+def measure_primitives(base: StarParams = StarParams(), solver: SolverConfig = SolverConfig(),
+                       cycles: int = 5, first_cycle: int = 1, arch: str = "cpu",
+                       progress: bool = False) -> Tuple[pd.DataFrame, pd.DataFrame]:
+    """Simulate one gait per symmetry class (29 robots, one batch) for `cycles` actuation
+    cycles from rest and return (primitive table, per-cycle table), both over all 255 gaits.
+    base: the robot (its gait is replaced); the period must be a whole number of solver
+    steps; statistics over cycles first_cycle..cycles-1 (0-based). ValueError for bad
+    arguments."""
+    if isinstance(cycles, bool) or not isinstance(cycles, int) or cycles < 1:
+        raise ValueError(f"cycles must be an integer >= 1, got {cycles!r}")
+    if isinstance(first_cycle, bool) or not isinstance(first_cycle, int) \
+            or not 0 <= first_cycle < cycles:
+        raise ValueError(f"first_cycle must be an integer in [0, {cycles - 1}], got "
+                         f"{first_cycle!r}")
+    if whole_steps(base.period, solver.dt) is None:
+        raise ValueError(f"period must be a whole number of steps (dt = {solver.dt} s) to "
+                         f"record every cycle boundary, got {base.period!r}")
+    representatives = [representative for representative, _ in symmetry_classes()]
+    result = simulate([base.replace(gait=g) for g in representatives], cycles * base.period,
+                      solver, arch=arch, record_interval_s=base.period, progress=progress)
+    per_cycle = cycle_displacements(result.trajectory, base.period)
+    per_cycle["gait"] = np.asarray(representatives)[per_cycle["instance"].to_numpy()]
+    per_cycle["status"] = result.summary["status"].to_numpy()[per_cycle["instance"].to_numpy()]
+    expanded = expand_cycles(per_cycle)
+    table = summarise_cycles(expanded, first_cycle)
+    table["period_s"] = base.period
+    table["dt_s"] = solver.dt
+    return table[PRIMITIVE_COLUMNS], expanded
+
