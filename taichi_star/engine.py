@@ -184,7 +184,7 @@ class BatchEngine:
 
     # ---------------------------------------------------------------- time stepping
     @ti.func
-    def prepare_step(self, b, start_time, end_time, h, ratio, use_history):
+    def prepare_step(self, b, start_time, end_time, h, ratio, use_history, extrapolate):
         """Start a step of size h from the current state q_k, v_k: the terms' histories, the
         integrator's offsets, `previous` = q_k, and the predictor q_k + h·v_k. Returns the
         integrator's (inertia scale, rate gain)."""
@@ -199,16 +199,24 @@ class BatchEngine:
                 h, ratio, use_history)
             self.state.velocity_offset[b, n] = self.integrator.rate_offset(
                 position, self.state.previous[b, n], h, ratio, use_history)
+            predictor = position + h * velocity
+            if extrapolate:
+                # the parabola through q_{k−1} and q_k with slope v_k: a second-order start for
+                # Newton, worth an iteration on the long steps of adaptive stepping
+                back = self.state.previous_step_size[b]
+                curve = (self.state.previous[b, n] - position + back * velocity) / (back * back)
+                predictor += h * h * curve
             self.state.previous[b, n] = position
             self.state.previous_velocities[b, n] = velocity
-            self.state.positions[b, n] = position + h * velocity
+            self.state.positions[b, n] = predictor
         return inertia_scale, rate_gain
 
     @ti.func
-    def solve_step(self, b, start_time, end_time, h, ratio, use_history):
+    def solve_step(self, b, start_time, end_time, h, ratio, use_history, extrapolate):
         """One implicit step of size h for instance b from start_time to end_time. Returns
         (converged, finite); on failure the positions are restored to the start of the step."""
-        inertia_scale, rate_gain = self.prepare_step(b, start_time, end_time, h, ratio, use_history)
+        inertia_scale, rate_gain = self.prepare_step(b, start_time, end_time, h, ratio, use_history,
+                                                     extrapolate)
         iterations = 0
         converged = 0
         finite = 1
@@ -270,7 +278,7 @@ class BatchEngine:
             substep = 0
             while converged == 1 and substep < substeps:
                 first = (step_number - 1) * substeps + substep
-                converged, finite = self.solve_step(b, first * h, (first + 1) * h, h, 1.0, use_history)
+                converged, finite = self.solve_step(b, first * h, (first + 1) * h, h, 1.0, use_history, 0)
                 substep += 1
             if converged == 0:
                 halvings += 1
@@ -328,10 +336,10 @@ class BatchEngine:
         """Advance instance b towards stop_time (s) by steps of its own size, at most max_steps
         attempts. Each step ends exactly on stop_time or on the next cycle start of its periodic
         gait if it would pass it (then the gait fires there: the step ending at k·T sees K̄(0));
-        a converged step is accepted when its local error estimate ½·max|q − q_k − h·v_k| (m,
-        implicit Euler's leading term, an upper bound for BDF2's) is within error_tol, else
-        redone from the start state with the step shrunk; the next step grows or shrinks by
-        0.9·√(tol/error) within [0.2, 2] and [dt_min, dt_max]. A step that fails to converge is
+        a converged step is accepted when its local error estimate (m; `first_order_error`, or
+        `second_order_error` for BDF2 with a history) is within error_tol, else redone from the
+        start state with the step shrunk; the next step grows or shrinks by
+        0.9·(tol/error)^(1/(order + 1)) within [0.2, 2] and [dt_min, dt_max]. A step that fails to converge is
         retried at a quarter of its size down to dt_min, then the instance fails."""
         attempts = 0
         tol = self.error_tol[None]
@@ -366,13 +374,10 @@ class BatchEngine:
             ratio = 1.0
             if use_history == 1:
                 ratio = h / self.state.previous_step_size[b]
-            converged, finite = self.solve_step(b, start, end, h, ratio, use_history)
+            converged, finite = self.solve_step(b, start, end, h, ratio, use_history, use_history)
             error = 0.0
             if converged == 1:
-                for n in range(self.n_nodes):
-                    drift = self.state.positions[b, n] - self.state.previous[b, n] \
-                        - h * self.state.previous_velocities[b, n]
-                    error = ti.max(error, 0.5 * ti.abs(drift[0]), 0.5 * ti.abs(drift[1]))
+                error = self.first_order_error(b, h)
             if converged == 1 and (error <= tol or h <= dt_min):
                 self.state.time[b] = end
                 self.state.steps_done[b] = self.state.steps_done[b] + 1
@@ -401,6 +406,17 @@ class BatchEngine:
                 else:
                     self.state.status[b] = STATUS_NON_FINITE if finite == 0 else STATUS_NEWTON_FAILED
                     self.state.failure_time[b] = end
+
+    @ti.func
+    def first_order_error(self, b, h):
+        """Local error estimate of an implicit Euler step, m: ½·max|q − q_k − h·v_k| (its
+        leading term h²·q''/2)."""
+        error = 0.0
+        for n in range(self.n_nodes):
+            drift = self.state.positions[b, n] - self.state.previous[b, n] \
+                - h * self.state.previous_velocities[b, n]
+            error = ti.max(error, 0.5 * ti.abs(drift[0]), 0.5 * ti.abs(drift[1]))
+        return error
 
     @ti.kernel
     def advance_adaptive(self, stop_time: float, max_steps: ti.i32):
