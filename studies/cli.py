@@ -27,7 +27,7 @@ from typing import Dict, List, Mapping, Optional, Sequence
 import numpy as np
 import pandas as pd
 
-from taichi_star import SolverConfig, StarParams
+from taichi_star import PRESETS, SolverConfig, StarParams
 from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, executor_for,
                                stored_chunk_size)
 from taichi_star.experiment import PAPER_GAITS
@@ -35,7 +35,6 @@ from taichi_star.gait import Gait
 
 from . import provenance
 
-PRESETS = ("paper", "accurate")
 QUICK_DURATION_S = 0.2
 """--quick: simulated time of every instance, s (instead of whole cycles)."""
 QUICK_DT = 2e-3
@@ -113,8 +112,10 @@ def add_model_flags(parser: StudyParser, fixed: Sequence[str] = ()):
     parser.set_defaults(fixed_fields=tuple(fixed))
 
 
-def add_dt_flag(parser: StudyParser):
-    parser.add_argument("--dt", type=float, quick=QUICK_DT,
+def add_dt_flag(parser: StudyParser, quick: float = QUICK_DT):
+    """--dt; `quick`: the step under --quick (a study whose instances must step whole cycles
+    may take a coarser one)."""
+    parser.add_argument("--dt", type=float, quick=quick,
                         help="time step, s (none: the preset's)")
 
 

@@ -1,7 +1,7 @@
 """Throughput of the vector environment: simulated robot-seconds per wall second.
 
     python -m studies env_bench [--num-envs 64] [--steps 2] [--presets paper,accurate]
-                                [--jacobians newton,chord] [--control-period S]
+                                [--jacobians newton,chord] [--control-period S] [--dt S]
                                 [--arch cpu|gpu] [--out DIR] [--quick]
 
 For each preset (StarParams.preset and SolverConfig.preset of that name) and Jacobian mode
@@ -10,8 +10,9 @@ For each preset (StarParams.preset and SolverConfig.preset of that name) and Jac
 engine compiles on the first advance) and then times --steps steps of seeded random actions
 (each actuator fired with probability 1/2). Writes `env_bench.csv` (one row per preset and
 Jacobian: preset, jacobian, num_envs, steps, control_period_s, dt_s, n_nodes, wall_s,
-robot_seconds_per_s, robot_steps_per_s, cores, load_average_1min (before the run), cpu_model)
-with a JSON sidecar into --out (default a fresh runs/env_bench/<timestamp>/).
+robot_seconds_per_s, robot_steps_per_s, cores, load_average_1min (before the run), cpu_model,
+arch) with its provenance sidecar (`.csv.json`) into --out (default a fresh
+runs/env_bench/<timestamp>/).
 
 --quick: 4 environments, one 0.2-s step at dt = 5 ms.
 """
@@ -19,36 +20,26 @@ with a JSON sidecar into --out (default a fresh runs/env_bench/<timestamp>/).
 from __future__ import annotations
 
 import os
-import platform
 import time
-from pathlib import Path
 
 import pandas as pd
 
-from taichi_star.envs import StarSwimmerVectorEnv
-from taichi_star.params import JACOBIANS, PRESETS, SolverConfig, StarParams
+from taichi_star import JACOBIANS, PRESETS, SolverConfig, StarParams
+from taichi_star.envs import StarSwimmerVectorEnv, control_period
 
-from . import common
+from . import cli, provenance
 
 DESCRIPTION = "Vector environment throughput: simulated robot-seconds per wall second."
-QUICK = {"num_envs": 4, "steps": 1, "control_period": 0.2, "dt": 5e-3}
+QUICK_NUM_ENVS = 4
+QUICK_STEPS = 1
+QUICK_CONTROL_PERIOD_S = 0.2
+QUICK_DT = 5e-3
 
 
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.lower().startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
-
-
-def measure(preset: str, num_envs: int, steps: int, control_period_s=None, dt=None,
-            jacobian: str = "newton", arch: str = "cpu") -> dict:
-    """One row of env_bench.csv (see the module docstring)."""
-    solver = SolverConfig.preset(preset, jacobian=jacobian,
-                                 **({} if dt is None else {"dt": dt}))
+def measure(preset: str, solver: SolverConfig, num_envs: int, steps: int,
+            control_period_s=None, arch: str = "cpu") -> dict:
+    """One row of env_bench.csv (see the module docstring): the robots of `preset` stepped
+    with `solver`."""
     envs = StarSwimmerVectorEnv(num_envs, params=StarParams.preset(preset), solver=solver,
                                 control_period_s=control_period_s, arch=arch,
                                 max_episode_steps=steps + 2)
@@ -62,61 +53,63 @@ def measure(preset: str, num_envs: int, steps: int, control_period_s=None, dt=No
     wall = time.perf_counter() - start
     period = envs.batch.control_period_s
     robot_seconds = num_envs * steps * period
-    return {"preset": preset, "jacobian": jacobian, "num_envs": num_envs, "steps": steps,
+    return {"preset": preset, "jacobian": solver.jacobian, "num_envs": num_envs, "steps": steps,
             "control_period_s": period, "dt_s": solver.dt,
             "n_nodes": envs.batch.simulator.model.topology.n_nodes, "wall_s": wall,
             "robot_seconds_per_s": robot_seconds / wall,
             "robot_steps_per_s": robot_seconds / solver.dt / wall, "cores": os.cpu_count(),
-            "load_average_1min": load, "cpu_model": cpu_model(), "arch": arch}
+            "load_average_1min": load, "cpu_model": provenance.cpu_model(), "arch": arch}
 
 
 def build_parser():
-    parser = common.common_parser("env_bench", DESCRIPTION)
-    parser.set_defaults(out=None)
-    parser.add_argument("--num-envs", type=int, default=None,
-                        help=f"robots in the vector env (default 64; --quick {QUICK['num_envs']})")
-    parser.add_argument("--steps", type=int, default=None,
-                        help=f"timed steps (default 2; --quick {QUICK['steps']})")
+    parser = cli.StudyParser("env_bench", DESCRIPTION)
+    cli.add_dt_flag(parser, quick=QUICK_DT)
+    parser.add_argument("--num-envs", type=int, default=64, quick=QUICK_NUM_ENVS,
+                        help="robots in the vector env")
+    parser.add_argument("--steps", type=int, default=2, quick=QUICK_STEPS, help="timed steps")
     parser.add_argument("--presets", default=",".join(PRESETS),
                         help=f"comma list of presets (default {','.join(PRESETS)})")
     parser.add_argument("--jacobians", default="newton",
-                        help="comma list of Jacobian modes, newton and/or chord (default newton)")
+                        help=f"comma list of Jacobian modes, {' and/or '.join(JACOBIANS)} "
+                             f"(default newton)")
     parser.add_argument("--control-period", type=float, default=None,
-                        help="control period, s (default the actuation period, 3.15; --quick "
-                             f"{QUICK['control_period']})")
+                        quick=QUICK_CONTROL_PERIOD_S,
+                        help="control period, s (none: the actuation period, 3.15)")
     return parser
 
 
 def main(argv=None):
-    argv = list(argv or [])
-    args = build_parser().parse_args(argv)
-    num_envs = args.num_envs if args.num_envs is not None else (
-        QUICK["num_envs"] if args.quick else 64)
-    steps = args.steps if args.steps is not None else (QUICK["steps"] if args.quick else 2)
-    period = args.control_period if args.control_period is not None else (
-        QUICK["control_period"] if args.quick else None)
-    dt = args.dt if args.dt is not None else (QUICK["dt"] if args.quick else None)
-    presets = common.parse_values(args.presets, "--presets", str)
-    jacobians = common.parse_values(args.jacobians, "--jacobians", str)
-    for value, flag in ((num_envs, "--num-envs"), (steps, "--steps")):
+    args = cli.parse(build_parser(), argv)
+    presets = cli.parse_choices(args.presets, "--presets", PRESETS)
+    jacobians = cli.parse_choices(args.jacobians, "--jacobians", JACOBIANS)
+    for value, flag in ((args.num_envs, "--num-envs"), (args.steps, "--steps")):
         if value < 1:
-            raise common.StudyArgumentError(f"{flag} must be >= 1, got {value}")
-    for flag, values, allowed in (("--presets", presets, PRESETS),
-                                  ("--jacobians", jacobians, JACOBIANS)):
-        unknown = [value for value in values if value not in allowed]
-        if unknown:
-            raise common.StudyArgumentError(f"{flag}: unknown {unknown}; choose from {allowed}")
-    out = common.fresh_output(args, "env_bench")
-    rows = []
+            raise cli.StudyArgumentError(f"{flag} must be >= 1, got {value}")
+    solvers = {}
     for preset in presets:
         for jacobian in jacobians:
             try:
-                rows.append(measure(preset, num_envs, steps, period, dt, jacobian, args.arch))
+                solvers[preset, jacobian] = SolverConfig.preset(
+                    preset, jacobian=jacobian, **({} if args.dt is None else {"dt": args.dt}))
             except ValueError as error:
-                raise common.StudyArgumentError(str(error)) from None
-            print(f"{preset}, {jacobian}: {rows[-1]['robot_seconds_per_s']:.1f} robot-s per "
-                  f"wall s ({rows[-1]['robot_steps_per_s']:,.0f} robot-steps/s)")
+                raise cli.StudyArgumentError(f"--dt: {error}") from None
+            try:
+                control_period(StarParams.preset(preset), solvers[preset, jacobian],
+                               args.control_period)
+            except ValueError as error:
+                raise cli.StudyArgumentError(f"--control-period: {error}") from None
+    out = cli.Output(args, argv or [], model={"presets": presets},
+                     solver={f"{preset}, {jacobian}": solver
+                             for (preset, jacobian), solver in solvers.items()},
+                     extra={"jacobians": jacobians, "num_envs": args.num_envs,
+                            "steps": args.steps})
+    rows = []
+    for (preset, jacobian), solver in solvers.items():
+        rows.append(measure(preset, solver, args.num_envs, args.steps, args.control_period,
+                            args.arch))
+        print(f"{preset}, {jacobian}: {rows[-1]['robot_seconds_per_s']:.1f} robot-s per "
+              f"wall s ({rows[-1]['robot_steps_per_s']:,.0f} robot-steps/s)")
     table = pd.DataFrame(rows)
-    path = common.write_table(table, out / "env_bench.csv", "env_bench", argv)
-    print(common.describe([path]))
+    out.write_csv(table, "env_bench.csv")
+    out.report()
     return table

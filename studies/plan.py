@@ -3,16 +3,17 @@ motion primitives, open loop (a plan made at the start, fired blindly) and close
 (re-planned each cycle from the simulated state); every goal x both controllers in one batch.
 
     python -m studies plan [--primitives CSV] [--distance 50] [--directions 8] [--far 150]
-                           [--tolerance 5] [--max-cycles 25] [--cycles 5] [--set NAME=VALUE]
-                           [--discretisation paper|converged] [--dt S] [--arch cpu|gpu]
-                           [--out DIR] [--quick]
+                           [--tolerance 5] [--max-cycles 25] [--cycles 5]
+                           [--preset paper|accurate] [--set NAME=VALUE ...] [--dt S]
+                           [--arch cpu|gpu] [--out DIR] [--quick]
 
 Goals: --directions points at --distance mm in every direction (0°, 45°, ... for 8), plus one
 --far mm straight behind the robot (0: none). The primitive table is read from --primitives
 (a `python -m studies primitives` CSV made with the same period and step) or measured first
 (--cycles cycles from rest, statistics from the second cycle on).
 
-Writes into --out (default a fresh runs/plan/<timestamp>/), each CSV with a JSON sidecar:
+Writes into --out (default a fresh runs/plan/<timestamp>/), each CSV with its provenance
+sidecar (`.csv.json`):
 - `plan.csv`: per goal and controller (`taichi_star.planner.PLAN_COLUMNS`): reached,
   cycles_to_goal, cycles_fired, final_error_mm (when the controller stopped), end_error_mm
   (when the batch stopped: the robot glides on after its last firing), status;
@@ -32,22 +33,26 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from taichi_star.params import SolverConfig
-from taichi_star.planner import PrimitiveModel, closed_loop_gain, default_goals, drive
+from taichi_star.planner import (PrimitiveModel, check_drive, closed_loop_gain, default_goals,
+                                 drive)
 from taichi_star.primitives import measure_primitives
 
-from . import common
+from . import cli
 
 DESCRIPTION = ("Drive the robot to goal points by choosing a gait per cycle from the motion "
                "primitives: open loop against closed loop, in one batch.")
-QUICK = {"dt": 5e-3, "cycles": 2, "max_cycles": 2}
+QUICK_DT = 5e-3
+QUICK_CYCLES = 2
+QUICK_MAX_CYCLES = 2
+PRIMITIVES_FIRST_CYCLE = 1
+"""Primitives measured here: statistics from the second cycle on."""
 
 
-def plot_paths(paths_csv, plan_csv, png_path):
+def plot_paths(paths_csv, plan_csv, png_path) -> Path:
     """The centroid paths of both controllers (open dashed, closed solid; where each stopped:
     o reached, x not; then the glide, dotted) and the goals (stars), from plan_paths.csv and
     plan.csv."""
-    plt = common.use_agg()
+    plt = cli.use_agg()
     paths = pd.read_csv(paths_csv)
     plan = pd.read_csv(plan_csv)
     fig, ax = plt.subplots(figsize=(7.0, 6.4))
@@ -85,8 +90,9 @@ def plot_paths(paths_csv, plan_csv, png_path):
 
 
 def build_parser():
-    parser = common.common_parser("plan", DESCRIPTION)
-    parser.set_defaults(out=None)
+    parser = cli.StudyParser("plan", DESCRIPTION)
+    cli.add_model_flags(parser, fixed=("gait",))
+    cli.add_dt_flag(parser, quick=QUICK_DT)
     parser.add_argument("--primitives", default=None, metavar="CSV",
                         help="primitive table to plan with (default: measure it first)")
     parser.add_argument("--distance", type=float, default=50.0,
@@ -97,86 +103,76 @@ def build_parser():
                         help="distance of the goal straight behind, mm (default 150; 0: none)")
     parser.add_argument("--tolerance", type=float, default=5.0,
                         help="a goal is reached within this distance, mm (default 5)")
-    parser.add_argument("--max-cycles", type=int, default=None,
-                        help=f"cycle budget per goal (default 25; --quick {QUICK['max_cycles']})")
-    parser.add_argument("--cycles", type=int, default=None,
-                        help=f"cycles of the primitive measurement when no --primitives is "
-                             f"given (default 5; --quick {QUICK['cycles']})")
-    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                        help="override one StarParams field, e.g. --set alpha=1.0")
+    parser.add_argument("--max-cycles", type=int, default=25, quick=QUICK_MAX_CYCLES,
+                        help="cycle budget per goal")
+    parser.add_argument("--cycles", type=int, default=5, quick=QUICK_CYCLES,
+                        help="cycles of the primitive measurement when no --primitives is given")
     return parser
 
 
-def read_primitives(path, period: float, dt: float) -> pd.DataFrame:
-    """A primitive CSV made at this period and step (StudyArgumentError naming --primitives
-    otherwise)."""
+def read_primitive_model(path, period: float, dt: float) -> PrimitiveModel:
+    """The planner's model from a primitive CSV made at this period and step
+    (StudyArgumentError naming --primitives otherwise)."""
     try:
         table = pd.read_csv(path)
     except (OSError, ValueError) as error:
-        raise common.StudyArgumentError(f"--primitives {path}: {error}") from None
+        raise cli.StudyArgumentError(f"--primitives {path}: {error}") from None
     needed = {"gait", "step_x_mm", "step_y_mm", "turn_deg", "status", "period_s", "dt_s"}
-    if not needed <= set(table.columns):
-        raise common.StudyArgumentError(f"--primitives {path}: not a primitives table (needs "
-                                        f"{sorted(needed)})")
+    if table.empty or not needed <= set(table.columns):
+        raise cli.StudyArgumentError(f"--primitives {path}: not a primitives table (needs "
+                                     f"rows with {sorted(needed)})")
     made = (float(table["period_s"].iloc[0]), float(table["dt_s"].iloc[0]))
     if not np.allclose(made, (period, dt), rtol=1e-12, atol=0):
-        raise common.StudyArgumentError(f"--primitives {path}: made at period {made[0]} s, "
-                                        f"dt {made[1]} s; this run has {period} s, {dt} s")
-    return table
+        raise cli.StudyArgumentError(f"--primitives {path}: made at period {made[0]} s, "
+                                     f"dt {made[1]} s; this run has {period} s, {dt} s")
+    try:
+        return PrimitiveModel.from_table(table)
+    except ValueError as error:
+        raise cli.StudyArgumentError(f"--primitives {path}: {error}") from None
 
 
 def main(argv=None):
-    argv = list(argv or [])
-    args = build_parser().parse_args(argv)
-    max_cycles = args.max_cycles if args.max_cycles is not None else (
-        QUICK["max_cycles"] if args.quick else 25)
-    cycles = args.cycles if args.cycles is not None else (QUICK["cycles"] if args.quick else 5)
-    for value, flag, lowest in ((max_cycles, "--max-cycles", 1), (cycles, "--cycles", 2),
+    args = cli.parse(build_parser(), argv)
+    for value, flag, lowest in ((args.max_cycles, "--max-cycles", 1),
+                                (args.cycles, "--cycles", 2),
                                 (args.directions, "--directions", 0)):
         if value < lowest:
-            raise common.StudyArgumentError(f"{flag} must be >= {lowest}, got {value}")
-    common.check_positive(args.distance, "--distance")
-    common.check_positive(args.tolerance, "--tolerance")
+            raise cli.StudyArgumentError(f"{flag} must be >= {lowest}, got {value}")
+    cli.check_positive(args.distance, "--distance")
+    cli.check_positive(args.tolerance, "--tolerance")
     if not (np.isfinite(args.far) and args.far >= 0):
-        raise common.StudyArgumentError(f"--far must be >= 0, got {args.far}")
+        raise cli.StudyArgumentError(f"--far must be >= 0, got {args.far}")
     if args.directions == 0 and args.far == 0:
-        raise common.StudyArgumentError("no goals: --directions 0 and --far 0")
-    overrides = common.parse_overrides(args.set)
-    if "gait" in overrides:
-        raise common.StudyArgumentError("--set gait=...: the planner chooses the gaits")
-    try:
-        base = common.base_params(args).replace(**overrides)
-        solver = SolverConfig(dt=args.dt if args.dt is not None else
-                              (QUICK["dt"] if args.quick else 1e-3))
-    except (ValueError, TypeError) as error:
-        raise common.StudyArgumentError(f"invalid parameter value: {error}") from None
+        raise cli.StudyArgumentError("no goals: --directions 0 and --far 0")
+    base = cli.base_params(args)
+    solver = cli.solver(args)
     goals = default_goals(args.distance, args.directions, args.far or None)
-    if args.primitives is not None:
-        primitives = read_primitives(args.primitives, base.period, solver.dt)
-    out = common.fresh_output(args, "plan")
-    details = {"overrides": overrides, "discretisation": args.discretisation,
-               "tolerance_mm": args.tolerance, "max_cycles": max_cycles,
-               "primitives": args.primitives or "measured in this run"}
-    paths = []
     try:
-        if args.primitives is None:
-            primitives, _ = measure_primitives(base, solver, cycles=cycles, first_cycle=1,
-                                               arch=args.arch, progress=not args.no_progress)
-            paths.append(common.write_table(primitives, out / "primitives.csv", "plan", argv,
-                                            details))
-        summary, per_cycle, path = drive(PrimitiveModel.from_table(primitives), goals, base,
-                                         solver, tolerance_mm=args.tolerance,
-                                         max_cycles=max_cycles, arch=args.arch,
-                                         progress=not args.no_progress)
+        check_drive(goals, base, solver, args.tolerance, args.max_cycles)
     except ValueError as error:
-        raise common.StudyArgumentError(str(error)) from None
+        raise cli.StudyArgumentError(f"--dt, --set period: {error}") from None
+    if args.primitives is not None:
+        model = read_primitive_model(args.primitives, base.period, solver.dt)
+    out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
+                     solver=solver,
+                     extra={"tolerance_mm": args.tolerance, "max_cycles": args.max_cycles,
+                            "primitives": args.primitives or "measured in this run"})
+    if args.primitives is None:
+        primitives, _ = measure_primitives(base, solver, cycles=args.cycles,
+                                           first_cycle=PRIMITIVES_FIRST_CYCLE, arch=args.arch,
+                                           progress=not args.no_progress)
+        out.write_csv(primitives, "primitives.csv")
+        model = PrimitiveModel.from_table(primitives)
+    summary, per_cycle, path = drive(model, goals, base, solver,
+                                     tolerance_mm=args.tolerance, max_cycles=args.max_cycles,
+                                     arch=args.arch, progress=not args.no_progress)
     gain = pd.DataFrame([closed_loop_gain(summary)])
-    paths += [common.write_table(summary, out / "plan.csv", "plan", argv, details),
-              common.write_table(gain, out / "plan_gain.csv", "plan", argv, details),
-              common.write_table(per_cycle, out / "plan_cycles.csv", "plan", argv, details),
-              common.write_table(path, out / "plan_paths.csv", "plan", argv, details)]
-    paths.append(plot_paths(paths[-1], paths[-4], out / "plan.png"))
-    print(common.describe(paths))
+    plan_csv = out.write_csv(summary, "plan.csv")
+    out.write_csv(gain, "plan_gain.csv")
+    out.write_csv(per_cycle, "plan_cycles.csv")
+    paths_csv = out.write_csv(path, "plan_paths.csv")
+    out.wrote(plot_paths(paths_csv, plan_csv, out.path("plan.png")))
+    out.report()
     with pd.option_context("display.width", 160, "display.max_columns", 20):
         print(summary.to_string(index=False))
         print(gain.T.to_string(header=False))

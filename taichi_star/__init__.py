@@ -5,12 +5,12 @@ Importing the package has no side effects (no `ti.init`); `simulate` initialises
 
 from .actuation import CurvatureProfile
 from .gait import Gait, symmetry_classes
-from .params import STAR_RANGES, SolverConfig, StarParams
+from .params import JACOBIANS, PRESETS, STAR_RANGES, SolverConfig, StarParams
 from .runtime import available_archs
 from .simulation import SimulationResult, simulate
 from .simulator import Simulator, SimulatorSnapshot
 
 __version__ = "0.2.0"
 
-__all__ = ["simulate", "SimulationResult", "Simulator", "SimulatorSnapshot", "available_archs", "StarParams", "STAR_RANGES", "SolverConfig",
+__all__ = ["simulate", "SimulationResult", "Simulator", "SimulatorSnapshot", "available_archs", "StarParams", "STAR_RANGES", "SolverConfig", "PRESETS", "JACOBIANS",
            "CurvatureProfile", "Gait", "symmetry_classes", "__version__"]

@@ -127,18 +127,12 @@ def default_goals(distance_mm: float = 50.0, count: int = 8,
     return goals if far_mm is None else np.vstack([goals, [[-far_mm, 0.0]]])
 
 
-def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
-          solver: SolverConfig = SolverConfig(), tolerance_mm: float = 5.0,
-          max_cycles: int = 25, frames_per_cycle: int = 10, arch: str = "cpu",
-          progress: bool = False):
-    """Drive one robot per (goal, mode) in one Simulator, a gait per actuation cycle of
-    `params.period`, until every controller has stopped or max_cycles have run.
-
-    goals_mm: (G, 2) goal points relative to the start (the robot starts at rest, heading 0).
-    Returns (summary, cycles, path): `PLAN_COLUMNS`, `CYCLE_COLUMNS` and the centroid path
-    (goal, mode, t_s, controlled (False once the controller has stopped), x_mm, y_mm)
-    recorded frames_per_cycle times per cycle. ValueError for
-    bad arguments."""
+def check_drive(goals_mm, params: StarParams, solver: SolverConfig, tolerance_mm: float = 5.0,
+                max_cycles: int = 25, frames_per_cycle: int = 10) -> np.ndarray:
+    """The goals as a (G, 2) float array, or ValueError naming the argument unless `drive`
+    can run with these: finite goals, max_cycles an integer >= 1, tolerance_mm > 0, the
+    period and period / frames_per_cycle whole numbers of steps. No compute: a command line
+    checks its input with this before starting."""
     goals = np.asarray(goals_mm, dtype=np.float64)
     if goals.ndim != 2 or goals.shape[1] != 2 or not len(goals) or not np.isfinite(goals).all():
         raise ValueError(f"goals_mm must be a finite (G, 2) array, got {goals_mm!r}")
@@ -152,6 +146,23 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
             whole_steps(period / frames_per_cycle, solver.dt) is None:
         raise ValueError(f"period / frames_per_cycle must be a whole number of steps (dt = "
                          f"{solver.dt} s), got period {period!r} and {frames_per_cycle!r} frames")
+    return goals
+
+
+def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
+          solver: SolverConfig = SolverConfig(), tolerance_mm: float = 5.0,
+          max_cycles: int = 25, frames_per_cycle: int = 10, arch: str = "cpu",
+          progress: bool = False):
+    """Drive one robot per (goal, mode) in one Simulator, a gait per actuation cycle of
+    `params.period`, until every controller has stopped or max_cycles have run.
+
+    goals_mm: (G, 2) goal points relative to the start (the robot starts at rest, heading 0).
+    Returns (summary, cycles, path): `PLAN_COLUMNS`, `CYCLE_COLUMNS` and the centroid path
+    (goal, mode, t_s, controlled (False once the controller has stopped), x_mm, y_mm)
+    recorded frames_per_cycle times per cycle. ValueError for
+    bad arguments (`check_drive`)."""
+    goals = check_drive(goals_mm, params, solver, tolerance_mm, max_cycles, frames_per_cycle)
+    period = params.period
     goal_index = np.repeat(np.arange(len(goals)), len(MODES))
     modes = np.tile(MODES, len(goals))
     closed = modes == "closed"

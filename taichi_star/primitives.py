@@ -147,14 +147,10 @@ def summarise_cycles(cycles: pd.DataFrame, first_cycle: int) -> pd.DataFrame:
     return sort_gaits(pd.DataFrame(rows))
 
 
-def measure_primitives(base: StarParams = StarParams(), solver: SolverConfig = SolverConfig(),
-                       cycles: int = 5, first_cycle: int = 1, arch: str = "cpu",
-                       progress: bool = False) -> Tuple[pd.DataFrame, pd.DataFrame]:
-    """Simulate one gait per symmetry class (29 robots, one batch) for `cycles` actuation
-    cycles from rest and return (primitive table, per-cycle table), both over all 255 gaits.
-    base: the robot (its gait is replaced); the period must be a whole number of solver
-    steps; statistics over cycles first_cycle..cycles-1 (0-based). ValueError for bad
-    arguments."""
+def check_measurement(base: StarParams, solver: SolverConfig, cycles: int, first_cycle: int):
+    """ValueError naming the argument unless `measure_primitives` can run with these: cycles
+    an integer >= 1, first_cycle in [0, cycles - 1], the period a whole number of steps. No
+    compute: a command line checks its input with this before starting."""
     if isinstance(cycles, bool) or not isinstance(cycles, int) or cycles < 1:
         raise ValueError(f"cycles must be an integer >= 1, got {cycles!r}")
     if isinstance(first_cycle, bool) or not isinstance(first_cycle, int) \
@@ -164,6 +160,17 @@ def measure_primitives(base: StarParams = StarParams(), solver: SolverConfig = S
     if whole_steps(base.period, solver.dt) is None:
         raise ValueError(f"period must be a whole number of steps (dt = {solver.dt} s) to "
                          f"record every cycle boundary, got {base.period!r}")
+
+
+def measure_primitives(base: StarParams = StarParams(), solver: SolverConfig = SolverConfig(),
+                       cycles: int = 5, first_cycle: int = 1, arch: str = "cpu",
+                       progress: bool = False) -> Tuple[pd.DataFrame, pd.DataFrame]:
+    """Simulate one gait per symmetry class (29 robots, one batch) for `cycles` actuation
+    cycles from rest and return (primitive table, per-cycle table), both over all 255 gaits.
+    base: the robot (its gait is replaced); the period must be a whole number of solver
+    steps; statistics over cycles first_cycle..cycles-1 (0-based). ValueError for bad
+    arguments (`check_measurement`)."""
+    check_measurement(base, solver, cycles, first_cycle)
     representatives = [representative for representative, _ in symmetry_classes()]
     result = simulate([base.replace(gait=g) for g in representatives], cycles * base.period,
                       solver, arch=arch, record_interval_s=base.period, progress=progress)

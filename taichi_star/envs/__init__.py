@@ -13,7 +13,7 @@ Both stop an episode after DEFAULT_MAX_EPISODE_STEPS (40) control periods unless
 import gymnasium
 
 from .swimmer import (DEFAULT_MAX_EPISODE_STEPS, OBSERVATION_NAMES, GoalReachingBatch,
-                      StarSwimmerEnv, StarSwimmerVectorEnv, SwimmerTask)
+                      StarSwimmerEnv, StarSwimmerVectorEnv, SwimmerTask, control_period)
 
 ENV_ID = "StarSwimmer-v0"
 
@@ -23,4 +23,4 @@ if ENV_ID not in gymnasium.registry:
                        max_episode_steps=DEFAULT_MAX_EPISODE_STEPS)
 
 __all__ = ["DEFAULT_MAX_EPISODE_STEPS", "ENV_ID", "OBSERVATION_NAMES", "GoalReachingBatch", "StarSwimmerEnv",
-           "StarSwimmerVectorEnv", "SwimmerTask"]
+           "StarSwimmerVectorEnv", "SwimmerTask", "control_period"]

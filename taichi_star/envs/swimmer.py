@@ -144,6 +144,20 @@ def goal_from_options(options, count: int) -> Optional[np.ndarray]:
     return goal
 
 
+def control_period(params: StarParams, solver: SolverConfig,
+                   control_period_s: Optional[float] = None) -> float:
+    """The control period, s: control_period_s, or the actuation period of `params` when None;
+    ValueError unless it is a positive whole number of solver steps. No compute: a command
+    line checks its input with this before building an environment."""
+    period = params.period if control_period_s is None else control_period_s
+    if isinstance(period, bool) or not isinstance(period, numbers.Real) \
+            or not math.isfinite(period) or period <= 0 \
+            or whole_steps(period, solver.dt) is None:
+        raise ValueError(f"control_period_s must be a positive whole number of steps "
+                         f"(dt = {solver.dt} s), got {control_period_s!r}")
+    return float(period)
+
+
 class GoalReachingBatch:
     """The task on B robots of one Simulator: goals, observations, rewards, episode ends.
 
@@ -168,14 +182,9 @@ class GoalReachingBatch:
         solver = SolverConfig.preset("paper") if solver is None else solver
         if not isinstance(task, SwimmerTask):
             raise ValueError(f"task must be a SwimmerTask, got {type(task).__name__}")
-        period = params[0].period if control_period_s is None else control_period_s
-        if isinstance(period, bool) or not isinstance(period, numbers.Real) \
-                or not math.isfinite(period) or period <= 0 \
-                or whole_steps(period, solver.dt) is None:
-            raise ValueError(f"control_period_s must be a positive whole number of steps "
-                             f"(dt = {solver.dt} s), got {control_period_s!r}")
+        period = control_period(params[0], solver, control_period_s)
         self.task = task
-        self.control_period_s = float(period)
+        self.control_period_s = period
         self.simulator = Simulator(params, solver, arch=arch)
         self.n_robots = n_robots
         self.goals = np.zeros((n_robots, 2))

@@ -5,14 +5,12 @@ reset_mask, info masks); a value check of the reward; bad input."""
 
 import gymnasium as gym
 import numpy as np
-import pandas as pd
 import pytest
 from gymnasium.utils.env_checker import check_env
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 from gymnasium.vector.utils import batch_space
 
 import taichi_star as ts
-from studies.__main__ import main as studies_main
 from taichi_star.envs import (DEFAULT_MAX_EPISODE_STEPS, ENV_ID, OBSERVATION_NAMES,
                               StarSwimmerEnv, StarSwimmerVectorEnv)
 
@@ -164,10 +162,3 @@ def test_bad_input_raises_value_error_and_changes_nothing():
     for name, values in before.fields.items():
         np.testing.assert_array_equal(values, after.fields[name], err_msg=name)
 
-
-def test_env_bench_quick(tmp_path):
-    assert studies_main(["env_bench", "--quick", "--presets", "paper", "--out",
-                         str(tmp_path)]) == 0
-    table = pd.read_csv(tmp_path / "env_bench.csv")
-    assert list(table["preset"]) == ["paper"] and (table["robot_seconds_per_s"] > 0).all()
-    assert studies_main(["env_bench", "--quick", "--presets", "fast"]) == 2

@@ -1,5 +1,11 @@
 """The stateful Simulator: commands, piecewise advance, save/load and reset are bitwise
-consistent with each other and with `simulate`; bad commands leave the state unchanged."""
+consistent with each other and with `simulate`; bad commands leave the state unchanged; the
+step_batch example runs."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -7,6 +13,7 @@ import pytest
 
 import taichi_star as ts
 
+REPO = Path(__file__).resolve().parents[2]
 PERIOD = 0.4
 PARAMS = [ts.StarParams(gait=g, period=PERIOD) for g in ("A1+A2", "A3", "A1+A3+A5")]
 GAITS = [p.gait for p in PARAMS]
@@ -155,3 +162,12 @@ def test_bad_durations_times_and_foreign_states_are_refused():
     other = ts.Simulator([ts.StarParams(n_arc=12)] * 3)
     with pytest.raises(ValueError, match="another engine"):
         sim.load(other.save())
+
+
+def test_step_batch_example_runs():
+    environment = dict(os.environ, STEP_BATCH_QUICK="1", PYTHONPATH=str(REPO))
+    result = subprocess.run([sys.executable, str(REPO / "examples" / "step_batch.py")],
+                            capture_output=True, text=True, env=environment, cwd=REPO,
+                            timeout=600)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert "robots" in result.stdout

@@ -1,0 +1,116 @@
+"""The control studies in --quick mode: primitives (255 gaits, the library's measurement,
+a plot, provenance), plan (with the primitives given), env_bench; their argument errors on
+one line with exit code 2 before any compute."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import taichi_star
+from taichi_star.primitives import measure_primitives
+
+from studies import cli
+from studies.__main__ import main as studies_main
+
+QUICK = ["--quick", "--no-progress"]
+
+
+@pytest.fixture(scope="module")
+def primitives_run(tmp_path_factory):
+    """`python -m studies primitives --quick`: 2 cycles of the 29 classes at dt = 5 ms."""
+    out = tmp_path_factory.mktemp("primitives")
+    assert studies_main(["primitives", *QUICK, "--out", str(out)]) == 0
+    return out
+
+
+def test_primitives_quick_writes_the_measurement_a_plot_and_provenance(primitives_run):
+    table = pd.read_csv(primitives_run / "primitives.csv")
+    assert len(table) == 255 and (table["status"] == "ok").all()
+    assert table["dt_s"].eq(5e-3).all() and table["cycles"].eq(2).all()
+    assert table["first_cycle"].eq(1).all()
+    cycles = pd.read_csv(primitives_run / "primitives_cycles.csv")
+    assert set(cycles["gait"]) == set(table["gait"])
+    assert (primitives_run / "primitives.png").stat().st_size > 1000
+    for name in ("primitives.csv", "primitives_cycles.csv"):
+        sidecar = json.loads((primitives_run / f"{name}.json").read_text())
+        assert sidecar["study"] == "primitives" and sidecar["model"]["preset"] == "paper"
+        assert sidecar["solver"]["dt"] == 5e-3
+        assert sidecar["details"] == {"cycles": 2, "first_cycle": 1}
+
+
+def test_primitives_quick_equals_the_library_measurement(primitives_run):
+    """The CSV is `measure_primitives` of the same robot and step (the library's own tests
+    check the measurement)."""
+    table = pd.read_csv(primitives_run / "primitives.csv")
+    row = table[table["gait"] == "A1+A3"]
+    direct, _ = measure_primitives(taichi_star.StarParams(gait="A1+A3"),
+                                   taichi_star.SolverConfig(dt=5e-3), cycles=2, first_cycle=1)
+    expected = direct[direct["gait"] == "A1+A3"]
+    for column in ("step_x_mm", "step_y_mm", "turn_deg"):
+        np.testing.assert_allclose(row[column], expected[column], rtol=1e-9, err_msg=column)
+
+
+def test_plan_quick_with_given_primitives(primitives_run, tmp_path):
+    primitives = str(primitives_run / "primitives.csv")
+    code = studies_main(["plan", *QUICK, "--primitives", primitives, "--directions", "2",
+                         "--far", "0", "--out", str(tmp_path)])
+    assert code == 0
+    summary = pd.read_csv(tmp_path / "plan.csv")
+    assert len(summary) == 4 and (tmp_path / "plan.png").stat().st_size > 1000
+    assert not (tmp_path / "primitives.csv").exists()  # given, not measured
+    gain = pd.read_csv(tmp_path / "plan_gain.csv")
+    assert {"open_mean_error_mm", "closed_mean_error_mm"} <= set(gain.columns)
+    for name in ("plan.csv", "plan_gain.csv", "plan_cycles.csv", "plan_paths.csv"):
+        sidecar = json.loads((tmp_path / f"{name}.json").read_text())
+        assert sidecar["details"]["primitives"] == primitives and sidecar["study"] == "plan"
+
+
+def test_env_bench_quick_into_a_fresh_run_folder(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert studies_main(["env_bench", *QUICK, "--presets", "paper"]) == 0
+    (folder,) = (tmp_path / "runs" / "env_bench").iterdir()  # runs/env_bench/<timestamp>/
+    table = pd.read_csv(folder / "env_bench.csv")
+    assert list(table["preset"]) == ["paper"] and (table["robot_seconds_per_s"] > 0).all()
+    assert table["num_envs"].tolist() == [4] and table["dt_s"].tolist() == [5e-3]
+    assert (folder / "env_bench.csv.json").exists()
+
+
+@pytest.fixture
+def no_compute(monkeypatch):
+    """Any simulation fails the test: argument errors must come before compute."""
+    def forbidden(*args, **kwargs):
+        raise AssertionError("a simulation started despite invalid arguments")
+    monkeypatch.setattr("taichi_star.primitives.simulate", forbidden)
+    monkeypatch.setattr("taichi_star.planner.Simulator", forbidden)
+    monkeypatch.setattr("taichi_star.envs.swimmer.Simulator", forbidden)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["plan", "--tolerance", "-1"], "--tolerance must be > 0"),
+    (["plan", "--primitives", "missing.csv"], "--primitives missing.csv"),
+    (["plan", "--max-cycles", "0"], "--max-cycles must be >= 1"),
+    (["plan", "--directions", "0", "--far", "0"], "no goals"),
+    (["plan", "--set", "gait=A1"], "--set gait: set by the plan study"),
+    (["plan", "--dt", "2e-3"], "--dt, --set period"),
+    (["primitives", "--first-cycle", "5"], "--first-cycle must be in [0, --cycles - 1 = 1]"),
+    (["primitives", "--cycles", "0"], "--cycles must be > 0"),
+    (["primitives", "--set", "period=3.1234"], "--dt, --set period"),
+    (["env_bench", "--presets", "fast"], "--presets: unknown value 'fast'"),
+    (["env_bench", "--jacobians", "broyden"], "--jacobians: unknown value 'broyden'"),
+    (["env_bench", "--num-envs", "0"], "--num-envs must be >= 1"),
+    (["env_bench", "--control-period", "0.0123"], "--control-period"),
+])
+def test_invalid_arguments_fail_before_compute(no_compute, tmp_path, capsys, argv, message):
+    out = tmp_path / "out"
+    assert studies_main([*argv, "--out", str(out), *QUICK]) == 2
+    error = capsys.readouterr().err
+    assert message in error and len(error.strip().splitlines()) == 1, error
+    assert not out.exists()  # nothing written
+
+
+@pytest.mark.parametrize("study", ["primitives", "plan", "env_bench"])
+def test_quick_never_writes_into_the_committed_results(no_compute, capsys, study):
+    assert studies_main([study, "--out", str(cli.COMMITTED_RESULTS), *QUICK]) == 2
+    assert "never write into the committed results/" in capsys.readouterr().err
