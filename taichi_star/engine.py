@@ -14,7 +14,6 @@ from typing import Dict
 import numpy as np
 import taichi as ti
 
-from .geometry import CENTRE
 from .linsolve import BlockSystem, plan_elimination
 from .model import BatchModel
 from .params import SolverConfig
