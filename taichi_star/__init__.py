@@ -1,7 +1,15 @@
 """taichi_star: a Taichi data-parallel batch simulator of the star-shaped soft swimming robot.
 
-Importing the package has no side effects (no `ti.init`); `simulate` initialises Taichi itself.
+Importing the package initialises nothing (no `ti.init`: `simulate` and `Simulator` initialise
+Taichi themselves) and prints nothing: it asks Taichi not to print its version banner unless
+ENABLE_TAICHI_HEADER_PRINT is set.
 """
+
+import os
+
+os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "false")
+
+# the package's modules import taichi, which reads the variable above at its own import
 
 from .actuation import CurvatureProfile
 from .gait import Gait, symmetry_classes

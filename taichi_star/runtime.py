@@ -8,6 +8,8 @@ precision changes, and keeps one compiled engine per (topology, terms, integrato
 
 from __future__ import annotations
 
+import contextlib
+import io
 import weakref
 from typing import Dict, List, Optional, Tuple
 
@@ -91,8 +93,11 @@ class Runtime:
         if self.arch == arch and self.precision == precision:
             return
         threads = {} if self.cpu_threads is None else {"cpu_max_num_threads": self.cpu_threads}
-        ti.init(arch=getattr(ti, arch), default_fp=ti.f64 if precision == "f64" else ti.f32,
-                fast_math=False, offline_cache=True, log_level=self.log_level, **threads)
+        # ti.init prints "[Taichi] Starting on arch=..." unconditionally; warnings still go to
+        # Taichi's logger
+        with contextlib.redirect_stdout(io.StringIO()):
+            ti.init(arch=getattr(ti, arch), default_fp=ti.f64 if precision == "f64" else ti.f32,
+                    fast_math=False, offline_cache=True, log_level=self.log_level, **threads)
         self.arch, self.precision = arch, precision
         self.engines.clear()
         self.leases.clear()

@@ -10,7 +10,7 @@ from typing import Optional, Sequence
 import numpy as np
 import pandas as pd
 
-from . import metrics
+from . import metrics, output
 from .geometry import CENTRE, Topology
 from .model import build_model, validate_batch
 from .params import SolverConfig, StarParams
@@ -54,8 +54,24 @@ class SimulationResult:
     summary: pd.DataFrame
     trajectory: pd.DataFrame
     shapes: Optional[np.ndarray]
-    topology: Topology = field(repr=False)
+    topology: Optional[Topology] = field(repr=False)
+    """The batch's topology (None for a run_batch result mixing topologies)."""
     solver: SolverConfig = field(repr=False)
+
+    def to_xarray(self):
+        """The result as a labelled xarray Dataset with units (see `output.to_xarray`)."""
+        return output.to_xarray(self)
+
+    def to_netcdf(self, path):
+        """Save `to_xarray()` as a netCDF file; returns the path."""
+        self.to_xarray().to_netcdf(path)
+        return path
+
+    def animate(self, path, instances=None, frame: str = "world", fps: int = 15,
+                size_px: int = 720):
+        """Animate the recorded shapes to an MP4 or GIF (see `output.animate`)."""
+        return output.animate(self, path, instances=instances, frame=frame, fps=fps,
+                              size_px=size_px)
 
     def __repr__(self) -> str:
         status = self.summary["status"].value_counts().to_dict() if len(self.summary) else {}

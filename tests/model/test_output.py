@@ -1,0 +1,57 @@
+"""Labelled data (xarray / netCDF), animation and the quiet import."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import taichi_star as ts
+
+
+@pytest.fixture(scope="module")
+def recorded():
+    params = [ts.StarParams(gait="A1+A2"), ts.StarParams(gait="A3", alpha=0.5)]
+    return ts.simulate(params, 0.2, ts.SolverConfig(dt=2e-3), record_interval_s=0.04,
+                       record_shapes=True)
+
+
+def test_xarray_holds_the_tables_with_units_and_survives_netcdf(recorded, tmp_path):
+    import xarray as xr
+
+    dataset = recorded.to_xarray()
+    assert dataset.sizes == {"instance": 2, "time": 6, "node": 193, "xy": 2}
+    np.testing.assert_array_equal(dataset.speed_mm_s, recorded.summary.speed_mm_s)
+    np.testing.assert_array_equal(dataset.alpha, [0.8, 0.5])
+    assert dataset.speed_mm_s.attrs["units"] == "mm/s"
+    assert dataset.youngs_modulus.attrs["units"] == "Pa"
+    last = recorded.trajectory[recorded.trajectory.t_s == recorded.trajectory.t_s.max()]
+    np.testing.assert_array_equal(dataset.centroid_x_mm.isel(time=-1), last.x_mm)
+    np.testing.assert_array_equal(dataset.positions, recorded.shapes)
+    path = recorded.to_netcdf(tmp_path / "result.nc")
+    with xr.open_dataset(path) as back:
+        np.testing.assert_array_equal(back.positions, recorded.shapes)
+        assert list(back.gait.values) == ["A1+A2", "A3"]
+
+
+@pytest.mark.parametrize("name,frame", [("shapes.gif", "world"), ("shapes.mp4", "body")])
+def test_animation_writes_a_movie_of_every_record(recorded, tmp_path, name, frame):
+    path = recorded.animate(tmp_path / name, frame=frame, size_px=300)
+    assert path.stat().st_size > 1000
+    if name.endswith(".gif"):
+        from PIL import Image
+
+        with Image.open(path) as movie:
+            assert movie.n_frames == 6
+
+
+def test_animation_refuses_results_without_shapes(tmp_path):
+    result = ts.simulate([ts.StarParams()], 0.01)
+    with pytest.raises(ValueError, match="record_shapes"):
+        result.animate(tmp_path / "x.gif")
+
+
+def test_import_prints_nothing():
+    out = subprocess.run([sys.executable, "-c", "import taichi_star"], capture_output=True,
+                         text=True, check=True)
+    assert out.stdout == "" and "[Taichi]" not in out.stderr
