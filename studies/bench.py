@@ -130,7 +130,7 @@ def advance(engine, first_step: int, n_steps: int):
     step = first_step
     while step < first_step + n_steps:
         count = min(STEPS_PER_LAUNCH, first_step + n_steps - step)
-        engine.advance(step, count)
+        engine.advance(count)
         step += count
     ti.sync()
 

@@ -136,7 +136,7 @@ def test_summary_and_trajectory_schema():
     expected = ts.StarParams.field_names() + [
         "displacement_x_mm", "displacement_y_mm", "speed_mm_s", "signed_speed_mm_s",
         "travel_direction_deg", "heading_deg", "steady_speed_mm_s", "steady_signed_speed_mm_s",
-        "newton_iterations_mean", "newton_iterations_max", "substep_retries", "status",
+        "steps", "rejected_steps", "newton_iterations_mean", "newton_iterations_max", "substep_retries", "status",
         "failure_time_s"]
     assert list(result.summary.columns) == expected
     assert list(result.trajectory.columns) == ["instance", "t_s", "x_mm", "y_mm", "heading_deg"]
@@ -183,15 +183,20 @@ def test_chord_jacobian_reaches_the_same_solution():
     assert np.abs(shapes["chord"] - shapes["newton"]).max() < 1e-9
 
 
-def test_shared_actuation_ends_halve_the_error_of_a1_a2():
-    """Design §2.7: for A1+A2, with the joints turning by their half-edge share, n_arc = 18
-    lands closer to the finer clamped run than the clamped n_arc = 18 does (one cycle: clamped
-    1.577 / 1.729 at n_arc 18 / 36, shared 1.716 at 18); 0.3 s covers the heating pulse."""
-    params = [ts.StarParams(gait="A1+A2", n_arc=18, actuation_ends=ends)
-              for ends in ("clamped", "shared")]
-    coarse = ts.simulate(params, 0.3).summary.signed_speed_mm_s
-    fine = ts.simulate([ts.StarParams(gait="A1+A2", n_arc=36)], 0.3).summary.signed_speed_mm_s[0]
-    assert abs(coarse[1] - fine) < 0.6 * abs(coarse[0] - fine)
+def test_shared_ends_with_series_joints_remove_most_of_the_mesh_dependence():
+    """A1+A2 over the heating pulse (0.3 s): refining the arcs from 18 to 36 edges changes the
+    clamped-ends / limb-joint speed by ~10 % (first order), the shared-ends / series-joint speed
+    by < 1 % (second order; measured 2.015 → 2.218 against 2.387 → 2.403 mm/s)."""
+    def speeds(n_arc):
+        params = [ts.StarParams(gait="A1+A2", n_arc=n_arc),
+                  ts.StarParams(gait="A1+A2", n_arc=n_arc, actuation_ends="shared",
+                                joint_stiffness="series")]
+        return ts.simulate(params, 0.3).summary.signed_speed_mm_s.to_numpy()
+
+    coarse, fine = speeds(18), speeds(36)
+    change = np.abs(coarse - fine)
+    assert change[0] > 0.05 * abs(fine[0])
+    assert change[1] < 0.2 * change[0]
 
 
 ACCURATE_PHYSICS_BATCH = [
@@ -200,8 +205,8 @@ ACCURATE_PHYSICS_BATCH = [
     ts.StarParams(gait="A3+A4+A8", damping_time=5e-3, profile_closure="ramp", period=0.2,
                   alpha=1.1),
     ts.StarParams(gait="A5+A6+A7", joint_stiffness="series", actuation_ends="shared",
-                  profile_closure="ramp", period=0.25, jet_mode="always"),
-    ts.StarParams(gait="A1+A3+A5", damping_time=2e-3, youngs_modulus=2e6),
+                  profile_closure="ramp", period=0.25, jet_mode="always", damping_time=2e-3,
+                  youngs_modulus=2e6),
 ]
 
 
@@ -209,12 +214,12 @@ ACCURATE_PHYSICS_BATCH = [
 def test_engine_matches_reference_with_damping_joints_ends_and_closure(integrator):
     """Material damping (with the integrator's own strain rate), series joints, shared ends and
     the ramp closure, implemented independently on both sides, agree to ≤ 1e-10 relative on
-    positions after 300 steps (h = 1 ms, crossing the cycle boundary of the 0.2 and 0.25 s
+    positions after 130 steps of 2 ms (crossing the cycle boundaries of the 0.2 and 0.25 s
     periods). Newton converges both to 1e-12 m; what remains is round-off (~1e-14 m)."""
-    solver = ts.SolverConfig(newton_tol=1e-12, integrator=integrator)
-    engine = _final_shapes(ACCURATE_PHYSICS_BATCH, 300, solver)
+    solver = ts.SolverConfig(newton_tol=1e-12, integrator=integrator, dt=2e-3)
+    engine = _final_shapes(ACCURATE_PHYSICS_BATCH, 130, solver)
     for index, params in enumerate(ACCURATE_PHYSICS_BATCH):
-        reference = ReferenceSimulator(params, solver).run(300)
+        reference = ReferenceSimulator(params, solver).run(130)
         error = np.abs(engine[index] - reference[-1]).max()
         assert error <= 1e-10 * np.abs(reference[-1]).max(), (params.gait, error)
         motion = np.abs(reference[-1] - reference[0]).max()
