@@ -331,10 +331,11 @@ class BatchEngine:
             self.state.fire_time[b, m] = time
 
     @ti.func
-    def adaptive_instance(self, b, stop_time, max_steps):
-        """Advance instance b towards stop_time (s) by steps of its own size, at most max_steps
-        attempts. Each step ends exactly on stop_time or on the next cycle start of its periodic
-        gait if it would pass it (then the gait fires there: the step ending at k·T sees K̄(0));
+    def adaptive_instance(self, b, max_steps):
+        """Advance instance b towards its stop_time (s) by steps of its own size, at most
+        max_steps attempts. Each step ends exactly on the stop, on the next cycle start of its
+        periodic gait or on a commanded firing time if it would pass them (the firing happens
+        there: the step ending at the firing time sees K̄(0));
         a converged step is accepted when its local error estimate (m; `first_order_error`, or
         `second_order_error` for BDF2 with a history) is within error_tol, else redone from the
         start state with the step shrunk; the next step grows or shrinks by
@@ -343,6 +344,7 @@ class BatchEngine:
         attempts = 0
         tol = self.error_tol[None]
         dt_min, dt_max = self.dt_min[None], self.dt_max[None]
+        stop_time = self.state.stop_time[b]
         while self.state.status[b] == STATUS_OK and self.state.time[b] < stop_time and attempts < max_steps:
             attempts += 1
             start = self.state.time[b]
@@ -355,6 +357,11 @@ class BatchEngine:
                 if boundary <= target:
                     target = boundary
                     cycle_start = boundary
+            for m in range(N_ACTUATORS):
+                due = self.state.scheduled_fire_time[b, m]
+                if due > start and due < target:
+                    target = due
+                    cycle_start = -1.0
             # land on it exactly; never leave a sliver under a quarter step before it (split
             # the rest in two instead): a rejected step then always shrinks
             end = start + proposed
@@ -365,10 +372,11 @@ class BatchEngine:
             if end != target:
                 cycle_start = -1.0
             h = end - start
-            if cycle_start >= 0.0:
-                for m in range(N_ACTUATORS):
-                    if self.state.schedule_mask[b, m] != 0:
-                        self.fire_at(b, m, cycle_start)
+            for m in range(N_ACTUATORS):
+                if cycle_start >= 0.0 and self.state.schedule_mask[b, m] != 0:
+                    self.fire_at(b, m, cycle_start)
+                if self.state.scheduled_fire_time[b, m] == end:
+                    self.fire_at(b, m, end)
             use_history = self.state.history_valid[b]
             ratio = 1.0
             if use_history == 1:
@@ -384,6 +392,9 @@ class BatchEngine:
                 self.state.history_valid[b] = 1
                 if cycle_start >= 0.0:
                     self.state.schedule_cycles[b] = self.state.schedule_cycles[b] + 1
+                for m in range(N_ACTUATORS):
+                    if self.state.scheduled_fire_time[b, m] == end:
+                        self.state.scheduled_fire_time[b, m] = NEVER
                 growth = 2.0
                 if error > 0.0:
                     growth = ti.min(2.0, ti.max(0.2, 0.9 * ti.sqrt(tol / error)))
@@ -418,13 +429,26 @@ class BatchEngine:
         return error
 
     @ti.kernel
-    def advance_adaptive(self, stop_time: float, max_steps: ti.i32):
-        """Adaptive stepping: advance every live instance towards stop_time (s), at most
+    def advance_adaptive(self, max_steps: ti.i32):
+        """Adaptive stepping: advance every live instance towards its stop_time (s), at most
         max_steps step attempts each in this launch (the host calls again until all are there)."""
         ti.loop_config(block_dim=self.instances_per_block)
         for slot in range(self.capacity * self.loop_spread):
             if slot % self.loop_spread == 0:
-                self.adaptive_instance(slot // self.loop_spread, stop_time, max_steps)
+                self.adaptive_instance(slot // self.loop_spread, max_steps)
+
+    def advance_adaptive_to(self, stop_times: np.ndarray, batch_size: int, max_steps: int = 200):
+        """Advance the first batch_size instances to their stop times (s, (batch_size,)) by
+        adaptive steps; returns when every live one is there."""
+        stops = self.state.stop_time.to_numpy()
+        stops[:batch_size] = stop_times
+        load_field(self.state.stop_time, stops)
+        while True:
+            times = self.state.time.to_numpy()[:batch_size]
+            live = self.state.status.to_numpy()[:batch_size] == STATUS_OK
+            if not (live & (times < stop_times)).any():
+                return
+            self.advance_adaptive(max_steps)
 
     @ti.func
     def restore_backup(self, b):

@@ -113,10 +113,6 @@ def validate_call(params, duration_s, solver, record_interval_s, record_shapes, 
     return params, duration_s, record_interval_s
 
 
-ADAPTIVE_ATTEMPTS_PER_LAUNCH = 200
-"""Step attempts per instance per kernel launch in adaptive mode (a live progress bar)."""
-
-
 class _Clock:
     """Where the run stops and how it gets there: with fixed steps a stop is a step number
     (time = step·dt, the engine's own product); with adaptive steps it is a time."""
@@ -139,13 +135,7 @@ class _Clock:
     def advance_to(self, start, stop, batch, bar):
         """Advance every live instance from stop `start` to stop `stop`."""
         if self.adaptive:
-            state = self.engine.state
-            while True:
-                times = state.time.to_numpy()[:batch]
-                live = state.status.to_numpy()[:batch] == STATUS_OK
-                if not (live & (times < stop)).any():
-                    break
-                self.engine.advance_adaptive(stop, ADAPTIVE_ATTEMPTS_PER_LAUNCH)
+            self.engine.advance_adaptive_to(np.full(batch, stop), batch)
             if bar is not None:
                 bar.update(stop - start)
             return

@@ -94,7 +94,6 @@ class Simulator:
         self.engine.load(self.model, solver, periodic_gaits=False)
         self._initial = self.engine.save_state()
         self._start_centroids = self.engine.centroids_of(self.n_instances)
-        self._float = self.engine.state.fire_time.to_numpy().dtype.type
 
     # ---------------------------------------------------------------- properties
     @property
@@ -111,7 +110,7 @@ class Simulator:
     @property
     def time_s(self) -> np.ndarray:
         """(B,) each instance's current time, s."""
-        return self._steps() * self.solver.dt
+        return self.engine.state.time.to_numpy()[:self.n_instances].astype(np.float64)
 
     # ---------------------------------------------------------------- commands
     def _command_mask(self, commands) -> np.ndarray:
@@ -141,13 +140,13 @@ class Simulator:
         (state unchanged) for a bad shape, dtype, gait or time."""
         mask = self._command_mask(commands)
         state = self.engine.state
-        steps = self._steps()
         rows = np.flatnonzero(mask.any(axis=1))
         if at_s is None:
             fire_time = state.fire_time.to_numpy()
             previous = state.previous_fire_time.to_numpy()
-            # the kernel's own product (f64 or f32): a firing now equals one scheduled for now
-            now = steps.astype(self._float) * self._float(self.solver.dt)
+            # the engine's own clock (with fixed steps the product step·dt that a firing
+            # scheduled for this step gets too)
+            now = state.time.to_numpy()
             for b in rows:
                 previous[b, mask[b]] = fire_time[b, mask[b]]
                 fire_time[b, mask[b]] = now[b]
@@ -156,6 +155,18 @@ class Simulator:
             return
         if isinstance(at_s, bool) or not isinstance(at_s, numbers.Real) or not math.isfinite(at_s):
             raise ValueError(f"at_s must be a finite time in s, got {at_s!r}")
+        if self.solver.adaptive:
+            late = rows[self.time_s[rows] >= at_s]
+            if len(late):
+                raise ValueError(f"at_s = {at_s!r} s is not after the current time of instance "
+                                 f"{int(late[0])} ({self.time_s[late[0]]:.6g} s); fire without "
+                                 f"at_s to fire now")
+            scheduled = state.scheduled_fire_time.to_numpy()
+            for b in rows:
+                scheduled[b, mask[b]] = at_s
+            state.scheduled_fire_time.from_numpy(scheduled)
+            return
+        steps = self._steps()
         step = int(round(at_s / self.solver.dt))
         if abs(step * self.solver.dt - at_s) > 1e-9 * max(1.0, abs(at_s)):
             raise ValueError(f"at_s must be a whole number of steps (dt = {self.solver.dt} s), "
@@ -178,16 +189,19 @@ class Simulator:
         if isinstance(duration_s, bool) or not isinstance(duration_s, numbers.Real) \
                 or not math.isfinite(duration_s) or duration_s <= 0:
             raise ValueError(f"duration_s must be a finite number > 0 s, got {duration_s!r}")
+        if record_interval_s and (isinstance(record_interval_s, bool)
+                                  or not isinstance(record_interval_s, numbers.Real)
+                                  or not record_interval_s > 0):
+            raise ValueError(f"record_interval_s must be a number > 0 s (or 0: no records), "
+                             f"got {record_interval_s!r}")
+        if self.solver.adaptive:
+            return self._advance_adaptive(duration_s, record_interval_s)
         n_steps = int(round(duration_s / self.solver.dt))
         if n_steps < 1:
             raise ValueError(f"duration_s must be at least one step (dt = {self.solver.dt} s), "
                              f"got {duration_s!r}")
         stride = 0
         if record_interval_s:
-            if isinstance(record_interval_s, bool) or not isinstance(record_interval_s, numbers.Real) \
-                    or not record_interval_s > 0:
-                raise ValueError(f"record_interval_s must be a number > 0 s (or 0: no records), "
-                                 f"got {record_interval_s!r}")
             stride = int(round(record_interval_s / self.solver.dt))
             if stride < 1 or abs(stride * self.solver.dt - record_interval_s) > 1e-9 * record_interval_s:
                 raise ValueError(f"record_interval_s must be a whole number of steps (dt = "
@@ -210,6 +224,22 @@ class Simulator:
                 records.append(self.state().assign(record=done // stride))
         if bar is not None:
             bar.close()
+        return pd.concat(records, ignore_index=True) if records else pd.DataFrame(
+            columns=[*STATE_COLUMNS, "record"])
+
+    def _advance_adaptive(self, duration_s, record_interval_s):
+        """`advance` with adaptive steps: every instance to its own time + duration_s, landing
+        exactly on the records."""
+        start = self.time_s
+        count = int(math.floor(duration_s / record_interval_s * (1 + 1e-12))) if record_interval_s else 0
+        offsets = [k * record_interval_s for k in range(1, count + 1)]
+        if not offsets or offsets[-1] < duration_s:
+            offsets.append(duration_s)
+        records = []
+        for index, offset in enumerate(offsets):
+            self.engine.advance_adaptive_to(start + offset, self.n_instances)
+            if record_interval_s and index < count:
+                records.append(self.state().assign(record=index + 1))
         return pd.concat(records, ignore_index=True) if records else pd.DataFrame(
             columns=[*STATE_COLUMNS, "record"])
 

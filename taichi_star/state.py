@@ -54,6 +54,10 @@ class BatchState:
         """Adaptive stepping: the size of the next step to try, s."""
         self.previous_step_size = ti.field(float, shape=capacity)
         """Adaptive stepping: the size of the last accepted step, s."""
+        self.stop_time = ti.field(float, shape=capacity)
+        """Adaptive stepping: where the current launch advances the instance to, s."""
+        self.scheduled_fire_time = ti.field(float, shape=(capacity, N_ACTUATORS))
+        """Adaptive stepping: time of a commanded firing that is due (NEVER: none), s."""
         self.rejected_steps = ti.field(ti.i32, shape=capacity)
         """Adaptive stepping: steps rejected by the error estimate or a failed Newton solve."""
         self.newton_total = ti.field(ti.i64, shape=capacity)
@@ -94,6 +98,7 @@ class BatchState:
         self.failure_step.fill(-1)
         self.fire_time.fill(NEVER)
         self.scheduled_fire_step.fill(-1)
+        self.scheduled_fire_time.fill(NEVER)
         self.previous_fire_time.fill(NEVER)
 
     def save(self) -> Dict[str, np.ndarray]:
