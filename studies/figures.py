@@ -84,7 +84,7 @@ def plot_fig4c(csv_path, png_path, title: str = None):
         top = row["exp_speed_mm_s"] + (spread[i] if spread is not None else 0.0)
         ax.text(i + width / 2, top if np.isfinite(top) else 0.0, paper, ha="center",
                 va="bottom", fontsize=8)
-    ax.set_xticks(x, [g.replace("+", "&") for g in table["gait"]])
+    ax.set_xticks(x, list(table["gait"]))
     ax.set_ylabel("speed (mm/s)")
     ax.set_title(title or "Fig. 4c: swimming speed, 3 cycles from rest "
                           "(labels: direction; red = disagrees with the paper)", fontsize=9)
@@ -108,7 +108,7 @@ def plot_fig4b(csv_path, png_path, title: str = None):
             part = table[(table["gait"] == gait) & (table["source"] == source)]
             if len(part):
                 ax.plot(part["t_s"], part["displacement_mm"], style, color=colour,
-                        label=f"{gait.replace('+', '&')} ({source[:3]}.)")
+                        label=f"{gait} ({'simulation' if source.startswith('sim') else 'experiment'})")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("centroid displacement (mm)")
     ax.set_title(title or "Fig. 4b: centroid displacement (simulation solid, experiment dashed)",
@@ -139,9 +139,9 @@ def run_fig4c(out: cli.Output, base: StarParams, solver: SolverConfig, *, durati
                                f"{fig4b_prefix}.csv")
     note = f" {title_note}" if title_note else ""
     out.wrote(plot_fig4c(table_csv, out.path(f"{prefix}.png"),
-                         title=f"Fig. 4c{note}: speed over {duration_s:g} s from rest (labels: "
+                         title=f"Fig. 4c{note}: speed over {duration_s:g} s from rest\n(labels: "
                                f"direction; red = disagrees with the paper)"),
               plot_fig4b(curves_csv, out.path(f"{fig4b_prefix}.png"),
-                         title=f"Fig. 4b{note}: centroid displacement (simulation solid, "
+                         title=f"Fig. 4b{note}:\ncentroid displacement (simulation solid, "
                                f"experiment dashed)"))
     return pd.read_csv(table_csv)

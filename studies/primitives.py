@@ -47,7 +47,7 @@ def plot_primitives(csv_path, png_path) -> Path:
                         c=moving["turn_deg"], cmap="coolwarm", vmin=-limit, vmax=limit,
                         s=8 + 6 * moving["n_actuators"], edgecolors="k", linewidths=0.3)
     fastest = moving.loc[moving["step_mm"].idxmax()]
-    ax.annotate(fastest["gait"].replace("+", "&"),
+    ax.annotate(fastest["gait"],
                 (np.radians(fastest["direction_deg"]), fastest["step_mm"]), fontsize=7,
                 xytext=(4, 4), textcoords="offset points")
     fig.colorbar(points, ax=ax, pad=0.1, shrink=0.8, label="turn per cycle (deg, ccw)")

@@ -127,7 +127,7 @@ def plot_sensitivity(csv_path, png_path) -> Path:
         ax.bar(x - 0.2, part["S1"], 0.4, yerr=part["S1_conf"], capsize=2, label="S1 (first order)")
         ax.bar(x + 0.2, part["ST"], 0.4, yerr=part["ST_conf"], capsize=2, label="ST (total)")
         ax.axhline(0, color="k", lw=0.5)
-        ax.set_ylabel(gait.replace("+", "&"))
+        ax.set_ylabel(gait)
         ax.set_ylim(-0.1, 1.1)  # the indices' range; wider confidence bars run off it
         ax.set_xticks(x, part["parameter"], rotation=35, ha="right", fontsize=8)
     axes[0, 0].legend(fontsize=7, ncol=2)
