@@ -108,7 +108,7 @@ def plot_fig4b(csv_path, png_path, title: str = None):
             part = table[(table["gait"] == gait) & (table["source"] == source)]
             if len(part):
                 ax.plot(part["t_s"], part["displacement_mm"], style, color=colour,
-                        label=f"{gait} ({'simulation' if source.startswith('sim') else 'experiment'})")
+                        label=f"{gait} ({source})")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("centroid displacement (mm)")
     ax.set_title(title or "Fig. 4b: centroid displacement (simulation solid, experiment dashed)",
