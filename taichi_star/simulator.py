@@ -156,30 +156,22 @@ class Simulator:
         if isinstance(at_s, bool) or not isinstance(at_s, numbers.Real) or not math.isfinite(at_s):
             raise ValueError(f"at_s must be a finite time in s, got {at_s!r}")
         if self.solver.adaptive:
-            late = rows[self.time_s[rows] >= at_s]
-            if len(late):
-                raise ValueError(f"at_s = {at_s!r} s is not after the current time of instance "
-                                 f"{int(late[0])} ({self.time_s[late[0]]:.6g} s); fire without "
-                                 f"at_s to fire now")
-            scheduled = state.scheduled_fire_time.to_numpy()
-            for b in rows:
-                scheduled[b, mask[b]] = at_s
-            state.scheduled_fire_time.from_numpy(scheduled)
-            return
-        steps = self._steps()
-        step = int(round(at_s / self.solver.dt))
-        if abs(step * self.solver.dt - at_s) > 1e-9 * max(1.0, abs(at_s)):
-            raise ValueError(f"at_s must be a whole number of steps (dt = {self.solver.dt} s), "
-                             f"got {at_s!r}")
-        late = rows[steps[rows] >= step]
+            due, clock, table = at_s, self.time_s, state.scheduled_fire_time
+        else:
+            due = int(round(at_s / self.solver.dt))
+            if abs(due * self.solver.dt - at_s) > 1e-9 * max(1.0, abs(at_s)):
+                raise ValueError(f"at_s must be a whole number of steps (dt = {self.solver.dt} "
+                                 f"s), got {at_s!r}")
+            clock, table = self._steps(), state.scheduled_fire_step
+        late = rows[clock[rows] >= due]
         if len(late):
             raise ValueError(f"at_s = {at_s!r} s is not after the current time of instance "
-                             f"{int(late[0])} ({steps[late[0]] * self.solver.dt:.6g} s); fire "
-                             f"without at_s to fire now")
-        scheduled = state.scheduled_fire_step.to_numpy()
+                             f"{int(late[0])} ({self.time_s[late[0]]:.6g} s); fire without at_s "
+                             f"to fire now")
+        scheduled = table.to_numpy()
         for b in rows:
-            scheduled[b, mask[b]] = step
-        state.scheduled_fire_step.from_numpy(scheduled)
+            scheduled[b, mask[b]] = due
+        table.from_numpy(scheduled)
 
     def advance(self, duration_s: float, record_interval_s: float = 0.0,
                 progress: bool = False) -> pd.DataFrame:

@@ -114,15 +114,6 @@ def test_parameter_values_come_from_unit_coordinates_and_stay_in_range():
     assert linear.unit(0.0) == 0.0 and linear.unit(5.0) == 1.0  # outside the box: clipped
 
 
-@pytest.fixture
-def no_compute(monkeypatch):
-    """Any call to simulate fails the test: argument errors must come before compute."""
-    def forbidden(*args, **kwargs):
-        raise AssertionError("simulate was called despite invalid arguments")
-    monkeypatch.setattr("taichi_star.batch.tasks.simulate", forbidden)
-    monkeypatch.setattr(taichi_star, "simulate", forbidden)
-
-
 @pytest.mark.parametrize("study, argv, message", [
     ("calibrate", ["--fit", "alpha=1.5:0.2"], "--fit alpha: reversed or empty bounds"),
     ("calibrate", ["--fit", "alpha=0.5:0.5"], "--fit alpha: reversed or empty bounds"),

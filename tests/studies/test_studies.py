@@ -108,15 +108,6 @@ def test_quick_defaults_and_presets():
         cli.base_params(cli.parse(parser, ["--set", "gait=A1"]))
 
 
-@pytest.fixture
-def no_compute(monkeypatch):
-    """Any simulation fails the test: argument errors must come before compute."""
-    def forbidden(*args, **kwargs):
-        raise AssertionError("simulate was called despite invalid arguments")
-    monkeypatch.setattr("taichi_star.batch.tasks.simulate", forbidden)
-    monkeypatch.setattr(taichi_star, "simulate", forbidden)
-
-
 @pytest.mark.parametrize("study, argv, message", [
     ("sweep", ["--alpha", "0.2:1.2"], "--alpha: malformed range"),
     ("sweep", ["--alpha", "0.2:1.2:zero"], "--alpha: malformed range"),
