@@ -36,8 +36,6 @@ def test_mkdocs_build_strict(built_site):
     assert "youngs_modulus" in api and "newton_tol" in api
 
 
-@pytest.mark.xfail(strict=False, reason="public docstrings (taichi_star/experiment.py) still cite "
-                                        "the internal design document; being removed")
 def test_rendered_site_does_not_cite_the_internal_design(built_site):
     completed, site = built_site
     assert completed.returncode == 0
