@@ -476,7 +476,7 @@ def plot_work_precision(summary_csv, png_path):
             f"{row['timing_batch']}", point,
             xytext=(40 if x < 0.5 else -40, 50 if y < 0.5 else -50), textcoords="offset points",
             ha="left" if x < 0.5 else "right", va="center",
-            fontsize=8, bbox={"boxstyle": "round", "fc": "white", "ec": "0.6"},
+            fontsize=8, bbox={"boxstyle": "round", "fc": "white", "ec": "0.6", "alpha": 0.85},
             arrowprops={"arrowstyle": "->", "color": "0.3"})
     pareto.set_xlabel("run time of one batch of the gaits (s)")
     pareto.set_ylabel("max speed error over the gaits vs the model's continuum limit")
@@ -517,6 +517,10 @@ def plot_work_precision(summary_csv, png_path):
     by_mesh.set_ylabel("max speed error vs the space limit")
     by_mesh.set_title("discretisation error (limit: the two finest meshes)", fontsize=9)
 
+    for ax, values in ((by_h, fixed_steps["h_ms"]), (by_mesh, space["n_arc"])):
+        values = sorted(set(values))
+        ax.set_xticks(values, [f"{v:g}" for v in values])
+        ax.xaxis.set_minor_locator(plt.NullLocator())
     legend_panel = fig.add_subplot(grid[0, 2])
     legend_panel.axis("off")
     legend_panel.legend(*pareto.get_legend_handles_labels(), fontsize=8, loc="center left")
@@ -549,6 +553,10 @@ def main(argv=None):
     out = cli.Output(args, argv or [], model={"models": MODEL_PRESETS, "gaits": gaits},
                      solver={"grid": grid, "configurations": [c.label() for c in configs]})
     machine = provenance.machine_columns(args.arch)
+    # taken before the runs: the code that ran, not what the tree became meanwhile
+    provenance_columns = {"machine": machine["machine"], "cpu_model": machine["cpu_model"],
+                          "cores": machine["cores"], "commit": provenance.short_commit(),
+                          "timestamp": out.provenance["date"]}
     load_at_start = os.getloadavg()
 
     bar = None
@@ -575,9 +583,6 @@ def main(argv=None):
     table = pd.concat(parts, ignore_index=True)
     table.insert(0, "config", np.repeat(np.arange(len(parts)), len(gaits)))
     table = add_errors(table, refs, gaits)
-    provenance_columns = {"machine": machine["machine"], "cpu_model": machine["cpu_model"],
-                          "cores": machine["cores"], "commit": provenance.short_commit(),
-                          "timestamp": out.provenance["date"]}
     for name, value in provenance_columns.items():
         table[name] = value
     summary = summarise(table, run_times, load_average, grid.timing_batch)
