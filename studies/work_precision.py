@@ -1,42 +1,68 @@
-"""Run time against error: the five paper gaits' speeds over 3 cycles from rest for
-time step, precision, Newton tolerance, discretisation and integrator, against a reference run.
+"""Work–precision: the time-step error and the discretisation error of the five paper gaits'
+speeds over 3 cycles from rest, for the undamped (paper) and the damped (accurate) model, and
+what each setting costs in run time.
 
-    python -m studies work_precision [--arch cpu|gpu] [--out DIR] [--quick]
+    python -m studies work_precision [--out DIR] [--quick] [--arch cpu|gpu]
                                      [--gaits paper|A1,A1+A2,...] [--cycles 3] [--no-progress]
 
-Reference: h = 0.125 ms, f64, newton_tol 1e-12 m, 2× the paper's discretisation (n_arc 36,
-n_limb 12), BDF2. Configurations (not the full Cartesian product): one
-axis at a time around the default (h = 1 ms, f64, tol 1e-10 m, 1× = n_arc 18 / n_limb 6, implicit
-Euler), i.e. f32 (tol 1e-7 and 1e-6 m: f32 cannot resolve less), tol 1e-6 and 1e-8 m, ½× (n_arc
-9, n_limb 3); and the h axis h ∈ {0.25, 0.5, 1, 2, 4, 8} ms for every integrator, both at 1× and at
-2× (the reference's discretisation, where the error is the time-stepping and solver error alone).
-Each configuration is one `simulate` batch of the gaits; its run time is the wall time of that
-call after a one-step call has compiled its kernels. With a handful of instances the batch
-cannot fill many cores: these run times rank the settings, `studies bench` measures throughput.
+Models: "undamped" = `StarParams.preset("paper")` (no damping, clamped actuator ends,
+limb-stiff joints; its preset mesh n_arc 18) and "damped" = `StarParams.preset("accurate")`
+(damping time 0.94 ms, series joints, shared ends; n_arc 36), with n_arc varied.
 
-Error of a gait: |speed − reference speed| / |reference speed| of `speed_mm_s` (3 cycles from
-rest); a configuration's error is the largest over the gaits (NaN if an instance
-failed). h values that do not divide the duration simulate the nearest whole number of steps.
+Speed error of a run against a reference: |v − v_ref| / max(|v_ref|, 0.5 mm/s), v the signed
+speed over `--cycles` cycles from rest (mm/s), so that a near-cancelling gait (A1 ≈ 0.1 mm/s)
+is judged on an absolute 5 µm/s at 1 %. A configuration's error is the largest over the gaits
+(NaN when an instance failed).
+
+References (Richardson extrapolation over a ladder refined by 2 per level):
+- time limit of a model: fixed-step BDF2 (Newton) on the preset mesh at the two finest h of
+  `BDF2_H_MS`; space limit: fixed-step BDF2 at h = `SPACE_H_MS` on the two finest n_arc of
+  `N_ARCS`. The limit is v_f + (v_f − v_m)/(2^p − 1), p the observed order of the ladder's three
+  finest levels, log2(max_g |v_c − v_m| / max_g |v_m − v_f|) over the gaits, taken as at least 1
+  (`MIN_ORDER`): below that the ladder is not in its asymptotic range, and p = 1 moves the limit
+  no further from the finest run than the last change.
+- continuum limit of a model: its space limit plus the time error of the space ladder's step
+  measured on the preset mesh (time limit − the BDF2 run at `SPACE_H_MS` on the preset mesh).
+
+Configurations (each one batch of the gaits): the time series on each model's preset mesh
+(implicit Euler at `EULER_H_MS`, BDF2 at `BDF2_H_MS`, adaptive BDF2 with the chord Jacobian and
+adaptive implicit Euler at `ERROR_TOLS`, adaptive BDF2 with Newton at the accurate preset's
+tolerance), the space series (BDF2 at `SPACE_H_MS` over `N_ARCS`), and other meshes with the
+presets' solvers (`MESH_N_ARCS`). Each is timed as one call after a one-step call has compiled
+its engine. Time error: against its model's time limit (preset mesh only); space error:
+against the space limit (space series only); total error: against the continuum limit.
+
+The presets, `paper` (implicit Euler 1 ms, n_arc 18, undamped) and `accurate` (adaptive BDF2,
+error_tol 3e-6 m, chord, n_arc 36, damped), are also timed at `TIMING_BATCH` instances (the
+gaits repeated) in the same process, alternated `TIMING_ROUNDS` times after a compiling call,
+the best of each kept; the machine and its load average are recorded.
 
 Writes
-- `work_precision.csv`: one row per configuration × gait (the reference's rows too, varied =
-  "reference"): config, label, varied (the settings that differ from the default), integrator,
-  dt_s, precision, newton_tol, discretisation, n_arc, n_limb, gait, duration_s, steps,
-  speed_mm_s, signed_speed_mm_s, reference_speed_mm_s, rel_error, max_rel_error, run_time_s,
-  robot_steps_per_s, robot_seconds_per_wall_s (simulated robot-seconds per wall second), newton_iterations_mean, status, pareto (on the front of max
-  error against run time), reference, arch, machine, commit, timestamp;
-- `work_precision_orders.csv`: observed convergence order in h of each integrator at each
-  discretisation, per gait and for the max over gaits: slope of log error against log h over all
-  h (order_fit), over the two smallest h (order_fine) and the two largest (order_coarse);
-- `work_precision.png`: error against run time (log-log, Pareto front marked, labels) and error
-  against h per integrator and discretisation.
+- `work_precision.csv`: one row per configuration × gait: config, label, model, preset, series,
+  n_arc, integrator, jacobian, stepping, h_ms (fixed step; the first step when adaptive),
+  error_tol_m, gait, duration_s, signed_speed_mm_s, time_limit_mm_s, time_error,
+  space_limit_mm_s, space_error, continuum_limit_mm_s, total_error, steps, rejected_steps,
+  newton_iterations_mean, status, run_time_s (the batch of the gaits), robot_seconds_per_wall_s,
+  machine, cpu_model, cores, commit, timestamp;
+- `work_precision_summary.csv`: one row per configuration: the largest time, space and total
+  errors and the gait of the largest total error, run time, robot-seconds per wall second,
+  steps, Newton iterations, status, pareto (on its model's front of total error against run
+  time); for the presets the `TIMING_BATCH` timing: timing_batch, timing_run_times_s,
+  timing_robot_seconds_per_wall_s, ratio_to_paper, load_average_1min;
+- `work_precision_references.csv`: per model, ladder (time, space) and gait the ladder's three
+  finest levels and speeds, the gait's own observed order, the ladder's observed and used
+  order, the limit and the finest run's error against it (the extrapolation); and the
+  continuum limit (ladder "continuum");
+- `work_precision.png`: total error against run time (Pareto fronts, paper and accurate
+  marked), time error against h and against error_tol, space error against n_arc.
 """
 
 from __future__ import annotations
 
 import math
+import os
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
@@ -46,119 +72,295 @@ from taichi_star import SolverConfig, StarParams
 
 from . import cli, provenance
 
-DESCRIPTION = ("Run time against error: h, precision, Newton tolerance, discretisation and "
-               "integrator, five gaits' 3-cycle speeds against a refined reference.")
+DESCRIPTION = ("Work–precision: time-step and discretisation errors of the five gaits' 3-cycle "
+               "speeds (damped and undamped models) against Richardson limits, and run times.")
 
-H_MS = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
-QUICK_H_MS = (1.0, 2.0)
-DISCRETISATIONS = {"0.5x": (9, 3), "1x": (18, 6), "2x": (36, 12)}
-"""Name -> (n_arc, n_limb): ½×, 1× (the paper's N = 193) and 2×."""
-F32_TOLERANCES = (1e-7, 1e-6)
-"""f32 cannot converge below ~1e-7 m (SolverConfig refuses it)."""
-QUICK_DURATION_S = 0.1
+MODEL_PRESETS = {"undamped": "paper", "damped": "accurate"}
+"""Model -> the StarParams preset that defines its physics (and its preset mesh)."""
+SPEED_FLOOR_MM_S = 0.5
+"""Smallest speed scale of the error metric, mm/s."""
+MIN_ORDER = 1.0
+"""Smallest order a Richardson extrapolation uses."""
+REFINEMENT = 2.0
+"""Ratio of successive levels of a ladder (h halved, n_arc doubled)."""
+
+EULER_H_MS = (4.0, 2.0, 1.0, 0.5)
+BDF2_H_MS = (4.0, 2.0, 1.0, 0.5, 0.25, 0.125)
+"""Fixed steps, ms; the last three of BDF2_H_MS make the time ladder."""
+ERROR_TOLS = (1e-5, 3e-6, 1e-6, 3e-7)
+"""Adaptive tolerances, m (at 5e-8 m and below the adaptive stepper stalls just after the
+second cycle starts: not used)."""
+SPACE_H_MS = 0.25
+N_ARCS = {"undamped": (18, 36, 72, 144), "damped": (18, 36, 72, 144)}
+"""The space ladder's meshes (its last three make the ladder)."""
+MESH_N_ARCS = {"undamped": (36, 72), "damped": (18, 24, 48, 72)}
+"""Other meshes, run with their model's preset solver (the damped ones also at error_tol
+1e-6 m)."""
+ACCURATE_SOLVER = SolverConfig.preset("accurate")
+TIMING_BATCH = 64
+TIMING_ROUNDS = 2
+
+QUICK_DURATION_S = 0.3
 QUICK_GAITS = ("A1+A2", "A1+A3")
+QUICK_EULER_H_MS = (2.0, 1.0)
+QUICK_BDF2_H_MS = (2.0, 1.0, 0.5)
+QUICK_ERROR_TOLS = (3e-6,)
+QUICK_SPACE_H_MS = 1.0
+QUICK_N_ARCS = {"undamped": (9, 18, 36), "damped": (9, 18, 36)}
+QUICK_TIMING_BATCH = 8
 
-INTEGRATORS = ("euler", "bdf2")
-"""The integrator axis."""
 
-ORDER_COLUMNS = ["integrator", "discretisation", "n_arc", "n_limb", "gait", "n_points",
-                 "h_min_ms", "h_max_ms", "order_fit", "order_fine", "order_coarse"]
+@dataclass(frozen=True)
+class Grid:
+    """The configurations' axes (full or --quick). Steps in ms, tolerances in m."""
+
+    euler_h_ms: tuple
+    bdf2_h_ms: tuple
+    error_tols: tuple
+    space_h_ms: float
+    n_arcs: dict
+    mesh_n_arcs: dict
+    timing_batch: int
+
+
+FULL_GRID = Grid(EULER_H_MS, BDF2_H_MS, ERROR_TOLS, SPACE_H_MS, N_ARCS, MESH_N_ARCS, TIMING_BATCH)
+QUICK_GRID = Grid(QUICK_EULER_H_MS, QUICK_BDF2_H_MS, QUICK_ERROR_TOLS, QUICK_SPACE_H_MS,
+                  QUICK_N_ARCS, {"undamped": (), "damped": ()}, QUICK_TIMING_BATCH)
 
 
 @dataclass(frozen=True)
 class Config:
-    """One solver/discretisation setting. dt_s in s, newton_tol in m."""
+    """One model, mesh and solver."""
 
-    dt_s: float = 1e-3
-    precision: str = "f64"
-    newton_tol: float = 1e-10
-    discretisation: str = "1x"
-    integrator: str = "euler"
-
-    def solver(self) -> SolverConfig:
-        return SolverConfig(dt=self.dt_s, precision=self.precision, newton_tol=self.newton_tol,
-                            integrator=self.integrator)
+    model: str
+    n_arc: int
+    solver: SolverConfig
 
     def params(self, gaits):
-        n_arc, n_limb = DISCRETISATIONS[self.discretisation]
-        return [StarParams(gait=g, n_arc=n_arc, n_limb=n_limb) for g in gaits]
+        """One instance per gait."""
+        return [StarParams.preset(MODEL_PRESETS[self.model], gait=g, n_arc=self.n_arc)
+                for g in gaits]
 
-    def varied(self) -> str:
-        """The fields that differ from the default setting ("default" when none)."""
-        names = [name for name in self.__dataclass_fields__
-                 if getattr(self, name) != getattr(DEFAULT, name)]
-        return ",".join(names) or "default"
+    @property
+    def preset_mesh(self) -> int:
+        """n_arc of the model's preset."""
+        return StarParams.preset(MODEL_PRESETS[self.model]).n_arc
+
+    def preset(self) -> str:
+        """"paper" or "accurate" when this is that preset's model, mesh and solver, else ""."""
+        name = MODEL_PRESETS[self.model]
+        return name if self == preset_config(self.model) else ""
 
     def label(self) -> str:
-        """Short label: the settings that differ from the default."""
-        parts = []
-        if self.dt_s != DEFAULT.dt_s:
-            parts.append(f"h={self.dt_s * 1e3:g}ms")
-        if self.integrator != DEFAULT.integrator:
-            parts.append(self.integrator)
-        if self.precision != DEFAULT.precision:
-            parts.append(self.precision)
-        if self.newton_tol != DEFAULT.newton_tol:
-            parts.append(f"tol={self.newton_tol:.0e}")
-        if self.discretisation != DEFAULT.discretisation:
-            parts.append(self.discretisation)
-        return " ".join(parts) or "default"
+        """e.g. "bdf2 h=0.5ms", "bdf2 tol=3e-06 chord", "euler h=1ms n_arc=72" (fixed steps:
+        Newton's method)."""
+        s = self.solver
+        parts = ([s.integrator, f"tol={s.error_tol:.0e}", s.jacobian] if s.adaptive
+                 else [s.integrator, f"h={s.dt * 1e3:g}ms"])
+        if self.n_arc != self.preset_mesh:
+            parts.append(f"n_arc={self.n_arc}")
+        return " ".join(parts)
 
 
-DEFAULT = Config()
-REFERENCE = Config(dt_s=1.25e-4, newton_tol=1e-12, discretisation="2x", integrator=INTEGRATORS[-1])
+def fixed(integrator: str, h_ms: float) -> SolverConfig:
+    """Fixed steps of h_ms milliseconds, Newton's method."""
+    return SolverConfig(integrator=integrator, dt=h_ms * 1e-3)
 
 
-def configurations(quick: bool):
-    """The configurations to run (reference excluded), deduplicated, f64 first (a precision
-    switch re-initialises Taichi)."""
-    if quick:
-        configs = [replace(DEFAULT, dt_s=h * 1e-3, integrator=integrator)
-                   for integrator in INTEGRATORS for h in QUICK_H_MS]
-        configs.append(replace(DEFAULT, newton_tol=1e-6))
-    else:
-        configs = [replace(DEFAULT, dt_s=h * 1e-3, integrator=integrator, discretisation=disc)
-                   for disc in ("1x", "2x") for integrator in INTEGRATORS for h in H_MS]
-        configs += [replace(DEFAULT, newton_tol=tol) for tol in (1e-6, 1e-8)]
-        configs += [replace(DEFAULT, discretisation="0.5x")]
-        configs += [replace(DEFAULT, precision="f32", newton_tol=tol) for tol in F32_TOLERANCES]
-    unique = list(dict.fromkeys(configs))
-    return sorted(unique, key=lambda c: c.precision != "f64")
+def adaptive(integrator: str, error_tol: float, jacobian: str) -> SolverConfig:
+    """The accurate preset's adaptive stepping (first step 1 ms) with another integrator,
+    tolerance (m) or Jacobian."""
+    return ACCURATE_SOLVER.replace(integrator=integrator, error_tol=error_tol, jacobian=jacobian)
 
 
-def run_config(config: Config, gaits, cycles, duration_s, arch, progress=False):
-    """(summary, run_time_s, steps) of one batch of the gaits: a one-step call compiles, then
-    the timed call simulates `duration_s` (or `cycles` periods)."""
-    params = config.params(gaits)
-    solver = config.solver()
-    duration = duration_s if duration_s is not None else cycles * params[0].period
-    taichi_star.simulate(params, solver.dt, solver=solver, arch=arch)
-    start = time.perf_counter()
-    result = taichi_star.simulate(params, duration, solver=solver, arch=arch, progress=progress)
-    run_time = time.perf_counter() - start
-    return result.summary, run_time, int(round(duration / solver.dt))
+def preset_config(model: str) -> Config:
+    """The model's preset: its StarParams and SolverConfig presets."""
+    name = MODEL_PRESETS[model]
+    return Config(model, StarParams.preset(name).n_arc, SolverConfig.preset(name))
 
 
-def config_rows(config, summary, run_time, steps, reference_speeds):
-    """The rows of one configuration: one per gait with its error against the reference."""
-    n_arc, n_limb = DISCRETISATIONS[config.discretisation]
-    ok = (summary["status"] == "ok").to_numpy()
-    speed = summary["speed_mm_s"].to_numpy(dtype=float)
-    reference = np.array([reference_speeds[g] for g in summary["gait"]])
-    error = np.where(ok, np.abs(speed - reference) / np.abs(reference), np.nan)
-    largest = float(np.max(error)) if np.isfinite(error).all() else math.nan
-    duration = steps * config.dt_s
+def time_ladder(model: str, grid: Grid):
+    """The time ladder's configurations, coarse to fine."""
+    mesh = preset_config(model).n_arc
+    return [Config(model, mesh, fixed("bdf2", h)) for h in grid.bdf2_h_ms[-3:]]
+
+
+def space_ladder(model: str, grid: Grid):
+    """The space ladder's configurations, coarse to fine."""
+    return [Config(model, n, fixed("bdf2", grid.space_h_ms)) for n in grid.n_arcs[model][-3:]]
+
+
+def configurations(grid: Grid):
+    """Every configuration of both models, deduplicated, in running order."""
+    configs = []
+    for model in MODEL_PRESETS:
+        mesh = preset_config(model).n_arc
+        configs.append(preset_config(model))
+        configs += [Config(model, mesh, fixed("euler", h)) for h in grid.euler_h_ms]
+        configs += [Config(model, mesh, fixed("bdf2", h)) for h in grid.bdf2_h_ms]
+        configs += [Config(model, mesh, adaptive("bdf2", tol, "chord")) for tol in grid.error_tols]
+        configs += [Config(model, mesh, adaptive("euler", tol, "newton"))
+                    for tol in grid.error_tols]
+        configs.append(Config(model, mesh, adaptive("bdf2", ACCURATE_SOLVER.error_tol,
+                                                    "newton")))
+        configs += [Config(model, n, fixed("bdf2", grid.space_h_ms)) for n in grid.n_arcs[model]]
+        for n in grid.mesh_n_arcs[model]:
+            configs.append(Config(model, n, preset_config(model).solver))
+            if model == "damped":
+                configs.append(Config(model, n, adaptive("bdf2", 1e-6, "chord")))
+    return list(dict.fromkeys(configs))
+
+
+# --------------------------------------------------------------------------- errors, references
+
+def speed_error(speed, reference):
+    """|v − v_ref| / max(|v_ref|, SPEED_FLOOR_MM_S), speeds in mm/s (arrays broadcast)."""
+    reference = np.asarray(reference, dtype=float)
+    return np.abs(np.asarray(speed, dtype=float) - reference) / np.maximum(
+        np.abs(reference), SPEED_FLOOR_MM_S)
+
+
+def observed_order(coarse, middle, fine) -> float:
+    """Observed order of a ladder (levels refined by REFINEMENT) from its three finest levels'
+    speeds (arrays over the gaits): log(max|v_c − v_m| / max|v_m − v_f|) / log(REFINEMENT)."""
+    coarse_change = np.max(np.abs(np.asarray(coarse) - np.asarray(middle)))
+    fine_change = np.max(np.abs(np.asarray(middle) - np.asarray(fine)))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return float(np.log(coarse_change / fine_change) / np.log(REFINEMENT))
+
+
+def order_used(observed: float) -> float:
+    """The order a Richardson extrapolation uses: the observed one, at least MIN_ORDER."""
+    return observed if observed >= MIN_ORDER else MIN_ORDER
+
+
+def richardson_limit(middle, fine, order: float):
+    """v_f + (v_f − v_m) / (REFINEMENT^order − 1)."""
+    fine = np.asarray(fine, dtype=float)
+    return fine + (fine - np.asarray(middle, dtype=float)) / (REFINEMENT ** order - 1.0)
+
+
+def ladder_reference(model, ladder, levels, speeds, gaits):
+    """Rows of the references table for one ladder and its limit per gait. levels: the three
+    finest (h in ms or n_arc), speeds: their (3, gaits) signed speeds, mm/s."""
+    coarse, middle, fine = speeds
+    observed = observed_order(coarse, middle, fine)
+    used = order_used(observed)
+    limit = richardson_limit(middle, fine, used)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        gait_orders = np.log(np.abs(coarse - middle) / np.abs(middle - fine)) / np.log(REFINEMENT)
     return pd.DataFrame({
-        "label": config.label(), "varied": config.varied(), "integrator": config.integrator,
-        "dt_s": config.dt_s, "precision": config.precision, "newton_tol": config.newton_tol,
-        "discretisation": config.discretisation, "n_arc": n_arc, "n_limb": n_limb,
-        "gait": summary["gait"].to_numpy(), "duration_s": duration, "steps": steps,
-        "speed_mm_s": speed, "signed_speed_mm_s": summary["signed_speed_mm_s"].to_numpy(),
-        "reference_speed_mm_s": reference, "rel_error": error, "max_rel_error": largest,
-        "run_time_s": run_time, "robot_steps_per_s": len(summary) * steps / run_time,
-        "robot_seconds_per_wall_s": len(summary) * duration / run_time,
+        "model": model, "ladder": ladder, "gait": gaits,
+        "refined": "h_ms" if ladder == "time" else "n_arc",
+        "coarse": levels[0], "middle": levels[1], "fine": levels[2],
+        "coarse_speed_mm_s": coarse, "middle_speed_mm_s": middle, "fine_speed_mm_s": fine,
+        "gait_order": gait_orders, "observed_order": observed, "order_used": used,
+        "limit_mm_s": limit, "fine_error": speed_error(fine, limit)})
+
+
+def references(speeds, grid: Grid, gaits):
+    """The references table: the time and space ladders' limits and the continuum limit of
+    each model. speeds: Config -> signed speeds over the gaits, mm/s."""
+    parts = []
+    for model in MODEL_PRESETS:
+        time_configs, space_configs = time_ladder(model, grid), space_ladder(model, grid)
+        time_part = ladder_reference(model, "time", [c.solver.dt * 1e3 for c in time_configs],
+                                     np.array([speeds[c] for c in time_configs]), gaits)
+        space_part = ladder_reference(model, "space", [c.n_arc for c in space_configs],
+                                      np.array([speeds[c] for c in space_configs]), gaits)
+        on_preset_mesh = Config(model, preset_config(model).n_arc, space_configs[0].solver)
+        step_time_error = time_part["limit_mm_s"].to_numpy() - speeds[on_preset_mesh]
+        continuum = space_part["limit_mm_s"].to_numpy() + step_time_error
+        parts += [time_part, space_part,
+                  pd.DataFrame({"model": model, "ladder": "continuum", "gait": gaits,
+                                "limit_mm_s": continuum})]
+    return pd.concat(parts, ignore_index=True)
+
+
+def limits_of(table: pd.DataFrame, model: str, ladder: str) -> np.ndarray:
+    """The limit speeds (mm/s, over the gaits in order) of one model's ladder."""
+    part = table[(table["model"] == model) & (table["ladder"] == ladder)]
+    return part["limit_mm_s"].to_numpy()
+
+
+# --------------------------------------------------------------------------- runs
+
+def run_config(config: Config, gaits, duration_s, arch):
+    """(summary, run time s) of one batch of the gaits: a one-step call compiles, then the
+    timed call simulates duration_s."""
+    params = config.params(gaits)
+    taichi_star.simulate(params, config.solver.dt, config.solver, arch=arch)
+    start = time.perf_counter()
+    summary = taichi_star.simulate(params, duration_s, config.solver, arch=arch).summary
+    return summary, time.perf_counter() - start
+
+
+def time_presets(gaits, duration_s, batch, arch):
+    """Run times (s) of `batch` instances (the gaits repeated) of each preset, its model's
+    configuration and solver, in alternation TIMING_ROUNDS times after one compiling call each;
+    and the 1-minute load average just before the first timed call."""
+    batches = {}
+    for model in MODEL_PRESETS:
+        config = preset_config(model)
+        params = config.params([gaits[i % len(gaits)] for i in range(batch)])
+        taichi_star.simulate(params, config.solver.dt, config.solver, arch=arch)
+        batches[MODEL_PRESETS[model]] = (params, config.solver)
+    load_average = os.getloadavg()[0]
+    run_times = {name: [] for name in batches}
+    for _ in range(TIMING_ROUNDS):
+        for name, (params, solver) in batches.items():
+            start = time.perf_counter()
+            taichi_star.simulate(params, duration_s, solver, arch=arch)
+            run_times[name].append(time.perf_counter() - start)
+    return run_times, load_average
+
+
+def series_of(config: Config, grid: Grid) -> str:
+    """"time" (the preset mesh), "space" (the space series), "time+space" (both: the space
+    series' run on the preset mesh) or "mesh" (another mesh)."""
+    in_space = (config.solver == fixed("bdf2", grid.space_h_ms)
+                and config.n_arc in grid.n_arcs[config.model])
+    on_preset_mesh = config.n_arc == config.preset_mesh
+    return {(True, True): "time+space", (True, False): "space", (False, True): "time",
+            (False, False): "mesh"}[(in_space, on_preset_mesh)]
+
+
+def config_rows(config: Config, grid: Grid, summary: pd.DataFrame, run_time: float,
+                duration_s: float) -> pd.DataFrame:
+    """The rows of one configuration, before the errors."""
+    solver = config.solver
+    return pd.DataFrame({
+        "label": config.label(), "model": config.model, "preset": config.preset(),
+        "series": series_of(config, grid), "n_arc": config.n_arc,
+        "integrator": solver.integrator, "jacobian": solver.jacobian,
+        "stepping": "adaptive" if solver.adaptive else "fixed", "h_ms": solver.dt * 1e3,
+        "error_tol_m": solver.error_tol if solver.adaptive else math.nan,
+        "gait": summary["gait"].to_numpy(), "duration_s": duration_s,
+        "signed_speed_mm_s": summary["signed_speed_mm_s"].to_numpy(dtype=float),
+        "steps": summary["steps"].to_numpy(),
+        "rejected_steps": summary["rejected_steps"].to_numpy(),
         "newton_iterations_mean": summary["newton_iterations_mean"].to_numpy(),
-        "status": summary["status"].to_numpy()})
+        "status": summary["status"].to_numpy(), "run_time_s": run_time,
+        "robot_seconds_per_wall_s": len(summary) * duration_s / run_time})
+
+
+def add_errors(table: pd.DataFrame, refs: pd.DataFrame, gaits) -> pd.DataFrame:
+    """The limit and error columns of every row: time (preset mesh only), space (space series
+    only) and total (against the continuum limit); NaN for a failed instance."""
+    table = table.copy()
+    limit_of = {(model, ladder, gait): limit for model, ladder, gait, limit in
+                refs[["model", "ladder", "gait", "limit_mm_s"]].itertuples(index=False)}
+    failed = table["status"] != "ok"
+    # (ladder, error column, the series it applies to: "" = every series)
+    for ladder, error, member in (("time", "time_error", "time"),
+                                  ("space", "space_error", "space"),
+                                  ("continuum", "total_error", "")):
+        limit = np.array([limit_of[(model, ladder, gait)] if member in series else math.nan
+                          for model, gait, series in
+                          table[["model", "gait", "series"]].itertuples(index=False)])
+        table[f"{ladder}_limit_mm_s"] = limit
+        table[error] = np.where(failed, math.nan, speed_error(table["signed_speed_mm_s"], limit))
+    return table
 
 
 def pareto_front(run_time, error) -> np.ndarray:
@@ -174,94 +376,162 @@ def pareto_front(run_time, error) -> np.ndarray:
     return mask
 
 
-def _slope(h, error):
-    return float(np.polyfit(np.log(h), np.log(error), 1)[0]) if len(h) >= 2 else math.nan
+def largest(errors: pd.Series) -> float:
+    """The largest error over the gaits; NaN when any is NaN (not in the series, or failed)."""
+    return float(errors.max()) if errors.notna().all() else math.nan
 
 
-def convergence_orders(table: pd.DataFrame) -> pd.DataFrame:
-    """Observed order in h per integrator and discretisation (f64, default tolerance), per gait
-    and for the max over gaits: least-squares slope of log error on log h over all h with a
-    positive finite error, and over the two smallest and the two largest such h."""
-    axis = table[(table["varied"] != "reference") & (table["precision"] == DEFAULT.precision)
-                 & (table["newton_tol"] == DEFAULT.newton_tol)]
+SUMMARY_KEYS = ["config", "label", "model", "preset", "series", "n_arc", "integrator",
+                "jacobian", "stepping", "h_ms", "error_tol_m"]
+
+
+def summarise(table: pd.DataFrame, run_times, load_average: float, batch: int) -> pd.DataFrame:
+    """One row per configuration; the presets' rows with their timing at `batch` instances
+    (run_times: preset -> wall times, s, of its timed calls)."""
     rows = []
-    for (integrator, disc), part in axis.groupby(["integrator", "discretisation"], sort=False):
-        per_config = part.groupby("dt_s")["max_rel_error"].first()
-        series = {gait: rows_.set_index("dt_s")["rel_error"]
-                  for gait, rows_ in part.groupby("gait", sort=False)}
-        series["max"] = per_config
-        for gait, errors in series.items():
-            errors = errors[np.isfinite(errors) & (errors > 0)].sort_index()
-            if len(errors) < 2:
-                continue
-            h = errors.index.to_numpy(dtype=float) * 1e3
-            values = errors.to_numpy(dtype=float)
-            n_arc, n_limb = DISCRETISATIONS[disc]
-            rows.append({"integrator": integrator, "discretisation": disc, "n_arc": n_arc,
-                         "n_limb": n_limb, "gait": gait, "n_points": len(h),
-                         "h_min_ms": h[0], "h_max_ms": h[-1], "order_fit": _slope(h, values),
-                         "order_fine": _slope(h[:2], values[:2]),
-                         "order_coarse": _slope(h[-2:], values[-2:])})
-    return pd.DataFrame(rows, columns=ORDER_COLUMNS)
+    for _, part in table.groupby("config", sort=True):
+        first = part.iloc[0]
+        total = part["total_error"]
+        rows.append({**{key: first[key] for key in SUMMARY_KEYS},
+                     "max_time_error": largest(part["time_error"]),
+                     "max_space_error": largest(part["space_error"]),
+                     "max_total_error": largest(total),
+                     "worst_gait": part["gait"].iloc[int(np.argmax(total.to_numpy()))]
+                     if total.notna().all() else "",
+                     "run_time_s": first["run_time_s"],
+                     "robot_seconds_per_wall_s": first["robot_seconds_per_wall_s"],
+                     "steps_mean": part["steps"].mean(),
+                     "newton_iterations_mean": part["newton_iterations_mean"].mean(),
+                     "status": ",".join(sorted(set(part["status"])))})
+    summary = pd.DataFrame(rows)
+    summary["pareto"] = False
+    for _, part in summary.groupby("model"):
+        summary.loc[part.index, "pareto"] = pareto_front(part["run_time_s"],
+                                                         part["max_total_error"])
+    duration = table["duration_s"].iloc[0]
+    rate = {name: batch * duration / min(times) for name, times in run_times.items()}
+    is_preset = summary["preset"] != ""
+    summary["timing_batch"] = np.where(is_preset, batch, 0)
+    summary["timing_run_times_s"] = [";".join(f"{t:.3f}" for t in run_times[p]) if p else ""
+                                     for p in summary["preset"]]
+    summary["timing_robot_seconds_per_wall_s"] = [rate.get(p, math.nan)
+                                                  for p in summary["preset"]]
+    summary["ratio_to_paper"] = summary["timing_robot_seconds_per_wall_s"] / rate["paper"]
+    summary["load_average_1min"] = np.where(is_preset, load_average, math.nan)
+    return summary
 
 
-def plot_work_precision(csv_path, orders_csv_path, png_path):
-    """Error against run time (log-log, Pareto front, labels) and error against h."""
+# --------------------------------------------------------------------------- plot
+
+FAMILIES = {("fixed", "euler", "newton"): ("implicit Euler, fixed h", "tab:red"),
+            ("fixed", "bdf2", "newton"): ("BDF2, fixed h", "tab:blue"),
+            ("adaptive", "bdf2", "chord"): ("BDF2 adaptive, chord", "tab:green"),
+            ("adaptive", "bdf2", "newton"): ("BDF2 adaptive, Newton", "tab:olive"),
+            ("adaptive", "euler", "newton"): ("implicit Euler adaptive", "tab:orange")}
+"""(stepping, integrator, jacobian) -> legend name and colour."""
+MODEL_MARKERS = {"undamped": "s", "damped": "o"}
+
+
+def plot_work_precision(summary_csv, png_path):
+    """Total error against run time (the presets marked), time error against h and against
+    error_tol, space error against n_arc."""
     plt = cli.use_agg()
-    table = pd.read_csv(csv_path)
-    orders = pd.read_csv(orders_csv_path)
-    configs = table[table["varied"] != "reference"].groupby("config", sort=False).first()
-    fig, (left, right) = plt.subplots(1, 2, figsize=(15, 6))
-    groups = configs.groupby(["integrator", "discretisation", "precision"], sort=False)
-    for (integrator, disc, precision), part in groups:
-        shown = part[np.isfinite(part["max_rel_error"])]
-        left.plot(shown["run_time_s"], shown["max_rel_error"], "o", ms=5, alpha=0.8,
-                  label=f"{integrator} {disc} {precision}")
-        for _, row in shown.iterrows():
-            left.annotate(row["label"], (row["run_time_s"], row["max_rel_error"]), fontsize=6,
-                          xytext=(3, 3), textcoords="offset points")
-    front = configs[configs["pareto"].astype(bool)].sort_values("run_time_s")
-    left.step(front["run_time_s"], front["max_rel_error"], "r-", where="post", lw=1.2,
-              label="Pareto front")
-    left.plot(front["run_time_s"], front["max_rel_error"], "o", mfc="none", mec="r", ms=10)
-    left.axhline(0.01, color="k", ls=":", lw=1, label="1 %")
-    failed = configs[~np.isfinite(configs["max_rel_error"])]
-    title = "max relative speed error over gaits vs run time"
-    if len(failed):
-        title += f" ({len(failed)} configuration(s) with a failed instance not shown)"
-    left.set_title(title, fontsize=9)
-    left.set_xlabel("run time of the batch (s)")
-    left.set_ylabel("max relative error of the speed")
+    summary = pd.read_csv(summary_csv)
+    summary["preset"] = summary["preset"].fillna("")
+    fig = plt.figure(figsize=(16, 11), layout="constrained")
+    grid = fig.add_gridspec(2, 3)
+    pareto = fig.add_subplot(grid[0, :2])
+    by_h, by_tol, by_mesh = (fig.add_subplot(grid[1, column]) for column in range(3))
 
-    axis = configs[(configs["precision"] == DEFAULT.precision)
-                   & (configs["newton_tol"] == DEFAULT.newton_tol)]
-    for (integrator, disc), part in axis.groupby(["integrator", "discretisation"], sort=False):
-        part = part[np.isfinite(part["max_rel_error"])].sort_values("dt_s")
-        if len(part) < 2:
-            continue
-        order = orders[(orders["integrator"] == integrator) & (orders["discretisation"] == disc)
-                       & (orders["gait"] == "max")]["order_fit"]
-        slope = f", order {order.iloc[0]:.2f}" if len(order) else ""
-        right.plot(part["dt_s"] * 1e3, part["max_rel_error"], "o-",
-                   label=f"{integrator} {disc}{slope}")
-    right.set_xlabel("time step h (ms)")
-    right.set_ylabel("max relative error of the speed")
-    reference = table[table["varied"] == "reference"].iloc[0]
-    right.set_title(f"error vs h (reference: h = {reference['dt_s'] * 1e3:g} ms, "
-                    f"{reference['integrator']}, {reference['discretisation']}, tol "
-                    f"{reference['newton_tol']:.0e})", fontsize=9)
-    for ax in (left, right):
+    for (stepping, integrator, jacobian), part in summary.groupby(
+            ["stepping", "integrator", "jacobian"], sort=False):
+        name, colour = FAMILIES[(stepping, integrator, jacobian)]
+        for model, points in part.groupby("model", sort=False):
+            pareto.plot(points["run_time_s"], points["max_total_error"],
+                        MODEL_MARKERS[model], color=colour, ms=6, alpha=0.8,
+                        mfc=colour if model == "damped" else "none",
+                        label=f"{name}, {model}")
+    for model, part in summary.groupby("model", sort=False):
+        front = part[part["pareto"]].sort_values("run_time_s")
+        pareto.step(front["run_time_s"], front["max_total_error"], where="post", color="k",
+                    lw=0.8, ls="-" if model == "damped" else "--",
+                    label=f"Pareto front, {model}")
+    for ax in (pareto, by_h, by_tol, by_mesh):
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.grid(alpha=0.3, which="both")
+    pareto.axhline(0.01, color="k", ls=":", lw=1)
+    pareto.autoscale_view()
+    presets = summary[summary["preset"] != ""].set_index("preset")
+    data_to_axes = pareto.transData + pareto.transAxes.inverted()
+    for name, row in presets.iterrows():
+        point = (row["run_time_s"], row["max_total_error"])
+        pareto.plot(*point, "*", ms=18, mfc="gold", mec="k", zorder=5)
+        # the label goes toward the middle of the panel, away from the edges
+        x, y = data_to_axes.transform(point)
+        pareto.annotate(
+            f"{name}: {row['label']}, n_arc {row['n_arc']}\n"
+            f"max error {row['max_total_error']:.2%} vs the {row['model']} limit\n"
+            f"{row['timing_robot_seconds_per_wall_s']:.0f} robot-s/s at B = "
+            f"{row['timing_batch']}", point,
+            xytext=(40 if x < 0.5 else -40, 50 if y < 0.5 else -50), textcoords="offset points",
+            ha="left" if x < 0.5 else "right", va="center",
+            fontsize=8, bbox={"boxstyle": "round", "fc": "white", "ec": "0.6", "alpha": 0.85},
+            arrowprops={"arrowstyle": "->", "color": "0.3"})
+    pareto.set_xlabel("run time of one batch of the gaits (s)")
+    pareto.set_ylabel("max speed error over the gaits vs the model's continuum limit")
+    pareto.set_title("total error against run time (dotted: 1 %)", fontsize=9)
+
+    fixed_steps = summary[summary["series"].str.contains("time")
+                          & (summary["stepping"] == "fixed")]
+    for (model, integrator), part in fixed_steps.groupby(["model", "integrator"], sort=False):
+        part = part.sort_values("h_ms")
+        by_h.plot(part["h_ms"], part["max_time_error"], MODEL_MARKERS[model] + "-",
+                  color=FAMILIES[("fixed", integrator, "newton")][1],
+                  mfc="none" if model == "undamped" else None,
+                  label=f"{integrator}, {model} (n_arc {part['n_arc'].iloc[0]})")
+    by_h.set_xlabel("time step h (ms)")
+    by_h.set_ylabel("max speed error vs the time limit")
+    by_h.set_title("time-step error, fixed steps, preset mesh", fontsize=9)
+
+    tolerances = summary[summary["series"].str.contains("time")
+                         & (summary["stepping"] == "adaptive")]
+    for (model, integrator, jacobian), part in tolerances.groupby(
+            ["model", "integrator", "jacobian"], sort=False):
+        part = part.sort_values("error_tol_m")
+        name, colour = FAMILIES[("adaptive", integrator, jacobian)]
+        by_tol.plot(part["error_tol_m"], part["max_time_error"], MODEL_MARKERS[model] + "-",
+                    color=colour, mfc="none" if model == "undamped" else None,
+                    label=f"{name}, {model}")
+    by_tol.set_xlabel("error_tol (m)")
+    by_tol.set_ylabel("max speed error vs the time limit")
+    by_tol.set_title("time-step error, adaptive steps, preset mesh", fontsize=9)
+
+    space = summary[summary["series"].str.contains("space")]
+    for model, part in space.groupby("model", sort=False):
+        part = part.sort_values("n_arc")
+        by_mesh.plot(part["n_arc"], part["max_space_error"], MODEL_MARKERS[model] + "-",
+                     color="k", mfc="none" if model == "undamped" else None,
+                     label=f"{model}, BDF2 h = {part['h_ms'].iloc[0]:g} ms")
+    by_mesh.set_xlabel("n_arc (edges per actuator arc)")
+    by_mesh.set_ylabel("max speed error vs the space limit")
+    by_mesh.set_title("discretisation error (limit: the two finest meshes)", fontsize=9)
+
+    for ax, values in ((by_h, fixed_steps["h_ms"]), (by_mesh, space["n_arc"])):
+        values = sorted(set(values))
+        ax.set_xticks(values, [f"{v:g}" for v in values])
+        ax.xaxis.set_minor_locator(plt.NullLocator())
+    legend_panel = fig.add_subplot(grid[0, 2])
+    legend_panel.axis("off")
+    legend_panel.legend(*pareto.get_legend_handles_labels(), fontsize=8, loc="center left")
+    for ax in (by_h, by_tol, by_mesh):
         ax.legend(fontsize=7)
-    fig.suptitle(f"{table['gait'].nunique()} gaits, {table['duration_s'].max():.4g} s from rest, "
-                 f"{table['machine'].iloc[0]}, {table['commit'].iloc[0]}", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(png_path, dpi=120)
+    fig.savefig(png_path, dpi=110)
     plt.close(fig)
     return png_path
 
+
+# --------------------------------------------------------------------------- command line
 
 def build_parser():
     parser = cli.StudyParser("work_precision", DESCRIPTION)
@@ -276,75 +546,77 @@ def build_parser():
 def main(argv=None):
     args = cli.parse(build_parser(), argv)
     gaits = cli.resolve_gaits(args.gaits)
-    duration = QUICK_DURATION_S if args.quick else None
-    configs = configurations(args.quick)
-    out = cli.Output(args, argv or [], model={"gaits": gaits, "discretisations": DISCRETISATIONS},
-                     solver={"reference": REFERENCE, "configurations": configs})
-    provenance_columns = {"arch": args.arch,
-                          "machine": provenance.machine_columns(args.arch)["machine"],
-                          "commit": provenance.short_commit(), "timestamp": out.provenance["date"],
-                          "reference": REFERENCE.label()}
-
-    def steps_of(config):
-        length = duration if duration is not None else args.cycles * StarParams().period
-        return int(round(length / config.dt_s)) * len(gaits)
+    grid = QUICK_GRID if args.quick else FULL_GRID
+    duration = (QUICK_DURATION_S if args.quick
+                else args.cycles * StarParams.preset("paper").period)
+    configs = configurations(grid)
+    out = cli.Output(args, argv or [], model={"models": MODEL_PRESETS, "gaits": gaits},
+                     solver={"grid": grid, "configurations": [c.label() for c in configs]})
+    machine = provenance.machine_columns(args.arch)
+    # taken before the runs: the code that ran, not what the tree became meanwhile
+    provenance_columns = {"machine": machine["machine"], "cpu_model": machine["cpu_model"],
+                          "cores": machine["cores"], "commit": provenance.short_commit(),
+                          "timestamp": out.provenance["date"]}
+    load_at_start = os.getloadavg()
 
     bar = None
     if not args.no_progress:
         from tqdm.auto import tqdm
-        bar = tqdm(total=sum(steps_of(c) for c in [REFERENCE, *configs]), unit="robot-step",
-                   desc="work-precision", unit_scale=True)
-    # the reference is the longest run: its own bar shows it moving
-    summary, run_time, steps = run_config(REFERENCE, gaits, args.cycles, duration, args.arch,
-                                          progress=bar is not None)
-    if (summary["status"] != "ok").any():
-        raise RuntimeError(f"the reference run failed:\n{summary[['gait', 'status']]}")
-    reference_speeds = dict(zip(summary["gait"], summary["speed_mm_s"]))
-    parts = [config_rows(REFERENCE, summary, run_time, steps, reference_speeds)
-             .assign(varied="reference", label="reference")]
-    if bar is not None:
-        bar.update(steps_of(REFERENCE))
+        bar = tqdm(total=len(configs) + 1, unit="run", desc="work-precision")
+    parts, speeds = [], {}
     for config in configs:
         if bar is not None:
-            bar.set_postfix_str(config.label())
-        summary, run_time, steps = run_config(config, gaits, args.cycles, duration, args.arch)
-        parts.append(config_rows(config, summary, run_time, steps, reference_speeds))
+            bar.set_postfix_str(f"{config.model} {config.label()}")
+        summary, run_time = run_config(config, gaits, duration, args.arch)
+        speeds[config] = summary["signed_speed_mm_s"].to_numpy(dtype=float)
+        parts.append(config_rows(config, grid, summary, run_time, duration))
         if bar is not None:
-            bar.update(steps_of(config))
+            bar.update()
     if bar is not None:
+        bar.set_postfix_str(f"presets at B = {grid.timing_batch}")
+    run_times, load_average = time_presets(gaits, duration, grid.timing_batch, args.arch)
+    if bar is not None:
+        bar.update()
         bar.close()
 
+    refs = references(speeds, grid, gaits)
     table = pd.concat(parts, ignore_index=True)
     table.insert(0, "config", np.repeat(np.arange(len(parts)), len(gaits)))
-    per_config = table.groupby("config", sort=False)[["run_time_s", "max_rel_error"]].first()
-    candidates = per_config.index != 0  # the reference (config 0) is not a candidate
-    front = np.zeros(len(per_config), dtype=bool)
-    front[candidates] = pareto_front(per_config["run_time_s"][candidates],
-                                     per_config["max_rel_error"][candidates])
-    table["pareto"] = front[table["config"].to_numpy()]
+    table = add_errors(table, refs, gaits)
     for name, value in provenance_columns.items():
         table[name] = value
-
-    csv_path = out.write_csv(table, "work_precision.csv")
-    orders = convergence_orders(table)
-    orders_path = out.write_csv(orders, "work_precision_orders.csv")
-    out.wrote(plot_work_precision(csv_path, orders_path, out.path("work_precision.png")))
-    report(table, orders)
+    summary = summarise(table, run_times, load_average, grid.timing_batch)
+    for name, value in provenance_columns.items():
+        summary[name] = value
+    timing = {"timing_batch": grid.timing_batch, "timing_rounds": TIMING_ROUNDS,
+              "preset_run_times_s": run_times, "load_average_at_start": load_at_start,
+              "load_average_before_timing_1min": load_average,
+              "load_average_at_end": os.getloadavg()}
+    out.write_csv(table, "work_precision.csv", extra=timing)
+    summary_path = out.write_csv(summary, "work_precision_summary.csv", extra=timing)
+    out.write_csv(refs, "work_precision_references.csv")
+    out.wrote(plot_work_precision(summary_path, out.path("work_precision.png")))
+    report(summary, refs)
     out.report()
-    return table
+    return table, summary, refs
 
 
-def report(table: pd.DataFrame, orders: pd.DataFrame):
-    """Print the configurations by run time and the observed orders (max over gaits)."""
-    configs = table[table["varied"] != "reference"].groupby("config", sort=False).first()
-    print(f"\nreference: {table['reference'].iloc[0]}")
-    print(f"{'configuration':<28} {'run time s':>10} {'max rel err':>12}  pareto")
-    for _, row in configs.sort_values("run_time_s").iterrows():
-        print(f"{row['label']:<28} {row['run_time_s']:10.3f} {row['max_rel_error']:12.3e}  "
-              f"{'*' if row['pareto'] else ''}")
-    print("\nobserved order in h (slope of log max error vs log h; at 1x the discretisation "
-          "error against the 2x reference dominates):")
-    for _, row in orders[orders["gait"] == "max"].iterrows():
-        print(f"  {row['integrator']:<6} {row['discretisation']:<5} fit {row['order_fit']:.2f} "
-              f"(fine {row['order_fine']:.2f}, coarse {row['order_coarse']:.2f}) over "
-              f"h = {row['h_min_ms']:g}..{row['h_max_ms']:g} ms")
+def report(summary: pd.DataFrame, refs: pd.DataFrame):
+    """Print the orders of the ladders, the configurations by model and run time, and the
+    presets' timing."""
+    print("\nRichardson ladders (observed order -> order used):")
+    ladders = refs[refs["ladder"] != "continuum"].groupby(["model", "ladder"], sort=False).first()
+    for (model, ladder), row in ladders.iterrows():
+        print(f"  {model:<9} {ladder:<5} {row['refined']} {row['coarse']:g}, {row['middle']:g}, "
+              f"{row['fine']:g}: order {row['observed_order']:.2f} -> {row['order_used']:.2f}")
+    print(f"\n{'model':<9} {'configuration':<30} {'time err':>9} {'space err':>9} "
+          f"{'total err':>9} {'run s':>7} {'robot-s/s':>9}")
+    for _, row in summary.sort_values(["model", "run_time_s"]).iterrows():
+        mark = f"  <- {row['preset']}" if row["preset"] else ""
+        print(f"{row['model']:<9} {row['label']:<30} {row['max_time_error']:9.2e} "
+              f"{row['max_space_error']:9.2e} {row['max_total_error']:9.2e} "
+              f"{row['run_time_s']:7.2f} {row['robot_seconds_per_wall_s']:9.1f}{mark}")
+    for _, row in summary[summary["preset"] != ""].iterrows():
+        print(f"{row['preset']}: {row['timing_robot_seconds_per_wall_s']:.1f} robot-s/s at "
+              f"B = {row['timing_batch']} (runs {row['timing_run_times_s']} s), "
+              f"{row['ratio_to_paper']:.2f}x paper")

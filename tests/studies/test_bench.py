@@ -1,8 +1,8 @@
-"""The benchmark and work-precision studies in --quick mode (what they measure against direct
-simulations, row counts, plots) and their argument errors, raised before any computation. No
-timing is asserted."""
+"""The benchmark study in --quick mode (what it measures against direct simulations, row
+counts, plots), and the benchmark and work-precision studies' argument errors, raised before
+any computation (the work-precision study itself: test_work_precision.py). No timing is
+asserted."""
 
-import numpy as np
 import pandas as pd
 import pytest
 
@@ -40,56 +40,6 @@ def test_bench_quick(tmp_path):
     for column in ("robot_steps_per_s", "assembly_us", "factor_flops"):
         assert (table[column] > 0).all(), column
     assert (tmp_path / "bench.png").stat().st_size > 1000
-
-
-def test_work_precision_quick(tmp_path):
-    work_precision.main(["--quick", "--no-progress", "--out", str(tmp_path)])
-    table = pd.read_csv(tmp_path / "work_precision.csv")
-    configs = work_precision.configurations(quick=True)
-    gaits = list(work_precision.QUICK_GAITS)
-    assert len(table) == (len(configs) + 1) * len(gaits)
-    assert table.groupby("config")["gait"].apply(list).map(lambda g: g == gaits).all()
-    reference = table[table["varied"] == "reference"]
-    assert len(reference) == len(gaits) and (reference["rel_error"] == 0).all()
-    assert (reference["dt_s"] == 1.25e-4).all() and (reference["discretisation"] == "2x").all()
-    rest = table[table["varied"] != "reference"]
-    assert (rest["status"] == "ok").all()
-    per_config = rest.groupby("config").agg(largest=("rel_error", "max"),
-                                            reported=("max_rel_error", "first"))
-    assert np.allclose(per_config["largest"], per_config["reported"])
-    # one configuration simulated directly: its speeds and its error against the reference
-    config = configs[0]
-    direct = taichi_star.simulate(config.params(gaits), work_precision.QUICK_DURATION_S,
-                                  config.solver()).summary
-    rows = rest[rest["label"] == config.label()]
-    assert rows["speed_mm_s"].to_numpy() == pytest.approx(direct["speed_mm_s"], rel=1e-9)
-    assert rows["rel_error"].to_numpy() == pytest.approx(
-        np.abs(direct["speed_mm_s"].to_numpy() - reference["speed_mm_s"].to_numpy())
-        / reference["speed_mm_s"].to_numpy(), rel=1e-6)
-    assert rest["pareto"].any() and not reference["pareto"].any()
-    assert set(rest["integrator"]) == set(work_precision.INTEGRATORS)
-    orders = pd.read_csv(tmp_path / "work_precision_orders.csv")
-    assert list(orders.columns) == work_precision.ORDER_COLUMNS
-    assert set(orders["integrator"]) == set(work_precision.INTEGRATORS)
-    assert set(orders["gait"]) == set(gaits) | {"max"}
-    assert (tmp_path / "work_precision.png").stat().st_size > 1000
-
-
-def test_pareto_front():
-    run_time = [1.0, 2.0, 3.0, 4.0, 0.5]
-    error = [0.1, 0.2, 0.01, np.nan, 0.3]
-    assert list(work_precision.pareto_front(run_time, error)) == [True, False, True, False, True]
-
-
-def test_convergence_order_of_a_power_law():
-    h = np.array([1e-3, 2e-3, 4e-3])
-    rows = pd.DataFrame({"varied": "dt_s", "precision": "f64", "newton_tol": 1e-10,
-                         "integrator": "euler", "discretisation": "2x", "dt_s": h,
-                         "gait": "A1", "rel_error": 3.0 * h ** 2, "max_rel_error": 3.0 * h ** 2})
-    orders = work_precision.convergence_orders(rows)
-    assert list(orders["gait"]) == ["A1", "max"]
-    for column in ("order_fit", "order_fine", "order_coarse"):
-        assert orders[column].to_numpy() == pytest.approx([2.0, 2.0])
 
 
 @pytest.mark.parametrize("study, argv, message", [

@@ -1,0 +1,146 @@
+"""The work-precision study in --quick mode: its speeds against a direct `simulate`, its
+Richardson limits and errors recomputed from the speeds in its own CSV, the summary against the
+rows; and the extrapolation helpers on exact power laws. No timing is asserted."""
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import taichi_star
+
+from studies import work_precision as wp
+
+FLOOR_MM_S = 0.5
+
+
+def ladder_limit(speeds):
+    """Richardson limit of a (levels, gaits) ladder, coarse to fine, refined by 2 per level:
+    the observed order of the three finest from the largest changes over the gaits, at least
+    1."""
+    coarse, middle, fine = speeds[-3:]
+    order = math.log2(np.abs(coarse - middle).max() / np.abs(middle - fine).max())
+    order = max(order, 1.0)
+    return fine + (fine - middle) / (2.0 ** order - 1.0)
+
+
+def error(speed, reference):
+    return np.abs(speed - reference) / np.maximum(np.abs(reference), FLOOR_MM_S)
+
+
+@pytest.fixture(scope="module")
+def quick_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("work_precision")
+    wp.main(["--quick", "--no-progress", "--out", str(out)])
+    return out
+
+
+def test_quick_rows_and_a_direct_simulation(quick_run):
+    rows = pd.read_csv(quick_run / "work_precision.csv")
+    summary = pd.read_csv(quick_run / "work_precision_summary.csv")
+    gaits = list(wp.QUICK_GAITS)
+    configs = wp.configurations(wp.QUICK_GRID)
+    assert len(rows) == len(configs) * len(gaits) and len(summary) == len(configs)
+    assert (rows["status"] == "ok").all()
+    assert rows.groupby("config")["gait"].apply(list).map(lambda g: g == gaits).all()
+    # the accurate preset simulated directly
+    config = wp.preset_config("damped")
+    direct = taichi_star.simulate(config.params(gaits), wp.QUICK_DURATION_S,
+                                  config.solver).summary
+    accurate = rows[rows["preset"] == "accurate"]
+    assert list(accurate["label"].unique()) == [config.label()]
+    assert accurate["signed_speed_mm_s"].to_numpy() == pytest.approx(
+        direct["signed_speed_mm_s"].to_numpy(), rel=1e-9)
+    assert accurate["steps"].tolist() == direct["steps"].tolist()
+    assert (quick_run / "work_precision.png").stat().st_size > 1000
+
+
+def test_quick_limits_and_errors_recomputed_from_the_speeds(quick_run):
+    rows = pd.read_csv(quick_run / "work_precision.csv")
+    gaits = list(wp.QUICK_GAITS)
+    grid = wp.QUICK_GRID
+    for model, preset in wp.MODEL_PRESETS.items():
+        part = rows[rows["model"] == model]
+        mesh = int(part.loc[part["preset"] == preset, "n_arc"].iloc[0])
+        bdf2 = part[(part["integrator"] == "bdf2") & (part["stepping"] == "fixed")]
+        on_mesh = bdf2[bdf2["n_arc"] == mesh].pivot(index="h_ms", columns="gait",
+                                                    values="signed_speed_mm_s")[gaits]
+        time_limit = ladder_limit(on_mesh.sort_index(ascending=False).to_numpy())
+        at_space_step = bdf2[bdf2["h_ms"] == grid.space_h_ms].pivot(
+            index="n_arc", columns="gait", values="signed_speed_mm_s")[gaits].sort_index()
+        assert list(at_space_step.index) == list(grid.n_arcs[model])
+        space_limit = ladder_limit(at_space_step.to_numpy())
+        continuum = space_limit + time_limit - at_space_step.loc[mesh].to_numpy()
+        for _, config in part.groupby("config"):
+            speed = config["signed_speed_mm_s"].to_numpy()
+            assert config["continuum_limit_mm_s"].to_numpy() == pytest.approx(continuum)
+            assert config["total_error"].to_numpy() == pytest.approx(error(speed, continuum))
+            if config["n_arc"].iloc[0] == mesh:
+                assert config["time_limit_mm_s"].to_numpy() == pytest.approx(time_limit)
+                assert config["time_error"].to_numpy() == pytest.approx(
+                    error(speed, time_limit))
+            else:
+                assert config["time_error"].isna().all()
+            space_series = (config["integrator"].iloc[0] == "bdf2"
+                            and config["stepping"].iloc[0] == "fixed"
+                            and config["h_ms"].iloc[0] == grid.space_h_ms)
+            if space_series:
+                assert config["space_error"].to_numpy() == pytest.approx(
+                    error(speed, space_limit))
+            else:
+                assert config["space_error"].isna().all()
+
+
+def test_quick_summary_and_timing(quick_run):
+    rows = pd.read_csv(quick_run / "work_precision.csv")
+    summary = pd.read_csv(quick_run / "work_precision_summary.csv")
+    refs = pd.read_csv(quick_run / "work_precision_references.csv")
+    largest = rows.groupby("config")[["time_error", "space_error", "total_error"]].max()
+    for column in ("time", "space", "total"):
+        assert summary[f"max_{column}_error"].to_numpy() == pytest.approx(
+            largest[f"{column}_error"].to_numpy(), nan_ok=True)
+    presets = summary[summary["preset"].notna()].set_index("preset")
+    assert sorted(presets.index) == ["accurate", "paper"]
+    assert (presets["timing_batch"] == wp.QUICK_TIMING_BATCH).all()
+    for name, row in presets.iterrows():
+        best = min(float(t) for t in row["timing_run_times_s"].split(";"))
+        assert row["timing_robot_seconds_per_wall_s"] == pytest.approx(
+            wp.QUICK_TIMING_BATCH * wp.QUICK_DURATION_S / best, rel=1e-2)
+    assert presets.loc["paper", "ratio_to_paper"] == pytest.approx(1.0)
+    assert presets.loc["paper", "model"] == "undamped"
+    assert presets.loc["accurate", "model"] == "damped"
+    assert (presets["load_average_1min"] >= 0).all()
+    assert summary["pareto"].any()
+    ladders = refs[refs["ladder"] != "continuum"]
+    assert (ladders["order_used"] >= wp.MIN_ORDER).all()
+    assert set(zip(ladders["model"], ladders["ladder"])) == {
+        (m, ladder) for m in wp.MODEL_PRESETS for ladder in ("time", "space")}
+
+
+def test_richardson_recovers_a_power_law():
+    h = np.array([4.0, 2.0, 1.0])
+    speeds = 3.0 + np.outer(h ** 2, [2.0, -1.0])  # two gaits, second order in h
+    assert wp.observed_order(*speeds) == pytest.approx(2.0)
+    assert wp.richardson_limit(speeds[1], speeds[2], 2.0) == pytest.approx([3.0, 3.0])
+    first_order = 3.0 + np.outer(h, [2.0, -1.0])
+    assert wp.observed_order(*first_order) == pytest.approx(1.0)
+    assert wp.richardson_limit(first_order[1], first_order[2], 1.0) == pytest.approx([3.0, 3.0])
+
+
+def test_order_used_is_at_least_one():
+    assert wp.order_used(2.3) == 2.3
+    assert wp.order_used(0.4) == wp.MIN_ORDER
+    assert wp.order_used(math.nan) == wp.MIN_ORDER  # no change at all between the levels
+
+
+def test_speed_error_floor():
+    assert wp.speed_error(2.2, 2.0) == pytest.approx(0.1)
+    assert wp.speed_error(0.105, 0.1) == pytest.approx(0.005 / FLOOR_MM_S)
+    assert wp.speed_error(-0.2, 0.2) == pytest.approx(0.4 / FLOOR_MM_S)
+
+
+def test_pareto_front():
+    run_time = [1.0, 2.0, 3.0, 4.0, 0.5]
+    errors = [0.1, 0.2, 0.01, np.nan, 0.3]
+    assert list(wp.pareto_front(run_time, errors)) == [True, False, True, False, True]
