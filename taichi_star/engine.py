@@ -18,7 +18,8 @@ from .linsolve import BlockSystem, plan_elimination
 from .model import BatchModel
 from .params import SolverConfig
 from .physics import coupled_node_pairs
-from .physics.base import index_field, load_field, pad_batch
+from .fields import FieldArena
+from .physics.base import load_field, pad_batch
 from .gait import N_ACTUATORS, Gait
 from .state import NEVER, STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_OK, BatchState
 
@@ -46,20 +47,21 @@ class BatchEngine:
         self.integrator = integrator
         self.plan = plan_elimination(topology.n_nodes, coupled_node_pairs(
             topology, [cls for cls, _ in model.terms_used]))
-        self.system = BlockSystem(self.plan, capacity)
-        self.state = BatchState(capacity, topology.n_nodes)
-        self.diagonal_slot = index_field([self.plan.slot[n, n] for n in range(self.n_nodes)])
-        self.mass = ti.field(float, shape=(capacity, self.n_nodes))
-        self.inertia = ti.field(float, shape=(capacity, self.n_nodes))
-        self.centroids = ti.Vector.field(2, float, shape=capacity)
-        self.dt = ti.field(float, shape=())
-        self.newton_tol = ti.field(float, shape=())
-        self.max_newton = ti.field(ti.i32, shape=())
-        self.max_substep_halvings = ti.field(ti.i32, shape=())
-        self.chord = ti.field(ti.i32, shape=())
-        self.error_tol = ti.field(float, shape=())
-        self.dt_min = ti.field(float, shape=())
-        self.dt_max = ti.field(float, shape=())
+        self.arena = arena = FieldArena()
+        self.system = BlockSystem(self.plan, capacity, arena)
+        self.state = BatchState(capacity, topology.n_nodes, arena)
+        self.diagonal_slot = arena.index([self.plan.slot[n, n] for n in range(self.n_nodes)])
+        self.mass = arena.field(float, (capacity, self.n_nodes))
+        self.inertia = arena.field(float, (capacity, self.n_nodes))
+        self.centroids = arena.field(float, capacity, vector=2)
+        self.dt = arena.field(float)
+        self.newton_tol = arena.field(float)
+        self.max_newton = arena.field(ti.i32)
+        self.max_substep_halvings = arena.field(ti.i32)
+        self.chord = arena.field(ti.i32)
+        self.error_tol = arena.field(float)
+        self.dt_min = arena.field(float)
+        self.dt_max = arena.field(float)
         self.terms = []
         for cls, configuration in model.terms_used:
             coefficients = model.coefficients[cls.name]
@@ -69,6 +71,7 @@ class BatchEngine:
         for term in self.terms:
             self.state.term_histories.update(
                 {f"{term.name}.{name}": field for name, field in term.history_fields().items()})
+        arena.finalize()
 
     # ---------------------------------------------------------------- host side
     def term(self, name: str):
@@ -81,12 +84,12 @@ class BatchEngine:
     def pair_slots(self, pairs) -> ti.Field:
         """(P, 4) Jacobian slots of the blocks (i,i), (i,j), (j,i), (j,j) of node pairs (i, j)."""
         slot = self.plan.slot
-        return index_field([[slot[i, i], slot[i, j], slot[j, i], slot[j, j]] for i, j in pairs])
+        return self.arena.index([[slot[i, i], slot[i, j], slot[j, i], slot[j, j]] for i, j in pairs])
 
     def triplet_slots(self, triplets) -> ti.Field:
         """(T, 9) Jacobian slots of the blocks (a, c) of each triplet's nodes, row-major."""
         slot = self.plan.slot
-        return index_field([[slot[a, c] for a in nodes for c in nodes] for nodes in triplets])
+        return self.arena.index([[slot[a, c] for a in nodes for c in nodes] for nodes in triplets])
 
     def load(self, model: BatchModel, solver: SolverConfig, periodic_gaits: bool = True):
         """Copy a batch (at most `capacity` instances) and the solver settings to the device and

@@ -19,9 +19,12 @@ hub-bordered band of a reverse Cuthill–McKee order.
 
 
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 import taichi as ti
+
+from .fields import FieldArena
 
 
 @dataclass(frozen=True)
@@ -124,11 +127,9 @@ def plan_elimination(n_nodes: int, pairs, order=None) -> EliminationPlan:
         update_slot=as_int(update_slot))
 
 
-def _int_field(values: np.ndarray):
-    field = ti.field(ti.i32, shape=max(len(values), 1))
-    if len(values):
-        field.from_numpy(values.astype(np.int32))
-    return field
+def _non_empty(values: np.ndarray) -> np.ndarray:
+    """An index table with at least one entry (a field cannot be empty)."""
+    return values if len(values) else np.zeros(1, dtype=np.int32)
 
 
 @ti.data_oriented
@@ -137,20 +138,26 @@ class BlockSystem:
     side: `blocks` (batch, n_slots) 2×2 and `rhs` (batch, n_nodes) 2-vectors. After `factor`
     the blocks hold L (unit block-lower), U and the inverted pivot blocks, in place."""
 
-    def __init__(self, plan: EliminationPlan, batch_size: int):
+    def __init__(self, plan: EliminationPlan, batch_size: int, arena: Optional[FieldArena] = None):
+        """`arena`: where the fields go (an engine's); None: an arena of its own, finalized
+        here."""
+        own = arena is None
+        arena = FieldArena() if own else arena
         self.plan = plan
         self.n_nodes = plan.n_nodes
         self.n_slots = plan.n_slots
-        self.order = _int_field(plan.order)
-        self.pivot_slot = _int_field(plan.pivot_slot)
-        self.neighbour_start = _int_field(plan.neighbour_start)
-        self.neighbour_node = _int_field(plan.neighbour_node)
-        self.lower_slot = _int_field(plan.lower_slot)
-        self.upper_slot = _int_field(plan.upper_slot)
-        self.update_start = _int_field(plan.update_start)
-        self.update_slot = _int_field(plan.update_slot)
-        self.blocks = ti.Matrix.field(2, 2, float, shape=(batch_size, plan.n_slots))
-        self.rhs = ti.Vector.field(2, float, shape=(batch_size, plan.n_nodes))
+        self.order = arena.index(_non_empty(plan.order))
+        self.pivot_slot = arena.index(_non_empty(plan.pivot_slot))
+        self.neighbour_start = arena.index(_non_empty(plan.neighbour_start))
+        self.neighbour_node = arena.index(_non_empty(plan.neighbour_node))
+        self.lower_slot = arena.index(_non_empty(plan.lower_slot))
+        self.upper_slot = arena.index(_non_empty(plan.upper_slot))
+        self.update_start = arena.index(_non_empty(plan.update_start))
+        self.update_slot = arena.index(_non_empty(plan.update_slot))
+        self.blocks = arena.field(float, (batch_size, plan.n_slots), matrix=(2, 2))
+        self.rhs = arena.field(float, (batch_size, plan.n_nodes), vector=2)
+        if own:
+            arena.finalize()
 
     @ti.func
     def clear(self, b, blocks):

@@ -185,8 +185,8 @@ class StarParams:
     def preset(cls, name: str = "paper", **overrides) -> "StarParams":
         """A named model with some fields changed. "paper": the paper's model as published
         (N = 193 nodes, no damping, clamped ends, limb-stiff joints). "accurate": material
-        damping τ = 0.94 ms, series joints and shared ends at the discretisation the
-        work–precision study found cheapest at ≤ 1 % speed error (n_arc 36)."""
+        damping τ = 0.94 ms, series joints and shared ends, which converge at second order in
+        the mesh, on n_arc 36 (N = 337)."""
         _check_choice("preset", name, PRESETS)
         return cls(**{**PRESET_FIELDS[name], **overrides})
 
@@ -289,8 +289,8 @@ class SolverConfig:
     @classmethod
     def preset(cls, name: str = "paper", **overrides) -> "SolverConfig":
         """Named solver settings: "paper" (implicit Euler at 1 ms with Newton's method, the
-        paper's scheme) or "accurate" (adaptive BDF2 with error_tol 3e-6 m and the chord
-        Jacobian: about 180 steps per 3.15-s cycle, time error ≤ 0.3 % of the speeds)."""
+        paper's scheme) or "accurate" (adaptive BDF2, error_tol 3e-6 m, the chord Jacobian:
+        about 180 steps per 3.15-s cycle)."""
         _check_choice("preset", name, PRESETS)
         return cls(**{**SOLVER_PRESET_FIELDS[name], **overrides})
 

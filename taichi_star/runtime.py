@@ -21,7 +21,7 @@ from .model import BatchModel, build_model
 from .params import SolverConfig
 
 ARCHS = ("cpu", "gpu", "cuda", "vulkan", "metal")
-MIN_CAPACITY = 8
+MIN_CAPACITY = 64
 PARALLEL_LOOP_MINIMUM = 1024
 """Taichi 1.7's CPU backend parallelises a range-for only from about this many iterations."""
 
@@ -53,7 +53,8 @@ def check_arch(arch: str) -> str:
 def batch_capacity(batch_size: int) -> int:
     """Engine capacity for a batch: the next power of two, at least MIN_CAPACITY, so that
     batches of similar size share one compiled engine (padding instances are inactive and cost
-    nothing)."""
+    nothing; every small batch shares the 64-instance engine, which saves a compilation of
+    several seconds per batch size)."""
     return max(MIN_CAPACITY, 1 << max(batch_size - 1, 0).bit_length())
 
 

@@ -45,14 +45,6 @@ def pad_batch(values: np.ndarray, capacity: int) -> np.ndarray:
     return np.concatenate([values, padding]) if len(padding) else values
 
 
-def index_field(values) -> ti.Field:
-    """An i32 field holding a (non-empty) integer table of the topology."""
-    values = np.asarray(values, dtype=np.int32)
-    field = ti.field(ti.i32, shape=values.shape)
-    field.from_numpy(values)
-    return field
-
-
 class Term:
     """Base of the force terms; see the module docstring. Subclasses are `@ti.data_oriented`
     and implement `assemble` as a `@ti.func`."""
@@ -93,14 +85,15 @@ class Term:
         capacity = engine.capacity
         self.coefficient_names = tuple(coefficient_shapes)
         for name, (shape, dtype) in coefficient_shapes.items():
-            setattr(self, name, ti.field(dtype, shape=(capacity,) + tuple(shape)))
+            setattr(self, name, engine.arena.field(dtype, (capacity,) + tuple(shape)))
         self.history_names = tuple(self.history(engine.topology))
         for name, shape in self.history(engine.topology).items():
-            setattr(self, name, ti.field(float, shape=(capacity,) + tuple(shape)))
+            setattr(self, name, engine.arena.field(float, (capacity,) + tuple(shape)))
         self.build(engine.topology)
 
     def build(self, topology):
-        """Device tables of the topology the term needs (index fields, Jacobian slots)."""
+        """Device tables of the topology the term needs (index fields, Jacobian slots, from
+        `engine.arena.index`)."""
 
     def load(self, coefficients: Dict[str, np.ndarray]):
         """Copy this batch's coefficients (padded to capacity) to the device."""

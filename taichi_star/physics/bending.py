@@ -13,7 +13,7 @@ import taichi as ti
 
 from ..gait import N_ACTUATORS, Gait
 from ..geometry import ARC_BEND, JOINT_BEND
-from .base import Term, index_field
+from .base import Term
 
 NOT_FIRED = -1.0
 """Marks an actuator that has not fired (K̄ is positive whenever it is defined)."""
@@ -131,10 +131,10 @@ class Bending(Term):
     def build(self, topology):
         (self.actuated,) = self.configuration_switches
         self.n_triplets = topology.n_triplets
-        self.triplets = index_field(topology.triplets)
+        self.triplets = self.engine.arena.index(topology.triplets)
         self.triplet_slot = self.engine.triplet_slots(topology.triplets)
-        self.triplet_actuator = index_field(topology.triplet_actuator)
-        self.joint_actuator = index_field(topology.joint_actuator)
+        self.triplet_actuator = self.engine.arena.index(topology.triplet_actuator)
+        self.joint_actuator = self.engine.arena.index(topology.joint_actuator)
 
     @ti.func
     def profile_curvature(self, b, tau):

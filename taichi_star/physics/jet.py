@@ -12,7 +12,7 @@ import taichi as ti
 
 from ..gait import N_ACTUATORS
 from ..geometry import CENTRE
-from .base import Term, index_field
+from .base import Term
 
 
 @ti.func
@@ -89,9 +89,9 @@ class Jet(Term):
         return {"previous_areas": (N_ACTUATORS,), "area_rate_offset": (N_ACTUATORS,)}
 
     def build(self, topology):
-        self.jet_quads = index_field(topology.jet_quads)
+        self.jet_quads = self.engine.arena.index(topology.jet_quads)
         slot = self.engine.plan.slot
-        self.jet_slot = index_field([[slot[CENTRE, CENTRE]] + [slot[CENTRE, n] for n in quad]
+        self.jet_slot = self.engine.arena.index([[slot[CENTRE, CENTRE]] + [slot[CENTRE, n] for n in quad]
                                      for quad in topology.jet_quads])
 
     @ti.func

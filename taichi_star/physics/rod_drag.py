@@ -9,7 +9,7 @@ import numpy as np
 import taichi as ti
 
 from ..geometry import SPOKE
-from .base import Term, index_field
+from .base import Term
 
 
 @ti.func
@@ -66,7 +66,7 @@ class RodDrag(Term):
     def build(self, topology):
         rods = rod_edges(topology)
         self.n_rods = len(rods)
-        self.rods = index_field(topology.edges[rods])
+        self.rods = self.engine.arena.index(topology.edges[rods])
         self.rod_slot = self.engine.pair_slots(topology.edges[rods])
 
     @ti.func

@@ -5,7 +5,7 @@ import numpy as np
 import taichi as ti
 
 from ..geometry import ARC
-from .base import Term, index_field
+from .base import Term
 
 
 @ti.func
@@ -50,7 +50,7 @@ class Stretching(Term):
 
     def build(self, topology):
         self.n_edges = topology.n_edges
-        self.edges = index_field(topology.edges)
+        self.edges = self.engine.arena.index(topology.edges)
         self.edge_slot = self.engine.pair_slots(topology.edges)
 
     @ti.func
