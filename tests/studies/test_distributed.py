@@ -17,7 +17,7 @@ from studies import cli, sweep
 from studies.__main__ import main as studies_main
 
 # 16 instances, 2 ms steps, 1.2 s each: in chunks of 2 about 0.2 s a chunk on one core (and
-# the engine of capacity 8 the other tests compile)
+# the engine of capacity 64 the other tests compile)
 SWEEP = ["--gaits", "A1,A1+A3", "--alpha", "0.4:1.2:8", "--period", "0.3", "--cycles", "4",
          "--dt", "0.002", "--chunk-size", "2", "--no-progress"]
 N_INSTANCES = 16
