@@ -19,7 +19,7 @@ from .model import BatchModel
 from .params import SolverConfig
 from .physics import coupled_node_pairs
 from .fields import FieldArena
-from .physics.base import load_field, pad_batch
+from .physics.base import load_field, numpy_to_field_type, pad_batch
 from .gait import N_ACTUATORS, Gait
 from .state import NEVER, STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_OK, BatchState
 
@@ -65,7 +65,7 @@ class BatchEngine:
         self.terms = []
         for cls, configuration in model.terms_used:
             coefficients = model.coefficients[cls.name]
-            shapes = {name: (values.shape[1:], ti.i32 if values.dtype.kind in "biu" else float)
+            shapes = {name: (values.shape[1:], numpy_to_field_type(values))
                       for name, values in coefficients.items()}
             self.terms.append(cls(self, configuration, shapes))
         for term in self.terms:
@@ -339,10 +339,10 @@ class BatchEngine:
         max_steps attempts. Each step ends exactly on the stop, on the next cycle start of its
         periodic gait or on a commanded firing time if it would pass them (the firing happens
         there: the step ending at the firing time sees K̄(0));
-        a converged step is accepted when its local error estimate (m; `first_order_error`, or
-        `second_order_error` for BDF2 with a history) is within error_tol, else redone from the
-        start state with the step shrunk; the next step grows or shrinks by
-        0.9·(tol/error)^(1/(order + 1)) within [0.2, 2] and [dt_min, dt_max]. A step that fails to converge is
+        a converged step is accepted when its local error estimate (m, `first_order_error`, for
+        both integrators: BDF2's own error is smaller) is within error_tol, else redone from the
+        start state with the step shrunk; the next step grows or shrinks by 0.9·√(tol/error)
+        within [0.2, 2] and [dt_min, dt_max]. A step that fails to converge is
         retried at a quarter of its size down to dt_min, then the instance fails."""
         attempts = 0
         tol = self.error_tol[None]

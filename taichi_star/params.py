@@ -242,7 +242,8 @@ class SolverConfig:
     """Floating point type of the engine: "f64" or "f32"."""
     integrator: str = "euler"
     """"euler": implicit Euler (the paper's scheme, first order); "bdf2": second-order BDF (its
-    first step, and the step after a retry, are implicit Euler)."""
+    first step, a step after a retry and a step after a rejected adaptive step are implicit
+    Euler)."""
     jacobian: str = "newton"
     """"newton": a fresh Jacobian and LU every iteration; "chord": the step's first Jacobian is
     reused while it contracts the update ≥ 4× per iteration (same converged solution to

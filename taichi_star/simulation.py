@@ -14,14 +14,13 @@ from . import metrics, output
 from .geometry import CENTRE, Topology
 from .model import build_model, validate_batch
 from .params import SolverConfig, StarParams
+from .engine import STEP_TOLERANCE
 from .runtime import Runtime, check_arch
 from .state import STATUS_NAMES, STATUS_OK
 
 STEPS_PER_LAUNCH = 50
 """Steps fused into one kernel launch: enough to hide launch cost, few enough for a live
 progress bar."""
-STEP_TOLERANCE = 1e-9
-"""Relative tolerance within which a time is taken to be a whole number of steps."""
 
 
 def whole_steps(time_s: float, dt: float) -> Optional[int]:
