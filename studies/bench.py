@@ -4,6 +4,8 @@
                             [--batch-sizes 1,8,64,512,2048,8192] [--precisions f64,f32]
                             [--steps 100] [--repeats 3] [--scenarios all_terms,alpha_0,...|none]
                             [--scenario-batch 64] [--workers-list 1,2] [--no-cache-probe]
+                            [--presets paper,accurate] [--accurate-duration 3.15]
+                            [--gpu-block-dims 64] [--layouts instance_minor,instance_major]
 
 Gait A1+A3, the paper's discretisation (N = 193 nodes), h = 1 ms, implicit Euler. For every batch
 size B and precision: a fresh engine is compiled (its first launch, timed apart as `compile_s`),
@@ -35,6 +37,21 @@ with α = 0 (no jet), C_a = 0 (no added mass), drag 0 (rod and cylinder drag off
 (no actuation); terms that no instance uses are compiled out (`terms`: the force terms the
 engine was compiled with).
 
+Preset "accurate" (`--presets`): the accurate model and solver (adaptive BDF2, N = 337) on the
+same gait, `simulate` end to end for `--accurate-duration` simulated seconds from rest (default
+one period) after one untimed call that compiles; `real_time_factor` is then simulated
+robot-seconds per wall second and `robot_steps_per_s` counts the adaptive steps taken.
+
+GPU alternatives (`--arch gpu`): the B sweep is repeated for every threads-per-block count
+(`--gpu-block-dims`) and layout of the per-instance fields (`--layouts`: instance_minor, the
+same element of consecutive instances adjacent; instance_major, the CPU's layout), each a
+compiled engine of its own. The memory-bound floor of an engine whose Newton matrix lives in
+device memory: per Newton iteration the Jacobian blocks are written by the assembly, read and
+written by the in-place LU and read by the solve (4 × n_slots 2×2 blocks), plus the node
+vectors (`bytes_per_step`, at the window's mean iterations per step); `bandwidth_gb_s` is
+measured on the same device by a Taichi copy kernel (bytes read + written) and
+`bandwidth_fraction` = robot_steps_per_s × bytes_per_step / bandwidth.
+
 Compile time with a cold and a warm Taichi offline cache: two fresh Python processes that share
 an empty temporary cache folder (`TI_OFFLINE_CACHE_FILE_PATH`), the first compiles from scratch,
 the second loads the first's kernels (section "compile"; off with --no-cache-probe and in
@@ -42,12 +59,13 @@ the second loads the first's kernels (section "compile"; off with --no-cache-pro
 
 Writes `bench.csv` (`bench_gpu.csv` for --arch gpu): one row per measurement; `section` is
 "batch" (B sweep), "skip" (terms at one B) or "compile" (cold/warm cache); columns: machine,
-cpu_model, cores, gpu, arch, section, scenario, terms, batch_size, precision, n_nodes, dt_s,
+cpu_model, cores, gpu, gpu_driver, arch, preset, layout, block_dim, section, scenario, terms, batch_size, precision, n_nodes, dt_s,
 gait, warmup_steps, steps, repeats, commit, timestamp, import_s, setup_s, compile_s,
 time_to_first_step_s, robot_steps_per_s, real_time_factor (= robot_steps_per_s × dt: simulated
 robot-seconds per wall second), step_us, newton_iterations_mean, assembly_us, factor_us,
 solve_us, bookkeeping_us (µs per instance-step), factor_flops (per factorisation),
-factor_gflops (achieved by the factorisation). And `bench.png` (`bench_gpu.png`): throughput
+factor_gflops (achieved by the factorisation), bytes_per_step, bandwidth_gb_s,
+bandwidth_fraction. And `bench.png` (`bench_gpu.png`): throughput
 against B (log-log, one line per precision, the design target dashed), the phase split and
 the scenarios.
 """
@@ -68,7 +86,7 @@ import taichi as ti
 
 from taichi_star import SolverConfig, StarParams
 from taichi_star.batch import LocalProcesses, run_batch
-from taichi_star.runtime import prepare_engine
+from taichi_star.runtime import GPU_BLOCK_DIM, GPU_INSTANCE_MINOR, Runtime, prepare_engine
 
 from . import cli, provenance
 
@@ -91,6 +109,8 @@ PROCESS_BATCH = 512
 QUICK_BATCH_SIZES = "2"
 QUICK_STEPS = 5
 QUICK_SCENARIO_BATCH = 2
+ACCURATE_DURATION = 3.15
+"""One period of the benchmark gait, s."""
 QUICK_SCENARIOS = "all_terms,added_mass_0"
 """--quick keeps to one engine (the smallest, as the other studies' quick batches use) and to
 scenarios with the same terms, so that it compiles the stepping kernel at most once."""
@@ -111,12 +131,19 @@ SCENARIOS = {
 }
 """Scenario name -> StarParams changes from the benchmark robot (gait A1+A3, paper values)."""
 
-COLUMNS = ["machine", "cpu_model", "cores", "gpu", "arch", "section", "scenario", "terms",
+LAYOUTS = ("instance_minor", "instance_major")
+PRESETS = ("paper", "accurate")
+BANDWIDTH_BYTES = 1 << 30
+"""Size of the buffer the bandwidth probe copies (bytes): far larger than any cache."""
+
+COLUMNS = ["machine", "cpu_model", "cores", "gpu", "gpu_driver", "arch", "preset", "layout",
+           "block_dim", "section", "scenario", "terms",
            "batch_size", "precision", "jacobian", "workers", "n_nodes", "dt_s", "gait",
            "warmup_steps", "steps", "repeats", "commit", "timestamp", "import_s", "setup_s",
            "compile_s", "time_to_first_step_s", "robot_steps_per_s", "real_time_factor",
            "step_us", "newton_iterations_mean", "assembly_us", "factor_us", "solve_us",
-           "bookkeeping_us", "factor_flops", "factor_gflops"]
+           "bookkeeping_us", "factor_flops", "factor_gflops", "bytes_per_step",
+           "bandwidth_gb_s", "bandwidth_fraction"]
 
 
 def timestamp() -> str:
@@ -194,7 +221,9 @@ def measure(params, arch: str, precision: str, steps: int, repeats: int,
                         timed / (steps * iterations), profile_seconds)
     assembly, factor, solve = (iterations * phase[name] for name in ("assembly", "factor", "solve"))
     flops = engine.plan.factor_flops
+    bytes_per_step = iterations * matrix_bytes_per_iteration(engine, precision)
     return {"gait": params[0].gait, "jacobian": jacobian, "workers": 1,
+            "preset": "paper", "bytes_per_step": bytes_per_step,
             "terms": terms_of(engine),
             "n_nodes": engine.n_nodes, "setup_s": setup,
             "compile_s": compile_s,
@@ -203,6 +232,66 @@ def measure(params, arch: str, precision: str, steps: int, repeats: int,
             "factor_us": factor, "solve_us": solve,
             "bookkeeping_us": step_us - assembly - factor - solve, "factor_flops": flops,
             "factor_gflops": flops / (phase["factor"] * 1e3) if phase["factor"] > 0 else math.nan}
+
+
+def matrix_bytes_per_iteration(engine, precision: str) -> float:
+    """Device-memory bytes of one Newton iteration of one instance when the matrix lives in
+    device memory (see the module docstring): the 2×2 blocks 4 times, the right-hand side
+    written and read twice, positions read and written."""
+    scalar = 8 if precision == "f64" else 4
+    return 4 * engine.plan.n_slots * 4 * scalar + 6 * engine.n_nodes * 2 * scalar
+
+
+def measure_accurate(batch: int, arch: str, precision: str, duration: float) -> dict:
+    """End-to-end throughput of `simulate` with the accurate preset (model and solver) for
+    `duration` simulated seconds from rest, after one untimed call of the same batch that
+    compiles (its time less the timed call's is `compile_s`)."""
+    from taichi_star import simulate
+
+    params = [StarParams.preset("accurate", gait=GAIT)] * batch
+    solver = SolverConfig.preset("accurate", precision=precision,
+                                 newton_tol=bench_solver(precision).newton_tol)
+    first = time.perf_counter()
+    simulate(params, duration, solver=solver, arch=arch, progress=False)
+    first = time.perf_counter() - first
+    start = time.perf_counter()
+    result = simulate(params, duration, solver=solver, arch=arch, progress=False)
+    timed = time.perf_counter() - start
+    summary = result.summary
+    if (summary["status"] != "ok").any():
+        raise RuntimeError("an instance failed during the benchmark: its timing is not valid")
+    steps = float(summary["steps"].sum())
+    return {"gait": GAIT, "preset": "accurate", "jacobian": solver.jacobian, "workers": 1,
+            "n_nodes": result.topology.n_nodes,
+            "compile_s": max(first - timed, 0.0), "robot_steps_per_s": steps / timed,
+            "real_time_factor": batch * duration / timed, "step_us": 1e6 * timed / steps,
+            "newton_iterations_mean": float(summary["newton_iterations_mean"].mean())}
+
+
+def measure_bandwidth(arch: str) -> float:
+    """Device-memory bandwidth, GB/s (bytes read + written by a copy kernel, best of 5), or NaN
+    on the CPU (not a figure this benchmark's CPU rows use)."""
+    if arch == "cpu":
+        return math.nan
+    count = BANDWIDTH_BYTES // 4
+    source = ti.field(ti.f32, count)
+    target = ti.field(ti.f32, count)
+
+    @ti.kernel
+    def copy():
+        for i in range(count):
+            target[i] = source[i]
+
+    source.fill(1.0)
+    copy()
+    ti.sync()
+    best = math.inf
+    for _ in range(5):
+        start = time.perf_counter()
+        copy()
+        ti.sync()
+        best = min(best, time.perf_counter() - start)
+    return 2 * BANDWIDTH_BYTES / best / 1e9
 
 
 def measure_processes(batch: int, workers: int, jacobian: str, steps: int, repeats: int) -> dict:
@@ -316,6 +405,19 @@ def build_parser():
                              "section, or none")
     parser.add_argument("--process-batch", type=int, default=PROCESS_BATCH,
                         help=f"batch size of the processes section (default {PROCESS_BATCH})")
+    parser.add_argument("--presets", default="paper", quick="paper",
+                        help="comma list of paper (fixed 1-ms Euler steps, the B sweep) and "
+                             "accurate (adaptive, simulate end to end at the same B)")
+    parser.add_argument("--accurate-duration", type=float, default=ACCURATE_DURATION,
+                        help="simulated seconds per accurate measurement (default one period, "
+                             f"{ACCURATE_DURATION} s)")
+    parser.add_argument("--gpu-block-dims", default=str(GPU_BLOCK_DIM),
+                        help="comma list of threads per GPU block (powers of two up to 1024), "
+                             "--arch gpu only")
+    parser.add_argument("--layouts", default="instance_minor" if GPU_INSTANCE_MINOR else
+                        "instance_major",
+                        help=f"comma list of {', '.join(LAYOUTS)}: the GPU layout of the "
+                             "per-instance fields, --arch gpu only")
     parser.add_argument("--no-cache-probe", action="store_true",
                         help="skip the cold/warm offline-cache compile probe (two subprocesses; "
                              "skipped by --quick)")
@@ -346,6 +448,19 @@ def parse_args(argv):
     args.scenarios = optional_list(args.scenarios, "--scenarios",
                                    lambda text, flag: cli.parse_choices(text, flag, SCENARIOS))
     args.workers_list = optional_list(args.workers_list, "--workers-list", cli.parse_counts)
+    args.presets = cli.parse_choices(args.presets, "--presets", PRESETS)
+    args.layouts = cli.parse_choices(args.layouts, "--layouts", LAYOUTS)
+    args.gpu_block_dims = cli.parse_counts(args.gpu_block_dims, "--gpu-block-dims")
+    for block_dim in args.gpu_block_dims:
+        if block_dim > 1024 or block_dim & (block_dim - 1):
+            raise cli.StudyArgumentError(f"--gpu-block-dims: each must be a power of two up to "
+                                         f"1024, got {block_dim}")
+    if args.arch == "cpu" and (len(args.layouts) > 1 or len(args.gpu_block_dims) > 1):
+        raise cli.StudyArgumentError("--layouts and --gpu-block-dims compare GPU settings; "
+                                     "use them with --arch gpu")
+    if not (0.0 < args.accurate_duration <= 100.0):
+        raise cli.StudyArgumentError(f"--accurate-duration must be in (0, 100] s, got "
+                                     f"{args.accurate_duration}")
     for flag in ("steps", "repeats", "scenario_batch", "process_batch"):
         if getattr(args, flag) < 1:
             raise cli.StudyArgumentError(f"--{flag.replace('_', '-')} must be >= 1, got "
@@ -375,19 +490,39 @@ def run_bench(args) -> pd.DataFrame:
         rows.append({**base, **row, "timestamp": timestamp()})
         if not args.no_progress:
             row = rows[-1]
-            print(f"  {row['section']:<7} {row['scenario']:<12} B={row['batch_size']:<5} "
-                  f"{row['precision']}: {row.get('robot_steps_per_s', math.nan):12.0f} "
-                  f"robot-steps/s, compile {row.get('compile_s', math.nan):6.2f} s", flush=True)
+            print(f"  {row['section']:<7} {row['scenario']:<12} {row.get('preset', ''):<8} "
+                  f"{row.get('layout', '')} {row.get('block_dim', '')} "
+                  f"{row.get('jacobian', '')} B={row['batch_size']:<5} {row['precision']}: "
+                  f"{row.get('robot_steps_per_s', math.nan):12.0f} robot-steps/s, "
+                  f"{row.get('real_time_factor', math.nan):10.1f} robot-s/s, "
+                  f"compile {row.get('compile_s', math.nan):6.2f} s", flush=True)
 
+    gpu = args.arch != "cpu"
+    settings = [(layout, block_dim) for layout in args.layouts for block_dim in args.gpu_block_dims]
     for index, precision in enumerate(args.precisions):
-        for jacobian in args.jacobians:
-            for batch in args.batch_sizes:
-                figures = measure([StarParams(gait=GAIT)] * batch, args.arch, precision,
-                                  args.steps, args.repeats, profile_seconds, jacobian)
-                add({"section": "batch", "scenario": "all_terms", "batch_size": batch,
-                     "precision": precision, **figures})
+        bandwidth = measure_bandwidth(args.arch) if gpu else math.nan
+        for layout, block_dim in settings if gpu else [("instance_major", 1)]:
+            if gpu:
+                Runtime.current().configure_gpu(block_dim, layout == "instance_minor")
+            place = {"layout": layout, "block_dim": block_dim, "bandwidth_gb_s": bandwidth}
+            if "paper" in args.presets:
+                for jacobian in args.jacobians:
+                    for batch in args.batch_sizes:
+                        figures = measure([StarParams(gait=GAIT)] * batch, args.arch, precision,
+                                          args.steps, args.repeats, profile_seconds, jacobian)
+                        moved = figures["robot_steps_per_s"] * figures["bytes_per_step"]
+                        add({"section": "batch", "scenario": "all_terms", "batch_size": batch,
+                             "precision": precision, **place, **figures,
+                             "bandwidth_fraction": moved / (bandwidth * 1e9)})
+            if "accurate" in args.presets:
+                for batch in args.batch_sizes:
+                    figures = measure_accurate(batch, args.arch, precision, args.accurate_duration)
+                    add({"section": "batch", "scenario": "all_terms", "batch_size": batch,
+                         "precision": precision, **place, **figures})
         if index == 0:
             # while this precision's runtime is live (a precision switch re-initialises Taichi)
+            if gpu:
+                Runtime.current().configure_gpu()
             for scenario in args.scenarios:
                 params = [StarParams(gait=GAIT).replace(**SCENARIOS[scenario])] * args.scenario_batch
                 figures = measure(params, args.arch, precision, args.steps, args.repeats,
@@ -421,10 +556,14 @@ def plot_bench(csv_path, png_path):
     fig.get_layout_engine().set(wspace=0.12)  # room for the real-time factor axis
 
     ax = axes[0]
-    for (precision, jacobian), part in sweep.groupby(["precision", "jacobian"], sort=False):
+    lines = ["precision", "jacobian", "preset", "layout", "block_dim"]
+    sweep = sweep.assign(**{name: sweep[name].fillna("") for name in lines})
+    for key, part in sweep[sweep["preset"] != "accurate"].groupby(lines, sort=False):
+        precision, jacobian, _, layout, block_dim = key
         part = part.sort_values("batch_size")
+        place = f", {layout}, {int(block_dim)}/block" if arch != "cpu" else ", in-process"
         ax.plot(part["batch_size"], part["robot_steps_per_s"], "o-",
-                label=f"{precision}, {jacobian}, in-process")
+                label=f"{precision}, {jacobian}{place}")
     processes = table[table["section"] == "processes"]
     for row in processes.to_dict("records"):
         ax.plot(row["batch_size"], row["robot_steps_per_s"], "s", markersize=8,

@@ -31,14 +31,19 @@ def cpu_model() -> str:
     return platform.processor() or platform.machine() or "unknown"
 
 
-def gpu_names() -> list:
-    """The names of the NVIDIA GPUs nvidia-smi lists (empty without nvidia-smi)."""
+def nvidia_smi(query: str) -> list:
+    """One line per NVIDIA GPU of `nvidia-smi --query-gpu=query` (empty without nvidia-smi)."""
     try:
-        output = subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"],
+        output = subprocess.run(["nvidia-smi", f"--query-gpu={query}", "--format=csv,noheader"],
                                 capture_output=True, text=True, timeout=30, check=True).stdout
     except (OSError, subprocess.SubprocessError):
         return []
     return [line.strip() for line in output.splitlines() if line.strip()]
+
+
+def gpu_names() -> list:
+    """The names of the NVIDIA GPUs nvidia-smi lists (empty without nvidia-smi)."""
+    return nvidia_smi("name")
 
 
 def machine() -> Dict[str, object]:
@@ -48,13 +53,14 @@ def machine() -> Dict[str, object]:
 
 
 def machine_columns(arch: str) -> Dict[str, object]:
-    """Table columns naming the machine: machine (one line), cpu_model, cores, gpu ("" on the
-    CPU arch)."""
+    """Table columns naming the machine: machine (one line), cpu_model, cores, gpu and
+    gpu_driver ("" on the CPU arch)."""
     facts = machine()
     gpu = ", ".join(facts["gpus"]) if arch != "cpu" else ""
     label = f"{facts['cpu_model']} ({facts['cores']} cores)" + (f" + {gpu}" if gpu else "")
+    driver = ", ".join(nvidia_smi("driver_version")) if arch != "cpu" else ""
     return {"machine": label, "cpu_model": facts["cpu_model"], "cores": facts["cores"],
-            "gpu": gpu}
+            "gpu": gpu, "gpu_driver": driver}
 
 
 def short_commit() -> str:

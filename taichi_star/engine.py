@@ -34,10 +34,13 @@ FINITE_LIMIT = 1e30
 class BatchEngine:
     """Device model, state and solver for up to `capacity` instances of one topology and one
     set of terms (`model.engine_key`). Compiled once per process and reused: the per-instance
-    coefficients and the solver settings are loaded by `load`, not baked into the kernels."""
+    coefficients and the solver settings are loaded by `load`, not baked into the kernels.
+    `instances_per_block`: threads (instances) per GPU block (1 on the CPU: one instance per
+    task); `loop_spread`: parallel-loop iterations per instance (see `advance`);
+    `instance_minor`: the GPU layout of the per-instance fields (`fields.FieldArena`)."""
 
     def __init__(self, model: BatchModel, capacity: int, integrator, instances_per_block: int = 1,
-                 loop_spread: int = 1):
+                 loop_spread: int = 1, instance_minor: bool = False):
         topology = model.topology
         self.topology = topology
         self.capacity = capacity
@@ -47,13 +50,13 @@ class BatchEngine:
         self.integrator = integrator
         self.plan = plan_elimination(topology.n_nodes, coupled_node_pairs(
             topology, [cls for cls, _ in model.terms_used]))
-        self.arena = arena = FieldArena()
+        self.arena = arena = FieldArena(instance_minor)
         self.system = BlockSystem(self.plan, capacity, arena)
         self.state = BatchState(capacity, topology.n_nodes, arena)
         self.diagonal_slot = arena.index([self.plan.slot[n, n] for n in range(self.n_nodes)])
-        self.mass = arena.field(float, (capacity, self.n_nodes))
-        self.inertia = arena.field(float, (capacity, self.n_nodes))
-        self.centroids = arena.field(float, capacity, vector=2)
+        self.mass = arena.batch_field(float, (capacity, self.n_nodes))
+        self.inertia = arena.batch_field(float, (capacity, self.n_nodes))
+        self.centroids = arena.batch_field(float, capacity, vector=2)
         self.dt = arena.field(float)
         self.newton_tol = arena.field(float)
         self.max_newton = arena.field(ti.i32)

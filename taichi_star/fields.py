@@ -1,7 +1,13 @@
 """One SNode tree per engine: Taichi gives every field created after the first kernel launch a
 tree of its own, and a program holds a limited number of trees (a process that builds many
 engines, each with dozens of fields, would run out and crash). A FieldArena places all of an
-engine's fields in one tree, and fills its index tables once the tree exists."""
+engine's fields in one tree, and fills its index tables once the tree exists.
+
+Fields with a leading batch axis (`batch_field`) are laid out instance-major on the CPU (one
+instance's values contiguous: one thread walks its own instance through the cache) and, with
+`instance_minor`, instance-minor on a GPU (the same element of consecutive instances adjacent:
+the threads of a warp, one instance each, read one contiguous run of memory).
+The index `[b, ...]` is the same in both layouts; only the addresses differ."""
 
 from typing import Optional
 
@@ -12,14 +18,37 @@ import taichi as ti
 class FieldArena:
     """Collects fields (`field`, `index`) and creates them together in `finalize`."""
 
-    def __init__(self):
+    def __init__(self, instance_minor: bool = False):
+        self.instance_minor = instance_minor
         self.builder = ti.FieldsBuilder()
         self.pending = []
         self.tree = None
 
     def field(self, dtype, shape=(), vector: Optional[int] = None, matrix: Optional[tuple] = None):
         """A scalar (or `vector`-long vector, or `matrix` = (rows, columns)) field of `shape`,
-        usable once the arena is finalized."""
+        stored row-major, usable once the arena is finalized."""
+        field, shape = self.new(dtype, shape, vector, matrix)
+        if shape:
+            self.builder.dense(ti.axes(*range(len(shape))), shape).place(field)
+        else:
+            self.builder.place(field)
+        return field
+
+    def batch_field(self, dtype, shape, vector: Optional[int] = None,
+                    matrix: Optional[tuple] = None):
+        """Like `field`, for a `shape` = (capacity, ...) whose first axis is the instance: stored
+        instance-minor when the arena is (see the module docstring)."""
+        field, shape = self.new(dtype, shape, vector, matrix)
+        if self.instance_minor and len(shape) > 1:
+            self.builder.dense(ti.axes(*range(1, len(shape))), shape[1:]).dense(
+                ti.axes(0), shape[0]).place(field)
+        else:
+            self.builder.dense(ti.axes(*range(len(shape))), shape).place(field)
+        return field
+
+    @staticmethod
+    def new(dtype, shape, vector, matrix):
+        """(unplaced field, shape as a tuple of ints)."""
         if vector is not None:
             field = ti.Vector.field(vector, dtype)
         elif matrix is not None:
@@ -27,11 +56,7 @@ class FieldArena:
         else:
             field = ti.field(dtype)
         shape = (shape,) if isinstance(shape, (int, np.integer)) else tuple(int(n) for n in shape)
-        if shape:
-            self.builder.dense(ti.axes(*range(len(shape))), shape).place(field)
-        else:
-            self.builder.place(field)
-        return field
+        return field, shape
 
     def index(self, values) -> ti.Field:
         """An i32 field holding the (non-empty) integer table `values`, filled at finalize."""

@@ -154,8 +154,8 @@ class BlockSystem:
         self.upper_slot = arena.index(_non_empty(plan.upper_slot))
         self.update_start = arena.index(_non_empty(plan.update_start))
         self.update_slot = arena.index(_non_empty(plan.update_slot))
-        self.blocks = arena.field(float, (batch_size, plan.n_slots), matrix=(2, 2))
-        self.rhs = arena.field(float, (batch_size, plan.n_nodes), vector=2)
+        self.blocks = arena.batch_field(float, (batch_size, plan.n_slots), matrix=(2, 2))
+        self.rhs = arena.batch_field(float, (batch_size, plan.n_nodes), vector=2)
         if own:
             arena.finalize()
 

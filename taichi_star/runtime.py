@@ -24,6 +24,10 @@ ARCHS = ("cpu", "gpu", "cuda", "vulkan", "metal")
 MIN_CAPACITY = 64
 PARALLEL_LOOP_MINIMUM = 1024
 """Taichi 1.7's CPU backend parallelises a range-for only from about this many iterations."""
+GPU_BLOCK_DIM = 64
+"""Threads (one instance each) per GPU block; chosen by `python -m studies bench --arch gpu`."""
+GPU_INSTANCE_MINOR = True
+"""GPU layout of the per-instance fields: instance-minor (coalesced); chosen by the same bench."""
 
 
 def available_archs() -> List[str]:
@@ -68,6 +72,8 @@ class Runtime:
         self.arch: Optional[str] = None
         self.precision: Optional[str] = None
         self.cpu_threads: Optional[int] = None
+        self.gpu_block_dim = GPU_BLOCK_DIM
+        self.gpu_instance_minor = GPU_INSTANCE_MINOR
         self.log_level = ti.WARN
         self.engines: Dict[tuple, BatchEngine] = {}
         self.leases: Dict[tuple, List[Tuple[BatchEngine, weakref.ref]]] = {}
@@ -103,6 +109,14 @@ class Runtime:
         self.engines.clear()
         self.leases.clear()
 
+    def configure_gpu(self, block_dim: int = GPU_BLOCK_DIM, instance_minor: bool = GPU_INSTANCE_MINOR):
+        """GPU launch and layout settings of the engines built from now on (for benchmarks that
+        compare them; the defaults are the measured best)."""
+        if block_dim < 1 or block_dim > 1024 or block_dim & (block_dim - 1):
+            raise ValueError(f"block_dim must be a power of two in [1, 1024], got {block_dim}")
+        self.gpu_block_dim = int(block_dim)
+        self.gpu_instance_minor = bool(instance_minor)
+
     def loop_spread(self, capacity: int) -> int:
         """Iterations of the engine's parallel loop per instance: on the CPU enough to reach
         PARALLEL_LOOP_MINIMUM iterations (below that Taichi runs the loop on one thread)."""
@@ -114,14 +128,22 @@ class Runtime:
         """A new engine (its own device state) for this batch. Taichi must be initialised
         (`ensure`)."""
         capacity = batch_capacity(model.batch_size)
+        gpu = self.arch != "cpu"
         return BatchEngine(model, capacity, INTEGRATORS[solver.integrator](),
-                           instances_per_block=1 if self.arch == "cpu" else 64,
-                           loop_spread=self.loop_spread(capacity))
+                           instances_per_block=self.gpu_block_dim if gpu else 1,
+                           loop_spread=self.loop_spread(capacity),
+                           instance_minor=gpu and self.gpu_instance_minor)
+
+    def engine_key(self, model: BatchModel, solver: SolverConfig) -> tuple:
+        """What an engine is compiled for: topology and terms, integrator, capacity and, on a
+        GPU, its launch and layout settings."""
+        gpu = (self.gpu_block_dim, self.gpu_instance_minor) if self.arch != "cpu" else ()
+        return (model.engine_key, solver.integrator, batch_capacity(model.batch_size)) + gpu
 
     def lease_engine(self, model: BatchModel, solver: SolverConfig, owner) -> BatchEngine:
         """An engine of its own for `owner` (a Simulator) while the owner lives: one whose
         previous owner is gone is reused (no recompilation), else a new one."""
-        key = (model.engine_key, solver.integrator, batch_capacity(model.batch_size))
+        key = self.engine_key(model, solver)
         leases = self.leases.setdefault(key, [])
         for index, (engine, holder) in enumerate(leases):
             if holder() is None:
@@ -134,7 +156,7 @@ class Runtime:
     def engine_for(self, model: BatchModel, solver: SolverConfig) -> BatchEngine:
         """The cached engine for this batch's topology, terms, integrator and capacity (created
         on first use), loaded with the batch at rest, its gaits firing every period."""
-        key = (model.engine_key, solver.integrator, batch_capacity(model.batch_size))
+        key = self.engine_key(model, solver)
         if key not in self.engines:
             self.engines[key] = self.new_engine(model, solver)
         engine = self.engines[key]

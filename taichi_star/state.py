@@ -32,51 +32,51 @@ class BatchState:
 
     def __init__(self, capacity: int, n_nodes: int, arena: FieldArena):
         per_node = (capacity, n_nodes)
-        self.positions = arena.field(float, per_node, vector=2)
-        self.velocities = arena.field(float, per_node, vector=2)
-        self.previous = arena.field(float, per_node, vector=2)
+        self.positions = arena.batch_field(float, per_node, vector=2)
+        self.velocities = arena.batch_field(float, per_node, vector=2)
+        self.previous = arena.batch_field(float, per_node, vector=2)
         """Positions at the start of the current (or last) step, m."""
-        self.previous_velocities = arena.field(float, per_node, vector=2)
-        self.inertia_offset = arena.field(float, per_node, vector=2)
-        self.velocity_offset = arena.field(float, per_node, vector=2)
-        self.backup_positions = arena.field(float, per_node, vector=2)
-        self.backup_velocities = arena.field(float, per_node, vector=2)
-        self.history_valid = arena.field(ti.i32, capacity)
+        self.previous_velocities = arena.batch_field(float, per_node, vector=2)
+        self.inertia_offset = arena.batch_field(float, per_node, vector=2)
+        self.velocity_offset = arena.batch_field(float, per_node, vector=2)
+        self.backup_positions = arena.batch_field(float, per_node, vector=2)
+        self.backup_velocities = arena.batch_field(float, per_node, vector=2)
+        self.history_valid = arena.batch_field(ti.i32, capacity)
         """1 when the last step was a full, accepted step (BDF2 may use it)."""
-        self.status = arena.field(ti.i32, capacity)
-        self.failure_step = arena.field(ti.i32, capacity)
-        self.steps_done = arena.field(ti.i32, capacity)
+        self.status = arena.batch_field(ti.i32, capacity)
+        self.failure_step = arena.batch_field(ti.i32, capacity)
+        self.steps_done = arena.batch_field(ti.i32, capacity)
         """Accepted steps."""
-        self.time = arena.field(float, capacity)
+        self.time = arena.batch_field(float, capacity)
         """The instance's current time, s."""
-        self.failure_time = arena.field(float, capacity)
+        self.failure_time = arena.batch_field(float, capacity)
         """End time of the step that failed, s."""
-        self.step_size = arena.field(float, capacity)
+        self.step_size = arena.batch_field(float, capacity)
         """Adaptive stepping: the size of the next step to try, s."""
-        self.previous_step_size = arena.field(float, capacity)
+        self.previous_step_size = arena.batch_field(float, capacity)
         """Adaptive stepping: the size of the last accepted step, s."""
-        self.stop_time = arena.field(float, capacity)
+        self.stop_time = arena.batch_field(float, capacity)
         """Adaptive stepping: where the current launch advances the instance to, s."""
-        self.scheduled_fire_time = arena.field(float, (capacity, N_ACTUATORS))
+        self.scheduled_fire_time = arena.batch_field(float, (capacity, N_ACTUATORS))
         """Adaptive stepping: time of a commanded firing that is due (NEVER: none), s."""
-        self.rejected_steps = arena.field(ti.i32, capacity)
+        self.rejected_steps = arena.batch_field(ti.i32, capacity)
         """Adaptive stepping: steps rejected by the error estimate or a failed Newton solve."""
-        self.newton_total = arena.field(ti.i64, capacity)
-        self.newton_max = arena.field(ti.i32, capacity)
-        self.substep_retries = arena.field(ti.i32, capacity)
-        self.fire_time = arena.field(float, (capacity, N_ACTUATORS))
+        self.newton_total = arena.batch_field(ti.i64, capacity)
+        self.newton_max = arena.batch_field(ti.i32, capacity)
+        self.substep_retries = arena.batch_field(ti.i32, capacity)
+        self.fire_time = arena.batch_field(float, (capacity, N_ACTUATORS))
         """Time (s) each actuator last fired; NEVER when it has not."""
-        self.previous_fire_time = arena.field(float, (capacity, N_ACTUATORS))
+        self.previous_fire_time = arena.batch_field(float, (capacity, N_ACTUATORS))
         """The firing before that (it still applies to times before `fire_time`)."""
-        self.scheduled_fire_step = arena.field(ti.i32, (capacity, N_ACTUATORS))
+        self.scheduled_fire_step = arena.batch_field(ti.i32, (capacity, N_ACTUATORS))
         """Step number at whose end a commanded firing is due (-1: none)."""
-        self.schedule_mask = arena.field(ti.i32, (capacity, N_ACTUATORS))
+        self.schedule_mask = arena.batch_field(ti.i32, (capacity, N_ACTUATORS))
         """Actuators the periodic schedule fires (a gait every period; none for commands)."""
-        self.schedule_period = arena.field(float, capacity)
+        self.schedule_period = arena.batch_field(float, capacity)
         """Period of the schedule, s."""
-        self.schedule_cycle_steps = arena.field(ti.i32, capacity)
+        self.schedule_cycle_steps = arena.batch_field(ti.i32, capacity)
         """Steps per period when the period is a whole number of steps, else 0."""
-        self.schedule_cycles = arena.field(ti.i32, capacity)
+        self.schedule_cycles = arena.batch_field(ti.i32, capacity)
         """Cycles the schedule has begun."""
         self.term_histories: Dict[str, Field] = {}
 

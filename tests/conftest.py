@@ -1,6 +1,20 @@
 import pytest
 
 
+def pytest_addoption(parser):
+    parser.addoption("--arch", default="cpu",
+                     help="Taichi arch for the engine tests that take the `arch` fixture "
+                          "(cpu, gpu): `pytest tests/model --arch gpu` runs them on a GPU")
+
+
+@pytest.fixture(scope="session")
+def arch(request):
+    """The arch the engine tests run on (--arch; ValueError if this machine lacks it)."""
+    from taichi_star.runtime import check_arch
+
+    return check_arch(request.config.getoption("--arch"))
+
+
 @pytest.fixture(scope="session")
 def taichi_cpu():
     """Taichi on the CPU in f64, initialised once for the tests that call kernels directly

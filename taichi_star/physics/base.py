@@ -85,10 +85,10 @@ class Term:
         capacity = engine.capacity
         self.coefficient_names = tuple(coefficient_shapes)
         for name, (shape, dtype) in coefficient_shapes.items():
-            setattr(self, name, engine.arena.field(dtype, (capacity,) + tuple(shape)))
+            setattr(self, name, engine.arena.batch_field(dtype, (capacity,) + tuple(shape)))
         self.history_names = tuple(self.history(engine.topology))
         for name, shape in self.history(engine.topology).items():
-            setattr(self, name, engine.arena.field(float, (capacity,) + tuple(shape)))
+            setattr(self, name, engine.arena.batch_field(float, (capacity,) + tuple(shape)))
         self.build(engine.topology)
 
     def build(self, topology):

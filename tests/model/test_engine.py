@@ -21,20 +21,20 @@ MIXED_BATCH = [
 ]
 
 
-def _final_shapes(params, n_steps, solver):
-    result = ts.simulate(params, n_steps * solver.dt, solver=solver,
+def _final_shapes(params, n_steps, solver, arch="cpu"):
+    result = ts.simulate(params, n_steps * solver.dt, solver=solver, arch=arch,
                          record_interval_s=n_steps * solver.dt, record_shapes=True)
     assert (result.summary.status == "ok").all()
     return result.shapes[-1]
 
 
-def test_engine_matches_reference_after_200_steps():
+def test_engine_matches_reference_after_200_steps(arch):
     """≤ 1e-8 relative on positions after 200 steps, every actuator fired by some instance.
     Both sides converge Newton to
     1e-12 m, so what remains is round-off accumulated over 200 steps (~1e-13 m), far inside
     1e-8 × 5 cm; we also hold the error against the motion itself (the displacement from rest)."""
     solver = ts.SolverConfig(newton_tol=1e-12)
-    engine = _final_shapes(MIXED_BATCH, 200, solver)
+    engine = _final_shapes(MIXED_BATCH, 200, solver, arch)
     for index, params in enumerate(MIXED_BATCH):
         reference = ReferenceSimulator(params, solver).run(200)
         error = np.abs(engine[index] - reference[-1]).max()
@@ -44,12 +44,13 @@ def test_engine_matches_reference_after_200_steps():
             assert error <= 1e-6 * motion, (params.gait, error, motion)
 
 
-def test_instance_alone_equals_instance_in_batch_bitwise():
+def test_instance_alone_equals_instance_in_batch_bitwise(arch):
     """One thread advances one instance with the same instructions whatever its neighbours,
-    so on the CPU the results must be identical to the last bit."""
-    batch = ts.simulate(MIXED_BATCH, 0.05, record_interval_s=0.01).summary
+    so the results must be identical to the last bit (on a GPU too: no reductions across
+    threads)."""
+    batch = ts.simulate(MIXED_BATCH, 0.05, record_interval_s=0.01, arch=arch).summary
     for index, params in enumerate(MIXED_BATCH):
-        alone = ts.simulate([params], 0.05, record_interval_s=0.01).summary
+        alone = ts.simulate([params], 0.05, record_interval_s=0.01, arch=arch).summary
         pd.testing.assert_frame_equal(alone.reset_index(drop=True),
                                       batch.iloc[[index]].reset_index(drop=True),
                                       check_exact=True)
@@ -211,13 +212,13 @@ ACCURATE_PHYSICS_BATCH = [
 
 
 @pytest.mark.parametrize("integrator", ["euler", "bdf2"])
-def test_engine_matches_reference_with_damping_joints_ends_and_closure(integrator):
+def test_engine_matches_reference_with_damping_joints_ends_and_closure(integrator, arch):
     """Material damping (with the integrator's own strain rate), series joints, shared ends and
     the ramp closure, implemented independently on both sides, agree to ≤ 1e-10 relative on
     positions after 130 steps of 2 ms (crossing the cycle boundaries of the 0.2 and 0.25 s
     periods). Newton converges both to 1e-12 m; what remains is round-off (~1e-14 m)."""
     solver = ts.SolverConfig(newton_tol=1e-12, integrator=integrator, dt=2e-3)
-    engine = _final_shapes(ACCURATE_PHYSICS_BATCH, 130, solver)
+    engine = _final_shapes(ACCURATE_PHYSICS_BATCH, 130, solver, arch)
     for index, params in enumerate(ACCURATE_PHYSICS_BATCH):
         reference = ReferenceSimulator(params, solver).run(130)
         error = np.abs(engine[index] - reference[-1]).max()

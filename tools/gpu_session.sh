@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# GPU checks and benchmarks on a lent NVIDIA machine (no network there): the Python packages it
+# lacks travel as wheels in .whl/ (ignored by git). Usage: bash tools/gpu_session.sh PHASE
+#   correctness  the engine-vs-reference, determinism and GPU-vs-CPU tests with --arch gpu, and
+#                the Fig. 4c study on the GPU compared with results/fig4c.csv (CPU)
+#   layouts      the layout and block-size alternatives at B = 8192 (paper, f64, Newton)
+#   bench        the full GPU benchmark into $OUT (results/bench_gpu.csv when committed)
+# Everything it writes is packed into $OUT/PHASE.tar.gz (the device returns few files).
+set -o pipefail
+phase=${1:?phase}
+python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
+    --target /tmp/site .whl/*.whl || exit 1
+export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1
+work=$(mktemp -d)
+nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv | tee "$work/gpu.txt"
+git rev-parse HEAD 2>/dev/null | tee -a "$work/gpu.txt"
+case "$phase" in
+correctness)
+    python3 -m pytest -q -p no:cacheprovider --arch gpu tests/model/test_gpu.py \
+        tests/model/test_determinism.py tests/model/test_engine.py \
+        -k "reference or alone or bitwise or batch_position or gpu" 2>&1 | tee "$work/pytest.log"
+    /usr/bin/time -v python3 -m studies fig4c --arch gpu --out "$work/fig4c_gpu" 2>&1 \
+        | tail -30 | tee "$work/fig4c.log"
+    python3 - "$work/fig4c_gpu/fig4c.csv" <<'PY' | tee "$work/fig4c_compare.txt"
+import sys
+import pandas as pd
+gpu, cpu = pd.read_csv(sys.argv[1]), pd.read_csv("results/fig4c.csv")
+for column in ("sim_speed_mm_s", "sim_signed_speed_mm_s"):
+    relative = ((gpu[column] - cpu[column]).abs() / cpu[column].abs()).max()
+    print(f"fig4c {column}: GPU vs CPU max relative difference {relative:.3e}")
+print(pd.DataFrame({"gait": cpu.gait, "cpu": cpu.sim_speed_mm_s, "gpu": gpu.sim_speed_mm_s}))
+PY
+    ;;
+layouts)
+    python3 -m studies bench --arch gpu --batch-sizes 8192 --precisions f64 --jacobians newton \
+        --layouts instance_minor,instance_major --gpu-block-dims "${BLOCKS:-32,64,128}" \
+        --scenarios none --workers-list none --no-cache-probe --repeats 2 --steps 60 \
+        --out "$work/layouts" 2>&1 | tee "$work/layouts.log"
+    ;;
+bench)
+    python3 -m studies bench --arch gpu --batch-sizes "${SIZES:-256,1024,4096,8192,16384,65536}" \
+        --precisions f64,f32 --presets paper,accurate --scenarios all_terms,alpha_0,drag_0 \
+        --scenario-batch 8192 --workers-list none --no-cache-probe \
+        --out "$work/bench" 2>&1 | tee "$work/bench.log"
+    ;;
+*)
+    echo "unknown phase $phase"; exit 2 ;;
+esac
+status=$?
+tar -czf "$OUT/$phase.tar.gz" -C "$work" .
+exit $status
