@@ -268,11 +268,12 @@ def measure_accurate(batch: int, arch: str, precision: str, duration: float) -> 
             "newton_iterations_mean": float(summary["newton_iterations_mean"].mean())}
 
 
-def measure_bandwidth(arch: str) -> float:
+def measure_bandwidth(arch: str, precision: str) -> float:
     """Device-memory bandwidth, GB/s (bytes read + written by a copy kernel, best of 5), or NaN
     on the CPU (not a figure this benchmark's CPU rows use)."""
     if arch == "cpu":
         return math.nan
+    Runtime.current().ensure(arch, precision)
     count = BANDWIDTH_BYTES // 4
     source = ti.field(ti.f32, count)
     target = ti.field(ti.f32, count)
@@ -500,7 +501,7 @@ def run_bench(args) -> pd.DataFrame:
     gpu = args.arch != "cpu"
     settings = [(layout, block_dim) for layout in args.layouts for block_dim in args.gpu_block_dims]
     for index, precision in enumerate(args.precisions):
-        bandwidth = measure_bandwidth(args.arch) if gpu else math.nan
+        bandwidth = measure_bandwidth(args.arch, precision) if gpu else math.nan
         for layout, block_dim in settings if gpu else [("instance_major", 1)]:
             if gpu:
                 Runtime.current().configure_gpu(block_dim, layout == "instance_minor")
