@@ -24,7 +24,7 @@ ARCHS = ("cpu", "gpu", "cuda", "vulkan", "metal")
 MIN_CAPACITY = 64
 PARALLEL_LOOP_MINIMUM = 1024
 """Taichi 1.7's CPU backend parallelises a range-for only from about this many iterations."""
-GPU_BLOCK_DIM = 64
+GPU_BLOCK_DIM = 32
 """Threads (one instance each) per GPU block; chosen by `python -m studies bench --arch gpu`."""
 GPU_INSTANCE_MINOR = True
 """GPU layout of the per-instance fields: instance-minor (coalesced); chosen by the same bench."""

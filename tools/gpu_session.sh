@@ -38,8 +38,9 @@ layouts)
         --out "$work/layouts" 2>&1 | tee "$work/layouts.log"
     ;;
 bench)
-    python3 -m studies bench --arch gpu --batch-sizes "${SIZES:-256,1024,4096,8192,16384,65536}" \
-        --precisions f64,f32 --presets paper,accurate --scenarios all_terms,alpha_0,drag_0 \
+    python3 -m studies bench --arch gpu --batch-sizes "${SIZES:-256,1024,4096,8192,16384,32768}" \
+        --precisions "${PRECISIONS:-f64,f32}" --presets paper,accurate \
+        --scenarios "${SCENARIOS:-all_terms,alpha_0,drag_0}" \
         --scenario-batch 8192 --workers-list none --no-cache-probe \
         --out "$work/bench" 2>&1 | tee "$work/bench.log"
     ;;
@@ -47,5 +48,5 @@ bench)
     echo "unknown phase $phase"; exit 2 ;;
 esac
 status=$?
-tar -czf "$OUT/$phase.tar.gz" -C "$work" .
+tar -czf "$OUT/$phase${PRECISIONS:+_$PRECISIONS}.tar.gz" -C "$work" .
 exit $status
