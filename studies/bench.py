@@ -48,7 +48,8 @@ same element of consecutive instances adjacent; instance_major, the CPU's layout
 compiled engine of its own. The memory-bound floor of an engine whose Newton matrix lives in
 device memory: per Newton iteration the Jacobian blocks are written by the assembly, read and
 written by the in-place LU and read by the solve (4 × n_slots 2×2 blocks), plus the node
-vectors (`bytes_per_step`, at the window's mean iterations per step); `bandwidth_gb_s` is
+vectors (`bytes_per_step`, at the window's mean iterations per step; Newton rows only: chord
+skips some of it); `bandwidth_gb_s` is
 measured on the same device by a Taichi copy kernel (bytes read + written) and
 `bandwidth_fraction` = robot_steps_per_s × bytes_per_step / bandwidth.
 
@@ -221,7 +222,9 @@ def measure(params, arch: str, precision: str, steps: int, repeats: int,
                         timed / (steps * iterations), profile_seconds)
     assembly, factor, solve = (iterations * phase[name] for name in ("assembly", "factor", "solve"))
     flops = engine.plan.factor_flops
-    bytes_per_step = iterations * matrix_bytes_per_iteration(engine, precision)
+    # the byte count assumes a fresh Jacobian and LU per iteration: Newton's rows only
+    bytes_per_step = (iterations * matrix_bytes_per_iteration(engine, precision)
+                      if jacobian == "newton" else math.nan)
     return {"gait": params[0].gait, "jacobian": jacobian, "workers": 1,
             "preset": "paper", "bytes_per_step": bytes_per_step,
             "terms": terms_of(engine),

@@ -48,5 +48,5 @@ bench)
     echo "unknown phase $phase"; exit 2 ;;
 esac
 status=$?
-tar -czf "$OUT/$phase${PRECISIONS:+_$PRECISIONS}.tar.gz" -C "$work" .
+tar -czf "$OUT/$phase${PRECISIONS:+_${PRECISIONS//,/_}}.tar.gz" -C "$work" .
 exit $status
