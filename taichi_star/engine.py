@@ -249,6 +249,7 @@ class BatchEngine:
                 refactor = 0
             previous_update = largest_update
         self.state.newton_total[b] = self.state.newton_total[b] + iterations
+        self.state.newton_solves[b] = self.state.newton_solves[b] + 1
         self.state.newton_max[b] = ti.max(self.state.newton_max[b], iterations)
         for n in range(self.n_nodes):
             if converged == 1:

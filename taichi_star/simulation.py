@@ -40,8 +40,9 @@ class SimulationResult:
         the displacement from +x); heading_deg (body rotation at the end, counter-clockwise);
         steady_speed_mm_s and steady_signed_speed_mm_s (over cycles [steady_from_cycle, last
         full cycle), NaN where the run has fewer cycles or the cycle boundaries are not whole
-        steps); steps (accepted) and rejected_steps (adaptive stepping); newton_iterations_mean / newton_iterations_max (per step, over accepted and
-        failed attempts), substep_retries (steps redone with substeps), status ("ok",
+        steps); steps (accepted) and rejected_steps (adaptive stepping); newton_iterations_mean /
+        newton_iterations_max (per Newton solve: every attempted step and substep, rejected
+        and failed ones included, so mean <= max), substep_retries (steps redone with substeps), status ("ok",
         "newton_failed", "non_finite") and failure_time_s (NaN when ok). Metrics of failed
         instances are NaN.
     trajectory: long table (instance, t_s, x_mm, y_mm, heading_deg): the centroid relative to its
@@ -231,7 +232,7 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
     steps_done = state.steps_done.to_numpy()[:batch]
     rejected = state.rejected_steps.to_numpy()[:batch]
     newton_total = state.newton_total.to_numpy()[:batch]
-    attempted = steps_done + rejected + (status != STATUS_OK)
+    newton_solves = state.newton_solves.to_numpy()[:batch]
     params = model.params
     gaits = [p.gait for p in params]
     failed = status != STATUS_OK
@@ -246,7 +247,7 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
                                             gaits, steady_from_cycle))
     rows["steps"] = steps_done
     rows["rejected_steps"] = rejected
-    rows["newton_iterations_mean"] = newton_total / np.maximum(attempted, 1)
+    rows["newton_iterations_mean"] = newton_total / np.maximum(newton_solves, 1)
     rows["newton_iterations_max"] = state.newton_max.to_numpy()[:batch]
     rows["substep_retries"] = state.substep_retries.to_numpy()[:batch]
     rows["status"] = [STATUS_NAMES[s] for s in status]

@@ -62,7 +62,11 @@ class BatchState:
         self.rejected_steps = arena.batch_field(ti.i32, capacity)
         """Adaptive stepping: steps rejected by the error estimate or a failed Newton solve."""
         self.newton_total = arena.batch_field(ti.i64, capacity)
+        """Newton iterations of every solve (retried substeps and rejected steps included)."""
+        self.newton_solves = arena.batch_field(ti.i64, capacity)
+        """Newton solves (one per attempted step or substep)."""
         self.newton_max = arena.batch_field(ti.i32, capacity)
+        """Most Newton iterations of one solve."""
         self.substep_retries = arena.batch_field(ti.i32, capacity)
         self.fire_time = arena.batch_field(float, (capacity, N_ACTUATORS))
         """Time (s) each actuator last fired; NEVER when it has not."""
