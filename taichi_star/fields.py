@@ -13,6 +13,7 @@ from typing import Optional
 
 import numpy as np
 import taichi as ti
+from taichi.lang.util import cook_dtype, to_numpy_type
 
 
 class FieldArena:
@@ -20,6 +21,8 @@ class FieldArena:
 
     def __init__(self, instance_minor: bool = False):
         self.instance_minor = instance_minor
+        self.nbytes = 0
+        """Bytes of the fields collected so far."""
         self.builder = ti.FieldsBuilder()
         self.pending = []
         self.tree = None
@@ -46,9 +49,8 @@ class FieldArena:
             self.builder.dense(ti.axes(*range(len(shape))), shape).place(field)
         return field
 
-    @staticmethod
-    def new(dtype, shape, vector, matrix):
-        """(unplaced field, shape as a tuple of ints)."""
+    def new(self, dtype, shape, vector, matrix):
+        """(unplaced field, shape as a tuple of ints); counts its bytes."""
         if vector is not None:
             field = ti.Vector.field(vector, dtype)
         elif matrix is not None:
@@ -56,6 +58,8 @@ class FieldArena:
         else:
             field = ti.field(dtype)
         shape = (shape,) if isinstance(shape, (int, np.integer)) else tuple(int(n) for n in shape)
+        components = vector or (matrix[0] * matrix[1] if matrix else 1)
+        self.nbytes += int(np.prod(shape, dtype=np.int64)) * components * np.dtype(to_numpy_type(cook_dtype(dtype))).itemsize
         return field, shape
 
     def index(self, values) -> ti.Field:

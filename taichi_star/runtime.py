@@ -13,12 +13,15 @@ import io
 import weakref
 from typing import Dict, List, Optional, Tuple
 
+import numpy as np
 import taichi as ti
 
 from .engine import BatchEngine
 from .integrators import INTEGRATORS
+from .linsolve import plan_elimination
 from .model import BatchModel, build_model
 from .params import SolverConfig
+from .physics import coupled_node_pairs
 
 ARCHS = ("cpu", "gpu", "cuda", "vulkan", "metal")
 MIN_CAPACITY = 64
@@ -52,6 +55,70 @@ def check_arch(arch: str) -> str:
             raise ValueError(f"arch {arch!r} is not available on this machine; available: "
                              f"{available}")
     return arch
+
+
+MEMORY_SHARE = 0.8
+"""An engine may take at most this share of the memory the machine has available."""
+STATE_VECTORS_PER_NODE = 10
+"""2-vectors per node an engine keeps per instance: 8 state fields and the right-hand side, plus
+mass and inertia counted as one."""
+FIXED_BYTES_PER_INSTANCE = 512
+"""Per-instance scalars (status, counters, times, actuator schedules), rounded up."""
+
+
+_MATRIX_SLOTS: Dict[tuple, int] = {}
+"""Newton-matrix blocks per engine key (the symbolic factorisation, done once per key)."""
+
+
+def matrix_slots(model: BatchModel) -> int:
+    """2×2 blocks of the Newton matrix's elimination pattern for this batch's engine."""
+    if model.engine_key not in _MATRIX_SLOTS:
+        terms = [cls for cls, _ in model.terms_used]
+        _MATRIX_SLOTS[model.engine_key] = plan_elimination(
+            model.topology.n_nodes, coupled_node_pairs(model.topology, terms)).n_slots
+    return _MATRIX_SLOTS[model.engine_key]
+
+
+def engine_bytes(model: BatchModel, precision: str) -> int:
+    """Memory (bytes) of an engine for this batch: its capacity times, per instance, the Newton
+    matrix (2×2 blocks of the elimination pattern), the node vectors, the terms' coefficients
+    and histories, and the fixed scalars."""
+    scalar = 8 if precision == "f64" else 4
+    slots = matrix_slots(model)
+    coefficients = sum(values[0].size for table in model.coefficients.values()
+                       for values in table.values())
+    histories = sum(int(np.prod(shape)) for cls, _ in model.terms_used
+                    for shape in cls.history(model.topology).values())
+    per_instance = (scalar * (4 * slots + 2 * STATE_VECTORS_PER_NODE * model.topology.n_nodes
+                              + coefficients + histories) + FIXED_BYTES_PER_INSTANCE)
+    return batch_capacity(model.batch_size) * per_instance
+
+
+def available_memory_bytes() -> Optional[int]:
+    """MemAvailable of /proc/meminfo (None where there is no such file)."""
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def check_memory(model: BatchModel, precision: str, arch: str):
+    """ValueError, before anything is allocated, when a CPU engine for this batch would take more
+    than MEMORY_SHARE of the available memory; it names the way to run such a batch (chunks)."""
+    if arch != "cpu":
+        return
+    available = available_memory_bytes()
+    needed = engine_bytes(model, precision)
+    if available is not None and needed > MEMORY_SHARE * available:
+        raise ValueError(
+            f"params: a batch of {model.batch_size} instances needs about {needed / 2**30:.1f} GiB "
+            f"for its engine, more than {MEMORY_SHARE:.0%} of the {available / 2**30:.1f} GiB "
+            f"available; run it in chunks with taichi_star.batch.run_batch(params, ..., "
+            f"chunk_size=...) (each chunk one engine, the results streamed)")
 
 
 def batch_capacity(batch_size: int) -> int:
@@ -127,6 +194,7 @@ class Runtime:
     def new_engine(self, model: BatchModel, solver: SolverConfig) -> BatchEngine:
         """A new engine (its own device state) for this batch. Taichi must be initialised
         (`ensure`)."""
+        check_memory(model, solver.precision, self.arch)
         capacity = batch_capacity(model.batch_size)
         gpu = self.arch != "cpu"
         return BatchEngine(model, capacity, INTEGRATORS[solver.integrator](),
