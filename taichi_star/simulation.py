@@ -40,7 +40,10 @@ class SimulationResult:
         the displacement from +x); heading_deg (body rotation at the end, counter-clockwise);
         steady_speed_mm_s and steady_signed_speed_mm_s (over cycles [steady_from_cycle, last
         full cycle), NaN where the run has fewer cycles or the cycle boundaries are not whole
-        steps); steps (accepted) and rejected_steps (adaptive stepping); newton_iterations_mean /
+        steps); max_strain (largest |axial strain| of an edge in the final shape) and shape_sane
+        (final shape finite, no limbs crossing, no arc inverted, max_strain within
+        `metrics.STRAIN_LIMIT`: False flags a run whose shape is not physical even if it
+        converged); steps (accepted) and rejected_steps (adaptive stepping); newton_iterations_mean /
         newton_iterations_max (per Newton solve: every attempted step and substep, rejected
         and failed ones included, so mean <= max), substep_retries (steps redone with substeps), status ("ok",
         "newton_failed", "non_finite") and failure_time_s (NaN when ok). Metrics of failed
@@ -242,6 +245,9 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
     positions = state.positions.to_numpy()[:batch].astype(np.float64)
     rows["heading_deg"] = np.degrees(metrics.body_rotation(
         positions, model.rest_positions, model.topology.joints, CENTRE))
+    sanity = metrics.shape_checks(positions[None], model.topology)
+    rows["max_strain"] = sanity["max_strain_final"].to_numpy()
+    rows["shape_sane"] = sanity["sane"].to_numpy()
     boundaries[failed] = np.nan
     rows.update(metrics.cycle_window_speeds(boundaries, np.array([p.period for p in params]),
                                             gaits, steady_from_cycle))

@@ -6,6 +6,7 @@ import pandas as pd
 import pytest
 
 import taichi_star as ts
+from taichi_star.metrics import shape_checks
 from taichi_star.reference import ReferenceSimulator
 
 MIXED_BATCH = [
@@ -136,10 +137,12 @@ def test_substep_retry_rescues_a_step_and_leaves_neighbours_bitwise_equal():
 
 
 def test_summary_and_trajectory_schema():
-    result = ts.simulate([ts.StarParams(gait="A1+A2")], 0.02, record_interval_s=0.005)
+    result = ts.simulate([ts.StarParams(gait="A1+A2")], 0.02, record_interval_s=0.005,
+                         record_shapes=True)
     expected = ts.StarParams.field_names() + [
         "displacement_x_mm", "displacement_y_mm", "speed_mm_s", "signed_speed_mm_s",
-        "travel_direction_deg", "heading_deg", "steady_speed_mm_s", "steady_signed_speed_mm_s",
+        "travel_direction_deg", "heading_deg", "max_strain", "shape_sane",
+        "steady_speed_mm_s", "steady_signed_speed_mm_s",
         "steps", "rejected_steps", "newton_iterations_mean", "newton_iterations_max", "substep_retries", "status",
         "failure_time_s"]
     assert list(result.summary.columns) == expected
@@ -147,6 +150,12 @@ def test_summary_and_trajectory_schema():
     np.testing.assert_allclose(result.trajectory.t_s, [0, 0.005, 0.01, 0.015, 0.02])
     assert result.trajectory.iloc[0][["x_mm", "y_mm"]].abs().max() == 0.0
     assert ts.simulate([ts.StarParams()], 0.01).trajectory.empty
+    # the sanity columns are those of the final recorded shape; heating the actuators strains
+    # the edges measurably (> 1e-6) but far from the sanity limit
+    final = shape_checks(result.shapes[-1:], result.topology)
+    assert result.summary.max_strain.iloc[0] == final.max_strain_final.iloc[0]
+    assert 1e-6 < result.summary.max_strain.iloc[0] < 0.01
+    assert bool(result.summary.shape_sane.iloc[0])
 
 
 def test_signed_speed_undefined_for_opposite_actuators():
