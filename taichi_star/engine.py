@@ -18,13 +18,19 @@ from .linsolve import BlockSystem, plan_elimination
 from .model import BatchModel
 from .params import SolverConfig
 from .physics import coupled_node_pairs
-from .fields import FieldArena
+from .fields import FieldArena, FieldStore
 from .physics.base import load_field, numpy_to_field_type, pad_batch
 from .gait import N_ACTUATORS, Gait
 from .state import NEVER, STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_OK, BatchState
 
 STEP_TOLERANCE = 1e-9
 """Relative tolerance within which a time is taken to be a whole number of steps."""
+
+SOLVER_SETTINGS = {"dt": float, "newton_tol": float, "max_newton": ti.i32,
+                   "max_substep_halvings": ti.i32, "chord": ti.i32, "error_tol": float,
+                   "dt_min": float, "dt_max": float}
+"""The solver settings the kernels read, with their field types (all SolverConfig fields of the
+same name but `chord`: 1 for the chord Jacobian)."""
 
 FINITE_LIMIT = 1e30
 """Updates larger than this (m) are treated as non-finite: no physical step moves a node 1e30 m."""
@@ -57,14 +63,8 @@ class BatchEngine:
         self.mass = arena.batch_field(float, (capacity, self.n_nodes))
         self.inertia = arena.batch_field(float, (capacity, self.n_nodes))
         self.centroids = arena.batch_field(float, capacity, vector=2)
-        self.dt = arena.field(float)
-        self.newton_tol = arena.field(float)
-        self.max_newton = arena.field(ti.i32)
-        self.max_substep_halvings = arena.field(ti.i32)
-        self.chord = arena.field(ti.i32)
-        self.error_tol = arena.field(float)
-        self.dt_min = arena.field(float)
-        self.dt_max = arena.field(float)
+        for name, dtype in SOLVER_SETTINGS.items():
+            setattr(self, name, arena.field(dtype))
         self.terms = []
         for cls, configuration in model.terms_used:
             coefficients = model.coefficients[cls.name]
@@ -75,6 +75,12 @@ class BatchEngine:
             self.state.term_histories.update(
                 {f"{term.name}.{name}": field for name, field in term.history_fields().items()})
         arena.finalize()
+        model_fields = {name: getattr(self, name) for name in ("mass", "inertia", *SOLVER_SETTINGS)}
+        for term in self.terms:
+            model_fields.update({f"{term.name}.{name}": field
+                                 for name, field in term.coefficient_fields().items()})
+        self.model_store = FieldStore(model_fields)
+        """Bulk loads of the batch's coefficients and the solver settings (`load`)."""
 
     # ---------------------------------------------------------------- host side
     def term(self, name: str):
@@ -101,29 +107,29 @@ class BatchEngine:
         otherwise nothing fires until commanded (`fire`)."""
         if model.batch_size > self.capacity:
             raise ValueError(f"batch of {model.batch_size} exceeds the engine capacity {self.capacity}")
-        load_field(self.mass, pad_batch(model.mass, self.capacity))
-        load_field(self.inertia, pad_batch(model.inertia, self.capacity))
+        capacity = self.capacity
+        values = {"mass": pad_batch(model.mass, capacity),
+                  "inertia": pad_batch(model.inertia, capacity),
+                  **{name: getattr(solver, name) for name in SOLVER_SETTINGS if name != "chord"},
+                  "chord": int(solver.jacobian == "chord")}
         for term in self.terms:
-            term.load(model.coefficients[term.name])
-        self.state.reset(pad_batch(model.rest_positions, self.capacity), model.batch_size)
+            coefficients = model.coefficients[term.name]
+            values.update({f"{term.name}.{name}": pad_batch(coefficients[name], capacity)
+                           for name in term.coefficient_names})
+        self.model_store.write(values)
+        state = self.state.initial_values(pad_batch(model.rest_positions, capacity),
+                                          model.batch_size)
         if periodic_gaits:
-            masks = pad_batch(np.stack([Gait.parse(p.gait).mask for p in model.params]), self.capacity)
-            periods = pad_batch(np.array([p.period for p in model.params]), self.capacity)
+            masks = pad_batch(np.stack([Gait.parse(p.gait).mask for p in model.params]), capacity)
+            periods = pad_batch(np.array([p.period for p in model.params]), capacity)
             ratio = periods / solver.dt
             whole = np.abs(ratio - np.round(ratio)) <= STEP_TOLERANCE * np.maximum(1.0, ratio)
-            load_field(self.state.schedule_mask, masks)
-            load_field(self.state.schedule_period, periods)
-            load_field(self.state.schedule_cycle_steps, np.where(whole, np.round(ratio), 0))
-            load_field(self.state.fire_time, np.where(masks != 0, 0.0, NEVER))
-        self.dt[None] = solver.dt
-        self.newton_tol[None] = solver.newton_tol
-        self.max_newton[None] = solver.max_newton
-        self.max_substep_halvings[None] = solver.max_substep_halvings
-        self.chord[None] = int(solver.jacobian == "chord")
-        self.error_tol[None] = solver.error_tol
-        self.dt_min[None] = solver.dt_min
-        self.dt_max[None] = solver.dt_max
-        self.state.step_size.fill(solver.dt)
+            state["schedule_mask"] = masks
+            state["schedule_period"] = periods
+            state["schedule_cycle_steps"] = np.where(whole, np.round(ratio), 0)
+            state["fire_time"] = np.where(masks != 0, 0.0, NEVER)
+        state["step_size"][:] = solver.dt
+        self.state.store.write(state)
 
     # ---------------------------------------------------------------- assembly
     @ti.func

@@ -9,10 +9,11 @@ instance's values contiguous: one thread walks its own instance through the cach
 the threads of a warp, one instance each, read one contiguous run of memory).
 The index `[b, ...]` is the same in both layouts; only the addresses differ."""
 
-from typing import Optional
+from typing import Dict, Optional
 
 import numpy as np
 import taichi as ti
+from taichi.lang.matrix import MatrixField
 from taichi.lang.util import cook_dtype, to_numpy_type
 
 
@@ -72,6 +73,115 @@ class FieldArena:
     def finalize(self):
         """Create the tree and fill the index tables."""
         self.tree = self.builder.finalize()
-        for field, values in self.pending:
-            field.from_numpy(values)
+        if self.pending:
+            tables = {str(number): entry for number, entry in enumerate(self.pending)}
+            FieldStore({key: field for key, (field, _) in tables.items()}).write(
+                {key: values for key, (_, values) in tables.items()})
         self.pending = []
+
+
+def _components(field) -> tuple:
+    """Per-element component shape of a field: () scalar, (n,) vector, (n, m) matrix."""
+    if isinstance(field, MatrixField):
+        return (field.n,) if field.ndim == 1 else (field.n, field.m)
+    return ()
+
+
+@ti.data_oriented
+class FieldStore:
+    """Copies NumPy arrays into a fixed set of fields in one kernel launch (and back).
+
+    Taichi compiles `from_numpy`/`fill`/`to_numpy` once per field, and an engine has dozens of
+    fields, all new for every engine built: those small compilations cost more than the
+    engine's own kernels. A store packs every value into one float64 and one int64 array and
+    scatters them with one kernel, compiled once per store. Values are cast to each field's type
+    exactly as `from_numpy` would (float64 → float32 rounds to nearest; integers are exact), so a
+    `write` of what `read` returned restores the fields bitwise."""
+
+    def __init__(self, fields: Dict[str, ti.Field]):
+        self.shapes = {name: tuple(field.shape) + _components(field) for name, field in fields.items()}
+        self.dtypes = {name: np.dtype(to_numpy_type(field.dtype)) for name, field in fields.items()}
+        floating = {name: np.issubdtype(self.dtypes[name], np.floating) for name in fields}
+        self.layout = {True: [], False: []}
+        """Per kind (True: float): (name, offset into the flat array, size) in packing order."""
+        totals = {True: 0, False: 0}
+        for name in fields:
+            size = int(np.prod(self.shapes[name], dtype=np.int64))
+            self.layout[floating[name]].append((name, totals[floating[name]], size))
+            totals[floating[name]] += size
+        self.float_entries = [(fields[name], offset) for name, offset, _ in self.layout[True]]
+        self.int_entries = [(fields[name], offset) for name, offset, _ in self.layout[False]]
+        self.totals = {kind: max(total, 1) for kind, total in totals.items()}
+
+    def write(self, values: Dict[str, np.ndarray]):
+        """Every field of the store from `values` (name -> array of the field's shape, with the
+        component axes last); ValueError naming a missing or misshapen entry."""
+        flats = {kind: np.zeros(self.totals[kind], dtype=np.float64 if kind else np.int64)
+                 for kind in (True, False)}
+        for kind, entries in self.layout.items():
+            for name, offset, size in entries:
+                if name not in values:
+                    raise ValueError(f"no values for field {name!r}")
+                array = np.asarray(values[name])
+                if array.shape != self.shapes[name]:
+                    raise ValueError(f"field {name!r} has shape {self.shapes[name]}, got "
+                                     f"{array.shape}")
+                flats[kind][offset:offset + size] = array.ravel()
+        self._scatter(flats[True], flats[False])
+
+    def read(self) -> Dict[str, np.ndarray]:
+        """Every field of the store as a NumPy array of its own dtype and shape."""
+        flats = {kind: np.zeros(self.totals[kind], dtype=np.float64 if kind else np.int64)
+                 for kind in (True, False)}
+        self._gather(flats[True], flats[False])
+        return {name: flats[kind][offset:offset + size].reshape(self.shapes[name])
+                .astype(self.dtypes[name])
+                for kind, entries in self.layout.items() for name, offset, size in entries}
+
+    @ti.func
+    def _element_offset(self, field: ti.template(), index, offset):
+        """Offset of element `index` of `field` in its flat array (row-major, components last)."""
+        linear = 0
+        for axis in ti.static(range(len(field.shape))):
+            linear = linear * field.shape[axis] + index[axis]
+        return offset + linear * ti.static(int(np.prod(_components(field), dtype=np.int64)))
+
+    @ti.func
+    def _copy(self, field: ti.template(), flat: ti.template(), offset, to_field: ti.template()):
+        components = ti.static(_components(field))
+        for index in ti.grouped(field):
+            start = self._element_offset(field, index, offset)
+            if ti.static(len(components) == 0):
+                if ti.static(to_field):
+                    field[index] = ti.cast(flat[start], field.dtype)
+                else:
+                    flat[start] = field[index]
+            elif ti.static(len(components) == 1):
+                for k in ti.static(range(components[0])):
+                    if ti.static(to_field):
+                        field[index][k] = ti.cast(flat[start + k], field.dtype)
+                    else:
+                        flat[start + k] = field[index][k]
+            else:
+                for k, m in ti.static(ti.ndrange(components[0], components[1])):
+                    if ti.static(to_field):
+                        field[index][k, m] = ti.cast(flat[start + k * components[1] + m],
+                                                     field.dtype)
+                    else:
+                        flat[start + k * components[1] + m] = field[index][k, m]
+
+    @ti.kernel
+    def _scatter(self, floats: ti.types.ndarray(dtype=ti.f64, ndim=1),
+                 ints: ti.types.ndarray(dtype=ti.i64, ndim=1)):
+        for field, offset in ti.static(self.float_entries):
+            self._copy(field, floats, offset, True)
+        for field, offset in ti.static(self.int_entries):
+            self._copy(field, ints, offset, True)
+
+    @ti.kernel
+    def _gather(self, floats: ti.types.ndarray(dtype=ti.f64, ndim=1),
+                ints: ti.types.ndarray(dtype=ti.i64, ndim=1)):
+        for field, offset in ti.static(self.float_entries):
+            self._copy(field, floats, offset, False)
+        for field, offset in ti.static(self.int_entries):
+            self._copy(field, ints, offset, False)

@@ -9,7 +9,7 @@ directions from their rest angles. Lengths in mm and times in s in every returne
 
 from __future__ import annotations
 
-from typing import Dict, Sequence
+from typing import Dict, Optional, Sequence
 
 import numpy as np
 import pandas as pd
@@ -177,18 +177,28 @@ def arcs_inverted(positions: np.ndarray, topology: Topology) -> np.ndarray:
     return (~(arc_mean_curvature(positions, topology) * rest > 0)).any(axis=-1)
 
 
-def edge_strain(positions: np.ndarray, topology: Topology) -> np.ndarray:
-    """positions (..., N, 2) -> (..., E): ε = |x_j − x_i| / Δl̄ − 1 of every edge."""
+def edge_lengths(positions: np.ndarray, topology: Topology) -> np.ndarray:
+    """positions (..., N, 2) m -> (..., E) m: the length of every edge."""
     edges = topology.edges
-    length = np.linalg.norm(positions[..., edges[:, 1], :] - positions[..., edges[:, 0], :],
-                            axis=-1)
-    return length / topology.rest_length - 1.0
+    return np.linalg.norm(positions[..., edges[:, 1], :] - positions[..., edges[:, 0], :],
+                          axis=-1)
 
 
-def shape_checks(shapes: np.ndarray, topology: Topology) -> pd.DataFrame:
+def edge_strain(positions: np.ndarray, topology: Topology,
+                rest_positions: Optional[np.ndarray] = None) -> np.ndarray:
+    """positions (..., N, 2) -> (..., E): ε = |x_j − x_i| / Δl̄ − 1 of every edge; Δl̄ from
+    `rest_positions` ((B, N, 2), one rest shape per instance of a batch whose geometry differs)
+    or else the topology's rest lengths."""
+    rest = topology.rest_length if rest_positions is None else edge_lengths(rest_positions, topology)
+    return edge_lengths(positions, topology) / rest - 1.0
+
+
+def shape_checks(shapes: np.ndarray, topology: Topology,
+                 rest_positions: Optional[np.ndarray] = None) -> pd.DataFrame:
     """Sanity of recorded shapes: shapes (R, B, N, 2) m, R records of B instances (the last
-    record is taken as the final shape; NaN records, e.g. after a failure, are skipped) -> one
-    row per instance:
+    record is taken as the final shape; NaN records, e.g. after a failure, are skipped), strains
+    against each instance's rest shape `rest_positions` (B, N, 2) m when the instances' geometry
+    differs (default: the topology's) -> one row per instance:
 
     - max_strain: max |ε| over all edges and finite records (`edge_strain`), max_strain_final on
       the final shape;
@@ -207,7 +217,7 @@ def shape_checks(shapes: np.ndarray, topology: Topology) -> pd.DataFrame:
     # one record at a time keeps the pairwise segment test small
     for record in shapes:
         valid = np.isfinite(record).all(axis=(1, 2))
-        strain = np.abs(edge_strain(record, topology)).max(axis=-1)
+        strain = np.abs(edge_strain(record, topology, rest_positions)).max(axis=-1)
         strain_max = np.where(valid, np.fmax(strain_max, strain), strain_max)
         cross_any |= limbs_cross(record, topology) & valid
         inverted_any |= arcs_inverted(record, topology) & valid
@@ -215,7 +225,7 @@ def shape_checks(shapes: np.ndarray, topology: Topology) -> pd.DataFrame:
     final_valid = np.isfinite(final).all(axis=(1, 2))
     table = pd.DataFrame({
         "max_strain": np.where(np.isfinite(strain_max), strain_max, np.nan),
-        "max_strain_final": np.abs(edge_strain(final, topology)).max(axis=-1),
+        "max_strain_final": np.abs(edge_strain(final, topology, rest_positions)).max(axis=-1),
         "limbs_cross": cross_any,
         "limbs_cross_final": limbs_cross(final, topology) & final_valid,
         "arc_inverted": inverted_any,

@@ -245,7 +245,7 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
     positions = state.positions.to_numpy()[:batch].astype(np.float64)
     rows["heading_deg"] = np.degrees(metrics.body_rotation(
         positions, model.rest_positions, model.topology.joints, CENTRE))
-    sanity = metrics.shape_checks(positions[None], model.topology)
+    sanity = metrics.shape_checks(positions[None], model.topology, model.rest_positions)
     rows["max_strain"] = sanity["max_strain_final"].to_numpy()
     rows["shape_sane"] = sanity["sane"].to_numpy()
     boundaries[failed] = np.nan

@@ -13,9 +13,8 @@ from typing import Dict
 import numpy as np
 import taichi as ti
 from taichi.lang.field import Field
-from taichi.lang.util import to_numpy_type
 
-from .fields import FieldArena
+from .fields import FieldArena, FieldStore
 from .gait import N_ACTUATORS
 
 STATUS_OK, STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_INACTIVE = 0, 1, 2, 3
@@ -91,35 +90,42 @@ class BatchState:
         """Every state field by name, the terms' histories as "<term>.<name>"."""
         return {**self.own_fields(), **self.term_histories}
 
-    def reset(self, rest_positions: np.ndarray, batch_size: int):
-        """Every instance at rest in its rest shape (capacity, N, 2), status ok (padding:
-        inactive), counters and histories zero."""
-        for field in self.fields().values():
-            field.fill(0)
-        self.positions.from_numpy(np.ascontiguousarray(rest_positions, dtype=to_numpy_type(self.positions.dtype)))
-        status = np.full(self.status.shape[0], STATUS_INACTIVE, dtype=np.int32)
-        status[:batch_size] = STATUS_OK
-        self.status.from_numpy(status)
-        self.failure_step.fill(-1)
-        self.fire_time.fill(NEVER)
-        self.scheduled_fire_step.fill(-1)
-        self.scheduled_fire_time.fill(NEVER)
-        self.previous_fire_time.fill(NEVER)
+    @property
+    def store(self) -> FieldStore:
+        """Bulk copies of every state field (made on first use, once the terms' histories are
+        in)."""
+        if getattr(self, "_store", None) is None:
+            self._store = FieldStore(self.fields())
+        return self._store
+
+    def initial_values(self, rest_positions: np.ndarray, batch_size: int) -> Dict[str, np.ndarray]:
+        """Every state field's values with every instance at rest in its rest shape (capacity,
+        N, 2), status ok (padding: inactive), counters and histories zero, nothing fired or
+        scheduled; for `store.write` (a caller may change entries first)."""
+        values = {name: np.zeros(shape, dtype=self.store.dtypes[name])
+                  for name, shape in self.store.shapes.items()}
+        values["positions"] = rest_positions
+        values["status"] = np.where(np.arange(len(values["status"])) < batch_size, STATUS_OK,
+                                    STATUS_INACTIVE)
+        values["failure_step"][:] = -1
+        values["scheduled_fire_step"][:] = -1
+        for name in ("fire_time", "scheduled_fire_time", "previous_fire_time"):
+            values[name][:] = NEVER
+        return values
 
     def save(self) -> Dict[str, np.ndarray]:
         """A copy of the whole state (every field, padding included)."""
-        return {name: field.to_numpy() for name, field in self.fields().items()}
+        return self.store.read()
 
     def restore(self, saved: Dict[str, np.ndarray]):
         """Put back a state from `save` of an engine of the same layout, bitwise. Raises
         ValueError naming the first field that does not match."""
-        fields = self.fields()
-        if set(saved) != set(fields):
+        shapes = self.store.shapes
+        if set(saved) != set(shapes):
             raise ValueError(f"saved state has fields {sorted(saved)}, this engine "
-                             f"{sorted(fields)} (another topology or term set)")
-        for name, field in fields.items():
-            if saved[name].shape != field.to_numpy().shape:
+                             f"{sorted(shapes)} (another topology or term set)")
+        for name, shape in shapes.items():
+            if saved[name].shape != shape:
                 raise ValueError(f"saved state field {name!r} has shape {saved[name].shape}, "
-                                 f"this engine {field.to_numpy().shape}")
-        for name, field in fields.items():
-            field.from_numpy(saved[name])
+                                 f"this engine {shape}")
+        self.store.write(saved)

@@ -95,10 +95,9 @@ class Term:
         """Device tables of the topology the term needs (index fields, Jacobian slots, from
         `engine.arena.index`)."""
 
-    def load(self, coefficients: Dict[str, np.ndarray]):
-        """Copy this batch's coefficients (padded to capacity) to the device."""
-        for name in self.coefficient_names:
-            load_field(getattr(self, name), pad_batch(coefficients[name], self.engine.capacity))
+    def coefficient_fields(self) -> Dict[str, ti.Field]:
+        """The device fields of the coefficients, by coefficient name."""
+        return {name: getattr(self, name) for name in self.coefficient_names}
 
     def history_fields(self) -> Dict[str, ti.Field]:
         return {name: getattr(self, name) for name in self.history_names}

@@ -132,3 +132,16 @@ def test_point_symmetric_collinear_segments_do_not_cross(topology):
     symmetric = topology.rest_positions.copy()
     symmetric[topology.limbs[4:]] = -symmetric[topology.limbs[:4]]
     assert not metrics.limbs_cross(symmetric, topology)
+
+
+def test_strain_is_measured_against_each_instances_own_rest_shape():
+    """Two robots of different geometry in their rest shapes: zero strain against their own
+    rest shapes; against the first one's rest lengths the second shows its size difference."""
+    import taichi_star as ts
+    from taichi_star.model import build_model
+
+    model = build_model([ts.StarParams(), ts.StarParams(joint_radius=0.022, tip_radius=0.05)])
+    own = metrics.shape_checks(model.rest_positions[None], model.topology, model.rest_positions)
+    assert own.max_strain.max() <= 1e-12  # round-off of the rest-shape construction
+    shared = metrics.shape_checks(model.rest_positions[None], model.topology)
+    assert shared.max_strain.iloc[0] <= 1e-12 and shared.max_strain.iloc[1] > 0.05
