@@ -17,6 +17,7 @@ import argparse
 import contextlib
 import datetime
 import itertools
+import json
 import logging
 import math
 import tempfile
@@ -423,12 +424,35 @@ class Output:
         return path
 
     def write_csv(self, frame: pd.DataFrame, name: str, extra: Optional[Mapping] = None) -> Path:
-        """Write a table (no index, full float precision) and its JSON sidecar."""
+        """Write a table (no index, floats to 10 significant digits) and its JSON sidecar."""
         path = self.path(name)
         frame.to_csv(path, index=False, float_format="%.10g")
+        return self._described(path, extra)
+
+    def write_parquet(self, frame: pd.DataFrame, name: str,
+                      extra: Optional[Mapping] = None) -> Path:
+        """Write a table as Parquet (typed columns, every float bit for bit) and its JSON
+        sidecar; the provenance is also in the file's own metadata (key "taichi_star")."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        path = self.path(name)
+        # values Parquet has no type for (the actuation profile) are stored as their text
+        frame = frame.assign(**{column: frame[column].map(str) for column in frame.columns
+                                if frame[column].dtype == object
+                                and not frame[column].map(lambda v: isinstance(v, str)).all()})
+        table = pa.Table.from_pandas(frame, preserve_index=False)
+        metadata = {**(table.schema.metadata or {}),
+                    b"taichi_star": json.dumps(self._details(extra), default=str).encode()}
+        pq.write_table(table.replace_schema_metadata(metadata), path)
+        return self._described(path, extra)
+
+    def _details(self, extra: Optional[Mapping]) -> dict:
         details = {**self.provenance.get("details", {}), **(extra or {})}
-        provenance.write_sidecar(path, {**self.provenance,
-                                        **({"details": details} if details else {})})
+        return {**self.provenance, **({"details": details} if details else {})}
+
+    def _described(self, path: Path, extra: Optional[Mapping]) -> Path:
+        provenance.write_sidecar(path, self._details(extra))
         self.wrote(path)
         return path
 

@@ -9,7 +9,8 @@
 Values: a comma list (`0,0.5,1`) or a range `start:stop:n` (n points, both ends included) or
 `start:stop:n:log` (geometric). `--param NAME=VALUES` sweeps any other StarParams field.
 Writes `sweep.csv` (one row per instance: every parameter, whole-run and steady speeds, heading,
-Newton statistics, status) and `sweep_<parameter>.png` for every swept parameter: speed against
+Newton statistics, status), the same table as `sweep.parquet` (typed, full precision, the
+provenance in its metadata; `pandas.read_parquet`) and `sweep_<parameter>.png` for every swept parameter: speed against
 the parameter, one line per gait, the other swept parameters held at the value closest to the
 default.
 
@@ -175,6 +176,7 @@ def main(argv=None):
                            executor=executor, run_dir=run_dir, resume=args.resume,
                            progress=not args.no_progress)
     csv = out.write_csv(result.summary, "sweep.csv")
+    out.write_parquet(result.summary, "sweep.parquet")
     out.wrote(*plot_sweep(csv, out))
     out.report()
     failed = (result.summary["status"] != "ok").sum()

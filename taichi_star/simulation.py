@@ -209,7 +209,10 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     bar = None
     if progress:
         from tqdm.auto import tqdm
-        bar = tqdm(total=clock.time_of(clock.end), unit="s", desc=f"{batch} robots")
+        # simulated seconds, shown to the millisecond (the clock's float sums are not round)
+        bar = tqdm(total=clock.time_of(clock.end), unit="s", desc=f"{batch} robots",
+                   bar_format="{l_bar}{bar}| {n:.3f}/{total:.3f} s simulated "
+                              "[{elapsed}<{remaining}]")
     start_centroids = engine.centroids_of(batch)
     previous = stops[0] * 0
     take(previous)

@@ -256,6 +256,13 @@ def test_sweep_quick(tmp_path):
     pngs_written(tmp_path / "sweep_alpha.png", tmp_path / "sweep_jet_mode.png")
     assert json.loads((tmp_path / "sweep.csv.json").read_text())["details"]["axes"]["alpha"] \
         == pytest.approx([0.4, 0.8, 1.2])
+    # the Parquet copy: the library's floats bit for bit, typed columns, provenance inside
+    parquet = pd.read_parquet(tmp_path / "sweep.parquet")
+    np.testing.assert_array_equal(parquet["signed_speed_mm_s"], direct["signed_speed_mm_s"])
+    assert parquet["status"].tolist() == table["status"].tolist()
+    import pyarrow.parquet as pq
+    inside = json.loads(pq.read_schema(tmp_path / "sweep.parquet").metadata[b"taichi_star"])
+    assert inside["details"]["axes"]["jet_mode"] == ["contract", "always"]
 
 
 def test_gaits_quick(tmp_path):
