@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import textwrap
 from pathlib import Path
 from typing import Callable, List, Optional, Sequence
 
@@ -253,9 +254,10 @@ def draw_convergence(evaluations: pd.DataFrame, names: Sequence[str]):
     bottom.legend(fontsize=7, ncol=2)
     if finite.any():
         row = best_row(evaluations)
-        fitted = ", ".join(f"{n} = {row[n]:.4g}" for n in names)
-        top.set_title(f"CMA-ES calibration: best {fitted}\nobjective {row['objective']:.4g}, "
-                      f"direction mismatches {int(row['n_direction_mismatches'])}", fontsize=8)
+        fitted = textwrap.fill(", ".join(f"{n} = {row[n]:.4g}" for n in names), width=100)
+        top.set_title(f"CMA-ES calibration, best point:\n{fitted}\nobjective "
+                      f"{row['objective']:.4g}, direction mismatches "
+                      f"{int(row['n_direction_mismatches'])}", fontsize=8)
     fig.tight_layout()
     return fig
 

@@ -8,6 +8,7 @@ each table with its provenance sidecar, `<prefix>.csv` (`compare_with_experiment
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 from typing import Sequence
 
@@ -137,11 +138,16 @@ def run_fig4c(out: cli.Output, base: StarParams, solver: SolverConfig, *, durati
     out.write_csv(result.summary, f"{prefix}_summary.csv")
     curves_csv = out.write_csv(fig4b_table(result.summary, result.trajectory, duration_s),
                                f"{fig4b_prefix}.csv")
-    note = f" {title_note}" if title_note else ""
-    out.wrote(plot_fig4c(table_csv, out.path(f"{prefix}.png"),
-                         title=f"Fig. 4c{note}: speed over {duration_s:g} s from rest\n(labels: "
-                               f"direction; red = disagrees with the paper)"),
-              plot_fig4b(curves_csv, out.path(f"{fig4b_prefix}.png"),
-                         title=f"Fig. 4b{note}:\ncentroid displacement (simulation solid, "
-                               f"experiment dashed)"))
+    title_4c, title_4b = fig4_titles(title_note, duration_s)
+    out.wrote(plot_fig4c(table_csv, out.path(f"{prefix}.png"), title=title_4c),
+              plot_fig4b(curves_csv, out.path(f"{fig4b_prefix}.png"), title=title_4b))
     return pd.read_csv(table_csv)
+
+
+def fig4_titles(title_note: str, duration_s: float):
+    """(Fig. 4c title, Fig. 4b title) with `title_note` wrapped to the plot's width."""
+    note = f" {title_note}" if title_note else ""
+    return (textwrap.fill(f"Fig. 4c{note}: speed over {duration_s:g} s from rest", 95)
+            + "\n(labels: direction; red = disagrees with the paper)",
+            textwrap.fill(f"Fig. 4b{note}:", 95)
+            + "\ncentroid displacement (simulation solid, experiment dashed)")

@@ -27,12 +27,13 @@ COMMANDS = {
     "gaits": ["--workers", "2"],
     "sweep": ["--alpha", "0.2:1.2:6", "--added-mass", "0,0.5,1,2",
               "--youngs-modulus", "2e6,5e6,1e7", "--workers", "2"],
-    "calibrate": ["--workers", "2"],
+    "calibrate": ["--preset", "accurate"],
     "animate": [],
     "bench": ["--batch-sizes", "1,8,64,512,2048", "--repeats", "2"],
     "work_precision": [],
     "stability": ["--workers", "2"],
     "scaling": [],
+    "sensitivity": ["--preset", "accurate"],
 }
 """Result name -> the study's flags (the study is the name unless the flags start with it)."""
 
