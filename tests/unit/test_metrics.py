@@ -145,3 +145,78 @@ def test_strain_is_measured_against_each_instances_own_rest_shape():
     assert own.max_strain.max() <= 1e-12  # round-off of the rest-shape construction
     shared = metrics.shape_checks(model.rest_positions[None], model.topology)
     assert shared.max_strain.iloc[0] <= 1e-12 and shared.max_strain.iloc[1] > 0.05
+
+
+def _crossing_by_orientations(p, q, r, s):
+    """Independent exact rule for integer points: a proper crossing has each segment's ends on
+    strictly opposite sides of the other; collinear segments cross where their extents along
+    the line overlap with positive length; touching at an end or parallel apart is no crossing."""
+    def orientation(a, b, c):
+        return np.sign((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+
+    o1, o2 = orientation(p, q, r), orientation(p, q, s)
+    o3, o4 = orientation(r, s, p), orientation(r, s, q)
+    if o1 == o2 == o3 == o4 == 0:
+        axis = 0 if p[0] != q[0] else 1
+        low = max(min(p[axis], q[axis]), min(r[axis], s[axis]))
+        high = min(max(p[axis], q[axis]), max(r[axis], s[axis]))
+        return high > low
+    return o1 * o2 < 0 and o3 * o4 < 0
+
+
+def test_segments_cross_matches_an_exact_orientation_rule_on_a_small_grid():
+    """2,000 random segment pairs with integer ends in [0, 4]² (many collinear, touching and
+    parallel cases), evaluated as one batch: every classification matches the exact rule."""
+    rng = np.random.default_rng(7)
+    points = rng.integers(0, 5, size=(4, 2000, 2)).astype(float)
+    keep = ~(np.all(points[0] == points[1], axis=-1) | np.all(points[2] == points[3], axis=-1))
+    p, q, r, s = points[:, keep]
+    batch = metrics.segments_cross(p, q, r, s)
+    expected = [_crossing_by_orientations(*ends) for ends in zip(p, q, r, s)]
+    np.testing.assert_array_equal(batch, expected)
+    assert 50 < batch.sum() < len(batch) - 50  # both outcomes well represented
+
+
+@pytest.mark.parametrize("length", [1e-3, 1.0, 1e3])
+def test_nearly_collinear_overlapping_segments_cross_at_any_scale(length):
+    """Two overlapping segments on one line, the second turned by 1e-12 rad about its start:
+    parallel within the relative tolerance (1e-9) at every length, so they cross by overlap;
+    shifted off the line by 1e-6 of their length they do not."""
+    angle = 1e-12
+    p, q = np.array([0.0, 0.0]), np.array([length, 0.0])
+    r = np.array([0.5 * length, 0.0])
+    s = r + 1.5 * length * np.array([np.cos(angle), np.sin(angle)])
+    assert metrics.segments_cross(p, q, r, s)
+    off = np.array([0.0, 1e-6 * length])
+    assert not metrics.segments_cross(p, q, r + off, s + off)
+
+
+def test_each_pair_of_a_batch_is_judged_parallel_at_its_own_scale():
+    """A tiny perpendicular crossing (1e-4 m) next to a huge pair (1e6 m) in one batch: the
+    parallel tolerance is relative to each pair's own lengths, so the tiny pair still crosses."""
+    p = np.array([[0.0, 0.0], [0.0, 0.0]])
+    q = np.array([[1e-4, 0.0], [1e6, 0.0]])
+    r = np.array([[5e-5, -5e-5], [0.0, 1.0]])
+    s = np.array([[5e-5, 5e-5], [1e6, 2.0]])
+    np.testing.assert_array_equal(metrics.segments_cross(p, q, r, s), [True, False])
+
+
+def test_an_arc_inverted_in_an_earlier_record_only_is_remembered(topology):
+    """Records: inverted, then back at rest; the neighbour stays at rest throughout; a third
+    instance has a non-finite final record. Each instance's checks are its own."""
+    shape = topology.rest_positions.copy()
+    interior = topology.arcs[0, 1:-1]
+    a, b = shape[topology.arcs[0, 0]], shape[topology.arcs[0, -1]]
+    direction = (b - a) / np.linalg.norm(b - a)
+    offset = shape[interior] - a
+    shape[interior] = a + 2.0 * (offset @ direction)[:, None] * direction - offset
+    rest = topology.rest_positions
+    stretched = 1.2 * rest
+    records = np.stack([np.stack([shape, rest, stretched]),
+                        np.stack([rest, rest, np.full_like(rest, np.nan)])])
+    checks = metrics.shape_checks(records, topology)
+    assert checks["arc_inverted"].tolist() == [True, False, False]
+    assert checks["arc_inverted_final"].tolist() == [False, False, False]
+    assert checks["finite"].tolist() == [True, True, False]
+    assert checks["max_strain_final"].iloc[0] < 1e-12
+    assert checks["max_strain"].iloc[2] == pytest.approx(0.2, rel=1e-9)
