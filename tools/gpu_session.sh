@@ -1,6 +1,12 @@
 #!/usr/bin/env bash
 # GPU checks and benchmarks on a lent NVIDIA machine (no network there): the Python packages it
-# lacks travel as wheels in .whl/ (ignored by git). Usage: bash tools/gpu_session.sh PHASE
+# lacks travel as wheels in .whl/ (ignored by git), fetched here with
+#   pip download --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
+#       --platform manylinux_2_27_x86_64 -d .whl taichi==1.7.4 dill cma SALib multiprocess \
+#       gymnasium farama-notifications
+# (the taichi wheel, 56 MB, fits the 64 MiB transfer only without taichi/_lib/c_api, which the
+# Python package does not use: unzip, delete that folder and its RECORD lines, zip again).
+# Usage: bash tools/gpu_session.sh PHASE
 #   correctness  the engine-vs-reference, determinism and GPU-vs-CPU tests with --arch gpu, and
 #                the Fig. 4c study on the GPU compared with results/fig4c.csv (CPU)
 #   layouts      the layout and block-size alternatives at B = 8192 (paper, f64, Newton)
