@@ -113,11 +113,15 @@ class FieldStore:
         self.int_entries = [(fields[name], offset) for name, offset, _ in self.layout[False]]
         self.totals = {kind: max(total, 1) for kind, total in totals.items()}
 
+    def flat_arrays(self) -> Dict[bool, np.ndarray]:
+        """Zeroed packing arrays: float64 (key True) and int64 (key False)."""
+        return {kind: np.zeros(self.totals[kind], dtype=np.float64 if kind else np.int64)
+                for kind in (True, False)}
+
     def write(self, values: Dict[str, np.ndarray]):
         """Every field of the store from `values` (name -> array of the field's shape, with the
         component axes last); ValueError naming a missing or misshapen entry."""
-        flats = {kind: np.zeros(self.totals[kind], dtype=np.float64 if kind else np.int64)
-                 for kind in (True, False)}
+        flats = self.flat_arrays()
         for kind, entries in self.layout.items():
             for name, offset, size in entries:
                 if name not in values:
@@ -127,13 +131,12 @@ class FieldStore:
                     raise ValueError(f"field {name!r} has shape {self.shapes[name]}, got "
                                      f"{array.shape}")
                 flats[kind][offset:offset + size] = array.ravel()
-        self._scatter(flats[True], flats[False])
+        self._transfer(flats[True], flats[False], True)
 
     def read(self) -> Dict[str, np.ndarray]:
         """Every field of the store as a NumPy array of its own dtype and shape."""
-        flats = {kind: np.zeros(self.totals[kind], dtype=np.float64 if kind else np.int64)
-                 for kind in (True, False)}
-        self._gather(flats[True], flats[False])
+        flats = self.flat_arrays()
+        self._transfer(flats[True], flats[False], False)
         return {name: flats[kind][offset:offset + size].reshape(self.shapes[name])
                 .astype(self.dtypes[name])
                 for kind, entries in self.layout.items() for name, offset, size in entries}
@@ -171,17 +174,10 @@ class FieldStore:
                         flat[start + k * components[1] + m] = field[index][k, m]
 
     @ti.kernel
-    def _scatter(self, floats: ti.types.ndarray(dtype=ti.f64, ndim=1),
-                 ints: ti.types.ndarray(dtype=ti.i64, ndim=1)):
+    def _transfer(self, floats: ti.types.ndarray(dtype=ti.f64, ndim=1),
+                  ints: ti.types.ndarray(dtype=ti.i64, ndim=1), to_fields: ti.template()):
+        """Flat arrays -> fields when `to_fields`, else fields -> flat arrays."""
         for field, offset in ti.static(self.float_entries):
-            self._copy(field, floats, offset, True)
+            self._copy(field, floats, offset, to_fields)
         for field, offset in ti.static(self.int_entries):
-            self._copy(field, ints, offset, True)
-
-    @ti.kernel
-    def _gather(self, floats: ti.types.ndarray(dtype=ti.f64, ndim=1),
-                ints: ti.types.ndarray(dtype=ti.i64, ndim=1)):
-        for field, offset in ti.static(self.float_entries):
-            self._copy(field, floats, offset, False)
-        for field, offset in ti.static(self.int_entries):
-            self._copy(field, ints, offset, False)
+            self._copy(field, ints, offset, to_fields)

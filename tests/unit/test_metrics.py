@@ -61,15 +61,20 @@ def test_limbs_bent_towards_each_other_without_touching_do_not_cross(topology):
     assert not metrics.limbs_cross(shape, topology)
 
 
-def test_an_inverted_arc_is_detected(topology):
+def first_arc_inverted(topology):
+    """The rest shape with arc 0's interior nodes reflected across its chord: lengths are kept,
+    the bulge flips outwards, so the strain check cannot be what flags it."""
     shape = topology.rest_positions.copy()
     interior = topology.arcs[0, 1:-1]
     a, b = shape[topology.arcs[0, 0]], shape[topology.arcs[0, -1]]
-    # reflect the arc's interior nodes across its chord: lengths are kept, the bulge flips
-    # outwards, so the strain check cannot be what flags it
     direction = (b - a) / np.linalg.norm(b - a)
     offset = shape[interior] - a
     shape[interior] = a + 2.0 * (offset @ direction)[:, None] * direction - offset
+    return shape
+
+
+def test_an_inverted_arc_is_detected(topology):
+    shape = first_arc_inverted(topology)
     mean = metrics.arc_mean_curvature(shape, topology)
     rest = metrics.arc_mean_curvature(topology.rest_positions, topology)
     assert mean[0] * rest[0] < 0 and (mean[1:] * rest[1:] > 0).all()
@@ -202,14 +207,10 @@ def test_each_pair_of_a_batch_is_judged_parallel_at_its_own_scale():
 
 
 def test_an_arc_inverted_in_an_earlier_record_only_is_remembered(topology):
-    """Records: inverted, then back at rest; the neighbour stays at rest throughout; a third
-    instance has a non-finite final record. Each instance's checks are its own."""
-    shape = topology.rest_positions.copy()
-    interior = topology.arcs[0, 1:-1]
-    a, b = shape[topology.arcs[0, 0]], shape[topology.arcs[0, -1]]
-    direction = (b - a) / np.linalg.norm(b - a)
-    offset = shape[interior] - a
-    shape[interior] = a + 2.0 * (offset @ direction)[:, None] * direction - offset
+    """Two records of three instances: the first inverted, then back at rest; the second at rest
+    throughout; the third stretched by 20 %, then non-finite. Each instance's checks are its
+    own."""
+    shape = first_arc_inverted(topology)
     rest = topology.rest_positions
     stretched = 1.2 * rest
     records = np.stack([np.stack([shape, rest, stretched]),
