@@ -7,7 +7,7 @@ All requested gaits run in one batch. Writes, under `<out>/animations/`: `shapes
 frame, t_s, node, x_mm, y_mm: every node at every frame), `centroid.csv` (gait, frame, t_s,
 x_mm, y_mm: centroid relative to its start), `edges.csv` (the topology: node_a, node_b, kind,
 actuator) and `<gait>.gif` drawn from those CSVs: limbs brown, resting actuators gray, fired
-actuators red, the central cylinder, and the centroid path in a zoomed inset.
+actuators red, the central cylinder, and beside it the centroid path (zoomed).
 """
 
 from __future__ import annotations
@@ -82,7 +82,9 @@ def draw_gif(shapes_csv, centroid_csv, edges_csv, gait: str, gif_path, fps: int 
                  for f, part in shapes.groupby("frame")}
     times = shapes.groupby("frame")["t_s"].first()
 
-    fig, ax = plt.subplots(figsize=(5, 5))
+    # the centroid path in a panel of its own: inside the robot's axes it covered the A2 label
+    fig, (ax, inset) = plt.subplots(1, 2, figsize=(7, 5), gridspec_kw={"width_ratios": [3, 1.2]},
+                                    layout="constrained")
     ax.set_aspect("equal")
     low = np.minimum(shapes[["x_mm", "y_mm"]].min().to_numpy(), -60.0)
     high = np.maximum(shapes[["x_mm", "y_mm"]].max().to_numpy(), 60.0)
@@ -99,14 +101,13 @@ def draw_gif(shapes_csv, centroid_csv, edges_csv, gait: str, gif_path, fps: int 
         angle = math.radians(45.0 * (m - 1))
         ax.text(60 * math.cos(angle), 60 * math.sin(angle), f"A{m}", ha="center", va="center",
                 fontsize=7, color="red" if m in fired else "0.4")
-    inset = ax.inset_axes([0.70, 0.70, 0.28, 0.28])
     cx, cy = centroid["x_mm"].to_numpy(), centroid["y_mm"].to_numpy()
     span = max(float(np.nanmax(np.abs(np.r_[cx, cy]))) if len(cx) else 0.0, 0.05) * 1.2
     inset.set_xlim(-span, span)
     inset.set_ylim(-span, span)
     inset.set_aspect("equal")
-    inset.tick_params(labelsize=5)
-    inset.set_title("centroid (mm)", fontsize=6)
+    inset.tick_params(labelsize=7)
+    inset.set_title("centroid path (mm)", fontsize=9)
     path_line, = inset.plot([], [], "b-", lw=0.8)
     dot, = inset.plot([], [], "bo", ms=3)
     title = ax.set_title("")
@@ -122,7 +123,7 @@ def draw_gif(shapes_csv, centroid_csv, edges_csv, gait: str, gif_path, fps: int 
         return lines, cylinder, path_line, dot, title
 
     animation = FuncAnimation(fig, update, frames=len(frames), blit=False)
-    animation.save(gif_path, writer=PillowWriter(fps=fps), dpi=80)
+    animation.save(gif_path, writer=PillowWriter(fps=fps), dpi=100)
     plt.close(fig)
     return Path(gif_path)
 

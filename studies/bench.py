@@ -6,6 +6,7 @@
                             [--scenario-batch 64] [--workers-list 1,2] [--no-cache-probe]
                             [--presets paper,accurate] [--accurate-duration 3.15]
                             [--gpu-block-dims 64] [--layouts instance_minor,instance_major]
+                            [--kernel-optimisation on,off]
 
 Gait A1+A3, the paper's discretisation (N = 193 nodes), h = 1 ms, implicit Euler. For every batch
 size B and precision: a fresh engine is compiled (its first launch, timed apart as `compile_s`),
@@ -53,6 +54,11 @@ skips some of it); `bandwidth_gb_s` is
 measured on the same device by a Taichi copy kernel (bytes read + written) and
 `bandwidth_fraction` = robot_steps_per_s × bytes_per_step / bandwidth.
 
+Compiler settings (`--kernel-optimisation on,off`): the B sweep (and the accurate preset) is
+repeated with Taichi's advanced IR optimisation on and off (`kernel_optimisation`), each a fresh
+initialisation and compilation, so that one table shows what the passes cost to compile and
+gain per step.
+
 Compile time with a cold and a warm Taichi offline cache: two fresh Python processes that share
 an empty temporary cache folder (`TI_OFFLINE_CACHE_FILE_PATH`), the first compiles from scratch,
 the second loads the first's kernels (section "compile"; off with --no-cache-probe and in
@@ -87,7 +93,8 @@ import taichi as ti
 
 from taichi_star import SolverConfig, StarParams
 from taichi_star.batch import LocalProcesses, run_batch
-from taichi_star.runtime import GPU_BLOCK_DIM, GPU_INSTANCE_MINOR, Runtime, prepare_engine
+from taichi_star.runtime import (GPU_BLOCK_DIM, GPU_INSTANCE_MINOR, KERNEL_OPTIMISATION, Runtime,
+                                 prepare_engine)
 
 from . import cli, provenance
 
@@ -138,7 +145,7 @@ BANDWIDTH_BYTES = 1 << 30
 """Size of the buffer the bandwidth probe copies (bytes): far larger than any cache."""
 
 COLUMNS = ["machine", "cpu_model", "cores", "gpu", "gpu_driver", "arch", "preset", "layout",
-           "block_dim", "section", "scenario", "terms",
+           "block_dim", "kernel_optimisation", "section", "scenario", "terms",
            "batch_size", "precision", "jacobian", "workers", "n_nodes", "dt_s", "gait",
            "warmup_steps", "steps", "repeats", "commit", "timestamp", "import_s", "setup_s",
            "compile_s", "time_to_first_step_s", "robot_steps_per_s", "real_time_factor",
@@ -422,6 +429,9 @@ def build_parser():
                         "instance_major",
                         help=f"comma list of {', '.join(LAYOUTS)}: the GPU layout of the "
                              "per-instance fields, --arch gpu only")
+    parser.add_argument("--kernel-optimisation", default="on" if KERNEL_OPTIMISATION else "off",
+                        help="comma list of on, off: Taichi's advanced IR optimisation for the "
+                             "B sweep (default: the library's setting)")
     parser.add_argument("--no-cache-probe", action="store_true",
                         help="skip the cold/warm offline-cache compile probe (two subprocesses; "
                              "skipped by --quick)")
@@ -455,6 +465,8 @@ def parse_args(argv):
     args.presets = cli.parse_choices(args.presets, "--presets", PRESETS)
     args.layouts = cli.parse_choices(args.layouts, "--layouts", LAYOUTS)
     args.gpu_block_dims = cli.parse_counts(args.gpu_block_dims, "--gpu-block-dims")
+    args.kernel_optimisation = [choice == "on" for choice in cli.parse_choices(
+        args.kernel_optimisation, "--kernel-optimisation", ("on", "off"))]
     for block_dim in args.gpu_block_dims:
         if block_dim > 1024 or block_dim & (block_dim - 1):
             raise cli.StudyArgumentError(f"--gpu-block-dims: each must be a power of two up to "
@@ -486,7 +498,8 @@ def run_bench(args) -> pd.DataFrame:
     """Every measurement of the parsed arguments as one table (columns `COLUMNS`)."""
     base = {**provenance.machine_columns(args.arch), "arch": args.arch, "dt_s": DT,
             "warmup_steps": WARMUP_STEPS, "steps": args.steps,
-            "repeats": args.repeats, "commit": provenance.short_commit()}
+            "repeats": args.repeats, "commit": provenance.short_commit(),
+            "kernel_optimisation": "on" if KERNEL_OPTIMISATION else "off"}
     profile_seconds = QUICK_PROFILE_SECONDS if args.quick else PROFILE_SECONDS
     rows = []
 
@@ -503,12 +516,16 @@ def run_bench(args) -> pd.DataFrame:
 
     gpu = args.arch != "cpu"
     settings = [(layout, block_dim) for layout in args.layouts for block_dim in args.gpu_block_dims]
-    for index, precision in enumerate(args.precisions):
+    compilers = [(optimise, precision) for optimise in args.kernel_optimisation
+                 for precision in args.precisions]
+    for index, (optimise, precision) in enumerate(compilers):
+        Runtime.current().configure_compiler(optimise)
         bandwidth = measure_bandwidth(args.arch, precision) if gpu else math.nan
         for layout, block_dim in settings if gpu else [("instance_major", 1)]:
             if gpu:
                 Runtime.current().configure_gpu(block_dim, layout == "instance_minor")
-            place = {"layout": layout, "block_dim": block_dim, "bandwidth_gb_s": bandwidth}
+            place = {"layout": layout, "block_dim": block_dim, "bandwidth_gb_s": bandwidth,
+                     "kernel_optimisation": "on" if optimise else "off"}
             if "paper" in args.presets:
                 for jacobian in args.jacobians:
                     for batch in args.batch_sizes:
@@ -532,7 +549,9 @@ def run_bench(args) -> pd.DataFrame:
                 figures = measure(params, args.arch, precision, args.steps, args.repeats,
                                   profile_seconds)
                 add({"section": "skip", "scenario": scenario, "batch_size": args.scenario_batch,
-                     "precision": precision, **figures})
+                     "precision": precision, "kernel_optimisation": "on" if optimise else "off",
+                     **figures})
+    Runtime.current().configure_compiler()
     for workers in args.workers_list:
         for jacobian in args.jacobians:
             figures = measure_processes(args.process_batch, workers, jacobian, args.steps,

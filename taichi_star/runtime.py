@@ -31,6 +31,11 @@ GPU_BLOCK_DIM = 32
 """Threads (one instance each) per GPU block; chosen by `python -m studies bench --arch gpu`."""
 GPU_INSTANCE_MINOR = True
 """GPU layout of the per-instance fields: instance-minor (coalesced); chosen by the same bench."""
+KERNEL_OPTIMISATION = False
+"""Taichi's advanced IR optimisation passes (`ti.init(advanced_optimization=...)`). Off: an
+engine compiles in less than half the time and computes the same bits (the IR passes do not
+reorder floating-point arithmetic); `python -m studies bench --kernel-optimisation on,off`
+measures what each costs per step and to compile."""
 
 
 def available_archs() -> List[str]:
@@ -108,17 +113,46 @@ def available_memory_bytes() -> Optional[int]:
 
 def check_memory(model: BatchModel, precision: str, arch: str):
     """ValueError, before anything is allocated, when a CPU engine for this batch would take more
-    than MEMORY_SHARE of the available memory; it names the way to run such a batch (chunks)."""
+    than MEMORY_SHARE of the available memory (`simulate` streams a large batch in chunks that
+    fit, so this refuses only a machine without room for the smallest engine)."""
     if arch != "cpu":
         return
     available = available_memory_bytes()
     needed = engine_bytes(model, precision)
     if available is not None and needed > MEMORY_SHARE * available:
         raise ValueError(
-            f"params: a batch of {model.batch_size} instances needs about {needed / 2**30:.1f} GiB "
-            f"for its engine, more than {MEMORY_SHARE:.0%} of the {available / 2**30:.1f} GiB "
-            f"available; run it in chunks with taichi_star.batch.run_batch(params, ..., "
-            f"chunk_size=...) (each chunk one engine, the results streamed)")
+            f"params: a batch of {model.batch_size} instances needs about {needed / 2**30:.2f} GiB "
+            f"for its engine, more than {MEMORY_SHARE:.0%} of the {available / 2**30:.2f} GiB "
+            f"available (the memory budget); free memory or run fewer instances")
+
+
+CPU_ENGINE_BUDGET_BYTES = 512 * 2**20
+"""Largest CPU engine `simulate` builds (bytes): a larger batch is streamed through one engine of
+at most this size, chunk by chunk (on the CPU the throughput stops growing with the batch at a
+few hundred instances, so chunking costs nothing and bounds the memory of any batch)."""
+
+
+def stream_chunk_size(params, precision: str, arch: str) -> int:
+    """Instances per chunk when `simulate` streams `params` (a validated batch) through one
+    engine: all of them on a GPU, and on the CPU as many as fit in CPU_ENGINE_BUDGET_BYTES (or
+    MEMORY_SHARE of the available memory, if less), in equal chunks so that every chunk shares
+    one engine capacity (one compilation). The per-instance size is measured on the first
+    MIN_CAPACITY instances' model."""
+    if arch != "cpu":
+        return len(params)
+    budget = CPU_ENGINE_BUDGET_BYTES
+    available = available_memory_bytes()
+    if available is not None:
+        budget = min(budget, MEMORY_SHARE * available)
+    probe = build_model(params[:MIN_CAPACITY])
+    per_instance = engine_bytes(probe, precision) / batch_capacity(probe.batch_size)
+    fitting = MIN_CAPACITY
+    while 2 * fitting * per_instance <= budget:
+        fitting *= 2
+    if len(params) <= fitting:
+        return len(params)
+    chunks = -(-len(params) // fitting)
+    return -(-len(params) // chunks)
 
 
 def batch_capacity(batch_size: int) -> int:
@@ -141,6 +175,7 @@ class Runtime:
         self.cpu_threads: Optional[int] = None
         self.gpu_block_dim = GPU_BLOCK_DIM
         self.gpu_instance_minor = GPU_INSTANCE_MINOR
+        self.kernel_optimisation = KERNEL_OPTIMISATION
         self.log_level = ti.WARN
         self.engines: Dict[tuple, BatchEngine] = {}
         self.leases: Dict[tuple, List[Tuple[BatchEngine, weakref.ref]]] = {}
@@ -171,7 +206,8 @@ class Runtime:
         # Taichi's logger
         with contextlib.redirect_stdout(io.StringIO()):
             ti.init(arch=getattr(ti, arch), default_fp=ti.f64 if precision == "f64" else ti.f32,
-                    fast_math=False, offline_cache=True, log_level=self.log_level, **threads)
+                    fast_math=False, advanced_optimization=self.kernel_optimisation,
+                    offline_cache=True, log_level=self.log_level, **threads)
         self.arch, self.precision = arch, precision
         self.engines.clear()
         self.leases.clear()
@@ -183,6 +219,15 @@ class Runtime:
             raise ValueError(f"block_dim must be a power of two in [1, 1024], got {block_dim}")
         self.gpu_block_dim = int(block_dim)
         self.gpu_instance_minor = bool(instance_minor)
+
+    def configure_compiler(self, kernel_optimisation: bool = KERNEL_OPTIMISATION):
+        """Whether Taichi's advanced IR optimisation compiles the engines (see
+        KERNEL_OPTIMISATION); forces a re-initialisation if Taichi is up."""
+        if not isinstance(kernel_optimisation, (bool, np.bool_)):
+            raise ValueError(f"kernel_optimisation must be True or False, got "
+                             f"{kernel_optimisation!r}")
+        self.kernel_optimisation = bool(kernel_optimisation)
+        self.arch = None
 
     def loop_spread(self, capacity: int) -> int:
         """Iterations of the engine's parallel loop per instance: on the CPU enough to reach

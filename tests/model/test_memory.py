@@ -19,10 +19,25 @@ def test_engine_size_estimate_matches_the_fields_allocated(preset, taichi_cpu):
     assert abs(estimate / engine.arena.nbytes - 1.0) <= 0.02, (estimate, engine.arena.nbytes)
 
 
-def test_a_batch_too_large_for_the_memory_is_refused_before_compute(monkeypatch):
-    """With 100 MiB available, 5,000 instances (~0.5 GB of engine) are refused with a message
-    naming run_batch; nothing is allocated (no engine of that capacity is cached)."""
+def test_a_large_batch_is_streamed_in_chunks_that_fit_the_memory(monkeypatch):
+    """With 100 MiB available (budget 80 %), 5,000 instances are cut into equal chunks whose
+    engine fits the budget but would not at twice the size (the planner takes the largest power
+    of two that fits)."""
     monkeypatch.setattr(runtime, "available_memory_bytes", lambda: 100 * 2**20)
-    with pytest.raises(ValueError, match=r"params: a batch of 5000 .*run_batch"):
-        ts.simulate([ts.StarParams()] * 5000, 0.001)
-    assert not any(key[2] == 8192 for key in runtime.Runtime.current().engines)
+    params = [ts.StarParams()] * 5000
+    chunk = runtime.stream_chunk_size(params, "f64", "cpu")
+    budget = runtime.MEMORY_SHARE * 100 * 2**20
+    assert engine_bytes(build_model(params[:chunk]), "f64") <= budget
+    assert engine_bytes(build_model(params[:2 * runtime.batch_capacity(chunk)]), "f64") > budget
+    assert len(range(0, 5000, chunk)) == -(-5000 // runtime.batch_capacity(chunk))
+
+
+def test_a_machine_without_room_for_the_smallest_engine_refuses_before_compute(monkeypatch):
+    """With 1 MiB available even the 64-instance engine (~7 MB) does not fit: a ValueError
+    naming the budget, and no engine is cached (a topology no other test builds, so that no
+    engine of it is cached already)."""
+    monkeypatch.setattr(runtime, "available_memory_bytes", lambda: 2**20)
+    before = set(runtime.Runtime.current().engines)
+    with pytest.raises(ValueError, match=r"params: a batch of 3 .*the memory budget"):
+        ts.simulate([ts.StarParams(n_arc=11)] * 3, 0.001)
+    assert set(runtime.Runtime.current().engines) == before
