@@ -59,6 +59,9 @@ repeated with Taichi's advanced IR optimisation on and off (`kernel_optimisation
 initialisation and compilation, so that one table shows what the passes cost to compile and
 gain per step.
 
+`final_state` is a hash of the final node positions (paper rows) or displacements (accurate
+rows): equal hashes across settings show they computed the same bits.
+
 Compile time with a cold and a warm Taichi offline cache: two fresh Python processes that share
 an empty temporary cache folder (`TI_OFFLINE_CACHE_FILE_PATH`), the first compiles from scratch,
 the second loads the first's kernels (section "compile"; off with --no-cache-probe and in
@@ -77,6 +80,7 @@ against B (log-log, one line per precision, the design target dashed), the phase
 the scenarios.
 """
 
+import hashlib
 import json
 import math
 import os
@@ -151,7 +155,7 @@ COLUMNS = ["machine", "cpu_model", "cores", "gpu", "gpu_driver", "arch", "preset
            "compile_s", "time_to_first_step_s", "robot_steps_per_s", "real_time_factor",
            "step_us", "newton_iterations_mean", "assembly_us", "factor_us", "solve_us",
            "bookkeeping_us", "factor_flops", "factor_gflops", "bytes_per_step",
-           "bandwidth_gb_s", "bandwidth_fraction"]
+           "bandwidth_gb_s", "bandwidth_fraction", "final_state"]
 
 
 def timestamp() -> str:
@@ -184,6 +188,12 @@ def start_batch(params, arch: str, precision: str, jacobian: str = "newton"):
     engine = prepare_engine(params, solver, arch)
     ti.sync()
     return engine, solver, time.perf_counter() - start
+
+
+def state_digest(values: np.ndarray) -> str:
+    """A short hash of an array's bytes: rows measured with different settings (compiler, layout)
+    that computed the same bits carry the same digest."""
+    return hashlib.sha1(np.ascontiguousarray(values).tobytes()).hexdigest()[:12]
 
 
 def terms_of(engine) -> str:
@@ -223,6 +233,7 @@ def measure(params, arch: str, precision: str, steps: int, repeats: int,
         iterations = ((engine.state.newton_total.to_numpy()[:batch].sum() - iterations_before)
                       / (batch * steps))
 
+    final_state = state_digest(engine.state.positions.to_numpy()[:batch])
     robot_steps = batch * steps / timed
     step_us = 1e6 / robot_steps
     phase = phase_split(engine, batch, (WARMUP_STEPS + steps) * DT,
@@ -233,7 +244,7 @@ def measure(params, arch: str, precision: str, steps: int, repeats: int,
     bytes_per_step = (iterations * matrix_bytes_per_iteration(engine, precision)
                       if jacobian == "newton" else math.nan)
     return {"gait": params[0].gait, "jacobian": jacobian, "workers": 1,
-            "preset": "paper", "bytes_per_step": bytes_per_step,
+            "preset": "paper", "bytes_per_step": bytes_per_step, "final_state": final_state,
             "terms": terms_of(engine),
             "n_nodes": engine.n_nodes, "setup_s": setup,
             "compile_s": compile_s,
@@ -275,7 +286,9 @@ def measure_accurate(batch: int, arch: str, precision: str, duration: float) -> 
             "n_nodes": result.topology.n_nodes,
             "compile_s": max(first - timed, 0.0), "robot_steps_per_s": steps / timed,
             "real_time_factor": batch * duration / timed, "step_us": 1e6 * timed / steps,
-            "newton_iterations_mean": float(summary["newton_iterations_mean"].mean())}
+            "newton_iterations_mean": float(summary["newton_iterations_mean"].mean()),
+            "final_state": state_digest(summary[["displacement_x_mm", "displacement_y_mm"]]
+                                        .to_numpy())}
 
 
 def measure_bandwidth(arch: str, precision: str) -> float:
