@@ -170,8 +170,8 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
 
     Memory: on the CPU a batch larger than one engine of `runtime.CPU_ENGINE_BUDGET_BYTES` is
     streamed through such an engine in equal chunks, one after the other; the result is the
-    same, bit for bit, as in one engine (instances never interact), and its size is what the
-    tables take (for 100,000 instances about 1 GB of summary and engine together)."""
+    same, bit for bit, as in one engine (instances never interact), and the memory a batch
+    needs grows only with its tables."""
     params, duration_s, record_interval_s = validate_call(params, duration_s, solver,
                                                           record_interval_s, record_shapes,
                                                           steady_from_cycle)
