@@ -141,3 +141,128 @@ def test_presets_are_named_models_with_overrides():
     assert ts.SolverConfig.preset("paper") == ts.SolverConfig()
     with pytest.raises(ValueError, match="preset"):
         ts.StarParams.preset("fast")
+
+
+# The boundaries and messages below are the ranges documented on each field.
+
+@pytest.mark.parametrize("field,value,message", [
+    ("max_newton", 0, "max_newton must be an integer in [1, 200], got 0"),
+    ("max_newton", 201, "max_newton must be an integer in [1, 200], got 201"),
+    ("max_substep_halvings", 11, "max_substep_halvings must be an integer in [0, 10], got 11"),
+    ("max_substep_halvings", 2.5, "max_substep_halvings must be an integer in [0, 10], got 2.5"),
+    ("dt", 0.0, "dt must be a real number in (0, 0.05], got 0.0"),
+    ("dt_min", 0.0, "dt_min must be a real number in (0, 0.05], got 0.0"),
+    ("dt_max", 0.0, "dt_max must be a real number in (0, 0.05], got 0.0"),
+    ("newton_tol", 2e-6, "newton_tol must be a real number in [1e-14, 1e-06], got 2e-06"),
+    ("error_tol", 2e-3, "error_tol must be a real number in [1e-12, 0.001], got 0.002"),
+])
+def test_solver_config_message_names_the_field_its_kind_and_its_range(field, value, message):
+    with pytest.raises(ValueError) as error:
+        ts.SolverConfig(**{field: value})
+    assert str(error.value) == message
+
+
+@pytest.mark.parametrize("changes", [
+    dict(max_newton=1), dict(max_newton=200), dict(max_substep_halvings=0),
+    dict(max_substep_halvings=10), dict(newton_tol=1e-14), dict(error_tol=1e-12),
+    dict(error_tol=1e-3), dict(dt=0.05, dt_max=0.05),
+    # a fixed step may be smaller than the adaptive bounds, which it does not use
+    dict(dt=1e-7),
+    # an adaptive run may pin its step: dt_min = dt = dt_max
+    dict(adaptive=True, dt=2e-3, dt_min=2e-3, dt_max=2e-3),
+])
+def test_solver_config_accepts_the_ends_of_its_closed_ranges(changes):
+    config = ts.SolverConfig(**changes)
+    for field, value in changes.items():
+        assert getattr(config, field) == value
+
+
+def test_solver_config_stores_numpy_scalars_as_python_numbers():
+    """A definition hash and a JSON manifest see the stored values: the same settings given as
+    NumPy scalars must be stored as the same Python numbers."""
+    config = ts.SolverConfig(dt=np.float32(0.0025), newton_tol=np.float64(1e-9),
+                             max_newton=np.int32(30), max_substep_halvings=np.int64(3),
+                             adaptive=np.bool_(True), error_tol=np.float64(1e-6),
+                             dt_min=np.float64(1e-5), dt_max=np.float64(0.01))
+    expected = {"dt": float, "newton_tol": float, "max_newton": int, "max_substep_halvings": int,
+                "adaptive": bool, "error_tol": float, "dt_min": float, "dt_max": float}
+    for field, kind in expected.items():
+        assert type(getattr(config, field)) is kind, field
+    assert config == ts.SolverConfig(dt=float(np.float32(0.0025)), newton_tol=1e-9, max_newton=30,
+                                     max_substep_halvings=3, adaptive=True, error_tol=1e-6,
+                                     dt_min=1e-5, dt_max=0.01)
+
+
+@pytest.mark.parametrize("cls,field,choices", [
+    (ts.StarParams, "jet_mode", ["contract", "always"]),
+    (ts.StarParams, "actuation_ends", ["clamped", "shared"]),
+    (ts.StarParams, "joint_stiffness", ["limb", "series"]),
+    (ts.StarParams, "profile_closure", ["jump", "ramp"]),
+    (ts.SolverConfig, "precision", ["f64", "f32"]),
+    (ts.SolverConfig, "integrator", ["euler", "bdf2"]),
+    (ts.SolverConfig, "jacobian", ["newton", "chord"]),
+])
+def test_a_bad_choice_is_refused_naming_the_field_and_the_choices(cls, field, choices):
+    with pytest.raises(ValueError) as error:
+        cls(**{field: "other"})
+    assert str(error.value) == f"{field} must be one of {choices}, got 'other'"
+
+
+def test_presets_default_to_the_paper_and_name_the_choices_when_unknown():
+    assert ts.StarParams.preset() == ts.StarParams()
+    assert ts.SolverConfig.preset() == ts.SolverConfig()
+    for cls in (ts.StarParams, ts.SolverConfig):
+        with pytest.raises(ValueError) as error:
+            cls.preset("fast")
+        assert str(error.value) == "preset must be one of ['paper', 'accurate'], got 'fast'"
+
+
+def test_a_profile_that_is_not_a_curvature_profile_is_refused_naming_its_type():
+    with pytest.raises(ValueError, match="must be a CurvatureProfile, got str$"):
+        ts.StarParams(actuator_profile="paper")
+
+
+def test_the_period_must_outlast_the_heating_pulse():
+    heating = ts.StarParams().actuator_profile.switch_time
+    with pytest.raises(ValueError, match="period must be in"):
+        ts.StarParams(period=heating)
+    assert ts.StarParams(period=heating * 1.001).period == pytest.approx(heating * 1.001)
+
+
+def test_the_tips_must_lie_beyond_the_joints():
+    with pytest.raises(ValueError, match="tip_radius must be in"):
+        ts.StarParams(tip_radius=ts.StarParams().joint_radius)
+
+
+def test_joint_radius_is_bounded_by_the_widest_chord_a_rest_arc_spans():
+    """Neighbouring joints 45° apart at radius r are a chord 2·r·sin(22.5°) apart; an arc of
+    curvature K̄(0) spans at most its diameter 2/K̄(0), so r < 1/(K̄(0)·sin(22.5°))."""
+    rest = ts.StarParams().actuator_profile.rest_curvature
+    widest = 1.0 / (rest * math.sin(math.radians(22.5)))
+    assert ts.StarParams(joint_radius=widest * 0.999).joint_radius == pytest.approx(widest * 0.999)
+    for radius in (widest, widest * 1.001):
+        with pytest.raises(ValueError, match="joint_radius must be in"):
+            ts.StarParams(joint_radius=radius)
+
+
+def test_replace_changes_fields_and_validates_again():
+    params = ts.StarParams().replace(alpha=0.5, gait="A3+A1")
+    assert (params.alpha, params.gait) == (0.5, "A1+A3")
+    assert params.replace(alpha=0.8) == ts.StarParams(gait="A1+A3")
+    with pytest.raises(ValueError, match="alpha"):
+        params.replace(alpha=-1.0)
+    solver = ts.SolverConfig().replace(dt=2e-3)
+    assert solver.dt == 2e-3 and solver.replace(dt=1e-3) == ts.SolverConfig()
+    with pytest.raises(ValueError, match="dt"):
+        solver.replace(dt=-1.0)
+
+
+def test_numeric_fields_are_all_fields_but_the_texts_and_the_profile():
+    names = ts.StarParams.field_names()
+    assert names[0] == "gait" and len(names) == len(set(names))
+    texts = {"gait", "jet_mode", "actuation_ends", "joint_stiffness", "profile_closure",
+             "actuator_profile"}
+    numeric = ts.StarParams.numeric_field_names()
+    assert set(numeric) == set(names) - texts and len(numeric) == len(names) - len(texts)
+    for name in numeric:
+        assert isinstance(getattr(ts.StarParams(), name), (int, float)), name

@@ -1,0 +1,497 @@
+"""The run store without simulations: chunk summaries built by hand as small tables, so every
+rule of the store (what a run's definition is, what makes a chunk file trusted, when a folder is
+refused, what the manifest records) is checked in milliseconds."""
+
+import dataclasses
+import json
+import logging
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+import taichi_star as ts
+from taichi_star.actuation import CurvatureProfile
+from taichi_star.batch import store as run_store
+from taichi_star.batch.store import (RunStore, RunStoreError, definition_differences,
+                                     run_definition, stored_chunk_size, table_checksum)
+from taichi_star.batch.tasks import plan_chunks
+
+SOLVER = ts.SolverConfig(dt=2e-3)
+PARAMS = [ts.StarParams(gait=g, alpha=a) for g in ("A1", "A1+A3") for a in (0.4, 0.8)]
+CHUNK = 3  # two chunks: 3 + 1 instances
+
+
+def tasks_of(params=PARAMS, chunk_size=CHUNK, **kwargs):
+    return plan_chunks(params, kwargs.pop("duration_s", 0.1), chunk_size=chunk_size,
+                       solver=kwargs.pop("solver", SOLVER), **kwargs)
+
+
+def definition_of(params=PARAMS, chunk_size=CHUNK, duration_s=0.1, **kwargs):
+    return run_definition(params, tasks_of(params, chunk_size, duration_s=duration_s, **kwargs),
+                          chunk_size, None, duration_s)
+
+
+def summary_of(task):
+    """A chunk summary shaped like run_chunk's: instance, a gait text, a value object, numbers
+    whose last bits matter, a bool and an int column."""
+    n = len(task.members)
+    return pd.DataFrame({
+        "instance": np.asarray(task.members, dtype=np.int64),
+        "gait": [p.gait for p in task.params],
+        "actuator_profile": pd.Series([p.actuator_profile for p in task.params], dtype=object),
+        "speed_mm_s": np.array([1.0 / 3.0 + k for k in range(n)]) * (task.index + 1),
+        "converged": np.arange(n) % 2 == 0,
+        "newton_iterations": np.arange(n, dtype=np.int32) + 7,
+    })
+
+
+def store_in(path, params=PARAMS):
+    return RunStore(path, definition_of(params))
+
+
+def manifest_of(folder):
+    return json.loads((Path(folder) / "manifest.json").read_text())
+
+
+def set_manifest(folder, **changes):
+    manifest = manifest_of(folder)
+    manifest.update(changes)
+    (Path(folder) / "manifest.json").write_text(json.dumps(manifest))
+
+
+@pytest.fixture
+def written(tmp_path):
+    """(folder, tasks) of a run whose two chunks are written, not yet finished."""
+    folder = tmp_path / "run"
+    tasks = tasks_of()
+    store = store_in(folder)
+    assert store.open(tasks, resume=False) == []
+    for task in tasks:
+        store.write(task, summary_of(task))
+    return folder, tasks
+
+
+# --- the definition ---
+
+def test_definition_records_what_a_resumed_run_must_repeat():
+    tasks = tasks_of(record_interval_s=0.02, steady_from_cycle=2)
+    definition = run_definition(PARAMS, tasks, CHUNK, None, 0.1)
+    assert definition["format"] == 2
+    assert definition["n_instances"] == 4 and definition["n_chunks"] == 2
+    assert definition["chunk_size"] == CHUNK and type(definition["chunk_size"]) is int
+    assert definition["cycles"] is None
+    assert definition["duration_s"] == 0.1 and type(definition["duration_s"]) is float
+    assert definition["solver"] == dataclasses.asdict(SOLVER)
+    assert definition["arch"] == "cpu"
+    assert definition["record_interval_s"] == 0.02 and definition["steady_from_cycle"] == 2
+    assert json.loads(json.dumps(definition)) == definition  # JSON-ready
+    by_cycles = run_definition(PARAMS, tasks, CHUNK, 2, None)
+    assert by_cycles["cycles"] == 2.0 and type(by_cycles["cycles"]) is float
+    assert by_cycles["duration_s"] is None
+
+
+def test_definition_hashes_change_with_the_parameters_and_the_chunk_plan_only():
+    base = definition_of()
+    assert definition_of() == base
+    assert definition_of([p.replace(alpha=p.alpha + 1e-12) for p in PARAMS])["params_sha256"] \
+        != base["params_sha256"]
+    assert definition_of(PARAMS[::-1])["params_sha256"] != base["params_sha256"]
+    # another cut of the same instances: same parameters, other chunks
+    other_cut = definition_of(chunk_size=2)
+    assert other_cut["params_sha256"] == base["params_sha256"]
+    assert other_cut["chunks_sha256"] != base["chunks_sha256"]
+    assert len(base["params_sha256"]) == len(base["chunks_sha256"]) == 64
+
+
+def test_definition_differences_name_each_changed_field():
+    old = definition_of()
+    new = definition_of(solver=SOLVER.replace(dt=1e-3, max_newton=30), chunk_size=2)
+    assert definition_differences(old, old) == []
+    assert definition_differences(old, new) == [
+        "chunk_size: 3 -> 2", f"chunks_sha256: {old['chunks_sha256']!r} -> "
+        f"{new['chunks_sha256']!r}", "solver.dt: 0.002 -> 0.001", "solver.max_newton: 25 -> 30"]
+    fewer = definition_differences(old, definition_of(PARAMS[:3]))
+    assert "n_chunks: 2 -> 1" in fewer and "n_instances: 4 -> 3" in fewer
+    assert "the instance parameters differ" in definition_differences(old, definition_of(
+        [p.replace(cylinder_drag=20.0) for p in PARAMS]))
+    assert definition_differences({"a": 1}, {"b": {"c": 2}}) == ["a: 1 -> None",
+                                                                "b: None -> {'c': 2}"]
+    assert definition_differences({"s": {"x": 1}}, {"s": {"y": 1}}) == ["s.x: 1 -> None",
+                                                                        "s.y: None -> 1"]
+
+
+# --- the checksum ---
+
+def test_checksum_sees_every_bit_name_dtype_and_text():
+    frame = summary_of(tasks_of()[0]).drop(columns="actuator_profile")
+    reference = table_checksum(frame)
+    assert table_checksum(frame.copy()) == reference and len(reference) == 64
+    changed = {
+        "last bit": frame.assign(speed_mm_s=np.nextafter(frame["speed_mm_s"], np.inf)),
+        "name": frame.rename(columns={"speed_mm_s": "speed"}),
+        "order": frame[frame.columns[::-1]],
+        "dtype": frame.assign(newton_iterations=frame["newton_iterations"].astype(np.int64)),
+        "text": frame.assign(gait=["A1", "A1", "A1+A4"]),
+        "bool": frame.assign(converged=~frame["converged"]),
+        "missing text": frame.assign(gait=["A1", "A1", None]),
+    }
+    for what, other in changed.items():
+        assert table_checksum(other) != reference, what
+
+
+def test_checksum_of_text_treats_every_missing_value_alike():
+    with_none = pd.DataFrame({"status": ["ok", None]})
+    with_nan = pd.DataFrame({"status": ["ok", np.nan]})
+    assert table_checksum(with_none) == table_checksum(with_nan)
+    assert table_checksum(with_none) != table_checksum(pd.DataFrame({"status": ["ok", "None"]}))
+    assert table_checksum(with_none) != table_checksum(pd.DataFrame({"status": ["ok", "nan"]}))
+
+
+# --- chunks ---
+
+def test_chunk_round_trip_keeps_every_bit_dtype_and_value_object(written):
+    folder, tasks = written
+    store = store_in(folder)
+    for task in tasks:
+        expected = summary_of(task)
+        stored = store.read(task)
+        pd.testing.assert_frame_equal(stored, expected, check_exact=True)
+        assert isinstance(stored["actuator_profile"].iloc[0], CurvatureProfile)
+    assert store.chunk_path(1) == folder / "chunk_000001.parquet"
+    assert sorted(p.name for p in folder.iterdir()) == [
+        "chunk_000000.parquet", "chunk_000001.parquet", "manifest.json"]
+
+
+def test_a_chunk_without_value_objects_or_rows_round_trips(tmp_path):
+    store = store_in(tmp_path / "run")
+    tasks = tasks_of()
+    store.open(tasks, resume=False)
+    plain = summary_of(tasks[0]).drop(columns="actuator_profile")
+    store.write(tasks[0], plain)
+    pd.testing.assert_frame_equal(store.read(tasks[0]), plain, check_exact=True)
+    empty = plain.iloc[:0]
+    store.write(tasks[1], empty)
+    assert len(store.read(tasks[1])) == 0
+    # a column with no value in any row (object dtype, all None) is not a value-object column
+    blank = plain.assign(note=pd.Series([None] * len(plain), dtype=object))
+    store.write(tasks[0], blank)
+    assert store.read(tasks[0])["note"].isna().all()
+
+
+def test_a_chunk_file_holds_the_rows_not_the_index(tmp_path):
+    """A summary cut from a larger table is stored as its rows: read back numbered from 0, the
+    file's columns are the summary's (no index column for other Parquet readers)."""
+    store = store_in(tmp_path / "run")
+    tasks = tasks_of()
+    store.open(tasks, resume=False)
+    summary = summary_of(tasks[0])
+    cut = summary.set_axis([7, 3, 5])
+    path = store.write(tasks[0], cut)
+    assert pq.read_table(path).column_names == list(summary.columns)
+    pd.testing.assert_frame_equal(store.read(tasks[0]), summary, check_exact=True)
+
+
+def test_the_chunk_stamp_names_run_chunk_members_and_checksum(written):
+    folder, tasks = written
+    metadata = pq.read_table(folder / "chunk_000001.parquet").schema.metadata
+    stamp = json.loads(metadata[b"taichi_star.chunk"])
+    assert stamp["definition_sha256"] == store_in(folder).definition_sha256
+    assert stamp["chunk"] == 1 and stamp["members"] == [3]
+    assert stamp["value_types"] == {"actuator_profile": "CurvatureProfile"}
+    assert manifest_of(folder)["definition_sha256"] == stamp["definition_sha256"]
+
+
+def rewrite(path, frame=None, stamp_changes=None, drop_stamp=False):
+    """Rewrite a chunk file with another table and/or stamp."""
+    table = pq.read_table(path)
+    metadata = dict(table.schema.metadata)
+    stamp = json.loads(metadata[b"taichi_star.chunk"])
+    stamp.update(stamp_changes or {})
+    metadata[b"taichi_star.chunk"] = json.dumps(stamp).encode()
+    if drop_stamp:
+        del metadata[b"taichi_star.chunk"]
+    if frame is not None:
+        table = pa.Table.from_pandas(frame, preserve_index=False)
+    pq.write_table(table.replace_schema_metadata(metadata), path)
+
+
+@pytest.mark.parametrize("damage,reason", [
+    (lambda path: path.write_bytes(path.read_bytes()[:100]),
+     r"unreadable \(Could not open Parquet input source .*magic bytes not found.*\)"),
+    (lambda path: path.write_bytes(b""),
+     r"unreadable \(Could not open Parquet input source .*file size is 0 bytes\)"),
+    (lambda path: rewrite(path, drop_stamp=True), r"no taichi_star chunk metadata"),
+    (lambda path: rewrite(path, stamp_changes={"definition_sha256": "0" * 64}),
+     r"from another run \(its definition differs\)"),
+    (lambda path: rewrite(path, stamp_changes={"chunk": 1}), r"holds another chunk's instances"),
+    (lambda path: rewrite(path, stamp_changes={"members": [0, 1, 3]}),
+     r"holds another chunk's instances"),
+    (lambda path: rewrite(path, frame=pq.read_table(path).to_pandas().assign(
+        speed_mm_s=lambda f: np.nextafter(f["speed_mm_s"], 0))),
+     r"its content does not match its checksum"),
+])
+def test_a_damaged_chunk_is_reported_deleted_and_not_counted_as_done(written, damage, reason,
+                                                                     caplog):
+    folder, tasks = written
+    path = folder / "chunk_000000.parquet"
+    damage(path)
+    with pytest.raises(RunStoreError) as error:
+        store_in(folder).read(tasks[0])
+    assert re.fullmatch(f"{re.escape(str(path))}: {reason}", str(error.value))
+    with caplog.at_level(logging.WARNING, logger="taichi_star.batch"):
+        done = store_in(folder).open(tasks, resume=True)
+    assert done == [1]
+    assert not path.exists() and (folder / "chunk_000001.parquet").exists()
+    [warning] = [r.getMessage() for r in caplog.records]
+    assert re.fullmatch(f"{re.escape(str(path))}: {reason}; recomputing it", warning)
+
+
+def test_a_chunk_stamp_without_value_types_reads_plain_columns(tmp_path):
+    """value_types may be absent from a stamp (a chunk without value-object columns)."""
+    store = store_in(tmp_path / "run")
+    tasks = tasks_of()
+    store.open(tasks, resume=False)
+    plain = summary_of(tasks[0]).drop(columns="actuator_profile")
+    path = store.write(tasks[0], plain)
+    table = pq.read_table(path)
+    metadata = dict(table.schema.metadata)
+    stamp = json.loads(metadata[b"taichi_star.chunk"])
+    del stamp["value_types"]
+    metadata[b"taichi_star.chunk"] = json.dumps(stamp).encode()
+    pq.write_table(table.replace_schema_metadata(metadata), path)
+    pd.testing.assert_frame_equal(store.read(tasks[0]), plain, check_exact=True)
+
+
+def test_a_chunk_never_written_is_not_counted_as_done(written):
+    folder, tasks = written
+    (folder / "chunk_000000.parquet").unlink()
+    assert store_in(folder).open(tasks, resume=True) == [1]
+
+
+def test_a_chunk_of_another_definition_is_refused(written, tmp_path):
+    """Two runs of other parameters cut the same way write the same chunk stamps but for their
+    definition's hash, which alone tells their chunks apart."""
+    folder, tasks = written
+    other = RunStore(tmp_path / "other", definition_of([p.replace(alpha=1.5) for p in PARAMS]))
+    assert other.definition_sha256 != store_in(folder).definition_sha256
+    (tmp_path / "other").mkdir()
+    shutil.copy(folder / "chunk_000000.parquet", tmp_path / "other")
+    with pytest.raises(RunStoreError, match=r"from another run \(its definition differs\)"):
+        other.read(tasks[0])
+
+
+def test_a_definition_hash_does_not_depend_on_the_order_of_its_keys(tmp_path):
+    definition = definition_of()
+    reordered = dict(reversed(list(definition.items())))
+    reordered["solver"] = dict(reversed(list(definition["solver"].items())))
+    assert list(reordered) != list(definition)
+    assert RunStore(tmp_path, reordered).definition_sha256 == \
+        RunStore(tmp_path, definition).definition_sha256
+
+
+# --- opening a folder ---
+
+def test_a_fresh_run_writes_an_unfinished_manifest(tmp_path):
+    folder = tmp_path / "deep" / "run"
+    store = store_in(folder)
+    assert store.open(tasks_of(), resume=False) == []
+    manifest = manifest_of(folder)
+    assert manifest["definition"] == definition_of()
+    assert manifest["complete"] is False and "finished" not in manifest
+    assert manifest["code"]["version"] == ts.__version__
+    assert "resumed" not in manifest and manifest["created"]
+    store.finish()
+    manifest = manifest_of(folder)
+    assert manifest["complete"] is True and manifest["finished"] >= manifest["created"]
+    assert [p.name for p in folder.iterdir()] == ["manifest.json"]  # no temporary left
+    # written for people too: one key a line, indented, in sorted order
+    text = (folder / "manifest.json").read_text()
+    assert text == json.dumps(manifest, indent=2, sort_keys=True)
+
+
+def test_a_manifest_without_its_creation_time_gets_the_resumption_time(written):
+    folder, tasks = written
+    manifest = manifest_of(folder)
+    del manifest["created"]
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    store_in(folder).open(tasks, resume=True)
+    manifest = manifest_of(folder)
+    assert manifest["created"] == manifest["resumed"][-1] and manifest["created"] > "2000"
+
+
+def test_resuming_keeps_the_creation_time_and_lists_each_resumption(written):
+    folder, tasks = written
+    set_manifest(folder, created="2000-01-01T00:00:00", resumed=["2000-01-02T00:00:00"])
+    assert store_in(folder).open(tasks, resume=True) == [0, 1]
+    manifest = manifest_of(folder)
+    assert manifest["created"] == "2000-01-01T00:00:00"
+    assert manifest["resumed"][0] == "2000-01-02T00:00:00" and len(manifest["resumed"]) == 2
+    assert manifest["resumed"][1] > "2000"
+    assert manifest["complete"] is False
+
+
+def test_resuming_a_run_of_other_code_warns_naming_both(written, caplog):
+    folder, tasks = written
+    old = {"version": "0.0.1", "commit": "abc", "dirty": False}
+    set_manifest(folder, code=old)
+    with caplog.at_level(logging.WARNING, logger="taichi_star.batch"):
+        store_in(folder).open(tasks, resume=True)
+    [warning] = [r.getMessage() for r in caplog.records]
+    assert warning == f"resuming a run started with code {old}; now {run_store.code_version()}"
+
+
+def test_resuming_the_same_code_does_not_warn(written, caplog):
+    folder, tasks = written
+    with caplog.at_level(logging.WARNING, logger="taichi_star.batch"):
+        assert store_in(folder).open(tasks, resume=True) == [0, 1]
+    assert caplog.text == ""
+
+
+def test_resuming_another_definition_is_refused_naming_the_differences(written):
+    folder, tasks = written
+    other = RunStore(folder, definition_of(solver=SOLVER.replace(dt=1e-3, max_newton=30)),
+                     flag="--run-dir")
+    with pytest.raises(RunStoreError) as error:
+        other.open(tasks, resume=True)
+    message = str(error.value)
+    assert message.startswith(f"--run-dir {folder} holds a run with another definition")
+    assert "(solver.dt: 0.002 -> 0.001; solver.max_newton: 25 -> 30)" in message
+    assert "\n" not in message
+    assert len(list(folder.glob("chunk_*"))) == 2  # nothing deleted
+
+
+def test_an_unfinished_run_is_not_restarted_without_resume(written):
+    folder, tasks = written
+    with pytest.raises(RunStoreError, match=r"run_dir .* holds an unfinished run \(2 of 2 "
+                                            r"chunks done\): resume it"):
+        store_in(folder).open(tasks, resume=False)
+    assert len(list(folder.glob("chunk_*"))) == 2
+
+
+def test_a_finished_or_empty_run_is_replaced_by_a_fresh_one(written):
+    folder, tasks = written
+    finishing = store_in(folder)
+    finishing.open(tasks, resume=True)
+    finishing.finish()
+    assert store_in(folder).open(tasks, resume=False) == []
+    assert list(folder.glob("chunk_*")) == []
+    assert manifest_of(folder)["complete"] is False
+    # an unfinished run with no chunk yet starts over too
+    assert store_in(folder).open(tasks, resume=False) == []
+
+
+def test_stale_temporary_files_of_a_killed_run_are_removed(written):
+    folder, tasks = written
+    stale = folder / ".chunk_000001.parquet.tmp-12345"
+    stale.write_bytes(b"half a chunk")
+    store_in(folder).open(tasks, resume=True)
+    assert not stale.exists()
+
+
+def test_folders_that_are_not_run_folders_are_refused(tmp_path):
+    a_file = tmp_path / "a_file"
+    a_file.write_text("mine")
+    with pytest.raises(RunStoreError, match=f"--run-dir {a_file}: exists and is not a folder"):
+        RunStore(a_file, {}, flag="--run-dir").open([], resume=True)
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("mine")
+    with pytest.raises(RunStoreError, match=r"not empty and has no manifest.json; not a run "
+                                            r"folder \(choose another run_dir\)"):
+        RunStore(mine, {}).open([], resume=False)
+    with pytest.raises(RunStoreError, match="cannot create it"):
+        RunStore(a_file / "run", {}).open([], resume=False)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert store_in(empty).open(tasks_of(), resume=True) == []
+
+
+@pytest.mark.parametrize("text,reason", [("{", "(Expecting property name"),
+                                         ("[]", "(no run definition in it)"),
+                                         ('{"definition": 3}', "(no run definition in it)"),
+                                         (b"\xff\xfe", "('utf-8' codec can't decode")])
+def test_a_damaged_manifest_is_a_one_line_error_naming_the_reason(tmp_path, text, reason):
+    folder = tmp_path / "run"
+    folder.mkdir()
+    path = folder / "manifest.json"
+    path.write_bytes(text if isinstance(text, bytes) else text.encode())
+    with pytest.raises(RunStoreError) as error:
+        RunStore(folder, {}, flag="--run-dir").read_manifest()
+    message = str(error.value)
+    assert message.startswith(f"--run-dir {folder}: manifest.json is damaged {reason}")
+    assert message.endswith("; delete the folder or choose another --run-dir")
+    assert "\n" not in message
+
+
+def test_stored_chunk_size_reads_the_manifest(written, tmp_path):
+    folder, _ = written
+    assert stored_chunk_size(folder) == CHUNK
+    assert stored_chunk_size(tmp_path / "nowhere") is None
+    assert stored_chunk_size(folder / "manifest.json") is None
+    (tmp_path / "bare").mkdir()
+    assert stored_chunk_size(tmp_path / "bare") is None
+
+
+def git(folder, *arguments):
+    return subprocess.run(["git", "-c", "user.name=test", "-c", "user.email=test@example.invalid",
+                           *arguments], cwd=folder, capture_output=True, text=True,
+                          check=True).stdout.strip()
+
+
+@pytest.fixture
+def checkout(tmp_path, monkeypatch):
+    """A git checkout without commits holding taichi_star/batch/store.py, seen by code_version
+    as its source checkout (it looks two folders above the module); the test runs elsewhere."""
+    if shutil.which("git") is None:
+        pytest.skip("needs git")
+    root = tmp_path / "checkout"
+    module = root / "taichi_star" / "batch" / "store.py"
+    module.parent.mkdir(parents=True)
+    module.write_text("# the module\n")
+    git(root, "init", "-q")
+    monkeypatch.setattr(run_store, "__file__", str(module))
+    monkeypatch.chdir(tmp_path)
+    return root
+
+
+def test_code_version_names_the_commit_and_whether_tracked_files_changed(checkout):
+    git(checkout, "add", "-A")
+    git(checkout, "commit", "-q", "-m", "first")
+    head = git(checkout, "rev-parse", "HEAD")
+    assert run_store.code_version() == {"version": ts.__version__, "commit": head,
+                                        "dirty": False}
+    (checkout / "notes.txt").write_text("untracked files do not count")
+    assert run_store.code_version()["dirty"] is False
+    (checkout / "taichi_star" / "batch" / "store.py").write_text("# changed\n")
+    assert run_store.code_version() == {"version": ts.__version__, "commit": head,
+                                        "dirty": True}
+
+
+def test_code_version_with_a_damaged_git_index_names_the_commit_but_not_dirtiness(checkout):
+    git(checkout, "add", "-A")
+    git(checkout, "commit", "-q", "-m", "first")
+    head = git(checkout, "rev-parse", "HEAD")
+    (checkout / ".git" / "index").write_bytes(b"damaged")  # `git status` fails, HEAD is known
+    assert run_store.code_version() == {"version": ts.__version__, "commit": head,
+                                        "dirty": None}
+
+
+def test_code_version_of_a_checkout_without_commits_names_none(checkout):
+    # there `git rev-parse HEAD` fails yet prints "HEAD"
+    assert run_store.code_version() == {"version": ts.__version__, "commit": None,
+                                        "dirty": None}
+
+
+def test_code_version_without_git_names_none(checkout, monkeypatch):
+    def no_git(*args, **kwargs):
+        raise FileNotFoundError("git")
+    monkeypatch.setattr(run_store.subprocess, "run", no_git)
+    assert run_store.code_version() == {"version": ts.__version__, "commit": None,
+                                        "dirty": None}
