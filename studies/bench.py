@@ -97,8 +97,8 @@ import taichi as ti
 
 from taichi_star import SolverConfig, StarParams
 from taichi_star.batch import LocalProcesses, run_batch
-from taichi_star.runtime import (GPU_BLOCK_DIM, GPU_INSTANCE_MINOR, KERNEL_OPTIMISATION, Runtime,
-                                 prepare_engine)
+from taichi_star.runtime import (GPU_BLOCK_DIM, GPU_INSTANCE_MINOR, Runtime,
+                                 kernel_optimisation_default, prepare_engine)
 
 from . import cli, provenance
 
@@ -442,7 +442,8 @@ def build_parser():
                         "instance_major",
                         help=f"comma list of {', '.join(LAYOUTS)}: the GPU layout of the "
                              "per-instance fields, --arch gpu only")
-    parser.add_argument("--kernel-optimisation", default="on" if KERNEL_OPTIMISATION else "off",
+    parser.add_argument("--kernel-optimisation",
+                        default="on" if kernel_optimisation_default() else "off",
                         help="comma list of on, off: Taichi's advanced IR optimisation for the "
                              "B sweep (default: the library's setting)")
     parser.add_argument("--no-cache-probe", action="store_true",
@@ -512,7 +513,7 @@ def run_bench(args) -> pd.DataFrame:
     base = {**provenance.machine_columns(args.arch), "arch": args.arch, "dt_s": DT,
             "warmup_steps": WARMUP_STEPS, "steps": args.steps,
             "repeats": args.repeats, "commit": provenance.short_commit(),
-            "kernel_optimisation": "on" if KERNEL_OPTIMISATION else "off"}
+            "kernel_optimisation": "on" if kernel_optimisation_default() else "off"}
     profile_seconds = QUICK_PROFILE_SECONDS if args.quick else PROFILE_SECONDS
     rows = []
 

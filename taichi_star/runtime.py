@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import os
 import weakref
 from typing import Dict, List, Optional, Tuple
 
@@ -31,11 +32,23 @@ GPU_BLOCK_DIM = 32
 """Threads (one instance each) per GPU block; chosen by `python -m studies bench --arch gpu`."""
 GPU_INSTANCE_MINOR = True
 """GPU layout of the per-instance fields: instance-minor (coalesced); chosen by the same bench."""
-KERNEL_OPTIMISATION = False
-"""Taichi's advanced IR optimisation passes (`ti.init(advanced_optimization=...)`). Off: an
-engine compiles in less than half the time and computes the same bits (the IR passes do not
-reorder floating-point arithmetic); `python -m studies bench --kernel-optimisation on,off`
-measures what each costs per step and to compile."""
+KERNEL_OPTIMISATION = True
+"""Taichi's advanced IR optimisation passes (`ti.init(advanced_optimization=...)`): on, an engine
+steps faster; off, it compiles in well under half the time; the bits are the same either way
+(`python -m studies bench --kernel-optimisation on,off` measures both and compares the final
+states). `Runtime.configure_compiler` changes it for this process; the environment variable
+KERNEL_OPTIMISATION_ENV = "0" turns it off for this process and the worker processes it starts
+(what the test suite does: its many short runs are mostly compilation)."""
+KERNEL_OPTIMISATION_ENV = "TAICHI_STAR_KERNEL_OPTIMISATION"
+
+
+def kernel_optimisation_default() -> bool:
+    """KERNEL_OPTIMISATION unless the environment variable KERNEL_OPTIMISATION_ENV says "0"/"1"
+    (ValueError for anything else)."""
+    value = os.environ.get(KERNEL_OPTIMISATION_ENV, "").strip()
+    if value not in ("", "0", "1"):
+        raise ValueError(f"{KERNEL_OPTIMISATION_ENV} must be 0 or 1, got {value!r}")
+    return KERNEL_OPTIMISATION if value == "" else value == "1"
 
 
 def available_archs() -> List[str]:
@@ -175,7 +188,7 @@ class Runtime:
         self.cpu_threads: Optional[int] = None
         self.gpu_block_dim = GPU_BLOCK_DIM
         self.gpu_instance_minor = GPU_INSTANCE_MINOR
-        self.kernel_optimisation = KERNEL_OPTIMISATION
+        self.kernel_optimisation = kernel_optimisation_default()
         self.log_level = ti.WARN
         self.engines: Dict[tuple, BatchEngine] = {}
         self.leases: Dict[tuple, List[Tuple[BatchEngine, weakref.ref]]] = {}
@@ -220,9 +233,11 @@ class Runtime:
         self.gpu_block_dim = int(block_dim)
         self.gpu_instance_minor = bool(instance_minor)
 
-    def configure_compiler(self, kernel_optimisation: bool = KERNEL_OPTIMISATION):
+    def configure_compiler(self, kernel_optimisation: Optional[bool] = None):
         """Whether Taichi's advanced IR optimisation compiles the engines (see
-        KERNEL_OPTIMISATION); forces a re-initialisation if Taichi is up."""
+        KERNEL_OPTIMISATION; None: the default); forces a re-initialisation if Taichi is up."""
+        if kernel_optimisation is None:
+            kernel_optimisation = kernel_optimisation_default()
         if not isinstance(kernel_optimisation, (bool, np.bool_)):
             raise ValueError(f"kernel_optimisation must be True or False, got "
                              f"{kernel_optimisation!r}")
