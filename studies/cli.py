@@ -33,6 +33,7 @@ from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, executor_for
                                stored_chunk_size)
 from taichi_star.experiment import PAPER_GAITS
 from taichi_star.gait import Gait
+from taichi_star.output import column_units
 
 from . import provenance
 
@@ -407,7 +408,8 @@ def executor(args):
 
 class Output:
     """The output folder of one study run, checked before any compute: --out or a fresh
-    runs/<study>/<timestamp>/. `write_csv` writes a table and its provenance sidecar."""
+    runs/<study>/<timestamp>/. `write_csv` writes a table and its provenance sidecar (with the
+    unit of every column whose unit its name tells: parameters and suffixes)."""
 
     def __init__(self, args, argv: Sequence[str], model=None, solver=None, extra=None):
         study = args.study
@@ -427,7 +429,7 @@ class Output:
         """Write a table (no index, floats to 10 significant digits) and its JSON sidecar."""
         path = self.path(name)
         frame.to_csv(path, index=False, float_format="%.10g")
-        return self._described(path, extra)
+        return self._described(path, extra, frame)
 
     def write_parquet(self, frame: pd.DataFrame, name: str,
                       extra: Optional[Mapping] = None) -> Path:
@@ -445,14 +447,15 @@ class Output:
         metadata = {**(table.schema.metadata or {}),
                     b"taichi_star": json.dumps(self._details(extra), default=str).encode()}
         pq.write_table(table.replace_schema_metadata(metadata), path)
-        return self._described(path, extra)
+        return self._described(path, extra, frame)
 
     def _details(self, extra: Optional[Mapping]) -> dict:
         details = {**self.provenance.get("details", {}), **(extra or {})}
         return {**self.provenance, **({"details": details} if details else {})}
 
-    def _described(self, path: Path, extra: Optional[Mapping]) -> Path:
-        provenance.write_sidecar(path, self._details(extra))
+    def _described(self, path: Path, extra: Optional[Mapping], frame: pd.DataFrame) -> Path:
+        provenance.write_sidecar(path, {**self._details(extra),
+                                        "units": column_units(frame.columns)})
         self.wrote(path)
         return path
 

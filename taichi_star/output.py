@@ -11,7 +11,9 @@ import pandas as pd
 
 from .geometry import CENTRE
 
-UNITS = {"_mm_s": "mm/s", "_mm": "mm", "_deg": "degree", "_s": "s", "_m": "m"}
+UNITS = {"_per_wall_s": "1/s", "_per_s": "1/s", "_gb_s": "GB/s", "_mm_s": "mm/s", "_mm": "mm",
+         "_deg": "degree", "_ms": "ms", "_us": "us", "_s": "s", "_m": "m"}
+"""Units of result columns by name suffix, the first match counting (longer suffixes first)."""
 PARAMETER_UNITS = {
     "alpha": "1", "added_mass_coeff": "1", "youngs_modulus": "Pa", "limb_stiffness_ratio": "1",
     "drag_parallel": "1", "drag_perpendicular": "1", "cylinder_drag": "1", "period": "s",
@@ -30,6 +32,11 @@ def column_unit(name: str) -> str:
         if name.endswith(suffix):
             return unit
     return ""
+
+
+def column_units(columns) -> dict:
+    """{column: unit} for the columns whose unit the name tells (see `column_unit`)."""
+    return {name: column_unit(name) for name in columns if column_unit(name)}
 
 
 def to_xarray(result):

@@ -237,6 +237,13 @@ def test_fig4c_quick_into_a_fresh_run_folder(tmp_path, monkeypatch):
     assert sidecar["model"]["preset"] == "paper" and sidecar["solver"]["dt"] == cli.QUICK_DT
     assert sidecar["model"]["params"]["alpha"] == StarParams().alpha
     assert {"cpu_model", "cores", "gpus"} <= set(sidecar["machine"])
+    # the unit of every parameter column and of every metric with a unit suffix
+    units = json.loads((folder / "fig4c_summary.csv.json").read_text())["units"]
+    numeric = [name for name in StarParams.field_names()
+               if isinstance(getattr(StarParams(), name), (int, float))]
+    assert set(numeric) <= set(units)
+    assert (units["youngs_modulus"], units["period"], units["speed_mm_s"],
+            units["heading_deg"]) == ("Pa", "s", "mm/s", "degree")
 
 
 def test_sweep_quick(tmp_path):
