@@ -28,6 +28,7 @@ COMMANDS = {
     "sweep": ["--alpha", "0.2:1.2:6", "--added-mass", "0,0.5,1,2",
               "--youngs-modulus", "2e6,5e6,1e7", "--workers", "2"],
     "calibrate": ["--preset", "accurate"],
+    "crossval": ["calibrate", "--preset", "accurate", "--cross-validate"],
     "animate": [],
     "bench": ["--batch-sizes", "1,8,64,512,2048", "--repeats", "2"],
     "work_precision": [],
