@@ -33,7 +33,7 @@ from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, executor_for
                                stored_chunk_size)
 from taichi_star.experiment import PAPER_GAITS
 from taichi_star.gait import Gait
-from taichi_star.output import column_units
+from taichi_star.output import column_unit, column_units
 
 from . import provenance
 
@@ -405,6 +405,32 @@ def executor(args):
 
 
 # --------------------------------------------------------------------------- output
+
+def run_settings(csv_path, mesh: bool = True) -> str:
+    """"<preset> preset, n_arc N, <integrator> h = X ms" (adaptive: "tol = E m"; without the
+    n_arc where the study varies it: `mesh` False) from a table's provenance sidecar, for plot
+    titles; "" without one."""
+    sidecar = Path(f"{csv_path}.json")
+    if not sidecar.exists():
+        return ""
+    recorded = json.loads(sidecar.read_text())
+    model, solver = recorded.get("model") or {}, recorded.get("solver") or {}
+    if not isinstance(model, dict) or "dt" not in solver:
+        return ""
+    parts = [f"{model['preset']} preset"] if "preset" in model else []
+    if mesh and isinstance(model.get("params"), dict) and "n_arc" in model["params"]:
+        parts.append(f"n_arc {model['params']['n_arc']}")
+    stepping = (f"tol = {solver['error_tol']:g} m" if solver.get("adaptive")
+                else f"h = {1e3 * solver['dt']:g} ms")
+    parts.append(f"{solver.get('integrator', '')} {stepping}".strip())
+    return ", ".join(parts)
+
+
+def axis_label(column: str) -> str:
+    """A plot axis label for a table column: its name with its unit, where it has one."""
+    unit = column_unit(column)
+    return f"{column} ({unit})" if unit not in ("", "1") else column
+
 
 class Output:
     """The output folder of one study run, checked before any compute: --out or a fresh

@@ -109,7 +109,9 @@ def plot_convergence(csv_path, png_path):
     ax.set_ylabel("relative speed error vs extrapolated limit")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7, ncol=2)
-    ax.set_title("discretisation convergence of the speed", fontsize=9)
+    settings = cli.run_settings(csv_path, mesh=False)
+    ax.set_title("discretisation convergence of the speed" + (f" ({settings})" if settings
+                                                              else ""), fontsize=9)
     fig.savefig(png_path, dpi=120)
     plt.close(fig)
     return png_path

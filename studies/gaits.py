@@ -166,7 +166,9 @@ def plot_gaits(csv_path, png_path):
     ax.set_xlabel("speed (mm/s)   [blue: forward, orange: reverse, gray: no forward direction]")
     duration = pd.read_csv(Path(csv_path).with_name("gaits_classes.csv"))["duration_s"].iloc[0] \
         if Path(csv_path).with_name("gaits_classes.csv").exists() else math.nan
-    ax.set_title(f"{n} gait classes ranked by speed over {duration:g} s from rest", fontsize=9)
+    settings = cli.run_settings(csv_path)
+    ax.set_title(f"{n} gait classes ranked by speed over {duration:g} s from rest"
+                 + (f"\n{settings}" if settings else ""), fontsize=9)
     fig.savefig(png_path, dpi=130, bbox_inches="tight")
     plt.close(fig)
     return Path(png_path)

@@ -133,7 +133,7 @@ def plot_sweep(csv_path, out: cli.Output, prefix: str = "sweep"):
                 if bad.any():
                     ax.plot(np.asarray(x)[bad], np.zeros(bad.sum()), "rx")
         for ax, label in zip(axes, ("speed (mm/s)", "signed speed along forward (mm/s)")):
-            ax.set_xlabel(name)
+            ax.set_xlabel(cli.axis_label(name))
             ax.set_ylabel(label)
             if categorical:
                 ax.set_xticks(range(len(categories)), categories)
@@ -145,7 +145,9 @@ def plot_sweep(csv_path, out: cli.Output, prefix: str = "sweep"):
         axes[1].axhline(0.0, color="k", lw=0.6)
         axes[0].legend(fontsize=7)
         duration = table["duration_s"].iloc[0] if "duration_s" in table else math.nan
+        settings = cli.run_settings(csv_path)
         fig.suptitle(f"speed vs {name} over {duration:g} s from rest"
+                     + (f"; {settings}" if settings else "")
                      + (f" ({', '.join(held)})" if held else "")
                      + ("; x = failed" if (selection["status"] != "ok").any() else ""),
                      fontsize=9)
