@@ -270,6 +270,12 @@ def test_sweep_quick(tmp_path):
     import pyarrow.parquet as pq
     inside = json.loads(pq.read_schema(tmp_path / "sweep.parquet").metadata[b"taichi_star"])
     assert inside["details"]["axes"]["jet_mode"] == ["contract", "always"]
+    # plot titles and axes say how the table was made and in which units
+    assert cli.run_settings(tmp_path / "sweep.csv") == \
+        f"paper preset, n_arc 18, euler h = {1e3 * cli.QUICK_DT:g} ms"
+    assert cli.run_settings(tmp_path / "sweep.csv", mesh=False) == \
+        f"paper preset, euler h = {1e3 * cli.QUICK_DT:g} ms"
+    assert (cli.axis_label("period"), cli.axis_label("alpha")) == ("period (s)", "alpha")
 
 
 def test_gaits_quick(tmp_path):
