@@ -236,6 +236,11 @@ class SolverConfig:
     newton_tol: float = 1e-10
     """Convergence: max |Δq| of a Newton update, m; [1e-14, 1e-6] (a micrometre is 1e-5 of the
     robot's size: any looser and "converged" would not mean the step was solved)."""
+    residual_tol: float = 1e-2
+    """Convergence, judged as well: max |r| of the residual (force imbalance of a node, N) at the
+    last iterate before the accepted update; [1e-8, 1] N (the robot's largest nodal forces are
+    tens of newtons: 1e-2 N is 1e-4 of them), at least 1e-4 N with precision "f32". With it a
+    loose newton_tol cannot accept a step whose forces do not balance."""
     max_newton: int = 25
     """Newton iterations per step before the instance is declared newton_failed; [1, 200]."""
     precision: str = "f64"
@@ -265,6 +270,8 @@ class SolverConfig:
         object.__setattr__(self, "dt", _check_number("dt", self.dt, 0.0, MAX_DT, False))
         object.__setattr__(self, "newton_tol", _check_number("newton_tol", self.newton_tol,
                                                              1e-14, 1e-6))
+        object.__setattr__(self, "residual_tol", _check_number("residual_tol", self.residual_tol,
+                                                               1e-8, 1.0))
         object.__setattr__(self, "max_newton", _check_number("max_newton", self.max_newton, 1,
                                                              200, integer=True))
         object.__setattr__(self, "max_substep_halvings", _check_number(
@@ -286,6 +293,10 @@ class SolverConfig:
         if self.precision == "f32" and self.newton_tol < 1e-7:
             raise ValueError(f"newton_tol must be in [1e-07, 1e-06] m with precision 'f32' (its "
                              f"rounding of ~5 cm positions is ~4e-9 m), got {self.newton_tol!r}")
+        if self.precision == "f32" and self.residual_tol < 1e-4:
+            raise ValueError(f"residual_tol must be in [0.0001, 1] N with precision 'f32' (its "
+                             f"rounding of forces of tens of newtons is ~1e-5 N), got "
+                             f"{self.residual_tol!r}")
 
     @classmethod
     def preset(cls, name: str = "paper", **overrides) -> "SolverConfig":
