@@ -26,11 +26,11 @@ from .state import NEVER, STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_OK, Ba
 STEP_TOLERANCE = 1e-9
 """Relative tolerance within which a time is taken to be a whole number of steps."""
 
-SOLVER_SETTINGS = {"dt": float, "newton_tol": float, "max_newton": ti.i32,
-                   "max_substep_halvings": ti.i32, "chord": ti.i32, "error_tol": float,
-                   "dt_min": float, "dt_max": float}
-"""The solver settings the kernels read, with their field types (all SolverConfig fields of the
-same name but `chord`: 1 for the chord Jacobian)."""
+SOLVER_SETTINGS = {"dt": float, "newton_tol": float, "residual_limit": float,
+                   "max_newton": ti.i32, "max_substep_halvings": ti.i32, "chord": ti.i32,
+                   "error_tol": float, "dt_min": float, "dt_max": float}
+"""The solver settings the kernels read, with their field types (all SolverConfig attributes of
+the same name but `chord`: 1 for the chord Jacobian)."""
 
 FINITE_LIMIT = 1e30
 """Updates larger than this (m) are treated as non-finite: no physical step moves a node 1e30 m."""
@@ -235,6 +235,10 @@ class BatchEngine:
         previous_update = 0.0
         while iterations < self.max_newton[None] and converged == 0 and finite == 1:
             self.assemble(b, inertia_scale, rate_gain, refactor)
+            largest_residual = 0.0
+            for n in range(self.n_nodes):
+                residual = self.system.rhs[b, n]
+                largest_residual = ti.max(largest_residual, ti.abs(residual[0]), ti.abs(residual[1]))
             if refactor:
                 self.system.factor(b)
             self.system.solve(b)
@@ -246,7 +250,8 @@ class BatchEngine:
                 if not (ti.abs(update[0]) < FINITE_LIMIT and ti.abs(update[1]) < FINITE_LIMIT):
                     finite = 0
             iterations += 1
-            if finite == 1 and largest_update <= self.newton_tol[None]:
+            if finite == 1 and largest_update <= self.newton_tol[None] \
+                    and largest_residual <= self.residual_limit[None]:
                 converged = 1
             # chord mode keeps the factorisation while it contracts the update at least 4×
             # per iteration (then each kept iteration saves the Jacobian's assembly and LU)

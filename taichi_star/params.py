@@ -16,7 +16,7 @@ import dataclasses
 import math
 import numbers
 from dataclasses import dataclass, field, fields
-from typing import Dict, Tuple
+from typing import Dict, Optional, Tuple
 
 import numpy as np
 
@@ -236,6 +236,12 @@ class SolverConfig:
     newton_tol: float = 1e-10
     """Convergence: max |Δq| of a Newton update, m; [1e-14, 1e-6] (a micrometre is 1e-5 of the
     robot's size: any looser and "converged" would not mean the step was solved)."""
+    residual_tol: Optional[float] = None
+    """Convergence judged on the residual as well (opt-in; None: the update test alone): the
+    largest component of the residual (a node's force imbalance, N) that the accepted update was
+    computed from must be at most this; [1e-8, 1000] N. The robot's largest nodal forces are tens
+    of newtons, and the round-off floor of the residual is the stiffness times the rounding of
+    the positions: ~1e-9 N in f64, but newtons in f32 (stiff limbs), where it is unusable."""
     max_newton: int = 25
     """Newton iterations per step before the instance is declared newton_failed; [1, 200]."""
     precision: str = "f64"
@@ -265,6 +271,9 @@ class SolverConfig:
         object.__setattr__(self, "dt", _check_number("dt", self.dt, 0.0, MAX_DT, False))
         object.__setattr__(self, "newton_tol", _check_number("newton_tol", self.newton_tol,
                                                              1e-14, 1e-6))
+        if self.residual_tol is not None:
+            object.__setattr__(self, "residual_tol", _check_number(
+                "residual_tol", self.residual_tol, 1e-8, 1000.0))
         object.__setattr__(self, "max_newton", _check_number("max_newton", self.max_newton, 1,
                                                              200, integer=True))
         object.__setattr__(self, "max_substep_halvings", _check_number(
@@ -294,6 +303,11 @@ class SolverConfig:
         about 180 steps per 3.15-s cycle)."""
         _check_choice("preset", name, PRESETS)
         return cls(**{**SOLVER_PRESET_FIELDS[name], **overrides})
+
+    @property
+    def residual_limit(self) -> float:
+        """residual_tol, N, or infinity when it is None (what the kernels compare against)."""
+        return math.inf if self.residual_tol is None else self.residual_tol
 
     def replace(self, **changes) -> "SolverConfig":
         """A copy with some fields changed (validated again)."""

@@ -573,8 +573,9 @@ class ReferenceSimulator:
         M = mass + added mass, starting Newton from q + dt·v. Args: q (N, 2) m, v (N, 2) m/s,
         t s. Returns: (q_new (N, 2), v_new (N, 2) the integrator's velocity at q_new, Newton
         iterations).
-        Raises NewtonDidNotConverge if max|Δq| > newton_tol after max_newton iterations, or if a
-        non-finite value appears.
+        Converged when max|Δq| <= newton_tol and the residual before that update has
+        max|r| <= residual_tol (when it is set). Raises NewtonDidNotConverge if not after max_newton iterations,
+        or if a non-finite value appears.
         """
         h = self.solver.dt if dt is None else dt
         q = np.asarray(q, dtype=np.float64)
@@ -596,12 +597,15 @@ class ReferenceSimulator:
             change = np.abs(delta).max()
             if not np.isfinite(change):
                 raise NewtonDidNotConverge(f"non-finite Newton update at t = {t + h:.6g} s")
-            if change <= self.solver.newton_tol:
+            if change <= self.solver.newton_tol \
+                    and np.abs(residual).max() <= self.solver.residual_limit:
                 q_new = q_new.reshape(q.shape)
                 return q_new, step.rate_gain * (q_new - step.position_anchor), iteration
         raise NewtonDidNotConverge(
-            f"step to t = {t + h:.6g} s: max|Δq| = {change:.3g} m > newton_tol = "
-            f"{self.solver.newton_tol:.3g} m after {self.solver.max_newton} iterations")
+            f"step to t = {t + h:.6g} s: max|Δq| = {change:.3g} m (newton_tol "
+            f"{self.solver.newton_tol:.3g} m), max|r| = {np.abs(residual).max():.3g} N "
+            f"(residual_tol {self.solver.residual_tol} N) after {self.solver.max_newton} "
+            f"iterations")
 
     def run(self, n_steps, q0=None, v0=None, return_velocities=False):
         """Positions (n_steps + 1, N, 2), m, at t = 0, h, ..., n_steps·h (h = solver.dt), from

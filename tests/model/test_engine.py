@@ -196,6 +196,24 @@ def test_chord_jacobian_reaches_the_same_solution():
     assert np.abs(shapes["chord"] - shapes["newton"]).max() < 1e-9
 
 
+def test_residual_tolerance_keeps_a_loose_update_tolerance_honest():
+    """With newton_tol at its loosest (1e-6 m) the update test alone accepts steps whose nodal
+    forces are out of balance by up to newtons during the heating pulse; with residual_tol
+    = 1e-2 N Newton iterates on. After 150 steps (A1+A3, inside the first pulse) the positions
+    are then within ~1e-11 m of the tightly converged ones, against ~2.5e-9 m without the
+    residual test: the factor 100 asserted leaves a margin of ~3. The reference applies the same
+    rule, so it takes the same iterations and agrees to round-off (1e-12 m against positions of
+    5 cm)."""
+    params = [ts.StarParams(gait="A1+A3")]
+    tight = _final_shapes(params, 150, ts.SolverConfig(newton_tol=1e-12, residual_tol=1e-8))
+    update_only = _final_shapes(params, 150, ts.SolverConfig(newton_tol=1e-6))
+    loose = ts.SolverConfig(newton_tol=1e-6, residual_tol=1e-2)
+    checked = _final_shapes(params, 150, loose)
+    assert np.abs(checked - tight).max() < 0.01 * np.abs(update_only - tight).max()
+    reference = ReferenceSimulator(params[0], loose).run(150)[-1]
+    assert np.abs(checked[0] - reference).max() <= 1e-12
+
+
 def test_shared_ends_with_series_joints_remove_most_of_the_mesh_dependence():
     """A1+A2 over the heating pulse (0.3 s): refining the arcs from 18 to 36 edges changes the
     clamped-ends / limb-joint speed by ~10 % (first order), the shared-ends / series-joint speed

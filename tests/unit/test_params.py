@@ -51,6 +51,13 @@ def test_f32_needs_a_tolerance_it_can_resolve():
     assert ts.SolverConfig(precision="f32", newton_tol=1e-7).precision == "f32"
 
 
+def test_the_residual_test_is_opt_in():
+    """None (the default) compares against infinity; a value is validated and used as is."""
+    assert ts.SolverConfig().residual_tol is None
+    assert ts.SolverConfig().residual_limit == math.inf
+    assert ts.SolverConfig(residual_tol=np.float64(0.5)).residual_limit == 0.5
+
+
 @pytest.mark.parametrize("kwargs,match", [
     (dict(params=[]), "empty"),
     (dict(params=[ts.StarParams(), ts.StarParams(n_arc=36)]), "n_arc"),
@@ -154,6 +161,8 @@ def test_presets_are_named_models_with_overrides():
     ("dt_min", 0.0, "dt_min must be a real number in (0, 0.05], got 0.0"),
     ("dt_max", 0.0, "dt_max must be a real number in (0, 0.05], got 0.0"),
     ("newton_tol", 2e-6, "newton_tol must be a real number in [1e-14, 1e-06], got 2e-06"),
+    ("residual_tol", 2e3, "residual_tol must be a real number in [1e-08, 1000], got 2000.0"),
+    ("residual_tol", 0.0, "residual_tol must be a real number in [1e-08, 1000], got 0.0"),
     ("error_tol", 2e-3, "error_tol must be a real number in [1e-12, 0.001], got 0.002"),
 ])
 def test_solver_config_message_names_the_field_its_kind_and_its_range(field, value, message):
@@ -165,6 +174,7 @@ def test_solver_config_message_names_the_field_its_kind_and_its_range(field, val
 @pytest.mark.parametrize("changes", [
     dict(max_newton=1), dict(max_newton=200), dict(max_substep_halvings=0),
     dict(max_substep_halvings=10), dict(newton_tol=1e-14), dict(error_tol=1e-12),
+    dict(residual_tol=1e-8), dict(residual_tol=1000.0),
     dict(error_tol=1e-3), dict(dt=0.05, dt_max=0.05),
     # a fixed step may be smaller than the adaptive bounds, which it does not use
     dict(dt=1e-7),
