@@ -296,8 +296,10 @@ def plot_cross_validation(csv_path, png_path) -> Path:
     ax.axvline(0, color="k", lw=0.5)
     ax.set_xlabel("measured signed speed (mm/s; sign = paper's direction)")
     ax.set_ylabel("predicted signed speed (mm/s)")
+    settings = cli.run_settings(csv_path)
     ax.set_title("leave-one-gait-out: fit on the others, predict the held-out gait\n"
-                 "(red quadrants: wrong direction)", fontsize=9)
+                 + (f"{settings}; " if settings else "") + "red quadrants: wrong direction",
+                 fontsize=9)
     ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(png_path, dpi=130)
