@@ -2,6 +2,7 @@
 strain, failed records; and the segment-crossing test they rest on."""
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from taichi_star import StarParams
@@ -221,3 +222,254 @@ def test_an_arc_inverted_in_an_earlier_record_only_is_remembered(topology):
     assert checks["finite"].tolist() == [True, True, False]
     assert checks["max_strain_final"].iloc[0] < 1e-12
     assert checks["max_strain"].iloc[2] == pytest.approx(0.2, rel=1e-9)
+
+
+# ------------------------------------------------------------------ batches, limb segments, arcs
+
+
+def _polar(radius, degrees):
+    angle = np.radians(degrees)
+    return radius * np.array([np.cos(angle), np.sin(angle)])
+
+
+def _limb0_turned(topology, degrees):
+    """The rest shape with limb 0 turned rigidly about its joint (edge lengths kept)."""
+    shape = topology.rest_positions.copy()
+    limb = topology.limbs[0]
+    joint = shape[limb[0]]
+    angle = np.radians(degrees)
+    turn = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    shape[limb[1:]] = joint + (shape[limb[1:]] - joint) @ turn.T
+    return shape
+
+
+def _limb0_hooked_around_limb1(topology):
+    """The rest shape with limb 0 (at -22.5°) hooked around limb 1's tip (limb 1 at 22.5°, tip
+    radius 52 mm): out to 1.3x the tip radius, across limb 1's ray beyond its tip, and back in
+    to 0.8x the tip radius at 35°, between limbs 1 and 2. No segment crosses limb 1, but the
+    chord from limb 0's joint to its tip does."""
+    shape = topology.rest_positions.copy()
+    tip = StarParams().tip_radius
+    shape[topology.limbs[0, 1:]] = [_polar(0.03, -20), _polar(1.3 * tip, -15),
+                                    _polar(1.3 * tip, 10), _polar(1.3 * tip, 30),
+                                    _polar(tip, 35), _polar(0.8 * tip, 35)]
+    return shape
+
+
+def test_limb_crossing_tests_each_limb_segment_not_chords_from_the_joint(topology):
+    """Guards the limb-segment slicing of `limbs_cross` (consecutive nodes, not every node
+    against the joint): a limb hooked around its neighbour's tip crosses nothing, although the
+    chord from its joint to its tip cuts the neighbour; checked against the exact orientation
+    rule on every pair of segments of limb 0 and another limb."""
+    shape = _limb0_hooked_around_limb1(topology)
+    limb0 = topology.limbs[0]
+    segments0 = list(zip(limb0[:-1], limb0[1:]))
+    for other in topology.limbs[1:]:
+        for a, b in segments0:
+            for c, d in zip(other[:-1], other[1:]):
+                assert not _crossing_by_orientations(shape[a], shape[b], shape[c], shape[d])
+    limb1 = topology.limbs[1]
+    assert _crossing_by_orientations(shape[limb0[0]], shape[limb0[-1]],
+                                     shape[limb1[0]], shape[limb1[-1]])  # the chord does cut
+    assert not metrics.limbs_cross(shape, topology)
+
+
+def test_limb_crossing_is_judged_per_instance_of_a_batch(topology):
+    """Guards the reduction axes of `limbs_cross` (over limb pairs and segments only, not the
+    batch): in a (2, 3) stack of shapes only the ones with limb 0 turned by 100° about its
+    joint, through limb 1, cross."""
+    rest = topology.rest_positions
+    crossed = _limb0_turned(topology, 100.0)
+    hooked = _limb0_hooked_around_limb1(topology)
+    limb0, limb1 = topology.limbs[0], topology.limbs[1]
+    # the turned limb cuts a segment of limb 1 (exact orientation rule)
+    assert any(_crossing_by_orientations(crossed[a], crossed[b], crossed[c], crossed[d])
+               for a, b in zip(limb0[:-1], limb0[1:]) for c, d in zip(limb1[:-1], limb1[1:]))
+    stack = np.stack([np.stack([rest, crossed, hooked]), np.stack([crossed, rest, rest])])
+    np.testing.assert_array_equal(metrics.limbs_cross(stack, topology),
+                                  [[False, True, False], [True, False, False]])
+
+
+def _circumcentre(a, b, c):
+    """Centre of the circle through three points (2-D)."""
+    d = 2.0 * (a[0] * (b[1] - c[1]) + b[0] * (c[1] - a[1]) + c[0] * (a[1] - b[1]))
+    ux = ((a @ a) * (b[1] - c[1]) + (b @ b) * (c[1] - a[1]) + (c @ c) * (a[1] - b[1])) / d
+    uy = ((a @ a) * (c[0] - b[0]) + (b @ b) * (a[0] - c[0]) + (c @ c) * (b[0] - a[0])) / d
+    return np.array([ux, uy])
+
+
+def test_arc_mean_curvature_weights_by_each_nodes_own_rest_voronoi_length(topology):
+    """Guards the rest Voronoi lengths ½(Δl_{i-1} + Δl_i) of `arc_mean_curvature`: a topology
+    whose arc 0 has its nodes unevenly spaced on its rest circle (edge angles growing 1:18 from
+    J_0 to J_1) still gives that arc the circle's curvature 1/ρ as its mean; a weighting that
+    mixed up the edges would be off by tens of per cent."""
+    import dataclasses
+
+    rest = topology.rest_positions
+    arc = topology.arcs[0]
+    centre = _circumcentre(rest[arc[0]], rest[arc[len(arc) // 2]], rest[arc[-1]])
+    radius = np.linalg.norm(rest[arc[0]] - centre)
+    assert radius == pytest.approx(1.0 / StarParams().actuator_profile.rest_curvature, rel=1e-9)
+    start, end = (np.arctan2(*(rest[arc[k]] - centre)[::-1]) for k in (0, -1))
+    steps = np.arange(1, len(arc))                      # edge k subtends an angle ∝ k + 1
+    fractions = np.cumsum(steps)[:-1] / steps.sum()
+    sweep = (end - start + np.pi) % (2 * np.pi) - np.pi  # the minor arc, through the bulge
+    angles = start + sweep * fractions
+    uneven = rest.copy()
+    uneven[arc[1:-1]] = centre + radius * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    edges = np.linalg.norm(np.diff(uneven[arc], axis=0), axis=1)
+    assert edges[-1] > 15 * edges[0]
+    uneven_topology = dataclasses.replace(topology, rest_positions=uneven)
+    mean = metrics.arc_mean_curvature(uneven, uneven_topology)
+    # On a circle, κ_i·Δl_i = 2 tan(θ_i/2) with θ_i the turning at node i, and the chords are
+    # shorter than their arcs by φ²/24: the mean overestimates 1/ρ by about φ²/12, 0.6 % for
+    # the largest edge angle φ = 0.26 rad here. Walking from J_0 to J_1 (counter-clockwise about
+    # the hub) the arc bulges towards the hub, a clockwise turn: negative.
+    assert mean[0] == pytest.approx(-1.0 / radius, rel=1e-2)
+    # the other arcs keep their even rest spacing and curvature
+    np.testing.assert_allclose(mean[1:], metrics.arc_mean_curvature(rest, topology)[1:],
+                               rtol=1e-12)
+
+
+def _arc0_on_circle(topology, curvature):
+    """The rest shape with arc 0's interior nodes evenly on the circle of signed `curvature`
+    (1/m, sign as `arc_mean_curvature`: negative bulges towards the hub like the rest shape)
+    through J_0 and J_1. J_0 and J_1 lie symmetric about the x axis."""
+    shape = topology.rest_positions.copy()
+    arc = topology.arcs[0]
+    a, b = shape[arc[0]], shape[arc[-1]]
+    half_chord = 0.5 * (b[1] - a[1])
+    radius = 1.0 / abs(curvature)
+    # centre on the far side of the chord from the bulge: outside (+x) for a bulge to the hub
+    offset = np.sqrt(radius ** 2 - half_chord ** 2) * (1.0 if curvature < 0 else -1.0)
+    centre = np.array([a[0] + offset, 0.0])
+    span = np.arcsin(half_chord / radius)
+    angles = (np.pi + np.linspace(span, -span, len(arc))[1:-1] if curvature < 0
+              else np.linspace(-span, span, len(arc))[1:-1])
+    shape[arc[1:-1]] = centre + radius * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    return shape
+
+
+def test_a_nearly_straight_arc_bulging_the_rest_way_is_not_inverted(topology):
+    """Guards the sign test of `arcs_inverted` (the sign of the mean curvature, not its size):
+    arc 0 flattened to 0.5 1/m (radius 2 m, 200x flatter than at rest) but still bulging
+    towards the hub is not inverted; the same flat arc bulging outwards is."""
+    same, opposite = _arc0_on_circle(topology, -0.5), _arc0_on_circle(topology, 0.5)
+    rest = topology.rest_positions
+    arc = topology.arcs[0]
+    chord = np.linalg.norm(rest[arc[-1]] - rest[arc[0]])
+    rest_length = np.linalg.norm(np.diff(rest[arc], axis=0), axis=1).sum()
+    # the mean is the arc's turning, about 0.5 1/m x its chord, over its rest length (the same
+    # share of the ends' half-edges drops out of both); chord against arc of the flat circle
+    # and the rest circle's discretisation (~φ²/12 at φ = 0.14 rad) stay well within 1 %
+    expected = 0.5 * chord / rest_length
+    assert expected < 1.0
+    assert metrics.arc_mean_curvature(same, topology)[0] == pytest.approx(-expected, rel=1e-2)
+    assert metrics.arc_mean_curvature(opposite, topology)[0] == pytest.approx(expected, rel=1e-2)
+    assert not metrics.arcs_inverted(same, topology)
+    assert metrics.arcs_inverted(opposite, topology)
+
+
+def test_arc_inversion_is_judged_per_shape_for_any_leading_axes(topology):
+    """Guards the reduction axis of `arcs_inverted` (over the eight arcs only): a single (N, 2)
+    shape gives one flag, and a (2, 3) stack gives each shape's own flag."""
+    rest = topology.rest_positions
+    inverted, flat = first_arc_inverted(topology), _arc0_on_circle(topology, -0.5)
+    assert metrics.arcs_inverted(inverted, topology) and not metrics.arcs_inverted(rest, topology)
+    stack = np.stack([np.stack([rest, inverted, flat]), np.stack([inverted, flat, rest])])
+    np.testing.assert_array_equal(metrics.arcs_inverted(stack, topology),
+                                  [[False, True, False], [True, False, False]])
+
+
+# ------------------------------------------------------------------ shape_checks over a batch
+
+
+def test_a_non_finite_instance_does_not_hide_the_other_instances_records(topology):
+    """Guards the per-instance validity of each record and of the final shape in
+    `shape_checks`: two records of three instances, the second instance non-finite throughout.
+    The first is stretched by 30 % then has limb 0 turned through limb 1; the third has limb 0
+    turned through limb 1, then arc 0 inverted. Their strain, crossing and inversion are found
+    although another instance of the same records is NaN; the NaN instance has no strain
+    (NaN) and is not sane."""
+    rest = topology.rest_positions
+    crossed = _limb0_turned(topology, 100.0)
+    failed = np.full_like(rest, np.nan)
+    records = np.stack([np.stack([1.3 * rest, failed, crossed]),
+                        np.stack([crossed, failed, first_arc_inverted(topology)])])
+    checks = metrics.shape_checks(records, topology)
+    # 1.3 x every coordinate: every edge 1.3 x longer up to round-off; the turned limb and the
+    # reflected arc keep their lengths up to round-off
+    assert checks["max_strain"].iloc[0] == pytest.approx(0.3, rel=1e-9)
+    assert np.isnan(checks["max_strain"].iloc[1])
+    assert checks["max_strain"].iloc[2] < 1e-12
+    assert checks["max_strain"].dtype == np.float64
+    assert checks["max_strain_final"].iloc[0] < 1e-12
+    assert checks["limbs_cross"].tolist() == [True, False, True]
+    assert checks["limbs_cross_final"].tolist() == [True, False, False]
+    assert checks["arc_inverted"].tolist() == [False, False, True]
+    assert checks["arc_inverted_final"].tolist() == [False, False, True]
+    assert checks["finite"].tolist() == [True, False, True]
+    assert checks["sane"].tolist() == [False, False, False]
+
+
+def test_final_strain_is_measured_against_each_instances_own_rest_shape():
+    """Guards the rest-shape argument of the final-shape strain in `shape_checks`: two robots
+    of different geometry, each blown up by 10 % from its own rest shape in the final record;
+    max_strain_final is 0.1 for both (against the topology's default rest lengths the second,
+    smaller robot would show its size difference too)."""
+    own = np.stack([build_topology(StarParams()).rest_positions,
+                    build_topology(StarParams(joint_radius=0.022, tip_radius=0.05)).rest_positions])
+    topology = build_topology(StarParams())
+    records = np.stack([own, 1.1 * own])
+    checks = metrics.shape_checks(records, topology, own)
+    # 1.1 x every coordinate: ε = 0.1 up to round-off
+    np.testing.assert_allclose(checks["max_strain_final"], [0.1, 0.1], rtol=1e-9)
+    np.testing.assert_allclose(checks["max_strain"], [0.1, 0.1], rtol=1e-9)
+    assert checks["sane"].all()
+
+
+def test_a_strain_exactly_at_the_limit_is_sane(topology):
+    """Guards the boundary of `sane`: |ε| above STRAIN_LIMIT is not sane, so ε exactly at it
+    is. Limb 0's last edge, made axis-parallel with binary-exact lengths in an instance's own
+    rest shape (2⁻⁹ m) and in the shape (1.5 x 2⁻⁹ m), has ε = 0.5 exactly and every other edge
+    ε = 0; one 2⁻²⁰ m (1 µm) longer is over the limit."""
+    assert metrics.STRAIN_LIMIT == 0.5
+    limb = topology.limbs[0]
+    before_tip, tip = limb[-2], limb[-1]
+    grid = 2.0 ** -20
+    own_rest = topology.rest_positions.copy()
+    own_rest[before_tip] = np.round(own_rest[before_tip] / grid) * grid
+    length = 2.0 ** -9
+    own_rest[tip] = own_rest[before_tip] + [length, 0.0]
+    at_limit, over = own_rest.copy(), own_rest.copy()
+    at_limit[tip] = own_rest[before_tip] + [1.5 * length, 0.0]
+    over[tip] = own_rest[before_tip] + [1.5 * length + grid, 0.0]
+    checks = metrics.shape_checks(np.stack([at_limit, over])[None], topology,
+                                  np.stack([own_rest, own_rest]))
+    assert checks["max_strain"].iloc[0] == 0.5 and checks["max_strain_final"].iloc[0] == 0.5
+    assert checks["max_strain"].iloc[1] > 0.5
+    assert not checks["limbs_cross"].any() and not checks["arc_inverted"].any()
+    assert checks["sane"].tolist() == [True, False]
+
+
+def test_single_precision_records_are_checked_in_double_precision(topology):
+    """Guards the float64 conversion in `shape_checks`: f32 records (an f32 run's shapes) give
+    exactly the table of the same values converted to f64 first (f32 arithmetic would move
+    the strains by ~1e-7)."""
+    rng = np.random.default_rng(3)
+    rest = topology.rest_positions
+    records = (rest + rng.normal(0.0, 2e-4, (2, 3) + rest.shape)).astype(np.float32)
+    single = metrics.shape_checks(records, topology)
+    double = metrics.shape_checks(records.astype(np.float64), topology)
+    pd.testing.assert_frame_equal(single, double, check_exact=True)
+
+
+def test_crossing_checks_run_under_strict_floating_point_error_settings(topology):
+    """Guards the local np.errstate of `segments_cross`: parallel segments divide by zero
+    (offset: x/0; collinear: 0/0) by design, so the crossing checks must not raise or warn
+    under a caller's np.errstate(all="raise"); the rest shape's opposite limbs are collinear."""
+    p, q = np.array([0.0, 0.0]), np.array([1.0, 0.0])
+    with np.errstate(all="raise"):
+        assert not metrics.segments_cross(p, q, np.array([0.0, 1e-3]), np.array([1.0, 1e-3]))
+        assert metrics.segments_cross(p, q, np.array([0.5, 0.0]), np.array([2.0, 0.0]))
+        assert not metrics.limbs_cross(topology.rest_positions, topology)
