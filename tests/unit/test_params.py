@@ -56,6 +56,8 @@ def test_the_residual_test_is_opt_in():
     assert ts.SolverConfig().residual_tol is None
     assert ts.SolverConfig().residual_limit == math.inf
     assert ts.SolverConfig(residual_tol=np.float64(0.5)).residual_limit == 0.5
+    # stored as a Python float (the definition hash and the manifests see the stored value)
+    assert type(ts.SolverConfig(residual_tol=np.float32(0.5)).residual_tol) is float
 
 
 @pytest.mark.parametrize("kwargs,match", [
