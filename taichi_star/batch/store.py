@@ -112,12 +112,15 @@ def definition_differences(old: Dict, new: Dict) -> List[str]:
 
 
 def table_checksum(frame: pd.DataFrame) -> str:
-    """SHA-256 of a table's column names, dtypes and values (bitwise for numbers)."""
+    """SHA-256 of a table's column names, dtypes and values (bitwise for numbers). Every
+    non-numeric column counts as text whatever its pandas dtype: Parquet stores text as text, and
+    a column of Python strings (object dtype) reads back as pandas' string dtype."""
     digest = hashlib.sha256()
     for name in frame.columns:
         column = frame[name]
-        digest.update(f"{name}\0{column.dtype}\0".encode())
-        if pd.api.types.is_numeric_dtype(column) or pd.api.types.is_bool_dtype(column):
+        numeric = pd.api.types.is_numeric_dtype(column) or pd.api.types.is_bool_dtype(column)
+        digest.update(f"{name}\0{column.dtype if numeric else 'text'}\0".encode())
+        if numeric:
             digest.update(np.ascontiguousarray(column.to_numpy()).tobytes())
         else:
             digest.update(_canonical([None if pd.isna(v) else str(v) for v in column]).encode())

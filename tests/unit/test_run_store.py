@@ -185,6 +185,20 @@ def test_a_chunk_without_value_objects_or_rows_round_trips(tmp_path):
     assert store.read(tasks[0])["note"].isna().all()
 
 
+def test_a_column_of_python_strings_reads_back_and_verifies(tmp_path):
+    """Text kept as Python objects (object dtype) comes back from Parquet as pandas' string
+    dtype: the chunk still verifies and its values are the same strings."""
+    store = store_in(tmp_path / "run")
+    tasks = tasks_of()
+    store.open(tasks, resume=False)
+    plain = summary_of(tasks[0]).drop(columns="actuator_profile")
+    notes = ["first", "second", None]
+    store.write(tasks[0], plain.assign(note=pd.Series(notes, dtype=object)))
+    back = store.read(tasks[0])
+    assert [None if pd.isna(v) else v for v in back["note"]] == notes
+    pd.testing.assert_frame_equal(back.drop(columns="note"), plain, check_exact=True)
+
+
 def test_a_chunk_file_holds_the_rows_not_the_index(tmp_path):
     """A summary cut from a larger table is stored as its rows: read back numbered from 0, the
     file's columns are the summary's (no index column for other Parquet readers)."""
