@@ -144,6 +144,9 @@ def test_checksum_sees_every_bit_name_dtype_and_text():
     }
     for what, other in changed.items():
         assert table_checksum(other) != reference, what
+    # the same bytes under another numeric dtype (0.0 and 0 are both eight zero bytes)
+    zeros = pd.DataFrame({"x": np.zeros(3)})
+    assert table_checksum(zeros) != table_checksum(zeros.astype(np.int64))
 
 
 def test_checksum_of_text_treats_every_missing_value_alike():
