@@ -190,6 +190,11 @@ def start_batch(params, arch: str, precision: str, jacobian: str = "newton"):
     return engine, solver, time.perf_counter() - start
 
 
+def on_off(flag: bool) -> str:
+    """A compiler setting as the table and the flag spell it."""
+    return "on" if flag else "off"
+
+
 def state_digest(values: np.ndarray) -> str:
     """A short hash of an array's bytes: rows measured with different settings (compiler, layout)
     that computed the same bits carry the same digest."""
@@ -443,7 +448,7 @@ def build_parser():
                         help=f"comma list of {', '.join(LAYOUTS)}: the GPU layout of the "
                              "per-instance fields, --arch gpu only")
     parser.add_argument("--kernel-optimisation",
-                        default="on" if kernel_optimisation_default() else "off",
+                        default=on_off(kernel_optimisation_default()),
                         help="comma list of on, off: Taichi's advanced IR optimisation for the "
                              "B sweep (default: the library's setting)")
     parser.add_argument("--no-cache-probe", action="store_true",
@@ -513,7 +518,7 @@ def run_bench(args) -> pd.DataFrame:
     base = {**provenance.machine_columns(args.arch), "arch": args.arch, "dt_s": DT,
             "warmup_steps": WARMUP_STEPS, "steps": args.steps,
             "repeats": args.repeats, "commit": provenance.short_commit(),
-            "kernel_optimisation": "on" if kernel_optimisation_default() else "off"}
+            "kernel_optimisation": on_off(kernel_optimisation_default())}
     profile_seconds = QUICK_PROFILE_SECONDS if args.quick else PROFILE_SECONDS
     rows = []
 
@@ -539,7 +544,7 @@ def run_bench(args) -> pd.DataFrame:
             if gpu:
                 Runtime.current().configure_gpu(block_dim, layout == "instance_minor")
             place = {"layout": layout, "block_dim": block_dim, "bandwidth_gb_s": bandwidth,
-                     "kernel_optimisation": "on" if optimise else "off"}
+                     "kernel_optimisation": on_off(optimise)}
             if "paper" in args.presets:
                 for jacobian in args.jacobians:
                     for batch in args.batch_sizes:
@@ -563,7 +568,7 @@ def run_bench(args) -> pd.DataFrame:
                 figures = measure(params, args.arch, precision, args.steps, args.repeats,
                                   profile_seconds)
                 add({"section": "skip", "scenario": scenario, "batch_size": args.scenario_batch,
-                     "precision": precision, "kernel_optimisation": "on" if optimise else "off",
+                     "precision": precision, "kernel_optimisation": on_off(optimise),
                      **figures})
     Runtime.current().configure_compiler()
     for workers in args.workers_list:

@@ -150,8 +150,9 @@ def stream_chunk_size(params, precision: str, arch: str) -> int:
     engine: all of them on a GPU, and on the CPU as many as fit in CPU_ENGINE_BUDGET_BYTES (or
     MEMORY_SHARE of the available memory, if less), in equal chunks so that every chunk shares
     one engine capacity (one compilation). The per-instance size is measured on the first
-    MIN_CAPACITY instances' model."""
-    if arch != "cpu":
+    MIN_CAPACITY instances' model; a batch no larger than that is never cut (the smallest engine
+    holds it, and `check_memory` refuses it where even that does not fit)."""
+    if arch != "cpu" or len(params) <= MIN_CAPACITY:
         return len(params)
     budget = CPU_ENGINE_BUDGET_BYTES
     available = available_memory_bytes()
