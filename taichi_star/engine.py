@@ -252,7 +252,14 @@ class BatchEngine:
                 if not (ti.abs(update[0]) < FINITE_LIMIT and ti.abs(update[1]) < FINITE_LIMIT):
                     finite = 0
             iterations += 1
-            if finite == 1 and largest_update <= self.newton_tol[None] \
+            # the error left after this update: the update itself bounds it, and once the
+            # iteration contracts (θ = |Δ_k|/|Δ_{k−1}| < 1) so does θ/(1 − θ)·|Δ_k|, which saves
+            # the iteration that would only confirm a quadratically converged step
+            error_left = largest_update
+            if largest_update < previous_update:
+                contraction = largest_update / previous_update
+                error_left = ti.min(error_left, contraction / (1.0 - contraction) * largest_update)
+            if finite == 1 and error_left <= self.newton_tol[None] \
                     and largest_residual <= self.residual_limit[None]:
                 converged = 1
             # chord mode keeps the factorisation while it contracts the update at least 4×

@@ -234,8 +234,11 @@ class SolverConfig:
     dt: float = 1e-3
     """Time step h, s; (0, 0.05] (at most a third of the 0.163-s heating pulse)."""
     newton_tol: float = 1e-10
-    """Convergence: max |Δq| of a Newton update, m; [1e-14, 1e-6] (a micrometre is 1e-5 of the
-    robot's size: any looser and "converged" would not mean the step was solved)."""
+    """Convergence: the largest position error left after a Newton update, m; [1e-14, 1e-6] (a
+    micrometre is 1e-5 of the robot's size: any looser and "converged" would not mean the step
+    was solved). The error left is bounded by max |Δq_k| and, once the updates contract
+    (θ = max |Δq_k| / max |Δq_{k−1}| < 1), by θ/(1 − θ)·max |Δq_k| — the standard estimate for a
+    contracting iteration, which spares the step an iteration that would only confirm it."""
     residual_tol: Optional[float] = None
     """Convergence judged on the residual as well (opt-in; None: the update test alone): the
     largest component of the residual (a node's force imbalance, N) that the accepted update was

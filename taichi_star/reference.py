@@ -573,7 +573,8 @@ class ReferenceSimulator:
         M = mass + added mass, starting Newton from q + dt·v. Args: q (N, 2) m, v (N, 2) m/s,
         t s. Returns: (q_new (N, 2), v_new (N, 2) the integrator's velocity at q_new, Newton
         iterations).
-        Converged when max|Δq| <= newton_tol and the residual before that update has
+        Converged when the error left after an update, max|Δq| or, once the updates contract by
+        θ = max|Δq_k|/max|Δq_{k−1}| < 1, θ/(1 − θ)·max|Δq_k| if smaller, is <= newton_tol and the residual before that update has
         max|r| <= residual_tol (when it is set). Raises NewtonDidNotConverge if not after max_newton iterations,
         or if a non-finite value appears.
         """
@@ -586,6 +587,7 @@ class ReferenceSimulator:
         inertia = step.inertia_gain * self._inertia
         target = step.inertia_target.reshape(-1)
         q_new = (q + h * v).reshape(-1)
+        change = 0.0  # no previous update: the first is judged on its own
         for iteration in range(1, self.solver.max_newton + 1):
             force, jac = self._step_forces(q_new.reshape(q.shape), step)
             residual = inertia * (q_new - target) - force
@@ -594,10 +596,14 @@ class ReferenceSimulator:
             system = (scipy.sparse.diags(inertia) - jac).tocsc()
             delta = -scipy.sparse.linalg.splu(system).solve(residual)
             q_new += delta
-            change = np.abs(delta).max()
+            previous_change, change = change, np.abs(delta).max()
             if not np.isfinite(change):
                 raise NewtonDidNotConverge(f"non-finite Newton update at t = {t + h:.6g} s")
-            if change <= self.solver.newton_tol \
+            error_left = change
+            if change < previous_change:
+                contraction = change / previous_change
+                error_left = min(change, contraction / (1.0 - contraction) * change)
+            if error_left <= self.solver.newton_tol \
                     and np.abs(residual).max() <= self.solver.residual_limit:
                 q_new = q_new.reshape(q.shape)
                 return q_new, step.rate_gain * (q_new - step.position_anchor), iteration

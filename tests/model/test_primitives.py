@@ -30,9 +30,10 @@ def test_primitives_cover_255_gaits_with_statistics_of_their_cycles(quick_primit
 def test_expansion_equals_direct_simulation_of_image_gaits(quick_primitives):
     """Gaits that are not class representatives, simulated directly, step and turn as the
     symmetry maps their representative's cycles: two mirror images that turn (the rotation's
-    sign flips) and one rotated image. Tolerance 1e-7 mm and deg: each step's Newton solve
-    is converged to |Δq| < 1e-10 m = 1e-7 mm, so mirror-image runs may differ by that much
-    (measured: ~3e-11)."""
+    sign flips) and one rotated image. Tolerance 1e-5 mm and deg: each step's Newton solve
+    leaves at most newton_tol = 1e-10 m, so over the 2 cycles of steps mirror-image runs may
+    drift apart by up to (steps × 1e-10 m, ~1e-4 mm, ~1e-4 deg on the 5-cm robot); measured
+    1e-6. A wrong symmetry map would be off by the step itself, millimetres."""
     table, cycles = quick_primitives
     solver = ts.SolverConfig(dt=table["dt_s"].iloc[0])
     turning = cycles[(cycles["cycle"] == 1) & (cycles["rotation_deg"].abs() > 0.1)]
@@ -45,5 +46,5 @@ def test_expansion_equals_direct_simulation_of_image_gaits(quick_primitives):
     for index, gait in enumerate(gaits):
         expected = cycles[cycles["gait"] == gait][["dx_body_mm", "dy_body_mm", "rotation_deg"]]
         got = direct[direct["instance"] == index][["dx_body_mm", "dy_body_mm", "rotation_deg"]]
-        np.testing.assert_allclose(got.to_numpy(), expected.to_numpy(), rtol=0, atol=1e-7,
+        np.testing.assert_allclose(got.to_numpy(), expected.to_numpy(), rtol=0, atol=1e-5,
                                    err_msg=gait)
