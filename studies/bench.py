@@ -38,7 +38,7 @@ with α = 0 (no jet), C_a = 0 (no added mass), drag 0 (rod and cylinder drag off
 (no actuation); terms that no instance uses are compiled out (`terms`: the force terms the
 engine was compiled with).
 
-Preset "accurate" (`--presets`): the accurate model and solver (adaptive BDF2, N = 337) on the
+Preset "accurate" (`--presets`): the accurate model and solver (adaptive BDF2, N = 433) on the
 same gait, `simulate` end to end for `--accurate-duration` simulated seconds from rest (default
 one period) after one untimed call that compiles; `real_time_factor` is then simulated
 robot-seconds per wall second and `robot_steps_per_s` counts the adaptive steps taken.

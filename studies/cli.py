@@ -106,7 +106,7 @@ def add_model_flags(parser: StudyParser, fixed: Sequence[str] = ()):
     """--preset and --set; `fixed`: fields the study sets itself (refused in --set)."""
     parser.add_argument("--preset", choices=PRESETS, default="paper",
                         help="paper: the model as published (N = 193 nodes, implicit Euler at "
-                             "1 ms); accurate: damping, series joints, shared ends, n_arc 36, "
+                             "1 ms); accurate: damping, series joints, shared ends, n_arc 48, "
                              "adaptive BDF2 (StarParams/SolverConfig.preset)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="change one StarParams field for every instance, e.g. --set "

@@ -186,7 +186,7 @@ class StarParams:
         """A named model with some fields changed. "paper": the paper's model as published
         (N = 193 nodes, no damping, clamped ends, limb-stiff joints). "accurate": material
         damping τ = 0.94 ms, series joints and shared ends, which converge at second order in
-        the mesh, on n_arc 36 (N = 337)."""
+        the mesh, on n_arc 48 (N = 433)."""
         _check_choice("preset", name, PRESETS)
         return cls(**{**PRESET_FIELDS[name], **overrides})
 
@@ -222,7 +222,7 @@ class StarParams:
 PRESET_FIELDS = {
     "paper": {},
     "accurate": {"damping_time": 0.94e-3, "joint_stiffness": "series",
-                 "actuation_ends": "shared", "profile_closure": "jump", "n_arc": 36},
+                 "actuation_ends": "shared", "profile_closure": "jump", "n_arc": 48},
 }
 """StarParams fields of each preset (the rest are the defaults)."""
 
@@ -302,8 +302,8 @@ class SolverConfig:
     @classmethod
     def preset(cls, name: str = "paper", **overrides) -> "SolverConfig":
         """Named solver settings: "paper" (implicit Euler at 1 ms with Newton's method, the
-        paper's scheme) or "accurate" (adaptive BDF2, error_tol 3e-6 m, the chord Jacobian:
-        about 180 steps per 3.15-s cycle)."""
+        paper's scheme) or "accurate" (adaptive BDF2, error_tol 1e-6 m, the chord Jacobian:
+        about 300 steps per 3.15-s cycle)."""
         _check_choice("preset", name, PRESETS)
         return cls(**{**SOLVER_PRESET_FIELDS[name], **overrides})
 
@@ -322,7 +322,7 @@ MAX_DT = 0.05
 
 SOLVER_PRESET_FIELDS = {
     "paper": {},
-    "accurate": {"integrator": "bdf2", "adaptive": True, "error_tol": 3e-6, "dt": 1e-3,
+    "accurate": {"integrator": "bdf2", "adaptive": True, "error_tol": 1e-6, "dt": 1e-3,
                  "jacobian": "chord"},
 }
 """SolverConfig fields of each preset."""
