@@ -67,8 +67,12 @@ an empty temporary cache folder (`TI_OFFLINE_CACHE_FILE_PATH`), the first compil
 the second loads the first's kernels (section "compile"; off with --no-cache-probe and in
 --quick).
 
+Section "plain": the plain call a user writes, `simulate(params, duration)` with the default
+SolverConfig at the process batch size (CPU; off with --no-plain-call).
+
 Writes `bench.csv` (`bench_gpu.csv` for --arch gpu): one row per measurement; `section` is
-"batch" (B sweep), "skip" (terms at one B) or "compile" (cold/warm cache); columns: machine,
+"batch" (B sweep), "skip" (terms at one B), "plain", "processes" or "compile" (cold/warm
+cache); columns: machine,
 cpu_model, cores, gpu, gpu_driver, arch, preset, layout, block_dim, section, scenario, terms, batch_size, precision, n_nodes, dt_s,
 gait, warmup_steps, steps, repeats, commit, timestamp, import_s, setup_s, compile_s,
 time_to_first_step_s, robot_steps_per_s, real_time_factor (= robot_steps_per_s × dt: simulated
@@ -95,7 +99,7 @@ import numpy as np
 import pandas as pd
 import taichi as ti
 
-from taichi_star import SolverConfig, StarParams
+from taichi_star import SolverConfig, StarParams, simulate
 from taichi_star.batch import LocalProcesses, run_batch
 from taichi_star.runtime import (GPU_BLOCK_DIM, GPU_INSTANCE_MINOR, Runtime,
                                  kernel_optimisation_default, prepare_engine)
@@ -349,6 +353,28 @@ def measure_processes(batch: int, workers: int, jacobian: str, steps: int, repea
             "step_us": 1e6 / robot_steps}
 
 
+def measure_plain(batch: int, steps: int, repeats: int) -> dict:
+    """End-to-end throughput of the plain call `simulate(params, duration)` with the default
+    SolverConfig, in this process: the best of `repeats` calls of WARMUP_STEPS + steps steps
+    from rest, after one call that compiles the engine."""
+    params = [StarParams(gait=GAIT)] * batch
+    duration = (WARMUP_STEPS + steps) * DT
+    simulate(params, DT)
+    timed = math.inf
+    for _ in range(repeats):
+        start = time.perf_counter()
+        result = simulate(params, duration)
+        timed = min(timed, time.perf_counter() - start)
+    if (result.summary["status"] != "ok").any():
+        raise RuntimeError("an instance failed during the benchmark: its timing is not valid")
+    robot_steps = batch * (WARMUP_STEPS + steps) / timed
+    return {"gait": GAIT, "jacobian": SolverConfig().jacobian, "workers": 1,
+            "n_nodes": result.topology.n_nodes,
+            "newton_iterations_mean": float(result.summary["newton_iterations_mean"].mean()),
+            "robot_steps_per_s": robot_steps, "real_time_factor": robot_steps * DT,
+            "step_us": 1e6 / robot_steps}
+
+
 def phase_split(engine, batch, time_s, iteration_s, profile_seconds) -> dict:
     """µs per instance and Newton iteration of assembly, factorisation and solve, from launches
     of `calls` assemblies, assembly + factor, and assembly + factor + solve per instance;
@@ -432,8 +458,12 @@ def build_parser():
     parser.add_argument("--workers-list", default="1,2", quick="none",
                         help="comma list of worker-process counts for the end-to-end processes "
                              "section, or none")
-    parser.add_argument("--process-batch", type=int, default=PROCESS_BATCH,
-                        help=f"batch size of the processes section (default {PROCESS_BATCH})")
+    parser.add_argument("--process-batch", type=int, default=PROCESS_BATCH, quick=2,
+                        help=f"batch size of the processes and plain sections (default "
+                             f"{PROCESS_BATCH})")
+    parser.add_argument("--no-plain-call", dest="plain_call", action="store_false",
+                        help="skip the plain section: simulate(params, duration) with the "
+                             "default solver at the process batch size (CPU)")
     parser.add_argument("--presets", default="paper", quick="paper",
                         help="comma list of paper (fixed 1-ms Euler steps, the B sweep) and "
                              "accurate (adaptive, simulate end to end at the same B)")
@@ -571,6 +601,10 @@ def run_bench(args) -> pd.DataFrame:
                      "precision": precision, "kernel_optimisation": on_off(optimise),
                      **figures})
     Runtime.current().configure_compiler()
+    if args.plain_call and not gpu:
+        add({"section": "plain", "scenario": "all_terms", "preset": "paper",
+             "batch_size": args.process_batch, "precision": "f64",
+             **measure_plain(args.process_batch, args.steps, args.repeats)})
     for workers in args.workers_list:
         for jacobian in args.jacobians:
             figures = measure_processes(args.process_batch, workers, jacobian, args.steps,

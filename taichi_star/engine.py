@@ -197,8 +197,9 @@ class BatchEngine:
     @ti.func
     def prepare_step(self, b, start_time, end_time, h, ratio, use_history, extrapolate):
         """Start a step of size h from the current state q_k, v_k: the terms' histories, the
-        integrator's offsets, `previous` = q_k, and the predictor q_k + h·v_k. Returns the
-        integrator's (inertia scale, rate gain)."""
+        integrator's offsets, `previous` = q_k, and Newton's start: q_k + h·v_k without history,
+        with it q_k + h·(2v_k − v_{k−1}) (fixed steps) or, with `extrapolate` (adaptive steps),
+        the parabola below. Returns the integrator's (inertia scale, rate gain)."""
         inertia_scale, rate_gain = self.integrator.weights(h, ratio, use_history)
         for term in ti.static(self.terms):
             term.begin_step(b, start_time, end_time, h, ratio, rate_gain, use_history)
@@ -211,6 +212,10 @@ class BatchEngine:
             self.state.velocity_offset[b, n] = self.integrator.rate_offset(
                 position, self.state.previous[b, n], h, ratio, use_history)
             predictor = position + h * velocity
+            if use_history and not extrapolate:
+                # + h²·(v_k − v_{k−1})/h: the acceleration of the last step carried on, a
+                # second-order start that most coast steps accept after one update
+                predictor += h * (velocity - self.state.previous_velocities[b, n])
             if extrapolate:
                 # the parabola through q_{k−1} and q_k with slope v_k: a second-order start for
                 # Newton, worth an iteration on the long steps of adaptive stepping

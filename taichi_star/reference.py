@@ -570,7 +570,8 @@ class ReferenceSimulator:
         implicit Euler otherwise.
 
         Solves inertia_gain·M·(q_new − inertia_target) − F(q_new) = 0 (see `ImplicitStep`) with
-        M = mass + added mass, starting Newton from q + dt·v. Args: q (N, 2) m, v (N, 2) m/s,
+        M = mass + added mass, starting Newton from q + dt·v, or from q + dt·(2v − v_prev) when
+        `previous` is given (with either integrator). Args: q (N, 2) m, v (N, 2) m/s,
         t s. Returns: (q_new (N, 2), v_new (N, 2) the integrator's velocity at q_new, Newton
         iterations).
         Converged when the error left after an update, max|Δq| or, once the updates contract by
@@ -581,12 +582,12 @@ class ReferenceSimulator:
         h = self.solver.dt if dt is None else dt
         q = np.asarray(q, dtype=np.float64)
         v = np.asarray(v, dtype=np.float64)
-        if self.solver.integrator != "bdf2":
-            previous = None
-        step = self.implicit_step(q, v, t, h, previous)
+        step = self.implicit_step(q, v, t, h, previous if self.solver.integrator == "bdf2" else None)
         inertia = step.inertia_gain * self._inertia
         target = step.inertia_target.reshape(-1)
-        q_new = (q + h * v).reshape(-1)
+        # Newton's start: the last step's acceleration carried on when there is one
+        start = q + h * v if previous is None else q + h * (2.0 * v - np.asarray(previous[1]))
+        q_new = start.reshape(-1)
         change = 0.0  # no previous update: the first is judged on its own
         for iteration in range(1, self.solver.max_newton + 1):
             force, jac = self._step_forces(q_new.reshape(q.shape), step)

@@ -26,7 +26,15 @@ def test_bench_quick(tmp_path):
     table = table[table["kernel_optimisation"] == "off"]
     batch = table[table["section"] == "batch"]
     skip = table[table["section"] == "skip"]
-    assert len(table) == len(batch) + len(skip)  # --quick: no cache-probe rows
+    plain = table[table["section"] == "plain"]
+    assert len(table) == len(batch) + len(skip) + 1  # --quick: no cache-probe rows
+    # the plain call is simulate() with the default solver: its iterations are those of the
+    # same call made here
+    default = taichi_star.simulate([StarParams(gait=bench.GAIT)] * int(plain["batch_size"].iloc[0]),
+                                   (bench.WARMUP_STEPS + int(plain["steps"].iloc[0])) * bench.DT)
+    assert plain["jacobian"].iloc[0] == taichi_star.SolverConfig().jacobian
+    assert plain["newton_iterations_mean"].iloc[0] == pytest.approx(
+        default.summary["newton_iterations_mean"].mean(), rel=1e-12)
     assert list(batch["batch_size"]) == [int(b) for b in bench.QUICK_BATCH_SIZES.split(",")]
     assert list(skip["scenario"]) == bench.QUICK_SCENARIOS.split(",")
     assert (table["arch"] == "cpu").all() and (table["precision"] == "f64").all()
@@ -44,8 +52,10 @@ def test_bench_quick(tmp_path):
     # added mass is inertia, not a force term: both quick scenarios share one compiled engine
     terms = dict(zip(skip["scenario"], skip["terms"].str.split("+")))
     assert terms["added_mass_0"] == terms["all_terms"] and "stretching" in terms["all_terms"]
+    assert plain["robot_steps_per_s"].iloc[0] > 0
+    engine_rows = table[table["section"] != "plain"]  # the plain call has no phase split
     for column in ("robot_steps_per_s", "assembly_us", "factor_flops"):
-        assert (table[column] > 0).all(), column
+        assert (engine_rows[column] > 0).all(), column
     assert (tmp_path / "bench.png").stat().st_size > 1000
 
 
