@@ -68,7 +68,9 @@ the second loads the first's kernels (section "compile"; off with --no-cache-pro
 --quick).
 
 Section "plain": the plain call a user writes, `simulate(params, duration)` with the default
-SolverConfig at the process batch size (CPU; off with --no-plain-call).
+SolverConfig, the five Fig. 4c gaits repeated to the process batch size, one whole period from
+rest (pulse and coast: the B sweep's window is the hardest part of the pulse) (CPU; off with
+--no-plain-call).
 
 Writes `bench.csv` (`bench_gpu.csv` for --arch gpu): one row per measurement; `section` is
 "batch" (B sweep), "skip" (terms at one B), "plain", "processes" or "compile" (cold/warm
@@ -100,6 +102,7 @@ import pandas as pd
 import taichi as ti
 
 from taichi_star import SolverConfig, StarParams, simulate
+from taichi_star.experiment import PAPER_GAITS
 from taichi_star.batch import LocalProcesses, run_batch
 from taichi_star.runtime import (GPU_BLOCK_DIM, GPU_INSTANCE_MINOR, Runtime,
                                  kernel_optimisation_default, prepare_engine)
@@ -127,6 +130,8 @@ QUICK_STEPS = 5
 QUICK_SCENARIO_BATCH = 2
 ACCURATE_DURATION = 3.15
 """One period of the benchmark gait, s."""
+PLAIN_DURATION = 3.15
+"""Simulated seconds of the plain call (one period: the pulse and the coast)."""
 QUICK_SCENARIOS = "all_terms,added_mass_0"
 """--quick keeps to one engine (the smallest, as the other studies' quick batches use) and to
 scenarios with the same terms, so that it compiles the stepping kernel at most once."""
@@ -353,12 +358,11 @@ def measure_processes(batch: int, workers: int, jacobian: str, steps: int, repea
             "step_us": 1e6 / robot_steps}
 
 
-def measure_plain(batch: int, steps: int, repeats: int) -> dict:
-    """End-to-end throughput of the plain call `simulate(params, duration)` with the default
-    SolverConfig, in this process: the best of `repeats` calls of WARMUP_STEPS + steps steps
-    from rest, after one call that compiles the engine."""
-    params = [StarParams(gait=GAIT)] * batch
-    duration = (WARMUP_STEPS + steps) * DT
+def measure_plain(batch: int, duration: float, repeats: int) -> dict:
+    """End-to-end throughput of the plain call a user writes, `simulate(params, duration)` with
+    the default SolverConfig, in this process: the five Fig. 4c gaits repeated to `batch`
+    instances from rest, the best of `repeats` calls after one that compiles the engine."""
+    params = [StarParams(gait=PAPER_GAITS[i % len(PAPER_GAITS)]) for i in range(batch)]
     simulate(params, DT)
     timed = math.inf
     for _ in range(repeats):
@@ -367,9 +371,8 @@ def measure_plain(batch: int, steps: int, repeats: int) -> dict:
         timed = min(timed, time.perf_counter() - start)
     if (result.summary["status"] != "ok").any():
         raise RuntimeError("an instance failed during the benchmark: its timing is not valid")
-    robot_steps = batch * (WARMUP_STEPS + steps) / timed
-    return {"gait": GAIT, "jacobian": SolverConfig().jacobian, "workers": 1,
-            "n_nodes": result.topology.n_nodes,
+    robot_steps = batch * round(duration / DT) / timed
+    return {"gait": "paper_gaits", "jacobian": SolverConfig().jacobian, "workers": 1, "n_nodes": result.topology.n_nodes, "steps": round(duration / DT),
             "newton_iterations_mean": float(result.summary["newton_iterations_mean"].mean()),
             "robot_steps_per_s": robot_steps, "real_time_factor": robot_steps * DT,
             "step_us": 1e6 / robot_steps}
@@ -464,6 +467,10 @@ def build_parser():
     parser.add_argument("--no-plain-call", dest="plain_call", action="store_false",
                         help="skip the plain section: simulate(params, duration) with the "
                              "default solver at the process batch size (CPU)")
+    parser.add_argument("--plain-duration", type=float, default=PLAIN_DURATION,
+                        quick=(WARMUP_STEPS + QUICK_STEPS) * DT,
+                        help=f"simulated seconds of the plain call (default one period, "
+                             f"{PLAIN_DURATION} s)")
     parser.add_argument("--presets", default="paper", quick="paper",
                         help="comma list of paper (fixed 1-ms Euler steps, the B sweep) and "
                              "accurate (adaptive, simulate end to end at the same B)")
@@ -604,7 +611,7 @@ def run_bench(args) -> pd.DataFrame:
     if args.plain_call and not gpu:
         add({"section": "plain", "scenario": "all_terms", "preset": "paper",
              "batch_size": args.process_batch, "precision": "f64",
-             **measure_plain(args.process_batch, args.steps, args.repeats)})
+             **measure_plain(args.process_batch, args.plain_duration, args.repeats)})
     for workers in args.workers_list:
         for jacobian in args.jacobians:
             figures = measure_processes(args.process_batch, workers, jacobian, args.steps,

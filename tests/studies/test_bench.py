@@ -30,8 +30,10 @@ def test_bench_quick(tmp_path):
     assert len(table) == len(batch) + len(skip) + 1  # --quick: no cache-probe rows
     # the plain call is simulate() with the default solver: its iterations are those of the
     # same call made here
-    default = taichi_star.simulate([StarParams(gait=bench.GAIT)] * int(plain["batch_size"].iloc[0]),
-                                   (bench.WARMUP_STEPS + int(plain["steps"].iloc[0])) * bench.DT)
+    batch_size = int(plain["batch_size"].iloc[0])
+    default = taichi_star.simulate(
+        [StarParams(gait=bench.PAPER_GAITS[i % 5]) for i in range(batch_size)],
+        int(plain["steps"].iloc[0]) * bench.DT)
     assert plain["jacobian"].iloc[0] == taichi_star.SolverConfig().jacobian
     assert plain["newton_iterations_mean"].iloc[0] == pytest.approx(
         default.summary["newton_iterations_mean"].mean(), rel=1e-12)
