@@ -286,14 +286,16 @@ class BatchEngine:
     @ti.func
     def advance_instance(self, b, step_number):
         """Advance instance b to step_number: one step (with the integrator's history when it
-        has one); if it fails, redo it from the saved start state as 2, 4, ...
-        2^max_substep_halvings substeps without history; if those fail too, freeze the instance
+        has one); if it fails, the same step without history (Newton from q_k + h·v_k, implicit
+        Euler), then from the saved start state 2, 4, ... 2^max_substep_halvings substeps
+        without history; if those fail too, freeze the instance
         at the start state with its status and failure step. One call site of `solve_step`
         keeps the kernel (and its compile time) small."""
         self.fire_schedule(b, step_number)
         dt = self.dt[None]
         converged, finite = 0, 1
         halvings = 0
+        history = self.state.history_valid[b]
         while converged == 0 and halvings <= self.max_substep_halvings[None]:
             if halvings == 1:
                 # a failed solve_step has restored the start state: keep it for later attempts
@@ -304,7 +306,7 @@ class BatchEngine:
                 self.restore_backup(b)
             substeps = 1 << halvings
             h = dt / substeps
-            use_history = halvings == 0 and self.state.history_valid[b] == 1
+            use_history = halvings == 0 and history == 1
             converged = 1
             substep = 0
             while converged == 1 and substep < substeps:
@@ -312,7 +314,12 @@ class BatchEngine:
                 converged, finite = self.solve_step(b, first * h, (first + 1) * h, h, 1.0, use_history, 0)
                 substep += 1
             if converged == 0:
-                halvings += 1
+                if use_history:
+                    # the carried acceleration can be a poor start where the forcing jumps (a
+                    # firing): the whole step again from q_k + h·v_k before any substeps
+                    history = 0
+                else:
+                    halvings += 1
         self.state.history_valid[b] = 1 if converged == 1 and halvings == 0 else 0
         if halvings > 0:
             self.state.substep_retries[b] = self.state.substep_retries[b] + 1

@@ -291,3 +291,15 @@ def test_newton_stops_within_newton_tol_of_the_step_solution():
             positions[-1], velocities[-1], 0.1)
     assert np.abs(solved[1e-8][0] - solved[1e-14][0]).max() <= 1e-8
     assert solved[1e-8][2] < solved[1e-14][2]
+
+
+def test_a_step_failing_from_the_carried_acceleration_is_redone_from_the_plain_start():
+    """A stiff (E ×100), heavily added-mass robot at a 0.3-s period (a case of the stability
+    grid): at one step the start q_k + h(2v_k − v_{k−1}) lets Newton run out of its 25
+    iterations. The step is redone whole from q_k + h·v_k, which converges: no substep retries (there was one before the plain retry existed), and the
+    25-iteration failure shows in newton_iterations_max, so the path was taken."""
+    params = ts.StarParams(gait="A1", youngs_modulus=5e8, added_mass_coeff=5, period=0.3)
+    summary = ts.simulate([params], 0.6, ts.SolverConfig(dt=0.5e-3)).summary.iloc[0]
+    assert summary.status == "ok"
+    assert summary.newton_iterations_max == 25
+    assert summary.substep_retries == 0
