@@ -332,6 +332,28 @@ def measure_bandwidth(arch: str, precision: str) -> float:
     return 2 * BANDWIDTH_BYTES / best / 1e9
 
 
+def best_of_calls(call, repeats: int, warmup=None):
+    """The result of `call()` and the best wall time (s) of `repeats` calls after an untimed
+    `warmup()` (default: `call()`) that starts and compiles what they need. Raises if an instance
+    failed (the timing would not be valid)."""
+    (warmup or call)()
+    timed = math.inf
+    for _ in range(repeats):
+        start = time.perf_counter()
+        result = call()
+        timed = min(timed, time.perf_counter() - start)
+    if (result.summary["status"] != "ok").any():
+        raise RuntimeError("an instance failed during the benchmark: its timing is not valid")
+    return result, timed
+
+
+def end_to_end_figures(result, robot_steps: float, timed: float) -> dict:
+    """Throughput columns of an end-to-end call that advanced robot_steps in timed s."""
+    rate = robot_steps / timed
+    return {"newton_iterations_mean": float(result.summary["newton_iterations_mean"].mean()),
+            "robot_steps_per_s": rate, "real_time_factor": rate * DT, "step_us": 1e6 / rate}
+
+
 def measure_processes(batch: int, workers: int, jacobian: str, steps: int, repeats: int) -> dict:
     """End-to-end throughput of `run_batch` on `workers` local worker processes, one chunk each
     (f64, CPU): the best of `repeats` calls of WARMUP_STEPS + steps steps from rest, after one
@@ -341,21 +363,11 @@ def measure_processes(batch: int, workers: int, jacobian: str, steps: int, repea
     solver = bench_solver("f64", jacobian)
     duration = (WARMUP_STEPS + steps) * DT
     chunk = math.ceil(batch / workers)
-    timed = math.inf
     with LocalProcesses(workers) as executor:
-        run_batch(params, duration, solver=solver, chunk_size=chunk, executor=executor)
-        for _ in range(repeats):
-            start = time.perf_counter()
-            result = run_batch(params, duration, solver=solver, chunk_size=chunk,
-                               executor=executor)
-            timed = min(timed, time.perf_counter() - start)
-    if (result.summary["status"] != "ok").any():
-        raise RuntimeError("an instance failed during the benchmark: its timing is not valid")
-    robot_steps = batch * (WARMUP_STEPS + steps) / timed
+        result, timed = best_of_calls(lambda: run_batch(
+            params, duration, solver=solver, chunk_size=chunk, executor=executor), repeats)
     return {"gait": GAIT, "jacobian": jacobian, "workers": workers,
-            "newton_iterations_mean": float(result.summary["newton_iterations_mean"].mean()),
-            "robot_steps_per_s": robot_steps, "real_time_factor": robot_steps * DT,
-            "step_us": 1e6 / robot_steps}
+            **end_to_end_figures(result, batch * (WARMUP_STEPS + steps), timed)}
 
 
 def measure_plain(batch: int, duration: float, repeats: int) -> dict:
@@ -363,19 +375,12 @@ def measure_plain(batch: int, duration: float, repeats: int) -> dict:
     the default SolverConfig, in this process: the five Fig. 4c gaits repeated to `batch`
     instances from rest, the best of `repeats` calls after one that compiles the engine."""
     params = [StarParams(gait=PAPER_GAITS[i % len(PAPER_GAITS)]) for i in range(batch)]
-    simulate(params, DT)
-    timed = math.inf
-    for _ in range(repeats):
-        start = time.perf_counter()
-        result = simulate(params, duration)
-        timed = min(timed, time.perf_counter() - start)
-    if (result.summary["status"] != "ok").any():
-        raise RuntimeError("an instance failed during the benchmark: its timing is not valid")
-    robot_steps = batch * round(duration / DT) / timed
-    return {"gait": "paper_gaits", "jacobian": SolverConfig().jacobian, "workers": 1, "n_nodes": result.topology.n_nodes, "steps": round(duration / DT),
-            "newton_iterations_mean": float(result.summary["newton_iterations_mean"].mean()),
-            "robot_steps_per_s": robot_steps, "real_time_factor": robot_steps * DT,
-            "step_us": 1e6 / robot_steps}
+    steps = round(duration / DT)
+    result, timed = best_of_calls(lambda: simulate(params, duration), repeats,
+                                  warmup=lambda: simulate(params, DT))
+    return {"gait": "paper_gaits", "jacobian": SolverConfig().jacobian, "workers": 1,
+            "n_nodes": result.topology.n_nodes, "steps": steps,
+            **end_to_end_figures(result, batch * steps, timed)}
 
 
 def phase_split(engine, batch, time_s, iteration_s, profile_seconds) -> dict:
