@@ -555,8 +555,10 @@ def output_names(arch: str):
     return f"{stem}.csv", f"{stem}.png"
 
 
-def run_bench(args) -> pd.DataFrame:
-    """Every measurement of the parsed arguments as one table (columns `COLUMNS`)."""
+def run_bench(args, on_table=None) -> pd.DataFrame:
+    """Every measurement of the parsed arguments as one table (columns `COLUMNS`);
+    `on_table(table)`, if given, receives the table so far after every measurement (so that a
+    run stopped by a time limit keeps what it measured)."""
     base = {**provenance.machine_columns(args.arch), "arch": args.arch, "dt_s": DT,
             "warmup_steps": WARMUP_STEPS, "steps": args.steps,
             "repeats": args.repeats, "commit": provenance.short_commit(),
@@ -566,6 +568,8 @@ def run_bench(args) -> pd.DataFrame:
 
     def add(row):
         rows.append({**base, **row, "timestamp": timestamp()})
+        if on_table is not None:
+            on_table(pd.DataFrame(rows).reindex(columns=COLUMNS))
         if not args.no_progress:
             row = rows[-1]
             print(f"  {row['section']:<7} {row['scenario']:<12} {row.get('preset', ''):<8} "
@@ -715,7 +719,7 @@ def main(argv=None):
     out = cli.Output(args, argv or [], model={"gait": GAIT, "scenarios": SCENARIOS},
                      solver={precision: bench_solver(precision) for precision in args.precisions})
     csv_name, png_name = output_names(args.arch)
-    table = run_bench(args)
+    table = run_bench(args, on_table=lambda partial: out.write_csv(partial, csv_name))
     csv_path = out.write_csv(table, csv_name)
     out.wrote(plot_bench(csv_path, out.path(png_name)))
     out.report()

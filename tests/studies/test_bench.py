@@ -9,15 +9,26 @@ import pytest
 import taichi_star
 from taichi_star import StarParams
 
-from studies import bench, work_precision
+from studies import bench, cli, work_precision
 from studies.__main__ import main as studies_main
 
 
-def test_bench_quick(tmp_path):
+def test_bench_quick(tmp_path, monkeypatch):
+    written = []  # the row counts of every bench.csv written, in order
+    write_csv = cli.Output.write_csv
+
+    def recording_write_csv(output, frame, name, extra=None):
+        written.append(len(frame))
+        return write_csv(output, frame, name, extra)
+
+    monkeypatch.setattr(cli.Output, "write_csv", recording_write_csv)
     bench.main(["--quick", "--no-progress", "--out", str(tmp_path),
                 "--kernel-optimisation", "off,on"])
     table = pd.read_csv(tmp_path / "bench.csv")
     assert list(table.columns) == bench.COLUMNS
+    # the table is rewritten after every measurement (a run stopped by a time limit keeps
+    # what it measured), then once whole
+    assert written == [*range(1, len(table) + 1), len(table)]
     # Taichi's IR optimisation passes change the speed, never the bits: every batch size ends
     # in the same state with them on and off (the faster-compiling default loses nothing)
     by_setting = table[table["section"] == "batch"].groupby("kernel_optimisation")
