@@ -30,7 +30,7 @@ import pandas as pd
 
 from taichi_star import PRESETS, SolverConfig, StarParams
 from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, executor_for,
-                               stored_chunk_size)
+                               stored_chunk_size, write_atomic)
 from taichi_star.experiment import PAPER_GAITS
 from taichi_star.gait import Gait
 from taichi_star.output import column_unit, column_units
@@ -452,9 +452,10 @@ class Output:
         return path
 
     def write_csv(self, frame: pd.DataFrame, name: str, extra: Optional[Mapping] = None) -> Path:
-        """Write a table (no index, floats to 10 significant digits) and its JSON sidecar."""
+        """Write a table (no index, floats to 10 significant digits) and its JSON sidecar, each
+        whole or not at all (a kill or a full disk leaves the previous files)."""
         path = self.path(name)
-        frame.to_csv(path, index=False, float_format="%.10g")
+        write_atomic(path, frame.to_csv(index=False, float_format="%.10g").encode())
         return self._described(path, extra, frame)
 
     def write_parquet(self, frame: pd.DataFrame, name: str,
@@ -472,7 +473,9 @@ class Output:
         table = pa.Table.from_pandas(frame, preserve_index=False)
         metadata = {**(table.schema.metadata or {}),
                     b"taichi_star": json.dumps(self._details(extra), default=str).encode()}
-        pq.write_table(table.replace_schema_metadata(metadata), path)
+        sink = pa.BufferOutputStream()
+        pq.write_table(table.replace_schema_metadata(metadata), sink)
+        write_atomic(path, sink.getvalue().to_pybytes())
         return self._described(path, extra, frame)
 
     def _details(self, extra: Optional[Mapping]) -> dict:

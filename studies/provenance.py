@@ -17,7 +17,7 @@ import subprocess
 from pathlib import Path
 from typing import Dict, Mapping, Optional, Sequence
 
-from taichi_star.batch import code_version
+from taichi_star.batch import code_version, write_atomic
 
 
 def cpu_model() -> str:
@@ -114,8 +114,8 @@ def sidecar_path(table_path) -> Path:
 
 
 def write_sidecar(table_path, provenance: Mapping) -> Path:
-    """Write `<table>.json` beside a table and return its path."""
+    """Write `<table>.json` beside a table (whole or not at all) and return its path."""
     path = sidecar_path(table_path)
-    path.write_text(json.dumps(provenance, indent=2, default=repr) + "\n")
+    write_atomic(path, (json.dumps(provenance, indent=2, default=repr) + "\n").encode())
     return path
 

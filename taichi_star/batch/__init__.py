@@ -9,16 +9,18 @@
 - Executors: `InProcess` (default), `LocalProcesses(n)`, and on Dask `DaskExecutor`
   (`taichi_star.batch.dask_cluster`, with the worker preload `taichi_star.batch.dask_worker`);
   `executor_for(workers=..., scheduler=...)` picks one.
-- `RunStore`: resumable runs (verified Parquet chunks and a manifest); `RunStoreError`.
+- `RunStore`: resumable runs (verified Parquet chunks and a manifest); `RunStoreError`;
+  `write_atomic`, how it writes every file (whole or not at all).
 
 Dask is imported only when a scheduler is used.
 """
 
 from .executors import DEFAULT_RETRIES, Executor, InProcess, LocalProcesses
 from .run import DEFAULT_CHUNK_SIZE, executor_for, run_batch
-from .store import RunStore, RunStoreError, code_version, stored_chunk_size
+from .store import RunStore, RunStoreError, code_version, stored_chunk_size, write_atomic
 from .tasks import ChunkResult, ChunkTask, plan_chunks, run_chunk
 
 __all__ = ["run_batch", "plan_chunks", "run_chunk", "ChunkTask", "ChunkResult", "Executor",
            "InProcess", "LocalProcesses", "executor_for", "RunStore", "RunStoreError",
-           "code_version", "stored_chunk_size", "DEFAULT_CHUNK_SIZE", "DEFAULT_RETRIES"]
+           "code_version", "stored_chunk_size", "write_atomic", "DEFAULT_CHUNK_SIZE",
+           "DEFAULT_RETRIES"]

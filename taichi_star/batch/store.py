@@ -145,7 +145,10 @@ def _decode(frame: pd.DataFrame, types: Dict[str, str]) -> pd.DataFrame:
     return frame
 
 
-def _write_atomic(path: Path, data: bytes):
+def write_atomic(path, data: bytes):
+    """Write `data` to `path` whole or not at all: into a temporary file beside it, flushed to
+    disk, then renamed over it; a kill or a full disk leaves any previous file untouched."""
+    path = Path(path)
     temporary = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     try:
         with open(temporary, "wb") as handle:
@@ -243,7 +246,7 @@ class RunStore:
         return done
 
     def _write_manifest(self):
-        _write_atomic(self.path / MANIFEST,
+        write_atomic(self.path / MANIFEST,
                       json.dumps(self.manifest, indent=2, sort_keys=True).encode())
 
     def write(self, task: ChunkTask, summary: pd.DataFrame) -> Path:
@@ -258,7 +261,7 @@ class RunStore:
         sink = pa.BufferOutputStream()
         pq.write_table(table, sink)
         path = self.chunk_path(task.index)
-        _write_atomic(path, sink.getvalue().to_pybytes())
+        write_atomic(path, sink.getvalue().to_pybytes())
         return path
 
     def _load(self, task: ChunkTask) -> pd.DataFrame:

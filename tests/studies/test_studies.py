@@ -350,3 +350,26 @@ def test_symmetry_reduction_is_exact():
         assert Gait.parse(source).transform(*mapping).name == gait
         assert abs(gaits_study.wrap_degrees(
             gaits_study.transform_direction(travel.iloc[0], *mapping) - direction)) < 1e-4
+
+
+def test_a_failed_table_write_leaves_the_previous_table_and_sidecar(tmp_path, monkeypatch):
+    """A study's table and sidecar are written whole or not at all: a write that fails (a full
+    disk at the rename) leaves the previous table and its provenance readable and equal."""
+    from types import SimpleNamespace
+
+    from taichi_star.batch import store
+
+    out = cli.Output(SimpleNamespace(study="fig4c", out=str(tmp_path), quick=False), [])
+    first = pd.DataFrame({"alpha": [0.4, 0.8], "speed_mm_s": [1.25, 2.5]})
+    path = out.write_csv(first, "table.csv")
+    sidecar = (tmp_path / "table.csv.json").read_text()
+
+    def full_disk(source, target):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(store.os, "replace", full_disk)
+    with pytest.raises(OSError, match="No space left"):
+        out.write_csv(pd.DataFrame({"alpha": [0.1], "speed_mm_s": [9.0]}), "table.csv")
+    pd.testing.assert_frame_equal(pd.read_csv(path), first)
+    assert (tmp_path / "table.csv.json").read_text() == sidecar
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["table.csv", "table.csv.json"]

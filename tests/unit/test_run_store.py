@@ -512,3 +512,23 @@ def test_code_version_without_git_names_none(checkout, monkeypatch):
     monkeypatch.setattr(run_store.subprocess, "run", no_git)
     assert run_store.code_version() == {"version": ts.__version__, "commit": None,
                                         "dirty": None}
+
+
+def test_write_atomic_writes_whole_or_leaves_the_previous_file(tmp_path, monkeypatch):
+    """A write that fails before its rename (here: fsync reports a full disk) leaves the previous
+    file byte for byte and no temporary file beside it; one that succeeds replaces it whole."""
+    path = tmp_path / "table.csv"
+    run_store.write_atomic(path, b"a,b\n1,2\n")
+    assert path.read_bytes() == b"a,b\n1,2\n"
+
+    def full_disk(descriptor):
+        raise OSError(28, "No space left on device")
+
+    with monkeypatch.context() as patched:
+        patched.setattr(run_store.os, "fsync", full_disk)
+        with pytest.raises(OSError, match="No space left"):
+            run_store.write_atomic(path, b"a,b\n3,4\n5,6\n")
+    assert path.read_bytes() == b"a,b\n1,2\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["table.csv"]
+    run_store.write_atomic(path, b"a,b\n3,4\n")
+    assert path.read_bytes() == b"a,b\n3,4\n"
