@@ -132,8 +132,10 @@ def plot_sensitivity(csv_path, png_path) -> Path:
         ax.set_xticks(x, part["parameter"], rotation=35, ha="right", fontsize=8)
     axes[0, 0].legend(fontsize=7, ncol=2)
     samples = int(table["n_base_samples"].iloc[0])
+    settings = cli.run_settings(csv_path)
     axes[0, 0].set_title(f"Sobol indices of the signed speed (N = {samples} base samples, "
-                         f"bars: 95 % confidence)", fontsize=9)
+                         f"bars: 95 % confidence)" + (f"\n{settings}" if settings else ""),
+                         fontsize=9)
     fig.tight_layout()
     fig.savefig(png_path, dpi=130)
     plt.close(fig)
