@@ -10,7 +10,8 @@
 #   correctness  the engine-vs-reference, determinism and GPU-vs-CPU tests with --arch gpu, and
 #                the Fig. 4c study on the GPU compared with results/fig4c.csv (CPU)
 #   layouts      the layout and block-size alternatives at B = 8192 (paper, f64, Newton)
-#   bench        the full GPU benchmark into $OUT (results/bench_gpu.csv when committed)
+#   bench        the GPU benchmark into $OUT (results/bench_gpu.csv when committed), one part
+#                per call: PRESETS=paper|accurate, PRECISIONS=f64|f32, SIZES=..., LIMIT=seconds
 # Everything it writes is packed into $OUT/PHASE.tar.gz (the device returns few files).
 set -o pipefail
 phase=${1:?phase}
@@ -44,15 +45,19 @@ layouts)
         --out "$work/layouts" 2>&1 | tee "$work/layouts.log"
     ;;
 bench)
-    python3 -m studies bench --arch gpu --batch-sizes "${SIZES:-256,1024,4096,8192,16384,32768}" \
-        --precisions "${PRECISIONS:-f64,f32}" --presets paper,accurate \
-        --scenarios "${SCENARIOS:-all_terms,alpha_0,drag_0}" \
-        --scenario-batch 8192 --workers-list none --no-cache-probe \
-        --out "$work/bench" 2>&1 | tee "$work/bench.log"
+    # one call of the device tool runs at most 10 minutes: the paper sweep of 7 sizes in one
+    # precision (Newton and chord) took about 4 minutes on an H100, the accurate preset about
+    # 2.5 minutes per size at B = 65,536 (compile, an untimed and a timed period); bench rewrites
+    # its table after every measurement, so a run stopped by `timeout` keeps what it measured
+    timeout "${LIMIT:-540}" python3 -m studies bench --arch gpu \
+        --batch-sizes "${SIZES:-256,1024,4096,8192,16384,32768,65536}" \
+        --precisions "${PRECISIONS:-f64}" --presets "${PRESETS:-paper}" \
+        --scenarios "${SCENARIOS:-none}" --scenario-batch 8192 --workers-list none \
+        --no-cache-probe --no-plain-call --out "$work/bench" 2>&1 | tee "$work/bench.log"
     ;;
 *)
     echo "unknown phase $phase"; exit 2 ;;
 esac
 status=$?
-tar -czf "$OUT/$phase${PRECISIONS:+_${PRECISIONS//,/_}}.tar.gz" -C "$work" .
+tar -czf "$OUT/$phase${PRESETS:+_${PRESETS//,/_}}${PRECISIONS:+_${PRECISIONS//,/_}}.tar.gz" -C "$work" .
 exit $status
