@@ -247,7 +247,7 @@ class RunStore:
 
     def _write_manifest(self):
         write_atomic(self.path / MANIFEST,
-                      json.dumps(self.manifest, indent=2, sort_keys=True).encode())
+                     json.dumps(self.manifest, indent=2, sort_keys=True).encode())
 
     def write(self, task: ChunkTask, summary: pd.DataFrame) -> Path:
         """Store one finished chunk's summary (atomically)."""

@@ -6,6 +6,7 @@ packaged experiment data."""
 import json
 import math
 import os
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -13,6 +14,7 @@ import pytest
 
 import taichi_star
 from taichi_star import SolverConfig, StarParams
+from taichi_star.batch import store
 from taichi_star.gait import Gait, symmetry_classes
 from taichi_star.experiment import (FIG4C_COLUMNS, PAPER_DIRECTIONS, PAPER_GAITS,
                                     compare_with_experiment, experimental_speed,
@@ -355,10 +357,6 @@ def test_symmetry_reduction_is_exact():
 def test_a_failed_table_write_leaves_the_previous_table_and_sidecar(tmp_path, monkeypatch):
     """A study's table and sidecar are written whole or not at all: a write that fails (a full
     disk at the rename) leaves the previous table and its provenance readable and equal."""
-    from types import SimpleNamespace
-
-    from taichi_star.batch import store
-
     out = cli.Output(SimpleNamespace(study="fig4c", out=str(tmp_path), quick=False), [])
     first = pd.DataFrame({"alpha": [0.4, 0.8], "speed_mm_s": [1.25, 2.5]})
     path = out.write_csv(first, "table.csv")
