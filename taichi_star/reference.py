@@ -575,9 +575,10 @@ class ReferenceSimulator:
         t s. Returns: (q_new (N, 2), v_new (N, 2) the integrator's velocity at q_new, Newton
         iterations).
         Converged when the error left after an update, max|Δq| or, once the updates contract by
-        θ = max|Δq_k|/max|Δq_{k−1}| < 1, θ/(1 − θ)·max|Δq_k| if smaller, is <= newton_tol and the residual before that update has
-        max|r| <= residual_tol (when it is set). Raises NewtonDidNotConverge if not after max_newton iterations,
-        or if a non-finite value appears.
+        θ = max|Δq_k|/max|Δq_{k−1}| < 1, θ/(1 − θ)·max|Δq_k| if smaller, is <= newton_tol and
+        the residual before that update has max|r| <= residual_tol (when it is set). Raises
+        NewtonDidNotConverge if not after max_newton iterations, or if a non-finite value
+        appears.
         """
         h = self.solver.dt if dt is None else dt
         q = np.asarray(q, dtype=np.float64)
