@@ -72,6 +72,8 @@ class BatchEngine:
                       for name, values in coefficients.items()}
             self.terms.append(cls(self, configuration, shapes))
         for term in self.terms:
+            term.reshapers = [other for other in self.terms if term.name in other.reshapes]
+        for term in self.terms:
             self.state.term_histories.update(
                 {f"{term.name}.{name}": field for name, field in term.history_fields().items()})
         arena.finalize()
@@ -374,42 +376,56 @@ class BatchEngine:
         """Advance instance b towards its stop_time (s) by steps of its own size, at most
         max_steps attempts. Each step ends exactly on the stop, on the next cycle start of its
         periodic gait or on a commanded firing time if it would pass them (the firing happens
-        there: the step ending at the firing time sees K̄(0));
+        there: the step ending at the firing time sees K̄(0), and is at most dt long);
         a converged step is accepted when its local error estimate (m, `first_order_error`, for
         both integrators: BDF2's own error is smaller) is within error_tol, else redone from the
-        start state with the step shrunk; the next step grows or shrinks by 0.9·√(tol/error)
-        within [0.2, 2] and [dt_min, dt_max]. A step that fails to converge is
-        retried at a quarter of its size down to dt_min, then the instance fails."""
+        start state with the step shrunk (by a further √2 when the redo loses BDF2's history);
+        the next step grows or shrinks by 0.9·√(tol/error) within [0.2, 2] and
+        [dt_min, dt_max]. A step that fails to converge is retried at a quarter of its size down
+        to dt_min, then the instance fails."""
         attempts = 0
         tol = self.error_tol[None]
+        first_step = self.dt[None]
         dt_min, dt_max = self.dt_min[None], self.dt_max[None]
         stop_time = self.state.stop_time[b]
         while self.state.status[b] == STATUS_OK and self.state.time[b] < stop_time and attempts < max_steps:
             attempts += 1
             start = self.state.time[b]
             proposed = ti.min(self.state.step_size[b], dt_max)
-            # the next stop: stop_time, or the next cycle start of the periodic gait
+            # the next stop: stop_time, or the next cycle start of the periodic gait, or a
+            # commanded firing before it
             target = stop_time
             cycle_start = -1.0
+            firing = 0
             if self.state.schedule_period[b] > 0.0:
                 boundary = self.state.schedule_period[b] * (self.state.schedule_cycles[b] + 1)
                 if boundary <= target:
                     target = boundary
                     cycle_start = boundary
+                    firing = 1
             for m in range(N_ACTUATORS):
                 due = self.state.scheduled_fire_time[b, m]
-                if due > start and due < target:
-                    target = due
-                    cycle_start = -1.0
-            # land on it exactly; never leave a sliver under a quarter step before it (split
-            # the rest in two instead): a rejected step then always shrinks
+                if due > start and due <= target:
+                    if due < target:
+                        target = due
+                        cycle_start = -1.0
+                    firing = 1
+            # a firing makes the forcing jump within the step that ends on it: that step is at
+            # most dt long (as a run's first step), so the steps before it end dt short of it
+            # (or halfway there)
+            limit = target
+            if firing == 1 and target - start > first_step:
+                limit = ti.max(target - first_step, start + 0.5 * (target - start))
+            # land on the limit exactly; never leave a sliver under a quarter step before it
+            # (split the rest in two instead): a rejected step then always shrinks
             end = start + proposed
-            if end >= target:
-                end = target
-            elif target - end < 0.25 * proposed:
-                end = start + 0.5 * (target - start)
+            if end >= limit:
+                end = limit
+            elif limit - end < 0.25 * proposed:
+                end = start + 0.5 * (limit - start)
             if end != target:
                 cycle_start = -1.0
+                firing = 0
             h = end - start
             for m in range(N_ACTUATORS):
                 if cycle_start >= 0.0 and self.state.schedule_mask[b, m] != 0:
@@ -437,9 +453,10 @@ class BatchEngine:
                 growth = 2.0
                 if error > 0.0:
                     growth = ti.min(2.0, ti.max(0.2, 0.9 * ti.sqrt(tol / error)))
-                # a step cut short to land on a stop says little about the size that fits
+                # a step cut short to land on a stop says little about the size that fits,
+                # unless the forcing jumped at its end (a firing)
                 basis = h
-                if h < proposed and growth >= 1.0:
+                if h < proposed and growth >= 1.0 and firing == 0:
                     basis = proposed
                 self.state.step_size[b] = ti.min(dt_max, ti.max(dt_min, basis * growth))
             else:
@@ -449,6 +466,11 @@ class BatchEngine:
                     for n in range(self.n_nodes):
                         self.state.positions[b, n] = self.state.previous[b, n]
                         self.state.velocities[b, n] = self.state.previous_velocities[b, n]
+                    # the retry has no history: with BDF2 it is an implicit Euler step, whose
+                    # estimate at a given size is about twice that of a BDF2 step (h²q'' against
+                    # ½h²q''), so it shrinks by a further √2
+                    if ti.static(self.integrator.order == 2) and use_history == 1:
+                        error *= 2.0
                     self.state.step_size[b] = ti.max(dt_min, h * ti.max(0.2, 0.9 * ti.sqrt(tol / error)))
                 elif h > dt_min:
                     self.state.step_size[b] = ti.max(dt_min, 0.25 * h)

@@ -262,7 +262,8 @@ class SolverConfig:
     is declared failed; 0 disables retries; [0, 10]. (Fixed steps only.)"""
     adaptive: bool = False
     """Adaptive stepping: each instance chooses its own step size from a local error estimate
-    (dt is then the first step's size); steps land exactly on record times and cycle starts."""
+    (dt is then the first step's size, and the largest of a step that ends on a firing, where
+    the actuation jumps); steps land exactly on record times, cycle starts and firings."""
     error_tol: float = 1e-7
     """Adaptive stepping: largest local error per step of any node position, m; [1e-12, 1e-3]."""
     dt_min: float = 1e-6

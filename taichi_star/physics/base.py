@@ -14,11 +14,16 @@ Its class owns everything about it:
 - on the device, an instance of the class (a `ti.data_oriented` object) holds those coefficients
   and histories in fields with a leading batch axis and assembles itself in `assemble`.
 
+A term may instead act on the elements of other terms (`reshapes`): a term whose element energy
+is ½·k·(s − s⁰)² in a strain s passes (k, s⁰) through `reshaped`, and every term that reshapes
+it returns the stiffness and target of the element's combined energy. The material damping does
+this (its pseudo-energy has the elastic form), so each element is evaluated and scattered into
+the Jacobian once, not once per term.
+
 The engine never names a coefficient: it loads whatever `coefficients` returned into fields of
 the same names and shapes.
 """
 
-from __future__ import annotations
 
 from typing import ClassVar, Dict, Optional, Sequence, Tuple
 
@@ -50,6 +55,8 @@ class Term:
     and implement `assemble` as a `@ti.func`."""
 
     name: ClassVar[str]
+    reshapes: ClassVar[Tuple[str, ...]] = ()
+    """Names of the terms whose element energies this term reshapes (`reshape`)."""
 
     @staticmethod
     def coefficients(params: Sequence, topologies: Sequence, topology) -> Dict[str, np.ndarray]:
@@ -86,6 +93,8 @@ class Term:
         self.coefficient_names = tuple(coefficient_shapes)
         for name, (shape, dtype) in coefficient_shapes.items():
             setattr(self, name, engine.arena.batch_field(dtype, (capacity,) + tuple(shape)))
+        self.reshapers = []
+        """The engine's terms that reshape this term's elements (set by the engine)."""
         self.history_names = tuple(self.history(engine.topology))
         for name, shape in self.history(engine.topology).items():
             setattr(self, name, engine.arena.batch_field(float, (capacity,) + tuple(shape)))
@@ -107,3 +116,23 @@ class Term:
         """Update the term's history at the start of a step of size h (s) from start_time to
         end_time, before the predictor moves the positions (a no-op by default)."""
         pass
+
+    @ti.func
+    def assemble(self, b, rate_gain, jacobian):
+        """Add the term's residual (and, if `jacobian`, its Jacobian blocks) at the current
+        iterate of instance b (a no-op for a term that only reshapes others)."""
+        pass
+
+    @ti.func
+    def reshape(self, b, term: ti.template(), element, stiffness, target, rate_gain):
+        """For a term named in `reshapes`: (stiffness, target) of element `element` of `term`
+        (instance b) → those of the element's energy with this term's added."""
+        return stiffness, target
+
+    @ti.func
+    def reshaped(self, b, element, stiffness, target, rate_gain):
+        """(stiffness, target) of this term's element `element` after every term that reshapes
+        it (unchanged when none does)."""
+        for reshaper in ti.static(self.reshapers):
+            stiffness, target = reshaper.reshape(b, self, element, stiffness, target, rate_gain)
+        return stiffness, target

@@ -209,8 +209,9 @@ class Bending(Term):
     def assemble(self, b, rate_gain, jacobian):
         for t in range(self.n_triplets):
             i, j, k, edge1, edge2 = self.edges_of(b, t)
+            stiffness, natural = self.reshaped(b, t, self.bend_stiffness[b, t],
+                                               self.natural_curvature(b, t, 0), rate_gain)
             g1, g2, h11, h12, h22 = bend_gradient_hessian(
-                edge1, edge2, self.voronoi_length[b, t], self.natural_curvature(b, t, 0),
-                self.bend_stiffness[b, t])
+                edge1, edge2, self.voronoi_length[b, t], natural, stiffness)
             self.engine.scatter_triplet(b, self.triplet_slot, t, i, j, k, g1, g2, h11, h12, h22,
                                         jacobian)

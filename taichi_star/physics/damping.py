@@ -7,21 +7,24 @@ ratio ζ = ωτ/2. The rate is the integrator's own: ṡ = γ·(s − s_k) + o, 
 o its offset from the history (implicit Euler: (s − s_k)/h; BDF2: (3s − 4s_k + s_{k−1})/(2h)).
 Since s_k and o are fixed during a step, f is the gradient of the pseudo-energy
 ½·τγ·k_s·(s − s*)², s* = s_k − o/γ: the same form as the elastic energy with stiffness τγ·k and a
-moving target, so it reuses the elastic element functions and its Jacobian is exact and
-symmetric. Without damping (τ = 0 everywhere) the term is compiled out.
+moving target. Added to the element's elastic energy ½·k_s·(s − s⁰)² it gives one energy of the
+same form, ½·k_s(1 + τγ)·(s − (s⁰ + τγ·s*)/(1 + τγ))² plus a constant, so the term reshapes the
+stretching and bending elements (`Term.reshapes`) rather than assembling its own: each element is
+evaluated and scattered once, and the Jacobian stays exact and symmetric. Without damping (τ = 0
+everywhere) the term is compiled out.
 """
 
 import numpy as np
 import taichi as ti
 
 from .base import Term
-from .bending import bend_gradient_hessian, turning_tangent
-from .stretching import stretch_gradient_hessian
+from .bending import turning_tangent
 
 
 @ti.data_oriented
 class MaterialDamping(Term):
     name = "damping"
+    reshapes = ("stretching", "bending")
 
     @staticmethod
     def coefficients(params, topologies, topology):
@@ -62,20 +65,13 @@ class MaterialDamping(Term):
             self.previous_bend[b, t] = excess
 
     @ti.func
-    def assemble(self, b, rate_gain, jacobian):
+    def reshape(self, b, term: ti.template(), element, stiffness, target, rate_gain):
+        # ½k(s − s⁰)² + ½ck(s − s*)² with c = τγ is ½k(1 + c)(s − (s⁰ + c·s*)/(1 + c))² plus a
+        # constant; the targets are kept as offsets from the elastic one
         viscosity = self.damping_time[b] * rate_gain
-        positions = ti.static(self.engine.state.positions)
-        for e in range(self.stretching.n_edges):
-            i, j = self.stretching.edges[e, 0], self.stretching.edges[e, 1]
-            gradient, hessian = stretch_gradient_hessian(
-                positions[b, j] - positions[b, i], self.stretching.rest_length[b, e],
-                viscosity * self.stretching.edge_stiffness[b, e], self.strain_target[b, e])
-            self.engine.scatter_edge(b, self.stretching.edge_slot, e, i, j, gradient, hessian, jacobian)
-        for t in range(self.bending.n_triplets):
-            i, j, k, edge1, edge2 = self.bending.edges_of(b, t)
-            g1, g2, h11, h12, h22 = bend_gradient_hessian(
-                edge1, edge2, self.bending.voronoi_length[b, t],
-                self.bending.natural_curvature(b, t, 0) + self.bend_target[b, t],
-                viscosity * self.bending.bend_stiffness[b, t])
-            self.engine.scatter_triplet(b, self.bending.triplet_slot, t, i, j, k, g1, g2, h11, h12,
-                                        h22, jacobian)
+        offset = 0.0
+        if ti.static(term.name == "stretching"):
+            offset = self.strain_target[b, element]
+        else:
+            offset = self.bend_target[b, element]
+        return stiffness * (1.0 + viscosity), target + viscosity * offset / (1.0 + viscosity)

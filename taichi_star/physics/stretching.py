@@ -57,7 +57,8 @@ class Stretching(Term):
     def assemble(self, b, rate_gain, jacobian):
         for e in range(self.n_edges):
             i, j = self.edges[e, 0], self.edges[e, 1]
+            stiffness, target = self.reshaped(b, e, self.edge_stiffness[b, e], 0.0, rate_gain)
             gradient, hessian = stretch_gradient_hessian(
                 self.engine.state.positions[b, j] - self.engine.state.positions[b, i],
-                self.rest_length[b, e], self.edge_stiffness[b, e], 0.0)
+                self.rest_length[b, e], stiffness, target)
             self.engine.scatter_edge(b, self.edge_slot, e, i, j, gradient, hessian, jacobian)

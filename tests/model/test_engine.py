@@ -276,6 +276,18 @@ def test_damping_is_compiled_out_and_changes_nothing_when_zero():
     assert mixed.speed_mm_s.iloc[1] != mixed.speed_mm_s.iloc[0]
 
 
+def test_damping_reshapes_the_elastic_elements_it_damps():
+    """The damping term adds nothing of its own to the assembly: it reshapes the stretching and
+    bending elements (one evaluation and one scatter per element; the engine = reference tests
+    above check the values), and only when it is compiled in."""
+    damped = ts.Simulator([ts.StarParams(damping_time=1e-3)]).engine
+    assert [term.name for term in damped.term("stretching").reshapers] == ["damping"]
+    assert [term.name for term in damped.term("bending").reshapers] == ["damping"]
+    assert all(term.reshapers == [] for term in damped.terms if term.name not in ("stretching", "bending"))
+    plain = ts.Simulator([ts.StarParams()]).engine
+    assert all(term.reshapers == [] for term in plain.terms)
+
+
 def test_newton_stops_within_newton_tol_of_the_step_solution():
     """The contraction estimate θ/(1 − θ)·|Δ_k| may stop Newton before an update is itself below
     newton_tol; the step must still be solved to newton_tol. One step inside the first heating
