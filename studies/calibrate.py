@@ -215,7 +215,7 @@ def cross_validate(box, base: StarParams, gaits: Sequence[str], weights: str,
                 "direction_matches": bool(np.sign(value) == np.sign(target)),
                 "status": point["status"] if point is not None else "fit_failed",
                 "fit_objective": objectives[position],
-                **{spec.name: (float(point[spec.name]) if point is not None else math.nan)
+                **{spec.column: (float(point[spec.column]) if point is not None else math.nan)
                    for spec in box}})
     return pd.DataFrame(rows), pd.concat(folds, ignore_index=True)
 
@@ -254,7 +254,8 @@ def draw_convergence(evaluations: pd.DataFrame, names: Sequence[str]):
     bottom.legend(fontsize=7, ncol=2)
     if finite.any():
         row = best_row(evaluations)
-        fitted = textwrap.fill(", ".join(f"{n} = {row[n]:.4g}" for n in names), width=100)
+        columns = StarParams.columns()
+        fitted = textwrap.fill(", ".join(f"{n} = {row[columns[n]]:.4g}" for n in names), width=100)
         top.set_title(f"CMA-ES calibration, best point:\n{fitted}\nobjective "
                       f"{row['objective']:.4g}, direction mismatches "
                       f"{int(row['n_direction_mismatches'])}", fontsize=8)
@@ -374,7 +375,7 @@ def main(argv=None):
         out.report()
         print("calibration: every candidate failed; no fit")
         return evaluations
-    best = {name: float(row[name]) for name in names}
+    best = {spec.name: float(row[spec.column]) for spec in box}
     calibrated = base.replace(**best)
     duration = cli.duration_s(args, calibrated.period)
     note = "calibrated (" + ", ".join(f"{n}={v:.3g}" for n, v in best.items()) + ")"
@@ -400,7 +401,7 @@ def best_point_table(row: pd.Series, box, table4c: pd.DataFrame, args, settings:
     all_directions_match) and the run's settings (duration_s and dt_s in s)."""
     record = {"evaluation": int(row["evaluation"]), "restart": int(row["restart"]),
               "generation": int(row["generation"]), "objective": float(row["objective"]),
-              **{spec.name: float(row[spec.name]) for spec in box}}
+              **{spec.column: float(row[spec.column]) for spec in box}}
     for _, gait_row in table4c.iterrows():
         gait = gait_row["gait"]
         record[f"signed_speed_{gait}"] = gait_row["sim_signed_speed_mm_s"]

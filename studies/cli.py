@@ -427,9 +427,11 @@ def run_settings(csv_path, mesh: bool = True) -> str:
 
 
 def axis_label(column: str) -> str:
-    """A plot axis label for a table column: its name with its unit, where it has one."""
+    """A plot axis label for a table column: its name with its unit, where it has one (a
+    parameter column by its field name: "youngs_modulus (Pa)")."""
     unit = column_unit(column)
-    return f"{column} ({unit})" if unit not in ("", "1") else column
+    fields = {column: name for name, column in StarParams.columns().items()}
+    return f"{fields.get(column, column)} ({unit})" if unit not in ("", "1") else column
 
 
 class Output:

@@ -74,6 +74,12 @@ class ParameterRange:
         return float(min(1.0, max(0.0, u)))
 
     @property
+    def column(self) -> str:
+        """The table column of the parameter's values (its name with its unit, e.g.
+        joint_radius_m)."""
+        return StarParams.columns()[self.name]
+
+    @property
     def spec(self) -> str:
         """The range as written on the command line, e.g. "cylinder_drag=1:100:log"."""
         return f"{self.name}={self.low:g}:{self.high:g}" + (":log" if self.log else "")
@@ -247,7 +253,7 @@ def evaluate_points(box: Sequence[ParameterRange], unit_points, base: StarParams
     wrong = ok & (np.sign(signed) != measurements["paper_sign"].to_numpy())
     table = pd.DataFrame({f"u_{s.name}": unit_points[:, d] for d, s in enumerate(box)})
     for d, spec in enumerate(box):
-        table[spec.name] = values[:, d]
+        table[spec.column] = values[:, d]
     table["objective"] = objective_values(signed, measurements)
     table["n_direction_mismatches"] = wrong.sum(axis=1)
     table["mismatched_gaits"] = [" ".join(np.asarray(gaits)[row]) for row in wrong]

@@ -18,11 +18,12 @@ coefficient a factor of about 2-3 either side of the paper's value, damping from
 the measured radii by a few millimetres and the thickness and masses by 10-30 %.
 
 Writes into `--out` (default a fresh `runs/sensitivity/<timestamp>/`), each table with its
-provenance sidecar: `sensitivity_samples.csv` (every point: unit coordinates and values),
-`sensitivity_runs.csv` (every instance: point, gait, signed speed, status), `sensitivity.csv`
-(gait, parameter, its range, S1, S1_conf, ST, ST_conf, n_failed) and `sensitivity.png` (bars
-drawn from `sensitivity.csv`). A failed instance makes its gait's indices NaN (Saltelli's
-estimators need every point); the count is in n_failed.
+provenance sidecar: `sensitivity_samples.csv` (every point: unit coordinates u_<name> and the
+values, in columns named with their unit), `sensitivity_runs.csv` (every instance: point, gait,
+signed speed, status), `sensitivity.csv` (gait, parameter, its range low–high in `unit`, S1,
+S1_conf, ST, ST_conf, n_failed) and `sensitivity.png` (bars drawn from `sensitivity.csv`). A
+failed instance makes its gait's indices NaN (Saltelli's estimators need every point); the count
+is in n_failed.
 
 Resumable: every finished chunk is stored, verified, in the run store (`--run-dir`, default
 `<out>/chunks/`); after a kill, the same command with `--out` of that run and `--resume` skips
@@ -39,6 +40,7 @@ import pandas as pd
 
 from taichi_star import SolverConfig
 from taichi_star.batch import run_batch
+from taichi_star.output import column_unit
 
 from . import cli, identify
 
@@ -192,8 +194,8 @@ def main(argv=None):
     params = identify.box_params(box, values, base, gaits)
     names = [spec.name for spec in box]
     sample_table = pd.DataFrame({f"u_{n}": units[:, d] for d, n in enumerate(names)})
-    for d, name in enumerate(names):
-        sample_table[name] = values[:, d]
+    for d, spec in enumerate(box):
+        sample_table[spec.column] = values[:, d]
     sample_table.insert(0, "point", np.arange(len(units)))
     out.write_csv(sample_table, "sensitivity_samples.csv")
     with cli.executor(args) as executor:
@@ -217,6 +219,7 @@ def main(argv=None):
     indices.insert(2, "low", [ranges[n].low for n in indices["parameter"]])
     indices.insert(3, "high", [ranges[n].high for n in indices["parameter"]])
     indices.insert(4, "log", [ranges[n].log for n in indices["parameter"]])
+    indices.insert(5, "unit", [column_unit(ranges[n].column) or "1" for n in indices["parameter"]])
     indices["n_base_samples"] = samples
     indices["n_instances"] = len(params)
     indices["cycles"] = args.cycles

@@ -82,7 +82,7 @@ QUICK_DURATION_S = 0.05
 
 RECORD_SPACING_S = 0.06
 
-PAPER = {"stiffness_factor": 1.0, "alpha": 0.8, "added_mass_coeff": 1.0, "period": 3.15}
+PAPER = {"stiffness_factor": 1.0, "alpha": 0.8, "added_mass_coeff": 1.0, "period_s": 3.15}
 """The paper's parameters within the grid."""
 
 SPEED_FLOOR_MM_S = 0.01
@@ -252,7 +252,7 @@ def outcome_summary(table: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-KEY = ["gait", "stiffness_factor", "alpha", "added_mass_coeff", "period", "dt_ms"]
+KEY = ["gait", "stiffness_factor", "alpha", "added_mass_coeff", "period_s", "dt_ms"]
 
 
 def _speed_difference(table: pd.DataFrame) -> pd.DataFrame:
@@ -446,7 +446,7 @@ def build_parser():
                         help="jet ratios")
     parser.add_argument("--added-mass", default=numbers(ADDED_MASS),
                         quick=numbers([PAPER["added_mass_coeff"]]), help="C_a values")
-    parser.add_argument("--periods", default=numbers(PERIODS), quick=numbers([PAPER["period"]]),
+    parser.add_argument("--periods", default=numbers(PERIODS), quick=numbers([PAPER["period_s"]]),
                         help="periods, s")
     parser.add_argument("--gaits", default=",".join(GAITS), quick=",".join(QUICK_GAITS),
                         help="gaits")

@@ -91,9 +91,10 @@ def sweep_axes(args) -> dict:
 
 
 def swept_parameters(table: pd.DataFrame):
-    """StarParams fields (other than gait) that take more than one value in a sweep table."""
-    return [name for name in StarParams.field_names()
-            if name != "gait" and name in table and table[name].nunique(dropna=False) > 1]
+    """{column: StarParams field} of the parameters (other than gait) that take more than one
+    value in a sweep table."""
+    return {column: name for name, column in StarParams.columns().items()
+            if name != "gait" and column in table and table[column].nunique(dropna=False) > 1}
 
 
 def plot_sweep(csv_path, out: cli.Output, prefix: str = "sweep"):
@@ -111,13 +112,14 @@ def plot_sweep(csv_path, out: cli.Output, prefix: str = "sweep"):
             if other == name:
                 continue
             values = selection[other].unique()
-            default = getattr(defaults, other)
+            default = getattr(defaults, swept[other])
             if isinstance(default, str):
                 pick = default if default in values else sorted(values)[0]
             else:
                 pick = values[np.argmin(np.abs(values.astype(float) - default))]
             selection = selection[selection[other] == pick]
-            held.append(f"{other}={pick:g}" if not isinstance(pick, str) else f"{other}={pick}")
+            field = swept[other]
+            held.append(f"{field}={pick:g}" if not isinstance(pick, str) else f"{field}={pick}")
         fig, axes = plt.subplots(1, 2, figsize=(10, 4))
         categorical = not pd.api.types.is_numeric_dtype(selection[name])
         categories = sorted(selection[name].unique()) if categorical else None
@@ -146,13 +148,13 @@ def plot_sweep(csv_path, out: cli.Output, prefix: str = "sweep"):
         axes[0].legend(fontsize=7)
         duration = table["duration_s"].iloc[0] if "duration_s" in table else math.nan
         settings = cli.run_settings(csv_path)
-        fig.suptitle(f"speed vs {name} over {duration:g} s from rest"
+        fig.suptitle(f"speed vs {swept[name]} over {duration:g} s from rest"
                      + (f"; {settings}" if settings else "")
                      + (f" ({', '.join(held)})" if held else "")
                      + ("; x = failed" if (selection["status"] != "ok").any() else ""),
                      fontsize=9)
         fig.tight_layout()
-        path = out.path(f"{prefix}_{name}.png")
+        path = out.path(f"{prefix}_{swept[name]}.png")
         fig.savefig(path, dpi=120)
         plt.close(fig)
         paths.append(path)

@@ -18,7 +18,7 @@ from .runtime import available_archs
 from .simulation import SimulationResult, simulate
 from .simulator import Simulator, SimulatorSnapshot
 
-__version__ = "0.2.0"
+__version__ = "0.3.0"
 
 __all__ = ["simulate", "SimulationResult", "Simulator", "SimulatorSnapshot", "available_archs", "StarParams", "STAR_RANGES", "SolverConfig", "PRESETS", "JACOBIANS",
            "CurvatureProfile", "Gait", "symmetry_classes", "__version__"]

@@ -10,24 +10,19 @@ import numpy as np
 import pandas as pd
 
 from .geometry import CENTRE
+from .params import PARAMETER_UNITS, StarParams, parameter_column
 
 UNITS = {"_per_wall_s": "1/s", "_per_s": "1/s", "_gb_s": "GB/s", "_mm_s": "mm/s", "_mm": "mm",
          "_deg": "degree", "_ms": "ms", "_us": "us", "_s": "s", "_m": "m"}
 """Units of result columns by name suffix, the first match counting (longer suffixes first)."""
-PARAMETER_UNITS = {
-    "alpha": "1", "added_mass_coeff": "1", "youngs_modulus": "Pa", "limb_stiffness_ratio": "1",
-    "drag_parallel": "1", "drag_perpendicular": "1", "cylinder_drag": "1", "period": "s",
-    "thickness": "m", "actuator_density": "kg/m^3", "foam_density": "kg/m^3",
-    "fluid_density": "kg/m^3", "cylinder_mass_per_height": "kg/m", "cylinder_diameter": "m",
-    "cylinder_added_mass_coeff": "1", "damping_time": "s", "joint_radius": "m",
-    "tip_radius": "m", "n_arc": "1", "n_limb": "1"}
-"""Units of the numeric StarParams fields (the summary's parameter columns)."""
+PARAMETER_COLUMN_UNITS = {parameter_column(name): unit for name, unit in PARAMETER_UNITS.items()}
+"""Units of the numeric parameter columns (youngs_modulus_pa: Pa, alpha: 1)."""
 
 
 def column_unit(name: str) -> str:
-    """The unit of a result column, from its suffix or the parameter table ("" if none)."""
-    if name in PARAMETER_UNITS:
-        return PARAMETER_UNITS[name]
+    """The unit of a result column, from the parameter columns or its suffix ("" if none)."""
+    if name in PARAMETER_COLUMN_UNITS:
+        return PARAMETER_COLUMN_UNITS[name]
     for suffix, unit in UNITS.items():
         if name.endswith(suffix):
             return unit
@@ -47,6 +42,7 @@ def to_xarray(result):
     import xarray as xr
 
     summary = result.summary.reset_index(drop=True)
+    parameter_columns = set(StarParams.columns().values())
     instances = np.arange(len(summary))
     coordinates = {"instance": instances}
     variables = {}
@@ -54,8 +50,7 @@ def to_xarray(result):
         values = summary[name].to_numpy()
         if values.dtype == object or pd.api.types.is_string_dtype(summary[name]):
             values = summary[name].astype(str).to_numpy()
-        if name in PARAMETER_UNITS or name in ("gait", "jet_mode", "actuation_ends",
-                                                 "joint_stiffness", "profile_closure"):
+        if name in parameter_columns and name != "actuator_profile":
             coordinates[name] = ("instance", values, {"units": column_unit(name)})
         elif name != "actuator_profile":
             variables[name] = ("instance", values, {"units": column_unit(name)})

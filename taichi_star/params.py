@@ -31,6 +31,25 @@ INTEGRATORS = ("euler", "bdf2")
 JACOBIANS = ("newton", "chord")
 PRESETS = ("paper", "accurate")
 
+PARAMETER_UNITS = {
+    "alpha": "1", "added_mass_coeff": "1", "youngs_modulus": "Pa", "limb_stiffness_ratio": "1",
+    "drag_parallel": "1", "drag_perpendicular": "1", "cylinder_drag": "1", "period": "s",
+    "thickness": "m", "actuator_density": "kg/m^3", "foam_density": "kg/m^3",
+    "fluid_density": "kg/m^3", "cylinder_mass_per_height": "kg/m", "cylinder_diameter": "m",
+    "cylinder_added_mass_coeff": "1", "damping_time": "s", "joint_radius": "m",
+    "tip_radius": "m", "n_arc": "1", "n_limb": "1"}
+"""Units of the numeric StarParams fields ("1": dimensionless or a count)."""
+UNIT_SUFFIXES = {"Pa": "_pa", "s": "_s", "m": "_m", "kg/m^3": "_kg_m3", "kg/m": "_kg_m"}
+"""Column-name suffix of each parameter unit (none for "1")."""
+
+
+def parameter_column(name: str) -> str:
+    """The table column of StarParams field `name`: the name with its unit as a suffix
+    (youngs_modulus_pa, period_s, joint_radius_m, fluid_density_kg_m3); dimensionless fields,
+    counts and texts keep their name."""
+    return name + UNIT_SUFFIXES.get(PARAMETER_UNITS.get(name, "1"), "")
+
+
 CONVERGED_DISCRETISATION = {"n_arc": 320, "n_limb": 6, "actuation_ends": "clamped"}
 """The converged discretisation, from `python -m studies convergence`: the five paper gaits'
 one-cycle speeds converge at first order in 1/n_arc, 8-19 % low at the paper's n_arc = 18 and
@@ -217,6 +236,36 @@ class StarParams:
     def numeric_field_names(cls):
         """The fields that take numbers (the ones a sweep or a fit can vary)."""
         return list(STAR_RANGES)
+
+    @classmethod
+    def columns(cls):
+        """{field name: table column} of every field (see `parameter_column`)."""
+        return {name: parameter_column(name) for name in cls.field_names()}
+
+    @classmethod
+    def from_row(cls, row, **overrides) -> "StarParams":
+        """The parameters of one row of a result table (a pandas Series or a mapping with the
+        parameter columns of `columns`, e.g. `result.summary.iloc[3]`), with some fields
+        changed. A row read back from a CSV holds the actuator profile as text: give
+        `actuator_profile` as an override, or the default profile is used only if the text is
+        the default's. Raises ValueError naming a missing column."""
+        values = {}
+        for name, column in cls.columns().items():
+            if name in overrides:
+                continue
+            if column not in row:
+                raise ValueError(f"row has no column {column!r} (StarParams field {name!r})")
+            value = row[column]
+            if name == "actuator_profile" and not isinstance(value, CurvatureProfile):
+                default = cls().actuator_profile
+                if str(value) != repr(default):
+                    raise ValueError(f"actuator_profile: the row holds {str(value)[:60]!r}, not "
+                                     f"a CurvatureProfile; pass actuator_profile=...")
+                value = default
+            if isinstance(value, np.generic):
+                value = value.item()
+            values[name] = value
+        return cls(**{**values, **overrides})
 
 
 PRESET_FIELDS = {

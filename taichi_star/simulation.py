@@ -34,7 +34,11 @@ def whole_steps(time_s: float, dt: float) -> Optional[int]:
 class SimulationResult:
     """What `simulate` returns.
 
-    summary: one row per instance, in input order: every StarParams field; the whole-run
+    summary: one row per instance, in input order: every StarParams field, named with its unit
+        where it has one (youngs_modulus_pa, period_s, thickness_m, the densities _kg_m3,
+        cylinder_mass_per_height_kg_m, cylinder_diameter_m, damping_time_s, joint_radius_m,
+        tip_radius_m; `StarParams.columns()`; `StarParams.from_row(row)` rebuilds the
+        parameters of a row); the whole-run
         metrics displacement_x_mm, displacement_y_mm, speed_mm_s, signed_speed_mm_s (on the
         gait's forward direction; NaN where it is undefined), travel_direction_deg (direction of
         the displacement from +x); heading_deg (body rotation at the end, counter-clockwise);
@@ -277,7 +281,7 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
     gaits = [p.gait for p in params]
     failed = status != STATUS_OK
 
-    rows = {name: [getattr(p, name) for p in params] for name in StarParams.field_names()}
+    rows = {column: [getattr(p, name) for p in params] for name, column in StarParams.columns().items()}
     rows.update(metrics.swimming_metrics(final - start, duration, gaits))
     positions = state.positions.to_numpy()[:batch].astype(np.float64)
     rows["heading_deg"] = np.degrees(metrics.body_rotation(

@@ -140,7 +140,7 @@ def test_substep_retry_rescues_a_step_and_leaves_neighbours_bitwise_equal():
 def test_summary_and_trajectory_schema():
     result = ts.simulate([ts.StarParams(gait="A1+A2")], 0.02, record_interval_s=0.005,
                          record_shapes=True)
-    expected = ts.StarParams.field_names() + [
+    expected = list(ts.StarParams.columns().values()) + [
         "displacement_x_mm", "displacement_y_mm", "speed_mm_s", "signed_speed_mm_s",
         "travel_direction_deg", "heading_deg", "max_strain", "shape_sane",
         "steady_speed_mm_s", "steady_signed_speed_mm_s",
@@ -148,6 +148,10 @@ def test_summary_and_trajectory_schema():
         "failure_time_s"]
     assert list(result.summary.columns) == expected
     assert list(result.trajectory.columns) == ["instance", "t_s", "x_mm", "y_mm", "heading_deg"]
+    # a parameter with a unit is named with it; dimensionless ones, counts and texts are not
+    assert {"youngs_modulus_pa", "period_s", "thickness_m", "fluid_density_kg_m3",
+            "cylinder_mass_per_height_kg_m", "damping_time_s", "joint_radius_m", "alpha",
+            "n_arc", "jet_mode"} <= set(result.summary.columns)
     np.testing.assert_allclose(result.trajectory.t_s, [0, 0.005, 0.01, 0.015, 0.02])
     assert result.trajectory.iloc[0][["x_mm", "y_mm"]].abs().max() == 0.0
     assert ts.simulate([ts.StarParams()], 0.01).trajectory.empty

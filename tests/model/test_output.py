@@ -4,16 +4,40 @@ import subprocess
 import sys
 
 import numpy as np
+import pandas as pd
 import pytest
 
 import taichi_star as ts
 
 
+RECORDED_PARAMS = [ts.StarParams(gait="A1+A2"), ts.StarParams(gait="A3", alpha=0.5)]
+
+
 @pytest.fixture(scope="module")
 def recorded():
-    params = [ts.StarParams(gait="A1+A2"), ts.StarParams(gait="A3", alpha=0.5)]
-    return ts.simulate(params, 0.2, ts.SolverConfig(dt=2e-3), record_interval_s=0.04,
+    return ts.simulate(RECORDED_PARAMS, 0.2, ts.SolverConfig(dt=2e-3), record_interval_s=0.04,
                        record_shapes=True)
+
+
+def test_a_summary_row_gives_its_parameters_back_also_from_a_csv(recorded, tmp_path):
+    """StarParams.from_row reads the unit-suffixed columns of a summary row (in memory, and
+    read back from a CSV, where the default actuator profile is text); a changed profile in
+    a CSV must be given explicitly, and a missing column is named."""
+    for index, params in enumerate(RECORDED_PARAMS):
+        assert ts.StarParams.from_row(recorded.summary.iloc[index]) == params
+    path = tmp_path / "summary.csv"
+    recorded.summary.to_csv(path, index=False)
+    table = pd.read_csv(path)
+    assert [ts.StarParams.from_row(row) for _, row in table.iterrows()] == RECORDED_PARAMS
+    assert ts.StarParams.from_row(table.iloc[1], alpha=0.9) == RECORDED_PARAMS[1].replace(alpha=0.9)
+    changed = table.iloc[0].copy()
+    changed["actuator_profile"] = "CurvatureProfile(heating=(1, 2, 3, 4), ...)"
+    with pytest.raises(ValueError, match="actuator_profile"):
+        ts.StarParams.from_row(changed)
+    profile = RECORDED_PARAMS[0].actuator_profile
+    assert ts.StarParams.from_row(changed, actuator_profile=profile) == RECORDED_PARAMS[0]
+    with pytest.raises(ValueError, match="period_s"):
+        ts.StarParams.from_row(table.iloc[0].drop("period_s"))
 
 
 def test_xarray_holds_the_tables_with_units_and_survives_netcdf(recorded, tmp_path):
@@ -24,7 +48,7 @@ def test_xarray_holds_the_tables_with_units_and_survives_netcdf(recorded, tmp_pa
     np.testing.assert_array_equal(dataset.speed_mm_s, recorded.summary.speed_mm_s)
     np.testing.assert_array_equal(dataset.alpha, [0.8, 0.5])
     assert dataset.speed_mm_s.attrs["units"] == "mm/s"
-    assert dataset.youngs_modulus.attrs["units"] == "Pa"
+    assert dataset.youngs_modulus_pa.attrs["units"] == "Pa"
     last = recorded.trajectory[recorded.trajectory.t_s == recorded.trajectory.t_s.max()]
     np.testing.assert_array_equal(dataset.centroid_x_mm.isel(time=-1), last.x_mm)
     np.testing.assert_array_equal(dataset.positions, recorded.shapes)

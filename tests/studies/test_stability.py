@@ -40,7 +40,7 @@ def test_paper_and_f32_summaries_from_a_synthetic_table():
                 ("f32", 1.0): "insane", ("f32", 5.0): "ok", ("f32", 20.0): "failed"}
     for (precision, dt), outcome in outcomes.items():
         rows.append(dict(gait="A1", stiffness_factor=1.0, alpha=0.8, added_mass_coeff=1.0,
-                         period=3.15, dt_ms=dt, precision=precision, outcome=outcome,
+                         period_s=3.15, dt_ms=dt, precision=precision, outcome=outcome,
                          substep_retries=int(outcome == "retried-then-ok"),
                          speed_mm_s=1.0 if precision == "f64" else 1.05))
     table = pd.DataFrame(rows)
@@ -73,7 +73,7 @@ def test_quick_stability_study(tmp_path):
     # 2 dt × 2 stiffness × 1 gait, f64
     assert len(csv) == len(table) == 4
     required = {"dt_ms", "stiffness_factor", "precision", "newton_tol", "gait", "alpha",
-                "added_mass_coeff", "period", "youngs_modulus", "status", "substep_retries",
+                "added_mass_coeff", "period_s", "youngs_modulus_pa", "status", "substep_retries",
                 "newton_iterations_max", "max_strain", "limbs_cross", "arc_inverted",
                 "limbs_cross_final", "arc_inverted_final", "sane", "outcome"}
     assert required <= set(csv.columns)
@@ -81,7 +81,7 @@ def test_quick_stability_study(tmp_path):
     assert set(csv["status"]) <= {"ok", "newton_failed", "non_finite"}
     assert sorted(csv["dt_ms"].unique()) == list(stability.QUICK_DTS_MS)
     assert sorted(csv["stiffness_factor"].unique()) == list(stability.QUICK_STIFFNESS)
-    assert np.allclose(csv["youngs_modulus"], csv["stiffness_factor"] * stability.BASE_MODULUS)
+    assert np.allclose(csv["youngs_modulus_pa"], csv["stiffness_factor"] * stability.BASE_MODULUS)
     assert (csv["duration_s"] == stability.QUICK_DURATION_S).all()
     # the first cell (dt 1 ms, stiffness x1) simulated directly, with the same records
     first = csv.iloc[0]

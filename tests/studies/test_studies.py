@@ -241,10 +241,10 @@ def test_fig4c_quick_into_a_fresh_run_folder(tmp_path, monkeypatch):
     assert {"cpu_model", "cores", "gpus"} <= set(sidecar["machine"])
     # the unit of every parameter column and of every metric with a unit suffix
     units = json.loads((folder / "fig4c_summary.csv.json").read_text())["units"]
-    numeric = [name for name in StarParams.field_names()
+    numeric = [column for name, column in StarParams.columns().items()
                if isinstance(getattr(StarParams(), name), (int, float))]
     assert set(numeric) <= set(units)
-    assert (units["youngs_modulus"], units["period"], units["speed_mm_s"],
+    assert (units["youngs_modulus_pa"], units["period_s"], units["speed_mm_s"],
             units["heading_deg"]) == ("Pa", "s", "mm/s", "degree")
 
 
@@ -277,7 +277,8 @@ def test_sweep_quick(tmp_path):
         f"paper preset, n_arc 18, euler h = {1e3 * cli.QUICK_DT:g} ms"
     assert cli.run_settings(tmp_path / "sweep.csv", mesh=False) == \
         f"paper preset, euler h = {1e3 * cli.QUICK_DT:g} ms"
-    assert (cli.axis_label("period"), cli.axis_label("alpha")) == ("period (s)", "alpha")
+    assert (cli.axis_label("period_s"), cli.axis_label("alpha"), cli.axis_label("speed_mm_s")) \
+        == ("period (s)", "alpha", "speed_mm_s (mm/s)")
 
 
 def test_gaits_quick(tmp_path):

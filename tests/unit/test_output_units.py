@@ -3,15 +3,17 @@ suffix first (a rate per second is not a time)."""
 
 import pytest
 
-from taichi_star.output import PARAMETER_UNITS, column_unit, column_units
-from taichi_star.params import StarParams
+from taichi_star.output import column_unit, column_units
+from taichi_star.params import PARAMETER_UNITS, StarParams
 
 
 @pytest.mark.parametrize("name, unit", [
     ("speed_mm_s", "mm/s"), ("displacement_x_mm", "mm"), ("heading_deg", "degree"),
     ("failure_time_s", "s"), ("robot_steps_per_s", "1/s"),
     ("timing_robot_seconds_per_wall_s", "1/s"), ("bandwidth_gb_s", "GB/s"), ("h_ms", "ms"),
-    ("step_us", "us"), ("youngs_modulus", "Pa"), ("status", ""), ("gait", "")])
+    ("step_us", "us"), ("youngs_modulus_pa", "Pa"), ("fluid_density_kg_m3", "kg/m^3"),
+    ("cylinder_mass_per_height_kg_m", "kg/m"), ("joint_radius_m", "m"), ("status", ""),
+    ("gait", "")])
 def test_column_unit_by_parameter_or_suffix(name, unit):
     assert column_unit(name) == unit
 
@@ -21,3 +23,16 @@ def test_every_numeric_parameter_has_a_unit_and_unitless_columns_are_left_out():
                if isinstance(getattr(StarParams(), name), (int, float))}
     assert numeric == set(PARAMETER_UNITS)
     assert column_units(["alpha", "status", "speed_mm_s"]) == {"alpha": "1", "speed_mm_s": "mm/s"}
+
+
+def test_every_column_with_a_unit_names_it_and_every_parameter_column_maps_back():
+    """A parameter column is its field name plus the unit's suffix (none for "1"); the suffix
+    gives the unit back, and the names are unique."""
+    columns = StarParams.columns()
+    assert len(set(columns.values())) == len(columns)
+    for name, column in columns.items():
+        unit = PARAMETER_UNITS.get(name, "1")
+        assert column.startswith(name)
+        assert (column == name) == (unit == "1"), (name, column)
+        if unit != "1":
+            assert column_unit(column) == unit
