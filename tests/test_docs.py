@@ -59,6 +59,10 @@ def test_citation_file_is_valid_cff():
     assert all(isinstance(author, dict) and author for author in data["authors"])
     pyproject = (REPO_ROOT / "pyproject.toml").read_text(encoding="utf-8")
     assert f'version = "{data["version"]}"' in pyproject
+    # the package reports the same version (it is written into every result's provenance)
+    import taichi_star
+
+    assert taichi_star.__version__ == data["version"]
     references = [data["preferred-citation"], *data.get("references", [])]
     for reference in references:
         for key in CFF_REFERENCE_KEYS:
