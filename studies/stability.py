@@ -23,7 +23,7 @@ of a failed instance are NaN from its failure on; the checks use its finite reco
 `retried-then-ok` (ok and sane after ≥ 1 substep retry), `ok` (ok, sane, no retry).
 
 Writes
-- `stability.csv`: one row per instance: stiffness_factor, dt_ms, precision, newton_tol, cycles,
+- `stability.csv`: one row per instance: stiffness_factor, dt_ms, precision, newton_tol_m, cycles,
   duration_s, every StarParams field, the simulate summary (speeds, Newton statistics,
   substep_retries, status, failure_time_s), the checks above and `outcome`;
 - `stability_summary.csv`: outcome counts (n_ok, n_retried_then_ok, n_insane, n_failed, n_total,
@@ -206,7 +206,7 @@ def run_grid(batches, arch="cpu", executor=None, chunk_size=None, progress=True)
             "stiffness_factor": batch["factors"],
             "dt_ms": batch["dt_s"] * 1e3,
             "precision": batch["precision"],
-            "newton_tol": batch["solver"].newton_tol,
+            "newton_tol_m": batch["solver"].newton_tol,
             "cycles": batch["duration_s"] / batch["period"],
             "duration_s": batch["duration_s"],
             "n_steps": batch["n_steps"],

@@ -72,7 +72,7 @@ def test_quick_stability_study(tmp_path):
     csv = pd.read_csv(tmp_path / "stability.csv")
     # 2 dt × 2 stiffness × 1 gait, f64
     assert len(csv) == len(table) == 4
-    required = {"dt_ms", "stiffness_factor", "precision", "newton_tol", "gait", "alpha",
+    required = {"dt_ms", "stiffness_factor", "precision", "newton_tol_m", "gait", "alpha",
                 "added_mass_coeff", "period_s", "youngs_modulus_pa", "status", "substep_retries",
                 "newton_iterations_max", "max_strain", "limbs_cross", "arc_inverted",
                 "limbs_cross_final", "arc_inverted_final", "sane", "outcome"}
