@@ -46,14 +46,12 @@ def to_xarray(result):
     instances = np.arange(len(summary))
     coordinates = {"instance": instances}
     variables = {}
-    for name in summary.columns:
+    for name in summary.columns.drop("actuator_profile"):
         values = summary[name].to_numpy()
         if values.dtype == object or pd.api.types.is_string_dtype(summary[name]):
             values = summary[name].astype(str).to_numpy()
-        if name in parameter_columns and name != "actuator_profile":
-            coordinates[name] = ("instance", values, {"units": column_unit(name)})
-        elif name != "actuator_profile":
-            variables[name] = ("instance", values, {"units": column_unit(name)})
+        into = coordinates if name in parameter_columns else variables
+        into[name] = ("instance", values, {"units": column_unit(name)})
     trajectory = result.trajectory
     if len(trajectory):
         times = np.sort(trajectory["t_s"].unique())
