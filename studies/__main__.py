@@ -6,7 +6,7 @@ import sys
 from taichi_star.batch import RunStoreError
 
 from . import study_names
-from .cli import StudyArgumentError, configure_logging
+from .cli import StudyArgumentError, StudyOutputError, configure_logging
 
 
 def usage() -> str:
@@ -32,7 +32,7 @@ def main(argv=None) -> int:
     module = importlib.import_module(f"studies.{name}")
     try:
         module.main(rest)
-    except (StudyArgumentError, RunStoreError) as error:
+    except (StudyArgumentError, StudyOutputError, RunStoreError) as error:
         print(f"python -m studies {name}: error: {error}", file=sys.stderr)
         return 2
     except SystemExit as exit_:  # argparse: --help, or an unknown / malformed flag
