@@ -26,11 +26,15 @@ def accepted_steps_around_a_firing(solver):
     stops[0] = stop
     load_field(engine.state.stop_time, stops)
     steps = []
+    attempts = 0
     while sim.time_s[0] < stop:
         start = sim.time_s[0]
         engine.advance_adaptive(1)
+        attempts += 1
         if sim.time_s[0] > start:
             steps.append((start, sim.time_s[0]))
+    # every attempt that did not advance the time was a rejection, and is counted as one
+    assert engine.state.rejected_steps.to_numpy()[0] == attempts - len(steps) > 0
     return np.array(steps)
 
 
@@ -61,7 +65,8 @@ def test_adaptive_results_do_not_depend_on_batch_position():
     shuffled = ts.simulate([PARAMS[i] for i in order], PERIOD, SOLVER).summary
     restored = shuffled.iloc[np.argsort(order)].reset_index(drop=True)
     pd.testing.assert_frame_equal(restored, reference, check_exact=True)
-    assert (reference.steps > 50).all() and (reference.rejected_steps >= 0).all()
+    # rejections happen, so the comparison covers them too
+    assert (reference.steps > 50).all() and (reference.rejected_steps > 0).any()
 
 
 def test_adaptive_steps_converge_to_the_fixed_step_solution_as_the_tolerance_shrinks():
