@@ -67,6 +67,15 @@ def test_adaptive_results_do_not_depend_on_batch_position():
     pd.testing.assert_frame_equal(restored, reference, check_exact=True)
     # rejections happen, so the comparison covers them too
     assert (reference.steps > 50).all() and (reference.rejected_steps > 0).any()
+    # A regression guard on cost, measured at this commit (CPU, f64; the same on every run):
+    # 576 accepted + 53 rejected steps, 1,266 Newton iterations (one solve per attempted step).
+    # Bands: steps ±2 % (±11), iterations ±5 %: room for a change of round-off that moves a few
+    # decisions, while a regression like issue 27's (+23 % iterations, +4 % steps) fails; so
+    # does starting Newton without the parabola through the last two states (+8.9 %, 1,379).
+    solves = reference.steps + reference.rejected_steps
+    assert abs(reference.steps.sum() - 576) <= 11
+    assert abs(solves.sum() - 629) <= 0.05 * 629
+    assert abs((reference.newton_iterations_mean * solves).sum() - 1266) <= 0.05 * 1266
 
 
 def test_adaptive_steps_converge_to_the_fixed_step_solution_as_the_tolerance_shrinks():
