@@ -496,12 +496,8 @@ class Output:
 
     def _write(self, path: Path, data: bytes):
         """`write_atomic`; a failure (a full disk) is a StudyOutputError naming the folder."""
-        try:
-            write_atomic(path, data)
-        except OSError as error:
-            raise StudyOutputError(f"--out {self.folder}: cannot write {path.name} "
-                                   f"({error.strerror or error}); the files written before are "
-                                   f"intact") from None
+        write_atomic(path, data, failure=lambda reason: StudyOutputError(
+            f"--out {self.folder}: {reason}; the files written before are intact"))
 
     def write_csv(self, frame: pd.DataFrame, name: str, extra: Optional[Mapping] = None) -> Path:
         """Write a table (no index, floats to 10 significant digits) and its JSON sidecar, each

@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import numbers
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, Optional, Sequence, Union

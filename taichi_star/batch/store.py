@@ -28,7 +28,7 @@ import logging
 import os
 import subprocess
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence
+from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
 import pandas as pd
@@ -151,9 +151,11 @@ def _decode(frame: pd.DataFrame, types: Dict[str, str]) -> pd.DataFrame:
     return frame
 
 
-def write_atomic(path, data: bytes):
+def write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception]] = None):
     """Write `data` to `path` whole or not at all: into a temporary file beside it, flushed to
-    disk, then renamed over it; a kill or a full disk leaves any previous file untouched."""
+    disk, then renamed over it; a kill or a full disk leaves any previous file untouched. With
+    `failure`, an OSError (a full disk) is raised as `failure(reason)` instead, the reason one
+    line naming the file and the error ("cannot write x.csv (No space left on device)")."""
     path = Path(path)
     temporary = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     try:
@@ -162,6 +164,10 @@ def write_atomic(path, data: bytes):
             handle.flush()
             os.fsync(handle.fileno())
         os.replace(temporary, path)
+    except OSError as error:
+        if failure is None:
+            raise
+        raise failure(f"cannot write {path.name} ({error.strerror or error})") from None
     finally:
         if temporary.exists():
             temporary.unlink()
@@ -254,9 +260,10 @@ class RunStore:
         """A non-empty folder without a manifest: when it holds only chunk files (its manifest
         was deleted) and `resume`, the indices of the chunks whose own stamp says they belong
         to this run (the others are recomputed); else RunStoreError saying what to do."""
+        chunks = set(self._chunk_files())
         others = [p.name for p in self.path.iterdir()
-                  if p not in self._chunk_files() and not p.name.startswith(".")]
-        if others or not self._chunk_files():
+                  if p not in chunks and not p.name.startswith(".")]
+        if others or not chunks:
             raise RunStoreError(f"{self.flag} {self.path}: not empty and has no {MANIFEST}; not "
                                 f"a run folder (choose another {self.flag})")
         if not resume:
@@ -274,12 +281,9 @@ class RunStore:
     def _write(self, path: Path, data: bytes):
         """`write_atomic`, a failure (a full disk) a RunStoreError naming the folder: the files
         written before are whole, so the run can be resumed once there is room."""
-        try:
-            write_atomic(path, data)
-        except OSError as error:
-            raise RunStoreError(f"{self.flag} {self.path}: cannot write {path.name} "
-                                f"({error.strerror or error}); the chunks stored before are kept: "
-                                f"make room and resume") from None
+        write_atomic(path, data, failure=lambda reason: RunStoreError(
+            f"{self.flag} {self.path}: {reason}; the chunks stored before are kept: make room "
+            f"and resume"))
 
     def write(self, task: ChunkTask, summary: pd.DataFrame) -> Path:
         """Store one finished chunk's summary (atomically)."""

@@ -385,10 +385,10 @@ def test_a_full_disk_is_a_one_line_error_naming_the_folder(tmp_path, monkeypatch
     def write_table(out, *args, **kwargs):
         out.write_csv(pd.DataFrame({"gait": ["A1"]}), "fig4c.csv")
 
-    def full_disk(path, data):
+    def full_disk(source, target):
         raise OSError(28, os.strerror(28))
     monkeypatch.setattr("studies.figures.run_fig4c", write_table)
-    monkeypatch.setattr(cli, "write_atomic", full_disk)
+    monkeypatch.setattr(store.os, "replace", full_disk)
     out = tmp_path / "out"
     assert studies_main(["fig4c", "--out", str(out), *QUICK]) == 2
     error = capsys.readouterr().err.strip()
