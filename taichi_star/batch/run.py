@@ -48,9 +48,9 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     calls (`LocalProcesses`, `executor_for`, a `DaskExecutor`).
 
     `run_dir`: a run store (`RunStore`): every finished chunk's summary is written there as it
-    arrives; with `resume`, verified chunks already there are not recomputed (damaged or foreign
-    ones are reported and recomputed), and the summary is read back from the store. The
-    trajectory then covers only the chunks computed by this call.
+    arrives; with `resume` (which needs `run_dir`), verified chunks already there are not
+    recomputed (damaged or foreign ones are reported and recomputed), and the summary is read
+    back from the store. The trajectory then covers only the chunks computed by this call.
 
     Raises ValueError (RunStoreError for the run folder) naming the argument before any
     compute."""

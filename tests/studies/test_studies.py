@@ -417,3 +417,17 @@ def test_cycles_shorter_than_a_step_is_an_error_naming_cycles(no_compute, tmp_pa
            "(dt = 0.001 s)" in error and len(error.splitlines()) == 1
     with pytest.raises(ValueError, match=r"cycles must give at least one step.*params\[0\]"):
         taichi_star.batch.run_batch([StarParams()], cycles=1e-4)
+
+
+def test_a_full_disk_while_drawing_a_plot_is_a_one_line_error(tmp_path, monkeypatch, capsys):
+    """A plot is saved by matplotlib, not by Output: ENOSPC there is still one line naming the
+    file (exit 2), not a traceback."""
+    plot = tmp_path / "out" / "fig4c.png"
+
+    def full_disk(*args, **kwargs):
+        raise OSError(28, os.strerror(28), str(plot))
+    monkeypatch.setattr("studies.figures.run_fig4c", full_disk)
+    assert studies_main(["fig4c", "--out", str(tmp_path / "out"), *QUICK]) == 2
+    error = capsys.readouterr().err.strip()
+    assert f"cannot write {plot} (No space left on device)" in error
+    assert len(error.splitlines()) == 1
