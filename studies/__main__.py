@@ -1,12 +1,17 @@
 """`python -m studies <name> [options]`; `python -m studies <name> --help` for a study's flags."""
 
+import errno
 import importlib
 import sys
 
 from taichi_star.batch import RunStoreError
 
 from . import study_names
-from .cli import StudyArgumentError, configure_logging
+from .cli import StudyArgumentError, StudyOutputError, configure_logging
+
+
+FULL_DISK = (errno.ENOSPC, errno.EDQUOT)
+"""Errors of a write that found no room: a one-line error, not a traceback."""
 
 
 def usage() -> str:
@@ -32,8 +37,15 @@ def main(argv=None) -> int:
     module = importlib.import_module(f"studies.{name}")
     try:
         module.main(rest)
-    except (StudyArgumentError, RunStoreError) as error:
+    except (StudyArgumentError, StudyOutputError, RunStoreError) as error:
         print(f"python -m studies {name}: error: {error}", file=sys.stderr)
+        return 2
+    except OSError as error:
+        if error.errno not in FULL_DISK:
+            raise
+        # a plot or animation written outside Output's tables (those give StudyOutputError)
+        print(f"python -m studies {name}: error: cannot write {error.filename or 'a file'} "
+              f"({error.strerror}); the files written before are intact", file=sys.stderr)
         return 2
     except SystemExit as exit_:  # argparse: --help, or an unknown / malformed flag
         return exit_.code if isinstance(exit_.code, int) else 2

@@ -57,6 +57,11 @@ class StudyArgumentError(ValueError):
     """A study argument is invalid; raised before any computation, naming the flag."""
 
 
+class StudyOutputError(RuntimeError):
+    """An output file cannot be written (a full disk, a folder gone); names the folder. The
+    files written before are whole (each is written atomically)."""
+
+
 # --------------------------------------------------------------------------- the parser
 
 class StudyParser(argparse.ArgumentParser):
@@ -166,6 +171,13 @@ def parse(parser: StudyParser, argv) -> argparse.Namespace:
             raise StudyArgumentError(f"--{flag.replace('_', '-')} must be >= 1, got {value}")
     if getattr(args, "retries", 0) < 0:
         raise StudyArgumentError(f"--retries must be >= 0, got {args.retries}")
+    for flag in ("out", "run_dir"):
+        value = getattr(args, flag, None)
+        if value is not None and not value.strip():
+            raise StudyArgumentError(f"--{flag.replace('_', '-')}: an empty folder name (give "
+                                     f"a folder, e.g. runs/mine)")
+    if getattr(args, "prefix", None) is not None:
+        check_file_name(args.prefix, "--prefix")
     if getattr(args, "resume", False) and args.out is None and args.run_dir is None:
         raise StudyArgumentError("--resume: give --out (the folder of the run to continue) "
                                  "or --run-dir")
@@ -187,6 +199,14 @@ def parse(parser: StudyParser, argv) -> argparse.Namespace:
             raise StudyArgumentError(f"--arch {args.arch}: no such backend on this machine; "
                                      f"available archs: {', '.join(available_archs())}")
     return args
+
+
+def check_file_name(name: str, flag: str):
+    """StudyArgumentError naming the flag unless `name` is a plain file name: not empty, no
+    path separator, not "." or ".." (output names never leave the output folder)."""
+    if not name or name in (".", "..") or "/" in name or "\\" in name or "\0" in name:
+        raise StudyArgumentError(f"{flag}: {name!r} is not a file name (no folders, no '/', "
+                                 f"'\\' or '..': files go into --out)")
 
 
 def check_positive(value: float, flag: str):
@@ -351,12 +371,22 @@ def base_params(args) -> StarParams:
 
 
 def solver(args) -> SolverConfig:
-    """SolverConfig of --preset with --dt (StudyArgumentError naming --dt)."""
+    """SolverConfig of --preset with --dt (StudyArgumentError naming --dt); with --cycles (not
+    --quick) and the model flags, checks that --cycles of the model's period are at least one
+    fixed step (StudyArgumentError naming --cycles)."""
     try:
         changes = {} if args.dt is None else {"dt": args.dt}
-        return SolverConfig.preset(getattr(args, "preset", "paper"), **changes)
+        config = SolverConfig.preset(getattr(args, "preset", "paper"), **changes)
     except ValueError as error:
         raise StudyArgumentError(f"--dt: {error}") from None
+    if getattr(args, "cycles", None) is not None and hasattr(args, "set") and not args.quick \
+            and not config.adaptive:
+        period = base_params(args).period
+        if round(args.cycles * period / config.dt) < 1:
+            raise StudyArgumentError(
+                f"--cycles {args.cycles:g}: {args.cycles:g} periods of {period:g} s are "
+                f"{args.cycles * period:.3g} s, less than one step (dt = {config.dt:g} s)")
+    return config
 
 
 def run_length(args) -> Dict[str, float]:
@@ -448,16 +478,32 @@ class Output:
         self.written: List[Path] = []
 
     def path(self, name: str) -> Path:
-        """A file of this run (its folder created)."""
+        """A file of this run, `name` relative to the folder ("gaits.png",
+        "animations/A1.gif"), its folder created. ValueError for a name that would leave the
+        folder (absolute, or with a "." or ".." part); StudyOutputError if the folder cannot be
+        made."""
+        parts = Path(name).parts
+        if not parts or Path(name).is_absolute() or any(p in (".", "..") for p in parts) \
+                or "\\" in name:
+            raise ValueError(f"output name {name!r} would leave the output folder {self.folder}")
         path = self.folder / name
-        path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as error:
+            raise StudyOutputError(f"--out {self.folder}: cannot create {path.parent} "
+                                   f"({error.strerror or error})") from None
         return path
+
+    def _write(self, path: Path, data: bytes):
+        """`write_atomic`; a failure (a full disk) is a StudyOutputError naming the folder."""
+        write_atomic(path, data, failure=lambda reason: StudyOutputError(
+            f"--out {self.folder}: {reason}; the files written before are intact"))
 
     def write_csv(self, frame: pd.DataFrame, name: str, extra: Optional[Mapping] = None) -> Path:
         """Write a table (no index, floats to 10 significant digits) and its JSON sidecar, each
         whole or not at all (a kill or a full disk leaves the previous files)."""
         path = self.path(name)
-        write_atomic(path, frame.to_csv(index=False, float_format="%.10g").encode())
+        self._write(path, frame.to_csv(index=False, float_format="%.10g").encode())
         return self._described(path, extra, frame)
 
     def write_parquet(self, frame: pd.DataFrame, name: str,
@@ -477,7 +523,7 @@ class Output:
                     b"taichi_star": json.dumps(self._details(extra), default=str).encode()}
         sink = pa.BufferOutputStream()
         pq.write_table(table.replace_schema_metadata(metadata), sink)
-        write_atomic(path, sink.getvalue().to_pybytes())
+        self._write(path, sink.getvalue().to_pybytes())
         return self._described(path, extra, frame)
 
     def _details(self, extra: Optional[Mapping]) -> dict:
@@ -485,8 +531,9 @@ class Output:
         return {**self.provenance, **({"details": details} if details else {})}
 
     def _described(self, path: Path, extra: Optional[Mapping], frame: pd.DataFrame) -> Path:
-        provenance.write_sidecar(path, {**self._details(extra),
-                                        "units": column_units(frame.columns)})
+        self._write(provenance.sidecar_path(path),
+                    provenance.sidecar_text({**self._details(extra),
+                                             "units": column_units(frame.columns)}))
         self.wrote(path)
         return path
 

@@ -113,9 +113,14 @@ def sidecar_path(table_path) -> Path:
     return Path(f"{table_path}.json")
 
 
+def sidecar_text(provenance: Mapping) -> bytes:
+    """The content of a provenance sidecar (indented JSON)."""
+    return (json.dumps(provenance, indent=2, default=repr) + "\n").encode()
+
+
 def write_sidecar(table_path, provenance: Mapping) -> Path:
     """Write `<table>.json` beside a table (whole or not at all) and return its path."""
     path = sidecar_path(table_path)
-    write_atomic(path, (json.dumps(provenance, indent=2, default=repr) + "\n").encode())
+    write_atomic(path, sidecar_text(provenance))
     return path
 

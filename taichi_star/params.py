@@ -370,6 +370,58 @@ class SolverConfig:
 MAX_DT = 0.05
 """Largest time step, s: under a third of the heating pulse, so a step cannot skip it."""
 
+F32_UNIT_ROUNDOFF = 2.0 ** -24
+"""Relative rounding of an f32 number (half its ulp at most)."""
+F32_TOLERANCE_ROUNDOFFS = 32
+"""With precision "f32", newton_tol must be at least this many f32 roundings of the robot's
+size (its tip_radius, the largest node coordinate): Newton's updates cannot be resolved below
+a few roundings of the positions, and a tolerance under that floor is met, if at all, by
+rounding noise (issue 27: 2-m limbs at 1e-7 m hit the iteration cap and came out 2.3× off).
+32 roundings of the paper's 5.2 cm are 9.9e-8 m (the 1e-7 m it allows); above 0.52 m the
+floor passes the largest newton_tol, 1e-6 m, and f32 is refused."""
+F32_MAX_SIZE_TO_EDGE = 320.0
+"""With precision "f32", the largest ratio of the robot's size (tip_radius) to its shortest
+rest edge (`shortest_rest_edge`). Measured, A1+A2 for 0.3 s against f64 (speeds; f32 at
+newton_tol 1e-7 m): ratios 39 (the paper's robot), 98, 104, 202 and 315 (n_arc 144) within
+0.7 %; 406 (joint_radius 3 mm) 4.2 % off, 700 (n_arc 320) 4.4 % off at the iteration cap,
+2,350 (joint_radius 1 mm, 10-cm limbs) 12× off. Beyond it f32 is refused."""
+
+
+def shortest_rest_edge(params: StarParams) -> float:
+    """Length of the shortest edge of the rest shape, m: a spoke (joint_radius), a limb edge
+    ((tip_radius − joint_radius)/n_limb) or an arc edge (the arc of rest curvature K̄(0)
+    between two neighbouring joints, over n_arc)."""
+    radius = 1.0 / params.actuator_profile.rest_curvature
+    half_chord = params.joint_radius * math.sin(math.pi / 8)
+    arc_length = 2.0 * radius * math.asin(half_chord / radius)
+    return min(params.joint_radius, (params.tip_radius - params.joint_radius) / params.n_limb,
+               arc_length / params.n_arc)
+
+
+def check_precision(params, solver: SolverConfig):
+    """ValueError, before any compute, where f32 cannot resolve an instance of the batch
+    (`params`: validated StarParams): newton_tol under `F32_TOLERANCE_ROUNDOFFS` roundings of
+    its size, or a size more than `F32_MAX_SIZE_TO_EDGE` times its shortest edge. Names the
+    instance and the fields; nothing to check in f64."""
+    if solver.precision != "f32":
+        return
+    for index, p in enumerate(params):
+        floor = F32_TOLERANCE_ROUNDOFFS * F32_UNIT_ROUNDOFF * p.tip_radius
+        if solver.newton_tol < floor:
+            advice = (f"use a newton_tol in [{floor:.2g}, 1e-06] m" if floor <= 1e-6
+                      else "use precision 'f64'")
+            raise ValueError(
+                f"newton_tol must be >= {floor:.2g} m with precision 'f32' for params[{index}] "
+                f"({F32_TOLERANCE_ROUNDOFFS} f32 roundings of its tip_radius {p.tip_radius:g} "
+                f"m), got {solver.newton_tol!r}: {advice}")
+        edge = shortest_rest_edge(p)
+        if p.tip_radius > F32_MAX_SIZE_TO_EDGE * edge:
+            raise ValueError(
+                f"precision 'f32' cannot resolve params[{index}]: its tip_radius "
+                f"{p.tip_radius:g} m is {p.tip_radius / edge:.0f} times its shortest rest edge "
+                f"({edge:.3g} m, from joint_radius, n_arc and n_limb), more than "
+                f"{F32_MAX_SIZE_TO_EDGE:g}: use precision 'f64'")
+
 SOLVER_PRESET_FIELDS = {
     "paper": {},
     "accurate": {"integrator": "bdf2", "adaptive": True, "error_tol": 1e-6, "dt": 1e-3,

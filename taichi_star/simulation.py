@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import warnings
 from dataclasses import dataclass, field
 from typing import Optional, Sequence
 
@@ -13,7 +14,7 @@ import pandas as pd
 from . import metrics, output
 from .geometry import CENTRE, Topology
 from .model import build_model, validate_batch
-from .params import SolverConfig, StarParams
+from .params import SolverConfig, StarParams, check_precision
 from .engine import STEP_TOLERANCE
 from .runtime import Runtime, check_arch, stream_chunk_size
 from .state import STATUS_NAMES, STATUS_OK
@@ -49,9 +50,13 @@ class SimulationResult:
         `metrics.STRAIN_LIMIT`: False flags a run whose shape is not physical even if it
         converged); steps (accepted) and rejected_steps (adaptive stepping); newton_iterations_mean /
         newton_iterations_max (per Newton solve: every attempted step and substep, rejected
-        and failed ones included, so mean <= max), substep_retries (steps redone with substeps), status ("ok",
+        and failed ones included, so mean <= max), substep_retries (steps redone with substeps),
+        newton_capped (a Newton solve used all max_newton iterations: for an "ok" instance, a
+        step accepted only after a retry rescued it; in f32 also a RuntimeWarning, as f32 then
+        barely resolves newton_tol), status ("ok",
         "newton_failed", "non_finite") and failure_time_s (NaN when ok). Metrics of failed
-        instances are NaN.
+        instances are NaN. "ok" means every step converged to newton_tol, not that the time
+        step is small enough: see docs/numerics.md, "What ok promises".
     trajectory: long table (instance, t_s, x_mm, y_mm, heading_deg): the centroid relative to its
         start and the body rotation at every record time (NaN from a failure on); empty without
         records.
@@ -103,6 +108,7 @@ def validate_call(params, duration_s, solver, record_interval_s, record_shapes, 
     duration_s = _check_real("duration_s", duration_s, 0.0)
     if not isinstance(solver, SolverConfig):
         raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
+    check_precision(params, solver)
     record_interval_s = _check_real("record_interval_s", record_interval_s, 0.0, allow_equal=True)
     if not solver.adaptive:
         n_steps = int(round(duration_s / solver.dt))
@@ -297,12 +303,19 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
     rows["newton_iterations_mean"] = newton_total / np.maximum(newton_solves, 1)
     rows["newton_iterations_max"] = state.newton_max.to_numpy()[:batch]
     rows["substep_retries"] = state.substep_retries.to_numpy()[:batch]
+    rows["newton_capped"] = rows["newton_iterations_max"] >= solver.max_newton
     rows["status"] = [STATUS_NAMES[s] for s in status]
     rows["failure_time_s"] = np.where(failed, failure_time, np.nan)
     summary = pd.DataFrame(rows)
     metric_columns = [*metrics.SPEED_COLUMNS, "heading_deg", "steady_speed_mm_s",
                       "steady_signed_speed_mm_s"]
     summary.loc[failed, metric_columns] = np.nan
+    capped = int((summary["newton_capped"] & ~failed).sum())
+    if capped and solver.precision == "f32":
+        warnings.warn(f"{capped} of {batch} f32 instances are 'ok' only after a Newton solve ran "
+                      f"out of its {solver.max_newton} iterations (newton_capped): f32 barely "
+                      f"resolves newton_tol = {solver.newton_tol:g} m for them, and their results "
+                      f"can be far off; run them in f64", RuntimeWarning, stacklevel=4)
 
     trajectory = pd.DataFrame({"instance": pd.Series(dtype=int), "t_s": pd.Series(dtype=float),
                                "x_mm": pd.Series(dtype=float), "y_mm": pd.Series(dtype=float),

@@ -22,6 +22,7 @@ from __future__ import annotations
 import json
 import math
 import numbers
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, Optional, Sequence, Union
@@ -33,7 +34,7 @@ from . import metrics
 from .gait import N_ACTUATORS, Gait
 from .geometry import CENTRE
 from .model import build_model, validate_batch
-from .params import SolverConfig, StarParams
+from .params import SolverConfig, StarParams, check_precision
 from .runtime import Runtime, check_arch
 from .state import NEVER, STATUS_NAMES, STATUS_OK
 
@@ -65,11 +66,24 @@ class SimulatorSnapshot:
 
     @classmethod
     def read(cls, path) -> "SimulatorSnapshot":
-        with np.load(Path(path), allow_pickle=False) as archive:
-            header = json.loads(str(archive["__header__"]))
-            fields = {name: archive[name] for name in archive.files if name != "__header__"}
-        return cls(fields=fields, engine_key=header["engine_key"],
-                   n_instances=header["n_instances"], dt=header["dt"])
+        """A snapshot from an .npz file written by `write`. ValueError naming the file when it
+        cannot be read or is not such a file."""
+        if not isinstance(path, (str, os.PathLike)):
+            raise ValueError(f"snapshot must be a SimulatorSnapshot or the path of its .npz "
+                             f"file, got {type(path).__name__}")
+        try:
+            with np.load(Path(path), allow_pickle=False) as archive:
+                header = json.loads(str(archive["__header__"]))
+                fields = {name: archive[name] for name in archive.files if name != "__header__"}
+            snapshot = cls(fields=fields, engine_key=str(header["engine_key"]),
+                           n_instances=int(header["n_instances"]), dt=float(header["dt"]))
+        except OSError as error:
+            raise ValueError(f"snapshot {path}: cannot read it ({error.strerror or error})") \
+                from None
+        except Exception as error:  # noqa: BLE001 -- whatever a foreign file makes numpy raise
+            raise ValueError(f"snapshot {path}: not a Simulator snapshot (.npz from "
+                             f"Simulator.save): {type(error).__name__}") from None
+        return snapshot
 
 
 class Simulator:
@@ -84,6 +98,7 @@ class Simulator:
         params = validate_batch(params)
         if not isinstance(solver, SolverConfig):
             raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
+        check_precision(params, solver)
         check_arch(arch)
         self.params = params
         self.solver = solver

@@ -11,12 +11,14 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import numbers
 import re
 import threading
+import time
 import uuid
 from typing import Iterator, Sequence
 
-from distributed import Client, LocalCluster, as_completed, get_worker
+from distributed import Client, LocalCluster, get_worker, wait
 from distributed.diagnostics.plugin import WorkerPlugin
 
 from .executors import DEFAULT_RETRIES, configure_worker_process
@@ -65,28 +67,63 @@ def run_on_worker(task: ChunkTask) -> ChunkResult:
         return run_chunk(task)
 
 
+NO_WORKERS_TIMEOUT_S = 120.0
+"""How long a run waits, s, on a cluster that has no worker left (time for a nanny or an
+autoscaler to bring one back) before it stops with an error."""
+POLL_S = 2.0
+"""How often a run waiting for its chunks checks that the cluster still has workers, s."""
+
+
 class DaskExecutor:
     """Runs the chunks as Dask tasks on `client`'s cluster; results arrive as they complete. A
     chunk whose worker dies is rerun by the scheduler; one that raises is retried `retries`
-    times, then its error is raised here (the chunks stored before stay stored)."""
+    times, then its error is raised here (the chunks stored before stay stored). A cluster left
+    without any worker for `no_workers_timeout_s` seconds stops the run with a RuntimeError
+    (the chunks stored before stay stored: resume once the cluster has workers again)."""
 
-    def __init__(self, client: Client, retries: int = DEFAULT_RETRIES):
+    def __init__(self, client: Client, retries: int = DEFAULT_RETRIES,
+                 no_workers_timeout_s: float = NO_WORKERS_TIMEOUT_S):
+        if isinstance(no_workers_timeout_s, bool) or not isinstance(
+                no_workers_timeout_s, numbers.Real) or not no_workers_timeout_s > 0:
+            raise ValueError(f"no_workers_timeout_s must be a number > 0, got "
+                             f"{no_workers_timeout_s!r}")
         self.client = client
         self.retries = retries
+        self.no_workers_timeout_s = float(no_workers_timeout_s)
         client.register_plugin(TaichiWorkerSetup())
+
+    def _workers(self) -> int:
+        return len(self.client.scheduler_info().get("workers", {}))
 
     @property
     def n_workers(self) -> int:
-        return max(1, len(self.client.scheduler_info().get("workers", {})))
+        return max(1, self._workers())
 
     def run(self, tasks: Sequence[ChunkTask], progress: bool = False) -> Iterator[ChunkResult]:
         run = uuid.uuid4().hex[:12]
         futures = [self.client.submit(run_on_worker, task, retries=self.retries, pure=False,
                                       key=f"taichi_star-chunk-{task.index}-{run}")
                    for task in tasks]
+        pending = set(futures)
+        alone_since = None
         try:
-            for future in as_completed(futures):
-                yield future.result()
+            while pending:
+                try:
+                    done, pending = wait(pending, timeout=POLL_S, return_when="FIRST_COMPLETED")
+                except TimeoutError:  # none finished within POLL_S
+                    done = set()
+                for future in done:
+                    yield future.result()
+                if done or self._workers() > 0:
+                    alone_since = None
+                    continue
+                alone_since = time.monotonic() if alone_since is None else alone_since
+                if time.monotonic() - alone_since >= self.no_workers_timeout_s:
+                    raise RuntimeError(
+                        f"the Dask cluster at {self.client.scheduler.address} has had no "
+                        f"worker for {self.no_workers_timeout_s:g} s with {len(pending)} "
+                        f"chunk(s) unfinished; stopping (chunks already stored are kept: "
+                        f"resume once it has workers)")
         finally:
             for future in futures:
                 future.cancel()

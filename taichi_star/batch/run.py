@@ -48,14 +48,19 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     calls (`LocalProcesses`, `executor_for`, a `DaskExecutor`).
 
     `run_dir`: a run store (`RunStore`): every finished chunk's summary is written there as it
-    arrives; with `resume`, verified chunks already there are not recomputed (damaged or foreign
-    ones are reported and recomputed), and the summary is read back from the store. The
-    trajectory then covers only the chunks computed by this call.
+    arrives; with `resume` (which needs `run_dir`), verified chunks already there are not
+    recomputed (damaged or foreign ones are reported and recomputed), and the summary is read
+    back from the store. The trajectory then covers only the chunks computed by this call.
 
     Raises ValueError (RunStoreError for the run folder) naming the argument before any
     compute."""
     if workers is not None and executor is not None:
         raise ValueError("give workers (local processes for this call) or executor, not both")
+    if executor is not None and not callable(getattr(executor, "run", None)):
+        raise ValueError(f"executor must be an Executor (InProcess, LocalProcesses, a "
+                         f"DaskExecutor: see executor_for(scheduler=...)), got {executor!r}")
+    if resume and run_dir is None:
+        raise ValueError("resume=True needs run_dir (the run store to continue)")
     params = list(params)
     tasks = plan_chunks(params, duration_s, cycles=cycles, chunk_size=chunk_size, solver=solver,
                         arch=arch, record_interval_s=record_interval_s,

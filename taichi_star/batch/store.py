@@ -10,9 +10,12 @@ long batch can be resumed after a crash or a kill.
 - Every file is written to a temporary name, flushed and renamed (`os.replace`): a kill leaves
   whole files or none.
 
-On resume, a chunk file that is unreadable, truncated, empty, from another run or whose content
-does not match its checksum is reported (a warning on the `taichi_star.batch` logger), deleted
-and recomputed, never loaded. A damaged manifest is an error (`RunStoreError`).
+On resume, a chunk file that is unreadable, truncated, empty, undecodable in any way, from
+another run or whose content does not match its checksum is reported (a warning on the
+`taichi_star.batch` logger), deleted and recomputed, never loaded. A damaged manifest is an
+error (`RunStoreError`); a deleted one is not: resuming a folder of chunk files alone reuses the
+chunks whose own stamp (the run definition's SHA-256, the chunk's instances) matches the run. A
+file that cannot be written (a full disk) is a `RunStoreError` naming the folder.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ import logging
 import os
 import subprocess
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence
+from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
 import pandas as pd
@@ -41,6 +44,9 @@ FORMAT = 2
 METADATA_KEY = b"taichi_star.chunk"
 VALUE_TYPES = {"CurvatureProfile": CurvatureProfile}
 """Value objects a summary column may hold; stored as JSON of their fields."""
+STAMP_KEYS = {"definition_sha256", "chunk", "members", "sha256", "value_types"}
+"""The keys of a chunk's metadata stamp: exactly these (a damaged key would otherwise drop
+what it says, e.g. the value types, silently)."""
 
 log = logging.getLogger("taichi_star.batch")
 
@@ -145,9 +151,11 @@ def _decode(frame: pd.DataFrame, types: Dict[str, str]) -> pd.DataFrame:
     return frame
 
 
-def write_atomic(path, data: bytes):
+def write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception]] = None):
     """Write `data` to `path` whole or not at all: into a temporary file beside it, flushed to
-    disk, then renamed over it; a kill or a full disk leaves any previous file untouched."""
+    disk, then renamed over it; a kill or a full disk leaves any previous file untouched. With
+    `failure`, an OSError (a full disk) is raised as `failure(reason)` instead, the reason one
+    line naming the file and the error ("cannot write x.csv (No space left on device)")."""
     path = Path(path)
     temporary = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     try:
@@ -156,6 +164,10 @@ def write_atomic(path, data: bytes):
             handle.flush()
             os.fsync(handle.fileno())
         os.replace(temporary, path)
+    except OSError as error:
+        if failure is None:
+            raise
+        raise failure(f"cannot write {path.name} ({error.strerror or error})") from None
     finally:
         if temporary.exists():
             temporary.unlink()
@@ -202,13 +214,12 @@ class RunStore:
         if self.path.exists() and not self.path.is_dir():
             raise RunStoreError(f"{self.flag} {self.path}: exists and is not a folder")
         old = self.read_manifest() if self.path.exists() else None
-        if old is None and self.path.exists() and any(self.path.iterdir()):
-            raise RunStoreError(f"{self.flag} {self.path}: not empty and has no {MANIFEST}; not "
-                                f"a run folder (choose another {self.flag})")
         version = code_version()
         now = datetime.datetime.now().isoformat(timespec="seconds")
         done: List[int] = []
         history: Dict = {}
+        if old is None and self.path.exists() and any(self.path.iterdir()):
+            done = self._orphan_chunks(tasks, resume)
         if old is not None:
             finished = self._chunk_files()
             if resume:
@@ -245,9 +256,34 @@ class RunStore:
         self._write_manifest()
         return done
 
+    def _orphan_chunks(self, tasks: Sequence[ChunkTask], resume: bool) -> List[int]:
+        """A non-empty folder without a manifest: when it holds only chunk files (its manifest
+        was deleted) and `resume`, the indices of the chunks whose own stamp says they belong
+        to this run (the others are recomputed); else RunStoreError saying what to do."""
+        chunks = set(self._chunk_files())
+        others = [p.name for p in self.path.iterdir()
+                  if p not in chunks and not p.name.startswith(".")]
+        if others or not chunks:
+            raise RunStoreError(f"{self.flag} {self.path}: not empty and has no {MANIFEST}; not "
+                                f"a run folder (choose another {self.flag})")
+        if not resume:
+            raise RunStoreError(f"{self.flag} {self.path} holds chunk files but no {MANIFEST}: "
+                                f"resume to reuse the chunks that belong to this run, or delete "
+                                f"the folder / choose another {self.flag} to start over")
+        log.warning("%s has no %s: reusing the chunks whose stamp matches this run", self.path,
+                    MANIFEST)
+        return [task.index for task in tasks if self._verified(task)]
+
     def _write_manifest(self):
-        write_atomic(self.path / MANIFEST,
-                     json.dumps(self.manifest, indent=2, sort_keys=True).encode())
+        self._write(self.path / MANIFEST,
+                    json.dumps(self.manifest, indent=2, sort_keys=True).encode())
+
+    def _write(self, path: Path, data: bytes):
+        """`write_atomic`, a failure (a full disk) a RunStoreError naming the folder: the files
+        written before are whole, so the run can be resumed once there is room."""
+        write_atomic(path, data, failure=lambda reason: RunStoreError(
+            f"{self.flag} {self.path}: {reason}; the chunks stored before are kept: make room "
+            f"and resume"))
 
     def write(self, task: ChunkTask, summary: pd.DataFrame) -> Path:
         """Store one finished chunk's summary (atomically)."""
@@ -261,28 +297,44 @@ class RunStore:
         sink = pa.BufferOutputStream()
         pq.write_table(table, sink)
         path = self.chunk_path(task.index)
-        write_atomic(path, sink.getvalue().to_pybytes())
+        self._write(path, sink.getvalue().to_pybytes())
         return path
 
     def _load(self, task: ChunkTask) -> pd.DataFrame:
         """The chunk's table; ValueError saying why it cannot be trusted."""
         path = self.chunk_path(task.index)
         try:
-            table = pq.read_table(path)
-        except (OSError, pa.ArrowException) as error:
-            raise ValueError(f"unreadable ({str(error).splitlines()[0]})") from None
-        raw = (table.schema.metadata or {}).get(METADATA_KEY)
-        if raw is None:
-            raise ValueError("no taichi_star chunk metadata")
-        stamp = json.loads(raw)
-        if stamp.get("definition_sha256") != self.definition_sha256:
-            raise ValueError("from another run (its definition differs)")
-        if stamp.get("chunk") != task.index or stamp.get("members") != list(map(int, task.members)):
-            raise ValueError("holds another chunk's instances")
-        frame = table.to_pandas()
-        if table_checksum(frame) != stamp.get("sha256"):
-            raise ValueError("its content does not match its checksum")
-        return _decode(frame, stamp.get("value_types", {}))
+            data = path.read_bytes()
+        except OSError as error:
+            raise ValueError(f"unreadable ({error.strerror})") from None
+        return self.decode_chunk(data, task)
+
+    def decode_chunk(self, data: bytes, task: ChunkTask) -> pd.DataFrame:
+        """The table in the bytes of a chunk file written for `task`; ValueError saying why it
+        cannot be trusted. Any failure to decode is such an error, whatever raised it (a damaged
+        file can make pyarrow or pandas fail in any way: a bit flip in the pandas metadata
+        gives KeyError or TypeError from `to_pandas`)."""
+        try:
+            table = pq.read_table(pa.BufferReader(data))
+            raw = (table.schema.metadata or {}).get(METADATA_KEY)
+            if raw is None:
+                raise ValueError("no taichi_star chunk metadata")
+            stamp = json.loads(raw)
+            if not isinstance(stamp, dict) or set(stamp) != STAMP_KEYS:
+                raise ValueError("its chunk metadata is malformed")
+            if stamp["definition_sha256"] != self.definition_sha256:
+                raise ValueError("from another run (its definition differs)")
+            if stamp["chunk"] != task.index or stamp["members"] != list(map(int, task.members)):
+                raise ValueError("holds another chunk's instances")
+            frame = table.to_pandas()
+            if table_checksum(frame) != stamp["sha256"]:
+                raise ValueError("its content does not match its checksum")
+            return _decode(frame, stamp["value_types"])
+        except ValueError:
+            raise
+        except Exception as error:  # noqa: BLE001 -- damage may surface as any exception
+            reason = str(error).splitlines()[0] if str(error) else ""
+            raise ValueError(f"undecodable ({type(error).__name__}: {reason})") from None
 
     def _verified(self, task: ChunkTask) -> bool:
         path = self.chunk_path(task.index)

@@ -82,12 +82,18 @@ def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None
             or chunk_size < 1:
         raise ValueError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")
     _check_duration(duration_s, cycles)
+    if not isinstance(solver, SolverConfig):
+        raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
     check_arch(arch)
     groups: Dict[tuple, List[int]] = {}
     for position, p in enumerate(params):
         if not isinstance(p, StarParams):
             raise ValueError(f"params[{position}] must be a StarParams, got {type(p).__name__}")
         duration = duration_s if duration_s is not None else cycles * p.period
+        if duration_s is None and not solver.adaptive and round(duration / solver.dt) < 1:
+            raise ValueError(f"cycles must give at least one step (dt = {solver.dt:g} s): "
+                             f"{cycles:g} periods of params[{position}] ({p.period:g} s) are "
+                             f"{duration:.3g} s, got cycles = {cycles!r}")
         groups.setdefault((p.topology_key, round(float(duration), 12)), []).append(position)
     tasks = []
     for (_, duration), positions in groups.items():

@@ -144,7 +144,7 @@ def test_summary_and_trajectory_schema():
         "displacement_x_mm", "displacement_y_mm", "speed_mm_s", "signed_speed_mm_s",
         "travel_direction_deg", "heading_deg", "max_strain", "shape_sane",
         "steady_speed_mm_s", "steady_signed_speed_mm_s",
-        "steps", "rejected_steps", "newton_iterations_mean", "newton_iterations_max", "substep_retries", "status",
+        "steps", "rejected_steps", "newton_iterations_mean", "newton_iterations_max", "substep_retries", "newton_capped", "status",
         "failure_time_s"]
     assert list(result.summary.columns) == expected
     assert list(result.trajectory.columns) == ["instance", "t_s", "x_mm", "y_mm", "heading_deg"]
@@ -318,4 +318,5 @@ def test_a_step_failing_from_the_carried_acceleration_is_redone_from_the_plain_s
     summary = ts.simulate([params], 0.6, ts.SolverConfig(dt=0.5e-3)).summary.iloc[0]
     assert summary.status == "ok"
     assert summary.newton_iterations_max == 25
+    assert summary.newton_capped  # ok, but flagged: a solve ran out of iterations
     assert summary.substep_retries == 0

@@ -78,6 +78,8 @@ def test_instances_of_several_topologies_and_periods_are_grouped_in_input_order(
     (dict(cycles=1, record_interval_s=0.0011), "record_interval_s must be a whole number"),
     (dict(cycles=1, workers=0), "workers must be an integer >= 1"),
     (dict(cycles=1, arch="tpu"), "arch must be one of"),
+    (dict(cycles=1, executor="dask"), "executor must be an Executor.*got 'dask'"),
+    (dict(cycles=1, resume=True), "resume=True needs run_dir"),
 ])
 def test_bad_arguments_fail_before_compute(monkeypatch, kwargs, message):
     monkeypatch.setattr("taichi_star.batch.tasks.simulate", _forbidden)

@@ -120,3 +120,24 @@ def test_scaling_quick(tmp_path):
     sidecar = json.loads((tmp_path / "scaling.csv.json").read_text())
     assert sidecar["machine"]["cores"] == os.cpu_count() and sidecar["machine"]["cpu_model"]
     assert len(table) == 2
+
+
+def test_a_cluster_without_workers_stops_the_run_after_the_timeout(monkeypatch):
+    """A scheduler whose last worker is gone (here: one that never had any): the run stops
+    with a RuntimeError naming the cluster after no_workers_timeout_s instead of waiting
+    forever; the check runs every POLL_S (shortened here)."""
+    from taichi_star import SolverConfig, StarParams
+    from taichi_star.batch import dask_cluster
+    from taichi_star.batch.tasks import ChunkTask
+
+    monkeypatch.setattr(dask_cluster, "POLL_S", 0.2)
+    task = ChunkTask(0, (0,), (StarParams(),), 0.01, SolverConfig())
+    with LocalCluster(n_workers=0, processes=False, dashboard_address=None) as local, \
+            Client(local) as client:
+        executor = dask_cluster.DaskExecutor(client, no_workers_timeout_s=0.5)
+        start = time.monotonic()
+        with pytest.raises(RuntimeError, match="has had no worker for 0.5 s with 1 chunk"):
+            list(executor.run([task]))
+        assert 0.5 <= time.monotonic() - start < 30
+    with pytest.raises(ValueError, match="no_workers_timeout_s must be a number > 0"):
+        dask_cluster.DaskExecutor(client, no_workers_timeout_s=0)

@@ -124,6 +124,10 @@ def test_quick_defaults_and_presets():
     ("fig4c", ["--set", "gait=A1"], "--set gait"),
     ("fig4c", ["--dt", "0.5"], "--dt: dt must be"),
     ("fig4c", ["--cycles", "nan"], "--cycles must be > 0"),
+    ("fig4c", ["--prefix", "../../escape"], "--prefix: '../../escape' is not a file name"),
+    ("fig4c", ["--prefix", "sub/fig"], "--prefix: 'sub/fig' is not a file name"),
+    ("fig4c", ["--prefix", ".."], "--prefix: '..' is not a file name"),
+    ("fig4c", ["--prefix", ""], "--prefix: '' is not a file name"),
     # identification (calibrate, sensitivity): more cases in test_identify.py
     ("calibrate", ["--fit", "alpha=1:2:3"], "--fit alpha: malformed bounds"),
     ("calibrate", ["--fit", "jet_mode=0:1"], "--fit jet_mode: not a real-valued numeric field"),
@@ -367,8 +371,63 @@ def test_a_failed_table_write_leaves_the_previous_table_and_sidecar(tmp_path, mo
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(store.os, "replace", full_disk)
-    with pytest.raises(OSError, match="No space left"):
+    with pytest.raises(cli.StudyOutputError, match=f"--out {tmp_path}: cannot write table.csv "
+                                                    f"\\(No space left on device\\)"):
         out.write_csv(pd.DataFrame({"alpha": [0.1], "speed_mm_s": [9.0]}), "table.csv")
     pd.testing.assert_frame_equal(pd.read_csv(path), first)
     assert (tmp_path / "table.csv.json").read_text() == sidecar
     assert sorted(p.name for p in tmp_path.iterdir()) == ["table.csv", "table.csv.json"]
+
+
+def test_a_full_disk_is_a_one_line_error_naming_the_folder(tmp_path, monkeypatch, capsys):
+    """ENOSPC while a study writes its table: exit 2, one line naming --out's folder, no
+    traceback; the file is not left half-written."""
+    def write_table(out, *args, **kwargs):
+        out.write_csv(pd.DataFrame({"gait": ["A1"]}), "fig4c.csv")
+
+    def full_disk(source, target):
+        raise OSError(28, os.strerror(28))
+    monkeypatch.setattr("studies.figures.run_fig4c", write_table)
+    monkeypatch.setattr(store.os, "replace", full_disk)
+    out = tmp_path / "out"
+    assert studies_main(["fig4c", "--out", str(out), *QUICK]) == 2
+    error = capsys.readouterr().err.strip()
+    assert f"--out {out}: cannot write fig4c.csv (No space left on device)" in error
+    assert len(error.splitlines()) == 1 and not (out / "fig4c.csv").exists()
+
+
+def test_output_names_stay_in_the_output_folder(no_compute, tmp_path, capsys):
+    """--out "" (the working folder) is refused; a study's own file names may name a
+    subfolder but never leave the folder."""
+    assert studies_main(["fig4c", "--out", "", *QUICK]) == 2
+    assert "--out: an empty folder name" in capsys.readouterr().err
+    out = cli.Output(SimpleNamespace(study="fig4c", out=str(tmp_path), quick=False), [])
+    assert out.path("animations/A1.gif") == tmp_path / "animations" / "A1.gif"
+    for name in ("../escape.csv", "/tmp/escape.csv", "a/../../b.csv", ""):
+        with pytest.raises(ValueError, match="would leave the output folder"):
+            out.path(name)
+
+
+def test_cycles_shorter_than_a_step_is_an_error_naming_cycles(no_compute, tmp_path, capsys):
+    """--cycles 0.0001 of the 3.15-s period is 0.3 ms, under the 1-ms step."""
+    assert studies_main(["fig4c", "--cycles", "0.0001", "--out", str(tmp_path / "out"),
+                         "--no-progress"]) == 2
+    error = capsys.readouterr().err.strip()
+    assert "--cycles 0.0001: 0.0001 periods of 3.15 s are 0.000315 s, less than one step " \
+           "(dt = 0.001 s)" in error and len(error.splitlines()) == 1
+    with pytest.raises(ValueError, match=r"cycles must give at least one step.*params\[0\]"):
+        taichi_star.batch.run_batch([StarParams()], cycles=1e-4)
+
+
+def test_a_full_disk_while_drawing_a_plot_is_a_one_line_error(tmp_path, monkeypatch, capsys):
+    """A plot is saved by matplotlib, not by Output: ENOSPC there is still one line naming the
+    file (exit 2), not a traceback."""
+    plot = tmp_path / "out" / "fig4c.png"
+
+    def full_disk(*args, **kwargs):
+        raise OSError(28, os.strerror(28), str(plot))
+    monkeypatch.setattr("studies.figures.run_fig4c", full_disk)
+    assert studies_main(["fig4c", "--out", str(tmp_path / "out"), *QUICK]) == 2
+    error = capsys.readouterr().err.strip()
+    assert f"cannot write {plot} (No space left on device)" in error
+    assert len(error.splitlines()) == 1
