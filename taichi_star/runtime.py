@@ -105,8 +105,9 @@ def engine_bytes(model: BatchModel, precision: str) -> int:
     slots = matrix_slots(model)
     coefficients = sum(values[0].size for table in model.coefficients.values()
                        for values in table.values())
-    histories = sum(int(np.prod(shape)) for cls, _ in model.terms_used
-                    for shape in cls.history(model.topology).values())
+    classes = [cls for cls, _ in model.terms_used]
+    histories = sum(int(np.prod(shape)) for cls in classes
+                    for shape in cls.history(model.topology, classes).values())
     per_instance = (scalar * (4 * slots + 2 * STATE_VECTORS_PER_NODE * model.topology.n_nodes
                               + coefficients + histories) + FIXED_BYTES_PER_INSTANCE)
     return batch_capacity(model.batch_size) * per_instance
