@@ -507,22 +507,3 @@ class BatchEngine:
 
     def restore_state(self, saved: Dict[str, np.ndarray]):
         self.state.restore(saved)
-
-    @ti.kernel
-    def profile_phases(self, phases: ti.i32, calls: ti.i32, time_s: float):
-        """For benchmarks: for every live instance, `calls` times, assemble the residual and
-        Jacobian of an implicit Euler step of size dt ending at time_s (s) at the current state,
-        then factor when phases >= 2, then solve when phases >= 3. Changes the terms' step
-        histories (not the positions)."""
-        for b in range(self.capacity):
-            if self.state.status[b] == STATUS_OK:
-                h = self.dt[None]
-                inertia_scale, rate_gain = self.integrator.weights(h, 1.0, 0)
-                for term in ti.static(self.terms):
-                    term.begin_step(b, time_s - h, time_s, h, 1.0, rate_gain, 0)
-                for _ in range(calls):
-                    self.assemble(b, inertia_scale, rate_gain, 1)
-                    if phases >= 2:
-                        self.system.factor(b)
-                    if phases >= 3:
-                        self.system.solve(b)

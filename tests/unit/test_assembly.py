@@ -181,7 +181,7 @@ def test_damping_reshapes_every_strain_term_through_the_base_interface(taichi_cp
         elastic = reference.stretch_element(xi, xj, rest, stiffness)
         damped = reference.damping_element(strain, gradient, hessian, anchor, 1.0 / h,
                                            stiffness * rest, tau)
-        return None, np.stack([elastic[1], damped[1]])
+        return elastic[1], damped[1]
 
     def bend(t, xi, xj, xk):
         voronoi, natural = BENDING["voronoi_length"][0, t], BENDING["rest_curvature"][0, t]
@@ -191,10 +191,15 @@ def test_damping_reshapes_every_strain_term_through_the_base_interface(taichi_cp
         elastic = reference.bend_element(xi, xj, xk, voronoi, natural, stiffness)
         damped = reference.damping_element(strain, gradient, hessian, anchor, 1.0 / h,
                                            stiffness * voronoi, tau)
-        return None, np.stack([elastic[1], damped[1]])
+        return elastic[1], damped[1]
 
-    elastic, damped = (reference_gradient(EDGES, moved, lambda *a: (None, stretch(*a)[1][part]))
-                       + reference_gradient(TRIPLETS, moved, lambda *a: (None, bend(*a)[1][part]))
-                       for part in (0, 1))
+    def chain_gradients(elements, element):
+        """(elastic, damping) gradients of the chain's elements, (8,) each."""
+        return [reference_gradient(elements, moved,
+                                   lambda *nodes, part=part: (None, element(*nodes)[part]))
+                for part in (0, 1)]
+
+    elastic, damped = (sum(pair) for pair in zip(chain_gradients(EDGES, stretch),
+                                                  chain_gradients(TRIPLETS, bend)))
     assert np.abs(damped).max() > 1e-2 * np.abs(elastic).max()  # the damping is no rounding
     assert_close(residual, elastic + damped, REFERENCE_RTOL)
