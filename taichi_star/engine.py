@@ -3,8 +3,8 @@ Newton's method, one Taichi thread per instance.
 
 One kernel launch advances every live instance by a chunk of steps; inside it each instance runs
 its own Newton loop (so converged instances stop iterating and failed ones are frozen at once),
-assembles its residual and Jacobian from the force terms of `physics.TERMS` into a fixed-pattern
-block-sparse store (`linsolve.BlockSystem`) and solves it by LU without pivoting. Terms that no
+assembles its residual and Jacobian from the force terms of `physics.TERMS` (each through the
+engine's `physics.assembly.Assembly`) into a fixed-pattern block-sparse store (`linsolve.BlockSystem`) and solves it by LU without pivoting. Terms that no
 instance of the batch uses are not part of the engine at all (compiled out).
 """
 

@@ -293,8 +293,9 @@ class Runtime:
 
 
 def prepare_engine(params, solver: SolverConfig = SolverConfig(), arch: str = "cpu") -> BatchEngine:
-    """For benchmarks and tools that drive the engine directly: Taichi initialised, the batch's
-    engine built (or reused from the cache) and loaded with the batch at rest."""
+    """For tests and tools that drive the engine directly (benchmarks: `profiling.EngineProfile`):
+    Taichi initialised, the batch's engine built (or reused from the cache) and loaded with the
+    batch at rest."""
     model = build_model(params)
     runtime = Runtime.current()
     runtime.ensure(arch, solver.precision)
