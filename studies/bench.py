@@ -99,13 +99,13 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import taichi as ti
 
 from taichi_star import SolverConfig, StarParams, simulate
 from taichi_star.experiment import PAPER_GAITS
 from taichi_star.batch import LocalProcesses, run_batch
+from taichi_star.profiling import EngineProfile, device_bandwidth
 from taichi_star.runtime import (GPU_BLOCK_DIM, GPU_INSTANCE_MINOR, Runtime,
-                                 kernel_optimisation_default, prepare_engine)
+                                 kernel_optimisation_default)
 
 from . import cli, provenance
 
@@ -115,10 +115,6 @@ DESCRIPTION = ("Engine throughput: robot-steps/s against batch size and precisio
 GAIT = "A1+A3"
 DT = 1e-3
 WARMUP_STEPS = 10
-STEPS_PER_LAUNCH = 50
-"""Steps per kernel launch, as `simulate` launches them."""
-STATUS_OK = 0
-"""An engine's per-instance status while the instance is live."""
 DEFAULT_BATCH_SIZES = "1,8,64,512,2048,8192"
 DEFAULT_STEPS = 100
 DEFAULT_REPEATS = 3
@@ -138,7 +134,6 @@ scenarios with the same terms, so that it compiles the stepping kernel at most o
 PROFILE_SECONDS = 0.5
 QUICK_PROFILE_SECONDS = 0.02
 """Target duration of one profiling launch, s: long enough to time, short next to the benchmark."""
-PROFILE_LAUNCHES = 3
 """Each phase is timed as the best of this many launches."""
 TARGETS = {"cpu": 40_000.0, "gpu": 2_000_000.0}
 """Throughput goals, robot-steps/s (2-core CPU at B >= 512, H100/H200 at B >= 8192)."""
@@ -154,8 +149,6 @@ SCENARIOS = {
 
 LAYOUTS = ("instance_minor", "instance_major")
 PRESETS = ("paper", "accurate")
-BANDWIDTH_BYTES = 1 << 30
-"""Size of the buffer the bandwidth probe copies (bytes): far larger than any cache."""
 
 COLUMNS = ["machine", "cpu_model", "cores", "gpu", "gpu_driver", "arch", "preset", "layout",
            "block_dim", "kernel_optimisation", "section", "scenario", "terms",
@@ -173,30 +166,10 @@ def timestamp() -> str:
 
 # --------------------------------------------------------------------------- measurement
 
-def advance(engine, first_step: int, n_steps: int):
-    """Steps in launches of simulate's size, finished when this returns."""
-    step = first_step
-    while step < first_step + n_steps:
-        count = min(STEPS_PER_LAUNCH, first_step + n_steps - step)
-        engine.advance(count)
-        step += count
-    ti.sync()
-
-
 def bench_solver(precision: str, jacobian: str = "newton") -> SolverConfig:
     """The benchmark's solver: h = 1 ms, implicit Euler, the precision's tightest usable tol."""
     return SolverConfig(dt=DT, precision=precision, jacobian=jacobian,
                         newton_tol=1e-10 if precision == "f64" else 1e-7)
-
-
-def start_batch(params, arch: str, precision: str, jacobian: str = "newton"):
-    """(engine, solver, setup_s): Taichi initialised, the batch's engine built (or reused) and
-    loaded at rest, as `simulate` does."""
-    solver = bench_solver(precision, jacobian)
-    start = time.perf_counter()
-    engine = prepare_engine(params, solver, arch)
-    ti.sync()
-    return engine, solver, time.perf_counter() - start
 
 
 def on_off(flag: bool) -> str:
@@ -210,71 +183,37 @@ def state_digest(values: np.ndarray) -> str:
     return hashlib.sha1(np.ascontiguousarray(values).tobytes()).hexdigest()[:12]
 
 
-def terms_of(engine) -> str:
-    """The force terms an engine was compiled with, "+"-joined."""
-    return "+".join(term.name for term in engine.terms)
-
-
-def first_launch(engine):
-    """(compile_s, first_s): the first one-step launch (compile + step) less a second one."""
-    first = time.perf_counter()
-    advance(engine, 0, 1)
-    first = time.perf_counter() - first
-    again = time.perf_counter()
-    advance(engine, 1, 1)
-    again = time.perf_counter() - again
-    return max(first - again, 0.0), first
-
-
 def measure(params, arch: str, precision: str, steps: int, repeats: int,
             profile_seconds: float, jacobian: str = "newton") -> dict:
     """Throughput and phase split of one batch (see the module docstring): the best of
     `repeats` timed windows, each from rest after the warm-up steps; times in s, µs."""
-    engine, solver, setup = start_batch(params, arch, precision, jacobian)
-    batch = len(params)
-    compile_s, _ = first_launch(engine)
+    profile = EngineProfile(params, bench_solver(precision, jacobian), arch)
+    compile_s, _ = profile.first_launch()
     timed = math.inf
     for _ in range(repeats):
-        engine = prepare_engine(params, solver, arch)  # the cached engine, back at rest
-        advance(engine, 0, WARMUP_STEPS)
-        iterations_before = engine.state.newton_total.to_numpy()[:batch].sum()
-        start = time.perf_counter()
-        advance(engine, WARMUP_STEPS, steps)
-        timed = min(timed, time.perf_counter() - start)
-        if (engine.state.status.to_numpy()[:batch] != STATUS_OK).any():
-            raise RuntimeError("an instance failed during the benchmark: its timing is not valid")
-        # the same every repeat: the simulation is deterministic
-        iterations = ((engine.state.newton_total.to_numpy()[:batch].sum() - iterations_before)
-                      / (batch * steps))
-
-    final_state = state_digest(engine.state.positions.to_numpy()[:batch])
-    robot_steps = batch * steps / timed
+        # the iterations are the same every repeat: the simulation is deterministic
+        seconds, iterations = profile.timed_window(WARMUP_STEPS, steps)
+        timed = min(timed, seconds)
+    final_state = state_digest(profile.positions())
+    robot_steps = profile.batch_size * steps / timed
     step_us = 1e6 / robot_steps
-    phase = phase_split(engine, batch, (WARMUP_STEPS + steps) * DT,
-                        timed / (steps * iterations), profile_seconds)
+    phase = profile.phase_split((WARMUP_STEPS + steps) * DT, timed / (steps * iterations),
+                                profile_seconds)
     assembly, factor, solve = (iterations * phase[name] for name in ("assembly", "factor", "solve"))
-    flops = engine.plan.factor_flops
+    flops = profile.factor_flops
     # the byte count assumes a fresh Jacobian and LU per iteration: Newton's rows only
-    bytes_per_step = (iterations * matrix_bytes_per_iteration(engine, precision)
+    bytes_per_step = (iterations * profile.matrix_bytes_per_iteration()
                       if jacobian == "newton" else math.nan)
     return {"gait": params[0].gait, "jacobian": jacobian, "workers": 1,
             "preset": "paper", "bytes_per_step": bytes_per_step, "final_state": final_state,
-            "terms": terms_of(engine),
-            "n_nodes": engine.n_nodes, "setup_s": setup,
+            "terms": "+".join(profile.terms),
+            "n_nodes": profile.n_nodes, "setup_s": profile.setup_s,
             "compile_s": compile_s,
             "robot_steps_per_s": robot_steps, "real_time_factor": robot_steps * DT,
             "step_us": step_us, "newton_iterations_mean": iterations, "assembly_us": assembly,
             "factor_us": factor, "solve_us": solve,
             "bookkeeping_us": step_us - assembly - factor - solve, "factor_flops": flops,
             "factor_gflops": flops / (phase["factor"] * 1e3) if phase["factor"] > 0 else math.nan}
-
-
-def matrix_bytes_per_iteration(engine, precision: str) -> float:
-    """Device-memory bytes of one Newton iteration of one instance when the matrix lives in
-    device memory (see the module docstring): the 2×2 blocks 4 times, the right-hand side
-    written and read twice, positions read and written."""
-    scalar = 8 if precision == "f64" else 4
-    return 4 * engine.plan.n_slots * 4 * scalar + 6 * engine.n_nodes * 2 * scalar
 
 
 def measure_accurate(batch: int, arch: str, precision: str, duration: float) -> dict:
@@ -303,33 +242,6 @@ def measure_accurate(batch: int, arch: str, precision: str, duration: float) -> 
             "newton_iterations_mean": float(summary["newton_iterations_mean"].mean()),
             "final_state": state_digest(summary[["displacement_x_mm", "displacement_y_mm"]]
                                         .to_numpy())}
-
-
-def measure_bandwidth(arch: str, precision: str) -> float:
-    """Device-memory bandwidth, GB/s (bytes read + written by a copy kernel, best of 5), or NaN
-    on the CPU (not a figure this benchmark's CPU rows use)."""
-    if arch == "cpu":
-        return math.nan
-    Runtime.current().ensure(arch, precision)
-    count = BANDWIDTH_BYTES // 4
-    source = ti.field(ti.f32, count)
-    target = ti.field(ti.f32, count)
-
-    @ti.kernel
-    def copy():
-        for i in range(count):
-            target[i] = source[i]
-
-    source.fill(1.0)
-    copy()
-    ti.sync()
-    best = math.inf
-    for _ in range(5):
-        start = time.perf_counter()
-        copy()
-        ti.sync()
-        best = min(best, time.perf_counter() - start)
-    return 2 * BANDWIDTH_BYTES / best / 1e9
 
 
 def best_of_calls(call, repeats: int, warmup=None):
@@ -383,27 +295,6 @@ def measure_plain(batch: int, duration: float, repeats: int) -> dict:
             **end_to_end_figures(result, batch * steps, timed)}
 
 
-def phase_split(engine, batch, time_s, iteration_s, profile_seconds) -> dict:
-    """µs per instance and Newton iteration of assembly, factorisation and solve, from launches
-    of `calls` assemblies, assembly + factor, and assembly + factor + solve per instance;
-    `iteration_s` (one Newton iteration of the batch, s) sizes `calls`."""
-    calls = int(min(max(round(profile_seconds / iteration_s), 1), 10_000))
-    engine.profile_phases(3, 1, time_s)  # compile outside the timings
-    ti.sync()
-    cumulative = []
-    for phases in (1, 2, 3):
-        # best of a few launches: the differences of noisy timings would be noisier still
-        best = math.inf
-        for _ in range(PROFILE_LAUNCHES):
-            start = time.perf_counter()
-            engine.profile_phases(phases, calls, time_s)
-            ti.sync()
-            best = min(best, time.perf_counter() - start)
-        cumulative.append(best * 1e6 / (batch * calls))
-    return {"assembly": cumulative[0], "factor": cumulative[1] - cumulative[0],
-            "solve": cumulative[2] - cumulative[1]}
-
-
 PROBE_CODE = """
 import json, sys, time
 start = time.perf_counter()
@@ -417,10 +308,10 @@ print("BENCH_PROBE " + json.dumps(bench.first_step_probe(sys.argv[1], sys.argv[2
 def first_step_probe(arch: str, precision: str, batch_size: int, import_s: float) -> dict:
     """In a fresh process: setup (Taichi init, engine, load) and the first launch of a batch,
     split into compile and step by timing a second launch. Times in s."""
-    engine, _, setup = start_batch([StarParams(gait=GAIT)] * batch_size, arch, precision)
-    compile_s, first = first_launch(engine)
-    return {"gait": GAIT, "import_s": import_s, "setup_s": setup, "compile_s": compile_s,
-            "time_to_first_step_s": import_s + setup + first}
+    profile = EngineProfile([StarParams(gait=GAIT)] * batch_size, bench_solver(precision), arch)
+    compile_s, first = profile.first_launch()
+    return {"gait": GAIT, "import_s": import_s, "setup_s": profile.setup_s, "compile_s": compile_s,
+            "time_to_first_step_s": import_s + profile.setup_s + first}
 
 
 def cache_probe(arch: str, precision: str, batch_size: int) -> dict:
@@ -585,7 +476,7 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
                  for precision in args.precisions]
     for index, (optimise, precision) in enumerate(compilers):
         Runtime.current().configure_compiler(optimise)
-        bandwidth = measure_bandwidth(args.arch, precision) if gpu else math.nan
+        bandwidth = device_bandwidth(args.arch, precision) if gpu else math.nan
         for layout, block_dim in settings if gpu else [("instance_major", 1)]:
             if gpu:
                 Runtime.current().configure_gpu(block_dim, layout == "instance_minor")

@@ -14,6 +14,7 @@ os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "false")
 from .actuation import CurvatureProfile
 from .gait import Gait, symmetry_classes
 from .params import JACOBIANS, PRESETS, STAR_RANGES, SolverConfig, StarParams
+from .profiling import EngineProfile
 from .runtime import available_archs
 from .simulation import SimulationResult, simulate
 from .simulator import Simulator, SimulatorSnapshot
@@ -21,4 +22,4 @@ from .simulator import Simulator, SimulatorSnapshot
 __version__ = "0.3.0"
 
 __all__ = ["simulate", "SimulationResult", "Simulator", "SimulatorSnapshot", "available_archs", "StarParams", "STAR_RANGES", "SolverConfig", "PRESETS", "JACOBIANS",
-           "CurvatureProfile", "Gait", "symmetry_classes", "__version__"]
+           "CurvatureProfile", "Gait", "symmetry_classes", "EngineProfile", "__version__"]

@@ -3,8 +3,8 @@ Newton's method, one Taichi thread per instance.
 
 One kernel launch advances every live instance by a chunk of steps; inside it each instance runs
 its own Newton loop (so converged instances stop iterating and failed ones are frozen at once),
-assembles its residual and Jacobian from the force terms of `physics.TERMS` into a fixed-pattern
-block-sparse store (`linsolve.BlockSystem`) and solves it by LU without pivoting. Terms that no
+assembles its residual and Jacobian from the force terms of `physics.TERMS` (each through the
+engine's `physics.assembly.Assembly`) into a fixed-pattern block-sparse store (`linsolve.BlockSystem`) and solves it by LU without pivoting. Terms that no
 instance of the batch uses are not part of the engine at all (compiled out).
 """
 
@@ -19,7 +19,8 @@ from .model import BatchModel
 from .params import SolverConfig
 from .physics import coupled_node_pairs
 from .fields import FieldArena, FieldStore
-from .physics.base import load_field, numpy_to_field_type, pad_batch
+from .physics.assembly import Assembly
+from .physics.base import connect_terms, load_field, numpy_to_field_type, pad_batch
 from .gait import N_ACTUATORS, Gait
 from .state import NEVER, STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_OK, BatchState
 
@@ -65,14 +66,17 @@ class BatchEngine:
         self.centroids = arena.batch_field(float, capacity, vector=2)
         for name, dtype in SOLVER_SETTINGS.items():
             setattr(self, name, arena.field(dtype))
+        self.assembly = Assembly(topology, capacity, arena, self.plan.slot, integrator, self.state,
+                                 self.system)
+        """What the terms see of this engine (they never hold the engine itself)."""
+        term_classes = [cls for cls, _ in model.terms_used]
         self.terms = []
         for cls, configuration in model.terms_used:
             coefficients = model.coefficients[cls.name]
             shapes = {name: (values.shape[1:], numpy_to_field_type(values))
                       for name, values in coefficients.items()}
-            self.terms.append(cls(self, configuration, shapes))
-        for term in self.terms:
-            term.reshapers = [other for other in self.terms if term.name in other.reshapes]
+            self.terms.append(cls(self.assembly, configuration, shapes, term_classes))
+        connect_terms(self.terms)
         for term in self.terms:
             self.state.term_histories.update(
                 {f"{term.name}.{name}": field for name, field in term.history_fields().items()})
@@ -91,16 +95,6 @@ class BatchEngine:
             if term.name == name:
                 return term
         raise KeyError(name)
-
-    def pair_slots(self, pairs) -> ti.Field:
-        """(P, 4) Jacobian slots of the blocks (i,i), (i,j), (j,i), (j,j) of node pairs (i, j)."""
-        slot = self.plan.slot
-        return self.arena.index([[slot[i, i], slot[i, j], slot[j, i], slot[j, j]] for i, j in pairs])
-
-    def triplet_slots(self, triplets) -> ti.Field:
-        """(T, 9) Jacobian slots of the blocks (a, c) of each triplet's nodes, row-major."""
-        slot = self.plan.slot
-        return self.arena.index([[slot[a, c] for a in nodes for c in nodes] for nodes in triplets])
 
     def load(self, model: BatchModel, solver: SolverConfig, periodic_gaits: bool = True):
         """Copy a batch (at most `capacity` instances) and the solver settings to the device and
@@ -135,50 +129,9 @@ class BatchEngine:
 
     # ---------------------------------------------------------------- assembly
     @ti.func
-    def add_block(self, b, slot, value, jacobian):
-        # load + store, not `+=` (an atomic in Taichi): one thread owns instance b
-        if jacobian:
-            self.system.blocks[b, slot] = self.system.blocks[b, slot] + value
-
-    @ti.func
-    def add_residual(self, b, n, value):
-        self.system.rhs[b, n] = self.system.rhs[b, n] + value
-
-    @ti.func
-    def scatter_edge(self, b, slots: ti.template(), e, i, j, gradient, hessian, jacobian):
-        """Scatter a term that depends on e = x_j − x_i alone (∂/∂x_i = −∂/∂e); `slots` from
-        `pair_slots`."""
-        self.add_residual(b, i, -gradient)
-        self.add_residual(b, j, gradient)
-        self.add_block(b, slots[e, 0], hessian, jacobian)
-        self.add_block(b, slots[e, 1], -hessian, jacobian)
-        self.add_block(b, slots[e, 2], -hessian, jacobian)
-        self.add_block(b, slots[e, 3], hessian, jacobian)
-
-    @ti.func
-    def scatter_triplet(self, b, slots: ti.template(), t, i, j, k, g1, g2, h11, h12, h22, jacobian):
-        """Scatter a term of the two edges e1 = x_j − x_i, e2 = x_k − x_j of triplet t: node
-        derivatives by the incidence of the edges; `slots` from `triplet_slots`."""
-        self.add_residual(b, i, -g1)
-        self.add_residual(b, j, g1)
-        self.add_residual(b, j, -g2)
-        self.add_residual(b, k, g2)
-        h21 = h12.transpose()
-        self.add_block(b, slots[t, 0], h11, jacobian)
-        self.add_block(b, slots[t, 1], h12 - h11, jacobian)
-        self.add_block(b, slots[t, 2], -h12, jacobian)
-        self.add_block(b, slots[t, 3], h21 - h11, jacobian)
-        self.add_block(b, slots[t, 4], h11 - h12 - h21 + h22, jacobian)
-        self.add_block(b, slots[t, 5], h12 - h22, jacobian)
-        self.add_block(b, slots[t, 6], -h21, jacobian)
-        self.add_block(b, slots[t, 7], h21 - h22, jacobian)
-        self.add_block(b, slots[t, 8], h22, jacobian)
-
-    @ti.func
     def implicit_velocity(self, b, n, rate_gain):
         """Node n's velocity at the current iterate by the integrator's rate, m/s."""
-        return rate_gain * (self.state.positions[b, n] - self.state.previous[b, n]) \
-            + self.state.velocity_offset[b, n]
+        return self.assembly.implicit_velocity(b, n, rate_gain)
 
     @ti.func
     def assemble(self, b, inertia_scale, rate_gain, jacobian):
@@ -189,9 +142,9 @@ class BatchEngine:
         identity = ti.Matrix.identity(float, 2)
         for n in range(self.n_nodes):
             scaled_mass = inertia_scale * self.inertia[b, n]
-            self.add_residual(b, n, scaled_mass * (
+            self.assembly.add_residual(b, n, scaled_mass * (
                 (self.state.positions[b, n] - self.state.previous[b, n]) - self.state.inertia_offset[b, n]))
-            self.add_block(b, self.diagonal_slot[n], scaled_mass * identity, jacobian)
+            self.assembly.add_block(b, self.diagonal_slot[n], scaled_mass * identity, jacobian)
         for term in ti.static(self.terms):
             term.assemble(b, rate_gain, jacobian)
 
@@ -554,22 +507,3 @@ class BatchEngine:
 
     def restore_state(self, saved: Dict[str, np.ndarray]):
         self.state.restore(saved)
-
-    @ti.kernel
-    def profile_phases(self, phases: ti.i32, calls: ti.i32, time_s: float):
-        """For benchmarks: for every live instance, `calls` times, assemble the residual and
-        Jacobian of an implicit Euler step of size dt ending at time_s (s) at the current state,
-        then factor when phases >= 2, then solve when phases >= 3. Changes the terms' step
-        histories (not the positions)."""
-        for b in range(self.capacity):
-            if self.state.status[b] == STATUS_OK:
-                h = self.dt[None]
-                inertia_scale, rate_gain = self.integrator.weights(h, 1.0, 0)
-                for term in ti.static(self.terms):
-                    term.begin_step(b, time_s - h, time_s, h, 1.0, rate_gain, 0)
-                for _ in range(calls):
-                    self.assemble(b, inertia_scale, rate_gain, 1)
-                    if phases >= 2:
-                        self.system.factor(b)
-                    if phases >= 3:
-                        self.system.solve(b)

@@ -93,8 +93,8 @@ def build_model(params: Sequence[StarParams], commanded: bool = False) -> BatchM
         if added is not None:
             inertia = inertia + added
         coefficients[cls.name] = cls.coefficients(params, topologies, topology)
-        if commanded and "gait_mask" in coefficients[cls.name]:
-            coefficients[cls.name]["gait_mask"][:] = 1
+        if commanded:
+            coefficients[cls.name] = cls.commanded(coefficients[cls.name])
         configuration = cls.configuration(coefficients[cls.name])
         if configuration is not None:
             used.append((cls, configuration))

@@ -84,29 +84,17 @@ FIXED_BYTES_PER_INSTANCE = 512
 """Per-instance scalars (status, counters, times, actuator schedules), rounded up."""
 
 
-_MATRIX_SLOTS: Dict[tuple, int] = {}
-"""Newton-matrix blocks per engine key (the symbolic factorisation, done once per key)."""
-
-
-def matrix_slots(model: BatchModel) -> int:
-    """2×2 blocks of the Newton matrix's elimination pattern for this batch's engine."""
-    if model.engine_key not in _MATRIX_SLOTS:
-        terms = [cls for cls, _ in model.terms_used]
-        _MATRIX_SLOTS[model.engine_key] = plan_elimination(
-            model.topology.n_nodes, coupled_node_pairs(model.topology, terms)).n_slots
-    return _MATRIX_SLOTS[model.engine_key]
-
-
 def engine_bytes(model: BatchModel, precision: str) -> int:
     """Memory (bytes) of an engine for this batch: its capacity times, per instance, the Newton
     matrix (2×2 blocks of the elimination pattern), the node vectors, the terms' coefficients
     and histories, and the fixed scalars."""
     scalar = 8 if precision == "f64" else 4
-    slots = matrix_slots(model)
+    slots = Runtime.current().matrix_slots(model)
     coefficients = sum(values[0].size for table in model.coefficients.values()
                        for values in table.values())
-    histories = sum(int(np.prod(shape)) for cls, _ in model.terms_used
-                    for shape in cls.history(model.topology).values())
+    classes = [cls for cls, _ in model.terms_used]
+    histories = sum(int(np.prod(shape)) for cls in classes
+                    for shape in cls.history(model.topology, classes).values())
     per_instance = (scalar * (4 * slots + 2 * STATE_VECTORS_PER_NODE * model.topology.n_nodes
                               + coefficients + histories) + FIXED_BYTES_PER_INSTANCE)
     return batch_capacity(model.batch_size) * per_instance
@@ -193,6 +181,8 @@ class Runtime:
         self.log_level = ti.WARN
         self.engines: Dict[tuple, BatchEngine] = {}
         self.leases: Dict[tuple, List[Tuple[BatchEngine, weakref.ref]]] = {}
+        self.slot_counts: Dict[tuple, int] = {}
+        """Newton-matrix blocks per model engine key (`matrix_slots`)."""
 
     @classmethod
     def current(cls) -> "Runtime":
@@ -245,6 +235,15 @@ class Runtime:
         self.kernel_optimisation = bool(kernel_optimisation)
         self.arch = None
 
+    def matrix_slots(self, model: BatchModel) -> int:
+        """2×2 blocks of the Newton matrix's elimination pattern for this batch's engine (the
+        symbolic factorisation, done once per topology and term set in this process)."""
+        if model.engine_key not in self.slot_counts:
+            terms = [cls for cls, _ in model.terms_used]
+            self.slot_counts[model.engine_key] = plan_elimination(
+                model.topology.n_nodes, coupled_node_pairs(model.topology, terms)).n_slots
+        return self.slot_counts[model.engine_key]
+
     def loop_spread(self, capacity: int) -> int:
         """Iterations of the engine's parallel loop per instance: on the CPU enough to reach
         PARALLEL_LOOP_MINIMUM iterations (below that Taichi runs the loop on one thread)."""
@@ -294,8 +293,9 @@ class Runtime:
 
 
 def prepare_engine(params, solver: SolverConfig = SolverConfig(), arch: str = "cpu") -> BatchEngine:
-    """For benchmarks and tools that drive the engine directly: Taichi initialised, the batch's
-    engine built (or reused from the cache) and loaded with the batch at rest."""
+    """For tests and tools that drive the engine directly (benchmarks: `profiling.EngineProfile`):
+    Taichi initialised, the batch's engine built (or reused from the cache) and loaded with the
+    batch at rest."""
     model = build_model(params)
     runtime = Runtime.current()
     runtime.ensure(arch, solver.precision)

@@ -3,7 +3,13 @@
 `TERMS` is the only list of terms: model building, loading to the device, compile-out and
 assembly all iterate it, in this order (which is also the order in which forces are summed, and
 the order of their `begin_step` hooks: the damping reads the natural curvatures the bending term
-sets). Adding a term is one module plus one line here.
+sets). Adding a term is one module plus one line here (and its NumPy twin in `reference.py`).
+
+A term (`base.Term`) sees the batch only through the `assembly.Assembly` it is given: positions,
+the integrator's rates, slot tables and the scatter of its residual and Jacobian; the elastic
+terms share the strain-element base `strain.StrainTerm`, which the material damping reshapes
+without knowing which terms they are. docs/numerics.md, "How a force term is written", explains
+the interface.
 """
 
 from .added_mass import AddedMass

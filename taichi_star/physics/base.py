@@ -5,31 +5,35 @@ Its class owns everything about it:
 
 - `coefficients(params, topologies, topology)`: its per-instance coefficients on the host, NumPy
   arrays with a leading batch axis, computed from the StarParams (and the per-instance rest
-  geometry);
+  geometry); `commanded(coefficients)`: the same for a batch that fires what it is commanded;
 - `configuration(coefficients)`: whether a batch uses it (None: compiled out) and the static
   switches of its kernel code (e.g. whether any instance is actuated);
 - `coupled_pairs(topology)`: the node pairs whose 2×2 Jacobian blocks it can fill;
-- `history(topology)`: per-instance state it carries from step to step (e.g. the previous area
-  of a jet space), saved and restored with the batch state;
+- `history(topology, terms)`: per-instance state it carries from step to step (e.g. the previous
+  area of a jet space), saved and restored with the batch state;
 - on the device, an instance of the class (a `ti.data_oriented` object) holds those coefficients
-  and histories in fields with a leading batch axis and assembles itself in `assemble`.
+  and histories in fields with a leading batch axis, builds its index tables in `build` and
+  assembles itself in `assemble`, both through the `assembly.Assembly` it is given (positions,
+  the integrator's rates, the scatter into the residual and the Jacobian): a term never sees
+  the engine.
 
-A term may instead act on the elements of other terms (`reshapes`): a term whose element energy
-is ½·k·(s − s⁰)² in a strain s passes (k, s⁰) through `reshaped`, and every term that reshapes
-it returns the stiffness and target of the element's combined energy. The material damping does
-this (its pseudo-energy has the elastic form), so each element is evaluated and scattered into
-the Jacobian once, not once per term.
+A term may instead act on the elements of other terms (`reshapes`): the elements of a
+`strain.StrainTerm` have the energy ½·k·(s − s⁰)² in a strain s, and a term that reshapes them
+returns, from the (k, s⁰) of an element, the stiffness and target of the element's energy with
+its own added. The material damping does this (its pseudo-energy has the elastic form), so each
+element is evaluated and scattered into the Jacobian once, not once per term.
 
 The engine never names a coefficient: it loads whatever `coefficients` returned into fields of
 the same names and shapes.
 """
-
 
 from typing import ClassVar, Dict, Optional, Sequence, Tuple
 
 import numpy as np
 import taichi as ti
 from taichi.lang.util import to_numpy_type
+
+from .assembly import Assembly
 
 
 def numpy_to_field_type(array: np.ndarray):
@@ -55,13 +59,18 @@ class Term:
     and implement `assemble` as a `@ti.func`."""
 
     name: ClassVar[str]
-    reshapes: ClassVar[Tuple[str, ...]] = ()
-    """Names of the terms whose element energies this term reshapes (`reshape`)."""
 
     @staticmethod
     def coefficients(params: Sequence, topologies: Sequence, topology) -> Dict[str, np.ndarray]:
         """Per-instance coefficients: name -> array of shape (B, ...)."""
         return {}
+
+    @staticmethod
+    def commanded(coefficients: Dict[str, np.ndarray]) -> Dict[str, np.ndarray]:
+        """The coefficients of a batch whose instances fire whatever they are commanded, not
+        their gait (`model.build_model(commanded=True)`): unchanged unless the term depends on
+        the gait."""
+        return coefficients
 
     @staticmethod
     def configuration(coefficients: Dict[str, np.ndarray]) -> Optional[Tuple]:
@@ -75,8 +84,9 @@ class Term:
         return ()
 
     @staticmethod
-    def history(topology) -> Dict[str, Tuple[int, ...]]:
-        """Per-instance state carried between steps: name -> per-instance shape."""
+    def history(topology, terms: Sequence[type] = ()) -> Dict[str, Tuple[int, ...]]:
+        """Per-instance state carried between steps: name -> per-instance shape. `terms`: the
+        classes of the batch's terms (a term that reshapes others sizes its history by them)."""
         return {}
 
     @staticmethod
@@ -84,25 +94,35 @@ class Term:
         """(B, N) diagonal mass the term adds to the nodes' inertia (kg/m), or None."""
         return None
 
-    def __init__(self, engine, configuration: Tuple, coefficient_shapes: Dict[str, Tuple]):
+    @classmethod
+    def reshapes(cls, other: type) -> bool:
+        """Whether this term reshapes the elements of the term class `other` (`reshape`)."""
+        return False
+
+    def __init__(self, assembly: Assembly, configuration: Tuple,
+                 coefficient_shapes: Dict[str, Tuple], terms: Sequence[type] = ()):
         """Device side: fields for the coefficients (shapes (capacity, ...)) and histories.
-        `engine` gives the shared pieces (topology, state, linear system, integrator)."""
-        self.engine = engine
+        `assembly` gives the batch's topology, state, integrator rates and linear system;
+        `terms`: the classes of the batch's terms (as for `history`)."""
+        self.assembly = assembly
         self.configuration_switches = configuration
-        capacity = engine.capacity
+        capacity = assembly.capacity
         self.coefficient_names = tuple(coefficient_shapes)
         for name, (shape, dtype) in coefficient_shapes.items():
-            setattr(self, name, engine.arena.batch_field(dtype, (capacity,) + tuple(shape)))
+            setattr(self, name, assembly.batch_field(dtype, (capacity,) + tuple(shape)))
         self.reshapers = []
-        """The engine's terms that reshape this term's elements (set by the engine)."""
-        self.history_names = tuple(self.history(engine.topology))
-        for name, shape in self.history(engine.topology).items():
-            setattr(self, name, engine.arena.batch_field(float, (capacity,) + tuple(shape)))
-        self.build(engine.topology)
+        """The terms that reshape this term's elements (`connect_terms`)."""
+        self.reshaped_terms = []
+        """The terms whose elements this term reshapes (`connect_terms`)."""
+        histories = self.history(assembly.topology, terms)
+        self.history_names = tuple(histories)
+        for name, shape in histories.items():
+            setattr(self, name, assembly.batch_field(float, (capacity,) + tuple(shape)))
+        self.build(assembly.topology)
 
     def build(self, topology):
         """Device tables of the topology the term needs (index fields, Jacobian slots, from
-        `engine.arena.index`)."""
+        `self.assembly`)."""
 
     def coefficient_fields(self) -> Dict[str, ti.Field]:
         """The device fields of the coefficients, by coefficient name."""
@@ -110,6 +130,15 @@ class Term:
 
     def history_fields(self) -> Dict[str, ti.Field]:
         return {name: getattr(self, name) for name in self.history_names}
+
+    def coefficient_derivatives(self, name: str):
+        """Reserved for the sensitivities through the solver (issue 24): the derivative of this
+        term's residual (and the Jacobian-vector products it needs) with respect to its
+        per-instance coefficient `name` at the current iterate, ∂r/∂c of shape (N, 2) per
+        instance, assembled like `assemble` through the same `Assembly`. No term provides it
+        yet."""
+        raise NotImplementedError(f"{type(self).__name__} gives no derivatives with respect to "
+                                  f"its coefficient {name!r} yet")
 
     @ti.func
     def begin_step(self, b, start_time, end_time, h, ratio, rate_gain, use_history):
@@ -125,8 +154,8 @@ class Term:
 
     @ti.func
     def reshape(self, b, term: ti.template(), element, stiffness, target, rate_gain):
-        """For a term named in `reshapes`: (stiffness, target) of element `element` of `term`
-        (instance b) → those of the element's energy with this term's added."""
+        """For a term class accepted by `reshapes`: (stiffness, target) of element `element` of
+        `term` (instance b) → those of the element's energy with this term's added."""
         return stiffness, target
 
     @ti.func
@@ -136,3 +165,11 @@ class Term:
         for reshaper in ti.static(self.reshapers):
             stiffness, target = reshaper.reshape(b, self, element, stiffness, target, rate_gain)
         return stiffness, target
+
+
+def connect_terms(terms: Sequence[Term]):
+    """Tell each of a batch's device terms which of the others reshape its elements and which
+    it reshapes (by `Term.reshapes`, in registry order)."""
+    for term in terms:
+        term.reshapers = [other for other in terms if other.reshapes(type(term))]
+        term.reshaped_terms = [other for other in terms if term.reshapes(type(other))]

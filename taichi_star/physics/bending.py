@@ -13,7 +13,7 @@ import taichi as ti
 
 from ..gait import N_ACTUATORS, Gait
 from ..geometry import ARC_BEND, JOINT_BEND
-from .base import Term
+from .strain import StrainTerm
 
 NOT_FIRED = -1.0
 """Marks an actuator that has not fired (K̄ is positive whenever it is defined)."""
@@ -85,7 +85,9 @@ def triplet_modulus(params, topology) -> np.ndarray:
 
 
 @ti.data_oriented
-class Bending(Term):
+class Bending(StrainTerm):
+    """Strain elements: the triplets, s = κ, k = E·r0³/12 (its energy ½·k·(κ − κ⁰)²·Δl)."""
+
     name = "bending"
 
     @staticmethod
@@ -107,7 +109,12 @@ class Bending(Term):
             "gait_mask": np.stack([Gait.parse(p.gait).mask for p in params]),
         }
     """gait_mask (B, 8): the actuators an instance fires (its gait, or all eight for a
-    commanded batch); the firing itself is in the batch state (fire times)."""
+    commanded batch: `commanded`); the firing itself is in the batch state (fire times)."""
+
+    @staticmethod
+    def commanded(coefficients):
+        # any actuator may be commanded to fire
+        return {**coefficients, "gait_mask": np.ones_like(coefficients["gait_mask"])}
 
     @staticmethod
     def configuration(coefficients):
@@ -124,17 +131,21 @@ class Bending(Term):
         return pairs
 
     @staticmethod
-    def history(topology):
+    def element_count(topology):
+        return topology.n_triplets
+
+    @staticmethod
+    def history(topology, terms=()):
         # K̄ of each actuator at the start and the end of the current step
         return {"start_curvature": (N_ACTUATORS,), "end_curvature": (N_ACTUATORS,)}
 
     def build(self, topology):
         (self.actuated,) = self.configuration_switches
-        self.n_triplets = topology.n_triplets
-        self.triplets = self.engine.arena.index(topology.triplets)
-        self.triplet_slot = self.engine.triplet_slots(topology.triplets)
-        self.triplet_actuator = self.engine.arena.index(topology.triplet_actuator)
-        self.joint_actuator = self.engine.arena.index(topology.joint_actuator)
+        self.n_elements = topology.n_triplets
+        self.triplets = self.assembly.index(topology.triplets)
+        self.triplet_slot = self.assembly.triplet_slots(topology.triplets)
+        self.triplet_actuator = self.assembly.index(topology.triplet_actuator)
+        self.joint_actuator = self.assembly.index(topology.joint_actuator)
 
     @ti.func
     def profile_curvature(self, b, tau):
@@ -154,9 +165,9 @@ class Bending(Term):
     def actuator_curvature(self, b, m, time):
         """K̄ (1/m) of actuator m of instance b at `time` (s) by the firing that applies then,
         or NOT_FIRED when it has never fired by then."""
-        fired = self.engine.state.fire_time[b, m]
+        fired = self.assembly.fire_time[b, m]
         if time < fired:
-            fired = self.engine.state.previous_fire_time[b, m]
+            fired = self.assembly.previous_fire_time[b, m]
         value = NOT_FIRED
         if fired >= 0.0:
             value = self.profile_curvature(b, time - fired)
@@ -201,17 +212,27 @@ class Bending(Term):
     @ti.func
     def edges_of(self, b, t):
         """(i, j, k, e1, e2) of triplet t at instance b's current positions."""
-        positions = ti.static(self.engine.state.positions)
+        positions = ti.static(self.assembly.positions)
         i, j, k = self.triplets[t, 0], self.triplets[t, 1], self.triplets[t, 2]
         return i, j, k, positions[b, j] - positions[b, i], positions[b, k] - positions[b, j]
 
     @ti.func
-    def assemble(self, b, rate_gain, jacobian):
-        for t in range(self.n_triplets):
-            i, j, k, edge1, edge2 = self.edges_of(b, t)
-            stiffness, natural = self.reshaped(b, t, self.bend_stiffness[b, t],
-                                               self.natural_curvature(b, t, 0), rate_gain)
-            g1, g2, h11, h12, h22 = bend_gradient_hessian(
-                edge1, edge2, self.voronoi_length[b, t], natural, stiffness)
-            self.engine.scatter_triplet(b, self.triplet_slot, t, i, j, k, g1, g2, h11, h12, h22,
-                                        jacobian)
+    def stiffness(self, b, t):
+        return self.bend_stiffness[b, t]
+
+    @ti.func
+    def natural_strain(self, b, t, at_start):
+        return self.natural_curvature(b, t, at_start)
+
+    @ti.func
+    def strain(self, b, t):
+        _, _, _, edge1, edge2 = self.edges_of(b, t)
+        return 2.0 * turning_tangent(edge1, edge2) / self.voronoi_length[b, t]
+
+    @ti.func
+    def add_element(self, b, t, stiffness, natural, jacobian):
+        i, j, k, edge1, edge2 = self.edges_of(b, t)
+        g1, g2, h11, h12, h22 = bend_gradient_hessian(
+            edge1, edge2, self.voronoi_length[b, t], natural, stiffness)
+        self.assembly.scatter_triplet(b, self.triplet_slot, t, i, j, k, g1, g2, h11, h12, h22,
+                                      jacobian)

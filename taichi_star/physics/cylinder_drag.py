@@ -31,11 +31,11 @@ class CylinderDrag(Term):
         return () if (coefficients["cylinder_drag_coeff"] > 0).any() else None
 
     def build(self, topology):
-        self.centre_slot = self.engine.plan.slot[CENTRE, CENTRE]
+        self.centre_slot = self.assembly.slot(CENTRE, CENTRE)
 
     @ti.func
     def assemble(self, b, rate_gain, jacobian):
-        velocity = self.engine.implicit_velocity(b, CENTRE, rate_gain)
+        velocity = self.assembly.implicit_velocity(b, CENTRE, rate_gain)
         force, d_velocity = cylinder_drag(velocity, self.cylinder_drag_coeff[b])
-        self.engine.add_residual(b, CENTRE, -force)
-        self.engine.add_block(b, self.centre_slot, -rate_gain * d_velocity, jacobian)
+        self.assembly.add_residual(b, CENTRE, -force)
+        self.assembly.add_block(b, self.centre_slot, -rate_gain * d_velocity, jacobian)

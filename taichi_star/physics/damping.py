@@ -1,15 +1,16 @@
-"""Kelvin–Voigt material damping on every stretching edge and bending triplet.
+"""Kelvin–Voigt material damping on every element of every strain term (`strain.StrainTerm`:
+the stretching edges and the bending triplets).
 
-A viscous force on the rate of each element's elastic strain s (ε for stretching, δ = κ − κ⁰ for
-bending): f = −τ·k_s·ṡ·∇s with the element's own stiffness (k_s = E·r0·Δl̄ for stretching,
-(E·r0³/12)·Δl for bending) and τ = `damping_time`; a mode of angular frequency ω gets the damping
+A viscous force on the rate of each element's elastic strain s − s⁰ (ε for stretching,
+δ = κ − κ⁰ for bending): f = −τ·k_s·ṡ·∇s with the element's own stiffness (k_s = E·r0·Δl̄ for
+stretching, (E·r0³/12)·Δl for bending) and τ = `damping_time`; a mode of angular frequency ω gets the damping
 ratio ζ = ωτ/2. The rate is the integrator's own: ṡ = γ·(s − s_k) + o, with γ its rate gain and
 o its offset from the history (implicit Euler: (s − s_k)/h; BDF2: (3s − 4s_k + s_{k−1})/(2h)).
 Since s_k and o are fixed during a step, f is the gradient of the pseudo-energy
 ½·τγ·k_s·(s − s*)², s* = s_k − o/γ: the same form as the elastic energy with stiffness τγ·k and a
 moving target. Added to the element's elastic energy ½·k_s·(s − s⁰)² it gives one energy of the
 same form, ½·k_s(1 + τγ)·(s − (s⁰ + τγ·s*)/(1 + τγ))² plus a constant, so the term reshapes the
-stretching and bending elements (`Term.reshapes`) rather than assembling its own: each element is
+strain elements (`Term.reshapes`) rather than assembling its own: each element is
 evaluated and scattered once, and the Jacobian stays exact and symmetric. Without damping (τ = 0
 everywhere) the term is compiled out.
 """
@@ -18,13 +19,16 @@ import numpy as np
 import taichi as ti
 
 from .base import Term
-from .bending import turning_tangent
+from .strain import StrainTerm
 
 
 @ti.data_oriented
 class MaterialDamping(Term):
     name = "damping"
-    reshapes = ("stretching", "bending")
+
+    @classmethod
+    def reshapes(cls, other):
+        return issubclass(other, StrainTerm)
 
     @staticmethod
     def coefficients(params, topologies, topology):
@@ -34,44 +38,40 @@ class MaterialDamping(Term):
     def configuration(coefficients):
         return () if (coefficients["damping_time"] > 0).any() else None
 
-    @staticmethod
-    def history(topology):
-        # s_k of every element (for the next step's BDF2 offset) and the target s* of this step
-        return {"previous_strain": (topology.n_edges,), "strain_target": (topology.n_edges,),
-                "previous_bend": (topology.n_triplets,), "bend_target": (topology.n_triplets,)}
+    @classmethod
+    def history(cls, topology, terms=()):
+        # per element of each strain term: s_k − s⁰ (for the next step's BDF2 offset) and the
+        # target s* − s⁰ of this step
+        histories = {}
+        for other in terms:
+            if cls.reshapes(other):
+                elements = (other.element_count(topology),)
+                histories[f"{other.name}_previous_strain"] = elements
+                histories[f"{other.name}_strain_target"] = elements
+        return histories
 
-    def build(self, topology):
-        self.stretching = self.engine.term("stretching")
-        self.bending = self.engine.term("bending")
+    def strain_history(self, term):
+        """(previous strain, strain target) fields of a reshaped term's elements."""
+        return (getattr(self, f"{term.name}_previous_strain"),
+                getattr(self, f"{term.name}_strain_target"))
 
     @ti.func
     def begin_step(self, b, start_time, end_time, h, ratio, rate_gain, use_history):
-        """Record every element's strain at the step's start (with κ⁰ at the start time) and
-        the target of the pseudo-energy. Runs after the bending term's begin_step, which sets
-        the natural curvatures of this step."""
-        positions = ti.static(self.engine.state.positions)
-        for e in range(self.stretching.n_edges):
-            i, j = self.stretching.edges[e, 0], self.stretching.edges[e, 1]
-            strain = (positions[b, j] - positions[b, i]).norm() / self.stretching.rest_length[b, e] - 1.0
-            offset = self.engine.integrator.rate_offset(strain, self.previous_strain[b, e], h, ratio, use_history)
-            self.strain_target[b, e] = strain - offset / rate_gain
-            self.previous_strain[b, e] = strain
-        for t in range(self.bending.n_triplets):
-            i, j, k, edge1, edge2 = self.bending.edges_of(b, t)
-            curvature = 2.0 * turning_tangent(edge1, edge2) / self.bending.voronoi_length[b, t]
-            excess = curvature - self.bending.natural_curvature(b, t, 1)
-            offset = self.engine.integrator.rate_offset(excess, self.previous_bend[b, t], h, ratio, use_history)
-            self.bend_target[b, t] = excess - offset / rate_gain
-            self.previous_bend[b, t] = excess
+        """Record every element's strain at the step's start (with s⁰ at the start time) and
+        the target of the pseudo-energy. Runs after the strain terms' begin_step (registry
+        order), which sets their natural strains of this step."""
+        for term in ti.static(self.reshaped_terms):
+            previous, target = ti.static(self.strain_history(term))
+            for e in range(term.n_elements):
+                excess = term.strain(b, e) - term.natural_strain(b, e, 1)
+                offset = self.assembly.rate_offset(excess, previous[b, e], h, ratio, use_history)
+                target[b, e] = excess - offset / rate_gain
+                previous[b, e] = excess
 
     @ti.func
     def reshape(self, b, term: ti.template(), element, stiffness, target, rate_gain):
         # ½k(s − s⁰)² + ½ck(s − s*)² with c = τγ is ½k(1 + c)(s − (s⁰ + c·s*)/(1 + c))² plus a
         # constant; the targets are kept as offsets from the elastic one
         viscosity = self.damping_time[b] * rate_gain
-        offset = 0.0
-        if ti.static(term.name == "stretching"):
-            offset = self.strain_target[b, element]
-        else:
-            offset = self.bend_target[b, element]
+        offset = ti.static(self.strain_history(term)[1])[b, element]
         return stiffness * (1.0 + viscosity), target + viscosity * offset / (1.0 + viscosity)

@@ -84,20 +84,20 @@ class Jet(Term):
         return [(CENTRE, node) for quad in topology.jet_quads for node in quad]
 
     @staticmethod
-    def history(topology):
+    def history(topology, terms=()):
         # S at the start of the step, and the integrator's offset of Ṡ (BDF2: from the step before)
         return {"previous_areas": (N_ACTUATORS,), "area_rate_offset": (N_ACTUATORS,)}
 
     def build(self, topology):
-        self.jet_quads = self.engine.arena.index(topology.jet_quads)
-        slot = self.engine.plan.slot
-        self.jet_slot = self.engine.arena.index([[slot[CENTRE, CENTRE]] + [slot[CENTRE, n] for n in quad]
-                                     for quad in topology.jet_quads])
+        self.jet_quads = self.assembly.index(topology.jet_quads)
+        slot = self.assembly.slot
+        self.jet_slot = self.assembly.index([[slot(CENTRE, CENTRE)] + [slot(CENTRE, n) for n in quad]
+                                             for quad in topology.jet_quads])
 
     @ti.func
     def area(self, b, k):
         """S (m²) of space k at instance b's current positions."""
-        positions = ti.static(self.engine.state.positions)
+        positions = ti.static(self.assembly.positions)
         return ti.abs(quad_signed_area(
             positions[b, self.jet_quads[k, 0]], positions[b, self.jet_quads[k, 1]],
             positions[b, self.jet_quads[k, 2]], positions[b, self.jet_quads[k, 3]]))
@@ -106,13 +106,13 @@ class Jet(Term):
     def begin_step(self, b, start_time, end_time, h, ratio, rate_gain, use_history):
         for k in range(N_ACTUATORS):
             area = self.area(b, k)
-            self.area_rate_offset[b, k] = self.engine.integrator.rate_offset(
+            self.area_rate_offset[b, k] = self.assembly.rate_offset(
                 area, self.previous_areas[b, k], h, ratio, use_history)
             self.previous_areas[b, k] = area
 
     @ti.func
     def assemble(self, b, rate_gain, jacobian):
-        positions = ti.static(self.engine.state.positions)
+        positions = ti.static(self.assembly.positions)
         for k in range(N_ACTUATORS):
             force, d_centre, d1, d2, d3, d4 = jet(
                 positions[b, CENTRE], positions[b, self.jet_quads[k, 0]],
@@ -120,9 +120,9 @@ class Jet(Term):
                 positions[b, self.jet_quads[k, 3]], self.previous_areas[b, k], rate_gain,
                 self.area_rate_offset[b, k], self.jet_alpha[b], self.fluid_density[b],
                 self.jet_always[b])
-            self.engine.add_residual(b, CENTRE, -force)
-            self.engine.add_block(b, self.jet_slot[k, 0], -d_centre, jacobian)
-            self.engine.add_block(b, self.jet_slot[k, 1], -d1, jacobian)
-            self.engine.add_block(b, self.jet_slot[k, 2], -d2, jacobian)
-            self.engine.add_block(b, self.jet_slot[k, 3], -d3, jacobian)
-            self.engine.add_block(b, self.jet_slot[k, 4], -d4, jacobian)
+            self.assembly.add_residual(b, CENTRE, -force)
+            self.assembly.add_block(b, self.jet_slot[k, 0], -d_centre, jacobian)
+            self.assembly.add_block(b, self.jet_slot[k, 1], -d1, jacobian)
+            self.assembly.add_block(b, self.jet_slot[k, 2], -d2, jacobian)
+            self.assembly.add_block(b, self.jet_slot[k, 3], -d3, jacobian)
+            self.assembly.add_block(b, self.jet_slot[k, 4], -d4, jacobian)

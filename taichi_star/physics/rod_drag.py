@@ -66,24 +66,24 @@ class RodDrag(Term):
     def build(self, topology):
         rods = rod_edges(topology)
         self.n_rods = len(rods)
-        self.rods = self.engine.arena.index(topology.edges[rods])
-        self.rod_slot = self.engine.pair_slots(topology.edges[rods])
+        self.rods = self.assembly.index(topology.edges[rods])
+        self.rod_slot = self.assembly.pair_slots(topology.edges[rods])
 
     @ti.func
     def assemble(self, b, rate_gain, jacobian):
         for r in range(self.n_rods):
             i, j = self.rods[r, 0], self.rods[r, 1]
-            velocity = 0.5 * (self.engine.implicit_velocity(b, i, rate_gain)
-                              + self.engine.implicit_velocity(b, j, rate_gain))
+            velocity = 0.5 * (self.assembly.implicit_velocity(b, i, rate_gain)
+                              + self.assembly.implicit_velocity(b, j, rate_gain))
             force, d_velocity, d_edge = rod_drag(
-                velocity, self.engine.state.positions[b, j] - self.engine.state.positions[b, i],
+                velocity, self.assembly.positions[b, j] - self.assembly.positions[b, i],
                 self.drag_parallel_coeff[b, r], self.drag_perpendicular_coeff[b, r])
             # half of F on each node; v is the mean of both, e = x_j − x_i
             d_first = 0.5 * (0.5 * rate_gain * d_velocity - d_edge)
             d_second = 0.5 * (0.5 * rate_gain * d_velocity + d_edge)
-            self.engine.add_residual(b, i, -0.5 * force)
-            self.engine.add_residual(b, j, -0.5 * force)
-            self.engine.add_block(b, self.rod_slot[r, 0], -d_first, jacobian)
-            self.engine.add_block(b, self.rod_slot[r, 1], -d_second, jacobian)
-            self.engine.add_block(b, self.rod_slot[r, 2], -d_first, jacobian)
-            self.engine.add_block(b, self.rod_slot[r, 3], -d_second, jacobian)
+            self.assembly.add_residual(b, i, -0.5 * force)
+            self.assembly.add_residual(b, j, -0.5 * force)
+            self.assembly.add_block(b, self.rod_slot[r, 0], -d_first, jacobian)
+            self.assembly.add_block(b, self.rod_slot[r, 1], -d_second, jacobian)
+            self.assembly.add_block(b, self.rod_slot[r, 2], -d_first, jacobian)
+            self.assembly.add_block(b, self.rod_slot[r, 3], -d_second, jacobian)

@@ -5,7 +5,7 @@ import numpy as np
 import taichi as ti
 
 from ..geometry import ARC
-from .base import Term
+from .strain import StrainTerm
 
 
 @ti.func
@@ -35,7 +35,9 @@ def edge_modulus(params, topology) -> np.ndarray:
 
 
 @ti.data_oriented
-class Stretching(Term):
+class Stretching(StrainTerm):
+    """Strain elements: the edges, s = ε, k = E·r0 (its energy ½·k·(ε − ε⁰)²·Δl̄, ε⁰ = 0)."""
+
     name = "stretching"
 
     @staticmethod
@@ -48,17 +50,32 @@ class Stretching(Term):
     def coupled_pairs(topology):
         return [tuple(edge) for edge in topology.edges]
 
+    @staticmethod
+    def element_count(topology):
+        return topology.n_edges
+
     def build(self, topology):
-        self.n_edges = topology.n_edges
-        self.edges = self.engine.arena.index(topology.edges)
-        self.edge_slot = self.engine.pair_slots(topology.edges)
+        self.n_elements = topology.n_edges
+        self.edges = self.assembly.index(topology.edges)
+        self.edge_slot = self.assembly.pair_slots(topology.edges)
 
     @ti.func
-    def assemble(self, b, rate_gain, jacobian):
-        for e in range(self.n_edges):
-            i, j = self.edges[e, 0], self.edges[e, 1]
-            stiffness, target = self.reshaped(b, e, self.edge_stiffness[b, e], 0.0, rate_gain)
-            gradient, hessian = stretch_gradient_hessian(
-                self.engine.state.positions[b, j] - self.engine.state.positions[b, i],
-                self.rest_length[b, e], stiffness, target)
-            self.engine.scatter_edge(b, self.edge_slot, e, i, j, gradient, hessian, jacobian)
+    def edge_vector(self, b, e):
+        """(i, j, x_j − x_i) of edge e at instance b's current positions."""
+        i, j = self.edges[e, 0], self.edges[e, 1]
+        return i, j, self.assembly.positions[b, j] - self.assembly.positions[b, i]
+
+    @ti.func
+    def stiffness(self, b, e):
+        return self.edge_stiffness[b, e]
+
+    @ti.func
+    def strain(self, b, e):
+        _, _, edge = self.edge_vector(b, e)
+        return edge.norm() / self.rest_length[b, e] - 1.0
+
+    @ti.func
+    def add_element(self, b, e, stiffness, target, jacobian):
+        i, j, edge = self.edge_vector(b, e)
+        gradient, hessian = stretch_gradient_hessian(edge, self.rest_length[b, e], stiffness, target)
+        self.assembly.scatter_edge(b, self.edge_slot, e, i, j, gradient, hessian, jacobian)

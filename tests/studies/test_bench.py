@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 import taichi_star
-from taichi_star import StarParams
+from taichi_star import SolverConfig, StarParams
 
 from studies import bench, cli, work_precision
 from studies.__main__ import main as studies_main
@@ -108,3 +108,10 @@ def test_gpu_arch_without_a_gpu_lists_the_available_archs(monkeypatch, tmp_path,
         error = capsys.readouterr().err
         assert "--arch gpu: no such backend on this machine; available archs: cpu" in error
     assert not any(tmp_path.iterdir())
+
+
+def test_engine_profile_refuses_an_adaptive_solver_before_compute():
+    """EngineProfile times fixed steps: an adaptive solver is a ValueError naming `solver`,
+    raised before Taichi or an engine is touched."""
+    with pytest.raises(ValueError, match="solver"):
+        taichi_star.EngineProfile([StarParams()], SolverConfig.preset("accurate"))

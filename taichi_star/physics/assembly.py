@@ -1,0 +1,134 @@
+"""What a force term sees of the system it adds itself to: the `Assembly`.
+
+A term never holds the engine. It receives one `Assembly` and asks it, on the host while it
+builds its tables, for
+
+- `capacity` and `topology`, `batch_field` (a field with a leading batch axis for its
+  coefficients and histories) and `index` (an integer table on the device);
+- `slot(i, j)`: where the 2×2 Jacobian block of nodes (i, j) is stored, and the slot tables
+  `pair_slots` (edges) and `triplet_slots` (bending triplets) that `scatter_edge` and
+  `scatter_triplet` read;
+
+and in its `@ti.func`s, for instance b,
+
+- `positions[b, n]`, `previous[b, n]`: node n at the current Newton iterate and at the step's
+  start, m; `fire_time[b, m]`, `previous_fire_time[b, m]`: when actuator m fired last and the
+  time before, s;
+- the integrator's rates: `implicit_velocity(b, n, rate_gain)` and `rate_offset(...)` for any
+  other quantity (the gain and offset of `integrators`);
+- the scatter of its residual and Jacobian: `add_residual(b, n, value)` for node n,
+  `add_block(b, slot, value, jacobian)` for one block, and for a term of one edge vector or of
+  the two edge vectors of a triplet `scatter_edge` and `scatter_triplet`, which apply the
+  incidence (∂/∂x_i = −∂/∂e) themselves.
+
+The engine makes one `Assembly` from its state, linear system and integrator and hands it to
+each term; a test can make one of a toy topology and assemble a single term on its own
+(tests/unit/test_assembly.py). Every method is a plain load, add and store of what it is
+given: a term assembled through it computes the same arithmetic as one written inline.
+"""
+
+import taichi as ti
+
+
+@ti.data_oriented
+class Assembly:
+    """The view of one batch system that its force terms assemble into.
+
+    `topology`: the shared `geometry.Topology`; `capacity`: instances (the batch axis of every
+    field); `arena`: the `fields.FieldArena` the fields come from; `slot`: dict (i, j) -> the
+    Jacobian block slot of nodes i, j (`linsolve.EliminationPlan.slot`); `integrator`: an
+    `integrators` object; `state`: the fields `positions`, `previous`, `velocity_offset`
+    ((capacity, N) 2-vectors), `fire_time`, `previous_fire_time` ((capacity, 8)) of a
+    `state.BatchState`; `system`: the fields `rhs` ((capacity, N) 2-vectors) and `blocks`
+    ((capacity, slots) 2×2) of a `linsolve.BlockSystem`."""
+
+    def __init__(self, topology, capacity: int, arena, slot: dict, integrator, state, system):
+        self.topology = topology
+        self.capacity = capacity
+        self.arena = arena
+        self.slots = slot
+        self.integrator = integrator
+        self.positions = state.positions
+        self.previous = state.previous
+        self.velocity_offset = state.velocity_offset
+        self.fire_time = state.fire_time
+        self.previous_fire_time = state.previous_fire_time
+        self.rhs = system.rhs
+        self.blocks = system.blocks
+
+    # ---------------------------------------------------------------- host side: tables
+    def batch_field(self, dtype, shape) -> ti.Field:
+        """A field of `shape` = (capacity, ...) (see `fields.FieldArena.batch_field`)."""
+        return self.arena.batch_field(dtype, shape)
+
+    def index(self, values) -> ti.Field:
+        """An i32 field holding the integer table `values` (rows of node numbers or slots)."""
+        return self.arena.index(values)
+
+    def slot(self, i: int, j: int) -> int:
+        """Slot of the Jacobian block (i, j) (KeyError when no term couples nodes i and j)."""
+        return self.slots[i, j]
+
+    def pair_slots(self, pairs) -> ti.Field:
+        """(P, 4) Jacobian slots of the blocks (i,i), (i,j), (j,i), (j,j) of node pairs (i, j)."""
+        return self.index([[self.slot(i, i), self.slot(i, j), self.slot(j, i), self.slot(j, j)]
+                           for i, j in pairs])
+
+    def triplet_slots(self, triplets) -> ti.Field:
+        """(T, 9) Jacobian slots of the blocks (a, c) of each triplet's nodes, row-major."""
+        return self.index([[self.slot(a, c) for a in nodes for c in nodes] for nodes in triplets])
+
+    # ---------------------------------------------------------------- device side
+    @ti.func
+    def implicit_velocity(self, b, n, rate_gain):
+        """Node n's velocity at the current iterate by the integrator's rate, m/s."""
+        return rate_gain * (self.positions[b, n] - self.previous[b, n]) + self.velocity_offset[b, n]
+
+    @ti.func
+    def rate_offset(self, value, previous, h, ratio, use_history):
+        """The integrator's offset of the rate of a quantity whose value at the step's start is
+        `value` and one step earlier `previous` (its rate is rate_gain·(now − value) + offset)."""
+        return self.integrator.rate_offset(value, previous, h, ratio, use_history)
+
+    @ti.func
+    def add_block(self, b, slot, value, jacobian):
+        """Add the 2×2 `value` to Jacobian block `slot` of instance b when `jacobian` is set."""
+        # load + store, not `+=` (an atomic in Taichi): one thread owns instance b
+        if jacobian:
+            self.blocks[b, slot] = self.blocks[b, slot] + value
+
+    @ti.func
+    def add_residual(self, b, n, value):
+        """Add the 2-vector `value` (N/m) to node n's residual of instance b."""
+        self.rhs[b, n] = self.rhs[b, n] + value
+
+    @ti.func
+    def scatter_edge(self, b, slots: ti.template(), e, i, j, gradient, hessian, jacobian):
+        """Scatter a term that depends on e = x_j − x_i alone, with gradient (2,) and Hessian
+        (2, 2) with respect to e (∂/∂x_i = −∂/∂e); `slots` from `pair_slots`, row e."""
+        self.add_residual(b, i, -gradient)
+        self.add_residual(b, j, gradient)
+        self.add_block(b, slots[e, 0], hessian, jacobian)
+        self.add_block(b, slots[e, 1], -hessian, jacobian)
+        self.add_block(b, slots[e, 2], -hessian, jacobian)
+        self.add_block(b, slots[e, 3], hessian, jacobian)
+
+    @ti.func
+    def scatter_triplet(self, b, slots: ti.template(), t, i, j, k, g1, g2, h11, h12, h22, jacobian):
+        """Scatter a term of the two edges e1 = x_j − x_i, e2 = x_k − x_j of triplet t (gradients
+        g1, g2; Hessian blocks h11, h12, h22, h21 = h12ᵀ): node derivatives by the incidence of
+        the edges; `slots` from `triplet_slots`, row t."""
+        self.add_residual(b, i, -g1)
+        self.add_residual(b, j, g1)
+        self.add_residual(b, j, -g2)
+        self.add_residual(b, k, g2)
+        h21 = h12.transpose()
+        self.add_block(b, slots[t, 0], h11, jacobian)
+        self.add_block(b, slots[t, 1], h12 - h11, jacobian)
+        self.add_block(b, slots[t, 2], -h12, jacobian)
+        self.add_block(b, slots[t, 3], h21 - h11, jacobian)
+        self.add_block(b, slots[t, 4], h11 - h12 - h21 + h22, jacobian)
+        self.add_block(b, slots[t, 5], h12 - h22, jacobian)
+        self.add_block(b, slots[t, 6], -h21, jacobian)
+        self.add_block(b, slots[t, 7], h21 - h22, jacobian)
+        self.add_block(b, slots[t, 8], h22, jacobian)

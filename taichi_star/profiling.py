@@ -1,0 +1,202 @@
+"""Profiling of the batch engine, for benchmarks (`python -m studies bench`).
+
+`EngineProfile` drives one batch's engine directly, as `simulate` does with fixed steps, and
+measures what a benchmark reports: the setup (Taichi initialisation, the engine built or reused,
+the batch loaded), the first launch (compilation, `first_launch`), timed windows of steps from
+rest (`timed_window`), the split of a Newton iteration into assembly, factorisation and solve
+(`phase_split`), and the engine's facts (its terms, node count, Jacobian blocks, the FLOPs of
+one factorisation); `device_bandwidth` measures a GPU's memory bandwidth.
+
+All times are wall-clock seconds of the whole machine (so they include the parallel speed-up
+over cores).
+"""
+
+import math
+import time
+from typing import Dict, Sequence, Tuple
+
+import numpy as np
+import taichi as ti
+
+from .model import build_model
+from .params import SolverConfig, StarParams
+from .runtime import Runtime
+from .simulation import STEPS_PER_LAUNCH
+from .state import STATUS_OK
+
+PROFILE_LAUNCHES = 3
+"""`phase_split` times each phase as the best of this many launches (the differences of noisy
+timings would be noisier still)."""
+MAX_PROFILE_CALLS = 10_000
+"""Most repetitions of a phase in one profiling launch."""
+BANDWIDTH_BYTES = 1 << 30
+"""Size of the buffer `device_bandwidth` copies (bytes): far larger than any cache."""
+
+
+@ti.kernel
+def _profile_phases(engine: ti.template(), phases: ti.i32, calls: ti.i32, time_s: float):
+    """For every live instance of `engine`, `calls` times: assemble the residual and Jacobian of
+    an implicit Euler step of size dt ending at time_s (s) at the current state, then factor when
+    phases >= 2, then solve when phases >= 3. Changes the terms' step histories (not the
+    positions)."""
+    for b in range(engine.capacity):
+        if engine.state.status[b] == STATUS_OK:
+            h = engine.dt[None]
+            inertia_scale, rate_gain = engine.integrator.weights(h, 1.0, 0)
+            for term in ti.static(engine.terms):
+                term.begin_step(b, time_s - h, time_s, h, 1.0, rate_gain, 0)
+            for _ in range(calls):
+                engine.assemble(b, inertia_scale, rate_gain, 1)
+                if phases >= 2:
+                    engine.system.factor(b)
+                if phases >= 3:
+                    engine.system.solve(b)
+
+
+class EngineProfile:
+    """The engine of one batch (`params`, a sequence of StarParams; `solver`, fixed steps) on
+    `arch`, loaded at rest. `setup_s`: the time this took (Taichi initialised if it was not,
+    the engine built or taken from the runtime's cache, the batch loaded)."""
+
+    def __init__(self, params: Sequence[StarParams], solver: SolverConfig = SolverConfig(),
+                 arch: str = "cpu"):
+        if solver.adaptive:
+            raise ValueError("solver: EngineProfile times fixed steps; got an adaptive solver "
+                             "(profile it end to end with simulate)")
+        start = time.perf_counter()
+        self.model = build_model(params)
+        self.solver = solver
+        runtime = Runtime.current()
+        runtime.ensure(arch, solver.precision)
+        self.engine = runtime.engine_for(self.model, solver)
+        ti.sync()
+        self.setup_s = time.perf_counter() - start
+
+    @property
+    def batch_size(self) -> int:
+        return self.model.batch_size
+
+    @property
+    def terms(self) -> Tuple[str, ...]:
+        """The force terms the engine was compiled with, in registry order."""
+        return tuple(term.name for term in self.engine.terms)
+
+    @property
+    def n_nodes(self) -> int:
+        return self.engine.n_nodes
+
+    @property
+    def n_slots(self) -> int:
+        """2×2 blocks of the Newton matrix's elimination pattern (fill-in included)."""
+        return self.engine.plan.n_slots
+
+    @property
+    def factor_flops(self) -> int:
+        """Floating-point operations of one numeric factorisation of one instance."""
+        return self.engine.plan.factor_flops
+
+    def matrix_bytes_per_iteration(self) -> float:
+        """Device-memory bytes of one Newton iteration of one instance when the matrix lives in
+        device memory: the 2×2 blocks written by the assembly, read and written by the in-place
+        LU and read by the solve (4 times), the right-hand side written and read twice,
+        positions read and written."""
+        scalar = 8 if self.solver.precision == "f64" else 4
+        return 4 * self.n_slots * 4 * scalar + 6 * self.n_nodes * 2 * scalar
+
+    def restart(self):
+        """Every instance back at rest, as after loading."""
+        self.engine.load(self.model, self.solver)
+
+    def advance(self, n_steps: int):
+        """n_steps steps of every live instance, in launches of `simulate`'s size; finished
+        (synchronised) when this returns."""
+        done = 0
+        while done < n_steps:
+            count = min(STEPS_PER_LAUNCH, n_steps - done)
+            self.engine.advance(count)
+            done += count
+        ti.sync()
+
+    def first_launch(self) -> Tuple[float, float]:
+        """(compile_s, first_s): the first one-step launch (compilation and a step), less the
+        time of a second one-step launch. Call it once, before any other stepping."""
+        first = time.perf_counter()
+        self.advance(1)
+        first = time.perf_counter() - first
+        again = time.perf_counter()
+        self.advance(1)
+        again = time.perf_counter() - again
+        return max(first - again, 0.0), first
+
+    def newton_iterations(self) -> np.ndarray:
+        """(B,) Newton iterations of every instance so far."""
+        return self.engine.state.newton_total.to_numpy()[:self.batch_size]
+
+    def positions(self) -> np.ndarray:
+        """(B, N, 2) node positions now, m (the engine's precision)."""
+        return self.engine.state.positions.to_numpy()[:self.batch_size]
+
+    def timed_window(self, warmup_steps: int, steps: int) -> Tuple[float, float]:
+        """From rest, `warmup_steps` untimed steps, then `steps` timed ones: (seconds, Newton
+        iterations per instance-step of the timed steps). RuntimeError if an instance failed
+        (the timing would not be valid)."""
+        self.restart()
+        self.advance(warmup_steps)
+        before = self.newton_iterations().sum()
+        start = time.perf_counter()
+        self.advance(steps)
+        seconds = time.perf_counter() - start
+        if (self.engine.state.status.to_numpy()[:self.batch_size] != STATUS_OK).any():
+            raise RuntimeError("an instance failed during the benchmark: its timing is not valid")
+        return seconds, (self.newton_iterations().sum() - before) / (self.batch_size * steps)
+
+    def phase_split(self, time_s: float, iteration_s: float, profile_seconds: float) -> Dict[str, float]:
+        """µs per instance and Newton iteration of the assembly, the factorisation and the
+        solve, at the current state of every live instance (its step ending at time_s, s): from
+        launches that repeat the assembly alone, assembly + factorisation, and assembly +
+        factorisation + solve (the factorisation is in place, so it always needs a fresh
+        assembly), each the best of PROFILE_LAUNCHES; `iteration_s` (one Newton iteration of the
+        batch, s) sizes the repetitions to about `profile_seconds` per launch. Changes the
+        terms' step histories, not the positions."""
+        calls = int(min(max(round(profile_seconds / iteration_s), 1), MAX_PROFILE_CALLS))
+        _profile_phases(self.engine, 3, 1, time_s)  # compile outside the timings
+        ti.sync()
+        cumulative = []
+        for phases in (1, 2, 3):
+            best = math.inf
+            for _ in range(PROFILE_LAUNCHES):
+                start = time.perf_counter()
+                _profile_phases(self.engine, phases, calls, time_s)
+                ti.sync()
+                best = min(best, time.perf_counter() - start)
+            cumulative.append(best * 1e6 / (self.batch_size * calls))
+        return {"assembly": cumulative[0], "factor": cumulative[1] - cumulative[0],
+                "solve": cumulative[2] - cumulative[1]}
+
+
+def device_bandwidth(arch: str, precision: str) -> float:
+    """Device-memory bandwidth of a GPU arch, GB/s (bytes read + written by a Taichi copy
+    kernel of BANDWIDTH_BYTES, best of 5), or NaN on the CPU (not a figure the CPU needs).
+    Initialises Taichi for arch and precision."""
+    if arch == "cpu":
+        return math.nan
+    Runtime.current().ensure(arch, precision)
+    count = BANDWIDTH_BYTES // 4
+    source = ti.field(ti.f32, count)
+    target = ti.field(ti.f32, count)
+
+    @ti.kernel
+    def copy():
+        for i in range(count):
+            target[i] = source[i]
+
+    source.fill(1.0)
+    copy()
+    ti.sync()
+    best = math.inf
+    for _ in range(5):
+        start = time.perf_counter()
+        copy()
+        ti.sync()
+        best = min(best, time.perf_counter() - start)
+    return 2 * BANDWIDTH_BYTES / best / 1e9

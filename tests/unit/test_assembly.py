@@ -1,0 +1,205 @@
+"""One force term assembled on its own: no engine, only a toy `Assembly` (a 4-node chain, dense
+Jacobian slots, one instance) that the term fills through the same interface as in the engine.
+
+The residual must equal the NumPy reference's energy gradient (`reference.stretch_element`,
+`reference.bend_element`): both are closed forms of the same derivative, written differently, so
+they agree to rounding, ~1e-13 relative in f64; 1e-9 of the largest entry leaves room for that and
+fails for any wrong term or misplaced scatter (O(1) relative). The Jacobian must equal central
+differences of the assembled residual: with δ = 1e-7 of the edge length the truncation error
+O(δ²) and the rounding error O(ε/δ) are both ~1e-9 relative, so 1e-6 of the largest entry.
+"""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import taichi as ti
+
+from taichi_star import reference
+from taichi_star.fields import FieldArena
+from taichi_star.integrators import ImplicitEuler
+from taichi_star.physics import Bending, MaterialDamping, Stretching
+from taichi_star.physics.assembly import Assembly
+from taichi_star.physics.base import connect_terms, load_field, numpy_to_field_type
+
+EDGES = np.array([[0, 1], [1, 2], [2, 3]])
+TRIPLETS = np.array([[0, 1, 2], [1, 2, 3]])
+REST = np.array([[0.0, 0.0], [1.0e-3, 0.1e-3], [2.1e-3, 0.0], [3.0e-3, -0.3e-3]])
+N_NODES = len(REST)
+REFERENCE_RTOL = 1e-9
+DIFFERENCE_RTOL = 1e-6
+
+
+def toy_system(term_classes, coefficients, configurations):
+    """The term classes' device objects on a toy Assembly: ({name: term}, assembly, arena)."""
+    arena = FieldArena()
+    nodes = (1, N_NODES)
+    state = SimpleNamespace(**{name: arena.batch_field(float, nodes, vector=2)
+                               for name in ("positions", "previous", "velocity_offset")},
+                            fire_time=arena.batch_field(float, (1, 8)),
+                            previous_fire_time=arena.batch_field(float, (1, 8)))
+    system = SimpleNamespace(rhs=arena.batch_field(float, nodes, vector=2),
+                             blocks=arena.batch_field(float, (1, N_NODES * N_NODES), matrix=(2, 2)))
+    topology = SimpleNamespace(n_nodes=N_NODES, edges=EDGES, n_edges=len(EDGES), triplets=TRIPLETS,
+                               n_triplets=len(TRIPLETS), triplet_actuator=np.full(2, -1),
+                               joint_actuator=np.full(2, -1))
+    slot = {(i, j): i * N_NODES + j for i in range(N_NODES) for j in range(N_NODES)}
+    assembly = Assembly(topology, 1, arena, slot, ImplicitEuler(), state, system)
+    terms = {}
+    for cls in term_classes:
+        shapes = {name: (values.shape[1:], numpy_to_field_type(values))
+                  for name, values in coefficients[cls.name].items()}
+        terms[cls.name] = cls(assembly, configurations[cls.name], shapes, term_classes)
+    connect_terms(list(terms.values()))
+    arena.finalize()
+    for cls in term_classes:
+        for name, field in terms[cls.name].coefficient_fields().items():
+            load_field(field, coefficients[cls.name][name])
+    return terms, assembly
+
+
+@ti.kernel
+def _assemble(term: ti.template(), rate_gain: float):
+    term.assemble(0, rate_gain, 1)
+
+
+@ti.kernel
+def _assemble_two(first: ti.template(), second: ti.template(), rate_gain: float):
+    first.assemble(0, rate_gain, 1)
+    second.assemble(0, rate_gain, 1)
+
+
+@ti.kernel
+def _begin_step(term: ti.template(), h: float):
+    term.begin_step(0, 0.0, h, h, 1.0, 1.0 / h, 0)
+
+
+def residual_and_jacobian(term, assembly, positions, rate_gain=1.0, other=None):
+    """(8,) residual and (8, 8) Jacobian the term (and `other`, if given) assembles at
+    `positions` (N, 2)."""
+    load_field(assembly.positions, positions[None])
+    assembly.rhs.fill(0.0)
+    assembly.blocks.fill(0.0)
+    if other is None:
+        _assemble(term, rate_gain)
+    else:
+        _assemble_two(term, other, rate_gain)
+    blocks = assembly.blocks.to_numpy()[0]
+    jacobian = np.zeros((2 * N_NODES, 2 * N_NODES))
+    for (i, j), slot in assembly.slots.items():
+        jacobian[2 * i:2 * i + 2, 2 * j:2 * j + 2] = blocks[slot]
+    return assembly.rhs.to_numpy()[0].ravel(), jacobian
+
+
+def central_jacobian(residual, positions, step):
+    columns = []
+    for index in range(positions.size):
+        forward, backward = positions.ravel().copy(), positions.ravel().copy()
+        forward[index] += step
+        backward[index] -= step
+        columns.append((residual(forward.reshape(positions.shape))
+                        - residual(backward.reshape(positions.shape))) / (2 * step))
+    return np.stack(columns, axis=1)
+
+
+def reference_gradient(elements, positions, element):
+    """(8,) sum of the reference elements' gradients over their nodes."""
+    gradient = np.zeros(2 * N_NODES)
+    for e, nodes in enumerate(elements):
+        local = element(e, *positions[nodes])[1]
+        for a, node in enumerate(nodes):
+            gradient[2 * node:2 * node + 2] += local[2 * a:2 * a + 2]
+    return gradient
+
+
+def assert_close(actual, expected, rtol):
+    scale = np.abs(expected).max()
+    assert scale > 0, "the expected values are all zero: the check would be vacuous"
+    np.testing.assert_allclose(actual, expected, rtol=0, atol=rtol * scale)
+
+
+STRETCHING = {"rest_length": np.linalg.norm(REST[EDGES[:, 1]] - REST[EDGES[:, 0]], axis=1)[None],
+              "edge_stiffness": np.array([[1.7e4, 2.3e4, 0.9e4]])}
+BENDING = {"voronoi_length": np.array([[1.05e-3, 1.0e-3]]),
+           "rest_curvature": np.array([[-150.0, 80.0]]),
+           "end_turning_length": np.zeros((1, 2)), "bend_stiffness": np.array([[2.0e-5, 3.5e-5]]),
+           "profile": np.zeros((1, 9)), "profile_rest": np.zeros(1), "closure_rate": np.zeros(1),
+           "period": np.ones(1), "gait_mask": np.zeros((1, 8), dtype=np.int32)}
+
+
+def deformed():
+    """The rest chain moved off its rest shape by ~10 % of an edge: every element strained."""
+    return REST + 1e-4 * np.random.default_rng(5).normal(size=REST.shape)
+
+
+@pytest.mark.parametrize("term_class", [Stretching, Bending])
+def test_one_term_assembles_the_reference_gradient_and_its_own_exact_jacobian(taichi_cpu, term_class):
+    coefficients = {"stretching": STRETCHING, "bending": BENDING}
+    terms, assembly = toy_system([term_class], coefficients,
+                                 {"stretching": (), "bending": (False,)})
+    term = terms[term_class.name]
+    positions = deformed()
+    residual, jacobian = residual_and_jacobian(term, assembly, positions)
+    if term_class is Stretching:
+        expected = reference_gradient(EDGES, positions, lambda e, xi, xj: reference.stretch_element(
+            xi, xj, STRETCHING["rest_length"][0, e], STRETCHING["edge_stiffness"][0, e]))
+    else:
+        expected = reference_gradient(TRIPLETS, positions, lambda t, xi, xj, xk: reference.bend_element(
+            xi, xj, xk, BENDING["voronoi_length"][0, t], BENDING["rest_curvature"][0, t],
+            BENDING["bend_stiffness"][0, t]))
+    assert_close(residual, expected, REFERENCE_RTOL)
+    numeric = central_jacobian(lambda q: residual_and_jacobian(term, assembly, q)[0], positions, 1e-10)
+    assert_close(jacobian, numeric, DIFFERENCE_RTOL)
+    # a gradient's Jacobian is symmetric; the scatter sums its blocks in different orders, so
+    # up to rounding
+    assert_close(jacobian, jacobian.T, 1e-12)
+
+
+def test_damping_reshapes_every_strain_term_through_the_base_interface(taichi_cpu):
+    """Damping with stretching and bending on the toy chain, no names involved: after a step's
+    begin (implicit Euler, h = 1 ms, from the deformed shape) and a move of the nodes, the
+    assembled residual is the elastic gradient plus τ·k_s·ṡ·∇s of every element (the reference's
+    `damping_element` at its anchor s* = s_k), for both terms."""
+    tau, h = 2e-3, 1e-3
+    coefficients = {"stretching": STRETCHING, "bending": BENDING,
+                    "damping": {"damping_time": np.array([tau])}}
+    classes = [Stretching, Bending, MaterialDamping]
+    terms, assembly = toy_system(classes, coefficients,
+                                 {"stretching": (), "bending": (False,), "damping": ()})
+    assert [t.name for t in terms["damping"].reshaped_terms] == ["stretching", "bending"]
+    start = deformed()
+    load_field(assembly.positions, start[None])
+    _begin_step(terms["damping"], h)
+    moved = start + 2e-5 * np.random.default_rng(6).normal(size=start.shape)
+    residual = residual_and_jacobian(terms["stretching"], assembly, moved, 1.0 / h,
+                                     terms["bending"])[0]
+
+    def stretch(e, xi, xj):
+        rest, stiffness = STRETCHING["rest_length"][0, e], STRETCHING["edge_stiffness"][0, e]
+        strain, gradient, hessian = reference.stretch_strain(xi, xj, rest)
+        anchor = reference.stretch_strain(*start[EDGES[e]], rest)[0]
+        elastic = reference.stretch_element(xi, xj, rest, stiffness)
+        damped = reference.damping_element(strain, gradient, hessian, anchor, 1.0 / h,
+                                           stiffness * rest, tau)
+        return elastic[1], damped[1]
+
+    def bend(t, xi, xj, xk):
+        voronoi, natural = BENDING["voronoi_length"][0, t], BENDING["rest_curvature"][0, t]
+        stiffness = BENDING["bend_stiffness"][0, t]
+        strain, gradient, hessian = reference.bend_strain(xi, xj, xk, voronoi, natural)
+        anchor = reference.bend_strain(*start[TRIPLETS[t]], voronoi, natural)[0]
+        elastic = reference.bend_element(xi, xj, xk, voronoi, natural, stiffness)
+        damped = reference.damping_element(strain, gradient, hessian, anchor, 1.0 / h,
+                                           stiffness * voronoi, tau)
+        return elastic[1], damped[1]
+
+    def chain_gradients(elements, element):
+        """(elastic, damping) gradients of the chain's elements, (8,) each."""
+        return [reference_gradient(elements, moved,
+                                   lambda *nodes, part=part: (None, element(*nodes)[part]))
+                for part in (0, 1)]
+
+    elastic, damped = (sum(pair) for pair in zip(chain_gradients(EDGES, stretch),
+                                                  chain_gradients(TRIPLETS, bend)))
+    assert np.abs(damped).max() > 1e-2 * np.abs(elastic).max()  # the damping is no rounding
+    assert_close(residual, elastic + damped, REFERENCE_RTOL)
