@@ -87,7 +87,7 @@ QUICK_CANDIDATES = (
 """--quick: two toy candidates (cma needs two axes at least)."""
 QUICK_GAITS = "A1+A2,A1+A4"
 QUICK_POPSIZE, QUICK_MAX_GENERATIONS, QUICK_FOLD_GENERATIONS = 4, 2, 1
-DEFAULT_POPSIZE, DEFAULT_MAX_GENERATIONS, DEFAULT_FOLD_GENERATIONS = 8, 10, 3
+DEFAULT_POPSIZE, DEFAULT_MAX_GENERATIONS, DEFAULT_FOLD_GENERATIONS = 6, 8, 2
 RECORD_INTERVAL_S = 0.01
 """Centroid records of the fits, s (rounded to whole steps): ≥ 4 per sample of a cycle curve."""
 PER_ACTUATOR = 8
@@ -270,7 +270,7 @@ def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMA
         return {"row": {**row, "status": "fit_failed", "note": "every candidate point failed",
                         "fit_time_s": time.perf_counter() - start},
                 "parameters": pd.DataFrame(), "gaits": pd.DataFrame(), "folds": pd.DataFrame(),
-                "evaluations": evaluations, "best": None}
+                "evaluations": evaluations, "best": None, "identified": None}
     units = best_units(evaluations, box)
     values = identify.box_values(box, units)[0]
     best = model.replace(**identify.point_changes(box, values, model))
@@ -312,7 +312,25 @@ def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMA
     gait_rows.insert(0, "candidate", candidate.name)
     return {"row": row, "parameters": parameter_table(candidate.name, box, values, fit.unit_std),
             "gaits": gait_rows, "folds": folds.assign(candidate=candidate.name),
-            "evaluations": evaluations, "best": best}
+            "evaluations": evaluations, "best": best, "identified": identified_fields(best)}
+
+
+def identified_fields(best: StarParams) -> dict:
+    """{field: value} of an identified model where it differs from StarParams' defaults (the
+    gait aside; tuples as tuples): the dict of a preset (`taichi_star.params.PRESET_FIELDS`)."""
+    default = StarParams()
+    return {name: getattr(best, name) for name in StarParams.field_names()
+            if name != "gait" and getattr(best, name) != getattr(default, name)}
+
+
+def identified_table(row: dict, fields: dict) -> pd.DataFrame:
+    """identified.csv: one row per field of the best candidate's model (field, value as Python
+    text, the candidate and its errors)."""
+    return pd.DataFrame([{"field": name, "value": repr(value), "candidate": row["candidate"],
+                          "train_objective": row["train_objective"],
+                          "validate_objective": row["validate_objective"],
+                          "logo_objective": row["logo_objective"]}
+                         for name, value in fields.items()])
 
 
 def parameter_table(name: str, box, values, unit_std) -> pd.DataFrame:
@@ -529,7 +547,7 @@ def main(argv=None):
     progress = not args.no_progress
     record = max(1, round(RECORD_INTERVAL_S / solver.dt)) * solver.dt
     started = time.perf_counter()
-    parameters, gait_tables, fold_tables = [], [], []
+    parameters, gait_tables, fold_tables, identified = [], [], [], {}
     with cli.executor(args) as executor:
         largest = settings.population(max((len(c.fit.split()) for c in runnable), default=1),
                                       settings.restarts) * len(gaits)
@@ -547,6 +565,9 @@ def main(argv=None):
                     parameters.append(pd.DataFrame(stored["parameters"]))
                     gait_tables.append(pd.DataFrame(stored["gaits"]))
                     fold_tables.append(pd.DataFrame(stored["folds"]))
+                    identified[candidate.name] = (None if stored["identified"] is None else {
+                        k: tuple(v) if isinstance(v, list) else v
+                        for k, v in stored["identified"].items()})
                     print(f"{candidate.name}: read back from {done}")
                     continue
             elapsed = time.perf_counter() - started
@@ -583,6 +604,7 @@ def main(argv=None):
             parameters.append(result["parameters"])
             gait_tables.append(result["gaits"])
             fold_tables.append(result["folds"])
+            identified[candidate.name] = result["identified"]
             if result["best"] is not None:
                 figures.run_fig4c(out, result["best"], solver,
                                   duration_s=cli.duration_s(args, result["best"].period)
@@ -594,7 +616,8 @@ def main(argv=None):
                 "row": result["row"],
                 "parameters": result["parameters"].to_dict(orient="list"),
                 "gaits": result["gaits"].to_dict(orient="list"),
-                "folds": result["folds"].to_dict(orient="list")}, default=float))
+                "folds": result["folds"].to_dict(orient="list"),
+                "identified": result["identified"]}, default=_json_value))
     table = ranked(rows)
     csv = out.write_csv(table, "model_select.csv")
     non_empty = [t for t in parameters if len(t)]
@@ -607,12 +630,23 @@ def main(argv=None):
     out.write_csv(pd.concat(non_empty, ignore_index=True) if non_empty else pd.DataFrame(),
                   "model_select_folds.csv")
     out.wrote(plot_ranking(csv, out.path("model_select.png")))
+    best = table.iloc[0]
+    if best["status"] == "ok" and identified.get(best["candidate"]) is not None:
+        fields = identified[best["candidate"]]
+        out.write_csv(identified_table(best.to_dict(), fields), "identified.csv")
+        print(f"identified preset (rank 1, {best['candidate']}): IDENTIFIED_FIELDS = {fields!r}")
     out.report()
     print(table[["rank", "candidate", "status", "train_objective", "validate_objective",
                  "logo_objective", "logo_directions_right", "train_directions_right", "bic",
                  "note"]].to_string(index=False))
     print(f"model_select: {(time.perf_counter() - started) / 60:.1f} min")
     return table
+
+
+def _json_value(value):
+    """JSON for the values of a finished candidate's record: NumPy scalars as numbers, other
+    objects as their text."""
+    return value.item() if isinstance(value, np.generic) else repr(value)
 
 
 def plot_ranking(csv_path, png_path) -> Path:

@@ -29,7 +29,7 @@ JOINT_STIFFNESSES = ("limb", "series")
 PRECISIONS = ("f64", "f32")
 INTEGRATORS = ("euler", "bdf2")
 JACOBIANS = ("newton", "chord")
-PRESETS = ("paper", "accurate")
+PRESETS = ("paper", "accurate", "identified")
 
 PARAMETER_UNITS = {
     "alpha": "1", "added_mass_coeff": "1", "youngs_modulus": "Pa", "limb_stiffness_ratio": "1",
@@ -205,7 +205,9 @@ class StarParams:
         """A named model with some fields changed. "paper": the paper's model as published
         (N = 193 nodes, no damping, clamped ends, limb-stiff joints). "accurate": material
         damping τ = 0.94 ms, series joints and shared ends, which converge at second order in
-        the mesh, on n_arc 48 (N = 433)."""
+        the mesh, on n_arc 48 (N = 433). "identified": the best model form of the model
+        selection study (`IDENTIFIED_FIELDS`), e.g. `StarParams.preset("identified",
+        gait="A1+A4")`."""
         _check_choice("preset", name, PRESETS)
         return cls(**{**PRESET_FIELDS[name], **overrides})
 
@@ -268,10 +270,19 @@ class StarParams:
         return cls(**{**values, **overrides})
 
 
+IDENTIFIED_FIELDS = {"alpha": 1.5, "drag_perpendicular": 0.3, "cylinder_drag": 1.0}
+"""StarParams fields of the "identified" preset (the rest are the defaults): the rank-1 row of
+`python -m studies model_select` (its `identified.csv`; the study prints this dict).
+PROVISIONAL: the best of a short run (candidates paper, ramp and added_mass only, the
+extensions not yet in StarParams; 6 generations of 8 points, no restart, 2 generations per
+leave-one-gait-out fold; `--only paper,ramp,added_mass --max-generations 6 --fold-generations 2
+--restarts 0`), to be replaced by the full study's result."""
+
 PRESET_FIELDS = {
     "paper": {},
     "accurate": {"damping_time": 0.94e-3, "joint_stiffness": "series",
                  "actuation_ends": "shared", "profile_closure": "jump", "n_arc": 48},
+    "identified": IDENTIFIED_FIELDS,
 }
 """StarParams fields of each preset (the rest are the defaults)."""
 
@@ -351,8 +362,8 @@ class SolverConfig:
 
     @classmethod
     def preset(cls, name: str = "paper", **overrides) -> "SolverConfig":
-        """Named solver settings: "paper" (implicit Euler at 1 ms with Newton's method, the
-        paper's scheme) or "accurate" (adaptive BDF2, error_tol 1e-6 m, the chord Jacobian:
+        """Named solver settings: "paper" and "identified" (implicit Euler at 1 ms with Newton's
+        method, the paper's scheme, with which the model selection study fits) or "accurate" (adaptive BDF2, error_tol 1e-6 m, the chord Jacobian:
         about 300 steps per 3.15-s cycle)."""
         _check_choice("preset", name, PRESETS)
         return cls(**{**SOLVER_PRESET_FIELDS[name], **overrides})
@@ -372,6 +383,7 @@ MAX_DT = 0.05
 
 SOLVER_PRESET_FIELDS = {
     "paper": {},
+    "identified": {},
     "accurate": {"integrator": "bdf2", "adaptive": True, "error_tol": 1e-6, "dt": 1e-3,
                  "jacobian": "chord"},
 }

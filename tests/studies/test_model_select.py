@@ -2,6 +2,7 @@
 leave-one-gait-out rule for per-actuator axes, bad arguments before compute, and the --quick
 run checked against a direct simulation of its identified parameters."""
 
+import ast
 import types
 
 import numpy as np
@@ -69,7 +70,7 @@ def test_invalid_arguments_fail_before_compute(no_compute, tmp_path, capsys, arg
     assert error.count("\n") == 1 and "Traceback" not in error
 
 
-def test_quick_run_against_a_direct_simulation(tmp_path):
+def test_quick_run_against_a_direct_simulation(tmp_path, capsys, monkeypatch):
     table = model_select.main(["--out", str(tmp_path), *QUICK])
     written = pd.read_csv(tmp_path / "model_select.csv")
     assert list(written["candidate"]) == list(table["candidate"])
@@ -119,3 +120,22 @@ def test_quick_run_against_a_direct_simulation(tmp_path):
         assert (tmp_path / f"fig4b_{name}.png").stat().st_size > 1000
     assert (tmp_path / "model_select.png").stat().st_size > 1000
     assert np.isfinite(parameters["std"]).all() and (parameters["std"] > 0).all()
+    # the preset's fields: the rank-1 candidate's model, field by field
+    identified = pd.read_csv(tmp_path / "identified.csv", dtype={"value": str})
+    best = written.iloc[0]
+    assert set(identified["candidate"]) == {best["candidate"]}
+    fields = {row["field"]: ast.literal_eval(row["value"]) for _, row in identified.iterrows()}
+    best_values = parameters[parameters["candidate"] == best["candidate"]]
+    for _, axis in best_values.iterrows():
+        assert fields[axis["parameter"]] == pytest.approx(axis["value"], rel=1e-9)
+    if best["candidate"] == "ramp":
+        assert fields["profile_closure"] == "ramp"
+
+    # --resume reads the finished candidates back, compute-free, to the same table
+    def forbidden(*args, **kwargs):
+        raise AssertionError("a finished candidate was simulated again")
+    monkeypatch.setattr("taichi_star.batch.tasks.simulate", forbidden)
+    capsys.readouterr()
+    model_select.main(["--out", str(tmp_path), "--resume", *QUICK])
+    assert "paper: read back from" in capsys.readouterr().out
+    pd.testing.assert_frame_equal(written, pd.read_csv(tmp_path / "model_select.csv"))
