@@ -28,9 +28,13 @@ mean over the gaits. The cycle window (`cycles`, 1-based, inclusive) is an argum
 window is `TRAINING_CYCLES` = cycles 1–3; `VALIDATION_CYCLES` (4–6) is held back for validation
 (with the phase fitted on the training window). Nothing after the window's last cycle is read.
 
-    >>> from taichi_star import identification
-    >>> trial = identification.measured_trial("A1+A4")
-    >>> identification.trial_fit(simulated_path, trial).objective     # one gait
+    >>> from taichi_star import StarParams, identification, simulate
+    >>> trials = identification.measured_trials()                 # the five paper gaits
+    >>> params = [StarParams(gait=g) for g in trials]
+    >>> result = simulate(params, 3 * 3.15, record_interval_s=0.01)
+    >>> runs = identification.simulated_runs(result.trajectory, list(trials), [3.15] * 5)
+    >>> table = identification.trajectory_objective(dict(zip(trials, runs)), trials)
+    >>> identification.objective_of(table)      # ≈ 60 for the paper's model on cycles 1-3
 """
 
 from __future__ import annotations
