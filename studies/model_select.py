@@ -306,9 +306,9 @@ def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMA
         if validate is not None else 0,
         "chi2": chi2, "n_samples": n_samples, "aic": chi2 + 2 * k,
         "bic": chi2 + k * math.log(n_samples), "fit_time_s": time.perf_counter() - start})
-    gait_rows = pd.concat([table.assign(window=name) for name, table in
-                           (("train", train), ("validate", validate)) if table is not None],
-                          ignore_index=True)
+    windows = [table.assign(window=name) for name, table in
+               (("train", train), ("validate", validate)) if table is not None]
+    gait_rows = pd.concat(windows, ignore_index=True) if windows else pd.DataFrame()
     gait_rows.insert(0, "candidate", candidate.name)
     return {"row": row, "parameters": parameter_table(candidate.name, box, values, fit.unit_std),
             "gaits": gait_rows, "folds": folds.assign(candidate=candidate.name),
