@@ -323,6 +323,15 @@ def identified_fields(best: StarParams) -> dict:
             if name != "gait" and getattr(best, name) != getattr(default, name)}
 
 
+def best_model(candidate: Candidate, base: StarParams, parameters: pd.DataFrame) -> StarParams:
+    """A candidate's identified model from its rows of the parameter table (a finished
+    candidate read back)."""
+    model = candidate.model(base)
+    box = candidate.box(base)
+    values = parameters.set_index("parameter").loc[[spec.label for spec in box], "value"]
+    return model.replace(**identify.point_changes(box, values.to_numpy(dtype=float), model))
+
+
 def identified_table(row: dict, fields: dict) -> pd.DataFrame:
     """identified.csv: one row per field of the best candidate's model (field, value as Python
     text, the candidate and its errors)."""
@@ -565,9 +574,9 @@ def main(argv=None):
                     parameters.append(pd.DataFrame(stored["parameters"]))
                     gait_tables.append(pd.DataFrame(stored["gaits"]))
                     fold_tables.append(pd.DataFrame(stored["folds"]))
-                    identified[candidate.name] = (None if stored["identified"] is None else {
-                        k: tuple(v) if isinstance(v, list) else v
-                        for k, v in stored["identified"].items()})
+                    identified[candidate.name] = (
+                        identified_fields(best_model(candidate, base, parameters[-1]))
+                        if stored["row"]["status"] == "ok" else None)
                     print(f"{candidate.name}: read back from {done}")
                     continue
             elapsed = time.perf_counter() - started
@@ -616,8 +625,7 @@ def main(argv=None):
                 "row": result["row"],
                 "parameters": result["parameters"].to_dict(orient="list"),
                 "gaits": result["gaits"].to_dict(orient="list"),
-                "folds": result["folds"].to_dict(orient="list"),
-                "identified": result["identified"]}, default=_json_value))
+                "folds": result["folds"].to_dict(orient="list")}, default=_json_value))
     table = ranked(rows)
     csv = out.write_csv(table, "model_select.csv")
     non_empty = [t for t in parameters if len(t)]
