@@ -32,7 +32,8 @@ plus a penalty on wrong-way travel. Then, per candidate:
   gaits that fire actuator A<INDEX>;
 - directions right (training and validation windows), the parameter count k (fitted axes plus
   one phase per gait), χ² = Σ over the gaits of the squared residuals (curve samples and the
-  direction residual), AIC = χ² + 2k and BIC = χ² + k ln n (n the number of curve samples).
+  direction residual, weighted as in the fit: as much as a whole curve), AIC = χ² + 2k and
+  BIC = χ² + k ln n (n the number of curve samples).
   The curve samples of a trial are correlated (one path), so χ², AIC and BIC overstate the
   evidence; they rank, they do not test.
 
@@ -283,9 +284,6 @@ def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMA
     folds = leave_one_gait_out(box, units, model, settings, fold_generations, setup)
     n_samples = len(gaits) * (setup.train[1] - setup.train[0] + 1) * \
         identification.SAMPLES_PER_CYCLE
-    chi2 = (math.inf if train is None else float(
-        (train["trajectory_error"] * n_samples / len(gaits) + train["direction_residual"] ** 2
-         ).sum()))
     k = row["n_parameters"]
     held = folds[folds["status"] == "ok"] if len(folds) else folds
     row.update({
@@ -304,8 +302,7 @@ def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMA
         else 0,
         "validate_directions_right": int(validate["direction_matches"].sum())
         if validate is not None else 0,
-        "chi2": chi2, "n_samples": n_samples, "aic": chi2 + 2 * k,
-        "bic": chi2 + k * math.log(n_samples), "fit_time_s": time.perf_counter() - start})
+        **information_criteria(train, k, n_samples), "fit_time_s": time.perf_counter() - start})
     windows = [table.assign(window=name) for name, table in
                (("train", train), ("validate", validate)) if table is not None]
     gait_rows = pd.concat(windows, ignore_index=True) if windows else pd.DataFrame()
@@ -313,6 +310,17 @@ def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMA
     return {"row": row, "parameters": parameter_table(candidate.name, box, values, fit.unit_std),
             "gaits": gait_rows, "folds": folds.assign(candidate=candidate.name),
             "evaluations": evaluations, "best": best, "identified": identified_fields(best)}
+
+
+def information_criteria(train: Optional[pd.DataFrame], k: int, n_samples: int) -> dict:
+    """chi2, n_samples, aic, bic of a fit from its training per-gait table: χ² = the samples
+    per gait × Σ over the gaits of the gait's objective (its mean squared curve residual plus
+    the direction residual², which thus weighs as much as a whole curve, as in the fit),
+    AIC = χ² + 2k, BIC = χ² + k ln n_samples; inf without a table."""
+    chi2 = (math.inf if train is None
+            else float(train["objective"].sum()) * n_samples / len(train))
+    return {"chi2": chi2, "n_samples": n_samples, "aic": chi2 + 2 * k,
+            "bic": chi2 + k * math.log(n_samples)}
 
 
 def identified_fields(best: StarParams) -> dict:
@@ -570,9 +578,14 @@ def main(argv=None):
             if args.resume and done.exists():
                 stored = json.loads(done.read_text())
                 if stored["row"].get("definition") == definition:
+                    stored_gaits = pd.DataFrame(stored["gaits"])
+                    if stored["row"]["status"] == "ok":
+                        stored["row"].update(information_criteria(
+                            stored_gaits[stored_gaits["window"] == "train"],
+                            stored["row"]["n_parameters"], stored["row"]["n_samples"]))
                     rows.append(stored["row"])
                     parameters.append(pd.DataFrame(stored["parameters"]))
-                    gait_tables.append(pd.DataFrame(stored["gaits"]))
+                    gait_tables.append(stored_gaits)
                     fold_tables.append(pd.DataFrame(stored["folds"]))
                     identified[candidate.name] = (
                         identified_fields(best_model(candidate, base, parameters[-1]))

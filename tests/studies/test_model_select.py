@@ -88,7 +88,8 @@ def test_quick_run_against_a_direct_simulation(tmp_path, capsys, monkeypatch):
         # the training objective of the re-simulated best point is the best evaluation's
         assert row["train_objective"] == pytest.approx(fits["objective"].min(), rel=1e-9)
         assert row["n_parameters"] == 2 + len(gaits)
-        assert row["aic"] == pytest.approx(row["chi2"] + 2 * row["n_parameters"], rel=1e-12)
+        # the CSV keeps 10 significant digits
+        assert row["aic"] == pytest.approx(row["chi2"] + 2 * row["n_parameters"], rel=1e-9)
         # a direct simulation of the identified parameters gives the same objective (CSV
         # values have 10 significant digits: the objective moves far less than 1e-6)
         values = parameters[parameters["candidate"] == name].set_index("parameter")["value"]
@@ -103,6 +104,12 @@ def test_quick_run_against_a_direct_simulation(tmp_path, capsys, monkeypatch):
         train = identification.trajectory_objective(dict(zip(gaits, runs)), trials, (1, 1))
         assert identification.objective_of(train) == pytest.approx(row["train_objective"],
                                                                    rel=1e-6)
+        # χ²: 64 curve samples per gait (one cycle) times each gait's objective
+        assert row["n_samples"] == len(gaits) * identification.SAMPLES_PER_CYCLE
+        assert row["chi2"] == pytest.approx(identification.SAMPLES_PER_CYCLE
+                                            * train["objective"].sum(), rel=1e-6)
+        assert row["bic"] == pytest.approx(row["chi2"] + row["n_parameters"]
+                                           * np.log(row["n_samples"]), rel=1e-9)
         validate = identification.trajectory_objective(
             dict(zip(gaits, runs)), trials, (2, 2), phases=dict(zip(gaits, train["phase_s"])))
         assert identification.objective_of(validate) == pytest.approx(
