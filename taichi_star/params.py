@@ -270,13 +270,20 @@ class StarParams:
         return cls(**{**values, **overrides})
 
 
-IDENTIFIED_FIELDS = {"alpha": 1.5, "drag_perpendicular": 0.3, "cylinder_drag": 1.0}
+IDENTIFIED_FIELDS = {"alpha": 0.4457040271, "added_mass_coeff": 0.3349258113,
+                     "drag_perpendicular": 0.3045642563, "cylinder_drag": 32.74314332,
+                     "cylinder_added_mass_coeff": 0.002039736130}
 """StarParams fields of the "identified" preset (the rest are the defaults): the rank-1 row of
-`python -m studies model_select` (its `identified.csv`; the study prints this dict).
-PROVISIONAL: the best of a short run (candidates paper, ramp and added_mass only, the
-extensions not yet in StarParams; 6 generations of 8 points, no restart, 2 generations per
-leave-one-gait-out fold; `--only paper,ramp,added_mass --max-generations 6 --fold-generations 2
---restarts 0`), to be replaced by the full study's result."""
+`python -m studies model_select` (its `identified.csv`; the study prints this dict), to 10
+significant digits.
+
+PROVISIONAL: the best of a short run, `python -m studies model_select --only
+paper,ramp,added_mass --max-generations 6 --fold-generations 2 --restarts 0 --popsize 8` (19 min
+on two shared cores), before the model extensions existed: rank 1 of the three was
+"added_mass" (the paper's model with α, C⊥, C_c and both added-mass coefficients fitted to the
+trajectories of cycles 1-3): trajectory objective 17.4 on cycles 1-3 (the paper preset: 60.0),
+76.5 on cycles 4-6 (paper: 189.0), 157.5 held out; A1 and A1+A4 still swim against the paper's
+directions. To be replaced by the full study's rank-1 row."""
 
 PRESET_FIELDS = {
     "paper": {},
