@@ -37,7 +37,7 @@ import dataclasses
 import math
 import textwrap
 from pathlib import Path
-from typing import Callable, List, Optional, Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 import pandas as pd
