@@ -112,7 +112,8 @@ def add_model_flags(parser: StudyParser, fixed: Sequence[str] = ()):
     parser.add_argument("--preset", choices=PRESETS, default="paper",
                         help="paper: the model as published (N = 193 nodes, implicit Euler at "
                              "1 ms); accurate: damping, series joints, shared ends, n_arc 48, "
-                             "adaptive BDF2 (StarParams/SolverConfig.preset)")
+                             "adaptive BDF2; identified: the model selection study's best model "
+                             "(StarParams/SolverConfig.preset)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="change one StarParams field for every instance, e.g. --set "
                              "alpha=1.0 (repeatable)")

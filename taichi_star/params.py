@@ -29,7 +29,7 @@ JOINT_STIFFNESSES = ("limb", "series")
 PRECISIONS = ("f64", "f32")
 INTEGRATORS = ("euler", "bdf2")
 JACOBIANS = ("newton", "chord")
-PRESETS = ("paper", "accurate")
+PRESETS = ("paper", "accurate", "identified")
 
 PARAMETER_UNITS = {
     "alpha": "1", "added_mass_coeff": "1", "youngs_modulus": "Pa", "limb_stiffness_ratio": "1",
@@ -205,7 +205,9 @@ class StarParams:
         """A named model with some fields changed. "paper": the paper's model as published
         (N = 193 nodes, no damping, clamped ends, limb-stiff joints). "accurate": material
         damping τ = 0.94 ms, series joints and shared ends, which converge at second order in
-        the mesh, on n_arc 48 (N = 433)."""
+        the mesh, on n_arc 48 (N = 433). "identified": the best model form of the model
+        selection study (`IDENTIFIED_FIELDS`), e.g. `StarParams.preset("identified",
+        gait="A1+A4")`."""
         _check_choice("preset", name, PRESETS)
         return cls(**{**PRESET_FIELDS[name], **overrides})
 
@@ -268,10 +270,26 @@ class StarParams:
         return cls(**{**values, **overrides})
 
 
+IDENTIFIED_FIELDS = {"alpha": 0.4457040271, "added_mass_coeff": 0.3349258113,
+                     "drag_perpendicular": 0.3045642563, "cylinder_drag": 32.74314332,
+                     "cylinder_added_mass_coeff": 0.002039736130}
+"""StarParams fields of the "identified" preset (the rest are the defaults): the rank-1 row of
+`python -m studies model_select` (its `identified.csv`; the study prints this dict), to 10
+significant digits.
+
+PROVISIONAL: the best of a short run, `python -m studies model_select --only
+paper,ramp,added_mass --max-generations 6 --fold-generations 2 --restarts 0 --popsize 8` (19 min
+on two shared cores), before the model extensions existed: rank 1 of the three was
+"added_mass" (the paper's model with α, C⊥, C_c and both added-mass coefficients fitted to the
+trajectories of cycles 1-3): trajectory objective 17.4 on cycles 1-3 (the paper preset: 60.0),
+76.5 on cycles 4-6 (paper: 189.0), 157.5 held out; A1 and A1+A4 still swim against the paper's
+directions. To be replaced by the full study's rank-1 row."""
+
 PRESET_FIELDS = {
     "paper": {},
     "accurate": {"damping_time": 0.94e-3, "joint_stiffness": "series",
                  "actuation_ends": "shared", "profile_closure": "jump", "n_arc": 48},
+    "identified": IDENTIFIED_FIELDS,
 }
 """StarParams fields of each preset (the rest are the defaults)."""
 
@@ -351,8 +369,8 @@ class SolverConfig:
 
     @classmethod
     def preset(cls, name: str = "paper", **overrides) -> "SolverConfig":
-        """Named solver settings: "paper" (implicit Euler at 1 ms with Newton's method, the
-        paper's scheme) or "accurate" (adaptive BDF2, error_tol 1e-6 m, the chord Jacobian:
+        """Named solver settings: "paper" and "identified" (implicit Euler at 1 ms with Newton's
+        method, the paper's scheme, with which the model selection study fits) or "accurate" (adaptive BDF2, error_tol 1e-6 m, the chord Jacobian:
         about 300 steps per 3.15-s cycle)."""
         _check_choice("preset", name, PRESETS)
         return cls(**{**SOLVER_PRESET_FIELDS[name], **overrides})
@@ -424,6 +442,7 @@ def check_precision(params, solver: SolverConfig):
 
 SOLVER_PRESET_FIELDS = {
     "paper": {},
+    "identified": {},
     "accurate": {"integrator": "bdf2", "adaptive": True, "error_tol": 1e-6, "dt": 1e-3,
                  "jacobian": "chord"},
 }

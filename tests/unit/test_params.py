@@ -152,6 +152,17 @@ def test_presets_are_named_models_with_overrides():
         ts.StarParams.preset("fast")
 
 
+def test_identified_preset_is_its_documented_fields():
+    from taichi_star.params import IDENTIFIED_FIELDS
+    identified = ts.StarParams.preset("identified", gait="A1+A4")
+    assert identified == ts.StarParams(gait="A1+A4", **IDENTIFIED_FIELDS)
+    assert identified != ts.StarParams(gait="A1+A4")  # it differs from the paper's model
+    # the identified values are fitted, not defaults: every field named differs from its default
+    for name, value in IDENTIFIED_FIELDS.items():
+        assert getattr(identified, name) == value != getattr(ts.StarParams(), name)
+    assert ts.SolverConfig.preset("identified") == ts.SolverConfig()
+
+
 # The boundaries and messages below are the ranges documented on each field.
 
 @pytest.mark.parametrize("field,value,message", [
@@ -226,7 +237,7 @@ def test_presets_default_to_the_paper_and_name_the_choices_when_unknown():
     for cls in (ts.StarParams, ts.SolverConfig):
         with pytest.raises(ValueError) as error:
             cls.preset("fast")
-        assert str(error.value) == "preset must be one of ['paper', 'accurate'], got 'fast'"
+        assert str(error.value) == "preset must be one of ['paper', 'accurate', 'identified'], got 'fast'"
 
 
 def test_a_profile_that_is_not_a_curvature_profile_is_refused_naming_its_type():
