@@ -5,7 +5,8 @@ drawing that `SimulationResult.animate`, `python -m studies animate` and the env
 The robot is drawn from its node positions (mm): foam limbs brown, spokes from the hub light
 gray, actuator arcs dark gray, and red while hot (during the heating pulse, the first t0 =
 `CurvatureProfile.switch_time` seconds after firing); the central cylinder; the labels A1..A8
-beside their arcs (red while hot); optionally the centroid's path and a goal point.
+beside their arcs (red while hot); optionally the centroid's path (a blue line, a dot where the
+centroid is now) and a goal point.
 """
 
 from __future__ import annotations
@@ -94,8 +95,9 @@ class RobotArtist:
         ax.add_collection(self.lines)
         self.labels = ([ax.text(0.0, 0.0, f"A{m + 1}", ha="center", va="center", fontsize=7,
                                 zorder=3) for m in range(len(topology.arcs))] if labels else [])
-        self.path = ax.plot([], [], color=PATH_COLOUR, lw=1.2, zorder=4,
-                            label="centroid path")[0] if path else None
+        # the line is the centroid's path so far, the dot its position now
+        self.path = ax.plot([], [], color=PATH_COLOUR, lw=1.2, zorder=4, marker="o", ms=4,
+                            markevery=[-1], label="centroid path")[0] if path else None
         self.ax = ax
 
     def update(self, positions_mm: np.ndarray, hot: np.ndarray,

@@ -199,17 +199,24 @@ def to_xarray(result):
 
 
 def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str = "world",
-            fps: int = 15, size_px: int = 720):
-    """Write the recorded shapes of some instances (default: all, up to 16) as an animation:
-    MP4 (through imageio-ffmpeg's ffmpeg) for a `.mp4` path, GIF for `.gif`. `frame` "world"
-    (lab axes, the centroid's path drawn) or "body" (following the centroid and the body's
-    rotation). Returns the path. Raises ValueError without recorded shapes, for an unknown
-    frame or suffix, or for instances out of range."""
+            fps: int = 15, size_px: int = 720, title: Optional[str] = None):
+    """Write the recorded shapes of some instances (default: all, up to 16; one panel each) as
+    an animation: MP4 (through imageio-ffmpeg's ffmpeg) for a `.mp4` path, GIF for `.gif`.
+    Drawn with `taichi_star.drawing`: limbs brown, actuator arcs gray and red while they heat
+    (the first t0 = `CurvatureProfile.switch_time` s of each cycle, for the gait's actuators:
+    `simulate` fires them at 0, T, 2T, ...), labels A1..A8, the central cylinder and a scale
+    bar. `frame` "world" (lab axes, mm, with the centroid's path so far drawn in blue) or
+    "body" (following the hub and the body's rotation; no path). `title` heads the movie
+    (default none) above the time. Returns the path. Raises ValueError without recorded
+    shapes, for an unknown frame or suffix, or for instances out of range."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib import animation
+
+    from . import drawing
+    from .gait import Gait
 
     path = Path(path)
     if result.shapes is None or result.topology is None:
@@ -223,19 +230,30 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
     chosen = list(range(min(batch, 16))) if instances is None else [int(i) for i in instances]
     if not chosen or min(chosen) < 0 or max(chosen) >= batch:
         raise ValueError(f"instances must be in [0, {batch}), got {instances!r}")
+    topology = result.topology
     times = np.sort(result.trajectory["t_s"].unique())
     shapes = result.shapes[:, chosen] * 1e3  # mm
+    paths = None
     if frame == "body":
-        shapes = _body_frame(shapes, result.topology)
+        shapes = _body_frame(shapes, topology)
+    else:
+        # the trajectory is the centroid relative to its start; the rest shape is symmetric,
+        # so the start centroid is the hub's rest position
+        start = topology.rest_positions[CENTRE] * 1e3
+        paths = [result.trajectory[result.trajectory["instance"] == i].sort_values("t_s")
+                 [["x_mm", "y_mm"]].to_numpy() + start for i in chosen]
+    params = [StarParams.from_row(result.summary.iloc[i]) for i in chosen]
+    hot = [drawing.periodic_hot_actuators(times, p.gait_value.mask, p.period,
+                                          p.actuator_profile.switch_time) for p in params]
     columns = int(np.ceil(np.sqrt(len(chosen))))
     rows = int(np.ceil(len(chosen) / columns))
     inches = size_px / 100
     fig, axes = plt.subplots(rows, columns, figsize=(inches, inches * rows / columns), dpi=100,
                              squeeze=False)
-    edges = result.topology.edges
-    gaits = result.summary["gait"].to_numpy()
-    reach = np.nanmax(np.abs(shapes)) * 1.05
-    lines = []
+    low = np.nanmin(shapes, axis=(0, 1, 2))
+    high = np.nanmax(shapes, axis=(0, 1, 2))
+    centre, half = 0.5 * (low + high), 0.5 * float((high - low).max()) + 10.0
+    robots = []
     for slot, ax in enumerate(axes.ravel()):
         ax.set_aspect("equal")
         ax.set_xticks([])
@@ -243,18 +261,24 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
         if slot >= len(chosen):
             ax.axis("off")
             continue
-        ax.set_xlim(-reach, reach)
-        ax.set_ylim(-reach, reach)
-        ax.set_title(f"#{chosen[slot]} {gaits[chosen[slot]]}", fontsize=9)
-        lines.append(ax.plot([], [], color="tab:blue", lw=1.2)[0])
+        ax.set_xlim(centre[0] - half, centre[0] + half)
+        ax.set_ylim(centre[1] - half, centre[1] + half)
+        ax.set_title(f"#{chosen[slot]} {params[slot].gait}", fontsize=9)
+        drawing.add_scale_bar(ax, drawing.nice_length(2 * half))
+        robots.append(drawing.RobotArtist(ax, topology, params[slot].cylinder_diameter * 1e3,
+                                          labels=len(chosen) <= 4, path=frame == "world"))
     label = fig.suptitle("")
-    fig.tight_layout(rect=(0, 0, 1, 0.95))
+    fig.tight_layout(rect=(0, 0, 1, 0.94))
+    heading = f"{title}\n" if title else ""
 
     def draw(index):
-        for slot, line in enumerate(lines):
-            line.set_data(*_polyline(shapes[index, slot], edges))
-        label.set_text(f"t = {times[index]:.2f} s ({frame} frame, mm)")
-        return lines
+        artists = []
+        for slot, robot in enumerate(robots):
+            artists += robot.update(shapes[index, slot], hot[slot][index],
+                                    None if paths is None else paths[slot][:index + 1])
+        label.set_text(f"{heading}t = {times[index]:.2f} s ({frame} frame; red: actuators "
+                       f"heating)")
+        return artists
 
     movie = animation.FuncAnimation(fig, draw, frames=len(times), blit=False)
     if path.suffix.lower() == ".mp4":
@@ -268,15 +292,6 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
     movie.save(path, writer=writer)
     plt.close(fig)
     return path
-
-
-def _polyline(points: np.ndarray, edges: np.ndarray):
-    """x, y arrays drawing every edge as a segment, NaN-separated (one Line2D for the robot)."""
-    segments = np.full((len(edges), 3, 2), np.nan)
-    segments[:, 0] = points[edges[:, 0]]
-    segments[:, 1] = points[edges[:, 1]]
-    flat = segments.reshape(-1, 2)
-    return flat[:, 0], flat[:, 1]
 
 
 def _body_frame(shapes_mm: np.ndarray, topology) -> np.ndarray:

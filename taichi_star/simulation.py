@@ -88,10 +88,11 @@ class SimulationResult:
         return output.to_csv(self, path, table)
 
     def animate(self, path, instances=None, frame: str = "world", fps: int = 15,
-                size_px: int = 720):
-        """Animate the recorded shapes to an MP4 or GIF (see `output.animate`)."""
+                size_px: int = 720, title=None):
+        """Animate the recorded shapes to an MP4 or GIF: fired actuators red while they heat,
+        labels A1..A8, a scale bar, the centroid's path (see `output.animate`)."""
         return output.animate(self, path, instances=instances, frame=frame, fps=fps,
-                              size_px=size_px)
+                              size_px=size_px, title=title)
 
     def __repr__(self) -> str:
         status = self.summary["status"].value_counts().to_dict() if len(self.summary) else {}

@@ -118,6 +118,23 @@ def test_animation_writes_a_movie_of_every_record(recorded, tmp_path, name, fram
             assert movie.n_frames == 6
 
 
+def test_animation_colours_the_heating_actuators_and_draws_the_path(recorded, tmp_path):
+    """Records at 0, 0.04, ..., 0.2 s: the fired actuators are red during the heating pulse
+    (t < t0 = 0.163 s and 0.15 s) and not after it; the centroid's path is drawn (blue)."""
+    from PIL import Image
+
+    path = recorded.animate(tmp_path / "heat.gif", instances=[0, 1], size_px=300)
+    with Image.open(path) as movie:
+        pictures = []
+        for index in (0, movie.n_frames - 1):
+            movie.seek(index)
+            pictures.append(np.asarray(movie.convert("RGB")).astype(int))
+    red = [int(((p[..., 0] > 200) & (p[..., 1] < 80) & (p[..., 2] < 80)).sum()) for p in pictures]
+    assert red[0] > 100 and red[1] == 0
+    blue = pictures[1][..., 2] - pictures[1][..., 0]
+    assert (blue > 120).sum() > 0  # tab:blue path (lightsteelblue cylinder: difference < 80)
+
+
 def test_animation_refuses_results_without_shapes(tmp_path):
     result = ts.simulate([ts.StarParams()], 0.01)
     with pytest.raises(ValueError, match="record_shapes"):
