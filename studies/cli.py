@@ -33,7 +33,7 @@ from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, executor_for
                                stored_chunk_size, write_atomic)
 from taichi_star.experiment import PAPER_GAITS
 from taichi_star.gait import Gait
-from taichi_star.output import column_unit, column_units
+from taichi_star.output import column_unit, column_units, parquet_bytes
 
 from . import provenance
 
@@ -511,20 +511,8 @@ class Output:
                       extra: Optional[Mapping] = None) -> Path:
         """Write a table as Parquet (typed columns, every float bit for bit) and its JSON
         sidecar; the provenance is also in the file's own metadata (key "taichi_star")."""
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-
         path = self.path(name)
-        # values Parquet has no type for (the actuation profile) are stored as their text
-        frame = frame.assign(**{column: frame[column].map(str) for column in frame.columns
-                                if frame[column].dtype == object
-                                and not frame[column].map(lambda v: isinstance(v, str)).all()})
-        table = pa.Table.from_pandas(frame, preserve_index=False)
-        metadata = {**(table.schema.metadata or {}),
-                    b"taichi_star": json.dumps(self._details(extra), default=str).encode()}
-        sink = pa.BufferOutputStream()
-        pq.write_table(table.replace_schema_metadata(metadata), sink)
-        self._write(path, sink.getvalue().to_pybytes())
+        self._write(path, parquet_bytes(frame, self._details(extra)))
         return self._described(path, extra, frame)
 
     def _details(self, extra: Optional[Mapping]) -> dict:

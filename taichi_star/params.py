@@ -247,10 +247,10 @@ class StarParams:
     @classmethod
     def from_row(cls, row, **overrides) -> "StarParams":
         """The parameters of one row of a result table (a pandas Series or a mapping with the
-        parameter columns of `columns`, e.g. `result.summary.iloc[3]`), with some fields
-        changed. A row read back from a CSV holds the actuator profile as text: give
-        `actuator_profile` as an override, or the default profile is used only if the text is
-        the default's. Raises ValueError naming a missing column."""
+        parameter columns of `columns`, e.g. `result.summary.iloc[3]`, or a row read back
+        from a CSV, Parquet or netCDF file), with some fields changed. The actuator profile may
+        be a CurvatureProfile or its text (`CurvatureProfile.to_text`, as result tables hold
+        it). Raises ValueError naming a missing column or an unreadable profile."""
         values = {}
         for name, column in cls.columns().items():
             if name in overrides:
@@ -259,11 +259,7 @@ class StarParams:
                 raise ValueError(f"row has no column {column!r} (StarParams field {name!r})")
             value = row[column]
             if name == "actuator_profile" and not isinstance(value, CurvatureProfile):
-                default = cls().actuator_profile
-                if str(value) != repr(default):
-                    raise ValueError(f"actuator_profile: the row holds {str(value)[:60]!r}, not "
-                                     f"a CurvatureProfile; pass actuator_profile=...")
-                value = default
+                value = CurvatureProfile.from_text(value)
             if isinstance(value, np.generic):
                 value = value.item()
             values[name] = value

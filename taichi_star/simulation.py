@@ -38,8 +38,9 @@ class SimulationResult:
     summary: one row per instance, in input order: every StarParams field, named with its unit
         where it has one (youngs_modulus_pa, period_s, thickness_m, the densities _kg_m3,
         cylinder_mass_per_height_kg_m, cylinder_diameter_m, damping_time_s, joint_radius_m,
-        tip_radius_m; `StarParams.columns()`; `StarParams.from_row(row)` rebuilds the
-        parameters of a row); the whole-run
+        tip_radius_m; `StarParams.columns()`; the actuator_profile column holds the profile's
+        text, `CurvatureProfile.to_text`; `StarParams.from_row(row)` rebuilds the parameters
+        of a row, also of a table read back from CSV, Parquet or netCDF); the whole-run
         metrics displacement_x_mm, displacement_y_mm, speed_mm_s, signed_speed_mm_s (on the
         gait's forward direction; NaN where it is undefined), travel_direction_deg (direction of
         the displacement from +x); heading_deg (body rotation at the end, counter-clockwise);
@@ -75,15 +76,28 @@ class SimulationResult:
         return output.to_xarray(self)
 
     def to_netcdf(self, path):
-        """Save `to_xarray()` as a netCDF file; returns the path."""
-        self.to_xarray().to_netcdf(path)
-        return path
+        """Save `to_xarray()` as a netCDF file (whole or not at all; the provenance in its
+        attributes); returns the path."""
+        return output.to_netcdf(self, path)
+
+    def to_parquet(self, path, table: str = "summary"):
+        """Save the summary (or table="trajectory") as Parquet, whole or not at all, with the
+        provenance (version, git commit, parameters, solver) in the file's metadata
+        (`output.read_provenance`); returns the path. `self.summary.to_parquet(path)` (plain
+        pandas) works too, without the provenance."""
+        return output.to_parquet(self, path, table)
+
+    def to_csv(self, path, table: str = "summary"):
+        """Save the summary (or table="trajectory") as CSV with the provenance in a JSON
+        sidecar `<path>.json`, each whole or not at all; returns the path."""
+        return output.to_csv(self, path, table)
 
     def animate(self, path, instances=None, frame: str = "world", fps: int = 15,
-                size_px: int = 720):
-        """Animate the recorded shapes to an MP4 or GIF (see `output.animate`)."""
+                size_px: int = 720, title=None):
+        """Animate the recorded shapes to an MP4 or GIF: fired actuators red while they heat,
+        labels A1..A8, a scale bar, the centroid's path (see `output.animate`)."""
         return output.animate(self, path, instances=instances, frame=frame, fps=fps,
-                              size_px=size_px)
+                              size_px=size_px, title=title)
 
     def __repr__(self) -> str:
         status = self.summary["status"].value_counts().to_dict() if len(self.summary) else {}
@@ -288,6 +302,8 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
     failed = status != STATUS_OK
 
     rows = {column: [getattr(p, name) for p in params] for name, column in StarParams.columns().items()}
+    # as text, so that every column has an Arrow type (Parquet, netCDF) and from_row reads it
+    rows["actuator_profile"] = [p.actuator_profile.to_text() for p in params]
     rows.update(metrics.swimming_metrics(final - start, duration, gaits))
     positions = state.positions.to_numpy()[:batch].astype(np.float64)
     rows["heading_deg"] = np.degrees(metrics.body_rotation(

@@ -25,10 +25,8 @@ import datetime
 import hashlib
 import json
 import logging
-import os
-import subprocess
 from pathlib import Path
-from typing import Callable, Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 import pandas as pd
@@ -36,6 +34,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from ..actuation import CurvatureProfile
+from ..provenance import code_version, write_atomic
 from .tasks import ChunkTask
 
 MANIFEST = "manifest.json"
@@ -54,25 +53,6 @@ log = logging.getLogger("taichi_star.batch")
 class RunStoreError(ValueError):
     """The run folder cannot be used as asked (another definition, an unfinished run without
     resume, not a run folder, a damaged manifest); one line, naming the folder."""
-
-
-def code_version() -> Dict[str, object]:
-    """{"version": the package version, "commit": git HEAD of the source checkout or None,
-    "dirty": whether tracked files differ from it (None outside git)}."""
-    from .. import __version__
-    root = Path(__file__).resolve().parents[2]
-    commit = dirty = None
-    try:
-        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True,
-                              text=True, timeout=10)
-        if head.returncode == 0 and head.stdout.strip():
-            commit = head.stdout.strip()
-            status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
-                                    cwd=root, capture_output=True, text=True, timeout=10)
-            dirty = bool(status.stdout.strip()) if status.returncode == 0 else None
-    except (OSError, subprocess.SubprocessError):
-        pass
-    return {"version": __version__, "commit": commit, "dirty": dirty}
 
 
 def _canonical(value) -> str:
@@ -149,28 +129,6 @@ def _decode(frame: pd.DataFrame, types: Dict[str, str]) -> pd.DataFrame:
         frame[name] = pd.Series([VALUE_TYPES[type_name](**json.loads(v)) for v in frame[name]],
                                 dtype=object, index=frame.index)
     return frame
-
-
-def write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception]] = None):
-    """Write `data` to `path` whole or not at all: into a temporary file beside it, flushed to
-    disk, then renamed over it; a kill or a full disk leaves any previous file untouched. With
-    `failure`, an OSError (a full disk) is raised as `failure(reason)` instead, the reason one
-    line naming the file and the error ("cannot write x.csv (No space left on device)")."""
-    path = Path(path)
-    temporary = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
-        with open(temporary, "wb") as handle:
-            handle.write(data)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(temporary, path)
-    except OSError as error:
-        if failure is None:
-            raise
-        raise failure(f"cannot write {path.name} ({error.strerror or error})") from None
-    finally:
-        if temporary.exists():
-            temporary.unlink()
 
 
 class RunStore:
