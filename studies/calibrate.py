@@ -43,6 +43,7 @@ import numpy as np
 import pandas as pd
 
 from taichi_star import SolverConfig, StarParams
+from taichi_star.extras import require
 
 from . import cli, figures, identify
 
@@ -108,7 +109,7 @@ def fit_cmaes(box: Sequence[identify.ParameterRange], base: StarParams,
     `run_kwargs`: keyword arguments of `taichi_star.batch.run_batch` (run length, solver, arch,
     executor, chunk size; default DEFAULT_CYCLES cycles from rest in this process).
     `on_generation(table so far)` is called after each generation (e.g. to write the CSV)."""
-    import cma
+    cma = require("cma", "studies")
     identify.check_box(box, base)
     settings.validate()
     run_kwargs = dict(run_kwargs or {"cycles": DEFAULT_CYCLES})

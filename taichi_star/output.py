@@ -9,6 +9,7 @@ from typing import Optional, Sequence
 import numpy as np
 import pandas as pd
 
+from .extras import require
 from .geometry import CENTRE
 from .params import PARAMETER_UNITS, StarParams, parameter_column
 
@@ -39,7 +40,7 @@ def to_xarray(result):
     parameters as coordinates; per record (dims `instance`, `time`) the centroid and heading;
     with recorded shapes, `positions` (time, instance, node, xy) in m. Every variable carries a
     `units` attribute."""
-    import xarray as xr
+    xr = require("xarray", "io")
 
     summary = result.summary.reset_index(drop=True)
     parameter_columns = set(StarParams.columns().values())
@@ -79,7 +80,8 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
     (lab axes, the centroid's path drawn) or "body" (following the centroid and the body's
     rotation). Returns the path. Raises ValueError without recorded shapes, for an unknown
     frame or suffix, or for instances out of range."""
-    import matplotlib
+    matplotlib = require("matplotlib", "video")
+    require("PIL", "video")
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -132,8 +134,7 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
 
     movie = animation.FuncAnimation(fig, draw, frames=len(times), blit=False)
     if path.suffix.lower() == ".mp4":
-        import imageio_ffmpeg
-
+        imageio_ffmpeg = require("imageio_ffmpeg", "video")
         matplotlib.rcParams["animation.ffmpeg_path"] = imageio_ffmpeg.get_ffmpeg_exe()
         writer = animation.FFMpegWriter(fps=fps)
     else:

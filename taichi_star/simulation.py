@@ -15,6 +15,7 @@ from .geometry import CENTRE, Topology
 from .model import build_model, validate_batch
 from .params import SolverConfig, StarParams
 from .engine import STEP_TOLERANCE
+from .extras import require
 from .runtime import Runtime, check_arch, stream_chunk_size
 from .state import STATUS_NAMES, STATUS_OK
 
@@ -70,7 +71,8 @@ class SimulationResult:
         return output.to_xarray(self)
 
     def to_netcdf(self, path):
-        """Save `to_xarray()` as a netCDF file; returns the path."""
+        """Save `to_xarray()` as a netCDF file (netCDF4 format); returns the path."""
+        require("netCDF4", "io")
         self.to_xarray().to_netcdf(path)
         return path
 

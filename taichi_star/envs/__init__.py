@@ -8,9 +8,13 @@
 Both stop an episode after DEFAULT_MAX_EPISODE_STEPS (40) control periods unless given
 `max_episode_steps=N`. The keyword arguments, spaces and reward are described in
 `taichi_star.envs.swimmer`.
+
+Gymnasium comes with the ``envs`` extra (``pip install "taichi_star[envs]"``).
 """
 
-import gymnasium
+from ..extras import require
+
+gymnasium = require("gymnasium", "envs")
 
 from .swimmer import (DEFAULT_MAX_EPISODE_STEPS, OBSERVATION_NAMES, GoalReachingBatch,
                       StarSwimmerEnv, StarSwimmerVectorEnv, SwimmerTask, control_period)
