@@ -1,5 +1,6 @@
 """The user documentation builds cleanly, and the licence and citation files are well formed."""
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -38,6 +39,25 @@ def test_mkdocs_build_strict(built_site):
     api = (site / "api" / "index.html").read_text(encoding="utf-8")
     # dataclass fields and their documented units reach the reference
     assert "youngs_modulus" in api and "newton_tol" in api
+
+
+def test_site_reads_offline_with_its_equations_rendered_by_the_vendored_katex(built_site):
+    """No page loads a script, stylesheet or font from the network; every page with equations
+    loads KaTeX from the site itself, and the files it names are there."""
+    completed, site = built_site
+    assert completed.returncode == 0
+    remote = re.compile(r'<(?:script|link)[^>]+(?:src|href)="(?:https?:)?//[^"]+"')
+    pages_with_math = 0
+    for page in site.rglob("*.html"):
+        text = page.read_text(encoding="utf-8")
+        assert not remote.findall(text), (page.name, remote.findall(text))
+        if 'class="arithmatex"' in text:
+            pages_with_math += 1
+            assert "vendor/katex/katex.min.js" in text and "katex.min.css" in text, page
+    assert pages_with_math >= 3  # model, numerics, ... carry the equations
+    css = (site / "vendor" / "katex" / "katex.min.css").read_text(encoding="utf-8")
+    fonts = set(re.findall(r"url\((fonts/[^)]+\.woff2)\)", css))
+    assert fonts and all((site / "vendor" / "katex" / font).exists() for font in fonts)
 
 
 def test_rendered_site_does_not_cite_the_internal_design(built_site):
