@@ -141,7 +141,54 @@ def fig4c_table() -> str:
     return "\n".join(lines) + "\n"
 
 
-BLOCKS: Dict[str, Callable[[], str]] = {"fig4c_table": fig4c_table}
+def thousands(value: str) -> str:
+    return f"{float(value):,.0f}"
+
+
+def bench_batch_table() -> str:
+    """docs/performance.md: robot-steps/s per precision × Jacobian (rows) and batch size."""
+    table = read_table("bench.csv")
+    table = table[table["section"] == "batch"]
+    sizes = sorted(set(table["batch_size"]), key=int)
+    lines = ["| robot-steps/s, in one process | " + " | ".join(f"B = {size}" for size in sizes) + " |",
+             "|---|" + "---|" * len(sizes)]
+    for precision in ("f64", "f32"):
+        for jacobian in ("newton", "chord"):
+            rows = table[(table["precision"] == precision) & (table["jacobian"] == jacobian)]
+            by_size = dict(zip(rows["batch_size"], rows["robot_steps_per_s"]))
+            lines.append(f"| {precision}, {'Newton' if jacobian == 'newton' else 'chord'} Jacobian | "
+                         + " | ".join(thousands(by_size[size]) for size in sizes) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def bench_processes_table() -> str:
+    """docs/performance.md: worker processes at B = 512, f64."""
+    table = read_table("bench.csv")
+    table = table[table["section"] == "processes"]
+    lines = ["| robot-steps/s | 1 worker process | 2 worker processes |", "|---|---|---|"]
+    for jacobian, label in (("newton", "Newton Jacobian"), ("chord", "chord Jacobian")):
+        rows = table[table["jacobian"] == jacobian]
+        by_workers = {float(w): v for w, v in zip(rows["workers"], rows["robot_steps_per_s"])}
+        lines.append(f"| {label} | {thousands(by_workers[1.0])} | {thousands(by_workers[2.0])} |")
+    return "\n".join(lines) + "\n"
+
+
+def scaling_table() -> str:
+    """docs/performance.md: one sweep in process, on worker processes and on Dask workers."""
+    labels = {("in-process", "0"): "in process (Taichi threads)", ("processes", "1"): "1 worker process",
+              ("dask-local", "1"): "1 Dask worker", ("processes", "2"): "2 worker processes",
+              ("dask-local", "2"): "2 Dask workers"}
+    lines = ["| mode | wall time | speed-up | same table as in process |", "|---|---|---|---|"]
+    for _, row in read_table("scaling.csv").iterrows():
+        lines.append(f"| {labels[(row['mode'], row['workers'])]} | {float(row['wall_s']):.1f} s | "
+                     f"{float(row['speedup_vs_in_process']):.2f} | "
+                     f"{'yes' if row['same_table_as_in_process'] == 'True' else '**no**'} |")
+    return "\n".join(lines) + "\n"
+
+
+BLOCKS: Dict[str, Callable[[], str]] = {
+    "fig4c_table": fig4c_table, "bench_batch_table": bench_batch_table,
+    "bench_processes_table": bench_processes_table, "scaling_table": scaling_table}
 """Generated blocks by name: each returns its Markdown, ending in a newline."""
 
 
