@@ -4,9 +4,14 @@ import importlib
 import sys
 
 from taichi_star.batch import RunStoreError
+from taichi_star.extras import first_missing
 
 from . import study_names
 from .cli import StudyArgumentError, configure_logging
+
+
+STUDIES_EXTRA = ("matplotlib", "PIL", "cma", "SALib", "scipy")
+"""What the studies import beyond the core (pyproject.toml's `studies` extra)."""
 
 
 def usage() -> str:
@@ -27,6 +32,10 @@ def main(argv=None) -> int:
     if name not in study_names():
         print(f"python -m studies: error: unknown study {name!r}; choose one of "
               f"{', '.join(study_names())}", file=sys.stderr)
+        return 2
+    missing = first_missing(STUDIES_EXTRA, "studies")
+    if missing:  # before any compute, not at the first plot
+        print(f"python -m studies {name}: error: {missing}", file=sys.stderr)
         return 2
     configure_logging()
     module = importlib.import_module(f"studies.{name}")

@@ -17,7 +17,23 @@ the error a missing one raises:
 from __future__ import annotations
 
 import importlib
+import importlib.util
 from types import ModuleType
+
+
+def missing_message(module: str, extra: str) -> str:
+    """What to tell a user who lacks `module`: the extra that installs it."""
+    return (f"{module} is not installed: it comes with the {extra!r} extra: "
+            f'pip install "taichi_star[{extra}]"')
+
+
+def first_missing(modules, extra: str) -> str:
+    """`missing_message` of the first of `modules` (top-level names) that cannot be found, without
+    importing any; "" when all are installed."""
+    for module in modules:
+        if importlib.util.find_spec(module) is None:
+            return missing_message(module, extra)
+    return ""
 
 
 def require(module: str, extra: str) -> ModuleType:
@@ -31,6 +47,4 @@ def require(module: str, extra: str) -> ModuleType:
         if missing.name is None or not (module == missing.name
                                         or module.startswith(missing.name + ".")):
             raise
-        raise ImportError(
-            f"{module} is not installed: it comes with the {extra!r} extra: "
-            f'pip install "taichi_star[{extra}]"') from missing
+        raise ImportError(missing_message(module, extra)) from missing

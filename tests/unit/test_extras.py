@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from taichi_star.extras import require
+from taichi_star.extras import first_missing, require
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -52,3 +52,33 @@ def test_require_passes_on_a_missing_import_inside_an_installed_package(tmp_path
     with pytest.raises(ModuleNotFoundError) as error:
         require("installed_but_broken", "io")
     assert error.value.name == "taichi_star_absent_dependency"
+
+
+def test_first_missing_names_the_first_absent_module_without_importing_it():
+    assert first_missing(["json", "os"], "io") == ""
+    message = first_missing(["json", "taichi_star_no_such_package", "another_absent"], "studies")
+    assert message.startswith("taichi_star_no_such_package is not installed")
+    assert 'pip install "taichi_star[studies]"' in message
+
+
+def test_a_study_without_its_extra_stops_before_compute_with_one_line(monkeypatch, capsys):
+    """The CLI's rule for bad setups: one line on stderr naming the extra, exit code 2, nothing
+    run (the missing package is faked: this environment has the whole extra)."""
+    from studies import __main__ as launcher
+
+    monkeypatch.setattr(launcher, "STUDIES_EXTRA", ("json", "taichi_star_no_such_package"))
+    assert launcher.main(["fig4c", "--quick"]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1
+    assert "taichi_star_no_such_package is not installed" in error
+    assert 'pip install "taichi_star[studies]"' in error
+
+
+def test_the_launcher_checks_exactly_the_studies_extra():
+    tomllib = pytest.importorskip("tomllib")  # Python 3.11 and later
+    from studies import __main__ as launcher
+
+    extras = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    import_names = {"pillow": "PIL"}  # distribution name → the module it installs, where they differ
+    assert {import_names.get(name.lower(), name) for name in extras["studies"]} == set(
+        launcher.STUDIES_EXTRA)
