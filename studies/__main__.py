@@ -10,7 +10,7 @@ from . import study_names
 from .cli import StudyArgumentError, configure_logging
 
 
-STUDIES_EXTRA = ("matplotlib", "PIL", "cma", "SALib", "scipy")
+STUDIES_EXTRA = ("matplotlib", "PIL", "cma", "SALib", "scipy", "gymnasium")
 """What the studies import beyond the core (pyproject.toml's `studies` extra)."""
 
 
@@ -25,6 +25,10 @@ def usage() -> str:
 
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    missing = first_missing(STUDIES_EXTRA, "studies")
+    if missing:  # before any compute (and before the list, which imports every study)
+        print(f"python -m studies: error: {missing}", file=sys.stderr)
+        return 2
     if not argv or argv[0] in ("-h", "--help"):
         print(usage())
         return 0 if argv else 2
@@ -32,10 +36,6 @@ def main(argv=None) -> int:
     if name not in study_names():
         print(f"python -m studies: error: unknown study {name!r}; choose one of "
               f"{', '.join(study_names())}", file=sys.stderr)
-        return 2
-    missing = first_missing(STUDIES_EXTRA, "studies")
-    if missing:  # before any compute, not at the first plot
-        print(f"python -m studies {name}: error: {missing}", file=sys.stderr)
         return 2
     configure_logging()
     module = importlib.import_module(f"studies.{name}")

@@ -5,7 +5,7 @@ enough for `simulate`, `Simulator` and `run_batch`. Everything else comes with a
 the error a missing one raises:
 
 - ``envs``: gymnasium (the Gymnasium environments, `taichi_star.envs`);
-- ``studies``: matplotlib, pillow, cma, SALib, scipy (the studies, `taichi-star <study>`);
+- ``studies``: matplotlib, pillow, cma, SALib, scipy, gymnasium (the studies: `python -m studies`);
 - ``io``: xarray, netCDF4 (`SimulationResult.to_xarray`, netCDF output);
 - ``video``: matplotlib, pillow, imageio-ffmpeg (`SimulationResult.animate`);
 - ``dask``: dask.distributed (`run_batch(..., scheduler=...)`);
