@@ -1,5 +1,6 @@
 """The user documentation builds cleanly, and the licence and citation files are well formed."""
 
+import html
 import re
 import subprocess
 import sys
@@ -34,11 +35,19 @@ def built_site(tmp_path_factory):
 def test_mkdocs_build_strict(built_site):
     completed, site = built_site
     assert completed.returncode == 0, completed.stdout + completed.stderr
-    for page in ("index", "model", "numerics", "performance", "studies", "reproducibility", "api"):
+    for page in ("index", "model", "numerics", "performance", "studies", "reproducibility", "results",
+                 "reliability", "result_files", "api"):
         assert (site / page / "index.html").exists() or (site / f"{page}.html").exists(), page
     api = (site / "api" / "index.html").read_text(encoding="utf-8")
     # dataclass fields and their documented units reach the reference
     assert "youngs_modulus" in api and "newton_tol" in api
+    # long signatures are wrapped one parameter a line (mkdocstrings formats them with ruff)
+    signature = re.sub(r"<[^>]+>", "", api[api.index('id="taichi_star.simulate"'):])
+    assert re.search(r"simulate\(\n\s+params: Sequence\[StarParams\],\n", html.unescape(signature))
+    # the result's columns are a table
+    assert "<td>signed_speed_mm_s</td>" in api and "<td>failure_time_s</td>" in api
+    # the plots the pages show come from results/
+    assert (site / "results" / "fig4c.png").read_bytes() == (REPO_ROOT / "results" / "fig4c.png").read_bytes()
 
 
 def test_site_reads_offline_with_its_equations_rendered_by_the_vendored_katex(built_site):
