@@ -122,3 +122,23 @@ def test_user_docs_do_not_cite_the_internal_design():
     offenders = [str(path.relative_to(REPO_ROOT)) for path in _user_facing_text_files()
                  if INTERNAL_CITATION in path.read_text(encoding="utf-8")]
     assert not offenders, offenders
+
+
+def test_readme_opens_with_the_two_commands_and_the_api():
+    """What a newcomer reads first: the install + main job and install + tests commands, then
+    within 60 lines a Python quickstart whose every `ts.` name exists; at most 200 lines."""
+    import taichi_star
+
+    lines = (REPO_ROOT / "README.md").read_text(encoding="utf-8").splitlines()
+    assert len(lines) <= 200
+    commands = [line.split("#")[0].strip() for line in lines[2:6] if line and not line.startswith("```")]
+    assert commands == ['pip install -e ".[studies]" && python -m studies fig4c',
+                        'pip install -e ".[test]" && python -m pytest -q']
+    start = lines.index("```python")
+    end = lines.index("```", start)
+    assert end < 60
+    quickstart = "\n".join(lines[start + 1:end])
+    compile(quickstart, "README quickstart", "exec")
+    for name in ("simulate", "Simulator", "StarParams"):
+        assert f"ts.{name}(" in quickstart and hasattr(taichi_star, name), name
+    assert 'gymnasium.make_vec("StarSwimmer-v0"' in quickstart
