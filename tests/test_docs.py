@@ -69,6 +69,19 @@ def test_site_reads_offline_with_its_equations_rendered_by_the_vendored_katex(bu
     assert fonts and all((site / "vendor" / "katex" / font).exists() for font in fonts)
 
 
+def test_the_readme_links_to_pages_and_headings_the_site_has(built_site):
+    completed, site = built_site
+    assert completed.returncode == 0
+    readme = (REPO_ROOT / "README.md").read_text(encoding="utf-8")
+    links = re.findall(r"\]\(docs/(\w+)\.md(?:#([\w-]+))?\)", readme)
+    assert len(links) >= 10
+    for page, anchor in links:
+        built = site / page / "index.html"
+        assert built.exists(), page
+        if anchor:
+            assert f'id="{anchor}"' in built.read_text(encoding="utf-8"), (page, anchor)
+
+
 def test_rendered_site_does_not_cite_the_internal_design(built_site):
     completed, site = built_site
     assert completed.returncode == 0
