@@ -83,3 +83,14 @@ def test_the_launcher_checks_exactly_the_studies_extra():
     import_names = {"pillow": "PIL"}  # distribution name → the module it installs, where they differ
     names = [re.split(r"[<>=!~\[ ;]", requirement)[0] for requirement in extras["studies"]]
     assert {import_names.get(name.lower(), name) for name in names} == set(launcher.STUDIES_EXTRA)
+
+
+@pytest.mark.parametrize("argv0, name", [("/venv/bin/taichi-star", "taichi-star"),
+                                         ("/repo/studies/__main__.py", "python -m studies")])
+def test_the_studies_call_themselves_as_the_user_called_them(monkeypatch, capsys, argv0, name):
+    from studies import __main__ as launcher
+
+    monkeypatch.setattr(sys, "argv", [argv0])
+    assert launcher.main(["no_such_study"]) == 2
+    assert capsys.readouterr().err.startswith(f"{name}: error: unknown study 'no_such_study'")
+    assert launcher.usage().startswith(f"usage: {name} <name>")
