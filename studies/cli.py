@@ -32,6 +32,7 @@ from taichi_star import PRESETS, SolverConfig, StarParams
 from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, executor_for,
                                stored_chunk_size, write_atomic)
 from taichi_star.experiment import PAPER_GAITS
+from taichi_star.extras import require
 from taichi_star.gait import Gait
 from taichi_star.output import column_unit, column_units, parquet_bytes
 
@@ -564,7 +565,7 @@ def check_output_folder(folder: Path, quick: bool):
 
 def use_agg():
     """Select the non-interactive Agg backend and return pyplot."""
-    import matplotlib
+    matplotlib = require("matplotlib", "studies")
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     return plt

@@ -15,6 +15,7 @@ from typing import Mapping, Optional, Sequence
 import numpy as np
 import pandas as pd
 
+from .extras import require
 from .geometry import CENTRE
 from .params import PARAMETER_UNITS, StarParams, parameter_column
 from .provenance import code_version, write_atomic
@@ -120,6 +121,7 @@ def to_csv(result, path, table: str = "summary") -> Path:
 
 def to_netcdf(result, path) -> Path:
     """Write `to_xarray(result)` as a netCDF file, whole or not at all. Returns the path."""
+    require("netCDF4", "io")
     dataset = to_xarray(result)
     with tempfile.TemporaryDirectory(dir=Path(path).parent) as folder:
         scratch = Path(folder) / "result.nc"
@@ -137,8 +139,7 @@ def read_provenance(path) -> dict:
 
         return json.loads(pq.read_schema(path).metadata[PROVENANCE_KEY.encode()])
     if path.suffix == ".nc":
-        import xarray as xr
-
+        xr = require("xarray", "io")
         with xr.open_dataset(path) as dataset:
             return json.loads(dataset.attrs["provenance"])
     return json.loads(Path(f"{path}.json").read_text())
@@ -160,7 +161,7 @@ def to_xarray(result):
     `units` attribute; the dataset's attributes hold the `provenance` as JSON (`provenance`)
     and its main entries one by one (taichi_star_version, git_commit, git_dirty, the solver's
     integrator, dt_s, adaptive, precision)."""
-    import xarray as xr
+    xr = require("xarray", "io")
 
     summary = result.summary.reset_index(drop=True)
     parameter_columns = set(StarParams.columns().values())
@@ -209,7 +210,8 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
     "body" (following the hub and the body's rotation; no path). `title` heads the movie
     (default none) above the time. Returns the path. Raises ValueError without recorded
     shapes, for an unknown frame or suffix, or for instances out of range."""
-    import matplotlib
+    matplotlib = require("matplotlib", "video")
+    require("PIL", "video")
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -282,8 +284,7 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
 
     movie = animation.FuncAnimation(fig, draw, frames=len(times), blit=False)
     if path.suffix.lower() == ".mp4":
-        import imageio_ffmpeg
-
+        imageio_ffmpeg = require("imageio_ffmpeg", "video")
         matplotlib.rcParams["animation.ffmpeg_path"] = imageio_ffmpeg.get_ffmpeg_exe()
         writer = animation.FFMpegWriter(fps=fps)
     else:

@@ -12,9 +12,13 @@ Both take ``render_mode="rgb_array"`` (a picture of the robot from `render()`).
 Both stop an episode after DEFAULT_MAX_EPISODE_STEPS (40) control periods unless given
 `max_episode_steps=N`. The keyword arguments, spaces and reward are described in
 `taichi_star.envs.swimmer`.
+
+Gymnasium comes with the ``envs`` extra (``pip install "taichi_star[envs]"``).
 """
 
-import gymnasium
+from ..extras import require
+
+gymnasium = require("gymnasium", "envs")
 
 from .sb3 import SB3VectorAdapter, to_sb3
 from .swimmer import (DEFAULT_MAX_EPISODE_STEPS, OBSERVATION_NAMES, RENDER_MODES,

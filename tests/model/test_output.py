@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 
 import taichi_star as ts
+from taichi_star.output import column_unit
 
 
 # the second robot's actuator profile is not the default: the files must carry it, not a name
@@ -145,3 +146,17 @@ def test_import_prints_nothing():
     out = subprocess.run([sys.executable, "-c", "import taichi_star"], capture_output=True,
                          text=True, check=True)
     assert out.stdout == "" and "[Taichi]" not in out.stderr
+
+
+def test_the_documented_result_columns_are_the_summary_columns_with_their_units(recorded):
+    """SimulationResult's column table (name | unit | meaning, "—" for no unit) lists every
+    summary column after the parameter columns, in order, with the unit `column_unit` gives."""
+    rows = [line.strip().strip("|").split("|") for line in ts.SimulationResult.__doc__.splitlines()
+            if line.strip().startswith("| ") and not line.strip().startswith("| column")]
+    documented = [(name.strip(), unit.strip()) for name, unit, _ in rows]
+    parameter_columns = list(ts.StarParams.columns().values())
+    assert list(recorded.summary.columns[:len(parameter_columns)]) == parameter_columns
+    results = list(recorded.summary.columns[len(parameter_columns):])
+    assert [name for name, _ in documented] == results
+    for name, unit in documented:
+        assert unit == (column_unit(name) or "—"), name
