@@ -430,12 +430,17 @@ def ranked(rows: Sequence[dict]) -> pd.DataFrame:
 
 def definition_of(candidate: Candidate, args, settings, base: StarParams,
                   solver: SolverConfig, gaits) -> str:
-    """SHA-256 of what defines a candidate's result (a resumed run reuses it only if equal)."""
+    """SHA-256 of what defines a candidate's result (a resumed run reuses it only if equal). The
+    base model enters by its fields that differ from StarParams' defaults, so a field added to
+    StarParams later (a new model option, off by default) leaves earlier results reusable."""
+    defaults = StarParams()
+    base_changes = {f.name: repr(getattr(base, f.name)) for f in dataclasses.fields(base)
+                    if getattr(base, f.name) != getattr(defaults, f.name)}
     text = json.dumps({"candidate": dataclasses.asdict(candidate),
                        "settings": dataclasses.asdict(settings),
                        "fold_generations": args.fold_generations, "gaits": list(gaits),
                        "train": args.train_cycles, "validate": args.validate_cycles,
-                       "base": repr(base), "solver": repr(solver)}, sort_keys=True)
+                       "base": base_changes, "solver": repr(solver)}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 

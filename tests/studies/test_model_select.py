@@ -22,11 +22,11 @@ def test_candidates_are_data_and_missing_fields_are_noted(tmp_path):
     table = tmp_path / "candidates.csv"
     table.write_text("name,set,fit,description\n"
                      "paper,,alpha=0.2:1.5 cylinder_drag=1:100:log,baseline\n"
-                     "future,jet_direction=normal,alpha=0.2:1.5 actuator_gains[4]=0.3:2,new\n")
+                     "future,jet_swirl=on,alpha=0.2:1.5 actuator_stiffnesses[4]=0.3:2,new\n")
     candidates = model_select.read_candidates(table)
     assert [c.name for c in candidates] == ["paper", "future"]
     assert candidates[0].missing_fields() == []
-    assert candidates[1].missing_fields() == ["jet_direction", "actuator_gains"]
+    assert candidates[1].missing_fields() == ["jet_swirl", "actuator_stiffnesses"]
     box = candidates[0].box(StarParams())
     assert [spec.spec for spec in box] == ["alpha=0.2:1.5", "cylinder_drag=1:100:log"]
     ramp = model_select.Candidate("ramp", "profile_closure=ramp", "alpha=0.2:1.5")
@@ -35,6 +35,22 @@ def test_candidates_are_data_and_missing_fields_are_noted(tmp_path):
     for candidate in model_select.read_candidates(model_select.CANDIDATES_CSV):
         if not candidate.missing_fields():
             candidate.box(StarParams())
+
+
+def test_a_resumed_candidate_is_reused_only_for_the_same_model():
+    """The definition names the base model by the fields that differ from the defaults: a field
+    set to its default value (as a model option added later, off by default) changes nothing; a
+    changed coefficient does."""
+    candidate = model_select.Candidate("paper", "", "alpha=0.2:1.5 cylinder_drag=1:100:log")
+    args = types.SimpleNamespace(fold_generations=2, train_cycles="1:3", validate_cycles="4:6")
+    settings, solver = identify.CMASettings(), SolverConfig()
+    base = StarParams.preset("paper")
+
+    def definition(model):
+        return model_select.definition_of(candidate, args, settings, model, solver, ["A1"])
+    assert definition(base) == definition(StarParams.preset("paper", jet_mode="contract"))
+    assert definition(base) != definition(StarParams.preset("paper", alpha=0.81))
+    assert definition(base) != definition(StarParams.preset("paper", jet_mode="always"))
 
 
 def test_a_per_actuator_axis_is_informed_only_by_gaits_that_fire_it():
