@@ -40,7 +40,8 @@ class SimulationResult:
     parameters, every StarParams field named with its unit where it has one (youngs_modulus_pa,
     period_s, thickness_m, ...: `StarParams.columns()`; `StarParams.from_row(row)` rebuilds the
     parameters of a row, also of a table read back from CSV, Parquet or netCDF; the
-    actuator_profile column holds the profile's text, `CurvatureProfile.to_text`). Then the run's results (metrics of a failed instance are NaN):
+    actuator_profile column holds the profile's text, `CurvatureProfile.to_text`). Then the
+    run's results (metrics of a failed instance are NaN):
 
     | column | unit | meaning |
     |---|---|---|
@@ -59,7 +60,7 @@ class SimulationResult:
     | newton_iterations_mean | — | Newton iterations per solve (every attempted step and substep, rejected and failed ones included) |
     | newton_iterations_max | — | most Newton iterations of one solve (≥ the mean) |
     | substep_retries | — | steps redone with substeps |
-| newton_capped | — | a Newton solve used all max_newton iterations (for an "ok" instance: a step accepted only after a retry rescued it; in f32 also a RuntimeWarning) |
+    | newton_capped | — | a Newton solve used all max_newton iterations (for an "ok" instance: a step accepted only after a retry rescued it; in f32 also a RuntimeWarning) |
     | status | — | "ok", "newton_failed" or "non_finite" |
     | failure_time_s | s | simulated time of the failure (NaN when ok) |
 

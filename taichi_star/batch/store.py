@@ -43,9 +43,11 @@ FORMAT = 2
 METADATA_KEY = b"taichi_star.chunk"
 VALUE_TYPES = {"CurvatureProfile": CurvatureProfile}
 """Value objects a summary column may hold; stored as JSON of their fields."""
-STAMP_KEYS = {"definition_sha256", "chunk", "members", "sha256", "value_types"}
-"""The keys of a chunk's metadata stamp: exactly these (a damaged key would otherwise drop
-what it says, e.g. the value types, silently)."""
+REQUIRED_STAMP_KEYS = {"definition_sha256", "chunk", "members", "sha256"}
+STAMP_KEYS = REQUIRED_STAMP_KEYS | {"value_types"}
+"""The keys a chunk's metadata stamp may hold: all the required ones, value_types only where
+the chunk has value-object columns, nothing else (a damaged key name is an unknown key, so it
+cannot drop what it says, e.g. the value types, silently)."""
 
 log = logging.getLogger("taichi_star.batch")
 
@@ -274,11 +276,14 @@ class RunStore:
         gives KeyError or TypeError from `to_pandas`)."""
         try:
             table = pq.read_table(pa.BufferReader(data))
+        except Exception as error:  # noqa: BLE001 -- pyarrow's errors for a damaged file vary
+            raise ValueError(f"unreadable ({str(error).splitlines()[0]})") from None
+        try:
             raw = (table.schema.metadata or {}).get(METADATA_KEY)
             if raw is None:
                 raise ValueError("no taichi_star chunk metadata")
             stamp = json.loads(raw)
-            if not isinstance(stamp, dict) or set(stamp) != STAMP_KEYS:
+            if not isinstance(stamp, dict) or not REQUIRED_STAMP_KEYS <= set(stamp) <= STAMP_KEYS:
                 raise ValueError("its chunk metadata is malformed")
             if stamp["definition_sha256"] != self.definition_sha256:
                 raise ValueError("from another run (its definition differs)")
@@ -287,7 +292,7 @@ class RunStore:
             frame = table.to_pandas()
             if table_checksum(frame) != stamp["sha256"]:
                 raise ValueError("its content does not match its checksum")
-            return _decode(frame, stamp["value_types"])
+            return _decode(frame, stamp.get("value_types", {}))
         except ValueError:
             raise
         except Exception as error:  # noqa: BLE001 -- damage may surface as any exception
