@@ -41,9 +41,9 @@ def main(argv=None) -> int:
     if missing:  # before any compute (and before the list, which imports every study)
         print(f"{program()}: error: {missing}", file=sys.stderr)
         return 2
-    if not argv or argv[0] in ("-h", "--help"):
+    if not argv or argv[0] in ("-h", "--help"):  # no study named: the list is the answer
         print(usage())
-        return 0 if argv else 2
+        return 0
     name, rest = argv[0], argv[1:]
     if name not in study_names():
         print(f"{program()}: error: unknown study {name!r}; choose one of "

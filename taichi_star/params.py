@@ -13,6 +13,8 @@ Presets: `StarParams.preset("paper" | "accurate", **overrides)` and
 from __future__ import annotations
 
 import dataclasses
+import difflib
+import functools
 import math
 import numbers
 from dataclasses import dataclass, field, fields
@@ -97,11 +99,32 @@ def _check_number(name, value, lowest, highest, lowest_included=True, integer=Fa
     return value
 
 
+def _named_fields_only(cls):
+    """Class decorator: a keyword that is not a field of the dataclass `cls` raises a TypeError
+    naming it, the closest field names and all fields, instead of the stock "unexpected keyword
+    argument" (StarParams(alpah=1) → "... did you mean 'alpha'?")."""
+    generated_init = cls.__init__
+    names = [f.name for f in fields(cls) if f.init]
+
+    @functools.wraps(generated_init)
+    def __init__(self, *args, **kwargs):
+        unknown = [key for key in kwargs if key not in names]
+        if unknown:
+            close = difflib.get_close_matches(unknown[0], names, n=3)
+            hint = f"; did you mean {' or '.join(map(repr, close))}?" if close else ""
+            raise TypeError(f"{cls.__name__} has no field {unknown[0]!r}{hint} "
+                            f"(fields: {', '.join(names)})")
+        generated_init(self, *args, **kwargs)
+    cls.__init__ = __init__
+    return cls
+
+
 def _check_choice(name, value, choices):
     if value not in choices:
         raise ValueError(f"{name} must be one of {list(choices)}, got {value!r}")
 
 
+@_named_fields_only
 @dataclass(frozen=True)
 class StarParams:
     """One star robot instance. Lengths in m, moduli in Pa, densities in kg/m³, times in s.
@@ -290,6 +313,7 @@ PRESET_FIELDS = {
 """StarParams fields of each preset (the rest are the defaults)."""
 
 
+@_named_fields_only
 @dataclass(frozen=True)
 class SolverConfig:
     """Time integration and Newton settings, shared by the batch."""

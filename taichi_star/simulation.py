@@ -188,8 +188,8 @@ class _Clock:
 def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConfig = SolverConfig(),
              *, arch: str = "cpu", record_interval_s: float = 0.0, record_shapes: bool = False,
              steady_from_cycle: int = 1, progress: bool = False) -> SimulationResult:
-    """Simulate a batch of robot instances from rest in their rest shape for duration_s seconds
-    and return a `SimulationResult` (see there for every column, with units).
+    """Simulate a batch of robot instances (a sequence of StarParams; a single StarParams is a
+    batch of one) from rest in their rest shape for duration_s seconds and return a `SimulationResult` (see there for every column, with units).
 
     Every instance may have its own parameters except the topology (n_arc, n_limb), and fires
     its gait at t = 0 and at the start of every period. An instance whose Newton solve fails

@@ -63,7 +63,6 @@ def test_the_residual_test_is_opt_in():
 @pytest.mark.parametrize("kwargs,match", [
     (dict(params=[]), "empty"),
     (dict(params=[ts.StarParams(), ts.StarParams(n_arc=36)]), "n_arc"),
-    (dict(params=ts.StarParams()), "sequence"),
     (dict(params=[ts.StarParams(), "A1"]), r"params\[1\]"),
     (dict(duration_s=0.0), "duration_s"),
     (dict(duration_s=-1.0), "duration_s"),
@@ -289,3 +288,30 @@ def test_numeric_fields_are_all_fields_but_the_texts_and_the_profile():
     assert set(numeric) == set(names) - texts and len(numeric) == len(names) - len(texts)
     for name in numeric:
         assert isinstance(getattr(ts.StarParams(), name), (int, float)), name
+
+
+@pytest.mark.parametrize("cls,typo,suggestion", [
+    (ts.StarParams, "alpah", "'alpha'"),
+    (ts.StarParams, "drag_perpendicualr", "'drag_perpendicular'"),
+    (ts.SolverConfig, "dtt", "'dt'"),
+])
+def test_a_misspelt_field_is_named_with_a_suggestion_and_the_field_list(cls, typo, suggestion):
+    with pytest.raises(TypeError, match=f"{cls.__name__} has no field '{typo}'; did you mean "
+                                        f"{suggestion}.*fields: ") as error:
+        cls(**{typo: 1})
+    assert all(f in str(error.value) for f in ("gait", "alpha", "n_limb")) \
+        if cls is ts.StarParams else "max_newton" in str(error.value)
+
+
+def test_a_word_like_no_field_gets_no_suggestion_and_real_fields_still_work():
+    with pytest.raises(TypeError, match=r"StarParams has no field 'zzz' \(fields: gait, "):
+        ts.StarParams(zzz=1)
+    assert ts.StarParams(alpha=0.5, gait="A1+A2").alpha == 0.5
+    assert ts.StarParams("A1+A2", 0.5) == ts.StarParams(gait="A1+A2", alpha=0.5)  # positional
+
+
+def test_a_single_star_params_is_a_batch_of_one():
+    from taichi_star.model import validate_batch
+    one = ts.StarParams(gait="A1+A2")
+    assert validate_batch(one) == (one,)
+    assert validate_batch([one, one]) == (one, one)
