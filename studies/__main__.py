@@ -21,16 +21,18 @@ STUDIES_EXTRA = ("matplotlib", "PIL", "cma", "SALib", "scipy", "gymnasium")
 
 
 def program() -> str:
-    """How the user called the studies: the installed `taichi-star` command, or
-    `python -m studies` in a checkout."""
-    return "taichi-star" if Path(sys.argv[0]).name == "taichi-star" else "python -m studies"
+    """How the user called the studies: the installed `taichi-star` command, or `python -m
+    studies` in a checkout (`python -m taichi_star.studies` installed)."""
+    if Path(sys.argv[0]).name == "taichi-star":
+        return "taichi-star"
+    return f"python -m {__package__}"
 
 
 def usage() -> str:
     lines = [f"usage: {program()} <name> [--out DIR] [--quick] [--arch cpu|gpu] ...",
              "", "studies:"]
     for name in study_names():
-        description = importlib.import_module(f"studies.{name}").DESCRIPTION
+        description = importlib.import_module(f"{__package__}.{name}").DESCRIPTION
         lines.append(f"  {name:<15} {description.splitlines()[0]}")
     return "\n".join(lines)
 
@@ -50,7 +52,7 @@ def main(argv=None) -> int:
               f"{', '.join(study_names())}", file=sys.stderr)
         return 2
     configure_logging()
-    module = importlib.import_module(f"studies.{name}")
+    module = importlib.import_module(f"{__package__}.{name}")
     try:
         module.main(rest)
     except (StudyArgumentError, StudyOutputError, RunStoreError) as error:

@@ -94,3 +94,21 @@ def test_the_studies_call_themselves_as_the_user_called_them(monkeypatch, capsys
     assert launcher.main(["no_such_study"]) == 2
     assert capsys.readouterr().err.startswith(f"{name}: error: unknown study 'no_such_study'")
     assert launcher.usage().startswith(f"usage: {name} <name>")
+
+
+def test_the_studies_install_inside_taichi_star_with_their_data_and_command():
+    """pyproject installs the checkout's studies/ as taichi_star.studies (no top-level
+    `studies` in site-packages), with the candidate table, and the command points there."""
+    import tomllib
+
+    project = tomllib.loads((REPO / "pyproject.toml").read_text())
+    setuptools = project["tool"]["setuptools"]
+    assert "studies" not in setuptools["packages"]
+    assert setuptools["package-dir"] == {"taichi_star.studies": "studies"}
+    assert project["project"]["scripts"]["taichi-star"] == "taichi_star.studies.__main__:main"
+    for name in setuptools["package-data"]["taichi_star.studies"]:
+        assert (REPO / "studies" / name).exists(), name
+    # every package with an __init__.py is listed (a new subpackage must be added)
+    found = {".".join(p.parent.relative_to(REPO).parts)
+             for p in (REPO / "taichi_star").rglob("__init__.py")}
+    assert found | {"taichi_star.studies"} == set(setuptools["packages"])
