@@ -33,14 +33,6 @@ INTEGRATORS = ("euler", "bdf2")
 JACOBIANS = ("newton", "chord")
 PRESETS = ("paper", "accurate", "identified")
 
-PARAMETER_UNITS = {
-    "alpha": "1", "added_mass_coeff": "1", "youngs_modulus": "Pa", "limb_stiffness_ratio": "1",
-    "drag_parallel": "1", "drag_perpendicular": "1", "cylinder_drag": "1", "period": "s",
-    "thickness": "m", "actuator_density": "kg/m^3", "foam_density": "kg/m^3",
-    "fluid_density": "kg/m^3", "cylinder_mass_per_height": "kg/m", "cylinder_diameter": "m",
-    "cylinder_added_mass_coeff": "1", "damping_time": "s", "joint_radius": "m",
-    "tip_radius": "m", "n_arc": "1", "n_limb": "1"}
-"""Units of the numeric StarParams fields ("1": dimensionless or a count)."""
 UNIT_SUFFIXES = {"Pa": "_pa", "s": "_s", "m": "_m", "kg/m^3": "_kg_m3", "kg/m": "_kg_m"}
 """Column-name suffix of each parameter unit (none for "1")."""
 
@@ -58,30 +50,19 @@ one-cycle speeds converge at first order in 1/n_arc, 8-19 % low at the paper's n
 0.7-1.7 % at 144 against the extrapolated limit; n_arc = 320 (N = 2609 nodes) measured
 0.25-0.74 % off. The studies' `--discretisation converged` uses it."""
 
-STAR_RANGES: Dict[str, Tuple[float, float, bool]] = {
-    # field: (lowest, highest, lowest allowed itself)
-    "alpha": (0.0, 10.0, True),
-    "added_mass_coeff": (0.0, 10.0, True),
-    "youngs_modulus": (1e3, 1e10, True),
-    "limb_stiffness_ratio": (1e-2, 1e4, True),
-    "drag_parallel": (0.0, 100.0, True),
-    "drag_perpendicular": (0.0, 100.0, True),
-    "cylinder_drag": (0.0, 1000.0, True),
-    "period": (0.0, 1000.0, False),
-    "thickness": (1e-4, 0.02, True),
-    "actuator_density": (10.0, 2e4, True),
-    "foam_density": (10.0, 2e4, True),
-    "fluid_density": (0.1, 2e4, True),
-    "cylinder_mass_per_height": (1e-3, 100.0, True),
-    "cylinder_diameter": (1e-3, 0.5, True),
-    "cylinder_added_mass_coeff": (0.0, 10.0, True),
-    "joint_radius": (1e-3, 1.0, True),
-    "tip_radius": (1e-3, 2.0, True),
-    "damping_time": (0.0, 1.0, True),
-    "n_arc": (2, 1000, True),
-    "n_limb": (1, 1000, True),
-}
-"""Allowed range of every numeric StarParams field (lowest, highest, lowest included)."""
+def parameter(default, unit: str = "1", lowest=None, highest=None, lowest_included=True,
+              choices=None):
+    """A StarParams field with its unit and allowed values declared once, in its metadata:
+    "unit" ("1": dimensionless or a count), "range" (lowest, highest, lowest included) for a
+    number (an integer if the default is one), "choices" for a word. `STAR_RANGES`,
+    `PARAMETER_UNITS`, `STAR_CHOICES`, the validation, the column names and the field table of
+    `help(StarParams)` are all read from it."""
+    metadata = {"unit": unit}
+    if lowest is not None:
+        metadata["range"] = (lowest, highest, lowest_included)
+    if choices is not None:
+        metadata["choices"] = tuple(choices)
+    return field(default=default, metadata=metadata)
 
 
 def _check_number(name, value, lowest, highest, lowest_included=True, integer=False):
@@ -129,82 +110,83 @@ def _check_choice(name, value, choices):
 class StarParams:
     """One star robot instance. Lengths in m, moduli in Pa, densities in kg/m³, times in s.
 
-    Every field's documentation gives its unit and allowed range."""
+    Each field's unit, allowed values and default (from its declaration; a field's own
+    documentation says what it means):"""
 
-    gait: str = "A1"
+    gait: str = field(default="A1", metadata={"allowed": 'a gait: "A1".."A8" joined by "+", '
+                                                         'or "none"'})
     """Actuators fired together each cycle: "A1".."A8" joined by "+" (no repeats), or "none".
     Stored canonically ("A2+A1" becomes "A1+A2")."""
-    alpha: float = 0.8
-    """Jet ratio α (-), the fraction of the squeezed fluid jetted in plane; [0, 10]."""
-    added_mass_coeff: float = 1.0
-    """Added-mass coefficient C_a (-) of the rod nodes; [0, 10]."""
-    youngs_modulus: float = 5e6
-    """E of the actuator arcs, Pa; [1e3, 1e10]."""
-    limb_stiffness_ratio: float = 100.0
-    """E_limb / E (-) for limbs, spokes and joint bending; [0.01, 1e4]."""
-    drag_parallel: float = 0.01
-    """Axial rod drag coefficient C∥ (-); [0, 100]."""
-    drag_perpendicular: float = 1.0
-    """Normal rod drag coefficient C⊥ (-); [0, 100]."""
-    cylinder_drag: float = 10.0
-    """Drag coefficient C_c (-) of the central cylinder; [0, 1000]."""
-    period: float = 3.15
-    """Actuation period T, s (150 ms heating pulse + 3 s rest); (heating time t0, 1000]."""
-    jet_mode: str = "contract"
+    alpha: float = parameter(0.8, "1", 0.0, 10.0)
+    """Jet ratio α (-), the fraction of the squeezed fluid jetted in plane."""
+    added_mass_coeff: float = parameter(1.0, "1", 0.0, 10.0)
+    """Added-mass coefficient C_a (-) of the rod nodes."""
+    youngs_modulus: float = parameter(5e6, "Pa", 1e3, 1e10)
+    """E of the actuator arcs, Pa."""
+    limb_stiffness_ratio: float = parameter(100.0, "1", 1e-2, 1e4)
+    """E_limb / E (-) for limbs, spokes and joint bending."""
+    drag_parallel: float = parameter(0.01, "1", 0.0, 100.0)
+    """Axial rod drag coefficient C∥ (-)."""
+    drag_perpendicular: float = parameter(1.0, "1", 0.0, 100.0)
+    """Normal rod drag coefficient C⊥ (-)."""
+    cylinder_drag: float = parameter(10.0, "1", 0.0, 1000.0)
+    """Drag coefficient C_c (-) of the central cylinder."""
+    period: float = parameter(3.15, "s", 0.0, 1000.0, lowest_included=False)
+    """Actuation period T, s (150 ms heating pulse + 3 s rest); longer than the heating time t0."""
+    jet_mode: str = parameter("contract", choices=JET_MODES)
     """"contract": jet only while an inter-limb space shrinks; "always": the paper's formula
     literally (a growing space jets too)."""
-    thickness: float = 3.4e-3
-    """Rod thickness r0, m; [1e-4, 0.02]."""
-    actuator_density: float = 2700.0
-    """Effective density of the actuator arcs, kg/m³; [10, 2e4]."""
-    foam_density: float = 700.0
-    """Effective density of the foam limbs, kg/m³; [10, 2e4]."""
-    fluid_density: float = 1000.0
-    """Water density ρ_f, kg/m³; [0.1, 2e4]."""
-    cylinder_mass_per_height: float = 0.98
-    """Mass of the central cylinder per unit height, kg/m (49 g / 50 mm); [1e-3, 100]."""
-    cylinder_diameter: float = 0.03
-    """D_c = 2 R_c, m; [1e-3, 0.5]."""
-    cylinder_added_mass_coeff: float = 0.0
-    """Added-mass coefficient of the cylinder (-), mass ρ_f·C·π D_c²/4 (the paper: none); [0, 10]."""
-    actuation_ends: str = "clamped"
+    thickness: float = parameter(3.4e-3, "m", 1e-4, 0.02)
+    """Rod thickness r0, m."""
+    actuator_density: float = parameter(2700.0, "kg/m^3", 10.0, 2e4)
+    """Effective density of the actuator arcs, kg/m³."""
+    foam_density: float = parameter(700.0, "kg/m^3", 10.0, 2e4)
+    """Effective density of the foam limbs, kg/m³."""
+    fluid_density: float = parameter(1000.0, "kg/m^3", 0.1, 2e4)
+    """Water density ρ_f, kg/m³."""
+    cylinder_mass_per_height: float = parameter(0.98, "kg/m", 1e-3, 100.0)
+    """Mass of the central cylinder per unit height, kg/m (49 g / 50 mm)."""
+    cylinder_diameter: float = parameter(0.03, "m", 1e-3, 0.5)
+    """D_c = 2 R_c, m."""
+    cylinder_added_mass_coeff: float = parameter(0.0, "1", 0.0, 10.0)
+    """Added-mass coefficient of the cylinder (-), mass ρ_f·C·π D_c²/4 (the paper: none)."""
+    actuation_ends: str = parameter("clamped", choices=ACTUATION_ENDS)
     """"clamped": only an actuator's interior bending triplets follow K̄(τ); "shared": each joint
     also turns by the curvature change of the arc's half-edge beside it, so that the limb keeps
     its angle to the arc's tangent (second-order accurate in n_arc with "series" joints)."""
-    joint_stiffness: str = "limb"
+    joint_stiffness: str = parameter("limb", choices=JOINT_STIFFNESSES)
     """Modulus of the two bending triplets at each joint: "limb" = E_limb (the paper's choice as
     we read it; it makes each arc rigid over its end half-edges); "series" = a half arc edge (E)
     in series with a half limb edge (E_limb) over the triplet's length."""
-    profile_closure: str = "jump"
+    profile_closure: str = parameter("jump", choices=PROFILE_CLOSURES)
     """How a periodic gait closes the fitted actuation profile: "jump" = the fit as published
     (the natural curvature steps by K̄(0) − K̄(T) at each new cycle); "ramp" = the difference is
     spread linearly over the cycle (continuous)."""
-    damping_time: float = 0.0
+    damping_time: float = parameter(0.0, "s", 0.0, 1.0)
     """Kelvin–Voigt material damping time τ, s (0 = none, the paper's model); a mode of angular
-    frequency ω gets a damping ratio ζ = ωτ/2; [0, 1]."""
-    actuator_profile: CurvatureProfile = field(default_factory=CurvatureProfile)
+    frequency ω gets a damping ratio ζ = ωτ/2."""
+    actuator_profile: CurvatureProfile = field(default_factory=CurvatureProfile,
+                                               metadata={"allowed": "a CurvatureProfile"})
     """The actuators' natural-curvature profile K̄(τ) (default: the paper's fit); its K̄(0) is
     the rest curvature of the arcs."""
-    joint_radius: float = 0.024
+    joint_radius: float = parameter(0.024, "m", 1e-3, 1.0)
     """Radius of the eight joints from the centre, m; must let an arc of curvature K̄(0) span
     two neighbouring joints."""
-    tip_radius: float = 0.052
-    """Radius of the limb tips, m (diameter L = 104 mm); (joint_radius, 2]."""
-    n_arc: int = 18
-    """Edges per actuator arc (topology: equal across a batch); [2, 1000]."""
-    n_limb: int = 6
-    """Edges per foam limb (topology: equal across a batch); [1, 1000]."""
+    tip_radius: float = parameter(0.052, "m", 1e-3, 2.0)
+    """Radius of the limb tips, m (diameter L = 104 mm); beyond joint_radius."""
+    n_arc: int = parameter(18, "1", 2, 1000)
+    """Edges per actuator arc (topology: equal across a batch)."""
+    n_limb: int = parameter(6, "1", 1, 1000)
+    """Edges per foam limb (topology: equal across a batch)."""
 
     def __post_init__(self):
         object.__setattr__(self, "gait", Gait.parse(self.gait).name)
         for name, (lowest, highest, included) in STAR_RANGES.items():
-            integer = name in ("n_arc", "n_limb")
             object.__setattr__(self, name, _check_number(name, getattr(self, name), lowest,
-                                                         highest, included, integer))
-        _check_choice("jet_mode", self.jet_mode, JET_MODES)
-        _check_choice("actuation_ends", self.actuation_ends, ACTUATION_ENDS)
-        _check_choice("joint_stiffness", self.joint_stiffness, JOINT_STIFFNESSES)
-        _check_choice("profile_closure", self.profile_closure, PROFILE_CLOSURES)
+                                                         highest, included,
+                                                         name in INTEGER_FIELDS))
+        for name, choices in STAR_CHOICES.items():
+            _check_choice(name, getattr(self, name), choices)
         if not isinstance(self.actuator_profile, CurvatureProfile):
             raise ValueError(f"actuator_profile must be a CurvatureProfile, got "
                              f"{type(self.actuator_profile).__name__}")
@@ -287,6 +269,41 @@ class StarParams:
                 value = value.item()
             values[name] = value
         return cls(**{**values, **overrides})
+
+
+STAR_RANGES: Dict[str, Tuple[float, float, bool]] = {
+    f.name: f.metadata["range"] for f in fields(StarParams) if "range" in f.metadata}
+"""Allowed range of every numeric StarParams field (lowest, highest, lowest included), from
+the fields' declarations (`parameter`)."""
+PARAMETER_UNITS: Dict[str, str] = {name: StarParams.__dataclass_fields__[name].metadata["unit"]
+                                   for name in STAR_RANGES}
+"""Units of the numeric StarParams fields ("1": dimensionless or a count)."""
+INTEGER_FIELDS = tuple(f.name for f in fields(StarParams)
+                       if "range" in f.metadata and isinstance(f.default, int))
+"""The numeric fields that take whole numbers (the topology)."""
+STAR_CHOICES: Dict[str, Tuple[str, ...]] = {
+    f.name: f.metadata["choices"] for f in fields(StarParams) if "choices" in f.metadata}
+"""The allowed words of every StarParams field that takes one of a list."""
+
+
+def _allowed(f) -> str:
+    """The allowed values of field `f` in words, from its metadata."""
+    if "range" in f.metadata:
+        lowest, highest, included = f.metadata["range"]
+        return f"{'[' if included else '('}{lowest:g}, {highest:g}]"
+    if "choices" in f.metadata:
+        return " or ".join(f'"{choice}"' for choice in f.metadata["choices"])
+    return f.metadata["allowed"]
+
+
+def _default(f):
+    return f.default if f.default is not dataclasses.MISSING else f.default_factory()
+
+
+StarParams.__doc__ += "\n\n    | field | unit | allowed | default |\n    |---|---|---|---|\n" + "".join(
+    f"    | {f.name} | {f.metadata['unit'] if 'range' in f.metadata else '—'} | {_allowed(f)} "
+    f"| {_default(f)!r} |\n"
+    for f in fields(StarParams))
 
 
 IDENTIFIED_FIELDS = {"alpha": 0.4457040271, "added_mass_coeff": 0.3349258113,

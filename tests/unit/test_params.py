@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import taichi_star as ts
+from taichi_star.params import PARAMETER_UNITS
 from taichi_star.gait import Gait, symmetry_classes
 from taichi_star.geometry import build_topology
 
@@ -315,3 +316,43 @@ def test_a_single_star_params_is_a_batch_of_one():
     one = ts.StarParams(gait="A1+A2")
     assert validate_batch(one) == (one,)
     assert validate_batch([one, one]) == (one, one)
+
+
+CROSS_CONSTRAINED = {"period", "joint_radius", "tip_radius"}
+"""Fields whose declared range is narrowed by another field (tested on their own above)."""
+
+
+@pytest.mark.parametrize("name", sorted(set(ts.STAR_RANGES) - CROSS_CONSTRAINED))
+def test_every_declared_range_is_the_validated_range_at_both_ends(name):
+    """The range declared with a field is what __post_init__ enforces: both ends accepted
+    (the lowest only where it is included), just beyond either end refused naming the field."""
+    from dataclasses import fields
+
+    lowest, highest, included = ts.STAR_RANGES[name]
+    integer = isinstance({f.name: f for f in fields(ts.StarParams)}[name].default, int)
+    beyond = 1 if integer else max(abs(highest), 1.0) * 1e-9
+    assert getattr(ts.StarParams(**{name: highest}), name) == highest
+    with pytest.raises(ValueError, match=name):
+        ts.StarParams(**{name: highest + beyond})
+    if included:
+        assert getattr(ts.StarParams(**{name: lowest}), name) == lowest
+    else:
+        with pytest.raises(ValueError, match=name):
+            ts.StarParams(**{name: lowest})
+    below = lowest - (1 if integer else max(abs(lowest), 1.0) * 1e-9)
+    with pytest.raises(ValueError, match=name):
+        ts.StarParams(**{name: below})
+
+
+def test_help_lists_every_field_with_its_declared_unit_and_allowed_values():
+    from dataclasses import fields
+
+    doc = ts.StarParams.__doc__
+    for f in fields(ts.StarParams):
+        [row] = [line for line in doc.splitlines() if line.strip().startswith(f"| {f.name} |")]
+        if f.name in ts.STAR_RANGES:
+            lowest, highest, included = ts.STAR_RANGES[f.name]
+            unit = PARAMETER_UNITS[f.name]
+            assert f"| {unit} | {'[' if included else '('}{lowest:g}, {highest:g}] |" in row
+        elif "choices" in f.metadata:
+            assert all(f'"{choice}"' in row for choice in f.metadata["choices"])
