@@ -39,7 +39,8 @@ PARAMETER_UNITS = {
     "thickness": "m", "actuator_density": "kg/m^3", "foam_density": "kg/m^3",
     "fluid_density": "kg/m^3", "cylinder_mass_per_height": "kg/m", "cylinder_diameter": "m",
     "cylinder_added_mass_coeff": "1", "damping_time": "s", "joint_radius": "m",
-    "tip_radius": "m", "n_arc": "1", "n_limb": "1", "jet_inflow": "1"}
+    "tip_radius": "m", "n_arc": "1", "n_limb": "1", "jet_inflow": "1",
+    "hub_height": "m", "foam_height": "m", "actuator_height": "m"}
 """Units of the numeric StarParams fields ("1": dimensionless or a count)."""
 UNIT_SUFFIXES = {"Pa": "_pa", "s": "_s", "m": "_m", "kg/m^3": "_kg_m3", "kg/m": "_kg_m"}
 """Column-name suffix of each parameter unit (none for "1")."""
@@ -81,8 +82,18 @@ STAR_RANGES: Dict[str, Tuple[float, float, bool]] = {
     "n_arc": (2, 1000, True),
     "n_limb": (1, 1000, True),
     "jet_inflow": (0.0, 10.0, True),
+    # 0 = off; a height itself must be at least COMPONENT_HEIGHT_MINIMUM
+    "hub_height": (0.0, 0.5, True),
+    "foam_height": (0.0, 0.5, True),
+    "actuator_height": (0.0, 0.5, True),
 }
 """Allowed range of every numeric StarParams field (lowest, highest, lowest included)."""
+
+
+COMPONENT_HEIGHTS = ("hub_height", "foam_height", "actuator_height")
+"""The StarParams fields of the component heights (2.5-D model): all 0 (off) or all set."""
+COMPONENT_HEIGHT_MINIMUM = 1e-3
+"""Smallest component height, m (a millimetre: no part of the robot is thinner)."""
 
 
 def _check_number(name, value, lowest, highest, lowest_included=True, integer=False):
@@ -187,6 +198,15 @@ class StarParams:
     """Inflow ratio α_in (-): while a space opens (Ṡ > 0) the water drawn in through its
     opening pulls the robot towards it with f = (ρ_f/L)(α_in·Ṡ)²·t (0 = none, the paper's
     model); [0, 10]. Needs jet_mode "contract" (with "always" an opening space already jets)."""
+    hub_height: float = 0.0
+    """Height of the hub (the central cylinder), m: with foam_height and actuator_height, the
+    2.5-D model (docs/model.md "Component heights"): each component's mass, drag, added mass and
+    jet scale with its height over the hub's. 0 (default) = off, every component one unit height
+    (the paper); else [0.001, 0.5], and all three must be set."""
+    foam_height: float = 0.0
+    """Height of the foam limbs, m (the paper's robot: 24 mm); 0 = off, else [0.001, 0.5]."""
+    actuator_height: float = 0.0
+    """Height of the actuator arcs, m; 0 = off, else [0.001, 0.5]."""
 
     def __post_init__(self):
         object.__setattr__(self, "gait", Gait.parse(self.gait).name)
@@ -198,6 +218,15 @@ class StarParams:
         _check_choice("actuation_ends", self.actuation_ends, ACTUATION_ENDS)
         _check_choice("joint_stiffness", self.joint_stiffness, JOINT_STIFFNESSES)
         _check_choice("profile_closure", self.profile_closure, PROFILE_CLOSURES)
+        heights = [getattr(self, name) for name in COMPONENT_HEIGHTS]
+        for name, height in zip(COMPONENT_HEIGHTS, heights):
+            if 0.0 < height < COMPONENT_HEIGHT_MINIMUM:
+                raise ValueError(f"{name} must be 0 (off) or in [{COMPONENT_HEIGHT_MINIMUM:g}, "
+                                 f"0.5] m, got {height!r}")
+        if 0.0 in heights and any(heights):
+            missing = [name for name, height in zip(COMPONENT_HEIGHTS, heights) if height == 0.0]
+            raise ValueError(f"{', '.join(missing)} must be in [{COMPONENT_HEIGHT_MINIMUM:g}, "
+                             f"0.5] m as well: the component heights are all set or all 0 (off)")
         _check_choice("jet_direction", self.jet_direction, JET_DIRECTIONS)
         _check_choice("jet_application", self.jet_application, JET_APPLICATIONS)
         if self.jet_inflow > 0.0 and self.jet_mode == "always":
@@ -235,6 +264,15 @@ class StarParams:
     def limb_modulus(self) -> float:
         """E_limb, Pa."""
         return self.youngs_modulus * self.limb_stiffness_ratio
+
+    @property
+    def height_ratios(self) -> Tuple[float, float]:
+        """(foam_height, actuator_height) over hub_height: what scales the limbs' and the arcs'
+        mass, drag, added mass and the jet (the hub's own ratio is 1); exactly (1.0, 1.0) when
+        the heights are off."""
+        if self.hub_height == 0.0:
+            return 1.0, 1.0
+        return self.foam_height / self.hub_height, self.actuator_height / self.hub_height
 
     @property
     def gait_value(self) -> Gait:

@@ -401,7 +401,9 @@ class ImplicitStep:
 class ReferenceSimulator:
     """One robot advanced by implicit Euler or BDF2 with an exact-Jacobian Newton solve.
 
-    Attributes: params, solver, topology; mass (N,) lumped mass without added mass, kg/m;
+    Attributes: params, solver, topology; foam_scale, actuator_scale: the limbs' and arcs'
+    heights over the hub's (1 without component heights); mass (N,) lumped mass without added
+    mass, kg/m (per hub height);
     added_mass (N,) diagonal added mass, kg/m; stretch_modulus (E,) and bend_modulus (T,), Pa,
     the Young's modulus of each edge and triplet (elasticity and damping alike).
     """
@@ -414,7 +416,12 @@ class ReferenceSimulator:
         p = params
         r0 = p.thickness
 
-        arc_len, limb_len = topo.lumped_length[:, 0], topo.lumped_length[:, 1]
+        # 2.5-D: every rod component per hub height, i.e. times its height over the hub's
+        self.foam_scale, self.actuator_scale = (
+            (1.0, 1.0) if p.hub_height == 0.0 else
+            (p.foam_height / p.hub_height, p.actuator_height / p.hub_height))
+        arc_len = self.actuator_scale * topo.lumped_length[:, 0]
+        limb_len = self.foam_scale * topo.lumped_length[:, 1]
         self.mass = r0 * (p.actuator_density * arc_len + p.foam_density * limb_len)
         self.mass[0] += p.cylinder_mass_per_height
         self.added_mass = p.fluid_density * p.added_mass_coeff * r0 * (arc_len + limb_len)
@@ -521,9 +528,12 @@ class ReferenceSimulator:
         p, topo = self.params, self.topology
         rods = topo.edges[self._rod_edges]
         a, b = rods.T
+        edge_scale = np.where(topo.edge_kind[self._rod_edges] == ARC, self.actuator_scale,
+                              self.foam_scale)
         f_rod, k_rod = rod_drag_element(q_new[a], q_new[b], q_old[a], q_old[b], dt,
-                                        topo.rest_length[self._rod_edges], p.fluid_density,
-                                        p.drag_parallel, p.drag_perpendicular)
+                                        topo.rest_length[self._rod_edges],
+                                        p.fluid_density * edge_scale, p.drag_parallel,
+                                        p.drag_perpendicular)
         f_cyl, k_cyl = cylinder_drag_element(q_new[0], q_old[0], dt, p.fluid_density,
                                              p.cylinder_drag, p.cylinder_diameter)
         quads = topo.jet_quads
@@ -531,7 +541,7 @@ class ReferenceSimulator:
         if area_old is None:
             area_old = self.areas(q_old)
         f_jet, k_jet = jet_element(*[q_new[quads[:, m]] for m in range(4)], q_new[centre[:, 0]],
-                                   area_old, dt, p.fluid_density, p.alpha,
+                                   area_old, dt, p.fluid_density * self.foam_scale, p.alpha,
                                    p.jet_mode == "contract", p.jet_inflow, p.jet_direction)
         jet_nodes = np.concatenate([quads, centre], axis=1)
         if p.jet_application == "spread":

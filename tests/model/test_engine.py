@@ -272,15 +272,20 @@ JET_VARIANT_BATCH = [
                   n_limb=2),
     ts.StarParams(gait="A2", jet_application="spread", jet_mode="always", n_arc=6, n_limb=2),
     ts.StarParams(gait="A1+A2", n_arc=6, n_limb=2),
+    ts.StarParams(gait="A1+A3", hub_height=0.05, foam_height=0.024, actuator_height=0.01,
+                  n_arc=6, n_limb=2),
+    ts.StarParams(gait="A1+A4", hub_height=0.03, foam_height=0.04, actuator_height=0.02,
+                  jet_direction="bisector", jet_application="spread", n_arc=6, n_limb=2),
 ]
+"""Model extensions of issue 28 (jet variants, component heights), one engine for all."""
 
 
-def test_engine_matches_reference_with_jet_variants():
-    """Jet directions, the spread application and the inflow (and one paper instance in the
-    same engine), implemented independently on both sides, agree to ≤ 1e-10 relative on
-    positions after 60 steps of 2 ms into the first pulse (the fired spaces open and draw in,
-    their neighbours close and jet). Newton converges both to 1e-12 m; what remains is
-    round-off. The coarse mesh (n_arc 6) keeps the reference cheap."""
+def test_engine_matches_reference_with_jet_variants_and_component_heights():
+    """Jet directions, the spread application, the inflow and the component heights (and one
+    paper instance in the same engine), implemented independently on both sides, agree to
+    ≤ 1e-10 relative on positions after 60 steps of 2 ms into the first pulse (the fired
+    spaces open and draw in, their neighbours close and jet). Newton converges both to
+    1e-12 m; what remains is round-off. The coarse mesh (n_arc 6) keeps the reference cheap."""
     from taichi_star.model import build_model
 
     assert dict(build_model(JET_VARIANT_BATCH).terms_used)[Jet] == ("variants", "spread")

@@ -471,6 +471,41 @@ def test_masses():
         [ARC_BEND] * int((sim.topology.triplet_actuator >= 0).sum())
 
 
+def test_component_heights_scale_each_components_mass_added_mass_drag_and_jet():
+    """Heights on (hub 50 mm, foams 24 mm, actuators 10 mm): everything of the limbs scales by
+    0.48, of the arcs by 0.2, the hub's stays; the jet scales with the foam (its walls). Equal
+    heights are exactly the model without heights."""
+    base = StarParams(gait="A1+A2", **SMALL)
+    heights = dict(hub_height=0.05, foam_height=0.024, actuator_height=0.01)
+    off, on = ReferenceSimulator(base), ReferenceSimulator(base.replace(**heights))
+    foam, actuator = 0.024 / 0.05, 0.01 / 0.05
+    lumped = off.topology.lumped_length
+    arc_nodes = (lumped[:, 0] > 0) & (lumped[:, 1] == 0)
+    limb_nodes = (lumped[:, 1] > 0) & (lumped[:, 0] == 0)
+    assert arc_nodes.sum() == 8 * 5 and limb_nodes.sum() == 8 * 2
+    for name in ("mass", "added_mass"):
+        before, after = getattr(off, name), getattr(on, name)
+        np.testing.assert_allclose(after[arc_nodes], actuator * before[arc_nodes], rtol=1e-14)
+        np.testing.assert_allclose(after[limb_nodes], foam * before[limb_nodes], rtol=1e-14)
+        assert after[0] == before[0]
+    q_new, q_old, _ = _moving_history(off, np.random.default_rng(15))
+    no_drag = dict(drag_parallel=0.0, drag_perpendicular=0.0, cylinder_drag=0.0)
+    jet_off = ReferenceSimulator(base.replace(**no_drag)).fluid_forces(q_new, q_old, 1e-3)
+    jet_on = ReferenceSimulator(base.replace(**no_drag, **heights)).fluid_forces(q_new, q_old,
+                                                                                   1e-3)
+    assert np.abs(jet_off[0]).max() > 0
+    np.testing.assert_allclose(jet_on, foam * jet_off, rtol=1e-14)
+    drag_off = ReferenceSimulator(base.replace(alpha=0.0)).fluid_forces(q_new, q_old, 1e-3)
+    drag_on = ReferenceSimulator(base.replace(alpha=0.0, **heights)).fluid_forces(q_new, q_old,
+                                                                                    1e-3)
+    np.testing.assert_allclose(drag_on[arc_nodes], actuator * drag_off[arc_nodes], rtol=1e-12)
+    np.testing.assert_allclose(drag_on[limb_nodes], foam * drag_off[limb_nodes], rtol=1e-12)
+    assert drag_on[0].tolist() == drag_off[0].tolist()  # the cylinder's drag
+    equal = ReferenceSimulator(base.replace(hub_height=0.03, foam_height=0.03,
+                                            actuator_height=0.03))
+    assert np.array_equal(equal.run(5), off.run(5))
+
+
 # ================================================================================================
 # Material damping, BDF2, joint stiffness, profile closure and shared actuated ends
 

@@ -22,6 +22,7 @@ from taichi_star.geometry import build_topology
     ("n_arc", 18.0), ("n_limb", 0), ("jet_mode", "sometimes"), ("youngs_modulus", "5e6"),
     ("actuation_ends", "free"), ("jet_inflow", -0.1), ("jet_inflow", 10.5),
     ("jet_inflow", math.nan), ("jet_direction", "radial"), ("jet_application", "tips"),
+    ("hub_height", -0.05), ("foam_height", 0.6), ("actuator_height", math.inf),
 ])
 def test_star_params_rejects_bad_values_naming_the_field(field, value):
     with pytest.raises(ValueError, match=field):
@@ -302,13 +303,31 @@ def test_jet_variant_fields_are_set_by_name_and_survive_a_csv_row(tmp_path):
 
     import pandas as pd
 
-    fields = {"jet_direction": "bisector", "jet_application": "spread", "jet_inflow": 0.35}
+    fields = {"jet_direction": "bisector", "jet_application": "spread", "jet_inflow": 0.35,
+              "hub_height": 0.05, "foam_height": 0.024, "actuator_height": 0.01}
     params = [ts.StarParams(gait="A1+A4", **fields),
               dataclasses.replace(ts.StarParams(), jet_direction="normal"), ts.StarParams()]
     assert ts.StarParams.columns()["jet_inflow"] == "jet_inflow"  # dimensionless: no suffix
+    assert ts.StarParams.columns()["hub_height"] == "hub_height_m"
     table = pd.DataFrame([{column: getattr(p, name) for name, column in
                            ts.StarParams.columns().items()} for p in params])
     path = tmp_path / "rows.csv"
     table.to_csv(path, index=False)
     back = pd.read_csv(path)
     assert [ts.StarParams.from_row(row) for _, row in back.iterrows()] == params
+
+
+def test_component_heights_are_all_off_or_all_in_their_range():
+    """0 = off (the default, ratios exactly 1); a set height is in [1 mm, 0.5 m] and the other
+    two must be set with it."""
+    assert ts.StarParams().height_ratios == (1.0, 1.0)
+    paper_robot = ts.StarParams(hub_height=0.05, foam_height=0.024, actuator_height=0.001)
+    assert paper_robot.height_ratios == (0.024 / 0.05, 0.001 / 0.05)
+    with pytest.raises(ValueError) as error:
+        ts.StarParams(foam_height=0.0009, hub_height=0.05, actuator_height=0.01)
+    assert str(error.value) == "foam_height must be 0 (off) or in [0.001, 0.5] m, got 0.0009"
+    with pytest.raises(ValueError) as error:
+        ts.StarParams(hub_height=0.05)
+    assert str(error.value) == ("foam_height, actuator_height must be in [0.001, 0.5] m as "
+                                "well: the component heights are all set or all 0 (off)")
+    assert ts.StarParams(hub_height=0.5, foam_height=0.001, actuator_height=0.5).hub_height == 0.5
