@@ -8,7 +8,7 @@ joint has no single tangent, so we apply it per edge.
 import numpy as np
 import taichi as ti
 
-from ..geometry import SPOKE
+from ..geometry import ARC, SPOKE
 from .base import Term
 
 
@@ -49,7 +49,10 @@ class RodDrag(Term):
     def coefficients(params, topologies, topology):
         rods = rod_edges(topology)
         fluid = np.array([p.fluid_density for p in params])[:, None]
-        wetted = 0.5 * fluid * np.stack([t.rest_length[rods] for t in topologies])
+        # with the component heights on, an edge's drag scales with its height over the hub's
+        heights = np.array([[p.height_ratios[1] if kind == ARC else p.height_ratios[0]
+                             for kind in topology.edge_kind[rods]] for p in params])
+        wetted = 0.5 * fluid * np.stack([t.rest_length[rods] for t in topologies]) * heights
         return {"drag_parallel_coeff": wetted * np.array([p.drag_parallel for p in params])[:, None],
                 "drag_perpendicular_coeff": wetted * np.array([p.drag_perpendicular for p in params])[:, None]}
 
