@@ -21,7 +21,7 @@ from typing import Dict, Optional, Tuple
 import numpy as np
 
 from .actuation import PROFILE_CLOSURES, CurvatureProfile
-from .gait import Gait
+from .gait import N_ACTUATORS, Gait
 
 JET_MODES = ("contract", "always")
 ACTUATION_ENDS = ("clamped", "shared")
@@ -37,9 +37,12 @@ PARAMETER_UNITS = {
     "thickness": "m", "actuator_density": "kg/m^3", "foam_density": "kg/m^3",
     "fluid_density": "kg/m^3", "cylinder_mass_per_height": "kg/m", "cylinder_diameter": "m",
     "cylinder_added_mass_coeff": "1", "damping_time": "s", "joint_radius": "m",
-    "tip_radius": "m", "n_arc": "1", "n_limb": "1"}
+    "tip_radius": "m", "n_arc": "1", "n_limb": "1",
+    "linear_drag": "Pa*s/m", "hub_linear_drag": "Pa*s", "actuator_gains": "1",
+    "actuator_delays": "s"}
 """Units of the numeric StarParams fields ("1": dimensionless or a count)."""
-UNIT_SUFFIXES = {"Pa": "_pa", "s": "_s", "m": "_m", "kg/m^3": "_kg_m3", "kg/m": "_kg_m"}
+UNIT_SUFFIXES = {"Pa": "_pa", "s": "_s", "m": "_m", "kg/m^3": "_kg_m3", "kg/m": "_kg_m",
+                 "Pa*s/m": "_pa_s_m", "Pa*s": "_pa_s"}
 """Column-name suffix of each parameter unit (none for "1")."""
 
 
@@ -78,6 +81,8 @@ STAR_RANGES: Dict[str, Tuple[float, float, bool]] = {
     "damping_time": (0.0, 1.0, True),
     "n_arc": (2, 1000, True),
     "n_limb": (1, 1000, True),
+    "linear_drag": (0.0, 1e4, True),
+    "hub_linear_drag": (0.0, 1e3, True),
 }
 """Allowed range of every numeric StarParams field (lowest, highest, lowest included)."""
 
@@ -95,6 +100,47 @@ def _check_number(name, value, lowest, highest, lowest_included=True, integer=Fa
             value == lowest and not lowest_included):
         raise ValueError(f"{name} must be {kind} in {span}, got {value!r}")
     return value
+
+
+MAX_ACTUATOR_GAIN = 5.0
+"""Largest actuator gain: five times the measured curvature change already bends an arc far
+past straight (K̄ goes from 102 to 14 1/m over a pulse at gain 1)."""
+
+
+def _check_actuator_values(name, values, lowest, highest, highest_included):
+    """`values` (a tuple, list or 1-D array of one real number per actuator A1..A8) as a tuple
+    of Python floats, each in [lowest, highest] (or [lowest, highest)); ValueError names the
+    field, the actuator and the range. Text as a table holds it ("(1.0, 2.0, ...)") is read."""
+    span = f"[{lowest:g}, {highest:g}" + ("]" if highest_included else ")")
+    if isinstance(values, str):
+        values = _parse_number_list(name, values)
+    if isinstance(values, np.ndarray):
+        values = values.tolist() if values.ndim == 1 else values
+    if not isinstance(values, (tuple, list)):
+        raise ValueError(f"{name} must be a tuple of {N_ACTUATORS} numbers in {span} "
+                         f"(A1..A8), got {values!r}")
+    if len(values) != N_ACTUATORS:
+        raise ValueError(f"{name} must have {N_ACTUATORS} entries (A1..A8), got {len(values)}")
+    checked = []
+    for index, value in enumerate(values):
+        if isinstance(value, bool) or not isinstance(value, numbers.Real) \
+                or not math.isfinite(value) or not lowest <= value <= highest \
+                or (value == highest and not highest_included):
+            raise ValueError(f"{name}[{index}] (A{index + 1}) must be a real number in {span}, "
+                             f"got {value!r}")
+        checked.append(float(value))
+    return tuple(checked)
+
+
+def _parse_number_list(name, text):
+    """The numbers of a tuple or list written as text ("(1.0, 0.5)" or "[1.0, 0.5]")."""
+    inner = text.strip()
+    if inner[:1] in "([" and inner[-1:] in ")]":
+        inner = inner[1:-1]
+    try:
+        return [float(part) for part in inner.split(",") if part.strip()]
+    except ValueError:
+        raise ValueError(f"{name}: cannot read {text[:60]!r} as {N_ACTUATORS} numbers") from None
 
 
 def _check_choice(name, value, choices):
@@ -171,6 +217,19 @@ class StarParams:
     """Edges per actuator arc (topology: equal across a batch); [2, 1000]."""
     n_limb: int = 6
     """Edges per foam limb (topology: equal across a batch); [1, 1000]."""
+    # ---- model extensions (issue 28), off by default: the defaults change no result
+    linear_drag: float = 0.0
+    """Linear (skin-friction) drag c_l on the rod edges, Pa·s/m: a force −c_l·v per unit rod
+    length and unit height on each edge's mean velocity v (`physics.linear_drag`); [0, 1e4]."""
+    hub_linear_drag: float = 0.0
+    """Linear drag c_h on the hub, Pa·s: a force −c_h·v per unit height on the centre node;
+    [0, 1000]."""
+    actuator_gains: Tuple[float, ...] = (1.0,) * N_ACTUATORS
+    """Gain g_k (-) of actuator A_k (index k − 1) on its commanded curvature change: it follows
+    K̄(0) + g_k·(K̄(τ) − K̄(0)); 8 numbers in [0, 5]."""
+    actuator_delays: Tuple[float, ...] = (0.0,) * N_ACTUATORS
+    """Delay d_k of actuator A_k (index k − 1), s: its profile starts d_k after each firing
+    (K̄(0) until then), K̄(max(τ − d_k, 0)); 8 numbers in [0, period)."""
 
     def __post_init__(self):
         object.__setattr__(self, "gait", Gait.parse(self.gait).name)
@@ -178,6 +237,10 @@ class StarParams:
             integer = name in ("n_arc", "n_limb")
             object.__setattr__(self, name, _check_number(name, getattr(self, name), lowest,
                                                          highest, included, integer))
+        object.__setattr__(self, "actuator_gains", _check_actuator_values(
+            "actuator_gains", self.actuator_gains, 0.0, MAX_ACTUATOR_GAIN, True))
+        object.__setattr__(self, "actuator_delays", _check_actuator_values(
+            "actuator_delays", self.actuator_delays, 0.0, self.period, False))
         _check_choice("jet_mode", self.jet_mode, JET_MODES)
         _check_choice("actuation_ends", self.actuation_ends, ACTUATION_ENDS)
         _check_choice("joint_stiffness", self.joint_stiffness, JOINT_STIFFNESSES)
@@ -246,7 +309,8 @@ class StarParams:
     def from_row(cls, row, **overrides) -> "StarParams":
         """The parameters of one row of a result table (a pandas Series or a mapping with the
         parameter columns of `columns`, e.g. `result.summary.iloc[3]`), with some fields
-        changed. A row read back from a CSV holds the actuator profile as text: give
+        changed. A row read back from a CSV holds the per-actuator tuples (`actuator_gains`,
+        `actuator_delays`) as text, which is read back exactly, and the actuator profile as text: give
         `actuator_profile` as an override, or the default profile is used only if the text is
         the default's. Raises ValueError naming a missing column."""
         values = {}

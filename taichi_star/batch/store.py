@@ -42,8 +42,10 @@ MANIFEST = "manifest.json"
 FORMAT = 2
 """Version of the store's layout (2: Parquet chunks with checksums)."""
 METADATA_KEY = b"taichi_star.chunk"
-VALUE_TYPES = {"CurvatureProfile": CurvatureProfile}
-"""Value objects a summary column may hold; stored as JSON of their fields."""
+VALUE_TYPES = {"CurvatureProfile": lambda fields: CurvatureProfile(**fields), "tuple": tuple}
+"""Value objects a summary column may hold, each stored as JSON (a dataclass: its fields; a
+tuple of numbers, e.g. the per-actuator gains: a list), by type name -> the function that
+rebuilds it from the JSON value."""
 STAMP_KEYS = {"definition_sha256", "chunk", "members", "sha256", "value_types"}
 """The keys of a chunk's metadata stamp: exactly these (a damaged key would otherwise drop
 what it says, e.g. the value types, silently)."""
@@ -141,12 +143,15 @@ def _encode(frame: pd.DataFrame):
         if frame[name].dtype == object and dataclasses.is_dataclass(first):
             types[name] = type(first).__name__
             encoded[name] = [_canonical(dataclasses.asdict(v)) for v in frame[name]]
+        elif frame[name].dtype == object and isinstance(first, tuple):
+            types[name] = "tuple"
+            encoded[name] = [_canonical(list(v)) for v in frame[name]]
     return encoded, types
 
 
 def _decode(frame: pd.DataFrame, types: Dict[str, str]) -> pd.DataFrame:
     for name, type_name in types.items():
-        frame[name] = pd.Series([VALUE_TYPES[type_name](**json.loads(v)) for v in frame[name]],
+        frame[name] = pd.Series([VALUE_TYPES[type_name](json.loads(v)) for v in frame[name]],
                                 dtype=object, index=frame.index)
     return frame
 

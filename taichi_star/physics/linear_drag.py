@@ -1,0 +1,71 @@
+"""Linear (skin-friction) drag on the rod edges and on the hub, off unless `linear_drag` or
+`hub_linear_drag` is set.
+
+The quadratic drag of `rod_drag` and `cylinder_drag` (∝ |v|v) vanishes in the slow glide
+between pulses, where the robot moves at ~1 mm/s; there the viscous (laminar, Stokes-like)
+friction of the boundary layer, ∝ v, is what is left to stop it. Per rod edge, on the mean v of
+its two nodes' implicit velocities: F = −c_l·Δl̄·v, half to each node; on the hub node:
+F = −c_h·v (forces per unit height, N/m).
+
+One isotropic coefficient per component, by choice: a slender body's viscous resistance
+normal to itself is about twice that along it (slender-body Stokes flow), but the ratio is then
+fixed by theory and adds nothing to fit, while a free ratio is a second number that five
+measured net speeds cannot separate from the first; the anisotropy of the fast strokes is
+carried by the quadratic term's C∥ and C⊥.
+"""
+
+import numpy as np
+import taichi as ti
+
+from ..geometry import CENTRE
+from .base import Term
+from .rod_drag import rod_edges
+
+
+@ti.data_oriented
+class LinearDrag(Term):
+    name = "linear_drag"
+
+    @staticmethod
+    def coefficients(params, topologies, topology):
+        """linear_rod_coeff (B, R) = c_l·Δl̄, N·s/m² per edge; linear_hub_coeff (B,) = c_h,
+        N·s/m² (both per unit height)."""
+        rods = rod_edges(topology)
+        lengths = np.stack([t.rest_length[rods] for t in topologies])
+        return {"linear_rod_coeff": lengths * np.array([p.linear_drag for p in params])[:, None],
+                "linear_hub_coeff": np.array([p.hub_linear_drag for p in params])}
+
+    @staticmethod
+    def configuration(coefficients):
+        used = (coefficients["linear_rod_coeff"] > 0).any() or (
+            coefficients["linear_hub_coeff"] > 0).any()
+        return () if used else None
+
+    @staticmethod
+    def coupled_pairs(topology):
+        return [tuple(topology.edges[e]) for e in rod_edges(topology)]
+
+    def build(self, topology):
+        rods = rod_edges(topology)
+        self.n_rods = len(rods)
+        self.rods = self.assembly.index(topology.edges[rods])
+        self.rod_slot = self.assembly.pair_slots(topology.edges[rods])
+        self.centre_slot = self.assembly.slot(CENTRE, CENTRE)
+
+    @ti.func
+    def assemble(self, b, rate_gain, jacobian):
+        identity = ti.Matrix.identity(float, 2)
+        for r in range(self.n_rods):
+            i, j = self.rods[r, 0], self.rods[r, 1]
+            coeff = self.linear_rod_coeff[b, r]
+            velocity = 0.5 * (self.assembly.implicit_velocity(b, i, rate_gain)
+                              + self.assembly.implicit_velocity(b, j, rate_gain))
+            # F = −c·v, half on each node; ∂v/∂x_i = ∂v/∂x_j = ½·rate_gain
+            self.assembly.add_residual(b, i, 0.5 * coeff * velocity)
+            self.assembly.add_residual(b, j, 0.5 * coeff * velocity)
+            block = 0.25 * coeff * rate_gain * identity
+            for corner in ti.static(range(4)):
+                self.assembly.add_block(b, self.rod_slot[r, corner], block, jacobian)
+        hub = self.linear_hub_coeff[b]
+        self.assembly.add_residual(b, CENTRE, hub * self.assembly.implicit_velocity(b, CENTRE, rate_gain))
+        self.assembly.add_block(b, self.centre_slot, hub * rate_gain * identity, jacobian)
