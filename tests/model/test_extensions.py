@@ -1,7 +1,9 @@
 """The model extensions of issue 28 (1a, 1c): linear drag on the rods and the hub, and
 per-actuator gains and delays. Each is off by default; with it on, the reference's elements
-against finite differences, the reference's actuation against the profile's formula, and the
-engine against the reference.
+against finite differences and the reference's actuation against the profile's formula here;
+the engine against the reference in tests/model/test_engine.py
+(`test_engine_matches_reference_with_damping_joints_ends_closure_and_extensions`) and the
+linear drag term assembled alone in tests/unit/test_assembly.py.
 
 Finite differences follow tests/model/test_reference.py: a central difference of step δ =
 1e-6 of the smallest length the element depends on has truncation and round-off errors ~1e-10
@@ -146,42 +148,6 @@ def test_reference_actuators_follow_their_gain_and_delay():
 
 
 # ---- the engine -------------------------------------------------------------------------------
-
-EXTENDED_BATCH = [
-    ts.StarParams(gait="A1+A2", period=0.2, linear_drag=80.0, hub_linear_drag=6.0,
-                  actuator_gains=(1.3, 0.6, 1, 1, 1, 1, 1, 1),
-                  actuator_delays=(0.0, 0.03, 0, 0, 0, 0, 0, 0)),
-    ts.StarParams(gait="A3+A5", period=0.2, actuation_ends="shared", profile_closure="ramp",
-                  linear_drag=20.0, actuator_gains=(1, 1, 0.8, 1, 1.1, 1, 1, 1),
-                  actuator_delays=(0, 0, 0, 0, 0.05, 0, 0, 0)),
-    ts.StarParams(gait="A1+A2", period=0.2, hub_linear_drag=6.0),
-]
-
-
-def test_engine_matches_reference_with_linear_drag_gains_and_delays():
-    """Both independent implementations with every extension on, ≤ 1e-10 relative on positions
-    after 110 steps of 2 ms, past the first 0.2-s cycle boundary (the delays restart there).
-    Newton converges both to 1e-12 m: what is left is round-off (~1e-14 m). The extensions
-    must also matter: each instance moves ≥ 1 % of its motion away from its plain twin."""
-    solver = ts.SolverConfig(newton_tol=1e-12, dt=2e-3)
-    n_steps = 110
-    plain = [params.replace(linear_drag=0.0, hub_linear_drag=0.0, actuator_gains=(1.0,) * 8,
-                            actuator_delays=(0.0,) * 8) for params in EXTENDED_BATCH]
-    batch = EXTENDED_BATCH + plain
-    assert "linear_drag" in [cls.name for cls, _ in build_model(batch).terms_used]
-    result = ts.simulate(batch, n_steps * solver.dt, solver=solver,
-                         record_interval_s=n_steps * solver.dt, record_shapes=True)
-    assert (result.summary.status == "ok").all()
-    engine = result.shapes[-1]
-    for index, params in enumerate(EXTENDED_BATCH):
-        reference = ReferenceSimulator(params, solver).run(n_steps)
-        error = np.abs(engine[index] - reference[-1]).max()
-        assert error <= 1e-10 * np.abs(reference[-1]).max(), (index, error)
-        motion = np.abs(reference[-1] - reference[0]).max()
-        assert error <= 1e-7 * motion, (index, error, motion)
-        twin = engine[len(EXTENDED_BATCH) + index]
-        assert np.abs(twin - engine[index]).max() >= 1e-2 * motion, index
-
 
 def test_extensions_are_off_by_default_and_compiled_out():
     model = build_model([ts.StarParams.preset("paper"), ts.StarParams.preset("accurate")
