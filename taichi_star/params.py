@@ -102,6 +102,8 @@ def _check_number(name, value, lowest, highest, lowest_included=True, integer=Fa
     return value
 
 
+PER_ACTUATOR_FIELDS = ("actuator_gains", "actuator_delays")
+"""The StarParams fields that hold one number per actuator (a tuple, A_k at index k − 1)."""
 MAX_ACTUATOR_GAIN = 5.0
 """Largest actuator gain: five times the measured curvature change already bends an arc far
 past straight (K̄ goes from 102 to 14 1/m over a pulse at gain 1)."""
@@ -297,7 +299,8 @@ class StarParams:
 
     @classmethod
     def numeric_field_names(cls):
-        """The fields that take numbers (the ones a sweep or a fit can vary)."""
+        """The fields that take one number (the ones a sweep or a fit can vary as a whole);
+        the fields of one number per actuator are `PER_ACTUATOR_FIELDS`."""
         return list(STAR_RANGES)
 
     @classmethod

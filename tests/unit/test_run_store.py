@@ -172,6 +172,21 @@ def test_chunk_round_trip_keeps_every_bit_dtype_and_value_object(written):
         "chunk_000000.parquet", "chunk_000001.parquet", "manifest.json"]
 
 
+def test_a_chunk_with_per_actuator_tuples_reads_them_back_as_the_same_tuples(tmp_path):
+    """The per-actuator parameter columns (`actuator_gains`, ...) hold a tuple per row: stored
+    as JSON lists and read back as tuples equal to the bit (a float's JSON text is exact)."""
+    store = store_in(tmp_path / "run")
+    tasks = tasks_of()
+    store.open(tasks, resume=False)
+    gains = [tuple(1.0 / (3 + k + a) for a in range(8)) for k in range(len(tasks[0].members))]
+    summary = summary_of(tasks[0]).assign(actuator_gains=pd.Series(gains, dtype=object))
+    store.write(tasks[0], summary)
+    stored = store.read(tasks[0])
+    pd.testing.assert_frame_equal(stored, summary, check_exact=True)
+    assert all(type(value) is tuple for value in stored["actuator_gains"])
+    assert list(stored["actuator_gains"]) == gains
+
+
 def test_a_chunk_without_value_objects_or_rows_round_trips(tmp_path):
     store = store_in(tmp_path / "run")
     tasks = tasks_of()
