@@ -295,10 +295,10 @@ def measure_plain(batch: int, duration: float, repeats: int) -> dict:
             **end_to_end_figures(result, batch * steps, timed)}
 
 
-PROBE_CODE = """
+PROBE_CODE = f"""
 import json, sys, time
 start = time.perf_counter()
-import studies.bench as bench
+import {__name__} as bench
 imported = time.perf_counter() - start
 print("BENCH_PROBE " + json.dumps(bench.first_step_probe(sys.argv[1], sys.argv[2],
                                                           int(sys.argv[3]), imported)))

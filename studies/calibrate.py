@@ -37,14 +37,16 @@ import dataclasses
 import math
 import textwrap
 from pathlib import Path
-from typing import Callable, List, Optional, Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 import pandas as pd
 
 from taichi_star import SolverConfig, StarParams
+from taichi_star.extras import require
 
 from . import cli, figures, identify
+from .identify import DEFAULT_MAX_GENERATIONS, CMASettings, best_row
 
 DESCRIPTION = ("Fit StarParams fields to the measured speeds and directions of the paper's gaits "
                "with CMA-ES (one batched simulation per generation); --cross-validate: "
@@ -56,117 +58,34 @@ DEFAULT_FIT = ["alpha=0.2:1.5", "added_mass_coeff=0:3", "drag_perpendicular=0.3:
 """The default six axes: jet ratio, added mass, rod drag (both), cylinder drag, limb stiffness,
 each spanning the paper's value by about a factor of 3-10 either way."""
 QUICK_FIT = ["alpha=0.2:1.5", "cylinder_drag=1:100:log"]
-DEFAULT_MAX_GENERATIONS = 20
 DEFAULT_CYCLES = 3.0
 """Cycles from rest of every evaluation of `fit_cmaes` when its run_kwargs give no run length
 (the Fig. 4c metric)."""
 QUICK_POPSIZE, QUICK_MAX_GENERATIONS = 4, 2
-FAILED_PENALTY = 1e6
-"""Objective told to CMA-ES for a failed candidate (it needs finite values; the CSV keeps inf)."""
-
-
-@dataclasses.dataclass(frozen=True)
-class CMASettings:
-    """CMA-ES settings: popsize None = cma's default 4 + ⌊3 ln D⌋ (doubled at each restart),
-    sigma0 = initial step in unit coordinates, seed ≥ 0 (the run is reproducible)."""
-    popsize: Optional[int] = None
-    max_generations: int = DEFAULT_MAX_GENERATIONS
-    restarts: int = 0
-    seed: int = 1
-    sigma0: float = 0.25
-
-    def validate(self):
-        """StudyArgumentError naming the flag of an invalid setting."""
-        if self.popsize is not None and self.popsize < 2:
-            raise cli.StudyArgumentError(f"--popsize must be >= 2, got {self.popsize}")
-        if self.max_generations < 1:
-            raise cli.StudyArgumentError(f"--max-generations must be >= 1, got "
-                                            f"{self.max_generations}")
-        if self.restarts < 0:
-            raise cli.StudyArgumentError(f"--restarts must be >= 0, got {self.restarts}")
-        if self.seed < 0:
-            raise cli.StudyArgumentError(f"--seed must be >= 0, got {self.seed}")
-        if not (math.isfinite(self.sigma0) and 0 < self.sigma0 <= 1):
-            raise cli.StudyArgumentError(f"--sigma0 must be in (0, 1] (unit coordinates), got "
-                                            f"{self.sigma0}")
-
-    def population(self, dimension: int, restart: int) -> int:
-        return (self.popsize or 4 + int(3 * math.log(dimension))) * 2 ** restart
-
-
-def _cma_seed(seed: int, restart: int) -> int:
-    # cma treats seed 0 as "randomise": derive a positive seed per (seed, restart)
-    return int(np.random.SeedSequence([seed, restart]).generate_state(1)[0]) % (2 ** 31 - 2) + 1
 
 
 def fit_cmaes(box: Sequence[identify.ParameterRange], base: StarParams,
               measurements: pd.DataFrame, settings: CMASettings = CMASettings(),
               run_kwargs: dict = None, progress: bool = False,
               on_generation: Callable[[pd.DataFrame], None] = None) -> pd.DataFrame:
-    """Minimise `identify.objective_values` over the box with CMA-ES and return every evaluation:
-    columns evaluation, restart, generation, candidate, then those of `identify.evaluate_points`.
-    `run_kwargs`: keyword arguments of `taichi_star.batch.run_batch` (run length, solver, arch,
-    executor, chunk size; default DEFAULT_CYCLES cycles from rest in this process).
+    """Minimise `identify.objective_values` over the box with CMA-ES (`identify.minimise_cmaes`,
+    from the base model's coordinates) and return every evaluation: columns evaluation,
+    restart, generation, candidate, then those of `identify.evaluate_points`. `run_kwargs`:
+    keyword arguments of `taichi_star.batch.run_batch` (run length, solver, arch, executor,
+    chunk size; default DEFAULT_CYCLES cycles from rest in this process).
     `on_generation(table so far)` is called after each generation (e.g. to write the CSV)."""
-    import cma
     identify.check_box(box, base)
-    settings.validate()
     run_kwargs = dict(run_kwargs or {"cycles": DEFAULT_CYCLES})
-    dimension = len(box)
-    start = np.array([spec.unit(getattr(base, spec.name)) for spec in box])
-    parts: List[pd.DataFrame] = []
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-        bar = tqdm(total=settings.max_generations * (settings.restarts + 1), unit="generation",
-                   desc="CMA-ES")
-    for restart in range(settings.restarts + 1):
-        rng = np.random.default_rng([settings.seed, restart])
-        x0 = start if restart == 0 else rng.uniform(0.0, 1.0, dimension)
-        es = cma.CMAEvolutionStrategy(list(x0), settings.sigma0, {
-            "bounds": [0.0, 1.0], "popsize": settings.population(dimension, restart),
-            "seed": _cma_seed(settings.seed, restart), "maxiter": settings.max_generations,
-            "verbose": -9})
-        generation = 0
-        while not es.stop():
-            candidates = es.ask()
-            table = identify.evaluate_points(box, candidates, base, measurements, run_kwargs)
-            values = table["objective"].to_numpy()
-            es.tell(candidates, list(np.where(np.isfinite(values), values, FAILED_PENALTY)))
-            table.insert(0, "candidate", np.arange(len(table)))
-            table.insert(0, "generation", generation)
-            table.insert(0, "restart", restart)
-            parts.append(table)
-            generation += 1
-            if bar is not None:
-                bar.update(1)
-                bar.set_postfix(best=f"{min(p['objective'].min() for p in parts):.4g}")
-            if on_generation is not None:
-                on_generation(_numbered(parts))
-        if bar is not None:  # an early stop leaves generations of this run unused
-            bar.total -= settings.max_generations - generation
-            bar.refresh()
-    if bar is not None:
-        bar.close()
-    return _numbered(parts)
-
-
-def _numbered(parts: List[pd.DataFrame]) -> pd.DataFrame:
-    table = pd.concat(parts, ignore_index=True)
-    table.insert(0, "evaluation", np.arange(len(table)))
-    return table
-
-
-def best_row(evaluations: pd.DataFrame) -> Optional[pd.Series]:
-    """The evaluation with the smallest finite objective (the first of ties), or None."""
-    finite = evaluations[np.isfinite(evaluations["objective"].astype(float))]
-    return None if finite.empty else finite.loc[finite["objective"].idxmin()]
+    return identify.minimise_cmaes(
+        box, identify.start_units(box, base),
+        lambda units: identify.evaluate_points(box, units, base, measurements, run_kwargs),
+        settings, progress=progress, on_generation=on_generation).evaluations
 
 
 def best_units(evaluations: pd.DataFrame, box) -> np.ndarray:
     """Unit coordinates (D,) of the best evaluation."""
     row = best_row(evaluations)
-    return np.array([row[f"u_{spec.name}"] for spec in box], dtype=float)
+    return np.array([row[f"u_{spec.key}"] for spec in box], dtype=float)
 
 
 # --------------------------------------------------------------------------- cross-validation

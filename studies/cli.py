@@ -32,8 +32,9 @@ from taichi_star import PRESETS, SolverConfig, StarParams
 from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, executor_for,
                                stored_chunk_size, write_atomic)
 from taichi_star.experiment import PAPER_GAITS
+from taichi_star.extras import require
 from taichi_star.gait import Gait
-from taichi_star.output import column_unit, column_units
+from taichi_star.output import column_unit, column_units, parquet_bytes
 
 from . import provenance
 
@@ -112,7 +113,8 @@ def add_model_flags(parser: StudyParser, fixed: Sequence[str] = ()):
     parser.add_argument("--preset", choices=PRESETS, default="paper",
                         help="paper: the model as published (N = 193 nodes, implicit Euler at "
                              "1 ms); accurate: damping, series joints, shared ends, n_arc 48, "
-                             "adaptive BDF2 (StarParams/SolverConfig.preset)")
+                             "adaptive BDF2; identified: the model selection study's best model "
+                             "(StarParams/SolverConfig.preset)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="change one StarParams field for every instance, e.g. --set "
                              "alpha=1.0 (repeatable)")
@@ -510,20 +512,8 @@ class Output:
                       extra: Optional[Mapping] = None) -> Path:
         """Write a table as Parquet (typed columns, every float bit for bit) and its JSON
         sidecar; the provenance is also in the file's own metadata (key "taichi_star")."""
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-
         path = self.path(name)
-        # values Parquet has no type for (the actuation profile) are stored as their text
-        frame = frame.assign(**{column: frame[column].map(str) for column in frame.columns
-                                if frame[column].dtype == object
-                                and not frame[column].map(lambda v: isinstance(v, str)).all()})
-        table = pa.Table.from_pandas(frame, preserve_index=False)
-        metadata = {**(table.schema.metadata or {}),
-                    b"taichi_star": json.dumps(self._details(extra), default=str).encode()}
-        sink = pa.BufferOutputStream()
-        pq.write_table(table.replace_schema_metadata(metadata), sink)
-        self._write(path, sink.getvalue().to_pybytes())
+        self._write(path, parquet_bytes(frame, self._details(extra)))
         return self._described(path, extra, frame)
 
     def _details(self, extra: Optional[Mapping]) -> dict:
@@ -575,7 +565,7 @@ def check_output_folder(folder: Path, quick: bool):
 
 def use_agg():
     """Select the non-interactive Agg backend and return pyplot."""
-    import matplotlib
+    matplotlib = require("matplotlib", "studies")
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     return plt

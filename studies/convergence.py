@@ -21,6 +21,7 @@ import math
 import numpy as np
 import pandas as pd
 
+from taichi_star import metrics
 from taichi_star.batch import run_batch
 from taichi_star.experiment import PAPER_GAITS
 
@@ -77,9 +78,8 @@ def convergence_table(summary: pd.DataFrame) -> pd.DataFrame:
         doubling = np.diff(series.n_arc.to_numpy()) == series.n_arc.to_numpy()[:-1]
         if len(speeds) < 3 or not doubling[-2:].all():
             continue
-        coarse, fine = speeds[-2] - speeds[-3], speeds[-1] - speeds[-2]
-        order = math.log2(coarse / fine) if coarse * fine > 0 else math.nan
-        limit = speeds[-1] + fine / (2.0 ** order - 1.0) if math.isfinite(order) else math.nan
+        order = float(metrics.observed_order(speeds[-2] - speeds[-3], speeds[-1] - speeds[-2]))
+        limit = float(metrics.richardson_limit(speeds[-2], speeds[-1], order))
         rows.loc[series.index, "observed_order"] = order
         rows.loc[series.index, "limit_mm_s"] = limit
     limits = rows.dropna(subset=["limit_mm_s"]).groupby(["gait", "actuation_ends"]).limit_mm_s.first()
@@ -88,8 +88,8 @@ def convergence_table(summary: pd.DataFrame) -> pd.DataFrame:
     reference = {gait: limits.get((gait, "clamped"), limits.get((gait, "shared"), math.nan))
                  for gait in rows.gait.unique()}
     rows["reference_limit_mm_s"] = rows.gait.map(reference)
-    rows["relative_error"] = (rows.speed_mm_s - rows.reference_limit_mm_s).abs() \
-        / rows.reference_limit_mm_s
+    rows["relative_error"] = metrics.speed_error(rows.speed_mm_s, rows.reference_limit_mm_s,
+                                                 floor_mm_s=0.0)
     return rows.reset_index(drop=True)
 
 

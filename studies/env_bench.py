@@ -67,8 +67,9 @@ def build_parser():
     parser.add_argument("--num-envs", type=int, default=64, quick=QUICK_NUM_ENVS,
                         help="robots in the vector env")
     parser.add_argument("--steps", type=int, default=2, quick=QUICK_STEPS, help="timed steps")
-    parser.add_argument("--presets", default=",".join(PRESETS),
-                        help=f"comma list of presets (default {','.join(PRESETS)})")
+    parser.add_argument("--presets", default="paper,accurate",
+                        help=f"comma list of presets from {','.join(PRESETS)} (default "
+                             f"paper,accurate)")
     parser.add_argument("--jacobians", default="newton",
                         help=f"comma list of Jacobian modes, {' and/or '.join(JACOBIANS)} "
                              f"(default newton)")

@@ -39,12 +39,8 @@ def main(argv=None):
     solver = cli.solver(args)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver)
-    stepping = (f"adaptive {solver.integrator}, tol {solver.error_tol:g} m" if solver.adaptive
-                else f"{solver.integrator}, h = {solver.dt * 1e3:g} ms")
-    note = f"({args.preset} preset, n_arc {base.n_arc}, {stepping})"
     table = figures.run_fig4c(out, base, solver, duration_s=cli.duration_s(args, base.period),
-                              arch=args.arch, prefix=args.prefix, progress=not args.no_progress,
-                              title_note=note)
+                              arch=args.arch, prefix=args.prefix, progress=not args.no_progress)
     out.report()
     with pd.option_context("display.width", 160, "display.max_columns", 20):
         print(table.to_string(index=False))

@@ -58,14 +58,15 @@ def fig4b_table(summary: pd.DataFrame, trajectory: pd.DataFrame, duration_s: flo
     return table
 
 
-def plot_fig4c(csv_path, png_path, title: str = None):
+def plot_fig4c(csv_path, png_path, title: str = None, caption: str = None):
     """Grouped bars from a fig4c CSV: simulated |speed| next to the experiment, per gait; the
-    simulated direction is written on each bar (red when it disagrees with the paper)."""
+    simulated direction is written on each bar (red when it disagrees with the paper).
+    `caption` (default: the model and solver from the CSV's sidecar) goes under the plot."""
     plt = cli.use_agg()
     table = pd.read_csv(csv_path)
     x = np.arange(len(table))
     width = 0.38
-    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    fig, ax = plt.subplots(figsize=(7.5, 4.4))
     ax.bar(x - width / 2, table["sim_speed_mm_s"], width, label="simulation", color="tab:blue")
     # error bars: the spread (± 1 std) of the measured per-cycle speeds (older CSVs lack it)
     spread = table["exp_cycle_speed_std_mm_s"] if "exp_cycle_speed_std_mm_s" in table else None
@@ -86,39 +87,64 @@ def plot_fig4c(csv_path, png_path, title: str = None):
         ax.text(i + width / 2, top if np.isfinite(top) else 0.0, paper, ha="center",
                 va="bottom", fontsize=8)
     ax.set_xticks(x, list(table["gait"]))
+    ax.set_xlabel("gait (actuators fired together each cycle)")
     ax.set_ylabel("speed (mm/s)")
-    ax.set_title(title or "Fig. 4c: swimming speed, 3 cycles from rest "
-                          "(labels: direction; red = disagrees with the paper)", fontsize=9)
+    ax.set_title(title or fig4_titles()[0], fontsize=9)
     ax.legend()
-    fig.tight_layout()
+    _caption(fig, csv_path, caption)
     fig.savefig(png_path, dpi=130)
     plt.close(fig)
     return Path(png_path)
 
 
-def plot_fig4b(csv_path, png_path, title: str = None):
-    """Displacement against time from a fig4b CSV: simulation solid, experiment dashed, one
-    colour per gait."""
+def plot_fig4b(csv_path, png_path, title: str = None, caption: str = None):
+    """Displacement against time from a fig4b CSV, one panel per gait: simulation solid blue,
+    experiment dashed gray (each panel has its own scale: A1 moves millimetres, A1+A3+A5
+    tens). `caption` (default: the model and solver from the sidecar) goes under the plot."""
     plt = cli.use_agg()
     table = pd.read_csv(csv_path)
-    fig, ax = plt.subplots(figsize=(7.5, 4.2))
-    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    for i, gait in enumerate(dict.fromkeys(table["gait"])):
-        colour = colours[i % len(colours)]
-        for source, style in (("simulation", "-"), ("experiment", "--")):
+    gaits = list(dict.fromkeys(table["gait"]))
+    columns = min(3, len(gaits))
+    rows = int(np.ceil(len(gaits) / columns))
+    fig, axes = plt.subplots(rows, columns, figsize=(3.0 * columns, 2.5 * rows + 0.9),
+                             sharex=True, squeeze=False)
+    for ax, gait in zip(axes.ravel(), gaits):
+        for source, style, colour in (("simulation", "-", "tab:blue"),
+                                      ("experiment", "--", "tab:gray")):
             part = table[(table["gait"] == gait) & (table["source"] == source)]
             if len(part):
                 ax.plot(part["t_s"], part["displacement_mm"], style, color=colour,
-                        label=f"{gait} ({source})")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("centroid displacement (mm)")
-    ax.set_title(title or "Fig. 4b: centroid displacement (simulation solid, experiment dashed)",
-                 fontsize=9)
-    ax.legend(fontsize=7, ncol=2)
-    fig.tight_layout()
+                        label=source)
+        ax.set_title(gait, fontsize=9)
+        ax.tick_params(labelsize=8)
+        ax.grid(alpha=0.3)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("displacement (mm)", fontsize=8)
+    for ax in axes[-1]:
+        ax.set_xlabel("time (s)", fontsize=8)
+    for ax in axes.ravel()[len(gaits):]:
+        ax.axis("off")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    spare = axes.ravel()[len(gaits)] if len(gaits) < axes.size else None
+    if spare is not None:
+        spare.legend(handles, labels, loc="center", fontsize=9, frameon=False)
+    else:
+        axes[0, 0].legend(fontsize=7)
+    fig.suptitle(title or fig4_titles()[1], fontsize=10)
+    _caption(fig, csv_path, caption)
     fig.savefig(png_path, dpi=130)
     plt.close(fig)
     return Path(png_path)
+
+
+def _caption(fig, csv_path, caption):
+    """Lay the figure out with `caption` (default: the model and solver of the CSV's sidecar,
+    `cli.run_settings`) in small gray text at its bottom."""
+    text = caption if caption is not None else cli.run_settings(csv_path)
+    fig.tight_layout(rect=(0, 0.05 if text else 0, 1, 1))
+    if text:
+        fig.text(0.01, 0.01, textwrap.fill(text, 130), fontsize=7, color="0.35", ha="left",
+                 va="bottom")
 
 
 def run_fig4c(out: cli.Output, base: StarParams, solver: SolverConfig, *, duration_s: float,
@@ -127,7 +153,8 @@ def run_fig4c(out: cli.Output, base: StarParams, solver: SolverConfig, *, durati
     """Simulate the five paper gaits on `base` for `duration_s` seconds from rest and write
     `<prefix>.csv` (the Fig. 4c table), `<prefix>_summary.csv` (the full summary), the Fig. 4b
     table (`fig4b` in place of `fig4c` in the prefix, else `<prefix>_fig4b`) and both plots
-    into `out`; `title_note` (e.g. "calibrated (alpha=0.8)") goes into the plot titles.
+    into `out`; `title_note` (e.g. "calibrated (alpha=0.8)") and the model and solver settings
+    go into the plots' captions.
     Returns the Fig. 4c table."""
     params = fig4c_params(base)
     result = run_batch(params, duration_s, solver=solver, arch=arch,
@@ -138,16 +165,18 @@ def run_fig4c(out: cli.Output, base: StarParams, solver: SolverConfig, *, durati
     out.write_csv(result.summary, f"{prefix}_summary.csv")
     curves_csv = out.write_csv(fig4b_table(result.summary, result.trajectory, duration_s),
                                f"{fig4b_prefix}.csv")
-    title_4c, title_4b = fig4_titles(title_note, duration_s)
-    out.wrote(plot_fig4c(table_csv, out.path(f"{prefix}.png"), title=title_4c),
-              plot_fig4b(curves_csv, out.path(f"{fig4b_prefix}.png"), title=title_4b))
+    title_4c, title_4b = fig4_titles(duration_s)
+    caption = "; ".join(part for part in (title_note, cli.run_settings(table_csv)) if part)
+    out.wrote(plot_fig4c(table_csv, out.path(f"{prefix}.png"), title=title_4c, caption=caption),
+              plot_fig4b(curves_csv, out.path(f"{fig4b_prefix}.png"), title=title_4b,
+                         caption=caption))
     return pd.read_csv(table_csv)
 
 
-def fig4_titles(title_note: str, duration_s: float):
-    """(Fig. 4c title, Fig. 4b title) with `title_note` wrapped to the plot's width."""
-    note = f" {title_note}" if title_note else ""
-    return (textwrap.fill(f"Fig. 4c{note}: speed over {duration_s:g} s from rest", 95)
-            + "\n(labels: direction; red = disagrees with the paper)",
-            textwrap.fill(f"Fig. 4b{note}:", 95)
-            + "\ncentroid displacement (simulation solid, experiment dashed)")
+def fig4_titles(duration_s: float = None):
+    """(Fig. 4c title, Fig. 4b title) in plain words; the model and solver settings go in the
+    caption (and the sidecar), not the title."""
+    span = f"the first {duration_s:g} s from rest" if duration_s else "from rest"
+    return (f"How fast each gait swims: simulation vs. experiment ({span})\n"
+            "labels: swimming direction (fwd/rev); red = opposite to the paper",
+            f"How far each gait's centre moves ({span}): simulation vs. experiment")

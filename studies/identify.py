@@ -21,9 +21,10 @@ measurement's own relative spread. `weights="uniform"` gives every gait weight 1
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
-from typing import List, Sequence
+from typing import Callable, List, Optional, Sequence
 
 import numpy as np
 import pandas as pd
@@ -35,6 +36,9 @@ from taichi_star.experiment import (PAPER_DIRECTIONS, PAPER_GAITS, experimental_
 
 from . import cli
 
+DEFAULT_MAX_GENERATIONS = 20
+FAILED_PENALTY = 1e6
+"""Objective told to CMA-ES for a failed candidate (it needs finite values; the CSV keeps inf)."""
 WEIGHT_SCHEMES = ("experimental", "uniform")
 TOPOLOGY_FIELDS = ("n_arc", "n_limb")
 """Integer fields fixing the topology (shared by a batch): not fittable."""
@@ -43,12 +47,15 @@ TOPOLOGY_FIELDS = ("n_arc", "n_limb")
 @dataclass(frozen=True)
 class ParameterRange:
     """One StarParams field varied over [low, high], uniformly in the value or (log) in its
-    logarithm. Unit coordinate u = 0 is `low`, u = 1 is `high`."""
+    logarithm. Unit coordinate u = 0 is `low`, u = 1 is `high`. `index` (1-based): the axis is
+    one element of a tuple-valued field (e.g. a per-actuator gain, index 4 = actuator A4),
+    written NAME[INDEX] on the command line."""
 
     name: str
     low: float
     high: float
     log: bool = False
+    index: Optional[int] = None
 
     def values(self, unit) -> np.ndarray:
         """Parameter values at unit coordinates (any shape; clipped to [0, 1]): the weighted
@@ -74,15 +81,31 @@ class ParameterRange:
         return float(min(1.0, max(0.0, u)))
 
     @property
+    def key(self) -> str:
+        """The axis' name in table columns: the field's name, with _INDEX for an element."""
+        return self.name if self.index is None else f"{self.name}_{self.index}"
+
+    @property
+    def label(self) -> str:
+        """The axis as written on the command line: NAME or NAME[INDEX]."""
+        return self.name if self.index is None else f"{self.name}[{self.index}]"
+
+    @property
     def column(self) -> str:
         """The table column of the parameter's values (its name with its unit, e.g.
-        joint_radius_m)."""
-        return StarParams.columns()[self.name]
+        joint_radius_m; _INDEX appended for an element)."""
+        column = StarParams.columns()[self.name]
+        return column if self.index is None else f"{column}_{self.index}"
 
     @property
     def spec(self) -> str:
         """The range as written on the command line, e.g. "cylinder_drag=1:100:log"."""
-        return f"{self.name}={self.low:g}:{self.high:g}" + (":log" if self.log else "")
+        return f"{self.label}={self.low:g}:{self.high:g}" + (":log" if self.log else "")
+
+    def value_of(self, params: StarParams) -> float:
+        """The axis' value in a model."""
+        value = getattr(params, self.name)
+        return float(value if self.index is None else value[self.index - 1])
 
 
 def parse_range_spec(text: str, flag: str = "--fit") -> ParameterRange:
@@ -93,13 +116,21 @@ def parse_range_spec(text: str, flag: str = "--fit") -> ParameterRange:
                                      f"alpha=0.2:1.5), got {text!r}")
     name, bounds = text.split("=", 1)
     name = name.strip().replace("-", "_")
+    index = None
+    if name.endswith("]") and "[" in name:
+        name, element = name[:-1].split("[", 1)
+        try:
+            index = int(element)
+        except ValueError:
+            raise cli.StudyArgumentError(f"{flag} {name}: element [{element}] is not an "
+                                         f"integer (NAME[INDEX], INDEX from 1)") from None
     parts = [p.strip() for p in bounds.split(":")]
     if len(parts) not in (2, 3) or (len(parts) == 3 and parts[2].lower() != "log"):
         raise cli.StudyArgumentError(f"{flag} {name}: malformed bounds {bounds!r}; expected "
                                      f"LOW:HIGH or LOW:HIGH:log (e.g. 1:100:log)")
     low = cli.parse_number(parts[0], f"{flag} {name}")
     high = cli.parse_number(parts[1], f"{flag} {name}")
-    spec = ParameterRange(name, low, high, log=len(parts) == 3)
+    spec = ParameterRange(name, low, high, log=len(parts) == 3, index=index)
     check_field_range(spec, flag)
     return spec
 
@@ -107,10 +138,18 @@ def parse_range_spec(text: str, flag: str = "--fit") -> ParameterRange:
 def check_field_range(spec: ParameterRange, flag: str):
     """StudyArgumentError naming `flag` and the field unless the field is a real-valued
     StarParams field, LOW < HIGH, both finite and inside the field's valid range, and LOW > 0 for
-    a log axis."""
+    a log axis. An element axis (NAME[INDEX]) needs a tuple-valued field and an INDEX within
+    it; its range is checked by the model's own validation (`check_box`)."""
     kind = cli.field_kind(spec.name)  # unknown field -> error naming it
-    where = f"{flag} {spec.name}"
-    if kind is not float or spec.name in TOPOLOGY_FIELDS or spec.name not in STAR_RANGES:
+    where = f"{flag} {spec.label}"
+    if spec.index is not None:
+        default = getattr(StarParams(), spec.name)
+        if not isinstance(default, tuple):
+            raise cli.StudyArgumentError(f"{where}: {spec.name} is not a tuple-valued field "
+                                         f"(give it without [INDEX])")
+        if not 1 <= spec.index <= len(default):
+            raise cli.StudyArgumentError(f"{where}: INDEX must be in [1, {len(default)}]")
+    elif kind is not float or spec.name in TOPOLOGY_FIELDS or spec.name not in STAR_RANGES:
         numeric = [n for n in StarParams.numeric_field_names() if n not in TOPOLOGY_FIELDS]
         raise cli.StudyArgumentError(f"{where}: not a real-valued numeric field (fix it with "
                                      f"--set); fittable fields: {', '.join(numeric)}")
@@ -122,6 +161,8 @@ def check_field_range(spec: ParameterRange, flag: str):
                                      f"{spec.high:g} (need LOW < HIGH)")
     if spec.log and spec.low <= 0:
         raise cli.StudyArgumentError(f"{where}: a log axis needs LOW > 0, got {spec.low:g}")
+    if spec.index is not None:
+        return
     lowest, highest, included = STAR_RANGES[spec.name]
     if spec.low < lowest or (spec.low == lowest and not included) or spec.high > highest:
         span = f"[{lowest:g}, {highest:g}]" if included else f"({lowest:g}, {highest:g}]"
@@ -136,14 +177,14 @@ def check_box(box: Sequence[ParameterRange], base: StarParams, flag: str = "--fi
     joint_radius). StudyArgumentError naming the flag and the field."""
     if not box:
         raise cli.StudyArgumentError(f"{flag}: no parameters to vary")
-    names = [spec.name for spec in box]
+    labels = [spec.label for spec in box]
     for spec in box:
         check_field_range(spec, flag)
-        if names.count(spec.name) > 1:
-            raise cli.StudyArgumentError(f"{flag} {spec.name}: given twice")
+        if labels.count(spec.label) > 1:
+            raise cli.StudyArgumentError(f"{flag} {spec.label}: given twice")
     for corner in range(2 ** len(box)):
-        point = {spec.name: (spec.high if corner >> axis & 1 else spec.low)
-                 for axis, spec in enumerate(box)}
+        values = [spec.high if corner >> axis & 1 else spec.low for axis, spec in enumerate(box)]
+        point = point_changes(box, values, base)
         try:
             base.replace(**point)
         except (ValueError, TypeError) as error:
@@ -175,9 +216,143 @@ def box_values(box: Sequence[ParameterRange], unit_points) -> np.ndarray:
 def box_params(box: Sequence[ParameterRange], values, base: StarParams,
                gaits: Sequence[str]) -> List[StarParams]:
     """One StarParams per (point, gait), point-major: values (P, D) -> P × len(gaits) robots."""
-    names = [spec.name for spec in box]
-    return [base.replace(gait=gait, **{n: float(v) for n, v in zip(names, point)})
+    return [base.replace(gait=gait, **point_changes(box, point, base))
             for point in np.atleast_2d(values) for gait in gaits]
+
+
+def point_changes(box: Sequence[ParameterRange], values, base: StarParams) -> dict:
+    """{field: value} of one point of the box (values (D,)): scalar axes as floats, element
+    axes assembled into their field's tuple on top of the base model's."""
+    changes = {}
+    for spec, value in zip(box, values):
+        if spec.index is None:
+            changes[spec.name] = float(value)
+        else:
+            elements = list(changes.get(spec.name, getattr(base, spec.name)))
+            elements[spec.index - 1] = float(value)
+            changes[spec.name] = tuple(elements)
+    return changes
+
+
+# --------------------------------------------------------------------------- CMA-ES
+
+@dataclasses.dataclass(frozen=True)
+class CMASettings:
+    """CMA-ES settings: popsize None = cma's default 4 + ⌊3 ln D⌋ (doubled at each restart),
+    sigma0 = initial step in unit coordinates, seed ≥ 0 (the run is reproducible)."""
+    popsize: Optional[int] = None
+    max_generations: int = DEFAULT_MAX_GENERATIONS
+    restarts: int = 0
+    seed: int = 1
+    sigma0: float = 0.25
+
+    def validate(self):
+        """StudyArgumentError naming the flag of an invalid setting."""
+        if self.popsize is not None and self.popsize < 2:
+            raise cli.StudyArgumentError(f"--popsize must be >= 2, got {self.popsize}")
+        if self.max_generations < 1:
+            raise cli.StudyArgumentError(f"--max-generations must be >= 1, got "
+                                            f"{self.max_generations}")
+        if self.restarts < 0:
+            raise cli.StudyArgumentError(f"--restarts must be >= 0, got {self.restarts}")
+        if self.seed < 0:
+            raise cli.StudyArgumentError(f"--seed must be >= 0, got {self.seed}")
+        if not (math.isfinite(self.sigma0) and 0 < self.sigma0 <= 1):
+            raise cli.StudyArgumentError(f"--sigma0 must be in (0, 1] (unit coordinates), got "
+                                            f"{self.sigma0}")
+
+    def population(self, dimension: int, restart: int) -> int:
+        return (self.popsize or 4 + int(3 * math.log(dimension))) * 2 ** restart
+
+
+def _cma_seed(seed: int, restart: int) -> int:
+    # cma treats seed 0 as "randomise": derive a positive seed per (seed, restart)
+    return int(np.random.SeedSequence([seed, restart]).generate_state(1)[0]) % (2 ** 31 - 2) + 1
+
+
+@dataclass
+class CMAResult:
+    """What `minimise_cmaes` returns: every evaluation (columns evaluation, restart,
+    generation, candidate, then those of the evaluate callable, which must include
+    "objective"), and the search distribution's standard deviation per axis in unit
+    coordinates (σ·√diag C of the restart that found the best point, when it stopped): a scale
+    of how well the data pin each axis down near the optimum, not a posterior."""
+    evaluations: pd.DataFrame
+    unit_std: np.ndarray
+
+
+def start_units(box: Sequence[ParameterRange], base: StarParams) -> np.ndarray:
+    """Unit coordinates (D,) of the base model's values (clipped into the box)."""
+    return np.array([spec.unit(spec.value_of(base)) for spec in box])
+
+
+def minimise_cmaes(box: Sequence[ParameterRange], start, evaluate: Callable[[np.ndarray],
+                   pd.DataFrame], settings: CMASettings = CMASettings(), progress: bool = False,
+                   on_generation: Callable[[pd.DataFrame], None] = None) -> CMAResult:
+    """Minimise over the box's unit cube with CMA-ES (ask/tell, cma's bound handling): the
+    first run from `start` (D,) with step settings.sigma0, each restart from a uniformly random
+    point with twice the population (IPOP), seeded from settings.seed. `evaluate(units (P, D))`
+    scores one generation (one batched simulation) and returns a table with one row per point
+    and an "objective" column (inf for a failed point: CMA-ES is told FAILED_PENALTY).
+    `on_generation(table so far)` is called after each generation (e.g. to write the CSV)."""
+    import cma
+    if not box:
+        raise cli.StudyArgumentError("--fit: no parameters to vary")
+    settings.validate()
+    dimension = len(box)
+    start = np.asarray(start, dtype=np.float64)
+    parts: List[pd.DataFrame] = []
+    spreads: List[np.ndarray] = []
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+        bar = tqdm(total=settings.max_generations * (settings.restarts + 1), unit="generation",
+                   desc="CMA-ES")
+    for restart in range(settings.restarts + 1):
+        rng = np.random.default_rng([settings.seed, restart])
+        x0 = start if restart == 0 else rng.uniform(0.0, 1.0, dimension)
+        es = cma.CMAEvolutionStrategy(list(x0), settings.sigma0, {
+            "bounds": [0.0, 1.0], "popsize": settings.population(dimension, restart),
+            "seed": _cma_seed(settings.seed, restart), "maxiter": settings.max_generations,
+            "verbose": -9})
+        generation = 0
+        while not es.stop():
+            candidates = es.ask()
+            table = evaluate(np.asarray(candidates))
+            values = table["objective"].to_numpy()
+            es.tell(candidates, list(np.where(np.isfinite(values), values, FAILED_PENALTY)))
+            table.insert(0, "candidate", np.arange(len(table)))
+            table.insert(0, "generation", generation)
+            table.insert(0, "restart", restart)
+            parts.append(table)
+            generation += 1
+            if bar is not None:
+                bar.update(1)
+                bar.set_postfix(best=f"{min(p['objective'].min() for p in parts):.4g}")
+            if on_generation is not None:
+                on_generation(_numbered(parts))
+        spreads.append(es.sigma * np.sqrt(np.diag(es.C)))
+        if bar is not None:  # an early stop leaves generations of this run unused
+            bar.total -= settings.max_generations - generation
+            bar.refresh()
+    if bar is not None:
+        bar.close()
+    evaluations = _numbered(parts)
+    best = best_row(evaluations)
+    restart = int(best["restart"]) if best is not None else 0
+    return CMAResult(evaluations, spreads[restart])
+
+
+def _numbered(parts: List[pd.DataFrame]) -> pd.DataFrame:
+    table = pd.concat(parts, ignore_index=True)
+    table.insert(0, "evaluation", np.arange(len(table)))
+    return table
+
+
+def best_row(evaluations: pd.DataFrame) -> Optional[pd.Series]:
+    """The evaluation with the smallest finite objective (the first of ties), or None."""
+    finite = evaluations[np.isfinite(evaluations["objective"].astype(float))]
+    return None if finite.empty else finite.loc[finite["objective"].idxmin()]
 
 
 # --------------------------------------------------------------------------- the objective
@@ -251,7 +426,7 @@ def evaluate_points(box: Sequence[ParameterRange], unit_points, base: StarParams
                       np.nan)
     speed = np.where(ok, summary["speed_mm_s"].to_numpy(dtype=float).reshape(shape), np.nan)
     wrong = ok & (np.sign(signed) != measurements["paper_sign"].to_numpy())
-    table = pd.DataFrame({f"u_{s.name}": unit_points[:, d] for d, s in enumerate(box)})
+    table = pd.DataFrame({f"u_{s.key}": unit_points[:, d] for d, s in enumerate(box)})
     for d, spec in enumerate(box):
         table[spec.column] = values[:, d]
     table["objective"] = objective_values(signed, measurements)

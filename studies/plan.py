@@ -4,26 +4,32 @@ motion primitives, open loop (a plan made at the start, fired blindly) and close
 
     python -m studies plan [--primitives CSV] [--distance 50] [--directions 8] [--far 150]
                            [--tolerance 5] [--max-cycles 25] [--cycles 5]
-                           [--preset paper|accurate] [--set NAME=VALUE ...] [--dt S]
+                           [--glide-cycles 4] [--settle-cycles 4]
+                           [--preset paper|accurate|identified] [--set NAME=VALUE ...] [--dt S]
                            [--arch cpu|gpu] [--out DIR] [--quick]
 
 Goals: --directions points at --distance mm in every direction (0°, 45°, ... for 8), plus one
 --far mm straight behind the robot (0: none). The primitive table is read from --primitives
 (a `python -m studies primitives` CSV made with the same period and step) or measured first
-(--cycles cycles from rest, statistics from the second cycle on).
+(--cycles cycles from rest, statistics from the second cycle on, and each gait's glide after
+its last firing over --glide-cycles cycles). The planner plans for the glide (it stops firing
+when the robot would coast to rest within the tolerance; primitives without glide columns:
+no glide), and after the last controller stops the robots coast --settle-cycles cycles: a goal
+is judged by where the robot comes to rest.
 
 Writes into --out (default a fresh runs/plan/<timestamp>/), each CSV with its provenance
 sidecar (`.csv.json`):
-- `plan.csv`: per goal and controller (`taichi_star.planner.PLAN_COLUMNS`): reached,
-  cycles_to_goal, cycles_fired, final_error_mm (when the controller stopped), end_error_mm
-  (when the batch stopped: the robot glides on after its last firing), status;
+- `plan.csv`: per goal and controller (`taichi_star.planner.PLAN_COLUMNS`): reached (at
+  rest within the tolerance), cycles_to_goal, cycles_fired, final_error_mm (when the
+  controller stopped, still gliding), end_error_mm (at rest), status;
 - `plan_gain.csv`: open against closed loop: goals reached, mean and largest final error,
   mean cycles to the goal where both reached it;
 - `plan_cycles.csv`: the state at each cycle boundary, the gait fired and the model's
   prediction; `plan_paths.csv`: the centroid paths;
 - `primitives.csv` when measured here; `plan.png`: the paths, drawn from the CSVs.
 
---quick: dt = 5 ms, 2 cycles of primitives, at most 2 cycles of driving.
+--quick: dt = 5 ms, 2 cycles of primitives and one of glide, at most 2 cycles of driving and
+one of settling.
 """
 
 from __future__ import annotations
@@ -33,9 +39,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from taichi_star.planner import (PrimitiveModel, check_drive, closed_loop_gain, default_goals,
-                                 drive)
-from taichi_star.primitives import measure_primitives
+from taichi_star.planner import (SETTLE_CYCLES, PrimitiveModel, check_drive, closed_loop_gain,
+                                 default_goals, drive)
+from taichi_star.primitives import GLIDE_CYCLES, measure_primitives
 
 from . import cli
 
@@ -44,6 +50,7 @@ DESCRIPTION = ("Drive the robot to goal points by choosing a gait per cycle from
 QUICK_DT = 5e-3
 QUICK_CYCLES = 2
 QUICK_MAX_CYCLES = 2
+QUICK_GLIDE_CYCLES = QUICK_SETTLE_CYCLES = 1
 PRIMITIVES_FIRST_CYCLE = 1
 """Primitives measured here: statistics from the second cycle on."""
 
@@ -107,6 +114,13 @@ def build_parser():
                         help="cycle budget per goal")
     parser.add_argument("--cycles", type=int, default=5, quick=QUICK_CYCLES,
                         help="cycles of the primitive measurement when no --primitives is given")
+    parser.add_argument("--glide-cycles", type=int, default=GLIDE_CYCLES,
+                        quick=QUICK_GLIDE_CYCLES,
+                        help="cycles of coasting of the glide measurement when no --primitives "
+                             "is given (0: plan without glide)")
+    parser.add_argument("--settle-cycles", type=int, default=SETTLE_CYCLES,
+                        quick=QUICK_SETTLE_CYCLES,
+                        help="cycles the robots coast to rest after the last controller stops")
     return parser
 
 
@@ -135,6 +149,8 @@ def main(argv=None):
     args = cli.parse(build_parser(), argv)
     for value, flag, lowest in ((args.max_cycles, "--max-cycles", 1),
                                 (args.cycles, "--cycles", 2),
+                                (args.glide_cycles, "--glide-cycles", 0),
+                                (args.settle_cycles, "--settle-cycles", 0),
                                 (args.directions, "--directions", 0)):
         if value < lowest:
             raise cli.StudyArgumentError(f"{flag} must be >= {lowest}, got {value}")
@@ -148,7 +164,8 @@ def main(argv=None):
     solver = cli.solver(args)
     goals = default_goals(args.distance, args.directions, args.far or None)
     try:
-        check_drive(goals, base, solver, args.tolerance, args.max_cycles)
+        check_drive(goals, base, solver, args.tolerance, args.max_cycles,
+                    settle_cycles=args.settle_cycles)
     except ValueError as error:
         raise cli.StudyArgumentError(f"--dt, --set period: {error}") from None
     if args.primitives is not None:
@@ -156,16 +173,19 @@ def main(argv=None):
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver,
                      extra={"tolerance_mm": args.tolerance, "max_cycles": args.max_cycles,
+                            "settle_cycles": args.settle_cycles,
                             "primitives": args.primitives or "measured in this run"})
     if args.primitives is None:
         primitives, _ = measure_primitives(base, solver, cycles=args.cycles,
                                            first_cycle=PRIMITIVES_FIRST_CYCLE, arch=args.arch,
-                                           progress=not args.no_progress)
+                                           progress=not args.no_progress,
+                                           glide_cycles=args.glide_cycles)
         out.write_csv(primitives, "primitives.csv")
         model = PrimitiveModel.from_table(primitives)
     summary, per_cycle, path = drive(model, goals, base, solver,
                                      tolerance_mm=args.tolerance, max_cycles=args.max_cycles,
-                                     arch=args.arch, progress=not args.no_progress)
+                                     arch=args.arch, progress=not args.no_progress,
+                                     settle_cycles=args.settle_cycles)
     gain = pd.DataFrame([closed_loop_gain(summary)])
     plan_csv = out.write_csv(summary, "plan.csv")
     out.write_csv(gain, "plan_gain.csv")

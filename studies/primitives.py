@@ -1,20 +1,25 @@
 """Motion primitives: every gait's steady per-cycle step in the body frame and its turn per
 cycle, from one batch of the 29 symmetry-class representatives expanded to the 255 gaits.
 
-    python -m studies primitives [--cycles 5] [--first-cycle 1] [--preset paper|accurate]
-                                 [--set NAME=VALUE ...] [--dt S] [--arch cpu|gpu]
-                                 [--out DIR] [--quick]
+    python -m studies primitives [--cycles 5] [--first-cycle 1] [--glide-cycles 4]
+                                 [--preset paper|accurate|identified] [--set NAME=VALUE ...]
+                                 [--dt S] [--arch cpu|gpu] [--out DIR] [--quick]
 
 Writes into --out (default a fresh runs/primitives/<timestamp>/), each CSV with its provenance
 sidecar (`.csv.json`):
 - `primitives.csv`: one row per gait (`taichi_star.primitives.PRIMITIVE_COLUMNS`): mean step
   (mm per cycle, body frame) and its spread, length and direction, mean turn per cycle and its
-  spread, over cycles first_cycle..cycles-1 (0-based; default 1..4, i.e. cycles 2-5);
+  spread, over cycles first_cycle..cycles-1 (0-based; default 1..4, i.e. cycles 2-5); and,
+  with --glide-cycles > 0, the glide after the gait's last firing
+  (`taichi_star.primitives.measure_glides`: --cycles firings from rest, then --glide-cycles
+  cycles of coasting; glide_x/glide_y_mm in the body frame, glide_turn_deg), which the planner
+  plans for;
 - `primitives_cycles.csv`: every gait's per-cycle steps and turns;
 - `primitives.png`: the primitives in polar form (direction, step length), coloured by turn,
   drawn from primitives.csv.
 
---quick: 2 cycles at dt = 5 ms (statistics over cycle 2 alone; spreads NaN).
+--quick: 2 cycles at dt = 5 ms (statistics over cycle 2 alone; spreads NaN), a glide of one
+cycle.
 """
 
 from __future__ import annotations
@@ -24,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from taichi_star.primitives import check_measurement, measure_primitives
+from taichi_star.primitives import GLIDE_CYCLES, check_measurement, measure_primitives
 
 from . import cli
 
@@ -32,6 +37,7 @@ DESCRIPTION = ("Every gait's steady per-cycle step (body frame) and turn, from o
                "the 29 symmetry classes expanded to 255 gaits; CSV and a polar plot.")
 QUICK_CYCLES = 2
 QUICK_DT = 5e-3
+QUICK_GLIDE_CYCLES = 1
 
 
 def plot_primitives(csv_path, png_path) -> Path:
@@ -70,11 +76,17 @@ def build_parser():
                         help="actuation cycles from rest")
     parser.add_argument("--first-cycle", type=int, default=1,
                         help="first cycle (0-based) of the statistics (default 1: cycles 2..)")
+    parser.add_argument("--glide-cycles", type=int, default=GLIDE_CYCLES,
+                        quick=QUICK_GLIDE_CYCLES,
+                        help="cycles of coasting over which each gait's glide after its last "
+                             "firing is measured (0: none)")
     return parser
 
 
 def main(argv=None):
     args = cli.parse(build_parser(), argv)
+    if args.glide_cycles < 0:
+        raise cli.StudyArgumentError(f"--glide-cycles must be >= 0, got {args.glide_cycles}")
     if not 0 <= args.first_cycle < args.cycles:
         raise cli.StudyArgumentError(f"--first-cycle must be in [0, --cycles - 1 = "
                                      f"{args.cycles - 1}], got {args.first_cycle}")
@@ -86,10 +98,12 @@ def main(argv=None):
         raise cli.StudyArgumentError(f"--dt, --set period: {error}") from None
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"cycles": args.cycles,
-                                           "first_cycle": args.first_cycle})
+                                           "first_cycle": args.first_cycle,
+                                           "glide_cycles": args.glide_cycles})
     table, per_cycle = measure_primitives(base, solver, cycles=args.cycles,
                                           first_cycle=args.first_cycle, arch=args.arch,
-                                          progress=not args.no_progress)
+                                          progress=not args.no_progress,
+                                          glide_cycles=args.glide_cycles)
     csv = out.write_csv(table, "primitives.csv")
     out.write_csv(per_cycle, "primitives_cycles.csv")
     out.wrote(plot_primitives(csv, out.path("primitives.png")))

@@ -40,6 +40,7 @@ import pandas as pd
 
 from taichi_star import SolverConfig
 from taichi_star.batch import run_batch
+from taichi_star.extras import require
 from taichi_star.output import column_unit
 
 from . import cli, identify
@@ -80,7 +81,7 @@ BOOTSTRAP_RESAMPLES = 200
 def saltelli_units(dimension: int, base_samples: int, seed: int) -> np.ndarray:
     """Saltelli's sample of the unit cube for first-order and total indices:
     (base_samples × (dimension + 2), dimension), scrambled Sobol' sequence seeded by `seed`."""
-    from SALib.sample import sobol as sobol_sample
+    sobol_sample = require("SALib.sample.sobol", "studies")
     problem = {"num_vars": dimension, "names": [f"u{d}" for d in range(dimension)],
                "bounds": [[0.0, 1.0]] * dimension}
     return sobol_sample.sample(problem, base_samples, calc_second_order=False, seed=seed)
@@ -93,7 +94,7 @@ def sobol_indices(names: Sequence[str], outputs: Mapping[str, np.ndarray],
     output name (e.g. a gait) to an array (N (D + 2),). Returns one row per output × input
     (columns output, parameter, S1, S1_conf, ST, ST_conf, n_failed); an output with a non-finite
     value gets NaN indices and its count of such values in n_failed."""
-    from SALib.analyze import sobol
+    sobol = require("SALib.analyze.sobol", "studies")
     problem = {"num_vars": len(names), "names": list(names),
                "bounds": [[0.0, 1.0]] * len(names)}
     rows = []

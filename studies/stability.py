@@ -54,6 +54,7 @@ import pandas as pd
 
 from taichi_star import SolverConfig, StarParams
 from taichi_star.batch import run_batch
+from taichi_star import metrics
 from taichi_star.metrics import shape_checks
 
 from . import cli
@@ -266,8 +267,9 @@ def _speed_difference(table: pd.DataFrame) -> pd.DataFrame:
     stable = both["outcome_f32"].isin(STABLE) & both["outcome_f64"].isin(STABLE)
     difference = (both["speed_mm_s_f32"] - both["speed_mm_s_f64"]).abs()
     both["speed_diff_mm_s"] = np.where(stable, difference, np.nan)
-    reference = np.maximum(both["speed_mm_s_f64"].abs(), SPEED_FLOOR_MM_S)
-    both["rel_speed_diff"] = np.where(stable, difference / reference, np.nan)
+    relative = metrics.speed_error(both["speed_mm_s_f32"], both["speed_mm_s_f64"],
+                                   floor_mm_s=SPEED_FLOOR_MM_S)
+    both["rel_speed_diff"] = np.where(stable, relative, np.nan)
     return both
 
 

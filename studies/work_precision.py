@@ -9,7 +9,8 @@ Models: "undamped" = `StarParams.preset("paper")` (no damping, clamped actuator 
 limb-stiff joints; its preset mesh n_arc 18) and "damped" = `StarParams.preset("accurate")`
 (damping time 0.94 ms, series joints, shared ends; n_arc 48), with n_arc varied.
 
-Speed error of a run against a reference: |v − v_ref| / max(|v_ref|, 0.5 mm/s), v the signed
+Speed error of a run against a reference (`taichi_star.metrics.speed_error`):
+|v − v_ref| / max(|v_ref|, 0.5 mm/s), v the signed
 speed over `--cycles` cycles from rest (mm/s), so that a near-cancelling gait (A1 ≈ 0.1 mm/s)
 is judged on an absolute 5 µm/s at 1 %. A configuration's error is the largest over the gaits
 (NaN when an instance failed).
@@ -68,7 +69,7 @@ import numpy as np
 import pandas as pd
 
 import taichi_star
-from taichi_star import SolverConfig, StarParams
+from taichi_star import SolverConfig, StarParams, metrics
 
 from . import cli, provenance
 
@@ -77,8 +78,6 @@ DESCRIPTION = ("Work–precision: time-step and discretisation errors of the fiv
 
 MODEL_PRESETS = {"undamped": "paper", "damped": "accurate"}
 """Model -> the StarParams preset that defines its physics (and its preset mesh)."""
-SPEED_FLOOR_MM_S = 0.5
-"""Smallest speed scale of the error metric, mm/s."""
 MIN_ORDER = 1.0
 """Smallest order a Richardson extrapolation uses."""
 REFINEMENT = 2.0
@@ -215,31 +214,18 @@ def configurations(grid: Grid):
 
 # --------------------------------------------------------------------------- errors, references
 
-def speed_error(speed, reference):
-    """|v − v_ref| / max(|v_ref|, SPEED_FLOOR_MM_S), speeds in mm/s (arrays broadcast)."""
-    reference = np.asarray(reference, dtype=float)
-    return np.abs(np.asarray(speed, dtype=float) - reference) / np.maximum(
-        np.abs(reference), SPEED_FLOOR_MM_S)
-
-
 def observed_order(coarse, middle, fine) -> float:
     """Observed order of a ladder (levels refined by REFINEMENT) from its three finest levels'
-    speeds (arrays over the gaits): log(max|v_c − v_m| / max|v_m − v_f|) / log(REFINEMENT)."""
+    speeds (arrays over the gaits), pooled over the gaits: `metrics.observed_order` of the
+    largest change between the coarser pair and the largest between the finer pair."""
     coarse_change = np.max(np.abs(np.asarray(coarse) - np.asarray(middle)))
     fine_change = np.max(np.abs(np.asarray(middle) - np.asarray(fine)))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return float(np.log(coarse_change / fine_change) / np.log(REFINEMENT))
+    return float(metrics.observed_order(coarse_change, fine_change, REFINEMENT))
 
 
 def order_used(observed: float) -> float:
     """The order a Richardson extrapolation uses: the observed one, at least MIN_ORDER."""
     return observed if observed >= MIN_ORDER else MIN_ORDER
-
-
-def richardson_limit(middle, fine, order: float):
-    """v_f + (v_f − v_m) / (REFINEMENT^order − 1)."""
-    fine = np.asarray(fine, dtype=float)
-    return fine + (fine - np.asarray(middle, dtype=float)) / (REFINEMENT ** order - 1.0)
 
 
 def ladder_reference(model, ladder, levels, speeds, gaits):
@@ -248,16 +234,16 @@ def ladder_reference(model, ladder, levels, speeds, gaits):
     coarse, middle, fine = speeds
     observed = observed_order(coarse, middle, fine)
     used = order_used(observed)
-    limit = richardson_limit(middle, fine, used)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        gait_orders = np.log(np.abs(coarse - middle) / np.abs(middle - fine)) / np.log(REFINEMENT)
+    limit = metrics.richardson_limit(middle, fine, used, REFINEMENT)
+    gait_orders = metrics.observed_order(np.abs(coarse - middle), np.abs(middle - fine),
+                                         REFINEMENT)
     return pd.DataFrame({
         "model": model, "ladder": ladder, "gait": gaits,
         "refined": "h_ms" if ladder == "time" else "n_arc",
         "coarse": levels[0], "middle": levels[1], "fine": levels[2],
         "coarse_speed_mm_s": coarse, "middle_speed_mm_s": middle, "fine_speed_mm_s": fine,
         "gait_order": gait_orders, "observed_order": observed, "order_used": used,
-        "limit_mm_s": limit, "fine_error": speed_error(fine, limit)})
+        "limit_mm_s": limit, "fine_error": metrics.speed_error(fine, limit)})
 
 
 def references(speeds, grid: Grid, gaits):
@@ -361,7 +347,8 @@ def add_errors(table: pd.DataFrame, refs: pd.DataFrame, gaits) -> pd.DataFrame:
                           for model, gait, series in
                           table[["model", "gait", "series"]].itertuples(index=False)])
         table[f"{ladder}_limit_mm_s"] = limit
-        table[error] = np.where(failed, math.nan, speed_error(table["signed_speed_mm_s"], limit))
+        table[error] = np.where(failed, math.nan,
+                                metrics.speed_error(table["signed_speed_mm_s"], limit))
     return table
 
 

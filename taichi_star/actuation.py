@@ -8,6 +8,7 @@ over the period so that a periodic gait has a continuous natural curvature.
 
 from __future__ import annotations
 
+import ast
 import math
 from dataclasses import dataclass
 from typing import Tuple
@@ -46,6 +47,27 @@ class CurvatureProfile:
         if not self.rest_curvature > 0:
             raise ValueError(f"CurvatureProfile: K̄(0) must be > 0 1/m (the rest arc), got "
                              f"{self.rest_curvature!r}")
+
+    def to_text(self) -> str:
+        """The profile as one line of text, its repr (every constant to the last bit), which
+        `from_text` reads back; how result tables store it."""
+        return repr(self)
+
+    @classmethod
+    def from_text(cls, text: str) -> "CurvatureProfile":
+        """The profile written by `to_text` ("CurvatureProfile(heating=(...), cooling=(...),
+        switch_time=...)"); ValueError naming actuator_profile for any other text."""
+        try:
+            call = ast.parse(str(text).strip(), mode="eval").body
+            if not (isinstance(call, ast.Call) and isinstance(call.func, ast.Name)
+                    and call.func.id == cls.__name__ and not call.args):
+                raise ValueError
+            values = {keyword.arg: ast.literal_eval(keyword.value) for keyword in call.keywords}
+            return cls(**values)
+        except (SyntaxError, ValueError, TypeError):
+            raise ValueError(f"actuator_profile: {str(text)[:80]!r} is not a profile's text "
+                             f"(CurvatureProfile(heating=(4 numbers), cooling=(4 numbers), "
+                             f"switch_time=number))") from None
 
     def as_array(self) -> np.ndarray:
         """The nine constants (c1a..c4a, c1d..c4d, t0) in the order the kernels read them."""

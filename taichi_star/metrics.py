@@ -9,6 +9,7 @@ directions from their rest angles. Lengths in mm and times in s in every returne
 
 from __future__ import annotations
 
+import math
 from typing import Dict, Optional, Sequence
 
 import numpy as np
@@ -104,6 +105,45 @@ def cycle_window_speeds(boundary_centroids_m: np.ndarray, periods: np.ndarray, g
         speed[rows] = np.hypot(delta[:, 0], delta[:, 1]) / span
         signed[rows] = (delta * forward_directions([gaits[r] for r in rows])).sum(axis=1) / span
     return {"steady_speed_mm_s": speed, "steady_signed_speed_mm_s": signed}
+
+
+# --------------------------------------------------------------------------- errors, extrapolation
+
+SPEED_ERROR_FLOOR_MM_S = 0.5
+"""Smallest speed scale of `speed_error`, mm/s (the design's §3): a relative error against a
+near-zero reference would be a ratio of round-off."""
+
+
+def speed_error(speed_mm_s, reference_mm_s, floor_mm_s: float = SPEED_ERROR_FLOOR_MM_S):
+    """|v − v_ref| / max(|v_ref|, floor), speeds in mm/s (arrays broadcast; NaN stays NaN).
+    The default floor is the design's 0.5 mm/s; floor_mm_s = 0 gives the plain relative error
+    |v − v_ref| / |v_ref|. ValueError for a negative or non-finite floor."""
+    if not (math.isfinite(floor_mm_s) and floor_mm_s >= 0):
+        raise ValueError(f"floor_mm_s must be a finite number >= 0, got {floor_mm_s!r}")
+    reference = np.asarray(reference_mm_s, dtype=np.float64)
+    return np.abs(np.asarray(speed_mm_s, dtype=np.float64) - reference) / np.maximum(
+        np.abs(reference), floor_mm_s)
+
+
+def observed_order(coarse_change, fine_change, refinement: float = 2.0):
+    """Observed order of convergence of a ladder refined by `refinement` per level, from the
+    change between its two coarser levels and the change between its two finer ones (arrays
+    broadcast): log(coarse_change / fine_change) / log(refinement). NaN where the changes
+    differ in sign or one is zero (no monotone convergence to read an order from)."""
+    coarse_change = np.asarray(coarse_change, dtype=np.float64)
+    fine_change = np.asarray(fine_change, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        order = np.log(coarse_change / fine_change) / np.log(refinement)
+    return np.where(coarse_change * fine_change > 0, order, np.nan)
+
+
+def richardson_limit(middle, fine, order, refinement: float = 2.0):
+    """Richardson extrapolation of a quantity computed on two levels refined by `refinement`,
+    its error ∝ (level size)^order: v_f + (v_f − v_m) / (refinement^order − 1) (arrays
+    broadcast; NaN where the order is NaN)."""
+    fine = np.asarray(fine, dtype=np.float64)
+    return fine + (fine - np.asarray(middle, dtype=np.float64)) / (refinement ** np.asarray(
+        order, dtype=np.float64) - 1.0)
 
 
 # --------------------------------------------------------------------------- shape checks

@@ -44,10 +44,10 @@ class BatchModel:
 
 
 def validate_batch(params) -> Tuple[StarParams, ...]:
-    """The batch as a tuple. Raises ValueError for an empty batch, a non-StarParams entry or
-    instances whose topology (n_arc, n_limb) differs."""
+    """The batch as a tuple (a single StarParams is a batch of one). Raises ValueError for an
+    empty batch, a non-StarParams entry or instances whose topology (n_arc, n_limb) differs."""
     if isinstance(params, StarParams):
-        raise ValueError("params must be a sequence of StarParams (wrap a single one in a list)")
+        return (params,)
     if params is None or isinstance(params, (str, bytes)) or not hasattr(params, "__iter__"):
         raise ValueError(f"params must be a sequence of StarParams, got {type(params).__name__}")
     params = tuple(params)

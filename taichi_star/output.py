@@ -1,16 +1,28 @@
-"""Labelled data and video of a SimulationResult: an xarray Dataset (netCDF) and an animation
-of the recorded shapes (MP4 through imageio-ffmpeg, or GIF)."""
+"""Files and video of a SimulationResult: CSV (with a JSON sidecar), Parquet and netCDF (an
+xarray Dataset), each carrying the same provenance (`provenance`), written whole or not at all;
+and an animation of the recorded shapes (MP4 through imageio-ffmpeg, or GIF)."""
 
 from __future__ import annotations
 
+import dataclasses
+import datetime
+import json
+import platform
+import tempfile
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import Mapping, Optional, Sequence
 
 import numpy as np
 import pandas as pd
 
+from .extras import require
 from .geometry import CENTRE
 from .params import PARAMETER_UNITS, StarParams, parameter_column
+from .provenance import code_version, write_atomic
+
+PROVENANCE_KEY = "taichi_star"
+"""Key of the provenance in a Parquet file's schema metadata (JSON)."""
+TABLES = ("summary", "trajectory")
 
 UNITS = {"_per_wall_s": "1/s", "_per_s": "1/s", "_gb_s": "GB/s", "_mm_s": "mm/s", "_mm": "mm",
          "_deg": "degree", "_ms": "ms", "_us": "us", "_s": "s", "_m": "m"}
@@ -34,19 +46,129 @@ def column_units(columns) -> dict:
     return {name: column_unit(name) for name in columns if column_unit(name)}
 
 
+def provenance(result) -> dict:
+    """What produced `result`, as the studies' CSV sidecars record it: taichi_star_version,
+    git_commit, git_dirty; solver (every SolverConfig field); parameters (the StarParams
+    fields equal across the instances, by field name) and varying_parameters (the fields that
+    differ, whose values are in the table's columns); units of the summary's columns; Taichi
+    and Python versions; date."""
+    import taichi
+
+    code = code_version()
+    summary = result.summary
+    parameters, varying = {}, []
+    for name, column in StarParams.columns().items():
+        if column not in summary:
+            continue
+        if len(summary) and summary[column].nunique(dropna=False) == 1:
+            value = summary[column].iloc[0]
+            parameters[name] = value.item() if isinstance(value, np.generic) else value
+        else:
+            varying.append(name)
+    version = taichi.__version__
+    return {"taichi_star_version": code["version"], "git_commit": code["commit"],
+            "git_dirty": code["dirty"], "solver": dataclasses.asdict(result.solver),
+            "parameters": parameters, "varying_parameters": varying,
+            "units": column_units(summary.columns),
+            "taichi_version": ".".join(map(str, version)) if isinstance(version, (tuple, list))
+            else str(version),
+            "python_version": platform.python_version(),
+            "date": datetime.datetime.now().astimezone().isoformat(timespec="seconds")}
+
+
+def _table(result, table: str) -> pd.DataFrame:
+    if table not in TABLES:
+        raise ValueError(f"table must be one of {list(TABLES)}, got {table!r}")
+    return getattr(result, table)
+
+
+def parquet_bytes(frame: pd.DataFrame, metadata: Mapping) -> bytes:
+    """`frame` as a Parquet file (typed columns, every float bit for bit) with `metadata` as
+    JSON under the schema metadata key "taichi_star". Values Parquet has no type for (objects
+    other than text) are stored as their text."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    frame = frame.assign(**{column: frame[column].map(str) for column in frame.columns
+                            if frame[column].dtype == object
+                            and not frame[column].map(lambda v: isinstance(v, str)).all()})
+    table = pa.Table.from_pandas(frame, preserve_index=False)
+    schema_metadata = {**(table.schema.metadata or {}),
+                       PROVENANCE_KEY.encode(): json.dumps(metadata, default=str).encode()}
+    sink = pa.BufferOutputStream()
+    pq.write_table(table.replace_schema_metadata(schema_metadata), sink)
+    return sink.getvalue().to_pybytes()
+
+
+def to_parquet(result, path, table: str = "summary") -> Path:
+    """Write the result's `table` ("summary" or "trajectory") as Parquet, whole or not at all,
+    its `provenance` in the file's metadata (`read_provenance`). Returns the path."""
+    frame = _table(result, table)
+    write_atomic(path, parquet_bytes(frame, provenance(result)))
+    return Path(path)
+
+
+def to_csv(result, path, table: str = "summary") -> Path:
+    """Write the result's `table` as CSV (floats to the last bit: pandas' `read_csv` gives them
+    back exactly) and its `provenance` as the JSON sidecar `<path>.json`, each whole or not
+    at all. Returns the path."""
+    frame = _table(result, table)
+    write_atomic(path, frame.to_csv(index=False).encode())
+    write_atomic(f"{path}.json", (json.dumps(provenance(result), indent=2, default=str)
+                                  + "\n").encode())
+    return Path(path)
+
+
+def to_netcdf(result, path) -> Path:
+    """Write `to_xarray(result)` as a netCDF file, whole or not at all. Returns the path."""
+    require("netCDF4", "io")
+    dataset = to_xarray(result)
+    with tempfile.TemporaryDirectory(dir=Path(path).parent) as folder:
+        scratch = Path(folder) / "result.nc"
+        dataset.to_netcdf(scratch)
+        write_atomic(path, scratch.read_bytes())
+    return Path(path)
+
+
+def read_provenance(path) -> dict:
+    """The provenance written with a result file: from a Parquet file's metadata, a netCDF
+    file's attributes (`provenance`) or a CSV file's sidecar."""
+    path = Path(path)
+    if path.suffix == ".parquet":
+        import pyarrow.parquet as pq
+
+        return json.loads(pq.read_schema(path).metadata[PROVENANCE_KEY.encode()])
+    if path.suffix == ".nc":
+        xr = require("xarray", "io")
+        with xr.open_dataset(path) as dataset:
+            return json.loads(dataset.attrs["provenance"])
+    return json.loads(Path(f"{path}.json").read_text())
+
+
+def summary_of_dataset(dataset) -> pd.DataFrame:
+    """The per-instance table of a `to_xarray` Dataset (or one read from netCDF): every
+    variable and coordinate along `instance` alone, as columns; `StarParams.from_row` reads
+    its rows."""
+    names = [name for name in [*dataset.coords, *dataset.data_vars]
+             if dataset[name].dims == ("instance",) and name != "instance"]
+    return pd.DataFrame({name: dataset[name].to_numpy() for name in names})
+
+
 def to_xarray(result):
     """The result as an xarray Dataset: per instance (dim `instance`) every summary column, the
     parameters as coordinates; per record (dims `instance`, `time`) the centroid and heading;
     with recorded shapes, `positions` (time, instance, node, xy) in m. Every variable carries a
-    `units` attribute."""
-    import xarray as xr
+    `units` attribute; the dataset's attributes hold the `provenance` as JSON (`provenance`)
+    and its main entries one by one (taichi_star_version, git_commit, git_dirty, the solver's
+    integrator, dt_s, adaptive, precision)."""
+    xr = require("xarray", "io")
 
     summary = result.summary.reset_index(drop=True)
     parameter_columns = set(StarParams.columns().values())
     instances = np.arange(len(summary))
     coordinates = {"instance": instances}
     variables = {}
-    for name in summary.columns.drop("actuator_profile"):
+    for name in summary.columns:
         values = summary[name].to_numpy()
         if values.dtype == object or pd.api.types.is_string_dtype(summary[name]):
             values = summary[name].astype(str).to_numpy()
@@ -66,24 +188,37 @@ def to_xarray(result):
         coordinates["xy"] = ["x", "y"]
         variables["positions"] = (("time", "instance", "node", "xy"), result.shapes, {"units": "m"})
     dataset = xr.Dataset(variables, coords=coordinates)
-    dataset.attrs.update({"integrator": result.solver.integrator, "dt_s": result.solver.dt,
+    facts = provenance(result)
+    dataset.attrs.update({"provenance": json.dumps(facts, default=str),
+                          "taichi_star_version": facts["taichi_star_version"],
+                          "git_commit": facts["git_commit"] or "unknown",
+                          "git_dirty": str(facts["git_dirty"]).lower(),
+                          "integrator": result.solver.integrator, "dt_s": result.solver.dt,
                           "adaptive": int(result.solver.adaptive),
                           "precision": result.solver.precision})
     return dataset
 
 
 def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str = "world",
-            fps: int = 15, size_px: int = 720):
-    """Write the recorded shapes of some instances (default: all, up to 16) as an animation:
-    MP4 (through imageio-ffmpeg's ffmpeg) for a `.mp4` path, GIF for `.gif`. `frame` "world"
-    (lab axes, the centroid's path drawn) or "body" (following the centroid and the body's
-    rotation). Returns the path. Raises ValueError without recorded shapes, for an unknown
-    frame or suffix, or for instances out of range."""
-    import matplotlib
+            fps: int = 15, size_px: int = 720, title: Optional[str] = None):
+    """Write the recorded shapes of some instances (default: all, up to 16; one panel each) as
+    an animation: MP4 (through imageio-ffmpeg's ffmpeg) for a `.mp4` path, GIF for `.gif`.
+    Drawn with `taichi_star.drawing`: limbs brown, actuator arcs gray and red while they heat
+    (the first t0 = `CurvatureProfile.switch_time` s of each cycle, for the gait's actuators:
+    `simulate` fires them at 0, T, 2T, ...), labels A1..A8, the central cylinder and a scale
+    bar. `frame` "world" (lab axes, mm, with the centroid's path so far drawn in blue) or
+    "body" (following the hub and the body's rotation; no path). `title` heads the movie
+    (default none) above the time. Returns the path. Raises ValueError without recorded
+    shapes, for an unknown frame or suffix, or for instances out of range."""
+    matplotlib = require("matplotlib", "video")
+    require("PIL", "video")
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib import animation
+
+    from . import drawing
+    from .gait import Gait
 
     path = Path(path)
     if result.shapes is None or result.topology is None:
@@ -97,19 +232,30 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
     chosen = list(range(min(batch, 16))) if instances is None else [int(i) for i in instances]
     if not chosen or min(chosen) < 0 or max(chosen) >= batch:
         raise ValueError(f"instances must be in [0, {batch}), got {instances!r}")
+    topology = result.topology
     times = np.sort(result.trajectory["t_s"].unique())
     shapes = result.shapes[:, chosen] * 1e3  # mm
+    paths = None
     if frame == "body":
-        shapes = _body_frame(shapes, result.topology)
+        shapes = _body_frame(shapes, topology)
+    else:
+        # the trajectory is the centroid relative to its start; the rest shape is symmetric,
+        # so the start centroid is the hub's rest position
+        start = topology.rest_positions[CENTRE] * 1e3
+        paths = [result.trajectory[result.trajectory["instance"] == i].sort_values("t_s")
+                 [["x_mm", "y_mm"]].to_numpy() + start for i in chosen]
+    params = [StarParams.from_row(result.summary.iloc[i]) for i in chosen]
+    hot = [drawing.periodic_hot_actuators(times, p.gait_value.mask, p.period,
+                                          p.actuator_profile.switch_time) for p in params]
     columns = int(np.ceil(np.sqrt(len(chosen))))
     rows = int(np.ceil(len(chosen) / columns))
     inches = size_px / 100
     fig, axes = plt.subplots(rows, columns, figsize=(inches, inches * rows / columns), dpi=100,
                              squeeze=False)
-    edges = result.topology.edges
-    gaits = result.summary["gait"].to_numpy()
-    reach = np.nanmax(np.abs(shapes)) * 1.05
-    lines = []
+    low = np.nanmin(shapes, axis=(0, 1, 2))
+    high = np.nanmax(shapes, axis=(0, 1, 2))
+    centre, half = 0.5 * (low + high), 0.5 * float((high - low).max()) + 10.0
+    robots = []
     for slot, ax in enumerate(axes.ravel()):
         ax.set_aspect("equal")
         ax.set_xticks([])
@@ -117,23 +263,28 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
         if slot >= len(chosen):
             ax.axis("off")
             continue
-        ax.set_xlim(-reach, reach)
-        ax.set_ylim(-reach, reach)
-        ax.set_title(f"#{chosen[slot]} {gaits[chosen[slot]]}", fontsize=9)
-        lines.append(ax.plot([], [], color="tab:blue", lw=1.2)[0])
+        ax.set_xlim(centre[0] - half, centre[0] + half)
+        ax.set_ylim(centre[1] - half, centre[1] + half)
+        ax.set_title(f"#{chosen[slot]} {params[slot].gait}", fontsize=9)
+        drawing.add_scale_bar(ax, drawing.nice_length(2 * half))
+        robots.append(drawing.RobotArtist(ax, topology, params[slot].cylinder_diameter * 1e3,
+                                          labels=len(chosen) <= 4, path=frame == "world"))
     label = fig.suptitle("")
-    fig.tight_layout(rect=(0, 0, 1, 0.95))
+    fig.tight_layout(rect=(0, 0, 1, 0.94))
+    heading = f"{title}\n" if title else ""
 
     def draw(index):
-        for slot, line in enumerate(lines):
-            line.set_data(*_polyline(shapes[index, slot], edges))
-        label.set_text(f"t = {times[index]:.2f} s ({frame} frame, mm)")
-        return lines
+        artists = []
+        for slot, robot in enumerate(robots):
+            artists += robot.update(shapes[index, slot], hot[slot][index],
+                                    None if paths is None else paths[slot][:index + 1])
+        label.set_text(f"{heading}t = {times[index]:.2f} s ({frame} frame; red: actuators "
+                       f"heating)")
+        return artists
 
     movie = animation.FuncAnimation(fig, draw, frames=len(times), blit=False)
     if path.suffix.lower() == ".mp4":
-        import imageio_ffmpeg
-
+        imageio_ffmpeg = require("imageio_ffmpeg", "video")
         matplotlib.rcParams["animation.ffmpeg_path"] = imageio_ffmpeg.get_ffmpeg_exe()
         writer = animation.FFMpegWriter(fps=fps)
     else:
@@ -142,15 +293,6 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
     movie.save(path, writer=writer)
     plt.close(fig)
     return path
-
-
-def _polyline(points: np.ndarray, edges: np.ndarray):
-    """x, y arrays drawing every edge as a segment, NaN-separated (one Line2D for the robot)."""
-    segments = np.full((len(edges), 3, 2), np.nan)
-    segments[:, 0] = points[edges[:, 0]]
-    segments[:, 1] = points[edges[:, 1]]
-    flat = segments.reshape(-1, 2)
-    return flat[:, 0], flat[:, 1]
 
 
 def _body_frame(shapes_mm: np.ndarray, topology) -> np.ndarray:

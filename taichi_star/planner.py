@@ -2,14 +2,19 @@
 
 The model: a cycle of gait g moves the centroid by its mean body-frame step s_g (turned into
 the world by the heading θ at the cycle's start) and turns the body by its mean turn ω_g:
-p' = p + R(θ)·s_g, θ' = θ + ω_g (`PrimitiveModel.predict`). The choice
-(`PrimitiveModel.choose`) is a two-cycle lookahead: fire nothing once within the tolerance; else the gait that lands
-within it now, if one does (the closest such); else the first gait of the pair of cycles
-predicted to end closest to the goal.
+p' = p + R(θ)·s_g, θ' = θ + ω_g (`PrimitiveModel.predict`). A robot that stops firing after
+gait g glides on by its glide γ_g (body frame at the stop; 0 when the primitives hold none) to
+rest at p + R(θ)·γ_g. The choice (`PrimitiveModel.choose`) plans for the glide with a two-cycle
+lookahead on the rest positions: fire nothing once the robot would come to rest within the
+tolerance if it stopped now (given the gait it fired last); else the gait after which it would
+come to rest within it, if one does (the closest such); else the first gait of the pair of
+cycles whose rest position is closest to the goal.
 
 Two controllers run in one Simulator (`drive`): open loop plans every cycle from the model at
 the start and fires that plan blindly; closed loop re-plans each cycle from the simulated
-position and heading and stops firing once within the tolerance.
+position and heading and stops firing once its predicted rest is within the tolerance. After
+the last controller stops the batch coasts `settle_cycles` more cycles, and a goal is judged
+by where the robot comes to rest.
 """
 
 from __future__ import annotations
@@ -32,14 +37,12 @@ MODES = ("open", "closed")
 PLAN_COLUMNS = ["goal", "goal_x_mm", "goal_y_mm", "goal_distance_mm", "mode", "reached",
                 "cycles_to_goal", "cycles_fired", "final_error_mm", "end_error_mm", "run_cycles",
                 "status"]
-"""Columns of `drive`'s summary: reached (within the tolerance at a cycle boundary while its
-controller ran, the boundary where it stopped included); cycles_to_goal (the first such
-boundary, in cycles; NaN if never); cycles_fired (cycles with a firing); final_error_mm
-(distance to the goal when the controller stopped: closed loop at the first boundary within
-the tolerance, open loop at the end of its plan, either at the end of the cycle budget
-otherwise); end_error_mm (distance to the goal when the whole batch stopped, after
-run_cycles cycles: a robot that stopped earlier has glided on meanwhile, as it does for
-several cycles after its last firing); status of the instance."""
+"""Columns of `drive`'s summary: reached (at rest within the tolerance: end_error_mm ≤
+tolerance_mm, the instance ok); cycles_to_goal (the cycle at which its controller stopped
+firing, for a goal reached; NaN otherwise); cycles_fired (cycles with a firing);
+final_error_mm (distance to the goal when the controller stopped, the robot still gliding);
+end_error_mm (distance to the goal at rest: when the whole batch stopped, after run_cycles
+cycles, the last `settle_cycles` of them without any firing); status of the instance."""
 
 CYCLE_COLUMNS = ["goal", "mode", "cycle", "gait", "x_mm", "y_mm", "heading_deg",
                  "distance_mm", "predicted_x_mm", "predicted_y_mm"]
@@ -53,31 +56,40 @@ class PrimitiveModel:
     """The gaits a planner may fire, with their mean per-cycle body-frame step (mm) and turn
     (deg), plus "none" (no step, no turn).
 
-    gaits: G names; steps_mm: (G, 2); turns_deg: (G,)."""
+    gaits: G names; steps_mm: (G, 2); turns_deg: (G,); glides_mm: (G, 2) the body-frame glide
+    after a gait's last firing until rest (None: no glide)."""
 
-    def __init__(self, gaits: Sequence[str], steps_mm, turns_deg):
+    def __init__(self, gaits: Sequence[str], steps_mm, turns_deg, glides_mm=None):
         steps = np.asarray(steps_mm, dtype=np.float64)
         turns = np.asarray(turns_deg, dtype=np.float64)
         names = [Gait.parse(g).name for g in gaits]
-        if steps.shape != (len(names), 2) or turns.shape != (len(names),):
-            raise ValueError(f"steps_mm must be ({len(names)}, 2) and turns_deg "
-                             f"({len(names)},), got {steps.shape} and {turns.shape}")
-        if not (np.isfinite(steps).all() and np.isfinite(turns).all()):
-            raise ValueError("steps_mm and turns_deg must be finite")
+        glides = (np.zeros_like(steps) if glides_mm is None
+                  else np.asarray(glides_mm, dtype=np.float64))
+        if steps.shape != (len(names), 2) or turns.shape != (len(names),) \
+                or glides.shape != steps.shape:
+            raise ValueError(f"steps_mm and glides_mm must be ({len(names)}, 2) and turns_deg "
+                             f"({len(names)},), got {steps.shape}, {glides.shape} and "
+                             f"{turns.shape}")
+        if not (np.isfinite(steps).all() and np.isfinite(turns).all()
+                and np.isfinite(glides).all()):
+            raise ValueError("steps_mm, turns_deg and glides_mm must be finite")
         keep = [i for i, name in enumerate(names) if name != NO_GAIT]
         self.gaits = [NO_GAIT] + [names[i] for i in keep]
         self.steps_mm = np.vstack([np.zeros((1, 2)), steps[keep]])
+        self.glides_mm = np.vstack([np.zeros((1, 2)), glides[keep]])
         self.turns_rad = np.radians(np.concatenate([[0.0], turns[keep]]))
         self.masks = np.stack([Gait.parse(g).mask.astype(bool) for g in self.gaits])
 
     @classmethod
     def from_table(cls, table: pd.DataFrame) -> "PrimitiveModel":
         """From a primitive table (`taichi_star.primitives`): its ok gaits' step_x_mm,
-        step_y_mm and turn_deg."""
+        step_y_mm and turn_deg, and glide_x_mm, glide_y_mm where it has them."""
         usable = table[(table["status"] == "ok") & np.isfinite(table["step_x_mm"])
                        & np.isfinite(table["turn_deg"])]
+        glides = (usable[["glide_x_mm", "glide_y_mm"]].to_numpy()
+                  if {"glide_x_mm", "glide_y_mm"} <= set(table.columns) else None)
         return cls(list(usable["gait"]), usable[["step_x_mm", "step_y_mm"]].to_numpy(),
-                   usable["turn_deg"].to_numpy())
+                   usable["turn_deg"].to_numpy(), glides)
 
     def predict(self, position_mm: np.ndarray, heading_rad: np.ndarray, choice: np.ndarray):
         """The model's (position (B, 2) mm, heading (B,) rad) after one cycle of gait index
@@ -85,36 +97,57 @@ class PrimitiveModel:
         return (position_mm + rotate(self.steps_mm[choice], heading_rad),
                 heading_rad + self.turns_rad[choice])
 
+    def rest(self, position_mm: np.ndarray, heading_rad: np.ndarray, last: np.ndarray):
+        """Where robots at position (B, 2) mm with heading (B,) rad come to rest (mm) if they
+        stop firing now, having fired gait index `last` (B,) in the cycle before."""
+        return position_mm + rotate(self.glides_mm[last], heading_rad)
+
     def choose(self, position_mm: np.ndarray, heading_rad: np.ndarray, goal_mm: np.ndarray,
-               tolerance_mm: float) -> np.ndarray:
+               tolerance_mm: float, last: Optional[np.ndarray] = None) -> np.ndarray:
         """(B,) gait indices (0 = "none") for robots at position (B, 2) mm with heading (B,)
-        rad and goals (B, 2) mm (see the module docstring)."""
+        rad and goals (B, 2) mm, having fired gait index `last` (B,) in the cycle before
+        (None: nothing); see the module docstring."""
+        last = np.zeros(len(position_mm), dtype=np.int64) if last is None else np.asarray(last)
         choice = np.zeros(len(position_mm), dtype=np.int64)
+        stop_rest = self.rest(position_mm, heading_rad, last)
         for b in range(len(position_mm)):
             to_goal = goal_mm[b] - position_mm[b]
-            if math.hypot(*to_goal) <= tolerance_mm:
+            if math.hypot(*(goal_mm[b] - stop_rest[b])) <= tolerance_mm:
                 continue
-            # one cycle: (G, 2) world steps; two cycles: (G, G, 2)
+            # rest positions relative to now: after one cycle of gait g, (G, 2); after g then h,
+            # (G, G, 2); "none" first means stopping now
             first = rotate(self.steps_mm, heading_rad[b])
-            after_first = np.hypot(*(to_goal - first).T)
+            turned = heading_rad[b] + self.turns_rad
+            rest_first = first + rotate(self.glides_mm, turned)
+            rest_first[0] = stop_rest[b] - position_mm[b]
+            after_first = np.hypot(*(to_goal - rest_first).T)
             if after_first.min() <= tolerance_mm:
                 choice[b] = int(np.argmin(after_first))
                 continue
-            second = rotate(self.steps_mm[None, :, :],
-                             (heading_rad[b] + self.turns_rad)[:, None])
-            after_second = np.hypot(*np.moveaxis(to_goal - first[:, None, :] - second, -1, 0))
+            second = rotate(self.steps_mm[None, :, :], turned[:, None])
+            glide = rotate(self.glides_mm[None, :, :], (turned[:, None] + self.turns_rad[None]))
+            rest_second = first[:, None, :] + second + glide
+            rest_second[:, 0] = rest_first
+            rest_second[0, :] = rest_first[0]
+            after_second = np.hypot(*np.moveaxis(to_goal - rest_second, -1, 0))
             choice[b] = int(np.unravel_index(np.argmin(after_second), after_second.shape)[0])
         return choice
 
     def plan(self, goal_mm: np.ndarray, tolerance_mm: float, max_cycles: int) -> np.ndarray:
-        """Open-loop plans from the start (origin, heading 0): (B, max_cycles) gait indices,
-        0 once the model says the goal is reached."""
+        """Open-loop plans from the start (origin, heading 0, at rest): (B, max_cycles) gait
+        indices, 0 once the model says the robot will come to rest within the tolerance."""
         count = len(goal_mm)
         position, heading = np.zeros((count, 2)), np.zeros(count)
         plans = np.zeros((count, max_cycles), dtype=np.int64)
+        last = np.zeros(count, dtype=np.int64)
+        done = np.zeros(count, dtype=bool)
         for cycle in range(max_cycles):
-            plans[:, cycle] = self.choose(position, heading, goal_mm, tolerance_mm)
-            position, heading = self.predict(position, heading, plans[:, cycle])
+            choice = np.where(done, 0, self.choose(position, heading, goal_mm, tolerance_mm,
+                                                   last))
+            done |= choice == 0  # a plan that stops firing lets the robot come to rest
+            plans[:, cycle] = choice
+            position, heading = self.predict(position, heading, choice)
+            last = choice
         return plans
 
 
@@ -127,17 +160,26 @@ def default_goals(distance_mm: float = 50.0, count: int = 8,
     return goals if far_mm is None else np.vstack([goals, [[-far_mm, 0.0]]])
 
 
+SETTLE_CYCLES = 4
+"""Cycles without firing after the last controller stops, for the robots to come to rest (they
+glide for several cycles after their last firing; the primitives' glide is measured over as
+many, `primitives.GLIDE_CYCLES`)."""
+
+
 def check_drive(goals_mm, params: StarParams, solver: SolverConfig, tolerance_mm: float = 5.0,
-                max_cycles: int = 25, frames_per_cycle: int = 10) -> np.ndarray:
+                max_cycles: int = 25, frames_per_cycle: int = 10,
+                settle_cycles: int = SETTLE_CYCLES) -> np.ndarray:
     """The goals as a (G, 2) float array, or ValueError naming the argument unless `drive`
-    can run with these: finite goals, max_cycles an integer >= 1, tolerance_mm > 0, the
-    period and period / frames_per_cycle whole numbers of steps. No compute: a command line
-    checks its input with this before starting."""
+    can run with these: finite goals, max_cycles an integer >= 1, settle_cycles an integer
+    >= 0, tolerance_mm > 0, the period and period / frames_per_cycle whole numbers of steps.
+    No compute: a command line checks its input with this before starting."""
     goals = np.asarray(goals_mm, dtype=np.float64)
     if goals.ndim != 2 or goals.shape[1] != 2 or not len(goals) or not np.isfinite(goals).all():
         raise ValueError(f"goals_mm must be a finite (G, 2) array, got {goals_mm!r}")
     if isinstance(max_cycles, bool) or not isinstance(max_cycles, int) or max_cycles < 1:
         raise ValueError(f"max_cycles must be an integer >= 1, got {max_cycles!r}")
+    if isinstance(settle_cycles, bool) or not isinstance(settle_cycles, int) or settle_cycles < 0:
+        raise ValueError(f"settle_cycles must be an integer >= 0, got {settle_cycles!r}")
     if isinstance(tolerance_mm, bool) or not isinstance(tolerance_mm, numbers.Real) \
             or not math.isfinite(tolerance_mm) or tolerance_mm <= 0:
         raise ValueError(f"tolerance_mm must be a number > 0, got {tolerance_mm!r}")
@@ -152,16 +194,19 @@ def check_drive(goals_mm, params: StarParams, solver: SolverConfig, tolerance_mm
 def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
           solver: SolverConfig = SolverConfig(), tolerance_mm: float = 5.0,
           max_cycles: int = 25, frames_per_cycle: int = 10, arch: str = "cpu",
-          progress: bool = False):
+          progress: bool = False, settle_cycles: int = SETTLE_CYCLES):
     """Drive one robot per (goal, mode) in one Simulator, a gait per actuation cycle of
-    `params.period`, until every controller has stopped or max_cycles have run.
+    `params.period`, until every controller has stopped or max_cycles have run, then let the
+    robots coast `settle_cycles` cycles to rest; a goal is reached if the robot comes to rest
+    within tolerance_mm of it.
 
     goals_mm: (G, 2) goal points relative to the start (the robot starts at rest, heading 0).
     Returns (summary, cycles, path): `PLAN_COLUMNS`, `CYCLE_COLUMNS` and the centroid path
     (goal, mode, t_s, controlled (False once the controller has stopped), x_mm, y_mm)
     recorded frames_per_cycle times per cycle. ValueError for
     bad arguments (`check_drive`)."""
-    goals = check_drive(goals_mm, params, solver, tolerance_mm, max_cycles, frames_per_cycle)
+    goals = check_drive(goals_mm, params, solver, tolerance_mm, max_cycles, frames_per_cycle,
+                        settle_cycles)
     period = params.period
     goal_index = np.repeat(np.arange(len(goals)), len(MODES))
     modes = np.tile(MODES, len(goals))
@@ -175,8 +220,8 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
     stopped = np.zeros(len(target), dtype=bool)
     stop_cycle = np.full(len(target), max_cycles)
     final_error = np.full(len(target), np.nan)
-    reached_at = np.full(len(target), np.nan)
     fired = np.zeros(len(target), dtype=np.int64)
+    last = np.zeros(len(target), dtype=np.int64)
     predicted = np.zeros((len(target), 2))
     cycle_rows, paths = [], []
     for cycle in range(max_cycles + 1):
@@ -184,14 +229,11 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
         position = state[["centroid_x_mm", "centroid_y_mm"]].to_numpy()
         heading = np.radians(state["heading_deg"].to_numpy())
         distance = np.hypot(*(target - position).T)
-        # only while its controller runs: a robot that has stopped may still coast in
-        newly = ~stopped & np.isnan(reached_at) & (distance <= tolerance_mm)
-        reached_at[newly] = cycle
         if cycle == max_cycles:
             choice = np.zeros(len(target), dtype=np.int64)
         else:
-            choice = np.where(closed, model.choose(position, heading, target, tolerance_mm),
-                              plans[:, cycle])
+            choice = np.where(closed, model.choose(position, heading, target, tolerance_mm,
+                                                   last), plans[:, cycle])
         # a controller stops when it chooses nothing (closed loop: within the tolerance; open
         # loop: its plan is done) or the budget is spent; its error is taken then
         stopping = ~stopped & ((choice == 0) | (cycle == max_cycles) | ~simulator.ok)
@@ -208,6 +250,7 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
         if stopped.all():
             break
         fired += choice != 0
+        last = choice
         closed_next, _ = model.predict(position, heading, choice)
         open_predicted, open_heading = model.predict(open_predicted, open_heading, choice)
         predicted = np.where(closed[:, None], closed_next, open_predicted)
@@ -215,11 +258,21 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
         frames = simulator.advance(period, record_interval_s=period / frames_per_cycle,
                                    progress=progress)
         paths.append(frames[["instance", "t_s", "centroid_x_mm", "centroid_y_mm"]])
+    for _ in range(settle_cycles):  # the robots glide on to rest, no controller firing
+        frames = simulator.advance(period, record_interval_s=period / frames_per_cycle,
+                                   progress=progress)
+        paths.append(frames[["instance", "t_s", "centroid_x_mm", "centroid_y_mm"]])
+    if settle_cycles:
+        state = simulator.state()
+        rest = state[["centroid_x_mm", "centroid_y_mm"]].to_numpy()
+        distance = np.hypot(*(target - rest).T)
+        cycle += settle_cycles
+    reached = (distance <= tolerance_mm) & (state["status"].to_numpy() == "ok")
 
     summary = pd.DataFrame({
         "goal": goal_index, "goal_x_mm": target[:, 0], "goal_y_mm": target[:, 1],
         "goal_distance_mm": np.hypot(*target.T), "mode": modes,
-        "reached": ~np.isnan(reached_at), "cycles_to_goal": reached_at,
+        "reached": reached, "cycles_to_goal": np.where(reached, stop_cycle, np.nan),
         "cycles_fired": fired, "final_error_mm": final_error, "end_error_mm": distance,
         "run_cycles": cycle,
         "status": state["status"].to_numpy()})[PLAN_COLUMNS]

@@ -20,10 +20,11 @@ from typing import Dict, Sequence, Tuple
 import numpy as np
 import pandas as pd
 
-from .gait import N_ACTUATORS, Gait, symmetry_classes
+from .gait import N_ACTUATORS, NO_GAIT, Gait, symmetry_classes
 from .metrics import rotate
 from .params import SolverConfig, StarParams
 from .simulation import simulate, whole_steps
+from .simulator import Simulator
 
 CYCLE_COLUMNS = ["gait", "class_representative", "symmetry_rotation", "reflected", "cycle",
                  "dx_body_mm", "dy_body_mm", "rotation_deg", "status"]
@@ -40,6 +41,17 @@ displacement per cycle over cycles first_cycle..cycles-1 (0-based; the default 1
 paper's "cycles 2-5"), and its sample standard deviation (*_std_mm); step_mm its length and
 direction_deg its direction in the body frame (NaN below ZERO_STEP_MM); turn_deg the mean
 rotation per cycle and turn_std_deg its sample standard deviation."""
+
+GLIDE_COLUMNS = ["gait", "glide_x_mm", "glide_y_mm", "glide_mm", "glide_turn_deg",
+                 "glide_fire_cycles", "glide_cycles"]
+"""Columns of the glide table (one row per gait): glide_x/glide_y_mm, the centroid's
+displacement from the end of the last firing cycle over the glide_cycles cycles after it, in the
+body frame at that moment (the robot having fired the gait at the start of each of
+glide_fire_cycles cycles from rest); glide_mm its length; glide_turn_deg the rotation over
+the glide."""
+GLIDE_CYCLES = 4
+"""Cycles of coasting over which a glide is measured (the planner lets robots settle as
+long)."""
 
 ZERO_STEP_MM = 1e-6
 """Below this mean step (mm per cycle; the symmetric gaits' round-off is ~1e-10) a gait does
@@ -164,13 +176,18 @@ def check_measurement(base: StarParams, solver: SolverConfig, cycles: int, first
 
 def measure_primitives(base: StarParams = StarParams(), solver: SolverConfig = SolverConfig(),
                        cycles: int = 5, first_cycle: int = 1, arch: str = "cpu",
-                       progress: bool = False) -> Tuple[pd.DataFrame, pd.DataFrame]:
+                       progress: bool = False, glide_cycles: int = 0
+                       ) -> Tuple[pd.DataFrame, pd.DataFrame]:
     """Simulate one gait per symmetry class (29 robots, one batch) for `cycles` actuation
     cycles from rest and return (primitive table, per-cycle table), both over all 255 gaits.
-    base: the robot (its gait is replaced); the period must be a whole number of solver
-    steps; statistics over cycles first_cycle..cycles-1 (0-based). ValueError for bad
-    arguments (`check_measurement`)."""
+    base: the robot (its gait is replaced; e.g. `StarParams.preset("identified")`); the period
+    must be a whole number of solver steps; statistics over cycles first_cycle..cycles-1
+    (0-based). With glide_cycles > 0 the primitive table also holds each gait's glide
+    (`measure_glides` after `cycles` firings; its columns but gait appended). ValueError for
+    bad arguments (`check_measurement`)."""
     check_measurement(base, solver, cycles, first_cycle)
+    if isinstance(glide_cycles, bool) or not isinstance(glide_cycles, int) or glide_cycles < 0:
+        raise ValueError(f"glide_cycles must be an integer >= 0, got {glide_cycles!r}")
     representatives = [representative for representative, _ in symmetry_classes()]
     result = simulate([base.replace(gait=g) for g in representatives], cycles * base.period,
                       solver, arch=arch, record_interval_s=base.period, progress=progress)
@@ -181,5 +198,46 @@ def measure_primitives(base: StarParams = StarParams(), solver: SolverConfig = S
     table = summarise_cycles(expanded, first_cycle)
     table["period_s"] = base.period
     table["dt_s"] = solver.dt
-    return table[PRIMITIVE_COLUMNS], expanded
+    table = table[PRIMITIVE_COLUMNS]
+    if glide_cycles:
+        glides = measure_glides(base, solver, fire_cycles=cycles, glide_cycles=glide_cycles,
+                                arch=arch, progress=progress)
+        table = table.merge(glides, on="gait", how="left", validate="one_to_one")
+    return table, expanded
 
+
+
+def measure_glides(base: StarParams = StarParams(), solver: SolverConfig = SolverConfig(),
+                   fire_cycles: int = 5, glide_cycles: int = GLIDE_CYCLES, arch: str = "cpu",
+                   progress: bool = False) -> pd.DataFrame:
+    """How far each gait's robot glides after its last firing: one robot per symmetry class
+    (29, one Simulator) fires its gait at the start of each of `fire_cycles` cycles from rest,
+    then coasts `glide_cycles` cycles; the glide table (`GLIDE_COLUMNS`) over all 255 gaits,
+    image gaits by symmetry as for the steps. ValueError for bad arguments."""
+    check_measurement(base, solver, fire_cycles, 0)
+    if isinstance(glide_cycles, bool) or not isinstance(glide_cycles, int) or glide_cycles < 1:
+        raise ValueError(f"glide_cycles must be an integer >= 1, got {glide_cycles!r}")
+    representatives = [representative for representative, _ in symmetry_classes()]
+    simulator = Simulator([base.replace(gait=NO_GAIT)] * len(representatives), solver, arch=arch)
+    for _ in range(fire_cycles):
+        simulator.fire(representatives)
+        simulator.advance(base.period, progress=progress)
+    stop = simulator.state()
+    simulator.advance(glide_cycles * base.period, progress=progress)
+    end = simulator.state()
+    heading = np.radians(stop["heading_deg"].to_numpy())
+    columns = ["centroid_x_mm", "centroid_y_mm"]
+    body = rotate(end[columns].to_numpy() - stop[columns].to_numpy(), -heading)
+    turn = wrap_degrees(end["heading_deg"].to_numpy() - stop["heading_deg"].to_numpy())
+    ok = end["status"].to_numpy() == "ok"
+    body[~ok], turn[~ok] = np.nan, np.nan
+    index = {representative: i for i, representative in enumerate(representatives)}
+    rows = []
+    for gait, (representative, rotation, reflect, _) in class_symmetries().items():
+        source = index[representative]
+        glide = transform_vectors(body[source][None, :], rotation, reflect)[0]
+        rows.append({"gait": gait, "glide_x_mm": glide[0], "glide_y_mm": glide[1],
+                     "glide_mm": float(np.hypot(*glide)),
+                     "glide_turn_deg": -turn[source] if reflect else turn[source],
+                     "glide_fire_cycles": fire_cycles, "glide_cycles": glide_cycles})
+    return sort_gaits(pd.DataFrame(rows))[GLIDE_COLUMNS]

@@ -22,9 +22,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse
-import scipy.sparse.linalg
 
+from .extras import require
 from .gait import Gait
 from .geometry import ARC, ARC_BEND, JOINT_BEND, SPOKE, build_topology
 from .params import SolverConfig, StarParams
@@ -354,9 +353,9 @@ def _assemble_matrix(n_dof, terms):
         cols.append(np.broadcast_to(_dofs(col_nodes)[:, None, :], blocks.shape).ravel())
         values.append(blocks.ravel())
     # Duplicate (row, col) pairs add up on conversion to CSC.
-    return scipy.sparse.csc_matrix((np.concatenate(values),
-                                    (np.concatenate(rows), np.concatenate(cols))),
-                                   shape=(n_dof, n_dof))
+    sparse = require("scipy.sparse", "test")
+    return sparse.csc_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))),
+                             shape=(n_dof, n_dof))
 
 
 @dataclass(frozen=True)
@@ -639,14 +638,16 @@ class ReferenceSimulator:
         # Newton's start: the last step's acceleration carried on when there is one
         start = q + h * v if previous is None else q + h * (2.0 * v - np.asarray(previous[1]))
         q_new = start.reshape(-1)
+        sparse_lu = require("scipy.sparse.linalg", "test").splu
+        sparse = require("scipy.sparse", "test")
         change = 0.0  # no previous update: the first is judged on its own
         for iteration in range(1, self.solver.max_newton + 1):
             force, jac = self._step_forces(q_new.reshape(q.shape), step)
             residual = inertia * (q_new - target) - force
             # Sparse LU (SuperLU) rather than a dense solve: it is fast, and it does not use the
             # threaded BLAS, whose threads thrash when other processes share the cores.
-            system = (scipy.sparse.diags(inertia) - jac).tocsc()
-            delta = -scipy.sparse.linalg.splu(system).solve(residual)
+            system = (sparse.diags(inertia) - jac).tocsc()
+            delta = -sparse_lu(system).solve(residual)
             q_new += delta
             previous_change, change = change, np.abs(delta).max()
             if not np.isfinite(change):

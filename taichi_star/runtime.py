@@ -4,10 +4,19 @@ Taichi is initialised once per process (`ti.init` is process-wide), so there is 
 process, reached through `Runtime.current()`. It initialises Taichi lazily on the first
 simulation (importing taichi_star does nothing), re-initialises only when the arch or the
 precision changes, and keeps one compiled engine per (topology, terms, integrator, capacity).
+
+Taichi keeps compiled kernels in an offline cache shared by every process of the user
+(~/.cache/taichi). Processes running at once (a batch's worker processes, two studies) take
+turns at its lock file; one that finds it taken prints "Lock .../ticache.lock failed. Please run
+'ti cache clean' and try again" and simply compiles without loading the cache, or leaves its
+new kernels out of it at exit. Nothing is wrong and nothing needs cleaning, so the runtime
+silences exactly those two moments: it opens the cache (a trivial kernel) and exits at log
+level ERROR; Taichi's warnings in between are shown as configured.
 """
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import io
 import os
@@ -165,6 +174,17 @@ def batch_capacity(batch_size: int) -> int:
     return max(MIN_CAPACITY, 1 << max(batch_size - 1, 0).bit_length())
 
 
+@ti.kernel
+def _open_kernel_cache():
+    """Nothing: compiling it makes Taichi open its offline cache (see the module docstring)."""
+    pass
+
+
+def _quiet_exit():
+    """Taichi's exit, which writes the offline cache, at log level ERROR (module docstring)."""
+    ti.set_logging_level(ti.ERROR)
+
+
 class Runtime:
     """See the module docstring. `cpu_threads` (None: Taichi's default, all cores) and
     `log_level` take effect at the next initialisation."""
@@ -207,11 +227,15 @@ class Runtime:
             return
         threads = {} if self.cpu_threads is None else {"cpu_max_num_threads": self.cpu_threads}
         # ti.init prints "[Taichi] Starting on arch=..." unconditionally; warnings still go to
-        # Taichi's logger
+        # Taichi's logger, except a taken cache lock's (module docstring)
         with contextlib.redirect_stdout(io.StringIO()):
             ti.init(arch=getattr(ti, arch), default_fp=ti.f64 if precision == "f64" else ti.f32,
                     fast_math=False, advanced_optimization=self.kernel_optimisation,
-                    offline_cache=True, log_level=self.log_level, **threads)
+                    offline_cache=True, log_level=ti.ERROR, **threads)
+            _open_kernel_cache()
+        ti.set_logging_level(self.log_level)
+        atexit.unregister(_quiet_exit)
+        atexit.register(_quiet_exit)
         self.arch, self.precision = arch, precision
         self.engines.clear()
         self.leases.clear()

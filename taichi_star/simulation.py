@@ -14,8 +14,10 @@ import pandas as pd
 from . import metrics, output
 from .geometry import CENTRE, Topology
 from .model import build_model, validate_batch
-from .params import SolverConfig, StarParams, check_precision
+from .params import (PER_ACTUATOR_FIELDS, SolverConfig, StarParams, check_precision,
+                     parameter_column)
 from .engine import STEP_TOLERANCE
+from .extras import require
 from .runtime import Runtime, check_arch, stream_chunk_size
 from .state import STATUS_NAMES, STATUS_OK
 
@@ -35,32 +37,43 @@ def whole_steps(time_s: float, dt: float) -> Optional[int]:
 class SimulationResult:
     """What `simulate` returns.
 
-    summary: one row per instance, in input order: every StarParams field, named with its unit
-        where it has one (youngs_modulus_pa, period_s, thickness_m, the densities _kg_m3,
-        cylinder_mass_per_height_kg_m, cylinder_diameter_m, damping_time_s, joint_radius_m,
-        tip_radius_m; `StarParams.columns()`; `StarParams.from_row(row)` rebuilds the
-        parameters of a row); the whole-run
-        metrics displacement_x_mm, displacement_y_mm, speed_mm_s, signed_speed_mm_s (on the
-        gait's forward direction; NaN where it is undefined), travel_direction_deg (direction of
-        the displacement from +x); heading_deg (body rotation at the end, counter-clockwise);
-        steady_speed_mm_s and steady_signed_speed_mm_s (over cycles [steady_from_cycle, last
-        full cycle), NaN where the run has fewer cycles or the cycle boundaries are not whole
-        steps); max_strain (largest |axial strain| of an edge in the final shape) and shape_sane
-        (final shape finite, no limbs crossing, no arc inverted, max_strain within
-        `metrics.STRAIN_LIMIT`: False flags a run whose shape is not physical even if it
-        converged); steps (accepted) and rejected_steps (adaptive stepping); newton_iterations_mean /
-        newton_iterations_max (per Newton solve: every attempted step and substep, rejected
-        and failed ones included, so mean <= max), substep_retries (steps redone with substeps),
-        newton_capped (a Newton solve used all max_newton iterations: for an "ok" instance, a
-        step accepted only after a retry rescued it; in f32 also a RuntimeWarning, as f32 then
-        barely resolves newton_tol), status ("ok",
-        "newton_failed", "non_finite") and failure_time_s (NaN when ok). Metrics of failed
-        instances are NaN. "ok" means every step converged to newton_tol, not that the time
-        step is small enough: see docs/numerics.md, "What ok promises".
-    trajectory: long table (instance, t_s, x_mm, y_mm, heading_deg): the centroid relative to its
-        start and the body rotation at every record time (NaN from a failure on); empty without
-        records.
-    shapes: (n_records, B, N, 2) node positions in m at the record times, when requested.
+    `summary`: one row per instance, in input order. Its first columns are the instance's
+    parameters, every StarParams field named with its unit where it has one (youngs_modulus_pa,
+    period_s, thickness_m, ...: `StarParams.columns()`; `StarParams.from_row(row)` rebuilds the
+    parameters of a row, also of a table read back from CSV, Parquet or netCDF; the
+    actuator_profile column holds the profile's text, `CurvatureProfile.to_text`, and the
+    per-actuator columns actuator_gains and actuator_delays_s the text of their tuples). Then the
+    run's results (metrics of a failed instance are NaN):
+
+    | column | unit | meaning |
+    |---|---|---|
+    | displacement_x_mm | mm | centroid displacement along x over the whole run |
+    | displacement_y_mm | mm | centroid displacement along y over the whole run |
+    | speed_mm_s | mm/s | length of the displacement / duration |
+    | signed_speed_mm_s | mm/s | displacement on the gait's forward direction / duration (NaN where no direction is defined) |
+    | travel_direction_deg | degree | direction of the displacement, from +x |
+    | heading_deg | degree | body rotation at the end, counter-clockwise |
+    | max_strain | — | largest absolute axial strain of an edge in the final shape |
+    | shape_sane | — | final shape finite, no limbs crossing, no arc inverted, max_strain within `metrics.STRAIN_LIMIT` (False: not physical even if converged) |
+    | steady_speed_mm_s | mm/s | speed over cycles [steady_from_cycle, last full cycle) (NaN with fewer cycles, or cycle boundaries not whole steps) |
+    | steady_signed_speed_mm_s | mm/s | signed speed over the same cycles |
+    | steps | — | accepted time steps |
+    | rejected_steps | — | steps rejected by the adaptive error control |
+    | newton_iterations_mean | — | Newton iterations per solve (every attempted step and substep, rejected and failed ones included) |
+    | newton_iterations_max | — | most Newton iterations of one solve (≥ the mean) |
+    | substep_retries | — | steps redone with substeps |
+    | newton_capped | — | a Newton solve used all max_newton iterations (for an "ok" instance: a step accepted only after a retry rescued it; in f32 also a RuntimeWarning) |
+    | status | — | "ok", "newton_failed" or "non_finite" |
+    | failure_time_s | s | simulated time of the failure (NaN when ok) |
+
+    "ok" means every step converged to newton_tol, not that the time step is small enough:
+    see docs/numerics.md, "What ok promises".
+
+    `trajectory`: long table (instance, t_s, x_mm, y_mm, heading_deg): the centroid relative to
+    its start and the body rotation at every record time (NaN from a failure on); empty without
+    records.
+
+    `shapes`: (n_records, B, N, 2) node positions in m at the record times, when requested.
     """
 
     summary: pd.DataFrame
@@ -75,15 +88,28 @@ class SimulationResult:
         return output.to_xarray(self)
 
     def to_netcdf(self, path):
-        """Save `to_xarray()` as a netCDF file; returns the path."""
-        self.to_xarray().to_netcdf(path)
-        return path
+        """Save `to_xarray()` as a netCDF file (whole or not at all; the provenance in its
+        attributes); returns the path."""
+        return output.to_netcdf(self, path)
+
+    def to_parquet(self, path, table: str = "summary"):
+        """Save the summary (or table="trajectory") as Parquet, whole or not at all, with the
+        provenance (version, git commit, parameters, solver) in the file's metadata
+        (`output.read_provenance`); returns the path. `self.summary.to_parquet(path)` (plain
+        pandas) works too, without the provenance."""
+        return output.to_parquet(self, path, table)
+
+    def to_csv(self, path, table: str = "summary"):
+        """Save the summary (or table="trajectory") as CSV with the provenance in a JSON
+        sidecar `<path>.json`, each whole or not at all; returns the path."""
+        return output.to_csv(self, path, table)
 
     def animate(self, path, instances=None, frame: str = "world", fps: int = 15,
-                size_px: int = 720):
-        """Animate the recorded shapes to an MP4 or GIF (see `output.animate`)."""
+                size_px: int = 720, title=None):
+        """Animate the recorded shapes to an MP4 or GIF: fired actuators red while they heat,
+        labels A1..A8, a scale bar, the centroid's path (see `output.animate`)."""
         return output.animate(self, path, instances=instances, frame=frame, fps=fps,
-                              size_px=size_px)
+                              size_px=size_px, title=title)
 
     def __repr__(self) -> str:
         status = self.summary["status"].value_counts().to_dict() if len(self.summary) else {}
@@ -164,8 +190,8 @@ class _Clock:
 def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConfig = SolverConfig(),
              *, arch: str = "cpu", record_interval_s: float = 0.0, record_shapes: bool = False,
              steady_from_cycle: int = 1, progress: bool = False) -> SimulationResult:
-    """Simulate a batch of robot instances from rest in their rest shape for duration_s seconds
-    and return a `SimulationResult` (see there for every column, with units).
+    """Simulate a batch of robot instances (a sequence of StarParams; a single StarParams is a
+    batch of one) from rest in their rest shape for duration_s seconds and return a `SimulationResult` (see there for every column, with units).
 
     Every instance may have its own parameters except the topology (n_arc, n_limb), and fires
     its gait at t = 0 and at the start of every period. An instance whose Newton solve fails
@@ -288,6 +314,10 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
     failed = status != STATUS_OK
 
     rows = {column: [getattr(p, name) for p in params] for name, column in StarParams.columns().items()}
+    # as text, so that every column has an Arrow type (Parquet, netCDF) and from_row reads it
+    rows["actuator_profile"] = [p.actuator_profile.to_text() for p in params]
+    for name in PER_ACTUATOR_FIELDS:  # "(1.0, 0.5, ...)": every float's repr reads back exactly
+        rows[parameter_column(name)] = [str(getattr(p, name)) for p in params]
     rows.update(metrics.swimming_metrics(final - start, duration, gaits))
     positions = state.positions.to_numpy()[:batch].astype(np.float64)
     rows["heading_deg"] = np.degrees(metrics.body_rotation(

@@ -1,5 +1,7 @@
 """The user documentation builds cleanly, and the licence and citation files are well formed."""
 
+import html
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -33,11 +35,51 @@ def built_site(tmp_path_factory):
 def test_mkdocs_build_strict(built_site):
     completed, site = built_site
     assert completed.returncode == 0, completed.stdout + completed.stderr
-    for page in ("index", "model", "numerics", "performance", "studies", "reproducibility", "api"):
+    for page in ("index", "model", "numerics", "performance", "studies", "reproducibility", "results",
+                 "reliability", "result_files", "api"):
         assert (site / page / "index.html").exists() or (site / f"{page}.html").exists(), page
     api = (site / "api" / "index.html").read_text(encoding="utf-8")
     # dataclass fields and their documented units reach the reference
     assert "youngs_modulus" in api and "newton_tol" in api
+    # long signatures are wrapped one parameter a line (mkdocstrings formats them with ruff)
+    signature = re.sub(r"<[^>]+>", "", api[api.index('id="taichi_star.simulate"'):])
+    assert re.search(r"simulate\(\n\s+params: Sequence\[StarParams\],\n", html.unescape(signature))
+    # the result's columns are a table
+    assert "<td>signed_speed_mm_s</td>" in api and "<td>failure_time_s</td>" in api
+    # the plots the pages show come from results/
+    assert (site / "results" / "fig4c.png").read_bytes() == (REPO_ROOT / "results" / "fig4c.png").read_bytes()
+
+
+def test_site_reads_offline_with_its_equations_rendered_by_the_vendored_katex(built_site):
+    """No page loads a script, stylesheet or font from the network; every page with equations
+    loads KaTeX from the site itself, and the files it names are there."""
+    completed, site = built_site
+    assert completed.returncode == 0
+    remote = re.compile(r'<(?:script|link)[^>]+(?:src|href)="(?:https?:)?//[^"]+"')
+    pages_with_math = 0
+    for page in site.rglob("*.html"):
+        text = page.read_text(encoding="utf-8")
+        assert not remote.findall(text), (page.name, remote.findall(text))
+        if 'class="arithmatex"' in text:
+            pages_with_math += 1
+            assert "vendor/katex/katex.min.js" in text and "katex.min.css" in text, page
+    assert pages_with_math >= 3  # model, numerics, ... carry the equations
+    css = (site / "vendor" / "katex" / "katex.min.css").read_text(encoding="utf-8")
+    fonts = set(re.findall(r"url\((fonts/[^)]+\.woff2)\)", css))
+    assert fonts and all((site / "vendor" / "katex" / font).exists() for font in fonts)
+
+
+def test_the_readme_links_to_pages_and_headings_the_site_has(built_site):
+    completed, site = built_site
+    assert completed.returncode == 0
+    readme = (REPO_ROOT / "README.md").read_text(encoding="utf-8")
+    links = re.findall(r"\]\(docs/(\w+)\.md(?:#([\w-]+))?\)", readme)
+    assert len(links) >= 10
+    for page, anchor in links:
+        built = site / page / "index.html"
+        assert built.exists(), page
+        if anchor:
+            assert f'id="{anchor}"' in built.read_text(encoding="utf-8"), (page, anchor)
 
 
 def test_rendered_site_does_not_cite_the_internal_design(built_site):
@@ -50,6 +92,7 @@ def test_rendered_site_does_not_cite_the_internal_design(built_site):
 
 def test_citation_file_is_valid_cff():
     yaml = pytest.importorskip("yaml")
+    tomllib = pytest.importorskip("tomllib")  # Python 3.11 and later
     data = yaml.safe_load((REPO_ROOT / "CITATION.cff").read_text(encoding="utf-8"))
     for key in CFF_REQUIRED_KEYS:
         assert key in data, key
@@ -57,9 +100,13 @@ def test_citation_file_is_valid_cff():
     assert data["title"] == "taichi_star"
     assert data["license"] == "MIT"
     assert all(isinstance(author, dict) and author for author in data["authors"])
-    pyproject = (REPO_ROOT / "pyproject.toml").read_text(encoding="utf-8")
-    assert f'version = "{data["version"]}"' in pyproject
-    # the package reports the same version (it is written into every result's provenance)
+    # the version has one source, taichi_star.__version__ (written into every result's
+    # provenance), which the package metadata reads
+    pyproject = tomllib.loads((REPO_ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    assert pyproject["project"]["dynamic"] == ["version"]
+    assert "version" not in pyproject["project"]
+    assert pyproject["tool"]["setuptools"]["dynamic"]["version"] == {
+        "attr": "taichi_star.__version__"}
     import taichi_star
 
     assert taichi_star.__version__ == data["version"]
@@ -88,3 +135,23 @@ def test_user_docs_do_not_cite_the_internal_design():
     offenders = [str(path.relative_to(REPO_ROOT)) for path in _user_facing_text_files()
                  if INTERNAL_CITATION in path.read_text(encoding="utf-8")]
     assert not offenders, offenders
+
+
+def test_readme_opens_with_the_two_commands_and_the_api():
+    """What a newcomer reads first: the install + main job and install + tests commands, then
+    within 60 lines a Python quickstart whose every `ts.` name exists; at most 200 lines."""
+    import taichi_star
+
+    lines = (REPO_ROOT / "README.md").read_text(encoding="utf-8").splitlines()
+    assert len(lines) <= 200
+    commands = [line.split("#")[0].strip() for line in lines[2:6] if line and not line.startswith("```")]
+    assert commands == ['pip install -e ".[studies]" && python -m studies fig4c',
+                        'pip install -e ".[test]" && python -m pytest -q']
+    start = lines.index("```python")
+    end = lines.index("```", start)
+    assert end < 60
+    quickstart = "\n".join(lines[start + 1:end])
+    compile(quickstart, "README quickstart", "exec")
+    for name in ("simulate", "Simulator", "StarParams"):
+        assert f"ts.{name}(" in quickstart and hasattr(taichi_star, name), name
+    assert 'gymnasium.make_vec("StarSwimmer-v0"' in quickstart

@@ -9,6 +9,7 @@ from typing import Optional, Sequence
 import numpy as np
 import pandas as pd
 
+from ..extras import require
 from ..geometry import build_topology
 from ..params import SolverConfig, StarParams
 from ..simulation import SimulationResult
@@ -134,6 +135,7 @@ def executor_for(workers: Optional[int] = None, scheduler: Optional[str] = None,
     if workers is not None and scheduler is not None:
         raise ValueError("give workers (local processes) or scheduler (a Dask cluster), not both")
     if scheduler is not None:
+        require("distributed", "dask")
         from .dask_cluster import remote_executor
         with remote_executor(scheduler, retries) as executor:
             yield executor

@@ -25,10 +25,8 @@ import datetime
 import hashlib
 import json
 import logging
-import os
-import subprocess
 from pathlib import Path
-from typing import Callable, Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 import pandas as pd
@@ -36,19 +34,20 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from ..actuation import CurvatureProfile
+from ..provenance import code_version, write_atomic
 from .tasks import ChunkTask
 
 MANIFEST = "manifest.json"
 FORMAT = 2
 """Version of the store's layout (2: Parquet chunks with checksums)."""
 METADATA_KEY = b"taichi_star.chunk"
-VALUE_TYPES = {"CurvatureProfile": lambda fields: CurvatureProfile(**fields), "tuple": tuple}
-"""Value objects a summary column may hold, each stored as JSON (a dataclass: its fields; a
-tuple of numbers, e.g. the per-actuator gains: a list), by type name -> the function that
-rebuilds it from the JSON value."""
-STAMP_KEYS = {"definition_sha256", "chunk", "members", "sha256", "value_types"}
-"""The keys of a chunk's metadata stamp: exactly these (a damaged key would otherwise drop
-what it says, e.g. the value types, silently)."""
+VALUE_TYPES = {"CurvatureProfile": CurvatureProfile}
+"""Value objects a summary column may hold; stored as JSON of their fields."""
+REQUIRED_STAMP_KEYS = {"definition_sha256", "chunk", "members", "sha256"}
+STAMP_KEYS = REQUIRED_STAMP_KEYS | {"value_types"}
+"""The keys a chunk's metadata stamp may hold: all the required ones, value_types only where
+the chunk has value-object columns, nothing else (a damaged key name is an unknown key, so it
+cannot drop what it says, e.g. the value types, silently)."""
 
 log = logging.getLogger("taichi_star.batch")
 
@@ -56,25 +55,6 @@ log = logging.getLogger("taichi_star.batch")
 class RunStoreError(ValueError):
     """The run folder cannot be used as asked (another definition, an unfinished run without
     resume, not a run folder, a damaged manifest); one line, naming the folder."""
-
-
-def code_version() -> Dict[str, object]:
-    """{"version": the package version, "commit": git HEAD of the source checkout or None,
-    "dirty": whether tracked files differ from it (None outside git)}."""
-    from .. import __version__
-    root = Path(__file__).resolve().parents[2]
-    commit = dirty = None
-    try:
-        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True,
-                              text=True, timeout=10)
-        if head.returncode == 0 and head.stdout.strip():
-            commit = head.stdout.strip()
-            status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
-                                    cwd=root, capture_output=True, text=True, timeout=10)
-            dirty = bool(status.stdout.strip()) if status.returncode == 0 else None
-    except (OSError, subprocess.SubprocessError):
-        pass
-    return {"version": __version__, "commit": commit, "dirty": dirty}
 
 
 def _canonical(value) -> str:
@@ -143,39 +123,14 @@ def _encode(frame: pd.DataFrame):
         if frame[name].dtype == object and dataclasses.is_dataclass(first):
             types[name] = type(first).__name__
             encoded[name] = [_canonical(dataclasses.asdict(v)) for v in frame[name]]
-        elif frame[name].dtype == object and isinstance(first, tuple):
-            types[name] = "tuple"
-            encoded[name] = [_canonical(list(v)) for v in frame[name]]
     return encoded, types
 
 
 def _decode(frame: pd.DataFrame, types: Dict[str, str]) -> pd.DataFrame:
     for name, type_name in types.items():
-        frame[name] = pd.Series([VALUE_TYPES[type_name](json.loads(v)) for v in frame[name]],
+        frame[name] = pd.Series([VALUE_TYPES[type_name](**json.loads(v)) for v in frame[name]],
                                 dtype=object, index=frame.index)
     return frame
-
-
-def write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception]] = None):
-    """Write `data` to `path` whole or not at all: into a temporary file beside it, flushed to
-    disk, then renamed over it; a kill or a full disk leaves any previous file untouched. With
-    `failure`, an OSError (a full disk) is raised as `failure(reason)` instead, the reason one
-    line naming the file and the error ("cannot write x.csv (No space left on device)")."""
-    path = Path(path)
-    temporary = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
-        with open(temporary, "wb") as handle:
-            handle.write(data)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(temporary, path)
-    except OSError as error:
-        if failure is None:
-            raise
-        raise failure(f"cannot write {path.name} ({error.strerror or error})") from None
-    finally:
-        if temporary.exists():
-            temporary.unlink()
 
 
 class RunStore:
@@ -321,11 +276,14 @@ class RunStore:
         gives KeyError or TypeError from `to_pandas`)."""
         try:
             table = pq.read_table(pa.BufferReader(data))
+        except Exception as error:  # noqa: BLE001 -- pyarrow's errors for a damaged file vary
+            raise ValueError(f"unreadable ({str(error).splitlines()[0]})") from None
+        try:
             raw = (table.schema.metadata or {}).get(METADATA_KEY)
             if raw is None:
                 raise ValueError("no taichi_star chunk metadata")
             stamp = json.loads(raw)
-            if not isinstance(stamp, dict) or set(stamp) != STAMP_KEYS:
+            if not isinstance(stamp, dict) or not REQUIRED_STAMP_KEYS <= set(stamp) <= STAMP_KEYS:
                 raise ValueError("its chunk metadata is malformed")
             if stamp["definition_sha256"] != self.definition_sha256:
                 raise ValueError("from another run (its definition differs)")
@@ -334,7 +292,7 @@ class RunStore:
             frame = table.to_pandas()
             if table_checksum(frame) != stamp["sha256"]:
                 raise ValueError("its content does not match its checksum")
-            return _decode(frame, stamp["value_types"])
+            return _decode(frame, stamp.get("value_types", {}))
         except ValueError:
             raise
         except Exception as error:  # noqa: BLE001 -- damage may surface as any exception

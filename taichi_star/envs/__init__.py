@@ -3,17 +3,27 @@
 - ``gymnasium.make("StarSwimmer-v0", **kwargs)``: one robot swimming to a goal point
   (`StarSwimmerEnv`);
 - ``gymnasium.make_vec("StarSwimmer-v0", num_envs=64, **kwargs)``: 64 robots in one engine
-  (`StarSwimmerVectorEnv`, the registered vector entry point).
+  (`StarSwimmerVectorEnv`, the registered vector entry point);
+- ``to_sb3(envs)``: that vector env as a Stable-Baselines3 VecEnv (`taichi_star.envs.sb3`;
+  needs stable-baselines3, which taichi_star does not install).
+
+Both take ``render_mode="rgb_array"`` (a picture of the robot from `render()`).
 
 Both stop an episode after DEFAULT_MAX_EPISODE_STEPS (40) control periods unless given
 `max_episode_steps=N`. The keyword arguments, spaces and reward are described in
 `taichi_star.envs.swimmer`.
+
+Gymnasium comes with the ``envs`` extra (``pip install "taichi_star[envs]"``).
 """
 
-import gymnasium
+from ..extras import require
 
-from .swimmer import (DEFAULT_MAX_EPISODE_STEPS, OBSERVATION_NAMES, GoalReachingBatch,
-                      StarSwimmerEnv, StarSwimmerVectorEnv, SwimmerTask, control_period)
+gymnasium = require("gymnasium", "envs")
+
+from .sb3 import SB3VectorAdapter, to_sb3
+from .swimmer import (DEFAULT_MAX_EPISODE_STEPS, OBSERVATION_NAMES, RENDER_MODES,
+                      GoalReachingBatch, StarSwimmerEnv, StarSwimmerVectorEnv, SwimmerTask,
+                      control_period)
 
 ENV_ID = "StarSwimmer-v0"
 
@@ -22,5 +32,6 @@ if ENV_ID not in gymnasium.registry:
                        vector_entry_point="taichi_star.envs.swimmer:StarSwimmerVectorEnv",
                        max_episode_steps=DEFAULT_MAX_EPISODE_STEPS)
 
-__all__ = ["DEFAULT_MAX_EPISODE_STEPS", "ENV_ID", "OBSERVATION_NAMES", "GoalReachingBatch", "StarSwimmerEnv",
-           "StarSwimmerVectorEnv", "SwimmerTask", "control_period"]
+__all__ = ["DEFAULT_MAX_EPISODE_STEPS", "ENV_ID", "OBSERVATION_NAMES", "RENDER_MODES",
+           "GoalReachingBatch", "SB3VectorAdapter", "StarSwimmerEnv", "StarSwimmerVectorEnv",
+           "SwimmerTask", "control_period", "to_sb3"]

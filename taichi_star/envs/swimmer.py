@@ -39,7 +39,7 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import dataclass
-from typing import Optional, Sequence
+from typing import Mapping, Optional, Sequence
 
 import gymnasium as gym
 import numpy as np
@@ -49,6 +49,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from ..gait import N_ACTUATORS
+from .. import drawing, metrics
 from ..metrics import rotate
 from ..params import SolverConfig, StarParams
 from ..simulation import whole_steps
@@ -69,6 +70,9 @@ MAX_GOAL_MM = 1e3
 """Largest goal distance a task may ask for, mm."""
 DEFAULT_MAX_EPISODE_STEPS = 40
 """The registered step budget (control periods) of StarSwimmer-v0."""
+RENDER_MODES = ("rgb_array",)
+"""`render_mode`s the environments offer: "rgb_array" (a picture of the robot, its heating
+actuators and its goal, drawn with matplotlib's Agg backend; no window)."""
 
 
 @dataclass(frozen=True)
@@ -118,6 +122,22 @@ def observation_space(task: SwimmerTask) -> spaces.Box:
     low = -high
     low[-N_ACTUATORS:] = 0.0
     return spaces.Box(low=low, high=high, dtype=np.float32)
+
+
+def checked_options(options, allowed: Sequence[str]) -> dict:
+    """A copy of `reset`'s options: None gives {}; ValueError naming the options for anything
+    but a dict, or naming the keys outside `allowed` (a misspelt "gaol" would otherwise be
+    ignored silently)."""
+    if options is None:
+        return {}
+    if not isinstance(options, Mapping):
+        raise ValueError(f"options must be a dict with keys {sorted(allowed)} or None, got "
+                         f"{type(options).__name__} {options!r}")
+    unknown = sorted(str(key) for key in options if key not in allowed)
+    if unknown:
+        raise ValueError(f"options has unknown keys {unknown}; the allowed keys are "
+                         f"{sorted(allowed)}")
+    return dict(options)
 
 
 def goal_from_options(options, count: int) -> Optional[np.ndarray]:
@@ -184,6 +204,7 @@ class GoalReachingBatch:
             raise ValueError(f"task must be a SwimmerTask, got {type(task).__name__}")
         period = control_period(params[0], solver, control_period_s)
         self.task = task
+        self.params = params
         self.control_period_s = period
         self.simulator = Simulator(params, solver, arch=arch)
         self.n_robots = n_robots
@@ -206,18 +227,19 @@ class GoalReachingBatch:
 
     @staticmethod
     def firing_mask(actions, shape) -> np.ndarray:
-        """Bool mask of `actions`: exactly `shape`, boolean or 0/1 integers; ValueError naming
-        the action otherwise."""
+        """Bool mask of `actions`: exactly `shape`, of any type `MultiBinary` accepts (boolean,
+        or integers or floats that are exactly 0 or 1: RL libraries emit float32 0./1.);
+        ValueError naming the action otherwise (0.5, 2, NaN, text)."""
         array = np.asarray(actions)
         if array.shape != shape:
             raise ValueError(f"action must have shape {shape} (one 0/1 per actuator A1..A8), "
                              f"got {array.shape}")
         if array.dtype == bool:
             return array.copy()
-        if array.dtype.kind in "iu" and np.isin(array, (0, 1)).all():
+        if array.dtype.kind in "iuf" and np.isin(array, (0, 1)).all():
             return array.astype(bool)
-        raise ValueError(f"action must be boolean or 0/1 integers, got dtype {array.dtype} "
-                         f"with values {np.unique(array)[:4]}")
+        raise ValueError(f"action must hold only 0 and 1 (boolean, integer or float), got "
+                         f"dtype {array.dtype} with values {np.unique(array)[:4]}")
 
     def step(self, fire: np.ndarray):
         """Fire `fire` ((B, 8) bool) now and advance one control period. Returns rewards (B,)
@@ -258,20 +280,53 @@ class GoalReachingBatch:
         return observation, info
 
 
+    def pictures(self, rows) -> list:
+        """An (400, 400, 3) uint8 RGB picture of each robot of `rows` (see
+        `taichi_star.drawing.robot_image`): its shape, the actuators heating now in red, the
+        goal (a green star), in the frame of the task (mm from the robot's start)."""
+        state = self.simulator.state()
+        shapes_mm = self.simulator.shapes() * metrics.METERS_TO_MM
+        # the task's frame has its origin at the start centroid: shift each robot by the
+        # difference between its centroid now and its centroid relative to the start
+        absolute = metrics.centroid(shapes_mm, self.simulator.model.mass)
+        relative = state[["centroid_x_mm", "centroid_y_mm"]].to_numpy()
+        since = state[list(ACTUATOR_COLUMNS)].to_numpy()
+        pictures = []
+        for row in rows:
+            params = self.params[row]
+            pictures.append(drawing.robot_image(
+                shapes_mm[row] - absolute[row] + relative[row], self.simulator.model.topology,
+                drawing.hot_actuators(since[row], params.actuator_profile.switch_time),
+                params.cylinder_diameter * metrics.METERS_TO_MM, goal_mm=self.goals[row],
+                title=f"t = {state['t_s'].iloc[row]:.2f} s, {self.distances[row]:.1f} mm to go"))
+        return pictures
+
+
+def checked_render_mode(render_mode):
+    """render_mode, which must be None or "rgb_array" (ValueError naming it otherwise)."""
+    if render_mode not in RENDER_MODES + (None,):
+        raise ValueError(f"render_mode must be None or one of {list(RENDER_MODES)}, got "
+                         f"{render_mode!r}")
+    return render_mode
+
+
 class StarSwimmerEnv(gym.Env):
     """One star robot swimming to a goal point (see the module docstring for the spaces,
     reward and episode ends). Keyword arguments: params (a StarParams; default the paper
     preset), solver (SolverConfig; default the paper preset), control_period_s, arch, and the
     SwimmerTask fields (goal_distance_mm=50, goal_tolerance_mm=5, firing_cost_mm=0.1,
-    max_episode_steps=None, since_fired_cap_s=10)."""
+    max_episode_steps=None, since_fired_cap_s=10), and render_mode (None or "rgb_array":
+    `render()` then returns a (400, 400, 3) uint8 picture)."""
 
-    metadata = {"render_modes": []}
+    metadata = {"render_modes": list(RENDER_MODES), "render_fps": 4}
 
     def __init__(self, params: Optional[StarParams] = None,
                  solver: Optional[SolverConfig] = None,
-                 control_period_s: Optional[float] = None, arch: str = "cpu", **task):
+                 control_period_s: Optional[float] = None, arch: str = "cpu",
+                 render_mode: Optional[str] = None, **task):
         if params is not None and not isinstance(params, StarParams):
             raise ValueError(f"params must be a StarParams, got {type(params).__name__}")
+        self.render_mode = checked_render_mode(render_mode)
         self.batch = GoalReachingBatch(1, params, solver, control_period_s, SwimmerTask(**task),
                                        arch)
         self.observation_space = observation_space(self.batch.task)
@@ -282,6 +337,7 @@ class StarSwimmerEnv(gym.Env):
         return observation[0], {key: value[0] for key, value in info.items()}
 
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
+        options = checked_options(options, ("goal",))
         super().reset(seed=seed)
         self.batch.reset([0], [self.np_random], goal_from_options(options, 1))
         return self._observe()
@@ -292,16 +348,25 @@ class StarSwimmerEnv(gym.Env):
         observation, info = self._observe()
         return observation, float(rewards[0]), bool(terminated[0]), bool(truncated[0]), info
 
+    def render(self):
+        """With render_mode "rgb_array": the robot now as a (400, 400, 3) uint8 array (see
+        `GoalReachingBatch.pictures`); None without a render mode."""
+        return self.batch.pictures([0])[0] if self.render_mode == "rgb_array" else None
+
 
 class StarSwimmerVectorEnv(VectorEnv):
     """num_envs star robots in one Simulator, each with its own goal and episode (NEXT_STEP
     autoreset; see the module docstring). Keyword arguments as `StarSwimmerEnv`, except that
-    params may also be a sequence of num_envs StarParams sharing a topology."""
+    params may also be a sequence of num_envs StarParams sharing a topology; with render_mode
+    "rgb_array", `render()` returns a tuple of num_envs pictures."""
 
-    metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+    metadata = {"render_modes": list(RENDER_MODES), "render_fps": 4,
+                "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(self, num_envs: int = 1, params=None, solver: Optional[SolverConfig] = None,
-                 control_period_s: Optional[float] = None, arch: str = "cpu", **task):
+                 control_period_s: Optional[float] = None, arch: str = "cpu",
+                 render_mode: Optional[str] = None, **task):
+        self.render_mode = checked_render_mode(render_mode)
         self.batch = GoalReachingBatch(num_envs, params, solver, control_period_s,
                                        SwimmerTask(**task), arch)
         self.num_envs = num_envs
@@ -316,9 +381,9 @@ class StarSwimmerVectorEnv(VectorEnv):
         """Reset every robot, or those of `options["reset_mask"]` ((num_envs,) bool). seed:
         None, an int s (robot b gets s + b) or a list of num_envs ints/None. options["goal"]:
         (2,) for every reset robot or (num_envs, 2) mm."""
+        options = checked_options(options, ("goal", "reset_mask"))
         # the vector env's own generator takes an int seed only; the robots' are set below
         super().reset(seed=seed if isinstance(seed, numbers.Integral) else None)
-        options = dict(options or {})
         mask = np.ones(self.num_envs, dtype=bool)
         if "reset_mask" in options:
             mask = np.asarray(options.pop("reset_mask"))
@@ -365,3 +430,10 @@ class StarSwimmerVectorEnv(VectorEnv):
         self._autoreset = terminated | truncated
         observation, info = self._observe()
         return observation, rewards, terminated, truncated, info
+
+    def render(self):
+        """With render_mode "rgb_array": a tuple of num_envs (400, 400, 3) uint8 pictures (see
+        `GoalReachingBatch.pictures`); None without a render mode."""
+        if self.render_mode != "rgb_array":
+            return None
+        return tuple(self.batch.pictures(range(self.num_envs)))

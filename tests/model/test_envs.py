@@ -1,7 +1,12 @@
 """The Gymnasium environments: gymnasium's own checker on the single env; the native vector
 env against gymnasium's SyncVectorEnv of single envs (same seeds and actions: bitwise the same
 observations, rewards, episode ends and autoresets); the vector API (spaces, dtypes, seeding,
-reset_mask, info masks); a value check of the reward; bad input."""
+reset_mask, info masks); a value check of the reward; bad input; float actions as RL
+libraries emit them; the rgb_array render; the Stable-Baselines3 adapter against SB3's VecEnv
+contract (same-step autoreset, terminal_observation), and, when stable-baselines3 is installed,
+PPO on both paths."""
+
+import warnings
 
 import gymnasium as gym
 import numpy as np
@@ -12,10 +17,12 @@ from gymnasium.vector.utils import batch_space
 
 import taichi_star as ts
 from taichi_star.envs import (DEFAULT_MAX_EPISODE_STEPS, ENV_ID, OBSERVATION_NAMES,
-                              StarSwimmerEnv, StarSwimmerVectorEnv)
+                              SB3VectorAdapter, StarSwimmerEnv, StarSwimmerVectorEnv, to_sb3)
 
 # the paper's actuation period at a coarse step: 630 steps per control period
 KWARGS = dict(solver=ts.SolverConfig(dt=5e-3))
+# 10 steps per control period, within the 0.163-s heating pulse: cheap steps for API tests
+SHORT = dict(KWARGS, control_period_s=0.05)
 FORWARD = ts.Gait.parse("A1+A2+A8").mask  # swims along +x (its forward direction) at 3.4 mm/s
 BACKWARD = ts.Gait.parse("A4+A5+A6").mask  # its mirror image: along -x
 
@@ -143,13 +150,22 @@ def test_bad_input_raises_value_error_and_changes_nothing():
     before = envs.batch.simulator.save()
     for actions, words in ((np.zeros((2, 7), np.int8), "shape"),
                            (np.zeros(8, np.int8), "shape"),
-                           (np.full((2, 8), 0.5), "dtype"),
-                           (np.full((2, 8), 2), "0/1")):
+                           (np.full((2, 8), 0.5), "0 and 1"),
+                           (np.full((2, 8), 2), "0 and 1"),
+                           (np.full((2, 8), 2.0, np.float32), "0 and 1"),
+                           (np.full((2, 8), np.nan), "0 and 1"),
+                           (np.full((2, 8), "1"), "0 and 1")):
         with pytest.raises(ValueError, match=words):
             envs.step(actions)
     for goal in ((np.nan, 0.0), (np.inf, 1.0), (1.0, 2.0, 3.0), (5e3, 0.0)):
         with pytest.raises(ValueError, match="goal"):
             envs.reset(options={"goal": goal})
+    with pytest.raises(ValueError, match=r"unknown keys \['gaol'\]"):
+        envs.reset(options={"gaol": (10.0, 0.0)})
+    with pytest.raises(ValueError, match="options must be a dict"):
+        envs.reset(options=[("goal", (10.0, 0.0))])
+    with pytest.raises(ValueError, match="render_mode"):
+        StarSwimmerVectorEnv(2, render_mode="human", **KWARGS)
     for name, value in (("goal_distance_mm", -1.0), ("goal_tolerance_mm", np.nan),
                         ("max_episode_steps", 0), ("firing_cost_mm", -0.1)):
         with pytest.raises(ValueError, match=name):
@@ -162,3 +178,104 @@ def test_bad_input_raises_value_error_and_changes_nothing():
     for name, values in before.fields.items():
         np.testing.assert_array_equal(values, after.fields[name], err_msg=name)
 
+
+
+def test_single_env_refuses_unknown_reset_options(single):
+    with pytest.raises(ValueError, match=r"unknown keys \['gaol'\]; the allowed keys are \['goal'\]"):
+        single.reset(options={"gaol": (10.0, 0.0)})
+    with pytest.raises(ValueError, match="options must be a dict"):
+        single.reset(options="goal")
+    with pytest.raises(ValueError, match="unknown keys"):  # reset_mask is the vector env's
+        single.reset(options={"reset_mask": np.array([True])})
+
+
+def test_float_actions_of_a_policy_equal_integer_actions():
+    """RL libraries sample MultiBinary as float32 0./1.: a step with them is bitwise the step
+    with the same 0/1 as int8 (and as bool)."""
+    results = []
+    envs = StarSwimmerVectorEnv(2, **SHORT)
+    for dtype in (np.float32, np.float64, np.int8, bool):
+        envs.reset(seed=5)
+        actions = np.array([[1, 1, 0, 0, 0, 0, 0, 1], [0, 0, 0, 1, 1, 1, 0, 0]], dtype=dtype)
+        assert actions[0] in envs.single_action_space  # MultiBinary(8) accepts each dtype
+        results.append(envs.step(actions)[:2])
+    for observation, reward in results[1:]:
+        np.testing.assert_array_equal(observation, results[0][0])
+        np.testing.assert_array_equal(reward, results[0][1])
+    assert results[0][0][0, 7] < 0.1 and results[0][0][1, 7] == 10.0  # A1 fired by robot 0 only
+
+
+def red_pixels(picture):
+    return int(((picture[..., 0] > 200) & (picture[..., 1] < 60) & (picture[..., 2] < 60)).sum())
+
+
+def test_rgb_array_render_shows_the_heating_actuators():
+    """render_mode "rgb_array" is declared (gymnasium.make gives no warning) and draws the
+    robot: no red before firing, red arcs while the fired actuators heat (the 0.05-s step ends
+    inside the 0.163-s pulse)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        env = gym.make(ENV_ID, render_mode="rgb_array", **SHORT)
+    env.reset(seed=0)
+    before = env.render()
+    assert before.shape == (400, 400, 3) and before.dtype == np.uint8
+    assert red_pixels(before) == 0
+    env.step(ts.Gait.parse("A1+A2").mask)
+    assert red_pixels(env.render()) > 200
+    assert StarSwimmerEnv(**SHORT).render() is None
+    envs = StarSwimmerVectorEnv(2, render_mode="rgb_array", **SHORT)
+    envs.reset(seed=0)
+    pictures = envs.render()
+    assert len(pictures) == 2 and pictures[1].shape == (400, 400, 3)
+
+
+def test_sb3_adapter_resets_in_the_same_step_and_keeps_the_final_observation():
+    """SB3's VecEnv contract, checked without SB3: float32 actions; step returns float32
+    rewards, bool dones and a list of info dicts; a finished episode is reset within the step
+    (the observation is the new episode's first, 50 mm from a new goal, nothing fired) and its
+    final observation is info["terminal_observation"], equal to what the native env returned."""
+    task = dict(SHORT, max_episode_steps=2)
+    adapter = SB3VectorAdapter(StarSwimmerVectorEnv(2, **task))
+    native = StarSwimmerVectorEnv(2, **task)
+    adapter.seed(21)
+    observation = adapter.reset()
+    np.testing.assert_array_equal(observation, native.reset(seed=21)[0])
+    assert adapter.reset_infos[1]["goal_mm"].shape == (2,)
+    actions = np.ones((2, 8), dtype=np.float32)
+    first = adapter.step(actions)
+    np.testing.assert_array_equal(first[0], native.step(actions)[0])
+    assert not first[2].any() and first[1].dtype == np.float32 and len(first[3]) == 2
+    observation, rewards, dones, infos = adapter.step(actions)
+    final = native.step(actions)
+    np.testing.assert_array_equal(rewards, final[1].astype(np.float32))
+    assert dones.all() and dones.dtype == bool
+    for row in range(2):
+        np.testing.assert_array_equal(infos[row]["terminal_observation"], final[0][row])
+        assert infos[row]["TimeLimit.truncated"] is True
+        assert np.hypot(*observation[row, :2]) == pytest.approx(50.0, rel=1e-6)
+        np.testing.assert_array_equal(observation[row, 7:], 10.0)  # never-fired cap
+    # the next step continues the new episodes (no NEXT_STEP no-op step)
+    assert not adapter.step(actions)[2].any()
+    assert adapter.get_attr("num_envs") == [2, 2] and adapter.env_is_wrapped(object) == [False] * 2
+    assert adapter.env_method("render", indices=[0]) == [None]
+    with pytest.raises(ValueError, match="StarSwimmerVectorEnv"):
+        SB3VectorAdapter(StarSwimmerEnv(**SHORT))
+
+
+def test_ppo_runs_on_both_paths_without_warnings():
+    """Optional (stable-baselines3 is not a test dependency): PPO learns a few hundred steps on
+    the native vector env through `to_sb3`, and on SB3's own `make_vec_env` of single envs."""
+    pytest.importorskip("stable_baselines3")
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    task = dict(SHORT, max_episode_steps=4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for envs, n_steps in ((VecMonitor(to_sb3(StarSwimmerVectorEnv(8, **task))), 32),
+                              (make_vec_env(ENV_ID, n_envs=2, env_kwargs=task), 64)):
+            model = PPO("MlpPolicy", envs, n_steps=n_steps, batch_size=64, n_epochs=1,
+                        device="cpu", seed=0)
+            model.learn(256)
+            assert model.num_timesteps == 256

@@ -213,15 +213,22 @@ def test_extension_fields_accept_their_bounds_lists_and_arrays():
     hash(params)  # frozen and hashable: usable as a key of a batch or a cache
 
 
-def test_extension_fields_survive_a_csv_round_trip(tmp_path):
-    """to_csv → read_csv → from_row gives back the same StarParams, tuples included, to the
-    bit (a float's repr reads back exactly)."""
+def test_extension_fields_survive_csv_and_parquet_round_trips(tmp_path):
+    """The summary holds the per-actuator tuples as their text (like the actuator profile, a
+    type every table format has); to_csv or to_parquet, read back, and from_row gives the same
+    StarParams, to the bit (a float's repr reads back exactly)."""
     params = ts.StarParams(gait="A1+A2", linear_drag=12.5, hub_linear_drag=0.1 + 0.2,
                            actuator_gains=(1.0, 0.1 + 0.2, 1, 1, 1, 1, 1, 2.5),
                            actuator_delays=(0.0, 1 / 3, 0, 0, 0, 0, 0, 0))
-    summary = ts.simulate([params], 0.002, record_interval_s=0.002).summary
-    assert "linear_drag_pa_s_m" in summary and "actuator_delays_s" in summary
-    summary.to_csv(tmp_path / "summary.csv", index=False)
-    row = pd.read_csv(tmp_path / "summary.csv").iloc[0]
-    assert ts.StarParams.from_row(row) == params
+    result = ts.simulate([params], 0.002, record_interval_s=0.002)
+    summary = result.summary
+    assert summary["actuator_gains"][0] == str(params.actuator_gains)
+    assert summary["linear_drag_pa_s_m"][0] == 12.5
     assert ts.StarParams.from_row(summary.iloc[0]) == params
+    row = pd.read_csv(result.to_csv(tmp_path / "summary.csv")).iloc[0]
+    assert ts.StarParams.from_row(row) == params
+    row = pd.read_parquet(result.to_parquet(tmp_path / "summary.parquet")).iloc[0]
+    assert ts.StarParams.from_row(row) == params
+    assert ts.StarParams(actuator_delays="[0, 0.25, 0, 0, 0, 0, 0, 0]").actuator_delays[1] == 0.25
+    with pytest.raises(ValueError, match="actuator_gains: cannot read 'a, b'"):
+        ts.StarParams(actuator_gains="a, b")

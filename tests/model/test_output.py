@@ -1,4 +1,7 @@
-"""Labelled data (xarray / netCDF), animation and the quiet import."""
+"""Result files (CSV, Parquet, netCDF: values, parameters and provenance back), labelled data
+(xarray), animation and the quiet import."""
+
+import json
 
 import subprocess
 import sys
@@ -8,9 +11,13 @@ import pandas as pd
 import pytest
 
 import taichi_star as ts
+from taichi_star.output import column_unit
 
 
-RECORDED_PARAMS = [ts.StarParams(gait="A1+A2"), ts.StarParams(gait="A3", alpha=0.5)]
+# the second robot's actuator profile is not the default: the files must carry it, not a name
+CHANGED_PROFILE = ts.CurvatureProfile(heating=(-89.5, 62.724, 0.061, 104.04), switch_time=0.15)
+RECORDED_PARAMS = [ts.StarParams(gait="A1+A2"),
+                   ts.StarParams(gait="A3", alpha=0.5, actuator_profile=CHANGED_PROFILE)]
 
 
 @pytest.fixture(scope="module")
@@ -21,10 +28,11 @@ def recorded():
 
 def test_a_summary_row_gives_its_parameters_back_also_from_a_csv(recorded, tmp_path):
     """StarParams.from_row reads the unit-suffixed columns of a summary row (in memory, and
-    read back from a CSV, where the default actuator profile is text); a changed profile in
-    a CSV must be given explicitly, and a missing column is named."""
+    read back from a plain pandas CSV, the actuator profile as text); an unreadable profile
+    text and a missing column are named."""
     for index, params in enumerate(RECORDED_PARAMS):
         assert ts.StarParams.from_row(recorded.summary.iloc[index]) == params
+    assert recorded.summary["actuator_profile"].map(type).eq(str).all()
     path = tmp_path / "summary.csv"
     recorded.summary.to_csv(path, index=False)
     table = pd.read_csv(path)
@@ -38,6 +46,48 @@ def test_a_summary_row_gives_its_parameters_back_also_from_a_csv(recorded, tmp_p
     assert ts.StarParams.from_row(changed, actuator_profile=profile) == RECORDED_PARAMS[0]
     with pytest.raises(ValueError, match="period_s"):
         ts.StarParams.from_row(table.iloc[0].drop("period_s"))
+
+
+def assert_same_summary(back: pd.DataFrame, summary: pd.DataFrame):
+    """Every column's values equal (NaN where NaN), the parameters recovered row by row."""
+    assert list(back.columns) == list(summary.columns)
+    for column in summary.columns:
+        np.testing.assert_array_equal(back[column].to_numpy(), summary[column].to_numpy(),
+                                      err_msg=column)
+    assert [ts.StarParams.from_row(row) for _, row in back.iterrows()] == RECORDED_PARAMS
+
+
+def test_csv_parquet_and_netcdf_round_trip_with_the_same_provenance(recorded, tmp_path):
+    import xarray as xr
+
+    from taichi_star.output import read_provenance, summary_of_dataset
+
+    summary = recorded.summary
+    plain = tmp_path / "plain.parquet"
+    summary.to_parquet(plain)  # plain pandas: every column has an Arrow type
+    assert_same_summary(pd.read_parquet(plain), summary)
+    csv = recorded.to_csv(tmp_path / "summary.csv")
+    assert_same_summary(pd.read_csv(csv), summary)
+    parquet = recorded.to_parquet(tmp_path / "summary.parquet")
+    assert_same_summary(pd.read_parquet(parquet), summary)
+    netcdf = recorded.to_netcdf(tmp_path / "result.nc")
+    with xr.open_dataset(netcdf) as dataset:
+        back = summary_of_dataset(dataset)
+    assert_same_summary(back[summary.columns], summary)
+    trajectory = recorded.to_parquet(tmp_path / "trajectory.parquet", table="trajectory")
+    pd.testing.assert_frame_equal(pd.read_parquet(trajectory), recorded.trajectory)
+    facts = [read_provenance(path) for path in (csv, parquet, netcdf)]
+    for fact in facts:
+        for key in ("taichi_star_version", "git_commit", "git_dirty", "solver", "parameters",
+                    "varying_parameters"):
+            assert fact[key] == facts[0][key], key
+    assert facts[0]["taichi_star_version"] == ts.__version__
+    assert facts[0]["solver"]["dt"] == 2e-3 and facts[0]["solver"]["integrator"] == "euler"
+    assert facts[0]["parameters"]["youngs_modulus"] == 5e6  # equal in both robots
+    assert set(facts[0]["varying_parameters"]) == {"gait", "alpha", "actuator_profile"}
+    assert json.loads(json.dumps(facts[0])) == facts[0]  # plain JSON values
+    with pytest.raises(ValueError, match="table"):
+        recorded.to_parquet(tmp_path / "x.parquet", table="shapes")
 
 
 def test_xarray_holds_the_tables_with_units_and_survives_netcdf(recorded, tmp_path):
@@ -69,6 +119,23 @@ def test_animation_writes_a_movie_of_every_record(recorded, tmp_path, name, fram
             assert movie.n_frames == 6
 
 
+def test_animation_colours_the_heating_actuators_and_draws_the_path(recorded, tmp_path):
+    """Records at 0, 0.04, ..., 0.2 s: the fired actuators are red during the heating pulse
+    (t < t0 = 0.163 s and 0.15 s) and not after it; the centroid's path is drawn (blue)."""
+    from PIL import Image
+
+    path = recorded.animate(tmp_path / "heat.gif", instances=[0, 1], size_px=300)
+    with Image.open(path) as movie:
+        pictures = []
+        for index in (0, movie.n_frames - 1):
+            movie.seek(index)
+            pictures.append(np.asarray(movie.convert("RGB")).astype(int))
+    red = [int(((p[..., 0] > 200) & (p[..., 1] < 80) & (p[..., 2] < 80)).sum()) for p in pictures]
+    assert red[0] > 100 and red[1] == 0
+    blue = pictures[1][..., 2] - pictures[1][..., 0]
+    assert (blue > 120).sum() > 0  # tab:blue path (lightsteelblue cylinder: difference < 80)
+
+
 def test_animation_refuses_results_without_shapes(tmp_path):
     result = ts.simulate([ts.StarParams()], 0.01)
     with pytest.raises(ValueError, match="record_shapes"):
@@ -79,3 +146,17 @@ def test_import_prints_nothing():
     out = subprocess.run([sys.executable, "-c", "import taichi_star"], capture_output=True,
                          text=True, check=True)
     assert out.stdout == "" and "[Taichi]" not in out.stderr
+
+
+def test_the_documented_result_columns_are_the_summary_columns_with_their_units(recorded):
+    """SimulationResult's column table (name | unit | meaning, "—" for no unit) lists every
+    summary column after the parameter columns, in order, with the unit `column_unit` gives."""
+    rows = [line.strip().strip("|").split("|") for line in ts.SimulationResult.__doc__.splitlines()
+            if line.strip().startswith("| ") and not line.strip().startswith("| column")]
+    documented = [(name.strip(), unit.strip()) for name, unit, _ in rows]
+    parameter_columns = list(ts.StarParams.columns().values())
+    assert list(recorded.summary.columns[:len(parameter_columns)]) == parameter_columns
+    results = list(recorded.summary.columns[len(parameter_columns):])
+    assert [name for name, _ in documented] == results
+    for name, unit in documented:
+        assert unit == (column_unit(name) or "—"), name

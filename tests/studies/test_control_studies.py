@@ -37,7 +37,27 @@ def test_primitives_quick_writes_the_measurement_a_plot_and_provenance(primitive
         sidecar = json.loads((primitives_run / f"{name}.json").read_text())
         assert sidecar["study"] == "primitives" and sidecar["model"]["preset"] == "paper"
         assert sidecar["solver"]["dt"] == 5e-3
-        assert sidecar["details"] == {"cycles": 2, "first_cycle": 1}
+        assert sidecar["details"] == {"cycles": 2, "first_cycle": 1, "glide_cycles": 1}
+
+
+def test_primitives_quick_glides_follow_the_symmetries(primitives_run):
+    """The glide after the last firing (one cycle of coasting under --quick): an image gait
+    glides as its class representative turned by the symmetry, a symmetric gait not at all,
+    and a swimming gait glides on in the direction it swam."""
+    table = pd.read_csv(primitives_run / "primitives.csv").set_index("gait")
+    assert (table["glide_cycles"] == 1).all() and (table["glide_fire_cycles"] == 2).all()
+    # A1+A3 and its rotation by one actuator, A2+A4: same glide length, turned by 45°
+    assert table.loc["A2+A4", "glide_mm"] == pytest.approx(table.loc["A1+A3", "glide_mm"],
+                                                          rel=1e-9)
+    turn = np.degrees(np.arctan2(table.loc["A2+A4", "glide_y_mm"], table.loc["A2+A4", "glide_x_mm"])
+                      - np.arctan2(table.loc["A1+A3", "glide_y_mm"],
+                                   table.loc["A1+A3", "glide_x_mm"]))
+    assert (turn - 45.0 + 180.0) % 360.0 - 180.0 == pytest.approx(0.0, abs=1e-6)
+    assert table.loc["A1+A5", "glide_mm"] < 1e-6 * table.loc["A1+A3", "glide_mm"]
+    moving = table[table["step_mm"] > 0.5]
+    along = (moving["glide_x_mm"] * moving["step_x_mm"] + moving["glide_y_mm"]
+             * moving["step_y_mm"])
+    assert (along > 0).all()
 
 
 def test_primitives_quick_equals_the_library_measurement(primitives_run):
@@ -59,6 +79,10 @@ def test_plan_quick_with_given_primitives(primitives_run, tmp_path):
     assert code == 0
     summary = pd.read_csv(tmp_path / "plan.csv")
     assert len(summary) == 4 and (tmp_path / "plan.png").stat().st_size > 1000
+    # a goal is judged at rest, after the settling cycle
+    assert (summary["reached"] == (summary["end_error_mm"] <= 5.0)).all()
+    cycles = pd.read_csv(tmp_path / "plan_cycles.csv")
+    assert (summary["run_cycles"] == cycles["cycle"].max() + 1).all()
     assert not (tmp_path / "primitives.csv").exists()  # given, not measured
     gain = pd.read_csv(tmp_path / "plan_gain.csv")
     assert {"open_mean_error_mm", "closed_mean_error_mm"} <= set(gain.columns)

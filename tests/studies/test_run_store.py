@@ -211,7 +211,7 @@ def test_a_full_disk_is_a_run_store_error_naming_the_folder(tmp_path, monkeypatc
 
     def full_disk(source, target):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-    monkeypatch.setattr("taichi_star.batch.store.os.replace", full_disk)
+    monkeypatch.setattr("taichi_star.provenance.os.replace", full_disk)
     with pytest.raises(RunStoreError) as error:
         store.write(task, pd.DataFrame({"speed_mm_s": [0.1]}))
     message = str(error.value)

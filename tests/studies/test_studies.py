@@ -14,7 +14,7 @@ import pytest
 
 import taichi_star
 from taichi_star import SolverConfig, StarParams
-from taichi_star.batch import store
+from taichi_star import provenance
 from taichi_star.gait import Gait, symmetry_classes
 from taichi_star.experiment import (FIG4C_COLUMNS, PAPER_DIRECTIONS, PAPER_GAITS,
                                     compare_with_experiment, experimental_speed,
@@ -370,7 +370,7 @@ def test_a_failed_table_write_leaves_the_previous_table_and_sidecar(tmp_path, mo
     def full_disk(source, target):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(store.os, "replace", full_disk)
+    monkeypatch.setattr(provenance.os, "replace", full_disk)
     with pytest.raises(cli.StudyOutputError, match=f"--out {tmp_path}: cannot write table.csv "
                                                     f"\\(No space left on device\\)"):
         out.write_csv(pd.DataFrame({"alpha": [0.1], "speed_mm_s": [9.0]}), "table.csv")
@@ -388,7 +388,7 @@ def test_a_full_disk_is_a_one_line_error_naming_the_folder(tmp_path, monkeypatch
     def full_disk(source, target):
         raise OSError(28, os.strerror(28))
     monkeypatch.setattr("studies.figures.run_fig4c", write_table)
-    monkeypatch.setattr(store.os, "replace", full_disk)
+    monkeypatch.setattr(provenance.os, "replace", full_disk)
     out = tmp_path / "out"
     assert studies_main(["fig4c", "--out", str(out), *QUICK]) == 2
     error = capsys.readouterr().err.strip()

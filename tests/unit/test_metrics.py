@@ -473,3 +473,42 @@ def test_crossing_checks_run_under_strict_floating_point_error_settings(topology
         assert not metrics.segments_cross(p, q, np.array([0.0, 1e-3]), np.array([1.0, 1e-3]))
         assert metrics.segments_cross(p, q, np.array([0.5, 0.0]), np.array([2.0, 0.0]))
         assert not metrics.limbs_cross(topology.rest_positions, topology)
+
+
+# ----------------------------------------------------------------------------- errors, extrapolation
+
+def test_speed_error_floor_boundary():
+    floor = metrics.SPEED_ERROR_FLOOR_MM_S
+    assert floor == 0.5  # the design's §3 metric
+    assert metrics.speed_error(2.2, 2.0) == pytest.approx(0.1, rel=1e-12)
+    # below the floor the error is absolute, in units of the floor; at the floor both agree
+    assert metrics.speed_error(0.105, 0.1) == pytest.approx(0.005 / floor, rel=1e-9)
+    assert metrics.speed_error(-0.2, 0.2) == pytest.approx(0.4 / floor, rel=1e-12)
+    assert metrics.speed_error(0.6, 0.5) == pytest.approx(0.2, rel=1e-12)
+    assert metrics.speed_error(-2.0, -1.0) == pytest.approx(1.0, rel=1e-12)  # |v_ref| scales
+    assert metrics.speed_error([1.0, 3.0], 2.0).tolist() == [0.5, 0.5]
+    assert metrics.speed_error(0.105, 0.1, floor_mm_s=0.0) == pytest.approx(0.05, rel=1e-9)
+    assert np.isnan(metrics.speed_error(np.nan, 1.0))
+    for bad in (-0.1, np.inf, np.nan):
+        with pytest.raises(ValueError, match="floor_mm_s"):
+            metrics.speed_error(1.0, 1.0, floor_mm_s=bad)
+
+
+@pytest.mark.parametrize("order, refinement", [(1.0, 2.0), (2.0, 2.0), (1.5, 3.0)])
+def test_richardson_is_exact_for_a_power_law(order, refinement):
+    """v(h) = L + C h^p on h, h/r, h/r²: the observed order is p and the limit L (round-off)."""
+    h = np.array([1.0, 1.0 / refinement, 1.0 / refinement ** 2])
+    coarse, middle, fine = 3.0 + np.outer(h ** order, [2.0, -1.0])  # two quantities
+    observed = metrics.observed_order(middle - coarse, fine - middle, refinement)
+    assert observed == pytest.approx([order, order], rel=1e-12)
+    limit = metrics.richardson_limit(middle, fine, observed, refinement)
+    assert limit == pytest.approx([3.0, 3.0], rel=1e-12)
+
+
+def test_observed_order_needs_monotone_changes():
+    # changes of opposite sign (oscillation) or a zero change: no order, and no limit from it
+    assert np.isnan(metrics.observed_order(0.1, -0.05))
+    assert np.isnan(metrics.observed_order(0.0, 0.05))
+    assert np.isnan(metrics.observed_order(0.1, 0.0))
+    assert metrics.observed_order(-0.4, -0.1) == pytest.approx(2.0, rel=1e-12)
+    assert np.isnan(metrics.richardson_limit(1.0, 1.1, np.nan))

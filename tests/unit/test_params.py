@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import taichi_star as ts
+from taichi_star.params import PARAMETER_UNITS
 from taichi_star.gait import Gait, symmetry_classes
 from taichi_star.geometry import build_topology
 from taichi_star.params import PER_ACTUATOR_FIELDS
@@ -64,7 +65,6 @@ def test_the_residual_test_is_opt_in():
 @pytest.mark.parametrize("kwargs,match", [
     (dict(params=[]), "empty"),
     (dict(params=[ts.StarParams(), ts.StarParams(n_arc=36)]), "n_arc"),
-    (dict(params=ts.StarParams()), "sequence"),
     (dict(params=[ts.StarParams(), "A1"]), r"params\[1\]"),
     (dict(duration_s=0.0), "duration_s"),
     (dict(duration_s=-1.0), "duration_s"),
@@ -153,6 +153,17 @@ def test_presets_are_named_models_with_overrides():
         ts.StarParams.preset("fast")
 
 
+def test_identified_preset_is_its_documented_fields():
+    from taichi_star.params import IDENTIFIED_FIELDS
+    identified = ts.StarParams.preset("identified", gait="A1+A4")
+    assert identified == ts.StarParams(gait="A1+A4", **IDENTIFIED_FIELDS)
+    assert identified != ts.StarParams(gait="A1+A4")  # it differs from the paper's model
+    # the identified values are fitted, not defaults: every field named differs from its default
+    for name, value in IDENTIFIED_FIELDS.items():
+        assert getattr(identified, name) == value != getattr(ts.StarParams(), name)
+    assert ts.SolverConfig.preset("identified") == ts.SolverConfig()
+
+
 # The boundaries and messages below are the ranges documented on each field.
 
 @pytest.mark.parametrize("field,value,message", [
@@ -227,7 +238,7 @@ def test_presets_default_to_the_paper_and_name_the_choices_when_unknown():
     for cls in (ts.StarParams, ts.SolverConfig):
         with pytest.raises(ValueError) as error:
             cls.preset("fast")
-        assert str(error.value) == "preset must be one of ['paper', 'accurate'], got 'fast'"
+        assert str(error.value) == "preset must be one of ['paper', 'accurate', 'identified'], got 'fast'"
 
 
 def test_a_profile_that_is_not_a_curvature_profile_is_refused_naming_its_type():
@@ -283,3 +294,70 @@ def test_numeric_fields_are_all_fields_but_the_texts_and_the_profile():
         assert len(getattr(ts.StarParams(), name)) == 8, name
     for name in numeric:
         assert isinstance(getattr(ts.StarParams(), name), (int, float)), name
+
+
+@pytest.mark.parametrize("cls,typo,suggestion", [
+    (ts.StarParams, "alpah", "'alpha'"),
+    (ts.StarParams, "drag_perpendicualr", "'drag_perpendicular'"),
+    (ts.SolverConfig, "dtt", "'dt'"),
+])
+def test_a_misspelt_field_is_named_with_a_suggestion_and_the_field_list(cls, typo, suggestion):
+    with pytest.raises(TypeError, match=f"{cls.__name__} has no field '{typo}'; did you mean "
+                                        f"{suggestion}.*fields: ") as error:
+        cls(**{typo: 1})
+    assert all(f in str(error.value) for f in ("gait", "alpha", "n_limb")) \
+        if cls is ts.StarParams else "max_newton" in str(error.value)
+
+
+def test_a_word_like_no_field_gets_no_suggestion_and_real_fields_still_work():
+    with pytest.raises(TypeError, match=r"StarParams has no field 'zzz' \(fields: gait, "):
+        ts.StarParams(zzz=1)
+    assert ts.StarParams(alpha=0.5, gait="A1+A2").alpha == 0.5
+    assert ts.StarParams("A1+A2", 0.5) == ts.StarParams(gait="A1+A2", alpha=0.5)  # positional
+
+
+def test_a_single_star_params_is_a_batch_of_one():
+    from taichi_star.model import validate_batch
+    one = ts.StarParams(gait="A1+A2")
+    assert validate_batch(one) == (one,)
+    assert validate_batch([one, one]) == (one, one)
+
+
+CROSS_CONSTRAINED = {"period", "joint_radius", "tip_radius"}
+"""Fields whose declared range is narrowed by another field (tested on their own above)."""
+
+
+@pytest.mark.parametrize("name", sorted(set(ts.STAR_RANGES) - CROSS_CONSTRAINED))
+def test_every_declared_range_is_the_validated_range_at_both_ends(name):
+    """The range declared with a field is what __post_init__ enforces: both ends accepted
+    (the lowest only where it is included), just beyond either end refused naming the field."""
+    from dataclasses import fields
+
+    lowest, highest, included = ts.STAR_RANGES[name]
+    integer = isinstance({f.name: f for f in fields(ts.StarParams)}[name].default, int)
+    beyond = 1 if integer else max(abs(highest), 1.0) * 1e-9
+    assert getattr(ts.StarParams(**{name: highest}), name) == highest
+    with pytest.raises(ValueError, match=name):
+        ts.StarParams(**{name: highest + beyond})
+    if included:
+        assert getattr(ts.StarParams(**{name: lowest}), name) == lowest
+    else:
+        with pytest.raises(ValueError, match=name):
+            ts.StarParams(**{name: lowest})
+    below = lowest - (1 if integer else max(abs(lowest), 1.0) * 1e-9)
+    with pytest.raises(ValueError, match=name):
+        ts.StarParams(**{name: below})
+
+
+def test_help_lists_every_field_with_its_declared_unit_and_allowed_values():
+    from dataclasses import fields
+
+    doc = ts.StarParams.__doc__
+    for f in fields(ts.StarParams):
+        [row] = [line for line in doc.splitlines() if line.strip().startswith(f"| {f.name} |")]
+        if f.name in ts.STAR_RANGES:
+            lowest, highest, included = ts.STAR_RANGES[f.name]
+            unit = PARAMETER_UNITS[f.name]
+            assert f"| {unit} | {'[' if included else '('}{lowest:g}, {highest:g}] |" in row
+        elif "choices" in f.metadata:
+            assert all(f'"{choice}"' in row for choice in f.metadata["choices"])

@@ -4,6 +4,7 @@ the body frame, open-loop plans to a lattice goal."""
 import math
 
 import numpy as np
+import pytest
 
 from taichi_star.planner import PrimitiveModel
 
@@ -30,3 +31,65 @@ def test_plan_reaches_a_lattice_goal_in_the_fewest_cycles():
     steps = model.steps_mm[plan].sum(axis=1)
     np.testing.assert_allclose(steps, [(30, 20), (0, 0)])
     assert (plan[0, :5] != 0).all() and (plan[0, 5:] == 0).all() and (plan[1] == 0).all()
+
+
+def glide_model(glide_mm=5.0):
+    """A1 steps 10 mm along x per cycle and glides glide_mm on after its last firing; A5 steps
+    back."""
+    return PrimitiveModel(["A1", "A5"], [(10, 0), (-10, 0)], [0.0, 0.0],
+                          glides_mm=[(glide_mm, 0), (-glide_mm, 0)])
+
+
+def test_the_plan_stops_firing_early_for_the_glide():
+    a1 = 1
+    goal, tolerance = np.array([[40.0, 0.0]]), 5.0
+    # a robot that glides 8 mm after its last firing: the glide-blind plan fires until the
+    # model puts it on the goal (4 × 10 mm) and the robot comes to rest 8 mm past it
+    blind = PrimitiveModel(["A1", "A5"], [(10, 0), (-10, 0)], [0.0, 0.0])
+    plan = blind.plan(goal, tolerance, max_cycles=6)[0]
+    assert plan.tolist() == [a1, a1, a1, a1, 0, 0]
+    assert 4 * 10 + 8 - goal[0, 0] > tolerance
+    # planning for the glide stops after three: at rest at 30 + 8 = 38 mm, within 5 mm
+    model = glide_model(8.0)
+    assert model.gaits[a1] == "A1"
+    plan = model.plan(goal, tolerance, max_cycles=6)[0]
+    assert plan.tolist() == [a1, a1, a1, 0, 0, 0]
+    rest = model.rest(model.steps_mm[plan].sum(axis=0)[None], np.zeros(1), np.array([a1]))
+    np.testing.assert_allclose(rest, [(38.0, 0.0)])
+    # exactly reachable: two firings and the glide rest on a goal 2·10 + 8 = 28 mm ahead
+    assert model.plan(np.array([[28.0, 0.0]]), 0.5, max_cycles=4)[0].tolist() == [a1, a1, 0, 0]
+
+
+def test_rest_and_choice_use_the_last_gait_and_the_heading():
+    model = glide_model()
+    a1, a5 = model.gaits.index("A1"), model.gaits.index("A5")
+    position = np.array([[20.0, 0.0], [0.0, 20.0], [20.0, 0.0]])
+    heading = np.array([0.0, math.pi / 2, 0.0])
+    last = np.array([a1, a1, 0])
+    np.testing.assert_allclose(model.rest(position, heading, last),
+                               [(25, 0), (0, 25), (20, 0)], atol=1e-12)
+    goals = np.array([[25.0, 0.0], [0.0, 25.0], [25.0, 0.0]])
+    choice = model.choose(position, heading, goals, 1.0, last)
+    # the first two glide into their goals: stop firing
+    assert choice[:2].tolist() == [0, 0]
+    # the third is at rest 5 mm short (tolerance 1 mm): one A1 would rest at 35 mm, one A5 at
+    # 5 mm; of the pairs only A5 then A1 rests on the goal (20 − 10 + 10 + 5 = 25)
+    assert choice[2] == a5
+    assert model.choose(position[2:], heading[2:], goals[2:], 1.0).tolist() == [a5]  # last: none
+    assert model.choose(position[2:], heading[2:], goals[2:], 5.0, last[2:]).tolist() == [0]
+
+
+def test_glides_are_read_from_a_primitive_table_and_checked():
+    import pandas as pd
+    table = pd.DataFrame({"gait": ["A1", "A5"], "step_x_mm": [10.0, -10.0],
+                          "step_y_mm": [0.0, 0.0], "turn_deg": [0.0, 0.0],
+                          "status": ["ok", "ok"], "glide_x_mm": [5.0, -5.0],
+                          "glide_y_mm": [0.0, 1.0]})
+    model = PrimitiveModel.from_table(table)
+    np.testing.assert_array_equal(model.glides_mm, [(0, 0), (5, 0), (-5, 1)])
+    without = PrimitiveModel.from_table(table.drop(columns=["glide_x_mm", "glide_y_mm"]))
+    assert not without.glides_mm.any()
+    with pytest.raises(ValueError, match="glides_mm must be"):
+        PrimitiveModel(["A1"], [(10, 0)], [0.0], glides_mm=[(1, 0), (2, 0)])
+    with pytest.raises(ValueError, match="must be finite"):
+        PrimitiveModel(["A1"], [(10, 0)], [0.0], glides_mm=[(np.nan, 0)])

@@ -17,6 +17,7 @@ import pyarrow.parquet as pq
 import pytest
 
 import taichi_star as ts
+from taichi_star import provenance
 from taichi_star.actuation import CurvatureProfile
 from taichi_star.batch import store as run_store
 from taichi_star.batch.store import (RunStore, RunStoreError, definition_differences,
@@ -170,21 +171,6 @@ def test_chunk_round_trip_keeps_every_bit_dtype_and_value_object(written):
     assert store.chunk_path(1) == folder / "chunk_000001.parquet"
     assert sorted(p.name for p in folder.iterdir()) == [
         "chunk_000000.parquet", "chunk_000001.parquet", "manifest.json"]
-
-
-def test_a_chunk_with_per_actuator_tuples_reads_them_back_as_the_same_tuples(tmp_path):
-    """The per-actuator parameter columns (`actuator_gains`, ...) hold a tuple per row: stored
-    as JSON lists and read back as tuples equal to the bit (a float's JSON text is exact)."""
-    store = store_in(tmp_path / "run")
-    tasks = tasks_of()
-    store.open(tasks, resume=False)
-    gains = [tuple(1.0 / (3 + k + a) for a in range(8)) for k in range(len(tasks[0].members))]
-    summary = summary_of(tasks[0]).assign(actuator_gains=pd.Series(gains, dtype=object))
-    store.write(tasks[0], summary)
-    stored = store.read(tasks[0])
-    pd.testing.assert_frame_equal(stored, summary, check_exact=True)
-    assert all(type(value) is tuple for value in stored["actuator_gains"])
-    assert list(stored["actuator_gains"]) == gains
 
 
 def test_a_chunk_without_value_objects_or_rows_round_trips(tmp_path):
@@ -479,16 +465,16 @@ def git(folder, *arguments):
 
 @pytest.fixture
 def checkout(tmp_path, monkeypatch):
-    """A git checkout without commits holding taichi_star/batch/store.py, seen by code_version
-    as its source checkout (it looks two folders above the module); the test runs elsewhere."""
+    """A git checkout without commits holding taichi_star/provenance.py, seen by code_version
+    as its source checkout (it looks one folder above the module); the test runs elsewhere."""
     if shutil.which("git") is None:
         pytest.skip("needs git")
     root = tmp_path / "checkout"
-    module = root / "taichi_star" / "batch" / "store.py"
+    module = root / "taichi_star" / "provenance.py"
     module.parent.mkdir(parents=True)
     module.write_text("# the module\n")
     git(root, "init", "-q")
-    monkeypatch.setattr(run_store, "__file__", str(module))
+    monkeypatch.setattr(provenance, "__file__", str(module))
     monkeypatch.chdir(tmp_path)
     return root
 
@@ -497,12 +483,12 @@ def test_code_version_names_the_commit_and_whether_tracked_files_changed(checkou
     git(checkout, "add", "-A")
     git(checkout, "commit", "-q", "-m", "first")
     head = git(checkout, "rev-parse", "HEAD")
-    assert run_store.code_version() == {"version": ts.__version__, "commit": head,
+    assert provenance.code_version() == {"version": ts.__version__, "commit": head,
                                         "dirty": False}
     (checkout / "notes.txt").write_text("untracked files do not count")
-    assert run_store.code_version()["dirty"] is False
-    (checkout / "taichi_star" / "batch" / "store.py").write_text("# changed\n")
-    assert run_store.code_version() == {"version": ts.__version__, "commit": head,
+    assert provenance.code_version()["dirty"] is False
+    (checkout / "taichi_star" / "provenance.py").write_text("# changed\n")
+    assert provenance.code_version() == {"version": ts.__version__, "commit": head,
                                         "dirty": True}
 
 
@@ -511,21 +497,21 @@ def test_code_version_with_a_damaged_git_index_names_the_commit_but_not_dirtines
     git(checkout, "commit", "-q", "-m", "first")
     head = git(checkout, "rev-parse", "HEAD")
     (checkout / ".git" / "index").write_bytes(b"damaged")  # `git status` fails, HEAD is known
-    assert run_store.code_version() == {"version": ts.__version__, "commit": head,
+    assert provenance.code_version() == {"version": ts.__version__, "commit": head,
                                         "dirty": None}
 
 
 def test_code_version_of_a_checkout_without_commits_names_none(checkout):
     # there `git rev-parse HEAD` fails yet prints "HEAD"
-    assert run_store.code_version() == {"version": ts.__version__, "commit": None,
+    assert provenance.code_version() == {"version": ts.__version__, "commit": None,
                                         "dirty": None}
 
 
 def test_code_version_without_git_names_none(checkout, monkeypatch):
     def no_git(*args, **kwargs):
         raise FileNotFoundError("git")
-    monkeypatch.setattr(run_store.subprocess, "run", no_git)
-    assert run_store.code_version() == {"version": ts.__version__, "commit": None,
+    monkeypatch.setattr(provenance.subprocess, "run", no_git)
+    assert provenance.code_version() == {"version": ts.__version__, "commit": None,
                                         "dirty": None}
 
 
@@ -533,17 +519,17 @@ def test_write_atomic_writes_whole_or_leaves_the_previous_file(tmp_path, monkeyp
     """A write that fails before its rename (here: fsync reports a full disk) leaves the previous
     file byte for byte and no temporary file beside it; one that succeeds replaces it whole."""
     path = tmp_path / "table.csv"
-    run_store.write_atomic(path, b"a,b\n1,2\n")
+    provenance.write_atomic(path, b"a,b\n1,2\n")
     assert path.read_bytes() == b"a,b\n1,2\n"
 
     def full_disk(descriptor):
         raise OSError(28, "No space left on device")
 
     with monkeypatch.context() as patched:
-        patched.setattr(run_store.os, "fsync", full_disk)
+        patched.setattr(provenance.os, "fsync", full_disk)
         with pytest.raises(OSError, match="No space left"):
-            run_store.write_atomic(path, b"a,b\n3,4\n5,6\n")
+            provenance.write_atomic(path, b"a,b\n3,4\n5,6\n")
     assert path.read_bytes() == b"a,b\n1,2\n"
     assert [p.name for p in tmp_path.iterdir()] == ["table.csv"]
-    run_store.write_atomic(path, b"a,b\n3,4\n")
+    provenance.write_atomic(path, b"a,b\n3,4\n")
     assert path.read_bytes() == b"a,b\n3,4\n"

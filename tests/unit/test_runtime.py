@@ -25,3 +25,54 @@ def test_a_bad_kernel_optimisation_variable_is_named_in_the_error(monkeypatch, v
 def test_configure_compiler_takes_only_a_bool():
     with pytest.raises(ValueError, match="kernel_optimisation must be True or False, got 'on'"):
         runtime.Runtime().configure_compiler("on")
+
+
+CACHE_PROBE = """
+import sys, taichi as ti
+if sys.argv[1] == "populate":
+    ti.init(arch=ti.cpu, log_level=ti.WARN)
+    @ti.kernel
+    def one():
+        pass
+    one()
+    ti.reset()  # writes the offline cache
+elif sys.argv[1] == "taichi":
+    ti.init(arch=ti.cpu, log_level=ti.WARN)
+    @ti.kernel
+    def two():
+        pass
+    two()
+else:
+    from taichi_star.runtime import Runtime
+    Runtime.current().ensure("cpu")
+    @ti.kernel
+    def three():
+        pass
+    three()  # an engine's first kernel
+"""
+
+
+def test_a_taken_cache_lock_prints_no_advice_to_clean_the_cache(tmp_path):
+    """Another process holding Taichi's offline-cache lock: plain Taichi prints "Lock ...
+    failed. Please run 'ti cache clean'" when it opens the cache; taichi_star's runtime opens
+    it at log level ERROR and prints nothing (its own private cache: HOME in tmp_path)."""
+    import os
+    import subprocess
+    import sys
+
+    script = tmp_path / "probe.py"
+    script.write_text(CACHE_PROBE)
+    environment = {**os.environ, "HOME": str(tmp_path)}
+
+    def run(mode):
+        return subprocess.run([sys.executable, str(script), mode], env=environment,
+                              capture_output=True, text=True, timeout=120)
+    run("populate")
+    caches = list(tmp_path.glob(".cache/taichi/ticache/*.tcb"))
+    assert caches, "the probe did not write an offline cache"
+    (caches[0].parent / "ticache.lock").touch()
+    plain = run("taichi")
+    assert "ticache.lock failed" in plain.stdout + plain.stderr
+    ours = run("taichi_star")
+    assert ours.returncode == 0, ours.stderr
+    assert "ticache.lock" not in ours.stdout + ours.stderr

@@ -1,0 +1,703 @@
+"""Model selection: candidate model forms fitted to the measured trajectories and ranked by how
+well they predict what they were not fitted to.
+
+    python -m studies model_select [--candidates CSV] [--only NAME,...] [--preset paper|accurate]
+                                   [--set NAME=VALUE ...] [--gaits paper|A1,A1+A2,...]
+                                   [--train-cycles 1:3] [--validate-cycles 4:6]
+                                   [--popsize P] [--max-generations G] [--restarts R]
+                                   [--fold-generations F] [--seed S] [--sigma0 0.25] [--dt S]
+                                   [--budget-hours 2] [--resume] [--arch cpu|gpu] [--out DIR]
+                                   [--quick] [--workers N | --scheduler tcp://HOST:PORT]
+
+Candidates are data: a table (`--candidates`, default `studies/model_candidates.csv`) with one
+row per model form: name, set (NAME=VALUE fields fixed on top of --preset/--set, space
+separated), fit (NAME=LOW:HIGH[:log] axes, space separated; NAME[INDEX] for one element of a
+tuple-valued field, e.g. actuator_gains[4]) and description. A candidate naming a field that
+StarParams does not have is skipped with a note in the table (the model extensions are added
+separately); `--only` picks candidates by name.
+
+Each candidate is fitted by CMA-ES (`studies.identify.minimise_cmaes`: one batched `run_batch`
+per generation, all points × all gaits; IPOP restarts) to the trajectory objective of
+`taichi_star.identification` on the training cycles (`--train-cycles`, the paper's 1–3): per
+gait, the simulated against the measured displacement-from-cycle-start curves, the trial's
+pulse phase fitted as a nuisance, residuals in units of the measured spread across cycles,
+plus a penalty on wrong-way travel. Then, per candidate:
+
+- training error: the objective on the training cycles at the best point (re-simulated);
+- validation error: the objective on `--validate-cycles` (4–6) with the training phases;
+- leave-one-gait-out: for each gait, a fit on the others (warm-started at the full fit's best
+  point with half its step, `--fold-generations` generations; 0 skips the folds) predicts the
+  held-out gait. An axis that only the held-out gait informs stays at its prior (the base
+  model's value): an element INDEX of a per-actuator field (a tuple of 8) is informed only by
+  gaits that fire actuator A<INDEX>;
+- directions right (training and validation windows), the parameter count k (fitted axes plus
+  one phase per gait), χ² = Σ over the gaits of the squared residuals (curve samples and the
+  direction residual, weighted as in the fit: as much as a whole curve), AIC = χ² + 2k and
+  BIC = χ² + k ln n (n the number of curve samples).
+  The curve samples of a trial are correlated (one path), so χ², AIC and BIC overstate the
+  evidence; they rank, they do not test.
+
+Writes into `--out` (default a fresh `runs/model_select/<timestamp>/`), each table with its
+provenance sidecar: `model_select.csv` (one row per candidate, ranked by the held-out error,
+then BIC; skipped candidates last with their note), `model_select_parameters.csv` (the
+identified values with a standard deviation from the final CMA-ES search distribution,
+σ·√diag C mapped to the parameter: how tightly the search closed in on each axis, not a
+posterior), `model_select_gaits.csv` (candidate × gait × window: objective, phase, speeds,
+direction), `model_select_folds.csv` (candidate × held-out gait), `fits/<candidate>.csv`
+(every evaluation, rewritten each generation), `model_select.png` (the ranking) and per
+candidate Fig. 4c/4b at its best point (`fig4c_<candidate>.*`, `fig4b_<candidate>.*`).
+
+`--resume` (with `--out`): candidates whose rows are already in `done/` with the same
+definition (candidate, settings, model, solver) are read back, not refitted.
+
+Cost: the study times its first generation, prints the estimate for the whole study and the
+`--budget-hours` it is held to; a candidate that would start after the budget has run out is
+skipped with a note.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import time
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+import pandas as pd
+
+from taichi_star import SolverConfig, StarParams, identification
+from taichi_star.batch import run_batch
+from taichi_star.gait import Gait
+
+from . import cli, figures, identify
+
+DESCRIPTION = ("Model selection: candidate model forms fitted by CMA-ES to the measured "
+               "trajectories (cycles 1-3), ranked by leave-one-gait-out and later-cycle error.")
+
+CANDIDATES_CSV = Path(__file__).resolve().parent / "model_candidates.csv"
+"""The default candidate table."""
+QUICK_CANDIDATES = (
+    {"name": "paper", "set": "", "fit": "alpha=0.2:1.5 cylinder_drag=1:100:log",
+     "description": "the paper's model, alpha and C_c fitted"},
+    {"name": "ramp", "set": "profile_closure=ramp", "fit": "alpha=0.2:1.5 cylinder_drag=1:100:log",
+     "description": "the ramp closure, alpha and C_c fitted"},
+)
+"""--quick: two toy candidates (cma needs two axes at least)."""
+QUICK_GAITS = "A1+A2,A1+A4"
+QUICK_POPSIZE, QUICK_MAX_GENERATIONS, QUICK_FOLD_GENERATIONS = 4, 2, 1
+DEFAULT_POPSIZE, DEFAULT_MAX_GENERATIONS, DEFAULT_FOLD_GENERATIONS = 6, 8, 2
+RECORD_INTERVAL_S = 0.01
+"""Centroid records of the fits, s (rounded to whole steps): ≥ 4 per sample of a cycle curve."""
+PER_ACTUATOR = 8
+"""A tuple-valued field of this length holds one value per actuator (A1..A8)."""
+RESULT_COLUMNS = ["rank", "candidate", "status", "note", "n_fitted", "n_parameters",
+                  "train_objective", "validate_objective", "logo_objective",
+                  "logo_directions_right", "logo_within_35pct", "n_folds",
+                  "train_directions_right", "validate_directions_right", "n_gaits", "chi2",
+                  "n_samples", "aic", "bic", "n_evaluations", "fit_time_s", "fit", "set",
+                  "description", "definition"]
+"""Columns of model_select.csv. logo_within_35pct: held-out gaits in the right direction with
+a speed within ±35 % of the measured one over the training window."""
+
+
+# --------------------------------------------------------------------------- candidates
+
+@dataclasses.dataclass(frozen=True)
+class Candidate:
+    """One model form: fields fixed on top of the base model and axes fitted."""
+    name: str
+    set: str
+    fit: str
+    description: str = ""
+
+    def missing_fields(self) -> List[str]:
+        """Fields the candidate names that StarParams does not have."""
+        known = set(StarParams.field_names())
+        names = [item.split("=", 1)[0].split("[", 1)[0].strip().replace("-", "_")
+                 for item in (self.set.split() + self.fit.split())]
+        return [name for name in dict.fromkeys(names) if name not in known]
+
+    def model(self, base: StarParams) -> StarParams:
+        """The base model with the candidate's fixed fields (StudyArgumentError naming the
+        candidate for a bad value)."""
+        changes = {}
+        for item in self.set.split():
+            name, values = cli.parse_assignment(item, f"candidate {self.name}: set")
+            if len(values) != 1:
+                raise cli.StudyArgumentError(f"candidate {self.name}: set {name}: give one value")
+            changes[name] = values[0]
+        try:
+            return base.replace(**changes)
+        except (ValueError, TypeError) as error:
+            raise cli.StudyArgumentError(f"candidate {self.name}: {error}") from None
+
+    def box(self, base: StarParams) -> List[identify.ParameterRange]:
+        """The fitted axes, checked on the candidate's model."""
+        box = [identify.parse_range_spec(text, f"candidate {self.name}: fit")
+               for text in self.fit.split()]
+        identify.check_box(box, self.model(base), f"candidate {self.name}: fit")
+        return box
+
+
+def read_candidates(path) -> List[Candidate]:
+    """The candidate table (columns name, set, fit, description); StudyArgumentError naming
+    --candidates for a missing file, column or name, or a name given twice."""
+    try:
+        table = pd.read_csv(path, dtype=str, keep_default_na=False)
+    except (OSError, pd.errors.ParserError) as error:
+        raise cli.StudyArgumentError(f"--candidates {path}: cannot read it ({error})") from None
+    missing = {"name", "set", "fit"} - set(table.columns)
+    if missing:
+        raise cli.StudyArgumentError(f"--candidates {path}: no column(s) "
+                                     f"{', '.join(sorted(missing))}")
+    candidates = [Candidate(row["name"].strip(), row["set"].strip(), row["fit"].strip(),
+                            row.get("description", "").strip()) for _, row in table.iterrows()]
+    names = [c.name for c in candidates]
+    for name in names:
+        if not name:
+            raise cli.StudyArgumentError(f"--candidates {path}: a row has no name")
+        if names.count(name) > 1:
+            raise cli.StudyArgumentError(f"--candidates {path}: {name} is listed twice")
+    return candidates
+
+
+def informed_axes(box: Sequence[identify.ParameterRange], base: StarParams,
+                  gaits: Sequence[str]) -> List[bool]:
+    """Per axis: do the gaits inform it? An element INDEX of a per-actuator field (a tuple of
+    `PER_ACTUATOR` values) only if some gait fires actuator A<INDEX>; every other axis always."""
+    fired = np.zeros(PER_ACTUATOR, dtype=bool)
+    for gait in gaits:
+        fired |= Gait.parse(gait).mask.astype(bool)
+    informed = []
+    for spec in box:
+        per_actuator = (spec.index is not None
+                        and len(getattr(base, spec.name)) == PER_ACTUATOR)
+        informed.append(bool(fired[spec.index - 1]) if per_actuator else True)
+    return informed
+
+
+# --------------------------------------------------------------------------- evaluation
+
+@dataclasses.dataclass(frozen=True)
+class Setup:
+    """What every evaluation of the study shares."""
+    gaits: Tuple[str, ...]
+    trials: dict
+    train: Tuple[int, int]
+    validate: Tuple[int, int]
+    run_kwargs: dict
+    record_interval_s: float
+
+
+def simulate_points(params: Sequence[StarParams], last_cycle: int, setup: Setup) -> list:
+    """`identification.SimulatedRun` of every model (None where it failed), simulated from rest
+    for `last_cycle` cycles in one batch."""
+    result = run_batch(list(params), cycles=float(last_cycle),
+                       record_interval_s=setup.record_interval_s, **setup.run_kwargs)
+    runs = identification.simulated_runs(result.trajectory, [p.gait for p in params],
+                                         [p.period for p in params])
+    ok = result.summary["status"].to_numpy() == "ok"
+    return [run if good else None for run, good in zip(runs, ok)]
+
+
+def score(runs: Sequence, gaits: Sequence[str], setup: Setup, cycles,
+          phases: Optional[Dict[str, float]] = None) -> Optional[pd.DataFrame]:
+    """The trajectory objective's per-gait table of one point's runs (None if any failed)."""
+    if any(run is None for run in runs):
+        return None
+    return identification.trajectory_objective(dict(zip(gaits, runs)), setup.trials, cycles,
+                                               phases=phases)
+
+
+def evaluate(box, units, model: StarParams, gaits: Sequence[str], setup: Setup) -> pd.DataFrame:
+    """One generation: every point (units (P, D)) on every gait in one batch, scored on the
+    training cycles. One row per point: u_<axis>, the values, objective (inf if a simulation
+    failed), n_direction_mismatches, then objective_<gait> and phase_<gait>_s."""
+    units = np.atleast_2d(units)
+    values = identify.box_values(box, units)
+    params = identify.box_params(box, values, model, gaits)
+    runs = simulate_points(params, setup.train[1], setup)
+    table = pd.DataFrame({f"u_{s.key}": units[:, d] for d, s in enumerate(box)})
+    for d, spec in enumerate(box):
+        table[spec.column] = values[:, d]
+    objective, mismatches = [], []
+    per_gait = {f"objective_{g}": [] for g in gaits} | {f"phase_{g}_s": [] for g in gaits}
+    for p in range(len(units)):
+        scored = score(runs[p * len(gaits):(p + 1) * len(gaits)], gaits, setup, setup.train)
+        objective.append(math.inf if scored is None else identification.objective_of(scored))
+        mismatches.append(len(gaits) if scored is None
+                          else int((~scored["direction_matches"]).sum()))
+        for g, gait in enumerate(gaits):
+            per_gait[f"objective_{gait}"].append(math.nan if scored is None
+                                                 else scored["objective"].iloc[g])
+            per_gait[f"phase_{gait}_s"].append(math.nan if scored is None
+                                               else scored["phase_s"].iloc[g])
+    table["objective"] = objective
+    table["n_direction_mismatches"] = mismatches
+    for column, values_ in per_gait.items():
+        table[column] = values_
+    return table
+
+
+def best_units(evaluations: pd.DataFrame, box) -> np.ndarray:
+    row = identify.best_row(evaluations)
+    return np.array([row[f"u_{spec.key}"] for spec in box], dtype=float)
+
+
+# --------------------------------------------------------------------------- one candidate
+
+def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMASettings,
+                  fold_generations: int, setup: Setup, on_generation=None,
+                  progress: bool = False) -> dict:
+    """Fit one candidate and assess it (module docstring). Returns {"row": the result row
+    (without rank), "parameters", "gaits", "folds", "evaluations": tables, "best": the
+    identified StarParams}."""
+    start = time.perf_counter()
+    model = candidate.model(base)
+    box = candidate.box(base)
+    gaits = list(setup.gaits)
+    fit = identify.minimise_cmaes(box, identify.start_units(box, model),
+                                  lambda u: evaluate(box, u, model, gaits, setup), settings,
+                                  progress=progress, on_generation=on_generation)
+    evaluations = fit.evaluations
+    row = {"candidate": candidate.name, "fit": candidate.fit, "set": candidate.set,
+           "description": candidate.description, "n_fitted": len(box),
+           "n_parameters": len(box) + len(gaits), "n_gaits": len(gaits),
+           "n_evaluations": len(evaluations)}
+    if identify.best_row(evaluations) is None:
+        return {"row": {**row, "status": "fit_failed", "note": "every candidate point failed",
+                        "fit_time_s": time.perf_counter() - start},
+                "parameters": pd.DataFrame(), "gaits": pd.DataFrame(), "folds": pd.DataFrame(),
+                "evaluations": evaluations, "best": None, "identified": None}
+    units = best_units(evaluations, box)
+    values = identify.box_values(box, units)[0]
+    best = model.replace(**identify.point_changes(box, values, model))
+    # training and validation windows from one simulation of the best point
+    runs = simulate_points([best.replace(gait=g) for g in gaits], setup.validate[1], setup)
+    train = score(runs, gaits, setup, setup.train)
+    validate = (score(runs, gaits, setup, setup.validate, dict(zip(train["gait"],
+                                                                    train["phase_s"])))
+                if train is not None else None)
+    folds = leave_one_gait_out(box, units, model, settings, fold_generations, setup)
+    n_samples = len(gaits) * (setup.train[1] - setup.train[0] + 1) * \
+        identification.SAMPLES_PER_CYCLE
+    k = row["n_parameters"]
+    held = folds[folds["status"] == "ok"] if len(folds) else folds
+    row.update({
+        "status": "ok" if train is not None else "failed", "note": "",
+        "train_objective": (identification.objective_of(train) if train is not None
+                            else math.inf),
+        "validate_objective": (identification.objective_of(validate) if validate is not None
+                               else math.inf),
+        "logo_objective": float(held["objective"].mean()) if len(held) else math.nan,
+        "logo_directions_right": int(held["direction_matches"].sum()) if len(held) else 0,
+        "logo_within_35pct": int((held["direction_matches"]
+                                  & (held["speed_ratio"].sub(1).abs() <= 0.35)).sum())
+        if len(held) else 0,
+        "n_folds": len(folds),
+        "train_directions_right": int(train["direction_matches"].sum()) if train is not None
+        else 0,
+        "validate_directions_right": int(validate["direction_matches"].sum())
+        if validate is not None else 0,
+        **information_criteria(train, k, n_samples), "fit_time_s": time.perf_counter() - start})
+    windows = [table.assign(window=name) for name, table in
+               (("train", train), ("validate", validate)) if table is not None]
+    gait_rows = pd.concat(windows, ignore_index=True) if windows else pd.DataFrame()
+    gait_rows.insert(0, "candidate", candidate.name)
+    return {"row": row, "parameters": parameter_table(candidate.name, box, values, fit.unit_std),
+            "gaits": gait_rows, "folds": folds.assign(candidate=candidate.name),
+            "evaluations": evaluations, "best": best, "identified": identified_fields(best)}
+
+
+def information_criteria(train: Optional[pd.DataFrame], k: int, n_samples: int) -> dict:
+    """chi2, n_samples, aic, bic of a fit from its training per-gait table: χ² = the samples
+    per gait × Σ over the gaits of the gait's objective (its mean squared curve residual plus
+    the direction residual², which thus weighs as much as a whole curve, as in the fit),
+    AIC = χ² + 2k, BIC = χ² + k ln n_samples; inf without a table."""
+    chi2 = (math.inf if train is None
+            else float(train["objective"].sum()) * n_samples / len(train))
+    return {"chi2": chi2, "n_samples": n_samples, "aic": chi2 + 2 * k,
+            "bic": chi2 + k * math.log(n_samples)}
+
+
+def identified_fields(best: StarParams) -> dict:
+    """{field: value} of an identified model where it differs from StarParams' defaults (the
+    gait aside; tuples as tuples): the dict of a preset (`taichi_star.params.PRESET_FIELDS`)."""
+    default = StarParams()
+    return {name: getattr(best, name) for name in StarParams.field_names()
+            if name != "gait" and getattr(best, name) != getattr(default, name)}
+
+
+def best_model(candidate: Candidate, base: StarParams, parameters: pd.DataFrame) -> StarParams:
+    """A candidate's identified model from its rows of the parameter table (a finished
+    candidate read back)."""
+    model = candidate.model(base)
+    box = candidate.box(base)
+    values = parameters.set_index("parameter").loc[[spec.label for spec in box], "value"]
+    return model.replace(**identify.point_changes(box, values.to_numpy(dtype=float), model))
+
+
+def identified_table(row: dict, fields: dict) -> pd.DataFrame:
+    """identified.csv: one row per field of the best candidate's model (field, value as Python
+    text, the candidate and its errors)."""
+    return pd.DataFrame([{"field": name, "value": repr(value), "candidate": row["candidate"],
+                          "train_objective": row["train_objective"],
+                          "validate_objective": row["validate_objective"],
+                          "logo_objective": row["logo_objective"]}
+                         for name, value in fields.items()])
+
+
+def parameter_table(name: str, box, values, unit_std) -> pd.DataFrame:
+    """The identified values with their spread: σ_u (unit coordinates) mapped through the
+    axis' scale, (high − low)·σ_u or value·ln(high/low)·σ_u for a log axis."""
+    rows = []
+    for spec, value, spread in zip(box, values, unit_std):
+        scale = (value * math.log(spec.high / spec.low)) if spec.log else (spec.high - spec.low)
+        rows.append({"candidate": name, "parameter": spec.label, "column": spec.column,
+                     "value": float(value), "std": float(scale * spread), "unit_std": float(spread),
+                     "low": spec.low, "high": spec.high, "log": spec.log})
+    return pd.DataFrame(rows)
+
+
+def leave_one_gait_out(box, units, model: StarParams, settings: identify.CMASettings,
+                       generations: int, setup: Setup) -> pd.DataFrame:
+    """One row per held-out gait: held_out_gait, n_fold_axes (axes its fold fitted),
+    frozen_axes (left at their prior), objective (the held-out gait on the training cycles),
+    sim_speed_mm_s (signed), meas_speed_mm_s, speed_ratio (|sim| / meas), direction_matches,
+    status. Every fold's prediction is simulated in one batch."""
+    gaits = list(setup.gaits)
+    if generations == 0 or len(gaits) < 2:
+        return pd.DataFrame()
+    predictions, notes = [], []
+    fold_settings = dataclasses.replace(settings, max_generations=generations, restarts=0,
+                                        sigma0=settings.sigma0 / 2)
+    for held_out in gaits:
+        fitted = [g for g in gaits if g != held_out]
+        informed = informed_axes(box, model, fitted)
+        fold_box = [spec for spec, keep in zip(box, informed) if keep]
+        frozen = [spec.label for spec, keep in zip(box, informed) if not keep]
+        point = {}
+        if fold_box:
+            fold_setup = dataclasses.replace(setup, gaits=tuple(fitted))
+            start = np.array([u for u, keep in zip(units, informed) if keep])
+            fold = identify.minimise_cmaes(
+                fold_box, start, lambda u: evaluate(fold_box, u, model, fitted, fold_setup),
+                fold_settings)
+            if identify.best_row(fold.evaluations) is not None:
+                fold_values = identify.box_values(fold_box, best_units(fold.evaluations,
+                                                                       fold_box))[0]
+                point = identify.point_changes(fold_box, fold_values, model)
+        predictions.append(model.replace(gait=held_out, **point))
+        notes.append((held_out, len(fold_box), " ".join(frozen)))
+    runs = simulate_points(predictions, setup.train[1], setup)
+    rows = []
+    for (held_out, n_axes, frozen), run in zip(notes, runs):
+        scored = score([run], [held_out], setup, setup.train)
+        if scored is None:
+            rows.append({"held_out_gait": held_out, "n_fold_axes": n_axes, "frozen_axes": frozen,
+                         "status": "failed", "objective": math.inf})
+            continue
+        line = scored.iloc[0]
+        rows.append({"held_out_gait": held_out, "n_fold_axes": n_axes, "frozen_axes": frozen,
+                     "objective": float(line["objective"]),
+                     "sim_speed_mm_s": float(line["sim_speed_mm_s"]),
+                     "meas_speed_mm_s": float(line["meas_speed_mm_s"]),
+                     "speed_ratio": abs(line["sim_speed_mm_s"]) / line["meas_speed_mm_s"],
+                     "direction_matches": bool(line["direction_matches"]), "status": "ok"})
+    return pd.DataFrame(rows)
+
+
+# --------------------------------------------------------------------------- the study
+
+def ranked(rows: Sequence[dict]) -> pd.DataFrame:
+    """The result rows ranked: fitted candidates by held-out error (then BIC, then training
+    error), skipped or failed ones after them; rank 1 is the best."""
+    table = pd.DataFrame(list(rows))
+    for column in RESULT_COLUMNS:
+        if column not in table:
+            table[column] = math.nan
+    table["_ok"] = table["status"] == "ok"
+    logo = table["logo_objective"].astype(float)
+    table["_logo"] = logo.where(np.isfinite(logo), math.inf)
+    table = table.sort_values(["_ok", "_logo", "bic", "train_objective"],
+                              ascending=[False, True, True, True], kind="stable")
+    table["rank"] = np.arange(1, len(table) + 1)
+    return table[RESULT_COLUMNS].reset_index(drop=True)
+
+
+def definition_of(candidate: Candidate, args, settings, base: StarParams,
+                  solver: SolverConfig, gaits) -> str:
+    """SHA-256 of what defines a candidate's result (a resumed run reuses it only if equal). The
+    base model enters by its fields that differ from StarParams' defaults, so a field added to
+    StarParams later (a new model option, off by default) leaves earlier results reusable."""
+    defaults = StarParams()
+    base_changes = {f.name: repr(getattr(base, f.name)) for f in dataclasses.fields(base)
+                    if getattr(base, f.name) != getattr(defaults, f.name)}
+    text = json.dumps({"candidate": dataclasses.asdict(candidate),
+                       "settings": dataclasses.asdict(settings),
+                       "fold_generations": args.fold_generations, "gaits": list(gaits),
+                       "train": args.train_cycles, "validate": args.validate_cycles,
+                       "base": base_changes, "solver": repr(solver)}, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def estimate_seconds(seconds_per_instance_cycle: float, candidates: Sequence[Candidate],
+                     base: StarParams, settings: identify.CMASettings, fold_generations: int,
+                     n_gaits: int, train_last: int, validate_last: int) -> float:
+    """Predicted run time of the whole study (s) from the measured cost of one simulated
+    instance-cycle: every generation of every restart, the folds, the assessment runs and
+    the Fig. 4c runs, at each candidate's population."""
+    cycles = 0.0
+    for candidate in candidates:
+        dimension = len(candidate.fit.split())
+        for restart in range(settings.restarts + 1):
+            cycles += (settings.max_generations * settings.population(dimension, restart)
+                       * n_gaits * train_last)
+        if n_gaits > 1:
+            cycles += (n_gaits * fold_generations * settings.population(dimension, 0)
+                       * (n_gaits - 1) * train_last + n_gaits * train_last)
+        cycles += n_gaits * validate_last + 5 * train_last
+    return cycles * seconds_per_instance_cycle
+
+
+def parse_window(text: str, flag: str) -> Tuple[int, int]:
+    """"FIRST:LAST" -> (first, last), 1 <= first <= last."""
+    parts = str(text).split(":")
+    try:
+        window = tuple(int(p) for p in parts)
+        if len(window) != 2:
+            raise ValueError
+        return identification.check_window(window)
+    except ValueError:
+        raise cli.StudyArgumentError(f"{flag}: expected FIRST:LAST cycle numbers with "
+                                     f"1 <= FIRST <= LAST, got {text!r}") from None
+
+
+def build_parser():
+    parser = cli.StudyParser("model_select", DESCRIPTION)
+    parser.add_argument("--candidates", default=None, metavar="CSV",
+                        help=f"the candidate table (CSV: name, set, fit, description; default "
+                             f"{CANDIDATES_CSV.name}; --quick: two toy candidates)")
+    parser.add_argument("--only", default=None,
+                        help="comma list of candidate names to run (default: all)")
+    parser.add_argument("--gaits", default="paper", quick=QUICK_GAITS,
+                        help="measured gaits to fit: paper (all five) or a comma list")
+    parser.add_argument("--train-cycles", default="1:3", quick="1:1",
+                        help="the fit window FIRST:LAST (cycles from 1)")
+    parser.add_argument("--validate-cycles", default="4:6", quick="2:2",
+                        help="the validation window FIRST:LAST")
+    parser.add_argument("--popsize", type=int, default=DEFAULT_POPSIZE, quick=QUICK_POPSIZE,
+                        help="CMA-ES population, doubled at each restart")
+    parser.add_argument("--max-generations", type=int, default=DEFAULT_MAX_GENERATIONS,
+                        quick=QUICK_MAX_GENERATIONS, help="generations per CMA-ES run")
+    parser.add_argument("--fold-generations", type=int, default=DEFAULT_FOLD_GENERATIONS,
+                        quick=QUICK_FOLD_GENERATIONS,
+                        help="generations of each leave-one-gait-out fit (0: no folds)")
+    parser.add_argument("--restarts", type=int, default=1, quick=0,
+                        help="extra CMA-ES runs from random points (multi-start, IPOP)")
+    parser.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
+    parser.add_argument("--sigma0", type=float, default=0.25,
+                        help="initial CMA-ES step in unit coordinates (default 0.25)")
+    parser.add_argument("--budget-hours", type=float, default=2.0,
+                        help="wall-clock budget: candidates that would start after it are "
+                             "skipped (default 2)")
+    parser.add_argument("--resume", action="store_true",
+                        help="reuse the finished candidates in --out (same definition)")
+    cli.add_model_flags(parser, fixed=("gait",))
+    cli.add_dt_flag(parser)
+    cli.add_execution_flags(parser)
+    return parser
+
+
+def select_candidates(args) -> List[Candidate]:
+    if args.candidates is None and args.quick:
+        candidates = [Candidate(**c) for c in QUICK_CANDIDATES]
+    else:
+        candidates = read_candidates(args.candidates or CANDIDATES_CSV)
+    if args.only is not None:
+        names = cli.parse_choices(args.only, "--only", [c.name for c in candidates])
+        candidates = [c for c in candidates if c.name in names]
+    return candidates
+
+
+def main(argv=None):
+    args = cli.parse(build_parser(), argv)
+    settings = identify.CMASettings(popsize=args.popsize, max_generations=args.max_generations,
+                                    restarts=args.restarts, seed=args.seed, sigma0=args.sigma0)
+    settings.validate()
+    if args.fold_generations < 0:
+        raise cli.StudyArgumentError(f"--fold-generations must be >= 0, got "
+                                     f"{args.fold_generations}")
+    cli.check_positive(args.budget_hours, "--budget-hours")
+    if args.resume and args.out is None:
+        raise cli.StudyArgumentError("--resume: give --out (the folder of the run to continue)")
+    train = parse_window(args.train_cycles, "--train-cycles")
+    validate = parse_window(args.validate_cycles, "--validate-cycles")
+    if validate[0] <= train[1]:
+        raise cli.StudyArgumentError(f"--validate-cycles {args.validate_cycles}: must start "
+                                     f"after the training window {args.train_cycles}")
+    gaits = identify.measured_gaits(args.gaits)
+    base = cli.base_params(args)
+    candidates = select_candidates(args)
+    runnable, rows = [], []
+    for candidate in candidates:  # every runnable candidate checked before any compute
+        missing = candidate.missing_fields()
+        if missing:
+            rows.append({"candidate": candidate.name, "status": "skipped",
+                         "note": f"StarParams has no field {', '.join(missing)}",
+                         "fit": candidate.fit, "set": candidate.set,
+                         "description": candidate.description})
+            continue
+        candidate.box(base)
+        runnable.append(candidate)
+    trials = identification.measured_trials(gaits)
+    for trial in trials.values():  # the trials cover the windows
+        try:
+            identification.latest_phase(trial, validate)
+        except ValueError as error:
+            raise cli.StudyArgumentError(f"--validate-cycles {args.validate_cycles}: "
+                                         f"{error}") from None
+    solver = cli.solver(args)
+    out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
+                     solver=solver, extra={"gaits": gaits, "train_cycles": list(train),
+                                           "validate_cycles": list(validate),
+                                           "cma": dataclasses.asdict(settings),
+                                           "fold_generations": args.fold_generations})
+    progress = not args.no_progress
+    record = max(1, round(RECORD_INTERVAL_S / solver.dt)) * solver.dt
+    started = time.perf_counter()
+    parameters, gait_tables, fold_tables, identified = [], [], [], {}
+    with cli.executor(args) as executor:
+        largest = settings.population(max((len(c.fit.split()) for c in runnable), default=1),
+                                      settings.restarts) * len(gaits)
+        setup = Setup(tuple(gaits), trials, train, validate,
+                      dict(solver=solver, arch=args.arch, executor=executor,
+                           chunk_size=cli.chunk_size(args, largest, executor.n_workers)),
+                      record)
+        for position, candidate in enumerate(runnable):
+            definition = definition_of(candidate, args, settings, base, solver, gaits)
+            done = out.folder / "done" / f"{candidate.name}.json"
+            if args.resume and done.exists():
+                stored = json.loads(done.read_text())
+                if stored["row"].get("definition") == definition:
+                    stored_gaits = pd.DataFrame(stored["gaits"])
+                    if stored["row"]["status"] == "ok":
+                        stored["row"].update(information_criteria(
+                            stored_gaits[stored_gaits["window"] == "train"],
+                            stored["row"]["n_parameters"], stored["row"]["n_samples"]))
+                    rows.append(stored["row"])
+                    parameters.append(pd.DataFrame(stored["parameters"]))
+                    gait_tables.append(stored_gaits)
+                    fold_tables.append(pd.DataFrame(stored["folds"]))
+                    identified[candidate.name] = (
+                        identified_fields(best_model(candidate, base, parameters[-1]))
+                        if stored["row"]["status"] == "ok" else None)
+                    print(f"{candidate.name}: read back from {done}")
+                    continue
+            elapsed = time.perf_counter() - started
+            if elapsed > 3600 * args.budget_hours:
+                rows.append({"candidate": candidate.name, "status": "skipped",
+                             "note": f"budget of {args.budget_hours:g} h spent",
+                             "fit": candidate.fit, "set": candidate.set,
+                             "description": candidate.description, "definition": definition})
+                continue
+            timing = {"last": time.perf_counter(), "generations": 0}
+
+            def on_generation(table, name=candidate.name, timing=timing):
+                out.write_csv(table, f"fits/{name}.csv")
+                now = time.perf_counter()
+                seconds, timing["last"] = now - timing["last"], now
+                timing["generations"] += 1
+                if timing["generations"] <= 2:  # the first compiles; the second is steady
+                    points = len(table) // timing["generations"]
+                    per = seconds / (points * len(gaits) * train[1])
+                    estimate = estimate_seconds(per, runnable[position:], base, settings,
+                                                args.fold_generations, len(gaits), train[1],
+                                                validate[1])
+                    print(f"{name}: generation {timing['generations']} took {seconds:.1f} s "
+                          f"({points} points x {len(gaits)} gaits x {train[1]} cycles"
+                          f"{', compile included' if timing['generations'] == 1 else ''}); "
+                          f"estimate for the {len(runnable) - position} candidate(s) left: "
+                          f"{estimate / 60:.1f} min (budget left "
+                          f"{60 * args.budget_hours - (now - started) / 60:.1f} min)")
+
+            result = fit_candidate(candidate, base, settings, args.fold_generations, setup,
+                                   on_generation=on_generation, progress=progress)
+            result["row"]["definition"] = definition
+            rows.append(result["row"])
+            parameters.append(result["parameters"])
+            gait_tables.append(result["gaits"])
+            fold_tables.append(result["folds"])
+            identified[candidate.name] = result["identified"]
+            if result["best"] is not None:
+                figures.run_fig4c(out, result["best"], solver,
+                                  duration_s=cli.duration_s(args, result["best"].period)
+                                  if args.quick else train[1] * result["best"].period,
+                                  arch=args.arch, prefix=f"fig4c_{candidate.name}",
+                                  progress=False, title_note=f"model {candidate.name}")
+            done.parent.mkdir(parents=True, exist_ok=True)
+            done.write_text(json.dumps({
+                "row": result["row"],
+                "parameters": result["parameters"].to_dict(orient="list"),
+                "gaits": result["gaits"].to_dict(orient="list"),
+                "folds": result["folds"].to_dict(orient="list")}, default=_json_value))
+    table = ranked(rows)
+    csv = out.write_csv(table, "model_select.csv")
+    non_empty = [t for t in parameters if len(t)]
+    out.write_csv(pd.concat(non_empty, ignore_index=True) if non_empty else pd.DataFrame(),
+                  "model_select_parameters.csv")
+    non_empty = [t for t in gait_tables if len(t)]
+    out.write_csv(pd.concat(non_empty, ignore_index=True) if non_empty else pd.DataFrame(),
+                  "model_select_gaits.csv")
+    non_empty = [t for t in fold_tables if len(t)]
+    out.write_csv(pd.concat(non_empty, ignore_index=True) if non_empty else pd.DataFrame(),
+                  "model_select_folds.csv")
+    out.wrote(plot_ranking(csv, out.path("model_select.png")))
+    best = table.iloc[0]
+    if best["status"] == "ok" and identified.get(best["candidate"]) is not None:
+        fields = identified[best["candidate"]]
+        out.write_csv(identified_table(best.to_dict(), fields), "identified.csv")
+        print(f"identified preset (rank 1, {best['candidate']}): IDENTIFIED_FIELDS = {fields!r}")
+    out.report()
+    print(table[["rank", "candidate", "status", "train_objective", "validate_objective",
+                 "logo_objective", "logo_directions_right", "train_directions_right", "bic",
+                 "note"]].to_string(index=False))
+    print(f"model_select: {(time.perf_counter() - started) / 60:.1f} min")
+    return table
+
+
+def _json_value(value):
+    """JSON for the values of a finished candidate's record: NumPy scalars as numbers, other
+    objects as their text."""
+    return value.item() if isinstance(value, np.generic) else repr(value)
+
+
+def plot_ranking(csv_path, png_path) -> Path:
+    """Bars from model_select.csv: each fitted candidate's training, validation and held-out
+    objective (log scale), in rank order."""
+    plt = cli.use_agg()
+    table = pd.read_csv(csv_path)
+    table = table[table["status"] == "ok"]
+    fig, ax = plt.subplots(figsize=(max(5.0, 1.1 * len(table) + 2), 4.5))
+    width = 0.27
+    x = np.arange(len(table))
+    for offset, column, label in ((-width, "train_objective", "training cycles"),
+                                  (0.0, "validate_objective", "validation cycles"),
+                                  (width, "logo_objective", "held-out gait (LOGO)")):
+        ax.bar(x + offset, table[column].astype(float), width, label=label)
+    ax.set_xticks(x, table["candidate"], rotation=30, ha="right", fontsize=8)
+    values = table[["train_objective", "validate_objective", "logo_objective"]].to_numpy(float)
+    if (values[np.isfinite(values)] > 0).any():
+        ax.set_yscale("log")
+    ax.set_ylabel("trajectory objective (mean squared residual / σ²)")
+    settings = cli.run_settings(csv_path)
+    ax.set_title("model selection, ranked by the held-out error"
+                 + (f"\n{settings}" if settings else ""), fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(png_path, dpi=120)
+    plt.close(fig)
+    return Path(png_path)

@@ -1,0 +1,50 @@
+"""Optional dependencies, imported only by the functions that need them.
+
+The core install (``pip install taichi_star``) brings Taichi, NumPy, pandas, pyarrow and tqdm:
+enough for `simulate`, `Simulator` and `run_batch`. Everything else comes with an extra, named in
+the error a missing one raises:
+
+- ``envs``: gymnasium (the Gymnasium environments, `taichi_star.envs`);
+- ``studies``: matplotlib, pillow, cma, SALib, scipy, gymnasium (the studies: `python -m studies`);
+- ``io``: xarray, netCDF4 (`SimulationResult.to_xarray`, netCDF output);
+- ``video``: matplotlib, pillow, imageio-ffmpeg (`SimulationResult.animate`);
+- ``dask``: dask.distributed (`run_batch(..., scheduler=...)`);
+- ``docs``: mkdocs-material, mkdocstrings (building the documentation);
+- ``rl``: stable-baselines3 (its torch is large; not part of ``all``);
+- ``all``: every extra but ``rl``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+from types import ModuleType
+
+
+def missing_message(module: str, extra: str) -> str:
+    """What to tell a user who lacks `module`: the extra that installs it."""
+    return (f"{module} is not installed: it comes with the {extra!r} extra: "
+            f'pip install "taichi_star[{extra}]"')
+
+
+def first_missing(modules, extra: str) -> str:
+    """`missing_message` of the first of `modules` (top-level names) that cannot be found, without
+    importing any; "" when all are installed."""
+    for module in modules:
+        if importlib.util.find_spec(module) is None:
+            return missing_message(module, extra)
+    return ""
+
+
+def require(module: str, extra: str) -> ModuleType:
+    """Import `module` (a dotted name) and return it; if it is not installed, raise an
+    ImportError that names the extra providing it, e.g. ``pip install "taichi_star[io]"``."""
+    try:
+        return importlib.import_module(module)
+    except ModuleNotFoundError as missing:
+        # only the package asked for (or one of its parents) counts as "not installed"; an
+        # import error inside an installed package is that package's problem and propagates
+        if missing.name is None or not (module == missing.name
+                                        or module.startswith(missing.name + ".")):
+            raise
+        raise ImportError(missing_message(module, extra)) from missing

@@ -1,0 +1,323 @@
+"""The trajectory objective: a simulated robot against the measured one, cycle by cycle.
+
+The net speeds of the paper's gaits are five numbers; the recordings hold the whole path at
+59.94 frames/s, 7–19 cycles per gait: the surge during each heating pulse and the glide through
+the coast. This module compares those paths with simulated ones.
+
+Per cycle k of a path, the *cycle curve* is the distance travelled from the cycle's start,
+d_k(τ) = |p(t_k + τ) − p(t_k)| at τ = T/M, 2T/M, ..., T (M = `samples` per cycle; τ = 0, where
+every curve is 0, is left out; d_k(T) is the cycle's chord). Distances, not coordinates: camera
+axes are not robot axes, so headings are never compared.
+
+- The simulation starts from rest with a pulse at t = 0: its cycle k starts at (k − 1)·T.
+- The video does not start at a pulse: a trial's pulses fire at φ + (k − 1)·T with an unknown
+  phase φ ∈ [0, T), a nuisance parameter fitted per trial (`align_phase`): the φ that minimises
+  the squared difference between the measured and simulated cycle curves over the cycle
+  window, found on a grid of `PHASE_GRID` phases, then refined by golden-section search in the
+  grid cell on either side of the best grid point.
+- Residuals are in units of the measurement's own spread across cycles: σ = the root mean
+  over τ of the variance of the measured d_k(τ) across the window's cycles (ddof = 1), at least
+  `DISPLACEMENT_FLOOR_MM` (the tracking noise; the floor alone for a one-cycle window).
+- Direction: Δ = the simulated net displacement over the window projected on the gait's forward
+  axis (mm) must have the paper's sign s (+1 forward, −1 reverse); the direction residual
+  ρ = max(0, −s·Δ) / σ is the wrong-way travel in the same units, so a robot that swims the
+  right distance the wrong way pays (Δ/σ)², far more than any error of the curve's shape.
+
+A trial's objective is mean_k,τ ((d_sim − d_meas)/σ)² + ρ², and `trajectory_objective` is the
+mean over the gaits. The cycle window (`cycles`, 1-based, inclusive) is an argument: the paper's
+window is `TRAINING_CYCLES` = cycles 1–3; `VALIDATION_CYCLES` (4–6) is held back for validation
+(with the phase fitted on the training window). Nothing after the window's last cycle is read.
+
+    >>> from taichi_star import StarParams, identification, simulate
+    >>> trials = identification.measured_trials()                 # the five paper gaits
+    >>> params = [StarParams(gait=g) for g in trials]
+    >>> result = simulate(params, 3 * 3.15, record_interval_s=0.01)
+    >>> runs = identification.simulated_runs(result.trajectory, list(trials), [3.15] * 5)
+    >>> table = identification.trajectory_objective(dict(zip(trials, runs)), trials)
+    >>> identification.objective_of(table)      # ≈ 60 for the paper's model on cycles 1-3
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import numbers
+from dataclasses import dataclass
+from typing import Mapping, Optional, Sequence, Tuple
+
+import numpy as np
+import pandas as pd
+
+from .experiment import EXPERIMENT_PERIOD_S, PAPER_DIRECTIONS, PAPER_GAITS, experimental_trajectory
+from .gait import Gait
+
+TRAINING_CYCLES = (1, 3)
+"""The fit window, cycles 1–3 of every trial (the paper's three cycles from rest)."""
+VALIDATION_CYCLES = (4, 6)
+"""The validation window: cycles the fit never sees (every measured trial has at least 6)."""
+SAMPLES_PER_CYCLE = 64
+"""Points of a cycle curve (every T/64 ≈ 49 ms: the 150-ms surge gets three)."""
+PHASE_GRID = 64
+"""Phases of the grid search of `align_phase` (the refinement then resolves ~1e-6 s)."""
+DISPLACEMENT_FLOOR_MM = 0.05
+"""Smallest spread σ, mm: the centroid tracking jitters by a few hundredths of a millimetre
+from frame to frame (the median frame-to-frame speed change of the recordings is 2–2.7 mm/s,
+i.e. ≈ 0.04 mm per frame)."""
+GOLDEN_ITERATIONS = 40
+"""Golden-section steps of the phase refinement: the bracket of two grid cells shrinks by
+0.618^40 ≈ 4e-9 of itself."""
+
+TRIAL_COLUMNS = ["gait", "first_cycle", "last_cycle", "phase_s", "sigma_mm",
+                 "trajectory_error", "direction_residual", "objective", "sim_net_signed_mm",
+                 "meas_net_mm", "sim_speed_mm_s", "meas_speed_mm_s", "direction_matches"]
+"""Columns of `trajectory_objective`'s table, one row per gait: the window, the fitted phase
+(s), σ (mm), mean squared curve residual, direction residual ρ, the gait's objective, the
+simulated net displacement over the window along the forward axis (mm) and the measured net
+displacement's magnitude (mm), both speeds over the window (mm/s; the simulated one signed), and
+whether the simulated direction is the paper's."""
+
+
+@dataclass(frozen=True)
+class CentroidPath:
+    """A tracked or simulated centroid path: times t_s (n,) s strictly increasing, positions
+    x_mm, y_mm (n,) mm, the actuation period (s). For a simulation the pulses fire at
+    0, T, 2T, ...; for a measurement at an unknown phase."""
+
+    t_s: np.ndarray
+    x_mm: np.ndarray
+    y_mm: np.ndarray
+    period_s: float
+
+    def __post_init__(self):
+        arrays = [np.asarray(getattr(self, name), dtype=np.float64)
+                  for name in ("t_s", "x_mm", "y_mm")]
+        if not (arrays[0].ndim == 1 and len(arrays[0]) >= 2
+                and all(a.shape == arrays[0].shape for a in arrays)):
+            raise ValueError("t_s, x_mm and y_mm must be 1-D arrays of one length >= 2")
+        if np.any(np.diff(arrays[0]) <= 0) or not all(np.isfinite(a).all() for a in arrays):
+            raise ValueError("t_s must be strictly increasing and t_s, x_mm, y_mm finite")
+        if not (isinstance(self.period_s, numbers.Real) and math.isfinite(self.period_s)
+                and self.period_s > 0):
+            raise ValueError(f"period_s must be a finite number > 0, got {self.period_s!r}")
+        for name, array in zip(("t_s", "x_mm", "y_mm"), arrays):
+            object.__setattr__(self, name, array)
+
+    def position(self, t_s) -> np.ndarray:
+        """Positions (..., 2) mm at times (...) s, linear between samples."""
+        return np.stack([np.interp(t_s, self.t_s, self.x_mm),
+                         np.interp(t_s, self.t_s, self.y_mm)], axis=-1)
+
+
+@dataclass(frozen=True)
+class Trial:
+    """A measured trial: its gait (canonical name), its path and the paper's direction sign
+    (+1 forward, −1 reverse)."""
+
+    gait: str
+    path: CentroidPath
+    paper_sign: float
+
+
+@dataclass(frozen=True)
+class SimulatedRun:
+    """A simulated trial: its gait, its path (pulses at 0, T, ...) and the gait's forward unit
+    vector in the simulation's axes."""
+
+    gait: str
+    path: CentroidPath
+    forward: Tuple[float, float]
+
+
+@dataclass(frozen=True)
+class TrialFit:
+    """The comparison of one simulated trial with the measured one (see `TRIAL_COLUMNS`)."""
+
+    gait: str
+    first_cycle: int
+    last_cycle: int
+    phase_s: float
+    sigma_mm: float
+    trajectory_error: float
+    direction_residual: float
+    objective: float
+    sim_net_signed_mm: float
+    meas_net_mm: float
+    sim_speed_mm_s: float
+    meas_speed_mm_s: float
+    direction_matches: bool
+
+
+def measured_trial(gait: str, period_s: float = EXPERIMENT_PERIOD_S) -> Trial:
+    """The recorded trial of one of the paper's gaits (`experiment.experimental_trajectory`)."""
+    table = experimental_trajectory(gait)
+    name = Gait.parse(gait).name
+    return Trial(name, CentroidPath(table["t_s"].to_numpy(), table["x_mm"].to_numpy(),
+                            table["y_mm"].to_numpy(), period_s),
+                 1.0 if PAPER_DIRECTIONS[name] == "forward" else -1.0)
+
+
+def check_window(cycles) -> Tuple[int, int]:
+    """(first, last) 1-based inclusive cycle numbers, first ≥ 1 and last ≥ first; ValueError
+    naming `cycles` otherwise."""
+    try:
+        first, last = cycles
+    except (TypeError, ValueError):
+        raise ValueError(f"cycles must be a pair (first, last) of cycle numbers, got "
+                         f"{cycles!r}") from None
+    if not all(isinstance(c, numbers.Integral) and not isinstance(c, bool) for c in (first, last)) \
+            or first < 1 or last < first:
+        raise ValueError(f"cycles must be integers with 1 <= first <= last, got {cycles!r}")
+    return int(first), int(last)
+
+
+def tau_grid(period_s: float, samples: int = SAMPLES_PER_CYCLE) -> np.ndarray:
+    """τ = T/M, 2T/M, ..., T (s), M = samples."""
+    if isinstance(samples, bool) or not isinstance(samples, numbers.Integral) or samples < 1:
+        raise ValueError(f"samples must be an integer >= 1, got {samples!r}")
+    return period_s * np.arange(1, samples + 1) / samples
+
+
+def cycle_curves(path: CentroidPath, start_s: float, cycles, samples: int = SAMPLES_PER_CYCLE
+                 ) -> np.ndarray:
+    """Cycle curves (n_cycles, samples) mm of the cycles `cycles` = (first, last) of a path
+    whose first cycle starts at start_s: cycle k spans [start + (k−1)T, start + kT]. ValueError
+    when the path does not cover the window."""
+    first, last = check_window(cycles)
+    starts = start_s + path.period_s * np.arange(first - 1, last)
+    end = starts[-1] + path.period_s
+    if starts[0] < path.t_s[0] or end > path.t_s[-1] * (1 + 1e-12):
+        raise ValueError(f"cycles {first}-{last} from {start_s:g} s need the path over "
+                         f"[{starts[0]:g}, {end:g}] s; it covers [{path.t_s[0]:g}, "
+                         f"{path.t_s[-1]:g}] s")
+    origin = path.position(starts)                                    # (n, 2)
+    points = path.position(starts[:, None] + tau_grid(path.period_s, samples)[None, :])
+    return np.hypot(*np.moveaxis(points - origin[:, None, :], -1, 0))
+
+
+def latest_phase(trial: Trial, cycles) -> float:
+    """The latest phase (s) at which the trial still covers the window: min(T, t_end − last·T)
+    (the phase search runs over [0, that))."""
+    _, last = check_window(cycles)
+    latest = min(trial.path.period_s, trial.path.t_s[-1] - last * trial.path.period_s)
+    if latest < 0:
+        raise ValueError(f"the {trial.gait} trial ({trial.path.t_s[-1]:g} s) is shorter than "
+                         f"cycles up to {last}")
+    return latest
+
+
+def _misfit(simulated_curves: np.ndarray, trial: Trial, phase_s, cycles, samples) -> float:
+    """Sum of squared differences (mm²) between simulated and measured cycle curves at one
+    phase."""
+    return float(((cycle_curves(trial.path, phase_s, cycles, samples) - simulated_curves) ** 2
+                  ).sum())
+
+
+def align_phase(simulated_curves: np.ndarray, trial: Trial, cycles=TRAINING_CYCLES,
+                samples: int = SAMPLES_PER_CYCLE, grid: int = PHASE_GRID) -> float:
+    """The trial's pulse phase φ (s) in [0, `latest_phase`] minimising the squared difference
+    between its cycle curves and `simulated_curves` (n_cycles, samples) over `cycles`: the best
+    of `grid` phases, refined by golden-section search over the grid cells on either side of it
+    (the misfit is smooth in φ between video frames: linear interpolation of the path)."""
+    latest = latest_phase(trial, cycles)
+    phases = np.linspace(0.0, latest, grid, endpoint=False) if latest > 0 else np.zeros(1)
+    misfits = [_misfit(simulated_curves, trial, phase, cycles, samples) for phase in phases]
+    best = int(np.argmin(misfits))
+    step = latest / grid
+    low, high = max(0.0, phases[best] - step), min(latest, phases[best] + step)
+    ratio = (math.sqrt(5.0) - 1.0) / 2.0
+    a, b = high - ratio * (high - low), low + ratio * (high - low)
+    fa = _misfit(simulated_curves, trial, a, cycles, samples)
+    fb = _misfit(simulated_curves, trial, b, cycles, samples)
+    for _ in range(GOLDEN_ITERATIONS):
+        if fa <= fb:
+            high, b, fb = b, a, fa
+            a = high - ratio * (high - low)
+            fa = _misfit(simulated_curves, trial, a, cycles, samples)
+        else:
+            low, a, fa = a, b, fb
+            b = low + ratio * (high - low)
+            fb = _misfit(simulated_curves, trial, b, cycles, samples)
+    refined, refined_misfit = (a, fa) if fa <= fb else (b, fb)
+    # the grid point itself when the refinement does not beat it (an exact match on the grid)
+    return float(refined) if refined_misfit < misfits[best] else float(phases[best])
+
+
+def trial_fit(simulated: SimulatedRun, trial: Trial, cycles=TRAINING_CYCLES,
+              samples: int = SAMPLES_PER_CYCLE, phase_s: Optional[float] = None) -> TrialFit:
+    """Compare one simulated trial with the measured one over the cycle window (module
+    docstring). `phase_s`: the trial's phase, fitted here when None (`align_phase`); give the
+    phase fitted on the training window to validate on later cycles. ValueError for gaits that
+    differ or a window the simulation or the trial does not cover."""
+    first, last = check_window(cycles)
+    if Gait.parse(simulated.gait).name != trial.gait:
+        raise ValueError(f"simulated gait {simulated.gait!r} is not the trial's {trial.gait!r}")
+    sim_curves = cycle_curves(simulated.path, 0.0, (first, last), samples)
+    if phase_s is None:
+        phase_s = align_phase(sim_curves, trial, (first, last), samples)
+    elif not (math.isfinite(phase_s) and 0.0 <= phase_s <= latest_phase(trial, cycles)):
+        raise ValueError(f"phase_s must be in [0, {latest_phase(trial, cycles):g}] s, got "
+                         f"{phase_s!r}")
+    measured = cycle_curves(trial.path, phase_s, (first, last), samples)
+    spread = (math.sqrt(float(np.mean(np.var(measured, axis=0, ddof=1))))
+              if len(measured) > 1 else 0.0)
+    sigma = max(spread, DISPLACEMENT_FLOOR_MM)
+    error = float(np.mean(((sim_curves - measured) / sigma) ** 2))
+    period, meas_period = simulated.path.period_s, trial.path.period_s
+    sim_ends = simulated.path.position(np.array([first - 1, last]) * period)
+    sim_net = float(np.dot(sim_ends[1] - sim_ends[0], simulated.forward))
+    meas_ends = trial.path.position(phase_s + np.array([first - 1, last]) * meas_period)
+    meas_net = float(np.hypot(*(meas_ends[1] - meas_ends[0])))
+    rho = max(0.0, -trial.paper_sign * sim_net) / sigma
+    n_cycles = last - first + 1
+    return TrialFit(trial.gait, first, last, float(phase_s), sigma, error, rho, error + rho ** 2,
+                    sim_net, meas_net, sim_net / (n_cycles * period),
+                    meas_net / (n_cycles * meas_period),
+                    bool(np.sign(sim_net) == trial.paper_sign))
+
+
+def trajectory_objective(simulated: Mapping[str, SimulatedRun], trials: Mapping[str, Trial],
+                         cycles=TRAINING_CYCLES, samples: int = SAMPLES_PER_CYCLE,
+                         phases: Optional[Mapping[str, float]] = None) -> pd.DataFrame:
+    """`trial_fit` of every gait of `simulated` against its trial: one row per gait
+    (`TRIAL_COLUMNS`); the objective of the whole set is the mean of the `objective` column
+    (`objective_of`). `phases`: gait -> phase (s) to use instead of fitting it."""
+    rows = []
+    for gait, run in simulated.items():
+        if gait not in trials:
+            raise ValueError(f"no measured trial for gait {gait!r}; trials: {', '.join(trials)}")
+        phase = None if phases is None else phases[gait]
+        rows.append(dataclasses.asdict(trial_fit(run, trials[gait], cycles, samples, phase)))
+    return pd.DataFrame(rows, columns=TRIAL_COLUMNS)
+
+
+def objective_of(table: pd.DataFrame) -> float:
+    """The set's objective: the mean of the gaits' objectives (inf if any is not finite)."""
+    value = float(table["objective"].mean())
+    return value if math.isfinite(value) else math.inf
+
+
+def measured_trials(gaits: Sequence[str] = PAPER_GAITS,
+                    period_s: float = EXPERIMENT_PERIOD_S) -> dict:
+    """{gait: `measured_trial`} of the gaits."""
+    return {Gait.parse(g).name: measured_trial(g, period_s) for g in gaits}
+
+
+def simulated_runs(trajectory: pd.DataFrame, gaits: Sequence[str],
+                   periods_s: Sequence[float]) -> list:
+    """`SimulatedRun`s from a batch's recorded trajectory (columns instance, t_s, x_mm, y_mm;
+    instance b = position b of `gaits` and `periods_s`); None for an instance with a non-finite
+    record (a failed simulation)."""
+    runs = []
+    groups = dict(tuple(trajectory.groupby("instance", sort=True)))
+    for b, (gait, period) in enumerate(zip(gaits, periods_s)):
+        part = groups.get(b)
+        forward = Gait.parse(gait).forward
+        if part is None or forward is None or not np.isfinite(
+                part[["t_s", "x_mm", "y_mm"]].to_numpy()).all():
+            runs.append(None)
+            continue
+        runs.append(SimulatedRun(Gait.parse(gait).name,
+                                 CentroidPath(part["t_s"].to_numpy(), part["x_mm"].to_numpy(),
+                                      part["y_mm"].to_numpy(), float(period)),
+                                 (float(forward[0]), float(forward[1]))))
+    return runs

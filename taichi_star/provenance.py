@@ -1,0 +1,51 @@
+"""Where results come from, and writing files whole: the code version (package version, git
+commit, dirty flag) that the run store, the studies' sidecars and `SimulationResult`'s files
+record, and `write_atomic`, which every writer of results uses."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+from pathlib import Path
+from typing import Callable, Dict, Optional
+
+
+def code_version() -> Dict[str, object]:
+    """{"version": the package version, "commit": git HEAD of the source checkout or None,
+    "dirty": whether tracked files differ from it (None outside git)}."""
+    from . import __version__
+    root = Path(__file__).resolve().parents[1]
+    commit = dirty = None
+    try:
+        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True,
+                              text=True, timeout=10)
+        if head.returncode == 0 and head.stdout.strip():
+            commit = head.stdout.strip()
+            status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+                                    cwd=root, capture_output=True, text=True, timeout=10)
+            dirty = bool(status.stdout.strip()) if status.returncode == 0 else None
+    except (OSError, subprocess.SubprocessError):
+        pass
+    return {"version": __version__, "commit": commit, "dirty": dirty}
+
+
+def write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception]] = None):
+    """Write `data` to `path` whole or not at all: into a temporary file beside it, flushed to
+    disk, then renamed over it; a kill or a full disk leaves any previous file untouched. With
+    `failure`, an OSError (a full disk) is raised as `failure(reason)` instead, the reason one
+    line naming the file and the error ("cannot write x.csv (No space left on device)")."""
+    path = Path(path)
+    temporary = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        with open(temporary, "wb") as handle:
+            handle.write(data)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(temporary, path)
+    except OSError as error:
+        if failure is None:
+            raise
+        raise failure(f"cannot write {path.name} ({error.strerror or error})") from None
+    finally:
+        if temporary.exists():
+            temporary.unlink()

@@ -1,0 +1,164 @@
+"""The model-selection study: candidates as data (a missing field skips a candidate), the
+leave-one-gait-out rule for per-actuator axes, bad arguments before compute, and the --quick
+run checked against a direct simulation of its identified parameters."""
+
+import ast
+import types
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import taichi_star
+from taichi_star import SolverConfig, StarParams, identification
+
+from studies import cli, identify, model_select
+from studies.__main__ import main as studies_main
+
+QUICK = ["--quick", "--no-progress"]
+
+
+def test_candidates_are_data_and_missing_fields_are_noted(tmp_path):
+    table = tmp_path / "candidates.csv"
+    table.write_text("name,set,fit,description\n"
+                     "paper,,alpha=0.2:1.5 cylinder_drag=1:100:log,baseline\n"
+                     "future,jet_swirl=on,alpha=0.2:1.5 actuator_stiffnesses[4]=0.3:2,new\n")
+    candidates = model_select.read_candidates(table)
+    assert [c.name for c in candidates] == ["paper", "future"]
+    assert candidates[0].missing_fields() == []
+    assert candidates[1].missing_fields() == ["jet_swirl", "actuator_stiffnesses"]
+    box = candidates[0].box(StarParams())
+    assert [spec.spec for spec in box] == ["alpha=0.2:1.5", "cylinder_drag=1:100:log"]
+    ramp = model_select.Candidate("ramp", "profile_closure=ramp", "alpha=0.2:1.5")
+    assert ramp.model(StarParams()).profile_closure == "ramp"
+    # every candidate of the default table names existing fields or is skipped by name
+    for candidate in model_select.read_candidates(model_select.CANDIDATES_CSV):
+        if not candidate.missing_fields():
+            candidate.box(StarParams())
+
+
+def test_a_resumed_candidate_is_reused_only_for_the_same_model():
+    """The definition names the base model by the fields that differ from the defaults: a field
+    set to its default value (as a model option added later, off by default) changes nothing; a
+    changed coefficient does."""
+    candidate = model_select.Candidate("paper", "", "alpha=0.2:1.5 cylinder_drag=1:100:log")
+    args = types.SimpleNamespace(fold_generations=2, train_cycles="1:3", validate_cycles="4:6")
+    settings, solver = identify.CMASettings(), SolverConfig()
+    base = StarParams.preset("paper")
+
+    def definition(model):
+        return model_select.definition_of(candidate, args, settings, model, solver, ["A1"])
+    assert definition(base) == definition(StarParams.preset("paper", jet_mode="contract"))
+    assert definition(base) != definition(StarParams.preset("paper", alpha=0.81))
+    assert definition(base) != definition(StarParams.preset("paper", jet_mode="always"))
+
+
+def test_a_per_actuator_axis_is_informed_only_by_gaits_that_fire_it():
+    # a stand-in model with a per-actuator field (the extensions add such fields)
+    base = types.SimpleNamespace(actuator_gains=(1.0,) * 8, pair=(0.0, 0.0))
+    box = [identify.ParameterRange("alpha", 0.2, 1.5),
+           identify.ParameterRange("actuator_gains", 0.3, 2.0, index=4),
+           identify.ParameterRange("actuator_gains", 0.3, 2.0, index=3),
+           identify.ParameterRange("pair", 0.0, 1.0, index=2)]  # not per actuator
+    # A1+A4 held out: no other paper gait fires A4, so its gain stays at the prior
+    others = ["A1", "A1+A2", "A1+A3", "A1+A3+A5"]
+    assert model_select.informed_axes(box, base, others) == [True, False, True, True]
+    assert model_select.informed_axes(box, base, ["A1+A4"]) == [True, True, False, True]
+    changes = identify.point_changes(box[1:3], [0.5, 0.7], base)
+    assert changes == {"actuator_gains": (1.0, 1.0, 0.7, 0.5, 1.0, 1.0, 1.0, 1.0)}
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--train-cycles", "0:3"], "--train-cycles: expected FIRST:LAST"),
+    (["--train-cycles", "1:2", "--validate-cycles", "2:3"], "--validate-cycles 2:3: must start "
+                                                             "after"),
+    (["--only", "nothing"], "--only: unknown value 'nothing'"),
+    (["--fold-generations", "-1"], "--fold-generations must be >= 0"),
+    (["--budget-hours", "0"], "--budget-hours must be > 0"),
+    (["--candidates", "/nonexistent.csv"], "--candidates /nonexistent.csv: cannot read it"),
+    (["--gaits", "A1+A6"], "--gaits A1+A6: not measured"),
+    (["--validate-cycles", "4:40"], "shorter than cycles up to 40"),
+])
+def test_invalid_arguments_fail_before_compute(no_compute, tmp_path, capsys, argv, message):
+    assert studies_main(["model_select", *argv, "--out", str(tmp_path), *QUICK]) == 2
+    error = capsys.readouterr().err
+    assert message in error, error
+    assert error.count("\n") == 1 and "Traceback" not in error
+
+
+def test_quick_run_against_a_direct_simulation(tmp_path, capsys, monkeypatch):
+    table = model_select.main(["--out", str(tmp_path), *QUICK])
+    written = pd.read_csv(tmp_path / "model_select.csv")
+    assert list(written["candidate"]) == list(table["candidate"])
+    assert set(written["candidate"]) == {"paper", "ramp"}
+    assert list(written["rank"]) == [1, 2]
+    assert (written["status"] == "ok").all()
+    logo = written["logo_objective"].to_numpy()
+    assert logo[0] <= logo[1]  # ranked by the held-out error
+    parameters = pd.read_csv(tmp_path / "model_select_parameters.csv")
+    gaits = ["A1+A2", "A1+A4"]  # --quick
+    for _, row in written.iterrows():
+        name = row["candidate"]
+        fits = pd.read_csv(tmp_path / "fits" / f"{name}.csv")
+        assert len(fits) == model_select.QUICK_POPSIZE * model_select.QUICK_MAX_GENERATIONS
+        # the training objective of the re-simulated best point is the best evaluation's
+        assert row["train_objective"] == pytest.approx(fits["objective"].min(), rel=1e-9)
+        assert row["n_parameters"] == 2 + len(gaits)
+        # the CSV keeps 10 significant digits
+        assert row["aic"] == pytest.approx(row["chi2"] + 2 * row["n_parameters"], rel=1e-9)
+        # a direct simulation of the identified parameters gives the same objective (CSV
+        # values have 10 significant digits: the objective moves far less than 1e-6)
+        values = parameters[parameters["candidate"] == name].set_index("parameter")["value"]
+        candidate = next(c for c in model_select.QUICK_CANDIDATES if c["name"] == name)
+        model = model_select.Candidate(**candidate).model(StarParams())
+        params = [model.replace(gait=g, **values.to_dict()) for g in gaits]
+        result = taichi_star.simulate(params, 2 * params[0].period, SolverConfig(dt=cli.QUICK_DT),
+                                      record_interval_s=5 * cli.QUICK_DT)
+        runs = identification.simulated_runs(result.trajectory, gaits,
+                                             [p.period for p in params])
+        trials = identification.measured_trials(gaits)
+        train = identification.trajectory_objective(dict(zip(gaits, runs)), trials, (1, 1))
+        assert identification.objective_of(train) == pytest.approx(row["train_objective"],
+                                                                   rel=1e-6)
+        # χ²: 64 curve samples per gait (one cycle) times each gait's objective
+        assert row["n_samples"] == len(gaits) * identification.SAMPLES_PER_CYCLE
+        assert row["chi2"] == pytest.approx(identification.SAMPLES_PER_CYCLE
+                                            * train["objective"].sum(), rel=1e-6)
+        assert row["bic"] == pytest.approx(row["chi2"] + row["n_parameters"]
+                                           * np.log(row["n_samples"]), rel=1e-9)
+        validate = identification.trajectory_objective(
+            dict(zip(gaits, runs)), trials, (2, 2), phases=dict(zip(gaits, train["phase_s"])))
+        assert identification.objective_of(validate) == pytest.approx(
+            row["validate_objective"], rel=1e-6)
+        assert row["train_directions_right"] == int(train["direction_matches"].sum())
+    folds = pd.read_csv(tmp_path / "model_select_folds.csv")
+    assert len(folds) == 2 * len(gaits) and set(folds["held_out_gait"]) == set(gaits)
+    assert folds["frozen_axes"].isna().all()  # alpha and C_c: every gait informs them
+    for name, part in folds.groupby("candidate"):
+        row = written.set_index("candidate").loc[name]
+        assert row["logo_objective"] == pytest.approx(part["objective"].mean(), rel=1e-9)
+        assert row["logo_directions_right"] == int(part["direction_matches"].sum())
+    for name in ("paper", "ramp"):
+        assert (tmp_path / f"fig4c_{name}.png").stat().st_size > 1000
+        assert (tmp_path / f"fig4b_{name}.png").stat().st_size > 1000
+    assert (tmp_path / "model_select.png").stat().st_size > 1000
+    assert np.isfinite(parameters["std"]).all() and (parameters["std"] > 0).all()
+    # the preset's fields: the rank-1 candidate's model, field by field
+    identified = pd.read_csv(tmp_path / "identified.csv", dtype={"value": str})
+    best = written.iloc[0]
+    assert set(identified["candidate"]) == {best["candidate"]}
+    fields = {row["field"]: ast.literal_eval(row["value"]) for _, row in identified.iterrows()}
+    best_values = parameters[parameters["candidate"] == best["candidate"]]
+    for _, axis in best_values.iterrows():
+        assert fields[axis["parameter"]] == pytest.approx(axis["value"], rel=1e-9)
+    if best["candidate"] == "ramp":
+        assert fields["profile_closure"] == "ramp"
+
+    # --resume reads the finished candidates back, compute-free, to the same table
+    def forbidden(*args, **kwargs):
+        raise AssertionError("a finished candidate was simulated again")
+    monkeypatch.setattr("taichi_star.batch.tasks.simulate", forbidden)
+    capsys.readouterr()
+    model_select.main(["--out", str(tmp_path), "--resume", *QUICK])
+    assert "paper: read back from" in capsys.readouterr().out
+    pd.testing.assert_frame_equal(written, pd.read_csv(tmp_path / "model_select.csv"))
