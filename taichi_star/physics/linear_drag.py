@@ -18,12 +18,11 @@ import numpy as np
 import taichi as ti
 
 from ..geometry import CENTRE
-from .base import Term
-from .rod_drag import rod_edges
+from .rod_drag import RodEdgeTerm, rod_edges
 
 
 @ti.data_oriented
-class LinearDrag(Term):
+class LinearDrag(RodEdgeTerm):
     name = "linear_drag"
 
     @staticmethod
@@ -35,21 +34,8 @@ class LinearDrag(Term):
         return {"linear_rod_coeff": lengths * np.array([p.linear_drag for p in params])[:, None],
                 "linear_hub_coeff": np.array([p.hub_linear_drag for p in params])}
 
-    @staticmethod
-    def configuration(coefficients):
-        used = (coefficients["linear_rod_coeff"] > 0).any() or (
-            coefficients["linear_hub_coeff"] > 0).any()
-        return () if used else None
-
-    @staticmethod
-    def coupled_pairs(topology):
-        return [tuple(topology.edges[e]) for e in rod_edges(topology)]
-
     def build(self, topology):
-        rods = rod_edges(topology)
-        self.n_rods = len(rods)
-        self.rods = self.assembly.index(topology.edges[rods])
-        self.rod_slot = self.assembly.pair_slots(topology.edges[rods])
+        super().build(topology)
         self.centre_slot = self.assembly.slot(CENTRE, CENTRE)
 
     @ti.func

@@ -42,21 +42,13 @@ def rod_edges(topology) -> np.ndarray:
 
 
 @ti.data_oriented
-class RodDrag(Term):
-    name = "rod_drag"
-
-    @staticmethod
-    def coefficients(params, topologies, topology):
-        rods = rod_edges(topology)
-        fluid = np.array([p.fluid_density for p in params])[:, None]
-        wetted = 0.5 * fluid * np.stack([t.rest_length[rods] for t in topologies])
-        return {"drag_parallel_coeff": wetted * np.array([p.drag_parallel for p in params])[:, None],
-                "drag_perpendicular_coeff": wetted * np.array([p.drag_perpendicular for p in params])[:, None]}
+class RodEdgeTerm(Term):
+    """Base of the terms that act on every rod edge (`rod_edges`): their Jacobian pattern, the
+    device tables `rods` (R, 2) and `rod_slot` (R, 4), and on when any coefficient is > 0."""
 
     @staticmethod
     def configuration(coefficients):
-        used = (coefficients["drag_parallel_coeff"] > 0).any() or (
-            coefficients["drag_perpendicular_coeff"] > 0).any()
+        used = any((values > 0).any() for values in coefficients.values())
         return () if used else None
 
     @staticmethod
@@ -68,6 +60,19 @@ class RodDrag(Term):
         self.n_rods = len(rods)
         self.rods = self.assembly.index(topology.edges[rods])
         self.rod_slot = self.assembly.pair_slots(topology.edges[rods])
+
+
+@ti.data_oriented
+class RodDrag(RodEdgeTerm):
+    name = "rod_drag"
+
+    @staticmethod
+    def coefficients(params, topologies, topology):
+        rods = rod_edges(topology)
+        fluid = np.array([p.fluid_density for p in params])[:, None]
+        wetted = 0.5 * fluid * np.stack([t.rest_length[rods] for t in topologies])
+        return {"drag_parallel_coeff": wetted * np.array([p.drag_parallel for p in params])[:, None],
+                "drag_perpendicular_coeff": wetted * np.array([p.drag_perpendicular for p in params])[:, None]}
 
     @ti.func
     def assemble(self, b, rate_gain, jacobian):
