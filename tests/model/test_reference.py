@@ -108,15 +108,26 @@ def test_bend_element_gradient_and_hessian():
 
 # ---- fluid elements --------------------------------------------------------------------------
 
-def test_rod_drag_element_jacobian():
-    rng = np.random.default_rng(3)
-    n = 20
+def moving_edges(seed, n):
+    """n random ~1.5-mm edges (xa, xb), where they were 1 ms before (xa_old, xb_old) and rest
+    lengths: node displacements of ~1e-4 m over 1 ms, velocities ~0.1 m/s, both along and
+    across every edge."""
+    rng = np.random.default_rng(seed)
     xa = rng.uniform(-1e-3, 1e-3, (n, 2))
     xb = xa + rng.uniform(-1e-3, 1e-3, (n, 2)) + np.array([1.5e-3, 0.0])
-    # Node displacements of ~1e-4 m over 1 ms: velocities ~0.1 m/s, with both a and b nonzero.
     xa_old = xa - rng.uniform(-1e-4, 1e-4, (n, 2))
     xb_old = xb - rng.uniform(-1e-4, 1e-4, (n, 2))
-    dt, rest = 1e-3, rng.uniform(0.8e-3, 1.2e-3, n)
+    return xa, xb, xa_old, xb_old, rng.uniform(0.8e-3, 1.2e-3, n)
+
+
+def edge_power(forces, xa, xb, xa_old, xb_old, dt):
+    """Power (n,) of the (n, 4) node forces of edges on their nodes' velocities, W/m."""
+    return (forces[:, :2] * (xa - xa_old) + forces[:, 2:] * (xb - xb_old)).sum(1) / dt
+
+
+def test_rod_drag_element_jacobian():
+    xa, xb, xa_old, xb_old, rest = moving_edges(3, 20)
+    dt = 1e-3
     x = np.concatenate([xa, xb], axis=1)
 
     def element(y):
@@ -135,8 +146,7 @@ def test_rod_drag_element_jacobian():
     assert np.allclose(forces[0, :2], 0.5 * expected, rtol=1e-12)
     assert np.allclose(forces[0, 2:], 0.5 * expected, rtol=1e-12)
     # Drag dissipates: the power of the two node forces is negative.
-    power = (forces[:, :2] * (xa - xa_old) + forces[:, 2:] * (xb - xb_old)).sum(1) / dt
-    assert np.all(power < 0)
+    assert np.all(edge_power(forces, xa, xb, xa_old, xb_old, dt) < 0)
 
 
 def test_cylinder_drag_element_jacobian():
@@ -245,13 +255,8 @@ def test_assembled_force_jacobian(jet_mode, shrink):
 # ---- model extensions (issue 28): linear drag, per-actuator gains and delays -----------------
 
 def test_linear_rod_drag_element_is_minus_c_l_times_the_mean_velocity_with_its_jacobian():
-    rng = np.random.default_rng(11)
-    n = 12
-    xa = rng.uniform(-1e-3, 1e-3, (n, 2))
-    xb = xa + rng.uniform(-1e-3, 1e-3, (n, 2)) + np.array([1.5e-3, 0.0])
-    xa_old = xa - rng.uniform(-1e-4, 1e-4, (n, 2))
-    xb_old = xb - rng.uniform(-1e-4, 1e-4, (n, 2))
-    dt, rest, coeff = 1e-3, rng.uniform(0.8e-3, 1.2e-3, n), 40.0
+    xa, xb, xa_old, xb_old, rest = moving_edges(11, 12)
+    dt, coeff = 1e-3, 40.0
     x = np.concatenate([xa, xb], axis=1)
 
     def element(y):
@@ -269,8 +274,7 @@ def test_linear_rod_drag_element_is_minus_c_l_times_the_mean_velocity_with_its_j
     turned = linear_rod_drag_element(xa, turned_xb, xa_old, xb_old + (turned_xb - xb), dt, rest,
                                      coeff)[0]
     np.testing.assert_allclose(turned, forces, rtol=1e-12)  # rounding of the shifted positions
-    power = (forces[:, :2] * (xa - xa_old) + forces[:, 2:] * (xb - xb_old)).sum(1) / dt
-    assert np.all(power < 0)
+    assert np.all(edge_power(forces, xa, xb, xa_old, xb_old, dt) < 0)
 
 
 def test_hub_linear_drag_element_is_minus_c_h_times_the_velocity_with_its_jacobian():
