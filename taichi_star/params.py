@@ -26,6 +26,8 @@ from .actuation import PROFILE_CLOSURES, CurvatureProfile
 from .gait import N_ACTUATORS, Gait
 
 JET_MODES = ("contract", "always")
+JET_DIRECTIONS = ("hub", "normal", "bisector")
+JET_APPLICATIONS = ("hub", "spread")
 ACTUATION_ENDS = ("clamped", "shared")
 JOINT_STIFFNESSES = ("limb", "series")
 PRECISIONS = ("f64", "f32")
@@ -114,6 +116,10 @@ def _parse_number_list(name, text):
         return [float(part) for part in inner.split(",") if part.strip()]
     except ValueError:
         raise ValueError(f"{name}: cannot read {text[:60]!r} as {N_ACTUATORS} numbers") from None
+COMPONENT_HEIGHTS = ("hub_height", "foam_height", "actuator_height")
+"""The StarParams fields of the component heights (2.5-D model): all 0 (off) or all set."""
+COMPONENT_HEIGHT_MINIMUM = 1e-3
+"""Smallest component height, m (a millimetre: no part of the robot is thinner)."""
 
 
 def _check_number(name, value, lowest, highest, lowest_included=True, integer=False):
@@ -229,6 +235,28 @@ class StarParams:
     """Edges per actuator arc (topology: equal across a batch)."""
     n_limb: int = parameter(6, "1", 1, 1000)
     """Edges per foam limb (topology: equal across a batch)."""
+    jet_direction: str = parameter("hub", choices=JET_DIRECTIONS)
+    """Direction t of each space's jet (model extension, docs/model.md "Jet variants"): "hub"
+    = from the hub to the opening's midpoint (the paper's reading); "normal" = normal to the
+    opening segment tip_k → tip_{k+1}, pointing away from the hub; "bisector" = along the
+    bisector of the two limbs' directions, joint → tip, that bound the space."""
+    jet_application: str = parameter("hub", choices=JET_APPLICATIONS)
+    """Where each jet's force acts: "hub" = all of it on the centre node (the paper); "spread"
+    = a quarter on each of the space's four corners (its two joints and two tips), the walls
+    the water pushes on."""
+    jet_inflow: float = parameter(0.0, "1", 0.0, 10.0)
+    """Inflow ratio α_in (-): while a space opens (Ṡ > 0) the water drawn in through its
+    opening pulls the robot towards it with f = (ρ_f/L)(α_in·Ṡ)²·t (0 = none, the paper's
+    model). Needs jet_mode "contract" (with "always" an opening space already jets)."""
+    hub_height: float = parameter(0.0, "m", 0.0, 0.5)
+    """Height of the hub (the central cylinder), m: with foam_height and actuator_height, the
+    2.5-D model (docs/model.md "Component heights"): each component's mass, drag, added mass and
+    jet scale with its height over the hub's. 0 (default) = off, every component one unit height
+    (the paper); else at least COMPONENT_HEIGHT_MINIMUM (1 mm), and all three must be set."""
+    foam_height: float = parameter(0.0, "m", 0.0, 0.5)
+    """Height of the foam limbs, m (the paper's robot: 24 mm); 0 = off, else ≥ 1 mm."""
+    actuator_height: float = parameter(0.0, "m", 0.0, 0.5)
+    """Height of the actuator arcs, m; 0 = off, else ≥ 1 mm."""
     # ---- model extensions (issue 28), off by default: the defaults change no result
     linear_drag: float = parameter(0.0, "Pa*s/m", 0.0, 1e4)
     """Linear (skin-friction) drag c_l on the rod edges, Pa·s/m: a force −c_l·v per unit rod
@@ -254,6 +282,19 @@ class StarParams:
             "actuator_gains", self.actuator_gains, 0.0, MAX_ACTUATOR_GAIN, True))
         object.__setattr__(self, "actuator_delays", _check_actuator_values(
             "actuator_delays", self.actuator_delays, 0.0, self.period, False))
+        heights = [getattr(self, name) for name in COMPONENT_HEIGHTS]
+        for name, height in zip(COMPONENT_HEIGHTS, heights):
+            if 0.0 < height < COMPONENT_HEIGHT_MINIMUM:
+                raise ValueError(f"{name} must be 0 (off) or in [{COMPONENT_HEIGHT_MINIMUM:g}, "
+                                 f"0.5] m, got {height!r}")
+        if 0.0 in heights and any(heights):
+            missing = [name for name, height in zip(COMPONENT_HEIGHTS, heights) if height == 0.0]
+            raise ValueError(f"{', '.join(missing)} must be in [{COMPONENT_HEIGHT_MINIMUM:g}, "
+                             f"0.5] m as well: the component heights are all set or all 0 (off)")
+        if self.jet_inflow > 0.0 and self.jet_mode == "always":
+            raise ValueError(f"jet_inflow must be 0 with jet_mode 'always' (its literal formula "
+                             f"already jets while a space opens; an inflow would only cancel "
+                             f"part of that), got {self.jet_inflow!r}: use jet_mode 'contract'")
         if not isinstance(self.actuator_profile, CurvatureProfile):
             raise ValueError(f"actuator_profile must be a CurvatureProfile, got "
                              f"{type(self.actuator_profile).__name__}")
@@ -287,6 +328,15 @@ class StarParams:
     def limb_modulus(self) -> float:
         """E_limb, Pa."""
         return self.youngs_modulus * self.limb_stiffness_ratio
+
+    @property
+    def height_ratios(self) -> Tuple[float, float]:
+        """(foam_height, actuator_height) over hub_height: what scales the limbs' and the arcs'
+        mass, drag, added mass and the jet (the hub's own ratio is 1); exactly (1.0, 1.0) when
+        the heights are off."""
+        if self.hub_height == 0.0:
+            return 1.0, 1.0
+        return self.foam_height / self.hub_height, self.actuator_height / self.hub_height
 
     @property
     def gait_value(self) -> Gait:

@@ -254,7 +254,7 @@ def linear_rod_drag_element(xa, xb, xa_old, xb_old, dt, rest_length, linear_drag
     v = mean node velocity; F = −c_l Δl̄ v; each node receives F/2.
 
     Args: xa, xb (..., 2) new positions, m; xa_old, xb_old (..., 2) old positions, m; dt h, s;
-        rest_length Δl̄ (...), m; linear_drag c_l, Pa·s/m.
+        rest_length Δl̄ (...), m; linear_drag c_l (...), Pa·s/m.
     Returns: forces (..., 4) on (xa, xb), N/m; Jacobian (..., 4, 4) = ∂forces/∂(xa, xb), N/m².
     """
     velocity = 0.5 * ((xa - xa_old) + (xb - xb_old)) / dt
@@ -282,17 +282,57 @@ def quad_area(x1, x2, x3, x4):
     return 0.5 * np.abs(_cross(x3 - x1, x4 - x2))
 
 
-def jet_element(x1, x2, x3, x4, xc, area_old, dt, fluid_density, alpha, contract_only):
-    """Jet force of one inter-limb space, applied at the centre, and its Jacobian.
+def _unit_with_derivative(v):
+    """u = v/|v| (..., 2) and ∂u/∂v = (I − u uᵀ)/|v| (..., 2, 2)."""
+    length = np.linalg.norm(v, axis=-1)
+    u = v / length[..., None]
+    return u, (np.eye(2) - _outer(u, u)) / length[..., None, None]
 
-    Ṡ = (S(x_new) − S_old)/h, L = |x2 − x3|, t = unit vector from xc to ½(x2 + x3);
-    f = −(ρ_f / L) (α Ṡ)² t, switched off where Ṡ ≥ 0 if `contract_only`.
+
+_QUARTER_TURN = np.array([[0.0, -1.0], [1.0, 0.0]])
+"""R with R a = _perp(a)."""
+
+
+def jet_direction(x1, x2, x3, x4, xc, direction):
+    """Unit jet direction t (..., 2) of a space and ∂t/∂(x1, x2, x3, x4, xc) (..., 2, 10).
+
+    "hub": from xc to ½(x2 + x3). "normal": the unit normal of the opening x2–x3 on the side
+    away from xc. "bisector": the bisector of the limb directions (x2 − x1)/|x2 − x1| and
+    (x3 − x4)/|x3 − x4| (each joint → tip).
+    """
+    zero = np.zeros(np.shape(x1)[:-1] + (2, 2))
+    if direction == "hub":
+        t, d_reach = _unit_with_derivative(0.5 * (x2 + x3) - xc)
+        return t, np.concatenate([zero, 0.5 * d_reach, 0.5 * d_reach, zero, -d_reach], axis=-1)
+    if direction == "normal":
+        along, d_along = _unit_with_derivative(x3 - x2)
+        # the normal on the side away from xc (the side is fixed near the rest shape)
+        side = np.sign(_dot(_perp(along), 0.5 * (x2 + x3) - xc))
+        d_x3 = side[..., None, None] * (_QUARTER_TURN @ d_along)
+        return side[..., None] * _perp(along), np.concatenate([zero, -d_x3, d_x3, zero, zero],
+                                                              axis=-1)
+    first, d_first = _unit_with_derivative(x2 - x1)
+    second, d_second = _unit_with_derivative(x3 - x4)
+    t, d_sum = _unit_with_derivative(first + second)
+    d_x2 = d_sum @ d_first
+    d_x3 = d_sum @ d_second
+    return t, np.concatenate([-d_x2, d_x2, d_x3, -d_x3, zero], axis=-1)
+
+
+def jet_element(x1, x2, x3, x4, xc, area_old, dt, fluid_density, alpha, contract_only,
+                inflow=0.0, direction="hub"):
+    """Jet (or inflow) force of one inter-limb space and its Jacobian.
+
+    Ṡ = (S(x_new) − S_old)/h, L = |x2 − x3|, t = `jet_direction(..., direction)`;
+    f = −(ρ_f / L) (α Ṡ)² t, switched off where Ṡ ≥ 0 if `contract_only`; there, where Ṡ > 0,
+    the inflow f = +(ρ_f / L) (α_in Ṡ)² t instead (α_in = `inflow`).
 
     Args: x1..x4 (..., 2) new quad corners (J_k, tip_k, tip_{k+1}, J_{k+1}), m; xc (..., 2) new
         centre, m; area_old S(x_old) (...), m²; dt h, s; fluid_density ρ_f, kg/m³; alpha α (-);
-        contract_only (bool, broadcasts).
-    Returns: force (..., 2) on the centre, N/m; Jacobian (..., 2, 10) = ∂f/∂(x1, x2, x3, x4, xc),
-        N/m².
+        contract_only (bool, broadcasts); inflow α_in (-); direction "hub" | "normal" |
+        "bisector".
+    Returns: force (..., 2) of the space on the robot, N/m; Jacobian (..., 2, 10) =
+        ∂f/∂(x1, x2, x3, x4, xc), N/m².
     """
     p = x3 - x1
     q = x4 - x2
@@ -310,20 +350,17 @@ def jet_element(x1, x2, x3, x4, xc, area_old, dt, fluid_density, alpha, contract
     zero = np.zeros_like(u)
     grad_length = np.concatenate([zero, u, -u, zero, zero], axis=-1)
 
-    r = 0.5 * (x2 + x3) - xc
-    r_norm = np.linalg.norm(r, axis=-1)
-    t = r / r_norm[..., None]
-    dt_dr = (np.eye(2) - _outer(t, t)) / r_norm[..., None, None]
-    dt_dx = np.concatenate([np.zeros_like(dt_dr), 0.5 * dt_dr, 0.5 * dt_dr,
-                            np.zeros_like(dt_dr), -dt_dr], axis=-1)
+    t, dt_dx = jet_direction(x1, x2, x3, x4, xc, direction)
 
-    on = np.where(np.asarray(contract_only) & (area_rate >= 0.0), 0.0, 1.0)
-    c = on * fluid_density * alpha ** 2
+    jetting = ~np.asarray(contract_only) | (area_rate < 0.0)
+    # the signed coefficient of g·t: −ρ α² while jetting, +ρ α_in² while refilling
+    c = np.where(jetting, -fluid_density * alpha ** 2,
+                 np.where(area_rate > 0.0, fluid_density * inflow ** 2, 0.0))
     g = area_rate ** 2 / length
     grad_g = ((2.0 * area_rate / length)[..., None] * grad_rate
               - (area_rate ** 2 / length ** 2)[..., None] * grad_length)
-    force = -(c * g)[..., None] * t
-    jac = -(c[..., None, None] * _outer(t, grad_g) + (c * g)[..., None, None] * dt_dx)
+    force = (c * g)[..., None] * t
+    jac = c[..., None, None] * _outer(t, grad_g) + (c * g)[..., None, None] * dt_dx
     return force, jac
 
 
@@ -393,7 +430,9 @@ class ImplicitStep:
 class ReferenceSimulator:
     """One robot advanced by implicit Euler or BDF2 with an exact-Jacobian Newton solve.
 
-    Attributes: params, solver, topology; mass (N,) lumped mass without added mass, kg/m;
+    Attributes: params, solver, topology; foam_scale, actuator_scale: the limbs' and arcs'
+    heights over the hub's (1 without component heights); mass (N,) lumped mass without added
+    mass, kg/m (per hub height);
     added_mass (N,) diagonal added mass, kg/m; stretch_modulus (E,) and bend_modulus (T,), Pa,
     the Young's modulus of each edge and triplet (elasticity and damping alike).
     """
@@ -406,7 +445,12 @@ class ReferenceSimulator:
         p = params
         r0 = p.thickness
 
-        arc_len, limb_len = topo.lumped_length[:, 0], topo.lumped_length[:, 1]
+        # 2.5-D: every rod component per hub height, i.e. times its height over the hub's
+        self.foam_scale, self.actuator_scale = (
+            (1.0, 1.0) if p.hub_height == 0.0 else
+            (p.foam_height / p.hub_height, p.actuator_height / p.hub_height))
+        arc_len = self.actuator_scale * topo.lumped_length[:, 0]
+        limb_len = self.foam_scale * topo.lumped_length[:, 1]
         self.mass = r0 * (p.actuator_density * arc_len + p.foam_density * limb_len)
         self.mass[0] += p.cylinder_mass_per_height
         self.added_mass = p.fluid_density * p.added_mass_coeff * r0 * (arc_len + limb_len)
@@ -520,14 +564,17 @@ class ReferenceSimulator:
 
     def _fluid(self, q_new, q_old, dt, area_old=None):
         """The terms (force, Jacobian) of rod drag, cylinder drag, the eight jets and, where
-        set, the linear drag of the rods and the hub for the velocities (q_new − q_old)/dt and area rates (S(q_new) − area_old)/dt (area_old
-        defaults to the areas of q_old)."""
+        set, the linear drag of the rods and the hub for the velocities (q_new − q_old)/dt and
+        area rates (S(q_new) − area_old)/dt (area_old defaults to the areas of q_old)."""
         p, topo = self.params, self.topology
         rods = topo.edges[self._rod_edges]
         a, b = rods.T
+        edge_scale = np.where(topo.edge_kind[self._rod_edges] == ARC, self.actuator_scale,
+                              self.foam_scale)
         f_rod, k_rod = rod_drag_element(q_new[a], q_new[b], q_old[a], q_old[b], dt,
-                                        topo.rest_length[self._rod_edges], p.fluid_density,
-                                        p.drag_parallel, p.drag_perpendicular)
+                                        topo.rest_length[self._rod_edges],
+                                        p.fluid_density * edge_scale, p.drag_parallel,
+                                        p.drag_perpendicular)
         f_cyl, k_cyl = cylinder_drag_element(q_new[0], q_old[0], dt, p.fluid_density,
                                              p.cylinder_drag, p.cylinder_diameter)
         quads = topo.jet_quads
@@ -535,15 +582,21 @@ class ReferenceSimulator:
         if area_old is None:
             area_old = self.areas(q_old)
         f_jet, k_jet = jet_element(*[q_new[quads[:, m]] for m in range(4)], q_new[centre[:, 0]],
-                                   area_old, dt, p.fluid_density, p.alpha,
-                                   p.jet_mode == "contract")
+                                   area_old, dt, p.fluid_density * self.foam_scale, p.alpha,
+                                   p.jet_mode == "contract", p.jet_inflow, p.jet_direction)
+        jet_nodes = np.concatenate([quads, centre], axis=1)
+        if p.jet_application == "spread":
+            # a quarter of each space's force on each of its four corners
+            jet_term = (quads, jet_nodes, np.tile(f_jet / 4.0, 4),
+                        np.concatenate([k_jet / 4.0] * 4, axis=-2))
+        else:
+            jet_term = (centre, jet_nodes, f_jet, k_jet)
         terms = [(rods, rods, f_rod, k_rod),
-                 (centre[:1], centre[:1], f_cyl[None], k_cyl[None]),
-                 (centre, np.concatenate([quads, centre], axis=1), f_jet, k_jet)]
+                 (centre[:1], centre[:1], f_cyl[None], k_cyl[None]), jet_term]
         if p.linear_drag > 0.0:
             terms.append((rods, rods) + linear_rod_drag_element(
                 q_new[a], q_new[b], q_old[a], q_old[b], dt, topo.rest_length[self._rod_edges],
-                p.linear_drag))
+                p.linear_drag * edge_scale))
         if p.hub_linear_drag > 0.0:
             f_hub, k_hub = hub_linear_drag_element(q_new[0], q_old[0], dt, p.hub_linear_drag)
             terms.append((centre[:1], centre[:1], f_hub[None], k_hub[None]))

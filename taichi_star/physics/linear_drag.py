@@ -18,7 +18,7 @@ import numpy as np
 import taichi as ti
 
 from ..geometry import CENTRE
-from .rod_drag import RodEdgeTerm, rod_edges
+from .rod_drag import RodEdgeTerm, rod_edges, rod_height_ratios
 
 
 @ti.data_oriented
@@ -27,10 +27,13 @@ class LinearDrag(RodEdgeTerm):
 
     @staticmethod
     def coefficients(params, topologies, topology):
-        """linear_rod_coeff (B, R) = c_l·Δl̄, N·s/m² per edge; linear_hub_coeff (B,) = c_h,
-        N·s/m² (both per unit height)."""
+        """linear_rod_coeff (B, R) = c_l·Δl̄ (times the edge's height ratio with component
+        heights), N·s/m² per edge; linear_hub_coeff (B,) = c_h, N·s/m² (both per unit height
+        of the hub)."""
         rods = rod_edges(topology)
-        lengths = np.stack([t.rest_length[rods] for t in topologies])
+        # with the component heights on, an edge's friction scales with its height over the hub's
+        lengths = (np.stack([t.rest_length[rods] for t in topologies])
+                   * rod_height_ratios(params, topology))
         return {"linear_rod_coeff": lengths * np.array([p.linear_drag for p in params])[:, None],
                 "linear_hub_coeff": np.array([p.hub_linear_drag for p in params])}
 

@@ -216,6 +216,55 @@ def test_jet_is_off_while_expanding_only_in_contract_mode():
     assert_close_to_scale(j_always, central_jacobian(element, x, 1e-6 * 1e-3))
 
 
+@pytest.mark.parametrize("direction", ["hub", "normal", "bisector"])
+@pytest.mark.parametrize("shrink", [1.05, 0.95])
+def test_jet_variant_elements_follow_their_definitions_with_exact_jacobians(direction, shrink):
+    """Each direction while the space closes (jet, −t) and opens (inflow α_in = 0.6, +t)."""
+    x, area_old = _jet_configuration(shrink)
+    dt = 1e-3
+
+    def element(y):
+        return jet_element(y[0:2], y[2:4], y[4:6], y[6:8], y[8:10], area_old, dt, 1000.0, 0.8,
+                           True, 0.6, direction)
+
+    force, jac = element(x)
+    x1, x2, x3, x4, centre = x.reshape(5, 2)
+    if direction == "hub":
+        t = 0.5 * (x2 + x3) - centre
+    elif direction == "normal":
+        t = np.array([x3[1] - x2[1], x2[0] - x3[0]])  # (x2 − x3) turned by +90°: outwards
+    else:
+        t = (x2 - x1) / np.linalg.norm(x2 - x1) + (x3 - x4) / np.linalg.norm(x3 - x4)
+    t /= np.linalg.norm(t)
+    assert np.dot(t, 0.5 * (x2 + x3) - centre) > 0  # every variant points out of the space
+    area_rate = (quad_area(x1, x2, x3, x4) - area_old) / dt
+    ratio, sense = (0.8, -1.0) if area_rate < 0 else (0.6, 1.0)
+    assert np.allclose(force, sense * 1000.0 / np.linalg.norm(x2 - x3) * (ratio * area_rate) ** 2
+                       * t, rtol=1e-12)
+    assert_close_to_scale(jac, central_jacobian(lambda y: element(y)[0], x, 1e-6 * 1e-3))
+
+
+def test_spread_jet_keeps_the_total_force_and_moves_it_to_the_corners():
+    """jet_application "spread": the same total force as on the hub, a quarter on each corner of
+    every space (a corner shared by two spaces gets a quarter of each), none on the hub."""
+    params = StarParams(gait="A1+A2", n_arc=6, n_limb=2, drag_parallel=0.0, drag_perpendicular=0.0,
+                        cylinder_drag=0.0)
+    hub = ReferenceSimulator(params)
+    spread = ReferenceSimulator(params.replace(jet_application="spread"))
+    q_new, q_old, _ = _moving_history(hub, np.random.default_rng(13))
+    on_hub = hub.fluid_forces(q_new, q_old, 1e-3)
+    on_corners = spread.fluid_forces(q_new, q_old, 1e-3)
+    assert np.abs(on_hub[1:]).max() == 0 and on_corners[0].tolist() == [0.0, 0.0]
+    np.testing.assert_allclose(on_corners.sum(0), on_hub[0], rtol=1e-12)
+    quads = hub.topology.jet_quads
+    areas_old = hub.areas(q_old)
+    expected = np.zeros_like(on_corners)
+    for k, quad in enumerate(quads):
+        force = jet_element(*q_new[quad], q_new[0], areas_old[k], 1e-3, 1000.0, 0.8, True)[0]
+        expected[quad] += force / 4
+    np.testing.assert_allclose(on_corners, expected, rtol=1e-12, atol=1e-15 * np.abs(expected).max())
+
+
 # ---- the assembled system ---------------------------------------------------------------------
 
 @pytest.mark.parametrize("jet_mode,shrink", [("contract", 1.001), ("always", 0.999)])
@@ -349,6 +398,27 @@ def test_reference_actuators_follow_their_gain_and_delay():
     arc = actuated & (sim.topology.triplet_kind == ARC_BEND)
     assert np.allclose(np.abs(natural[arc]), sim.driven_curvature(t)[1], rtol=1e-14)
     assert not np.isclose(sim.driven_curvature(t)[1], sim.driven_curvature(t)[0])
+def test_assembled_jacobian_with_jet_variants_is_exact():
+    """Spread application (corners coupled to each other and the hub), normal direction and
+    inflow in the whole fluid Jacobian, on the coarse mesh; δ as in the check above."""
+    sim = ReferenceSimulator(StarParams(gait="A1+A2", jet_direction="normal",
+                                        jet_application="spread", jet_inflow=0.7, **SMALL))
+    rest = sim.topology.rest_positions
+    rng = np.random.default_rng(14)
+    q_new = rest + rng.uniform(-2e-5, 2e-5, rest.shape)
+    # spaces both opening and closing: A1 and A2's shape moved apart from the others'
+    q_old = q_new + rng.uniform(-5e-5, 5e-5, rest.shape)
+    areas = sim.areas(q_new) - sim.areas(q_old)
+    assert (areas > 0).any() and (areas < 0).any()
+
+    def fluid(y):
+        return sim.fluid_forces(y.reshape(rest.shape), q_old, 1e-3).reshape(-1)
+
+    fluid_jac = sim.force_jacobian(q_new, q_old, 0.08, 1e-3)[1] - sim.force_jacobian(
+        q_new, q_new, 0.08, 1e-3)[1]
+    assert_close_to_scale(fluid_jac, central_jacobian(fluid, q_new.reshape(-1), 1e-9))
+    tips = sim.topology.tips
+    assert np.abs(fluid_jac[2 * tips[0]:2 * tips[0] + 2, 2 * tips[1]:2 * tips[1] + 2]).max() > 0
 
 
 # ---- invariants -------------------------------------------------------------------------------
@@ -506,6 +576,41 @@ def test_masses():
     assert np.allclose(sim.centroid(topo.rest_positions), 0.0, atol=1e-15)
     assert sim.topology.triplet_kind[sim.topology.triplet_actuator >= 0].tolist() == \
         [ARC_BEND] * int((sim.topology.triplet_actuator >= 0).sum())
+
+
+def test_component_heights_scale_each_components_mass_added_mass_drag_and_jet():
+    """Heights on (hub 50 mm, foams 24 mm, actuators 10 mm): everything of the limbs scales by
+    0.48, of the arcs by 0.2, the hub's stays; the jet scales with the foam (its walls). Equal
+    heights are exactly the model without heights."""
+    base = StarParams(gait="A1+A2", **SMALL)
+    heights = dict(hub_height=0.05, foam_height=0.024, actuator_height=0.01)
+    off, on = ReferenceSimulator(base), ReferenceSimulator(base.replace(**heights))
+    foam, actuator = 0.024 / 0.05, 0.01 / 0.05
+    lumped = off.topology.lumped_length
+    arc_nodes = (lumped[:, 0] > 0) & (lumped[:, 1] == 0)
+    limb_nodes = (lumped[:, 1] > 0) & (lumped[:, 0] == 0)
+    assert arc_nodes.sum() == 8 * 5 and limb_nodes.sum() == 8 * 2
+    for name in ("mass", "added_mass"):
+        before, after = getattr(off, name), getattr(on, name)
+        np.testing.assert_allclose(after[arc_nodes], actuator * before[arc_nodes], rtol=1e-14)
+        np.testing.assert_allclose(after[limb_nodes], foam * before[limb_nodes], rtol=1e-14)
+        assert after[0] == before[0]
+    q_new, q_old, _ = _moving_history(off, np.random.default_rng(15))
+    no_drag = dict(drag_parallel=0.0, drag_perpendicular=0.0, cylinder_drag=0.0)
+    jet_off = ReferenceSimulator(base.replace(**no_drag)).fluid_forces(q_new, q_old, 1e-3)
+    jet_on = ReferenceSimulator(base.replace(**no_drag, **heights)).fluid_forces(q_new, q_old,
+                                                                                   1e-3)
+    assert np.abs(jet_off[0]).max() > 0
+    np.testing.assert_allclose(jet_on, foam * jet_off, rtol=1e-14)
+    drag_off = ReferenceSimulator(base.replace(alpha=0.0)).fluid_forces(q_new, q_old, 1e-3)
+    drag_on = ReferenceSimulator(base.replace(alpha=0.0, **heights)).fluid_forces(q_new, q_old,
+                                                                                    1e-3)
+    np.testing.assert_allclose(drag_on[arc_nodes], actuator * drag_off[arc_nodes], rtol=1e-12)
+    np.testing.assert_allclose(drag_on[limb_nodes], foam * drag_off[limb_nodes], rtol=1e-12)
+    assert drag_on[0].tolist() == drag_off[0].tolist()  # the cylinder's drag
+    equal = ReferenceSimulator(base.replace(hub_height=0.03, foam_height=0.03,
+                                            actuator_height=0.03))
+    assert np.array_equal(equal.run(5), off.run(5))
 
 
 # ================================================================================================

@@ -21,6 +21,7 @@ from taichi_star.integrators import ImplicitEuler
 from taichi_star.geometry import LIMB
 from taichi_star.physics import Bending, LinearDrag, MaterialDamping, Stretching
 from taichi_star.physics.assembly import Assembly
+from taichi_star.params import StarParams
 from taichi_star.physics.base import connect_terms, load_field, numpy_to_field_type
 
 EDGES = np.array([[0, 1], [1, 2], [2, 3]])
@@ -218,7 +219,7 @@ def test_linear_drag_assembles_the_reference_forces_and_its_own_exact_jacobian(t
     h, rod_coeff, hub_coeff = 1e-3, 40.0, 3.0
     rest_length = np.linalg.norm(REST[EDGES[:, 1]] - REST[EDGES[:, 0]], axis=1)
     coefficients = LinearDrag.coefficients(
-        [SimpleNamespace(linear_drag=rod_coeff, hub_linear_drag=hub_coeff)],
+        [StarParams(linear_drag=rod_coeff, hub_linear_drag=hub_coeff)],
         [SimpleNamespace(rest_length=rest_length)], SimpleNamespace(edge_kind=TOY_EDGE_KIND))
     assert LinearDrag.configuration(coefficients) == ()
     terms, assembly = toy_system([LinearDrag], {"linear_drag": coefficients}, {"linear_drag": ()})
@@ -237,7 +238,7 @@ def test_linear_drag_assembles_the_reference_forces_and_its_own_exact_jacobian(t
     numeric = central_jacobian(lambda q: residual_and_jacobian(term, assembly, q, 1.0 / h)[0],
                                positions, 1e-10)
     assert_close(jacobian, numeric, DIFFERENCE_RTOL)
-    off = LinearDrag.coefficients([SimpleNamespace(linear_drag=0.0, hub_linear_drag=0.0)],
+    off = LinearDrag.coefficients([StarParams()],
                                   [SimpleNamespace(rest_length=rest_length)],
                                   SimpleNamespace(edge_kind=TOY_EDGE_KIND))
     assert LinearDrag.configuration(off) is None  # off: compiled out
