@@ -23,7 +23,7 @@ from typing import Dict, Optional, Tuple
 import numpy as np
 
 from .actuation import PROFILE_CLOSURES, CurvatureProfile
-from .gait import Gait
+from .gait import N_ACTUATORS, Gait
 
 JET_MODES = ("contract", "always")
 JET_DIRECTIONS = ("hub", "normal", "bisector")
@@ -35,7 +35,8 @@ INTEGRATORS = ("euler", "bdf2")
 JACOBIANS = ("newton", "chord")
 PRESETS = ("paper", "accurate", "identified")
 
-UNIT_SUFFIXES = {"Pa": "_pa", "s": "_s", "m": "_m", "kg/m^3": "_kg_m3", "kg/m": "_kg_m"}
+UNIT_SUFFIXES = {"Pa": "_pa", "s": "_s", "m": "_m", "kg/m^3": "_kg_m3", "kg/m": "_kg_m",
+                 "Pa*s/m": "_pa_s_m", "Pa*s": "_pa_s"}
 """Column-name suffix of each parameter unit (none for "1")."""
 
 
@@ -67,6 +68,54 @@ def parameter(default, unit: str = "1", lowest=None, highest=None, lowest_includ
     return field(default=default, metadata=metadata)
 
 
+def per_actuator(default: float, unit: str, allowed: str):
+    """A StarParams field of one number per actuator, A_k at index k − 1 (a tuple of
+    `N_ACTUATORS` floats, all `default` by default), with its unit and its allowed values in
+    words (`PER_ACTUATOR_FIELDS`; each such field is validated in `StarParams.__post_init__`)."""
+    return field(default=(float(default),) * N_ACTUATORS,
+                 metadata={"unit": unit, "allowed": allowed, "per_actuator": True})
+
+
+MAX_ACTUATOR_GAIN = 5.0
+"""Largest actuator gain: five times the measured curvature change already bends an arc far
+past straight (K̄ goes from 102 to 14 1/m over a pulse at gain 1)."""
+
+
+def _check_actuator_values(name, values, lowest, highest, highest_included):
+    """`values` (a tuple, list or 1-D array of one real number per actuator A1..A8, or the
+    text of one as a table holds it, "(1.0, 0.5, ...)") as a tuple of Python floats, each in
+    [lowest, highest] (or [lowest, highest)); ValueError names the field, the actuator and the
+    range."""
+    span = f"[{lowest:g}, {highest:g}" + ("]" if highest_included else ")")
+    if isinstance(values, str):
+        values = _parse_number_list(name, values)
+    if isinstance(values, np.ndarray) and values.ndim == 1:
+        values = values.tolist()
+    if not isinstance(values, (tuple, list)):
+        raise ValueError(f"{name} must be a tuple of {N_ACTUATORS} numbers in {span} "
+                         f"(A1..A8), got {values!r}")
+    if len(values) != N_ACTUATORS:
+        raise ValueError(f"{name} must have {N_ACTUATORS} entries (A1..A8), got {len(values)}")
+    checked = []
+    for index, value in enumerate(values):
+        if isinstance(value, bool) or not isinstance(value, numbers.Real) \
+                or not math.isfinite(value) or not lowest <= value <= highest \
+                or (value == highest and not highest_included):
+            raise ValueError(f"{name}[{index}] (A{index + 1}) must be a real number in {span}, "
+                             f"got {value!r}")
+        checked.append(float(value))
+    return tuple(checked)
+
+
+def _parse_number_list(name, text):
+    """The numbers of a tuple or list written as text ("(1.0, 0.5)" or "[1.0, 0.5]")."""
+    inner = text.strip()
+    if inner[:1] in "([" and inner[-1:] in ")]":
+        inner = inner[1:-1]
+    try:
+        return [float(part) for part in inner.split(",") if part.strip()]
+    except ValueError:
+        raise ValueError(f"{name}: cannot read {text[:60]!r} as {N_ACTUATORS} numbers") from None
 COMPONENT_HEIGHTS = ("hub_height", "foam_height", "actuator_height")
 """The StarParams fields of the component heights (2.5-D model): all 0 (off) or all set."""
 COMPONENT_HEIGHT_MINIMUM = 1e-3
@@ -208,6 +257,18 @@ class StarParams:
     """Height of the foam limbs, m (the paper's robot: 24 mm); 0 = off, else ≥ 1 mm."""
     actuator_height: float = parameter(0.0, "m", 0.0, 0.5)
     """Height of the actuator arcs, m; 0 = off, else ≥ 1 mm."""
+    # ---- model extensions (issue 28), off by default: the defaults change no result
+    linear_drag: float = parameter(0.0, "Pa*s/m", 0.0, 1e4)
+    """Linear (skin-friction) drag c_l on the rod edges, Pa·s/m: a force −c_l·v per unit rod
+    length and unit height on each edge's mean velocity v (`physics.linear_drag`)."""
+    hub_linear_drag: float = parameter(0.0, "Pa*s", 0.0, 1e3)
+    """Linear drag c_h on the hub, Pa·s: a force −c_h·v per unit height on the centre node."""
+    actuator_gains: Tuple[float, ...] = per_actuator(1.0, "1", f"8 numbers in [0, {MAX_ACTUATOR_GAIN:g}]")
+    """Gain g_k (-) of actuator A_k (index k − 1) on its commanded curvature change: it follows
+    K̄(0) + g_k·(K̄(τ) − K̄(0))."""
+    actuator_delays: Tuple[float, ...] = per_actuator(0.0, "s", "8 numbers in [0, period)")
+    """Delay d_k of actuator A_k (index k − 1), s: its profile starts d_k after each firing
+    (K̄(0) until then), K̄(max(τ − d_k, 0))."""
 
     def __post_init__(self):
         object.__setattr__(self, "gait", Gait.parse(self.gait).name)
@@ -217,6 +278,10 @@ class StarParams:
                                                          name in INTEGER_FIELDS))
         for name, choices in STAR_CHOICES.items():
             _check_choice(name, getattr(self, name), choices)
+        object.__setattr__(self, "actuator_gains", _check_actuator_values(
+            "actuator_gains", self.actuator_gains, 0.0, MAX_ACTUATOR_GAIN, True))
+        object.__setattr__(self, "actuator_delays", _check_actuator_values(
+            "actuator_delays", self.actuator_delays, 0.0, self.period, False))
         heights = [getattr(self, name) for name in COMPONENT_HEIGHTS]
         for name, height in zip(COMPONENT_HEIGHTS, heights):
             if 0.0 < height < COMPONENT_HEIGHT_MINIMUM:
@@ -293,7 +358,8 @@ class StarParams:
 
     @classmethod
     def numeric_field_names(cls):
-        """The fields that take numbers (the ones a sweep or a fit can vary)."""
+        """The fields that take one number (the ones a sweep or a fit can vary as a whole);
+        the fields of one number per actuator are `PER_ACTUATOR_FIELDS`."""
         return list(STAR_RANGES)
 
     @classmethod
@@ -307,7 +373,8 @@ class StarParams:
         parameter columns of `columns`, e.g. `result.summary.iloc[3]`, or a row read back
         from a CSV, Parquet or netCDF file), with some fields changed. The actuator profile may
         be a CurvatureProfile or its text (`CurvatureProfile.to_text`, as result tables hold
-        it). Raises ValueError naming a missing column or an unreadable profile."""
+        it); the per-actuator tuples (`actuator_gains`, ...) tuples or their text, read back
+        exactly. Raises ValueError naming a missing column or an unreadable profile."""
         values = {}
         for name, column in cls.columns().items():
             if name in overrides:
@@ -327,9 +394,12 @@ STAR_RANGES: Dict[str, Tuple[float, float, bool]] = {
     f.name: f.metadata["range"] for f in fields(StarParams) if "range" in f.metadata}
 """Allowed range of every numeric StarParams field (lowest, highest, lowest included), from
 the fields' declarations (`parameter`)."""
+PER_ACTUATOR_FIELDS = tuple(f.name for f in fields(StarParams) if f.metadata.get("per_actuator"))
+"""The StarParams fields of one number per actuator (a tuple, A_k at index k − 1)."""
 PARAMETER_UNITS: Dict[str, str] = {name: StarParams.__dataclass_fields__[name].metadata["unit"]
-                                   for name in STAR_RANGES}
-"""Units of the numeric StarParams fields ("1": dimensionless or a count)."""
+                                   for name in (*STAR_RANGES, *PER_ACTUATOR_FIELDS)}
+"""Units of the numeric StarParams fields, per-actuator ones included ("1": dimensionless or a
+count)."""
 INTEGER_FIELDS = tuple(f.name for f in fields(StarParams)
                        if "range" in f.metadata and isinstance(f.default, int))
 """The numeric fields that take whole numbers (the topology)."""
@@ -352,9 +422,13 @@ def _default(f):
     return f.default if f.default is not dataclasses.MISSING else f.default_factory()
 
 
+def _unit(f) -> str:
+    """The unit of field `f` for the table: numeric fields' own, "—" for texts."""
+    return f.metadata["unit"] if "range" in f.metadata or "per_actuator" in f.metadata else "—"
+
+
 StarParams.__doc__ += "\n\n    | field | unit | allowed | default |\n    |---|---|---|---|\n" + "".join(
-    f"    | {f.name} | {f.metadata['unit'] if 'range' in f.metadata else '—'} | {_allowed(f)} "
-    f"| {_default(f)!r} |\n"
+    f"    | {f.name} | {_unit(f)} | {_allowed(f)} | {_default(f)!r} |\n"
     for f in fields(StarParams))
 
 

@@ -10,6 +10,7 @@ import taichi_star as ts
 from taichi_star.params import PARAMETER_UNITS
 from taichi_star.gait import Gait, symmetry_classes
 from taichi_star.geometry import build_topology
+from taichi_star.params import PER_ACTUATOR_FIELDS
 
 
 @pytest.mark.parametrize("field,value", [
@@ -289,8 +290,12 @@ def test_numeric_fields_are_all_fields_but_the_texts_and_the_profile():
     assert names[0] == "gait" and len(names) == len(set(names))
     texts = {"gait", "jet_mode", "actuation_ends", "joint_stiffness", "profile_closure",
              "actuator_profile", "jet_direction", "jet_application"}
+    vectors = set(PER_ACTUATOR_FIELDS)  # one number per actuator
     numeric = ts.StarParams.numeric_field_names()
-    assert set(numeric) == set(names) - texts and len(numeric) == len(names) - len(texts)
+    assert set(numeric) == set(names) - texts - vectors
+    assert len(numeric) == len(names) - len(texts) - len(vectors)
+    for name in vectors:
+        assert len(getattr(ts.StarParams(), name)) == 8, name
     for name in numeric:
         assert isinstance(getattr(ts.StarParams(), name), (int, float)), name
 
