@@ -159,6 +159,11 @@ def test_bad_durations_times_and_foreign_states_are_refused():
         sim.fire(GAITS, at_s=0.005)
     with pytest.raises(ValueError, match="at_s"):
         sim.fire(GAITS, at_s=0.0105)
+    # now itself is refused (a firing at now is `fire` without at_s); one step later is accepted
+    with pytest.raises(ValueError, match=r"at_s = 0.01 s is not after the current time"):
+        sim.fire(GAITS, at_s=0.01)
+    sim.fire(["A1"] * 3, at_s=0.011)
+    assert (sim.engine.state.scheduled_fire_step.to_numpy()[:3, 0] == 11).all()
     other = ts.Simulator([ts.StarParams(n_arc=12)] * 3)
     with pytest.raises(ValueError, match="another engine"):
         sim.load(other.save())
