@@ -28,7 +28,7 @@ from typing import Dict, List, Mapping, Optional, Sequence
 import numpy as np
 import pandas as pd
 
-from taichi_star import PRESETS, SolverConfig, StarParams
+from taichi_star import PRESETS, SolverConfig, StarParams, check_work
 from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, executor_for,
                                stored_chunk_size, write_atomic)
 from taichi_star.experiment import PAPER_GAITS
@@ -375,16 +375,22 @@ def base_params(args) -> StarParams:
 def solver(args) -> SolverConfig:
     """SolverConfig of --preset with --dt (StudyArgumentError naming --dt); with --cycles (not
     --quick) and the model flags, checks that --cycles of the model's period are at least one
-    fixed step (StudyArgumentError naming --cycles)."""
+    fixed step and at most MAX_STEPS_PER_INSTANCE steps (dt_min steps when adaptive)
+    (StudyArgumentError naming --cycles and the step)."""
     try:
         changes = {} if args.dt is None else {"dt": args.dt}
         config = SolverConfig.preset(getattr(args, "preset", "paper"), **changes)
     except ValueError as error:
         raise StudyArgumentError(f"--dt: {error}") from None
-    if getattr(args, "cycles", None) is not None and hasattr(args, "set") and not args.quick \
-            and not config.adaptive:
+    if getattr(args, "cycles", None) is not None and hasattr(args, "set") and not args.quick:
         period = base_params(args).period
-        if round(args.cycles * period / config.dt) < 1:
+        step, step_name = (config.dt_min, "dt_min") if config.adaptive else (config.dt, "--dt")
+        try:
+            check_work(f"--cycles {args.cycles:g} ({args.cycles * period:.3g} s) at {step_name} "
+                       f"{step:g} s", args.cycles * period / step)
+        except ValueError as error:
+            raise StudyArgumentError(str(error)) from None
+        if not config.adaptive and round(args.cycles * period / config.dt) < 1:
             raise StudyArgumentError(
                 f"--cycles {args.cycles:g}: {args.cycles:g} periods of {period:g} s are "
                 f"{args.cycles * period:.3g} s, less than one step (dt = {config.dt:g} s)")

@@ -16,10 +16,10 @@ from .gait import Gait, symmetry_classes
 from .params import JACOBIANS, PRESETS, STAR_RANGES, SolverConfig, StarParams
 from .profiling import EngineProfile
 from .runtime import available_archs
-from .simulation import SimulationResult, simulate
+from .simulation import MAX_STEPS_PER_INSTANCE, SimulationResult, check_work, simulate
 from .simulator import Simulator, SimulatorSnapshot
 
 __version__ = "0.3.0"
 
-__all__ = ["simulate", "SimulationResult", "Simulator", "SimulatorSnapshot", "available_archs", "StarParams", "STAR_RANGES", "SolverConfig", "PRESETS", "JACOBIANS",
+__all__ = ["simulate", "SimulationResult", "MAX_STEPS_PER_INSTANCE", "check_work", "Simulator", "SimulatorSnapshot", "available_archs", "StarParams", "STAR_RANGES", "SolverConfig", "PRESETS", "JACOBIANS",
            "CurvatureProfile", "Gait", "symmetry_classes", "EngineProfile", "__version__"]

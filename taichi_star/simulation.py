@@ -26,6 +26,25 @@ STEPS_PER_LAUNCH = 50
 progress bar."""
 
 
+MAX_STEPS_PER_INSTANCE = 2 ** 31 - 1
+"""Most time steps one instance may take, counted from t = 0 (fixed steps: duration / dt;
+adaptive: duration / dt_min, the worst case). The engine's step counters (steps_done,
+scheduled_fire_step, failure_step) are int32, and a run this long (2.1e9 steps: 25 days of
+simulated time at the paper's 1 ms) is never what was meant; it is refused before any compute
+(issue 27) instead of running for days or overflowing."""
+
+
+def check_work(name: str, steps: float, batch: Optional[int] = None):
+    """ValueError when `steps` (time steps per instance, a float estimate: it may be inf),
+    rounded to whole steps as the drivers round a duration, is over MAX_STEPS_PER_INSTANCE; `name` says which arguments gave it (e.g. "duration_s = 1e9 s at
+    dt = 0.001 s"), the message the estimate (times `batch`, the number of instances, if given)
+    and the limit."""
+    if not (math.isfinite(steps) and round(steps) <= MAX_STEPS_PER_INSTANCE):
+        total = "" if batch is None else f" ({steps * batch:.3g} robot-steps for {batch} instances)"
+        raise ValueError(f"{name} is {steps:.3g} time steps per instance{total}; the limit is "
+                         f"{MAX_STEPS_PER_INSTANCE} steps per instance (the int32 step counter)")
+
+
 def whole_steps(time_s: float, dt: float) -> Optional[int]:
     """time_s / dt as an integer if it is one (within STEP_TOLERANCE), else None."""
     ratio = time_s / dt
@@ -136,7 +155,12 @@ def validate_call(params, duration_s, solver, record_interval_s, record_shapes, 
         raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
     check_precision(params, solver)
     record_interval_s = _check_real("record_interval_s", record_interval_s, 0.0, allow_equal=True)
-    if not solver.adaptive:
+    if solver.adaptive:
+        check_work(f"duration_s = {duration_s:g} s at dt_min = {solver.dt_min:g} s (the adaptive "
+                   f"worst case)", duration_s / solver.dt_min, len(params))
+    else:
+        check_work(f"duration_s = {duration_s:g} s at dt = {solver.dt:g} s",
+                   duration_s / solver.dt, len(params))
         n_steps = int(round(duration_s / solver.dt))
         if n_steps < 1:
             raise ValueError(f"duration_s must be at least one step (dt = {solver.dt} s), got "

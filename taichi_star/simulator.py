@@ -36,6 +36,7 @@ from .geometry import CENTRE
 from .model import build_model, validate_batch
 from .params import SolverConfig, StarParams, check_precision
 from .runtime import Runtime, check_arch
+from .simulation import MAX_STEPS_PER_INSTANCE, check_work
 from .state import NEVER, STATUS_NAMES, STATUS_OK
 
 STEPS_PER_LAUNCH = 50
@@ -173,6 +174,8 @@ class Simulator:
         if self.solver.adaptive:
             due, clock, table = at_s, self.time_s, state.scheduled_fire_time
         else:
+            check_work(f"at_s = {at_s!r} s (at most {MAX_STEPS_PER_INSTANCE * self.solver.dt:.6g} s "
+                       f"at dt = {self.solver.dt:g} s)", abs(at_s / self.solver.dt))
             due = int(round(at_s / self.solver.dt))
             if abs(due * self.solver.dt - at_s) > 1e-9 * max(1.0, abs(at_s)):
                 raise ValueError(f"at_s must be a whole number of steps (dt = {self.solver.dt} "
@@ -201,8 +204,14 @@ class Simulator:
                                   or not record_interval_s > 0):
             raise ValueError(f"record_interval_s must be a number > 0 s (or 0: no records), "
                              f"got {record_interval_s!r}")
+        taken = int(self._steps().max(initial=0))
         if self.solver.adaptive:
+            check_work(f"duration_s = {duration_s:g} s at dt_min = {self.solver.dt_min:g} s (the "
+                       f"adaptive worst case, after the {taken} steps taken)",
+                       taken + duration_s / self.solver.dt_min, self.n_instances)
             return self._advance_adaptive(duration_s, record_interval_s)
+        check_work(f"duration_s = {duration_s:g} s at dt = {self.solver.dt:g} s (after the {taken} "
+                   f"steps taken)", taken + duration_s / self.solver.dt, self.n_instances)
         n_steps = int(round(duration_s / self.solver.dt))
         if n_steps < 1:
             raise ValueError(f"duration_s must be at least one step (dt = {self.solver.dt} s), "

@@ -181,3 +181,39 @@ def test_f32_agrees_with_f64_or_flags_the_iteration_cap():
         coarse = ts.simulate(batch, 1.0, f32.replace(dt=0.05)).summary
     assert (coarse.status == "ok").all() and coarse.newton_capped.all()
     assert (coarse.newton_iterations_max == 25).all() and (coarse.substep_retries > 0).all()
+
+
+class _Accepted(Exception):
+    """Raised by a stand-in model builder: the call passed every check before compute."""
+
+
+def test_runs_beyond_the_step_counter_are_refused_before_any_compute(monkeypatch):
+    """Fixed steps: duration_s / dt steps; adaptive: duration_s / dt_min (its worst case). At
+    exactly MAX_STEPS_PER_INSTANCE (2³¹ − 1, the int32 counter) the run is accepted, one step
+    more is refused naming the arguments, the estimate and the limit. dt = 2⁻¹⁰ s makes the
+    durations exact binary multiples of the step."""
+    def accepted(*args, **kwargs):
+        raise _Accepted
+    monkeypatch.setattr("taichi_star.simulation.build_model", accepted)
+    limit = ts.MAX_STEPS_PER_INSTANCE
+    assert limit == np.iinfo(np.int32).max
+    dt = 2.0 ** -10
+    fixed = ts.SolverConfig(dt=dt)
+    with pytest.raises(_Accepted):
+        ts.simulate([ts.StarParams()], limit * dt, fixed)
+    with pytest.raises(ValueError, match=rf"duration_s = 2.09715e\+06 s at dt = 0.000976562 s is "
+                                         rf"2.15e\+09 time steps per instance \(4.29e\+09 "
+                                         rf"robot-steps for 2 instances\); the limit is {limit}"):
+        ts.simulate([ts.StarParams()] * 2, (limit + 1) * dt, fixed)
+    with pytest.raises(ValueError, match=r"duration_s = 1e\+09 s at dt = 0.001 s is 1e\+12 time"):
+        ts.simulate([ts.StarParams()], 1e9)
+    with pytest.raises(ValueError, match=r"duration_s = 1 s at dt = 1e-300 s is 1e\+300 time"):
+        ts.simulate([ts.StarParams()], 1.0, ts.SolverConfig(dt=1e-300))
+    adaptive = ts.SolverConfig.preset("accurate", dt_min=dt)
+    with pytest.raises(_Accepted):
+        ts.simulate([ts.StarParams()], limit * dt, adaptive)
+    with pytest.raises(ValueError, match=r"at dt_min = 0.000976562 s \(the adaptive worst case\) "
+                                         r"is 2.15e\+09 time steps"):
+        ts.simulate([ts.StarParams()], (limit + 1) * dt, adaptive)
+    with pytest.raises(ValueError, match=r"at dt_min = 1e-300 s .* is 3.15e\+300 time steps"):
+        ts.simulate([ts.StarParams()], 3.15, ts.SolverConfig.preset("accurate", dt_min=1e-300))

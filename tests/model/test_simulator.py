@@ -159,9 +159,51 @@ def test_bad_durations_times_and_foreign_states_are_refused():
         sim.fire(GAITS, at_s=0.005)
     with pytest.raises(ValueError, match="at_s"):
         sim.fire(GAITS, at_s=0.0105)
+    # now itself is refused (a firing at now is `fire` without at_s); one step later is accepted
+    with pytest.raises(ValueError, match=r"at_s = 0.01 s is not after the current time"):
+        sim.fire(GAITS, at_s=0.01)
+    sim.fire(["A1"] * 3, at_s=0.011)
+    assert (sim.engine.state.scheduled_fire_step.to_numpy()[:3, 0] == 11).all()
     other = ts.Simulator([ts.StarParams(n_arc=12)] * 3)
     with pytest.raises(ValueError, match="another engine"):
         sim.load(other.save())
+
+
+class _Accepted(Exception):
+    """Raised by a stand-in engine.advance: the call passed every check before compute."""
+
+
+def test_work_beyond_the_step_counter_is_refused_before_any_compute(monkeypatch):
+    """After 10 steps of 1 ms, advance may take MAX_STEPS_PER_INSTANCE − 10 more steps (2³¹ − 1
+    in all, the int32 counter), not one more; a firing may be scheduled at step 2³¹ − 1, not
+    one later (this used to be an OverflowError writing the int32 table)."""
+    sim = commanded()
+    sim.advance(0.01)
+    limit = ts.MAX_STEPS_PER_INSTANCE
+
+    def accepted(count):
+        raise _Accepted
+    monkeypatch.setattr(sim.engine, "advance", accepted)
+    with pytest.raises(_Accepted):
+        sim.advance((limit - 10) * 1e-3)
+    with pytest.raises(ValueError, match=rf"duration_s = 2.14748e\+06 s at dt = 0.001 s \(after the "
+                                         rf"10 steps taken\) is 2.15e\+09 time steps per instance "
+                                         rf"\(6.44e\+09 robot-steps for 3 instances\); the limit "
+                                         rf"is {limit}"):
+        sim.advance((limit - 9) * 1e-3)
+    with pytest.raises(ValueError, match=r"duration_s = 1e\+09 s .* 1e\+12 time steps"):
+        sim.advance(1e9)
+    before = sim.save().fields
+    with pytest.raises(ValueError, match=r"at_s = 3000000.0 s \(at most 2.14748e\+06 s at dt = "
+                                         r"0.001 s\) is 3e\+09 time steps"):
+        sim.fire(GAITS, at_s=3e6)
+    with pytest.raises(ValueError, match=r"at_s = .* is 2.15e\+09 time steps"):
+        sim.fire(GAITS, at_s=(limit + 1) * 1e-3)
+    after = sim.save().fields
+    assert all(np.array_equal(after[name], before[name]) for name in before)
+    sim.fire(GAITS, at_s=limit * 1e-3)
+    assert (sim.engine.state.scheduled_fire_step.to_numpy()[:3][np.array(
+        [ts.Gait.parse(g).mask for g in GAITS], dtype=bool)] == limit).all()
 
 
 def test_step_batch_example_runs():

@@ -419,6 +419,19 @@ def test_cycles_shorter_than_a_step_is_an_error_naming_cycles(no_compute, tmp_pa
         taichi_star.batch.run_batch([StarParams()], cycles=1e-4)
 
 
+@pytest.mark.parametrize("flags, message", [
+    (["--cycles", "1e9"], "--cycles 1e+09 (3.15e+09 s) at --dt 0.001 s is 3.15e+12 time steps per "
+                          "instance; the limit is 2147483647"),
+    (["--dt", "1e-12"], "--cycles 3 (9.45 s) at --dt 1e-12 s is 9.45e+12 time steps"),
+    (["--preset", "accurate", "--cycles", "1e4"], "--cycles 10000 (3.15e+04 s) at dt_min 1e-06 s "
+                                                  "is 3.15e+10 time steps")])
+def test_unbounded_runs_are_a_one_line_error_with_the_estimate(no_compute, tmp_path, capsys,
+                                                               flags, message):
+    assert studies_main(["fig4c", *flags, "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+    error = capsys.readouterr().err.strip()
+    assert message in error and len(error.splitlines()) == 1
+
+
 def test_a_full_disk_while_drawing_a_plot_is_a_one_line_error(tmp_path, monkeypatch, capsys):
     """A plot is saved by matplotlib, not by Output: ENOSPC there is still one line naming the
     file (exit 2), not a traceback."""
