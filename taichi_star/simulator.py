@@ -152,8 +152,10 @@ class Simulator:
         a list of B gait texts ("A1+A3", "none"). With at_s None they fire now (each instance
         at its own current time) and act on the steps after now; with at_s (s, not before an
         instance's current time, a whole number of steps ahead) they fire at that time, so the
-        step ending then already sees K̄(0). Failed instances ignore commands. Raises ValueError
-        (state unchanged) for a bad shape, dtype, gait or time."""
+        step ending then already sees K̄(0); an actuator holds one pending firing (scheduling the
+        same time again is a no-op, another time while one is pending a ValueError). Failed
+        instances ignore commands. Raises ValueError (state unchanged) for a bad shape, dtype,
+        gait or time."""
         mask = self._command_mask(commands)
         state = self.engine.state
         rows = np.flatnonzero(mask.any(axis=1))
@@ -187,6 +189,16 @@ class Simulator:
                              f"{int(late[0])} ({self.time_s[late[0]]:.6g} s); fire without at_s "
                              f"to fire now")
         scheduled = table.to_numpy()
+        # one pending firing per actuator: a second one for a later (or earlier) time would
+        # replace the first in the engine's table, so it is refused rather than lost
+        mine = scheduled[:len(mask)]
+        pending = mask & (mine >= 0) & (mine != due)
+        if pending.any():
+            b, m = (int(i) for i in np.argwhere(pending)[0])
+            when = scheduled[b, m] if self.solver.adaptive else scheduled[b, m] * self.solver.dt
+            raise ValueError(f"at_s = {at_s!r} s: actuator A{m + 1} of instance {b} already has a "
+                             f"firing pending at {when:.6g} s (one pending firing per actuator); "
+                             f"advance past it, then schedule the next")
         for b in rows:
             scheduled[b, mask[b]] = due
         table.from_numpy(scheduled)

@@ -164,6 +164,18 @@ def test_bad_durations_times_and_foreign_states_are_refused():
         sim.fire(GAITS, at_s=0.01)
     sim.fire(["A1"] * 3, at_s=0.011)
     assert (sim.engine.state.scheduled_fire_step.to_numpy()[:3, 0] == 11).all()
+    # one pending firing per actuator: the same time again is a no-op, another time is refused
+    # (it used to replace the first silently), another actuator is free, and once the first
+    # has fired the next may be scheduled
+    sim.fire(["A1"] * 3, at_s=0.011)
+    with pytest.raises(ValueError, match=r"actuator A1 of instance 0 already has a firing "
+                                         r"pending at 0.011 s"):
+        sim.fire(["A1"] * 3, at_s=0.02)
+    sim.fire(["A2"] * 3, at_s=0.02)
+    sim.advance(0.001)  # the step ending at 0.011 s fires A1
+    assert (sim.engine.state.scheduled_fire_step.to_numpy()[:3, 0] == -1).all()
+    sim.fire(["A1"] * 3, at_s=0.02)
+    assert (sim.engine.state.scheduled_fire_step.to_numpy()[:3, :2] == 20).all()
     other = ts.Simulator([ts.StarParams(n_arc=12)] * 3)
     with pytest.raises(ValueError, match="another engine"):
         sim.load(other.save())
