@@ -3,12 +3,19 @@
 The model: a cycle of gait g moves the centroid by its mean body-frame step s_g (turned into
 the world by the heading θ at the cycle's start) and turns the body by its mean turn ω_g:
 p' = p + R(θ)·s_g, θ' = θ + ω_g (`PrimitiveModel.predict`). A robot that stops firing after
-gait g glides on by its glide γ_g (body frame at the stop; 0 when the primitives hold none) to
-rest at p + R(θ)·γ_g. The choice (`PrimitiveModel.choose`) plans for the glide with a two-cycle
-lookahead on the rest positions: fire nothing once the robot would come to rest within the
-tolerance if it stopped now (given the gait it fired last); else the gait after which it would
-come to rest within it, if one does (the closest such); else the first gait of the pair of
-cycles whose rest position is closest to the goal.
+gait g glides on to rest at p + R(θ)·γ_g,k (body frame at the stop; 0 when the primitives hold
+no glides), where k is the streak: how many cycles in a row it fired g, capped at the K streaks
+the glides were measured for (`primitives.measure_glides`: k firings from rest, then coasting).
+The robot builds up momentum over its first cycles (the paper preset's A1+A3 glides about
+twice as far after 5 firings as after 1), so one glide for all streaks makes a planner that
+fires once stop far short. A gait fired after a different one starts a new streak of 1: the
+momentum left from the other gait points elsewhere and mostly decays within a cycle, and the
+k = 1 glide is the one measured from the nearest state (rest). The choice
+(`PrimitiveModel.choose`) plans for the glide with a two-cycle lookahead on the rest
+positions: fire nothing once the robot would come to rest within the tolerance if it stopped
+now (given the gait it fired last and its streak); else the gait after which it would come to
+rest within it, if one does (the closest such); else the first gait of the pair of cycles
+whose rest position is closest to the goal.
 
 Two controllers run in one Simulator (`drive`): open loop plans every cycle from the model at
 the start and fires that plan blindly; closed loop re-plans each cycle from the simulated
@@ -29,6 +36,7 @@ import pandas as pd
 from .gait import NO_GAIT, Gait
 from .metrics import rotate
 from .params import SolverConfig, StarParams
+from .primitives import glide_columns
 from .simulation import whole_steps
 from .simulator import Simulator
 
@@ -56,8 +64,10 @@ class PrimitiveModel:
     """The gaits a planner may fire, with their mean per-cycle body-frame step (mm) and turn
     (deg), plus "none" (no step, no turn).
 
-    gaits: G names; steps_mm: (G, 2); turns_deg: (G,); glides_mm: (G, 2) the body-frame glide
-    after a gait's last firing until rest (None: no glide)."""
+    gaits: G names; steps_mm: (G, 2); turns_deg: (G,); glides_mm: (K, G, 2) the body-frame
+    glide after the last of k = 1..K consecutive firings of a gait until rest, or (G, 2) for
+    one glide whatever the streak (K = 1), or None (no glide). Attributes: gaits (G' names,
+    "none" first), steps_mm (G', 2), turns_rad (G',), glides_mm (K, G', 2), masks (G', 8)."""
 
     def __init__(self, gaits: Sequence[str], steps_mm, turns_deg, glides_mm=None):
         steps = np.asarray(steps_mm, dtype=np.float64)
@@ -65,9 +75,12 @@ class PrimitiveModel:
         names = [Gait.parse(g).name for g in gaits]
         glides = (np.zeros_like(steps) if glides_mm is None
                   else np.asarray(glides_mm, dtype=np.float64))
+        if glides.ndim == 2:
+            glides = glides[None]
         if steps.shape != (len(names), 2) or turns.shape != (len(names),) \
-                or glides.shape != steps.shape:
-            raise ValueError(f"steps_mm and glides_mm must be ({len(names)}, 2) and turns_deg "
+                or glides.shape[1:] != steps.shape or not len(glides):
+            raise ValueError(f"steps_mm must be ({len(names)}, 2), glides_mm (K >= 1, "
+                             f"{len(names)}, 2) or ({len(names)}, 2) and turns_deg "
                              f"({len(names)},), got {steps.shape}, {glides.shape} and "
                              f"{turns.shape}")
         if not (np.isfinite(steps).all() and np.isfinite(turns).all()
@@ -76,18 +89,28 @@ class PrimitiveModel:
         keep = [i for i, name in enumerate(names) if name != NO_GAIT]
         self.gaits = [NO_GAIT] + [names[i] for i in keep]
         self.steps_mm = np.vstack([np.zeros((1, 2)), steps[keep]])
-        self.glides_mm = np.vstack([np.zeros((1, 2)), glides[keep]])
+        self.glides_mm = np.concatenate([np.zeros((len(glides), 1, 2)), glides[:, keep]],
+                                        axis=1)
         self.turns_rad = np.radians(np.concatenate([[0.0], turns[keep]]))
         self.masks = np.stack([Gait.parse(g).mask.astype(bool) for g in self.gaits])
 
     @classmethod
     def from_table(cls, table: pd.DataFrame) -> "PrimitiveModel":
         """From a primitive table (`taichi_star.primitives`): its ok gaits' step_x_mm,
-        step_y_mm and turn_deg, and glide_x_mm, glide_y_mm where it has them."""
+        step_y_mm and turn_deg, and the glides after k = 1, 2, ... firings in the columns
+        `primitives.glide_columns(k)` where it has them (none: no glide). ValueError for a
+        table with the single glide_x_mm/glide_y_mm of earlier versions (measured after
+        several firings only): measure it again."""
         usable = table[(table["status"] == "ok") & np.isfinite(table["step_x_mm"])
                        & np.isfinite(table["turn_deg"])]
-        glides = (usable[["glide_x_mm", "glide_y_mm"]].to_numpy()
-                  if {"glide_x_mm", "glide_y_mm"} <= set(table.columns) else None)
+        streaks = 0
+        while set(glide_columns(streaks + 1)) <= set(table.columns):
+            streaks += 1
+        if not streaks and "glide_x_mm" in table.columns:
+            raise ValueError("the primitive table has one glide per gait (glide_x_mm), not one "
+                             "per streak of firings (glide1_x_mm, ...): measure it again")
+        glides = (np.stack([usable[list(glide_columns(k))].to_numpy()
+                            for k in range(1, streaks + 1)]) if streaks else None)
         return cls(list(usable["gait"]), usable[["step_x_mm", "step_y_mm"]].to_numpy(),
                    usable["turn_deg"].to_numpy(), glides)
 
@@ -97,19 +120,31 @@ class PrimitiveModel:
         return (position_mm + rotate(self.steps_mm[choice], heading_rad),
                 heading_rad + self.turns_rad[choice])
 
-    def rest(self, position_mm: np.ndarray, heading_rad: np.ndarray, last: np.ndarray):
+    def glide(self, gait: np.ndarray, streak: np.ndarray) -> np.ndarray:
+        """(..., 2) body-frame glides (mm) after firing gait indices `gait` (...) `streak`
+        (...) cycles in a row (below 1 counts as 1, above K as K; "none" does not glide)."""
+        fired = np.clip(np.asarray(streak), 1, len(self.glides_mm)) - 1
+        return self.glides_mm[fired, gait]
+
+    def rest(self, position_mm: np.ndarray, heading_rad: np.ndarray, last: np.ndarray,
+             streak: Optional[np.ndarray] = None):
         """Where robots at position (B, 2) mm with heading (B,) rad come to rest (mm) if they
-        stop firing now, having fired gait index `last` (B,) in the cycle before."""
-        return position_mm + rotate(self.glides_mm[last], heading_rad)
+        stop firing now, having fired gait index `last` (B,) in each of the `streak` (B,;
+        None: 1) cycles before."""
+        streak = np.ones(len(last), dtype=np.int64) if streak is None else streak
+        return position_mm + rotate(self.glide(last, streak), heading_rad)
 
     def choose(self, position_mm: np.ndarray, heading_rad: np.ndarray, goal_mm: np.ndarray,
-               tolerance_mm: float, last: Optional[np.ndarray] = None) -> np.ndarray:
+               tolerance_mm: float, last: Optional[np.ndarray] = None,
+               streak: Optional[np.ndarray] = None) -> np.ndarray:
         """(B,) gait indices (0 = "none") for robots at position (B, 2) mm with heading (B,)
-        rad and goals (B, 2) mm, having fired gait index `last` (B,) in the cycle before
-        (None: nothing); see the module docstring."""
+        rad and goals (B, 2) mm, having fired gait index `last` (B,) in each of the `streak`
+        (B,) cycles before (None: nothing, resp. 1); see the module docstring."""
         last = np.zeros(len(position_mm), dtype=np.int64) if last is None else np.asarray(last)
+        streak = np.ones(len(last), dtype=np.int64) if streak is None else np.asarray(streak)
         choice = np.zeros(len(position_mm), dtype=np.int64)
-        stop_rest = self.rest(position_mm, heading_rad, last)
+        stop_rest = self.rest(position_mm, heading_rad, last, streak)
+        gaits = np.arange(len(self.gaits))
         for b in range(len(position_mm)):
             to_goal = goal_mm[b] - position_mm[b]
             if math.hypot(*(goal_mm[b] - stop_rest[b])) <= tolerance_mm:
@@ -118,14 +153,17 @@ class PrimitiveModel:
             # (G, G, 2); "none" first means stopping now
             first = rotate(self.steps_mm, heading_rad[b])
             turned = heading_rad[b] + self.turns_rad
-            rest_first = first + rotate(self.glides_mm, turned)
+            streak_first = next_streak(last[b], streak[b], gaits)  # (G,)
+            rest_first = first + rotate(self.glide(gaits, streak_first), turned)
             rest_first[0] = stop_rest[b] - position_mm[b]
             after_first = np.hypot(*(to_goal - rest_first).T)
             if after_first.min() <= tolerance_mm:
                 choice[b] = int(np.argmin(after_first))
                 continue
             second = rotate(self.steps_mm[None, :, :], turned[:, None])
-            glide = rotate(self.glides_mm[None, :, :], (turned[:, None] + self.turns_rad[None]))
+            streak_second = next_streak(gaits[:, None], streak_first[:, None], gaits[None])
+            glide = rotate(self.glide(gaits[None], streak_second),
+                           turned[:, None] + self.turns_rad[None])
             rest_second = first[:, None, :] + second + glide
             rest_second[:, 0] = rest_first
             rest_second[0, :] = rest_first[0]
@@ -140,15 +178,24 @@ class PrimitiveModel:
         position, heading = np.zeros((count, 2)), np.zeros(count)
         plans = np.zeros((count, max_cycles), dtype=np.int64)
         last = np.zeros(count, dtype=np.int64)
+        streak = np.zeros(count, dtype=np.int64)
         done = np.zeros(count, dtype=bool)
         for cycle in range(max_cycles):
             choice = np.where(done, 0, self.choose(position, heading, goal_mm, tolerance_mm,
-                                                   last))
+                                                   last, streak))
             done |= choice == 0  # a plan that stops firing lets the robot come to rest
             plans[:, cycle] = choice
             position, heading = self.predict(position, heading, choice)
-            last = choice
+            last, streak = choice, next_streak(last, streak, choice)
         return plans
+
+
+def next_streak(last, streak, choice):
+    """How many cycles in a row gait index `choice` will have fired after firing it, having
+    fired gait index `last` in each of the `streak` cycles before (arrays broadcast): streak + 1
+    for the same gait, 1 for another, 0 for "none" (index 0)."""
+    choice = np.asarray(choice)
+    return np.where(choice == 0, 0, np.where(choice == last, np.asarray(streak) + 1, 1))
 
 
 def default_goals(distance_mm: float = 50.0, count: int = 8,
@@ -222,6 +269,7 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
     final_error = np.full(len(target), np.nan)
     fired = np.zeros(len(target), dtype=np.int64)
     last = np.zeros(len(target), dtype=np.int64)
+    streak = np.zeros(len(target), dtype=np.int64)
     predicted = np.zeros((len(target), 2))
     cycle_rows, paths = [], []
     for cycle in range(max_cycles + 1):
@@ -233,7 +281,7 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
             choice = np.zeros(len(target), dtype=np.int64)
         else:
             choice = np.where(closed, model.choose(position, heading, target, tolerance_mm,
-                                                   last), plans[:, cycle])
+                                                   last, streak), plans[:, cycle])
         # a controller stops when it chooses nothing (closed loop: within the tolerance; open
         # loop: its plan is done) or the budget is spent; its error is taken then
         stopping = ~stopped & ((choice == 0) | (cycle == max_cycles) | ~simulator.ok)
@@ -250,7 +298,7 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
         if stopped.all():
             break
         fired += choice != 0
-        last = choice
+        last, streak = choice, next_streak(last, streak, choice)
         closed_next, _ = model.predict(position, heading, choice)
         open_predicted, open_heading = model.predict(open_predicted, open_heading, choice)
         predicted = np.where(closed[:, None], closed_next, open_predicted)
