@@ -40,7 +40,7 @@ import pandas as pd
 from .gait import NO_GAIT, Gait
 from .metrics import rotate
 from .params import SolverConfig, StarParams
-from .primitives import glide_columns
+from .primitives import glide_columns, streak_step_columns
 from .simulation import whole_steps
 from .simulator import Simulator
 
@@ -70,11 +70,17 @@ class PrimitiveModel:
 
     gaits: G names; steps_mm: (G, 2); turns_deg: (G,); glides_mm: (K, G, 2) the body-frame
     glide after the last of k = 1..K consecutive firings of a gait until rest, or (G, 2) for
-    one glide whatever the streak (K = 1), or None (no glide). Attributes: gaits (G' names,
-    "none" first), steps_mm (G', 2), turns_rad (G',), glides_mm (K, G', 2), masks (G', 8)."""
+    one glide whatever the streak (K = 1), or None (no glide); streak_steps_mm: (S, G, 2) the
+    step of the k-th consecutive firing from rest, k = 1..S (the robot speeds up over its
+    first cycles), the steady step after (None: S = 0). Attributes: gaits (G' names, "none"
+    first), steps_mm (G', 2), streak_steps_mm (S + 1, G', 2), turns_rad (G',), glides_mm
+    (K, G', 2), masks (G', 8)."""
 
-    def __init__(self, gaits: Sequence[str], steps_mm, turns_deg, glides_mm=None):
+    def __init__(self, gaits: Sequence[str], steps_mm, turns_deg, glides_mm=None,
+                 streak_steps_mm=None):
         steps = np.asarray(steps_mm, dtype=np.float64)
+        streak_steps = (np.zeros((0, *steps.shape)) if streak_steps_mm is None
+                        else np.asarray(streak_steps_mm, dtype=np.float64))
         turns = np.asarray(turns_deg, dtype=np.float64)
         names = [Gait.parse(g).name for g in gaits]
         glides = (np.zeros_like(steps) if glides_mm is None
@@ -82,17 +88,24 @@ class PrimitiveModel:
         if glides.ndim == 2:
             glides = glides[None]
         if steps.shape != (len(names), 2) or turns.shape != (len(names),) \
-                or glides.shape[1:] != steps.shape or not len(glides):
+                or glides.shape[1:] != steps.shape or not len(glides) \
+                or streak_steps.shape[1:] != steps.shape:
             raise ValueError(f"steps_mm must be ({len(names)}, 2), glides_mm (K >= 1, "
-                             f"{len(names)}, 2) or ({len(names)}, 2) and turns_deg "
-                             f"({len(names)},), got {steps.shape}, {glides.shape} and "
+                             f"{len(names)}, 2) or ({len(names)}, 2), streak_steps_mm (S, "
+                             f"{len(names)}, 2) and turns_deg ({len(names)},), got "
+                             f"{steps.shape}, {glides.shape}, {streak_steps.shape} and "
                              f"{turns.shape}")
         if not (np.isfinite(steps).all() and np.isfinite(turns).all()
-                and np.isfinite(glides).all()):
-            raise ValueError("steps_mm, turns_deg and glides_mm must be finite")
+                and np.isfinite(glides).all() and np.isfinite(streak_steps).all()):
+            raise ValueError("steps_mm, turns_deg, glides_mm and streak_steps_mm must be "
+                             "finite")
         keep = [i for i, name in enumerate(names) if name != NO_GAIT]
         self.gaits = [NO_GAIT] + [names[i] for i in keep]
         self.steps_mm = np.vstack([np.zeros((1, 2)), steps[keep]])
+        # the steps of streaks 1..S, then the steady step for every longer streak
+        self.streak_steps_mm = np.concatenate(
+            [np.zeros((len(streak_steps) + 1, 1, 2)),
+             np.concatenate([streak_steps[:, keep], steps[None, keep]])], axis=1)
         self.glides_mm = np.concatenate([np.zeros((len(glides), 1, 2)), glides[:, keep]],
                                         axis=1)
         self.turns_rad = np.radians(np.concatenate([[0.0], turns[keep]]))
@@ -101,8 +114,10 @@ class PrimitiveModel:
     @classmethod
     def from_table(cls, table: pd.DataFrame) -> "PrimitiveModel":
         """From a primitive table (`taichi_star.primitives`): its ok gaits' step_x_mm,
-        step_y_mm and turn_deg, and the glides after k = 1, 2, ... firings in the columns
-        `primitives.glide_columns(k)` where it has them (none: no glide). ValueError for a
+        step_y_mm and turn_deg, the steps of the k-th firing in a row from rest in the columns
+        `primitives.streak_step_columns(k)` and the glides after k = 1, 2, ... firings in
+        the columns `primitives.glide_columns(k)` where it has them (none: steady steps, no
+        glide). ValueError for a
         table with the single glide_x_mm/glide_y_mm of earlier versions (measured after
         several firings only): measure it again."""
         usable = table[(table["status"] == "ok") & np.isfinite(table["step_x_mm"])
@@ -115,13 +130,28 @@ class PrimitiveModel:
                              "per streak of firings (glide1_x_mm, ...): measure it again")
         glides = (np.stack([usable[list(glide_columns(k))].to_numpy()
                             for k in range(1, streaks + 1)]) if streaks else None)
+        stepped = 0
+        while set(streak_step_columns(stepped + 1)) <= set(table.columns):
+            stepped += 1
+        streak_steps = np.stack([usable[list(streak_step_columns(k))].to_numpy()
+                                 for k in range(1, stepped + 1)]) if stepped else None
         return cls(list(usable["gait"]), usable[["step_x_mm", "step_y_mm"]].to_numpy(),
-                   usable["turn_deg"].to_numpy(), glides)
+                   usable["turn_deg"].to_numpy(), glides, streak_steps)
 
-    def predict(self, position_mm: np.ndarray, heading_rad: np.ndarray, choice: np.ndarray):
+    def step(self, gait: np.ndarray, streak: Optional[np.ndarray] = None) -> np.ndarray:
+        """(..., 2) body-frame steps (mm) of gait indices `gait` (...) fired as the streak-th
+        cycle in a row (...; None, or beyond the streaks measured: the steady step)."""
+        if streak is None:
+            return self.steps_mm[gait]
+        fired = np.clip(np.asarray(streak), 1, len(self.streak_steps_mm)) - 1
+        return self.streak_steps_mm[fired, gait]
+
+    def predict(self, position_mm: np.ndarray, heading_rad: np.ndarray, choice: np.ndarray,
+                streak: Optional[np.ndarray] = None):
         """The model's (position (B, 2) mm, heading (B,) rad) after one cycle of gait index
-        `choice` (B,) from position (B, 2) and heading (B,)."""
-        return (position_mm + rotate(self.steps_mm[choice], heading_rad),
+        `choice` (B,) from position (B, 2) and heading (B,), that cycle being the streak-th
+        (B,; None: steady) in a row of that gait (`step`)."""
+        return (position_mm + rotate(self.step(choice, streak), heading_rad),
                 heading_rad + self.turns_rad[choice])
 
     def glide(self, gait: np.ndarray, streak: np.ndarray) -> np.ndarray:
@@ -155,17 +185,17 @@ class PrimitiveModel:
                 continue
             # rest positions relative to now: after one cycle of gait g, (G, 2); after g then h,
             # (G, G, 2); "none" first means stopping now
-            first = rotate(self.steps_mm, heading_rad[b])
             turned = heading_rad[b] + self.turns_rad
             streak_first = next_streak(last[b], streak[b], gaits)  # (G,)
+            first = rotate(self.step(gaits, streak_first), heading_rad[b])
             rest_first = first + rotate(self.glide(gaits, streak_first), turned)
             rest_first[0] = stop_rest[b] - position_mm[b]
             after_first = np.hypot(*(to_goal - rest_first).T)
             if after_first.min() <= tolerance_mm:
                 choice[b] = int(np.argmin(after_first))
                 continue
-            second = rotate(self.steps_mm[None, :, :], turned[:, None])
             streak_second = next_streak(gaits[:, None], streak_first[:, None], gaits[None])
+            second = rotate(self.step(gaits[None], streak_second), turned[:, None])
             glide = rotate(self.glide(gaits[None], streak_second),
                            turned[:, None] + self.turns_rad[None])
             rest_second = first[:, None, :] + second + glide
@@ -189,8 +219,9 @@ class PrimitiveModel:
                                                    last, streak))
             done |= choice == 0  # a plan that stops firing lets the robot come to rest
             plans[:, cycle] = choice
-            position, heading = self.predict(position, heading, choice)
-            last, streak = choice, next_streak(last, streak, choice)
+            streak = next_streak(last, streak, choice)
+            position, heading = self.predict(position, heading, choice, streak)
+            last = choice
         return plans
 
 
@@ -305,8 +336,9 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
             break
         fired += choice != 0
         last, streak = choice, next_streak(last, streak, choice)
-        closed_next, _ = model.predict(position, heading, choice)
-        open_predicted, open_heading = model.predict(open_predicted, open_heading, choice)
+        closed_next, _ = model.predict(position, heading, choice, streak)
+        open_predicted, open_heading = model.predict(open_predicted, open_heading, choice,
+                                                     streak)
         predicted = np.where(closed[:, None], closed_next, open_predicted)
         simulator.fire(model.masks[choice])
         frames = simulator.advance(period, record_interval_s=period / frames_per_cycle,

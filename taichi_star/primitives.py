@@ -60,6 +60,24 @@ def glide_columns(fired: int) -> Tuple[str, str]:
     return f"glide{fired}_x_mm", f"glide{fired}_y_mm"
 
 
+def streak_step_columns(fired: int) -> Tuple[str, str]:
+    """The primitive table's columns (x, y; mm, body frame) of the step of the fired-th
+    consecutive firing of the gait from rest (cycle fired - 1 of the measurement)."""
+    return f"step{fired}_x_mm", f"step{fired}_y_mm"
+
+
+def widen_steps(cycles: pd.DataFrame) -> pd.DataFrame:
+    """A per-cycle table (`CYCLE_COLUMNS`) as one row per gait: gait, then
+    `streak_step_columns(k)` for k = 1, 2, ... (cycle k - 1)."""
+    wide = cycles.pivot(index="gait", columns="cycle", values=["dx_body_mm", "dy_body_mm"])
+    columns = {}
+    for cycle in sorted(cycles["cycle"].unique()):
+        x, y = streak_step_columns(int(cycle) + 1)
+        columns[x] = wide[("dx_body_mm", cycle)]
+        columns[y] = wide[("dy_body_mm", cycle)]
+    return pd.DataFrame(columns).rename_axis("gait").reset_index()
+
+
 def widen_glides(glides: pd.DataFrame) -> pd.DataFrame:
     """A glide table (`GLIDE_COLUMNS`) as one row per gait: gait, then `glide_columns(k)` for
     k = 1, 2, ... firings, then glide_cycles."""
@@ -203,7 +221,8 @@ def measure_primitives(base: StarParams = StarParams(), solver: SolverConfig = S
     cycles from rest and return (primitive table, per-cycle table), both over all 255 gaits.
     base: the robot (its gait is replaced; e.g. `StarParams.preset("identified")`); the period
     must be a whole number of solver steps; statistics over cycles first_cycle..cycles-1
-    (0-based). With glide_cycles > 0 the primitive table also holds each gait's glides after
+    (0-based). The primitive table also holds the step of each cycle k - 1 (the k-th firing
+    in a row from rest) in the columns `streak_step_columns(k)`. With glide_cycles > 0 it holds each gait's glides after
     k = 1..cycles consecutive firings from rest (`measure_glides`), in the columns
     `glide_columns(k)`, and glide_cycles. ValueError for bad arguments (`check_measurement`)."""
     check_measurement(base, solver, cycles, first_cycle)
@@ -219,7 +238,8 @@ def measure_primitives(base: StarParams = StarParams(), solver: SolverConfig = S
     table = summarise_cycles(expanded, first_cycle)
     table["period_s"] = base.period
     table["dt_s"] = solver.dt
-    table = table[PRIMITIVE_COLUMNS]
+    table = table[PRIMITIVE_COLUMNS].merge(widen_steps(expanded), on="gait", how="left",
+                                           validate="one_to_one")
     if glide_cycles:
         glides = measure_glides(base, solver, fire_cycles=cycles, glide_cycles=glide_cycles,
                                 arch=arch, progress=progress)
