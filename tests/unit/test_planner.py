@@ -4,6 +4,7 @@ the body frame, open-loop plans to a lattice goal."""
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from taichi_star.planner import PrimitiveModel, next_streak
@@ -130,7 +131,6 @@ def test_plan_and_choice_use_the_glide_of_the_streak():
 
 
 def test_glides_are_read_from_a_primitive_table_and_checked():
-    import pandas as pd
     table = pd.DataFrame({"gait": ["A1", "A5"], "step_x_mm": [10.0, -10.0],
                           "step_y_mm": [0.0, 0.0], "turn_deg": [0.0, 0.0],
                           "status": ["ok", "ok"], "glide1_x_mm": [5.0, -5.0],
@@ -155,3 +155,28 @@ def test_glides_are_read_from_a_primitive_table_and_checked():
         PrimitiveModel(["A1"], [(10, 0)], [0.0], glides_mm=np.zeros((0, 1, 2)))
     with pytest.raises(ValueError, match="must be finite"):
         PrimitiveModel(["A1"], [(10, 0)], [0.0], glides_mm=[(np.nan, 0)])
+
+
+def test_steps_of_a_streak_speed_up_to_the_steady_step():
+    """A1's first firing from rest steps 6 mm, its second 9 mm, every later one its steady
+    10 mm; the glide is 2 mm after any streak."""
+    model = PrimitiveModel(["A1"], [(10, 0)], [0.0], glides_mm=[(2, 0)],
+                           streak_steps_mm=[[(6, 0)], [(9, 0)]])
+    a1 = model.gaits.index("A1")
+    np.testing.assert_array_equal(model.step(np.array([a1] * 4), np.array([1, 2, 3, 9])),
+                                  [(6, 0), (9, 0), (10, 0), (10, 0)])
+    np.testing.assert_array_equal(model.step(np.array([a1])), [(10, 0)])  # no streak: steady
+    position, _ = model.predict(np.zeros((2, 2)), np.array([0.0, math.pi / 2]),
+                                np.array([a1, a1]), np.array([1, 2]))
+    np.testing.assert_allclose(position, [(6, 0), (0, 9)], atol=1e-12)
+    # rests after 1, 2, 3 firings: 6 + 2 = 8, 15 + 2 = 17, 25 + 2 = 27
+    for goal, fired in ((8.0, 1), (17.0, 2), (27.0, 3)):
+        plan = model.plan(np.array([[goal, 0.0]]), 0.5, 4)[0]
+        assert plan.tolist() == [a1] * fired + [0] * (4 - fired), goal
+    table = pd.DataFrame({"gait": ["A1"], "step_x_mm": [10.0], "step_y_mm": [0.0],
+                          "turn_deg": [0.0], "status": ["ok"], "step1_x_mm": [6.0],
+                          "step1_y_mm": [0.5]})
+    np.testing.assert_array_equal(PrimitiveModel.from_table(table).streak_steps_mm,
+                                  [[(0, 0), (6, 0.5)], [(0, 0), (10, 0)]])
+    with pytest.raises(ValueError, match="streak_steps_mm"):
+        PrimitiveModel(["A1"], [(10, 0)], [0.0], streak_steps_mm=[(6, 0)])
