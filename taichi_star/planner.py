@@ -1,16 +1,20 @@
 """Drive robots to goal points by choosing a gait every actuation cycle from a primitive table.
 
-The model: a cycle of gait g moves the centroid by its mean body-frame step s_g (turned into
-the world by the heading θ at the cycle's start) and turns the body by its mean turn ω_g:
-p' = p + R(θ)·s_g, θ' = θ + ω_g (`PrimitiveModel.predict`). A robot that stops firing after
-gait g glides on to rest at p + R(θ)·γ_g,k (body frame at the stop; 0 when the primitives hold
-no glides), where k is the streak: how many cycles in a row it fired g, capped at the K streaks
-the glides were measured for (`primitives.measure_glides`: k firings from rest, then coasting).
-The robot builds up momentum over its first cycles (the paper preset's A1+A3 glides about
-twice as far after 5 firings as after 1), so one glide for all streaks makes a planner that
-fires once stop far short. A gait fired after a different one starts a new streak of 1: the
-momentum left from the other gait points elsewhere and mostly decays within a cycle, and the
-k = 1 glide is the one measured from the nearest state (rest). The choice
+The model: the k-th cycle in a row of gait g moves the centroid by its body-frame step s_g,k
+(turned into the world by the heading θ at the cycle's start) and turns the body by its mean
+turn ω_g: p' = p + R(θ)·s_g,k, θ' = θ + ω_g (`PrimitiveModel.predict`). A robot that stops
+firing after k cycles in a row of gait g glides on to rest at p + R(θ)·γ_g,k (body frame at
+the stop; 0 when the primitives hold no glides). The robot builds up momentum over its first
+cycles, so both depend on the streak k: s_g,k is the step of the per-cycle measurement's cycle
+k - 1 from rest while k is within the cycles measured, the steady mean step after (paper
+preset, A1+A3: 15.1, 19.6, 20.2, 20.3 mm in its first four cycles, steady 20.1); γ_g,k is the
+glide after k firings from rest (`primitives.measure_glides`), the longest measured streak's
+beyond (A1+A3: 22.8 mm after one firing, 25.2 after five, over 4 cycles of coasting). A
+gait fired after a different one whose steady step points within
+ALIGNED_DEG continues the streak (the robot keeps the momentum it built that way: on the
+paper preset's 150-mm goal the closed loop missed by 5.3 mm when a switch restarted the
+streak); any other starts a new streak of 1 (the momentum points elsewhere, and the k = 1
+values are measured from the nearest state, rest). The choice
 (`PrimitiveModel.choose`) plans for the glide with a two-cycle lookahead on the rest
 positions: fire nothing once the robot would come to rest within the tolerance if it stopped
 now (given the gait it fired last and its streak); else the gait after which it would come to
@@ -62,6 +66,11 @@ CYCLE_COLUMNS = ["goal", "mode", "cycle", "gait", "x_mm", "y_mm", "heading_deg",
 c's row holds the result of the c cycles before), the gait fired in it ("none" after the
 controller stopped) and the position the model predicted for this boundary (open loop: from
 the start; closed loop: from the previous boundary)."""
+
+
+ALIGNED_DEG = 45.0
+"""A gait fired after another whose steady step points within this angle (deg) continues its
+momentum streak (`PrimitiveModel.next_streak`)."""
 
 
 class PrimitiveModel:
@@ -154,6 +163,20 @@ class PrimitiveModel:
         return (position_mm + rotate(self.step(choice, streak), heading_rad),
                 heading_rad + self.turns_rad[choice])
 
+    def next_streak(self, last, streak, choice):
+        """How many cycles in a row of momentum gait index `choice` will have built after
+        firing it, having fired gait index `last` in each of the `streak` cycles before
+        (arrays broadcast): 0 for "none" (index 0); streak + 1 for the same gait or for one
+        whose steady step points within ALIGNED_DEG of the last's (the robot keeps the
+        momentum it built the same way); 1 otherwise (it starts again as from rest)."""
+        choice, last = np.asarray(choice), np.asarray(last)
+        before, after = self.steps_mm[last], self.steps_mm[choice]
+        dot = (before * after).sum(axis=-1)
+        aligned = dot > math.cos(math.radians(ALIGNED_DEG)) * np.hypot(*np.moveaxis(
+            before, -1, 0)) * np.hypot(*np.moveaxis(after, -1, 0))
+        carries = (choice == last) | ((last != 0) & aligned)
+        return np.where(choice == 0, 0, np.where(carries, np.asarray(streak) + 1, 1))
+
     def glide(self, gait: np.ndarray, streak: np.ndarray) -> np.ndarray:
         """(..., 2) body-frame glides (mm) after firing gait indices `gait` (...) `streak`
         (...) cycles in a row (below 1 counts as 1, above K as K; "none" does not glide)."""
@@ -186,7 +209,7 @@ class PrimitiveModel:
             # rest positions relative to now: after one cycle of gait g, (G, 2); after g then h,
             # (G, G, 2); "none" first means stopping now
             turned = heading_rad[b] + self.turns_rad
-            streak_first = next_streak(last[b], streak[b], gaits)  # (G,)
+            streak_first = self.next_streak(last[b], streak[b], gaits)  # (G,)
             first = rotate(self.step(gaits, streak_first), heading_rad[b])
             rest_first = first + rotate(self.glide(gaits, streak_first), turned)
             rest_first[0] = stop_rest[b] - position_mm[b]
@@ -194,7 +217,8 @@ class PrimitiveModel:
             if after_first.min() <= tolerance_mm:
                 choice[b] = int(np.argmin(after_first))
                 continue
-            streak_second = next_streak(gaits[:, None], streak_first[:, None], gaits[None])
+            streak_second = self.next_streak(gaits[:, None], streak_first[:, None],
+                                             gaits[None])
             second = rotate(self.step(gaits[None], streak_second), turned[:, None])
             glide = rotate(self.glide(gaits[None], streak_second),
                            turned[:, None] + self.turns_rad[None])
@@ -219,18 +243,10 @@ class PrimitiveModel:
                                                    last, streak))
             done |= choice == 0  # a plan that stops firing lets the robot come to rest
             plans[:, cycle] = choice
-            streak = next_streak(last, streak, choice)
+            streak = self.next_streak(last, streak, choice)
             position, heading = self.predict(position, heading, choice, streak)
             last = choice
         return plans
-
-
-def next_streak(last, streak, choice):
-    """How many cycles in a row gait index `choice` will have fired after firing it, having
-    fired gait index `last` in each of the `streak` cycles before (arrays broadcast): streak + 1
-    for the same gait, 1 for another, 0 for "none" (index 0)."""
-    choice = np.asarray(choice)
-    return np.where(choice == 0, 0, np.where(choice == last, np.asarray(streak) + 1, 1))
 
 
 def default_goals(distance_mm: float = 50.0, count: int = 8,
@@ -335,7 +351,7 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
         if stopped.all():
             break
         fired += choice != 0
-        last, streak = choice, next_streak(last, streak, choice)
+        last, streak = choice, model.next_streak(last, streak, choice)
         closed_next, _ = model.predict(position, heading, choice, streak)
         open_predicted, open_heading = model.predict(open_predicted, open_heading, choice,
                                                      streak)

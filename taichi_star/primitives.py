@@ -222,9 +222,9 @@ def measure_primitives(base: StarParams = StarParams(), solver: SolverConfig = S
     base: the robot (its gait is replaced; e.g. `StarParams.preset("identified")`); the period
     must be a whole number of solver steps; statistics over cycles first_cycle..cycles-1
     (0-based). The primitive table also holds the step of each cycle k - 1 (the k-th firing
-    in a row from rest) in the columns `streak_step_columns(k)`. With glide_cycles > 0 it holds each gait's glides after
-    k = 1..cycles consecutive firings from rest (`measure_glides`), in the columns
-    `glide_columns(k)`, and glide_cycles. ValueError for bad arguments (`check_measurement`)."""
+    in a row from rest) in the columns `streak_step_columns(k)`. With glide_cycles > 0 it
+    holds each gait's glides after k = 1..cycles consecutive firings from rest
+    (`measure_glides`), in the columns `glide_columns(k)`, and glide_cycles. ValueError for bad arguments (`check_measurement`)."""
     check_measurement(base, solver, cycles, first_cycle)
     if isinstance(glide_cycles, bool) or not isinstance(glide_cycles, int) or glide_cycles < 0:
         raise ValueError(f"glide_cycles must be an integer >= 0, got {glide_cycles!r}")

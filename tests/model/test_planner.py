@@ -61,7 +61,8 @@ def test_drive_plans_for_the_glide_and_judges_goals_at_rest(quick_primitives, qu
 def test_glides_per_streak_equal_a_robot_run_alone(quick_glides):
     """measure_glides' glide of A1+A3 after one firing and after two, and of its reflected
     image A1+A7, against one Simulator of three robots firing A1+A3 (once, twice) and A1+A7
-    (twice) then coasting (its glide: the cycle after its last firing; batch members do not interact: equal to round-off)."""
+    (twice) then coasting (its glide: the cycle after its last firing; batch members do not
+    interact: equal to round-off)."""
     params, solver = ts.StarParams(), ts.SolverConfig(dt=5e-3)
     glides = quick_glides.set_index(["gait", "glide_fire_cycles"])
     simulator = ts.Simulator([params.replace(gait="none")] * 3, solver)

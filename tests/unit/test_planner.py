@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from taichi_star.planner import PrimitiveModel, next_streak
+from taichi_star.planner import ALIGNED_DEG, PrimitiveModel
 
 
 def square_model(turn_deg=0.0):
@@ -100,10 +100,19 @@ def test_rest_uses_the_glide_of_the_streak_capped_at_the_longest_measured():
                                           np.array([0])), [(0, 0)])
 
 
-def test_next_streak_counts_a_gait_fired_in_a_row():
-    np.testing.assert_array_equal(next_streak(np.array([1, 1, 2, 0, 1]),
-                                              np.array([3, 1, 2, 0, 2]),
-                                              np.array([1, 2, 0, 3, 1])), [4, 1, 0, 1, 3])
+def test_next_streak_counts_a_gait_or_one_stepping_the_same_way_fired_in_a_row():
+    """Steps along x (A1), 44° and 46° from it (A2, A3) and none (A1+A5): a gait continues
+    its own streak, or one of a gait stepping within ALIGNED_DEG = 45° of it."""
+    steps = [(10, 0), (10 * math.cos(math.radians(44)), 10 * math.sin(math.radians(44))),
+             (10 * math.cos(math.radians(46)), 10 * math.sin(math.radians(46))), (0, 0)]
+    model = PrimitiveModel(["A1", "A2", "A3", "A1+A5"], steps, [0.0] * 4)
+    a1, a2, a3, a15 = (model.gaits.index(g) for g in ("A1", "A2", "A3", "A1+A5"))
+    last = np.array([a1, a1, a1, a1, 0, a15, a15, a1])
+    streak = np.array([3, 3, 3, 3, 0, 2, 2, 2])
+    choice = np.array([a1, a2, a3, 0, a1, a15, a1, a15])
+    np.testing.assert_array_equal(model.next_streak(last, streak, choice),
+                                  [4, 4, 1, 0, 1, 3, 1, 1])
+    assert ALIGNED_DEG == 45.0
 
 
 def test_plan_and_choice_use_the_glide_of_the_streak():
