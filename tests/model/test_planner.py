@@ -32,7 +32,7 @@ def test_drive_plans_for_the_glide_and_judges_goals_at_rest(quick_primitives, qu
     goals = default_goals(40.0, count=2, far_mm=None)
     summary, cycles, path = drive(aware, goals, solver=solver, max_cycles=3,
                                   frames_per_cycle=3, settle_cycles=1)
-    blind_summary, _, _ = drive(blind, goals, solver=solver, max_cycles=3, frames_per_cycle=3,
+    blind_summary, _, blind_path = drive(blind, goals, solver=solver, max_cycles=3, frames_per_cycle=3,
                                 settle_cycles=1)
     assert list(summary["mode"]) == ["open", "closed"] * 2
     first = cycles[cycles["cycle"] == 0]
@@ -44,6 +44,18 @@ def test_drive_plans_for_the_glide_and_judges_goals_at_rest(quick_primitives, qu
     assert (summary["run_cycles"] == cycles["cycle"].max() + 1).all()
     assert not blind_summary["reached"].any()
     assert (blind_summary["end_error_mm"] > 2 * summary["end_error_mm"]).all()
+    # each robot is judged one settling cycle after its own controller stopped (it fired
+    # every cycle until then): where its path is at that time
+    period = ts.StarParams().period
+    for result, trace in ((summary, path), (blind_summary, blind_path)):
+        assert (result["run_cycles"] == result["cycles_fired"] + 1).all()
+        for row in result.itertuples():
+            at = trace[(trace["goal"] == row.goal) & (trace["mode"] == row.mode)
+                       & np.isclose(trace["t_s"], row.run_cycles * period)]
+            assert len(at) == 1
+            assert row.end_error_mm == pytest.approx(np.hypot(
+                row.goal_x_mm - at["x_mm"].iloc[0], row.goal_y_mm - at["y_mm"].iloc[0]),
+                rel=1e-12)
     # the path starts at the origin and passes through each recorded cycle boundary
     row = cycles[(cycles["mode"] == "closed") & (cycles["goal"] == 0) & (cycles["cycle"] == 1)]
     on_path = path[(path["mode"] == "closed") & (path["goal"] == 0)
