@@ -12,10 +12,12 @@ Goals: --directions points at --distance mm in every direction (0°, 45°, ... f
 --far mm straight behind the robot (0: none). The primitive table is read from --primitives
 (a `python -m studies primitives` CSV made with the same period and step) or measured first
 (--cycles cycles from rest, statistics from the second cycle on, and each gait's glide after
-its last firing over --glide-cycles cycles). The planner plans for the glide (it stops firing
-when the robot would coast to rest within the tolerance; primitives without glide columns:
-no glide), and after the last controller stops the robots coast --settle-cycles cycles: a goal
-is judged by where the robot comes to rest.
+k = 1..--cycles firings in a row over --glide-cycles cycles). The planner follows how many
+cycles in a row a gait has fired (the robot builds up momentum: steps and glides grow over
+the first cycles) and plans for the glide (it stops firing when the robot would coast to rest
+within the tolerance; primitives without glide columns: no glide); after the last controller
+stops the robots coast --settle-cycles cycles, and a goal is judged by where the robot comes
+to rest, --settle-cycles cycles after its own controller stopped.
 
 Writes into --out (default a fresh runs/plan/<timestamp>/), each CSV with its provenance
 sidecar (`.csv.json`):

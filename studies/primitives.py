@@ -9,11 +9,11 @@ Writes into --out (default a fresh runs/primitives/<timestamp>/), each CSV with 
 sidecar (`.csv.json`):
 - `primitives.csv`: one row per gait (`taichi_star.primitives.PRIMITIVE_COLUMNS`): mean step
   (mm per cycle, body frame) and its spread, length and direction, mean turn per cycle and its
-  spread, over cycles first_cycle..cycles-1 (0-based; default 1..4, i.e. cycles 2-5); and,
-  with --glide-cycles > 0, the glide after the gait's last firing
-  (`taichi_star.primitives.measure_glides`: --cycles firings from rest, then --glide-cycles
-  cycles of coasting; glide_x/glide_y_mm in the body frame, glide_turn_deg), which the planner
-  plans for;
+  spread, over cycles first_cycle..cycles-1 (0-based; default 1..4, i.e. cycles 2-5); the
+  step of each cycle k from rest (step{k}_x/y_mm); and, with --glide-cycles > 0, the glide
+  after k = 1..--cycles firings in a row (`taichi_star.primitives.measure_glides`: k firings
+  from rest, then --glide-cycles cycles of coasting; glide{k}_x/y_mm in the body frame), which
+  the planner plans with;
 - `primitives_cycles.csv`: every gait's per-cycle steps and turns;
 - `primitives.png`: the primitives in polar form (direction, step length), coloured by turn,
   drawn from primitives.csv.

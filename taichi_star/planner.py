@@ -1,20 +1,35 @@
 """Drive robots to goal points by choosing a gait every actuation cycle from a primitive table.
 
-The model: a cycle of gait g moves the centroid by its mean body-frame step s_g (turned into
-the world by the heading θ at the cycle's start) and turns the body by its mean turn ω_g:
-p' = p + R(θ)·s_g, θ' = θ + ω_g (`PrimitiveModel.predict`). A robot that stops firing after
-gait g glides on by its glide γ_g (body frame at the stop; 0 when the primitives hold none) to
-rest at p + R(θ)·γ_g. The choice (`PrimitiveModel.choose`) plans for the glide with a two-cycle
-lookahead on the rest positions: fire nothing once the robot would come to rest within the
-tolerance if it stopped now (given the gait it fired last); else the gait after which it would
-come to rest within it, if one does (the closest such); else the first gait of the pair of
-cycles whose rest position is closest to the goal.
+The model: the k-th cycle in a row of gait g moves the centroid by its body-frame step s_g,k
+(turned into the world by the heading θ at the cycle's start) and turns the body by its mean
+turn ω_g: p' = p + R(θ)·s_g,k, θ' = θ + ω_g (`PrimitiveModel.predict`). A robot that stops
+firing after k cycles in a row of gait g glides on to rest at p + R(θ)·γ_g,k (body frame at
+the stop; 0 when the primitives hold no glides). The robot builds up momentum over its first
+cycles, so both depend on the streak k: s_g,k is the step of the per-cycle measurement's cycle
+k - 1 from rest while k is within the cycles measured, the steady mean step after (paper
+preset, A1+A3: 15.1, 19.6, 20.2, 20.3 mm in its first four cycles, steady 20.1); γ_g,k is the
+glide after k firings from rest (`primitives.measure_glides`), the longest measured streak's
+beyond (A1+A3: 22.8 mm after one firing, 25.2 after five, over 4 cycles of coasting). A
+gait fired after a different one whose steady step points within
+ALIGNED_DEG continues the streak (the robot keeps the momentum it built that way: on the
+paper preset's 150-mm goal the closed loop missed by 5.3 mm when a switch restarted the
+streak); any other starts a new streak of 1 (the momentum points elsewhere, and the k = 1
+values are measured from the nearest state, rest). The choice
+(`PrimitiveModel.choose`) plans for the glide with a two-cycle lookahead on the rest
+positions: fire nothing once the robot would come to rest within the tolerance if it stopped
+now (given the gait it fired last and its streak); else the gait after which it would come to
+rest within it, if one does (the closest such); else the first gait of the pair of cycles
+whose rest position is closest to the goal.
 
 Two controllers run in one Simulator (`drive`): open loop plans every cycle from the model at
 the start and fires that plan blindly; closed loop re-plans each cycle from the simulated
 position and heading and stops firing once its predicted rest is within the tolerance. After
 the last controller stops the batch coasts `settle_cycles` more cycles, and a goal is judged
-by where the robot comes to rest.
+by where the robot comes to rest: `settle_cycles` cycles after its own controller stopped, the
+horizon over which the glides are measured. (Under the paper preset's quadratic drag a coasting
+robot slows down as 1/t and creeps on for many cycles, ~1 mm per cycle after 7; judging every
+robot at the end of the batch would credit an early stopper with a longer glide than the
+model's.)
 """
 
 from __future__ import annotations
@@ -29,6 +44,7 @@ import pandas as pd
 from .gait import NO_GAIT, Gait
 from .metrics import rotate
 from .params import SolverConfig, StarParams
+from .primitives import glide_columns, streak_step_columns
 from .simulation import whole_steps
 from .simulator import Simulator
 
@@ -41,8 +57,8 @@ PLAN_COLUMNS = ["goal", "goal_x_mm", "goal_y_mm", "goal_distance_mm", "mode", "r
 tolerance_mm, the instance ok); cycles_to_goal (the cycle at which its controller stopped
 firing, for a goal reached; NaN otherwise); cycles_fired (cycles with a firing);
 final_error_mm (distance to the goal when the controller stopped, the robot still gliding);
-end_error_mm (distance to the goal at rest: when the whole batch stopped, after run_cycles
-cycles, the last `settle_cycles` of them without any firing); status of the instance."""
+end_error_mm (distance to the goal at rest: `settle_cycles` cycles after its controller
+stopped, after run_cycles cycles in all); status of the instance."""
 
 CYCLE_COLUMNS = ["goal", "mode", "cycle", "gait", "x_mm", "y_mm", "heading_deg",
                  "distance_mm", "predicted_x_mm", "predicted_y_mm"]
@@ -52,80 +68,160 @@ controller stopped) and the position the model predicted for this boundary (open
 the start; closed loop: from the previous boundary)."""
 
 
+ALIGNED_DEG = 45.0
+"""A gait fired after another whose steady step points within this angle (deg) continues its
+momentum streak (`PrimitiveModel.next_streak`)."""
+
+
 class PrimitiveModel:
     """The gaits a planner may fire, with their mean per-cycle body-frame step (mm) and turn
     (deg), plus "none" (no step, no turn).
 
-    gaits: G names; steps_mm: (G, 2); turns_deg: (G,); glides_mm: (G, 2) the body-frame glide
-    after a gait's last firing until rest (None: no glide)."""
+    gaits: G names; steps_mm: (G, 2); turns_deg: (G,); glides_mm: (K, G, 2) the body-frame
+    glide after the last of k = 1..K consecutive firings of a gait until rest, or (G, 2) for
+    one glide whatever the streak (K = 1), or None (no glide); streak_steps_mm: (S, G, 2) the
+    step of the k-th consecutive firing from rest, k = 1..S (the robot speeds up over its
+    first cycles), the steady step after (None: S = 0). Attributes: gaits (G' names, "none"
+    first), steps_mm (G', 2), streak_steps_mm (S + 1, G', 2), turns_rad (G',), glides_mm
+    (K, G', 2), masks (G', 8)."""
 
-    def __init__(self, gaits: Sequence[str], steps_mm, turns_deg, glides_mm=None):
+    def __init__(self, gaits: Sequence[str], steps_mm, turns_deg, glides_mm=None,
+                 streak_steps_mm=None):
         steps = np.asarray(steps_mm, dtype=np.float64)
+        streak_steps = (np.zeros((0, *steps.shape)) if streak_steps_mm is None
+                        else np.asarray(streak_steps_mm, dtype=np.float64))
         turns = np.asarray(turns_deg, dtype=np.float64)
         names = [Gait.parse(g).name for g in gaits]
         glides = (np.zeros_like(steps) if glides_mm is None
                   else np.asarray(glides_mm, dtype=np.float64))
+        if glides.ndim == 2:
+            glides = glides[None]
         if steps.shape != (len(names), 2) or turns.shape != (len(names),) \
-                or glides.shape != steps.shape:
-            raise ValueError(f"steps_mm and glides_mm must be ({len(names)}, 2) and turns_deg "
-                             f"({len(names)},), got {steps.shape}, {glides.shape} and "
+                or glides.shape[1:] != steps.shape or not len(glides) \
+                or streak_steps.shape[1:] != steps.shape:
+            raise ValueError(f"steps_mm must be ({len(names)}, 2), glides_mm (K >= 1, "
+                             f"{len(names)}, 2) or ({len(names)}, 2), streak_steps_mm (S, "
+                             f"{len(names)}, 2) and turns_deg ({len(names)},), got "
+                             f"{steps.shape}, {glides.shape}, {streak_steps.shape} and "
                              f"{turns.shape}")
         if not (np.isfinite(steps).all() and np.isfinite(turns).all()
-                and np.isfinite(glides).all()):
-            raise ValueError("steps_mm, turns_deg and glides_mm must be finite")
+                and np.isfinite(glides).all() and np.isfinite(streak_steps).all()):
+            raise ValueError("steps_mm, turns_deg, glides_mm and streak_steps_mm must be "
+                             "finite")
         keep = [i for i, name in enumerate(names) if name != NO_GAIT]
         self.gaits = [NO_GAIT] + [names[i] for i in keep]
         self.steps_mm = np.vstack([np.zeros((1, 2)), steps[keep]])
-        self.glides_mm = np.vstack([np.zeros((1, 2)), glides[keep]])
+        # the steps of streaks 1..S, then the steady step for every longer streak
+        self.streak_steps_mm = np.concatenate(
+            [np.zeros((len(streak_steps) + 1, 1, 2)),
+             np.concatenate([streak_steps[:, keep], steps[None, keep]])], axis=1)
+        self.glides_mm = np.concatenate([np.zeros((len(glides), 1, 2)), glides[:, keep]],
+                                        axis=1)
         self.turns_rad = np.radians(np.concatenate([[0.0], turns[keep]]))
         self.masks = np.stack([Gait.parse(g).mask.astype(bool) for g in self.gaits])
 
     @classmethod
     def from_table(cls, table: pd.DataFrame) -> "PrimitiveModel":
         """From a primitive table (`taichi_star.primitives`): its ok gaits' step_x_mm,
-        step_y_mm and turn_deg, and glide_x_mm, glide_y_mm where it has them."""
+        step_y_mm and turn_deg, the steps of the k-th firing in a row from rest in the columns
+        `primitives.streak_step_columns(k)` and the glides after k = 1, 2, ... firings in
+        the columns `primitives.glide_columns(k)` where it has them (none: steady steps, no
+        glide). ValueError for a
+        table with the single glide_x_mm/glide_y_mm of earlier versions (measured after
+        several firings only): measure it again."""
         usable = table[(table["status"] == "ok") & np.isfinite(table["step_x_mm"])
                        & np.isfinite(table["turn_deg"])]
-        glides = (usable[["glide_x_mm", "glide_y_mm"]].to_numpy()
-                  if {"glide_x_mm", "glide_y_mm"} <= set(table.columns) else None)
+        streaks = 0
+        while set(glide_columns(streaks + 1)) <= set(table.columns):
+            streaks += 1
+        if not streaks and "glide_x_mm" in table.columns:
+            raise ValueError("the primitive table has one glide per gait (glide_x_mm), not one "
+                             "per streak of firings (glide1_x_mm, ...): measure it again")
+        glides = (np.stack([usable[list(glide_columns(k))].to_numpy()
+                            for k in range(1, streaks + 1)]) if streaks else None)
+        stepped = 0
+        while set(streak_step_columns(stepped + 1)) <= set(table.columns):
+            stepped += 1
+        streak_steps = np.stack([usable[list(streak_step_columns(k))].to_numpy()
+                                 for k in range(1, stepped + 1)]) if stepped else None
         return cls(list(usable["gait"]), usable[["step_x_mm", "step_y_mm"]].to_numpy(),
-                   usable["turn_deg"].to_numpy(), glides)
+                   usable["turn_deg"].to_numpy(), glides, streak_steps)
 
-    def predict(self, position_mm: np.ndarray, heading_rad: np.ndarray, choice: np.ndarray):
+    def step(self, gait: np.ndarray, streak: Optional[np.ndarray] = None) -> np.ndarray:
+        """(..., 2) body-frame steps (mm) of gait indices `gait` (...) fired as the streak-th
+        cycle in a row (...; None, or beyond the streaks measured: the steady step)."""
+        if streak is None:
+            return self.steps_mm[gait]
+        fired = np.clip(np.asarray(streak), 1, len(self.streak_steps_mm)) - 1
+        return self.streak_steps_mm[fired, gait]
+
+    def predict(self, position_mm: np.ndarray, heading_rad: np.ndarray, choice: np.ndarray,
+                streak: Optional[np.ndarray] = None):
         """The model's (position (B, 2) mm, heading (B,) rad) after one cycle of gait index
-        `choice` (B,) from position (B, 2) and heading (B,)."""
-        return (position_mm + rotate(self.steps_mm[choice], heading_rad),
+        `choice` (B,) from position (B, 2) and heading (B,), that cycle being the streak-th
+        (B,; None: steady) in a row of that gait (`step`)."""
+        return (position_mm + rotate(self.step(choice, streak), heading_rad),
                 heading_rad + self.turns_rad[choice])
 
-    def rest(self, position_mm: np.ndarray, heading_rad: np.ndarray, last: np.ndarray):
+    def next_streak(self, last, streak, choice):
+        """How many cycles in a row of momentum gait index `choice` will have built after
+        firing it, having fired gait index `last` in each of the `streak` cycles before
+        (arrays broadcast): 0 for "none" (index 0); streak + 1 for the same gait or for one
+        whose steady step points within ALIGNED_DEG of the last's (the robot keeps the
+        momentum it built the same way); 1 otherwise (it starts again as from rest)."""
+        choice, last = np.asarray(choice), np.asarray(last)
+        before, after = self.steps_mm[last], self.steps_mm[choice]
+        dot = (before * after).sum(axis=-1)
+        aligned = dot > math.cos(math.radians(ALIGNED_DEG)) * np.hypot(*np.moveaxis(
+            before, -1, 0)) * np.hypot(*np.moveaxis(after, -1, 0))
+        carries = (choice == last) | ((last != 0) & aligned)
+        return np.where(choice == 0, 0, np.where(carries, np.asarray(streak) + 1, 1))
+
+    def glide(self, gait: np.ndarray, streak: np.ndarray) -> np.ndarray:
+        """(..., 2) body-frame glides (mm) after firing gait indices `gait` (...) `streak`
+        (...) cycles in a row (below 1 counts as 1, above K as K; "none" does not glide)."""
+        fired = np.clip(np.asarray(streak), 1, len(self.glides_mm)) - 1
+        return self.glides_mm[fired, gait]
+
+    def rest(self, position_mm: np.ndarray, heading_rad: np.ndarray, last: np.ndarray,
+             streak: Optional[np.ndarray] = None):
         """Where robots at position (B, 2) mm with heading (B,) rad come to rest (mm) if they
-        stop firing now, having fired gait index `last` (B,) in the cycle before."""
-        return position_mm + rotate(self.glides_mm[last], heading_rad)
+        stop firing now, having fired gait index `last` (B,) in each of the `streak` (B,;
+        None: 1) cycles before."""
+        streak = np.ones(len(last), dtype=np.int64) if streak is None else streak
+        return position_mm + rotate(self.glide(last, streak), heading_rad)
 
     def choose(self, position_mm: np.ndarray, heading_rad: np.ndarray, goal_mm: np.ndarray,
-               tolerance_mm: float, last: Optional[np.ndarray] = None) -> np.ndarray:
+               tolerance_mm: float, last: Optional[np.ndarray] = None,
+               streak: Optional[np.ndarray] = None) -> np.ndarray:
         """(B,) gait indices (0 = "none") for robots at position (B, 2) mm with heading (B,)
-        rad and goals (B, 2) mm, having fired gait index `last` (B,) in the cycle before
-        (None: nothing); see the module docstring."""
+        rad and goals (B, 2) mm, having fired gait index `last` (B,) in each of the `streak`
+        (B,) cycles before (None: nothing, resp. 1); see the module docstring."""
         last = np.zeros(len(position_mm), dtype=np.int64) if last is None else np.asarray(last)
+        streak = np.ones(len(last), dtype=np.int64) if streak is None else np.asarray(streak)
         choice = np.zeros(len(position_mm), dtype=np.int64)
-        stop_rest = self.rest(position_mm, heading_rad, last)
+        stop_rest = self.rest(position_mm, heading_rad, last, streak)
+        gaits = np.arange(len(self.gaits))
         for b in range(len(position_mm)):
             to_goal = goal_mm[b] - position_mm[b]
             if math.hypot(*(goal_mm[b] - stop_rest[b])) <= tolerance_mm:
                 continue
             # rest positions relative to now: after one cycle of gait g, (G, 2); after g then h,
             # (G, G, 2); "none" first means stopping now
-            first = rotate(self.steps_mm, heading_rad[b])
             turned = heading_rad[b] + self.turns_rad
-            rest_first = first + rotate(self.glides_mm, turned)
+            streak_first = self.next_streak(last[b], streak[b], gaits)  # (G,)
+            first = rotate(self.step(gaits, streak_first), heading_rad[b])
+            rest_first = first + rotate(self.glide(gaits, streak_first), turned)
             rest_first[0] = stop_rest[b] - position_mm[b]
             after_first = np.hypot(*(to_goal - rest_first).T)
             if after_first.min() <= tolerance_mm:
                 choice[b] = int(np.argmin(after_first))
                 continue
-            second = rotate(self.steps_mm[None, :, :], turned[:, None])
-            glide = rotate(self.glides_mm[None, :, :], (turned[:, None] + self.turns_rad[None]))
+            streak_second = self.next_streak(gaits[:, None], streak_first[:, None],
+                                             gaits[None])
+            second = rotate(self.step(gaits[None], streak_second), turned[:, None])
+            glide = rotate(self.glide(gaits[None], streak_second),
+                           turned[:, None] + self.turns_rad[None])
             rest_second = first[:, None, :] + second + glide
             rest_second[:, 0] = rest_first
             rest_second[0, :] = rest_first[0]
@@ -140,13 +236,15 @@ class PrimitiveModel:
         position, heading = np.zeros((count, 2)), np.zeros(count)
         plans = np.zeros((count, max_cycles), dtype=np.int64)
         last = np.zeros(count, dtype=np.int64)
+        streak = np.zeros(count, dtype=np.int64)
         done = np.zeros(count, dtype=bool)
         for cycle in range(max_cycles):
             choice = np.where(done, 0, self.choose(position, heading, goal_mm, tolerance_mm,
-                                                   last))
+                                                   last, streak))
             done |= choice == 0  # a plan that stops firing lets the robot come to rest
             plans[:, cycle] = choice
-            position, heading = self.predict(position, heading, choice)
+            streak = self.next_streak(last, streak, choice)
+            position, heading = self.predict(position, heading, choice, streak)
             last = choice
         return plans
 
@@ -198,7 +296,7 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
     """Drive one robot per (goal, mode) in one Simulator, a gait per actuation cycle of
     `params.period`, until every controller has stopped or max_cycles have run, then let the
     robots coast `settle_cycles` cycles to rest; a goal is reached if the robot comes to rest
-    within tolerance_mm of it.
+    (settle_cycles after its own controller stopped) within tolerance_mm of it.
 
     goals_mm: (G, 2) goal points relative to the start (the robot starts at rest, heading 0).
     Returns (summary, cycles, path): `PLAN_COLUMNS`, `CYCLE_COLUMNS` and the centroid path
@@ -222,18 +320,21 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
     final_error = np.full(len(target), np.nan)
     fired = np.zeros(len(target), dtype=np.int64)
     last = np.zeros(len(target), dtype=np.int64)
+    streak = np.zeros(len(target), dtype=np.int64)
     predicted = np.zeros((len(target), 2))
     cycle_rows, paths = [], []
+    boundaries = []  # (B, 2) centroid positions (mm) at every cycle boundary
     for cycle in range(max_cycles + 1):
         state = simulator.state()
         position = state[["centroid_x_mm", "centroid_y_mm"]].to_numpy()
+        boundaries.append(position)
         heading = np.radians(state["heading_deg"].to_numpy())
         distance = np.hypot(*(target - position).T)
         if cycle == max_cycles:
             choice = np.zeros(len(target), dtype=np.int64)
         else:
             choice = np.where(closed, model.choose(position, heading, target, tolerance_mm,
-                                                   last), plans[:, cycle])
+                                                   last, streak), plans[:, cycle])
         # a controller stops when it chooses nothing (closed loop: within the tolerance; open
         # loop: its plan is done) or the budget is spent; its error is taken then
         stopping = ~stopped & ((choice == 0) | (cycle == max_cycles) | ~simulator.ok)
@@ -250,9 +351,10 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
         if stopped.all():
             break
         fired += choice != 0
-        last = choice
-        closed_next, _ = model.predict(position, heading, choice)
-        open_predicted, open_heading = model.predict(open_predicted, open_heading, choice)
+        last, streak = choice, model.next_streak(last, streak, choice)
+        closed_next, _ = model.predict(position, heading, choice, streak)
+        open_predicted, open_heading = model.predict(open_predicted, open_heading, choice,
+                                                     streak)
         predicted = np.where(closed[:, None], closed_next, open_predicted)
         simulator.fire(model.masks[choice])
         frames = simulator.advance(period, record_interval_s=period / frames_per_cycle,
@@ -262,11 +364,13 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
         frames = simulator.advance(period, record_interval_s=period / frames_per_cycle,
                                    progress=progress)
         paths.append(frames[["instance", "t_s", "centroid_x_mm", "centroid_y_mm"]])
-    if settle_cycles:
         state = simulator.state()
-        rest = state[["centroid_x_mm", "centroid_y_mm"]].to_numpy()
-        distance = np.hypot(*(target - rest).T)
-        cycle += settle_cycles
+        boundaries.append(state[["centroid_x_mm", "centroid_y_mm"]].to_numpy())
+    # each robot is judged settle_cycles after its own stop, the horizon of the measured
+    # glides: a robot under quadratic drag slows down as 1/t and never quite stops
+    run_cycles = stop_cycle + settle_cycles
+    rest = np.stack(boundaries)[run_cycles, np.arange(len(target))]
+    distance = np.hypot(*(target - rest).T)
     reached = (distance <= tolerance_mm) & (state["status"].to_numpy() == "ok")
 
     summary = pd.DataFrame({
@@ -274,7 +378,7 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
         "goal_distance_mm": np.hypot(*target.T), "mode": modes,
         "reached": reached, "cycles_to_goal": np.where(reached, stop_cycle, np.nan),
         "cycles_fired": fired, "final_error_mm": final_error, "end_error_mm": distance,
-        "run_cycles": cycle,
+        "run_cycles": run_cycles,
         "status": state["status"].to_numpy()})[PLAN_COLUMNS]
     start = pd.DataFrame({"instance": np.arange(len(target)), "t_s": 0.0, "centroid_x_mm": 0.0,
                           "centroid_y_mm": 0.0})

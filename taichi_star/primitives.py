@@ -42,16 +42,55 @@ paper's "cycles 2-5"), and its sample standard deviation (*_std_mm); step_mm its
 direction_deg its direction in the body frame (NaN below ZERO_STEP_MM); turn_deg the mean
 rotation per cycle and turn_std_deg its sample standard deviation."""
 
-GLIDE_COLUMNS = ["gait", "glide_x_mm", "glide_y_mm", "glide_mm", "glide_turn_deg",
-                 "glide_fire_cycles", "glide_cycles"]
-"""Columns of the glide table (one row per gait): glide_x/glide_y_mm, the centroid's
-displacement from the end of the last firing cycle over the glide_cycles cycles after it, in the
-body frame at that moment (the robot having fired the gait at the start of each of
-glide_fire_cycles cycles from rest); glide_mm its length; glide_turn_deg the rotation over
-the glide."""
+GLIDE_COLUMNS = ["gait", "glide_fire_cycles", "glide_x_mm", "glide_y_mm", "glide_mm",
+                 "glide_turn_deg", "glide_cycles"]
+"""Columns of the glide table (one row per gait and number of firings): glide_x/glide_y_mm,
+the centroid's displacement from the end of the last firing cycle over the glide_cycles cycles
+after it, in the body frame at that moment, the robot having fired the gait at the start of
+each of glide_fire_cycles cycles from rest (it builds up momentum over the first cycles, so the
+glide grows with them); glide_mm its length; glide_turn_deg the rotation over the glide."""
 GLIDE_CYCLES = 4
 """Cycles of coasting over which a glide is measured (the planner lets robots settle as
 long)."""
+
+
+def glide_columns(fired: int) -> Tuple[str, str]:
+    """The primitive table's columns (x, y; mm, body frame) of the glide after `fired`
+    consecutive firings of the gait from rest (see `measure_primitives`)."""
+    return f"glide{fired}_x_mm", f"glide{fired}_y_mm"
+
+
+def streak_step_columns(fired: int) -> Tuple[str, str]:
+    """The primitive table's columns (x, y; mm, body frame) of the step of the fired-th
+    consecutive firing of the gait from rest (cycle fired - 1 of the measurement)."""
+    return f"step{fired}_x_mm", f"step{fired}_y_mm"
+
+
+def widen_steps(cycles: pd.DataFrame) -> pd.DataFrame:
+    """A per-cycle table (`CYCLE_COLUMNS`) as one row per gait: gait, then
+    `streak_step_columns(k)` for k = 1, 2, ... (cycle k - 1)."""
+    wide = cycles.pivot(index="gait", columns="cycle", values=["dx_body_mm", "dy_body_mm"])
+    columns = {}
+    for cycle in sorted(cycles["cycle"].unique()):
+        x, y = streak_step_columns(int(cycle) + 1)
+        columns[x] = wide[("dx_body_mm", cycle)]
+        columns[y] = wide[("dy_body_mm", cycle)]
+    return pd.DataFrame(columns).rename_axis("gait").reset_index()
+
+
+def widen_glides(glides: pd.DataFrame) -> pd.DataFrame:
+    """A glide table (`GLIDE_COLUMNS`) as one row per gait: gait, then `glide_columns(k)` for
+    k = 1, 2, ... firings, then glide_cycles."""
+    wide = glides.pivot(index="gait", columns="glide_fire_cycles",
+                        values=["glide_x_mm", "glide_y_mm"])
+    columns = {}
+    for fired in sorted(glides["glide_fire_cycles"].unique()):
+        x, y = glide_columns(int(fired))
+        columns[x] = wide[("glide_x_mm", fired)]
+        columns[y] = wide[("glide_y_mm", fired)]
+    columns["glide_cycles"] = glides.groupby("gait")["glide_cycles"].first()
+    return pd.DataFrame(columns).rename_axis("gait").reset_index()
+
 
 ZERO_STEP_MM = 1e-6
 """Below this mean step (mm per cycle; the symmetric gaits' round-off is ~1e-10) a gait does
@@ -182,9 +221,10 @@ def measure_primitives(base: StarParams = StarParams(), solver: SolverConfig = S
     cycles from rest and return (primitive table, per-cycle table), both over all 255 gaits.
     base: the robot (its gait is replaced; e.g. `StarParams.preset("identified")`); the period
     must be a whole number of solver steps; statistics over cycles first_cycle..cycles-1
-    (0-based). With glide_cycles > 0 the primitive table also holds each gait's glide
-    (`measure_glides` after `cycles` firings; its columns but gait appended). ValueError for
-    bad arguments (`check_measurement`)."""
+    (0-based). The primitive table also holds the step of each cycle k - 1 (the k-th firing
+    in a row from rest) in the columns `streak_step_columns(k)`. With glide_cycles > 0 it
+    holds each gait's glides after k = 1..cycles consecutive firings from rest
+    (`measure_glides`), in the columns `glide_columns(k)`, and glide_cycles. ValueError for bad arguments (`check_measurement`)."""
     check_measurement(base, solver, cycles, first_cycle)
     if isinstance(glide_cycles, bool) or not isinstance(glide_cycles, int) or glide_cycles < 0:
         raise ValueError(f"glide_cycles must be an integer >= 0, got {glide_cycles!r}")
@@ -198,46 +238,56 @@ def measure_primitives(base: StarParams = StarParams(), solver: SolverConfig = S
     table = summarise_cycles(expanded, first_cycle)
     table["period_s"] = base.period
     table["dt_s"] = solver.dt
-    table = table[PRIMITIVE_COLUMNS]
+    table = table[PRIMITIVE_COLUMNS].merge(widen_steps(expanded), on="gait", how="left",
+                                           validate="one_to_one")
     if glide_cycles:
         glides = measure_glides(base, solver, fire_cycles=cycles, glide_cycles=glide_cycles,
                                 arch=arch, progress=progress)
-        table = table.merge(glides, on="gait", how="left", validate="one_to_one")
+        table = table.merge(widen_glides(glides), on="gait", how="left",
+                            validate="one_to_one")
     return table, expanded
-
 
 
 def measure_glides(base: StarParams = StarParams(), solver: SolverConfig = SolverConfig(),
                    fire_cycles: int = 5, glide_cycles: int = GLIDE_CYCLES, arch: str = "cpu",
                    progress: bool = False) -> pd.DataFrame:
-    """How far each gait's robot glides after its last firing: one robot per symmetry class
-    (29, one Simulator) fires its gait at the start of each of `fire_cycles` cycles from rest,
-    then coasts `glide_cycles` cycles; the glide table (`GLIDE_COLUMNS`) over all 255 gaits,
-    image gaits by symmetry as for the steps. ValueError for bad arguments."""
+    """How far each gait's robot glides after its last firing, as a function of how many
+    cycles in a row it fired: for every k = 1..fire_cycles one robot per symmetry class
+    (29·fire_cycles robots, one Simulator) fires its gait at the start of each of k cycles from
+    rest, then coasts `glide_cycles` cycles. Returns the glide table (`GLIDE_COLUMNS`, k in
+    glide_fire_cycles) over all 255 gaits and every k, image gaits by symmetry as for the
+    steps. ValueError for bad arguments."""
     check_measurement(base, solver, fire_cycles, 0)
     if isinstance(glide_cycles, bool) or not isinstance(glide_cycles, int) or glide_cycles < 1:
         raise ValueError(f"glide_cycles must be an integer >= 1, got {glide_cycles!r}")
     representatives = [representative for representative, _ in symmetry_classes()]
-    simulator = Simulator([base.replace(gait=NO_GAIT)] * len(representatives), solver, arch=arch)
-    for _ in range(fire_cycles):
-        simulator.fire(representatives)
+    count = len(representatives)
+    # robot (k - 1)·count + i fires representative i in each of the first k cycles
+    fired = np.repeat(np.arange(1, fire_cycles + 1), count)
+    gaits = np.tile(np.asarray(representatives, dtype=object), fire_cycles)
+    simulator = Simulator([base.replace(gait=NO_GAIT)] * len(gaits), solver, arch=arch)
+    boundaries = []  # (x, y, heading) of every robot at the end of every cycle
+    columns = ["centroid_x_mm", "centroid_y_mm", "heading_deg"]
+    for cycle in range(fire_cycles + glide_cycles):
+        if cycle < fire_cycles:
+            simulator.fire(list(np.where(fired > cycle, gaits, NO_GAIT)))
         simulator.advance(base.period, progress=progress)
-    stop = simulator.state()
-    simulator.advance(glide_cycles * base.period, progress=progress)
-    end = simulator.state()
-    heading = np.radians(stop["heading_deg"].to_numpy())
-    columns = ["centroid_x_mm", "centroid_y_mm"]
-    body = rotate(end[columns].to_numpy() - stop[columns].to_numpy(), -heading)
-    turn = wrap_degrees(end["heading_deg"].to_numpy() - stop["heading_deg"].to_numpy())
-    ok = end["status"].to_numpy() == "ok"
+        boundaries.append(simulator.state()[columns].to_numpy())
+    robots = np.arange(len(gaits))
+    stop = np.stack(boundaries)[fired - 1, robots]
+    end = np.stack(boundaries)[fired - 1 + glide_cycles, robots]
+    body = rotate(end[:, :2] - stop[:, :2], -np.radians(stop[:, 2]))
+    turn = wrap_degrees(end[:, 2] - stop[:, 2])
+    ok = simulator.ok
     body[~ok], turn[~ok] = np.nan, np.nan
     index = {representative: i for i, representative in enumerate(representatives)}
     rows = []
     for gait, (representative, rotation, reflect, _) in class_symmetries().items():
-        source = index[representative]
-        glide = transform_vectors(body[source][None, :], rotation, reflect)[0]
-        rows.append({"gait": gait, "glide_x_mm": glide[0], "glide_y_mm": glide[1],
-                     "glide_mm": float(np.hypot(*glide)),
-                     "glide_turn_deg": -turn[source] if reflect else turn[source],
-                     "glide_fire_cycles": fire_cycles, "glide_cycles": glide_cycles})
-    return sort_gaits(pd.DataFrame(rows))[GLIDE_COLUMNS]
+        for k in range(1, fire_cycles + 1):
+            source = (k - 1) * count + index[representative]
+            glide = transform_vectors(body[source][None, :], rotation, reflect)[0]
+            rows.append({"gait": gait, "glide_fire_cycles": k, "glide_x_mm": glide[0],
+                         "glide_y_mm": glide[1], "glide_mm": float(np.hypot(*glide)),
+                         "glide_turn_deg": -turn[source] if reflect else turn[source],
+                         "glide_cycles": glide_cycles})
+    return sort_gaits(pd.DataFrame(rows), extra=["glide_fire_cycles"])[GLIDE_COLUMNS]

@@ -5,25 +5,34 @@ import numpy as np
 import pytest
 
 import taichi_star as ts
+from taichi_star.metrics import rotate
 from taichi_star.planner import PrimitiveModel, default_goals, drive
-from taichi_star.primitives import GLIDE_COLUMNS, measure_glides
+from taichi_star.primitives import GLIDE_COLUMNS, measure_glides, widen_glides
 
 
-def test_drive_plans_for_the_glide_and_judges_goals_at_rest(quick_primitives):
+@pytest.fixture(scope="module")
+def quick_glides():
+    """measure_glides after 1 and 2 firings, one cycle of coasting, at dt = 5 ms."""
+    return measure_glides(ts.StarParams(), ts.SolverConfig(dt=5e-3), fire_cycles=2,
+                          glide_cycles=1)
+
+
+def test_drive_plans_for_the_glide_and_judges_goals_at_rest(quick_primitives, quick_glides):
     """Two goals 40 mm away, 3 cycles and one of settling, with the quick primitives and their
     one-cycle glides: planning for the glide, both controllers fire once and the robot glides
     to rest within 5 mm of each goal; the same primitives without their glides fire until the
     model puts the robot on the goal and it glides on, 12-16 mm past (measured)."""
     table, _ = quick_primitives
     solver = ts.SolverConfig(dt=table["dt_s"].iloc[0])
-    glides = measure_glides(ts.StarParams(), solver, fire_cycles=2, glide_cycles=1)
-    assert list(glides.columns) == GLIDE_COLUMNS and len(glides) == 255
-    aware = PrimitiveModel.from_table(table.merge(glides, on="gait"))
+    glides = quick_glides
+    assert list(glides.columns) == GLIDE_COLUMNS and len(glides) == 2 * 255
+    aware = PrimitiveModel.from_table(table.merge(widen_glides(glides), on="gait"))
+    assert aware.glides_mm.shape[0] == 2 and aware.streak_steps_mm.shape[0] == 3
     blind = PrimitiveModel.from_table(table)
     goals = default_goals(40.0, count=2, far_mm=None)
     summary, cycles, path = drive(aware, goals, solver=solver, max_cycles=3,
                                   frames_per_cycle=3, settle_cycles=1)
-    blind_summary, _, _ = drive(blind, goals, solver=solver, max_cycles=3, frames_per_cycle=3,
+    blind_summary, _, blind_path = drive(blind, goals, solver=solver, max_cycles=3, frames_per_cycle=3,
                                 settle_cycles=1)
     assert list(summary["mode"]) == ["open", "closed"] * 2
     first = cycles[cycles["cycle"] == 0]
@@ -35,6 +44,18 @@ def test_drive_plans_for_the_glide_and_judges_goals_at_rest(quick_primitives):
     assert (summary["run_cycles"] == cycles["cycle"].max() + 1).all()
     assert not blind_summary["reached"].any()
     assert (blind_summary["end_error_mm"] > 2 * summary["end_error_mm"]).all()
+    # each robot is judged one settling cycle after its own controller stopped (it fired
+    # every cycle until then): where its path is at that time
+    period = ts.StarParams().period
+    for result, trace in ((summary, path), (blind_summary, blind_path)):
+        assert (result["run_cycles"] == result["cycles_fired"] + 1).all()
+        for row in result.itertuples():
+            at = trace[(trace["goal"] == row.goal) & (trace["mode"] == row.mode)
+                       & np.isclose(trace["t_s"], row.run_cycles * period)]
+            assert len(at) == 1
+            assert row.end_error_mm == pytest.approx(np.hypot(
+                row.goal_x_mm - at["x_mm"].iloc[0], row.goal_y_mm - at["y_mm"].iloc[0]),
+                rel=1e-12)
     # the path starts at the origin and passes through each recorded cycle boundary
     row = cycles[(cycles["mode"] == "closed") & (cycles["goal"] == 0) & (cycles["cycle"] == 1)]
     on_path = path[(path["mode"] == "closed") & (path["goal"] == 0)
@@ -47,3 +68,32 @@ def test_drive_plans_for_the_glide_and_judges_goals_at_rest(quick_primitives):
         drive(aware, [[np.nan, 0.0]], solver=solver)
     with pytest.raises(ValueError, match="settle_cycles"):
         drive(aware, goals, solver=solver, settle_cycles=-1)
+
+
+def test_glides_per_streak_equal_a_robot_run_alone(quick_glides):
+    """measure_glides' glide of A1+A3 after one firing and after two, and of its reflected
+    image A1+A7, against one Simulator of three robots firing A1+A3 (once, twice) and A1+A7
+    (twice) then coasting (its glide: the cycle after its last firing; batch members do not
+    interact: equal to round-off)."""
+    params, solver = ts.StarParams(), ts.SolverConfig(dt=5e-3)
+    glides = quick_glides.set_index(["gait", "glide_fire_cycles"])
+    simulator = ts.Simulator([params.replace(gait="none")] * 3, solver)
+    simulator.fire(["A1+A3", "A1+A3", "A1+A7"])
+    simulator.advance(params.period)
+    once = simulator.state()
+    simulator.fire(["none", "A1+A3", "A1+A7"])
+    simulator.advance(params.period)
+    twice = simulator.state()
+    simulator.advance(params.period)
+    after = simulator.state()
+    columns = ["centroid_x_mm", "centroid_y_mm"]
+    for robot, stop, end, key in ((0, once, twice, ("A1+A3", 1)),
+                                  (1, twice, after, ("A1+A3", 2)),
+                                  (2, twice, after, ("A1+A7", 2))):
+        heading = np.radians(stop["heading_deg"].to_numpy()[robot])
+        moved = end[columns].to_numpy()[robot] - stop[columns].to_numpy()[robot]
+        body = rotate(moved[None], -heading)[0]
+        np.testing.assert_allclose(glides.loc[key, ["glide_x_mm", "glide_y_mm"]], body,
+                                   rtol=1e-9, atol=1e-9, err_msg=str(key))
+    # the robot builds up momentum: a longer glide after two firings than after one
+    assert glides.loc[("A1+A3", 2), "glide_mm"] > glides.loc[("A1+A3", 1), "glide_mm"]

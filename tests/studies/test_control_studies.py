@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 import taichi_star
-from taichi_star.primitives import measure_primitives
+from taichi_star.primitives import glide_columns, measure_primitives, streak_step_columns
 
 from studies import cli
 from studies.__main__ import main as studies_main
@@ -41,23 +41,29 @@ def test_primitives_quick_writes_the_measurement_a_plot_and_provenance(primitive
 
 
 def test_primitives_quick_glides_follow_the_symmetries(primitives_run):
-    """The glide after the last firing (one cycle of coasting under --quick): an image gait
-    glides as its class representative turned by the symmetry, a symmetric gait not at all,
-    and a swimming gait glides on in the direction it swam."""
+    """The glides after 1 and 2 firings in a row (one cycle of coasting under --quick): an
+    image gait glides as its class representative turned by the symmetry, a symmetric gait not
+    at all, and a swimming gait glides on in the direction it swam; the per-streak steps are
+    the per-cycle table's."""
     table = pd.read_csv(primitives_run / "primitives.csv").set_index("gait")
-    assert (table["glide_cycles"] == 1).all() and (table["glide_fire_cycles"] == 2).all()
-    # A1+A3 and its rotation by one actuator, A2+A4: same glide length, turned by 45°
-    assert table.loc["A2+A4", "glide_mm"] == pytest.approx(table.loc["A1+A3", "glide_mm"],
-                                                          rel=1e-9)
-    turn = np.degrees(np.arctan2(table.loc["A2+A4", "glide_y_mm"], table.loc["A2+A4", "glide_x_mm"])
-                      - np.arctan2(table.loc["A1+A3", "glide_y_mm"],
-                                   table.loc["A1+A3", "glide_x_mm"]))
-    assert (turn - 45.0 + 180.0) % 360.0 - 180.0 == pytest.approx(0.0, abs=1e-6)
-    assert table.loc["A1+A5", "glide_mm"] < 1e-6 * table.loc["A1+A3", "glide_mm"]
-    moving = table[table["step_mm"] > 0.5]
-    along = (moving["glide_x_mm"] * moving["step_x_mm"] + moving["glide_y_mm"]
-             * moving["step_y_mm"])
-    assert (along > 0).all()
+    assert (table["glide_cycles"] == 1).all()
+    assert not set(glide_columns(3)) & set(table.columns)  # --quick: 2 cycles
+    for fired in (1, 2):
+        x, y = glide_columns(fired)
+        length = np.hypot(table[x], table[y])
+        # A1+A3 and its rotation by one actuator, A2+A4: same glide length, turned by 45°
+        assert length["A2+A4"] == pytest.approx(length["A1+A3"], rel=1e-9)
+        turn = np.degrees(np.arctan2(table.loc["A2+A4", y], table.loc["A2+A4", x])
+                          - np.arctan2(table.loc["A1+A3", y], table.loc["A1+A3", x]))
+        assert (turn - 45.0 + 180.0) % 360.0 - 180.0 == pytest.approx(0.0, abs=1e-6)
+        assert length["A1+A5"] < 1e-6 * length["A1+A3"]
+        moving = table[table["step_mm"] > 0.5]
+        assert (moving[x] * moving["step_x_mm"] + moving[y] * moving["step_y_mm"] > 0).all()
+    cycles = pd.read_csv(primitives_run / "primitives_cycles.csv")
+    second = cycles[cycles["cycle"] == 1].set_index("gait")
+    x, y = streak_step_columns(2)
+    np.testing.assert_array_equal(table.loc[second.index, x], second["dx_body_mm"])
+    np.testing.assert_array_equal(table.loc[second.index, y], second["dy_body_mm"])
 
 
 def test_primitives_quick_equals_the_library_measurement(primitives_run):

@@ -4,9 +4,10 @@ the body frame, open-loop plans to a lattice goal."""
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 
-from taichi_star.planner import PrimitiveModel
+from taichi_star.planner import ALIGNED_DEG, PrimitiveModel
 
 
 def square_model(turn_deg=0.0):
@@ -79,17 +80,112 @@ def test_rest_and_choice_use_the_last_gait_and_the_heading():
     assert model.choose(position[2:], heading[2:], goals[2:], 5.0, last[2:]).tolist() == [0]
 
 
+def streak_model():
+    """A1 steps 10 mm along x per cycle and A3 10 mm along y; their glides grow with the
+    streak: 2, 5, 7 mm after 1, 2, 3 (and more) firings in a row (A3's along y)."""
+    glides = [[(2, 0), (0, 2)], [(5, 0), (0, 5)], [(7, 0), (0, 7)]]
+    return PrimitiveModel(["A1", "A3"], [(10, 0), (0, 10)], [0.0, 0.0], glides_mm=glides)
+
+
+def test_rest_uses_the_glide_of_the_streak_capped_at_the_longest_measured():
+    model = streak_model()
+    a1, a3 = model.gaits.index("A1"), model.gaits.index("A3")
+    position, heading = np.zeros((6, 2)), np.array([0.0] * 5 + [math.pi / 2])
+    last = np.array([a1, a1, a1, a1, a3, a1])
+    streak = np.array([1, 2, 3, 4, 2, 2])
+    np.testing.assert_allclose(model.rest(position, heading, last, streak),
+                               [(2, 0), (5, 0), (7, 0), (7, 0), (0, 5), (0, 5)], atol=1e-12)
+    np.testing.assert_allclose(model.rest(position[:1], heading[:1], last[:1]), [(2, 0)])
+    np.testing.assert_allclose(model.rest(position[:1], heading[:1], np.array([0]),
+                                          np.array([0])), [(0, 0)])
+
+
+def test_next_streak_counts_a_gait_or_one_stepping_the_same_way_fired_in_a_row():
+    """Steps along x (A1), 44° and 46° from it (A2, A3) and none (A1+A5): a gait continues
+    its own streak, or one of a gait stepping within ALIGNED_DEG = 45° of it."""
+    steps = [(10, 0), (10 * math.cos(math.radians(44)), 10 * math.sin(math.radians(44))),
+             (10 * math.cos(math.radians(46)), 10 * math.sin(math.radians(46))), (0, 0)]
+    model = PrimitiveModel(["A1", "A2", "A3", "A1+A5"], steps, [0.0] * 4)
+    a1, a2, a3, a15 = (model.gaits.index(g) for g in ("A1", "A2", "A3", "A1+A5"))
+    last = np.array([a1, a1, a1, a1, 0, a15, a15, a1])
+    streak = np.array([3, 3, 3, 3, 0, 2, 2, 2])
+    choice = np.array([a1, a2, a3, 0, a1, a15, a1, a15])
+    np.testing.assert_array_equal(model.next_streak(last, streak, choice),
+                                  [4, 4, 1, 0, 1, 3, 1, 1])
+    assert ALIGNED_DEG == 45.0
+
+
+def test_plan_and_choice_use_the_glide_of_the_streak():
+    model = streak_model()
+    a1, a3 = model.gaits.index("A1"), model.gaits.index("A3")
+    # 12 mm ahead: one firing rests at 10 + 2 = 12 (the k = 3 glide would overshoot to 17)
+    assert model.plan(np.array([[12.0, 0.0]]), 0.5, 3)[0].tolist() == [a1, 0, 0]
+    # 25 mm: two firings rest at 20 + 5; 37 mm: three at 30 + 7; 47 mm: four at 40 + 7
+    for goal, fired in ((25.0, 2), (37.0, 3), (47.0, 4)):
+        plan = model.plan(np.array([[goal, 0.0]]), 0.5, 6)[0]
+        assert plan.tolist() == [a1] * fired + [0] * (6 - fired), goal
+    # a streak broken by another gait starts again at 1: A1 then A3 rests at (10, 10 + 2)
+    rest_second = model.plan(np.array([[10.0, 12.0]]), 0.5, 4)[0]
+    assert sorted(rest_second[:2].tolist()) == [a1, a3] and rest_second[2:].tolist() == [0, 0]
+    # having fired A1 twice at x = 20: stopping rests at 25; one more A1 rests at 30 + 7 = 37
+    at, heading = np.array([[20.0, 0.0]]), np.zeros(1)
+    assert model.choose(at, heading, np.array([[25.0, 0.0]]), 0.5, np.array([a1]),
+                        np.array([2])).tolist() == [0]
+    assert model.choose(at, heading, np.array([[37.0, 0.0]]), 0.5, np.array([a1]),
+                        np.array([2])).tolist() == [a1]
+    # the same robot having fired A1 once: another A1 is its second in a row, at rest at
+    # 30 + 5 = 35
+    assert model.choose(at, heading, np.array([[35.0, 0.0]]), 0.5, np.array([a1]),
+                        np.array([1])).tolist() == [a1]
+
+
 def test_glides_are_read_from_a_primitive_table_and_checked():
-    import pandas as pd
     table = pd.DataFrame({"gait": ["A1", "A5"], "step_x_mm": [10.0, -10.0],
                           "step_y_mm": [0.0, 0.0], "turn_deg": [0.0, 0.0],
-                          "status": ["ok", "ok"], "glide_x_mm": [5.0, -5.0],
-                          "glide_y_mm": [0.0, 1.0]})
+                          "status": ["ok", "ok"], "glide1_x_mm": [5.0, -5.0],
+                          "glide1_y_mm": [0.0, 1.0], "glide2_x_mm": [6.0, -6.0],
+                          "glide2_y_mm": [0.5, 2.0]})
     model = PrimitiveModel.from_table(table)
-    np.testing.assert_array_equal(model.glides_mm, [(0, 0), (5, 0), (-5, 1)])
-    without = PrimitiveModel.from_table(table.drop(columns=["glide_x_mm", "glide_y_mm"]))
-    assert not without.glides_mm.any()
-    with pytest.raises(ValueError, match="glides_mm must be"):
+    np.testing.assert_array_equal(model.glides_mm, [[(0, 0), (5, 0), (-5, 1)],
+                                                    [(0, 0), (6, 0.5), (-6, 2)]])
+    without = PrimitiveModel.from_table(table.drop(columns=["glide1_x_mm", "glide1_y_mm",
+                                                            "glide2_x_mm", "glide2_y_mm"]))
+    assert without.glides_mm.shape == (1, 3, 2) and not without.glides_mm.any()
+    # a gap in the streaks: only those before it are read
+    gap = PrimitiveModel.from_table(table.drop(columns=["glide1_x_mm", "glide1_y_mm"]))
+    assert not gap.glides_mm.any()
+    legacy = table.drop(columns=["glide2_x_mm", "glide2_y_mm"]).rename(
+        columns={"glide1_x_mm": "glide_x_mm", "glide1_y_mm": "glide_y_mm"})
+    with pytest.raises(ValueError, match="measure it again"):
+        PrimitiveModel.from_table(legacy)
+    with pytest.raises(ValueError, match="glides_mm"):
         PrimitiveModel(["A1"], [(10, 0)], [0.0], glides_mm=[(1, 0), (2, 0)])
+    with pytest.raises(ValueError, match="glides_mm"):
+        PrimitiveModel(["A1"], [(10, 0)], [0.0], glides_mm=np.zeros((0, 1, 2)))
     with pytest.raises(ValueError, match="must be finite"):
         PrimitiveModel(["A1"], [(10, 0)], [0.0], glides_mm=[(np.nan, 0)])
+
+
+def test_steps_of_a_streak_speed_up_to_the_steady_step():
+    """A1's first firing from rest steps 6 mm, its second 9 mm, every later one its steady
+    10 mm; the glide is 2 mm after any streak."""
+    model = PrimitiveModel(["A1"], [(10, 0)], [0.0], glides_mm=[(2, 0)],
+                           streak_steps_mm=[[(6, 0)], [(9, 0)]])
+    a1 = model.gaits.index("A1")
+    np.testing.assert_array_equal(model.step(np.array([a1] * 4), np.array([1, 2, 3, 9])),
+                                  [(6, 0), (9, 0), (10, 0), (10, 0)])
+    np.testing.assert_array_equal(model.step(np.array([a1])), [(10, 0)])  # no streak: steady
+    position, _ = model.predict(np.zeros((2, 2)), np.array([0.0, math.pi / 2]),
+                                np.array([a1, a1]), np.array([1, 2]))
+    np.testing.assert_allclose(position, [(6, 0), (0, 9)], atol=1e-12)
+    # rests after 1, 2, 3 firings: 6 + 2 = 8, 15 + 2 = 17, 25 + 2 = 27
+    for goal, fired in ((8.0, 1), (17.0, 2), (27.0, 3)):
+        plan = model.plan(np.array([[goal, 0.0]]), 0.5, 4)[0]
+        assert plan.tolist() == [a1] * fired + [0] * (4 - fired), goal
+    table = pd.DataFrame({"gait": ["A1"], "step_x_mm": [10.0], "step_y_mm": [0.0],
+                          "turn_deg": [0.0], "status": ["ok"], "step1_x_mm": [6.0],
+                          "step1_y_mm": [0.5]})
+    np.testing.assert_array_equal(PrimitiveModel.from_table(table).streak_steps_mm,
+                                  [[(0, 0), (6, 0.5)], [(0, 0), (10, 0)]])
+    with pytest.raises(ValueError, match="streak_steps_mm"):
+        PrimitiveModel(["A1"], [(10, 0)], [0.0], streak_steps_mm=[(6, 0)])
