@@ -95,12 +95,14 @@ PER_ACTUATOR = 8
 """A tuple-valued field of this length holds one value per actuator (A1..A8)."""
 RESULT_COLUMNS = ["rank", "candidate", "status", "note", "n_fitted", "n_parameters",
                   "train_objective", "validate_objective", "logo_objective",
-                  "logo_directions_right", "logo_within_35pct", "n_folds",
+                  "held_out_objective", "logo_directions_right", "logo_within_35pct", "n_folds",
                   "train_directions_right", "validate_directions_right", "n_gaits", "chi2",
                   "n_samples", "aic", "bic", "n_evaluations", "fit_time_s", "fit", "set",
                   "description", "definition"]
 """Columns of model_select.csv. logo_within_35pct: held-out gaits in the right direction with
-a speed within ±35 % of the measured one over the training window."""
+a speed within ±35 % of the measured one over the training window. held_out_objective: the
+error on what the fit did not see, the held-out gaits (logo_objective) plus the later cycles
+(validate_objective); the rank follows it."""
 
 
 # --------------------------------------------------------------------------- candidates
@@ -413,16 +415,18 @@ def leave_one_gait_out(box, units, model: StarParams, settings: identify.CMASett
 # --------------------------------------------------------------------------- the study
 
 def ranked(rows: Sequence[dict]) -> pd.DataFrame:
-    """The result rows ranked: fitted candidates by held-out error (then BIC, then training
-    error), skipped or failed ones after them; rank 1 is the best."""
+    """The result rows ranked: fitted candidates by held-out error (`held_out_objective`: held-out
+    gaits plus later cycles, each a test of prediction; then BIC, then training error), skipped
+    or failed ones after them; rank 1 is the best."""
     table = pd.DataFrame(list(rows))
     for column in RESULT_COLUMNS:
         if column not in table:
             table[column] = math.nan
     table["_ok"] = table["status"] == "ok"
-    logo = table["logo_objective"].astype(float)
-    table["_logo"] = logo.where(np.isfinite(logo), math.inf)
-    table = table.sort_values(["_ok", "_logo", "bic", "train_objective"],
+    held_out = table["logo_objective"].astype(float) + table["validate_objective"].astype(float)
+    table["held_out_objective"] = held_out
+    table["_held_out"] = held_out.where(np.isfinite(held_out), math.inf)
+    table = table.sort_values(["_ok", "_held_out", "bic", "train_objective"],
                               ascending=[False, True, True, True], kind="stable")
     table["rank"] = np.arange(1, len(table) + 1)
     return table[RESULT_COLUMNS].reset_index(drop=True)

@@ -37,6 +37,22 @@ def test_candidates_are_data_and_missing_fields_are_noted(tmp_path):
             candidate.box(StarParams())
 
 
+def test_the_rank_follows_held_out_gaits_plus_later_cycles_then_bic():
+    """A candidate better on held-out gaits but worse on later cycles can rank below; equal
+    held-out errors fall back to BIC; skipped candidates come last."""
+    rows = [{"candidate": "a", "status": "ok", "logo_objective": 20.0, "validate_objective": 70.0,
+             "bic": 1.0, "train_objective": 1.0},
+            {"candidate": "b", "status": "ok", "logo_objective": 22.0, "validate_objective": 19.0,
+             "bic": 9.0, "train_objective": 9.0},
+            {"candidate": "c", "status": "ok", "logo_objective": 30.0, "validate_objective": 11.0,
+             "bic": 5.0, "train_objective": 5.0},
+            {"candidate": "d", "status": "skipped"}]
+    table = model_select.ranked(rows)
+    assert list(table["candidate"]) == ["c", "b", "a", "d"]
+    assert list(table["rank"]) == [1, 2, 3, 4]
+    assert table["held_out_objective"].iloc[0] == 41.0 and np.isnan(table["held_out_objective"].iloc[3])
+
+
 def test_a_resumed_candidate_is_reused_only_for_the_same_model():
     """The definition names the base model by the fields that differ from the defaults: a field
     set to its default value (as a model option added later, off by default) changes nothing; a
@@ -93,8 +109,11 @@ def test_quick_run_against_a_direct_simulation(tmp_path, capsys, monkeypatch):
     assert set(written["candidate"]) == {"paper", "ramp"}
     assert list(written["rank"]) == [1, 2]
     assert (written["status"] == "ok").all()
-    logo = written["logo_objective"].to_numpy()
-    assert logo[0] <= logo[1]  # ranked by the held-out error
+    held_out = written["held_out_objective"].to_numpy()
+    # ranked by the held-out error: held-out gaits plus later cycles
+    np.testing.assert_allclose(held_out, written["logo_objective"] + written["validate_objective"],
+                               rtol=1e-12)
+    assert held_out[0] <= held_out[1]
     parameters = pd.read_csv(tmp_path / "model_select_parameters.csv")
     gaits = ["A1+A2", "A1+A4"]  # --quick
     for _, row in written.iterrows():
