@@ -56,7 +56,7 @@ class BatchEngine:
         self.n_nodes = topology.n_nodes
         self.integrator = integrator
         self.plan = plan_elimination(topology.n_nodes, coupled_node_pairs(
-            topology, [cls for cls, _ in model.terms_used]))
+            topology, model.terms_used))
         self.arena = arena = FieldArena(instance_minor)
         self.system = BlockSystem(self.plan, capacity, arena)
         self.state = BatchState(capacity, topology.n_nodes, arena)

@@ -26,6 +26,8 @@ from .actuation import PROFILE_CLOSURES, CurvatureProfile
 from .gait import Gait
 
 JET_MODES = ("contract", "always")
+JET_DIRECTIONS = ("hub", "normal", "bisector")
+JET_APPLICATIONS = ("hub", "spread")
 ACTUATION_ENDS = ("clamped", "shared")
 JOINT_STIFFNESSES = ("limb", "series")
 PRECISIONS = ("f64", "f32")
@@ -39,7 +41,7 @@ PARAMETER_UNITS = {
     "thickness": "m", "actuator_density": "kg/m^3", "foam_density": "kg/m^3",
     "fluid_density": "kg/m^3", "cylinder_mass_per_height": "kg/m", "cylinder_diameter": "m",
     "cylinder_added_mass_coeff": "1", "damping_time": "s", "joint_radius": "m",
-    "tip_radius": "m", "n_arc": "1", "n_limb": "1"}
+    "tip_radius": "m", "n_arc": "1", "n_limb": "1", "jet_inflow": "1"}
 """Units of the numeric StarParams fields ("1": dimensionless or a count)."""
 UNIT_SUFFIXES = {"Pa": "_pa", "s": "_s", "m": "_m", "kg/m^3": "_kg_m3", "kg/m": "_kg_m"}
 """Column-name suffix of each parameter unit (none for "1")."""
@@ -80,6 +82,7 @@ STAR_RANGES: Dict[str, Tuple[float, float, bool]] = {
     "damping_time": (0.0, 1.0, True),
     "n_arc": (2, 1000, True),
     "n_limb": (1, 1000, True),
+    "jet_inflow": (0.0, 10.0, True),
 }
 """Allowed range of every numeric StarParams field (lowest, highest, lowest included)."""
 
@@ -194,6 +197,19 @@ class StarParams:
     """Edges per actuator arc (topology: equal across a batch); [2, 1000]."""
     n_limb: int = 6
     """Edges per foam limb (topology: equal across a batch); [1, 1000]."""
+    jet_direction: str = "hub"
+    """Direction t of each space's jet (model extension, docs/model.md "Jet variants"): "hub"
+    = from the hub to the opening's midpoint (the paper's reading); "normal" = normal to the
+    opening segment tip_k → tip_{k+1}, pointing away from the hub; "bisector" = along the
+    bisector of the two limbs' directions, joint → tip, that bound the space."""
+    jet_application: str = "hub"
+    """Where each jet's force acts: "hub" = all of it on the centre node (the paper); "spread"
+    = a quarter on each of the space's four corners (its two joints and two tips), the walls
+    the water pushes on."""
+    jet_inflow: float = 0.0
+    """Inflow ratio α_in (-): while a space opens (Ṡ > 0) the water drawn in through its
+    opening pulls the robot towards it with f = (ρ_f/L)(α_in·Ṡ)²·t (0 = none, the paper's
+    model); [0, 10]. Needs jet_mode "contract" (with "always" an opening space already jets)."""
 
     def __post_init__(self):
         object.__setattr__(self, "gait", Gait.parse(self.gait).name)
@@ -205,6 +221,12 @@ class StarParams:
         _check_choice("actuation_ends", self.actuation_ends, ACTUATION_ENDS)
         _check_choice("joint_stiffness", self.joint_stiffness, JOINT_STIFFNESSES)
         _check_choice("profile_closure", self.profile_closure, PROFILE_CLOSURES)
+        _check_choice("jet_direction", self.jet_direction, JET_DIRECTIONS)
+        _check_choice("jet_application", self.jet_application, JET_APPLICATIONS)
+        if self.jet_inflow > 0.0 and self.jet_mode == "always":
+            raise ValueError(f"jet_inflow must be 0 with jet_mode 'always' (its literal formula "
+                             f"already jets while a space opens; an inflow would only cancel "
+                             f"part of that), got {self.jet_inflow!r}: use jet_mode 'contract'")
         if not isinstance(self.actuator_profile, CurvatureProfile):
             raise ValueError(f"actuator_profile must be a CurvatureProfile, got "
                              f"{type(self.actuator_profile).__name__}")

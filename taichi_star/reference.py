@@ -252,17 +252,57 @@ def quad_area(x1, x2, x3, x4):
     return 0.5 * np.abs(_cross(x3 - x1, x4 - x2))
 
 
-def jet_element(x1, x2, x3, x4, xc, area_old, dt, fluid_density, alpha, contract_only):
-    """Jet force of one inter-limb space, applied at the centre, and its Jacobian.
+def _unit_with_derivative(v):
+    """u = v/|v| (..., 2) and ∂u/∂v = (I − u uᵀ)/|v| (..., 2, 2)."""
+    length = np.linalg.norm(v, axis=-1)
+    u = v / length[..., None]
+    return u, (np.eye(2) - _outer(u, u)) / length[..., None, None]
 
-    Ṡ = (S(x_new) − S_old)/h, L = |x2 − x3|, t = unit vector from xc to ½(x2 + x3);
-    f = −(ρ_f / L) (α Ṡ)² t, switched off where Ṡ ≥ 0 if `contract_only`.
+
+_QUARTER_TURN = np.array([[0.0, -1.0], [1.0, 0.0]])
+"""R with R a = _perp(a)."""
+
+
+def jet_direction(x1, x2, x3, x4, xc, direction):
+    """Unit jet direction t (..., 2) of a space and ∂t/∂(x1, x2, x3, x4, xc) (..., 2, 10).
+
+    "hub": from xc to ½(x2 + x3). "normal": the unit normal of the opening x2–x3 on the side
+    away from xc. "bisector": the bisector of the limb directions (x2 − x1)/|x2 − x1| and
+    (x3 − x4)/|x3 − x4| (each joint → tip).
+    """
+    zero = np.zeros(np.shape(x1)[:-1] + (2, 2))
+    if direction == "hub":
+        t, d_reach = _unit_with_derivative(0.5 * (x2 + x3) - xc)
+        return t, np.concatenate([zero, 0.5 * d_reach, 0.5 * d_reach, zero, -d_reach], axis=-1)
+    if direction == "normal":
+        along, d_along = _unit_with_derivative(x3 - x2)
+        # the normal on the side away from xc (the side is fixed near the rest shape)
+        side = np.sign(_dot(_perp(along), 0.5 * (x2 + x3) - xc))
+        d_x3 = side[..., None, None] * (_QUARTER_TURN @ d_along)
+        return side[..., None] * _perp(along), np.concatenate([zero, -d_x3, d_x3, zero, zero],
+                                                              axis=-1)
+    first, d_first = _unit_with_derivative(x2 - x1)
+    second, d_second = _unit_with_derivative(x3 - x4)
+    t, d_sum = _unit_with_derivative(first + second)
+    d_x2 = d_sum @ d_first
+    d_x3 = d_sum @ d_second
+    return t, np.concatenate([-d_x2, d_x2, d_x3, -d_x3, zero], axis=-1)
+
+
+def jet_element(x1, x2, x3, x4, xc, area_old, dt, fluid_density, alpha, contract_only,
+                inflow=0.0, direction="hub"):
+    """Jet (or inflow) force of one inter-limb space and its Jacobian.
+
+    Ṡ = (S(x_new) − S_old)/h, L = |x2 − x3|, t = `jet_direction(..., direction)`;
+    f = −(ρ_f / L) (α Ṡ)² t, switched off where Ṡ ≥ 0 if `contract_only`; there, where Ṡ > 0,
+    the inflow f = +(ρ_f / L) (α_in Ṡ)² t instead (α_in = `inflow`).
 
     Args: x1..x4 (..., 2) new quad corners (J_k, tip_k, tip_{k+1}, J_{k+1}), m; xc (..., 2) new
         centre, m; area_old S(x_old) (...), m²; dt h, s; fluid_density ρ_f, kg/m³; alpha α (-);
-        contract_only (bool, broadcasts).
-    Returns: force (..., 2) on the centre, N/m; Jacobian (..., 2, 10) = ∂f/∂(x1, x2, x3, x4, xc),
-        N/m².
+        contract_only (bool, broadcasts); inflow α_in (-); direction "hub" | "normal" |
+        "bisector".
+    Returns: force (..., 2) of the space on the robot, N/m; Jacobian (..., 2, 10) =
+        ∂f/∂(x1, x2, x3, x4, xc), N/m².
     """
     p = x3 - x1
     q = x4 - x2
@@ -280,20 +320,17 @@ def jet_element(x1, x2, x3, x4, xc, area_old, dt, fluid_density, alpha, contract
     zero = np.zeros_like(u)
     grad_length = np.concatenate([zero, u, -u, zero, zero], axis=-1)
 
-    r = 0.5 * (x2 + x3) - xc
-    r_norm = np.linalg.norm(r, axis=-1)
-    t = r / r_norm[..., None]
-    dt_dr = (np.eye(2) - _outer(t, t)) / r_norm[..., None, None]
-    dt_dx = np.concatenate([np.zeros_like(dt_dr), 0.5 * dt_dr, 0.5 * dt_dr,
-                            np.zeros_like(dt_dr), -dt_dr], axis=-1)
+    t, dt_dx = jet_direction(x1, x2, x3, x4, xc, direction)
 
-    on = np.where(np.asarray(contract_only) & (area_rate >= 0.0), 0.0, 1.0)
-    c = on * fluid_density * alpha ** 2
+    jetting = ~np.asarray(contract_only) | (area_rate < 0.0)
+    # the signed coefficient of g·t: −ρ α² while jetting, +ρ α_in² while refilling
+    c = np.where(jetting, -fluid_density * alpha ** 2,
+                 np.where(area_rate > 0.0, fluid_density * inflow ** 2, 0.0))
     g = area_rate ** 2 / length
     grad_g = ((2.0 * area_rate / length)[..., None] * grad_rate
               - (area_rate ** 2 / length ** 2)[..., None] * grad_length)
-    force = -(c * g)[..., None] * t
-    jac = -(c[..., None, None] * _outer(t, grad_g) + (c * g)[..., None, None] * dt_dx)
+    force = (c * g)[..., None] * t
+    jac = c[..., None, None] * _outer(t, grad_g) + (c * g)[..., None, None] * dt_dx
     return force, jac
 
 
@@ -494,10 +531,16 @@ class ReferenceSimulator:
             area_old = self.areas(q_old)
         f_jet, k_jet = jet_element(*[q_new[quads[:, m]] for m in range(4)], q_new[centre[:, 0]],
                                    area_old, dt, p.fluid_density, p.alpha,
-                                   p.jet_mode == "contract")
+                                   p.jet_mode == "contract", p.jet_inflow, p.jet_direction)
+        jet_nodes = np.concatenate([quads, centre], axis=1)
+        if p.jet_application == "spread":
+            # a quarter of each space's force on each of its four corners
+            jet_term = (quads, jet_nodes, np.tile(f_jet / 4.0, 4),
+                        np.concatenate([k_jet / 4.0] * 4, axis=-2))
+        else:
+            jet_term = (centre, jet_nodes, f_jet, k_jet)
         return [(rods, rods, f_rod, k_rod),
-                (centre[:1], centre[:1], f_cyl[None], k_cyl[None]),
-                (centre, np.concatenate([quads, centre], axis=1), f_jet, k_jet)]
+                (centre[:1], centre[:1], f_cyl[None], k_cyl[None]), jet_term]
 
     def areas(self, q) -> np.ndarray:
         """Areas S (8,), m², of the eight inter-limb spaces (jet quadrilaterals) of q (N, 2) m."""

@@ -263,9 +263,8 @@ class Runtime:
         """2×2 blocks of the Newton matrix's elimination pattern for this batch's engine (the
         symbolic factorisation, done once per topology and term set in this process)."""
         if model.engine_key not in self.slot_counts:
-            terms = [cls for cls, _ in model.terms_used]
             self.slot_counts[model.engine_key] = plan_elimination(
-                model.topology.n_nodes, coupled_node_pairs(model.topology, terms)).n_slots
+                model.topology.n_nodes, coupled_node_pairs(model.topology, model.terms_used)).n_slots
         return self.slot_counts[model.engine_key]
 
     def loop_spread(self, capacity: int) -> int:

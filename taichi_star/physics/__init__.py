@@ -23,9 +23,15 @@ from .stretching import Stretching
 TERMS = (AddedMass, Stretching, Bending, RodDrag, CylinderDrag, Jet, MaterialDamping)
 
 
-def coupled_node_pairs(topology, term_classes=TERMS):
-    """Node pairs (i, j) whose 2×2 Jacobian block the given terms (default: all) can fill."""
-    return [pair for cls in term_classes for pair in cls.coupled_pairs(topology)]
+def coupled_node_pairs(topology, terms=TERMS):
+    """Node pairs (i, j) whose 2×2 Jacobian block the given terms can fill: term classes
+    (default: all, in their default configuration) or (class, configuration) pairs as in
+    `model.BatchModel.terms_used`."""
+    pairs = []
+    for term in terms:
+        cls, configuration = term if isinstance(term, tuple) else (term, ())
+        pairs += cls.configured_pairs(topology, configuration)
+    return pairs
 
 
 __all__ = ["TERMS", "coupled_node_pairs"]

@@ -8,7 +8,8 @@ Its class owns everything about it:
   geometry); `commanded(coefficients)`: the same for a batch that fires what it is commanded;
 - `configuration(coefficients)`: whether a batch uses it (None: compiled out) and the static
   switches of its kernel code (e.g. whether any instance is actuated);
-- `coupled_pairs(topology)`: the node pairs whose 2×2 Jacobian blocks it can fill;
+- `coupled_pairs(topology)`: the node pairs whose 2×2 Jacobian blocks it can fill
+  (`configured_pairs`: those of a given configuration, when its switches add some);
 - `history(topology, terms)`: per-instance state it carries from step to step (e.g. the previous
   area of a jet space), saved and restored with the batch state;
 - on the device, an instance of the class (a `ti.data_oriented` object) holds those coefficients
@@ -82,6 +83,12 @@ class Term:
     def coupled_pairs(topology) -> Sequence[Tuple[int, int]]:
         """Node pairs (i, j) whose Jacobian block the term can fill."""
         return ()
+
+    @classmethod
+    def configured_pairs(cls, topology, configuration: Tuple) -> Sequence[Tuple[int, int]]:
+        """The node pairs the term can fill when compiled with `configuration` (default: the
+        same as `coupled_pairs`; a term whose switches couple more nodes adds them)."""
+        return cls.coupled_pairs(topology)
 
     @staticmethod
     def history(topology, terms: Sequence[type] = ()) -> Dict[str, Tuple[int, ...]]:

@@ -206,6 +206,55 @@ def test_jet_is_off_while_expanding_only_in_contract_mode():
     assert_close_to_scale(j_always, central_jacobian(element, x, 1e-6 * 1e-3))
 
 
+@pytest.mark.parametrize("direction", ["hub", "normal", "bisector"])
+@pytest.mark.parametrize("shrink", [1.05, 0.95])
+def test_jet_variant_elements_follow_their_definitions_with_exact_jacobians(direction, shrink):
+    """Each direction while the space closes (jet, −t) and opens (inflow α_in = 0.6, +t)."""
+    x, area_old = _jet_configuration(shrink)
+    dt = 1e-3
+
+    def element(y):
+        return jet_element(y[0:2], y[2:4], y[4:6], y[6:8], y[8:10], area_old, dt, 1000.0, 0.8,
+                           True, 0.6, direction)
+
+    force, jac = element(x)
+    x1, x2, x3, x4, centre = x.reshape(5, 2)
+    if direction == "hub":
+        t = 0.5 * (x2 + x3) - centre
+    elif direction == "normal":
+        t = np.array([x3[1] - x2[1], x2[0] - x3[0]])  # (x2 − x3) turned by +90°: outwards
+    else:
+        t = (x2 - x1) / np.linalg.norm(x2 - x1) + (x3 - x4) / np.linalg.norm(x3 - x4)
+    t /= np.linalg.norm(t)
+    assert np.dot(t, 0.5 * (x2 + x3) - centre) > 0  # every variant points out of the space
+    area_rate = (quad_area(x1, x2, x3, x4) - area_old) / dt
+    ratio, sense = (0.8, -1.0) if area_rate < 0 else (0.6, 1.0)
+    assert np.allclose(force, sense * 1000.0 / np.linalg.norm(x2 - x3) * (ratio * area_rate) ** 2
+                       * t, rtol=1e-12)
+    assert_close_to_scale(jac, central_jacobian(lambda y: element(y)[0], x, 1e-6 * 1e-3))
+
+
+def test_spread_jet_keeps_the_total_force_and_moves_it_to_the_corners():
+    """jet_application "spread": the same total force as on the hub, a quarter on each corner of
+    every space (a corner shared by two spaces gets a quarter of each), none on the hub."""
+    params = StarParams(gait="A1+A2", n_arc=6, n_limb=2, drag_parallel=0.0, drag_perpendicular=0.0,
+                        cylinder_drag=0.0)
+    hub = ReferenceSimulator(params)
+    spread = ReferenceSimulator(params.replace(jet_application="spread"))
+    q_new, q_old, _ = _moving_history(hub, np.random.default_rng(13))
+    on_hub = hub.fluid_forces(q_new, q_old, 1e-3)
+    on_corners = spread.fluid_forces(q_new, q_old, 1e-3)
+    assert np.abs(on_hub[1:]).max() == 0 and on_corners[0].tolist() == [0.0, 0.0]
+    np.testing.assert_allclose(on_corners.sum(0), on_hub[0], rtol=1e-12)
+    quads = hub.topology.jet_quads
+    areas_old = hub.areas(q_old)
+    expected = np.zeros_like(on_corners)
+    for k, quad in enumerate(quads):
+        force = jet_element(*q_new[quad], q_new[0], areas_old[k], 1e-3, 1000.0, 0.8, True)[0]
+        expected[quad] += force / 4
+    np.testing.assert_allclose(on_corners, expected, rtol=1e-12, atol=1e-15 * np.abs(expected).max())
+
+
 # ---- the assembled system ---------------------------------------------------------------------
 
 @pytest.mark.parametrize("jet_mode,shrink", [("contract", 1.001), ("always", 0.999)])
@@ -240,6 +289,29 @@ def test_assembled_force_jacobian(jet_mode, shrink):
     assert_close_to_scale(fluid_jac, central_jacobian(fluid, x, step))
     centre_jet = fluid_jac[0:2, 2:]  # the jet couples the centre to joints and tips
     assert np.abs(centre_jet).max() > 0
+
+
+def test_assembled_jacobian_with_jet_variants_is_exact():
+    """Spread application (corners coupled to each other and the hub), normal direction and
+    inflow in the whole fluid Jacobian, on the coarse mesh; δ as in the check above."""
+    sim = ReferenceSimulator(StarParams(gait="A1+A2", jet_direction="normal",
+                                        jet_application="spread", jet_inflow=0.7, **SMALL))
+    rest = sim.topology.rest_positions
+    rng = np.random.default_rng(14)
+    q_new = rest + rng.uniform(-2e-5, 2e-5, rest.shape)
+    # spaces both opening and closing: A1 and A2's shape moved apart from the others'
+    q_old = q_new + rng.uniform(-5e-5, 5e-5, rest.shape)
+    areas = sim.areas(q_new) - sim.areas(q_old)
+    assert (areas > 0).any() and (areas < 0).any()
+
+    def fluid(y):
+        return sim.fluid_forces(y.reshape(rest.shape), q_old, 1e-3).reshape(-1)
+
+    fluid_jac = sim.force_jacobian(q_new, q_old, 0.08, 1e-3)[1] - sim.force_jacobian(
+        q_new, q_new, 0.08, 1e-3)[1]
+    assert_close_to_scale(fluid_jac, central_jacobian(fluid, q_new.reshape(-1), 1e-9))
+    tips = sim.topology.tips
+    assert np.abs(fluid_jac[2 * tips[0]:2 * tips[0] + 2, 2 * tips[1]:2 * tips[1] + 2]).max() > 0
 
 
 # ---- invariants -------------------------------------------------------------------------------

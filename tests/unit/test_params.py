@@ -20,7 +20,8 @@ from taichi_star.geometry import build_topology
     ("added_mass_coeff", -1.0), ("drag_parallel", -0.01), ("drag_perpendicular", math.inf),
     ("cylinder_drag", -10.0), ("cylinder_added_mass_coeff", -1.0), ("n_arc", 1),
     ("n_arc", 18.0), ("n_limb", 0), ("jet_mode", "sometimes"), ("youngs_modulus", "5e6"),
-    ("actuation_ends", "free"),
+    ("actuation_ends", "free"), ("jet_inflow", -0.1), ("jet_inflow", 10.5),
+    ("jet_inflow", math.nan), ("jet_direction", "radial"), ("jet_application", "tips"),
 ])
 def test_star_params_rejects_bad_values_naming_the_field(field, value):
     with pytest.raises(ValueError, match=field):
@@ -220,6 +221,8 @@ def test_solver_config_stores_numpy_scalars_as_python_numbers():
     (ts.StarParams, "actuation_ends", ["clamped", "shared"]),
     (ts.StarParams, "joint_stiffness", ["limb", "series"]),
     (ts.StarParams, "profile_closure", ["jump", "ramp"]),
+    (ts.StarParams, "jet_direction", ["hub", "normal", "bisector"]),
+    (ts.StarParams, "jet_application", ["hub", "spread"]),
     (ts.SolverConfig, "precision", ["f64", "f32"]),
     (ts.SolverConfig, "integrator", ["euler", "bdf2"]),
     (ts.SolverConfig, "jacobian", ["newton", "chord"]),
@@ -283,7 +286,7 @@ def test_numeric_fields_are_all_fields_but_the_texts_and_the_profile():
     names = ts.StarParams.field_names()
     assert names[0] == "gait" and len(names) == len(set(names))
     texts = {"gait", "jet_mode", "actuation_ends", "joint_stiffness", "profile_closure",
-             "actuator_profile"}
+             "actuator_profile", "jet_direction", "jet_application"}
     numeric = ts.StarParams.numeric_field_names()
     assert set(numeric) == set(names) - texts and len(numeric) == len(names) - len(texts)
     for name in numeric:
@@ -315,3 +318,34 @@ def test_a_single_star_params_is_a_batch_of_one():
     one = ts.StarParams(gait="A1+A2")
     assert validate_batch(one) == (one,)
     assert validate_batch([one, one]) == (one, one)
+
+
+def test_jet_inflow_has_its_range_and_needs_the_contract_mode():
+    """[0, 10], 0 included (the paper's model); refused with jet_mode "always", whose literal
+    formula already jets while a space opens."""
+    with pytest.raises(ValueError) as error:
+        ts.StarParams(jet_inflow=-0.5)
+    assert str(error.value) == "jet_inflow must be a real number in [0, 10], got -0.5"
+    assert ts.StarParams(jet_inflow=0.0, jet_mode="always").jet_inflow == 0.0
+    assert ts.StarParams(jet_inflow=10.0).jet_inflow == 10.0
+    with pytest.raises(ValueError, match="jet_inflow must be 0 with jet_mode 'always'"):
+        ts.StarParams(jet_inflow=0.5, jet_mode="always")
+
+
+def test_jet_variant_fields_are_set_by_name_and_survive_a_csv_row(tmp_path):
+    """The fields a model-selection study sets by name (StarParams(**fields), replace) come
+    back from a table row read from a CSV, the inflow with its unit column."""
+    import dataclasses
+
+    import pandas as pd
+
+    fields = {"jet_direction": "bisector", "jet_application": "spread", "jet_inflow": 0.35}
+    params = [ts.StarParams(gait="A1+A4", **fields),
+              dataclasses.replace(ts.StarParams(), jet_direction="normal"), ts.StarParams()]
+    assert ts.StarParams.columns()["jet_inflow"] == "jet_inflow"  # dimensionless: no suffix
+    table = pd.DataFrame([{column: getattr(p, name) for name, column in
+                           ts.StarParams.columns().items()} for p in params])
+    path = tmp_path / "rows.csv"
+    table.to_csv(path, index=False)
+    back = pd.read_csv(path)
+    assert [ts.StarParams.from_row(row) for _, row in back.iterrows()] == params

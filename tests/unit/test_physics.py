@@ -70,10 +70,11 @@ def _cylinder_drag(inputs: ti.types.ndarray(), coeff: float, out: ti.types.ndarr
 
 @ti.kernel
 def _jet(points: ti.types.ndarray(), old_area: float, dt: float, alpha: float, density: float,
-         always: ti.i32, out: ti.types.ndarray()):
+         always: ti.i32, inflow: float, direction: ti.i32, out: ti.types.ndarray()):
     force, d0, d1, d2, d3, d4 = jet.jet(
         ti.Vector([points[0], points[1]]), ti.Vector([points[2], points[3]]), ti.Vector([points[4], points[5]]),
-        ti.Vector([points[6], points[7]]), ti.Vector([points[8], points[9]]), old_area, 1.0 / dt, 0.0, alpha, density, always)
+        ti.Vector([points[6], points[7]]), ti.Vector([points[8], points[9]]), old_area, 1.0 / dt, 0.0, alpha, density, always,
+        inflow, direction)
     for a in ti.static(range(2)):
         out[a] = force[a]
         for c in ti.static(range(2)):
@@ -190,7 +191,7 @@ def test_jet_jacobian(taichi_cpu, always):
     x2, x3 = points[4:6], points[6:8]
     area = _quad_area(points)
     old_area = area * 1.001  # shrinking: the jet is on in both modes
-    args = (old_area, 1e-3, 0.8, 1000.0, always)
+    args = (old_area, 1e-3, 0.8, 1000.0, always, 0.0, jet.HUB_DIRECTION)
     evaluate = lambda x: _call(_jet, x, 22, *args)  # noqa: E731
     out = evaluate(points)
     jacobian = _central_jacobian(lambda x: evaluate(x)[:2], points, 1e-9)
@@ -206,5 +207,68 @@ def test_jet_contract_mode_is_off_while_expanding(taichi_cpu):
     points = _jet_points()
     area = _quad_area(points)
     expanding = (area * 0.999, 1e-3, 0.8, 1000.0)
-    assert np.all(_call(_jet, points, 22, *expanding, 0) == 0.0)
-    assert np.linalg.norm(_call(_jet, points, 22, *expanding, 1)[:2]) > 0.0
+    assert np.all(_call(_jet, points, 22, *expanding, 0, 0.0, jet.HUB_DIRECTION) == 0.0)
+    assert np.linalg.norm(_call(_jet, points, 22, *expanding, 1, 0.0, jet.HUB_DIRECTION)[:2]) > 0.0
+
+
+def _expected_direction(points, kind):
+    """The jet's unit direction written out from the definitions (docs/model.md)."""
+    centre, x1, x2, x3, x4 = points.reshape(5, 2)
+    if kind == jet.HUB_DIRECTION:
+        vector = 0.5 * (x2 + x3) - centre
+    elif kind == jet.NORMAL_DIRECTION:
+        opening = x3 - x2
+        vector = np.array([opening[1], -opening[0]])  # the normal on the side away from the hub
+        assert np.dot(vector, 0.5 * (x2 + x3) - centre) > 0
+    else:
+        vector = (x2 - x1) / np.linalg.norm(x2 - x1) + (x3 - x4) / np.linalg.norm(x3 - x4)
+    return vector / np.linalg.norm(vector)
+
+
+@pytest.mark.parametrize("kind", [jet.HUB_DIRECTION, jet.NORMAL_DIRECTION, jet.BISECTOR_DIRECTION])
+@pytest.mark.parametrize("shrink", [1.001, 0.999])
+def test_jet_and_inflow_directions_values_and_jacobians(taichi_cpu, kind, shrink):
+    """Each direction, while the space closes (the jet, along −t) and while it opens (the
+    inflow α_in = 0.5, along +t, contract mode): the force is ∓(ρ_f/L)(αṠ)²·t with t from its
+    definition, and the Jacobian matches central differences."""
+    points = _jet_points()
+    area = _quad_area(points)
+    old_area = area * shrink
+    args = (old_area, 1e-3, 0.8, 1000.0, 0, 0.5, kind)
+    evaluate = lambda x: _call(_jet, x, 22, *args)  # noqa: E731
+    out = evaluate(points)
+    _assert_close(out[2:].reshape(2, 10), _central_jacobian(lambda x: evaluate(x)[:2], points, 1e-9))
+    rate = (area - old_area) / 1e-3
+    ratio, sense = (0.8, -1.0) if rate < 0 else (0.5, 1.0)
+    expected = sense * 1000.0 / np.linalg.norm(points[4:6] - points[6:8]) * (ratio * rate) ** 2 \
+        * _expected_direction(points, kind)
+    np.testing.assert_allclose(out[:2], expected, rtol=1e-12)
+
+
+def test_inflow_is_off_while_closing_and_zero_inflow_changes_nothing(taichi_cpu):
+    """α_in acts only while the space opens: closing, the force is the jet's to the last bit;
+    opening with α_in = 0, nothing (as without the option)."""
+    points = _jet_points()
+    area = _quad_area(points)
+    closing = (area * 1.001, 1e-3, 0.8, 1000.0, 0)
+    np.testing.assert_array_equal(_call(_jet, points, 22, *closing, 0.7, jet.HUB_DIRECTION),
+                                  _call(_jet, points, 22, *closing, 0.0, jet.HUB_DIRECTION))
+    opening = (area * 0.999, 1e-3, 0.8, 1000.0, 0, 0.0, jet.BISECTOR_DIRECTION)
+    assert np.all(_call(_jet, points, 22, *opening) == 0.0)
+
+
+def test_the_three_directions_coincide_in_the_rest_shape(taichi_cpu):
+    """At rest the limbs are radial and the opening's midpoint lies on the space's bisector, so
+    hub, normal and bisector all give the radial unit vector through the midpoint."""
+    from taichi_star.geometry import build_topology
+    from taichi_star.params import StarParams
+
+    topology = build_topology(StarParams())
+    quad = topology.jet_quads[3]
+    points = np.concatenate([topology.rest_positions[0], topology.rest_positions[quad].reshape(-1)])
+    area = _quad_area(points)
+    forces = [_call(_jet, points, 22, area * 1.001, 1e-3, 0.8, 1000.0, 0, 0.0, kind)[:2]
+              for kind in (jet.HUB_DIRECTION, jet.NORMAL_DIRECTION, jet.BISECTOR_DIRECTION)]
+    # the rest shape is built by rounding cosines: the directions agree to ~1e-15
+    np.testing.assert_allclose(forces[1], forces[0], rtol=1e-12, atol=1e-12 * np.abs(forces[0]).max())
+    np.testing.assert_allclose(forces[2], forces[0], rtol=1e-12, atol=1e-12 * np.abs(forces[0]).max())
