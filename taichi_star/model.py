@@ -24,7 +24,8 @@ class BatchModel:
     rest_positions: np.ndarray
     """(B, N, 2) rest shape, m."""
     mass: np.ndarray
-    """(B, N) lumped structural mass, kg/m (the centroid's weights)."""
+    """(B, N) lumped structural mass, kg/m (per hub height when the component heights are on;
+    the centroid's weights)."""
     inertia: np.ndarray
     """(B, N) mass plus the terms' added mass, kg/m (the diagonal mass of the inertia term)."""
     coefficients: Dict[str, Dict[str, np.ndarray]]
@@ -83,8 +84,11 @@ def build_model(params: Sequence[StarParams], commanded: bool = False) -> BatchM
     topology = topologies[0]
     thickness = np.array([p.thickness for p in params])[:, None]
     lumped = np.stack([t.lumped_length for t in topologies])
-    mass = thickness * (np.array([p.actuator_density for p in params])[:, None] * lumped[:, :, 0]
-                        + np.array([p.foam_density for p in params])[:, None] * lumped[:, :, 1])
+    # each rod component's mass per hub height (its density times its height over the hub's)
+    mass = thickness * (np.array([p.actuator_density * p.height_ratios[1]
+                                  for p in params])[:, None] * lumped[:, :, 0]
+                        + np.array([p.foam_density * p.height_ratios[0]
+                                    for p in params])[:, None] * lumped[:, :, 1])
     mass[:, CENTRE] += np.array([p.cylinder_mass_per_height for p in params])
     inertia = mass
     coefficients, used = {}, []

@@ -23,7 +23,7 @@ from typing import Dict, Optional, Tuple
 import numpy as np
 
 from .actuation import PROFILE_CLOSURES, CurvatureProfile
-from .gait import Gait
+from .gait import N_ACTUATORS, Gait
 
 JET_MODES = ("contract", "always")
 JET_DIRECTIONS = ("hub", "normal", "bisector")
@@ -35,15 +35,8 @@ INTEGRATORS = ("euler", "bdf2")
 JACOBIANS = ("newton", "chord")
 PRESETS = ("paper", "accurate", "identified")
 
-PARAMETER_UNITS = {
-    "alpha": "1", "added_mass_coeff": "1", "youngs_modulus": "Pa", "limb_stiffness_ratio": "1",
-    "drag_parallel": "1", "drag_perpendicular": "1", "cylinder_drag": "1", "period": "s",
-    "thickness": "m", "actuator_density": "kg/m^3", "foam_density": "kg/m^3",
-    "fluid_density": "kg/m^3", "cylinder_mass_per_height": "kg/m", "cylinder_diameter": "m",
-    "cylinder_added_mass_coeff": "1", "damping_time": "s", "joint_radius": "m",
-    "tip_radius": "m", "n_arc": "1", "n_limb": "1", "jet_inflow": "1"}
-"""Units of the numeric StarParams fields ("1": dimensionless or a count)."""
-UNIT_SUFFIXES = {"Pa": "_pa", "s": "_s", "m": "_m", "kg/m^3": "_kg_m3", "kg/m": "_kg_m"}
+UNIT_SUFFIXES = {"Pa": "_pa", "s": "_s", "m": "_m", "kg/m^3": "_kg_m3", "kg/m": "_kg_m",
+                 "Pa*s/m": "_pa_s_m", "Pa*s": "_pa_s"}
 """Column-name suffix of each parameter unit (none for "1")."""
 
 
@@ -60,31 +53,73 @@ one-cycle speeds converge at first order in 1/n_arc, 8-19 % low at the paper's n
 0.7-1.7 % at 144 against the extrapolated limit; n_arc = 320 (N = 2609 nodes) measured
 0.25-0.74 % off. The studies' `--discretisation converged` uses it."""
 
-STAR_RANGES: Dict[str, Tuple[float, float, bool]] = {
-    # field: (lowest, highest, lowest allowed itself)
-    "alpha": (0.0, 10.0, True),
-    "added_mass_coeff": (0.0, 10.0, True),
-    "youngs_modulus": (1e3, 1e10, True),
-    "limb_stiffness_ratio": (1e-2, 1e4, True),
-    "drag_parallel": (0.0, 100.0, True),
-    "drag_perpendicular": (0.0, 100.0, True),
-    "cylinder_drag": (0.0, 1000.0, True),
-    "period": (0.0, 1000.0, False),
-    "thickness": (1e-4, 0.02, True),
-    "actuator_density": (10.0, 2e4, True),
-    "foam_density": (10.0, 2e4, True),
-    "fluid_density": (0.1, 2e4, True),
-    "cylinder_mass_per_height": (1e-3, 100.0, True),
-    "cylinder_diameter": (1e-3, 0.5, True),
-    "cylinder_added_mass_coeff": (0.0, 10.0, True),
-    "joint_radius": (1e-3, 1.0, True),
-    "tip_radius": (1e-3, 2.0, True),
-    "damping_time": (0.0, 1.0, True),
-    "n_arc": (2, 1000, True),
-    "n_limb": (1, 1000, True),
-    "jet_inflow": (0.0, 10.0, True),
-}
-"""Allowed range of every numeric StarParams field (lowest, highest, lowest included)."""
+def parameter(default, unit: str = "1", lowest=None, highest=None, lowest_included=True,
+              choices=None):
+    """A StarParams field with its unit and allowed values declared once, in its metadata:
+    "unit" ("1": dimensionless or a count), "range" (lowest, highest, lowest included) for a
+    number (an integer if the default is one), "choices" for a word. `STAR_RANGES`,
+    `PARAMETER_UNITS`, `STAR_CHOICES`, the validation, the column names and the field table of
+    `help(StarParams)` are all read from it."""
+    metadata = {"unit": unit}
+    if lowest is not None:
+        metadata["range"] = (lowest, highest, lowest_included)
+    if choices is not None:
+        metadata["choices"] = tuple(choices)
+    return field(default=default, metadata=metadata)
+
+
+def per_actuator(default: float, unit: str, allowed: str):
+    """A StarParams field of one number per actuator, A_k at index k − 1 (a tuple of
+    `N_ACTUATORS` floats, all `default` by default), with its unit and its allowed values in
+    words (`PER_ACTUATOR_FIELDS`; each such field is validated in `StarParams.__post_init__`)."""
+    return field(default=(float(default),) * N_ACTUATORS,
+                 metadata={"unit": unit, "allowed": allowed, "per_actuator": True})
+
+
+MAX_ACTUATOR_GAIN = 5.0
+"""Largest actuator gain: five times the measured curvature change already bends an arc far
+past straight (K̄ goes from 102 to 14 1/m over a pulse at gain 1)."""
+
+
+def _check_actuator_values(name, values, lowest, highest, highest_included):
+    """`values` (a tuple, list or 1-D array of one real number per actuator A1..A8, or the
+    text of one as a table holds it, "(1.0, 0.5, ...)") as a tuple of Python floats, each in
+    [lowest, highest] (or [lowest, highest)); ValueError names the field, the actuator and the
+    range."""
+    span = f"[{lowest:g}, {highest:g}" + ("]" if highest_included else ")")
+    if isinstance(values, str):
+        values = _parse_number_list(name, values)
+    if isinstance(values, np.ndarray) and values.ndim == 1:
+        values = values.tolist()
+    if not isinstance(values, (tuple, list)):
+        raise ValueError(f"{name} must be a tuple of {N_ACTUATORS} numbers in {span} "
+                         f"(A1..A8), got {values!r}")
+    if len(values) != N_ACTUATORS:
+        raise ValueError(f"{name} must have {N_ACTUATORS} entries (A1..A8), got {len(values)}")
+    checked = []
+    for index, value in enumerate(values):
+        if isinstance(value, bool) or not isinstance(value, numbers.Real) \
+                or not math.isfinite(value) or not lowest <= value <= highest \
+                or (value == highest and not highest_included):
+            raise ValueError(f"{name}[{index}] (A{index + 1}) must be a real number in {span}, "
+                             f"got {value!r}")
+        checked.append(float(value))
+    return tuple(checked)
+
+
+def _parse_number_list(name, text):
+    """The numbers of a tuple or list written as text ("(1.0, 0.5)" or "[1.0, 0.5]")."""
+    inner = text.strip()
+    if inner[:1] in "([" and inner[-1:] in ")]":
+        inner = inner[1:-1]
+    try:
+        return [float(part) for part in inner.split(",") if part.strip()]
+    except ValueError:
+        raise ValueError(f"{name}: cannot read {text[:60]!r} as {N_ACTUATORS} numbers") from None
+COMPONENT_HEIGHTS = ("hub_height", "foam_height", "actuator_height")
+"""The StarParams fields of the component heights (2.5-D model): all 0 (off) or all set."""
+COMPONENT_HEIGHT_MINIMUM = 1e-3
+"""Smallest component height, m (a millimetre: no part of the robot is thinner)."""
 
 
 def _check_number(name, value, lowest, highest, lowest_included=True, integer=False):
@@ -132,97 +167,130 @@ def _check_choice(name, value, choices):
 class StarParams:
     """One star robot instance. Lengths in m, moduli in Pa, densities in kg/m³, times in s.
 
-    Every field's documentation gives its unit and allowed range."""
+    Each field's unit, allowed values and default (from its declaration; a field's own
+    documentation says what it means):"""
 
-    gait: str = "A1"
+    gait: str = field(default="A1", metadata={"allowed": 'a gait: "A1".."A8" joined by "+", '
+                                                         'or "none"'})
     """Actuators fired together each cycle: "A1".."A8" joined by "+" (no repeats), or "none".
     Stored canonically ("A2+A1" becomes "A1+A2")."""
-    alpha: float = 0.8
-    """Jet ratio α (-), the fraction of the squeezed fluid jetted in plane; [0, 10]."""
-    added_mass_coeff: float = 1.0
-    """Added-mass coefficient C_a (-) of the rod nodes; [0, 10]."""
-    youngs_modulus: float = 5e6
-    """E of the actuator arcs, Pa; [1e3, 1e10]."""
-    limb_stiffness_ratio: float = 100.0
-    """E_limb / E (-) for limbs, spokes and joint bending; [0.01, 1e4]."""
-    drag_parallel: float = 0.01
-    """Axial rod drag coefficient C∥ (-); [0, 100]."""
-    drag_perpendicular: float = 1.0
-    """Normal rod drag coefficient C⊥ (-); [0, 100]."""
-    cylinder_drag: float = 10.0
-    """Drag coefficient C_c (-) of the central cylinder; [0, 1000]."""
-    period: float = 3.15
-    """Actuation period T, s (150 ms heating pulse + 3 s rest); (heating time t0, 1000]."""
-    jet_mode: str = "contract"
+    alpha: float = parameter(0.8, "1", 0.0, 10.0)
+    """Jet ratio α (-), the fraction of the squeezed fluid jetted in plane."""
+    added_mass_coeff: float = parameter(1.0, "1", 0.0, 10.0)
+    """Added-mass coefficient C_a (-) of the rod nodes."""
+    youngs_modulus: float = parameter(5e6, "Pa", 1e3, 1e10)
+    """E of the actuator arcs, Pa."""
+    limb_stiffness_ratio: float = parameter(100.0, "1", 1e-2, 1e4)
+    """E_limb / E (-) for limbs, spokes and joint bending."""
+    drag_parallel: float = parameter(0.01, "1", 0.0, 100.0)
+    """Axial rod drag coefficient C∥ (-)."""
+    drag_perpendicular: float = parameter(1.0, "1", 0.0, 100.0)
+    """Normal rod drag coefficient C⊥ (-)."""
+    cylinder_drag: float = parameter(10.0, "1", 0.0, 1000.0)
+    """Drag coefficient C_c (-) of the central cylinder."""
+    period: float = parameter(3.15, "s", 0.0, 1000.0, lowest_included=False)
+    """Actuation period T, s (150 ms heating pulse + 3 s rest); longer than the heating time t0."""
+    jet_mode: str = parameter("contract", choices=JET_MODES)
     """"contract": jet only while an inter-limb space shrinks; "always": the paper's formula
     literally (a growing space jets too)."""
-    thickness: float = 3.4e-3
-    """Rod thickness r0, m; [1e-4, 0.02]."""
-    actuator_density: float = 2700.0
-    """Effective density of the actuator arcs, kg/m³; [10, 2e4]."""
-    foam_density: float = 700.0
-    """Effective density of the foam limbs, kg/m³; [10, 2e4]."""
-    fluid_density: float = 1000.0
-    """Water density ρ_f, kg/m³; [0.1, 2e4]."""
-    cylinder_mass_per_height: float = 0.98
-    """Mass of the central cylinder per unit height, kg/m (49 g / 50 mm); [1e-3, 100]."""
-    cylinder_diameter: float = 0.03
-    """D_c = 2 R_c, m; [1e-3, 0.5]."""
-    cylinder_added_mass_coeff: float = 0.0
-    """Added-mass coefficient of the cylinder (-), mass ρ_f·C·π D_c²/4 (the paper: none); [0, 10]."""
-    actuation_ends: str = "clamped"
+    thickness: float = parameter(3.4e-3, "m", 1e-4, 0.02)
+    """Rod thickness r0, m."""
+    actuator_density: float = parameter(2700.0, "kg/m^3", 10.0, 2e4)
+    """Effective density of the actuator arcs, kg/m³."""
+    foam_density: float = parameter(700.0, "kg/m^3", 10.0, 2e4)
+    """Effective density of the foam limbs, kg/m³."""
+    fluid_density: float = parameter(1000.0, "kg/m^3", 0.1, 2e4)
+    """Water density ρ_f, kg/m³."""
+    cylinder_mass_per_height: float = parameter(0.98, "kg/m", 1e-3, 100.0)
+    """Mass of the central cylinder per unit height, kg/m (49 g / 50 mm)."""
+    cylinder_diameter: float = parameter(0.03, "m", 1e-3, 0.5)
+    """D_c = 2 R_c, m."""
+    cylinder_added_mass_coeff: float = parameter(0.0, "1", 0.0, 10.0)
+    """Added-mass coefficient of the cylinder (-), mass ρ_f·C·π D_c²/4 (the paper: none)."""
+    actuation_ends: str = parameter("clamped", choices=ACTUATION_ENDS)
     """"clamped": only an actuator's interior bending triplets follow K̄(τ); "shared": each joint
     also turns by the curvature change of the arc's half-edge beside it, so that the limb keeps
     its angle to the arc's tangent (second-order accurate in n_arc with "series" joints)."""
-    joint_stiffness: str = "limb"
+    joint_stiffness: str = parameter("limb", choices=JOINT_STIFFNESSES)
     """Modulus of the two bending triplets at each joint: "limb" = E_limb (the paper's choice as
     we read it; it makes each arc rigid over its end half-edges); "series" = a half arc edge (E)
     in series with a half limb edge (E_limb) over the triplet's length."""
-    profile_closure: str = "jump"
+    profile_closure: str = parameter("jump", choices=PROFILE_CLOSURES)
     """How a periodic gait closes the fitted actuation profile: "jump" = the fit as published
     (the natural curvature steps by K̄(0) − K̄(T) at each new cycle); "ramp" = the difference is
     spread linearly over the cycle (continuous)."""
-    damping_time: float = 0.0
+    damping_time: float = parameter(0.0, "s", 0.0, 1.0)
     """Kelvin–Voigt material damping time τ, s (0 = none, the paper's model); a mode of angular
-    frequency ω gets a damping ratio ζ = ωτ/2; [0, 1]."""
-    actuator_profile: CurvatureProfile = field(default_factory=CurvatureProfile)
+    frequency ω gets a damping ratio ζ = ωτ/2."""
+    actuator_profile: CurvatureProfile = field(default_factory=CurvatureProfile,
+                                               metadata={"allowed": "a CurvatureProfile"})
     """The actuators' natural-curvature profile K̄(τ) (default: the paper's fit); its K̄(0) is
     the rest curvature of the arcs."""
-    joint_radius: float = 0.024
+    joint_radius: float = parameter(0.024, "m", 1e-3, 1.0)
     """Radius of the eight joints from the centre, m; must let an arc of curvature K̄(0) span
     two neighbouring joints."""
-    tip_radius: float = 0.052
-    """Radius of the limb tips, m (diameter L = 104 mm); (joint_radius, 2]."""
-    n_arc: int = 18
-    """Edges per actuator arc (topology: equal across a batch); [2, 1000]."""
-    n_limb: int = 6
-    """Edges per foam limb (topology: equal across a batch); [1, 1000]."""
-    jet_direction: str = "hub"
+    tip_radius: float = parameter(0.052, "m", 1e-3, 2.0)
+    """Radius of the limb tips, m (diameter L = 104 mm); beyond joint_radius."""
+    n_arc: int = parameter(18, "1", 2, 1000)
+    """Edges per actuator arc (topology: equal across a batch)."""
+    n_limb: int = parameter(6, "1", 1, 1000)
+    """Edges per foam limb (topology: equal across a batch)."""
+    jet_direction: str = parameter("hub", choices=JET_DIRECTIONS)
     """Direction t of each space's jet (model extension, docs/model.md "Jet variants"): "hub"
     = from the hub to the opening's midpoint (the paper's reading); "normal" = normal to the
     opening segment tip_k → tip_{k+1}, pointing away from the hub; "bisector" = along the
     bisector of the two limbs' directions, joint → tip, that bound the space."""
-    jet_application: str = "hub"
+    jet_application: str = parameter("hub", choices=JET_APPLICATIONS)
     """Where each jet's force acts: "hub" = all of it on the centre node (the paper); "spread"
     = a quarter on each of the space's four corners (its two joints and two tips), the walls
     the water pushes on."""
-    jet_inflow: float = 0.0
+    jet_inflow: float = parameter(0.0, "1", 0.0, 10.0)
     """Inflow ratio α_in (-): while a space opens (Ṡ > 0) the water drawn in through its
     opening pulls the robot towards it with f = (ρ_f/L)(α_in·Ṡ)²·t (0 = none, the paper's
-    model); [0, 10]. Needs jet_mode "contract" (with "always" an opening space already jets)."""
+    model). Needs jet_mode "contract" (with "always" an opening space already jets)."""
+    hub_height: float = parameter(0.0, "m", 0.0, 0.5)
+    """Height of the hub (the central cylinder), m: with foam_height and actuator_height, the
+    2.5-D model (docs/model.md "Component heights"): each component's mass, drag, added mass and
+    jet scale with its height over the hub's. 0 (default) = off, every component one unit height
+    (the paper); else at least COMPONENT_HEIGHT_MINIMUM (1 mm), and all three must be set."""
+    foam_height: float = parameter(0.0, "m", 0.0, 0.5)
+    """Height of the foam limbs, m (the paper's robot: 24 mm); 0 = off, else ≥ 1 mm."""
+    actuator_height: float = parameter(0.0, "m", 0.0, 0.5)
+    """Height of the actuator arcs, m; 0 = off, else ≥ 1 mm."""
+    # ---- model extensions (issue 28), off by default: the defaults change no result
+    linear_drag: float = parameter(0.0, "Pa*s/m", 0.0, 1e4)
+    """Linear (skin-friction) drag c_l on the rod edges, Pa·s/m: a force −c_l·v per unit rod
+    length and unit height on each edge's mean velocity v (`physics.linear_drag`)."""
+    hub_linear_drag: float = parameter(0.0, "Pa*s", 0.0, 1e3)
+    """Linear drag c_h on the hub, Pa·s: a force −c_h·v per unit height on the centre node."""
+    actuator_gains: Tuple[float, ...] = per_actuator(1.0, "1", f"8 numbers in [0, {MAX_ACTUATOR_GAIN:g}]")
+    """Gain g_k (-) of actuator A_k (index k − 1) on its commanded curvature change: it follows
+    K̄(0) + g_k·(K̄(τ) − K̄(0))."""
+    actuator_delays: Tuple[float, ...] = per_actuator(0.0, "s", "8 numbers in [0, period)")
+    """Delay d_k of actuator A_k (index k − 1), s: its profile starts d_k after each firing
+    (K̄(0) until then), K̄(max(τ − d_k, 0))."""
 
     def __post_init__(self):
         object.__setattr__(self, "gait", Gait.parse(self.gait).name)
         for name, (lowest, highest, included) in STAR_RANGES.items():
-            integer = name in ("n_arc", "n_limb")
             object.__setattr__(self, name, _check_number(name, getattr(self, name), lowest,
-                                                         highest, included, integer))
-        _check_choice("jet_mode", self.jet_mode, JET_MODES)
-        _check_choice("actuation_ends", self.actuation_ends, ACTUATION_ENDS)
-        _check_choice("joint_stiffness", self.joint_stiffness, JOINT_STIFFNESSES)
-        _check_choice("profile_closure", self.profile_closure, PROFILE_CLOSURES)
-        _check_choice("jet_direction", self.jet_direction, JET_DIRECTIONS)
-        _check_choice("jet_application", self.jet_application, JET_APPLICATIONS)
+                                                         highest, included,
+                                                         name in INTEGER_FIELDS))
+        for name, choices in STAR_CHOICES.items():
+            _check_choice(name, getattr(self, name), choices)
+        object.__setattr__(self, "actuator_gains", _check_actuator_values(
+            "actuator_gains", self.actuator_gains, 0.0, MAX_ACTUATOR_GAIN, True))
+        object.__setattr__(self, "actuator_delays", _check_actuator_values(
+            "actuator_delays", self.actuator_delays, 0.0, self.period, False))
+        heights = [getattr(self, name) for name in COMPONENT_HEIGHTS]
+        for name, height in zip(COMPONENT_HEIGHTS, heights):
+            if 0.0 < height < COMPONENT_HEIGHT_MINIMUM:
+                raise ValueError(f"{name} must be 0 (off) or in [{COMPONENT_HEIGHT_MINIMUM:g}, "
+                                 f"0.5] m, got {height!r}")
+        if 0.0 in heights and any(heights):
+            missing = [name for name, height in zip(COMPONENT_HEIGHTS, heights) if height == 0.0]
+            raise ValueError(f"{', '.join(missing)} must be in [{COMPONENT_HEIGHT_MINIMUM:g}, "
+                             f"0.5] m as well: the component heights are all set or all 0 (off)")
         if self.jet_inflow > 0.0 and self.jet_mode == "always":
             raise ValueError(f"jet_inflow must be 0 with jet_mode 'always' (its literal formula "
                              f"already jets while a space opens; an inflow would only cancel "
@@ -262,6 +330,15 @@ class StarParams:
         return self.youngs_modulus * self.limb_stiffness_ratio
 
     @property
+    def height_ratios(self) -> Tuple[float, float]:
+        """(foam_height, actuator_height) over hub_height: what scales the limbs' and the arcs'
+        mass, drag, added mass and the jet (the hub's own ratio is 1); exactly (1.0, 1.0) when
+        the heights are off."""
+        if self.hub_height == 0.0:
+            return 1.0, 1.0
+        return self.foam_height / self.hub_height, self.actuator_height / self.hub_height
+
+    @property
     def gait_value(self) -> Gait:
         """The gait as a `Gait`."""
         return Gait.parse(self.gait)
@@ -281,7 +358,8 @@ class StarParams:
 
     @classmethod
     def numeric_field_names(cls):
-        """The fields that take numbers (the ones a sweep or a fit can vary)."""
+        """The fields that take one number (the ones a sweep or a fit can vary as a whole);
+        the fields of one number per actuator are `PER_ACTUATOR_FIELDS`."""
         return list(STAR_RANGES)
 
     @classmethod
@@ -295,7 +373,8 @@ class StarParams:
         parameter columns of `columns`, e.g. `result.summary.iloc[3]`, or a row read back
         from a CSV, Parquet or netCDF file), with some fields changed. The actuator profile may
         be a CurvatureProfile or its text (`CurvatureProfile.to_text`, as result tables hold
-        it). Raises ValueError naming a missing column or an unreadable profile."""
+        it); the per-actuator tuples (`actuator_gains`, ...) tuples or their text, read back
+        exactly. Raises ValueError naming a missing column or an unreadable profile."""
         values = {}
         for name, column in cls.columns().items():
             if name in overrides:
@@ -309,6 +388,48 @@ class StarParams:
                 value = value.item()
             values[name] = value
         return cls(**{**values, **overrides})
+
+
+STAR_RANGES: Dict[str, Tuple[float, float, bool]] = {
+    f.name: f.metadata["range"] for f in fields(StarParams) if "range" in f.metadata}
+"""Allowed range of every numeric StarParams field (lowest, highest, lowest included), from
+the fields' declarations (`parameter`)."""
+PER_ACTUATOR_FIELDS = tuple(f.name for f in fields(StarParams) if f.metadata.get("per_actuator"))
+"""The StarParams fields of one number per actuator (a tuple, A_k at index k − 1)."""
+PARAMETER_UNITS: Dict[str, str] = {name: StarParams.__dataclass_fields__[name].metadata["unit"]
+                                   for name in (*STAR_RANGES, *PER_ACTUATOR_FIELDS)}
+"""Units of the numeric StarParams fields, per-actuator ones included ("1": dimensionless or a
+count)."""
+INTEGER_FIELDS = tuple(f.name for f in fields(StarParams)
+                       if "range" in f.metadata and isinstance(f.default, int))
+"""The numeric fields that take whole numbers (the topology)."""
+STAR_CHOICES: Dict[str, Tuple[str, ...]] = {
+    f.name: f.metadata["choices"] for f in fields(StarParams) if "choices" in f.metadata}
+"""The allowed words of every StarParams field that takes one of a list."""
+
+
+def _allowed(f) -> str:
+    """The allowed values of field `f` in words, from its metadata."""
+    if "range" in f.metadata:
+        lowest, highest, included = f.metadata["range"]
+        return f"{'[' if included else '('}{lowest:g}, {highest:g}]"
+    if "choices" in f.metadata:
+        return " or ".join(f'"{choice}"' for choice in f.metadata["choices"])
+    return f.metadata["allowed"]
+
+
+def _default(f):
+    return f.default if f.default is not dataclasses.MISSING else f.default_factory()
+
+
+def _unit(f) -> str:
+    """The unit of field `f` for the table: numeric fields' own, "—" for texts."""
+    return f.metadata["unit"] if "range" in f.metadata or "per_actuator" in f.metadata else "—"
+
+
+StarParams.__doc__ += "\n\n    | field | unit | allowed | default |\n    |---|---|---|---|\n" + "".join(
+    f"    | {f.name} | {_unit(f)} | {_allowed(f)} | {_default(f)!r} |\n"
+    for f in fields(StarParams))
 
 
 IDENTIFIED_FIELDS = {"alpha": 0.4457040271, "added_mass_coeff": 0.3349258113,

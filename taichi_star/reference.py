@@ -2,7 +2,8 @@
 
 It is written independently of the Taichi batch engine, from the specification alone, so that
 the two can check each other. Implicit Euler or BDF2 in time; elasticity, Kelvin–Voigt material
-damping, rod and cylinder drag, jets and added mass. Everything is double precision; each
+damping, rod and cylinder drag (quadratic and linear), jets, added mass, and per-actuator gains
+and delays. Everything is double precision; each
 Newton iteration assembles the exact Jacobian of all forces as a scipy.sparse matrix and factors
 it with SuperLU (N = 193 nodes, 386 degrees of freedom: ~3 ms per iteration).
 
@@ -247,6 +248,35 @@ def cylinder_drag_element(x, x_old, dt, fluid_density, drag_coeff, diameter):
     return force, jac
 
 
+def linear_rod_drag_element(xa, xb, xa_old, xb_old, dt, rest_length, linear_drag):
+    """Linear (skin-friction) drag on one rod edge, split equally between its two nodes.
+
+    v = mean node velocity; F = −c_l Δl̄ v; each node receives F/2.
+
+    Args: xa, xb (..., 2) new positions, m; xa_old, xb_old (..., 2) old positions, m; dt h, s;
+        rest_length Δl̄ (...), m; linear_drag c_l (...), Pa·s/m.
+    Returns: forces (..., 4) on (xa, xb), N/m; Jacobian (..., 4, 4) = ∂forces/∂(xa, xb), N/m².
+    """
+    velocity = 0.5 * ((xa - xa_old) + (xb - xb_old)) / dt
+    edge_coeff = linear_drag * np.asarray(rest_length)
+    force = -edge_coeff[..., None] * velocity
+    # each node's half force depends on both nodes' velocities through the mean: ½·½/h each
+    block = -(edge_coeff / (4.0 * dt))[..., None, None] * np.eye(2)
+    return np.concatenate([0.5 * force, 0.5 * force], axis=-1), _blocks([[block, block],
+                                                                         [block, block]])
+
+
+def hub_linear_drag_element(x, x_old, dt, hub_linear_drag):
+    """Linear drag on the hub, F = −c_h v, and its Jacobian.
+
+    Args: x, x_old (..., 2) new and old centre positions, m; dt h, s; hub_linear_drag c_h, Pa·s.
+    Returns: force (..., 2), N/m; Jacobian (..., 2, 2) = ∂F/∂x, N/m².
+    """
+    velocity = (x - x_old) / dt
+    jac = np.broadcast_to(-(hub_linear_drag / dt) * np.eye(2), velocity.shape + (2,))
+    return -hub_linear_drag * velocity, jac
+
+
 def quad_area(x1, x2, x3, x4):
     """Area ½|(x3 − x1) × (x4 − x2)| (...) of the quadrilateral x1 x2 x3 x4, m²."""
     return 0.5 * np.abs(_cross(x3 - x1, x4 - x2))
@@ -400,7 +430,9 @@ class ImplicitStep:
 class ReferenceSimulator:
     """One robot advanced by implicit Euler or BDF2 with an exact-Jacobian Newton solve.
 
-    Attributes: params, solver, topology; mass (N,) lumped mass without added mass, kg/m;
+    Attributes: params, solver, topology; foam_scale, actuator_scale: the limbs' and arcs'
+    heights over the hub's (1 without component heights); mass (N,) lumped mass without added
+    mass, kg/m (per hub height);
     added_mass (N,) diagonal added mass, kg/m; stretch_modulus (E,) and bend_modulus (T,), Pa,
     the Young's modulus of each edge and triplet (elasticity and damping alike).
     """
@@ -413,7 +445,12 @@ class ReferenceSimulator:
         p = params
         r0 = p.thickness
 
-        arc_len, limb_len = topo.lumped_length[:, 0], topo.lumped_length[:, 1]
+        # 2.5-D: every rod component per hub height, i.e. times its height over the hub's
+        self.foam_scale, self.actuator_scale = (
+            (1.0, 1.0) if p.hub_height == 0.0 else
+            (p.foam_height / p.hub_height, p.actuator_height / p.hub_height))
+        arc_len = self.actuator_scale * topo.lumped_length[:, 0]
+        limb_len = self.foam_scale * topo.lumped_length[:, 1]
         self.mass = r0 * (p.actuator_density * arc_len + p.foam_density * limb_len)
         self.mass[0] += p.cylinder_mass_per_height
         self.added_mass = p.fluid_density * p.added_mass_coeff * r0 * (arc_len + limb_len)
@@ -448,25 +485,37 @@ class ReferenceSimulator:
 
     # ---- elasticity and damping ------------------------------------------------------------
 
-    def driven_curvature(self, t) -> float:
-        """K̄ (1/m) that fired actuators follow at time t (s), with the profile's closure."""
+    def driven_curvature(self, t) -> np.ndarray:
+        """K̄ (8,) in 1/m that the actuators A1..A8 follow, when fired, at time t (s): the
+        profile with its closure at the time since the cycle's start less each actuator's delay
+        (K̄(0) during the delay), its change from K̄(0) scaled by each actuator's gain."""
         p = self.params
-        return float(p.actuator_profile.cycle_curvature(math.fmod(t, p.period), p.period,
-                                                        p.profile_closure))
+        rest = p.actuator_profile.rest_curvature
+        since_firing = math.fmod(t, p.period)
+        driven = np.empty(len(p.actuator_gains))
+        for actuator, (gain, delay) in enumerate(zip(p.actuator_gains, p.actuator_delays)):
+            curvature = float(p.actuator_profile.cycle_curvature(
+                max(since_firing - delay, 0.0), p.period, p.profile_closure))
+            driven[actuator] = rest + gain * (curvature - rest)
+        return driven
 
     def natural_curvature(self, t):
-        """κ⁰ (T,) in 1/m at time t (s): rest curvature, or ±K̄(t mod T) on actuated triplets,
-        and with "shared" ends the joints turned with the arc's end half-edges."""
+        """κ⁰ (T,) in 1/m at time t (s): rest curvature, or ±K̄(t mod T) of its actuator on
+        actuated triplets, and with "shared" ends the joints turned with the arc's end
+        half-edges."""
         topo = self.topology
         kappa0 = topo.rest_curvature.copy()
         driven = self.driven_curvature(t)
         if self._actuated.any():
-            kappa0[self._actuated] = np.sign(kappa0[self._actuated]) * driven
+            actuated = self._actuated
+            kappa0[actuated] = (np.sign(kappa0[actuated])
+                                * driven[topo.triplet_actuator[actuated]])
         if self._shared_ends.any():
             ends = self._shared_ends
             voronoi = topo.voronoi_length[ends]
             angle = (2.0 * np.arctan(kappa0[ends] * voronoi / 2.0) + topo.end_turning_length[ends]
-                     * (driven - self.params.actuator_profile.rest_curvature))
+                     * (driven[topo.joint_actuator[ends]]
+                        - self.params.actuator_profile.rest_curvature))
             kappa0[ends] = 2.0 * np.tan(angle / 2.0) / voronoi
         return kappa0
 
@@ -514,15 +563,18 @@ class ReferenceSimulator:
     # ---- fluid -----------------------------------------------------------------------------
 
     def _fluid(self, q_new, q_old, dt, area_old=None):
-        """The terms (force, Jacobian) of rod drag, cylinder drag and the eight jets for the
-        velocities (q_new − q_old)/dt and area rates (S(q_new) − area_old)/dt (area_old
-        defaults to the areas of q_old)."""
+        """The terms (force, Jacobian) of rod drag, cylinder drag, the eight jets and, where
+        set, the linear drag of the rods and the hub for the velocities (q_new − q_old)/dt and
+        area rates (S(q_new) − area_old)/dt (area_old defaults to the areas of q_old)."""
         p, topo = self.params, self.topology
         rods = topo.edges[self._rod_edges]
         a, b = rods.T
+        edge_scale = np.where(topo.edge_kind[self._rod_edges] == ARC, self.actuator_scale,
+                              self.foam_scale)
         f_rod, k_rod = rod_drag_element(q_new[a], q_new[b], q_old[a], q_old[b], dt,
-                                        topo.rest_length[self._rod_edges], p.fluid_density,
-                                        p.drag_parallel, p.drag_perpendicular)
+                                        topo.rest_length[self._rod_edges],
+                                        p.fluid_density * edge_scale, p.drag_parallel,
+                                        p.drag_perpendicular)
         f_cyl, k_cyl = cylinder_drag_element(q_new[0], q_old[0], dt, p.fluid_density,
                                              p.cylinder_drag, p.cylinder_diameter)
         quads = topo.jet_quads
@@ -530,7 +582,7 @@ class ReferenceSimulator:
         if area_old is None:
             area_old = self.areas(q_old)
         f_jet, k_jet = jet_element(*[q_new[quads[:, m]] for m in range(4)], q_new[centre[:, 0]],
-                                   area_old, dt, p.fluid_density, p.alpha,
+                                   area_old, dt, p.fluid_density * self.foam_scale, p.alpha,
                                    p.jet_mode == "contract", p.jet_inflow, p.jet_direction)
         jet_nodes = np.concatenate([quads, centre], axis=1)
         if p.jet_application == "spread":
@@ -539,8 +591,16 @@ class ReferenceSimulator:
                         np.concatenate([k_jet / 4.0] * 4, axis=-2))
         else:
             jet_term = (centre, jet_nodes, f_jet, k_jet)
-        return [(rods, rods, f_rod, k_rod),
-                (centre[:1], centre[:1], f_cyl[None], k_cyl[None]), jet_term]
+        terms = [(rods, rods, f_rod, k_rod),
+                 (centre[:1], centre[:1], f_cyl[None], k_cyl[None]), jet_term]
+        if p.linear_drag > 0.0:
+            terms.append((rods, rods) + linear_rod_drag_element(
+                q_new[a], q_new[b], q_old[a], q_old[b], dt, topo.rest_length[self._rod_edges],
+                p.linear_drag * edge_scale))
+        if p.hub_linear_drag > 0.0:
+            f_hub, k_hub = hub_linear_drag_element(q_new[0], q_old[0], dt, p.hub_linear_drag)
+            terms.append((centre[:1], centre[:1], f_hub[None], k_hub[None]))
+        return terms
 
     def areas(self, q) -> np.ndarray:
         """Areas S (8,), m², of the eight inter-limb spaces (jet quadrilaterals) of q (N, 2) m."""

@@ -14,7 +14,8 @@ import pandas as pd
 from . import metrics, output
 from .geometry import CENTRE, Topology
 from .model import build_model, validate_batch
-from .params import SolverConfig, StarParams, check_precision
+from .params import (PER_ACTUATOR_FIELDS, SolverConfig, StarParams, check_precision,
+                     parameter_column)
 from .engine import STEP_TOLERANCE
 from .extras import require
 from .runtime import Runtime, check_arch, stream_chunk_size
@@ -40,7 +41,8 @@ class SimulationResult:
     parameters, every StarParams field named with its unit where it has one (youngs_modulus_pa,
     period_s, thickness_m, ...: `StarParams.columns()`; `StarParams.from_row(row)` rebuilds the
     parameters of a row, also of a table read back from CSV, Parquet or netCDF; the
-    actuator_profile column holds the profile's text, `CurvatureProfile.to_text`). Then the
+    actuator_profile column holds the profile's text, `CurvatureProfile.to_text`, and the
+    per-actuator columns actuator_gains and actuator_delays_s the text of their tuples). Then the
     run's results (metrics of a failed instance are NaN):
 
     | column | unit | meaning |
@@ -314,6 +316,8 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
     rows = {column: [getattr(p, name) for p in params] for name, column in StarParams.columns().items()}
     # as text, so that every column has an Arrow type (Parquet, netCDF) and from_row reads it
     rows["actuator_profile"] = [p.actuator_profile.to_text() for p in params]
+    for name in PER_ACTUATOR_FIELDS:  # "(1.0, 0.5, ...)": every float's repr reads back exactly
+        rows[parameter_column(name)] = [str(getattr(p, name)) for p in params]
     rows.update(metrics.swimming_metrics(final - start, duration, gaits))
     positions = state.positions.to_numpy()[:batch].astype(np.float64)
     rows["heading_deg"] = np.degrees(metrics.body_rotation(

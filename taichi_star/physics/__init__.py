@@ -17,10 +17,11 @@ from .bending import Bending
 from .cylinder_drag import CylinderDrag
 from .damping import MaterialDamping
 from .jet import Jet
+from .linear_drag import LinearDrag
 from .rod_drag import RodDrag
 from .stretching import Stretching
 
-TERMS = (AddedMass, Stretching, Bending, RodDrag, CylinderDrag, Jet, MaterialDamping)
+TERMS = (AddedMass, Stretching, Bending, RodDrag, CylinderDrag, LinearDrag, Jet, MaterialDamping)
 
 
 def coupled_node_pairs(topology, terms=TERMS):

@@ -1,7 +1,8 @@
 """Added mass (paper Eq. 3): f_a = −ρ_f·C_a·r0·Δl·ẍ on every rod node (Δl its lumped rest
 length), i.e. an extra diagonal mass; the cylinder gets ρ_f·C·π·D_c²/4 with its own coefficient
-(0 by default: the paper gives the cylinder none). It enters the integrator's inertia, so it has
-no assembly of its own."""
+(0 by default: the paper gives the cylinder none). With the component heights on, a rod node's
+added mass from its arc and limb edges scales with their heights over the hub's. It enters the
+integrator's inertia, so it has no assembly of its own."""
 
 import math
 
@@ -23,7 +24,9 @@ class AddedMass(Term):
     @staticmethod
     def added_inertia(params, topologies):
         fluid = np.array([p.fluid_density for p in params])
-        lumped = np.stack([t.lumped_length.sum(axis=1) for t in topologies])
+        # the arcs' and the limbs' lumped lengths, each times its height over the hub's
+        lumped = np.stack([(t.lumped_length * np.array(p.height_ratios[::-1])).sum(axis=1)
+                           for p, t in zip(params, topologies)])
         added = (fluid * np.array([p.added_mass_coeff for p in params]))[:, None] \
             * np.array([p.thickness for p in params])[:, None] * lumped
         added[:, CENTRE] += fluid * np.array(

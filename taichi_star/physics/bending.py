@@ -6,6 +6,11 @@ except on fired actuators: their interior triplets follow ±K̄(τ) (the actuati
 time τ since the actuator last fired) and, with `actuation_ends="shared"`, the joint triplets clamping
 their ends turn by the curvature change of the arc's end half-edge. Joint triplets use E_limb
 ("limb") or a half arc edge in series with a half limb edge ("series").
+
+Per-actuator heterogeneity (`actuator_gains`, `actuator_delays`): actuator A_k follows
+K̄(0) + g_k·(K̄(max(τ − d_k, 0)) − K̄(0)). The gain and the delay are applied only where they
+differ from 1 and 0, so that the default actuators compute exactly the arithmetic they computed
+without them (K̄(0) + 1·(K̄ − K̄(0)) is not always K̄ to the last bit).
 """
 
 import numpy as np
@@ -15,8 +20,9 @@ from ..gait import N_ACTUATORS, Gait
 from ..geometry import ARC_BEND, JOINT_BEND
 from .strain import StrainTerm
 
-NOT_FIRED = -1.0
-"""Marks an actuator that has not fired (K̄ is positive whenever it is defined)."""
+NOT_FIRED = -1e30
+"""Marks an actuator that has not fired (far below any K̄: with a gain ≤ 5 the profile's K̄
+stays above −500 1/m)."""
 
 
 @ti.func
@@ -107,9 +113,13 @@ class Bending(StrainTerm):
                 if p.profile_closure == "ramp" else 0.0 for p in params]),
             "period": np.array([p.period for p in params]),
             "gait_mask": np.stack([Gait.parse(p.gait).mask for p in params]),
+            "actuator_gain": np.array([p.actuator_gains for p in params]),
+            "actuator_delay": np.array([p.actuator_delays for p in params]),
         }
     """gait_mask (B, 8): the actuators an instance fires (its gait, or all eight for a
-    commanded batch: `commanded`); the firing itself is in the batch state (fire times)."""
+    commanded batch: `commanded`); the firing itself is in the batch state (fire times).
+    actuator_gain (B, 8) (-) and actuator_delay (B, 8) (s): each actuator's gain on its
+    curvature change and the delay of its profile after a firing."""
 
     @staticmethod
     def commanded(coefficients):
@@ -164,13 +174,20 @@ class Bending(StrainTerm):
     @ti.func
     def actuator_curvature(self, b, m, time):
         """K̄ (1/m) of actuator m of instance b at `time` (s) by the firing that applies then,
-        or NOT_FIRED when it has never fired by then."""
+        with the actuator's delay and gain, or NOT_FIRED when it has never fired by then."""
         fired = self.assembly.fire_time[b, m]
         if time < fired:
             fired = self.assembly.previous_fire_time[b, m]
         value = NOT_FIRED
         if fired >= 0.0:
-            value = self.profile_curvature(b, time - fired)
+            since = time - fired
+            delay = self.actuator_delay[b, m]
+            if delay != 0.0:
+                since = ti.max(since - delay, 0.0)
+            value = self.profile_curvature(b, since)
+            gain = self.actuator_gain[b, m]
+            if gain != 1.0:
+                value = self.profile_rest[b] + gain * (value - self.profile_rest[b])
         return value
 
     @ti.func

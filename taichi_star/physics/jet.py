@@ -34,6 +34,10 @@ Variants (StarParams fields, per instance; the defaults are the paper's model, b
   and the suction's lower pressure at the opening acts against it; α_in is the net fraction,
   to be fitted, 0 = none.) The force is continuous at Ṡ = 0 with its derivative (both vanish
   there), so Newton's Jacobian stays exact across the switch.
+
+With the component heights on (`foam_height` etc.), the force scales with the foam's height
+over the hub's: the limbs are the space's walls and its opening is as tall as they are (the
+coefficient `jet_fluid_density` is ρ_f times that ratio).
 """
 
 import numpy as np
@@ -155,7 +159,9 @@ class Jet(Term):
     @staticmethod
     def coefficients(params, topologies, topology):
         return {"jet_alpha": np.array([p.alpha for p in params]),
-                "fluid_density": np.array([p.fluid_density for p in params]),
+                # ρ_f times the space's height over the hub's: the foam limbs are its walls
+                "jet_fluid_density": np.array([p.fluid_density * p.height_ratios[0]
+                                               for p in params]),
                 "jet_always": np.array([p.jet_mode == "always" for p in params], dtype=np.int32),
                 "jet_inflow": np.array([p.jet_inflow for p in params]),
                 "jet_direction": np.array([JET_DIRECTIONS.index(p.jet_direction) for p in params],
@@ -233,7 +239,7 @@ class Jet(Term):
                 positions[b, CENTRE], positions[b, self.jet_quads[k, 0]],
                 positions[b, self.jet_quads[k, 1]], positions[b, self.jet_quads[k, 2]],
                 positions[b, self.jet_quads[k, 3]], self.previous_areas[b, k], rate_gain,
-                self.area_rate_offset[b, k], self.jet_alpha[b], self.fluid_density[b],
+                self.area_rate_offset[b, k], self.jet_alpha[b], self.jet_fluid_density[b],
                 self.jet_always[b], inflow, direction_kind)
             if ti.static("spread" in self.configuration_switches):
                 if self.jet_application[b] == SPREAD:

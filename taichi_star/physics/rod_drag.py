@@ -8,7 +8,7 @@ joint has no single tangent, so we apply it per edge.
 import numpy as np
 import taichi as ti
 
-from ..geometry import SPOKE
+from ..geometry import ARC, SPOKE
 from .base import Term
 
 
@@ -41,22 +41,22 @@ def rod_edges(topology) -> np.ndarray:
     return np.flatnonzero(topology.edge_kind != SPOKE)
 
 
-@ti.data_oriented
-class RodDrag(Term):
-    name = "rod_drag"
+def rod_height_ratios(params, topology) -> np.ndarray:
+    """(B, R) height over the hub's of each rod edge (`rod_edges`) of each instance, what its
+    drag scales with: the arcs' actuator_height ratio, the limbs' foam_height ratio (all 1.0
+    without component heights; `StarParams.height_ratios`)."""
+    return np.array([[p.height_ratios[1] if kind == ARC else p.height_ratios[0]
+                      for kind in topology.edge_kind[rod_edges(topology)]] for p in params])
 
-    @staticmethod
-    def coefficients(params, topologies, topology):
-        rods = rod_edges(topology)
-        fluid = np.array([p.fluid_density for p in params])[:, None]
-        wetted = 0.5 * fluid * np.stack([t.rest_length[rods] for t in topologies])
-        return {"drag_parallel_coeff": wetted * np.array([p.drag_parallel for p in params])[:, None],
-                "drag_perpendicular_coeff": wetted * np.array([p.drag_perpendicular for p in params])[:, None]}
+
+@ti.data_oriented
+class RodEdgeTerm(Term):
+    """Base of the terms that act on every rod edge (`rod_edges`): their Jacobian pattern, the
+    device tables `rods` (R, 2) and `rod_slot` (R, 4), and on when any coefficient is > 0."""
 
     @staticmethod
     def configuration(coefficients):
-        used = (coefficients["drag_parallel_coeff"] > 0).any() or (
-            coefficients["drag_perpendicular_coeff"] > 0).any()
+        used = any((values > 0).any() for values in coefficients.values())
         return () if used else None
 
     @staticmethod
@@ -68,6 +68,21 @@ class RodDrag(Term):
         self.n_rods = len(rods)
         self.rods = self.assembly.index(topology.edges[rods])
         self.rod_slot = self.assembly.pair_slots(topology.edges[rods])
+
+
+@ti.data_oriented
+class RodDrag(RodEdgeTerm):
+    name = "rod_drag"
+
+    @staticmethod
+    def coefficients(params, topologies, topology):
+        rods = rod_edges(topology)
+        fluid = np.array([p.fluid_density for p in params])[:, None]
+        # with the component heights on, an edge's drag scales with its height over the hub's
+        wetted = (0.5 * fluid * np.stack([t.rest_length[rods] for t in topologies])
+                  * rod_height_ratios(params, topology))
+        return {"drag_parallel_coeff": wetted * np.array([p.drag_parallel for p in params])[:, None],
+                "drag_perpendicular_coeff": wetted * np.array([p.drag_perpendicular for p in params])[:, None]}
 
     @ti.func
     def assemble(self, b, rate_gain, jacobian):

@@ -246,13 +246,21 @@ ACCURATE_PHYSICS_BATCH = [
     ts.StarParams(gait="A5+A6+A7", joint_stiffness="series", actuation_ends="shared",
                   profile_closure="ramp", period=0.25, jet_mode="always", damping_time=2e-3,
                   youngs_modulus=2e6),
+    # the extensions of issue 28: linear drag on rods and hub, per-actuator gains and delays
+    # (A3's restarting at the 0.2-s cycle boundary), with the shared ends that carry them to the
+    # joints
+    ts.StarParams(gait="A1+A3", period=0.2, linear_drag=80.0, hub_linear_drag=6.0,
+                  actuation_ends="shared", profile_closure="ramp",
+                  actuator_gains=(1.3, 1, 0.8, 1, 1, 1, 1, 1),
+                  actuator_delays=(0.0, 0, 0.03, 0, 0, 0, 0, 0)),
 ]
 
 
 @pytest.mark.parametrize("integrator", ["euler", "bdf2"])
-def test_engine_matches_reference_with_damping_joints_ends_and_closure(integrator, arch):
-    """Material damping (with the integrator's own strain rate), series joints, shared ends and
-    the ramp closure, implemented independently on both sides, agree to ≤ 1e-10 relative on
+def test_engine_matches_reference_with_damping_joints_ends_closure_and_extensions(integrator, arch):
+    """Material damping (with the integrator's own strain rate), series joints, shared ends,
+    the ramp closure, linear drag and per-actuator gains and delays, implemented independently
+    on both sides, agree to ≤ 1e-10 relative on
     positions after 130 steps of 2 ms (crossing the cycle boundaries of the 0.2 and 0.25 s
     periods). Newton converges both to 1e-12 m; what remains is round-off (~1e-14 m)."""
     solver = ts.SolverConfig(newton_tol=1e-12, integrator=integrator, dt=2e-3)
@@ -272,15 +280,21 @@ JET_VARIANT_BATCH = [
                   n_limb=2),
     ts.StarParams(gait="A2", jet_application="spread", jet_mode="always", n_arc=6, n_limb=2),
     ts.StarParams(gait="A1+A2", n_arc=6, n_limb=2),
+    ts.StarParams(gait="A1+A3", hub_height=0.05, foam_height=0.024, actuator_height=0.01,
+                  linear_drag=50.0, hub_linear_drag=3.0, n_arc=6, n_limb=2),
+    ts.StarParams(gait="A1+A4", hub_height=0.03, foam_height=0.04, actuator_height=0.02,
+                  jet_direction="bisector", jet_application="spread", n_arc=6, n_limb=2),
 ]
+"""Model extensions of issue 28 (jet variants, component heights, with them the linear drag
+scaled by the heights), one engine for all."""
 
 
-def test_engine_matches_reference_with_jet_variants():
-    """Jet directions, the spread application and the inflow (and one paper instance in the
-    same engine), implemented independently on both sides, agree to ≤ 1e-10 relative on
-    positions after 60 steps of 2 ms into the first pulse (the fired spaces open and draw in,
-    their neighbours close and jet). Newton converges both to 1e-12 m; what remains is
-    round-off. The coarse mesh (n_arc 6) keeps the reference cheap."""
+def test_engine_matches_reference_with_jet_variants_and_component_heights():
+    """Jet directions, the spread application, the inflow and the component heights (and one
+    paper instance in the same engine), implemented independently on both sides, agree to
+    ≤ 1e-10 relative on positions after 60 steps of 2 ms into the first pulse (the fired
+    spaces open and draw in, their neighbours close and jet). Newton converges both to
+    1e-12 m; what remains is round-off. The coarse mesh (n_arc 6) keeps the reference cheap."""
     from taichi_star.model import build_model
 
     assert dict(build_model(JET_VARIANT_BATCH).terms_used)[Jet] == ("variants", "spread")

@@ -18,12 +18,12 @@ import pytest
 import scipy.linalg
 
 from taichi_star.actuation import CurvatureProfile
-from taichi_star.geometry import ARC, ARC_BEND, JOINT_BEND, LIMB, discrete_curvature
+from taichi_star.geometry import ARC, ARC_BEND, JOINT_BEND, LIMB, SPOKE, discrete_curvature
 from taichi_star.params import SolverConfig, StarParams
 from taichi_star.reference import (NewtonDidNotConverge, ReferenceSimulator, bend_element,
                                    bend_strain, cylinder_drag_element, damping_element,
-                                   jet_element, quad_area, rod_drag_element, stretch_element,
-                                   stretch_strain)
+                                   hub_linear_drag_element, jet_element, linear_rod_drag_element,
+                                   quad_area, rod_drag_element, stretch_element, stretch_strain)
 
 FD_RTOL = 1e-6
 
@@ -108,15 +108,26 @@ def test_bend_element_gradient_and_hessian():
 
 # ---- fluid elements --------------------------------------------------------------------------
 
-def test_rod_drag_element_jacobian():
-    rng = np.random.default_rng(3)
-    n = 20
+def moving_edges(seed, n):
+    """n random ~1.5-mm edges (xa, xb), where they were 1 ms before (xa_old, xb_old) and rest
+    lengths: node displacements of ~1e-4 m over 1 ms, velocities ~0.1 m/s, both along and
+    across every edge."""
+    rng = np.random.default_rng(seed)
     xa = rng.uniform(-1e-3, 1e-3, (n, 2))
     xb = xa + rng.uniform(-1e-3, 1e-3, (n, 2)) + np.array([1.5e-3, 0.0])
-    # Node displacements of ~1e-4 m over 1 ms: velocities ~0.1 m/s, with both a and b nonzero.
     xa_old = xa - rng.uniform(-1e-4, 1e-4, (n, 2))
     xb_old = xb - rng.uniform(-1e-4, 1e-4, (n, 2))
-    dt, rest = 1e-3, rng.uniform(0.8e-3, 1.2e-3, n)
+    return xa, xb, xa_old, xb_old, rng.uniform(0.8e-3, 1.2e-3, n)
+
+
+def edge_power(forces, xa, xb, xa_old, xb_old, dt):
+    """Power (n,) of the (n, 4) node forces of edges on their nodes' velocities, W/m."""
+    return (forces[:, :2] * (xa - xa_old) + forces[:, 2:] * (xb - xb_old)).sum(1) / dt
+
+
+def test_rod_drag_element_jacobian():
+    xa, xb, xa_old, xb_old, rest = moving_edges(3, 20)
+    dt = 1e-3
     x = np.concatenate([xa, xb], axis=1)
 
     def element(y):
@@ -135,8 +146,7 @@ def test_rod_drag_element_jacobian():
     assert np.allclose(forces[0, :2], 0.5 * expected, rtol=1e-12)
     assert np.allclose(forces[0, 2:], 0.5 * expected, rtol=1e-12)
     # Drag dissipates: the power of the two node forces is negative.
-    power = (forces[:, :2] * (xa - xa_old) + forces[:, 2:] * (xb - xb_old)).sum(1) / dt
-    assert np.all(power < 0)
+    assert np.all(edge_power(forces, xa, xb, xa_old, xb_old, dt) < 0)
 
 
 def test_cylinder_drag_element_jacobian():
@@ -291,6 +301,103 @@ def test_assembled_force_jacobian(jet_mode, shrink):
     assert np.abs(centre_jet).max() > 0
 
 
+# ---- model extensions (issue 28): linear drag, per-actuator gains and delays -----------------
+
+def test_linear_rod_drag_element_is_minus_c_l_times_the_mean_velocity_with_its_jacobian():
+    xa, xb, xa_old, xb_old, rest = moving_edges(11, 12)
+    dt, coeff = 1e-3, 40.0
+    x = np.concatenate([xa, xb], axis=1)
+
+    def element(y):
+        return linear_rod_drag_element(y[:, :2], y[:, 2:], xa_old, xb_old, dt, rest, coeff)
+
+    forces, jac = element(x)
+    assert_close_to_scale(jac, central_jacobian(lambda y: element(y)[0], x, 1e-6 * 1e-5))
+    mean_velocity = 0.5 * ((xa - xa_old) + (xb - xb_old)) / dt
+    expected = -coeff * rest[:, None] * mean_velocity
+    np.testing.assert_allclose(forces[:, :2], 0.5 * expected, rtol=1e-12)
+    np.testing.assert_allclose(forces[:, 2:], 0.5 * expected, rtol=1e-12)
+    # it does not depend on the edge's direction (isotropic) and it dissipates
+    # (the edge turned, its nodes' velocities kept)
+    turned_xb = xa + (xb - xa)[:, ::-1]
+    turned = linear_rod_drag_element(xa, turned_xb, xa_old, xb_old + (turned_xb - xb), dt, rest,
+                                     coeff)[0]
+    np.testing.assert_allclose(turned, forces, rtol=1e-12)  # rounding of the shifted positions
+    assert np.all(edge_power(forces, xa, xb, xa_old, xb_old, dt) < 0)
+
+
+def test_hub_linear_drag_element_is_minus_c_h_times_the_velocity_with_its_jacobian():
+    rng = np.random.default_rng(12)
+    x = rng.uniform(-1e-3, 1e-3, (6, 2))
+    x_old = x - rng.uniform(-1e-4, 1e-4, (6, 2))
+    dt, coeff = 1e-3, 3.0
+
+    def element(y):
+        return hub_linear_drag_element(y, x_old, dt, coeff)
+
+    force, jac = element(x)
+    assert_close_to_scale(jac, central_jacobian(lambda y: element(y)[0], x, 1e-6 * 1e-5))
+    np.testing.assert_allclose(force, -coeff * (x - x_old) / dt, rtol=1e-12)
+
+
+def test_assembled_fluid_jacobian_with_linear_drag_matches_finite_differences():
+    """The reference's assembled fluid forces with the linear drag on: the drag's share is
+    −c_l·Δl̄·v on the rods and −c_h·v on the hub, and the Jacobian is exact."""
+    params = StarParams(gait="A1+A2", linear_drag=60.0, hub_linear_drag=4.0)
+    sim = ReferenceSimulator(params)
+    without = ReferenceSimulator(params.replace(linear_drag=0.0, hub_linear_drag=0.0))
+    rng = np.random.default_rng(13)
+    rest = sim.topology.rest_positions
+    q_new = rest + rng.uniform(-2e-5, 2e-5, rest.shape)
+    q_old = 1.001 * q_new + rng.uniform(-5e-5, 5e-5, rest.shape)
+    dt, t_new = 1e-3, 0.08
+
+    def fluid(y):
+        return sim.fluid_forces(y.reshape(rest.shape), q_old, dt).reshape(-1)
+
+    # the elastic Jacobian alone: without the linear drag and at v = 0 (q_old = q_new) every
+    # other fluid term and its Jacobian vanish
+    elastic_jac = without.force_jacobian(q_new, q_new, t_new, dt)[1]
+    fluid_jac = sim.force_jacobian(q_new, q_old, t_new, dt)[1] - elastic_jac
+    # δ = 1e-6 of the ~1 mm edges, as in test_reference.test_assembled_force_jacobian
+    assert_close_to_scale(fluid_jac, central_jacobian(fluid, q_new.reshape(-1), 1e-9))
+    added = sim.fluid_forces(q_new, q_old, dt) - without.fluid_forces(q_new, q_old, dt)
+    velocity = (q_new - q_old) / dt
+    rods = sim.topology.edge_kind != SPOKE  # spokes are inside the hub: no drag
+    expected = np.zeros_like(q_new)
+    for (i, j), length in zip(sim.topology.edges[rods], sim.topology.rest_length[rods]):
+        share = -0.5 * 60.0 * length * 0.5 * (velocity[i] + velocity[j])
+        expected[i] += share
+        expected[j] += share
+    expected[0] += -4.0 * velocity[0]
+    # the difference of two sums of ~1e-2 N/m forces: rounding ~1e-17 N/m
+    np.testing.assert_allclose(added, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+
+
+def test_reference_actuators_follow_their_gain_and_delay():
+    """K̄_k(t) = K̄(0) + g_k·(K̄(max(t − d_k, 0)) − K̄(0)) per actuator, within each cycle;
+    K̄(0) through the delay, including its last instant, and the profile after it."""
+    gains = (1.0, 0.5, 1.0, 2.0, 1.0, 1.0, 0.0, 1.0)
+    delays = (0.0, 0.0, 0.04, 0.04, 0.0, 0.0, 0.0, 0.0)
+    params = StarParams(gait="A1+A2+A3+A4+A7", actuator_gains=gains, actuator_delays=delays)
+    sim = ReferenceSimulator(params)
+    profile = params.actuator_profile
+    rest = profile.rest_curvature
+    for t in (0.0, 0.02, 0.04, 0.1, 0.5, params.period + 0.03, params.period + 0.06):
+        since = t % params.period
+        driven = sim.driven_curvature(t)
+        for k in range(8):
+            curvature = profile.curvature(max(since - delays[k], 0.0))
+            assert driven[k] == pytest.approx(rest + gains[k] * (curvature - rest), rel=1e-14)
+        if since <= 0.04:
+            assert driven[2] == rest  # still in A3's delay
+    # the actuated triplets of A2 follow its own K̄, not A1's
+    t = 0.1
+    natural = sim.natural_curvature(t)
+    actuated = sim.topology.triplet_actuator == 1
+    arc = actuated & (sim.topology.triplet_kind == ARC_BEND)
+    assert np.allclose(np.abs(natural[arc]), sim.driven_curvature(t)[1], rtol=1e-14)
+    assert not np.isclose(sim.driven_curvature(t)[1], sim.driven_curvature(t)[0])
 def test_assembled_jacobian_with_jet_variants_is_exact():
     """Spread application (corners coupled to each other and the hub), normal direction and
     inflow in the whole fluid Jacobian, on the coarse mesh; δ as in the check above."""
@@ -469,6 +576,41 @@ def test_masses():
     assert np.allclose(sim.centroid(topo.rest_positions), 0.0, atol=1e-15)
     assert sim.topology.triplet_kind[sim.topology.triplet_actuator >= 0].tolist() == \
         [ARC_BEND] * int((sim.topology.triplet_actuator >= 0).sum())
+
+
+def test_component_heights_scale_each_components_mass_added_mass_drag_and_jet():
+    """Heights on (hub 50 mm, foams 24 mm, actuators 10 mm): everything of the limbs scales by
+    0.48, of the arcs by 0.2, the hub's stays; the jet scales with the foam (its walls). Equal
+    heights are exactly the model without heights."""
+    base = StarParams(gait="A1+A2", **SMALL)
+    heights = dict(hub_height=0.05, foam_height=0.024, actuator_height=0.01)
+    off, on = ReferenceSimulator(base), ReferenceSimulator(base.replace(**heights))
+    foam, actuator = 0.024 / 0.05, 0.01 / 0.05
+    lumped = off.topology.lumped_length
+    arc_nodes = (lumped[:, 0] > 0) & (lumped[:, 1] == 0)
+    limb_nodes = (lumped[:, 1] > 0) & (lumped[:, 0] == 0)
+    assert arc_nodes.sum() == 8 * 5 and limb_nodes.sum() == 8 * 2
+    for name in ("mass", "added_mass"):
+        before, after = getattr(off, name), getattr(on, name)
+        np.testing.assert_allclose(after[arc_nodes], actuator * before[arc_nodes], rtol=1e-14)
+        np.testing.assert_allclose(after[limb_nodes], foam * before[limb_nodes], rtol=1e-14)
+        assert after[0] == before[0]
+    q_new, q_old, _ = _moving_history(off, np.random.default_rng(15))
+    no_drag = dict(drag_parallel=0.0, drag_perpendicular=0.0, cylinder_drag=0.0)
+    jet_off = ReferenceSimulator(base.replace(**no_drag)).fluid_forces(q_new, q_old, 1e-3)
+    jet_on = ReferenceSimulator(base.replace(**no_drag, **heights)).fluid_forces(q_new, q_old,
+                                                                                   1e-3)
+    assert np.abs(jet_off[0]).max() > 0
+    np.testing.assert_allclose(jet_on, foam * jet_off, rtol=1e-14)
+    drag_off = ReferenceSimulator(base.replace(alpha=0.0)).fluid_forces(q_new, q_old, 1e-3)
+    drag_on = ReferenceSimulator(base.replace(alpha=0.0, **heights)).fluid_forces(q_new, q_old,
+                                                                                    1e-3)
+    np.testing.assert_allclose(drag_on[arc_nodes], actuator * drag_off[arc_nodes], rtol=1e-12)
+    np.testing.assert_allclose(drag_on[limb_nodes], foam * drag_off[limb_nodes], rtol=1e-12)
+    assert drag_on[0].tolist() == drag_off[0].tolist()  # the cylinder's drag
+    equal = ReferenceSimulator(base.replace(hub_height=0.03, foam_height=0.03,
+                                            actuator_height=0.03))
+    assert np.array_equal(equal.run(5), off.run(5))
 
 
 # ================================================================================================

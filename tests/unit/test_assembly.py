@@ -18,14 +18,18 @@ import taichi as ti
 from taichi_star import reference
 from taichi_star.fields import FieldArena
 from taichi_star.integrators import ImplicitEuler
-from taichi_star.physics import Bending, MaterialDamping, Stretching
+from taichi_star.geometry import LIMB
+from taichi_star.physics import Bending, LinearDrag, MaterialDamping, Stretching
 from taichi_star.physics.assembly import Assembly
+from taichi_star.params import StarParams
 from taichi_star.physics.base import connect_terms, load_field, numpy_to_field_type
 
 EDGES = np.array([[0, 1], [1, 2], [2, 3]])
 TRIPLETS = np.array([[0, 1, 2], [1, 2, 3]])
 REST = np.array([[0.0, 0.0], [1.0e-3, 0.1e-3], [2.1e-3, 0.0], [3.0e-3, -0.3e-3]])
 N_NODES = len(REST)
+TOY_EDGE_KIND = np.full(len(EDGES), LIMB)
+"""Every edge of the chain is a rod (a limb): the drag terms act on all of them."""
 REFERENCE_RTOL = 1e-9
 DIFFERENCE_RTOL = 1e-6
 
@@ -40,7 +44,8 @@ def toy_system(term_classes, coefficients, configurations):
                             previous_fire_time=arena.batch_field(float, (1, 8)))
     system = SimpleNamespace(rhs=arena.batch_field(float, nodes, vector=2),
                              blocks=arena.batch_field(float, (1, N_NODES * N_NODES), matrix=(2, 2)))
-    topology = SimpleNamespace(n_nodes=N_NODES, edges=EDGES, n_edges=len(EDGES), triplets=TRIPLETS,
+    topology = SimpleNamespace(n_nodes=N_NODES, edges=EDGES, n_edges=len(EDGES),
+                               edge_kind=TOY_EDGE_KIND, triplets=TRIPLETS,
                                n_triplets=len(TRIPLETS), triplet_actuator=np.full(2, -1),
                                joint_actuator=np.full(2, -1))
     slot = {(i, j): i * N_NODES + j for i in range(N_NODES) for j in range(N_NODES)}
@@ -203,3 +208,37 @@ def test_damping_reshapes_every_strain_term_through_the_base_interface(taichi_cp
                                                   chain_gradients(TRIPLETS, bend)))
     assert np.abs(damped).max() > 1e-2 * np.abs(elastic).max()  # the damping is no rounding
     assert_close(residual, elastic + damped, REFERENCE_RTOL)
+
+
+def test_linear_drag_assembles_the_reference_forces_and_its_own_exact_jacobian(taichi_cpu):
+    """The linear drag on the toy chain (node 0 stands for the hub), its coefficients from its
+    own `coefficients`, one implicit-Euler iterate (h = 1 ms) from the rest chain: the residual
+    is minus the reference's rod and hub forces (`reference.linear_rod_drag_element`,
+    `hub_linear_drag_element`), the Jacobian the central differences of the residual (the
+    forces are linear in the positions: exact up to rounding)."""
+    h, rod_coeff, hub_coeff = 1e-3, 40.0, 3.0
+    rest_length = np.linalg.norm(REST[EDGES[:, 1]] - REST[EDGES[:, 0]], axis=1)
+    coefficients = LinearDrag.coefficients(
+        [StarParams(linear_drag=rod_coeff, hub_linear_drag=hub_coeff)],
+        [SimpleNamespace(rest_length=rest_length)], SimpleNamespace(edge_kind=TOY_EDGE_KIND))
+    assert LinearDrag.configuration(coefficients) == ()
+    terms, assembly = toy_system([LinearDrag], {"linear_drag": coefficients}, {"linear_drag": ()})
+    term = terms["linear_drag"]
+    load_field(assembly.previous, REST[None])
+    positions = deformed()
+    residual, jacobian = residual_and_jacobian(term, assembly, positions, 1.0 / h)
+    forces = np.zeros(2 * N_NODES)
+    for e, (i, j) in enumerate(EDGES):
+        local = reference.linear_rod_drag_element(positions[i], positions[j], REST[i], REST[j], h,
+                                                  rest_length[e], rod_coeff)[0]
+        forces[2 * i:2 * i + 2] += local[:2]
+        forces[2 * j:2 * j + 2] += local[2:]
+    forces[:2] += reference.hub_linear_drag_element(positions[0], REST[0], h, hub_coeff)[0]
+    assert_close(residual, -forces, REFERENCE_RTOL)
+    numeric = central_jacobian(lambda q: residual_and_jacobian(term, assembly, q, 1.0 / h)[0],
+                               positions, 1e-10)
+    assert_close(jacobian, numeric, DIFFERENCE_RTOL)
+    off = LinearDrag.coefficients([StarParams()],
+                                  [SimpleNamespace(rest_length=rest_length)],
+                                  SimpleNamespace(edge_kind=TOY_EDGE_KIND))
+    assert LinearDrag.configuration(off) is None  # off: compiled out

@@ -4,7 +4,7 @@ suffix first (a rate per second is not a time)."""
 import pytest
 
 from taichi_star.output import column_unit, column_units
-from taichi_star.params import PARAMETER_UNITS, StarParams
+from taichi_star.params import PARAMETER_UNITS, PER_ACTUATOR_FIELDS, StarParams
 
 
 @pytest.mark.parametrize("name, unit", [
@@ -20,7 +20,7 @@ def test_column_unit_by_parameter_or_suffix(name, unit):
 
 def test_every_numeric_parameter_has_a_unit_and_unitless_columns_are_left_out():
     numeric = {name for name in StarParams.field_names()
-               if isinstance(getattr(StarParams(), name), (int, float))}
+               if isinstance(getattr(StarParams(), name), (int, float))} | set(PER_ACTUATOR_FIELDS)
     assert numeric == set(PARAMETER_UNITS)
     assert column_units(["alpha", "status", "speed_mm_s"]) == {"alpha": "1", "speed_mm_s": "mm/s"}
 

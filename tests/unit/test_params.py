@@ -7,8 +7,10 @@ import numpy as np
 import pytest
 
 import taichi_star as ts
+from taichi_star.params import PARAMETER_UNITS
 from taichi_star.gait import Gait, symmetry_classes
 from taichi_star.geometry import build_topology
+from taichi_star.params import PER_ACTUATOR_FIELDS
 
 
 @pytest.mark.parametrize("field,value", [
@@ -22,6 +24,7 @@ from taichi_star.geometry import build_topology
     ("n_arc", 18.0), ("n_limb", 0), ("jet_mode", "sometimes"), ("youngs_modulus", "5e6"),
     ("actuation_ends", "free"), ("jet_inflow", -0.1), ("jet_inflow", 10.5),
     ("jet_inflow", math.nan), ("jet_direction", "radial"), ("jet_application", "tips"),
+    ("hub_height", -0.05), ("foam_height", 0.6), ("actuator_height", math.inf),
 ])
 def test_star_params_rejects_bad_values_naming_the_field(field, value):
     with pytest.raises(ValueError, match=field):
@@ -287,8 +290,12 @@ def test_numeric_fields_are_all_fields_but_the_texts_and_the_profile():
     assert names[0] == "gait" and len(names) == len(set(names))
     texts = {"gait", "jet_mode", "actuation_ends", "joint_stiffness", "profile_closure",
              "actuator_profile", "jet_direction", "jet_application"}
+    vectors = set(PER_ACTUATOR_FIELDS)  # one number per actuator
     numeric = ts.StarParams.numeric_field_names()
-    assert set(numeric) == set(names) - texts and len(numeric) == len(names) - len(texts)
+    assert set(numeric) == set(names) - texts - vectors
+    assert len(numeric) == len(names) - len(texts) - len(vectors)
+    for name in vectors:
+        assert len(getattr(ts.StarParams(), name)) == 8, name
     for name in numeric:
         assert isinstance(getattr(ts.StarParams(), name), (int, float)), name
 
@@ -320,6 +327,48 @@ def test_a_single_star_params_is_a_batch_of_one():
     assert validate_batch([one, one]) == (one, one)
 
 
+CROSS_CONSTRAINED = {"period", "joint_radius", "tip_radius", "hub_height", "foam_height",
+                     "actuator_height"}
+"""Fields whose declared range is narrowed by another field (tested on their own: the radii,
+the period beyond the heating time, the component heights all set or all off)."""
+
+
+@pytest.mark.parametrize("name", sorted(set(ts.STAR_RANGES) - CROSS_CONSTRAINED))
+def test_every_declared_range_is_the_validated_range_at_both_ends(name):
+    """The range declared with a field is what __post_init__ enforces: both ends accepted
+    (the lowest only where it is included), just beyond either end refused naming the field."""
+    from dataclasses import fields
+
+    lowest, highest, included = ts.STAR_RANGES[name]
+    integer = isinstance({f.name: f for f in fields(ts.StarParams)}[name].default, int)
+    beyond = 1 if integer else max(abs(highest), 1.0) * 1e-9
+    assert getattr(ts.StarParams(**{name: highest}), name) == highest
+    with pytest.raises(ValueError, match=name):
+        ts.StarParams(**{name: highest + beyond})
+    if included:
+        assert getattr(ts.StarParams(**{name: lowest}), name) == lowest
+    else:
+        with pytest.raises(ValueError, match=name):
+            ts.StarParams(**{name: lowest})
+    below = lowest - (1 if integer else max(abs(lowest), 1.0) * 1e-9)
+    with pytest.raises(ValueError, match=name):
+        ts.StarParams(**{name: below})
+
+
+def test_help_lists_every_field_with_its_declared_unit_and_allowed_values():
+    from dataclasses import fields
+
+    doc = ts.StarParams.__doc__
+    for f in fields(ts.StarParams):
+        [row] = [line for line in doc.splitlines() if line.strip().startswith(f"| {f.name} |")]
+        if f.name in ts.STAR_RANGES:
+            lowest, highest, included = ts.STAR_RANGES[f.name]
+            unit = PARAMETER_UNITS[f.name]
+            assert f"| {unit} | {'[' if included else '('}{lowest:g}, {highest:g}] |" in row
+        elif "choices" in f.metadata:
+            assert all(f'"{choice}"' in row for choice in f.metadata["choices"])
+
+
 def test_jet_inflow_has_its_range_and_needs_the_contract_mode():
     """[0, 10], 0 included (the paper's model); refused with jet_mode "always", whose literal
     formula already jets while a space opens."""
@@ -339,13 +388,31 @@ def test_jet_variant_fields_are_set_by_name_and_survive_a_csv_row(tmp_path):
 
     import pandas as pd
 
-    fields = {"jet_direction": "bisector", "jet_application": "spread", "jet_inflow": 0.35}
+    fields = {"jet_direction": "bisector", "jet_application": "spread", "jet_inflow": 0.35,
+              "hub_height": 0.05, "foam_height": 0.024, "actuator_height": 0.01}
     params = [ts.StarParams(gait="A1+A4", **fields),
               dataclasses.replace(ts.StarParams(), jet_direction="normal"), ts.StarParams()]
     assert ts.StarParams.columns()["jet_inflow"] == "jet_inflow"  # dimensionless: no suffix
+    assert ts.StarParams.columns()["hub_height"] == "hub_height_m"
     table = pd.DataFrame([{column: getattr(p, name) for name, column in
                            ts.StarParams.columns().items()} for p in params])
     path = tmp_path / "rows.csv"
     table.to_csv(path, index=False)
     back = pd.read_csv(path)
     assert [ts.StarParams.from_row(row) for _, row in back.iterrows()] == params
+
+
+def test_component_heights_are_all_off_or_all_in_their_range():
+    """0 = off (the default, ratios exactly 1); a set height is in [1 mm, 0.5 m] and the other
+    two must be set with it."""
+    assert ts.StarParams().height_ratios == (1.0, 1.0)
+    paper_robot = ts.StarParams(hub_height=0.05, foam_height=0.024, actuator_height=0.001)
+    assert paper_robot.height_ratios == (0.024 / 0.05, 0.001 / 0.05)
+    with pytest.raises(ValueError) as error:
+        ts.StarParams(foam_height=0.0009, hub_height=0.05, actuator_height=0.01)
+    assert str(error.value) == "foam_height must be 0 (off) or in [0.001, 0.5] m, got 0.0009"
+    with pytest.raises(ValueError) as error:
+        ts.StarParams(hub_height=0.05)
+    assert str(error.value) == ("foam_height, actuator_height must be in [0.001, 0.5] m as "
+                                "well: the component heights are all set or all 0 (off)")
+    assert ts.StarParams(hub_height=0.5, foam_height=0.001, actuator_height=0.5).hub_height == 0.5
