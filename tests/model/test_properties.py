@@ -273,8 +273,8 @@ def invalid_simulate_call(draw):
             lambda a: a not in ts.available_archs()))
         return base, "arch"
     if kind == "params":
-        base["params"] = draw(st.sampled_from([ts.StarParams(), [ts.StarParams(), "A1"],
-                                               [ts.StarParams(), None]]))
+        base["params"] = draw(st.sampled_from([ts.StarParams, [ts.StarParams(), "A1"],
+                                               [ts.StarParams(), None], "A1"]))
         return base, "params"
     base["record_shapes"] = True   # shapes need a record stride
     return base, "record_shapes"
