@@ -432,20 +432,18 @@ StarParams.__doc__ += "\n\n    | field | unit | allowed | default |\n    |---|--
     for f in fields(StarParams))
 
 
-IDENTIFIED_FIELDS = {"alpha": 0.4457040271, "added_mass_coeff": 0.3349258113,
-                     "drag_perpendicular": 0.3045642563, "cylinder_drag": 32.74314332,
-                     "cylinder_added_mass_coeff": 0.002039736130}
-"""StarParams fields of the "identified" preset (the rest are the defaults): the rank-1 row of
-`python -m studies model_select` (its `identified.csv`; the study prints this dict), to 10
-significant digits.
-
-PROVISIONAL: the best of a short run, `python -m studies model_select --only
-paper,ramp,added_mass --max-generations 6 --fold-generations 2 --restarts 0 --popsize 8` (19 min
-on two shared cores), before the model extensions existed: rank 1 of the three was
-"added_mass" (the paper's model with α, C⊥, C_c and both added-mass coefficients fitted to the
-trajectories of cycles 1-3): trajectory objective 17.4 on cycles 1-3 (the paper preset: 60.0),
-76.5 on cycles 4-6 (paper: 189.0), 157.5 held out; A1 and A1+A4 still swim against the paper's
-directions. To be replaced by the full study's rank-1 row."""
+IDENTIFIED_FIELDS = {"alpha": 0.9494493740, "drag_perpendicular": 1.213589224,
+                     "cylinder_drag": 54.28145268,
+                     "actuator_gains": (0.5993823308, 0.9653546728, 0.9139914816, 1.738832333,
+                                        0.4498417279, 1.0, 1.0, 1.0)}
+"""StarParams fields of the "identified" preset (the rest are the paper's): the rank-1 model of
+`python -m studies model_select` (results/model_select/identified.csv; the study prints this
+dict), to 10 significant digits. The model form "gains_with_a1": the paper's model with a gain
+per actuator on its curvature change, fitted with α, C⊥ and C_c by CMA-ES to the measured
+trajectories of cycles 1-3 of the five Fig. 4 gaits (A6-A8, fired by none of them, keep gain 1).
+It swims all five gaits in the paper's directions (trajectory objective 1.86 on cycles 1-3
+against 17.7 for the paper's model refitted), and ranks first on what the fit did not see:
+held-out gaits plus cycles 4-6 (docs/results.md, "Which model form explains the robot")."""
 
 PRESET_FIELDS = {
     "paper": {},

@@ -416,3 +416,21 @@ def test_component_heights_are_all_off_or_all_in_their_range():
     assert str(error.value) == ("foam_height, actuator_height must be in [0.001, 0.5] m as "
                                 "well: the component heights are all set or all 0 (off)")
     assert ts.StarParams(hub_height=0.5, foam_height=0.001, actuator_height=0.5).hub_height == 0.5
+
+
+def test_identified_preset_equals_the_committed_study_result():
+    """IDENTIFIED_FIELDS are the committed model_select run's identified.csv, to the 10
+    significant digits the preset keeps (so rtol 1e-9), field by field."""
+    import ast
+    from pathlib import Path
+
+    import pandas as pd
+
+    from taichi_star.params import IDENTIFIED_FIELDS
+
+    table = pd.read_csv(Path(__file__).resolve().parents[2] / "results" / "model_select"
+                        / "identified.csv")
+    assert set(table["field"]) == set(IDENTIFIED_FIELDS)
+    for field, text in zip(table["field"], table["value"]):
+        value = ast.literal_eval(str(text))
+        assert np.asarray(IDENTIFIED_FIELDS[field]) == pytest.approx(np.asarray(value), rel=1e-9)
