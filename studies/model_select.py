@@ -38,8 +38,8 @@ plus a penalty on wrong-way travel. Then, per candidate:
   evidence; they rank, they do not test.
 
 Writes into `--out` (default a fresh `runs/model_select/<timestamp>/`), each table with its
-provenance sidecar: `model_select.csv` (one row per candidate, ranked by the held-out error (held-out gaits + cycles 4-6),
-then BIC; skipped candidates last with their note), `model_select_parameters.csv` (the
+provenance sidecar: `model_select.csv` (one row per candidate, ranked by the held-out error
+(held-out gaits + cycles 4-6), then BIC; skipped candidates last with their note), `model_select_parameters.csv` (the
 identified values with a standard deviation from the final CMA-ES search distribution,
 σ·√diag C mapped to the parameter: how tightly the search closed in on each axis, not a
 posterior), `model_select_gaits.csv` (candidate × gait × window: objective, phase, speeds,
