@@ -22,7 +22,7 @@ import pandas as pd
 
 from .gait import N_ACTUATORS, NO_GAIT, Gait, symmetry_classes
 from .metrics import rotate
-from .params import SolverConfig, StarParams
+from .params import PER_ACTUATOR_FIELDS, SolverConfig, StarParams
 from .simulation import simulate, whole_steps
 from .simulator import Simulator
 
@@ -211,6 +211,12 @@ def check_measurement(base: StarParams, solver: SolverConfig, cycles: int, first
     if whole_steps(base.period, solver.dt) is None:
         raise ValueError(f"period must be a whole number of steps (dt = {solver.dt} s) to "
                          f"record every cycle boundary, got {base.period!r}")
+    for name in PER_ACTUATOR_FIELDS:
+        values = getattr(base, name)
+        if len(set(values)) > 1:  # one robot per symmetry class stands for its 8-16 images
+            raise ValueError(f"{name} must be equal for all eight actuators to measure primitives "
+                             f"(one gait per symmetry class stands for its rotations and "
+                             f"reflections, which differing actuators break), got {values!r}")
 
 
 def measure_primitives(base: StarParams = StarParams(), solver: SolverConfig = SolverConfig(),
