@@ -108,7 +108,9 @@ def test_the_studies_install_inside_taichi_star_with_their_data_and_command():
     assert project["project"]["scripts"]["taichi-star"] == "taichi_star.studies.__main__:main"
     for name in setuptools["package-data"]["taichi_star.studies"]:
         assert (REPO / "studies" / name).exists(), name
-    # every package with an __init__.py is listed (a new subpackage must be added)
+    # every package with an __init__.py is listed (a new subpackage must be added), and the
+    # data folders (package data, listed so that setuptools does not warn about them)
     found = {".".join(p.parent.relative_to(REPO).parts)
              for p in (REPO / "taichi_star").rglob("__init__.py")}
-    assert found | {"taichi_star.studies"} == set(setuptools["packages"])
+    data = {"taichi_star.data", "taichi_star.data.experiment"}
+    assert found | data | {"taichi_star.studies"} == set(setuptools["packages"])
