@@ -217,3 +217,20 @@ def test_runs_beyond_the_step_counter_are_refused_before_any_compute(monkeypatch
         ts.simulate([ts.StarParams()], (limit + 1) * dt, adaptive)
     with pytest.raises(ValueError, match=r"at dt_min = 1e-300 s .* is 3.15e\+300 time steps"):
         ts.simulate([ts.StarParams()], 3.15, ts.SolverConfig.preset("accurate", dt_min=1e-300))
+
+
+def test_long_but_possible_work_starts_with_a_warning_giving_its_estimate():
+    """Up to WARN_ROBOT_STEPS robot-steps a run starts silently; one step more (× the batch)
+    warns with the estimated hours at the stated rate (1e10 / 5e4 / 3600 = 55.6 h)."""
+    import warnings
+
+    from taichi_star.simulation import WARN_ROBOT_STEPS, check_work
+
+    assert WARN_ROBOT_STEPS == 1e10
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_work("duration_s = 1e6 s at dt = 0.001 s", 1e9, 10)  # exactly at the threshold
+        check_work("duration_s = 2e6 s at dt = 0.001 s", 2e9)  # one instance, under it
+    with pytest.warns(RuntimeWarning, match=r"duration_s = x is 1e\+10 robot-steps: about 55.6 h "
+                                            r"at 50000 robot-steps/s"):
+        check_work("duration_s = x", 1e9 + 1, 10)
