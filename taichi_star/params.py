@@ -257,7 +257,7 @@ class StarParams:
     """Height of the foam limbs, m (the paper's robot: 24 mm); 0 = off, else ≥ 1 mm."""
     actuator_height: float = parameter(0.0, "m", 0.0, 0.5)
     """Height of the actuator arcs, m; 0 = off, else ≥ 1 mm."""
-    # ---- model extensions (issue 28), off by default: the defaults change no result
+    # ---- model extensions (docs/model.md), off by default: the defaults change no result
     linear_drag: float = parameter(0.0, "Pa*s/m", 0.0, 1e4)
     """Linear (skin-friction) drag c_l on the rod edges, Pa·s/m: a force −c_l·v per unit rod
     length and unit height on each edge's mean velocity v (`physics.linear_drag`)."""
@@ -555,7 +555,8 @@ F32_TOLERANCE_ROUNDOFFS = 32
 """With precision "f32", newton_tol must be at least this many f32 roundings of the robot's
 size (its tip_radius, the largest node coordinate): Newton's updates cannot be resolved below
 a few roundings of the positions, and a tolerance under that floor is met, if at all, by
-rounding noise (issue 27: 2-m limbs at 1e-7 m hit the iteration cap and came out 2.3× off).
+rounding noise (docs/numerics.md, "What ok promises": 2-m limbs at 1e-7 m hit the
+iteration cap and came out 2.3× off).
 32 roundings of the paper's 5.2 cm are 9.9e-8 m (the 1e-7 m it allows); above 0.52 m the
 floor passes the largest newton_tol, 1e-6 m, and f32 is refused."""
 F32_MAX_SIZE_TO_EDGE = 320.0

@@ -139,8 +139,8 @@ class Term:
         return {name: getattr(self, name) for name in self.history_names}
 
     def coefficient_derivatives(self, name: str):
-        """Reserved for the sensitivities through the solver (issue 24): the derivative of this
-        term's residual (and the Jacobian-vector products it needs) with respect to its
+        """Reserved for sensitivities through the solver (not yet built): the derivative of
+        this term's residual (and the Jacobian-vector products it needs) with respect to its
         per-instance coefficient `name` at the current iterate, ∂r/∂c of shape (N, 2) per
         instance, assembled like `assemble` through the same `Assembly`. No term provides it
         yet."""

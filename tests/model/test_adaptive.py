@@ -70,7 +70,7 @@ def test_adaptive_results_do_not_depend_on_batch_position():
     # A regression guard on cost, measured at this commit (CPU, f64; the same on every run):
     # 576 accepted + 53 rejected steps, 1,266 Newton iterations (one solve per attempted step).
     # Bands: steps ±2 % (±11), iterations ±5 %: room for a change of round-off that moves a few
-    # decisions, while a regression like issue 27's (+23 % iterations, +4 % steps) fails; so
+    # decisions, while a regression of +23 % iterations and +4 % steps fails; so
     # does starting Newton without the parabola through the last two states (+8.9 %, 1,379).
     solves = reference.steps + reference.rejected_steps
     assert abs(reference.steps.sum() - 576) <= 11

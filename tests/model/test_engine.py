@@ -246,7 +246,7 @@ ACCURATE_PHYSICS_BATCH = [
     ts.StarParams(gait="A5+A6+A7", joint_stiffness="series", actuation_ends="shared",
                   profile_closure="ramp", period=0.25, jet_mode="always", damping_time=2e-3,
                   youngs_modulus=2e6),
-    # the extensions of issue 28: linear drag on rods and hub, per-actuator gains and delays
+    # the model extensions (docs/model.md): linear drag on rods and hub, per-actuator gains and delays
     # (A3's restarting at the 0.2-s cycle boundary), with the shared ends that carry them to the
     # joints
     ts.StarParams(gait="A1+A3", period=0.2, linear_drag=80.0, hub_linear_drag=6.0,
@@ -285,7 +285,7 @@ JET_VARIANT_BATCH = [
     ts.StarParams(gait="A1+A4", hub_height=0.03, foam_height=0.04, actuator_height=0.02,
                   jet_direction="bisector", jet_application="spread", n_arc=6, n_limb=2),
 ]
-"""Model extensions of issue 28 (jet variants, component heights, with them the linear drag
+"""Model extensions (docs/model.md: jet variants, component heights, with them the linear drag
 scaled by the heights), one engine for all."""
 
 

@@ -1,4 +1,4 @@
-"""The model extensions of issue 28 (1a, 1c), linear drag on the rods and the hub and
+"""The model extensions (docs/model.md): linear drag on the rods and the hub and
 per-actuator gains and delays, in the engine: off by default and compiled out, per instance,
 validated, and carried through result tables. Elsewhere: the reference's elements against
 finite differences and its actuation against the profile's formula (tests/model/

@@ -301,7 +301,7 @@ def test_assembled_force_jacobian(jet_mode, shrink):
     assert np.abs(centre_jet).max() > 0
 
 
-# ---- model extensions (issue 28): linear drag, per-actuator gains and delays -----------------
+# ---- model extensions (docs/model.md): linear drag, per-actuator gains and delays -----------------
 
 def test_linear_rod_drag_element_is_minus_c_l_times_the_mean_velocity_with_its_jacobian():
     xa, xb, xa_old, xb_old, rest = moving_edges(11, 12)

@@ -1,7 +1,7 @@
 """The engine's retry and stopping rules at their boundaries, its work counters exact, its
 iteration counts pinned (adaptive steps: test_adaptive), f32 refused or flagged where it cannot
 resolve the robot, and the public doors of Simulator snapshots: tests that kill the engine
-mutants of issue 27 (`halvings <= max` → `<`, an under-counted substep_retries, a changed
+hand-made engine mutants (`halvings <= max` → `<`, an under-counted substep_retries, a changed
 Newton stopping rule, a +20 % costlier Newton)."""
 
 import pickle
@@ -105,7 +105,7 @@ def test_newton_iterations_of_a_fixed_scenario_stay_in_their_band():
     (heating, then coasting) with the paper solver (fixed 1-ms implicit Euler). Measured at
     this commit (CPU, f64; the same on every run, the engine is deterministic): 400 steps in 800
     Newton iterations (2 each), no retry. Band ±5 %: room for a change of round-off that moves
-    a few decisions, while a regression like issue 27's (+23 % iterations) fails."""
+    a few decisions, while a regression of +23 % iterations fails."""
     fixed = ts.simulate([ts.StarParams(gait="A1+A3")], 0.4, ts.SolverConfig()).summary.iloc[0]
     assert fixed.steps == 400 and fixed.substep_retries == 0
     assert 0.95 * 800 <= fixed.newton_iterations_mean * fixed.steps <= 1.05 * 800
