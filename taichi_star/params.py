@@ -263,7 +263,8 @@ class StarParams:
     length and unit height on each edge's mean velocity v (`physics.linear_drag`)."""
     hub_linear_drag: float = parameter(0.0, "Pa*s", 0.0, 1e3)
     """Linear drag c_h on the hub, Pa·s: a force −c_h·v per unit height on the centre node."""
-    actuator_gains: Tuple[float, ...] = per_actuator(1.0, "1", f"8 numbers in [0, {MAX_ACTUATOR_GAIN:g}]")
+    actuator_gains: Tuple[float, ...] = per_actuator(1.0, "1",
+                                                     f"8 numbers in [0, {MAX_ACTUATOR_GAIN:g}]")
     """Gain g_k (-) of actuator A_k (index k − 1) on its commanded curvature change: it follows
     K̄(0) + g_k·(K̄(τ) − K̄(0))."""
     actuator_delays: Tuple[float, ...] = per_actuator(0.0, "s", "8 numbers in [0, period)")
@@ -283,14 +284,16 @@ class StarParams:
         object.__setattr__(self, "actuator_delays", _check_actuator_values(
             "actuator_delays", self.actuator_delays, 0.0, self.period, False))
         heights = [getattr(self, name) for name in COMPONENT_HEIGHTS]
+        tallest = STAR_RANGES[COMPONENT_HEIGHTS[0]][1]  # the heights share their declared range
         for name, height in zip(COMPONENT_HEIGHTS, heights):
             if 0.0 < height < COMPONENT_HEIGHT_MINIMUM:
                 raise ValueError(f"{name} must be 0 (off) or in [{COMPONENT_HEIGHT_MINIMUM:g}, "
-                                 f"0.5] m, got {height!r}")
+                                 f"{tallest:g}] m, got {height!r}")
         if 0.0 in heights and any(heights):
             missing = [name for name, height in zip(COMPONENT_HEIGHTS, heights) if height == 0.0]
             raise ValueError(f"{', '.join(missing)} must be in [{COMPONENT_HEIGHT_MINIMUM:g}, "
-                             f"0.5] m as well: the component heights are all set or all 0 (off)")
+                             f"{tallest:g}] m as well: the component heights are all set or all "
+                             f"0 (off)")
         if self.jet_inflow > 0.0 and self.jet_mode == "always":
             raise ValueError(f"jet_inflow must be 0 with jet_mode 'always' (its literal formula "
                              f"already jets while a space opens; an inflow would only cancel "
