@@ -6,6 +6,14 @@ its own Newton loop (so converged instances stop iterating and failed ones are f
 assembles its residual and Jacobian from the force terms of `physics.TERMS` (each through the
 engine's `physics.assembly.Assembly`) into a fixed-pattern block-sparse store (`linsolve.BlockSystem`) and solves it by LU without pivoting. Terms that no
 instance of the batch uses are not part of the engine at all (compiled out).
+
+An engine built `sensitive` also carries each instance's tangents (`tangent_step`): the batch's
+first `primal_count` instances are simulated, and behind them, for each of `tangent_count`
+directions j, instance b has two replicas built at its parameters moved by +ε_j and −ε_j
+(`replica`). A replica is never solved: after each accepted step of b its state is set to
+b's state ± ε_j times the state's derivative, which the implicit function theorem gives exactly
+from b's Jacobian at the converged state (see `tangent_step`). Any output is then a smooth
+function of the replicas' states, and its derivative is the central difference of the pair.
 """
 
 
@@ -47,8 +55,10 @@ class BatchEngine:
     `instance_minor`: the GPU layout of the per-instance fields (`fields.FieldArena`)."""
 
     def __init__(self, model: BatchModel, capacity: int, integrator, instances_per_block: int = 1,
-                 loop_spread: int = 1, instance_minor: bool = False):
+                 loop_spread: int = 1, instance_minor: bool = False, sensitive: bool = False):
         topology = model.topology
+        self.sensitive = sensitive
+        """Whether the kernels carry the tangents of replicas (module docstring; static)."""
         self.topology = topology
         self.capacity = capacity
         self.instances_per_block = instances_per_block
@@ -66,6 +76,11 @@ class BatchEngine:
         self.centroids = arena.batch_field(float, capacity, vector=2)
         for name, dtype in SOLVER_SETTINGS.items():
             setattr(self, name, arena.field(dtype))
+        self.primal_count = arena.field(ti.i32)
+        """Instances simulated: all of the batch, or in a sensitive engine those before the
+        replicas."""
+        self.tangent_count = arena.field(ti.i32)
+        """Directions whose tangents each simulated instance carries (0 unless sensitive)."""
         self.assembly = Assembly(topology, capacity, arena, self.plan.slot, integrator, self.state,
                                  self.system)
         """What the terms see of this engine (they never hold the engine itself)."""
@@ -81,7 +96,8 @@ class BatchEngine:
             self.state.term_histories.update(
                 {f"{term.name}.{name}": field for name, field in term.history_fields().items()})
         arena.finalize()
-        model_fields = {name: getattr(self, name) for name in ("mass", "inertia", *SOLVER_SETTINGS)}
+        model_fields = {name: getattr(self, name) for name in ("mass", "inertia", "primal_count",
+                                                               "tangent_count", *SOLVER_SETTINGS)}
         for term in self.terms:
             model_fields.update({f"{term.name}.{name}": field
                                  for name, field in term.coefficient_fields().items()})
@@ -96,16 +112,26 @@ class BatchEngine:
                 return term
         raise KeyError(name)
 
-    def load(self, model: BatchModel, solver: SolverConfig, periodic_gaits: bool = True):
+    def load(self, model: BatchModel, solver: SolverConfig, periodic_gaits: bool = True,
+             tangents: int = 0):
         """Copy a batch (at most `capacity` instances) and the solver settings to the device and
         put every instance at rest in its rest shape, status ok (padding: inactive). With
         `periodic_gaits`, each instance fires its gait at t = 0 and every period after;
-        otherwise nothing fires until commanded (`fire`)."""
+        otherwise nothing fires until commanded (`fire`). `tangents` (a sensitive engine only):
+        the batch is B simulated instances followed by their 2·tangents·B replicas, in the
+        order of `replica`."""
         if model.batch_size > self.capacity:
             raise ValueError(f"batch of {model.batch_size} exceeds the engine capacity {self.capacity}")
+        if tangents and not self.sensitive:
+            raise ValueError("tangents need an engine built sensitive")
+        if model.batch_size % (1 + 2 * tangents):
+            raise ValueError(f"a batch of {model.batch_size} is not B instances and their "
+                             f"2·{tangents}·B replicas")
         capacity = self.capacity
         values = {"mass": pad_batch(model.mass, capacity),
                   "inertia": pad_batch(model.inertia, capacity),
+                  "primal_count": model.batch_size // (1 + 2 * tangents),
+                  "tangent_count": tangents,
                   **{name: getattr(solver, name) for name in SOLVER_SETTINGS if name != "chord"},
                   "chord": int(solver.jacobian == "chord")}
         for term in self.terms:
@@ -254,9 +280,7 @@ class BatchEngine:
         while converged == 0 and halvings <= self.max_substep_halvings[None]:
             if halvings == 1:
                 # a failed solve_step has restored the start state: keep it for later attempts
-                for n in range(self.n_nodes):
-                    self.state.backup_positions[b, n] = self.state.positions[b, n]
-                    self.state.backup_velocities[b, n] = self.state.velocities[b, n]
+                self.save_backup(b)
             elif halvings > 1:
                 self.restore_backup(b)
             substeps = 1 << halvings
@@ -267,6 +291,9 @@ class BatchEngine:
             while converged == 1 and substep < substeps:
                 first = (step_number - 1) * substeps + substep
                 converged, finite = self.solve_step(b, first * h, (first + 1) * h, h, 1.0, use_history, 0)
+                if ti.static(self.sensitive):
+                    if converged == 1:
+                        self.tangent_step(b, first * h, (first + 1) * h, h, 1.0, use_history)
                 substep += 1
             if converged == 0:
                 if use_history:
@@ -287,6 +314,7 @@ class BatchEngine:
             self.state.status[b] = STATUS_NON_FINITE if finite == 0 else STATUS_NEWTON_FAILED
             self.state.failure_step[b] = step_number
             self.state.failure_time[b] = step_number * dt
+        self.mirror_replicas(b)
 
     @ti.func
     def fire_schedule(self, b, step_number):
@@ -394,6 +422,8 @@ class BatchEngine:
             if converged == 1:
                 error = self.first_order_error(b, h)
             if converged == 1 and (error <= tol or h <= dt_min):
+                if ti.static(self.sensitive):
+                    self.tangent_step(b, start, end, h, ratio, use_history)
                 self.state.time[b] = end
                 self.state.steps_done[b] = self.state.steps_done[b] + 1
                 self.state.previous_step_size[b] = h
@@ -430,6 +460,7 @@ class BatchEngine:
                 else:
                     self.state.status[b] = STATUS_NON_FINITE if finite == 0 else STATUS_NEWTON_FAILED
                     self.state.failure_time[b] = end
+        self.mirror_replicas(b)
 
     @ti.func
     def first_order_error(self, b, h):
@@ -448,7 +479,7 @@ class BatchEngine:
         max_steps step attempts each in this launch (the host calls again until all are there)."""
         ti.loop_config(block_dim=self.instances_per_block)
         for slot in range(self.capacity * self.loop_spread):
-            if slot % self.loop_spread == 0:
+            if slot % self.loop_spread == 0 and self.simulated(slot // self.loop_spread):
                 self.adaptive_instance(slot // self.loop_spread, max_steps)
 
     def advance_adaptive_to(self, stop_times: np.ndarray, batch_size: int, max_steps: int = 200):
@@ -465,10 +496,98 @@ class BatchEngine:
             self.advance_adaptive(max_steps)
 
     @ti.func
+    def save_backup(self, b):
+        """Keep instance b's positions and velocities (and its replicas') for `restore_backup`."""
+        for n in range(self.n_nodes):
+            self.state.backup_positions[b, n] = self.state.positions[b, n]
+            self.state.backup_velocities[b, n] = self.state.velocities[b, n]
+        if ti.static(self.sensitive):
+            for j in range(self.tangent_count[None]):
+                for sign in ti.static(range(2)):
+                    r = self.replica(b, j, sign)
+                    for n in range(self.n_nodes):
+                        self.state.backup_positions[r, n] = self.state.positions[r, n]
+                        self.state.backup_velocities[r, n] = self.state.velocities[r, n]
+
+    @ti.func
     def restore_backup(self, b):
         for n in range(self.n_nodes):
             self.state.positions[b, n] = self.state.backup_positions[b, n]
             self.state.velocities[b, n] = self.state.backup_velocities[b, n]
+        if ti.static(self.sensitive):
+            for j in range(self.tangent_count[None]):
+                for sign in ti.static(range(2)):
+                    r = self.replica(b, j, sign)
+                    for n in range(self.n_nodes):
+                        self.state.positions[r, n] = self.state.backup_positions[r, n]
+                        self.state.velocities[r, n] = self.state.backup_velocities[r, n]
+
+    # ---------------------------------------------------------------- tangents (sensitive engines)
+    @ti.func
+    def simulated(self, b):
+        """Whether the kernels advance instance b (not a replica; padding is frozen by its
+        status)."""
+        result = True
+        if ti.static(self.sensitive):
+            result = b < self.primal_count[None]
+        return result
+
+    @ti.func
+    def replica(self, b, j, sign):
+        """The instance holding simulated instance b moved along direction j by +ε_j (sign 0)
+        or −ε_j (sign 1)."""
+        count = self.primal_count[None]
+        return count + (2 * j + sign) * count + b
+
+    @ti.func
+    def tangent_step(self, b, start_time, end_time, h, ratio, use_history):
+        """After instance b's step from start_time to end_time (size h, ratio and history as
+        solved) converged to q* = positions[b], move each of its replica pairs along the exact
+        tangent of the step. For direction j the replicas hold the step's start state S ± ε·Ṡ
+        and the coefficients c ± ε·ċ. Each runs the step's preparation (the terms' histories,
+        the integrator's offsets) from its own state and assembles its residual at q*: half
+        their difference is ε·(∂r/∂S·Ṡ + ∂r/∂c·ċ) up to O(ε³). The implicit function theorem
+        on r(q*) = 0 gives ε·q̇* = −J⁻¹ times it, J the Jacobian at q* (assembled and factored
+        here, so a chord run gets the exact one too). The replicas' positions become
+        q* ± ε·q̇* and their velocities follow by the integrator's rate, which is linear in the
+        positions; their fire times are b's (a firing is an event, not a function of the
+        parameters). Nothing on the device divides by ε."""
+        inertia_scale, rate_gain = self.integrator.weights(h, ratio, use_history)
+        self.assemble(b, inertia_scale, rate_gain, 1)
+        self.system.factor(b)
+        for j in range(self.tangent_count[None]):
+            for sign in ti.static(range(2)):
+                r = self.replica(b, j, sign)
+                for m in range(N_ACTUATORS):
+                    self.state.fire_time[r, m] = self.state.fire_time[b, m]
+                    self.state.previous_fire_time[r, m] = self.state.previous_fire_time[b, m]
+                self.prepare_step(r, start_time, end_time, h, ratio, use_history, 0)
+                for n in range(self.n_nodes):
+                    self.state.positions[r, n] = self.state.positions[b, n]
+                self.assemble(r, inertia_scale, rate_gain, 0)
+            plus, minus = self.replica(b, j, 0), self.replica(b, j, 1)
+            for n in range(self.n_nodes):
+                self.system.rhs[b, n] = 0.5 * (self.system.rhs[plus, n] - self.system.rhs[minus, n])
+            self.system.solve(b)
+            for n in range(self.n_nodes):
+                shift = self.system.rhs[b, n]
+                self.state.positions[plus, n] = self.state.positions[b, n] - shift
+                self.state.positions[minus, n] = self.state.positions[b, n] + shift
+                self.state.velocities[plus, n] = self.implicit_velocity(plus, n, rate_gain)
+                self.state.velocities[minus, n] = self.implicit_velocity(minus, n, rate_gain)
+
+    @ti.func
+    def mirror_replicas(self, b):
+        """Give b's replicas its time, step count and status (a failed instance's tangents are
+        void: its outputs are NaN)."""
+        if ti.static(self.sensitive):
+            for j in range(self.tangent_count[None]):
+                for sign in ti.static(range(2)):
+                    r = self.replica(b, j, sign)
+                    self.state.time[r] = self.state.time[b]
+                    self.state.steps_done[r] = self.state.steps_done[b]
+                    self.state.status[r] = self.state.status[b]
+                    self.state.failure_time[r] = self.state.failure_time[b]
 
     @ti.kernel
     def advance(self, n_steps: ti.i32):
@@ -480,7 +599,7 @@ class BatchEngine:
         # instances are spread over `loop_spread` times as many iterations (the others idle).
         ti.loop_config(block_dim=self.instances_per_block)
         for slot in range(self.capacity * self.loop_spread):
-            if slot % self.loop_spread == 0:
+            if slot % self.loop_spread == 0 and self.simulated(slot // self.loop_spread):
                 b = slot // self.loop_spread
                 for _ in range(n_steps):
                     if self.state.status[b] == STATUS_OK:

@@ -54,13 +54,16 @@ one-cycle speeds converge at first order in 1/n_arc, 8-19 % low at the paper's n
 0.25-0.74 % off. The studies' `--discretisation converged` uses it."""
 
 def parameter(default, unit: str = "1", lowest=None, highest=None, lowest_included=True,
-              choices=None):
+              choices=None, differentiable: bool = True):
     """A StarParams field with its unit and allowed values declared once, in its metadata:
     "unit" ("1": dimensionless or a count), "range" (lowest, highest, lowest included) for a
     number (an integer if the default is one), "choices" for a word. `STAR_RANGES`,
     `PARAMETER_UNITS`, `STAR_CHOICES`, the validation, the column names and the field table of
-    `help(StarParams)` are all read from it."""
+    `help(StarParams)` are all read from it. `differentiable=False` marks a real number that
+    `simulate(sensitivities=...)` refuses (one that moves events rather than coefficients)."""
     metadata = {"unit": unit}
+    if not differentiable:
+        metadata["differentiable"] = False
     if lowest is not None:
         metadata["range"] = (lowest, highest, lowest_included)
     if choices is not None:
@@ -188,7 +191,7 @@ class StarParams:
     """Normal rod drag coefficient C⊥ (-)."""
     cylinder_drag: float = parameter(10.0, "1", 0.0, 1000.0)
     """Drag coefficient C_c (-) of the central cylinder."""
-    period: float = parameter(3.15, "s", 0.0, 1000.0, lowest_included=False)
+    period: float = parameter(3.15, "s", 0.0, 1000.0, lowest_included=False, differentiable=False)
     """Actuation period T, s (150 ms heating pulse + 3 s rest); longer than the heating time t0."""
     jet_mode: str = parameter("contract", choices=JET_MODES)
     """"contract": jet only while an inter-limb space shrinks; "always": the paper's formula
@@ -406,6 +409,12 @@ count)."""
 INTEGER_FIELDS = tuple(f.name for f in fields(StarParams)
                        if "range" in f.metadata and isinstance(f.default, int))
 """The numeric fields that take whole numbers (the topology)."""
+DIFFERENTIABLE_FIELDS = tuple(
+    f.name for f in fields(StarParams)
+    if ("range" in f.metadata and f.name not in INTEGER_FIELDS
+        and f.metadata.get("differentiable", True)) or f.metadata.get("per_actuator"))
+"""The fields `simulate(sensitivities=...)` can differentiate by: every real number but the
+period (it moves the firings, events of the scheme), and each number of a per-actuator field."""
 STAR_CHOICES: Dict[str, Tuple[str, ...]] = {
     f.name: f.metadata["choices"] for f in fields(StarParams) if "choices" in f.metadata}
 """The allowed words of every StarParams field that takes one of a list."""

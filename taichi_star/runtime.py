@@ -274,22 +274,24 @@ class Runtime:
             return 1
         return max(1, -(-PARALLEL_LOOP_MINIMUM // capacity))
 
-    def new_engine(self, model: BatchModel, solver: SolverConfig) -> BatchEngine:
-        """A new engine (its own device state) for this batch. Taichi must be initialised
-        (`ensure`)."""
+    def new_engine(self, model: BatchModel, solver: SolverConfig,
+                   sensitive: bool = False) -> BatchEngine:
+        """A new engine (its own device state) for this batch, `sensitive` if it is to carry
+        tangents (`engine.BatchEngine`). Taichi must be initialised (`ensure`)."""
         check_memory(model, solver.precision, self.arch)
         capacity = batch_capacity(model.batch_size)
         gpu = self.arch != "cpu"
         return BatchEngine(model, capacity, INTEGRATORS[solver.integrator](),
                            instances_per_block=self.gpu_block_dim if gpu else 1,
                            loop_spread=self.loop_spread(capacity),
-                           instance_minor=gpu and self.gpu_instance_minor)
+                           instance_minor=gpu and self.gpu_instance_minor, sensitive=sensitive)
 
-    def engine_key(self, model: BatchModel, solver: SolverConfig) -> tuple:
-        """What an engine is compiled for: topology and terms, integrator, capacity and, on a
-        GPU, its launch and layout settings."""
+    def engine_key(self, model: BatchModel, solver: SolverConfig, sensitive: bool = False) -> tuple:
+        """What an engine is compiled for: topology and terms, integrator, capacity, whether it
+        carries tangents and, on a GPU, its launch and layout settings."""
         gpu = (self.gpu_block_dim, self.gpu_instance_minor) if self.arch != "cpu" else ()
-        return (model.engine_key, solver.integrator, batch_capacity(model.batch_size)) + gpu
+        return (model.engine_key, solver.integrator, batch_capacity(model.batch_size),
+                sensitive) + gpu
 
     def lease_engine(self, model: BatchModel, solver: SolverConfig, owner) -> BatchEngine:
         """An engine of its own for `owner` (a Simulator) while the owner lives: one whose
@@ -304,14 +306,17 @@ class Runtime:
         leases.append((engine, weakref.ref(owner)))
         return engine
 
-    def engine_for(self, model: BatchModel, solver: SolverConfig) -> BatchEngine:
+    def engine_for(self, model: BatchModel, solver: SolverConfig, tangents: int = 0) -> BatchEngine:
         """The cached engine for this batch's topology, terms, integrator and capacity (created
-        on first use), loaded with the batch at rest, its gaits firing every period."""
-        key = self.engine_key(model, solver)
+        on first use), loaded with the batch at rest, its gaits firing every period. With
+        `tangents` > 0 the batch is B instances and their replicas (`BatchEngine.load`) and
+        the engine a sensitive one."""
+        sensitive = tangents > 0
+        key = self.engine_key(model, solver, sensitive)
         if key not in self.engines:
-            self.engines[key] = self.new_engine(model, solver)
+            self.engines[key] = self.new_engine(model, solver, sensitive)
         engine = self.engines[key]
-        engine.load(model, solver)
+        engine.load(model, solver, tangents=tangents)
         return engine
 
 

@@ -18,6 +18,7 @@ from .params import (PER_ACTUATOR_FIELDS, SolverConfig, StarParams, check_precis
                      parameter_column)
 from .engine import STEP_TOLERANCE
 from .extras import require
+from . import sensitivities as tangents
 from .runtime import Runtime, check_arch, stream_chunk_size
 from .state import STATUS_NAMES, STATUS_OK
 
@@ -108,6 +109,12 @@ class SimulationResult:
     records.
 
     `shapes`: (n_records, B, N, 2) node positions in m at the record times, when requested.
+
+    With `simulate(..., sensitivities=names)`: `sensitivities`, one row per instance with a
+    column "d(output)/d(parameter)" for every output of `sensitivities.SUMMARY_OUTPUTS` and
+    every parameter (in the output's unit per the parameter's unit), and
+    `trajectory_sensitivities`, the same for x_mm, y_mm and heading_deg at every record
+    (instance, t_s, ...); `sensitivity(output, parameter)` reads one as an array.
     """
 
     summary: pd.DataFrame
@@ -116,6 +123,35 @@ class SimulationResult:
     topology: Optional[Topology] = field(repr=False)
     """The batch's topology (None for a run_batch result mixing topologies)."""
     solver: SolverConfig = field(repr=False)
+    sensitivities: Optional[pd.DataFrame] = field(default=None, repr=False)
+    trajectory_sensitivities: Optional[pd.DataFrame] = field(default=None, repr=False)
+
+    def sensitivity(self, output: str, parameter: str) -> np.ndarray:
+        """d(output)/d(parameter) for every instance: (B,) for a summary output
+        (`sensitivities.SUMMARY_OUTPUTS`), (B, n_records) for a trajectory one (x_mm, y_mm,
+        heading_deg). `parameter` as named in `simulate` ("alpha"; "actuator_gains" gives
+        (B, 8) or (B, 8, n_records), "actuator_gains[2]" one actuator). ValueError for an
+        output or parameter the run did not differentiate."""
+        if self.sensitivities is None:
+            raise ValueError("this result has no sensitivities: pass sensitivities=(...) to "
+                             "simulate")
+        directions = tangents.parse_directions([parameter])
+        if output in tangents.SUMMARY_OUTPUTS:
+            table, shape = self.sensitivities, (len(self.summary),)
+        elif output in tangents.TRAJECTORY_OUTPUTS:
+            table = self.trajectory_sensitivities
+            shape = (len(self.summary), len(table) // max(len(self.summary), 1))
+        else:
+            raise ValueError(f"output must be one of {tangents.SUMMARY_OUTPUTS + tangents.TRAJECTORY_OUTPUTS}, "
+                             f"got {output!r}")
+        columns = [tangents.sensitivity_column(output, direction.label) for direction in directions]
+        missing = [column for column in columns if column not in table]
+        if missing:
+            raise ValueError(f"parameter {parameter!r} was not among this run's sensitivities "
+                             f"(columns: {list(self.sensitivities.columns[:3])}...)")
+        values = np.stack([table[column].to_numpy().reshape(shape) for column in columns], axis=1)
+        return values[:, 0] if len(columns) == 1 and "[" not in parameter and \
+            directions[0].index < 0 else values
 
     def to_xarray(self):
         """The result as a labelled xarray Dataset with units (see `output.to_xarray`)."""
@@ -228,7 +264,8 @@ class _Clock:
 
 def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConfig = SolverConfig(),
              *, arch: str = "cpu", record_interval_s: float = 0.0, record_shapes: bool = False,
-             steady_from_cycle: int = 1, progress: bool = False) -> SimulationResult:
+             steady_from_cycle: int = 1, progress: bool = False,
+             sensitivities: Sequence[str] = ()) -> SimulationResult:
     """Simulate a batch of robot instances (a sequence of StarParams; a single StarParams is a
     batch of one) from rest in their rest shape for duration_s seconds and return a `SimulationResult` (see there for every column, with units).
 
@@ -243,6 +280,11 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     that fall on a step) for the steady speeds from cycle `steady_from_cycle` on. Raises
     ValueError for any bad argument before computing anything.
 
+    `sensitivities`: StarParams fields (`params.DIFFERENTIABLE_FIELDS`; "actuator_gains" for
+    all eight, "actuator_gains[3]" for one) to differentiate every output by, for every
+    instance (`SimulationResult.sensitivity`; how: `taichi_star.sensitivities`). Each one costs
+    two replica instances per instance, which are moved along the exact tangent, not solved.
+
     Memory: on the CPU a batch larger than one engine of `runtime.CPU_ENGINE_BUDGET_BYTES` is
     streamed through such an engine in equal chunks, one after the other; the result is the
     same, bit for bit, as in one engine (instances never interact), and the memory a batch
@@ -250,10 +292,14 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     params, duration_s, record_interval_s = validate_call(params, duration_s, solver,
                                                           record_interval_s, record_shapes,
                                                           steady_from_cycle)
+    directions = tangents.parse_directions(sensitivities)
+    tangents.check_directions(directions, params, solver)
     check_arch(arch)
     runtime = Runtime.current()
     runtime.ensure(arch, solver.precision)
-    chunk = stream_chunk_size(params, solver.precision, arch)
+    # replicas travel in their instance's chunk: a chunk holds (1 + 2·directions) × its instances
+    per_instance = 1 + 2 * len(directions)
+    chunk = max(1, stream_chunk_size(params * per_instance, solver.precision, arch) // per_instance)
     starts = range(0, len(params), chunk)
     results = []
     for number, start in enumerate(starts):
@@ -261,7 +307,7 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
             f", chunk {number + 1}/{len(starts)}" if len(starts) > 1 else "")
         results.append(_simulate_chunk(params[start:start + chunk], duration_s, solver, runtime,
                                        record_interval_s, record_shapes, steady_from_cycle,
-                                       label if progress else None))
+                                       label if progress else None, directions))
     return results[0] if len(results) == 1 else _concatenate(results)
 
 
@@ -272,18 +318,29 @@ def _concatenate(results: Sequence[SimulationResult]) -> SimulationResult:
                             for result, offset in zip(results, offsets)], ignore_index=True)
     shapes = (np.concatenate([result.shapes for result in results], axis=1)
               if results[0].shapes is not None else None)
+    sensitivities, trajectory_sensitivities = None, None
+    if results[0].sensitivities is not None:
+        sensitivities = pd.concat([result.sensitivities for result in results], ignore_index=True)
+        trajectory_sensitivities = pd.concat(
+            [result.trajectory_sensitivities.assign(
+                instance=result.trajectory_sensitivities["instance"] + offset)
+             for result, offset in zip(results, offsets)], ignore_index=True)
     return SimulationResult(summary=pd.concat([result.summary for result in results],
                                               ignore_index=True),
                             trajectory=trajectory, shapes=shapes, topology=results[0].topology,
-                            solver=results[0].solver)
+                            solver=results[0].solver, sensitivities=sensitivities,
+                            trajectory_sensitivities=trajectory_sensitivities)
 
 
 def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, record_shapes,
-                    steady_from_cycle, progress_label):
+                    steady_from_cycle, progress_label, directions=()):
     """`simulate` of one batch in one engine (arguments validated, Taichi initialised);
-    progress_label: the progress bar's description, None for no bar."""
+    progress_label: the progress bar's description, None for no bar; `directions`: those of
+    the sensitivities (`sensitivities.parse_directions`)."""
+    if directions:
+        params, steps = tangents.replica_batch(params, directions)
     model = build_model(params)
-    engine = runtime.engine_for(model, solver)
+    engine = runtime.engine_for(model, solver, tangents=len(directions))
     batch = model.batch_size
     clock = _Clock(engine, solver, duration_s)
 
@@ -333,8 +390,17 @@ def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, reco
     if bar is not None:
         bar.close()
     record_times = np.array([clock.time_of(stop) for stop in record_stops])
-    return _collect(engine, model, solver, clock.time_of(clock.end), record_times, start_centroids,
-                    centroids, rotations, shapes, boundaries, steady_from_cycle)
+    result = _collect(engine, model, solver, clock.time_of(clock.end), record_times,
+                      start_centroids, centroids, rotations, shapes, boundaries, steady_from_cycle)
+    if not directions:
+        return result
+    count = batch // (1 + 2 * len(directions))
+    summary, trajectory, sensitivities, trajectory_sensitivities = tangents.split_result(
+        result.summary, result.trajectory, directions, steps)
+    return SimulationResult(summary=summary, trajectory=trajectory,
+                            shapes=None if result.shapes is None else result.shapes[:, :count],
+                            topology=result.topology, solver=solver, sensitivities=sensitivities,
+                            trajectory_sensitivities=trajectory_sensitivities)
 
 
 def _collect(engine, model, solver, duration, record_times, start, centroids, rotations, shapes,

@@ -1,0 +1,197 @@
+"""Sensitivities of a run's outputs with respect to per-instance parameters.
+
+`simulate(params, T, sensitivities=("alpha", "drag_perpendicular"))` gives, for every instance,
+the derivative of each output with respect to each named StarParams field, exact for the discrete
+scheme up to the round-off of a central difference (relative ~1e-9; the tests compare with
+finite differences of whole runs).
+
+How: for each direction (a field, or one number of a per-actuator field) every instance b gets
+two replicas in the same engine, built at its parameters moved by +ε and −ε (`DirectionSet`).
+The replicas are never solved. After each accepted step of b, the engine moves them to b's new
+state ± ε times the state's exact derivative, from the implicit function theorem on b's step
+(`engine.BatchEngine.tangent_step`): the step's Jacobian at the converged state, factored once,
+times the derivative equals minus the derivative of the residual with respect to the parameter
+and to the step's start state. The replicas' own residuals, assembled at b's converged state
+from their own start states and coefficients, give that right-hand side as a central
+difference, and every term and extension is covered without a line of derivative code of its
+own. An output of the run is a smooth function of the states, so its derivative is the central
+difference of the replicas' outputs, which lie on the tangent line (error O(ε²)).
+
+The step sequence is that of b: with adaptive steps the accepted steps are frozen, as are the
+firing times (events, not functions of the parameters: `period` is not differentiable).
+"""
+
+from __future__ import annotations
+
+import copy
+import difflib
+from dataclasses import dataclass
+from typing import List, Sequence, Tuple
+
+import numpy as np
+import pandas as pd
+
+from .params import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS, PER_ACTUATOR_FIELDS, STAR_RANGES,
+                     SolverConfig, StarParams)
+from .gait import N_ACTUATORS
+
+RELATIVE_STEP = 1e-5
+"""ε of a direction relative to the parameter's value: the central differences' truncation
+error is O(ε²) ≈ 1e-10 and their round-off ≈ 1e-16/ε ≈ 1e-11, relative."""
+ZERO_VALUE_SCALE = 0.01
+"""For a parameter at 0, ε is RELATIVE_STEP times this share of the top of its range (for a
+per-actuator delay: of the period)."""
+SUMMARY_OUTPUTS = ("displacement_x_mm", "displacement_y_mm", "speed_mm_s", "signed_speed_mm_s",
+                   "travel_direction_deg", "heading_deg", "steady_speed_mm_s",
+                   "steady_signed_speed_mm_s")
+"""The summary columns whose derivatives a run with sensitivities reports."""
+TRAJECTORY_OUTPUTS = ("x_mm", "y_mm", "heading_deg")
+"""The trajectory columns whose derivatives it reports, at every record."""
+
+
+def sensitivity_column(output: str, direction: str) -> str:
+    """Column name of d(output)/d(direction), e.g. "d(displacement_x_mm)/d(alpha)"."""
+    return f"d({output})/d({direction})"
+
+
+@dataclass(frozen=True)
+class Direction:
+    """One parameter to differentiate by: a field, and for a per-actuator field the actuator's
+    index (A_k at k − 1)."""
+
+    field: str
+    index: int = -1
+
+    @property
+    def label(self) -> str:
+        return self.field if self.index < 0 else f"{self.field}[{self.index}]"
+
+    def value(self, params: StarParams) -> float:
+        value = getattr(params, self.field)
+        return float(value if self.index < 0 else value[self.index])
+
+    def moved(self, params: StarParams, value: float) -> StarParams:
+        """A copy of params with this parameter set to `value`. Not validated: a replica of an
+        instance at the edge of a range lies ε beyond it, where the model's formulas continue
+        smoothly."""
+        replica = copy.copy(params)
+        if self.index < 0:
+            object.__setattr__(replica, self.field, float(value))
+        else:
+            values = list(getattr(params, self.field))
+            values[self.index] = float(value)
+            object.__setattr__(replica, self.field, tuple(values))
+        return replica
+
+    def step(self, params: StarParams) -> float:
+        """ε for this instance (see RELATIVE_STEP and ZERO_VALUE_SCALE)."""
+        value = abs(self.value(params))
+        if value == 0.0:
+            top = params.period if self.field == "actuator_delays" else (
+                STAR_RANGES[self.field][1] if self.field in STAR_RANGES else 1.0)
+            value = ZERO_VALUE_SCALE * top
+        return RELATIVE_STEP * value
+
+
+def parse_directions(names) -> Tuple[Direction, ...]:
+    """The directions of `simulate`'s `sensitivities` argument: field names, a per-actuator
+    field standing for its eight numbers ("actuator_gains") or one of them
+    ("actuator_gains[3]"). ValueError naming an unknown, repeated or non-differentiable one."""
+    if isinstance(names, str) or not hasattr(names, "__iter__"):
+        raise ValueError(f"sensitivities must be a sequence of StarParams field names, got "
+                         f"{names!r}")
+    directions: List[Direction] = []
+    for name in names:
+        if not isinstance(name, str):
+            raise ValueError(f"sensitivities must hold field names, got {name!r}")
+        field, _, rest = name.partition("[")
+        indices = [-1]
+        if field in PER_ACTUATOR_FIELDS:
+            indices = list(range(N_ACTUATORS))
+            if rest:
+                index = rest[:-1]
+                if not (rest.endswith("]") and index.isdigit() and int(index) < N_ACTUATORS):
+                    raise ValueError(f"sensitivities: {name!r} must name an actuator index in "
+                                     f"[0, {N_ACTUATORS - 1}], e.g. {field}[0]")
+                indices = [int(index)]
+        elif rest or field not in DIFFERENTIABLE_FIELDS:
+            if field in StarParams.__dataclass_fields__:
+                raise ValueError(f"sensitivities: {name!r} is not differentiable (a word, a "
+                                 f"count, the profile, or the period, which moves the firings); "
+                                 f"differentiable fields: {', '.join(DIFFERENTIABLE_FIELDS)}")
+            close = difflib.get_close_matches(field, DIFFERENTIABLE_FIELDS, n=3)
+            hint = f"; did you mean {', '.join(close)}?" if close else ""
+            raise ValueError(f"sensitivities: {name!r} is not a StarParams field{hint} "
+                             f"(differentiable fields: {', '.join(DIFFERENTIABLE_FIELDS)})")
+        for index in indices:
+            direction = Direction(field, index)
+            if direction in directions:
+                raise ValueError(f"sensitivities: {direction.label!r} is named twice")
+            directions.append(direction)
+    return tuple(directions)
+
+
+def check_directions(directions: Sequence[Direction], params: Sequence[StarParams],
+                     solver: SolverConfig):
+    """ValueError, before any compute, where the sensitivities are not defined: in f32 (a
+    central difference needs f64's digits) and for a component height at 0 (0 turns the 2.5-D
+    model off: no derivative across that switch)."""
+    if directions and solver.precision != "f64":
+        raise ValueError(f"sensitivities need precision 'f64' (central differences lose f32's "
+                         f"digits), got {solver.precision!r}")
+    for direction in directions:
+        if direction.field in COMPONENT_HEIGHTS:
+            at_zero = [b for b, p in enumerate(params) if direction.value(p) == 0.0]
+            if at_zero:
+                raise ValueError(f"sensitivities: {direction.field} is 0 (the 2.5-D model off) "
+                                 f"for instance {at_zero[0]}; its derivative is defined only "
+                                 f"with the component heights set (> 0)")
+
+
+def replica_batch(params: Sequence[StarParams], directions: Sequence[Direction]):
+    """(the batch to simulate: the instances, then for each direction j their +ε_j replicas and
+    their −ε_j replicas, the order of `engine.BatchEngine.replica`; steps (n_directions, B))."""
+    steps = np.array([[direction.step(p) for p in params] for direction in directions])
+    batch = list(params)
+    for direction, row in zip(directions, steps):
+        for sign in (1.0, -1.0):
+            batch += [direction.moved(p, direction.value(p) + sign * eps)
+                      for p, eps in zip(params, row)]
+    return batch, steps
+
+
+def _difference(plus: np.ndarray, minus: np.ndarray, output: str) -> np.ndarray:
+    """plus − minus, an angle's difference (output in degrees) taken the short way round."""
+    difference = plus - minus
+    if output.endswith("_deg"):
+        difference = (difference + 180.0) % 360.0 - 180.0
+    return difference
+
+
+def split_result(summary: pd.DataFrame, trajectory: pd.DataFrame,
+                 directions: Sequence[Direction], steps: np.ndarray):
+    """From the tables of a run of `replica_batch`: (summary and trajectory of the instances
+    alone, sensitivities: one row per instance with a column `sensitivity_column(output,
+    direction)` per SUMMARY_OUTPUTS × direction, trajectory sensitivities: the trajectory's
+    instance and t_s with one column per TRAJECTORY_OUTPUTS × direction)."""
+    count = len(summary) // (1 + 2 * len(directions))
+    sensitivities = {}
+    by_instance = trajectory.sort_values(["instance", "t_s"], kind="stable")
+    records = len(by_instance) // len(summary) if len(summary) else 0
+    primal_trajectory = by_instance[by_instance["instance"] < count].reset_index(drop=True)
+    trajectory_sensitivities = {"instance": primal_trajectory["instance"].to_numpy(),
+                                "t_s": primal_trajectory["t_s"].to_numpy()}
+    for j, direction in enumerate(directions):
+        plus = slice((1 + 2 * j) * count, (2 + 2 * j) * count)
+        minus = slice((2 + 2 * j) * count, (3 + 2 * j) * count)
+        width = 2.0 * steps[j]
+        for output in SUMMARY_OUTPUTS:
+            values = summary[output].to_numpy(dtype=float)
+            sensitivities[sensitivity_column(output, direction.label)] = _difference(
+                values[plus], values[minus], output) / width
+        for output in TRAJECTORY_OUTPUTS:
+            values = by_instance[output].to_numpy(dtype=float).reshape(len(summary), records)
+            trajectory_sensitivities[sensitivity_column(output, direction.label)] = (
+                _difference(values[plus], values[minus], output) / width[:, None]).ravel()
+    return (summary.iloc[:count].reset_index(drop=True), primal_trajectory,
+            pd.DataFrame(sensitivities), pd.DataFrame(trajectory_sensitivities))
