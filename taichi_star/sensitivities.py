@@ -35,9 +35,14 @@ from .params import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS, PER_ACTUATOR_FIEL
                      SolverConfig, StarParams)
 from .gait import N_ACTUATORS
 
-RELATIVE_STEP = 1e-5
-"""ε of a direction relative to the parameter's value: the central differences' truncation
-error is O(ε²) ≈ 1e-10 and their round-off ≈ 1e-16/ε ≈ 1e-11, relative."""
+RELATIVE_STEP = 1e-6
+"""ε of a direction relative to the parameter's value (see EXTRAPOLATION_SCALES)."""
+EXTRAPOLATION_SCALES = (1.0, 2.0)
+"""Each direction has a replica pair at ±ε and one at ±2ε; its derivative is 2·D(ε) − D(2ε).
+Where the residual is smooth, a pair's central differences are exact to O(ε²). The drag
+|v|·v is not twice differentiable at v = 0, and states sit exactly there (a velocity
+component that a symmetric gait keeps at zero): a pair straddling it adds ε²·a·|a| to its
+half difference, an error exactly linear in ε, which the extrapolation removes."""
 ZERO_VALUE_SCALE = 0.01
 """For a parameter at 0, ε is RELATIVE_STEP times this share of the top of its range (for a
 per-actuator delay: of the period)."""
@@ -149,14 +154,17 @@ def check_directions(directions: Sequence[Direction], params: Sequence[StarParam
 
 
 def replica_batch(params: Sequence[StarParams], directions: Sequence[Direction]):
-    """(the batch to simulate: the instances, then for each direction j their +ε_j replicas and
-    their −ε_j replicas, the order of `engine.BatchEngine.replica`; steps (n_directions, B))."""
+    """(the batch to simulate, steps (n_directions, B)). The batch: the instances, then for
+    each direction its pairs of replicas at ±ε and at ±2ε (`EXTRAPOLATION_SCALES`), each pair
+    as +ε replicas then −ε replicas: the order of `engine.BatchEngine.replica`, whose
+    direction j is pair j here (so the engine carries 2·n_directions tangents)."""
     steps = np.array([[direction.step(p) for p in params] for direction in directions])
     batch = list(params)
     for direction, row in zip(directions, steps):
-        for sign in (1.0, -1.0):
-            batch += [direction.moved(p, direction.value(p) + sign * eps)
-                      for p, eps in zip(params, row)]
+        for scale in EXTRAPOLATION_SCALES:
+            for sign in (1.0, -1.0):
+                batch += [direction.moved(p, direction.value(p) + sign * scale * eps)
+                          for p, eps in zip(params, row)]
     return batch, steps
 
 
@@ -174,24 +182,31 @@ def split_result(summary: pd.DataFrame, trajectory: pd.DataFrame,
     alone, sensitivities: one row per instance with a column `sensitivity_column(output,
     direction)` per SUMMARY_OUTPUTS × direction, trajectory sensitivities: the trajectory's
     instance and t_s with one column per TRAJECTORY_OUTPUTS × direction)."""
-    count = len(summary) // (1 + 2 * len(directions))
+    pairs = len(EXTRAPOLATION_SCALES)
+    count = len(summary) // (1 + 2 * pairs * len(directions))
     sensitivities = {}
     by_instance = trajectory.sort_values(["instance", "t_s"], kind="stable")
     records = len(by_instance) // len(summary) if len(summary) else 0
     primal_trajectory = by_instance[by_instance["instance"] < count].reset_index(drop=True)
     trajectory_sensitivities = {"instance": primal_trajectory["instance"].to_numpy(),
                                 "t_s": primal_trajectory["t_s"].to_numpy()}
+    def derivative(values, j, output):
+        """2·D(ε) − D(2ε) of direction j from per-instance values (B_all, ...) of output."""
+        quotients = []
+        for pair, scale in enumerate(EXTRAPOLATION_SCALES):
+            first = (1 + 2 * (pairs * j + pair)) * count
+            plus, minus = values[first:first + count], values[first + count:first + 2 * count]
+            width = (2.0 * scale * steps[j]).reshape((count,) + (1,) * (values.ndim - 1))
+            quotients.append(_difference(plus, minus, output) / width)
+        return 2.0 * quotients[0] - quotients[1]
+
     for j, direction in enumerate(directions):
-        plus = slice((1 + 2 * j) * count, (2 + 2 * j) * count)
-        minus = slice((2 + 2 * j) * count, (3 + 2 * j) * count)
-        width = 2.0 * steps[j]
         for output in SUMMARY_OUTPUTS:
-            values = summary[output].to_numpy(dtype=float)
-            sensitivities[sensitivity_column(output, direction.label)] = _difference(
-                values[plus], values[minus], output) / width
+            sensitivities[sensitivity_column(output, direction.label)] = derivative(
+                summary[output].to_numpy(dtype=float), j, output)
         for output in TRAJECTORY_OUTPUTS:
             values = by_instance[output].to_numpy(dtype=float).reshape(len(summary), records)
-            trajectory_sensitivities[sensitivity_column(output, direction.label)] = (
-                _difference(values[plus], values[minus], output) / width[:, None]).ravel()
+            trajectory_sensitivities[sensitivity_column(output, direction.label)] = derivative(
+                values, j, output).ravel()
     return (summary.iloc[:count].reset_index(drop=True), primal_trajectory,
             pd.DataFrame(sensitivities), pd.DataFrame(trajectory_sensitivities))

@@ -150,8 +150,7 @@ class SimulationResult:
             raise ValueError(f"parameter {parameter!r} was not among this run's sensitivities "
                              f"(columns: {list(self.sensitivities.columns[:3])}...)")
         values = np.stack([table[column].to_numpy().reshape(shape) for column in columns], axis=1)
-        return values[:, 0] if len(columns) == 1 and "[" not in parameter and \
-            directions[0].index < 0 else values
+        return values if len(columns) > 1 else values[:, 0]
 
     def to_xarray(self):
         """The result as a labelled xarray Dataset with units (see `output.to_xarray`)."""
@@ -298,7 +297,7 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     runtime = Runtime.current()
     runtime.ensure(arch, solver.precision)
     # replicas travel in their instance's chunk: a chunk holds (1 + 2·directions) × its instances
-    per_instance = 1 + 2 * len(directions)
+    per_instance = 1 + 2 * len(tangents.EXTRAPOLATION_SCALES) * len(directions)
     chunk = max(1, stream_chunk_size(params * per_instance, solver.precision, arch) // per_instance)
     starts = range(0, len(params), chunk)
     results = []
@@ -340,7 +339,8 @@ def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, reco
     if directions:
         params, steps = tangents.replica_batch(params, directions)
     model = build_model(params)
-    engine = runtime.engine_for(model, solver, tangents=len(directions))
+    engine = runtime.engine_for(model, solver, tangents=len(directions) * len(
+        tangents.EXTRAPOLATION_SCALES))
     batch = model.batch_size
     clock = _Clock(engine, solver, duration_s)
 
@@ -394,7 +394,7 @@ def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, reco
                       start_centroids, centroids, rotations, shapes, boundaries, steady_from_cycle)
     if not directions:
         return result
-    count = batch // (1 + 2 * len(directions))
+    count = len(params) // (1 + 2 * len(tangents.EXTRAPOLATION_SCALES) * len(directions))
     summary, trajectory, sensitivities, trajectory_sensitivities = tangents.split_result(
         result.summary, result.trajectory, directions, steps)
     return SimulationResult(summary=summary, trajectory=trajectory,
