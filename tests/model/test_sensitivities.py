@@ -1,0 +1,137 @@
+"""Sensitivities through the implicit solver (`simulate(..., sensitivities=...)`) against finite
+differences of whole runs, and the rules of the API."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from taichi_star import SolverConfig, StarParams, simulate
+from taichi_star.sensitivities import SUMMARY_OUTPUTS, parse_directions, sensitivity_column
+
+DURATION_S = 0.1
+"""100 steps of 1 ms: the A1 pulse has begun to bend the arcs and the robot to move."""
+BASE = StarParams.preset("paper")
+BATCH = (dataclasses.replace(BASE, gait="A1+A2"),
+         dataclasses.replace(BASE, gait="A1+A3", alpha=1.2))
+DIRECTIONS = ("alpha", "actuator_gains[1]", "drag_perpendicular")
+TIGHT = dict(newton_tol=1e-12)
+"""Newton to 1e-12 m, so that the finite differences' noise (tolerance / step) stays below 1e-7
+of the derivatives."""
+
+
+def component(direction):
+    """(get, put) of the parameter a direction names (one number of a per-actuator field)."""
+    (parsed,) = parse_directions([direction])
+    return parsed.value, parsed.moved
+
+
+def finite_difference(params, direction, solver, output="displacement_x_mm"):
+    """Richardson-extrapolated central difference 2·D(h) − D(2h) of whole runs, h = 1e-5 of
+    each instance's value: the drag's kink at zero velocity makes a plain central difference
+    first order in h for the symmetric gait A1+A2 (measured: D(h) and D(2h) differ by ~2e-6
+    relative there), the extrapolation second order."""
+    get, put = component(direction)
+
+    def quotient(relative):
+        steps = [relative * abs(get(p)) for p in params]
+        plus = simulate([put(p, get(p) + h) for p, h in zip(params, steps)], DURATION_S, solver)
+        minus = simulate([put(p, get(p) - h) for p, h in zip(params, steps)], DURATION_S, solver)
+        return (plus.summary[output].to_numpy() - minus.summary[output].to_numpy()) / (
+            2 * np.array(steps))
+
+    return 2 * quotient(1e-5) - quotient(2e-5)
+
+
+@pytest.fixture(scope="module")
+def euler_run(taichi_cpu):
+    return simulate(BATCH, DURATION_S, SolverConfig(**TIGHT), record_interval_s=0.05,
+                    sensitivities=DIRECTIONS)
+
+
+@pytest.mark.parametrize("direction", ["alpha", "drag_perpendicular"])
+def test_euler_sensitivities_equal_finite_differences(euler_run, direction):
+    expected = finite_difference(BATCH, direction, SolverConfig(**TIGHT))
+    # 1e-5: the target; measured 2e-6 and below (the rest is the extrapolated difference's own
+    # truncation and the Newton noise of the runs)
+    np.testing.assert_allclose(euler_run.sensitivity("displacement_x_mm", direction), expected,
+                               rtol=1e-5)
+
+
+def test_an_actuator_the_gait_never_fires_has_no_influence(euler_run):
+    gains = euler_run.sensitivity("displacement_x_mm", "actuator_gains[1]")
+    # A1+A3 never fires A2: its replicas differ only in a coefficient no kernel reads
+    assert gains[1] == 0.0
+    expected = finite_difference(BATCH[:1], "actuator_gains[1]", SolverConfig(**TIGHT))
+    np.testing.assert_allclose(gains[0], expected[0], rtol=1e-5)
+
+
+def test_the_instances_rows_are_those_of_a_run_without_sensitivities(euler_run):
+    plain = simulate(BATCH, DURATION_S, SolverConfig(**TIGHT), record_interval_s=0.05)
+    for column in SUMMARY_OUTPUTS:
+        # the replicas ride in the same engine but never touch an instance's arithmetic
+        assert np.array_equal(plain.summary[column].to_numpy(), euler_run.summary[column].to_numpy(),
+                              equal_nan=True), column
+    assert plain.trajectory.equals(euler_run.trajectory)
+
+
+def test_trajectory_sensitivities_start_at_zero_and_end_at_the_displacements(euler_run):
+    dx = euler_run.sensitivity("x_mm", "alpha")
+    assert dx.shape == (2, 3)
+    # x_mm is relative to the start: its derivative is exactly 0 there
+    assert np.all(dx[:, 0] == 0.0)
+    # the last record is the end of the run: the same difference of the same centroids
+    np.testing.assert_allclose(dx[:, -1], euler_run.sensitivity("displacement_x_mm", "alpha"),
+                               rtol=1e-12)
+
+
+def test_a_per_actuator_field_gives_one_column_per_actuator(euler_run):
+    with pytest.raises(ValueError, match="actuator_gains"):
+        euler_run.sensitivity("displacement_x_mm", "actuator_gains")  # only [1] was run
+    table = euler_run.sensitivities
+    assert sensitivity_column("signed_speed_mm_s", "actuator_gains[1]") in table
+    assert len(table) == len(BATCH)
+
+
+def test_bdf2_with_damping_chord_and_adaptive_steps(taichi_cpu):
+    batch = [dataclasses.replace(p, damping_time=0.01) for p in BATCH]
+    # dt_max = dt and a loose error_tol: every run, the replicas' instance and the finite
+    # differences' alike, takes the same 100 steps of 1 ms, so the frozen step sequence is the
+    # one the differences see
+    adaptive = dict(integrator="bdf2", adaptive=True, error_tol=1e-3, dt_max=1e-3, **TIGHT)
+    directions = ("alpha", "drag_perpendicular")
+    result = simulate(batch, DURATION_S, SolverConfig(jacobian="chord", **adaptive),
+                      sensitivities=directions)
+    assert (result.summary["steps"] == 100).all()
+    for direction in directions:
+        expected = finite_difference(batch, direction, SolverConfig(**adaptive))
+        # as for implicit Euler: 1e-5 the target, measured ≤ 4e-6
+        np.testing.assert_allclose(result.sensitivity("displacement_x_mm", direction), expected,
+                                   rtol=1e-5)
+
+
+@pytest.mark.parametrize("names, message", [
+    (("alpah",), "did you mean alpha"),
+    (("gait",), "not differentiable"),
+    (("period",), "not differentiable"),
+    (("n_arc",), "not differentiable"),
+    (("actuator_gains[8]",), r"actuator index in \[0, 7\]"),
+    (("alpha", "alpha"), "named twice"),
+    ("alpha", "sequence of StarParams field names"),
+])
+def test_bad_names_are_refused_before_any_compute(names, message):
+    with pytest.raises(ValueError, match=message):
+        simulate(BATCH, DURATION_S, sensitivities=names)
+
+
+def test_f32_and_an_unset_component_height_are_refused():
+    with pytest.raises(ValueError, match="precision 'f64'"):
+        simulate(BATCH, DURATION_S, SolverConfig(precision="f32", newton_tol=1e-7),
+                 sensitivities=("alpha",))
+    with pytest.raises(ValueError, match="hub_height is 0"):
+        simulate(BATCH, DURATION_S, sensitivities=("hub_height",))
+
+
+def test_a_whole_per_actuator_field_names_its_eight_numbers():
+    directions = parse_directions(["actuator_delays", "alpha"])
+    assert [d.label for d in directions] == [f"actuator_delays[{k}]" for k in range(8)] + ["alpha"]
