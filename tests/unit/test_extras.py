@@ -16,7 +16,9 @@ REPO = Path(__file__).resolve().parents[2]
 
 OPTIONAL_PACKAGES = ("gymnasium", "matplotlib", "PIL", "cma", "SALib", "scipy", "xarray",
                      "netCDF4", "imageio_ffmpeg", "dask", "distributed", "stable_baselines3")
-"""Top-level packages of the extras (pyproject.toml [project.optional-dependencies])."""
+"""Top-level packages of the extras (pyproject.toml [project.optional-dependencies]); pyarrow,
+an extra too, is left out here because pandas imports it whenever it is installed: the test of
+the main job below makes it absent instead."""
 
 
 def test_core_modules_import_no_optional_package():
