@@ -3,7 +3,7 @@
     python examples/sweep_alpha.py                       # 9 values × 2 gaits, 3 cycles (~1 min)
     EXAMPLE_QUICK=1 python examples/sweep_alpha.py       # 3 values, 0.3 s (seconds)
 
-The plot needs matplotlib (pip install -e ".[studies]").
+The plot needs matplotlib (pip install -e ".[plots]").
 
 Writes sweep_alpha.csv (one row per robot: its parameters and the simulate summary) and
 sweep_alpha.png (drawn from that CSV) into the current folder.

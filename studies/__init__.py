@@ -13,6 +13,18 @@ import pkgutil
 HELPERS = ("cli", "provenance", "figures", "identify", "__main__")
 """Modules of this package that are not studies."""
 
+EXTRA_OF_STUDY = {
+    "animate": "plots", "bench": "plots", "calibrate": "studies", "convergence": "plots",
+    "env_bench": "envs", "fig4c": "plots", "gaits": "plots", "model_select": "studies",
+    "plan": "plots", "primitives": "plots", "reproduce": "studies", "scaling": None,
+    "sensitivity": "studies", "stability": "plots", "sweep": "studies",
+    "work_precision": "plots",
+}
+"""The extra of pyproject.toml each study needs beyond the core (None: the core alone), checked
+by the launcher before the study is imported. "plots" (matplotlib) keeps the main job, fig4c,
+light; a study that needs more than one extra names "studies", which holds them all (reproduce
+runs every study). scaling times Dask clusters unless --no-dask, and checks for it itself."""
+
 
 def study_names():
     """The studies: every module of this package but the helpers, sorted."""

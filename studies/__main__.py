@@ -1,23 +1,20 @@
 """`python -m studies <name> [options]`; `python -m studies <name> --help` for a study's flags."""
 
+import ast
 import errno
 import importlib
 import sys
 from pathlib import Path
 
 from taichi_star.batch import RunStoreError
-from taichi_star.extras import first_missing
+from taichi_star.extras import missing_extra
 
-from . import study_names
+from . import EXTRA_OF_STUDY, study_names
 from .cli import StudyArgumentError, StudyOutputError, configure_logging
 
 
 FULL_DISK = (errno.ENOSPC, errno.EDQUOT)
 """Errors of a write that found no room: a one-line error, not a traceback."""
-
-
-STUDIES_EXTRA = ("matplotlib", "PIL", "cma", "SALib", "scipy", "gymnasium")
-"""What the studies import beyond the core (pyproject.toml's `studies` extra)."""
 
 
 def program() -> str:
@@ -28,21 +25,36 @@ def program() -> str:
     return f"python -m {__package__}"
 
 
+def description(name: str) -> str:
+    """The study's DESCRIPTION, read from its source without importing it (a study whose extra
+    is not installed cannot be imported, and is still listed)."""
+    source = (Path(__file__).parent / f"{name}.py").read_text(encoding="utf-8")
+    for node in ast.parse(source).body:
+        if isinstance(node, ast.Assign) and [getattr(t, "id", None) for t in node.targets] \
+                == ["DESCRIPTION"]:
+            return ast.literal_eval(node.value)
+    raise LookupError(f"study {name} has no DESCRIPTION")
+
+
+def missing_requirement(name: str) -> str:
+    """"" when the extra the study `name` needs is installed (or it needs none), else the one
+    line saying which extra to install."""
+    extra = EXTRA_OF_STUDY[name]
+    return missing_extra(extra) if extra else ""
+
+
 def usage() -> str:
     lines = [f"usage: {program()} <name> [--out DIR] [--quick] [--arch cpu|gpu] ...",
              "", "studies:"]
     for name in study_names():
-        description = importlib.import_module(f"{__package__}.{name}").DESCRIPTION
-        lines.append(f"  {name:<15} {description.splitlines()[0]}")
+        extra = EXTRA_OF_STUDY[name]
+        needs = f" (needs the {extra!r} extra)" if missing_requirement(name) else ""
+        lines.append(f"  {name:<15} {description(name).splitlines()[0]}{needs}")
     return "\n".join(lines)
 
 
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    missing = first_missing(STUDIES_EXTRA, "studies")
-    if missing:  # before any compute (and before the list, which imports every study)
-        print(f"{program()}: error: {missing}", file=sys.stderr)
-        return 2
     if not argv or argv[0] in ("-h", "--help"):  # no study named: the list is the answer
         print(usage())
         return 0
@@ -50,6 +62,10 @@ def main(argv=None) -> int:
     if name not in study_names():
         print(f"{program()}: error: unknown study {name!r}; choose one of "
               f"{', '.join(study_names())}", file=sys.stderr)
+        return 2
+    missing = missing_requirement(name)
+    if missing:  # before the study is imported, so before any compute
+        print(f"{program()} {name}: error: {missing}", file=sys.stderr)
         return 2
     configure_logging()
     module = importlib.import_module(f"{__package__}.{name}")
@@ -62,7 +78,7 @@ def main(argv=None) -> int:
         if error.errno not in FULL_DISK:
             raise
         # a plot or animation written outside Output's tables (those give StudyOutputError)
-        print(f"python -m studies {name}: error: cannot write {error.filename or 'a file'} "
+        print(f"{program()} {name}: error: cannot write {error.filename or 'a file'} "
               f"({error.strerror}); the files written before are intact", file=sys.stderr)
         return 2
     except SystemExit as exit_:  # argparse: --help, or an unknown / malformed flag

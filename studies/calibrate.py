@@ -43,7 +43,6 @@ import numpy as np
 import pandas as pd
 
 from taichi_star import SolverConfig, StarParams
-from taichi_star.extras import require
 
 from . import cli, figures, identify
 from .identify import DEFAULT_MAX_GENERATIONS, CMASettings, best_row

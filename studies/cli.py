@@ -571,7 +571,7 @@ def check_output_folder(folder: Path, quick: bool):
 
 def use_agg():
     """Select the non-interactive Agg backend and return pyplot."""
-    matplotlib = require("matplotlib", "studies")
+    matplotlib = require("matplotlib", "plots")
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     return plt

@@ -23,6 +23,7 @@ import time
 import pandas as pd
 
 from taichi_star.batch import InProcess, LocalProcesses, run_batch
+from taichi_star.extras import missing_extra
 from taichi_star.experiment import PAPER_GAITS
 
 from . import cli
@@ -64,6 +65,9 @@ def modes(counts, dask: bool):
 
 def main(argv=None):
     args = cli.parse(build_parser(), argv)
+    missing_dask = "" if args.no_dask else missing_extra("dask")
+    if missing_dask:
+        raise cli.StudyArgumentError(f"timing Dask clusters: {missing_dask} (or pass --no-dask)")
     counts = cli.parse_counts(args.workers_list, "--workers-list")
     solver = cli.solver(args)
     params = sweep_params(args.quick)

@@ -1,12 +1,14 @@
 """Optional dependencies, imported only by the functions that need them.
 
-The core install (``pip install taichi_star``) brings Taichi, NumPy, pandas, pyarrow and tqdm:
-enough for `simulate`, `Simulator` and `run_batch`. Everything else comes with an extra, named in
-the error a missing one raises:
+The core install (``pip install taichi_star``) brings Taichi, NumPy, pandas and tqdm: enough for
+`simulate`, `Simulator` and `run_batch` (without a run store). Everything else comes with an
+extra, named in the error a missing one raises:
 
+- ``plots``: matplotlib (the main job, ``taichi-star fig4c``, and the studies that only plot);
 - ``envs``: gymnasium (the Gymnasium environments, `taichi_star.envs`);
-- ``studies``: matplotlib, pillow, cma, SALib, scipy, gymnasium (the studies: `python -m studies`);
-- ``io``: xarray, netCDF4 (`SimulationResult.to_xarray`, netCDF output);
+- ``studies``: what every study needs (plots, envs, dask, cma, SALib, pyarrow);
+- ``io``: pyarrow, xarray, netCDF4 (Parquet: `to_parquet`, `run_batch(run_dir=...)`; netCDF:
+  `to_xarray`, `to_netcdf`);
 - ``video``: matplotlib, pillow, imageio-ffmpeg (`SimulationResult.animate`);
 - ``dask``: dask.distributed (`run_batch(..., scheduler=...)`);
 - ``docs``: mkdocs-material, mkdocstrings (building the documentation);
@@ -19,6 +21,17 @@ from __future__ import annotations
 import importlib
 import importlib.util
 from types import ModuleType
+
+EXTRA_MODULES = {
+    "plots": ("matplotlib",),
+    "envs": ("gymnasium",),
+    "studies": ("matplotlib", "gymnasium", "distributed", "cma", "SALib", "pyarrow"),
+    "io": ("pyarrow", "xarray", "netCDF4"),
+    "video": ("matplotlib", "PIL", "imageio_ffmpeg"),
+    "dask": ("distributed",),
+}
+"""The top-level modules each extra of pyproject.toml installs (those the code imports), by
+extra; `missing_extra` checks them."""
 
 
 def missing_message(module: str, extra: str) -> str:
@@ -34,6 +47,12 @@ def first_missing(modules, extra: str) -> str:
         if importlib.util.find_spec(module) is None:
             return missing_message(module, extra)
     return ""
+
+
+def missing_extra(extra: str) -> str:
+    """`first_missing` of the modules of `extra` (a key of `EXTRA_MODULES`): "" when it is
+    installed, else the one line telling the user which extra to install."""
+    return first_missing(EXTRA_MODULES[extra], extra)
 
 
 def require(module: str, extra: str) -> ModuleType:

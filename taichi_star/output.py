@@ -85,9 +85,10 @@ def _table(result, table: str) -> pd.DataFrame:
 def parquet_bytes(frame: pd.DataFrame, metadata: Mapping) -> bytes:
     """`frame` as a Parquet file (typed columns, every float bit for bit) with `metadata` as
     JSON under the schema metadata key "taichi_star". Values Parquet has no type for (objects
-    other than text) are stored as their text."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
+    other than text) are stored as their text. Needs pyarrow (the `io` extra: ImportError
+    naming it otherwise)."""
+    pa = require("pyarrow", "io")
+    pq = require("pyarrow.parquet", "io")
 
     frame = frame.assign(**{column: frame[column].map(str) for column in frame.columns
                             if frame[column].dtype == object
@@ -135,8 +136,7 @@ def read_provenance(path) -> dict:
     file's attributes (`provenance`) or a CSV file's sidecar."""
     path = Path(path)
     if path.suffix == ".parquet":
-        import pyarrow.parquet as pq
-
+        pq = require("pyarrow.parquet", "io")
         return json.loads(pq.read_schema(path).metadata[PROVENANCE_KEY.encode()])
     if path.suffix == ".nc":
         xr = require("xarray", "io")

@@ -165,7 +165,7 @@ class SimulationResult:
         """Save the summary (or table="trajectory") as Parquet, whole or not at all, with the
         provenance (version, git commit, parameters, solver) in the file's metadata
         (`output.read_provenance`); returns the path. `self.summary.to_parquet(path)` (plain
-        pandas) works too, without the provenance."""
+        pandas) works too, without the provenance. Needs pyarrow (the `io` extra)."""
         return output.to_parquet(self, path, table)
 
     def to_csv(self, path, table: str = "summary"):

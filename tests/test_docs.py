@@ -145,7 +145,7 @@ def test_readme_opens_with_the_two_commands_and_the_api():
     lines = (REPO_ROOT / "README.md").read_text(encoding="utf-8").splitlines()
     assert len(lines) <= 200
     commands = [line.split("#")[0].strip() for line in lines[2:6] if line and not line.startswith("```")]
-    assert commands == ['pip install -e ".[studies]" && python -m studies fig4c',
+    assert commands == ['pip install -e ".[plots]" && python -m studies fig4c',
                         'pip install -e ".[test]" && python -m pytest -q']
     start = lines.index("```python")
     end = lines.index("```", start)

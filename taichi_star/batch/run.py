@@ -51,10 +51,11 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     `run_dir`: a run store (`RunStore`): every finished chunk's summary is written there as it
     arrives; with `resume` (which needs `run_dir`), verified chunks already there are not
     recomputed (damaged or foreign ones are reported and recomputed), and the summary is read
-    back from the store. The trajectory then covers only the chunks computed by this call.
+    back from the store. The trajectory then covers only the chunks computed by this call. The
+    store's chunks are Parquet files: `run_dir` needs pyarrow (the `io` extra).
 
-    Raises ValueError (RunStoreError for the run folder) naming the argument before any
-    compute."""
+    Raises ValueError (RunStoreError for the run folder) naming the argument, or ImportError
+    naming the extra for a `run_dir` without pyarrow, before any compute."""
     if workers is not None and executor is not None:
         raise ValueError("give workers (local processes for this call) or executor, not both")
     if executor is not None and not callable(getattr(executor, "run", None)):

@@ -5,7 +5,8 @@ long batch can be resumed after a crash or a kill.
   parameters, the chunk plan, duration or cycles, solver, arch, records, steady window), its
   SHA-256, and for information the code version and the times.
 - `chunk_<index>.parquet`: one finished chunk's summary table (Parquet: a portable format that
-  keeps every float bit and dtype). Its schema metadata carries the definition's SHA-256, the
+  keeps every float bit and dtype; it needs pyarrow, the `io` extra, which `RunStore.open`
+  asks for before any compute). Its schema metadata carries the definition's SHA-256, the
   chunk index, its instances and a SHA-256 of the table's content.
 - Every file is written to a temporary name, flushed and renamed (`os.replace`): a kill leaves
   whole files or none.
@@ -30,10 +31,9 @@ from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 import pandas as pd
-import pyarrow as pa
-import pyarrow.parquet as pq
 
 from ..actuation import CurvatureProfile
+from ..extras import require
 from ..provenance import code_version, write_atomic
 from .tasks import ChunkTask
 
@@ -133,6 +133,11 @@ def _decode(frame: pd.DataFrame, types: Dict[str, str]) -> pd.DataFrame:
     return frame
 
 
+def _parquet():
+    """(pyarrow, pyarrow.parquet); ImportError naming the `io` extra where pyarrow is absent."""
+    return require("pyarrow", "io"), require("pyarrow.parquet", "io")
+
+
 class RunStore:
     """A run folder for one run definition. `open` it (it returns the chunks already finished
     and verified), `write` each finished chunk, `read` them back, `finish` marks it complete.
@@ -170,7 +175,9 @@ class RunStore:
         """Prepare the folder for this run; return the indices of the chunks already finished
         and verified (only when resuming). Raises RunStoreError, before any compute, for a
         folder that is not a run folder, holds another definition (resume) or an unfinished
-        run (no resume)."""
+        run (no resume); ImportError naming the `io` extra where pyarrow (the chunks' Parquet)
+        is not installed."""
+        _parquet()
         if self.path.exists() and not self.path.is_dir():
             raise RunStoreError(f"{self.flag} {self.path}: exists and is not a folder")
         old = self.read_manifest() if self.path.exists() else None
@@ -247,6 +254,7 @@ class RunStore:
 
     def write(self, task: ChunkTask, summary: pd.DataFrame) -> Path:
         """Store one finished chunk's summary (atomically)."""
+        pa, pq = _parquet()
         encoded, types = _encode(summary)
         table = pa.Table.from_pandas(encoded, preserve_index=False)
         stamp = {"definition_sha256": self.definition_sha256, "chunk": task.index,
@@ -273,7 +281,9 @@ class RunStore:
         """The table in the bytes of a chunk file written for `task`; ValueError saying why it
         cannot be trusted. Any failure to decode is such an error, whatever raised it (a damaged
         file can make pyarrow or pandas fail in any way: a bit flip in the pandas metadata
-        gives KeyError or TypeError from `to_pandas`)."""
+        gives KeyError or TypeError from `to_pandas`); a missing pyarrow is not damage: its
+        ImportError propagates."""
+        pa, pq = _parquet()
         try:
             table = pq.read_table(pa.BufferReader(data))
         except Exception as error:  # noqa: BLE001 -- pyarrow's errors for a damaged file vary
