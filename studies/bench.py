@@ -72,9 +72,12 @@ SolverConfig, the five Fig. 4c gaits repeated to the process batch size, one who
 rest (pulse and coast: the B sweep's window is the hardest part of the pulse) (CPU; off with
 --no-plain-call).
 
+Section "sensitivities": the plain call at B = 64 over the pulse, differentiating by 0, 1, 2
+and 4 parameters (`simulate(..., sensitivities=...)`; its cost against the same call without).
+
 Writes `bench.csv` (`bench_gpu.csv` for --arch gpu): one row per measurement; `section` is
-"batch" (B sweep), "skip" (terms at one B), "plain", "processes" or "compile" (cold/warm
-cache); columns: machine,
+"batch" (B sweep), "skip" (terms at one B), "plain", "sensitivities", "processes" or "compile"
+(cold/warm cache); columns: machine,
 cpu_model, cores, gpu, gpu_driver, arch, preset, layout, block_dim, section, scenario, terms, batch_size, precision, n_nodes, dt_s,
 gait, warmup_steps, steps, repeats, commit, timestamp, import_s, setup_s, compile_s,
 time_to_first_step_s, robot_steps_per_s, real_time_factor (= robot_steps_per_s × dt: simulated
@@ -128,6 +131,12 @@ ACCURATE_DURATION = 3.15
 """One period of the benchmark gait, s."""
 PLAIN_DURATION = 3.15
 """Simulated seconds of the plain call (one period: the pulse and the coast)."""
+SENSITIVITY_PARAMETERS = ("alpha", "drag_perpendicular", "youngs_modulus", "cylinder_drag")
+"""What the sensitivities section differentiates by, the first n of them."""
+SENSITIVITY_BATCH = 64
+"""Instances of the sensitivities section (the cost goal is stated at B = 64)."""
+SENSITIVITY_DURATION = 0.3
+"""Simulated seconds of the sensitivities section: the pulse and the start of the coast."""
 QUICK_SCENARIOS = "all_terms,added_mass_0"
 """--quick keeps to one engine (the smallest, as the other studies' quick batches use) and to
 scenarios with the same terms, so that it compiles the stepping kernel at most once."""
@@ -282,14 +291,17 @@ def measure_processes(batch: int, workers: int, jacobian: str, steps: int, repea
             **end_to_end_figures(result, batch * (WARMUP_STEPS + steps), timed)}
 
 
-def measure_plain(batch: int, duration: float, repeats: int) -> dict:
+def measure_plain(batch: int, duration: float, repeats: int, sensitivities=()) -> dict:
     """End-to-end throughput of the plain call a user writes, `simulate(params, duration)` with
     the default SolverConfig, in this process: the five Fig. 4c gaits repeated to `batch`
-    instances from rest, the best of `repeats` calls after one that compiles the engine."""
+    instances from rest, the best of `repeats` calls after one that compiles the engine;
+    with `sensitivities` (parameter names) the same call differentiating by them (the
+    robot-steps counted are the instances', not their replicas')."""
     params = [StarParams(gait=PAPER_GAITS[i % len(PAPER_GAITS)]) for i in range(batch)]
     steps = round(duration / DT)
-    result, timed = best_of_calls(lambda: simulate(params, duration), repeats,
-                                  warmup=lambda: simulate(params, DT))
+    result, timed = best_of_calls(
+        lambda: simulate(params, duration, sensitivities=sensitivities), repeats,
+        warmup=lambda: simulate(params, DT, sensitivities=sensitivities))
     return {"gait": "paper_gaits", "jacobian": SolverConfig().jacobian, "workers": 1,
             "n_nodes": result.topology.n_nodes, "steps": steps,
             **end_to_end_figures(result, batch * steps, timed)}
@@ -367,6 +379,14 @@ def build_parser():
                         quick=(WARMUP_STEPS + QUICK_STEPS) * DT,
                         help=f"simulated seconds of the plain call (default one period, "
                              f"{PLAIN_DURATION} s)")
+    parser.add_argument("--sensitivity-counts", default="0,1,2,4", quick="none",
+                        help=f"comma list of how many parameters ({', '.join(SENSITIVITY_PARAMETERS)}, "
+                             f"in this order) the plain call differentiates by, at "
+                             f"B = {SENSITIVITY_BATCH} (0: none, the baseline), or none to skip "
+                             f"the section")
+    parser.add_argument("--sensitivity-duration", type=float, default=SENSITIVITY_DURATION,
+                        help=f"simulated seconds of the sensitivities section (default "
+                             f"{SENSITIVITY_DURATION} s: the pulse)")
     parser.add_argument("--presets", default="paper", quick="paper",
                         help="comma list of paper (fixed 1-ms Euler steps, the B sweep) and "
                              "accurate (adaptive, simulate end to end at the same B)")
@@ -401,6 +421,16 @@ def solver_choices(text: str, flag: str, field: str):
     return values
 
 
+def parse_sensitivity_counts(text: str, flag: str):
+    """Comma list of parameter counts in [0, len(SENSITIVITY_PARAMETERS)]."""
+    counts = cli.parse_values(text, flag, int)
+    for count in counts:
+        if not 0 <= count <= len(SENSITIVITY_PARAMETERS):
+            raise cli.StudyArgumentError(f"{flag}: each count must be in [0, "
+                                         f"{len(SENSITIVITY_PARAMETERS)}], got {count}")
+    return counts
+
+
 def optional_list(text: str, flag: str, parse):
     return [] if text.strip().lower() == "none" else parse(text, flag)
 
@@ -414,6 +444,8 @@ def parse_args(argv):
     args.scenarios = optional_list(args.scenarios, "--scenarios",
                                    lambda text, flag: cli.parse_choices(text, flag, SCENARIOS))
     args.workers_list = optional_list(args.workers_list, "--workers-list", cli.parse_counts)
+    args.sensitivity_counts = optional_list(args.sensitivity_counts, "--sensitivity-counts",
+                                            parse_sensitivity_counts)
     args.presets = cli.parse_choices(args.presets, "--presets", PRESETS)
     args.layouts = cli.parse_choices(args.layouts, "--layouts", LAYOUTS)
     args.gpu_block_dims = cli.parse_counts(args.gpu_block_dims, "--gpu-block-dims")
@@ -512,6 +544,11 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
         add({"section": "plain", "scenario": "all_terms", "preset": "paper",
              "batch_size": args.process_batch, "precision": "f64",
              **measure_plain(args.process_batch, args.plain_duration, args.repeats)})
+    for count in args.sensitivity_counts:
+        add({"section": "sensitivities", "scenario": f"sensitivities_{count}", "preset": "paper",
+             "batch_size": SENSITIVITY_BATCH, "precision": "f64",
+             **measure_plain(SENSITIVITY_BATCH, args.sensitivity_duration, args.repeats,
+                             SENSITIVITY_PARAMETERS[:count])})
     for workers in args.workers_list:
         for jacobian in args.jacobians:
             figures = measure_processes(args.process_batch, workers, jacobian, args.steps,
