@@ -293,16 +293,18 @@ class Runtime:
         return (model.engine_key, solver.integrator, batch_capacity(model.batch_size),
                 sensitive) + gpu
 
-    def lease_engine(self, model: BatchModel, solver: SolverConfig, owner) -> BatchEngine:
+    def lease_engine(self, model: BatchModel, solver: SolverConfig, owner,
+                     sensitive: bool = False) -> BatchEngine:
         """An engine of its own for `owner` (a Simulator) while the owner lives: one whose
-        previous owner is gone is reused (no recompilation), else a new one."""
-        key = self.engine_key(model, solver)
+        previous owner is gone is reused (no recompilation), else a new one (`sensitive`: one
+        that carries tangents)."""
+        key = self.engine_key(model, solver, sensitive)
         leases = self.leases.setdefault(key, [])
         for index, (engine, holder) in enumerate(leases):
             if holder() is None:
                 leases[index] = (engine, weakref.ref(owner))
                 return engine
-        engine = self.new_engine(model, solver)
+        engine = self.new_engine(model, solver, sensitive)
         leases.append((engine, weakref.ref(owner)))
         return engine
 

@@ -176,37 +176,45 @@ def _difference(plus: np.ndarray, minus: np.ndarray, output: str) -> np.ndarray:
     return difference
 
 
-def split_result(summary: pd.DataFrame, trajectory: pd.DataFrame,
-                 directions: Sequence[Direction], steps: np.ndarray):
-    """From the tables of a run of `replica_batch`: (summary and trajectory of the instances
-    alone, sensitivities: one row per instance with a column `sensitivity_column(output,
-    direction)` per SUMMARY_OUTPUTS × direction, trajectory sensitivities: the trajectory's
-    instance and t_s with one column per TRAJECTORY_OUTPUTS × direction)."""
+def derivatives(values: np.ndarray, directions: Sequence[Direction], steps: np.ndarray,
+                output: str) -> dict:
+    """d(output)/d(direction) for every direction, label -> (B, ...) array, from `values`
+    (B_all, ...): the output of every instance of a `replica_batch` batch in its order (an
+    angle's differences, output in degrees, taken the short way round)."""
     pairs = len(EXTRAPOLATION_SCALES)
-    count = len(summary) // (1 + 2 * pairs * len(directions))
-    sensitivities = {}
-    by_instance = trajectory.sort_values(["instance", "t_s"], kind="stable")
-    records = len(by_instance) // len(summary) if len(summary) else 0
-    primal_trajectory = by_instance[by_instance["instance"] < count].reset_index(drop=True)
-    trajectory_sensitivities = {"instance": primal_trajectory["instance"].to_numpy(),
-                                "t_s": primal_trajectory["t_s"].to_numpy()}
-    def derivative(values, j, output):
-        """2·D(ε) − D(2ε) of direction j from per-instance values (B_all, ...) of output."""
+    count = len(values) // (1 + 2 * pairs * len(directions))
+    result = {}
+    for j, direction in enumerate(directions):
         quotients = []
         for pair, scale in enumerate(EXTRAPOLATION_SCALES):
             first = (1 + 2 * (pairs * j + pair)) * count
             plus, minus = values[first:first + count], values[first + count:first + 2 * count]
             width = (2.0 * scale * steps[j]).reshape((count,) + (1,) * (values.ndim - 1))
             quotients.append(_difference(plus, minus, output) / width)
-        return 2.0 * quotients[0] - quotients[1]
+        result[direction.label] = 2.0 * quotients[0] - quotients[1]
+    return result
 
-    for j, direction in enumerate(directions):
-        for output in SUMMARY_OUTPUTS:
-            sensitivities[sensitivity_column(output, direction.label)] = derivative(
-                summary[output].to_numpy(dtype=float), j, output)
-        for output in TRAJECTORY_OUTPUTS:
-            values = by_instance[output].to_numpy(dtype=float).reshape(len(summary), records)
-            trajectory_sensitivities[sensitivity_column(output, direction.label)] = derivative(
-                values, j, output).ravel()
+
+def split_result(summary: pd.DataFrame, trajectory: pd.DataFrame,
+                 directions: Sequence[Direction], steps: np.ndarray):
+    """From the tables of a run of `replica_batch`: (summary and trajectory of the instances
+    alone, sensitivities: one row per instance with a column `sensitivity_column(output,
+    direction)` per SUMMARY_OUTPUTS × direction, trajectory sensitivities: the trajectory's
+    instance and t_s with one column per TRAJECTORY_OUTPUTS × direction)."""
+    count = len(summary) // (1 + 2 * len(EXTRAPOLATION_SCALES) * len(directions))
+    sensitivities = {}
+    by_instance = trajectory.sort_values(["instance", "t_s"], kind="stable")
+    records = len(by_instance) // len(summary) if len(summary) else 0
+    primal_trajectory = by_instance[by_instance["instance"] < count].reset_index(drop=True)
+    trajectory_sensitivities = {"instance": primal_trajectory["instance"].to_numpy(),
+                                "t_s": primal_trajectory["t_s"].to_numpy()}
+    for output in SUMMARY_OUTPUTS:
+        for label, values in derivatives(summary[output].to_numpy(dtype=float), directions,
+                                         steps, output).items():
+            sensitivities[sensitivity_column(output, label)] = values
+    for output in TRAJECTORY_OUTPUTS:
+        recorded = by_instance[output].to_numpy(dtype=float).reshape(len(summary), records)
+        for label, values in derivatives(recorded, directions, steps, output).items():
+            trajectory_sensitivities[sensitivity_column(output, label)] = values.ravel()
     return (summary.iloc[:count].reset_index(drop=True), primal_trajectory,
             pd.DataFrame(sensitivities), pd.DataFrame(trajectory_sensitivities))

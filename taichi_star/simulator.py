@@ -31,6 +31,7 @@ import numpy as np
 import pandas as pd
 
 from . import metrics
+from . import sensitivities as tangents
 from .gait import N_ACTUATORS, Gait
 from .geometry import CENTRE
 from .model import build_model, validate_batch
@@ -45,6 +46,9 @@ STATE_COLUMNS = ("instance", "t_s", "centroid_x_mm", "centroid_y_mm", "heading_d
                  "velocity_x_mm_s", "velocity_y_mm_s", "angular_velocity_deg_s",
                  *ACTUATOR_COLUMNS, "status")
 """Columns of `Simulator.state()`."""
+DIFFERENTIABLE_STATE_COLUMNS = ("centroid_x_mm", "centroid_y_mm", "heading_deg",
+                                "velocity_x_mm_s", "velocity_y_mm_s", "angular_velocity_deg_s")
+"""The `state()` columns `Simulator.sensitivity` differentiates."""
 
 
 @dataclass(frozen=True)
@@ -92,24 +96,33 @@ class Simulator:
 
     params: a sequence of StarParams sharing n_arc and n_limb (their `gait` is ignored);
     solver: the SolverConfig of the batch; arch: "cpu" or a GPU arch. The robots start at rest
-    in their rest shape at t = 0 with no actuator fired."""
+    in their rest shape at t = 0 with no actuator fired. `sensitivities`: parameters to
+    differentiate the state by, as in `simulate` (`sensitivity`)."""
 
     def __init__(self, params: Sequence[StarParams], solver: SolverConfig = SolverConfig(),
-                 *, arch: str = "cpu"):
+                 *, arch: str = "cpu", sensitivities: Sequence[str] = ()):
         params = validate_batch(params)
         if not isinstance(solver, SolverConfig):
             raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
         check_precision(params, solver)
+        self.directions = tangents.parse_directions(sensitivities)
+        """The parameters the state is differentiated by (`sensitivities.Direction`)."""
+        tangents.check_directions(self.directions, params, solver)
         check_arch(arch)
         self.params = params
         self.solver = solver
-        self.model = build_model(params, commanded=True)
+        batch, self._steps_of_directions = params, None
+        if self.directions:
+            batch, self._steps_of_directions = tangents.replica_batch(params, self.directions)
+        self.model = build_model(batch, commanded=True)
+        """The batch's model: the instances and, with sensitivities, their replicas after them."""
         runtime = Runtime.current()
         runtime.ensure(arch, solver.precision)
-        self.engine = runtime.lease_engine(self.model, solver, self)
-        self.engine.load(self.model, solver, periodic_gaits=False)
+        carried = len(self.directions) * len(tangents.EXTRAPOLATION_SCALES)
+        self.engine = runtime.lease_engine(self.model, solver, self, sensitive=carried > 0)
+        self.engine.load(self.model, solver, periodic_gaits=False, tangents=carried)
         self._initial = self.engine.save_state()
-        self._start_centroids = self.engine.centroids_of(self.n_instances)
+        self._start_centroids = self.engine.centroids_of(self.model.batch_size)
 
     # ---------------------------------------------------------------- properties
     @property
@@ -118,7 +131,8 @@ class Simulator:
 
     @property
     def engine_key(self) -> tuple:
-        return (self.model.engine_key, self.solver.integrator, self.engine.capacity)
+        key = (self.model.engine_key, self.solver.integrator, self.engine.capacity)
+        return key + ((tuple(d.label for d in self.directions),) if self.directions else ())
 
     def _steps(self) -> np.ndarray:
         return self.engine.state.steps_done.to_numpy()[:self.n_instances].astype(np.int64)
@@ -279,6 +293,9 @@ class Simulator:
                 len(rows) and (rows.min() < 0 or rows.max() >= self.n_instances)):
             raise ValueError(f"instances must be integers in [0, {self.n_instances}), got "
                              f"{instances!r}")
+        # each instance's replicas (every n_instances rows after it) go back with it
+        copies = self.model.batch_size // self.n_instances
+        rows = (rows[None, :] + self.n_instances * np.arange(copies)[:, None]).ravel()
         fields = self.engine.save_state()
         for name, values in fields.items():
             values[rows] = self._initial[name][rows]
@@ -295,11 +312,33 @@ class Simulator:
         counter-clockwise); the centroid's velocity (mm/s) and the body's angular velocity
         (deg/s); since_A1_s..since_A8_s, the time since each actuator last fired (NaN: never);
         status."""
-        batch = self.n_instances
+        return self._state_of(self.n_instances)
+
+    def sensitivity(self, column: str, parameter: str) -> np.ndarray:
+        """d(column of `state()`)/d(parameter) now for every instance, (B,) ((B, 8) for a whole
+        per-actuator field): column one of `DIFFERENTIABLE_STATE_COLUMNS`, parameter one the
+        Simulator was built with (`sensitivities`). ValueError otherwise."""
+        if column not in DIFFERENTIABLE_STATE_COLUMNS:
+            raise ValueError(f"column must be one of {DIFFERENTIABLE_STATE_COLUMNS}, got "
+                             f"{column!r}")
+        wanted = tangents.parse_directions([parameter])
+        missing = [d.label for d in wanted if d not in self.directions]
+        if missing:
+            raise ValueError(f"parameter {missing[0]!r} is not among this Simulator's "
+                             f"sensitivities {[d.label for d in self.directions]}")
+        values = self._state_of(self.model.batch_size)[column].to_numpy(dtype=float)
+        derivatives = tangents.derivatives(values, self.directions, self._steps_of_directions,
+                                           column)
+        stacked = np.stack([derivatives[d.label] for d in wanted], axis=1)
+        return stacked if len(wanted) > 1 else stacked[:, 0]
+
+    def _state_of(self, batch: int) -> pd.DataFrame:
+        """`state()` of the engine's first `batch` instances (with sensitivities: the
+        replicas too)."""
         state = self.engine.state
-        positions = self.shapes()
+        positions = state.positions.to_numpy()[:batch].astype(np.float64)
         velocities = state.velocities.to_numpy()[:batch].astype(np.float64)
-        mass = self.model.mass
+        mass = self.model.mass[:batch]
         centroid = self.engine.centroids_of(batch)
         velocity = metrics.centroid(velocities, mass)
         joints = self.model.topology.joints
@@ -312,15 +351,15 @@ class Simulator:
         spin_sum = spin[:, 0]
         for joint in range(1, spin.shape[1]):
             spin_sum = spin_sum + spin[:, joint]
-        times = self.time_s
+        times = state.time.to_numpy()[:batch].astype(np.float64)
         fired = state.fire_time.to_numpy()[:batch].astype(np.float64)
         since = np.where(fired == NEVER, np.nan, times[:, None] - fired)
         frame = pd.DataFrame({
             "instance": np.arange(batch), "t_s": times,
-            "centroid_x_mm": (centroid[:, 0] - self._start_centroids[:, 0]) * metrics.METERS_TO_MM,
-            "centroid_y_mm": (centroid[:, 1] - self._start_centroids[:, 1]) * metrics.METERS_TO_MM,
-            "heading_deg": np.degrees(metrics.body_rotation(positions, self.model.rest_positions,
-                                                            joints, CENTRE)),
+            "centroid_x_mm": (centroid[:, 0] - self._start_centroids[:batch, 0]) * metrics.METERS_TO_MM,
+            "centroid_y_mm": (centroid[:, 1] - self._start_centroids[:batch, 1]) * metrics.METERS_TO_MM,
+            "heading_deg": np.degrees(metrics.body_rotation(
+                positions, self.model.rest_positions[:batch], joints, CENTRE)),
             "velocity_x_mm_s": velocity[:, 0] * metrics.METERS_TO_MM,
             "velocity_y_mm_s": velocity[:, 1] * metrics.METERS_TO_MM,
             "angular_velocity_deg_s": np.degrees(spin_sum / spin.shape[1]),

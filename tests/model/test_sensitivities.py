@@ -135,3 +135,26 @@ def test_f32_and_an_unset_component_height_are_refused():
 def test_a_whole_per_actuator_field_names_its_eight_numbers():
     directions = parse_directions(["actuator_delays", "alpha"])
     assert [d.label for d in directions] == [f"actuator_delays[{k}]" for k in range(8)] + ["alpha"]
+
+
+def test_a_simulator_gives_the_same_sensitivities_as_simulate(euler_run):
+    from taichi_star import Simulator
+
+    simulator = Simulator(BATCH, SolverConfig(**TIGHT), sensitivities=("alpha",))
+    simulator.fire(["A1+A2", "A1+A3"])  # at t = 0: what simulate's periodic gait does
+    simulator.advance(DURATION_S)
+    # the same steps in the same order: the same bits up to the last rounding of the centroids
+    np.testing.assert_allclose(simulator.sensitivity("centroid_x_mm", "alpha"),
+                               euler_run.sensitivity("displacement_x_mm", "alpha"), rtol=1e-12)
+    before = simulator.sensitivity("centroid_x_mm", "alpha")
+    saved = simulator.save()
+    simulator.reset([1])
+    moved = simulator.sensitivity("centroid_x_mm", "alpha")
+    # a reset instance is back at rest with its replicas: nothing has moved yet
+    assert moved[1] == 0.0 and moved[0] == before[0]
+    simulator.load(saved)  # the replicas are part of the saved state
+    np.testing.assert_array_equal(simulator.sensitivity("centroid_x_mm", "alpha"), before)
+    with pytest.raises(ValueError, match="not among this Simulator's sensitivities"):
+        simulator.sensitivity("centroid_x_mm", "drag_perpendicular")
+    with pytest.raises(ValueError, match="column must be one of"):
+        simulator.sensitivity("since_A1_s", "alpha")
