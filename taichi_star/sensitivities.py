@@ -1,12 +1,13 @@
 """Sensitivities of a run's outputs with respect to per-instance parameters.
 
 `simulate(params, T, sensitivities=("alpha", "drag_perpendicular"))` gives, for every instance,
-the derivative of each output with respect to each named StarParams field, exact for the discrete
-scheme up to the round-off of a central difference (relative ~1e-9; the tests compare with
-finite differences of whole runs).
+the derivative of each output with respect to each named StarParams field: the derivative of the
+discrete scheme by the implicit function theorem at every step, with the partial derivatives of
+the residual taken as central differences (measured against finite differences of whole runs:
+1e-7 to 4e-6 relative where the parameter moves the robot well; docs/numerics.md).
 
 How: for each direction (a field, or one number of a per-actuator field) every instance b gets
-two replicas in the same engine, built at its parameters moved by +ε and −ε (`DirectionSet`).
+replicas in the same engine, built at its parameters moved by ±ε and by ±2ε (`replica_batch`).
 The replicas are never solved. After each accepted step of b, the engine moves them to b's new
 state ± ε times the state's exact derivative, from the implicit function theorem on b's step
 (`engine.BatchEngine.tangent_step`): the step's Jacobian at the converged state, factored once,
@@ -15,7 +16,8 @@ and to the step's start state. The replicas' own residuals, assembled at b's con
 from their own start states and coefficients, give that right-hand side as a central
 difference, and every term and extension is covered without a line of derivative code of its
 own. An output of the run is a smooth function of the states, so its derivative is the central
-difference of the replicas' outputs, which lie on the tangent line (error O(ε²)).
+difference of the replicas' outputs, which lie on the tangent line, extrapolated from the two
+pairs (`EXTRAPOLATION_SCALES`).
 
 The step sequence is that of b: with adaptive steps the accepted steps are frozen, as are the
 firing times (events, not functions of the parameters: `period` is not differentiable).

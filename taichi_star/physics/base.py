@@ -138,15 +138,6 @@ class Term:
     def history_fields(self) -> Dict[str, ti.Field]:
         return {name: getattr(self, name) for name in self.history_names}
 
-    def coefficient_derivatives(self, name: str):
-        """Reserved for sensitivities through the solver (not yet built): the derivative of
-        this term's residual (and the Jacobian-vector products it needs) with respect to its
-        per-instance coefficient `name` at the current iterate, ∂r/∂c of shape (N, 2) per
-        instance, assembled like `assemble` through the same `Assembly`. No term provides it
-        yet."""
-        raise NotImplementedError(f"{type(self).__name__} gives no derivatives with respect to "
-                                  f"its coefficient {name!r} yet")
-
     @ti.func
     def begin_step(self, b, start_time, end_time, h, ratio, rate_gain, use_history):
         """Update the term's history at the start of a step of size h (s) from start_time to
