@@ -498,29 +498,31 @@ class BatchEngine:
     @ti.func
     def save_backup(self, b):
         """Keep instance b's positions and velocities (and its replicas') for `restore_backup`."""
-        for n in range(self.n_nodes):
-            self.state.backup_positions[b, n] = self.state.positions[b, n]
-            self.state.backup_velocities[b, n] = self.state.velocities[b, n]
-        if ti.static(self.sensitive):
-            for j in range(self.tangent_count[None]):
-                for sign in ti.static(range(2)):
-                    r = self.replica(b, j, sign)
-                    for n in range(self.n_nodes):
-                        self.state.backup_positions[r, n] = self.state.positions[r, n]
-                        self.state.backup_velocities[r, n] = self.state.velocities[r, n]
+        self.copy_backup(b, 1)
 
     @ti.func
     def restore_backup(self, b):
-        for n in range(self.n_nodes):
-            self.state.positions[b, n] = self.state.backup_positions[b, n]
-            self.state.velocities[b, n] = self.state.backup_velocities[b, n]
+        self.copy_backup(b, 0)
+
+    @ti.func
+    def copy_backup(self, b, save: ti.template()):
+        """Positions and velocities of instance b and its replicas into the backup (`save`) or
+        back from it."""
+        self.copy_instance_backup(b, save)
         if ti.static(self.sensitive):
             for j in range(self.tangent_count[None]):
                 for sign in ti.static(range(2)):
-                    r = self.replica(b, j, sign)
-                    for n in range(self.n_nodes):
-                        self.state.positions[r, n] = self.state.backup_positions[r, n]
-                        self.state.velocities[r, n] = self.state.backup_velocities[r, n]
+                    self.copy_instance_backup(self.replica(b, j, sign), save)
+
+    @ti.func
+    def copy_instance_backup(self, b, save: ti.template()):
+        for n in range(self.n_nodes):
+            if ti.static(save):
+                self.state.backup_positions[b, n] = self.state.positions[b, n]
+                self.state.backup_velocities[b, n] = self.state.velocities[b, n]
+            else:
+                self.state.positions[b, n] = self.state.backup_positions[b, n]
+                self.state.velocities[b, n] = self.state.backup_velocities[b, n]
 
     # ---------------------------------------------------------------- tangents (sensitive engines)
     @ti.func
