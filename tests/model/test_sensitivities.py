@@ -8,6 +8,7 @@ import pytest
 
 from taichi_star import SolverConfig, StarParams, simulate
 from taichi_star.sensitivities import SUMMARY_OUTPUTS, parse_directions, sensitivity_column
+from taichi_star.sensitivity_check import DIFFERENCE_STEP, check_sensitivities
 
 DURATION_S = 0.1
 """100 steps of 1 ms: the A1 pulse has begun to bend the arcs and the robot to move."""
@@ -20,27 +21,14 @@ TIGHT = dict(newton_tol=1e-12)
 of the derivatives."""
 
 
-def component(direction):
-    """(get, put) of the parameter a direction names (one number of a per-actuator field)."""
-    (parsed,) = parse_directions([direction])
-    return parsed.value, parsed.moved
-
-
-def finite_difference(params, direction, solver, output="displacement_x_mm"):
-    """Richardson-extrapolated central difference 2·D(h) − D(2h) of whole runs, h = 1e-5 of
-    each instance's value: the drag's kink at zero velocity makes a plain central difference
-    first order in h for the symmetric gait A1+A2 (measured: D(h) and D(2h) differ by ~2e-6
-    relative there), the extrapolation second order."""
-    get, put = component(direction)
-
-    def quotient(relative):
-        steps = [relative * abs(get(p)) for p in params]
-        plus = simulate([put(p, get(p) + h) for p, h in zip(params, steps)], DURATION_S, solver)
-        minus = simulate([put(p, get(p) - h) for p, h in zip(params, steps)], DURATION_S, solver)
-        return (plus.summary[output].to_numpy() - minus.summary[output].to_numpy()) / (
-            2 * np.array(steps))
-
-    return 2 * quotient(1e-5) - quotient(2e-5)
+def assert_matches_differences(table, tolerance=1e-5):
+    """Every row of a `check_sensitivities` table: the sensitivity within `tolerance` of the
+    extrapolated differences, and a Taylor remainder of second order."""
+    assert len(table) and np.isfinite(table["relative_error"]).all(), table
+    assert (table["relative_error"] <= tolerance).all(), table
+    # r(2h)/r(h) = 4 for a second-order remainder, 2 if the sensitivity were off by more
+    # than O(h); 3-5 leaves room for the remainder's own round-off
+    assert table["taylor_ratio"].between(3.0, 5.0).all(), table
 
 
 @pytest.fixture(scope="module")
@@ -49,21 +37,19 @@ def euler_run(taichi_cpu):
                     sensitivities=DIRECTIONS)
 
 
-@pytest.mark.parametrize("direction", ["alpha", "drag_perpendicular"])
-def test_euler_sensitivities_equal_finite_differences(euler_run, direction):
-    expected = finite_difference(BATCH, direction, SolverConfig(**TIGHT))
+def test_euler_sensitivities_equal_finite_differences(taichi_cpu):
     # 1e-5: the target; measured 2e-6 and below (the rest is the extrapolated difference's own
     # truncation and the Newton noise of the runs)
-    np.testing.assert_allclose(euler_run.sensitivity("displacement_x_mm", direction), expected,
-                               rtol=1e-5)
+    assert_matches_differences(check_sensitivities(BATCH, DURATION_S, SolverConfig(**TIGHT),
+                                                   ("alpha", "drag_perpendicular")))
 
 
 def test_an_actuator_the_gait_never_fires_has_no_influence(euler_run):
     gains = euler_run.sensitivity("displacement_x_mm", "actuator_gains[1]")
     # A1+A3 never fires A2: its replicas differ only in a coefficient no kernel reads
     assert gains[1] == 0.0
-    expected = finite_difference(BATCH[:1], "actuator_gains[1]", SolverConfig(**TIGHT))
-    np.testing.assert_allclose(gains[0], expected[0], rtol=1e-5)
+    assert_matches_differences(check_sensitivities(BATCH[:1], DURATION_S, SolverConfig(**TIGHT),
+                                                   ("actuator_gains[1]",)))
 
 
 def test_the_instances_rows_are_those_of_a_run_without_sensitivities(euler_run):
@@ -99,15 +85,12 @@ def test_bdf2_with_damping_chord_and_adaptive_steps(taichi_cpu):
     # differences' alike, takes the same 100 steps of 1 ms, so the frozen step sequence is the
     # one the differences see
     adaptive = dict(integrator="bdf2", adaptive=True, error_tol=1e-3, dt_max=1e-3, **TIGHT)
-    directions = ("alpha", "drag_perpendicular")
-    result = simulate(batch, DURATION_S, SolverConfig(jacobian="chord", **adaptive),
-                      sensitivities=directions)
-    assert (result.summary["steps"] == 100).all()
-    for direction in directions:
-        expected = finite_difference(batch, direction, SolverConfig(**adaptive))
-        # as for implicit Euler: 1e-5 the target, measured ≤ 4e-6
-        np.testing.assert_allclose(result.sensitivity("displacement_x_mm", direction), expected,
-                                   rtol=1e-5)
+    table = check_sensitivities(batch, DURATION_S, SolverConfig(jacobian="chord", **adaptive),
+                                ("alpha", "drag_perpendicular"))
+    steps = simulate(batch, DURATION_S, SolverConfig(**adaptive)).summary["steps"]
+    assert (steps == 100).all()
+    # as for implicit Euler: 1e-5 the target, measured ≤ 4e-6
+    assert_matches_differences(table)
 
 
 @pytest.mark.parametrize("names, message", [
@@ -167,14 +150,9 @@ def test_steps_redone_with_substeps_are_followed(euler_run):
     batch = BATCH[1:]
     result = simulate(batch, 0.2, solver, sensitivities=("alpha",))
     assert result.summary["substep_retries"].iloc[0] > 0
-    get, put = component("alpha")
-    h = 1e-5 * get(batch[0])
-    plus, minus = (simulate([put(batch[0], get(batch[0]) + s * h)], 0.2, solver).summary
-                   for s in (1, -1))
-    # the perturbed runs retry the same steps (checked): a plain central difference is then
-    # the derivative of the same sequence of substeps, to ~1e-7
-    assert plus["substep_retries"].iloc[0] == minus["substep_retries"].iloc[0] \
-        == result.summary["substep_retries"].iloc[0]
-    expected = (plus["displacement_x_mm"].iloc[0] - minus["displacement_x_mm"].iloc[0]) / (2 * h)
-    np.testing.assert_allclose(result.sensitivity("displacement_x_mm", "alpha"), [expected],
-                               rtol=1e-5)
+    table = check_sensitivities(batch, 0.2, solver, ("alpha",))
+    moved = dataclasses.replace(batch[0], alpha=batch[0].alpha * (1 + DIFFERENCE_STEP))
+    plus = simulate([moved], 0.2, solver).summary
+    # the moved runs retry the same steps: the differences are those of one substep sequence
+    assert plus["substep_retries"].iloc[0] == result.summary["substep_retries"].iloc[0]
+    assert_matches_differences(table)

@@ -1,0 +1,90 @@
+"""Sensitivities against finite differences of whole runs: the check behind
+`python -m studies sensitivity_check` and the tests.
+
+For each instance and direction, four more runs (the parameter moved by ±h and ±2h, all in one
+batch) give the central differences D(h) and D(2h) and their Richardson extrapolation
+2·D(h) − D(2h) (the drag's kink at zero velocity makes a plain central difference first order in
+h for a symmetric gait). The table also holds a Taylor test, which needs no reference: the
+remainder r(H) = |f(p + H) − f(p) − H·s| of the sensitivity s shrinks as H² when s is the
+derivative (r(2H)/r(H) ≈ 4) and only as H when it is not (≈ 2); two more runs at H and 2H,
+with H = TAYLOR_STEP large enough that the remainder stands above the runs' Newton noise.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+import pandas as pd
+
+from .params import SolverConfig, StarParams
+from .sensitivities import Direction, parse_directions
+from .simulation import simulate
+
+DIFFERENCE_STEP = 1e-5
+"""h of the finite differences relative to the parameter's value (ten times the sensitivities'
+own ε, `sensitivities.RELATIVE_STEP`, which also sets h for a parameter at 0)."""
+TAYLOR_STEP = 1e-3
+"""H of the Taylor test relative to the parameter's value (at 0: 100 times the differences'
+h): its remainder, ~H² relative, stays far above the Newton noise of the runs (1e-12 m against
+displacements of 1e-4 m)."""
+CHECK_COLUMNS = ("instance", "gait", "parameter", "value", "output", "sensitivity",
+                 "difference_h", "difference_2h", "difference", "relative_error",
+                 "difference_spread", "taylor_ratio")
+"""Columns of `check_sensitivities`: difference = 2·D(h) − D(2h); relative_error =
+|sensitivity − difference| / |difference|; difference_spread = |D(h) − difference| /
+|difference| (how far the differences themselves scatter: where it is large the check is ill
+conditioned); taylor_ratio = r(2H) / r(H)."""
+
+
+MULTIPLES = (1.0, -1.0, 2.0, -2.0, TAYLOR_STEP / DIFFERENCE_STEP,
+             2 * TAYLOR_STEP / DIFFERENCE_STEP)
+"""The moved runs, in multiples of h: the differences' ±h and ±2h, the Taylor test's H and 2H."""
+
+
+def difference_step(direction: Direction, params: StarParams) -> float:
+    """h for one instance: DIFFERENCE_STEP of its value, or ten times the sensitivities' ε at
+    0."""
+    value = abs(direction.value(params))
+    return DIFFERENCE_STEP * value if value else 10.0 * direction.step(params)
+
+
+def check_sensitivities(params: Sequence[StarParams], duration_s: float, solver: SolverConfig,
+                        names: Sequence[str], output: str = "displacement_x_mm",
+                        arch: str = "cpu") -> pd.DataFrame:
+    """One row per (instance, direction) of `names` (as `simulate` takes them), for `output` (a
+    summary column): see `CHECK_COLUMNS`. Two `simulate` calls: the sensitivities and one batch
+    of every moved run (`MULTIPLES`)."""
+    params = list(params)
+    directions = parse_directions(names)
+    result = simulate(params, duration_s, solver, arch=arch, sensitivities=names)
+    centre = result.summary[output].to_numpy(dtype=float)
+    moved, steps = [], []
+    for direction in directions:
+        row = [difference_step(direction, p) for p in params]
+        steps.append(row)
+        for multiple in MULTIPLES:
+            moved += [direction.moved(p, direction.value(p) + multiple * h)
+                      for p, h in zip(params, row)]
+    runs = simulate(moved, duration_s, solver, arch=arch).summary[output].to_numpy(dtype=float)
+    runs = runs.reshape(len(directions), len(MULTIPLES), len(params))
+    rows = []
+    for j, direction in enumerate(directions):
+        h = np.array(steps[j])
+        plus, minus, plus2, minus2, taylor, taylor2 = runs[j]
+        small, large = (plus - minus) / (2 * h), (plus2 - minus2) / (4 * h)
+        extrapolated = 2 * small - large
+        sensitivity = result.sensitivity(output, direction.label)
+        step = TAYLOR_STEP / DIFFERENCE_STEP * h
+        remainder = np.abs(taylor - centre - step * sensitivity)
+        remainder2 = np.abs(taylor2 - centre - 2 * step * sensitivity)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rows.append(pd.DataFrame({
+                "instance": np.arange(len(params)), "gait": [p.gait for p in params],
+                "parameter": direction.label, "value": [direction.value(p) for p in params],
+                "output": output, "sensitivity": sensitivity, "difference_h": small,
+                "difference_2h": large, "difference": extrapolated,
+                "relative_error": np.abs(sensitivity - extrapolated) / np.abs(extrapolated),
+                "difference_spread": np.abs(small - extrapolated) / np.abs(extrapolated),
+                "taylor_ratio": remainder2 / remainder}))
+    return pd.concat(rows, ignore_index=True).reindex(columns=list(CHECK_COLUMNS))
