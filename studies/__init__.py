@@ -17,7 +17,8 @@ EXTRA_OF_STUDY = {
     "animate": "plots", "bench": "plots", "calibrate": "studies", "convergence": "plots",
     "env_bench": "envs", "fig4c": "plots", "gaits": "plots", "model_select": "studies",
     "plan": "plots", "primitives": "plots", "reproduce": "studies", "scaling": None,
-    "sensitivity": "studies", "stability": "plots", "sweep": "studies",
+    "sensitivity": "studies", "sensitivity_check": "plots", "stability": "plots",
+    "sweep": "studies",
     "work_precision": "plots",
 }
 """The extra of pyproject.toml each study needs beyond the core (None: the core alone), checked
