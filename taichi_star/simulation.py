@@ -126,17 +126,18 @@ class SimulationResult:
     sensitivities: Optional[pd.DataFrame] = field(default=None, repr=False)
     trajectory_sensitivities: Optional[pd.DataFrame] = field(default=None, repr=False)
 
-    def sensitivity(self, output: str, parameter: str) -> np.ndarray:
+    def sensitivity(self, output: str, parameter: str, trajectory: bool = False) -> np.ndarray:
         """d(output)/d(parameter) for every instance: (B,) for a summary output
-        (`sensitivities.SUMMARY_OUTPUTS`), (B, n_records) for a trajectory one (x_mm, y_mm,
-        heading_deg). `parameter` as named in `simulate` ("alpha"; "actuator_gains" gives
-        (B, 8) or (B, 8, n_records), "actuator_gains[2]" one actuator). ValueError for an
-        output or parameter the run did not differentiate."""
+        (`sensitivities.SUMMARY_OUTPUTS`), (B, n_records) for a trajectory one (x_mm, y_mm, and
+        heading_deg with `trajectory=True`: the summary has a heading_deg too). `parameter` as
+        named in `simulate` ("alpha"; "actuator_gains" gives (B, 8) or (B, 8, n_records),
+        "actuator_gains[2]" one actuator). ValueError for an output or parameter the run did
+        not differentiate."""
         if self.sensitivities is None:
             raise ValueError("this result has no sensitivities: pass sensitivities=(...) to "
                              "simulate")
         directions = tangents.parse_directions([parameter])
-        if output in tangents.SUMMARY_OUTPUTS:
+        if output in tangents.SUMMARY_OUTPUTS and not trajectory:
             table, shape = self.sensitivities, (len(self.summary),)
         elif output in tangents.TRAJECTORY_OUTPUTS:
             table = self.trajectory_sensitivities
