@@ -29,6 +29,10 @@ from .params import PER_ACTUATOR_FIELDS, SolverConfig, StarParams
 from .simulation import simulate, whole_steps
 from .simulator import Simulator
 
+GaitSources = Dict[str, Tuple[str, int, bool, int]]
+"""gait -> (source, rotation, reflect, class size): the gait whose simulation a gait's steps are
+read from and the symmetry mapping them onto it (`gait_sources`)."""
+
 CYCLE_COLUMNS = ["gait", "class_representative", "symmetry_rotation", "reflected", "cycle",
                  "dx_body_mm", "dy_body_mm", "rotation_deg", "status"]
 """Columns of the per-cycle table: cycle k (0-based) runs from k·T to (k+1)·T; dx/dy_body_mm
@@ -111,7 +115,7 @@ def actuators_equal(base: StarParams) -> bool:
     return all(len(set(getattr(base, name))) == 1 for name in PER_ACTUATOR_FIELDS)
 
 
-def gait_sources(symmetric: bool) -> Dict[str, Tuple[str, int, bool, int]]:
+def gait_sources(symmetric: bool) -> GaitSources:
     """For every one of the 255 gaits: (source, rotation, reflect, class size), the gait whose
     simulation it is read from and the symmetry that maps the source's cycles onto it.
     symmetric: one source per symmetry class (`class_symmetries`); otherwise every gait is
@@ -121,13 +125,13 @@ def gait_sources(symmetric: bool) -> Dict[str, Tuple[str, int, bool, int]]:
     return {gait: (gait, 0, False, 1) for _, members in symmetry_classes() for gait in members}
 
 
-def simulated_gaits(sources: Dict[str, Tuple[str, int, bool, int]]) -> List[str]:
+def simulated_gaits(sources: GaitSources) -> List[str]:
     """The distinct sources of a `gait_sources` map, in order of first appearance (with the
     symmetry: the 29 representatives in `symmetry_classes` order)."""
     return list(dict.fromkeys(source for source, _, _, _ in sources.values()))
 
 
-def class_symmetries() -> Dict[str, Tuple[str, int, bool, int]]:
+def class_symmetries() -> GaitSources:
     """For every one of the 255 gaits: (representative, rotation, reflect, class size) with
     representative.transform(rotation, reflect) == gait (the first such symmetry in the order
     rotation 0..7 without, then with, reflection)."""
@@ -175,7 +179,7 @@ def cycle_displacements(trajectory: pd.DataFrame, period: float) -> pd.DataFrame
 
 
 def expand_cycles(representatives: pd.DataFrame,
-                  sources: Optional[Dict[str, Tuple[str, int, bool, int]]] = None
+                  sources: Optional[GaitSources] = None
                   ) -> pd.DataFrame:
     """The per-cycle table (CYCLE_COLUMNS) of all 255 gaits from that of the simulated gaits
     (columns gait, cycle, dx_body_mm, dy_body_mm, rotation_deg, status), each gait read from
@@ -205,7 +209,7 @@ def sort_gaits(table: pd.DataFrame, extra: Sequence[str] = ()) -> pd.DataFrame:
 
 
 def summarise_cycles(cycles: pd.DataFrame, first_cycle: int,
-                     sources: Optional[Dict[str, Tuple[str, int, bool, int]]] = None
+                     sources: Optional[GaitSources] = None
                      ) -> pd.DataFrame:
     """The primitive table (PRIMITIVE_COLUMNS but the run's period_s/dt_s) from a per-cycle
     table: mean and sample standard deviation over cycles >= first_cycle; class_size from
@@ -252,35 +256,36 @@ def check_measurement(base: StarParams, solver: SolverConfig, cycles: int, first
                          f"record every cycle boundary, got {base.period!r}")
 
 
-def measured_sources(base: StarParams, all_gaits: bool) -> Dict[str, Tuple[str, int, bool, int]]:
-    """`gait_sources` of a measurement: one gait per symmetry class when the actuators are
-    equal (`actuators_equal`) and all_gaits is False, all 255 gaits otherwise. ValueError
-    unless all_gaits is a bool."""
-    if not isinstance(all_gaits, bool):
-        raise ValueError(f"all_gaits must be True or False, got {all_gaits!r}")
-    return gait_sources(actuators_equal(base) and not all_gaits)
-
-
 def measure_primitives(base: StarParams = StarParams(), solver: SolverConfig = SolverConfig(),
                        cycles: int = 5, first_cycle: int = 1, arch: str = "cpu",
-                       progress: bool = False, glide_cycles: int = 0, all_gaits: bool = False
+                       progress: bool = False, glide_cycles: int = 0
                        ) -> Tuple[pd.DataFrame, pd.DataFrame]:
     """Simulate one gait per symmetry class (29 robots, one batch) for `cycles` actuation
     cycles from rest and return (primitive table, per-cycle table), both over all 255 gaits.
     When the actuators differ (`actuators_equal` False, e.g. `StarParams.preset("identified")`)
-    or with all_gaits True, all 255 gaits are simulated instead (255 robots, one batch), each
-    its own class representative (`gait_sources`).
+    all 255 gaits are simulated instead (255 robots, one batch), each its own class
+    representative (`gait_sources`).
     base: the robot (its gait is replaced); the period
     must be a whole number of solver steps; statistics over cycles first_cycle..cycles-1
     (0-based). The primitive table also holds the step of each cycle k - 1 (the k-th firing
     in a row from rest) in the columns `streak_step_columns(k)`. With glide_cycles > 0 it
     holds each gait's glides after k = 1..cycles consecutive firings from rest
     (`measure_glides`), in the columns `glide_columns(k)`, and glide_cycles. ValueError for
-    bad arguments (`check_measurement`; all_gaits not a bool)."""
+    bad arguments (`check_measurement`)."""
     check_measurement(base, solver, cycles, first_cycle)
     if isinstance(glide_cycles, bool) or not isinstance(glide_cycles, int) or glide_cycles < 0:
         raise ValueError(f"glide_cycles must be an integer >= 0, got {glide_cycles!r}")
-    sources = measured_sources(base, all_gaits)
+    return primitives_from_sources(base, solver, gait_sources(actuators_equal(base)), cycles,
+                                   first_cycle, arch, progress, glide_cycles)
+
+
+def primitives_from_sources(base: StarParams, solver: SolverConfig,
+                            sources: GaitSources, cycles: int,
+                            first_cycle: int, arch: str = "cpu", progress: bool = False,
+                            glide_cycles: int = 0) -> Tuple[pd.DataFrame, pd.DataFrame]:
+    """`measure_primitives` (arguments as it checks them) of the gaits in `sources` (a
+    `gait_sources` map, or part of one): every distinct source simulated in one batch, each
+    gait read from its source through its symmetry. Tables over the gaits of `sources`."""
     representatives = simulated_gaits(sources)
     result = simulate([base.replace(gait=g) for g in representatives], cycles * base.period,
                       solver, arch=arch, record_interval_s=base.period, progress=progress)
@@ -294,8 +299,8 @@ def measure_primitives(base: StarParams = StarParams(), solver: SolverConfig = S
     table = table[PRIMITIVE_COLUMNS].merge(widen_steps(expanded), on="gait", how="left",
                                            validate="one_to_one")
     if glide_cycles:
-        glides = measure_glides(base, solver, fire_cycles=cycles, glide_cycles=glide_cycles,
-                                arch=arch, progress=progress, all_gaits=all_gaits)
+        glides = glides_from_sources(base, solver, sources, cycles, glide_cycles, arch,
+                                     progress)
         table = table.merge(widen_glides(glides), on="gait", how="left",
                             validate="one_to_one")
     return table, expanded
@@ -303,18 +308,29 @@ def measure_primitives(base: StarParams = StarParams(), solver: SolverConfig = S
 
 def measure_glides(base: StarParams = StarParams(), solver: SolverConfig = SolverConfig(),
                    fire_cycles: int = 5, glide_cycles: int = GLIDE_CYCLES, arch: str = "cpu",
-                   progress: bool = False, all_gaits: bool = False) -> pd.DataFrame:
+                   progress: bool = False) -> pd.DataFrame:
     """How far each gait's robot glides after its last firing, as a function of how many
     cycles in a row it fired: for every k = 1..fire_cycles one robot per symmetry class
-    (29·fire_cycles robots, one Simulator; with differing actuators or all_gaits True, one per
-    gait: 255·fire_cycles, as in `measure_primitives`) fires its gait at the start of each of k
+    (29·fire_cycles robots, one Simulator; with differing actuators one per gait,
+    255·fire_cycles, as in `measure_primitives`) fires its gait at the start of each of k
     cycles from rest, then coasts `glide_cycles` cycles. Returns the glide table
     (`GLIDE_COLUMNS`, k in glide_fire_cycles) over all 255 gaits and every k, image gaits by
     symmetry as for the steps. ValueError for bad arguments."""
     check_measurement(base, solver, fire_cycles, 0)
     if isinstance(glide_cycles, bool) or not isinstance(glide_cycles, int) or glide_cycles < 1:
         raise ValueError(f"glide_cycles must be an integer >= 1, got {glide_cycles!r}")
-    sources = measured_sources(base, all_gaits)
+    return glides_from_sources(base, solver, gait_sources(actuators_equal(base)), fire_cycles,
+                               glide_cycles, arch, progress)
+
+
+def glides_from_sources(base: StarParams, solver: SolverConfig,
+                        sources: GaitSources, fire_cycles: int,
+                        glide_cycles: int, arch: str = "cpu", progress: bool = False
+                        ) -> pd.DataFrame:
+    """`measure_glides` (arguments as it checks them) of the gaits in `sources` (a
+    `gait_sources` map, or part of one): fire_cycles robots per distinct source in one
+    Simulator, each gait read from its source through its symmetry. The glide table over the
+    gaits of `sources`."""
     representatives = simulated_gaits(sources)
     count = len(representatives)
     # robot (k - 1)·count + i fires representative i in each of the first k cycles
