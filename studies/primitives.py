@@ -1,5 +1,6 @@
 """Motion primitives: every gait's steady per-cycle step in the body frame and its turn per
-cycle, from one batch of the 29 symmetry-class representatives expanded to the 255 gaits.
+cycle, from one batch of the 29 symmetry-class representatives expanded to the 255 gaits (a
+robot whose actuators differ, e.g. --preset identified: one batch of all 255 gaits).
 
     python -m studies primitives [--cycles 5] [--first-cycle 1] [--glide-cycles 4]
                                  [--preset paper|accurate|identified] [--set NAME=VALUE ...]
@@ -34,7 +35,8 @@ from taichi_star.primitives import GLIDE_CYCLES, check_measurement, measure_prim
 from . import cli
 
 DESCRIPTION = ("Every gait's steady per-cycle step (body frame) and turn, from one batch of "
-               "the 29 symmetry classes expanded to 255 gaits; CSV and a polar plot.")
+               "the 29 symmetry classes expanded to 255 gaits (of all 255 gaits when the "
+               "actuators differ); CSV and a polar plot.")
 QUICK_CYCLES = 2
 QUICK_DT = 5e-3
 QUICK_GLIDE_CYCLES = 1

@@ -2,11 +2,14 @@
 
 A primitive is the steady per-cycle displacement of the centroid in the body frame (the world
 frame turned by the heading at the cycle's start; x along the rest direction of A1's
-bisector) and the rotation of the body per cycle, with their spread over cycles. Because the
-octagon's 16 symmetries map gaits onto gaits (255 gaits in 29 classes), only one gait per
-class is simulated; an image gait's per-cycle displacement is the representative's turned by
-the symmetry's rotation (after mirroring across the x axis for a reflection, which also
-reverses the body's rotation).
+bisector) and the rotation of the body per cycle, with their spread over cycles. When the eight
+actuators are alike (every per-actuator field, e.g. `actuator_gains`, has one value:
+`actuators_equal`), the octagon's 16 symmetries map gaits onto gaits (255 gaits in 29
+classes), so only one gait per class is simulated; an image gait's per-cycle displacement is
+the representative's turned by the symmetry's rotation (after mirroring across the x axis for
+a reflection, which also reverses the body's rotation). When they differ (the "identified"
+preset's per-actuator gains) a gait and its images are different robots, and all 255 gaits are
+simulated, each its own source (`gait_sources`).
 
     table, cycles = measure_primitives(StarParams.preset("paper"), cycles=5, first_cycle=1)
     table.loc[table.gait == "A1+A2+A8", ["step_x_mm", "step_y_mm", "turn_deg"]]
@@ -15,7 +18,7 @@ reverses the body's rotation).
 from __future__ import annotations
 
 import math
-from typing import Dict, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import pandas as pd
@@ -25,6 +28,10 @@ from .metrics import rotate
 from .params import PER_ACTUATOR_FIELDS, SolverConfig, StarParams
 from .simulation import simulate, whole_steps
 from .simulator import Simulator
+
+GaitSources = Dict[str, Tuple[str, int, bool, int]]
+"""gait -> (source, rotation, reflect, class size): the gait whose simulation a gait's steps are
+read from and the symmetry mapping them onto it (`gait_sources`)."""
 
 CYCLE_COLUMNS = ["gait", "class_representative", "symmetry_rotation", "reflected", "cycle",
                  "dx_body_mm", "dy_body_mm", "rotation_deg", "status"]
@@ -36,7 +43,11 @@ PRIMITIVE_COLUMNS = ["gait", "class_representative", "class_size", "symmetry_rot
                      "reflected", "n_actuators", "step_x_mm", "step_y_mm", "step_x_std_mm",
                      "step_y_std_mm", "step_mm", "direction_deg", "turn_deg", "turn_std_deg",
                      "first_cycle", "cycles", "period_s", "dt_s", "status"]
-"""Columns of the primitive table (one row per gait): step_x/step_y_mm, the mean body-frame
+"""Columns of the primitive table (one row per gait): class_representative, the gait simulated
+whose cycles this gait's are read from, mapped by the symmetry (symmetry_rotation, reflected);
+class_size, how many gaits that simulation stands for (`gait_sources`: with equal actuators
+the symmetry class, 1 to 16 gaits; with differing ones every gait is simulated and is its own
+representative, rotation 0, not reflected, class size 1); step_x/step_y_mm, the mean body-frame
 displacement per cycle over cycles first_cycle..cycles-1 (0-based; the default 1..4 is the
 paper's "cycles 2-5"), and its sample standard deviation (*_std_mm); step_mm its length and
 direction_deg its direction in the body frame (NaN below ZERO_STEP_MM); turn_deg the mean
@@ -97,7 +108,30 @@ ZERO_STEP_MM = 1e-6
 not move and has no direction."""
 
 
-def class_symmetries() -> Dict[str, Tuple[str, int, bool, int]]:
+def actuators_equal(base: StarParams) -> bool:
+    """Whether every per-actuator field of `base` (`params.PER_ACTUATOR_FIELDS`, e.g.
+    actuator_gains, actuator_delays) holds one value for all eight actuators, exactly: then the
+    octagon's symmetries map the robot firing a gait onto the robots firing its images."""
+    return all(len(set(getattr(base, name))) == 1 for name in PER_ACTUATOR_FIELDS)
+
+
+def gait_sources(symmetric: bool) -> GaitSources:
+    """For every one of the 255 gaits: (source, rotation, reflect, class size), the gait whose
+    simulation it is read from and the symmetry that maps the source's cycles onto it.
+    symmetric: one source per symmetry class (`class_symmetries`); otherwise every gait is
+    simulated, its own source: (gait, 0, False, 1)."""
+    if symmetric:
+        return class_symmetries()
+    return {gait: (gait, 0, False, 1) for _, members in symmetry_classes() for gait in members}
+
+
+def simulated_gaits(sources: GaitSources) -> List[str]:
+    """The distinct sources of a `gait_sources` map, in order of first appearance (with the
+    symmetry: the 29 representatives in `symmetry_classes` order)."""
+    return list(dict.fromkeys(source for source, _, _, _ in sources.values()))
+
+
+def class_symmetries() -> GaitSources:
     """For every one of the 255 gaits: (representative, rotation, reflect, class size) with
     representative.transform(rotation, reflect) == gait (the first such symmetry in the order
     rotation 0..7 without, then with, reflection)."""
@@ -144,12 +178,17 @@ def cycle_displacements(trajectory: pd.DataFrame, period: float) -> pd.DataFrame
     return pd.concat(rows, ignore_index=True)
 
 
-def expand_cycles(representatives: pd.DataFrame) -> pd.DataFrame:
-    """The per-cycle table (CYCLE_COLUMNS) of all 255 gaits from that of the 29 class
-    representatives (columns gait, cycle, dx_body_mm, dy_body_mm, rotation_deg, status)."""
+def expand_cycles(representatives: pd.DataFrame,
+                  sources: Optional[GaitSources] = None
+                  ) -> pd.DataFrame:
+    """The per-cycle table (CYCLE_COLUMNS) of all 255 gaits from that of the simulated gaits
+    (columns gait, cycle, dx_body_mm, dy_body_mm, rotation_deg, status), each gait read from
+    its source in `sources` (`gait_sources`; None: the 29 class representatives,
+    `class_symmetries`)."""
+    sources = class_symmetries() if sources is None else sources
     by_gait = {gait: part for gait, part in representatives.groupby("gait", sort=False)}
     parts = []
-    for gait, (representative, rotation, reflect, _) in class_symmetries().items():
+    for gait, (representative, rotation, reflect, _) in sources.items():
         source = by_gait[representative]
         step = transform_vectors(source[["dx_body_mm", "dy_body_mm"]].to_numpy(), rotation,
                                  reflect)
@@ -169,10 +208,14 @@ def sort_gaits(table: pd.DataFrame, extra: Sequence[str] = ()) -> pd.DataFrame:
             .drop(columns="_key").reset_index(drop=True))
 
 
-def summarise_cycles(cycles: pd.DataFrame, first_cycle: int) -> pd.DataFrame:
+def summarise_cycles(cycles: pd.DataFrame, first_cycle: int,
+                     sources: Optional[GaitSources] = None
+                     ) -> pd.DataFrame:
     """The primitive table (PRIMITIVE_COLUMNS but the run's period_s/dt_s) from a per-cycle
-    table: mean and sample standard deviation over cycles >= first_cycle."""
-    sizes = {gait: size for gait, (_, _, _, size) in class_symmetries().items()}
+    table: mean and sample standard deviation over cycles >= first_cycle; class_size from
+    `sources` (`gait_sources`; None: the symmetry classes, `class_symmetries`)."""
+    sources = class_symmetries() if sources is None else sources
+    sizes = {gait: size for gait, (_, _, _, size) in sources.items()}
     steady = cycles[cycles["cycle"] >= first_cycle]
     rows = []
     for gait, part in steady.groupby("gait", sort=False):
@@ -211,12 +254,6 @@ def check_measurement(base: StarParams, solver: SolverConfig, cycles: int, first
     if whole_steps(base.period, solver.dt) is None:
         raise ValueError(f"period must be a whole number of steps (dt = {solver.dt} s) to "
                          f"record every cycle boundary, got {base.period!r}")
-    for name in PER_ACTUATOR_FIELDS:
-        values = getattr(base, name)
-        if len(set(values)) > 1:  # one robot per symmetry class stands for its 8-16 images
-            raise ValueError(f"{name} must be equal for all eight actuators to measure primitives "
-                             f"(one gait per symmetry class stands for its rotations and "
-                             f"reflections, which differing actuators break), got {values!r}")
 
 
 def measure_primitives(base: StarParams = StarParams(), solver: SolverConfig = SolverConfig(),
@@ -225,30 +262,45 @@ def measure_primitives(base: StarParams = StarParams(), solver: SolverConfig = S
                        ) -> Tuple[pd.DataFrame, pd.DataFrame]:
     """Simulate one gait per symmetry class (29 robots, one batch) for `cycles` actuation
     cycles from rest and return (primitive table, per-cycle table), both over all 255 gaits.
-    base: the robot (its gait is replaced; e.g. `StarParams.preset("identified")`); the period
+    When the actuators differ (`actuators_equal` False, e.g. `StarParams.preset("identified")`)
+    all 255 gaits are simulated instead (255 robots, one batch), each its own class
+    representative (`gait_sources`).
+    base: the robot (its gait is replaced); the period
     must be a whole number of solver steps; statistics over cycles first_cycle..cycles-1
     (0-based). The primitive table also holds the step of each cycle k - 1 (the k-th firing
     in a row from rest) in the columns `streak_step_columns(k)`. With glide_cycles > 0 it
     holds each gait's glides after k = 1..cycles consecutive firings from rest
-    (`measure_glides`), in the columns `glide_columns(k)`, and glide_cycles. ValueError for bad arguments (`check_measurement`)."""
+    (`measure_glides`), in the columns `glide_columns(k)`, and glide_cycles. ValueError for
+    bad arguments (`check_measurement`)."""
     check_measurement(base, solver, cycles, first_cycle)
     if isinstance(glide_cycles, bool) or not isinstance(glide_cycles, int) or glide_cycles < 0:
         raise ValueError(f"glide_cycles must be an integer >= 0, got {glide_cycles!r}")
-    representatives = [representative for representative, _ in symmetry_classes()]
+    return primitives_from_sources(base, solver, gait_sources(actuators_equal(base)), cycles,
+                                   first_cycle, arch, progress, glide_cycles)
+
+
+def primitives_from_sources(base: StarParams, solver: SolverConfig,
+                            sources: GaitSources, cycles: int,
+                            first_cycle: int, arch: str = "cpu", progress: bool = False,
+                            glide_cycles: int = 0) -> Tuple[pd.DataFrame, pd.DataFrame]:
+    """`measure_primitives` (arguments as it checks them) of the gaits in `sources` (a
+    `gait_sources` map, or part of one): every distinct source simulated in one batch, each
+    gait read from its source through its symmetry. Tables over the gaits of `sources`."""
+    representatives = simulated_gaits(sources)
     result = simulate([base.replace(gait=g) for g in representatives], cycles * base.period,
                       solver, arch=arch, record_interval_s=base.period, progress=progress)
     per_cycle = cycle_displacements(result.trajectory, base.period)
     per_cycle["gait"] = np.asarray(representatives)[per_cycle["instance"].to_numpy()]
     per_cycle["status"] = result.summary["status"].to_numpy()[per_cycle["instance"].to_numpy()]
-    expanded = expand_cycles(per_cycle)
-    table = summarise_cycles(expanded, first_cycle)
+    expanded = expand_cycles(per_cycle, sources)
+    table = summarise_cycles(expanded, first_cycle, sources)
     table["period_s"] = base.period
     table["dt_s"] = solver.dt
     table = table[PRIMITIVE_COLUMNS].merge(widen_steps(expanded), on="gait", how="left",
                                            validate="one_to_one")
     if glide_cycles:
-        glides = measure_glides(base, solver, fire_cycles=cycles, glide_cycles=glide_cycles,
-                                arch=arch, progress=progress)
+        glides = glides_from_sources(base, solver, sources, cycles, glide_cycles, arch,
+                                     progress)
         table = table.merge(widen_glides(glides), on="gait", how="left",
                             validate="one_to_one")
     return table, expanded
@@ -259,14 +311,27 @@ def measure_glides(base: StarParams = StarParams(), solver: SolverConfig = Solve
                    progress: bool = False) -> pd.DataFrame:
     """How far each gait's robot glides after its last firing, as a function of how many
     cycles in a row it fired: for every k = 1..fire_cycles one robot per symmetry class
-    (29·fire_cycles robots, one Simulator) fires its gait at the start of each of k cycles from
-    rest, then coasts `glide_cycles` cycles. Returns the glide table (`GLIDE_COLUMNS`, k in
-    glide_fire_cycles) over all 255 gaits and every k, image gaits by symmetry as for the
-    steps. ValueError for bad arguments."""
+    (29·fire_cycles robots, one Simulator; with differing actuators one per gait,
+    255·fire_cycles, as in `measure_primitives`) fires its gait at the start of each of k
+    cycles from rest, then coasts `glide_cycles` cycles. Returns the glide table
+    (`GLIDE_COLUMNS`, k in glide_fire_cycles) over all 255 gaits and every k, image gaits by
+    symmetry as for the steps. ValueError for bad arguments."""
     check_measurement(base, solver, fire_cycles, 0)
     if isinstance(glide_cycles, bool) or not isinstance(glide_cycles, int) or glide_cycles < 1:
         raise ValueError(f"glide_cycles must be an integer >= 1, got {glide_cycles!r}")
-    representatives = [representative for representative, _ in symmetry_classes()]
+    return glides_from_sources(base, solver, gait_sources(actuators_equal(base)), fire_cycles,
+                               glide_cycles, arch, progress)
+
+
+def glides_from_sources(base: StarParams, solver: SolverConfig,
+                        sources: GaitSources, fire_cycles: int,
+                        glide_cycles: int, arch: str = "cpu", progress: bool = False
+                        ) -> pd.DataFrame:
+    """`measure_glides` (arguments as it checks them) of the gaits in `sources` (a
+    `gait_sources` map, or part of one): fire_cycles robots per distinct source in one
+    Simulator, each gait read from its source through its symmetry. The glide table over the
+    gaits of `sources`."""
+    representatives = simulated_gaits(sources)
     count = len(representatives)
     # robot (k - 1)·count + i fires representative i in each of the first k cycles
     fired = np.repeat(np.arange(1, fire_cycles + 1), count)
@@ -288,7 +353,7 @@ def measure_glides(base: StarParams = StarParams(), solver: SolverConfig = Solve
     body[~ok], turn[~ok] = np.nan, np.nan
     index = {representative: i for i, representative in enumerate(representatives)}
     rows = []
-    for gait, (representative, rotation, reflect, _) in class_symmetries().items():
+    for gait, (representative, rotation, reflect, _) in sources.items():
         for k in range(1, fire_cycles + 1):
             source = (k - 1) * count + index[representative]
             glide = transform_vectors(body[source][None, :], rotation, reflect)[0]

@@ -5,10 +5,12 @@ direct simulation of image gaits."""
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 
 import taichi_star as ts
-from taichi_star.primitives import cycle_displacements
+from taichi_star.primitives import (cycle_displacements, gait_sources, measure_primitives,
+                                    primitives_from_sources)
 
 
 def test_primitives_cover_255_gaits_with_statistics_of_their_cycles(quick_primitives):
@@ -48,3 +50,70 @@ def test_expansion_equals_direct_simulation_of_image_gaits(quick_primitives):
         got = direct[direct["instance"] == index][["dx_body_mm", "dy_body_mm", "rotation_deg"]]
         np.testing.assert_allclose(got.to_numpy(), expected.to_numpy(), rtol=0, atol=1e-5,
                                    err_msg=gait)
+
+
+# A short cycle (0.2 s, just past the 0.163-s heating phase) at dt = 10 ms, one firing and one
+# cycle of glide (60 steps), and a part of the 255 gaits (at most 64 robots a batch, the engine
+# size the other tests compile): kept cheap for the suite's budget (the steps are still 0.2-2
+# mm). Every gait in `sources` is simulated as the all-gaits path does.
+SHORT_CYCLE = ts.StarParams(period=0.2)
+SHORT_SOLVER = ts.SolverConfig(dt=1e-2)
+MIRROR_ATOL = 1e-5
+"""mm and deg: a gait and its symmetry image, both simulated, differ only by the Newton solves'
+residuals (newton_tol = 1e-10 m a step: at most 60 steps × 1e-10 m = 6e-6 mm over the cycle and
+its glide; measured 2e-7); a wrong mapping or a broken symmetry is off by a sizeable part of
+the step, tenths of a millimetre and more."""
+STEP_COLUMNS = ["step_x_mm", "step_y_mm", "turn_deg", "glide1_x_mm", "glide1_y_mm"]
+
+
+def measure_directly(base, gaits):
+    """The primitive table (one cycle, its glide over one more) of `gaits`, each simulated
+    itself: the all-gaits path (`gait_sources(False)`) restricted to them."""
+    sources = {gait: source for gait, source in gait_sources(False).items() if gait in gaits}
+    assert set(sources) == set(gaits)
+    table, _ = primitives_from_sources(base, SHORT_SOLVER, sources, cycles=1, first_cycle=0,
+                                       glide_cycles=1)
+    return table.set_index("gait")
+
+
+def test_all_gaits_path_equals_the_symmetry_reduction_with_equal_actuators():
+    """With equal actuators, the 24 gaits of two classes (A1+A2's 8 rotations; A1+A2+A4's 8
+    rotations and 8 mirror images), each simulated itself, step, turn and glide as
+    measure_primitives reads them from the representative through the symmetry, within
+    MIRROR_ATOL."""
+    reduced, _ = measure_primitives(SHORT_CYCLE, SHORT_SOLVER, cycles=1, first_cycle=0,
+                                    glide_cycles=1)
+    reduced = reduced.set_index("gait")
+    classes = dict(ts.symmetry_classes())
+    gaits = classes["A1+A2"] + classes["A1+A2+A4"]
+    assert len(gaits) == 24
+    direct = measure_directly(SHORT_CYCLE, gaits)
+    assert reduced.loc[gaits, "reflected"].sum() == 8
+    assert (reduced.loc[gaits, "class_representative"] != pd.Index(gaits)).sum() == 22
+    assert (direct["class_representative"] == direct.index).all()
+    assert (direct["status"] == "ok").all() and (reduced["status"] == "ok").all()
+    assert reduced.loc[gaits, "step_mm"].min() > 0.1  # they move: not a comparison of zeros
+    np.testing.assert_allclose(direct.loc[gaits, STEP_COLUMNS].to_numpy(),
+                               reduced.loc[gaits, STEP_COLUMNS].to_numpy(), rtol=0,
+                               atol=MIRROR_ATOL)
+
+
+def test_unequal_gains_break_the_mirror_symmetry():
+    """Gains 1.5 on A2 and 0.5 on A8 (A1+A2 and A1+A8 are mirror images across A1's axis):
+    measure_primitives must simulate every gait (each its own source), because A1+A8's step
+    and glide are no longer A1+A2's mirrored (the stronger A2 pushes harder); A1+A3 and A1+A7,
+    whose actuators keep gain 1, still are, within MIRROR_ATOL."""
+    gains = (1.0, 1.5, 1.0, 1.0, 1.0, 1.0, 1.0, 0.5)
+    rows = measure_directly(SHORT_CYCLE.replace(actuator_gains=gains),
+                            ["A1+A2", "A1+A8", "A1+A3", "A1+A7"])
+    assert (rows["status"] == "ok").all()
+    mirror = np.array([1.0, -1.0])
+    for step in (["step_x_mm", "step_y_mm"], ["glide1_x_mm", "glide1_y_mm"]):
+        strong, weak = rows.loc["A1+A2", step].to_numpy(), rows.loc["A1+A8", step].to_numpy()
+        assert np.hypot(*(strong * mirror - weak)) > 0.1 * np.hypot(*strong), step
+        assert np.hypot(*strong) > np.hypot(*weak), step
+        np.testing.assert_allclose(rows.loc["A1+A7", step].to_numpy(),
+                                   rows.loc["A1+A3", step].to_numpy() * mirror,
+                                   rtol=0, atol=MIRROR_ATOL, err_msg=str(step))
+    assert rows.loc["A1+A7", "turn_deg"] == pytest.approx(-rows.loc["A1+A3", "turn_deg"],
+                                                         abs=MIRROR_ATOL)
