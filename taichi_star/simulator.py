@@ -119,7 +119,11 @@ class Simulator:
 
     @property
     def engine_key(self) -> tuple:
-        return (self.model.engine_key, self.solver.integrator, self.engine.capacity)
+        """What a saved state must match: the engine (topology and terms), the integrator, the
+        capacity and the stepping (fixed or adaptive: what the clock of pending firings reads,
+        steps or seconds)."""
+        return (self.model.engine_key, self.solver.integrator, self.engine.capacity,
+                "adaptive" if self.solver.adaptive else "fixed")
 
     def _steps(self) -> np.ndarray:
         return self.engine.state.steps_done.to_numpy()[:self.n_instances].astype(np.int64)
@@ -318,12 +322,13 @@ class Simulator:
 
     def load(self, snapshot: Union[SimulatorSnapshot, str, Path]):
         """Continue from a saved state (bitwise). Raises ValueError, state unchanged, for a
-        state of another topology, term set, integrator, batch size or step."""
+        state of another topology, term set, integrator, stepping (fixed or adaptive), batch
+        size or step."""
         if not isinstance(snapshot, SimulatorSnapshot):
             snapshot = SimulatorSnapshot.read(snapshot)
         if snapshot.engine_key != repr(self.engine_key):
             raise ValueError(f"the saved state belongs to another engine (topology, terms, "
-                             f"integrator or capacity): {snapshot.engine_key} vs "
+                             f"integrator, capacity or stepping): {snapshot.engine_key} vs "
                              f"{self.engine_key!r}")
         if snapshot.n_instances != self.n_instances or snapshot.dt != self.solver.dt:
             raise ValueError(f"the saved state has {snapshot.n_instances} instances at dt = "

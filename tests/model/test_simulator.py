@@ -253,6 +253,11 @@ def test_bad_durations_times_and_foreign_states_are_refused():
     other = ts.Simulator([ts.StarParams(n_arc=12)] * 3)
     with pytest.raises(ValueError, match="another engine"):
         sim.load(other.save())
+    # pending firings are step numbers with fixed steps, times with adaptive ones: a state of
+    # one stepping is refused by the other
+    adaptive = commanded(adaptive=True)
+    with pytest.raises(ValueError, match=r"another engine .*'fixed'\) vs .*'adaptive'\)"):
+        adaptive.load(sim.save())
 
 
 class _Accepted(Exception):
