@@ -147,12 +147,13 @@ class Schedule:
         self.gait_cycle_steps = arena.batch_field(ti.i32, capacity)
         """Fixed steps per period when the period is a whole number of steps, else 0."""
         self.gait_cycles = arena.batch_field(ti.i32, capacity)
-        """The last cycle of the gait begun (0 at t = 0) as counted so far: the count catches
-        up with the instance's time when asked (`count_cycles`), so that a rejected adaptive
-        step leaves it as it was."""
+        """The last cycle of the gait begun (0 at t = 0) as counted so far: the steps count
+        only the cycles begun by their start, so that a rejected adaptive step leaves the count
+        as it was."""
         self.pending_due = arena.batch_field(float, (capacity, PENDING_CAPACITY))
-        """Clock readings of the pending commanded firings, increasing (the first
-        `pending_count`; those at or before the instance's clock have fired)."""
+        """Clock readings of the commanded firings, increasing (the first `pending_count`):
+        those after the instance's clock are pending, those at or before it have fired (they
+        leave when the next command is queued)."""
         self.pending_actuators = arena.batch_field(ti.i32, (capacity, PENDING_CAPACITY))
         """The actuators each pending firing fires: bit m for actuator A(m+1)."""
         self.pending_count = arena.batch_field(ti.i32, capacity)
@@ -174,29 +175,22 @@ class Schedule:
             self.fire_time[b, m] = time
 
     @ti.func
-    def count_cycles(self, b, time):
-        """Count the cycles of instance b's periodic gait (it must have a period) begun at or
-        before `time` (s), the instance's current time; returns when the next one begins, s."""
-        period = self.gait_period[b]
-        cycle = self.gait_cycles[b] + 1
-        while period * cycle <= time:
-            cycle += 1
-        self.gait_cycles[b] = cycle - 1
-        return period * cycle
-
-    @ti.func
     def next_firing(self, b, time):
         """The time (s) of instance b's first firing after its current time `time` (s), with
         adaptive steps: the next cycle start of its periodic gait or its next pending command,
-        whichever comes first; NEVER when there is none."""
+        whichever comes first; NEVER when there is none. Counts the cycles begun by `time`."""
         due = NEVER
-        if self.gait_period[b] > 0.0:
-            due = self.count_cycles(b, time)
-        count = self.pending_count[b]
+        period = self.gait_period[b]
+        if period > 0.0:
+            cycle = self.gait_cycles[b]
+            while period * (cycle + 1) <= time:
+                cycle += 1
+            self.gait_cycles[b] = cycle
+            due = period * (cycle + 1)
         entry = 0
-        while entry < count and self.pending_due[b, entry] <= time:
+        while entry < self.pending_count[b] and self.pending_due[b, entry] <= time:
             entry += 1
-        if entry < count:
+        if entry < self.pending_count[b]:
             command = self.pending_due[b, entry]
             if due < 0.0 or command < due:
                 due = command
@@ -210,40 +204,34 @@ class Schedule:
         ends it on the first firing due, `next_firing`). Eq. 5 is right-continuous (a firing at
         t sets K̄(0) at t), so the step that ends on a firing already sees it.
 
-        Pending commands due in the step fire at its end (those due at or before its start
-        fired in earlier steps and leave the queue here). The periodic gait fires where a cycle
+        Pending commands due in the step fire at its end. The periodic gait fires where a cycle
         begins in the step: at its end when the period is a whole number of fixed steps (so
         that a command for the same step gives the same bits), else at the exact time k·T (with
         adaptive steps, the step's end). An actuator due twice in a step fires once, at the
-        later time."""
+        later time. Nothing is counted past the step's start (a rejected adaptive step is
+        retried from there)."""
         clock_start, clock_end = start, end
         if step > 0:
             clock_start, clock_end = ti.cast(step - 1, float), ti.cast(step, float)
-        count = self.pending_count[b]
-        fired = 0
-        while fired < count and self.pending_due[b, fired] <= clock_start:
-            fired += 1
-        if fired > 0:
-            for entry in range(count - fired):
-                self.pending_due[b, entry] = self.pending_due[b, entry + fired]
-                self.pending_actuators[b, entry] = self.pending_actuators[b, entry + fired]
-            count -= fired
-            self.pending_count[b] = count
         commanded = 0
         entry = 0
-        while entry < count and self.pending_due[b, entry] <= clock_end:
-            commanded |= self.pending_actuators[b, entry]
+        while entry < self.pending_count[b] and self.pending_due[b, entry] <= clock_end:
+            if self.pending_due[b, entry] > clock_start:
+                commanded |= self.pending_actuators[b, entry]
             entry += 1
         periodic_at = NEVER
+        period = self.gait_period[b]
         if step > 0 and self.gait_cycle_steps[b] > 0:
             if step % self.gait_cycle_steps[b] == 0:
                 periodic_at = end
-        elif self.gait_period[b] > 0.0:
-            self.count_cycles(b, start)
-            cycle = self.gait_cycles[b] + 1
-            while self.gait_period[b] * cycle <= end:
-                periodic_at = self.gait_period[b] * cycle
+        elif period > 0.0:
+            cycle = self.gait_cycles[b]
+            while period * (cycle + 1) <= end:
                 cycle += 1
+                if period * cycle > start:
+                    periodic_at = period * cycle
+                else:
+                    self.gait_cycles[b] = cycle
         for m in range(N_ACTUATORS):
             at = NEVER
             if self.gait_mask[b, m] != 0:
@@ -308,7 +296,7 @@ class Schedule:
             raise ValueError(f"at_s = {seconds:.6g} s is not after the current time of instance "
                              f"{int(late[0])} ({now:.6g} s); fire without at_s to fire now")
         for b in rows:
-            # the firings at or before the clock have happened: they leave the queue
+            # the firings at or before the clock have happened: they leave the queue here
             pending = dues[b, :counts[b]] > clock[b]
             times, fired = dues[b, :counts[b]][pending], entries[b, :counts[b]][pending]
             place = int(np.searchsorted(times, at))

@@ -2,9 +2,10 @@
 
 Where `simulate` runs every instance's gait from rest to the end, a Simulator holds the batch's
 state and advances it piecewise: `fire` actuators (per instance, any subset of the eight, now or
-at later times, any number of them pending), `advance` by a duration, read `state()` (position, heading, velocities, time
-since each actuator fired, status), `reset` instances, `save` and `load` the whole state. The
-StarParams' `gait` field is not used: an actuator fires only when commanded.
+at later times, any number of them pending), `advance` by a duration, read `state()` (position,
+heading, velocities, time since each actuator fired, status), `reset` instances, `save` and
+`load` the whole state. The StarParams' `gait` field is not used: an actuator fires only when
+commanded.
 
 Firing. An actuator fired at time t_f follows the actuation profile K̄(τ), τ = t − t_f: heating
 to its smallest curvature at τ = t0, then cooling. Firing an actuator that is still hot restarts
