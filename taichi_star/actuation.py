@@ -134,7 +134,6 @@ class Schedule:
     """The fields a state saves and restores (`fields`)."""
 
     def __init__(self, capacity: int, arena, time: Field):
-        self.capacity = capacity
         self.time = time
         self.fire_time = arena.batch_field(float, (capacity, N_ACTUATORS))
         """Time (s) each actuator last fired; NEVER when it has not."""
