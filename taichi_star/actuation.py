@@ -1,21 +1,33 @@
-"""Actuation: the curvature an SMA actuator takes over one cycle (paper Eq. 5).
+"""Actuation: the curvature an SMA actuator takes over one cycle (paper Eq. 5), and the
+`Schedule` of when each actuator fires.
 
 A fired actuator's arc follows K̄(τ), τ the time since it fired: a logistic fall while the SMA
 wire heats (τ < t0), then a logistic recovery while it cools. The fit does not close on itself
 (K̄ just before the next cycle is not K̄(0)); `closure="ramp"` spreads the difference linearly
 over the period so that a periodic gait has a continuous natural curvature.
-"""
 
-from __future__ import annotations
+What fires when, for every instance of a batch on the device, is one `Schedule`: a periodic
+gait (`simulate`), commanded firings (`Simulator.fire`), or both. Both step controllers of the
+engine ask its `fire_due` what fires in a step; `command` is the one way in for commands.
+"""
 
 import ast
 import math
 from dataclasses import dataclass
-from typing import Tuple
+from typing import Dict, Optional, Tuple
 
 import numpy as np
+import taichi as ti
+from taichi.lang.field import Field
+
+from .gait import N_ACTUATORS
 
 PROFILE_CLOSURES = ("jump", "ramp")
+NEVER = -1.0
+"""fire_time of an actuator that has not fired; the due time of no firing."""
+PENDING_CAPACITY = 16
+"""Commanded firings an instance holds pending: distinct times, each firing any set of its
+actuators."""
 
 
 @dataclass(frozen=True)
@@ -101,3 +113,202 @@ class CurvatureProfile:
     def rest_curvature(self) -> float:
         """K̄(0), 1/m: the curvature of an actuator at rest (the arcs of the rest shape)."""
         return self.curvature(0.0)
+
+
+@ti.data_oriented
+class Schedule:
+    """When the actuators of `capacity` instances fire, on the device: a periodic gait, pending
+    commanded firings (at most `PENDING_CAPACITY` distinct times per instance, each any set of
+    actuators), and each actuator's last two firings, which the bending term reads. Shapes
+    (capacity, 8) per actuator, (capacity,) per instance, (capacity, PENDING_CAPACITY) per
+    pending firing.
+
+    A command is due at a reading of the stepping's clock: with fixed steps the step number
+    (a firing due at step k happens at that step's end, k·dt, exactly as the periodic gait's),
+    with adaptive steps the time in s (the controller ends a step on it). `time`: the state's
+    field of each instance's current time, s (what firing now reads)."""
+
+    FIELD_NAMES = ("fire_time", "previous_fire_time", "gait_mask", "gait_period",
+                   "gait_cycle_steps", "gait_cycles", "pending_due", "pending_actuators",
+                   "pending_count")
+    """The fields a state saves and restores (`fields`)."""
+
+    def __init__(self, capacity: int, arena, time: Field):
+        self.time = time
+        self.fire_time = arena.batch_field(float, (capacity, N_ACTUATORS))
+        """Time (s) each actuator last fired; NEVER when it has not."""
+        self.previous_fire_time = arena.batch_field(float, (capacity, N_ACTUATORS))
+        """The firing before that (it still applies to times before `fire_time`)."""
+        self.gait_mask = arena.batch_field(ti.i32, (capacity, N_ACTUATORS))
+        """Actuators the periodic gait fires at the start of every cycle (none: commands only)."""
+        self.gait_period = arena.batch_field(float, capacity)
+        """Period of the gait, s; 0: no periodic gait."""
+        self.gait_cycle_steps = arena.batch_field(ti.i32, capacity)
+        """Fixed steps per period when the period is a whole number of steps, else 0."""
+        self.gait_cycles = arena.batch_field(ti.i32, capacity)
+        """The last cycle of the gait begun (0 at t = 0) as counted so far: the steps count
+        only the cycles begun by their start, so that a rejected adaptive step leaves the count
+        as it was."""
+        self.pending_due = arena.batch_field(float, (capacity, PENDING_CAPACITY))
+        """Clock readings of the commanded firings, increasing (the first `pending_count`):
+        those after the instance's clock are pending, those at or before it have fired (they
+        leave when the next command is queued)."""
+        self.pending_actuators = arena.batch_field(ti.i32, (capacity, PENDING_CAPACITY))
+        """The actuators each pending firing fires: bit m for actuator A(m+1)."""
+        self.pending_count = arena.batch_field(ti.i32, capacity)
+        """Entries of the pending firings in use."""
+
+    def fields(self) -> Dict[str, Field]:
+        """The schedule's fields by name (`FIELD_NAMES`)."""
+        return {name: getattr(self, name) for name in self.FIELD_NAMES}
+
+    # ---------------------------------------------------------------- device side
+    @ti.func
+    def fire(self, b, m, time):
+        """Actuator m of instance b fires at `time` (s); the firing it held becomes the previous
+        one, which still applies before `time`. The rule "previous ← current, current ← now",
+        written once. Firing at the time it last fired changes nothing: a rejected adaptive step
+        and its retry both fire what they end on."""
+        if self.fire_time[b, m] != time:
+            self.previous_fire_time[b, m] = self.fire_time[b, m]
+            self.fire_time[b, m] = time
+
+    @ti.func
+    def next_firing(self, b, time):
+        """The time (s) of instance b's first firing after its current time `time` (s), with
+        adaptive steps: the next cycle start of its periodic gait or its next pending command,
+        whichever comes first; NEVER when there is none. Counts the cycles begun by `time`."""
+        due = NEVER
+        period = self.gait_period[b]
+        if period > 0.0:
+            cycle = self.gait_cycles[b]
+            while period * (cycle + 1) <= time:
+                cycle += 1
+            self.gait_cycles[b] = cycle
+            due = period * (cycle + 1)
+        entry = 0
+        while entry < self.pending_count[b] and self.pending_due[b, entry] <= time:
+            entry += 1
+        if entry < self.pending_count[b]:
+            command = self.pending_due[b, entry]
+            if due < 0.0 or command < due:
+                due = command
+        return due
+
+    @ti.func
+    def fire_due(self, b, start, end, step):
+        """Fire what instance b has due in its step from `start` to `end` (s): `step` is the
+        step's number with fixed steps (the clock counts steps: the step is (step − 1, step]),
+        0 with adaptive steps (the clock reads s: the step is (start, end], and the controller
+        ends it on the first firing due, `next_firing`). Eq. 5 is right-continuous (a firing at
+        t sets K̄(0) at t), so the step that ends on a firing already sees it.
+
+        Pending commands due in the step fire at its end. The periodic gait fires where a cycle
+        begins in the step: at its end when the period is a whole number of fixed steps (so
+        that a command for the same step gives the same bits), else at the exact time k·T (with
+        adaptive steps, the step's end). An actuator due twice in a step fires once, at the
+        later time. Nothing is counted past the step's start (a rejected adaptive step is
+        retried from there)."""
+        clock_start, clock_end = start, end
+        if step > 0:
+            clock_start, clock_end = ti.cast(step - 1, float), ti.cast(step, float)
+        commanded = 0
+        entry = 0
+        while entry < self.pending_count[b] and self.pending_due[b, entry] <= clock_end:
+            if self.pending_due[b, entry] > clock_start:
+                commanded |= self.pending_actuators[b, entry]
+            entry += 1
+        periodic_at = NEVER
+        period = self.gait_period[b]
+        if step > 0 and self.gait_cycle_steps[b] > 0:
+            if step % self.gait_cycle_steps[b] == 0:
+                periodic_at = end
+        elif period > 0.0:
+            cycle = self.gait_cycles[b]
+            while period * (cycle + 1) <= end:
+                cycle += 1
+                if period * cycle > start:
+                    periodic_at = period * cycle
+                else:
+                    self.gait_cycles[b] = cycle
+        for m in range(N_ACTUATORS):
+            at = NEVER
+            if self.gait_mask[b, m] != 0:
+                at = periodic_at
+            if (commanded >> m) & 1:
+                at = end
+            if at >= 0.0:
+                self.fire(b, m, at)
+
+    @ti.kernel
+    def fire_now(self, actuators: ti.types.ndarray()):
+        """Fire the actuators of bits actuators[b] ((B,) int32) of the first B instances at
+        each one's current time."""
+        for b in range(actuators.shape[0]):
+            for m in range(N_ACTUATORS):
+                if (actuators[b] >> m) & 1:
+                    self.fire(b, m, self.time[b])
+
+    # ---------------------------------------------------------------- host side
+    def periodic_values(self, values: Dict[str, np.ndarray], masks: np.ndarray,
+                        periods: np.ndarray, cycle_steps: np.ndarray):
+        """Set, in a state's `values` (`state.BatchState.initial_values`), every instance to
+        fire its gait (`masks`: (capacity, 8) 0/1) at t = 0 and at the start of every cycle
+        (`periods`: (capacity,) s; `cycle_steps`: (capacity,) fixed steps per period, 0 where
+        the period is not a whole number of steps)."""
+        values["gait_mask"] = masks
+        values["gait_period"] = periods
+        values["gait_cycle_steps"] = cycle_steps
+        values["fire_time"] = np.where(masks != 0, 0.0, NEVER)
+
+    def command(self, actuators: np.ndarray, due: Optional[float] = None,
+                clock: Optional[np.ndarray] = None, step_s: Optional[float] = None):
+        """Fire actuators of the first B instances (`actuators`: (B, 8) bool, column m for
+        actuator A(m+1)): with `due` None now, each instance at its current time (acting on the
+        steps after it); else at the clock reading `due` (a step number with fixed steps, a time
+        in s with adaptive ones), added to the firings pending (the same reading again adds the
+        actuators to that firing). `clock`: (B,) each instance's clock reading now; `step_s`:
+        the fixed step (s) when the clock counts steps, None when it reads seconds.
+
+        Raises ValueError, nothing changed, where `due` is not after the clock of an instance
+        with actuators to fire, is a step number the clock's float type does not hold exactly
+        (f32: beyond 2²⁴ steps), or would be a firing beyond the `PENDING_CAPACITY` an
+        instance holds pending."""
+        actuators = np.asarray(actuators, dtype=bool)
+        bits = (actuators.astype(np.int32) << np.arange(N_ACTUATORS, dtype=np.int32)).sum(
+            axis=1, dtype=np.int32)
+        if due is None:
+            self.fire_now(bits)
+            return
+        dues = self.pending_due.to_numpy()
+        entries = self.pending_actuators.to_numpy()
+        counts = self.pending_count.to_numpy()
+        at = dues.dtype.type(due)
+        seconds = float(due) * (step_s if step_s is not None else 1.0)
+        if step_s is not None and float(at) != due:
+            raise ValueError(f"at_s = {seconds:.6g} s is step {due}, which the clock's "
+                             f"{dues.dtype} steps do not hold exactly; use precision 'f64'")
+        rows = np.flatnonzero(bits)
+        late = rows[~(clock[rows] < at)]
+        if len(late):
+            now = float(clock[late[0]]) * (step_s if step_s is not None else 1.0)
+            raise ValueError(f"at_s = {seconds:.6g} s is not after the current time of instance "
+                             f"{int(late[0])} ({now:.6g} s); fire without at_s to fire now")
+        for b in rows:
+            # the firings at or before the clock have happened: they leave the queue here
+            pending = dues[b, :counts[b]] > clock[b]
+            times, fired = dues[b, :counts[b]][pending], entries[b, :counts[b]][pending]
+            place = int(np.searchsorted(times, at))
+            if place < len(times) and times[place] == at:
+                fired[place] |= bits[b]
+            elif len(times) == PENDING_CAPACITY:
+                raise ValueError(f"at_s = {seconds:.6g} s: instance {int(b)} already has "
+                                 f"{PENDING_CAPACITY} firings pending, the most it holds "
+                                 f"(PENDING_CAPACITY); advance past one, then schedule this one")
+            else:
+                times, fired = np.insert(times, place, at), np.insert(fired, place, bits[b])
+            counts[b] = len(times)
+            dues[b, :len(times)], entries[b, :len(times)] = times, fired
+        self.pending_due.from_numpy(dues)
+        self.pending_actuators.from_numpy(entries)
+        self.pending_count.from_numpy(counts)

@@ -30,7 +30,7 @@ from .fields import FieldArena, FieldStore
 from .physics.assembly import Assembly
 from .physics.base import connect_terms, load_field, numpy_to_field_type, pad_batch
 from .gait import N_ACTUATORS, Gait
-from .state import NEVER, STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_OK, BatchState
+from .state import STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_OK, BatchState
 
 STEP_TOLERANCE = 1e-9
 """Relative tolerance within which a time is taken to be a whole number of steps."""
@@ -146,10 +146,8 @@ class BatchEngine:
             periods = pad_batch(np.array([p.period for p in model.params]), capacity)
             ratio = periods / solver.dt
             whole = np.abs(ratio - np.round(ratio)) <= STEP_TOLERANCE * np.maximum(1.0, ratio)
-            state["schedule_mask"] = masks
-            state["schedule_period"] = periods
-            state["schedule_cycle_steps"] = np.where(whole, np.round(ratio), 0)
-            state["fire_time"] = np.where(masks != 0, 0.0, NEVER)
+            self.state.schedule.periodic_values(state, masks, periods,
+                                                np.where(whole, np.round(ratio), 0))
         state["step_size"][:] = solver.dt
         self.state.store.write(state)
 
@@ -272,8 +270,8 @@ class BatchEngine:
         without history; if those fail too, freeze the instance
         at the start state with its status and failure step. One call site of `solve_step`
         keeps the kernel (and its compile time) small."""
-        self.fire_schedule(b, step_number)
         dt = self.dt[None]
+        self.state.schedule.fire_due(b, (step_number - 1) * dt, step_number * dt, step_number)
         converged, finite = 0, 1
         halvings = 0
         history = self.state.history_valid[b]
@@ -317,42 +315,6 @@ class BatchEngine:
         self.mirror_replicas(b)
 
     @ti.func
-    def fire_schedule(self, b, step_number):
-        """Fire instance b's due actuators for the step ending at step_number·dt (Eq. 5 is
-        right-continuous: a firing at t sets K̄(0) at t, so that step already sees it):
-        commanded firings scheduled for this step, and the periodic gait when the step reaches
-        a new cycle, exactly at that step when the period is a whole number of steps (so a
-        command for the same step gives the same bits), else at the exact time k·T inside it."""
-        step_end = step_number * self.dt[None]
-        periodic_at = -1.0
-        if self.state.schedule_cycle_steps[b] > 0:
-            if step_number % self.state.schedule_cycle_steps[b] == 0:
-                periodic_at = step_end
-        elif self.state.schedule_period[b] > 0.0:
-            period = self.state.schedule_period[b]
-            cycle = ti.cast(ti.floor(step_end / period), ti.i32)
-            if cycle > self.state.schedule_cycles[b]:
-                self.state.schedule_cycles[b] = cycle
-                periodic_at = period * cycle
-        for m in range(N_ACTUATORS):
-            fire_at = -1.0
-            if self.state.schedule_mask[b, m] != 0:
-                fire_at = periodic_at
-            if self.state.scheduled_fire_step[b, m] == step_number:
-                fire_at = step_end
-                self.state.scheduled_fire_step[b, m] = -1
-            if fire_at >= 0.0:
-                self.state.previous_fire_time[b, m] = self.state.fire_time[b, m]
-                self.state.fire_time[b, m] = fire_at
-
-    @ti.func
-    def fire_at(self, b, m, time):
-        """Actuator m of instance b fires at `time` (s) unless it already fired then."""
-        if self.state.fire_time[b, m] != time:
-            self.state.previous_fire_time[b, m] = self.state.fire_time[b, m]
-            self.state.fire_time[b, m] = time
-
-    @ti.func
     def adaptive_instance(self, b, max_steps):
         """Advance instance b towards its stop_time (s) by steps of its own size, at most
         max_steps attempts. Each step ends exactly on the stop, on the next cycle start of its
@@ -373,24 +335,14 @@ class BatchEngine:
             attempts += 1
             start = self.state.time[b]
             proposed = ti.min(self.state.step_size[b], dt_max)
-            # the next stop: stop_time, or the next cycle start of the periodic gait, or a
-            # commanded firing before it
+            # the next stop: stop_time, or the next firing (a cycle start of the periodic gait
+            # or a command) before it
             target = stop_time
-            cycle_start = -1.0
             firing = 0
-            if self.state.schedule_period[b] > 0.0:
-                boundary = self.state.schedule_period[b] * (self.state.schedule_cycles[b] + 1)
-                if boundary <= target:
-                    target = boundary
-                    cycle_start = boundary
-                    firing = 1
-            for m in range(N_ACTUATORS):
-                due = self.state.scheduled_fire_time[b, m]
-                if due > start and due <= target:
-                    if due < target:
-                        target = due
-                        cycle_start = -1.0
-                    firing = 1
+            due = self.state.schedule.next_firing(b, start)
+            if due >= 0.0 and due <= target:
+                target = due
+                firing = 1
             # a firing makes the forcing jump within the step that ends on it: that step is at
             # most dt long (as a run's first step), so the steps before it end dt short of it
             # (or halfway there)
@@ -405,14 +357,9 @@ class BatchEngine:
             elif limit - end < 0.25 * proposed:
                 end = start + 0.5 * (limit - start)
             if end != target:
-                cycle_start = -1.0
                 firing = 0
             h = end - start
-            for m in range(N_ACTUATORS):
-                if cycle_start >= 0.0 and self.state.schedule_mask[b, m] != 0:
-                    self.fire_at(b, m, cycle_start)
-                if self.state.scheduled_fire_time[b, m] == end:
-                    self.fire_at(b, m, end)
+            self.state.schedule.fire_due(b, start, end, 0)
             use_history = self.state.history_valid[b]
             ratio = 1.0
             if use_history == 1:
@@ -428,11 +375,6 @@ class BatchEngine:
                 self.state.steps_done[b] = self.state.steps_done[b] + 1
                 self.state.previous_step_size[b] = h
                 self.state.history_valid[b] = 1
-                if cycle_start >= 0.0:
-                    self.state.schedule_cycles[b] = self.state.schedule_cycles[b] + 1
-                for m in range(N_ACTUATORS):
-                    if self.state.scheduled_fire_time[b, m] == end:
-                        self.state.scheduled_fire_time[b, m] = NEVER
                 growth = 2.0
                 if error > 0.0:
                     growth = ti.min(2.0, ti.max(0.2, 0.9 * ti.sqrt(tol / error)))

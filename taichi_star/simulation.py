@@ -30,7 +30,7 @@ progress bar."""
 MAX_STEPS_PER_INSTANCE = 2 ** 31 - 1
 """Most time steps one instance may take, counted from t = 0 (fixed steps: duration / dt;
 adaptive: duration / dt_min, the worst case). The engine's step counters (steps_done,
-scheduled_fire_step, failure_step) are int32, and a run this long (2.1e9 steps: 25 days of
+failure_step) are int32, and a run this long (2.1e9 steps: 25 days of
 simulated time at the paper's 1 ms) is never what was meant; it is refused before any compute
 instead of running for days or overflowing."""
 

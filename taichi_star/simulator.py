@@ -2,9 +2,10 @@
 
 Where `simulate` runs every instance's gait from rest to the end, a Simulator holds the batch's
 state and advances it piecewise: `fire` actuators (per instance, any subset of the eight, now or
-at a later step), `advance` by a duration, read `state()` (position, heading, velocities, time
-since each actuator fired, status), `reset` instances, `save` and `load` the whole state. The
-StarParams' `gait` field is not used: an actuator fires only when commanded.
+at later times, any number of them pending), `advance` by a duration, read `state()` (position,
+heading, velocities, time since each actuator fired, status), `reset` instances, `save` and
+`load` the whole state. The StarParams' `gait` field is not used: an actuator fires only when
+commanded.
 
 Firing. An actuator fired at time t_f follows the actuation profile K̄(τ), τ = t − t_f: heating
 to its smallest curvature at τ = t0, then cooling. Firing an actuator that is still hot restarts
@@ -32,13 +33,14 @@ import pandas as pd
 
 from . import metrics
 from . import sensitivities as tangents
+from .actuation import NEVER
 from .gait import N_ACTUATORS, Gait
 from .geometry import CENTRE
 from .model import build_model, validate_batch
 from .params import SolverConfig, StarParams, check_precision
 from .runtime import Runtime, check_arch
 from .simulation import MAX_STEPS_PER_INSTANCE, check_work
-from .state import NEVER, STATUS_NAMES, STATUS_OK
+from .state import STATUS_NAMES, STATUS_OK
 
 STEPS_PER_LAUNCH = 50
 ACTUATOR_COLUMNS = tuple(f"since_A{m + 1}_s" for m in range(N_ACTUATORS))
@@ -131,7 +133,11 @@ class Simulator:
 
     @property
     def engine_key(self) -> tuple:
-        key = (self.model.engine_key, self.solver.integrator, self.engine.capacity)
+        """What a saved state must match: the engine (topology and terms), the integrator, the
+        capacity, the stepping (fixed or adaptive: what the clock of pending firings reads,
+        steps or seconds) and the parameters differentiated by, if any."""
+        key = (self.model.engine_key, self.solver.integrator, self.engine.capacity,
+               "adaptive" if self.solver.adaptive else "fixed")
         return key + ((tuple(d.label for d in self.directions),) if self.directions else ())
 
     def _steps(self) -> np.ndarray:
@@ -164,58 +170,30 @@ class Simulator:
     def fire(self, commands, at_s: Optional[float] = None):
         """Fire actuators: `commands` is a (B, 8) boolean array (column m = actuator A(m+1)) or
         a list of B gait texts ("A1+A3", "none"). With at_s None they fire now (each instance
-        at its own current time) and act on the steps after now; with at_s (s, not before an
-        instance's current time, a whole number of steps ahead) they fire at that time, so the
-        step ending then already sees K̄(0); an actuator holds one pending firing (scheduling the
-        same time again is a no-op, another time while one is pending a ValueError). Failed
-        instances ignore commands. Raises ValueError (state unchanged) for a bad shape, dtype,
-        gait or time."""
+        at its own current time) and act on the steps after now; with at_s (s, after every
+        commanded instance's current time, a whole number of steps ahead with fixed steps) they
+        fire at that time, so the step ending then already sees K̄(0). Firings at different
+        times are all kept, each actuator any number of them (an instance holds
+        `actuation.PENDING_CAPACITY` distinct pending times); the same time again adds
+        actuators to that firing. Failed instances ignore commands. Raises ValueError (state
+        unchanged) for a bad shape, dtype, gait or time, or a full queue of pending firings."""
         mask = self._command_mask(commands)
-        state = self.engine.state
-        rows = np.flatnonzero(mask.any(axis=1))
+        schedule = self.engine.state.schedule
         if at_s is None:
-            fire_time = state.fire_time.to_numpy()
-            previous = state.previous_fire_time.to_numpy()
-            # the engine's own clock (with fixed steps the product step·dt that a firing
-            # scheduled for this step gets too)
-            now = state.time.to_numpy()
-            for b in rows:
-                previous[b, mask[b]] = fire_time[b, mask[b]]
-                fire_time[b, mask[b]] = now[b]
-            state.previous_fire_time.from_numpy(previous)
-            state.fire_time.from_numpy(fire_time)
+            schedule.command(mask)
             return
         if isinstance(at_s, bool) or not isinstance(at_s, numbers.Real) or not math.isfinite(at_s):
             raise ValueError(f"at_s must be a finite time in s, got {at_s!r}")
         if self.solver.adaptive:
-            due, clock, table = at_s, self.time_s, state.scheduled_fire_time
-        else:
-            check_work(f"at_s = {at_s!r} s (at most {MAX_STEPS_PER_INSTANCE * self.solver.dt:.6g} s "
-                       f"at dt = {self.solver.dt:g} s)", abs(at_s / self.solver.dt))
-            due = int(round(at_s / self.solver.dt))
-            if abs(due * self.solver.dt - at_s) > 1e-9 * max(1.0, abs(at_s)):
-                raise ValueError(f"at_s must be a whole number of steps (dt = {self.solver.dt} "
-                                 f"s), got {at_s!r}")
-            clock, table = self._steps(), state.scheduled_fire_step
-        late = rows[clock[rows] >= due]
-        if len(late):
-            raise ValueError(f"at_s = {at_s!r} s is not after the current time of instance "
-                             f"{int(late[0])} ({self.time_s[late[0]]:.6g} s); fire without at_s "
-                             f"to fire now")
-        scheduled = table.to_numpy()
-        # one pending firing per actuator: a second one for a later (or earlier) time would
-        # replace the first in the engine's table, so it is refused rather than lost
-        mine = scheduled[:len(mask)]
-        pending = mask & (mine >= 0) & (mine != due)
-        if pending.any():
-            b, m = (int(i) for i in np.argwhere(pending)[0])
-            when = scheduled[b, m] if self.solver.adaptive else scheduled[b, m] * self.solver.dt
-            raise ValueError(f"at_s = {at_s!r} s: actuator A{m + 1} of instance {b} already has a "
-                             f"firing pending at {when:.6g} s (one pending firing per actuator); "
-                             f"advance past it, then schedule the next")
-        for b in rows:
-            scheduled[b, mask[b]] = due
-        table.from_numpy(scheduled)
+            schedule.command(mask, at_s, self.time_s)
+            return
+        check_work(f"at_s = {at_s!r} s (at most {MAX_STEPS_PER_INSTANCE * self.solver.dt:.6g} s "
+                   f"at dt = {self.solver.dt:g} s)", abs(at_s / self.solver.dt))
+        due = int(round(at_s / self.solver.dt))
+        if abs(due * self.solver.dt - at_s) > 1e-9 * max(1.0, abs(at_s)):
+            raise ValueError(f"at_s must be a whole number of steps (dt = {self.solver.dt} "
+                             f"s), got {at_s!r}")
+        schedule.command(mask, due, self._steps(), step_s=self.solver.dt)
 
     def advance(self, duration_s: float, record_interval_s: float = 0.0,
                 progress: bool = False) -> pd.DataFrame:
@@ -384,12 +362,13 @@ class Simulator:
 
     def load(self, snapshot: Union[SimulatorSnapshot, str, Path]):
         """Continue from a saved state (bitwise). Raises ValueError, state unchanged, for a
-        state of another topology, term set, integrator, batch size or step."""
+        state of another topology, term set, integrator, stepping (fixed or adaptive), batch
+        size or step."""
         if not isinstance(snapshot, SimulatorSnapshot):
             snapshot = SimulatorSnapshot.read(snapshot)
         if snapshot.engine_key != repr(self.engine_key):
             raise ValueError(f"the saved state belongs to another engine (topology, terms, "
-                             f"integrator or capacity): {snapshot.engine_key} vs "
+                             f"integrator, capacity or stepping): {snapshot.engine_key} vs "
                              f"{self.engine_key!r}")
         if snapshot.n_instances != self.n_instances or snapshot.dt != self.solver.dt:
             raise ValueError(f"the saved state has {snapshot.n_instances} instances at dt = "

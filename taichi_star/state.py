@@ -1,9 +1,10 @@
 """The state of a batch on the device: what changes as the instances advance.
 
 Positions and velocities, the integrator's history (the previous step's positions and
-velocities, whether that history is valid), each instance's status and counters, and the
-histories the force terms keep (see `physics.base.Term.history`). `save` copies all of it to
-NumPy and `restore` puts it back, bitwise.
+velocities, whether that history is valid), each instance's status and counters, its actuation
+`actuation.Schedule` (what has fired, what is pending) and the histories the force terms keep
+(see `physics.base.Term.history`). `save` copies all of it to NumPy and `restore` puts it back,
+bitwise.
 """
 
 from __future__ import annotations
@@ -14,13 +15,11 @@ import numpy as np
 import taichi as ti
 from taichi.lang.field import Field
 
+from .actuation import NEVER, Schedule
 from .fields import FieldArena, FieldStore
-from .gait import N_ACTUATORS
 
 STATUS_OK, STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_INACTIVE = 0, 1, 2, 3
 STATUS_NAMES = ("ok", "newton_failed", "non_finite", "inactive")
-NEVER = -1.0
-"""fire_time of an actuator that has not fired."""
 """Per-instance status; "inactive" marks the padding of a batch up to the engine's capacity."""
 
 
@@ -56,8 +55,6 @@ class BatchState:
         """Adaptive stepping: the size of the last accepted step, s."""
         self.stop_time = arena.batch_field(float, capacity)
         """Adaptive stepping: where the current launch advances the instance to, s."""
-        self.scheduled_fire_time = arena.batch_field(float, (capacity, N_ACTUATORS))
-        """Adaptive stepping: time of a commanded firing that is due (NEVER: none), s."""
         self.rejected_steps = arena.batch_field(ti.i32, capacity)
         """Adaptive stepping: steps rejected by the error estimate or a failed Newton solve."""
         self.newton_total = arena.batch_field(ti.i64, capacity)
@@ -67,28 +64,27 @@ class BatchState:
         self.newton_max = arena.batch_field(ti.i32, capacity)
         """Most Newton iterations of one solve."""
         self.substep_retries = arena.batch_field(ti.i32, capacity)
-        self.fire_time = arena.batch_field(float, (capacity, N_ACTUATORS))
-        """Time (s) each actuator last fired; NEVER when it has not."""
-        self.previous_fire_time = arena.batch_field(float, (capacity, N_ACTUATORS))
-        """The firing before that (it still applies to times before `fire_time`)."""
-        self.scheduled_fire_step = arena.batch_field(ti.i32, (capacity, N_ACTUATORS))
-        """Step number at whose end a commanded firing is due (-1: none)."""
-        self.schedule_mask = arena.batch_field(ti.i32, (capacity, N_ACTUATORS))
-        """Actuators the periodic schedule fires (a gait every period; none for commands)."""
-        self.schedule_period = arena.batch_field(float, capacity)
-        """Period of the schedule, s."""
-        self.schedule_cycle_steps = arena.batch_field(ti.i32, capacity)
-        """Steps per period when the period is a whole number of steps, else 0."""
-        self.schedule_cycles = arena.batch_field(ti.i32, capacity)
-        """Cycles the schedule has begun."""
+        self.schedule = Schedule(capacity, arena, self.time)
+        """When the actuators fire: the periodic gait, pending commands, the last firings."""
         self.term_histories: Dict[str, Field] = {}
+
+    @property
+    def fire_time(self) -> Field:
+        """(capacity, 8) time (s) each actuator last fired (`actuation.Schedule.fire_time`)."""
+        return self.schedule.fire_time
+
+    @property
+    def previous_fire_time(self) -> Field:
+        """(capacity, 8) the firing before (`actuation.Schedule.previous_fire_time`)."""
+        return self.schedule.previous_fire_time
 
     def own_fields(self) -> Dict[str, Field]:
         return {name: value for name, value in vars(self).items() if isinstance(value, Field)}
 
     def fields(self) -> Dict[str, Field]:
-        """Every state field by name, the terms' histories as "<term>.<name>"."""
-        return {**self.own_fields(), **self.term_histories}
+        """Every state field by name: the schedule's by their names (`Schedule.FIELD_NAMES`),
+        the terms' histories as "<term>.<name>"."""
+        return {**self.own_fields(), **self.schedule.fields(), **self.term_histories}
 
     @property
     def store(self) -> FieldStore:
@@ -108,8 +104,7 @@ class BatchState:
         values["status"] = np.where(np.arange(len(values["status"])) < batch_size, STATUS_OK,
                                     STATUS_INACTIVE)
         values["failure_step"][:] = -1
-        values["scheduled_fire_step"][:] = -1
-        for name in ("fire_time", "scheduled_fire_time", "previous_fire_time"):
+        for name in ("fire_time", "previous_fire_time"):
             values[name][:] = NEVER
         return values
 

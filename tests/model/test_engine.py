@@ -364,3 +364,19 @@ def test_a_step_failing_from_the_carried_acceleration_is_redone_from_the_plain_s
     assert summary.newton_iterations_max == 25
     assert summary.newton_capped  # ok, but flagged: a solve ran out of iterations
     assert summary.substep_retries == 0
+
+
+def test_a_period_of_no_whole_number_of_steps_fires_at_its_exact_time():
+    """Period 0.1705 s at 5-ms steps: the second cycle begins inside step 35, and the engine
+    fires the gait at exactly 0.1705 s (the step ending at 0.175 s sees τ = 4.5 ms), as the
+    reference's τ = t mod T does: within 1e-8 relative after 36 steps, as in the test above.
+    Firing at the end of that step instead (T = 0.175 s in the reference) is more than 100
+    times further off. The batch of the test above (its engine, compiled once), one compared."""
+    solver = ts.SolverConfig(dt=5e-3, newton_tol=1e-12)
+    batch = [p.replace(period=0.1705) for p in MIXED_BATCH]
+    engine = _final_shapes(batch, 36, solver)[0]
+    reference = ReferenceSimulator(batch[0], solver).run(36)[-1]
+    error = np.abs(engine - reference).max()
+    assert error <= 1e-8 * np.abs(reference).max(), error
+    late = ReferenceSimulator(batch[0].replace(period=0.175), solver).run(36)[-1]
+    assert np.abs(engine - late).max() > 100 * error

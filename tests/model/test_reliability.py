@@ -183,6 +183,24 @@ def test_f32_agrees_with_f64_or_flags_the_iteration_cap():
     assert (coarse.newton_iterations_max == 25).all() and (coarse.substep_retries > 0).all()
 
 
+def test_an_f32_simulator_refuses_a_firing_at_a_step_its_clock_cannot_hold():
+    """With fixed steps a pending firing is kept as its step number in the engine's float: f32
+    holds every whole number up to 2²⁴ (accepted), not 2²⁴ + 1 (refused, nothing changed).
+    dt = 2⁻¹⁰ s makes both times exact binary multiples of the step. After the f32 test above:
+    one switch of Taichi's precision."""
+    dt = 2.0 ** -10
+    sim = ts.Simulator([ts.StarParams()], ts.SolverConfig(dt=dt, precision="f32", newton_tol=1e-6))
+    sim.fire(["A1"], at_s=2 ** 24 * dt)
+    before = sim.save().fields
+    with pytest.raises(ValueError, match=r"at_s = 16384 s is step 16777217, which the clock's "
+                                         r"float32 steps do not hold exactly; use precision "
+                                         r"'f64'"):
+        sim.fire(["A2"], at_s=(2 ** 24 + 1) * dt)
+    after = sim.save().fields
+    assert all(np.array_equal(after[name], before[name]) for name in before)
+    assert sim.engine.state.schedule.pending_due.to_numpy()[0, 0] == 2 ** 24
+
+
 class _Accepted(Exception):
     """Raised by a stand-in model builder: the call passed every check before compute."""
 

@@ -119,6 +119,88 @@ def test_firing_a_hot_actuator_restarts_its_profile():
     assert np.abs(once.shapes() - sim.shapes()).max() > 1e-6
 
 
+def run_two_firings(solver, params, queued_ahead, pieces):
+    """A1 fired at 0.05 s and at 0.2 s: both queued at the start (`queued_ahead`) or the second
+    once 0.1 s is reached; advanced by `pieces` (s). Returns the final shapes and state."""
+    sim = ts.Simulator([params.replace(gait="none")], solver)
+    sim.fire(["A1"], at_s=0.05)
+    if queued_ahead:
+        sim.fire(["A1"], at_s=0.2)
+    for piece in pieces:
+        if not queued_ahead and sim.time_s[0] == pytest.approx(0.1):
+            sim.fire(["A1"], at_s=0.2)
+        sim.advance(piece)
+    return sim.shapes(), sim.state()
+
+
+@pytest.mark.parametrize("preset", ["paper", "accurate"])
+def test_an_actuator_holds_several_pending_firings_and_fires_each(preset):
+    """fire(A1, at_s=0.05); fire(A1, at_s=0.2) fires both: the same bits as scheduling 0.2 s
+    once 0.05 s has fired (it used to keep only the last firing, which equals firing at 0.2 s
+    alone). With fixed steps every firing ends the same step whatever the pieces, so the
+    queued run advances at once; adaptive steps end on every stop (0.1 s here) as well as on
+    the firings, so both runs advance by the same pieces and take the same steps."""
+    solver = ts.SolverConfig.preset(preset)
+    params = PARAMS[0] if preset == "paper" else PARAMS[0].replace(n_arc=18)
+    queued_pieces = [0.3] if preset == "paper" else [0.1, 0.2]
+    shapes, state = run_two_firings(solver, params, True, queued_pieces)
+    expected_shapes, expected_state = run_two_firings(solver, params, False, [0.1, 0.2])
+    np.testing.assert_array_equal(shapes, expected_shapes)
+    pd.testing.assert_frame_equal(state, expected_state, check_exact=True)
+    assert state.since_A1_s.iloc[0] == pytest.approx(0.1, abs=1e-12)
+    late_only = ts.Simulator([params.replace(gait="none")], solver)
+    late_only.fire(["A1"], at_s=0.2)
+    late_only.advance(0.3)
+    assert np.abs(late_only.shapes() - shapes).max() > 1e-6
+
+
+def test_pending_firings_up_to_the_capacity_then_refused_until_one_has_fired():
+    """An instance holds PENDING_CAPACITY pending times: one more is a ValueError naming the
+    capacity (state unchanged), the same time again only adds actuators, and once a firing has
+    happened its place is free. Every firing happens at its step (since = 0 there)."""
+    capacity = ts.actuation.PENDING_CAPACITY
+    sim = commanded(PARAMS[:1])
+    for step in range(1, capacity + 1):
+        sim.fire(["A1"], at_s=step * 1e-3)
+    sim.fire(["A2"], at_s=5e-3)
+    before = sim.save().fields
+    with pytest.raises(ValueError, match=rf"at_s = 0.017 s: instance 0 already has {capacity} "
+                                         rf"firings pending, the most it holds "
+                                         rf"\(PENDING_CAPACITY\)"):
+        sim.fire(["A1"], at_s=(capacity + 1) * 1e-3)
+    after = sim.save().fields
+    assert all(np.array_equal(after[name], before[name]) for name in before)
+    first = sim.advance(1e-3, record_interval_s=1e-3)
+    sim.fire(["A1"], at_s=(capacity + 1) * 1e-3)
+    rest = sim.advance(0.02 - 1e-3, record_interval_s=1e-3)
+    since_a1 = np.concatenate([first.since_A1_s, rest.since_A1_s])
+    steps = np.arange(1, 21)
+    np.testing.assert_allclose(since_a1, np.where(steps <= capacity + 1, 0.0,
+                                                  (steps - capacity - 1) * 1e-3), atol=1e-12)
+    since_a2 = np.concatenate([first.since_A2_s, rest.since_A2_s])
+    assert np.isnan(since_a2[:4]).all()
+    np.testing.assert_allclose(since_a2[4:], (steps[4:] - 5) * 1e-3, atol=1e-12)
+
+
+def test_pending_firings_travel_with_save_and_load(tmp_path):
+    """A snapshot holds the firings still pending: loaded (from memory or a file), the run goes
+    on to fire them, bitwise as the run that was saved."""
+    sim = commanded(PARAMS[:1])
+    sim.fire(["A1"], at_s=0.05)
+    sim.fire(["A1+A2"], at_s=0.2)
+    sim.advance(0.1)
+    snapshot = sim.save()
+    path = sim.save(tmp_path / "pending")
+    sim.advance(0.2)
+    expected_shapes, expected_state = sim.shapes(), sim.state()
+    assert expected_state.since_A2_s.iloc[0] == pytest.approx(0.1, abs=1e-12)
+    for source in (snapshot, path):
+        sim.load(source)
+        sim.advance(0.2)
+        np.testing.assert_array_equal(sim.shapes(), expected_shapes)
+        pd.testing.assert_frame_equal(sim.state(), expected_state, check_exact=True)
+
+
 def test_heading_and_angular_velocity_of_a_turning_gait():
     """An asymmetric gait turns the body: heading changes and its rate has the sign of the turn
     (checked against the heading's finite difference over the last record)."""
@@ -155,30 +237,27 @@ def test_bad_durations_times_and_foreign_states_are_refused():
     for duration in (-1.0, 0.0, float("nan")):
         with pytest.raises(ValueError, match="duration_s"):
             sim.advance(duration)
-    with pytest.raises(ValueError, match="at_s"):
+    before = sim.save().fields
+    with pytest.raises(ValueError, match=r"at_s = 0.005 s is not after the current time of "
+                                         r"instance 0 \(0.01 s\)"):
         sim.fire(GAITS, at_s=0.005)
-    with pytest.raises(ValueError, match="at_s"):
+    with pytest.raises(ValueError, match="at_s must be a whole number of steps"):
         sim.fire(GAITS, at_s=0.0105)
     # now itself is refused (a firing at now is `fire` without at_s); one step later is accepted
     with pytest.raises(ValueError, match=r"at_s = 0.01 s is not after the current time"):
         sim.fire(GAITS, at_s=0.01)
+    after = sim.save().fields
+    assert all(np.array_equal(after[name], before[name]) for name in before)
     sim.fire(["A1"] * 3, at_s=0.011)
-    assert (sim.engine.state.scheduled_fire_step.to_numpy()[:3, 0] == 11).all()
-    # one pending firing per actuator: the same time again is a no-op, another time is refused
-    # (it used to replace the first silently), another actuator is free, and once the first
-    # has fired the next may be scheduled
-    sim.fire(["A1"] * 3, at_s=0.011)
-    with pytest.raises(ValueError, match=r"actuator A1 of instance 0 already has a firing "
-                                         r"pending at 0.011 s"):
-        sim.fire(["A1"] * 3, at_s=0.02)
-    sim.fire(["A2"] * 3, at_s=0.02)
-    sim.advance(0.001)  # the step ending at 0.011 s fires A1
-    assert (sim.engine.state.scheduled_fire_step.to_numpy()[:3, 0] == -1).all()
-    sim.fire(["A1"] * 3, at_s=0.02)
-    assert (sim.engine.state.scheduled_fire_step.to_numpy()[:3, :2] == 20).all()
+    assert (sim.engine.state.schedule.pending_due.to_numpy()[:3, 0] == 11).all()
     other = ts.Simulator([ts.StarParams(n_arc=12)] * 3)
     with pytest.raises(ValueError, match="another engine"):
         sim.load(other.save())
+    # pending firings are step numbers with fixed steps, times with adaptive ones: a state of
+    # one stepping is refused by the other
+    adaptive = commanded(adaptive=True)
+    with pytest.raises(ValueError, match=r"another engine .*'fixed'\) vs .*'adaptive'\)"):
+        adaptive.load(sim.save())
 
 
 class _Accepted(Exception):
@@ -214,8 +293,11 @@ def test_work_beyond_the_step_counter_is_refused_before_any_compute(monkeypatch)
     after = sim.save().fields
     assert all(np.array_equal(after[name], before[name]) for name in before)
     sim.fire(GAITS, at_s=limit * 1e-3)
-    assert (sim.engine.state.scheduled_fire_step.to_numpy()[:3][np.array(
-        [ts.Gait.parse(g).mask for g in GAITS], dtype=bool)] == limit).all()
+    schedule = sim.engine.state.schedule
+    assert (schedule.pending_count.to_numpy()[:3] == 1).all()
+    assert (schedule.pending_due.to_numpy()[:3, 0] == limit).all()
+    np.testing.assert_array_equal(schedule.pending_actuators.to_numpy()[:3, 0],
+                                  [ts.Gait.parse(g).bits for g in GAITS])
 
 
 def test_step_batch_example_runs():
@@ -238,6 +320,11 @@ def test_adaptive_simulator_lands_on_scheduled_firings_and_matches_simulate():
     sim.fire(GAITS[:2])
     sim.fire(GAITS[:2], at_s=PERIOD)
     sim.advance(PERIOD)
+    # the boundaries of "after now" with adaptive steps: now and before it are refused
+    for late in (PERIOD, PERIOD - 0.01):
+        with pytest.raises(ValueError, match=rf"at_s = {late:g} s is not after the current "
+                                             rf"time of instance 0 \(0.4 s\)"):
+            sim.fire(GAITS[:2], at_s=late)
     sim.fire(GAITS[:2], at_s=2 * PERIOD)
     sim.advance(PERIOD)
     np.testing.assert_array_equal(sim.shapes(), reference.shapes[-1])
