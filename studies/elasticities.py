@@ -194,7 +194,8 @@ def plot_elasticities(csv_path, png_path) -> Path:
             value = grid.loc[gait, parameter]
             text = "0·" if zero.loc[gait, parameter] else (
                 "0" if value == 0 else f"{value:.2g}")
-            top.text(j, i, text, ha="center", va="center", fontsize=5.5)
+            top.text(j, i, text, ha="center", va="center", fontsize=5.5,
+                     color="w" if abs(value) > 1 else "k")  # dark cells beyond ±1
     top.set_yticks(range(len(gaits)), gaits)
     top.set_title("Elasticity of each gait's signed speed (exact sensitivities; 0·: parameter "
                   "at 0)" + (f"\n{cli.run_settings(csv_path)}" if cli.run_settings(csv_path)
@@ -208,7 +209,8 @@ def plot_elasticities(csv_path, png_path) -> Path:
         for j, parameter in enumerate(parameters):
             if np.isfinite(total.loc[gait, parameter]):
                 bottom.text(j, i, f"{total.loc[gait, parameter]:.2f}", ha="center",
-                            va="center", fontsize=5.5, color="w")
+                            va="center", fontsize=5.5,
+                            color="k" if total.loc[gait, parameter] > 0.5 else "w")
     preset = table["sobol_preset"].iloc[0]
     bottom.set_yticks(range(len(gaits)), gaits)
     bottom.set_xticks(range(len(parameters)), parameters, rotation=60, ha="right", fontsize=7)
