@@ -81,25 +81,11 @@ def resolve_parameters(text, base: StarParams, flag: str) -> List[str]:
         raise cli.StudyArgumentError(f"{flag}: {error}") from None
 
 
-def split_label(label: str):
-    """("actuator_gains", 2) for "actuator_gains[2]", (label, -1) for a plain field."""
-    field, _, rest = label.partition("[")
-    return field, int(rest[:-1]) if rest else -1
-
-
-def parameter_value(params: StarParams, label: str) -> float:
-    field, index = split_label(label)
-    value = getattr(params, field)
-    return float(value if index < 0 else value[index])
-
-
-def parameter_moved(params: StarParams, label: str, value: float) -> StarParams:
-    field, index = split_label(label)
-    if index < 0:
-        return params.replace(**{field: value})
-    values = list(getattr(params, field))
-    values[index] = value
-    return params.replace(**{field: tuple(values)})
+def direction(label: str):
+    """The `taichi_star.sensitivities.Direction` of one parameter label ("alpha",
+    "actuator_gains[2]"): its field, actuator index, value and moved copies of a StarParams."""
+    (parsed,) = parse_directions([label])
+    return parsed
 
 
 def sobol_table(path: Path) -> tuple:
@@ -124,8 +110,8 @@ def elasticity_table(params: Sequence[StarParams], parameters: Sequence[str],
     for b, p in enumerate(params):
         fired = set(Gait.parse(p.gait).actuators)
         for label in parameters:
-            field, index = split_label(label)
-            value = parameter_value(p, label)
+            field, index = direction(label).field, direction(label).index
+            value = direction(label).value(p)
             unit = column_unit(StarParams.columns()[field]) or "1"
             derivative = float(derivatives[label][b])
             rows.append({
@@ -153,10 +139,10 @@ def finite_difference_check(params: Sequence[StarParams], labels: Sequence[str],
     batch, steps = [], []
     for label in labels:
         for p in params:
-            value = parameter_value(p, label)
+            value = direction(label).value(p)
             step = CHECK_RELATIVE_STEP * abs(value)
             steps.append(step)
-            batch += [parameter_moved(p, label, value + sign * scale * step)
+            batch += [direction(label).moved(p, value + sign * scale * step)
                       for scale in (1.0, 2.0) for sign in (1.0, -1.0)]
     speeds = simulate(batch, duration_s, tight, arch=arch).summary[OUTPUT].to_numpy()
     speeds = speeds.reshape(len(steps), 2, 2)
@@ -251,7 +237,7 @@ def main(argv=None):
     parameters = (default_parameters(base) if args.parameters is None
                   else resolve_parameters(args.parameters, base, "--parameters"))
     heights = [label for label in parameters if label in COMPONENT_HEIGHTS
-               and parameter_value(base, label) == 0.0]
+               and direction(label).value(base) == 0.0]
     if heights:
         raise cli.StudyArgumentError(f"--parameters: {heights[0]} is 0 (the 2.5-D model off) "
                                      f"in this model; set the component heights with --set")
@@ -261,7 +247,7 @@ def main(argv=None):
     for label in checked:
         if label not in parameters:
             raise cli.StudyArgumentError(f"--check: {label} is not among the parameters")
-        if parameter_value(base, label) == 0.0:
+        if direction(label).value(base) == 0.0:
             raise cli.StudyArgumentError(f"--check: {label} is 0 in this model; a relative "
                                          f"finite-difference step needs a non-zero value")
     sobol_path = Path(args.sobol)
