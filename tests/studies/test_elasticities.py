@@ -19,7 +19,7 @@ at 0 in the paper's model: 1 + 4·5 = 21 instances, the smallest engine."""
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     """One quick run (0.2 s at 2 ms). Its cost is the compilation of the engine that carries
-    tangents (measured 75-113 s on the shared 2-core machine); the steps take under a second."""
+    tangents (measured 35-113 s on the shared 2-core machine); the steps take under a second."""
     out = tmp_path_factory.mktemp("elasticities")
     assert studies_main(["elasticities", "--quick", "--no-progress", "--out", str(out),
                          "--gaits", GAIT, "--parameters", ",".join(PARAMETERS),
