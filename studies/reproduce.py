@@ -35,6 +35,9 @@ COMMANDS = {
     "stability": ["--workers", "2"],
     "scaling": [],
     "sensitivity": ["--preset", "accurate"],
+    "elasticities": ["--check", "alpha,drag_perpendicular"],
+    "elasticities_accurate": ["elasticities", "--preset", "accurate", "--prefix",
+                              "elasticities_accurate", "--check", "alpha,drag_perpendicular"],
 }
 """Result name -> the study's flags (the study is the name unless the flags start with it)."""
 

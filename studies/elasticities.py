@@ -1,0 +1,300 @@
+"""Local sensitivities: the elasticity of each gait's signed speed to every parameter, beside
+the Sobol indices.
+
+    python -m studies elasticities [--preset paper|accurate|identified] [--set NAME=VALUE ...]
+                                   [--gaits paper|A1,...] [--parameters NAME,...] [--cycles 3]
+                                   [--dt S] [--sobol CSV] [--check NAME,...]
+                                   [--prefix elasticities] [--out DIR] [--quick] [--arch cpu|gpu]
+
+One `simulate` call with `sensitivities=` gives, for every gait at the model's parameters, the
+exact derivative dv/dp of its signed speed v (over `--cycles` cycles from rest, the Fig. 4c
+metric) with respect to every parameter p (`taichi_star.sensitivities`: the implicit function
+theorem at each converged step). The default parameters are every differentiable StarParams
+field (`DIFFERENTIABLE_FIELDS`) and each actuator's gain and delay, less the component heights
+where they are 0 (the 2.5-D model off: no derivative there). The elasticity
+d ln|v| / d ln p = (p / v)·dv/dp is the relative change of the speed per relative change of the
+parameter; for a parameter at 0 (linear drag, jet inflow, the delays, damping in the paper's
+model) it is 0 by definition, and only the absolute derivative says how the speed leaves 0.
+
+Writes into `--out` (default a fresh `runs/elasticities/<timestamp>/`), each table with its
+provenance sidecar: `<prefix>.csv`, one row per gait × parameter (gait, parameter, field,
+actuator, fired, value, unit, signed_speed_mm_s, derivative, derivative_unit, elasticity,
+at_zero, then S1, S1_conf, ST, ST_conf of the parameter for that gait from the Sobol table
+`--sobol` where the parameter was in its box, NaN otherwise, and sobol_preset, the preset that
+table was computed with), and `<prefix>.png`, drawn from it: a heatmap of the elasticities, gaits
+× parameters, above the Sobol ST of the same cells. `--check NAME,...` also compares the
+derivatives of those parameters with whole-run central differences (`<prefix>_check.csv`):
+over 3 cycles the sensitivities are measured to agree only to 1e-5 to 2e-2 relative (not at
+all for the near-cancelling A1; see docs/results.md), far less well than over 0.2 s.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Dict, List, Sequence
+
+import numpy as np
+import pandas as pd
+
+from taichi_star import Gait, SolverConfig, StarParams, simulate
+from taichi_star.output import column_unit
+from taichi_star.sensitivities import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS,
+                                       EXTRAPOLATION_SCALES, parse_directions)
+
+from . import cli
+
+DESCRIPTION = ("Elasticities d ln|v| / d ln p of each paper gait's signed speed to every "
+               "parameter (exact sensitivities), beside the Sobol indices.")
+
+OUTPUT = "signed_speed_mm_s"
+"""The output differentiated: the signed speed over the run (the Fig. 4c metric)."""
+SOBOL_TABLE = cli.COMMITTED_RESULTS / "sensitivity.csv"
+"""The committed Sobol indices (`python -m studies sensitivity`)."""
+SOBOL_COLUMNS = ("S1", "S1_conf", "ST", "ST_conf")
+CHECK_RELATIVE_STEP = 1e-4
+"""Step of the finite-difference check, relative to the parameter's value: large enough that
+the Newton noise of the runs (solved to CHECK_NEWTON_TOL) stays ~1e-6 of the quotient, small
+enough that the extrapolated quotient's O(h²) truncation is ~1e-8."""
+CHECK_NEWTON_TOL = 1e-12
+"""Newton tolerance of the check's runs, m (the sensitivities' own run keeps the preset's)."""
+
+
+def default_parameters(base: StarParams) -> List[str]:
+    """Every differentiable field, per-actuator ones as their eight numbers, less the component
+    heights where they are 0 (`simulate` refuses a derivative across the 2.5-D switch)."""
+    names = []
+    for field in DIFFERENTIABLE_FIELDS:
+        if field in COMPONENT_HEIGHTS and getattr(base, field) == 0.0:
+            continue
+        names.append(field)
+    return [direction.label for direction in parse_directions(names)]
+
+
+def resolve_parameters(text, base: StarParams, flag: str) -> List[str]:
+    """The parameters a flag names (a comma list as `simulate(sensitivities=...)` takes them,
+    "actuator_gains" standing for its eight), as single labels ("actuator_gains[2]");
+    StudyArgumentError naming the flag for an unknown or non-differentiable one."""
+    names = cli.parse_values(text, flag, str)
+    try:
+        return [direction.label for direction in parse_directions(names)]
+    except ValueError as error:
+        raise cli.StudyArgumentError(f"{flag}: {error}") from None
+
+
+def direction(label: str):
+    """The `taichi_star.sensitivities.Direction` of one parameter label ("alpha",
+    "actuator_gains[2]"): its field, actuator index, value and moved copies of a StarParams."""
+    (parsed,) = parse_directions([label])
+    return parsed
+
+
+def sobol_table(path: Path) -> tuple:
+    """(the Sobol table's gait, parameter and SOBOL_COLUMNS, the preset it was computed with
+    from its sidecar, "" without one)."""
+    table = pd.read_csv(path)[["gait", "parameter", *SOBOL_COLUMNS]]
+    sidecar = Path(f"{path}.json")
+    preset = ""
+    if sidecar.exists():
+        model = json.loads(sidecar.read_text()).get("model") or {}
+        preset = model.get("preset", "") if isinstance(model, dict) else ""
+    return table, preset
+
+
+def elasticity_table(params: Sequence[StarParams], parameters: Sequence[str],
+                     speeds: np.ndarray, derivatives: Dict[str, np.ndarray],
+                     sobol: pd.DataFrame, sobol_preset: str) -> pd.DataFrame:
+    """One row per instance × parameter: value, unit, the signed speed v (mm/s), dv/dp
+    (`derivatives[label]`, (B,)), the elasticity (p / v)·dv/dp (0 for p = 0: `at_zero`), and the
+    Sobol indices of (gait, field) where `sobol` has them (NaN otherwise)."""
+    rows = []
+    for b, p in enumerate(params):
+        fired = set(Gait.parse(p.gait).actuators)
+        for label in parameters:
+            field, index = direction(label).field, direction(label).index
+            value = direction(label).value(p)
+            unit = column_unit(StarParams.columns()[field]) or "1"
+            derivative = float(derivatives[label][b])
+            rows.append({
+                "gait": p.gait, "parameter": label, "field": field,
+                "actuator": f"A{index + 1}" if index >= 0 else "",
+                "fired": (index + 1 in fired) if index >= 0 else True,
+                "value": value, "unit": unit, "signed_speed_mm_s": float(speeds[b]),
+                "derivative": derivative,
+                "derivative_unit": "mm/s" if unit == "1" else f"mm/s per {unit}",
+                "elasticity": value / float(speeds[b]) * derivative,
+                "at_zero": value == 0.0})
+    table = pd.DataFrame(rows)
+    table = table.merge(sobol, how="left", on=["gait", "parameter"])
+    table["sobol_preset"] = sobol_preset
+    return table
+
+
+def finite_difference_check(params: Sequence[StarParams], labels: Sequence[str],
+                            solver: SolverConfig, duration_s: float, arch: str) -> pd.DataFrame:
+    """Richardson-extrapolated central differences 2·D(h) − D(2h) of whole runs (h =
+    CHECK_RELATIVE_STEP of each value; the extrapolation removes the first-order error of the
+    drag's kink at zero velocity) of the signed speed, for every instance × label, in one
+    batch at CHECK_NEWTON_TOL. Columns gait, parameter, finite_difference."""
+    tight = solver.replace(newton_tol=min(solver.newton_tol, CHECK_NEWTON_TOL))
+    batch, steps = [], []
+    for label in labels:
+        for p in params:
+            value = direction(label).value(p)
+            step = CHECK_RELATIVE_STEP * abs(value)
+            steps.append(step)
+            batch += [direction(label).moved(p, value + sign * scale * step)
+                      for scale in (1.0, 2.0) for sign in (1.0, -1.0)]
+    speeds = simulate(batch, duration_s, tight, arch=arch).summary[OUTPUT].to_numpy()
+    speeds = speeds.reshape(len(steps), 2, 2)
+    quotients = (speeds[:, :, 0] - speeds[:, :, 1]) / (2.0 * np.array(steps)[:, None]
+                                                         * np.array([1.0, 2.0]))
+    return pd.DataFrame({"gait": [p.gait for _ in labels for p in params],
+                         "parameter": [label for label in labels for _ in params],
+                         "finite_difference": 2.0 * quotients[:, 0] - quotients[:, 1]})
+
+
+def plot_elasticities(csv_path, png_path) -> Path:
+    """Two heatmaps sharing their columns, from an elasticities CSV: the elasticity of each
+    gait's signed speed to each parameter (cell text: its value; "0·" for a parameter at 0,
+    whose elasticity is 0 by definition), and below the Sobol ST of the same cells (grey where
+    the parameter was not in the Sobol box)."""
+    plt = cli.use_agg()
+    from matplotlib.colors import SymLogNorm
+
+    table = pd.read_csv(csv_path, keep_default_na=False, na_values=[""])
+    gaits = list(dict.fromkeys(table["gait"]))
+    parameters = list(dict.fromkeys(table["parameter"]))
+    grid = table.pivot(index="gait", columns="parameter", values="elasticity").loc[
+        gaits, parameters]
+    zero = table.pivot(index="gait", columns="parameter", values="at_zero").loc[
+        gaits, parameters].astype(bool)
+    total = table.pivot(index="gait", columns="parameter", values="ST").loc[gaits, parameters]
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(0.42 * len(parameters) + 2.5, 7.5),
+                                      sharex=True, gridspec_kw={"height_ratios": [1, 1]})
+    largest = max(float(np.nanmax(np.abs(grid.to_numpy()))), 1e-3)
+    image = top.imshow(grid.to_numpy(dtype=float), cmap="RdBu_r", aspect="auto",
+                       norm=SymLogNorm(linthresh=0.01, vmin=-largest, vmax=largest))
+    fig.colorbar(image, ax=top, label="elasticity d ln|v| / d ln p", shrink=0.9)
+    for i, gait in enumerate(gaits):
+        for j, parameter in enumerate(parameters):
+            value = grid.loc[gait, parameter]
+            text = "0·" if zero.loc[gait, parameter] else (
+                "0" if value == 0 else f"{value:.2g}")
+            top.text(j, i, text, ha="center", va="center", fontsize=5.5,
+                     color="w" if abs(value) > 1 else "k")  # dark cells beyond ±1
+    top.set_yticks(range(len(gaits)), gaits)
+    top.set_title("Elasticity of each gait's signed speed (exact sensitivities; 0·: parameter "
+                  "at 0)" + (f"\n{cli.run_settings(csv_path)}" if cli.run_settings(csv_path)
+                             else ""), fontsize=9)
+    masked = np.ma.masked_invalid(total.to_numpy(dtype=float))
+    cmap = plt.get_cmap("viridis").with_extremes(bad="0.85")
+    image = bottom.imshow(masked, cmap=cmap, vmin=0, vmax=1, aspect="auto")
+    fig.colorbar(image, ax=bottom, label="Sobol total index ST", shrink=0.9)
+    for i, gait in enumerate(gaits):
+        for j, parameter in enumerate(parameters):
+            if np.isfinite(total.loc[gait, parameter]):
+                bottom.text(j, i, f"{total.loc[gait, parameter]:.2f}", ha="center",
+                            va="center", fontsize=5.5,
+                            color="k" if total.loc[gait, parameter] > 0.5 else "w")
+    preset = table["sobol_preset"].iloc[0]
+    bottom.set_yticks(range(len(gaits)), gaits)
+    bottom.set_xticks(range(len(parameters)), parameters, rotation=60, ha="right", fontsize=7)
+    bottom.set_title(f"Sobol total index ST over the Sobol box ({preset or 'unknown'} preset; "
+                     f"grey: not in the box)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(png_path, dpi=130)
+    plt.close(fig)
+    return Path(png_path)
+
+
+def build_parser():
+    parser = cli.StudyParser("elasticities", DESCRIPTION)
+    parser.add_argument("--gaits", default="paper",
+                        help="gaits: paper (the five, default) or a comma list")
+    parser.add_argument("--parameters", default=None, metavar="NAME,...",
+                        help="parameters to differentiate by, as simulate(sensitivities=...) "
+                             "names them (default: every differentiable field and each "
+                             "actuator's gain and delay, less component heights at 0)")
+    parser.add_argument("--sobol", default=str(SOBOL_TABLE), metavar="CSV",
+                        help="the Sobol indices to set beside (default results/sensitivity.csv)")
+    parser.add_argument("--check", default=None, metavar="NAME,...",
+                        help="also compare these parameters' derivatives with whole-run central "
+                             "differences (<prefix>_check.csv; each must be non-zero)")
+    parser.add_argument("--prefix", default="elasticities",
+                        help="output file prefix (default elasticities)")
+    cli.add_model_flags(parser, fixed=("gait",))
+    cli.add_dt_flag(parser)
+    cli.add_cycles_flag(parser)
+    return parser
+
+
+def main(argv=None):
+    args = cli.parse(build_parser(), argv)
+    gaits = cli.resolve_gaits(args.gaits)
+    base = cli.base_params(args)
+    solver = cli.solver(args)
+    parameters = (default_parameters(base) if args.parameters is None
+                  else resolve_parameters(args.parameters, base, "--parameters"))
+    heights = [label for label in parameters if label in COMPONENT_HEIGHTS
+               and direction(label).value(base) == 0.0]
+    if heights:
+        raise cli.StudyArgumentError(f"--parameters: {heights[0]} is 0 (the 2.5-D model off) "
+                                     f"in this model; set the component heights with --set")
+    if solver.precision != "f64":
+        raise cli.StudyArgumentError("sensitivities need precision f64")
+    checked = [] if args.check is None else resolve_parameters(args.check, base, "--check")
+    for label in checked:
+        if label not in parameters:
+            raise cli.StudyArgumentError(f"--check: {label} is not among the parameters")
+        if direction(label).value(base) == 0.0:
+            raise cli.StudyArgumentError(f"--check: {label} is 0 in this model; a relative "
+                                         f"finite-difference step needs a non-zero value")
+    sobol_path = Path(args.sobol)
+    if not sobol_path.is_file():
+        raise cli.StudyArgumentError(f"--sobol: no such file {sobol_path}")
+    try:
+        sobol, sobol_preset = sobol_table(sobol_path)
+    except (KeyError, ValueError, pd.errors.ParserError) as error:
+        raise cli.StudyArgumentError(f"--sobol {sobol_path}: not a Sobol table with columns "
+                                     f"gait, parameter, {', '.join(SOBOL_COLUMNS)} ({error})") \
+            from None
+    out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
+                     solver=solver,
+                     extra={"gaits": gaits, "parameters": parameters, "output": OUTPUT,
+                            "sobol_table": str(sobol_path), "sobol_preset": sobol_preset})
+    params = [base.replace(gait=gait) for gait in gaits]
+    duration_s = cli.duration_s(args, base.period)
+    started = time.perf_counter()
+    result = simulate(params, duration_s, solver, arch=args.arch, sensitivities=parameters,
+                      progress=not args.no_progress)
+    wall_s = time.perf_counter() - started
+    if not (result.summary["status"] == "ok").all():
+        failed = result.summary.loc[result.summary["status"] != "ok", "gait"].tolist()
+        print(f"not ok: {', '.join(failed)} (their rows are NaN)")
+    speeds = np.where(result.summary["status"] == "ok", result.summary[OUTPUT], np.nan)
+    derivatives = {label: result.sensitivity(OUTPUT, label) for label in parameters}
+    table = elasticity_table(params, parameters, speeds, derivatives, sobol, sobol_preset)
+    table["cycles"] = args.cycles
+    table["quick"] = args.quick  # --quick: QUICK_DURATION_S from rest instead of the cycles
+    csv = out.write_csv(table, f"{args.prefix}.csv",
+                        extra={"instances": len(params) * (1 + 2 * len(EXTRAPOLATION_SCALES)
+                                                             * len(parameters)),
+                               "wall_s": round(wall_s, 1)})
+    out.wrote(plot_elasticities(csv, out.path(f"{args.prefix}.png")))
+    if checked:
+        check = finite_difference_check(params, checked, solver, duration_s, args.arch)
+        check = check.merge(table[["gait", "parameter", "derivative"]],
+                            on=["gait", "parameter"])
+        check["relative_difference"] = ((check["derivative"] - check["finite_difference"])
+                                        / check["finite_difference"].abs())
+        out.write_csv(check, f"{args.prefix}_check.csv",
+                      extra={"relative_step": CHECK_RELATIVE_STEP,
+                             "newton_tol": min(solver.newton_tol, CHECK_NEWTON_TOL)})
+        print(check.to_string(index=False))
+    out.report()
+    with pd.option_context("display.width", 160, "display.max_rows", 400):
+        print(table.pivot(index="parameter", columns="gait", values="elasticity")
+              .loc[parameters, gaits].round(4).to_string())
+    return table
