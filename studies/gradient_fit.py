@@ -87,8 +87,8 @@ RESULT_COLUMNS = ["parameter_set", "n_parameters", "optimiser", "starts", "evalu
 class Recorder:
     """Every evaluation of one optimiser: cumulative cost and best objective so far."""
 
-    def __init__(self, parameter_set: str, optimiser: str):
-        self.parameter_set, self.optimiser = parameter_set, optimiser
+    def __init__(self, parameter_set: str, optimiser: str, on_add=None):
+        self.parameter_set, self.optimiser, self.on_add = parameter_set, optimiser, on_add
         self.rows: List[dict] = []
         self.started = time.perf_counter()
         self.best_objective, self.best_units = math.inf, None
@@ -105,6 +105,8 @@ class Recorder:
                           "robot_seconds": self.robot_seconds,
                           "robot_seconds_cost_equivalent": self.cost_equivalent,
                           "wall_s": time.perf_counter() - self.started})
+        if self.on_add is not None:
+            self.on_add()
 
 
 class Problem:
@@ -174,10 +176,11 @@ class Problem:
 
 
 def fit_lbfgs(problem: Problem, starts: int, max_evaluations: int, seed: int,
-              parameter_set: str) -> Recorder:
-    """Multi-start L-BFGS-B over the unit box (module docstring)."""
+              recorder: Recorder) -> Recorder:
+    """Multi-start L-BFGS-B over the unit box (module docstring), every evaluation into
+    `recorder`."""
     from scipy.optimize import minimize
-    recorder = Recorder(parameter_set, "L-BFGS-B")
+    parameter_set = recorder.parameter_set
     dimension = len(problem.box)
     per_evaluation = problem.window_s * len(problem.gaits)
     rng = np.random.default_rng(seed)
@@ -199,9 +202,10 @@ def fit_lbfgs(problem: Problem, starts: int, max_evaluations: int, seed: int,
 
 
 def fit_cma(problem: Problem, generations: int, popsize, seed: int,
-            parameter_set: str) -> Recorder:
-    """CMA-ES from the base model over the unit box (module docstring)."""
-    recorder = Recorder(parameter_set, "CMA-ES")
+            recorder: Recorder) -> Recorder:
+    """CMA-ES from the base model over the unit box (module docstring), every evaluation into
+    `recorder`."""
+    parameter_set = recorder.parameter_set
     per_point = problem.window_s * len(problem.gaits)
 
     def evaluate(unit_points):
@@ -342,14 +346,18 @@ def main(argv=None):
                                            "popsize": args.popsize, "seed": args.seed,
                                            "sets": {n: PARAMETER_SETS[n] for n in sets}})
     problems, recorders = {}, []
+
+    def write_history():  # after every evaluation: an interrupted run keeps what it did
+        out.write_csv(pd.DataFrame([row for r in recorders for row in r.rows]),
+                      "gradient_fit_history.csv")
+
     for name in sets:
         problems[name] = Problem(boxes[name], base, gaits, trials, train, solver, args.arch)
-        recorders.append(fit_cma(problems[name], args.cma_generations, args.popsize, args.seed,
-                                 name))
-        recorders.append(fit_lbfgs(problems[name], args.starts, args.lbfgs_evaluations,
-                                   args.seed, name))
-        history = pd.DataFrame([row for r in recorders for row in r.rows])
-        out.write_csv(history, "gradient_fit_history.csv")
+        recorders.append(Recorder(name, "CMA-ES", write_history))
+        fit_cma(problems[name], args.cma_generations, args.popsize, args.seed, recorders[-1])
+        recorders.append(Recorder(name, "L-BFGS-B", write_history))
+        fit_lbfgs(problems[name], args.starts, args.lbfgs_evaluations, args.seed,
+                  recorders[-1])
     table = summarise(recorders, problems, validate)
     out.write_csv(table, "gradient_fit.csv")
     out.wrote(plot_history(out.path("gradient_fit_history.csv"),
