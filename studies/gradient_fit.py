@@ -306,15 +306,6 @@ def build_parser():
     return parser
 
 
-def parse_window(text: str, flag: str):
-    try:
-        first, last = (int(part) for part in str(text).split(":"))
-        return identification.check_window((first, last))
-    except ValueError:
-        raise cli.StudyArgumentError(f"{flag}: expected FIRST:LAST cycle numbers with "
-                                     f"1 <= FIRST <= LAST, got {text!r}") from None
-
-
 def main(argv=None):
     args = cli.parse(build_parser(), argv)
     sets = cli.parse_choices(args.sets, "--sets", list(PARAMETER_SETS))
@@ -324,11 +315,7 @@ def main(argv=None):
             raise cli.StudyArgumentError(f"{flag} must be >= 1, got {value}")
     if args.popsize is not None and args.popsize < 2:
         raise cli.StudyArgumentError(f"--popsize must be >= 2, got {args.popsize}")
-    train = parse_window(args.train_cycles, "--train-cycles")
-    validate = parse_window(args.validate_cycles, "--validate-cycles")
-    if validate[0] <= train[1]:
-        raise cli.StudyArgumentError(f"--validate-cycles {args.validate_cycles}: must start "
-                                     f"after the training window {args.train_cycles}")
+    train, validate = identify.parse_windows(args.train_cycles, args.validate_cycles)
     gaits = identify.measured_gaits(args.gaits)
     base = cli.base_params(args)
     boxes = {name: [identify.parse_range_spec(text, "--sets") for text in PARAMETER_SETS[name]]
@@ -336,6 +323,12 @@ def main(argv=None):
     for box in boxes.values():
         identify.check_box(box, base, "--sets")
     trials = identification.measured_trials(gaits, base.period)
+    for trial in trials.values():  # the trials cover the validation window
+        try:
+            identification.latest_phase(trial, validate)
+        except ValueError as error:
+            raise cli.StudyArgumentError(f"--validate-cycles {args.validate_cycles}: "
+                                         f"{error}") from None
     solver = cli.solver(args)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"gaits": gaits, "train_cycles": list(train),

@@ -4,6 +4,7 @@ synthetic paths whose parameter derivatives are known in closed form (no simulat
 sensitivities themselves are tested in tests/model/test_sensitivities.py)."""
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from taichi_star import identification as ident
@@ -139,7 +140,6 @@ def test_record_derivatives_reads_the_sensitivity_columns():
              "d(x_mm)/d(alpha)": [1.0, 2.0, 3.0, 4.0], "d(y_mm)/d(alpha)": [5.0, 6.0, 7.0, 8.0],
              "d(x_mm)/d(actuator_gains[2])": [9.0, 10.0, 11.0, 12.0],
              "d(y_mm)/d(actuator_gains[2])": [13.0, 14.0, 15.0, 16.0]}
-    import pandas as pd
     got = ident.record_derivatives(pd.DataFrame(table), 1, ["alpha", "actuator_gains[2]"])
     np.testing.assert_array_equal(got, [[[3.0, 11.0], [7.0, 15.0]], [[4.0, 12.0], [8.0, 16.0]]])
 
