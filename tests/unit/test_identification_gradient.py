@@ -138,9 +138,9 @@ def test_direction_residual_enters_the_gradient_only_when_the_robot_swims_the_wr
 def test_record_derivatives_reads_the_sensitivity_columns():
     table = {"instance": [0, 0, 1, 1], "t_s": [0.0, 1.0, 0.0, 1.0],
              "d(x_mm)/d(alpha)": [1.0, 2.0, 3.0, 4.0], "d(y_mm)/d(alpha)": [5.0, 6.0, 7.0, 8.0],
-             "d(x_mm)/d(actuator_gains[2])": [9.0, 10.0, 11.0, 12.0],
-             "d(y_mm)/d(actuator_gains[2])": [13.0, 14.0, 15.0, 16.0]}
-    got = ident.record_derivatives(pd.DataFrame(table), 1, ["alpha", "actuator_gains[2]"])
+             "d(x_mm)/d(actuator_gains[1])": [9.0, 10.0, 11.0, 12.0],
+             "d(y_mm)/d(actuator_gains[1])": [13.0, 14.0, 15.0, 16.0]}
+    got = ident.record_derivatives(pd.DataFrame(table), 1, ["alpha", "actuator_gains[1]"])
     np.testing.assert_array_equal(got, [[[3.0, 11.0], [7.0, 15.0]], [[4.0, 12.0], [8.0, 16.0]]])
 
 
