@@ -43,16 +43,19 @@ to the sensitivities' own accuracy:
 - a record interpolated linearly onto the τ grid has as derivative the same interpolation of
   the records' derivatives (`path_derivative`);
 - a distance d = |Δp| has dd = Δp·dΔp / |Δp| (`distance_derivative`; 0 where Δp = 0, where d
-  has no derivative and 0 is the smallest of its one-sided slopes in size);
+  has no derivative and 0 is a subgradient);
 - ρ = max(0, −sΔ)/σ has dρ = −s·dΔ/σ where −sΔ > 0 and 0 where −sΔ ≤ 0 (the left derivative
   at the kink: the direction already right);
 - the phase φ per trial is held at its fitted value. It minimises the curve misfit
   Σ(d_sim − d_meas)², so at an interior optimum its own derivative drops out (envelope
   theorem) of every term proportional to that misfit; at the edge of its range (0 or
   `latest_phase`) the bound is active and φ does not move. What is left out is ∂J/∂φ·dφ/dθ
-  through σ(φ) (the measured spread at the phase) and ρ/σ: zero when σ is at its floor
-  `DISPLACEMENT_FLOOR_MM`, else of the order of σ's relative change over dφ (see the test's
-  comparison with a difference of the re-fitted objective).
+  through σ(φ) (the measured spread at the phase) and ρ/σ. It is zero when σ is at its floor
+  `DISPLACEMENT_FLOOR_MM` (a one-cycle window: the gradient is then that of the re-fitted
+  objective, as tests/unit/test_identification_gradient.py checks), and it is not small
+  otherwise: on that test's synthetic three-cycle window the held-phase gradient differs from
+  central differences of the re-fitted objective by 15–40 %. On multi-cycle windows the result
+  is the exact gradient of the objective at the held phases, not of the re-fitted one.
 """
 
 from __future__ import annotations
