@@ -329,12 +329,7 @@ def main(argv=None):
         for group in range(0, len(box), CORNER_GROUP):  # too many; the groups share no limit)
             identify.check_box(box[group:group + CORNER_GROUP], base, "--sets")
     trials = identification.measured_trials(gaits, base.period)
-    for trial in trials.values():  # the trials cover the validation window
-        try:
-            identification.latest_phase(trial, validate)
-        except ValueError as error:
-            raise cli.StudyArgumentError(f"--validate-cycles {args.validate_cycles}: "
-                                         f"{error}") from None
+    identify.check_trials_cover(trials, validate, args.validate_cycles)
     solver = cli.solver(args)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"gaits": gaits, "train_cycles": list(train),

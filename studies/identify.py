@@ -389,6 +389,16 @@ def parse_windows(train_text: str, validate_text: str) -> Tuple[Tuple[int, int],
     return windows[0], windows[1]
 
 
+def check_trials_cover(trials, validate: Tuple[int, int], validate_text: str):
+    """StudyArgumentError naming --validate-cycles unless every measured trial
+    (`identification.Trial`s) covers the validation window (the later of the two)."""
+    for trial in trials.values():
+        try:
+            identification.latest_phase(trial, validate)
+        except ValueError as error:
+            raise cli.StudyArgumentError(f"--validate-cycles {validate_text}: {error}") from None
+
+
 def measurement_table(gaits: Sequence[str] = PAPER_GAITS,
                       weights: str = "experimental") -> pd.DataFrame:
     """What the objective compares with, indexed by gait: exp_speed_mm_s (full trial),

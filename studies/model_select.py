@@ -541,12 +541,7 @@ def main(argv=None):
         candidate.box(base)
         runnable.append(candidate)
     trials = identification.measured_trials(gaits)
-    for trial in trials.values():  # the trials cover the windows
-        try:
-            identification.latest_phase(trial, validate)
-        except ValueError as error:
-            raise cli.StudyArgumentError(f"--validate-cycles {args.validate_cycles}: "
-                                         f"{error}") from None
+    identify.check_trials_cover(trials, validate, args.validate_cycles)
     solver = cli.solver(args)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"gaits": gaits, "train_cycles": list(train),
