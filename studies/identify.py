@@ -24,12 +24,12 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Callable, List, Optional, Sequence
+from typing import Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
 import pandas as pd
 
-from taichi_star import STAR_RANGES, StarParams
+from taichi_star import STAR_RANGES, StarParams, identification
 from taichi_star.batch import run_batch
 from taichi_star.experiment import (PAPER_DIRECTIONS, PAPER_GAITS, experimental_cycle_speeds,
                                     experimental_speeds)
@@ -367,6 +367,36 @@ def measured_gaits(text: str, flag: str = "--gaits") -> List[str]:
             raise cli.StudyArgumentError(f"{flag} {gait}: not measured; the measured gaits are "
                                          f"{', '.join(PAPER_GAITS)}")
     return gaits
+
+
+def parse_windows(train_text: str, validate_text: str) -> Tuple[Tuple[int, int], Tuple[int, int]]:
+    """--train-cycles and --validate-cycles ("FIRST:LAST", 1 <= FIRST <= LAST) -> the two
+    windows; StudyArgumentError naming the flag for a malformed window or a validation window
+    that does not start after the training one."""
+    windows = []
+    for text, flag in ((train_text, "--train-cycles"), (validate_text, "--validate-cycles")):
+        parts = str(text).split(":")
+        try:
+            if len(parts) != 2:
+                raise ValueError
+            windows.append(identification.check_window(tuple(int(p) for p in parts)))
+        except ValueError:
+            raise cli.StudyArgumentError(f"{flag}: expected FIRST:LAST cycle numbers with "
+                                         f"1 <= FIRST <= LAST, got {text!r}") from None
+    if windows[1][0] <= windows[0][1]:
+        raise cli.StudyArgumentError(f"--validate-cycles {validate_text}: must start after the "
+                                     f"training window {train_text}")
+    return windows[0], windows[1]
+
+
+def check_trials_cover(trials, validate: Tuple[int, int], validate_text: str):
+    """StudyArgumentError naming --validate-cycles unless every measured trial
+    (`identification.Trial`s) covers the validation window (the later of the two)."""
+    for trial in trials.values():
+        try:
+            identification.latest_phase(trial, validate)
+        except ValueError as error:
+            raise cli.StudyArgumentError(f"--validate-cycles {validate_text}: {error}") from None
 
 
 def measurement_table(gaits: Sequence[str] = PAPER_GAITS,

@@ -467,19 +467,6 @@ def estimate_seconds(seconds_per_instance_cycle: float, candidates: Sequence[Can
     return cycles * seconds_per_instance_cycle
 
 
-def parse_window(text: str, flag: str) -> Tuple[int, int]:
-    """"FIRST:LAST" -> (first, last), 1 <= first <= last."""
-    parts = str(text).split(":")
-    try:
-        window = tuple(int(p) for p in parts)
-        if len(window) != 2:
-            raise ValueError
-        return identification.check_window(window)
-    except ValueError:
-        raise cli.StudyArgumentError(f"{flag}: expected FIRST:LAST cycle numbers with "
-                                     f"1 <= FIRST <= LAST, got {text!r}") from None
-
-
 def build_parser():
     parser = cli.StudyParser("model_select", DESCRIPTION)
     parser.add_argument("--candidates", default=None, metavar="CSV",
@@ -538,11 +525,7 @@ def main(argv=None):
     cli.check_positive(args.budget_hours, "--budget-hours")
     if args.resume and args.out is None:
         raise cli.StudyArgumentError("--resume: give --out (the folder of the run to continue)")
-    train = parse_window(args.train_cycles, "--train-cycles")
-    validate = parse_window(args.validate_cycles, "--validate-cycles")
-    if validate[0] <= train[1]:
-        raise cli.StudyArgumentError(f"--validate-cycles {args.validate_cycles}: must start "
-                                     f"after the training window {args.train_cycles}")
+    train, validate = identify.parse_windows(args.train_cycles, args.validate_cycles)
     gaits = identify.measured_gaits(args.gaits)
     base = cli.base_params(args)
     candidates = select_candidates(args)
@@ -558,12 +541,7 @@ def main(argv=None):
         candidate.box(base)
         runnable.append(candidate)
     trials = identification.measured_trials(gaits)
-    for trial in trials.values():  # the trials cover the windows
-        try:
-            identification.latest_phase(trial, validate)
-        except ValueError as error:
-            raise cli.StudyArgumentError(f"--validate-cycles {args.validate_cycles}: "
-                                         f"{error}") from None
+    identify.check_trials_cover(trials, validate, args.validate_cycles)
     solver = cli.solver(args)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"gaits": gaits, "train_cycles": list(train),

@@ -35,6 +35,27 @@ window is `TRAINING_CYCLES` = cycles 1–3; `VALIDATION_CYCLES` (4–6) is held 
     >>> runs = identification.simulated_runs(result.trajectory, list(trials), [3.15] * 5)
     >>> table = identification.trajectory_objective(dict(zip(trials, runs)), trials)
     >>> identification.objective_of(table)      # ≈ 60 for the paper's model on cycles 1-3
+
+Gradient (`objective_and_gradient`): with `simulate(..., sensitivities=names)` the records carry
+dx/dθ and dy/dθ, and the objective's gradient follows by the chain rule, exact for the scheme up
+to the sensitivities' own accuracy:
+
+- a record interpolated linearly onto the τ grid has as derivative the same interpolation of
+  the records' derivatives (`path_derivative`);
+- a distance d = |Δp| has dd = Δp·dΔp / |Δp| (`distance_derivative`; 0 where Δp = 0, where d
+  has no derivative and 0 is a subgradient);
+- ρ = max(0, −sΔ)/σ has dρ = −s·dΔ/σ where −sΔ > 0 and 0 where −sΔ ≤ 0 (the left derivative
+  at the kink: the direction already right);
+- the phase φ per trial is held at its fitted value. It minimises the curve misfit
+  Σ(d_sim − d_meas)², so at an interior optimum its own derivative drops out (envelope
+  theorem) of every term proportional to that misfit; at the edge of its range (0 or
+  `latest_phase`) the bound is active and φ does not move. What is left out is ∂J/∂φ·dφ/dθ
+  through σ(φ) (the measured spread at the phase) and ρ/σ. It is zero when σ is at its floor
+  `DISPLACEMENT_FLOOR_MM` (a one-cycle window: the gradient is then that of the re-fitted
+  objective, as tests/unit/test_identification_gradient.py checks), and it is not small
+  otherwise: on that test's synthetic three-cycle window the held-phase gradient differs from
+  central differences of the re-fitted objective by 15–40 %. On multi-cycle windows the result
+  is the exact gradient of the objective at the held phases, not of the re-fitted one.
 """
 
 from __future__ import annotations
@@ -321,3 +342,100 @@ def simulated_runs(trajectory: pd.DataFrame, gaits: Sequence[str],
                                       part["y_mm"].to_numpy(), float(period)),
                                  (float(forward[0]), float(forward[1]))))
     return runs
+
+
+# --------------------------------------------------------------------------- gradient
+
+def distance_derivative(delta_mm: np.ndarray, delta_derivative: np.ndarray) -> np.ndarray:
+    """Derivative of |Δp| from Δp (..., 2) and its derivatives (..., 2, P): Δp·dΔp/|Δp|, shape
+    (..., P); 0 where |Δp| = 0 (the norm has no derivative there)."""
+    delta_mm = np.asarray(delta_mm, dtype=np.float64)
+    norm = np.hypot(delta_mm[..., 0], delta_mm[..., 1])
+    safe = np.where(norm > 0, norm, 1.0)
+    unit = np.where((norm > 0)[..., None], delta_mm / safe[..., None], 0.0)
+    return np.einsum("...c,...cp->...p", unit, np.asarray(delta_derivative, dtype=np.float64))
+
+
+def path_derivative(path: CentroidPath, derivative_xy: np.ndarray, t_s) -> np.ndarray:
+    """Derivatives (..., 2, P) of `path.position(t_s)` from the records' derivatives
+    derivative_xy (n, 2, P): the same linear interpolation in time (the record times do not
+    depend on the parameters)."""
+    t_s = np.asarray(t_s, dtype=np.float64)
+    n, _, count = derivative_xy.shape
+    flat = derivative_xy.reshape(n, 2 * count)
+    values = np.stack([np.interp(t_s, path.t_s, flat[:, j]) for j in range(2 * count)], axis=-1)
+    return values.reshape(t_s.shape + (2, count))
+
+
+def _window_times(start_s: float, period_s: float, cycles, samples: int):
+    first, last = check_window(cycles)
+    starts = start_s + period_s * np.arange(first - 1, last)
+    return starts, starts[:, None] + tau_grid(period_s, samples)[None, :]
+
+
+def _curve_derivative(path: CentroidPath, derivative_xy, cycles, samples) -> np.ndarray:
+    """d(cycle curves)/dθ (n_cycles, samples, P) of a simulated path (cycle k from (k−1)T)."""
+    starts, times = _window_times(0.0, path.period_s, cycles, samples)
+    delta = path.position(times) - path.position(starts)[:, None, :]
+    derivative = (path_derivative(path, derivative_xy, times)
+                  - path_derivative(path, derivative_xy, starts)[:, None, :, :])
+    return distance_derivative(delta, derivative)
+
+
+def trial_gradient(simulated: SimulatedRun, derivative_xy: np.ndarray, trial: Trial,
+                   cycles=TRAINING_CYCLES, samples: int = SAMPLES_PER_CYCLE,
+                   phase_s: Optional[float] = None) -> Tuple[TrialFit, np.ndarray]:
+    """`trial_fit` of one simulated trial and the gradient (P,) of its objective with respect
+    to the P parameters whose record derivatives are derivative_xy (n_records, 2, P): column 0
+    d x_mm/dθ, column 1 d y_mm/dθ (module docstring, "Gradient"). With `phase_s` given the
+    phase is held (its derivative is 0)."""
+    derivative_xy = np.asarray(derivative_xy, dtype=np.float64)
+    if derivative_xy.ndim != 3 or derivative_xy.shape[:2] != (len(simulated.path.t_s), 2):
+        raise ValueError(f"derivative_xy must have shape ({len(simulated.path.t_s)}, 2, P), got "
+                         f"{derivative_xy.shape}")
+    fit = trial_fit(simulated, trial, cycles, samples, phase_s)
+    first, last = check_window(cycles)
+    path, forward = simulated.path, np.asarray(simulated.forward)
+    sim_curves = cycle_curves(path, 0.0, (first, last), samples)
+    curve_derivative = _curve_derivative(path, derivative_xy, (first, last), samples)
+    measured = cycle_curves(trial.path, fit.phase_s, (first, last), samples)
+    sigma = fit.sigma_mm
+    gradient = 2.0 * np.einsum("km,kmp->p", sim_curves - measured, curve_derivative) / (
+        sim_curves.size * sigma ** 2)
+    ends = path_derivative(path, derivative_xy, np.array([first - 1, last]) * path.period_s)
+    net_derivative = np.einsum("c,cp->p", forward, ends[1] - ends[0])
+    if -trial.paper_sign * fit.sim_net_signed_mm > 0:
+        gradient = gradient + 2.0 * fit.direction_residual * (-trial.paper_sign) * (
+            net_derivative / sigma)
+    return fit, gradient
+
+
+def objective_and_gradient(simulated: Mapping[str, SimulatedRun],
+                           derivatives: Mapping[str, np.ndarray], trials: Mapping[str, Trial],
+                           cycles=TRAINING_CYCLES, samples: int = SAMPLES_PER_CYCLE,
+                           phases: Optional[Mapping[str, float]] = None
+                           ) -> Tuple[float, np.ndarray, pd.DataFrame]:
+    """The set's objective (`objective_of` of `trajectory_objective`), its gradient (P,) with
+    respect to the P parameters (the mean of the gaits' `trial_gradient`s: every gait's run
+    shares the parameters) and the per-gait table. derivatives: gait -> (n_records, 2, P)
+    record derivatives of that gait's run (`record_derivatives`)."""
+    rows, gradients = [], []
+    for gait, run in simulated.items():
+        if gait not in trials:
+            raise ValueError(f"no measured trial for gait {gait!r}; trials: {', '.join(trials)}")
+        fit, gradient = trial_gradient(run, derivatives[gait], trials[gait], cycles, samples,
+                                       None if phases is None else phases[gait])
+        rows.append(dataclasses.asdict(fit))
+        gradients.append(gradient)
+    table = pd.DataFrame(rows, columns=TRIAL_COLUMNS)
+    return objective_of(table), np.mean(gradients, axis=0), table
+
+
+def record_derivatives(trajectory_sensitivities: pd.DataFrame, instance: int,
+                       parameters: Sequence[str]) -> np.ndarray:
+    """(n_records, 2, P) d x_mm/dθ and d y_mm/dθ of one instance at its records, from
+    `SimulationResult.trajectory_sensitivities` (columns "d(x_mm)/d(<parameter>)")."""
+    part = trajectory_sensitivities[trajectory_sensitivities["instance"] == instance]
+    return np.stack([np.stack([part[f"d({output})/d({name})"].to_numpy(dtype=np.float64)
+                               for name in parameters], axis=-1)
+                     for output in ("x_mm", "y_mm")], axis=1)

@@ -1,0 +1,361 @@
+"""Gradient-based identification beside CMA-ES: L-BFGS-B on the exact gradient of the
+trajectory objective against CMA-ES on the same objective, box and start, for two parameter
+sets.
+
+    python -m studies gradient_fit [--sets 6,20] [--gaits paper|A1,A1+A2,...]
+                                   [--train-cycles 1:3] [--validate-cycles 4:6]
+                                   [--starts 2] [--lbfgs-evaluations 8]
+                                   [--cma-generations 8] [--popsize P] [--seed S]
+                                   [--preset paper|accurate] [--set NAME=VALUE ...] [--dt S]
+                                   [--arch cpu|gpu] [--out DIR] [--quick]
+
+The objective is `taichi_star.identification`'s trajectory objective on the training window
+(`--train-cycles`), every gait's phase fitted as a nuisance. The box is in unit coordinates
+(`studies.identify.ParameterRange`: `:log` axes in the logarithm, as the CMA-ES studies fit
+them). Sets: "6", the six axes of `calibrate` (α, rod added mass, C⊥, C∥, C_c, limb stiffness);
+"20", those six, the eight actuator gains and six more per-robot fields (hub added mass,
+Young's modulus, the two densities, hub mass per height, thickness).
+
+- L-BFGS-B (scipy, bounds [0, 1] per axis) gets the objective and its gradient from one run
+  with sensitivities (`simulate(..., sensitivities=...)`, `identification.objective_and_gradient`,
+  chain rule through the box's map u -> value); `--starts` starts: the base model, then uniform
+  random points (seeded); each stops at `--lbfgs-evaluations` evaluations or when it stalls.
+- CMA-ES (`studies.identify.minimise_cmaes`) from the base model, step 0.25, population
+  `--popsize` (cma's default 4 + 3 ln D when not given), `--cma-generations` generations, one
+  batched run per generation.
+
+Cost, per optimiser: evaluations (a CMA-ES point; an L-BFGS-B call, objective and gradient),
+wall time, and simulated robot-seconds = instances × simulated seconds, counted two ways. A
+run with n sensitivities carries 4n replica instances per instance (pairs at ±ε and ±2ε): they
+are never solved, only assembled at the solved state, so they cost less than an instance;
+`robot_seconds` counts each replica as a full instance ((1 + 4n) × gaits × window), the
+conservative count, and `robot_seconds_cost_equivalent` as the measured (1 + 1.2n)× of a run
+(docs/numerics.md, "Sensitivities": the cost of n directions on this machine). CMA-ES counts
+gaits × window per point.
+
+Writes into --out (default runs/gradient_fit/<timestamp>/), each CSV with its provenance
+sidecar: `gradient_fit.csv` (per set and optimiser: the cost columns, objective reached,
+validation objective on `--validate-cycles` with the training phases, robot-seconds the
+gradient fit needed to reach CMA-ES's objective and their ratio to CMA-ES's total),
+`gradient_fit_history.csv` (every evaluation: cumulative cost and best objective so far) and
+`gradient_fit.png` (best objective against robot-seconds, drawn from the history).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from typing import List, Sequence
+
+import numpy as np
+import pandas as pd
+
+from taichi_star import identification, simulate
+
+from . import cli, identify
+
+DESCRIPTION = ("L-BFGS-B on the exact gradient of the trajectory objective beside CMA-ES, for 6 "
+               "and 20 parameters: evaluations, robot-seconds, wall time, objective reached.")
+
+PARAMETER_SETS = {
+    "6": ["alpha=0.2:1.5", "added_mass_coeff=0:3", "drag_perpendicular=0.3:3:log",
+          "drag_parallel=0.001:0.1:log", "cylinder_drag=1:100:log",
+          "limb_stiffness_ratio=10:1000:log"],
+}
+PARAMETER_SETS["20"] = PARAMETER_SETS["6"] + [
+    f"actuator_gains[{k}]=0.3:2" for k in range(1, 9)] + [
+    "cylinder_added_mass_coeff=0:2", "youngs_modulus=1e6:2.5e7:log",
+    "actuator_density=1500:4000", "foam_density=300:1200",
+    "cylinder_mass_per_height=0.5:2", "thickness=0.002:0.005"]
+"""The fitted boxes by name: calibrate's six axes, and twenty (six + eight gains + six)."""
+CORNER_GROUP = 10
+"""Axes whose 2^k corners are checked together (`identify.check_box`): the 20-axis box in two
+groups; no limit between fields ties an axis of one group to one of the other."""
+REPLICAS_PER_DIRECTION = 4
+"""Replica instances a sensitivity direction adds per instance (pairs at ±ε and ±2ε)."""
+COST_PER_DIRECTION = 1.2
+"""Measured cost of one direction relative to the run (docs/numerics.md, "Sensitivities")."""
+RECORD_INTERVAL_S = 0.01
+"""Centroid records, s (as model_select's fits)."""
+FAILED_OBJECTIVE = 1e6
+"""Objective told to L-BFGS-B for a failed simulation (with a zero gradient)."""
+QUICK_GAITS, QUICK_TRAIN, QUICK_VALIDATE = "A1+A2", "1:1", "2:2"
+RESULT_COLUMNS = ["parameter_set", "n_parameters", "optimiser", "starts", "evaluations",
+                  "robot_seconds", "robot_seconds_cost_equivalent", "wall_s", "objective",
+                  "validate_objective", "robot_seconds_to_cma_objective",
+                  "share_of_cma_robot_seconds"]
+
+
+class Recorder:
+    """Every evaluation of one optimiser: cumulative cost and best objective so far."""
+
+    def __init__(self, parameter_set: str, optimiser: str, on_add=None):
+        self.parameter_set, self.optimiser, self.on_add = parameter_set, optimiser, on_add
+        self.rows: List[dict] = []
+        self.started = time.perf_counter()
+        self.best_objective, self.best_units = math.inf, None
+        self.robot_seconds = self.cost_equivalent = 0.0
+
+    def add(self, units, objective, robot_seconds, cost_equivalent, start=0):
+        self.robot_seconds += robot_seconds
+        self.cost_equivalent += cost_equivalent
+        if objective < self.best_objective:
+            self.best_objective, self.best_units = objective, np.array(units, dtype=float)
+        self.rows.append({"parameter_set": self.parameter_set, "optimiser": self.optimiser,
+                          "start": start, "evaluation": len(self.rows) + 1,
+                          "objective": objective, "best_objective": self.best_objective,
+                          "robot_seconds": self.robot_seconds,
+                          "robot_seconds_cost_equivalent": self.cost_equivalent,
+                          "wall_s": time.perf_counter() - self.started})
+        if self.on_add is not None:
+            self.on_add()
+
+
+class Problem:
+    """The objective on one box: simulations of every gait at a point, its value and
+    gradient in unit coordinates."""
+
+    def __init__(self, box, base, gaits, trials, train, solver, arch):
+        self.box, self.base, self.gaits, self.trials = box, base, list(gaits), trials
+        self.train, self.solver, self.arch = train, solver, arch
+        self.record = max(1, round(RECORD_INTERVAL_S / solver.dt)) * solver.dt
+        self.window_s = train[1] * base.period
+        # the sensitivities number an actuator from 0, the box's NAME[INDEX] from 1
+        self.names = [spec.name if spec.index is None else f"{spec.name}[{spec.index - 1}]"
+                      for spec in box]
+
+    def params(self, units) -> list:
+        return identify.box_params(self.box, identify.box_values(self.box, units), self.base,
+                                   self.gaits)
+
+    def runs(self, params, cycles, sensitivities=()):
+        result = simulate(params, cycles * self.base.period, self.solver, arch=self.arch,
+                          record_interval_s=self.record, sensitivities=sensitivities)
+        runs = identification.simulated_runs(result.trajectory, [p.gait for p in params],
+                                             [p.period for p in params])
+        ok = result.summary["status"].to_numpy() == "ok"
+        return [run if good else None for run, good in zip(runs, ok)], result
+
+    def value_and_gradient(self, units):
+        """(objective, gradient (D,) in unit coordinates); FAILED_OBJECTIVE and zeros for a
+        failed simulation."""
+        units = np.clip(np.asarray(units, dtype=float), 0.0, 1.0)
+        runs, result = self.runs(self.params(units[None, :]), self.train[1], self.names)
+        if any(run is None for run in runs):
+            return FAILED_OBJECTIVE, np.zeros(len(self.box))
+        derivatives = {gait: identification.record_derivatives(
+            result.trajectory_sensitivities, b, self.names) for b, gait in enumerate(self.gaits)}
+        value, gradient, _ = identification.objective_and_gradient(
+            dict(zip(self.gaits, runs)), derivatives, self.trials, self.train)
+        values = identify.box_values(self.box, units[None, :])[0]
+        return value, gradient * self.value_per_unit(values)
+
+    def value_per_unit(self, values) -> np.ndarray:
+        """d value / d u per axis: high − low, or value × ln(high / low) for a log axis."""
+        return np.array([value * math.log(spec.high / spec.low) if spec.log
+                         else spec.high - spec.low for spec, value in zip(self.box, values)])
+
+    def objectives(self, unit_points) -> np.ndarray:
+        """The objective of every point (P, D) on the training window, one batched run."""
+        unit_points = np.atleast_2d(unit_points)
+        runs, _ = self.runs(self.params(unit_points), self.train[1])
+        values = []
+        for p in range(len(unit_points)):
+            part = runs[p * len(self.gaits):(p + 1) * len(self.gaits)]
+            values.append(math.inf if any(r is None for r in part) else
+                          identification.objective_of(identification.trajectory_objective(
+                              dict(zip(self.gaits, part)), self.trials, self.train)))
+        return np.array(values)
+
+    def validate(self, units, validate) -> float:
+        """The objective on the validation window with the phases fitted on training."""
+        runs, _ = self.runs(self.params(np.atleast_2d(units)), validate[1])
+        if any(run is None for run in runs):
+            return math.inf
+        simulated = dict(zip(self.gaits, runs))
+        phases = dict(zip(self.gaits, identification.trajectory_objective(
+            simulated, self.trials, self.train)["phase_s"]))
+        return identification.objective_of(identification.trajectory_objective(
+            simulated, self.trials, validate, phases=phases))
+
+
+def fit_lbfgs(problem: Problem, starts: int, max_evaluations: int, seed: int,
+              recorder: Recorder) -> Recorder:
+    """Multi-start L-BFGS-B over the unit box (module docstring), every evaluation into
+    `recorder`."""
+    from scipy.optimize import minimize
+    parameter_set = recorder.parameter_set
+    dimension = len(problem.box)
+    per_evaluation = problem.window_s * len(problem.gaits)
+    rng = np.random.default_rng(seed)
+    for start in range(starts):
+        x0 = (identify.start_units(problem.box, problem.base) if start == 0
+              else rng.uniform(0.0, 1.0, dimension))
+
+        def fun(units, start=start):
+            value, gradient = problem.value_and_gradient(units)
+            recorder.add(units, value, per_evaluation * (1 + REPLICAS_PER_DIRECTION * dimension),
+                         per_evaluation * (1 + COST_PER_DIRECTION * dimension), start)
+            print(f"set {parameter_set} L-BFGS-B start {start}: objective {value:.5g}, "
+                  f"|gradient| {np.linalg.norm(gradient):.3g}", flush=True)
+            return value, gradient
+
+        minimize(fun, x0, jac=True, method="L-BFGS-B", bounds=[(0.0, 1.0)] * dimension,
+                 options={"maxfun": max_evaluations, "maxiter": max_evaluations})
+    return recorder
+
+
+def fit_cma(problem: Problem, generations: int, popsize, seed: int,
+            recorder: Recorder) -> Recorder:
+    """CMA-ES from the base model over the unit box (module docstring), every evaluation into
+    `recorder`."""
+    parameter_set = recorder.parameter_set
+    per_point = problem.window_s * len(problem.gaits)
+
+    def evaluate(unit_points):
+        values = problem.objectives(unit_points)
+        for units, value in zip(unit_points, values):
+            recorder.add(units, value, per_point, per_point)
+        print(f"set {parameter_set} CMA-ES: best {recorder.best_objective:.5g}", flush=True)
+        return pd.DataFrame({"objective": values})
+
+    identify.minimise_cmaes(problem.box, identify.start_units(problem.box, problem.base),
+                            evaluate, identify.CMASettings(popsize=popsize,
+                                                           max_generations=generations,
+                                                           seed=seed))
+    return recorder
+
+
+def summarise(recorders: Sequence[Recorder], problem_of, validate) -> pd.DataFrame:
+    """One row per optimiser (RESULT_COLUMNS)."""
+    rows = []
+    for recorder in recorders:
+        last = recorder.rows[-1]
+        rows.append({"parameter_set": recorder.parameter_set,
+                     "n_parameters": len(problem_of[recorder.parameter_set].box),
+                     "optimiser": recorder.optimiser,
+                     "starts": len({row["start"] for row in recorder.rows}),
+                     "evaluations": len(recorder.rows), "robot_seconds": last["robot_seconds"],
+                     "robot_seconds_cost_equivalent": last["robot_seconds_cost_equivalent"],
+                     "wall_s": last["wall_s"], "objective": recorder.best_objective,
+                     "validate_objective": problem_of[recorder.parameter_set].validate(
+                         recorder.best_units, validate)})
+    table = pd.DataFrame(rows)
+    for parameter_set, part in table.groupby("parameter_set", sort=False):
+        cma = part[part["optimiser"] == "CMA-ES"]
+        if cma.empty:
+            continue
+        target, cma_cost = float(cma["objective"].iloc[0]), float(cma["robot_seconds"].iloc[0])
+        for recorder in recorders:
+            if recorder.parameter_set != parameter_set:
+                continue
+            reached = [row["robot_seconds"] for row in recorder.rows
+                       if row["best_objective"] <= target]
+            index = table.index[(table["parameter_set"] == parameter_set)
+                                & (table["optimiser"] == recorder.optimiser)]
+            cost = reached[0] if reached else math.nan
+            table.loc[index, "robot_seconds_to_cma_objective"] = cost
+            table.loc[index, "share_of_cma_robot_seconds"] = cost / cma_cost
+    return table.reindex(columns=RESULT_COLUMNS)
+
+
+def plot_history(csv_path, png_path) -> Path:
+    """Best objective so far against robot-seconds (replicas counted as instances), one panel
+    per parameter set, one line per optimiser (from gradient_fit_history.csv)."""
+    plt = cli.use_agg()
+    table = pd.read_csv(csv_path, dtype={"parameter_set": str})
+    sets = list(dict.fromkeys(table["parameter_set"]))
+    fig, axes = plt.subplots(1, len(sets), figsize=(5.2 * len(sets), 4.2), squeeze=False)
+    for ax, parameter_set in zip(axes[0], sets):
+        part = table[table["parameter_set"] == parameter_set]
+        for optimiser, rows in part.groupby("optimiser"):
+            ax.step(rows["robot_seconds"], rows["best_objective"], where="post",
+                    label=optimiser)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("simulated robot-seconds (replicas counted as instances)")
+        ax.set_ylabel("best trajectory objective so far")
+        ax.set_title(f"{parameter_set} parameters", fontsize=9)
+        ax.legend(fontsize=8)
+    settings = cli.run_settings(csv_path)
+    if settings:
+        fig.suptitle(settings, fontsize=8)
+    fig.tight_layout()
+    fig.savefig(png_path, dpi=120)
+    plt.close(fig)
+    return Path(png_path)
+
+
+def build_parser():
+    parser = cli.StudyParser("gradient_fit", DESCRIPTION)
+    parser.add_argument("--sets", default="6,20", quick="6",
+                        help=f"parameter sets to fit, comma list of {', '.join(PARAMETER_SETS)}")
+    parser.add_argument("--gaits", default="paper", quick=QUICK_GAITS,
+                        help="measured gaits to fit: paper (all five) or a comma list")
+    parser.add_argument("--train-cycles", default="1:3", quick=QUICK_TRAIN,
+                        help="the fit window FIRST:LAST (cycles from 1)")
+    parser.add_argument("--validate-cycles", default="4:6", quick=QUICK_VALIDATE,
+                        help="the validation window FIRST:LAST")
+    parser.add_argument("--starts", type=int, default=2, quick=1,
+                        help="L-BFGS-B starts: the base model, then random points")
+    parser.add_argument("--lbfgs-evaluations", type=int, default=8, quick=2,
+                        help="evaluations (objective + gradient) per L-BFGS-B start")
+    parser.add_argument("--cma-generations", type=int, default=8, quick=2,
+                        help="CMA-ES generations")
+    parser.add_argument("--popsize", type=int, default=None,
+                        help="CMA-ES population (default cma's 4 + 3 ln D)")
+    parser.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
+    cli.add_model_flags(parser, fixed=("gait",))
+    cli.add_dt_flag(parser)
+    return parser
+
+
+def main(argv=None):
+    args = cli.parse(build_parser(), argv)
+    sets = cli.parse_choices(args.sets, "--sets", list(PARAMETER_SETS))
+    for flag, value in (("--starts", args.starts), ("--lbfgs-evaluations", args.lbfgs_evaluations),
+                        ("--cma-generations", args.cma_generations)):
+        if value < 1:
+            raise cli.StudyArgumentError(f"{flag} must be >= 1, got {value}")
+    if args.popsize is not None and args.popsize < 2:
+        raise cli.StudyArgumentError(f"--popsize must be >= 2, got {args.popsize}")
+    train, validate = identify.parse_windows(args.train_cycles, args.validate_cycles)
+    gaits = identify.measured_gaits(args.gaits)
+    base = cli.base_params(args)
+    boxes = {name: [identify.parse_range_spec(text, "--sets") for text in PARAMETER_SETS[name]]
+             for name in sets}
+    for box in boxes.values():  # every corner of each group of CORNER_GROUP axes (2^20 is
+        for group in range(0, len(box), CORNER_GROUP):  # too many; the groups share no limit)
+            identify.check_box(box[group:group + CORNER_GROUP], base, "--sets")
+    trials = identification.measured_trials(gaits, base.period)
+    identify.check_trials_cover(trials, validate, args.validate_cycles)
+    solver = cli.solver(args)
+    out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
+                     solver=solver, extra={"gaits": gaits, "train_cycles": list(train),
+                                           "validate_cycles": list(validate),
+                                           "starts": args.starts,
+                                           "lbfgs_evaluations": args.lbfgs_evaluations,
+                                           "cma_generations": args.cma_generations,
+                                           "popsize": args.popsize, "seed": args.seed,
+                                           "sets": {n: PARAMETER_SETS[n] for n in sets}})
+    problems, recorders = {}, []
+
+    def write_history():  # after every evaluation: an interrupted run keeps what it did
+        out.write_csv(pd.DataFrame([row for r in recorders for row in r.rows]),
+                      "gradient_fit_history.csv")
+
+    for name in sets:
+        problems[name] = Problem(boxes[name], base, gaits, trials, train, solver, args.arch)
+        recorders.append(Recorder(name, "CMA-ES", write_history))
+        fit_cma(problems[name], args.cma_generations, args.popsize, args.seed, recorders[-1])
+        recorders.append(Recorder(name, "L-BFGS-B", write_history))
+        fit_lbfgs(problems[name], args.starts, args.lbfgs_evaluations, args.seed,
+                  recorders[-1])
+    table = summarise(recorders, problems, validate)
+    out.write_csv(table, "gradient_fit.csv")
+    out.wrote(plot_history(out.path("gradient_fit_history.csv"),
+                           out.path("gradient_fit.png")))
+    out.report()
+    print(table.to_string(index=False))
+    return table

@@ -1,0 +1,150 @@
+"""The trajectory objective's gradient (identification.objective_and_gradient): its pieces on
+analytic cases, and the whole against central differences of the objective itself on
+synthetic paths whose parameter derivatives are known in closed form (no simulation: the
+sensitivities themselves are tested in tests/model/test_sensitivities.py)."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from taichi_star import identification as ident
+
+T = 2.0
+DT = 1.0 / 64
+
+
+def test_distance_derivative_is_the_projection_on_the_unit_vector():
+    # |(3, 4)| = 5 and its derivative along (dx, dy) is (3 dx + 4 dy) / 5, for two directions
+    delta = np.array([[3.0, 4.0], [0.0, 0.0]])
+    derivative = np.array([[[1.0, 0.0], [0.0, 2.0]], [[1.0, 5.0], [2.0, 1.0]]])
+    got = ident.distance_derivative(delta, derivative)
+    np.testing.assert_allclose(got[0], [3.0 / 5.0, 8.0 / 5.0], rtol=1e-15)
+    # at Δp = 0 the norm has no derivative: 0 by convention (module docstring)
+    np.testing.assert_array_equal(got[1], [0.0, 0.0])
+
+
+def test_path_derivative_interpolates_the_record_derivatives_linearly():
+    t = np.array([0.0, 1.0, 3.0])
+    path = ident.CentroidPath(t, np.zeros(3), np.zeros(3), T)
+    records = np.zeros((3, 2, 1))
+    records[:, 0, 0] = [0.0, 2.0, 6.0]      # dx/dθ
+    records[:, 1, 0] = [1.0, 1.0, -3.0]     # dy/dθ
+    got = ident.path_derivative(path, records, np.array([0.5, 2.0, 3.0]))
+    np.testing.assert_allclose(got[:, 0, 0], [1.0, 4.0, 6.0], rtol=1e-15)
+    np.testing.assert_allclose(got[:, 1, 0], [1.0, -1.0, -3.0], rtol=1e-15)
+
+
+def model_path(theta, forward_sign=1.0, end_s=3 * T):
+    """A simulated run pulsing at 0, T, 2T: per cycle a surge a·(1 − e^{−τ/0.2}) plus a glide
+    b·τ/T along (cos 30°, sin 30°), and a sideways wobble c·sin(2πt/T); θ = (a, b, c). Returns
+    the run and its record derivatives (n, 2, 3), exact."""
+    a, b, c = theta
+    t = np.arange(0, int(round(end_s / DT)) + 1) * DT
+    local, cycle = np.mod(t, T), np.floor(t / T)
+    surge, glide = cycle * (1 - np.exp(-T / 0.2)) + (1 - np.exp(-local / 0.2)), t / T
+    along = forward_sign * (a * surge + b * glide)
+    wobble = np.sin(2 * np.pi * t / T)
+    direction, normal = np.array([np.cos(np.pi / 6), np.sin(np.pi / 6)]), np.array(
+        [-np.sin(np.pi / 6), np.cos(np.pi / 6)])
+    xy = along[:, None] * direction + c * wobble[:, None] * normal
+    derivative = np.stack([forward_sign * surge[:, None] * direction,
+                           forward_sign * glide[:, None] * direction,
+                           wobble[:, None] * normal], axis=-1)          # (n, 2, 3)
+    run = ident.SimulatedRun("A1+A2", ident.CentroidPath(t, xy[:, 0], xy[:, 1], T),
+                             (float(direction[0]), float(direction[1])))
+    return run, derivative
+
+
+def measured_trial():
+    """A "measurement": the model at other parameters, delayed by 0.37 s, with a small
+    cycle-to-cycle variation (σ above its floor on a multi-cycle window)."""
+    run, _ = model_path((3.1, 0.9, 0.3), end_s=8 * T)
+    t = run.path.t_s + 0.37
+    growth = 1.0 + 0.04 * np.floor(run.path.t_s / T)
+    return ident.Trial("A1+A2", ident.CentroidPath(
+        np.concatenate([[0.0], t]), np.concatenate([[0.0], run.path.x_mm * growth]),
+        np.concatenate([[0.0], run.path.y_mm * growth]), T), +1.0)
+
+
+def central_difference(theta, trials, cycles, phases=None, forward_sign=1.0, step=1e-6):
+    gradient = []
+    for p in range(3):
+        values = []
+        for sign in (1.0, -1.0):
+            moved = np.array(theta, dtype=float)
+            moved[p] += sign * step
+            run, _ = model_path(moved, forward_sign)
+            values.append(ident.objective_of(ident.trajectory_objective(
+                {"A1+A2": run}, trials, cycles, samples=16, phases=phases)))
+        gradient.append((values[0] - values[1]) / (2 * step))
+    return np.array(gradient)
+
+
+@pytest.mark.parametrize("cycles", [(1, 1), (1, 3)])
+def test_gradient_equals_central_differences_at_held_phases(cycles):
+    trials = {"A1+A2": measured_trial()}
+    theta = (2.5, 1.2, 0.1)
+    run, derivative = model_path(theta)
+    value, gradient, table = ident.objective_and_gradient(
+        {"A1+A2": run}, {"A1+A2": derivative}, trials, cycles, samples=16)
+    phases = {"A1+A2": float(table["phase_s"].iloc[0])}
+    assert value == pytest.approx(ident.objective_of(ident.trajectory_objective(
+        {"A1+A2": run}, trials, cycles, samples=16)), rel=1e-15)
+    expected = central_difference(theta, trials, cycles, phases)
+    # the objective is a polynomial of degree ≤ 4 in θ away from Δp = 0 (squared distances
+    # of affine paths, divided by a fixed σ): a central difference with step 1e-6 is exact to
+    # O(1e-12) relative; its rounding, ~1e-16 · J / 1e-6 ≈ 1e-10 · J, sets the tolerance
+    np.testing.assert_allclose(gradient, expected, rtol=1e-7, atol=1e-7 * abs(value))
+
+
+def test_gradient_equals_central_differences_of_the_refitted_objective_with_sigma_at_floor():
+    # one cycle: σ is at its floor, the objective is the misfit over a constant, and the
+    # envelope theorem makes the held-phase gradient that of the re-fitted objective; the phase
+    # is refitted to ~1e-9 s each time, and the objective is stationary in it, so the
+    # difference quotients differ by O(J_φφ·(1e-9)²/1e-6): far below the tolerance
+    trials = {"A1+A2": measured_trial()}
+    theta = (2.5, 1.2, 0.1)
+    run, derivative = model_path(theta)
+    value, gradient, table = ident.objective_and_gradient(
+        {"A1+A2": run}, {"A1+A2": derivative}, trials, (1, 1), samples=16)
+    assert table["sigma_mm"].iloc[0] == ident.DISPLACEMENT_FLOOR_MM
+    expected = central_difference(theta, trials, (1, 1))
+    np.testing.assert_allclose(gradient, expected, rtol=1e-6, atol=1e-6 * abs(value))
+
+
+def test_direction_residual_enters_the_gradient_only_when_the_robot_swims_the_wrong_way():
+    trials = {"A1+A2": measured_trial()}
+    theta = (2.5, 1.2, 0.1)
+    run, derivative = model_path(theta, forward_sign=-1.0)
+    value, gradient, table = ident.objective_and_gradient(
+        {"A1+A2": run}, {"A1+A2": derivative}, trials, (1, 2), samples=16)
+    assert table["direction_residual"].iloc[0] > 0
+    phases = {"A1+A2": float(table["phase_s"].iloc[0])}
+    expected = central_difference(theta, trials, (1, 2), phases, forward_sign=-1.0)
+    # as in the held-phase test: polynomial in θ, step 1e-6, rounding ~1e-10 relative
+    np.testing.assert_allclose(gradient, expected, rtol=1e-7, atol=1e-7 * abs(value))
+    # the boundary −sΔ = 0 (no travel: a = b = 0, the wobble returns each cycle): the left
+    # derivative, i.e. no direction term; the curve term is then all of the gradient
+    still, still_derivative = model_path((0.0, 0.0, 0.1))
+    _, at_kink, fit = ident.objective_and_gradient(
+        {"A1+A2": still}, {"A1+A2": still_derivative}, trials, (1, 1), samples=16)
+    assert fit["sim_net_signed_mm"].iloc[0] == pytest.approx(0.0, abs=1e-12)
+    phases = {"A1+A2": float(fit["phase_s"].iloc[0])}
+    run_plus, _ = model_path((1e-6, 0.0, 0.1))
+    table = ident.trajectory_objective({"A1+A2": run_plus}, trials, (1, 1), 16, phases)
+    assert table["direction_residual"].iloc[0] == 0.0   # moving a up keeps ρ at 0
+
+
+def test_record_derivatives_reads_the_sensitivity_columns():
+    table = {"instance": [0, 0, 1, 1], "t_s": [0.0, 1.0, 0.0, 1.0],
+             "d(x_mm)/d(alpha)": [1.0, 2.0, 3.0, 4.0], "d(y_mm)/d(alpha)": [5.0, 6.0, 7.0, 8.0],
+             "d(x_mm)/d(actuator_gains[1])": [9.0, 10.0, 11.0, 12.0],
+             "d(y_mm)/d(actuator_gains[1])": [13.0, 14.0, 15.0, 16.0]}
+    got = ident.record_derivatives(pd.DataFrame(table), 1, ["alpha", "actuator_gains[1]"])
+    np.testing.assert_array_equal(got, [[[3.0, 11.0], [7.0, 15.0]], [[4.0, 12.0], [8.0, 16.0]]])
+
+
+def test_trial_gradient_refuses_derivatives_of_the_wrong_shape():
+    run, derivative = model_path((2.5, 1.2, 0.1))
+    with pytest.raises(ValueError, match="derivative_xy"):
+        ident.trial_gradient(run, derivative[:-1], measured_trial(), (1, 1), 16)
