@@ -577,6 +577,15 @@ def use_agg():
     return plt
 
 
+def save_figure(fig, png_path, dpi: int = 130) -> Path:
+    """Lay out, write and close a figure; returns its path."""
+    import matplotlib.pyplot as plt
+    fig.tight_layout()
+    fig.savefig(png_path, dpi=dpi)
+    plt.close(fig)
+    return Path(png_path)
+
+
 def configure_logging():
     """Show the batch layer's notes (resuming, a damaged chunk recomputed) on stderr."""
     logging.basicConfig(level=logging.WARNING, format="%(message)s")

@@ -203,10 +203,7 @@ def plot_elasticities(csv_path, png_path) -> Path:
     bottom.set_xticks(range(len(parameters)), parameters, rotation=60, ha="right", fontsize=7)
     bottom.set_title(f"Sobol total index ST over the Sobol box ({preset or 'unknown'} preset; "
                      f"grey: not in the box)", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(png_path, dpi=130)
-    plt.close(fig)
-    return Path(png_path)
+    return cli.save_figure(fig, png_path, dpi=130)
 
 
 def build_parser():

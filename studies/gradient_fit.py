@@ -281,10 +281,7 @@ def plot_history(csv_path, png_path) -> Path:
     settings = cli.run_settings(csv_path)
     if settings:
         fig.suptitle(settings, fontsize=8)
-    fig.tight_layout()
-    fig.savefig(png_path, dpi=120)
-    plt.close(fig)
-    return Path(png_path)
+    return cli.save_figure(fig, png_path, dpi=120)
 
 
 def build_parser():

@@ -73,10 +73,7 @@ def plot_check(csv_path, png_path) -> Path:
     ax.set_title("Sensitivities against Richardson-extrapolated differences D_R\n"
                  "(dashed: 1e-5; points right of ~1e-5 are ill-conditioned checks)", fontsize=9)
     ax.legend(fontsize=6, ncol=2)
-    fig.tight_layout()
-    fig.savefig(png_path, dpi=130)
-    plt.close(fig)
-    return Path(png_path)
+    return cli.save_figure(fig, png_path, dpi=130)
 
 
 def build_parser():
