@@ -15,7 +15,7 @@ HELPERS = ("cli", "provenance", "figures", "identify", "__main__")
 
 EXTRA_OF_STUDY = {
     "animate": "plots", "bench": "plots", "calibrate": "studies", "convergence": "plots",
-    "env_bench": "envs", "fig4c": "plots", "gaits": "plots", "model_select": "studies",
+    "env_bench": "envs", "fig4c": "plots", "gait_design": "studies", "gaits": "plots", "model_select": "studies",
     "plan": "plots", "primitives": "plots", "reproduce": "studies", "scaling": None,
     "sensitivity": "studies", "stability": "plots", "sweep": "studies",
     "work_precision": "plots",
