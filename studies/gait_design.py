@@ -49,18 +49,17 @@ QUICK_DT = 5e-3
 QUICK_CYCLES = 1
 
 
-def objective_of(result, goal: str, direction_deg: float, duration_s: float, cycles: int):
-    """(objective per instance (B,), its gradient in the 8 delays (B, 8)): the displacement
-    projected on direction_deg per second (mm/s), or the heading change per cycle (deg)."""
+def objective_of(result, goal: str, direction_deg: float, duration_s: float, cycles: int,
+                 read=None):
+    """The objective per instance (B,): the displacement projected on direction_deg per second
+    (mm/s), or the heading change per cycle (deg). `read(output)` gives an output's values
+    (default: the summary column); with `read = lambda output: result.sensitivity(output,
+    "actuator_delays")` the same linear map gives the gradient in the 8 delays (B, 8)."""
+    read = read or (lambda output: result.summary[output].to_numpy())
     if goal == "turn":
-        return (result.summary["heading_deg"].to_numpy() / cycles,
-                result.sensitivity("heading_deg", "actuator_delays") / cycles)
+        return read("heading_deg") / cycles
     cosine, sine = np.cos(np.radians(direction_deg)), np.sin(np.radians(direction_deg))
-    value = (cosine * result.summary["displacement_x_mm"].to_numpy()
-             + sine * result.summary["displacement_y_mm"].to_numpy()) / duration_s
-    gradient = (cosine * result.sensitivity("displacement_x_mm", "actuator_delays")
-                + sine * result.sensitivity("displacement_y_mm", "actuator_delays")) / duration_s
-    return value, gradient
+    return (cosine * read("displacement_x_mm") + sine * read("displacement_y_mm")) / duration_s
 
 
 def choose_starts(primitives: pd.DataFrame, goal: str, direction_deg: float, n_synchronous: int,
@@ -95,7 +94,9 @@ def optimise(base, solver, starts, goal, direction_deg, cycles, iterations, arch
                   for gait, row in zip(gaits, delays)]
         result = simulate(params, duration_s, solver, arch=arch,
                           sensitivities=("actuator_delays",))
-        value, gradient = objective_of(result, goal, direction_deg, duration_s, cycles)
+        value = objective_of(result, goal, direction_deg, duration_s, cycles)
+        gradient = objective_of(result, goal, direction_deg, duration_s, cycles,
+                                read=lambda output: result.sensitivity(output, "actuator_delays"))
         evaluation = len(path_rows) // len(gaits)
         for start, (gait, row) in enumerate(zip(gaits, delays)):
             path_rows.append({"evaluation": evaluation, "start": start, "gait": gait,
@@ -122,8 +123,8 @@ def robustness(base, solver, patterns, goal, direction_deg, cycles, arch) -> pd.
     params = [base.replace(gait=gait, actuator_delays=tuple(delays), alpha=base.alpha * a,
                            drag_perpendicular=base.drag_perpendicular * c)
               for _, gait, delays, a, c in cases]
-    result = simulate(params, duration_s, solver, arch=arch, sensitivities=("actuator_delays",))
-    value, _ = objective_of(result, goal, direction_deg, duration_s, cycles)
+    result = simulate(params, duration_s, solver, arch=arch)
+    value = objective_of(result, goal, direction_deg, duration_s, cycles)
     return pd.DataFrame([{"pattern": name, "gait": gait, "alpha_factor": a,
                           "drag_perpendicular_factor": c, "objective": v,
                           "status": status, **{f"delay{k + 1}_s": delays[k] for k in range(8)}}
