@@ -19,7 +19,7 @@ start's gradient is its own, only the line search is shared.
 Writes into --out (default runs/gait_design/<timestamp>/), each CSV with its provenance sidecar:
 - `gait_design_paths.csv`: every evaluation of every start (evaluation, start, gait, origin,
   objective, gradient norm, the 8 delays in s);
-- `gait_design.csv`: the best pattern and the best synchronous gait, each simulated over the
+- `gait_design.csv`: the best pattern ("designed") and the best synchronous gait ("synchronous"), each simulated over the
   same cycles with the same solver, at α and drag_perpendicular × 0.8, 1 and 1.2 (the centre and
   4 corners; one batch): objective per case;
 - `gait_design.png` (objective per evaluation per start, and the robustness), drawn from the
@@ -207,8 +207,8 @@ def main(argv=None):
     synchronous = paths[(paths["evaluation"] == 0) & (paths["origin"] == "synchronous")]
     reference = synchronous.loc[synchronous["objective"].idxmax()]
     delay_columns = [f"delay{k + 1}_s" for k in range(8)]
-    patterns = [("best designed", winner["gait"], tuple(winner[delay_columns])),
-                ("best synchronous", reference["gait"], (0.0,) * 8)]
+    patterns = [("designed", winner["gait"], tuple(winner[delay_columns])),
+                ("synchronous", reference["gait"], (0.0,) * 8)]
     table = robustness(base, solver, patterns, args.goal, direction, args.cycles, args.arch)
     table_csv = out.write_csv(table, "gait_design.csv")
     unit = "deg per cycle" if args.goal == "turn" else "mm/s along the direction"
