@@ -19,8 +19,8 @@ start's gradient is its own, only the line search is shared.
 Writes into --out (default runs/gait_design/<timestamp>/), each CSV with its provenance sidecar:
 - `gait_design_paths.csv`: every evaluation of every start (evaluation, start, gait, origin,
   objective, gradient norm, the 8 delays in s);
-- `gait_design.csv`: the best pattern ("designed") and the best synchronous gait ("synchronous"), each simulated over the
-  same cycles with the same solver, at α and drag_perpendicular × 0.8, 1 and 1.2 (the centre and
+- `gait_design.csv`: the best pattern ("designed") and the best synchronous gait
+  ("synchronous"), each simulated over the same cycles with the same solver, at α and drag_perpendicular × 0.8, 1 and 1.2 (the centre and
   4 corners; one batch): objective per case;
 - `gait_design.png` (objective per evaluation per start, and the robustness), drawn from the
   CSVs; `gait_design.gif`, the best pattern's animation over its cycles.
