@@ -20,8 +20,8 @@ Writes into --out (default runs/gait_design/<timestamp>/), each CSV with its pro
 - `gait_design_paths.csv`: every evaluation of every start (evaluation, start, gait, origin,
   objective, gradient norm, the 8 delays in s);
 - `gait_design.csv`: the best pattern ("designed") and the best synchronous gait
-  ("synchronous"), each simulated over the same cycles with the same solver, at α and drag_perpendicular × 0.8, 1 and 1.2 (the centre and
-  4 corners; one batch): objective per case;
+  ("synchronous"), each simulated over the same cycles with the same solver, at α and
+  drag_perpendicular × 0.8, 1 and 1.2 (the centre and 4 corners; one batch): objective per case;
 - `gait_design.png` (objective per evaluation per start, and the robustness), drawn from the
   CSVs; `gait_design.gif`, the best pattern's animation over its cycles.
 """

@@ -7,10 +7,9 @@ import pandas as pd
 import pytest
 
 import taichi_star
-from taichi_star import SolverConfig, StarParams
-
 from studies import gait_design
 from studies.__main__ import main as studies_main
+from taichi_star import SolverConfig, StarParams
 
 
 def test_arguments_fail_before_compute(no_compute, tmp_path, capsys):
