@@ -15,8 +15,8 @@ HELPERS = ("cli", "provenance", "figures", "identify", "__main__")
 
 EXTRA_OF_STUDY = {
     "animate": "plots", "bench": "plots", "calibrate": "studies", "convergence": "plots",
-    "elasticities": "plots", "env_bench": "envs", "fig4c": "plots", "gaits": "plots",
-    "gradient_fit": "studies", "model_select": "studies",
+    "elasticities": "plots", "env_bench": "envs", "fig4c": "plots", "gait_design": "studies",
+    "gaits": "plots", "gradient_fit": "studies", "model_select": "studies",
     "plan": "plots", "primitives": "plots", "reproduce": "studies", "scaling": None,
     "sensitivity": "studies", "sensitivity_check": "plots", "stability": "plots",
     "sweep": "studies",

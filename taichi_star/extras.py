@@ -25,8 +25,8 @@ from types import ModuleType
 EXTRA_MODULES = {
     "plots": ("matplotlib",),
     "envs": ("gymnasium",),
-    "studies": ("matplotlib", "gymnasium", "distributed", "cma", "SALib", "pyarrow",
-                "scipy"),
+    "studies": ("matplotlib", "gymnasium", "distributed", "cma", "SALib", "pyarrow", "scipy",
+                "PIL"),
     "io": ("pyarrow", "xarray", "netCDF4"),
     "video": ("matplotlib", "PIL", "imageio_ffmpeg"),
     "dask": ("distributed",),

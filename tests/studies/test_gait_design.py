@@ -1,0 +1,61 @@
+"""The gait_design study: its starts from the primitives table, its arguments checked before any
+compute, and its optimiser's records against fresh simulations (objective) and a central finite
+difference of one delay (gradient)."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import taichi_star
+from studies import gait_design
+from studies.__main__ import main as studies_main
+from taichi_star import SolverConfig, StarParams
+
+
+def test_arguments_fail_before_compute(no_compute, tmp_path, capsys):
+    for bad in (["--cycles", "0"], ["--iterations", "0"], ["--random-starts", "-1"],
+                ["--primitives", str(tmp_path / "missing.csv")]):
+        assert studies_main(["gait_design", "--out", str(tmp_path / "out"), *bad]) == 2
+        assert bad[0] in capsys.readouterr().err
+
+
+def test_starts_follow_the_goal():
+    primitives = pd.DataFrame({"gait": ["A1", "A2", "A3"], "step_x_mm": [1.0, 0.0, -3.0],
+                               "step_y_mm": [0.0, 2.0, 0.0], "turn_deg": [0.5, -4.0, 3.0]})
+    along_x = gait_design.choose_starts(primitives, "speed", 0.0, 2, 3, 3.0, seed=1)
+    # projected on 0°: A1 (1) > A2 (0) > A3 (-3); the random starts cycle over the chosen sets
+    assert list(along_x["gait"]) == ["A1", "A2", "A1", "A2", "A1"]
+    assert list(along_x["origin"]) == ["synchronous"] * 2 + ["random 0", "random 1", "random 2"]
+    random_delays = np.array(list(along_x["delays"][2:]))
+    assert (random_delays >= 0).all() and (random_delays < 3.0).all()
+    assert along_x["delays"][0] == (0.0,) * 8
+    assert gait_design.choose_starts(primitives, "speed", 180.0, 1, 0, 3.0, 0)["gait"][0] == "A3"
+    assert gait_design.choose_starts(primitives, "turn", 0.0, 1, 0, 3.0, 0)["gait"][0] == "A3"
+
+
+@pytest.mark.slow
+def test_optimiser_records_match_fresh_runs_and_finite_differences():
+    base = StarParams(period=0.5)
+    solver = SolverConfig(dt=5e-3)
+    delays = (0.1, 0.05, 0.0, 0.0, 0.2, 0.0, 0.0, 0.0)
+    starts = pd.DataFrame({"gait": ["A1+A2+A5"], "origin": ["synchronous"], "delays": [delays]})
+    paths, _ = gait_design.optimise(base, solver, starts, "speed", 30.0, cycles=1,
+                                    iterations=1, arch="cpu")
+    first = paths.iloc[0]
+    step = 0.01  # s, two steps: the delay moves the firing by whole steps, so h >= dt
+    shifted = [base.replace(gait="A1+A2+A5", actuator_delays=(0.1 + sign * step,) + delays[1:])
+               for sign in (0, 1, -1)]
+    fresh = taichi_star.simulate(shifted, base.period, solver)
+    value = gait_design.objective_of(fresh, "speed", 30.0, base.period, 1)
+    # the replicas move along the tangent without touching their instance: the same run
+    assert first["objective"] == pytest.approx(value[0], rel=1e-9)
+    finite_difference = (value[1] - value[2]) / (2 * step)
+    gradient = taichi_star.simulate(shifted[:1], base.period, solver,
+                                    sensitivities=("actuator_delays[0]",))
+    exact = gait_design.objective_of(
+        gradient, "speed", 30.0, base.period, 1,
+        read=lambda output: gradient.sensitivity(output, "actuator_delays[0]"))[0]
+    assert first["gradient_norm"] >= abs(exact) * (1 - 1e-9)  # the norm bounds a component
+    assert np.sign(exact) == np.sign(finite_difference) != 0
+    # O(h²) truncation over a 2-step difference and the time discretisation of the delay
+    assert exact == pytest.approx(finite_difference, rel=0.1)
