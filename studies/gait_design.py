@@ -151,10 +151,7 @@ def plot_design(paths_csv, table_csv, png_path, unit: str) -> Path:
     right.set_xticks(np.arange(len(labels)), labels, fontsize=7)
     right.set(ylabel=f"objective ({unit})", title="robustness (±20 % in α and C⊥)")
     right.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(png_path, dpi=120)
-    plt.close(fig)
-    return Path(png_path)
+    return cli.save_figure(fig, png_path, dpi=120)
 
 
 def build_parser():
