@@ -37,6 +37,11 @@ def rotate(vectors: np.ndarray, angle_rad) -> np.ndarray:
                      sin * vectors[..., 0] + cos * vectors[..., 1]], axis=-1)
 
 
+def wrap_degrees(angle):
+    """Angles (deg) wrapped to [-180, 180)."""
+    return (np.asarray(angle) + 180.0) % 360.0 - 180.0
+
+
 def body_rotation(positions: np.ndarray, rest_positions: np.ndarray, joints: np.ndarray,
                   hub: int = 0) -> np.ndarray:
     """Heading: rotation (rad, counter-clockwise, in (−π, π]) of the body from its rest

@@ -24,7 +24,7 @@ import numpy as np
 import pandas as pd
 
 from .gait import N_ACTUATORS, NO_GAIT, Gait, symmetry_classes
-from .metrics import rotate
+from .metrics import rotate, wrap_degrees
 from .params import PER_ACTUATOR_FIELDS, SolverConfig, StarParams
 from .simulation import simulate, whole_steps
 from .simulator import Simulator
@@ -150,11 +150,6 @@ def transform_vectors(vectors: np.ndarray, rotation: int, reflect: bool) -> np.n
     x axis (y -> -y) when `reflect`, then turned by rotation·45°."""
     mirrored = vectors * np.array([1.0, -1.0]) if reflect else vectors
     return rotate(mirrored, math.radians(45.0 * rotation))
-
-
-def wrap_degrees(angle):
-    """Angles (deg) wrapped to [-180, 180)."""
-    return (np.asarray(angle) + 180.0) % 360.0 - 180.0
 
 
 def cycle_displacements(trajectory: pd.DataFrame, period: float) -> pd.DataFrame:

@@ -36,6 +36,7 @@ import pandas as pd
 from .params import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS, PER_ACTUATOR_FIELDS, STAR_RANGES,
                      SolverConfig, StarParams)
 from .gait import N_ACTUATORS
+from .metrics import wrap_degrees
 
 RELATIVE_STEP = 1e-6
 """ε of a direction relative to the parameter's value (see EXTRAPOLATION_SCALES)."""
@@ -173,9 +174,7 @@ def replica_batch(params: Sequence[StarParams], directions: Sequence[Direction])
 def _difference(plus: np.ndarray, minus: np.ndarray, output: str) -> np.ndarray:
     """plus − minus, an angle's difference (output in degrees) taken the short way round."""
     difference = plus - minus
-    if output.endswith("_deg"):
-        difference = (difference + 180.0) % 360.0 - 180.0
-    return difference
+    return wrap_degrees(difference) if output.endswith("_deg") else difference
 
 
 def derivatives(values: np.ndarray, directions: Sequence[Direction], steps: np.ndarray,
