@@ -41,7 +41,9 @@ engine was compiled with).
 Preset "accurate" (`--presets`): the accurate model and solver (adaptive BDF2, N = 433) on the
 same gait, `simulate` end to end for `--accurate-duration` simulated seconds from rest (default
 one period) after one untimed call that compiles; `real_time_factor` is then simulated
-robot-seconds per wall second and `robot_steps_per_s` counts the adaptive steps taken.
+robot-seconds per wall second and `robot_steps_per_s` counts the adaptive steps taken. Its phase
+split profiles the same model on fixed steps (a Newton iteration costs the same; the chord
+iteration's fewer factorisations make its `factor_us` an upper bound).
 
 GPU alternatives (`--arch gpu`): the B sweep is repeated for every threads-per-block count
 (`--gpu-block-dims`) and layout of the per-instance fields (`--layouts`: instance_minor, the
@@ -129,6 +131,8 @@ QUICK_STEPS = 5
 QUICK_SCENARIO_BATCH = 2
 ACCURATE_DURATION = 3.15
 """One period of the benchmark gait, s."""
+# fixed steps of the accurate model whose Newton iterations the phase split profiles
+ACCURATE_PHASE_STEPS = 20
 PLAIN_DURATION = 3.15
 """Simulated seconds of the plain call (one period: the pulse and the coast)."""
 SENSITIVITY_PARAMETERS = ("alpha", "drag_perpendicular", "youngs_modulus", "cylinder_drag")
@@ -225,10 +229,28 @@ def measure(params, arch: str, precision: str, steps: int, repeats: int,
             "factor_gflops": flops / (phase["factor"] * 1e3) if phase["factor"] > 0 else math.nan}
 
 
-def measure_accurate(batch: int, arch: str, precision: str, duration: float) -> dict:
+def accurate_phase_split(params, arch: str, precision: str, profile_seconds: float) -> dict:
+    """µs per instance and Newton iteration of the assembly, factorisation and solve of the
+    accurate model (its mesh and terms) on fixed BDF2 steps of DT with a fresh Jacobian every
+    iteration, WARMUP_STEPS into the pulse: the adaptive run's iterations cost the same per
+    iteration, but it refactors only when the chord iteration stops contracting, so its
+    factorisation share comes out as an upper bound."""
+    solver = SolverConfig.preset("accurate", precision=precision, adaptive=False, dt=DT,
+                                 jacobian="newton", newton_tol=bench_solver(precision).newton_tol)
+    profile = EngineProfile(params, solver, arch)
+    profile.first_launch()
+    seconds, iterations = profile.timed_window(WARMUP_STEPS, ACCURATE_PHASE_STEPS)
+    return profile.phase_split((WARMUP_STEPS + ACCURATE_PHASE_STEPS) * DT,
+                               seconds / (ACCURATE_PHASE_STEPS * iterations), profile_seconds)
+
+
+def measure_accurate(batch: int, arch: str, precision: str, duration: float,
+                     profile_seconds: float) -> dict:
     """End-to-end throughput of `simulate` with the accurate preset (model and solver) for
     `duration` simulated seconds from rest, after one untimed call of the same batch that
-    compiles (its time less the timed call's is `compile_s`)."""
+    compiles (its time less the timed call's is `compile_s`); the phase columns are
+    `accurate_phase_split` times the run's mean Newton iterations per step, bookkeeping the
+    rest of the measured step (step-size control, rejected steps, records)."""
     from taichi_star import simulate
 
     params = [StarParams.preset("accurate", gait=GAIT)] * batch
@@ -244,11 +266,16 @@ def measure_accurate(batch: int, arch: str, precision: str, duration: float) -> 
     if (summary["status"] != "ok").any():
         raise RuntimeError("an instance failed during the benchmark: its timing is not valid")
     steps = float(summary["steps"].sum())
+    step_us = 1e6 * timed / steps
+    iterations = float(summary["newton_iterations_mean"].mean())
+    phase = accurate_phase_split(params, arch, precision, profile_seconds)
+    assembly, factor, solve = (iterations * phase[name] for name in ("assembly", "factor", "solve"))
     return {"gait": GAIT, "preset": "accurate", "jacobian": solver.jacobian, "workers": 1,
             "n_nodes": result.topology.n_nodes,
             "compile_s": max(first - timed, 0.0), "robot_steps_per_s": steps / timed,
-            "real_time_factor": batch * duration / timed, "step_us": 1e6 * timed / steps,
-            "newton_iterations_mean": float(summary["newton_iterations_mean"].mean()),
+            "real_time_factor": batch * duration / timed, "step_us": step_us,
+            "newton_iterations_mean": iterations, "assembly_us": assembly, "factor_us": factor,
+            "solve_us": solve, "bookkeeping_us": step_us - assembly - factor - solve,
             "final_state": state_digest(summary[["displacement_x_mm", "displacement_y_mm"]]
                                         .to_numpy())}
 
@@ -525,7 +552,8 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
                              "bandwidth_fraction": moved / (bandwidth * 1e9)})
             if "accurate" in args.presets:
                 for batch in args.batch_sizes:
-                    figures = measure_accurate(batch, args.arch, precision, args.accurate_duration)
+                    figures = measure_accurate(batch, args.arch, precision, args.accurate_duration,
+                                               profile_seconds)
                     add({"section": "batch", "scenario": "all_terms", "batch_size": batch,
                          "precision": precision, **place, **figures})
         if index == 0:

@@ -12,20 +12,27 @@
 #   layouts      the layout and block-size alternatives at B = 8192 (paper, f64, Newton)
 #   bench        the GPU benchmark into $OUT (results/bench_gpu.csv when committed), one part
 #                per call: PRESETS=paper|accurate, PRECISIONS=f64|f32, SIZES=..., LIMIT=seconds
+#   compare      the paper preset's B sweep (f64, Newton and chord, SIZES) with this checkout,
+#                then with a baseline commit's source exported into .base/ (ignored by git):
+#                  mkdir .base && git archive BASE taichi_star studies | tar -x -C .base
+#                back to back on the same card, LIMIT seconds each
+# Correctness runs at most LIMIT seconds of tests (default 300) and FIG4C=0 skips its study.
 # Everything it writes is packed into $OUT/PHASE.tar.gz (the device returns few files).
 set -o pipefail
 phase=${1:?phase}
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
-    --target /tmp/site .whl/*.whl || exit 1
+# installed once per machine: later phases of the same lease reuse it
+[ -d /tmp/site/taichi ] || python3 -m pip install -q --no-index --no-deps --no-compile \
+    --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit 1
 export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1
 work=$(mktemp -d)
 nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv | tee "$work/gpu.txt"
 git rev-parse HEAD 2>/dev/null | tee -a "$work/gpu.txt"
 case "$phase" in
 correctness)
-    python3 -m pytest -q -p no:cacheprovider --arch gpu tests/model/test_gpu.py \
-        tests/model/test_determinism.py tests/model/test_engine.py \
+    timeout "${LIMIT:-300}" python3 -m pytest -q -p no:cacheprovider --arch gpu \
+        tests/model/test_gpu.py tests/model/test_determinism.py tests/model/test_engine.py \
         -k "reference or alone or bitwise or batch_position or gpu" 2>&1 | tee "$work/pytest.log"
+    [ "${FIG4C:-1}" = 1 ] || { tar -czf "$OUT/$phase.tar.gz" -C "$work" .; exit 0; }
     /usr/bin/time -v python3 -m studies fig4c --arch gpu --out "$work/fig4c_gpu" 2>&1 \
         | tail -30 | tee "$work/fig4c.log"
     python3 - "$work/fig4c_gpu/fig4c.csv" <<'PY' | tee "$work/fig4c_compare.txt"
@@ -54,6 +61,14 @@ bench)
         --precisions "${PRECISIONS:-f64}" --presets "${PRESETS:-paper}" \
         --scenarios "${SCENARIOS:-none}" --scenario-batch 8192 --workers-list none \
         --no-cache-probe --no-plain-call --out "$work/bench" 2>&1 | tee "$work/bench.log"
+    ;;
+compare)
+    sweep=(--arch gpu --batch-sizes "${SIZES:-8192,65536}" --precisions f64 --presets paper
+           --scenarios none --workers-list none --no-cache-probe --no-plain-call)
+    timeout "${LIMIT:-120}" python3 -m studies bench "${sweep[@]}" --sensitivity-counts none \
+        --out "$work/today" 2>&1 | tee "$work/today.log"
+    (cd .base && PYTHONPATH=/tmp/site:$PWD timeout "${LIMIT:-120}" python3 -m studies bench \
+        "${sweep[@]}" --out "$work/base" 2>&1 | tee "$work/base.log")
     ;;
 *)
     echo "unknown phase $phase"; exit 2 ;;
