@@ -82,7 +82,7 @@ class BatchEngine:
         self.tangent_count = arena.field(ti.i32)
         """Directions whose tangents each simulated instance carries (0 unless sensitive)."""
         self.assembly = Assembly(topology, capacity, arena, self.plan.slot, integrator, self.state,
-                                 self.system)
+                                 self.system, self.primal_count if sensitive else None)
         """What the terms see of this engine (they never hold the engine itself)."""
         term_classes = [cls for cls, _ in model.terms_used]
         self.terms = []

@@ -16,6 +16,8 @@ and in its `@ti.func`s, for instance b,
   time before, s;
 - the integrator's rates: `implicit_velocity(b, n, rate_gain)` and `rate_offset(...)` for any
   other quantity (the gain and offset of `integrators`);
+- `branch_instance(b)`: in an engine with sensitivities, the simulated instance whose branch a
+  piecewise force takes when b is one of its replicas (`replicated`: whether there are any);
 - the scatter of its residual and Jacobian: `add_residual(b, n, value)` for node n,
   `add_block(b, slot, value, jacobian)` for one block, and for a term of one edge vector or of
   the two edge vectors of a triplet `scatter_edge` and `scatter_triplet`, which apply the
@@ -40,9 +42,12 @@ class Assembly:
     `integrators` object; `state`: the fields `positions`, `previous`, `velocity_offset`
     ((capacity, N) 2-vectors), `fire_time`, `previous_fire_time` ((capacity, 8)) of a
     `state.BatchState`; `system`: the fields `rhs` ((capacity, N) 2-vectors) and `blocks`
-    ((capacity, slots) 2×2) of a `linsolve.BlockSystem`."""
+    ((capacity, slots) 2×2) of a `linsolve.BlockSystem`; `primal_count`: in an engine with
+    sensitivities, the field holding how many of its instances are simulated (the rest are
+    their replicas, `engine.BatchEngine.replica`), else None."""
 
-    def __init__(self, topology, capacity: int, arena, slot: dict, integrator, state, system):
+    def __init__(self, topology, capacity: int, arena, slot: dict, integrator, state, system,
+                 primal_count=None):
         self.topology = topology
         self.capacity = capacity
         self.arena = arena
@@ -55,6 +60,10 @@ class Assembly:
         self.previous_fire_time = state.previous_fire_time
         self.rhs = system.rhs
         self.blocks = system.blocks
+        self.primal_count = primal_count
+        self.replicated = primal_count is not None
+        """Whether some instances are replicas of others (static: the terms' branch freezing
+        is compiled only then)."""
 
     # ---------------------------------------------------------------- host side: tables
     def batch_field(self, dtype, shape) -> ti.Field:
@@ -83,6 +92,22 @@ class Assembly:
     def implicit_velocity(self, b, n, rate_gain):
         """Node n's velocity at the current iterate by the integrator's rate, m/s."""
         return rate_gain * (self.positions[b, n] - self.previous[b, n]) + self.velocity_offset[b, n]
+
+    @ti.func
+    def branch_instance(self, b):
+        """The instance whose side of a kink a piecewise force takes at instance b: b itself, or
+        for a replica (only with `replicated`) the simulated instance it is a replica of. A
+        replica's residual is differenced against its partner's at the instance's converged
+        state; where the instance sits just beside a kink of a force (a jet that switches off
+        as its space's area stops shrinking), a pair on both sides of it would difference two
+        formulas, and the error, of order ε² per step, builds up over a run. Taking the
+        instance's side keeps the difference that of one smooth formula: the one-sided
+        derivative, which is the derivative where the force is continuously differentiable."""
+        branch = b
+        if ti.static(self.replicated):
+            # replica(b, j, sign) = count·(1 + 2j + sign) + b; a simulated b < count
+            branch = b % self.primal_count[None]
+        return branch
 
     @ti.func
     def rate_offset(self, value, previous, h, ratio, use_history):

@@ -8,9 +8,15 @@ from .base import Term
 
 
 @ti.func
-def cylinder_drag(velocity, coeff):
-    """F = −c|v|v (N/m) with c = ½·ρ_f·C_c·D_c (kg/m²), v (2,) m/s. Returns F and ∂F/∂v."""
+def cylinder_drag(velocity, coeff, branch_velocity, frozen):
+    """F = −c|v|v (N/m) with c = ½·ρ_f·C_c·D_c (kg/m²), v (2,) m/s. With `frozen` (a replica,
+    `assembly.Assembly.branch_instance`) |v| is v's component along `branch_velocity` (m/s;
+    0 where that is 0) instead: at v = branch_velocity the same force and first derivative,
+    and a polynomial in v, with no kink at 0. Returns F and ∂F/∂v."""
     speed = velocity.norm()
+    if frozen != 0:
+        branch_speed = branch_velocity.norm()
+        speed = velocity.dot(branch_velocity) / branch_speed if branch_speed > 0.0 else 0.0
     d_velocity = ti.Matrix.zero(float, 2, 2)
     if speed > 0.0:
         d_velocity = -coeff * (speed * ti.Matrix.identity(float, 2) + velocity.outer_product(velocity) / speed)
@@ -36,6 +42,9 @@ class CylinderDrag(Term):
     @ti.func
     def assemble(self, b, rate_gain, jacobian):
         velocity = self.assembly.implicit_velocity(b, CENTRE, rate_gain)
-        force, d_velocity = cylinder_drag(velocity, self.cylinder_drag_coeff[b])
+        branch = self.assembly.branch_instance(b)
+        force, d_velocity = cylinder_drag(
+            velocity, self.cylinder_drag_coeff[b],
+            self.assembly.implicit_velocity(branch, CENTRE, rate_gain), branch != b)
         self.assembly.add_residual(b, CENTRE, -force)
         self.assembly.add_block(b, self.centre_slot, -rate_gain * d_velocity, jacobian)

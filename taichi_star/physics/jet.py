@@ -109,18 +109,21 @@ def jet_direction(kind, centre, x1, x2, x3, x4):
 
 @ti.func
 def jet(centre, x1, x2, x3, x4, old_area, rate_gain, rate_offset, alpha, fluid_density, always,
-        inflow, direction_kind):
+        inflow, direction_kind, branch_rate, frozen):
     """Force of one space on the robot: the jet f = −(ρ_f/L)(α·Ṡ)²·t while Ṡ < 0 (always if
     `always`), or the inflow f = +(ρ_f/L)(α_in·Ṡ)²·t while Ṡ > 0 (α_in = `inflow`, not with
     `always`), t by `jet_direction` code `direction_kind`. Ṡ = rate_gain·(S − S_old) +
     rate_offset (implicit Euler: (S − S_old)/h); x1, x4 the joints, x2, x3 the tips (m), areas
-    m², gain 1/s. Returns f (2,) N/m and ∂f/∂x_c, ∂f/∂x1..x4 (2, 2)."""
+    m², gain 1/s. With `frozen` (a replica, `assembly.Assembly.branch_instance`) the sign of
+    `branch_rate` (m²/s), not of Ṡ, says which of the three formulas applies. Returns f (2,)
+    N/m and ∂f/∂x_c, ∂f/∂x1..x4 (2, 2)."""
     signed_area = quad_signed_area(x1, x2, x3, x4)
     area_rate = rate_gain * (ti.abs(signed_area) - old_area) + rate_offset
     force = ti.Vector([0.0, 0.0])
     d_centre, d1, d2, d3, d4 = no_derivatives()
-    jetting = always != 0 or area_rate < 0.0
-    if jetting or (inflow > 0.0 and area_rate > 0.0):
+    branch = branch_rate if frozen != 0 else area_rate
+    jetting = always != 0 or branch < 0.0
+    if jetting or (inflow > 0.0 and branch > 0.0):
         # strength α² (jet) or α_in² (inflow); sense −1: pushed along −t, +1: pulled along +t
         strength = inflow * inflow
         sense = 1.0
@@ -234,13 +237,21 @@ class Jet(Term):
         if ti.static(variants):
             inflow = self.jet_inflow[b]
             direction_kind = self.jet_direction[b]
+        branch = self.assembly.branch_instance(b)
         for k in range(N_ACTUATORS):
+            # a replica's space jets (or draws in) when its instance's does: the switch at
+            # Ṡ = 0 is a kink of the force (continuous with its first derivative), and an
+            # instance's space that reopens slowly keeps Ṡ just above it for many steps
+            branch_rate = 0.0
+            if branch != b:
+                branch_rate = rate_gain * (self.area(branch, k) - self.previous_areas[branch, k]) \
+                    + self.area_rate_offset[branch, k]
             force, d_centre, d1, d2, d3, d4 = jet(
                 positions[b, CENTRE], positions[b, self.jet_quads[k, 0]],
                 positions[b, self.jet_quads[k, 1]], positions[b, self.jet_quads[k, 2]],
                 positions[b, self.jet_quads[k, 3]], self.previous_areas[b, k], rate_gain,
                 self.area_rate_offset[b, k], self.jet_alpha[b], self.jet_fluid_density[b],
-                self.jet_always[b], inflow, direction_kind)
+                self.jet_always[b], inflow, direction_kind, branch_rate, branch != b)
             if ti.static("spread" in self.configuration_switches):
                 if self.jet_application[b] == SPREAD:
                     self.spread_on_corners(b, k, force, d_centre, d1, d2, d3, d4, jacobian)

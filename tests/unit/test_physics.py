@@ -51,7 +51,7 @@ def _bend(edges: ti.types.ndarray(), voronoi: float, natural: float, stiffness: 
 def _rod_drag(inputs: ti.types.ndarray(), parallel: float, perpendicular: float,
               out: ti.types.ndarray()):
     force, d_velocity, d_edge = rod_drag.rod_drag(ti.Vector([inputs[0], inputs[1]]), ti.Vector([inputs[2], inputs[3]]),
-                                               parallel, perpendicular)
+                                               parallel, perpendicular, ti.Vector([0.0, 0.0]), 0)
     for a in ti.static(range(2)):
         out[a] = force[a]
         for c in ti.static(range(2)):
@@ -61,7 +61,8 @@ def _rod_drag(inputs: ti.types.ndarray(), parallel: float, perpendicular: float,
 
 @ti.kernel
 def _cylinder_drag(inputs: ti.types.ndarray(), coeff: float, out: ti.types.ndarray()):
-    force, d_velocity = cylinder_drag.cylinder_drag(ti.Vector([inputs[0], inputs[1]]), coeff)
+    force, d_velocity = cylinder_drag.cylinder_drag(ti.Vector([inputs[0], inputs[1]]), coeff,
+                                                    ti.Vector([0.0, 0.0]), 0)
     for a in ti.static(range(2)):
         out[a] = force[a]
         for c in ti.static(range(2)):
@@ -74,7 +75,7 @@ def _jet(points: ti.types.ndarray(), old_area: float, dt: float, alpha: float, d
     force, d0, d1, d2, d3, d4 = jet.jet(
         ti.Vector([points[0], points[1]]), ti.Vector([points[2], points[3]]), ti.Vector([points[4], points[5]]),
         ti.Vector([points[6], points[7]]), ti.Vector([points[8], points[9]]), old_area, 1.0 / dt, 0.0, alpha, density, always,
-        inflow, direction)
+        inflow, direction, 0.0, 0)
     for a in ti.static(range(2)):
         out[a] = force[a]
         for c in ti.static(range(2)):
