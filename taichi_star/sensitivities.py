@@ -42,10 +42,15 @@ RELATIVE_STEP = 1e-6
 """ε of a direction relative to the parameter's value (see EXTRAPOLATION_SCALES)."""
 EXTRAPOLATION_SCALES = (1.0, 2.0)
 """Each direction has a replica pair at ±ε and one at ±2ε; its derivative is 2·D(ε) − D(2ε).
-Where the residual is smooth, a pair's central differences are exact to O(ε²). The drag
-|v|·v is not twice differentiable at v = 0, and states sit exactly there (a velocity
-component that a symmetric gait keeps at zero): a pair straddling it adds ε²·a·|a| to its
-half difference, an error exactly linear in ε, which the extrapolation removes."""
+Where the residual is smooth, a pair's central differences are exact to O(ε²). The drags
+|v|·v and the jet's switch are not twice differentiable at 0, and states sit at or just
+beside it (a velocity component that a symmetric gait keeps at zero, one that creeps past it
+as the robot coasts): there a replica takes its instance's side of the kink
+(`physics.assembly.Assembly.branch_instance`), which keeps the pair's difference that of one
+polynomial (exact at a zero component, where a straddling pair would otherwise add ε²·a·|a| to
+its half difference, an error linear in ε). The extrapolation removes such linear errors
+wherever a kink is left outside the forces; whether the second pair is still needed is not
+yet measured."""
 ZERO_VALUE_SCALE = 0.01
 """For a parameter at 0, ε is RELATIVE_STEP times this share of the top of its range (for a
 per-actuator delay: of the period)."""

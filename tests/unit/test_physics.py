@@ -49,9 +49,10 @@ def _bend(edges: ti.types.ndarray(), voronoi: float, natural: float, stiffness: 
 
 @ti.kernel
 def _rod_drag(inputs: ti.types.ndarray(), parallel: float, perpendicular: float,
-              out: ti.types.ndarray()):
+              branch: ti.types.ndarray(), frozen: ti.i32, out: ti.types.ndarray()):
     force, d_velocity, d_edge = rod_drag.rod_drag(ti.Vector([inputs[0], inputs[1]]), ti.Vector([inputs[2], inputs[3]]),
-                                               parallel, perpendicular, ti.Vector([0.0, 0.0]), 0)
+                                               parallel, perpendicular,
+                                               ti.Vector([branch[0], branch[1]]), frozen)
     for a in ti.static(range(2)):
         out[a] = force[a]
         for c in ti.static(range(2)):
@@ -60,9 +61,10 @@ def _rod_drag(inputs: ti.types.ndarray(), parallel: float, perpendicular: float,
 
 
 @ti.kernel
-def _cylinder_drag(inputs: ti.types.ndarray(), coeff: float, out: ti.types.ndarray()):
+def _cylinder_drag(inputs: ti.types.ndarray(), coeff: float, branch: ti.types.ndarray(),
+                   frozen: ti.i32, out: ti.types.ndarray()):
     force, d_velocity = cylinder_drag.cylinder_drag(ti.Vector([inputs[0], inputs[1]]), coeff,
-                                                    ti.Vector([0.0, 0.0]), 0)
+                                                    ti.Vector([branch[0], branch[1]]), frozen)
     for a in ti.static(range(2)):
         out[a] = force[a]
         for c in ti.static(range(2)):
@@ -71,11 +73,12 @@ def _cylinder_drag(inputs: ti.types.ndarray(), coeff: float, out: ti.types.ndarr
 
 @ti.kernel
 def _jet(points: ti.types.ndarray(), old_area: float, dt: float, alpha: float, density: float,
-         always: ti.i32, inflow: float, direction: ti.i32, out: ti.types.ndarray()):
+         always: ti.i32, inflow: float, direction: ti.i32, branch_rate: float, frozen: ti.i32,
+         out: ti.types.ndarray()):
     force, d0, d1, d2, d3, d4 = jet.jet(
         ti.Vector([points[0], points[1]]), ti.Vector([points[2], points[3]]), ti.Vector([points[4], points[5]]),
         ti.Vector([points[6], points[7]]), ti.Vector([points[8], points[9]]), old_area, 1.0 / dt, 0.0, alpha, density, always,
-        inflow, direction, 0.0, 0)
+        inflow, direction, branch_rate, frozen)
     for a in ti.static(range(2)):
         out[a] = force[a]
         for c in ti.static(range(2)):
@@ -90,6 +93,12 @@ def _call(kernel, inputs, n_out, *args):
     out = np.zeros(n_out)
     kernel(np.ascontiguousarray(inputs, dtype=np.float64), *args, out)
     return out
+
+
+def _call_jet(points, n_out, *args, branch_rate=0.0, frozen=0):
+    """`_call` of `_jet`: as an instance (frozen 0) or as a replica whose instance's space
+    changes at `branch_rate` (m²/s)."""
+    return _call(_jet, points, n_out, *args, branch_rate, frozen)
 
 
 def _central_jacobian(function, x, step):
@@ -155,7 +164,7 @@ def test_rod_drag_jacobians(taichi_cpu, velocity):
     edge = np.array([1.1e-3, 0.6e-3])
     inputs = np.array([*velocity, *edge])
     coeffs = (0.5 * 1000 * 1.3e-3 * 0.01, 0.5 * 1000 * 1.3e-3 * 1.0)
-    evaluate = lambda x: _call(_rod_drag, x, 10, *coeffs)  # noqa: E731
+    evaluate = lambda x: _call(_rod_drag, x, 10, *coeffs, np.zeros(2), 0)  # noqa: E731
     out = evaluate(inputs)
     jacobian = _central_jacobian(lambda x: evaluate(x)[:2], inputs, 1e-8)
     _assert_close(out[2:].reshape(2, 4)[:, :2], jacobian[:, :2])
@@ -167,10 +176,47 @@ def test_rod_drag_jacobians(taichi_cpu, velocity):
 
 def test_cylinder_drag_jacobian(taichi_cpu):
     inputs = np.array([0.013, -0.021])
-    evaluate = lambda x: _call(_cylinder_drag, x, 6, 150.0)  # noqa: E731
+    evaluate = lambda x: _call(_cylinder_drag, x, 6, 150.0, np.zeros(2), 0)  # noqa: E731
     out = evaluate(inputs)
     _assert_close(out[2:].reshape(2, 2), _central_jacobian(lambda x: evaluate(x)[:2], inputs, 1e-9))
-    assert np.allclose(_call(_cylinder_drag, np.zeros(2), 6, 150.0), 0.0)
+    assert np.allclose(_call(_cylinder_drag, np.zeros(2), 6, 150.0, np.zeros(2), 0), 0.0)
+
+
+@pytest.mark.parametrize("drag", ["rod", "cylinder"])
+def test_a_replica_pair_across_the_drags_kink_differences_one_polynomial(taichi_cpu, drag):
+    """An instance whose velocity components lie 1e-12 m/s from zero, and a replica pair at
+    ±δ·w about it that straddles zero: frozen on the instance's side (`Assembly.branch_instance`),
+    the pair's half difference over δ is the drag's derivative at the instance along w; the
+    pair's own |v|·v (not frozen) is off by ~c·δ·|w|², which the test must see."""
+    instance, direction, step = np.array([1e-12, -1e-12]), np.array([0.7, -0.4]), 1e-6
+    if drag == "rod":
+        edge = np.array([1.1e-3, 0.6e-3])
+        coeffs = (0.5 * 1000 * 1.3e-3 * 0.01, 0.5 * 1000 * 1.3e-3 * 1.0)
+
+        def evaluate(velocity, branch, frozen):
+            return _call(_rod_drag, np.concatenate([velocity, edge]), 10, *coeffs, branch, frozen)
+        jacobian = evaluate(instance, instance, 0)[2:].reshape(2, 4)[:, :2]
+    else:
+        def evaluate(velocity, branch, frozen):
+            return _call(_cylinder_drag, velocity, 6, 150.0, branch, frozen)
+        jacobian = evaluate(instance, instance, 0)[2:].reshape(2, 2)
+    derivative = jacobian @ direction
+
+    def half_difference(frozen):
+        plus = evaluate(instance + step * direction, instance, frozen)[:2]
+        minus = evaluate(instance - step * direction, instance, frozen)[:2]
+        return (plus - minus) / (2 * step)
+
+    straddled = np.abs(half_difference(0) - derivative).max()
+    assert straddled > 1e-8, "the pair must straddle the kink for the check to mean anything"
+    # the frozen formula is a polynomial of degree 2 in v: its central difference is exact up
+    # to rounding (~1e-16·|F|/δ)
+    assert np.abs(half_difference(1) - derivative).max() <= 1e-6 * straddled
+    # at the instance's own velocity the frozen formula is the force itself (the hub's to
+    # rounding: v·v/|v| for |v|)
+    off_zero = np.array([0.02, -0.01])
+    np.testing.assert_allclose(evaluate(off_zero, off_zero, 1)[:2],
+                               evaluate(off_zero, off_zero, 0)[:2], rtol=1e-14)
 
 
 def _jet_points():
@@ -193,7 +239,7 @@ def test_jet_jacobian(taichi_cpu, always):
     area = _quad_area(points)
     old_area = area * 1.001  # shrinking: the jet is on in both modes
     args = (old_area, 1e-3, 0.8, 1000.0, always, 0.0, jet.HUB_DIRECTION)
-    evaluate = lambda x: _call(_jet, x, 22, *args)  # noqa: E731
+    evaluate = lambda x: _call_jet(x, 22, *args)  # noqa: E731
     out = evaluate(points)
     jacobian = _central_jacobian(lambda x: evaluate(x)[:2], points, 1e-9)
     _assert_close(out[2:].reshape(2, 10), jacobian)
@@ -208,8 +254,13 @@ def test_jet_contract_mode_is_off_while_expanding(taichi_cpu):
     points = _jet_points()
     area = _quad_area(points)
     expanding = (area * 0.999, 1e-3, 0.8, 1000.0)
-    assert np.all(_call(_jet, points, 22, *expanding, 0, 0.0, jet.HUB_DIRECTION) == 0.0)
-    assert np.linalg.norm(_call(_jet, points, 22, *expanding, 1, 0.0, jet.HUB_DIRECTION)[:2]) > 0.0
+    assert np.all(_call_jet(points, 22, *expanding, 0, 0.0, jet.HUB_DIRECTION) == 0.0)
+    assert np.linalg.norm(_call_jet(points, 22, *expanding, 1, 0.0, jet.HUB_DIRECTION)[:2]) > 0.0
+    # a replica's space that shrinks while its instance's opens (Ṡ just above 0, the pair on
+    # both sides) takes the instance's side: no jet
+    shrinking = (area * 1.001, 1e-3, 0.8, 1000.0, 0, 0.0, jet.HUB_DIRECTION)
+    assert np.linalg.norm(_call_jet(points, 22, *shrinking)[:2]) > 0.0
+    assert np.all(_call_jet(points, 22, *shrinking, branch_rate=1e-12, frozen=1) == 0.0)
 
 
 def _expected_direction(points, kind):
@@ -236,7 +287,7 @@ def test_jet_and_inflow_directions_values_and_jacobians(taichi_cpu, kind, shrink
     area = _quad_area(points)
     old_area = area * shrink
     args = (old_area, 1e-3, 0.8, 1000.0, 0, 0.5, kind)
-    evaluate = lambda x: _call(_jet, x, 22, *args)  # noqa: E731
+    evaluate = lambda x: _call_jet(x, 22, *args)  # noqa: E731
     out = evaluate(points)
     _assert_close(out[2:].reshape(2, 10), _central_jacobian(lambda x: evaluate(x)[:2], points, 1e-9))
     rate = (area - old_area) / 1e-3
@@ -252,10 +303,10 @@ def test_inflow_is_off_while_closing_and_zero_inflow_changes_nothing(taichi_cpu)
     points = _jet_points()
     area = _quad_area(points)
     closing = (area * 1.001, 1e-3, 0.8, 1000.0, 0)
-    np.testing.assert_array_equal(_call(_jet, points, 22, *closing, 0.7, jet.HUB_DIRECTION),
-                                  _call(_jet, points, 22, *closing, 0.0, jet.HUB_DIRECTION))
+    np.testing.assert_array_equal(_call_jet(points, 22, *closing, 0.7, jet.HUB_DIRECTION),
+                                  _call_jet(points, 22, *closing, 0.0, jet.HUB_DIRECTION))
     opening = (area * 0.999, 1e-3, 0.8, 1000.0, 0, 0.0, jet.BISECTOR_DIRECTION)
-    assert np.all(_call(_jet, points, 22, *opening) == 0.0)
+    assert np.all(_call_jet(points, 22, *opening) == 0.0)
 
 
 def test_the_three_directions_coincide_in_the_rest_shape(taichi_cpu):
@@ -268,7 +319,7 @@ def test_the_three_directions_coincide_in_the_rest_shape(taichi_cpu):
     quad = topology.jet_quads[3]
     points = np.concatenate([topology.rest_positions[0], topology.rest_positions[quad].reshape(-1)])
     area = _quad_area(points)
-    forces = [_call(_jet, points, 22, area * 1.001, 1e-3, 0.8, 1000.0, 0, 0.0, kind)[:2]
+    forces = [_call_jet(points, 22, area * 1.001, 1e-3, 0.8, 1000.0, 0, 0.0, kind)[:2]
               for kind in (jet.HUB_DIRECTION, jet.NORMAL_DIRECTION, jet.BISECTOR_DIRECTION)]
     # the rest shape is built by rounding cosines: the directions agree to ~1e-15
     np.testing.assert_allclose(forces[1], forces[0], rtol=1e-12, atol=1e-12 * np.abs(forces[0]).max())
