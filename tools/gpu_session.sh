@@ -60,7 +60,7 @@ bench)
         --batch-sizes "${SIZES:-256,1024,4096,8192,16384,32768,65536}" \
         --precisions "${PRECISIONS:-f64}" --presets "${PRESETS:-paper}" \
         --scenarios "${SCENARIOS:-none}" --scenario-batch 8192 --workers-list none \
-        --no-cache-probe --no-plain-call --out "$work/bench" 2>&1 | tee "$work/bench.log"
+        --no-cache-probe --no-plain-call --sensitivity-counts none --out "$work/bench" 2>&1 | tee "$work/bench.log"
     ;;
 compare)
     sweep=(--arch gpu --batch-sizes "${SIZES:-8192,65536}" --precisions f64 --presets paper
