@@ -16,6 +16,8 @@
 #                then with a baseline commit's source exported into .base/ (ignored by git):
 #                  mkdir .base && git archive BASE taichi_star studies | tar -x -C .base
 #                back to back on the same card, LIMIT seconds each
+#   occupancy    Nsight Compute's launch and occupancy figures of the accurate preset's two step
+#                kernels (adaptive and fixed steps, tools/gpu_kernels.py at BATCH instances)
 # Correctness runs at most LIMIT seconds of tests (default 300) and FIG4C=0 skips its study.
 # Everything it writes is packed into $OUT/PHASE.tar.gz (the device returns few files).
 set -o pipefail
@@ -69,6 +71,15 @@ compare)
         --out "$work/today" 2>&1 | tee "$work/today.log"
     (cd .base && PYTHONPATH=/tmp/site:$PWD timeout "${LIMIT:-120}" python3 -m studies bench \
         "${sweep[@]}" --out "$work/base" 2>&1 | tee "$work/base.log")
+    ;;
+occupancy)
+    ncu=$(command -v ncu || ls /opt/nvidia/nsight-compute/*/ncu 2>/dev/null | head -1)
+    timeout "${LIMIT:-150}" "$ncu" --target-processes all --kernel-name regex:advance \
+        --launch-count "${COUNT:-3}" --metrics launch__registers_per_thread,\
+launch__occupancy_limit_registers,launch__block_size,launch__grid_size,\
+sm__warps_active.avg.pct_of_peak_sustained_active,smsp__thread_inst_executed_per_inst_executed.ratio,\
+gpu__time_duration.sum,l1tex__t_bytes_pipe_lsu_mem_local_op_ld.sum,dram__bytes.sum \
+        python3 tools/gpu_kernels.py --batch "${BATCH:-8192}" 2>&1 | tee "$work/ncu.log"
     ;;
 *)
     echo "unknown phase $phase"; exit 2 ;;
