@@ -1,7 +1,7 @@
 """SIMD across instances: does grouping instances into vector lanes speed up the CPU's block LU?
 
     python -m studies simd [--presets paper,accurate] [--precisions f64,f32]
-                           [--batch-sizes 64,512,4096] [--lanes 4,8] [--repeats 5]
+                           [--batch-sizes 64,512,4096] [--lanes 4,8] [--repeats 7]
                            [--matmul-size 1024] [--out DIR] [--quick]
 
 A micro-benchmark of the kernel that dominates a Newton iteration on the CPU: the numeric block
@@ -23,16 +23,18 @@ Every form is compiled with Taichi's optimised LLVM IR printed (`print_kernel_ll
 and the IR of its factor-and-solve kernel is searched for packed floating-point instructions
 (`<N x double>` / `<N x float>` arithmetic). Timings are interleaved: each repeat restores the
 matrices (untimed) and times one factor-and-solve of the whole batch in every form in turn, so
-load from other processes hits all forms alike; a form's time is its best over the repeats and
-`speedup_vs_instance_major` the ratio of the bests. NumPy's matrix product of two n × n
+load from other processes hits all forms alike; a form's time is its best over the repeats,
+`speedup_vs_instance_major` the ratio of the bests and `speedup_median_of_rounds` the median over
+the rounds of the ratio of the two forms' times in that round (the steadier figure on a loaded
+machine). NumPy's matrix product of two n × n
 matrices (`--matmul-size`, same precision) is timed in the same rounds as the machine's
 reference rate.
 
 Writes `simd.csv`: one row per preset, precision, batch size and form: n_nodes, n_slots (2×2
 blocks with fill-in), lanes, flops_per_instance (factor + solve), seconds (best), us_per_instance,
 gflops, matmul_gflops (NumPy, best in the same rounds), fraction_of_matmul,
-speedup_vs_instance_major, packed_ops_in_ir (packed floating-point arithmetic instructions in
-the kernel's optimised IR), vector_width_in_ir (widest packed type found, lanes; 0: none),
+speedup_vs_instance_major, speedup_median_of_rounds, packed_ops_in_ir (packed floating-point
+arithmetic instructions in the kernel's optimised IR), vector_width_in_ir (widest packed type found, lanes; 0: none),
 max_relative_error (the solution against `numpy.linalg.solve` on the dense matrix of checked
 instances), bitwise_equal_to_instance_major (every instance's solution), load_average_1min
 (before the row's timings).
@@ -369,7 +371,7 @@ def measure(plans: dict, precision: str, batch_sizes: List[int], lanes_list: Lis
                 facts[form, lanes] = packed_ops(ir_folder)
                 systems[form, lanes] = system
             load = os.getloadavg()[0]
-            best = {key: math.inf for key in systems}
+            times = {key: [] for key in systems}
             best_matmul = 0.0
             for _ in range(repeats):
                 best_matmul = max(best_matmul, matmul_gflops(matmul_size, precision, rng))
@@ -379,7 +381,7 @@ def measure(plans: dict, precision: str, batch_sizes: List[int], lanes_list: Lis
                     start = time.perf_counter()
                     system.factor_solve()
                     ti.sync()
-                    best[key] = min(best[key], time.perf_counter() - start)
+                    times[key].append(time.perf_counter() - start)
             reference = systems["instance_major", 1].solution()
             checked = sorted({0, batch // 2, batch - 1})[:CHECKED_INSTANCES]
             exact = [np.linalg.solve(dense_matrix(plan, blocks[b]), rhs[b].ravel())
@@ -388,7 +390,8 @@ def measure(plans: dict, precision: str, batch_sizes: List[int], lanes_list: Lis
                 solution = system.solution()
                 error = max(np.abs(solution[b].ravel() - x).max() / np.abs(x).max()
                             for b, x in zip(checked, exact))
-                seconds = best[form, lanes]
+                seconds = min(times[form, lanes])
+                round_ratios = np.array(times["instance_major", 1]) / np.array(times[form, lanes])
                 gflops = batch * flops / seconds / 1e9
                 rows.append({
                     "preset": preset, "precision": precision, "batch_size": batch, "form": form,
@@ -396,7 +399,8 @@ def measure(plans: dict, precision: str, batch_sizes: List[int], lanes_list: Lis
                     "flops_per_instance": flops, "seconds": seconds,
                     "us_per_instance": seconds * 1e6 / batch, "gflops": gflops,
                     "matmul_gflops": best_matmul, "fraction_of_matmul": gflops / best_matmul,
-                    "speedup_vs_instance_major": best["instance_major", 1] / seconds,
+                    "speedup_vs_instance_major": min(times["instance_major", 1]) / seconds,
+                    "speedup_median_of_rounds": float(np.median(round_ratios)),
                     "packed_ops_in_ir": facts[form, lanes]["count"],
                     "vector_width_in_ir": facts[form, lanes]["width"],
                     "max_relative_error": float(error),
@@ -430,7 +434,7 @@ def build_parser():
                         help="comma list of batch sizes (multiples of every lane count)")
     parser.add_argument("--lanes", default="4,8", quick="4",
                         help="comma list of instances per loop iteration of the grouped forms")
-    parser.add_argument("--repeats", type=int, default=5, quick=2,
+    parser.add_argument("--repeats", type=int, default=7, quick=2,
                         help="interleaved timing rounds (each form's best is kept)")
     parser.add_argument("--matmul-size", type=int, default=1024, quick=256,
                         help="n of NumPy's n × n reference matrix product")
