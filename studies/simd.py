@@ -34,10 +34,10 @@ Writes `simd.csv`: one row per preset, precision, batch size and form: n_nodes, 
 blocks with fill-in), lanes, flops_per_instance (factor + solve), seconds (best), us_per_instance,
 gflops, matmul_gflops (NumPy, best in the same rounds), fraction_of_matmul,
 speedup_vs_instance_major, speedup_median_of_rounds, packed_ops_in_ir (packed floating-point
-arithmetic instructions in the kernel's optimised IR), vector_width_in_ir (widest packed type found, lanes; 0: none),
-max_relative_error (the solution against `numpy.linalg.solve` on the dense matrix of checked
-instances), bitwise_equal_to_instance_major (every instance's solution), load_average_1min
-(before the row's timings).
+arithmetic instructions in the kernel's optimised IR), vector_width_in_ir (widest packed type
+found, lanes; 0: none), max_relative_error (the solution against `numpy.linalg.solve` on the
+dense matrix of checked instances), bitwise_equal_to_instance_major (every instance's solution),
+load_average_1min (before the row's timings).
 
 --quick: the paper pattern, B = 8 and 16, f64 and f32, lanes 4, two repeats, 256 × 256 matmul.
 """
@@ -50,7 +50,6 @@ import re
 import tempfile
 import time
 from pathlib import Path
-from typing import Dict, List
 
 import numpy as np
 import pandas as pd
@@ -296,7 +295,7 @@ class LaneSystem:
         return factor_solve, restore
 
 
-def packed_ops(ir_folder: Path) -> Dict[str, int]:
+def packed_ops(ir_folder: Path) -> dict[str, int]:
     """{"count": packed floating-point arithmetic instructions, "width": widest (lanes)} in the
     optimised LLVM IR files Taichi wrote into ir_folder since it was last emptied; empties it."""
     count, width = 0, 0
@@ -339,7 +338,7 @@ def matmul_gflops(size: int, precision: str, rng) -> float:
     return 2 * size ** 3 / best / 1e9
 
 
-def forms_of(lanes_list: List[int]):
+def forms_of(lanes_list: list[int]):
     """(form, lanes) in the order they are timed: today's form first."""
     yield "instance_major", 1
     for form in FORMS[1:]:
@@ -347,8 +346,8 @@ def forms_of(lanes_list: List[int]):
             yield form, lanes
 
 
-def measure(plans: dict, precision: str, batch_sizes: List[int], lanes_list: List[int],
-            repeats: int, matmul_size: int, ir_folder: Path) -> List[dict]:
+def measure(plans: dict, precision: str, batch_sizes: list[int], lanes_list: list[int],
+            repeats: int, matmul_size: int, ir_folder: Path) -> list[dict]:
     """Rows of simd.csv for one precision (see the module docstring)."""
     init_taichi(precision, ir_folder)
     rng = np.random.default_rng(0)
@@ -415,7 +414,7 @@ def measure(plans: dict, precision: str, batch_sizes: List[int], lanes_list: Lis
     return rows
 
 
-def elimination_plans(presets: List[str]) -> dict:
+def elimination_plans(presets: list[str]) -> dict:
     """{preset: the elimination plan of its engine's Newton matrix} (builds the engines)."""
     plans = {}
     for preset in presets:
