@@ -56,7 +56,7 @@ import pandas as pd
 import taichi as ti
 
 from taichi_star import PRESETS, EngineProfile, SolverConfig, StarParams
-from taichi_star.runtime import Runtime
+from taichi_star.runtime import PARALLEL_LOOP_MINIMUM, Runtime
 
 from . import cli, provenance
 
@@ -278,19 +278,31 @@ class LaneSystem:
                 put(rhs, g, node, 0, solved0)
                 put(rhs, g, node, 1, solved1)
 
+        # one group per task, and the groups spread over at least PARALLEL_LOOP_MINIMUM loop
+        # iterations as the engine spreads its instances: Taichi's CPU backend runs a shorter
+        # parallel loop on one thread, which would favour whichever form has more iterations
+        spread = max(1, -(-PARALLEL_LOOP_MINIMUM // self.groups))
+        groups = self.groups
+
         @ti.kernel
         def factor_solve():
-            for g in range(self.groups):
-                factor(g)
-                solve(g)
+            ti.loop_config(block_dim=1)
+            for slot in range(groups * spread):
+                if slot % spread == 0:
+                    factor(slot // spread)
+                    solve(slot // spread)
 
         @ti.kernel
         def restore():
-            for g in range(self.groups):
-                for entry, component in ti.ndrange(plan.n_slots, 4):
-                    put(blocks, g, entry, component, get(pristine_blocks, g, entry, component))
-                for entry, component in ti.ndrange(n_nodes, 2):
-                    put(rhs, g, entry, component, get(pristine_rhs, g, entry, component))
+            ti.loop_config(block_dim=1)
+            for slot in range(groups * spread):
+                if slot % spread == 0:
+                    g = slot // spread
+                    for entry, component in ti.ndrange(plan.n_slots, 4):
+                        put(blocks, g, entry, component,
+                            get(pristine_blocks, g, entry, component))
+                    for entry, component in ti.ndrange(n_nodes, 2):
+                        put(rhs, g, entry, component, get(pristine_rhs, g, entry, component))
 
         return factor_solve, restore
 
