@@ -458,9 +458,6 @@ def main(argv=None):
     precisions = cli.parse_choices(args.precisions, "--precisions", PRECISIONS)
     batch_sizes = cli.parse_counts(args.batch_sizes, "--batch-sizes")
     lanes_list = cli.parse_counts(args.lanes, "--lanes")
-    for flag, values in (("--batch-sizes", batch_sizes), ("--lanes", lanes_list)):
-        if min(values) < 1:
-            raise cli.StudyArgumentError(f"{flag} must be >= 1, got {min(values)}")
     for batch in batch_sizes:
         if any(batch % lanes for lanes in lanes_list):
             raise cli.StudyArgumentError(f"--batch-sizes: {batch} is not a multiple of every "
