@@ -18,6 +18,11 @@ Taichi kernel whose per-instance arithmetic is identical:
 - `lane_vector`: the same unrolled lanes, on fields whose element is a `ti.Vector` of `lanes`
   scalars, one per instance (instances grouped in blocks of `lanes`, "array of structures of
   arrays"): the lanes of one scalar are one element, at constant offsets from one address.
+- `lane_vector_masked`: `lane_vector` with every store masked per lane, as an engine whose
+  converged or frozen instances sit out the rest of their group's Newton iterations would need:
+  each store writes `ti.select(active, new, old)` with the lane mask `active` read from a field
+  (all lanes active here, so the results stay comparable; the cost of the select does not
+  depend on the mask).
 
 Every form is compiled with Taichi's optimised LLVM IR printed (`print_kernel_llvm_ir_optimized`),
 and the IR of its factor-and-solve kernel is searched for packed floating-point instructions
@@ -62,7 +67,9 @@ from . import cli, provenance
 
 DESCRIPTION = ("SIMD across instances: the Newton matrix's block LU in today's layout against "
                "lane-grouped forms, with the LLVM IR checked for vector instructions.")
-FORMS = ("instance_major", "unrolled_scalar", "lane_vector")
+FORMS = ("instance_major", "unrolled_scalar", "lane_vector", "lane_vector_masked")
+VECTOR_FORMS = ("lane_vector", "lane_vector_masked")
+"""The forms whose field elements are ti.Vectors of lanes."""
 PRECISIONS = ("f64", "f32")
 DISTINCT_MATRICES = 64
 """Random matrices generated per configuration, repeated over the batch (the timing does not
@@ -118,6 +125,8 @@ class LaneSystem:
         self.blocks, self.pristine_blocks = (self._field(builder, plan.n_slots, 4)
                                              for _ in range(2))
         self.rhs, self.pristine_rhs = (self._field(builder, plan.n_nodes, 2) for _ in range(2))
+        self.active = ti.Vector.field(lanes, ti.i32)
+        builder.dense(ti.i, self.groups).place(self.active)
         tables = {name: np.ascontiguousarray(getattr(plan, name), dtype=np.int32)
                   for name in ("order", "pivot_slot", "neighbour_start", "neighbour_node",
                                "lower_slot", "upper_slot", "update_start", "update_slot")}
@@ -128,11 +137,12 @@ class LaneSystem:
         self.tree = builder.finalize()
         for name, values in tables.items():
             self.tables[name].from_numpy(values if len(values) else np.zeros(1, np.int32))
+        self.active.from_numpy(np.ones((self.groups, lanes), dtype=np.int32))
         self.factor_solve, self.restore = self._kernels()
 
     def _field(self, builder, entries: int, components: int):
         """(batch, entries, components) scalars in this form's layout."""
-        if self.form == "lane_vector":
+        if self.form in VECTOR_FORMS:
             field = ti.Vector.field(self.lanes, float)
             builder.dense(ti.ijk, (self.groups, entries, components)).place(field)
         else:
@@ -145,13 +155,13 @@ class LaneSystem:
 
     def to_layout(self, values: np.ndarray) -> np.ndarray:
         """(batch, entries, components) values as the field's from_numpy takes them."""
-        if self.form != "lane_vector":
+        if self.form not in VECTOR_FORMS:
             return values
         grouped = values.reshape(self.groups, self.lanes, *values.shape[1:])
         return np.ascontiguousarray(np.moveaxis(grouped, 1, -1))
 
     def from_layout(self, values: np.ndarray) -> np.ndarray:
-        if self.form != "lane_vector":
+        if self.form not in VECTOR_FORMS:
             return values
         return np.moveaxis(values, -1, 1).reshape(self.batch, *values.shape[1:3])
 
@@ -175,6 +185,7 @@ class LaneSystem:
         lanes, form, plan = self.lanes, self.form, self.plan
         blocks, rhs, pristine_blocks, pristine_rhs = (self.blocks, self.rhs, self.pristine_blocks,
                                                       self.pristine_rhs)
+        active = self.active
         t = self.tables
         n_nodes = plan.n_nodes
 
@@ -183,7 +194,7 @@ class LaneSystem:
         @ti.func
         def get(field: ti.template(), g, entry, component):
             """The lanes of group g: a ti.Vector of `lanes` scalars."""
-            if ti.static(form == "lane_vector"):
+            if ti.static(form in VECTOR_FORMS):
                 return field[g, entry, component]
             else:
                 return ti.Vector([field[g * lanes + lane, entry, component]
@@ -191,7 +202,10 @@ class LaneSystem:
 
         @ti.func
         def put(field: ti.template(), g, entry, component, value):
-            if ti.static(form == "lane_vector"):
+            if ti.static(form == "lane_vector_masked"):
+                field[g, entry, component] = ti.select(active[g] != 0, value,
+                                                       field[g, entry, component])
+            elif ti.static(form == "lane_vector"):
                 field[g, entry, component] = value
             else:
                 for lane in ti.static(range(lanes)):
@@ -351,11 +365,13 @@ def matmul_gflops(size: int, precision: str, rng) -> float:
 
 
 def forms_of(lanes_list: list[int]):
-    """(form, lanes) in the order they are timed: today's form first."""
+    """(form, lanes) in the order they are timed: today's form first; the masked form only at
+    the most lanes (what its cost is measured against)."""
     yield "instance_major", 1
-    for form in FORMS[1:]:
+    for form in ("unrolled_scalar", "lane_vector"):
         for lanes in lanes_list:
             yield form, lanes
+    yield "lane_vector_masked", max(lanes_list)
 
 
 def measure(plans: dict, precision: str, batch_sizes: list[int], lanes_list: list[int],
