@@ -91,6 +91,14 @@ class EngineProfile:
         return self.engine.plan.n_slots
 
     @property
+    def elimination_plan(self):
+        """The host-side symbolic factorisation of the engine's Newton matrix (its 2×2 block
+        pattern with fill-in, elimination order and the flat list of block operations of the
+        numeric LU; a frozen `EliminationPlan` of NumPy index tables), for prototypes of the
+        factorisation kernel (`python -m studies simd`)."""
+        return self.engine.plan
+
+    @property
     def factor_flops(self) -> int:
         """Floating-point operations of one numeric factorisation of one instance."""
         return self.engine.plan.factor_flops
