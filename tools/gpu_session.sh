@@ -16,6 +16,8 @@
 #                then with a baseline commit's source exported into .base/ (ignored by git):
 #                  mkdir .base && git archive BASE taichi_star studies | tar -x -C .base
 #                back to back on the same card, LIMIT seconds each
+#   occupancy    Nsight Compute's launch and occupancy figures of the accurate preset's two step
+#                kernels (adaptive and fixed steps, tools/gpu_kernels.py at BATCH instances)
 # Correctness runs at most LIMIT seconds of tests (default 300) and FIG4C=0 skips its study.
 # Everything it writes is packed into $OUT/PHASE.tar.gz (the device returns few files).
 set -o pipefail
@@ -60,7 +62,7 @@ bench)
         --batch-sizes "${SIZES:-256,1024,4096,8192,16384,32768,65536}" \
         --precisions "${PRECISIONS:-f64}" --presets "${PRESETS:-paper}" \
         --scenarios "${SCENARIOS:-none}" --scenario-batch 8192 --workers-list none \
-        --no-cache-probe --no-plain-call --out "$work/bench" 2>&1 | tee "$work/bench.log"
+        --no-cache-probe --no-plain-call --sensitivity-counts none --out "$work/bench" 2>&1 | tee "$work/bench.log"
     ;;
 compare)
     sweep=(--arch gpu --batch-sizes "${SIZES:-8192,65536}" --precisions f64 --presets paper
@@ -69,6 +71,15 @@ compare)
         --out "$work/today" 2>&1 | tee "$work/today.log"
     (cd .base && PYTHONPATH=/tmp/site:$PWD timeout "${LIMIT:-120}" python3 -m studies bench \
         "${sweep[@]}" --out "$work/base" 2>&1 | tee "$work/base.log")
+    ;;
+occupancy)
+    ncu=$(command -v ncu || ls /opt/nvidia/nsight-compute/*/ncu 2>/dev/null | head -1)
+    timeout "${LIMIT:-150}" "$ncu" --target-processes all --kernel-name regex:advance \
+        --launch-count "${COUNT:-3}" --metrics launch__registers_per_thread,\
+launch__occupancy_limit_registers,launch__block_size,launch__grid_size,\
+sm__warps_active.avg.pct_of_peak_sustained_active,smsp__thread_inst_executed_per_inst_executed.ratio,\
+gpu__time_duration.sum,l1tex__t_bytes_pipe_lsu_mem_local_op_ld.sum,dram__bytes.sum \
+        python3 tools/gpu_kernels.py --batch "${BATCH:-8192}" 2>&1 | tee "$work/ncu.log"
     ;;
 *)
     echo "unknown phase $phase"; exit 2 ;;

@@ -53,8 +53,9 @@ def rod_height_ratios(params, topology) -> np.ndarray:
     """(B, R) height over the hub's of each rod edge (`rod_edges`) of each instance, what its
     drag scales with: the arcs' actuator_height ratio, the limbs' foam_height ratio (all 1.0
     without component heights; `StarParams.height_ratios`)."""
-    return np.array([[p.height_ratios[1] if kind == ARC else p.height_ratios[0]
-                      for kind in topology.edge_kind[rod_edges(topology)]] for p in params])
+    foam, actuator = np.array([p.height_ratios for p in params]).reshape(-1, 2).T
+    on_arc = topology.edge_kind[rod_edges(topology)] == ARC
+    return np.where(on_arc[None, :], actuator[:, None], foam[:, None])
 
 
 @ti.data_oriented

@@ -290,6 +290,27 @@ def test_limb_crossing_is_judged_per_instance_of_a_batch(topology):
                                   [[False, True, False], [True, False, False]])
 
 
+@pytest.mark.parametrize("count", [metrics.CROSSING_SLICE - 1, metrics.CROSSING_SLICE,
+                                   metrics.CROSSING_SLICE + 1, 2 * metrics.CROSSING_SLICE + 3])
+def test_a_batch_sliced_for_the_cache_is_judged_as_each_shape_alone(topology, count):
+    """`limbs_cross` takes a large batch in slices of CROSSING_SLICE shapes: at every batch size
+    around a slice boundary, and with two leading axes, each shape is judged as it is alone
+    (crossed shapes placed across the boundaries, including the last one)."""
+    rest, crossed = topology.rest_positions, _limb0_turned(topology, 100.0)
+    is_crossed = np.zeros(count, dtype=bool)
+    is_crossed[[0, count // 2, count - 1]] = True
+    is_crossed[metrics.CROSSING_SLICE - 1:metrics.CROSSING_SLICE + 1] = True
+    is_crossed = is_crossed[:count]
+    shapes = np.where(is_crossed[:, None, None], crossed, rest)
+    alone = [bool(metrics.limbs_cross(shape, topology)) for shape in shapes]
+    assert alone == list(is_crossed)
+    np.testing.assert_array_equal(metrics.limbs_cross(shapes, topology), is_crossed)
+    if count % 2 == 0:
+        np.testing.assert_array_equal(metrics.limbs_cross(shapes.reshape(2, count // 2, -1, 2),
+                                                          topology),
+                                      is_crossed.reshape(2, -1))
+
+
 def _circumcentre(a, b, c):
     """Centre of the circle through three points (2-D)."""
     d = 2.0 * (a[0] * (b[1] - c[1]) + b[0] * (c[1] - a[1]) + c[0] * (a[1] - b[1]))

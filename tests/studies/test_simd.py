@@ -1,0 +1,80 @@
+"""The SIMD study in --quick mode: every form of the block LU solves the paper pattern's systems
+as numpy.linalg.solve does, bit for bit alike across forms, and the ti.Vector-lane form compiles
+to packed vector arithmetic; the random systems are what the study says they are; bad
+flags fail before any compute. No timing is asserted."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from taichi_star import EngineProfile, SolverConfig, StarParams
+
+from studies import simd
+from studies.__main__ import main as studies_main
+
+# the systems are diagonally dominant (each diagonal entry about twice its row's other entries
+# together), so LU without pivoting is backward stable and well conditioned: the solution is
+# good to a small multiple of the unit round-off (1.1e-16 in f64, 6e-8 in f32); the runs show
+# about 1e-15 and 2e-7, and the bounds leave a factor of 1,000 and 50 for other seeds
+TOLERANCE = {"f64": 1e-12, "f32": 1e-5}
+
+
+@pytest.fixture(scope="module")
+def paper_plan():
+    return EngineProfile([StarParams.preset("paper")], SolverConfig()).elimination_plan
+
+
+def test_simd_quick(tmp_path):
+    simd.main(["--quick", "--no-progress", "--out", str(tmp_path)])
+    table = pd.read_csv(tmp_path / "simd.csv")
+    # one preset, two precisions, two batch sizes, four forms (one lane count)
+    assert len(table) == 16
+    assert set(table["form"]) == set(simd.FORMS) and set(table["precision"]) == {"f64", "f32"}
+    assert (table["n_nodes"] == 193).all()
+    for precision, rows in table.groupby("precision"):
+        assert (rows["max_relative_error"] < TOLERANCE[precision]).all(), precision
+    # a lane runs the scalar form's operations in the same order, and packed IEEE arithmetic
+    # rounds each lane as the scalar instruction does (no fused multiply-adds without fast
+    # math); the masked form's lanes are all active
+    assert table["bitwise_equal_to_instance_major"].all()
+    # LLVM packs the lanes of a ti.Vector element (one scalar of consecutive instances at
+    # constant offsets from one address) into vector arithmetic
+    lane_vector = table[table["form"].isin(simd.VECTOR_FORMS)]
+    assert (lane_vector["packed_ops_in_ir"] > 0).all()
+    assert (lane_vector["vector_width_in_ir"] >= 2).all()
+    assert (table[table["form"] == "instance_major"]["speedup_vs_instance_major"] == 1).all()
+    assert (table["flops_per_instance"] == table["flops_per_instance"].iloc[0]).all()
+    assert (table["gflops"] > 0).all() and (table["matmul_gflops"] > 0).all()
+
+
+def test_random_systems_are_block_diagonally_dominant_on_the_pattern(paper_plan):
+    blocks, rhs = simd.random_system(paper_plan, 2, seed=1)
+    assert blocks.shape == (2, paper_plan.n_slots, 4) and rhs.shape == (2, paper_plan.n_nodes, 2)
+    for instance in range(2):
+        matrix = simd.dense_matrix(paper_plan, blocks[instance])
+        # every block of the matrix is a slot of the pattern, and no slot is lost
+        assert np.count_nonzero(matrix) == paper_plan.n_slots * 4
+        off_diagonal = np.abs(matrix).sum(axis=1) - np.abs(np.diag(matrix))
+        assert (np.abs(np.diag(matrix)) > off_diagonal).all()
+
+
+def test_solve_flops_counts_the_triangular_solves(paper_plan):
+    # forward and backward: 8 FLOPs per neighbour block each way, 6 per pivot product
+    assert simd.solve_flops(paper_plan) == 16 * len(paper_plan.neighbour_node) \
+        + 6 * paper_plan.n_nodes
+
+
+@pytest.mark.parametrize("flags, message", [
+    (["--batch-sizes", "12", "--lanes", "8"], "--batch-sizes: 12 is not a multiple"),
+    (["--lanes", "0"], "--lanes: every value must be >= 1"),
+    (["--precisions", "f16"], "--precisions"),
+    (["--repeats", "0"], "--repeats must be >= 1"),
+])
+def test_bad_flags_fail_before_compute(tmp_path, capsys, monkeypatch, flags, message):
+    def forbidden(*args, **kwargs):
+        raise AssertionError("the study computed despite invalid arguments")
+
+    monkeypatch.setattr(simd, "elimination_plans", forbidden)
+    assert studies_main(["simd", "--quick", "--out", str(tmp_path / "out"), *flags]) == 2
+    error = capsys.readouterr().err
+    assert message in error and len(error.strip().splitlines()) == 1
