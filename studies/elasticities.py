@@ -23,9 +23,8 @@ at_zero, then S1, S1_conf, ST, ST_conf of the parameter for that gait from the S
 `--sobol` where the parameter was in its box, NaN otherwise, and sobol_preset, the preset that
 table was computed with), and `<prefix>.png`, drawn from it: a heatmap of the elasticities, gaits
 × parameters, above the Sobol ST of the same cells. `--check NAME,...` also compares the
-derivatives of those parameters with whole-run central differences (`<prefix>_check.csv`):
-over 3 cycles the sensitivities are measured to agree only to 1e-5 to 2e-2 relative (not at
-all for the near-cancelling A1; see docs/results.md), far less well than over 0.2 s.
+derivatives of those parameters with whole-run central differences (`<prefix>_check.csv`;
+the measured agreement over 3 cycles is in docs/results.md).
 """
 
 from __future__ import annotations
