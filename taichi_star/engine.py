@@ -31,9 +31,7 @@ from .physics.assembly import Assembly
 from .physics.base import connect_terms, load_field, numpy_to_field_type, pad_batch
 from .gait import N_ACTUATORS, Gait
 from .state import STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_OK, BatchState
-
-STEP_TOLERANCE = 1e-9
-"""Relative tolerance within which a time is taken to be a whole number of steps."""
+from .timegrid import step_counts
 
 SOLVER_SETTINGS = {"dt": float, "newton_tol": float, "residual_limit": float,
                    "max_newton": ti.i32, "max_substep_halvings": ti.i32, "chord": ti.i32,
@@ -144,10 +142,8 @@ class BatchEngine:
         if periodic_gaits:
             masks = pad_batch(np.stack([Gait.parse(p.gait).mask for p in model.params]), capacity)
             periods = pad_batch(np.array([p.period for p in model.params]), capacity)
-            ratio = periods / solver.dt
-            whole = np.abs(ratio - np.round(ratio)) <= STEP_TOLERANCE * np.maximum(1.0, ratio)
             self.state.schedule.periodic_values(state, masks, periods,
-                                                np.where(whole, np.round(ratio), 0))
+                                                step_counts(periods, solver.dt))
         state["step_size"][:] = solver.dt
         self.state.store.write(state)
 
