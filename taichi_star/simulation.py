@@ -183,11 +183,12 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     failure_time_s); the others are unaffected. With fixed steps (the default) the duration is
     rounded to whole steps of solver.dt and record_interval_s (s; 0 = no records) must be a whole
     number of steps (`timegrid.nearest_interval` gives the nearest one,
-    `timegrid.interval_for_count` one for a number of records); with `solver.adaptive` every instance chooses its own steps, which land
-    exactly on the records, the cycle starts and the end. record_shapes adds the node positions
-    at the records. The centroid is also taken at every cycle start (with fixed steps: those
-    that fall on a step) for the steady speeds from cycle `steady_from_cycle` on. Raises
-    ValueError for any bad argument before computing anything.
+    `timegrid.interval_for_count` one for a number of records); with `solver.adaptive` every
+    instance chooses its own steps, which land exactly on the records, the cycle starts and the
+    end. record_shapes adds the node positions at the records. The centroid is also taken at
+    every cycle start (with fixed steps: those that fall on a step) for the steady speeds from
+    cycle `steady_from_cycle` on. Raises ValueError for any bad argument before computing
+    anything.
 
     `sensitivities`: StarParams fields (`params.DIFFERENTIABLE_FIELDS`; "actuator_gains" for
     all eight, "actuator_gains[3]" for one) to differentiate every output by, for every
