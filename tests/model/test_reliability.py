@@ -242,7 +242,7 @@ def test_long_but_possible_work_starts_with_a_warning_giving_its_estimate():
     warns with the estimated hours at the stated rate (1e10 / 5e4 / 3600 = 55.6 h)."""
     import warnings
 
-    from taichi_star.simulation import WARN_ROBOT_STEPS, check_work
+    from taichi_star.timegrid import WARN_ROBOT_STEPS, check_work
 
     assert WARN_ROBOT_STEPS == 1e10
     with warnings.catch_warnings():
