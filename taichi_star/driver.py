@@ -9,13 +9,14 @@ instance reaches exactly from its own start time.
 
 from __future__ import annotations
 
+import warnings
 from typing import Callable, Optional, Sequence
 
 import numpy as np
 
 from .params import SolverConfig
-from .timegrid import (STEPS_PER_LAUNCH, check_duration, check_steps, check_work,
-                       multiples_within, steps_in, whole_steps)
+from .timegrid import (MAX_STEPS_PER_INSTANCE, STEPS_PER_LAUNCH, check_duration, check_steps,
+                       check_work, multiples_within, steps_in, whole_steps)
 
 
 def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float, batch: int,
@@ -23,14 +24,24 @@ def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float,
     """ValueError before any compute unless a run of `batch` instances for duration_s (s) with
     records every record_interval_s (s; 0 = none) can go: at most MAX_STEPS_PER_INSTANCE steps
     in all (`timegrid.check_work`; `steps_taken`: the steps an instance has already taken,
-    None for a run from t = 0), and with fixed steps at least one step and a record interval
-    of whole steps."""
+    None for a run from t = 0; adaptive steps: the fewest, at dt_max, with a RuntimeWarning
+    when the most, at dt_min, could pass the limit), and with fixed steps at least one step
+    and a record interval of whole steps."""
     after = "" if steps_taken is None else f"after the {steps_taken} steps taken"
     taken = steps_taken or 0
     if solver.adaptive:
-        check_work(f"duration_s = {duration_s:g} s at dt_min = {solver.dt_min:g} s (the adaptive "
-                   f"worst case{', ' + after if after else ''})",
-                   taken + duration_s / solver.dt_min, batch)
+        # the work is known only to lie between the steps at dt_max and at dt_min: refused and
+        # estimated by the fewest; the most may exceed the counters, where the engine stops an
+        # instance with status step_limit (said before the run)
+        check_work(f"duration_s = {duration_s:g} s at dt_max = {solver.dt_max:g} s (the adaptive "
+                   f"lower bound{', ' + after if after else ''})",
+                   taken + duration_s / solver.dt_max, batch)
+        most = taken + duration_s / solver.dt_min
+        if not most <= MAX_STEPS_PER_INSTANCE:
+            warnings.warn(f"duration_s = {duration_s:g} s at dt_min = {solver.dt_min:g} s could "
+                          f"take {most:.3g} steps per instance: an instance that reaches "
+                          f"{MAX_STEPS_PER_INSTANCE} (the int32 step counter) stops there with "
+                          f"status step_limit", RuntimeWarning, stacklevel=3)
         return
     check_work(f"duration_s = {duration_s:g} s at dt = {solver.dt:g} s"
                f"{f' ({after})' if after else ''}", taken + duration_s / solver.dt, batch)

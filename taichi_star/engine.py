@@ -31,8 +31,9 @@ from .physics.assembly import Assembly
 from .physics.base import connect_terms, load_field, numpy_to_field_type, pad_batch
 from . import stepping
 from .gait import N_ACTUATORS, Gait
-from .state import STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_OK, BatchState
-from .timegrid import step_counts
+from .state import (STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_OK, STATUS_STEP_LIMIT,
+                    BatchState)
+from .timegrid import MAX_STEPS_PER_INSTANCE, step_counts
 
 SOLVER_SETTINGS = {"dt": float, "newton_tol": float, "residual_limit": float,
                    "max_newton": ti.i32, "max_substep_halvings": ti.i32, "chord": ti.i32,
@@ -80,6 +81,9 @@ class BatchEngine:
         replicas."""
         self.tangent_count = arena.field(ti.i32)
         """Directions whose tangents each simulated instance carries (0 unless sensitive)."""
+        self.step_limit = arena.field(ti.i32)
+        """Most steps an adaptive instance takes (MAX_STEPS_PER_INSTANCE: the int32 counters
+        never overflow); one that reaches it stops with status step_limit."""
         self.assembly = Assembly(topology, capacity, arena, self.plan.slot, integrator, self.state,
                                  self.system)
         """What the terms see of this engine (they never hold the engine itself)."""
@@ -96,7 +100,8 @@ class BatchEngine:
                 {f"{term.name}.{name}": field for name, field in term.history_fields().items()})
         arena.finalize()
         model_fields = {name: getattr(self, name) for name in ("mass", "inertia", "primal_count",
-                                                               "tangent_count", *SOLVER_SETTINGS)}
+                                                               "tangent_count", "step_limit",
+                                                               *SOLVER_SETTINGS)}
         for term in self.terms:
             model_fields.update({f"{term.name}.{name}": field
                                  for name, field in term.coefficient_fields().items()})
@@ -131,6 +136,7 @@ class BatchEngine:
                   "inertia": pad_batch(model.inertia, capacity),
                   "primal_count": model.batch_size // (1 + 2 * tangents),
                   "tangent_count": tangents,
+                  "step_limit": MAX_STEPS_PER_INSTANCE,
                   **{name: getattr(solver, name) for name in SOLVER_SETTINGS if name != "chord"},
                   "chord": int(solver.jacobian == "chord")}
         for term in self.terms:
@@ -315,7 +321,9 @@ class BatchEngine:
         step shrunk (by a further √2 when the redo loses BDF2's history); the next step grows
         or shrinks by 0.9·√(tol/error) within [0.2, 2] and [dt_min, dt_max] (`stepping`: where
         a step ends, how its size changes). A step that fails to converge is retried at a
-        quarter of its size down to dt_min, then the instance fails."""
+        quarter of its size down to dt_min, then the instance fails. An instance whose step
+        count has reached `step_limit`, or whose next step would not advance its time, stops
+        with status step_limit."""
         attempts = 0
         tol = self.error_tol[None]
         first_step = self.dt[None]
@@ -334,6 +342,11 @@ class BatchEngine:
                 target = due
                 firing = 1
             end = stepping.step_end(start, proposed, target, firing, first_step)
+            if self.state.steps_done[b] >= self.step_limit[None] or end <= start:
+                # the counter is full, or the step is below the time's rounding: stop here
+                self.state.status[b] = STATUS_STEP_LIMIT
+                self.state.failure_time[b] = start
+                break
             if end != target:
                 firing = 0
             h = end - start

@@ -53,7 +53,7 @@ class SimulationResult:
     | newton_iterations_max | — | most Newton iterations of one solve (≥ the mean) |
     | substep_retries | — | steps redone with substeps |
     | newton_capped | — | a Newton solve used all max_newton iterations (for an "ok" instance: a step accepted only after a retry rescued it; in f32 also a RuntimeWarning) |
-    | status | — | "ok", "newton_failed" or "non_finite" |
+    | status | — | "ok", "newton_failed", "non_finite" or (adaptive steps) "step_limit" |
     | failure_time_s | s | simulated time of the failure (NaN when ok) |
 
     "ok" means every step converged to newton_tol, not that the time step is small enough:

@@ -25,11 +25,12 @@ STEPS_PER_LAUNCH = 50
 progress bar."""
 
 MAX_STEPS_PER_INSTANCE = 2 ** 31 - 1
-"""Most time steps one instance may take, counted from t = 0 (fixed steps: duration / dt;
-adaptive: duration / dt_min, the worst case). The engine's step counters (steps_done,
-failure_step) are int32, and a run this long (2.1e9 steps: 25 days of
-simulated time at the paper's 1 ms) is never what was meant; it is refused before any compute
-instead of running for days or overflowing."""
+"""Most time steps one instance may take, counted from t = 0. The engine's step counters
+(steps_done, failure_step) are int32, and a run this long (2.1e9 steps: 25 days of simulated
+time at the paper's 1 ms) is never what was meant: a fixed-step run of more (duration / dt) is
+refused before any compute instead of running for days or overflowing, as is an adaptive one
+whose fewest steps (duration / dt_max) are more; an adaptive instance that reaches it stops
+with status step_limit."""
 
 WARN_ROBOT_STEPS = 1e10
 """A run of more robot-steps (time steps × instances) than this starts with a RuntimeWarning
