@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from taichi_star.batch import run_batch
+from taichi_star.timegrid import interval_for_count
 
 from . import cli
 
@@ -77,9 +78,9 @@ def main(argv=None):
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver)
     duration = cli.duration_s(args, base.period)
-    stride = max(1, int(round(duration / solver.dt)) // args.frames)
     result = run_batch(params, duration, solver=solver, arch=args.arch,
-                       record_interval_s=stride * solver.dt, record_shapes=True,
+                       record_interval_s=interval_for_count(duration, args.frames, solver.dt),
+                       record_shapes=True,
                        progress=not args.no_progress)
     times = sorted(result.trajectory[result.trajectory["instance"] == 0]["t_s"])
     shapes = shapes_table(gaits, [result.shapes[:, i] for i in range(len(gaits))], times)

@@ -35,6 +35,7 @@ from taichi_star.experiment import PAPER_GAITS
 from taichi_star.extras import require
 from taichi_star.gait import Gait
 from taichi_star.output import column_unit, column_units, parquet_bytes
+from taichi_star.timegrid import steps_in
 
 from . import provenance
 
@@ -390,7 +391,7 @@ def solver(args) -> SolverConfig:
                        f"{step:g} s", args.cycles * period / step)
         except ValueError as error:
             raise StudyArgumentError(str(error)) from None
-        if not config.adaptive and round(args.cycles * period / config.dt) < 1:
+        if not config.adaptive and steps_in(args.cycles * period, config.dt) < 1:
             raise StudyArgumentError(
                 f"--cycles {args.cycles:g}: {args.cycles:g} periods of {period:g} s are "
                 f"{args.cycles * period:.3g} s, less than one step (dt = {config.dt:g} s)")

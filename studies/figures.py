@@ -18,6 +18,7 @@ import pandas as pd
 from taichi_star import SolverConfig, StarParams
 from taichi_star.batch import run_batch
 from taichi_star.experiment import PAPER_GAITS, compare_with_experiment, experimental_trajectory
+from taichi_star.timegrid import interval_for_count
 
 from . import cli
 
@@ -28,11 +29,6 @@ RECORDS = 150
 def fig4c_params(base: StarParams, gaits: Sequence[str] = PAPER_GAITS):
     """One StarParams per gait, on top of `base`."""
     return [base.replace(gait=g) for g in gaits]
-
-
-def record_interval(duration_s: float, dt: float) -> float:
-    """A record interval (s, a whole number of steps) giving about RECORDS records."""
-    return max(1, int(round(duration_s / dt)) // RECORDS) * dt
 
 
 def fig4b_table(summary: pd.DataFrame, trajectory: pd.DataFrame, duration_s: float) -> pd.DataFrame:
@@ -158,7 +154,7 @@ def run_fig4c(out: cli.Output, base: StarParams, solver: SolverConfig, *, durati
     Returns the Fig. 4c table."""
     params = fig4c_params(base)
     result = run_batch(params, duration_s, solver=solver, arch=arch,
-                       record_interval_s=record_interval(duration_s, solver.dt),
+                       record_interval_s=interval_for_count(duration_s, RECORDS, solver.dt),
                        progress=progress)
     fig4b_prefix = prefix.replace("fig4c", "fig4b") if "fig4c" in prefix else prefix + "_fig4b"
     table_csv = out.write_csv(compare_with_experiment(result.summary), f"{prefix}.csv")

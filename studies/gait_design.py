@@ -35,6 +35,7 @@ import pandas as pd
 from scipy.optimize import minimize
 
 from taichi_star import simulate
+from taichi_star.timegrid import nearest_interval
 
 from . import cli
 
@@ -212,7 +213,7 @@ def main(argv=None):
     out.wrote(plot_design(paths_csv, table_csv, out.path("gait_design.png"), unit))
     shown = simulate(base.replace(gait=winner["gait"], actuator_delays=patterns[0][2]),
                      args.cycles * base.period, solver, arch=args.arch,
-                     record_interval_s=solver.dt * max(1, round(base.period / 30 / solver.dt)),
+                     record_interval_s=nearest_interval(base.period / 30, solver.dt),
                      record_shapes=True)
     out.wrote(shown.animate(out.path("gait_design.gif"), title=f"designed: {winner['gait']}"))
     out.report()

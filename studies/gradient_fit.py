@@ -52,6 +52,7 @@ import numpy as np
 import pandas as pd
 
 from taichi_star import identification, simulate
+from taichi_star.timegrid import nearest_interval
 
 from . import cli, identify
 
@@ -119,7 +120,7 @@ class Problem:
     def __init__(self, box, base, gaits, trials, train, solver, arch):
         self.box, self.base, self.gaits, self.trials = box, base, list(gaits), trials
         self.train, self.solver, self.arch = train, solver, arch
-        self.record = max(1, round(RECORD_INTERVAL_S / solver.dt)) * solver.dt
+        self.record = nearest_interval(RECORD_INTERVAL_S, solver.dt)
         self.window_s = train[1] * base.period
         # the sensitivities number an actuator from 0, the box's NAME[INDEX] from 1
         self.names = [spec.name if spec.index is None else f"{spec.name}[{spec.index - 1}]"

@@ -71,6 +71,7 @@ import pandas as pd
 from taichi_star import SolverConfig, StarParams, identification
 from taichi_star.batch import run_batch
 from taichi_star.gait import Gait
+from taichi_star.timegrid import nearest_interval
 
 from . import cli, figures, identify
 
@@ -549,7 +550,7 @@ def main(argv=None):
                                            "cma": dataclasses.asdict(settings),
                                            "fold_generations": args.fold_generations})
     progress = not args.no_progress
-    record = max(1, round(RECORD_INTERVAL_S / solver.dt)) * solver.dt
+    record = nearest_interval(RECORD_INTERVAL_S, solver.dt)
     started = time.perf_counter()
     parameters, gait_tables, fold_tables, identified = [], [], [], {}
     with cli.executor(args) as executor:

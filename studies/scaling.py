@@ -25,6 +25,7 @@ import pandas as pd
 from taichi_star.batch import InProcess, LocalProcesses, run_batch
 from taichi_star.extras import missing_extra
 from taichi_star.experiment import PAPER_GAITS
+from taichi_star.timegrid import steps_in
 
 from . import cli
 
@@ -75,7 +76,7 @@ def main(argv=None):
     sweep = {"gait": sorted({p.gait for p in params}), "alpha": sorted({p.alpha for p in params})}
     out = cli.Output(args, argv or [], model={"sweep": sweep}, solver=solver)
     run_kwargs = dict(solver=solver, chunk_size=args.chunk_size)
-    steps = int(round(duration / solver.dt))
+    steps = steps_in(duration, solver.dt)
     rows, reference = [], None
     for mode, workers, context in modes(counts, dask=not args.no_dask):
         load = os.getloadavg()[0]

@@ -56,6 +56,7 @@ from taichi_star import SolverConfig, StarParams
 from taichi_star.batch import run_batch
 from taichi_star import metrics
 from taichi_star.metrics import shape_checks
+from taichi_star.timegrid import whole_steps
 
 from . import cli
 
@@ -167,8 +168,8 @@ def plan(args):
                                           newton_tol=TOLERANCE[precision])
                 except ValueError as error:
                     raise cli.StudyArgumentError(f"--dts-ms: {error}") from None
-                n_steps = int(round(duration / dt))
-                if n_steps < 1 or abs(n_steps * dt - duration) > 1e-9 * max(1.0, duration):
+                n_steps = whole_steps(duration, dt)
+                if not n_steps:
                     raise cli.StudyArgumentError(
                         f"--dts-ms: dt {dt_ms} ms does not divide the duration {duration:g} s "
                         f"(period {period:g} s)")

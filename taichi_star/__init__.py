@@ -16,7 +16,8 @@ from .gait import Gait, symmetry_classes
 from .params import JACOBIANS, PRESETS, STAR_RANGES, SolverConfig, StarParams
 from .profiling import EngineProfile
 from .runtime import available_archs
-from .simulation import MAX_STEPS_PER_INSTANCE, SimulationResult, check_work, simulate
+from .simulation import SimulationResult, simulate
+from .timegrid import MAX_STEPS_PER_INSTANCE, check_work
 from .simulator import Simulator, SimulatorSnapshot
 
 __version__ = "0.3.0"

@@ -29,11 +29,11 @@ from .physics import coupled_node_pairs
 from .fields import FieldArena, FieldStore
 from .physics.assembly import Assembly
 from .physics.base import connect_terms, load_field, numpy_to_field_type, pad_batch
+from . import stepping
 from .gait import N_ACTUATORS, Gait
-from .state import STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_OK, BatchState
-
-STEP_TOLERANCE = 1e-9
-"""Relative tolerance within which a time is taken to be a whole number of steps."""
+from .state import (STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_OK, STATUS_STEP_LIMIT,
+                    BatchState)
+from .timegrid import MAX_STEPS_PER_INSTANCE, step_counts
 
 SOLVER_SETTINGS = {"dt": float, "newton_tol": float, "residual_limit": float,
                    "max_newton": ti.i32, "max_substep_halvings": ti.i32, "chord": ti.i32,
@@ -81,6 +81,9 @@ class BatchEngine:
         replicas."""
         self.tangent_count = arena.field(ti.i32)
         """Directions whose tangents each simulated instance carries (0 unless sensitive)."""
+        self.step_limit = arena.field(ti.i32)
+        """Most steps an adaptive instance takes (MAX_STEPS_PER_INSTANCE: the int32 counters
+        never overflow); one that reaches it stops with status step_limit."""
         self.assembly = Assembly(topology, capacity, arena, self.plan.slot, integrator, self.state,
                                  self.system, self.primal_count if sensitive else None)
         """What the terms see of this engine (they never hold the engine itself)."""
@@ -97,7 +100,8 @@ class BatchEngine:
                 {f"{term.name}.{name}": field for name, field in term.history_fields().items()})
         arena.finalize()
         model_fields = {name: getattr(self, name) for name in ("mass", "inertia", "primal_count",
-                                                               "tangent_count", *SOLVER_SETTINGS)}
+                                                               "tangent_count", "step_limit",
+                                                               *SOLVER_SETTINGS)}
         for term in self.terms:
             model_fields.update({f"{term.name}.{name}": field
                                  for name, field in term.coefficient_fields().items()})
@@ -132,6 +136,7 @@ class BatchEngine:
                   "inertia": pad_batch(model.inertia, capacity),
                   "primal_count": model.batch_size // (1 + 2 * tangents),
                   "tangent_count": tangents,
+                  "step_limit": MAX_STEPS_PER_INSTANCE,
                   **{name: getattr(solver, name) for name in SOLVER_SETTINGS if name != "chord"},
                   "chord": int(solver.jacobian == "chord")}
         for term in self.terms:
@@ -144,10 +149,8 @@ class BatchEngine:
         if periodic_gaits:
             masks = pad_batch(np.stack([Gait.parse(p.gait).mask for p in model.params]), capacity)
             periods = pad_batch(np.array([p.period for p in model.params]), capacity)
-            ratio = periods / solver.dt
-            whole = np.abs(ratio - np.round(ratio)) <= STEP_TOLERANCE * np.maximum(1.0, ratio)
             self.state.schedule.periodic_values(state, masks, periods,
-                                                np.where(whole, np.round(ratio), 0))
+                                                step_counts(periods, solver.dt))
         state["step_size"][:] = solver.dt
         self.state.store.write(state)
 
@@ -176,12 +179,13 @@ class BatchEngine:
     @ti.func
     def prepare_step(self, b, start_time, end_time, h, ratio, use_history, extrapolate):
         """Start a step of size h from the current state q_k, v_k: the terms' histories, the
-        integrator's offsets, `previous` = q_k, and Newton's start: q_k + h·v_k without history,
-        with it q_k + h·(2v_k − v_{k−1}) (fixed steps) or, with `extrapolate` (adaptive steps),
-        the parabola below. Returns the integrator's (inertia scale, rate gain)."""
+        integrator's offsets, `previous` = q_k, and Newton's start (the integrator's
+        `predictor`; `extrapolate`: from the parabola of adaptive steps). Returns the
+        integrator's (inertia scale, rate gain)."""
         inertia_scale, rate_gain = self.integrator.weights(h, ratio, use_history)
         for term in ti.static(self.terms):
             term.begin_step(b, start_time, end_time, h, ratio, rate_gain, use_history)
+        back = self.state.previous_step_size[b]
         for n in range(self.n_nodes):
             position = self.state.positions[b, n]
             velocity = self.state.velocities[b, n]
@@ -190,17 +194,9 @@ class BatchEngine:
                 h, ratio, use_history)
             self.state.velocity_offset[b, n] = self.integrator.rate_offset(
                 position, self.state.previous[b, n], h, ratio, use_history)
-            predictor = position + h * velocity
-            if use_history and not extrapolate:
-                # + h²·(v_k − v_{k−1})/h: the acceleration of the last step carried on, a
-                # second-order start that most coast steps accept after one update
-                predictor += h * (velocity - self.state.previous_velocities[b, n])
-            if extrapolate:
-                # the parabola through q_{k−1} and q_k with slope v_k: a second-order start for
-                # Newton, worth an iteration on the long steps of adaptive stepping
-                back = self.state.previous_step_size[b]
-                curve = (self.state.previous[b, n] - position + back * velocity) / (back * back)
-                predictor += h * h * curve
+            predictor = self.integrator.predictor(
+                position, self.state.previous[b, n], velocity, self.state.previous_velocities[b, n],
+                h, back, use_history, extrapolate)
             self.state.previous[b, n] = position
             self.state.previous_velocities[b, n] = velocity
             self.state.positions[b, n] = predictor
@@ -320,12 +316,14 @@ class BatchEngine:
         max_steps attempts. Each step ends exactly on the stop, on the next cycle start of its
         periodic gait or on a commanded firing time if it would pass them (the firing happens
         there: the step ending at the firing time sees K̄(0), and is at most dt long);
-        a converged step is accepted when its local error estimate (m, `first_order_error`, for
-        both integrators: BDF2's own error is smaller) is within error_tol, else redone from the
-        start state with the step shrunk (by a further √2 when the redo loses BDF2's history);
-        the next step grows or shrinks by 0.9·√(tol/error) within [0.2, 2] and
-        [dt_min, dt_max]. A step that fails to converge is retried at a quarter of its size down
-        to dt_min, then the instance fails."""
+        a converged step is accepted when its local error estimate (m, the largest node's
+        `Integrator.local_error`) is within error_tol, else redone from the start state with the
+        step shrunk (by a further √2 when the redo loses BDF2's history); the next step grows
+        or shrinks by 0.9·√(tol/error) within [0.2, 2] and [dt_min, dt_max] (`stepping`: where
+        a step ends, how its size changes). A step that fails to converge is retried at a
+        quarter of its size down to dt_min, then the instance fails. An instance whose step
+        count has reached `step_limit`, or whose next step would not advance its time, stops
+        with status step_limit."""
         attempts = 0
         tol = self.error_tol[None]
         first_step = self.dt[None]
@@ -343,19 +341,12 @@ class BatchEngine:
             if due >= 0.0 and due <= target:
                 target = due
                 firing = 1
-            # a firing makes the forcing jump within the step that ends on it: that step is at
-            # most dt long (as a run's first step), so the steps before it end dt short of it
-            # (or halfway there)
-            limit = target
-            if firing == 1 and target - start > first_step:
-                limit = ti.max(target - first_step, start + 0.5 * (target - start))
-            # land on the limit exactly; never leave a sliver under a quarter step before it
-            # (split the rest in two instead): a rejected step then always shrinks
-            end = start + proposed
-            if end >= limit:
-                end = limit
-            elif limit - end < 0.25 * proposed:
-                end = start + 0.5 * (limit - start)
+            end = stepping.step_end(start, proposed, target, firing, first_step)
+            if self.state.steps_done[b] >= self.step_limit[None] or end <= start:
+                # the counter is full, or the step is below the time's rounding: stop here
+                self.state.status[b] = STATUS_STEP_LIMIT
+                self.state.failure_time[b] = start
+                break
             if end != target:
                 firing = 0
             h = end - start
@@ -367,7 +358,10 @@ class BatchEngine:
             converged, finite = self.solve_step(b, start, end, h, ratio, use_history, use_history)
             error = 0.0
             if converged == 1:
-                error = self.first_order_error(b, h)
+                for n in range(self.n_nodes):
+                    error = ti.max(error, self.integrator.local_error(
+                        self.state.positions[b, n], self.state.previous[b, n],
+                        self.state.previous_velocities[b, n], h))
             if converged == 1 and (error <= tol or h <= dt_min):
                 if ti.static(self.sensitive):
                     self.tangent_step(b, start, end, h, ratio, use_history)
@@ -375,15 +369,8 @@ class BatchEngine:
                 self.state.steps_done[b] = self.state.steps_done[b] + 1
                 self.state.previous_step_size[b] = h
                 self.state.history_valid[b] = 1
-                growth = 2.0
-                if error > 0.0:
-                    growth = ti.min(2.0, ti.max(0.2, 0.9 * ti.sqrt(tol / error)))
-                # a step cut short to land on a stop says little about the size that fits,
-                # unless the forcing jumped at its end (a firing)
-                basis = h
-                if h < proposed and growth >= 1.0 and firing == 0:
-                    basis = proposed
-                self.state.step_size[b] = ti.min(dt_max, ti.max(dt_min, basis * growth))
+                self.state.step_size[b] = stepping.accepted_size(h, proposed, error, tol, firing,
+                                                                 dt_min, dt_max)
             else:
                 self.state.rejected_steps[b] = self.state.rejected_steps[b] + 1
                 self.state.history_valid[b] = 0
@@ -396,24 +383,13 @@ class BatchEngine:
                     # ½h²q''), so it shrinks by a further √2
                     if ti.static(self.integrator.order == 2) and use_history == 1:
                         error *= 2.0
-                    self.state.step_size[b] = ti.max(dt_min, h * ti.max(0.2, 0.9 * ti.sqrt(tol / error)))
+                    self.state.step_size[b] = stepping.rejected_size(h, error, tol, dt_min)
                 elif h > dt_min:
                     self.state.step_size[b] = ti.max(dt_min, 0.25 * h)
                 else:
                     self.state.status[b] = STATUS_NON_FINITE if finite == 0 else STATUS_NEWTON_FAILED
                     self.state.failure_time[b] = end
         self.mirror_replicas(b)
-
-    @ti.func
-    def first_order_error(self, b, h):
-        """Local error estimate of an implicit Euler step, m: ½·max|q − q_k − h·v_k| (its
-        leading term h²·q''/2)."""
-        error = 0.0
-        for n in range(self.n_nodes):
-            drift = self.state.positions[b, n] - self.state.previous[b, n] \
-                - h * self.state.previous_velocities[b, n]
-            error = ti.max(error, 0.5 * ti.abs(drift[0]), 0.5 * ti.abs(drift[1]))
-        return error
 
     @ti.kernel
     def advance_adaptive(self, max_steps: ti.i32):

@@ -12,13 +12,48 @@ integrator's gain and offset. Nothing outside this module knows the formulas.
   BDF2: gain γ = (1 + 2ω)/((1 + ω)h), rate offset −c·(value_k − value_{k−1}) with
   c = ω²/((1 + ω)h), scale γ² and d = (v_k + c(q_k − q_{k−1}))/γ + c(v_k − v_{k−1})/γ².
 Small offsets rather than absolute targets keep the digits of the motion in f32.
+
+Both share Newton's start (`predictor`) and the local error estimate of adaptive stepping
+(`local_error`), which are the implicit Euler step's.
 """
 
 import taichi as ti
 
 
 @ti.data_oriented
-class ImplicitEuler:
+class Integrator:
+    """What every integrator has: Newton's start for a step and the local error estimate."""
+
+    @ti.func
+    def predictor(self, position, previous, velocity, previous_velocity, h, back, use_history,
+                  extrapolate):
+        """Newton's start for a node, m, from q_k (`position`), q_{k−1}, v_k, v_{k−1}: q_k + h·v_k
+        without history, with it q_k + h·(2v_k − v_{k−1}) (fixed steps) or, with `extrapolate`
+        (adaptive steps; `back`: the previous step's size, s), the parabola below."""
+        predictor = position + h * velocity
+        if use_history and not extrapolate:
+            # + h²·(v_k − v_{k−1})/h: the acceleration of the last step carried on, a
+            # second-order start that most coast steps accept after one update
+            predictor += h * (velocity - previous_velocity)
+        if extrapolate:
+            # the parabola through q_{k−1} and q_k with slope v_k: a second-order start for
+            # Newton, worth an iteration on the long steps of adaptive stepping
+            curve = (previous - position + back * velocity) / (back * back)
+            predictor += h * h * curve
+        return predictor
+
+    @ti.func
+    def local_error(self, position, previous, previous_velocity, h):
+        """A node's local error estimate of an implicit Euler step of size h, m:
+        ½·max|q − q_k − h·v_k| over its two coordinates (the step's leading term h²·q''/2),
+        from the step's end q and start q_k, v_k. For both integrators: BDF2's own error is
+        smaller."""
+        drift = position - previous - h * previous_velocity
+        return ti.max(0.5 * ti.abs(drift[0]), 0.5 * ti.abs(drift[1]))
+
+
+@ti.data_oriented
+class ImplicitEuler(Integrator):
     name = "euler"
     order = 1
 
@@ -41,7 +76,7 @@ class ImplicitEuler:
 
 
 @ti.data_oriented
-class BDF2:
+class BDF2(Integrator):
     name = "bdf2"
     order = 2
 

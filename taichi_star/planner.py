@@ -45,8 +45,8 @@ from .gait import NO_GAIT, Gait
 from .metrics import rotate
 from .params import SolverConfig, StarParams
 from .primitives import glide_columns, streak_step_columns
-from .simulation import whole_steps
 from .simulator import Simulator
+from .timegrid import whole_steps
 
 MODES = ("open", "closed")
 

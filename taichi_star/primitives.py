@@ -26,8 +26,9 @@ import pandas as pd
 from .gait import N_ACTUATORS, NO_GAIT, Gait, symmetry_classes
 from .metrics import rotate, wrap_degrees
 from .params import PER_ACTUATOR_FIELDS, SolverConfig, StarParams
-from .simulation import simulate, whole_steps
+from .simulation import simulate
 from .simulator import Simulator
+from .timegrid import on_grid, whole_steps
 
 GaitSources = Dict[str, Tuple[str, int, bool, int]]
 """gait -> (source, rotation, reflect, class size): the gait whose simulation a gait's steps are
@@ -160,7 +161,7 @@ def cycle_displacements(trajectory: pd.DataFrame, period: float) -> pd.DataFrame
     for instance, part in trajectory.groupby("instance", sort=True):
         part = part.sort_values("t_s")
         cycle_of = np.rint(part["t_s"].to_numpy() / period).astype(int)
-        on_boundary = np.isclose(part["t_s"].to_numpy(), cycle_of * period, rtol=0, atol=1e-9)
+        on_boundary = on_grid(part["t_s"].to_numpy(), period)
         part, cycle_of = part[on_boundary], cycle_of[on_boundary]
         xy = part[["x_mm", "y_mm"]].to_numpy()
         heading = np.radians(part["heading_deg"].to_numpy())

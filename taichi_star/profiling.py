@@ -21,8 +21,8 @@ import taichi as ti
 from .model import build_model
 from .params import SolverConfig, StarParams
 from .runtime import Runtime
-from .simulation import STEPS_PER_LAUNCH
 from .state import STATUS_OK
+from .timegrid import STEPS_PER_LAUNCH
 
 PROFILE_LAUNCHES = 3
 """`phase_split` times each phase as the best of this many launches (the differences of noisy

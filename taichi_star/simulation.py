@@ -16,56 +16,11 @@ from .geometry import CENTRE, Topology
 from .model import build_model, validate_batch
 from .params import (PER_ACTUATOR_FIELDS, SolverConfig, StarParams, check_precision,
                      parameter_column)
-from .engine import STEP_TOLERANCE
-from .extras import require
+from .driver import Clock, check_run, drive
 from . import sensitivities as tangents
 from .runtime import Runtime, check_arch, stream_chunk_size
 from .state import STATUS_NAMES, STATUS_OK
-
-STEPS_PER_LAUNCH = 50
-"""Steps fused into one kernel launch: enough to hide launch cost, few enough for a live
-progress bar."""
-
-
-MAX_STEPS_PER_INSTANCE = 2 ** 31 - 1
-"""Most time steps one instance may take, counted from t = 0 (fixed steps: duration / dt;
-adaptive: duration / dt_min, the worst case). The engine's step counters (steps_done,
-failure_step) are int32, and a run this long (2.1e9 steps: 25 days of
-simulated time at the paper's 1 ms) is never what was meant; it is refused before any compute
-instead of running for days or overflowing."""
-
-
-WARN_ROBOT_STEPS = 1e10
-"""A run of more robot-steps (time steps × instances) than this starts with a RuntimeWarning
-giving its estimated duration: about 2.3 days at `ESTIMATE_ROBOT_STEPS_PER_S`."""
-ESTIMATE_ROBOT_STEPS_PER_S = 5e4
-"""The rate the warning's estimate assumes: the plain `simulate` call of the paper preset at
-B = 512 measured 51,000 and 90,000 robot-steps/s on two 2-core machines; the slower one."""
-
-
-def check_work(name: str, steps: float, batch: Optional[int] = None):
-    """ValueError when `steps` (time steps per instance, a float estimate: it may be inf),
-    rounded to whole steps as the drivers round a duration, is over MAX_STEPS_PER_INSTANCE;
-    `name` says which arguments gave it (e.g. "duration_s = 1e9 s at dt = 0.001 s"), the
-    message the estimate (times `batch`, the number of instances, if given) and the limit.
-    A RuntimeWarning with the estimated wall time when steps × batch is over WARN_ROBOT_STEPS."""
-    if not (math.isfinite(steps) and round(steps) <= MAX_STEPS_PER_INSTANCE):
-        total = "" if batch is None else f" ({steps * batch:.3g} robot-steps for {batch} instances)"
-        raise ValueError(f"{name} is {steps:.3g} time steps per instance{total}; the limit is "
-                         f"{MAX_STEPS_PER_INSTANCE} steps per instance (the int32 step counter)")
-    robot_steps = round(steps) * (batch or 1)
-    if robot_steps > WARN_ROBOT_STEPS:
-        hours = robot_steps / ESTIMATE_ROBOT_STEPS_PER_S / 3600
-        warnings.warn(f"{name} is {robot_steps:.3g} robot-steps: about {hours:.3g} h at "
-                      f"{ESTIMATE_ROBOT_STEPS_PER_S:g} robot-steps/s (on a 2-core CPU; a GPU or "
-                      f"more cores run faster)", RuntimeWarning, stacklevel=3)
-
-
-def whole_steps(time_s: float, dt: float) -> Optional[int]:
-    """time_s / dt as an integer if it is one (within STEP_TOLERANCE), else None."""
-    ratio = time_s / dt
-    steps = int(round(ratio))
-    return steps if abs(ratio - steps) <= STEP_TOLERANCE * max(1.0, ratio) else None
+from .timegrid import whole_steps
 
 
 @dataclass
@@ -98,7 +53,7 @@ class SimulationResult:
     | newton_iterations_max | — | most Newton iterations of one solve (≥ the mean) |
     | substep_retries | — | steps redone with substeps |
     | newton_capped | — | a Newton solve used all max_newton iterations (for an "ok" instance: a step accepted only after a retry rescued it; in f32 also a RuntimeWarning) |
-    | status | — | "ok", "newton_failed" or "non_finite" |
+    | status | — | "ok", "newton_failed", "non_finite" or (adaptive steps) "step_limit" |
     | failure_time_s | s | simulated time of the failure (NaN when ok) |
 
     "ok" means every step converged to newton_tol, not that the time step is small enough:
@@ -206,60 +161,13 @@ def validate_call(params, duration_s, solver, record_interval_s, record_shapes, 
         raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
     check_precision(params, solver)
     record_interval_s = _check_real("record_interval_s", record_interval_s, 0.0, allow_equal=True)
-    if solver.adaptive:
-        check_work(f"duration_s = {duration_s:g} s at dt_min = {solver.dt_min:g} s (the adaptive "
-                   f"worst case)", duration_s / solver.dt_min, len(params))
-    else:
-        check_work(f"duration_s = {duration_s:g} s at dt = {solver.dt:g} s",
-                   duration_s / solver.dt, len(params))
-        n_steps = int(round(duration_s / solver.dt))
-        if n_steps < 1:
-            raise ValueError(f"duration_s must be at least one step (dt = {solver.dt} s), got "
-                             f"{duration_s!r}")
-        if record_interval_s > 0 and whole_steps(record_interval_s, solver.dt) in (None, 0):
-            raise ValueError(f"record_interval_s must be a whole number of steps (dt = "
-                             f"{solver.dt} s), got {record_interval_s!r}")
+    check_run(solver, duration_s, record_interval_s, len(params))
     if record_shapes and record_interval_s == 0:
         raise ValueError("record_shapes needs record_interval_s > 0 (the spacing of the records)")
     if isinstance(steady_from_cycle, bool) or not isinstance(steady_from_cycle, numbers.Integral) \
             or steady_from_cycle < 0:
         raise ValueError(f"steady_from_cycle must be an integer >= 0, got {steady_from_cycle!r}")
     return params, duration_s, record_interval_s
-
-
-class _Clock:
-    """Where the run stops and how it gets there: with fixed steps a stop is a step number
-    (time = step·dt, the engine's own product); with adaptive steps it is a time."""
-
-    def __init__(self, engine, solver, duration_s):
-        self.engine, self.solver = engine, solver
-        self.adaptive = solver.adaptive
-        self.end = duration_s if self.adaptive else int(round(duration_s / solver.dt))
-
-    def stops_every(self, interval_s):
-        """Stops at 0, interval, 2·interval, ... up to the end."""
-        if self.adaptive:
-            count = int(math.floor(self.end / interval_s * (1 + STEP_TOLERANCE)))
-            return [k * interval_s for k in range(count + 1)]
-        return list(range(0, self.end + 1, whole_steps(interval_s, self.solver.dt)))
-
-    def time_of(self, stop) -> float:
-        return stop if self.adaptive else stop * self.solver.dt
-
-    def advance_to(self, start, stop, batch, bar):
-        """Advance every live instance from stop `start` to stop `stop`."""
-        if self.adaptive:
-            self.engine.advance_adaptive_to(np.full(batch, stop), batch)
-            if bar is not None:
-                bar.update(stop - start)
-            return
-        step = start
-        while step < stop:
-            count = min(STEPS_PER_LAUNCH, stop - step)
-            self.engine.advance(count)
-            step += count
-            if bar is not None:
-                bar.update(count * self.solver.dt)
 
 
 def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConfig = SolverConfig(),
@@ -274,11 +182,13 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     (even with substeps, or at the smallest adaptive step) is frozen and reported (status,
     failure_time_s); the others are unaffected. With fixed steps (the default) the duration is
     rounded to whole steps of solver.dt and record_interval_s (s; 0 = no records) must be a whole
-    number of steps; with `solver.adaptive` every instance chooses its own steps, which land
-    exactly on the records, the cycle starts and the end. record_shapes adds the node positions
-    at the records. The centroid is also taken at every cycle start (with fixed steps: those
-    that fall on a step) for the steady speeds from cycle `steady_from_cycle` on. Raises
-    ValueError for any bad argument before computing anything.
+    number of steps (`timegrid.nearest_interval` gives the nearest one,
+    `timegrid.interval_for_count` one for a number of records); with `solver.adaptive` every
+    instance chooses its own steps, which land exactly on the records, the cycle starts and the
+    end. record_shapes adds the node positions at the records. The centroid is also taken at
+    every cycle start (with fixed steps: those that fall on a step) for the steady speeds from
+    cycle `steady_from_cycle` on. Raises ValueError for any bad argument before computing
+    anything.
 
     `sensitivities`: StarParams fields (`params.DIFFERENTIABLE_FIELDS`; "actuator_gains" for
     all eight, "actuator_gains[3]" for one) to differentiate every output by, for every
@@ -343,7 +253,7 @@ def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, reco
     engine = runtime.engine_for(model, solver, tangents=len(directions) * len(
         tangents.EXTRAPOLATION_SCALES))
     batch = model.batch_size
-    clock = _Clock(engine, solver, duration_s)
+    clock = Clock(solver, duration_s)
 
     record_stops = clock.stops_every(record_interval_s) if record_interval_s else []
     by_stop = {}
@@ -355,7 +265,8 @@ def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, reco
             for index, stop in enumerate(boundary_stops):
                 by_stop.setdefault(stop, []).append((b, index))
     boundaries = np.full((batch, n_boundaries, 2), np.nan)
-    stops = sorted(set(record_stops) | set(by_stop) | {clock.end})
+    # the start is always taken: the centroids of the first cycle start
+    stops = sorted(set(record_stops) | set(by_stop) | {0, clock.end})
     record_set = set(record_stops)
 
     centroids, rotations, shapes = [], [], []
@@ -373,23 +284,8 @@ def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, reco
             if record_shapes:
                 shapes.append(positions.astype(np.float64))
 
-    bar = None
-    if progress_label is not None:
-        from tqdm.auto import tqdm
-        # simulated seconds, shown to the millisecond (the clock's float sums are not round)
-        bar = tqdm(total=clock.time_of(clock.end), unit="s", desc=progress_label,
-                   bar_format="{l_bar}{bar}| {n:.3f}/{total:.3f} s simulated "
-                              "[{elapsed}<{remaining}]")
     start_centroids = engine.centroids_of(batch)
-    previous = stops[0] * 0
-    take(previous)
-    for stop in stops:
-        if stop != previous:
-            clock.advance_to(previous, stop, batch, bar)
-            take(stop)
-            previous = stop
-    if bar is not None:
-        bar.close()
+    drive(engine, clock, stops, take, batch, progress_label=progress_label)
     record_times = np.array([clock.time_of(stop) for stop in record_stops])
     result = _collect(engine, model, solver, clock.time_of(clock.end), record_times,
                       start_centroids, centroids, rotations, shapes, boundaries, steady_from_cycle)

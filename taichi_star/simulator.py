@@ -34,15 +34,15 @@ import pandas as pd
 from . import metrics
 from . import sensitivities as tangents
 from .actuation import NEVER
+from .driver import Clock, check_run, drive
 from .gait import N_ACTUATORS, Gait
 from .geometry import CENTRE
 from .model import build_model, validate_batch
 from .params import SolverConfig, StarParams, check_precision
 from .runtime import Runtime, check_arch
-from .simulation import MAX_STEPS_PER_INSTANCE, check_work
 from .state import STATUS_NAMES, STATUS_OK
+from .timegrid import MAX_STEPS_PER_INSTANCE, check_work, whole_steps
 
-STEPS_PER_LAUNCH = 50
 ACTUATOR_COLUMNS = tuple(f"since_A{m + 1}_s" for m in range(N_ACTUATORS))
 STATE_COLUMNS = ("instance", "t_s", "centroid_x_mm", "centroid_y_mm", "heading_deg",
                  "velocity_x_mm_s", "velocity_y_mm_s", "angular_velocity_deg_s",
@@ -189,17 +189,19 @@ class Simulator:
             return
         check_work(f"at_s = {at_s!r} s (at most {MAX_STEPS_PER_INSTANCE * self.solver.dt:.6g} s "
                    f"at dt = {self.solver.dt:g} s)", abs(at_s / self.solver.dt))
-        due = int(round(at_s / self.solver.dt))
-        if abs(due * self.solver.dt - at_s) > 1e-9 * max(1.0, abs(at_s)):
+        due = whole_steps(at_s, self.solver.dt)
+        if due is None:
             raise ValueError(f"at_s must be a whole number of steps (dt = {self.solver.dt} "
                              f"s), got {at_s!r}")
         schedule.command(mask, due, self._steps(), step_s=self.solver.dt)
 
     def advance(self, duration_s: float, record_interval_s: float = 0.0,
                 progress: bool = False) -> pd.DataFrame:
-        """Advance every live instance by duration_s (rounded to whole steps). Returns the
-        `state()` rows at every multiple of record_interval_s after now (s, a whole number of
-        steps; 0 = none), with a `record` column; empty without records."""
+        """Advance every live instance by duration_s (with fixed steps rounded to whole steps).
+        Returns the `state()` rows at every multiple of record_interval_s after now (s, with
+        fixed steps a whole number of steps: `timegrid.nearest_interval` gives one; 0 = none),
+        with a `record` column; empty without records. `progress`: a progress bar in simulated
+        seconds."""
         if isinstance(duration_s, bool) or not isinstance(duration_s, numbers.Real) \
                 or not math.isfinite(duration_s) or duration_s <= 0:
             raise ValueError(f"duration_s must be a finite number > 0 s, got {duration_s!r}")
@@ -208,58 +210,22 @@ class Simulator:
                                   or not record_interval_s > 0):
             raise ValueError(f"record_interval_s must be a number > 0 s (or 0: no records), "
                              f"got {record_interval_s!r}")
-        taken = int(self._steps().max(initial=0))
-        if self.solver.adaptive:
-            check_work(f"duration_s = {duration_s:g} s at dt_min = {self.solver.dt_min:g} s (the "
-                       f"adaptive worst case, after the {taken} steps taken)",
-                       taken + duration_s / self.solver.dt_min, self.n_instances)
-            return self._advance_adaptive(duration_s, record_interval_s)
-        check_work(f"duration_s = {duration_s:g} s at dt = {self.solver.dt:g} s (after the {taken} "
-                   f"steps taken)", taken + duration_s / self.solver.dt, self.n_instances)
-        n_steps = int(round(duration_s / self.solver.dt))
-        if n_steps < 1:
-            raise ValueError(f"duration_s must be at least one step (dt = {self.solver.dt} s), "
-                             f"got {duration_s!r}")
-        stride = 0
-        if record_interval_s:
-            stride = int(round(record_interval_s / self.solver.dt))
-            if stride < 1 or abs(stride * self.solver.dt - record_interval_s) > 1e-9 * record_interval_s:
-                raise ValueError(f"record_interval_s must be a whole number of steps (dt = "
-                                 f"{self.solver.dt} s), got {record_interval_s!r}")
-        bar = None
-        if progress:
-            from tqdm.auto import tqdm
-            bar = tqdm(total=n_steps, unit="step", desc=f"{self.n_instances} robots")
+        check_run(self.solver, duration_s, record_interval_s, self.n_instances,
+                  steps_taken=int(self._steps().max(initial=0)))
+        clock = Clock(self.solver, duration_s)
+        record_stops = clock.stops_every(record_interval_s, first=1) if record_interval_s else []
+        record_numbers = {stop: number + 1 for number, stop in enumerate(record_stops)}
+        stops = record_stops + ([clock.end] if not record_stops or record_stops[-1] < clock.end
+                                else [])
         records = []
-        done = 0
-        while done < n_steps:
-            target = n_steps if not stride else min(n_steps, (done // stride + 1) * stride)
-            while done < target:
-                count = min(STEPS_PER_LAUNCH, target - done)
-                self.engine.advance(count)
-                done += count
-                if bar is not None:
-                    bar.update(count)
-            if stride and done % stride == 0:
-                records.append(self.state().assign(record=done // stride))
-        if bar is not None:
-            bar.close()
-        return pd.concat(records, ignore_index=True) if records else pd.DataFrame(
-            columns=[*STATE_COLUMNS, "record"])
 
-    def _advance_adaptive(self, duration_s, record_interval_s):
-        """`advance` with adaptive steps: every instance to its own time + duration_s, landing
-        exactly on the records."""
-        start = self.time_s
-        count = int(math.floor(duration_s / record_interval_s * (1 + 1e-12))) if record_interval_s else 0
-        offsets = [k * record_interval_s for k in range(1, count + 1)]
-        if not offsets or offsets[-1] < duration_s:
-            offsets.append(duration_s)
-        records = []
-        for index, offset in enumerate(offsets):
-            self.engine.advance_adaptive_to(start + offset, self.n_instances)
-            if record_interval_s and index < count:
-                records.append(self.state().assign(record=index + 1))
+        def take(stop):
+            if stop in record_numbers:
+                records.append(self.state().assign(record=record_numbers[stop]))
+
+        drive(self.engine, clock, stops, take, self.n_instances,
+              start_times=self.time_s if self.solver.adaptive else None,
+              progress_label=f"{self.n_instances} robots" if progress else None)
         return pd.concat(records, ignore_index=True) if records else pd.DataFrame(
             columns=[*STATE_COLUMNS, "record"])
 

@@ -18,9 +18,12 @@ from taichi.lang.field import Field
 from .actuation import NEVER, Schedule
 from .fields import FieldArena, FieldStore
 
-STATUS_OK, STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_INACTIVE = 0, 1, 2, 3
-STATUS_NAMES = ("ok", "newton_failed", "non_finite", "inactive")
-"""Per-instance status; "inactive" marks the padding of a batch up to the engine's capacity."""
+STATUS_OK, STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_INACTIVE, STATUS_STEP_LIMIT = range(5)
+STATUS_NAMES = ("ok", "newton_failed", "non_finite", "inactive", "step_limit")
+"""Per-instance status; "inactive" marks the padding of a batch up to the engine's capacity;
+"step_limit" an adaptive instance stopped before its stop time because its step count reached
+the counter's limit (`timegrid.MAX_STEPS_PER_INSTANCE`) or its step no longer advanced its
+time (a step below the time's rounding)."""
 
 
 @ti.data_oriented

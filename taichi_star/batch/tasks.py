@@ -20,6 +20,7 @@ from ..geometry import Topology
 from ..params import SolverConfig, StarParams
 from ..runtime import check_arch
 from ..simulation import simulate, validate_call
+from ..timegrid import steps_in
 
 
 @dataclass(frozen=True)
@@ -90,7 +91,7 @@ def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None
         if not isinstance(p, StarParams):
             raise ValueError(f"params[{position}] must be a StarParams, got {type(p).__name__}")
         duration = duration_s if duration_s is not None else cycles * p.period
-        if duration_s is None and not solver.adaptive and round(duration / solver.dt) < 1:
+        if duration_s is None and not solver.adaptive and steps_in(duration, solver.dt) < 1:
             raise ValueError(f"cycles must give at least one step (dt = {solver.dt:g} s): "
                              f"{cycles:g} periods of params[{position}] ({p.period:g} s) are "
                              f"{duration:.3g} s, got cycles = {cycles!r}")

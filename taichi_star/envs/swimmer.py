@@ -52,8 +52,8 @@ from ..gait import N_ACTUATORS
 from .. import drawing, metrics
 from ..metrics import rotate
 from ..params import SolverConfig, StarParams
-from ..simulation import whole_steps
 from ..simulator import ACTUATOR_COLUMNS, Simulator
+from ..timegrid import whole_steps
 
 OBSERVATION_NAMES = ("goal_x_body_mm", "goal_y_body_mm", "heading_sin", "heading_cos",
                      "velocity_x_body_mm_s", "velocity_y_body_mm_s", "angular_velocity_deg_s",

@@ -5,8 +5,10 @@ hand-made engine mutants (`halvings <= max` → `<`, an under-counted substep_re
 Newton stopping rule, a +20 % costlier Newton)."""
 
 import pickle
+import warnings
 
 import numpy as np
+import pandas as pd
 import pytest
 
 import taichi_star as ts
@@ -206,10 +208,12 @@ class _Accepted(Exception):
 
 
 def test_runs_beyond_the_step_counter_are_refused_before_any_compute(monkeypatch):
-    """Fixed steps: duration_s / dt steps; adaptive: duration_s / dt_min (its worst case). At
-    exactly MAX_STEPS_PER_INSTANCE (2³¹ − 1, the int32 counter) the run is accepted, one step
-    more is refused naming the arguments, the estimate and the limit. dt = 2⁻¹⁰ s makes the
-    durations exact binary multiples of the step."""
+    """Fixed steps: duration_s / dt steps; adaptive: duration_s / dt_max (the fewest it can
+    take). At exactly MAX_STEPS_PER_INSTANCE (2³¹ − 1, the int32 counter) the run is accepted,
+    one step more is refused naming the arguments, the estimate and the limit. dt = 2⁻¹⁰ s makes
+    the durations exact binary multiples of the step. An adaptive run whose most steps (at
+    dt_min) could pass the limit is accepted with a warning (the engine stops an instance
+    there: `test_an_adaptive_robot_stops_at_the_step_limit_or_a_step_that_cannot_advance`)."""
     def accepted(*args, **kwargs):
         raise _Accepted
     monkeypatch.setattr("taichi_star.simulation.build_model", accepted)
@@ -227,14 +231,58 @@ def test_runs_beyond_the_step_counter_are_refused_before_any_compute(monkeypatch
         ts.simulate([ts.StarParams()], 1e9)
     with pytest.raises(ValueError, match=r"duration_s = 1 s at dt = 1e-300 s is 1e\+300 time"):
         ts.simulate([ts.StarParams()], 1.0, ts.SolverConfig(dt=1e-300))
-    adaptive = ts.SolverConfig.preset("accurate", dt_min=dt)
+    adaptive = ts.SolverConfig.preset("accurate", dt_min=dt, dt=dt, dt_max=dt)
     with pytest.raises(_Accepted):
         ts.simulate([ts.StarParams()], limit * dt, adaptive)
-    with pytest.raises(ValueError, match=r"at dt_min = 0.000976562 s \(the adaptive worst case\) "
+    with pytest.raises(ValueError, match=r"at dt_max = 0.000976562 s \(the adaptive lower bound\) "
                                          r"is 2.15e\+09 time steps"):
         ts.simulate([ts.StarParams()], (limit + 1) * dt, adaptive)
-    with pytest.raises(ValueError, match=r"at dt_min = 1e-300 s .* is 3.15e\+300 time steps"):
-        ts.simulate([ts.StarParams()], 3.15, ts.SolverConfig.preset("accurate", dt_min=1e-300))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(_Accepted):  # at most the limit: no warning
+            ts.simulate([ts.StarParams()], limit * dt, adaptive.replace(dt_max=2 * dt))
+    with pytest.warns(RuntimeWarning, match=r"at dt_min = 1e-300 s could take 3.15e\+300 steps "
+                                            r"per instance: .* stops there with status step_limit"):
+        with pytest.raises(_Accepted):
+            ts.simulate([ts.StarParams()], 3.15, ts.SolverConfig.preset("accurate", dt_min=1e-300))
+
+
+@pytest.mark.filterwarnings("ignore:.*could take.*steps per instance:RuntimeWarning")
+def test_an_adaptive_robot_stops_at_the_step_limit_or_a_step_that_cannot_advance():
+    """With steps of exactly 1 ms (dt_max = dt): a robot whose counter holds 5 steps reaches
+    t = 5 ms "ok" on its 5th step and stops at its 6th with status step_limit at 5 ms; with 4,
+    at 4 ms. A robot whose next step (1e-30 s) would not move its time at 5 ms stops there
+    while its neighbour goes on, bitwise as alone."""
+    solver = ts.SolverConfig(integrator="bdf2", adaptive=True, dt=1e-3, dt_min=1e-30,
+                             dt_max=1e-3, error_tol=1e-3)
+    params = [ts.StarParams(gait="A1", n_arc=6, n_limb=2), ts.StarParams(gait="A2", n_arc=6,
+                                                                         n_limb=2)]
+    for limit in (5, 4):
+        sim = ts.Simulator(params, solver)
+        sim.engine.step_limit[None] = limit
+        sim.advance(0.005)
+        state = sim.state()
+        if limit == 5:
+            assert (state["status"] == "ok").all() and state["t_s"].tolist() == [0.005] * 2
+            sim.advance(0.001)
+            state = sim.state()
+        assert (state["status"] == "step_limit").all()
+        np.testing.assert_allclose(sim.engine.state.failure_time.to_numpy()[:2], limit * 1e-3,
+                                   rtol=1e-12)
+        assert (sim.engine.state.steps_done.to_numpy()[:2] == limit).all()
+    sim = ts.Simulator(params, solver)
+    sim.advance(0.005)
+    sizes = sim.engine.state.step_size.to_numpy()
+    sizes[0] = 1e-30  # below the rounding of t = 5 ms (~9e-19 s)
+    sim.engine.state.step_size.from_numpy(sizes)
+    sim.advance(0.002)
+    state = sim.state()
+    assert state["status"].tolist() == ["step_limit", "ok"]
+    assert sim.engine.state.failure_time.to_numpy()[0] == pytest.approx(0.005, rel=1e-12)
+    alone = ts.Simulator(params[1:], solver)
+    alone.advance(0.007)
+    neighbour, by_itself = state.iloc[1].drop("instance"), alone.state().iloc[0].drop("instance")
+    pd.testing.assert_series_equal(neighbour, by_itself, check_names=False)
 
 
 def test_long_but_possible_work_starts_with_a_warning_giving_its_estimate():
@@ -242,7 +290,7 @@ def test_long_but_possible_work_starts_with_a_warning_giving_its_estimate():
     warns with the estimated hours at the stated rate (1e10 / 5e4 / 3600 = 55.6 h)."""
     import warnings
 
-    from taichi_star.simulation import WARN_ROBOT_STEPS, check_work
+    from taichi_star.timegrid import WARN_ROBOT_STEPS, check_work
 
     assert WARN_ROBOT_STEPS == 1e10
     with warnings.catch_warnings():

@@ -1,0 +1,112 @@
+"""The one driver of the engine, for `simulate` and `Simulator.advance`: checks a run's
+duration and record interval, and advances a batch from its start through a list of stops
+(records, cycle starts, the end) by fixed or adaptive steps, with a progress bar.
+
+A stop is counted from the run's start (`Clock`): with fixed steps a number of steps (the
+engine's time is then its own product step·dt), with adaptive steps a time in s, which every
+instance reaches exactly from its own start time.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Callable, Optional, Sequence
+
+import numpy as np
+
+from .params import SolverConfig
+from .timegrid import (MAX_STEPS_PER_INSTANCE, STEPS_PER_LAUNCH, check_duration, check_steps,
+                       check_work, multiples_within, steps_in, whole_steps)
+
+
+def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float, batch: int,
+              steps_taken: Optional[int] = None):
+    """ValueError before any compute unless a run of `batch` instances for duration_s (s) with
+    records every record_interval_s (s; 0 = none) can go: at most MAX_STEPS_PER_INSTANCE steps
+    in all (`timegrid.check_work`; `steps_taken`: the steps an instance has already taken,
+    None for a run from t = 0; adaptive steps: the fewest, at dt_max, with a RuntimeWarning
+    when the most, at dt_min, could pass the limit), and with fixed steps at least one step
+    and a record interval of whole steps."""
+    after = "" if steps_taken is None else f"after the {steps_taken} steps taken"
+    taken = steps_taken or 0
+    if solver.adaptive:
+        # the work is known only to lie between the steps at dt_max and at dt_min: refused and
+        # estimated by the fewest; the most may exceed the counters, where the engine stops an
+        # instance with status step_limit (said before the run)
+        check_work(f"duration_s = {duration_s:g} s at dt_max = {solver.dt_max:g} s (the adaptive "
+                   f"lower bound{', ' + after if after else ''})",
+                   taken + duration_s / solver.dt_max, batch)
+        most = taken + duration_s / solver.dt_min
+        if not most <= MAX_STEPS_PER_INSTANCE:
+            warnings.warn(f"duration_s = {duration_s:g} s at dt_min = {solver.dt_min:g} s could "
+                          f"take {most:.3g} steps per instance: an instance that reaches "
+                          f"{MAX_STEPS_PER_INSTANCE} (the int32 step counter) stops there with "
+                          f"status step_limit", RuntimeWarning, stacklevel=3)
+        return
+    check_work(f"duration_s = {duration_s:g} s at dt = {solver.dt:g} s"
+               f"{f' ({after})' if after else ''}", taken + duration_s / solver.dt, batch)
+    check_duration(duration_s, solver.dt)
+    if record_interval_s:
+        check_steps("record_interval_s", record_interval_s, solver.dt)
+
+
+class Clock:
+    """Where a run of duration_s (s) stops, counted from its start: with fixed steps a stop is
+    a number of steps (the duration rounded to whole steps), with adaptive steps a time, s."""
+
+    def __init__(self, solver: SolverConfig, duration_s: float):
+        self.adaptive = solver.adaptive
+        self.dt = solver.dt
+        self.end = duration_s if self.adaptive else steps_in(duration_s, solver.dt)
+        """The last stop."""
+
+    def stops_every(self, interval_s: float, first: int = 0) -> list:
+        """Stops at first·interval_s, (first + 1)·interval_s, ... up to the end (adaptive:
+        the last one may be within STEP_TOLERANCE after it). With fixed steps interval_s must
+        be a whole number of steps."""
+        if self.adaptive:
+            return [k * interval_s for k in range(first, multiples_within(self.end, interval_s) + 1)]
+        stride = whole_steps(interval_s, self.dt)
+        return list(range(first * stride, self.end + 1, stride))
+
+    def time_of(self, stop) -> float:
+        """The time of a stop after the start, s."""
+        return stop if self.adaptive else stop * self.dt
+
+
+def drive(engine, clock: Clock, stops: Sequence, at_stop: Callable, batch: int,
+          start_times: Optional[np.ndarray] = None, progress_label: Optional[str] = None):
+    """Advance every live instance of the engine's first `batch` from its start through
+    `stops` (ascending, from `clock`; a stop at 0 is the start itself) and call at_stop(stop)
+    on reaching each. Fixed steps advance in launches of STEPS_PER_LAUNCH steps; adaptive
+    ones take each instance to its start time (s, (batch,); None: all at t = 0) plus the
+    stop. progress_label: the description of a progress bar in simulated seconds, None for
+    no bar."""
+    bar = None
+    if progress_label is not None:
+        from tqdm.auto import tqdm
+        # simulated seconds, shown to the millisecond (the clock's float sums are not round)
+        bar = tqdm(total=clock.time_of(clock.end), unit="s", desc=progress_label,
+                   bar_format="{l_bar}{bar}| {n:.3f}/{total:.3f} s simulated "
+                              "[{elapsed}<{remaining}]")
+    if clock.adaptive and start_times is None:
+        start_times = np.zeros(batch)
+    previous = 0
+    for stop in stops:
+        if stop != previous:
+            if clock.adaptive:
+                engine.advance_adaptive_to(start_times + stop, batch)
+                if bar is not None:
+                    bar.update(stop - previous)
+            else:
+                step = previous
+                while step < stop:
+                    count = min(STEPS_PER_LAUNCH, stop - step)
+                    engine.advance(count)
+                    step += count
+                    if bar is not None:
+                        bar.update(count * clock.dt)
+        at_stop(stop)
+        previous = stop
+    if bar is not None:
+        bar.close()

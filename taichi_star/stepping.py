@@ -1,0 +1,55 @@
+"""Adaptive step-size control: where an instance's next step ends, and the size of the step
+after it from the local error estimate (`integrators.Integrator.local_error`). The engine's
+`adaptive_instance` applies them to each instance; they read nothing but their arguments
+(times and sizes in s, errors and tolerance in m)."""
+
+import taichi as ti
+
+
+@ti.func
+def step_end(start, proposed, target, firing, firing_step):
+    """The end of a step of the `proposed` size from `start` towards `target` (the next stop,
+    or with `firing` = 1 the next firing): exactly on it when the step would pass it, and
+    never a sliver under a quarter step before it (the rest is split in two instead), so that
+    a rejected step always shrinks. A firing makes the forcing jump within the step that ends
+    on it: that step is at most `firing_step` long (dt, as a run's first step), so the steps
+    before it end firing_step short of it (or halfway there)."""
+    limit = target
+    if firing == 1 and target - start > firing_step:
+        limit = ti.max(target - firing_step, start + 0.5 * (target - start))
+    end = start + proposed
+    if end >= limit:
+        end = limit
+    elif limit - end < 0.25 * proposed:
+        end = start + 0.5 * (limit - start)
+    return end
+
+
+@ti.func
+def size_factor(tol, error):
+    """0.9·√(tol/error), at least 0.2: the factor on a step's size that brings its error
+    (∝ h² for the first-order estimate) to 0.81 of the tolerance."""
+    return ti.max(0.2, 0.9 * ti.sqrt(tol / error))
+
+
+@ti.func
+def accepted_size(h, proposed, error, tol, firing, dt_min, dt_max):
+    """The size of the step after an accepted one of size h (proposed: the size it had before
+    it was cut to land on a stop; `firing`: 1 if it ended on a firing): grown or shrunk by
+    `size_factor` within [0.2, 2] and [dt_min, dt_max]."""
+    growth = 2.0
+    if error > 0.0:
+        growth = ti.min(2.0, size_factor(tol, error))
+    # a step cut short to land on a stop says little about the size that fits, unless the
+    # forcing jumped at its end (a firing)
+    basis = h
+    if h < proposed and growth >= 1.0 and firing == 0:
+        basis = proposed
+    return ti.min(dt_max, ti.max(dt_min, basis * growth))
+
+
+@ti.func
+def rejected_size(h, error, tol, dt_min):
+    """The size of the retry of a converged step of size h rejected for its error (> tol):
+    shrunk by `size_factor`, at least dt_min."""
+    return ti.max(dt_min, h * size_factor(tol, error))

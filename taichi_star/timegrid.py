@@ -1,0 +1,120 @@
+"""The time grid of fixed steps: which times are a whole number of steps, how many steps a
+duration is, how many records fit, and the limits on a run's step count.
+
+With fixed steps every time the engine reaches is step·dt, so a record, a cycle start or a
+firing time must be a whole number of steps; `whole_steps` decides that, within one tolerance
+(`STEP_TOLERANCE`) for the whole package. A record interval that is not one is refused (a
+ValueError naming it); `nearest_interval` and `interval_for_count` give one that is.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from typing import Optional
+
+import numpy as np
+
+STEP_TOLERANCE = 1e-9
+"""Relative tolerance within which a time is taken to be a whole number of steps (and a
+duration a whole number of record intervals): far above the rounding of a time built from
+decimal inputs (~1e-16 relative), far below any real difference of a step."""
+
+STEPS_PER_LAUNCH = 50
+"""Steps fused into one kernel launch: enough to hide launch cost, few enough for a live
+progress bar."""
+
+MAX_STEPS_PER_INSTANCE = 2 ** 31 - 1
+"""Most time steps one instance may take, counted from t = 0. The engine's step counters
+(steps_done, failure_step) are int32, and a run this long (2.1e9 steps: 25 days of simulated
+time at the paper's 1 ms) is never what was meant: a fixed-step run of more (duration / dt) is
+refused before any compute instead of running for days or overflowing, as is an adaptive one
+whose fewest steps (duration / dt_max) are more; an adaptive instance that reaches it stops
+with status step_limit."""
+
+WARN_ROBOT_STEPS = 1e10
+"""A run of more robot-steps (time steps × instances) than this starts with a RuntimeWarning
+giving its estimated duration: about 2.3 days at `ESTIMATE_ROBOT_STEPS_PER_S`."""
+ESTIMATE_ROBOT_STEPS_PER_S = 5e4
+"""The rate the warning's estimate assumes: the plain `simulate` call of the paper preset at
+B = 512 measured 51,000 and 90,000 robot-steps/s on two 2-core machines; the slower one."""
+
+
+def on_grid(times_s, interval_s: float) -> np.ndarray:
+    """Whether each time (s, array) is a whole number of `interval_s` (s), within
+    STEP_TOLERANCE of the count (relative, at least one step)."""
+    ratio = np.asarray(times_s) / interval_s
+    return np.abs(ratio - np.round(ratio)) <= STEP_TOLERANCE * np.maximum(1.0, np.abs(ratio))
+
+
+def whole_steps(time_s: float, dt: float) -> Optional[int]:
+    """time_s / dt as an integer if it is one (`on_grid`), else None."""
+    return int(round(time_s / dt)) if on_grid(time_s, dt) else None
+
+
+def step_counts(times_s: np.ndarray, dt: float) -> np.ndarray:
+    """(n,) whole steps in each time (s, (n,)); 0 where a time is not a whole number of
+    steps."""
+    ratio = np.asarray(times_s) / dt
+    return np.where(on_grid(times_s, dt), np.round(ratio), 0)
+
+
+def steps_in(duration_s: float, dt: float) -> int:
+    """The steps a fixed-step run of duration_s takes: the duration rounded to whole steps."""
+    return int(round(duration_s / dt))
+
+
+def multiples_within(duration_s: float, interval_s: float) -> int:
+    """How many whole intervals fit in duration_s (one that ends within STEP_TOLERANCE after
+    it counts: a duration of exactly n intervals gives n, whatever the rounding)."""
+    return int(math.floor(duration_s / interval_s * (1 + STEP_TOLERANCE)))
+
+
+def check_steps(name: str, time_s: float, dt: float) -> int:
+    """The whole steps in time_s (s); ValueError naming `name` unless they are at least one
+    and time_s is on the grid of dt (s)."""
+    steps = whole_steps(time_s, dt)
+    if not steps or steps < 1:
+        raise ValueError(f"{name} must be a whole number of steps (dt = {dt} s), got "
+                         f"{time_s!r} (nearest valid: {nearest_interval(time_s, dt)!r} s)")
+    return steps
+
+
+def check_duration(duration_s: float, dt: float) -> int:
+    """`steps_in(duration_s, dt)`; ValueError naming duration_s unless it is at least one."""
+    steps = steps_in(duration_s, dt)
+    if steps < 1:
+        raise ValueError(f"duration_s must be at least one step (dt = {dt} s), got "
+                         f"{duration_s!r}")
+    return steps
+
+
+def nearest_interval(interval_s: float, dt: float) -> float:
+    """The record interval (s) nearest interval_s that is a whole number of steps of dt (s),
+    at least one step: what `simulate` and `Simulator.advance` accept as record_interval_s
+    with fixed steps."""
+    return max(1, round(interval_s / dt)) * dt
+
+
+def interval_for_count(duration_s: float, count: int, dt: float) -> float:
+    """A record interval (s, a whole number of steps of dt, at least one) giving about `count`
+    records over duration_s (s): at least `count` when the run has that many steps."""
+    return max(1, steps_in(duration_s, dt) // count) * dt
+
+
+def check_work(name: str, steps: float, batch: Optional[int] = None):
+    """ValueError when `steps` (time steps per instance, a float estimate: it may be inf),
+    rounded to whole steps as the drivers round a duration, is over MAX_STEPS_PER_INSTANCE;
+    `name` says which arguments gave it (e.g. "duration_s = 1e9 s at dt = 0.001 s"), the
+    message the estimate (times `batch`, the number of instances, if given) and the limit.
+    A RuntimeWarning with the estimated wall time when steps × batch is over WARN_ROBOT_STEPS."""
+    if not (math.isfinite(steps) and round(steps) <= MAX_STEPS_PER_INSTANCE):
+        total = "" if batch is None else f" ({steps * batch:.3g} robot-steps for {batch} instances)"
+        raise ValueError(f"{name} is {steps:.3g} time steps per instance{total}; the limit is "
+                         f"{MAX_STEPS_PER_INSTANCE} steps per instance (the int32 step counter)")
+    robot_steps = round(steps) * (batch or 1)
+    if robot_steps > WARN_ROBOT_STEPS:
+        hours = robot_steps / ESTIMATE_ROBOT_STEPS_PER_S / 3600
+        warnings.warn(f"{name} is {robot_steps:.3g} robot-steps: about {hours:.3g} h at "
+                      f"{ESTIMATE_ROBOT_STEPS_PER_S:g} robot-steps/s (on a 2-core CPU; a GPU or "
+                      f"more cores run faster)", RuntimeWarning, stacklevel=3)

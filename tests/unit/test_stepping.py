@@ -1,0 +1,57 @@
+"""The adaptive step-size control (taichi_star.stepping) on hand-worked cases: every expected
+value below follows from the rules in the functions' docstrings by exact arithmetic, so the
+comparisons allow only the rounding of a few operations (1e-15 relative)."""
+
+import math
+
+import pytest
+import taichi as ti
+
+from taichi_star import stepping
+
+TOL = 1e-6  # m, the error tolerance of these cases
+
+
+@ti.kernel
+def _step_end(start: float, proposed: float, target: float, firing: int,
+              firing_step: float) -> float:
+    return stepping.step_end(start, proposed, target, firing, firing_step)
+
+
+@ti.kernel
+def _accepted_size(h: float, proposed: float, error: float, firing: int) -> float:
+    return stepping.accepted_size(h, proposed, error, TOL, firing, 1e-6, 0.05)
+
+
+@ti.kernel
+def _rejected_size(h: float, error: float) -> float:
+    return stepping.rejected_size(h, error, TOL, 1e-6)
+
+
+@pytest.mark.parametrize("proposed, target, firing, expected", [
+    (0.01, 1.0, 0, 0.01),      # far from the stop: the proposed step
+    (0.01, 0.008, 0, 0.008),   # would pass the stop: lands on it
+    (0.01, 0.012, 0, 0.006),   # would leave 0.002 < a quarter step: the rest split in two
+    (0.01, 0.0105, 1, 0.0095),  # a firing: end dt = 0.001 short of it
+    (0.01, 0.0015, 1, 0.00075),  # a firing within 2 dt: halfway there
+    (0.01, 0.0008, 1, 0.0008),  # a firing within dt: on it
+])
+def test_step_end(taichi_cpu, proposed, target, firing, expected):
+    assert _step_end(0.0, proposed, target, firing, 0.001) == pytest.approx(expected, rel=1e-15)
+
+
+@pytest.mark.parametrize("h, proposed, error, firing, expected", [
+    (0.01, 0.01, TOL / 4, 0, 0.01 * 1.8),   # 0.9·√4
+    (0.01, 0.01, 0.0, 0, 0.02),             # no error: doubles
+    (0.04, 0.04, 1e-12, 0, 0.05),           # at most dt_max
+    (0.004, 0.01, TOL / 4, 0, 0.01 * 1.8),  # cut short to land: grows from the proposed size
+    (0.004, 0.01, TOL / 4, 1, 0.004 * 1.8),  # cut short by a firing: from its own size
+    (0.004, 0.01, TOL, 0, 0.004 * 0.9),     # shrinking: from its own size
+])
+def test_accepted_size(taichi_cpu, h, proposed, error, firing, expected):
+    assert _accepted_size(h, proposed, error, firing) == pytest.approx(expected, rel=1e-15)
+
+
+@pytest.mark.parametrize("error, factor", [(2 * TOL, 0.9 / math.sqrt(2)), (100 * TOL, 0.2)])
+def test_rejected_size(taichi_cpu, error, factor):
+    assert _rejected_size(0.01, error) == pytest.approx(0.01 * factor, rel=1e-15)
