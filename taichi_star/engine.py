@@ -10,7 +10,7 @@ instance of the batch uses are not part of the engine at all (compiled out).
 An engine built `sensitive` also carries each instance's tangents (`tangent_step`): the batch's
 first `primal_count` instances are simulated, and behind them, for each of `tangent_count`
 replica pairs j, instance b has two replicas built at its parameters moved by +ε_j and −ε_j
-(`replica`; the host gives each parameter two pairs, at ±ε and ±2ε). A replica is never solved: after each accepted step of b its state is set to
+(`replica`; the host gives each parameter one pair, at ±ε). A replica is never solved: after each accepted step of b its state is set to
 b's state ± ε_j times the state's derivative, which the implicit function theorem gives exactly
 from b's Jacobian at the converged state (see `tangent_step`). Any output is then a smooth
 function of the replicas' states, and its derivative is the central difference of the pair.

@@ -7,7 +7,7 @@ the residual taken as central differences (measured against finite differences o
 1e-7 to 4e-6 relative where the parameter moves the robot well; docs/numerics.md).
 
 How: for each direction (a field, or one number of a per-actuator field) every instance b gets
-replicas in the same engine, built at its parameters moved by ±ε and by ±2ε (`replica_batch`).
+replicas in the same engine, built at its parameters moved by ±ε (`replica_batch`).
 The replicas are never solved. After each accepted step of b, the engine moves them to b's new
 state ± ε times the state's exact derivative, from the implicit function theorem on b's step
 (`engine.BatchEngine.tangent_step`): the step's Jacobian at the converged state, factored once,
@@ -16,8 +16,7 @@ and to the step's start state. The replicas' own residuals, assembled at b's con
 from their own start states and coefficients, give that right-hand side as a central
 difference, and every term and extension is covered without a line of derivative code of its
 own. An output of the run is a smooth function of the states, so its derivative is the central
-difference of the replicas' outputs, which lie on the tangent line, extrapolated from the two
-pairs (`EXTRAPOLATION_SCALES`).
+difference of the replicas' outputs, which lie on the tangent line.
 
 The step sequence is that of b: with adaptive steps the accepted steps are frozen, as are the
 firing times (events, not functions of the parameters: `period` is not differentiable).
@@ -39,18 +38,15 @@ from .gait import N_ACTUATORS
 from .metrics import wrap_degrees
 
 RELATIVE_STEP = 1e-6
-"""ε of a direction relative to the parameter's value (see EXTRAPOLATION_SCALES)."""
-EXTRAPOLATION_SCALES = (1.0, 2.0)
-"""Each direction has a replica pair at ±ε and one at ±2ε; its derivative is 2·D(ε) − D(2ε).
-Where the residual is smooth, a pair's central differences are exact to O(ε²). The drags
-|v|·v and the jet's switch are not twice differentiable at 0, and states sit at or just
-beside it (a velocity component that a symmetric gait keeps at zero, one that creeps past it
-as the robot coasts): there a replica takes its instance's side of the kink
+"""ε of a direction relative to the parameter's value. Each direction has one replica pair, at
+±ε; its derivative is the pair's central difference D(ε), exact to O(ε²) where the residual is
+smooth. The drags |v|·v and the jet's switch are not twice differentiable at 0, and states sit
+at or just beside it (a velocity component that a symmetric gait keeps at zero, one that creeps
+past it as the robot coasts): there a replica takes its instance's side of the kink
 (`physics.assembly.Assembly.branch_instance`), which keeps the pair's difference that of one
-polynomial (exact at a zero component, where a straddling pair would otherwise add ε²·a·|a| to
-its half difference, an error linear in ε). The extrapolation removes such linear errors
-wherever a kink is left outside the forces; whether the second pair is still needed is not
-yet measured."""
+polynomial. A second pair at ±2ε, extrapolated as 2·D(ε) − D(2ε), was needed before that rule;
+without it a 9.45-s run of A1 stays within 2.3e-7 of whole-run differences (docs: numerics,
+sensitivities), with half the replicas."""
 ZERO_VALUE_SCALE = 0.01
 """For a parameter at 0, ε is RELATIVE_STEP times this share of the top of its range (for a
 per-actuator delay: of the period)."""
@@ -163,16 +159,15 @@ def check_directions(directions: Sequence[Direction], params: Sequence[StarParam
 
 def replica_batch(params: Sequence[StarParams], directions: Sequence[Direction]):
     """(the batch to simulate, steps (n_directions, B)). The batch: the instances, then for
-    each direction its pairs of replicas at ±ε and at ±2ε (`EXTRAPOLATION_SCALES`), each pair
+    each direction its pair of replicas at ±ε, the pair
     as +ε replicas then −ε replicas: the order of `engine.BatchEngine.replica`, whose
     direction j is pair j here (so the engine carries 2·n_directions tangents)."""
     steps = np.array([[direction.step(p) for p in params] for direction in directions])
     batch = list(params)
     for direction, row in zip(directions, steps):
-        for scale in EXTRAPOLATION_SCALES:
-            for sign in (1.0, -1.0):
-                batch += [direction.moved(p, direction.value(p) + sign * scale * eps)
-                          for p, eps in zip(params, row)]
+        for sign in (1.0, -1.0):
+            batch += [direction.moved(p, direction.value(p) + sign * eps)
+                      for p, eps in zip(params, row)]
     return batch, steps
 
 
@@ -187,17 +182,13 @@ def derivatives(values: np.ndarray, directions: Sequence[Direction], steps: np.n
     """d(output)/d(direction) for every direction, label -> (B, ...) array, from `values`
     (B_all, ...): the output of every instance of a `replica_batch` batch in its order (an
     angle's differences, output in degrees, taken the short way round)."""
-    pairs = len(EXTRAPOLATION_SCALES)
-    count = len(values) // (1 + 2 * pairs * len(directions))
+    count = len(values) // (1 + 2 * len(directions))
     result = {}
     for j, direction in enumerate(directions):
-        quotients = []
-        for pair, scale in enumerate(EXTRAPOLATION_SCALES):
-            first = (1 + 2 * (pairs * j + pair)) * count
-            plus, minus = values[first:first + count], values[first + count:first + 2 * count]
-            width = (2.0 * scale * steps[j]).reshape((count,) + (1,) * (values.ndim - 1))
-            quotients.append(_difference(plus, minus, output) / width)
-        result[direction.label] = 2.0 * quotients[0] - quotients[1]
+        first = (1 + 2 * j) * count
+        plus, minus = values[first:first + count], values[first + count:first + 2 * count]
+        width = (2.0 * steps[j]).reshape((count,) + (1,) * (values.ndim - 1))
+        result[direction.label] = _difference(plus, minus, output) / width
     return result
 
 
@@ -207,7 +198,7 @@ def split_result(summary: pd.DataFrame, trajectory: pd.DataFrame,
     alone, sensitivities: one row per instance with a column `sensitivity_column(output,
     direction)` per SUMMARY_OUTPUTS × direction, trajectory sensitivities: the trajectory's
     instance and t_s with one column per TRAJECTORY_OUTPUTS × direction)."""
-    count = len(summary) // (1 + 2 * len(EXTRAPOLATION_SCALES) * len(directions))
+    count = len(summary) // (1 + 2 * len(directions))
     sensitivities = {}
     by_instance = trajectory.sort_values(["instance", "t_s"], kind="stable")
     records = len(by_instance) // len(summary) if len(summary) else 0

@@ -120,7 +120,7 @@ class Simulator:
         """The batch's model: the instances and, with sensitivities, their replicas after them."""
         runtime = Runtime.current()
         runtime.ensure(arch, solver.precision)
-        carried = len(self.directions) * len(tangents.EXTRAPOLATION_SCALES)
+        carried = len(self.directions)
         self.engine = runtime.lease_engine(self.model, solver, self, sensitive=carried > 0)
         self.engine.load(self.model, solver, periodic_gaits=False, tangents=carried)
         self._initial = self.engine.save_state()
