@@ -1,7 +1,8 @@
 """Hand-made mutants of the engine, each run against the tests meant to kill it: the mutation
 check that mutmut cannot do for Taichi kernels (they compile per process and do not survive its
 fork). For each mutant: a fresh copy of the committed tree (git worktree at HEAD), one textual
-change, the named tests with `-x`; killed when they fail. Writes a CSV (one row per mutant).
+change, the named tests with `-x`; killed when they fail (after a control run in which every
+named test passes unmutated). Writes a CSV (one row per mutant) and its provenance sidecar.
 
     python tools/engine_mutants.py [--out results/mutation/engine_mutants.csv] [--only M1,M3]
 """
@@ -9,6 +10,7 @@ change, the named tests with `-x`; killed when they fail. Writes a CSV (one row 
 import argparse
 import csv
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -53,6 +55,14 @@ MUTANTS = [
 ]
 
 
+def pytest(tests, worktree: Path) -> subprocess.CompletedProcess:
+    """The tests, stopping at the first failure, on the worktree's code."""
+    return subprocess.run([sys.executable, "-m", "pytest", "-q", "-x", "-n", "0",
+                           "-p", "no:cacheprovider", *tests], cwd=worktree,
+                          capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": str(worktree)})
+
+
 def run(mutant, worktree: Path) -> dict:
     ident, path, original, mutated, tests, what = mutant
     target = worktree / path
@@ -62,10 +72,7 @@ def run(mutant, worktree: Path) -> dict:
     target.write_text(source.replace(original, mutated))
     start = time.perf_counter()
     try:
-        result = subprocess.run([sys.executable, "-m", "pytest", "-q", "-x", "-n", "0",
-                                 "-p", "no:cacheprovider", *tests], cwd=worktree,
-                                capture_output=True, text=True,
-                                env={**__import__("os").environ, "PYTHONPATH": str(worktree)})
+        result = pytest(tests, worktree)
     finally:
         target.write_text(source)
     return {"mutant": ident, "file": path, "what": what, "tests": " ".join(tests),
@@ -87,6 +94,10 @@ def main():
         subprocess.run(["git", "worktree", "add", "--detach", str(worktree), "HEAD"], cwd=REPO,
                        check=True, capture_output=True)
         try:
+            # the control: unmutated, every test must pass, or a "kill" would mean nothing
+            control = pytest(sorted({test for m in chosen for test in m[4]}), worktree)
+            if control.returncode != 0:
+                raise SystemExit(f"the tests fail without a mutant:\n{control.stdout[-2000:]}")
             for mutant in chosen:
                 row = {**run(mutant, worktree), "commit": commit}
                 print(f"{row['mutant']} {row['outcome']:<8} {row['seconds']:6.1f} s  {row['what']}",
