@@ -374,27 +374,29 @@ def base_params(args) -> StarParams:
 
 
 def solver(args) -> SolverConfig:
-    """SolverConfig of --preset with --dt (StudyArgumentError naming --dt); with --cycles (not
-    --quick) and the model flags, checks that --cycles of the model's period are at least one
-    fixed step and at most MAX_STEPS_PER_INSTANCE steps (dt_min steps when adaptive)
-    (StudyArgumentError naming --cycles and the step)."""
+    """SolverConfig of --preset with --dt (StudyArgumentError naming --dt); with the model flags,
+    checks that the run's length (--cycles of the model's period, or --quick's) is at least one
+    fixed step and at most MAX_STEPS_PER_INSTANCE steps (dt_max steps, the fewest, when
+    adaptive) (StudyArgumentError naming the flags and the step)."""
     try:
         changes = {} if args.dt is None else {"dt": args.dt}
         config = SolverConfig.preset(getattr(args, "preset", "paper"), **changes)
     except ValueError as error:
         raise StudyArgumentError(f"--dt: {error}") from None
-    if getattr(args, "cycles", None) is not None and hasattr(args, "set") and not args.quick:
-        period = base_params(args).period
-        step, step_name = (config.dt_min, "dt_min") if config.adaptive else (config.dt, "--dt")
+    if hasattr(args, "set") and (args.quick or getattr(args, "cycles", None) is not None):
+        if args.quick:
+            duration, length = QUICK_DURATION_S, f"--quick ({QUICK_DURATION_S:g} s)"
+        else:
+            duration = args.cycles * base_params(args).period
+            length = f"--cycles {args.cycles:g} ({duration:.3g} s)"
+        # adaptive runs are refused by their fewest steps, as the library refuses them
+        step, step_name = (config.dt_max, "dt_max") if config.adaptive else (config.dt, "--dt")
         try:
-            check_work(f"--cycles {args.cycles:g} ({args.cycles * period:.3g} s) at {step_name} "
-                       f"{step:g} s", args.cycles * period / step)
+            check_work(f"{length} at {step_name} {step:g} s", duration / step)
         except ValueError as error:
             raise StudyArgumentError(str(error)) from None
-        if not config.adaptive and steps_in(args.cycles * period, config.dt) < 1:
-            raise StudyArgumentError(
-                f"--cycles {args.cycles:g}: {args.cycles:g} periods of {period:g} s are "
-                f"{args.cycles * period:.3g} s, less than one step (dt = {config.dt:g} s)")
+        if not config.adaptive and steps_in(duration, config.dt) < 1:
+            raise StudyArgumentError(f"{length} is less than one step (dt = {config.dt:g} s)")
     return config
 
 

@@ -413,8 +413,8 @@ def test_cycles_shorter_than_a_step_is_an_error_naming_cycles(no_compute, tmp_pa
     assert studies_main(["fig4c", "--cycles", "0.0001", "--out", str(tmp_path / "out"),
                          "--no-progress"]) == 2
     error = capsys.readouterr().err.strip()
-    assert "--cycles 0.0001: 0.0001 periods of 3.15 s are 0.000315 s, less than one step " \
-           "(dt = 0.001 s)" in error and len(error.splitlines()) == 1
+    assert "--cycles 0.0001 (0.000315 s) is less than one step (dt = 0.001 s)" in error \
+        and len(error.splitlines()) == 1
     with pytest.raises(ValueError, match=r"cycles must give at least one step.*params\[0\]"):
         taichi_star.batch.run_batch([StarParams()], cycles=1e-4)
 
@@ -423,8 +423,12 @@ def test_cycles_shorter_than_a_step_is_an_error_naming_cycles(no_compute, tmp_pa
     (["--cycles", "1e9"], "--cycles 1e+09 (3.15e+09 s) at --dt 0.001 s is 3.15e+12 time steps per "
                           "instance; the limit is 2147483647"),
     (["--dt", "1e-12"], "--cycles 3 (9.45 s) at --dt 1e-12 s is 9.45e+12 time steps"),
-    (["--preset", "accurate", "--cycles", "1e4"], "--cycles 10000 (3.15e+04 s) at dt_min 1e-06 s "
-                                                  "is 3.15e+10 time steps")])
+    # adaptive: refused by the fewest steps, at dt_max (1e4 cycles at the accurate preset's
+    # 0.05 s are 6.3e5 steps: accepted)
+    (["--preset", "accurate", "--cycles", "1e9"], "--cycles 1e+09 (3.15e+09 s) at dt_max 0.05 s "
+                                                  "is 6.3e+10 time steps"),
+    # --quick runs 0.2 s whatever --cycles says: its length is what is checked
+    (["--quick", "--dt", "1e-12"], "--quick (0.2 s) at --dt 1e-12 s is 2e+11 time steps")])
 def test_unbounded_runs_are_a_one_line_error_with_the_estimate(no_compute, tmp_path, capsys,
                                                                flags, message):
     assert studies_main(["fig4c", *flags, "--out", str(tmp_path / "out"), "--no-progress"]) == 2
