@@ -212,6 +212,16 @@ def check_file_name(name: str, flag: str):
                                  f"'\\' or '..': files go into --out)")
 
 
+def check_length(length: str, duration_s: float, step_s: float, step_name: str):
+    """StudyArgumentError (one line) unless a run of duration_s (s, what `length` says, e.g.
+    "--cycles 3 (9.45 s)") at steps of step_s (s, named `step_name`) stays within the step
+    counter (`check_work`, which also warns with an estimate when it is long)."""
+    try:
+        check_work(f"{length} at {step_name} {step_s:g} s", duration_s / step_s)
+    except ValueError as error:
+        raise StudyArgumentError(str(error)) from None
+
+
 def check_positive(value: float, flag: str):
     """StudyArgumentError naming the flag unless value is a finite number > 0."""
     if not (math.isfinite(value) and value > 0):
@@ -391,10 +401,7 @@ def solver(args) -> SolverConfig:
             length = f"--cycles {args.cycles:g} ({duration:.3g} s)"
         # adaptive runs are refused by their fewest steps, as the library refuses them
         step, step_name = (config.dt_max, "dt_max") if config.adaptive else (config.dt, "--dt")
-        try:
-            check_work(f"{length} at {step_name} {step:g} s", duration / step)
-        except ValueError as error:
-            raise StudyArgumentError(str(error)) from None
+        check_length(length, duration, step, step_name)
         if not config.adaptive and steps_in(duration, config.dt) < 1:
             raise StudyArgumentError(f"{length} is less than one step (dt = {config.dt:g} s)")
     return config

@@ -163,6 +163,8 @@ def plan(args):
             duration = QUICK_DURATION_S if quick else args.cycles * period
             for dt_ms in dts:
                 dt = dt_ms * 1e-3
+                cli.check_length(f"--cycles {args.cycles:g} ({duration:.3g} s)", duration, dt,
+                                 "dt (--dts-ms)")
                 try:
                     solver = SolverConfig(dt=dt, precision=precision,
                                           newton_tol=TOLERANCE[precision])

@@ -436,6 +436,19 @@ def test_unbounded_runs_are_a_one_line_error_with_the_estimate(no_compute, tmp_p
     assert message in error and len(error.splitlines()) == 1
 
 
+@pytest.mark.parametrize("study, message", [
+    ("work_precision", "--cycles 1e+09 (3.15e+09 s) at the grid's finest step 0.000125 s is "
+                       "2.52e+13 time steps"),
+    ("stability", "--cycles 1e+09 (3e+08 s) at dt (--dts-ms) 0.0005 s is 6e+11 time steps")])
+def test_studies_with_their_own_step_grids_refuse_unbounded_cycles(no_compute, tmp_path, capsys,
+                                                                  study, message):
+    """The studies that pick their own steps check --cycles against the finest of them."""
+    assert studies_main([study, "--cycles", "1e9", "--out", str(tmp_path / "out"),
+                         "--no-progress"]) == 2
+    error = capsys.readouterr().err.strip()
+    assert message in error and len(error.splitlines()) == 1
+
+
 def test_a_full_disk_while_drawing_a_plot_is_a_one_line_error(tmp_path, monkeypatch, capsys):
     """A plot is saved by matplotlib, not by Output: ENOSPC there is still one line naming the
     file (exit 2), not a traceback."""
