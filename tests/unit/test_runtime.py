@@ -62,7 +62,9 @@ def test_a_taken_cache_lock_prints_no_advice_to_clean_the_cache(tmp_path):
 
     script = tmp_path / "probe.py"
     script.write_text(CACHE_PROBE)
-    environment = {**os.environ, "HOME": str(tmp_path)}
+    # the cache under HOME, even where the caller's environment names another cache folder
+    environment = {**{name: value for name, value in os.environ.items()
+                      if name != "TI_OFFLINE_CACHE_FILE_PATH"}, "HOME": str(tmp_path)}
 
     def run(mode):
         return subprocess.run([sys.executable, str(script), mode], env=environment,
