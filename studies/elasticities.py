@@ -40,7 +40,7 @@ import pandas as pd
 from taichi_star import Gait, SolverConfig, StarParams, simulate
 from taichi_star.output import column_unit
 from taichi_star.sensitivities import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS,
-                                       parse_directions)
+                                       REPLICAS_PER_DIRECTION, parse_directions)
 
 from . import cli
 
@@ -275,7 +275,7 @@ def main(argv=None):
     table["cycles"] = args.cycles
     table["quick"] = args.quick  # --quick: QUICK_DURATION_S from rest instead of the cycles
     csv = out.write_csv(table, f"{args.prefix}.csv",
-                        extra={"instances": len(params) * (1 + 2 * len(parameters)),
+                        extra={"instances": len(params) * (1 + REPLICAS_PER_DIRECTION * len(parameters)),
                                "wall_s": round(wall_s, 1)})
     out.wrote(plot_elasticities(csv, out.path(f"{args.prefix}.png")))
     if checked:

@@ -26,9 +26,9 @@ Young's modulus, the two densities, hub mass per height, thickness).
 
 Cost, per optimiser: evaluations (a CMA-ES point; an L-BFGS-B call, objective and gradient),
 wall time, and simulated robot-seconds = instances × simulated seconds, counted two ways. A
-run with n sensitivities carries 4n replica instances per instance (pairs at ±ε and ±2ε): they
+run with n sensitivities carries 2n replica instances per instance (the ±ε pairs): they
 are never solved, only assembled at the solved state, so they cost less than an instance;
-`robot_seconds` counts each replica as a full instance ((1 + 4n) × gaits × window), the
+`robot_seconds` counts each replica as a full instance ((1 + 2n) × gaits × window), the
 conservative count, and `robot_seconds_cost_equivalent` as the measured (1 + 1.2n)× of a run
 (docs/numerics.md, "Sensitivities": the cost of n directions on this machine). CMA-ES counts
 gaits × window per point.
@@ -52,6 +52,7 @@ import numpy as np
 import pandas as pd
 
 from taichi_star import identification, simulate
+from taichi_star.sensitivities import REPLICAS_PER_DIRECTION
 from taichi_star.timegrid import nearest_interval
 
 from . import cli, identify
@@ -73,10 +74,9 @@ PARAMETER_SETS["20"] = PARAMETER_SETS["6"] + [
 CORNER_GROUP = 10
 """Axes whose 2^k corners are checked together (`identify.check_box`): the 20-axis box in two
 groups; no limit between fields ties an axis of one group to one of the other."""
-REPLICAS_PER_DIRECTION = 4
-"""Replica instances a sensitivity direction adds per instance (pairs at ±ε and ±2ε)."""
 COST_PER_DIRECTION = 1.2
-"""Measured cost of one direction relative to the run (docs/numerics.md, "Sensitivities")."""
+"""Cost of one direction relative to the run as measured when the committed tables were made
+(sensitivities with two replica pairs); docs/numerics.md, "Sensitivities", has today's."""
 RECORD_INTERVAL_S = 0.01
 """Centroid records, s (as model_select's fits)."""
 FAILED_OBJECTIVE = 1e6

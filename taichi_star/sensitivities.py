@@ -47,6 +47,8 @@ past it as the robot coasts): there a replica takes its instance's side of the k
 polynomial. A second pair at ±2ε, extrapolated as 2·D(ε) − D(2ε), was needed before that rule;
 without it a 9.45-s run of A1 stays within 2.3e-7 of whole-run differences (docs: numerics,
 sensitivities), with half the replicas."""
+REPLICAS_PER_DIRECTION = 2
+"""Replica instances each direction adds per instance: the pair at ±ε."""
 ZERO_VALUE_SCALE = 0.01
 """For a parameter at 0, ε is RELATIVE_STEP times this share of the top of its range (for a
 per-actuator delay: of the period)."""
@@ -182,7 +184,7 @@ def derivatives(values: np.ndarray, directions: Sequence[Direction], steps: np.n
     """d(output)/d(direction) for every direction, label -> (B, ...) array, from `values`
     (B_all, ...): the output of every instance of a `replica_batch` batch in its order (an
     angle's differences, output in degrees, taken the short way round)."""
-    count = len(values) // (1 + 2 * len(directions))
+    count = len(values) // (1 + REPLICAS_PER_DIRECTION * len(directions))
     result = {}
     for j, direction in enumerate(directions):
         first = (1 + 2 * j) * count
@@ -198,7 +200,7 @@ def split_result(summary: pd.DataFrame, trajectory: pd.DataFrame,
     alone, sensitivities: one row per instance with a column `sensitivity_column(output,
     direction)` per SUMMARY_OUTPUTS × direction, trajectory sensitivities: the trajectory's
     instance and t_s with one column per TRAJECTORY_OUTPUTS × direction)."""
-    count = len(summary) // (1 + 2 * len(directions))
+    count = len(summary) // (1 + REPLICAS_PER_DIRECTION * len(directions))
     sensitivities = {}
     by_instance = trajectory.sort_values(["instance", "t_s"], kind="stable")
     records = len(by_instance) // len(summary) if len(summary) else 0

@@ -208,7 +208,7 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     runtime = Runtime.current()
     runtime.ensure(arch, solver.precision)
     # replicas travel in their instance's chunk: a chunk holds (1 + 2·directions) × its instances
-    per_instance = 1 + 2 * len(directions)
+    per_instance = 1 + tangents.REPLICAS_PER_DIRECTION * len(directions)
     chunk = max(1, stream_chunk_size(params * per_instance, solver.precision, arch) // per_instance)
     starts = range(0, len(params), chunk)
     results = []
@@ -290,7 +290,7 @@ def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, reco
                       start_centroids, centroids, rotations, shapes, boundaries, steady_from_cycle)
     if not directions:
         return result
-    count = len(params) // (1 + 2 * len(directions))
+    count = len(params) // (1 + tangents.REPLICAS_PER_DIRECTION * len(directions))
     summary, trajectory, sensitivities, trajectory_sensitivities = tangents.split_result(
         result.summary, result.trajectory, directions, steps)
     return SimulationResult(summary=summary, trajectory=trajectory,
