@@ -187,7 +187,7 @@ def derivatives(values: np.ndarray, directions: Sequence[Direction], steps: np.n
     count = len(values) // (1 + REPLICAS_PER_DIRECTION * len(directions))
     result = {}
     for j, direction in enumerate(directions):
-        first = (1 + 2 * j) * count
+        first = (1 + REPLICAS_PER_DIRECTION * j) * count
         plus, minus = values[first:first + count], values[first + count:first + 2 * count]
         width = (2.0 * steps[j]).reshape((count,) + (1,) * (values.ndim - 1))
         result[direction.label] = _difference(plus, minus, output) / width

@@ -14,11 +14,16 @@ def cylinder_drag(velocity, coeff, branch_velocity, frozen):
     0 where that is 0) instead: at v = branch_velocity the same force and first derivative,
     and a polynomial in v, with no kink at 0. Returns F and ∂F/∂v."""
     speed = velocity.norm()
-    if frozen != 0:
-        branch_speed = branch_velocity.norm()
-        speed = velocity.dot(branch_velocity) / branch_speed if branch_speed > 0.0 else 0.0
     d_velocity = ti.Matrix.zero(float, 2, 2)
-    if speed > 0.0:
+    if frozen != 0:
+        # |v| → v·u, u the branch's unit direction (0 for none): ∂(v·u)v/∂v = (v·u)I + v⊗u
+        branch_speed = branch_velocity.norm()
+        direction = ti.Vector.zero(float, 2)
+        if branch_speed > 0.0:
+            direction = branch_velocity / branch_speed
+        speed = velocity.dot(direction)
+        d_velocity = -coeff * (speed * ti.Matrix.identity(float, 2) + velocity.outer_product(direction))
+    elif speed > 0.0:
         d_velocity = -coeff * (speed * ti.Matrix.identity(float, 2) + velocity.outer_product(velocity) / speed)
     return -coeff * speed * velocity, d_velocity
 

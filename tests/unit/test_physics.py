@@ -182,6 +182,18 @@ def test_cylinder_drag_jacobian(taichi_cpu):
     assert np.allclose(_call(_cylinder_drag, np.zeros(2), 6, 150.0, np.zeros(2), 0), 0.0)
 
 
+@pytest.mark.parametrize("branch", [(0.013, -0.021), (-0.02, 0.004)])
+def test_the_frozen_cylinder_drag_returns_its_own_jacobian(taichi_cpu, branch):
+    """On a replica's branch (|v| taken as v's component along the instance's velocity, which
+    here points with or against v), the returned ∂F/∂v is that of the frozen formula; with an
+    instance at rest (no direction) force and derivative are exactly 0."""
+    inputs, branch = np.array([0.011, -0.017]), np.array(branch)
+    evaluate = lambda x: _call(_cylinder_drag, x, 6, 150.0, branch, 1)  # noqa: E731
+    out = evaluate(inputs)
+    _assert_close(out[2:].reshape(2, 2), _central_jacobian(lambda x: evaluate(x)[:2], inputs, 1e-9))
+    assert not _call(_cylinder_drag, inputs, 6, 150.0, np.zeros(2), 1).any()
+
+
 @pytest.mark.parametrize("drag", ["rod", "cylinder"])
 def test_a_replica_pair_across_the_drags_kink_differences_one_polynomial(taichi_cpu, drag):
     """An instance whose velocity components lie 1e-12 m/s from zero, and a replica pair at
