@@ -51,11 +51,14 @@ class BatchEngine:
     set of terms (`model.engine_key`). Compiled once per process and reused: the per-instance
     coefficients and the solver settings are loaded by `load`, not baked into the kernels.
     `instances_per_block`: threads (instances) per GPU block (1 on the CPU: one instance per
-    task); `loop_spread`: parallel-loop iterations per instance (see `advance`);
-    `instance_minor`: the GPU layout of the per-instance fields (`fields.FieldArena`)."""
+    task); `loop_spread`: parallel-loop iterations per instance of the capacity (see
+    `advance`); `even_spread` (the CPU): the simulated instances placed evenly over those
+    iterations (`slot_instance`); `instance_minor`: the GPU layout of the per-instance fields
+    (`fields.FieldArena`)."""
 
     def __init__(self, model: BatchModel, capacity: int, integrator, instances_per_block: int = 1,
-                 loop_spread: int = 1, instance_minor: bool = False, sensitive: bool = False):
+                 loop_spread: int = 1, instance_minor: bool = False, sensitive: bool = False,
+                 even_spread: bool = False):
         topology = model.topology
         self.sensitive = sensitive
         """Whether the kernels carry the tangents of replicas (module docstring; static)."""
@@ -63,6 +66,7 @@ class BatchEngine:
         self.capacity = capacity
         self.instances_per_block = instances_per_block
         self.loop_spread = loop_spread
+        self.even_spread = even_spread
         self.n_nodes = topology.n_nodes
         self.integrator = integrator
         self.plan = plan_elimination(topology.n_nodes, coupled_node_pairs(
@@ -81,6 +85,8 @@ class BatchEngine:
         replicas."""
         self.tangent_count = arena.field(ti.i32)
         """Directions whose tangents each simulated instance carries (0 unless sensitive)."""
+        self.slot_stride = arena.field(ti.i32)
+        """Parallel-loop iterations between two simulated instances (`slot_instance`)."""
         self.step_limit = arena.field(ti.i32)
         """Most steps an adaptive instance takes (MAX_STEPS_PER_INSTANCE: the int32 counters
         never overflow); one that reaches it stops with status step_limit."""
@@ -99,9 +105,9 @@ class BatchEngine:
             self.state.term_histories.update(
                 {f"{term.name}.{name}": field for name, field in term.history_fields().items()})
         arena.finalize()
-        model_fields = {name: getattr(self, name) for name in ("mass", "inertia", "primal_count",
-                                                               "tangent_count", "step_limit",
-                                                               *SOLVER_SETTINGS)}
+        model_fields = {name: getattr(self, name)
+                        for name in ("mass", "inertia", "primal_count", "tangent_count",
+                                     "slot_stride", "step_limit", *SOLVER_SETTINGS)}
         for term in self.terms:
             model_fields.update({f"{term.name}.{name}": field
                                  for name, field in term.coefficient_fields().items()})
@@ -132,10 +138,14 @@ class BatchEngine:
             raise ValueError(f"a batch of {model.batch_size} is not B instances and their "
                              f"2·{tangents}·B replicas")
         capacity = self.capacity
+        primal_count = model.batch_size // (1 + 2 * tangents)
+        slots = capacity * self.loop_spread
         values = {"mass": pad_batch(model.mass, capacity),
                   "inertia": pad_batch(model.inertia, capacity),
-                  "primal_count": model.batch_size // (1 + 2 * tangents),
+                  "primal_count": primal_count,
                   "tangent_count": tangents,
+                  "slot_stride": slots // max(primal_count, 1) if self.even_spread
+                  else self.loop_spread,
                   "step_limit": MAX_STEPS_PER_INSTANCE,
                   **{name: getattr(solver, name) for name in SOLVER_SETTINGS if name != "chord"},
                   "chord": int(solver.jacobian == "chord")}
@@ -397,8 +407,9 @@ class BatchEngine:
         max_steps step attempts each in this launch (the host calls again until all are there)."""
         ti.loop_config(block_dim=self.instances_per_block)
         for slot in range(self.capacity * self.loop_spread):
-            if slot % self.loop_spread == 0 and self.simulated(slot // self.loop_spread):
-                self.adaptive_instance(slot // self.loop_spread, max_steps)
+            b = self.slot_instance(slot)
+            if b >= 0:
+                self.adaptive_instance(b, max_steps)
 
     def advance_adaptive_to(self, stop_times: np.ndarray, batch_size: int, max_steps: int = 200):
         """Advance the first batch_size instances to their stop times (s, (batch_size,)) by
@@ -444,13 +455,18 @@ class BatchEngine:
 
     # ---------------------------------------------------------------- tangents (sensitive engines)
     @ti.func
-    def simulated(self, b):
-        """Whether the kernels advance instance b (not a replica; padding is frozen by its
-        status)."""
-        result = True
-        if ti.static(self.sensitive):
-            result = b < self.primal_count[None]
-        return result
+    def slot_instance(self, slot):
+        """The simulated instance (not a replica, not padding) that iteration `slot` of a
+        parallel loop over capacity·loop_spread advances, or −1 (an idle iteration). Taichi's
+        CPU backend hands each thread a contiguous share of a loop's range, so the instances sit
+        `slot_stride` iterations apart: evenly over the whole range on the CPU (a batch of 5 in
+        the 64-instance engine, or the first third of a sensitive engine's batch, would
+        otherwise all fall to one thread), contiguously on a GPU (whole warps of instances)."""
+        stride = ti.max(self.slot_stride[None], 1)  # 0 before the first load (a compile-only launch)
+        instance = -1
+        if slot % stride == 0 and slot // stride < self.primal_count[None]:
+            instance = slot // stride
+        return instance
 
     @ti.func
     def replica(self, b, j, sign):
@@ -516,11 +532,12 @@ class BatchEngine:
         # one instance per task on the CPU (Taichi's default grain of 32 would run a small batch
         # on one thread); a full block of instances per GPU block. Taichi's CPU backend runs a
         # parallel loop of fewer than ~1,024 iterations on one thread, so on the CPU the
-        # instances are spread over `loop_spread` times as many iterations (the others idle).
+        # instances are spread over `loop_spread` times as many iterations (the others idle),
+        # evenly (`slot_instance`).
         ti.loop_config(block_dim=self.instances_per_block)
         for slot in range(self.capacity * self.loop_spread):
-            if slot % self.loop_spread == 0 and self.simulated(slot // self.loop_spread):
-                b = slot // self.loop_spread
+            b = self.slot_instance(slot)
+            if b >= 0:
                 for _ in range(n_steps):
                     if self.state.status[b] == STATUS_OK:
                         self.advance_instance(b, self.state.steps_done[b] + 1)

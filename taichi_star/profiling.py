@@ -39,11 +39,11 @@ def _profile_phases(engine: ti.template(), phases: ti.i32, calls: ti.i32, time_s
     an implicit Euler step of size dt ending at time_s (s) at the current state, then factor when
     phases >= 2, then solve when phases >= 3. Changes the terms' step histories (not the
     positions). The instances are spread over the loop as the engine's own step spreads them
-    (`loop_spread`), so that the profile runs on as many cores as the step it splits."""
+    (`slot_instance`), so that the profile runs on as many cores as the step it splits."""
     ti.loop_config(block_dim=engine.instances_per_block)
     for slot in range(engine.capacity * engine.loop_spread):
-        b = slot // engine.loop_spread
-        if slot % engine.loop_spread == 0 and engine.state.status[b] == STATUS_OK:
+        b = engine.slot_instance(slot)
+        if b >= 0 and engine.state.status[b] == STATUS_OK:
             h = engine.dt[None]
             inertia_scale, rate_gain = engine.integrator.weights(h, 1.0, 0)
             for term in ti.static(engine.terms):

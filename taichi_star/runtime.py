@@ -283,7 +283,7 @@ class Runtime:
         gpu = self.arch != "cpu"
         return BatchEngine(model, capacity, INTEGRATORS[solver.integrator](),
                            instances_per_block=self.gpu_block_dim if gpu else 1,
-                           loop_spread=self.loop_spread(capacity),
+                           loop_spread=self.loop_spread(capacity), even_spread=not gpu,
                            instance_minor=gpu and self.gpu_instance_minor, sensitive=sensitive)
 
     def engine_key(self, model: BatchModel, solver: SolverConfig, sensitive: bool = False) -> tuple:

@@ -4,11 +4,16 @@ batch independence, failure isolation and the swimming directions of the paper's
 import numpy as np
 import pandas as pd
 import pytest
+import taichi as ti
 
 import taichi_star as ts
+from taichi_star.engine import BatchEngine
+from taichi_star.integrators import INTEGRATORS
 from taichi_star.metrics import shape_checks
+from taichi_star.model import build_model
 from taichi_star.physics.jet import Jet
 from taichi_star.reference import ReferenceSimulator
+from taichi_star.runtime import prepare_engine
 
 MIXED_BATCH = [
     ts.StarParams(gait="A1"),
@@ -384,3 +389,42 @@ def test_a_period_of_no_whole_number_of_steps_fires_at_its_exact_time():
     assert error <= 1e-8 * np.abs(reference).max(), error
     late = ReferenceSimulator(batch[0].replace(period=0.175), solver).run(36)[-1]
     assert np.abs(engine - late).max() > 100 * error
+
+
+@ti.kernel
+def _slot_instances(engine: ti.template(), instances: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+    for slot in range(engine.capacity * engine.loop_spread):
+        instances[slot] = engine.slot_instance(slot)
+
+
+def _slots_of(engine):
+    """(iterations of the engine's parallel loop, the slot of each simulated instance)."""
+    instances = np.empty(engine.capacity * engine.loop_spread, dtype=np.int32)
+    _slot_instances(engine, instances)
+    slots = np.flatnonzero(instances >= 0)
+    return len(instances), slots, instances[slots]
+
+
+@pytest.mark.parametrize("batch_size", [1, 5, 40, 64])
+def test_the_cpu_loop_spreads_the_instances_evenly_over_its_iterations(taichi_cpu, batch_size):
+    """Taichi's CPU backend gives each thread a contiguous share of a parallel loop, so every
+    instance must appear exactly once and evenly spaced over the whole range (each half holds
+    half of them, ±1): a batch of 5 in the 64-instance engine once ran on one core only."""
+    engine = prepare_engine([ts.StarParams(gait="A1")] * batch_size)
+    iterations, slots, instances = _slots_of(engine)
+    np.testing.assert_array_equal(instances, np.arange(batch_size))
+    np.testing.assert_array_equal(slots, np.arange(batch_size) * (iterations // batch_size))
+    assert abs(int((slots < iterations // 2).sum()) - batch_size / 2) <= 1
+
+
+def test_a_gpu_engine_keeps_its_instances_contiguous(taichi_cpu):
+    """Without even_spread (a GPU: whole warps of consecutive instances) instance b sits at
+    slot b·loop_spread, the padding idle."""
+    params = [ts.StarParams(gait="A1")] * 5
+    model = build_model(params)
+    solver = ts.SolverConfig()
+    engine = BatchEngine(model, 64, INTEGRATORS[solver.integrator](), loop_spread=1)
+    engine.load(model, solver)
+    _, slots, instances = _slots_of(engine)
+    np.testing.assert_array_equal(instances, np.arange(5))
+    np.testing.assert_array_equal(slots, np.arange(5))
