@@ -29,9 +29,10 @@ wall time, and simulated robot-seconds = instances × simulated seconds, counted
 run with n sensitivities carries 2n replica instances per instance (the ±ε pairs): they
 are never solved, only assembled at the solved state, so they cost less than an instance;
 `robot_seconds` counts each replica as a full instance ((1 + 2n) × gaits × window), the
-conservative count, and `robot_seconds_cost_equivalent` as the measured (1 + 1.2n)× of a run
-(docs/numerics.md, "Sensitivities": the cost of n directions on this machine). CMA-ES counts
-gaits × window per point.
+conservative count, and `robot_seconds_cost_equivalent` counts a call as `gradient_cost_ratio`
+runs: the wall time of the call's simulation (with the n sensitivities) over that of the same
+simulation without, measured in this run at the base point (`measure_cost_ratio`; column
+`gradient_cost_ratio`). CMA-ES counts gaits × window per point.
 
 Writes into --out (default runs/gradient_fit/<timestamp>/), each CSV with its provenance
 sidecar: `gradient_fit.csv` (per set and optimiser: the cost columns, objective reached,
@@ -74,9 +75,8 @@ PARAMETER_SETS["20"] = PARAMETER_SETS["6"] + [
 CORNER_GROUP = 10
 """Axes whose 2^k corners are checked together (`identify.check_box`): the 20-axis box in two
 groups; no limit between fields ties an axis of one group to one of the other."""
-COST_PER_DIRECTION = 1.2
-"""Cost of one direction relative to the run as measured when the committed tables were made
-(sensitivities with two replica pairs); docs/numerics.md, "Sensitivities", has today's."""
+COST_REPEATS = 3
+"""Interleaved timings of the gradient's simulation and the plain one (`measure_cost_ratio`)."""
 RECORD_INTERVAL_S = 0.01
 """Centroid records, s (as model_select's fits)."""
 FAILED_OBJECTIVE = 1e6
@@ -85,7 +85,7 @@ QUICK_GAITS, QUICK_TRAIN, QUICK_VALIDATE = "A1+A2", "1:1", "2:2"
 RESULT_COLUMNS = ["parameter_set", "n_parameters", "optimiser", "starts", "evaluations",
                   "robot_seconds", "robot_seconds_cost_equivalent", "wall_s", "objective",
                   "validate_objective", "robot_seconds_to_cma_objective",
-                  "share_of_cma_robot_seconds"]
+                  "share_of_cma_robot_seconds", "gradient_cost_ratio"]
 
 
 class Recorder:
@@ -181,10 +181,34 @@ class Problem:
             simulated, self.trials, validate, phases=phases))
 
 
+def measure_cost_ratio(problem: Problem, repeats: int = COST_REPEATS) -> float:
+    """What one L-BFGS-B call costs in runs: the wall time of the simulation of
+    `Problem.value_and_gradient` (every gait with the box's sensitivities) over that of the same
+    simulation without them, at the base point. Each is run once first (compilation, not
+    counted), then `repeats` times interleaved; the ratio of the fastest of each (the least
+    disturbed by the rest of the machine)."""
+    params = problem.params(identify.start_units(problem.box, problem.base)[None, :])
+    window = problem.train[1] * problem.base.period
+    calls = {"plain": lambda: simulate(params, window, problem.solver, arch=problem.arch,
+                                       record_interval_s=problem.record, progress=False),
+             "gradient": lambda: simulate(params, window, problem.solver, arch=problem.arch,
+                                          record_interval_s=problem.record, progress=False,
+                                          sensitivities=problem.names)}
+    best = {}
+    for name, call in calls.items():
+        call()
+    for _ in range(repeats):
+        for name, call in calls.items():
+            started = time.perf_counter()
+            call()
+            best[name] = min(best.get(name, math.inf), time.perf_counter() - started)
+    return best["gradient"] / best["plain"]
+
+
 def fit_lbfgs(problem: Problem, starts: int, max_evaluations: int, seed: int,
-              recorder: Recorder) -> Recorder:
+              recorder: Recorder, cost_ratio: float) -> Recorder:
     """Multi-start L-BFGS-B over the unit box (module docstring), every evaluation into
-    `recorder`."""
+    `recorder`, a call counted as `cost_ratio` runs in the cost-equivalent robot-seconds."""
     from scipy.optimize import minimize
     parameter_set = recorder.parameter_set
     dimension = len(problem.box)
@@ -197,7 +221,7 @@ def fit_lbfgs(problem: Problem, starts: int, max_evaluations: int, seed: int,
         def fun(units, start=start):
             value, gradient = problem.value_and_gradient(units)
             recorder.add(units, value, per_evaluation * (1 + REPLICAS_PER_DIRECTION * dimension),
-                         per_evaluation * (1 + COST_PER_DIRECTION * dimension), start)
+                         per_evaluation * cost_ratio, start)
             print(f"set {parameter_set} L-BFGS-B start {start}: objective {value:.5g}, "
                   f"|gradient| {np.linalg.norm(gradient):.3g}", flush=True)
             return value, gradient
@@ -228,8 +252,10 @@ def fit_cma(problem: Problem, generations: int, popsize, seed: int,
     return recorder
 
 
-def summarise(recorders: Sequence[Recorder], problem_of, validate) -> pd.DataFrame:
-    """One row per optimiser (RESULT_COLUMNS)."""
+def summarise(recorders: Sequence[Recorder], problem_of, validate,
+              cost_ratios: dict) -> pd.DataFrame:
+    """One row per optimiser (RESULT_COLUMNS); `cost_ratios`: parameter set -> the measured
+    cost of a gradient call in runs (1 for CMA-ES's points)."""
     rows = []
     for recorder in recorders:
         last = recorder.rows[-1]
@@ -241,7 +267,9 @@ def summarise(recorders: Sequence[Recorder], problem_of, validate) -> pd.DataFra
                      "robot_seconds_cost_equivalent": last["robot_seconds_cost_equivalent"],
                      "wall_s": last["wall_s"], "objective": recorder.best_objective,
                      "validate_objective": problem_of[recorder.parameter_set].validate(
-                         recorder.best_units, validate)})
+                         recorder.best_units, validate),
+                     "gradient_cost_ratio": (cost_ratios[recorder.parameter_set]
+                                             if recorder.optimiser == "L-BFGS-B" else 1.0)})
     table = pd.DataFrame(rows)
     for parameter_set, part in table.groupby("parameter_set", sort=False):
         cma = part[part["optimiser"] == "CMA-ES"]
@@ -337,7 +365,7 @@ def main(argv=None):
                                            "cma_generations": args.cma_generations,
                                            "popsize": args.popsize, "seed": args.seed,
                                            "sets": {n: PARAMETER_SETS[n] for n in sets}})
-    problems, recorders = {}, []
+    problems, recorders, cost_ratios = {}, [], {}
 
     def write_history():  # after every evaluation: an interrupted run keeps what it did
         out.write_csv(pd.DataFrame([row for r in recorders for row in r.rows]),
@@ -347,10 +375,12 @@ def main(argv=None):
         problems[name] = Problem(boxes[name], base, gaits, trials, train, solver, args.arch)
         recorders.append(Recorder(name, "CMA-ES", write_history))
         fit_cma(problems[name], args.cma_generations, args.popsize, args.seed, recorders[-1])
+        cost_ratios[name] = measure_cost_ratio(problems[name])
+        print(f"set {name}: a gradient call costs {cost_ratios[name]:.2f} runs", flush=True)
         recorders.append(Recorder(name, "L-BFGS-B", write_history))
         fit_lbfgs(problems[name], args.starts, args.lbfgs_evaluations, args.seed,
-                  recorders[-1])
-    table = summarise(recorders, problems, validate)
+                  recorders[-1], cost_ratios[name])
+    table = summarise(recorders, problems, validate, cost_ratios)
     out.write_csv(table, "gradient_fit.csv")
     out.wrote(plot_history(out.path("gradient_fit_history.csv"),
                            out.path("gradient_fit.png")))

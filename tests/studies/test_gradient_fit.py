@@ -4,8 +4,9 @@ tests/unit/test_identification_gradient.py, and from the committed run in result
 
 import pytest
 
-from studies import gradient_fit
+from studies import gradient_fit, identify
 from studies.__main__ import main as studies_main
+from taichi_star import SolverConfig, StarParams
 
 
 @pytest.mark.parametrize("argv, message", [
@@ -36,3 +37,26 @@ def test_the_twenty_parameter_set_extends_the_six():
     assert len(gradient_fit.PARAMETER_SETS["6"]) == 6
     assert len(gradient_fit.PARAMETER_SETS["20"]) == 20
     assert gradient_fit.PARAMETER_SETS["20"][:6] == gradient_fit.PARAMETER_SETS["6"]
+
+
+def test_the_cost_ratio_is_the_fastest_gradient_run_over_the_fastest_plain_one(monkeypatch):
+    """measure_cost_ratio runs each simulation once untimed (compilation), then `repeats`
+    times interleaved, and divides the fastest gradient run by the fastest plain one: a fake
+    clock makes every duration known (gradient runs 3.0, 2.5, 2.8 s; plain 1.1, 1.0, 1.2 s)."""
+    box = [identify.parse_range_spec(text, "--sets") for text in gradient_fit.PARAMETER_SETS["6"]]
+    base = StarParams(gait="A1+A2")
+    problem = gradient_fit.Problem(box, base, ["A1+A2"], {}, (1, 1), SolverConfig(), "cpu")
+    durations = {"gradient": [9.0, 3.0, 2.5, 2.8], "plain": [9.0, 1.1, 1.0, 1.2]}
+    clock, calls = [0.0], []
+
+    def fake_simulate(params, duration_s, solver, sensitivities=(), **kwargs):
+        kind = "gradient" if sensitivities else "plain"
+        calls.append(kind)
+        assert tuple(sensitivities) in ((), tuple(problem.names))
+        assert duration_s == pytest.approx(base.period)
+        clock[0] += durations[kind].pop(0)
+
+    monkeypatch.setattr(gradient_fit, "simulate", fake_simulate)
+    monkeypatch.setattr(gradient_fit.time, "perf_counter", lambda: clock[0])
+    assert gradient_fit.measure_cost_ratio(problem, repeats=3) == pytest.approx(2.5 / 1.0)
+    assert calls == ["plain", "gradient"] + ["plain", "gradient"] * 3
