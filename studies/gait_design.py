@@ -19,7 +19,9 @@ start's gradient is its own, only the line search is shared.
 Writes into --out (default runs/gait_design/<timestamp>/), each CSV with its provenance sidecar:
 - `gait_design_paths.csv`: every evaluation of every start (evaluation, start, gait, origin,
   objective, gradient norm, the 8 delays in s);
-- `gait_design.csv`: the best pattern ("designed") and the best synchronous gait
+- `gait_design_synchronous.csv`: every synchronous gait of `--primitives` (offsets 0) under
+  the same conditions (cycles from rest, solver), one batch: gait, objective, status;
+- `gait_design.csv`: the best pattern ("designed") and the best synchronous gait of that table
   ("synchronous"), each simulated over the same cycles with the same solver, at α and
   drag_perpendicular × 0.8, 1 and 1.2 (the centre and 4 corners; one batch): objective per case;
 - `gait_design.png` (objective per evaluation per start, and the robustness), drawn from the
@@ -133,6 +135,20 @@ def robustness(base, solver, patterns, goal, direction_deg, cycles, arch) -> pd.
                          in zip(cases, value, result.summary["status"])])
 
 
+def synchronous_objectives(base, solver, gaits, goal, direction_deg, cycles,
+                           arch) -> pd.DataFrame:
+    """Every synchronous gait of `gaits` (all offsets 0) under the study's conditions (cycles
+    from rest, solver), one batch: gait, objective, status; the reference the designed pattern
+    is judged against is the best of them."""
+    duration_s = cycles * base.period
+    params = [base.replace(gait=gait, actuator_delays=(0.0,) * 8) for gait in gaits]
+    result = simulate(params, duration_s, solver, arch=arch)
+    return pd.DataFrame({"gait": list(gaits),
+                         "objective": objective_of(result, goal, direction_deg, duration_s,
+                                                   cycles),
+                         "status": result.summary["status"].to_numpy()})
+
+
 def plot_design(paths_csv, table_csv, png_path, unit: str) -> Path:
     """Left: every start's objective per evaluation; right: best pattern vs best synchronous
     gait at the robustness cases."""
@@ -202,8 +218,11 @@ def main(argv=None):
                            args.iterations, args.arch)
     paths_csv = out.write_csv(paths, "gait_design_paths.csv")
     winner = best.loc[best["objective"].idxmax()]
-    synchronous = paths[(paths["evaluation"] == 0) & (paths["origin"] == "synchronous")]
-    reference = synchronous.loc[synchronous["objective"].idxmax()]
+    synchronous = synchronous_objectives(base, solver, list(primitives["gait"]), args.goal,
+                                         direction, args.cycles, args.arch)
+    out.write_csv(synchronous, "gait_design_synchronous.csv")
+    finished = synchronous[synchronous["status"] == "ok"]
+    reference = finished.loc[finished["objective"].idxmax()]
     delay_columns = [f"delay{k + 1}_s" for k in range(8)]
     patterns = [("designed", winner["gait"], tuple(winner[delay_columns])),
                 ("synchronous", reference["gait"], (0.0,) * 8)]

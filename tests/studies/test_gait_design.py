@@ -59,3 +59,23 @@ def test_optimiser_records_match_fresh_runs_and_finite_differences():
     assert np.sign(exact) == np.sign(finite_difference) != 0
     # O(h²) truncation over a 2-step difference and the time discretisation of the delay
     assert exact == pytest.approx(finite_difference, rel=0.1)
+
+
+def test_the_synchronous_table_holds_every_gait_at_offsets_zero():
+    """One row per gait in the given order, each the objective of that gait fired in sync
+    (fresh runs, one per gait, give the same numbers: batch-position independence is bitwise),
+    so the reference is the best synchronous gait under the study's own conditions."""
+    base = StarParams(period=0.5, actuator_delays=(0.1,) + (0.0,) * 7)
+    solver = SolverConfig(dt=5e-3)
+    gaits = ["A1+A2+A4", "A1", "A2+A3+A5"]
+    table = gait_design.synchronous_objectives(base, solver, gaits, "turn", 0.0, 1, "cpu")
+    assert list(table["gait"]) == gaits and (table["status"] == "ok").all()
+    for gait, objective in zip(gaits, table["objective"]):
+        alone = taichi_star.simulate(base.replace(gait=gait, actuator_delays=(0.0,) * 8),
+                                     base.period, solver)
+        assert objective == gait_design.objective_of(alone, "turn", 0.0, base.period, 1)[0]
+    # A1+A2+A4 turns (about -0.15 deg in this half-second cycle) and A2+A3+A5 is the same
+    # gait rotated by one actuator: the same turn to round-off (1e-9 deg); A1 is symmetric
+    assert abs(table["objective"][0]) > 0.05
+    assert table["objective"][0] == pytest.approx(table["objective"][2], abs=1e-9)
+    assert abs(table["objective"][1]) < 1e-9
