@@ -37,7 +37,8 @@ simulation without, measured in this run at the base point (`measure_cost_ratio`
 Writes into --out (default runs/gradient_fit/<timestamp>/), each CSV with its provenance
 sidecar: `gradient_fit.csv` (per set and optimiser: the cost columns, objective reached,
 validation objective on `--validate-cycles` with the training phases, robot-seconds the
-gradient fit needed to reach CMA-ES's objective and their ratio to CMA-ES's total),
+gradient fit needed to reach CMA-ES's objective and their ratio to CMA-ES's total, both
+counts),
 `gradient_fit_history.csv` (every evaluation: cumulative cost and best objective so far) and
 `gradient_fit.png` (best objective against robot-seconds, drawn from the history).
 """
@@ -85,7 +86,8 @@ QUICK_GAITS, QUICK_TRAIN, QUICK_VALIDATE = "A1+A2", "1:1", "2:2"
 RESULT_COLUMNS = ["parameter_set", "n_parameters", "optimiser", "starts", "evaluations",
                   "robot_seconds", "robot_seconds_cost_equivalent", "wall_s", "objective",
                   "validate_objective", "robot_seconds_to_cma_objective",
-                  "share_of_cma_robot_seconds", "gradient_cost_ratio"]
+                  "share_of_cma_robot_seconds", "cost_equivalent_to_cma_objective",
+                  "share_of_cma_cost_equivalent", "gradient_cost_ratio"]
 
 
 class Recorder:
@@ -279,13 +281,17 @@ def summarise(recorders: Sequence[Recorder], problem_of, validate,
         for recorder in recorders:
             if recorder.parameter_set != parameter_set:
                 continue
-            reached = [row["robot_seconds"] for row in recorder.rows
-                       if row["best_objective"] <= target]
+            reached = [row for row in recorder.rows if row["best_objective"] <= target]
             index = table.index[(table["parameter_set"] == parameter_set)
                                 & (table["optimiser"] == recorder.optimiser)]
-            cost = reached[0] if reached else math.nan
-            table.loc[index, "robot_seconds_to_cma_objective"] = cost
-            table.loc[index, "share_of_cma_robot_seconds"] = cost / cma_cost
+            for count, cost_column, share_column in (
+                    ("robot_seconds", "robot_seconds_to_cma_objective",
+                     "share_of_cma_robot_seconds"),
+                    ("robot_seconds_cost_equivalent", "cost_equivalent_to_cma_objective",
+                     "share_of_cma_cost_equivalent")):
+                cost = reached[0][count] if reached else math.nan
+                table.loc[index, cost_column] = cost
+                table.loc[index, share_column] = cost / cma_cost
     return table.reindex(columns=RESULT_COLUMNS)
 
 

@@ -2,6 +2,7 @@
 on stderr, exit code 2 (its numbers come from identification.objective_and_gradient, tested in
 tests/unit/test_identification_gradient.py, and from the committed run in results/)."""
 
+import numpy as np
 import pytest
 
 from studies import gradient_fit, identify
@@ -60,3 +61,30 @@ def test_the_cost_ratio_is_the_fastest_gradient_run_over_the_fastest_plain_one(m
     monkeypatch.setattr(gradient_fit.time, "perf_counter", lambda: clock[0])
     assert gradient_fit.measure_cost_ratio(problem, repeats=3) == pytest.approx(2.5 / 1.0)
     assert calls == ["plain", "gradient"] + ["plain", "gradient"] * 3
+
+
+def test_the_summary_counts_the_cost_to_cma_objective_both_ways():
+    """A CMA-ES run of three points (10 robot-seconds each, best objective 2.0) and an
+    L-BFGS-B run whose calls count 26 robot-seconds with the replicas as instances and 7 at the
+    measured cost: the gradient fit first reaches 2.0 at its second call, after 52 and 14."""
+    class FakeProblem:
+        box = [None] * 6
+
+        def validate(self, units, validate):
+            return float(np.sum(units))
+
+    cma = gradient_fit.Recorder("6", "CMA-ES")
+    for objective in (5.0, 3.0, 2.0):
+        cma.add([objective], objective, 10.0, 10.0)
+    lbfgs = gradient_fit.Recorder("6", "L-BFGS-B")
+    for objective in (4.0, 1.5, 1.0):
+        lbfgs.add([objective], objective, 26.0, 7.0)
+    table = gradient_fit.summarise([cma, lbfgs], {"6": FakeProblem()}, (4, 6), {"6": 3.5})
+    row = table[table["optimiser"] == "L-BFGS-B"].iloc[0]
+    assert row["robot_seconds_to_cma_objective"] == 52.0
+    assert row["share_of_cma_robot_seconds"] == pytest.approx(52.0 / 30.0)
+    assert row["cost_equivalent_to_cma_objective"] == 14.0
+    assert row["share_of_cma_cost_equivalent"] == pytest.approx(14.0 / 30.0)
+    assert row["gradient_cost_ratio"] == 3.5 and row["objective"] == 1.0
+    assert row["validate_objective"] == 1.0  # the best point's units, validated
+    assert table[table["optimiser"] == "CMA-ES"].iloc[0]["gradient_cost_ratio"] == 1.0
