@@ -13,7 +13,8 @@ from taichi_star.metrics import shape_checks
 from taichi_star.model import build_model
 from taichi_star.physics.jet import Jet
 from taichi_star.reference import ReferenceSimulator
-from taichi_star.runtime import prepare_engine
+from taichi_star.runtime import Runtime, prepare_engine
+from taichi_star.sensitivities import parse_directions, replica_batch
 
 MIXED_BATCH = [
     ts.StarParams(gait="A1"),
@@ -415,6 +416,21 @@ def test_the_cpu_loop_spreads_the_instances_evenly_over_its_iterations(taichi_cp
     np.testing.assert_array_equal(instances, np.arange(batch_size))
     np.testing.assert_array_equal(slots, np.arange(batch_size) * (iterations // batch_size))
     assert abs(int((slots < iterations // 2).sum()) - batch_size / 2) <= 1
+
+
+def test_a_sensitive_engine_spreads_its_instances_and_never_its_replicas(taichi_cpu):
+    """5 instances with one direction: a batch of 15 (the 10 replicas behind the instances),
+    of which the loop advances the 5 instances only, spread over the whole range as a plain
+    batch of 5 is (the replicas once took two thirds of the range and left one core idle)."""
+    params = [ts.StarParams(gait="A1", alpha=0.5 + 0.1 * k) for k in range(5)]
+    batch, _ = replica_batch(params, parse_directions(["alpha"]))
+    solver = ts.SolverConfig()
+    runtime = Runtime.current()
+    runtime.ensure("cpu", solver.precision)
+    engine = runtime.engine_for(build_model(batch), solver, tangents=1)
+    iterations, slots, instances = _slots_of(engine)
+    np.testing.assert_array_equal(instances, np.arange(5))
+    np.testing.assert_array_equal(slots, np.arange(5) * (iterations // 5))
 
 
 def test_a_gpu_engine_keeps_its_instances_contiguous(taichi_cpu):
