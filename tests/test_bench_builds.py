@@ -1,0 +1,46 @@
+"""tools/bench_builds.py's summary: the best of each build's rounds per measured case, the
+ratio after/before, and whether the builds' final states agree (synthetic runs)."""
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def bench_builds():
+    spec = importlib.util.spec_from_file_location("bench_builds",
+                                                  REPO / "tools" / "bench_builds.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _row(build, round_number, batch, rate, digest, section="batch"):
+    return {"build": build, "round": round_number, "section": section, "scenario": "all_terms",
+            "preset": "paper", "batch_size": batch, "precision": "f64", "jacobian": "newton",
+            "robot_steps_per_s": rate, "final_state": digest}
+
+
+def test_the_summary_takes_each_builds_best_round_and_compares_the_bits(bench_builds):
+    table = pd.DataFrame([
+        _row("before", 1, 5, 100.0, "aa"), _row("after", 1, 5, 190.0, "aa"),
+        _row("before", 2, 5, 120.0, "aa"), _row("after", 2, 5, 180.0, "aa"),
+        _row("before", 1, 64, 400.0, "bb"), _row("after", 1, 64, 390.0, "cc"),
+        _row("before", 1, 64, 50.0, np.nan, "sensitivities"),
+        _row("after", 1, 64, 80.0, np.nan, "sensitivities")])
+    summary = bench_builds.summarise(table).set_index(["section", "batch_size"])
+    five = summary.loc[("batch", 5)]
+    # best rounds: before 120 (round 2), after 190 (round 1)
+    assert five["before_robot_steps_per_s"] == 120.0
+    assert five["after_robot_steps_per_s"] == 190.0
+    assert five["ratio_after_to_before"] == pytest.approx(190.0 / 120.0)
+    assert five["same_bits"] == "True"
+    assert summary.loc[("batch", 64), "same_bits"] == "False"
+    # a section that records no digest says nothing about the bits
+    assert summary.loc[("sensitivities", 64), "same_bits"] == ""
+    assert summary.loc[("sensitivities", 64), "ratio_after_to_before"] == pytest.approx(1.6)

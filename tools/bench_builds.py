@@ -1,0 +1,110 @@
+"""The bench study at two commits of this repository, interleaved: the before/after table that a
+change's speed claims rest on. Each build is a git worktree at its commit (the package imported
+from there); the rounds alternate before, after, before, after, ... on the same machine, so a
+drift of the machine's speed falls on both. Writes into --out:
+
+- `bench.csv`: every row of every run, with `build` (before/after) and `round`, and a sidecar
+  listing each run's own provenance (command, commit, machine, date);
+- `summary.csv`: per measured case (section, scenario, preset, batch size, precision,
+  Jacobian) the best robot-steps/s of each build over the rounds, their ratio after/before,
+  and whether the builds' final states agree bit for bit (`same_bits`, the digest the batch
+  section records; empty where a section records none).
+
+    python tools/bench_builds.py --before 89677b5 --after HEAD --rounds 2 --out DIR -- \\
+        --batch-sizes 5,40,64 --presets paper --sensitivity-counts 0,1 ...
+
+Everything after `--` goes to `python -m studies bench` unchanged (`--out` and
+`--no-progress` are added).
+"""
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import pandas as pd
+
+REPO = Path(__file__).resolve().parents[1]
+CASE = ["section", "scenario", "preset", "batch_size", "precision", "jacobian"]
+"""The columns that name one measured case of the bench study."""
+
+
+def worktree(revision: str, parent: Path) -> Path:
+    """A detached git worktree of `revision` under parent."""
+    path = parent / revision.replace("/", "_")
+    subprocess.run(["git", "worktree", "add", "--detach", str(path), revision], cwd=REPO,
+                   check=True, capture_output=True)
+    return path
+
+
+def commit_of(revision: str) -> str:
+    return subprocess.run(["git", "rev-parse", "--short", revision], cwd=REPO, check=True,
+                          capture_output=True, text=True).stdout.strip()
+
+
+def summarise(table: pd.DataFrame) -> pd.DataFrame:
+    """One row per CASE: best robot-steps/s per build, ratio after/before, same_bits."""
+    keyed = table.assign(**{c: table[c].fillna("") for c in CASE})
+    best = keyed.pivot_table(index=CASE, columns="build", values="robot_steps_per_s",
+                             aggfunc="max")
+    summary = best.rename(columns=lambda b: f"{b}_robot_steps_per_s").reset_index()
+    summary["ratio_after_to_before"] = (summary["after_robot_steps_per_s"]
+                                        / summary["before_robot_steps_per_s"])
+    digests = keyed.groupby(CASE)["final_state"].agg(
+        lambda d: "" if d.isna().all() else str(d.dropna().nunique() == 1))
+    return summary.merge(digests.rename("same_bits").reset_index(), on=CASE)
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    split = argv.index("--") if "--" in argv else len(argv)
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--before", required=True, help="baseline commit")
+    parser.add_argument("--after", default="HEAD", help="commit measured against it")
+    parser.add_argument("--rounds", type=int, default=2, help="interleaved rounds (>= 1)")
+    parser.add_argument("--out", required=True, help="folder for the tables")
+    args = parser.parse_args(argv[:split])
+    if args.rounds < 1:
+        parser.error(f"--rounds must be >= 1, got {args.rounds}")
+    bench_args = argv[split + 1:]
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    builds = {"before": commit_of(args.before), "after": commit_of(args.after)}
+    frames, runs = [], []
+    with tempfile.TemporaryDirectory() as scratch:
+        trees = {build: worktree(commit, Path(scratch)) for build, commit in builds.items()}
+        try:
+            for round_number in range(1, args.rounds + 1):
+                for build, tree in trees.items():
+                    run_out = Path(scratch) / f"{build}_{round_number}"
+                    command = [sys.executable, "-m", "studies", "bench", *bench_args,
+                               "--no-progress", "--out", str(run_out)]
+                    print(f"round {round_number}, {build} ({builds[build]})", flush=True)
+                    subprocess.run(command, cwd=tree, check=True, env={
+                        **os.environ, "PYTHONPATH": str(tree)})
+                    frames.append(pd.read_csv(run_out / "bench.csv").assign(
+                        build=build, round=round_number))
+                    runs.append(json.loads((run_out / "bench.csv.json").read_text()))
+        finally:
+            for tree in trees.values():
+                subprocess.run(["git", "worktree", "remove", "--force", str(tree)], cwd=REPO,
+                               capture_output=True)
+    table = pd.concat(frames, ignore_index=True)
+    table = table[["build", "round"] + [c for c in table.columns if c not in ("build", "round")]]
+    table.to_csv(out / "bench.csv", index=False)
+    (out / "bench.csv.json").write_text(json.dumps({"runs": runs}, indent=1, default=str))
+    summary = summarise(table)
+    summary.to_csv(out / "summary.csv", index=False)
+    (out / "summary.csv.json").write_text(json.dumps({
+        "study": "bench", "command": "python tools/bench_builds.py " + " ".join(argv),
+        "description": f"the best of {args.rounds} interleaved rounds per case and build "
+                       f"(before: {builds['before']}, after: {builds['after']})",
+        "git_commit": builds["after"]}, indent=1))
+    print(summary.to_string(index=False))
+
+
+if __name__ == "__main__":
+    main()
