@@ -462,7 +462,7 @@ class BatchEngine:
         `slot_stride` iterations apart: evenly over the whole range on the CPU (a batch of 5 in
         the 64-instance engine, or the first third of a sensitive engine's batch, would
         otherwise all fall to one thread), contiguously on a GPU (whole warps of instances)."""
-        # the stride is 0 before the first load (a launch that only compiles)
+        # 0 until the first `load` (primal_count is 0 too): nothing advances, nothing divides by 0
         stride = ti.max(self.slot_stride[None], 1)
         instance = -1
         if slot % stride == 0 and slot // stride < self.primal_count[None]:
