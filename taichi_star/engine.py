@@ -101,6 +101,9 @@ class BatchEngine:
                       for name, values in coefficients.items()}
             self.terms.append(cls(self.assembly, configuration, shapes, term_classes))
         connect_terms(self.terms)
+        self.carrying = any(term.carries_state for term in self.terms)
+        """Whether a term keeps state the positions do not determine (static: the kernels
+        commit and back it up only then, `accept_step`)."""
         for term in self.terms:
             self.state.term_histories.update(
                 {f"{term.name}.{name}": field for name, field in term.history_fields().items()})
@@ -295,9 +298,10 @@ class BatchEngine:
             while converged == 1 and substep < substeps:
                 first = (step_number - 1) * substeps + substep
                 converged, finite = self.solve_step(b, first * h, (first + 1) * h, h, 1.0, use_history, 0)
-                if ti.static(self.sensitive):
-                    if converged == 1:
+                if converged == 1:
+                    if ti.static(self.sensitive):
                         self.tangent_step(b, first * h, (first + 1) * h, h, 1.0, use_history)
+                    self.accept_step(b, h, 1.0, use_history)
                 substep += 1
             if converged == 0:
                 if use_history:
@@ -375,6 +379,7 @@ class BatchEngine:
             if converged == 1 and (error <= tol or h <= dt_min):
                 if ti.static(self.sensitive):
                     self.tangent_step(b, start, end, h, ratio, use_history)
+                self.accept_step(b, h, ratio, use_history)
                 self.state.time[b] = end
                 self.state.steps_done[b] = self.state.steps_done[b] + 1
                 self.state.previous_step_size[b] = h
@@ -435,8 +440,8 @@ class BatchEngine:
 
     @ti.func
     def copy_backup(self, b, save: ti.template()):
-        """Positions and velocities of instance b and its replicas into the backup (`save`) or
-        back from it."""
+        """Positions and velocities of instance b and its replicas (and what the terms carry,
+        `physics.base.Term.copy_carried`) into the backup (`save`) or back from it."""
         self.copy_instance_backup(b, save)
         if ti.static(self.sensitive):
             for j in range(self.tangent_count[None]):
@@ -444,7 +449,24 @@ class BatchEngine:
                     self.copy_instance_backup(self.replica(b, j, sign), save)
 
     @ti.func
+    def accept_step(self, b, h, ratio, use_history):
+        """Let the terms that carry state commit instance b's accepted step (of size h, ratio
+        and history as solved) and its replicas' (moved by `tangent_step`); nothing is compiled
+        for a batch without such a term."""
+        if ti.static(self.carrying):
+            _, rate_gain = self.integrator.weights(h, ratio, use_history)
+            for term in ti.static(self.terms):
+                term.accept_step(b, rate_gain)
+            if ti.static(self.sensitive):
+                for j in range(self.tangent_count[None]):
+                    for sign in ti.static(range(2)):
+                        for term in ti.static(self.terms):
+                            term.accept_step(self.replica(b, j, sign), rate_gain)
+
+    @ti.func
     def copy_instance_backup(self, b, save: ti.template()):
+        for term in ti.static(self.terms):
+            term.copy_carried(b, save)
         for n in range(self.n_nodes):
             if ti.static(save):
                 self.state.backup_positions[b, n] = self.state.positions[b, n]

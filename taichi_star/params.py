@@ -266,6 +266,13 @@ class StarParams:
     length and unit height on each edge's mean velocity v (`physics.linear_drag`)."""
     hub_linear_drag: float = parameter(0.0, "Pa*s", 0.0, 1e3)
     """Linear drag c_h on the hub, Pa·s: a force −c_h·v per unit height on the centre node."""
+    wake_coupling: float = parameter(0.0, "Pa*s", 0.0, 1e3)
+    """Coupling c_w of the entrained water to the hub, Pa·s (0 = no entrained water): a force
+    c_w·(u − v) per unit height on the centre node, v its velocity, u that of the water the
+    robot has set moving, which follows it as u̇ = (v − u)/τ_w and takes the opposite force
+    (`physics.wake`)."""
+    wake_time: float = parameter(1.0, "s", 0.0, 1e3, lowest_included=False)
+    """Exchange time τ_w of the entrained water, s: its mass per unit height is c_w·τ_w."""
     actuator_gains: Tuple[float, ...] = per_actuator(1.0, "1",
                                                      f"8 numbers in [0, {MAX_ACTUATOR_GAIN:g}]")
     """Gain g_k (-) of actuator A_k (index k − 1) on its commanded curvature change: it follows

@@ -2,8 +2,8 @@
 
 It is written independently of the Taichi batch engine, from the specification alone, so that
 the two can check each other. Implicit Euler or BDF2 in time; elasticity, Kelvin–Voigt material
-damping, rod and cylinder drag (quadratic and linear), jets, added mass, and per-actuator gains
-and delays. Everything is double precision; each
+damping, rod and cylinder drag (quadratic and linear), jets, added mass, per-actuator gains
+and delays, and the entrained water (its velocity two more unknowns of each step). Everything is double precision; each
 Newton iteration assembles the exact Jacobian of all forces as a scipy.sparse matrix and factors
 it with SuperLU (N = 193 nodes, 386 degrees of freedom: ~3 ms per iteration).
 
@@ -666,10 +666,17 @@ class ReferenceSimulator:
         force, jac = self._step_forces(q_new, step)
         return force.reshape(q_new.shape), jac.toarray()
 
-    def step(self, q, v, t, dt=None, previous=None):
+    def step(self, q, v, t, dt=None, previous=None, water=None):
         """One implicit step from time t to t + dt (default solver.dt): BDF2 when the solver's
         integrator is "bdf2" and `previous` = (q_prev, v_prev), the state at t − dt, is given;
         implicit Euler otherwise.
+
+        With the entrained water (`wake_coupling` > 0), `water` = (u, u_prev) is its velocity
+        (2,) m/s at t and at t − dt (u_prev is read only for BDF2), and the step solves for the
+        water's velocity at t + dt with the positions: two more unknowns u', with the residual
+        m_w·γ·(u' − anchor) − c_w·(v_hub − u') = 0 (m_w = c_w·τ_w; the anchor as for any rate,
+        `ImplicitStep`) beside the nodes', on which the hub's force c_w·(u' − v_hub) acts. It
+        then returns u' as a fourth value.
 
         Solves inertia_gain·M·(q_new − inertia_target) − F(q_new) = 0 (see `ImplicitStep`) with
         M = mass + added mass, starting Newton from q + dt·v, or from q + dt·(2v − v_prev) when
@@ -685,21 +692,27 @@ class ReferenceSimulator:
         h = self.solver.dt if dt is None else dt
         q = np.asarray(q, dtype=np.float64)
         v = np.asarray(v, dtype=np.float64)
-        step = self.implicit_step(q, v, t, h, previous if self.solver.integrator == "bdf2" else None)
+        bdf2 = self.solver.integrator == "bdf2" and previous is not None
+        step = self.implicit_step(q, v, t, h, previous if bdf2 else None)
         inertia = step.inertia_gain * self._inertia
         target = step.inertia_target.reshape(-1)
         # Newton's start: the last step's acceleration carried on when there is one
         start = q + h * v if previous is None else q + h * (2.0 * v - np.asarray(previous[1]))
         q_new = start.reshape(-1)
+        wake = self._water_system(step, water, bdf2)
+        if wake is not None:
+            q_new = np.concatenate([q_new, np.asarray(water[0], dtype=np.float64)])
         sparse_lu = require("scipy.sparse.linalg", "test").splu
         sparse = require("scipy.sparse", "test")
         change = 0.0  # no previous update: the first is judged on its own
         for iteration in range(1, self.solver.max_newton + 1):
-            force, jac = self._step_forces(q_new.reshape(q.shape), step)
-            residual = inertia * (q_new - target) - force
+            force, jac = self._step_forces(q_new[:q.size].reshape(q.shape), step)
+            residual = inertia * (q_new[:q.size] - target) - force
             # Sparse LU (SuperLU) rather than a dense solve: it is fast, and it does not use the
             # threaded BLAS, whose threads thrash when other processes share the cores.
             system = (sparse.diags(inertia) - jac).tocsc()
+            if wake is not None:
+                residual, system = wake(q_new, residual, system)
             delta = -sparse_lu(system).solve(residual)
             q_new += delta
             previous_change, change = change, np.abs(delta).max()
@@ -711,13 +724,50 @@ class ReferenceSimulator:
                 error_left = min(change, contraction / (1.0 - contraction) * change)
             if error_left <= self.solver.newton_tol \
                     and np.abs(residual).max() <= self.solver.residual_limit:
-                q_new = q_new.reshape(q.shape)
-                return q_new, step.rate_gain * (q_new - step.position_anchor), iteration
+                positions = q_new[:q.size].reshape(q.shape)
+                solved = (positions, step.rate_gain * (positions - step.position_anchor), iteration)
+                return solved if wake is None else solved + (q_new[q.size:].copy(),)
         raise NewtonDidNotConverge(
             f"step to t = {t + h:.6g} s: max|Δq| = {change:.3g} m (newton_tol "
             f"{self.solver.newton_tol:.3g} m), max|r| = {np.abs(residual).max():.3g} N "
             f"(residual_tol {self.solver.residual_tol} N) after {self.solver.max_newton} "
             f"iterations")
+
+    def _water_system(self, step: ImplicitStep, water, bdf2: bool):
+        """None without the entrained water; else a function that adds the water's two
+        unknowns (after the 2N of the nodes) to a Newton iteration's residual (2N,) and
+        matrix (2N, 2N) at the unknowns z (2N + 2,) and returns them extended."""
+        p = self.params
+        if p.wake_coupling == 0.0:
+            return None
+        if water is None:
+            raise ValueError("a step with wake_coupling > 0 needs water = (u, u_prev)")
+        sparse = require("scipy.sparse", "test")
+        u, u_prev = (np.asarray(w, dtype=np.float64) for w in water)
+        anchor = u + (u - u_prev) / 3.0 if bdf2 else u
+        gain, coupling = step.rate_gain, p.wake_coupling
+        water_mass = coupling * p.wake_time
+        hub_anchor = step.position_anchor[0]
+        eye = np.eye(2)
+
+        def extend(z, residual, system):
+            n = residual.size
+            hub_velocity = gain * (z[:2] - hub_anchor)
+            water_velocity = z[n:]
+            hub = residual.copy()
+            hub[:2] -= coupling * (water_velocity - hub_velocity)
+            water_residual = (water_mass * gain * (water_velocity - anchor)
+                              - coupling * (hub_velocity - water_velocity))
+            corner = sparse.lil_matrix((n, 2))
+            corner[:2, :] = -coupling * eye
+            row = sparse.lil_matrix((2, n))
+            row[:, :2] = -coupling * gain * eye
+            system = sparse.bmat([[system + sparse.csc_matrix(
+                (coupling * gain * eye.ravel(), ([0, 0, 1, 1], [0, 1, 0, 1])), shape=(n, n)),
+                corner], [row, (water_mass * gain + coupling) * eye]]).tocsc()
+            return np.concatenate([hub, water_residual]), system
+
+        return extend
 
     def run(self, n_steps, q0=None, v0=None, return_velocities=False):
         """Positions (n_steps + 1, N, 2), m, at t = 0, h, ..., n_steps·h (h = solver.dt), from
@@ -731,9 +781,13 @@ class ReferenceSimulator:
         velocities = np.empty_like(positions)
         positions[0], velocities[0] = q, v
         previous = None
+        # the entrained water (if any) starts at rest
+        water = (np.zeros(2), np.zeros(2)) if self.params.wake_coupling > 0.0 else None
         for k in range(n_steps):
-            q_new, v_new, _ = self.step(q, v, k * h, h, previous)
-            previous, q, v = (q, v), q_new, v_new
+            solved = self.step(q, v, k * h, h, previous, water)
+            if water is not None:
+                water = (solved[3], water[0])
+            previous, q, v = (q, v), solved[0], solved[1]
             positions[k + 1], velocities[k + 1] = q, v
         return (positions, velocities) if return_velocities else positions
 

@@ -20,8 +20,10 @@ from .jet import Jet
 from .linear_drag import LinearDrag
 from .rod_drag import RodDrag
 from .stretching import Stretching
+from .wake import Wake
 
-TERMS = (AddedMass, Stretching, Bending, RodDrag, CylinderDrag, LinearDrag, Jet, MaterialDamping)
+TERMS = (AddedMass, Stretching, Bending, RodDrag, CylinderDrag, LinearDrag, Wake, Jet,
+         MaterialDamping)
 
 
 def coupled_node_pairs(topology, terms=TERMS):

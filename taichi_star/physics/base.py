@@ -11,7 +11,12 @@ Its class owns everything about it:
 - `coupled_pairs(topology)`: the node pairs whose 2×2 Jacobian blocks it can fill
   (`configured_pairs`: those of a given configuration, when its switches add some);
 - `history(topology, terms)`: per-instance state it carries from step to step (e.g. the previous
-  area of a jet space), saved and restored with the batch state;
+  area of a jet space), saved and restored with the batch state. Most histories are recomputed
+  from the positions at each step's start (`begin_step`), so a step redone from its start
+  state finds them as they were. A term with `carries_state` keeps state that the positions do
+  not determine (the velocity of the entrained water): it commits it in `accept_step` when the
+  engine accepts a step (its own and its replicas'), and copies it in `copy_carried` when the
+  engine keeps or restores the positions of a step it may redo in substeps;
 - on the device, an instance of the class (a `ti.data_oriented` object) holds those coefficients
   and histories in fields with a leading batch axis, builds its index tables in `build` and
   assembles itself in `assemble`, both through the `assembly.Assembly` it is given (positions,
@@ -60,6 +65,9 @@ class Term:
     and implement `assemble` as a `@ti.func`."""
 
     name: ClassVar[str]
+    carries_state: ClassVar[bool] = False
+    """Whether the term keeps state the positions do not determine (`accept_step`,
+    `copy_carried`); the engine compiles those calls only for a batch with such a term."""
 
     @staticmethod
     def coefficients(params: Sequence, topologies: Sequence, topology) -> Dict[str, np.ndarray]:
@@ -142,6 +150,19 @@ class Term:
     def begin_step(self, b, start_time, end_time, h, ratio, rate_gain, use_history):
         """Update the term's history at the start of a step of size h (s) from start_time to
         end_time, before the predictor moves the positions (a no-op by default)."""
+        pass
+
+    @ti.func
+    def accept_step(self, b, rate_gain):
+        """Commit the state carried over the step instance b has just converged and the engine
+        has accepted (positions at its end; `rate_gain` that of the step): only with
+        `carries_state`."""
+        pass
+
+    @ti.func
+    def copy_carried(self, b, save: ti.template()):
+        """Copy instance b's carried state into the term's backup (`save`) or back from it, with
+        the engine's backup of the positions: only with `carries_state`."""
         pass
 
     @ti.func

@@ -19,7 +19,7 @@ from taichi_star import reference
 from taichi_star.fields import FieldArena
 from taichi_star.integrators import ImplicitEuler
 from taichi_star.geometry import LIMB
-from taichi_star.physics import Bending, LinearDrag, MaterialDamping, Stretching
+from taichi_star.physics import Bending, LinearDrag, MaterialDamping, Stretching, Wake
 from taichi_star.physics.assembly import Assembly
 from taichi_star.params import StarParams
 from taichi_star.physics.base import connect_terms, load_field, numpy_to_field_type
@@ -77,6 +77,11 @@ def _assemble_two(first: ti.template(), second: ti.template(), rate_gain: float)
 @ti.kernel
 def _begin_step(term: ti.template(), h: float):
     term.begin_step(0, 0.0, h, h, 1.0, 1.0 / h, 0)
+
+
+@ti.kernel
+def _accept_step(term: ti.template(), rate_gain: float):
+    term.accept_step(0, rate_gain)
 
 
 def residual_and_jacobian(term, assembly, positions, rate_gain=1.0, other=None):
@@ -242,3 +247,42 @@ def test_linear_drag_assembles_the_reference_forces_and_its_own_exact_jacobian(t
                                   [SimpleNamespace(rest_length=rest_length)],
                                   SimpleNamespace(edge_kind=TOY_EDGE_KIND))
     assert LinearDrag.configuration(off) is None  # off: compiled out
+
+
+def test_wake_assembles_the_water_exchange_and_its_own_exact_jacobian(taichi_cpu):
+    """The entrained water on the toy chain (node 0 stands for the hub), one implicit-Euler
+    iterate (h = 1 ms) from the rest chain with the water at u_k: the hub's residual is
+    −c_w·(u' − v), u' solved by hand from the water's own momentum balance
+    m_w·(u' − u_k)/h = c_w·(v − u') with m_w = c_w·τ_w (the term eliminates u' in another form),
+    no other node feels it; the Jacobian is the central differences of the residual (linear in
+    the positions: exact up to rounding). Accepting the step commits u' and keeps u_k as the
+    previous value."""
+    h, coupling, exchange_time = 1e-3, 4.0, 0.02
+    coefficients = Wake.coefficients(
+        [StarParams(wake_coupling=coupling, wake_time=exchange_time)], None, None)
+    assert Wake.configuration(coefficients) == ()
+    terms, assembly = toy_system([Wake], {"wake": coefficients}, {"wake": ()})
+    term = terms["wake"]
+    water = np.array([2e-3, -1e-3])
+    load_field(term.water_velocity, water[None])
+    # read only by BDF2's offset with history, which this step has not: a value that would show
+    load_field(term.water_previous, np.array([[5.0, 5.0]]))
+    load_field(assembly.previous, REST[None])
+    _begin_step(term, h)
+    positions = deformed()
+    residual, jacobian = residual_and_jacobian(term, assembly, positions, 1.0 / h)
+    hub_velocity = (positions[0] - REST[0]) / h
+    water_mass = coupling * exchange_time
+    solved = (water_mass / h * water + coupling * hub_velocity) / (water_mass / h + coupling)
+    expected = np.zeros(2 * N_NODES)
+    expected[:2] = -coupling * (solved - hub_velocity)
+    assert_close(residual, expected, REFERENCE_RTOL)
+    numeric = central_jacobian(lambda q: residual_and_jacobian(term, assembly, q, 1.0 / h)[0],
+                               positions, 1e-10)
+    assert_close(jacobian, numeric, DIFFERENCE_RTOL)
+    load_field(assembly.positions, positions[None])
+    _accept_step(term, 1.0 / h)
+    # 1e-12: u' by two algebraically equal closed forms, a few roundings apart
+    np.testing.assert_allclose(term.water_velocity.to_numpy()[0], solved, rtol=1e-12)
+    np.testing.assert_array_equal(term.water_previous.to_numpy()[0], water)
+    assert Wake.configuration(Wake.coefficients([StarParams()], None, None)) is None
