@@ -37,10 +37,15 @@ from .params import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS, PER_ACTUATOR_FIEL
 from .gait import N_ACTUATORS
 from .metrics import wrap_degrees
 
-RELATIVE_STEP = 1e-6
+RELATIVE_STEP = 1e-5
 """ε of a direction relative to the parameter's value. Each direction has one replica pair, at
 ±ε; its derivative is the pair's central difference D(ε), exact to O(ε²) where the residual is
-smooth. The drags |v|·v and the jet's switch are not twice differentiable at 0, and states sit
+smooth. The pair's state offsets ε·q̇ must stand well above the positions' rounding: at 1e-6
+those of a parameter that barely moves the robot (C∥, the cylinder's drag and diameter) were
+only ~1e3 roundings, and C∥'s derivative was 2-20 % off; at 1e-5 the error of every parameter
+falls, or stays at the finite differences' own spread, while the O(ε²) truncation stays
+~1e-10 (measured on 0.2-s runs of A1+A2 and A1+A3, both integrators, against 1e-6 and 1e-4:
+docs: numerics, sensitivities). The drags |v|·v and the jet's switch are not twice differentiable at 0, and states sit
 at or just beside it (a velocity component that a symmetric gait keeps at zero, one that creeps
 past it as the robot coasts): there a replica takes its instance's side of the kink
 (`physics.assembly.Assembly.branch_instance`), which keeps the pair's difference that of one

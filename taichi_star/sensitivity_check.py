@@ -22,8 +22,8 @@ from .sensitivities import Direction, parse_directions
 from .simulation import simulate
 
 DIFFERENCE_STEP = 1e-5
-"""h of the finite differences relative to the parameter's value (ten times the sensitivities'
-own ε, `sensitivities.RELATIVE_STEP`, which also sets h for a parameter at 0)."""
+"""h of the finite differences relative to the parameter's value (the size of the sensitivities'
+own ε, `sensitivities.RELATIVE_STEP`; for a parameter at 0, ten times that ε)."""
 TAYLOR_STEP = 1e-3
 """H of the Taylor test relative to the parameter's value (at 0: 100 times the differences'
 h): its remainder, ~H² relative, stays far above the Newton noise of the runs (1e-12 m against
