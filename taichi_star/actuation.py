@@ -95,6 +95,16 @@ class CurvatureProfile:
         out = np.where(tau < self.switch_time, heating, cooling)
         return float(out) if out.ndim == 0 else out
 
+    @property
+    def switch_jump(self) -> float:
+        """K̄ just after t0 minus just before, 1/m: the two fitted branches do not quite meet
+        (the paper's fit: 0.0064 1/m, 0.004 % of the stroke)."""
+        c1a, c2a, c3a, c4a = self.heating
+        c1d, c2d, c3d, c4d = self.cooling
+        t0 = self.switch_time
+        return (c1d / (1.0 + math.exp(-c2d * (t0 - c3d))) + c4d) \
+            - (c1a / (1.0 + math.exp(-c2a * (t0 - c3a))) + c4a)
+
     def closure_gap(self, period: float) -> float:
         """K̄(0) − K̄(T), 1/m: the step of the natural curvature where a new cycle starts."""
         return self.rest_curvature - self.curvature(period)

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import copy
 import difflib
+import warnings
 from dataclasses import dataclass
 from typing import List, Sequence, Tuple
 
@@ -34,8 +35,9 @@ import pandas as pd
 
 from .params import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS, PER_ACTUATOR_FIELDS, STAR_RANGES,
                      SolverConfig, StarParams)
-from .gait import N_ACTUATORS
+from .gait import N_ACTUATORS, Gait
 from .metrics import wrap_degrees
+from .timegrid import on_grid
 
 RELATIVE_STEP = 1e-5
 """ε of a direction relative to the parameter's value. Each direction has one replica pair, at
@@ -151,7 +153,8 @@ def check_directions(directions: Sequence[Direction], params: Sequence[StarParam
                      solver: SolverConfig):
     """ValueError, before any compute, where the sensitivities are not defined: in f32 (a
     central difference needs f64's digits) and for a component height at 0 (0 turns the 2.5-D
-    model off: no derivative across that switch)."""
+    model off: no derivative across that switch). A warning (`delay_on_step_grid`) for a delay
+    at which the run has a jump, not a slope."""
     if directions and solver.precision != "f64":
         raise ValueError(f"sensitivities need precision 'f64' (central differences lose f32's "
                          f"digits), got {solver.precision!r}")
@@ -162,6 +165,31 @@ def check_directions(directions: Sequence[Direction], params: Sequence[StarParam
                 raise ValueError(f"sensitivities: {direction.field} is 0 (the 2.5-D model off) "
                                  f"for instance {at_zero[0]}; its derivative is defined only "
                                  f"with the component heights set (> 0)")
+        if direction.field == "actuator_delays" and not solver.adaptive:
+            on_grid = [b for b, p in enumerate(params)
+                       if delay_on_step_grid(p, direction.index, solver.dt)]
+            if on_grid:
+                p = params[on_grid[0]]
+                warnings.warn(
+                    f"sensitivities: {direction.label} = {direction.value(p):g} s (instance "
+                    f"{on_grid[0]}, {len(on_grid)} in all) puts the actuation profile's switch, "
+                    f"{p.actuator_profile.switch_time:g} s after a firing, where the fitted "
+                    f"curvature jumps by {p.actuator_profile.switch_jump:.2g} 1/m, on a step "
+                    f"end: the run jumps there as the delay passes, and its derivative by the "
+                    f"delay is not defined; move the delay off the step grid (e.g. by dt/2)",
+                    stacklevel=3)
+
+
+def delay_on_step_grid(params: StarParams, actuator: int, dt: float) -> bool:
+    """Whether a fixed-step run of `params` (steps of dt s) has no derivative by the delay of
+    `actuator` (index k − 1 for A_k): the gait fires it, the profile's branches do not meet at
+    their switch (`CurvatureProfile.switch_jump`), and the switch, delay + t0 after a firing (a
+    step end), falls on a step end. Moving the delay by any ε then moves the switch across that
+    step end and the curvature there by the jump."""
+    profile = params.actuator_profile
+    fired = Gait.parse(params.gait).mask[actuator] == 1
+    return bool(fired and profile.switch_jump != 0.0 and on_grid(
+        params.actuator_delays[actuator] + profile.switch_time, dt))
 
 
 def replica_batch(params: Sequence[StarParams], directions: Sequence[Direction]):

@@ -191,3 +191,27 @@ def test_the_check_study_writes_what_it_measured(euler_run, tmp_path):
     # 0.1 s (measured 3e-5)
     assert (table["relative_error"] <= 1e-4).all()
     assert (tmp_path / "sensitivity_check.png").stat().st_size > 0
+
+
+def test_a_delay_on_the_step_grid_warns_and_one_off_it_is_differentiable(taichi_cpu):
+    """The fitted profile's branches miss each other at the switch t0 = 0.163 s by
+    `switch_jump` (K̄ just after minus just before). With A2's delay a whole number of 1-ms steps
+    (0 included) the switch lies on a step end and the run jumps as the delay moves: a warning,
+    for a gait that fires A2 only. Off the grid (12.3 ms) the derivative is one: within 1e-5 of
+    the differences with a Taylor ratio of 4 (measured 2.7e-6 and 3.99)."""
+    profile = BASE.actuator_profile
+    below = profile.curvature(np.nextafter(profile.switch_time, 0.0))
+    # the slope times one ulp of t0 (~1e-15 1/m) is all that separates the two
+    assert profile.switch_jump == pytest.approx(profile.curvature(profile.switch_time) - below,
+                                                abs=1e-12)
+    assert abs(profile.switch_jump) > 1e-3
+    with pytest.warns(UserWarning, match=r"actuator_delays\[1\] = 0 s .* not defined"):
+        simulate([BASE.replace(gait="A1+A2")], 0.002, sensitivities=("actuator_delays[1]",))
+    import warnings
+    off_grid = (0.0, 0.0123, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        simulate([BASE.replace(gait="A1+A3")], 0.002, sensitivities=("actuator_delays[1]",))
+        table = check_sensitivities([BASE.replace(gait="A1+A2", actuator_delays=off_grid)], 0.2,
+                                    SolverConfig(**TIGHT), ("actuator_delays[1]",))
+    assert_matches_differences(table)
