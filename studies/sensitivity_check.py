@@ -7,7 +7,7 @@ integrators, damping on and off, fixed and adaptive steps.
 For each of the eight solver settings (implicit Euler or BDF2 × material damping off or
 τ = 0.01 s × fixed 1-ms steps or adaptive steps held at 1 ms by dt_max, so that every moved run
 takes the same steps as the sensitivities freeze) the paper robot (every delay at
-half a step, `OFF_GRID_DELAY_S`) runs `--duration` from rest
+10.5 ms, off the step grid: `OFF_GRID_DELAY_S`) runs `--duration` from rest
 on each gait, differentiated by every differentiable parameter (each actuator's gain and
 delay, every real field but the period), and `taichi_star.sensitivity_check.check_sensitivities`
 compares each derivative of the displacement along x with Richardson-extrapolated central
@@ -39,11 +39,13 @@ from . import cli
 DESCRIPTION = ("Sensitivities against finite differences of whole runs for every "
                "differentiable parameter: Euler and BDF2, damping on and off, fixed and adaptive "
                "steps.")
-OFF_GRID_DELAY_S = 0.5e-3
-"""Every actuator's delay in the checked robot, s: half a 1-ms step. At 0 (the paper's robot)
-the actuation profile's switch, whose fitted branches miss by 0.0064 1/m, lies on a step end
-and the run jumps as a delay moves (`sensitivities.delay_on_step_grid`): no derivative to
-check. Half a step keeps it between step ends and changes the robot by nothing measurable."""
+OFF_GRID_DELAY_S = 10.5e-3
+"""Every actuator's delay in the checked robot, s: ten and a half 1-ms steps. At 0 (the
+paper's robot) the actuation profile's switch, whose fitted branches miss by 0.0064 1/m, lies
+on a step end and the run jumps as a delay moves (`sensitivities.delay_on_step_grid`): no
+derivative to check. Half a step off the grid keeps the switch between step ends; ten steps
+more keep the differences' step (10⁻⁵ of the delay) above the runs' Newton noise (at half a
+step alone, 5 ns, most delay rows were ill-conditioned)."""
 HEIGHTS = {"hub_height": 0.05, "foam_height": 0.024, "actuator_height": 0.02}
 """The 2.5-D setting's component heights, m (the robot's hub and foams; an actuator strip)."""
 DAMPING_TIME_S = 0.01
