@@ -157,6 +157,7 @@ SCENARIOS = {
     "added_mass_0": {"added_mass_coeff": 0.0},
     "drag_0": {"drag_parallel": 0.0, "drag_perpendicular": 0.0, "cylinder_drag": 0.0},
     "gait_none": {"gait": "none"},
+    "wake": {"wake_coupling": 5.0, "wake_time": 1.0},
 }
 """Scenario name -> StarParams changes from the benchmark robot (gait A1+A3, paper values)."""
 
