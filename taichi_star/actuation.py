@@ -30,6 +30,13 @@ PENDING_CAPACITY = 16
 actuators."""
 
 
+def _logistic(constants, tau):
+    """c1/(1 + exp(−c2 (τ − c3))) + c4 for one branch's constants (c1..c4) at τ (s, scalar or
+    array): one branch of Eq. 5, 1/m."""
+    c1, c2, c3, c4 = constants
+    return c1 / (1.0 + np.exp(-c2 * (np.asarray(tau, dtype=np.float64) - c3))) + c4
+
+
 @dataclass(frozen=True)
 class CurvatureProfile:
     """Logistic fit of one actuator's natural curvature over a cycle (paper Eq. 5).
@@ -88,22 +95,16 @@ class CurvatureProfile:
     def curvature(self, tau):
         """K̄(τ) in 1/m for τ (s) since firing; scalar or array (Eq. 5 as fitted, no closure)."""
         tau = np.asarray(tau, dtype=np.float64)
-        c1a, c2a, c3a, c4a = self.heating
-        c1d, c2d, c3d, c4d = self.cooling
-        heating = c1a / (1.0 + np.exp(-c2a * (tau - c3a))) + c4a
-        cooling = c1d / (1.0 + np.exp(-c2d * (tau - c3d))) + c4d
-        out = np.where(tau < self.switch_time, heating, cooling)
+        out = np.where(tau < self.switch_time, _logistic(self.heating, tau),
+                       _logistic(self.cooling, tau))
         return float(out) if out.ndim == 0 else out
 
     @property
     def switch_jump(self) -> float:
         """K̄ just after t0 minus just before, 1/m: the two fitted branches do not quite meet
         (the paper's fit: 0.0064 1/m, 0.004 % of the stroke)."""
-        c1a, c2a, c3a, c4a = self.heating
-        c1d, c2d, c3d, c4d = self.cooling
-        t0 = self.switch_time
-        return (c1d / (1.0 + math.exp(-c2d * (t0 - c3d))) + c4d) \
-            - (c1a / (1.0 + math.exp(-c2a * (t0 - c3a))) + c4a)
+        return float(_logistic(self.cooling, self.switch_time)
+                     - _logistic(self.heating, self.switch_time))
 
     def closure_gap(self, period: float) -> float:
         """K̄(0) − K̄(T), 1/m: the step of the natural curvature where a new cycle starts."""

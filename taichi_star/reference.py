@@ -3,8 +3,8 @@
 It is written independently of the Taichi batch engine, from the specification alone, so that
 the two can check each other. Implicit Euler or BDF2 in time; elasticity, Kelvin–Voigt material
 damping, rod and cylinder drag (quadratic and linear), jets, added mass, per-actuator gains
-and delays, and the entrained water (its velocity two more unknowns of each step). Everything is double precision; each
-Newton iteration assembles the exact Jacobian of all forces as a scipy.sparse matrix and factors
+and delays, and the entrained water (its velocity two more unknowns of each step). Everything
+is double precision; each Newton iteration assembles the exact Jacobian of all forces as a scipy.sparse matrix and factors
 it with SuperLU (N = 193 nodes, 386 degrees of freedom: ~3 ms per iteration).
 
 Units are SI, per unit out-of-plane height H = 1 m: positions in m, forces in N/m, energies in
@@ -748,23 +748,24 @@ class ReferenceSimulator:
         gain, coupling = step.rate_gain, p.wake_coupling
         water_mass = coupling * p.wake_time
         hub_anchor = step.position_anchor[0]
-        eye = np.eye(2)
+        n = 2 * self.topology.n_nodes
+        # the water's blocks are linear, the same at every iterate: the hub's own (its force's
+        # ∂/∂x_hub = −c_w·γ), the hub by the water, the water by the hub, the water's own
+        hub_rows = ([0, 1], [0, 1])
+        hub_block = sparse.csc_matrix((np.full(2, coupling * gain), hub_rows), shape=(n, n))
+        hub_by_water = sparse.csc_matrix((np.full(2, -coupling), hub_rows), shape=(n, 2))
+        water_by_hub = sparse.csc_matrix((np.full(2, -coupling * gain), hub_rows), shape=(2, n))
+        water_block = (water_mass * gain + coupling) * sparse.identity(2, format="csc")
 
         def extend(z, residual, system):
-            n = residual.size
             hub_velocity = gain * (z[:2] - hub_anchor)
             water_velocity = z[n:]
             hub = residual.copy()
             hub[:2] -= coupling * (water_velocity - hub_velocity)
             water_residual = (water_mass * gain * (water_velocity - anchor)
                               - coupling * (hub_velocity - water_velocity))
-            corner = sparse.lil_matrix((n, 2))
-            corner[:2, :] = -coupling * eye
-            row = sparse.lil_matrix((2, n))
-            row[:, :2] = -coupling * gain * eye
-            system = sparse.bmat([[system + sparse.csc_matrix(
-                (coupling * gain * eye.ravel(), ([0, 0, 1, 1], [0, 1, 0, 1])), shape=(n, n)),
-                corner], [row, (water_mass * gain + coupling) * eye]]).tocsc()
+            system = sparse.bmat([[system + hub_block, hub_by_water],
+                                  [water_by_hub, water_block]]).tocsc()
             return np.concatenate([hub, water_residual]), system
 
         return extend

@@ -47,8 +47,8 @@ those of a parameter that barely moves the robot (C∥, the cylinder's drag and 
 only ~1e3 roundings, and C∥'s derivative was 2-20 % off; at 1e-5 the error of every parameter
 falls, or stays at the finite differences' own spread, while the O(ε²) truncation stays
 ~1e-10 (measured on 0.2-s runs of A1+A2 and A1+A3, both integrators, against 1e-6 and 1e-4:
-docs: numerics, sensitivities). The drags |v|·v and the jet's switch are not twice differentiable at 0, and states sit
-at or just beside it (a velocity component that a symmetric gait keeps at zero, one that creeps
+docs: numerics, sensitivities). The drags |v|·v and the jet's switch are not twice
+differentiable at 0, and states sit at or just beside it (a velocity component that a symmetric gait keeps at zero, one that creeps
 past it as the robot coasts): there a replica takes its instance's side of the kink
 (`physics.assembly.Assembly.branch_instance`), which keeps the pair's difference that of one
 polynomial. A second pair at ±2ε, extrapolated as 2·D(ε) − D(2ε), was needed before that rule;
@@ -166,13 +166,13 @@ def check_directions(directions: Sequence[Direction], params: Sequence[StarParam
                                  f"for instance {at_zero[0]}; its derivative is defined only "
                                  f"with the component heights set (> 0)")
         if direction.field == "actuator_delays" and not solver.adaptive:
-            on_grid = [b for b, p in enumerate(params)
+            jumping = [b for b, p in enumerate(params)
                        if delay_on_step_grid(p, direction.index, solver.dt)]
-            if on_grid:
-                p = params[on_grid[0]]
+            if jumping:
+                p = params[jumping[0]]
                 warnings.warn(
                     f"sensitivities: {direction.label} = {direction.value(p):g} s (instance "
-                    f"{on_grid[0]}, {len(on_grid)} in all) puts the actuation profile's switch, "
+                    f"{jumping[0]}, {len(jumping)} in all) puts the actuation profile's switch, "
                     f"{p.actuator_profile.switch_time:g} s after a firing, where the fitted "
                     f"curvature jumps by {p.actuator_profile.switch_jump:.2g} 1/m, on a step "
                     f"end: the run jumps there as the delay passes, and its derivative by the "
