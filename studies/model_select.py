@@ -6,6 +6,8 @@ well they predict what they were not fitted to.
                                    [--train-cycles 1:3] [--validate-cycles 4:6]
                                    [--popsize P] [--max-generations G] [--restarts R]
                                    [--fold-generations F] [--seed S] [--sigma0 0.25] [--dt S]
+                                   [--refine-top K] [--refine-popsize P2]
+                                   [--refine-generations G2]
                                    [--budget-hours 2] [--resume] [--arch cpu|gpu] [--out DIR]
                                    [--quick] [--workers N | --scheduler tcp://HOST:PORT]
 
@@ -37,22 +39,32 @@ plus a penalty on wrong-way travel. Then, per candidate:
   The curve samples of a trial are correlated (one path), so χ², AIC and BIC overstate the
   evidence; they rank, they do not test.
 
+Two stages. The *screen* fits every candidate at the budget above (`--popsize`,
+`--max-generations`); it is too small to converge a form of eight or more axes, so its rank is
+partly the budget's. The *refine* stage fits the `--refine-top` best screened forms again, from
+the same start, at a larger budget (`--refine-popsize`, `--refine-generations`) and assesses
+them the same way. The ranking puts the refined forms first, in their own order, then every
+screened form in its own: rank 1, the form the `identified` preset is read from, is the best
+refined form (the best screened one with `--refine-top 0`).
+
 Writes into `--out` (default a fresh `runs/model_select/<timestamp>/`), each table with its
-provenance sidecar: `model_select.csv` (one row per candidate, ranked by the held-out error
-(held-out gaits + cycles 4-6), then BIC; skipped candidates last with their note), `model_select_parameters.csv` (the
+provenance sidecar: `model_select.csv` (one row per candidate and stage, column `stage`:
+refined forms first, each stage ranked by the held-out error (held-out gaits + cycles 4-6),
+then BIC; skipped candidates last with their note), `model_select_parameters.csv` (the
 identified values with a standard deviation from the final CMA-ES search distribution,
 σ·√diag C mapped to the parameter: how tightly the search closed in on each axis, not a
-posterior), `model_select_gaits.csv` (candidate × gait × window: objective, phase, speeds,
-direction), `model_select_folds.csv` (candidate × held-out gait), `fits/<candidate>.csv`
-(every evaluation, rewritten each generation), `model_select.png` (the ranking) and per
-candidate Fig. 4c/4b at its best point (`fig4c_<candidate>.*`, `fig4b_<candidate>.*`).
+posterior), `model_select_gaits.csv` (candidate × stage × gait × window: objective, phase,
+speeds, direction), `model_select_folds.csv` (candidate × stage × held-out gait),
+`fits/<candidate>.csv` (every evaluation, rewritten each generation; `fits/refine/` for the
+refine stage), `model_select.png` (the ranking) and per candidate and stage Fig. 4c/4b at its
+best point (`fig4c_<candidate>.*`, `fig4b_<candidate>.*`; `fig4c_<candidate>_refined.*`).
 
-`--resume` (with `--out`): candidates whose rows are already in `done/` with the same
-definition (candidate, settings, model, solver) are read back, not refitted.
+`--resume` (with `--out`): candidates whose rows are already in `done/` (`done/refine/`) with
+the same definition (candidate, settings, model, solver) are read back, not refitted.
 
-Cost: the study times its first generation, prints the estimate for the whole study and the
-`--budget-hours` it is held to; a candidate that would start after the budget has run out is
-skipped with a note.
+Cost: the study times its first generation, prints the estimate for the whole study (the
+refine stage counted for the `--refine-top` largest forms) and the `--budget-hours` it is held
+to; a candidate that would start after the budget has run out is skipped with a note.
 """
 
 from __future__ import annotations
@@ -90,11 +102,18 @@ QUICK_CANDIDATES = (
 QUICK_GAITS = "A1+A2,A1+A4"
 QUICK_POPSIZE, QUICK_MAX_GENERATIONS, QUICK_FOLD_GENERATIONS = 4, 2, 1
 DEFAULT_POPSIZE, DEFAULT_MAX_GENERATIONS, DEFAULT_FOLD_GENERATIONS = 6, 8, 2
+DEFAULT_REFINE_TOP, DEFAULT_REFINE_POPSIZE, DEFAULT_REFINE_GENERATIONS = 6, 8, 16
+"""The refine stage: the six best screened forms at 2.7x the screen's evaluations (8 x 16 +
+16 x 16 = 384 with the restart, against 6 x 8 + 12 x 8 = 144). At the screen's budget a 10-axis form ended above the 8-axis form it contains
+(docs: Results, model selection)."""
+QUICK_REFINE_TOP, QUICK_REFINE_POPSIZE, QUICK_REFINE_GENERATIONS = 1, 4, 3
+STAGES = ("refine", "screen")
+"""The stages in ranking order: a refined form above every screened one."""
 RECORD_INTERVAL_S = 0.01
 """Centroid records of the fits, s (rounded to whole steps): ≥ 4 per sample of a cycle curve."""
 PER_ACTUATOR = 8
 """A tuple-valued field of this length holds one value per actuator (A1..A8)."""
-RESULT_COLUMNS = ["rank", "candidate", "status", "note", "n_fitted", "n_parameters",
+RESULT_COLUMNS = ["rank", "stage", "candidate", "status", "note", "n_fitted", "n_parameters",
                   "train_objective", "validate_objective", "logo_objective",
                   "held_out_objective", "logo_directions_right", "logo_within_35pct", "n_folds",
                   "train_directions_right", "validate_directions_right", "n_gaits", "chi2",
@@ -103,7 +122,7 @@ RESULT_COLUMNS = ["rank", "candidate", "status", "note", "n_fitted", "n_paramete
 """Columns of model_select.csv. logo_within_35pct: held-out gaits in the right direction with
 a speed within ±35 % of the measured one over the training window. held_out_objective: the
 error on what the fit did not see, the held-out gaits (logo_objective) plus the later cycles
-(validate_objective); the rank follows it."""
+(validate_objective); the rank follows it within a stage (`STAGES`)."""
 
 
 # --------------------------------------------------------------------------- candidates
@@ -347,7 +366,7 @@ def identified_table(row: dict, fields: dict) -> pd.DataFrame:
     """identified.csv: one row per field of the best candidate's model (field, value as Python
     text, the candidate and its errors)."""
     return pd.DataFrame([{"field": name, "value": repr(value), "candidate": row["candidate"],
-                          "train_objective": row["train_objective"],
+                          "stage": row["stage"], "train_objective": row["train_objective"],
                           "validate_objective": row["validate_objective"],
                           "logo_objective": row["logo_objective"]}
                          for name, value in fields.items()])
@@ -416,21 +435,32 @@ def leave_one_gait_out(box, units, model: StarParams, settings: identify.CMASett
 # --------------------------------------------------------------------------- the study
 
 def ranked(rows: Sequence[dict]) -> pd.DataFrame:
-    """The result rows ranked: fitted candidates by held-out error (`held_out_objective`: held-out
-    gaits plus later cycles, each a test of prediction; then BIC, then training error), skipped
-    or failed ones after them; rank 1 is the best."""
+    """The result rows ranked: the refined forms, then the screened ones (`STAGES`; a row
+    without a stage is a screened one); within a stage, fitted candidates by held-out error
+    (`held_out_objective`: held-out gaits plus later cycles, each a test of prediction; then
+    BIC, then training error), skipped or failed ones after them; rank 1 is the best."""
     table = pd.DataFrame(list(rows))
     for column in RESULT_COLUMNS:
         if column not in table:
             table[column] = math.nan
+    table["stage"] = table["stage"].where(table["stage"].isin(STAGES), "screen")
+    table["_stage"] = table["stage"].map(STAGES.index)
     table["_ok"] = table["status"] == "ok"
     held_out = table["logo_objective"].astype(float) + table["validate_objective"].astype(float)
     table["held_out_objective"] = held_out
     table["_held_out"] = held_out.where(np.isfinite(held_out), math.inf)
-    table = table.sort_values(["_ok", "_held_out", "bic", "train_objective"],
-                              ascending=[False, True, True, True], kind="stable")
+    table = table.sort_values(["_stage", "_ok", "_held_out", "bic", "train_objective"],
+                              ascending=[True, False, True, True, True], kind="stable")
     table["rank"] = np.arange(1, len(table) + 1)
     return table[RESULT_COLUMNS].reset_index(drop=True)
+
+
+def refined_candidates(screen: pd.DataFrame, runnable: Sequence[Candidate],
+                       top: int) -> List[Candidate]:
+    """The `top` best fitted candidates of the ranked screen, in rank order."""
+    by_name = {candidate.name: candidate for candidate in runnable}
+    fitted = screen[(screen["status"] == "ok") & screen["candidate"].isin(by_name)]
+    return [by_name[name] for name in fitted["candidate"].head(top)]
 
 
 def definition_of(candidate: Candidate, args, settings, base: StarParams,
@@ -449,14 +479,15 @@ def definition_of(candidate: Candidate, args, settings, base: StarParams,
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def estimate_seconds(seconds_per_instance_cycle: float, candidates: Sequence[Candidate],
-                     base: StarParams, settings: identify.CMASettings, fold_generations: int,
-                     n_gaits: int, train_last: int, validate_last: int) -> float:
-    """Predicted run time of the whole study (s) from the measured cost of one simulated
-    instance-cycle: every generation of every restart, the folds, the assessment runs and
-    the Fig. 4c runs, at each candidate's population."""
+def estimate_seconds(seconds_per_instance_cycle: float,
+                     work: Sequence[Tuple[Candidate, identify.CMASettings]],
+                     fold_generations: int, n_gaits: int, train_last: int,
+                     validate_last: int) -> float:
+    """Predicted run time (s) of the fits in `work` ((candidate, settings) pairs) from the
+    measured cost of one simulated instance-cycle: every generation of every restart, the
+    folds, the assessment runs and the Fig. 4c runs, at each candidate's population."""
     cycles = 0.0
-    for candidate in candidates:
+    for candidate, settings in work:
         dimension = len(candidate.fit.split())
         for restart in range(settings.restarts + 1):
             cycles += (settings.max_generations * settings.population(dimension, restart)
@@ -466,6 +497,17 @@ def estimate_seconds(seconds_per_instance_cycle: float, candidates: Sequence[Can
                        * (n_gaits - 1) * train_last + n_gaits * train_last)
         cycles += n_gaits * validate_last + 5 * train_last
     return cycles * seconds_per_instance_cycle
+
+
+def planned_work(runnable: Sequence[Candidate], settings: identify.CMASettings,
+                 refine_settings: identify.CMASettings,
+                 refine_top: int) -> List[Tuple[Candidate, identify.CMASettings]]:
+    """Every fit the study will run, for its estimate: each candidate at the screen's budget,
+    then, standing in for the refined forms (unknown until the screen is ranked), the
+    `refine_top` candidates of most axes at the refine budget (an upper bound)."""
+    largest = sorted(runnable, key=lambda c: len(c.fit.split()), reverse=True)[:refine_top]
+    return ([(candidate, settings) for candidate in runnable]
+            + [(candidate, refine_settings) for candidate in largest])
 
 
 def build_parser():
@@ -488,6 +530,18 @@ def build_parser():
     parser.add_argument("--fold-generations", type=int, default=DEFAULT_FOLD_GENERATIONS,
                         quick=QUICK_FOLD_GENERATIONS,
                         help="generations of each leave-one-gait-out fit (0: no folds)")
+    parser.add_argument("--refine-top", type=int, default=DEFAULT_REFINE_TOP,
+                        quick=QUICK_REFINE_TOP,
+                        help=f"refit the K best screened forms at the refine budget (0: no "
+                             f"refine stage; default {DEFAULT_REFINE_TOP})")
+    parser.add_argument("--refine-popsize", type=int, default=DEFAULT_REFINE_POPSIZE,
+                        quick=QUICK_REFINE_POPSIZE,
+                        help=f"CMA-ES population of the refine stage (default "
+                             f"{DEFAULT_REFINE_POPSIZE})")
+    parser.add_argument("--refine-generations", type=int, default=DEFAULT_REFINE_GENERATIONS,
+                        quick=QUICK_REFINE_GENERATIONS,
+                        help=f"generations per CMA-ES run of the refine stage (default "
+                             f"{DEFAULT_REFINE_GENERATIONS})")
     parser.add_argument("--restarts", type=int, default=1, quick=0,
                         help="extra CMA-ES runs from random points (multi-start, IPOP)")
     parser.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
@@ -520,6 +574,13 @@ def main(argv=None):
     settings = identify.CMASettings(popsize=args.popsize, max_generations=args.max_generations,
                                     restarts=args.restarts, seed=args.seed, sigma0=args.sigma0)
     settings.validate()
+    for flag, value, least in (("--refine-top", args.refine_top, 0),
+                               ("--refine-popsize", args.refine_popsize, 2),
+                               ("--refine-generations", args.refine_generations, 1)):
+        if value < least:
+            raise cli.StudyArgumentError(f"{flag} must be >= {least}, got {value}")
+    refine_settings = dataclasses.replace(settings, popsize=args.refine_popsize,
+                                          max_generations=args.refine_generations)
     if args.fold_generations < 0:
         raise cli.StudyArgumentError(f"--fold-generations must be >= 0, got "
                                      f"{args.fold_generations}")
@@ -552,81 +613,99 @@ def main(argv=None):
     progress = not args.no_progress
     record = nearest_interval(RECORD_INTERVAL_S, solver.dt)
     started = time.perf_counter()
-    parameters, gait_tables, fold_tables, identified = [], [], [], {}
+    rows, parameters, gait_tables, fold_tables, identified = list(rows), [], [], [], {}
+    budget_s = 3600 * args.budget_hours
+
+    def fit_or_read_back(candidate: Candidate, stage_settings, stage: str, setup: Setup,
+                         work_left):
+        """One candidate at one stage: read back from done/ (--resume, same definition) or
+        fitted, assessed and stored; skipped with a note once the budget is spent."""
+        definition = definition_of(candidate, args, stage_settings, base, solver, gaits)
+        subfolder = "" if stage == "screen" else f"{stage}/"
+        done = out.folder / "done" / subfolder / f"{candidate.name}.json"
+        tables = (parameters, gait_tables, fold_tables)
+        if args.resume and done.exists():
+            stored = json.loads(done.read_text())
+            if stored["row"].get("definition") == definition:
+                stored_gaits = pd.DataFrame(stored["gaits"])
+                if stored["row"]["status"] == "ok":
+                    stored["row"].update(information_criteria(
+                        stored_gaits[stored_gaits["window"] == "train"],
+                        stored["row"]["n_parameters"], stored["row"]["n_samples"]))
+                rows.append({**stored["row"], "stage": stage})
+                stored_parameters = pd.DataFrame(stored["parameters"])
+                for store, table in zip(tables, (stored_parameters, stored_gaits,
+                                                 pd.DataFrame(stored["folds"]))):
+                    store.append(table.assign(stage=stage) if len(table) else table)
+                identified[(stage, candidate.name)] = (
+                    identified_fields(best_model(candidate, base, stored_parameters))
+                    if stored["row"]["status"] == "ok" else None)
+                print(f"{candidate.name} ({stage}): read back from {done}")
+                return
+        if time.perf_counter() - started > budget_s:
+            rows.append({"stage": stage, "candidate": candidate.name, "status": "skipped",
+                         "note": f"budget of {args.budget_hours:g} h spent",
+                         "fit": candidate.fit, "set": candidate.set,
+                         "description": candidate.description, "definition": definition})
+            return
+        timing = {"last": time.perf_counter(), "generations": 0}
+        label = candidate.name if stage == "screen" else f"{candidate.name} ({stage})"
+
+        def on_generation(table):
+            out.write_csv(table, f"fits/{subfolder}{candidate.name}.csv")
+            now = time.perf_counter()
+            seconds, timing["last"] = now - timing["last"], now
+            timing["generations"] += 1
+            if timing["generations"] <= 2:  # the first compiles; the second is steady
+                points = len(table) // timing["generations"]
+                per = seconds / (points * len(gaits) * train[1])
+                estimate = estimate_seconds(per, work_left, args.fold_generations, len(gaits),
+                                            train[1], validate[1])
+                print(f"{label}: generation {timing['generations']} took {seconds:.1f} s "
+                      f"({points} points x {len(gaits)} gaits x {train[1]} cycles"
+                      f"{', compile included' if timing['generations'] == 1 else ''}); "
+                      f"estimate for the {len(work_left)} fit(s) left: "
+                      f"{estimate / 60:.1f} min (budget left "
+                      f"{(budget_s - (now - started)) / 60:.1f} min)")
+
+        result = fit_candidate(candidate, base, stage_settings, args.fold_generations, setup,
+                               on_generation=on_generation, progress=progress)
+        result["row"].update(definition=definition, stage=stage)
+        rows.append(result["row"])
+        for store, table in zip(tables, (result["parameters"], result["gaits"],
+                                         result["folds"])):
+            store.append(table.assign(stage=stage) if len(table) else table)
+        identified[(stage, candidate.name)] = result["identified"]
+        if result["best"] is not None:
+            suffix = "" if stage == "screen" else "_refined"
+            figures.run_fig4c(out, result["best"], solver,
+                              duration_s=cli.duration_s(args, result["best"].period)
+                              if args.quick else train[1] * result["best"].period,
+                              arch=args.arch, prefix=f"fig4c_{candidate.name}{suffix}",
+                              progress=False, title_note=f"model {label}")
+        done.parent.mkdir(parents=True, exist_ok=True)
+        done.write_text(json.dumps({
+            "row": result["row"],
+            "parameters": result["parameters"].to_dict(orient="list"),
+            "gaits": result["gaits"].to_dict(orient="list"),
+            "folds": result["folds"].to_dict(orient="list")}, default=_json_value))
+
     with cli.executor(args) as executor:
-        largest = settings.population(max((len(c.fit.split()) for c in runnable), default=1),
-                                      settings.restarts) * len(gaits)
+        largest = max(settings.population(max((len(c.fit.split()) for c in runnable),
+                                              default=1), settings.restarts),
+                      refine_settings.population(1, refine_settings.restarts)
+                      if args.refine_top else 0) * len(gaits)
         setup = Setup(tuple(gaits), trials, train, validate,
                       dict(solver=solver, arch=args.arch, executor=executor,
                            chunk_size=cli.chunk_size(args, largest, executor.n_workers)),
                       record)
+        work = planned_work(runnable, settings, refine_settings, args.refine_top)
         for position, candidate in enumerate(runnable):
-            definition = definition_of(candidate, args, settings, base, solver, gaits)
-            done = out.folder / "done" / f"{candidate.name}.json"
-            if args.resume and done.exists():
-                stored = json.loads(done.read_text())
-                if stored["row"].get("definition") == definition:
-                    stored_gaits = pd.DataFrame(stored["gaits"])
-                    if stored["row"]["status"] == "ok":
-                        stored["row"].update(information_criteria(
-                            stored_gaits[stored_gaits["window"] == "train"],
-                            stored["row"]["n_parameters"], stored["row"]["n_samples"]))
-                    rows.append(stored["row"])
-                    parameters.append(pd.DataFrame(stored["parameters"]))
-                    gait_tables.append(stored_gaits)
-                    fold_tables.append(pd.DataFrame(stored["folds"]))
-                    identified[candidate.name] = (
-                        identified_fields(best_model(candidate, base, parameters[-1]))
-                        if stored["row"]["status"] == "ok" else None)
-                    print(f"{candidate.name}: read back from {done}")
-                    continue
-            elapsed = time.perf_counter() - started
-            if elapsed > 3600 * args.budget_hours:
-                rows.append({"candidate": candidate.name, "status": "skipped",
-                             "note": f"budget of {args.budget_hours:g} h spent",
-                             "fit": candidate.fit, "set": candidate.set,
-                             "description": candidate.description, "definition": definition})
-                continue
-            timing = {"last": time.perf_counter(), "generations": 0}
-
-            def on_generation(table, name=candidate.name, timing=timing):
-                out.write_csv(table, f"fits/{name}.csv")
-                now = time.perf_counter()
-                seconds, timing["last"] = now - timing["last"], now
-                timing["generations"] += 1
-                if timing["generations"] <= 2:  # the first compiles; the second is steady
-                    points = len(table) // timing["generations"]
-                    per = seconds / (points * len(gaits) * train[1])
-                    estimate = estimate_seconds(per, runnable[position:], base, settings,
-                                                args.fold_generations, len(gaits), train[1],
-                                                validate[1])
-                    print(f"{name}: generation {timing['generations']} took {seconds:.1f} s "
-                          f"({points} points x {len(gaits)} gaits x {train[1]} cycles"
-                          f"{', compile included' if timing['generations'] == 1 else ''}); "
-                          f"estimate for the {len(runnable) - position} candidate(s) left: "
-                          f"{estimate / 60:.1f} min (budget left "
-                          f"{60 * args.budget_hours - (now - started) / 60:.1f} min)")
-
-            result = fit_candidate(candidate, base, settings, args.fold_generations, setup,
-                                   on_generation=on_generation, progress=progress)
-            result["row"]["definition"] = definition
-            rows.append(result["row"])
-            parameters.append(result["parameters"])
-            gait_tables.append(result["gaits"])
-            fold_tables.append(result["folds"])
-            identified[candidate.name] = result["identified"]
-            if result["best"] is not None:
-                figures.run_fig4c(out, result["best"], solver,
-                                  duration_s=cli.duration_s(args, result["best"].period)
-                                  if args.quick else train[1] * result["best"].period,
-                                  arch=args.arch, prefix=f"fig4c_{candidate.name}",
-                                  progress=False, title_note=f"model {candidate.name}")
-            done.parent.mkdir(parents=True, exist_ok=True)
-            done.write_text(json.dumps({
-                "row": result["row"],
-                "parameters": result["parameters"].to_dict(orient="list"),
-                "gaits": result["gaits"].to_dict(orient="list"),
-                "folds": result["folds"].to_dict(orient="list")}, default=_json_value))
+            fit_or_read_back(candidate, settings, "screen", setup, work[position:])
+        refined = refined_candidates(ranked(rows), runnable, args.refine_top)
+        for position, candidate in enumerate(refined):
+            fit_or_read_back(candidate, refine_settings, "refine", setup,
+                             [(c, refine_settings) for c in refined[position:]])
     table = ranked(rows)
     csv = out.write_csv(table, "model_select.csv")
     non_empty = [t for t in parameters if len(t)]
@@ -640,12 +719,13 @@ def main(argv=None):
                   "model_select_folds.csv")
     out.wrote(plot_ranking(csv, out.path("model_select.png")))
     best = table.iloc[0]
-    if best["status"] == "ok" and identified.get(best["candidate"]) is not None:
-        fields = identified[best["candidate"]]
+    fields = identified.get((best["stage"], best["candidate"]))
+    if best["status"] == "ok" and fields is not None:
         out.write_csv(identified_table(best.to_dict(), fields), "identified.csv")
-        print(f"identified preset (rank 1, {best['candidate']}): IDENTIFIED_FIELDS = {fields!r}")
+        print(f"identified preset (rank 1, {best['candidate']}, {best['stage']}): "
+              f"IDENTIFIED_FIELDS = {fields!r}")
     out.report()
-    print(table[["rank", "candidate", "status", "train_objective", "validate_objective",
+    print(table[["rank", "stage", "candidate", "status", "train_objective", "validate_objective",
                  "logo_objective", "logo_directions_right", "train_directions_right", "bic",
                  "note"]].to_string(index=False))
     print(f"model_select: {(time.perf_counter() - started) / 60:.1f} min")
@@ -660,7 +740,7 @@ def _json_value(value):
 
 def plot_ranking(csv_path, png_path) -> Path:
     """Bars from model_select.csv: each fitted candidate's training, validation and held-out
-    objective (log scale), in rank order."""
+    objective (log scale), in rank order (the refined forms first, labelled so)."""
     plt = cli.use_agg()
     table = pd.read_csv(csv_path)
     table = table[table["status"] == "ok"]
@@ -671,7 +751,9 @@ def plot_ranking(csv_path, png_path) -> Path:
                                   (0.0, "validate_objective", "validation cycles"),
                                   (width, "logo_objective", "held-out gait (LOGO)")):
         ax.bar(x + offset, table[column].astype(float), width, label=label)
-    ax.set_xticks(x, table["candidate"], rotation=30, ha="right", fontsize=8)
+    labels = [name if stage == "screen" else f"{name} (refined)"
+              for name, stage in zip(table["candidate"], table["stage"])]
+    ax.set_xticks(x, labels, rotation=30, ha="right", fontsize=8)
     values = table[["train_objective", "validate_objective", "logo_objective"]].to_numpy(float)
     if (values[np.isfinite(values)] > 0).any():
         ax.set_yscale("log")

@@ -51,6 +51,28 @@ def test_the_rank_follows_held_out_gaits_plus_later_cycles_then_bic():
     assert list(table["candidate"]) == ["c", "b", "a", "d"]
     assert list(table["rank"]) == [1, 2, 3, 4]
     assert table["held_out_objective"].iloc[0] == 41.0 and np.isnan(table["held_out_objective"].iloc[3])
+    assert (table["stage"] == "screen").all()  # a row without a stage is a screened one
+
+
+def test_a_refined_form_ranks_above_every_screened_one():
+    """Rank 1 is the best refined form even where a screened form's held-out error is lower
+    (the refine stage is the converged fit); the refine stage takes the best screened forms."""
+    screen = [{"candidate": name, "stage": "screen", "status": "ok", "logo_objective": logo,
+               "validate_objective": 10.0, "bic": 1.0, "train_objective": 1.0}
+              for name, logo in (("a", 5.0), ("b", 3.0), ("c", 9.0), ("d", 1.0))]
+    screen[3]["status"] = "failed"
+    runnable = [model_select.Candidate(name, "", "alpha=0.2:1.5") for name in "abcd"]
+    assert [c.name for c in model_select.refined_candidates(model_select.ranked(screen),
+                                                            runnable, 2)] == ["b", "a"]
+    assert [c.name for c in model_select.refined_candidates(model_select.ranked(screen),
+                                                            runnable, 9)] == ["b", "a", "c"]
+    refine = [{**screen[1], "stage": "refine", "logo_objective": 8.0},
+              {**screen[0], "stage": "refine", "logo_objective": 7.0}]
+    table = model_select.ranked(screen + refine)
+    assert list(zip(table["stage"], table["candidate"])) == [
+        ("refine", "a"), ("refine", "b"), ("screen", "b"), ("screen", "a"), ("screen", "c"),
+        ("screen", "d")]
+    assert list(table["rank"]) == [1, 2, 3, 4, 5, 6]
 
 
 def test_a_resumed_candidate_is_reused_only_for_the_same_model():
@@ -91,6 +113,9 @@ def test_a_per_actuator_axis_is_informed_only_by_gaits_that_fire_it():
     (["--only", "nothing"], "--only: unknown value 'nothing'"),
     (["--fold-generations", "-1"], "--fold-generations must be >= 0"),
     (["--budget-hours", "0"], "--budget-hours must be > 0"),
+    (["--refine-top", "-1"], "--refine-top must be >= 0, got -1"),
+    (["--refine-popsize", "1"], "--refine-popsize must be >= 2, got 1"),
+    (["--refine-generations", "0"], "--refine-generations must be >= 1, got 0"),
     (["--candidates", "/nonexistent.csv"], "--candidates /nonexistent.csv: cannot read it"),
     (["--gaits", "A1+A6"], "--gaits A1+A6: not measured"),
     (["--validate-cycles", "4:40"], "shorter than cycles up to 40"),
@@ -107,19 +132,26 @@ def test_quick_run_against_a_direct_simulation(tmp_path, capsys, monkeypatch):
     written = pd.read_csv(tmp_path / "model_select.csv")
     assert list(written["candidate"]) == list(table["candidate"])
     assert set(written["candidate"]) == {"paper", "ramp"}
-    assert list(written["rank"]) == [1, 2]
+    # --quick refines the one best screened form: its refined row ranks first
+    assert list(written["stage"]) == ["refine", "screen", "screen"]
+    assert list(written["rank"]) == [1, 2, 3]
     assert (written["status"] == "ok").all()
     held_out = written["held_out_objective"].to_numpy()
     # ranked by the held-out error: held-out gaits plus later cycles
     np.testing.assert_allclose(held_out, written["logo_objective"] + written["validate_objective"],
                                rtol=1e-12)
-    assert held_out[0] <= held_out[1]
+    assert held_out[1] <= held_out[2]
+    assert written["candidate"].iloc[0] == written["candidate"].iloc[1]
     parameters = pd.read_csv(tmp_path / "model_select_parameters.csv")
     gaits = ["A1+A2", "A1+A4"]  # --quick
+    budgets = {"screen": (model_select.QUICK_POPSIZE * model_select.QUICK_MAX_GENERATIONS, ""),
+               "refine": (model_select.QUICK_REFINE_POPSIZE
+                          * model_select.QUICK_REFINE_GENERATIONS, "refine/")}
     for _, row in written.iterrows():
         name = row["candidate"]
-        fits = pd.read_csv(tmp_path / "fits" / f"{name}.csv")
-        assert len(fits) == model_select.QUICK_POPSIZE * model_select.QUICK_MAX_GENERATIONS
+        evaluations, subfolder = budgets[row["stage"]]
+        fits = pd.read_csv(tmp_path / "fits" / f"{subfolder}{name}.csv")
+        assert len(fits) == evaluations == row["n_evaluations"]
         # the training objective of the re-simulated best point is the best evaluation's
         assert row["train_objective"] == pytest.approx(fits["objective"].min(), rel=1e-9)
         assert row["n_parameters"] == 2 + len(gaits)
@@ -127,7 +159,8 @@ def test_quick_run_against_a_direct_simulation(tmp_path, capsys, monkeypatch):
         assert row["aic"] == pytest.approx(row["chi2"] + 2 * row["n_parameters"], rel=1e-9)
         # a direct simulation of the identified parameters gives the same objective (CSV
         # values have 10 significant digits: the objective moves far less than 1e-6)
-        values = parameters[parameters["candidate"] == name].set_index("parameter")["value"]
+        values = parameters[(parameters["candidate"] == name)
+                            & (parameters["stage"] == row["stage"])].set_index("parameter")["value"]
         candidate = next(c for c in model_select.QUICK_CANDIDATES if c["name"] == name)
         model = model_select.Candidate(**candidate).model(StarParams())
         params = [model.replace(gait=g, **values.to_dict()) for g in gaits]
@@ -151,23 +184,25 @@ def test_quick_run_against_a_direct_simulation(tmp_path, capsys, monkeypatch):
             row["validate_objective"], rel=1e-6)
         assert row["train_directions_right"] == int(train["direction_matches"].sum())
     folds = pd.read_csv(tmp_path / "model_select_folds.csv")
-    assert len(folds) == 2 * len(gaits) and set(folds["held_out_gait"]) == set(gaits)
+    assert len(folds) == 3 * len(gaits) and set(folds["held_out_gait"]) == set(gaits)
     assert folds["frozen_axes"].isna().all()  # alpha and C_c: every gait informs them
-    for name, part in folds.groupby("candidate"):
-        row = written.set_index("candidate").loc[name]
+    for (name, stage), part in folds.groupby(["candidate", "stage"]):
+        row = written.set_index(["candidate", "stage"]).loc[(name, stage)]
         assert row["logo_objective"] == pytest.approx(part["objective"].mean(), rel=1e-9)
         assert row["logo_directions_right"] == int(part["direction_matches"].sum())
-    for name in ("paper", "ramp"):
+    for name in ("paper", "ramp", f"{written['candidate'].iloc[0]}_refined"):
         assert (tmp_path / f"fig4c_{name}.png").stat().st_size > 1000
         assert (tmp_path / f"fig4b_{name}.png").stat().st_size > 1000
     assert (tmp_path / "model_select.png").stat().st_size > 1000
     assert np.isfinite(parameters["std"]).all() and (parameters["std"] > 0).all()
-    # the preset's fields: the rank-1 candidate's model, field by field
+    # the preset's fields: the rank-1 candidate's refined model, field by field
     identified = pd.read_csv(tmp_path / "identified.csv", dtype={"value": str})
     best = written.iloc[0]
     assert set(identified["candidate"]) == {best["candidate"]}
+    assert set(identified["stage"]) == {"refine"}
     fields = {row["field"]: ast.literal_eval(row["value"]) for _, row in identified.iterrows()}
-    best_values = parameters[parameters["candidate"] == best["candidate"]]
+    best_values = parameters[(parameters["candidate"] == best["candidate"])
+                             & (parameters["stage"] == "refine")]
     for _, axis in best_values.iterrows():
         assert fields[axis["parameter"]] == pytest.approx(axis["value"], rel=1e-9)
     if best["candidate"] == "ramp":
@@ -179,5 +214,7 @@ def test_quick_run_against_a_direct_simulation(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr("taichi_star.batch.tasks.simulate", forbidden)
     capsys.readouterr()
     model_select.main(["--out", str(tmp_path), "--resume", *QUICK])
-    assert "paper: read back from" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "paper (screen): read back from" in printed
+    assert f"{best['candidate']} (refine): read back from" in printed
     pd.testing.assert_frame_equal(written, pd.read_csv(tmp_path / "model_select.csv"))
