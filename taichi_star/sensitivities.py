@@ -54,6 +54,15 @@ past it as the robot coasts): there a replica takes its instance's side of the k
 polynomial. A second pair at ±2ε, extrapolated as 2·D(ε) − D(2ε), was needed before that rule;
 without it a 9.45-s run of A1 stays within 2.3e-7 of whole-run differences (docs: numerics,
 sensitivities), with half the replicas."""
+FIELD_RELATIVE_STEPS = {"drag_parallel": 1e-2}
+"""Fields whose ε departs from RELATIVE_STEP. C∥ barely moves the robot (its derivative is
+~1e-2 mm of displacement per unit over 0.3 s from rest, α's ~1): at 1e-5 its replicas'
+offsets are ~1e-12 m, 1e5 roundings of a position, and its derivative was 6e-5 to 1.6e-3 off
+(0.3 s of A1, A1+A2 and A1+A3 at C∥ = 0.01 and 0.1, implicit Euler, fixed 1-ms steps, against
+Richardson differences at h = 1e-2 and 3e-2 of C∥, which agree with each other to 3e-7); at
+1e-2 all six are within 1e-6 (docs: numerics, sensitivities). C∥ multiplies its own force,
+so the residual is linear in it and the larger ε adds no truncation of the coefficient's; the
+offsets, ~1e-9 m, stay small enough that the state's O(ε²) terms do not show."""
 REPLICAS_PER_DIRECTION = 2
 """Replica instances each direction adds per instance: the pair at ±ε."""
 ZERO_VALUE_SCALE = 0.01
@@ -101,14 +110,19 @@ class Direction:
             object.__setattr__(replica, self.field, tuple(values))
         return replica
 
+    @property
+    def relative_step(self) -> float:
+        """ε relative to the parameter's value (RELATIVE_STEP or FIELD_RELATIVE_STEPS)."""
+        return FIELD_RELATIVE_STEPS.get(self.field, RELATIVE_STEP)
+
     def step(self, params: StarParams) -> float:
-        """ε for this instance (see RELATIVE_STEP and ZERO_VALUE_SCALE)."""
+        """ε for this instance (see `relative_step` and ZERO_VALUE_SCALE)."""
         value = abs(self.value(params))
         if value == 0.0:
             top = params.period if self.field == "actuator_delays" else (
                 STAR_RANGES[self.field][1] if self.field in STAR_RANGES else 1.0)
             value = ZERO_VALUE_SCALE * top
-        return RELATIVE_STEP * value
+        return self.relative_step * value
 
 
 def parse_directions(names) -> Tuple[Direction, ...]:

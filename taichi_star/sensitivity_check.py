@@ -7,7 +7,7 @@ batch) give the central differences D(h) and D(2h) and their Richardson extrapol
 h for a symmetric gait). The table also holds a Taylor test, which needs no reference: the
 remainder r(H) = |f(p + H) − f(p) − H·s| of the sensitivity s shrinks as H² when s is the
 derivative (r(2H)/r(H) ≈ 4) and only as H when it is not (≈ 2); two more runs at H and 2H,
-with H = TAYLOR_STEP large enough that the remainder stands above the runs' Newton noise.
+with H (`taylor_step`) large enough that the remainder stands above the runs' Newton noise.
 """
 
 from __future__ import annotations
@@ -21,13 +21,12 @@ from .params import SolverConfig, StarParams
 from .sensitivities import Direction, parse_directions
 from .simulation import simulate
 
-DIFFERENCE_STEP = 1e-5
-"""h of the finite differences relative to the parameter's value (the size of the sensitivities'
-own ε, `sensitivities.RELATIVE_STEP`; for a parameter at 0, ten times that ε)."""
-TAYLOR_STEP = 1e-3
-"""H of the Taylor test relative to the parameter's value (at 0: 100 times the differences'
-h): its remainder, ~H² relative, stays far above the Newton noise of the runs (1e-12 m against
-displacements of 1e-4 m)."""
+TAYLOR_MULTIPLE = 100.0
+"""H of the Taylor test in multiples of the differences' h (1e-3 of the value for ε = 1e-5):
+its remainder, ~H² relative, stays far above the Newton noise of the runs (1e-12 m against
+displacements of 1e-4 m)..."""
+TAYLOR_MOST = 0.1
+"""... but H at most this share of a nonzero value (C∥, whose ε is 1e-2 of it, moves by 10 %)."""
 CHECK_COLUMNS = ("instance", "gait", "parameter", "value", "output", "sensitivity",
                  "difference_h", "difference_2h", "difference", "relative_error",
                  "difference_spread", "taylor_ratio")
@@ -37,16 +36,21 @@ CHECK_COLUMNS = ("instance", "gait", "parameter", "value", "output", "sensitivit
 conditioned); taylor_ratio = r(2H) / r(H)."""
 
 
-MULTIPLES = (1.0, -1.0, 2.0, -2.0, TAYLOR_STEP / DIFFERENCE_STEP,
-             2 * TAYLOR_STEP / DIFFERENCE_STEP)
-"""The moved runs, in multiples of h: the differences' ±h and ±2h, the Taylor test's H and 2H."""
+MULTIPLES = (1.0, -1.0, 2.0, -2.0)
+"""The differences' runs, in multiples of h: ±h and ±2h (then the Taylor test's H and 2H)."""
 
 
 def difference_step(direction: Direction, params: StarParams) -> float:
-    """h for one instance: DIFFERENCE_STEP of its value, or ten times the sensitivities' ε at
-    0."""
+    """h for one instance: the sensitivities' own ε (`Direction.step`), ten times it at 0."""
     value = abs(direction.value(params))
-    return DIFFERENCE_STEP * value if value else 10.0 * direction.step(params)
+    return direction.step(params) * (1.0 if value else 10.0)
+
+
+def taylor_step(h: float, value: float) -> float:
+    """H of the Taylor test for differences of step h at a parameter value: TAYLOR_MULTIPLE·h,
+    at most TAYLOR_MOST·|value| where the value is not 0."""
+    step = TAYLOR_MULTIPLE * h
+    return min(step, TAYLOR_MOST * abs(value)) if value else step
 
 
 def check_sensitivities(params: Sequence[StarParams], duration_s: float, solver: SolverConfig,
@@ -59,15 +63,18 @@ def check_sensitivities(params: Sequence[StarParams], duration_s: float, solver:
     directions = parse_directions(names)
     result = simulate(params, duration_s, solver, arch=arch, sensitivities=names)
     centre = result.summary[output].to_numpy(dtype=float)
-    moved, steps = [], []
+    moved, steps, taylor_steps = [], [], []
     for direction in directions:
         row = [difference_step(direction, p) for p in params]
+        taylor_row = [taylor_step(h, direction.value(p)) for p, h in zip(params, row)]
         steps.append(row)
-        for multiple in MULTIPLES:
-            moved += [direction.moved(p, direction.value(p) + multiple * h)
-                      for p, h in zip(params, row)]
+        taylor_steps.append(taylor_row)
+        for offsets in [[m * h for h in row] for m in MULTIPLES] + [taylor_row,
+                                                                    [2 * H for H in taylor_row]]:
+            moved += [direction.moved(p, direction.value(p) + offset)
+                      for p, offset in zip(params, offsets)]
     runs = simulate(moved, duration_s, solver, arch=arch).summary[output].to_numpy(dtype=float)
-    runs = runs.reshape(len(directions), len(MULTIPLES), len(params))
+    runs = runs.reshape(len(directions), len(MULTIPLES) + 2, len(params))
     rows = []
     for j, direction in enumerate(directions):
         h = np.array(steps[j])
@@ -75,7 +82,7 @@ def check_sensitivities(params: Sequence[StarParams], duration_s: float, solver:
         small, large = (plus - minus) / (2 * h), (plus2 - minus2) / (4 * h)
         extrapolated = 2 * small - large
         sensitivity = result.sensitivity(output, direction.label)
-        step = TAYLOR_STEP / DIFFERENCE_STEP * h
+        step = np.array(taylor_steps[j])
         remainder = np.abs(taylor - centre - step * sensitivity)
         remainder2 = np.abs(taylor2 - centre - 2 * step * sensitivity)
         with np.errstate(divide="ignore", invalid="ignore"):

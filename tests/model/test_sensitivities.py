@@ -8,7 +8,7 @@ import pytest
 
 from taichi_star import SolverConfig, StarParams, simulate
 from taichi_star.sensitivities import SUMMARY_OUTPUTS, parse_directions, sensitivity_column
-from taichi_star.sensitivity_check import DIFFERENCE_STEP, check_sensitivities
+from taichi_star.sensitivity_check import check_sensitivities, difference_step, taylor_step
 
 DURATION_S = 0.1
 """100 steps of 1 ms: the A1 pulse has begun to bend the arcs and the robot to move."""
@@ -53,6 +53,27 @@ def test_a_coast_after_the_pulse_keeps_its_sensitivities(taichi_cpu):
     # 1e-5: the target, 20× the measured error and half the error without the branch rule
     assert_matches_differences(check_sensitivities([BASE.replace(gait="A1")], 0.84,
                                                    SolverConfig(**TIGHT), ("alpha",)))
+
+
+def test_c_parallel_takes_its_own_step_and_then_matches_its_differences(taichi_cpu):
+    """C∥ barely moves the robot, so at the common ε (1e-5 of the value) its replicas' offsets
+    are a few thousand roundings of a position: here its derivative was 4e-4 and 3.6e-3 off,
+    with Taylor ratios of 2.0 (measured). At its own ε, 1e-2 of the value, 9e-9 and 1.7e-6,
+    ratios 3.9 and 4.4."""
+    (direction,) = parse_directions(["drag_parallel"])
+    assert direction.step(BASE) == pytest.approx(1e-2 * BASE.drag_parallel, rel=1e-15)
+    assert difference_step(direction, BASE) == direction.step(BASE)
+    # 1e-5: the target, 6x the larger measured error
+    assert_matches_differences(check_sensitivities(BATCH, DURATION_S, SolverConfig(**TIGHT),
+                                                   ("drag_parallel",)))
+
+
+def test_the_taylor_step_is_a_hundred_differences_steps_at_most_a_tenth_of_the_value():
+    assert taylor_step(1e-5, 1.0) == pytest.approx(1e-3, rel=1e-15)
+    assert taylor_step(1e-3, 1.0) == pytest.approx(0.1, rel=1e-15)  # both rules: equal
+    assert taylor_step(2e-3, 1.0) == pytest.approx(0.1, rel=1e-15)  # a tenth of the value
+    assert taylor_step(2e-3, -1.0) == pytest.approx(0.1, rel=1e-15)
+    assert taylor_step(2e-3, 0.0) == pytest.approx(0.2, rel=1e-15)  # at 0: no value to bound
 
 
 def test_an_actuator_the_gait_never_fires_has_no_influence(euler_run):
@@ -162,7 +183,8 @@ def test_steps_redone_with_substeps_are_followed(euler_run):
     result = simulate(batch, 0.2, solver, sensitivities=("alpha",))
     assert result.summary["substep_retries"].iloc[0] > 0
     table = check_sensitivities(batch, 0.2, solver, ("alpha",))
-    moved = dataclasses.replace(batch[0], alpha=batch[0].alpha * (1 + DIFFERENCE_STEP))
+    moved = dataclasses.replace(batch[0], alpha=batch[0].alpha
+                                + difference_step(parse_directions(["alpha"])[0], batch[0]))
     plus = simulate([moved], 0.2, solver).summary
     # the moved runs retry the same steps: the differences are those of one substep sequence
     assert plus["substep_retries"].iloc[0] == result.summary["substep_retries"].iloc[0]
