@@ -451,18 +451,19 @@ StarParams.__doc__ += "\n\n    | field | unit | allowed | default |\n    |---|--
     for f in fields(StarParams))
 
 
-IDENTIFIED_FIELDS = {"alpha": 0.9494493740, "drag_perpendicular": 1.213589224,
-                     "cylinder_drag": 54.28145268,
-                     "actuator_gains": (0.5993823308, 0.9653546728, 0.9139914816, 1.738832333,
-                                        0.4498417279, 1.0, 1.0, 1.0)}
+IDENTIFIED_FIELDS = {"alpha": 1.067728543, "drag_perpendicular": 2.707613657,
+                     "cylinder_drag": 48.85854191,
+                     "actuator_gains": (0.5298242138, 0.6219816725, 0.9734488742, 1.990744069,
+                                        0.4879760263, 1.0, 1.0, 1.0)}
 """StarParams fields of the "identified" preset (the rest are the paper's): the rank-1 model of
 `python -m studies model_select` (results/model_select/identified.csv; the study prints this
 dict), to 10 significant digits. The model form "gains_with_a1": the paper's model with a gain
 per actuator on its curvature change, fitted with α, C⊥ and C_c by CMA-ES to the measured
-trajectories of cycles 1-3 of the five Fig. 4 gaits (A6-A8, fired by none of them, keep gain 1).
-It swims all five gaits in the paper's directions (trajectory objective 1.86 on cycles 1-3
-against 17.7 for the paper's model refitted), and ranks first on what the fit did not see:
-held-out gaits plus cycles 4-6 (docs/results.md, "Which model form explains the robot")."""
+trajectories of cycles 1-3 of the five Fig. 4 gaits (A6-A8, fired by none of them, keep gain 1),
+in the study's refine stage (384 evaluations). It swims all five gaits in the paper's
+directions over cycles 1-3 and 4-6 (trajectory objective 1.11 on cycles 1-3 against 17.7 for
+the paper's model refitted), and ranks first on what the fit did not see: held-out gaits plus
+cycles 4-6 (docs/results.md, "Which model form explains the robot")."""
 
 PRESET_FIELDS = {
     "paper": {},
