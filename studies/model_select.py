@@ -609,6 +609,8 @@ def main(argv=None):
                      solver=solver, extra={"gaits": gaits, "train_cycles": list(train),
                                            "validate_cycles": list(validate),
                                            "cma": dataclasses.asdict(settings),
+                                           "refine_top": args.refine_top,
+                                           "refine_cma": dataclasses.asdict(refine_settings),
                                            "fold_generations": args.fold_generations})
     progress = not args.no_progress
     record = nearest_interval(RECORD_INTERVAL_S, solver.dt)
