@@ -101,6 +101,12 @@ class BatchEngine:
                       for name, values in coefficients.items()}
             self.terms.append(cls(self.assembly, configuration, shapes, term_classes))
         connect_terms(self.terms)
+        self.same_as_instance = arena.batch_field(ti.i32, (capacity, len(self.terms))) \
+            if sensitive else None
+        """Per replica and term: 1 where the term is `position_only` and its coefficients are
+        those of the replica's instance; its residual at the instance's positions is then the
+        instance's, the same for both replicas of a pair, and `assemble` leaves it out of their
+        difference (0 for the simulated instances, which assemble every term)."""
         self.carrying = any(term.carries_state for term in self.terms)
         """Whether a term keeps state the positions do not determine (static: the kernels
         commit and back it up only then, `accept_step`)."""
@@ -114,6 +120,8 @@ class BatchEngine:
         for term in self.terms:
             model_fields.update({f"{term.name}.{name}": field
                                  for name, field in term.coefficient_fields().items()})
+        if sensitive:
+            model_fields["same_as_instance"] = self.same_as_instance
         self.model_store = FieldStore(model_fields)
         """Bulk loads of the batch's coefficients and the solver settings (`load`)."""
 
@@ -156,6 +164,8 @@ class BatchEngine:
             coefficients = model.coefficients[term.name]
             values.update({f"{term.name}.{name}": pad_batch(coefficients[name], capacity)
                            for name in term.coefficient_names})
+        if self.sensitive:
+            values["same_as_instance"] = self.replica_sameness(model, primal_count)
         self.model_store.write(values)
         state = self.state.initial_values(pad_batch(model.rest_positions, capacity),
                                           model.batch_size)
@@ -166,6 +176,22 @@ class BatchEngine:
                                                 step_counts(periods, solver.dt))
         state["step_size"][:] = solver.dt
         self.state.store.write(state)
+
+    def replica_sameness(self, model: BatchModel, primal_count: int) -> np.ndarray:
+        """(capacity, terms) values of `same_as_instance` for a batch of `primal_count`
+        instances followed by their replicas."""
+        same = np.zeros((self.capacity, len(self.terms)), dtype=np.int32)
+        replicas = np.arange(primal_count, model.batch_size)
+        instances = replicas % max(primal_count, 1)
+        for k, term in enumerate(self.terms):
+            if not term.position_only:
+                continue
+            equal = np.ones(len(replicas), dtype=bool)
+            for name in term.coefficient_names:
+                values = model.coefficients[term.name][name]
+                equal &= (values[replicas] == values[instances]).reshape(len(replicas), -1).all(1)
+            same[replicas, k] = equal
+        return same
 
     # ---------------------------------------------------------------- assembly
     @ti.func
@@ -185,8 +211,12 @@ class BatchEngine:
             self.assembly.add_residual(b, n, scaled_mass * (
                 (self.state.positions[b, n] - self.state.previous[b, n]) - self.state.inertia_offset[b, n]))
             self.assembly.add_block(b, self.diagonal_slot[n], scaled_mass * identity, jacobian)
-        for term in ti.static(self.terms):
-            term.assemble(b, rate_gain, jacobian)
+        for k, term in ti.static(enumerate(self.terms)):
+            if ti.static(self.sensitive and term.position_only):
+                if self.same_as_instance[b, k] == 0:
+                    term.assemble(b, rate_gain, jacobian)
+            else:
+                term.assemble(b, rate_gain, jacobian)
 
     # ---------------------------------------------------------------- time stepping
     @ti.func

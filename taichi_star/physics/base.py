@@ -68,6 +68,11 @@ class Term:
     carries_state: ClassVar[bool] = False
     """Whether the term keeps state the positions do not determine (`accept_step`,
     `copy_carried`); the engine compiles those calls only for a batch with such a term."""
+    reads_step_start: ClassVar[bool] = True
+    """Whether its residual at given positions depends on the state at the step's start (the
+    integrator's rates, velocities, histories carried from the last step). One that does not
+    (an elastic energy) gives a sensitivities' replica the residual of its instance wherever
+    their coefficients agree (`position_only`)."""
 
     @staticmethod
     def coefficients(params: Sequence, topologies: Sequence, topology) -> Dict[str, np.ndarray]:
@@ -127,6 +132,10 @@ class Term:
             setattr(self, name, assembly.batch_field(dtype, (capacity,) + tuple(shape)))
         self.reshapers = []
         """The terms that reshape this term's elements (`connect_terms`)."""
+        self.position_only = False
+        """Whether its residual depends only on the positions, its coefficients, the time and
+        the firings: not `reads_step_start` and reshaped by no term that does
+        (`connect_terms`)."""
         self.reshaped_terms = []
         """The terms whose elements this term reshapes (`connect_terms`)."""
         histories = self.history(assembly.topology, terms)
@@ -192,3 +201,5 @@ def connect_terms(terms: Sequence[Term]):
     for term in terms:
         term.reshapers = [other for other in terms if other.reshapes(type(term))]
         term.reshaped_terms = [other for other in terms if term.reshapes(type(other))]
+        term.position_only = not term.reads_step_start and not any(
+            other.reads_step_start for other in term.reshapers)

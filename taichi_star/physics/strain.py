@@ -32,6 +32,7 @@ class StrainTerm(Term):
     subclass gives (`stiffness`, `strain`, `add_element` have no default)."""
 
     n_elements: int
+    reads_step_start = False  # k and s⁰ come from the coefficients, the time and the firings
 
     @staticmethod
     def element_count(topology) -> int:

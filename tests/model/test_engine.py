@@ -439,6 +439,41 @@ def test_a_sensitive_engine_spreads_its_instances_and_never_its_replicas(taichi_
     np.testing.assert_array_equal(slots, np.arange(5) * (iterations // 5))
 
 
+def test_replicas_leave_out_the_elastic_terms_their_instance_shares(taichi_cpu):
+    """A replica pair moved along α or C⊥ has its instance's stretching and bending
+    coefficients, so those terms add the same residual to both replicas and are left out of
+    their difference; along E or a gain they differ and are assembled; the simulated
+    instances assemble every term; with the material damping (which reads the velocities)
+    every term is assembled. The derivatives themselves: tests/model/test_sensitivities.py."""
+    solver = ts.SolverConfig()
+    runtime = Runtime.current()
+    runtime.ensure("cpu", solver.precision)
+    directions = ["alpha", "drag_perpendicular", "youngs_modulus", "actuator_gains[0]"]
+    params = [ts.StarParams(gait="A1+A2"), ts.StarParams(gait="A1+A3", alpha=1.2)]
+    batch, _ = replica_batch(params, parse_directions(directions))
+    engine = runtime.engine_for(build_model(batch), solver, tangents=len(directions))
+    names = [term.name for term in engine.terms]
+    same = engine.same_as_instance.to_numpy()[:len(batch)]
+    stretching, bending = names.index("stretching"), names.index("bending")
+    assert [term.name for term in engine.terms if term.position_only] == ["stretching",
+                                                                          "bending"]
+    assert not same[:2].any()  # the simulated instances
+    # replicas: direction j's pair at rows 2 + 4j .. 2 + 4j + 3 (+ε of both, then −ε of both)
+    expected = {"alpha": (1, 1), "drag_perpendicular": (1, 1), "youngs_modulus": (0, 0),
+                "actuator_gains[0]": (1, 0)}
+    for j, name in enumerate(directions):
+        rows = same[2 + 4 * j:6 + 4 * j]
+        np.testing.assert_array_equal(rows[:, [stretching, bending]],
+                                      np.tile(expected[name], (4, 1)), err_msg=name)
+        others = [k for k in range(len(names)) if k not in (stretching, bending)]
+        assert not rows[:, others].any(), name
+    damped = [p.replace(damping_time=0.01) for p in params]
+    batch, _ = replica_batch(damped, parse_directions(["alpha"]))
+    engine = runtime.engine_for(build_model(batch), solver, tangents=1)
+    assert not any(term.position_only for term in engine.terms)
+    assert not engine.same_as_instance.to_numpy().any()
+
+
 def test_a_gpu_engine_keeps_its_instances_contiguous(taichi_cpu):
     """Without even_spread (a GPU: whole warps of consecutive instances) instance b sits at
     slot b·loop_spread, the padding idle."""
