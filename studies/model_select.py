@@ -104,8 +104,8 @@ QUICK_POPSIZE, QUICK_MAX_GENERATIONS, QUICK_FOLD_GENERATIONS = 4, 2, 1
 DEFAULT_POPSIZE, DEFAULT_MAX_GENERATIONS, DEFAULT_FOLD_GENERATIONS = 6, 8, 2
 DEFAULT_REFINE_TOP, DEFAULT_REFINE_POPSIZE, DEFAULT_REFINE_GENERATIONS = 6, 8, 16
 """The refine stage: the six best screened forms at 2.7x the screen's evaluations (8 x 16 +
-16 x 16 = 384 with the restart, against 6 x 8 + 12 x 8 = 144). At the screen's budget a 10-axis form ended above the 8-axis form it contains
-(docs: Results, model selection)."""
+16 x 16 = 384 with the restart, against 6 x 8 + 12 x 8 = 144). At the screen's budget a
+10-axis form ended above the 8-axis form it contains (docs: Results, model selection)."""
 QUICK_REFINE_TOP, QUICK_REFINE_POPSIZE, QUICK_REFINE_GENERATIONS = 1, 4, 3
 STAGES = ("refine", "screen")
 """The stages in ranking order: a refined form above every screened one."""
@@ -693,15 +693,13 @@ def main(argv=None):
             "folds": result["folds"].to_dict(orient="list")}, default=_json_value))
 
     with cli.executor(args) as executor:
-        largest = max(settings.population(max((len(c.fit.split()) for c in runnable),
-                                              default=1), settings.restarts),
-                      refine_settings.population(1, refine_settings.restarts)
-                      if args.refine_top else 0) * len(gaits)
+        work = planned_work(runnable, settings, refine_settings, args.refine_top)
+        largest = max((fit_settings.population(len(c.fit.split()), fit_settings.restarts)
+                       for c, fit_settings in work), default=1) * len(gaits)
         setup = Setup(tuple(gaits), trials, train, validate,
                       dict(solver=solver, arch=args.arch, executor=executor,
                            chunk_size=cli.chunk_size(args, largest, executor.n_workers)),
                       record)
-        work = planned_work(runnable, settings, refine_settings, args.refine_top)
         for position, candidate in enumerate(runnable):
             fit_or_read_back(candidate, settings, "screen", setup, work[position:])
         refined = refined_candidates(ranked(rows), runnable, args.refine_top)

@@ -4,8 +4,9 @@ It is written independently of the Taichi batch engine, from the specification a
 the two can check each other. Implicit Euler or BDF2 in time; elasticity, Kelvin–Voigt material
 damping, rod and cylinder drag (quadratic and linear), jets, added mass, per-actuator gains
 and delays, and the entrained water (its velocity two more unknowns of each step). Everything
-is double precision; each Newton iteration assembles the exact Jacobian of all forces as a scipy.sparse matrix and factors
-it with SuperLU (N = 193 nodes, 386 degrees of freedom: ~3 ms per iteration).
+is double precision; each Newton iteration assembles the exact Jacobian of all forces as a
+scipy.sparse matrix and factors it with SuperLU (N = 193 nodes, 386 degrees of freedom: ~3 ms
+per iteration).
 
 Units are SI, per unit out-of-plane height H = 1 m: positions in m, forces in N/m, energies in
 J/m, masses in kg/m. A configuration `q` is an (N, 2) array; its flat degree-of-freedom vector is

@@ -47,9 +47,10 @@ those of a parameter that barely moves the robot (C∥, the cylinder's drag and 
 only ~1e3 roundings, and C∥'s derivative was 2-20 % off; at 1e-5 the error of every parameter
 falls, or stays at the finite differences' own spread, while the O(ε²) truncation stays
 ~1e-10 (measured on 0.2-s runs of A1+A2 and A1+A3, both integrators, against 1e-6 and 1e-4:
-docs: numerics, sensitivities). The drags |v|·v and the jet's switch are not twice
-differentiable at 0, and states sit at or just beside it (a velocity component that a symmetric gait keeps at zero, one that creeps
-past it as the robot coasts): there a replica takes its instance's side of the kink
+docs: numerics, sensitivities); C∥ takes its own (FIELD_RELATIVE_STEPS). The drags |v|·v and
+the jet's switch are not twice differentiable at 0, and states sit at or just beside it (a
+velocity component that a symmetric gait keeps at zero, one that creeps past it as the robot
+coasts): there a replica takes its instance's side of the kink
 (`physics.assembly.Assembly.branch_instance`), which keeps the pair's difference that of one
 polynomial. A second pair at ±2ε, extrapolated as 2·D(ε) − D(2ε), was needed before that rule;
 without it a 9.45-s run of A1 stays within 2.3e-7 of whole-run differences (docs: numerics,
