@@ -12,6 +12,7 @@ engine ask its `fire_due` what fires in a step; `command` is the one way in for 
 """
 
 import ast
+import functools
 import math
 from dataclasses import dataclass
 from typing import Dict, Optional, Tuple
@@ -120,9 +121,10 @@ class CurvatureProfile:
             value = value + self.closure_gap(period) * np.asarray(tau, dtype=np.float64) / period
         return value
 
-    @property
+    @functools.cached_property
     def rest_curvature(self) -> float:
-        """K̄(0), 1/m: the curvature of an actuator at rest (the arcs of the rest shape)."""
+        """K̄(0), 1/m: the curvature of an actuator at rest (the arcs of the rest shape); kept
+        once computed (the profile is immutable, and a batch asks each instance's)."""
         return self.curvature(0.0)
 
 

@@ -175,7 +175,7 @@ class BatchEngine:
             self.state.schedule.periodic_values(state, masks, periods,
                                                 step_counts(periods, solver.dt))
         state["step_size"][:] = solver.dt
-        self.state.store.write(state)
+        self.state.reset(state)
 
     def replica_sameness(self, model: BatchModel, primal_count: int) -> np.ndarray:
         """(capacity, terms) values of `same_as_instance` for a batch of `primal_count`

@@ -9,7 +9,7 @@ instance's values contiguous: one thread walks its own instance through the cach
 the threads of a warp, one instance each, read one contiguous run of memory).
 The index `[b, ...]` is the same in both layouts; only the addresses differ."""
 
-from typing import Dict, Optional
+from typing import Dict, Optional, Sequence
 
 import numpy as np
 import taichi as ti
@@ -96,21 +96,30 @@ class FieldStore:
     engine's own kernels. A store packs every value into one float64 and one int64 array and
     scatters them with one kernel, compiled once per store. Values are cast to each field's type
     exactly as `from_numpy` would (float64 → float32 rounds to nearest; integers are exact), so a
-    `write` of what `read` returned restores the fields bitwise."""
+    `write` of what `read` returned restores the fields bitwise.
 
-    def __init__(self, fields: Dict[str, ti.Field]):
-        self.shapes = {name: tuple(field.shape) + _components(field) for name, field in fields.items()}
-        self.dtypes = {name: np.dtype(to_numpy_type(field.dtype)) for name, field in fields.items()}
-        floating = {name: np.issubdtype(self.dtypes[name], np.floating) for name in fields}
+    `zeroed`: names of fields that a `write` sets to zero on the device instead of copying
+    (a store that resets a large batch to rest need not pack gigabytes of zeros on the host);
+    such a store does not `read`."""
+
+    def __init__(self, fields: Dict[str, ti.Field], zeroed: Sequence[str] = ()):
+        unknown = set(zeroed) - set(fields)
+        if unknown:
+            raise ValueError(f"zeroed fields {sorted(unknown)} are not fields of the store")
+        copied = {name: field for name, field in fields.items() if name not in zeroed}
+        self.shapes = {name: tuple(field.shape) + _components(field) for name, field in copied.items()}
+        self.dtypes = {name: np.dtype(to_numpy_type(field.dtype)) for name, field in copied.items()}
+        floating = {name: np.issubdtype(self.dtypes[name], np.floating) for name in copied}
         self.layout = {True: [], False: []}
         """Per kind (True: float): (name, offset into the flat array, size) in packing order."""
         totals = {True: 0, False: 0}
-        for name in fields:
+        for name in copied:
             size = int(np.prod(self.shapes[name], dtype=np.int64))
             self.layout[floating[name]].append((name, totals[floating[name]], size))
             totals[floating[name]] += size
-        self.float_entries = [(fields[name], offset) for name, offset, _ in self.layout[True]]
-        self.int_entries = [(fields[name], offset) for name, offset, _ in self.layout[False]]
+        self.float_entries = [(copied[name], offset) for name, offset, _ in self.layout[True]]
+        self.int_entries = [(copied[name], offset) for name, offset, _ in self.layout[False]]
+        self.zeroed_fields = [fields[name] for name in zeroed]
         self.totals = {kind: max(total, 1) for kind, total in totals.items()}
 
     def flat_arrays(self) -> Dict[bool, np.ndarray]:
@@ -135,6 +144,8 @@ class FieldStore:
 
     def read(self) -> Dict[str, np.ndarray]:
         """Every field of the store as a NumPy array of its own dtype and shape."""
+        if self.zeroed_fields:
+            raise ValueError("a store with zeroed fields only writes")
         flats = self.flat_arrays()
         self._transfer(flats[True], flats[False], False)
         return {name: flats[kind][offset:offset + size].reshape(self.shapes[name])
@@ -176,8 +187,13 @@ class FieldStore:
     @ti.kernel
     def _transfer(self, floats: ti.types.ndarray(dtype=ti.f64, ndim=1),
                   ints: ti.types.ndarray(dtype=ti.i64, ndim=1), to_fields: ti.template()):
-        """Flat arrays -> fields when `to_fields`, else fields -> flat arrays."""
+        """Flat arrays -> fields (and zero into the zeroed fields) when `to_fields`, else fields
+        -> flat arrays."""
         for field, offset in ti.static(self.float_entries):
             self._copy(field, floats, offset, to_fields)
         for field, offset in ti.static(self.int_entries):
             self._copy(field, ints, offset, to_fields)
+        if ti.static(to_fields):
+            for field in ti.static(self.zeroed_fields):
+                for index in ti.grouped(field):
+                    field[index] = ti.zero(field[index])

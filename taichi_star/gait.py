@@ -8,6 +8,7 @@ forward direction, the images under the octagon's symmetries) is read off that v
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import List, Optional, Tuple, Union
@@ -23,6 +24,13 @@ def actuator_direction(number: int) -> np.ndarray:
     """Unit bisector u_m (2,) of actuator A_m: the angle (m − 1)·45° from +x."""
     angle = math.radians(45.0 * (number - 1))
     return np.array([math.cos(angle), math.sin(angle)])
+
+
+@functools.lru_cache(maxsize=1024)
+def _parse_text(gait: str) -> "Gait":
+    """`Gait.parse` of a text, once per distinct text: a batch of 65,536 instances names a few
+    gaits, and a Gait is immutable, so every instance of a gait shares one."""
+    return Gait._from_text(gait)
 
 
 @dataclass(frozen=True)
@@ -48,6 +56,10 @@ class Gait:
             return gait
         if not isinstance(gait, str):
             raise ValueError(f"gait must be a string ({_ALLOWED}), got {gait!r}")
+        return _parse_text(gait)
+
+    @classmethod
+    def _from_text(cls, gait: str) -> "Gait":
         if gait.strip().lower() == NO_GAIT:
             return cls(())
         numbers = []

@@ -5,7 +5,7 @@ to the device once."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Dict, Sequence, Tuple
+from typing import Dict, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -64,15 +64,45 @@ def validate_batch(params) -> Tuple[StarParams, ...]:
     return params
 
 
-def rest_topologies(params: Sequence[StarParams]):
-    """One Topology per instance (shared between instances of the same rest geometry)."""
-    shapes = {}
-    for p in params:
-        key = (p.joint_radius, p.tip_radius, p.actuator_profile.rest_curvature)
-        if key not in shapes:
-            shapes[key] = build_topology(p)
-    return [shapes[(p.joint_radius, p.tip_radius, p.actuator_profile.rest_curvature)]
-            for p in params]
+class InstanceTopologies(Sequence[Topology]):
+    """One Topology per instance of a batch, shared between the instances of the same rest
+    geometry: a sequence of B Topology objects whose `stack` gathers a per-instance table
+    without touching every instance (a batch of 65,536 has one or a few geometries)."""
+
+    def __init__(self, distinct: Sequence[Topology], index: Optional[np.ndarray] = None):
+        self.distinct = tuple(distinct)
+        """The distinct topologies."""
+        self.index = (np.arange(len(self.distinct)) if index is None
+                      else np.asarray(index, dtype=np.int64))
+        """(B,) int64: the position in `distinct` of each instance's topology (default: one
+        instance per topology)."""
+
+    @classmethod
+    def of(cls, params: Sequence[StarParams]) -> "InstanceTopologies":
+        """The topologies of a batch, each built once per distinct rest geometry."""
+        position: Dict[Tuple, int] = {}
+        index = np.empty(len(params), dtype=np.int64)
+        built = []
+        for b, p in enumerate(params):
+            key = (p.joint_radius, p.tip_radius, p.actuator_profile.rest_curvature)
+            if key not in position:
+                position[key] = len(built)
+                built.append(build_topology(p))
+            index[b] = position[key]
+        return cls(built, index)
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+    def __getitem__(self, b):
+        if isinstance(b, slice):
+            return [self.distinct[k] for k in self.index[b]]
+        return self.distinct[self.index[b]]
+
+    def stack(self, attribute: str) -> np.ndarray:
+        """(B, ...) the Topology array `attribute` of every instance (a copy): the same values
+        as stacking them one by one."""
+        return np.stack([getattr(t, attribute) for t in self.distinct])[self.index]
 
 
 def build_model(params: Sequence[StarParams], commanded: bool = False) -> BatchModel:
@@ -80,10 +110,10 @@ def build_model(params: Sequence[StarParams], commanded: bool = False) -> BatchM
     `commanded`, the instances fire whatever they are commanded to (every actuator can fire),
     not their gait."""
     params = validate_batch(params)
-    topologies = rest_topologies(params)
+    topologies = InstanceTopologies.of(params)
     topology = topologies[0]
     thickness = np.array([p.thickness for p in params])[:, None]
-    lumped = np.stack([t.lumped_length for t in topologies])
+    lumped = topologies.stack("lumped_length")
     # each rod component's mass per hub height (its density times its height over the hub's)
     mass = thickness * (np.array([p.actuator_density * p.height_ratios[1]
                                   for p in params])[:, None] * lumped[:, :, 0]
@@ -103,6 +133,6 @@ def build_model(params: Sequence[StarParams], commanded: bool = False) -> BatchM
         if configuration is not None:
             used.append((cls, configuration))
     return BatchModel(params=params, topology=topology,
-                      rest_positions=np.stack([t.rest_positions for t in topologies]),
+                      rest_positions=topologies.stack("rest_positions"),
                       mass=mass, inertia=inertia, coefficients=coefficients,
                       terms_used=tuple(used))

@@ -299,6 +299,16 @@ def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, reco
                             trajectory_sensitivities=trajectory_sensitivities)
 
 
+def _texts(values: Sequence, to_text) -> list:
+    """to_text(value) of every value, computed once per distinct object: a batch of 65,536
+    instances shares a few profiles and gain tuples, and these are immutable."""
+    by_object = {}
+    for value in values:
+        if id(value) not in by_object:
+            by_object[id(value)] = to_text(value)
+    return [by_object[id(value)] for value in values]
+
+
 def _collect(engine, model, solver, duration, record_times, start, centroids, rotations, shapes,
              boundaries, steady_from_cycle):
     batch = model.batch_size
@@ -316,9 +326,10 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
 
     rows = {column: [getattr(p, name) for p in params] for name, column in StarParams.columns().items()}
     # as text, so that every column has an Arrow type (Parquet, netCDF) and from_row reads it
-    rows["actuator_profile"] = [p.actuator_profile.to_text() for p in params]
+    rows["actuator_profile"] = _texts([p.actuator_profile for p in params],
+                                      lambda profile: profile.to_text())
     for name in PER_ACTUATOR_FIELDS:  # "(1.0, 0.5, ...)": every float's repr reads back exactly
-        rows[parameter_column(name)] = [str(getattr(p, name)) for p in params]
+        rows[parameter_column(name)] = _texts([getattr(p, name) for p in params], str)
     rows.update(metrics.swimming_metrics(final - start, duration, gaits))
     positions = state.positions.to_numpy()[:batch].astype(np.float64)
     rows["heading_deg"] = np.degrees(metrics.body_rotation(

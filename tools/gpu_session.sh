@@ -6,13 +6,18 @@
 #       gymnasium farama-notifications
 # (the taichi wheel, 56 MB, fits the 64 MiB transfer only without taichi/_lib/c_api, which the
 # Python package does not use: unzip, delete that folder and its RECORD lines, zip again).
+# Once the tracked tree outgrew what is left of the 64 MiB, the same wheels travel unpacked and
+# xz-compressed instead (25 MB): .gpu_site/site.tar.xz (ignored by git), made here with
+#   mkdir site && for w in .whl/*.whl; do unzip -q -o "$w" -d site; done
+#   tar -cJf .gpu_site/site.tar.xz -C site .
+# and used when present (carry .gpu_site instead of .whl).
 # Usage: bash tools/gpu_session.sh PHASE
 #   correctness  the engine-vs-reference, determinism and GPU-vs-CPU tests with --arch gpu, and
 #                the Fig. 4c study on the GPU compared with results/fig4c.csv (CPU)
 #   layouts      the layout and block-size alternatives at B = 8192 (paper, f64, Newton)
 #   bench        the GPU benchmark into $OUT (results/bench_gpu.csv when committed), one part
 #                per call: PRESETS=paper|accurate, PRECISIONS=f64|f32, SIZES=..., LIMIT=seconds
-#   compare      the paper preset's B sweep (f64, Newton and chord, SIZES) with this checkout,
+#   compare      the B sweep of PRESETS (default paper; f64, SIZES) with this checkout,
 #                then with a baseline commit's source exported into .base/ (ignored by git):
 #                  mkdir .base && git archive BASE taichi_star studies | tar -x -C .base
 #                back to back on the same card, LIMIT seconds each
@@ -23,8 +28,14 @@
 set -o pipefail
 phase=${1:?phase}
 # installed once per machine: later phases of the same lease reuse it
-[ -d /tmp/site/taichi ] || python3 -m pip install -q --no-index --no-deps --no-compile \
-    --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit 1
+if [ ! -d /tmp/site/taichi ]; then
+    if [ -f .gpu_site/site.tar.xz ]; then
+        mkdir -p /tmp/site && tar -xJf .gpu_site/site.tar.xz -C /tmp/site || exit 1
+    else
+        python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
+            --target /tmp/site .whl/*.whl || exit 1
+    fi
+fi
 export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1
 work=$(mktemp -d)
 nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv | tee "$work/gpu.txt"
@@ -65,9 +76,10 @@ bench)
         --no-cache-probe --no-plain-call --sensitivity-counts none --out "$work/bench" 2>&1 | tee "$work/bench.log"
     ;;
 compare)
-    sweep=(--arch gpu --batch-sizes "${SIZES:-8192,65536}" --precisions f64 --presets paper
-           --scenarios none --workers-list none --no-cache-probe --no-plain-call)
-    timeout "${LIMIT:-120}" python3 -m studies bench "${sweep[@]}" --sensitivity-counts none \
+    sweep=(--arch gpu --batch-sizes "${SIZES:-8192,65536}" --precisions f64 --presets "${PRESETS:-paper}"
+           --scenarios none --workers-list none --no-cache-probe --no-plain-call
+           --sensitivity-counts none)
+    timeout "${LIMIT:-120}" python3 -m studies bench "${sweep[@]}" \
         --out "$work/today" 2>&1 | tee "$work/today.log"
     (cd .base && PYTHONPATH=/tmp/site:$PWD timeout "${LIMIT:-120}" python3 -m studies bench \
         "${sweep[@]}" --out "$work/base" 2>&1 | tee "$work/base.log")

@@ -25,8 +25,8 @@ class AddedMass(Term):
     def added_inertia(params, topologies):
         fluid = np.array([p.fluid_density for p in params])
         # the arcs' and the limbs' lumped lengths, each times its height over the hub's
-        lumped = np.stack([(t.lumped_length * np.array(p.height_ratios[::-1])).sum(axis=1)
-                           for p, t in zip(params, topologies)])
+        lumped = (topologies.stack("lumped_length")
+                  * np.array([p.height_ratios[::-1] for p in params])[:, None, :]).sum(axis=-1)
         added = (fluid * np.array([p.added_mass_coeff for p in params]))[:, None] \
             * np.array([p.thickness for p in params])[:, None] * lumped
         added[:, CENTRE] += fluid * np.array(

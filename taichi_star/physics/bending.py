@@ -102,9 +102,9 @@ class Bending(StrainTerm):
         shared = np.array([p.actuation_ends == "shared" for p in params], dtype=np.float64)
         profiles = [p.actuator_profile for p in params]
         return {
-            "voronoi_length": np.stack([t.voronoi_length for t in topologies]),
-            "rest_curvature": np.stack([t.rest_curvature for t in topologies]),
-            "end_turning_length": np.stack([t.end_turning_length for t in topologies]) * shared[:, None],
+            "voronoi_length": topologies.stack("voronoi_length"),
+            "rest_curvature": topologies.stack("rest_curvature"),
+            "end_turning_length": topologies.stack("end_turning_length") * shared[:, None],
             "bend_stiffness": triplet_modulus(params, topology) * thickness ** 3 / 12.0,
             "profile": np.stack([profile.as_array() for profile in profiles]),
             "profile_rest": np.array([profile.rest_curvature for profile in profiles]),

@@ -32,7 +32,7 @@ class LinearDrag(RodEdgeTerm):
         of the hub)."""
         rods = rod_edges(topology)
         # with the component heights on, an edge's friction scales with its height over the hub's
-        lengths = (np.stack([t.rest_length[rods] for t in topologies])
+        lengths = (topologies.stack("rest_length")[:, rods]
                    * rod_height_ratios(params, topology))
         return {"linear_rod_coeff": lengths * np.array([p.linear_drag for p in params])[:, None],
                 "linear_hub_coeff": np.array([p.hub_linear_drag for p in params])}

@@ -88,7 +88,7 @@ class RodDrag(RodEdgeTerm):
         rods = rod_edges(topology)
         fluid = np.array([p.fluid_density for p in params])[:, None]
         # with the component heights on, an edge's drag scales with its height over the hub's
-        wetted = (0.5 * fluid * np.stack([t.rest_length[rods] for t in topologies])
+        wetted = (0.5 * fluid * topologies.stack("rest_length")[:, rods]
                   * rod_height_ratios(params, topology))
         return {"drag_parallel_coeff": wetted * np.array([p.drag_parallel for p in params])[:, None],
                 "drag_perpendicular_coeff": wetted * np.array([p.drag_perpendicular for p in params])[:, None]}

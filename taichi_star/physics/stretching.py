@@ -43,7 +43,7 @@ class Stretching(StrainTerm):
     @staticmethod
     def coefficients(params, topologies, topology):
         thickness = np.array([p.thickness for p in params])[:, None]
-        return {"rest_length": np.stack([t.rest_length for t in topologies]),
+        return {"rest_length": topologies.stack("rest_length"),
                 "edge_stiffness": edge_modulus(params, topology) * thickness}
 
     @staticmethod

@@ -18,6 +18,7 @@ import taichi as ti
 from taichi_star import reference
 from taichi_star.fields import FieldArena
 from taichi_star.integrators import ImplicitEuler
+from taichi_star.model import InstanceTopologies
 from taichi_star.geometry import LIMB
 from taichi_star.physics import Bending, LinearDrag, MaterialDamping, Stretching, Wake
 from taichi_star.physics.assembly import Assembly
@@ -225,7 +226,7 @@ def test_linear_drag_assembles_the_reference_forces_and_its_own_exact_jacobian(t
     rest_length = np.linalg.norm(REST[EDGES[:, 1]] - REST[EDGES[:, 0]], axis=1)
     coefficients = LinearDrag.coefficients(
         [StarParams(linear_drag=rod_coeff, hub_linear_drag=hub_coeff)],
-        [SimpleNamespace(rest_length=rest_length)], SimpleNamespace(edge_kind=TOY_EDGE_KIND))
+        InstanceTopologies([SimpleNamespace(rest_length=rest_length)]), SimpleNamespace(edge_kind=TOY_EDGE_KIND))
     assert LinearDrag.configuration(coefficients) == ()
     terms, assembly = toy_system([LinearDrag], {"linear_drag": coefficients}, {"linear_drag": ()})
     term = terms["linear_drag"]
@@ -244,7 +245,7 @@ def test_linear_drag_assembles_the_reference_forces_and_its_own_exact_jacobian(t
                                positions, 1e-10)
     assert_close(jacobian, numeric, DIFFERENCE_RTOL)
     off = LinearDrag.coefficients([StarParams()],
-                                  [SimpleNamespace(rest_length=rest_length)],
+                                  InstanceTopologies([SimpleNamespace(rest_length=rest_length)]),
                                   SimpleNamespace(edge_kind=TOY_EDGE_KIND))
     assert LinearDrag.configuration(off) is None  # off: compiled out
 

@@ -7,7 +7,7 @@ import pytest
 
 from taichi_star import StarParams
 from taichi_star import metrics
-from taichi_star.geometry import build_topology
+from taichi_star.geometry import build_topology, discrete_curvature
 
 
 @pytest.fixture(scope="module")
@@ -290,25 +290,413 @@ def test_limb_crossing_is_judged_per_instance_of_a_batch(topology):
                                   [[False, True, False], [True, False, False]])
 
 
-@pytest.mark.parametrize("count", [metrics.CROSSING_SLICE - 1, metrics.CROSSING_SLICE,
-                                   metrics.CROSSING_SLICE + 1, 2 * metrics.CROSSING_SLICE + 3])
-def test_a_batch_sliced_for_the_cache_is_judged_as_each_shape_alone(topology, count):
-    """`limbs_cross` takes a large batch in slices of CROSSING_SLICE shapes: at every batch size
-    around a slice boundary, and with two leading axes, each shape is judged as it is alone
-    (crossed shapes placed across the boundaries, including the last one)."""
+def _with_zero_length_segment(shape, topology):
+    """shape with limb 5's tip moved onto the node before it: a segment of zero length, which
+    sends every limb pair of the shape to the exact test (`metrics.ORDINARY_SCALE`)."""
+    shape = shape.copy()
+    shape[topology.limbs[5, -1]] = shape[topology.limbs[5, -2]]
+    return shape
+
+
+@pytest.mark.parametrize("crossing_slice", [1, 2, 5, metrics.CROSSING_SLICE])
+def test_limb_pairs_sliced_for_the_cache_are_judged_as_each_shape_alone(topology, monkeypatch,
+                                                                         crossing_slice):
+    """`limbs_cross` gives its exact test the limb pairs whose boxes come close in slices of
+    CROSSING_SLICE pairs: with slices that cut one shape's pairs apart (28 for a shape with a
+    zero-length segment, one for the turned or the hooked limb) and slices that join several
+    shapes' pairs, and with two leading axes, each shape is judged as it is alone."""
+    monkeypatch.setattr(metrics, "CROSSING_SLICE", crossing_slice)
     rest, crossed = topology.rest_positions, _limb0_turned(topology, 100.0)
-    is_crossed = np.zeros(count, dtype=bool)
-    is_crossed[[0, count // 2, count - 1]] = True
-    is_crossed[metrics.CROSSING_SLICE - 1:metrics.CROSSING_SLICE + 1] = True
-    is_crossed = is_crossed[:count]
-    shapes = np.where(is_crossed[:, None, None], crossed, rest)
-    alone = [bool(metrics.limbs_cross(shape, topology)) for shape in shapes]
-    assert alone == list(is_crossed)
+    hooked = _limb0_hooked_around_limb1(topology)
+    shapes = np.stack([crossed, hooked, rest, _with_zero_length_segment(crossed, topology),
+                       _with_zero_length_segment(rest, topology), hooked, crossed, rest,
+                       crossed, hooked])
+    is_crossed = [True, False, False, True, False, False, True, False, True, False]
+    assert [bool(metrics.limbs_cross(shape, topology)) for shape in shapes] == is_crossed
     np.testing.assert_array_equal(metrics.limbs_cross(shapes, topology), is_crossed)
-    if count % 2 == 0:
-        np.testing.assert_array_equal(metrics.limbs_cross(shapes.reshape(2, count // 2, -1, 2),
-                                                          topology),
-                                      is_crossed.reshape(2, -1))
+    np.testing.assert_array_equal(metrics.limbs_cross(shapes.reshape(2, 5, -1, 2), topology),
+                                  np.reshape(is_crossed, (2, 5)))
+
+
+# ------------------------------------------------- the bounding-box prefilter of limbs_cross
+
+GRID = 2.0 ** -9
+"""1.95 mm: coordinates on this grid, and their differences, are exact in binary."""
+
+
+def _limbs_0_and_1_set(topology, limb0, limb1):
+    """The rest shape with the nodes of limbs 0 and 1 (at -22.5° and 22.5°) replaced by limb0
+    and limb1 ((L+1, 2) m each); the other limbs are far from x > 20 mm, |y| < 15 mm."""
+    shape = topology.rest_positions.copy()
+    shape[topology.limbs[0]] = limb0
+    shape[topology.limbs[1]] = limb1
+    return shape
+
+
+def _boxes_apart(shape, topology, a, b):
+    """`_limb_boxes_apart` of limbs a < b of one shape."""
+    first, second = np.triu_indices(len(topology.limbs), k=1)
+    pair = np.flatnonzero((first == a) & (second == b))
+    return bool(metrics._limb_boxes_apart(shape[None, topology.limbs], first, second)[0, pair])
+
+
+def _grid_limb(x, y):
+    """(L+1, 2) nodes at x, y (in GRID units; scalars or L+1 values)."""
+    x, y = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+    return GRID * np.stack([x, y], axis=-1)
+
+
+@pytest.mark.parametrize("limb1_y, crosses", [
+    # limb 1 up the edge x = 17 from y = 0.5: it overlaps limb 0's end segment (y in [0, 1])
+    # along that edge by 0.5 GRID, a collinear crossing
+    (0.5 + np.arange(7), True),
+    # from y = 1, limb 0's tip: collinear, touching end to end, no crossing
+    (1.0 + np.arange(7), False),
+    # from y = 2: the boxes overlap nowhere (a gap of one GRID)
+    (2.0 + np.arange(7), False),
+])
+def test_limbs_whose_boxes_touch_along_an_edge_take_the_exact_test(topology, limb1_y, crosses):
+    """Guards the prefilter's boundary (`metrics._limb_boxes_apart`): two boxes that share only
+    an edge, with zero overlap, can hold crossing limbs (collinear along that edge), so touching
+    boxes go to the exact test; a strict comparison would drop the first case. Limb 0 runs along
+    y = 0 to x = 17 GRID and turns up to (17, 1); limb 1 runs up the line x = 17 GRID, the edge
+    of limb 0's box, from limb1_y[0]."""
+    limb0 = _grid_limb([12, 13, 14, 15, 16, 17, 17], [0, 0, 0, 0, 0, 0, 1])
+    shape = _limbs_0_and_1_set(topology, limb0, _grid_limb(17, limb1_y))
+    touching = limb1_y[0] <= 1.0
+    assert _boxes_apart(shape, topology, 0, 1) == (not touching)
+    assert bool(metrics.limbs_cross(shape, topology)) == crosses
+    assert bool(reference_limbs_cross(shape, topology)) == crosses
+
+
+@pytest.mark.parametrize("limb1_x, crosses", [
+    (18.0, False),  # a corner: limb 1 starts at limb 0's tip (18, 0), touching, no crossing
+    (15.5, True),   # through limb 0's segment between x = 15 and 16: a proper crossing
+])
+def test_limbs_whose_boxes_touch_at_a_corner_or_overlap(topology, limb1_x, crosses):
+    """Guards the prefilter's boundary: limb 0 along y = 0 from x = 12 to 18 GRID, limb 1 up the
+    line x = limb1_x from y = 0 (at the corner of limb 0's box: the limbs touch at an end) or
+    from y = -0.5 (the boxes overlap, the limbs cross); both go to the exact test."""
+    limb0 = _grid_limb(12 + np.arange(7), 0)
+    limb1 = _grid_limb(limb1_x, np.arange(7) - (0.5 if crosses else 0.0))
+    shape = _limbs_0_and_1_set(topology, limb0, limb1)
+    assert not _boxes_apart(shape, topology, 0, 1)
+    assert bool(metrics.limbs_cross(shape, topology)) == crosses
+    assert bool(reference_limbs_cross(shape, topology)) == crosses
+
+
+def test_a_crossing_found_by_rounding_between_apart_boxes_is_kept(topology):
+    """Guards `metrics.BOX_MARGIN`: limb 1 continues limb 0's line (turned by 0.2532 rad) past
+    its tip, kinked by 4.14e-9 rad, just above PARALLEL_TOLERANCE, and 6.2e-12 m beyond it, so
+    the limbs' boxes are 6.0e-12 m apart and the lines meet outside both limbs. The intersection
+    parameters of so shallow a pair err by ~1e-7, and `segments_cross` finds a crossing: the
+    prefilter must keep what it finds, so its margin exceeds any gap that rounding bridges."""
+    phi, kink, gap = 0.2532434757273788, 4.1377454563537715e-09, 6.234699463676469e-12
+    segment = 0.0025
+    turn = np.array([[np.cos(phi), -np.sin(phi)], [np.sin(phi), np.cos(phi)]])
+    direction = np.array([np.cos(kink), np.sin(kink)])
+    # limb 1's line crosses y = 0 at gap / 2 beyond limb 0's tip, and starts gap / 2 further on
+    start = np.array([0.035 + gap / 2, 0.0]) + (gap / 2) * direction
+    limb0 = [turn @ np.array([0.035 - (6 - k) * segment, 0.0]) for k in range(7)]
+    limb1 = [turn @ (start + k * segment * direction) for k in range(7)]
+    shape = _limbs_0_and_1_set(topology, limb0, limb1)
+    box0, box1 = shape[topology.limbs[0]], shape[topology.limbs[1]]
+    assert (box1.min(axis=0) > box0.max(axis=0)).all()          # apart in both x and y
+    assert (box1.min(axis=0) - box0.max(axis=0) < 1e-11).all()
+    assert reference_limbs_cross(shape, topology)                # by rounding
+    assert not _boxes_apart(shape, topology, 0, 1)
+    assert metrics.limbs_cross(shape, topology)
+
+
+def test_shapes_too_small_for_the_margin_take_the_exact_test(topology, monkeypatch):
+    """Guards `metrics.ORDINARY_SCALE`: in random stars shrunk 1e160-fold the products of
+    `segments_cross` are subnormal (~1e-320), rounding noise, and it finds crossings between
+    limbs whose boxes lie far more than BOX_MARGIN apart; every limb pair of such a shape takes
+    the exact test, so `limbs_cross` still gives the brute force's result."""
+    rng = np.random.default_rng(1)
+    shapes = random_stars(topology, rng, 400) * 1e-160
+    first, second = np.triu_indices(len(topology.limbs), k=1)
+    points = shapes[:, topology.limbs]
+    with np.errstate(all="ignore"):
+        pairs = reference_limb_pairs_cross(shapes, topology)
+        np.testing.assert_array_equal(metrics.limbs_cross(shapes, topology), pairs.any(axis=-1))
+        assert not (metrics._limb_boxes_apart(points, first, second) & pairs).any()
+        monkeypatch.setattr(metrics, "ORDINARY_SCALE", (0.0, np.inf))
+        assert (metrics._limb_boxes_apart(points, first, second) & pairs).any()
+
+
+# ------------------------------------------- the fast shape checks against the reference code
+
+
+def reference_segments_cross(p, q, r, s):
+    """`metrics.segments_cross` as it was before its speed-up: the oracle."""
+    d1, d2, offset = np.broadcast_arrays(q - p, s - r, r - p)
+    length1 = np.linalg.norm(d1, axis=-1)
+    denominator = d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0]
+    offset_across = offset[..., 0] * d1[..., 1] - offset[..., 1] * d1[..., 0]
+    parallel = ~(np.abs(denominator) > metrics.PARALLEL_TOLERANCE
+                 * (length1 * np.linalg.norm(d2, axis=-1)))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (offset[..., 0] * d2[..., 1] - offset[..., 1] * d2[..., 0]) / denominator
+        u = offset_across / denominator
+        crossing = np.asarray((t > 0) & (t < 1) & (u > 0) & (u < 1))
+        if parallel.any():
+            length, direction = length1[parallel], d1[parallel]
+            along_r = (offset[parallel] * direction).sum(-1) / length
+            along_s = (np.broadcast_to(s - p, d1.shape)[parallel] * direction).sum(-1) / length
+            low, high = np.minimum(along_r, along_s), np.maximum(along_r, along_s)
+            overlap = np.minimum(high, length) - np.maximum(low, 0.0)
+            crossing[parallel] = ((np.abs(offset_across[parallel]) / length
+                                   <= metrics.PARALLEL_TOLERANCE * length) & (overlap > 0))
+    return crossing
+
+
+def reference_limb_pairs_cross(positions, topology):
+    """(S, N, 2) -> (S, pairs) bool: every segment of limb first[k] against every segment of
+    limb second[k] (`np.triu_indices(8, k=1)`), brute force."""
+    first, second = np.triu_indices(len(topology.limbs), k=1)
+    points = positions[:, topology.limbs, :]              # (S, 8, L+1, 2)
+    start, end = points[..., :-1, :], points[..., 1:, :]
+    hit = reference_segments_cross(start[:, first, :, None, :], end[:, first, :, None, :],
+                                   start[:, second, None, :, :], end[:, second, None, :, :])
+    return hit.any(axis=(-2, -1))
+
+
+def reference_limbs_cross(positions, topology):
+    """positions (..., N, 2) -> (...) bool: `metrics.limbs_cross` before the prefilter."""
+    positions = np.asarray(positions)
+    shapes = positions.reshape(-1, *positions.shape[-2:])
+    return reference_limb_pairs_cross(shapes, topology).any(axis=-1).reshape(positions.shape[:-2])
+
+
+def reference_arc_mean_curvature(positions, topology):
+    """`metrics.arc_mean_curvature` before its speed-up, on `geometry.discrete_curvature`."""
+    arcs = topology.arcs
+    rest = topology.rest_positions[arcs]
+    edge = np.linalg.norm(np.diff(rest, axis=1), axis=-1)
+    voronoi = 0.5 * (edge[:, :-1] + edge[:, 1:])
+    points = positions[..., arcs, :]
+    kappa = discrete_curvature(points[..., :-2, :], points[..., 1:-1, :], points[..., 2:, :],
+                               voronoi)
+    return (kappa * voronoi).sum(-1) / voronoi.sum(-1)
+
+
+def reference_arcs_inverted(positions, topology):
+    rest = np.sign(reference_arc_mean_curvature(topology.rest_positions, topology))
+    return (~(reference_arc_mean_curvature(positions, topology) * rest > 0)).any(axis=-1)
+
+
+def reference_edge_lengths(positions, topology):
+    edges = topology.edges
+    return np.linalg.norm(positions[..., edges[:, 1], :] - positions[..., edges[:, 0], :],
+                          axis=-1)
+
+
+def reference_edge_strain(positions, topology, rest_positions=None):
+    rest = (topology.rest_length if rest_positions is None
+            else reference_edge_lengths(rest_positions, topology))
+    return reference_edge_lengths(positions, topology) / rest - 1.0
+
+
+def reference_shape_checks(shapes, topology, rest_positions=None):
+    """`metrics.shape_checks` before its speed-up: every record, then the final one again."""
+    shapes = np.asarray(shapes, dtype=np.float64)
+    batch = shapes.shape[1]
+    finite = np.isfinite(shapes).all(axis=(0, 2, 3))
+    strain_max = np.full(batch, -np.inf)
+    cross_any = np.zeros(batch, dtype=bool)
+    inverted_any = np.zeros(batch, dtype=bool)
+    for record in shapes:
+        valid = np.isfinite(record).all(axis=(1, 2))
+        strain = np.abs(reference_edge_strain(record, topology, rest_positions)).max(axis=-1)
+        strain_max = np.where(valid, np.fmax(strain_max, strain), strain_max)
+        cross_any |= reference_limbs_cross(record, topology) & valid
+        inverted_any |= reference_arcs_inverted(record, topology) & valid
+    final = shapes[-1]
+    final_valid = np.isfinite(final).all(axis=(1, 2))
+    table = pd.DataFrame({
+        "max_strain": np.where(np.isfinite(strain_max), strain_max, np.nan),
+        "max_strain_final": np.abs(reference_edge_strain(final, topology,
+                                                         rest_positions)).max(axis=-1),
+        "limbs_cross": cross_any,
+        "limbs_cross_final": reference_limbs_cross(final, topology) & final_valid,
+        "arc_inverted": inverted_any,
+        "arc_inverted_final": reference_arcs_inverted(final, topology) & final_valid,
+        "finite": finite,
+    })
+    table["sane"] = (finite & ~table["limbs_cross"] & ~table["arc_inverted"]
+                     & (table["max_strain"] <= metrics.STRAIN_LIMIT))
+    return table
+
+
+def assert_bitwise_equal(actual, expected):
+    """Equal shapes, dtypes and values, floats to the last bit (NaN where NaN, and 0.0 is not
+    -0.0)."""
+    actual, expected = np.asarray(actual), np.asarray(expected)
+    assert actual.shape == expected.shape and actual.dtype == expected.dtype
+    if actual.dtype.kind == "f":
+        assert np.array_equal(actual, expected, equal_nan=True)
+        numbers = ~np.isnan(expected)
+        assert np.array_equal(actual[numbers].view(np.uint64), expected[numbers].view(np.uint64))
+    else:
+        assert np.array_equal(actual, expected)
+
+
+def assert_same_table(actual, expected):
+    assert list(actual.columns) == list(expected.columns)
+    for column in expected.columns:
+        assert_bitwise_equal(actual[column].to_numpy(), expected[column].to_numpy())
+
+
+def _straight_limb(shape, topology, limb):
+    """shape's limb made straight: its nodes evenly from its joint to its tip."""
+    nodes = topology.limbs[limb]
+    fraction = np.linspace(0.0, 1.0, len(nodes))[:, None]
+    shape[nodes] = shape[nodes[0]] + fraction * (shape[nodes[-1]] - shape[nodes[0]])
+
+
+def random_stars(topology, rng, count):
+    """count (N, 2) shapes m of the star, each the rest shape with noise of 10 µm, 1 mm or 4 mm
+    (the larger crumple the limbs into each other's boxes) and one of: a limb turned about its
+    joint (through its neighbours), a limb laid collinear on another, overlapping it or end to
+    end, opposite limbs point-symmetric (collinear), a limb's tip on a node or a segment of
+    another limb (touching), one limb's box clamped to touch another's along an edge, a NaN or
+    infinite node or all NaN, the whole shape scaled to 1e-150 or 1e150 times its size or moved
+    1 km, a zero-length segment; or nothing more."""
+    rest = topology.rest_positions
+    limbs = topology.limbs
+    shapes = []
+    for _ in range(count):
+        shape = rest + rng.normal(0.0, rng.choice([1e-5, 1e-3, 4e-3]), rest.shape)
+        a, b = rng.choice(len(limbs), 2, replace=False)
+        case = rng.integers(10)
+        if case == 0:
+            angle = np.radians(rng.uniform(-180.0, 180.0))
+            turn = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+            joint = shape[limbs[a, 0]]
+            shape[limbs[a]] = joint + (shape[limbs[a]] - joint) @ turn.T
+        elif case == 1:
+            _straight_limb(shape, topology, a)
+            along = shape[limbs[a, -1]] - shape[limbs[a, 0]]
+            shift = rng.choice([rng.uniform(-1.5, 1.5), 1.0, -1.0])
+            shape[limbs[b]] = shape[limbs[a]] + shift * along
+        elif case == 2:
+            shape[limbs[4:]] = -shape[limbs[:4]]
+        elif case == 3:
+            node = rng.integers(limbs.shape[1] - 1)
+            on = shape[limbs[b, node]]
+            if rng.random() < 0.5:
+                on = 0.5 * (on + shape[limbs[b, node + 1]])
+            shape[limbs[a, -1]] = on
+        elif case == 4:
+            axis = rng.integers(2)
+            edge = shape[limbs[a], axis].max()
+            shape[limbs[b], axis] = np.maximum(shape[limbs[b], axis], edge)
+        elif case == 5:
+            shape[rng.integers(len(shape)), rng.integers(2)] = rng.choice([np.nan, np.inf, -np.inf])
+        elif case == 6:
+            shape[:] = np.nan
+        elif case == 7:
+            shape = shape * rng.choice([1e-150, 1e150]) if rng.random() < 0.5 else shape + 1e3
+        elif case == 8:
+            shape[limbs[a, -1]] = shape[limbs[a, -2]]
+        shapes.append(shape)
+    return np.stack(shapes)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_limb_crossing_equals_the_brute_force_reference(topology, monkeypatch, seed):
+    """`limbs_cross` (the bounding-box prefilter, then the exact test on the pairs it keeps, in
+    slices) gives exactly the brute-force test of every segment pair on random stars
+    (`random_stars`: crossing, collinear, touching, non-finite and extreme shapes), in one call
+    with slices of 3 limb pairs and the default; the prefilter never drops a pair that the
+    brute force finds crossing; the other shape checks' parts equal their references bitwise."""
+    rng = np.random.default_rng(seed)
+    shapes = random_stars(topology, rng, 400)
+    with np.errstate(all="ignore"):
+        pairs = reference_limb_pairs_cross(shapes, topology)
+        expected = pairs.any(axis=-1)
+        first, second = np.triu_indices(len(topology.limbs), k=1)
+        apart = metrics._limb_boxes_apart(shapes[:, topology.limbs], first, second)
+        assert not (apart & pairs).any()
+        assert 0.05 < expected.mean() < 0.5 and (~apart).any(axis=-1).mean() < 1.0
+        np.testing.assert_array_equal(metrics.limbs_cross(shapes, topology), expected)
+        monkeypatch.setattr(metrics, "CROSSING_SLICE", 3)
+        np.testing.assert_array_equal(metrics.limbs_cross(shapes.reshape(20, 20, -1, 2), topology),
+                                      expected.reshape(20, 20))
+        assert_bitwise_equal(metrics.segments_cross(shapes[:, :-1], shapes[:, 1:],
+                                                    shapes[::-1, 1:], shapes[::-1, :-1]),
+                             reference_segments_cross(shapes[:, :-1], shapes[:, 1:],
+                                                      shapes[::-1, 1:], shapes[::-1, :-1]))
+        for stack in (shapes, shapes.reshape(20, 20, -1, 2), shapes[:1], shapes[0]):
+            assert_bitwise_equal(metrics.arc_mean_curvature(stack, topology),
+                                 reference_arc_mean_curvature(stack, topology))
+        assert_bitwise_equal(metrics.arcs_inverted(shapes, topology),
+                             reference_arcs_inverted(shapes, topology))
+        assert_bitwise_equal(metrics.edge_lengths(shapes, topology),
+                             reference_edge_lengths(shapes, topology))
+        own_rest = shapes[::-1]
+        assert_bitwise_equal(metrics.edge_strain(shapes, topology, own_rest),
+                             reference_edge_strain(shapes, topology, own_rest))
+
+
+@pytest.mark.parametrize("batch, shape_slice", [(150, 149), (129, 64), (7, 3), (2, 2), (1, 64)])
+def test_shape_checks_sums_the_arcs_of_every_slice_as_of_the_whole_record(topology, monkeypatch,
+                                                                          batch, shape_slice):
+    """Guards the slice bounds of `shape_checks`: NumPy sums each arc's curvatures in an order
+    that follows their memory layout, another for one shape than for a batch, so a slice of a
+    lone instance would give its mean curvatures other last bits than the whole record does
+    (and a mean that is zero up to round-off another sign). The means computed on the slices
+    equal those of the whole record, bitwise, with SHAPE_SLICE leaving one instance over."""
+    monkeypatch.setattr(metrics, "SHAPE_SLICE", shape_slice)
+    arc_mean_curvature, means = metrics.arc_mean_curvature, []
+
+    def recorded(positions, topology):
+        mean = arc_mean_curvature(positions, topology)
+        if positions.ndim == 3:  # not the rest shape
+            means.append(mean)
+        return mean
+
+    monkeypatch.setattr(metrics, "arc_mean_curvature", recorded)
+    rest = topology.rest_positions
+    record = rest + np.random.default_rng(7).normal(0.0, 1e-3, (batch,) + rest.shape)
+    metrics.shape_checks(record[None], topology)
+    assert_bitwise_equal(np.concatenate(means), reference_arc_mean_curvature(record, topology))
+
+
+@pytest.mark.parametrize("seed, n_records, own_rest, shape_slice", [
+    (0, 1, True, metrics.SHAPE_SLICE), (1, 1, False, 7), (2, 3, True, 149), (3, 3, False, 2),
+    (4, 2, True, 37),
+])
+def test_shape_checks_equal_the_reference_code(topology, monkeypatch, seed, n_records,
+                                               own_rest, shape_slice):
+    """`shape_checks` (instances in slices of SHAPE_SLICE, the final record's checks taken from
+    the loop over records) gives exactly the table of the code it replaced, which checked every
+    record and then the final one again: random stars (`random_stars`; the first 20 instances
+    quiet, sane ones) in 1 to 3 records of 150 instances, some failing (NaN from a record on)
+    or NaN in one earlier record only, five crossed in the final record but with a NaN node
+    there, with one rest shape per instance (scaled 0.9 to 1.1 and jittered) or the
+    topology's."""
+    monkeypatch.setattr(metrics, "SHAPE_SLICE", shape_slice)
+    rng = np.random.default_rng(seed)
+    batch = 150
+    shapes = random_stars(topology, rng, n_records * batch).reshape(n_records, batch, -1, 2)
+    rest = topology.rest_positions
+    shapes[:, :20] = rest + rng.normal(0.0, 1e-5, (n_records, 20) + rest.shape)  # sane ones
+    failed_from = rng.integers(0, 3 * n_records, batch)   # mostly never
+    for record in range(n_records):
+        shapes[record, failed_from <= record] = np.nan
+    shapes[0, rng.choice(batch, 5)] = np.nan
+    # crossing limbs in a record that is skipped, as one node (of limb 4) is NaN
+    shapes[-1, 20:25] = _limb0_turned(topology, 100.0)
+    shapes[-1, 20:25, topology.limbs[4, 3], 1] = np.nan
+    rest_positions = (rng.uniform(0.9, 1.1, (batch, 1, 1)) * rest
+                      + rng.normal(0.0, 1e-4, (batch,) + rest.shape)) if own_rest else None
+    with np.errstate(all="ignore"):
+        expected = reference_shape_checks(shapes, topology, rest_positions)
+        assert_same_table(metrics.shape_checks(shapes, topology, rest_positions), expected)
+    assert expected["limbs_cross_final"].any() and expected["arc_inverted_final"].any()
+    assert expected["sane"].any() and not expected["finite"].all()
 
 
 def _circumcentre(a, b, c):

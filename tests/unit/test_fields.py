@@ -1,0 +1,57 @@
+"""`fields.FieldStore`: bulk copies between NumPy and an arena's fields, and the zeroed fields
+a store resets on the device instead of copying. Every value is compared exactly: a store only
+moves and casts values (f64 -> f64 here), so nothing may change in the last bit."""
+
+import numpy as np
+import pytest
+
+from taichi_star.fields import FieldArena, FieldStore
+
+
+def _fields():
+    """A scalar, a vector, a matrix and an integer batch field of 3 instances, in one arena."""
+    arena = FieldArena()
+    fields = {"scalar": arena.batch_field(float, (3, 4)),
+              "vector": arena.batch_field(float, (3, 5), vector=2),
+              "matrix": arena.batch_field(float, (3, 2), matrix=(2, 2)),
+              "count": arena.batch_field(int, 3)}
+    arena.finalize()
+    return fields
+
+
+def _random_values(store, seed):
+    rng = np.random.default_rng(seed)
+    return {name: (rng.normal(size=shape) if np.issubdtype(store.dtypes[name], np.floating)
+                   else rng.integers(-9, 9, size=shape)).astype(store.dtypes[name])
+            for name, shape in store.shapes.items()}
+
+
+def test_a_store_writes_and_reads_back_every_field_exactly(taichi_cpu):
+    store = FieldStore(_fields())
+    values = _random_values(store, 0)
+    store.write(values)
+    back = store.read()
+    for name, array in values.items():
+        assert np.array_equal(back[name], array), name
+
+
+def test_zeroed_fields_are_set_to_zero_and_the_others_copied(taichi_cpu):
+    fields = _fields()
+    full = FieldStore(fields)
+    full.write(_random_values(full, 1))        # every field non-zero before the reset
+    reset = FieldStore(fields, zeroed=("vector", "matrix"))
+    assert set(reset.shapes) == {"scalar", "count"}   # only these are packed on the host
+    copied = _random_values(reset, 2)
+    reset.write(copied)
+    after = full.read()
+    assert not after["vector"].any() and not after["matrix"].any()
+    assert np.array_equal(after["scalar"], copied["scalar"])
+    assert np.array_equal(after["count"], copied["count"])
+
+
+def test_a_store_with_zeroed_fields_refuses_to_read_and_unknown_names(taichi_cpu):
+    fields = _fields()
+    with pytest.raises(ValueError, match="only writes"):
+        FieldStore(fields, zeroed=("vector",)).read()
+    with pytest.raises(ValueError, match="velocity"):
+        FieldStore(fields, zeroed=("velocity",))
