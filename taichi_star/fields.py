@@ -184,6 +184,21 @@ class FieldStore:
                     else:
                         flat[start + k * components[1] + m] = field[index][k, m]
 
+    @ti.func
+    def _zero(self, field: ti.template()):
+        """Every element of `field` set to +0 (not `ti.zero`, which multiplies the old value by
+        zero: -0.0 from a negative one, NaN from NaN)."""
+        components = ti.static(_components(field))
+        for index in ti.grouped(field):
+            if ti.static(len(components) == 0):
+                field[index] = 0
+            elif ti.static(len(components) == 1):
+                for k in ti.static(range(components[0])):
+                    field[index][k] = 0
+            else:
+                for k, m in ti.static(ti.ndrange(components[0], components[1])):
+                    field[index][k, m] = 0
+
     @ti.kernel
     def _transfer(self, floats: ti.types.ndarray(dtype=ti.f64, ndim=1),
                   ints: ti.types.ndarray(dtype=ti.i64, ndim=1), to_fields: ti.template()):
@@ -195,5 +210,4 @@ class FieldStore:
             self._copy(field, ints, offset, to_fields)
         if ti.static(to_fields):
             for field in ti.static(self.zeroed_fields):
-                for index in ti.grouped(field):
-                    field[index] = ti.zero(field[index])
+                self._zero(field)
