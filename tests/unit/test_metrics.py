@@ -921,3 +921,13 @@ def test_observed_order_needs_monotone_changes():
     assert np.isnan(metrics.observed_order(0.1, 0.0))
     assert metrics.observed_order(-0.4, -0.1) == pytest.approx(2.0, rel=1e-12)
     assert np.isnan(metrics.richardson_limit(1.0, 1.1, np.nan))
+
+
+def test_shape_checks_need_at_least_one_record_of_instances(topology):
+    n_nodes = len(topology.rest_positions)
+    with pytest.raises(ValueError, match="at least one record"):
+        metrics.shape_checks(np.zeros((0, 2, n_nodes, 2)), topology)
+    with pytest.raises(ValueError, match=r"\(R, B, N, 2\)"):
+        metrics.shape_checks(np.zeros((2, n_nodes, 2)), topology)
+    one = metrics.shape_checks(topology.rest_positions[None, None], topology)  # the boundary: R = 1
+    assert bool(one["sane"].iloc[0]) and one["max_strain"].iloc[0] == 0.0
