@@ -26,13 +26,6 @@ def actuator_direction(number: int) -> np.ndarray:
     return np.array([math.cos(angle), math.sin(angle)])
 
 
-@functools.lru_cache(maxsize=1024)
-def _parse_text(gait: str) -> "Gait":
-    """`Gait.parse` of a text, once per distinct text: a batch of 65,536 instances names a few
-    gaits, and a Gait is immutable, so every instance of a gait shares one."""
-    return Gait._from_text(gait)
-
-
 @dataclass(frozen=True)
 class Gait:
     """A set of actuators (numbers 1..8, sorted, no repeats) fired together."""
@@ -56,10 +49,12 @@ class Gait:
             return gait
         if not isinstance(gait, str):
             raise ValueError(f"gait must be a string ({_ALLOWED}), got {gait!r}")
-        return _parse_text(gait)
+        return cls._from_text(gait)
 
     @classmethod
+    @functools.lru_cache(maxsize=1024)
     def _from_text(cls, gait: str) -> "Gait":
+        # once per distinct text: a batch of 65,536 names a few gaits, and a Gait is immutable
         if gait.strip().lower() == NO_GAIT:
             return cls(())
         numbers = []

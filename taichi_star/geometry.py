@@ -23,14 +23,22 @@ LIMB_BEND, JOINT_BEND, ARC_BEND = 0, 1, 2
 """Triplet kinds. Limb and joint triplets use E_limb; arc triplets use E and may be actuated."""
 
 
+def edge_curvature(e1x, e1y, e2x, e2y, length1, length2, voronoi_length):
+    """Signed κ = 2 (e1 × e2) / ((|e1||e2| + e1·e2) Δl), 1/m, of two consecutive edges given by
+    their components and lengths (m; arrays that broadcast): the one formula of
+    `discrete_curvature` and of the shape checks, which compute each edge once for the two
+    nodes it joins."""
+    return 2.0 * (e1x * e2y - e1y * e2x) / ((length1 * length2 + (e1x * e2x + e1y * e2y))
+                                            * voronoi_length)
+
+
 def discrete_curvature(x_prev, x_mid, x_next, voronoi_length):
-    """Signed κ = 2 (e1 × e2) / ((|e1||e2| + e1·e2) Δl), 1/m; arrays of shape (..., 2)."""
+    """Signed κ (`edge_curvature`), 1/m, at x_mid; arrays of shape (..., 2)."""
     e1 = x_mid - x_prev
     e2 = x_next - x_mid
-    cross = e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0]
-    dot = (e1 * e2).sum(-1)
-    norms = np.linalg.norm(e1, axis=-1) * np.linalg.norm(e2, axis=-1)
-    return 2.0 * cross / ((norms + dot) * voronoi_length)
+    return edge_curvature(e1[..., 0], e1[..., 1], e2[..., 0], e2[..., 1],
+                          np.linalg.norm(e1, axis=-1), np.linalg.norm(e2, axis=-1),
+                          voronoi_length)
 
 
 @dataclass(frozen=True)

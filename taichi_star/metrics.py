@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from .gait import Gait
-from .geometry import Topology
+from .geometry import Topology, edge_curvature
 
 METERS_TO_MM = 1e3
 SPEED_COLUMNS = ("displacement_x_mm", "displacement_y_mm", "speed_mm_s", "signed_speed_mm_s",
@@ -275,19 +275,16 @@ def arc_mean_curvature(positions: np.ndarray, topology: Topology) -> np.ndarray:
     rest = topology.rest_positions[arcs]                    # (8, n_arc + 1, 2)
     edge = np.linalg.norm(np.diff(rest, axis=1), axis=-1)   # (8, n_arc)
     voronoi = 0.5 * (edge[:, :-1] + edge[:, 1:])            # (8, n_arc - 1)
-    # `geometry.discrete_curvature`'s κ = 2 (e1 × e2) / ((|e1||e2| + e1·e2) Δl): the same
-    # operations on the same values, bitwise, but on the component arrays and with each edge's
-    # difference and length computed once for the two nodes it joins (several times faster).
-    # e1·e2 as the sum of the two products is NumPy's sum over the last axis but for the sign
-    # of a zero, which adding |e1||e2| ≥ 0 to it absorbs. The sum over the nodes below adds in
-    # an order that follows κ's memory layout: gathered as positions[..., arcs, 0], the nodes
-    # (and so κ) have the layout that positions[..., arcs, :] gives, and the same bits.
+    # κ on the component arrays, each edge's difference and length computed once for the two
+    # nodes it joins (several times faster than `discrete_curvature` per node, the same bits).
+    # The sum over the nodes below adds in an order that follows κ's memory layout: gathered as
+    # positions[..., arcs, 0], the nodes (and so κ) have the layout that positions[..., arcs, :]
+    # gives, and the same bits.
     dx = np.diff(positions[..., arcs, 0], axis=-1)         # (..., 8, n_arc)
     dy = np.diff(positions[..., arcs, 1], axis=-1)
     length = _norm(dx, dy)
-    e1x, e1y, e2x, e2y = dx[..., :-1], dy[..., :-1], dx[..., 1:], dy[..., 1:]
-    kappa = 2.0 * (e1x * e2y - e1y * e2x) / ((length[..., :-1] * length[..., 1:]
-                                               + (e1x * e2x + e1y * e2y)) * voronoi)
+    kappa = edge_curvature(dx[..., :-1], dy[..., :-1], dx[..., 1:], dy[..., 1:],
+                           length[..., :-1], length[..., 1:], voronoi)
     return (kappa * voronoi).sum(-1) / voronoi.sum(-1)
 
 

@@ -47,7 +47,8 @@ those of a parameter that barely moves the robot (C∥, the cylinder's drag and 
 only ~1e3 roundings, and C∥'s derivative was 2-20 % off; at 1e-5 the error of every parameter
 falls, or stays at the finite differences' own spread, while the O(ε²) truncation stays
 ~1e-10 (measured on 0.2-s runs of A1+A2 and A1+A3, both integrators, against 1e-6 and 1e-4:
-docs: numerics, sensitivities); C∥ takes its own (FIELD_RELATIVE_STEPS). The drags |v|·v and
+docs: numerics, sensitivities). Over whole cycles the truncation grows: C⊥, the density and
+the radii take 1e-6, C∥ 1e-2 (FIELD_RELATIVE_STEPS). The drags |v|·v and
 the jet's switch are not twice differentiable at 0, and states sit at or just beside it (a
 velocity component that a symmetric gait keeps at zero, one that creeps past it as the robot
 coasts): there a replica takes its instance's side of the kink

@@ -6,7 +6,8 @@ Its class owns everything about it:
 - `coefficients(params, topologies, topology)`: its per-instance coefficients on the host, NumPy
   arrays with a leading batch axis, computed from the StarParams and the per-instance rest
   geometry (`topologies`: one Topology per instance, whose `stack(name)` gathers a table of
-  every instance; `topology`: the first one, for the shared structure); `commanded(coefficients)`: the same for a batch that fires what it is commanded;
+  every instance; `topology`: the first one, for the shared structure);
+  `commanded(coefficients)`: the same for a batch that fires what it is commanded;
 - `configuration(coefficients)`: whether a batch uses it (None: compiled out) and the static
   switches of its kernel code (e.g. whether any instance is actuated);
 - `coupled_pairs(topology)`: the node pairs whose 2×2 Jacobian blocks it can fill
