@@ -39,38 +39,35 @@ from .gait import N_ACTUATORS, Gait
 from .metrics import wrap_degrees
 from .timegrid import on_grid
 
-RELATIVE_STEP = 1e-5
+RELATIVE_STEP = 1e-4
 """ε of a direction relative to the parameter's value. Each direction has one replica pair, at
-±ε; its derivative is the pair's central difference D(ε), exact to O(ε²) where the residual is
-smooth. The pair's state offsets ε·q̇ must stand well above the positions' rounding: at 1e-6
-those of a parameter that barely moves the robot (C∥, the cylinder's drag and diameter) were
-only ~1e3 roundings, and C∥'s derivative was 2-20 % off; at 1e-5 the error of every parameter
-falls, or stays at the finite differences' own spread, while the O(ε²) truncation stays
-~1e-10 (measured on 0.2-s runs of A1+A2 and A1+A3, both integrators, against 1e-6 and 1e-4:
-docs: numerics, sensitivities). Over whole cycles the truncation grows: C⊥, the density and
-the radii take 1e-6, C∥ 1e-2 (FIELD_RELATIVE_STEPS). The drags |v|·v and
-the jet's switch are not twice differentiable at 0, and states sit at or just beside it (a
-velocity component that a symmetric gait keeps at zero, one that creeps past it as the robot
-coasts): there a replica takes its instance's side of the kink
-(`physics.assembly.Assembly.branch_instance`), which keeps the pair's difference that of one
-polynomial. A second pair at ±2ε, extrapolated as 2·D(ε) − D(2ε), was needed before that rule;
-without it a 9.45-s run of A1 stays within 2.3e-7 of whole-run differences (docs: numerics,
-sensitivities), with half the replicas."""
-FIELD_RELATIVE_STEPS = {"drag_parallel": 1e-2, "drag_perpendicular": 1e-6, "fluid_density": 1e-6,
-                        "joint_radius": 1e-6, "tip_radius": 1e-6}
+±ε; its derivative is the pair's central difference, D(ε). Where the replicas' residual is
+linear in their offsets from the instance, D(ε) is exact whatever ε, and a larger ε only
+lifts the pair's offsets above the rounding of the positions. The forces that are not linear
+in the velocity (the drags |v|·v, the jet's Ṡ²) are therefore expanded, for a replica, about
+its instance's velocity to first order (`physics.assembly.Assembly.primal_instance`); the
+coefficients enter the forces linearly or as smooth functions of the parameter, whose
+curvature leaves an O(ε²) error, ~ε² relative. Measured over three cycles of the paper
+preset's five Fig. 4c gaits against Richardson differences of whole runs, at 1e-4 ten of the
+eleven parameters checked are within 2.6e-6 (docs: numerics, sensitivities); at 1e-5 the
+weakly moving ones lose to rounding (E, the cylinder's drag: 4e-5), at 1e-3 the tip radius
+to truncation (1e-5). Before the expansion (the replicas used their own |v|·v, taking only
+their instance's side of the kinks) the error was O(ε²)·|Ṡ|²/|v|², large near zero velocity,
+and no single ε served every parameter over long runs. The geometric joint radius keeps
+another ε (FIELD_RELATIVE_STEPS)."""
+FIELD_RELATIVE_STEPS = {"drag_parallel": 1e-2, "joint_radius": 1e-6}
 """Fields whose ε departs from RELATIVE_STEP. C∥ barely moves the robot (its derivative is
 ~1e-2 mm of displacement per unit over 0.3 s from rest, α's ~1): at 1e-5 its replicas'
-offsets are ~1e-12 m, 1e5 roundings of a position, and its derivative was 6e-5 to 1.6e-3 off
-(0.3 s of A1, A1+A2 and A1+A3 at C∥ = 0.01 and 0.1, implicit Euler, fixed 1-ms steps, against
-Richardson differences at h = 1e-2 and 3e-2 of C∥, which agree with each other to 3e-7); at
-1e-2 all six are within 1e-6 (docs: numerics, sensitivities). C∥ multiplies its own force,
-so the residual is linear in it and the larger ε adds no truncation of the coefficient's; the
-offsets, ~1e-9 m, stay small enough that the state's O(ε²) terms do not show.
-C⊥, the fluid density and the two radii move the robot strongly: over three cycles of the
-paper preset's five Fig. 4c gaits their pairs' O(ε²) truncation at 1e-5 put the signed speed's
-derivative 1.8e-4 (C⊥), 3.8e-4 (ρ), 5.4e-3 (joint radius) and 2.8e-3 (tip radius) off the
-Richardson differences of whole runs, at 1e-6 2.3e-6, 2.2e-5, 4.3e-5 and 2.7e-5 (3e-6 lies
-between); the other fields were measured there too (docs: numerics, sensitivities)."""
+offsets were ~1e-12 m, 1e5 roundings of a position, and its derivative 6e-5 to 1.6e-3 off
+(0.3 s of A1, A1+A2 and A1+A3 at C∥ = 0.01 and 0.1, implicit Euler, fixed 1-ms steps,
+against Richardson differences at h = 1e-2 and 3e-2 of C∥, which agree with each other to
+3e-7); at 1e-2 all six are within 1e-6. C∥ multiplies its own force, so the residual is
+linear in it and the larger ε adds no truncation. The joint radius moves the rest geometry
+(an arc's rest curvature at a joint has an elasticity of ~90 to it), and its pairs' residuals
+difference large elastic forces that nearly cancel against the offsets of the positions, with
+the rest lengths entering them non-linearly: an O(ε²) error with a large constant (its
+3-cycle derivative 0.6 off at 1e-4, 5e-3 at 1e-5, 4.3e-5 at 1e-6; docs: numerics,
+sensitivities)."""
 REPLICAS_PER_DIRECTION = 2
 """Replica instances each direction adds per instance: the pair at ±ε."""
 ZERO_VALUE_SCALE = 0.01

@@ -22,7 +22,7 @@ from .sensitivities import Direction, parse_directions
 from .simulation import simulate
 
 TAYLOR_MULTIPLE = 100.0
-"""H of the Taylor test in multiples of the differences' h (1e-3 of the value for ε = 1e-5):
+"""H of the Taylor test in multiples of the differences' h (1e-2 of the value for ε = 1e-4):
 its remainder, ~H² relative, stays far above the Newton noise of the runs (1e-12 m against
 displacements of 1e-4 m)..."""
 TAYLOR_MOST = 0.1

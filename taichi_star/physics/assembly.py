@@ -16,8 +16,8 @@ and in its `@ti.func`s, for instance b,
   time before, s;
 - the integrator's rates: `implicit_velocity(b, n, rate_gain)` and `rate_offset(...)` for any
   other quantity (the gain and offset of `integrators`);
-- `branch_instance(b)`: in an engine with sensitivities, the simulated instance whose branch a
-  piecewise force takes when b is one of its replicas (`replicated`: whether there are any);
+- `primal_instance(b)`: in an engine with sensitivities, the simulated instance that b is a
+  replica of (b itself for a simulated one; `replicated`: whether there are any replicas);
 - the scatter of its residual and Jacobian: `add_residual(b, n, value)` for node n,
   `add_block(b, slot, value, jacobian)` for one block, and for a term of one edge vector or of
   the two edge vectors of a triplet `scatter_edge` and `scatter_triplet`, which apply the
@@ -62,8 +62,8 @@ class Assembly:
         self.blocks = system.blocks
         self.primal_count = primal_count
         self.replicated = primal_count is not None
-        """Whether some instances are replicas of others (static: the terms' branch freezing
-        is compiled only then)."""
+        """Whether some instances are replicas of others (static: the terms' expansion of a
+        replica about its instance is compiled only then)."""
 
     # ---------------------------------------------------------------- host side: tables
     def batch_field(self, dtype, shape) -> ti.Field:
@@ -94,20 +94,22 @@ class Assembly:
         return rate_gain * (self.positions[b, n] - self.previous[b, n]) + self.velocity_offset[b, n]
 
     @ti.func
-    def branch_instance(self, b):
-        """The instance whose side of a kink a piecewise force takes at instance b: b itself, or
-        for a replica (only with `replicated`) the simulated instance it is a replica of. A
-        replica's residual is differenced against its partner's at the instance's converged
-        state; where the instance sits just beside a kink of a force (a jet that switches off
-        as its space's area stops shrinking), a pair on both sides of it would difference two
-        formulas, and the error, of order ε² per step, builds up over a run. Taking the
-        instance's side keeps the difference that of one smooth formula: the one-sided
-        derivative, which is the derivative where the force is continuously differentiable."""
-        branch = b
+    def primal_instance(self, b):
+        """b itself, or for a replica (only with `replicated`) the simulated instance it is a
+        replica of. A replica's residual is differenced against its partner's at the
+        instance's converged state, the pair's start states ±ε·Ṡ apart; a force that is not
+        linear in the velocity (the drags, the jet) would put its own curvature into that
+        difference, an error of order ε²·|Ṡ|²/|v|² per step that is large where the instance's
+        velocity is near a zero (a kink) and builds up over a run. So such a term evaluates a
+        replica's force and its velocity derivative at this instance's velocity (the replica's
+        own coefficients) and adds the derivative times the replica's velocity offset: its
+        first-order Taylor expansion about the instance, linear in the offset, whose pair
+        difference is the derivative exactly (for coefficients that the force is linear in)."""
+        primal = b
         if ti.static(self.replicated):
             # replica(b, j, sign) = count·(1 + 2j + sign) + b; a simulated b < count
-            branch = b % self.primal_count[None]
-        return branch
+            primal = b % self.primal_count[None]
+        return primal
 
     @ti.func
     def rate_offset(self, value, previous, h, ratio, use_history):

@@ -108,22 +108,20 @@ def jet_direction(kind, centre, x1, x2, x3, x4):
 
 
 @ti.func
-def jet(centre, x1, x2, x3, x4, old_area, rate_gain, rate_offset, alpha, fluid_density, always,
-        inflow, direction_kind, branch_rate, frozen):
+def jet(centre, x1, x2, x3, x4, area_rate, rate_gain, alpha, fluid_density, always, inflow,
+        direction_kind):
     """Force of one space on the robot: the jet f = −(ρ_f/L)(α·Ṡ)²·t while Ṡ < 0 (always if
     `always`), or the inflow f = +(ρ_f/L)(α_in·Ṡ)²·t while Ṡ > 0 (α_in = `inflow`, not with
-    `always`), t by `jet_direction` code `direction_kind`. Ṡ = rate_gain·(S − S_old) +
-    rate_offset (implicit Euler: (S − S_old)/h); x1, x4 the joints, x2, x3 the tips (m), areas
-    m², gain 1/s. With `frozen` (a replica, `assembly.Assembly.branch_instance`) the sign of
-    `branch_rate` (m²/s), not of Ṡ, says which of the three formulas applies. Returns f (2,)
-    N/m and ∂f/∂x_c, ∂f/∂x1..x4 (2, 2)."""
+    `always`), t by `jet_direction` code `direction_kind`. Ṡ = `area_rate` (m²/s), the
+    integrator's rate of S, whose derivative with respect to S is `rate_gain` (1/s; implicit
+    Euler: Ṡ = (S − S_old)/h, gain 1/h); x1, x4 the joints, x2, x3 the tips (m). Returns f (2,)
+    N/m, ∂f/∂x_c, ∂f/∂x1..x4 (2, 2) and ∂f/∂Ṡ (2,) N·s/m³."""
     signed_area = quad_signed_area(x1, x2, x3, x4)
-    area_rate = rate_gain * (ti.abs(signed_area) - old_area) + rate_offset
     force = ti.Vector([0.0, 0.0])
+    force_d_rate = ti.Vector([0.0, 0.0])
     d_centre, d1, d2, d3, d4 = no_derivatives()
-    branch = branch_rate if frozen != 0 else area_rate
-    jetting = always != 0 or branch < 0.0
-    if jetting or (inflow > 0.0 and branch > 0.0):
+    jetting = always != 0 or area_rate < 0.0
+    if jetting or (inflow > 0.0 and area_rate > 0.0):
         # strength α² (jet) or α_in² (inflow); sense −1: pushed along −t, +1: pulled along +t
         strength = inflow * inflow
         sense = 1.0
@@ -144,6 +142,7 @@ def jet(centre, x1, x2, x3, x4, old_area, rate_gain, rate_offset, alpha, fluid_d
             jet_direction(direction_kind, centre, x1, x2, x3, x4)
         signed_magnitude = sense * (fluid_density * squared_rate / width)
         force = signed_magnitude * direction
+        force_d_rate = sense * (fluid_density / width) * 2.0 * strength * area_rate * direction
         # f = ±ρ g t / L: the three factors' derivatives, each as an outer product or through t
         d_rate = sense * (fluid_density / width) * squared_rate_d_area * direction
         d_width = -sense * (fluid_density * squared_rate / (width * width)) * direction
@@ -152,7 +151,7 @@ def jet(centre, x1, x2, x3, x4, old_area, rate_gain, rate_offset, alpha, fluid_d
         d4 = d_rate.outer_product(area_d4) + signed_magnitude * direction_d4
         d2 = -d_rate.outer_product(area_d4) + d_width.outer_product(opening_unit) + signed_magnitude * direction_d2
         d_centre = signed_magnitude * direction_d_centre
-    return force, d_centre, d1, d2, d3, d4
+    return force, d_centre, d1, d2, d3, d4, force_d_rate
 
 
 @ti.data_oriented
@@ -221,6 +220,11 @@ class Jet(Term):
             positions[b, self.jet_quads[k, 2]], positions[b, self.jet_quads[k, 3]]))
 
     @ti.func
+    def area_rate(self, b, k, rate_gain):
+        """Ṡ (m²/s) of space k at instance b's current positions, by the integrator's rate."""
+        return rate_gain * (self.area(b, k) - self.previous_areas[b, k]) + self.area_rate_offset[b, k]
+
+    @ti.func
     def begin_step(self, b, start_time, end_time, h, ratio, rate_gain, use_history):
         for k in range(N_ACTUATORS):
             area = self.area(b, k)
@@ -237,21 +241,24 @@ class Jet(Term):
         if ti.static(variants):
             inflow = self.jet_inflow[b]
             direction_kind = self.jet_direction[b]
-        branch = self.assembly.branch_instance(b)
+        primal = self.assembly.primal_instance(b)
         for k in range(N_ACTUATORS):
-            # a replica's space jets (or draws in) when its instance's does: the switch at
-            # Ṡ = 0 is a kink of the force (continuous with its first derivative), and an
-            # instance's space that reopens slowly keeps Ṡ just above it for many steps
-            branch_rate = 0.0
-            if branch != b:
-                branch_rate = rate_gain * (self.area(branch, k) - self.previous_areas[branch, k]) \
-                    + self.area_rate_offset[branch, k]
-            force, d_centre, d1, d2, d3, d4 = jet(
+            area_rate = self.area_rate(b, k, rate_gain)
+            # a replica: the force's Taylor expansion in Ṡ about its instance's Ṡ
+            # (`Assembly.primal_instance`), so it also jets (or draws in) when its instance's
+            # space does: the switch at Ṡ = 0 is a kink, and an instance's space that reopens
+            # slowly keeps Ṡ just above it for many steps
+            expansion_rate = area_rate
+            if primal != b:
+                expansion_rate = self.area_rate(primal, k, rate_gain)
+            force, d_centre, d1, d2, d3, d4, force_d_rate = jet(
                 positions[b, CENTRE], positions[b, self.jet_quads[k, 0]],
                 positions[b, self.jet_quads[k, 1]], positions[b, self.jet_quads[k, 2]],
-                positions[b, self.jet_quads[k, 3]], self.previous_areas[b, k], rate_gain,
-                self.area_rate_offset[b, k], self.jet_alpha[b], self.jet_fluid_density[b],
-                self.jet_always[b], inflow, direction_kind, branch_rate, branch != b)
+                positions[b, self.jet_quads[k, 3]], expansion_rate, rate_gain,
+                self.jet_alpha[b], self.jet_fluid_density[b], self.jet_always[b], inflow,
+                direction_kind)
+            if primal != b:
+                force += force_d_rate * (area_rate - expansion_rate)
             if ti.static("spread" in self.configuration_switches):
                 if self.jet_application[b] == SPREAD:
                     self.spread_on_corners(b, k, force, d_centre, d1, d2, d3, d4, jacobian)

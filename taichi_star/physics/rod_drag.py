@@ -13,13 +13,10 @@ from .base import Term
 
 
 @ti.func
-def rod_drag(velocity, edge, parallel_coeff, perpendicular_coeff, branch_velocity, frozen):
+def rod_drag(velocity, edge, parallel_coeff, perpendicular_coeff):
     """Drag on one edge: F = −(c∥|a|a·t + c⊥|b|b·n), a = v·t, b = v·n, n = t rotated by +90°,
-    c = ½·ρ_f·Δl̄·C (kg/m² per unit height). With `frozen` (a replica,
-    `assembly.Assembly.branch_instance`) |a| and |b| are a and b times the signs of the
-    components of `branch_velocity` (m/s) instead (+ for 0): one smooth formula on each side
-    of the kink at 0. Returns F (2,) N/m, ∂F/∂v and ∂F/∂e (2, 2) with v the edge's mean
-    velocity (m/s) and e its edge vector (m)."""
+    c = ½·ρ_f·Δl̄·C (kg/m² per unit height). Returns F (2,) N/m, ∂F/∂v and ∂F/∂e (2, 2) with
+    v the edge's mean velocity (m/s) and e its edge vector (m)."""
     length = edge.norm()
     tangent = edge / length
     normal = ti.Vector([-tangent[1], tangent[0]])
@@ -27,9 +24,6 @@ def rod_drag(velocity, edge, parallel_coeff, perpendicular_coeff, branch_velocit
     across = velocity.dot(normal)
     along_size = ti.abs(along)
     across_size = ti.abs(across)
-    if frozen != 0:
-        along_size = along if branch_velocity.dot(tangent) >= 0.0 else -along
-        across_size = across if branch_velocity.dot(normal) >= 0.0 else -across
     force = -(parallel_coeff * along_size * along * tangent
               + perpendicular_coeff * across_size * across * normal)
     d_velocity = -2.0 * (parallel_coeff * along_size * tangent.outer_product(tangent)
@@ -95,20 +89,22 @@ class RodDrag(RodEdgeTerm):
 
     @ti.func
     def assemble(self, b, rate_gain, jacobian):
-        branch = self.assembly.branch_instance(b)
+        primal = self.assembly.primal_instance(b)
         for r in range(self.n_rods):
             i, j = self.rods[r, 0], self.rods[r, 1]
             velocity = 0.5 * (self.assembly.implicit_velocity(b, i, rate_gain)
                               + self.assembly.implicit_velocity(b, j, rate_gain))
-            # a replica takes its instance's side of the kink at each zero component
-            branch_velocity = velocity
-            if branch != b:
-                branch_velocity = 0.5 * (self.assembly.implicit_velocity(branch, i, rate_gain)
-                                         + self.assembly.implicit_velocity(branch, j, rate_gain))
+            # a replica: the drag's Taylor expansion about its instance's velocity
+            # (`Assembly.primal_instance`)
+            expansion_velocity = velocity
+            if primal != b:
+                expansion_velocity = 0.5 * (self.assembly.implicit_velocity(primal, i, rate_gain)
+                                            + self.assembly.implicit_velocity(primal, j, rate_gain))
             force, d_velocity, d_edge = rod_drag(
-                velocity, self.assembly.positions[b, j] - self.assembly.positions[b, i],
-                self.drag_parallel_coeff[b, r], self.drag_perpendicular_coeff[b, r],
-                branch_velocity, branch != b)
+                expansion_velocity, self.assembly.positions[b, j] - self.assembly.positions[b, i],
+                self.drag_parallel_coeff[b, r], self.drag_perpendicular_coeff[b, r])
+            if primal != b:
+                force += d_velocity @ (velocity - expansion_velocity)
             # half of F on each node; v is the mean of both, e = x_j − x_i
             d_first = 0.5 * (0.5 * rate_gain * d_velocity - d_edge)
             d_second = 0.5 * (0.5 * rate_gain * d_velocity + d_edge)

@@ -6,7 +6,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from taichi_star import SolverConfig, StarParams, simulate
+from taichi_star import SolverConfig, StarParams, sensitivities, simulate
 from taichi_star.sensitivities import SUMMARY_OUTPUTS, parse_directions, sensitivity_column
 from taichi_star.sensitivity_check import check_sensitivities, difference_step, taylor_step
 
@@ -38,7 +38,7 @@ def euler_run(taichi_cpu):
 
 
 def test_euler_sensitivities_equal_finite_differences(taichi_cpu):
-    # 1e-5: the target; measured 2e-6 and below (the rest is the extrapolated difference's own
+    # 1e-5: the target; measured 1e-8 and below (the rest is the extrapolated difference's own
     # truncation and the Newton noise of the runs)
     assert_matches_differences(check_sensitivities(BATCH, DURATION_S, SolverConfig(**TIGHT),
                                                    ("alpha", "drag_perpendicular")))
@@ -47,25 +47,48 @@ def test_euler_sensitivities_equal_finite_differences(taichi_cpu):
 def test_a_coast_after_the_pulse_keeps_its_sensitivities(taichi_cpu):
     """Over 0.84 s the A1 robot coasts after its pulse: many rod-edge velocity components creep
     past zero, within a replica pair's ε·v̇ of it, for many steps. A pair differencing the drag
-    |v|·v across its kink there got an error ε²-small per step that built up (measured before
-    the replicas took their instance's side of the kink: 2.1e-5 here, 1.3e-2 after 2.1 s;
-    after: 4.4e-7 and 2.4e-7)."""
-    # 1e-5: the target, 20× the measured error and half the error without the branch rule
+    |v|·v across its kink there got an error ε²-small per step that built up (measured when
+    the replicas used their own |v|·v: 2.1e-5 here, 1.3e-2 after 2.1 s; taking their
+    instance's side of the kink: 8e-8 here; expanding the drag about the instance's velocity,
+    `Assembly.primal_instance`: 5e-9)."""
+    # 1e-5: the target, half the error of a pair across the kink
     assert_matches_differences(check_sensitivities([BASE.replace(gait="A1")], 0.84,
                                                    SolverConfig(**TIGHT), ("alpha",)))
 
 
 def test_c_parallel_takes_its_own_step_and_then_matches_its_differences(taichi_cpu):
-    """C∥ barely moves the robot, so at the common ε (1e-5 of the value) its replicas' offsets
-    are a few thousand roundings of a position: here its derivative was 4e-4 and 3.6e-3 off,
-    with Taylor ratios of 2.0 (measured). At its own ε, 1e-2 of the value, 9e-9 and 1.7e-6,
-    ratios 3.9 and 4.4."""
+    """C∥ barely moves the robot, so at an ε of 1e-5 of the value its replicas' offsets are a
+    few thousand roundings of a position: here its derivative was 4e-4 and 3.6e-3 off, with
+    Taylor ratios of 2.0 (measured). At its own ε, 1e-2 of the value, 2.2e-7 and 1.8e-6,
+    ratios 3.9 and 4.5."""
     (direction,) = parse_directions(["drag_parallel"])
     assert direction.step(BASE) == pytest.approx(1e-2 * BASE.drag_parallel, rel=1e-15)
     assert difference_step(direction, BASE) == direction.step(BASE)
     # 1e-5: the target, 6x the larger measured error
     assert_matches_differences(check_sensitivities(BATCH, DURATION_S, SolverConfig(**TIGHT),
                                                    ("drag_parallel",)))
+
+
+@pytest.mark.parametrize("field, tolerance", [("drag_perpendicular", 1e-7),
+                                              ("fluid_density", 1e-6)])
+def test_a_derivative_does_not_depend_on_the_replicas_step(taichi_cpu, monkeypatch, field,
+                                                           tolerance):
+    """The replicas expand the drags and the jet about their instance's velocity
+    (`Assembly.primal_instance`), so their residuals are linear in their offsets, and a pair's
+    difference depends on ε only through terms of order ε² relative (products of the
+    coefficients' offsets with the quadratic part of the states', as in the jet's areas). Over
+    0.3 s of the A1+A2 and A1+A3 pulses (the jet switches off as the spaces reopen, velocity
+    components cross zero), ε = 1e-3 and 1e-2 of the value give derivatives of the
+    displacement 6e-10 (C⊥) and 1.3e-7 (ρ_f, whose derivative here is small: an ε² term of
+    1.3e-3 relative at 1e-2) apart, measured; replicas with their own |v|·v and Ṡ² (before
+    the expansion) were 6e-3, 7e-3 (C⊥) and 1.6e-2, 6.1e-2 (ρ_f) apart. The tolerances: about
+    8× the measured differences, far below the former ones."""
+    derivatives = []
+    for step in (1e-3, 1e-2):
+        monkeypatch.setitem(sensitivities.FIELD_RELATIVE_STEPS, field, step)
+        run = simulate(BATCH, 0.3, SolverConfig(), sensitivities=(field,))
+        derivatives.append(run.sensitivity("displacement_x_mm", field))
+    np.testing.assert_allclose(derivatives[1], derivatives[0], rtol=tolerance)
 
 
 def test_the_taylor_step_is_a_hundred_differences_steps_at_most_a_tenth_of_the_value():

@@ -20,7 +20,8 @@ from taichi_star.fields import FieldArena
 from taichi_star.integrators import ImplicitEuler
 from taichi_star.model import InstanceTopologies
 from taichi_star.geometry import LIMB
-from taichi_star.physics import Bending, LinearDrag, MaterialDamping, Stretching, Wake
+from taichi_star.physics import (Bending, CylinderDrag, LinearDrag, MaterialDamping, RodDrag,
+                                  Stretching, Wake)
 from taichi_star.physics.assembly import Assembly
 from taichi_star.params import StarParams
 from taichi_star.physics.base import connect_terms, load_field, numpy_to_field_type
@@ -35,22 +36,26 @@ REFERENCE_RTOL = 1e-9
 DIFFERENCE_RTOL = 1e-6
 
 
-def toy_system(term_classes, coefficients, configurations):
-    """The term classes' device objects on a toy Assembly: ({name: term}, assembly, arena)."""
+def toy_system(term_classes, coefficients, configurations, capacity=1, primal_count=None):
+    """The term classes' device objects on a toy Assembly of `capacity` instances: ({name:
+    term}, assembly). With `primal_count`, the first that many are simulated instances and the
+    rest their replicas (instance b's at primal_count·k + b, as in the engine)."""
     arena = FieldArena()
-    nodes = (1, N_NODES)
+    nodes = (capacity, N_NODES)
     state = SimpleNamespace(**{name: arena.batch_field(float, nodes, vector=2)
                                for name in ("positions", "previous", "velocity_offset")},
-                            fire_time=arena.batch_field(float, (1, 8)),
-                            previous_fire_time=arena.batch_field(float, (1, 8)))
+                            fire_time=arena.batch_field(float, (capacity, 8)),
+                            previous_fire_time=arena.batch_field(float, (capacity, 8)))
     system = SimpleNamespace(rhs=arena.batch_field(float, nodes, vector=2),
-                             blocks=arena.batch_field(float, (1, N_NODES * N_NODES), matrix=(2, 2)))
+                             blocks=arena.batch_field(float, (capacity, N_NODES * N_NODES),
+                                                      matrix=(2, 2)))
+    primal = None if primal_count is None else arena.field(ti.i32)
     topology = SimpleNamespace(n_nodes=N_NODES, edges=EDGES, n_edges=len(EDGES),
                                edge_kind=TOY_EDGE_KIND, triplets=TRIPLETS,
                                n_triplets=len(TRIPLETS), triplet_actuator=np.full(2, -1),
                                joint_actuator=np.full(2, -1))
     slot = {(i, j): i * N_NODES + j for i in range(N_NODES) for j in range(N_NODES)}
-    assembly = Assembly(topology, 1, arena, slot, ImplicitEuler(), state, system)
+    assembly = Assembly(topology, capacity, arena, slot, ImplicitEuler(), state, system, primal)
     terms = {}
     for cls in term_classes:
         shapes = {name: (values.shape[1:], numpy_to_field_type(values))
@@ -61,6 +66,8 @@ def toy_system(term_classes, coefficients, configurations):
     for cls in term_classes:
         for name, field in terms[cls.name].coefficient_fields().items():
             load_field(field, coefficients[cls.name][name])
+    if primal is not None:
+        primal[None] = primal_count
     return terms, assembly
 
 
@@ -73,6 +80,12 @@ def _assemble(term: ti.template(), rate_gain: float):
 def _assemble_two(first: ti.template(), second: ti.template(), rate_gain: float):
     first.assemble(0, rate_gain, 1)
     second.assemble(0, rate_gain, 1)
+
+
+@ti.kernel
+def _assemble_all(term: ti.template(), rate_gain: float, count: ti.i32):
+    for b in range(count):
+        term.assemble(b, rate_gain, 0)
 
 
 @ti.kernel
@@ -287,3 +300,67 @@ def test_wake_assembles_the_water_exchange_and_its_own_exact_jacobian(taichi_cpu
     np.testing.assert_allclose(term.water_velocity.to_numpy()[0], solved, rtol=1e-12)
     np.testing.assert_array_equal(term.water_previous.to_numpy()[0], water)
     assert Wake.configuration(Wake.coefficients([StarParams()], None, None)) is None
+
+
+def _replica_pair_difference(term_class, coefficients, instance_velocity, direction, step,
+                             replicated):
+    """Half the difference of the residuals of a replica pair of one instance of the toy chain,
+    over `step`: the instance at `deformed()` positions with node velocities
+    `instance_velocity` (N, 2) m/s (implicit Euler, h = 1 ms), its replicas at the same
+    positions from start states whose velocities are instance_velocity ± step·`direction`, with
+    their coefficients at c·(1 ± step) (a relative direction of a parameter the term is linear
+    in). `replicated`: the pair assembled as replicas of the instance (the engine's sensitive
+    assembly), else as three independent instances."""
+    h = 1e-3
+    name = term_class.name
+    moved = {key: np.stack([values[0], values[0] * (1 + step), values[0] * (1 - step)])
+             for key, values in coefficients.items()}
+    terms, assembly = toy_system([term_class], {name: moved}, {name: ()}, capacity=3,
+                                 primal_count=1 if replicated else None)
+    positions = deformed()
+    velocities = np.stack([instance_velocity, instance_velocity + step * direction,
+                           instance_velocity - step * direction])
+    load_field(assembly.positions, np.stack([positions] * 3))
+    load_field(assembly.previous, positions[None] - h * velocities)
+    _assemble_all(terms[name], 1.0 / h, 3)
+    rhs = assembly.rhs.to_numpy()
+    return (rhs[1] - rhs[2]).ravel() / (2 * step)
+
+
+DRAG_COEFFICIENTS = {
+    RodDrag: {"drag_parallel_coeff": np.array([[0.006, 0.007, 0.0065]]),
+              "drag_perpendicular_coeff": np.array([[0.6, 0.7, 0.65]])},
+    CylinderDrag: {"cylinder_drag_coeff": np.array([150.0])}}
+"""½ρ_f·Δl̄·C∥, ½ρ_f·Δl̄·C⊥ per edge (kg/m², edges ~1.3 mm, C∥ = 0.01, C⊥ = 1) and
+½ρ_f·C_c·D_c of the hub (kg/m², C_c = 10, D_c = 3 cm)."""
+
+
+@pytest.mark.parametrize("term_class", [RodDrag, CylinderDrag])
+def test_a_replica_pair_differences_the_drags_derivative_exactly(taichi_cpu, term_class):
+    """A replica takes the drag's first-order expansion about its instance's velocity
+    (`Assembly.primal_instance`), so its pair's half difference is linear in the pair's offsets
+    and the parameter's: the same for a step of 1e-2 and of 1e-5, also with the instance
+    1e-12 m/s from the kink at rest, where the pair straddles it; away from the kink it equals
+    the derivative of independent instances (the plain central difference at 1e-5). 1e-7: the
+    pair's velocity offsets come back from positions ~1e-3 m and steps of 1e-3 s, ~1e-8
+    relative of rounding at a step of 1e-5, and the plain difference's O(δ²) truncation is
+    ~1e-10. The plain difference at 1e-2 is 1e-5 or more off, at the kink O(1): the check has
+    teeth."""
+    rng = np.random.default_rng(11)
+    coefficients = DRAG_COEFFICIENTS[term_class]
+    direction = 0.02 * rng.normal(size=REST.shape)
+    moving = 0.03 * rng.normal(size=REST.shape)
+    at_kink = 1e-12 * rng.normal(size=REST.shape)
+
+    def difference(velocity, step, replicated):
+        return _replica_pair_difference(term_class, coefficients, velocity, direction, step,
+                                        replicated)
+
+    for velocity in (moving, at_kink):
+        assert_close(difference(velocity, 1e-2, True), difference(velocity, 1e-5, True), 1e-7)
+    derivative = difference(moving, 1e-5, False)
+    assert_close(difference(moving, 1e-2, True), derivative, 1e-7)
+    assert np.abs(difference(moving, 1e-2, False) - derivative).max() \
+        > 1e-5 * np.abs(derivative).max()
+    exact = difference(at_kink, 1e-2, True)
+    assert np.abs(difference(at_kink, 1e-2, False) - exact).max() > 1e-2 * np.abs(exact).max()

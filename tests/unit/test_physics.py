@@ -49,10 +49,9 @@ def _bend(edges: ti.types.ndarray(), voronoi: float, natural: float, stiffness: 
 
 @ti.kernel
 def _rod_drag(inputs: ti.types.ndarray(), parallel: float, perpendicular: float,
-              branch: ti.types.ndarray(), frozen: ti.i32, out: ti.types.ndarray()):
+              out: ti.types.ndarray()):
     force, d_velocity, d_edge = rod_drag.rod_drag(ti.Vector([inputs[0], inputs[1]]), ti.Vector([inputs[2], inputs[3]]),
-                                               parallel, perpendicular,
-                                               ti.Vector([branch[0], branch[1]]), frozen)
+                                               parallel, perpendicular)
     for a in ti.static(range(2)):
         out[a] = force[a]
         for c in ti.static(range(2)):
@@ -61,10 +60,8 @@ def _rod_drag(inputs: ti.types.ndarray(), parallel: float, perpendicular: float,
 
 
 @ti.kernel
-def _cylinder_drag(inputs: ti.types.ndarray(), coeff: float, branch: ti.types.ndarray(),
-                   frozen: ti.i32, out: ti.types.ndarray()):
-    force, d_velocity = cylinder_drag.cylinder_drag(ti.Vector([inputs[0], inputs[1]]), coeff,
-                                                    ti.Vector([branch[0], branch[1]]), frozen)
+def _cylinder_drag(inputs: ti.types.ndarray(), coeff: float, out: ti.types.ndarray()):
+    force, d_velocity = cylinder_drag.cylinder_drag(ti.Vector([inputs[0], inputs[1]]), coeff)
     for a in ti.static(range(2)):
         out[a] = force[a]
         for c in ti.static(range(2)):
@@ -73,14 +70,17 @@ def _cylinder_drag(inputs: ti.types.ndarray(), coeff: float, branch: ti.types.nd
 
 @ti.kernel
 def _jet(points: ti.types.ndarray(), old_area: float, dt: float, alpha: float, density: float,
-         always: ti.i32, inflow: float, direction: ti.i32, branch_rate: float, frozen: ti.i32,
-         out: ti.types.ndarray()):
-    force, d0, d1, d2, d3, d4 = jet.jet(
-        ti.Vector([points[0], points[1]]), ti.Vector([points[2], points[3]]), ti.Vector([points[4], points[5]]),
-        ti.Vector([points[6], points[7]]), ti.Vector([points[8], points[9]]), old_area, 1.0 / dt, 0.0, alpha, density, always,
-        inflow, direction, branch_rate, frozen)
+         always: ti.i32, inflow: float, direction: ti.i32, out: ti.types.ndarray()):
+    corners = [ti.Vector([points[2 * c], points[2 * c + 1]]) for c in ti.static(range(5))]
+    # implicit Euler's rate of the area: gain 1/dt, no offset
+    area_rate = (ti.abs(jet.quad_signed_area(corners[1], corners[2], corners[3], corners[4]))
+                 - old_area) / dt
+    force, d0, d1, d2, d3, d4, d_rate = jet.jet(corners[0], corners[1], corners[2], corners[3],
+                                                corners[4], area_rate, 1.0 / dt, alpha, density,
+                                                always, inflow, direction)
     for a in ti.static(range(2)):
         out[a] = force[a]
+        out[22 + a] = d_rate[a]
         for c in ti.static(range(2)):
             out[2 + 10 * a + c] = d0[a, c]
             out[2 + 10 * a + 2 + c] = d1[a, c]
@@ -95,10 +95,9 @@ def _call(kernel, inputs, n_out, *args):
     return out
 
 
-def _call_jet(points, n_out, *args, branch_rate=0.0, frozen=0):
-    """`_call` of `_jet`: as an instance (frozen 0) or as a replica whose instance's space
-    changes at `branch_rate` (m²/s)."""
-    return _call(_jet, points, n_out, *args, branch_rate, frozen)
+def _call_jet(points, *args):
+    """`_call` of `_jet`: force (2,), its position derivatives (2, 10) and ∂f/∂Ṡ (2,)."""
+    return _call(_jet, points, 24, *args)
 
 
 def _central_jacobian(function, x, step):
@@ -164,7 +163,7 @@ def test_rod_drag_jacobians(taichi_cpu, velocity):
     edge = np.array([1.1e-3, 0.6e-3])
     inputs = np.array([*velocity, *edge])
     coeffs = (0.5 * 1000 * 1.3e-3 * 0.01, 0.5 * 1000 * 1.3e-3 * 1.0)
-    evaluate = lambda x: _call(_rod_drag, x, 10, *coeffs, np.zeros(2), 0)  # noqa: E731
+    evaluate = lambda x: _call(_rod_drag, x, 10, *coeffs)  # noqa: E731
     out = evaluate(inputs)
     jacobian = _central_jacobian(lambda x: evaluate(x)[:2], inputs, 1e-8)
     _assert_close(out[2:].reshape(2, 4)[:, :2], jacobian[:, :2])
@@ -176,59 +175,10 @@ def test_rod_drag_jacobians(taichi_cpu, velocity):
 
 def test_cylinder_drag_jacobian(taichi_cpu):
     inputs = np.array([0.013, -0.021])
-    evaluate = lambda x: _call(_cylinder_drag, x, 6, 150.0, np.zeros(2), 0)  # noqa: E731
+    evaluate = lambda x: _call(_cylinder_drag, x, 6, 150.0)  # noqa: E731
     out = evaluate(inputs)
     _assert_close(out[2:].reshape(2, 2), _central_jacobian(lambda x: evaluate(x)[:2], inputs, 1e-9))
-    assert np.allclose(_call(_cylinder_drag, np.zeros(2), 6, 150.0, np.zeros(2), 0), 0.0)
-
-
-@pytest.mark.parametrize("branch", [(0.013, -0.021), (-0.02, 0.004)])
-def test_the_frozen_cylinder_drag_returns_its_own_jacobian(taichi_cpu, branch):
-    """On a replica's branch (|v| taken as v's component along the instance's velocity, which
-    here points with or against v), the returned ∂F/∂v is that of the frozen formula; with an
-    instance at rest (no direction) force and derivative are exactly 0."""
-    inputs, branch = np.array([0.011, -0.017]), np.array(branch)
-    evaluate = lambda x: _call(_cylinder_drag, x, 6, 150.0, branch, 1)  # noqa: E731
-    out = evaluate(inputs)
-    _assert_close(out[2:].reshape(2, 2), _central_jacobian(lambda x: evaluate(x)[:2], inputs, 1e-9))
-    assert not _call(_cylinder_drag, inputs, 6, 150.0, np.zeros(2), 1).any()
-
-
-@pytest.mark.parametrize("drag", ["rod", "cylinder"])
-def test_a_replica_pair_across_the_drags_kink_differences_one_polynomial(taichi_cpu, drag):
-    """An instance whose velocity components lie 1e-12 m/s from zero, and a replica pair at
-    ±δ·w about it that straddles zero: frozen on the instance's side (`Assembly.branch_instance`),
-    the pair's half difference over δ is the drag's derivative at the instance along w; the
-    pair's own |v|·v (not frozen) is off by ~c·δ·|w|², which the test must see."""
-    instance, direction, step = np.array([1e-12, -1e-12]), np.array([0.7, -0.4]), 1e-6
-    if drag == "rod":
-        edge = np.array([1.1e-3, 0.6e-3])
-        coeffs = (0.5 * 1000 * 1.3e-3 * 0.01, 0.5 * 1000 * 1.3e-3 * 1.0)
-
-        def evaluate(velocity, branch, frozen):
-            return _call(_rod_drag, np.concatenate([velocity, edge]), 10, *coeffs, branch, frozen)
-        jacobian = evaluate(instance, instance, 0)[2:].reshape(2, 4)[:, :2]
-    else:
-        def evaluate(velocity, branch, frozen):
-            return _call(_cylinder_drag, velocity, 6, 150.0, branch, frozen)
-        jacobian = evaluate(instance, instance, 0)[2:].reshape(2, 2)
-    derivative = jacobian @ direction
-
-    def half_difference(frozen):
-        plus = evaluate(instance + step * direction, instance, frozen)[:2]
-        minus = evaluate(instance - step * direction, instance, frozen)[:2]
-        return (plus - minus) / (2 * step)
-
-    straddled = np.abs(half_difference(0) - derivative).max()
-    assert straddled > 1e-8, "the pair must straddle the kink for the check to mean anything"
-    # the frozen formula is a polynomial of degree 2 in v: its central difference is exact up
-    # to rounding (~1e-16·|F|/δ)
-    assert np.abs(half_difference(1) - derivative).max() <= 1e-6 * straddled
-    # at the instance's own velocity the frozen formula is the force itself (the hub's to
-    # rounding: v·v/|v| for |v|)
-    off_zero = np.array([0.02, -0.01])
-    np.testing.assert_allclose(evaluate(off_zero, off_zero, 1)[:2],
-                               evaluate(off_zero, off_zero, 0)[:2], rtol=1e-14)
+    assert np.allclose(_call(_cylinder_drag, np.zeros(2), 6, 150.0), 0.0)
 
 
 def _jet_points():
@@ -251,7 +201,7 @@ def test_jet_jacobian(taichi_cpu, always):
     area = _quad_area(points)
     old_area = area * 1.001  # shrinking: the jet is on in both modes
     args = (old_area, 1e-3, 0.8, 1000.0, always, 0.0, jet.HUB_DIRECTION)
-    evaluate = lambda x: _call_jet(x, 22, *args)  # noqa: E731
+    evaluate = lambda x: _call_jet(x, *args)[:22]  # noqa: E731
     out = evaluate(points)
     jacobian = _central_jacobian(lambda x: evaluate(x)[:2], points, 1e-9)
     _assert_close(out[2:].reshape(2, 10), jacobian)
@@ -266,13 +216,8 @@ def test_jet_contract_mode_is_off_while_expanding(taichi_cpu):
     points = _jet_points()
     area = _quad_area(points)
     expanding = (area * 0.999, 1e-3, 0.8, 1000.0)
-    assert np.all(_call_jet(points, 22, *expanding, 0, 0.0, jet.HUB_DIRECTION) == 0.0)
-    assert np.linalg.norm(_call_jet(points, 22, *expanding, 1, 0.0, jet.HUB_DIRECTION)[:2]) > 0.0
-    # a replica's space that shrinks while its instance's opens (Ṡ just above 0, the pair on
-    # both sides) takes the instance's side: no jet
-    shrinking = (area * 1.001, 1e-3, 0.8, 1000.0, 0, 0.0, jet.HUB_DIRECTION)
-    assert np.linalg.norm(_call_jet(points, 22, *shrinking)[:2]) > 0.0
-    assert np.all(_call_jet(points, 22, *shrinking, branch_rate=1e-12, frozen=1) == 0.0)
+    assert np.all(_call_jet(points, *expanding, 0, 0.0, jet.HUB_DIRECTION) == 0.0)
+    assert np.linalg.norm(_call_jet(points, *expanding, 1, 0.0, jet.HUB_DIRECTION)[:2]) > 0.0
 
 
 def _expected_direction(points, kind):
@@ -294,14 +239,20 @@ def _expected_direction(points, kind):
 def test_jet_and_inflow_directions_values_and_jacobians(taichi_cpu, kind, shrink):
     """Each direction, while the space closes (the jet, along −t) and while it opens (the
     inflow α_in = 0.5, along +t, contract mode): the force is ∓(ρ_f/L)(αṠ)²·t with t from its
-    definition, and the Jacobian matches central differences."""
+    definition, and the derivatives by the positions and by Ṡ match central differences."""
     points = _jet_points()
     area = _quad_area(points)
     old_area = area * shrink
     args = (old_area, 1e-3, 0.8, 1000.0, 0, 0.5, kind)
-    evaluate = lambda x: _call_jet(x, 22, *args)  # noqa: E731
+    evaluate = lambda x: _call_jet(x, *args)[:22]  # noqa: E731
     out = evaluate(points)
     _assert_close(out[2:].reshape(2, 10), _central_jacobian(lambda x: evaluate(x)[:2], points, 1e-9))
+    # Ṡ = (S − S_old)/dt, so ∂f/∂Ṡ = −dt·∂f/∂S_old; f is quadratic in Ṡ (on one side of 0,
+    # which a step of 1e-6·S_old does not cross: Ṡ is ±1e-3·S/dt), so the difference is exact
+    # up to rounding
+    by_old_area = _central_jacobian(lambda old: _call_jet(points, old[0], *args[1:])[:2],
+                                    np.array([old_area]), 1e-6 * old_area)[:, 0]
+    _assert_close(_call_jet(points, *args)[22:], -1e-3 * by_old_area)
     rate = (area - old_area) / 1e-3
     ratio, sense = (0.8, -1.0) if rate < 0 else (0.5, 1.0)
     expected = sense * 1000.0 / np.linalg.norm(points[4:6] - points[6:8]) * (ratio * rate) ** 2 \
@@ -315,10 +266,10 @@ def test_inflow_is_off_while_closing_and_zero_inflow_changes_nothing(taichi_cpu)
     points = _jet_points()
     area = _quad_area(points)
     closing = (area * 1.001, 1e-3, 0.8, 1000.0, 0)
-    np.testing.assert_array_equal(_call_jet(points, 22, *closing, 0.7, jet.HUB_DIRECTION),
-                                  _call_jet(points, 22, *closing, 0.0, jet.HUB_DIRECTION))
+    np.testing.assert_array_equal(_call_jet(points, *closing, 0.7, jet.HUB_DIRECTION),
+                                  _call_jet(points, *closing, 0.0, jet.HUB_DIRECTION))
     opening = (area * 0.999, 1e-3, 0.8, 1000.0, 0, 0.0, jet.BISECTOR_DIRECTION)
-    assert np.all(_call_jet(points, 22, *opening) == 0.0)
+    assert np.all(_call_jet(points, *opening) == 0.0)
 
 
 def test_the_three_directions_coincide_in_the_rest_shape(taichi_cpu):
@@ -331,7 +282,7 @@ def test_the_three_directions_coincide_in_the_rest_shape(taichi_cpu):
     quad = topology.jet_quads[3]
     points = np.concatenate([topology.rest_positions[0], topology.rest_positions[quad].reshape(-1)])
     area = _quad_area(points)
-    forces = [_call_jet(points, 22, area * 1.001, 1e-3, 0.8, 1000.0, 0, 0.0, kind)[:2]
+    forces = [_call_jet(points, area * 1.001, 1e-3, 0.8, 1000.0, 0, 0.0, kind)[:2]
               for kind in (jet.HUB_DIRECTION, jet.NORMAL_DIRECTION, jet.BISECTOR_DIRECTION)]
     # the rest shape is built by rounding cosines: the directions agree to ~1e-15
     np.testing.assert_allclose(forces[1], forces[0], rtol=1e-12, atol=1e-12 * np.abs(forces[0]).max())
