@@ -39,6 +39,7 @@ import pandas as pd
 
 from taichi_star import Gait, SolverConfig, StarParams, simulate
 from taichi_star.output import column_unit
+from taichi_star.sensitivity_check import extrapolated_difference
 from taichi_star.sensitivities import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS,
                                        REPLICAS_PER_DIRECTION, parse_directions)
 
@@ -55,7 +56,7 @@ SOBOL_COLUMNS = ("S1", "S1_conf", "ST", "ST_conf")
 CHECK_RELATIVE_STEP = 1e-4
 """Step of the finite-difference check, relative to the parameter's value: large enough that
 the Newton noise of the runs (solved to CHECK_NEWTON_TOL) stays ~1e-6 of the quotient, small
-enough that the extrapolated quotient's O(h²) truncation is ~1e-8."""
+enough that the extrapolated quotient's O(h³) truncation is negligible."""
 CHECK_NEWTON_TOL = 1e-12
 """Newton tolerance of the check's runs, m (the sensitivities' own run keeps the preset's)."""
 
@@ -132,11 +133,12 @@ def elasticity_table(params: Sequence[StarParams], parameters: Sequence[str],
 
 def finite_difference_check(params: Sequence[StarParams], labels: Sequence[str],
                             solver: SolverConfig, duration_s: float, arch: str) -> pd.DataFrame:
-    """Richardson-extrapolated central differences 2·D(h) − D(2h) of whole runs (h =
-    CHECK_RELATIVE_STEP of each value; the extrapolation removes the first-order error of the
-    drag's kink at zero velocity) of the signed speed, for every instance × label, in one
-    batch at CHECK_NEWTON_TOL. Columns gait, parameter, finite_difference."""
+    """Central differences of whole runs at h, 2h and 4h (h = CHECK_RELATIVE_STEP of each
+    value), extrapolated (`taichi_star.sensitivity_check.extrapolated_difference`), of the
+    signed speed, for every instance × label, in one batch at CHECK_NEWTON_TOL. Columns gait,
+    parameter, finite_difference."""
     tight = solver.replace(newton_tol=min(solver.newton_tol, CHECK_NEWTON_TOL))
+    scales = (1.0, 2.0, 4.0)
     batch, steps = [], []
     for label in labels:
         for p in params:
@@ -144,14 +146,14 @@ def finite_difference_check(params: Sequence[StarParams], labels: Sequence[str],
             step = CHECK_RELATIVE_STEP * abs(value)
             steps.append(step)
             batch += [direction(label).moved(p, value + sign * scale * step)
-                      for scale in (1.0, 2.0) for sign in (1.0, -1.0)]
+                      for scale in scales for sign in (1.0, -1.0)]
     speeds = simulate(batch, duration_s, tight, arch=arch).summary[OUTPUT].to_numpy()
-    speeds = speeds.reshape(len(steps), 2, 2)
+    speeds = speeds.reshape(len(steps), len(scales), 2)
     quotients = (speeds[:, :, 0] - speeds[:, :, 1]) / (2.0 * np.array(steps)[:, None]
-                                                         * np.array([1.0, 2.0]))
+                                                         * np.array(scales))
     return pd.DataFrame({"gait": [p.gait for _ in labels for p in params],
                          "parameter": [label for label in labels for _ in params],
-                         "finite_difference": 2.0 * quotients[:, 0] - quotients[:, 1]})
+                         "finite_difference": extrapolated_difference(*quotients.T)})
 
 
 def plot_elasticities(csv_path, png_path) -> Path:

@@ -25,6 +25,7 @@ firing times (events, not functions of the parameters: `period` is not different
 from __future__ import annotations
 
 import copy
+import dataclasses
 import difflib
 import warnings
 from dataclasses import dataclass
@@ -37,6 +38,7 @@ from .params import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS, PER_ACTUATOR_FIEL
                      SolverConfig, StarParams)
 from .gait import N_ACTUATORS, Gait
 from .metrics import wrap_degrees
+from .model import build_model
 from .timegrid import on_grid
 
 RELATIVE_STEP = 1e-4
@@ -211,18 +213,56 @@ def delay_on_step_grid(params: StarParams, actuator: int, dt: float) -> bool:
         params.actuator_delays[actuator] + profile.switch_time, dt))
 
 
-def replica_batch(params: Sequence[StarParams], directions: Sequence[Direction]):
+def replica_batch(params: Sequence[StarParams], directions: Sequence[Direction],
+                  scale: float = 1.0):
     """(the batch to simulate, steps (n_directions, B)). The batch: the instances, then for
-    each direction its pair of replicas at ±ε, the pair
+    each direction its pair of replicas at ±ε (±scale·ε), the pair
     as +ε replicas then −ε replicas: the order of `engine.BatchEngine.replica`, whose
     direction j is pair j here (so the engine carries 2·n_directions tangents)."""
     steps = np.array([[direction.step(p) for p in params] for direction in directions])
     batch = list(params)
     for direction, row in zip(directions, steps):
         for sign in (1.0, -1.0):
-            batch += [direction.moved(p, direction.value(p) + sign * eps)
+            batch += [direction.moved(p, direction.value(p) + sign * scale * eps)
                       for p, eps in zip(params, row)]
     return batch, steps
+
+
+def replica_model(params: Sequence[StarParams], directions: Sequence[Direction],
+                  commanded: bool = False):
+    """(the `model.BatchModel` of `replica_batch`'s batch, steps (n_directions, B)), its
+    replicas' rest shapes, masses and coefficients moved from their instance's by exactly ±ε
+    times their derivatives: c ± (8·(c(ε) − c(−ε)) − (c(2ε) − c(−2ε)))/12, the fourth-order
+    central difference of the host's tables (a second batch at ±2ε is built for it). A pair
+    built at p ± ε itself differs from that by the tables' curvature, ε²·c‴/6, the same sign for
+    both replicas' third-order terms: where a parameter moves the rest geometry, the elastic
+    forces of that small misfit between a replica's rest shape and its tables are large, and
+    they dominated the joint radius's derivatives (docs: numerics, sensitivities)."""
+    batch, steps = replica_batch(params, directions)
+    model = build_model(batch, commanded)
+    if not directions:
+        return model, steps
+    wide = build_model(replica_batch(params, directions, scale=2.0)[0], commanded)
+    count = len(params)
+
+    def linear(near: np.ndarray, far: np.ndarray) -> np.ndarray:
+        if not np.issubdtype(near.dtype, np.floating):
+            return near
+        moved = near.copy()
+        for j in range(len(directions)):
+            plus = slice((1 + 2 * j) * count, (2 + 2 * j) * count)
+            minus = slice((2 + 2 * j) * count, (3 + 2 * j) * count)
+            offset = (8.0 * (near[plus] - near[minus]) - (far[plus] - far[minus])) / 12.0
+            moved[plus] = near[:count] + offset
+            moved[minus] = near[:count] - offset
+        return moved
+
+    return dataclasses.replace(
+        model, rest_positions=linear(model.rest_positions, wide.rest_positions),
+        mass=linear(model.mass, wide.mass), inertia=linear(model.inertia, wide.inertia),
+        coefficients={name: {key: linear(values, wide.coefficients[name][key])
+                             for key, values in table.items()}
+                      for name, table in model.coefficients.items()}), steps
 
 
 def _difference(plus: np.ndarray, minus: np.ndarray, output: str) -> np.ndarray:

@@ -13,7 +13,7 @@ import pandas as pd
 
 from . import metrics, output
 from .geometry import CENTRE, Topology
-from .model import build_model, validate_batch
+from .model import validate_batch
 from .params import (PER_ACTUATOR_FIELDS, SolverConfig, StarParams, check_precision,
                      parameter_column)
 from .driver import Clock, check_run, drive
@@ -247,9 +247,8 @@ def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, reco
     """`simulate` of one batch in one engine (arguments validated, Taichi initialised);
     progress_label: the progress bar's description, None for no bar; `directions`: those of
     the sensitivities (`sensitivities.parse_directions`)."""
-    if directions:
-        params, steps = tangents.replica_batch(params, directions)
-    model = build_model(params)
+    model, steps = tangents.replica_model(params, directions)
+    params = model.params
     engine = runtime.engine_for(model, solver, tangents=len(directions))
     batch = model.batch_size
     clock = Clock(solver, duration_s)

@@ -37,7 +37,7 @@ from .actuation import NEVER
 from .driver import Clock, check_run, drive
 from .gait import N_ACTUATORS, Gait
 from .geometry import CENTRE
-from .model import build_model, validate_batch
+from .model import validate_batch
 from .params import SolverConfig, StarParams, check_precision
 from .runtime import Runtime, check_arch
 from .state import STATUS_NAMES, STATUS_OK
@@ -113,10 +113,8 @@ class Simulator:
         check_arch(arch)
         self.params = params
         self.solver = solver
-        batch, self._steps_of_directions = params, None
-        if self.directions:
-            batch, self._steps_of_directions = tangents.replica_batch(params, self.directions)
-        self.model = build_model(batch, commanded=True)
+        self.model, self._steps_of_directions = tangents.replica_model(params, self.directions,
+                                                                       commanded=True)
         """The batch's model: the instances and, with sensitivities, their replicas after them."""
         runtime = Runtime.current()
         runtime.ensure(arch, solver.precision)

@@ -47,3 +47,43 @@ def test_an_instances_model_tables_do_not_depend_on_its_batch():
         for term, table in alone.coefficients.items():
             for name, values in table.items():
                 assert np.array_equal(batch.coefficients[term][name][b], values[0]), (term, name)
+
+
+def test_a_replica_models_tables_lie_on_their_instances_tangent():
+    """`sensitivities.replica_model`: each replica pair's rest shape, masses and coefficients are
+    its instance's ± one offset (symmetric to rounding), the offset ε times the tables'
+    derivative by the parameter (against a central difference of the host's tables at a step
+    of 1e-6 of the value: O(h²) ~1e-12 and rounding ~1e-10 relative, so 1e-8 of the largest
+    offset); a pair built at p ± ε itself is not symmetric (its midpoint is ε²·c″/2 off, the
+    misfit the linear model removes); and a table the parameter does not move stays the
+    instance's, bit for bit (so the engine still leaves such a term out of the pair)."""
+    from taichi_star.sensitivities import parse_directions, replica_batch, replica_model
+
+    params = [StarParams.preset("paper"), StarParams.preset("paper").replace(gait="A1+A3")]
+    directions = parse_directions(["joint_radius", "alpha"])
+    model, steps = replica_model(params, directions)
+    plain = build_model(replica_batch(params, directions)[0])
+    count = len(params)
+    pair = {"joint_radius": (slice(count, 2 * count), slice(2 * count, 3 * count)),
+            "alpha": (slice(3 * count, 4 * count), slice(4 * count, 5 * count))}
+    instance = model.rest_positions[:count]
+    plus, minus = (model.rest_positions[s] for s in pair["joint_radius"])
+    offset = plus - instance
+    np.testing.assert_allclose(instance - minus, offset, rtol=0,
+                               atol=1e-12 * np.abs(offset).max())
+    h = 1e-6 * params[0].joint_radius
+    moved = [build_model([p.replace(joint_radius=p.joint_radius + sign * h) for p in params])
+             for sign in (1.0, -1.0)]
+    derivative = (moved[0].rest_positions - moved[1].rest_positions) / (2 * h)
+    np.testing.assert_allclose(offset / steps[0][:, None, None], derivative, rtol=0,
+                               atol=1e-8 * np.abs(derivative).max())
+    plain_plus, plain_minus = (plain.rest_positions[s] for s in pair["joint_radius"])
+    assert np.abs(plain_plus + plain_minus - 2 * instance).max() > 1e-6 * np.abs(offset).max()
+    # α moves the jet's coefficient only: the rest shape and the bending tables stay bitwise
+    for side in pair["alpha"]:
+        np.testing.assert_array_equal(model.rest_positions[side], instance)
+        np.testing.assert_array_equal(model.coefficients["bending"]["voronoi_length"][side],
+                                      model.coefficients["bending"]["voronoi_length"][:count])
+    alpha_plus = model.coefficients["jet"]["jet_alpha"][pair["alpha"][0]]
+    np.testing.assert_allclose(alpha_plus - model.coefficients["jet"]["jet_alpha"][:count],
+                               steps[1], rtol=1e-9)
