@@ -45,31 +45,26 @@ RELATIVE_STEP = 1e-4
 """ε of a direction relative to the parameter's value. Each direction has one replica pair, at
 ±ε; its derivative is the pair's central difference, D(ε). Where the replicas' residual is
 linear in their offsets from the instance, D(ε) is exact whatever ε, and a larger ε only
-lifts the pair's offsets above the rounding of the positions. The forces that are not linear
-in the velocity (the drags |v|·v, the jet's Ṡ²) are therefore expanded, for a replica, about
-its instance's velocity to first order (`physics.assembly.Assembly.primal_instance`); the
-coefficients enter the forces linearly or as smooth functions of the parameter, whose
-curvature leaves an O(ε²) error, ~ε² relative. Measured over three cycles of the paper
-preset's five Fig. 4c gaits against Richardson differences of whole runs, at 1e-4 ten of the
-eleven parameters checked are within 2.6e-6 (docs: numerics, sensitivities); at 1e-5 the
-weakly moving ones lose to rounding (E, the cylinder's drag: 4e-5), at 1e-3 the tip radius
-to truncation (1e-5). Before the expansion (the replicas used their own |v|·v, taking only
-their instance's side of the kinks) the error was O(ε²)·|Ṡ|²/|v|², large near zero velocity,
-and no single ε served every parameter over long runs. The geometric joint radius keeps
-another ε (FIELD_RELATIVE_STEPS)."""
-FIELD_RELATIVE_STEPS = {"drag_parallel": 1e-2, "joint_radius": 1e-6}
+lifts the pair's offsets above the rounding of the positions. So the forces that are not
+linear in the velocity (the drags |v|·v, the jet's Ṡ²) are, for a replica, expanded about its
+instance's velocity to first order (`physics.assembly.Assembly.primal_instance`), and a
+replica's tables lie on its instance's tangent (`replica_model`); what is left is the
+forces' own curvature in their coefficients (~ε² relative) and in the states' offsets through
+quadratic maps (the jet's areas). Measured over three cycles of the paper preset's five
+Fig. 4c gaits against extrapolated differences of whole runs, at 1e-4 all eleven parameters
+checked are within 1.1e-5 (docs: numerics, sensitivities); at 1e-5 the weakly moving ones lose
+to rounding (the cylinder's drag 3.5e-5), at 1e-3 the tip radius to truncation (1e-5). Before
+the expansion (the replicas used their own |v|·v, taking only their instance's side of the
+kinks) the error was O(ε²) with a constant that grows as the velocity nears zero, and no single
+ε served every parameter over long runs."""
+FIELD_RELATIVE_STEPS = {"drag_parallel": 1e-2}
 """Fields whose ε departs from RELATIVE_STEP. C∥ barely moves the robot (its derivative is
 ~1e-2 mm of displacement per unit over 0.3 s from rest, α's ~1): at 1e-5 its replicas'
 offsets were ~1e-12 m, 1e5 roundings of a position, and its derivative 6e-5 to 1.6e-3 off
 (0.3 s of A1, A1+A2 and A1+A3 at C∥ = 0.01 and 0.1, implicit Euler, fixed 1-ms steps,
 against Richardson differences at h = 1e-2 and 3e-2 of C∥, which agree with each other to
 3e-7); at 1e-2 all six are within 1e-6. C∥ multiplies its own force, so the residual is
-linear in it and the larger ε adds no truncation. The joint radius moves the rest geometry
-(an arc's rest curvature at a joint has an elasticity of ~90 to it), and its pairs' residuals
-difference large elastic forces that nearly cancel against the offsets of the positions, with
-the rest lengths entering them non-linearly: an O(ε²) error with a large constant (its
-3-cycle derivative 0.6 off at 1e-4, 5e-3 at 1e-5, 4.3e-5 at 1e-6; docs: numerics,
-sensitivities)."""
+linear in it and the larger ε adds no truncation (docs: numerics, sensitivities)."""
 REPLICAS_PER_DIRECTION = 2
 """Replica instances each direction adds per instance: the pair at ±ε."""
 ZERO_VALUE_SCALE = 0.01
