@@ -3,19 +3,23 @@
 `simulate(params, T, sensitivities=("alpha", "drag_perpendicular"))` gives, for every instance,
 the derivative of each output with respect to each named StarParams field: the derivative of the
 discrete scheme by the implicit function theorem at every step, with the partial derivatives of
-the residual taken as central differences (measured against finite differences of whole runs:
-1e-7 to 4e-6 relative where the parameter moves the robot well; docs/numerics.md).
+the residual taken as central differences of a residual made linear in the replicas' offsets
+(measured against extrapolated differences of whole runs: within 1.1e-5 over three cycles,
+mostly ~1e-6; docs/numerics.md).
 
 How: for each direction (a field, or one number of a per-actuator field) every instance b gets
-replicas in the same engine, built at its parameters moved by ±ε (`replica_batch`).
+a pair of replicas in the same engine, at its parameters moved by ±ε, whose tables (rest
+shape, masses, coefficients) lie on b's tangent (`replica_model`).
 The replicas are never solved. After each accepted step of b, the engine moves them to b's new
 state ± ε times the state's exact derivative, from the implicit function theorem on b's step
 (`engine.BatchEngine.tangent_step`): the step's Jacobian at the converged state, factored once,
 times the derivative equals minus the derivative of the residual with respect to the parameter
 and to the step's start state. The replicas' own residuals, assembled at b's converged state
 from their own start states and coefficients, give that right-hand side as a central
-difference, and every term and extension is covered without a line of derivative code of its
-own. An output of the run is a smooth function of the states, so its derivative is the central
+difference, and every term and extension is covered without derivative code of its own; a
+term whose force is not linear in the velocity expands a replica's force about b's velocity
+with the velocity derivative it computes for Newton anyway (`physics.assembly.Assembly.
+primal_instance`), so that the pair's difference has no truncation from it. An output of the run is a smooth function of the states, so its derivative is the central
 difference of the replicas' outputs, which lie on the tangent line.
 
 The step sequence is that of b: with adaptive steps the accepted steps are frozen, as are the
@@ -52,11 +56,12 @@ replica's tables lie on its instance's tangent (`replica_model`); what is left i
 forces' own curvature in their coefficients (~ε² relative) and in the states' offsets through
 quadratic maps (the jet's areas). Measured over three cycles of the paper preset's five
 Fig. 4c gaits against extrapolated differences of whole runs, at 1e-4 all eleven parameters
-checked are within 1.1e-5 (docs: numerics, sensitivities); at 1e-5 the weakly moving ones lose
-to rounding (the cylinder's drag 3.5e-5), at 1e-3 the tip radius to truncation (1e-5). Before
-the expansion (the replicas used their own |v|·v, taking only their instance's side of the
-kinks) the error was O(ε²) with a constant that grows as the velocity nears zero, and no single
-ε served every parameter over long runs."""
+checked are within 1.0e-5 (the joint radius; the others within 4.4e-6; docs: numerics,
+sensitivities); at 1e-5 the weakly moving ones lose to rounding (the cylinder's drag 3.6e-5,
+the limbs' stiffness ratio 3.2e-5), at 1e-3 the radii to truncation (joint 1.6e-4, tip
+1.0e-5). Before the expansion (the replicas used their own |v|·v, taking only their
+instance's side of the kinks) the error was O(ε²) with a constant that grows as the velocity
+nears zero, and no single ε served every parameter over long runs."""
 FIELD_RELATIVE_STEPS = {"drag_parallel": 1e-2}
 """Fields whose ε departs from RELATIVE_STEP. C∥ barely moves the robot (its derivative is
 ~1e-2 mm of displacement per unit over 0.3 s from rest, α's ~1): at 1e-5 its replicas'
