@@ -236,12 +236,15 @@ class Jet(Term):
     def assemble(self, b, rate_gain, jacobian):
         positions = ti.static(self.assembly.positions)
         variants = ti.static("variants" in self.configuration_switches)
+        primal = self.assembly.primal_instance(b)
         inflow = 0.0
         direction_kind = HUB_DIRECTION
         if ti.static(variants):
-            inflow = self.jet_inflow[b]
+            # a replica of an instance without inflow has none either: the inflow force is
+            # α_in²-flat at 0, and a pair at ±ε would switch it on on one side only
+            if self.jet_inflow[primal] != 0.0:
+                inflow = self.jet_inflow[b]
             direction_kind = self.jet_direction[b]
-        primal = self.assembly.primal_instance(b)
         for k in range(N_ACTUATORS):
             area_rate = self.area_rate(b, k, rate_gain)
             # a replica: the force's Taylor expansion in Ṡ about its instance's Ṡ

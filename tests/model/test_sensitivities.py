@@ -91,6 +91,19 @@ def test_a_derivative_does_not_depend_on_the_replicas_step(taichi_cpu, monkeypat
     np.testing.assert_allclose(derivatives[1], derivatives[0], rtol=tolerance)
 
 
+def test_the_inflow_at_zero_has_a_zero_derivative(taichi_cpu):
+    """The inflow force is α_in²-flat at α_in = 0 (the paper's model): its derivative there is
+    0, exactly, though a replica pair at ±ε would draw water in on its + side only (its
+    − side has no inflow at all) unless the replicas follow their instance, which has none."""
+    run = simulate(BATCH, DURATION_S, SolverConfig(), sensitivities=("jet_inflow",))
+    for output in SUMMARY_OUTPUTS:  # the steady speeds are NaN over so short a run
+        values = run.sensitivity(output, "jet_inflow")
+        assert not np.any(values[np.isfinite(values)]), output
+    assert np.all(run.sensitivity("displacement_x_mm", "jet_inflow") == 0.0)
+    # a pulse and a coast do move the robot: the zero is not for want of motion
+    assert np.all(np.abs(run.summary["displacement_x_mm"]) > 1e-3)
+
+
 def test_the_taylor_step_is_a_hundred_differences_steps_at_most_a_tenth_of_the_value():
     assert taylor_step(1e-5, 1.0) == pytest.approx(1e-3, rel=1e-15)
     assert taylor_step(1e-3, 1.0) == pytest.approx(0.1, rel=1e-15)  # both rules: equal
