@@ -140,8 +140,8 @@ def test_f32_refuses_robots_it_cannot_resolve_before_any_compute(monkeypatch):
     shortest edge (12× off in f32 when run: refused, naming the fields)."""
     def forbidden(*args, **kwargs):
         raise AssertionError("an engine was built for a refused batch")
-    monkeypatch.setattr("taichi_star.simulation.build_model", forbidden)
-    monkeypatch.setattr("taichi_star.simulator.build_model", forbidden)
+    # simulate and Simulator both build their model through sensitivities.replica_model
+    monkeypatch.setattr("taichi_star.sensitivities.build_model", forbidden)
     f32 = ts.SolverConfig(precision="f32", newton_tol=1e-6)
     large = ts.StarParams(gait="A1+A2", joint_radius=1e-3, tip_radius=2.0)
     with pytest.raises(ValueError, match=r"newton_tol must be >= 3.8e-06 m with precision 'f32' "
@@ -216,7 +216,7 @@ def test_runs_beyond_the_step_counter_are_refused_before_any_compute(monkeypatch
     there: `test_an_adaptive_robot_stops_at_the_step_limit_or_a_step_that_cannot_advance`)."""
     def accepted(*args, **kwargs):
         raise _Accepted
-    monkeypatch.setattr("taichi_star.simulation.build_model", accepted)
+    monkeypatch.setattr("taichi_star.sensitivities.build_model", accepted)
     limit = ts.MAX_STEPS_PER_INSTANCE
     assert limit == np.iinfo(np.int32).max
     dt = 2.0 ** -10
