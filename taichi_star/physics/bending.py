@@ -172,19 +172,53 @@ class Bending(StrainTerm):
         return value
 
     @ti.func
+    def profile_rate(self, b, tau):
+        """dK̄/dτ (1/(m·s)) of `profile_curvature` at τ (s), on the same branch."""
+        rate = 0.0
+        if self.closure_rate[b] == 0.0 or tau < self.period[b]:
+            c1, c2, c3 = self.profile[b, 0], self.profile[b, 1], self.profile[b, 2]
+            if tau >= self.profile[b, 8]:
+                c1, c2, c3 = self.profile[b, 4], self.profile[b, 5], self.profile[b, 6]
+            decay = ti.exp(-c2 * (tau - c3))
+            rate = c1 * c2 * decay / ((1.0 + decay) * (1.0 + decay)) + self.closure_rate[b]
+        return rate
+
+    @ti.func
+    def since_firing(self, b, m, since):
+        """τ (s) of actuator m of instance b's profile, `since` s after its firing: its delay
+        later, and 0 until then. Returns (τ, dτ/d(delay): −1, or 0 while it waits)."""
+        delay = self.actuator_delay[b, m]
+        tau = since
+        slope = -1.0
+        if delay != 0.0:
+            tau = ti.max(since - delay, 0.0)
+            if since - delay <= 0.0:
+                slope = 0.0
+        return tau, slope
+
+    @ti.func
     def actuator_curvature(self, b, m, time):
         """K̄ (1/m) of actuator m of instance b at `time` (s) by the firing that applies then,
-        with the actuator's delay and gain, or NOT_FIRED when it has never fired by then."""
+        with the actuator's delay and gain, or NOT_FIRED when it has never fired by then. A
+        replica (`Assembly.primal_instance`) takes the profile's first-order expansion in its
+        delay about its instance's: the profile is steep (a heating time of ~16 ms) and jumps
+        at its switch, which a replica pair at ±ε would straddle for the steps that end within
+        ε of it."""
         fired = self.assembly.fire_time[b, m]
         if time < fired:
             fired = self.assembly.previous_fire_time[b, m]
         value = NOT_FIRED
         if fired >= 0.0:
             since = time - fired
-            delay = self.actuator_delay[b, m]
-            if delay != 0.0:
-                since = ti.max(since - delay, 0.0)
-            value = self.profile_curvature(b, since)
+            tau, _ = self.since_firing(b, m, since)
+            primal = self.assembly.primal_instance(b)
+            if primal != b:
+                instance_tau, slope = self.since_firing(primal, m, since)
+                tau = instance_tau
+                value = self.profile_curvature(b, tau) + self.profile_rate(b, tau) * slope * (
+                    self.actuator_delay[b, m] - self.actuator_delay[primal, m])
+            else:
+                value = self.profile_curvature(b, tau)
             gain = self.actuator_gain[b, m]
             if gain != 1.0:
                 value = self.profile_rest[b] + gain * (value - self.profile_rest[b])

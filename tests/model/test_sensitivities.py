@@ -91,6 +91,25 @@ def test_a_derivative_does_not_depend_on_the_replicas_step(taichi_cpu, monkeypat
     np.testing.assert_allclose(derivatives[1], derivatives[0], rtol=tolerance)
 
 
+def test_a_delays_derivative_does_not_depend_on_the_replicas_step(taichi_cpu, monkeypatch):
+    """A replica expands the actuation profile in its delay about its instance's
+    (`Bending.actuator_curvature`): the profile is steep (heating over ~16 ms) and jumps by
+    0.0064 1/m at its switch, and a pair at ±ε straddles that switch for the steps that end
+    within ε of it. With delays of 50.5 ms (the switch, 0.2135 s after the firing, off the 1-ms
+    grid), over 0.3 s, ε = 1e-3 and 1e-2 of the delay give the same derivatives to 3e-8
+    (measured; the expansion is linear in the delay's offset, what is left is rounding); without
+    it they were 4.7e-4 apart. 1e-7: three times the measured difference."""
+    delays = (0.0505, 0.0505, 0.0505, 0.0, 0.0, 0.0, 0.0, 0.0)
+    batch = [p.replace(actuator_delays=delays) for p in BATCH]
+    labels = ("actuator_delays[0]", "actuator_delays[1]")
+    derivatives = []
+    for step in (1e-3, 1e-2):
+        monkeypatch.setitem(sensitivities.FIELD_RELATIVE_STEPS, "actuator_delays", step)
+        run = simulate(batch, 0.3, SolverConfig(), sensitivities=labels)
+        derivatives.append([run.sensitivity("displacement_x_mm", label) for label in labels])
+    np.testing.assert_allclose(derivatives[1], derivatives[0], rtol=1e-7)
+
+
 def test_the_inflow_at_zero_has_a_zero_derivative(taichi_cpu):
     """The inflow force is α_in²-flat at α_in = 0 (the paper's model): its derivative there is
     0, exactly, though a replica pair at ±ε would draw water in on its + side only (its
