@@ -51,8 +51,9 @@ RELATIVE_STEP = 1e-4
 linear in their offsets from the instance, D(ε) is exact whatever ε, and a larger ε only
 lifts the pair's offsets above the rounding of the positions. So the forces that are not
 linear in the velocity (the drags |v|·v, the jet's Ṡ²) are, for a replica, expanded about its
-instance's velocity to first order (`physics.assembly.Assembly.primal_instance`), and a
-replica's tables lie on its instance's tangent (`replica_model`); what is left is the
+instance's velocity to first order (`physics.assembly.Assembly.primal_instance`), the
+actuation profile in a delay about its instance's time since the firing, and a replica's
+tables lie on its instance's tangent (`replica_model`); what is left is the
 forces' own curvature in their coefficients (~ε² relative) and in the states' offsets through
 quadratic maps (the jet's areas). Measured over three cycles of the paper preset's five
 Fig. 4c gaits against extrapolated differences of whole runs, at 1e-4 all eleven parameters
