@@ -4,7 +4,7 @@
 the derivative of each output with respect to each named StarParams field: the derivative of the
 discrete scheme by the implicit function theorem at every step, with the partial derivatives of
 the residual taken as central differences of a residual made linear in the replicas' offsets
-(measured against extrapolated differences of whole runs: within 1.1e-5 over three cycles,
+(measured against extrapolated differences of whole runs: within 1e-5 over three cycles,
 mostly ~1e-6; docs/numerics.md).
 
 How: for each direction (a field, or one number of a per-actuator field) every instance b gets
@@ -19,8 +19,9 @@ from their own start states and coefficients, give that right-hand side as a cen
 difference, and every term and extension is covered without derivative code of its own; a
 term whose force is not linear in the velocity expands a replica's force about b's velocity
 with the velocity derivative it computes for Newton anyway (`physics.assembly.Assembly.
-primal_instance`), so that the pair's difference has no truncation from it. An output of the run is a smooth function of the states, so its derivative is the central
-difference of the replicas' outputs, which lie on the tangent line.
+primal_instance`), so that the pair's difference has no truncation from it. An output of the
+run is a smooth function of the states, so its derivative is the central difference of the
+replicas' outputs, which lie on the tangent line.
 
 The step sequence is that of b: with adaptive steps the accepted steps are frozen, as are the
 firing times (events, not functions of the parameters: `period` is not differentiable).

@@ -210,14 +210,13 @@ class Bending(StrainTerm):
         value = NOT_FIRED
         if fired >= 0.0:
             since = time - fired
-            tau, _ = self.since_firing(b, m, since)
             primal = self.assembly.primal_instance(b)
             if primal != b:
-                instance_tau, slope = self.since_firing(primal, m, since)
-                tau = instance_tau
+                tau, slope = self.since_firing(primal, m, since)
                 value = self.profile_curvature(b, tau) + self.profile_rate(b, tau) * slope * (
                     self.actuator_delay[b, m] - self.actuator_delay[primal, m])
             else:
+                tau, _ = self.since_firing(b, m, since)
                 value = self.profile_curvature(b, tau)
             gain = self.actuator_gain[b, m]
             if gain != 1.0:
