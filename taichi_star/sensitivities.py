@@ -230,16 +230,23 @@ def replica_batch(params: Sequence[StarParams], directions: Sequence[Direction],
     return batch, steps
 
 
+def pair_slices(direction: int, count: int) -> Tuple[slice, slice]:
+    """Where the +ε and the −ε replicas of direction number `direction` lie in a
+    `replica_batch` batch of `count` instances."""
+    first = (1 + REPLICAS_PER_DIRECTION * direction) * count
+    return slice(first, first + count), slice(first + count, first + 2 * count)
+
+
 def replica_model(params: Sequence[StarParams], directions: Sequence[Direction],
                   commanded: bool = False):
     """(the `model.BatchModel` of `replica_batch`'s batch, steps (n_directions, B)), its
     replicas' rest shapes, masses and coefficients moved from their instance's by exactly ±ε
     times their derivatives: c ± (8·(c(ε) − c(−ε)) − (c(2ε) − c(−2ε)))/12, the fourth-order
     central difference of the host's tables (a second batch at ±2ε is built for it). A pair
-    built at p ± ε itself differs from that by the tables' curvature, ε²·c‴/6, the same sign for
-    both replicas' third-order terms: where a parameter moves the rest geometry, the elastic
-    forces of that small misfit between a replica's rest shape and its tables are large, and
-    they dominated the joint radius's derivatives (docs: numerics, sensitivities)."""
+    built at p ± ε itself is off that line by the tables' curvature, ε²·c″/2, the same for both
+    replicas: where a parameter moves the rest geometry, the elastic forces of that small misfit
+    between a replica's rest shape and its tables are large, and they dominated the joint
+    radius's derivatives (docs: numerics, sensitivities)."""
     batch, steps = replica_batch(params, directions)
     model = build_model(batch, commanded)
     if not directions:
@@ -252,8 +259,7 @@ def replica_model(params: Sequence[StarParams], directions: Sequence[Direction],
             return near
         moved = near.copy()
         for j in range(len(directions)):
-            plus = slice((1 + 2 * j) * count, (2 + 2 * j) * count)
-            minus = slice((2 + 2 * j) * count, (3 + 2 * j) * count)
+            plus, minus = pair_slices(j, count)
             offset = (8.0 * (near[plus] - near[minus]) - (far[plus] - far[minus])) / 12.0
             moved[plus] = near[:count] + offset
             moved[minus] = near[:count] - offset
@@ -281,8 +287,7 @@ def derivatives(values: np.ndarray, directions: Sequence[Direction], steps: np.n
     count = len(values) // (1 + REPLICAS_PER_DIRECTION * len(directions))
     result = {}
     for j, direction in enumerate(directions):
-        first = (1 + REPLICAS_PER_DIRECTION * j) * count
-        plus, minus = values[first:first + count], values[first + count:first + 2 * count]
+        plus, minus = (values[side] for side in pair_slices(j, count))
         width = (2.0 * steps[j]).reshape((count,) + (1,) * (values.ndim - 1))
         result[direction.label] = _difference(plus, minus, output) / width
     return result
