@@ -382,13 +382,17 @@ def _curve_derivative(path: CentroidPath, derivative_xy, cycles, samples) -> np.
     return distance_derivative(delta, derivative)
 
 
-def trial_gradient(simulated: SimulatedRun, derivative_xy: np.ndarray, trial: Trial,
-                   cycles=TRAINING_CYCLES, samples: int = SAMPLES_PER_CYCLE,
-                   phase_s: Optional[float] = None) -> Tuple[TrialFit, np.ndarray]:
-    """`trial_fit` of one simulated trial and the gradient (P,) of its objective with respect
-    to the P parameters whose record derivatives are derivative_xy (n_records, 2, P): column 0
-    d x_mm/dθ, column 1 d y_mm/dθ (module docstring, "Gradient"). With `phase_s` given the
-    phase is held (its derivative is 0)."""
+def trial_residuals(simulated: SimulatedRun, derivative_xy: np.ndarray, trial: Trial,
+                    cycles=TRAINING_CYCLES, samples: int = SAMPLES_PER_CYCLE,
+                    phase_s: Optional[float] = None
+                    ) -> Tuple[TrialFit, np.ndarray, np.ndarray]:
+    """`trial_fit` of one simulated trial and its objective as a sum of squares: residuals
+    (R,) with Σ r² = the trial's objective, R = cycles × samples + 1 (the curve residuals
+    (d_sim − d_meas)/(σ·√(cycles·samples)) cycle by cycle, then ρ), and their Jacobian (R, P)
+    with respect to the P parameters whose record derivatives are derivative_xy
+    (n_records, 2, P): column 0 d x_mm/dθ, column 1 d y_mm/dθ (module docstring, "Gradient";
+    ρ's row is 0 where −sΔ ≤ 0). With `phase_s` given the phase is held (its derivative
+    is 0). The form a Gauss-Newton or trust-region least-squares method takes."""
     derivative_xy = np.asarray(derivative_xy, dtype=np.float64)
     if derivative_xy.ndim != 3 or derivative_xy.shape[:2] != (len(simulated.path.t_s), 2):
         raise ValueError(f"derivative_xy must have shape ({len(simulated.path.t_s)}, 2, P), got "
@@ -399,15 +403,49 @@ def trial_gradient(simulated: SimulatedRun, derivative_xy: np.ndarray, trial: Tr
     sim_curves = cycle_curves(path, 0.0, (first, last), samples)
     curve_derivative = _curve_derivative(path, derivative_xy, (first, last), samples)
     measured = cycle_curves(trial.path, fit.phase_s, (first, last), samples)
-    sigma = fit.sigma_mm
-    gradient = 2.0 * np.einsum("km,kmp->p", sim_curves - measured, curve_derivative) / (
-        sim_curves.size * sigma ** 2)
+    scale = 1.0 / (fit.sigma_mm * math.sqrt(sim_curves.size))
     ends = path_derivative(path, derivative_xy, np.array([first - 1, last]) * path.period_s)
     net_derivative = np.einsum("c,cp->p", forward, ends[1] - ends[0])
-    if -trial.paper_sign * fit.sim_net_signed_mm > 0:
-        gradient = gradient + 2.0 * fit.direction_residual * (-trial.paper_sign) * (
-            net_derivative / sigma)
-    return fit, gradient
+    wrong_way = -trial.paper_sign * fit.sim_net_signed_mm > 0
+    direction_row = (-trial.paper_sign * net_derivative / fit.sigma_mm if wrong_way
+                     else np.zeros_like(net_derivative))
+    residuals = np.append(((sim_curves - measured) * scale).ravel(), fit.direction_residual)
+    jacobian = np.vstack([(curve_derivative * scale).reshape(sim_curves.size, -1),
+                          direction_row[None, :]])
+    return fit, residuals, jacobian
+
+
+def trial_gradient(simulated: SimulatedRun, derivative_xy: np.ndarray, trial: Trial,
+                   cycles=TRAINING_CYCLES, samples: int = SAMPLES_PER_CYCLE,
+                   phase_s: Optional[float] = None) -> Tuple[TrialFit, np.ndarray]:
+    """`trial_fit` of one simulated trial and the gradient (P,) of its objective, 2·Jᵀr of
+    `trial_residuals` (same arguments)."""
+    fit, residuals, jacobian = trial_residuals(simulated, derivative_xy, trial, cycles, samples,
+                                               phase_s)
+    return fit, 2.0 * jacobian.T @ residuals
+
+
+def objective_residuals(simulated: Mapping[str, SimulatedRun],
+                        derivatives: Mapping[str, np.ndarray], trials: Mapping[str, Trial],
+                        cycles=TRAINING_CYCLES, samples: int = SAMPLES_PER_CYCLE,
+                        phases: Optional[Mapping[str, float]] = None
+                        ) -> Tuple[np.ndarray, np.ndarray, pd.DataFrame]:
+    """The set's objective as a sum of squares: every gait's `trial_residuals` over √(gaits),
+    stacked (Σ r² = `objective_of` of the table, the mean of the gaits' objectives), their
+    Jacobian (R, P) and the per-gait table. derivatives: gait -> (n_records, 2, P) record
+    derivatives of that gait's run (`record_derivatives`)."""
+    rows, residuals, jacobians = [], [], []
+    for gait, run in simulated.items():
+        if gait not in trials:
+            raise ValueError(f"no measured trial for gait {gait!r}; trials: {', '.join(trials)}")
+        fit, residual, jacobian = trial_residuals(run, derivatives[gait], trials[gait], cycles,
+                                                  samples, None if phases is None else phases[gait])
+        rows.append(dataclasses.asdict(fit))
+        residuals.append(residual)
+        jacobians.append(jacobian)
+    scale = 1.0 / math.sqrt(len(residuals))
+    return (np.concatenate(residuals) * scale, np.vstack(jacobians) * scale,
+            pd.DataFrame(rows, columns=TRIAL_COLUMNS))
 
 
 def objective_and_gradient(simulated: Mapping[str, SimulatedRun],
@@ -416,19 +454,11 @@ def objective_and_gradient(simulated: Mapping[str, SimulatedRun],
                            phases: Optional[Mapping[str, float]] = None
                            ) -> Tuple[float, np.ndarray, pd.DataFrame]:
     """The set's objective (`objective_of` of `trajectory_objective`), its gradient (P,) with
-    respect to the P parameters (the mean of the gaits' `trial_gradient`s: every gait's run
-    shares the parameters) and the per-gait table. derivatives: gait -> (n_records, 2, P)
-    record derivatives of that gait's run (`record_derivatives`)."""
-    rows, gradients = [], []
-    for gait, run in simulated.items():
-        if gait not in trials:
-            raise ValueError(f"no measured trial for gait {gait!r}; trials: {', '.join(trials)}")
-        fit, gradient = trial_gradient(run, derivatives[gait], trials[gait], cycles, samples,
-                                       None if phases is None else phases[gait])
-        rows.append(dataclasses.asdict(fit))
-        gradients.append(gradient)
-    table = pd.DataFrame(rows, columns=TRIAL_COLUMNS)
-    return objective_of(table), np.mean(gradients, axis=0), table
+    respect to the P parameters, 2·Jᵀr of `objective_residuals` (same arguments), and the
+    per-gait table."""
+    residuals, jacobian, table = objective_residuals(simulated, derivatives, trials, cycles,
+                                                     samples, phases)
+    return objective_of(table), 2.0 * jacobian.T @ residuals, table
 
 
 def record_derivatives(trajectory_sensitivities: pd.DataFrame, instance: int,

@@ -14,6 +14,7 @@ from taichi_star import SolverConfig, StarParams
     (["--sets", "7"], "--sets: unknown value '7'"),
     (["--starts", "0"], "--starts must be >= 1"),
     (["--lbfgs-evaluations", "0"], "--lbfgs-evaluations must be >= 1"),
+    (["--least-squares-evaluations", "-1"], "--least-squares-evaluations must be >= 0"),
     (["--cma-generations", "0"], "--cma-generations must be >= 1"),
     (["--popsize", "1"], "--popsize must be >= 2"),
     (["--train-cycles", "0:3"], "--train-cycles: expected FIRST:LAST"),
@@ -88,3 +89,40 @@ def test_the_summary_counts_the_cost_to_cma_objective_both_ways():
     assert row["gradient_cost_ratio"] == 3.5 and row["objective"] == 1.0
     assert row["validate_objective"] == 1.0  # the best point's units, validated
     assert table[table["optimiser"] == "CMA-ES"].iloc[0]["gradient_cost_ratio"] == 1.0
+
+
+def test_the_least_squares_fit_finds_a_linear_problems_minimum_and_simulates_each_point_once(
+        monkeypatch):
+    """On residuals linear in the units, r = A·u − y with the minimum u* inside the box, the
+    Gauss-Newton step is exact: the fit reaches Σ r² at u* (to the solver's tolerances) from
+    the base model's units; every point is simulated once, although scipy asks for the
+    residuals and then the Jacobian there, and each simulation counts (1 + 2·6) × gaits ×
+    window robot-seconds and `cost_ratio` runs."""
+    box = [identify.parse_range_spec(text, "--sets") for text in gradient_fit.PARAMETER_SETS["6"]]
+    base = StarParams(gait="A1+A2")
+    problem = gradient_fit.Problem(box, base, ["A1+A2"], {}, (1, 1), SolverConfig(), "cpu")
+    rng = np.random.default_rng(4)
+    matrix = rng.normal(size=(15, 6))
+    best_units = rng.uniform(0.2, 0.8, 6)
+    offset = rng.normal(scale=0.1, size=15)
+    target = matrix @ best_units + offset     # the minimum of |A u − y|² is u*, value |offset_⊥|²
+    minimum = float(np.sum((offset - matrix @ np.linalg.lstsq(matrix, offset, rcond=None)[0])
+                           ** 2))
+    points = []
+
+    def residuals_and_jacobian(units):
+        points.append(np.array(units))
+        return matrix @ units - target, matrix
+
+    monkeypatch.setattr(problem, "residuals_and_jacobian", residuals_and_jacobian)
+    recorder = gradient_fit.fit_least_squares(problem, 1, 20, 0, gradient_fit.Recorder(
+        "6", gradient_fit.LEAST_SQUARES), cost_ratio=2.5)
+    # scipy's default tolerances stop the linear problem within ~1e-8 of the minimum's value
+    assert recorder.best_objective == pytest.approx(minimum, rel=1e-6)
+    np.testing.assert_allclose(recorder.best_units, best_units + np.linalg.lstsq(
+        matrix, offset, rcond=None)[0], atol=1e-5)
+    assert len(points) == len(recorder.rows) >= 2
+    assert len({p.tobytes() for p in points}) == len(points)
+    window = base.period
+    assert recorder.robot_seconds == pytest.approx(len(points) * window * 13)
+    assert recorder.cost_equivalent == pytest.approx(len(points) * window * 2.5)

@@ -3,6 +3,8 @@ analytic cases, and the whole against central differences of the objective itsel
 synthetic paths whose parameter derivatives are known in closed form (no simulation: the
 sensitivities themselves are tested in tests/model/test_sensitivities.py)."""
 
+import dataclasses
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -148,3 +150,45 @@ def test_trial_gradient_refuses_derivatives_of_the_wrong_shape():
     run, derivative = model_path((2.5, 1.2, 0.1))
     with pytest.raises(ValueError, match="derivative_xy"):
         ident.trial_gradient(run, derivative[:-1], measured_trial(), (1, 1), 16)
+
+
+@pytest.mark.parametrize("forward_sign, cycles", [(1.0, (1, 3)), (-1.0, (1, 2))])
+def test_residuals_square_to_the_objective_and_their_jacobian_equals_central_differences(
+        forward_sign, cycles):
+    # the least-squares form: Σ r² is the objective (mean over gaits), and each residual's
+    # Jacobian row is its derivative at held phases; the backward gait makes ρ > 0, so the
+    # direction row is checked too (on its own branch: ρ stays > 0 within the step)
+    trials = {"A1+A2": measured_trial(), "A1+A3": measured_trial()}
+    theta = (2.5, 1.2, 0.1)
+    run, derivative = model_path(theta, forward_sign)
+
+    def both_gaits(run):  # the same path stands for a second gait, compared with its own trial
+        return {"A1+A2": run, "A1+A3": dataclasses.replace(run, gait="A1+A3")}
+
+    runs, derivatives = both_gaits(run), {"A1+A2": derivative, "A1+A3": derivative}
+    trials["A1+A3"] = ident.Trial("A1+A3", trials["A1+A3"].path, +1.0)
+    residuals, jacobian, table = ident.objective_residuals(runs, derivatives, trials, cycles,
+                                                           samples=16)
+    assert residuals.shape == (2 * ((cycles[1] - cycles[0] + 1) * 16 + 1),)
+    assert jacobian.shape == residuals.shape + (3,)
+    # the sum is the mean of the two gaits' objectives up to the summation's rounding
+    assert float(residuals @ residuals) == pytest.approx(ident.objective_of(table), rel=1e-13)
+    assert (table["direction_residual"] > 0).all() == (forward_sign < 0)
+    phases = dict(zip(table["gait"], table["phase_s"]))
+    step, columns = 1e-6, []
+    for p in range(3):
+        moved = []
+        for sign in (1.0, -1.0):
+            shifted = np.array(theta)
+            shifted[p] += sign * step
+            moved_run, _ = model_path(shifted, forward_sign)
+            moved.append(ident.objective_residuals(
+                both_gaits(moved_run), derivatives, trials, cycles, 16,
+                phases)[0])
+        columns.append((moved[0] - moved[1]) / (2 * step))
+    # each residual is a distance of affine paths over a fixed σ (smooth away from Δp = 0),
+    # so the central difference is exact to O(step²) ≈ 1e-12; its rounding, ~1e-16·|r|/1e-6,
+    # sets the tolerance
+    scale = np.abs(residuals).max()
+    np.testing.assert_allclose(jacobian, np.stack(columns, axis=-1), rtol=1e-7,
+                               atol=1e-8 * scale)
