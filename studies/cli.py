@@ -35,6 +35,7 @@ from taichi_star.experiment import PAPER_GAITS
 from taichi_star.extras import require
 from taichi_star.gait import Gait
 from taichi_star.output import column_unit, column_units, parquet_bytes
+from taichi_star.params import PER_ACTUATOR_FIELDS
 from taichi_star.timegrid import steps_in
 
 from . import provenance
@@ -118,7 +119,8 @@ def add_model_flags(parser: StudyParser, fixed: Sequence[str] = ()):
                              "(StarParams/SolverConfig.preset)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="change one StarParams field for every instance, e.g. --set "
-                             "alpha=1.0 (repeatable)")
+                             "alpha=1.0 (repeatable); a per-actuator field takes its eight "
+                             "values A1..A8, --set actuator_gains=1,1,0.5,1,1,1,1,1")
     parser.set_defaults(fixed_fields=tuple(fixed))
 
 
@@ -372,6 +374,9 @@ def base_params(args) -> StarParams:
     overrides = {}
     for item in args.set:
         name, values = parse_assignment(item, "--set")
+        if name in PER_ACTUATOR_FIELDS:
+            # one value is the whole tuple, A1..A8 (StarParams checks the count and range)
+            values = [tuple(parse_number(value, f"--set {name}") for value in values)]
         if len(values) != 1:
             raise StudyArgumentError(f"--set {name}: give exactly one value, got {values}")
         if name in args.fixed_fields:

@@ -108,6 +108,16 @@ def test_quick_defaults_and_presets():
     assert cli.solver(cli.parse(parser, ["--quick"])).dt == cli.QUICK_DT
     with pytest.raises(cli.StudyArgumentError, match="--set gait: set by the probe study"):
         cli.base_params(cli.parse(parser, ["--set", "gait=A1"]))
+    # a per-actuator field: its eight values A1..A8 are the one value; seven are refused, as is
+    # a value out of its range, each naming the field
+    delays = cli.base_params(cli.parse(parser, ["--set", "actuator_delays=0,0.1,0,0,0,0,0,0.5"]))
+    assert delays.actuator_delays == (0.0, 0.1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.5)
+    with pytest.raises(cli.StudyArgumentError, match="actuator_gains must have 8 entries"):
+        cli.base_params(cli.parse(parser, ["--set", "actuator_gains=1,1,1,1,1,1,1"]))
+    with pytest.raises(cli.StudyArgumentError, match=r"actuator_gains\[2\] \(A3\) must be"):
+        cli.base_params(cli.parse(parser, ["--set", "actuator_gains=1,1,-1,1,1,1,1,1"]))
+    with pytest.raises(cli.StudyArgumentError, match="--set actuator_gains: 'x' is not a number"):
+        cli.base_params(cli.parse(parser, ["--set", "actuator_gains=1,1,x,1,1,1,1,1"]))
 
 
 @pytest.mark.parametrize("study, argv, message", [
