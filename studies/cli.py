@@ -28,14 +28,13 @@ from typing import Dict, List, Mapping, Optional, Sequence
 import numpy as np
 import pandas as pd
 
-from taichi_star import PRESETS, SolverConfig, StarParams, check_work
+from taichi_star import PER_ACTUATOR_FIELDS, PRESETS, SolverConfig, StarParams, check_work
 from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, executor_for,
                                stored_chunk_size, write_atomic)
 from taichi_star.experiment import PAPER_GAITS
 from taichi_star.extras import require
 from taichi_star.gait import Gait
 from taichi_star.output import column_unit, column_units, parquet_bytes
-from taichi_star.params import PER_ACTUATOR_FIELDS
 from taichi_star.timegrid import steps_in
 
 from . import provenance

@@ -13,7 +13,7 @@ os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "false")
 
 from .actuation import CurvatureProfile
 from .gait import Gait, symmetry_classes
-from .params import JACOBIANS, PRESETS, STAR_RANGES, SolverConfig, StarParams
+from .params import JACOBIANS, PER_ACTUATOR_FIELDS, PRESETS, STAR_RANGES, SolverConfig, StarParams
 from .profiling import EngineProfile
 from .runtime import available_archs
 from .simulation import SimulationResult, simulate
@@ -23,4 +23,5 @@ from .simulator import Simulator, SimulatorSnapshot
 __version__ = "0.3.0"
 
 __all__ = ["simulate", "SimulationResult", "MAX_STEPS_PER_INSTANCE", "check_work", "Simulator", "SimulatorSnapshot", "available_archs", "StarParams", "STAR_RANGES", "SolverConfig", "PRESETS", "JACOBIANS",
+           "PER_ACTUATOR_FIELDS",
            "CurvatureProfile", "Gait", "symmetry_classes", "EngineProfile", "__version__"]
