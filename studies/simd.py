@@ -1,8 +1,10 @@
-"""SIMD across instances: does grouping instances into vector lanes speed up the CPU's block LU?
+"""SIMD across instances: does grouping instances into vector lanes speed up the CPU's block LU
+and the assembly?
 
     python -m studies simd [--presets paper,accurate] [--precisions f64,f32]
                            [--batch-sizes 64,512,4096] [--lanes 4,8] [--repeats 7]
-                           [--matmul-size 1024] [--out DIR] [--quick]
+                           [--matmul-size 1024] [--kernels factor_solve,bending] [--out DIR]
+                           [--quick]
 
 A micro-benchmark of the kernel that dominates a Newton iteration on the CPU: the numeric block
 LU factorisation of the Newton matrix on its fixed elimination pattern, and the forward/backward
@@ -35,14 +37,29 @@ machine). NumPy's matrix product of two n × n
 matrices (`--matmul-size`, same precision) is timed in the same rounds as the machine's
 reference rate.
 
-Writes `simd.csv`: one row per preset, precision, batch size and form: n_nodes, n_slots (2×2
+The assembly (`--kernels bending`): the bending term's gradient and Hessian, the assembly's
+arithmetic-heaviest element (`bend_element`: the engine's closed form, on the turning angle's
+half tangent), written once on components so that the same function runs on one instance's
+scalars (today's form) and on a group's lane vectors, over a chain of the preset's node count
+with a triplet on every three consecutive nodes (`bending_chain`; the robot's star has about
+as many triplets, but its own pattern), scattered into the residual and the Newton matrix's
+blocks by the same additions in every form. Its state (`bending_state`): a bent rod with
+random node offsets, the actuator's range of natural curvatures. Timed like the LU (interleaved
+rounds), checked for bitwise equality across forms and against central differences of a NumPy
+copy of the energy (`gradient_error`).
+
+Writes `simd.csv` (the LU): one row per preset, precision, batch size and form: n_nodes, n_slots (2×2
 blocks with fill-in), lanes, flops_per_instance (factor + solve), seconds (best), us_per_instance,
 gflops, matmul_gflops (NumPy, best in the same rounds), fraction_of_matmul,
 speedup_vs_instance_major, speedup_median_of_rounds, packed_ops_in_ir (packed floating-point
 arithmetic instructions in the kernel's optimised IR), vector_width_in_ir (widest packed type
 found, lanes; 0: none), max_relative_error (the solution against `numpy.linalg.solve` on the
 dense matrix of checked instances), bitwise_equal_to_instance_major (every instance's solution),
-load_average_1min (before the row's timings).
+load_average_1min (before the row's timings). `simd_assembly.csv` (the bending assembly): the
+same keys, n_triplets, seconds, us_per_instance, the two speed-ups, packed_ops_in_ir,
+vector_width_in_ir, gradient_relative_error (instance 0 against central differences, relative
+to the largest entry), bitwise_equal_to_instance_major (gradient and Hessian blocks of every
+instance), load_average_1min.
 
 --quick: the paper pattern, B = 8 and 16, f64 and f32, lanes 4, two repeats, 256 × 256 matmul.
 """
@@ -67,6 +84,9 @@ from . import cli, provenance
 
 DESCRIPTION = ("SIMD across instances: the Newton matrix's block LU in today's layout against "
                "lane-grouped forms, with the LLVM IR checked for vector instructions.")
+KERNELS = ("factor_solve", "bending")
+"""The kernels the study times: the block LU (simd.csv), the bending term's assembly
+(simd_assembly.csv)."""
 FORMS = ("instance_major", "unrolled_scalar", "lane_vector", "lane_vector_masked")
 VECTOR_FORMS = ("lane_vector", "lane_vector_masked")
 """The forms whose field elements are ti.Vectors of lanes."""
@@ -111,34 +131,62 @@ def dense_matrix(plan, blocks: np.ndarray) -> np.ndarray:
     return matrix
 
 
-class LaneSystem:
-    """The block LU of `plan` for `batch` instances in `form` (FORMS) with `lanes` instances per
-    loop iteration (1 for instance_major), in the current Taichi precision. Fields in one SNode
-    tree of their own (`destroy` frees it)."""
+class LaneFields:
+    """Per-instance fields of `batch` instances in `form` (FORMS) with `lanes` instances per loop
+    iteration (1 for instance_major), in the current Taichi precision, and the accessors that
+    read and write a group's lanes as one ti.Vector; the fields live in one SNode tree of their
+    own (`destroy` frees it)."""
 
-    def __init__(self, plan, batch: int, form: str, lanes: int):
+    def __init__(self, batch: int, form: str, lanes: int):
         if batch % lanes:
             raise ValueError(f"batch: a multiple of lanes = {lanes}, got {batch}")
-        self.plan, self.batch, self.form, self.lanes = plan, batch, form, lanes
+        self.batch, self.form, self.lanes = batch, form, lanes
         self.groups = batch // lanes
-        builder = ti.FieldsBuilder()
-        self.blocks, self.pristine_blocks = (self._field(builder, plan.n_slots, 4)
-                                             for _ in range(2))
-        self.rhs, self.pristine_rhs = (self._field(builder, plan.n_nodes, 2) for _ in range(2))
         self.active = ti.Vector.field(lanes, ti.i32)
-        builder.dense(ti.i, self.groups).place(self.active)
-        tables = {name: np.ascontiguousarray(getattr(plan, name), dtype=np.int32)
-                  for name in ("order", "pivot_slot", "neighbour_start", "neighbour_node",
-                               "lower_slot", "upper_slot", "update_start", "update_slot")}
-        self.tables = {}
-        for name, values in tables.items():
-            self.tables[name] = ti.field(ti.i32)
-            builder.dense(ti.i, max(len(values), 1)).place(self.tables[name])
-        self.tree = builder.finalize()
-        for name, values in tables.items():
-            self.tables[name].from_numpy(values if len(values) else np.zeros(1, np.int32))
-        self.active.from_numpy(np.ones((self.groups, lanes), dtype=np.int32))
-        self.factor_solve, self.restore = self._kernels()
+
+    def accessors(self):
+        """(get, put): `get(field, g, entry, component)` the lanes of group g as a ti.Vector of
+        `lanes` scalars, `put(field, g, entry, component, value)` their store (masked per lane
+        by `active` in the masked form)."""
+        lanes, form, active = self.lanes, self.form, self.active
+
+        @ti.func
+        def get(field: ti.template(), g, entry, component):
+            if ti.static(form in VECTOR_FORMS):
+                return field[g, entry, component]
+            else:
+                return ti.Vector([field[g * lanes + lane, entry, component]
+                                  for lane in ti.static(range(lanes))])
+
+        @ti.func
+        def put(field: ti.template(), g, entry, component, value):
+            if ti.static(form == "lane_vector_masked"):
+                field[g, entry, component] = ti.select(active[g] != 0, value,
+                                                       field[g, entry, component])
+            elif ti.static(form == "lane_vector"):
+                field[g, entry, component] = value
+            else:
+                for lane in ti.static(range(lanes)):
+                    field[g * lanes + lane, entry, component] = value[lane]
+
+        return get, put
+
+    def group_loop(self, body):
+        """A kernel running `body(g)` for every group, one group per task, the groups spread
+        over at least PARALLEL_LOOP_MINIMUM loop iterations as the engine spreads its
+        instances: Taichi's CPU backend runs a shorter parallel loop on one thread, which would
+        favour whichever form has more iterations."""
+        groups = self.groups
+        spread = max(1, -(-PARALLEL_LOOP_MINIMUM // groups))
+
+        @ti.kernel
+        def run():
+            ti.loop_config(block_dim=1)
+            for slot in range(groups * spread):
+                if slot % spread == 0:
+                    body(slot // spread)
+
+        return run
 
     def _field(self, builder, entries: int, components: int):
         """(batch, entries, components) scalars in this form's layout."""
@@ -156,23 +204,14 @@ class LaneSystem:
     def to_layout(self, values: np.ndarray) -> np.ndarray:
         """(batch, entries, components) values as the field's from_numpy takes them."""
         if self.form not in VECTOR_FORMS:
-            return values
+            return values.astype(self._dtype())
         grouped = values.reshape(self.groups, self.lanes, *values.shape[1:])
-        return np.ascontiguousarray(np.moveaxis(grouped, 1, -1))
+        return np.ascontiguousarray(np.moveaxis(grouped, 1, -1)).astype(self._dtype())
 
     def from_layout(self, values: np.ndarray) -> np.ndarray:
         if self.form not in VECTOR_FORMS:
             return values
         return np.moveaxis(values, -1, 1).reshape(self.batch, *values.shape[1:3])
-
-    def load(self, blocks: np.ndarray, rhs: np.ndarray):
-        """Set the matrices (batch, n_slots, 4) and right-hand sides (batch, n_nodes, 2)."""
-        self.pristine_blocks.from_numpy(self.to_layout(blocks.astype(self._dtype())))
-        self.pristine_rhs.from_numpy(self.to_layout(rhs.astype(self._dtype())))
-
-    def solution(self) -> np.ndarray:
-        """(batch, n_nodes, 2) the right-hand sides after factor_solve: the solutions."""
-        return self.from_layout(self.rhs.to_numpy())
 
     @staticmethod
     def _dtype():
@@ -181,35 +220,50 @@ class LaneSystem:
     def destroy(self):
         self.tree.destroy()
 
+
+class LaneSystem(LaneFields):
+    """The block LU of `plan` (see `LaneFields` for the layout arguments)."""
+
+    def __init__(self, plan, batch: int, form: str, lanes: int):
+        super().__init__(batch, form, lanes)
+        self.plan = plan
+        builder = ti.FieldsBuilder()
+        self.blocks, self.pristine_blocks = (self._field(builder, plan.n_slots, 4)
+                                             for _ in range(2))
+        self.rhs, self.pristine_rhs = (self._field(builder, plan.n_nodes, 2) for _ in range(2))
+        builder.dense(ti.i, self.groups).place(self.active)
+        tables = {name: np.ascontiguousarray(getattr(plan, name), dtype=np.int32)
+                  for name in ("order", "pivot_slot", "neighbour_start", "neighbour_node",
+                               "lower_slot", "upper_slot", "update_start", "update_slot")}
+        self.tables = {}
+        for name, values in tables.items():
+            self.tables[name] = ti.field(ti.i32)
+            builder.dense(ti.i, max(len(values), 1)).place(self.tables[name])
+        self.tree = builder.finalize()
+        for name, values in tables.items():
+            self.tables[name].from_numpy(values if len(values) else np.zeros(1, np.int32))
+        self.active.from_numpy(np.ones((self.groups, lanes), dtype=np.int32))
+        self.factor_solve, self.restore = self._kernels()
+
+    def load(self, blocks: np.ndarray, rhs: np.ndarray):
+        """Set the matrices (batch, n_slots, 4) and right-hand sides (batch, n_nodes, 2)."""
+        self.pristine_blocks.from_numpy(self.to_layout(blocks))
+        self.pristine_rhs.from_numpy(self.to_layout(rhs))
+
+    def solution(self) -> np.ndarray:
+        """(batch, n_nodes, 2) the right-hand sides after factor_solve: the solutions."""
+        return self.from_layout(self.rhs.to_numpy())
+
     def _kernels(self):
-        lanes, form, plan = self.lanes, self.form, self.plan
+        lanes, plan = self.lanes, self.plan
         blocks, rhs, pristine_blocks, pristine_rhs = (self.blocks, self.rhs, self.pristine_blocks,
                                                       self.pristine_rhs)
-        active = self.active
         t = self.tables
         n_nodes = plan.n_nodes
+        get, put = self.accessors()
 
         # a block of a group is a 4 × lanes matrix: its components a00, a01, a10, a11 (rows)
         # for every lane (columns); Taichi unrolls all of it into scalar code
-        @ti.func
-        def get(field: ti.template(), g, entry, component):
-            """The lanes of group g: a ti.Vector of `lanes` scalars."""
-            if ti.static(form in VECTOR_FORMS):
-                return field[g, entry, component]
-            else:
-                return ti.Vector([field[g * lanes + lane, entry, component]
-                                  for lane in ti.static(range(lanes))])
-
-        @ti.func
-        def put(field: ti.template(), g, entry, component, value):
-            if ti.static(form == "lane_vector_masked"):
-                field[g, entry, component] = ti.select(active[g] != 0, value,
-                                                       field[g, entry, component])
-            elif ti.static(form == "lane_vector"):
-                field[g, entry, component] = value
-            else:
-                for lane in ti.static(range(lanes)):
-                    field[g * lanes + lane, entry, component] = value[lane]
 
         @ti.func
         def row(block, component):
@@ -292,33 +346,188 @@ class LaneSystem:
                 put(rhs, g, node, 0, solved0)
                 put(rhs, g, node, 1, solved1)
 
-        # one group per task, and the groups spread over at least PARALLEL_LOOP_MINIMUM loop
-        # iterations as the engine spreads its instances: Taichi's CPU backend runs a shorter
-        # parallel loop on one thread, which would favour whichever form has more iterations
-        spread = max(1, -(-PARALLEL_LOOP_MINIMUM // self.groups))
-        groups = self.groups
+        @ti.func
+        def factor_solve(g):
+            factor(g)
+            solve(g)
 
-        @ti.kernel
-        def factor_solve():
-            ti.loop_config(block_dim=1)
-            for slot in range(groups * spread):
-                if slot % spread == 0:
-                    factor(slot // spread)
-                    solve(slot // spread)
+        @ti.func
+        def restore(g):
+            for entry, component in ti.ndrange(plan.n_slots, 4):
+                put(blocks, g, entry, component, get(pristine_blocks, g, entry, component))
+            for entry, component in ti.ndrange(n_nodes, 2):
+                put(rhs, g, entry, component, get(pristine_rhs, g, entry, component))
 
-        @ti.kernel
-        def restore():
-            ti.loop_config(block_dim=1)
-            for slot in range(groups * spread):
-                if slot % spread == 0:
-                    g = slot // spread
-                    for entry, component in ti.ndrange(plan.n_slots, 4):
-                        put(blocks, g, entry, component,
-                            get(pristine_blocks, g, entry, component))
-                    for entry, component in ti.ndrange(n_nodes, 2):
-                        put(rhs, g, entry, component, get(pristine_rhs, g, entry, component))
+        return self.group_loop(factor_solve), self.group_loop(restore)
 
-        return factor_solve, restore
+
+@ti.func
+def bend_element(e1x, e1y, e2x, e2y, voronoi_length, natural_curvature, stiffness):
+    """The bending energy's gradient and Hessian of one triplet in the engine's closed form
+    (`E_b = ½·B·(κ − κ⁰)²·Δl`, κ = 2·tan(φ/2)/Δl, through the edges' polar angles), written on
+    components so that every argument may be a scalar (one instance) or a ti.Vector of lanes
+    (one scalar of each of `lanes` instances): the same operations in the same order either
+    way. Edges e1 = x_j − x_i, e2 = x_k − x_j (m). Returns (g1x, g1y, g2x, g2y) and the
+    Hessian's blocks H11 (xx, xy, yy), H22 (xx, xy, yy), H12 (xx, xy, yx, yy)."""
+    squared1 = e1x * e1x + e1y * e1y
+    squared2 = e2x * e2x + e2y * e2y
+    cross = e1x * e2y - e1y * e2x
+    half_tangent = cross / (ti.sqrt(squared1) * ti.sqrt(squared2) + (e1x * e2x + e1y * e2y))
+    curvature = 2.0 * half_tangent / voronoi_length
+    dcurv = (1.0 + half_tangent * half_tangent) / voronoi_length
+    d2curv = half_tangent * dcurv
+    scale = stiffness * voronoi_length
+    excess = curvature - natural_curvature
+    energy_phi = scale * excess * dcurv
+    energy_phi_phi = scale * (dcurv * dcurv + excess * d2curv)
+    # the polar angles' gradients and Hessians
+    a1x, a1y = -e1y / squared1, e1x / squared1
+    a2x, a2y = -e2y / squared2, e2x / squared2
+    q1 = squared1 * squared1
+    q2 = squared2 * squared2
+    b1xx, b1xy = 2.0 * e1x * e1y / q1, (e1y * e1y - e1x * e1x) / q1
+    b2xx, b2xy = 2.0 * e2x * e2y / q2, (e2y * e2y - e2x * e2x) / q2
+    gradients = (-energy_phi * a1x, -energy_phi * a1y, energy_phi * a2x, energy_phi * a2y)
+    h11 = (energy_phi_phi * a1x * a1x - energy_phi * b1xx,
+           energy_phi_phi * a1x * a1y - energy_phi * b1xy,
+           energy_phi_phi * a1y * a1y + energy_phi * b1xx)
+    h22 = (energy_phi_phi * a2x * a2x + energy_phi * b2xx,
+           energy_phi_phi * a2x * a2y + energy_phi * b2xy,
+           energy_phi_phi * a2y * a2y - energy_phi * b2xx)
+    h12 = (-energy_phi_phi * a1x * a2x, -energy_phi_phi * a1x * a2y,
+           -energy_phi_phi * a1y * a2x, -energy_phi_phi * a1y * a2y)
+    return gradients, h11, h22, h12
+
+
+BEND_COUPLING = ((-1.0, 0.0), (1.0, -1.0), (0.0, 1.0))
+"""d(e1, e2)/d(node) of a triplet's nodes i, j, k (times the identity): node a's Hessian block
+with node c is Σ_pq BEND_COUPLING[a][p]·BEND_COUPLING[c][q]·H_pq."""
+
+
+def bending_chain(n_nodes: int):
+    """A chain of n_nodes with a bending triplet on every three consecutive nodes: the triplets
+    (T, 3), and the blocks of the Newton matrix they fill, slot[(a, c)] for |a − c| ≤ 2
+    (row-major), with each triplet's nine slots (T, 9) in the order (i, j, k) × (i, j, k)."""
+    triplets = np.stack([np.arange(n_nodes - 2) + offset for offset in range(3)], axis=1)
+    slot = {}
+    for a in range(n_nodes):
+        for c in range(max(0, a - 2), min(n_nodes, a + 3)):
+            slot[a, c] = len(slot)
+    triplet_slots = np.array([[slot[a, c] for a in t for c in t] for t in triplets])
+    return triplets.astype(np.int32), slot, triplet_slots.astype(np.int32)
+
+
+class LaneBending(LaneFields):
+    """The bending term's assembly, gradient into `residual` (n_nodes, 2) and Hessian into
+    `blocks` (n_slots, 4), over a `bending_chain` (see `LaneFields` for the layout arguments):
+    per triplet `bend_element`, on scalars of one instance in the instance-major form and on
+    lane vectors in the others, scattered by the same additions in the same order."""
+
+    def __init__(self, n_nodes: int, batch: int, form: str, lanes: int):
+        super().__init__(batch, form, lanes)
+        self.triplets, self.slot, triplet_slots = bending_chain(n_nodes)
+        self.n_nodes, self.n_triplets = n_nodes, len(self.triplets)
+        builder = ti.FieldsBuilder()
+        self.positions = self._field(builder, n_nodes, 2)
+        self.element = self._field(builder, self.n_triplets, 3)  # Δl, κ⁰, B
+        self.residual = self._field(builder, n_nodes, 2)
+        self.blocks = self._field(builder, len(self.slot), 4)
+        builder.dense(ti.i, self.groups).place(self.active)
+        self.triplet_nodes = ti.field(ti.i32)
+        self.triplet_slots = ti.field(ti.i32)
+        builder.dense(ti.ij, (self.n_triplets, 3)).place(self.triplet_nodes)
+        builder.dense(ti.ij, (self.n_triplets, 9)).place(self.triplet_slots)
+        self.tree = builder.finalize()
+        self.triplet_nodes.from_numpy(self.triplets)
+        self.triplet_slots.from_numpy(triplet_slots)
+        self.active.from_numpy(np.ones((self.groups, lanes), dtype=np.int32))
+        self.assemble = self._kernel()
+
+    def load(self, positions: np.ndarray, element: np.ndarray):
+        """Node positions (batch, n_nodes, 2) m and per triplet (batch, T, 3) its Voronoi length
+        Δl (m), natural curvature κ⁰ (1/m) and stiffness B (N·m²)."""
+        self.positions.from_numpy(self.to_layout(positions))
+        self.element.from_numpy(self.to_layout(element))
+
+    def gradient(self) -> np.ndarray:
+        """(batch, n_nodes, 2) the assembled gradient, N."""
+        return self.from_layout(self.residual.to_numpy())
+
+    def hessian_blocks(self) -> np.ndarray:
+        """(batch, n_slots, 4) the assembled Hessian blocks, N/m."""
+        return self.from_layout(self.blocks.to_numpy())
+
+    def _kernel(self):
+        positions, element, residual, blocks = (self.positions, self.element, self.residual,
+                                                self.blocks)
+        nodes, slots = self.triplet_nodes, self.triplet_slots
+        n_nodes, n_slots, n_triplets, lanes = (self.n_nodes, len(self.slot), self.n_triplets,
+                                               self.lanes)
+        get, put = self.accessors()
+        # today's engine: one instance per iteration on plain scalars
+        scalar = self.form == "instance_major"
+
+        @ti.func
+        def read(field: ti.template(), g, entry, component):
+            """One instance's scalar (instance-major) or a group's lanes."""
+            if ti.static(scalar):
+                return field[g, entry, component]
+            else:
+                return get(field, g, entry, component)
+
+        @ti.func
+        def zero():
+            if ti.static(scalar):
+                return 0.0
+            else:
+                return ti.Vector([0.0] * lanes)
+
+        @ti.func
+        def store(field: ti.template(), g, entry, component, value):
+            if ti.static(scalar):
+                field[g, entry, component] = value
+            else:
+                put(field, g, entry, component, value)
+
+        @ti.func
+        def add(field: ti.template(), g, entry, component, value):
+            store(field, g, entry, component, read(field, g, entry, component) + value)
+
+        @ti.func
+        def assemble(g):
+            for n, c in ti.ndrange(n_nodes, 2):
+                store(residual, g, n, c, zero())
+            for a, c in ti.ndrange(n_slots, 4):
+                store(blocks, g, a, c, zero())
+            for t in range(n_triplets):
+                i, j, k = nodes[t, 0], nodes[t, 1], nodes[t, 2]
+                gradients, h11, h22, h12 = bend_element(
+                    read(positions, g, j, 0) - read(positions, g, i, 0),
+                    read(positions, g, j, 1) - read(positions, g, i, 1),
+                    read(positions, g, k, 0) - read(positions, g, j, 0),
+                    read(positions, g, k, 1) - read(positions, g, j, 1),
+                    read(element, g, t, 0), read(element, g, t, 1), read(element, g, t, 2))
+                # node a's gradient Σ_p coupling[a][p]·g_p, and the 3 × 3 node blocks
+                hessian = ((h11[0], h11[1], h11[1], h11[2]), (h12[0], h12[1], h12[2], h12[3]),
+                           (h12[0], h12[2], h12[1], h12[3]), (h22[0], h22[1], h22[1], h22[2]))
+                for a in ti.static(range(3)):
+                    node = nodes[t, a]
+                    for c in ti.static(range(2)):
+                        value = zero()
+                        for p in ti.static(range(2)):
+                            if ti.static(BEND_COUPLING[a][p] != 0.0):
+                                value += BEND_COUPLING[a][p] * gradients[2 * p + c]
+                        add(residual, g, node, c, value)
+                for a, b in ti.static(ti.ndrange(3, 3)):
+                    for c in ti.static(range(4)):
+                        value = zero()
+                        for p, q in ti.static(ti.ndrange(2, 2)):
+                            weight = ti.static(BEND_COUPLING[a][p] * BEND_COUPLING[b][q])
+                            if ti.static(weight != 0.0):
+                                value += weight * hessian[2 * p + q][c]
+                        add(blocks, g, slots[t, 3 * a + b], c, value)
+
+        return self.group_loop(assemble)
 
 
 def packed_ops(ir_folder: Path) -> dict[str, int]:
@@ -442,6 +651,102 @@ def measure(plans: dict, precision: str, batch_sizes: list[int], lanes_list: lis
     return rows
 
 
+def bend_energy(positions: np.ndarray, element: np.ndarray, triplets: np.ndarray) -> float:
+    """NumPy: the chain's bending energy Σ ½·B·(κ − κ⁰)²·Δl (J/m) of one instance, positions
+    (n_nodes, 2) m, element (T, 3) = (Δl, κ⁰, B) per triplet (`LaneBending.load`)."""
+    e1 = positions[triplets[:, 1]] - positions[triplets[:, 0]]
+    e2 = positions[triplets[:, 2]] - positions[triplets[:, 1]]
+    cross = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    half_tangent = cross / (np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
+                            + (e1 * e2).sum(axis=1))
+    length, natural, stiffness = element.T
+    return float(0.5 * (stiffness * (2.0 * half_tangent / length - natural) ** 2 * length).sum())
+
+
+def bending_state(n_nodes: int, count: int, seed: int):
+    """(positions (count, n_nodes, 2), element (count, n_nodes − 2, 3)) of `count` chains: a
+    10-cm rod of n_nodes bent in a wave of ±1 cm, every node moved by N(0, 0.1 mm), and per
+    triplet its Voronoi length, a natural curvature uniform in ±50 1/m (the actuator's range)
+    and the paper's arc stiffness B = E·r0³/12 (E = 5 MPa, r0 = 3.4 mm)."""
+    rng = np.random.default_rng(seed)
+    arc = np.linspace(0.0, 0.1, n_nodes)
+    rod = np.stack([arc, 0.01 * np.sin(40.0 * arc)], axis=-1)
+    positions = rod[None] + 1e-4 * rng.standard_normal((count, n_nodes, 2))
+    element = np.empty((count, n_nodes - 2, 3))
+    element[..., 0] = 0.1 / (n_nodes - 1)
+    element[..., 1] = rng.uniform(-50.0, 50.0, (count, n_nodes - 2))
+    element[..., 2] = 5e6 * 3.4e-3 ** 3 / 12.0
+    return positions, element
+
+
+def gradient_error(system: "LaneBending", positions: np.ndarray, element: np.ndarray) -> float:
+    """The largest error of instance 0's assembled gradient against central differences of
+    `bend_energy` (f64, step 1e-8 m: truncation ~(1e-8/0.5e-3)² of the gradient, rounding
+    ~1e-16·E/1e-8), relative to the gradient's largest entry."""
+    step, reference = 1e-8, np.zeros_like(positions[0])
+    for node, component in np.ndindex(*positions[0].shape):
+        moved = [positions[0].copy(), positions[0].copy()]
+        moved[0][node, component] += step
+        moved[1][node, component] -= step
+        reference[node, component] = (bend_energy(moved[0], element[0], system.triplets)
+                                      - bend_energy(moved[1], element[0], system.triplets)
+                                      ) / (2 * step)
+    return float(np.abs(system.gradient()[0] - reference).max() / np.abs(reference).max())
+
+
+def measure_bending(plans: dict, precision: str, batch_sizes: list[int], lanes_list: list[int],
+                    repeats: int, ir_folder: Path) -> list[dict]:
+    """Rows of simd_assembly.csv for one precision (module docstring)."""
+    init_taichi(precision, ir_folder)
+    rows = []
+    for preset, plan in plans.items():
+        for batch in batch_sizes:
+            distinct = bending_state(plan.n_nodes, min(batch, DISTINCT_MATRICES), seed=batch)
+            repeat = -(-batch // len(distinct[0]))
+            positions, element = (np.tile(values, (repeat, 1, 1))[:batch] for values in distinct)
+            systems, facts = {}, {}
+            for form, lanes in forms_of(lanes_list):
+                system = LaneBending(plan.n_nodes, batch, form, lanes)
+                system.load(positions, element)
+                packed_ops(ir_folder)
+                system.assemble()
+                facts[form, lanes] = packed_ops(ir_folder)
+                systems[form, lanes] = system
+            load = os.getloadavg()[0]
+            times = {key: [] for key in systems}
+            for _ in range(repeats):
+                for key, system in systems.items():
+                    ti.sync()
+                    start = time.perf_counter()
+                    system.assemble()
+                    ti.sync()
+                    times[key].append(time.perf_counter() - start)
+            reference = systems["instance_major", 1]
+            for (form, lanes), system in systems.items():
+                seconds = min(times[form, lanes])
+                round_ratios = np.array(times["instance_major", 1]) / np.array(times[form, lanes])
+                rows.append({
+                    "preset": preset, "precision": precision, "batch_size": batch, "form": form,
+                    "lanes": lanes, "n_nodes": plan.n_nodes, "n_triplets": plan.n_nodes - 2,
+                    "seconds": seconds, "us_per_instance": seconds * 1e6 / batch,
+                    "speedup_vs_instance_major": min(times["instance_major", 1]) / seconds,
+                    "speedup_median_of_rounds": float(np.median(round_ratios)),
+                    "packed_ops_in_ir": facts[form, lanes]["count"],
+                    "vector_width_in_ir": facts[form, lanes]["width"],
+                    "gradient_relative_error": gradient_error(system, positions, element),
+                    "bitwise_equal_to_instance_major": bool(
+                        np.array_equal(system.gradient(), reference.gradient())
+                        and np.array_equal(system.hessian_blocks(), reference.hessian_blocks())),
+                    "load_average_1min": load})
+                print(f"bending {preset} {precision} B={batch:>5} {form:>18} x{lanes}: "
+                      f"{rows[-1]['us_per_instance']:8.2f} us/instance "
+                      f"({rows[-1]['speedup_median_of_rounds']:.2f}x), packed ops "
+                      f"{rows[-1]['packed_ops_in_ir']} (width {rows[-1]['vector_width_in_ir']})")
+            for system in systems.values():
+                system.destroy()
+    return rows
+
+
 def elimination_plans(presets: list[str]) -> dict:
     """{preset: the elimination plan of its engine's Newton matrix} (builds the engines)."""
     plans = {}
@@ -465,6 +770,8 @@ def build_parser():
                         help="interleaved timing rounds (each form's best is kept)")
     parser.add_argument("--matmul-size", type=int, default=1024, quick=256,
                         help="n of NumPy's n × n reference matrix product")
+    parser.add_argument("--kernels", default=",".join(KERNELS),
+                        help=f"comma list of the kernels to time, from {','.join(KERNELS)}")
     return parser
 
 
@@ -474,6 +781,7 @@ def main(argv=None):
     precisions = cli.parse_choices(args.precisions, "--precisions", PRECISIONS)
     batch_sizes = cli.parse_counts(args.batch_sizes, "--batch-sizes")
     lanes_list = cli.parse_counts(args.lanes, "--lanes")
+    kernels = cli.parse_choices(args.kernels, "--kernels", KERNELS)
     for batch in batch_sizes:
         if any(batch % lanes for lanes in lanes_list):
             raise cli.StudyArgumentError(f"--batch-sizes: {batch} is not a multiple of every "
@@ -485,20 +793,28 @@ def main(argv=None):
     out = cli.Output(args, argv or [], model={"presets": presets},
                      extra={"precisions": precisions, "batch_sizes": batch_sizes,
                             "lanes": lanes_list, "repeats": args.repeats,
-                            "matmul_size": args.matmul_size, "cpu_model": provenance.cpu_model(),
+                            "matmul_size": args.matmul_size, "kernels": kernels,
+                            "cpu_model": provenance.cpu_model(),
                             "cores": os.cpu_count()})
     plans = elimination_plans(presets)
-    rows = []
+    rows = {kernel: [] for kernel in kernels}
     try:
         with tempfile.TemporaryDirectory(prefix="simd-ir-") as ir_folder:
             for precision in precisions:
                 with working_directory(Path(ir_folder)):  # where Taichi writes the IR
-                    rows += measure(plans, precision, batch_sizes, lanes_list, args.repeats,
-                                    args.matmul_size, Path(ir_folder))
+                    if "factor_solve" in kernels:
+                        rows["factor_solve"] += measure(plans, precision, batch_sizes,
+                                                        lanes_list, args.repeats,
+                                                        args.matmul_size, Path(ir_folder))
+                    if "bending" in kernels:
+                        rows["bending"] += measure_bending(plans, precision, batch_sizes,
+                                                           lanes_list, args.repeats,
+                                                           Path(ir_folder))
     finally:
         # this study initialised Taichi itself: the next simulation initialises it again
         Runtime.current().configure_compiler()
-    table = pd.DataFrame(rows)
-    out.write_csv(table, "simd.csv")
+    tables = {kernel: pd.DataFrame(kernel_rows) for kernel, kernel_rows in rows.items()}
+    for kernel, table in tables.items():
+        out.write_csv(table, "simd.csv" if kernel == "factor_solve" else "simd_assembly.csv")
     out.report()
-    return table
+    return tables.get("factor_solve", tables.get("bending"))

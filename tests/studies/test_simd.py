@@ -3,11 +3,15 @@ as numpy.linalg.solve does, bit for bit alike across forms, and the ti.Vector-la
 to packed vector arithmetic; the random systems are what the study says they are; bad
 flags fail before any compute. No timing is asserted."""
 
+import tempfile
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
 
 from taichi_star import EngineProfile, SolverConfig, StarParams
+from taichi_star.runtime import Runtime
 
 from studies import simd
 from studies.__main__ import main as studies_main
@@ -25,10 +29,10 @@ def paper_plan():
 
 
 def test_simd_quick(tmp_path):
-    simd.main(["--quick", "--no-progress", "--out", str(tmp_path)])
+    simd.main(["--quick", "--batch-sizes", "8", "--no-progress", "--out", str(tmp_path)])
     table = pd.read_csv(tmp_path / "simd.csv")
-    # one preset, two precisions, two batch sizes, four forms (one lane count)
-    assert len(table) == 16
+    # one preset, two precisions, one batch size, four forms (one lane count)
+    assert len(table) == 8
     assert set(table["form"]) == set(simd.FORMS) and set(table["precision"]) == {"f64", "f32"}
     assert (table["n_nodes"] == 193).all()
     for precision, rows in table.groupby("precision"):
@@ -45,6 +49,56 @@ def test_simd_quick(tmp_path):
     assert (table[table["form"] == "instance_major"]["speedup_vs_instance_major"] == 1).all()
     assert (table["flops_per_instance"] == table["flops_per_instance"].iloc[0]).all()
     assert (table["gflops"] > 0).all() and (table["matmul_gflops"] > 0).all()
+    # the bending assembly: the same forms, every one bitwise equal to today's, the lanes
+    # packed, the gradient that of the energy (central differences in f64: ~1e-8 measured,
+    # their truncation and rounding; in f32 the rounding of the curvature, ~1e-5 measured)
+    assembly = pd.read_csv(tmp_path / "simd_assembly.csv")
+    assert len(assembly) == 8 and set(assembly["form"]) == set(simd.FORMS)
+    assert assembly["bitwise_equal_to_instance_major"].all()
+    assert (assembly[assembly["form"].isin(simd.VECTOR_FORMS)]["packed_ops_in_ir"] > 0).all()
+    bound = assembly["precision"].map({"f64": 1e-6, "f32": 1e-3})
+    assert (assembly["gradient_relative_error"] < bound).all()
+
+
+def test_the_bending_assembly_is_the_energys_derivatives_in_every_form():
+    """On a 12-node chain, 8 instances: each form assembles the same bits; the gradient equals
+    central differences of the NumPy energy and the Hessian blocks central differences of the
+    assembled gradient (f64)."""
+    positions, element = simd.bending_state(12, 8, seed=3)
+    systems = {}
+    with simd.working_directory(Path(tempfile.mkdtemp())):
+        simd.init_taichi("f64", Path.cwd())
+        try:
+            for form, lanes in (("instance_major", 1), ("lane_vector", 4)):
+                systems[form] = simd.LaneBending(12, 8, form, lanes)
+                systems[form].load(positions, element)
+                systems[form].assemble()
+            today, lanes = systems["instance_major"], systems["lane_vector"]
+            assert np.array_equal(today.gradient(), lanes.gradient())
+            assert np.array_equal(today.hessian_blocks(), lanes.hessian_blocks())
+            # step 1e-8 m on 9-mm edges: truncation ~1e-12, rounding ~1e-16·E/1e-8 ≈ 1e-8
+            assert simd.gradient_error(today, positions, element) < 1e-6
+            step, node, component = 1e-9, 5, 1
+            moved = []
+            for sign in (1.0, -1.0):
+                shifted = positions.copy()
+                shifted[:, node, component] += sign * step
+                today.load(shifted, element)
+                today.assemble()
+                moved.append(today.gradient()[0])
+            column = (moved[0] - moved[1]) / (2 * step)
+            blocks = lanes.hessian_blocks()[0]
+            expected = np.zeros_like(column)
+            for (row_node, column_node), slot in today.slot.items():
+                if column_node == node:
+                    expected[row_node] = blocks[slot].reshape(2, 2)[:, component]
+            # the gradient is smooth (edges far from zero length): the difference quotient is
+            # exact to ~1e-7 of the column's largest entry at this step
+            np.testing.assert_allclose(column, expected, atol=1e-6 * np.abs(expected).max())
+        finally:
+            for system in systems.values():
+                system.destroy()
+            Runtime.current().configure_compiler()
 
 
 def test_random_systems_are_block_diagonally_dominant_on_the_pattern(paper_plan):
@@ -69,6 +123,7 @@ def test_solve_flops_counts_the_triangular_solves(paper_plan):
     (["--lanes", "0"], "--lanes: every value must be >= 1"),
     (["--precisions", "f16"], "--precisions"),
     (["--repeats", "0"], "--repeats must be >= 1"),
+    (["--kernels", "stretching"], "--kernels: unknown value 'stretching'"),
 ])
 def test_bad_flags_fail_before_compute(tmp_path, capsys, monkeypatch, flags, message):
     def forbidden(*args, **kwargs):
