@@ -227,6 +227,15 @@ def measure_cost_ratio(problem: Problem, repeats: int = COST_REPEATS) -> float:
     return best["gradient"] / best["plain"]
 
 
+def start_points(problem: Problem, starts: int, seed: int):
+    """The gradient fits' starts in unit coordinates: the base model, then uniform random
+    points (seeded)."""
+    rng = np.random.default_rng(seed)
+    for start in range(starts):
+        yield (identify.start_units(problem.box, problem.base) if start == 0
+               else rng.uniform(0.0, 1.0, len(problem.box)))
+
+
 def fit_lbfgs(problem: Problem, starts: int, max_evaluations: int, seed: int,
               recorder: Recorder, cost_ratio: float) -> Recorder:
     """Multi-start L-BFGS-B over the unit box (module docstring), every evaluation into
@@ -235,10 +244,7 @@ def fit_lbfgs(problem: Problem, starts: int, max_evaluations: int, seed: int,
     parameter_set = recorder.parameter_set
     dimension = len(problem.box)
     per_evaluation = problem.window_s * len(problem.gaits)
-    rng = np.random.default_rng(seed)
-    for start in range(starts):
-        x0 = (identify.start_units(problem.box, problem.base) if start == 0
-              else rng.uniform(0.0, 1.0, dimension))
+    for start, x0 in enumerate(start_points(problem, starts, seed)):
 
         def fun(units, start=start):
             value, gradient = problem.value_and_gradient(units)
@@ -267,10 +273,7 @@ def fit_least_squares(problem: Problem, starts: int, max_evaluations: int, seed:
     parameter_set = recorder.parameter_set
     dimension = len(problem.box)
     per_evaluation = problem.window_s * len(problem.gaits)
-    rng = np.random.default_rng(seed)
-    for start in range(starts):
-        x0 = (identify.start_units(problem.box, problem.base) if start == 0
-              else rng.uniform(0.0, 1.0, dimension))
+    for start, x0 in enumerate(start_points(problem, starts, seed)):
         latest = {}
 
         def evaluate(units, start=start):
