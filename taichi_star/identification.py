@@ -56,6 +56,12 @@ to the sensitivities' own accuracy:
   otherwise: on that test's synthetic three-cycle window the held-phase gradient differs from
   central differences of the re-fitted objective by 15–40 %. On multi-cycle windows the result
   is the exact gradient of the objective at the held phases, not of the re-fitted one.
+
+The objective is a sum of squares, and `objective_residuals` gives it in that form: the
+residuals r (every gait's curve residuals and ρ, scaled so that Σ r² is the objective) and
+their Jacobian J from the same record derivatives, for a Gauss-Newton or trust-region
+least-squares fit (`scipy.optimize.least_squares(fun, x0, jac=...)`); the gradient above is
+2·Jᵀr.
 """
 
 from __future__ import annotations
