@@ -30,9 +30,10 @@ Young's modulus, the two densities, hub mass per height, thickness).
   batched run per generation.
 
 Cost, per optimiser: evaluations (a CMA-ES point; a gradient optimiser's simulation with
-sensitivities), wall time, and simulated robot-seconds = instances × simulated seconds, counted two ways. A
-run with n sensitivities carries 2n replica instances per instance (the ±ε pairs): they
-are never solved, only assembled at the solved state, so they cost less than an instance;
+sensitivities), wall time, and simulated robot-seconds = instances × simulated seconds,
+counted two ways. A run with n sensitivities carries 2n replica instances per instance (the
+±ε pairs): they are never solved, only assembled at the solved state, so they cost less than
+an instance;
 `robot_seconds` counts each replica as a full instance ((1 + 2n) × gaits × window), the
 conservative count, and `robot_seconds_cost_equivalent` counts a call as `gradient_cost_ratio`
 runs: the wall time of the call's simulation (with the n sensitivities) over that of the same
@@ -43,8 +44,8 @@ Writes into --out (default runs/gradient_fit/<timestamp>/), each CSV with its pr
 sidecar: `gradient_fit.csv` (per set and optimiser: the cost columns, objective reached,
 validation objective on `--validate-cycles` with the training phases, robot-seconds each
 gradient fit needed to reach CMA-ES's objective and their ratio to CMA-ES's total, both
-counts), `gradient_fit_history.csv` (every evaluation: cumulative cost and best objective so far) and
-`gradient_fit.png` (best objective against robot-seconds, drawn from the history).
+counts), `gradient_fit_history.csv` (every evaluation: cumulative cost and best objective so
+far) and `gradient_fit.png` (best objective against robot-seconds, drawn from the history).
 """
 
 from __future__ import annotations
@@ -90,7 +91,7 @@ LEAST_SQUARES = "least-squares"
 GRADIENT_OPTIMISERS = ("L-BFGS-B", LEAST_SQUARES)
 """Optimisers whose evaluations are runs with sensitivities."""
 FAILED_OBJECTIVE = 1e6
-"""Objective told to L-BFGS-B for a failed simulation (with a zero gradient)."""
+"""Objective told to the gradient fits for a failed simulation (with a zero gradient)."""
 QUICK_GAITS, QUICK_TRAIN, QUICK_VALIDATE = "A1+A2", "1:1", "2:2"
 RESULT_COLUMNS = ["parameter_set", "n_parameters", "optimiser", "starts", "evaluations",
                   "robot_seconds", "robot_seconds_cost_equivalent", "wall_s", "objective",
@@ -157,8 +158,7 @@ class Problem:
         units = np.clip(np.asarray(units, dtype=float), 0.0, 1.0)
         runs, result = self.runs(self.params(units[None, :]), self.train[1], self.names)
         if any(run is None for run in runs):
-            count = len(self.gaits) * (
-                (self.train[1] - self.train[0] + 1) * identification.SAMPLES_PER_CYCLE + 1)
+            count = identification.residual_count(len(self.gaits), self.train)
             return (np.full(count, math.sqrt(FAILED_OBJECTIVE / count)),
                     np.zeros((count, len(self.box))))
         derivatives = {gait: identification.record_derivatives(
@@ -236,25 +236,31 @@ def start_points(problem: Problem, starts: int, seed: int):
                else rng.uniform(0.0, 1.0, len(problem.box)))
 
 
+def record_gradient_call(recorder: Recorder, problem: Problem, units, value: float,
+                         cost_ratio: float, start: int):
+    """Add one simulation with the box's sensitivities to `recorder`: (1 + 2·D) instances per
+    gait with the replicas counted, `cost_ratio` runs cost-equivalent."""
+    per_evaluation = problem.window_s * len(problem.gaits)
+    recorder.add(units, value, per_evaluation * (1 + REPLICAS_PER_DIRECTION * len(problem.box)),
+                 per_evaluation * cost_ratio, start)
+
+
 def fit_lbfgs(problem: Problem, starts: int, max_evaluations: int, seed: int,
               recorder: Recorder, cost_ratio: float) -> Recorder:
     """Multi-start L-BFGS-B over the unit box (module docstring), every evaluation into
     `recorder`, a call counted as `cost_ratio` runs in the cost-equivalent robot-seconds."""
     from scipy.optimize import minimize
     parameter_set = recorder.parameter_set
-    dimension = len(problem.box)
-    per_evaluation = problem.window_s * len(problem.gaits)
     for start, x0 in enumerate(start_points(problem, starts, seed)):
 
         def fun(units, start=start):
             value, gradient = problem.value_and_gradient(units)
-            recorder.add(units, value, per_evaluation * (1 + REPLICAS_PER_DIRECTION * dimension),
-                         per_evaluation * cost_ratio, start)
+            record_gradient_call(recorder, problem, units, value, cost_ratio, start)
             print(f"set {parameter_set} L-BFGS-B start {start}: objective {value:.5g}, "
                   f"|gradient| {np.linalg.norm(gradient):.3g}", flush=True)
             return value, gradient
 
-        minimize(fun, x0, jac=True, method="L-BFGS-B", bounds=[(0.0, 1.0)] * dimension,
+        minimize(fun, x0, jac=True, method="L-BFGS-B", bounds=[(0.0, 1.0)] * len(problem.box),
                  options={"maxfun": max_evaluations, "maxiter": max_evaluations})
     return recorder
 
@@ -271,8 +277,6 @@ def fit_least_squares(problem: Problem, starts: int, max_evaluations: int, seed:
     → 66 on the six, dogbox 5,550 → 57.5 and 5,550 → 67.6 (measured before choosing)."""
     from scipy.optimize import least_squares
     parameter_set = recorder.parameter_set
-    dimension = len(problem.box)
-    per_evaluation = problem.window_s * len(problem.gaits)
     for start, x0 in enumerate(start_points(problem, starts, seed)):
         latest = {}
 
@@ -281,9 +285,7 @@ def fit_least_squares(problem: Problem, starts: int, max_evaluations: int, seed:
             if key not in latest:
                 residuals, jacobian = problem.residuals_and_jacobian(units)
                 value = float(residuals @ residuals)
-                recorder.add(units, value,
-                             per_evaluation * (1 + REPLICAS_PER_DIRECTION * dimension),
-                             per_evaluation * cost_ratio, start)
+                record_gradient_call(recorder, problem, units, value, cost_ratio, start)
                 print(f"set {parameter_set} {LEAST_SQUARES} start {start}: objective "
                       f"{value:.5g}", flush=True)
                 latest.clear()

@@ -48,8 +48,9 @@ random node offsets, the actuator's range of natural curvatures. Timed like the 
 rounds), checked for bitwise equality across forms and against central differences of a NumPy
 copy of the energy (`gradient_error`).
 
-Writes `simd.csv` (the LU): one row per preset, precision, batch size and form: n_nodes, n_slots (2×2
-blocks with fill-in), lanes, flops_per_instance (factor + solve), seconds (best), us_per_instance,
+Writes `simd.csv` (the LU): one row per preset, precision, batch size and form: n_nodes,
+n_slots (2×2 blocks with fill-in), lanes, flops_per_instance (factor + solve), seconds
+(best), us_per_instance,
 gflops, matmul_gflops (NumPy, best in the same rounds), fraction_of_matmul,
 speedup_vs_instance_major, speedup_median_of_rounds, packed_ops_in_ir (packed floating-point
 arithmetic instructions in the kernel's optimised IR), vector_width_in_ir (widest packed type
@@ -188,6 +189,12 @@ class LaneFields:
 
         return run
 
+    def _finish(self, builder):
+        """Place the lane mask (all lanes active), then build the SNode tree of `builder`."""
+        builder.dense(ti.i, self.groups).place(self.active)
+        self.tree = builder.finalize()
+        self.active.from_numpy(np.ones((self.groups, self.lanes), dtype=np.int32))
+
     def _field(self, builder, entries: int, components: int):
         """(batch, entries, components) scalars in this form's layout."""
         if self.form in VECTOR_FORMS:
@@ -231,7 +238,6 @@ class LaneSystem(LaneFields):
         self.blocks, self.pristine_blocks = (self._field(builder, plan.n_slots, 4)
                                              for _ in range(2))
         self.rhs, self.pristine_rhs = (self._field(builder, plan.n_nodes, 2) for _ in range(2))
-        builder.dense(ti.i, self.groups).place(self.active)
         tables = {name: np.ascontiguousarray(getattr(plan, name), dtype=np.int32)
                   for name in ("order", "pivot_slot", "neighbour_start", "neighbour_node",
                                "lower_slot", "upper_slot", "update_start", "update_slot")}
@@ -239,10 +245,9 @@ class LaneSystem(LaneFields):
         for name, values in tables.items():
             self.tables[name] = ti.field(ti.i32)
             builder.dense(ti.i, max(len(values), 1)).place(self.tables[name])
-        self.tree = builder.finalize()
+        self._finish(builder)
         for name, values in tables.items():
             self.tables[name].from_numpy(values if len(values) else np.zeros(1, np.int32))
-        self.active.from_numpy(np.ones((self.groups, lanes), dtype=np.int32))
         self.factor_solve, self.restore = self._kernels()
 
     def load(self, blocks: np.ndarray, rhs: np.ndarray):
@@ -368,7 +373,10 @@ def bend_element(e1x, e1y, e2x, e2y, voronoi_length, natural_curvature, stiffnes
     components so that every argument may be a scalar (one instance) or a ti.Vector of lanes
     (one scalar of each of `lanes` instances): the same operations in the same order either
     way. Edges e1 = x_j − x_i, e2 = x_k − x_j (m). Returns (g1x, g1y, g2x, g2y) and the
-    Hessian's blocks H11 (xx, xy, yy), H22 (xx, xy, yy), H12 (xx, xy, yx, yy)."""
+    Hessian's blocks H11 (xx, xy, yy), H22 (xx, xy, yy), H12 (xx, xy, yx, yy). A copy of the
+    engine's `bend_gradient_hessian` on components, on purpose: the study stands alone (as its
+    LU does), studies do not import the engine's physics, and the engine's form on 2-vectors
+    does not carry lanes."""
     squared1 = e1x * e1x + e1y * e1y
     squared2 = e2x * e2x + e2y * e2y
     cross = e1x * e2y - e1y * e2x
@@ -432,15 +440,13 @@ class LaneBending(LaneFields):
         self.element = self._field(builder, self.n_triplets, 3)  # Δl, κ⁰, B
         self.residual = self._field(builder, n_nodes, 2)
         self.blocks = self._field(builder, len(self.slot), 4)
-        builder.dense(ti.i, self.groups).place(self.active)
         self.triplet_nodes = ti.field(ti.i32)
         self.triplet_slots = ti.field(ti.i32)
         builder.dense(ti.ij, (self.n_triplets, 3)).place(self.triplet_nodes)
         builder.dense(ti.ij, (self.n_triplets, 9)).place(self.triplet_slots)
-        self.tree = builder.finalize()
+        self._finish(builder)
         self.triplet_nodes.from_numpy(self.triplets)
         self.triplet_slots.from_numpy(triplet_slots)
-        self.active.from_numpy(np.ones((self.groups, lanes), dtype=np.int32))
         self.assemble = self._kernel()
 
     def load(self, positions: np.ndarray, element: np.ndarray):

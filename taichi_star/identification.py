@@ -388,6 +388,13 @@ def _curve_derivative(path: CentroidPath, derivative_xy, cycles, samples) -> np.
     return distance_derivative(delta, derivative)
 
 
+def residual_count(gaits: int, cycles=TRAINING_CYCLES, samples: int = SAMPLES_PER_CYCLE) -> int:
+    """The number of residuals of `objective_residuals` for `gaits` gaits on the window
+    `cycles`: per gait its cycles × samples curve residuals and ρ."""
+    first, last = check_window(cycles)
+    return gaits * ((last - first + 1) * samples + 1)
+
+
 def trial_residuals(simulated: SimulatedRun, derivative_xy: np.ndarray, trial: Trial,
                     cycles=TRAINING_CYCLES, samples: int = SAMPLES_PER_CYCLE,
                     phase_s: Optional[float] = None

@@ -170,6 +170,7 @@ def test_residuals_square_to_the_objective_and_their_jacobian_equals_central_dif
     residuals, jacobian, table = ident.objective_residuals(runs, derivatives, trials, cycles,
                                                            samples=16)
     assert residuals.shape == (2 * ((cycles[1] - cycles[0] + 1) * 16 + 1),)
+    assert ident.residual_count(2, cycles, 16) == len(residuals)
     assert jacobian.shape == residuals.shape + (3,)
     # the sum is the mean of the two gaits' objectives up to the summation's rounding
     assert float(residuals @ residuals) == pytest.approx(ident.objective_of(table), rel=1e-13)
