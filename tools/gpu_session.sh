@@ -12,8 +12,9 @@
 #   tar -cJf .gpu_site/site.tar.xz -C site .
 # and used when present (carry .gpu_site instead of .whl).
 # Usage: bash tools/gpu_session.sh PHASE
-#   correctness  the engine-vs-reference, determinism and GPU-vs-CPU tests with --arch gpu, and
-#                the Fig. 4c study on the GPU compared with results/fig4c.csv (CPU)
+#   correctness  the engine-vs-reference, determinism, sensitivities-vs-differences and GPU-vs-CPU
+#                tests with --arch gpu (junit.xml holds the GPU-vs-CPU sensitivities' largest
+#                difference), and the Fig. 4c study on the GPU compared with results/fig4c.csv
 #   layouts      the layout and block-size alternatives at B = 8192 (paper, f64, Newton)
 #   bench        the GPU benchmark into $OUT (results/bench_gpu.csv when committed), one part
 #                per call: PRESETS=paper|accurate, PRECISIONS=f64|f32, SIZES=..., LIMIT=seconds
@@ -43,8 +44,10 @@ git rev-parse HEAD 2>/dev/null | tee -a "$work/gpu.txt"
 case "$phase" in
 correctness)
     timeout "${LIMIT:-300}" python3 -m pytest -q -p no:cacheprovider --arch gpu \
-        tests/model/test_gpu.py tests/model/test_determinism.py tests/model/test_engine.py \
-        -k "reference or alone or bitwise or batch_position or gpu" 2>&1 | tee "$work/pytest.log"
+        --junitxml "$work/junit.xml" tests/model/test_gpu.py tests/model/test_sensitivities.py \
+        tests/model/test_determinism.py tests/model/test_engine.py \
+        -k "reference or alone or bitwise or batch_position or gpu or equal_finite or bdf2_with" \
+        2>&1 | tee "$work/pytest.log"
     [ "${FIG4C:-1}" = 1 ] || { tar -czf "$OUT/$phase.tar.gz" -C "$work" .; exit 0; }
     /usr/bin/time -v python3 -m studies fig4c --arch gpu --out "$work/fig4c_gpu" 2>&1 \
         | tail -30 | tee "$work/fig4c.log"

@@ -9,6 +9,7 @@ from taichi_star.engine import BatchEngine
 from taichi_star.integrators import INTEGRATORS
 from taichi_star.model import build_model
 from taichi_star.runtime import Runtime, available_archs, prepare_engine
+from taichi_star.sensitivities import SUMMARY_OUTPUTS
 
 PAPER_GAITS = ["A1", "A1+A2", "A1+A3", "A1+A4", "A1+A3+A5"]
 
@@ -50,3 +51,33 @@ def test_gpu_matches_cpu(preset):
     for column in ("displacement_x_mm", "displacement_y_mm", "speed_mm_s"):
         np.testing.assert_allclose(gpu.summary[column], cpu.summary[column], rtol=1e-9,
                                    atol=1e-9 * np.abs(cpu.summary[column]).max(), err_msg=column)
+
+
+@pytest.mark.skipif("gpu" not in available_archs(), reason="no GPU on this machine")
+def test_gpu_sensitivities_match_cpu(record_property):
+    """The sensitivities of the five paper gaits over the pulse and into the coast (0.4 s) on
+    the GPU and the CPU. Each derivative is a linear solve with the Jacobian at the converged
+    state, whose GPU and CPU values differ by the states' Newton-tolerance difference (≤ 1e-9
+    relative, above); a replica pair's residual difference divided by its offset (1e-4 of the
+    value) amplifies round-off to about 1e-12. 1e-6 relative leaves a hundredfold margin over
+    both. The largest difference, relative to its output's scale, is recorded as a property
+    (`--junitxml` writes it)."""
+    directions = ("alpha", "drag_perpendicular", "actuator_gains[0]")
+    params = [ts.StarParams(gait=gait) for gait in PAPER_GAITS]
+    cpu, gpu = (ts.simulate(params, 0.4, arch=arch, sensitivities=directions)
+                for arch in ("cpu", "gpu"))
+    largest = 0.0
+    for output in SUMMARY_OUTPUTS:
+        expected, actual = (np.stack([r.sensitivity(output, name) for name in directions])
+                            for r in (cpu, gpu))
+        finite = np.isfinite(expected)  # the steady-cycle outputs need a whole cycle
+        np.testing.assert_array_equal(np.isfinite(actual), finite, err_msg=output)
+        if finite.any():
+            # the output's largest derivative sets the scale: a direction that a symmetric
+            # gait does not turn (d heading / d alpha) is round-off about zero
+            scale = np.abs(expected[finite]).max()
+            largest = max(largest, np.abs(actual[finite] - expected[finite]).max() / scale)
+            np.testing.assert_allclose(actual[finite], expected[finite], rtol=1e-6,
+                                       atol=1e-6 * scale, err_msg=output)
+    record_property("largest_relative_difference", f"{largest:.3e}")
+    assert np.nanmax(np.abs(cpu.sensitivities.to_numpy())) > 0  # the runs did respond

@@ -37,11 +37,11 @@ def euler_run(taichi_cpu):
                     sensitivities=DIRECTIONS)
 
 
-def test_euler_sensitivities_equal_finite_differences(taichi_cpu):
+def test_euler_sensitivities_equal_finite_differences(arch):
     # 1e-5: the target; measured 1e-8 and below (the rest is the extrapolated difference's own
     # truncation and the Newton noise of the runs)
     assert_matches_differences(check_sensitivities(BATCH, DURATION_S, SolverConfig(**TIGHT),
-                                                   ("alpha", "drag_perpendicular")))
+                                                   ("alpha", "drag_perpendicular"), arch=arch))
 
 
 def test_a_coast_after_the_pulse_keeps_its_sensitivities(taichi_cpu):
@@ -166,15 +166,15 @@ def test_a_per_actuator_field_gives_one_column_per_actuator(euler_run):
     assert len(table) == len(BATCH)
 
 
-def test_bdf2_with_damping_chord_and_adaptive_steps(taichi_cpu):
+def test_bdf2_with_damping_chord_and_adaptive_steps(arch):
     batch = [dataclasses.replace(p, damping_time=0.01) for p in BATCH]
     # dt_max = dt and a loose error_tol: every run, the replicas' instance and the finite
     # differences' alike, takes the same 100 steps of 1 ms, so the frozen step sequence is the
     # one the differences see
     adaptive = dict(integrator="bdf2", adaptive=True, error_tol=1e-3, dt_max=1e-3, **TIGHT)
     table = check_sensitivities(batch, DURATION_S, SolverConfig(jacobian="chord", **adaptive),
-                                ("alpha", "drag_perpendicular"))
-    steps = simulate(batch, DURATION_S, SolverConfig(**adaptive)).summary["steps"]
+                                ("alpha", "drag_perpendicular"), arch=arch)
+    steps = simulate(batch, DURATION_S, SolverConfig(**adaptive), arch=arch).summary["steps"]
     assert (steps == 100).all()
     # as for implicit Euler: 1e-5 the target, measured ≤ 4e-6
     assert_matches_differences(table)
