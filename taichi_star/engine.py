@@ -103,6 +103,14 @@ class BatchEngine:
         connect_terms(self.terms)
         self.same_as_instance = arena.batch_field(ti.i32, (capacity, len(self.terms))) \
             if sensitive else None
+        if sensitive:
+            self.slot_nodes = arena.index(sorted(
+                ([slot, i, j] for (i, j), slot in self.plan.slot.items())))
+            """(slots, 3): each Jacobian slot with its block's row and column node."""
+            self.rigid_projector = arena.batch_field(float, (capacity, self.n_nodes),
+                                                     matrix=(3, 2))
+            """Per simulated instance and node m, the 3×2 map of a tangent step's x_m to its
+            share of the net force and torque of J·x (`rigid_projector_of`)."""
         """Per replica and term: 1 where the term is `position_only` and its coefficients are
         those of the replica's instance; its residual at the instance's positions is then the
         instance's, the same for both replicas of a pair, and `assemble` leaves it out of their
@@ -204,6 +212,13 @@ class BatchEngine:
         """Residual r = scale·M·((q − q_k) − d) + ∇E − F into rhs[b] and, if `jacobian`, its
         Jacobian into blocks[b], at the current iterate q = positions[b]: the integrator's
         inertia (with added mass), then every term in registry order."""
+        self.assemble_forces(b, inertia_scale, rate_gain, jacobian, False)
+
+    @ti.func
+    def assemble_forces(self, b, inertia_scale, rate_gain, jacobian, rigid_only: ti.template()):
+        """`assemble`, or with `rigid_only` the residual of the inertia and the terms that are
+        not `internal` alone, every one of them (what the rigid-body equations of instance b
+        see: the internal forces' net force and torque vanish)."""
         self.system.clear(b, jacobian)
         identity = ti.Matrix.identity(float, 2)
         for n in range(self.n_nodes):
@@ -212,7 +227,9 @@ class BatchEngine:
                 (self.state.positions[b, n] - self.state.previous[b, n]) - self.state.inertia_offset[b, n]))
             self.assembly.add_block(b, self.diagonal_slot[n], scaled_mass * identity, jacobian)
         for k, term in ti.static(enumerate(self.terms)):
-            if ti.static(self.sensitive and term.position_only):
+            if ti.static(rigid_only and term.internal):
+                pass
+            elif ti.static(self.sensitive and term.position_only and not rigid_only):
                 if self.same_as_instance[b, k] == 0:
                     term.assemble(b, rate_gain, jacobian)
             else:
@@ -542,7 +559,11 @@ class BatchEngine:
         positions; their fire times are b's (a firing is an event, not a function of the
         parameters). Nothing on the device divides by ε."""
         inertia_scale, rate_gain = self.integrator.weights(h, ratio, use_history)
+        centre, total_mass, moment = self.mass_centre(b)
+        self.assemble_forces(b, inertia_scale, rate_gain, 1, True)
+        self.rigid_projector_of(b, centre, 1.0)
         self.assemble(b, inertia_scale, rate_gain, 1)
+        self.rigid_projector_of(b, centre, 0.0)
         self.system.factor(b)
         for j in range(self.tangent_count[None]):
             for sign in ti.static(range(2)):
@@ -557,13 +578,104 @@ class BatchEngine:
             plus, minus = self.replica(b, j, 0), self.replica(b, j, 1)
             for n in range(self.n_nodes):
                 self.system.rhs[b, n] = 0.5 * (self.system.rhs[plus, n] - self.system.rhs[minus, n])
+            wanted_force, wanted_torque = self.rigid_parts(b, centre)
             self.system.solve(b)
+            self.rigid_correction(b, centre, wanted_force, wanted_torque,
+                                  inertia_scale * total_mass, inertia_scale * moment)
             for n in range(self.n_nodes):
                 shift = self.system.rhs[b, n]
                 self.state.positions[plus, n] = self.state.positions[b, n] - shift
                 self.state.positions[minus, n] = self.state.positions[b, n] + shift
                 self.state.velocities[plus, n] = self.implicit_velocity(plus, n, rate_gain)
                 self.state.velocities[minus, n] = self.implicit_velocity(minus, n, rate_gain)
+
+    @ti.func
+    def mass_centre(self, b):
+        """(mass centre c (m), total mass (kg/m), moment of inertia about c (kg)) of instance
+        b's positions, with the inertia's masses (added mass included)."""
+        total_mass = 0.0
+        centre = ti.Vector.zero(float, 2)
+        for n in range(self.n_nodes):
+            total_mass += self.inertia[b, n]
+            centre += self.inertia[b, n] * self.state.positions[b, n]
+        centre /= total_mass
+        moment = 0.0
+        for n in range(self.n_nodes):
+            arm = self.state.positions[b, n] - centre
+            moment += self.inertia[b, n] * arm.dot(arm)
+        return centre, total_mass, moment
+
+    @ti.func
+    def rigid_projector_of(self, b, centre, rigid_only):
+        """Build `rigid_projector[b]` in two passes over instance b's assembled system: with
+        `rigid_only` = 1 after `assemble_forces(..., rigid_only=True)` (the inertia and the
+        external terms' residual r_e and Jacobian J_e), with 0 after the full `assemble` (its
+        residual r). Then Σ_m P_m·x_m = (Σ_n (J·x)_n, Σ_n (q_n − c) × (J·x)_n) for any x,
+        computed without the internal terms' Jacobian: their blocks' column sums vanish and
+        Σ_n (q_n − c) × (J_i·x)_n = −Σ_m x_m × r_i,m for the internal residual r_i = r − r_e
+        (both by the internal energy's invariance under rigid motions, `Term.internal`)."""
+        if rigid_only == 1.0:
+            for m in range(self.n_nodes):
+                self.rigid_projector[b, m] = ti.Matrix.zero(float, 3, 2)
+            for entry in range(self.system.n_slots):
+                slot, row, column = (self.slot_nodes[entry, 0], self.slot_nodes[entry, 1],
+                                     self.slot_nodes[entry, 2])
+                block = self.system.blocks[b, slot]
+                arm = self.state.positions[b, row] - centre
+                share = ti.Matrix.zero(float, 3, 2)
+                for k in ti.static(range(2)):
+                    share[0, k] = block[0, k]
+                    share[1, k] = block[1, k]
+                    share[2, k] = arm[0] * block[1, k] - arm[1] * block[0, k]
+                self.rigid_projector[b, column] = self.rigid_projector[b, column] + share
+        # x_m × r_i,m = x_0·r_1 − x_1·r_0, with r_i = r − r_e: r enters with sign +, r_e −
+        sign = 1.0 - 2.0 * rigid_only
+        for m in range(self.n_nodes):
+            residual = self.system.rhs[b, m]
+            share = ti.Matrix.zero(float, 3, 2)
+            share[2, 0] = -sign * residual[1]
+            share[2, 1] = sign * residual[0]
+            self.rigid_projector[b, m] = self.rigid_projector[b, m] + share
+
+    @ti.func
+    def rigid_parts(self, b, centre):
+        """Net force (2,) and torque about `centre` of instance b's right-hand side rhs[b]
+        (N/m, N)."""
+        force = ti.Vector.zero(float, 2)
+        torque = 0.0
+        for n in range(self.n_nodes):
+            value = self.system.rhs[b, n]
+            force += value
+            torque += (self.state.positions[b, n] - centre).cross(value)
+        return force, torque
+
+    @ti.func
+    def rigid_correction(self, b, centre, wanted_force, wanted_torque, mass, moment):
+        """Correct the rigid motion of the tangent step x in rhs[b] (J·x = ρ solved, ρ's net
+        force and torque about the mass centre `wanted_force`, `wanted_torque`) so that J·x has
+        ρ's net force and torque as computed by `rigid_projector`, `mass` and `moment` being
+        the inertia's share of J in the rigid motions (kg/(m·s²), kg/s²).
+
+        Why: the internal terms' blocks of J are the stiffness, ~10⁶ times the inertia's
+        M/h² here, and their column sums, zero in exact arithmetic, keep a rounding of ~10⁻¹⁶
+        of it, which the solve turns into an error of x's rigid motion (the stiffness's null
+        space, held by the inertia alone). In a glide the robot's shape, and with it those
+        roundings, repeat from step to step, so the error does not average out: it builds up
+        as a drift of the tangent's rigid-body velocity. The projector computes the rigid
+        equations of J·x without those blocks; one correction with the inertia as their
+        Jacobian (the external terms' share is ~h·c/M, 10⁻³ here) removes the defect."""
+        force = -wanted_force
+        torque = -wanted_torque
+        for m in range(self.n_nodes):
+            share = self.rigid_projector[b, m] @ self.system.rhs[b, m]
+            force += ti.Vector([share[0], share[1]])
+            torque += share[2]
+        translation = force / mass
+        rotation = torque / moment
+        for n in range(self.n_nodes):
+            arm = self.state.positions[b, n] - centre
+            self.system.rhs[b, n] = self.system.rhs[b, n] - (
+                translation + rotation * ti.Vector([-arm[1], arm[0]]))
 
     @ti.func
     def mirror_replicas(self, b):

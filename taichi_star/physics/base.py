@@ -70,6 +70,11 @@ class Term:
     carries_state: ClassVar[bool] = False
     """Whether the term keeps state the positions do not determine (`accept_step`,
     `copy_carried`); the engine compiles those calls only for a batch with such a term."""
+    internal: ClassVar[bool] = False
+    """Whether its forces are internal: the gradient of an energy that a rigid motion of the
+    robot leaves unchanged (its net force and its net torque about any point vanish at every
+    state). A sensitive engine leaves such terms out of the rigid-body equations of a tangent
+    step (`engine.BatchEngine.rigid_correction`)."""
     reads_step_start: ClassVar[bool] = True
     """Whether its residual at given positions depends on the state at the step's start (the
     integrator's rates, velocities, histories carried from the last step). One that does not

@@ -25,6 +25,7 @@ from .strain import StrainTerm
 @ti.data_oriented
 class MaterialDamping(Term):
     name = "damping"
+    internal = True  # a pseudo-energy of the strain elements' rates
 
     @classmethod
     def reshapes(cls, other):

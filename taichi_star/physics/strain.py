@@ -33,6 +33,7 @@ class StrainTerm(Term):
 
     n_elements: int
     reads_step_start = False  # k and s⁰ come from the coefficients, the time and the firings
+    internal = True  # an energy of strains: edge lengths and turning angles
 
     @staticmethod
     def element_count(topology) -> int:
