@@ -12,8 +12,10 @@ first `primal_count` instances are simulated, and behind them, for each of `tang
 replica pairs j, instance b has two replicas built at its parameters moved by +ε_j and −ε_j
 (`replica`; the host gives each parameter one pair, at ±ε). A replica is never solved: after each accepted step of b its state is set to
 b's state ± ε_j times the state's derivative, which the implicit function theorem gives exactly
-from b's Jacobian at the converged state (see `tangent_step`). Any output is then a smooth
-function of the replicas' states, and its derivative is the central difference of the pair.
+from b's Jacobian at the converged state (see `tangent_step`), its rigid motion corrected so
+that it obeys the rigid-body equations, which the Jacobian's stiffness blocks hold only to their
+rounding (`rigid_correction`). Any output is then a smooth function of the replicas' states,
+and its derivative is the central difference of the pair.
 """
 
 
@@ -554,10 +556,13 @@ class BatchEngine:
         the integrator's offsets) from its own state and assembles its residual at q*: half
         their difference is ε·(∂r/∂S·Ṡ + ∂r/∂c·ċ) up to O(ε³). The implicit function theorem
         on r(q*) = 0 gives ε·q̇* = −J⁻¹ times it, J the Jacobian at q* (assembled and factored
-        here, so a chord run gets the exact one too). The replicas' positions become
-        q* ± ε·q̇* and their velocities follow by the integrator's rate, which is linear in the
-        positions; their fire times are b's (a firing is an event, not a function of the
-        parameters). Nothing on the device divides by ε."""
+        here, so a chord run gets the exact one too), whose rigid motion `rigid_correction`
+        then makes obey the rigid-body equations (net force and torque, by
+        `rigid_projector_of`, from the inertia's and the external terms' blocks and the
+        internal terms' residual). The replicas' positions become q* ± ε·q̇* and their
+        velocities follow by the integrator's rate, which is linear in the positions; their
+        fire times are b's (a firing is an event, not a function of the parameters). Nothing
+        on the device divides by ε."""
         inertia_scale, rate_gain = self.integrator.weights(h, ratio, use_history)
         centre, total_mass, moment = self.mass_centre(b)
         self.assemble_forces(b, inertia_scale, rate_gain, 1, True)
