@@ -37,6 +37,9 @@ from .state import (STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_OK, STATUS_S
                     BatchState)
 from .timegrid import MAX_STEPS_PER_INSTANCE, step_counts
 
+ALL_TERMS, EXTERNAL_TERMS, INTERNAL_TERMS = range(3)
+"""Which terms `BatchEngine.assemble_forces` assembles (static)."""
+
 SOLVER_SETTINGS = {"dt": float, "newton_tol": float, "residual_limit": float,
                    "max_newton": ti.i32, "max_substep_halvings": ti.i32, "chord": ti.i32,
                    "error_tol": float, "dt_min": float, "dt_max": float}
@@ -214,28 +217,30 @@ class BatchEngine:
         """Residual r = scale·M·((q − q_k) − d) + ∇E − F into rhs[b] and, if `jacobian`, its
         Jacobian into blocks[b], at the current iterate q = positions[b]: the integrator's
         inertia (with added mass), then every term in registry order."""
-        self.assemble_forces(b, inertia_scale, rate_gain, jacobian, False)
+        self.assemble_forces(b, inertia_scale, rate_gain, jacobian, ALL_TERMS)
 
     @ti.func
-    def assemble_forces(self, b, inertia_scale, rate_gain, jacobian, rigid_only: ti.template()):
-        """`assemble`, or with `rigid_only` the residual of the inertia and the terms that are
-        not `internal` alone, every one of them (what the rigid-body equations of instance b
-        see: the internal forces' net force and torque vanish)."""
-        self.system.clear(b, jacobian)
+    def assemble_forces(self, b, inertia_scale, rate_gain, jacobian, terms: ti.template()):
+        """`assemble` (`terms` = ALL_TERMS); with EXTERNAL_TERMS the inertia and the terms that
+        are not `internal` alone (what the rigid-body equations of instance b see: the internal
+        forces' net force and torque vanish); with INTERNAL_TERMS the internal terms alone,
+        added to what rhs[b] and blocks[b] hold. EXTERNAL_TERMS then INTERNAL_TERMS assemble
+        the system of ALL_TERMS, its sums in another order."""
         identity = ti.Matrix.identity(float, 2)
-        for n in range(self.n_nodes):
-            scaled_mass = inertia_scale * self.inertia[b, n]
-            self.assembly.add_residual(b, n, scaled_mass * (
-                (self.state.positions[b, n] - self.state.previous[b, n]) - self.state.inertia_offset[b, n]))
-            self.assembly.add_block(b, self.diagonal_slot[n], scaled_mass * identity, jacobian)
+        if ti.static(terms != INTERNAL_TERMS):
+            self.system.clear(b, jacobian)
+            for n in range(self.n_nodes):
+                scaled_mass = inertia_scale * self.inertia[b, n]
+                self.assembly.add_residual(b, n, scaled_mass * (
+                    (self.state.positions[b, n] - self.state.previous[b, n]) - self.state.inertia_offset[b, n]))
+                self.assembly.add_block(b, self.diagonal_slot[n], scaled_mass * identity, jacobian)
         for k, term in ti.static(enumerate(self.terms)):
-            if ti.static(rigid_only and term.internal):
-                pass
-            elif ti.static(self.sensitive and term.position_only and not rigid_only):
-                if self.same_as_instance[b, k] == 0:
+            if ti.static(terms == ALL_TERMS or (terms == INTERNAL_TERMS) == term.internal):
+                if ti.static(self.sensitive and term.position_only):
+                    if self.same_as_instance[b, k] == 0:
+                        term.assemble(b, rate_gain, jacobian)
+                else:
                     term.assemble(b, rate_gain, jacobian)
-            else:
-                term.assemble(b, rate_gain, jacobian)
 
     # ---------------------------------------------------------------- time stepping
     @ti.func
@@ -565,9 +570,9 @@ class BatchEngine:
         on the device divides by ε."""
         inertia_scale, rate_gain = self.integrator.weights(h, ratio, use_history)
         centre, total_mass, moment = self.mass_centre(b)
-        self.assemble_forces(b, inertia_scale, rate_gain, 1, True)
+        self.assemble_forces(b, inertia_scale, rate_gain, 1, EXTERNAL_TERMS)
         self.rigid_projector_of(b, centre, 1.0)
-        self.assemble(b, inertia_scale, rate_gain, 1)
+        self.assemble_forces(b, inertia_scale, rate_gain, 1, INTERNAL_TERMS)
         self.rigid_projector_of(b, centre, 0.0)
         self.system.factor(b)
         for j in range(self.tangent_count[None]):
@@ -611,15 +616,16 @@ class BatchEngine:
         return centre, total_mass, moment
 
     @ti.func
-    def rigid_projector_of(self, b, centre, rigid_only):
+    def rigid_projector_of(self, b, centre, external_pass):
         """Build `rigid_projector[b]` in two passes over instance b's assembled system: with
-        `rigid_only` = 1 after `assemble_forces(..., rigid_only=True)` (the inertia and the
-        external terms' residual r_e and Jacobian J_e), with 0 after the full `assemble` (its
-        residual r). Then Σ_m P_m·x_m = (Σ_n (J·x)_n, Σ_n (q_n − c) × (J·x)_n) for any x,
+        `external_pass` = 1 after `assemble_forces(..., EXTERNAL_TERMS)` (the inertia and the
+        external terms' residual r_e and Jacobian J_e), with 0 after the internal terms are
+        added (`INTERNAL_TERMS`: the whole residual r). Then for any x, Σ_m P_m·x_m =
+        (Σ_n (J·x)_n, Σ_n (q_n − c) × (J·x)_n), the net force and torque about c of J·x,
         computed without the internal terms' Jacobian: their blocks' column sums vanish and
         Σ_n (q_n − c) × (J_i·x)_n = −Σ_m x_m × r_i,m for the internal residual r_i = r − r_e
         (both by the internal energy's invariance under rigid motions, `Term.internal`)."""
-        if rigid_only == 1.0:
+        if external_pass == 1.0:
             for m in range(self.n_nodes):
                 self.rigid_projector[b, m] = ti.Matrix.zero(float, 3, 2)
             for entry in range(self.system.n_slots):
@@ -634,7 +640,7 @@ class BatchEngine:
                     share[2, k] = arm[0] * block[1, k] - arm[1] * block[0, k]
                 self.rigid_projector[b, column] = self.rigid_projector[b, column] + share
         # x_m × r_i,m = x_0·r_1 − x_1·r_0, with r_i = r − r_e: r enters with sign +, r_e −
-        sign = 1.0 - 2.0 * rigid_only
+        sign = 1.0 - 2.0 * external_pass
         for m in range(self.n_nodes):
             residual = self.system.rhs[b, m]
             share = ti.Matrix.zero(float, 3, 2)
