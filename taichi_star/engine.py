@@ -108,6 +108,10 @@ class BatchEngine:
         connect_terms(self.terms)
         self.same_as_instance = arena.batch_field(ti.i32, (capacity, len(self.terms))) \
             if sensitive else None
+        """Per replica and term: 1 where the term is `position_only` and its coefficients are
+        those of the replica's instance; its residual at the instance's positions is then the
+        instance's, the same for both replicas of a pair, and `assemble` leaves it out of their
+        difference (0 for the simulated instances, which assemble every term)."""
         if sensitive:
             self.slot_nodes = arena.index(sorted(
                 ([slot, i, j] for (i, j), slot in self.plan.slot.items())))
@@ -116,10 +120,6 @@ class BatchEngine:
                                                      matrix=(3, 2))
             """Per simulated instance and node m, the 3×2 map of a tangent step's x_m to its
             share of the net force and torque of J·x (`rigid_projector_of`)."""
-        """Per replica and term: 1 where the term is `position_only` and its coefficients are
-        those of the replica's instance; its residual at the instance's positions is then the
-        instance's, the same for both replicas of a pair, and `assemble` leaves it out of their
-        difference (0 for the simulated instances, which assemble every term)."""
         self.carrying = any(term.carries_state for term in self.terms)
         """Whether a term keeps state the positions do not determine (static: the kernels
         commit and back it up only then, `accept_step`)."""
@@ -226,8 +226,8 @@ class BatchEngine:
         forces' net force and torque vanish); with INTERNAL_TERMS the internal terms alone,
         added to what rhs[b] and blocks[b] hold. EXTERNAL_TERMS then INTERNAL_TERMS assemble
         the system of ALL_TERMS, its sums in another order."""
-        identity = ti.Matrix.identity(float, 2)
         if ti.static(terms != INTERNAL_TERMS):
+            identity = ti.Matrix.identity(float, 2)
             self.system.clear(b, jacobian)
             for n in range(self.n_nodes):
                 scaled_mass = inertia_scale * self.inertia[b, n]
