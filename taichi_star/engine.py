@@ -570,10 +570,7 @@ class BatchEngine:
         on the device divides by ε."""
         inertia_scale, rate_gain = self.integrator.weights(h, ratio, use_history)
         centre, total_mass, moment = self.mass_centre(b)
-        self.assemble_forces(b, inertia_scale, rate_gain, 1, EXTERNAL_TERMS)
-        self.rigid_projector_of(b, centre, 1.0)
-        self.assemble_forces(b, inertia_scale, rate_gain, 1, INTERNAL_TERMS)
-        self.rigid_projector_of(b, centre, 0.0)
+        self.assemble_with_rigid_projector(b, inertia_scale, rate_gain, centre)
         self.system.factor(b)
         for j in range(self.tangent_count[None]):
             for sign in ti.static(range(2)):
@@ -616,16 +613,27 @@ class BatchEngine:
         return centre, total_mass, moment
 
     @ti.func
-    def rigid_projector_of(self, b, centre, external_pass):
-        """Build `rigid_projector[b]` in two passes over instance b's assembled system: with
-        `external_pass` = 1 after `assemble_forces(..., EXTERNAL_TERMS)` (the inertia and the
-        external terms' residual r_e and Jacobian J_e), with 0 after the internal terms are
-        added (`INTERNAL_TERMS`: the whole residual r). Then for any x, Σ_m P_m·x_m =
+    def assemble_with_rigid_projector(self, b, inertia_scale, rate_gain, centre):
+        """`assemble` instance b's residual and Jacobian in two parts, the inertia and the
+        external terms, then the internal terms, building `rigid_projector[b]` (about the mass
+        centre `centre`) from each part as it is complete."""
+        self.assemble_forces(b, inertia_scale, rate_gain, 1, EXTERNAL_TERMS)
+        self.rigid_projector_of(b, centre, True)
+        self.assemble_forces(b, inertia_scale, rate_gain, 1, INTERNAL_TERMS)
+        self.rigid_projector_of(b, centre, False)
+
+    @ti.func
+    def rigid_projector_of(self, b, centre, external_pass: ti.template()):
+        """Build `rigid_projector[b]` in two passes over instance b's assembled system
+        (`assemble_with_rigid_projector`): `external_pass` (static) True after
+        `assemble_forces(..., EXTERNAL_TERMS)` (the inertia and the external terms' residual r_e
+        and Jacobian J_e), False after the internal terms are added (`INTERNAL_TERMS`: the whole
+        residual r). Then for any x, Σ_m P_m·x_m =
         (Σ_n (J·x)_n, Σ_n (q_n − c) × (J·x)_n), the net force and torque about c of J·x,
         computed without the internal terms' Jacobian: their blocks' column sums vanish and
         Σ_n (q_n − c) × (J_i·x)_n = −Σ_m x_m × r_i,m for the internal residual r_i = r − r_e
         (both by the internal energy's invariance under rigid motions, `Term.internal`)."""
-        if external_pass == 1.0:
+        if ti.static(external_pass):
             for m in range(self.n_nodes):
                 self.rigid_projector[b, m] = ti.Matrix.zero(float, 3, 2)
             for entry in range(self.system.n_slots):
@@ -640,7 +648,7 @@ class BatchEngine:
                     share[2, k] = arm[0] * block[1, k] - arm[1] * block[0, k]
                 self.rigid_projector[b, column] = self.rigid_projector[b, column] + share
         # x_m × r_i,m = x_0·r_1 − x_1·r_0, with r_i = r − r_e: r enters with sign +, r_e −
-        sign = 1.0 - 2.0 * external_pass
+        sign = -1.0 if ti.static(external_pass) else 1.0
         for m in range(self.n_nodes):
             residual = self.system.rhs[b, m]
             share = ti.Matrix.zero(float, 3, 2)

@@ -7,7 +7,7 @@ import pytest
 import taichi as ti
 
 import taichi_star as ts
-from taichi_star.engine import EXTERNAL_TERMS, INTERNAL_TERMS, BatchEngine
+from taichi_star.engine import BatchEngine
 from taichi_star.integrators import INTEGRATORS
 from taichi_star.metrics import shape_checks
 from taichi_star.model import build_model
@@ -510,10 +510,7 @@ def _rigid_projectors(engine: ti.template(), count: ti.i32, h: ti.f64):
     for b in range(count):
         inertia_scale, rate_gain = engine.integrator.weights(h, 1.0, 0)
         centre, _, _ = engine.mass_centre(b)
-        engine.assemble_forces(b, inertia_scale, rate_gain, 1, EXTERNAL_TERMS)
-        engine.rigid_projector_of(b, centre, 1.0)
-        engine.assemble_forces(b, inertia_scale, rate_gain, 1, INTERNAL_TERMS)
-        engine.rigid_projector_of(b, centre, 0.0)
+        engine.assemble_with_rigid_projector(b, inertia_scale, rate_gain, centre)
 
 
 def test_the_rigid_projector_gives_the_net_force_and_torque_of_the_jacobian(taichi_cpu):
