@@ -69,6 +69,19 @@ def test_c_parallel_takes_its_own_step_and_then_matches_its_differences(taichi_c
                                                    ("drag_parallel",)))
 
 
+def test_the_damping_time_takes_its_own_step_and_then_matches_its_differences(taichi_cpu):
+    """τ barely moves the robot (an elasticity of ~1e-4 here), so at the default ε of 1e-4 of
+    its value its replicas are near the rounding of the positions: over these 0.3 s, with
+    τ = 0.94 ms, A1+A2's derivative was 1.2e-5 off (differences spread 6e-7, Taylor ratio 4.0;
+    measured), beyond the 1e-5 held to. At its own ε, 1e-3 of the value, 3.5e-6 and 9.5e-8
+    (ratios 3.9 and 4.2); over three cycles the default was 2.6e-4 off (docs: numerics)."""
+    (direction,) = parse_directions(["damping_time"])
+    damped = [p.replace(damping_time=0.00094) for p in BATCH]
+    assert direction.step(damped[0]) == pytest.approx(1e-3 * 0.00094, rel=1e-15)
+    assert_matches_differences(check_sensitivities(damped, 0.3, SolverConfig(**TIGHT),
+                                                   ("damping_time",)))
+
+
 @pytest.mark.parametrize("field, tolerance", [("drag_perpendicular", 1e-7),
                                               ("fluid_density", 1e-6)])
 def test_a_derivative_does_not_depend_on_the_replicas_step(taichi_cpu, monkeypatch, field,
