@@ -41,7 +41,10 @@ def test_the_pages_quote_figures_and_carry_the_generated_table(results_page):
     ("0.852", 0.85251, False), ("0.852", 0.8514, False), ("0.852", -0.852, False),
     ("51,155", 51155.20863, True), ("51,155", 51155.6, False),
     ("−2.06", -2.0577, True), ("-2.06", -2.0649, True), ("-2.06", 2.06, False),
-    ("3", float("nan"), False)])
+    ("3", float("nan"), False),
+    # a power of ten: the mantissa's decimals, scaled
+    ("5.5·10⁻⁷", 5.52e-7, True), ("5.5·10⁻⁷", 5.56e-7, False), ("1.0·10⁻⁵", 1.045e-5, True),
+    ("1.0·10⁻⁵", 1.06e-5, False), ("2·10³", 2400.0, True), ("2·10³", 2600.0, False)])
 def test_a_quoted_number_is_its_cell_rounded_to_the_quoted_decimals(results_page, quoted, value,
                                                                      matches):
     assert results_page.quoted_number_matches(quoted, value) is matches

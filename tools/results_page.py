@@ -17,7 +17,7 @@ Two markups tie a page's figures to the CSVs:
   results/), selectors COLUMN=VALUE that pick exactly one row (compared as the CSV's text), the
   column, and optionally a transform of the cell: ``abs``, ``neg`` (−value), ``x1000``
   (any factor), ``%`` (×100). The number must be the cell rounded to the number's decimals
-  (thousands separators and the minus sign − allowed). Readers see only the number.
+  (thousands separators and the minus sign − allowed; a power of ten as ``5.5·10⁻⁷``). Readers see only the number.
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ GENERATED_PAGE = REPO / "docs" / "result_files.md"
 BLOCK = re.compile(r"(<!-- generated: (?P<name>\w+) -->\n)(?P<body>.*?)(<!-- end generated -->)",
                    re.S)
 QUOTE = re.compile(
-    r"(?P<number>[-−+]?\d[\d,]*(?:\.\d+)?)<!-- (?P<file>[\w./-]+\.csv)"
+    r"(?P<number>[-−+]?\d[\d,]*(?:\.\d+)?(?:·10[⁻]?[⁰¹²³⁴⁵⁶⁷⁸⁹]+)?)<!-- (?P<file>[\w./-]+\.csv)"
     r"(?P<selectors>(?: [\w.]+=[^\s=]+)*) (?P<column>\w+)(?: (?P<transform>abs|neg|%|x[\d.]+))? -->")
 
 SMALL_TABLE_ROWS = 12
@@ -91,13 +91,20 @@ def apply_transform(value: float, transform: Optional[str]) -> float:
     return value * float(transform[1:])
 
 
+SUPERSCRIPTS = str.maketrans("⁻⁰¹²³⁴⁵⁶⁷⁸⁹", "-0123456789")
+
+
 def quoted_number_matches(quoted: str, value: float) -> bool:
-    """Whether `quoted` (text, e.g. "-1,234.5") is `value` rounded to the quoted decimals."""
+    """Whether `quoted` (text, e.g. "-1,234.5", or with a power of ten, "5.5·10⁻⁷") is `value`
+    rounded to the quoted decimals (of the mantissa, times the power)."""
     text = quoted.replace(",", "").replace("−", "-")
-    decimals = len(text.split(".")[1]) if "." in text else 0
+    mantissa, _, power = text.partition("·10")
+    scale = 10.0 ** int(power.translate(SUPERSCRIPTS)) if power else 1.0
+    decimals = len(mantissa.split(".")[1]) if "." in mantissa else 0
     # half a unit of the last quoted digit, and a hair more for values exactly halfway that the
     # CSV's own rounding put on one side
-    return math.isfinite(value) and abs(float(text) - value) <= 0.5 * 10.0 ** -decimals * (1 + 1e-9)
+    return math.isfinite(value) and (abs(float(mantissa) * scale - value)
+                                     <= 0.5 * 10.0 ** -decimals * scale * (1 + 1e-9))
 
 
 def check_quotes(page: str, text: str) -> List[Mismatch]:
