@@ -39,7 +39,7 @@ import pandas as pd
 
 from taichi_star import Gait, SolverConfig, StarParams, simulate
 from taichi_star.output import column_unit
-from taichi_star.sensitivity_check import extrapolated_difference
+from taichi_star.sensitivity_check import difference_step, extrapolated_difference
 from taichi_star.sensitivities import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS,
                                        REPLICAS_PER_DIRECTION, parse_directions)
 
@@ -53,10 +53,6 @@ OUTPUT = "signed_speed_mm_s"
 SOBOL_TABLE = cli.COMMITTED_RESULTS / "sensitivity.csv"
 """The committed Sobol indices (`python -m studies sensitivity`)."""
 SOBOL_COLUMNS = ("S1", "S1_conf", "ST", "ST_conf")
-CHECK_RELATIVE_STEP = 1e-4
-"""Step of the finite-difference check, relative to the parameter's value: large enough that
-the Newton noise of the runs (solved to CHECK_NEWTON_TOL) stays ~1e-6 of the quotient, small
-enough that the extrapolated quotient's O(h³) truncation is negligible."""
 CHECK_NEWTON_TOL = 1e-12
 """Newton tolerance of the check's runs, m (the sensitivities' own run keeps the preset's)."""
 
@@ -133,17 +129,19 @@ def elasticity_table(params: Sequence[StarParams], parameters: Sequence[str],
 
 def finite_difference_check(params: Sequence[StarParams], labels: Sequence[str],
                             solver: SolverConfig, duration_s: float, arch: str) -> pd.DataFrame:
-    """Central differences of whole runs at h, 2h and 4h (h = CHECK_RELATIVE_STEP of each
-    value), extrapolated (`taichi_star.sensitivity_check.extrapolated_difference`), of the
-    signed speed, for every instance × label, in one batch at CHECK_NEWTON_TOL. Columns gait,
-    parameter, finite_difference."""
+    """Central differences of whole runs at h, 2h and 4h, extrapolated
+    (`taichi_star.sensitivity_check.extrapolated_difference`), of the signed speed, for every
+    instance × label, in one batch at CHECK_NEWTON_TOL. h is each parameter's own step as
+    `check_sensitivities` takes it (`difference_step`: the sensitivities' ε, 1e-4 of the value
+    for most, larger for the two that barely move the robot, whose runs at 1e-4 differ by
+    little more than their Newton noise). Columns gait, parameter, finite_difference."""
     tight = solver.replace(newton_tol=min(solver.newton_tol, CHECK_NEWTON_TOL))
     scales = (1.0, 2.0, 4.0)
     batch, steps = [], []
     for label in labels:
         for p in params:
             value = direction(label).value(p)
-            step = CHECK_RELATIVE_STEP * abs(value)
+            step = difference_step(direction(label), p)
             steps.append(step)
             batch += [direction(label).moved(p, value + sign * scale * step)
                       for scale in scales for sign in (1.0, -1.0)]
@@ -287,7 +285,8 @@ def main(argv=None):
         check["relative_difference"] = ((check["derivative"] - check["finite_difference"])
                                         / check["finite_difference"].abs())
         out.write_csv(check, f"{args.prefix}_check.csv",
-                      extra={"relative_step": CHECK_RELATIVE_STEP,
+                      extra={"relative_steps": {label: direction(label).relative_step
+                                                for label in checked},
                              "newton_tol": min(solver.newton_tol, CHECK_NEWTON_TOL)})
         print(check.to_string(index=False))
     out.report()

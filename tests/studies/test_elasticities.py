@@ -82,6 +82,34 @@ def test_the_derivative_equals_a_whole_run_central_difference(run):
     assert check["derivative"].iloc[0] == table.loc["alpha", "derivative"]
 
 
+def test_the_check_differences_each_parameter_at_its_own_step(monkeypatch):
+    """The whole-run differences take each parameter's step as `check_sensitivities` does: 1e-4
+    of α, 1e-2 of C∥ and 1e-3 of the damping time (whose runs at 1e-4 differ by little more
+    than their Newton noise), at h, 2h and 4h; the quotients are extrapolated from them."""
+    from taichi_star import SolverConfig, StarParams
+
+    params = [StarParams.preset("paper", gait=GAIT, damping_time=0.001)]
+    fields = ("alpha", "drag_parallel", "damping_time")
+    moved = []
+
+    class Run:  # what the check reads of a simulate() result: the signed speed per instance
+        def __init__(self, batch):
+            moved.extend(batch)
+            # a speed linear in each parameter's offset: every quotient is 1
+            self.summary = pd.DataFrame({study.OUTPUT: [
+                sum(getattr(q, f) - getattr(params[0], f) for f in fields) for q in batch]})
+
+    monkeypatch.setattr(study, "simulate", lambda batch, *args, **kwargs: Run(batch))
+    check = study.finite_difference_check(params, fields, SolverConfig(), 0.1, "cpu")
+    # 1e-9: the quotients of a linear speed are 1 up to the rounding of the offsets
+    np.testing.assert_allclose(check["finite_difference"], 1.0, rtol=1e-9)
+    for k, (field, relative) in enumerate(zip(fields, (1e-4, 1e-2, 1e-3))):
+        value = getattr(params[0], field)
+        offsets = [getattr(q, field) - value for q in moved[6 * k:6 * k + 6]]
+        np.testing.assert_allclose(offsets, np.array([1, -1, 2, -2, 4, -4]) * relative * value,
+                                   rtol=1e-9)
+
+
 def test_default_parameters_leave_out_component_heights_at_zero():
     from taichi_star import StarParams
 
