@@ -23,8 +23,8 @@ at_zero, then S1, S1_conf, ST, ST_conf of the parameter for that gait from the S
 `--sobol` where the parameter was in its box, NaN otherwise, and sobol_preset, the preset that
 table was computed with), and `<prefix>.png`, drawn from it: a heatmap of the elasticities, gaits
 × parameters, above the Sobol ST of the same cells. `--check NAME,...` also compares the
-derivatives of those parameters with whole-run central differences (`<prefix>_check.csv`;
-the measured agreement over 3 cycles is in docs/results.md).
+derivatives of those parameters with whole-run central differences at each parameter's own
+step (`<prefix>_check.csv`; the measured agreement over 3 cycles is in docs/results.md).
 """
 
 from __future__ import annotations
