@@ -75,7 +75,7 @@ C∥ (its derivative is ~1e-2 mm of displacement per unit over 0.3 s from rest, 
 6e-5 to 1.6e-3 off (0.3 s of A1, A1+A2 and A1+A3 at C∥ = 0.01 and 0.1, implicit Euler, fixed
 1-ms steps, against Richardson differences at h = 1e-2 and 3e-2 of C∥, which agree with each
 other to 3e-7); at 1e-2 all six are within 1e-6.
-τ (elasticities d ln v / d ln τ of 5e-5 to 2e-3 at 0.94 ms, every optional term on, three
+τ (elasticities d ln v / d ln τ of 5e-5 to 3.5e-3 at 0.94 ms, every optional term on, three
 cycles of the five Fig. 4c gaits, Newton to 1e-12 m): at 1e-4 its derivative was 2.6e-4 and
 4.3e-4 off for A1+A3 and A1+A3+A5 (implicit Euler) and moved with ε; at 1e-3 and 1e-2 the
 derivatives agree with each other to 1.3e-5 (Euler) and 4e-7 (BDF2), and at 1e-3 with

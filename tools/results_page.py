@@ -17,7 +17,8 @@ Two markups tie a page's figures to the CSVs:
   results/), selectors COLUMN=VALUE that pick exactly one row (compared as the CSV's text), the
   column, and optionally a transform of the cell: ``abs``, ``neg`` (−value), ``x1000``
   (any factor), ``%`` (×100). The number must be the cell rounded to the number's decimals
-  (thousands separators and the minus sign − allowed; a power of ten as ``5.5·10⁻⁷``). Readers see only the number.
+  (thousands separators and the minus sign − allowed; a power of ten as ``5.5·10⁻⁷``).
+  Readers see only the number.
 """
 
 from __future__ import annotations
