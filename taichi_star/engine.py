@@ -597,15 +597,21 @@ class BatchEngine:
                 self.state.velocities[minus, n] = self.implicit_velocity(minus, n, rate_gain)
 
     @ti.func
+    def weighted_centre(self, b, weights: ti.template()):
+        """(Σ w_n·q_n / Σ w_n (m), Σ w_n) of instance b's positions q, `weights` a
+        (capacity, N) field (the nodes' masses, or with the added mass the inertia's)."""
+        total = 0.0
+        weighted = ti.Vector.zero(float, 2)
+        for n in range(self.n_nodes):
+            weighted += weights[b, n] * self.state.positions[b, n]
+            total += weights[b, n]
+        return weighted / total, total
+
+    @ti.func
     def mass_centre(self, b):
         """(mass centre c (m), total mass (kg/m), moment of inertia about c (kg)) of instance
         b's positions, with the inertia's masses (added mass included)."""
-        total_mass = 0.0
-        centre = ti.Vector.zero(float, 2)
-        for n in range(self.n_nodes):
-            total_mass += self.inertia[b, n]
-            centre += self.inertia[b, n] * self.state.positions[b, n]
-        centre /= total_mass
+        centre, total_mass = self.weighted_centre(b, self.inertia)
         moment = 0.0
         for n in range(self.n_nodes):
             arm = self.state.positions[b, n] - centre
@@ -730,12 +736,7 @@ class BatchEngine:
     def compute_centroids(self):
         """centroids[b] = mass-weighted mean of the current node positions."""
         for b in range(self.capacity):
-            weighted = ti.Vector.zero(float, 2)
-            total = 0.0
-            for n in range(self.n_nodes):
-                weighted += self.mass[b, n] * self.state.positions[b, n]
-                total += self.mass[b, n]
-            self.centroids[b] = weighted / total
+            self.centroids[b] = self.weighted_centre(b, self.mass)[0]
 
     def centroids_of(self, batch_size: int) -> np.ndarray:
         """(B, 2) centroids of the first batch_size instances now, m (f64)."""
