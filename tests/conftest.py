@@ -18,6 +18,41 @@ def pytest_addoption(parser):
                           "(cpu, gpu): `pytest tests/model --arch gpu` runs them on a GPU")
 
 
+FIRST = (
+    # first on a fresh worker, as under xdist's most-tests-first order: its subnormal-product
+    # test fails in a process where Taichi is initialised (it flushes subnormals to zero; the
+    # test passes alone and fails after any Taichi run under -n 0, before this change too)
+    "tests/unit/test_metrics.py",
+    # these re-initialise Taichi (the kernel optimisation switched on, f32): every engine the
+    # worker compiled before is dropped, and the files after them compile theirs again
+    "tests/studies/test_bench.py", "tests/studies/test_simd.py",
+    "tests/model/test_reliability.py",
+    # then the longest files (measured: 20-100 s each on 2 cores), so that no long file is left
+    # to run alone at the end
+    "tests/model/test_engine.py", "tests/model/test_wake.py", "tests/model/test_sensitivities.py",
+    "tests/model/test_envs.py", "tests/studies/test_distributed.py",
+    "tests/model/test_simulator.py", "tests/studies/test_work_precision.py",
+    "tests/studies/test_model_select.py", "tests/studies/test_control_studies.py",
+)
+"""Files run first, in this order (the rest follow in collection order); with
+`--no-loadscope-reorder` (pyproject's addopts) pytest-xdist hands the files to its workers in
+this order, each file whole to one worker."""
+
+
+def pytest_collection_modifyitems(config, items):
+    rank = {path: index for index, path in enumerate(FIRST)}
+    root = config.rootpath
+
+    def file_rank(item):
+        try:
+            path = item.path.relative_to(root).as_posix()
+        except ValueError:
+            return len(FIRST)
+        return rank.get(path, len(FIRST))
+
+    items.sort(key=file_rank)  # stable: each file's tests keep their order
+
+
 @pytest.fixture(scope="session")
 def arch(request):
     """The arch the engine tests run on (--arch; ValueError if this machine lacks it)."""
