@@ -19,10 +19,6 @@ def pytest_addoption(parser):
 
 
 FIRST = (
-    # first on a fresh worker, as under xdist's most-tests-first order: its subnormal-product
-    # test fails in a process where Taichi is initialised (it flushes subnormals to zero; the
-    # test passes alone and fails after any Taichi run under -n 0, before this change too)
-    "tests/unit/test_metrics.py",
     # these re-initialise Taichi (the kernel optimisation switched on, f32): every engine the
     # worker compiled before is dropped, and the files after them compile theirs again
     "tests/studies/test_bench.py", "tests/studies/test_simd.py",
@@ -42,6 +38,9 @@ this order, each file whole to one worker."""
 def pytest_collection_modifyitems(config, items):
     rank = {path: index for index, path in enumerate(FIRST)}
     root = config.rootpath
+    missing = [path for path in FIRST if not (root / path).is_file()]
+    if missing:  # a renamed or removed file would silently lose its place
+        raise pytest.UsageError(f"tests/conftest.py FIRST names missing files: {missing}")
 
     def file_rank(item):
         try:
