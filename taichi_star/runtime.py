@@ -3,7 +3,9 @@
 Taichi is initialised once per process (`ti.init` is process-wide), so there is one `Runtime` per
 process, reached through `Runtime.current()`. It initialises Taichi lazily on the first
 simulation (importing taichi_star does nothing), re-initialises only when the arch or the
-precision changes, and keeps one compiled engine per (topology, terms, integrator, capacity).
+precision changes, and keeps the engines it compiled, per (topology, terms, integrator,
+capacity), for the `simulate` calls and Simulators that follow (a Simulator holds one while it
+lives; a call uses a free one while it runs).
 
 Taichi keeps compiled kernels in an offline cache shared by every process of the user
 (~/.cache/taichi). Processes running at once (a batch's worker processes, two studies) take
@@ -21,7 +23,8 @@ import contextlib
 import io
 import os
 import weakref
-from typing import Dict, List, Optional, Tuple
+from dataclasses import dataclass
+from typing import Dict, List, Optional
 
 import numpy as np
 import taichi as ti
@@ -185,6 +188,19 @@ def _quiet_exit():
     ti.set_logging_level(ti.ERROR)
 
 
+@dataclass
+class EngineSlot:
+    """One engine of the runtime's and who holds it: a weak reference to the Simulator that
+    leased it, or None (free; a `simulate` call uses a free engine only while it runs)."""
+
+    engine: BatchEngine
+    holder: Optional[weakref.ref] = None
+
+    def held(self) -> bool:
+        """Whether a living Simulator holds the engine."""
+        return self.holder is not None and self.holder() is not None
+
+
 class Runtime:
     """See the module docstring. `cpu_threads` (None: Taichi's default, all cores) and
     `log_level` take effect at the next initialisation."""
@@ -199,8 +215,9 @@ class Runtime:
         self.gpu_instance_minor = GPU_INSTANCE_MINOR
         self.kernel_optimisation = kernel_optimisation_default()
         self.log_level = ti.WARN
-        self.engines: Dict[tuple, BatchEngine] = {}
-        self.leases: Dict[tuple, List[Tuple[BatchEngine, weakref.ref]]] = {}
+        self.engines: Dict[tuple, List[EngineSlot]] = {}
+        """The engines built in this process, per `engine_key`: each free for the next call or
+        Simulator, or held by a living Simulator (`free_engine`)."""
         self.slot_counts: Dict[tuple, int] = {}
         """Newton-matrix blocks per model engine key (`matrix_slots`)."""
 
@@ -238,7 +255,6 @@ class Runtime:
         atexit.register(_quiet_exit)
         self.arch, self.precision = arch, precision
         self.engines.clear()
-        self.leases.clear()
 
     def configure_gpu(self, block_dim: int = GPU_BLOCK_DIM, instance_minor: bool = GPU_INSTANCE_MINOR):
         """GPU launch and layout settings of the engines built from now on (for benchmarks that
@@ -293,33 +309,37 @@ class Runtime:
         return (model.engine_key, solver.integrator, batch_capacity(model.batch_size),
                 sensitive) + gpu
 
+    def free_engine(self, model: BatchModel, solver: SolverConfig,
+                    sensitive: bool = False) -> "EngineSlot":
+        """The slot of an engine for this batch that no living Simulator holds (one is built if
+        there is none): `simulate` calls and Simulators draw on the same engines, so a Simulator
+        made after a `simulate` of the same topology, terms and integrator (or after another
+        Simulator is gone) compiles nothing."""
+        key = self.engine_key(model, solver, sensitive)
+        for slot in self.engines.get(key, []):
+            if not slot.held():
+                return slot
+        slot = EngineSlot(self.new_engine(model, solver, sensitive))  # may refuse: no entry
+        self.engines.setdefault(key, []).append(slot)
+        return slot
+
     def lease_engine(self, model: BatchModel, solver: SolverConfig, owner,
                      sensitive: bool = False) -> BatchEngine:
-        """An engine of its own for `owner` (a Simulator) while the owner lives: one whose
-        previous owner is gone is reused (no recompilation), else a new one (`sensitive`: one
-        that carries tangents)."""
-        key = self.engine_key(model, solver, sensitive)
-        leases = self.leases.setdefault(key, [])
-        for index, (engine, holder) in enumerate(leases):
-            if holder() is None:
-                leases[index] = (engine, weakref.ref(owner))
-                return engine
-        engine = self.new_engine(model, solver, sensitive)
-        leases.append((engine, weakref.ref(owner)))
-        return engine
+        """An engine of its own for `owner` (a Simulator) while the owner lives (`free_engine`;
+        `sensitive`: one that carries tangents). No call or other Simulator uses it meanwhile."""
+        slot = self.free_engine(model, solver, sensitive)
+        slot.holder = weakref.ref(owner)
+        return slot.engine
 
     def engine_for(self, model: BatchModel, solver: SolverConfig, tangents: int = 0) -> BatchEngine:
-        """The cached engine for this batch's topology, terms, integrator and capacity (created
-        on first use), loaded with the batch at rest, its gaits firing every period. With
+        """A free engine for this batch's topology, terms, integrator and capacity
+        (`free_engine`), loaded with the batch at rest, its gaits firing every period. With
         `tangents` > 0 the batch is B instances and their replicas (`BatchEngine.load`) and
-        the engine a sensitive one."""
-        sensitive = tangents > 0
-        key = self.engine_key(model, solver, sensitive)
-        if key not in self.engines:
-            self.engines[key] = self.new_engine(model, solver, sensitive)
-        engine = self.engines[key]
-        engine.load(model, solver, tangents=tangents)
-        return engine
+        the engine a sensitive one. It stays free: the next call may load it again."""
+        slot = self.free_engine(model, solver, tangents > 0)
+        slot.holder = None
+        slot.engine.load(model, solver, tangents=tangents)
+        return slot.engine
 
 
 def prepare_engine(params, solver: SolverConfig = SolverConfig(), arch: str = "cpu") -> BatchEngine:

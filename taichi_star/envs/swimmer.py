@@ -206,11 +206,24 @@ class GoalReachingBatch:
         self.task = task
         self.params = params
         self.control_period_s = period
-        self.simulator = Simulator(params, solver, arch=arch)
+        self._simulator = Simulator(params, solver, arch=arch)
         self.n_robots = n_robots
         self.goals = np.zeros((n_robots, 2))
         self.distances = np.zeros(n_robots)
         self.episode_steps = np.zeros(n_robots, dtype=np.int64)
+
+    @property
+    def simulator(self) -> Simulator:
+        """The robots' Simulator; RuntimeError once the batch is closed."""
+        if self._simulator is None:
+            raise RuntimeError("this environment is closed; make a new one to go on")
+        return self._simulator
+
+    def close(self):
+        """Let go of the Simulator: its engine (compiled kernels, device memory) returns to the
+        process's runtime, which gives it to the next Simulator of the same topology, terms and
+        integrator instead of compiling another. Closing again does nothing."""
+        self._simulator = None
 
     def reset(self, rows: np.ndarray, generators: Sequence[np.random.Generator],
               goals: Optional[np.ndarray] = None):
@@ -353,6 +366,12 @@ class StarSwimmerEnv(gym.Env):
         `GoalReachingBatch.pictures`); None without a render mode."""
         return self.batch.pictures([0])[0] if self.render_mode == "rgb_array" else None
 
+    def close(self):
+        """Release the robot's engine for the next environment made in this process
+        (`GoalReachingBatch.close`); a closed environment raises RuntimeError when stepped,
+        reset or rendered."""
+        self.batch.close()
+
 
 class StarSwimmerVectorEnv(VectorEnv):
     """num_envs star robots in one Simulator, each with its own goal and episode (NEXT_STEP
@@ -437,3 +456,9 @@ class StarSwimmerVectorEnv(VectorEnv):
         if self.render_mode != "rgb_array":
             return None
         return tuple(self.batch.pictures(range(self.num_envs)))
+
+    def close_extras(self, **kwargs):
+        """`close()`: release the robots' engine for the next environment made in this process
+        (`GoalReachingBatch.close`); a closed environment raises RuntimeError when stepped or
+        reset."""
+        self.batch.close()

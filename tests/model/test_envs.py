@@ -27,18 +27,51 @@ FORWARD = ts.Gait.parse("A1+A2+A8").mask  # swims along +x (its forward directio
 BACKWARD = ts.Gait.parse("A4+A5+A6").mask  # its mirror image: along -x
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def single():
-    return gym.make(ENV_ID, **KWARGS)
+    # per test, closed after it: its engine goes back for the next env (no compilation), and
+    # no env of this file is kept open beside those a test makes
+    env = gym.make(ENV_ID, **KWARGS)
+    yield env
+    env.close()
 
 
-def test_single_env_passes_gymnasiums_checker(single):
+def test_single_env_passes_gymnasiums_checker():
     # the checker steps and resets a dozen times: a 50-ms control period keeps it cheap (the
-    # spaces and API it checks do not depend on the period)
-    check_env(gym.make(ENV_ID, **SHORT).unwrapped)
-    assert single.observation_space.shape == (len(OBSERVATION_NAMES),)
-    assert single.observation_space.dtype == np.float32
-    assert single.action_space == gym.spaces.MultiBinary(8)
+    # spaces and API it checks do not depend on the period); the envs it makes from the spec
+    # and closes, and this one once closed, hand their engine on (no `single` is alive yet)
+    env = gym.make(ENV_ID, **SHORT).unwrapped
+    check_env(env)
+    assert env.observation_space.shape == (len(OBSERVATION_NAMES),)
+    assert env.observation_space.dtype == np.float32
+    assert env.action_space == gym.spaces.MultiBinary(8)
+    env.close()
+
+
+def test_a_closed_env_hands_its_engine_to_the_next_and_refuses_to_step():
+    first = gym.make(ENV_ID, **SHORT)
+    first.reset(seed=5)
+    expected = [first.step(FORWARD)[0] for _ in range(2)]
+    engine = first.unwrapped.batch.simulator.engine
+    first.close()
+    first.close()  # gymnasium allows closing twice
+    for call in (lambda: first.reset(seed=5), lambda: first.step(FORWARD)):
+        with pytest.raises(RuntimeError, match="closed"):
+            call()
+    # the same topology, terms, integrator and capacity (every batch up to 64 robots): the
+    # closed env's engine, not a new compilation, and from a reset it gives the same bits
+    second = gym.make(ENV_ID, **SHORT)
+    assert second.unwrapped.batch.simulator.engine is engine
+    second.reset(seed=5)
+    np.testing.assert_array_equal([second.step(FORWARD)[0] for _ in range(2)], expected)
+    # while `second` is open its engine is its own: the vector env gets another
+    vector = StarSwimmerVectorEnv(2, **SHORT)
+    assert vector.batch.simulator.engine is not engine
+    vector.close()
+    assert vector.closed
+    with pytest.raises(RuntimeError, match="closed"):
+        vector.reset(seed=5)
+    second.close()
 
 
 def test_forward_gait_toward_a_goal_ahead_is_rewarded(single):
@@ -86,6 +119,8 @@ def test_make_and_make_vec_take_the_step_budget():
     envs = gym.make_vec(ENV_ID, num_envs=2, max_episode_steps=1, **KWARGS)
     envs.reset(seed=0)
     assert envs.step(np.zeros((2, 8), dtype=np.int8))[3].all()
+    single.close()
+    envs.close()
 
 
 def actions_schedule(steps, num_envs):
@@ -123,6 +158,8 @@ def test_vector_env_equals_sync_vector_env_of_single_envs():
         np.testing.assert_array_equal(got[4]["distance_mm"], expected[4]["distance_mm"])
         ends += got[2] | got[3]
     assert (ends == 2).all()  # robot 0 terminated then was truncated, the others truncated
+    native.close()
+    reference.close()
 
 
 def test_vector_env_api():

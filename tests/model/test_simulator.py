@@ -40,6 +40,36 @@ def test_scheduled_periodic_firing_reproduces_simulate_bitwise():
     assert state.since_A1_s.iloc[0] == 0.0 and np.isnan(state.since_A1_s.iloc[1])
 
 
+def test_simulate_and_simulators_share_engines_but_never_one_in_use():
+    """A Simulator made after a `simulate` of the same topology, terms and integrator takes that
+    call's engine (no compilation); a call made while the Simulator lives takes another and
+    leaves the Simulator's state alone; the shared engine gives the same bits as the call."""
+    from taichi_star.model import build_model
+    from taichi_star.runtime import Runtime
+
+    reference = ts.simulate(PARAMS, 3 * PERIOD, record_interval_s=3 * PERIOD, record_shapes=True)
+    runtime = Runtime.current()
+    slots = runtime.engines[runtime.engine_key(build_model(PARAMS), ts.SolverConfig())]
+    free = [slot.engine for slot in slots if not slot.held()]
+    sim = commanded()
+    assert any(sim.engine is engine for engine in free)
+    sim.fire(GAITS)
+    sim.fire(GAITS, at_s=PERIOD)
+    sim.advance(PERIOD)
+    halfway = sim.shapes()
+    again = ts.simulate(PARAMS, PERIOD)  # while sim lives: another engine (free or new)
+    assert any(slot.engine is sim.engine and slot.held() for slot in slots)
+    np.testing.assert_array_equal(sim.shapes(), halfway)
+    for k in (2, 3):
+        sim.fire(GAITS, at_s=k * PERIOD)
+        sim.advance(PERIOD)
+    np.testing.assert_array_equal(sim.shapes(), reference.shapes[-1])
+    assert (again.summary["status"] == "ok").all()
+    engine = sim.engine
+    del sim  # gone: its engine is free for the next call or Simulator
+    assert not any(slot.engine is engine and slot.held() for slot in slots)
+
+
 def test_one_advance_equals_pieces_equals_save_and_load():
     def run(pieces, snapshot_at=None):
         sim = commanded()
