@@ -107,6 +107,9 @@ DEFAULT_REFINE_TOP, DEFAULT_REFINE_POPSIZE, DEFAULT_REFINE_GENERATIONS = 6, 8, 1
 16 x 16 = 384 with the restart, against 6 x 8 + 12 x 8 = 144). At the screen's budget a
 10-axis form ended above the 8-axis form it contains (docs: Results, model selection)."""
 QUICK_REFINE_TOP, QUICK_REFINE_POPSIZE, QUICK_REFINE_GENERATIONS = 1, 4, 3
+QUICK_DT = 5e-3
+"""--quick: time step, s (630 steps per 3.15-s cycle): the quick run checks the study's
+pipeline, whose fits simulate whole cycles."""
 STAGES = ("refine", "screen")
 """The stages in ranking order: a refined form above every screened one."""
 RECORD_INTERVAL_S = 0.01
@@ -553,7 +556,7 @@ def build_parser():
     parser.add_argument("--resume", action="store_true",
                         help="reuse the finished candidates in --out (same definition)")
     cli.add_model_flags(parser, fixed=("gait",))
-    cli.add_dt_flag(parser)
+    cli.add_dt_flag(parser, quick=QUICK_DT)
     cli.add_execution_flags(parser)
     return parser
 

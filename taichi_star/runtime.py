@@ -310,7 +310,7 @@ class Runtime:
                 sensitive) + gpu
 
     def free_engine(self, model: BatchModel, solver: SolverConfig,
-                    sensitive: bool = False) -> "EngineSlot":
+                    sensitive: bool = False) -> EngineSlot:
         """The slot of an engine for this batch that no living Simulator holds (one is built if
         there is none): `simulate` calls and Simulators draw on the same engines, so a Simulator
         made after a `simulate` of the same topology, terms and integrator (or after another
