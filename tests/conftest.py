@@ -19,9 +19,10 @@ def short_compile_error_positions():
     only if that kernel fails to compile. The suite is nearly all compilation (the kernels'
     runs took ~2 % of the time of the five slowest test files, measured) and these excerpts
     10-20 % of an engine's first call (measured: the paper engine 3.4 -> 2.7 s, the accurate
-    one 6.9 -> 6.3 s): here each position is file, line and function only. Compiled code and results are unchanged; a compile error
-    raised in a test names its line without the excerpt. Left alone if Taichi's compiler does
-    not have the method (another Taichi version)."""
+    one 6.9 -> 6.3 s): here each position is file, line and function only. Compiled code and
+    results are unchanged; a compile error raised in a test names its line without the
+    excerpt. Left alone if Taichi's compiler does not have the method (another Taichi
+    version)."""
     from taichi.lang.ast import ast_transformer_utils
 
     context = getattr(ast_transformer_utils, "ASTTransformerContext", None)

@@ -220,9 +220,10 @@ class GoalReachingBatch:
         return self._simulator
 
     def close(self):
-        """Let go of the Simulator: its engine (compiled kernels, device memory) returns to the
-        process's runtime, which gives it to the next Simulator of the same topology, terms and
-        integrator instead of compiling another. Closing again does nothing."""
+        """Let go of the Simulator: once nothing else refers to it, its engine (compiled
+        kernels, device memory) is free in the process's runtime, which gives it to the next
+        Simulator of the same topology, terms and integrator instead of compiling another.
+        Closing again does nothing."""
         self._simulator = None
 
     def reset(self, rows: np.ndarray, generators: Sequence[np.random.Generator],
