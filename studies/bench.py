@@ -6,7 +6,6 @@
                             [--scenario-batch 64] [--workers-list 1,2] [--no-cache-probe]
                             [--presets paper,accurate] [--accurate-duration 3.15]
                             [--gpu-block-dims 64] [--layouts instance_minor,instance_major]
-                            [--gpu-max-registers 0,128,96]
                             [--kernel-optimisation on,off]
 
 Gait A1+A3, the paper's discretisation (N = 193 nodes), h = 1 ms, implicit Euler. For every batch
@@ -48,11 +47,8 @@ iteration's fewer factorisations make its `factor_us` an upper bound).
 
 GPU alternatives (`--arch gpu`): the B sweep is repeated for every threads-per-block count
 (`--gpu-block-dims`) and layout of the per-instance fields (`--layouts`: instance_minor, the
-same element of consecutive instances adjacent; instance_major, the CPU's layout) and cap on
-registers per thread (`--gpu-max-registers`, 0 for none: fewer registers let more warps run at
-once, at the price of spills), each a compiled engine of its own; a cap is the outer loop (a
-fresh initialisation each), and a value may repeat ("0,96,0,96") so that the alternatives
-interleave. The memory-bound floor of an engine whose Newton matrix lives in
+same element of consecutive instances adjacent; instance_major, the CPU's layout), each a
+compiled engine of its own. The memory-bound floor of an engine whose Newton matrix lives in
 device memory: per Newton iteration the Jacobian blocks are written by the assembly, read and
 written by the in-place LU and read by the solve (4 × n_slots 2×2 blocks), plus the node
 vectors (`bytes_per_step`, at the window's mean iterations per step; Newton rows only: chord
@@ -84,7 +80,7 @@ and 4 parameters (`simulate(..., sensitivities=...)`; its cost against the same 
 Writes `bench.csv` (`bench_gpu.csv` for --arch gpu): one row per measurement; `section` is
 "batch" (B sweep), "skip" (terms at one B), "plain", "sensitivities", "processes" or "compile"
 (cold/warm cache); columns: machine,
-cpu_model, cores, gpu, gpu_driver, arch, preset, layout, block_dim, max_registers, section, scenario, terms, batch_size, precision, n_nodes, dt_s,
+cpu_model, cores, gpu, gpu_driver, arch, preset, layout, block_dim, section, scenario, terms, batch_size, precision, n_nodes, dt_s,
 gait, warmup_steps, steps, repeats, commit, timestamp, import_s, setup_s, compile_s,
 time_to_first_step_s, robot_steps_per_s, real_time_factor (= robot_steps_per_s × dt: simulated
 robot-seconds per wall second), step_us, newton_iterations_mean, assembly_us, factor_us,
@@ -113,8 +109,8 @@ from taichi_star import SolverConfig, StarParams, simulate
 from taichi_star.experiment import PAPER_GAITS
 from taichi_star.batch import LocalProcesses, run_batch
 from taichi_star.profiling import EngineProfile, device_bandwidth
-from taichi_star.runtime import (GPU_BLOCK_DIM, GPU_INSTANCE_MINOR, GPU_MAX_REGISTERS,
-                                 GPU_MAX_REGISTERS_RANGE, Runtime, kernel_optimisation_default)
+from taichi_star.runtime import (GPU_BLOCK_DIM, GPU_INSTANCE_MINOR, Runtime,
+                                 kernel_optimisation_default)
 
 from . import cli, provenance
 
@@ -169,7 +165,7 @@ LAYOUTS = ("instance_minor", "instance_major")
 PRESETS = ("paper", "accurate")
 
 COLUMNS = ["machine", "cpu_model", "cores", "gpu", "gpu_driver", "arch", "preset", "layout",
-           "block_dim", "max_registers", "kernel_optimisation", "section", "scenario", "terms",
+           "block_dim", "kernel_optimisation", "section", "scenario", "terms",
            "batch_size", "precision", "jacobian", "workers", "n_nodes", "dt_s", "gait",
            "warmup_steps", "steps", "repeats", "commit", "timestamp", "import_s", "setup_s",
            "compile_s", "time_to_first_step_s", "robot_steps_per_s", "real_time_factor",
@@ -428,10 +424,6 @@ def build_parser():
     parser.add_argument("--gpu-block-dims", default=str(GPU_BLOCK_DIM),
                         help="comma list of threads per GPU block (powers of two up to 1024), "
                              "--arch gpu only")
-    parser.add_argument("--gpu-max-registers", default=str(GPU_MAX_REGISTERS),
-                        help="comma list of register caps per GPU thread (0: none, or "
-                             f"{GPU_MAX_REGISTERS_RANGE[0]}-{GPU_MAX_REGISTERS_RANGE[1]}), "
-                             "--arch gpu only")
     parser.add_argument("--layouts", default="instance_minor" if GPU_INSTANCE_MINOR else
                         "instance_major",
                         help=f"comma list of {', '.join(LAYOUTS)}: the GPU layout of the "
@@ -491,16 +483,9 @@ def parse_args(argv):
         if block_dim > 1024 or block_dim & (block_dim - 1):
             raise cli.StudyArgumentError(f"--gpu-block-dims: each must be a power of two up to "
                                          f"1024, got {block_dim}")
-    args.gpu_max_registers = cli.parse_values(args.gpu_max_registers, "--gpu-max-registers", int)
-    low, high = GPU_MAX_REGISTERS_RANGE
-    for cap in args.gpu_max_registers:
-        if not (cap == 0 or low <= cap <= high):
-            raise cli.StudyArgumentError(f"--gpu-max-registers: each must be 0 (no cap) or in "
-                                         f"[{low}, {high}], got {cap}")
-    if args.arch == "cpu" and (len(args.layouts) > 1 or len(args.gpu_block_dims) > 1
-                               or args.gpu_max_registers != [GPU_MAX_REGISTERS]):
-        raise cli.StudyArgumentError("--layouts, --gpu-block-dims and --gpu-max-registers "
-                                     "compare GPU settings; use them with --arch gpu")
+    if args.arch == "cpu" and (len(args.layouts) > 1 or len(args.gpu_block_dims) > 1):
+        raise cli.StudyArgumentError("--layouts and --gpu-block-dims compare GPU settings; "
+                                     "use them with --arch gpu")
     if not (0.0 < args.accurate_duration <= 100.0):
         raise cli.StudyArgumentError(f"--accurate-duration must be in (0, 100] s, got "
                                      f"{args.accurate_duration}")
@@ -540,25 +525,23 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
             row = rows[-1]
             print(f"  {row['section']:<7} {row['scenario']:<12} {row.get('preset', ''):<8} "
                   f"{row.get('layout', '')} {row.get('block_dim', '')} "
-                  f"{_cap_text(row.get('max_registers'))}"
                   f"{row.get('jacobian', '')} B={row['batch_size']:<5} {row['precision']}: "
                   f"{row.get('robot_steps_per_s', math.nan):12.0f} robot-steps/s, "
                   f"{row.get('real_time_factor', math.nan):10.1f} robot-s/s, "
                   f"compile {row.get('compile_s', math.nan):6.2f} s", flush=True)
 
     gpu = args.arch != "cpu"
-    settings = [(cap, layout, block_dim) for cap in args.gpu_max_registers
-                for layout in args.layouts for block_dim in args.gpu_block_dims]
+    settings = [(layout, block_dim) for layout in args.layouts for block_dim in args.gpu_block_dims]
     compilers = [(optimise, precision) for optimise in args.kernel_optimisation
                  for precision in args.precisions]
     for index, (optimise, precision) in enumerate(compilers):
         Runtime.current().configure_compiler(optimise)
         bandwidth = device_bandwidth(args.arch, precision) if gpu else math.nan
-        for cap, layout, block_dim in settings if gpu else [(math.nan, "instance_major", 1)]:
+        for layout, block_dim in settings if gpu else [("instance_major", 1)]:
             if gpu:
-                Runtime.current().configure_gpu(block_dim, layout == "instance_minor", cap)
-            place = {"layout": layout, "block_dim": block_dim, "max_registers": cap,
-                     "bandwidth_gb_s": bandwidth, "kernel_optimisation": on_off(optimise)}
+                Runtime.current().configure_gpu(block_dim, layout == "instance_minor")
+            place = {"layout": layout, "block_dim": block_dim, "bandwidth_gb_s": bandwidth,
+                     "kernel_optimisation": on_off(optimise)}
             if "paper" in args.presets:
                 for jacobian in args.jacobians:
                     for batch in args.batch_sizes:
@@ -609,15 +592,6 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
     return pd.DataFrame(rows).reindex(columns=COLUMNS)
 
 
-def _cap_text(cap) -> str:
-    """", ≤N registers" for a register cap, "" for none (0) or a CPU row."""
-    try:
-        cap = int(cap)
-    except (TypeError, ValueError):
-        return ""
-    return f", ≤{cap} registers" if cap else ""
-
-
 def plot_bench(csv_path, png_path):
     """Three panels from a bench CSV: throughput against B (log-log, one line per precision,
     the target dashed, real-time factor on the right axis); the phase split per
@@ -626,8 +600,6 @@ def plot_bench(csv_path, png_path):
     table = pd.read_csv(csv_path, dtype={"commit": str})  # a hash like 83e1667 reads as a float
     if "kernel_optimisation" not in table:
         table["kernel_optimisation"] = "on"  # tables from before the setting: the passes ran
-    if "max_registers" not in table:
-        table["max_registers"] = math.nan  # tables from before the setting: no cap
     compilers = table["kernel_optimisation"].dropna().unique()
     arch = str(table["arch"].iloc[0])
     sweep = table[table["section"] == "batch"]
@@ -636,15 +608,13 @@ def plot_bench(csv_path, png_path):
     fig.get_layout_engine().set(wspace=0.12)  # room for the real-time factor axis
 
     ax = axes[0]
-    lines = ["precision", "jacobian", "preset", "layout", "block_dim", "max_registers",
-             "kernel_optimisation"]
+    lines = ["precision", "jacobian", "preset", "layout", "block_dim", "kernel_optimisation"]
     sweep = sweep.assign(**{name: sweep[name].fillna("") for name in lines})
     for key, part in sweep[sweep["preset"] != "accurate"].groupby(lines, sort=False):
-        precision, jacobian, _, layout, block_dim, cap, optimise = key
+        precision, jacobian, _, layout, block_dim, optimise = key
         # rounds of the same setting: the fastest counts, as within a measurement
         best = part.groupby("batch_size")["robot_steps_per_s"].max()
-        place = (f", {layout}, {int(block_dim)}/block{_cap_text(cap)}" if arch != "cpu"
-                 else ", in-process")
+        place = f", {layout}, {int(block_dim)}/block" if arch != "cpu" else ", in-process"
         compiler = f", IR optimisation {optimise}" if len(compilers) > 1 else ""
         ax.plot(best.index, best.to_numpy(), "o-",
                 label=f"{precision}, {jacobian}{place}{compiler}")
@@ -675,8 +645,7 @@ def plot_bench(csv_path, png_path):
                             (axes[2], skip, "{scenario}\nB={batch_size} {precision}")):
         # rounds of one setting: the fastest
         part = part.sort_values("robot_steps_per_s").drop_duplicates(
-            ["scenario", "batch_size", "precision", "kernel_optimisation", "layout", "block_dim",
-             "max_registers"],
+            ["scenario", "batch_size", "precision", "kernel_optimisation", "layout", "block_dim"],
             keep="last").sort_index()
         names = [label.format(**row) for row in part.to_dict("records")]
         bottom = np.zeros(len(part))

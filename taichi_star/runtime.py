@@ -44,13 +44,6 @@ GPU_BLOCK_DIM = 32
 """Threads (one instance each) per GPU block; chosen by `python -m studies bench --arch gpu`."""
 GPU_INSTANCE_MINOR = True
 """GPU layout of the per-instance fields: instance-minor (coalesced); chosen by the same bench."""
-GPU_MAX_REGISTERS = 0
-"""Registers a GPU thread may use (`ti.init(gpu_max_reg=...)`, the CUDA driver's cap when it
-loads a kernel); 0 leaves the choice to the compiler. A lower cap lets more warps share a
-multiprocessor at the price of spilling to local memory; `python -m studies bench --arch gpu
---gpu-max-registers ...` measures the alternatives."""
-GPU_MAX_REGISTERS_RANGE = (16, 255)
-"""The caps CUDA accepts besides 0 (sm_50 and later)."""
 KERNEL_OPTIMISATION = True
 """Taichi's advanced IR optimisation passes (`ti.init(advanced_optimization=...)`): on, an engine
 steps faster; off, it compiles in well under half the time; the bits are the same either way
@@ -220,7 +213,6 @@ class Runtime:
         self.cpu_threads: Optional[int] = None
         self.gpu_block_dim = GPU_BLOCK_DIM
         self.gpu_instance_minor = GPU_INSTANCE_MINOR
-        self.gpu_max_registers = GPU_MAX_REGISTERS
         self.kernel_optimisation = kernel_optimisation_default()
         self.log_level = ti.WARN
         self.engines: Dict[tuple, List[EngineSlot]] = {}
@@ -251,8 +243,6 @@ class Runtime:
         if self.arch == arch and self.precision == precision:
             return
         threads = {} if self.cpu_threads is None else {"cpu_max_num_threads": self.cpu_threads}
-        if arch != "cpu":
-            threads["gpu_max_reg"] = self.gpu_max_registers
         # ti.init prints "[Taichi] Starting on arch=..." unconditionally; warnings still go to
         # Taichi's logger, except a taken cache lock's (module docstring)
         with contextlib.redirect_stdout(io.StringIO()):
@@ -266,23 +256,13 @@ class Runtime:
         self.arch, self.precision = arch, precision
         self.engines.clear()
 
-    def configure_gpu(self, block_dim: int = GPU_BLOCK_DIM, instance_minor: bool = GPU_INSTANCE_MINOR,
-                      max_registers: int = GPU_MAX_REGISTERS):
+    def configure_gpu(self, block_dim: int = GPU_BLOCK_DIM, instance_minor: bool = GPU_INSTANCE_MINOR):
         """GPU launch and layout settings of the engines built from now on (for benchmarks that
-        compare them; the defaults are the measured best). A new `max_registers` (see
-        GPU_MAX_REGISTERS) takes a re-initialisation: Taichi applies it at `ti.init`."""
+        compare them; the defaults are the measured best)."""
         if block_dim < 1 or block_dim > 1024 or block_dim & (block_dim - 1):
             raise ValueError(f"block_dim must be a power of two in [1, 1024], got {block_dim}")
-        low, high = GPU_MAX_REGISTERS_RANGE
-        if not (max_registers == 0 or low <= max_registers <= high):
-            raise ValueError(f"max_registers must be 0 (no cap) or in [{low}, {high}], got "
-                             f"{max_registers}")
         self.gpu_block_dim = int(block_dim)
         self.gpu_instance_minor = bool(instance_minor)
-        if int(max_registers) != self.gpu_max_registers:
-            self.gpu_max_registers = int(max_registers)
-            if self.arch != "cpu":
-                self.arch = None
 
     def configure_compiler(self, kernel_optimisation: Optional[bool] = None):
         """Whether Taichi's advanced IR optimisation compiles the engines (see
@@ -324,9 +304,8 @@ class Runtime:
 
     def engine_key(self, model: BatchModel, solver: SolverConfig, sensitive: bool = False) -> tuple:
         """What an engine is compiled for: topology and terms, integrator, capacity, whether it
-        carries tangents and, on a GPU, its launch, layout and register settings."""
-        gpu = ((self.gpu_block_dim, self.gpu_instance_minor, self.gpu_max_registers)
-               if self.arch != "cpu" else ())
+        carries tangents and, on a GPU, its launch and layout settings."""
+        gpu = (self.gpu_block_dim, self.gpu_instance_minor) if self.arch != "cpu" else ()
         return (model.engine_key, solver.integrator, batch_capacity(model.batch_size),
                 sensitive) + gpu
 

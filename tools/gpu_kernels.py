@@ -3,13 +3,12 @@ occupancy runs this under Nsight Compute): `simulate` of B instances of the accu
 a few steps with its adaptive solver, then with fixed steps of the same model, so that one
 launch of each (`advance_adaptive`, `advance`) can be profiled.
 
-    python tools/gpu_kernels.py [--arch gpu] [--batch 8192] [--duration 0.02] [--max-registers 0]
+    python tools/gpu_kernels.py [--arch gpu] [--batch 8192] [--duration 0.02]
 """
 
 import argparse
 
 import taichi_star as ts
-from taichi_star.runtime import Runtime
 
 
 def main():
@@ -17,10 +16,7 @@ def main():
     parser.add_argument("--arch", default="gpu")
     parser.add_argument("--batch", type=int, default=8192)
     parser.add_argument("--duration", type=float, default=0.02)
-    parser.add_argument("--max-registers", type=int, default=0,
-                        help="registers a GPU thread may use (0: no cap)")
     args = parser.parse_args()
-    Runtime.current().configure_gpu(max_registers=args.max_registers)
     params = [ts.StarParams.preset("accurate", gait="A1+A3")] * args.batch
     adaptive = ts.SolverConfig.preset("accurate")
     fixed = ts.SolverConfig.preset("accurate", adaptive=False, dt=1e-3, jacobian="newton")

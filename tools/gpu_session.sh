@@ -18,16 +18,14 @@
 #   layouts      the layout and block-size alternatives at B = 8192 (paper, f64, Newton)
 #   bench        the GPU benchmark into $OUT (results/bench_gpu.csv when committed), one part
 #                per call: PRESETS=paper|accurate, PRECISIONS=f64|f32, SIZES=..., LIMIT=seconds,
-#                JACOBIANS (default newton,chord), DURATION (the accurate preset's simulated
-#                seconds, default one period) and CAPS (registers per thread, default 0: none;
-#                "0,96,0,96" interleaves two settings)
+#                JACOBIANS (default newton,chord) and DURATION (the accurate preset's simulated
+#                seconds, default one period)
 #   compare      the B sweep of PRESETS (default paper; f64, SIZES) with this checkout,
 #                then with a baseline commit's source exported into .base/ (ignored by git):
 #                  mkdir .base && git archive BASE taichi_star studies | tar -x -C .base
 #                back to back on the same card, LIMIT seconds each
 #   occupancy    Nsight Compute's launch and occupancy figures of the accurate preset's two step
-#                kernels (adaptive and fixed steps, tools/gpu_kernels.py at BATCH instances,
-#                CAP registers per thread, default 0: none)
+#                kernels (adaptive and fixed steps, tools/gpu_kernels.py at BATCH instances)
 # Correctness runs at most LIMIT seconds of tests (default 300) and FIG4C=0 skips its study.
 # Everything it writes is packed into $OUT/PHASE.tar.gz (the device returns few files).
 set -o pipefail
@@ -79,7 +77,7 @@ bench)
     timeout "${LIMIT:-540}" python3 -m studies bench --arch gpu \
         --batch-sizes "${SIZES:-256,1024,4096,8192,16384,32768,65536}" \
         --precisions "${PRECISIONS:-f64}" --presets "${PRESETS:-paper}" \
-        --jacobians "${JACOBIANS:-newton,chord}" --gpu-max-registers "${CAPS:-0}" \
+        --jacobians "${JACOBIANS:-newton,chord}" \
         ${DURATION:+--accurate-duration "$DURATION"} --scenarios "${SCENARIOS:-none}" \
         --scenario-batch 8192 --workers-list none \
         --no-cache-probe --no-plain-call --sensitivity-counts none --out "$work/bench" 2>&1 | tee "$work/bench.log"
@@ -100,12 +98,11 @@ occupancy)
 launch__occupancy_limit_registers,launch__block_size,launch__grid_size,\
 sm__warps_active.avg.pct_of_peak_sustained_active,smsp__thread_inst_executed_per_inst_executed.ratio,\
 gpu__time_duration.sum,l1tex__t_bytes_pipe_lsu_mem_local_op_ld.sum,dram__bytes.sum \
-        python3 tools/gpu_kernels.py --batch "${BATCH:-8192}" --max-registers "${CAP:-0}" 2>&1 | tee "$work/ncu.log"
+        python3 tools/gpu_kernels.py --batch "${BATCH:-8192}" 2>&1 | tee "$work/ncu.log"
     ;;
 *)
     echo "unknown phase $phase"; exit 2 ;;
 esac
 status=$?
-tar -czf "$OUT/$phase${PRESETS:+_${PRESETS//,/_}}${PRECISIONS:+_${PRECISIONS//,/_}}${CAP:+_cap$CAP}.tar.gz" \
-    -C "$work" .
+tar -czf "$OUT/$phase${PRESETS:+_${PRESETS//,/_}}${PRECISIONS:+_${PRECISIONS//,/_}}.tar.gz" -C "$work" .
 exit $status

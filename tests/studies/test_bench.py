@@ -84,13 +84,6 @@ def test_bench_quick(tmp_path, monkeypatch):
     ("bench", ["--scenario-batch", "-1"], "--scenario-batch must be >= 1"),
     ("bench", ["--workers-list", "0"], "--workers-list: every value must be >= 1"),
     ("bench", ["--kernel-optimisation", "fast"], "--kernel-optimisation: unknown value 'fast'"),
-    # CUDA's register caps: 0 or 16..255, both ends; a valid cap is still a GPU-only setting
-    ("bench", ["--gpu-max-registers", "15"],
-     "--gpu-max-registers: each must be 0 (no cap) or in [16, 255], got 15"),
-    ("bench", ["--gpu-max-registers", "256"],
-     "--gpu-max-registers: each must be 0 (no cap) or in [16, 255], got 256"),
-    ("bench", ["--gpu-max-registers", "16"], "compare GPU settings; use them with --arch gpu"),
-    ("bench", ["--gpu-max-registers", "0,255"], "compare GPU settings; use them with --arch gpu"),
     ("work_precision", ["--cycles", "0"], "--cycles must be > 0"),
     ("work_precision", ["--gaits", "A1,A9"], "unknown actuator 'A9'"),
     ("work_precision", ["--gaits", "A1,A1"], "listed twice"),

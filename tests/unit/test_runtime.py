@@ -27,39 +27,6 @@ def test_configure_compiler_takes_only_a_bool():
         runtime.Runtime().configure_compiler("on")
 
 
-@pytest.mark.parametrize("cap", [-1, 15, 256])
-def test_configure_gpu_refuses_a_register_cap_cuda_does_not_take(cap):
-    with pytest.raises(ValueError, match=rf"max_registers must be 0 \(no cap\) or in \[16, 255\], "
-                                         rf"got {cap}"):
-        runtime.Runtime().configure_gpu(max_registers=cap)
-
-
-@pytest.mark.parametrize("arch, cap, reinitialise", [
-    ("gpu", 16, True), ("gpu", 255, True), ("gpu", runtime.GPU_MAX_REGISTERS, False),
-    ("cpu", 96, False)])
-def test_a_new_register_cap_reinitialises_only_a_gpu_runtime(arch, cap, reinitialise):
-    """Taichi takes the cap at ti.init: a GPU runtime must start again for a different one; the
-    CPU ignores it (and Taichi's CPU backend refuses any but 0), so a CPU runtime stays up."""
-    state = runtime.Runtime()
-    state.arch = arch
-    state.configure_gpu(max_registers=cap)
-    assert state.gpu_max_registers == cap
-    assert (state.arch is None) is reinitialise
-
-
-@pytest.mark.parametrize("arch, passed", [("cpu", None), ("cuda", 96)])
-def test_the_register_cap_reaches_ti_init_on_a_gpu_only(monkeypatch, arch, passed):
-    calls = []
-    monkeypatch.setattr(runtime, "check_arch", lambda arch: None)
-    monkeypatch.setattr(runtime, "_open_kernel_cache", lambda: None)
-    monkeypatch.setattr(runtime.ti, "init", lambda **kwargs: calls.append(kwargs))
-    monkeypatch.setattr(runtime.ti, "set_logging_level", lambda level: None)
-    state = runtime.Runtime()
-    state.configure_gpu(max_registers=96)
-    state.ensure(arch)
-    assert calls[0].get("gpu_max_reg") == passed
-
-
 CACHE_PROBE = """
 import sys, taichi as ti
 if sys.argv[1] == "populate":
