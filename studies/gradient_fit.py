@@ -15,7 +15,9 @@ The objective is `taichi_star.identification`'s trajectory objective on the trai
 (`studies.identify.ParameterRange`: `:log` axes in the logarithm, as the CMA-ES studies fit
 them). Sets: "6", the six axes of `calibrate` (α, rod added mass, C⊥, C∥, C_c, limb stiffness);
 "20", those six, the eight actuator gains and six more per-robot fields (hub added mass,
-Young's modulus, the two densities, hub mass per height, thickness).
+Young's modulus, the two densities, hub mass per height, thickness); "20fired", twenty that the
+measured gaits can all move (the six, the gains of A1-A5, the delays of A2-A4, the six
+per-robot fields: no measured gait fires A6-A8, so their gains have zero derivatives).
 
 - L-BFGS-B (scipy, bounds [0, 1] per axis) gets the objective and its gradient from one run
   with sensitivities (`simulate(..., sensitivities=...)`, `identification.objective_and_gradient`,
@@ -73,11 +75,20 @@ PARAMETER_SETS = {
           "drag_parallel=0.001:0.1:log", "cylinder_drag=1:100:log",
           "limb_stiffness_ratio=10:1000:log"],
 }
+ROBOT_FIELDS = ["cylinder_added_mass_coeff=0:2", "youngs_modulus=1e6:2.5e7:log",
+                "actuator_density=1500:4000", "foam_density=300:1200",
+                "cylinder_mass_per_height=0.5:2", "thickness=0.002:0.005"]
 PARAMETER_SETS["20"] = PARAMETER_SETS["6"] + [
-    f"actuator_gains[{k}]=0.3:2" for k in range(1, 9)] + [
-    "cylinder_added_mass_coeff=0:2", "youngs_modulus=1e6:2.5e7:log",
-    "actuator_density=1500:4000", "foam_density=300:1200",
-    "cylinder_mass_per_height=0.5:2", "thickness=0.002:0.005"]
+    f"actuator_gains[{k}]=0.3:2" for k in range(1, 9)] + ROBOT_FIELDS
+FIRED_ACTUATORS = range(1, 6)
+"""The actuators the measured gaits fire (A1-A5: A1, A1+A2, A1+A3, A1+A4, A1+A3+A5)."""
+PARAMETER_SETS["20fired"] = PARAMETER_SETS["6"] + [
+    f"actuator_gains[{k}]=0.3:2" for k in FIRED_ACTUATORS] + [
+    f"actuator_delays[{k}]=0:0.3" for k in (2, 3, 4)] + ROBOT_FIELDS
+"""Twenty parameters that the five measured gaits can all move: set "20" has the gains of
+A6-A8, which no measured gait fires (their derivatives are exactly zero); here the gains of the
+fired actuators and the firing delays of A2-A4 after A1 (A1's own delay is a shift of the whole
+gait, which the fitted phase absorbs; A5 fires only with A3)."""
 """The fitted boxes by name: calibrate's six axes, and twenty (six + eight gains + six)."""
 CORNER_GROUP = 10
 """Axes whose 2^k corners are checked together (`identify.check_box`): the 20-axis box in two

@@ -8,6 +8,7 @@ import pytest
 from studies import gradient_fit, identify
 from studies.__main__ import main as studies_main
 from taichi_star import SolverConfig, StarParams
+from taichi_star.experiment import PAPER_GAITS
 
 
 @pytest.mark.parametrize("argv, message", [
@@ -39,6 +40,19 @@ def test_the_twenty_parameter_set_extends_the_six():
     assert len(gradient_fit.PARAMETER_SETS["6"]) == 6
     assert len(gradient_fit.PARAMETER_SETS["20"]) == 20
     assert gradient_fit.PARAMETER_SETS["20"][:6] == gradient_fit.PARAMETER_SETS["6"]
+
+
+def test_the_fired_set_names_only_what_the_measured_gaits_move():
+    """Twenty distinct parameters, the six first; per-actuator ones only of actuators some
+    measured gait fires, and no delay of A1 (a shift of the whole gait: the fitted phase)."""
+    fired = gradient_fit.PARAMETER_SETS["20fired"]
+    box = [identify.parse_range_spec(text, "--sets") for text in fired]
+    assert len(fired) == 20 and len({text.split("=")[0] for text in fired}) == 20
+    assert fired[:6] == gradient_fit.PARAMETER_SETS["6"]
+    moved = {int(a[1:]) for gait in PAPER_GAITS for a in gait.split("+")}
+    actuators = [int(text.split("[")[1].split("]")[0]) for text in fired if "[" in text]
+    assert set(actuators) <= moved and "actuator_delays[1]" not in str(fired)
+    assert len(box) == 20
 
 
 def test_the_cost_ratio_is_the_fastest_gradient_run_over_the_fastest_plain_one(monkeypatch):
