@@ -84,14 +84,14 @@ FIRED_ACTUATORS = range(1, 6)
 """The actuators the measured gaits fire (A1-A5: A1, A1+A2, A1+A3, A1+A4, A1+A3+A5)."""
 PARAMETER_SETS["20fired"] = PARAMETER_SETS["6"] + [
     f"actuator_gains[{k}]=0.3:2" for k in FIRED_ACTUATORS] + [
-    f"actuator_delays[{k}]=0.0005:0.3" for k in (2, 3, 4)] + ROBOT_FIELDS
+    f"actuator_delays[{k}]=0.0005:0.2995" for k in (2, 3, 4)] + ROBOT_FIELDS
 """Twenty parameters that the five measured gaits can all move: set "20" has the gains of
 A6-A8, which no measured gait fires (their derivatives are exactly zero); here the gains of the
 fired actuators and the firing delays of A2-A4 after A1 (A1's own delay is a shift of the whole
-gait, which the fitted phase absorbs; A5 fires only with A3). The delays start half a default
-step (0.5 ms) after A1's firing, not at it: a delay on the step grid puts the actuation
+gait, which the fitted phase absorbs; A5 fires only with A3). Both ends of the delays' box lie
+half a default step (0.5 ms) off the step grid: a delay on the grid puts the actuation
 profile's switch on a step end, where the run jumps as the delay passes and has no derivative
-by it (the sensitivities warn)."""
+by it (the sensitivities warn), and a fit often ends at a bound."""
 """The fitted boxes by name: calibrate's six axes, and twenty (six + eight gains + six)."""
 CORNER_GROUP = 10
 """Axes whose 2^k corners are checked together (`identify.check_box`): the 20-axis box in two
