@@ -6,7 +6,8 @@ residuals, against CMA-ES on the same objective, box and start, for two paramete
                                    [--train-cycles 1:3] [--validate-cycles 4:6]
                                    [--starts 2] [--lbfgs-evaluations 8]
                                    [--least-squares-evaluations 8]
-                                   [--cma-generations 8] [--popsize P] [--seed S]
+                                   [--cma-generations 8] [--polish-evaluations 0]
+                                   [--popsize P] [--seed S]
                                    [--preset paper|accurate] [--set NAME=VALUE ...] [--dt S]
                                    [--arch cpu|gpu] [--out DIR] [--quick]
 
@@ -30,6 +31,9 @@ per-robot fields: no measured gait fires A6-A8, so their gains have zero derivat
 - CMA-ES (`studies.identify.minimise_cmaes`) from the base model, step 0.25, population
   `--popsize` (cma's default 4 + 3 ln D when not given), `--cma-generations` generations, one
   batched run per generation.
+- CMA-ES + least squares (`--polish-evaluations`, off by default): the least-squares fit from
+  CMA-ES's best point, its rows' costs and wall time counted on top of CMA-ES's whole run (a
+  global search, then Gauss-Newton steps to polish its result).
 
 Cost, per optimiser: evaluations (a CMA-ES point; a gradient optimiser's simulation with
 sensitivities), wall time, and simulated robot-seconds = instances × simulated seconds,
@@ -102,7 +106,9 @@ RECORD_INTERVAL_S = 0.01
 """Centroid records, s (as model_select's fits)."""
 LEAST_SQUARES = "least-squares"
 """The least-squares optimiser's name in the tables."""
-GRADIENT_OPTIMISERS = ("L-BFGS-B", LEAST_SQUARES)
+POLISH = "CMA-ES + least-squares"
+"""Least squares from CMA-ES's best point (`--polish-evaluations`): its costs include CMA-ES's."""
+GRADIENT_OPTIMISERS = ("L-BFGS-B", LEAST_SQUARES, POLISH)
 """Optimisers whose evaluations are runs with sensitivities."""
 FAILED_OBJECTIVE = 1e6
 """Objective told to the gradient fits for a failed simulation (with a zero gradient)."""
@@ -123,6 +129,20 @@ class Recorder:
         self.started = time.perf_counter()
         self.best_objective, self.best_units = math.inf, None
         self.robot_seconds = self.cost_equivalent = 0.0
+
+    @classmethod
+    def continuing(cls, previous: "Recorder", optimiser: str, on_add=None) -> "Recorder":
+        """A recorder for an optimiser that starts where `previous` ended (a polish of its
+        best point): its robot-seconds, wall time and best point carried over, so that its rows
+        give the two optimisers' cost together."""
+        recorder = cls(previous.parameter_set, optimiser, on_add)
+        last = previous.rows[-1]
+        recorder.robot_seconds = last["robot_seconds"]
+        recorder.cost_equivalent = last["robot_seconds_cost_equivalent"]
+        recorder.started -= last["wall_s"]
+        recorder.best_objective = previous.best_objective
+        recorder.best_units = np.array(previous.best_units, dtype=float)
+        return recorder
 
     def add(self, units, objective, robot_seconds, cost_equivalent, start=0):
         self.robot_seconds += robot_seconds
@@ -279,19 +299,20 @@ def fit_lbfgs(problem: Problem, starts: int, max_evaluations: int, seed: int,
     return recorder
 
 
-def fit_least_squares(problem: Problem, starts: int, max_evaluations: int, seed: int,
-                      recorder: Recorder, cost_ratio: float) -> Recorder:
+def fit_least_squares(problem: Problem, points, max_evaluations: int, recorder: Recorder,
+                      cost_ratio: float) -> Recorder:
     """Multi-start trust-region least squares over the unit box (scipy's `least_squares`,
     method "dogbox": Gauss-Newton steps on the residuals' Jacobian, a dogleg within a
     rectangular trust region that the bounds [0, 1] of each axis clip; axes scaled by the
-    Jacobian's columns), from the same starts as `fit_lbfgs`; every simulation (residuals and
+    Jacobian's columns), from each of `points` (unit coordinates: `start_points`, as
+    `fit_lbfgs`, or another optimiser's best point to polish); every simulation (residuals and
     Jacobian from one run with sensitivities, reused when scipy asks for the Jacobian at that
     point) into `recorder`. Dogbox rather than scipy's default "trf": from the base model
     (two gaits, one cycle) trf went 5,550 → 374 → 95 on the 20-parameter set and 5,550 → 412
     → 66 on the six, dogbox 5,550 → 57.5 and 5,550 → 67.6 (measured before choosing)."""
     from scipy.optimize import least_squares
     parameter_set = recorder.parameter_set
-    for start, x0 in enumerate(start_points(problem, starts, seed)):
+    for start, x0 in enumerate(points):
         latest = {}
 
         def evaluate(units, start=start):
@@ -418,6 +439,10 @@ def build_parser():
                              "leaves the least-squares fit out")
     parser.add_argument("--cma-generations", type=int, default=8, quick=2,
                         help="CMA-ES generations")
+    parser.add_argument("--polish-evaluations", type=int, default=0,
+                        help="simulations of a least-squares fit from CMA-ES's best point "
+                             f"(optimiser '{POLISH}', its costs counted on top of CMA-ES's); "
+                             "0 (default) leaves it out")
     parser.add_argument("--popsize", type=int, default=None,
                         help="CMA-ES population (default cma's 4 + 3 ln D)")
     parser.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
@@ -433,9 +458,10 @@ def main(argv=None):
                         ("--cma-generations", args.cma_generations)):
         if value < 1:
             raise cli.StudyArgumentError(f"{flag} must be >= 1, got {value}")
-    if args.least_squares_evaluations < 0:
-        raise cli.StudyArgumentError(f"--least-squares-evaluations must be >= 0, got "
-                                     f"{args.least_squares_evaluations}")
+    for flag, value in (("--least-squares-evaluations", args.least_squares_evaluations),
+                        ("--polish-evaluations", args.polish_evaluations)):
+        if value < 0:
+            raise cli.StudyArgumentError(f"{flag} must be >= 0, got {value}")
     if args.popsize is not None and args.popsize < 2:
         raise cli.StudyArgumentError(f"--popsize must be >= 2, got {args.popsize}")
     train, validate = identify.parse_windows(args.train_cycles, args.validate_cycles)
@@ -457,6 +483,7 @@ def main(argv=None):
                                            "least_squares_evaluations":
                                                args.least_squares_evaluations,
                                            "cma_generations": args.cma_generations,
+                                           "polish_evaluations": args.polish_evaluations,
                                            "popsize": args.popsize, "seed": args.seed,
                                            "sets": {n: PARAMETER_SETS[n] for n in sets}})
     problems, recorders, cost_ratios = {}, [], {}
@@ -467,8 +494,9 @@ def main(argv=None):
 
     for name in sets:
         problems[name] = Problem(boxes[name], base, gaits, trials, train, solver, args.arch)
-        recorders.append(Recorder(name, "CMA-ES", write_history))
-        fit_cma(problems[name], args.cma_generations, args.popsize, args.seed, recorders[-1])
+        cma = Recorder(name, "CMA-ES", write_history)
+        recorders.append(cma)
+        fit_cma(problems[name], args.cma_generations, args.popsize, args.seed, cma)
         cost_ratios[name] = measure_cost_ratio(problems[name])
         print(f"set {name}: a gradient call costs {cost_ratios[name]:.2f} runs", flush=True)
         recorders.append(Recorder(name, "L-BFGS-B", write_history))
@@ -476,8 +504,13 @@ def main(argv=None):
                   recorders[-1], cost_ratios[name])
         if args.least_squares_evaluations:
             recorders.append(Recorder(name, LEAST_SQUARES, write_history))
-            fit_least_squares(problems[name], args.starts, args.least_squares_evaluations,
-                              args.seed, recorders[-1], cost_ratios[name])
+            fit_least_squares(problems[name], start_points(problems[name], args.starts,
+                                                           args.seed),
+                              args.least_squares_evaluations, recorders[-1], cost_ratios[name])
+        if args.polish_evaluations:
+            recorders.append(Recorder.continuing(cma, POLISH, write_history))
+            fit_least_squares(problems[name], [cma.best_units], args.polish_evaluations,
+                              recorders[-1], cost_ratios[name])
     table = summarise(recorders, problems, validate, cost_ratios)
     out.write_csv(table, "gradient_fit.csv")
     out.wrote(plot_history(out.path("gradient_fit_history.csv"),

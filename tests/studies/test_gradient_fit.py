@@ -2,6 +2,8 @@
 on stderr, exit code 2 (its numbers come from identification.objective_and_gradient, tested in
 tests/unit/test_identification_gradient.py, and from the committed run in results/)."""
 
+import time
+
 import numpy as np
 import pytest
 
@@ -11,11 +13,56 @@ from taichi_star import SolverConfig, StarParams
 from taichi_star.experiment import PAPER_GAITS
 
 
+def test_a_polish_starts_at_cma_best_point_and_counts_its_cost_on_top(monkeypatch):
+    """The polish recorder carries CMA-ES's robot-seconds (both counts), wall time and best
+    point; least squares then starts at that point (its first simulation), and its rows add each
+    call to CMA-ES's totals; its best stays CMA-ES's until a call beats it."""
+    box = [identify.parse_range_spec(text, "--sets") for text in gradient_fit.PARAMETER_SETS["6"]]
+    base = StarParams(gait="A1+A2")
+    problem = gradient_fit.Problem(box, base, ["A1+A2"], {}, (1, 1), SolverConfig(), "cpu")
+    cma = gradient_fit.Recorder("6", "CMA-ES")
+    cma_best = np.full(6, 0.3)
+    for units, objective in ((np.full(6, 0.9), 9.0), (cma_best, 4.0), (np.full(6, 0.6), 5.0)):
+        cma.add(units, objective, 10.0, 10.0)
+    cma.rows[-1]["wall_s"] = 7.0  # as if CMA-ES had run for 7 s
+    polish = gradient_fit.Recorder.continuing(cma, gradient_fit.POLISH)
+    assert (polish.robot_seconds, polish.cost_equivalent) == (30.0, 30.0)
+    assert polish.best_objective == 4.0 and np.array_equal(polish.best_units, cma_best)
+    assert polish.best_units is not cma.best_units
+    assert time.perf_counter() - polish.started >= 7.0
+    # residuals r = u − 0.5: the minimum (0 at u = 0.5) is one Gauss-Newton step away
+    points = []
+
+    def residuals_and_jacobian(units):
+        points.append(np.array(units))
+        return np.asarray(units) - 0.5, np.eye(6)
+
+    monkeypatch.setattr(problem, "residuals_and_jacobian", residuals_and_jacobian)
+    gradient_fit.fit_least_squares(problem, [polish.best_units], 5, polish, cost_ratio=2.0)
+    np.testing.assert_array_equal(points[0], cma_best)
+    first = polish.rows[0]
+    # the point's own value (6 · 0.2² = 0.24), below CMA-ES's 4.0: it becomes the best
+    assert first["objective"] == pytest.approx(0.24) == first["best_objective"]
+    window = base.period
+    assert first["robot_seconds"] == pytest.approx(30.0 + window * 13)
+    assert first["robot_seconds_cost_equivalent"] == pytest.approx(30.0 + window * 2.0)
+    assert polish.best_objective == pytest.approx(0.0, abs=1e-12)
+    np.testing.assert_allclose(polish.best_units, 0.5, atol=1e-6)
+    # a call that does not beat CMA-ES's best (0.1 here) leaves it the best
+    cma.add(np.full(6, 0.45), 0.1, 10.0, 10.0)
+    kept = gradient_fit.Recorder.continuing(cma, gradient_fit.POLISH)
+    gradient_fit.fit_least_squares(problem, [np.full(6, 0.3)], 1, kept, cost_ratio=2.0)
+    assert kept.rows[0]["objective"] == pytest.approx(0.24)
+    assert kept.rows[0]["best_objective"] == 0.1
+    np.testing.assert_array_equal(kept.best_units, np.full(6, 0.45))
+
+
 @pytest.mark.parametrize("argv, message", [
     (["--sets", "7"], "--sets: unknown value '7'"),
     (["--starts", "0"], "--starts must be >= 1"),
     (["--lbfgs-evaluations", "0"], "--lbfgs-evaluations must be >= 1"),
     (["--least-squares-evaluations", "-1"], "--least-squares-evaluations must be >= 0"),
+    (["--polish-evaluations", "-1"], "--polish-evaluations must be >= 0"),
     (["--cma-generations", "0"], "--cma-generations must be >= 1"),
     (["--popsize", "1"], "--popsize must be >= 2"),
     (["--train-cycles", "0:3"], "--train-cycles: expected FIRST:LAST"),
@@ -133,8 +180,9 @@ def test_the_least_squares_fit_finds_a_linear_problems_minimum_and_simulates_eac
         return matrix @ units - target, matrix
 
     monkeypatch.setattr(problem, "residuals_and_jacobian", residuals_and_jacobian)
-    recorder = gradient_fit.fit_least_squares(problem, 1, 20, 0, gradient_fit.Recorder(
-        "6", gradient_fit.LEAST_SQUARES), cost_ratio=2.5)
+    recorder = gradient_fit.fit_least_squares(
+        problem, gradient_fit.start_points(problem, 1, 0), 20,
+        gradient_fit.Recorder("6", gradient_fit.LEAST_SQUARES), cost_ratio=2.5)
     # scipy's default tolerances stop the linear problem within ~1e-8 of the minimum's value
     assert recorder.best_objective == pytest.approx(minimum, rel=1e-6)
     np.testing.assert_allclose(recorder.best_units, best_units + np.linalg.lstsq(
