@@ -65,6 +65,26 @@ def test_a_wrong_or_ambiguous_quote_is_reported(results_page):
     assert len(unknown) == 1 and "no column 'no_such_column'" in unknown[0].expected
 
 
+def test_every_marker_is_read_or_reported(results_page):
+    """A selector value with spaces is read in quotes and a column may hold '+'; a marker that
+    the pattern cannot read (no number right before it, two spaces, an unquoted value with
+    spaces) is reported, never skipped."""
+    polish = 'gradient_fit/set20fired_polish/gradient_fit.csv optimiser="CMA-ES + least-squares"'
+    assert results_page.check_quotes("page", f"187.0<!-- {polish} objective -->") == []
+    wrong = results_page.check_quotes("page", f"187.9<!-- {polish} objective -->")
+    assert [m.quoted for m in wrong] == ["187.9"]
+    plus = "calibration_best.csv signed_speed_A1+A2"
+    value = float(results_page.cell("calibration_best.csv", {}, "signed_speed_A1+A2"))
+    assert results_page.check_quotes("page", f"{value:.3f}<!-- {plus} -->") == []
+    assert len(results_page.check_quotes("page", f"{value + 1:.3f}<!-- {plus} -->")) == 1
+    for unreadable in ("0.796 <!-- fig4c.csv gait=A1+A4 sim_speed_mm_s -->",
+                       "0.796<!-- fig4c.csv  gait=A1+A4 sim_speed_mm_s -->",
+                       "187.0<!-- gradient_fit/set20fired_polish/gradient_fit.csv "
+                       "optimiser=CMA-ES + least-squares objective -->"):
+        problems = results_page.check_quotes("page", unreadable)
+        assert [m.what for m in problems] == ["unreadable marker"], unreadable
+
+
 def test_a_hand_edited_generated_table_is_reported(results_page, tmp_path):
     text = "<!-- generated: fig4c_table -->\n| stale |\n<!-- end generated -->\n"
     regenerated = results_page.regenerate_blocks(text)

@@ -14,11 +14,12 @@ Two markups tie a page's figures to the CSVs:
   (the names are the keys of BLOCKS);
 - a quoted figure, checked (not rewritten): the number followed by an HTML comment naming its
   cell, ``0.852<!-- fig4c_accurate.csv gait=A1+A4 sim_speed_mm_s -->``: the CSV (relative to
-  results/), selectors COLUMN=VALUE that pick exactly one row (compared as the CSV's text), the
-  column, and optionally a transform of the cell: ``abs``, ``neg`` (−value), ``x1000``
+  results/), selectors COLUMN=VALUE that pick exactly one row (compared as the CSV's text;
+  ``COLUMN="A VALUE"`` for one with spaces), the column, and optionally a transform of the cell: ``abs``, ``neg`` (−value), ``x1000``
   (any factor), ``%`` (×100). The number must be the cell rounded to the number's decimals
   (thousands separators and the minus sign − allowed; a power of ten as ``5.5·10⁻⁷``).
-  Readers see only the number.
+  Readers see only the number. A comment that names a CSV but does not read as such a marker
+  (no number right before it, a stray space) is reported, not skipped.
 """
 
 from __future__ import annotations
@@ -42,7 +43,12 @@ BLOCK = re.compile(r"(<!-- generated: (?P<name>\w+) -->\n)(?P<body>.*?)(<!-- end
                    re.S)
 QUOTE = re.compile(
     r"(?P<number>[-−+]?\d[\d,]*(?:\.\d+)?(?:·10[⁻]?[⁰¹²³⁴⁵⁶⁷⁸⁹]+)?)<!-- (?P<file>[\w./-]+\.csv)"
-    r"(?P<selectors>(?: [\w.]+=[^\s=]+)*) (?P<column>\w+)(?: (?P<transform>abs|neg|%|x[\d.]+))? -->")
+    r'(?P<selectors>(?: [\w.]+=(?:"[^"]*"|[^\s="]+))*) (?P<column>[\w+]+)'
+    r"(?: (?P<transform>abs|neg|%|x[\d.]+))? -->")
+SELECTOR = re.compile(r'([\w.]+)=(?:"([^"]*)"|([^\s="]+))')
+"""One selector of a marker: COLUMN=VALUE, or COLUMN="VALUE WITH SPACES"."""
+MARKER = re.compile(r"<!-- [\w./-]+\.csv\b.*?-->")
+"""Anything that looks like a figure's marker: one QUOTE cannot read is reported, not skipped."""
 
 SMALL_TABLE_ROWS = 12
 """A CSV of at most this many rows is shown whole on the generated page."""
@@ -111,8 +117,15 @@ def quoted_number_matches(quoted: str, value: float) -> bool:
 def check_quotes(page: str, text: str) -> List[Mismatch]:
     """Every quoted figure of `text` that is not its CSV cell (or names no single cell)."""
     problems = []
+    read = {match.start("number") + len(match["number"]) for match in QUOTE.finditer(text)}
+    for marker in MARKER.finditer(text):
+        if marker.start() not in read:
+            problems.append(Mismatch(page, "unreadable marker", marker.group(),
+                                     "NUMBER<!-- FILE.csv [COLUMN=VALUE ...] COLUMN "
+                                     "[abs|neg|%|xF] --> (a value with spaces in quotes)"))
     for match in QUOTE.finditer(text):
-        selectors = dict(item.split("=", 1) for item in match["selectors"].split())
+        selectors = {key: quoted if quoted or not bare else bare
+                     for key, quoted, bare in SELECTOR.findall(match["selectors"])}
         what = f"{match['file']} {match['selectors'].strip()} {match['column']}".replace("  ", " ")
         try:
             value = apply_transform(float(cell(match["file"], selectors, match["column"])),
