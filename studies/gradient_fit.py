@@ -397,23 +397,26 @@ def summarise(recorders: Sequence[Recorder], problem_of, validate,
 
 
 def plot_history(csv_path, png_path) -> Path:
-    """Best objective so far against robot-seconds (replicas counted as instances), one panel
-    per parameter set, one line per optimiser (from gradient_fit_history.csv)."""
+    """Best objective so far against robot-seconds, one column of panels per parameter set, one
+    line per optimiser (from gradient_fit_history.csv): above with every replica counted as an
+    instance, below with a gradient call counted at its measured cost (cost-equivalent)."""
     plt = cli.use_agg()
     table = pd.read_csv(csv_path, dtype={"parameter_set": str})
     sets = list(dict.fromkeys(table["parameter_set"]))
-    fig, axes = plt.subplots(1, len(sets), figsize=(5.2 * len(sets), 4.2), squeeze=False)
-    for ax, parameter_set in zip(axes[0], sets):
+    fig, axes = plt.subplots(2, len(sets), figsize=(5.2 * len(sets), 8.0), squeeze=False)
+    counts = (("robot_seconds", "robot-seconds, replicas counted as instances"),
+              ("robot_seconds_cost_equivalent", "robot-seconds, a call at its measured cost"))
+    for column, parameter_set in enumerate(sets):
         part = table[table["parameter_set"] == parameter_set]
-        for optimiser, rows in part.groupby("optimiser"):
-            ax.step(rows["robot_seconds"], rows["best_objective"], where="post",
-                    label=optimiser)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("simulated robot-seconds (replicas counted as instances)")
-        ax.set_ylabel("best trajectory objective so far")
-        ax.set_title(f"{parameter_set} parameters", fontsize=9)
-        ax.legend(fontsize=8)
+        for (count, label), ax in zip(counts, axes[:, column]):
+            for optimiser, rows in part.groupby("optimiser"):
+                ax.step(rows[count], rows["best_objective"], where="post", label=optimiser)
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.set_xlabel(label)
+            ax.set_ylabel("best trajectory objective so far")
+            ax.set_title(f"{parameter_set} parameters", fontsize=9)
+            ax.legend(fontsize=8)
     settings = cli.run_settings(csv_path)
     if settings:
         fig.suptitle(settings, fontsize=8)

@@ -5,6 +5,7 @@ tests/unit/test_identification_gradient.py, and from the committed run in result
 import time
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from studies import gradient_fit, identify
@@ -55,6 +56,43 @@ def test_a_polish_starts_at_cma_best_point_and_counts_its_cost_on_top(monkeypatc
     assert kept.rows[0]["objective"] == pytest.approx(0.24)
     assert kept.rows[0]["best_objective"] == 0.1
     np.testing.assert_array_equal(kept.best_units, np.full(6, 0.45))
+
+
+def test_the_history_plot_draws_both_counts_from_the_csv(tmp_path, monkeypatch):
+    """Two parameter sets, two optimisers each: a column of two panels per set, the robot-seconds
+    with replicas counted above and the cost-equivalent ones below, one step line per
+    optimiser whose points are the CSV's (cost, best objective) pairs."""
+    rows = []
+    for parameter_set in ("6", "20"):
+        for optimiser, scale in (("CMA-ES", 1.0), (gradient_fit.LEAST_SQUARES, 0.25)):
+            recorder = gradient_fit.Recorder(parameter_set, optimiser)
+            for objective in (9.0, 4.0, 5.0):
+                recorder.add([objective], objective, 10.0, 10.0 * scale)
+            rows += recorder.rows
+    csv_path = tmp_path / "gradient_fit_history.csv"
+    pd.DataFrame(rows).to_csv(csv_path, index=False)
+    drawn = {}
+
+    def keep(fig, png_path, dpi=130):
+        drawn["axes"] = fig.axes
+        return png_path
+
+    monkeypatch.setattr(gradient_fit.cli, "save_figure", keep)
+    gradient_fit.plot_history(csv_path, tmp_path / "gradient_fit.png")
+    axes = drawn["axes"]
+    assert len(axes) == 4
+    table = pd.read_csv(csv_path, dtype={"parameter_set": str})
+    for ax, (parameter_set, count) in zip(axes, [("6", "robot_seconds"), ("20", "robot_seconds"),
+                                                 ("6", "robot_seconds_cost_equivalent"),
+                                                 ("20", "robot_seconds_cost_equivalent")]):
+        assert ax.get_title() == f"{parameter_set} parameters"
+        lines = {line.get_label(): line for line in ax.get_lines()}
+        assert set(lines) == {"CMA-ES", gradient_fit.LEAST_SQUARES}
+        for optimiser, line in lines.items():
+            part = table[(table["parameter_set"] == parameter_set)
+                         & (table["optimiser"] == optimiser)]
+            np.testing.assert_array_equal(line.get_xdata(), part[count])
+            np.testing.assert_array_equal(line.get_ydata(), [9.0, 4.0, 4.0])
 
 
 @pytest.mark.parametrize("argv, message", [
