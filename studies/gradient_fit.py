@@ -82,6 +82,8 @@ PARAMETER_SETS = {
 ROBOT_FIELDS = ["cylinder_added_mass_coeff=0:2", "youngs_modulus=1e6:2.5e7:log",
                 "actuator_density=1500:4000", "foam_density=300:1200",
                 "cylinder_mass_per_height=0.5:2", "thickness=0.002:0.005"]
+"""The twenty-parameter sets' six per-robot fields (hub added mass, Young's modulus, the two
+densities, the hub's mass per height, thickness)."""
 PARAMETER_SETS["20"] = PARAMETER_SETS["6"] + [
     f"actuator_gains[{k}]=0.3:2" for k in range(1, 9)] + ROBOT_FIELDS
 FIRED_ACTUATORS = range(1, 6)
@@ -89,14 +91,14 @@ FIRED_ACTUATORS = range(1, 6)
 PARAMETER_SETS["20fired"] = PARAMETER_SETS["6"] + [
     f"actuator_gains[{k}]=0.3:2" for k in FIRED_ACTUATORS] + [
     f"actuator_delays[{k}]=0.0005:0.2995" for k in (2, 3, 4)] + ROBOT_FIELDS
-"""Twenty parameters that the five measured gaits can all move: set "20" has the gains of
-A6-A8, which no measured gait fires (their derivatives are exactly zero); here the gains of the
-fired actuators and the firing delays of A2-A4 after A1 (A1's own delay is a shift of the whole
-gait, which the fitted phase absorbs; A5 fires only with A3). Both ends of the delays' box lie
-half a default step (0.5 ms) off the step grid: a delay on the grid puts the actuation
-profile's switch on a step end, where the run jumps as the delay passes and has no derivative
-by it (the sensitivities warn), and a fit often ends at a bound."""
-"""The fitted boxes by name: calibrate's six axes, and twenty (six + eight gains + six)."""
+"""The fitted boxes by name: calibrate's six axes; "20", six + eight gains + six per-robot
+fields; "20fired", twenty that the five measured gaits can all move. Set "20" has the gains of
+A6-A8, which no measured gait fires (their derivatives are exactly zero); "20fired" has the
+gains of the fired actuators and the firing delays of A2-A4 after A1 (A1's own delay is a
+shift of the whole gait, which the fitted phase absorbs; A5 fires only with A3). Both ends of
+the delays' box lie half a default step (0.5 ms) off the step grid: a delay on the grid puts
+the actuation profile's switch on a step end, where the run jumps as the delay passes and has
+no derivative by it (the sensitivities warn), and a fit often ends at a bound."""
 CORNER_GROUP = 10
 """Axes whose 2^k corners are checked together (`identify.check_box`): the 20-axis box in two
 groups; no limit between fields ties an axis of one group to one of the other."""

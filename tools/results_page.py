@@ -15,9 +15,10 @@ Two markups tie a page's figures to the CSVs:
 - a quoted figure, checked (not rewritten): the number followed by an HTML comment naming its
   cell, ``0.852<!-- fig4c_accurate.csv gait=A1+A4 sim_speed_mm_s -->``: the CSV (relative to
   results/), selectors COLUMN=VALUE that pick exactly one row (compared as the CSV's text;
-  ``COLUMN="A VALUE"`` for one with spaces), the column, and optionally a transform of the cell: ``abs``, ``neg`` (−value), ``x1000``
-  (any factor), ``%`` (×100). The number must be the cell rounded to the number's decimals
-  (thousands separators and the minus sign − allowed; a power of ten as ``5.5·10⁻⁷``).
+  ``COLUMN="A VALUE"`` for one with spaces), the column, and optionally a transform of the
+  cell: ``abs``, ``neg`` (−value), ``x1000`` (any factor), ``%`` (×100). The number must be
+  the cell rounded to the number's decimals (thousands separators and the minus sign −
+  allowed; a power of ten as ``5.5·10⁻⁷``).
   Readers see only the number. A comment that names a CSV but does not read as such a marker
   (no number right before it, a stray space) is reported, not skipped.
 """
