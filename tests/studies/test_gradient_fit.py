@@ -127,6 +127,18 @@ def test_the_twenty_parameter_set_extends_the_six():
     assert gradient_fit.PARAMETER_SETS["20"][:6] == gradient_fit.PARAMETER_SETS["6"]
 
 
+def test_a_plain_run_fits_only_parameters_its_gaits_move():
+    """The default sets on the default gaits (all five measured): every per-actuator axis is
+    of an actuator that some gait fires (set "20" would add three with zero derivatives)."""
+    args = gradient_fit.build_parser().parse_args([])
+    gaits = identify.measured_gaits(args.gaits)
+    fired = {int(a[1:]) for gait in gaits for a in gait.split("+")}
+    for name in args.sets.split(","):
+        box = [identify.parse_range_spec(text, "--sets") for text in
+               gradient_fit.PARAMETER_SETS[name]]
+        assert {axis.index for axis in box if axis.index is not None} <= fired, name
+
+
 def test_the_fired_set_names_only_what_the_measured_gaits_move():
     """Twenty distinct parameters, the six first; per-actuator ones only of actuators some
     measured gait fires, and no delay of A1 (a shift of the whole gait: the fitted phase)."""
