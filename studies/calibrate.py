@@ -267,6 +267,7 @@ def main(argv=None):
         raise cli.StudyArgumentError("--cross-validate: needs at least two gaits in --gaits")
     box = [identify.parse_range_spec(text, "--fit") for text in args.fit]
     base = identify.model_with_box(args, box, "--fit")
+    identify.note_unfired_axes("calibrate", "--fit", box, gaits)
     measurements = identify.measurement_table(gaits, args.weights)
     solver = cli.solver(args)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},

@@ -478,6 +478,8 @@ def main(argv=None):
     base = cli.base_params(args)
     boxes = {name: [identify.parse_range_spec(text, "--sets") for text in PARAMETER_SETS[name]]
              for name in sets}
+    for name, box in boxes.items():
+        identify.note_unfired_axes("gradient_fit", f"set {name}", box, gaits)
     for box in boxes.values():  # every corner of each group of CORNER_GROUP axes (2^20 is
         for group in range(0, len(box), CORNER_GROUP):  # too many; the groups share no limit)
             identify.check_box(box[group:group + CORNER_GROUP], base, "--sets")

@@ -23,13 +23,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 from dataclasses import dataclass
 from typing import Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
 import pandas as pd
 
-from taichi_star import STAR_RANGES, StarParams, identification
+from taichi_star import PER_ACTUATOR_FIELDS, STAR_RANGES, Gait, StarParams, identification
 from taichi_star.batch import run_batch
 from taichi_star.experiment import (PAPER_DIRECTIONS, PAPER_GAITS, experimental_cycle_speeds,
                                     experimental_speeds)
@@ -367,6 +368,29 @@ def measured_gaits(text: str, flag: str = "--gaits") -> List[str]:
             raise cli.StudyArgumentError(f"{flag} {gait}: not measured; the measured gaits are "
                                          f"{', '.join(PAPER_GAITS)}")
     return gaits
+
+
+def unfired_axes(box: Sequence[ParameterRange], gaits: Sequence[str]) -> List[str]:
+    """Labels of the box's per-actuator axes (NAME[k]) whose actuator A_k none of `gaits`
+    fires: nothing those gaits do depends on them (their derivatives are exactly zero), so no
+    fit to those gaits can identify them."""
+    fired = {actuator for gait in gaits for actuator in Gait.parse(gait).actuators}
+    return [axis.label for axis in box
+            if axis.name in PER_ACTUATOR_FIELDS and axis.index not in fired]
+
+
+def note_unfired_axes(study: str, what: str, box: Sequence[ParameterRange],
+                      gaits: Sequence[str]):
+    """Name on stderr, before a fit starts, the box's axes that the fitted gaits cannot move
+    (`unfired_axes`); `what` names the box ("--fit", "set 20")."""
+    idle = unfired_axes(box, gaits)
+    if idle:
+        one = len(idle) == 1
+        print(f"{study}: note: {what}: {', '.join(idle)} "
+              f"{'belongs to an actuator' if one else 'belong to actuators'} that no fitted gait "
+              f"fires ({', '.join(gaits)}): the fit does not depend on "
+              f"{'it' if one else 'them'} and cannot identify {'it' if one else 'them'}",
+              file=sys.stderr)
 
 
 def parse_windows(train_text: str, validate_text: str) -> Tuple[Tuple[int, int], Tuple[int, int]]:

@@ -127,16 +127,50 @@ def test_the_twenty_parameter_set_extends_the_six():
     assert gradient_fit.PARAMETER_SETS["20"][:6] == gradient_fit.PARAMETER_SETS["6"]
 
 
+def box_of(name):
+    return [identify.parse_range_spec(text, "--sets") for text in gradient_fit.PARAMETER_SETS[name]]
+
+
+@pytest.mark.parametrize("name, gaits, idle", [
+    ("20", ["A1+A2", "A1+A3"], [f"actuator_gains[{k}]" for k in range(4, 9)]),
+    ("20", list(PAPER_GAITS), [f"actuator_gains[{k}]" for k in range(6, 9)]),
+    ("20fired", list(PAPER_GAITS), []),
+    ("20fired", ["A1+A3"], ["actuator_gains[2]", "actuator_gains[4]", "actuator_gains[5]",
+                            "actuator_delays[2]", "actuator_delays[4]"]),
+    ("6", ["A1"], []),
+])
+def test_unfired_axes_are_the_per_actuator_ones_no_gait_fires(name, gaits, idle):
+    assert identify.unfired_axes(box_of(name), gaits) == idle
+
+
 def test_a_plain_run_fits_only_parameters_its_gaits_move():
-    """The default sets on the default gaits (all five measured): every per-actuator axis is
-    of an actuator that some gait fires (set "20" would add three with zero derivatives)."""
+    """The default sets on the default gaits (all five measured) have no unfired axis (set
+    "20" would have three, with zero derivatives)."""
     args = gradient_fit.build_parser().parse_args([])
     gaits = identify.measured_gaits(args.gaits)
-    fired = {int(a[1:]) for gait in gaits for a in gait.split("+")}
     for name in args.sets.split(","):
-        box = [identify.parse_range_spec(text, "--sets") for text in
-               gradient_fit.PARAMETER_SETS[name]]
-        assert {axis.index for axis in box if axis.index is not None} <= fired, name
+        assert identify.unfired_axes(box_of(name), gaits) == [], name
+
+
+def test_a_set_with_unfired_axes_is_named_on_stderr_before_any_fit(monkeypatch, tmp_path,
+                                                                     capsys):
+    class Stop(Exception):
+        pass
+
+    def stop(*args, **kwargs):
+        raise Stop
+    monkeypatch.setattr(gradient_fit, "fit_cma", stop)
+    with pytest.raises(Stop):
+        gradient_fit.main(["--sets", "20", "--gaits", "A1+A2,A1+A3", "--out", str(tmp_path),
+                           "--no-progress"])
+    assert ("set 20: actuator_gains[4], actuator_gains[5], actuator_gains[6], "
+            "actuator_gains[7], actuator_gains[8] belong to actuators that no fitted gait "
+            "fires (A1+A2, A1+A3)") in capsys.readouterr().err
+    # a set the gaits move all of gets no note
+    with pytest.raises(Stop):
+        gradient_fit.main(["--sets", "20fired", "--out", str(tmp_path / "fired"),
+                           "--no-progress"])
+    assert "note" not in capsys.readouterr().err
 
 
 def test_the_fired_set_names_only_what_the_measured_gaits_move():

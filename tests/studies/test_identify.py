@@ -176,6 +176,25 @@ def quick_speeds(points, gaits):
     return summary["signed_speed_mm_s"].to_numpy().reshape(len(points), len(gaits))
 
 
+def test_calibrate_names_fitted_gains_no_gait_fires_before_it_fits(no_compute, monkeypatch,
+                                                                  tmp_path, capsys):
+    class Stop(Exception):
+        pass
+
+    def stop(*args, **kwargs):
+        raise Stop
+    monkeypatch.setattr(identify, "measurement_table", stop)  # the step after the note
+    for fit, note in (("actuator_gains[7]=0.3:2", "--fit: actuator_gains[7] belongs to an "
+                                                  "actuator that no fitted gait fires (A1, "
+                                                  "A1+A2): the fit does not depend on it"),
+                      ("actuator_gains[2]=0.3:2", None)):
+        with pytest.raises(Stop):
+            calibrate.main(["--fit", fit, "--gaits", "A1,A1+A2", "--out", str(tmp_path),
+                            "--no-progress"])
+        error = capsys.readouterr().err
+        assert (note in error) if note else ("note" not in error), error
+
+
 def test_calibrate_quick_against_a_direct_simulation(tmp_path):
     calibrate.main(["--out", str(tmp_path), *QUICK])
     evaluations = pd.read_csv(tmp_path / "calibration.csv")
