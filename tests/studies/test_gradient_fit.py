@@ -166,11 +166,17 @@ def test_a_set_with_unfired_axes_is_named_on_stderr_before_any_fit(monkeypatch, 
     assert ("set 20: actuator_gains[4], actuator_gains[5], actuator_gains[6], "
             "actuator_gains[7], actuator_gains[8] belong to actuators that no fitted gait "
             "fires (A1+A2, A1+A3)") in capsys.readouterr().err
-    # a set the gaits move all of gets no note
+    # a set the gaits move all of, on the default one-cycle window, gets no note
     with pytest.raises(Stop):
         gradient_fit.main(["--sets", "20fired", "--out", str(tmp_path / "fired"),
                            "--no-progress"])
     assert "note" not in capsys.readouterr().err
+    # a two-cycle window is the shortest whose gradient holds the phases
+    with pytest.raises(Stop):
+        gradient_fit.main(["--sets", "6", "--train-cycles", "1:2", "--out",
+                           str(tmp_path / "two"), "--no-progress"])
+    assert ("--train-cycles 1:2: on a window of more than one cycle the gradient holds each "
+            "gait's fitted phase") in capsys.readouterr().err
 
 
 def test_the_fired_set_names_only_what_the_measured_gaits_move():
