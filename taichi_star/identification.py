@@ -46,22 +46,26 @@ to the sensitivities' own accuracy:
   has no derivative and 0 is a subgradient);
 - ρ = max(0, −sΔ)/σ has dρ = −s·dΔ/σ where −sΔ > 0 and 0 where −sΔ ≤ 0 (the left derivative
   at the kink: the direction already right);
-- the phase φ per trial is held at its fitted value. It minimises the curve misfit
-  Σ(d_sim − d_meas)², so at an interior optimum its own derivative drops out (envelope
-  theorem) of every term proportional to that misfit; at the edge of its range (0 or
-  `latest_phase`) the bound is active and φ does not move. What is left out is ∂J/∂φ·dφ/dθ
-  through σ(φ) (the measured spread at the phase) and ρ/σ. It is zero when σ is at its floor
-  `DISPLACEMENT_FLOOR_MM` (a one-cycle window: the gradient is then that of the re-fitted
-  objective, as tests/unit/test_identification_gradient.py checks), and it is not small
-  otherwise: on that test's synthetic three-cycle window the held-phase gradient differs from
-  central differences of the re-fitted objective by 15–40 %. On multi-cycle windows the result
-  is the exact gradient of the objective at the held phases, not of the re-fitted one.
+- the phase φ per trial is re-fitted at every θ, and it moves with θ. It minimises the curve
+  misfit M = Σ(d_sim − d_meas)², so its own derivative drops out (envelope theorem) of every
+  term proportional to that misfit; what remains is ∂J/∂φ·dφ/dθ through σ(φ) (the measured
+  spread at the phase) and ρ/σ (`phase_motion`). The implicit function theorem on ∂M/∂φ = 0
+  gives dφ/dθ = −(∂²M/∂φ∂θ)/(∂²M/∂φ²), with ∂²M/∂φ∂θ = −2 Σ (∂d_sim/∂θ)·(∂d_meas/∂φ): the
+  φ-derivatives are of the measured data alone (central differences with step
+  `PHASE_STEP_S`, within one linear piece of the interpolated video track), the θ-derivatives
+  those of the records. The term is zero, and left out, when σ is at its floor
+  `DISPLACEMENT_FLOOR_MM` (always on a one-cycle window), when the phase is given (held), and
+  at the edge of its range (0 or `latest_phase`), where the bound holds it. On the synthetic
+  three-cycle window of tests/unit/test_identification_gradient.py it is 19–40 % of the
+  gradient, which then equals central differences of the re-fitted objective.
 
 The objective is a sum of squares, and `objective_residuals` gives it in that form: the
 residuals r (every gait's curve residuals and ρ, scaled so that Σ r² is the objective) and
-their Jacobian J from the same record derivatives, for a Gauss-Newton or trust-region
-least-squares fit (`scipy.optimize.least_squares(fun, x0, jac=...)`); the gradient above is
-2·Jᵀr.
+their Jacobian J from the same record derivatives, at the fitted phases held, for a
+Gauss-Newton or trust-region least-squares fit (`scipy.optimize.least_squares(fun, x0,
+jac=...)`; holding the nuisance parameters in the Jacobian is Kaufman's form of variable
+projection); the gradient above is 2·Jᵀr plus `phase_motion`, which is zero on a one-cycle
+window.
 """
 
 from __future__ import annotations
@@ -90,6 +94,10 @@ DISPLACEMENT_FLOOR_MM = 0.05
 """Smallest spread σ, mm: the centroid tracking jitters by a few hundredths of a millimetre
 from frame to frame (the median frame-to-frame speed change of the recordings is 2–2.7 mm/s,
 i.e. ≈ 0.04 mm per frame)."""
+PHASE_STEP_S = 1e-5
+"""Step of the central differences in the phase (`phase_motion`), s: far inside one video
+frame (the track is linear between frames), so the differences are exact for most curve
+samples; their rounding, ~1e-16·M/h², is ~1e-6 of ∂²M/∂φ² on the paper's data."""
 GOLDEN_ITERATIONS = 40
 """Golden-section steps of the phase refinement: the bracket of two grid cells shrinks by
 0.618^40 ≈ 4e-9 of itself."""
@@ -461,17 +469,63 @@ def objective_residuals(simulated: Mapping[str, SimulatedRun],
             pd.DataFrame(rows, columns=TRIAL_COLUMNS))
 
 
+def trial_phase_motion(simulated: SimulatedRun, derivative_xy: np.ndarray, trial: Trial,
+                       fit: TrialFit, cycles=TRAINING_CYCLES,
+                       samples: int = SAMPLES_PER_CYCLE) -> np.ndarray:
+    """The part of the trial objective's gradient (P,) that comes from its fitted phase moving
+    with θ: ∂J/∂φ · dφ/dθ (module docstring, "Gradient"); `fit` is the trial's `trial_fit` with
+    the phase fitted. Zero when σ is at its floor, at the phase's bounds, or where the misfit
+    is not convex in the phase."""
+    step = PHASE_STEP_S
+    phase, count = fit.phase_s, np.asarray(derivative_xy).shape[-1]
+    if (fit.sigma_mm <= DISPLACEMENT_FLOOR_MM or phase - step < 0.0
+            or phase + step > latest_phase(trial, cycles)):
+        return np.zeros(count)
+    first, last = check_window(cycles)
+    sim_curves = cycle_curves(simulated.path, 0.0, (first, last), samples)
+    below, above = (cycle_curves(trial.path, phase + sign * step, (first, last), samples)
+                    for sign in (-1.0, 1.0))
+    misfit = [float(((sim_curves - curves) ** 2).sum()) for curves in
+              (below, cycle_curves(trial.path, phase, (first, last), samples), above)]
+    curvature = (misfit[0] - 2.0 * misfit[1] + misfit[2]) / step ** 2
+    if curvature <= 0.0:
+        return np.zeros(count)
+    curve_derivative = _curve_derivative(simulated.path, np.asarray(derivative_xy, np.float64),
+                                         (first, last), samples)
+    mixed = -2.0 * np.einsum("cs,csp->p", (above - below) / (2.0 * step), curve_derivative)
+    objective = [trial_fit(simulated, trial, cycles, samples, phase + sign * step).objective
+                 for sign in (-1.0, 1.0)]
+    return (objective[1] - objective[0]) / (2.0 * step) * (-mixed / curvature)
+
+
 def objective_and_gradient(simulated: Mapping[str, SimulatedRun],
                            derivatives: Mapping[str, np.ndarray], trials: Mapping[str, Trial],
                            cycles=TRAINING_CYCLES, samples: int = SAMPLES_PER_CYCLE,
                            phases: Optional[Mapping[str, float]] = None
                            ) -> Tuple[float, np.ndarray, pd.DataFrame]:
     """The set's objective (`objective_of` of `trajectory_objective`), its gradient (P,) with
-    respect to the P parameters, 2·Jᵀr of `objective_residuals` (same arguments), and the
-    per-gait table."""
+    respect to the P parameters, and the per-gait table. The gradient is 2·Jᵀr of
+    `objective_residuals` (same arguments) plus, for phases fitted here, `phase_motion`: that
+    of the objective with the phases re-fitted at every θ."""
     residuals, jacobian, table = objective_residuals(simulated, derivatives, trials, cycles,
                                                      samples, phases)
-    return objective_of(table), 2.0 * jacobian.T @ residuals, table
+    gradient = 2.0 * jacobian.T @ residuals
+    if phases is None:
+        gradient = gradient + phase_motion(simulated, derivatives, trials, table, cycles,
+                                           samples)
+    return objective_of(table), gradient, table
+
+
+def phase_motion(simulated: Mapping[str, SimulatedRun], derivatives: Mapping[str, np.ndarray],
+                 trials: Mapping[str, Trial], table: pd.DataFrame, cycles=TRAINING_CYCLES,
+                 samples: int = SAMPLES_PER_CYCLE) -> np.ndarray:
+    """The set's `trial_phase_motion`s (P,), averaged as the objective averages the gaits;
+    `table`: the per-gait table of `objective_residuals` with the phases fitted there."""
+    fits = {row["gait"]: TrialFit(**row) for row in table.to_dict("records")}
+    motions = [trial_phase_motion(run, derivatives[gait], trials[gait],
+                                  fits[Gait.parse(gait).name], cycles, samples)
+               for gait, run in simulated.items()]
+    return np.mean(motions, axis=0)
 
 
 def record_derivatives(trajectory_sensitivities: pd.DataFrame, instance: int,

@@ -87,11 +87,11 @@ def test_gradient_equals_central_differences_at_held_phases(cycles):
     trials = {"A1+A2": measured_trial()}
     theta = (2.5, 1.2, 0.1)
     run, derivative = model_path(theta)
+    fitted = ident.trajectory_objective({"A1+A2": run}, trials, cycles, samples=16)
+    phases = {"A1+A2": float(fitted["phase_s"].iloc[0])}
     value, gradient, table = ident.objective_and_gradient(
-        {"A1+A2": run}, {"A1+A2": derivative}, trials, cycles, samples=16)
-    phases = {"A1+A2": float(table["phase_s"].iloc[0])}
-    assert value == pytest.approx(ident.objective_of(ident.trajectory_objective(
-        {"A1+A2": run}, trials, cycles, samples=16)), rel=1e-15)
+        {"A1+A2": run}, {"A1+A2": derivative}, trials, cycles, samples=16, phases=phases)
+    assert value == pytest.approx(ident.objective_of(fitted), rel=1e-15)
     expected = central_difference(theta, trials, cycles, phases)
     # the objective is a polynomial of degree ≤ 4 in θ away from Δp = 0 (squared distances
     # of affine paths, divided by a fixed σ): a central difference with step 1e-6 is exact to
@@ -114,14 +114,61 @@ def test_gradient_equals_central_differences_of_the_refitted_objective_with_sigm
     np.testing.assert_allclose(gradient, expected, rtol=1e-6, atol=1e-6 * abs(value))
 
 
+@pytest.mark.parametrize("forward_sign", [1.0, -1.0])
+def test_gradient_on_three_cycles_follows_the_refitted_phase(forward_sign):
+    """Three cycles: σ depends on the phase, which moves with θ; the gradient (held-phase part
+    plus `phase_motion`) equals central differences of the re-fitted objective. Step 1e-3: a
+    smaller one is swamped by the refit's own precision (~1e-9 s × ∂J/∂φ ≈ 16 / step); at 1e-3
+    the quotients' truncation was ~1e-6 of the largest component (measured 6e-7, 2e-6 and
+    5.6e-6 absolute on -6.5, -4.7 and -0.061). Backwards (forward_sign −1) the wrong-way
+    residual ρ = max(0, −sΔ)/σ(φ) moves with the phase too."""
+    trials = {"A1+A2": measured_trial()}
+    theta = (2.5, 1.2, 0.1)
+    run, derivative = model_path(theta, forward_sign)
+    value, gradient, table = ident.objective_and_gradient(
+        {"A1+A2": run}, {"A1+A2": derivative}, trials, (1, 3), samples=16)
+    assert table["sigma_mm"].iloc[0] > ident.DISPLACEMENT_FLOOR_MM
+    residuals, jacobian, _ = ident.objective_residuals(
+        {"A1+A2": run}, {"A1+A2": derivative}, trials, (1, 3), samples=16)
+    held = 2.0 * jacobian.T @ residuals
+    # the phase's motion is 14-40 % of the components here: leaving it out fails
+    assert np.all(np.abs(gradient - held) > 0.1 * np.abs(gradient))
+    assert (table["direction_residual"].iloc[0] > 0) == (forward_sign < 0)
+    expected = central_difference(theta, trials, (1, 3), forward_sign=forward_sign, step=1e-3)
+    np.testing.assert_allclose(gradient, expected, rtol=0, atol=1e-5 * np.abs(expected).max())
+
+
+@pytest.mark.parametrize("case", ["one cycle", "phase given", "phase at its bound"])
+def test_the_phase_motion_is_left_out_exactly_where_it_is_zero(monkeypatch, case):
+    """σ at its floor (envelope theorem), a held phase, and a phase at the edge of its range
+    (the bound holds it): the gradient is 2·Jᵀr of the residuals, bit for bit."""
+    trials = {"A1+A2": measured_trial()}
+    run, derivative = model_path((2.5, 1.2, 0.1))
+    cycles, phases = (1, 3), None
+    if case == "one cycle":
+        cycles = (1, 1)
+    elif case == "phase given":
+        phases = {"A1+A2": 0.41}
+    else:
+        monkeypatch.setattr(ident, "align_phase", lambda *args, **kwargs: 0.0)
+    _, gradient, table = ident.objective_and_gradient(
+        {"A1+A2": run}, {"A1+A2": derivative}, trials, cycles, samples=16, phases=phases)
+    residuals, jacobian, _ = ident.objective_residuals(
+        {"A1+A2": run}, {"A1+A2": derivative}, trials, cycles, samples=16, phases=phases)
+    np.testing.assert_array_equal(gradient, 2.0 * jacobian.T @ residuals)
+    if case != "one cycle":
+        assert table["sigma_mm"].iloc[0] > ident.DISPLACEMENT_FLOOR_MM
+
+
 def test_direction_residual_enters_the_gradient_only_when_the_robot_swims_the_wrong_way():
     trials = {"A1+A2": measured_trial()}
     theta = (2.5, 1.2, 0.1)
     run, derivative = model_path(theta, forward_sign=-1.0)
+    fitted = ident.trajectory_objective({"A1+A2": run}, trials, (1, 2), samples=16)
+    phases = {"A1+A2": float(fitted["phase_s"].iloc[0])}
     value, gradient, table = ident.objective_and_gradient(
-        {"A1+A2": run}, {"A1+A2": derivative}, trials, (1, 2), samples=16)
+        {"A1+A2": run}, {"A1+A2": derivative}, trials, (1, 2), samples=16, phases=phases)
     assert table["direction_residual"].iloc[0] > 0
-    phases = {"A1+A2": float(table["phase_s"].iloc[0])}
     expected = central_difference(theta, trials, (1, 2), phases, forward_sign=-1.0)
     # as in the held-phase test: polynomial in θ, step 1e-6, rounding ~1e-10 relative
     np.testing.assert_allclose(gradient, expected, rtol=1e-7, atol=1e-7 * abs(value))
