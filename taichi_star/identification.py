@@ -54,8 +54,10 @@ to the sensitivities' own accuracy:
   φ-derivatives are of the measured data alone (central differences with step
   `PHASE_STEP_S`, within one linear piece of the interpolated video track), the θ-derivatives
   those of the records. The term is zero, and left out, when σ is at its floor
-  `DISPLACEMENT_FLOOR_MM` (always on a one-cycle window), when the phase is given (held), and
-  at the edge of its range (0 or `latest_phase`), where the bound holds it. On the synthetic
+  `DISPLACEMENT_FLOOR_MM` (always on a one-cycle window), when the phase is given (held), at
+  the edge of its range (0 or `latest_phase`), where the bound holds it, and where the fitted
+  phase sits at a kink of the interpolated track, which holds it too (`PHASE_KINK_RATIO`; on
+  the measured trials the fitted phase often lies on a frame time). On the synthetic
   three-cycle window of tests/unit/test_identification_gradient.py it is 19–40 % of the
   gradient, which then equals central differences of the re-fitted objective.
 
@@ -94,10 +96,16 @@ DISPLACEMENT_FLOOR_MM = 0.05
 """Smallest spread σ, mm: the centroid tracking jitters by a few hundredths of a millimetre
 from frame to frame (the median frame-to-frame speed change of the recordings is 2–2.7 mm/s,
 i.e. ≈ 0.04 mm per frame)."""
-PHASE_STEP_S = 1e-5
+PHASE_STEP_S = 1e-6
 """Step of the central differences in the phase (`phase_motion`), s: far inside one video
-frame (the track is linear between frames), so the differences are exact for most curve
-samples; their rounding, ~1e-16·M/h², is ~1e-6 of ∂²M/∂φ² on the paper's data."""
+frame (16.7 ms; the track is linear between frames), so the differences are exact for most
+curve samples; their rounding, ~1e-16·M/h², is ~1e-4 of ∂²M/∂φ² on the paper's data."""
+PHASE_KINK_RATIO = 10.0
+"""The second step of the kink test, PHASE_KINK_RATIO × PHASE_STEP_S: where the misfit's
+curvature at the small step exceeds twice that at the large one (a kink gives 1/h: ten times;
+a smooth piece the same value), the fitted phase sits at a kink of the interpolated track
+(a frame time of a cycle's reference point pulls every sample of that cycle at once), where it
+stays as θ moves: it has no motion."""
 GOLDEN_ITERATIONS = 40
 """Golden-section steps of the phase refinement: the bracket of two grid cells shrinks by
 0.618^40 ≈ 4e-9 of itself."""
@@ -474,22 +482,26 @@ def trial_phase_motion(simulated: SimulatedRun, derivative_xy: np.ndarray, trial
                        samples: int = SAMPLES_PER_CYCLE) -> np.ndarray:
     """The part of the trial objective's gradient (P,) that comes from its fitted phase moving
     with θ: ∂J/∂φ · dφ/dθ (module docstring, "Gradient"); `fit` is the trial's `trial_fit` with
-    the phase fitted. Zero when σ is at its floor, at the phase's bounds, or where the misfit
-    is not convex in the phase."""
-    step = PHASE_STEP_S
+    the phase fitted. Zero when σ is at its floor, at the phase's bounds, at a kink of the
+    measured track (`PHASE_KINK_RATIO`), or where the misfit is not convex in the phase."""
+    step, wide = PHASE_STEP_S, PHASE_STEP_S * PHASE_KINK_RATIO
     phase, count = fit.phase_s, np.asarray(derivative_xy).shape[-1]
-    if (fit.sigma_mm <= DISPLACEMENT_FLOOR_MM or phase - step < 0.0
-            or phase + step > latest_phase(trial, cycles)):
+    if (fit.sigma_mm <= DISPLACEMENT_FLOOR_MM or phase - wide < 0.0
+            or phase + wide > latest_phase(trial, cycles)):
         return np.zeros(count)
     first, last = check_window(cycles)
     sim_curves = cycle_curves(simulated.path, 0.0, (first, last), samples)
+
+    def misfit(at):
+        return _misfit(sim_curves, trial, at, (first, last), samples)
+
+    centre = misfit(phase)
+    curvature, wide_curvature = ((misfit(phase + h) - 2.0 * centre + misfit(phase - h)) / h ** 2
+                                 for h in (step, wide))
+    if curvature <= 0.0 or curvature > 2.0 * wide_curvature:
+        return np.zeros(count)
     below, above = (cycle_curves(trial.path, phase + sign * step, (first, last), samples)
                     for sign in (-1.0, 1.0))
-    misfit = [float(((sim_curves - curves) ** 2).sum()) for curves in
-              (below, cycle_curves(trial.path, phase, (first, last), samples), above)]
-    curvature = (misfit[0] - 2.0 * misfit[1] + misfit[2]) / step ** 2
-    if curvature <= 0.0:
-        return np.zeros(count)
     curve_derivative = _curve_derivative(simulated.path, np.asarray(derivative_xy, np.float64),
                                          (first, last), samples)
     mixed = -2.0 * np.einsum("cs,csp->p", (above - below) / (2.0 * step), curve_derivative)

@@ -138,6 +138,47 @@ def test_gradient_on_three_cycles_follows_the_refitted_phase(forward_sign):
     np.testing.assert_allclose(gradient, expected, rtol=0, atol=1e-5 * np.abs(expected).max())
 
 
+def measured_track_run(theta, first_frame=30):
+    """A "simulated" run that is the measured A1+A3 track itself from one of its frames on,
+    scaled by θ (its derivative: the track); forward points against its net travel, so that
+    the wrong-way residual is 0."""
+    track = ident.measured_trials(["A1+A3"])["A1+A3"].path
+    x = (track.x_mm[first_frame:] - track.x_mm[first_frame]) * theta
+    y = (track.y_mm[first_frame:] - track.y_mm[first_frame]) * theta
+    net = np.array([x[-1], y[-1]]) / np.hypot(x[-1], y[-1])
+    path = ident.CentroidPath(track.t_s[first_frame:] - track.t_s[first_frame], x, y,
+                              track.period_s)
+    derivative = np.stack([x / theta, y / theta], axis=1)[:, :, None]
+    return ident.SimulatedRun("A1+A3", path, (float(-net[0]), float(-net[1]))), derivative
+
+
+def test_on_the_measured_track_the_phase_moves_between_kinks_and_not_at_one():
+    """The measured track (60 frames/s, linear between frames): fitted between two kinks of
+    the misfit the phase moves with θ, and the gradient with its motion equals central
+    differences of the re-fitted objective (step 1e-4: measured agreement 7e-7 relative; the
+    motion is 3 % of the gradient); set on a frame time, where the track's kink pulls every
+    sample of a cycle at once, the kink test finds it and the phase has no motion."""
+    trials = {"A1+A3": ident.measured_trials(["A1+A3"])["A1+A3"]}
+    theta = 1.1
+    run, derivative = measured_track_run(theta)
+    _, gradient, table = ident.objective_and_gradient(
+        {"A1+A3": run}, {"A1+A3": derivative}, trials, (1, 3))
+    residuals, jacobian, _ = ident.objective_residuals(
+        {"A1+A3": run}, {"A1+A3": derivative}, trials, (1, 3))
+    assert abs(gradient[0] - 2.0 * jacobian[:, 0] @ residuals) > 0.01 * abs(gradient[0])
+    refitted = [ident.objective_of(ident.trajectory_objective(
+        {"A1+A3": measured_track_run(theta + sign * 1e-4)[0]}, trials, (1, 3)))
+        for sign in (1.0, -1.0)]
+    assert gradient[0] == pytest.approx((refitted[0] - refitted[1]) / 2e-4, rel=1e-5)
+    fit = ident.trial_fit(run, trials["A1+A3"], (1, 3))
+    frames = trials["A1+A3"].path.t_s
+    on_frame = dataclasses.replace(fit, phase_s=float(frames[np.argmin(np.abs(frames
+                                                                              - fit.phase_s))]))
+    assert on_frame.phase_s != fit.phase_s
+    np.testing.assert_array_equal(ident.trial_phase_motion(run, derivative, trials["A1+A3"],
+                                                           on_frame, (1, 3)), [0.0])
+
+
 @pytest.mark.parametrize("case", ["one cycle", "phase given", "phase at its bound"])
 def test_the_phase_motion_is_left_out_exactly_where_it_is_zero(monkeypatch, case):
     """σ at its floor (envelope theorem), a held phase, and a phase at the edge of its range
