@@ -58,7 +58,7 @@ to the sensitivities' own accuracy:
   the edge of its range (0 or `latest_phase`), where the bound holds it, and where the fitted
   phase sits at a kink of the interpolated track, which holds it too (`PHASE_KINK_RATIO`; on
   the measured trials the fitted phase often lies on a frame time). On the synthetic
-  three-cycle window of tests/unit/test_identification_gradient.py it is 19–40 % of the
+  three-cycle window of tests/unit/test_identification_gradient.py it is 14–40 % of the
   gradient, which then equals central differences of the re-fitted objective.
 
 The objective is a sum of squares, and `objective_residuals` gives it in that form: the
@@ -99,7 +99,8 @@ i.e. ≈ 0.04 mm per frame)."""
 PHASE_STEP_S = 1e-6
 """Step of the central differences in the phase (`phase_motion`), s: far inside one video
 frame (16.7 ms; the track is linear between frames), so the differences are exact for most
-curve samples; their rounding, ~1e-16·M/h², is ~1e-4 of ∂²M/∂φ² on the paper's data."""
+curve samples; their rounding, ~1e-16·M/h², was 4e-8 of ∂²M/∂φ² on the measured A1+A3
+track (tests/unit/test_identification_gradient.py)."""
 PHASE_KINK_RATIO = 10.0
 """The second step of the kink test, PHASE_KINK_RATIO × PHASE_STEP_S: where the misfit's
 curvature at the small step exceeds twice that at the large one (a kink gives 1/h: ten times;
