@@ -184,8 +184,12 @@ def _open_kernel_cache():
 
 
 def _quiet_exit():
-    """Taichi's exit, which writes the offline cache, at log level ERROR (module docstring)."""
+    """Taichi's exit, which writes the offline cache, at log level ERROR (module docstring).
+    Called explicitly: left to the interpreter's shutdown, Taichi's program was never finalized
+    (the engines' kernels and fields keep it alive to the end) and nothing was written, so every
+    process compiled every engine again (measured: an empty cache folder after a run)."""
     ti.set_logging_level(ti.ERROR)
+    ti.reset()
 
 
 @dataclass

@@ -78,3 +78,21 @@ def test_a_taken_cache_lock_prints_no_advice_to_clean_the_cache(tmp_path):
     ours = run("taichi_star")
     assert ours.returncode == 0, ours.stderr
     assert "ticache.lock" not in ours.stdout + ours.stderr
+
+
+def test_a_process_that_exits_leaves_its_kernels_in_the_offline_cache(tmp_path):
+    """A process that ran kernels through the runtime and exits without `ti.reset` writes them
+    to the offline cache (at 10e264a it wrote nothing: Taichi's program was never finalized at
+    exit, and every process compiled every engine again)."""
+    import os
+    import subprocess
+    import sys
+
+    script = tmp_path / "probe.py"
+    script.write_text(CACHE_PROBE)
+    cache = tmp_path / "cache"
+    environment = {**os.environ, "TI_OFFLINE_CACHE_FILE_PATH": str(cache)}
+    run = subprocess.run([sys.executable, str(script), "taichi_star"], env=environment,
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert list(cache.glob("*.tic")), "no kernel in the offline cache after the process exited"
