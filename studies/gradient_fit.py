@@ -26,8 +26,9 @@ per-robot fields: no measured gait fires A6-A8, so their gains have zero derivat
   random points (seeded); each stops at `--lbfgs-evaluations` evaluations or when it stalls.
 - least squares (scipy's `least_squares`, dogbox, same bounds and starts): the objective is a
   sum of squares (`identification.objective_residuals`: the curve residuals and ρ of every
-  gait), so the same run gives the residuals' Jacobian and a Gauss-Newton step;
-  `--least-squares-evaluations` simulations per start (0: not run).
+  gait), and a run with sensitivities gives the residuals' Jacobian and a Gauss-Newton step;
+  every trial point is a run without sensitivities, the Jacobian a run with them at the points
+  scipy accepts; `--least-squares-evaluations` trial points per start (0: not run).
 - CMA-ES (`studies.identify.minimise_cmaes`) from the base model, step 0.25, population
   `--popsize` (cma's default 4 + 3 ln D when not given), `--cma-generations` generations, one
   batched run per generation.
@@ -188,6 +189,25 @@ class Problem:
         ok = result.summary["status"].to_numpy() == "ok"
         return [run if good else None for run, good in zip(runs, ok)], result
 
+    def residuals(self, units) -> np.ndarray:
+        """Residuals (R,) of `fit_terms` from a run without sensitivities (an instance's rows
+        are bitwise those of the run with them); a failed simulation as in `fit_terms`."""
+        units = np.clip(np.asarray(units, dtype=float), 0.0, 1.0)
+        runs, _ = self.runs(self.params(units[None, :]), self.train[1])
+        if any(run is None for run in runs):
+            return self.failed_residuals()
+        # the residuals need no derivatives: one zero column stands in for them
+        no_derivatives = {gait: np.zeros((len(run.path.t_s), 2, 1))
+                          for gait, run in zip(self.gaits, runs)}
+        residuals, _, _ = identification.objective_residuals(
+            dict(zip(self.gaits, runs)), no_derivatives, self.trials, self.train)
+        return residuals
+
+    def failed_residuals(self) -> np.ndarray:
+        """R equal residuals whose squares sum to FAILED_OBJECTIVE."""
+        count = identification.residual_count(len(self.gaits), self.train)
+        return np.full(count, math.sqrt(FAILED_OBJECTIVE / count))
+
     def fit_terms(self, units):
         """The objective as a sum of squares at a point, from one run with sensitivities:
         residuals (R,), their Jacobian (R, D) at the fitted phases held
@@ -198,9 +218,8 @@ class Problem:
         units = np.clip(np.asarray(units, dtype=float), 0.0, 1.0)
         runs, result = self.runs(self.params(units[None, :]), self.train[1], self.names)
         if any(run is None for run in runs):
-            count = identification.residual_count(len(self.gaits), self.train)
-            return (np.full(count, math.sqrt(FAILED_OBJECTIVE / count)),
-                    np.zeros((count, len(self.box))), np.zeros(len(self.box)))
+            failed = self.failed_residuals()
+            return failed, np.zeros((len(failed), len(self.box))), np.zeros(len(self.box))
         derivatives = {gait: identification.record_derivatives(
             result.trajectory_sensitivities, b, self.names) for b, gait in enumerate(self.gaits)}
         simulated = dict(zip(self.gaits, runs))
@@ -293,6 +312,12 @@ def record_gradient_call(recorder: Recorder, problem: Problem, units, value: flo
                  per_evaluation * cost_ratio, start)
 
 
+def record_plain_call(recorder: Recorder, problem: Problem, units, value: float, start: int):
+    """Add one simulation without sensitivities to `recorder`: one run of every gait."""
+    per_evaluation = problem.window_s * len(problem.gaits)
+    recorder.add(units, value, per_evaluation, per_evaluation, start)
+
+
 def fit_lbfgs(problem: Problem, starts: int, max_evaluations: int, seed: int,
               recorder: Recorder, cost_ratio: float) -> Recorder:
     """Multi-start L-BFGS-B over the unit box (module docstring), every evaluation into
@@ -319,31 +344,36 @@ def fit_least_squares(problem: Problem, points, max_evaluations: int, recorder: 
     method "dogbox": Gauss-Newton steps on the residuals' Jacobian, a dogleg within a
     rectangular trust region that the bounds [0, 1] of each axis clip; axes scaled by the
     Jacobian's columns), from each of `points` (unit coordinates: `start_points`, as
-    `fit_lbfgs`, or another optimiser's best point to polish); every simulation (residuals and
-    Jacobian from one run with sensitivities, reused when scipy asks for the Jacobian at that
-    point) into `recorder`. Dogbox rather than scipy's default "trf": from the base model
-    (two gaits, one cycle) trf went 5,550 → 374 → 95 on the 20-parameter set and 5,550 → 412
-    → 66 on the six, dogbox 5,550 → 57.5 and 5,550 → 67.6 (measured before choosing)."""
+    `fit_lbfgs`, or another optimiser's best point to polish), `max_evaluations` residual
+    evaluations per start. Each trial point costs one run without sensitivities (its
+    residuals); the run with sensitivities (the Jacobian) is made only where scipy asks for it,
+    at the points it accepts: a rejected trial point, and the point that ends the fit, cost one
+    run instead of `cost_ratio`, an accepted one 1 + `cost_ratio` (at 1595fb0 and before, every
+    point got the Jacobian with its residuals, `cost_ratio` runs). Every simulation goes into
+    `recorder` (a Jacobian's row with its point's objective). Dogbox rather than scipy's
+    default "trf": from the base model (two gaits, one cycle) trf went 5,550 → 374 → 95 on the
+    20-parameter set and 5,550 → 412 → 66 on the six, dogbox 5,550 → 57.5 and 5,550 → 67.6
+    (measured before choosing)."""
     from scipy.optimize import least_squares
     parameter_set = recorder.parameter_set
     for start, x0 in enumerate(points):
-        latest = {}
 
-        def evaluate(units, start=start):
-            key = np.asarray(units, dtype=float).tobytes()
-            if key not in latest:
-                residuals, jacobian = problem.residuals_and_jacobian(units)
-                value = float(residuals @ residuals)
-                record_gradient_call(recorder, problem, units, value, cost_ratio, start)
-                print(f"set {parameter_set} {LEAST_SQUARES} start {start}: objective "
-                      f"{value:.5g}", flush=True)
-                latest.clear()
-                latest[key] = residuals, jacobian
-            return latest[key]
+        def residuals(units, start=start):
+            values = problem.residuals(units)
+            value = float(values @ values)
+            record_plain_call(recorder, problem, units, value, start)
+            print(f"set {parameter_set} {LEAST_SQUARES} start {start}: objective {value:.5g}",
+                  flush=True)
+            return values
 
-        least_squares(lambda u: evaluate(u)[0], x0, jac=lambda u: evaluate(u)[1],
-                      bounds=(0.0, 1.0), method="dogbox", x_scale="jac",
-                      max_nfev=max_evaluations)
+        def jacobian(units, start=start):
+            values, derivatives = problem.residuals_and_jacobian(units)
+            record_gradient_call(recorder, problem, units, float(values @ values), cost_ratio,
+                                 start)
+            return derivatives
+
+        least_squares(residuals, x0, jac=jacobian, bounds=(0.0, 1.0), method="dogbox",
+                      x_scale="jac", max_nfev=max_evaluations)
     return recorder
 
 

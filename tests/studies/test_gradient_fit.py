@@ -49,20 +49,21 @@ def test_a_polish_starts_at_cma_best_point_and_counts_its_cost_on_top(monkeypatc
     assert time.perf_counter() - polish.started >= 7.0
     # residuals r = u − 0.5: the minimum (0 at u = 0.5) is one Gauss-Newton step away
     points = []
-
-    def residuals_and_jacobian(units):
-        points.append(np.array(units))
-        return np.asarray(units) - 0.5, np.eye(6)
-
-    monkeypatch.setattr(problem, "residuals_and_jacobian", residuals_and_jacobian)
+    monkeypatch.setattr(problem, "residuals",
+                        lambda units: points.append(np.array(units)) or np.asarray(units) - 0.5)
+    monkeypatch.setattr(problem, "residuals_and_jacobian",
+                        lambda units: (np.asarray(units) - 0.5, np.eye(6)))
     gradient_fit.fit_least_squares(problem, [polish.best_units], 5, polish, cost_ratio=2.0)
     np.testing.assert_array_equal(points[0], cma_best)
-    first = polish.rows[0]
+    first, its_jacobian = polish.rows[:2]
     # the point's own value (6 · 0.2² = 0.24), below CMA-ES's 4.0: it becomes the best
     assert first["objective"] == pytest.approx(0.24) == first["best_objective"]
     window = base.period
-    assert first["robot_seconds"] == pytest.approx(30.0 + window * 13)
-    assert first["robot_seconds_cost_equivalent"] == pytest.approx(30.0 + window * 2.0)
+    # its residuals: one run; its Jacobian: 1 + 2·6 instances, 2 runs cost-equivalent
+    assert first["robot_seconds"] == pytest.approx(30.0 + window)
+    assert first["robot_seconds_cost_equivalent"] == pytest.approx(30.0 + window)
+    assert its_jacobian["robot_seconds"] == pytest.approx(30.0 + window * (1 + 13))
+    assert its_jacobian["robot_seconds_cost_equivalent"] == pytest.approx(30.0 + window * 3.0)
     assert polish.best_objective == pytest.approx(0.0, abs=1e-12)
     np.testing.assert_allclose(polish.best_units, 0.5, atol=1e-6)
     # a call that does not beat CMA-ES's best (0.1 here) leaves it the best
@@ -257,13 +258,14 @@ def test_the_summary_counts_the_cost_to_cma_objective_both_ways():
     assert table[table["optimiser"] == "CMA-ES"].iloc[0]["gradient_cost_ratio"] == 1.0
 
 
-def test_the_least_squares_fit_finds_a_linear_problems_minimum_and_simulates_each_point_once(
+def test_the_least_squares_fit_finds_a_linear_problems_minimum_and_differentiates_only_where_asked(
         monkeypatch):
     """On residuals linear in the units, r = A·u − y with the minimum u* inside the box, the
     Gauss-Newton step is exact: the fit reaches Σ r² at u* (to the solver's tolerances) from
-    the base model's units; every point is simulated once, although scipy asks for the
-    residuals and then the Jacobian there, and each simulation counts (1 + 2·6) × gaits ×
-    window robot-seconds and `cost_ratio` runs."""
+    the base model's units. Every trial point is simulated once without sensitivities (one
+    run: gaits × window robot-seconds); the Jacobian's simulation ((1 + 2·6) × gaits × window,
+    `cost_ratio` runs) only where scipy asks for it: at points whose residuals it has just had,
+    right after them."""
     box = [identify.parse_range_spec(text, "--sets") for text in gradient_fit.PARAMETER_SETS["6"]]
     base = StarParams(gait="A1+A2")
     problem = gradient_fit.Problem(box, base, ["A1+A2"], {}, (1, 1), SolverConfig(), "cpu")
@@ -274,12 +276,19 @@ def test_the_least_squares_fit_finds_a_linear_problems_minimum_and_simulates_eac
     target = matrix @ best_units + offset     # the minimum of |A u − y|² is u*, value |offset_⊥|²
     minimum = float(np.sum((offset - matrix @ np.linalg.lstsq(matrix, offset, rcond=None)[0])
                            ** 2))
-    points = []
+    points, differentiated, calls = [], [], []
+
+    def residuals(units):
+        points.append(np.array(units))
+        calls.append("residuals")
+        return matrix @ units - target
 
     def residuals_and_jacobian(units):
-        points.append(np.array(units))
+        differentiated.append(np.array(units))
+        calls.append("jacobian")
         return matrix @ units - target, matrix
 
+    monkeypatch.setattr(problem, "residuals", residuals)
     monkeypatch.setattr(problem, "residuals_and_jacobian", residuals_and_jacobian)
     recorder = gradient_fit.fit_least_squares(
         problem, gradient_fit.start_points(problem, 1, 0), 20,
@@ -288,8 +297,15 @@ def test_the_least_squares_fit_finds_a_linear_problems_minimum_and_simulates_eac
     assert recorder.best_objective == pytest.approx(minimum, rel=1e-6)
     np.testing.assert_allclose(recorder.best_units, best_units + np.linalg.lstsq(
         matrix, offset, rcond=None)[0], atol=1e-5)
-    assert len(points) == len(recorder.rows) >= 2
-    assert len({p.tobytes() for p in points}) == len(points)
+    assert len({p.tobytes() for p in points}) == len(points) >= 2
+    assert calls[0] == "residuals" and 1 <= len(differentiated) <= len(points)
+    assert len(recorder.rows) == len(points) + len(differentiated)
+    for k, call in enumerate(calls):
+        if call == "jacobian":
+            assert calls[k - 1] == "residuals"
+            np.testing.assert_array_equal(differentiated.pop(0), points[calls[:k].count(
+                "residuals") - 1])
     window = base.period
-    assert recorder.robot_seconds == pytest.approx(len(points) * window * 13)
-    assert recorder.cost_equivalent == pytest.approx(len(points) * window * 2.5)
+    jacobians = calls.count("jacobian")
+    assert recorder.robot_seconds == pytest.approx((len(points) + 13 * jacobians) * window)
+    assert recorder.cost_equivalent == pytest.approx((len(points) + 2.5 * jacobians) * window)
