@@ -347,9 +347,10 @@ def fit_least_squares(problem: Problem, points, max_evaluations: int, recorder: 
     `fit_lbfgs`, or another optimiser's best point to polish), `max_evaluations` residual
     evaluations per start. Each trial point costs one run without sensitivities (its
     residuals); the run with sensitivities (the Jacobian) is made only where scipy asks for it,
-    at the points it accepts: a rejected trial point, and the point that ends the fit, cost one
-    run instead of `cost_ratio`, an accepted one 1 + `cost_ratio` (at 1595fb0 and before, every
-    point got the Jacobian with its residuals, `cost_ratio` runs). Every simulation goes into
+    at the points it accepts and not at the last one a start's budget allows (no step follows
+    it): a rejected trial point, and the last, cost one run instead of `cost_ratio`, an
+    accepted one 1 + `cost_ratio` (at 1595fb0 and before, every point got the Jacobian with its
+    residuals, `cost_ratio` runs). Every simulation goes into
     `recorder` (a Jacobian's row with its point's objective). Dogbox rather than scipy's
     default "trf": from the base model (two gaits, one cycle) trf went 5,550 → 374 → 95 on the
     20-parameter set and 5,550 → 412 → 66 on the six, dogbox 5,550 → 57.5 and 5,550 → 67.6
@@ -357,16 +358,22 @@ def fit_least_squares(problem: Problem, points, max_evaluations: int, recorder: 
     from scipy.optimize import least_squares
     parameter_set = recorder.parameter_set
     for start, x0 in enumerate(points):
+        trial_points = []
 
         def residuals(units, start=start):
             values = problem.residuals(units)
             value = float(values @ values)
+            trial_points.append(values)
             record_plain_call(recorder, problem, units, value, start)
             print(f"set {parameter_set} {LEAST_SQUARES} start {start}: objective {value:.5g}",
                   flush=True)
             return values
 
         def jacobian(units, start=start):
+            if len(trial_points) == max_evaluations:
+                # the budget is spent: scipy asks only to test convergence before it stops, and
+                # no step will use this Jacobian, so none is simulated (zeros end the fit)
+                return np.zeros((len(trial_points[-1]), len(problem.box)))
             values, derivatives = problem.residuals_and_jacobian(units)
             record_gradient_call(recorder, problem, units, float(values @ values), cost_ratio,
                                  start)
@@ -484,12 +491,12 @@ def build_parser():
     parser.add_argument("--lbfgs-evaluations", type=int, default=8, quick=2,
                         help="evaluations (objective + gradient) per L-BFGS-B start")
     parser.add_argument("--least-squares-evaluations", type=int, default=8, quick=2,
-                        help="simulations (residuals + Jacobian) per least-squares start; 0 "
-                             "leaves the least-squares fit out")
+                        help="trial points (residuals; the Jacobian where accepted) per "
+                             "least-squares start; 0 leaves the least-squares fit out")
     parser.add_argument("--cma-generations", type=int, default=8, quick=2,
                         help="CMA-ES generations")
     parser.add_argument("--polish-evaluations", type=int, default=0,
-                        help="simulations of a least-squares fit from CMA-ES's best point "
+                        help="trial points of a least-squares fit from CMA-ES's best point "
                              f"(optimiser '{POLISH}', its costs counted on top of CMA-ES's); "
                              "0 (default) leaves it out")
     parser.add_argument("--popsize", type=int, default=None,

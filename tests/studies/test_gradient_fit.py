@@ -73,6 +73,9 @@ def test_a_polish_starts_at_cma_best_point_and_counts_its_cost_on_top(monkeypatc
     assert kept.rows[0]["objective"] == pytest.approx(0.24)
     assert kept.rows[0]["best_objective"] == 0.1
     np.testing.assert_array_equal(kept.best_units, np.full(6, 0.45))
+    # a budget of one trial point: no step can follow it, so no Jacobian is simulated
+    assert len(kept.rows) == 1
+    assert kept.rows[0]["robot_seconds"] == pytest.approx(40.0 + window)
 
 
 def test_the_history_plot_draws_both_counts_from_the_csv(tmp_path, monkeypatch):
