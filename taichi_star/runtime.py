@@ -10,10 +10,10 @@ lives; a call uses a free one while it runs).
 Taichi keeps compiled kernels in an offline cache shared by every process of the user
 (~/.cache/taichi), written when the process exits (`_quiet_exit`). Its key includes the fields'
 identities, which follow the order in which a process builds its engines: a process loads the
-kernels of an earlier one that built the same engines in the same order. Processes running at once (a batch's worker processes, two studies) take
-turns at its lock file; one that finds it taken prints "Lock .../ticache.lock failed. Please run
-'ti cache clean' and try again" and simply compiles without loading the cache, or leaves its
-new kernels out of it at exit. Nothing is wrong and nothing needs cleaning, so the runtime
+kernels of an earlier one that built the same engines in the same order. Processes running at
+once (a batch's worker processes, two studies) take turns at its lock file; one that finds it
+taken prints "Lock .../ticache.lock failed. Please run 'ti cache clean' and try again" and
+simply compiles without loading the cache, or leaves its new kernels out of it at exit. Nothing is wrong and nothing needs cleaning, so the runtime
 silences exactly those two moments: it opens the cache (a trivial kernel) and exits at log
 level ERROR; Taichi's warnings in between are shown as configured.
 """

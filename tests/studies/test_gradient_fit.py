@@ -261,7 +261,7 @@ def test_the_summary_counts_the_cost_to_cma_objective_both_ways():
     assert table[table["optimiser"] == "CMA-ES"].iloc[0]["gradient_cost_ratio"] == 1.0
 
 
-def test_the_least_squares_fit_finds_a_linear_problems_minimum_and_differentiates_only_where_asked(
+def test_least_squares_finds_a_linear_minimum_and_differentiates_only_where_asked(
         monkeypatch):
     """On residuals linear in the units, r = A·u − y with the minimum u* inside the box, the
     Gauss-Newton step is exact: the fit reaches Σ r² at u* (to the solver's tolerances) from
