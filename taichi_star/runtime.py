@@ -13,8 +13,8 @@ identities, which follow the order in which a process builds its engines: a proc
 kernels of an earlier one that built the same engines in the same order. Processes running at
 once (a batch's worker processes, two studies) take turns at its lock file; one that finds it
 taken prints "Lock .../ticache.lock failed. Please run 'ti cache clean' and try again" and
-simply compiles without loading the cache, or leaves its new kernels out of it at exit. Nothing is wrong and nothing needs cleaning, so the runtime
-silences exactly those two moments: it opens the cache (a trivial kernel) and exits at log
+simply compiles without loading the cache, or leaves its new kernels out of it at exit.
+Nothing is wrong and nothing needs cleaning, so the runtime silences exactly those two moments: it opens the cache (a trivial kernel) and exits at log
 level ERROR; Taichi's warnings in between are shown as configured.
 """
 
