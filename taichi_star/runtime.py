@@ -14,8 +14,9 @@ kernels of an earlier one that built the same engines in the same order. Process
 once (a batch's worker processes, two studies) take turns at its lock file; one that finds it
 taken prints "Lock .../ticache.lock failed. Please run 'ti cache clean' and try again" and
 simply compiles without loading the cache, or leaves its new kernels out of it at exit.
-Nothing is wrong and nothing needs cleaning, so the runtime silences exactly those two moments: it opens the cache (a trivial kernel) and exits at log
-level ERROR; Taichi's warnings in between are shown as configured.
+Nothing is wrong and nothing needs cleaning, so the runtime silences exactly those two moments:
+it opens the cache (a trivial kernel) and exits at log level ERROR; Taichi's warnings in between
+are shown as configured.
 """
 
 from __future__ import annotations
