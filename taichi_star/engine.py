@@ -573,7 +573,9 @@ class BatchEngine:
         self.assemble_with_rigid_projector(b, inertia_scale, rate_gain, centre)
         self.system.factor(b)
         for j in range(self.tangent_count[None]):
-            for sign in ti.static(range(2)):
+            # a loop, not unrolled: the replicas' preparation and assembly, every term inlined,
+            # are compiled once, not twice (the sensitive kernel's compile time)
+            for sign in range(2):
                 r = self.replica(b, j, sign)
                 for m in range(N_ACTUATORS):
                     self.state.fire_time[r, m] = self.state.fire_time[b, m]
