@@ -126,7 +126,7 @@ class BatchEngine:
         for term in self.terms:
             self.state.term_histories.update(
                 {f"{term.name}.{name}": field for name, field in term.history_fields().items()})
-        arena.finalize()
+        arena.finalize(fill_tables=False)
         model_fields = {name: getattr(self, name)
                         for name in ("mass", "inertia", "primal_count", "tangent_count",
                                      "slot_stride", "step_limit", *SOLVER_SETTINGS)}
@@ -135,8 +135,17 @@ class BatchEngine:
                                  for name, field in term.coefficient_fields().items()})
         if sensitive:
             model_fields["same_as_instance"] = self.same_as_instance
-        self.model_store = FieldStore(model_fields)
-        """Bulk loads of the batch's coefficients and the solver settings (`load`)."""
+        tables = arena.tables()
+        self.table_values = {name: values for name, (_, values) in tables.items()}
+        """The index tables' values (`fields.FieldArena.tables`), written with every load."""
+        state_fields, zeroed = self.state.reset_fields()
+        self.load_store = FieldStore(
+            {**model_fields, **{name: field for name, (field, _) in tables.items()},
+             **{f"state.{name}": field for name, field in state_fields.items()}},
+            zeroed=[f"state.{name}" for name in zeroed])
+        """What `load` writes, in one kernel (each store is a kernel to compile, ~0.4 s
+        whatever its size): the batch's coefficients, the solver settings, the index tables
+        and the state at rest."""
 
     # ---------------------------------------------------------------- host side
     def term(self, name: str):
@@ -179,7 +188,6 @@ class BatchEngine:
                            for name in term.coefficient_names})
         if self.sensitive:
             values["same_as_instance"] = self.replica_sameness(model, primal_count)
-        self.model_store.write(values)
         state = self.state.initial_values(pad_batch(model.rest_positions, capacity),
                                           model.batch_size)
         if periodic_gaits:
@@ -188,7 +196,8 @@ class BatchEngine:
             self.state.schedule.periodic_values(state, masks, periods,
                                                 step_counts(periods, solver.dt))
         state["step_size"][:] = solver.dt
-        self.state.reset(state)
+        self.load_store.write({**values, **self.table_values,
+                               **{f"state.{name}": array for name, array in state.items()}})
 
     def replica_sameness(self, model: BatchModel, primal_count: int) -> np.ndarray:
         """(capacity, terms) values of `same_as_instance` for a batch of `primal_count`

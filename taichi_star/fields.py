@@ -70,14 +70,28 @@ class FieldArena:
         self.pending.append((field, values))
         return field
 
-    def finalize(self):
-        """Create the tree and fill the index tables."""
+    def finalize(self, fill_tables: bool = True):
+        """Create the tree and fill the index tables, or with `fill_tables` False leave them to
+        the owner, who writes `tables()` with its own store (one kernel fewer to compile)."""
         self.tree = self.builder.finalize()
-        if self.pending:
-            tables = {str(number): entry for number, entry in enumerate(self.pending)}
+        if fill_tables and self.pending:
+            tables = self.tables()
             FieldStore({key: field for key, (field, _) in tables.items()}).write(
                 {key: values for key, (_, values) in tables.items()})
-        self.pending = []
+
+    def tables(self) -> Dict[str, tuple]:
+        """The index tables: name -> (field, values)."""
+        return {f"table.{number}": entry for number, entry in enumerate(self.pending)}
+
+
+def array_shape(field) -> tuple:
+    """Shape of a field's values as one NumPy array (the component axes last)."""
+    return tuple(field.shape) + _components(field)
+
+
+def array_dtype(field) -> np.dtype:
+    """NumPy dtype of a field's values."""
+    return np.dtype(to_numpy_type(field.dtype))
 
 
 def _components(field) -> tuple:
@@ -107,8 +121,8 @@ class FieldStore:
         if unknown:
             raise ValueError(f"zeroed fields {sorted(unknown)} are not fields of the store")
         copied = {name: field for name, field in fields.items() if name not in zeroed}
-        self.shapes = {name: tuple(field.shape) + _components(field) for name, field in copied.items()}
-        self.dtypes = {name: np.dtype(to_numpy_type(field.dtype)) for name, field in copied.items()}
+        self.shapes = {name: array_shape(field) for name, field in copied.items()}
+        self.dtypes = {name: array_dtype(field) for name, field in copied.items()}
         floating = {name: np.issubdtype(self.dtypes[name], np.floating) for name in copied}
         self.layout = {True: [], False: []}
         """Per kind (True: float): (name, offset into the flat array, size) in packing order."""

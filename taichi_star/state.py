@@ -9,14 +9,14 @@ bitwise.
 
 from __future__ import annotations
 
-from typing import Dict
+from typing import Dict, List, Tuple
 
 import numpy as np
 import taichi as ti
 from taichi.lang.field import Field
 
 from .actuation import NEVER, Schedule
-from .fields import FieldArena, FieldStore
+from .fields import FieldArena, FieldStore, array_dtype, array_shape
 
 STATUS_OK, STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_INACTIVE, STATUS_STEP_LIMIT = range(5)
 STATUS_NAMES = ("ok", "newton_failed", "non_finite", "inactive", "step_limit")
@@ -97,25 +97,24 @@ class BatchState:
             self._store = FieldStore(self.fields())
         return self._store
 
-    @property
-    def reset_store(self) -> FieldStore:
-        """Writes a state at rest (`reset`): the per-node fields that are zero at rest
-        (velocities, the step's start, the backups, the offsets: all but `positions`) are
-        zeroed on the device instead of copied, which at a batch of 65,536 would be gigabytes
-        of zeros."""
-        if getattr(self, "_reset_store", None) is None:
-            per_node = [name for name, field in self.own_fields().items()
-                        if len(field.shape) == 2 and name != "positions"]
-            self._reset_store = FieldStore(self.fields(), zeroed=per_node)
-        return self._reset_store
+    def reset_fields(self) -> Tuple[Dict[str, Field], List[str]]:
+        """(every state field by name, the names of those that a reset to rest zeroes on the
+        device instead of copying): the per-node fields that are zero at rest (velocities, the
+        step's start, the backups, the offsets: all but `positions`), which at a batch of
+        65,536 would be gigabytes of zeros. The engine writes a reset with its load
+        (`engine.BatchEngine.load`)."""
+        zeroed = [name for name, field in self.own_fields().items()
+                  if len(field.shape) == 2 and name != "positions"]
+        return self.fields(), zeroed
 
     def initial_values(self, rest_positions: np.ndarray, batch_size: int) -> Dict[str, np.ndarray]:
-        """The values of the state fields that `reset` copies (`reset_store`) with every
-        instance at rest in its rest shape (capacity, N, 2), status ok (padding: inactive),
-        counters and histories zero, nothing fired or scheduled; a caller may change entries
-        before `reset`."""
-        values = {name: np.zeros(shape, dtype=self.reset_store.dtypes[name])
-                  for name, shape in self.reset_store.shapes.items()}
+        """The values of the state fields that a reset copies (`reset_fields`: all but the
+        zeroed ones) with every instance at rest in its rest shape (capacity, N, 2), status ok
+        (padding: inactive), counters and histories zero, nothing fired or scheduled; a caller
+        may change entries before writing them."""
+        fields, zeroed = self.reset_fields()
+        values = {name: np.zeros(array_shape(field), dtype=array_dtype(field))
+                  for name, field in fields.items() if name not in zeroed}
         values["positions"] = rest_positions
         values["status"] = np.where(np.arange(len(values["status"])) < batch_size, STATUS_OK,
                                     STATUS_INACTIVE)
@@ -123,10 +122,6 @@ class BatchState:
         for name in ("fire_time", "previous_fire_time"):
             values[name][:] = NEVER
         return values
-
-    def reset(self, values: Dict[str, np.ndarray]):
-        """Write a state from `initial_values` (the per-node fields it leaves out are zeroed)."""
-        self.reset_store.write(values)
 
     def save(self) -> Dict[str, np.ndarray]:
         """A copy of the whole state (every field, padding included)."""

@@ -60,3 +60,16 @@ def test_a_store_with_zeroed_fields_refuses_to_read_and_unknown_names(taichi_cpu
         FieldStore(fields, zeroed=("vector",)).read()
     with pytest.raises(ValueError, match="velocity"):
         FieldStore(fields, zeroed=("velocity",))
+
+
+def test_an_arena_leaves_its_index_tables_to_the_owner_when_asked(taichi_cpu):
+    # the engine writes its tables with its own load (one kernel fewer to compile): until then
+    # they hold zeros, and `tables` gives each field with the values it is to hold
+    arena = FieldArena()
+    table = arena.index([[3, 1], [4, 1]])
+    arena.finalize(fill_tables=False)
+    assert not table.to_numpy().any()
+    (name, (field, values)), = arena.tables().items()
+    assert field is table and np.array_equal(values, [[3, 1], [4, 1]])
+    FieldStore({name: field}).write({name: values})
+    assert np.array_equal(table.to_numpy(), [[3, 1], [4, 1]])
