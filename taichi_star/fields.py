@@ -9,6 +9,7 @@ instance's values contiguous: one thread walks its own instance through the cach
 the threads of a warp, one instance each, read one contiguous run of memory).
 The index `[b, ...]` is the same in both layouts; only the addresses differ."""
 
+import warnings
 from typing import Dict, Optional, Sequence
 
 import numpy as np
@@ -154,17 +155,25 @@ class FieldStore:
                     raise ValueError(f"field {name!r} has shape {self.shapes[name]}, got "
                                      f"{array.shape}")
                 flats[kind][offset:offset + size] = array.ravel()
-        self._transfer(flats[True], flats[False], True)
+        self._run_transfer(flats, True)
 
     def read(self) -> Dict[str, np.ndarray]:
         """Every field of the store as a NumPy array of its own dtype and shape."""
         if self.zeroed_fields:
             raise ValueError("a store with zeroed fields only writes")
         flats = self.flat_arrays()
-        self._transfer(flats[True], flats[False], False)
+        self._run_transfer(flats, False)
         return {name: flats[kind][offset:offset + size].reshape(self.shapes[name])
                 .astype(self.dtypes[name])
                 for kind, entries in self.layout.items() for name, offset, size in entries}
+
+    def _run_transfer(self, flats: Dict[bool, np.ndarray], to_fields: bool):
+        # the kernel has a loop per field by design (an engine's load store has ~40): Taichi's
+        # warning that a static loop of over 32 iterations may compile slowly is not for it
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message="You are unrolling more than",
+                                    category=SyntaxWarning)
+            self._transfer(flats[True], flats[False], to_fields)
 
     @ti.func
     def _element_offset(self, field: ti.template(), index, offset):

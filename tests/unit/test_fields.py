@@ -2,6 +2,8 @@
 a store resets on the device instead of copying. Every value is compared exactly: a store only
 moves and casts values (f64 -> f64 here), so nothing may change in the last bit."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -73,3 +75,17 @@ def test_an_arena_leaves_its_index_tables_to_the_owner_when_asked(taichi_cpu):
     assert field is table and np.array_equal(values, [[3, 1], [4, 1]])
     FieldStore({name: field}).write({name: values})
     assert np.array_equal(table.to_numpy(), [[3, 1], [4, 1]])
+
+
+def test_a_store_of_many_fields_compiles_without_taichis_unrolling_warning(taichi_cpu):
+    # an engine's load store copies ~40 fields, one loop each: Taichi warns of any static loop
+    # over 32 iterations, which would reach the user at every engine's first load
+    arena = FieldArena()
+    fields = {f"field_{number}": arena.batch_field(float, 2) for number in range(40)}
+    arena.finalize()
+    store = FieldStore(fields)
+    values = {name: np.full(2, float(number)) for number, name in enumerate(fields)}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        store.write(values)
+    assert all(np.array_equal(store.read()[name], values[name]) for name in fields)
