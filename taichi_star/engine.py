@@ -135,12 +135,9 @@ class BatchEngine:
                                  for name, field in term.coefficient_fields().items()})
         if sensitive:
             model_fields["same_as_instance"] = self.same_as_instance
-        tables = arena.tables()
-        self.table_values = {name: values for name, (_, values) in tables.items()}
-        """The index tables' values (`fields.FieldArena.tables`), written with every load."""
         state_fields, zeroed = self.state.reset_fields()
         self.load_store = FieldStore(
-            {**model_fields, **{name: field for name, (field, _) in tables.items()},
+            {**model_fields, **{name: field for name, (field, _) in arena.tables().items()},
              **{f"state.{name}": field for name, field in state_fields.items()}},
             zeroed=[f"state.{name}" for name in zeroed])
         """What `load` writes, in one kernel (each store is a kernel to compile, ~0.4 s
@@ -196,7 +193,8 @@ class BatchEngine:
             self.state.schedule.periodic_values(state, masks, periods,
                                                 step_counts(periods, solver.dt))
         state["step_size"][:] = solver.dt
-        self.load_store.write({**values, **self.table_values,
+        tables = {name: table for name, (_, table) in self.arena.tables().items()}
+        self.load_store.write({**values, **tables,
                                **{f"state.{name}": array for name, array in state.items()}})
 
     def replica_sameness(self, model: BatchModel, primal_count: int) -> np.ndarray:
