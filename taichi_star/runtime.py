@@ -17,12 +17,21 @@ simply compiles without loading the cache, or leaves its new kernels out of it a
 Nothing is wrong and nothing needs cleaning, so the runtime silences exactly those two moments:
 it opens the cache (a trivial kernel) and exits at log level ERROR; Taichi's warnings in between
 are shown as configured.
+
+Compiling a kernel, Taichi's front end writes the source position of every statement and
+expression it meets (the line, and an excerpt with a caret line under it, each line passed
+through textwrap) for the compiled code's debug information and its error messages. An
+engine's functions are inlined wherever they are called, so the same positions are written over
+and over: the paper preset's sensitive engine asks for ~80,000 of them, ~6,000 distinct, and
+writing them took 15-20 % of its first call. `memoise_source_positions` makes Taichi write each
+distinct one once per process; the texts, and so Taichi's messages, are unchanged.
 """
 
 from __future__ import annotations
 
 import atexit
 import contextlib
+import functools
 import io
 import os
 import weakref
@@ -180,6 +189,53 @@ def batch_capacity(batch_size: int) -> int:
     return max(MIN_CAPACITY, 1 << max(batch_size - 1, 0).bit_length())
 
 
+SOURCE_POSITIONS_KEPT = 1 << 16
+"""Most source positions `memoise_source_positions` keeps (it starts afresh beyond: a few MB)."""
+MEMOISED_TAICHI = (1, 7)
+"""Taichi versions (major, minor) whose position writer `memoise_source_positions` was checked
+against (what its key holds is what that writer reads)."""
+
+
+def _source_position_key(context, node) -> tuple:
+    """Everything the position text of `node` in `context` is made of in Taichi 1.7: the file,
+    the function and its offsets, the node's span, and the source lines the span covers (they
+    also fix what else the text reads: whether the node is a loop, a branch or a function, and
+    where its body begins)."""
+    return (context.file, context.func.func.__name__, context.lineno_offset, context.indent,
+            node.lineno, node.end_lineno, node.col_offset, node.end_col_offset,
+            tuple(context.src[node.lineno - 1:node.end_lineno]))
+
+
+def memoise_source_positions(context_class=None, taichi_version=ti.__version__) -> bool:
+    """Make `context_class.get_pos_info` (Taichi's `ASTTransformerContext`; the module docstring
+    says why) return each distinct position's text from a cache, the text the original writes.
+    Done once (a second call changes nothing); left alone for a Taichi version other than
+    MEMOISED_TAICHI or one without that method. Returns whether the memo is in place."""
+    if context_class is None:
+        from taichi.lang.ast import ast_transformer_utils
+        context_class = getattr(ast_transformer_utils, "ASTTransformerContext", None)
+    write = getattr(context_class, "get_pos_info", None)
+    if write is None or tuple(taichi_version[:2]) != MEMOISED_TAICHI:
+        return False
+    if hasattr(write, "unmemoised"):
+        return True
+    texts: Dict[tuple, str] = {}
+
+    @functools.wraps(write)
+    def position(context, node):
+        key = _source_position_key(context, node)
+        text = texts.get(key)
+        if text is None:
+            if len(texts) >= SOURCE_POSITIONS_KEPT:
+                texts.clear()
+            text = texts[key] = write(context, node)
+        return text
+
+    position.unmemoised = write
+    context_class.get_pos_info = position
+    return True
+
+
 @ti.kernel
 def _open_kernel_cache():
     """Nothing: compiling it makes Taichi open its offline cache (see the module docstring)."""
@@ -250,6 +306,7 @@ class Runtime:
         if self.arch == arch and self.precision == precision:
             return
         threads = {} if self.cpu_threads is None else {"cpu_max_num_threads": self.cpu_threads}
+        memoise_source_positions()
         # ti.init prints "[Taichi] Starting on arch=..." unconditionally; warnings still go to
         # Taichi's logger, except a taken cache lock's (module docstring)
         with contextlib.redirect_stdout(io.StringIO()):

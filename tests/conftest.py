@@ -10,30 +10,6 @@ def pytest_configure(config):
     # engine compiles in well under half the time and computes the same bits
     # (test_bench_quick checks); set here, it reaches every worker process the tests start
     os.environ.setdefault(KERNEL_OPTIMISATION_ENV, "0")
-    short_compile_error_positions()
-
-
-def short_compile_error_positions():
-    """Taichi's kernel compiler writes, for every node of a kernel's syntax tree, the source
-    excerpt with a caret line under it (each line passed through textwrap), which it shows
-    only if that kernel fails to compile. The suite is nearly all compilation (the kernels'
-    runs took ~2 % of the time of the five slowest test files, measured) and these excerpts
-    10-20 % of an engine's first call (measured: the paper engine 3.4 -> 2.7 s, the accurate
-    one 6.9 -> 6.3 s): here each position is file, line and function only. Compiled code and
-    results are unchanged; a compile error raised in a test names its line without the
-    excerpt. Left alone if Taichi's compiler does not have the method (another Taichi
-    version)."""
-    from taichi.lang.ast import ast_transformer_utils
-
-    context = getattr(ast_transformer_utils, "ASTTransformerContext", None)
-    if context is None or not hasattr(context, "get_pos_info"):
-        return
-
-    def position(self, node):
-        return (f'File "{self.file}", line {node.lineno + self.lineno_offset}, in '
-                f'{self.func.func.__name__}:\n')
-
-    context.get_pos_info = position
 
 
 def pytest_addoption(parser):

@@ -1,0 +1,155 @@
+"""`runtime.memoise_source_positions`: Taichi's front end writes each distinct source position once
+per process, and the texts (so its debug information and error messages) stay those it writes."""
+
+import ast
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import taichi as ti
+from taichi.lang.ast import ast_transformer_utils
+
+from taichi_star import runtime
+
+
+def fake_context_class():
+    """A stand-in for Taichi's context: what the key reads, and a writer that counts."""
+
+    class Context:
+        writes = 0
+
+        def __init__(self, lines, function="g", file="f.py", lineno_offset=0, indent=0):
+            self.file, self.lineno_offset, self.indent, self.src = file, lineno_offset, indent, lines
+            self.func = SimpleNamespace(func=SimpleNamespace(__name__=function))
+
+        def get_pos_info(self, node):
+            Context.writes += 1
+            return (f"{self.file}:{node.lineno + self.lineno_offset}:{self.func.func.__name__}:"
+                    f"{self.src[node.lineno - 1]}@{self.indent + node.col_offset}")
+
+    return Context
+
+
+def statement(source, index=0):
+    return ast.parse(source).body[index]
+
+
+def test_each_distinct_position_is_written_once_and_read_back_unchanged():
+    context = fake_context_class()
+    assert runtime.memoise_source_positions(context, (1, 7, 4))
+    node = statement("a = b + c")
+    texts = [context(["a = b + c"]).get_pos_info(node) for _ in range(3)]
+    assert texts == ["f.py:1:g:a = b + c@0"] * 3
+    assert context.writes == 1
+
+
+@pytest.mark.parametrize("node, lines, where, expected", [
+    ("a = b + c", ["a = b + d"], {}, "f.py:1:g:a = b + d@0"),  # another source line
+    ("a = b + c", ["a = b + c"], {"function": "h"}, "f.py:1:h:a = b + c@0"),
+    ("a = b + c", ["a = b + c"], {"file": "e.py"}, "e.py:1:g:a = b + c@0"),
+    ("a = b + c", ["a = b + c"], {"lineno_offset": 4}, "f.py:5:g:a = b + c@0"),
+    ("a = b + c", ["a = b + c"], {"indent": 8}, "f.py:1:g:a = b + c@8"),
+    ("a = (b + c)", ["a = b + c"], {}, "f.py:1:g:a = b + c@0"),  # another span
+])
+def test_a_position_that_differs_in_anything_it_is_made_of_is_written_again(node, lines, where,
+                                                                          expected):
+    context = fake_context_class()
+    runtime.memoise_source_positions(context, (1, 7, 4))
+    context(["a = b + c"]).get_pos_info(statement("a = b + c"))
+    assert context(lines, **where).get_pos_info(statement(node)) == expected
+    assert context.writes == 2
+
+
+def test_the_cache_keeps_up_to_its_size_then_starts_afresh(monkeypatch):
+    monkeypatch.setattr(runtime, "SOURCE_POSITIONS_KEPT", 2)
+    context = fake_context_class()
+    runtime.memoise_source_positions(context, (1, 7, 4))
+    lines = ["a = 1", "b = 2", "c = 3"]
+    first, second, third = (statement("\n".join(lines), i) for i in range(3))
+    for node in (first, second, first):  # two kept: the third ask is a hit
+        context(lines).get_pos_info(node)
+    assert context.writes == 2
+    context(lines).get_pos_info(third)   # a third distinct one: the two are dropped
+    context(lines).get_pos_info(first)
+    assert context.writes == 4
+
+
+def test_installed_once_only_for_the_checked_taichi_and_only_where_the_writer_exists():
+    context = fake_context_class()
+    original = context.get_pos_info
+    assert not runtime.memoise_source_positions(context, (1, 8, 0))
+    assert context.get_pos_info is original
+    assert runtime.memoise_source_positions(context, (1, 7, 0))
+    memoised = context.get_pos_info
+    assert memoised is not original and memoised.unmemoised is original
+    assert runtime.memoise_source_positions(context, (1, 7, 4))  # a second call: the same memo
+    assert context.get_pos_info is memoised
+    assert not runtime.memoise_source_positions(type("NoWriter", (), {}), (1, 7, 4))
+
+
+@ti.func
+def clipped_sum(values: ti.template(), count):
+    total = 0.0
+    for i in range(count):
+        if values[i] > 0.0:
+            total += (values[i]
+                      * 2.0)
+        else:
+            total -= values[i]
+    while total > 10.0:
+        total -= 1.0
+    return total
+
+
+def test_taichis_own_texts_are_unchanged_on_a_real_compile(monkeypatch):
+    """Every position asked for while compiling a kernel that inlines one function (a loop, a
+    branch, a statement over two lines, a while) three times equals the original writer's."""
+    runtime.Runtime.current().ensure("cpu", "f64")  # installs the memo
+    memoised = ast_transformer_utils.ASTTransformerContext.get_pos_info
+    assert hasattr(memoised, "unmemoised")
+    pairs = []
+
+    def checking(context, node):
+        text = memoised(context, node)
+        pairs.append((text, memoised.unmemoised(context, node)))
+        return text
+
+    monkeypatch.setattr(ast_transformer_utils.ASTTransformerContext, "get_pos_info", checking)
+    values = ti.field(ti.f64, shape=4)
+
+    @ti.kernel
+    def three_sums() -> ti.f64:
+        return clipped_sum(values, 4) + clipped_sum(values, 3) + clipped_sum(values, 2)
+
+    values.from_numpy(np.array([1.0, -2.0, 3.0, 7.0]))
+    # 2·(1 + 3 + 7) + 2 = 24, brought down to 10 by the while; 2·(1 + 3) + 2 = 10; 2·1 + 2 = 4
+    assert three_sums() == 24.0
+    assert len(pairs) > 100 and any("^" in text for text, _ in pairs)
+    assert [memo for memo, _ in pairs] == [written for _, written in pairs]
+    assert len(set(pairs)) < len(pairs)  # the function's positions were asked for again
+
+
+def broken_kernel():
+    @ti.kernel
+    def broken() -> ti.f64:
+        total = 0.0
+        for i in range(3):
+            total += name_that_is_not_defined * i  # noqa: F821
+        return total
+
+    return broken
+
+
+def test_a_compile_error_reads_as_without_the_memo(monkeypatch):
+    runtime.Runtime.current().ensure("cpu", "f64")
+    with pytest.raises(Exception) as memoised_error:
+        broken_kernel()()
+    memoised = ast_transformer_utils.ASTTransformerContext.get_pos_info
+    monkeypatch.setattr(ast_transformer_utils.ASTTransformerContext, "get_pos_info",
+                        memoised.unmemoised)
+    with pytest.raises(Exception) as original_error:
+        broken_kernel()()
+    assert type(memoised_error.value) is type(original_error.value)
+    assert str(memoised_error.value) == str(original_error.value)
+    assert "name_that_is_not_defined" in str(memoised_error.value)
+    assert "^" in str(memoised_error.value)  # the excerpt with its caret line is there
