@@ -62,7 +62,8 @@ initialisation and compilation, so that one table shows what the passes cost to 
 gain per step.
 
 `final_state` is a hash of the final node positions (paper rows) or displacements (accurate
-rows): equal hashes across settings show they computed the same bits.
+rows; the plain and sensitivities sections: displacements and their sensitivities): equal
+hashes across settings show they computed the same bits.
 
 Compile time with a cold and a warm Taichi offline cache: two fresh Python processes that share
 an empty temporary cache folder (`TI_OFFLINE_CACHE_FILE_PATH`), the first compiles from scratch,
@@ -76,6 +77,7 @@ rest (pulse and coast: the B sweep's window is the hardest part of the pulse) (C
 
 Section "sensitivities": the plain call at B = 64 over the pulse, differentiating by 0, 1, 2
 and 4 parameters (`simulate(..., sensitivities=...)`; its cost against the same call without).
+In both sections `time_to_first_step_s` is the first call's (one step, compilation included).
 
 Writes `bench.csv` (`bench_gpu.csv` for --arch gpu): one row per measurement; `section` is
 "batch" (B sweep), "skip" (terms at one B), "plain", "sensitivities", "processes" or "compile"
@@ -191,6 +193,10 @@ def on_off(flag: bool) -> str:
     return "on" if flag else "off"
 
 
+DISPLACEMENTS = ("displacement_x_mm", "displacement_y_mm")
+"""The outputs whose values (and sensitivities) `measure_plain`'s digest covers."""
+
+
 def state_digest(values: np.ndarray) -> str:
     """A short hash of an array's bytes: rows measured with different settings (compiler, layout)
     that computed the same bits carry the same digest."""
@@ -282,10 +288,12 @@ def measure_accurate(batch: int, arch: str, precision: str, duration: float,
 
 
 def best_of_calls(call, repeats: int, warmup=None):
-    """The result of `call()` and the best wall time (s) of `repeats` calls after an untimed
-    `warmup()` (default: `call()`) that starts and compiles what they need. Raises if an instance
-    failed (the timing would not be valid)."""
+    """(result of `call()`, best wall time (s) of `repeats` calls, wall time (s) of the
+    `warmup()` (default: `call()`) before them, which starts and compiles what they need).
+    Raises if an instance failed (the timing would not be valid)."""
+    start = time.perf_counter()
     (warmup or call)()
+    first = time.perf_counter() - start
     timed = math.inf
     for _ in range(repeats):
         start = time.perf_counter()
@@ -293,7 +301,7 @@ def best_of_calls(call, repeats: int, warmup=None):
         timed = min(timed, time.perf_counter() - start)
     if (result.summary["status"] != "ok").any():
         raise RuntimeError("an instance failed during the benchmark: its timing is not valid")
-    return result, timed
+    return result, timed, first
 
 
 def end_to_end_figures(result, robot_steps: float, timed: float) -> dict:
@@ -313,7 +321,7 @@ def measure_processes(batch: int, workers: int, jacobian: str, steps: int, repea
     duration = (WARMUP_STEPS + steps) * DT
     chunk = math.ceil(batch / workers)
     with LocalProcesses(workers) as executor:
-        result, timed = best_of_calls(lambda: run_batch(
+        result, timed, _ = best_of_calls(lambda: run_batch(
             params, duration, solver=solver, chunk_size=chunk, executor=executor), repeats)
     return {"gait": GAIT, "jacobian": jacobian, "workers": workers,
             **end_to_end_figures(result, batch * (WARMUP_STEPS + steps), timed)}
@@ -324,14 +332,21 @@ def measure_plain(batch: int, duration: float, repeats: int, sensitivities=()) -
     the default SolverConfig, in this process: the five Fig. 4c gaits repeated to `batch`
     instances from rest, the best of `repeats` calls after one that compiles the engine;
     with `sensitivities` (parameter names) the same call differentiating by them (the
-    robot-steps counted are the instances', not their replicas')."""
+    robot-steps counted are the instances', not their replicas'). `time_to_first_step_s` is
+    that first call's, one step: the engine's compilation where this process has not built
+    one of its size and kind before (the sections run in order), its loading and a step;
+    `final_state` a digest of the displacements and of their sensitivities."""
     params = [StarParams(gait=PAPER_GAITS[i % len(PAPER_GAITS)]) for i in range(batch)]
     steps = round(duration / DT)
-    result, timed = best_of_calls(
+    result, timed, first = best_of_calls(
         lambda: simulate(params, duration, sensitivities=sensitivities), repeats,
         warmup=lambda: simulate(params, DT, sensitivities=sensitivities))
     return {"gait": "paper_gaits", "jacobian": SolverConfig().jacobian, "workers": 1,
-            "n_nodes": result.topology.n_nodes, "steps": steps,
+            "n_nodes": result.topology.n_nodes, "steps": steps, "time_to_first_step_s": first,
+            "final_state": state_digest(np.column_stack(
+                [result.summary[output].to_numpy() for output in DISPLACEMENTS]
+                + [result.sensitivity(output, name) for output in DISPLACEMENTS
+                   for name in sensitivities])),
             **end_to_end_figures(result, batch * steps, timed)}
 
 

@@ -3,6 +3,7 @@ counts, plots), and the benchmark and work-precision studies' argument errors, r
 any computation (the work-precision study itself: test_work_precision.py). No timing is
 asserted."""
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -66,6 +67,9 @@ def test_bench_quick(tmp_path, monkeypatch):
     terms = dict(zip(skip["scenario"], skip["terms"].str.split("+")))
     assert terms["added_mass_0"] == terms["all_terms"] and "stretching" in terms["all_terms"]
     assert plain["robot_steps_per_s"].iloc[0] > 0
+    assert plain["time_to_first_step_s"].iloc[0] > 0  # the first call's wall time, recorded
+    assert plain["final_state"].iloc[0] == bench.state_digest(np.column_stack(
+        [default.summary[output].to_numpy() for output in bench.DISPLACEMENTS]))
     engine_rows = table[table["section"] != "plain"]  # the plain call has no phase split
     for column in ("robot_steps_per_s", "assembly_us", "factor_flops"):
         assert (engine_rows[column] > 0).all(), column
