@@ -62,8 +62,17 @@ steps faster; off, it compiles in well under half the time; the bits are the sam
 (`python -m studies bench --kernel-optimisation on,off` measures both and compares the final
 states). `Runtime.configure_compiler` changes it for this process; the environment variable
 KERNEL_OPTIMISATION_ENV = "0" turns it off for this process and the worker processes it starts
-(what the test suite does: its many short runs are mostly compilation)."""
+(what the test suite does: its many short runs are mostly compilation). A sensitive engine's
+stepping kernels on the CPU need SENSITIVE_KERNEL_OPTIMISATION as well."""
 KERNEL_OPTIMISATION_ENV = "TAICHI_STAR_KERNEL_OPTIMISATION"
+SENSITIVE_KERNEL_OPTIMISATION = False
+"""Whether the passes of KERNEL_OPTIMISATION also compile the stepping kernels of a sensitive
+engine (one that carries tangents) on the CPU. Off: there they cost far more to compile than
+they gain (measured at b3fdb7f, paper preset, B = 64, two parameters, one period: the first
+call 50.6 s with them, 5.9 s without; each later call 7.7 s against 8.6 s, the same bits), so
+a call would have to be repeated ~50 times to win them back. `Runtime.configure_compiler`
+turns them on for a process that makes many sensitive calls (a long gradient fit). On a GPU
+the engines follow KERNEL_OPTIMISATION (not measured there)."""
 
 
 def kernel_optimisation_default() -> bool:
@@ -277,6 +286,7 @@ class Runtime:
         self.gpu_block_dim = GPU_BLOCK_DIM
         self.gpu_instance_minor = GPU_INSTANCE_MINOR
         self.kernel_optimisation = kernel_optimisation_default()
+        self.sensitive_kernel_optimisation = SENSITIVE_KERNEL_OPTIMISATION
         self.log_level = ti.WARN
         self.engines: Dict[tuple, List[EngineSlot]] = {}
         """The engines built in this process, per `engine_key`: each free for the next call or
@@ -328,16 +338,31 @@ class Runtime:
         self.gpu_block_dim = int(block_dim)
         self.gpu_instance_minor = bool(instance_minor)
 
-    def configure_compiler(self, kernel_optimisation: Optional[bool] = None):
+    def configure_compiler(self, kernel_optimisation: Optional[bool] = None,
+                           sensitive_kernel_optimisation: Optional[bool] = None):
         """Whether Taichi's advanced IR optimisation compiles the engines (see
-        KERNEL_OPTIMISATION; None: the default); forces a re-initialisation if Taichi is up."""
+        KERNEL_OPTIMISATION) and, where it does, also a sensitive engine's stepping kernels on
+        the CPU (SENSITIVE_KERNEL_OPTIMISATION); None: the defaults. Forces a re-initialisation
+        if Taichi is up."""
         if kernel_optimisation is None:
             kernel_optimisation = kernel_optimisation_default()
-        if not isinstance(kernel_optimisation, (bool, np.bool_)):
-            raise ValueError(f"kernel_optimisation must be True or False, got "
-                             f"{kernel_optimisation!r}")
+        if sensitive_kernel_optimisation is None:
+            sensitive_kernel_optimisation = SENSITIVE_KERNEL_OPTIMISATION
+        for name, value in (("kernel_optimisation", kernel_optimisation),
+                            ("sensitive_kernel_optimisation", sensitive_kernel_optimisation)):
+            if not isinstance(value, (bool, np.bool_)):
+                raise ValueError(f"{name} must be True or False, got {value!r}")
         self.kernel_optimisation = bool(kernel_optimisation)
+        self.sensitive_kernel_optimisation = bool(sensitive_kernel_optimisation)
         self.arch = None
+
+    def engine_kernel_optimisation(self, sensitive: bool) -> bool:
+        """Whether an engine's stepping kernels compile with the advanced IR optimisation:
+        KERNEL_OPTIMISATION's setting, but for a sensitive engine on the CPU only with
+        SENSITIVE_KERNEL_OPTIMISATION's too."""
+        if sensitive and self.arch == "cpu":
+            return self.kernel_optimisation and self.sensitive_kernel_optimisation
+        return self.kernel_optimisation
 
     def matrix_slots(self, model: BatchModel) -> int:
         """2×2 blocks of the Newton matrix's elimination pattern for this batch's engine (the
@@ -364,7 +389,8 @@ class Runtime:
         return BatchEngine(model, capacity, INTEGRATORS[solver.integrator](),
                            instances_per_block=self.gpu_block_dim if gpu else 1,
                            loop_spread=self.loop_spread(capacity), even_spread=not gpu,
-                           instance_minor=gpu and self.gpu_instance_minor, sensitive=sensitive)
+                           instance_minor=gpu and self.gpu_instance_minor, sensitive=sensitive,
+                           kernel_optimisation=self.engine_kernel_optimisation(sensitive))
 
     def engine_key(self, model: BatchModel, solver: SolverConfig, sensitive: bool = False) -> tuple:
         """What an engine is compiled for: topology and terms, integrator, capacity, whether it

@@ -22,9 +22,11 @@ def test_a_bad_kernel_optimisation_variable_is_named_in_the_error(monkeypatch, v
         runtime.kernel_optimisation_default()
 
 
-def test_configure_compiler_takes_only_a_bool():
-    with pytest.raises(ValueError, match="kernel_optimisation must be True or False, got 'on'"):
-        runtime.Runtime().configure_compiler("on")
+@pytest.mark.parametrize("arguments, name", [(("on",), "kernel_optimisation"),
+                                             ((True, 1), "sensitive_kernel_optimisation")])
+def test_configure_compiler_takes_only_bools(arguments, name):
+    with pytest.raises(ValueError, match=f"^{name} must be True or False, got"):
+        runtime.Runtime().configure_compiler(*arguments)
 
 
 CACHE_PROBE = """
