@@ -68,11 +68,11 @@ KERNEL_OPTIMISATION_ENV = "TAICHI_STAR_KERNEL_OPTIMISATION"
 SENSITIVE_KERNEL_OPTIMISATION = False
 """Whether the passes of KERNEL_OPTIMISATION also compile the stepping kernels of a sensitive
 engine (one that carries tangents) on the CPU. Off: there they cost far more to compile than
-they gain (measured at b3fdb7f, paper preset, B = 64, two parameters, one period: the first
-call 50.6 s with them, 5.9 s without; each later call 7.7 s against 8.6 s, the same bits), so
-a call would have to be repeated ~50 times to win them back. `Runtime.configure_compiler`
-turns them on for a process that makes many sensitive calls (a long gradient fit). On a GPU
-the engines follow KERNEL_OPTIMISATION (not measured there)."""
+they gain (results/bench_sensitive_compile, paper preset, B = 64, one parameter: the first call
+48 s with them, 4.3 s without; later calls 0.915x as fast without, the same bits), so they pay
+back only after ~10,000 simulated robot-seconds with sensitivities in one process.
+`Runtime.configure_compiler` turns them on for a process that makes that many. On a GPU the
+engines follow KERNEL_OPTIMISATION (not measured there)."""
 
 
 def kernel_optimisation_default() -> bool:
