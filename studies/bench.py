@@ -589,13 +589,10 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
              "batch_size": args.process_batch, "precision": "f64",
              **measure_plain(args.process_batch, args.plain_duration, args.repeats)})
     for count in args.sensitivity_counts:
-        figures = measure_plain(SENSITIVITY_BATCH, args.sensitivity_duration, args.repeats,
-                                SENSITIVITY_PARAMETERS[:count])
-        # a sensitive engine has its own compiler setting on the CPU (runtime module)
-        compiled = Runtime.current().engine_kernel_optimisation(sensitive=count > 0)
         add({"section": "sensitivities", "scenario": f"sensitivities_{count}", "preset": "paper",
-             "batch_size": SENSITIVITY_BATCH, "precision": "f64", **figures,
-             "kernel_optimisation": on_off(compiled)})
+             "batch_size": SENSITIVITY_BATCH, "precision": "f64",
+             **measure_plain(SENSITIVITY_BATCH, args.sensitivity_duration, args.repeats,
+                             SENSITIVITY_PARAMETERS[:count])})
     for workers in args.workers_list:
         for jacobian in args.jacobians:
             figures = measure_processes(args.process_batch, workers, jacobian, args.steps,

@@ -19,8 +19,7 @@ and its derivative is the central difference of the pair.
 """
 
 
-import contextlib
-from typing import Dict, Optional
+from typing import Dict
 
 import numpy as np
 import taichi as ti
@@ -51,20 +50,6 @@ FINITE_LIMIT = 1e30
 """Updates larger than this (m) are treated as non-finite: no physical step moves a node 1e30 m."""
 
 
-@contextlib.contextmanager
-def advanced_optimisation(enabled: Optional[bool]):
-    """Taichi's advanced IR optimisation passes on or off for the kernels compiled inside (a
-    kernel compiles at its first launch; None: as Taichi was initialised), restored after."""
-    config = ti.lang.impl.current_cfg()
-    kept = config.advanced_optimization
-    if enabled is not None:
-        config.advanced_optimization = bool(enabled)
-    try:
-        yield
-    finally:
-        config.advanced_optimization = kept
-
-
 @ti.data_oriented
 class BatchEngine:
     """Device model, state and solver for up to `capacity` instances of one topology and one
@@ -72,20 +57,16 @@ class BatchEngine:
     coefficients and the solver settings are loaded by `load`, not baked into the kernels.
     `instances_per_block`: threads (instances) per GPU block (1 on the CPU: one instance per
     task); `loop_spread`: parallel-loop iterations per instance of the capacity (see
-    `advance_kernel`); `even_spread` (the CPU): the simulated instances placed evenly over those
+    `advance`); `even_spread` (the CPU): the simulated instances placed evenly over those
     iterations (`slot_instance`); `instance_minor`: the GPU layout of the per-instance fields
-    (`fields.FieldArena`); `kernel_optimisation`: Taichi's advanced IR optimisation for the
-    stepping kernels (`advanced_optimisation`; None: as Taichi was initialised)."""
+    (`fields.FieldArena`)."""
 
     def __init__(self, model: BatchModel, capacity: int, integrator, instances_per_block: int = 1,
                  loop_spread: int = 1, instance_minor: bool = False, sensitive: bool = False,
-                 even_spread: bool = False, kernel_optimisation: Optional[bool] = None):
+                 even_spread: bool = False):
         topology = model.topology
         self.sensitive = sensitive
         """Whether the kernels carry the tangents of replicas (module docstring; static)."""
-        self.kernel_optimisation = kernel_optimisation
-        """Whether the stepping kernels compile with Taichi's advanced IR optimisation (None:
-        as Taichi was initialised); the bits are the same either way."""
         self.topology = topology
         self.capacity = capacity
         self.instances_per_block = instances_per_block
@@ -486,15 +467,10 @@ class BatchEngine:
                     self.state.failure_time[b] = end
         self.mirror_replicas(b)
 
-    def advance_adaptive(self, max_steps: int):
+    @ti.kernel
+    def advance_adaptive(self, max_steps: ti.i32):
         """Adaptive stepping: advance every live instance towards its stop_time (s), at most
         max_steps step attempts each in this launch (the host calls again until all are there)."""
-        with advanced_optimisation(self.kernel_optimisation):
-            self.advance_adaptive_kernel(max_steps)
-
-    @ti.kernel
-    def advance_adaptive_kernel(self, max_steps: ti.i32):
-        """`advance_adaptive`'s launch."""
         ti.loop_config(block_dim=self.instances_per_block)
         for slot in range(self.capacity * self.loop_spread):
             b = self.slot_instance(slot)
@@ -748,15 +724,10 @@ class BatchEngine:
                     self.state.status[r] = self.state.status[b]
                     self.state.failure_time[r] = self.state.failure_time[b]
 
-    def advance(self, n_steps: int):
+    @ti.kernel
+    def advance(self, n_steps: ti.i32):
         """Advance every live instance by n_steps steps (from its own step count) in one
         launch."""
-        with advanced_optimisation(self.kernel_optimisation):
-            self.advance_kernel(n_steps)
-
-    @ti.kernel
-    def advance_kernel(self, n_steps: ti.i32):
-        """`advance`'s launch."""
         # one instance per task on the CPU (Taichi's default grain of 32 would run a small batch
         # on one thread); a full block of instances per GPU block. Taichi's CPU backend runs a
         # parallel loop of fewer than ~1,024 iterations on one thread, so on the CPU the

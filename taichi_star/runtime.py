@@ -62,17 +62,17 @@ steps faster; off, it compiles in well under half the time; the bits are the sam
 (`python -m studies bench --kernel-optimisation on,off` measures both and compares the final
 states). `Runtime.configure_compiler` changes it for this process; the environment variable
 KERNEL_OPTIMISATION_ENV = "0" turns it off for this process and the worker processes it starts
-(what the test suite does: its many short runs are mostly compilation). A sensitive engine's
-stepping kernels on the CPU need SENSITIVE_KERNEL_OPTIMISATION as well."""
+(what the test suite does: its many short runs are mostly compilation)."""
 KERNEL_OPTIMISATION_ENV = "TAICHI_STAR_KERNEL_OPTIMISATION"
-SENSITIVE_KERNEL_OPTIMISATION = False
-"""Whether the passes of KERNEL_OPTIMISATION also compile the stepping kernels of a sensitive
-engine (one that carries tangents) on the CPU. Off: there they cost far more to compile than
-they gain (results/bench_sensitive_compile, paper preset, B = 64, one parameter: the first call
-48 s with them, 4.3 s without; later calls 0.915x as fast without, the same bits), so they pay
-back only after ~10,000 simulated robot-seconds with sensitivities in one process.
-`Runtime.configure_compiler` turns them on for a process that makes that many. On a GPU the
-engines follow KERNEL_OPTIMISATION (not measured there)."""
+CPU_CFG_OPTIMISATION = False
+"""Whether the passes of KERNEL_OPTIMISATION include Taichi's control-flow-graph optimisation
+(`ti.init(cfg_optimization=...)`: store-to-load forwarding and dead-store elimination over a
+whole kernel, by reaching-definition and liveness analyses) on the CPU. Off: on the engine's
+large kernels those analyses were most of the compilation (the sensitive engine's first call
+~48 s, ~37 s of it in them) and LLVM, which compiles the kernels after, does the same work, so
+the engines step as fast and compute the same bits without them (measured:
+results/bench_cfg_optimisation, docs/performance.md). On a GPU Taichi's default (on) stays:
+not measured there. `Runtime.configure_compiler` changes it for comparisons."""
 
 
 def kernel_optimisation_default() -> bool:
@@ -286,7 +286,7 @@ class Runtime:
         self.gpu_block_dim = GPU_BLOCK_DIM
         self.gpu_instance_minor = GPU_INSTANCE_MINOR
         self.kernel_optimisation = kernel_optimisation_default()
-        self.sensitive_kernel_optimisation = SENSITIVE_KERNEL_OPTIMISATION
+        self.cpu_cfg_optimisation = CPU_CFG_OPTIMISATION
         self.log_level = ti.WARN
         self.engines: Dict[tuple, List[EngineSlot]] = {}
         """The engines built in this process, per `engine_key`: each free for the next call or
@@ -322,6 +322,7 @@ class Runtime:
         with contextlib.redirect_stdout(io.StringIO()):
             ti.init(arch=getattr(ti, arch), default_fp=ti.f64 if precision == "f64" else ti.f32,
                     fast_math=False, advanced_optimization=self.kernel_optimisation,
+                    cfg_optimization=self.cpu_cfg_optimisation if arch == "cpu" else True,
                     offline_cache=True, log_level=ti.ERROR, **threads)
             _open_kernel_cache()
         ti.set_logging_level(self.log_level)
@@ -339,30 +340,21 @@ class Runtime:
         self.gpu_instance_minor = bool(instance_minor)
 
     def configure_compiler(self, kernel_optimisation: Optional[bool] = None,
-                           sensitive_kernel_optimisation: Optional[bool] = None):
+                           cpu_cfg_optimisation: Optional[bool] = None):
         """Whether Taichi's advanced IR optimisation compiles the engines (see
-        KERNEL_OPTIMISATION) and, where it does, also a sensitive engine's stepping kernels on
-        the CPU (SENSITIVE_KERNEL_OPTIMISATION); None: the defaults. Forces a re-initialisation
-        if Taichi is up."""
+        KERNEL_OPTIMISATION) and, with it, its control-flow-graph optimisation on the CPU (see
+        CPU_CFG_OPTIMISATION); None: the defaults. Forces a re-initialisation if Taichi is up."""
         if kernel_optimisation is None:
             kernel_optimisation = kernel_optimisation_default()
-        if sensitive_kernel_optimisation is None:
-            sensitive_kernel_optimisation = SENSITIVE_KERNEL_OPTIMISATION
+        if cpu_cfg_optimisation is None:
+            cpu_cfg_optimisation = CPU_CFG_OPTIMISATION
         for name, value in (("kernel_optimisation", kernel_optimisation),
-                            ("sensitive_kernel_optimisation", sensitive_kernel_optimisation)):
+                            ("cpu_cfg_optimisation", cpu_cfg_optimisation)):
             if not isinstance(value, (bool, np.bool_)):
                 raise ValueError(f"{name} must be True or False, got {value!r}")
         self.kernel_optimisation = bool(kernel_optimisation)
-        self.sensitive_kernel_optimisation = bool(sensitive_kernel_optimisation)
+        self.cpu_cfg_optimisation = bool(cpu_cfg_optimisation)
         self.arch = None
-
-    def engine_kernel_optimisation(self, sensitive: bool) -> bool:
-        """Whether an engine's stepping kernels compile with the advanced IR optimisation:
-        KERNEL_OPTIMISATION's setting, but for a sensitive engine on the CPU only with
-        SENSITIVE_KERNEL_OPTIMISATION's too."""
-        if sensitive and self.arch == "cpu":
-            return self.kernel_optimisation and self.sensitive_kernel_optimisation
-        return self.kernel_optimisation
 
     def matrix_slots(self, model: BatchModel) -> int:
         """2×2 blocks of the Newton matrix's elimination pattern for this batch's engine (the
@@ -389,8 +381,7 @@ class Runtime:
         return BatchEngine(model, capacity, INTEGRATORS[solver.integrator](),
                            instances_per_block=self.gpu_block_dim if gpu else 1,
                            loop_spread=self.loop_spread(capacity), even_spread=not gpu,
-                           instance_minor=gpu and self.gpu_instance_minor, sensitive=sensitive,
-                           kernel_optimisation=self.engine_kernel_optimisation(sensitive))
+                           instance_minor=gpu and self.gpu_instance_minor, sensitive=sensitive)
 
     def engine_key(self, model: BatchModel, solver: SolverConfig, sensitive: bool = False) -> tuple:
         """What an engine is compiled for: topology and terms, integrator, capacity, whether it

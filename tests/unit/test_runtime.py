@@ -22,13 +22,6 @@ def test_a_bad_kernel_optimisation_variable_is_named_in_the_error(monkeypatch, v
         runtime.kernel_optimisation_default()
 
 
-@pytest.mark.parametrize("arguments, name", [(("on",), "kernel_optimisation"),
-                                             ((True, 1), "sensitive_kernel_optimisation")])
-def test_configure_compiler_takes_only_bools(arguments, name):
-    with pytest.raises(ValueError, match=f"^{name} must be True or False, got"):
-        runtime.Runtime().configure_compiler(*arguments)
-
-
 CACHE_PROBE = """
 import sys, taichi as ti
 if sys.argv[1] == "populate":
