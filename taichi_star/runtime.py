@@ -58,7 +58,8 @@ GPU_INSTANCE_MINOR = True
 """GPU layout of the per-instance fields: instance-minor (coalesced); chosen by the same bench."""
 KERNEL_OPTIMISATION = True
 """Taichi's advanced IR optimisation passes (`ti.init(advanced_optimization=...)`): on, an engine
-steps faster; off, it compiles in well under half the time; the bits are the same either way
+steps 10-13 % faster; off, it compiles faster (~0.7x as long on the CPU, where the passes leave
+out the CFG optimisation: CPU_CFG_OPTIMISATION); the bits are the same either way
 (`python -m studies bench --kernel-optimisation on,off` measures both and compares the final
 states). `Runtime.configure_compiler` changes it for this process; the environment variable
 KERNEL_OPTIMISATION_ENV = "0" turns it off for this process and the worker processes it starts
