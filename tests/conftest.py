@@ -7,7 +7,7 @@ from taichi_star.runtime import KERNEL_OPTIMISATION_ENV
 
 def pytest_configure(config):
     # the suite's runs are short, mostly compilation: without Taichi's IR optimisation passes an
-    # engine compiles in well under half the time and computes the same bits
+    # engine compiles in 0.45-0.7x the time (docs/reliability.md) and computes the same bits
     # (test_bench_quick checks); set here, it reaches every worker process the tests start
     os.environ.setdefault(KERNEL_OPTIMISATION_ENV, "0")
 
