@@ -16,12 +16,12 @@ from .gait import Gait, symmetry_classes
 from .params import JACOBIANS, PER_ACTUATOR_FIELDS, PRESETS, STAR_RANGES, SolverConfig, StarParams
 from .profiling import EngineProfile
 from .runtime import available_archs
-from .simulation import SimulationResult, simulate
+from .simulation import RunTiming, SimulationResult, simulate
 from .timegrid import MAX_STEPS_PER_INSTANCE, check_work
 from .simulator import Simulator, SimulatorSnapshot
 
 __version__ = "0.3.0"
 
-__all__ = ["simulate", "SimulationResult", "MAX_STEPS_PER_INSTANCE", "check_work", "Simulator", "SimulatorSnapshot", "available_archs", "StarParams", "STAR_RANGES", "SolverConfig", "PRESETS", "JACOBIANS",
+__all__ = ["simulate", "SimulationResult", "RunTiming", "MAX_STEPS_PER_INSTANCE", "check_work", "Simulator", "SimulatorSnapshot", "available_archs", "StarParams", "STAR_RANGES", "SolverConfig", "PRESETS", "JACOBIANS",
            "PER_ACTUATOR_FIELDS",
            "CurvatureProfile", "Gait", "symmetry_classes", "EngineProfile", "__version__"]

@@ -741,6 +741,17 @@ class BatchEngine:
                     if self.state.status[b] == STATUS_OK:
                         self.advance_instance(b, self.state.steps_done[b] + 1)
 
+    def compile_stepping(self, adaptive: bool):
+        """Compile the stepping kernel of fixed (`advance`) or adaptive (`advance_adaptive`)
+        steps, or load it from Taichi's offline cache, by a launch that takes no step (the
+        state is unchanged); returns once it is done, so that a caller can time compilation
+        apart from the run. About free once this process has compiled it."""
+        if adaptive:
+            self.advance_adaptive(0)
+        else:
+            self.advance(0)
+        ti.sync()
+
     @ti.kernel
     def compute_centroids(self):
         """centroids[b] = mass-weighted mean of the current node positions."""

@@ -51,7 +51,8 @@ def provenance(result) -> dict:
     git_commit, git_dirty; solver (every SolverConfig field); parameters (the StarParams
     fields equal across the instances, by field name) and varying_parameters (the fields that
     differ, whose values are in the table's columns); units of the summary's columns; Taichi
-    and Python versions; date."""
+    and Python versions; date; with the result's `timing` (a `simulate` call's), its phases in
+    s (compilation apart), its robot-steps and robot_steps_per_s."""
     import taichi
 
     code = code_version()
@@ -66,6 +67,10 @@ def provenance(result) -> dict:
         else:
             varying.append(name)
     version = taichi.__version__
+    timing = {}
+    if result.timing is not None:
+        timing = {"timing": {**dataclasses.asdict(result.timing),
+                             "robot_steps_per_s": result.timing.robot_steps_per_s}}
     return {"taichi_star_version": code["version"], "git_commit": code["commit"],
             "git_dirty": code["dirty"], "solver": dataclasses.asdict(result.solver),
             "parameters": parameters, "varying_parameters": varying,
@@ -73,7 +78,8 @@ def provenance(result) -> dict:
             "taichi_version": ".".join(map(str, version)) if isinstance(version, (tuple, list))
             else str(version),
             "python_version": platform.python_version(),
-            "date": datetime.datetime.now().astimezone().isoformat(timespec="seconds")}
+            "date": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
+            **timing}
 
 
 def _table(result, table: str) -> pd.DataFrame:

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
+import time
 import warnings
 from dataclasses import dataclass, field
 from typing import Optional, Sequence
@@ -21,6 +23,48 @@ from . import sensitivities as tangents
 from .runtime import Runtime, check_arch, stream_chunk_size
 from .state import STATUS_NAMES, STATUS_OK
 from .timegrid import whole_steps
+
+
+@dataclass(frozen=True)
+class RunTiming:
+    """Where a `simulate` call's wall time went, in s (summed over its chunks, which run one
+    after the other), so that compilation is seen apart from the run:
+
+    - `setup_s`: Taichi initialised (the first call of a process), the batch's tables built,
+      its engine built (when this process has none yet for its topology, terms, integrator
+      and capacity) and loaded with the batch;
+    - `compile_s`: the engine's stepping kernel compiled, or loaded from Taichi's offline cache
+      (a launch that takes no step; about 0 once this process has compiled it);
+    - `run_s`: the steps, with the records and the progress bar;
+    - `collect_s`: the result's tables;
+    - `robot_steps`: accepted steps summed over the instances (a sensitivity's replicas are
+      not counted: they are moved, not solved)."""
+
+    setup_s: float
+    compile_s: float
+    run_s: float
+    collect_s: float
+    robot_steps: int
+
+    @property
+    def total_s(self) -> float:
+        """The call from Taichi's initialisation on (all but its argument checks), s."""
+        return self.setup_s + self.compile_s + self.run_s + self.collect_s
+
+    @property
+    def robot_steps_per_s(self) -> float:
+        """robot_steps / run_s (NaN for a run of no measurable time)."""
+        return self.robot_steps / self.run_s if self.run_s > 0 else math.nan
+
+    def __add__(self, other: "RunTiming") -> "RunTiming":
+        """The timing of two calls (or chunks) run one after the other."""
+        return RunTiming(*(getattr(self, name.name) + getattr(other, name.name)
+                           for name in dataclasses.fields(self)))
+
+    def __str__(self) -> str:
+        return (f"setup {self.setup_s:.2f} s, compile {self.compile_s:.2f} s, run "
+                f"{self.run_s:.2f} s ({self.robot_steps_per_s:,.0f} robot-steps/s), tables "
+                f"{self.collect_s:.2f} s")
 
 
 @dataclass
@@ -80,6 +124,7 @@ class SimulationResult:
     solver: SolverConfig = field(repr=False)
     sensitivities: Optional[pd.DataFrame] = field(default=None, repr=False)
     trajectory_sensitivities: Optional[pd.DataFrame] = field(default=None, repr=False)
+    timing: Optional[RunTiming] = field(default=None, repr=False)
 
     def sensitivity(self, output: str, parameter: str, trajectory: bool = False) -> np.ndarray:
         """d(output)/d(parameter) for every instance: (B,) for a summary output
@@ -138,9 +183,10 @@ class SimulationResult:
 
     def __repr__(self) -> str:
         status = self.summary["status"].value_counts().to_dict() if len(self.summary) else {}
+        timing = f"; {self.timing}" if self.timing is not None else ""
         return (f"SimulationResult({len(self.summary)} instances, status {status}, "
                 f"{self.trajectory['t_s'].nunique() if len(self.trajectory) else 0} records, "
-                f"shapes {'recorded' if self.shapes is not None else 'not recorded'})")
+                f"shapes {'recorded' if self.shapes is not None else 'not recorded'}{timing})")
 
 
 def _check_real(name, value, lowest, allow_equal=False):
@@ -205,8 +251,10 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     directions = tangents.parse_directions(sensitivities)
     tangents.check_directions(directions, params, solver)
     check_arch(arch)
+    started = time.perf_counter()
     runtime = Runtime.current()
     runtime.ensure(arch, solver.precision)
+    initialise_s = time.perf_counter() - started
     # replicas travel in their instance's chunk: a chunk holds (1 + 2·directions) × its instances
     per_instance = 1 + tangents.REPLICAS_PER_DIRECTION * len(directions)
     chunk = max(1, stream_chunk_size(params * per_instance, solver.precision, arch) // per_instance)
@@ -218,7 +266,9 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
         results.append(_simulate_chunk(params[start:start + chunk], duration_s, solver, runtime,
                                        record_interval_s, record_shapes, steady_from_cycle,
                                        label if progress else None, directions))
-    return results[0] if len(results) == 1 else _concatenate(results)
+    result = results[0] if len(results) == 1 else _concatenate(results)
+    result.timing = dataclasses.replace(result.timing, setup_s=result.timing.setup_s + initialise_s)
+    return result
 
 
 def _concatenate(results: Sequence[SimulationResult]) -> SimulationResult:
@@ -239,17 +289,23 @@ def _concatenate(results: Sequence[SimulationResult]) -> SimulationResult:
                                               ignore_index=True),
                             trajectory=trajectory, shapes=shapes, topology=results[0].topology,
                             solver=results[0].solver, sensitivities=sensitivities,
-                            trajectory_sensitivities=trajectory_sensitivities)
+                            trajectory_sensitivities=trajectory_sensitivities,
+                            timing=sum((result.timing for result in results[1:]), results[0].timing))
 
 
 def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, record_shapes,
                     steady_from_cycle, progress_label, directions=()):
     """`simulate` of one batch in one engine (arguments validated, Taichi initialised);
     progress_label: the progress bar's description, None for no bar; `directions`: those of
-    the sensitivities (`sensitivities.parse_directions`)."""
+    the sensitivities (`sensitivities.parse_directions`). The result's `timing` has every
+    phase but Taichi's initialisation (`simulate` adds it)."""
+    started = time.perf_counter()
     model, steps = tangents.replica_model(params, directions)
     params = model.params
     engine = runtime.engine_for(model, solver, tangents=len(directions))
+    set_up = time.perf_counter()
+    engine.compile_stepping(solver.adaptive)
+    compiled = time.perf_counter()
     batch = model.batch_size
     clock = Clock(solver, duration_s)
 
@@ -284,18 +340,23 @@ def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, reco
 
     start_centroids = engine.centroids_of(batch)
     drive(engine, clock, stops, take, batch, progress_label=progress_label)
+    ran = time.perf_counter()
     record_times = np.array([clock.time_of(stop) for stop in record_stops])
     result = _collect(engine, model, solver, clock.time_of(clock.end), record_times,
                       start_centroids, centroids, rotations, shapes, boundaries, steady_from_cycle)
-    if not directions:
-        return result
-    count = len(params) // (1 + tangents.REPLICAS_PER_DIRECTION * len(directions))
-    summary, trajectory, sensitivities, trajectory_sensitivities = tangents.split_result(
-        result.summary, result.trajectory, directions, steps)
-    return SimulationResult(summary=summary, trajectory=trajectory,
-                            shapes=None if result.shapes is None else result.shapes[:, :count],
-                            topology=result.topology, solver=solver, sensitivities=sensitivities,
-                            trajectory_sensitivities=trajectory_sensitivities)
+    if directions:
+        count = len(params) // (1 + tangents.REPLICAS_PER_DIRECTION * len(directions))
+        summary, trajectory, sensitivities, trajectory_sensitivities = tangents.split_result(
+            result.summary, result.trajectory, directions, steps)
+        result = SimulationResult(
+            summary=summary, trajectory=trajectory,
+            shapes=None if result.shapes is None else result.shapes[:, :count],
+            topology=result.topology, solver=solver, sensitivities=sensitivities,
+            trajectory_sensitivities=trajectory_sensitivities)
+    result.timing = RunTiming(setup_s=set_up - started, compile_s=compiled - set_up,
+                              run_s=ran - compiled, collect_s=time.perf_counter() - ran,
+                              robot_steps=int(result.summary["steps"].sum()))
+    return result
 
 
 def _texts(values: Sequence, to_text) -> list:

@@ -57,6 +57,21 @@ def test_the_step_that_ends_on_a_firing_is_at_most_dt_and_the_coast_stops_dt_sho
     assert sizes[landing + 1] <= 2 * sizes[landing] * (1 + 1e-12)
 
 
+def test_compiling_the_adaptive_kernel_takes_no_step_and_changes_no_state():
+    """`compile_stepping` (what `simulate` times as compilation) launches the adaptive kernel
+    with no attempt: mid-run, after a rejected step's bookkeeping, every state field of every
+    instance keeps every bit."""
+    sim = ts.Simulator(PARAMS, SOLVER)
+    sim.advance(0.05)
+    before = sim.engine.state.save()
+    sim.engine.compile_stepping(adaptive=True)
+    after = sim.engine.state.save()
+    assert before.keys() == after.keys()
+    for name in before:
+        np.testing.assert_array_equal(after[name], before[name], err_msg=name)
+    assert (before["steps_done"][:len(PARAMS)] > 0).all()  # a state mid-run, not at rest
+
+
 def test_adaptive_results_do_not_depend_on_batch_position():
     """Each instance chooses its own steps: shuffling the batch permutes the rows, bit for
     bit (steps and rejections included)."""

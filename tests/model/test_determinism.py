@@ -80,6 +80,8 @@ def test_a_batch_streamed_in_chunks_equals_one_engine_bitwise(monkeypatch):
     pd.testing.assert_frame_equal(streamed.summary, whole.summary, check_exact=True)
     pd.testing.assert_frame_equal(streamed.trajectory, whole.trajectory, check_exact=True)
     np.testing.assert_array_equal(streamed.shapes, whole.shapes)
+    # the chunks' timings are summed: every instance's steps counted once
+    assert streamed.timing.robot_steps == whole.timing.robot_steps == whole.summary["steps"].sum()
 
 
 if __name__ == "__main__":  # the other process of test_another_process_gives_the_same_bits

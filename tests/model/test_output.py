@@ -1,6 +1,7 @@
 """Result files (CSV, Parquet, netCDF: values, parameters and provenance back), labelled data
 (xarray), animation and the quiet import."""
 
+import dataclasses
 import json
 
 import subprocess
@@ -79,8 +80,10 @@ def test_csv_parquet_and_netcdf_round_trip_with_the_same_provenance(recorded, tm
     facts = [read_provenance(path) for path in (csv, parquet, netcdf)]
     for fact in facts:
         for key in ("taichi_star_version", "git_commit", "git_dirty", "solver", "parameters",
-                    "varying_parameters"):
+                    "varying_parameters", "timing"):
             assert fact[key] == facts[0][key], key
+    assert facts[0]["timing"] == {**dataclasses.asdict(recorded.timing),
+                                  "robot_steps_per_s": recorded.timing.robot_steps_per_s}
     assert facts[0]["taichi_star_version"] == ts.__version__
     assert facts[0]["solver"]["dt"] == 2e-3 and facts[0]["solver"]["integrator"] == "euler"
     assert facts[0]["parameters"]["youngs_modulus"] == 5e6  # equal in both robots

@@ -159,6 +159,8 @@ def test_the_instances_rows_are_those_of_a_run_without_sensitivities(euler_run):
         assert np.array_equal(plain.summary[column].to_numpy(), euler_run.summary[column].to_numpy(),
                               equal_nan=True), column
     assert plain.trajectory.equals(euler_run.trajectory)
+    # the timing counts the instances' steps, not their replicas' (moved, never solved)
+    assert euler_run.timing.robot_steps == plain.timing.robot_steps == plain.summary["steps"].sum()
 
 
 def test_trajectory_sensitivities_start_at_zero_and_end_at_the_displacements(euler_run):
