@@ -16,7 +16,8 @@ from .gait import Gait, symmetry_classes
 from .params import JACOBIANS, PER_ACTUATOR_FIELDS, PRESETS, STAR_RANGES, SolverConfig, StarParams
 from .profiling import EngineProfile
 from .runtime import available_archs
-from .simulation import RunTiming, SimulationResult, simulate
+from .driver import RunTiming
+from .simulation import SimulationResult, simulate
 from .timegrid import MAX_STEPS_PER_INSTANCE, check_work
 from .simulator import Simulator, SimulatorSnapshot
 

@@ -4,12 +4,16 @@ duration and record interval, and advances a batch from its start through a list
 
 A stop is counted from the run's start (`Clock`): with fixed steps a number of steps (the
 engine's time is then its own product step·dt), with adaptive steps a time in s, which every
-instance reaches exactly from its own start time.
+instance reaches exactly from its own start time. `RunTiming` is what both callers report of
+where their time went.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import warnings
+from dataclasses import dataclass
 from typing import Callable, Optional, Sequence
 
 import numpy as np
@@ -17,6 +21,52 @@ import numpy as np
 from .params import SolverConfig
 from .timegrid import (MAX_STEPS_PER_INSTANCE, STEPS_PER_LAUNCH, check_duration, check_steps,
                        check_work, multiples_within, steps_in, whole_steps)
+
+
+@dataclass(frozen=True)
+class RunTiming:
+    """Where the wall time of a `simulate` call (summed over its chunks, which run one after
+    the other) or of a `Simulator` so far went, in s, so that compilation is seen apart from
+    the run:
+
+    - `setup_s`: Taichi initialised (the first call of a process), the batch's tables built,
+      its engine built (when this process has none yet for its topology, terms, integrator
+      and capacity) and loaded with the batch;
+    - `compile_s`: the engine's stepping kernel compiled, or loaded from Taichi's offline cache
+      (`BatchEngine.compile_stepping`, before the first step; about 0 once this process has
+      compiled it);
+    - `run_s`: the steps, with the records and the progress bar (a Simulator's: its
+      `advance` calls);
+    - `collect_s`: the result's tables (0 for a Simulator, whose tables are read on request);
+    - `robot_steps`: accepted steps summed over the instances (a sensitivity's replicas are
+      not counted: they are moved, not solved)."""
+
+    setup_s: float
+    compile_s: float
+    run_s: float
+    collect_s: float
+    robot_steps: int
+
+    @property
+    def total_s(self) -> float:
+        """The sum of the phases, s (of a `simulate` call: all of it from Taichi's
+        initialisation on, all but its argument checks)."""
+        return self.setup_s + self.compile_s + self.run_s + self.collect_s
+
+    @property
+    def robot_steps_per_s(self) -> float:
+        """robot_steps / run_s (NaN for a run of no measurable time)."""
+        return self.robot_steps / self.run_s if self.run_s > 0 else math.nan
+
+    def __add__(self, other: "RunTiming") -> "RunTiming":
+        """The timing of two calls (or chunks) run one after the other."""
+        return RunTiming(*(getattr(self, name.name) + getattr(other, name.name)
+                           for name in dataclasses.fields(self)))
+
+    def __str__(self) -> str:
+        return (f"setup {self.setup_s:.2f} s, compile {self.compile_s:.2f} s, run "
+                f"{self.run_s:.2f} s ({self.robot_steps_per_s:,.0f} robot-steps/s), tables "
+                f"{self.collect_s:.2f} s")
 
 
 def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float, batch: int,

@@ -18,53 +18,11 @@ from .geometry import CENTRE, Topology
 from .model import validate_batch
 from .params import (PER_ACTUATOR_FIELDS, SolverConfig, StarParams, check_precision,
                      parameter_column)
-from .driver import Clock, check_run, drive
+from .driver import Clock, RunTiming, check_run, drive
 from . import sensitivities as tangents
 from .runtime import Runtime, check_arch, stream_chunk_size
 from .state import STATUS_NAMES, STATUS_OK
 from .timegrid import whole_steps
-
-
-@dataclass(frozen=True)
-class RunTiming:
-    """Where a `simulate` call's wall time went, in s (summed over its chunks, which run one
-    after the other), so that compilation is seen apart from the run:
-
-    - `setup_s`: Taichi initialised (the first call of a process), the batch's tables built,
-      its engine built (when this process has none yet for its topology, terms, integrator
-      and capacity) and loaded with the batch;
-    - `compile_s`: the engine's stepping kernel compiled, or loaded from Taichi's offline cache
-      (a launch that takes no step; about 0 once this process has compiled it);
-    - `run_s`: the steps, with the records and the progress bar;
-    - `collect_s`: the result's tables;
-    - `robot_steps`: accepted steps summed over the instances (a sensitivity's replicas are
-      not counted: they are moved, not solved)."""
-
-    setup_s: float
-    compile_s: float
-    run_s: float
-    collect_s: float
-    robot_steps: int
-
-    @property
-    def total_s(self) -> float:
-        """The call from Taichi's initialisation on (all but its argument checks), s."""
-        return self.setup_s + self.compile_s + self.run_s + self.collect_s
-
-    @property
-    def robot_steps_per_s(self) -> float:
-        """robot_steps / run_s (NaN for a run of no measurable time)."""
-        return self.robot_steps / self.run_s if self.run_s > 0 else math.nan
-
-    def __add__(self, other: "RunTiming") -> "RunTiming":
-        """The timing of two calls (or chunks) run one after the other."""
-        return RunTiming(*(getattr(self, name.name) + getattr(other, name.name)
-                           for name in dataclasses.fields(self)))
-
-    def __str__(self) -> str:
-        return (f"setup {self.setup_s:.2f} s, compile {self.compile_s:.2f} s, run "
-                f"{self.run_s:.2f} s ({self.robot_steps_per_s:,.0f} robot-steps/s), tables "
-                f"{self.collect_s:.2f} s")
 
 
 @dataclass

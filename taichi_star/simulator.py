@@ -24,6 +24,7 @@ import json
 import math
 import numbers
 import os
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, Optional, Sequence, Union
@@ -34,7 +35,7 @@ import pandas as pd
 from . import metrics
 from . import sensitivities as tangents
 from .actuation import NEVER
-from .driver import Clock, check_run, drive
+from .driver import Clock, RunTiming, check_run, drive
 from .gait import N_ACTUATORS, Gait
 from .geometry import CENTRE
 from .model import validate_batch
@@ -99,10 +100,13 @@ class Simulator:
     params: a sequence of StarParams sharing n_arc and n_limb (their `gait` is ignored);
     solver: the SolverConfig of the batch; arch: "cpu" or a GPU arch. The robots start at rest
     in their rest shape at t = 0 with no actuator fired. `sensitivities`: parameters to
-    differentiate the state by, as in `simulate` (`sensitivity`)."""
+    differentiate the state by, as in `simulate` (`sensitivity`). `timing`: where its time
+    has gone so far (`RunTiming`: the setup here, the stepping kernel's compilation at the first
+    `advance`, the steps of every `advance`)."""
 
     def __init__(self, params: Sequence[StarParams], solver: SolverConfig = SolverConfig(),
                  *, arch: str = "cpu", sensitivities: Sequence[str] = ()):
+        started = time.perf_counter()
         params = validate_batch(params)
         if not isinstance(solver, SolverConfig):
             raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
@@ -123,6 +127,10 @@ class Simulator:
         self.engine.load(self.model, solver, periodic_gaits=False, tangents=carried)
         self._initial = self.engine.save_state()
         self._start_centroids = self.engine.centroids_of(self.model.batch_size)
+        self._compiled = False
+        """Whether `advance` has had the stepping kernel compiled (timed apart, once)."""
+        self.timing = RunTiming(setup_s=time.perf_counter() - started, compile_s=0.0,
+                                run_s=0.0, collect_s=0.0, robot_steps=0)
 
     # ---------------------------------------------------------------- properties
     @property
@@ -221,9 +229,20 @@ class Simulator:
             if stop in record_numbers:
                 records.append(self.state().assign(record=record_numbers[stop]))
 
+        compile_s = 0.0
+        if not self._compiled:
+            started = time.perf_counter()
+            self.engine.compile_stepping(self.solver.adaptive)
+            compile_s = time.perf_counter() - started
+            self._compiled = True
+        steps_before = self._steps()
+        started = time.perf_counter()
         drive(self.engine, clock, stops, take, self.n_instances,
               start_times=self.time_s if self.solver.adaptive else None,
               progress_label=f"{self.n_instances} robots" if progress else None)
+        self.timing = self.timing + RunTiming(
+            setup_s=0.0, compile_s=compile_s, run_s=time.perf_counter() - started, collect_s=0.0,
+            robot_steps=int((self._steps() - steps_before).sum()))
         return pd.concat(records, ignore_index=True) if records else pd.DataFrame(
             columns=[*STATE_COLUMNS, "record"])
 

@@ -58,3 +58,22 @@ def test_timings_add_field_by_field_and_a_run_of_no_time_has_no_rate():
     assert "robot-steps/s" in str(first)
     with pytest.raises(dataclasses.FrozenInstanceError):
         first.run_s = 1.0  # frozen: a result's timing is a record
+
+
+def test_a_simulator_times_its_setup_once_its_compilation_once_and_sums_its_advances():
+    sim = ts.Simulator(PARAMS, SOLVER)
+    set_up = sim.timing
+    assert set_up.setup_s > 0.0
+    assert (set_up.compile_s, set_up.run_s, set_up.collect_s, set_up.robot_steps) == (0, 0, 0, 0)
+    sim.fire(["A1", "A1+A3"])
+    sim.advance(0.02)
+    first = sim.timing
+    assert first.robot_steps == len(PARAMS) * 10  # 0.02 s at 2 ms, every instance
+    assert first.setup_s == set_up.setup_s and first.run_s > 0.0
+    sim.advance(0.01)
+    second = sim.timing
+    # compiled at the first advance only; the steps of both advances counted
+    assert second.compile_s == first.compile_s
+    assert second.robot_steps == len(PARAMS) * 15
+    np.testing.assert_allclose(sim.time_s, 15 * SOLVER.dt, rtol=1e-12)  # 15 steps each
+    assert second.run_s > first.run_s and second.collect_s == 0.0
