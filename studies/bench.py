@@ -6,7 +6,7 @@
                             [--scenario-batch 64] [--workers-list 1,2] [--no-cache-probe]
                             [--presets paper,accurate] [--accurate-duration 3.15]
                             [--gpu-block-dims 64] [--layouts instance_minor,instance_major]
-                            [--kernel-optimisation on,off]
+                            [--kernel-optimisation on,off] [--lanes 1,8]
 
 Gait A1+A3, the paper's discretisation (N = 193 nodes), h = 1 ms, implicit Euler. For every batch
 size B and precision: a fresh engine is compiled (its first launch, timed apart as `compile_s`),
@@ -82,7 +82,8 @@ In both sections `time_to_first_step_s` is the first call's (one step, compilati
 Writes `bench.csv` (`bench_gpu.csv` for --arch gpu): one row per measurement; `section` is
 "batch" (B sweep), "skip" (terms at one B), "plain", "sensitivities", "processes" or "compile"
 (cold/warm cache); columns: machine,
-cpu_model, cores, gpu, gpu_driver, arch, preset, layout, block_dim, section, scenario, terms, batch_size, precision, n_nodes, dt_s,
+cpu_model, cores, gpu, gpu_driver, arch, preset, layout, block_dim, lanes (the CPU's vector
+lanes per group of instances, `--lanes`), section, scenario, terms, batch_size, precision, n_nodes, dt_s,
 gait, warmup_steps, steps, repeats, commit, timestamp, import_s, setup_s, compile_s,
 time_to_first_step_s, robot_steps_per_s, real_time_factor (= robot_steps_per_s × dt: simulated
 robot-seconds per wall second), step_us, newton_iterations_mean, assembly_us, factor_us,
@@ -111,7 +112,7 @@ from taichi_star import SolverConfig, StarParams, simulate
 from taichi_star.experiment import PAPER_GAITS
 from taichi_star.batch import LocalProcesses, run_batch
 from taichi_star.profiling import EngineProfile, device_bandwidth
-from taichi_star.runtime import (GPU_BLOCK_DIM, GPU_INSTANCE_MINOR, Runtime,
+from taichi_star.runtime import (CPU_LANES, GPU_BLOCK_DIM, GPU_INSTANCE_MINOR, Runtime,
                                  kernel_optimisation_default)
 
 from . import cli, provenance
@@ -167,7 +168,7 @@ LAYOUTS = ("instance_minor", "instance_major")
 PRESETS = ("paper", "accurate")
 
 COLUMNS = ["machine", "cpu_model", "cores", "gpu", "gpu_driver", "arch", "preset", "layout",
-           "block_dim", "kernel_optimisation", "section", "scenario", "terms",
+           "block_dim", "lanes", "kernel_optimisation", "section", "scenario", "terms",
            "batch_size", "precision", "jacobian", "workers", "n_nodes", "dt_s", "gait",
            "warmup_steps", "steps", "repeats", "commit", "timestamp", "import_s", "setup_s",
            "compile_s", "time_to_first_step_s", "robot_steps_per_s", "real_time_factor",
@@ -443,6 +444,11 @@ def build_parser():
                         "instance_major",
                         help=f"comma list of {', '.join(LAYOUTS)}: the GPU layout of the "
                              "per-instance fields, --arch gpu only")
+    parser.add_argument("--lanes", default=str(CPU_LANES),
+                        help="comma list of 1, 2, 4, 8, 16: instances whose Newton systems the "
+                             "CPU factors and solves together in vector lanes, for the B sweep and "
+                             "the plain call "
+                             f"(default the library's, {CPU_LANES}); --arch cpu only")
     parser.add_argument("--kernel-optimisation",
                         default=on_off(kernel_optimisation_default()),
                         help="comma list of on, off: Taichi's advanced IR optimisation for the "
@@ -494,6 +500,11 @@ def parse_args(argv):
     args.gpu_block_dims = cli.parse_counts(args.gpu_block_dims, "--gpu-block-dims")
     args.kernel_optimisation = [choice == "on" for choice in cli.parse_choices(
         args.kernel_optimisation, "--kernel-optimisation", ("on", "off"))]
+    args.lanes = cli.parse_counts(args.lanes, "--lanes")
+    if any(lanes not in (1, 2, 4, 8, 16) for lanes in args.lanes):
+        raise cli.StudyArgumentError(f"--lanes: each must be 1, 2, 4, 8 or 16, got {args.lanes}")
+    if args.arch != "cpu" and args.lanes != [CPU_LANES]:
+        raise cli.StudyArgumentError("--lanes compares CPU settings; run it with --arch cpu")
     for block_dim in args.gpu_block_dims:
         if block_dim > 1024 or block_dim & (block_dim - 1):
             raise cli.StudyArgumentError(f"--gpu-block-dims: each must be a power of two up to "
@@ -552,11 +563,14 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
     for index, (optimise, precision) in enumerate(compilers):
         Runtime.current().configure_compiler(optimise)
         bandwidth = device_bandwidth(args.arch, precision) if gpu else math.nan
-        for layout, block_dim in settings if gpu else [("instance_major", 1)]:
+        for layout, block_dim, lanes in ([(*setting, 1) for setting in settings] if gpu else
+                                         [("instance_major", 1, lanes) for lanes in args.lanes]):
             if gpu:
                 Runtime.current().configure_gpu(block_dim, layout == "instance_minor")
-            place = {"layout": layout, "block_dim": block_dim, "bandwidth_gb_s": bandwidth,
-                     "kernel_optimisation": on_off(optimise)}
+            else:
+                Runtime.current().configure_lanes(lanes)
+            place = {"layout": layout, "block_dim": block_dim, "lanes": lanes,
+                     "bandwidth_gb_s": bandwidth, "kernel_optimisation": on_off(optimise)}
             if "paper" in args.presets:
                 for jacobian in args.jacobians:
                     for batch in args.batch_sizes:
@@ -572,6 +586,7 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
                                                profile_seconds)
                     add({"section": "batch", "scenario": "all_terms", "batch_size": batch,
                          "precision": precision, **place, **figures})
+        Runtime.current().configure_lanes()
         if index == 0:
             # while this precision's runtime is live (a precision switch re-initialises Taichi)
             if gpu:
@@ -585,9 +600,12 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
                      **figures})
     Runtime.current().configure_compiler()
     if args.plain_call and not gpu:
-        add({"section": "plain", "scenario": "all_terms", "preset": "paper",
-             "batch_size": args.process_batch, "precision": "f64",
-             **measure_plain(args.process_batch, args.plain_duration, args.repeats)})
+        for lanes in args.lanes:
+            Runtime.current().configure_lanes(lanes)
+            add({"section": "plain", "scenario": "all_terms", "preset": "paper",
+                 "batch_size": args.process_batch, "precision": "f64", "lanes": lanes,
+                 **measure_plain(args.process_batch, args.plain_duration, args.repeats)})
+        Runtime.current().configure_lanes()
     for count in args.sensitivity_counts:
         add({"section": "sensitivities", "scenario": f"sensitivities_{count}", "preset": "paper",
              "batch_size": SENSITIVITY_BATCH, "precision": "f64",
@@ -615,6 +633,8 @@ def plot_bench(csv_path, png_path):
     table = pd.read_csv(csv_path, dtype={"commit": str})  # a hash like 83e1667 reads as a float
     if "kernel_optimisation" not in table:
         table["kernel_optimisation"] = "on"  # tables from before the setting: the passes ran
+    if "lanes" not in table:
+        table["lanes"] = 1  # tables from before the setting: one instance at a time
     compilers = table["kernel_optimisation"].dropna().unique()
     arch = str(table["arch"].iloc[0])
     sweep = table[table["section"] == "batch"]
@@ -623,13 +643,15 @@ def plot_bench(csv_path, png_path):
     fig.get_layout_engine().set(wspace=0.12)  # room for the real-time factor axis
 
     ax = axes[0]
-    lines = ["precision", "jacobian", "preset", "layout", "block_dim", "kernel_optimisation"]
+    lines = ["precision", "jacobian", "preset", "layout", "block_dim", "kernel_optimisation",
+             "lanes"]
     sweep = sweep.assign(**{name: sweep[name].fillna("") for name in lines})
     for key, part in sweep[sweep["preset"] != "accurate"].groupby(lines, sort=False):
-        precision, jacobian, _, layout, block_dim, optimise = key
+        precision, jacobian, _, layout, block_dim, optimise, lanes = key
         # rounds of the same setting: the fastest counts, as within a measurement
         best = part.groupby("batch_size")["robot_steps_per_s"].max()
-        place = f", {layout}, {int(block_dim)}/block" if arch != "cpu" else ", in-process"
+        place = (f", {layout}, {int(block_dim)}/block" if arch != "cpu"
+                 else f", in-process{f', {int(lanes)} lanes' if lanes not in ('', 1) else ''}")
         compiler = f", IR optimisation {optimise}" if len(compilers) > 1 else ""
         ax.plot(best.index, best.to_numpy(), "o-",
                 label=f"{precision}, {jacobian}{place}{compiler}")

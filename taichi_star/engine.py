@@ -24,7 +24,7 @@ from typing import Dict
 import numpy as np
 import taichi as ti
 
-from .linsolve import BlockSystem, plan_elimination
+from .linsolve import BlockSystem, LaneBlocks, plan_elimination
 from .model import BatchModel
 from .params import SolverConfig
 from .physics import coupled_node_pairs
@@ -46,6 +46,11 @@ SOLVER_SETTINGS = {"dt": float, "newton_tol": float, "residual_limit": float,
 """The solver settings the kernels read, with their field types (all SolverConfig attributes of
 the same name but `chord`: 1 for the chord Jacobian)."""
 
+LOCKSTEP_MINIMUM_BATCH = 64
+"""Simulated instances from which the fixed-step kernel of an engine with lanes iterates its
+groups in lockstep (`lockstep_attempt`). Below it each instance runs on its own: a group of
+few instances pays for all its lanes' factorisations, and few groups leave cores idle."""
+
 FINITE_LIMIT = 1e30
 """Updates larger than this (m) are treated as non-finite: no physical step moves a node 1e30 m."""
 
@@ -63,7 +68,7 @@ class BatchEngine:
 
     def __init__(self, model: BatchModel, capacity: int, integrator, instances_per_block: int = 1,
                  loop_spread: int = 1, instance_minor: bool = False, sensitive: bool = False,
-                 even_spread: bool = False):
+                 even_spread: bool = False, lanes: int = 0):
         topology = model.topology
         self.sensitive = sensitive
         """Whether the kernels carry the tangents of replicas (module docstring; static)."""
@@ -78,6 +83,17 @@ class BatchEngine:
             topology, model.terms_used))
         self.arena = arena = FieldArena(instance_minor)
         self.system = BlockSystem(self.plan, capacity, arena)
+        self.lanes = max(lanes, 1)
+        """Instances per group of the fixed-step kernel (static): with more than one, the
+        groups' Newton iterations run in lockstep with their factorisations and solves in the
+        CPU's vector lanes (`lockstep_attempt`, `linsolve.LaneBlocks`)."""
+        self.lane_system = LaneBlocks(self.system, -(-capacity // lanes), lanes, arena) \
+            if lanes > 1 else None
+        for name, dtype in (("running", ti.i32), ("iterations", ti.i32),
+                            ("converged", ti.i32), ("finite", ti.i32), ("refactor", ti.i32),
+                            ("previous_update", float), ("largest_residual", float)):
+            setattr(self, f"newton_{name}", arena.batch_field(dtype, capacity))
+        """newton_*: each instance's Newton iteration in progress (`start_newton`)."""
         self.state = BatchState(capacity, topology.n_nodes, arena)
         self.diagonal_slot = arena.index([self.plan.slot[n, n] for n in range(self.n_nodes)])
         self.mass = arena.batch_field(float, (capacity, self.n_nodes))
@@ -92,6 +108,13 @@ class BatchEngine:
         """Directions whose tangents each simulated instance carries (0 unless sensitive)."""
         self.slot_stride = arena.field(ti.i32)
         """Parallel-loop iterations between two simulated instances (`slot_instance`)."""
+        self.group_count = arena.field(ti.i32)
+        """Groups of the fixed-step kernel (`group_member`): ⌈instances / lanes⌉ in lockstep,
+        else one per instance."""
+        self.group_stride = arena.field(ti.i32)
+        """Parallel-loop iterations between two groups (`slot_group`)."""
+        self.lockstep = arena.field(ti.i32)
+        """1 where the groups iterate in lockstep (`lockstep_attempt`)."""
         self.step_limit = arena.field(ti.i32)
         """Most steps an adaptive instance takes (MAX_STEPS_PER_INSTANCE: the int32 counters
         never overflow); one that reaches it stops with status step_limit."""
@@ -129,7 +152,8 @@ class BatchEngine:
         arena.finalize(fill_tables=False)
         model_fields = {name: getattr(self, name)
                         for name in ("mass", "inertia", "primal_count", "tangent_count",
-                                     "slot_stride", "step_limit", *SOLVER_SETTINGS)}
+                                     "slot_stride", "group_count", "group_stride", "lockstep",
+                                     "step_limit", *SOLVER_SETTINGS)}
         for term in self.terms:
             model_fields.update({f"{term.name}.{name}": field
                                  for name, field in term.coefficient_fields().items()})
@@ -170,12 +194,19 @@ class BatchEngine:
         capacity = self.capacity
         primal_count = model.batch_size // (1 + 2 * tangents)
         slots = capacity * self.loop_spread
+        lockstep = self.lanes > 1 and solver.jacobian == "newton" \
+            and primal_count >= LOCKSTEP_MINIMUM_BATCH
+        groups = -(-primal_count // self.lanes) if lockstep else primal_count
         values = {"mass": pad_batch(model.mass, capacity),
                   "inertia": pad_batch(model.inertia, capacity),
                   "primal_count": primal_count,
                   "tangent_count": tangents,
                   "slot_stride": slots // max(primal_count, 1) if self.even_spread
                   else self.loop_spread,
+                  "group_count": groups,
+                  "group_stride": slots // max(groups, 1) if self.even_spread
+                  else self.loop_spread,
+                  "lockstep": int(lockstep),
                   "step_limit": MAX_STEPS_PER_INSTANCE,
                   **{name: getattr(solver, name) for name in SOLVER_SETTINGS if name != "chord"},
                   "chord": int(solver.jacobian == "chord")}
@@ -282,46 +313,81 @@ class BatchEngine:
         (converged, finite); on failure the positions are restored to the start of the step."""
         inertia_scale, rate_gain = self.prepare_step(b, start_time, end_time, h, ratio, use_history,
                                                      extrapolate)
-        iterations = 0
-        converged = 0
-        finite = 1
-        refactor = 1
-        previous_update = 0.0
-        while iterations < self.max_newton[None] and converged == 0 and finite == 1:
-            self.assemble(b, inertia_scale, rate_gain, refactor)
-            largest_residual = 0.0
-            if self.residual_limit[None] < FINITE_LIMIT:  # the residual test is opt-in
-                for n in range(self.n_nodes):
-                    residual = self.system.rhs[b, n]
-                    largest_residual = ti.max(largest_residual, ti.abs(residual[0]),
-                                              ti.abs(residual[1]))
-            if refactor:
+        self.start_newton(b)
+        while self.newton_running[b] == 1:
+            self.assemble_newton(b, inertia_scale, rate_gain)
+            if self.newton_refactor[b] == 1:
                 self.system.factor(b)
             self.system.solve(b)
-            largest_update = 0.0
+            self.newton_update(b)
+        return self.finish_newton(b, rate_gain)
+
+    @ti.func
+    def start_newton(self, b):
+        """Put instance b's Newton iteration (`newton_*`, per instance so that a group of
+        instances can iterate in lockstep, `lockstep_attempt`) at its start."""
+        self.newton_running[b] = 1
+        self.newton_iterations[b] = 0
+        self.newton_converged[b] = 0
+        self.newton_finite[b] = 1
+        self.newton_refactor[b] = 1
+        self.newton_previous_update[b] = 0.0
+
+    @ti.func
+    def assemble_newton(self, b, inertia_scale, rate_gain):
+        """Instance b's residual (and, unless the chord Jacobian is kept, its Jacobian) at the
+        current iterate, and its largest component for the opt-in residual test."""
+        self.assemble(b, inertia_scale, rate_gain, self.newton_refactor[b])
+        largest_residual = 0.0
+        if self.residual_limit[None] < FINITE_LIMIT:  # the residual test is opt-in
             for n in range(self.n_nodes):
-                update = self.system.rhs[b, n]
-                self.state.positions[b, n] = self.state.positions[b, n] - update
-                largest_update = ti.max(largest_update, ti.abs(update[0]), ti.abs(update[1]))
-                if not (ti.abs(update[0]) < FINITE_LIMIT and ti.abs(update[1]) < FINITE_LIMIT):
-                    finite = 0
-            iterations += 1
-            # the error left after this update: the update itself bounds it, and once the
-            # iteration contracts (θ = |Δ_k|/|Δ_{k−1}| < 1) so does θ/(1 − θ)·|Δ_k|, which saves
-            # the iteration that would only confirm a quadratically converged step
-            error_left = largest_update
-            if largest_update < previous_update:
-                contraction = largest_update / previous_update
-                error_left = ti.min(error_left, contraction / (1.0 - contraction) * largest_update)
-            if finite == 1 and error_left <= self.newton_tol[None] \
-                    and largest_residual <= self.residual_limit[None]:
-                converged = 1
-            # chord mode keeps the factorisation while it contracts the update at least 4×
-            # per iteration (then each kept iteration saves the Jacobian's assembly and LU)
-            refactor = 1
-            if self.chord[None] == 1 and (iterations == 1 or largest_update < 0.25 * previous_update):
-                refactor = 0
-            previous_update = largest_update
+                residual = self.system.rhs[b, n]
+                largest_residual = ti.max(largest_residual, ti.abs(residual[0]),
+                                          ti.abs(residual[1]))
+        self.newton_largest_residual[b] = largest_residual
+
+    @ti.func
+    def newton_update(self, b):
+        """Apply the Newton update that rhs[b] holds (solved) to instance b's positions and
+        decide whether its iteration has converged, failed or goes on (and, for the chord
+        Jacobian, whether the next iteration refactors)."""
+        largest_update = 0.0
+        for n in range(self.n_nodes):
+            update = self.system.rhs[b, n]
+            self.state.positions[b, n] = self.state.positions[b, n] - update
+            largest_update = ti.max(largest_update, ti.abs(update[0]), ti.abs(update[1]))
+            if not (ti.abs(update[0]) < FINITE_LIMIT and ti.abs(update[1]) < FINITE_LIMIT):
+                self.newton_finite[b] = 0
+        iterations = self.newton_iterations[b] + 1
+        self.newton_iterations[b] = iterations
+        previous_update = self.newton_previous_update[b]
+        # the error left after this update: the update itself bounds it, and once the
+        # iteration contracts (θ = |Δ_k|/|Δ_{k−1}| < 1) so does θ/(1 − θ)·|Δ_k|, which saves
+        # the iteration that would only confirm a quadratically converged step
+        error_left = largest_update
+        if largest_update < previous_update:
+            contraction = largest_update / previous_update
+            error_left = ti.min(error_left, contraction / (1.0 - contraction) * largest_update)
+        if self.newton_finite[b] == 1 and error_left <= self.newton_tol[None] \
+                and self.newton_largest_residual[b] <= self.residual_limit[None]:
+            self.newton_converged[b] = 1
+        # chord mode keeps the factorisation while it contracts the update at least 4×
+        # per iteration (then each kept iteration saves the Jacobian's assembly and LU)
+        refactor = 1
+        if self.chord[None] == 1 and (iterations == 1 or largest_update < 0.25 * previous_update):
+            refactor = 0
+        self.newton_refactor[b] = refactor
+        self.newton_previous_update[b] = largest_update
+        if not (iterations < self.max_newton[None] and self.newton_converged[b] == 0
+                and self.newton_finite[b] == 1):
+            self.newton_running[b] = 0
+
+    @ti.func
+    def finish_newton(self, b, rate_gain):
+        """Count instance b's finished Newton iteration and set its velocities (converged) or
+        restore its positions to the step's start (failed). Returns (converged, finite)."""
+        iterations = self.newton_iterations[b]
+        converged = self.newton_converged[b]
         self.state.newton_total[b] = self.state.newton_total[b] + iterations
         self.state.newton_solves[b] = self.state.newton_solves[b] + 1
         self.state.newton_max[b] = ti.max(self.state.newton_max[b], iterations)
@@ -330,21 +396,25 @@ class BatchEngine:
                 self.state.velocities[b, n] = self.implicit_velocity(b, n, rate_gain)
             else:
                 self.state.positions[b, n] = self.state.previous[b, n]
-        return converged, finite
+        return converged, self.newton_finite[b]
 
     @ti.func
-    def advance_instance(self, b, step_number):
+    def advance_instance(self, b, step_number, attempted):
         """Advance instance b to step_number: one step (with the integrator's history when it
         has one); if it fails, the same step without history (Newton from q_k + h·v_k, implicit
         Euler), then from the saved start state 2, 4, ... 2^max_substep_halvings substeps
         without history; if those fail too, freeze the instance
-        at the start state with its status and failure step. One call site of `solve_step`
-        keeps the kernel (and its compile time) small."""
+        at the start state with its status and failure step. With `attempted` = 1 the first
+        attempt has been made already (its firings done, its Newton iteration finished: in
+        lockstep with its group, `lockstep_attempt`), and its outcome is taken from there. One
+        call site of `solve_step` keeps the kernel (and its compile time) small."""
         dt = self.dt[None]
-        self.state.schedule.fire_due(b, (step_number - 1) * dt, step_number * dt, step_number)
+        if attempted == 0:
+            self.state.schedule.fire_due(b, (step_number - 1) * dt, step_number * dt, step_number)
         converged, finite = 0, 1
         halvings = 0
         history = self.state.history_valid[b]
+        pending = attempted
         while converged == 0 and halvings <= self.max_substep_halvings[None]:
             if halvings == 1:
                 # a failed solve_step has restored the start state: keep it for later attempts
@@ -358,7 +428,12 @@ class BatchEngine:
             substep = 0
             while converged == 1 and substep < substeps:
                 first = (step_number - 1) * substeps + substep
-                converged, finite = self.solve_step(b, first * h, (first + 1) * h, h, 1.0, use_history, 0)
+                if pending == 1:
+                    converged, finite = self.newton_converged[b], self.newton_finite[b]
+                    pending = 0
+                else:
+                    converged, finite = self.solve_step(b, first * h, (first + 1) * h, h, 1.0,
+                                                        use_history, 0)
                 if converged == 1:
                     if ti.static(self.sensitive):
                         self.tangent_step(b, first * h, (first + 1) * h, h, 1.0, use_history)
@@ -545,12 +620,18 @@ class BatchEngine:
         `slot_stride` iterations apart: evenly over the whole range on the CPU (a batch of 5 in
         the 64-instance engine, or the first third of a sensitive engine's batch, would
         otherwise all fall to one thread), contiguously on a GPU (whole warps of instances)."""
-        # 0 until the first `load` (primal_count is 0 too): nothing advances, nothing divides by 0
-        stride = ti.max(self.slot_stride[None], 1)
-        instance = -1
-        if slot % stride == 0 and slot // stride < self.primal_count[None]:
-            instance = slot // stride
-        return instance
+        return self.spread_index(slot, self.slot_stride[None], self.primal_count[None])
+
+    @ti.func
+    def spread_index(self, slot, stride, count):
+        """The one of `count` things (instances, groups), placed `stride` iterations apart,
+        that iteration `slot` of a parallel loop advances, or −1."""
+        # 0 until the first `load` (the counts are 0 too): nothing advances, nothing divides by 0
+        stride = ti.max(stride, 1)
+        index = -1
+        if slot % stride == 0 and slot // stride < count:
+            index = slot // stride
+        return index
 
     @ti.func
     def replica(self, b, j, sign):
@@ -724,6 +805,93 @@ class BatchEngine:
                     self.state.status[r] = self.state.status[b]
                     self.state.failure_time[r] = self.state.failure_time[b]
 
+    @ti.func
+    def slot_group(self, slot):
+        """The group (`group_member`) that iteration `slot` of the fixed-step kernel's loop
+        advances, or −1: placed as `slot_instance` places instances."""
+        return self.spread_index(slot, self.group_stride[None], self.group_count[None])
+
+    @ti.func
+    def group_member(self, g, lane):
+        """The simulated instance in lane `lane` of group g, or −1: lane l of group g holds
+        instance l·G + g (G = group_count), so that a batch's instances fill the groups'
+        first lanes evenly."""
+        b = lane * self.group_count[None] + g
+        if lane >= self.lanes or b >= self.primal_count[None]:
+            b = -1
+        return b
+
+    @ti.func
+    def advance_group(self, g):
+        """Advance every live instance of group g by one step: in lockstep when the engine's
+        batch is (`lockstep`, not with the chord Jacobian), each failed instance then retrying
+        on its own (`advance_instance`), else one instance after the other."""
+        attempted = 0
+        if ti.static(self.lanes > 1):
+            if self.lockstep[None] == 1:
+                self.lockstep_attempt(g)
+                attempted = 1
+        for lane in range(self.lanes):
+            b = self.group_member(g, lane)
+            if b >= 0:
+                if self.state.status[b] == STATUS_OK:
+                    self.advance_instance(b, self.state.steps_done[b] + 1, attempted)
+
+    @ti.func
+    def lockstep_attempt(self, g):
+        """The first attempt at the next step of every live instance of group g (with its
+        history when it has one), their Newton iterations in lockstep: each assembles its own
+        system while it iterates, then the group's systems are factored and solved together in
+        the vector lanes (`linsolve.LaneBlocks`; a lane that has stopped iterating, or holds no
+        instance, is computed and its result dropped), then each applies its update and decides
+        whether it goes on. The group iterates until its last instance stops. Every instance
+        gets the bits of its own `solve_step`. Leaves `finish_newton` done and the outcome in
+        `newton_converged`, `newton_finite` for `advance_instance`."""
+        dt = self.dt[None]
+        members = ti.Vector([0] * self.lanes)
+        for lane in ti.static(range(self.lanes)):
+            b = self.group_member(g, lane)
+            # an empty lane repeats the first instance's system (its solution is dropped)
+            members[lane] = ti.select(b >= 0, b, g)
+        for lane in range(self.lanes):
+            b = self.group_member(g, lane)
+            if b >= 0:
+                if self.state.status[b] == STATUS_OK:
+                    step_number = self.state.steps_done[b] + 1
+                    self.state.schedule.fire_due(b, (step_number - 1) * dt, step_number * dt,
+                                                 step_number)
+                    self.prepare_step(b, (step_number - 1) * dt, step_number * dt, dt, 1.0,
+                                      self.state.history_valid[b] == 1, 0)
+                    self.start_newton(b)
+                else:
+                    self.newton_running[b] = 0
+        running = 1
+        while running == 1:
+            for lane in range(self.lanes):
+                b = self.group_member(g, lane)
+                if b >= 0:
+                    if self.newton_running[b] == 1:
+                        inertia_scale, rate_gain = self.integrator.weights(
+                            dt, 1.0, self.state.history_valid[b] == 1)
+                        self.assemble_newton(b, inertia_scale, rate_gain)
+            self.lane_system.gather(g, members)
+            self.lane_system.factor(g)
+            self.lane_system.solve(g)
+            self.lane_system.scatter_solution(g, members)
+            running = 0
+            for lane in range(self.lanes):
+                b = self.group_member(g, lane)
+                if b >= 0:
+                    if self.newton_running[b] == 1:
+                        self.newton_update(b)
+                        running = ti.max(running, self.newton_running[b])
+        for lane in range(self.lanes):
+            b = self.group_member(g, lane)
+            if b >= 0:
+                if self.state.status[b] == STATUS_OK:
+                    _, rate_gain = self.integrator.weights(dt, 1.0, self.state.history_valid[b] == 1)
+                    self.finish_newton(b, rate_gain)
+
     @ti.kernel
     def advance(self, n_steps: ti.i32):
         """Advance every live instance by n_steps steps (from its own step count) in one
@@ -735,11 +903,10 @@ class BatchEngine:
         # evenly (`slot_instance`).
         ti.loop_config(block_dim=self.instances_per_block)
         for slot in range(self.capacity * self.loop_spread):
-            b = self.slot_instance(slot)
-            if b >= 0:
+            g = self.slot_group(slot)
+            if g >= 0:
                 for _ in range(n_steps):
-                    if self.state.status[b] == STATUS_OK:
-                        self.advance_instance(b, self.state.steps_done[b] + 1)
+                    self.advance_group(g)
 
     def compile_stepping(self, adaptive: bool):
         """Compile the stepping kernel of fixed (`advance`) or adaptive (`advance_adaptive`)

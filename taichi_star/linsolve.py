@@ -132,11 +132,93 @@ def _non_empty(values: np.ndarray) -> np.ndarray:
     return values if len(values) else np.zeros(1, dtype=np.int32)
 
 
+class BlockElimination:
+    """The numeric block LU and solve of an `EliminationPlan`, written once for two storages:
+    `BlockSystem` (a unit is one instance, an entry one scalar) and `LaneBlocks` (a unit is a
+    group of instances, an entry a ti.Vector holding one scalar of each). A subclass provides
+    the plan's index tables (`tables`, a BlockSystem) and the storage: `block(u, slot)` and
+    `put_block(u, slot, block)`, a 2×2 block as its four entries a00, a01, a10, a11
+    (`entry(block, k)`, `block_of(a00, a01, a10, a11)`), `rhs_entry(u, node, k)` and
+    `put_rhs_entry(u, node, k, value)`. Each entry is computed by the same operations in the
+    same order in both: Taichi's 2×2 `@` (a[i,0]·b[0,j] + a[i,1]·b[1,j]) and `inverse()`
+    (1/(a00·a11 − a01·a10) times the adjugate), so the two storages give the same bits."""
+
+    @ti.func
+    def product(self, x, y):
+        """The 2×2 block product x·y."""
+        return self.block_of(
+            self.entry(x, 0) * self.entry(y, 0) + self.entry(x, 1) * self.entry(y, 2),
+            self.entry(x, 0) * self.entry(y, 1) + self.entry(x, 1) * self.entry(y, 3),
+            self.entry(x, 2) * self.entry(y, 0) + self.entry(x, 3) * self.entry(y, 2),
+            self.entry(x, 2) * self.entry(y, 1) + self.entry(x, 3) * self.entry(y, 3))
+
+    @ti.func
+    def inverse(self, x):
+        """The inverse of the 2×2 block x."""
+        inverse_determinant = 1.0 / (self.entry(x, 0) * self.entry(x, 3)
+                                     - self.entry(x, 1) * self.entry(x, 2))
+        return self.block_of(inverse_determinant * self.entry(x, 3),
+                             -inverse_determinant * self.entry(x, 1),
+                             -inverse_determinant * self.entry(x, 2),
+                             inverse_determinant * self.entry(x, 0))
+
+    @ti.func
+    def factor(self, u):
+        """In-place block LU of unit u without pivoting (the pivots are 2×2 inverses)."""
+        t = self.tables
+        for p in range(t.n_nodes):
+            pivot_inverse = self.inverse(self.block(u, t.pivot_slot[p]))
+            self.put_block(u, t.pivot_slot[p], pivot_inverse)
+            start = t.neighbour_start[p]
+            count = t.neighbour_start[p + 1] - start
+            for a in range(count):
+                lower = t.lower_slot[start + a]
+                self.put_block(u, lower, self.product(self.block(u, lower), pivot_inverse))
+            update = t.update_start[p]
+            for a in range(count):
+                lower_block = self.block(u, t.lower_slot[start + a])
+                for c in range(count):
+                    target = t.update_slot[update + a * count + c]
+                    upper_block = self.block(u, t.upper_slot[start + c])
+                    self.put_block(u, target, self.block(u, target)
+                                   - self.product(lower_block, upper_block))
+
+    @ti.func
+    def solve(self, u):
+        """Overwrite unit u's right-hand side with the solution of its factored system (node
+        numbering)."""
+        t = self.tables
+        for p in range(t.n_nodes):
+            node = t.order[p]
+            x0, x1 = self.rhs_entry(u, node, 0), self.rhs_entry(u, node, 1)
+            for a in range(t.neighbour_start[p], t.neighbour_start[p + 1]):
+                neighbour = t.neighbour_node[a]
+                lower = self.block(u, t.lower_slot[a])
+                self.put_rhs_entry(u, neighbour, 0, self.rhs_entry(u, neighbour, 0) - (
+                    self.entry(lower, 0) * x0 + self.entry(lower, 1) * x1))
+                self.put_rhs_entry(u, neighbour, 1, self.rhs_entry(u, neighbour, 1) - (
+                    self.entry(lower, 2) * x0 + self.entry(lower, 3) * x1))
+        for reverse in range(t.n_nodes):
+            p = t.n_nodes - 1 - reverse
+            node = t.order[p]
+            v0, v1 = self.rhs_entry(u, node, 0), self.rhs_entry(u, node, 1)
+            for a in range(t.neighbour_start[p], t.neighbour_start[p + 1]):
+                upper = self.block(u, t.upper_slot[a])
+                neighbour = t.neighbour_node[a]
+                y0, y1 = self.rhs_entry(u, neighbour, 0), self.rhs_entry(u, neighbour, 1)
+                v0 -= self.entry(upper, 0) * y0 + self.entry(upper, 1) * y1
+                v1 -= self.entry(upper, 2) * y0 + self.entry(upper, 3) * y1
+            pivot = self.block(u, t.pivot_slot[p])
+            self.put_rhs_entry(u, node, 0, self.entry(pivot, 0) * v0 + self.entry(pivot, 1) * v1)
+            self.put_rhs_entry(u, node, 1, self.entry(pivot, 2) * v0 + self.entry(pivot, 3) * v1)
+
+
 @ti.data_oriented
-class BlockSystem:
+class BlockSystem(BlockElimination):
     """Device copy of an EliminationPlan plus, per instance, the matrix blocks and right-hand
     side: `blocks` (batch, n_slots) 2×2 and `rhs` (batch, n_nodes) 2-vectors. After `factor`
-    the blocks hold L (unit block-lower), U and the inverted pivot blocks, in place."""
+    the blocks hold L (unit block-lower), U and the inverted pivot blocks, in place (a unit of
+    `BlockElimination` is an instance)."""
 
     def __init__(self, plan: EliminationPlan, batch_size: int, arena: Optional[FieldArena] = None):
         """`arena`: where the fields go (an engine's); None: an arena of its own, finalized
@@ -144,6 +226,7 @@ class BlockSystem:
         own = arena is None
         arena = FieldArena() if own else arena
         self.plan = plan
+        self.tables = self
         self.n_nodes = plan.n_nodes
         self.n_slots = plan.n_slots
         self.order = arena.index(_non_empty(plan.order))
@@ -169,38 +252,94 @@ class BlockSystem:
             self.rhs[b, n] = ti.Vector.zero(float, 2)
 
     @ti.func
-    def factor(self, b):
-        """In-place block LU of instance b without pivoting (the pivots are 2×2 inverses)."""
-        for p in range(self.n_nodes):
-            pivot_inverse = self.blocks[b, self.pivot_slot[p]].inverse()
-            self.blocks[b, self.pivot_slot[p]] = pivot_inverse
-            start = self.neighbour_start[p]
-            count = self.neighbour_start[p + 1] - start
-            for a in range(count):
-                lower = self.lower_slot[start + a]
-                self.blocks[b, lower] = self.blocks[b, lower] @ pivot_inverse
-            update = self.update_start[p]
-            for a in range(count):
-                lower_block = self.blocks[b, self.lower_slot[start + a]]
-                for c in range(count):
-                    target = self.update_slot[update + a * count + c]
-                    upper_block = self.blocks[b, self.upper_slot[start + c]]
-                    self.blocks[b, target] = self.blocks[b, target] - lower_block @ upper_block
+    def entry(self, block, k):
+        return block[k]
 
     @ti.func
-    def solve(self, b):
-        """Overwrite rhs[b] with the solution of the factored system (node numbering)."""
-        for p in range(self.n_nodes):
-            node = self.order[p]
-            start = self.neighbour_start[p]
-            for a in range(start, self.neighbour_start[p + 1]):
-                neighbour = self.neighbour_node[a]
-                lower_block = self.blocks[b, self.lower_slot[a]]
-                self.rhs[b, neighbour] = self.rhs[b, neighbour] - lower_block @ self.rhs[b, node]
-        for reverse in range(self.n_nodes):
-            p = self.n_nodes - 1 - reverse
-            node = self.order[p]
-            value = self.rhs[b, node]
-            for a in range(self.neighbour_start[p], self.neighbour_start[p + 1]):
-                value -= self.blocks[b, self.upper_slot[a]] @ self.rhs[b, self.neighbour_node[a]]
-            self.rhs[b, node] = self.blocks[b, self.pivot_slot[p]] @ value
+    def block_of(self, a00, a01, a10, a11):
+        return ti.Vector([a00, a01, a10, a11])
+
+    @ti.func
+    def block(self, b, slot):
+        value = self.blocks[b, slot]
+        return ti.Vector([value[0, 0], value[0, 1], value[1, 0], value[1, 1]])
+
+    @ti.func
+    def put_block(self, b, slot, block):
+        self.blocks[b, slot] = ti.Matrix([[block[0], block[1]], [block[2], block[3]]])
+
+    @ti.func
+    def rhs_entry(self, b, node, k: ti.template()):
+        return self.rhs[b, node][k]
+
+    @ti.func
+    def put_rhs_entry(self, b, node, k: ti.template(), value):
+        self.rhs[b, node][k] = value
+
+
+@ti.data_oriented
+class LaneBlocks(BlockElimination):
+    """The Newton systems of groups of `lanes` instances of a `BlockSystem`, laid out so that
+    the CPU's vector units factor and solve them together: every entry of a group is a
+    ti.Vector of its lanes' values (LLVM packs those into vector instructions), `blocks`
+    (groups, n_slots, 4) and `rhs` (groups, n_nodes, 2). `gather` copies a group's instances'
+    systems in, `scatter_solution` their solutions back; `factor` and `solve` (of
+    `BlockElimination`, a unit being a group) give each lane the bits the instance's own
+    factorisation and solve give."""
+
+    def __init__(self, system: BlockSystem, groups: int, lanes: int, arena: FieldArena):
+        self.tables = system
+        self.system = system
+        self.lanes = lanes
+        self.blocks = arena.field(float, (groups, system.n_slots, 4), vector=lanes)
+        self.rhs = arena.field(float, (groups, system.n_nodes, 2), vector=lanes)
+
+    @ti.func
+    def entry(self, block, k):
+        return ti.Vector([block[k, lane] for lane in ti.static(range(self.lanes))])
+
+    @ti.func
+    def block_of(self, a00, a01, a10, a11):
+        return ti.Matrix.rows([a00, a01, a10, a11])
+
+    @ti.func
+    def block(self, g, slot):
+        return ti.Matrix.rows([self.blocks[g, slot, k] for k in ti.static(range(4))])
+
+    @ti.func
+    def put_block(self, g, slot, block):
+        for k in ti.static(range(4)):
+            self.blocks[g, slot, k] = self.entry(block, k)
+
+    @ti.func
+    def rhs_entry(self, g, node, k: ti.template()):
+        return self.rhs[g, node, k]
+
+    @ti.func
+    def put_rhs_entry(self, g, node, k: ti.template(), value):
+        self.rhs[g, node, k] = value
+
+    @ti.func
+    def gather(self, g, members):
+        """Copy the systems of group g's instances (`members`, a ti.Vector of `lanes` instance
+        numbers) into its lanes."""
+        system = self.system
+        for slot in range(system.n_slots):
+            for k in ti.static(range(4)):
+                self.blocks[g, slot, k] = ti.Vector(
+                    [system.blocks[members[lane], slot][k // 2, k % 2]
+                     for lane in ti.static(range(self.lanes))])
+        for node in range(system.n_nodes):
+            for k in ti.static(range(2)):
+                self.rhs[g, node, k] = ti.Vector(
+                    [system.rhs[members[lane], node][k] for lane in ti.static(range(self.lanes))])
+
+    @ti.func
+    def scatter_solution(self, g, members):
+        """Copy each lane's solution back into its instance's right-hand side."""
+        system = self.system
+        for node in range(system.n_nodes):
+            x = self.rhs[g, node, 0]
+            y = self.rhs[g, node, 1]
+            for lane in ti.static(range(self.lanes)):
+                system.rhs[members[lane], node] = ti.Vector([x[lane], y[lane]])

@@ -56,6 +56,13 @@ GPU_BLOCK_DIM = 32
 """Threads (one instance each) per GPU block; chosen by `python -m studies bench --arch gpu`."""
 GPU_INSTANCE_MINOR = True
 """GPU layout of the per-instance fields: instance-minor (coalesced); chosen by the same bench."""
+CPU_LANES = 1
+"""Instances whose Newton systems the CPU's vector units factor and solve together
+(`engine.BatchEngine` `lanes`: the fixed-step kernel iterates groups of them in lockstep once a
+batch has `engine.LOCKSTEP_MINIMUM_BATCH` instances; the same bits as one at a time). 1, one
+at a time, by default: 8 lanes step a batch of 64-4,096 paper robots 1.1-1.3x as fast but
+compile the fixed-step kernel about three times as long (docs/performance.md, "SIMD across
+instances"); `Runtime.configure_lanes(8)` turns them on for the engines built after it."""
 KERNEL_OPTIMISATION = True
 """Taichi's advanced IR optimisation passes (`ti.init(advanced_optimization=...)`): on, an engine
 steps 10-13 % faster; off, it compiles faster (~0.7x as long on the CPU, where the passes leave
@@ -286,6 +293,7 @@ class Runtime:
         self.cpu_threads: Optional[int] = None
         self.gpu_block_dim = GPU_BLOCK_DIM
         self.gpu_instance_minor = GPU_INSTANCE_MINOR
+        self.cpu_lanes = CPU_LANES
         self.kernel_optimisation = kernel_optimisation_default()
         self.cpu_cfg_optimisation = CPU_CFG_OPTIMISATION
         self.log_level = ti.WARN
@@ -340,6 +348,14 @@ class Runtime:
         self.gpu_block_dim = int(block_dim)
         self.gpu_instance_minor = bool(instance_minor)
 
+    def configure_lanes(self, lanes: int = CPU_LANES):
+        """Lanes of the CPU engines built from now on (see CPU_LANES; 1: none), for comparisons
+        (the engines already built keep theirs)."""
+        if isinstance(lanes, bool) or not isinstance(lanes, (int, np.integer)) \
+                or lanes not in (1, 2, 4, 8, 16):
+            raise ValueError(f"lanes must be 1, 2, 4, 8 or 16, got {lanes!r}")
+        self.cpu_lanes = int(lanes)
+
     def configure_compiler(self, kernel_optimisation: Optional[bool] = None,
                            cpu_cfg_optimisation: Optional[bool] = None):
         """Whether Taichi's advanced IR optimisation compiles the engines (see
@@ -382,12 +398,15 @@ class Runtime:
         return BatchEngine(model, capacity, INTEGRATORS[solver.integrator](),
                            instances_per_block=self.gpu_block_dim if gpu else 1,
                            loop_spread=self.loop_spread(capacity), even_spread=not gpu,
-                           instance_minor=gpu and self.gpu_instance_minor, sensitive=sensitive)
+                           instance_minor=gpu and self.gpu_instance_minor, sensitive=sensitive,
+                           lanes=1 if gpu else self.cpu_lanes)
 
     def engine_key(self, model: BatchModel, solver: SolverConfig, sensitive: bool = False) -> tuple:
         """What an engine is compiled for: topology and terms, integrator, capacity, whether it
-        carries tangents and, on a GPU, its launch and layout settings."""
-        gpu = (self.gpu_block_dim, self.gpu_instance_minor) if self.arch != "cpu" else ()
+        carries tangents and, on a GPU, its launch and layout settings (on the CPU its
+        lanes)."""
+        gpu = (self.gpu_block_dim, self.gpu_instance_minor) if self.arch != "cpu" \
+            else (self.cpu_lanes,)
         return (model.engine_key, solver.integrator, batch_capacity(model.batch_size),
                 sensitive) + gpu
 
