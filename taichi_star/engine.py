@@ -903,10 +903,17 @@ class BatchEngine:
         # evenly (`slot_instance`).
         ti.loop_config(block_dim=self.instances_per_block)
         for slot in range(self.capacity * self.loop_spread):
-            g = self.slot_group(slot)
-            if g >= 0:
-                for _ in range(n_steps):
-                    self.advance_group(g)
+            if ti.static(self.lanes > 1):
+                g = self.slot_group(slot)
+                if g >= 0:
+                    for _ in range(n_steps):
+                        self.advance_group(g)
+            else:
+                b = self.slot_instance(slot)
+                if b >= 0:
+                    for _ in range(n_steps):
+                        if self.state.status[b] == STATUS_OK:
+                            self.advance_instance(b, self.state.steps_done[b] + 1, 0)
 
     def compile_stepping(self, adaptive: bool):
         """Compile the stepping kernel of fixed (`advance`) or adaptive (`advance_adaptive`)
