@@ -5,7 +5,10 @@ One kernel launch advances every live instance by a chunk of steps; inside it ea
 its own Newton loop (so converged instances stop iterating and failed ones are frozen at once),
 assembles its residual and Jacobian from the force terms of `physics.TERMS` (each through the
 engine's `physics.assembly.Assembly`) into a fixed-pattern block-sparse store (`linsolve.BlockSystem`) and solves it by LU without pivoting. Terms that no
-instance of the batch uses are not part of the engine at all (compiled out).
+instance of the batch uses are not part of the engine at all (compiled out). An engine built
+with `lanes` > 1 (on the CPU, opt-in) advances groups of that many instances per thread with
+fixed steps, their Newton iterations in lockstep and their systems factored and solved together
+in the vector lanes (`lockstep_attempt`), each instance's bits those of its own loop.
 
 An engine built `sensitive` also carries each instance's tangents (`tangent_step`): the batch's
 first `primal_count` instances are simulated, and behind them, for each of `tangent_count`
@@ -64,7 +67,8 @@ class BatchEngine:
     task); `loop_spread`: parallel-loop iterations per instance of the capacity (see
     `advance`); `even_spread` (the CPU): the simulated instances placed evenly over those
     iterations (`slot_instance`); `instance_minor`: the GPU layout of the per-instance fields
-    (`fields.FieldArena`)."""
+    (`fields.FieldArena`); `lanes`: instances per group of the fixed-step kernel on the CPU
+    (0 or 1: one at a time; see `lockstep_attempt`)."""
 
     def __init__(self, model: BatchModel, capacity: int, integrator, instances_per_block: int = 1,
                  loop_spread: int = 1, instance_minor: bool = False, sensitive: bool = False,
