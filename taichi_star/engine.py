@@ -93,11 +93,13 @@ class BatchEngine:
         CPU's vector lanes (`lockstep_attempt`, `linsolve.LaneBlocks`)."""
         self.lane_system = LaneBlocks(self.system, -(-capacity // lanes), lanes, arena) \
             if lanes > 1 else None
-        for name, dtype in (("running", ti.i32), ("iterations", ti.i32),
-                            ("converged", ti.i32), ("finite", ti.i32), ("refactor", ti.i32),
-                            ("previous_update", float), ("largest_residual", float)):
-            setattr(self, f"newton_{name}", arena.batch_field(dtype, capacity))
-        """newton_*: each instance's Newton iteration in progress (`start_newton`)."""
+        if lanes > 1:
+            for name, dtype in (("iterations", ti.i32), ("converged", ti.i32),
+                                ("finite", ti.i32), ("previous_update", float),
+                                ("largest_residual", float)):
+                setattr(self, f"newton_{name}", arena.batch_field(dtype, capacity))
+        """newton_* (engines with lanes): each instance's Newton iteration between the lockstep's
+        rounds (`lockstep_attempt`); the one-instance solve keeps it in registers."""
         self.state = BatchState(capacity, topology.n_nodes, arena)
         self.diagonal_slot = arena.index([self.plan.slot[n, n] for n in range(self.n_nodes)])
         self.mass = arena.batch_field(float, (capacity, self.n_nodes))
@@ -317,54 +319,49 @@ class BatchEngine:
         (converged, finite); on failure the positions are restored to the start of the step."""
         inertia_scale, rate_gain = self.prepare_step(b, start_time, end_time, h, ratio, use_history,
                                                      extrapolate)
-        self.start_newton(b)
-        while self.newton_running[b] == 1:
-            self.assemble_newton(b, inertia_scale, rate_gain)
-            if self.newton_refactor[b] == 1:
+        iterations, converged, finite, refactor, previous_update = 0, 0, 1, 1, 0.0
+        while self.newton_goes_on(iterations, converged, finite):
+            largest_residual = self.assemble_newton(b, inertia_scale, rate_gain, refactor)
+            if refactor:
                 self.system.factor(b)
             self.system.solve(b)
-            self.newton_update(b)
-        return self.finish_newton(b, rate_gain)
+            iterations, converged, finite, refactor, previous_update = self.newton_update(
+                b, iterations, previous_update, largest_residual)
+        return self.finish_newton(b, rate_gain, iterations, converged, finite)
 
     @ti.func
-    def start_newton(self, b):
-        """Put instance b's Newton iteration (`newton_*`, per instance so that a group of
-        instances can iterate in lockstep, `lockstep_attempt`) at its start."""
-        self.newton_running[b] = 1
-        self.newton_iterations[b] = 0
-        self.newton_converged[b] = 0
-        self.newton_finite[b] = 1
-        self.newton_refactor[b] = 1
-        self.newton_previous_update[b] = 0.0
+    def newton_goes_on(self, iterations, converged, finite):
+        """Whether a Newton iteration that has made `iterations` updates goes on."""
+        return iterations < self.max_newton[None] and converged == 0 and finite == 1
 
     @ti.func
-    def assemble_newton(self, b, inertia_scale, rate_gain):
-        """Instance b's residual (and, unless the chord Jacobian is kept, its Jacobian) at the
-        current iterate, and its largest component for the opt-in residual test."""
-        self.assemble(b, inertia_scale, rate_gain, self.newton_refactor[b])
+    def assemble_newton(self, b, inertia_scale, rate_gain, jacobian):
+        """Instance b's residual (and, if `jacobian`, its Jacobian) at the current iterate;
+        returns its largest component for the opt-in residual test (0 without it)."""
+        self.assemble(b, inertia_scale, rate_gain, jacobian)
         largest_residual = 0.0
         if self.residual_limit[None] < FINITE_LIMIT:  # the residual test is opt-in
             for n in range(self.n_nodes):
                 residual = self.system.rhs[b, n]
                 largest_residual = ti.max(largest_residual, ti.abs(residual[0]),
                                           ti.abs(residual[1]))
-        self.newton_largest_residual[b] = largest_residual
+        return largest_residual
 
     @ti.func
-    def newton_update(self, b):
-        """Apply the Newton update that rhs[b] holds (solved) to instance b's positions and
-        decide whether its iteration has converged, failed or goes on (and, for the chord
-        Jacobian, whether the next iteration refactors)."""
+    def newton_update(self, b, iterations, previous_update, largest_residual):
+        """Apply the Newton update that rhs[b] holds (solved) to instance b's positions after
+        `iterations` updates, the last of size `previous_update` (m). Returns (iterations,
+        converged, finite, refactor: for the chord Jacobian whether the next iteration
+        refactors, this update's size)."""
+        finite = 1
         largest_update = 0.0
         for n in range(self.n_nodes):
             update = self.system.rhs[b, n]
             self.state.positions[b, n] = self.state.positions[b, n] - update
             largest_update = ti.max(largest_update, ti.abs(update[0]), ti.abs(update[1]))
             if not (ti.abs(update[0]) < FINITE_LIMIT and ti.abs(update[1]) < FINITE_LIMIT):
-                self.newton_finite[b] = 0
-        iterations = self.newton_iterations[b] + 1
-        self.newton_iterations[b] = iterations
-        previous_update = self.newton_previous_update[b]
+                finite = 0
+        iterations += 1
         # the error left after this update: the update itself bounds it, and once the
         # iteration contracts (θ = |Δ_k|/|Δ_{k−1}| < 1) so does θ/(1 − θ)·|Δ_k|, which saves
         # the iteration that would only confirm a quadratically converged step
@@ -372,26 +369,21 @@ class BatchEngine:
         if largest_update < previous_update:
             contraction = largest_update / previous_update
             error_left = ti.min(error_left, contraction / (1.0 - contraction) * largest_update)
-        if self.newton_finite[b] == 1 and error_left <= self.newton_tol[None] \
-                and self.newton_largest_residual[b] <= self.residual_limit[None]:
-            self.newton_converged[b] = 1
+        converged = 0
+        if finite == 1 and error_left <= self.newton_tol[None] \
+                and largest_residual <= self.residual_limit[None]:
+            converged = 1
         # chord mode keeps the factorisation while it contracts the update at least 4×
         # per iteration (then each kept iteration saves the Jacobian's assembly and LU)
         refactor = 1
         if self.chord[None] == 1 and (iterations == 1 or largest_update < 0.25 * previous_update):
             refactor = 0
-        self.newton_refactor[b] = refactor
-        self.newton_previous_update[b] = largest_update
-        if not (iterations < self.max_newton[None] and self.newton_converged[b] == 0
-                and self.newton_finite[b] == 1):
-            self.newton_running[b] = 0
+        return iterations, converged, finite, refactor, largest_update
 
     @ti.func
-    def finish_newton(self, b, rate_gain):
+    def finish_newton(self, b, rate_gain, iterations, converged, finite):
         """Count instance b's finished Newton iteration and set its velocities (converged) or
         restore its positions to the step's start (failed). Returns (converged, finite)."""
-        iterations = self.newton_iterations[b]
-        converged = self.newton_converged[b]
         self.state.newton_total[b] = self.state.newton_total[b] + iterations
         self.state.newton_solves[b] = self.state.newton_solves[b] + 1
         self.state.newton_max[b] = ti.max(self.state.newton_max[b], iterations)
@@ -400,7 +392,7 @@ class BatchEngine:
                 self.state.velocities[b, n] = self.implicit_velocity(b, n, rate_gain)
             else:
                 self.state.positions[b, n] = self.state.previous[b, n]
-        return converged, self.newton_finite[b]
+        return converged, finite
 
     @ti.func
     def advance_instance(self, b, step_number, attempted):
@@ -433,7 +425,9 @@ class BatchEngine:
             while converged == 1 and substep < substeps:
                 first = (step_number - 1) * substeps + substep
                 if pending == 1:
-                    converged, finite = self.newton_converged[b], self.newton_finite[b]
+                    # only an engine with lanes makes the first attempt in lockstep
+                    if ti.static(self.lanes > 1):
+                        converged, finite = self.newton_converged[b], self.newton_finite[b]
                     pending = 0
                 else:
                     converged, finite = self.solve_step(b, first * h, (first + 1) * h, h, 1.0,
@@ -821,7 +815,7 @@ class BatchEngine:
         instance l·G + g (G = group_count), so that a batch's instances fill the groups'
         first lanes evenly."""
         b = lane * self.group_count[None] + g
-        if lane >= self.lanes or b >= self.primal_count[None]:
+        if b >= self.primal_count[None]:
             b = -1
         return b
 
@@ -831,10 +825,9 @@ class BatchEngine:
         batch is (`lockstep`, not with the chord Jacobian), each failed instance then retrying
         on its own (`advance_instance`), else one instance after the other."""
         attempted = 0
-        if ti.static(self.lanes > 1):
-            if self.lockstep[None] == 1:
-                self.lockstep_attempt(g)
-                attempted = 1
+        if self.lockstep[None] == 1:
+            self.lockstep_attempt(g)
+            attempted = 1
         for lane in range(self.lanes):
             b = self.group_member(g, lane)
             if b >= 0:
@@ -866,18 +859,19 @@ class BatchEngine:
                                                  step_number)
                     self.prepare_step(b, (step_number - 1) * dt, step_number * dt, dt, 1.0,
                                       self.state.history_valid[b] == 1, 0)
-                    self.start_newton(b)
-                else:
-                    self.newton_running[b] = 0
+                    self.newton_iterations[b] = 0
+                    self.newton_converged[b] = 0
+                    self.newton_finite[b] = 1
+                    self.newton_previous_update[b] = 0.0
         running = 1
         while running == 1:
             for lane in range(self.lanes):
                 b = self.group_member(g, lane)
-                if b >= 0:
-                    if self.newton_running[b] == 1:
-                        inertia_scale, rate_gain = self.integrator.weights(
-                            dt, 1.0, self.state.history_valid[b] == 1)
-                        self.assemble_newton(b, inertia_scale, rate_gain)
+                if self.lane_iterates(b):
+                    inertia_scale, rate_gain = self.integrator.weights(
+                        dt, 1.0, self.state.history_valid[b] == 1)
+                    self.newton_largest_residual[b] = self.assemble_newton(b, inertia_scale,
+                                                                           rate_gain, 1)
             self.lane_system.gather(g, members)
             self.lane_system.factor(g)
             self.lane_system.solve(g)
@@ -885,16 +879,34 @@ class BatchEngine:
             running = 0
             for lane in range(self.lanes):
                 b = self.group_member(g, lane)
-                if b >= 0:
-                    if self.newton_running[b] == 1:
-                        self.newton_update(b)
-                        running = ti.max(running, self.newton_running[b])
+                if self.lane_iterates(b):
+                    iterations, converged, finite, _, largest_update = self.newton_update(
+                        b, self.newton_iterations[b], self.newton_previous_update[b],
+                        self.newton_largest_residual[b])
+                    self.newton_iterations[b] = iterations
+                    self.newton_converged[b] = converged
+                    self.newton_finite[b] = finite
+                    self.newton_previous_update[b] = largest_update
+                    if self.lane_iterates(b):
+                        running = 1
         for lane in range(self.lanes):
             b = self.group_member(g, lane)
             if b >= 0:
                 if self.state.status[b] == STATUS_OK:
                     _, rate_gain = self.integrator.weights(dt, 1.0, self.state.history_valid[b] == 1)
-                    self.finish_newton(b, rate_gain)
+                    self.finish_newton(b, rate_gain, self.newton_iterations[b],
+                                       self.newton_converged[b], self.newton_finite[b])
+
+    @ti.func
+    def lane_iterates(self, b):
+        """Whether the instance b of a lane (−1: none) is live and its lockstep Newton iteration
+        goes on."""
+        iterates = 0
+        if b >= 0:
+            if self.state.status[b] == STATUS_OK and self.newton_goes_on(
+                    self.newton_iterations[b], self.newton_converged[b], self.newton_finite[b]):
+                iterates = 1
+        return iterates
 
     @ti.kernel
     def advance(self, n_steps: ti.i32):
