@@ -7,8 +7,9 @@ assembles its residual and Jacobian from the force terms of `physics.TERMS` (eac
 engine's `physics.assembly.Assembly`) into a fixed-pattern block-sparse store (`linsolve.BlockSystem`) and solves it by LU without pivoting. Terms that no
 instance of the batch uses are not part of the engine at all (compiled out). An engine built
 with `lanes` > 1 (on the CPU, opt-in) advances groups of that many instances per thread with
-fixed steps, their Newton iterations in lockstep and their systems factored and solved together
-in the vector lanes (`lockstep_attempt`), each instance's bits those of its own loop.
+fixed steps, their Newton iterations interleaved round by round and their systems factored and
+solved together in the vector lanes (`advance_group`), each instance's bits those of its own
+loop.
 
 An engine built `sensitive` also carries each instance's tangents (`tangent_step`): the batch's
 first `primal_count` instances are simulated, and behind them, for each of `tangent_count`
@@ -51,8 +52,16 @@ the same name but `chord`: 1 for the chord Jacobian)."""
 
 LOCKSTEP_MINIMUM_BATCH = 64
 """Simulated instances from which the fixed-step kernel of an engine with lanes iterates its
-groups in lockstep (`lockstep_attempt`). Below it each instance runs on its own: a group of
+groups in lockstep (`advance_group`). Below it each instance runs on its own: a group of
 few instances pays for all its lanes' factorisations, and few groups leave cores idle."""
+
+ATTEMPT_GOES_ON, STEP_CONVERGED, STEP_FAILED = range(3)
+"""Where a fixed step stands after a solve (`BatchEngine.after_solve`)."""
+
+LANE_IDLE, LANE_STARTS, LANE_ITERATES = range(3)
+"""What a lane's instance does next in a group of the fixed-step kernel
+(`BatchEngine.advance_group`): nothing more in this launch, start a solve, or go on with its
+Newton iteration."""
 
 FINITE_LIMIT = 1e30
 """Updates larger than this (m) are treated as non-finite: no physical step moves a node 1e30 m."""
@@ -68,7 +77,7 @@ class BatchEngine:
     `advance`); `even_spread` (the CPU): the simulated instances placed evenly over those
     iterations (`slot_instance`); `instance_minor`: the GPU layout of the per-instance fields
     (`fields.FieldArena`); `lanes`: instances per group of the fixed-step kernel on the CPU
-    (0 or 1: one at a time; see `lockstep_attempt`)."""
+    (0 or 1: one at a time; see `advance_group`)."""
 
     def __init__(self, model: BatchModel, capacity: int, integrator, instances_per_block: int = 1,
                  loop_spread: int = 1, instance_minor: bool = False, sensitive: bool = False,
@@ -88,18 +97,22 @@ class BatchEngine:
         self.arena = arena = FieldArena(instance_minor)
         self.system = BlockSystem(self.plan, capacity, arena)
         self.lanes = max(lanes, 1)
-        """Instances per group of the fixed-step kernel (static): with more than one, the
-        groups' Newton iterations run in lockstep with their factorisations and solves in the
-        CPU's vector lanes (`lockstep_attempt`, `linsolve.LaneBlocks`)."""
+        """Instances per group of the fixed-step kernel (static): with more than one, a group's
+        instances interleave their Newton solves round by round, factored and solved together
+        in the CPU's vector lanes in lockstep (`advance_group`, `linsolve.LaneBlocks`)."""
         self.lane_system = LaneBlocks(self.system, -(-capacity // lanes), lanes, arena) \
             if lanes > 1 else None
         if lanes > 1:
-            for name, dtype in (("iterations", ti.i32), ("converged", ti.i32),
-                                ("finite", ti.i32), ("previous_update", float),
-                                ("largest_residual", float)):
-                setattr(self, f"newton_{name}", arena.batch_field(dtype, capacity))
-        """newton_* (engines with lanes): each instance's Newton iteration between the lockstep's
-        rounds (`lockstep_attempt`); the one-instance solve keeps it in registers."""
+            for name, dtype in (("newton_iterations", ti.i32), ("newton_converged", ti.i32),
+                                ("newton_finite", ti.i32), ("newton_refactor", ti.i32),
+                                ("newton_previous_update", float),
+                                ("newton_largest_residual", float), ("lane_phase", ti.i32),
+                                ("lane_last_step", ti.i32), ("lane_halvings", ti.i32),
+                                ("lane_history", ti.i32), ("lane_substep", ti.i32)):
+                setattr(self, name, arena.batch_field(dtype, capacity))
+        """newton_*, lane_* (engines with lanes): each instance's Newton iteration and fixed-step
+        attempt between the rounds of its group (`advance_group`); the one-instance kernel keeps
+        them in registers."""
         self.state = BatchState(capacity, topology.n_nodes, arena)
         self.diagonal_slot = arena.index([self.plan.slot[n, n] for n in range(self.n_nodes)])
         self.mass = arena.batch_field(float, (capacity, self.n_nodes))
@@ -120,7 +133,7 @@ class BatchEngine:
         self.group_stride = arena.field(ti.i32)
         """Parallel-loop iterations between two groups (`slot_group`)."""
         self.lockstep = arena.field(ti.i32)
-        """1 where the groups iterate in lockstep (`lockstep_attempt`)."""
+        """1 where the groups iterate in lockstep (`advance_group`)."""
         self.step_limit = arena.field(ti.i32)
         """Most steps an adaptive instance takes (MAX_STEPS_PER_INSTANCE: the int32 counters
         never overflow); one that reaches it stops with status step_limit."""
@@ -395,55 +408,83 @@ class BatchEngine:
         return converged, finite
 
     @ti.func
-    def advance_instance(self, b, step_number, attempted):
-        """Advance instance b to step_number: one step (with the integrator's history when it
-        has one); if it fails, the same step without history (Newton from q_k + h·v_k, implicit
-        Euler), then from the saved start state 2, 4, ... 2^max_substep_halvings substeps
-        without history; if those fail too, freeze the instance
-        at the start state with its status and failure step. With `attempted` = 1 the first
-        attempt has been made already (its firings done, its Newton iteration finished: in
-        lockstep with its group, `lockstep_attempt`), and its outcome is taken from there. One
-        call site of `solve_step` keeps the kernel (and its compile time) small."""
+    def advance_instance(self, b, step_number):
+        """Advance instance b to step_number by the fixed-step policy (`begin_step`,
+        `after_solve`, `finish_step`), its Newton solves one after the other (`solve_step`).
+        One call site of `solve_step` keeps the kernel (and its compile time) small."""
+        halvings, history, substep = self.begin_step(b, step_number)
+        converged, finite, outcome = 0, 1, ATTEMPT_GOES_ON
+        while outcome == ATTEMPT_GOES_ON:
+            start, end, h, use_history = self.attempt_interval(step_number, halvings, substep,
+                                                               history)
+            converged, finite = self.solve_step(b, start, end, h, 1.0, use_history, 0)
+            halvings, history, substep, outcome = self.after_solve(
+                b, step_number, halvings, history, substep, converged)
+        self.finish_step(b, step_number, halvings, converged, finite)
+
+    @ti.func
+    def begin_step(self, b, step_number):
+        """Start instance b's fixed step to step_number: fire what is due in it and return the
+        first attempt (halvings 0, BDF2's history if instance b has one, substep 0).
+
+        The fixed-step policy, whatever runs the solves: the step with the integrator's history
+        when it has one; if it fails, the same step without history (Newton from q_k + h·v_k,
+        implicit Euler), then from the saved start state 2, 4, ... 2^max_substep_halvings
+        substeps without history; if those fail too, the instance is frozen at the start state
+        with its status and failure step. An attempt is (halvings, history, substep)."""
         dt = self.dt[None]
-        if attempted == 0:
-            self.state.schedule.fire_due(b, (step_number - 1) * dt, step_number * dt, step_number)
-        converged, finite = 0, 1
-        halvings = 0
-        history = self.state.history_valid[b]
-        pending = attempted
-        while converged == 0 and halvings <= self.max_substep_halvings[None]:
-            if halvings == 1:
-                # a failed solve_step has restored the start state: keep it for later attempts
-                self.save_backup(b)
-            elif halvings > 1:
-                self.restore_backup(b)
-            substeps = 1 << halvings
-            h = dt / substeps
-            use_history = halvings == 0 and history == 1
-            converged = 1
+        self.state.schedule.fire_due(b, (step_number - 1) * dt, step_number * dt, step_number)
+        return 0, self.state.history_valid[b], 0
+
+    @ti.func
+    def attempt_interval(self, step_number, halvings, substep, history):
+        """(start time, end time, size h (s), use_history) of the solve that an attempt at step
+        step_number makes next."""
+        substeps = 1 << halvings
+        h = self.dt[None] / substeps
+        first = (step_number - 1) * substeps + substep
+        use_history = halvings == 0 and history == 1
+        return first * h, (first + 1) * h, h, use_history
+
+    @ti.func
+    def after_solve(self, b, step_number, halvings, history, substep, converged):
+        """After instance b's solve of an attempt (`attempt_interval`) ended, `converged` or
+        not (its positions restored then): accept a converged substep (tangents, carried
+        state), or move to the next attempt (keeping or restoring the start state). Returns the
+        attempt then and the outcome: ATTEMPT_GOES_ON (another solve), STEP_CONVERGED or
+        STEP_FAILED (every attempt failed)."""
+        start, end, h, use_history = self.attempt_interval(step_number, halvings, substep,
+                                                           history)
+        outcome = ATTEMPT_GOES_ON
+        if converged == 1:
+            if ti.static(self.sensitive):
+                self.tangent_step(b, start, end, h, 1.0, use_history)
+            self.accept_step(b, h, 1.0, use_history)
+            substep += 1
+            if substep == 1 << halvings:
+                outcome = STEP_CONVERGED
+        else:
             substep = 0
-            while converged == 1 and substep < substeps:
-                first = (step_number - 1) * substeps + substep
-                if pending == 1:
-                    # only an engine with lanes makes the first attempt in lockstep
-                    if ti.static(self.lanes > 1):
-                        converged, finite = self.newton_converged[b], self.newton_finite[b]
-                    pending = 0
-                else:
-                    converged, finite = self.solve_step(b, first * h, (first + 1) * h, h, 1.0,
-                                                        use_history, 0)
-                if converged == 1:
-                    if ti.static(self.sensitive):
-                        self.tangent_step(b, first * h, (first + 1) * h, h, 1.0, use_history)
-                    self.accept_step(b, h, 1.0, use_history)
-                substep += 1
-            if converged == 0:
-                if use_history:
-                    # the carried acceleration can be a poor start where the forcing jumps (a
-                    # firing): the whole step again from q_k + h·v_k before any substeps
-                    history = 0
-                else:
-                    halvings += 1
+            if use_history:
+                # the carried acceleration can be a poor start where the forcing jumps (a
+                # firing): the whole step again from q_k + h·v_k before any substeps
+                history = 0
+            else:
+                halvings += 1
+            if halvings > self.max_substep_halvings[None]:
+                outcome = STEP_FAILED
+            # the start state (restored by the failed solve) is kept when the substeps begin,
+            # and restored before each later attempt and when the step has failed after them
+            if halvings > 1 or (halvings == 1 and outcome == ATTEMPT_GOES_ON):
+                self.copy_backup(b, halvings == 1)
+        return halvings, history, substep, outcome
+
+    @ti.func
+    def finish_step(self, b, step_number, halvings, converged, finite):
+        """Instance b's fixed step to step_number is over, `converged` in its last attempt
+        (`halvings`) or frozen at the start state (`finite`: whether its last solve stayed
+        finite): its history, counters, time or failure."""
+        dt = self.dt[None]
         self.state.history_valid[b] = 1 if converged == 1 and halvings == 0 else 0
         if halvings > 0:
             self.state.substep_retries[b] = self.state.substep_retries[b] + 1
@@ -451,8 +492,6 @@ class BatchEngine:
             self.state.steps_done[b] = step_number
             self.state.time[b] = step_number * dt
         else:
-            if halvings > 1:
-                self.restore_backup(b)
             self.state.status[b] = STATUS_NON_FINITE if finite == 0 else STATUS_NEWTON_FAILED
             self.state.failure_step[b] = step_number
             self.state.failure_time[b] = step_number * dt
@@ -564,18 +603,9 @@ class BatchEngine:
             self.advance_adaptive(max_steps)
 
     @ti.func
-    def save_backup(self, b):
-        """Keep instance b's positions and velocities (and its replicas') for `restore_backup`."""
-        self.copy_backup(b, 1)
-
-    @ti.func
-    def restore_backup(self, b):
-        self.copy_backup(b, 0)
-
-    @ti.func
-    def copy_backup(self, b, save: ti.template()):
+    def copy_backup(self, b, save):
         """Positions and velocities of instance b and its replicas (and what the terms carry,
-        `physics.base.Term.copy_carried`) into the backup (`save`) or back from it."""
+        `physics.base.Term.copy_carried`) into the backup (`save` = 1) or back from it (0)."""
         self.copy_instance_backup(b, save)
         if ti.static(self.sensitive):
             for j in range(self.tangent_count[None]):
@@ -598,11 +628,11 @@ class BatchEngine:
                             term.accept_step(self.replica(b, j, sign), rate_gain)
 
     @ti.func
-    def copy_instance_backup(self, b, save: ti.template()):
+    def copy_instance_backup(self, b, save):
         for term in ti.static(self.terms):
             term.copy_carried(b, save)
         for n in range(self.n_nodes):
-            if ti.static(save):
+            if save:
                 self.state.backup_positions[b, n] = self.state.positions[b, n]
                 self.state.backup_velocities[b, n] = self.state.velocities[b, n]
             else:
@@ -820,91 +850,141 @@ class BatchEngine:
         return b
 
     @ti.func
-    def advance_group(self, g):
-        """Advance every live instance of group g by one step: in lockstep when the engine's
-        batch is (`lockstep`, not with the chord Jacobian), each failed instance then retrying
-        on its own (`advance_instance`), else one instance after the other."""
-        attempted = 0
-        if self.lockstep[None] == 1:
-            self.lockstep_attempt(g)
-            attempted = 1
+    def advance_group(self, g, n_steps):
+        """Advance every live instance of group g by n_steps fixed steps (`begin_step`,
+        `after_solve`, `finish_step`: the policy of `advance_instance`), their Newton solves
+        interleaved: in each round every lane that starts a solve prepares it, every lane that
+        iterates assembles its system, the systems are solved (in lockstep: factored and solved
+        together in the vector lanes, `linsolve.LaneBlocks`, a lane without an iterating
+        instance computed and its result dropped; else each on its own, its chord Jacobian
+        refactored as it decides), and each iterating lane applies its update; a lane whose
+        solve ends moves on by the policy, to its next attempt or its next step, at once, so
+        that no lane waits for the others. The kernel thus holds the assembly once. Every
+        instance gets the bits of its own `advance_instance`."""
         for lane in range(self.lanes):
             b = self.group_member(g, lane)
             if b >= 0:
-                if self.state.status[b] == STATUS_OK:
-                    self.advance_instance(b, self.state.steps_done[b] + 1, attempted)
-
-    @ti.func
-    def lockstep_attempt(self, g):
-        """The first attempt at the next step of every live instance of group g (with its
-        history when it has one), their Newton iterations in lockstep: each assembles its own
-        system while it iterates, then the group's systems are factored and solved together in
-        the vector lanes (`linsolve.LaneBlocks`; a lane that has stopped iterating, or holds no
-        instance, is computed and its result dropped), then each applies its update and decides
-        whether it goes on. The group iterates until its last instance stops. Every instance
-        gets the bits of its own `solve_step`. Leaves `finish_newton` done and the outcome in
-        `newton_converged`, `newton_finite` for `advance_instance`."""
-        dt = self.dt[None]
+                self.lane_phase[b] = LANE_IDLE
+                if self.state.status[b] == STATUS_OK and n_steps > 0:
+                    self.lane_last_step[b] = self.state.steps_done[b] + n_steps
+                    self.begin_lane_step(b)
         members = ti.Vector([0] * self.lanes)
         for lane in ti.static(range(self.lanes)):
             b = self.group_member(g, lane)
             # an empty lane repeats the first instance's system (its solution is dropped)
             members[lane] = ti.select(b >= 0, b, g)
-        for lane in range(self.lanes):
-            b = self.group_member(g, lane)
-            if b >= 0:
-                if self.state.status[b] == STATUS_OK:
-                    step_number = self.state.steps_done[b] + 1
-                    self.state.schedule.fire_due(b, (step_number - 1) * dt, step_number * dt,
-                                                 step_number)
-                    self.prepare_step(b, (step_number - 1) * dt, step_number * dt, dt, 1.0,
-                                      self.state.history_valid[b] == 1, 0)
-                    self.newton_iterations[b] = 0
-                    self.newton_converged[b] = 0
-                    self.newton_finite[b] = 1
-                    self.newton_previous_update[b] = 0.0
-        running = 1
+        running = self.group_runs(g)
         while running == 1:
             for lane in range(self.lanes):
                 b = self.group_member(g, lane)
-                if self.lane_iterates(b):
-                    inertia_scale, rate_gain = self.integrator.weights(
-                        dt, 1.0, self.state.history_valid[b] == 1)
-                    self.newton_largest_residual[b] = self.assemble_newton(b, inertia_scale,
-                                                                           rate_gain, 1)
-            self.lane_system.gather(g, members)
-            self.lane_system.factor(g)
-            self.lane_system.solve(g)
-            self.lane_system.scatter_solution(g, members)
-            running = 0
+                if b >= 0:
+                    if self.lane_phase[b] == LANE_STARTS:
+                        self.start_lane_solve(b)
             for lane in range(self.lanes):
                 b = self.group_member(g, lane)
                 if self.lane_iterates(b):
-                    iterations, converged, finite, _, largest_update = self.newton_update(
+                    inertia_scale, rate_gain = self.lane_weights(b)
+                    self.newton_largest_residual[b] = self.assemble_newton(
+                        b, inertia_scale, rate_gain, self.newton_refactor[b])
+            if self.lockstep[None] == 1:
+                self.lane_system.gather(g, members)
+                self.lane_system.factor(g)
+                self.lane_system.solve(g)
+                self.lane_system.scatter_solution(g, members)
+            else:
+                for lane in range(self.lanes):
+                    b = self.group_member(g, lane)
+                    if self.lane_iterates(b):
+                        if self.newton_refactor[b]:
+                            self.system.factor(b)
+                        self.system.solve(b)
+            for lane in range(self.lanes):
+                b = self.group_member(g, lane)
+                if self.lane_iterates(b):
+                    iterations, converged, finite, refactor, largest_update = self.newton_update(
                         b, self.newton_iterations[b], self.newton_previous_update[b],
                         self.newton_largest_residual[b])
                     self.newton_iterations[b] = iterations
                     self.newton_converged[b] = converged
                     self.newton_finite[b] = finite
+                    self.newton_refactor[b] = refactor
                     self.newton_previous_update[b] = largest_update
-                    if self.lane_iterates(b):
-                        running = 1
+                    if not self.newton_goes_on(iterations, converged, finite):
+                        self.end_lane_solve(b)
+            running = self.group_runs(g)
+
+    @ti.func
+    def group_runs(self, g):
+        """1 while an instance of group g has a solve to start or to iterate."""
+        runs = 0
         for lane in range(self.lanes):
             b = self.group_member(g, lane)
             if b >= 0:
-                if self.state.status[b] == STATUS_OK:
-                    _, rate_gain = self.integrator.weights(dt, 1.0, self.state.history_valid[b] == 1)
-                    self.finish_newton(b, rate_gain, self.newton_iterations[b],
-                                       self.newton_converged[b], self.newton_finite[b])
+                if self.lane_phase[b] != LANE_IDLE:
+                    runs = 1
+        return runs
+
+    @ti.func
+    def begin_lane_step(self, b):
+        """`begin_step` of instance b's next step; its first solve starts in the next round."""
+        halvings, history, substep = self.begin_step(b, self.state.steps_done[b] + 1)
+        self.lane_halvings[b] = halvings
+        self.lane_history[b] = history
+        self.lane_substep[b] = substep
+        self.lane_phase[b] = LANE_STARTS
+
+    @ti.func
+    def lane_attempt(self, b):
+        """(start time, end time, h, use_history) of instance b's current solve."""
+        return self.attempt_interval(self.state.steps_done[b] + 1, self.lane_halvings[b],
+                                     self.lane_substep[b], self.lane_history[b])
+
+    @ti.func
+    def lane_weights(self, b):
+        """The integrator's (inertia scale, rate gain) of instance b's current solve."""
+        _, _, h, use_history = self.lane_attempt(b)
+        return self.integrator.weights(h, 1.0, use_history)
+
+    @ti.func
+    def start_lane_solve(self, b):
+        """`prepare_step` of instance b's current solve, its Newton iteration at the start."""
+        start, end, h, use_history = self.lane_attempt(b)
+        self.prepare_step(b, start, end, h, 1.0, use_history, 0)
+        self.newton_iterations[b] = 0
+        self.newton_converged[b] = 0
+        self.newton_finite[b] = 1
+        self.newton_refactor[b] = 1
+        self.newton_previous_update[b] = 0.0
+        self.lane_phase[b] = LANE_ITERATES
+
+    @ti.func
+    def end_lane_solve(self, b):
+        """Instance b's Newton iteration has stopped: `finish_newton`, then the policy's next
+        move (`after_solve`): another solve, the next step, or nothing more in this launch."""
+        _, rate_gain = self.lane_weights(b)
+        converged, finite = self.finish_newton(b, rate_gain, self.newton_iterations[b],
+                                               self.newton_converged[b], self.newton_finite[b])
+        step_number = self.state.steps_done[b] + 1
+        halvings, history, substep, outcome = self.after_solve(
+            b, step_number, self.lane_halvings[b], self.lane_history[b], self.lane_substep[b],
+            converged)
+        self.lane_halvings[b] = halvings
+        self.lane_history[b] = history
+        self.lane_substep[b] = substep
+        self.lane_phase[b] = LANE_STARTS
+        if outcome != ATTEMPT_GOES_ON:
+            self.finish_step(b, step_number, halvings, converged, finite)
+            self.lane_phase[b] = LANE_IDLE
+            if self.state.status[b] == STATUS_OK and \
+                    self.state.steps_done[b] < self.lane_last_step[b]:
+                self.begin_lane_step(b)
 
     @ti.func
     def lane_iterates(self, b):
-        """Whether the instance b of a lane (−1: none) is live and its lockstep Newton iteration
-        goes on."""
+        """Whether the instance b of a lane (−1: none) is in a Newton iteration."""
         iterates = 0
         if b >= 0:
-            if self.state.status[b] == STATUS_OK and self.newton_goes_on(
-                    self.newton_iterations[b], self.newton_converged[b], self.newton_finite[b]):
+            if self.lane_phase[b] == LANE_ITERATES:
                 iterates = 1
         return iterates
 
@@ -922,14 +1002,13 @@ class BatchEngine:
             if ti.static(self.lanes > 1):
                 g = self.slot_group(slot)
                 if g >= 0:
-                    for _ in range(n_steps):
-                        self.advance_group(g)
+                    self.advance_group(g, n_steps)
             else:
                 b = self.slot_instance(slot)
                 if b >= 0:
                     for _ in range(n_steps):
                         if self.state.status[b] == STATUS_OK:
-                            self.advance_instance(b, self.state.steps_done[b] + 1, 0)
+                            self.advance_instance(b, self.state.steps_done[b] + 1)
 
     def compile_stepping(self, adaptive: bool):
         """Compile the stepping kernel of fixed (`advance`) or adaptive (`advance_adaptive`)

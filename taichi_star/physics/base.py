@@ -176,8 +176,8 @@ class Term:
         pass
 
     @ti.func
-    def copy_carried(self, b, save: ti.template()):
-        """Copy instance b's carried state into the term's backup (`save`) or back from it, with
+    def copy_carried(self, b, save):
+        """Copy instance b's carried state into the term's backup (`save` = 1) or back from it (0), with
         the engine's backup of the positions: only with `carries_state`."""
         pass
 

@@ -99,9 +99,9 @@ class Wake(Term):
             self.water_velocity[b, c] = water[c]
 
     @ti.func
-    def copy_carried(self, b, save: ti.template()):
+    def copy_carried(self, b, save):
         for c in ti.static(range(2)):
-            if ti.static(save):
+            if save:
                 self.backup_velocity[b, c] = self.water_velocity[b, c]
                 self.backup_previous[b, c] = self.water_previous[b, c]
             else:
