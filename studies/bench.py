@@ -129,6 +129,9 @@ DEFAULT_REPEATS = 3
 """Timed windows per measurement; the fastest counts (the others were disturbed)."""
 SCENARIO_BATCH = 64
 PROCESS_BATCH = 512
+AUTO_LANES = "auto"
+"""`--lanes` choice for the library's own (`Runtime.engine_lanes`); a row's `lanes` column holds
+the lanes its engine had."""
 QUICK_BATCH_SIZES = "2"
 QUICK_STEPS = 5
 QUICK_SCENARIO_BATCH = 2
@@ -444,11 +447,11 @@ def build_parser():
                         "instance_major",
                         help=f"comma list of {', '.join(LAYOUTS)}: the GPU layout of the "
                              "per-instance fields, --arch gpu only")
-    parser.add_argument("--lanes", default=str(CPU_LANES),
-                        help="comma list of 1, 2, 4, 8, 16: instances whose Newton systems the "
-                             "CPU factors and solves together in vector lanes, for the B sweep and "
-                             "the plain call "
-                             f"(default the library's, {CPU_LANES}); --arch cpu only")
+    parser.add_argument("--lanes", default=AUTO_LANES,
+                        help="comma list of auto, 1, 2, 4, 8, 16: instances whose Newton systems "
+                             "the CPU factors and solves together in vector lanes, for the B "
+                             "sweep and the plain call (default auto: the library's choice, "
+                             f"{CPU_LANES} where they pay, else 1); --arch cpu only")
     parser.add_argument("--kernel-optimisation",
                         default=on_off(kernel_optimisation_default()),
                         help="comma list of on, off: Taichi's advanced IR optimisation for the "
@@ -500,10 +503,9 @@ def parse_args(argv):
     args.gpu_block_dims = cli.parse_counts(args.gpu_block_dims, "--gpu-block-dims")
     args.kernel_optimisation = [choice == "on" for choice in cli.parse_choices(
         args.kernel_optimisation, "--kernel-optimisation", ("on", "off"))]
-    args.lanes = cli.parse_counts(args.lanes, "--lanes")
-    if any(lanes not in (1, 2, 4, 8, 16) for lanes in args.lanes):
-        raise cli.StudyArgumentError(f"--lanes: each must be 1, 2, 4, 8 or 16, got {args.lanes}")
-    if args.arch != "cpu" and args.lanes != [CPU_LANES]:
+    args.lanes = [None if choice == AUTO_LANES else int(choice) for choice in cli.parse_choices(
+        args.lanes, "--lanes", (AUTO_LANES, "1", "2", "4", "8", "16"))]
+    if args.arch != "cpu" and args.lanes != [None]:
         raise cli.StudyArgumentError("--lanes compares CPU settings; run it with --arch cpu")
     for block_dim in args.gpu_block_dims:
         if block_dim > 1024 or block_dim & (block_dim - 1):
@@ -569,7 +571,7 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
                 Runtime.current().configure_gpu(block_dim, layout == "instance_minor")
             else:
                 Runtime.current().configure_lanes(lanes)
-            place = {"layout": layout, "block_dim": block_dim, "lanes": lanes,
+            place = {"layout": layout, "block_dim": block_dim,
                      "bandwidth_gb_s": bandwidth, "kernel_optimisation": on_off(optimise)}
             if "paper" in args.presets:
                 for jacobian in args.jacobians:
@@ -579,13 +581,17 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
                         moved = figures["robot_steps_per_s"] * figures["bytes_per_step"]
                         add({"section": "batch", "scenario": "all_terms", "batch_size": batch,
                              "precision": precision, **place, **figures,
+                             "lanes": Runtime.current().engine_lanes(
+                                 batch, bench_solver(precision, jacobian)),
                              "bandwidth_fraction": moved / (bandwidth * 1e9)})
             if "accurate" in args.presets:
                 for batch in args.batch_sizes:
                     figures = measure_accurate(batch, args.arch, precision, args.accurate_duration,
                                                profile_seconds)
                     add({"section": "batch", "scenario": "all_terms", "batch_size": batch,
-                         "precision": precision, **place, **figures})
+                         "precision": precision, **place, **figures,
+                         "lanes": Runtime.current().engine_lanes(
+                             batch, SolverConfig.preset("accurate", precision=precision))})
         Runtime.current().configure_lanes()
         if index == 0:
             # while this precision's runtime is live (a precision switch re-initialises Taichi)
@@ -602,9 +608,12 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
     if args.plain_call and not gpu:
         for lanes in args.lanes:
             Runtime.current().configure_lanes(lanes)
+            figures = measure_plain(args.process_batch, args.plain_duration, args.repeats)
             add({"section": "plain", "scenario": "all_terms", "preset": "paper",
-                 "batch_size": args.process_batch, "precision": "f64", "lanes": lanes,
-                 **measure_plain(args.process_batch, args.plain_duration, args.repeats)})
+                 "batch_size": args.process_batch, "precision": "f64", **figures,
+                 "lanes": Runtime.current().engine_lanes(
+                     args.process_batch, SolverConfig(),
+                     robot_steps=args.process_batch * figures["steps"])})
         Runtime.current().configure_lanes()
     for count in args.sensitivity_counts:
         add({"section": "sensitivities", "scenario": f"sensitivities_{count}", "preset": "paper",

@@ -41,7 +41,7 @@ from typing import Dict, List, Optional
 import numpy as np
 import taichi as ti
 
-from .engine import BatchEngine
+from .engine import LOCKSTEP_MINIMUM_BATCH, BatchEngine
 from .integrators import INTEGRATORS
 from .linsolve import plan_elimination
 from .model import BatchModel, build_model
@@ -56,13 +56,21 @@ GPU_BLOCK_DIM = 32
 """Threads (one instance each) per GPU block; chosen by `python -m studies bench --arch gpu`."""
 GPU_INSTANCE_MINOR = True
 """GPU layout of the per-instance fields: instance-minor (coalesced); chosen by the same bench."""
-CPU_LANES = 1
-"""Instances whose Newton systems the CPU's vector units factor and solve together
-(`engine.BatchEngine` `lanes`: the fixed-step kernel iterates groups of them in lockstep once a
-batch has `engine.LOCKSTEP_MINIMUM_BATCH` instances; the same bits as one at a time). 1, one
-at a time, by default: 8 lanes step a batch of 64-4,096 paper robots 1.1-1.3x as fast but
-compile the fixed-step kernel about three times as long (docs/performance.md, "SIMD across
-instances"); `Runtime.configure_lanes(8)` turns them on for the engines built after it."""
+CPU_LANES = 8
+"""Instances whose Newton systems the CPU's vector units factor and solve together in an engine
+with lanes (`engine.BatchEngine` `lanes`: a group's instances interleave their solves round by
+round, and with Newton's Jacobian from `engine.LOCKSTEP_MINIMUM_BATCH` simulated instances their
+systems are solved in lockstep; the same bits as one at a time)."""
+LANES_MINIMUM_WORK = 4_000_000
+"""Robot-steps (simulated instances × fixed steps) from which a `simulate` call's engine has
+CPU_LANES lanes by default, when it runs fixed steps with Newton's Jacobian on at least
+`engine.LOCKSTEP_MINIMUM_BATCH` instances and carries no tangents (`Runtime.engine_lanes`).
+There 8 lanes step 1.04-1.23x as fast, but their kernel compiles in ~7 s against ~2.6 s with
+an empty cache, and loads from Taichi's offline cache in ~2.8 s against ~0.8 s in each new
+process: a call of 4 M robot-steps runs ~100 s on 2 cores, of which the lanes save ~10 s,
+more than that compilation; a shorter call, adaptive steps, the chord Jacobian, tangents and
+Simulators (whose work is not known ahead) run one instance at a time
+(docs/performance.md, "SIMD across instances")."""
 KERNEL_OPTIMISATION = True
 """Taichi's advanced IR optimisation passes (`ti.init(advanced_optimization=...)`): on, an engine
 steps 10-13 % faster; off, it compiles faster (~0.7x as long on the CPU, where the passes leave
@@ -293,7 +301,7 @@ class Runtime:
         self.cpu_threads: Optional[int] = None
         self.gpu_block_dim = GPU_BLOCK_DIM
         self.gpu_instance_minor = GPU_INSTANCE_MINOR
-        self.cpu_lanes = CPU_LANES
+        self.cpu_lanes: Optional[int] = None
         self.kernel_optimisation = kernel_optimisation_default()
         self.cpu_cfg_optimisation = CPU_CFG_OPTIMISATION
         self.log_level = ti.WARN
@@ -348,13 +356,31 @@ class Runtime:
         self.gpu_block_dim = int(block_dim)
         self.gpu_instance_minor = bool(instance_minor)
 
-    def configure_lanes(self, lanes: int = CPU_LANES):
-        """Lanes of the CPU engines built from now on (see CPU_LANES; 1: none), for comparisons
-        (the engines already built keep theirs)."""
-        if isinstance(lanes, bool) or not isinstance(lanes, (int, np.integer)) \
-                or lanes not in (1, 2, 4, 8, 16):
-            raise ValueError(f"lanes must be 1, 2, 4, 8 or 16, got {lanes!r}")
-        self.cpu_lanes = int(lanes)
+    def configure_lanes(self, lanes: Optional[int] = None):
+        """Lanes of the CPU engines used from now on: None, the default, where they pay
+        (`engine_lanes`); 1 (none) or 2, 4, 8, 16 for every CPU engine (a Simulator's too),
+        for comparisons and long-lived Simulators."""
+        if lanes is not None and (isinstance(lanes, bool)
+                                  or not isinstance(lanes, (int, np.integer))
+                                  or lanes not in (1, 2, 4, 8, 16)):
+            raise ValueError(f"lanes must be 1, 2, 4, 8 or 16 (or None: where they pay), "
+                             f"got {lanes!r}")
+        self.cpu_lanes = None if lanes is None else int(lanes)
+
+    def engine_lanes(self, batch_size: int, solver: SolverConfig, sensitive: bool = False,
+                     robot_steps: Optional[int] = None) -> int:
+        """Lanes of the engine for a batch of `batch_size` instances (replicas included) run
+        with `solver` for `robot_steps` (None: not known ahead), see `configure_lanes`: 1 on a
+        GPU; on the CPU the configured number, or by default CPU_LANES where they pay
+        (LANES_MINIMUM_WORK), else 1."""
+        if self.arch != "cpu":
+            return 1
+        if self.cpu_lanes is not None:
+            return self.cpu_lanes
+        pays = robot_steps is not None and robot_steps >= LANES_MINIMUM_WORK \
+            and batch_size >= LOCKSTEP_MINIMUM_BATCH and not sensitive \
+            and not solver.adaptive and solver.jacobian == "newton"
+        return CPU_LANES if pays else 1
 
     def configure_compiler(self, kernel_optimisation: Optional[bool] = None,
                            cpu_cfg_optimisation: Optional[bool] = None):
@@ -388,10 +414,11 @@ class Runtime:
             return 1
         return max(1, -(-PARALLEL_LOOP_MINIMUM // capacity))
 
-    def new_engine(self, model: BatchModel, solver: SolverConfig,
-                   sensitive: bool = False) -> BatchEngine:
+    def new_engine(self, model: BatchModel, solver: SolverConfig, sensitive: bool = False,
+                   lanes: int = 1) -> BatchEngine:
         """A new engine (its own device state) for this batch, `sensitive` if it is to carry
-        tangents (`engine.BatchEngine`). Taichi must be initialised (`ensure`)."""
+        tangents, with `lanes` on the CPU (`engine.BatchEngine`). Taichi must be initialised
+        (`ensure`)."""
         check_memory(model, solver.precision, self.arch)
         capacity = batch_capacity(model.batch_size)
         gpu = self.arch != "cpu"
@@ -399,28 +426,31 @@ class Runtime:
                            instances_per_block=self.gpu_block_dim if gpu else 1,
                            loop_spread=self.loop_spread(capacity), even_spread=not gpu,
                            instance_minor=gpu and self.gpu_instance_minor, sensitive=sensitive,
-                           lanes=1 if gpu else self.cpu_lanes)
+                           lanes=lanes)
 
-    def engine_key(self, model: BatchModel, solver: SolverConfig, sensitive: bool = False) -> tuple:
+    def engine_key(self, model: BatchModel, solver: SolverConfig, sensitive: bool = False,
+                   lanes: int = 1) -> tuple:
         """What an engine is compiled for: topology and terms, integrator, capacity, whether it
         carries tangents and, on a GPU, its launch and layout settings (on the CPU its
-        lanes)."""
-        gpu = (self.gpu_block_dim, self.gpu_instance_minor) if self.arch != "cpu" \
-            else (self.cpu_lanes,)
+        `lanes`)."""
+        gpu = (self.gpu_block_dim, self.gpu_instance_minor) if self.arch != "cpu" else (lanes,)
         return (model.engine_key, solver.integrator, batch_capacity(model.batch_size),
                 sensitive) + gpu
 
-    def free_engine(self, model: BatchModel, solver: SolverConfig,
-                    sensitive: bool = False) -> EngineSlot:
-        """The slot of an engine for this batch that no living Simulator holds (one is built if
-        there is none): `simulate` calls and Simulators draw on the same engines, so a Simulator
-        made after a `simulate` of the same topology, terms and integrator (or after another
-        Simulator is gone) compiles nothing."""
-        key = self.engine_key(model, solver, sensitive)
+    def free_engine(self, model: BatchModel, solver: SolverConfig, sensitive: bool = False,
+                    robot_steps: Optional[int] = None) -> EngineSlot:
+        """The slot of an engine for this batch, run for `robot_steps` (None: not known ahead;
+        `engine_lanes`), that no living Simulator holds (one is built if there is none):
+        `simulate` calls and Simulators draw on the same engines, so a Simulator made after a
+        `simulate` of the same topology, terms and integrator (or after another Simulator is
+        gone) compiles nothing."""
+        lanes = self.engine_lanes(model.batch_size, solver, sensitive, robot_steps)
+        key = self.engine_key(model, solver, sensitive, lanes)
         for slot in self.engines.get(key, []):
             if not slot.held():
                 return slot
-        slot = EngineSlot(self.new_engine(model, solver, sensitive))  # may refuse: no entry
+        # may refuse: no entry
+        slot = EngineSlot(self.new_engine(model, solver, sensitive, lanes))
         self.engines.setdefault(key, []).append(slot)
         return slot
 
@@ -432,12 +462,14 @@ class Runtime:
         slot.holder = weakref.ref(owner)
         return slot.engine
 
-    def engine_for(self, model: BatchModel, solver: SolverConfig, tangents: int = 0) -> BatchEngine:
+    def engine_for(self, model: BatchModel, solver: SolverConfig, tangents: int = 0,
+                   robot_steps: Optional[int] = None) -> BatchEngine:
         """A free engine for this batch's topology, terms, integrator and capacity
-        (`free_engine`), loaded with the batch at rest, its gaits firing every period. With
-        `tangents` > 0 the batch is B instances and their replicas (`BatchEngine.load`) and
-        the engine a sensitive one. It stays free: the next call may load it again."""
-        slot = self.free_engine(model, solver, tangents > 0)
+        (`free_engine`; `robot_steps`: the call's work, if known), loaded with the batch at
+        rest, its gaits firing every period. With `tangents` > 0 the batch is B instances and
+        their replicas (`BatchEngine.load`) and the engine a sensitive one. It stays free: the
+        next call may load it again."""
+        slot = self.free_engine(model, solver, tangents > 0, robot_steps)
         slot.holder = None
         slot.engine.load(model, solver, tangents=tangents)
         return slot.engine

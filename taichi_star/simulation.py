@@ -260,12 +260,13 @@ def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, reco
     started = time.perf_counter()
     model, steps = tangents.replica_model(params, directions)
     params = model.params
-    engine = runtime.engine_for(model, solver, tangents=len(directions))
+    clock = Clock(solver, duration_s)
+    engine = runtime.engine_for(model, solver, tangents=len(directions),
+                                robot_steps=None if clock.adaptive else len(params) * clock.end)
     set_up = time.perf_counter()
     engine.compile_stepping(solver.adaptive)
     compiled = time.perf_counter()
     batch = model.batch_size
-    clock = Clock(solver, duration_s)
 
     record_stops = clock.stops_every(record_interval_s) if record_interval_s else []
     by_stop = {}

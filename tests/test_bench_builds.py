@@ -20,10 +20,10 @@ def bench_builds():
     return module
 
 
-def _row(build, round_number, batch, rate, digest, section="batch"):
+def _row(build, round_number, batch, rate, digest, section="batch", lanes=1):
     return {"build": build, "round": round_number, "section": section, "scenario": "all_terms",
             "preset": "paper", "batch_size": batch, "precision": "f64", "jacobian": "newton",
-            "robot_steps_per_s": rate, "final_state": digest}
+            "lanes": lanes, "robot_steps_per_s": rate, "final_state": digest}
 
 
 def test_the_summary_takes_each_builds_best_round_and_compares_the_bits(bench_builds):
@@ -44,3 +44,18 @@ def test_the_summary_takes_each_builds_best_round_and_compares_the_bits(bench_bu
     # a section that records no digest says nothing about the bits
     assert summary.loc[("sensitivities", 64), "same_bits"] == ""
     assert summary.loc[("sensitivities", 64), "ratio_after_to_before"] == pytest.approx(1.6)
+
+
+def test_the_summary_keeps_the_lanes_apart(bench_builds):
+    """A bench run with `--lanes 1,8` measures each case twice per build: each lanes setting is
+    compared with its own; a table without the column (before the setting) ran one at a time."""
+    table = pd.DataFrame([
+        _row("before", 1, 512, 100.0, "aa"), _row("after", 1, 512, 110.0, "aa"),
+        _row("before", 1, 512, 150.0, "aa", lanes=8), _row("after", 1, 512, 165.0, "aa", lanes=8)])
+    summary = bench_builds.summarise(table).set_index("lanes")
+    assert summary.loc[1, "ratio_after_to_before"] == pytest.approx(1.1)
+    assert summary.loc[8, "before_robot_steps_per_s"] == 150.0
+    assert summary.loc[8, "ratio_after_to_before"] == pytest.approx(1.1)
+    unlabelled = bench_builds.summarise(table[table["lanes"] == 1].drop(columns="lanes"))
+    assert unlabelled["lanes"].tolist() == [1]
+    assert unlabelled["ratio_after_to_before"].tolist() == pytest.approx([1.1])

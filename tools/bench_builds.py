@@ -28,8 +28,9 @@ from pathlib import Path
 import pandas as pd
 
 REPO = Path(__file__).resolve().parents[1]
-CASE = ["section", "scenario", "preset", "batch_size", "precision", "jacobian"]
-"""The columns that name one measured case of the bench study."""
+CASE = ["section", "scenario", "preset", "batch_size", "precision", "jacobian", "lanes"]
+"""The columns that name one measured case of the bench study (tables without `lanes` ran one
+instance at a time: 1)."""
 
 
 def worktree(revision: str, parent: Path) -> Path:
@@ -47,6 +48,8 @@ def commit_of(revision: str) -> str:
 
 def summarise(table: pd.DataFrame) -> pd.DataFrame:
     """One row per CASE: best robot-steps/s per build, ratio after/before, same_bits."""
+    if "lanes" not in table:
+        table = table.assign(lanes=1)
     keyed = table.assign(**{c: table[c].fillna("") for c in CASE})
     best = keyed.pivot_table(index=CASE, columns="build", values="robot_steps_per_s",
                              aggfunc="max")

@@ -12,8 +12,9 @@ import pandas as pd
 import pytest
 
 import taichi_star as ts
+import taichi_star.runtime as runtime_module
 from taichi_star.engine import LOCKSTEP_MINIMUM_BATCH
-from taichi_star.runtime import Runtime, prepare_engine
+from taichi_star.runtime import CPU_LANES, LANES_MINIMUM_WORK, Runtime, prepare_engine
 
 GAITS = ["A1", "A1+A2", "A1+A3", "A1+A4", "A1+A3+A5", "none"]
 # 70: eight full groups of 8 lanes and six in a ninth, partly empty (lane l of group g holds
@@ -94,6 +95,64 @@ def test_lockstep_from_the_minimum_batch_and_only_with_newtons_jacobian(count, j
     assert (steps == 20).all() and (engine.state.status.to_numpy()[:count] == 0).all()
     # every instance of the batch advanced once per step, padding never
     assert (engine.state.steps_done.to_numpy()[count:] == saved["steps_done"][count:]).all()
+
+
+WORK = LANES_MINIMUM_WORK
+
+
+@pytest.mark.parametrize("batch_size, solver, sensitive, robot_steps, lanes", [
+    # the work of the call and the batch at, and one short of, their minimums
+    (LOCKSTEP_MINIMUM_BATCH, ts.SolverConfig(), False, WORK, CPU_LANES),
+    (LOCKSTEP_MINIMUM_BATCH, ts.SolverConfig(), False, WORK - 1, 1),
+    (LOCKSTEP_MINIMUM_BATCH - 1, ts.SolverConfig(), False, WORK, 1),
+    # a Simulator's work is not known ahead
+    (4096, ts.SolverConfig(), False, None, 1),
+    # what the lanes do not speed up runs one instance at a time
+    (4096, ts.SolverConfig(jacobian="chord"), False, WORK, 1),
+    (4096, ts.SolverConfig(adaptive=True), False, WORK, 1),
+    (4096, ts.SolverConfig(), True, WORK, 1)])
+def test_engines_have_lanes_by_default_where_they_pay(batch_size, solver, sensitive,
+                                                      robot_steps, lanes):
+    runtime = Runtime.current()
+    runtime.ensure("cpu", "f64")
+    assert runtime.engine_lanes(batch_size, solver, sensitive, robot_steps) == lanes
+    # a configured number holds for every CPU engine, until the default is configured again
+    runtime.configure_lanes(2)
+    try:
+        assert runtime.engine_lanes(batch_size, solver, sensitive, robot_steps) == 2
+    finally:
+        runtime.configure_lanes()
+    assert runtime.engine_lanes(batch_size, solver, sensitive, robot_steps) == lanes
+
+
+def test_a_call_gets_the_lanes_by_its_work_and_the_bits_of_one_at_a_time(monkeypatch):
+    """`simulate` asks for the engine with lanes for a call of LANES_MINIMUM_WORK robot-steps,
+    not for one step fewer (the minimum lowered here to 64 instances × 20 steps, so that the
+    calls are short; `engine_lanes` is checked at the real minimum above). The call with lanes
+    gets the bits of the engine without them."""
+    steps = 20
+    params = BATCH[:LOCKSTEP_MINIMUM_BATCH]
+    monkeypatch.setattr(runtime_module, "LANES_MINIMUM_WORK", steps * len(params))
+    solver = ts.SolverConfig()
+    runtime = Runtime.current()
+    runtime.ensure("cpu", "f64")
+    built = []
+    new_engine = runtime.new_engine
+
+    def recording(model, solver, sensitive=False, lanes=1):
+        built.append(lanes)
+        return new_engine(model, solver, sensitive, lanes)
+
+    monkeypatch.setattr(runtime, "new_engine", recording)
+    monkeypatch.setattr(runtime, "engines", {})
+    shorter = ts.simulate(params, (steps - 1) * solver.dt, solver)
+    together = ts.simulate(params, steps * solver.dt, solver)
+    alone = run(1, params, steps * solver.dt, solver)
+    # the engine without lanes is built for the shorter call and reused for the run alone
+    assert built == [1, CPU_LANES]
+    assert_same_bits(alone, together)
+    assert (shorter.summary["steps"] == steps - 1).all()
+    assert (together.summary["steps"] == steps).all()
 
 
 def test_lanes_are_refused_outside_the_supported_counts():
