@@ -68,8 +68,8 @@ def test_chord_jacobian_in_an_engine_with_lanes_as_each_instance_alone():
     instance gets the bits of the engine without lanes, retries included."""
     solver = ts.SolverConfig(integrator="bdf2", dt=0.01, max_newton=4, max_substep_halvings=2,
                              jacobian="chord")
-    alone = run(1, BATCH, 0.2, solver, record_interval_s=0.05)
-    together = run(8, BATCH, 0.2, solver, record_interval_s=0.05)
+    alone = run(1, BATCH, 0.1, solver, record_interval_s=0.05)
+    together = run(8, BATCH, 0.1, solver, record_interval_s=0.05)
     assert_same_bits(alone, together)
     assert together.summary["substep_retries"].sum() > 0
 
