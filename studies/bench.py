@@ -228,7 +228,7 @@ def measure(params, arch: str, precision: str, steps: int, repeats: int,
     # the byte count assumes a fresh Jacobian and LU per iteration: Newton's rows only
     bytes_per_step = (iterations * profile.matrix_bytes_per_iteration()
                       if jacobian == "newton" else math.nan)
-    return {"gait": params[0].gait, "jacobian": jacobian, "workers": 1,
+    return {"gait": params[0].gait, "jacobian": jacobian, "workers": 1, "lanes": profile.lanes,
             "preset": "paper", "bytes_per_step": bytes_per_step, "final_state": final_state,
             "terms": "+".join(profile.terms),
             "n_nodes": profile.n_nodes, "setup_s": profile.setup_s,
@@ -282,6 +282,7 @@ def measure_accurate(batch: int, arch: str, precision: str, duration: float,
     phase = accurate_phase_split(params, arch, precision, profile_seconds)
     assembly, factor, solve = (iterations * phase[name] for name in ("assembly", "factor", "solve"))
     return {"gait": GAIT, "preset": "accurate", "jacobian": solver.jacobian, "workers": 1,
+            "lanes": Runtime.current().engine_lanes(batch, solver),
             "n_nodes": result.topology.n_nodes,
             "compile_s": max(first - timed, 0.0), "robot_steps_per_s": steps / timed,
             "real_time_factor": batch * duration / timed, "step_us": step_us,
@@ -581,17 +582,13 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
                         moved = figures["robot_steps_per_s"] * figures["bytes_per_step"]
                         add({"section": "batch", "scenario": "all_terms", "batch_size": batch,
                              "precision": precision, **place, **figures,
-                             "lanes": Runtime.current().engine_lanes(
-                                 batch, bench_solver(precision, jacobian)),
                              "bandwidth_fraction": moved / (bandwidth * 1e9)})
             if "accurate" in args.presets:
                 for batch in args.batch_sizes:
                     figures = measure_accurate(batch, args.arch, precision, args.accurate_duration,
                                                profile_seconds)
                     add({"section": "batch", "scenario": "all_terms", "batch_size": batch,
-                         "precision": precision, **place, **figures,
-                         "lanes": Runtime.current().engine_lanes(
-                             batch, SolverConfig.preset("accurate", precision=precision))})
+                         "precision": precision, **place, **figures})
         Runtime.current().configure_lanes()
         if index == 0:
             # while this precision's runtime is live (a precision switch re-initialises Taichi)

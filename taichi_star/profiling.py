@@ -89,6 +89,12 @@ class EngineProfile:
         return self.engine.n_nodes
 
     @property
+    def lanes(self) -> int:
+        """Instances per group of the engine's fixed-step kernel (`runtime.Runtime.engine_lanes`;
+        1: one at a time)."""
+        return self.engine.lanes
+
+    @property
     def n_slots(self) -> int:
         """2×2 blocks of the Newton matrix's elimination pattern (fill-in included)."""
         return self.engine.plan.n_slots

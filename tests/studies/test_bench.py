@@ -27,6 +27,9 @@ def test_bench_quick(tmp_path, monkeypatch):
                 "--kernel-optimisation", "off,on"])
     table = pd.read_csv(tmp_path / "bench.csv")
     assert list(table.columns) == bench.COLUMNS
+    # `--lanes auto` (the default): each row records its engine's, one at a time for these
+    # small batches and short calls (`Runtime.engine_lanes`)
+    assert (table["lanes"] == 1).all()
     # the table is rewritten after every measurement (a run stopped by a time limit keeps
     # what it measured), then once whole
     assert written == [*range(1, len(table) + 1), len(table)]
