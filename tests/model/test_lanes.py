@@ -68,8 +68,10 @@ def test_chord_jacobian_in_an_engine_with_lanes_as_each_instance_alone():
     instance gets the bits of the engine without lanes, retries included."""
     solver = ts.SolverConfig(integrator="bdf2", dt=0.01, max_newton=4, max_substep_halvings=2,
                              jacobian="chord")
-    alone = run(1, BATCH, 0.1, solver, record_interval_s=0.05)
-    together = run(8, BATCH, 0.1, solver, record_interval_s=0.05)
+    # the batch of the test above, whose engines this one shares (the chord is a setting)
+    params = [p.replace(damping_time=1e-3) for p in BATCH]
+    alone = run(1, params, 0.1, solver, record_interval_s=0.05)
+    together = run(8, params, 0.1, solver, record_interval_s=0.05)
     assert_same_bits(alone, together)
     assert together.summary["substep_retries"].sum() > 0
 
@@ -127,32 +129,32 @@ def test_engines_have_lanes_by_default_where_they_pay(batch_size, solver, sensit
 
 def test_a_call_gets_the_lanes_by_its_work_and_the_bits_of_one_at_a_time(monkeypatch):
     """`simulate` asks for the engine with lanes for a call of LANES_MINIMUM_WORK robot-steps,
-    not for one step fewer (the minimum lowered here to 64 instances × 20 steps, so that the
+    not for one step fewer (the minimum lowered here to 70 instances × 20 steps, so that the
     calls are short; `engine_lanes` is checked at the real minimum above). The call with lanes
     gets the bits of the engine without them."""
     steps = 20
-    params = BATCH[:LOCKSTEP_MINIMUM_BATCH]
+    # the batch and integrator of the first test, whose engines this one shares
+    params = [p.replace(damping_time=1e-3) for p in BATCH]
     monkeypatch.setattr(runtime_module, "LANES_MINIMUM_WORK", steps * len(params))
-    solver = ts.SolverConfig()
+    solver = ts.SolverConfig(integrator="bdf2")
     runtime = Runtime.current()
-    runtime.ensure("cpu", "f64")
-    built = []
-    new_engine = runtime.new_engine
+    used = []
+    engine_for = runtime.engine_for
 
-    def recording(model, solver, sensitive=False, lanes=1):
-        built.append(lanes)
-        return new_engine(model, solver, sensitive, lanes)
+    def recording(*args, **kwargs):
+        engine = engine_for(*args, **kwargs)
+        used.append(engine.lanes)
+        return engine
 
-    monkeypatch.setattr(runtime, "new_engine", recording)
-    monkeypatch.setattr(runtime, "engines", {})
+    monkeypatch.setattr(runtime, "engine_for", recording)
     shorter = ts.simulate(params, (steps - 1) * solver.dt, solver)
     together = ts.simulate(params, steps * solver.dt, solver)
     alone = run(1, params, steps * solver.dt, solver)
-    # the engine without lanes is built for the shorter call and reused for the run alone
-    assert built == [1, CPU_LANES]
+    assert used == [1, CPU_LANES, 1]
     assert_same_bits(alone, together)
     assert (shorter.summary["steps"] == steps - 1).all()
     assert (together.summary["steps"] == steps).all()
+    assert (together.summary["status"] == "ok").all()
 
 
 def test_lanes_are_refused_outside_the_supported_counts():
