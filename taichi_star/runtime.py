@@ -65,12 +65,13 @@ LANES_MINIMUM_WORK = 4_000_000
 """Robot-steps (simulated instances × fixed steps) from which a `simulate` call's engine has
 CPU_LANES lanes by default, when it runs fixed steps with Newton's Jacobian on at least
 `engine.LOCKSTEP_MINIMUM_BATCH` instances and carries no tangents (`Runtime.engine_lanes`).
-There 8 lanes step 1.04-1.23x as fast, but their kernel compiles in ~7 s against ~2.6 s with
-an empty cache, and loads from Taichi's offline cache in ~2.8 s against ~0.8 s in each new
-process: a call of 4 M robot-steps runs ~100 s on 2 cores, of which the lanes save ~10 s,
-more than that compilation; a shorter call, adaptive steps, the chord Jacobian, tangents and
-Simulators (whose work is not known ahead) run one instance at a time
-(docs/performance.md, "SIMD across instances")."""
+The lanes step 1.04-1.23x as fast, but their kernel compiles in ~7 s against ~2.6 s with an
+empty cache and loads from Taichi's offline cache in ~3 s against ~0.8 s in each new process;
+from this much work they no longer lose: a call of 4.0 M robot-steps (1,024 robots, 3.91 s)
+took as long with and without them with an empty cache and ~3 % less with a warm one (2
+cores). Shorter calls, adaptive steps, the chord Jacobian, tangents and Simulators (whose work
+is not known ahead) run one instance at a time (docs/performance.md, "SIMD across
+instances")."""
 KERNEL_OPTIMISATION = True
 """Taichi's advanced IR optimisation passes (`ti.init(advanced_optimization=...)`): on, an engine
 steps 10-13 % faster; off, it compiles faster (~0.7x as long on the CPU, where the passes leave
