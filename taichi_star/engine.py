@@ -6,10 +6,10 @@ its own Newton loop (so converged instances stop iterating and failed ones are f
 assembles its residual and Jacobian from the force terms of `physics.TERMS` (each through the
 engine's `physics.assembly.Assembly`) into a fixed-pattern block-sparse store (`linsolve.BlockSystem`) and solves it by LU without pivoting. Terms that no
 instance of the batch uses are not part of the engine at all (compiled out). An engine built
-with `lanes` > 1 (on the CPU, opt-in) advances groups of that many instances per thread with
-fixed steps, their Newton iterations interleaved round by round and their systems factored and
-solved together in the vector lanes (`advance_group`), each instance's bits those of its own
-loop.
+with `lanes` > 1 (on the CPU; `runtime.Runtime.engine_lanes` says when) advances groups of
+that many instances per thread with fixed steps, their Newton iterations interleaved round by
+round and their systems factored and solved together in the vector lanes (`advance_group`),
+each instance's bits those of its own loop.
 
 An engine built `sensitive` also carries each instance's tangents (`tangent_step`): the batch's
 first `primal_count` instances are simulated, and behind them, for each of `tangent_count`
