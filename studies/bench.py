@@ -88,7 +88,11 @@ gait, warmup_steps, steps, repeats, commit, timestamp, import_s, setup_s, compil
 time_to_first_step_s, robot_steps_per_s, real_time_factor (= robot_steps_per_s × dt: simulated
 robot-seconds per wall second), step_us, newton_iterations_mean, assembly_us, factor_us,
 solve_us, bookkeeping_us (µs per instance-step), factor_flops (per factorisation),
-factor_gflops (achieved by the factorisation), bytes_per_step, bandwidth_gb_s,
+factor_gflops (achieved by the factorisation; in an engine with lanes its phase includes the
+copy of the group's systems into the lanes), matmul_gflops (NumPy's matrix product of
+MATMUL_SIZE, quick: QUICK_MATMUL_SIZE, in the row's precision, best of three, timed just before
+the row's engine: the machine's attainable rate in the same run; CPU paper rows only),
+factor_fraction_of_matmul (their ratio), bytes_per_step, bandwidth_gb_s,
 bandwidth_fraction. And `bench.png` (`bench_gpu.png`): throughput
 against B (log-log, one line per precision, the design target dashed), the phase split and
 the scenarios.
@@ -116,6 +120,7 @@ from taichi_star.runtime import (CPU_LANES, GPU_BLOCK_DIM, GPU_INSTANCE_MINOR, R
                                  kernel_optimisation_default)
 
 from . import cli, provenance
+from .simd import matmul_gflops
 
 DESCRIPTION = ("Engine throughput: robot-steps/s against batch size and precision (gait A1+A3, "
                "N = 193, h = 1 ms), compile time apart, phase split, terms compiled out.")
@@ -152,6 +157,8 @@ QUICK_SCENARIOS = "all_terms,added_mass_0"
 scenarios with the same terms, so that it compiles the stepping kernel at most once."""
 PROFILE_SECONDS = 0.5
 QUICK_PROFILE_SECONDS = 0.02
+MATMUL_SIZE = 1024
+QUICK_MATMUL_SIZE = 256
 """Target duration of one profiling launch, s: long enough to time, short next to the benchmark."""
 """Each phase is timed as the best of this many launches."""
 TARGETS = {"cpu": 40_000.0, "gpu": 2_000_000.0}
@@ -176,7 +183,8 @@ COLUMNS = ["machine", "cpu_model", "cores", "gpu", "gpu_driver", "arch", "preset
            "warmup_steps", "steps", "repeats", "commit", "timestamp", "import_s", "setup_s",
            "compile_s", "time_to_first_step_s", "robot_steps_per_s", "real_time_factor",
            "step_us", "newton_iterations_mean", "assembly_us", "factor_us", "solve_us",
-           "bookkeeping_us", "factor_flops", "factor_gflops", "bytes_per_step",
+           "bookkeeping_us", "factor_flops", "factor_gflops", "matmul_gflops",
+           "factor_fraction_of_matmul", "bytes_per_step",
            "bandwidth_gb_s", "bandwidth_fraction", "final_state"]
 
 
@@ -577,11 +585,16 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
             if "paper" in args.presets:
                 for jacobian in args.jacobians:
                     for batch in args.batch_sizes:
+                        matmul = math.nan if gpu else matmul_gflops(
+                            QUICK_MATMUL_SIZE if args.quick else MATMUL_SIZE, precision,
+                            np.random.default_rng(0))
                         figures = measure([StarParams(gait=GAIT)] * batch, args.arch, precision,
                                           args.steps, args.repeats, profile_seconds, jacobian)
                         moved = figures["robot_steps_per_s"] * figures["bytes_per_step"]
                         add({"section": "batch", "scenario": "all_terms", "batch_size": batch,
                              "precision": precision, **place, **figures,
+                             "matmul_gflops": matmul,
+                             "factor_fraction_of_matmul": figures["factor_gflops"] / matmul,
                              "bandwidth_fraction": moved / (bandwidth * 1e9)})
             if "accurate" in args.presets:
                 for batch in args.batch_sizes:

@@ -868,11 +868,7 @@ class BatchEngine:
                 if self.state.status[b] == STATUS_OK and n_steps > 0:
                     self.lane_last_step[b] = self.state.steps_done[b] + n_steps
                     self.begin_lane_step(b)
-        members = ti.Vector([0] * self.lanes)
-        for lane in ti.static(range(self.lanes)):
-            b = self.group_member(g, lane)
-            # an empty lane repeats the first instance's system (its solution is dropped)
-            members[lane] = ti.select(b >= 0, b, g)
+        members = self.group_members(g)
         running = self.group_runs(g)
         while running == 1:
             for lane in range(self.lanes):
@@ -912,6 +908,17 @@ class BatchEngine:
                     if not self.newton_goes_on(iterations, converged, finite):
                         self.end_lane_solve(b)
             running = self.group_runs(g)
+
+    @ti.func
+    def group_members(self, g):
+        """The instances whose systems group g's lanes hold in lockstep (`linsolve.LaneBlocks`
+        `gather`, `scatter_solution`): a ti.Vector of `lanes`, an empty lane repeating the
+        group's first instance (its solution is dropped)."""
+        members = ti.Vector([0] * self.lanes)
+        for lane in ti.static(range(self.lanes)):
+            b = self.group_member(g, lane)
+            members[lane] = ti.select(b >= 0, b, g)
+        return members
 
     @ti.func
     def group_runs(self, g):

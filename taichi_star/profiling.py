@@ -4,7 +4,7 @@
 measures what a benchmark reports: the setup (Taichi initialisation, the engine built or reused,
 the batch loaded), the first launch (compilation, `first_launch`), timed windows of steps from
 rest (`timed_window`), the split of a Newton iteration into assembly, factorisation and solve
-(`phase_split`), and the engine's facts (its terms, node count, Jacobian blocks, the FLOPs of
+(`phase_split`, by groups in an engine with lanes), and the engine's facts (its terms, node count, Jacobian blocks, the FLOPs of
 one factorisation); `device_bandwidth` measures a GPU's memory bandwidth.
 
 All times are wall-clock seconds of the whole machine (so they include the parallel speed-up
@@ -33,27 +33,69 @@ BANDWIDTH_BYTES = 1 << 30
 """Size of the buffer `device_bandwidth` copies (bytes): far larger than any cache."""
 
 
+@ti.func
+def _begin_profile_step(engine: ti.template(), b, time_s):
+    """The terms' step start of instance b for an implicit Euler step of size dt ending at
+    time_s (s); returns the integrator's (inertia scale, rate gain) of that step."""
+    h = engine.dt[None]
+    inertia_scale, rate_gain = engine.integrator.weights(h, 1.0, 0)
+    for term in ti.static(engine.terms):
+        term.begin_step(b, time_s - h, time_s, h, 1.0, rate_gain, 0)
+    return inertia_scale, rate_gain
+
+
 @ti.kernel
 def _profile_phases(engine: ti.template(), phases: ti.i32, calls: ti.i32, time_s: float):
     """For every live instance of `engine`, `calls` times: assemble the residual and Jacobian of
     an implicit Euler step of size dt ending at time_s (s) at the current state, then factor when
-    phases >= 2, then solve when phases >= 3. Changes the terms' step histories (not the
-    positions). The instances are spread over the loop as the engine's own step spreads them
-    (`slot_instance`), so that the profile runs on as many cores as the step it splits."""
+    phases >= 2, then solve when phases >= 3, as the engine's fixed steps do: one instance at a
+    time, or in an engine with lanes by groups (`engine.BatchEngine.advance_group`: every
+    member assembles its own system, then the group's systems are gathered into the lanes and
+    factored there, then solved there and scattered back, in lockstep; each on its own
+    otherwise). Changes the terms' step histories (not the positions). The instances (groups)
+    are spread over the loop as the engine's own step spreads them (`slot_instance`,
+    `slot_group`), so that the profile runs on as many cores as the step it splits."""
     ti.loop_config(block_dim=engine.instances_per_block)
     for slot in range(engine.capacity * engine.loop_spread):
-        b = engine.slot_instance(slot)
-        if b >= 0 and engine.state.status[b] == STATUS_OK:
-            h = engine.dt[None]
-            inertia_scale, rate_gain = engine.integrator.weights(h, 1.0, 0)
-            for term in ti.static(engine.terms):
-                term.begin_step(b, time_s - h, time_s, h, 1.0, rate_gain, 0)
-            for _ in range(calls):
-                engine.assemble(b, inertia_scale, rate_gain, 1)
-                if phases >= 2:
-                    engine.system.factor(b)
-                if phases >= 3:
-                    engine.system.solve(b)
+        if ti.static(engine.lanes > 1):
+            g = engine.slot_group(slot)
+            if g >= 0:
+                inertia_scale, rate_gain = 0.0, 0.0
+                for lane in range(engine.lanes):
+                    b = engine.group_member(g, lane)
+                    if b >= 0:
+                        inertia_scale, rate_gain = _begin_profile_step(engine, b, time_s)
+                members = engine.group_members(g)
+                for _ in range(calls):
+                    for lane in range(engine.lanes):
+                        b = engine.group_member(g, lane)
+                        if b >= 0 and engine.state.status[b] == STATUS_OK:
+                            engine.assemble(b, inertia_scale, rate_gain, 1)
+                    if engine.lockstep[None] == 1:
+                        if phases >= 2:
+                            engine.lane_system.gather(g, members)
+                            engine.lane_system.factor(g)
+                        if phases >= 3:
+                            engine.lane_system.solve(g)
+                            engine.lane_system.scatter_solution(g, members)
+                    else:
+                        for lane in range(engine.lanes):
+                            b = engine.group_member(g, lane)
+                            if b >= 0 and engine.state.status[b] == STATUS_OK:
+                                if phases >= 2:
+                                    engine.system.factor(b)
+                                if phases >= 3:
+                                    engine.system.solve(b)
+        else:
+            b = engine.slot_instance(slot)
+            if b >= 0 and engine.state.status[b] == STATUS_OK:
+                inertia_scale, rate_gain = _begin_profile_step(engine, b, time_s)
+                for _ in range(calls):
+                    engine.assemble(b, inertia_scale, rate_gain, 1)
+                    if phases >= 2:
+                        engine.system.factor(b)
+                    if phases >= 3:
+                        engine.system.solve(b)
 
 
 class EngineProfile:
@@ -169,7 +211,9 @@ class EngineProfile:
 
     def phase_split(self, time_s: float, iteration_s: float, profile_seconds: float) -> Dict[str, float]:
         """µs per instance and Newton iteration of the assembly, the factorisation and the
-        solve, at the current state of every live instance (its step ending at time_s, s): from
+        solve as the engine's fixed steps run them (in an engine with lanes by groups, the
+        factorisation's share including the copy of a group's systems into its lanes), at the
+        current state of every live instance (its step ending at time_s, s): from
         launches that repeat the assembly alone, assembly + factorisation, and assembly +
         factorisation + solve (the factorisation is in place, so it always needs a fresh
         assembly), each the best of PROFILE_LAUNCHES; `iteration_s` (one Newton iteration of the

@@ -14,6 +14,7 @@ import pytest
 import taichi_star as ts
 import taichi_star.runtime as runtime_module
 from taichi_star.engine import LOCKSTEP_MINIMUM_BATCH
+from taichi_star.profiling import EngineProfile, _profile_phases as profile_phases
 from taichi_star.runtime import CPU_LANES, LANES_MINIMUM_WORK, Runtime, prepare_engine
 
 GAITS = ["A1", "A1+A2", "A1+A3", "A1+A4", "A1+A3+A5", "none"]
@@ -97,6 +98,31 @@ def test_lockstep_from_the_minimum_batch_and_only_with_newtons_jacobian(count, j
     assert (steps == 20).all() and (engine.state.status.to_numpy()[:count] == 0).all()
     # every instance of the batch advanced once per step, padding never
     assert (engine.state.steps_done.to_numpy()[count:] == saved["steps_done"][count:]).all()
+
+
+def test_the_phase_profile_of_an_engine_with_lanes_runs_its_groups_as_its_steps_do():
+    """`EngineProfile.phase_split` of an engine with lanes assembles each instance's system,
+    then factors and solves the group's systems in its lanes (`advance_group`'s lockstep):
+    the Newton updates the profile leaves in every instance's right-hand side are those of the
+    engine without lanes, bit for bit (a profile that skipped the lanes' solve or the copy
+    back would leave each instance's residual there)."""
+    # the batch and integrator of the first test, whose engines this one shares
+    params = [p.replace(damping_time=1e-3) for p in BATCH]
+    solver = ts.SolverConfig(integrator="bdf2", dt=0.01)
+    updates = {}
+    for lanes in (1, 8):
+        Runtime.current().configure_lanes(lanes)
+        try:
+            profile = EngineProfile(params, solver)
+        finally:
+            Runtime.current().configure_lanes()
+        assert profile.lanes == lanes
+        profile_phases(profile.engine, 3, 1, solver.dt)
+        updates[lanes] = profile.engine.system.rhs.to_numpy()[:len(params)]
+    assert profile.engine.lockstep[None] == 1
+    np.testing.assert_array_equal(updates[8], updates[1])
+    # not trivially equal: every instance has an update
+    assert (np.abs(updates[1]).max(axis=(1, 2)) > 0).all()
 
 
 WORK = LANES_MINIMUM_WORK
