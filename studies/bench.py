@@ -115,12 +115,11 @@ import pandas as pd
 from taichi_star import SolverConfig, StarParams, simulate
 from taichi_star.experiment import PAPER_GAITS
 from taichi_star.batch import LocalProcesses, run_batch
-from taichi_star.profiling import EngineProfile, device_bandwidth
+from taichi_star.profiling import EngineProfile, device_bandwidth, matmul_gflops
 from taichi_star.runtime import (CPU_LANES, GPU_BLOCK_DIM, GPU_INSTANCE_MINOR, Runtime,
                                  kernel_optimisation_default)
 
 from . import cli, provenance
-from .simd import matmul_gflops
 
 DESCRIPTION = ("Engine throughput: robot-steps/s against batch size and precision (gait A1+A3, "
                "N = 193, h = 1 ms), compile time apart, phase split, terms compiled out.")

@@ -67,7 +67,6 @@ instance), load_average_1min.
 
 import contextlib
 import io
-import math
 import os
 import re
 import tempfile
@@ -79,6 +78,7 @@ import pandas as pd
 import taichi as ti
 
 from taichi_star import PRESETS, EngineProfile, SolverConfig, StarParams
+from taichi_star.profiling import matmul_gflops
 from taichi_star.runtime import PARALLEL_LOOP_MINIMUM, Runtime
 
 from . import cli, provenance
@@ -565,18 +565,6 @@ def working_directory(folder: Path):
         yield
     finally:
         os.chdir(previous)
-
-
-def matmul_gflops(size: int, precision: str, rng) -> float:
-    """NumPy's size × size matrix product in precision, GFLOP/s (best of 3)."""
-    dtype = np.float64 if precision == "f64" else np.float32
-    a, b = (rng.standard_normal((size, size)).astype(dtype) for _ in range(2))
-    best = math.inf
-    for _ in range(3):
-        start = time.perf_counter()
-        np.dot(a, b)
-        best = min(best, time.perf_counter() - start)
-    return 2 * size ** 3 / best / 1e9
 
 
 def forms_of(lanes_list: list[int]):

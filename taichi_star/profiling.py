@@ -4,8 +4,9 @@
 measures what a benchmark reports: the setup (Taichi initialisation, the engine built or reused,
 the batch loaded), the first launch (compilation, `first_launch`), timed windows of steps from
 rest (`timed_window`), the split of a Newton iteration into assembly, factorisation and solve
-(`phase_split`, by groups in an engine with lanes), and the engine's facts (its terms, node count, Jacobian blocks, the FLOPs of
-one factorisation); `device_bandwidth` measures a GPU's memory bandwidth.
+(`phase_split`, by groups in an engine with lanes), and the engine's facts (its terms, node
+count, Jacobian blocks, the FLOPs of one factorisation); `device_bandwidth` measures a GPU's memory bandwidth and
+`matmul_gflops` NumPy's matrix-product rate (the CPU's attainable floating-point rate).
 
 All times are wall-clock seconds of the whole machine (so they include the parallel speed-up
 over cores).
@@ -233,6 +234,20 @@ class EngineProfile:
             cumulative.append(best * 1e6 / (self.batch_size * calls))
         return {"assembly": cumulative[0], "factor": cumulative[1] - cumulative[0],
                 "solve": cumulative[2] - cumulative[1]}
+
+
+def matmul_gflops(size: int, precision: str, rng: np.random.Generator) -> float:
+    """NumPy's size × size matrix product in precision ("f64" or "f32"), GFLOP/s (best of 3, of
+    random normal matrices from `rng`): the machine's attainable floating-point rate, the
+    reference a benchmark sets its kernels' GFLOP/s against."""
+    dtype = np.float64 if precision == "f64" else np.float32
+    a, b = (rng.standard_normal((size, size)).astype(dtype) for _ in range(2))
+    best = math.inf
+    for _ in range(3):
+        start = time.perf_counter()
+        np.dot(a, b)
+        best = min(best, time.perf_counter() - start)
+    return 2 * size ** 3 / best / 1e9
 
 
 def device_bandwidth(arch: str, precision: str) -> float:

@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 import taichi_star
-from taichi_star import SolverConfig, StarParams
+from taichi_star import SolverConfig, StarParams, profiling
 
 from studies import bench, cli, work_precision
 from studies.__main__ import main as studies_main
@@ -76,7 +76,19 @@ def test_bench_quick(tmp_path, monkeypatch):
     engine_rows = table[table["section"] != "plain"]  # the plain call has no phase split
     for column in ("robot_steps_per_s", "assembly_us", "factor_flops"):
         assert (engine_rows[column] > 0).all(), column
+    # the paper rows' reference rate, timed before each, and the factorisation's share of it
+    assert (batch["matmul_gflops"] > 0).all() and skip["matmul_gflops"].isna().all()
+    np.testing.assert_allclose(batch["factor_fraction_of_matmul"],
+                               batch["factor_gflops"] / batch["matmul_gflops"], rtol=1e-9)
     assert (tmp_path / "bench.png").stat().st_size > 1000
+
+
+def test_matmul_rate_is_the_products_flops_over_its_best_time(monkeypatch):
+    """2·n³ floating-point operations over the fastest of three products."""
+    clock = iter([0.0, 0.5, 1.0, 1.25, 2.0, 3.0])  # three products of 0.5, 0.25 and 1 s
+    monkeypatch.setattr(profiling.time, "perf_counter", lambda: next(clock))
+    rate = profiling.matmul_gflops(100, "f64", np.random.default_rng(0))
+    assert rate == pytest.approx(2 * 100 ** 3 / 0.25 / 1e9, rel=1e-12)
 
 
 @pytest.mark.parametrize("study, argv, message", [
