@@ -156,10 +156,11 @@ QUICK_SCENARIOS = "all_terms,added_mass_0"
 scenarios with the same terms, so that it compiles the stepping kernel at most once."""
 PROFILE_SECONDS = 0.5
 QUICK_PROFILE_SECONDS = 0.02
-MATMUL_SIZE = 1024
-QUICK_MATMUL_SIZE = 256
 """Target duration of one profiling launch, s: long enough to time, short next to the benchmark."""
 """Each phase is timed as the best of this many launches."""
+MATMUL_SIZE = 1024
+QUICK_MATMUL_SIZE = 256
+"""n of the n × n NumPy matrix product timed before each paper row (`matmul_gflops`)."""
 TARGETS = {"cpu": 40_000.0, "gpu": 2_000_000.0}
 """Throughput goals, robot-steps/s (2-core CPU at B >= 512, H100/H200 at B >= 8192)."""
 

@@ -5,8 +5,9 @@ measures what a benchmark reports: the setup (Taichi initialisation, the engine 
 the batch loaded), the first launch (compilation, `first_launch`), timed windows of steps from
 rest (`timed_window`), the split of a Newton iteration into assembly, factorisation and solve
 (`phase_split`, by groups in an engine with lanes), and the engine's facts (its terms, node
-count, Jacobian blocks, the FLOPs of one factorisation); `device_bandwidth` measures a GPU's memory bandwidth and
-`matmul_gflops` NumPy's matrix-product rate (the CPU's attainable floating-point rate).
+count, Jacobian blocks, the FLOPs of one factorisation); `device_bandwidth` measures a GPU's
+memory bandwidth and `matmul_gflops` NumPy's matrix-product rate (the CPU's attainable
+floating-point rate).
 
 All times are wall-clock seconds of the whole machine (so they include the parallel speed-up
 over cores).
@@ -35,14 +36,12 @@ BANDWIDTH_BYTES = 1 << 30
 
 
 @ti.func
-def _begin_profile_step(engine: ti.template(), b, time_s):
+def _begin_profile_step(engine: ti.template(), b, time_s, rate_gain):
     """The terms' step start of instance b for an implicit Euler step of size dt ending at
-    time_s (s); returns the integrator's (inertia scale, rate gain) of that step."""
+    time_s (s), `rate_gain` that step's (`integrator.weights`)."""
     h = engine.dt[None]
-    inertia_scale, rate_gain = engine.integrator.weights(h, 1.0, 0)
     for term in ti.static(engine.terms):
         term.begin_step(b, time_s - h, time_s, h, 1.0, rate_gain, 0)
-    return inertia_scale, rate_gain
 
 
 @ti.kernel
@@ -58,14 +57,14 @@ def _profile_phases(engine: ti.template(), phases: ti.i32, calls: ti.i32, time_s
     `slot_group`), so that the profile runs on as many cores as the step it splits."""
     ti.loop_config(block_dim=engine.instances_per_block)
     for slot in range(engine.capacity * engine.loop_spread):
+        inertia_scale, rate_gain = engine.integrator.weights(engine.dt[None], 1.0, 0)
         if ti.static(engine.lanes > 1):
             g = engine.slot_group(slot)
             if g >= 0:
-                inertia_scale, rate_gain = 0.0, 0.0
                 for lane in range(engine.lanes):
                     b = engine.group_member(g, lane)
                     if b >= 0:
-                        inertia_scale, rate_gain = _begin_profile_step(engine, b, time_s)
+                        _begin_profile_step(engine, b, time_s, rate_gain)
                 members = engine.group_members(g)
                 for _ in range(calls):
                     for lane in range(engine.lanes):
@@ -90,7 +89,7 @@ def _profile_phases(engine: ti.template(), phases: ti.i32, calls: ti.i32, time_s
         else:
             b = engine.slot_instance(slot)
             if b >= 0 and engine.state.status[b] == STATUS_OK:
-                inertia_scale, rate_gain = _begin_profile_step(engine, b, time_s)
+                _begin_profile_step(engine, b, time_s, rate_gain)
                 for _ in range(calls):
                     engine.assemble(b, inertia_scale, rate_gain, 1)
                     if phases >= 2:
