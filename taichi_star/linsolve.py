@@ -34,12 +34,15 @@ class EliminationPlan:
     For pivot p (node order[p]): neighbours are the later nodes coupled to it after fill; their
     lower blocks A[i, k] and upper blocks A[k, i] live at `lower_slot`/`upper_slot` in
     [neighbour_start[p], neighbour_start[p + 1]); the Schur updates A[i, j] -= L[i, k] U[k, j]
-    for all neighbour pairs, row-major, at `update_slot` from update_start[p].
+    for all neighbour pairs, row-major, at `update_slot` from update_start[p]. The slots of the
+    pattern itself (the diagonal and the given pairs) come first, `n_structural` of them; the
+    fill-in's follow, which only the factorisation writes.
     """
 
     n_nodes: int
     order: np.ndarray
     slot: dict
+    n_structural: int
     pivot_slot: np.ndarray
     neighbour_start: np.ndarray
     neighbour_node: np.ndarray
@@ -104,6 +107,7 @@ def plan_elimination(n_nodes: int, pairs, order=None) -> EliminationPlan:
     for i, j in pairs:
         slot_of(i, j)
         slot_of(j, i)
+    n_structural = len(slot)
 
     pivot_slot, neighbour_start, neighbour_node = [], [0], []
     lower_slot, upper_slot, update_start, update_slot = [], [], [0], []
@@ -121,7 +125,8 @@ def plan_elimination(n_nodes: int, pairs, order=None) -> EliminationPlan:
     as_int = lambda values: np.array(values, dtype=np.int32)  # noqa: E731
     return EliminationPlan(
         n_nodes=n_nodes, order=np.asarray(order, dtype=np.int32), slot=slot,
-        pivot_slot=as_int(pivot_slot), neighbour_start=as_int(neighbour_start),
+        n_structural=n_structural, pivot_slot=as_int(pivot_slot),
+        neighbour_start=as_int(neighbour_start),
         neighbour_node=as_int(neighbour_node), lower_slot=as_int(lower_slot),
         upper_slot=as_int(upper_slot), update_start=as_int(update_start),
         update_slot=as_int(update_slot))
@@ -229,6 +234,7 @@ class BlockSystem(BlockElimination):
         self.tables = self
         self.n_nodes = plan.n_nodes
         self.n_slots = plan.n_slots
+        self.n_structural = plan.n_structural
         self.order = arena.index(_non_empty(plan.order))
         self.pivot_slot = arena.index(_non_empty(plan.pivot_slot))
         self.neighbour_start = arena.index(_non_empty(plan.neighbour_start))
@@ -322,13 +328,18 @@ class LaneBlocks(BlockElimination):
     @ti.func
     def gather(self, g, members):
         """Copy the systems of group g's instances (`members`, a ti.Vector of `lanes` instance
-        numbers) into its lanes."""
+        numbers) into its lanes. The fill-in's slots, which no assembly writes (an instance's
+        hold the zeros its assembly cleared), are zeroed without reading the instances: the
+        copy reads eight instances' systems and is bound by the memory traffic."""
         system = self.system
-        for slot in range(system.n_slots):
+        for slot in range(system.n_structural):
             for k in ti.static(range(4)):
                 self.blocks[g, slot, k] = ti.Vector(
                     [system.blocks[members[lane], slot][k // 2, k % 2]
                      for lane in ti.static(range(self.lanes))])
+        for slot in range(system.n_structural, system.n_slots):
+            for k in ti.static(range(4)):
+                self.blocks[g, slot, k] = ti.Vector([0.0] * self.lanes)
         for node in range(system.n_nodes):
             for k in ti.static(range(2)):
                 self.rhs[g, node, k] = ti.Vector(

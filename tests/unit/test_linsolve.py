@@ -60,8 +60,22 @@ def test_minimum_degree_eliminates_chains_without_fill():
     n = 12
     pairs = [(i, i + 1) for i in range(n - 1)]
     plan = plan_elimination(n, pairs)
-    assert plan.n_slots == n + 2 * len(pairs)
+    assert plan.n_slots == plan.n_structural == n + 2 * len(pairs)
     assert sorted(minimum_degree_order(n, pairs)) == list(range(n))
+
+
+def test_the_patterns_slots_come_before_the_fill_ins():
+    """The star's pattern (its diagonal and coupled pairs, both ways) holds exactly the slots
+    below `n_structural`; every later slot is fill-in, written only by the factorisation (the
+    lanes' copy zeroes those without reading them)."""
+    topology = build_topology(StarParams())
+    pairs = coupled_node_pairs(topology)
+    plan = plan_elimination(topology.n_nodes, pairs)
+    pattern = ({(n, n) for n in range(topology.n_nodes)}
+               | {(int(i), int(j)) for i, j in pairs} | {(int(j), int(i)) for i, j in pairs})
+    structural = {pair for pair, slot in plan.slot.items() if slot < plan.n_structural}
+    assert structural == pattern
+    assert plan.n_structural == len(pattern) < plan.n_slots  # the star's elimination fills in
 
 
 def test_plan_is_cheaper_than_a_bordered_band():
