@@ -19,6 +19,12 @@ DIRECTIONS = ("alpha", "actuator_gains[1]", "drag_perpendicular")
 TIGHT = dict(newton_tol=1e-12)
 """Newton to 1e-12 m, so that the finite differences' noise (tolerance / step) stays below 1e-7
 of the derivatives."""
+DAMPING_TIME = 0.01
+"""τ (s) of the damped batch."""
+ADAPTIVE = dict(integrator="bdf2", adaptive=True, error_tol=1e-3, dt_max=1e-3, **TIGHT)
+"""Adaptive BDF2 steps with dt_max = dt and a loose error_tol: every run, the replicas' instance
+and the finite differences' alike, takes the same 100 steps of 1 ms over DURATION_S, so the
+frozen step sequence is the one the differences see."""
 
 
 def assert_matches_differences(table, tolerance=1e-5):
@@ -70,15 +76,17 @@ def test_c_parallel_takes_its_own_step_and_then_matches_its_differences(taichi_c
 
 
 def test_the_damping_time_takes_its_own_step_and_then_matches_its_differences(taichi_cpu):
-    """τ barely moves the robot (an elasticity of ~1e-4 here), so at the default ε of 1e-4 of
-    its value its replicas are near the rounding of the positions: over these 0.3 s, with
-    τ = 0.94 ms, A1+A2's derivative was 1.2e-5 off (differences spread 6e-7, Taylor ratio 4.0;
-    measured), beyond the 1e-5 held to. At its own ε, 1e-3 of the value, 3.5e-6 and 9.5e-8
-    (ratios 3.9 and 4.2); over three cycles the default was 2.6e-4 off (docs: numerics)."""
+    """τ barely moves the robot, so at the default ε of 1e-4 of its value its replicas are near
+    the rounding of the positions: on the damped batch and adaptive BDF2 steps of the test
+    below (whose engines this one shares), A1+A2's derivative was 1.7e-5 off (Taylor ratio
+    4.0; measured), beyond the 1e-5 held to. At its own ε, 1e-3 of the value, 2.6e-7 and
+    1.8e-6 (ratios 3.8 and 4.0); with implicit Euler over 0.3 s at τ = 0.94 ms the default
+    was 1.2e-5 off, over three cycles 2.6e-4 (docs: numerics)."""
     (direction,) = parse_directions(["damping_time"])
-    damped = [p.replace(damping_time=0.00094) for p in BATCH]
-    assert direction.step(damped[0]) == pytest.approx(1e-3 * 0.00094, rel=1e-15)
-    assert_matches_differences(check_sensitivities(damped, 0.3, SolverConfig(**TIGHT),
+    damped = [p.replace(damping_time=DAMPING_TIME) for p in BATCH]
+    assert direction.step(damped[0]) == pytest.approx(1e-3 * DAMPING_TIME, rel=1e-15)
+    # 1e-5: the target, 5x the larger measured error
+    assert_matches_differences(check_sensitivities(damped, DURATION_S, SolverConfig(**ADAPTIVE),
                                                    ("damping_time",)))
 
 
@@ -182,14 +190,10 @@ def test_a_per_actuator_field_gives_one_column_per_actuator(euler_run):
 
 
 def test_bdf2_with_damping_chord_and_adaptive_steps(arch):
-    batch = [dataclasses.replace(p, damping_time=0.01) for p in BATCH]
-    # dt_max = dt and a loose error_tol: every run, the replicas' instance and the finite
-    # differences' alike, takes the same 100 steps of 1 ms, so the frozen step sequence is the
-    # one the differences see
-    adaptive = dict(integrator="bdf2", adaptive=True, error_tol=1e-3, dt_max=1e-3, **TIGHT)
-    table = check_sensitivities(batch, DURATION_S, SolverConfig(jacobian="chord", **adaptive),
+    batch = [dataclasses.replace(p, damping_time=DAMPING_TIME) for p in BATCH]
+    table = check_sensitivities(batch, DURATION_S, SolverConfig(jacobian="chord", **ADAPTIVE),
                                 ("alpha", "drag_perpendicular"), arch=arch)
-    steps = simulate(batch, DURATION_S, SolverConfig(**adaptive), arch=arch).summary["steps"]
+    steps = simulate(batch, DURATION_S, SolverConfig(**ADAPTIVE), arch=arch).summary["steps"]
     assert (steps == 100).all()
     # as for implicit Euler: 1e-5 the target, measured ≤ 4e-6
     assert_matches_differences(table)
