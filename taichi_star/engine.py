@@ -137,8 +137,9 @@ class BatchEngine:
         self.step_limit = arena.field(ti.i32)
         """Most steps an adaptive instance takes (MAX_STEPS_PER_INSTANCE: the int32 counters
         never overflow); one that reaches it stops with status step_limit."""
-        self.assembly = Assembly(topology, capacity, arena, self.plan.slot, integrator, self.state,
-                                 self.system, self.primal_count if sensitive else None)
+        self.assembly = Assembly(topology, capacity, arena, self.plan.pattern_slot, integrator,
+                                 self.state, self.system,
+                                 self.primal_count if sensitive else None)
         """What the terms see of this engine (they never hold the engine itself)."""
         term_classes = [cls for cls, _ in model.terms_used]
         self.terms = []

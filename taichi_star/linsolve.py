@@ -56,6 +56,13 @@ class EliminationPlan:
         return len(self.slot)
 
     @property
+    def pattern_slot(self) -> dict:
+        """`slot` without the fill-in: (i, j) -> slot for the diagonal and the given pairs, the
+        blocks an assembly may write (a pair it did not declare then fails as a KeyError, even
+        where the elimination filled it in)."""
+        return {pair: slot for pair, slot in self.slot.items() if slot < self.n_structural}
+
+    @property
     def factor_flops(self) -> int:
         """Floating point operations of one numeric factorisation (2×2 block products = 8 FMA)."""
         n_neighbours = np.diff(self.neighbour_start)

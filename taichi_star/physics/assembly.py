@@ -38,7 +38,8 @@ class Assembly:
 
     `topology`: the shared `geometry.Topology`; `capacity`: instances (the batch axis of every
     field); `arena`: the `fields.FieldArena` the fields come from; `slot`: dict (i, j) -> the
-    Jacobian block slot of nodes i, j (`linsolve.EliminationPlan.slot`); `integrator`: an
+    Jacobian block slot of nodes i, j that the terms couple (the `pattern_slot` of a
+    `linsolve.EliminationPlan`: no fill-in, which only the factorisation writes); `integrator`: an
     `integrators` object; `state`: the fields `positions`, `previous`, `velocity_offset`
     ((capacity, N) 2-vectors), `fire_time`, `previous_fire_time` ((capacity, 8)) of a
     `state.BatchState`; `system`: the fields `rhs` ((capacity, N) 2-vectors) and `blocks`

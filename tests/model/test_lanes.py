@@ -122,6 +122,9 @@ def test_the_phase_profile_of_an_engine_with_lanes_runs_its_groups_as_its_steps_
         updates[lanes] = profile.engine.system.rhs.to_numpy()[:len(params)]
     assert profile.engine.lockstep[None] == 1
     np.testing.assert_array_equal(updates[8], updates[1])
+    # the lanes' copy reads only the pattern's slots: every slot a term may write is one of them
+    plan = profile.engine.plan
+    assert set(profile.engine.assembly.slots.values()) == set(range(plan.n_structural))
     # not trivially equal: every instance has an update
     assert (np.abs(updates[1]).max(axis=(1, 2)) > 0).all()
 

@@ -74,7 +74,8 @@ def test_the_patterns_slots_come_before_the_fill_ins():
     pattern = ({(n, n) for n in range(topology.n_nodes)}
                | {(int(i), int(j)) for i, j in pairs} | {(int(j), int(i)) for i, j in pairs})
     structural = {pair for pair, slot in plan.slot.items() if slot < plan.n_structural}
-    assert structural == pattern
+    assert structural == pattern == set(plan.pattern_slot)
+    assert all(plan.pattern_slot[pair] == plan.slot[pair] for pair in pattern)
     assert plan.n_structural == len(pattern) < plan.n_slots  # the star's elimination fills in
 
 
