@@ -157,7 +157,6 @@ scenarios with the same terms, so that it compiles the stepping kernel at most o
 PROFILE_SECONDS = 0.5
 QUICK_PROFILE_SECONDS = 0.02
 """Target duration of one profiling launch, s: long enough to time, short next to the benchmark."""
-"""Each phase is timed as the best of this many launches."""
 MATMUL_SIZE = 1024
 QUICK_MATMUL_SIZE = 256
 """n of the n × n NumPy matrix product timed before each paper row (`matmul_gflops`)."""

@@ -177,8 +177,8 @@ class Term:
 
     @ti.func
     def copy_carried(self, b, save):
-        """Copy instance b's carried state into the term's backup (`save` = 1) or back from it (0), with
-        the engine's backup of the positions: only with `carries_state`."""
+        """Copy instance b's carried state into the term's backup (`save` = 1) or back from it
+        (0), with the engine's backup of the positions: only with `carries_state`."""
         pass
 
     @ti.func
