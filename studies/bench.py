@@ -17,11 +17,14 @@ are conservative against a whole-cycle average (`newton_iterations_mean` says ho
 window was).
 
 Phase split: after the timed windows, the engine's profiling kernel repeats, for every instance
-at its current state, the assembly alone, assembly + factorisation, and assembly +
-factorisation + solve (the factorisation is in place, so it always needs a fresh assembly); the
-differences give each phase's time per Newton iteration, times the window's mean iterations per
-step gives µs per instance-step, and bookkeeping (predictor, convergence test, status, step
-loop) is the rest of the measured step time. All times are wall-clock of the whole machine
+at its current state, the residual's assembly alone, the assembly (residual and Jacobian),
+assembly + factorisation, and assembly + factorisation + solve (the factorisation is in place,
+so it always needs a fresh assembly); the differences give each phase's time per Newton
+iteration, times the window's mean iterations per step gives µs per instance-step, and
+bookkeeping (predictor, convergence test, status, step loop) is the rest of the measured step
+time. `residual_us` is the part of `assembly_us` that the residual alone costs (what a chord
+iteration that keeps its factorisation assembles); the rest is the Jacobian's: its derivatives
+and the clearing and scatter of its blocks. All times are wall-clock of the whole machine
 divided by the instances processed (so they include the parallel speed-up over cores); the
 profile repeats work on a state already in cache, so under noise or when bookkeeping is small
 `bookkeeping_us` can come out slightly negative.
@@ -86,9 +89,9 @@ cpu_model, cores, gpu, gpu_driver, arch, preset, layout, block_dim, lanes (the C
 lanes per group of instances, `--lanes`), section, scenario, terms, batch_size, precision, n_nodes, dt_s,
 gait, warmup_steps, steps, repeats, commit, timestamp, import_s, setup_s, compile_s,
 time_to_first_step_s, robot_steps_per_s, real_time_factor (= robot_steps_per_s × dt: simulated
-robot-seconds per wall second), step_us, newton_iterations_mean, assembly_us, factor_us,
-solve_us, bookkeeping_us (µs per instance-step), factor_flops (per factorisation),
-factor_gflops (achieved by the factorisation; in an engine with lanes its phase includes the
+robot-seconds per wall second), step_us, newton_iterations_mean, assembly_us, residual_us
+(of assembly_us), factor_us, solve_us, bookkeeping_us (µs per instance-step), factor_flops
+(per factorisation), factor_gflops (achieved by the factorisation; in an engine with lanes its phase includes the
 copy of the group's systems into the lanes), matmul_gflops (NumPy's matrix product of
 MATMUL_SIZE, quick: QUICK_MATMUL_SIZE, in the row's precision, best of three, timed just before
 the row's engine: the machine's attainable rate in the same run; CPU paper rows only),
@@ -174,6 +177,9 @@ SCENARIOS = {
 """Scenario name -> StarParams changes from the benchmark robot (gait A1+A3, paper values)."""
 
 LAYOUTS = ("instance_minor", "instance_major")
+PHASES = ("residual", "assembly", "factor", "solve")
+"""The parts of a Newton iteration `EngineProfile.phase_split` times (the residual is part of
+the assembly)."""
 PRESETS = ("paper", "accurate")
 
 COLUMNS = ["machine", "cpu_model", "cores", "gpu", "gpu_driver", "arch", "preset", "layout",
@@ -181,7 +187,8 @@ COLUMNS = ["machine", "cpu_model", "cores", "gpu", "gpu_driver", "arch", "preset
            "batch_size", "precision", "jacobian", "workers", "n_nodes", "dt_s", "gait",
            "warmup_steps", "steps", "repeats", "commit", "timestamp", "import_s", "setup_s",
            "compile_s", "time_to_first_step_s", "robot_steps_per_s", "real_time_factor",
-           "step_us", "newton_iterations_mean", "assembly_us", "factor_us", "solve_us",
+           "step_us", "newton_iterations_mean", "assembly_us", "residual_us", "factor_us",
+           "solve_us",
            "bookkeeping_us", "factor_flops", "factor_gflops", "matmul_gflops",
            "factor_fraction_of_matmul", "bytes_per_step",
            "bandwidth_gb_s", "bandwidth_fraction", "final_state"]
@@ -230,7 +237,7 @@ def measure(params, arch: str, precision: str, steps: int, repeats: int,
     step_us = 1e6 / robot_steps
     phase = profile.phase_split((WARMUP_STEPS + steps) * DT, timed / (steps * iterations),
                                 profile_seconds)
-    assembly, factor, solve = (iterations * phase[name] for name in ("assembly", "factor", "solve"))
+    residual, assembly, factor, solve = (iterations * phase[name] for name in PHASES)
     flops = profile.factor_flops
     # the byte count assumes a fresh Jacobian and LU per iteration: Newton's rows only
     bytes_per_step = (iterations * profile.matrix_bytes_per_iteration()
@@ -242,7 +249,7 @@ def measure(params, arch: str, precision: str, steps: int, repeats: int,
             "compile_s": compile_s,
             "robot_steps_per_s": robot_steps, "real_time_factor": robot_steps * DT,
             "step_us": step_us, "newton_iterations_mean": iterations, "assembly_us": assembly,
-            "factor_us": factor, "solve_us": solve,
+            "residual_us": residual, "factor_us": factor, "solve_us": solve,
             "bookkeeping_us": step_us - assembly - factor - solve, "factor_flops": flops,
             "factor_gflops": flops / (phase["factor"] * 1e3) if phase["factor"] > 0 else math.nan}
 
@@ -287,14 +294,15 @@ def measure_accurate(batch: int, arch: str, precision: str, duration: float,
     step_us = 1e6 * timed / steps
     iterations = float(summary["newton_iterations_mean"].mean())
     phase = accurate_phase_split(params, arch, precision, profile_seconds)
-    assembly, factor, solve = (iterations * phase[name] for name in ("assembly", "factor", "solve"))
+    residual, assembly, factor, solve = (iterations * phase[name] for name in PHASES)
     return {"gait": GAIT, "preset": "accurate", "jacobian": solver.jacobian, "workers": 1,
             "lanes": Runtime.current().engine_lanes(batch, solver),
             "n_nodes": result.topology.n_nodes,
             "compile_s": max(first - timed, 0.0), "robot_steps_per_s": steps / timed,
             "real_time_factor": batch * duration / timed, "step_us": step_us,
-            "newton_iterations_mean": iterations, "assembly_us": assembly, "factor_us": factor,
-            "solve_us": solve, "bookkeeping_us": step_us - assembly - factor - solve,
+            "newton_iterations_mean": iterations, "assembly_us": assembly,
+            "residual_us": residual, "factor_us": factor, "solve_us": solve,
+            "bookkeeping_us": step_us - assembly - factor - solve,
             "final_state": state_digest(summary[["displacement_x_mm", "displacement_y_mm"]]
                                         .to_numpy())}
 

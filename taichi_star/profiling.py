@@ -46,8 +46,9 @@ def _begin_profile_step(engine: ti.template(), b, time_s, rate_gain):
 
 @ti.kernel
 def _profile_phases(engine: ti.template(), phases: ti.i32, calls: ti.i32, time_s: float):
-    """For every live instance of `engine`, `calls` times: assemble the residual and Jacobian of
-    an implicit Euler step of size dt ending at time_s (s) at the current state, then factor when
+    """For every live instance of `engine`, `calls` times: assemble the residual of an implicit
+    Euler step of size dt ending at time_s (s) at the current state, and its Jacobian when
+    phases >= 1 (phases = 0: the residual alone, as a chord iteration does), then factor when
     phases >= 2, then solve when phases >= 3, as the engine's fixed steps do: one instance at a
     time, or in an engine with lanes by groups (`engine.BatchEngine.advance_group`: every
     member assembles its own system, then the group's systems are gathered into the lanes and
@@ -56,6 +57,7 @@ def _profile_phases(engine: ti.template(), phases: ti.i32, calls: ti.i32, time_s
     are spread over the loop as the engine's own step spreads them (`slot_instance`,
     `slot_group`), so that the profile runs on as many cores as the step it splits."""
     ti.loop_config(block_dim=engine.instances_per_block)
+    jacobian = 1 if phases >= 1 else 0
     for slot in range(engine.capacity * engine.loop_spread):
         inertia_scale, rate_gain = engine.integrator.weights(engine.dt[None], 1.0, 0)
         if ti.static(engine.lanes > 1):
@@ -70,7 +72,7 @@ def _profile_phases(engine: ti.template(), phases: ti.i32, calls: ti.i32, time_s
                     for lane in range(engine.lanes):
                         b = engine.group_member(g, lane)
                         if b >= 0 and engine.state.status[b] == STATUS_OK:
-                            engine.assemble(b, inertia_scale, rate_gain, 1)
+                            engine.assemble(b, inertia_scale, rate_gain, jacobian)
                     if engine.lockstep[None] == 1:
                         if phases >= 2:
                             engine.lane_system.gather(g, members)
@@ -91,7 +93,7 @@ def _profile_phases(engine: ti.template(), phases: ti.i32, calls: ti.i32, time_s
             if b >= 0 and engine.state.status[b] == STATUS_OK:
                 _begin_profile_step(engine, b, time_s, rate_gain)
                 for _ in range(calls):
-                    engine.assemble(b, inertia_scale, rate_gain, 1)
+                    engine.assemble(b, inertia_scale, rate_gain, jacobian)
                     if phases >= 2:
                         engine.system.factor(b)
                     if phases >= 3:
@@ -212,18 +214,20 @@ class EngineProfile:
     def phase_split(self, time_s: float, iteration_s: float, profile_seconds: float) -> Dict[str, float]:
         """µs per instance and Newton iteration of the assembly, the factorisation and the
         solve as the engine's fixed steps run them (in an engine with lanes by groups, the
-        factorisation's share including the copy of a group's systems into its lanes), at the
-        current state of every live instance (its step ending at time_s, s): from
-        launches that repeat the assembly alone, assembly + factorisation, and assembly +
-        factorisation + solve (the factorisation is in place, so it always needs a fresh
-        assembly), each the best of PROFILE_LAUNCHES; `iteration_s` (one Newton iteration of the
-        batch, s) sizes the repetitions to about `profile_seconds` per launch. Changes the
-        terms' step histories, not the positions."""
+        factorisation's share including the copy of a group's systems into its lanes), and of
+        the residual's assembly alone (`residual`: the part of `assembly` that does not come
+        from the Jacobian's derivatives and blocks), at the current state of every live
+        instance (its step ending at time_s, s): from launches that repeat the residual's
+        assembly, the assembly, assembly + factorisation, and assembly + factorisation + solve
+        (the factorisation is in place, so it always needs a fresh assembly), each the best of
+        PROFILE_LAUNCHES; `iteration_s` (one Newton iteration of the batch, s) sizes the
+        repetitions to about `profile_seconds` per launch. Changes the terms' step histories,
+        not the positions."""
         calls = int(min(max(round(profile_seconds / iteration_s), 1), MAX_PROFILE_CALLS))
         _profile_phases(self.engine, 3, 1, time_s)  # compile outside the timings
         ti.sync()
         cumulative = []
-        for phases in (1, 2, 3):
+        for phases in (0, 1, 2, 3):
             best = math.inf
             for _ in range(PROFILE_LAUNCHES):
                 start = time.perf_counter()
@@ -231,8 +235,8 @@ class EngineProfile:
                 ti.sync()
                 best = min(best, time.perf_counter() - start)
             cumulative.append(best * 1e6 / (self.batch_size * calls))
-        return {"assembly": cumulative[0], "factor": cumulative[1] - cumulative[0],
-                "solve": cumulative[2] - cumulative[1]}
+        return {"residual": cumulative[0], "assembly": cumulative[1],
+                "factor": cumulative[2] - cumulative[1], "solve": cumulative[3] - cumulative[2]}
 
 
 def matmul_gflops(size: int, precision: str, rng: np.random.Generator) -> float:

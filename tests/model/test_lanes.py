@@ -14,7 +14,7 @@ import pytest
 import taichi_star as ts
 import taichi_star.runtime as runtime_module
 from taichi_star.engine import LOCKSTEP_MINIMUM_BATCH
-from taichi_star.profiling import EngineProfile
+from taichi_star.profiling import EngineProfile, _profile_phases
 from taichi_star.runtime import CPU_LANES, LANES_MINIMUM_WORK, Runtime, prepare_engine
 
 GAITS = ["A1", "A1+A2", "A1+A3", "A1+A4", "A1+A3+A5", "none"]
@@ -127,6 +127,35 @@ def test_the_phase_profile_of_an_engine_with_lanes_runs_its_groups_as_its_steps_
     assert set(profile.engine.assembly.slots.values()) == set(range(plan.n_structural))
     # not trivially equal: every instance has an update
     assert (np.abs(updates[1]).max(axis=(1, 2)) > 0).all()
+
+
+@pytest.mark.parametrize("lanes", [1, 8])
+def test_the_residual_phase_assembles_the_residual_alone(lanes):
+    """The profile's residual phase (`phase_split`'s "residual") assembles what an iteration
+    that keeps its factorisation does: the residual, bit for bit that of the full assembly,
+    and no Jacobian (the blocks keep what was there, a marker); the full assembly then
+    overwrites them."""
+    params = [p.replace(damping_time=1e-3) for p in BATCH]  # the engines of the tests above
+    solver = ts.SolverConfig(integrator="bdf2", dt=0.01)
+    Runtime.current().configure_lanes(lanes)
+    try:
+        engine = EngineProfile(params, solver).engine
+    finally:
+        Runtime.current().configure_lanes()
+    system = engine.system
+
+    def launch(phases):
+        _profile_phases(engine, phases, 1, solver.dt)
+        return system.rhs.to_numpy()[:len(params)], system.blocks.to_numpy()[:len(params)]
+
+    marker = np.full(system.blocks.shape + (2, 2), 7.0)
+    system.blocks.from_numpy(marker)
+    residual, blocks = launch(0)
+    np.testing.assert_array_equal(blocks, marker[:len(params)])
+    assembled_residual, assembled = launch(1)
+    np.testing.assert_array_equal(residual, assembled_residual)
+    assert (np.abs(residual).max(axis=(1, 2)) > 0).all()  # every instance has a residual
+    assert (assembled != 7.0).any(axis=(1, 2, 3)).all()  # and a Jacobian, once assembled
 
 
 WORK = LANES_MINIMUM_WORK

@@ -74,7 +74,7 @@ def test_bench_quick(tmp_path, monkeypatch):
     assert plain["final_state"].iloc[0] == bench.state_digest(np.column_stack(
         [default.summary[output].to_numpy() for output in bench.DISPLACEMENTS]))
     engine_rows = table[table["section"] != "plain"]  # the plain call has no phase split
-    for column in ("robot_steps_per_s", "assembly_us", "factor_flops"):
+    for column in ("robot_steps_per_s", "assembly_us", "residual_us", "factor_flops"):
         assert (engine_rows[column] > 0).all(), column
     # the paper rows' reference rate, timed before each, and the factorisation's share of it
     assert (batch["matmul_gflops"] > 0).all() and skip["matmul_gflops"].isna().all()
