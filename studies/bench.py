@@ -20,18 +20,20 @@ Phase split: after the timed windows, the engine's profiling kernel repeats, for
 at its current state, the residual's assembly alone, the assembly (residual and Jacobian),
 assembly + factorisation, and assembly + factorisation + solve (the factorisation is in place,
 so it always needs a fresh assembly); the differences give each phase's time per Newton
-iteration, times the window's mean iterations per step gives µs per instance-step, and
-bookkeeping (predictor, convergence test, status, step loop) is the rest of the measured step
-time. `residual_us` is the part of `assembly_us` that the residual alone costs (what a chord
-iteration that keeps its factorisation assembles); the rest is the Jacobian's: its derivatives
-and the clearing and scatter of its blocks. All times are wall-clock of the whole machine
-divided by the instances processed (so they include the parallel speed-up over cores); the
-profile repeats work on a state already in cache, so under noise or when bookkeeping is small
-`bookkeeping_us` can come out slightly negative.
+iteration, and the window's mean iterations and factorisations per step
+(`newton_iterations_mean`, `factorisations_mean`; `profiling.step_phases`) µs per
+instance-step; bookkeeping (predictor, convergence test, status, step loop) is the rest of the
+measured step time. `residual_us` is the part of `assembly_us` that the residual alone costs
+(what a chord iteration that keeps its factorisation assembles); the rest is the Jacobian's:
+its derivatives and the clearing and scatter of its blocks. All times are wall-clock of the
+whole machine divided by the instances processed (so they include the parallel speed-up over
+cores); the profile repeats work on a state already in cache, so under noise or when
+bookkeeping is small `bookkeeping_us` can come out slightly negative.
 
 The B sweep runs for each Newton Jacobian mode (`jacobian`: "newton" refactors every
-iteration, "chord" reuses the step's first LU while it contracts); the phase split assumes one
-factorisation per iteration, so only its "newton" rows are meaningful (and plotted). Section
+iteration, "chord" reuses the step's first LU while it contracts, so that its iterations
+assemble the Jacobian and factor only `factorisations_mean` times a step); the plot shows the
+"newton" rows' split. Section
 "processes": the end-to-end throughput of `run_batch` on N local worker processes (one chunk
 per worker) at one batch size, f64 (worker processes are how a machine with few cores is used:
 Taichi's own CPU threads gained only ~1.25× on two cores).
@@ -45,8 +47,9 @@ Preset "accurate" (`--presets`): the accurate model and solver (adaptive BDF2, N
 same gait, `simulate` end to end for `--accurate-duration` simulated seconds from rest (default
 one period) after one untimed call that compiles; `real_time_factor` is then simulated
 robot-seconds per wall second and `robot_steps_per_s` counts the adaptive steps taken. Its phase
-split profiles the same model on fixed steps (a Newton iteration costs the same; the chord
-iteration's fewer factorisations make its `factor_us` an upper bound).
+split profiles the same model on fixed steps (a Newton iteration costs the same), counted by
+the adaptive run's own iterations and factorisations per accepted step, its rejected steps'
+included.
 
 GPU alternatives (`--arch gpu`): the B sweep is repeated for every threads-per-block count
 (`--gpu-block-dims`) and layout of the per-instance fields (`--layouts`: instance_minor, the
@@ -89,9 +92,9 @@ cpu_model, cores, gpu, gpu_driver, arch, preset, layout, block_dim, lanes (the C
 lanes per group of instances, `--lanes`), section, scenario, terms, batch_size, precision, n_nodes, dt_s,
 gait, warmup_steps, steps, repeats, commit, timestamp, import_s, setup_s, compile_s,
 time_to_first_step_s, robot_steps_per_s, real_time_factor (= robot_steps_per_s × dt: simulated
-robot-seconds per wall second), step_us, newton_iterations_mean, assembly_us, residual_us
-(of assembly_us), factor_us, solve_us, bookkeeping_us (µs per instance-step), factor_flops
-(per factorisation), factor_gflops (achieved by the factorisation; in an engine with lanes its phase includes the
+robot-seconds per wall second), step_us, newton_iterations_mean, factorisations_mean (per
+step), assembly_us, residual_us (of assembly_us), factor_us, solve_us, bookkeeping_us (µs per
+instance-step), factor_flops (per factorisation), factor_gflops (achieved by the factorisation; in an engine with lanes its phase includes the
 copy of the group's systems into the lanes), matmul_gflops (NumPy's matrix product of
 MATMUL_SIZE, quick: QUICK_MATMUL_SIZE, in the row's precision, best of three, timed just before
 the row's engine: the machine's attainable rate in the same run; CPU paper rows only),
@@ -118,7 +121,7 @@ import pandas as pd
 from taichi_star import SolverConfig, StarParams, simulate
 from taichi_star.experiment import PAPER_GAITS
 from taichi_star.batch import LocalProcesses, run_batch
-from taichi_star.profiling import EngineProfile, device_bandwidth, matmul_gflops
+from taichi_star.profiling import EngineProfile, device_bandwidth, matmul_gflops, step_phases
 from taichi_star.runtime import (CPU_LANES, GPU_BLOCK_DIM, GPU_INSTANCE_MINOR, Runtime,
                                  kernel_optimisation_default)
 
@@ -187,8 +190,8 @@ COLUMNS = ["machine", "cpu_model", "cores", "gpu", "gpu_driver", "arch", "preset
            "batch_size", "precision", "jacobian", "workers", "n_nodes", "dt_s", "gait",
            "warmup_steps", "steps", "repeats", "commit", "timestamp", "import_s", "setup_s",
            "compile_s", "time_to_first_step_s", "robot_steps_per_s", "real_time_factor",
-           "step_us", "newton_iterations_mean", "assembly_us", "residual_us", "factor_us",
-           "solve_us",
+           "step_us", "newton_iterations_mean", "factorisations_mean", "assembly_us",
+           "residual_us", "factor_us", "solve_us",
            "bookkeeping_us", "factor_flops", "factor_gflops", "matmul_gflops",
            "factor_fraction_of_matmul", "bytes_per_step",
            "bandwidth_gb_s", "bandwidth_fraction", "final_state"]
@@ -230,14 +233,15 @@ def measure(params, arch: str, precision: str, steps: int, repeats: int,
     timed = math.inf
     for _ in range(repeats):
         # the iterations are the same every repeat: the simulation is deterministic
-        seconds, iterations = profile.timed_window(WARMUP_STEPS, steps)
+        seconds, iterations, factorisations = profile.timed_window(WARMUP_STEPS, steps)
         timed = min(timed, seconds)
     final_state = state_digest(profile.positions())
     robot_steps = profile.batch_size * steps / timed
     step_us = 1e6 / robot_steps
     phase = profile.phase_split((WARMUP_STEPS + steps) * DT, timed / (steps * iterations),
                                 profile_seconds)
-    residual, assembly, factor, solve = (iterations * phase[name] for name in PHASES)
+    per_step = step_phases(phase, iterations, factorisations)
+    residual, assembly, factor, solve = (per_step[name] for name in PHASES)
     flops = profile.factor_flops
     # the byte count assumes a fresh Jacobian and LU per iteration: Newton's rows only
     bytes_per_step = (iterations * profile.matrix_bytes_per_iteration()
@@ -248,23 +252,24 @@ def measure(params, arch: str, precision: str, steps: int, repeats: int,
             "n_nodes": profile.n_nodes, "setup_s": profile.setup_s,
             "compile_s": compile_s,
             "robot_steps_per_s": robot_steps, "real_time_factor": robot_steps * DT,
-            "step_us": step_us, "newton_iterations_mean": iterations, "assembly_us": assembly,
+            "step_us": step_us, "newton_iterations_mean": iterations,
+            "factorisations_mean": factorisations, "assembly_us": assembly,
             "residual_us": residual, "factor_us": factor, "solve_us": solve,
             "bookkeeping_us": step_us - assembly - factor - solve, "factor_flops": flops,
             "factor_gflops": flops / (phase["factor"] * 1e3) if phase["factor"] > 0 else math.nan}
 
 
 def accurate_phase_split(params, arch: str, precision: str, profile_seconds: float) -> dict:
-    """µs per instance and Newton iteration of the assembly, factorisation and solve of the
-    accurate model (its mesh and terms) on fixed BDF2 steps of DT with a fresh Jacobian every
-    iteration, WARMUP_STEPS into the pulse: the adaptive run's iterations cost the same per
-    iteration, but it refactors only when the chord iteration stops contracting, so its
-    factorisation share comes out as an upper bound."""
+    """µs per instance and Newton iteration of the residual, the assembly, the factorisation
+    and the solve of the accurate model (its mesh and terms) on fixed BDF2 steps of DT with a
+    fresh Jacobian every iteration, WARMUP_STEPS into the pulse (`EngineProfile.phase_split`):
+    the adaptive run's iterations cost the same per iteration, and `step_phases` counts its
+    chord iterations' fewer Jacobians and factorisations."""
     solver = SolverConfig.preset("accurate", precision=precision, adaptive=False, dt=DT,
                                  jacobian="newton", newton_tol=bench_solver(precision).newton_tol)
     profile = EngineProfile(params, solver, arch)
     profile.first_launch()
-    seconds, iterations = profile.timed_window(WARMUP_STEPS, ACCURATE_PHASE_STEPS)
+    seconds, iterations, _ = profile.timed_window(WARMUP_STEPS, ACCURATE_PHASE_STEPS)
     return profile.phase_split((WARMUP_STEPS + ACCURATE_PHASE_STEPS) * DT,
                                seconds / (ACCURATE_PHASE_STEPS * iterations), profile_seconds)
 
@@ -274,8 +279,9 @@ def measure_accurate(batch: int, arch: str, precision: str, duration: float,
     """End-to-end throughput of `simulate` with the accurate preset (model and solver) for
     `duration` simulated seconds from rest, after one untimed call of the same batch that
     compiles (its time less the timed call's is `compile_s`); the phase columns are
-    `accurate_phase_split` times the run's mean Newton iterations per step, bookkeeping the
-    rest of the measured step (step-size control, rejected steps, records)."""
+    `accurate_phase_split`'s per iteration, taken as many times per accepted step as the run
+    iterated and factored (`step_phases`; rejected steps' solves included), bookkeeping the
+    rest of the measured step (error estimate, step-size control, records)."""
     from taichi_star import simulate
 
     params = [StarParams.preset("accurate", gait=GAIT)] * batch
@@ -292,17 +298,21 @@ def measure_accurate(batch: int, arch: str, precision: str, duration: float,
         raise RuntimeError("an instance failed during the benchmark: its timing is not valid")
     steps = float(summary["steps"].sum())
     step_us = 1e6 * timed / steps
-    iterations = float(summary["newton_iterations_mean"].mean())
+    # an adaptive run solves every step it tries once: the accepted and the rejected
+    solves = summary["steps"] + summary["rejected_steps"]
+    iterations = float((summary["newton_iterations_mean"] * solves).sum() / steps)
+    factorisations = float((summary["factorisations_mean"] * solves).sum() / steps)
     phase = accurate_phase_split(params, arch, precision, profile_seconds)
-    residual, assembly, factor, solve = (iterations * phase[name] for name in PHASES)
+    per_step = step_phases(phase, iterations, factorisations)
+    residual, assembly, factor, solve = (per_step[name] for name in PHASES)
     return {"gait": GAIT, "preset": "accurate", "jacobian": solver.jacobian, "workers": 1,
             "lanes": Runtime.current().engine_lanes(batch, solver),
             "n_nodes": result.topology.n_nodes,
             "compile_s": max(first - timed, 0.0), "robot_steps_per_s": steps / timed,
             "real_time_factor": batch * duration / timed, "step_us": step_us,
-            "newton_iterations_mean": iterations, "assembly_us": assembly,
-            "residual_us": residual, "factor_us": factor, "solve_us": solve,
-            "bookkeeping_us": step_us - assembly - factor - solve,
+            "newton_iterations_mean": iterations, "factorisations_mean": factorisations,
+            "assembly_us": assembly, "residual_us": residual, "factor_us": factor,
+            "solve_us": solve, "bookkeeping_us": step_us - assembly - factor - solve,
             "final_state": state_digest(summary[["displacement_x_mm", "displacement_y_mm"]]
                                         .to_numpy())}
 

@@ -350,9 +350,12 @@ class BatchEngine:
 
     @ti.func
     def assemble_newton(self, b, inertia_scale, rate_gain, jacobian):
-        """Instance b's residual (and, if `jacobian`, its Jacobian) at the current iterate;
-        returns its largest component for the opt-in residual test (0 without it)."""
+        """Instance b's residual (and, if `jacobian`, its Jacobian, which the iteration then
+        factors: counted in `factorisations`) at the current iterate; returns its largest
+        component for the opt-in residual test (0 without it)."""
         self.assemble(b, inertia_scale, rate_gain, jacobian)
+        if jacobian:
+            self.state.factorisations[b] = self.state.factorisations[b] + 1
         largest_residual = 0.0
         if self.residual_limit[None] < FINITE_LIMIT:  # the residual test is opt-in
             for n in range(self.n_nodes):

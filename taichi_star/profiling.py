@@ -193,23 +193,30 @@ class EngineProfile:
         """(B,) Newton iterations of every instance so far."""
         return self.engine.state.newton_total.to_numpy()[:self.batch_size]
 
+    def factorisations(self) -> np.ndarray:
+        """(B,) Newton matrices assembled and factored by every instance so far (one per
+        iteration with Newton's Jacobian, fewer with the chord's)."""
+        return self.engine.state.factorisations.to_numpy()[:self.batch_size]
+
     def positions(self) -> np.ndarray:
         """(B, N, 2) node positions now, m (the engine's precision)."""
         return self.engine.state.positions.to_numpy()[:self.batch_size]
 
-    def timed_window(self, warmup_steps: int, steps: int) -> Tuple[float, float]:
+    def timed_window(self, warmup_steps: int, steps: int) -> Tuple[float, float, float]:
         """From rest, `warmup_steps` untimed steps, then `steps` timed ones: (seconds, Newton
-        iterations per instance-step of the timed steps). RuntimeError if an instance failed
-        (the timing would not be valid)."""
+        iterations and factorisations per instance-step of the timed steps). RuntimeError if
+        an instance failed (the timing would not be valid)."""
         self.restart()
         self.advance(warmup_steps)
-        before = self.newton_iterations().sum()
+        iterations, factorisations = self.newton_iterations().sum(), self.factorisations().sum()
         start = time.perf_counter()
         self.advance(steps)
         seconds = time.perf_counter() - start
         if (self.engine.state.status.to_numpy()[:self.batch_size] != STATUS_OK).any():
             raise RuntimeError("an instance failed during the benchmark: its timing is not valid")
-        return seconds, (self.newton_iterations().sum() - before) / (self.batch_size * steps)
+        instance_steps = self.batch_size * steps
+        return (seconds, (self.newton_iterations().sum() - iterations) / instance_steps,
+                (self.factorisations().sum() - factorisations) / instance_steps)
 
     def phase_split(self, time_s: float, iteration_s: float, profile_seconds: float) -> Dict[str, float]:
         """µs per instance and Newton iteration of the assembly, the factorisation and the
@@ -237,6 +244,20 @@ class EngineProfile:
             cumulative.append(best * 1e6 / (self.batch_size * calls))
         return {"residual": cumulative[0], "assembly": cumulative[1],
                 "factor": cumulative[2] - cumulative[1], "solve": cumulative[3] - cumulative[2]}
+
+
+def step_phases(phase: Dict[str, float], iterations: float,
+                factorisations: float) -> Dict[str, float]:
+    """µs per instance-step of the residual, the assembly (residual included), the
+    factorisation and the solve, from `EngineProfile.phase_split`'s µs per Newton iteration
+    (`phase`) and the step's mean Newton `iterations` and `factorisations`: every iteration
+    assembles its residual and solves, the iterations that refresh the Newton matrix (all of
+    them with Newton's Jacobian, fewer with the chord's) also assemble the Jacobian and
+    factor."""
+    residual = iterations * phase["residual"]
+    return {"residual": residual,
+            "assembly": residual + factorisations * (phase["assembly"] - phase["residual"]),
+            "factor": factorisations * phase["factor"], "solve": iterations * phase["solve"]}
 
 
 def matmul_gflops(size: int, precision: str, rng: np.random.Generator) -> float:

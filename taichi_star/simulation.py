@@ -53,6 +53,7 @@ class SimulationResult:
     | rejected_steps | — | steps rejected by the adaptive error control |
     | newton_iterations_mean | — | Newton iterations per solve (every attempted step and substep, rejected and failed ones included) |
     | newton_iterations_max | — | most Newton iterations of one solve (≥ the mean) |
+    | factorisations_mean | — | Newton matrices assembled and factored per solve: newton_iterations_mean with Newton's Jacobian, fewer with the chord's (which keeps a factorisation while it contracts) |
     | substep_retries | — | steps redone with substeps |
     | newton_capped | — | a Newton solve used all max_newton iterations (for an "ok" instance: a step accepted only after a retry rescued it; in f32 also a RuntimeWarning) |
     | status | — | "ok", "newton_failed", "non_finite" or (adaptive steps) "step_limit" |
@@ -363,6 +364,8 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
     rows["rejected_steps"] = rejected
     rows["newton_iterations_mean"] = newton_total / np.maximum(newton_solves, 1)
     rows["newton_iterations_max"] = state.newton_max.to_numpy()[:batch]
+    rows["factorisations_mean"] = (state.factorisations.to_numpy()[:batch]
+                                   / np.maximum(newton_solves, 1))
     rows["substep_retries"] = state.substep_retries.to_numpy()[:batch]
     rows["newton_capped"] = rows["newton_iterations_max"] >= solver.max_newton
     rows["status"] = [STATUS_NAMES[s] for s in status]

@@ -20,6 +20,9 @@ from .fields import FieldArena, FieldStore, array_dtype, array_shape
 
 STATUS_OK, STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_INACTIVE, STATUS_STEP_LIMIT = range(5)
 STATUS_NAMES = ("ok", "newton_failed", "non_finite", "inactive", "step_limit")
+LATER_COUNTERS = ("factorisations",)
+"""Work counters the state gained after states were first saved (`Simulator.save`): a saved
+state without one (from an earlier version) restores with it at zero."""
 """Per-instance status; "inactive" marks the padding of a batch up to the engine's capacity;
 "step_limit" an adaptive instance stopped before its stop time because its step count reached
 the counter's limit (`timegrid.MAX_STEPS_PER_INSTANCE`) or its step no longer advanced its
@@ -66,6 +69,9 @@ class BatchState:
         """Newton solves (one per attempted step or substep)."""
         self.newton_max = arena.batch_field(ti.i32, capacity)
         """Most Newton iterations of one solve."""
+        self.factorisations = arena.batch_field(ti.i64, capacity)
+        """Newton matrices assembled and factored (one per iteration with Newton's Jacobian,
+        fewer with the chord's; a sensitive engine's tangent steps not included)."""
         self.substep_retries = arena.batch_field(ti.i32, capacity)
         self.schedule = Schedule(capacity, arena, self.time)
         """When the actuators fire: the periodic gait, pending commands, the last firings."""
@@ -128,9 +134,12 @@ class BatchState:
         return self.store.read()
 
     def restore(self, saved: Dict[str, np.ndarray]):
-        """Put back a state from `save` of an engine of the same layout, bitwise. Raises
-        ValueError naming the first field that does not match."""
+        """Put back a state from `save` of an engine of the same layout, bitwise (a state saved
+        before a `LATER_COUNTERS` counter was kept restores with it at zero). Raises ValueError
+        naming the first field that does not match."""
         shapes = self.store.shapes
+        saved = {**{name: np.zeros(shapes[name], dtype=np.int64) for name in LATER_COUNTERS},
+                 **saved}
         if set(saved) != set(shapes):
             raise ValueError(f"saved state has fields {sorted(saved)}, this engine "
                              f"{sorted(shapes)} (another topology or term set)")

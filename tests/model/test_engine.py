@@ -151,7 +151,8 @@ def test_summary_and_trajectory_schema():
         "displacement_x_mm", "displacement_y_mm", "speed_mm_s", "signed_speed_mm_s",
         "travel_direction_deg", "heading_deg", "max_strain", "shape_sane",
         "steady_speed_mm_s", "steady_signed_speed_mm_s",
-        "steps", "rejected_steps", "newton_iterations_mean", "newton_iterations_max", "substep_retries", "newton_capped", "status",
+        "steps", "rejected_steps", "newton_iterations_mean", "newton_iterations_max",
+        "factorisations_mean", "substep_retries", "newton_capped", "status",
         "failure_time_s"]
     assert list(result.summary.columns) == expected
     assert list(result.trajectory.columns) == ["instance", "t_s", "x_mm", "y_mm", "heading_deg"]
@@ -208,6 +209,22 @@ def test_chord_jacobian_reaches_the_same_solution():
     for mode in ("newton", "chord"):
         shapes[mode] = _final_shapes(params, 300, ts.SolverConfig(jacobian=mode))
     assert np.abs(shapes["chord"] - shapes["newton"]).max() < 300 * 1e-10
+
+
+def test_factorisations_are_every_iteration_with_newton_and_the_first_with_the_chord():
+    """Newton's Jacobian assembles and factors the matrix at every iteration; the chord keeps
+    the first iteration's factorisation at the second (`newton_update`: it always keeps after
+    one update), so solves of at most two iterations factor exactly once. The window is in the
+    heating pulse, where every step takes two iterations (checked), and the coast, one."""
+    params = [ts.StarParams(gait="A1+A2"), ts.StarParams(gait="A1+A3+A5", alpha=1.2),
+              ts.StarParams(gait="none")]
+    summaries = {mode: ts.simulate(params, 0.05, ts.SolverConfig(jacobian=mode)).summary
+                 for mode in ("newton", "chord")}
+    newton, chord = summaries["newton"], summaries["chord"]
+    assert newton["newton_iterations_mean"].tolist() == [2.0, 2.0, 1.0]
+    assert newton["factorisations_mean"].tolist() == newton["newton_iterations_mean"].tolist()
+    assert chord["newton_iterations_max"].max() == 2
+    assert chord["factorisations_mean"].tolist() == [1.0, 1.0, 1.0]
 
 
 def test_residual_tolerance_keeps_a_loose_update_tolerance_honest():

@@ -2,6 +2,7 @@
 consistent with each other and with `simulate`; bad commands leave the state unchanged; the
 step_batch example runs."""
 
+import dataclasses
 import os
 import subprocess
 import sys
@@ -103,6 +104,33 @@ def test_save_to_file_and_load(tmp_path):
     np.testing.assert_array_equal(sim.shapes(), later)
     sim.advance(0.1)
     np.testing.assert_array_equal(sim.shapes(), after)
+
+
+def test_a_state_saved_before_the_factorisations_were_counted_loads_and_counts_from_zero(
+        tmp_path):
+    """A snapshot written without the `factorisations` counter (an earlier version's) loads,
+    continues bitwise as the current one does, and counts the factorisations from the load
+    on; any other missing field is still refused by name."""
+    sim = commanded()
+    sim.fire(GAITS)
+    sim.advance(0.05)
+    current = sim.save()
+    counted = current.fields["factorisations"][:sim.n_instances]
+    assert (counted > 0).all()
+    earlier = dataclasses.replace(current, fields={
+        name: values for name, values in current.fields.items() if name != "factorisations"})
+    sim.advance(0.05)
+    after = sim.shapes()
+    total = sim.save().fields["factorisations"][:sim.n_instances]
+    sim.load(earlier.write(tmp_path / "earlier"))
+    sim.advance(0.05)
+    np.testing.assert_array_equal(sim.shapes(), after)
+    np.testing.assert_array_equal(sim.save().fields["factorisations"][:sim.n_instances],
+                                  total - counted)
+    broken = dataclasses.replace(current, fields={
+        name: values for name, values in current.fields.items() if name != "newton_total"})
+    with pytest.raises(ValueError, match="saved state has fields"):
+        sim.load(broken)
 
 
 def test_different_command_sequences_in_one_batch_equal_each_alone():

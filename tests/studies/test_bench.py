@@ -76,11 +76,26 @@ def test_bench_quick(tmp_path, monkeypatch):
     engine_rows = table[table["section"] != "plain"]  # the plain call has no phase split
     for column in ("robot_steps_per_s", "assembly_us", "residual_us", "factor_flops"):
         assert (engine_rows[column] > 0).all(), column
+    # Newton's Jacobian factors at every iteration (the engine's own count)
+    assert batch["factorisations_mean"].tolist() == batch["newton_iterations_mean"].tolist()
     # the paper rows' reference rate, timed before each, and the factorisation's share of it
     assert (batch["matmul_gflops"] > 0).all() and skip["matmul_gflops"].isna().all()
     np.testing.assert_allclose(batch["factor_fraction_of_matmul"],
                                batch["factor_gflops"] / batch["matmul_gflops"], rtol=1e-9)
     assert (tmp_path / "bench.png").stat().st_size > 1000
+
+
+def test_step_phases_count_the_jacobian_only_where_the_matrix_is_refreshed():
+    """Every iteration assembles its residual and solves; only the iterations that refresh the
+    Newton matrix assemble the Jacobian (assembly − residual per iteration) and factor."""
+    phase = {"residual": 2.0, "assembly": 8.0, "factor": 3.0, "solve": 1.5}
+    # Newton's Jacobian: every phase once per iteration
+    assert profiling.step_phases(phase, 2.0, 2.0) == {
+        "residual": 4.0, "assembly": 16.0, "factor": 6.0, "solve": 3.0}
+    # the chord's: 2.5 iterations, 1.25 of them refreshing: 2.5 residuals, 1.25 Jacobians of
+    # 6 µs, 1.25 factorisations, 2.5 solves (every figure exact in binary)
+    assert profiling.step_phases(phase, 2.5, 1.25) == {
+        "residual": 5.0, "assembly": 12.5, "factor": 3.75, "solve": 3.75}
 
 
 def test_matmul_rate_is_the_products_flops_over_its_best_time(monkeypatch):
