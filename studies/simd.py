@@ -3,8 +3,8 @@ and the assembly?
 
     python -m studies simd [--presets paper,accurate] [--precisions f64,f32]
                            [--batch-sizes 64,512,4096] [--lanes 4,8] [--repeats 7]
-                           [--matmul-size 1024] [--kernels factor_solve,bending] [--out DIR]
-                           [--quick]
+                           [--matmul-size 1024] [--kernels factor_solve,bending,rod_drag]
+                           [--out DIR] [--quick]
 
 A micro-benchmark of the kernel that dominates a Newton iteration on the CPU: the numeric block
 LU factorisation of the Newton matrix on its fixed elimination pattern, and the forward/backward
@@ -37,16 +37,22 @@ machine). NumPy's matrix product of two n × n
 matrices (`--matmul-size`, same precision) is timed in the same rounds as the machine's
 reference rate.
 
-The assembly (`--kernels bending`): the bending term's gradient and Hessian, the assembly's
-arithmetic-heaviest element (`bend_element`: the engine's closed form, on the turning angle's
-half tangent), written once on components so that the same function runs on one instance's
-scalars (today's form) and on a group's lane vectors, over a chain of the preset's node count
-with a triplet on every three consecutive nodes (`bending_chain`; the robot's star has about
-as many triplets, but its own pattern), scattered into the residual and the Newton matrix's
-blocks by the same additions in every form. Its state (`bending_state`): a bent rod with
-random node offsets, the actuator's range of natural curvatures. Timed like the LU (interleaved
-rounds), checked for bitwise equality across forms and against central differences of a NumPy
-copy of the energy (`gradient_error`).
+The assembly (`--kernels bending,rod_drag`): the Jacobian's two heaviest terms, each written
+once on components so that the same function runs on one instance's scalars (today's form) and
+on a group's lane vectors, over a chain of the preset's node count (`LaneAssembly`), scattered
+into the residual and the Newton matrix's blocks by the same additions in every form:
+- `bending`: the bending term's gradient and Hessian (`bend_element`: the engine's closed
+  form, on the turning angle's half tangent), a triplet on every three consecutive nodes
+  (`bending_chain`; the robot's star has about as many triplets, but its own pattern); its
+  state (`bending_state`): a bent rod with random node offsets, the actuator's range of natural
+  curvatures; checked against central differences of a NumPy copy of the energy
+  (`gradient_error`).
+- `rod_drag`: the rod drag on every edge of the chain and its derivatives in the velocity and
+  the edge (`rod_drag_element`: the engine's closed form), on the mean implicit velocity of the
+  edge's nodes, as the engine's term assembles it; its state (`rod_drag_state`): the bent rod
+  swimming at a few cm/s, the paper's drag coefficients; its Jacobian checked against central
+  differences of a NumPy copy of the residual (`rod_drag_jacobian_error`).
+Timed like the LU (interleaved rounds), checked for bitwise equality across forms.
 
 Writes `simd.csv` (the LU): one row per preset, precision, batch size and form: n_nodes,
 n_slots (2×2 blocks with fill-in), lanes, flops_per_instance (factor + solve), seconds
@@ -56,10 +62,12 @@ speedup_vs_instance_major, speedup_median_of_rounds, packed_ops_in_ir (packed fl
 arithmetic instructions in the kernel's optimised IR), vector_width_in_ir (widest packed type
 found, lanes; 0: none), max_relative_error (the solution against `numpy.linalg.solve` on the
 dense matrix of checked instances), bitwise_equal_to_instance_major (every instance's solution),
-load_average_1min (before the row's timings). `simd_assembly.csv` (the bending assembly): the
-same keys, n_triplets, seconds, us_per_instance, the two speed-ups, packed_ops_in_ir,
-vector_width_in_ir, gradient_relative_error (instance 0 against central differences, relative
-to the largest entry), bitwise_equal_to_instance_major (gradient and Hessian blocks of every
+load_average_1min (before the row's timings). `simd_assembly.csv` (the assemblies): one
+row per term (`term`: bending, rod_drag), preset, precision, batch size and form: n_nodes,
+n_elements (triplets or edges), lanes, seconds, us_per_instance, the two speed-ups,
+packed_ops_in_ir, vector_width_in_ir, derivative_relative_error (instance 0's gradient, for
+bending, or Jacobian, for the rod drag, against central differences, relative to its largest
+entry), bitwise_equal_to_instance_major (the residual and the Jacobian's blocks of every
 instance), load_average_1min.
 
 --quick: the paper pattern, B = 8 and 16, f64 and f32, lanes 4, two repeats, 256 × 256 matmul.
@@ -85,9 +93,9 @@ from . import cli, provenance
 
 DESCRIPTION = ("SIMD across instances: the Newton matrix's block LU in today's layout against "
                "lane-grouped forms, with the LLVM IR checked for vector instructions.")
-KERNELS = ("factor_solve", "bending")
-"""The kernels the study times: the block LU (simd.csv), the bending term's assembly
-(simd_assembly.csv)."""
+KERNELS = ("factor_solve", "bending", "rod_drag")
+"""The kernels the study times: the block LU (simd.csv), the bending term's and the rod drag's
+assemblies (simd_assembly.csv)."""
 FORMS = ("instance_major", "unrolled_scalar", "lane_vector", "lane_vector_masked")
 VECTOR_FORMS = ("lane_vector", "lane_vector_masked")
 """The forms whose field elements are ti.Vectors of lanes."""
@@ -412,62 +420,72 @@ BEND_COUPLING = ((-1.0, 0.0), (1.0, -1.0), (0.0, 1.0))
 with node c is Σ_pq BEND_COUPLING[a][p]·BEND_COUPLING[c][q]·H_pq."""
 
 
-def bending_chain(n_nodes: int):
-    """A chain of n_nodes with a bending triplet on every three consecutive nodes: the triplets
-    (T, 3), and the blocks of the Newton matrix they fill, slot[(a, c)] for |a − c| ≤ 2
-    (row-major), with each triplet's nine slots (T, 9) in the order (i, j, k) × (i, j, k)."""
-    triplets = np.stack([np.arange(n_nodes - 2) + offset for offset in range(3)], axis=1)
+def bending_chain(n_nodes: int) -> np.ndarray:
+    """(T, 3) the triplets of a chain of n_nodes: one on every three consecutive nodes."""
+    return np.stack([np.arange(n_nodes - 2) + offset for offset in range(3)], axis=1)
+
+
+def chain_slots(n_nodes: int) -> dict:
+    """The blocks of a chain's Newton matrix, slot[(a, c)] for |a − c| ≤ 2 (row-major): what a
+    bending triplet on three consecutive nodes fills, and an edge's pair within it."""
     slot = {}
     for a in range(n_nodes):
         for c in range(max(0, a - 2), min(n_nodes, a + 3)):
             slot[a, c] = len(slot)
-    triplet_slots = np.array([[slot[a, c] for a in t for c in t] for t in triplets])
-    return triplets.astype(np.int32), slot, triplet_slots.astype(np.int32)
+    return slot
 
 
-class LaneBending(LaneFields):
-    """The bending term's assembly, gradient into `residual` (n_nodes, 2) and Hessian into
-    `blocks` (n_slots, 4), over a `bending_chain` (see `LaneFields` for the layout arguments):
-    per triplet `bend_element`, on scalars of one instance in the instance-major form and on
-    lane vectors in the others, scattered by the same additions in the same order."""
+class LaneAssembly(LaneFields):
+    """A term's assembly over a chain of n_nodes, its residual into `residual` (n_nodes, 2) and
+    its Jacobian into `blocks` (chain_slots, 4) (see `LaneFields` for the layout arguments):
+    per element (`elements` (E, k) of its k nodes, `element_slots` (E, k²) of its node blocks
+    in the order (nodes) × (nodes)) the subclass's element function, on scalars of one
+    instance in the instance-major form and on lane vectors in the others, scattered by the
+    same additions in the same order. A subclass names its per-node state fields
+    (`node_fields`) and its per-element values (`element_columns`), and writes `_element`."""
 
-    def __init__(self, n_nodes: int, batch: int, form: str, lanes: int):
+    node_fields = ("positions",)
+    element_columns = 0
+
+    def __init__(self, n_nodes: int, batch: int, form: str, lanes: int, elements: np.ndarray):
         super().__init__(batch, form, lanes)
-        self.triplets, self.slot, triplet_slots = bending_chain(n_nodes)
-        self.n_nodes, self.n_triplets = n_nodes, len(self.triplets)
+        self.n_nodes, self.elements = n_nodes, elements.astype(np.int32)
+        self.n_elements, nodes_per_element = elements.shape
+        self.slot = chain_slots(n_nodes)
+        element_slots = np.array([[self.slot[a, c] for a in element for c in element]
+                                  for element in elements], dtype=np.int32)
         builder = ti.FieldsBuilder()
-        self.positions = self._field(builder, n_nodes, 2)
-        self.element = self._field(builder, self.n_triplets, 3)  # Δl, κ⁰, B
+        self.state = {name: self._field(builder, n_nodes, 2) for name in self.node_fields}
+        self.element = self._field(builder, self.n_elements, self.element_columns)
         self.residual = self._field(builder, n_nodes, 2)
         self.blocks = self._field(builder, len(self.slot), 4)
-        self.triplet_nodes = ti.field(ti.i32)
-        self.triplet_slots = ti.field(ti.i32)
-        builder.dense(ti.ij, (self.n_triplets, 3)).place(self.triplet_nodes)
-        builder.dense(ti.ij, (self.n_triplets, 9)).place(self.triplet_slots)
+        self.element_nodes = ti.field(ti.i32)
+        self.element_slots = ti.field(ti.i32)
+        builder.dense(ti.ij, (self.n_elements, nodes_per_element)).place(self.element_nodes)
+        builder.dense(ti.ij, (self.n_elements, nodes_per_element ** 2)).place(self.element_slots)
         self._finish(builder)
-        self.triplet_nodes.from_numpy(self.triplets)
-        self.triplet_slots.from_numpy(triplet_slots)
+        self.element_nodes.from_numpy(self.elements)
+        self.element_slots.from_numpy(element_slots)
         self.assemble = self._kernel()
 
-    def load(self, positions: np.ndarray, element: np.ndarray):
-        """Node positions (batch, n_nodes, 2) m and per triplet (batch, T, 3) its Voronoi length
-        Δl (m), natural curvature κ⁰ (1/m) and stiffness B (N·m²)."""
-        self.positions.from_numpy(self.to_layout(positions))
+    def load(self, state: dict, element: np.ndarray):
+        """Per-node state {name: (batch, n_nodes, 2)} (`node_fields`) and per element
+        (batch, E, element_columns) its values."""
+        for name, values in state.items():
+            self.state[name].from_numpy(self.to_layout(values))
         self.element.from_numpy(self.to_layout(element))
 
-    def gradient(self) -> np.ndarray:
-        """(batch, n_nodes, 2) the assembled gradient, N."""
+    def assembled_residual(self) -> np.ndarray:
+        """(batch, n_nodes, 2) the assembled residual."""
         return self.from_layout(self.residual.to_numpy())
 
-    def hessian_blocks(self) -> np.ndarray:
-        """(batch, n_slots, 4) the assembled Hessian blocks, N/m."""
+    def jacobian_blocks(self) -> np.ndarray:
+        """(batch, n_slots, 4) the assembled Jacobian's blocks (xx, xy, yx, yy)."""
         return self.from_layout(self.blocks.to_numpy())
 
     def _kernel(self):
-        positions, element, residual, blocks = (self.positions, self.element, self.residual,
-                                                self.blocks)
-        nodes, slots = self.triplet_nodes, self.triplet_slots
-        n_nodes, n_slots, n_triplets, lanes = (self.n_nodes, len(self.slot), self.n_triplets,
+        residual, blocks = self.residual, self.blocks
+        n_nodes, n_slots, n_elements, lanes = (self.n_nodes, len(self.slot), self.n_elements,
                                                self.lanes)
         get, put = self.accessors()
         # today's engine: one instance per iteration on plain scalars
@@ -499,41 +517,178 @@ class LaneBending(LaneFields):
         def add(field: ti.template(), g, entry, component, value):
             store(field, g, entry, component, read(field, g, entry, component) + value)
 
+        element = self._element(read, zero, add)
+
         @ti.func
         def assemble(g):
             for n, c in ti.ndrange(n_nodes, 2):
                 store(residual, g, n, c, zero())
             for a, c in ti.ndrange(n_slots, 4):
                 store(blocks, g, a, c, zero())
-            for t in range(n_triplets):
-                i, j, k = nodes[t, 0], nodes[t, 1], nodes[t, 2]
-                gradients, h11, h22, h12 = bend_element(
-                    read(positions, g, j, 0) - read(positions, g, i, 0),
-                    read(positions, g, j, 1) - read(positions, g, i, 1),
-                    read(positions, g, k, 0) - read(positions, g, j, 0),
-                    read(positions, g, k, 1) - read(positions, g, j, 1),
-                    read(element, g, t, 0), read(element, g, t, 1), read(element, g, t, 2))
-                # node a's gradient Σ_p coupling[a][p]·g_p, and the 3 × 3 node blocks
-                hessian = ((h11[0], h11[1], h11[1], h11[2]), (h12[0], h12[1], h12[2], h12[3]),
-                           (h12[0], h12[2], h12[1], h12[3]), (h22[0], h22[1], h22[1], h22[2]))
-                for a in ti.static(range(3)):
-                    node = nodes[t, a]
-                    for c in ti.static(range(2)):
-                        value = zero()
-                        for p in ti.static(range(2)):
-                            if ti.static(BEND_COUPLING[a][p] != 0.0):
-                                value += BEND_COUPLING[a][p] * gradients[2 * p + c]
-                        add(residual, g, node, c, value)
-                for a, b in ti.static(ti.ndrange(3, 3)):
-                    for c in ti.static(range(4)):
-                        value = zero()
-                        for p, q in ti.static(ti.ndrange(2, 2)):
-                            weight = ti.static(BEND_COUPLING[a][p] * BEND_COUPLING[b][q])
-                            if ti.static(weight != 0.0):
-                                value += weight * hessian[2 * p + q][c]
-                        add(blocks, g, slots[t, 3 * a + b], c, value)
+            for e in range(n_elements):
+                element(g, e)
 
         return self.group_loop(assemble)
+
+    def _element(self, read, zero, add):
+        """A ti.func (g, e): element e of group (instance) g added into residual and blocks."""
+        raise NotImplementedError
+
+
+class LaneBending(LaneAssembly):
+    """The bending term's assembly: the gradient as residual, the Hessian as Jacobian, per
+    triplet `bend_element` on a `bending_chain`; element values (Δl, κ⁰, B)."""
+
+    element_columns = 3
+
+    def __init__(self, n_nodes: int, batch: int, form: str, lanes: int):
+        super().__init__(n_nodes, batch, form, lanes, bending_chain(n_nodes))
+
+    @staticmethod
+    def state_of(n_nodes: int, count: int, seed: int):
+        positions, element = bending_state(n_nodes, count, seed)
+        return {"positions": positions}, element
+
+    def derivative_error(self, state: dict, element: np.ndarray) -> float:
+        return gradient_error(self, state["positions"], element)
+
+    def _element(self, read, zero, add):
+        positions, element = self.state["positions"], self.element
+        residual, blocks = self.residual, self.blocks
+        nodes, slots = self.element_nodes, self.element_slots
+
+        @ti.func
+        def triplet(g, t):
+            i, j, k = nodes[t, 0], nodes[t, 1], nodes[t, 2]
+            gradients, h11, h22, h12 = bend_element(
+                read(positions, g, j, 0) - read(positions, g, i, 0),
+                read(positions, g, j, 1) - read(positions, g, i, 1),
+                read(positions, g, k, 0) - read(positions, g, j, 0),
+                read(positions, g, k, 1) - read(positions, g, j, 1),
+                read(element, g, t, 0), read(element, g, t, 1), read(element, g, t, 2))
+            # node a's gradient Σ_p coupling[a][p]·g_p, and the 3 × 3 node blocks
+            hessian = ((h11[0], h11[1], h11[1], h11[2]), (h12[0], h12[1], h12[2], h12[3]),
+                       (h12[0], h12[2], h12[1], h12[3]), (h22[0], h22[1], h22[1], h22[2]))
+            for a in ti.static(range(3)):
+                node = nodes[t, a]
+                for c in ti.static(range(2)):
+                    value = zero()
+                    for p in ti.static(range(2)):
+                        if ti.static(BEND_COUPLING[a][p] != 0.0):
+                            value += BEND_COUPLING[a][p] * gradients[2 * p + c]
+                    add(residual, g, node, c, value)
+            for a, b in ti.static(ti.ndrange(3, 3)):
+                for c in ti.static(range(4)):
+                    value = zero()
+                    for p, q in ti.static(ti.ndrange(2, 2)):
+                        weight = ti.static(BEND_COUPLING[a][p] * BEND_COUPLING[b][q])
+                        if ti.static(weight != 0.0):
+                            value += weight * hessian[2 * p + q][c]
+                    add(blocks, g, slots[t, 3 * a + b], c, value)
+
+        return triplet
+
+
+RATE_GAIN = 1000.0
+"""∂v/∂x of the rod drag's implicit velocity (1/s): implicit Euler's 1/h at the paper's 1-ms
+step."""
+
+
+@ti.func
+def rod_drag_element(vx, vy, ex, ey, parallel_coeff, perpendicular_coeff):
+    """The rod drag on one edge, F = −(c∥|a|a·t + c⊥|b|b·n) with a = v·t, b = v·n, t = e/|e|
+    and n = t turned by +90°, and its derivatives ∂F/∂v (xx, xy, yy: symmetric) and ∂F/∂e
+    (xx, xy, yx, yy), in the engine's closed form (`rod_drag`) written on components, so that
+    every argument may be a scalar (one instance) or a ti.Vector of lanes: the same operations
+    in the same order either way. v: the edge's mean velocity (m/s), e: its edge vector (m),
+    c = ½·ρ_f·Δl̄·C (kg/m² per unit height). Returns ((Fx, Fy), ∂F/∂v, ∂F/∂e). A copy on
+    components on purpose, as `bend_element` is."""
+    length = ti.sqrt(ex * ex + ey * ey)
+    tx, ty = ex / length, ey / length
+    nx, ny = -ty, tx
+    along = vx * tx + vy * ty
+    across = vx * nx + vy * ny
+    along_size, across_size = ti.abs(along), ti.abs(across)
+    force = (-(parallel_coeff * along_size * along * tx + perpendicular_coeff * across_size
+               * across * nx),
+             -(parallel_coeff * along_size * along * ty + perpendicular_coeff * across_size
+               * across * ny))
+    d_velocity = (-2.0 * (parallel_coeff * along_size * tx * tx
+                          + perpendicular_coeff * across_size * nx * nx),
+                  -2.0 * (parallel_coeff * along_size * tx * ty
+                          + perpendicular_coeff * across_size * nx * ny),
+                  -2.0 * (parallel_coeff * along_size * ty * ty
+                          + perpendicular_coeff * across_size * ny * ny))
+    # ∂F/∂t (t's derivative with v fixed), then through ∂t/∂e = (I − t tᵀ)/|e|
+    along_part, across_part = 2.0 * along_size, 2.0 * across_size
+    along_force, across_force = along_size * along, across_size * across
+    d_xx = -(parallel_coeff * (along_part * tx * vx + along_force)
+             + perpendicular_coeff * (across_part * nx * vy))
+    d_xy = -(parallel_coeff * (along_part * tx * vy)
+             + perpendicular_coeff * (-across_part * nx * vx - across_force))
+    d_yx = -(parallel_coeff * (along_part * ty * vx)
+             + perpendicular_coeff * (across_part * ny * vy + across_force))
+    d_yy = -(parallel_coeff * (along_part * ty * vy + along_force)
+             + perpendicular_coeff * (-across_part * ny * vx))
+    p_xx, p_xy, p_yy = (1.0 - tx * tx) / length, -tx * ty / length, (1.0 - ty * ty) / length
+    d_edge = (d_xx * p_xx + d_xy * p_xy, d_xx * p_xy + d_xy * p_yy,
+              d_yx * p_xx + d_yy * p_xy, d_yx * p_xy + d_yy * p_yy)
+    return force, d_velocity, d_edge
+
+
+class LaneRodDrag(LaneAssembly):
+    """The rod drag's assembly as the engine's term does it: on every edge of a chain, the drag
+    on the mean implicit velocity of its two nodes, v = RATE_GAIN·(x − x_prev) + offset, half to
+    each node (residual −F/2), its Jacobian on the edge's four blocks; element values
+    (c∥, c⊥)."""
+
+    node_fields = ("positions", "previous", "velocity_offset")
+    element_columns = 2
+
+    def __init__(self, n_nodes: int, batch: int, form: str, lanes: int):
+        edges = np.stack([np.arange(n_nodes - 1), np.arange(1, n_nodes)], axis=1)
+        super().__init__(n_nodes, batch, form, lanes, edges)
+
+    @staticmethod
+    def state_of(n_nodes: int, count: int, seed: int):
+        return rod_drag_state(n_nodes, count, seed)
+
+    def derivative_error(self, state: dict, element: np.ndarray) -> float:
+        return rod_drag_jacobian_error(self, state, element)
+
+    def _element(self, read, zero, add):
+        positions, previous, offset = (self.state[name] for name in self.node_fields)
+        element, residual, blocks = self.element, self.residual, self.blocks
+        nodes, slots = self.element_nodes, self.element_slots
+
+        @ti.func
+        def velocity(g, node, c):
+            return RATE_GAIN * (read(positions, g, node, c) - read(previous, g, node, c)) \
+                + read(offset, g, node, c)
+
+        @ti.func
+        def edge(g, r):
+            i, j = nodes[r, 0], nodes[r, 1]
+            force, d_velocity, d_edge = rod_drag_element(
+                0.5 * (velocity(g, i, 0) + velocity(g, j, 0)),
+                0.5 * (velocity(g, i, 1) + velocity(g, j, 1)),
+                read(positions, g, j, 0) - read(positions, g, i, 0),
+                read(positions, g, j, 1) - read(positions, g, i, 1),
+                read(element, g, r, 0), read(element, g, r, 1))
+            for node in ti.static(range(2)):
+                for c in ti.static(range(2)):
+                    add(residual, g, nodes[r, node], c, -0.5 * force[c])
+            d_v = (d_velocity[0], d_velocity[1], d_velocity[1], d_velocity[2])
+            # the residual's derivative by node i (first) and node j (second): v is the mean
+            # of both, e = x_j − x_i
+            for c in ti.static(range(4)):
+                first = -0.5 * (0.5 * RATE_GAIN * d_v[c] - d_edge[c])
+                second = -0.5 * (0.5 * RATE_GAIN * d_v[c] + d_edge[c])
+                for row in ti.static(range(2)):
+                    add(blocks, g, slots[r, 2 * row], c, first)
+                    add(blocks, g, slots[r, 2 * row + 1], c, second)
+
+        return edge
 
 
 def packed_ops(ir_folder: Path) -> dict[str, int]:
@@ -673,7 +828,7 @@ def bending_state(n_nodes: int, count: int, seed: int):
     return positions, element
 
 
-def gradient_error(system: "LaneBending", positions: np.ndarray, element: np.ndarray) -> float:
+def gradient_error(system: LaneBending, positions: np.ndarray, element: np.ndarray) -> float:
     """The largest error of instance 0's assembled gradient against central differences of
     `bend_energy` (f64, step 1e-8 m: truncation ~(1e-8/0.5e-3)² of the gradient, rounding
     ~1e-16·E/1e-8), relative to the gradient's largest entry."""
@@ -682,26 +837,96 @@ def gradient_error(system: "LaneBending", positions: np.ndarray, element: np.nda
         moved = [positions[0].copy(), positions[0].copy()]
         moved[0][node, component] += step
         moved[1][node, component] -= step
-        reference[node, component] = (bend_energy(moved[0], element[0], system.triplets)
-                                      - bend_energy(moved[1], element[0], system.triplets)
+        reference[node, component] = (bend_energy(moved[0], element[0], system.elements)
+                                      - bend_energy(moved[1], element[0], system.elements)
                                       ) / (2 * step)
-    return float(np.abs(system.gradient()[0] - reference).max() / np.abs(reference).max())
+    return float(np.abs(system.assembled_residual()[0] - reference).max()
+                 / np.abs(reference).max())
 
 
-def measure_bending(plans: dict, precision: str, batch_sizes: list[int], lanes_list: list[int],
-                    repeats: int, ir_folder: Path) -> list[dict]:
-    """Rows of simd_assembly.csv for one precision (module docstring)."""
+def rod_drag_state(n_nodes: int, count: int, seed: int):
+    """({"positions", "previous", "velocity_offset"} (count, n_nodes, 2), element (count,
+    n_nodes − 1, 2)) of `count` chains: the rod of `bending_state` swimming at N(2, 5) cm/s per
+    node and component (positions − previous = that velocity / RATE_GAIN), an integrator's
+    offset of N(0, 1) cm/s, and per edge c∥ and c⊥ of the paper's drag coefficients (C∥ =
+    0.01, C⊥ = 1) in water on its rest length (c = ½·ρ_f·Δl̄·C)."""
+    rng = np.random.default_rng(seed)
+    positions, _ = bending_state(n_nodes, count, seed)
+    velocity = 0.02 + 0.05 * rng.standard_normal((count, n_nodes, 2))
+    wetted = 0.5 * 1000.0 * 0.1 / (n_nodes - 1)
+    element = np.empty((count, n_nodes - 1, 2))
+    element[..., 0], element[..., 1] = wetted * 0.01, wetted * 1.0
+    return {"positions": positions, "previous": positions - velocity / RATE_GAIN,
+            "velocity_offset": 0.01 * rng.standard_normal((count, n_nodes, 2))}, element
+
+
+def rod_drag_residual(state: dict, element: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """NumPy: one instance's rod drag residual (n_nodes, 2), N/m: −F/2 of every edge on each
+    of its nodes (`LaneRodDrag`), from its node state {name: (n_nodes, 2)} and element (E, 2)."""
+    velocity = RATE_GAIN * (state["positions"] - state["previous"]) + state["velocity_offset"]
+    mean = 0.5 * (velocity[edges[:, 0]] + velocity[edges[:, 1]])
+    edge = state["positions"][edges[:, 1]] - state["positions"][edges[:, 0]]
+    tangent = edge / np.linalg.norm(edge, axis=1, keepdims=True)
+    normal = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
+    along, across = (mean * tangent).sum(axis=1), (mean * normal).sum(axis=1)
+    force = -(element[:, :1] * (np.abs(along) * along)[:, None] * tangent
+              + element[:, 1:] * (np.abs(across) * across)[:, None] * normal)
+    residual = np.zeros_like(velocity)
+    for node in (0, 1):
+        np.add.at(residual, edges[:, node], -0.5 * force)
+    return residual
+
+
+def rod_drag_jacobian_error(system: LaneRodDrag, state: dict, element: np.ndarray) -> float:
+    """The largest error of instance 0's assembled Jacobian (every block of the chain) against
+    central differences of `rod_drag_residual` in the positions (f64, step 1e-8 m: the drag is
+    quadratic in v, so only the tangent's curvature truncates, ~(1e-8/0.5e-3)²; the velocities
+    move by 1e-5 m/s, far from the kink of |v·t| at the state's cm/s), relative to the
+    Jacobian's largest entry."""
+    step = 1e-8
+    one = {name: values[0] for name, values in state.items()}
+    n_nodes = system.n_nodes
+    reference = np.zeros((2 * n_nodes, 2 * n_nodes))
+    for node, component in np.ndindex(n_nodes, 2):
+        moved = []
+        for sign in (1.0, -1.0):
+            shifted = dict(one, positions=one["positions"].copy())
+            shifted["positions"][node, component] += sign * step
+            moved.append(rod_drag_residual(shifted, element[0], system.elements).ravel())
+        reference[:, 2 * node + component] = (moved[0] - moved[1]) / (2 * step)
+    assembled = np.zeros_like(reference)
+    blocks = system.jacobian_blocks()[0]
+    for (row, column), slot in system.slot.items():
+        assembled[2 * row:2 * row + 2, 2 * column:2 * column + 2] = blocks[slot].reshape(2, 2)
+    return float(np.abs(assembled - reference).max() / np.abs(reference).max())
+
+
+def repeated(values: np.ndarray, batch: int) -> np.ndarray:
+    """The first `batch` of `values` (count, ...) repeated along the first axis."""
+    return np.tile(values, (-(-batch // len(values)),) + (1,) * (values.ndim - 1))[:batch]
+
+
+ASSEMBLIES = {"bending": LaneBending, "rod_drag": LaneRodDrag}
+"""The assembly kernels of KERNELS and the term each times."""
+
+
+def measure_assembly(kernel: str, plans: dict, precision: str, batch_sizes: list[int],
+                     lanes_list: list[int], repeats: int, ir_folder: Path) -> list[dict]:
+    """Rows of simd_assembly.csv for one assembly kernel (ASSEMBLIES) and one precision (module
+    docstring)."""
     init_taichi(precision, ir_folder)
+    assembly = ASSEMBLIES[kernel]
     rows = []
     for preset, plan in plans.items():
         for batch in batch_sizes:
-            distinct = bending_state(plan.n_nodes, min(batch, DISTINCT_MATRICES), seed=batch)
-            repeat = -(-batch // len(distinct[0]))
-            positions, element = (np.tile(values, (repeat, 1, 1))[:batch] for values in distinct)
+            state, element = assembly.state_of(plan.n_nodes, min(batch, DISTINCT_MATRICES),
+                                               seed=batch)
+            state = {name: repeated(values, batch) for name, values in state.items()}
+            element = repeated(element, batch)
             systems, facts = {}, {}
             for form, lanes in forms_of(lanes_list):
-                system = LaneBending(plan.n_nodes, batch, form, lanes)
-                system.load(positions, element)
+                system = assembly(plan.n_nodes, batch, form, lanes)
+                system.load(state, element)
                 packed_ops(ir_folder)
                 system.assemble()
                 facts[form, lanes] = packed_ops(ir_folder)
@@ -720,19 +945,22 @@ def measure_bending(plans: dict, precision: str, batch_sizes: list[int], lanes_l
                 seconds = min(times[form, lanes])
                 round_ratios = np.array(times["instance_major", 1]) / np.array(times[form, lanes])
                 rows.append({
-                    "preset": preset, "precision": precision, "batch_size": batch, "form": form,
-                    "lanes": lanes, "n_nodes": plan.n_nodes, "n_triplets": plan.n_nodes - 2,
+                    "term": kernel, "preset": preset, "precision": precision, "batch_size": batch,
+                    "form": form, "lanes": lanes, "n_nodes": plan.n_nodes,
+                    "n_elements": system.n_elements,
                     "seconds": seconds, "us_per_instance": seconds * 1e6 / batch,
                     "speedup_vs_instance_major": min(times["instance_major", 1]) / seconds,
                     "speedup_median_of_rounds": float(np.median(round_ratios)),
                     "packed_ops_in_ir": facts[form, lanes]["count"],
                     "vector_width_in_ir": facts[form, lanes]["width"],
-                    "gradient_relative_error": gradient_error(system, positions, element),
+                    "derivative_relative_error": system.derivative_error(state, element),
                     "bitwise_equal_to_instance_major": bool(
-                        np.array_equal(system.gradient(), reference.gradient())
-                        and np.array_equal(system.hessian_blocks(), reference.hessian_blocks())),
+                        np.array_equal(system.assembled_residual(),
+                                       reference.assembled_residual())
+                        and np.array_equal(system.jacobian_blocks(),
+                                           reference.jacobian_blocks())),
                     "load_average_1min": load})
-                print(f"bending {preset} {precision} B={batch:>5} {form:>18} x{lanes}: "
+                print(f"{kernel} {preset} {precision} B={batch:>5} {form:>18} x{lanes}: "
                       f"{rows[-1]['us_per_instance']:8.2f} us/instance "
                       f"({rows[-1]['speedup_median_of_rounds']:.2f}x), packed ops "
                       f"{rows[-1]['packed_ops_in_ir']} (width {rows[-1]['vector_width_in_ir']})")
@@ -800,15 +1028,21 @@ def main(argv=None):
                         rows["factor_solve"] += measure(plans, precision, batch_sizes,
                                                         lanes_list, args.repeats,
                                                         args.matmul_size, Path(ir_folder))
-                    if "bending" in kernels:
-                        rows["bending"] += measure_bending(plans, precision, batch_sizes,
-                                                           lanes_list, args.repeats,
-                                                           Path(ir_folder))
+                    for kernel in ASSEMBLIES:
+                        if kernel in kernels:
+                            rows[kernel] += measure_assembly(kernel, plans, precision,
+                                                             batch_sizes, lanes_list,
+                                                             args.repeats, Path(ir_folder))
     finally:
         # this study initialised Taichi itself: the next simulation initialises it again
         Runtime.current().configure_compiler()
-    tables = {kernel: pd.DataFrame(kernel_rows) for kernel, kernel_rows in rows.items()}
-    for kernel, table in tables.items():
-        out.write_csv(table, "simd.csv" if kernel == "factor_solve" else "simd_assembly.csv")
+    tables = {}
+    if "factor_solve" in kernels:
+        tables["simd.csv"] = pd.DataFrame(rows["factor_solve"])
+    assembly_rows = [row for kernel in ASSEMBLIES if kernel in kernels for row in rows[kernel]]
+    if assembly_rows:
+        tables["simd_assembly.csv"] = pd.DataFrame(assembly_rows)
+    for name, table in tables.items():
+        out.write_csv(table, name)
     out.report()
-    return tables.get("factor_solve", tables.get("bending"))
+    return next(iter(tables.values()))

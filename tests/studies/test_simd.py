@@ -54,48 +54,61 @@ def test_simd_quick(tmp_path):
     assert not (tmp_path / "simd_assembly.csv").exists()
 
 
-def test_simd_quick_bending_in_f32(tmp_path):
-    # the bending assembly through the study (f64 is tested directly below): the same forms,
-    # every one bitwise equal to today's, the lanes packed, the gradient that of the energy to
-    # the rounding of the curvature in f32 (~1e-5 measured)
-    simd.main(["--quick", "--batch-sizes", "8", "--kernels", "bending", "--precisions", "f32",
-               "--no-progress", "--out", str(tmp_path)])
+def test_simd_quick_assemblies_in_f32(tmp_path):
+    # the bending and rod drag assemblies through the study (f64 is tested directly below): the
+    # same forms, every one bitwise equal to today's, the lanes packed, the derivatives those of
+    # the NumPy energy and residual to the rounding of f32 (~1e-5 measured)
+    simd.main(["--quick", "--batch-sizes", "8", "--kernels", "bending,rod_drag", "--precisions",
+               "f32", "--no-progress", "--out", str(tmp_path)])
     assembly = pd.read_csv(tmp_path / "simd_assembly.csv")
-    assert len(assembly) == 4 and set(assembly["form"]) == set(simd.FORMS)
+    assert len(assembly) == 8 and set(assembly["term"]) == {"bending", "rod_drag"}
+    for _, term in assembly.groupby("term"):
+        assert set(term["form"]) == set(simd.FORMS)
+    # the paper robot's chain: 193 nodes, 191 triplets, 192 edges
+    assert dict(zip(assembly["term"], assembly["n_elements"])) == {"bending": 191, "rod_drag": 192}
     assert assembly["bitwise_equal_to_instance_major"].all()
     assert (assembly[assembly["form"].isin(simd.VECTOR_FORMS)]["packed_ops_in_ir"] > 0).all()
-    assert (assembly["gradient_relative_error"] < 1e-3).all()
+    assert (assembly["derivative_relative_error"] < 1e-3).all()
     assert not (tmp_path / "simd.csv").exists()
+
+
+def assembled_in(assembly, n_nodes, batch, state, element, forms):
+    """{form: the `assembly` (simd.LaneBending, LaneRodDrag) of state and element assembled in
+    that form} (f64, `forms` of (form, lanes)); the caller destroys them."""
+    systems = {}
+    simd.init_taichi("f64", Path.cwd())
+    for form, lanes in forms:
+        systems[form] = assembly(n_nodes, batch, form, lanes)
+        systems[form].load(state, element)
+        systems[form].assemble()
+    return systems
 
 
 def test_the_bending_assembly_is_the_energys_derivatives_in_every_form():
     """On a 12-node chain, 8 instances: each form assembles the same bits; the gradient equals
     central differences of the NumPy energy and the Hessian blocks central differences of the
     assembled gradient (f64)."""
-    positions, element = simd.bending_state(12, 8, seed=3)
+    state, element = simd.LaneBending.state_of(12, 8, seed=3)
     systems = {}
     with simd.working_directory(Path(tempfile.mkdtemp())):
-        simd.init_taichi("f64", Path.cwd())
         try:
-            for form, lanes in (("instance_major", 1), ("lane_vector", 4)):
-                systems[form] = simd.LaneBending(12, 8, form, lanes)
-                systems[form].load(positions, element)
-                systems[form].assemble()
+            systems = assembled_in(simd.LaneBending, 12, 8, state, element,
+                                   (("instance_major", 1), ("lane_vector", 4)))
             today, lanes = systems["instance_major"], systems["lane_vector"]
-            assert np.array_equal(today.gradient(), lanes.gradient())
-            assert np.array_equal(today.hessian_blocks(), lanes.hessian_blocks())
+            assert np.array_equal(today.assembled_residual(), lanes.assembled_residual())
+            assert np.array_equal(today.jacobian_blocks(), lanes.jacobian_blocks())
             # step 1e-8 m on 9-mm edges: truncation ~1e-12, rounding ~1e-16·E/1e-8 ≈ 1e-8
-            assert simd.gradient_error(today, positions, element) < 1e-6
+            assert today.derivative_error(state, element) < 1e-6
             step, node, component = 1e-9, 5, 1
             moved = []
             for sign in (1.0, -1.0):
-                shifted = positions.copy()
+                shifted = state["positions"].copy()
                 shifted[:, node, component] += sign * step
-                today.load(shifted, element)
+                today.load({"positions": shifted}, element)
                 today.assemble()
-                moved.append(today.gradient()[0])
+                moved.append(today.assembled_residual()[0])
             column = (moved[0] - moved[1]) / (2 * step)
-            blocks = lanes.hessian_blocks()[0]
+            blocks = lanes.jacobian_blocks()[0]
             expected = np.zeros_like(column)
             for (row_node, column_node), slot in today.slot.items():
                 if column_node == node:
@@ -103,6 +116,42 @@ def test_the_bending_assembly_is_the_energys_derivatives_in_every_form():
             # the gradient is smooth (edges far from zero length): the difference quotient is
             # exact to ~1e-7 of the column's largest entry at this step
             np.testing.assert_allclose(column, expected, atol=1e-6 * np.abs(expected).max())
+        finally:
+            for system in systems.values():
+                system.destroy()
+            Runtime.current().configure_compiler()
+
+
+def test_the_rod_drag_assembly_is_the_numpy_residual_and_its_jacobian_in_every_form():
+    """On a 12-node chain, 8 instances: each form assembles the same bits; the residual equals
+    the NumPy copy's and the Jacobian its central differences (f64)."""
+    state, element = simd.rod_drag_state(12, 8, seed=3)
+    systems = {}
+    with simd.working_directory(Path(tempfile.mkdtemp())):
+        try:
+            systems = assembled_in(simd.LaneRodDrag, 12, 8, state, element,
+                                   (("instance_major", 1), ("unrolled_scalar", 4),
+                                    ("lane_vector", 4)))
+            today = systems["instance_major"]
+            for other in ("unrolled_scalar", "lane_vector"):
+                assert np.array_equal(today.assembled_residual(),
+                                      systems[other].assembled_residual())
+                assert np.array_equal(today.jacobian_blocks(), systems[other].jacobian_blocks())
+            for instance in (0, 7):
+                expected = simd.rod_drag_residual(
+                    {name: values[instance] for name, values in state.items()},
+                    element[instance], today.elements)
+                # the same formula in another order of operations: round-off only
+                np.testing.assert_allclose(today.assembled_residual()[instance], expected,
+                                           rtol=0, atol=1e-13 * np.abs(expected).max())
+            # central differences at 1e-8 m: the velocity part is exact (the drag is quadratic
+            # in v away from its kink), the tangent's truncation ~(1e-8/9e-3)² ≈ 1e-12, rounding
+            # ~1e-16·|r|/1e-8 against entries of ~RATE_GAIN·c·|v|: 1e-9 leaves a factor of 10
+            assert today.derivative_error(state, element) < 1e-9
+            # the check can fail: a Jacobian assembled with coefficients 0.1 % off is ~1e-3 off
+            today.load(state, element * 1.001)
+            today.assemble()
+            assert today.derivative_error(state, element) > 1e-4
         finally:
             for system in systems.values():
                 system.destroy()
