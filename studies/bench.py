@@ -661,6 +661,24 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
     return pd.DataFrame(rows).reindex(columns=COLUMNS)
 
 
+def phase_bars(rows: pd.DataFrame, label: str):
+    """The stacked bars of a phase-split panel from bench rows: (the rows kept, their names
+    (`label` formatted with each row), {phase: µs per instance-step}). Of the rounds of one
+    setting the fastest is kept; the assembly is split into the residual and the Jacobian
+    where every row has `residual_us` (tables from before it show the assembly whole)."""
+    part = rows.sort_values("robot_steps_per_s").drop_duplicates(
+        ["scenario", "batch_size", "precision", "jacobian", "preset", "lanes",
+         "kernel_optimisation", "layout", "block_dim"], keep="last").sort_index()
+    names = [label.format(**row) for row in part.to_dict("records")]
+    split = {"assembly": part["assembly_us"]}
+    if "residual_us" in part and part["residual_us"].notna().all():
+        split = {"residual": part["residual_us"],
+                 "Jacobian": part["assembly_us"] - part["residual_us"]}
+    split.update(factor=part["factor_us"], solve=part["solve_us"],
+                 bookkeeping=part["bookkeeping_us"])
+    return part, names, split
+
+
 def plot_bench(csv_path, png_path):
     """Three panels from a bench CSV: throughput against B (log-log, one line per precision,
     the target dashed, real-time factor on the right axis); the phase split per
@@ -707,24 +725,29 @@ def plot_bench(csv_path, png_path):
     right.set_ylabel(f"real-time factor (h = {dt * 1e3:g} ms)")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
+    if sweep[sweep["preset"] != "accurate"].empty and processes.empty:
+        ax.text(0.5, 0.5, "no paper-preset B sweep in this run\n(the accurate preset's steps vary "
+                "in size: its rows are in the phase split)", ha="center", va="center",
+                fontsize=8, transform=ax.transAxes)
     ax.set_title(f"{table['machine'].iloc[0]}, {arch}, {table['commit'].iloc[0]}", fontsize=8)
 
-    phases = ["assembly_us", "factor_us", "solve_us", "bookkeeping_us"]
-    # the phase split assumes one factorisation per Newton iteration: the newton mode only
-    split_label = "B={batch_size} {precision}" + (" opt {kernel_optimisation}"
-                                                   if len(compilers) > 1 else "")
-    for ax, part, label in ((axes[1], sweep[(sweep["jacobian"] == "newton")
-                                            & (sweep["preset"] != "accurate")], split_label),
+    # the split takes the Jacobian and its factorisation as often as they happen (profiling.
+    # step_phases), so every Jacobian mode and preset has one; tables from before the residual
+    # was timed apart show the assembly whole
+    split_label = ("B={batch_size} {precision} {jacobian}{preset_note}{lanes_note}"
+                   + (" opt {kernel_optimisation}" if len(compilers) > 1 else ""))
+    sweep = sweep.assign(
+        preset_note=np.where(sweep["preset"] == "accurate", " accurate", ""),
+        lanes_note=[f" {int(lanes)} lanes" if lanes not in ("", 1) else ""
+                    for lanes in sweep["lanes"]])
+    skip = skip.assign(preset_note="", lanes_note="")
+    for ax, part, label in ((axes[1], sweep, split_label),
                             (axes[2], skip, "{scenario}\nB={batch_size} {precision}")):
-        # rounds of one setting: the fastest
-        part = part.sort_values("robot_steps_per_s").drop_duplicates(
-            ["scenario", "batch_size", "precision", "kernel_optimisation", "layout", "block_dim"],
-            keep="last").sort_index()
-        names = [label.format(**row) for row in part.to_dict("records")]
+        part, names, split = phase_bars(part, label)
         bottom = np.zeros(len(part))
-        for phase in phases:
-            values = np.nan_to_num(part[phase].to_numpy(dtype=float).clip(min=0.0))
-            ax.bar(names, values, bottom=bottom, label=phase.replace("_us", ""))
+        for phase, column in split.items():
+            values = np.nan_to_num(column.to_numpy(dtype=float).clip(min=0.0))
+            ax.bar(names, values, bottom=bottom, label=phase)
             bottom += values
         ax.set_ylabel("µs per instance-step (whole machine)")
         ax.tick_params(axis="x", labelrotation=60, labelsize=7)

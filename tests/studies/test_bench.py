@@ -98,6 +98,28 @@ def test_step_phases_count_the_jacobian_only_where_the_matrix_is_refreshed():
         "residual": 5.0, "assembly": 12.5, "factor": 3.75, "solve": 3.75}
 
 
+def test_phase_bars_keep_one_bar_per_setting_and_split_the_assembly():
+    row = {"section": "batch", "scenario": "all_terms", "batch_size": 512, "precision": "f64",
+           "jacobian": "newton", "preset": "paper", "lanes": 1, "kernel_optimisation": "on",
+           "layout": "instance_major", "block_dim": 1, "robot_steps_per_s": 40000.0,
+           "assembly_us": 12.0, "residual_us": 4.0, "factor_us": 5.0, "solve_us": 2.0,
+           "bookkeeping_us": 1.0}
+    rows = pd.DataFrame([row,
+                         dict(row, robot_steps_per_s=45000.0, assembly_us=11.0),  # a faster round
+                         dict(row, lanes=8, solve_us=1.0),  # another setting: its own bar
+                         dict(row, jacobian="chord")])
+    part, names, split = bench.phase_bars(rows, "B={batch_size} {jacobian} {lanes}")
+    assert names == ["B=512 newton 1", "B=512 newton 8", "B=512 chord 1"]
+    assert list(split) == ["residual", "Jacobian", "factor", "solve", "bookkeeping"]
+    # the faster round of the first setting, its assembly cut at the residual
+    assert split["Jacobian"].tolist() == [7.0, 8.0, 8.0]
+    assert split["solve"].tolist() == [2.0, 1.0, 2.0]
+    # a table from before the residual was timed apart: the assembly whole
+    _, _, whole = bench.phase_bars(rows.drop(columns="residual_us"), "{lanes}")
+    assert list(whole) == ["assembly", "factor", "solve", "bookkeeping"]
+    assert whole["assembly"].tolist() == [11.0, 12.0, 12.0]
+
+
 def test_matmul_rate_is_the_products_flops_over_its_best_time(monkeypatch):
     """2·n³ floating-point operations over the fastest of three products."""
     clock = iter([0.0, 0.5, 1.0, 1.25, 2.0, 3.0])  # three products of 0.5, 0.25 and 1 s
