@@ -2,7 +2,8 @@
 
 The sidecar of `fig4c.csv` is `fig4c.csv.json`: the study and its command line, the package
 version, git commit and dirty flag, the model (preset and every StarParams field) and solver
-configuration, Taichi and Python versions, the machine (CPU model, cores, GPU) and the date.
+configuration, Taichi and Python versions, the machine (CPU model, cores, vector instruction
+sets, cache sizes, GPU) and the date.
 """
 
 from __future__ import annotations
@@ -31,6 +32,40 @@ def cpu_model() -> str:
     return platform.processor() or platform.machine() or "unknown"
 
 
+VECTOR_EXTENSIONS = ("sse2", "avx", "avx2", "fma", "avx512f", "asimd", "sve")
+"""The CPU's vector instruction sets a sidecar names, from /proc/cpuinfo's flags (x86) or
+features (Arm): which lanes LLVM can use for a kernel, why one machine's figures differ from
+another's."""
+
+
+def vector_extensions(cpuinfo: str) -> list:
+    """The VECTOR_EXTENSIONS among the first processor's flags (or features) in the text of
+    /proc/cpuinfo, in VECTOR_EXTENSIONS's order."""
+    for line in cpuinfo.splitlines():
+        name, _, value = line.partition(":")
+        if name.strip().lower() in ("flags", "features"):
+            flags = set(value.split())
+            return [extension for extension in VECTOR_EXTENSIONS if extension in flags]
+    return []
+
+
+def cache_sizes(cache_folder: Path) -> Dict[str, str]:
+    """{"L1d", "L1i", "L2", "L3": size as the kernel writes it, "48K"} of the caches in a
+    /sys/devices/system/cpu/cpuN/cache folder (empty where there is none): with the cores, what
+    decides whether a batch's matrices stay in cache."""
+    sizes = {}
+    for index in sorted(cache_folder.glob("index*")):
+        try:
+            level = (index / "level").read_text().strip()
+            kind = (index / "type").read_text().strip()
+            size = (index / "size").read_text().strip()
+        except OSError:
+            continue
+        suffix = {"Data": "d", "Instruction": "i"}.get(kind, "")
+        sizes[f"L{level}{suffix}"] = size
+    return sizes
+
+
 def nvidia_smi(query: str) -> list:
     """One line per NVIDIA GPU of `nvidia-smi --query-gpu=query` (empty without nvidia-smi)."""
     try:
@@ -47,9 +82,16 @@ def gpu_names() -> list:
 
 
 def machine() -> Dict[str, object]:
-    """cpu_model, cores, gpus, platform of this machine."""
-    return {"cpu_model": cpu_model(), "cores": os.cpu_count(), "gpus": gpu_names(),
-            "platform": platform.platform()}
+    """cpu_model, cores, vector_extensions, caches (`cache_sizes`), gpus, platform of this
+    machine."""
+    try:
+        cpuinfo = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        cpuinfo = ""
+    return {"cpu_model": cpu_model(), "cores": os.cpu_count(),
+            "vector_extensions": vector_extensions(cpuinfo),
+            "caches": cache_sizes(Path("/sys/devices/system/cpu/cpu0/cache")),
+            "gpus": gpu_names(), "platform": platform.platform()}
 
 
 def machine_columns(arch: str) -> Dict[str, object]:

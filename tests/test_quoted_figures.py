@@ -90,3 +90,14 @@ def test_a_hand_edited_generated_table_is_reported(results_page, tmp_path):
     regenerated = results_page.regenerate_blocks(text)
     assert "| stale |" not in regenerated
     assert "| A1+A4 | 0.796 | 0.852 | **forward** | 3.349 ± 0.50 | reverse |" in regenerated
+
+
+def test_a_sidecar_with_vector_sets_and_caches_names_the_widest_and_the_last_level(results_page):
+    machine = {"cpu_model": "Some CPU", "cores": 2, "gpus": [],
+               "vector_extensions": ["sse2", "avx", "avx2", "avx512f"],
+               "caches": {"L1d": "48K", "L1i": "64K", "L2": "2048K", "L3": "491520K"}}
+    text = results_page._provenance({"command": "python -m studies bench", "machine": machine})
+    assert text.endswith("Some CPU, 2 cores, avx512f, L3 491520K")
+    # a sidecar from before they were recorded reads as it did
+    older = {key: machine[key] for key in ("cpu_model", "cores", "gpus")}
+    assert results_page._provenance({"machine": older}).endswith("Some CPU, 2 cores")

@@ -240,7 +240,14 @@ def _provenance(sidecar: dict) -> str:
     if machine.get("cpu_model"):
         gpus = ", ".join(gpu if isinstance(gpu, str) else str(gpu.get("name", gpu))
                          for gpu in machine.get("gpus") or [])
+        # sidecars since the vector sets and caches were recorded: the widest set, the
+        # last-level cache (where a batch's matrices may or may not fit)
+        vectors = machine.get("vector_extensions") or []
+        caches = machine.get("caches") or {}
+        last_level = max(caches, default=None)
         parts.append(f"{machine['cpu_model']}, {machine.get('cores', '?')} cores"
+                     + (f", {vectors[-1]}" if vectors else "")
+                     + (f", {last_level} {caches[last_level]}" if last_level else "")
                      + (f", {gpus}" if gpus else ""))
     return "; ".join(parts)
 

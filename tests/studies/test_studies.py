@@ -20,7 +20,7 @@ from taichi_star.experiment import (FIG4C_COLUMNS, PAPER_DIRECTIONS, PAPER_GAITS
                                     compare_with_experiment, experimental_speed,
                                     experimental_speeds, experimental_trajectory)
 
-from studies import cli, gaits as gaits_study, study_names
+from studies import cli, gaits as gaits_study, provenance as study_provenance, study_names
 from studies.__main__ import main as studies_main
 
 QUICK = ["--quick", "--no-progress"]
@@ -471,3 +471,27 @@ def test_a_full_disk_while_drawing_a_plot_is_a_one_line_error(tmp_path, monkeypa
     error = capsys.readouterr().err.strip()
     assert f"cannot write {plot} (No space left on device)" in error
     assert len(error.splitlines()) == 1
+
+
+def test_the_machine_record_names_the_vector_sets_and_the_caches(tmp_path):
+    x86 = ("processor : 0\nflags : fpu sse sse2 avx fma avx2\n\n"
+           "processor : 1\nflags : fpu sse2 avx avx2 fma avx512f\n")
+    # the first processor's flags, in the order of VECTOR_EXTENSIONS
+    assert study_provenance.vector_extensions(x86) == ["sse2", "avx", "avx2", "fma"]
+    assert study_provenance.vector_extensions("Features : fp asimd evtstrm sve") == ["asimd",
+                                                                                    "sve"]
+    assert study_provenance.vector_extensions("model name : a CPU") == []
+    for index, (level, kind, size) in enumerate([("1", "Data", "48K"),
+                                                 ("1", "Instruction", "64K"),
+                                                 ("2", "Unified", "2048K"),
+                                                 ("3", "Unified", None)]):
+        folder = tmp_path / f"index{index}"
+        folder.mkdir()
+        (folder / "level").write_text(level + "\n")
+        (folder / "type").write_text(kind + "\n")
+        if size:
+            (folder / "size").write_text(size + "\n")
+    # a cache whose size cannot be read is left out, not guessed
+    assert study_provenance.cache_sizes(tmp_path) == {"L1d": "48K", "L1i": "64K", "L2": "2048K"}
+    assert study_provenance.cache_sizes(tmp_path / "missing") == {}
+    assert {"vector_extensions", "caches"} <= set(study_provenance.machine())
