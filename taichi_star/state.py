@@ -20,13 +20,13 @@ from .fields import FieldArena, FieldStore, array_dtype, array_shape
 
 STATUS_OK, STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_INACTIVE, STATUS_STEP_LIMIT = range(5)
 STATUS_NAMES = ("ok", "newton_failed", "non_finite", "inactive", "step_limit")
-LATER_COUNTERS = ("factorisations",)
-"""Work counters the state gained after states were first saved (`Simulator.save`): a saved
-state without one (from an earlier version) restores with it at zero."""
 """Per-instance status; "inactive" marks the padding of a batch up to the engine's capacity;
 "step_limit" an adaptive instance stopped before its stop time because its step count reached
 the counter's limit (`timegrid.MAX_STEPS_PER_INSTANCE`) or its step no longer advanced its
 time (a step below the time's rounding)."""
+LATER_COUNTERS = ("factorisations",)
+"""Work counters the state gained after states were first saved (`Simulator.save`): a saved
+state without one (from an earlier version) restores with it at zero."""
 
 
 @ti.data_oriented
