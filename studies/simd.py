@@ -68,13 +68,15 @@ n_elements (triplets or edges), lanes, seconds, us_per_instance, the two speed-u
 packed_ops_in_ir, vector_width_in_ir, derivative_relative_error (instance 0's gradient, for
 bending, or Jacobian, for the rod drag, against central differences, relative to its largest
 entry), bitwise_equal_to_instance_major (the residual and the Jacobian's blocks of every
-instance), load_average_1min.
+instance), load_average_1min. Each CSV comes with its plot (`simd.png`, `simd_assembly.png`):
+the grouped forms' speed-ups against the batch size, drawn from the CSV.
 
 --quick: the paper pattern, B = 8 and 16, f64 and f32, lanes 4, two repeats, 256 × 256 matmul.
 """
 
 import contextlib
 import io
+import json
 import os
 import re
 import tempfile
@@ -969,6 +971,47 @@ def measure_assembly(kernel: str, plans: dict, precision: str, batch_sizes: list
     return rows
 
 
+def plot_speedups(csv_path, png_path):
+    """One panel per preset and precision (and term, for simd_assembly.csv) from a simd CSV:
+    each grouped form's speed-up over today's form (median of the rounds) against the batch
+    size, one line per form and lane count, today's form the dashed line at 1."""
+    plt = cli.use_agg()
+    table = pd.read_csv(csv_path)
+    if "n_slots" not in table and "term" not in table:
+        table["term"] = "bending"  # assembly tables from before the rod drag: bending alone
+    keys = [key for key in ("term", "preset", "precision") if key in table]
+    panels = list(table.groupby(keys, sort=False))
+    columns = min(len(panels), 4)
+    rows = -(-len(panels) // columns)
+    fig, axes = plt.subplots(rows, columns, figsize=(4.2 * columns, 3.4 * rows), squeeze=False,
+                             sharey=True, layout="constrained")
+    for ax, (key, part) in zip(axes.flat, panels):
+        for (form, lanes), line in part[part["form"] != "instance_major"].groupby(
+                ["form", "lanes"], sort=False):
+            line = line.sort_values("batch_size")
+            ax.plot(line["batch_size"], line["speedup_median_of_rounds"], "o-",
+                    label=f"{form} × {lanes}")
+        ax.axhline(1.0, color="k", ls="--", lw=1, label="today's form")
+        ax.set_xscale("log")
+        ax.set_title(", ".join(str(value) for value in (key if isinstance(key, tuple) else (key,))),
+                     fontsize=9)
+        ax.set_xlabel("batch size B")
+        ax.grid(alpha=0.3, which="both")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("speed-up over today's form")
+    for ax in list(axes.flat)[len(panels):]:
+        ax.set_axis_off()
+    axes.flat[0].legend(fontsize=7)
+    sidecar = provenance.sidecar_path(csv_path)
+    if sidecar.exists():
+        made = json.loads(sidecar.read_text())
+        fig.suptitle(f"{made.get('machine', {}).get('cpu_model', '')}, commit "
+                     f"{str(made.get('git_commit', ''))[:7]}", fontsize=9)
+    fig.savefig(png_path, dpi=110)
+    plt.close(fig)
+    return png_path
+
+
 def elimination_plans(presets: list[str]) -> dict:
     """{preset: the elimination plan of its engine's Newton matrix} (builds the engines)."""
     plans = {}
@@ -1043,6 +1086,7 @@ def main(argv=None):
     if assembly_rows:
         tables["simd_assembly.csv"] = pd.DataFrame(assembly_rows)
     for name, table in tables.items():
-        out.write_csv(table, name)
+        csv_path = out.write_csv(table, name)
+        out.wrote(plot_speedups(csv_path, out.path(name.replace(".csv", ".png"))))
     out.report()
     return next(iter(tables.values()))

@@ -52,6 +52,7 @@ def test_simd_quick(tmp_path):
     assert (table["flops_per_instance"] == table["flops_per_instance"].iloc[0]).all()
     assert (table["gflops"] > 0).all() and (table["matmul_gflops"] > 0).all()
     assert not (tmp_path / "simd_assembly.csv").exists()
+    assert (tmp_path / "simd.png").stat().st_size > 1000
 
 
 def test_simd_quick_assemblies_in_f32(tmp_path):
@@ -70,6 +71,7 @@ def test_simd_quick_assemblies_in_f32(tmp_path):
     assert (assembly[assembly["form"].isin(simd.VECTOR_FORMS)]["packed_ops_in_ir"] > 0).all()
     assert (assembly["derivative_relative_error"] < 1e-3).all()
     assert not (tmp_path / "simd.csv").exists()
+    assert (tmp_path / "simd_assembly.png").stat().st_size > 1000
 
 
 def assembled_in(assembly, n_nodes, batch, state, element, forms):
