@@ -18,7 +18,7 @@ EXTRA_OF_STUDY = {
     "elasticities": "plots", "env_bench": "envs", "fig4c": "plots", "gait_design": "studies",
     "gaits": "plots", "gradient_fit": "studies", "model_select": "studies",
     "plan": "plots", "primitives": "plots", "reproduce": "studies", "scaling": None,
-    "sensitivity": "studies", "sensitivity_check": "plots", "simd": None, "stability": "plots",
+    "sensitivity": "studies", "sensitivity_check": "plots", "simd": "plots", "stability": "plots",
     "sweep": "studies",
     "work_precision": "plots",
 }
