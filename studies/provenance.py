@@ -21,20 +21,27 @@ from typing import Dict, Mapping, Optional, Sequence
 from taichi_star.batch import code_version, write_atomic
 
 
-def cpu_model() -> str:
-    """The CPU model name from /proc/cpuinfo (platform.processor() elsewhere)."""
+def cpuinfo_text() -> str:
+    """The text of /proc/cpuinfo ("" where there is none)."""
     try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.lower().startswith("model name"):
-                return line.split(":", 1)[1].strip()
+        return Path("/proc/cpuinfo").read_text()
     except OSError:
-        pass
+        return ""
+
+
+def cpu_model(cpuinfo: Optional[str] = None) -> str:
+    """The CPU model name from the text of /proc/cpuinfo (read when not given;
+    platform.processor() where it names none)."""
+    for line in (cpuinfo_text() if cpuinfo is None else cpuinfo).splitlines():
+        if line.lower().startswith("model name"):
+            return line.split(":", 1)[1].strip()
     return platform.processor() or platform.machine() or "unknown"
 
 
-VECTOR_EXTENSIONS = ("sse2", "avx", "avx2", "fma", "avx512f", "asimd", "sve")
+VECTOR_EXTENSIONS = ("sse2", "avx", "fma", "avx2", "avx512f", "asimd", "sve")
 """The CPU's vector instruction sets a sidecar names, from /proc/cpuinfo's flags (x86) or
-features (Arm): which lanes LLVM can use for a kernel, why one machine's figures differ from
+features (Arm), each family from the narrowest to the widest, so that the last one a CPU has
+is its widest: which lanes LLVM can use for a kernel, why one machine's figures differ from
 another's."""
 
 
@@ -84,11 +91,8 @@ def gpu_names() -> list:
 def machine() -> Dict[str, object]:
     """cpu_model, cores, vector_extensions, caches (`cache_sizes`), gpus, platform of this
     machine."""
-    try:
-        cpuinfo = Path("/proc/cpuinfo").read_text()
-    except OSError:
-        cpuinfo = ""
-    return {"cpu_model": cpu_model(), "cores": os.cpu_count(),
+    cpuinfo = cpuinfo_text()
+    return {"cpu_model": cpu_model(cpuinfo), "cores": os.cpu_count(),
             "vector_extensions": vector_extensions(cpuinfo),
             "caches": cache_sizes(Path("/sys/devices/system/cpu/cpu0/cache")),
             "gpus": gpu_names(), "platform": platform.platform()}

@@ -70,9 +70,9 @@ empty cache and loads from Taichi's offline cache in ~3 s against ~0.8 s in each
 from this much work they no longer lose: a call of 4.0 M robot-steps (1,024 robots, 3.91 s)
 took as long with and without them with an empty cache and ~3 % less with a warm one (a
 2-core AMD EPYC; as long with a warm one on a 2-core Intel Xeon, whose cache holds the batch's
-matrices, so that one instance's LU is as fast as the lanes'). Shorter calls, adaptive steps, the chord Jacobian, tangents and Simulators (whose work
-is not known ahead) run one instance at a time (docs/performance.md, "SIMD across
-instances")."""
+matrices, so that one instance's LU is as fast as the lanes'). Shorter calls, adaptive steps,
+the chord Jacobian, tangents and Simulators (whose work is not known ahead) run one instance
+at a time (docs/performance.md, "SIMD across instances")."""
 KERNEL_OPTIMISATION = True
 """Taichi's advanced IR optimisation passes (`ti.init(advanced_optimization=...)`): on, an engine
 steps 10-13 % faster; off, it compiles faster (~0.7x as long on the CPU, where the passes leave

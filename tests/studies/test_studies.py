@@ -476,8 +476,9 @@ def test_a_full_disk_while_drawing_a_plot_is_a_one_line_error(tmp_path, monkeypa
 def test_the_machine_record_names_the_vector_sets_and_the_caches(tmp_path):
     x86 = ("processor : 0\nflags : fpu sse sse2 avx fma avx2\n\n"
            "processor : 1\nflags : fpu sse2 avx avx2 fma avx512f\n")
-    # the first processor's flags, in the order of VECTOR_EXTENSIONS
-    assert study_provenance.vector_extensions(x86) == ["sse2", "avx", "avx2", "fma"]
+    # the first processor's flags, in the order of VECTOR_EXTENSIONS (the widest last)
+    assert study_provenance.vector_extensions(x86) == ["sse2", "avx", "fma", "avx2"]
+    assert study_provenance.cpu_model("model name : Some CPU\n" + x86) == "Some CPU"
     assert study_provenance.vector_extensions("Features : fp asimd evtstrm sve") == ["asimd",
                                                                                     "sve"]
     assert study_provenance.vector_extensions("model name : a CPU") == []
