@@ -621,20 +621,14 @@ def rod_drag_element(vx, vy, ex, ey, parallel_coeff, perpendicular_coeff):
                           + perpendicular_coeff * across_size * nx * ny),
                   -2.0 * (parallel_coeff * along_size * ty * ty
                           + perpendicular_coeff * across_size * ny * ny))
-    # ∂F/∂t (t's derivative with v fixed), then through ∂t/∂e = (I − t tᵀ)/|e|
-    along_part, across_part = 2.0 * along_size, 2.0 * across_size
-    along_force, across_force = along_size * along, across_size * across
-    d_xx = -(parallel_coeff * (along_part * tx * vx + along_force)
-             + perpendicular_coeff * (across_part * nx * vy))
-    d_xy = -(parallel_coeff * (along_part * tx * vy)
-             + perpendicular_coeff * (-across_part * nx * vx - across_force))
-    d_yx = -(parallel_coeff * (along_part * ty * vx)
-             + perpendicular_coeff * (across_part * ny * vy + across_force))
-    d_yy = -(parallel_coeff * (along_part * ty * vy + along_force)
-             + perpendicular_coeff * (-across_part * ny * vx))
-    p_xx, p_xy, p_yy = (1.0 - tx * tx) / length, -tx * ty / length, (1.0 - ty * ty) / length
-    d_edge = (d_xx * p_xx + d_xy * p_xy, d_xx * p_xy + d_xy * p_yy,
-              d_yx * p_xx + d_yy * p_xy, d_yx * p_xy + d_yy * p_yy)
+    # ∂F/∂e = −(p·t + q·n)·nᵀ/|e|, rank one (the engine's `rod_drag` says why)
+    tangent_weight = across * (2.0 * parallel_coeff * along_size
+                               - perpendicular_coeff * across_size)
+    normal_weight = along * (parallel_coeff * along_size - 2.0 * perpendicular_coeff * across_size)
+    weighted_x = tangent_weight * tx + normal_weight * nx
+    weighted_y = tangent_weight * ty + normal_weight * ny
+    d_edge = (-(weighted_x * nx) / length, -(weighted_x * ny) / length,
+              -(weighted_y * nx) / length, -(weighted_y * ny) / length)
     return force, d_velocity, d_edge
 
 

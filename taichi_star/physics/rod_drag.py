@@ -28,14 +28,13 @@ def rod_drag(velocity, edge, parallel_coeff, perpendicular_coeff):
               + perpendicular_coeff * across_size * across * normal)
     d_velocity = -2.0 * (parallel_coeff * along_size * tangent.outer_product(tangent)
                          + perpendicular_coeff * across_size * normal.outer_product(normal))
-    rotation = ti.Matrix([[0.0, -1.0], [1.0, 0.0]])
-    rotated_velocity = ti.Vector([velocity[1], -velocity[0]])
-    d_tangent = -(parallel_coeff * (2.0 * along_size * tangent.outer_product(velocity)
-                                    + along_size * along * ti.Matrix.identity(float, 2))
-                  + perpendicular_coeff * (2.0 * across_size * normal.outer_product(rotated_velocity)
-                                           + across_size * across * rotation))
-    tangent_d_edge = (ti.Matrix.identity(float, 2) - tangent.outer_product(tangent)) / length
-    return force, d_velocity, d_tangent @ tangent_d_edge
+    # in the plane ∂t/∂e = n·nᵀ/|e| and ∂n/∂e = −t·nᵀ/|e| (the unit vectors only turn), so
+    # ∂a/∂e = (b/|e|)·nᵀ, ∂b/∂e = −(a/|e|)·nᵀ and ∂F/∂e has rank one: −(p·t + q·n)·nᵀ/|e|;
+    # half the arithmetic of the chain rule through ∂F/∂t and ∂t/∂e = (I − t·tᵀ)/|e|
+    tangent_weight = across * (2.0 * parallel_coeff * along_size - perpendicular_coeff * across_size)
+    normal_weight = along * (parallel_coeff * along_size - 2.0 * perpendicular_coeff * across_size)
+    d_edge = -(tangent_weight * tangent + normal_weight * normal).outer_product(normal) / length
+    return force, d_velocity, d_edge
 
 
 def rod_edges(topology) -> np.ndarray:
