@@ -168,6 +168,10 @@ def test_rod_drag_jacobians(taichi_cpu, velocity):
     jacobian = _central_jacobian(lambda x: evaluate(x)[:2], inputs, 1e-8)
     _assert_close(out[2:].reshape(2, 4)[:, :2], jacobian[:, :2])
     _assert_close(out[2:].reshape(2, 4)[:, 2:], jacobian[:, 2:])
+    # the drag depends on the edge's direction alone: lengthening the edge along itself changes
+    # nothing, so ∂F/∂e·e vanishes (to round-off of its entries, ~1e-16 of their size)
+    d_edge = out[2:].reshape(2, 4)[:, 2:]
+    np.testing.assert_allclose(d_edge @ edge, 0.0, atol=1e-14 * np.abs(d_edge).max() * 1.3e-3)
     speed_squared = np.dot(velocity, velocity)
     # drag opposes motion: the force does negative work
     assert np.dot(out[:2], velocity) < 0 < speed_squared
