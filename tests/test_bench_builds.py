@@ -59,3 +59,22 @@ def test_the_summary_keeps_the_lanes_apart(bench_builds):
     unlabelled = bench_builds.summarise(table[table["lanes"] == 1].drop(columns="lanes"))
     assert unlabelled["lanes"].tolist() == [1]
     assert unlabelled["ratio_after_to_before"].tolist() == pytest.approx([1.1])
+
+
+def test_a_build_from_before_a_column_is_compared_where_it_says_nothing(bench_builds):
+    """A baseline from before the lanes setting and before the plain section's digest: its rows
+    (lanes and digest missing) meet the other build's one-lane rows, and the bits of a case
+    are compared only where both builds recorded them."""
+    table = pd.DataFrame([
+        _row("before", 1, 512, 80.0, np.nan, "plain", lanes=np.nan),
+        _row("after", 1, 512, 90.0, "dd", "plain"),
+        _row("before", 1, 64, 40.0, "ee", lanes=np.nan), _row("after", 1, 64, 50.0, "ee"),
+        _row("after", 1, 64, 30.0, "ff", "sensitivities")])
+    summary = bench_builds.summarise(table).set_index("section")
+    assert len(summary) == 3 and summary["lanes"].tolist() == [1, 1, 1]
+    # a section only the later build has: no ratio, and nothing to compare the bits with
+    assert np.isnan(summary.loc["sensitivities", "ratio_after_to_before"])
+    assert summary.loc["sensitivities", "same_bits"] == ""
+    assert summary.loc["plain", "ratio_after_to_before"] == pytest.approx(90.0 / 80.0)
+    assert summary.loc["plain", "same_bits"] == ""
+    assert summary.loc["batch", "same_bits"] == "True"

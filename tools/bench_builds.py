@@ -46,18 +46,28 @@ def commit_of(revision: str) -> str:
                           capture_output=True, text=True).stdout.strip()
 
 
+def bits_agree(rows: pd.DataFrame) -> str:
+    """"True" or "False": whether every run of one case ended in the same state, or "" where
+    one build did not run it or recorded no digest for it (a section without one, or a build
+    from before it)."""
+    recorded = rows.dropna(subset=["final_state"])
+    if set(recorded["build"]) != {"before", "after"}:
+        return ""
+    return str(recorded["final_state"].nunique() == 1)
+
+
 def summarise(table: pd.DataFrame) -> pd.DataFrame:
     """One row per CASE: best robot-steps/s per build, ratio after/before, same_bits."""
-    if "lanes" not in table:
-        table = table.assign(lanes=1)
+    # a row without lanes (a build from before the setting, a section that does not record
+    # it) ran one instance at a time
+    table = table.assign(lanes=table["lanes"].fillna(1) if "lanes" in table else 1)
     keyed = table.assign(**{c: table[c].fillna("") for c in CASE})
     best = keyed.pivot_table(index=CASE, columns="build", values="robot_steps_per_s",
                              aggfunc="max")
     summary = best.rename(columns=lambda b: f"{b}_robot_steps_per_s").reset_index()
     summary["ratio_after_to_before"] = (summary["after_robot_steps_per_s"]
                                         / summary["before_robot_steps_per_s"])
-    digests = keyed.groupby(CASE)["final_state"].agg(
-        lambda d: "" if d.isna().all() else str(d.dropna().nunique() == 1))
+    digests = keyed.groupby(CASE)[["build", "final_state"]].apply(bits_agree)
     return summary.merge(digests.rename("same_bits").reset_index(), on=CASE)
 
 
