@@ -29,8 +29,9 @@ def rod_drag(velocity, edge, parallel_coeff, perpendicular_coeff):
     d_velocity = -2.0 * (parallel_coeff * along_size * tangent.outer_product(tangent)
                          + perpendicular_coeff * across_size * normal.outer_product(normal))
     # in the plane ∂t/∂e = n·nᵀ/|e| and ∂n/∂e = −t·nᵀ/|e| (the unit vectors only turn), so
-    # ∂a/∂e = (b/|e|)·nᵀ, ∂b/∂e = −(a/|e|)·nᵀ and ∂F/∂e has rank one: −(p·t + q·n)·nᵀ/|e|;
-    # half the arithmetic of the chain rule through ∂F/∂t and ∂t/∂e = (I − t·tᵀ)/|e|
+    # ∂a/∂e = (b/|e|)·nᵀ, ∂b/∂e = −(a/|e|)·nᵀ and ∂F/∂e has rank one: −(p·t + q·n)·nᵀ/|e|
+    # with p, q the tangent and normal weights below; half the arithmetic of the chain rule
+    # through ∂F/∂t and ∂t/∂e = (I − t·tᵀ)/|e|
     tangent_weight = across * (2.0 * parallel_coeff * along_size - perpendicular_coeff * across_size)
     normal_weight = along * (parallel_coeff * along_size - 2.0 * perpendicular_coeff * across_size)
     d_edge = -(tangent_weight * tangent + normal_weight * normal).outer_product(normal) / length
