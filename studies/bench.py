@@ -679,6 +679,12 @@ def phase_bars(rows: pd.DataFrame, label: str):
     return part, names, split
 
 
+def lanes_note(lanes) -> str:
+    """", 8 lanes" for a row that grouped its instances in lanes, "" for one instance at a time
+    (1, or "" in a table from before the setting)."""
+    return f", {int(lanes)} lanes" if lanes not in ("", 1) else ""
+
+
 def plot_bench(csv_path, png_path):
     """Three panels from a bench CSV: throughput against B (log-log, one line per precision,
     the target dashed, real-time factor on the right axis); the phase split per
@@ -705,7 +711,7 @@ def plot_bench(csv_path, png_path):
         # rounds of the same setting: the fastest counts, as within a measurement
         best = part.groupby("batch_size")["robot_steps_per_s"].max()
         place = (f", {layout}, {int(block_dim)}/block" if arch != "cpu"
-                 else f", in-process{f', {int(lanes)} lanes' if lanes not in ('', 1) else ''}")
+                 else f", in-process{lanes_note(lanes)}")
         compiler = f", IR optimisation {optimise}" if len(compilers) > 1 else ""
         ax.plot(best.index, best.to_numpy(), "o-",
                 label=f"{precision}, {jacobian}{place}{compiler}")
@@ -738,9 +744,7 @@ def plot_bench(csv_path, png_path):
                    + (" opt {kernel_optimisation}" if len(compilers) > 1 else ""))
     sweep = sweep.assign(
         preset_note=np.where(sweep["preset"] == "accurate", " accurate", ""),
-        lanes_note=[f" {int(lanes)} lanes" if lanes not in ("", 1) else ""
-                    for lanes in sweep["lanes"]])
-    skip = skip.assign(preset_note="", lanes_note="")
+        lanes_note=[lanes_note(lanes) for lanes in sweep["lanes"]])
     split_rows = sweep
     if "factorisations_mean" not in table:
         # tables from before the factorisations were counted charged one to every iteration:
