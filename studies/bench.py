@@ -357,21 +357,24 @@ def measure_processes(batch: int, workers: int, jacobian: str, steps: int, repea
             **end_to_end_figures(result, batch * (WARMUP_STEPS + steps), timed)}
 
 
-def measure_plain(batch: int, duration: float, repeats: int, sensitivities=()) -> dict:
+def measure_plain(batch: int, duration: float, repeats: int, sensitivities=(),
+                  jacobian: str = "newton") -> dict:
     """End-to-end throughput of the plain call a user writes, `simulate(params, duration)` with
-    the default SolverConfig, in this process: the five Fig. 4c gaits repeated to `batch`
-    instances from rest, the best of `repeats` calls after one that compiles the engine;
-    with `sensitivities` (parameter names) the same call differentiating by them (the
-    robot-steps counted are the instances', not their replicas'). `time_to_first_step_s` is
+    the default SolverConfig (or its `jacobian` mode), in this process: the five Fig. 4c gaits
+    repeated to `batch` instances from rest, the best of `repeats` calls after one that
+    compiles the engine; with `sensitivities` (parameter names) the same call differentiating
+    by them (the robot-steps counted are the instances', not their replicas').
+    `time_to_first_step_s` is
     that first call's, one step: the engine's compilation where this process has not built
     one of its size and kind before (the sections run in order), its loading and a step;
     `final_state` a digest of the displacements and of their sensitivities."""
     params = [StarParams(gait=PAPER_GAITS[i % len(PAPER_GAITS)]) for i in range(batch)]
     steps = round(duration / DT)
+    solver = SolverConfig(jacobian=jacobian)
     result, timed, first = best_of_calls(
-        lambda: simulate(params, duration, sensitivities=sensitivities), repeats,
-        warmup=lambda: simulate(params, DT, sensitivities=sensitivities))
-    return {"gait": "paper_gaits", "jacobian": SolverConfig().jacobian, "workers": 1,
+        lambda: simulate(params, duration, solver, sensitivities=sensitivities), repeats,
+        warmup=lambda: simulate(params, DT, solver, sensitivities=sensitivities))
+    return {"gait": "paper_gaits", "jacobian": jacobian, "workers": 1,
             "n_nodes": result.topology.n_nodes, "steps": steps, "time_to_first_step_s": first,
             "final_state": state_digest(np.column_stack(
                 [result.summary[output].to_numpy() for output in DISPLACEMENTS]
@@ -437,8 +440,8 @@ def build_parser():
     parser.add_argument("--scenario-batch", type=int, default=SCENARIO_BATCH,
                         quick=QUICK_SCENARIO_BATCH, help="batch size of the scenarios")
     parser.add_argument("--jacobians", default="newton,chord", quick="newton",
-                        help="comma list of newton, chord for the B sweep and the processes "
-                             "section")
+                        help="comma list of newton, chord, lagged for the B sweep and the "
+                             "processes section")
     parser.add_argument("--workers-list", default="1,2", quick="none",
                         help="comma list of worker-process counts for the end-to-end processes "
                              "section, or none")
@@ -448,6 +451,9 @@ def build_parser():
     parser.add_argument("--no-plain-call", dest="plain_call", action="store_false",
                         help="skip the plain section: simulate(params, duration) with the "
                              "default solver at the process batch size (CPU)")
+    parser.add_argument("--plain-jacobians", default="newton", quick="newton",
+                        help="comma list of Jacobian modes of the plain call: newton (the "
+                             "default solver's), chord, lagged (opt-in: kept across steps)")
     parser.add_argument("--plain-duration", type=float, default=PLAIN_DURATION,
                         quick=(WARMUP_STEPS + QUICK_STEPS) * DT,
                         help=f"simulated seconds of the plain call (default one period, "
@@ -519,6 +525,7 @@ def parse_args(argv):
     args.batch_sizes = cli.parse_counts(args.batch_sizes, "--batch-sizes")
     args.precisions = solver_choices(args.precisions, "--precisions", "precision")
     args.jacobians = solver_choices(args.jacobians, "--jacobians", "jacobian")
+    args.plain_jacobians = solver_choices(args.plain_jacobians, "--plain-jacobians", "jacobian")
     args.scenarios = optional_list(args.scenarios, "--scenarios",
                                    lambda text, flag: cli.parse_choices(text, flag, SCENARIOS))
     args.workers_list = optional_list(args.workers_list, "--workers-list", cli.parse_counts)
@@ -635,12 +642,14 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
     if args.plain_call and not gpu:
         for lanes in args.lanes:
             Runtime.current().configure_lanes(lanes)
-            figures = measure_plain(args.process_batch, args.plain_duration, args.repeats)
-            add({"section": "plain", "scenario": "all_terms", "preset": "paper",
-                 "batch_size": args.process_batch, "precision": "f64", **figures,
-                 "lanes": Runtime.current().engine_lanes(
-                     args.process_batch, SolverConfig(),
-                     robot_steps=args.process_batch * figures["steps"])})
+            for jacobian in args.plain_jacobians:
+                figures = measure_plain(args.process_batch, args.plain_duration, args.repeats,
+                                        jacobian=jacobian)
+                add({"section": "plain", "scenario": "all_terms", "preset": "paper",
+                     "batch_size": args.process_batch, "precision": "f64", **figures,
+                     "lanes": Runtime.current().engine_lanes(
+                         args.process_batch, SolverConfig(jacobian=jacobian),
+                         robot_steps=args.process_batch * figures["steps"])})
         Runtime.current().configure_lanes()
     for count in args.sensitivity_counts:
         add({"section": "sensitivities", "scenario": f"sensitivities_{count}", "preset": "paper",

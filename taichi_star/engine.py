@@ -30,7 +30,7 @@ import taichi as ti
 
 from .linsolve import BlockSystem, LaneBlocks, plan_elimination
 from .model import BatchModel
-from .params import SolverConfig
+from .params import JACOBIANS, SolverConfig
 from .physics import coupled_node_pairs
 from .fields import FieldArena, FieldStore
 from .physics.assembly import Assembly
@@ -45,10 +45,22 @@ ALL_TERMS, EXTERNAL_TERMS, INTERNAL_TERMS = range(3)
 """Which terms `BatchEngine.assemble_forces` assembles (static)."""
 
 SOLVER_SETTINGS = {"dt": float, "newton_tol": float, "residual_limit": float,
-                   "max_newton": ti.i32, "max_substep_halvings": ti.i32, "chord": ti.i32,
+                   "max_newton": ti.i32, "max_substep_halvings": ti.i32, "jacobian_mode": ti.i32,
                    "error_tol": float, "dt_min": float, "dt_max": float}
 """The solver settings the kernels read, with their field types (all SolverConfig attributes of
-the same name but `chord`: 1 for the chord Jacobian)."""
+the same name but `jacobian_mode`: the position of SolverConfig.jacobian in JACOBIANS)."""
+
+JACOBIAN_NEWTON, JACOBIAN_CHORD, JACOBIAN_LAGGED = (JACOBIANS.index(mode) for mode in
+                                                    ("newton", "chord", "lagged"))
+"""`jacobian_mode` of each SolverConfig.jacobian."""
+
+LAGGED_MAX_AGE = 100
+"""Most solves that start with a kept factorisation of the lagged Jacobian before a step
+refactors anyway. Steps that converge after one update never measure how well an old
+factorisation still contracts (the chord's rule refactors on a contraction under 4×), and the
+error left after that update is bounded by the update only while it contracts at least 2×; 100
+fixed steps (0.1 s at the default dt) keep its age well inside the shape's changes (a heating
+pulse lasts 0.163 s)."""
 
 LOCKSTEP_MINIMUM_BATCH = 64
 """Simulated instances from which the fixed-step kernel of an engine with lanes iterates its
@@ -135,6 +147,12 @@ class BatchEngine:
         self.lockstep = arena.field(ti.i32)
         """1 where the groups iterate in lockstep (`advance_group`)."""
         self.step_limit = arena.field(ti.i32)
+        self.kept_inertia_scale = arena.batch_field(float, capacity)
+        self.kept_rate_gain = arena.batch_field(float, capacity)
+        self.kept_age = arena.batch_field(ti.i32, capacity)
+        """The factorisation blocks[b] holds (the lagged Jacobian reuses it across steps): the
+        integrator weights its matrix was assembled with (inertia scale 1/s², rate gain 1/s;
+        scale 0: none to reuse) and the solves that have started with it since."""
         """Most steps an adaptive instance takes (MAX_STEPS_PER_INSTANCE: the int32 counters
         never overflow); one that reaches it stops with status step_limit."""
         self.assembly = Assembly(topology, capacity, arena, self.plan.pattern_slot, integrator,
@@ -173,7 +191,8 @@ class BatchEngine:
         model_fields = {name: getattr(self, name)
                         for name in ("mass", "inertia", "primal_count", "tangent_count",
                                      "slot_stride", "group_count", "group_stride", "lockstep",
-                                     "step_limit", *SOLVER_SETTINGS)}
+                                     "step_limit", "kept_inertia_scale", "kept_age",
+                                     *SOLVER_SETTINGS)}
         for term in self.terms:
             model_fields.update({f"{term.name}.{name}": field
                                  for name, field in term.coefficient_fields().items()})
@@ -228,8 +247,10 @@ class BatchEngine:
                   else self.loop_spread,
                   "lockstep": int(lockstep),
                   "step_limit": MAX_STEPS_PER_INSTANCE,
-                  **{name: getattr(solver, name) for name in SOLVER_SETTINGS if name != "chord"},
-                  "chord": int(solver.jacobian == "chord")}
+                  "kept_inertia_scale": np.zeros(capacity), "kept_age": np.zeros(capacity),
+                  **{name: getattr(solver, name) for name in SOLVER_SETTINGS
+                     if name != "jacobian_mode"},
+                  "jacobian_mode": JACOBIANS.index(solver.jacobian)}
         for term in self.terms:
             coefficients = model.coefficients[term.name]
             values.update({f"{term.name}.{name}": pad_batch(coefficients[name], capacity)
@@ -287,6 +308,9 @@ class BatchEngine:
         if ti.static(terms != INTERNAL_TERMS):
             identity = ti.Matrix.identity(float, 2)
             self.system.clear(b, jacobian)
+            if jacobian:
+                # the blocks no longer hold a factorisation until `factor`
+                self.kept_inertia_scale[b] = 0.0
             for n in range(self.n_nodes):
                 scaled_mass = inertia_scale * self.inertia[b, n]
                 self.assembly.add_residual(b, n, scaled_mass * (
@@ -333,15 +357,39 @@ class BatchEngine:
         (converged, finite); on failure the positions are restored to the start of the step."""
         inertia_scale, rate_gain = self.prepare_step(b, start_time, end_time, h, ratio, use_history,
                                                      extrapolate)
-        iterations, converged, finite, refactor, previous_update = 0, 0, 1, 1, 0.0
+        iterations, converged, finite, previous_update = 0, 0, 1, 0.0
+        refactor = self.first_refactor(b, inertia_scale, rate_gain)
         while self.newton_goes_on(iterations, converged, finite):
             largest_residual = self.assemble_newton(b, inertia_scale, rate_gain, refactor)
             if refactor:
-                self.system.factor(b)
+                self.factor(b, inertia_scale, rate_gain)
             self.system.solve(b)
             iterations, converged, finite, refactor, previous_update = self.newton_update(
                 b, iterations, previous_update, largest_residual)
         return self.finish_newton(b, rate_gain, iterations, converged, finite)
+
+    @ti.func
+    def first_refactor(self, b, inertia_scale, rate_gain):
+        """Whether instance b's solve with these integrator weights (`integrator.weights`)
+        starts by assembling and factoring its Jacobian (1), or with the factorisation that
+        blocks[b] holds (0): only the lagged Jacobian's, made with the same weights (so for the
+        same step size and integrator formula) at most LAGGED_MAX_AGE solves ago."""
+        refactor = 1
+        if self.jacobian_mode[None] == JACOBIAN_LAGGED \
+                and self.kept_inertia_scale[b] == inertia_scale \
+                and self.kept_rate_gain[b] == rate_gain and self.kept_age[b] < LAGGED_MAX_AGE:
+            refactor = 0
+            self.kept_age[b] = self.kept_age[b] + 1
+        return refactor
+
+    @ti.func
+    def factor(self, b, inertia_scale, rate_gain):
+        """Factor instance b's assembled Jacobian, made with these integrator weights, in
+        place (the factorisation the lagged Jacobian may reuse, `first_refactor`)."""
+        self.system.factor(b)
+        self.kept_inertia_scale[b] = inertia_scale
+        self.kept_rate_gain[b] = rate_gain
+        self.kept_age[b] = 0
 
     @ti.func
     def newton_goes_on(self, iterations, converged, finite):
@@ -368,8 +416,8 @@ class BatchEngine:
     def newton_update(self, b, iterations, previous_update, largest_residual):
         """Apply the Newton update that rhs[b] holds (solved) to instance b's positions after
         `iterations` updates, the last of size `previous_update` (m). Returns (iterations,
-        converged, finite, refactor: for the chord Jacobian whether the next iteration
-        refactors, this update's size)."""
+        converged, finite, refactor: for the chord and lagged Jacobians whether the next
+        iteration refactors, this update's size)."""
         finite = 1
         largest_update = 0.0
         for n in range(self.n_nodes):
@@ -390,17 +438,22 @@ class BatchEngine:
         if finite == 1 and error_left <= self.newton_tol[None] \
                 and largest_residual <= self.residual_limit[None]:
             converged = 1
-        # chord mode keeps the factorisation while it contracts the update at least 4×
-        # per iteration (then each kept iteration saves the Jacobian's assembly and LU)
+        # the chord and lagged Jacobians keep the factorisation while it contracts the update
+        # at least 4× per iteration (then each kept iteration saves the Jacobian's assembly
+        # and LU)
         refactor = 1
-        if self.chord[None] == 1 and (iterations == 1 or largest_update < 0.25 * previous_update):
+        if self.jacobian_mode[None] != JACOBIAN_NEWTON \
+                and (iterations == 1 or largest_update < 0.25 * previous_update):
             refactor = 0
         return iterations, converged, finite, refactor, largest_update
 
     @ti.func
     def finish_newton(self, b, rate_gain, iterations, converged, finite):
         """Count instance b's finished Newton iteration and set its velocities (converged) or
-        restore its positions to the step's start (failed). Returns (converged, finite)."""
+        restore its positions to the step's start (failed; its factorisation then is not
+        reused). Returns (converged, finite)."""
+        if converged == 0:
+            self.kept_inertia_scale[b] = 0.0
         self.state.newton_total[b] = self.state.newton_total[b] + iterations
         self.state.newton_solves[b] = self.state.newton_solves[b] + 1
         self.state.newton_max[b] = ti.max(self.state.newton_max[b], iterations)
@@ -681,7 +734,8 @@ class BatchEngine:
         the integrator's offsets) from its own state and assembles its residual at q*: half
         their difference is ε·(∂r/∂S·Ṡ + ∂r/∂c·ċ) up to O(ε³). The implicit function theorem
         on r(q*) = 0 gives ε·q̇* = −J⁻¹ times it, J the Jacobian at q* (assembled and factored
-        here, so a chord run gets the exact one too), whose rigid motion `rigid_correction`
+        here, so a chord run gets the exact one too, and a lagged run's next step starts
+        with it), whose rigid motion `rigid_correction`
         then makes obey the rigid-body equations (net force and torque, by
         `rigid_projector_of`, from the inertia's and the external terms' blocks and the
         internal terms' residual). The replicas' positions become q* ± ε·q̇* and their
@@ -691,7 +745,7 @@ class BatchEngine:
         inertia_scale, rate_gain = self.integrator.weights(h, ratio, use_history)
         centre, total_mass, moment = self.mass_centre(b)
         self.assemble_with_rigid_projector(b, inertia_scale, rate_gain, centre)
-        self.system.factor(b)
+        self.factor(b, inertia_scale, rate_gain)
         for j in range(self.tangent_count[None]):
             # a loop, not unrolled: the replicas' preparation and assembly, every term inlined,
             # are compiled once, not twice (the sensitive kernel's compile time)
@@ -896,7 +950,8 @@ class BatchEngine:
                     b = self.group_member(g, lane)
                     if self.lane_iterates(b):
                         if self.newton_refactor[b]:
-                            self.system.factor(b)
+                            inertia_scale, rate_gain = self.lane_weights(b)
+                            self.factor(b, inertia_scale, rate_gain)
                         self.system.solve(b)
             for lane in range(self.lanes):
                 b = self.group_member(g, lane)
@@ -960,11 +1015,11 @@ class BatchEngine:
     def start_lane_solve(self, b):
         """`prepare_step` of instance b's current solve, its Newton iteration at the start."""
         start, end, h, use_history = self.lane_attempt(b)
-        self.prepare_step(b, start, end, h, 1.0, use_history, 0)
+        inertia_scale, rate_gain = self.prepare_step(b, start, end, h, 1.0, use_history, 0)
         self.newton_iterations[b] = 0
         self.newton_converged[b] = 0
         self.newton_finite[b] = 1
-        self.newton_refactor[b] = 1
+        self.newton_refactor[b] = self.first_refactor(b, inertia_scale, rate_gain)
         self.newton_previous_update[b] = 0.0
         self.lane_phase[b] = LANE_ITERATES
 
@@ -1047,4 +1102,14 @@ class BatchEngine:
         return self.state.save()
 
     def restore_state(self, saved: Dict[str, np.ndarray]):
+        """Put back a state from `save_state` (`BatchState.restore`, bitwise). The lagged
+        Jacobian's kept factorisations are not part of a state: an instance that this changes
+        refactors at its next step (the others keep theirs, so that putting back some
+        instances leaves the rest as they would have been)."""
+        changed = self.state.changed_instances(saved) \
+            if self.jacobian_mode[None] == JACOBIAN_LAGGED else None
         self.state.restore(saved)
+        if changed is not None and changed.any():
+            kept = self.kept_inertia_scale.to_numpy()
+            kept[changed] = 0.0
+            load_field(self.kept_inertia_scale, kept)

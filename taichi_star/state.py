@@ -133,6 +133,22 @@ class BatchState:
         """A copy of the whole state (every field, padding included)."""
         return self.store.read()
 
+    def changed_instances(self, saved: Dict[str, np.ndarray]) -> np.ndarray:
+        """(capacity,) bool: the instances whose fields in `saved` (a `save` of an engine of the
+        same layout) differ in any bit from the state now; all of them where a field is
+        missing or of another shape or type."""
+        now = self.save()
+        changed = np.zeros(len(now["status"]), dtype=bool)
+        for name, values in now.items():
+            other = saved.get(name)
+            if other is None or other.shape != values.shape or other.dtype != values.dtype:
+                changed[:] = True
+                continue
+            as_bytes = lambda array: np.ascontiguousarray(array).reshape(  # noqa: E731
+                len(array), -1).view(np.uint8)
+            changed |= (as_bytes(values) != as_bytes(other)).any(axis=1)
+        return changed
+
     def restore(self, saved: Dict[str, np.ndarray]):
         """Put back a state from `save` of an engine of the same layout, bitwise (a state saved
         before a `LATER_COUNTERS` counter was kept restores with it at zero). Raises ValueError

@@ -228,7 +228,7 @@ def test_solver_config_stores_numpy_scalars_as_python_numbers():
     (ts.StarParams, "jet_application", ["hub", "spread"]),
     (ts.SolverConfig, "precision", ["f64", "f32"]),
     (ts.SolverConfig, "integrator", ["euler", "bdf2"]),
-    (ts.SolverConfig, "jacobian", ["newton", "chord"]),
+    (ts.SolverConfig, "jacobian", ["newton", "chord", "lagged"]),
 ])
 def test_a_bad_choice_is_refused_naming_the_field_and_the_choices(cls, field, choices):
     with pytest.raises(ValueError) as error:

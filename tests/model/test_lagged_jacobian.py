@@ -1,0 +1,114 @@
+"""The lagged Jacobian (SolverConfig(jacobian="lagged")): a factorisation kept across steps
+reaches each step's solution to newton_tol, is reused exactly when its integrator weights
+match and it is young enough, is never taken from another call, another instance or a failed
+solve, and a Simulator that puts back some instances leaves the others' bits alone."""
+
+import numpy as np
+
+import taichi_star as ts
+from taichi_star.engine import LAGGED_MAX_AGE
+from taichi_star.runtime import prepare_engine
+from taichi_star.state import STATUS_NEWTON_FAILED, STATUS_OK
+
+LAGGED = ts.SolverConfig(jacobian="lagged")
+
+
+def _final_shapes(params, n_steps, solver):
+    result = ts.simulate(params, n_steps * solver.dt, solver=solver,
+                         record_interval_s=n_steps * solver.dt, record_shapes=True)
+    assert (result.summary.status == "ok").all()
+    return result.shapes[-1]
+
+
+def test_lagged_jacobian_reaches_the_same_solution():
+    """As the chord: another path to each step's solution, which both modes reach within
+    newton_tol = 1e-10 m (the kept factorisation contracts the update at least 4× when last
+    measured, so the error left after an update is at most a third of it), hence within
+    300 × 1e-10 m after 300 steps (the steps' errors add at worst). A mode that converged to
+    another point would be off by the step's motion, micrometres."""
+    params = [ts.StarParams(gait="A1+A2"), ts.StarParams(gait="A1+A3+A5", alpha=1.2)]
+    newton = _final_shapes(params, 300, ts.SolverConfig())
+    lagged = _final_shapes(params, 300, LAGGED)
+    assert np.abs(lagged - newton).max() < 300 * 1e-10
+
+
+def _factorisations(params, n_steps, solver):
+    summary = ts.simulate(params, n_steps * solver.dt, solver).summary
+    assert (summary["newton_iterations_max"] == 1).all()  # at rest: every solve one update
+    assert (summary["steps"] == n_steps).all()  # no retries: a solve per step
+    return (summary["factorisations_mean"] * n_steps).round().astype(int).tolist()
+
+
+def test_a_kept_factorisation_is_reused_for_its_age_limit_and_then_refactored():
+    """A robot at rest (gait "none") solves every step with one update, so only the age rule
+    refactors: the first step factors, the next LAGGED_MAX_AGE steps reuse it (the last of
+    them at age LAGGED_MAX_AGE − 1 < LAGGED_MAX_AGE), and the step after them factors again."""
+    rest = [ts.StarParams(gait="none")]
+    assert _factorisations(rest, 1 + LAGGED_MAX_AGE, LAGGED) == [1]
+    assert _factorisations(rest, 2 + LAGGED_MAX_AGE, LAGGED) == [2]
+
+
+def test_a_factorisation_is_reused_only_with_the_same_integrator_weights():
+    """BDF2's first step is implicit Euler's (inertia scale 1/h²), its second BDF2's (9/(4h²)):
+    the weights differ, so the second step factors again, and the steps after it (the same
+    weights) reuse that factorisation. Implicit Euler factors once."""
+    rest = [ts.StarParams(gait="none")]
+    assert _factorisations(rest, 50, LAGGED.replace(integrator="bdf2")) == [2]
+    assert _factorisations(rest, 50, LAGGED) == [1]
+
+
+def test_runs_do_not_see_each_others_factorisations():
+    """The engine is reused from call to call: a call starts with nothing kept, so a run
+    repeated after another batch's run gives the same bits, and an instance's bits do not
+    depend on its neighbours (the batch reversed)."""
+    batch = [ts.StarParams(gait="A1+A2"), ts.StarParams(gait="A1+A3", alpha=1.2)]
+    first = ts.simulate(batch, 0.3, LAGGED).summary
+    ts.simulate([ts.StarParams(gait="A1+A4", youngs_modulus=8e6)] * 2, 0.3, LAGGED)
+    again = ts.simulate(batch, 0.3, LAGGED).summary
+    reversed_batch = ts.simulate(batch[::-1], 0.3, LAGGED).summary.iloc[::-1]
+    for column in ("displacement_x_mm", "displacement_y_mm", "factorisations_mean"):
+        np.testing.assert_array_equal(again[column].to_numpy(), first[column].to_numpy())
+        np.testing.assert_array_equal(reversed_batch[column].to_numpy(), first[column].to_numpy())
+
+
+def test_a_failed_solve_leaves_nothing_to_reuse():
+    """An instance whose only attempt fails (one Newton update allowed, no substeps, the
+    firing's first step) is frozen with no kept factorisation; one at rest converges and keeps
+    the factorisation of its step's weights (1/h² for implicit Euler)."""
+    solver = LAGGED.replace(max_newton=1, max_substep_halvings=0)
+    engine = prepare_engine([ts.StarParams(gait="A1+A2"), ts.StarParams(gait="none")], solver)
+    engine.advance(1)
+    status = engine.state.status.to_numpy()[:2]
+    kept = engine.kept_inertia_scale.to_numpy()[:2]
+    assert status.tolist() == [STATUS_NEWTON_FAILED, STATUS_OK]
+    assert kept[0] == 0.0
+    assert kept[1] == 1.0 / solver.dt ** 2
+
+
+def test_putting_back_some_instances_leaves_the_others_bitwise_alone():
+    """Simulator.reset restores the whole state with some rows changed: only those refactor;
+    the other robot goes on with its kept factorisation, exactly as in a Simulator where
+    nothing was reset. Loading a snapshot changes every row, so the continuation refactors
+    and agrees with the uninterrupted run to newton_tol per step (not bitwise; 100 steps)."""
+    params = [ts.StarParams(gait="none"), ts.StarParams(gait="none", alpha=1.1)]
+
+    def driven(reset_first: bool):
+        simulator = ts.Simulator(params, LAGGED)
+        simulator.fire(["A1+A3", "A1+A3"])
+        simulator.advance(0.2)
+        snapshot = simulator.save()
+        if reset_first:
+            simulator.reset([0])
+            kept = simulator.engine.kept_inertia_scale.to_numpy()[:2]
+            assert kept[0] == 0.0 and kept[1] == 1.0 / LAGGED.dt ** 2  # robot 0 refactors
+        simulator.advance(0.1)
+        return simulator, snapshot
+
+    reset, _ = driven(True)
+    untouched, snapshot = driven(False)
+    np.testing.assert_array_equal(reset.shapes()[1], untouched.shapes()[1])
+    assert np.abs(reset.shapes()[0] - untouched.shapes()[0]).max() > 1e-3  # it was reset
+    restored = ts.Simulator(params, LAGGED)
+    restored.load(snapshot)
+    restored.advance(0.1)
+    assert np.abs(restored.shapes() - untouched.shapes()).max() < 100 * 1e-10
