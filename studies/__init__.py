@@ -16,7 +16,7 @@ HELPERS = ("cli", "provenance", "figures", "identify", "__main__")
 EXTRA_OF_STUDY = {
     "animate": "plots", "bench": "plots", "calibrate": "studies", "convergence": "plots",
     "elasticities": "plots", "env_bench": "envs", "fig4c": "plots", "gait_design": "studies",
-    "gaits": "plots", "gradient_fit": "studies", "model_select": "studies",
+    "gaits": "plots", "gradient_fit": "studies", "jacobians": "plots", "model_select": "studies",
     "plan": "plots", "primitives": "plots", "reproduce": "studies", "scaling": None,
     "sensitivity": "studies", "sensitivity_check": "plots", "simd": "plots", "stability": "plots",
     "sweep": "studies",

@@ -31,6 +31,7 @@ COMMANDS = {
     "crossval": ["calibrate", "--preset", "accurate", "--cross-validate"],
     "animate": [],
     "bench": ["--batch-sizes", "1,8,64,512,2048", "--repeats", "2"],
+    "jacobians": [],
     "work_precision": [],
     "stability": ["--workers", "2"],
     "scaling": [],

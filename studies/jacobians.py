@@ -1,0 +1,173 @@
+"""Jacobians: the Newton Jacobian modes' speed against the solver's error, over a cycle of the
+five Fig. 4c gaits.
+
+    python -m studies jacobians [--batch 512] [--modes newton:1e-10,lagged:1e-10,...]
+                                [--rounds 2] [--duration 3.15] [--out DIR] [--quick]
+
+The five gaits repeated to --batch instances from rest, simulated for --duration (default one
+period) with the paper preset's fixed 1-ms implicit Euler steps, once per configuration
+(`SolverConfig.jacobian` and `newton_tol`, "mode:tol") and round; each round runs every
+configuration back to back, so the rounds interleave them, and a configuration's time is its
+best round's. The solver's error of a configuration is measured against a reference run of
+the same batch with Newton's Jacobian at newton_tol 1e-13 m (timed like the others): the
+largest difference of a final node coordinate (`position_error_m`) and of a displacement
+(`displacement_error_mm`). newton_tol bounds the error left at each step; the steps' errors
+add up at worst to steps × newton_tol (`error_bound_m`).
+
+Writes `jacobians.csv` (one row per configuration, the reference included; `same_bits_as_default`:
+whether the final positions equal those of the default solver, Newton's Jacobian at
+1e-10 m, bit for bit; `speedup_vs_default`: the default's best time over this one's) and
+`jacobians.png` (the position error against robot-steps/s).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pandas as pd
+
+from taichi_star import SolverConfig, StarParams, simulate
+from taichi_star.experiment import PAPER_GAITS
+
+from . import cli
+
+DESCRIPTION = ("Newton Jacobian modes (newton, chord, lagged): speed against the solver's "
+               "error over a cycle of the Fig. 4c gaits.")
+
+DEFAULT_MODES = "newton:1e-10,chord:1e-10,lagged:1e-10,lagged:1e-11,lagged:1e-12"
+REFERENCE = ("newton", 1e-13)
+"""The reference configuration: Newton's Jacobian, converged to 1e-13 m (its updates contract
+quadratically, so its own error is far below that)."""
+DEFAULT = (SolverConfig().jacobian, SolverConfig().newton_tol)
+
+
+def build_parser():
+    parser = cli.StudyParser("jacobians", DESCRIPTION, archs=("cpu",))
+    parser.add_argument("--modes", default=DEFAULT_MODES, quick="newton:1e-10,lagged:1e-10",
+                        help="comma list of jacobian:newton_tol configurations (the reference, "
+                             f"{REFERENCE[0]}:{REFERENCE[1]:g}, and the default, "
+                             f"{DEFAULT[0]}:{DEFAULT[1]:g}, are always run)")
+    parser.add_argument("--batch", type=int, default=512, quick=5,
+                        help="instances (the five gaits repeated)")
+    parser.add_argument("--duration", type=float, default=StarParams().period, quick=0.05,
+                        help="simulated seconds per run")
+    parser.add_argument("--rounds", type=int, default=2, quick=1,
+                        help="interleaved rounds; a configuration's time is its best round's")
+    return parser
+
+
+def parse_modes(text: str):
+    """[(jacobian, newton_tol)] from "mode:tol,...", the default and the reference added (the
+    reference last), each checked by SolverConfig (StudyArgumentError naming --modes)."""
+    configurations = []
+    for item in cli.parse_values(text, "--modes", str):
+        mode, _, tol = item.partition(":")
+        try:
+            SolverConfig(jacobian=mode, newton_tol=float(tol))
+        except ValueError as error:
+            raise cli.StudyArgumentError(f"--modes: {item!r}: {error}") from None
+        configurations.append((mode, float(tol)))
+    ordered = [DEFAULT] + [c for c in configurations if c not in (DEFAULT, REFERENCE)]
+    return list(dict.fromkeys(ordered)) + [REFERENCE]
+
+
+def check_args(args):
+    if args.batch < 1:
+        raise cli.StudyArgumentError(f"--batch must be at least 1, got {args.batch}")
+    if args.rounds < 1:
+        raise cli.StudyArgumentError(f"--rounds must be at least 1, got {args.rounds}")
+    dt = SolverConfig().dt
+    if not dt <= args.duration <= 100.0:
+        raise cli.StudyArgumentError(f"--duration must be in [{dt:g}, 100] s, got "
+                                     f"{args.duration:g}")
+
+
+def run_configuration(params, duration: float, mode: str, tol: float):
+    """(wall time s, final node positions (B, N, 2) m, summary) of one run."""
+    solver = SolverConfig(jacobian=mode, newton_tol=tol)
+    start = time.perf_counter()
+    result = simulate(params, duration, solver, record_interval_s=duration, record_shapes=True)
+    wall = time.perf_counter() - start
+    failed = result.summary[result.summary["status"] != "ok"]
+    if len(failed):
+        raise RuntimeError(f"{mode}:{tol:g}: instance {failed.index[0]} "
+                           f"{failed['status'].iloc[0]}; its time would not be valid")
+    return wall, result.shapes[-1], result.summary
+
+
+def jacobians_table(params, duration: float, configurations, rounds: int,
+                    progress: bool = True) -> pd.DataFrame:
+    """One row per configuration: best wall time, robot-steps/s, Newton iterations and
+    factorisations per solve, the errors against the reference (the last configuration)."""
+    # the engine is the same for every mode (the mode is loaded, not compiled): compile once
+    simulate(params, SolverConfig().dt)
+    best, shapes, summaries = {}, {}, {}
+    for round_number in range(rounds):
+        for configuration in configurations:
+            wall, shapes[configuration], summaries[configuration] = run_configuration(
+                params, duration, *configuration)
+            best[configuration] = min(wall, best.get(configuration, np.inf))
+            if progress:
+                print(f"round {round_number + 1}, {configuration[0]}:{configuration[1]:g}: "
+                      f"{wall:.2f} s", flush=True)
+    reference = configurations[-1]
+    steps = int(summaries[reference]["steps"].iloc[0])
+    displacement = ["displacement_x_mm", "displacement_y_mm"]
+    rows = []
+    for configuration in configurations:
+        summary = summaries[configuration]
+        mode, tol = configuration
+        rows.append({
+            "jacobian": mode, "newton_tol_m": tol, "reference": configuration == reference,
+            "batch_size": len(params), "steps": steps, "wall_s": best[configuration],
+            "robot_steps_per_s": len(params) * steps / best[configuration],
+            "newton_iterations_mean": float(summary["newton_iterations_mean"].mean()),
+            "factorisations_mean": float(summary["factorisations_mean"].mean()),
+            "position_error_m": float(np.abs(shapes[configuration] - shapes[reference]).max()),
+            "displacement_error_mm": float(np.abs(
+                summary[displacement].to_numpy() - summaries[reference][displacement].to_numpy()
+            ).max()),
+            "error_bound_m": steps * tol,
+            "same_bits_as_default": bool(np.array_equal(shapes[configuration], shapes[DEFAULT])),
+        })
+    table = pd.DataFrame(rows)
+    table["speedup_vs_default"] = best[DEFAULT] / table["wall_s"]
+    return table
+
+
+def plot_jacobians(csv_path, png_path):
+    plt = cli.use_agg()
+    table = pd.read_csv(csv_path)
+    fig, ax = plt.subplots(figsize=(7, 4.8))
+    colours = {"newton": "tab:blue", "chord": "tab:green", "lagged": "tab:red"}
+    for row in table[~table["reference"]].itertuples():
+        ax.scatter(row.robot_steps_per_s, row.position_error_m,
+                   color=colours.get(row.jacobian, "k"), zorder=3)
+        ax.annotate(f"{row.jacobian}, {row.newton_tol_m:g} m", (row.robot_steps_per_s,
+                                                                  row.position_error_m),
+                    textcoords="offset points", xytext=(6, 4), fontsize=8)
+    ax.set_yscale("log")
+    ax.set_xlabel("robot-steps/s (best of the rounds)")
+    ax.set_ylabel("largest final position error vs Newton at 1e-13 m (m)")
+    ax.grid(alpha=0.3, which="both")
+    batch, steps = int(table["batch_size"].iloc[0]), int(table["steps"].iloc[0])
+    ax.set_title(f"Newton Jacobian modes: B = {batch}, five Fig. 4c gaits, {steps} steps of "
+                 f"1 ms", fontsize=9)
+    return cli.save_figure(fig, png_path)
+
+
+def main(argv=None):
+    args = cli.parse(build_parser(), argv)
+    check_args(args)
+    configurations = parse_modes(args.modes)
+    params = [StarParams(gait=PAPER_GAITS[i % len(PAPER_GAITS)]) for i in range(args.batch)]
+    out = cli.Output(args, argv or [], model={"preset": "paper", "gaits": list(PAPER_GAITS),
+                                              "batch_size": args.batch},
+                     solver=SolverConfig())
+    table = jacobians_table(params, args.duration, configurations, args.rounds,
+                            progress=not args.no_progress)
+    csv_path = out.write_csv(table, "jacobians.csv")
+    out.wrote(plot_jacobians(csv_path, out.path("jacobians.png")))
+    out.report()
+    return table

@@ -1,0 +1,65 @@
+"""The Jacobian modes study: its --quick run against direct simulations, the error bound it
+states, and its argument checks."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import taichi_star
+from taichi_star import SolverConfig, StarParams
+from taichi_star.experiment import PAPER_GAITS
+
+from studies import cli, jacobians
+from studies.__main__ import main as studies_main
+
+
+def test_quick_run_measures_each_mode_against_the_reference(tmp_path):
+    table = jacobians.main(["--quick", "--out", str(tmp_path), "--no-progress"])
+    written = pd.read_csv(tmp_path / "jacobians.csv")
+    assert written["jacobian"].tolist() == ["newton", "lagged", "newton"]
+    assert written["reference"].tolist() == [False, False, True]
+    default, lagged, reference = (written.iloc[i] for i in range(3))
+    # the reference against itself, and the default against itself
+    assert reference["position_error_m"] == 0.0 and default["same_bits_as_default"]
+    # the study's figures are those of a direct run: 5 instances, 0.05 s of 1-ms steps
+    params = [StarParams(gait=PAPER_GAITS[i % 5]) for i in range(5)]
+    direct = {tol: taichi_star.simulate(params, 0.05, SolverConfig(jacobian="lagged",
+                                                                   newton_tol=tol))
+              for tol in (1e-10, 1e-13)}
+    assert lagged["factorisations_mean"] == pytest.approx(
+        direct[1e-10].summary["factorisations_mean"].mean(), rel=1e-12)
+    assert default["steps"] == 50 and default["error_bound_m"] == pytest.approx(50 * 1e-10)
+    # the lagged run differs from the reference by at most the bound newton_tol sets (each
+    # step's error left at most newton_tol, the errors adding at worst), but by more than
+    # round-off: another path to the steps' solutions, not Newton's bits
+    assert 1e-13 < lagged["position_error_m"] <= lagged["error_bound_m"]
+    assert not lagged["same_bits_as_default"]
+    assert lagged["factorisations_mean"] < default["factorisations_mean"]
+    np.testing.assert_allclose(written["speedup_vs_default"],
+                               written["wall_s"].iloc[0] / written["wall_s"], rtol=1e-9)
+    assert len(table) == 3 and (tmp_path / "jacobians.png").stat().st_size > 1000
+
+
+def test_the_default_and_the_reference_are_always_run_once():
+    assert jacobians.parse_modes("lagged:1e-11,newton:1e-10,lagged:1e-11") == [
+        ("newton", 1e-10), ("lagged", 1e-11), ("newton", 1e-13)]
+
+
+@pytest.mark.parametrize("argv, flag", [
+    (["--modes", "lagged"], "--modes"),               # no tolerance
+    (["--modes", "secant:1e-10"], "--modes"),         # no such mode
+    (["--modes", "lagged:1e-3"], "--modes"),          # tolerance out of range
+    (["--batch", "0"], "--batch"),
+    (["--rounds", "0"], "--rounds"),
+    (["--duration", "0.0001"], "--duration"),
+])
+def test_bad_arguments_are_one_line_errors_before_any_compute(argv, flag, tmp_path, capsys):
+    assert studies_main(["jacobians", *argv, "--out", str(tmp_path)]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and flag in error
+    assert not (tmp_path / "jacobians.csv").exists()
+
+
+def test_quick_never_writes_into_the_committed_results():
+    with pytest.raises(cli.StudyArgumentError, match="--quick"):
+        jacobians.main(["--quick", "--out", str(cli.COMMITTED_RESULTS)])
