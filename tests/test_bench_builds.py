@@ -78,3 +78,26 @@ def test_a_build_from_before_a_column_is_compared_where_it_says_nothing(bench_bu
     assert summary.loc["plain", "ratio_after_to_before"] == pytest.approx(90.0 / 80.0)
     assert summary.loc["plain", "same_bits"] == ""
     assert summary.loc["batch", "same_bits"] == "True"
+
+
+def test_after_args_go_to_the_after_build_alone(bench_builds, tmp_path):
+    common, extra = ["--batch-sizes", "64"], ["--plain-jacobians", "newton,lagged"]
+    before = bench_builds.bench_command("before", common, extra, tmp_path)
+    after = bench_builds.bench_command("after", common, extra, tmp_path)
+    assert before[1:] == ["-m", "studies", "bench", *common, "--no-progress", "--out",
+                          str(tmp_path)]
+    assert after[1:] == ["-m", "studies", "bench", *common, *extra, "--no-progress", "--out",
+                         str(tmp_path)]
+
+
+def test_a_case_only_the_after_build_ran_has_its_figures_and_no_ratio(bench_builds):
+    table = pd.DataFrame([_row("before", 1, 512, 80.0, "a", section="plain"),
+                          _row("after", 1, 512, 90.0, "a", section="plain"),
+                          {**_row("after", 1, 512, 200.0, "b", section="plain"),
+                           "jacobian": "lagged"}])
+    summary = bench_builds.summarise(table).set_index("jacobian")
+    assert summary.loc["newton", "ratio_after_to_before"] == pytest.approx(90.0 / 80.0)
+    assert summary.loc["lagged", "after_robot_steps_per_s"] == 200.0
+    assert np.isnan(summary.loc["lagged", "before_robot_steps_per_s"])
+    assert np.isnan(summary.loc["lagged", "ratio_after_to_before"])
+    assert summary.loc["lagged", "same_bits"] == ""

@@ -14,12 +14,16 @@ drift of the machine's speed falls on both. Writes into --out:
         --batch-sizes 5,40,64 --presets paper --sensitivity-counts 0,1 ...
 
 Everything after `--` goes to `python -m studies bench` unchanged (`--out` and
-`--no-progress` are added).
+`--no-progress` are added). `--after-args "..."` adds bench flags to the after build's runs
+alone, for a setting the baseline does not have (`--plain-jacobians newton,lagged`): its cases
+are measured in the same interleaved rounds, and the summary lists them with the after build's
+figures alone (no ratio), beside the cases both builds ran.
 """
 
 import argparse
 import json
 import os
+import shlex
 import subprocess
 import sys
 import tempfile
@@ -71,6 +75,14 @@ def summarise(table: pd.DataFrame) -> pd.DataFrame:
     return summary.merge(digests.rename("same_bits").reset_index(), on=CASE)
 
 
+def bench_command(build: str, bench_args, after_args, run_out: Path):
+    """The bench study's command line for one run of `build` ("before" or "after"):
+    `bench_args` for both, `after_args` for the after build alone."""
+    extra = list(after_args) if build == "after" else []
+    return [sys.executable, "-m", "studies", "bench", *bench_args, *extra, "--no-progress",
+            "--out", str(run_out)]
+
+
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
     split = argv.index("--") if "--" in argv else len(argv)
@@ -79,6 +91,8 @@ def main(argv=None):
     parser.add_argument("--after", default="HEAD", help="commit measured against it")
     parser.add_argument("--rounds", type=int, default=2, help="interleaved rounds (>= 1)")
     parser.add_argument("--out", required=True, help="folder for the tables")
+    parser.add_argument("--after-args", default="",
+                        help="bench flags for the after build's runs alone (one quoted string)")
     args = parser.parse_args(argv[:split])
     if args.rounds < 1:
         parser.error(f"--rounds must be >= 1, got {args.rounds}")
@@ -93,8 +107,8 @@ def main(argv=None):
             for round_number in range(1, args.rounds + 1):
                 for build, tree in trees.items():
                     run_out = Path(scratch) / f"{build}_{round_number}"
-                    command = [sys.executable, "-m", "studies", "bench", *bench_args,
-                               "--no-progress", "--out", str(run_out)]
+                    command = bench_command(build, bench_args, shlex.split(args.after_args),
+                                            run_out)
                     print(f"round {round_number}, {build} ({builds[build]})", flush=True)
                     subprocess.run(command, cwd=tree, check=True, env={
                         **os.environ, "PYTHONPATH": str(tree)})
