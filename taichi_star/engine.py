@@ -147,14 +147,14 @@ class BatchEngine:
         self.lockstep = arena.field(ti.i32)
         """1 where the groups iterate in lockstep (`advance_group`)."""
         self.step_limit = arena.field(ti.i32)
+        """Most steps an adaptive instance takes (MAX_STEPS_PER_INSTANCE: the int32 counters
+        never overflow); one that reaches it stops with status step_limit."""
         self.kept_inertia_scale = arena.batch_field(float, capacity)
         self.kept_rate_gain = arena.batch_field(float, capacity)
         self.kept_age = arena.batch_field(ti.i32, capacity)
         """The factorisation blocks[b] holds (the lagged Jacobian reuses it across steps): the
         integrator weights its matrix was assembled with (inertia scale 1/s², rate gain 1/s;
         scale 0: none to reuse) and the solves that have started with it since."""
-        """Most steps an adaptive instance takes (MAX_STEPS_PER_INSTANCE: the int32 counters
-        never overflow); one that reaches it stops with status step_limit."""
         self.assembly = Assembly(topology, capacity, arena, self.plan.pattern_slot, integrator,
                                  self.state, self.system,
                                  self.primal_count if sensitive else None)
@@ -734,14 +734,13 @@ class BatchEngine:
         the integrator's offsets) from its own state and assembles its residual at q*: half
         their difference is ε·(∂r/∂S·Ṡ + ∂r/∂c·ċ) up to O(ε³). The implicit function theorem
         on r(q*) = 0 gives ε·q̇* = −J⁻¹ times it, J the Jacobian at q* (assembled and factored
-        here, so a chord run gets the exact one too, and a lagged run's next step starts
-        with it), whose rigid motion `rigid_correction`
-        then makes obey the rigid-body equations (net force and torque, by
-        `rigid_projector_of`, from the inertia's and the external terms' blocks and the
-        internal terms' residual). The replicas' positions become q* ± ε·q̇* and their
-        velocities follow by the integrator's rate, which is linear in the positions; their
-        fire times are b's (a firing is an event, not a function of the parameters). Nothing
-        on the device divides by ε."""
+        here, so a chord run gets the exact one too, and a lagged run's next step starts with
+        it), whose rigid motion `rigid_correction` then makes obey the rigid-body equations
+        (net force and torque, by `rigid_projector_of`, from the inertia's and the external
+        terms' blocks and the internal terms' residual). The replicas' positions become
+        q* ± ε·q̇* and their velocities follow by the integrator's rate, which is linear in the
+        positions; their fire times are b's (a firing is an event, not a function of the
+        parameters). Nothing on the device divides by ε."""
         inertia_scale, rate_gain = self.integrator.weights(h, ratio, use_history)
         centre, total_mass, moment = self.mass_centre(b)
         self.assemble_with_rigid_projector(b, inertia_scale, rate_gain, centre)
