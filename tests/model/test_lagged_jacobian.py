@@ -4,9 +4,11 @@ match and it is young enough, is never taken from another call, another instance
 solve, and a Simulator that puts back some instances leaves the others' bits alone."""
 
 import numpy as np
+import pytest
+import taichi as ti
 
 import taichi_star as ts
-from taichi_star.engine import LAGGED_MAX_AGE
+from taichi_star.engine import LAGGED_KEEP_MAX_UPDATES, LAGGED_MAX_AGE
 from taichi_star.runtime import prepare_engine
 from taichi_star.state import STATUS_NEWTON_FAILED, STATUS_OK
 
@@ -112,3 +114,36 @@ def test_putting_back_some_instances_leaves_the_others_bitwise_alone():
     restored.load(snapshot)
     restored.advance(0.1)
     assert np.abs(restored.shapes() - untouched.shapes()).max() < 100 * 1e-10
+
+
+@ti.kernel
+def _finish_solve(engine: ti.template(), iterations: ti.i32, converged: ti.i32):
+    """Instance 0's Newton solve ends after `iterations` updates, converged or not, with a
+    factorisation of weights (1, 1) kept."""
+    engine.kept_inertia_scale[0] = 1.0
+    engine.kept_rate_gain[0] = 1.0
+    engine.finish_newton(0, 1.0, iterations, converged, 1)
+
+
+@pytest.mark.parametrize("iterations, converged, kept", [
+    (1, 1, True), (LAGGED_KEEP_MAX_UPDATES, 1, True), (LAGGED_KEEP_MAX_UPDATES + 1, 1, False),
+    (1, 0, False)])
+def test_a_solve_of_many_updates_or_a_failed_one_leaves_nothing_to_reuse(iterations, converged,
+                                                                        kept):
+    """The rule on its boundary: a converged solve of at most LAGGED_KEEP_MAX_UPDATES (2)
+    updates keeps its factorisation, one of three does not, nor does a failed solve."""
+    engine = prepare_engine([ts.StarParams(gait="none")], LAGGED)
+    _finish_solve(engine, iterations, converged)
+    assert bool(engine.kept_inertia_scale.to_numpy()[0] != 0.0) is kept
+
+
+def test_in_a_run_two_updates_keep_and_four_do_not():
+    """The first step of a firing takes two updates at newton_tol 1e-10 m, and four at
+    1e-14 m (the updates stall at round-off): the factorisation of the first is kept (its
+    weights, 1/h² for implicit Euler), the second's is not."""
+    params = [ts.StarParams(gait="A1+A2")]
+    for tol, updates, kept in ((1e-10, 2, 1.0 / LAGGED.dt ** 2), (1e-14, 4, 0.0)):
+        engine = prepare_engine(params, LAGGED.replace(newton_tol=tol))
+        engine.advance(1)
+        assert engine.state.newton_max.to_numpy()[0] == updates
+        assert engine.kept_inertia_scale.to_numpy()[0] == kept
