@@ -344,9 +344,11 @@ class Simulator:
         return snapshot.write(path) if path is not None else snapshot
 
     def load(self, snapshot: Union[SimulatorSnapshot, str, Path]):
-        """Continue from a saved state (bitwise). Raises ValueError, state unchanged, for a
-        state of another topology, term set, integrator, stepping (fixed or adaptive), batch
-        size or step."""
+        """Continue from a saved state (bitwise; with SolverConfig(jacobian="lagged"), whose
+        kept factorisations a state does not hold, the next step refactors and the continuation
+        agrees with an uninterrupted run to newton_tol per step). Raises ValueError, state
+        unchanged, for a state of another topology, term set, integrator, stepping (fixed or
+        adaptive), batch size or step."""
         if not isinstance(snapshot, SimulatorSnapshot):
             snapshot = SimulatorSnapshot.read(snapshot)
         if snapshot.engine_key != repr(self.engine_key):

@@ -126,7 +126,7 @@ def main(argv=None):
     summary = summarise(table)
     summary.to_csv(out / "summary.csv", index=False)
     (out / "summary.csv.json").write_text(json.dumps({
-        "study": "bench", "command": "python tools/bench_builds.py " + " ".join(argv),
+        "study": "bench", "command": "python tools/bench_builds.py " + shlex.join(argv),
         "description": f"the best of {args.rounds} interleaved rounds per case and build "
                        f"(before: {builds['before']}, after: {builds['after']})",
         "git_commit": builds["after"]}, indent=1))
