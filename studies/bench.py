@@ -83,6 +83,7 @@ rest (pulse and coast: the B sweep's window is the hardest part of the pulse) (C
 
 Section "sensitivities": the plain call at B = 64 over the pulse, differentiating by 0, 1, 2
 and 4 parameters (`simulate(..., sensitivities=...)`; its cost against the same call without).
+Both sections run once per Jacobian mode of --plain-jacobians (default Newton's alone).
 In both sections `time_to_first_step_s` is the first call's (one step, compilation included).
 
 Writes `bench.csv` (`bench_gpu.csv` for --arch gpu): one row per measurement; `section` is
@@ -338,6 +339,7 @@ def end_to_end_figures(result, robot_steps: float, timed: float) -> dict:
     """Throughput columns of an end-to-end call that advanced robot_steps in timed s."""
     rate = robot_steps / timed
     return {"newton_iterations_mean": float(result.summary["newton_iterations_mean"].mean()),
+            "factorisations_mean": float(result.summary["factorisations_mean"].mean()),
             "robot_steps_per_s": rate, "real_time_factor": rate * DT, "step_us": 1e6 / rate}
 
 
@@ -452,8 +454,9 @@ def build_parser():
                         help="skip the plain section: simulate(params, duration) with the "
                              "default solver at the process batch size (CPU)")
     parser.add_argument("--plain-jacobians", default="newton", quick="newton",
-                        help="comma list of Jacobian modes of the plain call: newton (the "
-                             "default solver's), chord, lagged (opt-in: kept across steps)")
+                        help="comma list of Jacobian modes of the plain call and the "
+                             "sensitivities sections: newton (the default solver's), chord, "
+                             "lagged (opt-in: kept across steps)")
     parser.add_argument("--plain-duration", type=float, default=PLAIN_DURATION,
                         quick=(WARMUP_STEPS + QUICK_STEPS) * DT,
                         help=f"simulated seconds of the plain call (default one period, "
@@ -652,10 +655,11 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
                          robot_steps=args.process_batch * figures["steps"])})
         Runtime.current().configure_lanes()
     for count in args.sensitivity_counts:
-        add({"section": "sensitivities", "scenario": f"sensitivities_{count}", "preset": "paper",
-             "batch_size": SENSITIVITY_BATCH, "precision": "f64",
-             **measure_plain(SENSITIVITY_BATCH, args.sensitivity_duration, args.repeats,
-                             SENSITIVITY_PARAMETERS[:count])})
+        for jacobian in args.plain_jacobians:
+            add({"section": "sensitivities", "scenario": f"sensitivities_{count}",
+                 "preset": "paper", "batch_size": SENSITIVITY_BATCH, "precision": "f64",
+                 **measure_plain(SENSITIVITY_BATCH, args.sensitivity_duration, args.repeats,
+                                 SENSITIVITY_PARAMETERS[:count], jacobian=jacobian)})
     for workers in args.workers_list:
         for jacobian in args.jacobians:
             figures = measure_processes(args.process_batch, workers, jacobian, args.steps,

@@ -85,6 +85,25 @@ def test_bench_quick(tmp_path, monkeypatch):
     assert (tmp_path / "bench.png").stat().st_size > 1000
 
 
+def test_the_plain_call_of_another_jacobian_mode_is_that_call_made_directly():
+    """`--plain-jacobians lagged`: the plain (and sensitivities) section's call with
+    SolverConfig(jacobian="lagged"), its iterations, factorisations and digest those of the same
+    call made here (and not those of Newton's Jacobian)."""
+    figures = bench.measure_plain(5, 0.05, 1, sensitivities=("alpha",), jacobian="lagged")
+    params = [StarParams(gait=bench.PAPER_GAITS[i % 5]) for i in range(5)]
+    direct = taichi_star.simulate(params, 0.05, taichi_star.SolverConfig(jacobian="lagged"),
+                                  sensitivities=("alpha",))
+    newton = taichi_star.simulate(params, 0.05, sensitivities=("alpha",))
+    assert figures["jacobian"] == "lagged"
+    for column in ("newton_iterations_mean", "factorisations_mean"):
+        assert figures[column] == pytest.approx(direct.summary[column].mean(), rel=1e-12)
+    assert figures["factorisations_mean"] != pytest.approx(
+        newton.summary["factorisations_mean"].mean(), rel=1e-3)
+    assert figures["final_state"] == bench.state_digest(np.column_stack(
+        [direct.summary[output].to_numpy() for output in bench.DISPLACEMENTS]
+        + [direct.sensitivity(output, "alpha") for output in bench.DISPLACEMENTS]))
+
+
 def test_step_phases_count_the_jacobian_only_where_the_matrix_is_refreshed():
     """Every iteration assembles its residual and solves; only the iterations that refresh the
     Newton matrix assemble the Jacobian (assembly − residual per iteration) and factor."""
@@ -134,6 +153,7 @@ def test_matmul_rate_is_the_products_flops_over_its_best_time(monkeypatch):
     ("bench", ["--batch-sizes", ""], "--batch-sizes: empty"),
     ("bench", ["--precisions", "f16"], "--precisions: precision must be one of"),
     ("bench", ["--jacobians", "broyden"], "--jacobians: jacobian must be one of"),
+    ("bench", ["--plain-jacobians", "broyden"], "--plain-jacobians: jacobian must be one of"),
     ("bench", ["--steps", "0"], "--steps must be >= 1"),
     ("bench", ["--repeats", "0"], "--repeats must be >= 1"),
     ("bench", ["--scenarios", "no_jet"], "--scenarios: unknown value 'no_jet'"),
