@@ -63,12 +63,14 @@ def test_lockstep_retries_and_freezes_as_each_instance_alone():
     assert not frozen[2].any()
 
 
-def test_chord_jacobian_in_an_engine_with_lanes_as_each_instance_alone():
-    """The chord Jacobian keeps or refactors each instance's factorisation as that instance's
-    iteration contracts; in an engine with lanes its groups hold one instance each, and every
-    instance gets the bits of the engine without lanes, retries included."""
+@pytest.mark.parametrize("jacobian", ["chord", "lagged"])
+def test_chord_and_lagged_jacobians_in_an_engine_with_lanes_as_each_instance_alone(jacobian):
+    """The chord and lagged Jacobians keep or refactor each instance's factorisation as that
+    instance's iteration contracts (the lagged one also from step to step); in an engine with
+    lanes their groups hold one instance each, and every instance gets the bits of the engine
+    without lanes, retries included."""
     solver = ts.SolverConfig(integrator="bdf2", dt=0.01, max_newton=4, max_substep_halvings=2,
-                             jacobian="chord")
+                             jacobian=jacobian)
     # the batch of the test above, whose engines this one shares (the chord is a setting)
     params = [p.replace(damping_time=1e-3) for p in BATCH]
     alone = run(1, params, 0.1, solver, record_interval_s=0.05)
@@ -79,12 +81,12 @@ def test_chord_jacobian_in_an_engine_with_lanes_as_each_instance_alone():
 
 @pytest.mark.parametrize("count, jacobian, lockstep", [
     (LOCKSTEP_MINIMUM_BATCH - 1, "newton", 0), (LOCKSTEP_MINIMUM_BATCH, "newton", 1),
-    (LOCKSTEP_MINIMUM_BATCH, "chord", 0)])
+    (LOCKSTEP_MINIMUM_BATCH, "chord", 0), (LOCKSTEP_MINIMUM_BATCH, "lagged", 0)])
 def test_lockstep_from_the_minimum_batch_and_only_with_newtons_jacobian(count, jacobian,
                                                                         lockstep):
     """A batch one short of the minimum runs its instances alone (one group each); from the
-    minimum they go in groups of 8; the chord Jacobian, whose instances keep or refactor
-    their Jacobians each on its own, always runs them alone."""
+    minimum they go in groups of 8; the chord and lagged Jacobians, whose instances keep or
+    refactor their Jacobians each on its own, always run them alone."""
     Runtime.current().configure_lanes(8)
     try:
         engine = prepare_engine(BATCH[:count], ts.SolverConfig(jacobian=jacobian))
