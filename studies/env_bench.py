@@ -63,7 +63,7 @@ def measure(preset: str, solver: SolverConfig, num_envs: int, steps: int,
 
 def build_parser():
     parser = cli.StudyParser("env_bench", DESCRIPTION)
-    cli.add_dt_flag(parser, quick=QUICK_DT)
+    cli.add_dt_flag(parser, quick=QUICK_DT, jacobian=False)
     parser.add_argument("--num-envs", type=int, default=64, quick=QUICK_NUM_ENVS,
                         help="robots in the vector env")
     parser.add_argument("--steps", type=int, default=2, quick=QUICK_STEPS, help="timed steps")

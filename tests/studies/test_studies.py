@@ -106,6 +106,10 @@ def test_quick_defaults_and_presets():
     assert cli.base_params(args) == StarParams.preset("accurate", alpha=1.0)
     assert cli.solver(args) == SolverConfig.preset("accurate")
     assert cli.solver(cli.parse(parser, ["--quick"])).dt == cli.QUICK_DT
+    # --jacobian changes the preset's mode and nothing else; without it the preset's stays
+    assert cli.solver(cli.parse(parser, ["--preset", "accurate", "--jacobian", "lagged"])) == \
+        SolverConfig.preset("accurate", jacobian="lagged")
+    assert cli.solver(cli.parse(parser, [])).jacobian == SolverConfig.preset("paper").jacobian
     with pytest.raises(cli.StudyArgumentError, match="--set gait: set by the probe study"):
         cli.base_params(cli.parse(parser, ["--set", "gait=A1"]))
     # a per-actuator field: its eight values A1..A8 are the one value; seven are refused, as is
@@ -164,6 +168,25 @@ def test_resume_needs_the_folder_of_the_run(no_compute, tmp_path, monkeypatch, c
     assert studies_main(["sweep", "--resume", *QUICK]) == 2
     assert "--resume: give --out" in capsys.readouterr().err
     assert not any(tmp_path.iterdir())
+
+
+def test_the_jacobian_flag_reaches_the_run_and_its_provenance(tmp_path):
+    """fig4c --jacobian lagged: the speeds of the lagged call made directly, and the mode in
+    the table's sidecar."""
+    from studies import fig4c
+    fig4c.main([*QUICK, "--jacobian", "lagged", "--out", str(tmp_path)])
+    table = pd.read_csv(tmp_path / "fig4c.csv")
+    direct = taichi_star.simulate([StarParams(gait=g) for g in PAPER_GAITS],
+                                  cli.QUICK_DURATION_S,
+                                  QUICK_SOLVER.replace(jacobian="lagged")).summary
+    assert table["sim_speed_mm_s"].to_numpy() == pytest.approx(direct["speed_mm_s"], rel=1e-9)
+    sidecar = json.loads((tmp_path / "fig4c.csv.json").read_text())
+    assert sidecar["solver"]["jacobian"] == "lagged"
+
+
+def test_a_study_that_times_several_jacobian_modes_has_no_jacobian_flag(capsys):
+    assert studies_main(["env_bench", "--jacobian", "lagged", "--quick"]) == 2
+    assert "unrecognized arguments: --jacobian" in capsys.readouterr().err
 
 
 def test_unknown_study_and_unknown_flag(no_compute, capsys):
