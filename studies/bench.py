@@ -120,7 +120,6 @@ import numpy as np
 import pandas as pd
 
 from taichi_star import SolverConfig, StarParams, simulate
-from taichi_star.experiment import PAPER_GAITS
 from taichi_star.batch import LocalProcesses, run_batch
 from taichi_star.profiling import EngineProfile, device_bandwidth, matmul_gflops, step_phases
 from taichi_star.runtime import (CPU_LANES, GPU_BLOCK_DIM, GPU_INSTANCE_MINOR, Runtime,
@@ -370,7 +369,7 @@ def measure_plain(batch: int, duration: float, repeats: int, sensitivities=(),
     that first call's, one step: the engine's compilation where this process has not built
     one of its size and kind before (the sections run in order), its loading and a step;
     `final_state` a digest of the displacements and of their sensitivities."""
-    params = [StarParams(gait=PAPER_GAITS[i % len(PAPER_GAITS)]) for i in range(batch)]
+    params = cli.paper_gaits_batch(batch)
     steps = round(duration / DT)
     solver = SolverConfig(jacobian=jacobian)
     result, timed, first = best_of_calls(

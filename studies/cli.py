@@ -354,6 +354,12 @@ def resolve_gaits(text: str, flag: str = "--gaits") -> List[str]:
     return gaits
 
 
+def paper_gaits_batch(size: int) -> List[StarParams]:
+    """The plain call's batch: the five Fig. 4c gaits (`PAPER_GAITS`, default parameters)
+    repeated in order to `size` instances."""
+    return [StarParams(gait=PAPER_GAITS[i % len(PAPER_GAITS)]) for i in range(size)]
+
+
 def param_product(axes: Mapping[str, Sequence],
                   base: StarParams = StarParams()) -> List[StarParams]:
     """Every combination of the given StarParams field values (the last axis varies fastest),

@@ -161,7 +161,7 @@ def main(argv=None):
     args = cli.parse(build_parser(), argv)
     check_args(args)
     configurations = parse_modes(args.modes)
-    params = [StarParams(gait=PAPER_GAITS[i % len(PAPER_GAITS)]) for i in range(args.batch)]
+    params = cli.paper_gaits_batch(args.batch)
     out = cli.Output(args, argv or [], model={"preset": "paper", "gaits": list(PAPER_GAITS),
                                               "batch_size": args.batch},
                      solver=SolverConfig())

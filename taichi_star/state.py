@@ -137,6 +137,9 @@ class BatchState:
         """(capacity,) bool: the instances whose fields in `saved` (a `save` of an engine of the
         same layout) differ in any bit from the state now; all of them where a field is
         missing or of another shape or type."""
+        def bytes_per_instance(array):
+            return np.ascontiguousarray(array).reshape(len(array), -1).view(np.uint8)
+
         now = self.save()
         changed = np.zeros(len(now["status"]), dtype=bool)
         for name, values in now.items():
@@ -144,9 +147,7 @@ class BatchState:
             if other is None or other.shape != values.shape or other.dtype != values.dtype:
                 changed[:] = True
                 continue
-            as_bytes = lambda array: np.ascontiguousarray(array).reshape(  # noqa: E731
-                len(array), -1).view(np.uint8)
-            changed |= (as_bytes(values) != as_bytes(other)).any(axis=1)
+            changed |= (bytes_per_instance(values) != bytes_per_instance(other)).any(axis=1)
         return changed
 
     def restore(self, saved: Dict[str, np.ndarray]):

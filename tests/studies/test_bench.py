@@ -9,6 +9,7 @@ import pytest
 
 import taichi_star
 from taichi_star import SolverConfig, StarParams, profiling
+from taichi_star.experiment import PAPER_GAITS
 
 from studies import bench, cli, work_precision
 from studies.__main__ import main as studies_main
@@ -47,7 +48,7 @@ def test_bench_quick(tmp_path, monkeypatch):
     # same call made here
     batch_size = int(plain["batch_size"].iloc[0])
     default = taichi_star.simulate(
-        [StarParams(gait=bench.PAPER_GAITS[i % 5]) for i in range(batch_size)],
+        [StarParams(gait=PAPER_GAITS[i % 5]) for i in range(batch_size)],
         int(plain["steps"].iloc[0]) * bench.DT)
     assert plain["jacobian"].iloc[0] == taichi_star.SolverConfig().jacobian
     assert plain["newton_iterations_mean"].iloc[0] == pytest.approx(
@@ -90,7 +91,7 @@ def test_the_plain_call_of_another_jacobian_mode_is_that_call_made_directly():
     SolverConfig(jacobian="lagged"), its iterations, factorisations and digest those of the same
     call made here (and not those of Newton's Jacobian)."""
     figures = bench.measure_plain(5, 0.05, 1, sensitivities=("alpha",), jacobian="lagged")
-    params = [StarParams(gait=bench.PAPER_GAITS[i % 5]) for i in range(5)]
+    params = [StarParams(gait=PAPER_GAITS[i % 5]) for i in range(5)]
     direct = taichi_star.simulate(params, 0.05, taichi_star.SolverConfig(jacobian="lagged"),
                                   sensitivities=("alpha",))
     newton = taichi_star.simulate(params, 0.05, sensitivities=("alpha",))
