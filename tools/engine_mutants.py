@@ -19,12 +19,15 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 RELIABILITY = "tests/model/test_reliability.py::"
+LAGGED = "tests/model/test_lagged_jacobian.py::"
+SENSITIVITIES = "tests/model/test_sensitivities.py::"
 
 MUTANTS = [
     # (id, file, original text, mutated text, tests that should kill it, what it breaks)
-    ("M1", "taichi_star/engine.py", "halvings <= self.max_substep_halvings[None]",
-     "halvings < self.max_substep_halvings[None]",
-     [RELIABILITY + "test_no_substep_halvings_still_takes_every_benign_step"],
+    ("M1", "taichi_star/engine.py", "if halvings > self.max_substep_halvings[None]:",
+     "if halvings >= self.max_substep_halvings[None]:",
+     [RELIABILITY + "test_no_substep_halvings_still_takes_every_benign_step",
+      RELIABILITY + "test_substep_retries_counts_exactly_the_steps_the_full_step_could_not_take"],
      "the substep loop stops one halving early"),
     ("M2", "taichi_star/engine.py", "        if halvings > 0:\n            self.state.substep_retries",
      "        if halvings > 1:\n            self.state.substep_retries",
@@ -52,6 +55,43 @@ MUTANTS = [
      "late = rows[~(clock[rows] <= at)]",
      ["tests/model/test_simulator.py::test_bad_durations_times_and_foreign_states_are_refused"],
      "fire(at_s=now) accepted (and lost)"),
+    ("M8", "taichi_star/engine.py", "self.kept_age[b] < LAGGED_MAX_AGE",
+     "self.kept_age[b] <= LAGGED_MAX_AGE",
+     [LAGGED + "test_a_kept_factorisation_is_reused_for_its_age_limit_and_then_refactored"],
+     "the lagged Jacobian keeps a factorisation one solve past its age limit"),
+    ("M9", "taichi_star/engine.py",
+     "and self.kept_inertia_scale[b] == inertia_scale \\\n"
+     "                and self.kept_rate_gain[b] == rate_gain and",
+     "and self.kept_inertia_scale[b] > 0.0 and",
+     [LAGGED + "test_a_factorisation_is_reused_only_with_the_same_integrator_weights"],
+     "the lagged Jacobian reuses a factorisation made with other integrator weights"),
+    ("M10", "taichi_star/engine.py", "iterations > LAGGED_KEEP_MAX_UPDATES",
+     "iterations >= LAGGED_KEEP_MAX_UPDATES",
+     [LAGGED + "test_a_solve_of_many_updates_or_a_failed_one_leaves_nothing_to_reuse",
+      LAGGED + "test_in_a_run_two_updates_keep_and_four_do_not"],
+     "a solve of exactly LAGGED_KEEP_MAX_UPDATES updates drops its factorisation"),
+    ("M11", "taichi_star/engine.py",
+     "if converged == 0 or iterations > LAGGED_KEEP_MAX_UPDATES:",
+     "if iterations > LAGGED_KEEP_MAX_UPDATES:",
+     [LAGGED + "test_a_failed_solve_leaves_nothing_to_reuse"],
+     "a failed solve's factorisation kept for reuse"),
+    ("M12", "taichi_star/engine.py", "kept[changed] = 0.0", "kept[:] = 0.0",
+     [LAGGED + "test_putting_back_some_instances_leaves_the_others_bitwise_alone"],
+     "resetting some robots drops every robot's kept factorisation"),
+    ("M13", "taichi_star/engine.py", "if changed is not None and changed.any():",
+     "if False:",
+     [LAGGED + "test_putting_back_some_instances_leaves_the_others_bitwise_alone"],
+     "a reset robot goes on with the factorisation of the state it left"),
+    ("M14", "taichi_star/engine.py",
+     "            self.rigid_correction(b, centre, wanted_force, wanted_torque,\n"
+     "                                  inertia_scale * total_mass, inertia_scale * moment)\n",
+     "",
+     [SENSITIVITIES + "test_a_coast_after_the_pulse_keeps_its_sensitivities"],
+     "the tangent step without its rigid-motion correction"),
+    ("M15", "taichi_star/engine.py", "if self.same_as_instance[b, k] == 0:",
+     "if self.same_as_instance[b, k] == 1:",
+     [SENSITIVITIES + "test_euler_sensitivities_equal_finite_differences"],
+     "the replicas leave out the terms they differ in, not those they share"),
 ]
 
 
