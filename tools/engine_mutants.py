@@ -12,6 +12,7 @@ import argparse
 import csv
 import json
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -93,6 +94,10 @@ MUTANTS = [
      "if self.same_as_instance[b, k] == 1:",
      [SENSITIVITIES + "test_euler_sensitivities_equal_finite_differences"],
      "the replicas leave out the terms they differ in, not those they share"),
+    ("M16", "taichi_star/stepping.py", "elif limit - end < 0.25 * proposed:",
+     "elif limit - end <= 0.25 * proposed:",
+     ["tests/unit/test_stepping.py::test_step_end"],
+     "a step that leaves exactly a quarter step before its stop is split"),
 ]
 
 
@@ -129,12 +134,12 @@ def run(mutant, worktree: Path) -> dict:
 
 
 def first_failure(output: str) -> str:
-    """The exception of the first failed test in pytest's short summary ("FAILED test - Error:
-    ..." gives "Error"), "" when no test failed."""
-    for line in output.splitlines():
-        if line.startswith("FAILED ") and " - " in line:
-            return line.split(" - ", 1)[1].split(":", 1)[0].strip()
-    return ""
+    """The exception that failed the first failed test, from the traceback's last line
+    ("tests/x.py:50: AssertionError" gives "AssertionError"); "" when no test failed."""
+    if not any(line.startswith("FAILED ") for line in output.splitlines()):
+        return ""
+    raised = re.search(r"^\S+\.py:\d+: (\w+)", output, re.MULTILINE)
+    return raised.group(1) if raised else "unknown"
 
 
 def main():
