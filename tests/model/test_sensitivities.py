@@ -62,7 +62,6 @@ def test_a_coast_after_the_pulse_keeps_its_sensitivities(taichi_cpu):
                                                    SolverConfig(**TIGHT), ("alpha",)))
 
 
-
 def test_a_glide_does_not_drift_the_tangents_rigid_motion(taichi_cpu):
     """With damping (the stiffness blocks ×(1 + τ/h)) and the rods' linear drag (a long glide),
     the Jacobian's column sums over the stiffness blocks keep a rounding that repeats from step
@@ -286,6 +285,25 @@ def test_steps_redone_with_substeps_are_followed(euler_run):
     # the moved runs retry the same steps: the differences are those of one substep sequence
     assert plus["substep_retries"].iloc[0] == result.summary["substep_retries"].iloc[0]
     assert_matches_differences(table)
+
+
+def test_a_failed_instance_has_no_derivatives_and_leaves_its_neighbour_alone(taichi_cpu):
+    """5-ms steps, at most three Newton updates, no substeps: A1+A3+A5's first step fails and
+    the instance is frozen; its replicas share its status, so every derivative of it is NaN
+    (not its replicas' frozen offsets divided by 2ε). A softer A1+A2 beside it swims on and
+    keeps exactly the derivatives of a run of its own."""
+    solver = SolverConfig(dt=0.005, max_newton=3, max_substep_halvings=0)
+    failing = BASE.replace(gait="A1+A3+A5")
+    swimming = BASE.replace(gait="A1+A2", youngs_modulus=2e5)
+    both = simulate([failing, swimming], 0.1, solver, sensitivities=("alpha",))
+    alone = simulate([swimming], 0.1, solver, sensitivities=("alpha",))
+    assert both.summary["status"].tolist() == ["newton_failed", "ok"]
+    assert both.summary["failure_time_s"].iloc[0] == 0.005
+    assert both.sensitivities.iloc[0].isna().all()
+    moving = alone.sensitivity("displacement_x_mm", "alpha")
+    assert np.isfinite(moving).all() and (moving != 0.0).all()
+    np.testing.assert_array_equal(both.sensitivities.iloc[1].to_numpy(),
+                                  alone.sensitivities.iloc[0].to_numpy())
 
 
 def test_the_check_study_writes_what_it_measured(euler_run, tmp_path):
