@@ -3,7 +3,8 @@ check that mutmut cannot do for Taichi kernels (they compile per process and do 
 fork). For each mutant: a fresh copy of the committed tree (git worktree at HEAD), one textual
 change, the named tests with `-x`; killed when one of them fails (its exception recorded: an
 assertion, or what else stopped it), "error" when pytest stops otherwise (after a control run
-in which every named test passes unmutated). Writes a CSV (one row per mutant) and its provenance sidecar.
+in which every named test passes unmutated). Writes a CSV (one row per mutant) and its
+provenance sidecar.
 
     python tools/engine_mutants.py [--out results/mutation/engine_mutants.csv] [--only M1,M3]
 """

@@ -74,6 +74,7 @@ def test_a_glide_does_not_drift_the_tangents_rigid_motion(taichi_cpu):
     table = check_sensitivities(glide, 2.2, SolverConfig(**TIGHT), ("alpha",))
     assert_matches_differences(table, tolerance=2e-8)
 
+
 def test_c_parallel_takes_its_own_step_and_then_matches_its_differences(taichi_cpu):
     """C∥ barely moves the robot, so at an ε of 1e-5 of the value its replicas' offsets are a
     few thousand roundings of a position: here its derivative was 4e-4 and 3.6e-3 off, with
