@@ -99,8 +99,8 @@ MUTANTS = [
      "elif limit - end <= 0.25 * proposed:",
      ["tests/unit/test_stepping.py::test_step_end"],
      "a step that leaves exactly a quarter step before its stop is split"),
-    ("M17", "taichi_star/engine.py", "                    self.state.status[r] = self.state.status[b]\n",
-     "",
+    ("M17", "taichi_star/engine.py",
+     "                    self.state.status[r] = self.state.status[b]\n", "",
      [SENSITIVITIES + "test_a_failed_instance_has_no_derivatives_and_leaves_its_neighbour_alone"],
      "a failed instance's replicas keep status ok (finite derivatives of a frozen run)"),
 ]
