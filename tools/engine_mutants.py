@@ -24,6 +24,7 @@ REPO = Path(__file__).resolve().parents[1]
 RELIABILITY = "tests/model/test_reliability.py::"
 LAGGED = "tests/model/test_lagged_jacobian.py::"
 SENSITIVITIES = "tests/model/test_sensitivities.py::"
+ADAPTIVE = "tests/model/test_adaptive.py::"
 
 MUTANTS = [
     # (id, file, original text, mutated text, tests that should kill it, what it breaks)
@@ -103,6 +104,28 @@ MUTANTS = [
      "                    self.state.status[r] = self.state.status[b]\n", "",
      [SENSITIVITIES + "test_a_failed_instance_has_no_derivatives_and_leaves_its_neighbour_alone"],
      "a failed instance's replicas keep status ok (finite derivatives of a frozen run)"),
+    ("M18", "taichi_star/stepping.py", "    if end >= limit:", "    if end > limit:",
+     ["tests/unit/test_stepping.py::test_step_end"],
+     "a step that would end exactly on its stop is split instead"),
+    ("M19", "taichi_star/engine.py",
+     "                    if ti.static(self.integrator.order == 2) and use_history == 1:\n"
+     "                        error *= 2.0\n", "",
+     [ADAPTIVE + "test_adaptive_results_do_not_depend_on_batch_position"],
+     "a rejected BDF2 step redone without history is sized as a BDF2 step"),
+    ("M20", "taichi_star/engine.py",
+     "                self.state.rejected_steps[b] = self.state.rejected_steps[b] + 1\n"
+     "                self.state.history_valid[b] = 0\n",
+     "                self.state.rejected_steps[b] = self.state.rejected_steps[b] + 1\n",
+     [ADAPTIVE + "test_adaptive_results_do_not_depend_on_batch_position"],
+     "a rejected step's redo keeps BDF2's history"),
+    ("M21", "taichi_star/engine.py", "            if due >= 0.0 and due <= target:",
+     "            if due >= 0.0 and due < target:",
+     [ADAPTIVE + "test_adaptive_results_do_not_depend_on_batch_position"],
+     "an adaptive step ending exactly on a firing is not treated as the firing's"),
+    ("M22", "taichi_star/engine.py",
+     "                self.state.velocities[plus, n] = self.implicit_velocity(plus, n, rate_gain)\n",
+     "", [SENSITIVITIES + "test_euler_sensitivities_equal_finite_differences"],
+     "a replica's velocities not moved with its positions"),
 ]
 
 

@@ -31,6 +31,7 @@ def _rejected_size(h: float, error: float) -> float:
 @pytest.mark.parametrize("proposed, target, firing, expected", [
     (0.01, 1.0, 0, 0.01),      # far from the stop: the proposed step
     (0.01, 0.008, 0, 0.008),   # would pass the stop: lands on it
+    (2 ** -7, 2 ** -7, 0, 2 ** -7),  # ends exactly on the stop (binary-exact): lands on it
     (0.01, 0.012, 0, 0.006),   # would leave 0.002 < a quarter step: the rest split in two
     (2 ** -7, 1.25 * 2 ** -7, 0, 2 ** -7),  # leaves exactly a quarter step (binary-exact): kept
     (0.01, 0.0105, 1, 0.0095),  # a firing: end dt = 0.001 short of it
