@@ -197,8 +197,7 @@ class BatchEngine:
         model_fields = {name: getattr(self, name)
                         for name in ("mass", "inertia", "primal_count", "tangent_count",
                                      "slot_stride", "group_count", "group_stride", "lockstep",
-                                     "step_limit", "kept_inertia_scale", "kept_age",
-                                     *SOLVER_SETTINGS)}
+                                     "step_limit", "kept_inertia_scale", *SOLVER_SETTINGS)}
         for term in self.terms:
             model_fields.update({f"{term.name}.{name}": field
                                  for name, field in term.coefficient_fields().items()})
@@ -253,7 +252,8 @@ class BatchEngine:
                   else self.loop_spread,
                   "lockstep": int(lockstep),
                   "step_limit": MAX_STEPS_PER_INSTANCE,
-                  "kept_inertia_scale": np.zeros(capacity), "kept_age": np.zeros(capacity),
+                  # nothing kept: the weights and age of a factorisation are set with it
+                  "kept_inertia_scale": np.zeros(capacity),
                   **{name: getattr(solver, name) for name in SOLVER_SETTINGS
                      if name != "jacobian_mode"},
                   "jacobian_mode": JACOBIANS.index(solver.jacobian)}
