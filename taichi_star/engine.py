@@ -613,7 +613,7 @@ class BatchEngine:
                     error = ti.max(error, self.integrator.local_error(
                         self.state.positions[b, n], self.state.previous[b, n],
                         self.state.previous_velocities[b, n], h))
-            if converged == 1 and (error <= tol or h <= dt_min):
+            if converged == 1 and stepping.accepts(error, tol, h, dt_min):
                 if ti.static(self.sensitive):
                     self.tangent_step(b, start, end, h, ratio, use_history)
                 self.accept_step(b, h, ratio, use_history)

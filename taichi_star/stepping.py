@@ -1,7 +1,8 @@
-"""Adaptive step-size control: where an instance's next step ends, and the size of the step
-after it from the local error estimate (`integrators.Integrator.local_error`). The engine's
-`adaptive_instance` applies them to each instance; they read nothing but their arguments
-(times and sizes in s, errors and tolerance in m)."""
+"""Adaptive step-size control: where an instance's next step ends, whether a converged step
+is kept, and the size of the step after it from the local error estimate
+(`integrators.Integrator.local_error`). The engine's `adaptive_instance` applies them to each
+instance; they read nothing but their arguments (times and sizes in s, errors and tolerance in
+m)."""
 
 import taichi as ti
 
@@ -23,6 +24,15 @@ def step_end(start, proposed, target, firing, firing_step):
     elif limit - end < 0.25 * proposed:
         end = start + 0.5 * (limit - start)
     return end
+
+
+@ti.func
+def accepts(error, tol, h, dt_min):
+    """Whether a converged step of size h (s) with local error estimate `error` (m) is kept:
+    when the error is within tol, or when the step is already at most dt_min long (it cannot
+    shrink further, so its error is kept rather than the step redone at the same size forever;
+    a step cut short to land on a stop may be shorter still)."""
+    return error <= tol or h <= dt_min
 
 
 @ti.func

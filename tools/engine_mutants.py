@@ -7,6 +7,10 @@ in which every named test passes unmutated). Writes a CSV (one row per mutant) a
 provenance sidecar.
 
     python tools/engine_mutants.py [--out results/mutation/engine_mutants.csv] [--only M1,M3]
+
+Without --out the table goes to a fresh runs/engine_mutants/<time>/, so a partial run never
+overwrites the committed one; it is rewritten after every mutant, so an interrupted run keeps
+what it measured. A mutant whose tests have not ended within --timeout-s counts as "timeout".
 """
 
 import argparse
@@ -126,18 +130,32 @@ MUTANTS = [
      "                self.state.velocities[plus, n] = self.implicit_velocity(plus, n, rate_gain)\n",
      "", [SENSITIVITIES + "test_euler_sensitivities_equal_finite_differences"],
      "a replica's velocities not moved with its positions"),
+    ("M23", "taichi_star/stepping.py", "return error <= tol or h <= dt_min",
+     "return error < tol or h <= dt_min", ["tests/unit/test_stepping.py::test_accepts"],
+     "a step whose error is exactly the tolerance is redone"),
+    ("M24", "taichi_star/stepping.py", "return error <= tol or h <= dt_min",
+     "return error <= tol or h < dt_min", ["tests/unit/test_stepping.py::test_accepts"],
+     "a step at exactly dt_min over the tolerance is redone at dt_min again, forever"),
+    ("M25", "taichi_star/stepping.py", "return error <= tol or h <= dt_min",
+     "return error <= tol", ["tests/unit/test_stepping.py::test_accepts"],
+     "no step is kept over the tolerance, even at dt_min (the adaptive loop never ends)"),
 ]
 
 
-def pytest(tests, worktree: Path) -> subprocess.CompletedProcess:
-    """The tests, stopping at the first failure, on the worktree's code."""
-    return subprocess.run([sys.executable, "-m", "pytest", "-q", "-x", "-n", "0",
-                           "-p", "no:cacheprovider", *tests], cwd=worktree,
-                          capture_output=True, text=True,
-                          env={**os.environ, "PYTHONPATH": str(worktree)})
+def pytest(tests, worktree: Path,
+           timeout_s: float | None) -> subprocess.CompletedProcess | None:
+    """The tests, stopping at the first failure, on the worktree's code; None when they have
+    not ended within timeout_s (None: no limit)."""
+    try:
+        return subprocess.run([sys.executable, "-m", "pytest", "-q", "-x", "-n", "0",
+                               "-p", "no:cacheprovider", *tests], cwd=worktree,
+                              capture_output=True, text=True, timeout=timeout_s,
+                              env={**os.environ, "PYTHONPATH": str(worktree)})
+    except subprocess.TimeoutExpired:
+        return None
 
 
-def run(mutant, worktree: Path) -> dict:
+def run(mutant, worktree: Path, timeout_s: float) -> dict:
     ident, path, original, mutated, tests, what = mutant
     target = worktree / path
     source = target.read_text()
@@ -146,11 +164,14 @@ def run(mutant, worktree: Path) -> dict:
     target.write_text(source.replace(original, mutated))
     start = time.perf_counter()
     try:
-        result = pytest(tests, worktree)
+        result = pytest(tests, worktree, timeout_s)
     finally:
         target.write_text(source)
-    failure = first_failure(result.stdout)
-    if result.returncode == 0:
+    failure = "" if result is None else first_failure(result.stdout)
+    if result is None:
+        # a mutant that hangs its tests is not killed by them: they never fail
+        outcome = "timeout"
+    elif result.returncode == 0:
         outcome = "survived"
     else:
         # a kill is a named test failing; anything else (a collection error, a crash) says
@@ -170,33 +191,8 @@ def first_failure(output: str) -> str:
     return raised.group(1) if raised else "unknown"
 
 
-def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default="results/mutation/engine_mutants.csv")
-    parser.add_argument("--only", default="", help="comma list of mutant ids (default: all)")
-    args = parser.parse_args()
-    chosen = [m for m in MUTANTS if not args.only or m[0] in args.only.split(",")]
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO,
-                            capture_output=True, text=True, check=True).stdout.strip()
-    rows = []
-    with tempfile.TemporaryDirectory(prefix="engine_mutants_") as scratch:
-        worktree = Path(scratch) / "tree"
-        subprocess.run(["git", "worktree", "add", "--detach", str(worktree), "HEAD"], cwd=REPO,
-                       check=True, capture_output=True)
-        try:
-            # the control: unmutated, every test must pass, or a "kill" would mean nothing
-            control = pytest(sorted({test for m in chosen for test in m[4]}), worktree)
-            if control.returncode != 0:
-                raise SystemExit(f"the tests fail without a mutant:\n{control.stdout[-2000:]}")
-            for mutant in chosen:
-                row = {**run(mutant, worktree), "commit": commit}
-                print(f"{row['mutant']} {row['outcome']:<8} {row['seconds']:6.1f} s  {row['what']}",
-                      flush=True)
-                rows.append(row)
-        finally:
-            subprocess.run(["git", "worktree", "remove", "--force", str(worktree)], cwd=REPO,
-                           capture_output=True)
-    out = REPO / args.out
+def write_table(rows, out: Path):
+    """The rows so far as a CSV at out, with its provenance sidecar."""
     out.parent.mkdir(parents=True, exist_ok=True)
     with out.open("w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
@@ -207,6 +203,44 @@ def main():
                                             capture_output=True, text=True).stdout.strip(),
                "date": time.strftime("%Y-%m-%dT%H:%M:%S+00:00", time.gmtime())}
     out.with_name(out.name + ".json").write_text(json.dumps(sidecar, indent=2) + "\n")
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default=None,
+                        help="the table's path (default: runs/engine_mutants/<time>/)")
+    parser.add_argument("--only", default="", help="comma list of mutant ids (default: all)")
+    parser.add_argument("--timeout-s", type=float, default=1200.0,
+                        help="the most seconds one mutant's tests may run (default 1200)")
+    args = parser.parse_args()
+    chosen = [m for m in MUTANTS if not args.only or m[0] in args.only.split(",")]
+    if not chosen:
+        parser.error(f"--only {args.only!r} names no mutant (M1-M{len(MUTANTS)})")
+    if args.timeout_s <= 0:
+        parser.error(f"--timeout-s must be > 0, got {args.timeout_s:g}")
+    out = REPO / (args.out or f"runs/engine_mutants/{time.strftime('%Y%m%d-%H%M%S')}"
+                              "/engine_mutants.csv")
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO,
+                            capture_output=True, text=True, check=True).stdout.strip()
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="engine_mutants_") as scratch:
+        worktree = Path(scratch) / "tree"
+        subprocess.run(["git", "worktree", "add", "--detach", str(worktree), "HEAD"], cwd=REPO,
+                       check=True, capture_output=True)
+        try:
+            # the control: unmutated, every test must pass, or a "kill" would mean nothing
+            control = pytest(sorted({test for m in chosen for test in m[4]}), worktree, None)
+            if control.returncode != 0:
+                raise SystemExit(f"the tests fail without a mutant:\n{control.stdout[-2000:]}")
+            for mutant in chosen:
+                row = {**run(mutant, worktree, args.timeout_s), "commit": commit}
+                print(f"{row['mutant']} {row['outcome']:<8} {row['seconds']:6.1f} s  {row['what']}",
+                      flush=True)
+                rows.append(row)
+                write_table(rows, out)
+        finally:
+            subprocess.run(["git", "worktree", "remove", "--force", str(worktree)], cwd=REPO,
+                           capture_output=True)
     print(f"wrote {out}")
 
 

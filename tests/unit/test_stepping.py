@@ -10,12 +10,18 @@ import taichi as ti
 from taichi_star import stepping
 
 TOL = 1e-6  # m, the error tolerance of these cases
+DT_MIN = 2 ** -20  # s, the smallest step of the acceptance cases (binary-exact)
 
 
 @ti.kernel
 def _step_end(start: float, proposed: float, target: float, firing: int,
               firing_step: float) -> float:
     return stepping.step_end(start, proposed, target, firing, firing_step)
+
+
+@ti.kernel
+def _accepts(error: float, h: float) -> int:
+    return stepping.accepts(error, TOL, h, DT_MIN)
 
 
 @ti.kernel
@@ -57,3 +63,15 @@ def test_accepted_size(taichi_cpu, h, proposed, error, firing, expected):
 @pytest.mark.parametrize("error, factor", [(2 * TOL, 0.9 / math.sqrt(2)), (100 * TOL, 0.2)])
 def test_rejected_size(taichi_cpu, error, factor):
     assert _rejected_size(0.01, error) == pytest.approx(0.01 * factor, rel=1e-15)
+
+
+@pytest.mark.parametrize("error, h, kept", [
+    (TOL, 0.01, True),                   # the error exactly at the tolerance: kept
+    (TOL * (1 + 2 ** -40), 0.01, False),  # just over it: redone
+    (2 * TOL, DT_MIN, True),             # over it at exactly dt_min: kept (cannot shrink)
+    (2 * TOL, DT_MIN * (1 + 2 ** -30), False),  # just above dt_min: redone smaller
+    (2 * TOL, 0.5 * DT_MIN, True),       # cut below dt_min to land on a stop: kept
+])
+def test_accepts(taichi_cpu, error, h, kept):
+    # exact comparisons of binary-exact or nearly equal values: no tolerance involved
+    assert bool(_accepts(error, h)) is kept
