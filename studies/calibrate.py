@@ -220,10 +220,7 @@ def plot_cross_validation(csv_path, png_path) -> Path:
                  + (f"{settings}; " if settings else "") + "red quadrants: wrong direction",
                  fontsize=9)
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(png_path, dpi=130)
-    plt.close(fig)
-    return Path(png_path)
+    return cli.save_figure(fig, png_path)
 
 
 # --------------------------------------------------------------------------- CLI

@@ -765,7 +765,4 @@ def plot_ranking(csv_path, png_path) -> Path:
     ax.set_title("model selection, ranked by the held-out error"
                  + (f"\n{settings}" if settings else ""), fontsize=9)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(png_path, dpi=120)
-    plt.close(fig)
-    return Path(png_path)
+    return cli.save_figure(fig, png_path, dpi=120)

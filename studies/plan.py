@@ -92,10 +92,7 @@ def plot_paths(paths_csv, plan_csv, png_path) -> Path:
                  f"{gain.get('closed', np.nan):.1f} mm; o = reached, x = not", fontsize=9)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(png_path, dpi=130)
-    plt.close(fig)
-    return Path(png_path)
+    return cli.save_figure(fig, png_path)
 
 
 def build_parser():

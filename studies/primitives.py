@@ -64,10 +64,7 @@ def plot_primitives(csv_path, png_path) -> Path:
     ax.set_title(f"Motion primitives: step per cycle (mm, body frame) of the {len(table)} "
                  f"gaits\nT = {period:g} s, mean over cycles {cycles}; marker size = actuators",
                  fontsize=9)
-    fig.tight_layout()
-    fig.savefig(png_path, dpi=130)
-    plt.close(fig)
-    return Path(png_path)
+    return cli.save_figure(fig, png_path)
 
 
 def build_parser():

@@ -139,10 +139,7 @@ def plot_sensitivity(csv_path, png_path) -> Path:
     axes[0, 0].set_title(f"Sobol indices of the signed speed (N = {samples} base samples, "
                          f"bars: 95 % confidence)" + (f"\n{settings}" if settings else ""),
                          fontsize=9)
-    fig.tight_layout()
-    fig.savefig(png_path, dpi=130)
-    plt.close(fig)
-    return Path(png_path)
+    return cli.save_figure(fig, png_path)
 
 
 def solver(args) -> SolverConfig:

@@ -224,7 +224,6 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
     from matplotlib import animation
 
     from . import drawing
-    from .gait import Gait
 
     path = Path(path)
     if result.shapes is None or result.topology is None:
