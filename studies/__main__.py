@@ -81,7 +81,7 @@ def main(argv=None) -> int:
         print(f"{program()} {name}: error: cannot write {error.filename or 'a file'} "
               f"({error.strerror}); the files written before are intact", file=sys.stderr)
         return 2
-    except SystemExit as exit_:  # argparse: --help, or an unknown / malformed flag
+    except SystemExit as exit_:  # argparse's --help (its refusals are StudyArgumentError)
         return exit_.code if isinstance(exit_.code, int) else 2
     return 0
 

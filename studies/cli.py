@@ -67,7 +67,16 @@ class StudyOutputError(RuntimeError):
 
 # --------------------------------------------------------------------------- the parser
 
-class StudyParser(argparse.ArgumentParser):
+class OneLineParser(argparse.ArgumentParser):
+    """A parser whose refusals (an unknown flag, a value of the wrong type, a choice not
+    offered) are a StudyArgumentError, so that `python -m studies` prints them as one line
+    with exit code 2, as it prints the studies' own checks, instead of argparse's usage block."""
+
+    def error(self, message):
+        raise StudyArgumentError(f"{message} (see --help)")
+
+
+class StudyParser(OneLineParser):
     """The parser of one study, with the flags every study takes (--out, --quick, --arch,
     --no-progress). `add_argument(..., quick=VALUE)` gives a flag another default under
     --quick; both defaults are shown in its help."""

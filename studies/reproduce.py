@@ -10,13 +10,12 @@ other, and the first failure stops the run. The whole set takes hours on a 2-cor
 
 from __future__ import annotations
 
-import argparse
 import shlex
 import subprocess
 import sys
 from pathlib import Path
 
-from .cli import COMMITTED_RESULTS, StudyArgumentError
+from .cli import COMMITTED_RESULTS, OneLineParser, StudyArgumentError
 
 DESCRIPTION = "Regenerate the committed results/ with every study's full run (hours)."
 
@@ -51,7 +50,7 @@ def command(name: str, into: Path):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(prog="python -m studies reproduce", description=DESCRIPTION)
+    parser = OneLineParser(prog="python -m studies reproduce", description=DESCRIPTION)
     parser.add_argument("--only", default=None,
                         help=f"comma list of {', '.join(COMMANDS)} (default all)")
     parser.add_argument("--into", default=str(COMMITTED_RESULTS),

@@ -115,6 +115,10 @@ def test_parameter_values_come_from_unit_coordinates_and_stay_in_range():
 
 
 @pytest.mark.parametrize("study, argv, message", [
+    # argparse's own refusals, one line like the studies' checks (cli.OneLineParser)
+    ("fig4c", ["--no-such-flag"], "unrecognized arguments: --no-such-flag (see --help)"),
+    ("fig4c", ["--cycles", "abc"], "argument --cycles: invalid float value: 'abc'"),
+    ("sweep", ["--arch", "tpu"], "argument --arch: invalid choice: 'tpu'"),
     ("calibrate", ["--fit", "alpha=1.5:0.2"], "--fit alpha: reversed or empty bounds"),
     ("calibrate", ["--fit", "alpha=0.5:0.5"], "--fit alpha: reversed or empty bounds"),
     ("calibrate", ["--fit", "alpha=0:inf"], "--fit alpha: 'inf' is not a finite number"),
@@ -150,6 +154,13 @@ def test_invalid_arguments_fail_before_compute(no_compute, tmp_path, capsys, stu
     assert message in error, error
     assert error.count("\n") == 1 and "Traceback" not in error  # one line, no traceback
     assert not any(tmp_path.iterdir())  # nothing written
+
+
+def test_reproduce_refuses_an_unknown_flag_in_one_line(no_compute, capsys):
+    assert studies_main(["reproduce", "--dry-run", "--bogus"]) == 2
+    error = capsys.readouterr().err
+    assert error == ("python -m studies reproduce: error: unrecognized arguments: --bogus "
+                     "(see --help)\n")
 
 
 def test_api_bad_input_raises_value_error(no_compute):
