@@ -68,6 +68,9 @@ error left after that update is bounded by the update only while it contracts at
 fixed steps (0.1 s at the default dt) keep its age well inside the shape's changes (a heating
 pulse lasts 0.163 s)."""
 
+FACTORISATION_PREFIX = "factorisation."
+"""The names of the kept factorisations' arrays in a saved state (`BatchEngine.save_state`)."""
+
 LOCKSTEP_MINIMUM_BATCH = 64
 """Simulated instances from which the fixed-step kernel of an engine with lanes iterates its
 groups in lockstep (`advance_group`). Below it each instance runs on its own: a group of
@@ -161,6 +164,8 @@ class BatchEngine:
         """The factorisation blocks[b] holds (the lagged Jacobian reuses it across steps): the
         integrator weights its matrix was assembled with (inertia scale 1/s², rate gain 1/s;
         scale 0: none to reuse) and the solves that have started with it since."""
+        self._factorisation_store = None
+        """The kept factorisations' FieldStore (`factorisation_store`), once built."""
         self.assembly = Assembly(topology, capacity, arena, self.plan.pattern_slot, integrator,
                                  self.state, self.system,
                                  self.primal_count if sensitive else None)
@@ -1104,18 +1109,49 @@ class BatchEngine:
         self.compute_centroids()
         return self.centroids.to_numpy()[:batch_size].astype(np.float64)
 
-    def save_state(self) -> Dict[str, np.ndarray]:
-        return self.state.save()
+    def save_state(self, factorisations: bool = False) -> Dict[str, np.ndarray]:
+        """A copy of the batch's state (`BatchState.save`); with `factorisations`, also the
+        factorisations the lagged Jacobian keeps (every instance's LU blocks and the weights
+        and age they were made with, names starting "factorisation."), so that a lagged run
+        put back from it goes on bit for bit as if never interrupted."""
+        saved = self.state.save()
+        if factorisations:
+            saved.update({f"{FACTORISATION_PREFIX}{name}": values
+                          for name, values in self.factorisation_store().read().items()})
+        return saved
 
     def restore_state(self, saved: Dict[str, np.ndarray]):
-        """Put back a state from `save_state` (`BatchState.restore`, bitwise). The lagged
-        Jacobian's kept factorisations are not part of a state: an instance that this changes
-        refactors at its next step (the others keep theirs, so that putting back some
-        instances leaves the rest as they would have been)."""
-        changed = self.state.changed_instances(saved) \
-            if self.jacobian_mode[None] == JACOBIAN_LAGGED else None
-        self.state.restore(saved)
-        if changed is not None and changed.any():
-            kept = self.kept_inertia_scale.to_numpy()
-            kept[changed] = 0.0
-            load_field(self.kept_inertia_scale, kept)
+        """Put back a state from `save_state` (`BatchState.restore`, bitwise), and the kept
+        factorisations where it holds them. Where it does not, an instance of a lagged run
+        that this changes refactors at its next step (the others keep theirs, so that putting
+        back some instances leaves the rest as they would have been). Raises ValueError, nothing
+        changed, for a state of another layout."""
+        kept = {name[len(FACTORISATION_PREFIX):]: values for name, values in saved.items()
+                if name.startswith(FACTORISATION_PREFIX)}
+        state = {name: values for name, values in saved.items()
+                 if not name.startswith(FACTORISATION_PREFIX)}
+        store = self.factorisation_store() if kept else None
+        if store is not None:
+            for name, shape in store.shapes.items():
+                if name not in kept or kept[name].shape != shape:
+                    found = kept[name].shape if name in kept else "none"
+                    raise ValueError(f"saved state field {FACTORISATION_PREFIX + name!r} has "
+                                     f"shape {found}, this engine {shape}")
+        changed = self.state.changed_instances(state) \
+            if self.jacobian_mode[None] == JACOBIAN_LAGGED and store is None else None
+        self.state.restore(state)
+        if store is not None:
+            store.write(kept)
+        elif changed is not None and changed.any():
+            scale = self.kept_inertia_scale.to_numpy()
+            scale[changed] = 0.0
+            load_field(self.kept_inertia_scale, scale)
+
+    def factorisation_store(self) -> FieldStore:
+        """The fields of the kept factorisations (`first_refactor`) as one store, built at its
+        first use (a store is a kernel to compile, and only lagged runs that save need it)."""
+        if self._factorisation_store is None:
+            self._factorisation_store = FieldStore({
+                "blocks": self.system.blocks, "inertia_scale": self.kept_inertia_scale,
+                "rate_gain": self.kept_rate_gain, "age": self.kept_age})
+        return self._factorisation_store

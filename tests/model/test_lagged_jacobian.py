@@ -8,7 +8,7 @@ import pytest
 import taichi as ti
 
 import taichi_star as ts
-from taichi_star.engine import LAGGED_KEEP_MAX_UPDATES, LAGGED_MAX_AGE
+from taichi_star.engine import FACTORISATION_PREFIX, LAGGED_KEEP_MAX_UPDATES, LAGGED_MAX_AGE
 from taichi_star.runtime import prepare_engine
 from taichi_star.state import STATUS_NEWTON_FAILED, STATUS_OK
 
@@ -87,11 +87,13 @@ def test_a_failed_solve_leaves_nothing_to_reuse():
     assert kept[1] == 1.0 / solver.dt ** 2
 
 
-def test_putting_back_some_instances_leaves_the_others_bitwise_alone():
+def test_putting_back_some_instances_leaves_the_others_bitwise_alone(tmp_path):
     """Simulator.reset restores the whole state with some rows changed: only those refactor;
     the other robot goes on with its kept factorisation, exactly as in a Simulator where
-    nothing was reset. Loading a snapshot changes every row, so the continuation refactors
-    and agrees with the uninterrupted run to newton_tol per step (not bitwise; 100 steps)."""
+    nothing was reset. A lagged snapshot holds the kept factorisations: loaded (from memory or
+    its file) the continuation is the uninterrupted run's bit for bit. Without them (a
+    snapshot of a Newton simulator, say) every changed row refactors and the continuation
+    agrees with the uninterrupted run to newton_tol per step (not bitwise; 100 steps)."""
     params = [ts.StarParams(gait="none"), ts.StarParams(gait="none", alpha=1.1)]
 
     def driven(reset_first: bool):
@@ -110,10 +112,37 @@ def test_putting_back_some_instances_leaves_the_others_bitwise_alone():
     untouched, snapshot = driven(False)
     np.testing.assert_array_equal(reset.shapes()[1], untouched.shapes()[1])
     assert np.abs(reset.shapes()[0] - untouched.shapes()[0]).max() > 1e-3  # it was reset
+    for source in (snapshot, snapshot.write(tmp_path / "lagged")):
+        restored = ts.Simulator(params, LAGGED)
+        restored.load(source)
+        restored.advance(0.1)
+        np.testing.assert_array_equal(restored.shapes(), untouched.shapes())
+    without = ts.SimulatorSnapshot(
+        fields={name: values for name, values in snapshot.fields.items()
+                if not name.startswith(FACTORISATION_PREFIX)},
+        engine_key=snapshot.engine_key, n_instances=snapshot.n_instances, dt=snapshot.dt)
     restored = ts.Simulator(params, LAGGED)
-    restored.load(snapshot)
+    restored.load(without)
     restored.advance(0.1)
-    assert np.abs(restored.shapes() - untouched.shapes()).max() < 100 * 1e-10
+    difference = np.abs(restored.shapes() - untouched.shapes()).max()
+    assert 0.0 < difference < 100 * 1e-10  # refactored: within 100 steps x newton_tol
+
+
+def test_a_snapshot_with_a_damaged_factorisation_is_refused_and_changes_nothing():
+    simulator = ts.Simulator([ts.StarParams(gait="none")], LAGGED)
+    simulator.fire(["A1"])
+    simulator.advance(0.01)
+    snapshot = simulator.save()
+    before = simulator.save()
+    name = FACTORISATION_PREFIX + "blocks"
+    damaged = ts.SimulatorSnapshot(
+        fields={**snapshot.fields, name: snapshot.fields[name][:, :-1]},
+        engine_key=snapshot.engine_key, n_instances=snapshot.n_instances, dt=snapshot.dt)
+    with pytest.raises(ValueError, match="'factorisation.blocks' has shape"):
+        simulator.load(damaged)
+    after = simulator.save()
+    for field, values in before.fields.items():
+        np.testing.assert_array_equal(after.fields[field], values)
 
 
 @ti.kernel
