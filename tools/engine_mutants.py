@@ -83,7 +83,7 @@ MUTANTS = [
      "if iterations > LAGGED_KEEP_MAX_UPDATES:",
      [LAGGED + "test_a_failed_solve_leaves_nothing_to_reuse"],
      "a failed solve's factorisation kept for reuse"),
-    ("M12", "taichi_star/engine.py", "kept[changed] = 0.0", "kept[:] = 0.0",
+    ("M12", "taichi_star/engine.py", "scale[changed] = 0.0", "scale[:] = 0.0",
      [LAGGED + "test_putting_back_some_instances_leaves_the_others_bitwise_alone"],
      "resetting some robots drops every robot's kept factorisation"),
     ("M13", "taichi_star/engine.py", "if changed is not None and changed.any():",
@@ -162,8 +162,6 @@ def run(mutant, worktree: Path, timeout_s: float) -> dict:
     ident, path, original, mutated, tests, what = mutant
     target = worktree / path
     source = target.read_text()
-    if source.count(original) != 1:
-        raise SystemExit(f"{ident}: the text to mutate is not found once in {path}")
     target.write_text(source.replace(original, mutated))
     start = time.perf_counter()
     try:
@@ -231,6 +229,10 @@ def main():
         subprocess.run(["git", "worktree", "add", "--detach", str(worktree), "HEAD"], cwd=REPO,
                        check=True, capture_output=True)
         try:
+            missing = [f"{ident} ({path})" for ident, path, original, *_ in chosen
+                       if (worktree / path).read_text().count(original) != 1]
+            if missing:
+                raise SystemExit(f"the text to mutate is not found once for {', '.join(missing)}")
             # the control: unmutated, every test must pass, or a "kill" would mean nothing
             control = pytest(sorted({test for m in chosen for test in m[4]}), worktree, None)
             if control.returncode != 0:
