@@ -139,7 +139,7 @@ MUTANTS = [
     ("M25", "taichi_star/stepping.py", "return error <= tol or h <= dt_min",
      "return error <= tol", ["tests/unit/test_stepping.py::test_accepts"],
      "no step is kept over the tolerance, even at dt_min (the adaptive loop never ends)"),
-    ("M26", "taichi_star/engine.py", "            store.write(kept)\n", "",
+    ("M26", "taichi_star/engine.py", "            store.write(kept)\n", "            pass\n",
      [LAGGED + "test_putting_back_some_instances_leaves_the_others_bitwise_alone"],
      "a lagged snapshot's kept factorisations not put back (the continuation refactors)"),
 ]
