@@ -20,6 +20,7 @@ to K̄(0) at τ = T (its `period`) and stays there.
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import numbers
@@ -40,6 +41,7 @@ from .gait import N_ACTUATORS, Gait
 from .geometry import CENTRE
 from .model import validate_batch
 from .params import SolverConfig, StarParams, check_precision
+from .provenance import write_atomic
 from .runtime import Runtime, check_arch
 from .state import STATUS_NAMES, STATUS_OK
 from .timegrid import MAX_STEPS_PER_INSTANCE, check_work, whole_steps
@@ -65,12 +67,17 @@ class SimulatorSnapshot:
     dt: float
 
     def write(self, path) -> Path:
-        """Save to an .npz file (arrays plus a JSON header)."""
+        """Save to an .npz file (arrays plus a JSON header; ".npz" is added to a path without
+        it), whole or not at all (`provenance.write_atomic`: a kill or a full disk leaves a
+        snapshot already there as it was). Returns the file's path."""
         path = Path(path)
+        path = path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
         header = json.dumps({"engine_key": self.engine_key, "n_instances": self.n_instances,
                              "dt": self.dt})
-        np.savez(path, __header__=np.array(header), **self.fields)
-        return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
+        archive = io.BytesIO()
+        np.savez(archive, __header__=np.array(header), **self.fields)
+        write_atomic(path, archive.getvalue())
+        return path
 
     @classmethod
     def read(cls, path) -> "SimulatorSnapshot":

@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 
 import taichi_star as ts
+from taichi_star import provenance
 
 REPO = Path(__file__).resolve().parents[2]
 PERIOD = 0.4
@@ -104,6 +105,31 @@ def test_save_to_file_and_load(tmp_path):
     np.testing.assert_array_equal(sim.shapes(), later)
     sim.advance(0.1)
     np.testing.assert_array_equal(sim.shapes(), after)
+
+
+def test_a_snapshot_is_written_whole_or_leaves_the_previous_one(tmp_path, monkeypatch):
+    """Writing a snapshot over an earlier one fails before its rename (fsync reports a full
+    disk): the earlier file is byte for byte as it was and loads, nothing else is left beside
+    it."""
+    sim = commanded()
+    sim.fire(GAITS)
+    sim.advance(0.05)
+    path = sim.save(tmp_path / "state")
+    written = path.read_bytes()
+    sim.advance(0.05)
+
+    def full_disk(descriptor):
+        raise OSError(28, "No space left on device")
+
+    with monkeypatch.context() as patched:
+        patched.setattr(provenance.os, "fsync", full_disk)
+        with pytest.raises(OSError, match="No space left"):
+            sim.save(path)
+    assert path.read_bytes() == written
+    assert [p.name for p in tmp_path.iterdir()] == ["state.npz"]
+    later = sim.shapes()
+    sim.load(path)
+    assert np.abs(sim.shapes() - later).max() > 0.0  # back at the earlier state
 
 
 def test_a_state_saved_before_the_factorisations_were_counted_loads_and_counts_from_zero(
