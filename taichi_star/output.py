@@ -295,8 +295,15 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
     else:
         writer = animation.PillowWriter(fps=fps)
     path.parent.mkdir(parents=True, exist_ok=True)
-    movie.save(path, writer=writer)
-    plt.close(fig)
+    # drawn into a scratch folder beside the path, then written whole or not at all: a kill or
+    # a full disk leaves a movie already there as it was
+    with tempfile.TemporaryDirectory(dir=path.parent) as folder:
+        scratch = Path(folder) / path.name
+        try:
+            movie.save(scratch, writer=writer)
+        finally:
+            plt.close(fig)
+        write_atomic(path, scratch.read_bytes())
     return path
 
 
