@@ -1,7 +1,10 @@
+import contextlib
+import errno
 import os
 
 import pytest
 
+from taichi_star import provenance
 from taichi_star.runtime import KERNEL_OPTIMISATION_ENV
 
 
@@ -10,6 +13,22 @@ def pytest_configure(config):
     # engine compiles in 0.45-0.7x the time (docs/reliability.md) and computes the same bits
     # (test_bench_quick checks); set here, it reaches every worker process the tests start
     os.environ.setdefault(KERNEL_OPTIMISATION_ENV, "0")
+
+
+@pytest.fixture
+def full_disk(monkeypatch):
+    """A context manager within which every `provenance.write_atomic` fails as on a full disk:
+    its fsync raises ENOSPC after the data went to the temporary file, before the rename."""
+    def no_space(descriptor):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    @contextlib.contextmanager
+    def patched():
+        with monkeypatch.context() as context:
+            context.setattr(provenance.os, "fsync", no_space)
+            yield
+
+    return patched
 
 
 def pytest_addoption(parser):

@@ -12,7 +12,6 @@ import pandas as pd
 import pytest
 
 import taichi_star as ts
-from taichi_star import provenance
 from taichi_star.output import column_unit
 
 
@@ -140,17 +139,13 @@ def test_animation_colours_the_heating_actuators_and_draws_the_path(recorded, tm
     assert (blue > 120).sum() > 0  # tab:blue path (lightsteelblue cylinder: difference < 80)
 
 
-def test_a_movie_is_written_whole_or_leaves_the_previous_one(recorded, tmp_path, monkeypatch):
+def test_a_movie_is_written_whole_or_leaves_the_previous_one(recorded, tmp_path, full_disk):
     """Drawing a movie over an earlier one fails at the disk (fsync reports it full): the earlier
     file is byte for byte as it was and nothing else is left in its folder."""
     path = recorded.animate(tmp_path / "movie.gif", instances=[0], size_px=200)
     written = path.read_bytes()
 
-    def full_disk(descriptor):
-        raise OSError(28, "No space left on device")
-
-    with monkeypatch.context() as patched:
-        patched.setattr(provenance.os, "fsync", full_disk)
+    with full_disk():
         with pytest.raises(OSError, match="No space left"):
             recorded.animate(path, instances=[1], size_px=200)
     assert path.read_bytes() == written

@@ -13,7 +13,6 @@ import pandas as pd
 import pytest
 
 import taichi_star as ts
-from taichi_star import provenance
 
 REPO = Path(__file__).resolve().parents[2]
 PERIOD = 0.4
@@ -107,7 +106,7 @@ def test_save_to_file_and_load(tmp_path):
     np.testing.assert_array_equal(sim.shapes(), after)
 
 
-def test_a_snapshot_is_written_whole_or_leaves_the_previous_one(tmp_path, monkeypatch):
+def test_a_snapshot_is_written_whole_or_leaves_the_previous_one(tmp_path, full_disk):
     """Writing a snapshot over an earlier one fails before its rename (fsync reports a full
     disk): the earlier file is byte for byte as it was and loads, nothing else is left beside
     it."""
@@ -118,11 +117,7 @@ def test_a_snapshot_is_written_whole_or_leaves_the_previous_one(tmp_path, monkey
     written = path.read_bytes()
     sim.advance(0.05)
 
-    def full_disk(descriptor):
-        raise OSError(28, "No space left on device")
-
-    with monkeypatch.context() as patched:
-        patched.setattr(provenance.os, "fsync", full_disk)
+    with full_disk():
         with pytest.raises(OSError, match="No space left"):
             sim.save(path)
     assert path.read_bytes() == written

@@ -5,8 +5,6 @@ its sensitivities against finite differences. Elsewhere: the term assembled alon
 (tests/model/test_engine.py, `test_engine_matches_reference_with_damping_joints_ends_closure_and_extensions`).
 """
 
-import dataclasses
-
 import numpy as np
 import pandas as pd
 import pytest

@@ -515,18 +515,14 @@ def test_code_version_without_git_names_none(checkout, monkeypatch):
                                         "dirty": None}
 
 
-def test_write_atomic_writes_whole_or_leaves_the_previous_file(tmp_path, monkeypatch):
+def test_write_atomic_writes_whole_or_leaves_the_previous_file(tmp_path, full_disk):
     """A write that fails before its rename (here: fsync reports a full disk) leaves the previous
     file byte for byte and no temporary file beside it; one that succeeds replaces it whole."""
     path = tmp_path / "table.csv"
     provenance.write_atomic(path, b"a,b\n1,2\n")
     assert path.read_bytes() == b"a,b\n1,2\n"
 
-    def full_disk(descriptor):
-        raise OSError(28, "No space left on device")
-
-    with monkeypatch.context() as patched:
-        patched.setattr(provenance.os, "fsync", full_disk)
+    with full_disk():
         with pytest.raises(OSError, match="No space left"):
             provenance.write_atomic(path, b"a,b\n3,4\n5,6\n")
     assert path.read_bytes() == b"a,b\n1,2\n"
