@@ -15,6 +15,7 @@ what it measured. A mutant whose tests have not ended within --timeout-s counts 
 
 import argparse
 import csv
+import io
 import json
 import os
 import re
@@ -23,6 +24,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+from taichi_star.provenance import write_atomic
 
 REPO = Path(__file__).resolve().parents[1]
 RELIABILITY = "tests/model/test_reliability.py::"
@@ -193,17 +196,19 @@ def first_failure(output: str) -> str:
 
 
 def write_table(rows, out: Path):
-    """The rows so far as a CSV at out, with its provenance sidecar."""
+    """The rows so far as a CSV at out, with its provenance sidecar, each written whole or not
+    at all (a kill while the table is rewritten leaves the previous one)."""
     out.parent.mkdir(parents=True, exist_ok=True)
-    with out.open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    table = io.StringIO(newline="")
+    writer = csv.DictWriter(table, fieldnames=list(rows[0]))
+    writer.writeheader()
+    writer.writerows(rows)
+    write_atomic(out, table.getvalue().encode())
     sidecar = {"command": "python tools/engine_mutants.py " + " ".join(sys.argv[1:]),
                "git_commit": subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO,
                                             capture_output=True, text=True).stdout.strip(),
                "date": time.strftime("%Y-%m-%dT%H:%M:%S+00:00", time.gmtime())}
-    out.with_name(out.name + ".json").write_text(json.dumps(sidecar, indent=2) + "\n")
+    write_atomic(out.with_name(out.name + ".json"), (json.dumps(sidecar, indent=2) + "\n").encode())
 
 
 def main():
