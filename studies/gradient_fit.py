@@ -52,7 +52,11 @@ sidecar: `gradient_fit.csv` (per set and optimiser: the cost columns, objective 
 validation objective on `--validate-cycles` with the training phases, robot-seconds each
 gradient fit needed to reach CMA-ES's objective and their ratio to CMA-ES's total, both
 counts), `gradient_fit_history.csv` (every evaluation: cumulative cost and best objective so
-far) and `gradient_fit.png` (best objective against robot-seconds, drawn from the history).
+far), `gradient_fit_uncertainty.csv` (per set, optimiser and parameter, at the optimiser's best
+point: `identification.parameter_uncertainty` from one run with the sensitivities there, not
+counted in any cost: which parameters the training data determine, their standard errors and
+correlations) and `gradient_fit.png` (best objective against robot-seconds, drawn from the
+history).
 """
 
 from __future__ import annotations
@@ -240,6 +244,17 @@ class Problem:
         motion, of `fit_terms` (the gradient of the objective with the phases re-fitted)."""
         residuals, jacobian, motion = self.fit_terms(units)
         return float(residuals @ residuals), 2.0 * jacobian.T @ residuals + motion
+
+    def uncertainty(self, units) -> pd.DataFrame:
+        """`identification.parameter_uncertainty` at a point (unit coordinates): its residuals
+        and their Jacobian with respect to the parameters' values, from one run with the
+        sensitivities."""
+        units = np.clip(np.asarray(units, dtype=float), 0.0, 1.0)
+        values = identify.box_values(self.box, units[None, :])[0]
+        residuals, jacobian, _ = self.fit_terms(units)
+        return identification.parameter_uncertainty(residuals,
+                                                    jacobian / self.value_per_unit(values),
+                                                    self.names, values)
 
     def value_per_unit(self, values) -> np.ndarray:
         """d value / d u per axis: high − low, or value × ln(high / low) for a log axis."""
@@ -571,6 +586,11 @@ def main(argv=None):
                               recorders[-1], cost_ratios[name])
     table = summarise(recorders, problems, validate, cost_ratios)
     out.write_csv(table, "gradient_fit.csv")
+    out.write_csv(pd.concat([problems[r.parameter_set].uncertainty(r.best_units)
+                             .assign(parameter_set=r.parameter_set, optimiser=r.optimiser)
+                             for r in recorders], ignore_index=True)
+                  [["parameter_set", "optimiser", *identification.UNCERTAINTY_COLUMNS]],
+                  "gradient_fit_uncertainty.csv")
     out.wrote(plot_history(out.path("gradient_fit_history.csv"),
                            out.path("gradient_fit.png")))
     out.report()

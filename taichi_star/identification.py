@@ -111,6 +111,15 @@ GOLDEN_ITERATIONS = 40
 """Golden-section steps of the phase refinement: the bracket of two grid cells shrinks by
 0.618^40 ≈ 4e-9 of itself."""
 
+UNCERTAINTY_RCOND = 1e-10
+"""`parameter_uncertainty`: singular values of the relative Jacobian below this fraction of its
+largest count as zero (double precision resolves ~1e-16 of it; the sensitivities are held to
+~1e-5 relative, so a direction 1e-10 below the strongest is indistinguishable from none)."""
+UNCERTAINTY_COLUMNS = ["parameter", "value", "standard_error", "relative_standard_error",
+                       "identifiable", "most_correlated_with", "correlation", "rank",
+                       "condition_number", "residual_dof"]
+"""Columns of `parameter_uncertainty`'s table, one row per parameter."""
+
 TRIAL_COLUMNS = ["gait", "first_cycle", "last_cycle", "phase_s", "sigma_mm",
                  "trajectory_error", "direction_residual", "objective", "sim_net_signed_mm",
                  "meas_net_mm", "sim_speed_mm_s", "meas_speed_mm_s", "direction_matches"]
@@ -539,6 +548,81 @@ def phase_motion(simulated: Mapping[str, SimulatedRun], derivatives: Mapping[str
                                   fits[Gait.parse(gait).name], cycles, samples)
                for gait, run in simulated.items()]
     return np.mean(motions, axis=0)
+
+
+def parameter_uncertainty(residuals: np.ndarray, jacobian: np.ndarray, names: Sequence[str],
+                          values: Sequence[float], rcond: float = UNCERTAINTY_RCOND
+                          ) -> pd.DataFrame:
+    """How well a least-squares fit's data determine its parameters, locally: from the
+    residuals r (R,) at the fitted point and their Jacobian J (R, P) with respect to the
+    parameters' values (per unit of each; `objective_residuals` gives both), one row per
+    parameter (`UNCERTAINTY_COLUMNS`).
+
+    The relative Jacobian J·diag(|value|) (value 0: its own unit) is split by its singular
+    values; those below `rcond` × the largest are directions the data do not see. A parameter
+    with a component along one of them (over 1e-8 of the direction) is not `identifiable`: its
+    standard error is inf and its correlations NaN. For the rest, the Gauss-Newton (Fisher)
+    covariance s²·(JᵀJ)⁺, s² = Σr² / (R − rank): `standard_error` (the value's units) and
+    `relative_standard_error` (of |value|), and the largest correlation with another
+    identifiable parameter (`most_correlated_with`, `correlation`, signed). `rank`,
+    `condition_number` (largest / smallest kept singular value of the relative Jacobian) and
+    `residual_dof` (R − rank) describe the whole fit. The standard errors take the residuals as
+    independent with one variance; samples of one measured curve are correlated, so they are
+    lower bounds, while the rank, the conditioning and the correlations do not depend on that.
+
+    ValueError for mismatched shapes, non-finite entries, or R ≤ rank (no residual left to
+    estimate s²)."""
+    residuals = np.asarray(residuals, dtype=np.float64)
+    jacobian = np.asarray(jacobian, dtype=np.float64)
+    values = np.asarray(values, dtype=np.float64)
+    names = list(names)
+    if residuals.ndim != 1 or jacobian.shape != (len(residuals), len(names)) \
+            or values.shape != (len(names),):
+        raise ValueError(f"residuals (R,), jacobian (R, P) and values (P,) must match the "
+                         f"{len(names)} names; got {residuals.shape}, {jacobian.shape} and "
+                         f"{values.shape}")
+    if not (np.isfinite(residuals).all() and np.isfinite(jacobian).all()
+            and np.isfinite(values).all()):
+        raise ValueError("residuals, jacobian and values must be finite")
+    if not 0.0 < rcond < 1.0:
+        raise ValueError(f"rcond must be in (0, 1), got {rcond!r}")
+    scale = np.where(values != 0.0, np.abs(values), 1.0)
+    _, singular, directions = np.linalg.svd(jacobian * scale, full_matrices=False)
+    kept = singular > rcond * singular[0] if singular.size and singular[0] > 0 \
+        else np.zeros(singular.shape, dtype=bool)
+    rank = int(kept.sum())
+    dof = len(residuals) - rank
+    if dof <= 0:
+        raise ValueError(f"{len(residuals)} residuals for {rank} determined directions: no "
+                         f"residual degree of freedom to estimate their scatter")
+    unseen = np.abs(directions[~kept]).max(axis=0) > 1e-8 if (~kept).any() \
+        else np.zeros(len(names), dtype=bool)
+    variance = float(residuals @ residuals) / dof
+    basis = directions[kept].T / singular[kept]                   # V S⁻¹, (P, rank)
+    relative_covariance = variance * basis @ basis.T              # of value_j / |value_j|
+    spread = np.sqrt(np.diag(relative_covariance))
+    identifiable = ~unseen
+    rows = []
+    for j, name in enumerate(names):
+        row = {"parameter": name, "value": values[j], "identifiable": bool(identifiable[j]),
+               "rank": rank, "condition_number": (singular[0] / singular[kept][-1]
+                                                  if rank else math.inf),
+               "residual_dof": dof, "most_correlated_with": "", "correlation": math.nan}
+        if identifiable[j]:
+            row["standard_error"] = spread[j] * scale[j]
+            row["relative_standard_error"] = (spread[j] if values[j] != 0.0 else math.nan)
+            others = [k for k in range(len(names)) if k != j and identifiable[k]
+                      and spread[k] > 0.0]
+            if others and spread[j] > 0.0:
+                correlations = [relative_covariance[j, k] / (spread[j] * spread[k])
+                                for k in others]
+                best = int(np.argmax(np.abs(correlations)))
+                row["most_correlated_with"] = names[others[best]]
+                row["correlation"] = float(correlations[best])
+        else:
+            row["standard_error"] = row["relative_standard_error"] = math.inf
+        rows.append(row)
+    return pd.DataFrame(rows, columns=UNCERTAINTY_COLUMNS)
 
 
 def record_derivatives(trajectory_sensitivities: pd.DataFrame, instance: int,

@@ -10,7 +10,7 @@ import pytest
 
 from studies import gradient_fit, identify
 from studies.__main__ import main as studies_main
-from taichi_star import SolverConfig, StarParams
+from taichi_star import SolverConfig, StarParams, identification
 from taichi_star.experiment import PAPER_GAITS
 
 
@@ -28,6 +28,27 @@ def test_the_study_gradient_adds_the_phases_motion_and_least_squares_does_not(mo
     np.testing.assert_array_equal(gradient, 2.0 * jacobian.T @ residuals + motion)
     got_residuals, got_jacobian = problem.residuals_and_jacobian(np.full(6, 0.5))
     assert got_residuals is residuals and got_jacobian is jacobian
+
+
+def test_the_uncertainty_is_taken_per_unit_of_each_value_on_linear_and_log_axes(monkeypatch):
+    """Problem.uncertainty turns the unit coordinates' Jacobian into one per unit of each value
+    (÷ (high − low) on a linear axis, ÷ value·ln(high/low) on a log axis) before
+    identification.parameter_uncertainty: the fake fit's Jacobian is built per value and
+    multiplied out, and the table must equal the library's on the per-value one."""
+    box = [identify.parse_range_spec(text, "--sets") for text in gradient_fit.PARAMETER_SETS["6"]]
+    assert any(spec.log for spec in box) and not all(spec.log for spec in box)
+    problem = gradient_fit.Problem(box, StarParams(gait="A1+A2"), ["A1+A2"], {}, (1, 1),
+                                   SolverConfig(), "cpu")
+    units = np.linspace(0.2, 0.7, 6)
+    values = identify.box_values(box, units[None, :])[0]
+    rng = np.random.default_rng(11)
+    residuals, per_value = rng.normal(size=40), rng.normal(size=(40, 6))
+    per_unit = per_value * np.array([spec.high - spec.low if not spec.log
+                                     else value * np.log(spec.high / spec.low)
+                                     for spec, value in zip(box, values)])
+    monkeypatch.setattr(problem, "fit_terms", lambda point: (residuals, per_unit, np.zeros(6)))
+    expected = identification.parameter_uncertainty(residuals, per_value, problem.names, values)
+    pd.testing.assert_frame_equal(problem.uncertainty(units), expected, rtol=1e-12)
 
 
 def test_a_polish_starts_at_cma_best_point_and_counts_its_cost_on_top(monkeypatch):

@@ -155,3 +155,86 @@ def test_recorded_trials_cover_both_windows():
         assert np.isfinite(curves).all() and (curves >= 0).all()
     assert [trials[g].paper_sign for g in PAPER_GAITS] == [1, 1, -1, -1, -1]
     assert math.isclose(trials["A1"].path.period_s, 3.15)
+
+
+# ------------------------------------------------------------------ parameter_uncertainty
+
+def _linear_fit(rng, rows=40):
+    """A linear model's Jacobian (its design), values of three scales and residuals."""
+    design = rng.normal(size=(rows, 3)) / np.array([2.0, 0.5, 30.0])
+    return rng.normal(size=rows), design, np.array([2.0, -0.5, 30.0])
+
+
+def test_uncertainty_of_a_full_rank_fit_is_the_gauss_newton_covariance():
+    """Against s²·(JᵀJ)⁻¹ from the normal equations (numpy's inverse, another route than the
+    scaled SVD): cond(JᵀJ) here is ~10, so the two agree to ~1e-15; 1e-12 leaves room. A
+    parameter's unit changed (its column × 1e3, its value / 1e3) changes its standard error
+    by 1e-3 and nothing relative."""
+    residuals, jacobian, values = _linear_fit(np.random.default_rng(3))
+    table = ident.parameter_uncertainty(residuals, jacobian, ["a", "b", "c"], values)
+    variance = residuals @ residuals / (len(residuals) - 3)
+    covariance = variance * np.linalg.inv(jacobian.T @ jacobian)
+    errors = np.sqrt(np.diag(covariance))
+    np.testing.assert_allclose(table.standard_error, errors, rtol=1e-12)
+    np.testing.assert_allclose(table.relative_standard_error, errors / np.abs(values),
+                               rtol=1e-12)
+    correlation = covariance / np.outer(errors, errors)
+    np.fill_diagonal(correlation, 0.0)
+    for j, row in table.iterrows():
+        k = int(np.argmax(np.abs(correlation[j])))
+        assert row.most_correlated_with == "abc"[k]
+        assert row.correlation == pytest.approx(correlation[j, k], rel=1e-12)
+    assert table.identifiable.all() and (table["rank"] == 3).all()
+    assert (table.residual_dof == len(residuals) - 3).all()
+    assert table.condition_number.iloc[0] == pytest.approx(
+        np.linalg.cond(jacobian * np.abs(values)), rel=1e-12)
+    rescaled = ident.parameter_uncertainty(residuals, jacobian * [1.0, 1.0, 1e3], ["a", "b", "c"],
+                                           values / [1.0, 1.0, 1e3])
+    np.testing.assert_allclose(rescaled.standard_error, errors / [1.0, 1.0, 1e3], rtol=1e-12)
+    np.testing.assert_allclose(rescaled.relative_standard_error,
+                               table.relative_standard_error, rtol=1e-12)
+
+
+def test_a_parameter_the_data_cannot_see_is_not_identifiable_and_leaves_the_others_exact():
+    """Column c = 2 × column a: a and c move the residuals only together (the direction
+    (2, 0, −1) is unseen), so both have an infinite standard error; b, orthogonal to that
+    direction, keeps s²·(JᵀJ)⁺ (any generalised inverse gives an estimable parameter the same
+    variance), s² over R − 2 degrees of freedom. A zero column is unseen too."""
+    residuals, jacobian, values = _linear_fit(np.random.default_rng(5))
+    jacobian[:, 2] = 2.0 * jacobian[:, 0]
+    table = ident.parameter_uncertainty(residuals, jacobian, ["a", "b", "c"], values)
+    assert table.identifiable.tolist() == [False, True, False]
+    assert np.isinf(table.standard_error[[0, 2]]).all()
+    assert np.isnan(table.correlation[[0, 2]]).all()
+    variance = residuals @ residuals / (len(residuals) - 2)
+    expected = np.sqrt(variance * np.linalg.pinv(jacobian.T @ jacobian)[1, 1])
+    assert table.standard_error[1] == pytest.approx(expected, rel=1e-10)
+    assert table.most_correlated_with[1] == "" and (table["rank"] == 2).all()
+    jacobian[:, 2] = 0.0
+    zero = ident.parameter_uncertainty(residuals, jacobian, ["a", "b", "c"], values)
+    assert zero.identifiable.tolist() == [True, True, False]
+
+
+@pytest.mark.parametrize("rcond, kept", [(1e-10, False), (0.5e-10, True)])
+def test_a_singular_value_at_exactly_rcond_times_the_largest_counts_as_unseen(rcond, kept):
+    """Singular values 1 and 1e-10 (a diagonal Jacobian, exact): at rcond = 1e-10 the second
+    sits on the threshold and is dropped (kept only when above it)."""
+    jacobian = np.zeros((5, 2))
+    jacobian[0, 0], jacobian[1, 1] = 1.0, 1e-10
+    table = ident.parameter_uncertainty(np.ones(5), jacobian, ["x", "y"], [1.0, 1.0],
+                                        rcond=rcond)
+    assert table.identifiable.tolist() == [True, kept]
+    assert table["rank"].iloc[0] == (2 if kept else 1)
+
+
+def test_uncertainty_refuses_what_it_cannot_estimate():
+    residuals, jacobian, values = _linear_fit(np.random.default_rng(7), rows=3)
+    with pytest.raises(ValueError, match="no residual degree of freedom"):
+        ident.parameter_uncertainty(residuals, jacobian, ["a", "b", "c"], values)
+    with pytest.raises(ValueError, match="must match the 2 names"):
+        ident.parameter_uncertainty(residuals, jacobian, ["a", "b"], values)
+    jacobian[0, 0] = np.nan
+    with pytest.raises(ValueError, match="must be finite"):
+        ident.parameter_uncertainty(residuals, jacobian, ["a", "b", "c"], values)
+    with pytest.raises(ValueError, match="rcond must be in"):
+        ident.parameter_uncertainty(np.ones(9), np.ones((9, 1)), ["a"], [1.0], rcond=1.0)
