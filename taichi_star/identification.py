@@ -111,13 +111,18 @@ GOLDEN_ITERATIONS = 40
 """Golden-section steps of the phase refinement: the bracket of two grid cells shrinks by
 0.618^40 ≈ 4e-9 of itself."""
 
-UNCERTAINTY_RCOND = 1e-10
-"""`parameter_uncertainty`: singular values of the relative Jacobian below this fraction of its
-largest count as zero (double precision resolves ~1e-16 of it; the sensitivities are held to
-~1e-5 relative, so a direction 1e-10 below the strongest is indistinguishable from none)."""
+UNCERTAINTY_RCOND = 1e-5
+"""`parameter_uncertainty`: singular values of the relative Jacobian at most this fraction of
+its largest are not resolved. The sensitivities are held to 1e-5 relative, and an error δJ
+moves every singular value by at most ‖δJ‖ (Weyl), so a direction that weak cannot be told from
+one the data do not see at all (an exact invariance of the model gives ~1e-9 here)."""
+UNCERTAINTY_SHARE = 1e-2
+"""`parameter_uncertainty`: a parameter is identifiable when its share of the unresolved
+directions (the norm of its components along them) is at most this: a step along any of them
+moves it by at most 1 % of the step."""
 UNCERTAINTY_COLUMNS = ["parameter", "value", "standard_error", "relative_standard_error",
-                       "identifiable", "most_correlated_with", "correlation", "rank",
-                       "condition_number", "residual_dof"]
+                       "identifiable", "unresolved_share", "most_correlated_with",
+                       "correlation", "rank", "condition_number", "residual_dof"]
 """Columns of `parameter_uncertainty`'s table, one row per parameter."""
 
 TRIAL_COLUMNS = ["gait", "first_cycle", "last_cycle", "phase_s", "sigma_mm",
@@ -551,27 +556,29 @@ def phase_motion(simulated: Mapping[str, SimulatedRun], derivatives: Mapping[str
 
 
 def parameter_uncertainty(residuals: np.ndarray, jacobian: np.ndarray, names: Sequence[str],
-                          values: Sequence[float], rcond: float = UNCERTAINTY_RCOND
-                          ) -> pd.DataFrame:
+                          values: Sequence[float], rcond: float = UNCERTAINTY_RCOND,
+                          share: float = UNCERTAINTY_SHARE) -> pd.DataFrame:
     """How well a least-squares fit's data determine its parameters, locally: from the
     residuals r (R,) at the fitted point and their Jacobian J (R, P) with respect to the
     parameters' values (per unit of each; `objective_residuals` gives both), one row per
     parameter (`UNCERTAINTY_COLUMNS`).
 
     The relative Jacobian J·diag(|value|) (value 0: its own unit) is split by its singular
-    values; those below `rcond` × the largest are directions the data do not see. A parameter
-    with a component along one of them (over 1e-8 of the direction) is not `identifiable`: its
-    standard error is inf and its correlations NaN. For the rest, the Gauss-Newton (Fisher)
-    covariance s²·(JᵀJ)⁺, s² = Σr² / (R − rank): `standard_error` (the value's units) and
+    values; those at most `rcond` × the largest are directions the data do not resolve
+    (`UNCERTAINTY_RCOND`). A parameter whose components along them have a norm
+    (`unresolved_share`) above `share` is not `identifiable`: its standard error is inf and its
+    correlations NaN. For the rest, the Gauss-Newton (Fisher) covariance s²·(JᵀJ)⁺ on the
+    resolved directions, s² = Σr² / (R − rank): `standard_error` (the value's units) and
     `relative_standard_error` (of |value|), and the largest correlation with another
-    identifiable parameter (`most_correlated_with`, `correlation`, signed). `rank`,
-    `condition_number` (largest / smallest kept singular value of the relative Jacobian) and
-    `residual_dof` (R − rank) describe the whole fit. The standard errors take the residuals as
-    independent with one variance; samples of one measured curve are correlated, so they are
-    lower bounds, while the rank, the conditioning and the correlations do not depend on that.
+    identifiable parameter (`most_correlated_with`, `correlation`, signed). `rank` (resolved
+    directions), `condition_number` (largest / smallest singular value of the relative
+    Jacobian, inf when one is zero) and `residual_dof` (R − rank) describe the whole fit. The
+    standard errors take the residuals as independent with one variance; samples of one
+    measured curve are correlated, so they are lower bounds, while the rank, the conditioning
+    and the correlations do not depend on that.
 
-    ValueError for mismatched shapes, non-finite entries, or R ≤ rank (no residual left to
-    estimate s²)."""
+    ValueError for mismatched shapes, non-finite entries, rcond or share outside (0, 1), or
+    R ≤ rank (no residual left to estimate s²)."""
     residuals = np.asarray(residuals, dtype=np.float64)
     jacobian = np.asarray(jacobian, dtype=np.float64)
     values = np.asarray(values, dtype=np.float64)
@@ -584,33 +591,37 @@ def parameter_uncertainty(residuals: np.ndarray, jacobian: np.ndarray, names: Se
     if not (np.isfinite(residuals).all() and np.isfinite(jacobian).all()
             and np.isfinite(values).all()):
         raise ValueError("residuals, jacobian and values must be finite")
-    if not 0.0 < rcond < 1.0:
-        raise ValueError(f"rcond must be in (0, 1), got {rcond!r}")
+    for label, number in (("rcond", rcond), ("share", share)):
+        if not 0.0 < number < 1.0:
+            raise ValueError(f"{label} must be in (0, 1), got {number!r}")
     scale = np.where(values != 0.0, np.abs(values), 1.0)
-    _, singular, directions = np.linalg.svd(jacobian * scale, full_matrices=False)
-    kept = singular > rcond * singular[0] if singular.size and singular[0] > 0 \
-        else np.zeros(singular.shape, dtype=bool)
+    # full_matrices: every direction of the P parameters, also those R < P rows cannot see
+    _, singular, directions = np.linalg.svd(jacobian * scale, full_matrices=True)
+    singular = np.concatenate([singular, np.zeros(len(names) - len(singular))])
+    kept = singular > rcond * singular[0] if singular[0] > 0.0 \
+        else np.zeros(len(names), dtype=bool)
     rank = int(kept.sum())
     dof = len(residuals) - rank
     if dof <= 0:
-        raise ValueError(f"{len(residuals)} residuals for {rank} determined directions: no "
+        raise ValueError(f"{len(residuals)} residuals for {rank} resolved directions: no "
                          f"residual degree of freedom to estimate their scatter")
-    unseen = np.abs(directions[~kept]).max(axis=0) > 1e-8 if (~kept).any() \
-        else np.zeros(len(names), dtype=bool)
+    unresolved = np.sqrt((directions[~kept] ** 2).sum(axis=0))
+    identifiable = unresolved <= share
     variance = float(residuals @ residuals) / dof
     basis = directions[kept].T / singular[kept]                   # V S⁻¹, (P, rank)
     relative_covariance = variance * basis @ basis.T              # of value_j / |value_j|
     spread = np.sqrt(np.diag(relative_covariance))
-    identifiable = ~unseen
+    condition = singular[0] / singular[-1] if singular[-1] > 0.0 else math.inf
     rows = []
     for j, name in enumerate(names):
         row = {"parameter": name, "value": values[j], "identifiable": bool(identifiable[j]),
-               "rank": rank, "condition_number": (singular[0] / singular[kept][-1]
-                                                  if rank else math.inf),
-               "residual_dof": dof, "most_correlated_with": "", "correlation": math.nan}
+               "unresolved_share": float(unresolved[j]), "rank": rank,
+               "condition_number": condition, "residual_dof": dof,
+               "most_correlated_with": "", "correlation": math.nan,
+               "standard_error": math.inf, "relative_standard_error": math.inf}
         if identifiable[j]:
             row["standard_error"] = spread[j] * scale[j]
-            row["relative_standard_error"] = (spread[j] if values[j] != 0.0 else math.nan)
+            row["relative_standard_error"] = spread[j] if values[j] != 0.0 else math.nan
             others = [k for k in range(len(names)) if k != j and identifiable[k]
                       and spread[k] > 0.0]
             if others and spread[j] > 0.0:
@@ -619,8 +630,6 @@ def parameter_uncertainty(residuals: np.ndarray, jacobian: np.ndarray, names: Se
                 best = int(np.argmax(np.abs(correlations)))
                 row["most_correlated_with"] = names[others[best]]
                 row["correlation"] = float(correlations[best])
-        else:
-            row["standard_error"] = row["relative_standard_error"] = math.inf
         rows.append(row)
     return pd.DataFrame(rows, columns=UNCERTAINTY_COLUMNS)
 

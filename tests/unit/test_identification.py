@@ -185,6 +185,7 @@ def test_uncertainty_of_a_full_rank_fit_is_the_gauss_newton_covariance():
         assert row.most_correlated_with == "abc"[k]
         assert row.correlation == pytest.approx(correlation[j, k], rel=1e-12)
     assert table.identifiable.all() and (table["rank"] == 3).all()
+    assert (table.unresolved_share == 0.0).all()
     assert (table.residual_dof == len(residuals) - 3).all()
     assert table.condition_number.iloc[0] == pytest.approx(
         np.linalg.cond(jacobian * np.abs(values)), rel=1e-12)
@@ -199,7 +200,8 @@ def test_a_parameter_the_data_cannot_see_is_not_identifiable_and_leaves_the_othe
     """Column c = 2 × column a: a and c move the residuals only together (the direction
     (2, 0, −1) is unseen), so both have an infinite standard error; b, orthogonal to that
     direction, keeps s²·(JᵀJ)⁺ (any generalised inverse gives an estimable parameter the same
-    variance), s² over R − 2 degrees of freedom. A zero column is unseen too."""
+    variance), s² over R − 2 degrees of freedom. A zero column is unseen too (its share of the
+    unseen direction is 1, the condition number inf)."""
     residuals, jacobian, values = _linear_fit(np.random.default_rng(5))
     jacobian[:, 2] = 2.0 * jacobian[:, 0]
     table = ident.parameter_uncertainty(residuals, jacobian, ["a", "b", "c"], values)
@@ -213,6 +215,26 @@ def test_a_parameter_the_data_cannot_see_is_not_identifiable_and_leaves_the_othe
     jacobian[:, 2] = 0.0
     zero = ident.parameter_uncertainty(residuals, jacobian, ["a", "b", "c"], values)
     assert zero.identifiable.tolist() == [True, True, False]
+    assert zero.unresolved_share[2] == pytest.approx(1.0, rel=1e-12)
+    assert zero.condition_number[0] == np.inf
+
+
+def test_a_parameter_is_identifiable_up_to_exactly_its_share_of_the_unresolved_directions():
+    """A weak direction (singular value 1e-7 of the largest, under UNCERTAINTY_RCOND) turned a
+    little towards parameter a: a's share of it is small but not zero. With `share` at exactly
+    that value a is identifiable (≤), just below it not; b, mostly along it, never is."""
+    angle = 0.003
+    rotation = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    jacobian = np.vstack([np.diag([1.0, 1e-7]) @ rotation.T, np.zeros((4, 2))])
+    residuals = np.arange(6.0)
+    first = ident.parameter_uncertainty(residuals, jacobian, ["a", "b"], [1.0, 1.0])
+    share = first.unresolved_share[0]
+    assert share == pytest.approx(np.sin(angle), rel=1e-9) and first["rank"][0] == 1
+    at = ident.parameter_uncertainty(residuals, jacobian, ["a", "b"], [1.0, 1.0], share=share)
+    below = ident.parameter_uncertainty(residuals, jacobian, ["a", "b"], [1.0, 1.0],
+                                        share=share * (1 - 1e-12))
+    assert at.identifiable.tolist() == [True, False]
+    assert below.identifiable.tolist() == [False, False]
 
 
 @pytest.mark.parametrize("rcond, kept", [(1e-10, False), (0.5e-10, True)])
@@ -238,3 +260,5 @@ def test_uncertainty_refuses_what_it_cannot_estimate():
         ident.parameter_uncertainty(residuals, jacobian, ["a", "b", "c"], values)
     with pytest.raises(ValueError, match="rcond must be in"):
         ident.parameter_uncertainty(np.ones(9), np.ones((9, 1)), ["a"], [1.0], rcond=1.0)
+    with pytest.raises(ValueError, match="share must be in"):
+        ident.parameter_uncertainty(np.ones(9), np.ones((9, 1)), ["a"], [1.0], share=0.0)
