@@ -583,10 +583,10 @@ def parameter_uncertainty(residuals: np.ndarray, jacobian: np.ndarray, names: Se
     jacobian = np.asarray(jacobian, dtype=np.float64)
     values = np.asarray(values, dtype=np.float64)
     names = list(names)
-    if residuals.ndim != 1 or jacobian.shape != (len(residuals), len(names)) \
+    if not names or residuals.ndim != 1 or jacobian.shape != (len(residuals), len(names)) \
             or values.shape != (len(names),):
         raise ValueError(f"residuals (R,), jacobian (R, P) and values (P,) must match the "
-                         f"{len(names)} names; got {residuals.shape}, {jacobian.shape} and "
+                         f"{len(names)} names (at least one); got {residuals.shape}, {jacobian.shape} and "
                          f"{values.shape}")
     if not (np.isfinite(residuals).all() and np.isfinite(jacobian).all()
             and np.isfinite(values).all()):
@@ -595,9 +595,10 @@ def parameter_uncertainty(residuals: np.ndarray, jacobian: np.ndarray, names: Se
         if not 0.0 < number < 1.0:
             raise ValueError(f"{label} must be in (0, 1), got {number!r}")
     scale = np.where(values != 0.0, np.abs(values), 1.0)
-    # full_matrices: every direction of the P parameters, also those R < P rows cannot see
-    _, singular, directions = np.linalg.svd(jacobian * scale, full_matrices=True)
-    singular = np.concatenate([singular, np.zeros(len(names) - len(singular))])
+    relative = jacobian * scale
+    if len(relative) < len(names):  # zero rows: all P directions, those R rows cannot see too
+        relative = np.vstack([relative, np.zeros((len(names) - len(relative), len(names)))])
+    _, singular, directions = np.linalg.svd(relative, full_matrices=False)
     kept = singular > rcond * singular[0] if singular[0] > 0.0 \
         else np.zeros(len(names), dtype=bool)
     rank = int(kept.sum())

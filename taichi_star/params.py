@@ -506,9 +506,9 @@ class SolverConfig:
     reused while it contracts the update ≥ 4× per iteration (same converged solution to
     newton_tol, fewer factorisations); "lagged": the chord's rule across steps, a factorisation
     kept from step to step while the step size and integrator weights stay the same (opt-in:
-    fixed steps about 2.5× as fast over a cycle, converged to newton_tol like the others, but not to
-    Newton's far smaller actual error; a restored state refactors, so its continuation agrees
-    with an uninterrupted run to newton_tol, not bitwise)."""
+    fixed steps about 2.5× as fast over a cycle, converged to newton_tol like the others, but
+    not to Newton's far smaller actual error; a Simulator's snapshot holds the kept
+    factorisations, so a loaded one continues bitwise)."""
     max_substep_halvings: int = 4
     """A failed step is retried as 2, 4, ... 2^max_substep_halvings substeps before the instance
     is declared failed; 0 disables retries; [0, 10]. (Fixed steps only.)"""

@@ -237,6 +237,21 @@ def test_a_parameter_is_identifiable_up_to_exactly_its_share_of_the_unresolved_d
     assert below.identifiable.tolist() == [False, False]
 
 
+def test_fewer_residuals_than_parameters_leave_the_unseen_directions_unresolved():
+    """Three residuals that only the first of four parameters moves: the other three lie wholly
+    along directions no row can see (share 1), the first is determined (share 0), and the
+    scatter has 3 − 1 degrees of freedom."""
+    jacobian = np.outer([1.0, 2.0, 3.0], [1.0, 0.0, 0.0, 0.0])
+    residuals = np.array([1.0, -1.0, 0.5])
+    table = ident.parameter_uncertainty(residuals, jacobian, list("abcd"), np.ones(4))
+    assert table.identifiable.tolist() == [True, False, False, False]
+    np.testing.assert_allclose(table.unresolved_share, [0.0, 1.0, 1.0, 1.0], atol=1e-15)
+    assert (table["rank"] == 1).all() and (table.residual_dof == 2).all()
+    assert table.condition_number[0] == np.inf
+    # one parameter: s² (JᵀJ)⁻¹ = (Σr² / 2) / Σj²
+    assert table.standard_error[0] == pytest.approx(np.sqrt(2.25 / 2 / 14.0), rel=1e-14)
+
+
 @pytest.mark.parametrize("rcond, kept", [(1e-10, False), (0.5e-10, True)])
 def test_a_singular_value_at_exactly_rcond_times_the_largest_counts_as_unseen(rcond, kept):
     """Singular values 1 and 1e-10 (a diagonal Jacobian, exact): at rcond = 1e-10 the second
@@ -260,5 +275,7 @@ def test_uncertainty_refuses_what_it_cannot_estimate():
         ident.parameter_uncertainty(residuals, jacobian, ["a", "b", "c"], values)
     with pytest.raises(ValueError, match="rcond must be in"):
         ident.parameter_uncertainty(np.ones(9), np.ones((9, 1)), ["a"], [1.0], rcond=1.0)
+    with pytest.raises(ValueError, match="must match the 0 names"):
+        ident.parameter_uncertainty(np.ones(9), np.ones((9, 0)), [], [])
     with pytest.raises(ValueError, match="share must be in"):
         ident.parameter_uncertainty(np.ones(9), np.ones((9, 1)), ["a"], [1.0], share=0.0)
