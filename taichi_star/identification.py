@@ -459,16 +459,6 @@ def trial_residuals(simulated: SimulatedRun, derivative_xy: np.ndarray, trial: T
     return fit, residuals, jacobian
 
 
-def trial_gradient(simulated: SimulatedRun, derivative_xy: np.ndarray, trial: Trial,
-                   cycles=TRAINING_CYCLES, samples: int = SAMPLES_PER_CYCLE,
-                   phase_s: Optional[float] = None) -> Tuple[TrialFit, np.ndarray]:
-    """`trial_fit` of one simulated trial and the gradient (P,) of its objective, 2·Jᵀr of
-    `trial_residuals` (same arguments)."""
-    fit, residuals, jacobian = trial_residuals(simulated, derivative_xy, trial, cycles, samples,
-                                               phase_s)
-    return fit, 2.0 * jacobian.T @ residuals
-
-
 def objective_residuals(simulated: Mapping[str, SimulatedRun],
                         derivatives: Mapping[str, np.ndarray], trials: Mapping[str, Trial],
                         cycles=TRAINING_CYCLES, samples: int = SAMPLES_PER_CYCLE,
@@ -599,8 +589,7 @@ def parameter_uncertainty(residuals: np.ndarray, jacobian: np.ndarray, names: Se
     if len(relative) < len(names):  # zero rows: all P directions, those R rows cannot see too
         relative = np.vstack([relative, np.zeros((len(names) - len(relative), len(names)))])
     _, singular, directions = np.linalg.svd(relative, full_matrices=False)
-    kept = singular > rcond * singular[0] if singular[0] > 0.0 \
-        else np.zeros(len(names), dtype=bool)
+    kept = singular > rcond * singular[0]        # none when J = 0: 0 > 0 is false
     rank = int(kept.sum())
     dof = len(residuals) - rank
     if dof <= 0:
@@ -623,8 +612,8 @@ def parameter_uncertainty(residuals: np.ndarray, jacobian: np.ndarray, names: Se
         if identifiable[j]:
             row["standard_error"] = spread[j] * scale[j]
             row["relative_standard_error"] = spread[j] if values[j] != 0.0 else math.nan
-            others = [k for k in range(len(names)) if k != j and identifiable[k]
-                      and spread[k] > 0.0]
+            # an identifiable parameter's spread is 0 only when every one's is (s² = 0)
+            others = [k for k in range(len(names)) if k != j and identifiable[k]]
             if others and spread[j] > 0.0:
                 correlations = [relative_covariance[j, k] / (spread[j] * spread[k])
                                 for k in others]

@@ -283,20 +283,3 @@ def test_an_adaptive_robot_stops_at_the_step_limit_or_a_step_that_cannot_advance
     alone.advance(0.007)
     neighbour, by_itself = state.iloc[1].drop("instance"), alone.state().iloc[0].drop("instance")
     pd.testing.assert_series_equal(neighbour, by_itself, check_names=False)
-
-
-def test_long_but_possible_work_starts_with_a_warning_giving_its_estimate():
-    """Up to WARN_ROBOT_STEPS robot-steps a run starts silently; one step more (× the batch)
-    warns with the estimated hours at the stated rate (1e10 / 5e4 / 3600 = 55.6 h)."""
-    import warnings
-
-    from taichi_star.timegrid import WARN_ROBOT_STEPS, check_work
-
-    assert WARN_ROBOT_STEPS == 1e10
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        check_work("duration_s = 1e6 s at dt = 0.001 s", 1e9, 10)  # exactly at the threshold
-        check_work("duration_s = 2e6 s at dt = 0.001 s", 2e9)  # one instance, under it
-    with pytest.warns(RuntimeWarning, match=r"duration_s = x is 1e\+10 robot-steps: about 55.6 h "
-                                            r"at 50000 robot-steps/s"):
-        check_work("duration_s = x", 1e9 + 1, 10)

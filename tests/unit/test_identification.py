@@ -103,7 +103,8 @@ def test_validation_window_with_the_training_phase():
     assert validation.objective == 0.0
     with pytest.raises(ValueError, match="phase_s must be in"):
         ident.trial_fit(sim, trial, (4, 6), phase_s=5.0)
-    with pytest.raises(ValueError, match=r"cycles 1-6 from 0 s need the path"):
+    with pytest.raises(ValueError, match=r"^cycles 1-6 from 0 s need the path over \[0, 24\] s; "
+                                         r"it covers \[0, 16\] s$"):
         ident.trial_fit(simulated(end_s=16.0), trial, (1, 6))
 
 
@@ -135,12 +136,105 @@ def test_bad_windows_and_inputs():
         ident.check_window(3)
     with pytest.raises(ValueError, match="samples must be"):
         ident.tau_grid(T, 0)
+    with pytest.raises(ValueError, match="samples must be"):
+        ident.tau_grid(T, 2.5)
     with pytest.raises(ValueError, match="strictly increasing"):
         ident.CentroidPath(np.array([0.0, 0.0]), np.zeros(2), np.zeros(2), T)
     with pytest.raises(ValueError, match="period_s"):
         ident.CentroidPath(np.array([0.0, 1.0]), np.zeros(2), np.zeros(2), 0.0)
-    with pytest.raises(ValueError, match="shorter than cycles up to 5"):
+    with pytest.raises(ValueError, match=r"^the A1\+A2 trial \(16 s\) is shorter than cycles up "
+                                         r"to 5$"):
         ident.latest_phase(measured(1.0), (1, 5))
+
+
+def test_a_centroid_path_holds_float_arrays_and_refuses_each_malformed_one():
+    path = ident.CentroidPath([0, 1, 2], [0, 1, 4], (0, -1, 0), 0.5)   # a half-second period
+    for name, expected in (("t_s", [0, 1, 2]), ("x_mm", [0, 1, 4]), ("y_mm", [0, -1, 0])):
+        array = getattr(path, name)
+        assert isinstance(array, np.ndarray) and array.dtype == np.float64
+        np.testing.assert_array_equal(array, expected)
+    shape = r"^t_s, x_mm and y_mm must be 1-D arrays of one length >= 2$"
+    for t, x, y in (([0.0], [0.0], [0.0]),                            # one sample
+                    (np.zeros((2, 2)), np.zeros((2, 2)), np.zeros((2, 2))),  # 2-D
+                    ([0.0, 1.0], [0.0, 1.0, 2.0], [0.0, 1.0]),        # x one longer
+                    ([0.0, 1.0], [0.0, 1.0], [0.0])):                 # y one shorter
+        with pytest.raises(ValueError, match=shape):
+            ident.CentroidPath(t, x, y, T)
+    with pytest.raises(ValueError, match=r"^t_s must be strictly increasing and t_s, x_mm, y_mm "
+                                         r"finite$"):
+        ident.CentroidPath([0.0, 1.0], [0.0, 1.0], [0.0, np.nan], T)
+
+
+def test_window_boundaries():
+    # booleans are integers to Python, not cycle numbers
+    with pytest.raises(ValueError, match="cycles must be integers"):
+        ident.check_window((True, 2))
+    assert ident.check_window((2, 2)) == (2, 2)                       # first = last allowed
+    np.testing.assert_array_equal(ident.tau_grid(T, 1), [T])          # one sample: the end
+    # a trial exactly as long as the window leaves one phase, 0; a frame less, none
+    t = np.arange(0, int(3 * T / DT) + 1) * DT
+    exact = ident.Trial("A1+A2", ident.CentroidPath(t, t, 0 * t, T), +1.0)
+    assert ident.latest_phase(exact, (1, 3)) == 0.0
+    short = ident.Trial("A1+A2", ident.CentroidPath(t[:-1], t[:-1], 0 * t[:-1], T), +1.0)
+    with pytest.raises(ValueError, match="shorter than cycles up to 3"):
+        ident.latest_phase(short, (1, 3))
+
+
+def test_a_phase_at_exactly_the_latest_is_accepted():
+    trial = measured(1.0)                       # 16 s: latest phase min(T, 16 − 3T) = 4 s
+    latest = ident.latest_phase(trial, (1, 3))
+    assert latest == 4.0
+    assert ident.trial_fit(simulated(), trial, (1, 3), phase_s=latest).phase_s == latest
+    with pytest.raises(ValueError, match=r"phase_s must be in \[0, 4\] s"):
+        ident.trial_fit(simulated(), trial, (1, 3), phase_s=latest + 1e-9)
+
+
+def test_a_later_window_is_the_same_cycles_of_a_longer_one():
+    """Cycles 2-3 are rows 2-3 of cycles 1-3; their net travel and speeds are those between
+    the ends of cycles 1 and 3 (from t = T, not from rest)."""
+    sim, trial = simulated(), measured(1.0)
+    np.testing.assert_array_equal(ident.cycle_curves(sim.path, 0.0, (2, 3)),
+                                  ident.cycle_curves(sim.path, 0.0, (1, 3))[1:])
+    fit = ident.trial_fit(sim, trial, (2, 3), phase_s=1.0)
+    start, end = sim.path.position(np.array([T, 3 * T]))
+    assert fit.sim_net_signed_mm == pytest.approx(end[0] - start[0], rel=1e-15)
+    assert fit.sim_net_signed_mm == pytest.approx(4.4 + 4.84, rel=1e-2)   # cycles 2 and 3
+    assert fit.meas_net_mm == pytest.approx(fit.sim_net_signed_mm, rel=1e-12)
+    assert fit.sim_speed_mm_s == pytest.approx(fit.sim_net_signed_mm / (2 * T), rel=1e-15)
+    assert fit.meas_speed_mm_s == pytest.approx(fit.meas_net_mm / (2 * T), rel=1e-15)
+
+
+def test_sigma_is_the_sample_spread_of_the_measured_cycles():
+    """σ² = the mean over the curve's samples of the cycles' sample variance (n − 1): with two
+    cycles, (d₁ − d₂)²/2 at each sample; one cycle has no spread: σ is the floor."""
+    trial = measured(1.0)
+    curves = ident.cycle_curves(trial.path, 1.0, (1, 2))
+    expected = np.sqrt(np.mean((curves[0] - curves[1]) ** 2 / 2.0))
+    fit = ident.trial_fit(simulated(), trial, (1, 2), phase_s=1.0)
+    assert expected > ident.DISPLACEMENT_FLOOR_MM
+    assert fit.sigma_mm == pytest.approx(expected, rel=1e-14)
+    one = ident.trial_fit(simulated(), trial, (2, 2), phase_s=1.0)
+    assert one.sigma_mm == ident.DISPLACEMENT_FLOOR_MM
+
+
+def test_set_objective_and_its_refusals():
+    trial = measured(1.0)
+    table = ident.trajectory_objective({"A1+A2": simulated(gain=0.5)}, {"A1+A2": trial}, (1, 3))
+    assert ident.objective_of(table) == table["objective"].iloc[0] > 0
+    assert ident.objective_of(table.assign(objective=[np.nan])) == math.inf
+    with pytest.raises(ValueError, match=r"^no measured trial for gait 'A1\+A3'; trials: "
+                                         r"A1\+A2, A1$"):
+        ident.trajectory_objective({"A1+A3": simulated()}, {"A1+A2": trial, "A1": trial})
+    with pytest.raises(ValueError, match=r"^no measured trial for gait 'A1'"):
+        ident.objective_residuals({"A1": simulated()}, {"A1": np.zeros((1025, 2, 1))},
+                                  {"A1+A2": trial})
+    with pytest.raises(ValueError, match=r"^simulated gait 'A1\+A2' is not the trial's 'A1'$"):
+        ident.trial_fit(simulated(), ident.Trial("A1", trial.path, +1.0))
+
+
+def test_measured_trials_take_the_period_given():
+    trials = ident.measured_trials(["A1"], period_s=3.0)
+    assert trials["A1"].path.period_s == 3.0
 
 
 def test_recorded_trials_cover_both_windows():
@@ -254,14 +348,63 @@ def test_fewer_residuals_than_parameters_leave_the_unseen_directions_unresolved(
 
 @pytest.mark.parametrize("rcond, kept", [(1e-10, False), (0.5e-10, True)])
 def test_a_singular_value_at_exactly_rcond_times_the_largest_counts_as_unseen(rcond, kept):
-    """Singular values 1 and 1e-10 (a diagonal Jacobian, exact): at rcond = 1e-10 the second
-    sits on the threshold and is dropped (kept only when above it)."""
+    """Singular values 2 and 2e-10 (a diagonal Jacobian, exact; 2 × 1e-10 is exact too): at
+    rcond = 1e-10 the second sits on the threshold, rcond × the largest, and is dropped (kept
+    only when above it)."""
     jacobian = np.zeros((5, 2))
-    jacobian[0, 0], jacobian[1, 1] = 1.0, 1e-10
+    jacobian[0, 0], jacobian[1, 1] = 2.0, 2e-10
     table = ident.parameter_uncertainty(np.ones(5), jacobian, ["x", "y"], [1.0, 1.0],
                                         rcond=rcond)
     assert table.identifiable.tolist() == [True, kept]
     assert table["rank"].iloc[0] == (2 if kept else 1)
+    assert table.condition_number.iloc[0] == 2.0 / 2e-10
+    # kept: s²/σ² with s² = Σr²/(R − 2), to rounding (1e-14); dropped: inf
+    expected = np.sqrt(5.0 / (5 - 2)) / 2e-10 if kept else np.inf
+    assert table.relative_standard_error.iloc[1] == pytest.approx(expected, rel=1e-14)
+
+
+def test_uncertainty_names_its_rows_and_keeps_a_zero_value_in_its_own_unit():
+    """A parameter at 0 has no relative scale: its column enters J as it is (unit 1), its
+    standard error is absolute and its relative error NaN; the others are unchanged."""
+    residuals, jacobian, values = _linear_fit(np.random.default_rng(11))
+    values[1] = 0.0
+    table = ident.parameter_uncertainty(residuals, jacobian, ["a", "b", "c"], values)
+    assert table.columns.tolist() == ident.UNCERTAINTY_COLUMNS
+    assert table.parameter.tolist() == ["a", "b", "c"]
+    np.testing.assert_array_equal(table.value, values)
+    variance = residuals @ residuals / (len(residuals) - 3)
+    errors = np.sqrt(np.diag(variance * np.linalg.inv(jacobian.T @ jacobian)))
+    np.testing.assert_allclose(table.standard_error, errors, rtol=1e-12)   # cond ~10: as above
+    assert np.isnan(table.relative_standard_error[1])
+    np.testing.assert_allclose(table.relative_standard_error[[0, 2]], errors[[0, 2]]
+                               / np.abs(values[[0, 2]]), rtol=1e-12)
+
+
+def test_an_exact_fit_has_zero_errors_and_no_correlations():
+    """Zero residuals: s² = 0, every standard error 0; correlations 0/0 are left out (NaN, no
+    partner named) rather than made up."""
+    _, jacobian, values = _linear_fit(np.random.default_rng(13))
+    table = ident.parameter_uncertainty(np.zeros(len(jacobian)), jacobian, ["a", "b", "c"],
+                                        values)
+    assert (table.standard_error == 0.0).all() and table.identifiable.all()
+    assert (table.most_correlated_with == "").all() and table.correlation.isna().all()
+
+
+def test_one_residual_degree_of_freedom_is_enough():
+    """R − rank = 1 (the boundary): s² = Σr²; R − rank = 0 is refused (below)."""
+    residuals, jacobian, values = _linear_fit(np.random.default_rng(17), rows=4)
+    table = ident.parameter_uncertainty(residuals, jacobian, ["a", "b", "c"], values)
+    assert (table.residual_dof == 1).all()
+    errors = np.sqrt(np.diag(residuals @ residuals * np.linalg.inv(jacobian.T @ jacobian)))
+    # 4 × 3 Jacobian: its conditioning varies with the draw; measured cond(JᵀJ) < 1e4
+    np.testing.assert_allclose(table.standard_error, errors, rtol=1e-9)
+
+
+def test_a_jacobian_of_zeros_resolves_nothing():
+    table = ident.parameter_uncertainty(np.ones(5), np.zeros((5, 2)), ["a", "b"], [1.0, 2.0])
+    assert not table.identifiable.any() and (table["rank"] == 0).all()
+    assert (table.residual_dof == 5).all() and np.isinf(table.standard_error).all()
+    assert (table.unresolved_share == 1.0).all() and (table.condition_number == np.inf).all()
 
 
 def test_uncertainty_refuses_what_it_cannot_estimate():
@@ -279,3 +422,12 @@ def test_uncertainty_refuses_what_it_cannot_estimate():
         ident.parameter_uncertainty(np.ones(9), np.ones((9, 0)), [], [])
     with pytest.raises(ValueError, match="share must be in"):
         ident.parameter_uncertainty(np.ones(9), np.ones((9, 1)), ["a"], [1.0], share=0.0)
+    with pytest.raises(ValueError, match="share must be in"):
+        ident.parameter_uncertainty(np.ones(9), np.ones((9, 1)), ["a"], [1.0], share=1.0)
+    with pytest.raises(ValueError, match="rcond must be in"):
+        ident.parameter_uncertainty(np.ones(9), np.ones((9, 1)), ["a"], [1.0], rcond=0.0)
+    # each shape on its own: values, then residuals as a column
+    with pytest.raises(ValueError, match="must match the 1 names"):
+        ident.parameter_uncertainty(np.ones(9), np.ones((9, 1)), ["a"], [1.0, 2.0])
+    with pytest.raises(ValueError, match="must match the 1 names"):
+        ident.parameter_uncertainty(np.ones((9, 1)), np.ones((9, 1)), ["a"], [1.0])

@@ -179,7 +179,8 @@ def test_on_the_measured_track_the_phase_moves_between_kinks_and_not_at_one():
                                                            on_frame, (1, 3)), [0.0])
 
 
-@pytest.mark.parametrize("case", ["one cycle", "phase given", "phase at its bound"])
+@pytest.mark.parametrize("case", ["one cycle", "phase given", "phase at its bound",
+                                  "phase at its upper bound"])
 def test_the_phase_motion_is_left_out_exactly_where_it_is_zero(monkeypatch, case):
     """σ at its floor (envelope theorem), a held phase, and a phase at the edge of its range
     (the bound holds it): the gradient is 2·Jᵀr of the residuals, bit for bit."""
@@ -190,8 +191,11 @@ def test_the_phase_motion_is_left_out_exactly_where_it_is_zero(monkeypatch, case
         cycles = (1, 1)
     elif case == "phase given":
         phases = {"A1+A2": 0.41}
-    else:
+    elif case == "phase at its bound":
         monkeypatch.setattr(ident, "align_phase", lambda *args, **kwargs: 0.0)
+    else:
+        latest = ident.latest_phase(trials["A1+A2"], cycles)
+        monkeypatch.setattr(ident, "align_phase", lambda *args, **kwargs: latest)
     _, gradient, table = ident.objective_and_gradient(
         {"A1+A2": run}, {"A1+A2": derivative}, trials, cycles, samples=16, phases=phases)
     residuals, jacobian, _ = ident.objective_residuals(
@@ -234,13 +238,56 @@ def test_record_derivatives_reads_the_sensitivity_columns():
     np.testing.assert_array_equal(got, [[[3.0, 11.0], [7.0, 15.0]], [[4.0, 12.0], [8.0, 16.0]]])
 
 
-def test_trial_gradient_refuses_derivatives_of_the_wrong_shape():
+def test_trial_residuals_refuse_derivatives_of_the_wrong_shape():
     run, derivative = model_path((2.5, 1.2, 0.1))
-    with pytest.raises(ValueError, match="derivative_xy"):
-        ident.trial_gradient(run, derivative[:-1], measured_trial(), (1, 1), 16)
+    with pytest.raises(ValueError, match=r"derivative_xy must have shape \(385, 2, P\)"):
+        ident.trial_residuals(run, derivative[:-1], measured_trial(), (1, 1), 16)
 
 
-@pytest.mark.parametrize("forward_sign, cycles", [(1.0, (1, 3)), (-1.0, (1, 2))])
+def test_any_wrong_way_travel_gets_a_direction_row_however_small():
+    """Backwards by a few micrometres over the window (a = 1e-3 mm per surge): ρ > 0, and its
+    Jacobian row is −s·dΔ/dθ / σ, the surge's and the glide's net derivatives along the
+    forward axis (the wobble c returns each cycle: 0)."""
+    run, derivative = model_path((1e-3, 0.0, 0.1), forward_sign=-1.0)
+    fit, residuals, jacobian = ident.trial_residuals(run, derivative, measured_trial(), (1, 1),
+                                                     16)
+    assert 0.0 < -fit.sim_net_signed_mm < 1e-2 and residuals[-1] == fit.direction_residual > 0
+    surge_net = 1 - np.exp(-T / 0.2)        # model_path's surge over one cycle, glide's is 1
+    np.testing.assert_allclose(jacobian[-1], [surge_net / fit.sigma_mm, 1.0 / fit.sigma_mm, 0.0],
+                               rtol=1e-12, atol=1e-12)
+    # no travel at all (the boundary −sΔ = 0 exactly): no row, as for the right way
+    still, still_derivative = model_path((0.0, 0.0, 0.0))
+    fit, residuals, jacobian = ident.trial_residuals(still, still_derivative, measured_trial(),
+                                                     (1, 1), 16)
+    assert fit.sim_net_signed_mm == 0.0 and residuals[-1] == 0.0
+    np.testing.assert_array_equal(jacobian[-1], [0.0, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("shape, moves", [("parabola", True), ("flat", False), ("kink", False),
+                                          ("parabola and kink", False)])
+def test_the_phase_moves_only_where_the_misfit_is_smoothly_convex(monkeypatch, shape, moves):
+    """The kink rule of `trial_phase_motion` on misfits of known shape about the fitted phase
+    φ₀ (the misfit replaced; everything else the three-cycle synthetic case, whose objective
+    changes with the phase): a parabola of curvature 0.2 (below 1: any positive curvature
+    counts) moves; a flat misfit (curvature exactly 0) and a convex kink |φ − φ₀| (second
+    differences 2/h: ten times larger at the small step than at the wide one) do not, nor a
+    parabola a·δ² with a kink 2a·h·|δ| (h = PHASE_STEP_S): second differences 2a + 4a at the
+    small step and 2a + 0.4a at the wide one, a ratio of 2.5, above the rule's 2."""
+    trial = measured_trial()
+    run, derivative = model_path((2.5, 1.2, 0.1))
+    fit = ident.trial_fit(run, trial, (1, 3), 16)
+    assert fit.sigma_mm > ident.DISPLACEMENT_FLOOR_MM
+    centre = fit.phase_s
+    misfit = {"parabola": lambda at: 0.1 * (at - centre) ** 2, "flat": lambda at: 1.0,
+              "kink": lambda at: abs(at - centre),
+              "parabola and kink": lambda at: 0.1 * (at - centre) ** 2
+              + 0.2 * ident.PHASE_STEP_S * abs(at - centre)}[shape]
+    monkeypatch.setattr(ident, "_misfit", lambda curves, trial, at, cycles, samples: misfit(at))
+    motion = ident.trial_phase_motion(run, derivative, trial, fit, (1, 3), 16)
+    assert np.any(motion != 0.0) == moves
+
+
+@pytest.mark.parametrize("forward_sign, cycles", [(1.0, (1, 3)), (-1.0, (1, 2)), (-1.0, (2, 3))])
 def test_residuals_square_to_the_objective_and_their_jacobian_equals_central_differences(
         forward_sign, cycles):
     # the least-squares form: Σ r² is the objective (mean over gaits), and each residual's

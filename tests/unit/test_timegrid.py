@@ -3,12 +3,14 @@
 Exact checks: the intervals are compared with the integer multiples of dt they must be, and the
 tolerance cases sit far inside and far outside STEP_TOLERANCE (1e-9 relative)."""
 
+import warnings
+
 import numpy as np
 import pytest
 
-from taichi_star.timegrid import (STEP_TOLERANCE, check_duration, check_steps,
-                                  interval_for_count, multiples_within, nearest_interval,
-                                  on_grid, step_counts, whole_steps)
+from taichi_star.timegrid import (MAX_STEPS_PER_INSTANCE, STEP_TOLERANCE, check_duration,
+                                  check_steps, check_work, interval_for_count, multiples_within,
+                                  nearest_interval, on_grid, step_counts, whole_steps)
 
 
 @pytest.mark.parametrize("time_s, dt, expected", [
@@ -22,6 +24,15 @@ from taichi_star.timegrid import (STEP_TOLERANCE, check_duration, check_steps,
 ])
 def test_whole_steps(time_s, dt, expected):
     assert whole_steps(time_s, dt) == expected
+
+
+def test_on_grid_tolerance_is_relative_but_at_least_one_step():
+    """The tolerance is STEP_TOLERANCE × max(1, |count|): a time at exactly that distance from a
+    whole count is on the grid (≤): 1e-9 of a step from 0; 5e-7 steps from 1,000 (within its
+    1e-6), and 1.5e-9 of one step is not (the minimum is one step's worth, not two)."""
+    assert on_grid(1e-9, 1.0) and not on_grid(1.5e-9, 1.0)
+    assert not on_grid(1.0 + 1.5e-9, 1.0)
+    assert on_grid(1000.0 + 5e-7, 1.0) and not on_grid(1000.0 + 1.5e-6, 1.0)
 
 
 def test_step_counts_match_whole_steps_and_mark_off_grid_with_zero():
@@ -66,3 +77,33 @@ def test_check_duration_refuses_less_than_one_step():
     assert check_duration(0.0006, 1e-3) == 1  # rounded to whole steps
     with pytest.raises(ValueError, match=r"duration_s must be at least one step \(dt = 0.001 s\)"):
         check_duration(0.0004, 1e-3)
+
+
+def test_long_but_possible_work_starts_with_a_warning_giving_its_estimate():
+    """Up to WARN_ROBOT_STEPS robot-steps a run starts silently; one step more (× the batch)
+    warns with the estimated hours at the stated rate (1e10 / 5e4 / 3600 = 55.6 h)."""
+    from taichi_star.timegrid import WARN_ROBOT_STEPS
+
+    assert WARN_ROBOT_STEPS == 1e10
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_work("duration_s = 1e6 s at dt = 0.001 s", 1e9, 10)  # exactly at the threshold
+        check_work("duration_s = 2e6 s at dt = 0.001 s", 2e9)  # one instance, under it
+    with pytest.warns(RuntimeWarning, match=r"duration_s = x is 1e\+10 robot-steps: about 55.6 h "
+                                            r"at 50000 robot-steps/s"):
+        check_work("duration_s = x", 1e9 + 1, 10)
+
+
+def test_work_up_to_exactly_the_step_counter_is_accepted_and_past_it_refused():
+    """MAX_STEPS_PER_INSTANCE steps (2³¹ − 1: the int32 counter) are allowed, one more or an
+    infinite estimate is refused with the estimate, the batch's total and the limit."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)   # 2.1e9 steps: the long-work warning
+        check_work("duration_s = x", MAX_STEPS_PER_INSTANCE)
+        check_work("duration_s = x", MAX_STEPS_PER_INSTANCE + 0.4)   # rounds to the limit
+    with pytest.raises(ValueError, match=r"^duration_s = x is 2\.15e\+09 time steps per instance "
+                                         r"\(4\.29e\+09 robot-steps for 2 instances\); the limit is "
+                                         r"2147483647 steps per instance \(the int32 step counter\)$"):
+        check_work("duration_s = x", MAX_STEPS_PER_INSTANCE + 1, 2)
+    with pytest.raises(ValueError, match=r"^duration_s = y is inf time steps per instance; the"):
+        check_work("duration_s = y", float("inf"))
