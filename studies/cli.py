@@ -590,8 +590,9 @@ def _fresh_run_folder(study: str) -> Path:
 
 def check_output_folder(folder: Path, quick: bool):
     """Create the output folder or fail with a StudyArgumentError naming --out: not a folder,
-    cannot be created, not writable; --quick into the committed results/."""
-    if quick and folder.resolve() == COMMITTED_RESULTS:
+    cannot be created, not writable; --quick into the committed results/ or any folder in it."""
+    resolved = folder.resolve()
+    if quick and (resolved == COMMITTED_RESULTS or COMMITTED_RESULTS in resolved.parents):
         raise StudyArgumentError(f"--out {folder}: --quick runs never write into the committed "
                                  f"results/ (give another folder)")
     if folder.exists() and not folder.is_dir():

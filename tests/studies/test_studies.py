@@ -229,9 +229,22 @@ def test_read_only_output_folder_fails_before_compute(no_compute, tmp_path, caps
         folder.chmod(0o755)
 
 
-def test_quick_never_writes_into_the_committed_results(no_compute, capsys):
-    assert studies_main(["fig4c", "--out", str(cli.COMMITTED_RESULTS), *QUICK]) == 2
+@pytest.mark.parametrize("inside", ["", "paper_dt5", "a/new/folder", "paper_dt5/../fig4c_q"])
+def test_quick_never_writes_into_the_committed_results(no_compute, capsys, inside):
+    """Neither results/ itself nor any folder under it, existing or not, spelt with `..` or
+    not; the folder is not created."""
+    out = cli.COMMITTED_RESULTS / inside
+    assert studies_main(["fig4c", "--out", str(out), *QUICK]) == 2
     assert "never write into the committed results/" in capsys.readouterr().err
+    assert not (cli.COMMITTED_RESULTS / "a").exists()
+    assert not (cli.COMMITTED_RESULTS / "fig4c_q").exists()
+
+
+def test_quick_may_write_beside_the_committed_results(no_compute, tmp_path, monkeypatch):
+    """A sibling whose name only starts like it ("results_quick") is not inside it."""
+    monkeypatch.setattr(cli, "COMMITTED_RESULTS", tmp_path / "results")
+    cli.check_output_folder(tmp_path / "results_quick", quick=True)
+    assert (tmp_path / "results_quick").is_dir()
 
 
 def test_reproduce_lists_one_command_per_committed_result(capsys):
