@@ -123,6 +123,39 @@ class Clock:
         """The time of a stop after the start, s."""
         return stop if self.adaptive else stop * self.dt
 
+    @property
+    def seconds_per_tick(self) -> float:
+        """The unit of `ticks`, s: a step with fixed steps, a nanosecond with adaptive ones."""
+        return 1.0 / NANOSECONDS if self.adaptive else self.dt
+
+    def ticks(self, stop) -> int:
+        """A stop as a whole number of ticks, at most the end's: the count a progress bar keeps,
+        so that its sum ends exactly on its total (a sum of float seconds can pass it by a
+        rounding, and an adaptive run's last stop may lie within STEP_TOLERANCE after the
+        end)."""
+        if not self.adaptive:
+            return stop
+        return min(round(stop * NANOSECONDS), round(self.end * NANOSECONDS))
+
+
+NANOSECONDS = 1e9
+"""Ticks per simulated second of an adaptive run's progress bar."""
+
+
+def robots_label(count: int) -> str:
+    """A progress bar's description of a batch: "1 robot", "64 robots"."""
+    return f"{count} robot" + ("" if count == 1 else "s")
+
+
+def progress_bar(clock: Clock, label: str):
+    """A tqdm bar over the run in the clock's `ticks`, shown in simulated seconds to the
+    millisecond."""
+    from tqdm.auto import tqdm
+    return tqdm(total=clock.ticks(clock.end), unit="s", unit_scale=clock.seconds_per_tick,
+                desc=label,
+                bar_format="{l_bar}{bar}| {n:.3f}/{total:.3f} s simulated "
+                           "[{elapsed}<{remaining}]")
+
 
 def drive(engine, clock: Clock, stops: Sequence, at_stop: Callable, batch: int,
           start_times: Optional[np.ndarray] = None, progress_label: Optional[str] = None):
@@ -132,13 +165,7 @@ def drive(engine, clock: Clock, stops: Sequence, at_stop: Callable, batch: int,
     ones take each instance to its start time (s, (batch,); None: all at t = 0) plus the
     stop. progress_label: the description of a progress bar in simulated seconds, None for
     no bar."""
-    bar = None
-    if progress_label is not None:
-        from tqdm.auto import tqdm
-        # simulated seconds, shown to the millisecond (the clock's float sums are not round)
-        bar = tqdm(total=clock.time_of(clock.end), unit="s", desc=progress_label,
-                   bar_format="{l_bar}{bar}| {n:.3f}/{total:.3f} s simulated "
-                              "[{elapsed}<{remaining}]")
+    bar = progress_bar(clock, progress_label) if progress_label is not None else None
     if clock.adaptive and start_times is None:
         start_times = np.zeros(batch)
     previous = 0
@@ -147,7 +174,7 @@ def drive(engine, clock: Clock, stops: Sequence, at_stop: Callable, batch: int,
             if clock.adaptive:
                 engine.advance_adaptive_to(start_times + stop, batch)
                 if bar is not None:
-                    bar.update(stop - previous)
+                    bar.update(clock.ticks(stop) - clock.ticks(previous))
             else:
                 step = previous
                 while step < stop:
@@ -155,7 +182,7 @@ def drive(engine, clock: Clock, stops: Sequence, at_stop: Callable, batch: int,
                     engine.advance(count)
                     step += count
                     if bar is not None:
-                        bar.update(count * clock.dt)
+                        bar.update(count)
         at_stop(stop)
         previous = stop
     if bar is not None:

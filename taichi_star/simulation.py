@@ -18,7 +18,7 @@ from .geometry import CENTRE, Topology
 from .model import validate_batch
 from .params import (PER_ACTUATOR_FIELDS, SolverConfig, StarParams, check_precision,
                      parameter_column)
-from .driver import Clock, RunTiming, check_run, drive
+from .driver import Clock, RunTiming, check_run, drive, robots_label
 from . import sensitivities as tangents
 from .runtime import Runtime, check_arch, stream_chunk_size
 from .state import STATUS_NAMES, STATUS_OK
@@ -220,7 +220,7 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     starts = range(0, len(params), chunk)
     results = []
     for number, start in enumerate(starts):
-        label = f"{min(chunk, len(params) - start)} robots" + (
+        label = robots_label(min(chunk, len(params) - start)) + (
             f", chunk {number + 1}/{len(starts)}" if len(starts) > 1 else "")
         results.append(_simulate_chunk(params[start:start + chunk], duration_s, solver, runtime,
                                        record_interval_s, record_shapes, steady_from_cycle,

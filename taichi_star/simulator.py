@@ -36,7 +36,7 @@ import pandas as pd
 from . import metrics
 from . import sensitivities as tangents
 from .actuation import NEVER
-from .driver import Clock, RunTiming, check_run, drive
+from .driver import Clock, RunTiming, check_run, drive, robots_label
 from .gait import N_ACTUATORS, Gait
 from .geometry import CENTRE
 from .model import validate_batch
@@ -246,7 +246,7 @@ class Simulator:
         started = time.perf_counter()
         drive(self.engine, clock, stops, take, self.n_instances,
               start_times=self.time_s if self.solver.adaptive else None,
-              progress_label=f"{self.n_instances} robots" if progress else None)
+              progress_label=robots_label(self.n_instances) if progress else None)
         self.timing = self.timing + RunTiming(
             setup_s=0.0, compile_s=compile_s, run_s=time.perf_counter() - started, collect_s=0.0,
             robot_steps=int((self._steps() - steps_before).sum()))
