@@ -211,7 +211,8 @@ def build_parser():
                         help="gaits: paper (the five, default) or a comma list")
     parser.add_argument("--parameters", default=None, metavar="NAME,...",
                         help="parameters to differentiate by, as simulate(sensitivities=...) "
-                             "names them (default: every differentiable field and each "
+                             "names them, an actuator by its Python index (actuator_gains[0] "
+                             "is A1's) (default: every differentiable field and each "
                              "actuator's gain and delay, less component heights at 0)")
     parser.add_argument("--sobol", default=str(SOBOL_TABLE), metavar="CSV",
                         help="the Sobol indices to set beside (default results/sensitivity.csv)")

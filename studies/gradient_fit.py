@@ -252,9 +252,10 @@ class Problem:
         units = np.clip(np.asarray(units, dtype=float), 0.0, 1.0)
         values = identify.box_values(self.box, units[None, :])[0]
         residuals, jacobian, _ = self.fit_terms(units)
+        # labelled as the box's axes (NAME[INDEX] from 1), like the study's other tables
         return identification.parameter_uncertainty(residuals,
                                                     jacobian / self.value_per_unit(values),
-                                                    self.names, values)
+                                                    [spec.label for spec in self.box], values)
 
     def value_per_unit(self, values) -> np.ndarray:
         """d value / d u per axis: high − low, or value × ln(high / low) for a log axis."""

@@ -91,7 +91,8 @@ def build_parser():
     parser.add_argument("--gaits", default="A1+A2,A1+A3", quick="A1+A3",
                         help="comma list of gaits, or paper (the five Fig. 4c gaits)")
     parser.add_argument("--parameters", default="all", quick=",".join(QUICK_PARAMETERS),
-                        help="comma list of parameters as simulate's sensitivities take them, "
+                        help="comma list of parameters as simulate's sensitivities take them "
+                             "(an actuator by its Python index: actuator_gains[0] is A1's), "
                              "or all (every differentiable one)")
     return parser
 

@@ -146,8 +146,9 @@ class Direction:
 
 def parse_directions(names) -> Tuple[Direction, ...]:
     """The directions of `simulate`'s `sensitivities` argument: field names, a per-actuator
-    field standing for its eight numbers ("actuator_gains") or one of them
-    ("actuator_gains[3]"). ValueError naming an unknown, repeated or non-differentiable one."""
+    field standing for its eight numbers ("actuator_gains") or one of them by its Python index
+    ("actuator_gains[3]": A4's, as `StarParams.actuator_gains[3]`; the studies' parameter boxes,
+    NAME[INDEX] on their command lines, count from 1 instead: actuator_gains[4] there is A4). ValueError naming an unknown, repeated or non-differentiable one."""
     if isinstance(names, str) or not hasattr(names, "__iter__"):
         raise ValueError(f"sensitivities must be a sequence of StarParams field names, got "
                          f"{names!r}")
@@ -163,7 +164,8 @@ def parse_directions(names) -> Tuple[Direction, ...]:
                 index = rest[:-1]
                 if not (rest.endswith("]") and index.isdigit() and int(index) < N_ACTUATORS):
                     raise ValueError(f"sensitivities: {name!r} must name an actuator index in "
-                                     f"[0, {N_ACTUATORS - 1}], e.g. {field}[0]")
+                                     f"[0, {N_ACTUATORS - 1}] (Python's: {field}[0] is A1's, "
+                                     f"{field}[{N_ACTUATORS - 1}] A{N_ACTUATORS}'s)")
                 indices = [int(index)]
         elif rest or field not in DIFFERENTIABLE_FIELDS:
             if field in StarParams.__dataclass_fields__:

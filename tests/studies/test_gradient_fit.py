@@ -30,25 +30,39 @@ def test_the_study_gradient_adds_the_phases_motion_and_least_squares_does_not(mo
     assert got_residuals is residuals and got_jacobian is jacobian
 
 
-def test_the_uncertainty_is_taken_per_unit_of_each_value_on_linear_and_log_axes(monkeypatch):
+@pytest.mark.parametrize("parameter_set", ["6", "20fired"])
+def test_the_uncertainty_is_taken_per_unit_of_each_value_on_linear_and_log_axes(
+        monkeypatch, parameter_set):
     """Problem.uncertainty turns the unit coordinates' Jacobian into one per unit of each value
     (÷ (high − low) on a linear axis, ÷ value·ln(high/low) on a log axis) before
     identification.parameter_uncertainty: the fake fit's Jacobian is built per value and
-    multiplied out, and the table must equal the library's on the per-value one."""
-    box = [identify.parse_range_spec(text, "--sets") for text in gradient_fit.PARAMETER_SETS["6"]]
+    multiplied out, and the table must equal the library's on the per-value one. Its rows are
+    labelled as the box's axes (an actuator counted from 1, as in --sets and the study's other
+    tables), though the sensitivities asked for count from 0."""
+    box = [identify.parse_range_spec(text, "--sets")
+           for text in gradient_fit.PARAMETER_SETS[parameter_set]]
     assert any(spec.log for spec in box) and not all(spec.log for spec in box)
     problem = gradient_fit.Problem(box, StarParams(gait="A1+A2"), ["A1+A2"], {}, (1, 1),
                                    SolverConfig(), "cpu")
-    units = np.linspace(0.2, 0.7, 6)
+    count = len(box)
+    units = np.linspace(0.2, 0.7, count)
     values = identify.box_values(box, units[None, :])[0]
     rng = np.random.default_rng(11)
-    residuals, per_value = rng.normal(size=40), rng.normal(size=(40, 6))
+    residuals, per_value = rng.normal(size=40), rng.normal(size=(40, count))
     per_unit = per_value * np.array([spec.high - spec.low if not spec.log
                                      else value * np.log(spec.high / spec.low)
                                      for spec, value in zip(box, values)])
-    monkeypatch.setattr(problem, "fit_terms", lambda point: (residuals, per_unit, np.zeros(6)))
-    expected = identification.parameter_uncertainty(residuals, per_value, problem.names, values)
-    pd.testing.assert_frame_equal(problem.uncertainty(units), expected, rtol=1e-12)
+    monkeypatch.setattr(problem, "fit_terms",
+                        lambda point: (residuals, per_unit, np.zeros(count)))
+    labels = [spec.label for spec in box]
+    expected = identification.parameter_uncertainty(residuals, per_value, labels, values)
+    # the round trip per value → per unit → per value rounds each entry by an ulp; the SVD
+    # turns that into up to cond × 1e-16 of its results: the 20-axis box's relative Jacobian
+    # has cond ≈ 3e9 here (its values span 1e-3 to 1e7), so 1e-9; measured 5e-12
+    pd.testing.assert_frame_equal(problem.uncertainty(units), expected, rtol=1e-9)
+    if parameter_set == "20fired":
+        assert "actuator_gains[1]" in labels and "actuator_gains[0]" in problem.names
+        assert labels.index("actuator_gains[1]") == problem.names.index("actuator_gains[0]")
 
 
 def test_a_polish_starts_at_cma_best_point_and_counts_its_cost_on_top(monkeypatch):
