@@ -155,3 +155,20 @@ def test_readme_opens_with_the_two_commands_and_the_api():
     for name in ("simulate", "Simulator", "StarParams"):
         assert f"ts.{name}(" in quickstart and hasattr(taichi_star, name), name
     assert 'gymnasium.make_vec("StarSwimmer-v0"' in quickstart
+
+
+def test_the_extras_paragraph_names_every_study_with_its_extra():
+    """docs/index.md's "Which study needs which extra" lists, after each extra, the studies
+    whose launcher checks for it (studies.EXTRA_OF_STUDY): none missing, none misplaced."""
+    from studies import EXTRA_OF_STUDY
+
+    text = (REPO_ROOT / "docs" / "index.md").read_text()
+    paragraph = text[text.index("Which study needs which extra:"):]
+    paragraph = paragraph[:paragraph.index("\n\n")]
+    for extra in ("plots", "envs", "studies"):
+        part = paragraph[paragraph.index(f"`{extra}` for"):]
+        listed = set(re.findall(r"[a-z][a-z0-9_]*", part[:part.index(";")]))
+        expected = {name for name, needs in EXTRA_OF_STUDY.items() if needs == extra}
+        assert expected <= listed, (extra, expected - listed)
+        others = {name for name, needs in EXTRA_OF_STUDY.items() if needs != extra}
+        assert not (others & listed), (extra, others & listed)

@@ -21,3 +21,15 @@ def test_import_contracts_are_kept():
                          env=dict(os.environ, PYTHONPATH=str(REPO)))
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-2000:]
     assert "BROKEN" not in run.stdout
+
+
+def test_every_study_is_in_the_independence_contract():
+    """The contract lists the studies by name: a study added without it could import another."""
+    from studies import study_names
+
+    tomllib = pytest.importorskip("tomllib")     # Python ≥ 3.11
+
+    contracts = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["importlinter"][
+        "contracts"]
+    (independent,) = [c for c in contracts if c["name"] == "no study imports another study"]
+    assert sorted(independent["modules"]) == [f"studies.{name}" for name in study_names()]
