@@ -11,59 +11,13 @@ import pytest
 
 import taichi_star
 from taichi_star import SolverConfig, StarParams
-from taichi_star.experiment import (EXPERIMENT_PERIOD_S, PAPER_GAITS, cycle_speeds,
-                                    experimental_cycle_speeds, experimental_speeds,
-                                    experimental_trajectory)
+from taichi_star.experiment import (EXPERIMENT_PERIOD_S, PAPER_GAITS)
 
 from studies import calibrate, cli, identify, sensitivity
 from studies.__main__ import main as studies_main
 
 QUICK = ["--quick", "--no-progress"]
 T = EXPERIMENT_PERIOD_S
-
-
-# ----------------------------------------------------------------------------- per-cycle speeds
-
-def test_cycle_speeds_by_hand():
-    # x: 1 mm/s in the first cycle, 3 mm/s in the second, then still; y: a wiggle of one period
-    # (zero at every cycle edge, so a window cut at the wrong phase would see it). Frames every
-    # T/190 hit the edges; the half cycle at the end is incomplete and dropped.
-    t = np.arange(0, 476) * (T / 190)
-    x = np.where(t < T, t, np.where(t < 2 * T, T + 3 * (t - T), 4 * T))
-    y = 0.2 * np.sin(2 * np.pi * t / T)
-    speeds = cycle_speeds(t, x, y, T)
-    assert speeds == pytest.approx([1.0, 3.0], rel=1e-9)  # rounding of sin(2πk) only
-    # frames that miss the edges (59.94 fps): the edge positions are interpolated, exactly for a
-    # straight path at constant velocity (1.5, -2) mm/s: |v| = 2.5 mm/s in each of 3 cycles
-    t = np.arange(0, 600) / 59.94
-    speeds = cycle_speeds(t, 1.5 * t, -2.0 * t, T)
-    assert len(speeds) == math.floor(t[-1] / T) == 3
-    assert speeds == pytest.approx([2.5] * 3, rel=1e-12)
-    with pytest.raises(ValueError, match="period_s"):
-        cycle_speeds(t, t, t, 0.0)
-
-
-def test_experimental_cycle_speeds_against_trial_speeds():
-    table = experimental_cycle_speeds()
-    trials = experimental_speeds()
-    assert list(table.index) == list(PAPER_GAITS)
-    for gait in PAPER_GAITS:
-        path = experimental_trajectory(gait)
-        row = table.loc[gait]
-        assert row["n_cycles"] == math.floor(path["t_s"].iloc[-1] / T)
-        assert 0 < row["cycle_speed_std_mm_s"] < row["cycle_speed_mean_mm_s"]
-        # triangle inequality: the summed chords of the cycles cover at least the net
-        # displacement over those whole cycles
-        end = row["n_cycles"] * T
-        net = math.hypot(np.interp(end, path["t_s"], path["x_mm"]),
-                         np.interp(end, path["t_s"], path["y_mm"]))
-        assert row["cycle_speed_mean_mm_s"] * end >= net * (1 - 1e-12)
-        # plausibility against the full-trial speed: the four fast gaits swim straight at the
-        # scale of a cycle (≥ 4 mm per cycle), within 5 %; A1 moves 1.4 mm per cycle with a
-        # sideways wander of the same size, so its chords add up to more: within 25 %
-        tolerance = 0.25 if gait == "A1" else 0.05
-        assert row["cycle_speed_mean_mm_s"] == pytest.approx(trials.loc[gait, "speed_mm_s"],
-                                                             rel=tolerance)
 
 
 # ----------------------------------------------------------------------------- objective

@@ -4,7 +4,6 @@ before any compute, provenance sidecars, the gait-symmetry basis of the gaits st
 packaged experiment data."""
 
 import json
-import math
 import os
 from types import SimpleNamespace
 
@@ -16,9 +15,7 @@ import taichi_star
 from taichi_star import SolverConfig, StarParams
 from taichi_star import provenance
 from taichi_star.gait import Gait, symmetry_classes
-from taichi_star.experiment import (FIG4C_COLUMNS, PAPER_DIRECTIONS, PAPER_GAITS,
-                                    compare_with_experiment, experimental_speed,
-                                    experimental_speeds, experimental_trajectory)
+from taichi_star.experiment import (FIG4C_COLUMNS, PAPER_GAITS)
 
 from studies import cli, gaits as gaits_study, provenance as study_provenance, study_names
 from studies.__main__ import main as studies_main
@@ -35,38 +32,6 @@ def quick_simulation(params):
 def pngs_written(*paths):
     for path in paths:
         assert path.exists() and path.stat().st_size > 1000, path
-
-
-# ----------------------------------------------------------------------------- experiment data
-
-def test_experiment_data_is_packaged():
-    speeds = experimental_speeds()
-    assert list(speeds.index) == list(PAPER_GAITS)
-    assert experimental_speed("A1+A2") == pytest.approx(2.85)
-    assert experimental_speed("A2+A1") == pytest.approx(2.85)  # canonical gait names
-    assert math.isnan(experimental_speed("A1+A6"))
-    for gait in PAPER_GAITS:
-        trajectory = experimental_trajectory(gait)
-        assert list(trajectory.columns) == ["t_s", "x_mm", "y_mm", "displacement_mm"]
-        assert trajectory["t_s"].iloc[0] == 0.0 and len(trajectory) > 1000
-    with pytest.raises(ValueError, match="no experimental trajectory"):
-        experimental_trajectory("A1+A6")
-
-
-def test_compare_with_experiment_directions_and_failures():
-    summary = pd.DataFrame({
-        "gait": list(PAPER_GAITS),
-        "speed_mm_s": [0.5, 2.0, 3.0, 1.0, 4.0],
-        "signed_speed_mm_s": [0.5, 2.0, -3.0, 1.0, -4.0],
-        "status": ["ok", "ok", "ok", "ok", "newton_failed"]})
-    table = compare_with_experiment(summary)
-    assert list(table.columns) == FIG4C_COLUMNS
-    assert list(table["paper_direction"]) == [PAPER_DIRECTIONS[g] for g in PAPER_GAITS]
-    assert list(table["sim_direction"][:4]) == ["forward", "forward", "reverse", "forward"]
-    assert list(table["direction_matches"][:4]) == [True, True, True, False]
-    assert table["speed_ratio"].iloc[1] == pytest.approx(2.0 / 2.85)
-    # a failed instance never reports a speed
-    assert math.isnan(table["sim_speed_mm_s"].iloc[4]) and table["status"].iloc[4] == "newton_failed"
 
 
 # ----------------------------------------------------------------------------- argument parsing

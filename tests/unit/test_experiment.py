@@ -1,9 +1,18 @@
-"""The measured trials as the package ships them (taichi_star.experiment)."""
+"""The measured trials as the package ships them (taichi_star.experiment): the speeds, the
+tracked paths, the per-cycle speeds and the comparison table of Fig. 4c."""
+
+import math
 
 import numpy as np
+import pandas as pd
 import pytest
 
-from taichi_star.experiment import PAPER_GAITS, experimental_trajectory
+from taichi_star.experiment import (EXPERIMENT_PERIOD_S, FIG4C_COLUMNS, PAPER_DIRECTIONS,
+                                    PAPER_GAITS, compare_with_experiment, cycle_speeds,
+                                    experimental_cycle_speeds, experimental_speed,
+                                    experimental_speeds, experimental_trajectory)
+
+T = EXPERIMENT_PERIOD_S
 
 
 @pytest.mark.parametrize("gait", PAPER_GAITS)
@@ -20,3 +29,75 @@ def test_a_gait_never_measured_is_refused_naming_the_measured_ones():
                                          r"gaits: A1, A1\+A2, A1\+A3, A1\+A4, A1\+A3\+A5$"):
         experimental_trajectory("A2")
     assert experimental_trajectory("a3+a1").equals(experimental_trajectory("A1+A3"))
+
+
+def test_experiment_data_is_packaged():
+    speeds = experimental_speeds()
+    assert list(speeds.index) == list(PAPER_GAITS)
+    assert experimental_speed("A1+A2") == pytest.approx(2.85)
+    assert experimental_speed("A2+A1") == pytest.approx(2.85)  # canonical gait names
+    assert math.isnan(experimental_speed("A1+A6"))
+    for gait in PAPER_GAITS:
+        trajectory = experimental_trajectory(gait)
+        assert list(trajectory.columns) == ["t_s", "x_mm", "y_mm", "displacement_mm"]
+        assert trajectory["t_s"].iloc[0] == 0.0 and len(trajectory) > 1000
+    with pytest.raises(ValueError, match="no experimental trajectory"):
+        experimental_trajectory("A1+A6")
+
+
+def test_compare_with_experiment_directions_and_failures():
+    summary = pd.DataFrame({
+        "gait": list(PAPER_GAITS),
+        "speed_mm_s": [0.5, 2.0, 3.0, 1.0, 4.0],
+        "signed_speed_mm_s": [0.5, 2.0, -3.0, 1.0, -4.0],
+        "status": ["ok", "ok", "ok", "ok", "newton_failed"]})
+    table = compare_with_experiment(summary)
+    assert list(table.columns) == FIG4C_COLUMNS
+    assert list(table["paper_direction"]) == [PAPER_DIRECTIONS[g] for g in PAPER_GAITS]
+    assert list(table["sim_direction"][:4]) == ["forward", "forward", "reverse", "forward"]
+    assert list(table["direction_matches"][:4]) == [True, True, True, False]
+    assert table["speed_ratio"].iloc[1] == pytest.approx(2.0 / 2.85)
+    # a failed instance never reports a speed
+    assert math.isnan(table["sim_speed_mm_s"].iloc[4]) and table["status"].iloc[4] == "newton_failed"
+
+
+def test_cycle_speeds_by_hand():
+    # x: 1 mm/s in the first cycle, 3 mm/s in the second, then still; y: a wiggle of one period
+    # (zero at every cycle edge, so a window cut at the wrong phase would see it). Frames every
+    # T/190 hit the edges; the half cycle at the end is incomplete and dropped.
+    t = np.arange(0, 476) * (T / 190)
+    x = np.where(t < T, t, np.where(t < 2 * T, T + 3 * (t - T), 4 * T))
+    y = 0.2 * np.sin(2 * np.pi * t / T)
+    speeds = cycle_speeds(t, x, y, T)
+    assert speeds == pytest.approx([1.0, 3.0], rel=1e-9)  # rounding of sin(2πk) only
+    # frames that miss the edges (59.94 fps): the edge positions are interpolated, exactly for a
+    # straight path at constant velocity (1.5, -2) mm/s: |v| = 2.5 mm/s in each of 3 cycles
+    t = np.arange(0, 600) / 59.94
+    speeds = cycle_speeds(t, 1.5 * t, -2.0 * t, T)
+    assert len(speeds) == math.floor(t[-1] / T) == 3
+    assert speeds == pytest.approx([2.5] * 3, rel=1e-12)
+    with pytest.raises(ValueError, match="period_s"):
+        cycle_speeds(t, t, t, 0.0)
+
+
+def test_experimental_cycle_speeds_against_trial_speeds():
+    table = experimental_cycle_speeds()
+    trials = experimental_speeds()
+    assert list(table.index) == list(PAPER_GAITS)
+    for gait in PAPER_GAITS:
+        path = experimental_trajectory(gait)
+        row = table.loc[gait]
+        assert row["n_cycles"] == math.floor(path["t_s"].iloc[-1] / T)
+        assert 0 < row["cycle_speed_std_mm_s"] < row["cycle_speed_mean_mm_s"]
+        # triangle inequality: the summed chords of the cycles cover at least the net
+        # displacement over those whole cycles
+        end = row["n_cycles"] * T
+        net = math.hypot(np.interp(end, path["t_s"], path["x_mm"]),
+                         np.interp(end, path["t_s"], path["y_mm"]))
+        assert row["cycle_speed_mean_mm_s"] * end >= net * (1 - 1e-12)
+        # plausibility against the full-trial speed: the four fast gaits swim straight at the
+        # scale of a cycle (≥ 4 mm per cycle), within 5 %; A1 moves 1.4 mm per cycle with a
+        # sideways wander of the same size, so its chords add up to more: within 25 %
+        tolerance = 0.25 if gait == "A1" else 0.05
+        assert row["cycle_speed_mean_mm_s"] == pytest.approx(trials.loc[gait, "speed_mm_s"],
+                                                             rel=tolerance)
