@@ -3,6 +3,7 @@
 import ast
 import errno
 import importlib
+import os
 import sys
 from pathlib import Path
 
@@ -74,6 +75,11 @@ def main(argv=None) -> int:
     except (StudyArgumentError, StudyOutputError, RunStoreError) as error:
         print(f"{program()} {name}: error: {error}", file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        # the reader of the study's printed output left (`| head`): stop quietly, as a Unix
+        # tool does; stdout's last flush at exit then goes nowhere
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
     except OSError as error:
         if error.errno not in FULL_DISK:
             raise

@@ -95,6 +95,9 @@ class SimulationResult:
         if self.sensitivities is None:
             raise ValueError("this result has no sensitivities: pass sensitivities=(...) to "
                              "simulate")
+        outputs = list(dict.fromkeys(tangents.SUMMARY_OUTPUTS + tangents.TRAJECTORY_OUTPUTS))
+        if output not in outputs:   # before the parameter: swapped arguments name the output
+            raise ValueError(f"output must be one of {outputs}, got {output!r}")
         directions = tangents.parse_directions([parameter])
         if output in tangents.SUMMARY_OUTPUTS and not trajectory:
             table, shape = self.sensitivities, (len(self.summary),)
@@ -102,8 +105,8 @@ class SimulationResult:
             table = self.trajectory_sensitivities
             shape = (len(self.summary), len(table) // max(len(self.summary), 1))
         else:
-            raise ValueError(f"output must be one of {tangents.SUMMARY_OUTPUTS + tangents.TRAJECTORY_OUTPUTS}, "
-                             f"got {output!r}")
+            raise ValueError(f"output {output!r} is a summary output, not one of the trajectory's "
+                             f"{list(tangents.TRAJECTORY_OUTPUTS)} (trajectory=True)")
         columns = [tangents.sensitivity_column(output, direction.label) for direction in directions]
         missing = [column for column in columns if column not in table]
         if missing:

@@ -194,6 +194,17 @@ def test_trajectory_sensitivities_start_at_zero_and_end_at_the_displacements(eul
                                rtol=1e-12)
 
 
+def test_a_bad_output_is_named_before_the_parameter(euler_run):
+    """Arguments swapped, an unknown output, a summary output asked of the trajectory: each
+    error names the output, listing each allowed one once."""
+    with pytest.raises(ValueError, match=r"^output must be one of \[.*\], got 'alpha'$") as error:
+        euler_run.sensitivity("alpha", "signed_speed_mm_s")
+    listed = str(error.value).split("[", 1)[1].split("]", 1)[0].split(", ")
+    assert len(listed) == len(set(listed)) and "'heading_deg'" in listed
+    with pytest.raises(ValueError, match=r"^output 'signed_speed_mm_s' is a summary output"):
+        euler_run.sensitivity("signed_speed_mm_s", "alpha", trajectory=True)
+
+
 def test_a_per_actuator_field_gives_one_column_per_actuator(euler_run):
     with pytest.raises(ValueError, match="actuator_gains"):
         euler_run.sensitivity("displacement_x_mm", "actuator_gains")  # only [1] was run

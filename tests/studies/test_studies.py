@@ -212,6 +212,27 @@ def test_quick_may_write_beside_the_committed_results(no_compute, tmp_path, monk
     assert (tmp_path / "results_quick").is_dir()
 
 
+def test_a_reader_that_leaves_ends_the_study_quietly(capfd, monkeypatch):
+    """`python -m studies fig4c | head -1`: the pipe breaks while the table prints; exit code 1
+    and no traceback, and stdout is pointed at /dev/null so that its flush at exit cannot
+    fail either."""
+    from studies import fig4c
+
+    def printing_into_a_closed_pipe(argv):
+        raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr(fig4c, "main", printing_into_a_closed_pipe)
+    saved = os.dup(1)
+    try:
+        assert studies_main(["fig4c"]) == 1
+        print("after")          # goes to /dev/null now
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+    out, err = capfd.readouterr()
+    assert "after" not in out and "Traceback" not in err
+
+
 def test_reproduce_lists_one_command_per_committed_result(capsys):
     assert studies_main(["reproduce", "--dry-run", "--into", "elsewhere"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
