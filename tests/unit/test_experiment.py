@@ -101,3 +101,61 @@ def test_experimental_cycle_speeds_against_trial_speeds():
         tolerance = 0.25 if gait == "A1" else 0.05
         assert row["cycle_speed_mean_mm_s"] == pytest.approx(trials.loc[gait, "speed_mm_s"],
                                                              rel=tolerance)
+
+
+def test_the_speeds_file_names_its_gaits_canonically():
+    speeds = experimental_speeds()
+    assert list(speeds.index) == list(PAPER_GAITS)
+    assert experimental_speed("A1+A3", excerpt=True) == 4.304       # the authors' excerpt
+    assert experimental_speed("A3+A1") == 3.37                       # the full trial
+
+
+def test_every_column_of_the_comparison_for_measured_unmeasured_and_failed_gaits():
+    """A measured gait gets its measured speed, the spread of its cycles and their ratio; one
+    never measured gets NaN there and "unknown" for the paper's direction; a failed instance
+    gets NaN speeds and "undefined" direction; without a status column every row is ok."""
+    summary = pd.DataFrame({"gait": ["A2+A1", "A1+A6", "A1+A3"],
+                            "speed_mm_s": [1.425, 2.0, 1.0],
+                            "signed_speed_mm_s": [1.425, -2.0, -1.0]})
+    table = compare_with_experiment(summary)
+    assert table.columns.tolist() == FIG4C_COLUMNS
+    assert table.gait.tolist() == ["A1+A2", "A1+A6", "A1+A3"]
+    assert table.status.tolist() == ["ok", "ok", "ok"]
+    np.testing.assert_array_equal(table.sim_speed_mm_s, [1.425, 2.0, 1.0])
+    np.testing.assert_array_equal(table.sim_signed_speed_mm_s, [1.425, -2.0, -1.0])
+    spread = experimental_cycle_speeds()["cycle_speed_std_mm_s"]
+    np.testing.assert_array_equal(table.exp_speed_mm_s, [2.85, np.nan, 3.37])
+    np.testing.assert_array_equal(table.exp_cycle_speed_std_mm_s,
+                                  [spread["A1+A2"], np.nan, spread["A1+A3"]])
+    np.testing.assert_array_equal(table.speed_ratio, [0.5, np.nan, 1.0 / 3.37])
+    assert table.sim_direction.tolist() == ["forward", "reverse", "reverse"]
+    assert table.paper_direction.tolist() == ["forward", "unknown", "reverse"]
+    assert table.direction_matches.tolist() == [True, False, True]
+    failed = compare_with_experiment(summary.assign(status=["ok", "ok", "nan_state"]))
+    assert failed.status.tolist() == ["ok", "ok", "nan_state"]
+    assert np.isnan(failed.sim_speed_mm_s[2]) and np.isnan(failed.sim_signed_speed_mm_s[2])
+    assert failed.sim_direction[2] == "undefined" and not failed.direction_matches[2]
+
+
+@pytest.mark.parametrize("speed, direction", [(1e-300, "forward"), (-1e-300, "reverse"),
+                                              (0.0, "undefined"), (-0.0, "undefined"),
+                                              (float("nan"), "undefined"), (None, "undefined"),
+                                              (float("inf"), "undefined")])
+def test_direction_of_a_signed_speed(speed, direction):
+    from taichi_star.experiment import direction_of
+    assert direction_of(speed) == direction
+
+
+def test_cycle_speeds_counts_whole_periods_from_the_first_sample():
+    """Two samples suffice (one straight segment), and exactly two periods are two cycles; a
+    trial starting at t = 5 s has its cycles from there: 2.4 periods of 0.5 s sampled every
+    0.3 s give 2 cycles of 1 mm/s (the last sample decides, not the one before it)."""
+    np.testing.assert_allclose(cycle_speeds([0.0, 1.0], [0.0, 2.0], [0.0, 0.0], 0.5), [2.0, 2.0],
+                               rtol=1e-15)
+    t = 5.0 + np.linspace(0.0, 1.2, 5)
+    np.testing.assert_allclose(cycle_speeds(t, t - 5.0, 0 * t, 0.5), [1.0, 1.0], rtol=1e-14)
+    message = r"^cycle_speeds needs equal-length t, x, y with t strictly increasing$"
+    for t_s, x_mm in (([0.0], [0.0]), ([0.0, 1.0, 1.0], [0.0, 1.0, 2.0]),
+                      ([0.0, 1.0], [0.0, 1.0, 2.0])):
+        with pytest.raises(ValueError, match=message):
+            cycle_speeds(t_s, x_mm, [0.0] * len(x_mm), 0.5)
