@@ -59,6 +59,10 @@ def main(argv=None) -> int:
     if not argv or argv[0] in ("-h", "--help"):  # no study named: the list is the answer
         print(usage())
         return 0
+    if argv[0] == "--version":
+        import taichi_star
+        print(f"taichi_star {taichi_star.__version__}")
+        return 0
     name, rest = argv[0], argv[1:]
     if name not in study_names():
         print(f"{program()}: error: unknown study {name!r}; choose one of "

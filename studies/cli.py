@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import datetime
+import difflib
 import itertools
 import json
 import logging
@@ -158,7 +159,8 @@ def add_execution_flags(parser: StudyParser, chunk_size: int = DEFAULT_CHUNK_SIZ
                         help="run the chunks on N local worker processes, each a "
                              "single-threaded Taichi runtime (default: in this process)")
     parser.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
-                        help="run the chunks on an existing Dask cluster (see the README)")
+                        help="run the chunks on an existing Dask cluster (docs/studies.md, "
+                             "the common flags)")
     parser.add_argument("--retries", type=int, default=DEFAULT_RETRIES,
                         help=f"extra tries of a chunk whose worker died or whose Dask task "
                              f"failed (default {DEFAULT_RETRIES})")
@@ -323,23 +325,29 @@ def parse_choices(text: str, flag: str, choices: Sequence[str]) -> List[str]:
     return values
 
 
-def field_kind(name: str) -> type:
-    """float, int or str: the type of a StarParams field (StudyArgumentError if unknown)."""
+def field_kind(name: str, flag: Optional[str] = None) -> type:
+    """float, int or str: the type of a StarParams field (StudyArgumentError if unknown, naming
+    `flag` when given and the closest fields)."""
     hints = typing.get_type_hints(StarParams)
     if name not in hints:
-        raise StudyArgumentError(
-            f"unknown parameter {name!r}; StarParams fields: {', '.join(StarParams.field_names())}")
+        close = difflib.get_close_matches(name, StarParams.field_names(), n=3)
+        hint = f"did you mean {', '.join(close)}?" if close else \
+            f"StarParams fields: {', '.join(StarParams.field_names())}"
+        raise StudyArgumentError(f"{flag + ': ' if flag else ''}unknown parameter {name!r}; "
+                                 f"{hint}")
     return hints[name]
 
 
 def parse_assignment(text: str, flag: str):
-    """"name=values" (e.g. "alpha=0.2:1.2:6") -> (field name, list of values)."""
+    """"name=values" (e.g. "alpha=0.2:1.2:6"; --set takes one value, "alpha=0.8") -> (field
+    name, list of values)."""
     if "=" not in text:
-        raise StudyArgumentError(f"{flag}: expected NAME=VALUES (e.g. alpha=0.2:1.2:6), got "
-                                 f"{text!r}")
+        example = "alpha=0.8" if flag == "--set" else "alpha=0.2:1.2:6"
+        raise StudyArgumentError(f"{flag}: expected NAME=VALUE{'' if flag == '--set' else 'S'} "
+                                 f"(e.g. {example}), got {text!r}")
     name, values = text.split("=", 1)
     name = name.strip().replace("-", "_")
-    return name, parse_values(values, f"{flag} {name}", field_kind(name))
+    return name, parse_values(values, f"{flag} {name}", field_kind(name, flag))
 
 
 def resolve_gaits(text: str, flag: str = "--gaits") -> List[str]:

@@ -32,7 +32,7 @@ from taichi_star.batch import run_batch
 
 from . import cli
 
-DESCRIPTION = "Sensitivity study: Cartesian product of StarParams values, one chunked batch."
+DESCRIPTION = "Parameter sweep: Cartesian product of StarParams values, one chunked batch."
 
 NAMED_FLAGS = {
     "alpha": "alpha",
@@ -57,9 +57,10 @@ every core busy."""
 def build_parser():
     parser = cli.StudyParser("sweep", DESCRIPTION)
     for flag, field in NAMED_FLAGS.items():
+        forms = "list a,b,c" if cli.field_kind(field) is str else \
+            "list a,b,c or range start:stop:n[:log]"
         parser.add_argument(f"--{flag}", dest=field, default=None, metavar="VALUES",
-                            help=f"values of StarParams.{field} (list a,b,c or range "
-                                 f"start:stop:n[:log])")
+                            help=f"values of StarParams.{field} ({forms})")
     parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUES",
                         help="sweep any StarParams field, e.g. --param drag_parallel=0,0.01,0.1")
     parser.add_argument("--gaits", default="paper",

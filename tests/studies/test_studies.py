@@ -98,7 +98,10 @@ def test_quick_defaults_and_presets():
     ("sweep", ["--gaits", "A1,A9"], "unknown actuator 'A9'"),
     ("sweep", ["--alpha=-1,1"], "alpha must be"),
     ("sweep", ["--jet-mode", "sometimes"], "jet_mode must be one of"),
-    ("fig4c", ["--set", "gamma=1"], "unknown parameter 'gamma'"),
+    ("fig4c", ["--set", "gamma=1"], "--set: unknown parameter 'gamma'"),
+    ("fig4c", ["--set", "alpa=1"], "--set: unknown parameter 'alpa'; did you mean alpha?"),
+    ("fig4c", ["--set", "alpha"], "--set: expected NAME=VALUE (e.g. alpha=0.8), got 'alpha'"),
+    ("sweep", ["--param", "alpha"], "--param: expected NAME=VALUES (e.g. alpha=0.2:1.2:6)"),
     ("fig4c", ["--set", "alpha=1,2"], "exactly one value"),
     ("fig4c", ["--set", "gait=A1"], "--set gait"),
     ("fig4c", ["--dt", "0.5"], "--dt: dt must be"),
@@ -210,6 +213,11 @@ def test_quick_may_write_beside_the_committed_results(no_compute, tmp_path, monk
     monkeypatch.setattr(cli, "COMMITTED_RESULTS", tmp_path / "results")
     cli.check_output_folder(tmp_path / "results_quick", quick=True)
     assert (tmp_path / "results_quick").is_dir()
+
+
+def test_the_launcher_says_its_version(capsys):
+    assert studies_main(["--version"]) == 0
+    assert capsys.readouterr().out == f"taichi_star {taichi_star.__version__}\n"
 
 
 def test_a_reader_that_leaves_ends_the_study_quietly(capfd, monkeypatch):
