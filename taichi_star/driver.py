@@ -76,7 +76,12 @@ def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float,
     in all (`timegrid.check_work`; `steps_taken`: the steps an instance has already taken,
     None for a run from t = 0; adaptive steps: the fewest, at dt_max, with a RuntimeWarning
     when the most, at dt_min, could pass the limit), and with fixed steps at least one step
-    and a record interval of whole steps."""
+    and a record interval of whole steps. A record interval longer than the run warns: its
+    trajectory holds the start alone."""
+    if record_interval_s and multiples_within(duration_s, record_interval_s) == 0:
+        warnings.warn(f"record_interval_s = {record_interval_s:g} s is longer than duration_s = "
+                      f"{duration_s:g} s: the trajectory holds only the start (the summary has "
+                      f"the end)", RuntimeWarning, stacklevel=3)
     after = "" if steps_taken is None else f"after the {steps_taken} steps taken"
     taken = steps_taken or 0
     if solver.adaptive:

@@ -46,3 +46,19 @@ def test_the_bar_ends_on_its_total_without_a_warning(capsys, adaptive, duration_
 
 def test_robots_label_counts_one_robot_in_the_singular():
     assert [robots_label(n) for n in (1, 2, 64)] == ["1 robot", "2 robots", "64 robots"]
+
+
+def test_a_record_interval_longer_than_the_run_warns_and_one_as_long_does_not():
+    """Records fall at whole multiples of the interval: one as long as the run records its end
+    (no warning), a longer one only the start (warned, naming both); 0 asks for none."""
+    from taichi_star.driver import check_run
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_run(SolverConfig(), 0.2, 0.2, 1)
+        check_run(SolverConfig(), 0.2, 0.0, 1)
+        check_run(SolverConfig(adaptive=True), 0.3, 0.1, 1)   # 0.3 / 0.1 = 2.9999999999999996
+    with pytest.warns(RuntimeWarning, match=r"^record_interval_s = 0\.201 s is longer than "
+                                            r"duration_s = 0\.2 s: the trajectory holds only the "
+                                            r"start"):
+        check_run(SolverConfig(), 0.2, 0.201, 1)
