@@ -189,3 +189,95 @@ def test_steps_of_a_streak_speed_up_to_the_steady_step():
                                   [[(0, 0), (6, 0.5)], [(0, 0), (10, 0)]])
     with pytest.raises(ValueError, match="streak_steps_mm"):
         PrimitiveModel(["A1"], [(10, 0)], [0.0], streak_steps_mm=[(6, 0)])
+
+
+def random_model(rng):
+    """Four gaits with random steps, turns, two streak steps and three streak glides."""
+    steps = rng.normal(scale=8.0, size=(4, 2))
+    return PrimitiveModel(["A1", "A2", "A3", "A4"], steps, rng.uniform(-40, 40, 4),
+                          glides_mm=rng.normal(scale=3.0, size=(3, 4, 2)),
+                          streak_steps_mm=steps * rng.uniform(0.3, 0.9, (2, 4, 1)))
+
+
+def chosen_by_enumeration(model, position, heading, goal, tolerance, last, streak):
+    """`choose`'s rule for one robot, by scalar calls of the model's public pieces: stop if
+    its rest is within the tolerance; else the first gait whose one cycle and glide rest
+    within it (the nearest); else the first gait of the nearest rest over every two-cycle
+    pair ("none" first: stopping now; "none" second: gliding after the first)."""
+    def one(index):
+        return np.array([index])
+
+    def rest_after(pos, head, gait, run):
+        return model.rest(pos[None], np.array([head]), one(gait), one(run))[0]
+
+    stop = rest_after(position, heading, last, streak)
+    if math.dist(goal, stop) <= tolerance:
+        return 0
+    gaits = range(len(model.gaits))
+    firsts = {}
+    for g in gaits:
+        run = model.next_streak(last, streak, g)
+        pos, head = model.predict(position[None], np.array([heading]), one(g), one(run))
+        firsts[g] = (pos[0], head[0], run, stop if g == 0 else rest_after(pos[0], head[0], g, run))
+    distances = [math.dist(goal, firsts[g][3]) for g in gaits]
+    if min(distances) <= tolerance:
+        return int(np.argmin(distances))
+    best, choice = math.inf, None
+    for g in gaits:
+        pos, head, run, rest_first = firsts[g]
+        for h in gaits:
+            if g == 0:
+                rest = stop
+            elif h == 0:
+                rest = rest_first
+            else:
+                second_run = model.next_streak(g, run, h)
+                pos2, head2 = model.predict(pos[None], np.array([head]), one(h), one(second_run))
+                rest = rest_after(pos2[0], head2[0], h, second_run)
+            if math.dist(goal, rest) < best:
+                best, choice = math.dist(goal, rest), g
+    return choice
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_choice_equals_enumerating_every_one_and_two_cycle_plan(seed):
+    """Random models and states (position, heading, last gait and its streak, goal): the
+    vectorised choice equals the enumeration, for robots that stop, finish in one cycle or
+    plan two; one robot's early stop does not end the others' choices."""
+    rng = np.random.default_rng(seed)
+    model = random_model(rng)
+    count = 24
+    position = rng.normal(scale=20.0, size=(count, 2))
+    heading = rng.uniform(-math.pi, math.pi, count)
+    last = rng.integers(0, len(model.gaits), count)
+    streak = np.where(last == 0, 0, rng.integers(1, 5, count))
+    goal = position + rng.normal(scale=15.0, size=(count, 2))
+    goal[:4] = model.rest(position[:4], heading[:4], last[:4], streak[:4]) + 0.5  # stop there
+    tolerance = 1.5
+    got = model.choose(position, heading, goal, tolerance, last, streak)
+    expected = [chosen_by_enumeration(model, position[b], heading[b], goal[b], tolerance,
+                                      last[b], streak[b]) for b in range(count)]
+    assert got.tolist() == expected
+    assert (got[:4] == 0).all() and (got[4:] != 0).any()
+
+
+def test_tolerance_boundaries_of_the_choice():
+    """At rest exactly the tolerance from the goal: stop (≤). One cycle resting exactly the
+    tolerance from it: that gait (≤), though two cycles of another would rest on the goal."""
+    model = PrimitiveModel(["A1", "A3"], [(10, 0), (6, 0)], [0.0, 0.0])
+    a1, a3 = model.gaits.index("A1"), model.gaits.index("A3")
+    origin, heading = np.zeros((1, 2)), np.zeros(1)
+    assert model.choose(origin, heading, np.array([[2.0, 0.0]]), 2.0).tolist() == [0]
+    assert model.choose(origin, heading, np.array([[12.0, 0.0]]), 2.0).tolist() == [a1]
+    # just outside that: the two cycles A3, A3 land on 12 mm
+    assert model.choose(origin, heading, np.array([[12.0, 0.0]]), 1.999).tolist() == [a3]
+
+
+def test_a_primitive_table_keeps_only_ok_and_finite_rows():
+    table = pd.DataFrame({"gait": ["A1", "A2", "A3", "A4"],
+                          "step_x_mm": [10.0, 5.0, np.nan, 3.0], "step_y_mm": [0.0] * 4,
+                          "turn_deg": [0.0, 10.0, 0.0, np.nan],
+                          "status": ["ok", "nan_state", "ok", "ok"]})
+    model = PrimitiveModel.from_table(table)
+    assert model.gaits == ["none", "A1"]
+    np.testing.assert_array_equal(model.steps_mm, [(0, 0), (10, 0)])
