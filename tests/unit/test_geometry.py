@@ -150,3 +150,12 @@ def test_lumped_lengths_and_jet_spaces(shape):
         assert topology.jet_quads[k].tolist() == [
             topology.joints[k], topology.tips[k], topology.tips[(k + 1) % 8],
             topology.joints[(k + 1) % 8]]
+
+
+def test_index_tables_are_int32_as_the_engine_takes_them(shape):
+    """The engine copies these into int32 Taichi fields; another integer width would be cast
+    (or refused) on the way."""
+    _, topology = shape
+    for name in ("edges", "edge_kind", "triplets", "triplet_kind", "triplet_actuator",
+                 "joint_actuator", "jet_quads", "limbs", "arcs"):
+        assert getattr(topology, name).dtype == np.int32, name

@@ -24,6 +24,12 @@ def test_model_predicts_in_the_body_frame():
     np.testing.assert_allclose(position, [(10, 0), (0, 10)], atol=1e-12)
     np.testing.assert_allclose(heading, [math.pi / 2, math.pi])
     assert model.gaits[0] == "none" and not model.masks[0].any()
+    assert model.masks.dtype == bool and model.masks[a1].tolist() == [True] + [False] * 7
+    # "none" neither steps nor turns
+    position, heading = model.predict(np.ones((1, 2)), np.array([0.3]), np.array([0]))
+    assert position.tolist() == [[1.0, 1.0]] and heading.tolist() == [0.3]
+    with pytest.raises(ValueError, match="turns_deg"):
+        PrimitiveModel(["A1", "A3"], [(10, 0), (0, 10)], [0.0])
 
 
 def test_plan_reaches_a_lattice_goal_in_the_fewest_cycles():
@@ -144,10 +150,15 @@ def test_glides_are_read_from_a_primitive_table_and_checked():
                           "step_y_mm": [0.0, 0.0], "turn_deg": [0.0, 0.0],
                           "status": ["ok", "ok"], "glide1_x_mm": [5.0, -5.0],
                           "glide1_y_mm": [0.0, 1.0], "glide2_x_mm": [6.0, -6.0],
-                          "glide2_y_mm": [0.5, 2.0]})
+                          "glide2_y_mm": [0.5, 2.0], "glide3_x_mm": [7.0, -7.0],
+                          "glide3_y_mm": [1.0, 3.0]})
     model = PrimitiveModel.from_table(table)
     np.testing.assert_array_equal(model.glides_mm, [[(0, 0), (5, 0), (-5, 1)],
-                                                    [(0, 0), (6, 0.5), (-6, 2)]])
+                                                    [(0, 0), (6, 0.5), (-6, 2)],
+                                                    [(0, 0), (7, 1), (-7, 3)]])
+    # a streak of 0 (nothing fired yet) glides as one firing
+    np.testing.assert_array_equal(model.glide(np.array([1]), np.array([0])), [(5, 0)])
+    table = table.drop(columns=["glide3_x_mm", "glide3_y_mm"])
     without = PrimitiveModel.from_table(table.drop(columns=["glide1_x_mm", "glide1_y_mm",
                                                             "glide2_x_mm", "glide2_y_mm"]))
     assert without.glides_mm.shape == (1, 3, 2) and not without.glides_mm.any()
@@ -182,11 +193,13 @@ def test_steps_of_a_streak_speed_up_to_the_steady_step():
     for goal, fired in ((8.0, 1), (17.0, 2), (27.0, 3)):
         plan = model.plan(np.array([[goal, 0.0]]), 0.5, 4)[0]
         assert plan.tolist() == [a1] * fired + [0] * (4 - fired), goal
+    # a streak of 0 steps as the first firing
+    np.testing.assert_array_equal(model.step(np.array([a1]), np.array([0])), [(6, 0)])
     table = pd.DataFrame({"gait": ["A1"], "step_x_mm": [10.0], "step_y_mm": [0.0],
                           "turn_deg": [0.0], "status": ["ok"], "step1_x_mm": [6.0],
-                          "step1_y_mm": [0.5]})
+                          "step1_y_mm": [0.5], "step2_x_mm": [8.0], "step2_y_mm": [0.25]})
     np.testing.assert_array_equal(PrimitiveModel.from_table(table).streak_steps_mm,
-                                  [[(0, 0), (6, 0.5)], [(0, 0), (10, 0)]])
+                                  [[(0, 0), (6, 0.5)], [(0, 0), (8, 0.25)], [(0, 0), (10, 0)]])
     with pytest.raises(ValueError, match="streak_steps_mm"):
         PrimitiveModel(["A1"], [(10, 0)], [0.0], streak_steps_mm=[(6, 0)])
 
@@ -253,12 +266,18 @@ def test_choice_equals_enumerating_every_one_and_two_cycle_plan(seed):
     streak = np.where(last == 0, 0, rng.integers(1, 5, count))
     goal = position + rng.normal(scale=15.0, size=(count, 2))
     goal[:4] = model.rest(position[:4], heading[:4], last[:4], streak[:4]) + 0.5  # stop there
+    for b in range(4, 8):      # finish in one cycle of a gait: its rest after it, nearly
+        gait = rng.integers(1, len(model.gaits))
+        run = model.next_streak(last[b], streak[b], gait)
+        moved, turned = model.predict(position[b:b + 1], heading[b:b + 1], np.array([gait]),
+                                      np.array([run]))
+        goal[b] = model.rest(moved, turned, np.array([gait]), np.array([run]))[0] + 0.4
     tolerance = 1.5
     got = model.choose(position, heading, goal, tolerance, last, streak)
     expected = [chosen_by_enumeration(model, position[b], heading[b], goal[b], tolerance,
                                       last[b], streak[b]) for b in range(count)]
     assert got.tolist() == expected
-    assert (got[:4] == 0).all() and (got[4:] != 0).any()
+    assert (got[:4] == 0).all() and (got[4:8] != 0).all() and (got[8:] != 0).any()
 
 
 def test_tolerance_boundaries_of_the_choice():
@@ -271,6 +290,14 @@ def test_tolerance_boundaries_of_the_choice():
     assert model.choose(origin, heading, np.array([[12.0, 0.0]]), 2.0).tolist() == [a1]
     # just outside that: the two cycles A3, A3 land on 12 mm
     assert model.choose(origin, heading, np.array([[12.0, 0.0]]), 1.999).tolist() == [a3]
+    # stopping within the tolerance stops, though a gait would rest nearer the goal; at
+    # exactly the tolerance too (not a step of A2's 1.2 mm, which would rest 0.8 mm from it)
+    near = PrimitiveModel(["A1", "A2"], [(10, 0), (1.2, 0)], [0.0, 0.0])
+    at = np.array([[10.0, 0.0]])
+    assert near.choose(at, heading, np.array([[11.5, 0.0]]), 2.0).tolist() == [0]
+    assert near.choose(at, heading, np.array([[12.0, 0.0]]), 2.0).tolist() == [0]
+    assert near.choose(at, heading, np.array([[12.0, 0.0]]), 1.999).tolist() == [
+        near.gaits.index("A2")]
 
 
 def test_a_primitive_table_keeps_only_ok_and_finite_rows():
