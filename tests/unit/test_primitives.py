@@ -1,6 +1,7 @@
 """taichi_star.primitives without simulation: the body-frame vectors follow the gait symmetry."""
 
 import numpy as np
+import pytest
 
 import taichi_star as ts
 from taichi_star.primitives import transform_vectors
@@ -37,3 +38,112 @@ def test_actuators_equal_decides_between_the_symmetry_classes_and_all_gaits():
     assert set(direct) == set(reduced) and len(direct) == 255
     assert simulated_gaits(direct) == list(direct)
     assert all(source == (gait, 0, False, 1) for gait, source in direct.items())
+
+
+def test_cycle_displacements_are_in_the_frame_the_body_had_when_the_cycle_began():
+    """One robot over three 2-s cycles: facing +y it moves (0, 5) (body frame: 5 mm ahead),
+    turns from 170° to −170° (a +20° rotation, wrapped), then moves (−3, 0) facing −170°; a
+    record between two boundaries is left out; a second robot that stands still."""
+    import pandas as pd
+
+    from taichi_star.primitives import cycle_displacements
+
+    trajectory = pd.DataFrame({
+        "instance": [0, 0, 0, 0, 0, 1, 1],
+        "t_s": [0.0, 2.0, 3.0, 4.0, 6.0, 0.0, 2.0],
+        "x_mm": [0.0, 0.0, 9.0, 0.0, -3.0, 1.0, 1.0],
+        "y_mm": [0.0, 5.0, 9.0, 5.0, 5.0, 1.0, 1.0],
+        "heading_deg": [90.0, 170.0, 0.0, -170.0, -170.0, 0.0, 0.0]})
+    table = cycle_displacements(trajectory, 2.0)
+    assert table.columns.tolist() == ["instance", "cycle", "dx_body_mm", "dy_body_mm",
+                                      "rotation_deg"]
+    assert table.instance.tolist() == [0, 0, 0, 1] and table.cycle.tolist() == [0, 1, 2, 0]
+    turned = np.radians(-170.0)
+    expected = [(5.0, 0.0), (0.0, 0.0),
+                (-3.0 * np.cos(turned), 3.0 * np.sin(turned)), (0.0, 0.0)]
+    np.testing.assert_allclose(table[["dx_body_mm", "dy_body_mm"]], expected, atol=1e-12)
+    np.testing.assert_allclose(table.rotation_deg, [80.0, 20.0, 0.0, 0.0], atol=1e-12)
+
+
+def cycles_of(gait, steps, turns, status="ok"):
+    import pandas as pd
+    return pd.DataFrame({"gait": gait, "cycle": range(len(steps)),
+                         "dx_body_mm": [s[0] for s in steps], "dy_body_mm": [s[1] for s in steps],
+                         "rotation_deg": turns, "status": status})
+
+
+def test_expanded_cycles_are_the_sources_turned_and_mirrored():
+    """A source's cycles read for an image gait: steps turned by rotation·45° (mirrored first
+    when reflected), turns negated when reflected; rows sorted by gait then cycle."""
+    import pandas as pd
+
+    from taichi_star.primitives import CYCLE_COLUMNS, expand_cycles
+
+    source = cycles_of("A1", [(2.0, 1.0), (4.0, 0.0)], [10.0, -5.0], "ok")
+    sources = {"A1": ("A1", 0, False, 8), "A3": ("A1", 2, False, 8), "A8": ("A1", 0, True, 8)}
+    table = expand_cycles(pd.concat([source]), sources)
+    assert table.columns.tolist() == CYCLE_COLUMNS
+    assert table.gait.tolist() == ["A1", "A1", "A3", "A3", "A8", "A8"]
+    assert table.cycle.tolist() == [0, 1] * 3
+    np.testing.assert_allclose(table[["dx_body_mm", "dy_body_mm"]],
+                               [(2, 1), (4, 0), (-1, 2), (0, 4), (2, -1), (4, 0)], atol=1e-12)
+    np.testing.assert_array_equal(table.rotation_deg, [10, -5, 10, -5, -10, 5])
+    assert table.class_representative.tolist() == ["A1"] * 6
+    assert table.symmetry_rotation.tolist() == [0, 0, 2, 2, 0, 0]
+    assert table.reflected.tolist() == [False, False, False, False, True, True]
+
+
+def test_a_summary_averages_the_cycles_from_the_first_one_counted():
+    """Mean step and turn over cycles ≥ first_cycle with their sample spread (ddof 1; NaN for
+    one cycle), the direction of the mean step (NaN below ZERO_STEP_MM, defined at it), the
+    class size from the sources and the cycles run; gaits sorted by actuator count then
+    bits."""
+    import math
+
+    import pandas as pd
+
+    from taichi_star.primitives import ZERO_STEP_MM, summarise_cycles
+
+    cycles = pd.concat([
+        cycles_of("A1+A2", [(99.0, 99.0), (1.0, 1.0), (3.0, 5.0)], [50.0, 2.0, 4.0]),
+        cycles_of("A1", [(99.0, 0.0), (ZERO_STEP_MM, 0.0), (ZERO_STEP_MM, 0.0)], [0.0] * 3),
+        cycles_of("A2", [(0.0, 0.0), (0.0, 0.0), (0.0, 0.0)], [0.0] * 3, "nan_state"),
+    ]).assign(class_representative="A1", symmetry_rotation=0, reflected=False)
+    sources = {"A1": ("A1", 0, False, 8), "A2": ("A1", 1, False, 8),
+               "A1+A2": ("A1+A2", 0, False, 4)}
+    table = summarise_cycles(cycles, 1, sources)
+    assert table.gait.tolist() == ["A1", "A2", "A1+A2"]
+    pair = table.set_index("gait").loc["A1+A2"]
+    assert (pair.step_x_mm, pair.step_y_mm, pair.turn_deg) == (2.0, 3.0, 3.0)
+    assert pair.step_x_std_mm == pytest.approx(math.sqrt(2.0), rel=1e-15)
+    assert pair.step_y_std_mm == pytest.approx(math.sqrt(8.0), rel=1e-15)
+    assert pair.turn_std_deg == pytest.approx(math.sqrt(2.0), rel=1e-15)
+    assert pair.step_mm == pytest.approx(math.hypot(2.0, 3.0), rel=1e-15)
+    assert pair.direction_deg == pytest.approx(math.degrees(math.atan2(3.0, 2.0)), rel=1e-15)
+    assert (pair.class_size, pair.n_actuators, pair.first_cycle, pair.cycles) == (4, 2, 1, 3)
+    rows = table.set_index("gait")
+    assert rows.loc["A1", "direction_deg"] == 0.0                    # a step of exactly the floor
+    assert math.isnan(rows.loc["A2", "direction_deg"]) and rows.loc["A2", "status"] == "nan_state"
+    one = summarise_cycles(cycles, 2, sources).set_index("gait")
+    assert math.isnan(one.loc["A1+A2", "step_x_std_mm"]) and one.loc["A1+A2", "step_x_mm"] == 3.0
+    assert math.isnan(one.loc["A1+A2", "turn_std_deg"])
+
+
+def test_widened_tables_put_each_streak_in_its_own_columns():
+    import pandas as pd
+
+    from taichi_star.primitives import widen_glides, widen_steps
+
+    steps = widen_steps(pd.concat([cycles_of("A1", [(1.0, 2.0), (3.0, 4.0)], [0.0, 0.0]),
+                                   cycles_of("A2", [(5.0, 6.0), (7.0, 8.0)], [0.0, 0.0])]))
+    assert steps.columns.tolist() == ["gait", "step1_x_mm", "step1_y_mm", "step2_x_mm",
+                                      "step2_y_mm"]
+    assert steps.values.tolist() == [["A1", 1.0, 2.0, 3.0, 4.0], ["A2", 5.0, 6.0, 7.0, 8.0]]
+    glides = widen_glides(pd.DataFrame({
+        "gait": ["A1", "A1", "A2", "A2"], "glide_fire_cycles": [1, 2, 1, 2],
+        "glide_x_mm": [1.0, 2.0, 3.0, 4.0], "glide_y_mm": [-1.0, -2.0, -3.0, -4.0],
+        "glide_cycles": [4, 4, 4, 4]}))
+    assert glides.columns.tolist() == ["gait", "glide1_x_mm", "glide1_y_mm", "glide2_x_mm",
+                                       "glide2_y_mm", "glide_cycles"]
+    assert glides.values.tolist() == [["A1", 1.0, -1.0, 2.0, -2.0, 4],
+                                      ["A2", 3.0, -3.0, 4.0, -4.0, 4]]
