@@ -48,16 +48,17 @@ def test_cycle_displacements_are_in_the_frame_the_body_had_when_the_cycle_began(
 
     from taichi_star.primitives import cycle_displacements
 
-    trajectory = pd.DataFrame({
-        "instance": [0, 0, 0, 0, 0, 1, 1],
-        "t_s": [0.0, 2.0, 3.0, 4.0, 6.0, 0.0, 2.0],
-        "x_mm": [0.0, 0.0, 9.0, 0.0, -3.0, 1.0, 1.0],
-        "y_mm": [0.0, 5.0, 9.0, 5.0, 5.0, 1.0, 1.0],
-        "heading_deg": [90.0, 170.0, 0.0, -170.0, -170.0, 0.0, 0.0]})
+    trajectory = pd.DataFrame({                   # the still robot's rows first: sorted out
+        "instance": [1, 1, 0, 0, 0, 0, 0],
+        "t_s": [0.0, 2.0, 0.0, 2.0, 3.0, 4.0, 6.0],
+        "x_mm": [1.0, 1.0, 0.0, 0.0, 9.0, 0.0, -3.0],
+        "y_mm": [1.0, 1.0, 0.0, 5.0, 9.0, 5.0, 5.0],
+        "heading_deg": [0.0, 0.0, 90.0, 170.0, 0.0, -170.0, -170.0]})
     table = cycle_displacements(trajectory, 2.0)
     assert table.columns.tolist() == ["instance", "cycle", "dx_body_mm", "dy_body_mm",
                                       "rotation_deg"]
     assert table.instance.tolist() == [0, 0, 0, 1] and table.cycle.tolist() == [0, 1, 2, 0]
+    assert table.index.tolist() == [0, 1, 2, 3] and table.cycle.dtype.kind == "i"
     turned = np.radians(-170.0)
     expected = [(5.0, 0.0), (0.0, 0.0),
                 (-3.0 * np.cos(turned), 3.0 * np.sin(turned)), (0.0, 0.0)]
@@ -79,7 +80,7 @@ def test_expanded_cycles_are_the_sources_turned_and_mirrored():
 
     from taichi_star.primitives import CYCLE_COLUMNS, expand_cycles
 
-    source = cycles_of("A1", [(2.0, 1.0), (4.0, 0.0)], [10.0, -5.0], "ok")
+    source = cycles_of("A1", [(2.0, 1.0), (4.0, 0.0)], [10.0, -5.0], "ok").iloc[::-1]
     sources = {"A1": ("A1", 0, False, 8), "A3": ("A1", 2, False, 8), "A8": ("A1", 0, True, 8)}
     table = expand_cycles(pd.concat([source]), sources)
     assert table.columns.tolist() == CYCLE_COLUMNS
@@ -91,6 +92,7 @@ def test_expanded_cycles_are_the_sources_turned_and_mirrored():
     assert table.class_representative.tolist() == ["A1"] * 6
     assert table.symmetry_rotation.tolist() == [0, 0, 2, 2, 0, 0]
     assert table.reflected.tolist() == [False, False, False, False, True, True]
+    assert table.index.tolist() == list(range(6))
 
 
 def test_a_summary_averages_the_cycles_from_the_first_one_counted():
@@ -109,6 +111,8 @@ def test_a_summary_averages_the_cycles_from_the_first_one_counted():
         cycles_of("A1", [(99.0, 0.0), (ZERO_STEP_MM, 0.0), (ZERO_STEP_MM, 0.0)], [0.0] * 3),
         cycles_of("A2", [(0.0, 0.0), (0.0, 0.0), (0.0, 0.0)], [0.0] * 3, "nan_state"),
     ]).assign(class_representative="A1", symmetry_rotation=0, reflected=False)
+    cycles.loc[cycles.gait == "A1+A2", ["class_representative", "symmetry_rotation",
+                                        "reflected"]] = ["A1+A4", 6, True]
     sources = {"A1": ("A1", 0, False, 8), "A2": ("A1", 1, False, 8),
                "A1+A2": ("A1+A2", 0, False, 4)}
     table = summarise_cycles(cycles, 1, sources)
@@ -121,6 +125,8 @@ def test_a_summary_averages_the_cycles_from_the_first_one_counted():
     assert pair.step_mm == pytest.approx(math.hypot(2.0, 3.0), rel=1e-15)
     assert pair.direction_deg == pytest.approx(math.degrees(math.atan2(3.0, 2.0)), rel=1e-15)
     assert (pair.class_size, pair.n_actuators, pair.first_cycle, pair.cycles) == (4, 2, 1, 3)
+    assert (pair.class_representative, pair.symmetry_rotation, pair.reflected) == ("A1+A4", 6,
+                                                                                   True)
     rows = table.set_index("gait")
     assert rows.loc["A1", "direction_deg"] == 0.0                    # a step of exactly the floor
     assert math.isnan(rows.loc["A2", "direction_deg"]) and rows.loc["A2", "status"] == "nan_state"
@@ -147,3 +153,15 @@ def test_widened_tables_put_each_streak_in_its_own_columns():
                                        "glide2_y_mm", "glide_cycles"]
     assert glides.values.tolist() == [["A1", 1.0, -1.0, 2.0, -2.0, 4],
                                       ["A2", 3.0, -3.0, 4.0, -4.0, 4]]
+
+
+def test_gaits_sort_by_actuator_count_then_bits_then_the_extra_keys():
+    import pandas as pd
+
+    from taichi_star.primitives import sort_gaits
+
+    table = pd.DataFrame({"gait": ["A1+A2", "A3", "A1", "A3", "A8"], "cycle": [0, 1, 0, 0, 0]})
+    ordered = sort_gaits(table, extra=["cycle"])
+    assert ordered.values.tolist() == [["A1", 0], ["A3", 0], ["A3", 1], ["A8", 0], ["A1+A2", 0]]
+    assert ordered.columns.tolist() == ["gait", "cycle"] and ordered.index.tolist() == [0, 1, 2,
+                                                                                         3, 4]
