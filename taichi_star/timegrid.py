@@ -109,7 +109,8 @@ def check_work(name: str, steps: float, batch: Optional[int] = None):
     message the estimate (times `batch`, the number of instances, if given) and the limit.
     A RuntimeWarning with the estimated wall time when steps × batch is over WARN_ROBOT_STEPS."""
     if not (math.isfinite(steps) and round(steps) <= MAX_STEPS_PER_INSTANCE):
-        total = "" if batch is None else f" ({steps * batch:.3g} robot-steps for {batch} instances)"
+        total = "" if batch is None else \
+            f" ({steps * batch:.3g} robot-steps for {batch} instance{'' if batch == 1 else 's'})"
         raise ValueError(f"{name} is {steps:.3g} time steps per instance{total}; the limit is "
                          f"{MAX_STEPS_PER_INSTANCE} steps per instance (the int32 step counter)")
     robot_steps = round(steps) * (batch or 1)

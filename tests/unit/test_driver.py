@@ -62,3 +62,62 @@ def test_a_record_interval_longer_than_the_run_warns_and_one_as_long_does_not():
                                             r"duration_s = 0\.2 s: the trajectory holds only the "
                                             r"start"):
         check_run(SolverConfig(), 0.2, 0.201, 1)
+
+
+def test_a_fixed_step_run_is_checked_against_the_step_counter_before_any_compute():
+    """At most MAX_STEPS_PER_INSTANCE steps counted from t = 0, those already taken included:
+    exactly the limit goes (warned as long work), one step more is refused naming the call,
+    the steps taken and the batch's total. Steps of 1/32 s keep every duration exact."""
+    import re
+
+    from taichi_star.driver import check_run
+    from taichi_star.timegrid import MAX_STEPS_PER_INSTANCE
+
+    solver = SolverConfig(dt=1 / 32)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        check_run(solver, (MAX_STEPS_PER_INSTANCE - 10) / 32, 0.0, 2, steps_taken=10)
+    over = (MAX_STEPS_PER_INSTANCE - 9) / 32
+    with pytest.raises(ValueError, match="^" + re.escape(
+            f"duration_s = {over:g} s at dt = 0.03125 s (after the 10 steps taken) is 2.15e+09 "
+            f"time steps per instance (4.29e+09 robot-steps for 2 instances)")):
+        check_run(solver, over, 0.0, 2, steps_taken=10)
+    with pytest.raises(ValueError, match=r"^record_interval_s must be a whole number of steps"):
+        check_run(SolverConfig(dt=1e-3), 0.2, 0.0015, 1)
+
+
+def test_an_adaptive_run_is_refused_by_its_fewest_steps_and_warned_by_its_most():
+    """Adaptive steps: the fewest (duration / dt_max, plus those taken) must fit the counter;
+    the most (duration / dt_min) may not, which is said before the run; at exactly the limit
+    nothing is said (dt_min 1/32 s, dt_max 3/64 s: exact quotients)."""
+    import re
+
+    from taichi_star.driver import check_run
+    from taichi_star.timegrid import MAX_STEPS_PER_INSTANCE
+
+    limit = MAX_STEPS_PER_INSTANCE
+    solver = SolverConfig(adaptive=True, dt=1 / 32, dt_min=1 / 32, dt_max=3 / 64)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_run(solver, (limit - 6) / 32, 0.0, 1, steps_taken=6)   # the most: the limit
+    longer = (limit - 5) / 32
+    with pytest.warns(RuntimeWarning, match="^" + re.escape(
+            f"duration_s = {longer:g} s at dt_min = 0.03125 s could take 2.15e+09 steps per "
+            f"instance: an instance that reaches {limit}")):
+        check_run(solver, longer, 0.0, 1, steps_taken=6)
+    fewest_over = limit * 3 / 64              # limit steps at dt_max, 6 more taken before
+    for taken, after in ((6, ", after the 6 steps taken"), (None, "")):
+        duration = fewest_over if taken else fewest_over + 3 / 64
+        with pytest.raises(ValueError, match="^" + re.escape(
+                f"duration_s = {duration:g} s at dt_max = 0.046875 s (the adaptive lower "
+                f"bound{after}) is 2.15e+09 time steps per instance (2.15e+09 robot-steps for 1 "
+                f"instance); the limit")):
+            check_run(solver, duration, 0.0, 1, steps_taken=taken)
+
+
+def test_stops_fall_on_the_record_grid_from_the_first_one_asked():
+    fixed = Clock(SolverConfig(dt=1e-3), 0.01)
+    assert fixed.stops_every(0.004) == [0, 4, 8] and fixed.stops_every(0.004, first=1) == [4, 8]
+    adaptive = Clock(SolverConfig(adaptive=True), 0.3)
+    assert adaptive.stops_every(0.1, first=2) == pytest.approx([0.2, 0.3], rel=1e-15)
+    assert adaptive.time_of(0.25) == 0.25 and fixed.time_of(4) == pytest.approx(0.004)
