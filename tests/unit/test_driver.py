@@ -82,6 +82,15 @@ def test_a_fixed_step_run_is_checked_against_the_step_counter_before_any_compute
             f"duration_s = {over:g} s at dt = 0.03125 s (after the 10 steps taken) is 2.15e+09 "
             f"time steps per instance (4.29e+09 robot-steps for 2 instances)")):
         check_run(solver, over, 0.0, 2, steps_taken=10)
+    # from t = 0: the whole limit is the run's own, and the message names no steps taken
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        check_run(solver, MAX_STEPS_PER_INSTANCE / 32, 0.0, 1)
+    over = (MAX_STEPS_PER_INSTANCE + 1) / 32
+    with pytest.raises(ValueError, match="^" + re.escape(
+            f"duration_s = {over:g} s at dt = 0.03125 s is 2.15e+09 time steps per instance "
+            f"(2.15e+09 robot-steps for 1 instance)")):
+        check_run(solver, over, 0.0, 1)
     with pytest.raises(ValueError, match=r"^record_interval_s must be a whole number of steps"):
         check_run(SolverConfig(dt=1e-3), 0.2, 0.0015, 1)
 
