@@ -529,3 +529,9 @@ def test_write_atomic_writes_whole_or_leaves_the_previous_file(tmp_path, full_di
     assert [p.name for p in tmp_path.iterdir()] == ["table.csv"]
     provenance.write_atomic(path, b"a,b\n3,4\n")
     assert path.read_bytes() == b"a,b\n3,4\n"
+    # with a failure type: one line naming the file and the error, the file as it was
+    with full_disk():
+        with pytest.raises(ValueError, match=r"^cannot write table\.csv \(No space left on "
+                                             r"device\)$"):
+            provenance.write_atomic(path, b"x", failure=ValueError)
+    assert path.read_bytes() == b"a,b\n3,4\n"
