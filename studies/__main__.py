@@ -7,6 +7,7 @@ import os
 import sys
 from pathlib import Path
 
+import taichi_star
 from taichi_star.batch import RunStoreError
 from taichi_star.extras import missing_extra
 
@@ -60,7 +61,6 @@ def main(argv=None) -> int:
         print(usage())
         return 0
     if argv[0] == "--version":
-        import taichi_star
         print(f"taichi_star {taichi_star.__version__}")
         return 0
     name, rest = argv[0], argv[1:]

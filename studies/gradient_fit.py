@@ -177,9 +177,7 @@ class Problem:
         self.train, self.solver, self.arch = train, solver, arch
         self.record = nearest_interval(RECORD_INTERVAL_S, solver.dt)
         self.window_s = train[1] * base.period
-        # the sensitivities number an actuator from 0, the box's NAME[INDEX] from 1
-        self.names = [spec.name if spec.index is None else f"{spec.name}[{spec.index - 1}]"
-                      for spec in box]
+        self.names = [spec.sensitivity_name for spec in box]
 
     def params(self, units) -> list:
         return identify.box_params(self.box, identify.box_values(self.box, units), self.base,

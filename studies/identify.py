@@ -92,6 +92,13 @@ class ParameterRange:
         return self.name if self.index is None else f"{self.name}[{self.index}]"
 
     @property
+    def sensitivity_name(self) -> str:
+        """The axis as `simulate(sensitivities=...)` names it: NAME, or NAME[INDEX − 1] for an
+        element (the sensitivities take Python's index, the command line the actuator's
+        number)."""
+        return self.name if self.index is None else f"{self.name}[{self.index - 1}]"
+
+    @property
     def column(self) -> str:
         """The table column of the parameter's values (its name with its unit, e.g.
         joint_radius_m; _INDEX appended for an element)."""

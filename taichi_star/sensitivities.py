@@ -148,7 +148,8 @@ def parse_directions(names) -> Tuple[Direction, ...]:
     """The directions of `simulate`'s `sensitivities` argument: field names, a per-actuator
     field standing for its eight numbers ("actuator_gains") or one of them by its Python index
     ("actuator_gains[3]": A4's, as `StarParams.actuator_gains[3]`; the studies' parameter boxes,
-    NAME[INDEX] on their command lines, count from 1 instead: actuator_gains[4] there is A4). ValueError naming an unknown, repeated or non-differentiable one."""
+    NAME[INDEX] on their command lines, count from 1 instead: actuator_gains[4] there is A4).
+    ValueError naming an unknown, repeated or non-differentiable one."""
     if isinstance(names, str) or not hasattr(names, "__iter__"):
         raise ValueError(f"sensitivities must be a sequence of StarParams field names, got "
                          f"{names!r}")
