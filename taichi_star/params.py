@@ -125,10 +125,14 @@ COMPONENT_HEIGHT_MINIMUM = 1e-3
 """Smallest component height, m (a millimetre: no part of the robot is thinner)."""
 
 
-def _check_number(name, value, lowest, highest, lowest_included=True, integer=False):
+def _check_number(name, value, lowest, highest, lowest_included=True, integer=False,
+                  reason=""):
     """Validated `value` as a Python int/float (NumPy scalars accepted); ValueError names the
-    field and its range."""
+    field and its range (and `reason`, words in brackets after the range, where the range is
+    not the declared one)."""
     span = f"[{lowest:g}, {highest:g}]" if lowest_included else f"({lowest:g}, {highest:g}]"
+    if reason:
+        span = f"{span} ({reason})"
     kind = "an integer" if integer else "a real number"
     valid_type = numbers.Integral if integer else numbers.Real
     if isinstance(value, bool) or not isinstance(value, valid_type):
@@ -283,10 +287,18 @@ class StarParams:
 
     def __post_init__(self):
         object.__setattr__(self, "gait", Gait.parse(self.gait).name)
-        for name, (lowest, highest, included) in STAR_RANGES.items():
+        if not isinstance(self.actuator_profile, CurvatureProfile):
+            raise ValueError(f"actuator_profile must be a CurvatureProfile, got "
+                             f"{type(self.actuator_profile).__name__}")
+        # a firing's heating phase must end within its period: the period's lowest value is the
+        # profile's, so one message states the whole range whichever end a value misses
+        ranges = dict(STAR_RANGES, period=(self.actuator_profile.switch_time,
+                                           STAR_RANGES["period"][1], False))
+        for name, (lowest, highest, included) in ranges.items():
+            reason = "longer than the heating phase t0" if name == "period" else ""
             object.__setattr__(self, name, _check_number(name, getattr(self, name), lowest,
                                                          highest, included,
-                                                         name in INTEGER_FIELDS))
+                                                         name in INTEGER_FIELDS, reason))
         for name, choices in STAR_CHOICES.items():
             _check_choice(name, getattr(self, name), choices)
         object.__setattr__(self, "actuator_gains", _check_actuator_values(
@@ -308,13 +320,6 @@ class StarParams:
             raise ValueError(f"jet_inflow must be 0 with jet_mode 'always' (its literal formula "
                              f"already jets while a space opens; an inflow would only cancel "
                              f"part of that), got {self.jet_inflow!r}: use jet_mode 'contract'")
-        if not isinstance(self.actuator_profile, CurvatureProfile):
-            raise ValueError(f"actuator_profile must be a CurvatureProfile, got "
-                             f"{type(self.actuator_profile).__name__}")
-        heating = self.actuator_profile.switch_time
-        if self.period <= heating:
-            raise ValueError(f"period must be in ({heating:g}, 1000] s (longer than the heating "
-                             f"phase t0), got {self.period!r}")
         if self.tip_radius <= self.joint_radius:
             raise ValueError(f"tip_radius must be in ({self.joint_radius:g}, 2] m (beyond "
                              f"joint_radius: the limb points outwards), got {self.tip_radius!r}")

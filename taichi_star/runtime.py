@@ -106,9 +106,17 @@ def available_archs() -> List[str]:
     """The arch names this machine can run ("cpu" always; "gpu" when one of the GPU backends
     is available)."""
     names = ["cpu"]
-    for name in ("cuda", "vulkan", "metal"):
-        if ti.lang.misc.is_arch_supported(getattr(ti, name)):
-            names.append(name)
+    # probing a backend that is not there logs Taichi's own warning ("libcuda.so lib not
+    # found"), which would print before the one-line error naming the available archs
+    level = next(name for name in ("trace", "debug", "info", "warn", "error", "critical")
+                 if ti._logging.is_logging_effective(name))
+    ti.set_logging_level(ti.ERROR)
+    try:
+        for name in ("cuda", "vulkan", "metal"):
+            if ti.lang.misc.is_arch_supported(getattr(ti, name)):
+                names.append(name)
+    finally:
+        ti.set_logging_level(level)
     if len(names) > 1:
         names.insert(1, "gpu")
     return names

@@ -1,6 +1,7 @@
 """Validation of the public parameters and of `simulate`'s arguments: every bad input is a
 ValueError naming the field, raised before any compute."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -252,9 +253,19 @@ def test_a_profile_that_is_not_a_curvature_profile_is_refused_naming_its_type():
 
 def test_the_period_must_outlast_the_heating_pulse():
     heating = ts.StarParams().actuator_profile.switch_time
-    with pytest.raises(ValueError, match="period must be in"):
-        ts.StarParams(period=heating)
+    whole_range = (f"period must be a real number in ({heating:g}, 1000] (longer than the "
+                   f"heating phase t0), got ")
+    # the heating phase's end itself is refused (the range is open there), a hair past it not;
+    # a value below the declared (0, 1000] and one inside it but shorter than the heating phase
+    # get the same message: the range the profile makes, not only the declared one
+    for value in (heating, 0.5 * heating, 0.0, -1.0, 1000.5):
+        with pytest.raises(ValueError) as error:
+            ts.StarParams(period=value)
+        assert str(error.value) == whole_range + repr(float(value))
     assert ts.StarParams(period=heating * 1.001).period == pytest.approx(heating * 1.001)
+    assert ts.StarParams(period=1000.0).period == 1000.0
+    shorter = dataclasses.replace(ts.StarParams().actuator_profile, switch_time=0.05)
+    assert ts.StarParams(period=0.1, actuator_profile=shorter).period == 0.1
 
 
 def test_the_tips_must_lie_beyond_the_joints():

@@ -1,5 +1,8 @@
-"""The runtime's settings that need no Taichi: the compiler default and its environment
-variable."""
+"""The runtime's settings that need no engine: the compiler default and its environment
+variable, the offline cache's lock, the arch probe."""
+
+import subprocess
+import sys
 
 import pytest
 
@@ -52,8 +55,6 @@ def test_a_taken_cache_lock_prints_no_advice_to_clean_the_cache(tmp_path):
     failed. Please run 'ti cache clean'" when it opens the cache; taichi_star's runtime opens
     it at log level ERROR and prints nothing (its own private cache: HOME in tmp_path)."""
     import os
-    import subprocess
-    import sys
 
     script = tmp_path / "probe.py"
     script.write_text(CACHE_PROBE)
@@ -91,3 +92,25 @@ def test_a_process_that_exits_leaves_its_kernels_in_the_offline_cache(tmp_path):
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr
     assert list(cache.glob("*.tic")), "no kernel in the offline cache after the process exited"
+
+
+ARCH_PROBE = """
+import taichi as ti
+from taichi import _logging
+ti.set_logging_level("info")
+from taichi_star.runtime import available_archs
+print(available_archs())
+print(_logging.is_logging_effective("info"), _logging.is_logging_effective("debug"))
+"""
+
+
+def test_probing_the_archs_prints_nothing_and_keeps_the_logging_level():
+    # a machine without CUDA: Taichi's probe logs "libcuda.so lib not found" (a warning, from
+    # C++, so only a separate process sees it on its standard error) before the CLI's one-line
+    # error; with CUDA there is nothing to log and the test checks the level alone
+    probe = subprocess.run([sys.executable, "-c", ARCH_PROBE], capture_output=True, text=True,
+                           timeout=120, check=True)
+    archs_line, level_line = probe.stdout.strip().splitlines()[-2:]
+    assert archs_line.startswith("['cpu'")
+    assert level_line == "True False"  # "info" as set before the probe, not the probe's ERROR
+    assert not [line for line in probe.stderr.splitlines() if line.startswith("[W")]
