@@ -1,0 +1,268 @@
+"""The host side of the sensitivities (`taichi_star.sensitivities`), without an engine: which
+names a run can differentiate by and the errors for the rest, each direction's ε, the checks
+made before any compute, the replicas' batch and tables, and the derivatives read back from
+their outputs. Each rule is tested at both sides of its boundary."""
+
+import dataclasses
+import re
+import warnings
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from taichi_star import SolverConfig, StarParams
+from taichi_star.actuation import CurvatureProfile, _logistic
+from taichi_star.model import build_model
+from taichi_star.params import DIFFERENTIABLE_FIELDS, STAR_RANGES
+from taichi_star import sensitivities as sens
+from taichi_star.sensitivities import Direction, parse_directions
+
+BASE = StarParams(gait="A1+A3")
+
+
+def labels(names):
+    return [direction.label for direction in parse_directions(names)]
+
+
+def test_fields_and_actuator_numbers_become_directions_in_the_order_named():
+    assert labels(["alpha"]) == ["alpha"]
+    assert labels(("drag_perpendicular", "actuator_gains[0]", "actuator_delays[7]")) == [
+        "drag_perpendicular", "actuator_gains[0]", "actuator_delays[7]"]
+    assert labels(["actuator_gains"]) == [f"actuator_gains[{k}]" for k in range(8)]
+    assert parse_directions([]) == ()
+    assert parse_directions(iter(["alpha"])) == (Direction("alpha"),)
+    assert Direction("alpha").label == "alpha" and Direction("alpha").index == -1
+    # every field the parameters call differentiable is accepted, once each
+    assert len(parse_directions(DIFFERENTIABLE_FIELDS)) == len(DIFFERENTIABLE_FIELDS) + 2 * 7
+
+
+@pytest.mark.parametrize("name", ["actuator_gains[8]", "actuator_gains[-1]", "actuator_gains[1",
+                                  "actuator_gains[]", "actuator_gains[x]", "actuator_gains[ 1]"])
+def test_an_actuator_index_outside_0_to_7_or_not_a_number_is_refused(name):
+    with pytest.raises(ValueError) as error:
+        parse_directions([name])
+    assert str(error.value) == (f"sensitivities: {name!r} must name an actuator index in [0, 7] "
+                                f"(Python's: actuator_gains[0] is A1's, actuator_gains[7] A8's)")
+
+
+@pytest.mark.parametrize("name", ["period", "gait", "n_arc", "alpha[0]", "actuator_profile"])
+def test_a_field_that_is_not_a_real_coefficient_is_named_not_differentiable(name):
+    with pytest.raises(ValueError, match=rf"^sensitivities: {re.escape(repr(name))} is not "
+                                         r"differentiable \(.*; differentiable fields: alpha, "):
+        parse_directions([name])
+
+
+def test_an_unknown_name_gets_the_closest_fields_and_no_hint_when_nothing_is_close():
+    with pytest.raises(ValueError, match=r"^sensitivities: 'alpah' is not a StarParams field; "
+                                         r"did you mean alpha\?"):
+        parse_directions(["alpah"])
+    with pytest.raises(ValueError, match=r"^sensitivities: 'zzzz' is not a StarParams field "
+                                         r"\(differentiable fields: "):
+        parse_directions(["zzzz"])
+
+
+@pytest.mark.parametrize("names, message", [
+    ("alpha", "sensitivities must be a sequence of StarParams field names, got 'alpha'"),
+    (5, "sensitivities must be a sequence of StarParams field names, got 5"),
+    (["alpha", 3], "sensitivities must hold field names, got 3"),
+    (["alpha", "alpha"], "sensitivities: 'alpha' is named twice"),
+    (["actuator_gains", "actuator_gains[2]"], "sensitivities: 'actuator_gains[2]' is named twice"),
+])
+def test_a_string_a_number_a_non_name_and_a_repeat_are_refused(names, message):
+    with pytest.raises(ValueError) as error:
+        parse_directions(names)
+    assert str(error.value) == message
+
+
+def test_epsilon_is_relative_to_the_value_with_its_own_share_for_two_fields():
+    params = BASE.replace(alpha=1.3, drag_parallel=0.2, damping_time=0.004)
+    assert Direction("alpha").step(params) == sens.RELATIVE_STEP * 1.3
+    assert Direction("drag_parallel").step(params) == 1e-2 * 0.2
+    assert Direction("damping_time").step(params) == 1e-3 * 0.004
+    gains = params.replace(actuator_gains=(1.0, 0.5, 2.0, 1.0, 1.0, 1.0, 1.0, 1.0))
+    assert Direction("actuator_gains", 1).step(gains) == sens.RELATIVE_STEP * 0.5
+    # a negative value (a replica may lie beyond a range) takes ε from its size
+    assert Direction("alpha").step(Direction("alpha").moved(params, -2.0)) == \
+        sens.RELATIVE_STEP * 2.0
+
+
+def test_epsilon_of_a_parameter_at_zero_is_a_share_of_its_range_or_period():
+    at_zero = BASE.replace(linear_drag=0.0, actuator_gains=(0.0,) + (1.0,) * 7,
+                           actuator_delays=(0.0,) * 8, period=2.0)
+    top = STAR_RANGES["linear_drag"][1]
+    assert Direction("linear_drag").step(at_zero) == sens.RELATIVE_STEP * (sens.ZERO_VALUE_SCALE * top)
+    assert Direction("actuator_delays", 3).step(at_zero) == \
+        sens.RELATIVE_STEP * (sens.ZERO_VALUE_SCALE * 2.0)
+    # a gain has no declared range: the share of 1
+    assert Direction("actuator_gains", 0).step(at_zero) == \
+        sens.RELATIVE_STEP * (sens.ZERO_VALUE_SCALE * 1.0)
+    assert Direction("actuator_gains", 1).step(at_zero) == sens.RELATIVE_STEP
+
+
+def test_a_moved_copy_changes_one_number_unvalidated_and_leaves_the_original():
+    top = STAR_RANGES["alpha"][1]
+    beyond = Direction("alpha").moved(BASE, top + 1.0)
+    assert beyond.alpha == top + 1.0 and BASE.alpha == 0.8
+    delays = Direction("actuator_delays", 2).moved(BASE, 0.25)
+    assert delays.actuator_delays == (0.0, 0.0, 0.25, 0.0, 0.0, 0.0, 0.0, 0.0)
+    assert BASE.actuator_delays == (0.0,) * 8
+    assert Direction("actuator_delays", 2).value(delays) == 0.25
+
+
+def test_f32_is_refused_only_with_directions():
+    f32 = SolverConfig(precision="f32", newton_tol=1e-7)
+    with pytest.raises(ValueError, match=r"^sensitivities need precision 'f64' .*got 'f32'$"):
+        sens.check_directions(parse_directions(["alpha"]), [BASE], f32)
+    sens.check_directions((), [BASE], f32)
+
+
+def test_a_component_height_at_zero_names_the_first_such_instance():
+    heights = dict(hub_height=0.05, foam_height=0.02, actuator_height=0.03)
+    batch = [BASE.replace(**heights), BASE, BASE]
+    with pytest.raises(ValueError, match=r"^sensitivities: foam_height is 0 \(the 2.5-D model "
+                                         r"off\) for instance 1; "):
+        sens.check_directions(parse_directions(["foam_height"]), batch, SolverConfig())
+    sens.check_directions(parse_directions(["foam_height"]), batch[:1], SolverConfig())
+    # a height that is not differentiated may be 0
+    sens.check_directions(parse_directions(["alpha"]), batch, SolverConfig())
+
+
+def on_grid_delay(dt, steps):
+    """A delay that puts the profile's switch (t0 after the firing) on step `steps`."""
+    return steps * dt - CurvatureProfile().switch_time
+
+
+def test_a_delay_puts_the_switch_on_a_step_end_only_when_fired_and_on_the_grid():
+    dt = 1e-3
+    delay = on_grid_delay(dt, 400)
+    fired = BASE.replace(gait="A1+A3", actuator_delays=(0.0, 0.0, delay) + (0.0,) * 5)
+    assert sens.delay_on_step_grid(fired, 2, dt)
+    # half a step off the grid, or a tenth of a step: no jump at a step end
+    for offset in (0.5 * dt, 0.1 * dt, -0.1 * dt):
+        moved = fired.replace(actuator_delays=(0.0, 0.0, delay + offset) + (0.0,) * 5)
+        assert not sens.delay_on_step_grid(moved, 2, dt)
+    # A2 does not fire in A1+A3: its delay moves nothing
+    assert not sens.delay_on_step_grid(
+        fired.replace(actuator_delays=(0.0, delay) + (0.0,) * 6), 1, dt)
+    # a profile whose branches meet at the switch (the cooling branch a constant at the
+    # heating branch's value there) has no jump to cross
+    meeting = CurvatureProfile()
+    level = float(_logistic(meeting.heating, meeting.switch_time))
+    smooth = dataclasses.replace(meeting, cooling=(0.0, 1.0, 0.0, level))
+    assert smooth.switch_jump == 0.0
+    assert not sens.delay_on_step_grid(fired.replace(actuator_profile=smooth), 2, dt)
+
+
+def test_a_delay_on_the_grid_warns_with_fixed_steps_only():
+    dt = 1e-3
+    on = BASE.replace(actuator_delays=(0.0, 0.0, on_grid_delay(dt, 400)) + (0.0,) * 5)
+    off = BASE.replace(actuator_delays=(0.0, 0.0, on_grid_delay(dt, 400) + 0.5 * dt) + (0.0,) * 5)
+    directions = parse_directions(["actuator_delays[2]"])
+    with pytest.warns(UserWarning, match=r"actuator_delays\[2\] = .* s \(instance 1, 2 in all\) "
+                                         r"puts the actuation profile's switch"):
+        sens.check_directions(directions, [off, on, on], SolverConfig(dt=dt))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sens.check_directions(directions, [off], SolverConfig(dt=dt))
+        sens.check_directions(directions, [on], SolverConfig(integrator="bdf2", adaptive=True))
+        # another delay's direction does not look at A3's
+        sens.check_directions(parse_directions(["actuator_delays[0]"]), [on.replace(
+            actuator_delays=(0.0005,) + on.actuator_delays[1:])], SolverConfig(dt=dt))
+
+
+def test_the_replicas_follow_their_instances_as_plus_then_minus_pairs():
+    batch = [BASE, BASE.replace(alpha=1.2), BASE.replace(alpha=0.5, drag_perpendicular=3.0)]
+    directions = parse_directions(["alpha", "drag_perpendicular"])
+    replicas, steps = sens.replica_batch(batch, directions, scale=2.0)
+    assert len(replicas) == 3 * (1 + 2 * 2) and steps.shape == (2, 3)
+    assert replicas[:3] == batch
+    for j, direction in enumerate(directions):
+        plus, minus = sens.pair_slices(j, 3)
+        assert (plus.start, plus.stop, minus.start, minus.stop) == (3 + 6 * j, 6 + 6 * j,
+                                                                  6 + 6 * j, 9 + 6 * j)
+        for b, p in enumerate(batch):
+            eps = direction.step(p)
+            assert steps[j, b] == eps
+            assert direction.value(replicas[plus][b]) == direction.value(p) + 2.0 * eps
+            assert direction.value(replicas[minus][b]) == direction.value(p) - 2.0 * eps
+            # the other parameters are the instance's
+            other = directions[1 - j]
+            assert other.value(replicas[plus][b]) == other.value(p)
+
+
+def test_the_replicas_tables_lie_on_their_instances_tangent():
+    """For the joint radius, which moves the rest shape and the elastic tables nonlinearly,
+    the replicas' tables are the instance's ± ε times their derivative: symmetric about the
+    instance to the rounding, and (plus − minus)/2ε equals a central difference of the host
+    tables at a tenth of ε to 1e-6 of the tables' scale (its truncation, ~(ε/10)²·c‴/6, and the
+    tables' rounding over ε/10 ~1e-11 relative, are both far below)."""
+    batch = [BASE]
+    (direction,) = parse_directions(["joint_radius"])
+    model, steps = sens.replica_model(batch, (direction,))
+    eps = steps[0, 0]
+    plus, minus = sens.pair_slices(0, 1)
+    small = 0.1 * eps
+    above = build_model([direction.moved(BASE, BASE.joint_radius + small)]).rest_positions[0]
+    below = build_model([direction.moved(BASE, BASE.joint_radius - small)]).rest_positions[0]
+    rest = model.rest_positions
+    scale = np.abs(rest[0]).max()
+    assert np.abs(rest[plus][0] + rest[minus][0] - 2.0 * rest[0]).max() <= 1e-15 * scale
+    tangent = (rest[plus][0] - rest[minus][0]) / (2.0 * eps)
+    difference = (above - below) / (2.0 * small)
+    assert np.abs(tangent - difference).max() <= 1e-6 * np.abs(difference).max()
+    # built plainly at ±ε, a replica's rest shape is off that line by ε²·c″/2 (both the same
+    # way): the tables must not be the plain ones
+    plain = build_model([direction.moved(BASE, BASE.joint_radius + eps)]).rest_positions[0]
+    assert not np.array_equal(plain, rest[plus][0])
+
+
+def test_derivatives_are_the_pairs_central_differences_and_angles_go_the_short_way():
+    directions = parse_directions(["alpha", "drag_perpendicular"])
+    steps = np.array([[0.1, 0.2], [0.5, 1.0]])
+    values = np.array([0.0, 0.0,          # the instances
+                       1.0, 2.0, 0.6, 1.0,     # alpha: +ε, then −ε
+                       179.0, -179.0, -179.0, 179.0])  # C⊥: across ±180°
+    linear = sens.derivatives(values, directions, steps, "displacement_x_mm")
+    np.testing.assert_array_equal(linear["alpha"], [(1.0 - 0.6) / 0.2, (2.0 - 1.0) / 0.4])
+    np.testing.assert_array_equal(linear["drag_perpendicular"], [358.0 / 1.0, -358.0 / 2.0])
+    angles = sens.derivatives(values, directions, steps, "heading_deg")
+    np.testing.assert_allclose(angles["drag_perpendicular"], [-2.0 / 1.0, 2.0 / 2.0], rtol=1e-12)
+    # a trajectory output: one row per instance, the records along the second axis
+    records = np.arange(10 * 3, dtype=float).reshape(10, 3)
+    by_record = sens.derivatives(records, directions, steps, "x_mm")
+    assert by_record["alpha"].shape == (2, 3)
+    np.testing.assert_array_equal(by_record["alpha"][1], (records[3] - records[5]) / 0.4)
+
+
+def test_a_runs_tables_split_into_the_instances_and_their_derivatives():
+    directions = parse_directions(["alpha"])
+    steps = np.array([[0.01, 0.02]])
+    total, records = 6, 2  # two instances, their +ε and their −ε replicas; two records
+    summary = pd.DataFrame({output: np.arange(total, dtype=float) * (k + 1)
+                            for k, output in enumerate(sens.SUMMARY_OUTPUTS)})
+    summary["instance"] = np.arange(total)
+    # the trajectory as an engine writes it, record by record, instances inside
+    trajectory = pd.DataFrame({
+        "instance": np.tile(np.arange(total), records),
+        "t_s": np.repeat([0.0, 0.5], total),
+        **{output: np.concatenate([np.arange(total) * 1.0, np.arange(total) * 3.0])
+           for output in sens.TRAJECTORY_OUTPUTS}})
+    own, own_trajectory, table, trajectory_table = sens.split_result(summary, trajectory,
+                                                                     directions, steps)
+    assert own["instance"].tolist() == [0, 1]
+    assert own_trajectory[["instance", "t_s"]].values.tolist() == [[0, 0.0], [0, 0.5],
+                                                                   [1, 0.0], [1, 0.5]]
+    column = sens.sensitivity_column("displacement_x_mm", "alpha")
+    assert column == "d(displacement_x_mm)/d(alpha)"
+    assert len(table.columns) == len(sens.SUMMARY_OUTPUTS)
+    # +ε replicas are rows 2, 3 and −ε rows 4, 5; displacement_x_mm is the row number
+    np.testing.assert_allclose(table[column], [(2 - 4) / 0.02, (3 - 5) / 0.04])
+    factor = sens.SUMMARY_OUTPUTS.index("heading_deg") + 1  # its column is the row × this
+    np.testing.assert_allclose(table[sens.sensitivity_column("heading_deg", "alpha")],
+                               [factor * (2 - 4) / 0.02, factor * (3 - 5) / 0.04])
+    x = trajectory_table[sens.sensitivity_column("x_mm", "alpha")]
+    # instance 0: records 0 and 0.5 s (values ×1 then ×3); instance 1 likewise
+    np.testing.assert_allclose(x, [(2 - 4) / 0.02, 3 * (2 - 4) / 0.02,
+                                   (3 - 5) / 0.04, 3 * (3 - 5) / 0.04])
+    assert trajectory_table["t_s"].tolist() == [0.0, 0.5, 0.0, 0.5]
