@@ -20,6 +20,7 @@ to K̄(0) at τ = T (its `period`) and stays there.
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import math
@@ -28,7 +29,7 @@ import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, Optional, Sequence, Union
+from typing import Dict, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import pandas as pd
@@ -56,15 +57,27 @@ DIFFERENTIABLE_STATE_COLUMNS = ("centroid_x_mm", "centroid_y_mm", "heading_deg",
 """The `state()` columns `Simulator.sensitivity` differentiates."""
 
 
+def parameter_texts(params: Sequence[StarParams]) -> Tuple[Dict[str, str], ...]:
+    """Each instance's parameters as {field: repr of its value} (floats to the last bit), what
+    a snapshot records of the instances it belongs to: every field but the gait, which a
+    Simulator does not use (its actuators fire when commanded)."""
+    return tuple({field.name: repr(getattr(p, field.name))
+                  for field in dataclasses.fields(StarParams) if field.name != "gait"}
+                 for p in params)
+
+
 @dataclass(frozen=True)
 class SimulatorSnapshot:
     """The whole state of a Simulator's batch (from `Simulator.save`): every device field as a
-    NumPy array (padding included) and what the state belongs to."""
+    NumPy array (padding included) and what the state belongs to: the engine, the batch size,
+    the step and each instance's parameters (`parameter_texts`; empty in a snapshot written
+    before they were recorded)."""
 
     fields: Dict[str, np.ndarray]
     engine_key: str
     n_instances: int
     dt: float
+    params: Tuple[Dict[str, str], ...] = ()
 
     def write(self, path) -> Path:
         """Save to an .npz file (arrays plus a JSON header; ".npz" is added to a path without
@@ -73,7 +86,7 @@ class SimulatorSnapshot:
         path = Path(path)
         path = path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
         header = json.dumps({"engine_key": self.engine_key, "n_instances": self.n_instances,
-                             "dt": self.dt})
+                             "dt": self.dt, "params": list(self.params)})
         archive = io.BytesIO()
         np.savez(archive, __header__=np.array(header), **self.fields)
         write_atomic(path, archive.getvalue())
@@ -91,7 +104,9 @@ class SimulatorSnapshot:
                 header = json.loads(str(archive["__header__"]))
                 fields = {name: archive[name] for name in archive.files if name != "__header__"}
             snapshot = cls(fields=fields, engine_key=str(header["engine_key"]),
-                           n_instances=int(header["n_instances"]), dt=float(header["dt"]))
+                           n_instances=int(header["n_instances"]), dt=float(header["dt"]),
+                           params=tuple({str(name): str(text) for name, text in row.items()}
+                                        for row in header.get("params", ())))
         except OSError as error:
             raise ValueError(f"snapshot {path}: cannot read it ({error.strerror or error})") \
                 from None
@@ -351,16 +366,23 @@ class Simulator:
         lagged = self.solver.jacobian == "lagged"
         snapshot = SimulatorSnapshot(fields=self.engine.save_state(factorisations=lagged),
                                      engine_key=repr(self.engine_key),
-                                     n_instances=self.n_instances, dt=self.solver.dt)
+                                     n_instances=self.n_instances, dt=self.solver.dt,
+                                     params=parameter_texts(self.params))
         return snapshot.write(path) if path is not None else snapshot
 
-    def load(self, snapshot: Union[SimulatorSnapshot, str, Path]):
+    def load(self, snapshot: Union[SimulatorSnapshot, str, Path], *,
+             other_params: bool = False):
         """Continue from a saved state, bit for bit as if never interrupted (with
         SolverConfig(jacobian="lagged") and a snapshot without kept factorisations, one saved
         by a simulator of another Jacobian mode, the next step refactors and the continuation
         agrees with an uninterrupted run to newton_tol per step). Raises ValueError, state
         unchanged, for a state of another topology, term set, integrator, stepping (fixed or
-        adaptive), batch size or step."""
+        adaptive), batch size or step, and for one saved by instances of other parameters,
+        naming the first instance and field that differ: the state would go on under this
+        simulator's coefficients, rest shape and start centroids, as no run did. With
+        `other_params=True` that is what happens, on purpose (a parameter changed mid-run:
+        the positions, velocities and firings carry over, the rest is this simulator's, and
+        displacements are measured from this simulator's start)."""
         if not isinstance(snapshot, SimulatorSnapshot):
             snapshot = SimulatorSnapshot.read(snapshot)
         if snapshot.engine_key != repr(self.engine_key):
@@ -371,6 +393,16 @@ class Simulator:
             raise ValueError(f"the saved state has {snapshot.n_instances} instances at dt = "
                              f"{snapshot.dt} s; this simulator {self.n_instances} at "
                              f"{self.solver.dt} s")
+        if snapshot.params and not other_params:
+            for b, (saved, own) in enumerate(zip(snapshot.params,
+                                                 parameter_texts(self.params))):
+                changed = [name for name in own if saved.get(name) != own[name]]
+                if changed:
+                    raise ValueError(
+                        f"the saved state belongs to instances of other parameters: instance "
+                        f"{b}'s {changed[0]} is {saved.get(changed[0], 'not recorded')} there, "
+                        f"{own[changed[0]]} here ({len(changed)} field(s) differ); load(..., "
+                        f"other_params=True) continues it under this simulator's parameters")
         self.engine.restore_state(snapshot.fields)
 
     def __repr__(self) -> str:
