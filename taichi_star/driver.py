@@ -74,8 +74,9 @@ def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float,
     """ValueError before any compute unless a run of `batch` instances for duration_s (s) with
     records every record_interval_s (s; 0 = none) can go: at most MAX_STEPS_PER_INSTANCE steps
     in all (`timegrid.check_work`; `steps_taken`: the steps an instance has already taken,
-    None for a run from t = 0; adaptive steps: the fewest, at dt_max, with a RuntimeWarning
-    when the most, at dt_min, could pass the limit), and with fixed steps at least one step
+    None for a run from t = 0; adaptive steps: the fewest, at dt_max or at the record interval
+    if shorter, with a RuntimeWarning when the most, at dt_min, could pass the limit), with
+    adaptive steps a record interval of at least dt_min, and with fixed steps at least one step
     and a record interval of whole steps. A record interval longer than the run warns: its
     trajectory holds the start alone."""
     if record_interval_s and multiples_within(duration_s, record_interval_s) == 0:
@@ -87,10 +88,21 @@ def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float,
     if solver.adaptive:
         # the work is known only to lie between the steps at dt_max and at dt_min: refused and
         # estimated by the fewest; the most may exceed the counters, where the engine stops an
-        # instance with status step_limit (said before the run)
-        check_work(f"duration_s = {duration_s:g} s at dt_max = {solver.dt_max:g} s (the adaptive "
-                   f"lower bound{', ' + after if after else ''})",
-                   taken + duration_s / solver.dt_max, batch)
+        # instance with status step_limit (said before the run). A record is a stop a step must
+        # end on, so records closer than dt_max bound the steps from below too, and records
+        # closer than dt_min would force steps shorter than the controller's floor
+        if record_interval_s and record_interval_s < solver.dt_min:
+            raise ValueError(f"record_interval_s must be at least dt_min = {solver.dt_min:g} s "
+                             f"with adaptive steps (a step ends on every record), got "
+                             f"{record_interval_s!r}")
+        if record_interval_s and record_interval_s < solver.dt_max:
+            bound = f"a record every {record_interval_s:g} s, each a step end"
+            fewest = duration_s / record_interval_s
+        else:
+            bound = f"dt_max = {solver.dt_max:g} s"
+            fewest = duration_s / solver.dt_max
+        check_work(f"duration_s = {duration_s:g} s at {bound} (the adaptive lower bound"
+                   f"{', ' + after if after else ''})", taken + fewest, batch)
         most = taken + duration_s / solver.dt_min
         if not most <= MAX_STEPS_PER_INSTANCE:
             warnings.warn(f"duration_s = {duration_s:g} s at dt_min = {solver.dt_min:g} s could "

@@ -171,10 +171,13 @@ def to_xarray(result):
 
     summary = result.summary.reset_index(drop=True)
     parameter_columns = set(StarParams.columns().values())
-    instances = np.arange(len(summary))
+    # a batch's summary (`batch.run_batch`) names its instances in a column of its own: that
+    # is the coordinate; a plain result's instances are its rows
+    instances = (summary["instance"].to_numpy() if "instance" in summary
+                 else np.arange(len(summary)))
     coordinates = {"instance": instances}
     variables = {}
-    for name in summary.columns:
+    for name in summary.columns.drop("instance", errors="ignore"):
         values = summary[name].to_numpy()
         if values.dtype == object or pd.api.types.is_string_dtype(summary[name]):
             values = summary[name].astype(str).to_numpy()
@@ -186,8 +189,11 @@ def to_xarray(result):
         coordinates["time"] = ("time", times, {"units": "s"})
         table = trajectory.pivot(index="instance", columns="t_s")
         for name in ("x_mm", "y_mm", "heading_deg"):
+            # an instance without records (a resumed batch's chunks read back from its store
+            # carry their summaries alone) gets NaN rows
             variables[f"centroid_{name}" if name != "heading_deg" else "record_heading_deg"] = (
-                ("instance", "time"), table[name].reindex(columns=times).to_numpy(),
+                ("instance", "time"),
+                table[name].reindex(index=instances, columns=times).to_numpy(),
                 {"units": column_unit(name)})
     if result.shapes is not None:
         coordinates["node"] = np.arange(result.shapes.shape[2])

@@ -111,6 +111,33 @@ def test_xarray_holds_the_tables_with_units_and_survives_netcdf(recorded, tmp_pa
         assert list(back.gait.values) == ["A1+A2", "A3"]
 
 
+def test_a_batchs_result_goes_to_xarray_by_its_instance_column(recorded, tmp_path):
+    """`run_batch` names its instances in a summary column: that is the coordinate (it also
+    was a variable, and xarray refused the dataset), and an instance without records (a
+    resumed batch's stored chunks carry their summaries alone) gets NaN rows, not another
+    instance's."""
+    import xarray as xr
+
+    from taichi_star.batch import run_batch
+
+    batch = run_batch(RECORDED_PARAMS, 0.2, solver=ts.SolverConfig(dt=2e-3),
+                      record_interval_s=0.04, chunk_size=1)
+    dataset = batch.to_xarray()
+    assert "instance" not in dataset.data_vars
+    np.testing.assert_array_equal(dataset.instance, [0, 1])
+    plain = recorded.to_xarray()
+    for name in ("centroid_x_mm", "record_heading_deg", "speed_mm_s", "alpha"):
+        np.testing.assert_array_equal(dataset[name], plain[name])
+    with xr.open_dataset(batch.to_netcdf(tmp_path / "batch.nc")) as back:
+        np.testing.assert_array_equal(back.centroid_y_mm, plain.centroid_y_mm)
+    first_only = dataclasses.replace(batch, trajectory=batch.trajectory[
+        batch.trajectory.instance == 0])
+    partial = first_only.to_xarray()
+    np.testing.assert_array_equal(partial.centroid_x_mm.sel(instance=0),
+                                  plain.centroid_x_mm.sel(instance=0))
+    assert np.isnan(partial.centroid_x_mm.sel(instance=1)).all()
+
+
 @pytest.mark.parametrize("name,frame", [("shapes.gif", "world"), ("shapes.mp4", "body")])
 def test_animation_writes_a_movie_of_every_record(recorded, tmp_path, name, frame):
     path = recorded.animate(tmp_path / name, frame=frame, size_px=300)

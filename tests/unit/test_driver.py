@@ -124,6 +124,35 @@ def test_an_adaptive_run_is_refused_by_its_fewest_steps_and_warned_by_its_most()
             check_run(solver, duration, 0.0, 1, steps_taken=taken)
 
 
+def test_adaptive_records_closer_than_dt_max_bound_the_steps_and_closer_than_dt_min_are_refused():
+    """Every record is a step end: with records closer than dt_max the fewest steps are the
+    records (a run of 0.05 s recorded every 1e-8 s asked 5e6 records and steps below dt_min, and
+    ran on unrefused); a record interval of dt_min itself is accepted, one below refused, and
+    one of dt_max or more leaves the estimate at dt_max (dt_min 1/1024 s, dt_max 1/64 s,
+    exact quotients)."""
+    import re
+
+    from taichi_star.driver import check_run
+    from taichi_star.timegrid import MAX_STEPS_PER_INSTANCE
+
+    solver = SolverConfig(adaptive=True, dt=1 / 64, dt_min=1 / 1024, dt_max=1 / 64)
+    check_run(solver, 0.5, 1 / 1024, 1)
+    with pytest.raises(ValueError, match="^" + re.escape(
+            "record_interval_s must be at least dt_min = 0.000976562 s with adaptive steps (a "
+            "step ends on every record), got 0.0009765624999999999")):
+        check_run(solver, 0.5, 1 / 1024 * (1 - 1e-16), 1)
+    over = (MAX_STEPS_PER_INSTANCE + 1) / 1024      # one record more than the counter holds
+    with pytest.raises(ValueError, match="^" + re.escape(
+            f"duration_s = {over:g} s at a record every 0.000976562 s, each a step end (the "
+            f"adaptive lower bound) is 2.15e+09 time steps per instance")):
+        check_run(solver, over, 1 / 1024, 1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)   # the most steps, at dt_min, may not fit
+        check_run(solver, over, 1 / 64, 1)                # records at dt_max: the fewest at dt_max
+        with pytest.raises(ValueError, match=re.escape("at dt_max = 0.015625 s (the adaptive")):
+            check_run(solver, (MAX_STEPS_PER_INSTANCE + 1) / 64, 1 / 32, 1)
+
+
 def test_stops_fall_on_the_record_grid_from_the_first_one_asked():
     fixed = Clock(SolverConfig(dt=1e-3), 0.01)
     assert fixed.stops_every(0.004) == [0, 4, 8] and fixed.stops_every(0.004, first=1) == [4, 8]
