@@ -126,11 +126,12 @@ COMPONENT_HEIGHT_MINIMUM = 1e-3
 
 
 def _check_number(name, value, lowest, highest, lowest_included=True, integer=False,
-                  reason=""):
+                  reason="", highest_included=True):
     """Validated `value` as a Python int/float (NumPy scalars accepted); ValueError names the
     field and its range (and `reason`, words in brackets after the range, where the range is
     not the declared one)."""
-    span = f"[{lowest:g}, {highest:g}]" if lowest_included else f"({lowest:g}, {highest:g}]"
+    span = (("[" if lowest_included else "(") + f"{lowest:.6g}, {highest:.6g}"
+            + ("]" if highest_included else ")"))
     if reason:
         span = f"{span} ({reason})"
     kind = "an integer" if integer else "a real number"
@@ -139,7 +140,8 @@ def _check_number(name, value, lowest, highest, lowest_included=True, integer=Fa
         raise ValueError(f"{name} must be {kind} in {span}, got {value!r}")
     value = int(value) if integer else float(value)
     if not math.isfinite(value) or value > highest or value < lowest or (
-            value == lowest and not lowest_included):
+            value == lowest and not lowest_included) or (
+            value == highest and not highest_included):
         raise ValueError(f"{name} must be {kind} in {span}, got {value!r}")
     return value
 
@@ -290,15 +292,27 @@ class StarParams:
         if not isinstance(self.actuator_profile, CurvatureProfile):
             raise ValueError(f"actuator_profile must be a CurvatureProfile, got "
                              f"{type(self.actuator_profile).__name__}")
-        # a firing's heating phase must end within its period: the period's lowest value is the
-        # profile's, so one message states the whole range whichever end a value misses
-        ranges = dict(STAR_RANGES, period=(self.actuator_profile.switch_time,
-                                           STAR_RANGES["period"][1], False))
-        for name, (lowest, highest, included) in ranges.items():
-            reason = "longer than the heating phase t0" if name == "period" else ""
-            object.__setattr__(self, name, _check_number(name, getattr(self, name), lowest,
-                                                         highest, included,
-                                                         name in INTEGER_FIELDS, reason))
+        for name, (lowest, highest, included) in STAR_RANGES.items():
+            highest_included, reason = True, ""
+            # three ranges hang on other fields (checked before them, in declaration order),
+            # so that one message states the whole range whichever end a value misses
+            if name == "period":
+                # a firing's heating phase must end within its period
+                lowest, included = self.actuator_profile.switch_time, False
+                reason = "longer than the heating phase t0"
+            elif name == "joint_radius":
+                # the rest shape's actuator arcs, of the profile's rest curvature, must reach
+                # from one joint to the next
+                rest = self.actuator_profile.rest_curvature
+                highest, highest_included = 1.0 / (rest * math.sin(math.pi / 8)), False
+                reason = (f"an actuator arc of rest curvature {rest:.5g} 1/m cannot span "
+                          f"joints further apart")
+            elif name == "tip_radius":
+                lowest, included = self.joint_radius, False
+                reason = "beyond joint_radius: the limbs point outwards"
+            object.__setattr__(self, name, _check_number(
+                name, getattr(self, name), lowest, highest, included, name in INTEGER_FIELDS,
+                reason, highest_included))
         for name, choices in STAR_CHOICES.items():
             _check_choice(name, getattr(self, name), choices)
         object.__setattr__(self, "actuator_gains", _check_actuator_values(
@@ -320,16 +334,6 @@ class StarParams:
             raise ValueError(f"jet_inflow must be 0 with jet_mode 'always' (its literal formula "
                              f"already jets while a space opens; an inflow would only cancel "
                              f"part of that), got {self.jet_inflow!r}: use jet_mode 'contract'")
-        if self.tip_radius <= self.joint_radius:
-            raise ValueError(f"tip_radius must be in ({self.joint_radius:g}, 2] m (beyond "
-                             f"joint_radius: the limb points outwards), got {self.tip_radius!r}")
-        rest = self.actuator_profile.rest_curvature
-        largest_joint_radius = 1.0 / (rest * math.sin(math.pi / 8))
-        if self.joint_radius >= largest_joint_radius:
-            raise ValueError(
-                f"joint_radius must be in [0.001, {largest_joint_radius:.6g}) m: an actuator arc "
-                f"of rest curvature {rest:.5g} 1/m cannot span joints further apart, got "
-                f"{self.joint_radius!r}")
 
     @classmethod
     def preset(cls, name: str = "paper", **overrides) -> "StarParams":

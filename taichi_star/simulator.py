@@ -235,9 +235,9 @@ class Simulator:
             raise ValueError(f"duration_s must be a finite number > 0 s, got {duration_s!r}")
         if record_interval_s and (isinstance(record_interval_s, bool)
                                   or not isinstance(record_interval_s, numbers.Real)
-                                  or not record_interval_s > 0):
-            raise ValueError(f"record_interval_s must be a number > 0 s (or 0: no records), "
-                             f"got {record_interval_s!r}")
+                                  or not 0 < record_interval_s < math.inf):
+            raise ValueError(f"record_interval_s must be a finite number > 0 s (or 0: no "
+                             f"records), got {record_interval_s!r}")
         check_run(self.solver, duration_s, record_interval_s, self.n_instances,
                   steps_taken=int(self._steps().max(initial=0)))
         clock = Clock(self.solver, duration_s)
@@ -272,6 +272,8 @@ class Simulator:
         """Put instances (all by default) back at rest in their rest shape at t = 0, nothing
         fired, status ok; the others are untouched."""
         rows = np.arange(self.n_instances) if instances is None else np.asarray(instances)
+        if rows.size == 0:  # no instance to reset (an RL loop where none finished): [] is float
+            return
         if rows.ndim != 1 or rows.dtype.kind not in "iu" or (
                 len(rows) and (rows.min() < 0 or rows.max() >= self.n_instances)):
             raise ValueError(f"instances must be integers in [0, {self.n_instances}), got "

@@ -304,7 +304,15 @@ def test_bad_durations_times_and_foreign_states_are_refused():
     for duration in (-1.0, 0.0, float("nan")):
         with pytest.raises(ValueError, match="duration_s"):
             sim.advance(duration)
+    for interval in (float("inf"), -0.01, float("nan")):
+        with pytest.raises(ValueError, match=r"^record_interval_s must be a finite number > 0 s"):
+            sim.advance(0.01, record_interval_s=interval)
     before = sim.save().fields
+    sim.reset([])   # no instance: a plain empty list (float to NumPy) is accepted, nothing reset
+    sim.reset(np.array([], dtype=int))
+    assert all(np.array_equal(sim.save().fields[name], before[name]) for name in before)
+    with pytest.raises(ValueError, match=r"instances must be integers in \[0, 3\), got \[0.5\]"):
+        sim.reset([0.5])
     with pytest.raises(ValueError, match=r"at_s = 0.005 s is not after the current time of "
                                          r"instance 0 \(0.01 s\)"):
         sim.fire(GAITS, at_s=0.005)

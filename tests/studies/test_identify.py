@@ -86,7 +86,7 @@ def test_parameter_values_come_from_unit_coordinates_and_stay_in_range():
     ("calibrate", ["--fit", "period=0:5"], "--fit period: bounds 0:5 leave the field's valid "
                                            "range (0, 1000]"),
     ("calibrate", ["--fit", "cylinder_drag=0:100:log"], "--fit cylinder_drag: a log axis needs"),
-    ("calibrate", ["--fit", "joint_radius=0.02:0.03"], "joint_radius must be in"),
+    ("calibrate", ["--fit", "joint_radius=0.02:0.03"], "joint_radius must be a real number in"),
     ("calibrate", ["--fit", "alpha=0.2:1", "--fit", "alpha=0.3:1"], "--fit alpha: given twice"),
     ("calibrate", ["--gaits", ""], "--gaits: empty gait list"),
     ("calibrate", ["--gaits", "A1,A1+A6"], "--gaits A1+A6: not measured"),
@@ -123,7 +123,7 @@ def test_api_bad_input_raises_value_error(no_compute):
         identify.parse_range_spec("alpha=2:1")
     with pytest.raises(ValueError, match="no parameters to vary"):
         calibrate.fit_cmaes([], base, identify.measurement_table(["A1"]))
-    with pytest.raises(ValueError, match="tip_radius must be in"):
+    with pytest.raises(ValueError, match="tip_radius must be a real number in"):
         identify.check_box([identify.ParameterRange("tip_radius", 0.01, 0.06)], base)
     with pytest.raises(ValueError, match="--popsize must be >= 2"):
         calibrate.fit_cmaes([identify.ParameterRange("alpha", 0.2, 1.0)], base,

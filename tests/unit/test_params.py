@@ -269,8 +269,16 @@ def test_the_period_must_outlast_the_heating_pulse():
 
 
 def test_the_tips_must_lie_beyond_the_joints():
-    with pytest.raises(ValueError, match="tip_radius must be in"):
-        ts.StarParams(tip_radius=ts.StarParams().joint_radius)
+    """The tip radius's range starts at the joint radius (open): at it and below the declared
+    0.001 the message states (joint_radius, 2], not the declared [0.001, 2]."""
+    joint = ts.StarParams().joint_radius
+    for tip in (joint, 5e-4, 2.5):
+        with pytest.raises(ValueError) as error:
+            ts.StarParams(tip_radius=tip)
+        assert str(error.value) == (f"tip_radius must be a real number in ({joint:g}, 2] (beyond "
+                                    f"joint_radius: the limbs point outwards), got {tip!r}")
+    assert ts.StarParams(tip_radius=2.0).tip_radius == 2.0
+    assert ts.StarParams(joint_radius=0.01, tip_radius=0.011).tip_radius == 0.011
 
 
 def test_joint_radius_is_bounded_by_the_widest_chord_a_rest_arc_spans():
@@ -279,9 +287,15 @@ def test_joint_radius_is_bounded_by_the_widest_chord_a_rest_arc_spans():
     rest = ts.StarParams().actuator_profile.rest_curvature
     widest = 1.0 / (rest * math.sin(math.radians(22.5)))
     assert ts.StarParams(joint_radius=widest * 0.999).joint_radius == pytest.approx(widest * 0.999)
-    for radius in (widest, widest * 1.001):
-        with pytest.raises(ValueError, match="joint_radius must be in"):
+    # the widest itself is refused (open), and so is 1.5 m, inside the declared [0.001, 1]: the
+    # message states the range the profile makes, whichever end a value misses
+    for radius in (widest, widest * 1.001, 1.5, 5e-4):
+        with pytest.raises(ValueError) as error:
             ts.StarParams(joint_radius=radius)
+        assert str(error.value) == (
+            f"joint_radius must be a real number in [0.001, {widest:.6g}) (an actuator arc of "
+            f"rest curvature {rest:.5g} 1/m cannot span joints further apart), got {radius!r}")
+    assert ts.StarParams(joint_radius=0.001, tip_radius=0.05).joint_radius == 0.001
 
 
 def test_replace_changes_fields_and_validates_again():
