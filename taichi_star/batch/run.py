@@ -9,13 +9,14 @@ from typing import Optional, Sequence
 import numpy as np
 import pandas as pd
 
+from ..driver import RunTiming
 from ..extras import require
 from ..geometry import build_topology
 from ..params import SolverConfig, StarParams
 from ..simulation import SimulationResult
 from .executors import DEFAULT_RETRIES, Executor, InProcess, LocalProcesses
 from .store import RunStore, run_definition
-from .tasks import plan_chunks
+from .tasks import batch_list, plan_chunks
 
 DEFAULT_CHUNK_SIZE = 2048
 """Instances per chunk on the CPU: one compiled engine's worth, large enough to keep a process
@@ -54,6 +55,10 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     back from the store. The trajectory then covers only the chunks computed by this call. The
     store's chunks are Parquet files: `run_dir` needs pyarrow (the `io` extra).
 
+    `timing` sums the `RunTiming` of the chunks computed by this call (not those a resume
+    read back; chunks on worker processes overlap, so its phases add up to more than the
+    call's wall time).
+
     Raises ValueError (RunStoreError for the run folder) naming the argument, or ImportError
     naming the extra for a `run_dir` without pyarrow, before any compute."""
     if workers is not None and executor is not None:
@@ -63,7 +68,7 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
                          f"DaskExecutor: see executor_for(scheduler=...)), got {executor!r}")
     if resume and run_dir is None:
         raise ValueError("resume=True needs run_dir (the run store to continue)")
-    params = list(params)
+    params = batch_list(params)
     tasks = plan_chunks(params, duration_s, cycles=cycles, chunk_size=chunk_size, solver=solver,
                         arch=arch, record_interval_s=record_interval_s,
                         record_shapes=record_shapes, steady_from_cycle=steady_from_cycle)
@@ -87,6 +92,7 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
         owned = executor = LocalProcesses(workers)
     executor = executor if executor is not None else InProcess()
     summaries, trajectories, shapes = {}, [], {}
+    timing = RunTiming(setup_s=0.0, compile_s=0.0, run_s=0.0, collect_s=0.0, robot_steps=0)
     outer = None
     if progress and len(tasks) > 1:
         from tqdm.auto import tqdm
@@ -98,6 +104,8 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
                 store.write(task, result.summary)
             summaries[result.index] = result.summary
             trajectories.append(result.trajectory)
+            if result.timing is not None:
+                timing = timing + result.timing
             if result.shapes is not None:
                 shapes[result.index] = result.shapes
             if outer is not None:
@@ -124,7 +132,7 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
         shape_array = stacked[:, np.argsort(members, kind="stable")]
     topology = build_topology(params[0]) if len(topology_keys) == 1 else None
     return SimulationResult(summary=summary, trajectory=trajectory, shapes=shape_array,
-                            topology=topology, solver=solver)
+                            topology=topology, solver=solver, timing=timing)
 
 
 @contextlib.contextmanager

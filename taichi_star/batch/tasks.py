@@ -16,6 +16,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 import pandas as pd
 
+from ..driver import RunTiming
 from ..geometry import Topology
 from ..params import SolverConfig, StarParams
 from ..runtime import check_arch
@@ -47,13 +48,15 @@ class ChunkTask:
 class ChunkResult:
     """What `run_chunk` returns. summary: simulate's summary with `instance` (position in the
     whole batch) first and `duration_s` added; trajectory: its instance column renumbered the
-    same way; shapes: (n_records, len(members), N, 2) m or None."""
+    same way; shapes: (n_records, len(members), N, 2) m or None; timing: the chunk's
+    `simulate` call's."""
 
     index: int
     summary: pd.DataFrame
     trajectory: pd.DataFrame
     shapes: Optional[np.ndarray]
     topology: Topology
+    timing: Optional[RunTiming] = None
 
 
 def _check_duration(duration_s, cycles):
@@ -66,6 +69,16 @@ def _check_duration(duration_s, cycles):
         raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
 
 
+def batch_list(params) -> List[StarParams]:
+    """The instances of a batch as a list: a single StarParams is a batch of one; ValueError
+    for what is not a sequence (the entries are checked where the chunks are planned)."""
+    if isinstance(params, StarParams):
+        return [params]
+    if params is None or isinstance(params, (str, bytes)) or not hasattr(params, "__iter__"):
+        raise ValueError(f"params must be a sequence of StarParams, got {type(params).__name__}")
+    return list(params)
+
+
 def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None, *,
                 cycles: Optional[float] = None, chunk_size: int = 2048,
                 solver: SolverConfig = SolverConfig(), arch: str = "cpu",
@@ -75,8 +88,8 @@ def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None
     (`duration_s`, or `cycles` × the instance's period), groups in order of first appearance,
     each cut into runs of at most `chunk_size` in input order. Every chunk's arguments are
     validated here, so a bad batch fails before any chunk is computed (ValueError naming the
-    argument)."""
-    params = list(params)
+    argument); a single StarParams is a batch of one, as for `simulate`."""
+    params = batch_list(params)
     if not params:
         raise ValueError("params must hold at least one StarParams (the batch is empty)")
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, numbers.Integral) \
@@ -123,4 +136,4 @@ def run_chunk(task: ChunkTask, progress: bool = False) -> ChunkResult:
     trajectory = result.trajectory
     trajectory["instance"] = members[trajectory["instance"].to_numpy(dtype=int)]
     return ChunkResult(index=task.index, summary=summary, trajectory=trajectory,
-                       shapes=result.shapes, topology=result.topology)
+                       shapes=result.shapes, topology=result.topology, timing=result.timing)

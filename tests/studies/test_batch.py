@@ -37,6 +37,21 @@ def test_chunked_batch_equals_one_simulate_call(direct):
     np.testing.assert_array_equal(result.shapes, direct.shapes)
     assert result.topology.n_nodes == direct.topology.n_nodes
     assert np.isfinite(result.summary["steady_speed_mm_s"]).all()  # cycle 1 of 2 is whole
+    # the timing of its two chunks, summed: every robot-step counted once (the wall times are
+    # not compared: no timing in tests)
+    assert result.timing.robot_steps == direct.timing.robot_steps == len(PARAMS) * 300
+    assert result.timing.run_s > 0.0
+
+
+def test_a_single_starparams_is_a_batch_of_one_and_a_string_is_refused(monkeypatch, direct):
+    alone = run_batch(PARAMS[0], DURATION, solver=SOLVER)
+    pd.testing.assert_frame_equal(alone.summary.drop(columns=["instance", "duration_s"]),
+                                  direct.summary.iloc[:1], check_exact=True)
+    monkeypatch.setattr("taichi_star.batch.tasks.simulate", _forbidden)
+    for bad, name in (("A1", "str"), (None, "NoneType"), (3, "int")):
+        with pytest.raises(ValueError, match=rf"^params must be a sequence of StarParams, got "
+                                             rf"{name}$"):
+            run_batch(bad, DURATION, solver=SOLVER)
 
 
 @pytest.mark.slow
