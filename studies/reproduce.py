@@ -1,5 +1,6 @@
-"""Regenerate the committed results: every study in full, with the flags the README quotes,
-written into results/ (or --into DIR).
+"""Regenerate the main committed results: the studies below in full, with the flags the docs
+quote, written into results/ (or --into DIR); the rest are run by hand (docs:
+reproducibility).
 
     python -m studies reproduce [--only fig4c,sweep] [--into results] [--dry-run]
 
@@ -17,7 +18,7 @@ from pathlib import Path
 
 from .cli import COMMITTED_RESULTS, OneLineParser, StudyArgumentError
 
-DESCRIPTION = "Regenerate the committed results/ with every study's full run (hours)."
+DESCRIPTION = "Regenerate the main committed results/ with their studies' full runs (hours)."
 
 COMMANDS = {
     "fig4c": [],
@@ -64,6 +65,7 @@ def main(argv=None):
                                  f"{', '.join(COMMANDS)}")
     for name in names:
         line = command(name, Path(args.into))
-        print(" ".join(map(shlex.quote, line[1:])), flush=True)
+        # as a user types it (the run itself uses this interpreter, `line[0]`)
+        print(" ".join(map(shlex.quote, ["python", *line[1:]])), flush=True)
         if not args.dry_run:
             subprocess.run(line, check=True)

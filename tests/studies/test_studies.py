@@ -244,9 +244,9 @@ def test_a_reader_that_leaves_ends_the_study_quietly(capfd, monkeypatch):
 def test_reproduce_lists_one_command_per_committed_result(capsys):
     assert studies_main(["reproduce", "--dry-run", "--into", "elsewhere"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
-    assert lines[0] == "-m studies fig4c --no-progress --out elsewhere"
+    assert lines[0] == "python -m studies fig4c --no-progress --out elsewhere"
     assert all("--quick" not in line for line in lines)
-    assert any(line.startswith("-m studies fig4c --preset accurate") for line in lines)
+    assert any(line.startswith("python -m studies fig4c --preset accurate") for line in lines)
 
 
 # ----------------------------------------------------------------------------- studies, quick
