@@ -60,7 +60,8 @@ class SimulationResult:
     | failure_time_s | s | simulated time of the failure (NaN when ok) |
 
     "ok" means every step converged to newton_tol, not that the time step is small enough:
-    see docs/numerics.md, "What ok promises".
+    see docs/numerics.md, "What ok promises". An ok instance whose final shape is not physical
+    (shape_sane False) is reported in a RuntimeWarning as well.
 
     `trajectory`: long table (instance, t_s, x_mm, y_mm, heading_deg): the centroid relative to
     its start and the body rotation at every record time (NaN from a failure on); empty without
@@ -383,6 +384,14 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
                       f"out of its {solver.max_newton} iterations (newton_capped): f32 barely "
                       f"resolves newton_tol = {solver.newton_tol:g} m for them, and their results "
                       f"can be far off; run them in f64", RuntimeWarning, stacklevel=4)
+    unphysical = summary["status"].eq("ok") & ~summary["shape_sane"].astype(bool)
+    if unphysical.any():
+        first = int(np.flatnonzero(unphysical.to_numpy())[0])
+        warnings.warn(f"{int(unphysical.sum())} of {batch} 'ok' instances (the first: instance "
+                      f"{first}) end in a shape that is not physical (shape_sane False, "
+                      f"max_strain up to {summary.loc[unphysical, 'max_strain'].max():.3g}): "
+                      f"every step was solved, but their parameters or time step take the "
+                      f"rods beyond what the model describes", RuntimeWarning, stacklevel=4)
 
     trajectory = pd.DataFrame({"instance": pd.Series(dtype=int), "t_s": pd.Series(dtype=float),
                                "x_mm": pd.Series(dtype=float), "y_mm": pd.Series(dtype=float),

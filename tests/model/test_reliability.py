@@ -283,3 +283,22 @@ def test_an_adaptive_robot_stops_at_the_step_limit_or_a_step_that_cannot_advance
     alone.advance(0.007)
     neighbour, by_itself = state.iloc[1].drop("instance"), alone.state().iloc[0].drop("instance")
     pd.testing.assert_series_equal(neighbour, by_itself, check_names=False)
+
+
+def test_an_ok_instance_with_an_unphysical_shape_is_reported_in_a_warning():
+    """Every step solved ("ok") but the rods strained beyond the sanity limit: the run says so
+    in a RuntimeWarning naming the count and the first instance (a default robot beside it is
+    sane; alone it runs without the warning)."""
+    flailing = ts.StarParams(gait="A1+A2+A3+A4+A5+A6+A7+A8", alpha=10, fluid_density=2e4,
+                             cylinder_mass_per_height=1e-3, added_mass_coeff=0,
+                             actuator_gains=(5.0,) * 8, youngs_modulus=1e3,
+                             limb_stiffness_ratio=0.01)
+    with pytest.warns(RuntimeWarning, match=r"^1 of 2 'ok' instances \(the first: instance 1\) "
+                                            r"end in a shape that is not physical \(shape_sane "
+                                            r"False, max_strain up to 0.15\)"):
+        result = ts.simulate([ts.StarParams(), flailing], 0.2)
+    assert result.summary.status.tolist() == ["ok", "ok"]
+    assert result.summary.shape_sane.tolist() == [True, False]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ts.simulate([ts.StarParams()], 0.2)
