@@ -167,7 +167,8 @@ def _named_fields_only(cls):
 
 
 def _check_choice(name, value, choices):
-    if value not in choices:
+    # a word first: `in` on an array or a list of words would compare element-wise or fail
+    if not isinstance(value, str) or value not in choices:
         raise ValueError(f"{name} must be one of {list(choices)}, got {value!r}")
 
 

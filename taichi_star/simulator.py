@@ -89,7 +89,8 @@ class SimulatorSnapshot:
                              "dt": self.dt, "params": list(self.params)})
         archive = io.BytesIO()
         np.savez(archive, __header__=np.array(header), **self.fields)
-        write_atomic(path, archive.getvalue())
+        # an OSError all the same, but naming the file asked for, not the temporary beside it
+        write_atomic(path, archive.getvalue(), failure=OSError)
         return path
 
     @classmethod
@@ -185,7 +186,11 @@ class Simulator:
                 raise ValueError(f"commands must hold one gait per instance ({batch}), got "
                                  f"{len(commands)}")
             return np.stack([Gait.parse(c).mask.astype(bool) for c in commands])
-        array = np.asarray(commands)
+        try:
+            array = np.asarray(commands)
+        except ValueError:  # rows of different lengths or kinds (a gait beside an array)
+            raise ValueError(f"commands must be a ({batch}, {N_ACTUATORS}) boolean array or a "
+                             f"list of {batch} gaits, got a mixture that is neither") from None
         if array.shape != (batch, N_ACTUATORS):
             raise ValueError(f"commands must be a ({batch}, {N_ACTUATORS}) boolean array or a list "
                              f"of {batch} gaits, got shape {array.shape}")

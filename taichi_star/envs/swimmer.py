@@ -124,6 +124,16 @@ def observation_space(task: SwimmerTask) -> spaces.Box:
     return spaces.Box(low=low, high=high, dtype=np.float32)
 
 
+def checked_seed(seed, name: str = "seed"):
+    """`seed` if it is None or an int >= 0 (what gymnasium's generators take), as a Python int;
+    else ValueError naming it, before anything is reset."""
+    if seed is None:
+        return None
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0:
+        raise ValueError(f"{name} must be None or an integer >= 0, got {seed!r}")
+    return int(seed)
+
+
 def checked_options(options, allowed: Sequence[str]) -> dict:
     """A copy of `reset`'s options: None gives {}; ValueError naming the options for anything
     but a dict, or naming the keys outside `allowed` (a misspelt "gaol" would otherwise be
@@ -352,7 +362,7 @@ class StarSwimmerEnv(gym.Env):
 
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
         options = checked_options(options, ("goal",))
-        super().reset(seed=seed)
+        super().reset(seed=checked_seed(seed))
         self.batch.reset([0], [self.np_random], goal_from_options(options, 1))
         return self._observe()
 
@@ -402,24 +412,25 @@ class StarSwimmerVectorEnv(VectorEnv):
         None, an int s (robot b gets s + b) or a list of num_envs ints/None. options["goal"]:
         (2,) for every reset robot or (num_envs, 2) mm."""
         options = checked_options(options, ("goal", "reset_mask"))
-        # the vector env's own generator takes an int seed only; the robots' are set below
-        super().reset(seed=seed if isinstance(seed, numbers.Integral) else None)
         mask = np.ones(self.num_envs, dtype=bool)
         if "reset_mask" in options:
             mask = np.asarray(options.pop("reset_mask"))
             if mask.shape != (self.num_envs,) or mask.dtype != bool:
                 raise ValueError(f"options['reset_mask'] must be a ({self.num_envs},) bool "
                                  f"array, got {mask.dtype} {mask.shape}")
+        # every seed checked before any generator is replaced: a bad one changes nothing
         if seed is None:
             seeds = [None] * self.num_envs
         elif isinstance(seed, numbers.Integral) and not isinstance(seed, bool):
-            seeds = [int(seed) + b for b in range(self.num_envs)]
+            seeds = [checked_seed(seed) + b for b in range(self.num_envs)]
         elif isinstance(seed, (list, tuple)) and len(seed) == self.num_envs:
-            seeds = list(seed)
+            seeds = [checked_seed(value, f"seed[{b}]") for b, value in enumerate(seed)]
         else:
             raise ValueError(f"seed must be None, an int or a list of {self.num_envs} seeds, "
                              f"got {seed!r}")
         goals = goal_from_options(options, self.num_envs)
+        # the vector env's own generator takes an int seed only; the robots' are set below
+        super().reset(seed=seed if isinstance(seed, numbers.Integral) else None)
         rows = np.flatnonzero(mask)
         for b in rows:
             if seeds[b] is not None:  # as Env.reset: no seed keeps the robot's generator going

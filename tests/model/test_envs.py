@@ -104,6 +104,31 @@ def test_reset_is_reproducible_and_goals_follow_the_seed(single):
     assert np.hypot(*info["goal_mm"]) == pytest.approx(50.0)
 
 
+def test_a_bad_seed_is_a_value_error_and_changes_no_robot(single):
+    """Gymnasium's generators take None or an int >= 0: anything else is refused with a
+    ValueError naming it (was gymnasium's own error), and in the vector env before any robot's
+    generator is replaced (robot 0's was, before robot 1's seed was found bad)."""
+    for seed, message in ((-1, "seed must be None or an integer >= 0, got -1"),
+                          (1.5, "seed must be None or an integer >= 0, got 1.5"),
+                          (True, "seed must be None or an integer >= 0, got True")):
+        with pytest.raises(ValueError) as error:
+            single.reset(seed=seed)
+        assert str(error.value) == message
+    envs = StarSwimmerVectorEnv(2, **SHORT)
+    envs.reset(seed=3)
+    generators = [generator.bit_generator.state for generator in envs._generators]
+    for seed, message in (([1, -2], "seed[1] must be None or an integer >= 0, got -2"),
+                          (-1, "seed must be None or an integer >= 0, got -1")):
+        with pytest.raises(ValueError) as error:
+            envs.reset(seed=seed)
+        assert str(error.value) == message
+        assert [g.bit_generator.state for g in envs._generators] == generators
+    replaced, kept = envs._generators
+    envs.reset(seed=[0, None])   # 0 is a seed, None keeps robot 1's generator going
+    assert envs._generators[0] is not replaced and envs._generators[1] is kept
+    envs.close()
+
+
 def test_make_vec_builds_the_native_vector_env():
     envs = gym.make_vec(ENV_ID, num_envs=2, **KWARGS)
     assert isinstance(envs, StarSwimmerVectorEnv)

@@ -448,3 +448,18 @@ def test_a_snapshot_without_parameters_loads_as_before(tmp_path):
     other = ts.Simulator([p.replace(alpha=2.0) for p in sim.params])
     other.load(earlier.write(tmp_path / "earlier"))
     np.testing.assert_array_equal(other.time_s, sim.time_s)
+
+
+def test_mixed_commands_and_a_missing_folder_are_named_in_plain_words(tmp_path):
+    """A gait beside a mask is neither form of `commands` (NumPy's "inhomogeneous shape" was
+    the message); saving into a folder that does not exist names the file asked for, not the
+    temporary beside it."""
+    sim = commanded()
+    before = sim.save().fields
+    with pytest.raises(ValueError, match=r"^commands must be a \(3, 8\) boolean array or a list "
+                                         r"of 3 gaits, got a mixture that is neither$"):
+        sim.fire(["A1", np.zeros(8, dtype=bool), "A3"])
+    assert all(np.array_equal(sim.save().fields[name], before[name]) for name in before)
+    with pytest.raises(OSError, match=r"^cannot write state.npz \(No such file or directory\)$"):
+        sim.save(tmp_path / "missing" / "state")
+    assert not (tmp_path / "missing").exists()

@@ -459,3 +459,12 @@ def test_identified_preset_equals_the_committed_study_result():
     for field, text in zip(table["field"], table["value"]):
         value = ast.literal_eval(str(text))
         assert np.asarray(IDENTIFIED_FIELDS[field]) == pytest.approx(np.asarray(value), rel=1e-9)
+
+
+def test_a_choice_field_given_an_array_or_a_list_names_the_field():
+    """`in` on an array compares element-wise (NumPy's "truth value ... is ambiguous" was the
+    message); a list of words is not a word either."""
+    for value in (np.array(["contract", "always"]), ["contract"], None, 3):
+        with pytest.raises(ValueError) as error:
+            ts.StarParams(jet_mode=value)
+        assert str(error.value) == f"jet_mode must be one of ['contract', 'always'], got {value!r}"
