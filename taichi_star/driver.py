@@ -69,6 +69,14 @@ class RunTiming:
                 f"{self.collect_s:.2f} s")
 
 
+def check_flag(name: str, value) -> bool:
+    """`value` as a bool if it is one (NumPy's included); else ValueError naming it (a text
+    such as "no" would otherwise switch the option on)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
+
+
 def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float, batch: int,
               steps_taken: Optional[int] = None):
     """ValueError before any compute unless a run of `batch` instances for duration_s (s) with
@@ -77,12 +85,13 @@ def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float,
     None for a run from t = 0; adaptive steps: the fewest, at dt_max or at the record interval
     if shorter, with a RuntimeWarning when the most, at dt_min, could pass the limit), with
     adaptive steps a record interval of at least dt_min, and with fixed steps at least one step
-    and a record interval of whole steps. A record interval longer than the run warns: its
-    trajectory holds the start alone."""
+    and a record interval of whole steps. A record interval longer than the run warns: no
+    record falls after its start."""
     if record_interval_s and multiples_within(duration_s, record_interval_s) == 0:
         warnings.warn(f"record_interval_s = {record_interval_s:g} s is longer than duration_s = "
-                      f"{duration_s:g} s: the trajectory holds only the start (the summary has "
-                      f"the end)", RuntimeWarning, stacklevel=3)
+                      f"{duration_s:g} s: no record falls after the start (simulate's trajectory "
+                      f"holds the start alone, Simulator.advance returns no rows)",
+                      RuntimeWarning, stacklevel=3)
     after = "" if steps_taken is None else f"after the {steps_taken} steps taken"
     taken = steps_taken or 0
     if solver.adaptive:

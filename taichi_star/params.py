@@ -529,9 +529,11 @@ class SolverConfig:
     error_tol: float = 1e-7
     """Adaptive stepping: largest local error per step of any node position, m; [1e-12, 1e-3]."""
     dt_min: float = 1e-6
-    """Adaptive stepping: smallest step, s; (0, dt]."""
+    """Adaptive stepping: smallest step, s; (0, 0.05], at most dt_max, and at most dt when
+    adaptive (unused with fixed steps)."""
     dt_max: float = 0.05
-    """Adaptive stepping: largest step, s; [dt, 0.05]."""
+    """Adaptive stepping: largest step, s; (0, 0.05], and at least dt when adaptive (unused
+    with fixed steps)."""
 
     def __post_init__(self):
         object.__setattr__(self, "dt", _check_number("dt", self.dt, 0.0, MAX_DT, False))

@@ -18,7 +18,7 @@ from .geometry import CENTRE, Topology
 from .model import validate_batch
 from .params import (PER_ACTUATOR_FIELDS, SolverConfig, StarParams, check_precision,
                      parameter_column)
-from .driver import Clock, RunTiming, check_run, drive, robots_label
+from .driver import Clock, RunTiming, check_flag, check_run, drive, robots_label
 from . import sensitivities as tangents
 from .runtime import Runtime, check_arch, stream_chunk_size
 from .state import STATUS_NAMES, STATUS_OK
@@ -171,7 +171,7 @@ def validate_call(params, duration_s, solver, record_interval_s, record_shapes, 
     check_precision(params, solver)
     record_interval_s = _check_real("record_interval_s", record_interval_s, 0.0, allow_equal=True)
     check_run(solver, duration_s, record_interval_s, len(params))
-    if record_shapes and record_interval_s == 0:
+    if check_flag("record_shapes", record_shapes) and record_interval_s == 0:
         raise ValueError("record_shapes needs record_interval_s > 0 (the spacing of the records)")
     if isinstance(steady_from_cycle, bool) or not isinstance(steady_from_cycle, numbers.Integral) \
             or steady_from_cycle < 0:
@@ -211,6 +211,7 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     params, duration_s, record_interval_s = validate_call(params, duration_s, solver,
                                                           record_interval_s, record_shapes,
                                                           steady_from_cycle)
+    check_flag("progress", progress)
     directions = tangents.parse_directions(sensitivities)
     tangents.check_directions(directions, params, solver)
     check_arch(arch)

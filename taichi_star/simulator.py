@@ -37,7 +37,7 @@ import pandas as pd
 from . import metrics
 from . import sensitivities as tangents
 from .actuation import NEVER
-from .driver import Clock, RunTiming, check_run, drive, robots_label
+from .driver import Clock, RunTiming, check_flag, check_run, drive, robots_label
 from .gait import N_ACTUATORS, Gait
 from .geometry import CENTRE
 from .model import validate_batch
@@ -218,7 +218,19 @@ class Simulator:
         if isinstance(at_s, bool) or not isinstance(at_s, numbers.Real) or not math.isfinite(at_s):
             raise ValueError(f"at_s must be a finite time in s, got {at_s!r}")
         if self.solver.adaptive:
-            schedule.command(mask, at_s, self.time_s)
+            check_work(f"at_s = {at_s!r} s (at most {MAX_STEPS_PER_INSTANCE * self.solver.dt_max:.6g}"
+                       f" s at dt_max = {self.solver.dt_max:g} s)", abs(at_s / self.solver.dt_max))
+            # a step ends on every firing: one closer than dt_min after an instance's time would
+            # force a step shorter than the controller's floor (at or before it: refused below)
+            times = self.time_s
+            soon = np.flatnonzero(mask.any(axis=1) & (times < at_s)
+                                  & (at_s < times + self.solver.dt_min))
+            if len(soon):
+                raise ValueError(f"at_s = {at_s:.9g} s is less than dt_min = "
+                                 f"{self.solver.dt_min:g} s after the current time of instance "
+                                 f"{int(soon[0])} ({times[soon[0]]:.9g} s): a step would have to "
+                                 f"end there")
+            schedule.command(mask, at_s, times)
             return
         check_work(f"at_s = {at_s!r} s (at most {MAX_STEPS_PER_INSTANCE * self.solver.dt:.6g} s "
                    f"at dt = {self.solver.dt:g} s)", abs(at_s / self.solver.dt))
@@ -243,6 +255,7 @@ class Simulator:
                                   or not 0 < record_interval_s < math.inf):
             raise ValueError(f"record_interval_s must be a finite number > 0 s (or 0: no "
                              f"records), got {record_interval_s!r}")
+        check_flag("progress", progress)
         check_run(self.solver, duration_s, record_interval_s, self.n_instances,
                   steps_taken=int(self._steps().max(initial=0)))
         clock = Clock(self.solver, duration_s)

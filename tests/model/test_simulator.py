@@ -400,6 +400,18 @@ def test_adaptive_simulator_lands_on_scheduled_firings_and_matches_simulate():
         with pytest.raises(ValueError, match=rf"at_s = {late:g} s is not after the current "
                                              rf"time of instance 0 \(0.4 s\)"):
             sim.fire(GAITS[:2], at_s=late)
+    # a firing is a step end: closer than dt_min after now would force a shorter step; dt_min
+    # itself is the shortest allowed (checked on a copy: the same bits below need the schedule
+    # as simulate's); past the step counter at dt_max, a firing is never reached
+    now, dt_min = sim.time_s[0], solver.dt_min
+    with pytest.raises(ValueError, match=rf"^at_s = {now + dt_min / 2:.9g} s is less than dt_min "
+                                         rf"= {dt_min:g} s after the current time of instance 0"):
+        sim.fire(GAITS[:2], at_s=now + dt_min / 2)
+    probe = ts.Simulator(sim.params, solver)
+    probe.load(sim.save())
+    probe.fire(GAITS[:2], at_s=now + dt_min)
+    with pytest.raises(ValueError, match=r"^at_s = 1e\+300 s \(at most .* s at dt_max"):
+        probe.fire(GAITS[:2], at_s=1e300)
     sim.fire(GAITS[:2], at_s=2 * PERIOD)
     sim.advance(PERIOD)
     np.testing.assert_array_equal(sim.shapes(), reference.shapes[-1])

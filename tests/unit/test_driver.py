@@ -59,7 +59,7 @@ def test_a_record_interval_longer_than_the_run_warns_and_one_as_long_does_not():
         check_run(SolverConfig(), 0.2, 0.0, 1)
         check_run(SolverConfig(adaptive=True), 0.3, 0.1, 1)   # 0.3 / 0.1 = 2.9999999999999996
     with pytest.warns(RuntimeWarning, match=r"^record_interval_s = 0\.201 s is longer than "
-                                            r"duration_s = 0\.2 s: the trajectory holds only the "
+                                            r"duration_s = 0\.2 s: no record falls after the "
                                             r"start"):
         check_run(SolverConfig(), 0.2, 0.201, 1)
 
