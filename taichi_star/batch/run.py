@@ -51,9 +51,9 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
 
     `run_dir`: a run store (`RunStore`): every finished chunk's summary is written there as it
     arrives; with `resume` (which needs `run_dir`), verified chunks already there are not
-    recomputed (damaged or foreign ones are reported and recomputed), and the summary is read
-    back from the store. The trajectory then covers only the chunks computed by this call. The
-    store's chunks are Parquet files: `run_dir` needs pyarrow (the `io` extra).
+    recomputed (damaged or foreign ones are reported and recomputed), and the summary and the
+    trajectory are read back from the store (a chunk stored before the store kept trajectories
+    has none). The store's chunks are Parquet files: `run_dir` needs pyarrow (the `io` extra).
 
     `timing` sums the `RunTiming` of the chunks computed by this call (not those a resume
     read back; chunks on worker processes overlap, so its phases add up to more than the
@@ -101,7 +101,7 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
         for result in executor.run(todo, progress=progress and isinstance(executor, InProcess)):
             task = tasks[result.index]
             if store is not None:
-                store.write(task, result.summary)
+                store.write(task, result.summary, result.trajectory)
             summaries[result.index] = result.summary
             trajectories.append(result.trajectory)
             if result.timing is not None:
@@ -117,6 +117,9 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
             owned.shutdown()
     if store is not None:
         summaries = {task.index: store.read(task) for task in tasks}
+        # every chunk's records from the store, those a resume did not compute as well
+        trajectories = [trajectory for trajectory in map(store.read_trajectory, tasks)
+                        if trajectory is not None]
         store.finish()
 
     summary = pd.concat([summaries[task.index] for task in tasks], ignore_index=True)

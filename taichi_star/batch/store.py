@@ -7,7 +7,11 @@ long batch can be resumed after a crash or a kill.
 - `chunk_<index>.parquet`: one finished chunk's summary table (Parquet: a portable format that
   keeps every float bit and dtype; it needs pyarrow, the `io` extra, which `RunStore.open`
   asks for before any compute). Its schema metadata carries the definition's SHA-256, the
-  chunk index, its instances and a SHA-256 of the table's content.
+  chunk index, its instances and a SHA-256 of the table's content, and for a run with records
+  the SHA-256 of its trajectory.
+- `trajectory_<index>.parquet`: that chunk's trajectory (a run with records), stamped the same
+  way and written before the summary, whose file marks the chunk finished: a resumed run has
+  every chunk's records, not only those it computed.
 - Every file is written to a temporary name, flushed and renamed (`os.replace`): a kill leaves
   whole files or none.
 
@@ -44,10 +48,11 @@ METADATA_KEY = b"taichi_star.chunk"
 VALUE_TYPES = {"CurvatureProfile": CurvatureProfile}
 """Value objects a summary column may hold; stored as JSON of their fields."""
 REQUIRED_STAMP_KEYS = {"definition_sha256", "chunk", "members", "sha256"}
-STAMP_KEYS = REQUIRED_STAMP_KEYS | {"value_types"}
+STAMP_KEYS = REQUIRED_STAMP_KEYS | {"value_types", "trajectory_sha256"}
 """The keys a chunk's metadata stamp may hold: all the required ones, value_types only where
-the chunk has value-object columns, nothing else (a damaged key name is an unknown key, so it
-cannot drop what it says, e.g. the value types, silently)."""
+the chunk has value-object columns, trajectory_sha256 only where it has a stored trajectory,
+nothing else (a damaged key name is an unknown key, so it cannot drop what it says, e.g. the
+value types, silently)."""
 
 log = logging.getLogger("taichi_star.batch")
 
@@ -153,8 +158,14 @@ class RunStore:
     def chunk_path(self, index: int) -> Path:
         return self.path / f"chunk_{index:06d}.parquet"
 
+    def trajectory_path(self, index: int) -> Path:
+        return self.path / f"trajectory_{index:06d}.parquet"
+
     def _chunk_files(self) -> List[Path]:
         return sorted(self.path.glob("chunk_*.parquet"))
+
+    def _trajectory_files(self) -> List[Path]:
+        return sorted(self.path.glob("trajectory_*.parquet"))
 
     def read_manifest(self) -> Optional[Dict]:
         """The folder's manifest, None if it has none; RunStoreError if it is damaged."""
@@ -208,7 +219,7 @@ class RunStore:
                     f"{old['definition'].get('n_chunks')} chunks done): resume it, or delete the "
                     f"folder / choose another {self.flag} to start over")
             else:  # a finished (or empty) run is replaced by a fresh one
-                for path in finished:
+                for path in finished + self._trajectory_files():
                     path.unlink()
         try:
             self.path.mkdir(parents=True, exist_ok=True)
@@ -228,8 +239,9 @@ class RunStore:
         was deleted) and `resume`, the indices of the chunks whose own stamp says they belong
         to this run (the others are recomputed); else RunStoreError saying what to do."""
         chunks = set(self._chunk_files())
+        stored = chunks | set(self._trajectory_files())
         others = [p.name for p in self.path.iterdir()
-                  if p not in chunks and not p.name.startswith(".")]
+                  if p not in stored and not p.name.startswith(".")]
         if others or not chunks:
             raise RunStoreError(f"{self.flag} {self.path}: not empty and has no {MANIFEST}; not "
                                 f"a run folder (choose another {self.flag})")
@@ -252,37 +264,67 @@ class RunStore:
             f"{self.flag} {self.path}: {reason}; the chunks stored before are kept: make room "
             f"and resume"))
 
-    def write(self, task: ChunkTask, summary: pd.DataFrame) -> Path:
-        """Store one finished chunk's summary (atomically)."""
+    def write(self, task: ChunkTask, summary: pd.DataFrame,
+              trajectory: Optional[pd.DataFrame] = None) -> Path:
+        """Store one finished chunk's summary and, where it has records, its trajectory (each
+        atomically; the trajectory first, so that a chunk file means the chunk is whole)."""
+        extra = {}
+        if trajectory is not None and len(trajectory):
+            extra["trajectory_sha256"] = self._write_table(self.trajectory_path(task.index),
+                                                           task, trajectory)
+        self._write_table(self.chunk_path(task.index), task, summary, extra)
+        return self.chunk_path(task.index)
+
+    def _write_table(self, path: Path, task: ChunkTask, frame: pd.DataFrame,
+                     extra: Optional[Dict] = None) -> str:
+        """Write `frame` as `task`'s stamped Parquet file at `path`; returns its checksum."""
         pa, pq = _parquet()
-        encoded, types = _encode(summary)
+        encoded, types = _encode(frame)
         table = pa.Table.from_pandas(encoded, preserve_index=False)
+        checksum = table_checksum(encoded)
         stamp = {"definition_sha256": self.definition_sha256, "chunk": task.index,
-                 "members": list(map(int, task.members)), "sha256": table_checksum(encoded),
-                 "value_types": types}
+                 "members": list(map(int, task.members)), "sha256": checksum,
+                 "value_types": types, **(extra or {})}
         table = table.replace_schema_metadata({**(table.schema.metadata or {}),
                                                METADATA_KEY: _canonical(stamp).encode()})
         sink = pa.BufferOutputStream()
         pq.write_table(table, sink)
-        path = self.chunk_path(task.index)
         self._write(path, sink.getvalue().to_pybytes())
-        return path
+        return checksum
 
     def _load(self, task: ChunkTask) -> pd.DataFrame:
-        """The chunk's table; ValueError saying why it cannot be trusted."""
-        path = self.chunk_path(task.index)
+        """The chunk's summary, its trajectory (if stored) checked against the checksum the
+        summary's stamp holds; ValueError saying why it cannot be trusted."""
+        summary, stamp = self._load_table(self.chunk_path(task.index), task)
+        if "trajectory_sha256" in stamp:
+            _, trajectory_stamp = self._load_table(self.trajectory_path(task.index), task,
+                                                   "its trajectory ")
+            if trajectory_stamp["sha256"] != stamp["trajectory_sha256"]:
+                raise ValueError("its trajectory is another one than the summary's")
+        return summary
+
+    def _load_table(self, path: Path, task: ChunkTask, what: str = ""):
+        """(table, stamp) of the file at `path` written for `task`; ValueError (its reason
+        prefixed by `what`) saying why it cannot be trusted."""
         try:
             data = path.read_bytes()
         except OSError as error:
-            raise ValueError(f"unreadable ({error.strerror})") from None
-        return self.decode_chunk(data, task)
+            raise ValueError(f"{what}unreadable ({error.strerror})") from None
+        try:
+            return self.decode_table(data, task)
+        except ValueError as error:
+            raise ValueError(f"{what}{error}") from None
 
     def decode_chunk(self, data: bytes, task: ChunkTask) -> pd.DataFrame:
-        """The table in the bytes of a chunk file written for `task`; ValueError saying why it
-        cannot be trusted. Any failure to decode is such an error, whatever raised it (a damaged
-        file can make pyarrow or pandas fail in any way: a bit flip in the pandas metadata
-        gives KeyError or TypeError from `to_pandas`); a missing pyarrow is not damage: its
-        ImportError propagates."""
+        """The table in the bytes of a chunk file written for `task` (`decode_table`)."""
+        return self.decode_table(data, task)[0]
+
+    def decode_table(self, data: bytes, task: ChunkTask):
+        """(the table, its stamp) in the bytes of a file written for `task`; ValueError saying
+        why it cannot be trusted. Any failure to decode is such an error, whatever raised it (a
+        damaged file can make pyarrow or pandas fail in any way: a bit flip in the pandas
+        metadata gives KeyError or TypeError from `to_pandas`); a missing pyarrow is not
+        damage: its ImportError propagates."""
         pa, pq = _parquet()
         try:
             table = pq.read_table(pa.BufferReader(data))
@@ -302,7 +344,7 @@ class RunStore:
             frame = table.to_pandas()
             if table_checksum(frame) != stamp["sha256"]:
                 raise ValueError("its content does not match its checksum")
-            return _decode(frame, stamp.get("value_types", {}))
+            return _decode(frame, stamp.get("value_types", {})), stamp
         except ValueError:
             raise
         except Exception as error:  # noqa: BLE001 -- damage may surface as any exception
@@ -318,6 +360,7 @@ class RunStore:
         except ValueError as error:
             log.warning("%s: %s; recomputing it", path, error)
             path.unlink()
+            self.trajectory_path(task.index).unlink(missing_ok=True)
             return False
         return True
 
@@ -327,6 +370,22 @@ class RunStore:
             return self._load(task)
         except ValueError as error:
             raise RunStoreError(f"{self.chunk_path(task.index)}: {error}") from None
+
+    def read_trajectory(self, task: ChunkTask) -> Optional[pd.DataFrame]:
+        """A stored chunk's trajectory, verified against its summary's stamp (RunStoreError if
+        it changed since `open`); None where the chunk stored none (a run without records, or
+        a chunk stored before trajectories were)."""
+        try:
+            _, stamp = self._load_table(self.chunk_path(task.index), task)
+            if "trajectory_sha256" not in stamp:
+                return None
+            trajectory, trajectory_stamp = self._load_table(self.trajectory_path(task.index),
+                                                            task, "its trajectory ")
+            if trajectory_stamp["sha256"] != stamp["trajectory_sha256"]:
+                raise ValueError("its trajectory is another one than the summary's")
+        except ValueError as error:
+            raise RunStoreError(f"{self.chunk_path(task.index)}: {error}") from None
+        return trajectory
 
     def finish(self):
         self.manifest["complete"] = True

@@ -43,6 +43,23 @@ def test_chunked_batch_equals_one_simulate_call(direct):
     assert result.timing.run_s > 0.0
 
 
+def test_a_resumed_batch_has_every_chunks_records_from_its_store(tmp_path, direct):
+    """The store keeps each chunk's trajectory beside its summary: a run resumed after losing a
+    chunk recomputes that one and reads the others' records back, so its trajectory is the
+    whole run's, bit for bit (it used to hold the recomputed chunks' records alone)."""
+    run_dir = tmp_path / "run"
+    whole = run_batch(PARAMS, DURATION, solver=SOLVER, chunk_size=2, record_interval_s=0.1,
+                      run_dir=run_dir)
+    (run_dir / "chunk_000001.parquet").unlink()   # as if killed before chunk 1 was stored
+    resumed = run_batch(PARAMS, DURATION, solver=SOLVER, chunk_size=2, record_interval_s=0.1,
+                        run_dir=run_dir, resume=True)
+    for result in (whole, resumed):
+        pd.testing.assert_frame_equal(result.trajectory, direct.trajectory, check_exact=True)
+        pd.testing.assert_frame_equal(result.summary.drop(columns=["instance", "duration_s"]),
+                                      direct.summary, check_exact=True)
+    assert resumed.timing.robot_steps == 2 * 300   # chunk 1 alone was computed
+
+
 def test_a_single_starparams_is_a_batch_of_one_and_a_string_is_refused(monkeypatch, direct):
     alone = run_batch(PARAMS[0], DURATION, solver=SOLVER)
     pd.testing.assert_frame_equal(alone.summary.drop(columns=["instance", "duration_s"]),

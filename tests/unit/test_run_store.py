@@ -535,3 +535,67 @@ def test_write_atomic_writes_whole_or_leaves_the_previous_file(tmp_path, full_di
                                              r"device\)$"):
             provenance.write_atomic(path, b"x", failure=ValueError)
     assert path.read_bytes() == b"a,b\n3,4\n"
+
+
+# --- trajectories ---
+
+def trajectory_of(task, records=3):
+    """A chunk trajectory shaped like run_chunk's: instance, t_s and three coordinates per
+    record, numbers whose last bits matter."""
+    members = np.repeat(np.asarray(task.members, dtype=np.int64), records)
+    times = np.tile(np.arange(records) * 0.02, len(task.members))
+    return pd.DataFrame({"instance": members, "t_s": times, "x_mm": members / 7.0 + times,
+                         "y_mm": -members / 3.0, "heading_deg": times * np.pi})
+
+
+def test_a_chunks_trajectory_is_stored_beside_it_and_read_back_bitwise(tmp_path):
+    folder = tmp_path / "run"
+    tasks = tasks_of()
+    store = store_in(folder)
+    store.open(tasks, resume=False)
+    store.write(tasks[0], summary_of(tasks[0]), trajectory_of(tasks[0]))
+    store.write(tasks[1], summary_of(tasks[1]), trajectory_of(tasks[1]).iloc[:0])  # no records
+    assert store.trajectory_path(0) == folder / "trajectory_000000.parquet"
+    assert store.trajectory_path(0).exists() and not store.trajectory_path(1).exists()
+    pd.testing.assert_frame_equal(store.read_trajectory(tasks[0]), trajectory_of(tasks[0]),
+                                  check_exact=True)
+    assert store.read_trajectory(tasks[1]) is None
+    # the stamp ties the summary to its trajectory: resuming verifies both
+    again = store_in(folder)
+    assert again.open(tasks, resume=True) == [0, 1]
+
+
+def test_a_damaged_or_swapped_trajectory_recomputes_its_chunk(tmp_path, caplog):
+    folder = tmp_path / "run"
+    tasks = tasks_of(params=PARAMS * 3)   # four chunks of three instances
+    assert len(tasks) == 4
+    store = RunStore(folder, definition_of(params=PARAMS * 3))
+    store.open(tasks, resume=False)
+    for task in tasks:
+        store.write(task, summary_of(task), trajectory_of(task))
+    # chunk 0: its trajectory's bytes cut; chunk 1: chunk 2's trajectory (same size, its own
+    # stamp) put in its place; chunk 2: its trajectory deleted
+    path = store.trajectory_path(0)
+    path.write_bytes(path.read_bytes()[:-20])
+    shutil.copy(store.trajectory_path(2), store.trajectory_path(1))
+    store.trajectory_path(2).unlink()
+    with caplog.at_level(logging.WARNING, logger="taichi_star.batch"):
+        done = RunStore(folder, definition_of(params=PARAMS * 3)).open(tasks, resume=True)
+    assert done == [3]   # the one chunk left whole
+    reasons = caplog.text
+    assert "its trajectory unreadable" in reasons
+    assert "its trajectory holds another chunk's instances" in reasons
+    assert "its trajectory unreadable (No such file or directory)" in reasons
+    for index in (0, 1, 2):
+        assert not store.chunk_path(index).exists() and not store.trajectory_path(index).exists()
+
+
+def test_a_folder_of_chunks_and_trajectories_without_a_manifest_is_resumable(tmp_path):
+    folder = tmp_path / "run"
+    tasks = tasks_of()
+    store = store_in(folder)
+    store.open(tasks, resume=False)
+    for task in tasks:
+        store.write(task, summary_of(task), trajectory_of(task))
+    (folder / "manifest.json").unlink()
+    assert store_in(folder).open(tasks, resume=True) == [0, 1]
