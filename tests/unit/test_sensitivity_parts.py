@@ -4,6 +4,7 @@ made before any compute, the replicas' batch and tables, and the derivatives rea
 their outputs. Each rule is tested at both sides of its boundary."""
 
 import dataclasses
+import difflib
 import re
 import warnings
 
@@ -38,7 +39,8 @@ def test_fields_and_actuator_numbers_become_directions_in_the_order_named():
 
 
 @pytest.mark.parametrize("name", ["actuator_gains[8]", "actuator_gains[-1]", "actuator_gains[1",
-                                  "actuator_gains[]", "actuator_gains[x]", "actuator_gains[ 1]"])
+                                  "actuator_gains[]", "actuator_gains[x]", "actuator_gains[ 1]",
+                                  "actuator_gains[12]", "actuator_gains[10]"])
 def test_an_actuator_index_outside_0_to_7_or_not_a_number_is_refused(name):
     with pytest.raises(ValueError) as error:
         parse_directions([name])
@@ -54,9 +56,16 @@ def test_a_field_that_is_not_a_real_coefficient_is_named_not_differentiable(name
 
 
 def test_an_unknown_name_gets_the_closest_fields_and_no_hint_when_nothing_is_close():
-    with pytest.raises(ValueError, match=r"^sensitivities: 'alpah' is not a StarParams field; "
-                                         r"did you mean alpha\?"):
+    listed = ", ".join(DIFFERENTIABLE_FIELDS)
+    with pytest.raises(ValueError) as error:
         parse_directions(["alpah"])
+    assert str(error.value) == (f"sensitivities: 'alpah' is not a StarParams field; did you mean "
+                                f"alpha? (differentiable fields: {listed})")
+    # at most the three closest, comma-separated (difflib's order: the closest first)
+    close = difflib.get_close_matches("actuator", DIFFERENTIABLE_FIELDS, n=10)
+    assert len(close) > 3
+    with pytest.raises(ValueError, match=rf"; did you mean {', '.join(close[:3])}\? "):
+        parse_directions(["actuator"])
     with pytest.raises(ValueError, match=r"^sensitivities: 'zzzz' is not a StarParams field "
                                          r"\(differentiable fields: "):
         parse_directions(["zzzz"])
@@ -104,6 +113,8 @@ def test_a_moved_copy_changes_one_number_unvalidated_and_leaves_the_original():
     top = STAR_RANGES["alpha"][1]
     beyond = Direction("alpha").moved(BASE, top + 1.0)
     assert beyond.alpha == top + 1.0 and BASE.alpha == 0.8
+    first = Direction("actuator_gains", 0).moved(BASE, 0.5)   # index 0 is A1's, not the field
+    assert first.actuator_gains == (0.5,) + (1.0,) * 7
     delays = Direction("actuator_delays", 2).moved(BASE, 0.25)
     assert delays.actuator_delays == (0.0, 0.0, 0.25, 0.0, 0.0, 0.0, 0.0, 0.0)
     assert BASE.actuator_delays == (0.0,) * 8
@@ -142,6 +153,12 @@ def test_a_delay_puts_the_switch_on_a_step_end_only_when_fired_and_on_the_grid()
     for offset in (0.5 * dt, 0.1 * dt, -0.1 * dt):
         moved = fired.replace(actuator_delays=(0.0, 0.0, delay + offset) + (0.0,) * 5)
         assert not sens.delay_on_step_grid(moved, 2, dt)
+    # at 5-ms steps t0 = 32.6 steps: the switch, delay + t0, is on the grid, not delay − t0
+    coarse = 5e-3
+    on_coarse = fired.replace(actuator_delays=(0.0, 0.0, on_grid_delay(coarse, 400)) + (0.0,) * 5)
+    assert sens.delay_on_step_grid(on_coarse, 2, coarse)
+    minus = fired.replace(actuator_delays=(0.0, 0.0, 400 * coarse + 0.163) + (0.0,) * 5)
+    assert not sens.delay_on_step_grid(minus, 2, coarse)
     # A2 does not fire in A1+A3: its delay moves nothing
     assert not sens.delay_on_step_grid(
         fired.replace(actuator_delays=(0.0, delay) + (0.0,) * 6), 1, dt)
@@ -157,11 +174,14 @@ def test_a_delay_puts_the_switch_on_a_step_end_only_when_fired_and_on_the_grid()
 def test_a_delay_on_the_grid_warns_with_fixed_steps_only():
     dt = 1e-3
     on = BASE.replace(actuator_delays=(0.0, 0.0, on_grid_delay(dt, 400)) + (0.0,) * 5)
+    later = BASE.replace(actuator_delays=(0.0, 0.0, on_grid_delay(dt, 500)) + (0.0,) * 5)
     off = BASE.replace(actuator_delays=(0.0, 0.0, on_grid_delay(dt, 400) + 0.5 * dt) + (0.0,) * 5)
     directions = parse_directions(["actuator_delays[2]"])
-    with pytest.warns(UserWarning, match=r"actuator_delays\[2\] = .* s \(instance 1, 2 in all\) "
-                                         r"puts the actuation profile's switch"):
-        sens.check_directions(directions, [off, on, on], SolverConfig(dt=dt))
+    # the first such instance's delay is quoted (0.237 s = 400 ms − t0), the count is all
+    with pytest.warns(UserWarning, match=r"^sensitivities: actuator_delays\[2\] = 0.237 s "
+                                         r"\(instance 1, 2 in all\) puts the actuation profile's "
+                                         r"switch, 0.163 s after a firing"):
+        sens.check_directions(directions, [off, on, later], SolverConfig(dt=dt))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         sens.check_directions(directions, [off], SolverConfig(dt=dt))
@@ -215,6 +235,42 @@ def test_the_replicas_tables_lie_on_their_instances_tangent():
     # way): the tables must not be the plain ones
     plain = build_model([direction.moved(BASE, BASE.joint_radius + eps)]).rest_positions[0]
     assert not np.array_equal(plain, rest[plus][0])
+    # so for the masses, the inertia and every float coefficient the radius moves (lengths,
+    # curvatures, stiffnesses): each replica pair symmetric about the instance and its
+    # half-difference the derivative; the integer tables (the gait mask) the instance's
+    above_model = build_model([direction.moved(BASE, BASE.joint_radius + small)])
+    below_model = build_model([direction.moved(BASE, BASE.joint_radius - small)])
+    tables = {"mass": (model.mass, above_model.mass, below_model.mass),
+              "inertia": (model.inertia, above_model.inertia, below_model.inertia)}
+    for name, table in model.coefficients.items():
+        for key, values in table.items():
+            tables[f"{name}.{key}"] = (values, above_model.coefficients[name][key],
+                                       below_model.coefficients[name][key])
+    moved = []
+    for label, (values, up, down) in tables.items():
+        if not np.issubdtype(values.dtype, np.floating):
+            assert (values[plus] == values[0]).all() and (values[minus] == values[0]).all(), label
+            continue
+        scale = max(np.abs(values[0]).max(), 1e-300)
+        assert np.abs(values[plus] + values[minus] - 2 * values[:1]).max() <= 1e-14 * scale, label
+        difference = (up[0] - down[0]) / (2.0 * small)
+        tangent = (values[plus][0] - values[minus][0]) / (2.0 * eps)
+        assert np.abs(tangent - difference).max() <= 1e-6 * max(np.abs(difference).max(),
+                                                                 1e-12 * scale), label
+        if np.abs(difference).max() > 0:
+            moved.append(label)
+    assert {"mass", "inertia", "stretching.rest_length", "bending.rest_curvature"} <= set(moved)
+
+
+def test_a_commanded_model_lets_every_actuator_fire_its_replicas_too():
+    """`commanded` (a Simulator's batch) reaches the instances' and the replicas' tables, the
+    ±2ε batch's as well: every actuator may fire; without it each fires its gait's."""
+    directions = parse_directions(["alpha"])
+    gaits, _ = sens.replica_model([BASE], directions)
+    commanded, _ = sens.replica_model([BASE], directions, commanded=True)
+    mask = np.array([1, 0, 1, 0, 0, 0, 0, 0])  # BASE fires A1+A3
+    assert (gaits.coefficients["bending"]["gait_mask"] == mask).all()
+    assert (commanded.coefficients["bending"]["gait_mask"] == 1).all()
 
 
 def test_derivatives_are_the_pairs_central_differences_and_angles_go_the_short_way():
@@ -251,6 +307,9 @@ def test_a_runs_tables_split_into_the_instances_and_their_derivatives():
     own, own_trajectory, table, trajectory_table = sens.split_result(summary, trajectory,
                                                                      directions, steps)
     assert own["instance"].tolist() == [0, 1]
+    assert list(own.columns) == list(summary.columns)   # no index column added
+    assert list(own_trajectory.columns) == list(trajectory.columns)
+    assert list(trajectory_table.columns[:2]) == ["instance", "t_s"]
     assert own_trajectory[["instance", "t_s"]].values.tolist() == [[0, 0.0], [0, 0.5],
                                                                    [1, 0.0], [1, 0.5]]
     column = sens.sensitivity_column("displacement_x_mm", "alpha")
