@@ -56,17 +56,18 @@ def test_simd_quick(tmp_path):
 
 
 def test_simd_quick_assemblies_in_f32(tmp_path):
-    # the bending and rod drag assemblies through the study (f64 is tested directly below): the
-    # same forms, every one bitwise equal to today's, the lanes packed, the derivatives those of
-    # the NumPy energy and residual to the rounding of f32 (~1e-5 measured)
-    simd.main(["--quick", "--batch-sizes", "8", "--kernels", "bending,rod_drag", "--precisions",
+    # the bending assembly through the study (f64, and the rod drag's, are tested directly
+    # below; the rod drag's f32 forms through the study were left out for the suite's time:
+    # each form compiles its kernels): the same forms, every one bitwise equal to today's, the
+    # lanes packed, the derivatives those of the NumPy energy to the rounding of f32 (~1e-5
+    # measured)
+    simd.main(["--quick", "--batch-sizes", "8", "--kernels", "bending", "--precisions",
                "f32", "--no-progress", "--out", str(tmp_path)])
     assembly = pd.read_csv(tmp_path / "simd_assembly.csv")
-    assert len(assembly) == 8 and set(assembly["term"]) == {"bending", "rod_drag"}
-    for _, term in assembly.groupby("term"):
-        assert set(term["form"]) == set(simd.FORMS)
-    # the paper robot's chain: 193 nodes, 191 triplets, 192 edges
-    assert dict(zip(assembly["term"], assembly["n_elements"])) == {"bending": 191, "rod_drag": 192}
+    assert len(assembly) == 4 and set(assembly["term"]) == {"bending"}
+    assert set(assembly["form"]) == set(simd.FORMS)
+    # the paper robot's chain: 193 nodes, 191 triplets
+    assert (assembly["n_elements"] == 191).all()
     assert assembly["bitwise_equal_to_instance_major"].all()
     assert (assembly[assembly["form"].isin(simd.VECTOR_FORMS)]["packed_ops_in_ir"] > 0).all()
     assert (assembly["derivative_relative_error"] < 1e-3).all()
