@@ -1,6 +1,6 @@
 """The model extensions (docs/model.md): linear drag on the rods and the hub and
 per-actuator gains and delays, in the engine: off by default and compiled out, per instance,
-validated, and carried through result tables. Elsewhere: the reference's elements against
+and carried through result tables (their validation is in tests/unit/test_params.py). Elsewhere: the reference's elements against
 finite differences and its actuation against the profile's formula (tests/model/
 test_reference.py), the engine against the reference with them on (tests/model/test_engine.py,
 `test_engine_matches_reference_with_damping_joints_ends_closure_and_extensions`) and the linear
@@ -47,38 +47,7 @@ def test_per_actuator_values_are_per_instance():
     assert together.speed_mm_s[2] != together.speed_mm_s[0]
 
 
-# ---- parameters -------------------------------------------------------------------------------
-
-@pytest.mark.parametrize("changes,message", [
-    ({"actuator_gains": (1.0,) * 3}, r"actuator_gains must have 8 entries \(A1..A8\), got 3"),
-    ({"actuator_gains": (1.0,) * 9}, r"actuator_gains must have 8 entries \(A1..A8\), got 9"),
-    ({"actuator_gains": (1, 1, -0.1, 1, 1, 1, 1, 1)}, r"actuator_gains\[2\] \(A3\) must be a real "
-                                                      r"number in \[0, 5\]"),
-    ({"actuator_gains": (1, 1, 1, 1, 1, 1, 1, 5.000001)}, r"actuator_gains\[7\] \(A8\)"),
-    ({"actuator_gains": (1, float("nan"), 1, 1, 1, 1, 1, 1)}, r"actuator_gains\[1\]"),
-    ({"actuator_gains": (1, True, 1, 1, 1, 1, 1, 1)}, r"actuator_gains\[1\]"),
-    ({"actuator_gains": 1.0}, "actuator_gains must be a tuple of 8 numbers"),
-    ({"actuator_delays": (0, 0, 0, 0, 0, 0, 0, -1e-9)}, r"actuator_delays\[7\] \(A8\) must be a "
-                                                        r"real number in \[0, 3.15\)"),
-    ({"actuator_delays": (3.15, 0, 0, 0, 0, 0, 0, 0)}, r"actuator_delays\[0\] \(A1\)"),
-    ({"period": 0.5, "actuator_delays": (0, 0.5, 0, 0, 0, 0, 0, 0)}, r"in \[0, 0.5\)"),
-    ({"linear_drag": -1.0}, r"linear_drag must be a real number in \[0, 10000\]"),
-    ({"hub_linear_drag": 1001.0}, r"hub_linear_drag must be a real number in \[0, 1000\]"),
-])
-def test_extension_fields_refuse_values_out_of_range(changes, message):
-    with pytest.raises(ValueError, match=message):
-        ts.StarParams(**changes)
-
-
-def test_extension_fields_accept_their_bounds_lists_and_arrays():
-    params = ts.StarParams(actuator_gains=[0, 5, 1, 1, 1, 1, 1, 1],
-                           actuator_delays=np.array([0.0, 3.1499, 0, 0, 0, 0, 0, 0]),
-                           linear_drag=1e4, hub_linear_drag=0.0)
-    assert params.actuator_gains == (0.0, 5.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
-    assert all(type(v) is float for v in params.actuator_gains + params.actuator_delays)
-    assert params.actuator_delays[1] == 3.1499
-    hash(params)  # frozen and hashable: usable as a key of a batch or a cache
-
+# ---- parameters (their validation: tests/unit/test_params.py) -----------------------------------
 
 def test_extension_fields_survive_csv_and_parquet_round_trips(tmp_path):
     """The summary holds the per-actuator tuples as their text (like the actuator profile, a

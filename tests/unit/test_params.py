@@ -473,3 +473,107 @@ def test_a_choice_field_given_an_array_or_a_list_names_the_field():
         with pytest.raises(ValueError) as error:
             ts.StarParams(jet_mode=value)
         assert str(error.value) == f"jet_mode must be one of ['contract', 'always'], got {value!r}"
+
+
+# ---- moved from the model tests: no engine is built ------------------------------------------
+
+@pytest.mark.parametrize("changes,message", [
+    ({"actuator_gains": (1.0,) * 3}, r"actuator_gains must have 8 entries \(A1..A8\), got 3"),
+    ({"actuator_gains": (1.0,) * 9}, r"actuator_gains must have 8 entries \(A1..A8\), got 9"),
+    ({"actuator_gains": (1, 1, -0.1, 1, 1, 1, 1, 1)}, r"actuator_gains\[2\] \(A3\) must be a real "
+                                                      r"number in \[0, 5\]"),
+    ({"actuator_gains": (1, 1, 1, 1, 1, 1, 1, 5.000001)}, r"actuator_gains\[7\] \(A8\)"),
+    ({"actuator_gains": (1, float("nan"), 1, 1, 1, 1, 1, 1)}, r"actuator_gains\[1\]"),
+    ({"actuator_gains": (1, True, 1, 1, 1, 1, 1, 1)}, r"actuator_gains\[1\]"),
+    ({"actuator_gains": 1.0}, "actuator_gains must be a tuple of 8 numbers"),
+    ({"actuator_delays": (0, 0, 0, 0, 0, 0, 0, -1e-9)}, r"actuator_delays\[7\] \(A8\) must be a "
+                                                        r"real number in \[0, 3.15\)"),
+    ({"actuator_delays": (3.15, 0, 0, 0, 0, 0, 0, 0)}, r"actuator_delays\[0\] \(A1\)"),
+    ({"period": 0.5, "actuator_delays": (0, 0.5, 0, 0, 0, 0, 0, 0)}, r"in \[0, 0.5\)"),
+    ({"linear_drag": -1.0}, r"linear_drag must be a real number in \[0, 10000\]"),
+    ({"hub_linear_drag": 1001.0}, r"hub_linear_drag must be a real number in \[0, 1000\]"),
+])
+def test_extension_fields_refuse_values_out_of_range(changes, message):
+    with pytest.raises(ValueError, match=message):
+        ts.StarParams(**changes)
+
+
+def test_extension_fields_accept_their_bounds_lists_and_arrays():
+    params = ts.StarParams(actuator_gains=[0, 5, 1, 1, 1, 1, 1, 1],
+                           actuator_delays=np.array([0.0, 3.1499, 0, 0, 0, 0, 0, 0]),
+                           linear_drag=1e4, hub_linear_drag=0.0)
+    assert params.actuator_gains == (0.0, 5.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
+    assert all(type(v) is float for v in params.actuator_gains + params.actuator_delays)
+    assert params.actuator_delays[1] == 3.1499
+    hash(params)  # frozen and hashable: usable as a key of a batch or a cache
+
+
+def test_f32_refuses_robots_it_cannot_resolve_before_any_compute(monkeypatch):
+    """2-m limbs need newton_tol >= 3.8e-6 m in f32 (over the 1e-6 m allowed: refused, naming
+    newton_tol and tip_radius); 1-mm joints with 10-cm limbs make the size 2,351 times the
+    shortest edge (12× off in f32 when run: refused, naming the fields)."""
+    def forbidden(*args, **kwargs):
+        raise AssertionError("an engine was built for a refused batch")
+    # simulate and Simulator both build their model through sensitivities.replica_model
+    monkeypatch.setattr("taichi_star.sensitivities.build_model", forbidden)
+    f32 = ts.SolverConfig(precision="f32", newton_tol=1e-6)
+    large = ts.StarParams(gait="A1+A2", joint_radius=1e-3, tip_radius=2.0)
+    with pytest.raises(ValueError, match=r"newton_tol must be >= 3.8e-06 m with precision 'f32' "
+                                         r"for params\[1\] .*tip_radius 2 m.*precision 'f64'"):
+        ts.simulate([ts.StarParams(), large], 0.3, f32)
+    with pytest.raises(ValueError, match=r"newton_tol must be >= 9.5e-07 m .*got 1e-07: use a "
+                                         r"newton_tol in \[9.5e-07, 1e-06\] m"):
+        ts.Simulator([ts.StarParams(tip_radius=0.5)], f32.replace(newton_tol=1e-7))
+    tiny_joints = ts.StarParams(joint_radius=1e-3, tip_radius=0.1)
+    with pytest.raises(ValueError, match=r"cannot resolve params\[0\]: its tip_radius 0.1 m is "
+                                         r"2351 times its shortest rest edge"):
+        ts.simulate([tiny_joints], 0.3, f32)
+    # the same batches run in f64
+    ts.params.check_precision([large, tiny_joints], ts.SolverConfig())
+
+
+def test_per_actuator_text_reads_back_as_tables_write_it():
+    """Result tables hold a per-actuator tuple as its text; parentheses, brackets or none, spaces
+    and a trailing comma read back; anything else names the field and the text."""
+    for text in ("(1.0, 0.5, 1, 1, 1, 1, 1, 2.5)", "[1.0,0.5,1,1,1,1,1,2.5]",
+                 " 1.0, 0.5, 1, 1, 1, 1, 1, 2.5, "):
+        assert ts.StarParams(actuator_gains=text).actuator_gains == (
+            1.0, 0.5, 1.0, 1.0, 1.0, 1.0, 1.0, 2.5)
+    for text in ("(1.0, 0.5", "1.0; 0.5", "(a, b)"):
+        with pytest.raises(ValueError) as error:
+            ts.StarParams(actuator_gains=text)
+        assert str(error.value) == (f"actuator_gains: cannot read {text!r} as 8 numbers")
+    with pytest.raises(ValueError, match=r"^actuator_delays must have 8 entries \(A1..A8\), "
+                                         r"got 2$"):
+        ts.StarParams(actuator_delays="(0, 0.5)")
+
+
+def test_from_row_reads_every_field_back_and_takes_overrides():
+    """A row of a result table (column names with units, the profile and the per-actuator
+    tuples as text, NumPy scalars) gives the StarParams back exactly; overrides replace a
+    column (which then need not be there); a missing column is named."""
+    params = ts.StarParams(gait="A1+A2", alpha=0.1 + 0.2, actuator_gains=(1.0, 0.3, 1, 1, 1, 1, 1, 2),
+                           actuator_delays=(0.0, 1 / 3, 0, 0, 0, 0, 0, 0),
+                           actuator_profile=ts.CurvatureProfile(switch_time=0.15))
+    row = {}
+    for name, column in ts.StarParams.columns().items():
+        value = getattr(params, name)
+        if name == "actuator_profile":
+            value = value.to_text()
+        elif isinstance(value, tuple):
+            value = str(value)
+        elif isinstance(value, float):
+            value = np.float64(value)
+        row[column] = value
+    back = ts.StarParams.from_row(row)
+    assert back == params and type(back.alpha) is float
+    assert ts.StarParams.from_row(row, alpha=0.5) == params.replace(alpha=0.5)
+    del row["alpha"]
+    assert ts.StarParams.from_row(row, alpha=0.5).alpha == 0.5
+    with pytest.raises(ValueError, match=r"^row has no column 'alpha' \(StarParams field "
+                                         r"'alpha'\)$"):
+        ts.StarParams.from_row(row)
+    row["alpha"] = 0.8
+    row["actuator_profile"] = "paper"
+    with pytest.raises(ValueError, match=r"^actuator_profile: 'paper' is not a profile's text"):
+        ts.StarParams.from_row(row)
