@@ -116,10 +116,10 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
         if owned is not None:
             owned.shutdown()
     if store is not None:
-        summaries = {task.index: store.read(task) for task in tasks}
-        # every chunk's records from the store, those a resume did not compute as well
-        trajectories = [trajectory for trajectory in map(store.read_trajectory, tasks)
-                        if trajectory is not None]
+        # every chunk's summary and records from the store, those a resume did not compute too
+        stored = {task.index: store.read_chunk(task) for task in tasks}
+        summaries = {index: summary for index, (summary, _) in stored.items()}
+        trajectories = [trajectory for _, trajectory in stored.values() if trajectory is not None]
         store.finish()
 
     summary = pd.concat([summaries[task.index] for task in tasks], ignore_index=True)

@@ -31,7 +31,7 @@ import hashlib
 import json
 import logging
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import pandas as pd
@@ -292,16 +292,18 @@ class RunStore:
         self._write(path, sink.getvalue().to_pybytes())
         return checksum
 
-    def _load(self, task: ChunkTask) -> pd.DataFrame:
-        """The chunk's summary, its trajectory (if stored) checked against the checksum the
-        summary's stamp holds; ValueError saying why it cannot be trusted."""
+    def _load(self, task: ChunkTask) -> Tuple[pd.DataFrame, Optional[pd.DataFrame]]:
+        """(the chunk's summary, its trajectory or None where it stored none), the trajectory
+        checked against the checksum the summary's stamp holds; ValueError saying why they
+        cannot be trusted."""
         summary, stamp = self._load_table(self.chunk_path(task.index), task)
-        if "trajectory_sha256" in stamp:
-            _, trajectory_stamp = self._load_table(self.trajectory_path(task.index), task,
-                                                   "its trajectory ")
-            if trajectory_stamp["sha256"] != stamp["trajectory_sha256"]:
-                raise ValueError("its trajectory is another one than the summary's")
-        return summary
+        if "trajectory_sha256" not in stamp:
+            return summary, None
+        trajectory, trajectory_stamp = self._load_table(self.trajectory_path(task.index), task,
+                                                        "its trajectory ")
+        if trajectory_stamp["sha256"] != stamp["trajectory_sha256"]:
+            raise ValueError("its trajectory is another one than the summary's")
+        return summary, trajectory
 
     def _load_table(self, path: Path, task: ChunkTask, what: str = ""):
         """(table, stamp) of the file at `path` written for `task`; ValueError (its reason
@@ -366,26 +368,16 @@ class RunStore:
 
     def read(self, task: ChunkTask) -> pd.DataFrame:
         """A stored chunk's summary, verified (RunStoreError if it changed since `open`)."""
+        return self.read_chunk(task)[0]
+
+    def read_chunk(self, task: ChunkTask) -> Tuple[pd.DataFrame, Optional[pd.DataFrame]]:
+        """A stored chunk's (summary, trajectory), verified (RunStoreError if they changed
+        since `open`); the trajectory None where the chunk stored none (a run without records,
+        or a chunk stored before trajectories were)."""
         try:
             return self._load(task)
         except ValueError as error:
             raise RunStoreError(f"{self.chunk_path(task.index)}: {error}") from None
-
-    def read_trajectory(self, task: ChunkTask) -> Optional[pd.DataFrame]:
-        """A stored chunk's trajectory, verified against its summary's stamp (RunStoreError if
-        it changed since `open`); None where the chunk stored none (a run without records, or
-        a chunk stored before trajectories were)."""
-        try:
-            _, stamp = self._load_table(self.chunk_path(task.index), task)
-            if "trajectory_sha256" not in stamp:
-                return None
-            trajectory, trajectory_stamp = self._load_table(self.trajectory_path(task.index),
-                                                            task, "its trajectory ")
-            if trajectory_stamp["sha256"] != stamp["trajectory_sha256"]:
-                raise ValueError("its trajectory is another one than the summary's")
-        except ValueError as error:
-            raise RunStoreError(f"{self.chunk_path(task.index)}: {error}") from None
-        return trajectory
 
     def finish(self):
         self.manifest["complete"] = True

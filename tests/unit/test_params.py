@@ -543,6 +543,11 @@ def test_per_actuator_text_reads_back_as_tables_write_it():
         with pytest.raises(ValueError) as error:
             ts.StarParams(actuator_gains=text)
         assert str(error.value) == (f"actuator_gains: cannot read {text!r} as 8 numbers")
+    # a long text is quoted by its first 60 characters
+    long = "(" + "x, " * 40 + ")"
+    with pytest.raises(ValueError) as error:
+        ts.StarParams(actuator_gains=long)
+    assert str(error.value) == f"actuator_gains: cannot read {long[:60]!r} as 8 numbers"
     with pytest.raises(ValueError, match=r"^actuator_delays must have 8 entries \(A1..A8\), "
                                          r"got 2$"):
         ts.StarParams(actuator_delays="(0, 0.5)")
@@ -577,3 +582,45 @@ def test_from_row_reads_every_field_back_and_takes_overrides():
     row["actuator_profile"] = "paper"
     with pytest.raises(ValueError, match=r"^actuator_profile: 'paper' is not a profile's text"):
         ts.StarParams.from_row(row)
+
+
+@pytest.mark.parametrize("changes", [{}, dict(joint_radius=1e-3, tip_radius=0.1),
+                                     dict(n_limb=40, tip_radius=0.03), dict(n_arc=40)])
+def test_the_shortest_rest_edge_is_the_rest_shapes(changes):
+    """f32's check estimates the shortest edge of the rest shape (an arc edge by the arc's
+    length over n_arc, the geometry's edge its chord: 1e-3 relative covers that for arcs of
+    45° cut in 6 or more); the cases make the arc's, then a limb's edge the shortest."""
+    from taichi_star.geometry import build_topology
+    from taichi_star.params import shortest_rest_edge
+
+    params = ts.StarParams(**changes)
+    assert shortest_rest_edge(params) == pytest.approx(
+        build_topology(params).rest_length.min(), rel=1e-3)
+
+
+def test_f32s_refusals_at_their_boundaries():
+    """newton_tol exactly at the floor (32 f32 roundings of the tip radius) is accepted, a hair
+    under refused; the advice names the tolerance range while the floor is at most 1e-6 m; a
+    robot exactly 320 times its shortest edge runs, a hair more is refused."""
+    from taichi_star.params import (F32_MAX_SIZE_TO_EDGE, F32_TOLERANCE_ROUNDOFFS,
+                                    F32_UNIT_ROUNDOFF, check_precision, shortest_rest_edge)
+
+    params = ts.StarParams(tip_radius=0.4)   # 302 times its shortest edge: resolvable
+    floor = F32_TOLERANCE_ROUNDOFFS * F32_UNIT_ROUNDOFF * params.tip_radius
+    check_precision([params], ts.SolverConfig(precision="f32", newton_tol=floor))
+    with pytest.raises(ValueError, match=r"use a newton_tol in \[7.6e-07, 1e-06\] m$"):
+        check_precision([params], ts.SolverConfig(precision="f32", newton_tol=floor * 0.999))
+    # the largest tip radius whose floor is 1e-6 m still gets the range advice
+    at_limit = ts.StarParams(tip_radius=1e-6 / (F32_TOLERANCE_ROUNDOFFS * F32_UNIT_ROUNDOFF))
+    with pytest.raises(ValueError, match=r"use a newton_tol in \[1e-06, 1e-06\] m$"):
+        check_precision([at_limit], ts.SolverConfig(precision="f32", newton_tol=9e-7))
+    beyond = ts.StarParams(tip_radius=at_limit.tip_radius * 1.01)
+    with pytest.raises(ValueError, match=r"got 1e-06: use precision 'f64'$"):
+        check_precision([beyond], ts.SolverConfig(precision="f32", newton_tol=1e-6))
+    small = ts.StarParams(joint_radius=0.004)
+    edge = shortest_rest_edge(small)
+    size = F32_MAX_SIZE_TO_EDGE * edge
+    f32 = ts.SolverConfig(precision="f32", newton_tol=1e-6)
+    check_precision([small.replace(tip_radius=size)], f32)
+    with pytest.raises(ValueError, match=r"^precision 'f32' cannot resolve params\[0\]"):
+        check_precision([small.replace(tip_radius=size * (1 + 1e-12))], f32)

@@ -557,9 +557,10 @@ def test_a_chunks_trajectory_is_stored_beside_it_and_read_back_bitwise(tmp_path)
     store.write(tasks[1], summary_of(tasks[1]), trajectory_of(tasks[1]).iloc[:0])  # no records
     assert store.trajectory_path(0) == folder / "trajectory_000000.parquet"
     assert store.trajectory_path(0).exists() and not store.trajectory_path(1).exists()
-    pd.testing.assert_frame_equal(store.read_trajectory(tasks[0]), trajectory_of(tasks[0]),
-                                  check_exact=True)
-    assert store.read_trajectory(tasks[1]) is None
+    summary, trajectory = store.read_chunk(tasks[0])
+    pd.testing.assert_frame_equal(trajectory, trajectory_of(tasks[0]), check_exact=True)
+    pd.testing.assert_frame_equal(summary, store.read(tasks[0]), check_exact=True)
+    assert store.read_chunk(tasks[1])[1] is None
     # the stamp ties the summary to its trajectory: resuming verifies both
     again = store_in(folder)
     assert again.open(tasks, resume=True) == [0, 1]
@@ -599,3 +600,25 @@ def test_a_folder_of_chunks_and_trajectories_without_a_manifest_is_resumable(tmp
         store.write(task, summary_of(task), trajectory_of(task))
     (folder / "manifest.json").unlink()
     assert store_in(folder).open(tasks, resume=True) == [0, 1]
+
+
+def test_a_trajectory_changed_after_open_is_an_error_naming_the_chunk(tmp_path):
+    """Between `open` and the final read a chunk's trajectory replaced by another of the same
+    chunk (its own stamp valid) no longer matches the checksum its summary holds; one cut
+    short is unreadable: both a RunStoreError naming the chunk file and why."""
+    folder = tmp_path / "run"
+    tasks = tasks_of()
+    store = store_in(folder)
+    store.open(tasks, resume=False)
+    for task in tasks:
+        store.write(task, summary_of(task), trajectory_of(task))
+    store._write_table(store.trajectory_path(0), tasks[0], trajectory_of(tasks[0], records=2))
+    with pytest.raises(RunStoreError) as error:
+        store.read_chunk(tasks[0])
+    assert str(error.value) == (f"{store.chunk_path(0)}: its trajectory is another one than the "
+                                f"summary's")
+    path = store.trajectory_path(1)
+    path.write_bytes(path.read_bytes()[:100])
+    with pytest.raises(RunStoreError, match=rf"^{re.escape(str(store.chunk_path(1)))}: its "
+                                            rf"trajectory unreadable \("):
+        store.read(tasks[1])
