@@ -591,13 +591,19 @@ def test_a_damaged_or_swapped_trajectory_recomputes_its_chunk(tmp_path, caplog):
         assert not store.chunk_path(index).exists() and not store.trajectory_path(index).exists()
 
 
-def test_a_folder_of_chunks_and_trajectories_without_a_manifest_is_resumable(tmp_path):
-    folder = tmp_path / "run"
+def written_with_trajectories(folder):
+    """(store, tasks) of a run whose two chunks are written with their trajectories."""
     tasks = tasks_of()
     store = store_in(folder)
     store.open(tasks, resume=False)
     for task in tasks:
         store.write(task, summary_of(task), trajectory_of(task))
+    return store, tasks
+
+
+def test_a_folder_of_chunks_and_trajectories_without_a_manifest_is_resumable(tmp_path):
+    folder = tmp_path / "run"
+    _, tasks = written_with_trajectories(folder)
     (folder / "manifest.json").unlink()
     assert store_in(folder).open(tasks, resume=True) == [0, 1]
 
@@ -606,12 +612,7 @@ def test_a_trajectory_changed_after_open_is_an_error_naming_the_chunk(tmp_path):
     """Between `open` and the final read a chunk's trajectory replaced by another of the same
     chunk (its own stamp valid) no longer matches the checksum its summary holds; one cut
     short is unreadable: both a RunStoreError naming the chunk file and why."""
-    folder = tmp_path / "run"
-    tasks = tasks_of()
-    store = store_in(folder)
-    store.open(tasks, resume=False)
-    for task in tasks:
-        store.write(task, summary_of(task), trajectory_of(task))
+    store, tasks = written_with_trajectories(tmp_path / "run")
     store._write_table(store.trajectory_path(0), tasks[0], trajectory_of(tasks[0], records=2))
     with pytest.raises(RunStoreError) as error:
         store.read_chunk(tasks[0])
