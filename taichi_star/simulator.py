@@ -21,6 +21,7 @@ to K̄(0) at τ = T (its `period`) and stays there.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import io
 import json
 import math
@@ -378,6 +379,12 @@ class Simulator:
         return self.engine.state.status.to_numpy()[:self.n_instances] == STATUS_OK
 
     # ---------------------------------------------------------------- save / load
+    @functools.cached_property
+    def _parameter_texts(self) -> Tuple[Dict[str, str], ...]:
+        """`parameter_texts` of the batch, made at the first save or load (the parameters of
+        a Simulator never change)."""
+        return parameter_texts(self.params)
+
     def save(self, path=None) -> Union[SimulatorSnapshot, Path]:
         """The whole batch state as a SimulatorSnapshot; with `path`, written to an .npz file
         (returns its path). With SolverConfig(jacobian="lagged") it holds the kept
@@ -387,7 +394,7 @@ class Simulator:
         snapshot = SimulatorSnapshot(fields=self.engine.save_state(factorisations=lagged),
                                      engine_key=repr(self.engine_key),
                                      n_instances=self.n_instances, dt=self.solver.dt,
-                                     params=parameter_texts(self.params))
+                                     params=self._parameter_texts)
         return snapshot.write(path) if path is not None else snapshot
 
     def load(self, snapshot: Union[SimulatorSnapshot, str, Path], *,
@@ -415,7 +422,7 @@ class Simulator:
                              f"{self.solver.dt} s")
         if snapshot.params and not other_params:
             for b, (saved, own) in enumerate(zip(snapshot.params,
-                                                 parameter_texts(self.params))):
+                                                 self._parameter_texts)):
                 changed = [name for name in own if saved.get(name) != own[name]]
                 if changed:
                     raise ValueError(
