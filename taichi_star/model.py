@@ -44,9 +44,9 @@ class BatchModel:
                 tuple((cls.name, configuration) for cls, configuration in self.terms_used))
 
 
-def validate_batch(params) -> Tuple[StarParams, ...]:
-    """The batch as a tuple (a single StarParams is a batch of one). Raises ValueError for an
-    empty batch, a non-StarParams entry or instances whose topology (n_arc, n_limb) differs."""
+def instances_of(params) -> Tuple[StarParams, ...]:
+    """The instances of a batch as a tuple (a single StarParams is a batch of one). Raises
+    ValueError for what is not a sequence, an empty batch or a non-StarParams entry."""
     if isinstance(params, StarParams):
         return (params,)
     if params is None or isinstance(params, (str, bytes)) or not hasattr(params, "__iter__"):
@@ -57,6 +57,13 @@ def validate_batch(params) -> Tuple[StarParams, ...]:
     for index, p in enumerate(params):
         if not isinstance(p, StarParams):
             raise ValueError(f"params[{index}] must be a StarParams, got {type(p).__name__}")
+    return params
+
+
+def validate_batch(params) -> Tuple[StarParams, ...]:
+    """The batch of one engine as a tuple (`instances_of`). Raises ValueError as that does and
+    for instances whose topology (n_arc, n_limb) differs."""
+    params = instances_of(params)
     keys = {p.topology_key for p in params}
     if len(keys) > 1:
         raise ValueError(f"all instances of a batch must share n_arc and n_limb (the topology); "

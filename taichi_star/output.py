@@ -189,8 +189,8 @@ def to_xarray(result):
         coordinates["time"] = ("time", times, {"units": "s"})
         table = trajectory.pivot(index="instance", columns="t_s")
         for name in ("x_mm", "y_mm", "heading_deg"):
-            # an instance without records (a resumed batch's chunks read back from its store
-            # carry their summaries alone) gets NaN rows
+            # an instance without records (a resumed batch's chunk stored before the run store
+            # kept trajectories has its summary alone) gets NaN rows
             variables[f"centroid_{name}" if name != "heading_deg" else "record_heading_deg"] = (
                 ("instance", "time"),
                 table[name].reindex(index=instances, columns=times).to_numpy(),

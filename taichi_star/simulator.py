@@ -218,9 +218,12 @@ class Simulator:
             return
         if isinstance(at_s, bool) or not isinstance(at_s, numbers.Real) or not math.isfinite(at_s):
             raise ValueError(f"at_s must be a finite time in s, got {at_s!r}")
+        # a firing beyond the step counter is never reached (adaptive: even at dt_max)
+        step, step_name = ((self.solver.dt_max, "dt_max") if self.solver.adaptive
+                           else (self.solver.dt, "dt"))
+        check_work(f"at_s = {at_s!r} s (at most {MAX_STEPS_PER_INSTANCE * step:.6g} s at "
+                   f"{step_name} = {step:g} s)", abs(at_s / step))
         if self.solver.adaptive:
-            check_work(f"at_s = {at_s!r} s (at most {MAX_STEPS_PER_INSTANCE * self.solver.dt_max:.6g}"
-                       f" s at dt_max = {self.solver.dt_max:g} s)", abs(at_s / self.solver.dt_max))
             # a step ends on every firing: one closer than dt_min after an instance's time would
             # force a step shorter than the controller's floor (at or before it: refused below)
             times = self.time_s
@@ -233,8 +236,6 @@ class Simulator:
                                  f"end there")
             schedule.command(mask, at_s, times)
             return
-        check_work(f"at_s = {at_s!r} s (at most {MAX_STEPS_PER_INSTANCE * self.solver.dt:.6g} s "
-                   f"at dt = {self.solver.dt:g} s)", abs(at_s / self.solver.dt))
         due = whole_steps(at_s, self.solver.dt)
         if due is None:
             raise ValueError(f"at_s must be a whole number of steps (dt = {self.solver.dt} "
@@ -294,7 +295,7 @@ class Simulator:
         if rows.size == 0:  # no instance to reset (an RL loop where none finished): [] is float
             return
         if rows.ndim != 1 or rows.dtype.kind not in "iu" or (
-                len(rows) and (rows.min() < 0 or rows.max() >= self.n_instances)):
+                rows.min() < 0 or rows.max() >= self.n_instances):
             raise ValueError(f"instances must be integers in [0, {self.n_instances}), got "
                              f"{instances!r}")
         # each instance's replicas (every n_instances rows after it) go back with it

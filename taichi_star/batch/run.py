@@ -12,11 +12,12 @@ import pandas as pd
 from ..driver import RunTiming
 from ..extras import require
 from ..geometry import build_topology
+from ..model import instances_of
 from ..params import SolverConfig, StarParams
 from ..simulation import SimulationResult
 from .executors import DEFAULT_RETRIES, Executor, InProcess, LocalProcesses
 from .store import RunStore, run_definition
-from .tasks import batch_list, plan_chunks
+from .tasks import plan_chunks
 
 DEFAULT_CHUNK_SIZE = 2048
 """Instances per chunk on the CPU: one compiled engine's worth, large enough to keep a process
@@ -68,7 +69,7 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
                          f"DaskExecutor: see executor_for(scheduler=...)), got {executor!r}")
     if resume and run_dir is None:
         raise ValueError("resume=True needs run_dir (the run store to continue)")
-    params = batch_list(params)
+    params = instances_of(params)
     tasks = plan_chunks(params, duration_s, cycles=cycles, chunk_size=chunk_size, solver=solver,
                         arch=arch, record_interval_s=record_interval_s,
                         record_shapes=record_shapes, steady_from_cycle=steady_from_cycle)

@@ -313,15 +313,11 @@ class RunStore:
         except OSError as error:
             raise ValueError(f"{what}unreadable ({error.strerror})") from None
         try:
-            return self.decode_table(data, task)
+            return self.decode_chunk(data, task)
         except ValueError as error:
             raise ValueError(f"{what}{error}") from None
 
-    def decode_chunk(self, data: bytes, task: ChunkTask) -> pd.DataFrame:
-        """The table in the bytes of a chunk file written for `task` (`decode_table`)."""
-        return self.decode_table(data, task)[0]
-
-    def decode_table(self, data: bytes, task: ChunkTask):
+    def decode_chunk(self, data: bytes, task: ChunkTask):
         """(the table, its stamp) in the bytes of a file written for `task`; ValueError saying
         why it cannot be trusted. Any failure to decode is such an error, whatever raised it (a
         damaged file can make pyarrow or pandas fail in any way: a bit flip in the pandas

@@ -18,6 +18,7 @@ import pandas as pd
 
 from ..driver import RunTiming
 from ..geometry import Topology
+from ..model import instances_of
 from ..params import SolverConfig, StarParams
 from ..runtime import check_arch
 from ..simulation import simulate, validate_call
@@ -69,16 +70,6 @@ def _check_duration(duration_s, cycles):
         raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
 
 
-def batch_list(params) -> List[StarParams]:
-    """The instances of a batch as a list: a single StarParams is a batch of one; ValueError
-    for what is not a sequence (the entries are checked where the chunks are planned)."""
-    if isinstance(params, StarParams):
-        return [params]
-    if params is None or isinstance(params, (str, bytes)) or not hasattr(params, "__iter__"):
-        raise ValueError(f"params must be a sequence of StarParams, got {type(params).__name__}")
-    return list(params)
-
-
 def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None, *,
                 cycles: Optional[float] = None, chunk_size: int = 2048,
                 solver: SolverConfig = SolverConfig(), arch: str = "cpu",
@@ -89,9 +80,7 @@ def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None
     each cut into runs of at most `chunk_size` in input order. Every chunk's arguments are
     validated here, so a bad batch fails before any chunk is computed (ValueError naming the
     argument); a single StarParams is a batch of one, as for `simulate`."""
-    params = batch_list(params)
-    if not params:
-        raise ValueError("params must hold at least one StarParams (the batch is empty)")
+    params = instances_of(params)
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, numbers.Integral) \
             or chunk_size < 1:
         raise ValueError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")
@@ -101,8 +90,6 @@ def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None
     check_arch(arch)
     groups: Dict[tuple, List[int]] = {}
     for position, p in enumerate(params):
-        if not isinstance(p, StarParams):
-            raise ValueError(f"params[{position}] must be a StarParams, got {type(p).__name__}")
         duration = duration_s if duration_s is not None else cycles * p.period
         if duration_s is None and not solver.adaptive and steps_in(duration, solver.dt) < 1:
             raise ValueError(f"cycles must give at least one step (dt = {solver.dt:g} s): "

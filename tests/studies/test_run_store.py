@@ -163,7 +163,7 @@ def test_every_bit_flip_in_a_chunks_metadata_is_damage_or_harmless(tmp_path):
     written = pd.DataFrame({"speed_mm_s": [0.1], "actuator_profile": [CurvatureProfile()]})
     store = RunStore(tmp_path, {"a": "definition"})
     data = store.write(task, written).read_bytes()
-    original = store.decode_chunk(data, task)
+    original = store.decode_chunk(data, task)[0]
     pd.testing.assert_frame_equal(original, written, check_exact=True)
     footer_length = int.from_bytes(data[-8:-4], "little")
     outcomes = {"damage": 0, "same": 0}
@@ -171,7 +171,7 @@ def test_every_bit_flip_in_a_chunks_metadata_is_damage_or_harmless(tmp_path):
         flipped = bytearray(data)
         flipped[position] ^= 1 << (position % 8)
         try:
-            decoded = store.decode_chunk(bytes(flipped), task)
+            decoded = store.decode_chunk(bytes(flipped), task)[0]
         except ValueError:
             outcomes["damage"] += 1
             continue
