@@ -102,6 +102,10 @@ def _components(field) -> tuple:
     return ()
 
 
+_FLOAT, _INT, _ZERO = 0, 1, 2
+"""What a store does with a field: copy it through the float64 or the int64 array, or zero it."""
+
+
 @ti.data_oriented
 class FieldStore:
     """Copies NumPy arrays into a fixed set of fields in one kernel launch (and back).
@@ -109,7 +113,10 @@ class FieldStore:
     Taichi compiles `from_numpy`/`fill`/`to_numpy` once per field, and an engine has dozens of
     fields, all new for every engine built: those small compilations cost more than the
     engine's own kernels. A store packs every value into one float64 and one int64 array and
-    scatters them with one kernel, compiled once per store. Values are cast to each field's type
+    scatters them with one kernel, compiled once per store, with one parallel loop per shape
+    of the fields (each loop is a function LLVM compiles apart: an engine's load store of ~100
+    fields in ~20 shapes compiled in 0.56 s where a loop per field took 1.83 s, cold, on a
+    2-core Intel Xeon; docs/performance.md, "Compile time"). Values are cast to each field's type
     exactly as `from_numpy` would (float64 → float32 rounds to nearest; integers are exact), so a
     `write` of what `read` returned restores the fields bitwise.
 
@@ -132,9 +139,19 @@ class FieldStore:
             size = int(np.prod(self.shapes[name], dtype=np.int64))
             self.layout[floating[name]].append((name, totals[floating[name]], size))
             totals[floating[name]] += size
-        self.float_entries = [(copied[name], offset) for name, offset, _ in self.layout[True]]
-        self.int_entries = [(copied[name], offset) for name, offset, _ in self.layout[False]]
         self.zeroed_fields = [fields[name] for name in zeroed]
+        entries = [(copied[name], _FLOAT if kind else _INT, offset,
+                    int(np.prod(_components(copied[name]), dtype=np.int64)))
+                   for kind in (True, False) for name, offset, _ in self.layout[kind]]
+        entries += [(field, _ZERO, 0, 0) for field in self.zeroed_fields]
+        self.scalars = [entry for entry in entries if not entry[0].shape]
+        """(field, kind, offset, components) of the 0-D fields."""
+        by_shape: Dict[tuple, list] = {}
+        for entry in entries:
+            if entry[0].shape:
+                by_shape.setdefault(tuple(entry[0].shape), []).append(entry)
+        self.by_shape = list(by_shape.items())
+        """(shape, [(field, kind, offset, components), ...]) for each shape of the fields."""
         self.totals = {kind: max(total, 1) for kind, total in totals.items()}
 
     def flat_arrays(self) -> Dict[bool, np.ndarray]:
@@ -168,69 +185,84 @@ class FieldStore:
                 for kind, entries in self.layout.items() for name, offset, size in entries}
 
     def _run_transfer(self, flats: Dict[bool, np.ndarray], to_fields: bool):
-        # the kernel has a loop per field by design (an engine's load store has ~40): Taichi's
-        # warning that a static loop of over 32 iterations may compile slowly is not for it
+        # the kernel unrolls a static loop over the fields of each shape by design (an engine's
+        # load store has ~50 of one shape): Taichi's warning that a static loop of over 32
+        # iterations may compile slowly is not for it
         with warnings.catch_warnings():
             warnings.filterwarnings("ignore", message="You are unrolling more than",
                                     category=SyntaxWarning)
             self._transfer(flats[True], flats[False], to_fields)
 
     @ti.func
-    def _element_offset(self, field: ti.template(), index, offset):
-        """Offset of element `index` of `field` in its flat array (row-major, components last)."""
-        linear = 0
-        for axis in ti.static(range(len(field.shape))):
-            linear = linear * field.shape[axis] + index[axis]
-        return offset + linear * ti.static(int(np.prod(_components(field), dtype=np.int64)))
-
-    @ti.func
-    def _copy(self, field: ti.template(), flat: ti.template(), offset, to_field: ti.template()):
+    def _copy_element(self, field: ti.template(), index: ti.template(), flat: ti.template(),
+                      start, to_field: ti.template()):
+        """Element `index` (None: a 0-D field's) of `field` to or from its flat array at `start`
+        (components last)."""
         components = ti.static(_components(field))
-        for index in ti.grouped(field):
-            start = self._element_offset(field, index, offset)
-            if ti.static(len(components) == 0):
+        if ti.static(len(components) == 0):
+            if ti.static(to_field):
+                field[index] = ti.cast(flat[start], field.dtype)
+            else:
+                flat[start] = field[index]
+        elif ti.static(len(components) == 1):
+            for k in ti.static(range(components[0])):
                 if ti.static(to_field):
-                    field[index] = ti.cast(flat[start], field.dtype)
+                    field[index][k] = ti.cast(flat[start + k], field.dtype)
                 else:
-                    flat[start] = field[index]
-            elif ti.static(len(components) == 1):
-                for k in ti.static(range(components[0])):
-                    if ti.static(to_field):
-                        field[index][k] = ti.cast(flat[start + k], field.dtype)
-                    else:
-                        flat[start + k] = field[index][k]
-            else:
-                for k, m in ti.static(ti.ndrange(components[0], components[1])):
-                    if ti.static(to_field):
-                        field[index][k, m] = ti.cast(flat[start + k * components[1] + m],
-                                                     field.dtype)
-                    else:
-                        flat[start + k * components[1] + m] = field[index][k, m]
+                    flat[start + k] = field[index][k]
+        else:
+            for k, m in ti.static(ti.ndrange(components[0], components[1])):
+                if ti.static(to_field):
+                    field[index][k, m] = ti.cast(flat[start + k * components[1] + m],
+                                                 field.dtype)
+                else:
+                    flat[start + k * components[1] + m] = field[index][k, m]
 
     @ti.func
-    def _zero(self, field: ti.template()):
-        """Every element of `field` set to +0 (not `ti.zero`, which multiplies the old value by
-        zero: -0.0 from a negative one, NaN from NaN)."""
+    def _zero_element(self, field: ti.template(), index: ti.template()):
+        """Element `index` (None: a 0-D field's) of `field` set to +0 (not `ti.zero`, which multiplies the old value
+        by zero: -0.0 from a negative one, NaN from NaN)."""
         components = ti.static(_components(field))
-        for index in ti.grouped(field):
-            if ti.static(len(components) == 0):
-                field[index] = 0
-            elif ti.static(len(components) == 1):
-                for k in ti.static(range(components[0])):
-                    field[index][k] = 0
-            else:
-                for k, m in ti.static(ti.ndrange(components[0], components[1])):
-                    field[index][k, m] = 0
+        if ti.static(len(components) == 0):
+            field[index] = 0
+        elif ti.static(len(components) == 1):
+            for k in ti.static(range(components[0])):
+                field[index][k] = 0
+        else:
+            for k, m in ti.static(ti.ndrange(components[0], components[1])):
+                field[index][k, m] = 0
+
+    @ti.func
+    def _linear(self, index, shape: ti.template()):
+        """Row-major position of `index` within `shape`."""
+        linear = 0
+        for axis in ti.static(range(len(shape))):
+            linear = linear * shape[axis] + index[axis]
+        return linear
 
     @ti.kernel
     def _transfer(self, floats: ti.types.ndarray(dtype=ti.f64, ndim=1),
                   ints: ti.types.ndarray(dtype=ti.i64, ndim=1), to_fields: ti.template()):
         """Flat arrays -> fields (and zero into the zeroed fields) when `to_fields`, else fields
-        -> flat arrays."""
-        for field, offset in ti.static(self.float_entries):
-            self._copy(field, floats, offset, to_fields)
-        for field, offset in ti.static(self.int_entries):
-            self._copy(field, ints, offset, to_fields)
-        if ti.static(to_fields):
-            for field in ti.static(self.zeroed_fields):
-                self._zero(field)
+        -> flat arrays. One parallel loop per shape, which copies the element of every field of
+        that shape: each loop is a function that LLVM compiles apart, and ~100 fields in ~20
+        shapes compile in a fraction of the time of a loop each."""
+        for shape, entries in ti.static(self.by_shape):
+            for index in ti.grouped(ti.ndrange(*shape)):
+                linear = self._linear(index, shape)
+                for field, kind, offset, width in ti.static(entries):
+                    if ti.static(kind == _FLOAT):
+                        self._copy_element(field, index, floats, offset + linear * width,
+                                           to_fields)
+                    elif ti.static(kind == _INT):
+                        self._copy_element(field, index, ints, offset + linear * width,
+                                           to_fields)
+                    elif ti.static(to_fields):
+                        self._zero_element(field, index)
+        for field, kind, offset, _ in ti.static(self.scalars):
+            if ti.static(kind == _FLOAT):
+                self._copy_element(field, None, floats, offset, to_fields)
+            elif ti.static(kind == _INT):
+                self._copy_element(field, None, ints, offset, to_fields)
+            elif ti.static(to_fields):
+                self._zero_element(field, None)

@@ -334,17 +334,20 @@ def _texts(values: Sequence, to_text) -> list:
     return [by_object[id(value)] for value in values]
 
 
+SUMMARY_STATE = ("status", "failure_time", "steps_done", "rejected_steps", "newton_total",
+                 "newton_solves", "newton_max", "factorisations", "substep_retries", "positions")
+"""The state fields a run's summary reads at its end (`BatchState.read`)."""
+
+
 def _collect(engine, model, solver, duration, record_times, start, centroids, rotations, shapes,
              boundaries, steady_from_cycle):
     batch = model.batch_size
     state = engine.state
     final = engine.centroids_of(batch)
-    status = state.status.to_numpy()[:batch]
-    failure_time = state.failure_time.to_numpy()[:batch].astype(np.float64)
-    steps_done = state.steps_done.to_numpy()[:batch]
-    rejected = state.rejected_steps.to_numpy()[:batch]
-    newton_total = state.newton_total.to_numpy()[:batch]
-    newton_solves = state.newton_solves.to_numpy()[:batch]
+    counts = state.read(SUMMARY_STATE, batch)
+    status = counts["status"]
+    failure_time = counts["failure_time"].astype(np.float64)
+    newton_solves = counts["newton_solves"]
     params = model.params
     gaits = [p.gait for p in params]
     failed = status != STATUS_OK
@@ -356,7 +359,7 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
     for name in PER_ACTUATOR_FIELDS:  # "(1.0, 0.5, ...)": every float's repr reads back exactly
         rows[parameter_column(name)] = _texts([getattr(p, name) for p in params], str)
     rows.update(metrics.swimming_metrics(final - start, duration, gaits))
-    positions = state.positions.to_numpy()[:batch].astype(np.float64)
+    positions = counts["positions"].astype(np.float64)
     rows["heading_deg"] = np.degrees(metrics.body_rotation(
         positions, model.rest_positions, model.topology.joints, CENTRE))
     sanity = metrics.shape_checks(positions[None], model.topology, model.rest_positions)
@@ -365,13 +368,12 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
     boundaries[failed] = np.nan
     rows.update(metrics.cycle_window_speeds(boundaries, np.array([p.period for p in params]),
                                             gaits, steady_from_cycle))
-    rows["steps"] = steps_done
-    rows["rejected_steps"] = rejected
-    rows["newton_iterations_mean"] = newton_total / np.maximum(newton_solves, 1)
-    rows["newton_iterations_max"] = state.newton_max.to_numpy()[:batch]
-    rows["factorisations_mean"] = (state.factorisations.to_numpy()[:batch]
-                                   / np.maximum(newton_solves, 1))
-    rows["substep_retries"] = state.substep_retries.to_numpy()[:batch]
+    rows["steps"] = counts["steps_done"]
+    rows["rejected_steps"] = counts["rejected_steps"]
+    rows["newton_iterations_mean"] = counts["newton_total"] / np.maximum(newton_solves, 1)
+    rows["newton_iterations_max"] = counts["newton_max"]
+    rows["factorisations_mean"] = counts["factorisations"] / np.maximum(newton_solves, 1)
+    rows["substep_retries"] = counts["substep_retries"]
     rows["newton_capped"] = rows["newton_iterations_max"] >= solver.max_newton
     rows["status"] = [STATUS_NAMES[s] for s in status]
     rows["failure_time_s"] = np.where(failed, failure_time, np.nan)

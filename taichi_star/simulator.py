@@ -340,9 +340,10 @@ class Simulator:
     def _state_of(self, batch: int) -> pd.DataFrame:
         """`state()` of the engine's first `batch` instances (with sensitivities: the
         replicas too)."""
-        state = self.engine.state
-        positions = state.positions.to_numpy()[:batch].astype(np.float64)
-        velocities = state.velocities.to_numpy()[:batch].astype(np.float64)
+        values = self.engine.state.read(("positions", "velocities", "time", "fire_time", "status"),
+                                        batch)
+        positions = values["positions"].astype(np.float64)
+        velocities = values["velocities"].astype(np.float64)
         mass = self.model.mass[:batch]
         centroid = self.engine.centroids_of(batch)
         velocity = metrics.centroid(velocities, mass)
@@ -356,8 +357,8 @@ class Simulator:
         spin_sum = spin[:, 0]
         for joint in range(1, spin.shape[1]):
             spin_sum = spin_sum + spin[:, joint]
-        times = state.time.to_numpy()[:batch].astype(np.float64)
-        fired = state.fire_time.to_numpy()[:batch].astype(np.float64)
+        times = values["time"].astype(np.float64)
+        fired = values["fire_time"].astype(np.float64)
         since = np.where(fired == NEVER, np.nan, times[:, None] - fired)
         frame = pd.DataFrame({
             "instance": np.arange(batch), "t_s": times,
@@ -371,7 +372,7 @@ class Simulator:
         })
         for m, column in enumerate(ACTUATOR_COLUMNS):
             frame[column] = since[:, m]
-        frame["status"] = [STATUS_NAMES[s] for s in state.status.to_numpy()[:batch]]
+        frame["status"] = [STATUS_NAMES[s] for s in values["status"]]
         return frame
 
     @property

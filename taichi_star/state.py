@@ -9,7 +9,7 @@ bitwise.
 
 from __future__ import annotations
 
-from typing import Dict, List, Tuple
+from typing import Dict, List, Sequence, Tuple
 
 import numpy as np
 import taichi as ti
@@ -76,6 +76,8 @@ class BatchState:
         self.schedule = Schedule(capacity, arena, self.time)
         """When the actuators fire: the periodic gait, pending commands, the last firings."""
         self.term_histories: Dict[str, Field] = {}
+        self._reads: Dict[tuple, FieldStore] = {}
+        """The stores of `read`, by the names they copy."""
 
     @property
     def fire_time(self) -> Field:
@@ -102,6 +104,17 @@ class BatchState:
         if getattr(self, "_store", None) is None:
             self._store = FieldStore(self.fields())
         return self._store
+
+    def read(self, names: Sequence[str], count: int) -> Dict[str, np.ndarray]:
+        """The named state fields (`fields` names) of the first `count` instances, each of its
+        own dtype, copied in one kernel: compiled once per tuple of names (kept), where a
+        `to_numpy` per field compiles one kernel each, which costs more than the copy whenever
+        an engine is new."""
+        key = tuple(names)
+        if key not in self._reads:
+            fields = self.fields()
+            self._reads[key] = FieldStore({name: fields[name] for name in key})
+        return {name: values[:count] for name, values in self._reads[key].read().items()}
 
     def reset_fields(self) -> Tuple[Dict[str, Field], List[str]]:
         """(every state field by name, the names of those that a reset to rest zeroes on the
