@@ -14,6 +14,7 @@ engine ask its `fire_due` what fires in a step; `command` is the one way in for 
 import ast
 import functools
 import math
+import numbers
 from dataclasses import dataclass
 from typing import Dict, Optional, Tuple
 
@@ -38,6 +39,12 @@ def _logistic(constants, tau):
     return c1 / (1.0 + np.exp(-c2 * (np.asarray(tau, dtype=np.float64) - c3))) + c4
 
 
+def _real_numbers(values) -> bool:
+    """Whether `values` is a sequence of real numbers (NumPy's included), none a bool."""
+    return isinstance(values, (tuple, list, np.ndarray)) and all(
+        isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_)) for v in values)
+
+
 @dataclass(frozen=True)
 class CurvatureProfile:
     """Logistic fit of one actuator's natural curvature over a cycle (paper Eq. 5).
@@ -55,15 +62,17 @@ class CurvatureProfile:
 
     def __post_init__(self):
         for name in ("heating", "cooling"):
-            values = tuple(float(v) for v in getattr(self, name))
+            given = getattr(self, name)
+            values = tuple(float(v) for v in given) if _real_numbers(given) else ()
             if len(values) != 4 or not all(math.isfinite(v) for v in values):
                 raise ValueError(f"CurvatureProfile.{name} must be 4 finite numbers, got "
-                                 f"{getattr(self, name)!r}")
+                                 f"{given!r}")
             object.__setattr__(self, name, values)
-        if not (isinstance(self.switch_time, (int, float)) and math.isfinite(self.switch_time)
+        if not (_real_numbers([self.switch_time]) and math.isfinite(self.switch_time)
                 and self.switch_time > 0):
             raise ValueError(f"CurvatureProfile.switch_time must be a finite number > 0 s, got "
                              f"{self.switch_time!r}")
+        object.__setattr__(self, "switch_time", float(self.switch_time))
         if not self.rest_curvature > 0:
             raise ValueError(f"CurvatureProfile: K̄(0) must be > 0 1/m (the rest arc), got "
                              f"{self.rest_curvature!r}")

@@ -1,6 +1,8 @@
-"""Shape checks of taichi_star.metrics on hand-made shapes: limb crossing, arc inversion,
-strain, failed records; and the segment-crossing test they rest on."""
+"""taichi_star.metrics on hand-made cases: shape checks (limb crossing, arc inversion,
+strain, failed records) and the segment-crossing test they rest on; speeds, cycle-window
+speeds and the heading against hand-worked values."""
 
+import math
 import os
 import subprocess
 import sys
@@ -940,3 +942,97 @@ def test_shape_checks_need_at_least_one_record_of_instances(topology):
         metrics.shape_checks(np.zeros((2, n_nodes, 2)), topology)
     one = metrics.shape_checks(topology.rest_positions[None, None], topology)  # the boundary: R = 1
     assert bool(one["sane"].iloc[0]) and one["max_strain"].iloc[0] == 0.0
+
+
+# ----------------------------------------------------------------------------- speeds and heading
+
+def test_swimming_metrics_of_hand_made_displacements():
+    """A 3-4-5 displacement and one along -x: speed |d|/T, the signed speed the projection on
+    the gait's forward direction (A1+A3: 45°; A5: -x), NaN where the bisectors cancel (A1+A5),
+    the travel direction counter-clockwise from +x; each instance over its own duration."""
+    displacement_m = np.array([[3e-3, 4e-3], [-3e-3, 0.0], [3e-3, 4e-3]])
+    duration_s = np.array([2.0, 2.0, 0.5])
+    got = metrics.swimming_metrics(displacement_m, duration_s, ["A1+A3", "A5", "A1+A5"])
+    assert list(got) == list(metrics.SPEED_COLUMNS)
+    # 1e-15: a product, a square root and a quotient of exact decimal inputs
+    np.testing.assert_allclose(got["displacement_x_mm"], [3.0, -3.0, 3.0], rtol=1e-15)
+    np.testing.assert_allclose(got["displacement_y_mm"], [4.0, 0.0, 4.0], rtol=1e-15)
+    np.testing.assert_allclose(got["speed_mm_s"], [2.5, 1.5, 10.0], rtol=1e-15)
+    np.testing.assert_allclose(got["signed_speed_mm_s"][:2], [7.0 / math.sqrt(2) / 2.0, 1.5],
+                               rtol=1e-15)
+    assert np.isnan(got["signed_speed_mm_s"][2])
+    np.testing.assert_allclose(got["travel_direction_deg"],
+                               [math.degrees(math.atan2(4.0, 3.0)), 180.0,
+                                math.degrees(math.atan2(4.0, 3.0))], rtol=1e-15)
+
+
+def _boundary_centroids(rows):
+    """(B, 4, 2) centroids (m) at t = 0, T, 2T, 3T from rows of four (x, y) in mm, None where a
+    boundary was not recorded."""
+    return np.array([[(np.nan, np.nan) if point is None else point for point in row]
+                     for row in rows], dtype=np.float64) * 1e-3
+
+
+@pytest.mark.filterwarnings("error")  # a window of no cycle must not be a 0/0 of NumPy's
+def test_cycle_window_speeds_span_first_cycle_to_the_last_recorded_boundary():
+    """From cycle 1 on, over boundaries t = 0, T, 2T, 3T: a whole run spans two cycles, one
+    whose last recorded boundary is 2T exactly one (the fewest: a speed), one ending at T none
+    (NaN), as one that failed (no boundary) or whose boundary T is missing; each instance over
+    its own period and forward direction (A1: +x, A1+A3: 45°, A1+A5: none)."""
+    centroids = _boundary_centroids([
+        [(0, 0), (1, 0), (3, 1), (6, 2)],          # A1, T = 2 s: (5, 2) mm over 4 s
+        [(0, 0), (1, 1), (4, 5), None],            # A1+A3, T = 1 s: (3, 4) mm over 1 s
+        [(0, 0), (2, 0), None, None],              # no whole cycle after cycle 1
+        [(0, 0), (1, 0), (1, 3), (1, 6)],          # A1+A5, T = 2 s: (0, 6) mm over 4 s
+        [None, None, None, None],                  # failed: nothing recorded
+        [(0, 0), None, (1, 0), (2, 0)],            # the window's first boundary missing
+    ])
+    periods = np.array([2.0, 1.0, 2.0, 2.0, 2.0, 2.0])
+    gaits = ["A1", "A1+A3", "A1", "A1+A5", "A1", "A1"]
+    got = metrics.cycle_window_speeds(centroids, periods, gaits, first_cycle=1)
+    # 1e-15 relative: a difference, a hypot and a quotient of small whole millimetres
+    nan = np.nan
+    np.testing.assert_allclose(got["steady_speed_mm_s"],
+                               [math.hypot(5, 2) / 4, 5.0, nan, 1.5, nan, nan], rtol=1e-15)
+    np.testing.assert_allclose(got["steady_signed_speed_mm_s"],
+                               [5 / 4, 7 / math.sqrt(2), nan, nan, nan, nan], rtol=1e-15)
+    # from cycle 0 the window starts at t = 0: the third instance has its one cycle
+    from_start = metrics.cycle_window_speeds(centroids, periods, gaits, first_cycle=0)
+    np.testing.assert_allclose(from_start["steady_speed_mm_s"][:3],
+                               [math.hypot(6, 2) / 6, math.hypot(4, 5) / 2, 1.0], rtol=1e-15)
+    # a window starting at the last boundary, or past every boundary, has no cycle
+    for first_cycle in (3, 4):
+        past = metrics.cycle_window_speeds(centroids, periods, gaits, first_cycle)
+        assert np.isnan(past["steady_speed_mm_s"]).all()
+        assert np.isnan(past["steady_signed_speed_mm_s"]).all()
+
+
+def _turned(shape, angle_rad, about, shift):
+    """shape (N, 2) turned by angle_rad counter-clockwise about the point `about`, then
+    shifted by `shift` (a rotation matrix written out, not `metrics.rotate`)."""
+    cos, sin = math.cos(angle_rad), math.sin(angle_rad)
+    matrix = np.array([[cos, -sin], [sin, cos]])
+    return (shape - about) @ matrix.T + about + shift
+
+
+@pytest.mark.parametrize("degrees, expected", [
+    (30.0, 30.0), (-75.0, -75.0), (179.0, 179.0), (190.0, -170.0), (-181.0, 179.0), (0.0, 0.0)])
+def test_body_rotation_of_a_rigidly_turned_rest_shape_is_its_angle(topology, degrees, expected):
+    """The rest shape turned about an off-centre point and moved: its heading is the turn,
+    in (-180°, 180°] (a turn past ±180° comes back on the other side), whatever the move."""
+    rest = topology.rest_positions
+    shape = _turned(rest, math.radians(degrees), np.array([0.013, -0.021]), np.array([0.4, 0.7]))
+    got = metrics.body_rotation(shape, rest, topology.joints)
+    # 1e-12 rad: arctan2 of coordinates ~5 cm rounded at 1e-17 m, summed over eight joints
+    assert math.degrees(float(got)) == pytest.approx(expected, abs=1e-12)
+    stack = np.stack([rest, shape])    # leading axes: one heading per shape
+    np.testing.assert_allclose(np.degrees(metrics.body_rotation(stack, rest, topology.joints)),
+                               [0.0, expected], rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("angle, wrapped", [
+    (180.0, -180.0), (-180.0, -180.0), (179.5, 179.5), (-181.0, 179.0), (540.0, -180.0),
+    (359.0, -1.0), (0.0, 0.0)])
+def test_wrap_degrees_lands_in_minus_180_to_180_excluded(angle, wrapped):
+    """[-180, 180): -180 itself stays, +180 and every odd multiple go to -180."""
+    assert metrics.wrap_degrees(angle) == wrapped

@@ -51,8 +51,12 @@ def test_solver_config_rejects_bad_values(field, value):
 
 
 def test_f32_needs_a_tolerance_it_can_resolve():
-    with pytest.raises(ValueError, match="newton_tol"):
-        ts.SolverConfig(precision="f32")
+    """newton_tol at least 1e-7 m in f32: the default 1e-10 and a hair under 1e-7 refused,
+    1e-7 itself accepted."""
+    for tolerance in (1e-10, 1e-7 * (1 - 1e-12)):
+        with pytest.raises(ValueError, match=r"^newton_tol must be in \[1e-07, 1e-06\] m with "
+                                             r"precision 'f32'"):
+            ts.SolverConfig(precision="f32", newton_tol=tolerance)
     assert ts.SolverConfig(precision="f32", newton_tol=1e-7).precision == "f32"
 
 
@@ -127,10 +131,18 @@ def test_default_topology_is_the_papers():
 
 
 def test_adaptive_step_bounds_must_be_ordered():
-    with pytest.raises(ValueError, match="dt_min"):
+    """dt_min ≤ dt_max, and an adaptive first step dt within [dt_min, dt_max]: each end
+    accepted, just past either refused with the bounds named; a fixed step ignores them."""
+    with pytest.raises(ValueError, match=r"^dt_min must be <= dt_max = 0.005 s, got 0.01$"):
         ts.SolverConfig(adaptive=True, dt_min=0.01, dt_max=0.005)
-    with pytest.raises(ValueError, match="dt"):
-        ts.SolverConfig(adaptive=True, dt=0.02, dt_max=0.01)
+    bounds = dict(adaptive=True, dt_min=1e-4, dt_max=0.01)
+    assert ts.SolverConfig(dt=1e-4, **bounds).dt == 1e-4
+    assert ts.SolverConfig(dt=0.01, **bounds).dt == 0.01
+    for dt in (0.01 * (1 + 1e-12), 1e-4 * (1 - 1e-12)):
+        with pytest.raises(ValueError, match=r"^dt \(the first adaptive step\) must be in "
+                                             r"\[dt_min, dt_max\] = \[0.0001, 0.01\] s, got "):
+            ts.SolverConfig(dt=dt, **bounds)
+    assert ts.SolverConfig(dt=1e-5, dt_min=1e-4, dt_max=0.01).dt == 1e-5
 
 
 @pytest.mark.parametrize("field,value", [

@@ -308,3 +308,37 @@ def test_a_primitive_table_keeps_only_ok_and_finite_rows():
     model = PrimitiveModel.from_table(table)
     assert model.gaits == ["none", "A1"]
     np.testing.assert_array_equal(model.steps_mm, [(0, 0), (10, 0)])
+
+
+def test_a_drive_is_checked_at_the_ends_of_its_ranges_before_any_compute():
+    """goals a finite, non-empty (G, 2) array; max_cycles ≥ 1 and settle_cycles ≥ 0, integers
+    (a bool is not one); tolerance_mm > 0; the period and period / frames_per_cycle whole
+    numbers of steps: each end accepted, just past it refused naming the argument."""
+    from taichi_star import SolverConfig, StarParams
+    from taichi_star.planner import check_drive
+
+    params, solver = StarParams(), SolverConfig()
+    goals = check_drive([[40, 0], [0, -5]], params, solver, tolerance_mm=1e-9, max_cycles=1,
+                        settle_cycles=0, frames_per_cycle=1)
+    assert goals.dtype == np.float64 and goals.tolist() == [[40.0, 0.0], [0.0, -5.0]]
+    # 3.15 s is 3150 steps of 1 ms: 10 frames of 315 steps, 7 of 450 (whole), 4 of 787.5 (not)
+    check_drive(goals, params, solver, frames_per_cycle=7)
+    refused = [
+        (dict(goals_mm=np.zeros((0, 2))), "goals_mm must be a finite"),
+        (dict(goals_mm=[40.0, 0.0]), "goals_mm must be a finite"),
+        (dict(goals_mm=[[40.0, 0.0, 0.0]]), "goals_mm must be a finite"),
+        (dict(goals_mm=[[40.0, np.inf]]), "goals_mm must be a finite"),
+        (dict(max_cycles=0), "max_cycles must be an integer >= 1, got 0"),
+        (dict(max_cycles=True), "max_cycles must be an integer >= 1, got True"),
+        (dict(settle_cycles=-1), "settle_cycles must be an integer >= 0, got -1"),
+        (dict(settle_cycles=1.0), "settle_cycles must be an integer >= 0, got 1.0"),
+        (dict(tolerance_mm=0.0), "tolerance_mm must be a number > 0, got 0.0"),
+        (dict(tolerance_mm=math.nan), "tolerance_mm must be a number > 0, got nan"),
+        (dict(frames_per_cycle=4), r"period / frames_per_cycle must be a whole number of steps "
+                                   r"\(dt = 0.001 s\), got period 3.15 and 4 frames"),
+        (dict(params=params.replace(period=3.1505), frames_per_cycle=1), "period / frames"),
+    ]
+    for changes, message in refused:
+        arguments = {"goals_mm": goals, "params": params, "solver": solver, **changes}
+        with pytest.raises(ValueError, match="^" + message):
+            check_drive(**arguments)

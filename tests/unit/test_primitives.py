@@ -165,3 +165,24 @@ def test_gaits_sort_by_actuator_count_then_bits_then_the_extra_keys():
     assert ordered.values.tolist() == [["A1", 0], ["A3", 0], ["A3", 1], ["A8", 0], ["A1+A2", 0]]
     assert ordered.columns.tolist() == ["gait", "cycle"] and ordered.index.tolist() == [0, 1, 2,
                                                                                          3, 4]
+
+
+def test_a_measurement_is_checked_at_the_ends_of_its_ranges_before_any_compute():
+    """cycles ≥ 1 and first_cycle in [0, cycles − 1], both integers (a bool is not one), and
+    the period a whole number of steps: each end accepted, just past it refused, naming the
+    argument and its range."""
+    from taichi_star.primitives import check_measurement
+
+    base, solver = ts.StarParams(), ts.SolverConfig()
+    check_measurement(base, solver, cycles=1, first_cycle=0)
+    check_measurement(base, solver, cycles=3, first_cycle=2)
+    for cycles in (0, True, 2.0):
+        with pytest.raises(ValueError, match=rf"^cycles must be an integer >= 1, got {cycles!r}$"):
+            check_measurement(base, solver, cycles=cycles, first_cycle=0)
+    for first_cycle in (3, -1, False):
+        with pytest.raises(ValueError, match=rf"^first_cycle must be an integer in \[0, 2\], got "
+                                             rf"{first_cycle!r}$"):
+            check_measurement(base, solver, cycles=3, first_cycle=first_cycle)
+    with pytest.raises(ValueError, match=r"^period must be a whole number of steps \(dt = 0.001 "
+                                         r"s\) to record every cycle boundary, got 3.1505$"):
+        check_measurement(base.replace(period=3.1505), solver, cycles=2, first_cycle=1)

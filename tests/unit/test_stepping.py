@@ -48,6 +48,15 @@ def test_step_end(taichi_cpu, proposed, target, firing, expected):
     assert _step_end(0.0, proposed, target, firing, 0.001) == pytest.approx(expected, rel=1e-15)
 
 
+def test_a_firing_exactly_one_firing_step_away_is_reached_in_one_step(taichi_cpu):
+    """The approach splits only when the firing is more than firing_step away (>): exactly
+    firing_step away the step ends on it; with a firing step one ulp shorter it stops halfway
+    (binary-exact values: the comparisons are exact)."""
+    away = 2 ** -10
+    assert _step_end(0.0, 0.01, away, 1, away) == away
+    assert _step_end(0.0, 0.01, away, 1, away * (1 - 2 ** -52)) == away / 2
+
+
 @pytest.mark.parametrize("h, proposed, error, firing, expected", [
     (0.01, 0.01, TOL / 4, 0, 0.01 * 1.8),   # 0.9·√4
     (0.01, 0.01, 0.0, 0, 0.02),             # no error: doubles
@@ -55,14 +64,18 @@ def test_step_end(taichi_cpu, proposed, target, firing, expected):
     (0.004, 0.01, TOL / 4, 0, 0.01 * 1.8),  # cut short to land: grows from the proposed size
     (0.004, 0.01, TOL / 4, 1, 0.004 * 1.8),  # cut short by a firing: from its own size
     (0.004, 0.01, TOL, 0, 0.004 * 0.9),     # shrinking: from its own size
+    (4e-6, 4e-6, 100 * TOL, 0, 1e-6),       # shrunk by the least factor 0.2 below dt_min: dt_min
 ])
 def test_accepted_size(taichi_cpu, h, proposed, error, firing, expected):
     assert _accepted_size(h, proposed, error, firing) == pytest.approx(expected, rel=1e-15)
 
 
-@pytest.mark.parametrize("error, factor", [(2 * TOL, 0.9 / math.sqrt(2)), (100 * TOL, 0.2)])
-def test_rejected_size(taichi_cpu, error, factor):
-    assert _rejected_size(0.01, error) == pytest.approx(0.01 * factor, rel=1e-15)
+@pytest.mark.parametrize("h, error, expected", [
+    (0.01, 2 * TOL, 0.01 * 0.9 / math.sqrt(2)), (0.01, 100 * TOL, 0.01 * 0.2),
+    (4e-6, 100 * TOL, 1e-6),    # 0.2 × 4e-6 s is under dt_min = 1e-6 s: dt_min
+])
+def test_rejected_size(taichi_cpu, h, error, expected):
+    assert _rejected_size(h, error) == pytest.approx(expected, rel=1e-15)
 
 
 @pytest.mark.parametrize("error, h, kept", [
