@@ -22,6 +22,7 @@ import numpy as np
 import taichi as ti
 from taichi.lang.field import Field
 
+from .fields import FieldStore
 from .gait import N_ACTUATORS
 
 PROFILE_CLOSURES = ("jump", "ramp")
@@ -179,10 +180,20 @@ class Schedule:
         """The actuators each pending firing fires: bit m for actuator A(m+1)."""
         self.pending_count = arena.batch_field(ti.i32, capacity)
         """Entries of the pending firings in use."""
+        self._pending_store: Optional[FieldStore] = None
 
     def fields(self) -> Dict[str, Field]:
         """The schedule's fields by name (`FIELD_NAMES`)."""
         return {name: getattr(self, name) for name in self.FIELD_NAMES}
+
+    @property
+    def pending_store(self) -> FieldStore:
+        """The pending firings' fields in one copy each way (made at the first scheduled
+        command: three kernels each way to compile otherwise)."""
+        if self._pending_store is None:
+            self._pending_store = FieldStore({name: getattr(self, name) for name in
+                                              ("pending_due", "pending_actuators", "pending_count")})
+        return self._pending_store
 
     # ---------------------------------------------------------------- device side
     @ti.func
@@ -302,9 +313,9 @@ class Schedule:
         if due is None:
             self.fire_now(bits)
             return
-        dues = self.pending_due.to_numpy()
-        entries = self.pending_actuators.to_numpy()
-        counts = self.pending_count.to_numpy()
+        pending_now = self.pending_store.read()
+        dues, entries, counts = (pending_now[name] for name in
+                                 ("pending_due", "pending_actuators", "pending_count"))
         at = dues.dtype.type(due)
         seconds = float(due) * (step_s if step_s is not None else 1.0)
         if step_s is not None and float(at) != due:
@@ -331,6 +342,5 @@ class Schedule:
                 times, fired = np.insert(times, place, at), np.insert(fired, place, bits[b])
             counts[b] = len(times)
             dues[b, :len(times)], entries[b, :len(times)] = times, fired
-        self.pending_due.from_numpy(dues)
-        self.pending_actuators.from_numpy(entries)
-        self.pending_count.from_numpy(counts)
+        self.pending_store.write({"pending_due": dues, "pending_actuators": entries,
+                                  "pending_count": counts})
