@@ -157,6 +157,9 @@ SENSITIVITY_BATCH = 64
 """Instances of the sensitivities section (the cost goal is stated at B = 64)."""
 SENSITIVITY_DURATION = 0.3
 """Simulated seconds of the sensitivities section: the pulse and the start of the coast."""
+MAX_DURATION = 100.0
+"""The longest simulated time of one measurement, s (--plain-duration, --sensitivity-duration,
+--accurate-duration): a measurement, not a run."""
 QUICK_SCENARIOS = "all_terms,added_mass_0"
 """--quick keeps to one engine (the smallest, as the other studies' quick batches use) and to
 scenarios with the same terms, so that it compiles the stepping kernel at most once."""
@@ -549,9 +552,13 @@ def parse_args(argv):
     if args.arch == "cpu" and (len(args.layouts) > 1 or len(args.gpu_block_dims) > 1):
         raise cli.StudyArgumentError("--layouts and --gpu-block-dims compare GPU settings; "
                                      "use them with --arch gpu")
-    if not (0.0 < args.accurate_duration <= 100.0):
-        raise cli.StudyArgumentError(f"--accurate-duration must be in (0, 100] s, got "
-                                     f"{args.accurate_duration}")
+    if not (0.0 < args.accurate_duration <= MAX_DURATION):
+        raise cli.StudyArgumentError(f"--accurate-duration must be in (0, {MAX_DURATION:g}] s, "
+                                     f"got {args.accurate_duration}")
+    for flag in ("plain_duration", "sensitivity_duration"):  # fixed steps of DT
+        if not (DT <= getattr(args, flag) <= MAX_DURATION):
+            raise cli.StudyArgumentError(f"--{flag.replace('_', '-')} must be in [{DT:g}, "
+                                         f"{MAX_DURATION:g}] s, got {getattr(args, flag)}")
     for flag in ("steps", "repeats", "scenario_batch", "process_batch"):
         if getattr(args, flag) < 1:
             raise cli.StudyArgumentError(f"--{flag.replace('_', '-')} must be >= 1, got "

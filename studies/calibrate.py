@@ -241,7 +241,8 @@ def build_parser():
     parser.add_argument("--max-generations", type=int, default=DEFAULT_MAX_GENERATIONS,
                         quick=QUICK_MAX_GENERATIONS, help="generations per CMA-ES run")
     parser.add_argument("--restarts", type=int, default=0,
-                        help="extra CMA-ES runs from random points, population doubled (IPOP)")
+                        help=f"extra CMA-ES runs from random points, population doubled (IPOP; at "
+                             f"most {identify.MAX_RESTARTS})")
     parser.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
     parser.add_argument("--sigma0", type=float, default=0.25,
                         help="initial CMA-ES step in unit coordinates (default 0.25)")

@@ -200,9 +200,12 @@ def parse(parser: StudyParser, argv) -> argparse.Namespace:
                                      f"a folder, e.g. runs/mine)")
     if getattr(args, "prefix", None) is not None:
         check_file_name(args.prefix, "--prefix")
-    if getattr(args, "resume", False) and args.out is None and args.run_dir is None:
-        raise StudyArgumentError("--resume: give --out (the folder of the run to continue) "
-                                 "or --run-dir")
+    if getattr(args, "resume", False) and args.out is None \
+            and getattr(args, "run_dir", None) is None:
+        # a study that keeps its finished work in --out itself has no --run-dir
+        alternative = " or --run-dir" if hasattr(args, "run_dir") else ""
+        raise StudyArgumentError(f"--resume: give --out (the folder of the run to continue)"
+                                 f"{alternative}")
     if getattr(args, "workers", None) is not None and args.scheduler is not None:
         raise StudyArgumentError("--workers and --scheduler: give one (local worker processes "
                                  "or a Dask cluster), not both")
@@ -239,6 +242,24 @@ def check_length(length: str, duration_s: float, step_s: float, step_name: str):
         check_work(f"{length} at {step_name} {step_s:g} s", duration_s / step_s)
     except ValueError as error:
         raise StudyArgumentError(str(error)) from None
+
+
+def check_run(length: str, duration_s: float, config: SolverConfig):
+    """`check_length` of a run of duration_s (s, what `length` says, e.g. "--cycles 3 +
+    --glide-cycles 4 (22 s)") with this solver: its fixed steps, or its dt_max steps (the
+    fewest) when adaptive, as the library refuses them; and at least one fixed step."""
+    step, step_name = (config.dt_max, "dt_max") if config.adaptive else (config.dt, "--dt")
+    check_length(length, duration_s, step, step_name)
+    if not config.adaptive and steps_in(duration_s, config.dt) < 1:
+        raise StudyArgumentError(f"{length} is less than one step (dt = {config.dt:g} s)")
+
+
+def check_cycles(cycles: Mapping[str, int], period: float, config: SolverConfig):
+    """`check_run` of a run of whole actuation cycles of `period` (s): the sum of the counts
+    in `cycles`, each given by the flag it maps from ({"--cycles": 5, "--glide-cycles": 4})."""
+    total = sum(cycles.values())
+    named = " + ".join(f"{flag} {count}" for flag, count in cycles.items())
+    check_run(f"{named} ({total * period:.3g} s)", total * period, config)
 
 
 def check_positive(value: float, flag: str):
@@ -435,11 +456,7 @@ def solver(args) -> SolverConfig:
         else:
             duration = args.cycles * base_params(args).period
             length = f"--cycles {args.cycles:g} ({duration:.3g} s)"
-        # adaptive runs are refused by their fewest steps, as the library refuses them
-        step, step_name = (config.dt_max, "dt_max") if config.adaptive else (config.dt, "--dt")
-        check_length(length, duration, step, step_name)
-        if not config.adaptive and steps_in(duration, config.dt) < 1:
-            raise StudyArgumentError(f"{length} is less than one step (dt = {config.dt:g} s)")
+        check_run(length, duration, config)
     return config
 
 

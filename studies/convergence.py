@@ -21,7 +21,7 @@ import math
 import numpy as np
 import pandas as pd
 
-from taichi_star import metrics
+from taichi_star import StarParams, metrics
 from taichi_star.batch import run_batch
 from taichi_star.experiment import PAPER_GAITS
 
@@ -54,6 +54,10 @@ def parse_n_arc(text: str):
         raise cli.StudyArgumentError(
             f"--n-arc needs at least three values >= 2, each twice the previous (for the "
             f"observed order), got {text!r}")
+    try:
+        StarParams(n_arc=n_arcs[-1])  # the finest, as StarParams bounds it
+    except ValueError as error:
+        raise cli.StudyArgumentError(f"--n-arc: {error}") from None
     return n_arcs
 
 

@@ -95,10 +95,14 @@ def main(argv=None):
             except ValueError as error:
                 raise cli.StudyArgumentError(f"--dt: {error}") from None
             try:
-                control_period(StarParams.preset(preset), solvers[preset, jacobian],
-                               args.control_period)
+                period = control_period(StarParams.preset(preset), solvers[preset, jacobian],
+                                        args.control_period)
             except ValueError as error:
                 raise cli.StudyArgumentError(f"--control-period: {error}") from None
+            # the timed steps and the one that compiles, one control period each
+            duration = (args.steps + 1) * period
+            cli.check_run(f"--steps {args.steps} (+1 compiling) of --control-period {period:g} s "
+                          f"({duration:.3g} s)", duration, solvers[preset, jacobian])
     out = cli.Output(args, argv or [], model={"presets": presets},
                      solver={f"{preset}, {jacobian}": solver
                              for (preset, jacobian), solver in solvers.items()},

@@ -30,6 +30,7 @@ Writes into --out (default runs/gait_design/<timestamp>/), each CSV with its pro
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +45,8 @@ from . import cli
 DESCRIPTION = ("Firing offsets per actuator optimised by L-BFGS-B on the exact sensitivities "
                "for speed in a direction or turning, against the best synchronous gait.")
 DEFAULT_PRIMITIVES = Path(__file__).resolve().parent.parent / "results" / "primitives.csv"
+PRIMITIVE_COLUMNS = {"gait", "step_mm", "direction_deg", "step_x_mm", "step_y_mm", "turn_deg"}
+"""The columns of the --primitives table this study reads."""
 ROBUSTNESS_SCALES = ((1.0, 1.0), (0.8, 0.8), (0.8, 1.2), (1.2, 0.8), (1.2, 1.2))
 """(α factor, drag_perpendicular factor): the centre, then the 4 corners of ±20 %."""
 DELAY_MARGIN = 1e-6
@@ -199,14 +202,24 @@ def main(argv=None):
         if getattr(args, flag) < 1:
             raise cli.StudyArgumentError(f"--{flag.replace('_', '-')} must be >= 1, got "
                                          f"{getattr(args, flag)}")
-    if args.random_starts < 0:
-        raise cli.StudyArgumentError(f"--random-starts must be >= 0, got {args.random_starts}")
+    for flag in ("random_starts", "seed"):
+        if getattr(args, flag) < 0:
+            raise cli.StudyArgumentError(f"--{flag.replace('_', '-')} must be >= 0, got "
+                                         f"{getattr(args, flag)}")
+    if args.direction is not None and not math.isfinite(args.direction):
+        raise cli.StudyArgumentError(f"--direction must be a finite angle (deg), got "
+                                     f"{args.direction}")
     try:
         primitives = pd.read_csv(args.primitives)
     except (OSError, ValueError) as error:
         raise cli.StudyArgumentError(f"--primitives {args.primitives}: {error}") from None
+    if primitives.empty or not PRIMITIVE_COLUMNS <= set(primitives.columns):
+        raise cli.StudyArgumentError(f"--primitives {args.primitives}: not a primitives table "
+                                     f"(needs rows with {sorted(PRIMITIVE_COLUMNS)})")
     base = cli.base_params(args)
     solver = cli.solver(args)
+    # every evaluation runs --cycles from rest, even under --quick
+    cli.check_cycles({"--cycles": args.cycles}, base.period, solver)
     fastest = primitives.loc[primitives["step_mm"].idxmax()]
     direction = float(fastest["direction_deg"]) if args.direction is None else args.direction
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},

@@ -532,8 +532,8 @@ def main(argv=None):
                         ("--polish-evaluations", args.polish_evaluations)):
         if value < 0:
             raise cli.StudyArgumentError(f"{flag} must be >= 0, got {value}")
-    if args.popsize is not None and args.popsize < 2:
-        raise cli.StudyArgumentError(f"--popsize must be >= 2, got {args.popsize}")
+    identify.CMASettings(popsize=args.popsize, max_generations=args.cma_generations,
+                         seed=args.seed).validate()
     train, validate = identify.parse_windows(args.train_cycles, args.validate_cycles)
     gaits = identify.measured_gaits(args.gaits)
     base = cli.base_params(args)

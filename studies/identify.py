@@ -38,6 +38,9 @@ from taichi_star.experiment import (PAPER_DIRECTIONS, PAPER_GAITS, experimental_
 from . import cli
 
 DEFAULT_MAX_GENERATIONS = 20
+MAX_RESTARTS = 10
+"""The most CMA-ES restarts: each doubles the population (IPOP), the last's is 2^10 times the
+first's; more is work that cannot finish (and overflows the run-time estimate)."""
 FAILED_PENALTY = 1e6
 """Objective told to CMA-ES for a failed candidate (it needs finite values; the CSV keeps inf)."""
 WEIGHT_SCHEMES = ("experimental", "uniform")
@@ -263,6 +266,9 @@ class CMASettings:
                                             f"{self.max_generations}")
         if self.restarts < 0:
             raise cli.StudyArgumentError(f"--restarts must be >= 0, got {self.restarts}")
+        if self.restarts > MAX_RESTARTS:
+            raise cli.StudyArgumentError(f"--restarts must be <= {MAX_RESTARTS} (each doubles "
+                                         f"the population), got {self.restarts}")
         if self.seed < 0:
             raise cli.StudyArgumentError(f"--seed must be >= 0, got {self.seed}")
         if not (math.isfinite(self.sigma0) and 0 < self.sigma0 <= 1):

@@ -546,7 +546,8 @@ def build_parser():
                         help=f"generations per CMA-ES run of the refine stage (default "
                              f"{DEFAULT_REFINE_GENERATIONS})")
     parser.add_argument("--restarts", type=int, default=1, quick=0,
-                        help="extra CMA-ES runs from random points (multi-start, IPOP)")
+                        help=f"extra CMA-ES runs from random points (multi-start, IPOP; at most "
+                             f"{identify.MAX_RESTARTS})")
     parser.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
     parser.add_argument("--sigma0", type=float, default=0.25,
                         help="initial CMA-ES step in unit coordinates (default 0.25)")
@@ -588,8 +589,6 @@ def main(argv=None):
         raise cli.StudyArgumentError(f"--fold-generations must be >= 0, got "
                                      f"{args.fold_generations}")
     cli.check_positive(args.budget_hours, "--budget-hours")
-    if args.resume and args.out is None:
-        raise cli.StudyArgumentError("--resume: give --out (the folder of the run to continue)")
     train, validate = identify.parse_windows(args.train_cycles, args.validate_cycles)
     gaits = identify.measured_gaits(args.gaits)
     base = cli.base_params(args)

@@ -169,6 +169,11 @@ def main(argv=None):
         raise cli.StudyArgumentError(f"--dt, --set period: {error}") from None
     if args.primitives is not None:
         model = read_primitive_model(args.primitives, base.period, solver.dt)
+    else:  # the primitives' longest run, as that study checks it
+        cli.check_cycles({"--cycles": args.cycles, "--glide-cycles": args.glide_cycles},
+                         base.period, solver)
+    cli.check_cycles({"--max-cycles": args.max_cycles, "--settle-cycles": args.settle_cycles},
+                     base.period, solver)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver,
                      extra={"tolerance_mm": args.tolerance, "max_cycles": args.max_cycles,

@@ -95,6 +95,9 @@ def main(argv=None):
         check_measurement(base, solver, args.cycles, args.first_cycle)
     except ValueError as error:
         raise cli.StudyArgumentError(f"--dt, --set period: {error}") from None
+    # the longest run: the glide run fires --cycles in a row, then coasts --glide-cycles
+    cli.check_cycles({"--cycles": args.cycles, "--glide-cycles": args.glide_cycles},
+                     base.period, solver)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"cycles": args.cycles,
                                            "first_cycle": args.first_cycle,

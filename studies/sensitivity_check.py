@@ -31,7 +31,7 @@ import numpy as np
 import pandas as pd
 
 from taichi_star import SolverConfig, StarParams
-from taichi_star.sensitivities import DIFFERENTIABLE_FIELDS
+from taichi_star.sensitivities import DIFFERENTIABLE_FIELDS, parse_directions
 from taichi_star.sensitivity_check import check_sensitivities
 
 from . import cli
@@ -62,6 +62,12 @@ def settings(quick: bool):
             for integrator in ("euler", "bdf2") for damping in (0.0, DAMPING_TIME_S)
             for adaptive in (False, True)]
     return rows + [("euler/heights/fixed", "euler", 0.0, False, True)]
+
+
+def solver_of(integrator: str, adaptive: bool) -> SolverConfig:
+    """The SolverConfig of one setting (at most 1-ms steps, adaptive or fixed)."""
+    return SolverConfig(integrator=integrator, newton_tol=1e-12, adaptive=adaptive,
+                        **({"error_tol": 1e-3, "dt_max": 1e-3} if adaptive else {}))
 
 
 def plot_check(csv_path, png_path) -> Path:
@@ -111,16 +117,21 @@ def main(argv=None):
     cli.check_positive(args.duration, "--duration")
     gaits = cli.resolve_gaits(args.gaits)
     base = StarParams.preset("paper", actuator_delays=(OFF_GRID_DELAY_S,) * 8)
+    for _, integrator, _, adaptive, heights in settings(args.quick):  # before the output folder
+        try:
+            parse_directions(parameters_of(args.parameters, heights))
+        except ValueError as error:
+            raise cli.StudyArgumentError(f"--parameters: {error}") from None
+        cli.check_run(f"--duration {args.duration:g} s", args.duration,
+                      solver_of(integrator, adaptive))
     out = cli.Output(args, argv or [], model={"preset": "paper", "params": base},
                      extra={"duration_s": args.duration, "gaits": gaits})
     tables = []
     for name, integrator, damping, adaptive, heights in settings(args.quick):
         extra = HEIGHTS if heights else {}
         params = [base.replace(gait=gait, damping_time=damping, **extra) for gait in gaits]
-        solver = SolverConfig(integrator=integrator, newton_tol=1e-12, adaptive=adaptive,
-                              **({"error_tol": 1e-3, "dt_max": 1e-3} if adaptive else {}))
         try:
-            table = check_sensitivities(params, args.duration, solver,
+            table = check_sensitivities(params, args.duration, solver_of(integrator, adaptive),
                                         parameters_of(args.parameters, heights))
         except ValueError as error:
             raise cli.StudyArgumentError(str(error)) from None

@@ -102,6 +102,8 @@ FORMS = ("instance_major", "unrolled_scalar", "lane_vector", "lane_vector_masked
 VECTOR_FORMS = ("lane_vector", "lane_vector_masked")
 """The forms whose field elements are ti.Vectors of lanes."""
 PRECISIONS = ("f64", "f32")
+MAX_MATMUL_SIZE = 8192
+"""The largest --matmul-size: its three n × n f64 matrices take 1.5 GiB."""
 DISTINCT_MATRICES = 64
 """Random matrices generated per configuration, repeated over the batch (the timing does not
 depend on the values; generating 4,096 matrices of the accurate pattern would take longer than
@@ -1028,7 +1030,8 @@ def build_parser():
     parser.add_argument("--repeats", type=int, default=7, quick=2,
                         help="interleaved timing rounds (each form's best is kept)")
     parser.add_argument("--matmul-size", type=int, default=1024, quick=256,
-                        help="n of NumPy's n × n reference matrix product")
+                        help=f"n of NumPy's n × n reference matrix product (16 to "
+                             f"{MAX_MATMUL_SIZE})")
     parser.add_argument("--kernels", default=",".join(KERNELS),
                         help=f"comma list of the kernels to time, from {','.join(KERNELS)}")
     return parser
@@ -1045,10 +1048,11 @@ def main(argv=None):
         if any(batch % lanes for lanes in lanes_list):
             raise cli.StudyArgumentError(f"--batch-sizes: {batch} is not a multiple of every "
                                          f"--lanes value ({args.lanes})")
-    for value, flag, low in ((args.repeats, "--repeats", 1), (args.matmul_size,
-                                                               "--matmul-size", 16)):
-        if value < low:
-            raise cli.StudyArgumentError(f"{flag} must be >= {low}, got {value}")
+    if args.repeats < 1:
+        raise cli.StudyArgumentError(f"--repeats must be >= 1, got {args.repeats}")
+    if not 16 <= args.matmul_size <= MAX_MATMUL_SIZE:
+        raise cli.StudyArgumentError(f"--matmul-size must be in [16, {MAX_MATMUL_SIZE}], got "
+                                     f"{args.matmul_size}")
     out = cli.Output(args, argv or [], model={"presets": presets},
                      extra={"precisions": precisions, "batch_sizes": batch_sizes,
                             "lanes": lanes_list, "repeats": args.repeats,

@@ -164,6 +164,8 @@ def plot_sweep(csv_path, out: cli.Output, prefix: str = "sweep"):
 
 def main(argv=None):
     args = cli.parse(build_parser(), argv)
+    if args.max_instances < 1:
+        raise cli.StudyArgumentError(f"--max-instances must be >= 1, got {args.max_instances}")
     axes = sweep_axes(args)
     size = int(np.prod([len(v) for v in axes.values()]))
     if size > args.max_instances:
