@@ -160,6 +160,8 @@ SENSITIVITY_DURATION = 0.3
 MAX_DURATION = 100.0
 """The longest simulated time of one measurement, s (--plain-duration, --sensitivity-duration,
 --accurate-duration): a measurement, not a run."""
+MAX_STEPS = round(MAX_DURATION / DT)
+"""The most timed steps per measurement (--steps): MAX_DURATION at h = DT."""
 QUICK_SCENARIOS = "all_terms,added_mass_0"
 """--quick keeps to one engine (the smallest, as the other studies' quick batches use) and to
 scenarios with the same terms, so that it compiles the stepping kernel at most once."""
@@ -431,27 +433,29 @@ def cache_probe(arch: str, precision: str, batch_size: int) -> dict:
 def build_parser():
     parser = cli.StudyParser("bench", DESCRIPTION)
     parser.add_argument("--batch-sizes", default=DEFAULT_BATCH_SIZES, quick=QUICK_BATCH_SIZES,
-                        help="comma list of batch sizes B >= 1")
+                        help=f"comma list of batch sizes B, each in [1, {cli.MAX_BATCH_SIZE}]")
     parser.add_argument("--precisions", default="f64,f32", quick="f64",
                         help="comma list of f64, f32")
     parser.add_argument("--steps", type=int, default=DEFAULT_STEPS, quick=QUICK_STEPS,
-                        help=f"timed steps per measurement, after {WARMUP_STEPS} warm-up steps")
+                        help=f"timed steps per measurement, after {WARMUP_STEPS} warm-up steps, "
+                             f"at most {MAX_STEPS}")
     parser.add_argument("--repeats", type=int, default=DEFAULT_REPEATS, quick=1,
                         help="timed windows per measurement, the best counts")
     parser.add_argument("--scenarios", default=",".join(SCENARIOS), quick=QUICK_SCENARIOS,
                         help=f"comma list of {', '.join(SCENARIOS)} measured at the scenario "
                              f"batch size in the first precision, or none")
     parser.add_argument("--scenario-batch", type=int, default=SCENARIO_BATCH,
-                        quick=QUICK_SCENARIO_BATCH, help="batch size of the scenarios")
+                        quick=QUICK_SCENARIO_BATCH,
+                        help=f"batch size of the scenarios, at most {cli.MAX_BATCH_SIZE}")
     parser.add_argument("--jacobians", default="newton,chord", quick="newton",
                         help="comma list of newton, chord, lagged for the B sweep and the "
                              "processes section")
     parser.add_argument("--workers-list", default="1,2", quick="none",
-                        help="comma list of worker-process counts for the end-to-end processes "
-                             "section, or none")
+                        help=f"comma list of worker-process counts (each at most "
+                             f"{cli.MAX_WORKERS}) for the end-to-end processes section, or none")
     parser.add_argument("--process-batch", type=int, default=PROCESS_BATCH, quick=2,
-                        help=f"batch size of the processes and plain sections (default "
-                             f"{PROCESS_BATCH})")
+                        help=f"batch size of the processes and plain sections, at most "
+                             f"{cli.MAX_BATCH_SIZE} (default {PROCESS_BATCH})")
     parser.add_argument("--no-plain-call", dest="plain_call", action="store_false",
                         help="skip the plain section: simulate(params, duration) with the "
                              "default solver at the process batch size (CPU)")
@@ -527,13 +531,15 @@ def optional_list(text: str, flag: str, parse):
 def parse_args(argv):
     """Parsed and validated arguments (StudyArgumentError before any computation)."""
     args = cli.parse(build_parser(), argv)
-    args.batch_sizes = cli.parse_counts(args.batch_sizes, "--batch-sizes")
+    args.batch_sizes = cli.parse_counts(args.batch_sizes, "--batch-sizes", cli.MAX_BATCH_SIZE)
     args.precisions = solver_choices(args.precisions, "--precisions", "precision")
     args.jacobians = solver_choices(args.jacobians, "--jacobians", "jacobian")
     args.plain_jacobians = solver_choices(args.plain_jacobians, "--plain-jacobians", "jacobian")
     args.scenarios = optional_list(args.scenarios, "--scenarios",
                                    lambda text, flag: cli.parse_choices(text, flag, SCENARIOS))
-    args.workers_list = optional_list(args.workers_list, "--workers-list", cli.parse_counts)
+    args.workers_list = optional_list(
+        args.workers_list, "--workers-list",
+        lambda text, flag: cli.parse_counts(text, flag, cli.MAX_WORKERS))
     args.sensitivity_counts = optional_list(args.sensitivity_counts, "--sensitivity-counts",
                                             parse_sensitivity_counts)
     args.presets = cli.parse_choices(args.presets, "--presets", PRESETS)
@@ -559,10 +565,11 @@ def parse_args(argv):
         if not (DT <= getattr(args, flag) <= MAX_DURATION):
             raise cli.StudyArgumentError(f"--{flag.replace('_', '-')} must be in [{DT:g}, "
                                          f"{MAX_DURATION:g}] s, got {getattr(args, flag)}")
-    for flag in ("steps", "repeats", "scenario_batch", "process_batch"):
-        if getattr(args, flag) < 1:
-            raise cli.StudyArgumentError(f"--{flag.replace('_', '-')} must be >= 1, got "
-                                         f"{getattr(args, flag)}")
+    if args.repeats < 1:
+        raise cli.StudyArgumentError(f"--repeats must be >= 1, got {args.repeats}")
+    for flag, highest in (("steps", MAX_STEPS), ("scenario_batch", cli.MAX_BATCH_SIZE),
+                          ("process_batch", cli.MAX_BATCH_SIZE)):
+        cli.check_count(getattr(args, flag), f"--{flag.replace('_', '-')}", 1, highest)
     if args.workers_list and args.arch != "cpu":
         raise cli.StudyArgumentError("--workers-list: worker processes run on the CPU; use "
                                      "--workers-list none with --arch gpu")

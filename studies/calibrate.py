@@ -273,7 +273,7 @@ def main(argv=None):
                                            "weights": args.weights,
                                            "cma": dataclasses.asdict(settings)})
     progress = not args.no_progress
-    with cli.executor(args) as executor:
+    with cli.executor(args, out) as executor:
         generation_size = settings.population(len(box), 0) * len(gaits)
         run_kwargs = dict(**cli.run_length(args), solver=solver, arch=args.arch,
                           executor=executor,

@@ -14,6 +14,7 @@ A flag may have a different default under --quick: `parser.add_argument(..., qui
 from __future__ import annotations
 
 import argparse
+import collections
 import contextlib
 import datetime
 import difflib
@@ -53,6 +54,17 @@ RUNS_FOLDER = Path("runs")
 """Default parent of the output folders: runs/<study>/<timestamp>/ (git-ignored)."""
 COMMITTED_RESULTS = Path(__file__).resolve().parent.parent / "results"
 """The committed results, written only by full runs (`python -m studies reproduce`)."""
+MAX_INSTANCES = 1_000_000
+"""The most instances one study run simulates (a sweep's product, a sensitivity's sample; a
+range's points): about 100 times the sensitivity study's default 10,240, days of a 2-core CPU."""
+MAX_WORKERS = 256
+"""The most local worker processes (--workers; the scaling and bench --workers-list): each is a
+process with a single-threaded Taichi runtime, so more than one per core only competes for the
+cores; 256 is 16 times the most cores the committed results ran on (more: a Dask cluster,
+--scheduler)."""
+MAX_BATCH_SIZE = 2 ** 20
+"""The most instances a benchmark builds one engine for (bench's batch sizes, env_bench's
+robots): 16 times the largest batch the committed results measure (65,536 on an H200)."""
 
 _UNSET = object()
 
@@ -156,8 +168,9 @@ def add_cycles_flag(parser: StudyParser, default: float = 3.0):
 def add_execution_flags(parser: StudyParser, chunk_size: int = DEFAULT_CHUNK_SIZE):
     """--workers / --scheduler / --retries / --chunk-size."""
     parser.add_argument("--workers", type=int, default=None, metavar="N",
-                        help="run the chunks on N local worker processes, each a "
-                             "single-threaded Taichi runtime (default: in this process)")
+                        help=f"run the chunks on N local worker processes (at most "
+                             f"{MAX_WORKERS}), each a single-threaded Taichi runtime (default: "
+                             f"in this process)")
     parser.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
                         help="run the chunks on an existing Dask cluster (docs/studies.md, "
                              "the common flags)")
@@ -187,10 +200,10 @@ def parse(parser: StudyParser, argv) -> argparse.Namespace:
         check_positive(args.cycles, "--cycles")
     if getattr(args, "dt", None) is not None:
         check_positive(args.dt, "--dt")
-    for flag in ("workers", "chunk_size"):
-        value = getattr(args, flag, None)
-        if value is not None and value < 1:
-            raise StudyArgumentError(f"--{flag.replace('_', '-')} must be >= 1, got {value}")
+    if getattr(args, "workers", None) is not None:
+        check_count(args.workers, "--workers", 1, MAX_WORKERS)
+    if getattr(args, "chunk_size", None) is not None and args.chunk_size < 1:
+        raise StudyArgumentError(f"--chunk-size must be >= 1, got {args.chunk_size}")
     if getattr(args, "retries", 0) < 0:
         raise StudyArgumentError(f"--retries must be >= 0, got {args.retries}")
     for flag in ("out", "run_dir"):
@@ -262,6 +275,15 @@ def check_cycles(cycles: Mapping[str, int], period: float, config: SolverConfig)
     check_run(f"{named} ({total * period:.3g} s)", total * period, config)
 
 
+def check_count(value: int, flag: str, lowest: int, highest: int):
+    """StudyArgumentError naming the flag unless lowest <= value <= highest (a count whose
+    upper bound keeps the run finite: a study's MAX_ constant)."""
+    if value < lowest:
+        raise StudyArgumentError(f"{flag} must be >= {lowest}, got {value}")
+    if value > highest:
+        raise StudyArgumentError(f"{flag} must be in [{lowest}, {highest}], got {value}")
+
+
 def check_positive(value: float, flag: str):
     """StudyArgumentError naming the flag unless value is a finite number > 0."""
     if not (math.isfinite(value) and value > 0):
@@ -297,6 +319,9 @@ def parse_range(text: str, flag: str = "value") -> List[float]:
                                  f"{parts[2]!r} is not an integer") from None
     if count < 1:
         raise StudyArgumentError(f"{flag}: range {text!r} has {count} points; need at least 1")
+    if count > MAX_INSTANCES:
+        raise StudyArgumentError(f"{flag}: range {text!r} has {count} points; at most "
+                                 f"{MAX_INSTANCES} (the most instances a study runs)")
     if count == 1 and start != stop:
         raise StudyArgumentError(f"{flag}: range {text!r} has one point but start != stop")
     if len(parts) == 4:
@@ -306,38 +331,51 @@ def parse_range(text: str, flag: str = "value") -> List[float]:
     return [float(v) for v in np.linspace(start, stop, count)]
 
 
-def parse_values(text: str, flag: str = "value", kind: type = float) -> list:
+def parse_values(text: str, flag: str = "value", kind: type = float,
+                 repeats: bool = False) -> list:
     """A comma-separated list ("0,0.5,1", "contract,always") or, for numbers, a range
-    ("0.2:1.2:11", "1e6:1e7:5:log"). StudyArgumentError naming `flag` when malformed or empty."""
+    ("0.2:1.2:11", "1e6:1e7:5:log"). StudyArgumentError naming `flag` when malformed or empty,
+    or when a value is listed twice (it would only repeat the work) unless `repeats` (a list
+    whose values may repeat: a per-actuator field's eight)."""
     if text is None or not str(text).strip():
         raise StudyArgumentError(f"{flag}: empty value list")
     text = str(text).strip()
     if kind is float and ":" in text:
-        return parse_range(text, flag)
-    items = [item.strip() for item in text.split(",")]
-    if any(not item for item in items):
-        raise StudyArgumentError(f"{flag}: malformed list {text!r} (an empty item)")
-    if kind is float:
-        return [parse_number(item, flag) for item in items]
-    if kind is int:
-        try:
-            return [int(item) for item in items]
-        except ValueError as error:
-            bad = str(error).rsplit(": ", 1)[-1]
-            raise StudyArgumentError(f"{flag}: {bad} is not an integer") from None
-    return items
+        values = parse_range(text, flag)
+    else:
+        items = [item.strip() for item in text.split(",")]
+        if any(not item for item in items):
+            raise StudyArgumentError(f"{flag}: malformed list {text!r} (an empty item)")
+        if kind is float:
+            values = [parse_number(item, flag) for item in items]
+        elif kind is int:
+            try:
+                values = [int(item) for item in items]
+            except ValueError as error:
+                bad = str(error).rsplit(": ", 1)[-1]
+                raise StudyArgumentError(f"{flag}: {bad} is not an integer") from None
+        else:
+            values = items
+    if not repeats and len(set(values)) < len(values):
+        repeated = next(v for v, count in collections.Counter(values).items() if count > 1)
+        raise StudyArgumentError(f"{flag}: {repeated!r} is listed twice in {text!r} (give each "
+                                 f"value once)")
+    return values
 
 
-def parse_counts(text: str, flag: str) -> List[int]:
-    """A comma list of integers >= 1 ("1,8,64")."""
+def parse_counts(text: str, flag: str, highest: Optional[int] = None) -> List[int]:
+    """A comma list of integers >= 1 ("1,8,64"), each at most `highest` when given."""
     values = parse_values(text, flag, int)
     if any(v < 1 for v in values):
         raise StudyArgumentError(f"{flag}: every value must be >= 1, got {text!r}")
+    if highest is not None and max(values) > highest:
+        raise StudyArgumentError(f"{flag}: every value must be in [1, {highest}], got "
+                                 f"{max(values)}")
     return values
 
 
 def parse_choices(text: str, flag: str, choices: Sequence[str]) -> List[str]:
-    """A comma list of names from `choices`."""
+    """A comma list of names from `choices`, each once."""
     values = parse_values(text, flag, str)
     unknown = [v for v in values if v not in choices]
     if unknown:
@@ -368,7 +406,9 @@ def parse_assignment(text: str, flag: str):
                                  f"(e.g. {example}), got {text!r}")
     name, values = text.split("=", 1)
     name = name.strip().replace("-", "_")
-    return name, parse_values(values, f"{flag} {name}", field_kind(name, flag))
+    # a per-actuator field's values are its eight, A1..A8, which may be equal
+    return name, parse_values(values, f"{flag} {name}", field_kind(name, flag),
+                              repeats=name in PER_ACTUATOR_FIELDS)
 
 
 def resolve_gaits(text: str, flag: str = "--gaits") -> List[str]:
@@ -494,13 +534,17 @@ def run_store(args, out: "Output") -> Path:
 
 
 @contextlib.contextmanager
-def executor(args):
-    """The executor --workers / --scheduler ask for (in process without either)."""
+def executor(args, out: Output):
+    """The executor --workers / --scheduler ask for (in process without either). An unreachable
+    scheduler is a StudyArgumentError, and `out`'s folder is removed when this run made it and
+    nothing was written into it yet (the address can only be tried, for up to its timeout,
+    after the cheap checks have made the folder)."""
     with contextlib.ExitStack() as stack:
         try:
             chosen = stack.enter_context(executor_for(
                 workers=args.workers, scheduler=args.scheduler, retries=args.retries))
         except ValueError as error:  # an unreachable scheduler
+            out.remove_if_unused()
             raise StudyArgumentError(f"--{error}") from None
         yield chosen
 
@@ -543,10 +587,17 @@ class Output:
     def __init__(self, args, argv: Sequence[str], model=None, solver=None, extra=None):
         study = args.study
         self.folder = Path(args.out) if args.out is not None else _fresh_run_folder(study)
+        self.made_folder = not self.folder.exists()
         check_output_folder(self.folder, args.quick)
         self.provenance = provenance.record(study, list(argv), model=model, solver=solver,
                                             extra=extra)
         self.written: List[Path] = []
+
+    def remove_if_unused(self):
+        """Remove the folder if this run made it and it is still empty (a run refused after the
+        folder was made); a folder that was there before is left as it was."""
+        if self.made_folder and not any(self.folder.iterdir()):
+            self.folder.rmdir()
 
     def path(self, name: str) -> Path:
         """A file of this run, `name` relative to the folder ("gaits.png",
@@ -651,5 +702,10 @@ def save_figure(fig, png_path, dpi: int = 130) -> Path:
 
 
 def configure_logging():
-    """Show the batch layer's notes (resuming, a damaged chunk recomputed) on stderr."""
-    logging.basicConfig(level=logging.WARNING, format="%(message)s")
+    """Show the batch layer's notes (resuming, a damaged chunk recomputed) on stderr: warnings
+    and errors only, also from a library that sets its own loggers lower (Dask's distributed
+    logs at INFO, among it a traceback of every connection closed when a cluster shuts down,
+    and adds no handler of its own once this one is there)."""
+    handler = logging.StreamHandler()
+    handler.setLevel(logging.WARNING)
+    logging.basicConfig(level=logging.WARNING, format="%(message)s", handlers=[handler])

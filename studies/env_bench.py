@@ -65,7 +65,7 @@ def build_parser():
     parser = cli.StudyParser("env_bench", DESCRIPTION)
     cli.add_dt_flag(parser, quick=QUICK_DT, jacobian=False)
     parser.add_argument("--num-envs", type=int, default=64, quick=QUICK_NUM_ENVS,
-                        help="robots in the vector env")
+                        help=f"robots in the vector env, at most {cli.MAX_BATCH_SIZE}")
     parser.add_argument("--steps", type=int, default=2, quick=QUICK_STEPS, help="timed steps")
     parser.add_argument("--presets", default="paper,accurate",
                         help=f"comma list of presets from {','.join(PRESETS)} (default "
@@ -83,9 +83,9 @@ def main(argv=None):
     args = cli.parse(build_parser(), argv)
     presets = cli.parse_choices(args.presets, "--presets", PRESETS)
     jacobians = cli.parse_choices(args.jacobians, "--jacobians", JACOBIANS)
-    for value, flag in ((args.num_envs, "--num-envs"), (args.steps, "--steps")):
-        if value < 1:
-            raise cli.StudyArgumentError(f"{flag} must be >= 1, got {value}")
+    cli.check_count(args.num_envs, "--num-envs", 1, cli.MAX_BATCH_SIZE)
+    if args.steps < 1:
+        raise cli.StudyArgumentError(f"--steps must be >= 1, got {args.steps}")
     solvers = {}
     for preset in presets:
         for jacobian in jacobians:

@@ -53,6 +53,15 @@ DELAY_MARGIN = 1e-6
 """The delays' upper bound is period·(1 − DELAY_MARGIN): StarParams wants them < period."""
 QUICK_DT = 5e-3
 QUICK_CYCLES = 1
+MAX_SYNCHRONOUS_STARTS = 255
+"""The most synchronous starts (--synchronous-starts): every non-empty gait, the most rows a
+primitives table has."""
+MAX_RANDOM_STARTS = 1000
+"""The most random starts (--random-starts), each an instance of every evaluation's batch (the
+committed runs: 2 and 3)."""
+MAX_ITERATIONS = 1000
+"""The most L-BFGS-B iterations (--iterations), each a batch simulated with its sensitivities
+(the committed runs: 3 and 6)."""
 
 
 def objective_of(result, goal: str, direction_deg: float, duration_s: float, cycles: int,
@@ -185,11 +194,13 @@ def build_parser():
     parser.add_argument("--cycles", type=int, default=2, quick=QUICK_CYCLES,
                         help="actuation cycles from rest per evaluation")
     parser.add_argument("--synchronous-starts", type=int, default=3, quick=1,
-                        help="best synchronous gaits started from")
+                        help=f"best synchronous gaits started from, at most "
+                             f"{MAX_SYNCHRONOUS_STARTS}")
     parser.add_argument("--random-starts", type=int, default=3, quick=1,
-                        help="random delay patterns on those gaits' actuator sets")
+                        help=f"random delay patterns on those gaits' actuator sets, at most "
+                             f"{MAX_RANDOM_STARTS}")
     parser.add_argument("--iterations", type=int, default=6, quick=1,
-                        help="L-BFGS-B iterations at most")
+                        help=f"L-BFGS-B iterations at most, in [1, {MAX_ITERATIONS}]")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random starts")
     parser.add_argument("--primitives", default=str(DEFAULT_PRIMITIVES),
                         help="the synchronous gaits' primitives CSV")
@@ -198,14 +209,14 @@ def build_parser():
 
 def main(argv=None):
     args = cli.parse(build_parser(), argv)
-    for flag in ("cycles", "synchronous_starts", "iterations"):
-        if getattr(args, flag) < 1:
-            raise cli.StudyArgumentError(f"--{flag.replace('_', '-')} must be >= 1, got "
-                                         f"{getattr(args, flag)}")
-    for flag in ("random_starts", "seed"):
-        if getattr(args, flag) < 0:
-            raise cli.StudyArgumentError(f"--{flag.replace('_', '-')} must be >= 0, got "
-                                         f"{getattr(args, flag)}")
+    if args.cycles < 1:
+        raise cli.StudyArgumentError(f"--cycles must be >= 1, got {args.cycles}")
+    if args.seed < 0:
+        raise cli.StudyArgumentError(f"--seed must be >= 0, got {args.seed}")
+    for flag, lowest, highest in (("synchronous_starts", 1, MAX_SYNCHRONOUS_STARTS),
+                                  ("random_starts", 0, MAX_RANDOM_STARTS),
+                                  ("iterations", 1, MAX_ITERATIONS)):
+        cli.check_count(getattr(args, flag), f"--{flag.replace('_', '-')}", lowest, highest)
     if args.direction is not None and not math.isfinite(args.direction):
         raise cli.StudyArgumentError(f"--direction must be a finite angle (deg), got "
                                      f"{args.direction}")

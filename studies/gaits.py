@@ -190,7 +190,7 @@ def main(argv=None):
     solver = cli.solver(args)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver)
-    with cli.executor(args) as executor:
+    with cli.executor(args, out) as executor:
         result = run_batch(params, **cli.run_length(args), solver=solver, arch=args.arch,
                            chunk_size=cli.chunk_size(args, len(params), executor.n_workers),
                            executor=executor, progress=not args.no_progress)

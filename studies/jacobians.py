@@ -27,7 +27,7 @@ import time
 import numpy as np
 import pandas as pd
 
-from taichi_star import SolverConfig, StarParams, simulate
+from taichi_star import JACOBIANS, SolverConfig, StarParams, simulate
 from taichi_star.experiment import PAPER_GAITS
 
 from . import cli
@@ -45,8 +45,9 @@ DEFAULT = (SolverConfig().jacobian, SolverConfig().newton_tol)
 def build_parser():
     parser = cli.StudyParser("jacobians", DESCRIPTION, archs=("cpu",))
     parser.add_argument("--modes", default=DEFAULT_MODES, quick="newton:1e-10,lagged:1e-10",
-                        help="comma list of jacobian:newton_tol configurations (the reference, "
-                             f"{REFERENCE[0]}:{REFERENCE[1]:g}, and the default, "
+                        help=f"comma list of MODE:TOL configurations, MODE one of "
+                             f"{', '.join(JACOBIANS)} and TOL Newton's tolerance, m (the "
+                             f"reference, {REFERENCE[0]}:{REFERENCE[1]:g}, and the default, "
                              f"{DEFAULT[0]}:{DEFAULT[1]:g}, are always run)")
     parser.add_argument("--batch", type=int, default=512, quick=5,
                         help="instances (the five gaits repeated)")
@@ -61,13 +62,20 @@ def parse_modes(text: str):
     """[(jacobian, newton_tol)] from "mode:tol,...", the default and the reference added (the
     reference last), each checked by SolverConfig (StudyArgumentError naming --modes)."""
     configurations = []
-    for item in cli.parse_values(text, "--modes", str):
+    # a configuration listed twice runs once (as the default and the reference do)
+    for item in cli.parse_values(text, "--modes", str, repeats=True):
         mode, _, tol = item.partition(":")
         try:
-            SolverConfig(jacobian=mode, newton_tol=float(tol))
+            tolerance = float(tol)
+        except ValueError:
+            raise cli.StudyArgumentError(
+                f"--modes: {item!r} is not MODE:TOL (MODE one of {', '.join(JACOBIANS)}, TOL "
+                f"Newton's tolerance in m, e.g. lagged:1e-10)") from None
+        try:
+            SolverConfig(jacobian=mode, newton_tol=tolerance)
         except ValueError as error:
             raise cli.StudyArgumentError(f"--modes: {item!r}: {error}") from None
-        configurations.append((mode, float(tol)))
+        configurations.append((mode, tolerance))
     ordered = [DEFAULT] + [c for c in configurations if c not in (DEFAULT, REFERENCE)]
     return list(dict.fromkeys(ordered)) + [REFERENCE]
 

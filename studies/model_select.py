@@ -694,7 +694,7 @@ def main(argv=None):
             "gaits": result["gaits"].to_dict(orient="list"),
             "folds": result["folds"].to_dict(orient="list")}, default=_json_value))
 
-    with cli.executor(args) as executor:
+    with cli.executor(args, out) as executor:
         work = planned_work(runnable, settings, refine_settings, args.refine_top)
         largest = max((fit_settings.population(len(c.fit.split()), fit_settings.restarts)
                        for c, fit_settings in work), default=1) * len(gaits)

@@ -55,6 +55,8 @@ QUICK_MAX_CYCLES = 2
 QUICK_GLIDE_CYCLES = QUICK_SETTLE_CYCLES = 1
 PRIMITIVES_FIRST_CYCLE = 1
 """Primitives measured here: statistics from the second cycle on."""
+MAX_DIRECTIONS = 360
+"""The most goals around the robot (--directions): one per degree (the committed run: 7)."""
 
 
 def plot_paths(paths_csv, plan_csv, png_path) -> Path:
@@ -104,7 +106,8 @@ def build_parser():
     parser.add_argument("--distance", type=float, default=50.0,
                         help="distance of the goals around the robot, mm (default 50)")
     parser.add_argument("--directions", type=int, default=8,
-                        help="goals at --distance, equally spaced in direction (default 8)")
+                        help=f"goals at --distance, equally spaced in direction (default 8, at "
+                             f"most {MAX_DIRECTIONS})")
     parser.add_argument("--far", type=float, default=150.0,
                         help="distance of the goal straight behind, mm (default 150; 0: none)")
     parser.add_argument("--tolerance", type=float, default=5.0,
@@ -149,10 +152,10 @@ def main(argv=None):
     for value, flag, lowest in ((args.max_cycles, "--max-cycles", 1),
                                 (args.cycles, "--cycles", 2),
                                 (args.glide_cycles, "--glide-cycles", 0),
-                                (args.settle_cycles, "--settle-cycles", 0),
-                                (args.directions, "--directions", 0)):
+                                (args.settle_cycles, "--settle-cycles", 0)):
         if value < lowest:
             raise cli.StudyArgumentError(f"{flag} must be >= {lowest}, got {value}")
+    cli.check_count(args.directions, "--directions", 0, MAX_DIRECTIONS)
     cli.check_positive(args.distance, "--distance")
     cli.check_positive(args.tolerance, "--tolerance")
     if not (np.isfinite(args.far) and args.far >= 0):

@@ -16,7 +16,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from .cli import COMMITTED_RESULTS, OneLineParser, StudyArgumentError
+from .cli import COMMITTED_RESULTS, OneLineParser, StudyArgumentError, parse_values
 
 DESCRIPTION = "Regenerate the main committed results/ with their studies' full runs (hours)."
 
@@ -53,12 +53,12 @@ def command(name: str, into: Path):
 def main(argv=None):
     parser = OneLineParser(prog="python -m studies reproduce", description=DESCRIPTION)
     parser.add_argument("--only", default=None,
-                        help=f"comma list of {', '.join(COMMANDS)} (default all)")
+                        help=f"comma list of {', '.join(COMMANDS)}, each once (default all)")
     parser.add_argument("--into", default=str(COMMITTED_RESULTS),
                         help="output folder (default the repository's results/)")
     parser.add_argument("--dry-run", action="store_true", help="print the commands only")
     args = parser.parse_args(argv)
-    names = list(COMMANDS) if args.only is None else [n.strip() for n in args.only.split(",")]
+    names = list(COMMANDS) if args.only is None else parse_values(args.only, "--only", str)
     unknown = [n for n in names if n not in COMMANDS]
     if unknown:
         raise StudyArgumentError(f"--only: unknown result {unknown[0]!r}; choose from "

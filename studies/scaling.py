@@ -45,7 +45,8 @@ def sweep_params(quick: bool):
 def build_parser():
     parser = cli.StudyParser("scaling", DESCRIPTION, archs=("cpu",))
     parser.add_argument("--workers-list", default="1,2",
-                        help="worker counts to time after the in-process run (default 1,2)")
+                        help=f"worker counts to time after the in-process run, each once and at "
+                             f"most {cli.MAX_WORKERS} (default 1,2)")
     parser.add_argument("--no-dask", action="store_true",
                         help="time local worker processes only, not Dask clusters")
     parser.add_argument("--chunk-size", type=int, default=CHUNK, quick=1,
@@ -69,7 +70,7 @@ def main(argv=None):
     missing_dask = "" if args.no_dask else missing_extra("dask")
     if missing_dask:
         raise cli.StudyArgumentError(f"timing Dask clusters: {missing_dask} (or pass --no-dask)")
-    counts = cli.parse_counts(args.workers_list, "--workers-list")
+    counts = cli.parse_counts(args.workers_list, "--workers-list", cli.MAX_WORKERS)
     solver = cli.solver(args)
     params = sweep_params(args.quick)
     duration = cli.QUICK_DURATION_S if args.quick else params[0].period

@@ -157,8 +157,8 @@ def build_parser():
                         help="gaits: paper (the five, default) or a comma list")
     parser.add_argument("--base-samples", type=int, default=DEFAULT_BASE_SAMPLES,
                         quick=QUICK_BASE_SAMPLES,
-                        help="Saltelli base samples N, a power of 2; instances = N (D + 2) × "
-                             "gaits")
+                        help=f"Saltelli base samples N, a power of 2; instances = N (D + 2) × "
+                             f"gaits, at most {cli.MAX_INSTANCES:,}")
     parser.add_argument("--seed", type=int, default=1, help="sampling and bootstrap seed")
     cli.add_model_flags(parser, fixed=("gait",))
     parser.add_argument("--dt", type=float, default=DEFAULT_DT, quick=cli.QUICK_DT,
@@ -179,6 +179,11 @@ def main(argv=None):
         raise cli.StudyArgumentError(f"--seed must be >= 0, got {args.seed}")
     gaits = cli.resolve_gaits(args.gaits)
     box = [identify.parse_range_spec(text, "--vary") for text in (args.vary or DEFAULT_BOX)]
+    instances = samples * (len(box) + 2) * len(gaits)
+    if instances > cli.MAX_INSTANCES:
+        raise cli.StudyArgumentError(
+            f"--base-samples {samples}: {instances:,} instances ({samples} × ({len(box)} + 2) "
+            f"points × {len(gaits)} gaits), more than the {cli.MAX_INSTANCES:,} a study runs")
     base = identify.model_with_box(args, box, "--vary")
     solver_config = solver(args)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
@@ -195,8 +200,9 @@ def main(argv=None):
     for d, spec in enumerate(box):
         sample_table[spec.column] = values[:, d]
     sample_table.insert(0, "point", np.arange(len(units)))
-    out.write_csv(sample_table, "sensitivity_samples.csv")
-    with cli.executor(args) as executor:
+    # connected first: an unreachable scheduler leaves the folder empty, and it is removed
+    with cli.executor(args, out) as executor:
+        out.write_csv(sample_table, "sensitivity_samples.csv")
         summary = run_batch(params, **cli.run_length(args), solver=solver_config,
                             arch=args.arch,
                             chunk_size=cli.chunk_size(args, len(params), executor.n_workers),

@@ -471,7 +471,7 @@ def main(argv=None):
                                               "params": cli.base_params(args)},
                      solver={precision: {"newton_tol": tolerance} for precision, tolerance
                              in TOLERANCE.items()})
-    with cli.executor(args) as executor:
+    with cli.executor(args, out) as executor:
         table = run_grid(batches, arch=args.arch, executor=executor, chunk_size=args.chunk_size,
                          progress=not args.no_progress)
     summary = outcome_summary(table)

@@ -48,7 +48,6 @@ NAMED_FLAGS = {
 }
 """Command-line flag -> StarParams field."""
 
-MAX_INSTANCES = 1_000_000
 CPU_CHUNK = 256
 """Default chunk size on the CPU: small enough that a kill costs little, large enough to keep
 every core busy."""
@@ -66,8 +65,8 @@ def build_parser():
     parser.add_argument("--gaits", default="paper",
                         help="paper (the five Fig. 4 gaits, default), all (255), or a list "
                              "A1,A1+A2")
-    parser.add_argument("--max-instances", type=int, default=MAX_INSTANCES,
-                        help=f"refuse larger products (default {MAX_INSTANCES})")
+    parser.add_argument("--max-instances", type=int, default=cli.MAX_INSTANCES,
+                        help=f"refuse larger products (default {cli.MAX_INSTANCES})")
     cli.add_resume_flags(parser)
     cli.add_model_flags(parser)
     cli.add_dt_flag(parser)
@@ -177,7 +176,7 @@ def main(argv=None):
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"axes": axes})
     run_dir = cli.run_store(args, out)
-    with cli.executor(args) as executor:
+    with cli.executor(args, out) as executor:
         result = run_batch(grid, **cli.run_length(args), solver=solver, arch=args.arch,
                            chunk_size=cli.chunk_size(args, len(grid), executor.n_workers),
                            executor=executor, run_dir=run_dir, resume=args.resume,

@@ -1,10 +1,14 @@
 """Study-specific flags refused on the command line before any compute and before the output
 folder is made: one line naming the flag and its range, exit code 2, no traceback (each case
-crashed with a traceback, started work that could not finish, or refused only after making the
-output folder)."""
+crashed with a traceback, started work that could not finish, repeated work listed twice, or
+refused only after making the output folder). Also what a refused or finished run leaves: no
+output folder after an unreachable --scheduler, no library's INFO log on stderr."""
+
+import logging
 
 import pytest
 
+from studies import cli
 from studies.__main__ import main as studies_main
 
 QUICK = ["--quick", "--no-progress"]
@@ -32,6 +36,40 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
     ("sensitivity_check", ["--duration", "1e-9"], "--duration 1e-09 s is less than one step"),
     ("simd", ["--matmul-size", "10000000"], "--matmul-size must be in [16, 8192], got 10000000"),
     ("sweep", ["--max-instances", "0"], "--max-instances must be >= 1, got 0"),
+    # a sample that would not fit in memory (224 GiB), counted before it is drawn
+    ("sensitivity", ["--base-samples", "1073741824"],
+     "--base-samples 1073741824: 85,899,345,920 instances (1073741824 × (14 + 2) points × 5 "
+     "gaits), more than the 1,000,000 a study runs"),
+    ("sweep", ["--alpha", "0:1:10000000000"],
+     "--alpha: range '0:1:10000000000' has 10000000000 points; at most 1000000"),
+    # as many processes as asked for would be started
+    ("scaling", ["--workers-list", "100000"],
+     "--workers-list: every value must be in [1, 256], got 100000"),
+    ("bench", ["--workers-list", "1,100000"],
+     "--workers-list: every value must be in [1, 256], got 100000"),
+    ("sweep", ["--workers", "100000"], "--workers must be in [1, 256], got 100000"),
+    # a value listed twice would only be measured or fitted twice
+    ("scaling", ["--workers-list", "1,1"], "--workers-list: 1 is listed twice in '1,1'"),
+    ("bench", ["--workers-list", "1,1"], "--workers-list: 1 is listed twice in '1,1'"),
+    ("bench", ["--lanes", "auto,auto"], "--lanes: 'auto' is listed twice in 'auto,auto'"),
+    ("gradient_fit", ["--sets", "6,6"], "--sets: '6' is listed twice in '6,6'"),
+    # measurements and searches that could not finish
+    ("bench", ["--steps", "2000000000"], "--steps must be in [1, 100000], got 2000000000"),
+    ("bench", ["--scenario-batch", "1000000000"],
+     "--scenario-batch must be in [1, 1048576], got 1000000000"),
+    ("bench", ["--batch-sizes", "8,2000000000"],
+     "--batch-sizes: every value must be in [1, 1048576], got 2000000000"),
+    ("env_bench", ["--num-envs", "100000000"], "--num-envs must be in [1, 1048576], got 100000000"),
+    ("gait_design", ["--synchronous-starts", "1000000"],
+     "--synchronous-starts must be in [1, 255], got 1000000"),
+    ("gait_design", ["--random-starts", "1000000"],
+     "--random-starts must be in [0, 1000], got 1000000"),
+    ("gait_design", ["--iterations", "1000000000"],
+     "--iterations must be in [1, 1000], got 1000000000"),
+    ("plan", ["--directions", "100000"], "--directions must be in [0, 360], got 100000"),
+    ("jacobians", ["--modes", "bogus"],
+     "--modes: 'bogus' is not MODE:TOL (MODE one of newton, chord, lagged, TOL Newton's "
+     "tolerance in m, e.g. lagged:1e-10)"),
 ])
 def test_study_flags_are_refused_before_the_output_folder(no_compute, tmp_path, capsys, study,
                                                           argv, message):
@@ -68,3 +106,61 @@ def test_model_select_resume_needs_out(no_compute, tmp_path, monkeypatch, capsys
     error = capsys.readouterr().err
     assert "--resume: give --out (the folder of the run to continue)" in error, error
     assert "--run-dir" not in error and not any(tmp_path.iterdir())
+
+
+def test_reproduce_refuses_a_result_listed_twice(tmp_path, capsys):
+    assert studies_main(["reproduce", "--only", "sweep,sweep", "--into", str(tmp_path / "into"),
+                         "--dry-run"]) == 2
+    error = capsys.readouterr().err
+    assert "--only: 'sweep' is listed twice in 'sweep,sweep'" in error, error
+    assert len(error.strip().splitlines()) == 1
+
+
+def unreachable_scheduler(**settings):
+    """executor_for of a --scheduler that does not answer (after its timeout, 30 s)."""
+    raise ValueError("scheduler: cannot reach tcp://127.0.0.1:9: Timed out trying to connect")
+
+
+@pytest.mark.parametrize("study, argv", [
+    ("sweep", []),
+    ("gaits", []),
+    # it writes its sample before the run: a small one (SALib's import is most of the time)
+    ("sensitivity", ["--vary", "alpha=0.4:1.2", "--gaits", "A1"]),
+])
+def test_an_unreachable_scheduler_leaves_no_output_folder(no_compute, monkeypatch, tmp_path,
+                                                          capsys, study, argv):
+    monkeypatch.setattr(cli, "executor_for", unreachable_scheduler)
+    out = tmp_path / "out"
+    assert studies_main([study, *argv, "--scheduler", "tcp://127.0.0.1:9", "--out", str(out),
+                         *QUICK]) == 2
+    error = capsys.readouterr().err
+    assert "--scheduler: cannot reach tcp://127.0.0.1:9" in error, error
+    assert len(error.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_an_unreachable_scheduler_keeps_an_output_folder_that_was_there(no_compute, monkeypatch,
+                                                                        tmp_path):
+    monkeypatch.setattr(cli, "executor_for", unreachable_scheduler)
+    out = tmp_path / "out"
+    out.mkdir()
+    assert studies_main(["sweep", "--scheduler", "tcp://127.0.0.1:9", "--out", str(out),
+                         *QUICK]) == 2
+    assert out.is_dir()
+
+
+def test_library_info_logs_stay_off_stderr(monkeypatch, capsys):
+    """Dask's distributed sets its loggers to INFO and logs every connection closed at a
+    cluster's shutdown with its traceback (the scaling study printed them): the studies show
+    warnings and errors only."""
+    root = logging.getLogger()
+    monkeypatch.setattr(root, "handlers", [])  # as in a fresh `python -m studies`
+    monkeypatch.setattr(root, "level", root.level)
+    cli.configure_logging()
+    chatty = logging.getLogger("distributed.batched")
+    monkeypatch.setattr(chatty, "level", logging.INFO)
+    try:
+        raise ConnectionError("the client left")
+    except ConnectionError:
+        chatty.info("Batched Comm Closed", exc_info=True)
+    logging.getLogger("taichi_star.batch").warning("a damaged chunk is recomputed")
+    assert capsys.readouterr().err == "a damaged chunk is recomputed\n"
