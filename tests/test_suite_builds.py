@@ -1,0 +1,43 @@
+"""tools/suite_builds.py's reading of pytest's last line and its alternating round order
+(the suite runs themselves are what the tool measures, not tested here)."""
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def suite_builds():
+    with pytest.MonkeyPatch.context() as patch:
+        patch.syspath_prepend(str(REPO / "tools"))  # it imports bench_builds beside it
+        spec = importlib.util.spec_from_file_location("suite_builds",
+                                                      REPO / "tools" / "suite_builds.py")
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("line, expected", [
+    ("1241 passed, 5 skipped, 4 warnings in 236.09s (0:03:56)",
+     {"pytest_s": 236.09, "passed": 1241, "failed": 0, "skipped": 5, "errors": 0}),
+    ("2 failed, 1239 passed, 1 error in 12.5s",
+     {"pytest_s": 12.5, "passed": 1239, "failed": 2, "skipped": 0, "errors": 1}),
+])
+def test_the_last_summary_line_gives_the_counts_and_seconds(suite_builds, line, expected):
+    # a summary-like line earlier in the output (a test's own print) must not be taken
+    output = f"3 passed in 1.0s\n........ [100%]\n{line}\n"
+    assert suite_builds.last_line_figures(output) == expected
+
+
+def test_an_output_without_a_summary_line_is_refused(suite_builds):
+    with pytest.raises(ValueError, match="no pytest summary line"):
+        suite_builds.last_line_figures("collected 0 items\nINTERNALERROR\n")
+
+
+def test_rounds_alternate_the_order_of_the_builds(suite_builds):
+    builds = {"before": "a", "after": "b"}
+    assert [suite_builds.round_order(builds, n) for n in (1, 2, 3)] == [
+        ["before", "after"], ["after", "before"], ["before", "after"]]
