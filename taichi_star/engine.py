@@ -138,7 +138,6 @@ class BatchEngine:
         self.diagonal_slot = arena.index([self.plan.slot[n, n] for n in range(self.n_nodes)])
         self.mass = arena.batch_field(float, (capacity, self.n_nodes))
         self.inertia = arena.batch_field(float, (capacity, self.n_nodes))
-        self.centroids = arena.batch_field(float, capacity, vector=2)
         for name, dtype in SOLVER_SETTINGS.items():
             setattr(self, name, arena.field(dtype))
         self.primal_count = arena.field(ti.i32)
@@ -1099,15 +1098,20 @@ class BatchEngine:
         ti.sync()
 
     @ti.kernel
-    def compute_centroids(self):
-        """centroids[b] = mass-weighted mean of the current node positions."""
-        for b in range(self.capacity):
-            self.centroids[b] = self.weighted_centre(b, self.mass)[0]
+    def compute_centroids(self, centroids: ti.types.ndarray(dtype=ti.f64, ndim=2)):
+        """centroids[b] (B, 2) = the mass-weighted mean of instance b's node positions now, m;
+        written straight into the host's array (a field in between would be one kernel more to
+        compile, its `to_numpy`, for every engine)."""
+        for b in range(centroids.shape[0]):
+            centre = self.weighted_centre(b, self.mass)[0]
+            centroids[b, 0] = ti.cast(centre[0], ti.f64)
+            centroids[b, 1] = ti.cast(centre[1], ti.f64)
 
     def centroids_of(self, batch_size: int) -> np.ndarray:
         """(B, 2) centroids of the first batch_size instances now, m (f64)."""
-        self.compute_centroids()
-        return self.centroids.to_numpy()[:batch_size].astype(np.float64)
+        centroids = np.empty((batch_size, 2), dtype=np.float64)
+        self.compute_centroids(centroids)
+        return centroids
 
     def save_state(self, factorisations: bool = False) -> Dict[str, np.ndarray]:
         """A copy of the batch's state (`BatchState.save`); with `factorisations`, also the
