@@ -111,18 +111,24 @@ def to_parquet(result, path, table: str = "summary") -> Path:
     """Write the result's `table` ("summary" or "trajectory") as Parquet, whole or not at all,
     its `provenance` in the file's metadata (`read_provenance`). Returns the path."""
     frame = _table(result, table)
-    write_atomic(path, parquet_bytes(frame, provenance(result)))
+    write_atomic(path, parquet_bytes(frame, provenance(result)), failure=OSError)
     return Path(path)
 
 
 def to_csv(result, path, table: str = "summary") -> Path:
     """Write the result's `table` as CSV (floats to the last bit: pandas' `read_csv` gives them
     back exactly) and its `provenance` as the JSON sidecar `<path>.json`, each whole or not
-    at all. Returns the path."""
+    at all (a sidecar that cannot be written, the table written, is removed: the one there
+    before would describe another result). Returns the path."""
     frame = _table(result, table)
-    write_atomic(path, frame.to_csv(index=False).encode())
-    write_atomic(f"{path}.json", (json.dumps(provenance(result), indent=2, default=str)
-                                  + "\n").encode())
+    sidecar = Path(f"{path}.json")
+    write_atomic(path, frame.to_csv(index=False).encode(), failure=OSError)
+    try:
+        write_atomic(sidecar, (json.dumps(provenance(result), indent=2, default=str)
+                               + "\n").encode(), failure=OSError)
+    except OSError:
+        sidecar.unlink(missing_ok=True)
+        raise
     return Path(path)
 
 
@@ -130,25 +136,39 @@ def to_netcdf(result, path) -> Path:
     """Write `to_xarray(result)` as a netCDF file, whole or not at all. Returns the path."""
     require("netCDF4", "io")
     dataset = to_xarray(result)
-    with tempfile.TemporaryDirectory(dir=Path(path).parent) as folder:
-        scratch = Path(folder) / "result.nc"
-        dataset.to_netcdf(scratch)
-        write_atomic(path, scratch.read_bytes())
+    try:
+        with tempfile.TemporaryDirectory(dir=Path(path).parent) as folder:
+            scratch = Path(folder) / "result.nc"
+            dataset.to_netcdf(scratch)
+            data = scratch.read_bytes()
+    except OSError as error:  # naming the file asked for, not the scratch folder beside it
+        raise OSError(f"cannot write {Path(path).name} ({error.strerror or error})") from None
+    write_atomic(path, data, failure=OSError)
     return Path(path)
 
 
 def read_provenance(path) -> dict:
     """The provenance written with a result file: from a Parquet file's metadata, a netCDF
-    file's attributes (`provenance`) or a CSV file's sidecar."""
+    file's attributes (`provenance`) or a CSV file's sidecar. OSError where the file cannot be
+    read; ValueError naming it where it holds no provenance (damaged, or not written by
+    `to_parquet`, `to_netcdf` or `to_csv`)."""
     path = Path(path)
-    if path.suffix == ".parquet":
-        pq = require("pyarrow.parquet", "io")
-        return json.loads(pq.read_schema(path).metadata[PROVENANCE_KEY.encode()])
-    if path.suffix == ".nc":
-        xr = require("xarray", "io")
-        with xr.open_dataset(path) as dataset:
-            return json.loads(dataset.attrs["provenance"])
-    return json.loads(Path(f"{path}.json").read_text())
+    source = path if path.suffix in (".parquet", ".nc") else Path(f"{path}.json")
+    try:
+        if path.suffix == ".parquet":
+            pq = require("pyarrow.parquet", "io")
+            return json.loads(pq.read_schema(path).metadata[PROVENANCE_KEY.encode()])
+        if path.suffix == ".nc":
+            xr = require("xarray", "io")
+            with xr.open_dataset(path) as dataset:
+                return json.loads(dataset.attrs["provenance"])
+        return json.loads(source.read_text())
+    except (OSError, ImportError):
+        raise
+    except Exception as error:  # noqa: BLE001 -- pyarrow's, xarray's and json's errors vary
+        reason = str(error).splitlines()[0] if str(error) else ""
+        raise ValueError(f"{source}: no taichi_star provenance in it ({type(error).__name__}"
+                         f"{': ' + reason if reason else ''})") from None
 
 
 def summary_of_dataset(dataset) -> pd.DataFrame:
@@ -309,7 +329,7 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
             movie.save(scratch, writer=writer)
         finally:
             plt.close(fig)
-        write_atomic(path, scratch.read_bytes())
+        write_atomic(path, scratch.read_bytes(), failure=OSError)
     return path
 
 

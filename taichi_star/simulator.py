@@ -84,6 +84,9 @@ class SimulatorSnapshot:
         """Save to an .npz file (arrays plus a JSON header; ".npz" is added to a path without
         it), whole or not at all (`provenance.write_atomic`: a kill or a full disk leaves a
         snapshot already there as it was). Returns the file's path."""
+        if not isinstance(path, (str, os.PathLike)):
+            raise ValueError(f"path must be the path of the snapshot's .npz file, got "
+                             f"{type(path).__name__}")
         path = Path(path)
         path = path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
         header = json.dumps({"engine_key": self.engine_key, "n_instances": self.n_instances,
@@ -406,9 +409,9 @@ class Simulator:
         by a simulator of another Jacobian mode, the next step refactors and the continuation
         agrees with an uninterrupted run to newton_tol per step). Raises ValueError, state
         unchanged, for a state of another topology, term set, integrator, stepping (fixed or
-        adaptive), batch size or step, and for one saved by instances of other parameters,
-        naming the first instance and field that differ: the state would go on under this
-        simulator's coefficients, rest shape and start centroids, as no run did. With
+        adaptive), precision, batch size or step, and for one saved by instances of other
+        parameters, naming the first instance and field that differ: the state would go on under
+        this simulator's coefficients, rest shape and start centroids, as no run did. With
         `other_params=True` that is what happens, on purpose (a parameter changed mid-run:
         the positions, velocities and firings carry over, the rest is this simulator's, and
         displacements are measured from this simulator's start)."""

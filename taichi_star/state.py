@@ -166,9 +166,10 @@ class BatchState:
     def restore(self, saved: Dict[str, np.ndarray]):
         """Put back a state from `save` of an engine of the same layout, bitwise (a state saved
         before a `LATER_COUNTERS` counter was kept restores with it at zero). Raises ValueError
-        naming the first field that does not match."""
+        naming the first field that does not match in shape or type."""
         shapes = self.store.shapes
-        saved = {**{name: np.zeros(shapes[name], dtype=np.int64) for name in LATER_COUNTERS},
+        saved = {**{name: np.zeros(shapes[name], dtype=self.store.dtypes[name])
+                    for name in LATER_COUNTERS},
                  **saved}
         if set(saved) != set(shapes):
             raise ValueError(f"saved state has fields {sorted(saved)}, this engine "
@@ -177,4 +178,10 @@ class BatchState:
             if saved[name].shape != shape:
                 raise ValueError(f"saved state field {name!r} has shape {saved[name].shape}, "
                                  f"this engine {shape}")
+            # the store would cast silently: an f32 state would go on in f64 (or an f64 one be
+            # rounded to f32) as no run did, and a damaged file's integers pass for positions
+            if saved[name].dtype != self.store.dtypes[name]:
+                raise ValueError(f"saved state field {name!r} has type {saved[name].dtype}, "
+                                 f"this engine {self.store.dtypes[name]} (another precision, "
+                                 f"or a damaged file)")
         self.store.write(saved)

@@ -1,0 +1,126 @@
+"""What a user saved stays whole and says what it is: a snapshot whose fields are of another
+type (another precision, a damaged file) is refused, not cast; result files on a full disk or
+in a missing folder fail naming the file, leaving the previous ones, and a CSV never keeps a
+sidecar of another result; reading the provenance of a foreign or damaged file is a ValueError
+naming it."""
+
+import dataclasses
+import errno
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import taichi_star as ts
+from taichi_star import provenance
+from taichi_star.output import read_provenance
+
+SOLVER = ts.SolverConfig(dt=5e-3)
+
+
+@pytest.fixture(scope="module")
+def simulator():
+    sim = ts.Simulator([ts.StarParams(gait="none")], SOLVER)
+    sim.fire(["A1"])
+    sim.advance(0.02)
+    return sim
+
+
+@pytest.fixture(scope="module")
+def results():
+    """Two results of one robot's run (different gaits), each with records."""
+    return [ts.simulate([ts.StarParams(gait=gait)], 0.02, SOLVER, record_interval_s=0.01)
+            for gait in ("A1", "A1+A3")]
+
+
+def test_a_snapshot_with_fields_of_another_type_is_refused_and_changes_nothing(simulator,
+                                                                               tmp_path):
+    """A state saved in f32 (every float field float32), or a damaged file whose positions are
+    integers, was cast into this f64 engine and loaded as no run left it; it is refused naming
+    the field, the state unchanged."""
+    saved = simulator.save()
+    before = simulator.save().fields
+    single = dataclasses.replace(saved, fields={
+        name: values.astype(np.float32) if values.dtype == np.float64 else values
+        for name, values in saved.fields.items()})
+    integers = dataclasses.replace(saved, fields={
+        **saved.fields, "positions": saved.fields["positions"].astype(np.int64)})
+    for snapshot, found in ((single, "float32"), (integers, "int64")):
+        with pytest.raises(ValueError, match=rf"field '\w+' has type {found}, this engine "
+                                             rf"float64 \(another precision, or a damaged"):
+            simulator.load(snapshot.write(tmp_path / found))
+        after = simulator.save().fields
+        assert all(np.array_equal(after[name], before[name]) for name in before)
+
+
+def test_saving_to_a_non_path_is_a_value_error_naming_the_argument(simulator):
+    with pytest.raises(ValueError, match="^path must be the path of the snapshot's .npz file, "
+                                         "got int$"):
+        simulator.save(42)
+
+
+def write_all(result, folder):
+    result.to_csv(folder / "r.csv")
+    result.to_parquet(folder / "r.parquet")
+    result.to_netcdf(folder / "r.nc")
+
+
+def test_result_files_on_a_full_disk_or_in_a_missing_folder_name_the_file(results, tmp_path,
+                                                                           full_disk):
+    """A full disk leaves the previous files byte for byte and nothing beside them; both it and
+    a missing folder are OSErrors naming the file asked for (they named no file, or the
+    temporary or scratch folder beside it)."""
+    first, second = results
+    write_all(first, tmp_path)
+    written = {path.name: path.read_bytes() for path in tmp_path.iterdir()}
+    with full_disk():
+        for name, write in (("r.csv", second.to_csv), ("r.parquet", second.to_parquet),
+                            ("r.nc", second.to_netcdf)):
+            with pytest.raises(OSError, match=rf"^cannot write {name} \(No space left"):
+                write(tmp_path / name)
+    assert {path.name: path.read_bytes() for path in tmp_path.iterdir()} == written
+    for name, write in (("r.csv", second.to_csv), ("r.parquet", second.to_parquet),
+                        ("r.nc", second.to_netcdf)):
+        with pytest.raises(OSError, match=rf"^cannot write {name} \(No such file or directory\)$"):
+            write(tmp_path / "missing" / name)
+    assert not (tmp_path / "missing").exists()
+
+
+def test_a_csv_whose_sidecar_cannot_be_written_keeps_no_sidecar_of_another_result(
+        results, tmp_path, monkeypatch):
+    """The table is written, then the disk is full for its sidecar: the sidecar of the previous
+    result (its provenance, another run's) was left beside the new table; now there is none,
+    and reading the provenance fails instead of telling another run's."""
+    first, second = results
+    path = first.to_csv(tmp_path / "r.csv")
+    fsync = provenance.os.fsync
+    writes = []
+
+    def full_at_the_second_file(descriptor):
+        writes.append(descriptor)
+        if len(writes) == 2:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        fsync(descriptor)
+    monkeypatch.setattr(provenance.os, "fsync", full_at_the_second_file)
+    with pytest.raises(OSError, match=r"^cannot write r.csv.json \(No space left"):
+        second.to_csv(path)
+    pd.testing.assert_frame_equal(pd.read_csv(path), second.summary.reset_index(drop=True),
+                                  check_dtype=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.csv"]
+    with pytest.raises(OSError):
+        read_provenance(path)
+
+
+def test_the_provenance_of_a_damaged_or_foreign_file_is_a_value_error_naming_it(tmp_path):
+    """pyarrow's ArrowInvalid, a KeyError of the metadata key, xarray's backend message and a
+    bare JSONDecodeError were what these raised."""
+    (tmp_path / "garbage.parquet").write_bytes(b"garbage")
+    pd.DataFrame({"a": [1]}).to_parquet(tmp_path / "foreign.parquet")
+    (tmp_path / "garbage.nc").write_bytes(b"garbage")
+    (tmp_path / "r.csv").write_text("a\n1\n")
+    (tmp_path / "r.csv.json").write_text('{"taichi_star_version": ')
+    for name, source in (("garbage.parquet", "garbage.parquet"),
+                         ("foreign.parquet", "foreign.parquet"), ("garbage.nc", "garbage.nc"),
+                         ("r.csv", "r.csv.json")):
+        with pytest.raises(ValueError, match=rf"{source}: no taichi_star provenance in it \("):
+            read_provenance(tmp_path / name)
