@@ -49,3 +49,21 @@ def write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception]
     finally:
         if temporary.exists():
             temporary.unlink()
+    _sync_folder(path.parent)
+
+
+def _sync_folder(folder: Path):
+    """Flush a folder's entries to disk, so that a rename into it outlives a power cut (until
+    then the folder may still name the previous file after a restart). Best effort: a system
+    that cannot open a folder for it (Windows) or does not sync folders leaves the rename to
+    its own schedule, the file's data already on disk either way."""
+    try:
+        descriptor = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    except OSError:
+        return
+    try:
+        os.fsync(descriptor)
+    except OSError:
+        pass
+    finally:
+        os.close(descriptor)

@@ -3,8 +3,10 @@ rule of the store (what a run's definition is, what makes a chunk file trusted, 
 refused, what the manifest records) is checked in milliseconds."""
 
 import dataclasses
+import errno
 import json
 import logging
+import os
 import re
 import shutil
 import subprocess
@@ -535,6 +537,41 @@ def test_write_atomic_writes_whole_or_leaves_the_previous_file(tmp_path, full_di
                                              r"device\)$"):
             provenance.write_atomic(path, b"x", failure=ValueError)
     assert path.read_bytes() == b"a,b\n3,4\n"
+
+
+def test_write_atomic_syncs_the_folder_after_the_rename_and_goes_on_where_it_cannot(
+        tmp_path, monkeypatch):
+    """The file's data is synced before the rename and its folder after it (the rename itself
+    outlives a power cut); a folder that cannot be synced (ENOTSUP, as some file systems
+    answer) leaves a whole, renamed file and no error."""
+    path = tmp_path / "table.csv"
+    events = []
+    real_fsync, real_replace = provenance.os.fsync, provenance.os.replace
+
+    def logged_fsync(descriptor):
+        events.append(("fsync", os.path.isdir(f"/proc/self/fd/{descriptor}")
+                       and os.path.realpath(f"/proc/self/fd/{descriptor}")))
+        real_fsync(descriptor)
+
+    def logged_replace(source, target):
+        events.append(("replace", str(target)))
+        real_replace(source, target)
+
+    monkeypatch.setattr(provenance.os, "fsync", logged_fsync)
+    monkeypatch.setattr(provenance.os, "replace", logged_replace)
+    provenance.write_atomic(path, b"a\n")
+    assert events == [("fsync", False), ("replace", str(path)),
+                      ("fsync", os.path.realpath(tmp_path))]
+
+    def folder_unsupported(descriptor):
+        if os.path.isdir(f"/proc/self/fd/{descriptor}"):
+            raise OSError(errno.ENOTSUP, "Operation not supported")
+        real_fsync(descriptor)
+
+    monkeypatch.setattr(provenance.os, "fsync", folder_unsupported)
+    provenance.write_atomic(path, b"b\n")
+    assert path.read_bytes() == b"b\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["table.csv"]
 
 
 # --- trajectories ---
