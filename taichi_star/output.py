@@ -18,7 +18,7 @@ import pandas as pd
 from .extras import require
 from .geometry import CENTRE
 from .params import PARAMETER_UNITS, StarParams, parameter_column
-from .provenance import code_version, write_atomic
+from .provenance import code_version, file_path, write_atomic
 
 PROVENANCE_KEY = "taichi_star"
 """Key of the provenance in a Parquet file's schema metadata (JSON)."""
@@ -110,9 +110,10 @@ def parquet_bytes(frame: pd.DataFrame, metadata: Mapping) -> bytes:
 def to_parquet(result, path, table: str = "summary") -> Path:
     """Write the result's `table` ("summary" or "trajectory") as Parquet, whole or not at all,
     its `provenance` in the file's metadata (`read_provenance`). Returns the path."""
+    path = file_path(path, "path of the Parquet file")
     frame = _table(result, table)
     write_atomic(path, parquet_bytes(frame, provenance(result)), failure=OSError)
-    return Path(path)
+    return path
 
 
 def to_csv(result, path, table: str = "summary") -> Path:
@@ -120,6 +121,7 @@ def to_csv(result, path, table: str = "summary") -> Path:
     back exactly) and its `provenance` as the JSON sidecar `<path>.json`, each whole or not
     at all (a sidecar that cannot be written, the table written, is removed: the one there
     before would describe another result). Returns the path."""
+    path = file_path(path, "path of the CSV file")
     frame = _table(result, table)
     sidecar = Path(f"{path}.json")
     write_atomic(path, frame.to_csv(index=False).encode(), failure=OSError)
@@ -129,22 +131,23 @@ def to_csv(result, path, table: str = "summary") -> Path:
     except OSError:
         sidecar.unlink(missing_ok=True)
         raise
-    return Path(path)
+    return path
 
 
 def to_netcdf(result, path) -> Path:
     """Write `to_xarray(result)` as a netCDF file, whole or not at all. Returns the path."""
+    path = file_path(path, "path of the netCDF file")
     require("netCDF4", "io")
     dataset = to_xarray(result)
     try:
-        with tempfile.TemporaryDirectory(dir=Path(path).parent) as folder:
+        with tempfile.TemporaryDirectory(dir=path.parent) as folder:
             scratch = Path(folder) / "result.nc"
             dataset.to_netcdf(scratch)
             data = scratch.read_bytes()
     except OSError as error:  # naming the file asked for, not the scratch folder beside it
-        raise OSError(f"cannot write {Path(path).name} ({error.strerror or error})") from None
+        raise OSError(f"cannot write {path.name} ({error.strerror or error})") from None
     write_atomic(path, data, failure=OSError)
-    return Path(path)
+    return path
 
 
 def read_provenance(path) -> dict:
@@ -152,7 +155,7 @@ def read_provenance(path) -> dict:
     file's attributes (`provenance`) or a CSV file's sidecar. OSError where the file cannot be
     read; ValueError naming it where it holds no provenance (damaged, or not written by
     `to_parquet`, `to_netcdf` or `to_csv`)."""
-    path = Path(path)
+    path = file_path(path, "path of a result file")
     source = path if path.suffix in (".parquet", ".nc") else Path(f"{path}.json")
     try:
         if path.suffix == ".parquet":
@@ -251,7 +254,7 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
 
     from . import drawing
 
-    path = Path(path)
+    path = file_path(path, "path of the .mp4 or .gif file")
     if result.shapes is None or result.topology is None:
         raise ValueError("animate needs recorded shapes of one topology: simulate with "
                          "record_interval_s > 0 and record_shapes=True")

@@ -29,6 +29,14 @@ def code_version() -> Dict[str, object]:
     return {"version": __version__, "commit": commit, "dirty": dirty}
 
 
+def file_path(path, what: str) -> Path:
+    """`path` as a Path; ValueError naming `what` (e.g. "path of the CSV file") unless it is
+    a str or an os.PathLike, before anything is computed or written."""
+    if not isinstance(path, (str, os.PathLike)):
+        raise ValueError(f"path must be the {what}, got {type(path).__name__}")
+    return Path(path)
+
+
 def write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception]] = None):
     """Write `data` to `path` whole or not at all: into a temporary file beside it, flushed to
     disk, then renamed over it; a kill or a full disk leaves any previous file untouched. With

@@ -43,7 +43,7 @@ from .gait import N_ACTUATORS, Gait
 from .geometry import CENTRE
 from .model import validate_batch
 from .params import SolverConfig, StarParams, check_precision
-from .provenance import write_atomic
+from .provenance import file_path, write_atomic
 from .runtime import Runtime, check_arch
 from .state import STATUS_NAMES, STATUS_OK
 from .timegrid import MAX_STEPS_PER_INSTANCE, check_work, whole_steps
@@ -84,10 +84,7 @@ class SimulatorSnapshot:
         """Save to an .npz file (arrays plus a JSON header; ".npz" is added to a path without
         it), whole or not at all (`provenance.write_atomic`: a kill or a full disk leaves a
         snapshot already there as it was). Returns the file's path."""
-        if not isinstance(path, (str, os.PathLike)):
-            raise ValueError(f"path must be the path of the snapshot's .npz file, got "
-                             f"{type(path).__name__}")
-        path = Path(path)
+        path = file_path(path, "path of the snapshot's .npz file")
         path = path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
         header = json.dumps({"engine_key": self.engine_key, "n_instances": self.n_instances,
                              "dt": self.dt, "params": list(self.params)})

@@ -61,6 +61,18 @@ def test_saving_to_a_non_path_is_a_value_error_naming_the_argument(simulator):
         simulator.save(42)
 
 
+@pytest.mark.parametrize("write, what", [
+    (lambda result: result.to_csv(42), "the CSV file"),
+    (lambda result: result.to_parquet(42), "the Parquet file"),
+    (lambda result: result.to_netcdf(42), "the netCDF file"),
+    (lambda result: result.animate(42), "the .mp4 or .gif file"),
+    (lambda result: read_provenance(42), "a result file")])
+def test_a_result_file_that_is_not_a_path_is_a_value_error_naming_the_argument(results, write,
+                                                                               what):
+    with pytest.raises(ValueError, match=f"^path must be the path of {what}, got int$"):
+        write(results[0])
+
+
 def write_all(result, folder):
     result.to_csv(folder / "r.csv")
     result.to_parquet(folder / "r.parquet")
