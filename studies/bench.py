@@ -440,7 +440,8 @@ def build_parser():
                         help=f"timed steps per measurement, after {WARMUP_STEPS} warm-up steps, "
                              f"at most {MAX_STEPS}")
     parser.add_argument("--repeats", type=int, default=DEFAULT_REPEATS, quick=1,
-                        help="timed windows per measurement, the best counts")
+                        help=f"timed windows per measurement, the best counts (at most "
+                             f"{cli.MAX_REPEATS})")
     parser.add_argument("--scenarios", default=",".join(SCENARIOS), quick=QUICK_SCENARIOS,
                         help=f"comma list of {', '.join(SCENARIOS)} measured at the scenario "
                              f"batch size in the first precision, or none")
@@ -565,8 +566,7 @@ def parse_args(argv):
         if not (DT <= getattr(args, flag) <= MAX_DURATION):
             raise cli.StudyArgumentError(f"--{flag.replace('_', '-')} must be in [{DT:g}, "
                                          f"{MAX_DURATION:g}] s, got {getattr(args, flag)}")
-    if args.repeats < 1:
-        raise cli.StudyArgumentError(f"--repeats must be >= 1, got {args.repeats}")
+    cli.check_count(args.repeats, "--repeats", 1, cli.MAX_REPEATS)
     for flag, highest in (("steps", MAX_STEPS), ("scenario_batch", cli.MAX_BATCH_SIZE),
                           ("process_batch", cli.MAX_BATCH_SIZE)):
         cli.check_count(getattr(args, flag), f"--{flag.replace('_', '-')}", 1, highest)

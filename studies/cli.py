@@ -62,6 +62,9 @@ MAX_WORKERS = 256
 process with a single-threaded Taichi runtime, so more than one per core only competes for the
 cores; 256 is 16 times the most cores the committed results ran on (more: a Dask cluster,
 --scheduler)."""
+MAX_REPEATS = 100
+"""The most timed repeats or rounds of one measurement (bench's and simd's --repeats,
+jacobians' --rounds): the best of a few is the figure, the committed results took at most 7."""
 MAX_BATCH_SIZE = 2 ** 20
 """The most instances a benchmark builds one engine for (bench's batch sizes, env_bench's
 robots): 16 times the largest batch the committed results measure (65,536 on an H200)."""

@@ -50,11 +50,12 @@ def build_parser():
                              f"reference, {REFERENCE[0]}:{REFERENCE[1]:g}, and the default, "
                              f"{DEFAULT[0]}:{DEFAULT[1]:g}, are always run)")
     parser.add_argument("--batch", type=int, default=512, quick=5,
-                        help="instances (the five gaits repeated)")
+                        help=f"instances (the five gaits repeated; at most {cli.MAX_BATCH_SIZE})")
     parser.add_argument("--duration", type=float, default=StarParams().period, quick=0.05,
                         help="simulated seconds per run")
     parser.add_argument("--rounds", type=int, default=2, quick=1,
-                        help="interleaved rounds; a configuration's time is its best round's")
+                        help=f"interleaved rounds; a configuration's time is its best round's (at "
+                             f"most {cli.MAX_REPEATS})")
     return parser
 
 
@@ -81,10 +82,8 @@ def parse_modes(text: str):
 
 
 def check_args(args):
-    if args.batch < 1:
-        raise cli.StudyArgumentError(f"--batch must be at least 1, got {args.batch}")
-    if args.rounds < 1:
-        raise cli.StudyArgumentError(f"--rounds must be at least 1, got {args.rounds}")
+    cli.check_count(args.batch, "--batch", 1, cli.MAX_BATCH_SIZE)
+    cli.check_count(args.rounds, "--rounds", 1, cli.MAX_REPEATS)
     dt = SolverConfig().dt
     if not dt <= args.duration <= 100.0:
         raise cli.StudyArgumentError(f"--duration must be in [{dt:g}, 100] s, got "

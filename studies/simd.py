@@ -1028,7 +1028,8 @@ def build_parser():
     parser.add_argument("--lanes", default="4,8", quick="4",
                         help="comma list of instances per loop iteration of the grouped forms")
     parser.add_argument("--repeats", type=int, default=7, quick=2,
-                        help="interleaved timing rounds (each form's best is kept)")
+                        help=f"interleaved timing rounds (each form's best is kept; at most "
+                             f"{cli.MAX_REPEATS})")
     parser.add_argument("--matmul-size", type=int, default=1024, quick=256,
                         help=f"n of NumPy's n × n reference matrix product (16 to "
                              f"{MAX_MATMUL_SIZE})")
@@ -1048,8 +1049,7 @@ def main(argv=None):
         if any(batch % lanes for lanes in lanes_list):
             raise cli.StudyArgumentError(f"--batch-sizes: {batch} is not a multiple of every "
                                          f"--lanes value ({args.lanes})")
-    if args.repeats < 1:
-        raise cli.StudyArgumentError(f"--repeats must be >= 1, got {args.repeats}")
+    cli.check_count(args.repeats, "--repeats", 1, cli.MAX_REPEATS)
     if not 16 <= args.matmul_size <= MAX_MATMUL_SIZE:
         raise cli.StudyArgumentError(f"--matmul-size must be in [16, {MAX_MATMUL_SIZE}], got "
                                      f"{args.matmul_size}")

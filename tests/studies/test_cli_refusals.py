@@ -67,6 +67,10 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
     ("gait_design", ["--iterations", "1000000000"],
      "--iterations must be in [1, 1000], got 1000000000"),
     ("plan", ["--directions", "100000"], "--directions must be in [0, 360], got 100000"),
+    ("bench", ["--repeats", "101"], "--repeats must be in [1, 100], got 101"),
+    ("simd", ["--repeats", "1000000"], "--repeats must be in [1, 100], got 1000000"),
+    ("jacobians", ["--rounds", "1000000"], "--rounds must be in [1, 100], got 1000000"),
+    ("jacobians", ["--batch", "2000000000"], "--batch must be in [1, 1048576], got 2000000000"),
     ("jacobians", ["--modes", "bogus"],
      "--modes: 'bogus' is not MODE:TOL (MODE one of newton, chord, lagged, TOL Newton's "
      "tolerance in m, e.g. lagged:1e-10)"),
