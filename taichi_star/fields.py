@@ -220,8 +220,8 @@ class FieldStore:
 
     @ti.func
     def _zero_element(self, field: ti.template(), index: ti.template()):
-        """Element `index` (None: a 0-D field's) of `field` set to +0 (not `ti.zero`, which multiplies the old value
-        by zero: -0.0 from a negative one, NaN from NaN)."""
+        """Element `index` (None: a 0-D field's) of `field` set to +0 (not `ti.zero`, which
+        multiplies the old value by zero: -0.0 from a negative one, NaN from NaN)."""
         components = ti.static(_components(field))
         if ti.static(len(components) == 0):
             field[index] = 0
