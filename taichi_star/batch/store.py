@@ -191,6 +191,7 @@ class RunStore:
         _parquet()
         if self.path.exists() and not self.path.is_dir():
             raise RunStoreError(f"{self.flag} {self.path}: exists and is not a folder")
+        self._refuse_entries_that_are_not_files()
         old = self.read_manifest() if self.path.exists() else None
         version = code_version()
         now = datetime.datetime.now().isoformat(timespec="seconds")
@@ -233,6 +234,17 @@ class RunStore:
                          "created": now, "complete": False, **history}
         self._write_manifest()
         return done
+
+    def _refuse_entries_that_are_not_files(self):
+        """RunStoreError naming the first of the store's names (its manifest, a chunk's or a
+        trajectory's file) that is something other than a file (a folder): the store could
+        neither read, replace nor delete it."""
+        if not self.path.is_dir():
+            return
+        for path in [self.path / MANIFEST] + self._chunk_files() + self._trajectory_files():
+            if path.exists() and not path.is_file():
+                raise RunStoreError(f"{self.flag} {self.path}: {path.name} is not a file; "
+                                    f"remove it or choose another {self.flag}")
 
     def _orphan_chunks(self, tasks: Sequence[ChunkTask], resume: bool) -> List[int]:
         """A non-empty folder without a manifest: when it holds only chunk files (its manifest

@@ -273,6 +273,23 @@ def test_a_damaged_chunk_is_reported_deleted_and_not_counted_as_done(written, da
     assert re.fullmatch(f"{re.escape(str(path))}: {reason}; recomputing it", warning)
 
 
+@pytest.mark.parametrize("name", ["chunk_000001.parquet", "trajectory_000000.parquet",
+                                  "manifest.json"])
+@pytest.mark.parametrize("resume", [True, False])
+def test_a_folder_in_place_of_a_stores_file_is_refused_naming_it(written, name, resume):
+    """A folder where the store keeps a file can be neither read, replaced nor deleted by it
+    (an IsADirectoryError from deep inside before): refused before the run, naming it, and
+    left as it is."""
+    folder, tasks = written
+    path = folder / name
+    path.unlink(missing_ok=True)
+    (path / "inside").mkdir(parents=True)
+    with pytest.raises(RunStoreError, match=re.escape(
+            f"run_dir {folder}: {name} is not a file; remove it or choose another run_dir")):
+        store_in(folder).open(tasks, resume=resume)
+    assert (path / "inside").is_dir() and (folder / "chunk_000000.parquet").is_file()
+
+
 def test_a_chunk_stamp_without_value_types_reads_plain_columns(tmp_path):
     """value_types may be absent from a stamp (a chunk without value-object columns)."""
     store = store_in(tmp_path / "run")
