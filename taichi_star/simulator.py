@@ -28,6 +28,7 @@ import math
 import numbers
 import os
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, Optional, Sequence, Tuple, Union
@@ -67,18 +68,26 @@ def parameter_texts(params: Sequence[StarParams]) -> Tuple[Dict[str, str], ...]:
                  for p in params)
 
 
+def solver_texts(solver: SolverConfig) -> Dict[str, str]:
+    """The solver's settings as {field: repr of its value}, what a snapshot records of the
+    solver that stepped it."""
+    return {field.name: repr(getattr(solver, field.name))
+            for field in dataclasses.fields(SolverConfig)}
+
+
 @dataclass(frozen=True)
 class SimulatorSnapshot:
     """The whole state of a Simulator's batch (from `Simulator.save`): every device field as a
     NumPy array (padding included) and what the state belongs to: the engine, the batch size,
-    the step and each instance's parameters (`parameter_texts`; empty in a snapshot written
-    before they were recorded)."""
+    the step, each instance's parameters (`parameter_texts`) and the solver's settings
+    (`solver_texts`); the last two empty in a snapshot written before they were recorded."""
 
     fields: Dict[str, np.ndarray]
     engine_key: str
     n_instances: int
     dt: float
     params: Tuple[Dict[str, str], ...] = ()
+    solver: Dict[str, str] = dataclasses.field(default_factory=dict)
 
     def write(self, path) -> Path:
         """Save to an .npz file (arrays plus a JSON header; ".npz" is added to a path without
@@ -87,7 +96,8 @@ class SimulatorSnapshot:
         path = file_path(path, "path of the snapshot's .npz file")
         path = path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
         header = json.dumps({"engine_key": self.engine_key, "n_instances": self.n_instances,
-                             "dt": self.dt, "params": list(self.params)})
+                             "dt": self.dt, "params": list(self.params),
+                             "solver": dict(self.solver)})
         archive = io.BytesIO()
         np.savez(archive, __header__=np.array(header), **self.fields)
         # an OSError all the same, but naming the file asked for, not the temporary beside it
@@ -108,7 +118,9 @@ class SimulatorSnapshot:
             snapshot = cls(fields=fields, engine_key=str(header["engine_key"]),
                            n_instances=int(header["n_instances"]), dt=float(header["dt"]),
                            params=tuple({str(name): str(text) for name, text in row.items()}
-                                        for row in header.get("params", ())))
+                                        for row in header.get("params", ())),
+                           solver={str(name): str(text)
+                                   for name, text in header.get("solver", {}).items()})
         except OSError as error:
             raise ValueError(f"snapshot {path}: cannot read it ({error.strerror or error})") \
                 from None
@@ -396,7 +408,8 @@ class Simulator:
         snapshot = SimulatorSnapshot(fields=self.engine.save_state(factorisations=lagged),
                                      engine_key=repr(self.engine_key),
                                      n_instances=self.n_instances, dt=self.solver.dt,
-                                     params=self._parameter_texts)
+                                     params=self._parameter_texts,
+                                     solver=solver_texts(self.solver))
         return snapshot.write(path) if path is not None else snapshot
 
     def load(self, snapshot: Union[SimulatorSnapshot, str, Path], *,
@@ -411,7 +424,11 @@ class Simulator:
         this simulator's coefficients, rest shape and start centroids, as no run did. With
         `other_params=True` that is what happens, on purpose (a parameter changed mid-run:
         the positions, velocities and firings carry over, the rest is this simulator's, and
-        displacements are measured from this simulator's start)."""
+        displacements are measured from this simulator's start).
+
+        The state goes on under this simulator's solver settings; where the snapshot records
+        others (say newton_tol, or the Jacobian mode), a RuntimeWarning names them after the
+        state is loaded: the continuation is then not the saved run's bit for bit."""
         if not isinstance(snapshot, SimulatorSnapshot):
             snapshot = SimulatorSnapshot.read(snapshot)
         if snapshot.engine_key != repr(self.engine_key):
@@ -433,6 +450,15 @@ class Simulator:
                         f"{own[changed[0]]} here ({len(changed)} field(s) differ); load(..., "
                         f"other_params=True) continues it under this simulator's parameters")
         self.engine.restore_state(snapshot.fields)
+        own = solver_texts(self.solver)
+        changed = [name for name in own
+                   if snapshot.solver and snapshot.solver.get(name) != own[name]]
+        if changed:
+            warnings.warn(f"the saved state was stepped with {changed[0]} = "
+                          f"{snapshot.solver.get(changed[0], 'not recorded')}, this simulator's "
+                          f"is {own[changed[0]]} ({len(changed)} setting(s) differ): it goes on "
+                          f"under this simulator's settings, not bit for bit as the saved run "
+                          f"would have", RuntimeWarning, stacklevel=2)
 
     def __repr__(self) -> str:
         times = self.time_s

@@ -6,6 +6,7 @@ import dataclasses
 import os
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -471,6 +472,33 @@ def test_a_state_of_other_parameters_is_refused_naming_them_unless_asked_for(tmp
     assert all(np.array_equal(after[name], before[name]) for name in before)
     other.load(path, other_params=True)
     np.testing.assert_array_equal(other.time_s, [0.01] * 3)
+
+
+def test_a_state_stepped_under_other_solver_settings_loads_with_a_warning_naming_them(tmp_path):
+    """Settings outside the engine's key (Newton's tolerance and iteration cap, the Jacobian
+    mode, ...) do not stop a load, but the continuation is not the saved run's bit for bit:
+    a warning names the first that differs and counts them; the same settings load silently,
+    and so does a snapshot that records none (written before they were)."""
+    saved = commanded(newton_tol=1e-9, max_newton=30)
+    saved.fire(GAITS)
+    saved.advance(0.01)
+    snapshot, times = saved.save(), saved.time_s
+    path = saved.save(tmp_path / "state")
+    assert snapshot.solver["newton_tol"] == "1e-09" and snapshot.solver["max_newton"] == "30"
+    del saved  # its engine goes to the next simulator
+    other = commanded()
+    for source in (path, snapshot):
+        with pytest.warns(RuntimeWarning, match=r"^the saved state was stepped with newton_tol "
+                                                r"= 1e-09, this simulator's is 1e-10 \(2 "
+                                                r"setting\(s\) differ\): it goes on under "):
+            other.load(source)
+        np.testing.assert_array_equal(other.time_s, times)
+    unrecorded = dataclasses.replace(snapshot, solver={})
+    own = other.save()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        other.load(own)
+        other.load(unrecorded)
 
 
 def test_a_snapshot_without_parameters_loads_as_before(tmp_path):
