@@ -71,19 +71,20 @@ def bend_gradient_hessian(edge1, edge2, voronoi_length, natural_curvature, bendi
     return -energy_phi * grad1, energy_phi * grad2, h11, h12, h22
 
 
-def triplet_modulus(params, topology) -> np.ndarray:
+def triplet_modulus(params, topologies, topology) -> np.ndarray:
     """(B, T) Young's modulus of every bending triplet, Pa: E on arcs, E_limb on limbs, and on
     joints E_limb ("limb") or Δl_j / (½Δl_a/E + ½Δl_l/E_limb) ("series"; Δl_a, Δl_l the rest
-    lengths of the joint triplet's arc and limb edges, Δl_j their mean)."""
+    lengths of the joint triplet's arc and limb edges in the instance's own rest shape, from
+    `topologies`, Δl_j their mean)."""
     youngs = np.array([p.youngs_modulus for p in params])[:, None]
     limb = np.array([p.limb_modulus for p in params])[:, None]
     modulus = np.where(topology.triplet_kind == ARC_BEND, youngs, limb)
     series = np.array([p.joint_stiffness == "series" for p in params])
     if series.any():
         joint = topology.triplet_kind == JOINT_BEND
-        nodes = topology.rest_positions[topology.triplets[joint]]
-        arc_length = np.linalg.norm(nodes[:, 1] - nodes[:, 0], axis=1)
-        limb_length = np.linalg.norm(nodes[:, 2] - nodes[:, 1], axis=1)
+        nodes = topologies.stack("rest_positions")[:, topology.triplets[joint]]  # (B, J, 3, 2)
+        arc_length = np.linalg.norm(nodes[:, :, 1] - nodes[:, :, 0], axis=-1)
+        limb_length = np.linalg.norm(nodes[:, :, 2] - nodes[:, :, 1], axis=-1)
         combined = (0.5 * (arc_length + limb_length)
                     / (0.5 * arc_length / youngs + 0.5 * limb_length / limb))
         modulus[:, joint] = np.where(series[:, None], combined, modulus[:, joint])
@@ -105,7 +106,7 @@ class Bending(StrainTerm):
             "voronoi_length": topologies.stack("voronoi_length"),
             "rest_curvature": topologies.stack("rest_curvature"),
             "end_turning_length": topologies.stack("end_turning_length") * shared[:, None],
-            "bend_stiffness": triplet_modulus(params, topology) * thickness ** 3 / 12.0,
+            "bend_stiffness": triplet_modulus(params, topologies, topology) * thickness ** 3 / 12.0,
             "profile": np.stack([profile.as_array() for profile in profiles]),
             "profile_rest": np.array([profile.rest_curvature for profile in profiles]),
             "closure_rate": np.array([

@@ -3,6 +3,7 @@ alone, whatever its neighbours, and the per-instance topologies (`InstanceTopolo
 one Topology per rest geometry. Values are compared exactly: building a model only gathers and
 multiplies per-instance numbers, so batch position must not change a bit."""
 
+import dataclasses
 from dataclasses import fields
 
 import numpy as np
@@ -47,6 +48,42 @@ def test_an_instances_model_tables_do_not_depend_on_its_batch():
         for term, table in alone.coefficients.items():
             for name, values in table.items():
                 assert np.array_equal(batch.coefficients[term][name][b], values[0]), (term, name)
+
+
+def test_a_series_joints_stiffness_comes_from_its_own_rest_shape():
+    """The series joint's modulus weighs the joint triplet's arc and limb rest lengths; behind
+    an instance of another rest geometry it took that instance's lengths (the batch's first
+    topology) until 2026-12: its joints' bend stiffness 13 % off here."""
+    series = BATCH[2]
+    model = build_model([BATCH[1], series])
+    alone = build_model([series])
+    stiffness = model.coefficients["bending"]["bend_stiffness"]
+    assert np.array_equal(stiffness[1], alone.coefficients["bending"]["bend_stiffness"][0])
+    assert not np.array_equal(stiffness[1], build_model([series.replace(
+        joint_radius=BATCH[1].joint_radius, tip_radius=BATCH[1].tip_radius)]).coefficients[
+        "bending"]["bend_stiffness"][0])  # the other geometry's lengths give another stiffness
+
+
+def test_equal_instances_are_built_once_with_their_tables_repeated_bit_for_bit():
+    """A batch that repeats instances (equal objects, or the same object again; the order
+    mixed) is built from its distinct instances and their tables repeated: every row is its
+    instance's alone, bit for bit, the terms used are the batch's, and the model keeps the
+    batch's own StarParams objects."""
+    copies = [dataclasses.replace(p) for p in BATCH]  # equal, not the same objects
+    order = [3, 0, 4, 1, 2, 0, 3, 1]
+    batch = [(copies if i % 2 else BATCH)[k] for i, k in enumerate(order)]
+    model = build_model(batch)
+    assert all(kept is given for kept, given in zip(model.params, batch))
+    assert model.terms_used == build_model(BATCH).terms_used
+    for b, p in enumerate(batch):
+        alone = build_model([p])
+        for name in ("rest_positions", "mass", "inertia"):
+            assert np.array_equal(getattr(model, name)[b], getattr(alone, name)[0]), name
+        for term, table in alone.coefficients.items():
+            for name, values in table.items():
+                built = model.coefficients[term][name]
+                assert built.shape == (len(batch),) + values.shape[1:], (term, name)
+                assert np.array_equal(built[b], values[0]), (term, name)
 
 
 def test_a_replica_models_tables_lie_on_their_instances_tangent():
