@@ -64,7 +64,8 @@ class CurvatureProfile:
     def __post_init__(self):
         for name in ("heating", "cooling"):
             given = getattr(self, name)
-            values = tuple(float(v) for v in given) if _real_numbers(given) else ()
+            # + 0.0: a zero as +0.0, as StarParams' numbers (equal profiles are the same bits)
+            values = tuple(float(v) + 0.0 for v in given) if _real_numbers(given) else ()
             if len(values) != 4 or not all(math.isfinite(v) for v in values):
                 raise ValueError(f"CurvatureProfile.{name} must be 4 finite numbers, got "
                                  f"{given!r}")

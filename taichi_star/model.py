@@ -4,6 +4,7 @@ to the device once."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Dict, Optional, Sequence, Tuple
 
@@ -115,8 +116,25 @@ class InstanceTopologies(Sequence[Topology]):
 def build_model(params: Sequence[StarParams], commanded: bool = False) -> BatchModel:
     """The host model of a batch (see `validate_batch` for the errors it raises). With
     `commanded`, the instances fire whatever they are commanded to (every actuator can fire),
-    not their gait."""
+    not their gait. Instances equal as StarParams (a batch that repeats a few gaits, the
+    replicas of such instances) are built once and their tables repeated: every table is a
+    function of its own instance's parameters alone, so the values are those of building each
+    (`tests/unit/test_model.py`)."""
     params = validate_batch(params)
+    position: Dict[StarParams, int] = {}
+    index = np.array([position.setdefault(p, len(position)) for p in params], dtype=np.int64)
+    if len(position) == len(params):
+        return _build_distinct(params, commanded)
+    distinct = _build_distinct(tuple(position), commanded)
+    return dataclasses.replace(
+        distinct, params=params, rest_positions=distinct.rest_positions[index],
+        mass=distinct.mass[index], inertia=distinct.inertia[index],
+        coefficients={name: {key: values[index] for key, values in table.items()}
+                      for name, table in distinct.coefficients.items()})
+
+
+def _build_distinct(params: Tuple[StarParams, ...], commanded: bool) -> BatchModel:
+    """`build_model` of a validated batch, instance by instance."""
     topologies = InstanceTopologies.of(params)
     topology = topologies[0]
     thickness = np.array([p.thickness for p in params])[:, None]

@@ -106,7 +106,7 @@ def _check_actuator_values(name, values, lowest, highest, highest_included):
                 or (value == highest and not highest_included):
             raise ValueError(f"{name}[{index}] (A{index + 1}) must be a real number in {span}, "
                              f"got {value!r}")
-        checked.append(float(value))
+        checked.append(float(value) + 0.0)  # a zero as +0.0, as `_check_number`
     return tuple(checked)
 
 
@@ -138,7 +138,9 @@ def _check_number(name, value, lowest, highest, lowest_included=True, integer=Fa
     valid_type = numbers.Integral if integer else numbers.Real
     if isinstance(value, bool) or not isinstance(value, valid_type):
         raise ValueError(f"{name} must be {kind} in {span}, got {value!r}")
-    value = int(value) if integer else float(value)
+    # + 0.0 stores a zero as +0.0: parameters that compare equal are then the same bits
+    # (build_model builds equal instances once)
+    value = int(value) if integer else float(value) + 0.0
     if not math.isfinite(value) or value > highest or value < lowest or (
             value == lowest and not lowest_included) or (
             value == highest and not highest_included):

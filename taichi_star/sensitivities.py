@@ -34,7 +34,7 @@ import dataclasses
 import difflib
 import warnings
 from dataclasses import dataclass
-from typing import List, Sequence, Tuple
+from typing import Dict, List, Sequence, Tuple
 
 import numpy as np
 import pandas as pd
@@ -233,13 +233,17 @@ def replica_batch(params: Sequence[StarParams], directions: Sequence[Direction],
     """(the batch to simulate, steps (n_directions, B)). The batch: the instances, then for
     each direction its pair of replicas at ±ε (±scale·ε), the pair
     as +ε replicas then −ε replicas: the order of `engine.BatchEngine.replica`, whose
-    direction j is pair j here (so the engine carries 2·n_directions tangents)."""
+    direction j is pair j here (so the engine carries 2·n_directions tangents). Equal
+    instances share their replicas (ε is a function of the instance's parameters)."""
     steps = np.array([[direction.step(p) for p in params] for direction in directions])
     batch = list(params)
     for direction, row in zip(directions, steps):
         for sign in (1.0, -1.0):
-            batch += [direction.moved(p, direction.value(p) + sign * scale * eps)
-                      for p, eps in zip(params, row)]
+            replicas: Dict[StarParams, StarParams] = {}
+            for p, eps in zip(params, row):
+                if p not in replicas:
+                    replicas[p] = direction.moved(p, direction.value(p) + sign * scale * eps)
+                batch.append(replicas[p])
     return batch, steps
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
+import operator
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -277,9 +278,14 @@ def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, reco
     record_stops = clock.stops_every(record_interval_s) if record_interval_s else []
     by_stop = {}
     n_boundaries = 1
+    stops_of_period = {}  # a batch has few periods
     for b, p in enumerate(params):
-        if clock.adaptive or whole_steps(p.period, solver.dt) is not None:
-            boundary_stops = clock.stops_every(p.period)
+        if p.period not in stops_of_period:
+            stops_of_period[p.period] = (
+                clock.stops_every(p.period)
+                if clock.adaptive or whole_steps(p.period, solver.dt) is not None else None)
+        boundary_stops = stops_of_period[p.period]
+        if boundary_stops is not None:
             n_boundaries = max(n_boundaries, len(boundary_stops))
             for index, stop in enumerate(boundary_stops):
                 by_stop.setdefault(stop, []).append((b, index))
@@ -352,7 +358,10 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
     gaits = [p.gait for p in params]
     failed = status != STATUS_OK
 
-    rows = {column: [getattr(p, name) for p in params] for name, column in StarParams.columns().items()}
+    columns = StarParams.columns()
+    # one attrgetter call per instance, not a getattr per field and instance
+    by_field = zip(*map(operator.attrgetter(*columns), params))
+    rows = {column: list(values) for column, values in zip(columns.values(), by_field)}
     # as text, so that every column has an Arrow type (Parquet, netCDF) and from_row reads it
     rows["actuator_profile"] = _texts([p.actuator_profile for p in params],
                                       lambda profile: profile.to_text())

@@ -162,6 +162,20 @@ def test_numpy_scalars_are_accepted_as_numbers():
     assert ts.SolverConfig(dt=np.float64(2e-3), max_newton=np.int32(10)).max_newton == 10
 
 
+def test_a_zero_is_stored_as_positive_zero():
+    """-0.0 == 0.0, so two parameters that compare equal must also be the same bits: a zero is
+    stored as +0.0 (build_model builds equal instances once and repeats their tables)."""
+    from taichi_star.actuation import CurvatureProfile
+
+    negative = ts.StarParams(damping_time=-0.0, linear_drag=-0.0, actuator_delays=(-0.0,) * 8,
+                             actuator_profile=CurvatureProfile(cooling=(94.777, 2.507, -0.0,
+                                                                         4.445)))
+    zeros = [negative.damping_time, negative.linear_drag, *negative.actuator_delays,
+             negative.actuator_profile.cooling[2]]
+    assert zeros == [0.0] * 11 and all(math.copysign(1.0, z) == 1.0 for z in zeros)
+    assert math.copysign(1.0, ts.StarParams(alpha=-0.0).alpha) == 1.0
+
+
 def test_presets_are_named_models_with_overrides():
     assert ts.StarParams.preset("paper") == ts.StarParams()
     accurate = ts.StarParams.preset("accurate", gait="A1+A2")
