@@ -57,7 +57,9 @@ def build_parser():
     parser = cli.StudyParser("animate", DESCRIPTION)
     parser.add_argument("--gait", default="paper", quick="A1+A2",
                         help="gait(s): A1+A2, a comma list, or paper (the five Fig. 4 gaits)")
-    parser.add_argument("--frames", type=int, default=60, help="frames per GIF (about; default 60)")
+    parser.add_argument("--frames", type=int, default=60,
+                        help="frames per GIF (default 60): at least this many where the run has "
+                             "as many steps, fewer than twice as many")
     parser.add_argument("--fps", type=int, default=15, help="GIF frame rate (default 15)")
     cli.add_model_flags(parser, fixed=("gait",))
     cli.add_dt_flag(parser)
