@@ -98,8 +98,8 @@ def nearest_interval(interval_s: float, dt: float) -> float:
 
 def interval_for_count(duration_s: float, count: int, dt: float) -> float:
     """A record interval (s, a whole number of steps of dt, at least one) giving `count` to
-    2·count − 1 records over duration_s (s) when the run has at least `count` steps (one per
-    step when it has fewer)."""
+    2·count − 1 records after the start over duration_s (s) when the run has at least `count`
+    steps (one per step when it has fewer)."""
     return max(1, steps_in(duration_s, dt) // count) * dt
 
 
