@@ -165,6 +165,9 @@ def main(argv=None):
     base = cli.base_params(args)
     solver = cli.solver(args)
     goals = default_goals(args.distance, args.directions, args.far or None)
+    # named by its flags before check_drive refuses the same run in the library's words
+    cli.check_cycles({"--max-cycles": args.max_cycles, "--settle-cycles": args.settle_cycles},
+                     base.period, solver)
     try:
         check_drive(goals, base, solver, args.tolerance, args.max_cycles,
                     settle_cycles=args.settle_cycles)
@@ -175,8 +178,6 @@ def main(argv=None):
     else:  # the primitives' longest run, as that study checks it
         cli.check_cycles({"--cycles": args.cycles, "--glide-cycles": args.glide_cycles},
                          base.period, solver)
-    cli.check_cycles({"--max-cycles": args.max_cycles, "--settle-cycles": args.settle_cycles},
-                     base.period, solver)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver,
                      extra={"tolerance_mm": args.tolerance, "max_cycles": args.max_cycles,

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import functools
 import math
+import numbers
 from importlib import resources
 
 import numpy as np
@@ -100,13 +101,23 @@ def cycle_speeds(t_s: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray,
     t_s, x_mm, y_mm = (np.asarray(a, dtype=np.float64) for a in (t_s, x_mm, y_mm))
     if not (len(t_s) == len(x_mm) == len(y_mm)) or len(t_s) < 2 or np.any(np.diff(t_s) <= 0):
         raise ValueError("cycle_speeds needs equal-length t, x, y with t strictly increasing")
-    if not (math.isfinite(period_s) and period_s > 0):
-        raise ValueError(f"period_s must be > 0, got {period_s!r}")
+    # a NaN passes the test above (it compares False) and gave NaN speeds
+    if not (t_s.ndim == x_mm.ndim == y_mm.ndim == 1) \
+            or not all(np.isfinite(a).all() for a in (t_s, x_mm, y_mm)):
+        raise ValueError("cycle_speeds needs finite 1-D t, x, y")
+    _check_period(period_s)
     # a path of exactly n periods (up to the rounding of its time stamps) has n cycles
     n_cycles = int(np.floor((t_s[-1] - t_s[0]) / period_s + 1e-9))
     edges = t_s[0] + period_s * np.arange(n_cycles + 1)
     x_edges, y_edges = np.interp(edges, t_s, x_mm), np.interp(edges, t_s, y_mm)
     return np.hypot(np.diff(x_edges), np.diff(y_edges)) / period_s
+
+
+def _check_period(period_s):
+    """ValueError naming period_s unless it is a finite real number > 0 (s)."""
+    if isinstance(period_s, bool) or not isinstance(period_s, numbers.Real) \
+            or not (math.isfinite(period_s) and period_s > 0):
+        raise ValueError(f"period_s must be a finite number > 0 s, got {period_s!r}")
 
 
 def experimental_cycle_speeds(period_s: float = EXPERIMENT_PERIOD_S) -> pd.DataFrame:
@@ -119,16 +130,25 @@ def experimental_cycle_speeds(period_s: float = EXPERIMENT_PERIOD_S) -> pd.DataF
     at the end (A1+A3's last cycle), and is used as the measurement's uncertainty. It is not
     divided by √n: successive cycles of one trial are strongly correlated (a trend, not noise).
     By the triangle inequality the mean per-cycle speed is at least the net speed over the same
-    whole cycles; it exceeds the full-trial speed when the path wanders sideways (A1, slow)."""
+    whole cycles; it exceeds the full-trial speed when the path wanders sideways (A1, slow).
+    ValueError naming period_s unless every trial holds at least two whole periods (the
+    spread needs two cycles)."""
+    _check_period(period_s)
     return _cycle_speed_table(float(period_s)).copy()
 
 
 @functools.lru_cache(maxsize=4)
 def _cycle_speed_table(period_s: float) -> pd.DataFrame:
     # cached: the Fig. 4c table of every calibration candidate needs the error bars
+    paths = {gait: experimental_trajectory(gait) for gait in PAPER_GAITS}
+    durations = {gait: path["t_s"].iloc[-1] - path["t_s"].iloc[0] for gait, path in paths.items()}
+    shortest = min(durations, key=durations.get)
+    if period_s > durations[shortest] / 2:
+        raise ValueError(f"period_s must be in (0, {durations[shortest] / 2:g}] s (two whole "
+                         f"cycles of the shortest trial, {shortest}'s {durations[shortest]:g} s, "
+                         f"for the spread), got {period_s!r}")
     rows = []
-    for gait in PAPER_GAITS:
-        path = experimental_trajectory(gait)
+    for gait, path in paths.items():
         speeds = cycle_speeds(path["t_s"], path["x_mm"], path["y_mm"], period_s)
         rows.append({"gait": gait, "n_cycles": len(speeds),
                      "cycle_speed_mean_mm_s": float(np.mean(speeds)),
@@ -157,6 +177,14 @@ def compare_with_experiment(summary: pd.DataFrame,
     status of the simulation.
     Speeds of instances whose status is not "ok" are reported as NaN, never as numbers.
     """
+    if not isinstance(summary, pd.DataFrame):
+        raise ValueError(f"summary must be a simulate(...).summary table, got "
+                         f"{type(summary).__name__}")
+    missing = [column for column in ("gait", speed_column, signed_column)
+               if column not in summary.columns]
+    if missing:
+        raise ValueError(f"summary has no column {missing[0]!r} (a simulate(...).summary has "
+                         f"gait, {speed_column} and {signed_column})")
     speeds = experimental_speeds()
     spread = experimental_cycle_speeds()["cycle_speed_std_mm_s"]
     rows = []

@@ -11,6 +11,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
+from numbers import Integral
 from typing import List, Optional, Tuple, Union
 
 import numpy as np
@@ -33,7 +34,12 @@ class Gait:
     actuators: Tuple[int, ...] = ()
 
     def __post_init__(self):
-        numbers = tuple(int(a) for a in self.actuators)
+        # whole numbers only: int() would take 1.5 for A1, True for A1 and "12" for A1+A2
+        given = self.actuators
+        if isinstance(given, (str, bytes)) or not hasattr(given, "__iter__") or any(
+                isinstance(a, (bool, np.bool_)) or not isinstance(a, Integral) for a in given):
+            raise ValueError(f"gait actuators must be numbers 1..{N_ACTUATORS}, got {given!r}")
+        numbers = tuple(int(a) for a in given)
         if any(not 1 <= a <= N_ACTUATORS for a in numbers):
             raise ValueError(f"gait actuators must be numbers 1..{N_ACTUATORS}, got {self.actuators!r}")
         if len(set(numbers)) != len(numbers):
@@ -73,6 +79,10 @@ class Gait:
         mask = np.asarray(mask)
         if mask.shape != (N_ACTUATORS,):
             raise ValueError(f"an actuator mask must have shape ({N_ACTUATORS},), got {mask.shape}")
+        # a NaN, a 2 or a text would be nonzero: fired
+        if not (mask.dtype == bool or (mask.dtype.kind in "iu" and np.isin(mask, (0, 1)).all())):
+            raise ValueError(f"an actuator mask must be boolean (or 0/1 integers), got "
+                             f"{mask.tolist()!r}")
         return cls(tuple(int(m) + 1 for m in np.flatnonzero(mask)))
 
     @property

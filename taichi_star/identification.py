@@ -154,7 +154,8 @@ class CentroidPath:
             raise ValueError("t_s, x_mm and y_mm must be 1-D arrays of one length >= 2")
         if np.any(np.diff(arrays[0]) <= 0) or not all(np.isfinite(a).all() for a in arrays):
             raise ValueError("t_s must be strictly increasing and t_s, x_mm, y_mm finite")
-        if not (isinstance(self.period_s, numbers.Real) and math.isfinite(self.period_s)
+        if not (isinstance(self.period_s, numbers.Real) and not isinstance(self.period_s, bool)
+                and math.isfinite(self.period_s)
                 and self.period_s > 0):
             raise ValueError(f"period_s must be a finite number > 0, got {self.period_s!r}")
         for name, array in zip(("t_s", "x_mm", "y_mm"), arrays):
@@ -307,12 +308,17 @@ def trial_fit(simulated: SimulatedRun, trial: Trial, cycles=TRAINING_CYCLES,
     phase fitted on the training window to validate on later cycles. ValueError for gaits that
     differ or a window the simulation or the trial does not cover."""
     first, last = check_window(cycles)
+    if not isinstance(simulated, SimulatedRun):
+        raise ValueError(f"simulated must be a SimulatedRun, got {type(simulated).__name__}")
+    if not isinstance(trial, Trial):
+        raise ValueError(f"trial must be a Trial (measured_trial), got {type(trial).__name__}")
     if Gait.parse(simulated.gait).name != trial.gait:
         raise ValueError(f"simulated gait {simulated.gait!r} is not the trial's {trial.gait!r}")
     sim_curves = cycle_curves(simulated.path, 0.0, (first, last), samples)
     if phase_s is None:
         phase_s = align_phase(sim_curves, trial, (first, last), samples)
-    elif not (math.isfinite(phase_s) and 0.0 <= phase_s <= latest_phase(trial, cycles)):
+    elif isinstance(phase_s, bool) or not isinstance(phase_s, numbers.Real) or not (
+            math.isfinite(phase_s) and 0.0 <= phase_s <= latest_phase(trial, cycles)):
         raise ValueError(f"phase_s must be in [0, {latest_phase(trial, cycles):g}] s, got "
                          f"{phase_s!r}")
     measured = cycle_curves(trial.path, phase_s, (first, last), samples)
@@ -343,6 +349,9 @@ def trajectory_objective(simulated: Mapping[str, SimulatedRun], trials: Mapping[
     for gait, run in simulated.items():
         if gait not in trials:
             raise ValueError(f"no measured trial for gait {gait!r}; trials: {', '.join(trials)}")
+        if phases is not None and gait not in phases:
+            raise ValueError(f"phases has no phase for gait {gait!r}; phases: "
+                             f"{', '.join(phases)}")
         phase = None if phases is None else phases[gait]
         rows.append(dataclasses.asdict(trial_fit(run, trials[gait], cycles, samples, phase)))
     return pd.DataFrame(rows, columns=TRIAL_COLUMNS)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import datetime
 import json
+import numbers
 import platform
 import tempfile
 from pathlib import Path
@@ -17,12 +18,17 @@ import pandas as pd
 
 from .extras import require
 from .geometry import CENTRE
-from .params import PARAMETER_UNITS, StarParams, parameter_column
+from .params import PARAMETER_UNITS, StarParams, _check_number, parameter_column
 from .provenance import code_version, file_path, write_atomic
 
 PROVENANCE_KEY = "taichi_star"
 """Key of the provenance in a Parquet file's schema metadata (JSON)."""
 TABLES = ("summary", "trajectory")
+ANIMATION_FPS = (1, 1000)
+"""Allowed frame rates of `animate`, frames per second (lowest, highest)."""
+ANIMATION_SIZE_PX = (100, 8192)
+"""Allowed widths of `animate`'s movie, pixels (lowest, highest): a 1-inch figure at 100 dpi
+up to what a frame of 8192² RGBA pixels (268 MB) still holds in memory."""
 
 UNITS = {"_per_wall_s": "1/s", "_per_s": "1/s", "_gb_s": "GB/s", "_mm_s": "mm/s", "_mm": "mm",
          "_deg": "degree", "_ms": "ms", "_us": "us", "_s": "s", "_m": "m"}
@@ -262,10 +268,20 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
         raise ValueError(f"frame must be 'world' or 'body', got {frame!r}")
     if path.suffix.lower() not in (".mp4", ".gif"):
         raise ValueError(f"path must end in .mp4 or .gif, got {path.name!r}")
+    fps = _check_number("fps", fps, *ANIMATION_FPS, integer=True)
+    size_px = _check_number("size_px", size_px, *ANIMATION_SIZE_PX, integer=True)
     batch = result.shapes.shape[1]
-    chosen = list(range(min(batch, 16))) if instances is None else [int(i) for i in instances]
-    if not chosen or min(chosen) < 0 or max(chosen) >= batch:
+    # whole numbers only: int() would take 0.5 for instance 0, True for 1
+    if instances is not None and (isinstance(instances, (str, bytes))
+                                  or not hasattr(instances, "__iter__")
+                                  or np.ndim(instances) != 1):
+        raise ValueError(f"instances must be a sequence of integers in [0, {batch}), got "
+                         f"{instances!r}")
+    chosen = list(range(min(batch, 16))) if instances is None else list(instances)
+    if not chosen or any(isinstance(i, (bool, np.bool_)) or not isinstance(i, numbers.Integral)
+                         for i in chosen) or min(chosen) < 0 or max(chosen) >= batch:
         raise ValueError(f"instances must be in [0, {batch}), got {instances!r}")
+    chosen = [int(i) for i in chosen]
     topology = result.topology
     times = np.sort(result.trajectory["t_s"].unique())
     shapes = result.shapes[:, chosen] * 1e3  # mm

@@ -400,6 +400,11 @@ class StarParams:
         be a CurvatureProfile or its text (`CurvatureProfile.to_text`, as result tables hold
         it); the per-actuator tuples (`actuator_gains`, ...) tuples or their text, read back
         exactly. Raises ValueError naming a missing column or an unreadable profile."""
+        # `in` on a text finds substrings, and None has no columns at all
+        if isinstance(row, (str, bytes)) or not (hasattr(row, "__contains__")
+                                                 and hasattr(row, "__getitem__")):
+            raise ValueError(f"row must be a table row (a pandas Series or a mapping of "
+                             f"columns), got {type(row).__name__}")
         values = {}
         for name, column in cls.columns().items():
             if name in overrides:

@@ -41,12 +41,14 @@ from typing import Optional, Sequence
 import numpy as np
 import pandas as pd
 
+from .driver import check_flag
 from .gait import NO_GAIT, Gait
 from .metrics import rotate
 from .params import SolverConfig, StarParams
 from .primitives import glide_columns, streak_step_columns
+from .runtime import check_arch
 from .simulator import Simulator
-from .timegrid import whole_steps
+from .timegrid import check_work, whole_steps
 
 MODES = ("open", "closed")
 
@@ -269,19 +271,39 @@ def check_drive(goals_mm, params: StarParams, solver: SolverConfig, tolerance_mm
                 settle_cycles: int = SETTLE_CYCLES) -> np.ndarray:
     """The goals as a (G, 2) float array, or ValueError naming the argument unless `drive`
     can run with these: finite goals, max_cycles an integer >= 1, settle_cycles an integer
-    >= 0, tolerance_mm > 0, the period and period / frames_per_cycle whole numbers of steps.
+    >= 0, tolerance_mm > 0, frames_per_cycle an integer >= 1, the period and period /
+    frames_per_cycle whole numbers of steps, and max_cycles + settle_cycles periods within the
+    step counter (`timegrid.check_work`).
     No compute: a command line checks its input with this before starting."""
-    goals = np.asarray(goals_mm, dtype=np.float64)
+    try:
+        goals = np.asarray(goals_mm, dtype=np.float64)
+    except (TypeError, ValueError):  # texts, mappings, ragged rows
+        goals = np.empty(0)
     if goals.ndim != 2 or goals.shape[1] != 2 or not len(goals) or not np.isfinite(goals).all():
         raise ValueError(f"goals_mm must be a finite (G, 2) array, got {goals_mm!r}")
-    if isinstance(max_cycles, bool) or not isinstance(max_cycles, int) or max_cycles < 1:
+    if not isinstance(params, StarParams):
+        raise ValueError(f"params must be a StarParams, got {type(params).__name__}")
+    if not isinstance(solver, SolverConfig):
+        raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
+    if isinstance(max_cycles, bool) or not isinstance(max_cycles, numbers.Integral) \
+            or max_cycles < 1:
         raise ValueError(f"max_cycles must be an integer >= 1, got {max_cycles!r}")
-    if isinstance(settle_cycles, bool) or not isinstance(settle_cycles, int) or settle_cycles < 0:
+    if isinstance(settle_cycles, bool) or not isinstance(settle_cycles, numbers.Integral) \
+            or settle_cycles < 0:
         raise ValueError(f"settle_cycles must be an integer >= 0, got {settle_cycles!r}")
     if isinstance(tolerance_mm, bool) or not isinstance(tolerance_mm, numbers.Real) \
             or not math.isfinite(tolerance_mm) or tolerance_mm <= 0:
         raise ValueError(f"tolerance_mm must be a number > 0, got {tolerance_mm!r}")
+    if isinstance(frames_per_cycle, bool) or not isinstance(frames_per_cycle, numbers.Integral) \
+            or frames_per_cycle < 1:
+        raise ValueError(f"frames_per_cycle must be an integer >= 1, got {frames_per_cycle!r}")
     period = params.period
+    # the whole run, every controller to max_cycles and the coast after: refused (with its
+    # estimate) before the plans, (G, max_cycles) per mode, or the Simulator are made
+    step, step_name = (solver.dt_max, "dt_max") if solver.adaptive else (solver.dt, "dt")
+    check_work(f"max_cycles + settle_cycles = {max_cycles + settle_cycles} cycles of "
+               f"{period:g} s at {step_name} = {step:g} s",
+               (max_cycles + settle_cycles) * period / step, len(goals) * len(MODES))
     if whole_steps(period, solver.dt) is None or \
             whole_steps(period / frames_per_cycle, solver.dt) is None:
         raise ValueError(f"period / frames_per_cycle must be a whole number of steps (dt = "
@@ -303,8 +325,13 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
     (goal, mode, t_s, controlled (False once the controller has stopped), x_mm, y_mm)
     recorded frames_per_cycle times per cycle. ValueError for
     bad arguments (`check_drive`)."""
+    if not isinstance(model, PrimitiveModel):
+        raise ValueError(f"model must be a PrimitiveModel (PrimitiveModel.from_table), got "
+                         f"{type(model).__name__}")
     goals = check_drive(goals_mm, params, solver, tolerance_mm, max_cycles, frames_per_cycle,
                         settle_cycles)
+    check_flag("progress", progress)
+    check_arch(arch)
     period = params.period
     goal_index = np.repeat(np.arange(len(goals)), len(MODES))
     modes = np.tile(MODES, len(goals))

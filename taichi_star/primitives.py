@@ -18,17 +18,19 @@ simulated, each its own source (`gait_sources`).
 from __future__ import annotations
 
 import math
+import numbers
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import pandas as pd
 
+from .driver import check_flag
 from .gait import N_ACTUATORS, NO_GAIT, Gait, symmetry_classes
 from .metrics import rotate, wrap_degrees
 from .params import PER_ACTUATOR_FIELDS, SolverConfig, StarParams
 from .simulation import simulate
 from .simulator import Simulator
-from .timegrid import on_grid, whole_steps
+from .timegrid import check_work, on_grid, whole_steps
 
 GaitSources = Dict[str, Tuple[str, int, bool, int]]
 """gait -> (source, rotation, reflect, class size): the gait whose simulation a gait's steps are
@@ -241,15 +243,34 @@ def check_measurement(base: StarParams, solver: SolverConfig, cycles: int, first
     """ValueError naming the argument unless `measure_primitives` can run with these: cycles
     an integer >= 1, first_cycle in [0, cycles - 1], the period a whole number of steps. No
     compute: a command line checks its input with this before starting."""
-    if isinstance(cycles, bool) or not isinstance(cycles, int) or cycles < 1:
+    if not isinstance(base, StarParams):
+        raise ValueError(f"base must be a StarParams, got {type(base).__name__}")
+    if not isinstance(solver, SolverConfig):
+        raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
+    if isinstance(cycles, bool) or not isinstance(cycles, numbers.Integral) or cycles < 1:
         raise ValueError(f"cycles must be an integer >= 1, got {cycles!r}")
-    if isinstance(first_cycle, bool) or not isinstance(first_cycle, int) \
+    if isinstance(first_cycle, bool) or not isinstance(first_cycle, numbers.Integral) \
             or not 0 <= first_cycle < cycles:
         raise ValueError(f"first_cycle must be an integer in [0, {cycles - 1}], got "
                          f"{first_cycle!r}")
     if whole_steps(base.period, solver.dt) is None:
         raise ValueError(f"period must be a whole number of steps (dt = {solver.dt} s) to "
                          f"record every cycle boundary, got {base.period!r}")
+
+
+def check_glides(base: StarParams, solver: SolverConfig, fire_cycles: int, glide_cycles: int,
+                 lowest: int = 1, fire_name: str = "fire_cycles"):
+    """ValueError naming glide_cycles unless it is an integer >= `lowest`, or naming the run
+    (with its estimate, `timegrid.check_work`) when fire_cycles + glide_cycles periods of
+    `base` would pass the step counter; before the glides' Simulator is built (arguments
+    otherwise as `check_measurement` checks them)."""
+    if isinstance(glide_cycles, bool) or not isinstance(glide_cycles, numbers.Integral) \
+            or glide_cycles < lowest:
+        raise ValueError(f"glide_cycles must be an integer >= {lowest}, got {glide_cycles!r}")
+    step, step_name = (solver.dt_max, "dt_max") if solver.adaptive else (solver.dt, "dt")
+    check_work(f"{fire_name} + glide_cycles = {fire_cycles + glide_cycles} cycles of "
+               f"{base.period:g} s at {step_name} = {step:g} s",
+               (fire_cycles + glide_cycles) * base.period / step)
 
 
 def measure_primitives(base: StarParams = StarParams(), solver: SolverConfig = SolverConfig(),
@@ -269,8 +290,7 @@ def measure_primitives(base: StarParams = StarParams(), solver: SolverConfig = S
     (`measure_glides`), in the columns `glide_columns(k)`, and glide_cycles. ValueError for
     bad arguments (`check_measurement`)."""
     check_measurement(base, solver, cycles, first_cycle)
-    if isinstance(glide_cycles, bool) or not isinstance(glide_cycles, int) or glide_cycles < 0:
-        raise ValueError(f"glide_cycles must be an integer >= 0, got {glide_cycles!r}")
+    check_glides(base, solver, cycles, glide_cycles, lowest=0, fire_name="cycles")
     return primitives_from_sources(base, solver, gait_sources(actuators_equal(base)), cycles,
                                    first_cycle, arch, progress, glide_cycles)
 
@@ -313,8 +333,8 @@ def measure_glides(base: StarParams = StarParams(), solver: SolverConfig = Solve
     (`GLIDE_COLUMNS`, k in glide_fire_cycles) over all 255 gaits and every k, image gaits by
     symmetry as for the steps. ValueError for bad arguments."""
     check_measurement(base, solver, fire_cycles, 0)
-    if isinstance(glide_cycles, bool) or not isinstance(glide_cycles, int) or glide_cycles < 1:
-        raise ValueError(f"glide_cycles must be an integer >= 1, got {glide_cycles!r}")
+    check_glides(base, solver, fire_cycles, glide_cycles)
+    check_flag("progress", progress)
     return glides_from_sources(base, solver, gait_sources(actuators_equal(base)), fire_cycles,
                                glide_cycles, arch, progress)
 

@@ -14,17 +14,18 @@ over cores).
 """
 
 import math
+import numbers
 import time
 from typing import Dict, Sequence, Tuple
 
 import numpy as np
 import taichi as ti
 
-from .model import build_model
-from .params import SolverConfig, StarParams
-from .runtime import Runtime
+from .model import build_model, validate_batch
+from .params import SolverConfig, StarParams, check_precision
+from .runtime import Runtime, check_arch
 from .state import STATUS_OK
-from .timegrid import STEPS_PER_LAUNCH
+from .timegrid import STEPS_PER_LAUNCH, check_work
 
 PROFILE_LAUNCHES = 3
 """`phase_split` times each phase as the best of this many launches (the differences of noisy
@@ -100,6 +101,14 @@ def _profile_phases(engine: ti.template(), phases: ti.i32, calls: ti.i32, time_s
                         engine.system.solve(b)
 
 
+def _check_steps(name: str, value, lowest: int, batch: int):
+    """ValueError naming `name` unless `value` is an integer >= lowest and within the step
+    counter (`timegrid.check_work` for `batch` instances)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < lowest:
+        raise ValueError(f"{name} must be an integer >= {lowest}, got {value!r}")
+    check_work(f"{name} = {value}", value, batch)
+
+
 class EngineProfile:
     """The engine of one batch (`params`, a sequence of StarParams; `solver`, fixed steps) on
     `arch`, loaded at rest. `setup_s`: the time this took (Taichi initialised if it was not,
@@ -107,9 +116,15 @@ class EngineProfile:
 
     def __init__(self, params: Sequence[StarParams], solver: SolverConfig = SolverConfig(),
                  arch: str = "cpu"):
+        if not isinstance(solver, SolverConfig):
+            raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
         if solver.adaptive:
             raise ValueError("solver: EngineProfile times fixed steps; got an adaptive solver "
                              "(profile it end to end with simulate)")
+        # refused before the model is built or Taichi started, as `simulate` refuses them
+        params = validate_batch(params)
+        check_precision(params, solver)
+        check_arch(arch)
         start = time.perf_counter()
         self.model = build_model(params)
         self.solver = solver
@@ -170,7 +185,9 @@ class EngineProfile:
 
     def advance(self, n_steps: int):
         """n_steps steps of every live instance, in launches of `simulate`'s size; finished
-        (synchronised) when this returns."""
+        (synchronised) when this returns. ValueError naming n_steps unless it is an integer >= 0
+        within the step counter (`timegrid.check_work`)."""
+        _check_steps("n_steps", n_steps, 0, self.batch_size)
         done = 0
         while done < n_steps:
             count = min(STEPS_PER_LAUNCH, n_steps - done)
@@ -205,7 +222,13 @@ class EngineProfile:
     def timed_window(self, warmup_steps: int, steps: int) -> Tuple[float, float, float]:
         """From rest, `warmup_steps` untimed steps, then `steps` timed ones: (seconds, Newton
         iterations and factorisations per instance-step of the timed steps). RuntimeError if
-        an instance failed (the timing would not be valid)."""
+        an instance failed (the timing would not be valid). ValueError naming warmup_steps
+        (an integer >= 0) or steps (>= 1) otherwise, or the two together past the step
+        counter."""
+        _check_steps("warmup_steps", warmup_steps, 0, self.batch_size)
+        _check_steps("steps", steps, 1, self.batch_size)
+        check_work(f"warmup_steps + steps = {warmup_steps + steps}", warmup_steps + steps,
+                   self.batch_size)
         self.restart()
         self.advance(warmup_steps)
         iterations, factorisations = self.newton_iterations().sum(), self.factorisations().sum()

@@ -124,7 +124,7 @@ def available_archs() -> List[str]:
 
 def check_arch(arch: str) -> str:
     """`arch` if this machine has it; else ValueError naming the available ones."""
-    if arch not in ARCHS:
+    if not isinstance(arch, str) or arch not in ARCHS:
         raise ValueError(f"arch must be one of {list(ARCHS)}, got {arch!r}")
     if arch != "cpu":
         available = available_archs()

@@ -264,9 +264,10 @@ class Simulator:
         if isinstance(duration_s, bool) or not isinstance(duration_s, numbers.Real) \
                 or not math.isfinite(duration_s) or duration_s <= 0:
             raise ValueError(f"duration_s must be a finite number > 0 s, got {duration_s!r}")
-        if record_interval_s and (isinstance(record_interval_s, bool)
-                                  or not isinstance(record_interval_s, numbers.Real)
-                                  or not 0 < record_interval_s < math.inf):
+        # the kind first: an empty text or list, None or False is not 0, and an array has no
+        # truth value
+        if isinstance(record_interval_s, bool) or not isinstance(record_interval_s, numbers.Real) \
+                or not (record_interval_s == 0 or 0 < record_interval_s < math.inf):
             raise ValueError(f"record_interval_s must be a finite number > 0 s (or 0: no "
                              f"records), got {record_interval_s!r}")
         check_flag("progress", progress)
@@ -429,6 +430,7 @@ class Simulator:
         The state goes on under this simulator's solver settings; where the snapshot records
         others (say newton_tol, or the Jacobian mode), a RuntimeWarning names them after the
         state is loaded: the continuation is then not the saved run's bit for bit."""
+        check_flag("other_params", other_params)  # "no" would load other parameters' state
         if not isinstance(snapshot, SimulatorSnapshot):
             snapshot = SimulatorSnapshot.read(snapshot)
         if snapshot.engine_key != repr(self.engine_key):

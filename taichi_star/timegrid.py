@@ -10,6 +10,7 @@ ValueError naming it); `nearest_interval` and `interval_for_count` give one that
 from __future__ import annotations
 
 import math
+import numbers
 import warnings
 from typing import Optional
 
@@ -99,7 +100,13 @@ def nearest_interval(interval_s: float, dt: float) -> float:
 def interval_for_count(duration_s: float, count: int, dt: float) -> float:
     """A record interval (s, a whole number of steps of dt, at least one) giving `count` to
     2·count − 1 records after the start over duration_s (s) when the run has at least `count`
-    steps (one per step when it has fewer)."""
+    steps (one per step when it has fewer). ValueError naming count (an integer >= 1) or
+    duration_s (a finite number > 0)."""
+    if isinstance(count, bool) or not isinstance(count, numbers.Integral) or count < 1:
+        raise ValueError(f"count must be an integer >= 1, got {count!r}")
+    if isinstance(duration_s, bool) or not isinstance(duration_s, numbers.Real) \
+            or not (math.isfinite(duration_s) and duration_s > 0):
+        raise ValueError(f"duration_s must be a finite number > 0 s, got {duration_s!r}")
     return max(1, steps_in(duration_s, dt) // count) * dt
 
 
@@ -108,7 +115,14 @@ def check_work(name: str, steps: float, batch: Optional[int] = None):
     rounded to whole steps as the drivers round a duration, is over MAX_STEPS_PER_INSTANCE;
     `name` says which arguments gave it (e.g. "duration_s = 1e9 s at dt = 0.001 s"), the
     message the estimate (times `batch`, the number of instances, if given) and the limit.
-    A RuntimeWarning with the estimated wall time when steps × batch is over WARN_ROBOT_STEPS."""
+    A RuntimeWarning with the estimated wall time when steps × batch is over WARN_ROBOT_STEPS.
+    ValueError naming `steps` (a real number >= 0) or `batch` (an integer >= 1) otherwise."""
+    if isinstance(steps, bool) or not isinstance(steps, numbers.Real) or steps < 0:
+        raise ValueError(f"steps must be a real number >= 0 (time steps per instance), got "
+                         f"{steps!r}")
+    if batch is not None and (isinstance(batch, bool) or not isinstance(batch, numbers.Integral)
+                              or batch < 1):
+        raise ValueError(f"batch must be an integer >= 1 (instances) or None, got {batch!r}")
     if not (math.isfinite(steps) and round(steps) <= MAX_STEPS_PER_INSTANCE):
         total = "" if batch is None else \
             f" ({steps * batch:.3g} robot-steps for {batch} instance{'' if batch == 1 else 's'})"

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import numbers
+import os
 from typing import Optional, Sequence
 
 import numpy as np
 import pandas as pd
 
-from ..driver import RunTiming
+from ..driver import RunTiming, check_flag
 from ..extras import require
 from ..geometry import build_topology
 from ..model import instances_of
@@ -67,8 +69,17 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     if executor is not None and not callable(getattr(executor, "run", None)):
         raise ValueError(f"executor must be an Executor (InProcess, LocalProcesses, a "
                          f"DaskExecutor: see executor_for(scheduler=...)), got {executor!r}")
+    # flags and the run folder's path before the folder is touched: resume="no" would resume
+    check_flag("resume", resume)
+    check_flag("progress", progress)
+    if run_dir is not None and not isinstance(run_dir, (str, os.PathLike)):
+        raise ValueError(f"run_dir must be the path of the run store's folder, got "
+                         f"{type(run_dir).__name__}")
     if resume and run_dir is None:
         raise ValueError("resume=True needs run_dir (the run store to continue)")
+    # the worker processes (started at their first chunk) before the run store is opened: a
+    # bad count must not leave a run folder behind that a later call would take as unfinished
+    owned = LocalProcesses(workers) if workers is not None else None
     params = instances_of(params)
     tasks = plan_chunks(params, duration_s, cycles=cycles, chunk_size=chunk_size, solver=solver,
                         arch=arch, record_interval_s=record_interval_s,
@@ -88,10 +99,7 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
                         len(tasks))
     todo = [task for task in tasks if task.index not in set(done)]
 
-    owned = None
-    if workers is not None:
-        owned = executor = LocalProcesses(workers)
-    executor = executor if executor is not None else InProcess()
+    executor = owned if owned is not None else executor if executor is not None else InProcess()
     summaries, trajectories, shapes = {}, [], {}
     timing = RunTiming(setup_s=0.0, compile_s=0.0, run_s=0.0, collect_s=0.0, robot_steps=0)
     outer = None
@@ -147,6 +155,10 @@ def executor_for(workers: Optional[int] = None, scheduler: Optional[str] = None,
     closed on exit."""
     if workers is not None and scheduler is not None:
         raise ValueError("give workers (local processes) or scheduler (a Dask cluster), not both")
+    if isinstance(retries, bool) or not isinstance(retries, numbers.Integral) or retries < 0:
+        raise ValueError(f"retries must be an integer >= 0, got {retries!r}")
+    if scheduler is not None and not isinstance(scheduler, str):
+        raise ValueError(f"scheduler must be an address like tcp://HOST:PORT, got {scheduler!r}")
     if scheduler is not None:
         require("distributed", "dask")
         from .dask_cluster import remote_executor

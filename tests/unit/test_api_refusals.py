@@ -1,0 +1,432 @@
+"""Refusals of the public API found missing by an audit: each bad argument is a ValueError
+naming it (and its range) before any compute; the boundary values on the allowed side pass the
+check. No engine is compiled here: `no_compute` makes Taichi's start an error, so a call that
+reaches it has accepted its arguments (and one that should have refused them fails)."""
+
+import math
+import types
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import taichi_star as ts
+from taichi_star import experiment, identification, planner, primitives, profiling, runtime
+from taichi_star.batch import executor_for, run_batch
+from taichi_star.gait import Gait
+from taichi_star.geometry import build_topology
+from taichi_star.params import PER_ACTUATOR_FIELDS, parameter_column
+from taichi_star.timegrid import MAX_STEPS_PER_INSTANCE, check_work, interval_for_count
+
+
+class ComputeStarted(Exception):
+    """Taichi was about to start: every argument check had passed."""
+
+
+@pytest.fixture
+def no_compute(monkeypatch):
+    def refuse(*args, **kwargs):
+        raise ComputeStarted
+    monkeypatch.setattr(runtime.Runtime, "ensure", refuse)
+
+
+P = ts.StarParams()
+S = ts.SolverConfig()
+# the most cycles of the paper's 3.15-s period that fit the step counter at dt = 1 ms
+MOST_CYCLES = math.floor(MAX_STEPS_PER_INSTANCE * S.dt / P.period * (1 + 1e-12))
+
+
+# ---------------------------------------------------------------- Simulator.advance
+def bare_simulator():
+    """A Simulator's argument checks without its engine (none compiled): the steps it has taken
+    are 0."""
+    sim = ts.Simulator.__new__(ts.Simulator)
+    sim.params, sim.solver = (P,), S
+    sim._steps = lambda: np.zeros(1, dtype=np.int64)
+    return sim
+
+
+@pytest.mark.parametrize("interval", [None, "", [], False, np.array([0.01, 0.02])])
+def test_advance_refuses_a_record_interval_of_another_kind(interval):
+    with pytest.raises(ValueError, match=r"^record_interval_s must be a finite number > 0 s"):
+        bare_simulator().advance(0.01, record_interval_s=interval)
+
+
+@pytest.mark.parametrize("flag", ["no", 1, None])
+def test_load_refuses_other_params_that_is_not_a_bool(flag):
+    # a text "no" was true: the state of other parameters loaded
+    with pytest.raises(ValueError, match=r"^other_params must be True or False"):
+        bare_simulator().load("missing.npz", other_params=flag)
+
+
+@pytest.mark.parametrize("interval", [0, 0.0, 0.01, np.float64(0.01)])
+def test_advance_accepts_no_records_or_a_positive_interval(interval):
+    # accepted: the run's length is refused next
+    with pytest.raises(ValueError, match=r"^duration_s = 1e\+09 s"):
+        bare_simulator().advance(1e9, record_interval_s=interval)
+
+
+# ---------------------------------------------------------------- run_batch, executor_for
+@pytest.mark.parametrize("keywords, name", [
+    ({"resume": "no"}, "resume"), ({"resume": 0}, "resume"), ({"progress": "no"}, "progress"),
+    ({"workers": 0}, "workers"), ({"workers": 1.5}, "workers")])
+def test_run_batch_refuses_bad_flags_and_workers_before_its_run_folder(tmp_path, no_compute,
+                                                                      keywords, name):
+    """resume="no" resumed, progress="no" drew bars, and workers=0 was refused only after the
+    run folder had been opened (a manifest left that the next call took for an unfinished
+    run)."""
+    folder = tmp_path / "run"
+    with pytest.raises(ValueError, match=f"^{name} must be"):
+        run_batch([P], 0.01, run_dir=folder, **keywords)
+    assert not folder.exists()
+
+
+def test_run_batch_accepts_one_worker_and_plain_flags(tmp_path, no_compute):
+    folder = tmp_path / "run"
+    with pytest.raises(ValueError, match=r"^duration_s = 1e\+09 s"):  # the next check
+        run_batch([P], 1e9, run_dir=folder, workers=1, resume=False, progress=np.bool_(False))
+    assert not folder.exists()
+
+
+def test_run_batch_refuses_a_run_dir_that_is_not_a_path(no_compute):
+    with pytest.raises(ValueError, match="^run_dir must be the path of the run store's folder, "
+                                         "got int$"):
+        run_batch([P], 0.01, run_dir=5)
+
+
+@pytest.mark.parametrize("keywords, name", [
+    ({"retries": -1}, "retries"), ({"retries": "2"}, "retries"), ({"retries": True}, "retries"),
+    ({"scheduler": 5}, "scheduler")])
+def test_executor_for_refuses_bad_retries_and_schedulers(keywords, name):
+    with pytest.raises(ValueError, match=f"^{name} must be"):
+        with executor_for(**keywords):
+            pass
+
+
+def test_executor_for_accepts_zero_retries():
+    with executor_for(retries=0) as executor:
+        assert executor.n_workers == 1
+
+
+# ---------------------------------------------------------------- timegrid, check_arch
+@pytest.mark.parametrize("steps", [-1.0, -1e-9, "5", None, True])
+def test_check_work_refuses_steps_that_are_not_a_count(steps):
+    with pytest.raises(ValueError, match=r"^steps must be a real number >= 0"):
+        check_work("x", steps)
+
+
+@pytest.mark.parametrize("batch", [0, -1, 1.5, True, math.nan])
+def test_check_work_refuses_a_batch_that_is_not_a_count(batch):
+    with pytest.raises(ValueError, match=r"^batch must be an integer >= 1"):
+        check_work("x", 5.0, batch)
+
+
+def test_check_work_accepts_its_boundaries():
+    check_work("x", 0.0, 1)
+    check_work("x", float(MAX_STEPS_PER_INSTANCE), np.int64(1))
+    with pytest.raises(ValueError, match="the limit is"):
+        check_work("x", float(MAX_STEPS_PER_INSTANCE + 1), 1)
+
+
+@pytest.mark.parametrize("count", [0, -1, 1.5, True, "3"])
+def test_interval_for_count_refuses_a_count_that_is_not_one(count):
+    with pytest.raises(ValueError, match=r"^count must be an integer >= 1"):
+        interval_for_count(1.0, count, 1e-3)
+
+
+@pytest.mark.parametrize("duration", [0.0, -1.0, math.nan, math.inf, "1"])
+def test_interval_for_count_refuses_a_duration_that_is_not_one(duration):
+    with pytest.raises(ValueError, match=r"^duration_s must be a finite number > 0"):
+        interval_for_count(duration, 10, 1e-3)
+
+
+def test_interval_for_count_accepts_one_record():
+    assert interval_for_count(1.0, 1, 1e-3) == pytest.approx(1.0)
+
+
+def test_an_arch_array_is_refused_naming_arch(no_compute):
+    with pytest.raises(ValueError, match=r"^arch must be one of"):
+        ts.simulate([P], 0.01, arch=np.array(["cpu", "cuda"]))
+
+
+# ---------------------------------------------------------------- SimulationResult.animate
+def recorded_result(instances=2):
+    """A result with recorded shapes (the rest shape twice) built without simulating."""
+    topology = build_topology(P)
+    row = {column: getattr(P, name) for name, column in ts.StarParams.columns().items()}
+    row["actuator_profile"] = P.actuator_profile.to_text()
+    for name in PER_ACTUATOR_FIELDS:
+        row[parameter_column(name)] = str(getattr(P, name))
+    summary = pd.DataFrame([{**row, "status": "ok"}] * instances)
+    trajectory = pd.DataFrame({"instance": np.repeat(np.arange(instances), 2),
+                               "t_s": np.tile([0.0, 0.1], instances), "x_mm": 0.0, "y_mm": 0.0,
+                               "heading_deg": 0.0})
+    shapes = np.broadcast_to(topology.rest_positions, (2, instances) + topology.rest_positions.shape)
+    return ts.SimulationResult(summary=summary, trajectory=trajectory, shapes=shapes.copy(),
+                               topology=topology, solver=S)
+
+
+@pytest.mark.parametrize("keywords, name", [
+    ({"fps": 0}, "fps"), ({"fps": -1}, "fps"), ({"fps": 1001}, "fps"), ({"fps": math.nan}, "fps"),
+    ({"fps": 1.5}, "fps"), ({"fps": "x"}, "fps"), ({"fps": True}, "fps"),
+    ({"size_px": 99}, "size_px"), ({"size_px": 8193}, "size_px"), ({"size_px": 0}, "size_px"),
+    ({"size_px": math.nan}, "size_px"),
+    ({"instances": [0.5]}, "instances"), ({"instances": [True]}, "instances"),
+    ({"instances": 0}, "instances"), ({"instances": ["a"]}, "instances"),
+    ({"instances": [math.nan]}, "instances"), ({"instances": np.zeros((1, 1), int)}, "instances"),
+    ({"instances": "01"}, "instances")])
+def test_animate_refuses_bad_frame_rates_sizes_and_instances(tmp_path, keywords, name):
+    pytest.importorskip("matplotlib")
+    with pytest.raises(ValueError, match=f"^{name} must be"):
+        recorded_result().animate(tmp_path / "movie.gif", **keywords)
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("keywords", [{"fps": 1}, {"fps": 1000}, {"fps": np.int64(15)},
+                                      {"size_px": 100}, {"size_px": 8192}])
+def test_animate_accepts_its_boundaries(tmp_path, keywords):
+    pytest.importorskip("matplotlib")
+    # accepted: the instance out of range is refused next, before anything is drawn
+    with pytest.raises(ValueError, match=r"^instances must be in \[0, 2\), got \[2\]"):
+        recorded_result().animate(tmp_path / "movie.gif", instances=[2], **keywords)
+
+
+# ---------------------------------------------------------------- planner
+GOALS = [[50.0, 0.0]]
+
+
+def model():
+    return planner.PrimitiveModel(["A1"], [[10.0, 0.0]], [0.0])
+
+
+@pytest.mark.parametrize("keywords, name", [
+    ({"frames_per_cycle": 0}, "frames_per_cycle"), ({"frames_per_cycle": -1}, "frames_per_cycle"),
+    ({"frames_per_cycle": 2.5}, "frames_per_cycle"), ({"frames_per_cycle": True}, "frames_per_cycle"),
+    ({"frames_per_cycle": "x"}, "frames_per_cycle"),
+    ({"params": None}, "params"), ({"solver": None}, "solver"),
+    ({"goals_mm": {}}, "goals_mm"), ({"goals_mm": [["a", "b"]]}, "goals_mm"),
+    ({"goals_mm": [[1.0, 2.0], [3.0]]}, "goals_mm")])
+def test_check_drive_refuses_bad_arguments(keywords, name):
+    arguments = {"goals_mm": GOALS, "params": P, "solver": S, **keywords}
+    with pytest.raises(ValueError, match=f"^{name} must be"):
+        planner.check_drive(**arguments)
+
+
+def test_check_drive_accepts_numpy_counts_and_one_frame_per_cycle():
+    planner.check_drive(GOALS, P, S, max_cycles=np.int64(3), settle_cycles=np.int64(0),
+                        frames_per_cycle=1)
+
+
+@pytest.mark.parametrize("max_cycles, settle_cycles, refused", [
+    (MOST_CYCLES - 4, 4, False), (MOST_CYCLES - 3, 4, True), (MOST_CYCLES, 0, False),
+    (1, MOST_CYCLES, True), (10 ** 9, 4, True)])
+def test_check_drive_refuses_a_run_past_the_step_counter(max_cycles, settle_cycles, refused):
+    """drive(max_cycles=10**9) allocated a (G, 10**9) plan and ran for ever."""
+    if refused:
+        with pytest.raises(ValueError, match=r"^max_cycles \+ settle_cycles = \d+ cycles of "
+                                             r"3.15 s at dt = 0.001 s is .* the limit is"):
+            planner.check_drive(GOALS, P, S, max_cycles=max_cycles, settle_cycles=settle_cycles)
+    else:
+        planner.check_drive(GOALS, P, S, max_cycles=max_cycles, settle_cycles=settle_cycles)
+
+
+@pytest.mark.parametrize("arguments, keywords, name", [
+    ((None, GOALS), {}, "model"), ((model(), GOALS), {"progress": "no"}, "progress"),
+    ((model(), GOALS), {"max_cycles": 10 ** 9}, "max_cycles")])
+def test_drive_refuses_before_its_simulator(no_compute, arguments, keywords, name):
+    with pytest.raises(ValueError, match=f"^{name}"):
+        planner.drive(*arguments, **keywords)
+
+
+def test_drive_starts_with_good_arguments(no_compute):
+    with pytest.raises(ComputeStarted):
+        planner.drive(model(), GOALS, max_cycles=1, progress=np.bool_(False))
+
+
+# ---------------------------------------------------------------- primitives
+@pytest.mark.parametrize("base, solver, name", [(None, S, "base"), (P, None, "solver"),
+                                                ("paper", S, "base")])
+def test_check_measurement_refuses_other_objects(base, solver, name):
+    with pytest.raises(ValueError, match=f"^{name} must be a"):
+        primitives.check_measurement(base, solver, 5, 1)
+
+
+def test_check_measurement_accepts_numpy_integers():
+    primitives.check_measurement(P, S, np.int64(5), np.int64(4))
+
+
+@pytest.mark.parametrize("glide_cycles, refused", [
+    (MOST_CYCLES - 5, False), (MOST_CYCLES - 4, True), (10 ** 9, True)])
+def test_measure_glides_refuses_a_run_past_the_step_counter(no_compute, glide_cycles, refused):
+    """fire_cycles + glide_cycles periods must fit the step counter: it ran for ever."""
+    if refused:
+        with pytest.raises(ValueError, match=r"^fire_cycles \+ glide_cycles = \d+ cycles .* "
+                                             r"the limit is"):
+            primitives.measure_glides(P, S, fire_cycles=5, glide_cycles=glide_cycles)
+    else:
+        with pytest.raises(ComputeStarted):
+            primitives.measure_glides(P, S, fire_cycles=5, glide_cycles=glide_cycles)
+
+
+def test_measure_primitives_refuses_its_glides_past_the_step_counter(no_compute):
+    with pytest.raises(ValueError, match=r"^cycles \+ glide_cycles = \d+ cycles"):
+        primitives.measure_primitives(P, S, cycles=5, glide_cycles=MOST_CYCLES - 4)
+    with pytest.raises(ComputeStarted):
+        primitives.measure_primitives(P, S, cycles=5, glide_cycles=MOST_CYCLES - 5)
+
+
+def test_measure_glides_refuses_a_progress_that_is_not_a_flag(no_compute):
+    with pytest.raises(ValueError, match="^progress must be True or False"):
+        primitives.measure_glides(P, S, fire_cycles=1, glide_cycles=1, progress="no")
+
+
+# ---------------------------------------------------------------- identification, experiment
+def simulated_run(gait="A1+A2"):
+    times = np.arange(0.0, 20.0, 0.1)
+    path = identification.CentroidPath(times, times, np.zeros_like(times), 3.15)
+    return identification.SimulatedRun(gait, path, (1.0, 0.0))
+
+
+@pytest.mark.parametrize("phase", ["0", True])
+def test_trial_fit_refuses_a_phase_that_is_not_a_time_in_range(phase):
+    trial = identification.measured_trial("A1+A2")
+    with pytest.raises(ValueError, match=r"^phase_s must be in \[0, "):
+        identification.trial_fit(simulated_run(), trial, phase_s=phase)
+
+
+def test_trial_fit_accepts_the_ends_of_the_phase_range():
+    trial = identification.measured_trial("A1+A2")
+    latest = identification.latest_phase(trial, identification.TRAINING_CYCLES)
+    for phase in (0.0, latest):
+        assert identification.trial_fit(simulated_run(), trial, phase_s=phase).phase_s == phase
+
+
+@pytest.mark.parametrize("simulated, trial, name", [
+    (None, "trial", "simulated"), ("run", None, "trial"), ("run", "run", "trial")])
+def test_trial_fit_refuses_other_objects(simulated, trial, name):
+    objects = {"run": simulated_run(), "trial": identification.measured_trial("A1+A2"),
+               None: None}
+    with pytest.raises(ValueError, match=f"^{name} must be a"):
+        identification.trial_fit(objects[simulated], objects[trial])
+
+
+def test_trajectory_objective_names_a_gait_without_a_phase():
+    trials = {"A1+A2": identification.measured_trial("A1+A2")}
+    with pytest.raises(ValueError, match=r"^phases has no phase for gait 'A1\+A2'"):
+        identification.trajectory_objective({"A1+A2": simulated_run()}, trials, phases={})
+
+
+def test_a_path_period_of_true_is_refused():
+    with pytest.raises(ValueError, match="^period_s must be a finite number > 0"):
+        identification.CentroidPath([0.0, 1.0], [0.0, 1.0], [0.0, 1.0], True)
+
+
+@pytest.mark.parametrize("t, x", [
+    ([0.0, math.nan, 2.0], [0.0, 1.0, 2.0]), ([0.0, 1.0, 2.0], [0.0, math.inf, 2.0]),
+    ([[0.0, 1.0], [2.0, 3.0]], [[0.0, 1.0], [2.0, 3.0]])])
+def test_cycle_speeds_refuses_non_finite_or_shaped_paths(t, x):
+    """A NaN position gave NaN speeds silently; 2-D arrays a TypeError."""
+    with pytest.raises(ValueError, match="^cycle_speeds needs finite 1-D t, x, y$"):
+        experiment.cycle_speeds(t, x, np.zeros_like(np.asarray(x, dtype=float)), 1.0)
+
+
+@pytest.mark.parametrize("period", ["1", True, math.nan, 0.0, -1.0])
+def test_cycle_speeds_refuses_a_period_that_is_not_a_time(period):
+    with pytest.raises(ValueError, match="^period_s must be a finite number > 0 s"):
+        experiment.cycle_speeds([0.0, 1.0, 2.0], [0.0, 1.0, 2.0], [0.0, 0.0, 0.0], period)
+
+
+def test_experimental_cycle_speeds_needs_two_cycles_of_every_trial():
+    """Past half the shortest trial a gait had one cycle or none: NumPy's "zero-size array"."""
+    durations = {gait: float(np.ptp(experiment.experimental_trajectory(gait)["t_s"]))
+                 for gait in experiment.PAPER_GAITS}
+    longest = min(durations.values()) / 2
+    assert (experiment.experimental_cycle_speeds(longest)["n_cycles"] >= 2).all()
+    with pytest.raises(ValueError, match=rf"^period_s must be in \(0, {longest:g}\] s"):
+        experiment.experimental_cycle_speeds(longest * (1 + 1e-6))
+    for period in ("3", True, math.nan):
+        with pytest.raises(ValueError, match="^period_s must be a finite number > 0 s"):
+            experiment.experimental_cycle_speeds(period)
+
+
+@pytest.mark.parametrize("summary, match", [
+    (None, "^summary must be a simulate"), (pd.DataFrame({"x": [1]}), "^summary has no column 'gait'"),
+    (pd.DataFrame({"gait": ["A1"], "speed_mm_s": [1.0]}),
+     "^summary has no column 'signed_speed_mm_s'")])
+def test_compare_with_experiment_refuses_tables_without_its_columns(summary, match):
+    with pytest.raises(ValueError, match=match):
+        experiment.compare_with_experiment(summary)
+
+
+# ---------------------------------------------------------------- profiling
+@pytest.mark.parametrize("params, solver, arch, match", [
+    ([P], None, "cpu", "^solver must be a SolverConfig"),
+    ([P], S, "x", "^arch must be one of"),
+    ([ts.StarParams(tip_radius=1.9)], ts.SolverConfig(precision="f32", newton_tol=1e-7), "cpu",
+     r"^newton_tol must be >= 3.6e-06 m with precision 'f32'")])
+def test_engine_profile_refuses_before_building_the_engine(no_compute, params, solver, arch,
+                                                           match):
+    with pytest.raises(ValueError, match=match):
+        profiling.EngineProfile(params, solver, arch)
+
+
+def bare_profile(monkeypatch):
+    profile = profiling.EngineProfile.__new__(profiling.EngineProfile)
+    profile.model = types.SimpleNamespace(batch_size=1)
+    profile.engine = types.SimpleNamespace(advance=lambda count: None)
+    monkeypatch.setattr(profiling.ti, "sync", lambda: None)
+    return profile
+
+
+@pytest.mark.parametrize("steps", [-1, 1.5, True, "10", math.nan, MAX_STEPS_PER_INSTANCE + 1])
+def test_engine_profile_advance_refuses_a_step_count_that_is_not_one(monkeypatch, steps):
+    with pytest.raises(ValueError, match=r"^n_steps (must be an integer >= 0|= \d+ is)"):
+        bare_profile(monkeypatch).advance(steps)
+
+
+def test_engine_profile_advance_accepts_zero_and_numpy_counts(monkeypatch):
+    bare_profile(monkeypatch).advance(0)
+    bare_profile(monkeypatch).advance(np.int64(3))
+
+
+@pytest.mark.parametrize("warmup, steps, name", [(-1, 10, "warmup_steps"), (0, 0, "steps"),
+                                                 (0, 2.5, "steps"),
+                                                 (MAX_STEPS_PER_INSTANCE, 1, "warmup_steps")])
+def test_engine_profile_timed_window_refuses_bad_step_counts(monkeypatch, warmup, steps, name):
+    """steps = 0 divided by zero after the run; no count was checked."""
+    with pytest.raises(ValueError, match=f"^{name}"):
+        bare_profile(monkeypatch).timed_window(warmup, steps)
+
+
+# ---------------------------------------------------------------- StarParams.from_row, Gait
+@pytest.mark.parametrize("row", [None, "gait", 5])
+def test_from_row_refuses_what_is_not_a_row(row):
+    with pytest.raises(ValueError, match="^row must be a table row"):
+        ts.StarParams.from_row(row)
+
+
+@pytest.mark.parametrize("actuators", [(1.5,), (True,), "12", 5, (math.nan,), ("1",)])
+def test_gait_refuses_actuators_that_are_not_whole_numbers(actuators):
+    """Gait((1.5,)) was A1, Gait("12") A1+A2."""
+    with pytest.raises(ValueError, match=r"^gait actuators must be numbers 1\.\.8"):
+        Gait(actuators)
+
+
+def test_gait_accepts_numpy_actuator_numbers_up_to_eight():
+    assert Gait((np.int64(1), 8)).name == "A1+A8"
+    with pytest.raises(ValueError, match=r"^gait actuators must be numbers 1\.\.8"):
+        Gait((9,))
+
+
+@pytest.mark.parametrize("mask", [[math.nan] * 8, [2] + [0] * 7, [-1] + [0] * 7,
+                                  [0.5] + [0.0] * 7, ["0"] * 8])
+def test_an_actuator_mask_must_be_boolean(mask):
+    """A NaN (or any nonzero) fired the actuator."""
+    with pytest.raises(ValueError, match=r"^an actuator mask must be boolean"):
+        Gait.from_mask(mask)
+
+
+def test_an_actuator_mask_of_booleans_or_bits_is_read():
+    assert Gait.from_mask([1, 0, 1, 0, 0, 0, 0, 0]).name == "A1+A3"
+    assert Gait.from_mask(np.array([0] * 7 + [1], dtype=np.uint8)).name == "A8"
+    assert Gait.from_mask([True] + [False] * 7).name == "A1"
