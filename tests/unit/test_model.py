@@ -7,10 +7,15 @@ import dataclasses
 from dataclasses import fields
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from taichi_star import StarParams
+from taichi_star import params as params_module
 from taichi_star.geometry import Topology, build_topology
 from taichi_star.model import InstanceTopologies, build_model
+
+LARGEST_JOINT_RADIUS = 1.0 / (StarParams().actuator_profile.rest_curvature * np.sin(np.pi / 8))
 
 BASE = StarParams(gait="A1+A3")
 BATCH = [BASE,
@@ -124,3 +129,53 @@ def test_a_replica_models_tables_lie_on_their_instances_tangent():
     alpha_plus = model.coefficients["jet"]["jet_alpha"][pair["alpha"][0]]
     np.testing.assert_allclose(alpha_plus - model.coefficients["jet"]["jet_alpha"][:count],
                                steps[1], rtol=1e-9)
+
+
+@st.composite
+def mixed_instance(draw):
+    """StarParams differing in every field that shapes a table: rest geometry, every option,
+    component heights on or off, the model extensions, per-actuator gains and delays."""
+    joint_radius = draw(st.floats(0.015, 0.95 * LARGEST_JOINT_RADIUS))
+    heights = draw(st.sampled_from([(0.0, 0.0, 0.0), (0.05, 0.024, 0.03), (0.03, 0.01, 0.02)]))
+    period = draw(st.floats(0.5, 5.0))
+    return StarParams(
+        gait=draw(st.sampled_from(["A1", "A1+A3", "A2+A5+A8", "none"])),
+        alpha=draw(st.floats(0.0, 2.0)), youngs_modulus=draw(st.floats(1e6, 1e7)),
+        limb_stiffness_ratio=draw(st.floats(1.0, 300.0)), thickness=draw(st.floats(2e-3, 5e-3)),
+        period=period, joint_radius=joint_radius,
+        tip_radius=joint_radius + draw(st.floats(0.015, 0.04)),
+        cylinder_diameter=draw(st.floats(0.015, 0.04)),
+        added_mass_coeff=draw(st.floats(0.0, 3.0)), fluid_density=draw(st.floats(800.0, 1200.0)),
+        jet_mode=draw(st.sampled_from(params_module.JET_MODES)),
+        jet_direction=draw(st.sampled_from(params_module.JET_DIRECTIONS)),
+        jet_application=draw(st.sampled_from(params_module.JET_APPLICATIONS)),
+        actuation_ends=draw(st.sampled_from(params_module.ACTUATION_ENDS)),
+        joint_stiffness=draw(st.sampled_from(params_module.JOINT_STIFFNESSES)),
+        profile_closure=draw(st.sampled_from(("jump", "ramp"))),
+        damping_time=draw(st.sampled_from([0.0, 1e-3])),
+        hub_height=heights[0], foam_height=heights[1], actuator_height=heights[2],
+        linear_drag=draw(st.sampled_from([0.0, 5.0])),
+        wake_coupling=draw(st.sampled_from([0.0, 2.0])),
+        actuator_gains=tuple(draw(st.lists(st.floats(0.0, 2.0), min_size=8, max_size=8))),
+        actuator_delays=tuple(draw(st.lists(st.floats(0.0, 0.9 * period), min_size=8,
+                                            max_size=8))))
+
+
+@settings(max_examples=25, deadline=None)
+@given(batch=st.lists(mixed_instance(), min_size=2, max_size=4), data=st.data())
+def test_every_table_of_a_mixed_batch_is_its_instances_own(batch, data):
+    """Whatever the other instances (any geometry, option or extension, in any order, some
+    repeated), each instance's rows of the host model are those it has alone, bit for bit: the
+    engine's kernels read an instance's own rows only, so its motion is then its own too. The
+    series joints' stiffness from the batch's first rest shape broke this (2026-12)."""
+    batch = batch + [batch[0]]
+    order = data.draw(st.permutations(range(len(batch))))
+    batch = [batch[k] for k in order]
+    model = build_model(batch)
+    for b, p in enumerate(batch):
+        alone = build_model([p])
+        for name in ("rest_positions", "mass", "inertia"):
+            assert np.array_equal(getattr(model, name)[b], getattr(alone, name)[0]), name
+        for term, table in alone.coefficients.items():
+            for name, values in table.items():
+                assert np.array_equal(model.coefficients[term][name][b], values[0]), (term, name)
