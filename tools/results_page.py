@@ -26,6 +26,7 @@ Two markups tie a page's figures to the CSVs:
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import re
@@ -34,6 +35,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Dict, List, Optional
 
+import numpy as np
 import pandas as pd
 
 REPO = Path(__file__).resolve().parents[1]
@@ -68,8 +70,17 @@ class Mismatch:
 
 
 def read_table(name: str) -> pd.DataFrame:
-    """results/<name> with every cell as its text (so selectors compare what the file says)."""
-    return pd.read_csv(RESULTS / name, dtype=str, keep_default_na=False)
+    """results/<name> with every cell as its text (so selectors compare what the file says);
+    parsed once per version of the file (a page quotes one table many times; callers only read
+    the frame)."""
+    path = RESULTS / name
+    status = path.stat()
+    return _parsed_table(path, status.st_mtime_ns, status.st_size)
+
+
+@functools.lru_cache(maxsize=None)
+def _parsed_table(path: Path, mtime_ns: int, size: int) -> pd.DataFrame:
+    return pd.read_csv(path, dtype=str, keep_default_na=False)
 
 
 def cell(name: str, selectors: Dict[str, str], column: str) -> str:
@@ -79,12 +90,13 @@ def cell(name: str, selectors: Dict[str, str], column: str) -> str:
     for key in [*selectors, column]:
         if key not in table.columns:
             raise ValueError(f"{name} has no column {key!r}")
-    chosen = table
+    picked = np.ones(len(table), dtype=bool)
     for key, value in selectors.items():
-        chosen = chosen[chosen[key] == value]
-    if len(chosen) != 1:
-        raise ValueError(f"{name} {selectors}: {len(chosen)} rows match, not one")
-    return chosen[column].iloc[0]
+        picked &= table[key].to_numpy() == value
+    rows = np.flatnonzero(picked)
+    if len(rows) != 1:
+        raise ValueError(f"{name} {selectors}: {len(rows)} rows match, not one")
+    return table[column].iat[rows[0]]
 
 
 def apply_transform(value: float, transform: Optional[str]) -> float:
