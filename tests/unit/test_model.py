@@ -44,15 +44,22 @@ def test_stack_equals_the_instances_own_topologies_one_by_one():
         assert np.array_equal(topologies.stack(name), np.stack([getattr(t, name) for t in own])), name
 
 
-def test_an_instances_model_tables_do_not_depend_on_its_batch():
-    batch = build_model(BATCH)
-    for b, p in enumerate(BATCH):
+def assert_rows_are_their_instances_own(model, batch):
+    """Each instance's rows of `model` (built from `batch`) are, bit for bit, those of the
+    model of that instance alone, every table with the batch's leading axis."""
+    for b, p in enumerate(batch):
         alone = build_model([p])
         for name in ("rest_positions", "mass", "inertia"):
-            assert np.array_equal(getattr(batch, name)[b], getattr(alone, name)[0]), name
+            assert np.array_equal(getattr(model, name)[b], getattr(alone, name)[0]), name
         for term, table in alone.coefficients.items():
             for name, values in table.items():
-                assert np.array_equal(batch.coefficients[term][name][b], values[0]), (term, name)
+                built = model.coefficients[term][name]
+                assert built.shape == (len(batch),) + values.shape[1:], (term, name)
+                assert np.array_equal(built[b], values[0]), (term, name)
+
+
+def test_an_instances_model_tables_do_not_depend_on_its_batch():
+    assert_rows_are_their_instances_own(build_model(BATCH), BATCH)
 
 
 def test_a_series_joints_stiffness_comes_from_its_own_rest_shape():
@@ -80,15 +87,7 @@ def test_equal_instances_are_built_once_with_their_tables_repeated_bit_for_bit()
     model = build_model(batch)
     assert all(kept is given for kept, given in zip(model.params, batch))
     assert model.terms_used == build_model(BATCH).terms_used
-    for b, p in enumerate(batch):
-        alone = build_model([p])
-        for name in ("rest_positions", "mass", "inertia"):
-            assert np.array_equal(getattr(model, name)[b], getattr(alone, name)[0]), name
-        for term, table in alone.coefficients.items():
-            for name, values in table.items():
-                built = model.coefficients[term][name]
-                assert built.shape == (len(batch),) + values.shape[1:], (term, name)
-                assert np.array_equal(built[b], values[0]), (term, name)
+    assert_rows_are_their_instances_own(model, batch)
 
 
 def test_a_replica_models_tables_lie_on_their_instances_tangent():
@@ -171,11 +170,4 @@ def test_every_table_of_a_mixed_batch_is_its_instances_own(batch, data):
     batch = batch + [batch[0]]
     order = data.draw(st.permutations(range(len(batch))))
     batch = [batch[k] for k in order]
-    model = build_model(batch)
-    for b, p in enumerate(batch):
-        alone = build_model([p])
-        for name in ("rest_positions", "mass", "inertia"):
-            assert np.array_equal(getattr(model, name)[b], getattr(alone, name)[0]), name
-        for term, table in alone.coefficients.items():
-            for name, values in table.items():
-                assert np.array_equal(model.coefficients[term][name][b], values[0]), (term, name)
+    assert_rows_are_their_instances_own(build_model(batch), batch)
