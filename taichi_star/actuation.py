@@ -124,7 +124,11 @@ class CurvatureProfile:
 
     def cycle_curvature(self, tau, period: float, closure: str = "jump"):
         """K̄ over a cycle of `period` s with the given closure: "jump" = Eq. 5 as fitted,
-        "ramp" = K̄(τ) + (K̄(0) − K̄(T))·τ/T (continuous from one cycle to the next)."""
+        "ramp" = K̄(τ) + (K̄(0) − K̄(T))·τ/T (continuous from one cycle to the next).
+        ValueError naming period unless it is a finite number > 0 s (0 gave NaN), or
+        closure."""
+        if not (_real_numbers([period]) and math.isfinite(period) and period > 0):
+            raise ValueError(f"period must be a finite number > 0 s, got {period!r}")
         if closure not in PROFILE_CLOSURES:
             raise ValueError(f"closure must be one of {list(PROFILE_CLOSURES)}, got {closure!r}")
         value = self.curvature(tau)

@@ -24,6 +24,7 @@ from importlib import resources
 import numpy as np
 import pandas as pd
 
+from .driver import check_flag
 from .gait import canonical_gait
 
 PAPER_GAITS = ("A1", "A1+A2", "A1+A3", "A1+A4", "A1+A3+A5")
@@ -36,6 +37,12 @@ along the gait's forward direction (the sum of its actuators' bisectors), "rever
 
 EXPERIMENT_PERIOD_S = 3.15
 """Actuation period of the physical robot's trials, s (150 ms heating pulse + 3 s rest)."""
+
+MAX_PATH_CYCLES = 10 ** 6
+"""The most cycles `cycle_speeds` cuts a path into (a few arrays of this many edges, 8 MB
+each): the measured trials hold at most 19 cycles of 3.15 s, a simulated run of the step
+counter's 2.1e9 steps 7e5 at 1 ms. A period smaller than the frame spacing is fine (the edges
+are interpolated); a period of 1e-9 s, 2e9 cycles of a 2-s path, was a MemoryError."""
 
 FIG4C_COLUMNS = ["gait", "sim_speed_mm_s", "sim_signed_speed_mm_s", "sim_direction",
                  "exp_speed_mm_s", "exp_cycle_speed_std_mm_s", "paper_direction", "direction_matches", "speed_ratio",
@@ -63,7 +70,8 @@ def experimental_speeds() -> pd.DataFrame:
 
 def experimental_speed(gait: str, excerpt: bool = False) -> float:
     """Measured speed of one Fig. 4 gait in mm/s (full trial, or the authors' excerpt); NaN for a
-    gait that was not measured."""
+    gait that was not measured. ValueError naming excerpt unless it is True or False."""
+    excerpt = check_flag("excerpt", excerpt)
     table = experimental_speeds()
     gait = _canonical(gait)
     if gait not in table.index:
@@ -107,7 +115,15 @@ def cycle_speeds(t_s: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray,
         raise ValueError("cycle_speeds needs finite 1-D t, x, y")
     _check_period(period_s)
     # a path of exactly n periods (up to the rounding of its time stamps) has n cycles
-    n_cycles = int(np.floor((t_s[-1] - t_s[0]) / period_s + 1e-9))
+    duration = t_s[-1] - t_s[0]
+    with np.errstate(over="ignore"):                    # inf for a subnormal period
+        estimate = np.floor(duration / period_s + 1e-9)
+    if not estimate <= MAX_PATH_CYCLES:
+        raise ValueError(f"period_s = {period_s!r} s cuts the {duration:g}-s path into "
+                         f"{estimate:.3g} cycles; the limit is {MAX_PATH_CYCLES} cycles "
+                         f"(MAX_PATH_CYCLES): a period_s >= {duration / MAX_PATH_CYCLES:.3g} s "
+                         f"for this path")
+    n_cycles = int(estimate)
     edges = t_s[0] + period_s * np.arange(n_cycles + 1)
     x_edges, y_edges = np.interp(edges, t_s, x_mm), np.interp(edges, t_s, y_mm)
     return np.hypot(np.diff(x_edges), np.diff(y_edges)) / period_s
@@ -159,7 +175,12 @@ def _cycle_speed_table(period_s: float) -> pd.DataFrame:
 
 
 def direction_of(signed_speed: float) -> str:
-    """"forward" (> 0), "reverse" (< 0), or "undefined" (zero, NaN: no forward direction)."""
+    """"forward" (> 0), "reverse" (< 0), or "undefined" (zero, NaN, None: no forward
+    direction). ValueError naming signed_speed for anything but a real number or None."""
+    if signed_speed is not None and (isinstance(signed_speed, (bool, np.bool_))
+                                     or not isinstance(signed_speed, numbers.Real)):
+        raise ValueError(f"signed_speed must be a real number (mm/s) or None, got "
+                         f"{signed_speed!r}")
     if signed_speed is None or not math.isfinite(signed_speed) or signed_speed == 0.0:
         return "undefined"
     return "forward" if signed_speed > 0 else "reverse"

@@ -116,7 +116,16 @@ class Gait:
 
     def transform(self, rotation: int, reflect: bool) -> "Gait":
         """Image under an octagon symmetry: optional reflection across the A1 axis
-        (A_m -> A_{2−m}, indices mod 8), then rotation by `rotation`·45° (A_m -> A_{m+rotation})."""
+        (A_m -> A_{2−m}, indices mod 8), then rotation by `rotation`·45° (A_m -> A_{m+rotation}).
+        ValueError naming rotation unless it is an integer (any: taken mod 8), or reflect
+        unless it is True or False (a text "no" would reflect)."""
+        if isinstance(rotation, (bool, np.bool_)) or not isinstance(rotation, Integral):
+            raise ValueError(f"rotation must be an integer number of 45° turns (taken mod "
+                             f"{N_ACTUATORS}), got {rotation!r}")
+        # driver.check_flag's test: gait is below driver (params imports it), so not imported
+        if not isinstance(reflect, (bool, np.bool_)):
+            raise ValueError(f"reflect must be True or False, got {reflect!r}")
+        rotation, reflect = int(rotation), bool(reflect)
         images = []
         for number in self.actuators:
             index = -(number - 1) if reflect else number - 1

@@ -90,6 +90,14 @@ VALIDATION_CYCLES = (4, 6)
 """The validation window: cycles the fit never sees (every measured trial has at least 6)."""
 SAMPLES_PER_CYCLE = 64
 """Points of a cycle curve (every T/64 ≈ 49 ms: the 150-ms surge gets three)."""
+MAX_CYCLE = 1000
+"""The last cycle a window (`check_window`) may reach: 50 times the longest measured trial
+(A1's 19 cycles of 3.15 s); a window is compared with a trial that covers it, and a window
+of 10**12 cycles allocated terabytes before failing."""
+MAX_SAMPLES_PER_CYCLE = 1024
+"""The most points of a cycle curve (`samples`): 5 times the video frames of a 3.15-s cycle
+(59.94 frames/s: 189; between frames the track is linear, so more points add nothing). With
+`MAX_CYCLE` a window's curves hold at most ~1e6 points (16 MB), a phase fit seconds."""
 PHASE_GRID = 64
 """Phases of the grid search of `align_phase` (the refinement then resolves ~1e-6 s)."""
 DISPLACEMENT_FLOOR_MM = 0.05
@@ -216,23 +224,33 @@ def measured_trial(gait: str, period_s: float = EXPERIMENT_PERIOD_S) -> Trial:
 
 
 def check_window(cycles) -> Tuple[int, int]:
-    """(first, last) 1-based inclusive cycle numbers, first ≥ 1 and last ≥ first; ValueError
-    naming `cycles` otherwise."""
+    """(first, last) 1-based inclusive cycle numbers, 1 ≤ first ≤ last ≤ `MAX_CYCLE`;
+    ValueError naming `cycles` otherwise."""
     try:
         first, last = cycles
     except (TypeError, ValueError):
         raise ValueError(f"cycles must be a pair (first, last) of cycle numbers, got "
                          f"{cycles!r}") from None
     if not all(isinstance(c, numbers.Integral) and not isinstance(c, bool) for c in (first, last)) \
-            or first < 1 or last < first:
-        raise ValueError(f"cycles must be integers with 1 <= first <= last, got {cycles!r}")
+            or not 1 <= first <= last <= MAX_CYCLE:
+        raise ValueError(f"cycles must be integers with 1 <= first <= last <= {MAX_CYCLE} "
+                         f"(MAX_CYCLE), got {cycles!r}")
     return int(first), int(last)
 
 
+def check_samples(samples) -> int:
+    """`samples` (points per cycle curve) as an int; ValueError naming it unless it is an
+    integer in [1, `MAX_SAMPLES_PER_CYCLE`]."""
+    if isinstance(samples, (bool, np.bool_)) or not isinstance(samples, numbers.Integral) \
+            or not 1 <= samples <= MAX_SAMPLES_PER_CYCLE:
+        raise ValueError(f"samples must be an integer in [1, {MAX_SAMPLES_PER_CYCLE}] "
+                         f"(MAX_SAMPLES_PER_CYCLE), got {samples!r}")
+    return int(samples)
+
+
 def tau_grid(period_s: float, samples: int = SAMPLES_PER_CYCLE) -> np.ndarray:
-    """τ = T/M, 2T/M, ..., T (s), M = samples."""
-    if isinstance(samples, bool) or not isinstance(samples, numbers.Integral) or samples < 1:
-        raise ValueError(f"samples must be an integer >= 1, got {samples!r}")
+    """τ = T/M, 2T/M, ..., T (s), M = samples (`check_samples`)."""
+    samples = check_samples(samples)
     return period_s * np.arange(1, samples + 1) / samples
 
 
@@ -308,6 +326,7 @@ def trial_fit(simulated: SimulatedRun, trial: Trial, cycles=TRAINING_CYCLES,
     phase fitted on the training window to validate on later cycles. ValueError for gaits that
     differ or a window the simulation or the trial does not cover."""
     first, last = check_window(cycles)
+    samples = check_samples(samples)
     if not isinstance(simulated, SimulatedRun):
         raise ValueError(f"simulated must be a SimulatedRun, got {type(simulated).__name__}")
     if not isinstance(trial, Trial):
@@ -430,9 +449,15 @@ def _curve_derivative(path: CentroidPath, derivative_xy, cycles, samples) -> np.
 
 def residual_count(gaits: int, cycles=TRAINING_CYCLES, samples: int = SAMPLES_PER_CYCLE) -> int:
     """The number of residuals of `objective_residuals` for `gaits` gaits on the window
-    `cycles`: per gait its cycles × samples curve residuals and ρ."""
+    `cycles`: per gait its cycles × samples curve residuals and ρ. ValueError naming gaits
+    unless it is an integer >= 1, or naming cycles or samples (`check_window`,
+    `check_samples`)."""
+    if isinstance(gaits, (bool, np.bool_)) or not isinstance(gaits, numbers.Integral) \
+            or gaits < 1:
+        raise ValueError(f"gaits must be an integer >= 1 (the number of gaits), got {gaits!r}")
     first, last = check_window(cycles)
-    return gaits * ((last - first + 1) * samples + 1)
+    samples = check_samples(samples)
+    return int(gaits) * ((last - first + 1) * samples + 1)
 
 
 def trial_residuals(simulated: SimulatedRun, derivative_xy: np.ndarray, trial: Trial,

@@ -94,6 +94,13 @@ class PrimitiveModel:
                         else np.asarray(streak_steps_mm, dtype=np.float64))
         turns = np.asarray(turns_deg, dtype=np.float64)
         names = [Gait.parse(g).name for g in gaits]
+        repeated = sorted({name for name in names if names.count(name) > 1})
+        if repeated:
+            raise ValueError(f"gaits must name each gait once, got {', '.join(repeated)} more "
+                             f"than once")
+        if not [name for name in names if name != NO_GAIT]:
+            raise ValueError(f"gaits must name at least one gait other than {NO_GAIT!r} (from "
+                             f"a primitive table: its rows of status ok), got {names}")
         glides = (np.zeros_like(steps) if glides_mm is None
                   else np.asarray(glides_mm, dtype=np.float64))
         if glides.ndim == 2:
@@ -254,7 +261,22 @@ class PrimitiveModel:
 def default_goals(distance_mm: float = 50.0, count: int = 8,
                   far_mm: Optional[float] = 150.0) -> np.ndarray:
     """(count [+1], 2) goals, mm: `count` at distance_mm in directions 0, 360/count, ... deg,
-    then one far_mm straight behind the robot (-x), unless far_mm is None."""
+    then one far_mm straight behind the robot (-x), unless far_mm is None. ValueError naming
+    count unless it is an integer >= 0 (>= 1 without far_mm: some goal), distance_mm unless a
+    finite number > 0 mm, far_mm unless None or one."""
+    if isinstance(count, (bool, np.bool_)) or not isinstance(count, numbers.Integral) \
+            or count < (1 if far_mm is None else 0):
+        rule = ("far_mm is None: no goal otherwise" if far_mm is None
+                else ">= 1 when far_mm is None")
+        raise ValueError(f"count must be an integer >= {1 if far_mm is None else 0} ({rule}), "
+                         f"got {count!r}")
+    for name, value in (("distance_mm", distance_mm), ("far_mm", far_mm)):
+        if name == "far_mm" and value is None:
+            continue
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) \
+                or not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be a finite number > 0 mm"
+                             f"{' or None' if name == 'far_mm' else ''}, got {value!r}")
     angles = np.radians(np.arange(count) * 360.0 / count)
     goals = distance_mm * np.stack([np.cos(angles), np.sin(angles)], axis=1)
     return goals if far_mm is None else np.vstack([goals, [[-far_mm, 0.0]]])

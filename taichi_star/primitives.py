@@ -114,7 +114,10 @@ not move and has no direction."""
 def actuators_equal(base: StarParams) -> bool:
     """Whether every per-actuator field of `base` (`params.PER_ACTUATOR_FIELDS`, e.g.
     actuator_gains, actuator_delays) holds one value for all eight actuators, exactly: then the
-    octagon's symmetries map the robot firing a gait onto the robots firing its images."""
+    octagon's symmetries map the robot firing a gait onto the robots firing its images.
+    ValueError naming base unless it is a StarParams."""
+    if not isinstance(base, StarParams):
+        raise ValueError(f"base must be a StarParams, got {type(base).__name__}")
     return all(len(set(getattr(base, name))) == 1 for name in PER_ACTUATOR_FIELDS)
 
 

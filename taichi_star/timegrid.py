@@ -76,8 +76,10 @@ def check_steps(name: str, time_s: float, dt: float) -> int:
     and time_s is on the grid of dt (s)."""
     steps = whole_steps(time_s, dt)
     if not steps or steps < 1:
+        nearest = (f" (nearest valid: {nearest_interval(time_s, dt)!r} s)"
+                   if _positive_number(time_s) else "")
         raise ValueError(f"{name} must be a whole number of steps (dt = {dt} s), got "
-                         f"{time_s!r} (nearest valid: {nearest_interval(time_s, dt)!r} s)")
+                         f"{time_s!r}{nearest}")
     return steps
 
 
@@ -93,8 +95,21 @@ def check_duration(duration_s: float, dt: float) -> int:
 def nearest_interval(interval_s: float, dt: float) -> float:
     """The record interval (s) nearest interval_s that is a whole number of steps of dt (s),
     at least one step: what `simulate` and `Simulator.advance` accept as record_interval_s
-    with fixed steps."""
-    return max(1, round(interval_s / dt)) * dt
+    with fixed steps. ValueError naming interval_s or dt unless each is a finite number
+    > 0 s."""
+    for name, value in (("interval_s", interval_s), ("dt", dt)):
+        if not _positive_number(value):
+            raise ValueError(f"{name} must be a finite number > 0 s, got {value!r}")
+    steps = interval_s / dt
+    if not math.isfinite(steps):
+        raise ValueError(f"interval_s = {interval_s!r} s is {steps} steps of dt = {dt!r} s")
+    return max(1, round(steps)) * dt
+
+
+def _positive_number(value) -> bool:
+    """Whether `value` is a finite real number > 0 (NumPy's included), not a bool."""
+    return (not isinstance(value, (bool, np.bool_)) and isinstance(value, numbers.Real)
+            and math.isfinite(value) and value > 0)
 
 
 def interval_for_count(duration_s: float, count: int, dt: float) -> float:

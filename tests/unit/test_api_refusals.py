@@ -11,12 +11,14 @@ import pandas as pd
 import pytest
 
 import taichi_star as ts
-from taichi_star import experiment, identification, planner, primitives, profiling, runtime
+from taichi_star import (CurvatureProfile, experiment, identification, planner, primitives,
+                         profiling, runtime)
 from taichi_star.batch import executor_for, run_batch
 from taichi_star.gait import Gait
 from taichi_star.geometry import build_topology
 from taichi_star.params import PER_ACTUATOR_FIELDS, parameter_column
-from taichi_star.timegrid import MAX_STEPS_PER_INSTANCE, check_work, interval_for_count
+from taichi_star.timegrid import (MAX_STEPS_PER_INSTANCE, check_work, interval_for_count,
+                                  nearest_interval)
 
 
 class ComputeStarted(Exception):
@@ -144,6 +146,19 @@ def test_interval_for_count_accepts_one_record():
     assert interval_for_count(1.0, 1, 1e-3) == pytest.approx(1.0)
 
 
+@pytest.mark.parametrize("interval, dt, name", [
+    (math.nan, 1e-3, "interval_s"), (math.inf, 1e-3, "interval_s"), (0.0, 1e-3, "interval_s"),
+    ("0.01", 1e-3, "interval_s"), (0.01, 0.0, "dt"), (0.01, math.nan, "dt"), (0.01, True, "dt")])
+def test_nearest_interval_refuses_what_is_not_a_time(interval, dt, name):
+    """NaN was Python's "cannot convert float NaN to integer", dt = 0 a ZeroDivisionError."""
+    with pytest.raises(ValueError, match=f"^{name} must be a finite number > 0 s"):
+        nearest_interval(interval, dt)
+
+
+def test_nearest_interval_accepts_less_than_a_step():
+    assert nearest_interval(1e-12, np.float64(1e-3)) == 1e-3
+
+
 def test_an_arch_array_is_refused_naming_arch(no_compute):
     with pytest.raises(ValueError, match=r"^arch must be one of"):
         ts.simulate([P], 0.01, arch=np.array(["cpu", "cuda"]))
@@ -212,6 +227,46 @@ def test_check_drive_refuses_bad_arguments(keywords, name):
         planner.check_drive(**arguments)
 
 
+@pytest.mark.parametrize("keywords, name", [
+    ({"count": -1}, "count"), ({"count": 2.5}, "count"), ({"count": True}, "count"),
+    ({"count": 0, "far_mm": None}, "count"), ({"distance_mm": math.nan}, "distance_mm"),
+    ({"distance_mm": 0.0}, "distance_mm"), ({"far_mm": math.nan}, "far_mm"),
+    ({"far_mm": -1.0}, "far_mm")])
+def test_default_goals_refuses_bad_counts_and_distances(keywords, name):
+    """count 2.5 gave goals at 0°, 144° and 288°, count 0 without far_mm no goal at all, a NaN
+    distance NaN goals."""
+    with pytest.raises(ValueError, match=f"^{name} must be"):
+        planner.default_goals(**keywords)
+
+
+def test_default_goals_accepts_no_directions_with_the_far_goal():
+    # the plan study's --directions 0 --far 150
+    np.testing.assert_array_equal(planner.default_goals(50.0, 0, 150.0), [[-150.0, 0.0]])
+    assert planner.default_goals(np.float64(50.0), np.int64(1), None).tolist() == [[50.0, 0.0]]
+
+
+@pytest.mark.parametrize("gaits, match", [
+    (["A1", "A1"], r"^gaits must name each gait once, got A1 more"),
+    (["A1+A2", "A2+A1"], r"^gaits must name each gait once, got A1\+A2 more"),
+    ([], r"^gaits must name at least one gait other than 'none'"),
+    (["none"], r"^gaits must name at least one gait other than 'none'")])
+def test_primitive_model_refuses_repeated_gaits_or_none(gaits, match):
+    """Repeated gaits made a model whose second copy was never chosen; none a model that
+    could only stand still."""
+    with pytest.raises(ValueError, match=match):
+        planner.PrimitiveModel(gaits, np.full((len(gaits), 2), 10.0), np.zeros(len(gaits)))
+
+
+def test_primitive_model_from_a_table_without_ok_gaits_is_refused():
+    table = pd.DataFrame({"gait": ["A1", "A2"], "step_x_mm": [10.0, math.nan],
+                          "step_y_mm": [0.0, 0.0], "turn_deg": [0.0, 0.0],
+                          "status": ["failed", "ok"]})
+    with pytest.raises(ValueError, match=r"^gaits must name at least one gait other"):
+        planner.PrimitiveModel.from_table(table)
+    assert planner.PrimitiveModel.from_table(table.assign(status="ok")
+                                             .iloc[:1]).gaits == ["none", "A1"]
+
+
 def test_check_drive_accepts_numpy_counts_and_one_frame_per_cycle():
     planner.check_drive(GOALS, P, S, max_cycles=np.int64(3), settle_cycles=np.int64(0),
                         frames_per_cycle=1)
@@ -275,6 +330,13 @@ def test_measure_primitives_refuses_its_glides_past_the_step_counter(no_compute)
         primitives.measure_primitives(P, S, cycles=5, glide_cycles=MOST_CYCLES - 5)
 
 
+@pytest.mark.parametrize("base", [None, "paper", {}])
+def test_actuators_equal_refuses_what_is_not_a_star_params(base):
+    """None was an AttributeError."""
+    with pytest.raises(ValueError, match=r"^base must be a StarParams"):
+        primitives.actuators_equal(base)
+
+
 def test_measure_glides_refuses_a_progress_that_is_not_a_flag(no_compute):
     with pytest.raises(ValueError, match="^progress must be True or False"):
         primitives.measure_glides(P, S, fire_cycles=1, glide_cycles=1, progress="no")
@@ -310,6 +372,41 @@ def test_trial_fit_refuses_other_objects(simulated, trial, name):
         identification.trial_fit(objects[simulated], objects[trial])
 
 
+@pytest.mark.parametrize("keywords, match", [
+    ({"samples": 10 ** 12}, r"^samples must be an integer in \[1, 1024\]"),
+    ({"samples": identification.MAX_SAMPLES_PER_CYCLE + 1}, r"^samples must be an integer in"),
+    ({"cycles": (1, 10 ** 12)}, r"^cycles must be integers with 1 <= first <= last <= 1000"),
+    ({"cycles": (identification.MAX_CYCLE + 1,) * 2}, r"^cycles must be integers with")])
+def test_trial_fit_refuses_windows_past_its_bounds(keywords, match):
+    """A window of 10**12 cycles or samples was a MemoryError (terabytes)."""
+    trial = identification.measured_trial("A1+A2")
+    with pytest.raises(ValueError, match=match):
+        identification.trial_fit(simulated_run(), trial, **keywords)
+
+
+def test_window_and_samples_accept_their_bounds():
+    assert identification.check_window((1, identification.MAX_CYCLE)) == (1, 1000)
+    grid = identification.tau_grid(3.15, np.int64(identification.MAX_SAMPLES_PER_CYCLE))
+    assert len(grid) == 1024 and grid[-1] == 3.15
+    with pytest.raises(ValueError, match=r"^samples must be an integer in \[1, 1024\]"):
+        identification.tau_grid(3.15, 10 ** 12)
+    with pytest.raises(ValueError, match=r"^cycles must be integers with 1 <= first <= last "
+                                         r"<= 1000"):
+        identification.check_window((1, 10 ** 12))
+
+
+@pytest.mark.parametrize("gaits", [-1, 0, 2.5, True, "2"])
+def test_residual_count_refuses_a_count_of_gaits_that_is_not_one(gaits):
+    """-1 gave -193 residuals."""
+    with pytest.raises(ValueError, match=r"^gaits must be an integer >= 1"):
+        identification.residual_count(gaits)
+
+
+def test_residual_count_accepts_one_gait_and_the_largest_window():
+    assert identification.residual_count(np.int64(1), (1, 3), 16) == 49
+    assert identification.residual_count(1, (1, 1000), 1024) == 1000 * 1024 + 1
+
+
 def test_trajectory_objective_names_a_gait_without_a_phase():
     trials = {"A1+A2": identification.measured_trial("A1+A2")}
     with pytest.raises(ValueError, match=r"^phases has no phase for gait 'A1\+A2'"):
@@ -334,6 +431,43 @@ def test_cycle_speeds_refuses_non_finite_or_shaped_paths(t, x):
 def test_cycle_speeds_refuses_a_period_that_is_not_a_time(period):
     with pytest.raises(ValueError, match="^period_s must be a finite number > 0 s"):
         experiment.cycle_speeds([0.0, 1.0, 2.0], [0.0, 1.0, 2.0], [0.0, 0.0, 0.0], period)
+
+
+@pytest.mark.parametrize("period", [1e-9, 5e-324, 2.0 / (experiment.MAX_PATH_CYCLES + 1)])
+def test_cycle_speeds_refuses_a_period_of_too_many_cycles(period):
+    """1e-9 s cut a 2-s path into 2e9 cycles: a MemoryError."""
+    with pytest.raises(ValueError, match=r"^period_s = .* cycles; the limit is 1000000 cycles"):
+        experiment.cycle_speeds([0.0, 1.0, 2.0], [0.0, 1.0, 2.0], [0.0, 0.0, 0.0], period)
+
+
+def test_cycle_speeds_accepts_the_most_cycles_between_samples():
+    speeds = experiment.cycle_speeds([0.0, 1.0, 2.0], [0.0, 1.0, 2.0], [0.0, 0.0, 0.0],
+                                     2.0 / experiment.MAX_PATH_CYCLES)
+    assert len(speeds) == experiment.MAX_PATH_CYCLES
+    np.testing.assert_allclose(speeds, 1.0)
+
+
+@pytest.mark.parametrize("speed", ["x", True, [1.0]])
+def test_direction_of_refuses_what_is_not_a_speed(speed):
+    with pytest.raises(ValueError, match=r"^signed_speed must be a real number \(mm/s\) or None"):
+        experiment.direction_of(speed)
+
+
+def test_direction_of_reads_numpy_numbers_and_none():
+    assert experiment.direction_of(np.float32(-1.0)) == "reverse"
+    assert experiment.direction_of(None) == experiment.direction_of(math.nan) == "undefined"
+
+
+@pytest.mark.parametrize("excerpt", ["no", 0, None])
+def test_experimental_speed_refuses_an_excerpt_that_is_not_a_bool(excerpt):
+    """excerpt="no" gave the excerpt's speed."""
+    with pytest.raises(ValueError, match=r"^excerpt must be True or False"):
+        experiment.experimental_speed("A1", excerpt=excerpt)
+
+
+def test_experimental_speed_accepts_numpy_bools():
+    assert experiment.experimental_speed("A1", excerpt=np.bool_(False)) == \
+        experiment.experimental_speed("A1")
 
 
 def test_experimental_cycle_speeds_needs_two_cycles_of_every_trial():
@@ -430,3 +564,31 @@ def test_an_actuator_mask_of_booleans_or_bits_is_read():
     assert Gait.from_mask([1, 0, 1, 0, 0, 0, 0, 0]).name == "A1+A3"
     assert Gait.from_mask(np.array([0] * 7 + [1], dtype=np.uint8)).name == "A8"
     assert Gait.from_mask([True] + [False] * 7).name == "A1"
+
+
+@pytest.mark.parametrize("rotation, reflect, match", [
+    ("1", False, r"^rotation must be an integer"), (1.5, False, r"^rotation must be an integer"),
+    (True, False, r"^rotation must be an integer"), (None, False, r"^rotation must be an integer"),
+    (1, "no", r"^reflect must be True or False"), (1, 0, r"^reflect must be True or False"),
+    (1, None, r"^reflect must be True or False")])
+def test_gait_transform_refuses_bad_rotations_and_reflections(rotation, reflect, match):
+    """A text rotation was a TypeError, 1.5 refused as "gait actuators", reflect="no" true."""
+    with pytest.raises(ValueError, match=match):
+        Gait.parse("A1+A2").transform(rotation, reflect)
+
+
+def test_gait_transform_accepts_numpy_integers_and_bools_and_any_turn():
+    assert Gait.parse("A2").transform(np.int64(0), np.bool_(True)).name == "A8"
+    assert Gait.parse("A1").transform(-1, False) == Gait.parse("A1").transform(7, False)
+
+
+@pytest.mark.parametrize("period", [0.0, -1.0, math.nan, math.inf, "3", True])
+def test_cycle_curvature_refuses_a_period_that_is_not_a_time(period):
+    """period = 0 gave NaN with the ramp closure."""
+    with pytest.raises(ValueError, match=r"^period must be a finite number > 0 s"):
+        CurvatureProfile().cycle_curvature(0.0, period, "ramp")
+
+
+def test_cycle_curvature_accepts_a_short_period():
+    profile = CurvatureProfile()
+    assert profile.cycle_curvature(0.0, np.float64(1e-3), "ramp") == profile.rest_curvature
