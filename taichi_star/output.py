@@ -18,7 +18,7 @@ import pandas as pd
 
 from .extras import require
 from .geometry import CENTRE
-from .params import PARAMETER_UNITS, StarParams, _check_number, parameter_column
+from .params import PARAMETER_UNITS, StarParams, check_number, parameter_column
 from .provenance import code_version, file_path, write_atomic
 
 PROVENANCE_KEY = "taichi_star"
@@ -268,8 +268,8 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
         raise ValueError(f"frame must be 'world' or 'body', got {frame!r}")
     if path.suffix.lower() not in (".mp4", ".gif"):
         raise ValueError(f"path must end in .mp4 or .gif, got {path.name!r}")
-    fps = _check_number("fps", fps, *ANIMATION_FPS, integer=True)
-    size_px = _check_number("size_px", size_px, *ANIMATION_SIZE_PX, integer=True)
+    fps = check_number("fps", fps, *ANIMATION_FPS, integer=True)
+    size_px = check_number("size_px", size_px, *ANIMATION_SIZE_PX, integer=True)
     batch = result.shapes.shape[1]
     # whole numbers only: int() would take 0.5 for instance 0, True for 1
     if instances is not None and (isinstance(instances, (str, bytes))

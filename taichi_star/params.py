@@ -106,7 +106,7 @@ def _check_actuator_values(name, values, lowest, highest, highest_included):
                 or (value == highest and not highest_included):
             raise ValueError(f"{name}[{index}] (A{index + 1}) must be a real number in {span}, "
                              f"got {value!r}")
-        checked.append(float(value) + 0.0)  # a zero as +0.0, as `_check_number`
+        checked.append(float(value) + 0.0)  # a zero as +0.0, as `check_number`
     return tuple(checked)
 
 
@@ -125,8 +125,8 @@ COMPONENT_HEIGHT_MINIMUM = 1e-3
 """Smallest component height, m (a millimetre: no part of the robot is thinner)."""
 
 
-def _check_number(name, value, lowest, highest, lowest_included=True, integer=False,
-                  reason="", highest_included=True):
+def check_number(name, value, lowest, highest, lowest_included=True, integer=False,
+                 reason="", highest_included=True):
     """Validated `value` as a Python int/float (NumPy scalars accepted); ValueError names the
     field and its range (and `reason`, words in brackets after the range, where the range is
     not the declared one)."""
@@ -313,7 +313,7 @@ class StarParams:
             elif name == "tip_radius":
                 lowest, included = self.joint_radius, False
                 reason = "beyond joint_radius: the limbs point outwards"
-            object.__setattr__(self, name, _check_number(
+            object.__setattr__(self, name, check_number(
                 name, getattr(self, name), lowest, highest, included, name in INTEGER_FIELDS,
                 reason, highest_included))
         for name, choices in STAR_CHOICES.items():
@@ -543,22 +543,22 @@ class SolverConfig:
     with fixed steps)."""
 
     def __post_init__(self):
-        object.__setattr__(self, "dt", _check_number("dt", self.dt, 0.0, MAX_DT, False))
-        object.__setattr__(self, "newton_tol", _check_number("newton_tol", self.newton_tol,
-                                                             1e-14, 1e-6))
+        object.__setattr__(self, "dt", check_number("dt", self.dt, 0.0, MAX_DT, False))
+        object.__setattr__(self, "newton_tol", check_number("newton_tol", self.newton_tol,
+                                                            1e-14, 1e-6))
         if self.residual_tol is not None:
-            object.__setattr__(self, "residual_tol", _check_number(
+            object.__setattr__(self, "residual_tol", check_number(
                 "residual_tol", self.residual_tol, 1e-8, 1000.0))
-        object.__setattr__(self, "max_newton", _check_number("max_newton", self.max_newton, 1,
-                                                             200, integer=True))
-        object.__setattr__(self, "max_substep_halvings", _check_number(
+        object.__setattr__(self, "max_newton", check_number("max_newton", self.max_newton, 1,
+                                                            200, integer=True))
+        object.__setattr__(self, "max_substep_halvings", check_number(
             "max_substep_halvings", self.max_substep_halvings, 0, 10, integer=True))
         if not isinstance(self.adaptive, (bool, np.bool_)):
             raise ValueError(f"adaptive must be True or False, got {self.adaptive!r}")
         object.__setattr__(self, "adaptive", bool(self.adaptive))
-        object.__setattr__(self, "error_tol", _check_number("error_tol", self.error_tol, 1e-12, 1e-3))
-        object.__setattr__(self, "dt_min", _check_number("dt_min", self.dt_min, 0.0, MAX_DT, False))
-        object.__setattr__(self, "dt_max", _check_number("dt_max", self.dt_max, 0.0, MAX_DT, False))
+        object.__setattr__(self, "error_tol", check_number("error_tol", self.error_tol, 1e-12, 1e-3))
+        object.__setattr__(self, "dt_min", check_number("dt_min", self.dt_min, 0.0, MAX_DT, False))
+        object.__setattr__(self, "dt_max", check_number("dt_max", self.dt_max, 0.0, MAX_DT, False))
         if self.dt_min > self.dt_max:
             raise ValueError(f"dt_min must be <= dt_max = {self.dt_max:g} s, got {self.dt_min!r}")
         if self.adaptive and not self.dt_min <= self.dt <= self.dt_max:
