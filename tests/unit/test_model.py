@@ -90,6 +90,16 @@ def test_equal_instances_are_built_once_with_their_tables_repeated_bit_for_bit()
     assert_rows_are_their_instances_own(model, batch)
 
 
+def test_every_parameter_takes_part_in_equality():
+    """build_model builds instances equal as StarParams once: a field left out of equality
+    (compare=False) would merge instances that differ in it."""
+    from taichi_star.actuation import CurvatureProfile
+
+    for cls in (StarParams, CurvatureProfile):
+        assert [f.name for f in fields(cls) if not f.compare] == [], cls.__name__
+    assert StarParams() != StarParams(actuator_profile=CurvatureProfile(switch_time=0.15))
+
+
 def test_a_replica_models_tables_lie_on_their_instances_tangent():
     """`sensitivities.replica_model`: each replica pair's rest shape, masses and coefficients are
     its instance's ± one offset (symmetric to rounding), the offset ε times the tables'
