@@ -28,7 +28,8 @@ from typing import Dict
 import numpy as np
 import taichi as ti
 
-from .linsolve import BlockSystem, LaneBlocks, plan_elimination
+from .linsolve import (BlockSystem, EliminationPlan, LaneBlocks, minimum_degree_order,
+                       plan_elimination)
 from .model import BatchModel
 from .params import JACOBIANS, SolverConfig
 from .physics import coupled_node_pairs
@@ -88,6 +89,19 @@ FINITE_LIMIT = 1e30
 """Updates larger than this (m) are treated as non-finite: no physical step moves a node 1e30 m."""
 
 
+def elimination_plan(topology, terms_used) -> EliminationPlan:
+    """The symbolic LU of the Newton matrix of an engine of `topology` and `terms_used`
+    (`model.BatchModel.terms_used`): their pattern, eliminated in the minimum-degree order of
+    every term's pattern in its default configuration. A switch that couples more nodes (the
+    jet's "spread") adds blocks under that order, not an order of its own: an instance's pivots,
+    and so its bits, do not depend on whether another instance of its batch switched it on
+    (with its own order, a spread engine factored 3,741 block updates at N = 193 against
+    6,053 now, and its other instances moved by ~1e-13)."""
+    order = minimum_degree_order(topology.n_nodes, coupled_node_pairs(topology))
+    return plan_elimination(topology.n_nodes, coupled_node_pairs(topology, terms_used),
+                            order=order)
+
+
 @ti.data_oriented
 class BatchEngine:
     """Device model, state and solver for up to `capacity` instances of one topology and one
@@ -113,8 +127,7 @@ class BatchEngine:
         self.even_spread = even_spread
         self.n_nodes = topology.n_nodes
         self.integrator = integrator
-        self.plan = plan_elimination(topology.n_nodes, coupled_node_pairs(
-            topology, model.terms_used))
+        self.plan = elimination_plan(topology, model.terms_used)
         self.arena = arena = FieldArena(instance_minor)
         self.system = BlockSystem(self.plan, capacity, arena)
         self.lanes = max(lanes, 1)

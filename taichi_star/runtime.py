@@ -41,12 +41,10 @@ from typing import Dict, List, Optional
 import numpy as np
 import taichi as ti
 
-from .engine import LOCKSTEP_MINIMUM_BATCH, BatchEngine
+from .engine import LOCKSTEP_MINIMUM_BATCH, BatchEngine, elimination_plan
 from .integrators import INTEGRATORS
-from .linsolve import plan_elimination
 from .model import BatchModel, build_model
 from .params import SolverConfig
-from .physics import coupled_node_pairs
 
 ARCHS = ("cpu", "gpu", "cuda", "vulkan", "metal")
 MIN_CAPACITY = 64
@@ -413,8 +411,8 @@ class Runtime:
         """2×2 blocks of the Newton matrix's elimination pattern for this batch's engine (the
         symbolic factorisation, done once per topology and term set in this process)."""
         if model.engine_key not in self.slot_counts:
-            self.slot_counts[model.engine_key] = plan_elimination(
-                model.topology.n_nodes, coupled_node_pairs(model.topology, model.terms_used)).n_slots
+            self.slot_counts[model.engine_key] = elimination_plan(
+                model.topology, model.terms_used).n_slots
         return self.slot_counts[model.engine_key]
 
     def loop_spread(self, capacity: int) -> int:

@@ -65,6 +65,19 @@ def test_batch_position_and_size_do_not_matter(arch):
     pd.testing.assert_frame_equal(padded, reference, check_exact=True)
 
 
+def test_an_instance_keeps_its_bits_beside_any_options_of_another():
+    """Another instance's options compile terms and switches into the engine (here the jet
+    spread over the corners, which couples more nodes, damping and the entrained water): the
+    instance's own rows stay bitwise those it has alone. Until the elimination order was
+    fixed per topology, the spread's own order moved them by ~1e-13."""
+    robot = ts.StarParams(gait="A1+A3")
+    other = ts.StarParams(gait="A2", jet_application="spread", damping_time=1e-3,
+                          wake_coupling=1.0, joint_stiffness="series", joint_radius=0.022)
+    alone = ts.simulate([robot], DURATION).summary
+    beside = ts.simulate([other, robot], DURATION).summary.iloc[[1]].reset_index(drop=True)
+    pd.testing.assert_frame_equal(beside, alone, check_exact=True)
+
+
 def test_a_batch_streamed_in_chunks_equals_one_engine_bitwise(monkeypatch):
     """A batch over the CPU engine budget runs as equal chunks through one engine: with a budget
     of one byte the 100 instances run as two chunks of 50 (the smallest engine holds 64), the

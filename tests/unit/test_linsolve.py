@@ -86,3 +86,24 @@ def test_plan_is_cheaper_than_a_bordered_band():
     plan = plan_elimination(topology.n_nodes, coupled_node_pairs(topology))
     band_flops = 2 * (2 * topology.n_nodes) * (2 * 9 + 1) ** 2
     assert plan.factor_flops < band_flops / 3
+
+
+def test_every_engine_of_a_topology_eliminates_in_one_order():
+    """An instance's pivots must not depend on the switches of the other instances of its
+    batch: the jet's "spread" couples each space's corners (more blocks), but every term set
+    and configuration of a topology eliminates in the order of the default pattern (the
+    spread's own minimum-degree order moved the other instances of its batch by ~1e-13)."""
+    from taichi_star.engine import elimination_plan
+    from taichi_star.model import build_model
+
+    base = StarParams()
+    variants = [base, base.replace(jet_application="spread"), base.replace(damping_time=1e-3),
+                base.replace(wake_coupling=1.0, linear_drag=2.0, jet_direction="normal")]
+    plans = [elimination_plan(model.topology, model.terms_used)
+             for model in (build_model([p]) for p in variants)]
+    topology = build_topology(base)
+    default_order = minimum_degree_order(topology.n_nodes, coupled_node_pairs(topology))
+    for plan in plans:
+        assert np.array_equal(plan.order, default_order)
+    # the spread's corner blocks are there, under the same order
+    assert set(plans[1].slot) > set(plans[0].slot)
