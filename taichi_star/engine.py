@@ -192,10 +192,12 @@ class BatchEngine:
         connect_terms(self.terms)
         self.same_as_instance = arena.batch_field(ti.i32, (capacity, len(self.terms))) \
             if sensitive else None
-        """Per replica and term: 1 where the term is `position_only` and its coefficients are
-        those of the replica's instance; its residual at the instance's positions is then the
-        instance's, the same for both replicas of a pair, and `assemble` leaves it out of their
-        difference (0 for the simulated instances, which assemble every term)."""
+        """Per replica and term: 1 where the term does not read the step's start, no term that
+        does reshapes it for the replica or its instance (`Term.start_reshapers`,
+        `Term.reshaping`), and its coefficients are those of the replica's instance (the same
+        whatever other instances the batch holds); its residual at the instance's positions is
+        then the instance's, the same for both replicas of a pair, and `assemble` leaves it out
+        of their difference (0 for the simulated instances, which assemble every term)."""
         if sensitive:
             self.slot_nodes = arena.index(sorted(
                 ([slot, i, j] for (i, j), slot in self.plan.slot.items())))
@@ -299,12 +301,18 @@ class BatchEngine:
         replicas = np.arange(primal_count, model.batch_size)
         instances = replicas % max(primal_count, 1)
         for k, term in enumerate(self.terms):
-            if not term.position_only:
+            if term.reads_step_start:
                 continue
             equal = np.ones(len(replicas), dtype=bool)
             for name in term.coefficient_names:
                 values = model.coefficients[term.name][name]
                 equal &= (values[replicas] == values[instances]).reshape(len(replicas), -1).all(1)
+            for reshaper in term.start_reshapers:
+                reshaped = reshaper.reshaping(model.coefficients[reshaper.name])
+                if reshaped is None:
+                    equal[:] = False
+                else:
+                    equal &= ~reshaped[replicas] & ~reshaped[instances]
             same[replicas, k] = equal
         return same
 
@@ -341,7 +349,7 @@ class BatchEngine:
                 self.assembly.add_block(b, self.diagonal_slot[n], scaled_mass * identity, jacobian)
         for k, term in ti.static(enumerate(self.terms)):
             if ti.static(terms == ALL_TERMS or (terms == INTERNAL_TERMS) == term.internal):
-                if ti.static(self.sensitive and term.position_only):
+                if ti.static(self.sensitive and not term.reads_step_start):
                     if self.same_as_instance[b, k] == 0:
                         term.assemble(b, rate_gain, jacobian)
                 else:

@@ -79,7 +79,8 @@ class Term:
     """Whether its residual at given positions depends on the state at the step's start (the
     integrator's rates, velocities, histories carried from the last step). One that does not
     (an elastic energy) gives a sensitivities' replica the residual of its instance wherever
-    their coefficients agree (`position_only`)."""
+    their coefficients agree and no term that reads it reshapes the two (`start_reshapers`,
+    `reshaping`; `engine.BatchEngine.replica_sameness`)."""
 
     @staticmethod
     def coefficients(params: Sequence, topologies: Sequence, topology) -> Dict[str, np.ndarray]:
@@ -126,6 +127,12 @@ class Term:
         """Whether this term reshapes the elements of the term class `other` (`reshape`)."""
         return False
 
+    @staticmethod
+    def reshaping(coefficients: Dict[str, np.ndarray]) -> Optional[np.ndarray]:
+        """For a term that reshapes others: (B,) bool, whether its `reshape` changes any element
+        of each instance (with these coefficients); None: every instance's (the safe answer)."""
+        return None
+
     def __init__(self, assembly: Assembly, configuration: Tuple,
                  coefficient_shapes: Dict[str, Tuple], terms: Sequence[type] = ()):
         """Device side: fields for the coefficients (shapes (capacity, ...)) and histories.
@@ -139,10 +146,10 @@ class Term:
             setattr(self, name, assembly.batch_field(dtype, (capacity,) + tuple(shape)))
         self.reshapers = []
         """The terms that reshape this term's elements (`connect_terms`)."""
-        self.position_only = False
-        """Whether its residual depends only on the positions, its coefficients, the time and
-        the firings: not `reads_step_start` and reshaped by no term that does
-        (`connect_terms`)."""
+        self.start_reshapers = []
+        """The terms that reshape this term's elements and read the step's start: where one
+        of them reshapes an instance (`reshaping`), this term's residual reads the step's
+        start too (`connect_terms`)."""
         self.reshaped_terms = []
         """The terms whose elements this term reshapes (`connect_terms`)."""
         histories = self.history(assembly.topology, terms)
@@ -208,5 +215,4 @@ def connect_terms(terms: Sequence[Term]):
     for term in terms:
         term.reshapers = [other for other in terms if other.reshapes(type(term))]
         term.reshaped_terms = [other for other in terms if term.reshapes(type(other))]
-        term.position_only = not term.reads_step_start and not any(
-            other.reads_step_start for other in term.reshapers)
+        term.start_reshapers = [other for other in term.reshapers if other.reads_step_start]

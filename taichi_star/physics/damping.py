@@ -39,6 +39,11 @@ class MaterialDamping(Term):
     def configuration(coefficients):
         return () if (coefficients["damping_time"] > 0).any() else None
 
+    @staticmethod
+    def reshaping(coefficients):
+        # τ = 0 leaves an element's stiffness and target as they are (factors 1 + 0, offsets 0)
+        return coefficients["damping_time"] > 0
+
     @classmethod
     def history(cls, topology, terms=()):
         # per element of each strain term: s_k − s⁰ (for the next step's BDF2 offset) and the
