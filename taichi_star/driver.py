@@ -14,7 +14,7 @@ import dataclasses
 import math
 import warnings
 from dataclasses import dataclass
-from typing import Callable, Optional, Sequence
+from typing import Callable, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -164,6 +164,29 @@ class Clock:
         return min(round(stop * NANOSECONDS), round(self.end * NANOSECONDS))
 
 
+class NextOwnStops:
+    """Where each instance goes next at every stop of `drive`: its first own stop at or after
+    it. `own`: per group, the ascending indices into `stops` of its own stops, the last stop
+    among them; `group`: (batch,) each instance's group. Memory: the groups' own stops alone
+    (a sweep of many periods has as many groups, each few stops of its own)."""
+
+    def __init__(self, stops: Sequence, own: Sequence[np.ndarray], group: np.ndarray):
+        self.stops = np.asarray(stops, dtype=np.float64)
+        count = len(self.stops)
+        if any(len(indices) == 0 or indices[-1] != count - 1 for indices in own):
+            raise ValueError("every group's own stops must end on the last stop (the run's end)")
+        self.base = np.arange(len(own)) * count
+        # one ascending key per own stop: group·count + index
+        self.keys = np.concatenate([g * count + np.asarray(indices, dtype=np.int64)
+                                    for g, indices in enumerate(own)])
+        self.group = np.asarray(group, dtype=np.int64)
+
+    def at(self, index: int) -> np.ndarray:
+        """(batch,) the times (s after the start) each instance goes to at stop `index`."""
+        found = self.keys[np.searchsorted(self.keys, self.base + index)] - self.base
+        return self.stops[found][self.group]
+
+
 NANOSECONDS = 1e9
 """Ticks per simulated second of an adaptive run's progress bar."""
 
@@ -184,21 +207,32 @@ def progress_bar(clock: Clock, label: str):
 
 
 def drive(engine, clock: Clock, stops: Sequence, at_stop: Callable, batch: int,
-          start_times: Optional[np.ndarray] = None, progress_label: Optional[str] = None):
+          start_times: Optional[np.ndarray] = None, progress_label: Optional[str] = None,
+          stop_groups: Optional[Tuple[Sequence[np.ndarray], np.ndarray]] = None):
     """Advance every live instance of the engine's first `batch` from its start through
     `stops` (ascending, from `clock`; a stop at 0 is the start itself) and call at_stop(stop)
     on reaching each. Fixed steps advance in launches of STEPS_PER_LAUNCH steps; adaptive
     ones take each instance to its start time (s, (batch,); None: all at t = 0) plus the
-    stop. progress_label: the description of a progress bar in simulated seconds, None for
-    no bar."""
+    stop, an adaptive step ending there. `stop_groups` (own, group): for each group of
+    instances the ascending indices into `stops` of those it must end a step on (the last
+    stop among them), and each instance's group ((batch,) int); default: every stop for
+    every instance. An adaptive instance goes straight on to its next own stop past the
+    others, so that another instance's stops (its cycle boundaries) do not cut its steps:
+    at_stop(stop) may read only the instances whose stop it is.
+    progress_label: the description of a progress bar in simulated seconds, None for no
+    bar."""
     bar = progress_bar(clock, progress_label) if progress_label is not None else None
     if clock.adaptive and start_times is None:
         start_times = np.zeros(batch)
+    next_own = None
+    if clock.adaptive and stop_groups is not None:
+        next_own = NextOwnStops(stops, *stop_groups)
     previous = 0
-    for stop in stops:
+    for index, stop in enumerate(stops):
         if stop != previous:
             if clock.adaptive:
-                engine.advance_adaptive_to(start_times + stop, batch)
+                engine.advance_adaptive_to(
+                    start_times + (stop if next_own is None else next_own.at(index)), batch)
                 if bar is not None:
                     bar.update(clock.ticks(stop) - clock.ticks(previous))
             else:

@@ -310,7 +310,9 @@ def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, reco
                 shapes.append(positions.astype(np.float64))
 
     start_centroids = engine.centroids_of(batch)
-    drive(engine, clock, stops, take, batch, progress_label=progress_label)
+    drive(engine, clock, stops, take, batch, progress_label=progress_label,
+          stop_groups=_stops_by_period(params, stops_of_period, stops,
+                                       record_set | {0, clock.end}))
     ran = time.perf_counter()
     record_times = np.array([clock.time_of(stop) for stop in record_stops])
     result = _collect(engine, model, solver, clock.time_of(clock.end), record_times,
@@ -328,6 +330,17 @@ def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, reco
                               run_s=ran - compiled, collect_s=time.perf_counter() - ran,
                               robot_steps=int(result.summary["steps"].sum()))
     return result
+
+
+def _stops_by_period(params, stops_of_period: dict, stops: list, shared: set):
+    """`drive`'s stop_groups: one group per period of the batch, its own stops the `shared`
+    ones (records, start, end) and the boundaries of its cycles (`stops_of_period`)."""
+    index_of = {stop: index for index, stop in enumerate(stops)}
+    common = [index_of[stop] for stop in shared]
+    group_of = {period: g for g, period in enumerate(stops_of_period)}
+    own = [np.unique(common + [index_of[stop] for stop in boundaries or ()])
+           for boundaries in stops_of_period.values()]
+    return own, np.array([group_of[p.period] for p in params], dtype=np.int64)
 
 
 def _texts(values: Sequence, to_text) -> list:

@@ -97,6 +97,19 @@ def test_adaptive_results_do_not_depend_on_batch_position():
     assert abs(reference.rejected_steps.sum() - 53) <= 8
 
 
+def test_an_adaptive_instance_keeps_its_steps_beside_another_period():
+    """Another instance's cycle boundaries are stops of the run (its cycle speeds are measured
+    there) but not step ends of this one: its steps, rejections and state are bitwise those it
+    has alone (until 2026-12 every instance ended a step on every boundary of the batch)."""
+    alone = ts.simulate([PARAMS[0]], 2 * PERIOD, SOLVER).summary
+    other = PARAMS[1].replace(period=0.25)  # boundaries at 0.25, 0.5, 0.75
+    beside = ts.simulate([other, PARAMS[0]], 2 * PERIOD, SOLVER).summary
+    pd.testing.assert_frame_equal(beside.iloc[[1]].reset_index(drop=True), alone,
+                                  check_exact=True)
+    # the other instance's own boundaries are still measured: its cycle speeds exist
+    assert np.isfinite(beside["steady_speed_mm_s"].iloc[0])
+
+
 def test_adaptive_steps_converge_to_the_fixed_step_solution_as_the_tolerance_shrinks():
     """Against fixed-step BDF2 at h = 62.5 µs (within 0.6 µm of h = 125 µs here), the
     displacement error after one period falls as error_tol goes from 1e-5 to 1e-7 m (measured

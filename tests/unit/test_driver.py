@@ -3,6 +3,7 @@ exactly on its total, whatever the float sums of the stops' times."""
 
 import warnings
 
+import numpy as np
 import pytest
 
 from taichi_star.driver import Clock, drive, robots_label
@@ -159,3 +160,19 @@ def test_stops_fall_on_the_record_grid_from_the_first_one_asked():
     adaptive = Clock(SolverConfig(adaptive=True), 0.3)
     assert adaptive.stops_every(0.1, first=2) == pytest.approx([0.2, 0.3], rel=1e-15)
     assert adaptive.time_of(0.25) == 0.25 and fixed.time_of(4) == pytest.approx(0.004)
+
+
+def test_next_own_stops_go_to_each_groups_first_own_stop_at_or_after_the_stop():
+    """An adaptive instance passes the stops of other instances (their cycle boundaries) and
+    goes to its own next one: at a stop of its own it goes exactly there."""
+    from taichi_star.driver import NextOwnStops
+
+    stops = [0.0, 0.25, 0.4, 0.5, 0.75, 0.8]
+    own = [np.array([0, 2, 5]), np.array([0, 1, 3, 4, 5])]  # a period of 0.4 s; of 0.25 s
+    going = NextOwnStops(stops, own, np.array([1, 0, 1]))
+    np.testing.assert_array_equal(going.at(1), [0.25, 0.4, 0.25])
+    np.testing.assert_array_equal(going.at(2), [0.5, 0.4, 0.5])  # its own: exactly there
+    np.testing.assert_array_equal(going.at(3), [0.5, 0.8, 0.5])
+    np.testing.assert_array_equal(going.at(5), [0.8, 0.8, 0.8])
+    with pytest.raises(ValueError, match="must end on the last stop"):
+        NextOwnStops(stops, [np.array([0, 2])], np.array([0]))
