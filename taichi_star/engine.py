@@ -296,10 +296,16 @@ class BatchEngine:
 
     def replica_sameness(self, model: BatchModel, primal_count: int) -> np.ndarray:
         """(capacity, terms) values of `same_as_instance` for a batch of `primal_count`
-        instances followed by their replicas."""
+        instances followed by their replicas; the two replicas of a pair always alike (a term
+        left out of one replica's residual and not the other's would put its whole residual
+        into their difference: a damping time at 0 reshapes the +ε replica and not the −ε
+        one)."""
         same = np.zeros((self.capacity, len(self.terms)), dtype=np.int32)
         replicas = np.arange(primal_count, model.batch_size)
-        instances = replicas % max(primal_count, 1)
+        count = max(primal_count, 1)
+        instances = replicas % count
+        # the other replica of each one's pair (`replica`: pair j's +ε at 2j, −ε at 2j + 1)
+        partner_rows = (((replicas - count) // count) ^ 1) * count + instances
         for k, term in enumerate(self.terms):
             if term.reads_step_start:
                 continue
@@ -313,7 +319,7 @@ class BatchEngine:
                     equal[:] = False
                 else:
                     equal &= ~reshaped[replicas] & ~reshaped[instances]
-            same[replicas, k] = equal
+            same[replicas, k] = equal & equal[partner_rows]
         return same
 
     # ---------------------------------------------------------------- assembly

@@ -490,15 +490,18 @@ def test_replicas_leave_out_the_elastic_terms_their_instance_shares(taichi_cpu):
         others = [k for k in range(len(names)) if k not in (stretching, bending)]
         assert not rows[:, others].any(), name
     mixed = [params[0].replace(damping_time=0.01), params[1]]  # A1+A2 damped, A1+A3 not
-    batch, _ = replica_batch(mixed, parse_directions(["alpha"]))
-    engine = runtime.engine_for(build_model(batch), solver, tangents=1)
+    batch, _ = replica_batch(mixed, parse_directions(["alpha", "damping_time"]))
+    engine = runtime.engine_for(build_model(batch), solver, tangents=2)
     names = [term.name for term in engine.terms]
     assert "damping" in names
     same = engine.same_as_instance.to_numpy()[:len(batch)]
     elastic = [names.index("stretching"), names.index("bending")]
-    # rows: the two instances, then +ε of both, then −ε of both
+    # rows: the two instances; α's +ε of both, −ε of both; the damping time's likewise. At
+    # the undamped instance's τ = 0 the damping time's +ε replica is damped and its −ε one is
+    # not: both assemble the elastic terms (one left out of one replica only would put its
+    # whole residual into the pair's difference: 2,000 times the derivative, found so)
     np.testing.assert_array_equal(same[:, elastic], [[0, 0], [0, 0], [0, 0], [1, 1], [0, 0],
-                                                     [1, 1]])
+                                                     [1, 1], [0, 0], [0, 0], [0, 0], [0, 0]])
     assert not np.delete(same, elastic, axis=1).any()
 
 
