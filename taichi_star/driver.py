@@ -69,14 +69,6 @@ class RunTiming:
                 f"{self.collect_s:.2f} s")
 
 
-def check_flag(name: str, value) -> bool:
-    """`value` as a bool if it is one (NumPy's included); else ValueError naming it (a text
-    such as "no" would otherwise switch the option on)."""
-    if not isinstance(value, (bool, np.bool_)):
-        raise ValueError(f"{name} must be True or False, got {value!r}")
-    return bool(value)
-
-
 def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float, batch: int,
               steps_taken: Optional[int] = None):
     """ValueError before any compute unless a run of `batch` instances for duration_s (s) with

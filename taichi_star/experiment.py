@@ -24,7 +24,7 @@ from importlib import resources
 import numpy as np
 import pandas as pd
 
-from .driver import check_flag
+from .checks import check_flag, is_real
 from .gait import canonical_gait
 
 PAPER_GAITS = ("A1", "A1+A2", "A1+A3", "A1+A4", "A1+A3+A5")
@@ -131,8 +131,7 @@ def cycle_speeds(t_s: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray,
 
 def _check_period(period_s):
     """ValueError naming period_s unless it is a finite real number > 0 (s)."""
-    if isinstance(period_s, bool) or not isinstance(period_s, numbers.Real) \
-            or not (math.isfinite(period_s) and period_s > 0):
+    if not is_real(period_s) or not (math.isfinite(period_s) and period_s > 0):
         raise ValueError(f"period_s must be a finite number > 0 s, got {period_s!r}")
 
 

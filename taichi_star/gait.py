@@ -11,10 +11,10 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from numbers import Integral
 from typing import List, Optional, Tuple, Union
 
 import numpy as np
+from .checks import check_flag, is_whole
 
 N_ACTUATORS = 8
 NO_GAIT = "none"
@@ -37,7 +37,7 @@ class Gait:
         # whole numbers only: int() would take 1.5 for A1, True for A1 and "12" for A1+A2
         given = self.actuators
         if isinstance(given, (str, bytes)) or not hasattr(given, "__iter__") or any(
-                isinstance(a, (bool, np.bool_)) or not isinstance(a, Integral) for a in given):
+                not is_whole(a) for a in given):
             raise ValueError(f"gait actuators must be numbers 1..{N_ACTUATORS}, got {given!r}")
         numbers = tuple(int(a) for a in given)
         if any(not 1 <= a <= N_ACTUATORS for a in numbers):
@@ -119,13 +119,10 @@ class Gait:
         (A_m -> A_{2−m}, indices mod 8), then rotation by `rotation`·45° (A_m -> A_{m+rotation}).
         ValueError naming rotation unless it is an integer (any: taken mod 8), or reflect
         unless it is True or False (a text "no" would reflect)."""
-        if isinstance(rotation, (bool, np.bool_)) or not isinstance(rotation, Integral):
+        if not is_whole(rotation):
             raise ValueError(f"rotation must be an integer number of 45° turns (taken mod "
                              f"{N_ACTUATORS}), got {rotation!r}")
-        # driver.check_flag's test: gait is below driver (params imports it), so not imported
-        if not isinstance(reflect, (bool, np.bool_)):
-            raise ValueError(f"reflect must be True or False, got {reflect!r}")
-        rotation, reflect = int(rotation), bool(reflect)
+        rotation, reflect = int(rotation), check_flag("reflect", reflect)
         images = []
         for number in self.actuators:
             index = -(number - 1) if reflect else number - 1

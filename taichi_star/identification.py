@@ -81,6 +81,7 @@ from typing import Mapping, Optional, Sequence, Tuple
 import numpy as np
 import pandas as pd
 
+from .checks import is_real, is_whole
 from .experiment import EXPERIMENT_PERIOD_S, PAPER_DIRECTIONS, PAPER_GAITS, experimental_trajectory
 from .gait import Gait
 
@@ -241,8 +242,7 @@ def check_window(cycles) -> Tuple[int, int]:
 def check_samples(samples) -> int:
     """`samples` (points per cycle curve) as an int; ValueError naming it unless it is an
     integer in [1, `MAX_SAMPLES_PER_CYCLE`]."""
-    if isinstance(samples, (bool, np.bool_)) or not isinstance(samples, numbers.Integral) \
-            or not 1 <= samples <= MAX_SAMPLES_PER_CYCLE:
+    if not is_whole(samples) or not 1 <= samples <= MAX_SAMPLES_PER_CYCLE:
         raise ValueError(f"samples must be an integer in [1, {MAX_SAMPLES_PER_CYCLE}] "
                          f"(MAX_SAMPLES_PER_CYCLE), got {samples!r}")
     return int(samples)
@@ -336,7 +336,7 @@ def trial_fit(simulated: SimulatedRun, trial: Trial, cycles=TRAINING_CYCLES,
     sim_curves = cycle_curves(simulated.path, 0.0, (first, last), samples)
     if phase_s is None:
         phase_s = align_phase(sim_curves, trial, (first, last), samples)
-    elif isinstance(phase_s, bool) or not isinstance(phase_s, numbers.Real) or not (
+    elif not is_real(phase_s) or not (
             math.isfinite(phase_s) and 0.0 <= phase_s <= latest_phase(trial, cycles)):
         raise ValueError(f"phase_s must be in [0, {latest_phase(trial, cycles):g}] s, got "
                          f"{phase_s!r}")
@@ -452,8 +452,7 @@ def residual_count(gaits: int, cycles=TRAINING_CYCLES, samples: int = SAMPLES_PE
     `cycles`: per gait its cycles × samples curve residuals and ρ. ValueError naming gaits
     unless it is an integer >= 1, or naming cycles or samples (`check_window`,
     `check_samples`)."""
-    if isinstance(gaits, (bool, np.bool_)) or not isinstance(gaits, numbers.Integral) \
-            or gaits < 1:
+    if not is_whole(gaits) or gaits < 1:
         raise ValueError(f"gaits must be an integer >= 1 (the number of gaits), got {gaits!r}")
     first, last = check_window(cycles)
     samples = check_samples(samples)

@@ -7,7 +7,6 @@ from __future__ import annotations
 import dataclasses
 import datetime
 import json
-import numbers
 import platform
 import tempfile
 from pathlib import Path
@@ -16,6 +15,7 @@ from typing import Mapping, Optional, Sequence
 import numpy as np
 import pandas as pd
 
+from .checks import is_whole
 from .extras import require
 from .geometry import CENTRE
 from .params import PARAMETER_UNITS, StarParams, check_number, parameter_column
@@ -278,7 +278,7 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
         raise ValueError(f"instances must be a sequence of integers in [0, {batch}), got "
                          f"{instances!r}")
     chosen = list(range(min(batch, 16))) if instances is None else list(instances)
-    if not chosen or any(isinstance(i, (bool, np.bool_)) or not isinstance(i, numbers.Integral)
+    if not chosen or any(not is_whole(i)
                          for i in chosen) or min(chosen) < 0 or max(chosen) >= batch:
         raise ValueError(f"instances must be in [0, {batch}), got {instances!r}")
     chosen = [int(i) for i in chosen]

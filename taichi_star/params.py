@@ -23,6 +23,7 @@ from typing import Dict, Optional, Tuple
 import numpy as np
 
 from .actuation import PROFILE_CLOSURES, CurvatureProfile
+from .checks import is_real
 from .gait import N_ACTUATORS, Gait
 
 JET_MODES = ("contract", "always")
@@ -101,8 +102,7 @@ def _check_actuator_values(name, values, lowest, highest, highest_included):
         raise ValueError(f"{name} must have {N_ACTUATORS} entries (A1..A8), got {len(values)}")
     checked = []
     for index, value in enumerate(values):
-        if isinstance(value, bool) or not isinstance(value, numbers.Real) \
-                or not math.isfinite(value) or not lowest <= value <= highest \
+        if not is_real(value) or not math.isfinite(value) or not lowest <= value <= highest \
                 or (value == highest and not highest_included):
             raise ValueError(f"{name}[{index}] (A{index + 1}) must be a real number in {span}, "
                              f"got {value!r}")

@@ -35,13 +35,12 @@ model's.)
 from __future__ import annotations
 
 import math
-import numbers
 from typing import Optional, Sequence
 
 import numpy as np
 import pandas as pd
 
-from .driver import check_flag
+from .checks import check_flag, is_real, is_whole
 from .gait import NO_GAIT, Gait
 from .metrics import rotate
 from .params import SolverConfig, StarParams
@@ -264,8 +263,7 @@ def default_goals(distance_mm: float = 50.0, count: int = 8,
     then one far_mm straight behind the robot (-x), unless far_mm is None. ValueError naming
     count unless it is an integer >= 0 (>= 1 without far_mm: some goal), distance_mm unless a
     finite number > 0 mm, far_mm unless None or one."""
-    if isinstance(count, (bool, np.bool_)) or not isinstance(count, numbers.Integral) \
-            or count < (1 if far_mm is None else 0):
+    if not is_whole(count) or count < (1 if far_mm is None else 0):
         rule = ("far_mm is None: no goal otherwise" if far_mm is None
                 else ">= 1 when far_mm is None")
         raise ValueError(f"count must be an integer >= {1 if far_mm is None else 0} ({rule}), "
@@ -273,8 +271,7 @@ def default_goals(distance_mm: float = 50.0, count: int = 8,
     for name, value in (("distance_mm", distance_mm), ("far_mm", far_mm)):
         if name == "far_mm" and value is None:
             continue
-        if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) \
-                or not (math.isfinite(value) and value > 0):
+        if not is_real(value) or not (math.isfinite(value) and value > 0):
             raise ValueError(f"{name} must be a finite number > 0 mm"
                              f"{' or None' if name == 'far_mm' else ''}, got {value!r}")
     angles = np.radians(np.arange(count) * 360.0 / count)
@@ -307,17 +304,13 @@ def check_drive(goals_mm, params: StarParams, solver: SolverConfig, tolerance_mm
         raise ValueError(f"params must be a StarParams, got {type(params).__name__}")
     if not isinstance(solver, SolverConfig):
         raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
-    if isinstance(max_cycles, bool) or not isinstance(max_cycles, numbers.Integral) \
-            or max_cycles < 1:
+    if not is_whole(max_cycles) or max_cycles < 1:
         raise ValueError(f"max_cycles must be an integer >= 1, got {max_cycles!r}")
-    if isinstance(settle_cycles, bool) or not isinstance(settle_cycles, numbers.Integral) \
-            or settle_cycles < 0:
+    if not is_whole(settle_cycles) or settle_cycles < 0:
         raise ValueError(f"settle_cycles must be an integer >= 0, got {settle_cycles!r}")
-    if isinstance(tolerance_mm, bool) or not isinstance(tolerance_mm, numbers.Real) \
-            or not math.isfinite(tolerance_mm) or tolerance_mm <= 0:
+    if not is_real(tolerance_mm) or not math.isfinite(tolerance_mm) or tolerance_mm <= 0:
         raise ValueError(f"tolerance_mm must be a number > 0, got {tolerance_mm!r}")
-    if isinstance(frames_per_cycle, bool) or not isinstance(frames_per_cycle, numbers.Integral) \
-            or frames_per_cycle < 1:
+    if not is_whole(frames_per_cycle) or frames_per_cycle < 1:
         raise ValueError(f"frames_per_cycle must be an integer >= 1, got {frames_per_cycle!r}")
     period = params.period
     # the whole run, every controller to max_cycles and the coast after: refused (with its

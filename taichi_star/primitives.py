@@ -18,13 +18,12 @@ simulated, each its own source (`gait_sources`).
 from __future__ import annotations
 
 import math
-import numbers
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import pandas as pd
 
-from .driver import check_flag
+from .checks import check_flag, is_whole
 from .gait import N_ACTUATORS, NO_GAIT, Gait, symmetry_classes
 from .metrics import rotate, wrap_degrees
 from .params import PER_ACTUATOR_FIELDS, SolverConfig, StarParams
@@ -250,10 +249,9 @@ def check_measurement(base: StarParams, solver: SolverConfig, cycles: int, first
         raise ValueError(f"base must be a StarParams, got {type(base).__name__}")
     if not isinstance(solver, SolverConfig):
         raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
-    if isinstance(cycles, bool) or not isinstance(cycles, numbers.Integral) or cycles < 1:
+    if not is_whole(cycles) or cycles < 1:
         raise ValueError(f"cycles must be an integer >= 1, got {cycles!r}")
-    if isinstance(first_cycle, bool) or not isinstance(first_cycle, numbers.Integral) \
-            or not 0 <= first_cycle < cycles:
+    if not is_whole(first_cycle) or not 0 <= first_cycle < cycles:
         raise ValueError(f"first_cycle must be an integer in [0, {cycles - 1}], got "
                          f"{first_cycle!r}")
     if whole_steps(base.period, solver.dt) is None:
@@ -267,8 +265,7 @@ def check_glides(base: StarParams, solver: SolverConfig, fire_cycles: int, glide
     (with its estimate, `timegrid.check_work`) when fire_cycles + glide_cycles periods of
     `base` would pass the step counter; before the glides' Simulator is built (arguments
     otherwise as `check_measurement` checks them)."""
-    if isinstance(glide_cycles, bool) or not isinstance(glide_cycles, numbers.Integral) \
-            or glide_cycles < lowest:
+    if not is_whole(glide_cycles) or glide_cycles < lowest:
         raise ValueError(f"glide_cycles must be an integer >= {lowest}, got {glide_cycles!r}")
     step, step_name = (solver.dt_max, "dt_max") if solver.adaptive else (solver.dt, "dt")
     check_work(f"{fire_name} + glide_cycles = {fire_cycles + glide_cycles} cycles of "

@@ -14,13 +14,13 @@ over cores).
 """
 
 import math
-import numbers
 import time
 from typing import Dict, Sequence, Tuple
 
 import numpy as np
 import taichi as ti
 
+from .checks import is_whole
 from .model import build_model, validate_batch
 from .params import SolverConfig, StarParams, check_precision
 from .runtime import Runtime, check_arch
@@ -104,7 +104,7 @@ def _profile_phases(engine: ti.template(), phases: ti.i32, calls: ti.i32, time_s
 def _check_steps(name: str, value, lowest: int, batch: int):
     """ValueError naming `name` unless `value` is an integer >= lowest and within the step
     counter (`timegrid.check_work` for `batch` instances)."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < lowest:
+    if not is_whole(value) or value < lowest:
         raise ValueError(f"{name} must be an integer >= {lowest}, got {value!r}")
     check_work(f"{name} = {value}", value, batch)
 

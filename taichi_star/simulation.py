@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import numbers
 import operator
 import time
 import warnings
@@ -15,11 +14,12 @@ import numpy as np
 import pandas as pd
 
 from . import metrics, output
+from .checks import check_flag, is_real, is_whole
 from .geometry import CENTRE, Topology
 from .model import validate_batch
 from .params import (PER_ACTUATOR_FIELDS, SolverConfig, StarParams, check_precision,
                      parameter_column)
-from .driver import Clock, RunTiming, check_flag, check_run, drive, robots_label
+from .driver import Clock, RunTiming, check_run, drive, robots_label
 from . import sensitivities as tangents
 from .runtime import Runtime, check_arch, stream_chunk_size
 from .state import STATUS_NAMES, STATUS_OK
@@ -154,7 +154,7 @@ class SimulationResult:
 
 
 def _check_real(name, value, lowest, allow_equal=False):
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value) \
+    if not is_real(value) or not math.isfinite(value) \
             or value < lowest or (value == lowest and not allow_equal):
         bound = f">= {lowest}" if allow_equal else f"> {lowest}"
         raise ValueError(f"{name} must be a finite number {bound}, got {value!r}")
@@ -174,8 +174,7 @@ def validate_call(params, duration_s, solver, record_interval_s, record_shapes, 
     check_run(solver, duration_s, record_interval_s, len(params))
     if check_flag("record_shapes", record_shapes) and record_interval_s == 0:
         raise ValueError("record_shapes needs record_interval_s > 0 (the spacing of the records)")
-    if isinstance(steady_from_cycle, bool) or not isinstance(steady_from_cycle, numbers.Integral) \
-            or steady_from_cycle < 0:
+    if not is_whole(steady_from_cycle) or steady_from_cycle < 0:
         raise ValueError(f"steady_from_cycle must be an integer >= 0, got {steady_from_cycle!r}")
     return params, duration_s, record_interval_s
 
@@ -310,9 +309,11 @@ def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, reco
                 shapes.append(positions.astype(np.float64))
 
     start_centroids = engine.centroids_of(batch)
+    # fixed steps never end a step early for a stop: only adaptive ones need each its own
+    stop_groups = (_stops_by_period(params, stops_of_period, stops, record_set | {0, clock.end})
+                   if clock.adaptive else None)
     drive(engine, clock, stops, take, batch, progress_label=progress_label,
-          stop_groups=_stops_by_period(params, stops_of_period, stops,
-                                       record_set | {0, clock.end}))
+          stop_groups=stop_groups)
     ran = time.perf_counter()
     record_times = np.array([clock.time_of(stop) for stop in record_stops])
     result = _collect(engine, model, solver, clock.time_of(clock.end), record_times,

@@ -25,7 +25,6 @@ import functools
 import io
 import json
 import math
-import numbers
 import os
 import time
 import warnings
@@ -39,7 +38,8 @@ import pandas as pd
 from . import metrics
 from . import sensitivities as tangents
 from .actuation import NEVER
-from .driver import Clock, RunTiming, check_flag, check_run, drive, robots_label
+from .checks import check_flag, is_real
+from .driver import Clock, RunTiming, check_run, drive, robots_label
 from .gait import N_ACTUATORS, Gait
 from .geometry import CENTRE
 from .model import validate_batch
@@ -228,7 +228,7 @@ class Simulator:
         if at_s is None:
             schedule.command(mask)
             return
-        if isinstance(at_s, bool) or not isinstance(at_s, numbers.Real) or not math.isfinite(at_s):
+        if not is_real(at_s) or not math.isfinite(at_s):
             raise ValueError(f"at_s must be a finite time in s, got {at_s!r}")
         # a firing beyond the step counter is never reached (adaptive: even at dt_max)
         step, step_name = ((self.solver.dt_max, "dt_max") if self.solver.adaptive
@@ -261,12 +261,11 @@ class Simulator:
         fixed steps a whole number of steps: `timegrid.nearest_interval` gives one; 0 = none),
         with a `record` column; empty without records. `progress`: a progress bar in simulated
         seconds."""
-        if isinstance(duration_s, bool) or not isinstance(duration_s, numbers.Real) \
-                or not math.isfinite(duration_s) or duration_s <= 0:
+        if not is_real(duration_s) or not math.isfinite(duration_s) or duration_s <= 0:
             raise ValueError(f"duration_s must be a finite number > 0 s, got {duration_s!r}")
         # the kind first: an empty text or list, None or False is not 0, and an array has no
         # truth value
-        if isinstance(record_interval_s, bool) or not isinstance(record_interval_s, numbers.Real) \
+        if not is_real(record_interval_s) \
                 or not (record_interval_s == 0 or 0 < record_interval_s < math.inf):
             raise ValueError(f"record_interval_s must be a finite number > 0 s (or 0: no "
                              f"records), got {record_interval_s!r}")

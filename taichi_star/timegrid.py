@@ -10,11 +10,11 @@ ValueError naming it); `nearest_interval` and `interval_for_count` give one that
 from __future__ import annotations
 
 import math
-import numbers
 import warnings
 from typing import Optional
 
 import numpy as np
+from .checks import is_real, is_whole
 
 STEP_TOLERANCE = 1e-9
 """Relative tolerance within which a time is taken to be a whole number of steps (and a
@@ -108,8 +108,7 @@ def nearest_interval(interval_s: float, dt: float) -> float:
 
 def _positive_number(value) -> bool:
     """Whether `value` is a finite real number > 0 (NumPy's included), not a bool."""
-    return (not isinstance(value, (bool, np.bool_)) and isinstance(value, numbers.Real)
-            and math.isfinite(value) and value > 0)
+    return is_real(value) and math.isfinite(value) and value > 0
 
 
 def interval_for_count(duration_s: float, count: int, dt: float) -> float:
@@ -117,10 +116,9 @@ def interval_for_count(duration_s: float, count: int, dt: float) -> float:
     2·count − 1 records after the start over duration_s (s) when the run has at least `count`
     steps (one per step when it has fewer). ValueError naming count (an integer >= 1) or
     duration_s (a finite number > 0)."""
-    if isinstance(count, bool) or not isinstance(count, numbers.Integral) or count < 1:
+    if not is_whole(count) or count < 1:
         raise ValueError(f"count must be an integer >= 1, got {count!r}")
-    if isinstance(duration_s, bool) or not isinstance(duration_s, numbers.Real) \
-            or not (math.isfinite(duration_s) and duration_s > 0):
+    if not is_real(duration_s) or not (math.isfinite(duration_s) and duration_s > 0):
         raise ValueError(f"duration_s must be a finite number > 0 s, got {duration_s!r}")
     return max(1, steps_in(duration_s, dt) // count) * dt
 
@@ -132,10 +130,10 @@ def check_work(name: str, steps: float, batch: Optional[int] = None):
     message the estimate (times `batch`, the number of instances, if given) and the limit.
     A RuntimeWarning with the estimated wall time when steps × batch is over WARN_ROBOT_STEPS.
     ValueError naming `steps` (a real number >= 0) or `batch` (an integer >= 1) otherwise."""
-    if isinstance(steps, bool) or not isinstance(steps, numbers.Real) or steps < 0:
+    if not is_real(steps) or steps < 0:
         raise ValueError(f"steps must be a real number >= 0 (time steps per instance), got "
                          f"{steps!r}")
-    if batch is not None and (isinstance(batch, bool) or not isinstance(batch, numbers.Integral)
+    if batch is not None and (not is_whole(batch)
                               or batch < 1):
         raise ValueError(f"batch must be an integer >= 1 (instances) or None, got {batch!r}")
     if not (math.isfinite(steps) and round(steps) <= MAX_STEPS_PER_INSTANCE):

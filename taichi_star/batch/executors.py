@@ -17,12 +17,12 @@ import ast
 import atexit
 import concurrent.futures
 import multiprocessing
-import numbers
 import sys
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Iterator, Optional, Protocol, Sequence
 
+from ..checks import is_whole
 from .tasks import ChunkResult, ChunkTask, run_chunk
 
 DEFAULT_RETRIES = 2
@@ -98,7 +98,7 @@ class LocalProcesses:
 
     def __init__(self, n_workers: int, retries: int = DEFAULT_RETRIES):
         for name, value, lowest in (("workers", n_workers, 1), ("retries", retries, 0)):
-            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < lowest:
+            if not is_whole(value) or value < lowest:
                 raise ValueError(f"{name} must be an integer >= {lowest}, got {value!r}")
         self.n_workers = int(n_workers)
         self.retries = int(retries)

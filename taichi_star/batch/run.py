@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import numbers
 import os
 from typing import Optional, Sequence
 
 import numpy as np
 import pandas as pd
 
-from ..driver import RunTiming, check_flag
+from ..checks import check_flag, is_whole
+from ..driver import RunTiming
 from ..extras import require
 from ..geometry import build_topology
 from ..model import instances_of
@@ -155,7 +155,7 @@ def executor_for(workers: Optional[int] = None, scheduler: Optional[str] = None,
     closed on exit."""
     if workers is not None and scheduler is not None:
         raise ValueError("give workers (local processes) or scheduler (a Dask cluster), not both")
-    if isinstance(retries, bool) or not isinstance(retries, numbers.Integral) or retries < 0:
+    if not is_whole(retries) or retries < 0:
         raise ValueError(f"retries must be an integer >= 0, got {retries!r}")
     if scheduler is not None and not isinstance(scheduler, str):
         raise ValueError(f"scheduler must be an address like tcp://HOST:PORT, got {scheduler!r}")

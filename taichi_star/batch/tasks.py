@@ -9,13 +9,13 @@ the instances numbered by their position in the whole batch.
 from __future__ import annotations
 
 import dataclasses
-import numbers
 from dataclasses import dataclass
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import pandas as pd
 
+from ..checks import is_real, is_whole
 from ..driver import RunTiming
 from ..geometry import Topology
 from ..model import instances_of
@@ -65,7 +65,7 @@ def _check_duration(duration_s, cycles):
         raise ValueError("give exactly one of duration_s (s, the same for every instance) and "
                          "cycles (actuation periods of each instance)")
     name, value = ("duration_s", duration_s) if duration_s is not None else ("cycles", cycles)
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not value > 0 \
+    if not is_real(value) or not value > 0 \
             or not np.isfinite(value):
         raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
 
@@ -81,8 +81,7 @@ def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None
     validated here, so a bad batch fails before any chunk is computed (ValueError naming the
     argument); a single StarParams is a batch of one, as for `simulate`."""
     params = instances_of(params)
-    if isinstance(chunk_size, bool) or not isinstance(chunk_size, numbers.Integral) \
-            or chunk_size < 1:
+    if not is_whole(chunk_size) or chunk_size < 1:
         raise ValueError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")
     _check_duration(duration_s, cycles)
     if not isinstance(solver, SolverConfig):

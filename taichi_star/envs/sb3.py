@@ -40,6 +40,7 @@ from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
 
+from ..checks import is_whole
 from .swimmer import StarSwimmerVectorEnv
 
 
@@ -115,7 +116,7 @@ class SB3VectorAdapter:
         """Seeds for the next reset: robot b gets seed + b (a random seed when None)."""
         if seed is None:
             seed = int(np.random.randint(0, np.iinfo(np.uint32).max, dtype=np.uint32))
-        if isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
+        if not is_whole(seed):
             raise ValueError(f"seed must be an int or None, got {seed!r}")
         self._seeds = [int(seed) + b for b in range(self.num_envs)]
         return self._seeds

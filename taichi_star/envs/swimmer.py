@@ -48,6 +48,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from ..checks import is_real, is_whole
 from ..gait import N_ACTUATORS
 from .. import drawing, metrics
 from ..metrics import rotate
@@ -99,8 +100,7 @@ class SwimmerTask:
                 ("firing_cost_mm", 0.0, MAX_GOAL_MM, True),
                 ("since_fired_cap_s", 0.0, 1e6, False)):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, numbers.Real) \
-                    or not math.isfinite(value) or value > highest or value < lowest \
+            if not is_real(value) or not math.isfinite(value) or value > highest or value < lowest \
                     or (value == lowest and not lowest_allowed):
                 bracket = "[" if lowest_allowed else "("
                 raise ValueError(f"{name} must be a number in {bracket}{lowest:g}, {highest:g}], "
@@ -108,7 +108,7 @@ class SwimmerTask:
             object.__setattr__(self, name, float(value))
         steps = self.max_episode_steps
         if steps is not None:
-            if isinstance(steps, bool) or not isinstance(steps, numbers.Integral) or steps < 1:
+            if not is_whole(steps) or steps < 1:
                 raise ValueError(f"max_episode_steps must be an integer >= 1 or None, got "
                                  f"{steps!r}")
             object.__setattr__(self, "max_episode_steps", int(steps))
@@ -129,7 +129,7 @@ def checked_seed(seed, name: str = "seed"):
     else ValueError naming it, before anything is reset."""
     if seed is None:
         return None
-    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0:
+    if not is_whole(seed) or seed < 0:
         raise ValueError(f"{name} must be None or an integer >= 0, got {seed!r}")
     return int(seed)
 
@@ -180,8 +180,7 @@ def control_period(params: StarParams, solver: SolverConfig,
     ValueError unless it is a positive whole number of solver steps. No compute: a command
     line checks its input with this before building an environment."""
     period = params.period if control_period_s is None else control_period_s
-    if isinstance(period, bool) or not isinstance(period, numbers.Real) \
-            or not math.isfinite(period) or period <= 0 \
+    if not is_real(period) or not math.isfinite(period) or period <= 0 \
             or whole_steps(period, solver.dt) is None:
         raise ValueError(f"control_period_s must be a positive whole number of steps "
                          f"(dt = {solver.dt} s), got {control_period_s!r}")
@@ -198,8 +197,7 @@ class GoalReachingBatch:
     def __init__(self, n_robots: int, params=None, solver: Optional[SolverConfig] = None,
                  control_period_s: Optional[float] = None, task: SwimmerTask = SwimmerTask(),
                  arch: str = "cpu"):
-        if isinstance(n_robots, bool) or not isinstance(n_robots, numbers.Integral) \
-                or n_robots < 1:
+        if not is_whole(n_robots) or n_robots < 1:
             raise ValueError(f"num_envs must be an integer >= 1, got {n_robots!r}")
         params = StarParams.preset("paper") if params is None else params
         if isinstance(params, StarParams):
