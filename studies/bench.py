@@ -120,7 +120,7 @@ import numpy as np
 import pandas as pd
 
 from taichi_star import SolverConfig, StarParams, simulate
-from taichi_star.batch import LocalProcesses, run_batch
+from taichi_star.batch import MAX_LOCAL_WORKERS, LocalProcesses, run_batch
 from taichi_star.profiling import EngineProfile, device_bandwidth, matmul_gflops, step_phases
 from taichi_star.runtime import (CPU_LANES, GPU_BLOCK_DIM, GPU_INSTANCE_MINOR, Runtime,
                                  kernel_optimisation_default)
@@ -453,7 +453,8 @@ def build_parser():
                              "processes section")
     parser.add_argument("--workers-list", default="1,2", quick="none",
                         help=f"comma list of worker-process counts (each at most "
-                             f"{cli.MAX_WORKERS}) for the end-to-end processes section, or none")
+                             f"{MAX_LOCAL_WORKERS}) for the end-to-end processes section, or "
+                             f"none")
     parser.add_argument("--process-batch", type=int, default=PROCESS_BATCH, quick=2,
                         help=f"batch size of the processes and plain sections, at most "
                              f"{cli.MAX_BATCH_SIZE} (default {PROCESS_BATCH})")
@@ -540,7 +541,7 @@ def parse_args(argv):
                                    lambda text, flag: cli.parse_choices(text, flag, SCENARIOS))
     args.workers_list = optional_list(
         args.workers_list, "--workers-list",
-        lambda text, flag: cli.parse_counts(text, flag, cli.MAX_WORKERS))
+        lambda text, flag: cli.parse_counts(text, flag, MAX_LOCAL_WORKERS))
     args.sensitivity_counts = optional_list(args.sensitivity_counts, "--sensitivity-counts",
                                             parse_sensitivity_counts)
     args.presets = cli.parse_choices(args.presets, "--presets", PRESETS)

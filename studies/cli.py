@@ -32,8 +32,8 @@ import pandas as pd
 
 from taichi_star import (JACOBIANS, PER_ACTUATOR_FIELDS, PRESETS, SolverConfig, StarParams,
                          check_work)
-from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, executor_for,
-                               stored_chunk_size, write_atomic)
+from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, MAX_LOCAL_WORKERS,
+                               executor_for, stored_chunk_size, write_atomic)
 from taichi_star.experiment import PAPER_GAITS
 from taichi_star.extras import require
 from taichi_star.gait import Gait
@@ -57,11 +57,6 @@ COMMITTED_RESULTS = Path(__file__).resolve().parent.parent / "results"
 MAX_INSTANCES = 1_000_000
 """The most instances one study run simulates (a sweep's product, a sensitivity's sample; a
 range's points): about 100 times the sensitivity study's default 10,240, days of a 2-core CPU."""
-MAX_WORKERS = 256
-"""The most local worker processes (--workers; the scaling and bench --workers-list): each is a
-process with a single-threaded Taichi runtime, so more than one per core only competes for the
-cores; 256 is 16 times the most cores the committed results ran on (more: a Dask cluster,
---scheduler)."""
 MAX_REPEATS = 100
 """The most timed repeats or rounds of one measurement (bench's and simd's --repeats,
 jacobians' --rounds): the best of a few is the figure, the committed results took at most 7."""
@@ -172,8 +167,8 @@ def add_execution_flags(parser: StudyParser, chunk_size: int = DEFAULT_CHUNK_SIZ
     """--workers / --scheduler / --retries / --chunk-size."""
     parser.add_argument("--workers", type=int, default=None, metavar="N",
                         help=f"run the chunks on N local worker processes (at most "
-                             f"{MAX_WORKERS}), each a single-threaded Taichi runtime (default: "
-                             f"in this process)")
+                             f"{MAX_LOCAL_WORKERS}), each a single-threaded Taichi runtime "
+                             f"(default: in this process)")
     parser.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
                         help="run the chunks on an existing Dask cluster (docs/studies.md, "
                              "the common flags)")
@@ -204,7 +199,7 @@ def parse(parser: StudyParser, argv) -> argparse.Namespace:
     if getattr(args, "dt", None) is not None:
         check_positive(args.dt, "--dt")
     if getattr(args, "workers", None) is not None:
-        check_count(args.workers, "--workers", 1, MAX_WORKERS)
+        check_count(args.workers, "--workers", 1, MAX_LOCAL_WORKERS)
     if getattr(args, "chunk_size", None) is not None and args.chunk_size < 1:
         raise StudyArgumentError(f"--chunk-size must be >= 1, got {args.chunk_size}")
     if getattr(args, "retries", 0) < 0:

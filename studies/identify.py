@@ -407,9 +407,9 @@ def note_unfired_axes(study: str, what: str, box: Sequence[ParameterRange],
 
 
 def parse_windows(train_text: str, validate_text: str) -> Tuple[Tuple[int, int], Tuple[int, int]]:
-    """--train-cycles and --validate-cycles ("FIRST:LAST", 1 <= FIRST <= LAST) -> the two
-    windows; StudyArgumentError naming the flag for a malformed window or a validation window
-    that does not start after the training one."""
+    """--train-cycles and --validate-cycles ("FIRST:LAST", 1 <= FIRST <= LAST <= the library's
+    MAX_CYCLE) -> the two windows; StudyArgumentError naming the flag for a malformed window or
+    a validation window that does not start after the training one."""
     windows = []
     for text, flag in ((train_text, "--train-cycles"), (validate_text, "--validate-cycles")):
         parts = str(text).split(":")
@@ -418,8 +418,9 @@ def parse_windows(train_text: str, validate_text: str) -> Tuple[Tuple[int, int],
                 raise ValueError
             windows.append(identification.check_window(tuple(int(p) for p in parts)))
         except ValueError:
-            raise cli.StudyArgumentError(f"{flag}: expected FIRST:LAST cycle numbers with "
-                                         f"1 <= FIRST <= LAST, got {text!r}") from None
+            raise cli.StudyArgumentError(
+                f"{flag}: expected FIRST:LAST cycle numbers with 1 <= FIRST <= LAST <= "
+                f"{identification.MAX_CYCLE}, got {text!r}") from None
     if windows[1][0] <= windows[0][1]:
         raise cli.StudyArgumentError(f"--validate-cycles {validate_text}: must start after the "
                                      f"training window {train_text}")

@@ -41,8 +41,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from taichi_star.planner import (SETTLE_CYCLES, PrimitiveModel, check_drive, closed_loop_gain,
-                                 default_goals, drive)
+from taichi_star.planner import (MAX_DEFAULT_GOALS, SETTLE_CYCLES, PrimitiveModel, check_drive,
+                                 closed_loop_gain, default_goals, drive)
 from taichi_star.primitives import GLIDE_CYCLES, measure_primitives
 
 from . import cli
@@ -55,8 +55,6 @@ QUICK_MAX_CYCLES = 2
 QUICK_GLIDE_CYCLES = QUICK_SETTLE_CYCLES = 1
 PRIMITIVES_FIRST_CYCLE = 1
 """Primitives measured here: statistics from the second cycle on."""
-MAX_DIRECTIONS = 360
-"""The most goals around the robot (--directions): one per degree (the committed run: 7)."""
 
 
 def plot_paths(paths_csv, plan_csv, png_path) -> Path:
@@ -107,7 +105,7 @@ def build_parser():
                         help="distance of the goals around the robot, mm (default 50)")
     parser.add_argument("--directions", type=int, default=8,
                         help=f"goals at --distance, equally spaced in direction (default 8, at "
-                             f"most {MAX_DIRECTIONS})")
+                             f"most {MAX_DEFAULT_GOALS})")
     parser.add_argument("--far", type=float, default=150.0,
                         help="distance of the goal straight behind, mm (default 150; 0: none)")
     parser.add_argument("--tolerance", type=float, default=5.0,
@@ -155,7 +153,7 @@ def main(argv=None):
                                 (args.settle_cycles, "--settle-cycles", 0)):
         if value < lowest:
             raise cli.StudyArgumentError(f"{flag} must be >= {lowest}, got {value}")
-    cli.check_count(args.directions, "--directions", 0, MAX_DIRECTIONS)
+    cli.check_count(args.directions, "--directions", 0, MAX_DEFAULT_GOALS)
     cli.check_positive(args.distance, "--distance")
     cli.check_positive(args.tolerance, "--tolerance")
     if not (np.isfinite(args.far) and args.far >= 0):

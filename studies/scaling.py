@@ -22,7 +22,7 @@ import time
 
 import pandas as pd
 
-from taichi_star.batch import InProcess, LocalProcesses, run_batch
+from taichi_star.batch import MAX_LOCAL_WORKERS, InProcess, LocalProcesses, run_batch
 from taichi_star.extras import missing_extra
 from taichi_star.experiment import PAPER_GAITS
 from taichi_star.timegrid import steps_in
@@ -46,7 +46,7 @@ def build_parser():
     parser = cli.StudyParser("scaling", DESCRIPTION, archs=("cpu",))
     parser.add_argument("--workers-list", default="1,2",
                         help=f"worker counts to time after the in-process run, each once and at "
-                             f"most {cli.MAX_WORKERS} (default 1,2)")
+                             f"most {MAX_LOCAL_WORKERS} (default 1,2)")
     parser.add_argument("--no-dask", action="store_true",
                         help="time local worker processes only, not Dask clusters")
     parser.add_argument("--chunk-size", type=int, default=CHUNK, quick=1,
@@ -70,7 +70,7 @@ def main(argv=None):
     missing_dask = "" if args.no_dask else missing_extra("dask")
     if missing_dask:
         raise cli.StudyArgumentError(f"timing Dask clusters: {missing_dask} (or pass --no-dask)")
-    counts = cli.parse_counts(args.workers_list, "--workers-list", cli.MAX_WORKERS)
+    counts = cli.parse_counts(args.workers_list, "--workers-list", MAX_LOCAL_WORKERS)
     solver = cli.solver(args)
     params = sweep_params(args.quick)
     duration = cli.QUICK_DURATION_S if args.quick else params[0].period

@@ -14,7 +14,6 @@ engine ask its `fire_due` what fires in a step; `command` is the one way in for 
 import ast
 import functools
 import math
-import numbers
 from dataclasses import dataclass
 from typing import Dict, Optional, Tuple
 
@@ -22,6 +21,7 @@ import numpy as np
 import taichi as ti
 from taichi.lang.field import Field
 
+from .checks import is_real
 from .fields import FieldStore
 from .gait import N_ACTUATORS
 
@@ -42,8 +42,13 @@ def _logistic(constants, tau):
 
 def _real_numbers(values) -> bool:
     """Whether `values` is a sequence of real numbers (NumPy's included), none a bool."""
-    return isinstance(values, (tuple, list, np.ndarray)) and all(
-        isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_)) for v in values)
+    return isinstance(values, (tuple, list, np.ndarray)) and all(is_real(v) for v in values)
+
+
+def _check_period(period) -> None:
+    """ValueError naming period unless it is a finite number > 0 s (0 gave NaN)."""
+    if not (is_real(period) and math.isfinite(period) and period > 0):
+        raise ValueError(f"period must be a finite number > 0 s, got {period!r}")
 
 
 @dataclass(frozen=True)
@@ -119,7 +124,9 @@ class CurvatureProfile:
                      - _logistic(self.heating, self.switch_time))
 
     def closure_gap(self, period: float) -> float:
-        """K̄(0) − K̄(T), 1/m: the step of the natural curvature where a new cycle starts."""
+        """K̄(0) − K̄(T), 1/m: the step of the natural curvature where a new cycle starts.
+        ValueError naming period unless it is a finite number > 0 s."""
+        _check_period(period)
         return self.rest_curvature - self.curvature(period)
 
     def cycle_curvature(self, tau, period: float, closure: str = "jump"):
@@ -127,8 +134,7 @@ class CurvatureProfile:
         "ramp" = K̄(τ) + (K̄(0) − K̄(T))·τ/T (continuous from one cycle to the next).
         ValueError naming period unless it is a finite number > 0 s (0 gave NaN), or
         closure."""
-        if not (_real_numbers([period]) and math.isfinite(period) and period > 0):
-            raise ValueError(f"period must be a finite number > 0 s, got {period!r}")
+        _check_period(period)
         if closure not in PROFILE_CLOSURES:
             raise ValueError(f"closure must be one of {list(PROFILE_CLOSURES)}, got {closure!r}")
         value = self.curvature(tau)

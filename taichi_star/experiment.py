@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import functools
 import math
-import numbers
 from importlib import resources
 
 import numpy as np
@@ -176,8 +175,7 @@ def _cycle_speed_table(period_s: float) -> pd.DataFrame:
 def direction_of(signed_speed: float) -> str:
     """"forward" (> 0), "reverse" (< 0), or "undefined" (zero, NaN, None: no forward
     direction). ValueError naming signed_speed for anything but a real number or None."""
-    if signed_speed is not None and (isinstance(signed_speed, (bool, np.bool_))
-                                     or not isinstance(signed_speed, numbers.Real)):
+    if signed_speed is not None and not is_real(signed_speed):
         raise ValueError(f"signed_speed must be a real number (mm/s) or None, got "
                          f"{signed_speed!r}")
     if signed_speed is None or not math.isfinite(signed_speed) or signed_speed == 0.0:

@@ -74,7 +74,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import numbers
 from dataclasses import dataclass
 from typing import Mapping, Optional, Sequence, Tuple
 
@@ -163,9 +162,7 @@ class CentroidPath:
             raise ValueError("t_s, x_mm and y_mm must be 1-D arrays of one length >= 2")
         if np.any(np.diff(arrays[0]) <= 0) or not all(np.isfinite(a).all() for a in arrays):
             raise ValueError("t_s must be strictly increasing and t_s, x_mm, y_mm finite")
-        if not (isinstance(self.period_s, numbers.Real) and not isinstance(self.period_s, bool)
-                and math.isfinite(self.period_s)
-                and self.period_s > 0):
+        if not (is_real(self.period_s) and math.isfinite(self.period_s) and self.period_s > 0):
             raise ValueError(f"period_s must be a finite number > 0, got {self.period_s!r}")
         for name, array in zip(("t_s", "x_mm", "y_mm"), arrays):
             object.__setattr__(self, name, array)
@@ -232,8 +229,7 @@ def check_window(cycles) -> Tuple[int, int]:
     except (TypeError, ValueError):
         raise ValueError(f"cycles must be a pair (first, last) of cycle numbers, got "
                          f"{cycles!r}") from None
-    if not all(isinstance(c, numbers.Integral) and not isinstance(c, bool) for c in (first, last)) \
-            or not 1 <= first <= last <= MAX_CYCLE:
+    if not all(is_whole(c) for c in (first, last)) or not 1 <= first <= last <= MAX_CYCLE:
         raise ValueError(f"cycles must be integers with 1 <= first <= last <= {MAX_CYCLE} "
                          f"(MAX_CYCLE), got {cycles!r}")
     return int(first), int(last)

@@ -16,14 +16,13 @@ import dataclasses
 import difflib
 import functools
 import math
-import numbers
 from dataclasses import dataclass, field, fields
 from typing import Dict, Optional, Tuple
 
 import numpy as np
 
 from .actuation import PROFILE_CLOSURES, CurvatureProfile
-from .checks import is_real
+from .checks import check_flag, is_real, is_whole
 from .gait import N_ACTUATORS, Gait
 
 JET_MODES = ("contract", "always")
@@ -135,8 +134,7 @@ def check_number(name, value, lowest, highest, lowest_included=True, integer=Fal
     if reason:
         span = f"{span} ({reason})"
     kind = "an integer" if integer else "a real number"
-    valid_type = numbers.Integral if integer else numbers.Real
-    if isinstance(value, bool) or not isinstance(value, valid_type):
+    if not (is_whole(value) if integer else is_real(value)):
         raise ValueError(f"{name} must be {kind} in {span}, got {value!r}")
     # + 0.0 stores a zero as +0.0: parameters that compare equal are then the same bits
     # (build_model builds equal instances once)
@@ -553,9 +551,7 @@ class SolverConfig:
                                                             200, integer=True))
         object.__setattr__(self, "max_substep_halvings", check_number(
             "max_substep_halvings", self.max_substep_halvings, 0, 10, integer=True))
-        if not isinstance(self.adaptive, (bool, np.bool_)):
-            raise ValueError(f"adaptive must be True or False, got {self.adaptive!r}")
-        object.__setattr__(self, "adaptive", bool(self.adaptive))
+        object.__setattr__(self, "adaptive", check_flag("adaptive", self.adaptive))
         object.__setattr__(self, "error_tol", check_number("error_tol", self.error_tol, 1e-12, 1e-3))
         object.__setattr__(self, "dt_min", check_number("dt_min", self.dt_min, 0.0, MAX_DT, False))
         object.__setattr__(self, "dt_max", check_number("dt_max", self.dt_max, 0.0, MAX_DT, False))

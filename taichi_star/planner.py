@@ -257,17 +257,23 @@ class PrimitiveModel:
         return plans
 
 
+MAX_DEFAULT_GOALS = 360
+"""The most goals `default_goals` sets around the robot: one per degree (10**10 asked for
+160 GB)."""
+
+
 def default_goals(distance_mm: float = 50.0, count: int = 8,
                   far_mm: Optional[float] = 150.0) -> np.ndarray:
     """(count [+1], 2) goals, mm: `count` at distance_mm in directions 0, 360/count, ... deg,
     then one far_mm straight behind the robot (-x), unless far_mm is None. ValueError naming
-    count unless it is an integer >= 0 (>= 1 without far_mm: some goal), distance_mm unless a
-    finite number > 0 mm, far_mm unless None or one."""
-    if not is_whole(count) or count < (1 if far_mm is None else 0):
+    count unless it is an integer from 0 (1 without far_mm: some goal) to `MAX_DEFAULT_GOALS`,
+    distance_mm unless a finite number > 0 mm, far_mm unless None or one."""
+    lowest = 1 if far_mm is None else 0
+    if not is_whole(count) or not lowest <= count <= MAX_DEFAULT_GOALS:
         rule = ("far_mm is None: no goal otherwise" if far_mm is None
                 else ">= 1 when far_mm is None")
-        raise ValueError(f"count must be an integer >= {1 if far_mm is None else 0} ({rule}), "
-                         f"got {count!r}")
+        raise ValueError(f"count must be an integer from {lowest} to {MAX_DEFAULT_GOALS} "
+                         f"(MAX_DEFAULT_GOALS; {rule}), got {count!r}")
     for name, value in (("distance_mm", distance_mm), ("far_mm", far_mm)):
         if name == "far_mm" and value is None:
             continue

@@ -41,6 +41,7 @@ from typing import Dict, List, Optional
 import numpy as np
 import taichi as ti
 
+from .checks import check_flag
 from .engine import LOCKSTEP_MINIMUM_BATCH, BatchEngine, elimination_plan
 from .integrators import INTEGRATORS
 from .model import BatchModel, build_model
@@ -399,12 +400,8 @@ class Runtime:
             kernel_optimisation = kernel_optimisation_default()
         if cpu_cfg_optimisation is None:
             cpu_cfg_optimisation = CPU_CFG_OPTIMISATION
-        for name, value in (("kernel_optimisation", kernel_optimisation),
-                            ("cpu_cfg_optimisation", cpu_cfg_optimisation)):
-            if not isinstance(value, (bool, np.bool_)):
-                raise ValueError(f"{name} must be True or False, got {value!r}")
-        self.kernel_optimisation = bool(kernel_optimisation)
-        self.cpu_cfg_optimisation = bool(cpu_cfg_optimisation)
+        self.kernel_optimisation = check_flag("kernel_optimisation", kernel_optimisation)
+        self.cpu_cfg_optimisation = check_flag("cpu_cfg_optimisation", cpu_cfg_optimisation)
         self.arch = None
 
     def matrix_slots(self, model: BatchModel) -> int:

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import numbers
 import re
 import threading
 import time
@@ -21,6 +20,7 @@ from typing import Iterator, Sequence
 from distributed import Client, LocalCluster, get_worker, wait
 from distributed.diagnostics.plugin import WorkerPlugin
 
+from ..checks import is_real
 from .executors import DEFAULT_RETRIES, configure_worker_process
 from .tasks import ChunkResult, ChunkTask, run_chunk
 
@@ -83,8 +83,7 @@ class DaskExecutor:
 
     def __init__(self, client: Client, retries: int = DEFAULT_RETRIES,
                  no_workers_timeout_s: float = NO_WORKERS_TIMEOUT_S):
-        if isinstance(no_workers_timeout_s, bool) or not isinstance(
-                no_workers_timeout_s, numbers.Real) or not no_workers_timeout_s > 0:
+        if not is_real(no_workers_timeout_s) or not no_workers_timeout_s > 0:
             raise ValueError(f"no_workers_timeout_s must be a number > 0, got "
                              f"{no_workers_timeout_s!r}")
         self.client = client

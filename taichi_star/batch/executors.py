@@ -28,6 +28,11 @@ from .tasks import ChunkResult, ChunkTask, run_chunk
 DEFAULT_RETRIES = 2
 """Extra tries of a chunk whose worker process died (a chunk that raises is not retried: its
 error is deterministic)."""
+MAX_LOCAL_WORKERS = 256
+"""The most local worker processes: each is a process with a single-threaded Taichi runtime
+(some 200 MB), so more than one per core only competes for the cores; 256 is 16 times the most
+cores the committed results ran on (10**6 started processes until memory ran out; more: a
+Dask cluster)."""
 
 
 class Executor(Protocol):
@@ -97,9 +102,11 @@ class LocalProcesses:
     `shutdown`, at the end of a `with` block, or at interpreter exit."""
 
     def __init__(self, n_workers: int, retries: int = DEFAULT_RETRIES):
-        for name, value, lowest in (("workers", n_workers, 1), ("retries", retries, 0)):
-            if not is_whole(value) or value < lowest:
-                raise ValueError(f"{name} must be an integer >= {lowest}, got {value!r}")
+        if not is_whole(n_workers) or not 1 <= n_workers <= MAX_LOCAL_WORKERS:
+            raise ValueError(f"workers must be an integer from 1 to {MAX_LOCAL_WORKERS} "
+                             f"(MAX_LOCAL_WORKERS), got {n_workers!r}")
+        if not is_whole(retries) or retries < 0:
+            raise ValueError(f"retries must be an integer >= 0, got {retries!r}")
         self.n_workers = int(n_workers)
         self.retries = int(retries)
         self._pool: Optional[concurrent.futures.ProcessPoolExecutor] = None

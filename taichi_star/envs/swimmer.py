@@ -37,7 +37,6 @@ terminated = truncated = False). `reset(seed=s)` seeds robot b with s + b, as
 from __future__ import annotations
 
 import math
-import numbers
 from dataclasses import dataclass
 from typing import Mapping, Optional, Sequence
 
@@ -419,7 +418,7 @@ class StarSwimmerVectorEnv(VectorEnv):
         # every seed checked before any generator is replaced: a bad one changes nothing
         if seed is None:
             seeds = [None] * self.num_envs
-        elif isinstance(seed, numbers.Integral) and not isinstance(seed, bool):
+        elif is_whole(seed):
             seeds = [checked_seed(seed) + b for b in range(self.num_envs)]
         elif isinstance(seed, (list, tuple)) and len(seed) == self.num_envs:
             seeds = [checked_seed(value, f"seed[{b}]") for b, value in enumerate(seed)]
@@ -428,7 +427,7 @@ class StarSwimmerVectorEnv(VectorEnv):
                              f"got {seed!r}")
         goals = goal_from_options(options, self.num_envs)
         # the vector env's own generator takes an int seed only; the robots' are set below
-        super().reset(seed=seed if isinstance(seed, numbers.Integral) else None)
+        super().reset(seed=seed if is_whole(seed) else None)
         rows = np.flatnonzero(mask)
         for b in rows:
             if seeds[b] is not None:  # as Env.reset: no seed keeps the robot's generator going

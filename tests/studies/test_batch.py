@@ -108,7 +108,7 @@ def test_instances_of_several_topologies_and_periods_are_grouped_in_input_order(
     (dict(cycles=0), "cycles must be a finite number > 0"),
     (dict(cycles=1, chunk_size=0), "chunk_size must be an integer >= 1"),
     (dict(cycles=1, record_interval_s=0.0011), "record_interval_s must be a whole number"),
-    (dict(cycles=1, workers=0), "workers must be an integer >= 1"),
+    (dict(cycles=1, workers=0), "workers must be an integer from 1 to 256"),
     (dict(cycles=1, arch="tpu"), "arch must be one of"),
     (dict(cycles=1, executor="dask"), "executor must be an Executor.*got 'dask'"),
     (dict(cycles=1, resume=True), "resume=True needs run_dir"),

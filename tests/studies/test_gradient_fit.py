@@ -162,6 +162,10 @@ def test_the_history_plot_draws_both_counts_from_the_csv(tmp_path, monkeypatch):
     (["--train-cycles", "1:2", "--validate-cycles", "2:3"], "--validate-cycles 2:3: must start "
                                                              "after"),
     (["--validate-cycles", "4:40"], "shorter than cycles up to 40"),
+    # the window's bound (MAX_CYCLE 1000) named; at the bound the window parses and the
+    # recordings' length refuses it
+    (["--validate-cycles", "4:1001"], "1 <= FIRST <= LAST <= 1000, got '4:1001'"),
+    (["--validate-cycles", "4:1000"], "shorter than cycles up to 1000"),
     (["--gaits", "A1+A6"], "--gaits A1+A6: not measured"),
 ])
 def test_invalid_arguments_fail_before_compute(no_compute, monkeypatch, tmp_path, capsys, argv,

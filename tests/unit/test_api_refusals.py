@@ -13,7 +13,7 @@ import pytest
 import taichi_star as ts
 from taichi_star import (CurvatureProfile, experiment, identification, planner, primitives,
                          profiling, runtime)
-from taichi_star.batch import executor_for, run_batch
+from taichi_star.batch import MAX_LOCAL_WORKERS, LocalProcesses, executor_for, run_batch
 from taichi_star.gait import Gait
 from taichi_star.geometry import build_topology
 from taichi_star.params import PER_ACTUATOR_FIELDS, parameter_column
@@ -108,6 +108,17 @@ def test_executor_for_refuses_bad_retries_and_schedulers(keywords, name):
 def test_executor_for_accepts_zero_retries():
     with executor_for(retries=0) as executor:
         assert executor.n_workers == 1
+
+
+def test_local_processes_are_bounded_before_any_starts():
+    """10**6 workers started processes until the memory ran out; the bound itself is allowed
+    (no process starts before the first chunk)."""
+    with pytest.raises(ValueError, match=r"^workers must be an integer from 1 to 256 "):
+        LocalProcesses(MAX_LOCAL_WORKERS + 1)
+    with pytest.raises(ValueError, match=r"^workers must be"):
+        run_batch([P], 0.01, workers=10**6)
+    executor = LocalProcesses(MAX_LOCAL_WORKERS)
+    assert executor.n_workers == MAX_LOCAL_WORKERS and executor._pool is None
 
 
 # ---------------------------------------------------------------- timegrid, check_arch
@@ -229,12 +240,13 @@ def test_check_drive_refuses_bad_arguments(keywords, name):
 
 @pytest.mark.parametrize("keywords, name", [
     ({"count": -1}, "count"), ({"count": 2.5}, "count"), ({"count": True}, "count"),
-    ({"count": 0, "far_mm": None}, "count"), ({"distance_mm": math.nan}, "distance_mm"),
+    ({"count": 0, "far_mm": None}, "count"), ({"count": planner.MAX_DEFAULT_GOALS + 1}, "count"),
+    ({"count": 10**10}, "count"), ({"distance_mm": math.nan}, "distance_mm"),
     ({"distance_mm": 0.0}, "distance_mm"), ({"far_mm": math.nan}, "far_mm"),
     ({"far_mm": -1.0}, "far_mm")])
 def test_default_goals_refuses_bad_counts_and_distances(keywords, name):
-    """count 2.5 gave goals at 0°, 144° and 288°, count 0 without far_mm no goal at all, a NaN
-    distance NaN goals."""
+    """count 2.5 gave goals at 0°, 144° and 288°, count 0 without far_mm no goal at all,
+    10**10 a MemoryError (160 GB), a NaN distance NaN goals."""
     with pytest.raises(ValueError, match=f"^{name} must be"):
         planner.default_goals(**keywords)
 
@@ -243,6 +255,15 @@ def test_default_goals_accepts_no_directions_with_the_far_goal():
     # the plan study's --directions 0 --far 150
     np.testing.assert_array_equal(planner.default_goals(50.0, 0, 150.0), [[-150.0, 0.0]])
     assert planner.default_goals(np.float64(50.0), np.int64(1), None).tolist() == [[50.0, 0.0]]
+
+
+def test_default_goals_sets_one_goal_per_degree_at_most():
+    goals = planner.default_goals(50.0, planner.MAX_DEFAULT_GOALS, None)
+    # the bound itself is allowed: 360 goals 1° apart on the 50-mm circle (exact to round-off
+    # of cos/sin, 1e-12 mm)
+    assert goals.shape == (360, 2)
+    np.testing.assert_allclose(np.hypot(*goals.T), 50.0, rtol=1e-12)
+    np.testing.assert_allclose(np.degrees(np.arctan2(goals[1, 1], goals[1, 0])), 1.0, rtol=1e-12)
 
 
 @pytest.mark.parametrize("gaits, match", [
@@ -584,9 +605,12 @@ def test_gait_transform_accepts_numpy_integers_and_bools_and_any_turn():
 
 @pytest.mark.parametrize("period", [0.0, -1.0, math.nan, math.inf, "3", True])
 def test_cycle_curvature_refuses_a_period_that_is_not_a_time(period):
-    """period = 0 gave NaN with the ramp closure."""
+    """period = 0 gave NaN with the ramp closure; closure_gap alone answered every one of
+    these (a gap of 0 for 0 s, NumPy read "3" as 3 s and True as 1 s)."""
     with pytest.raises(ValueError, match=r"^period must be a finite number > 0 s"):
         CurvatureProfile().cycle_curvature(0.0, period, "ramp")
+    with pytest.raises(ValueError, match=r"^period must be a finite number > 0 s"):
+        CurvatureProfile().closure_gap(period)
 
 
 def test_cycle_curvature_accepts_a_short_period():
