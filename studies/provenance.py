@@ -18,7 +18,7 @@ import subprocess
 from pathlib import Path
 from typing import Dict, Mapping, Optional, Sequence
 
-from taichi_star.batch import code_version, write_atomic
+from taichi_star.batch import code_version
 
 
 def cpuinfo_text() -> str:
@@ -162,11 +162,3 @@ def sidecar_path(table_path) -> Path:
 def sidecar_text(provenance: Mapping) -> bytes:
     """The content of a provenance sidecar (indented JSON)."""
     return (json.dumps(provenance, indent=2, default=repr) + "\n").encode()
-
-
-def write_sidecar(table_path, provenance: Mapping) -> Path:
-    """Write `<table>.json` beside a table (whole or not at all) and return its path."""
-    path = sidecar_path(table_path)
-    write_atomic(path, sidecar_text(provenance))
-    return path
-

@@ -269,12 +269,6 @@ def references(speeds, grid: Grid, gaits):
     return pd.concat(parts, ignore_index=True)
 
 
-def limits_of(table: pd.DataFrame, model: str, ladder: str) -> np.ndarray:
-    """The limit speeds (mm/s, over the gaits in order) of one model's ladder."""
-    part = table[(table["model"] == model) & (table["ladder"] == ladder)]
-    return part["limit_mm_s"].to_numpy()
-
-
 # --------------------------------------------------------------------------- runs
 
 def run_config(config: Config, gaits, duration_s, arch):

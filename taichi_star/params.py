@@ -47,12 +47,6 @@ def parameter_column(name: str) -> str:
     return name + UNIT_SUFFIXES.get(PARAMETER_UNITS.get(name, "1"), "")
 
 
-CONVERGED_DISCRETISATION = {"n_arc": 320, "n_limb": 6, "actuation_ends": "clamped"}
-"""The converged discretisation, from `python -m studies convergence`: the five paper gaits'
-one-cycle speeds converge at first order in 1/n_arc, 8-19 % low at the paper's n_arc = 18 and
-0.7-1.7 % at 144 against the extrapolated limit; n_arc = 320 (N = 2609 nodes) measured
-0.25-0.74 % off. The studies' `--discretisation converged` uses it."""
-
 def parameter(default, unit: str = "1", lowest=None, highest=None, lowest_included=True,
               choices=None, differentiable: bool = True):
     """A StarParams field with its unit and allowed values declared once, in its metadata:
