@@ -644,7 +644,7 @@ class BatchEngine:
                     error = ti.max(error, self.integrator.local_error(
                         self.state.positions[b, n], self.state.previous[b, n],
                         self.state.previous_velocities[b, n], h))
-            if converged == 1 and stepping.accepts(error, tol, h, dt_min):
+            if converged == 1 and stepping.accepts(error, tol, h, proposed, dt_min):
                 if ti.static(self.sensitive):
                     self.tangent_step(b, start, end, h, ratio, use_history)
                 self.accept_step(b, h, ratio, use_history)
@@ -667,7 +667,7 @@ class BatchEngine:
                     if ti.static(self.integrator.order == 2) and use_history == 1:
                         error *= 2.0
                     self.state.step_size[b] = stepping.rejected_size(h, error, tol, dt_min)
-                elif h > dt_min:
+                elif not stepping.at_smallest(h, proposed, dt_min):
                     self.state.step_size[b] = ti.max(dt_min, 0.25 * h)
                 else:
                     self.state.status[b] = STATUS_NON_FINITE if finite == 0 else STATUS_NEWTON_FAILED

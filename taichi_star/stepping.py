@@ -27,12 +27,21 @@ def step_end(start, proposed, target, firing, firing_step):
 
 
 @ti.func
-def accepts(error, tol, h, dt_min):
+def at_smallest(h, proposed, dt_min):
+    """Whether a step cannot shrink further: its size as set (`proposed`, which a rejection
+    clamps at dt_min) or as taken (h = end − start, shorter when cut to land on a stop) is at
+    most dt_min. The size as set decides where rounding puts the size as taken a hair above
+    it: (0.2 + 1e-6) − 0.2 = 1.000000000001e-06, and a step redone at that size was redone
+    forever."""
+    return ti.min(h, proposed) <= dt_min
+
+
+@ti.func
+def accepts(error, tol, h, proposed, dt_min):
     """Whether a converged step of size h (s) with local error estimate `error` (m) is kept:
-    when the error is within tol, or when the step is already at most dt_min long (it cannot
-    shrink further, so its error is kept rather than the step redone at the same size forever;
-    a step cut short to land on a stop may be shorter still)."""
-    return error <= tol or h <= dt_min
+    when the error is within tol, or when the step cannot shrink further (`at_smallest`: its
+    error is kept rather than the step redone at the same size forever)."""
+    return error <= tol or at_smallest(h, proposed, dt_min)
 
 
 @ti.func

@@ -130,3 +130,26 @@ def test_adaptive_steps_converge_to_the_fixed_step_solution_as_the_tolerance_shr
     assert np.all(errors[1e-7] <= errors[1e-6]), errors
     assert np.all(steps[1e-7] > steps[1e-6]) and np.all(steps[1e-6] > steps[1e-5])
     assert np.all(errors[1e-6] <= 0.005 * np.linalg.norm(reference_xy, axis=1)), errors
+
+
+def test_a_step_at_dt_min_that_rounding_puts_above_it_is_kept_not_redone_forever():
+    """A damped robot fired again at 0.2 s shrinks its step to dt_min there and is still over
+    the tolerance; (0.2 + 1e-6) - 0.2 rounds to 1.000000000001e-06 > dt_min, so a rule on the
+    step's size as taken redid that step forever (the run never ended, found by an audit).
+    Advanced by a bounded number of attempts, it now reaches its stop."""
+    params = ts.StarParams.preset("paper", gait="none", period=0.2, damping_time=1e-3)
+    solver = ts.SolverConfig(adaptive=True)
+    assert (0.2 + solver.dt_min) - 0.2 > solver.dt_min  # the rounding this case needs
+    sim = ts.Simulator([params], solver)
+    sim.fire(["A1"])
+    sim.fire(["A1"], at_s=0.2)
+    engine = sim.engine
+    stop = 0.201
+    stops = engine.state.stop_time.to_numpy()
+    stops[0] = stop
+    load_field(engine.state.stop_time, stops)
+    # 2,000 attempts: the run takes 193 (179 steps, 14 redone); before, the time stayed at 0.2
+    # after any number
+    engine.advance_adaptive(2000)
+    assert sim.time_s[0] == stop
+    assert engine.state.status.to_numpy()[0] == 0  # ok

@@ -20,8 +20,8 @@ def _step_end(start: float, proposed: float, target: float, firing: int,
 
 
 @ti.kernel
-def _accepts(error: float, h: float) -> int:
-    return stepping.accepts(error, TOL, h, DT_MIN)
+def _accepts(error: float, h: float, proposed: float) -> int:
+    return stepping.accepts(error, TOL, h, proposed, DT_MIN)
 
 
 @ti.kernel
@@ -78,13 +78,16 @@ def test_rejected_size(taichi_cpu, h, error, expected):
     assert _rejected_size(h, error) == pytest.approx(expected, rel=1e-15)
 
 
-@pytest.mark.parametrize("error, h, kept", [
-    (TOL, 0.01, True),                   # the error exactly at the tolerance: kept
-    (TOL * (1 + 2 ** -40), 0.01, False),  # just over it: redone
-    (2 * TOL, DT_MIN, True),             # over it at exactly dt_min: kept (cannot shrink)
-    (2 * TOL, DT_MIN * (1 + 2 ** -30), False),  # just above dt_min: redone smaller
-    (2 * TOL, 0.5 * DT_MIN, True),       # cut below dt_min to land on a stop: kept
+@pytest.mark.parametrize("error, h, proposed, kept", [
+    (TOL, 0.01, 0.01, True),                   # the error exactly at the tolerance: kept
+    (TOL * (1 + 2 ** -40), 0.01, 0.01, False),  # just over it: redone
+    (2 * TOL, DT_MIN, DT_MIN, True),           # over it at exactly dt_min: kept (cannot shrink)
+    # just above dt_min, as set and as taken: redone smaller
+    (2 * TOL, DT_MIN * (1 + 2 ** -30), DT_MIN * (1 + 2 ** -30), False),
+    (2 * TOL, 0.5 * DT_MIN, 0.01, True),       # cut below dt_min to land on a stop: kept
+    # set at dt_min, taken a hair longer (end - start rounded up): kept, not redone forever
+    (2 * TOL, DT_MIN * (1 + 2 ** -30), DT_MIN, True),
 ])
-def test_accepts(taichi_cpu, error, h, kept):
+def test_accepts(taichi_cpu, error, h, proposed, kept):
     # exact comparisons of binary-exact or nearly equal values: no tolerance involved
-    assert bool(_accepts(error, h)) is kept
+    assert bool(_accepts(error, h, proposed)) is kept
