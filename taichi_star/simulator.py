@@ -260,7 +260,8 @@ class Simulator:
         Returns the `state()` rows at every multiple of record_interval_s after now (s, with
         fixed steps a whole number of steps: `timegrid.nearest_interval` gives one; 0 = none),
         with a `record` column; empty without records. `progress`: a progress bar in simulated
-        seconds."""
+        seconds. With adaptive steps the end ends a step (as a record time does): pieces give
+        one call's bits where they end on its step ends (docs: Control, The Simulator)."""
         if not is_real(duration_s) or not math.isfinite(duration_s) or duration_s <= 0:
             raise ValueError(f"duration_s must be a finite number > 0 s, got {duration_s!r}")
         # the kind first: an empty text or list, None or False is not 0, and an array has no
