@@ -170,6 +170,10 @@ class BatchEngine:
         self.step_limit = arena.field(ti.i32)
         """Most steps an adaptive instance takes (MAX_STEPS_PER_INSTANCE: the int32 counters
         never overflow); one that reaches it stops with status step_limit."""
+        self.sliver_limit = arena.field(float)
+        """`stepping.SLIVER_ROUNDINGS` roundings of the precision: an adaptive step that lands
+        on a stop at most sliver_limit · max(|t|, 1 s) after its start is a rounding's sliver
+        (`stepping.is_sliver`), crossed by the clock alone."""
         self.kept_inertia_scale = arena.batch_field(float, capacity)
         self.kept_rate_gain = arena.batch_field(float, capacity)
         self.kept_age = arena.batch_field(ti.i32, capacity)
@@ -216,7 +220,8 @@ class BatchEngine:
         model_fields = {name: getattr(self, name)
                         for name in ("mass", "inertia", "primal_count", "tangent_count",
                                      "slot_stride", "group_count", "group_stride", "lockstep",
-                                     "step_limit", "kept_inertia_scale", *SOLVER_SETTINGS)}
+                                     "step_limit", "sliver_limit", "kept_inertia_scale",
+                                     *SOLVER_SETTINGS)}
         for term in self.terms:
             model_fields.update({f"{term.name}.{name}": field
                                  for name, field in term.coefficient_fields().items()})
@@ -271,6 +276,8 @@ class BatchEngine:
                   else self.loop_spread,
                   "lockstep": int(lockstep),
                   "step_limit": MAX_STEPS_PER_INSTANCE,
+                  "sliver_limit": stepping.SLIVER_ROUNDINGS * float(np.finfo(
+                      np.float64 if solver.precision == "f64" else np.float32).eps),
                   # nothing kept: the weights and age of a factorisation are set with it
                   "kept_inertia_scale": np.zeros(capacity),
                   **{name: getattr(solver, name) for name in SOLVER_SETTINGS
@@ -633,6 +640,12 @@ class BatchEngine:
                 firing = 0
             h = end - start
             self.state.schedule.fire_due(b, start, end, 0)
+            if stepping.is_sliver(start, end, target, self.sliver_limit[None]):
+                # a stop a rounding's width after the last (a record time k·interval an ulp
+                # off a cycle start): solved, a step this short turns the velocities into
+                # rounding noise; the positions would move by less than a rounding
+                self.state.time[b] = end
+                continue
             use_history = self.state.history_valid[b]
             ratio = 1.0
             if use_history == 1:

@@ -25,6 +25,11 @@ def _accepts(error: float, h: float, proposed: float) -> int:
 
 
 @ti.kernel
+def _is_sliver(start: float, end: float, target: float, limit: float) -> int:
+    return stepping.is_sliver(start, end, target, limit)
+
+
+@ti.kernel
 def _accepted_size(h: float, proposed: float, error: float, firing: int) -> float:
     return stepping.accepted_size(h, proposed, error, TOL, firing, 1e-6, 0.05)
 
@@ -91,3 +96,19 @@ def test_rejected_size(taichi_cpu, h, error, expected):
 def test_accepts(taichi_cpu, error, h, proposed, kept):
     # exact comparisons of binary-exact or nearly equal values: no tolerance involved
     assert bool(_accepts(error, h, proposed)) is kept
+
+
+SLIVER = 2 ** -46  # the relative limit of the sliver cases (64 f64 roundings, binary-exact)
+
+
+@pytest.mark.parametrize("start, end, target, sliver", [
+    (4.0 - 4 * SLIVER, 4.0, 4.0, True),            # exactly at the limit, SLIVER·4 s: a sliver
+    (4.0 - 4 * SLIVER - 2 ** -51, 4.0, 4.0, False),  # one rounding (at 4 s) longer: solved
+    (4.0 - 4 * SLIVER, 4.0, 5.0, False),          # not on its stop: a step the controller asked
+                                                  # for, solved however short
+    (0.25, 0.25 + SLIVER, 0.25 + SLIVER, True),   # under 1 s the limit is SLIVER s
+    (0.25, 0.25 + 2 * SLIVER, 0.25 + 2 * SLIVER, False),
+])
+def test_is_sliver(taichi_cpu, start, end, target, sliver):
+    # binary-exact times and limits: the comparisons are exact, no tolerance involved
+    assert bool(_is_sliver(start, end, target, SLIVER)) is sliver
