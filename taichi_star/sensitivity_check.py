@@ -80,7 +80,14 @@ def check_sensitivities(params: Sequence[StarParams], duration_s: float, solver:
                         arch: str = "cpu") -> pd.DataFrame:
     """One row per (instance, direction) of `names` (as `simulate` takes them), for `output` (a
     summary column): see `CHECK_COLUMNS`. Two `simulate` calls: the sensitivities and one batch
-    of every moved run (`MULTIPLES`)."""
+    of every moved run (`MULTIPLES`).
+
+    With adaptive steps hold them (a loose error_tol, dt_max the step: `python -m studies
+    sensitivity_check` uses 1e-3 m and 1 ms). The sensitivities are those of the instance's
+    accepted step sequence, frozen; a moved run on free steps chooses its own, whose sizes
+    move with the parameter, and its differences carry that too: 0.3 s of the accurate preset
+    (A1+A2, period 0.3 s) on its own adaptive steps checked α to 5e-6 and the joint radius to
+    7 % (differences spread 2.6 %), held at 1 ms to 9e-9 and 2.9e-7."""
     params = list(params)
     directions = parse_directions(names)
     result = simulate(params, duration_s, solver, arch=arch, sensitivities=names)
