@@ -663,6 +663,8 @@ class BatchEngine:
                 self.accept_step(b, h, ratio, use_history)
                 self.state.time[b] = end
                 self.state.steps_done[b] = self.state.steps_done[b] + 1
+                if error > tol:
+                    self.state.steps_over_tolerance[b] = self.state.steps_over_tolerance[b] + 1
                 self.state.previous_step_size[b] = h
                 self.state.history_valid[b] = 1
                 self.state.step_size[b] = stepping.accepted_size(h, proposed, error, tol, firing,

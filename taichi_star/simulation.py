@@ -52,6 +52,7 @@ class SimulationResult:
     | steady_signed_speed_mm_s | mm/s | signed speed over the same cycles |
     | steps | — | accepted time steps |
     | rejected_steps | — | steps rejected by the adaptive error control |
+    | steps_over_tolerance | — | adaptive steps accepted with their error estimate above error_tol, at dt_min where they could not shrink further (0 otherwise: with more, the run does not hold error_tol there; a smaller dt_min may) |
     | newton_iterations_mean | — | Newton iterations per solve (every attempted step and substep, rejected and failed ones included) |
     | newton_iterations_max | — | most Newton iterations of one solve (≥ the mean) |
     | factorisations_mean | — | Newton matrices assembled and factored per solve: newton_iterations_mean with Newton's Jacobian, fewer with the chord's (which keeps a factorisation while it contracts) |
@@ -354,8 +355,9 @@ def _texts(values: Sequence, to_text) -> list:
     return [by_object[id(value)] for value in values]
 
 
-SUMMARY_STATE = ("status", "failure_time", "steps_done", "rejected_steps", "newton_total",
-                 "newton_solves", "newton_max", "factorisations", "substep_retries", "positions")
+SUMMARY_STATE = ("status", "failure_time", "steps_done", "rejected_steps",
+                 "steps_over_tolerance", "newton_total", "newton_solves", "newton_max",
+                 "factorisations", "substep_retries", "positions")
 """The state fields a run's summary reads at its end (`BatchState.read`)."""
 
 
@@ -393,6 +395,7 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
                                             gaits, steady_from_cycle))
     rows["steps"] = counts["steps_done"]
     rows["rejected_steps"] = counts["rejected_steps"]
+    rows["steps_over_tolerance"] = counts["steps_over_tolerance"]
     rows["newton_iterations_mean"] = counts["newton_total"] / np.maximum(newton_solves, 1)
     rows["newton_iterations_max"] = counts["newton_max"]
     rows["factorisations_mean"] = counts["factorisations"] / np.maximum(newton_solves, 1)

@@ -24,7 +24,7 @@ STATUS_NAMES = ("ok", "newton_failed", "non_finite", "inactive", "step_limit")
 "step_limit" an adaptive instance stopped before its stop time because its step count reached
 the counter's limit (`timegrid.MAX_STEPS_PER_INSTANCE`) or its step no longer advanced its
 time (a step below the time's rounding)."""
-LATER_COUNTERS = ("factorisations",)
+LATER_COUNTERS = ("factorisations", "steps_over_tolerance")
 """Work counters the state gained after states were first saved (`Simulator.save`): a saved
 state without one (from an earlier version) restores with it at zero."""
 
@@ -63,6 +63,9 @@ class BatchState:
         """Adaptive stepping: where the current launch advances the instance to, s."""
         self.rejected_steps = arena.batch_field(ti.i32, capacity)
         """Adaptive stepping: steps rejected by the error estimate or a failed Newton solve."""
+        self.steps_over_tolerance = arena.batch_field(ti.i32, capacity)
+        """Adaptive stepping: steps accepted with their error estimate above error_tol, because
+        they could not shrink further (`stepping.at_smallest`)."""
         self.newton_total = arena.batch_field(ti.i64, capacity)
         """Newton iterations of every solve (retried substeps and rejected steps included)."""
         self.newton_solves = arena.batch_field(ti.i64, capacity)

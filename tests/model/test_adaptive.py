@@ -148,11 +148,14 @@ def test_a_step_at_dt_min_that_rounding_puts_above_it_is_kept_not_redone_forever
     stops = engine.state.stop_time.to_numpy()
     stops[0] = stop
     load_field(engine.state.stop_time, stops)
-    # 2,000 attempts: the run takes 193 (179 steps, 14 redone); before, the time stayed at 0.2
+    # 2,000 attempts: the run takes 715 (702 steps, 13 redone); before, the time stayed at 0.2
     # after any number
     engine.advance_adaptive(2000)
     assert sim.time_s[0] == stop
     assert engine.state.status.to_numpy()[0] == 0  # ok
+    # ... and the steps kept over the tolerance at dt_min are counted, not hidden
+    over = engine.state.steps_over_tolerance.to_numpy()[0]
+    assert 0 < over < engine.state.steps_done.to_numpy()[0]
 
 
 def test_a_record_an_ulp_after_a_cycle_start_does_not_reset_the_velocities():
@@ -168,3 +171,5 @@ def test_a_record_an_ulp_after_a_cycle_start_does_not_reset_the_velocities():
     # records end steps, which moves the path within the error tolerance (measured 1.6e-4
     # relative); the sliver moved it by 3.5e-2
     assert abs(recorded.summary.displacement_x_mm[0] / alone - 1) < 1e-3
+    # every step of both runs held the tolerance (none was kept over it at dt_min)
+    assert recorded.summary.steps_over_tolerance[0] == 0

@@ -153,7 +153,8 @@ def test_summary_and_trajectory_schema():
         "displacement_x_mm", "displacement_y_mm", "speed_mm_s", "signed_speed_mm_s",
         "travel_direction_deg", "heading_deg", "max_strain", "shape_sane",
         "steady_speed_mm_s", "steady_signed_speed_mm_s",
-        "steps", "rejected_steps", "newton_iterations_mean", "newton_iterations_max",
+        "steps", "rejected_steps", "steps_over_tolerance", "newton_iterations_mean",
+        "newton_iterations_max",
         "factorisations_mean", "substep_retries", "newton_capped", "status",
         "failure_time_s"]
     assert list(result.summary.columns) == expected
