@@ -14,6 +14,7 @@ import pandas as pd
 import pytest
 
 import taichi_star as ts
+from taichi_star.state import LATER_COUNTERS
 
 REPO = Path(__file__).resolve().parents[2]
 PERIOD = 0.4
@@ -137,6 +138,15 @@ def test_a_state_saved_before_the_factorisations_were_counted_loads_and_counts_f
     np.testing.assert_array_equal(sim.shapes(), after)
     np.testing.assert_array_equal(sim.save().fields["factorisations"][:sim.n_instances],
                                   total - counted)
+    # a state saved before any of the later counters (steps_over_tolerance too) loads and
+    # continues the same way
+    earliest = dataclasses.replace(current, fields={
+        name: values for name, values in current.fields.items() if name not in LATER_COUNTERS})
+    assert set(current.fields) - set(earliest.fields) == {"factorisations",
+                                                          "steps_over_tolerance"}
+    sim.load(earliest.write(tmp_path / "earliest"))
+    sim.advance(0.05)
+    np.testing.assert_array_equal(sim.shapes(), after)
     broken = dataclasses.replace(current, fields={
         name: values for name, values in current.fields.items() if name != "newton_total"})
     with pytest.raises(ValueError, match="saved state has fields"):
