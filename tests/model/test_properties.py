@@ -295,8 +295,15 @@ SCALED_BY_LAMBDA = ("youngs_modulus", "actuator_density", "foam_density",
                     "cylinder_drag", "added_mass_coeff", "cylinder_added_mass_coeff")
 
 
+OPTIONAL_FORCES = {"linear_drag": 1.0, "hub_linear_drag": 0.1, "wake_coupling": 1.0}
+"""The optional terms' force coefficients (Pa·s/m, Pa·s, Pa·s), scaled by λ with the others;
+jet_inflow, a ratio like α, by √λ (its force is ∝ its square)."""
+
+
+@pytest.mark.parametrize("optional_terms", [False, True])
 @pytest.mark.parametrize("alpha_power, same", [(0.5, True), (1.0, False)])
-def test_every_mass_and_force_scaled_together_leave_the_motion_unchanged(alpha_power, same):
+def test_every_mass_and_force_scaled_together_leave_the_motion_unchanged(alpha_power, same,
+                                                                          optional_terms):
     """An exact invariance of the model: every mass (the densities, the hub's mass per height),
     every force coefficient (Young's modulus, the drags, the added masses) × λ and α × √λ (the
     jet force is ∝ α²) scale the residual by λ, so the path is the same: kinematic data cannot
@@ -304,10 +311,14 @@ def test_every_mass_and_force_scaled_together_leave_the_motion_unchanged(alpha_p
     iterations see the same updates up to rounding, so the paths agree to far inside 1e-6 mm
     (10 × newton_tol; 8e-12 mm measured over a period); α × λ instead moves them by
     millimetres."""
-    base = ts.StarParams(gait="A1+A3")
+    options = {**OPTIONAL_FORCES, "jet_inflow": 0.3} if optional_terms else {}
+    base = ts.StarParams(gait="A1+A3", **options)
     lam = 2.0
-    changes = {name: getattr(base, name) * lam for name in SCALED_BY_LAMBDA}
-    scaled = ts.StarParams(gait="A1+A3", alpha=base.alpha * lam ** alpha_power, **changes)
+    scaled_names = SCALED_BY_LAMBDA + (tuple(OPTIONAL_FORCES) if optional_terms else ())
+    changes = {name: getattr(base, name) * lam for name in scaled_names}
+    if optional_terms:
+        changes["jet_inflow"] = base.jet_inflow * lam ** alpha_power
+    scaled = base.replace(alpha=base.alpha * lam ** alpha_power, **changes)
     result = ts.simulate([base, scaled], 0.3, record_interval_s=0.05)
     assert (result.summary.status == "ok").all()
     paths = [result.trajectory[result.trajectory.instance == i][["x_mm", "y_mm"]].to_numpy()
