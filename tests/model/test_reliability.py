@@ -5,6 +5,7 @@ hand-made engine mutants (`halvings <= max` → `<`, an under-counted substep_re
 Newton stopping rule, a +20 % costlier Newton)."""
 
 import pickle
+import signal
 import warnings
 
 import numpy as np
@@ -177,6 +178,48 @@ def test_an_f32_simulator_refuses_a_firing_at_a_step_its_clock_cannot_hold():
     after = sim.save().fields
     assert all(np.array_equal(after[name], before[name]) for name in before)
     assert sim.engine.state.schedule.pending_due.to_numpy()[0, 0] == 2 ** 24
+
+
+@pytest.fixture
+def bounded_time():
+    """A run that does not end fails the test after 300 s (these cases take a few seconds)
+    instead of hanging the suite: SIGALRM's handler raises between two kernel launches."""
+    if not hasattr(signal, "SIGALRM"):
+        pytest.skip("needs SIGALRM (POSIX)")
+
+    def expired(signum, frame):
+        raise TimeoutError("the run did not end within 300 s")
+
+    previous = signal.signal(signal.SIGALRM, expired)
+    signal.alarm(300)
+    yield
+    signal.alarm(0)
+    signal.signal(signal.SIGALRM, previous)
+
+
+def test_an_f32_adaptive_run_ends_at_a_stop_that_float32_rounds_down(bounded_time):
+    """float32(0.35) < 0.35: the f32 time reached the stop as the device holds it, and the host
+    compared it with the f64 stop, launching the kernel forever (an audit; `bounded_time` turns
+    that into a failure). After the f32 tests above: no further switch of Taichi's
+    precision."""
+    assert float(np.float32(0.35)) < 0.35
+    sim = ts.Simulator([ts.StarParams()], ts.SolverConfig(adaptive=True, precision="f32",
+                                                          newton_tol=1e-7))
+    sim.fire(["A1"])
+    sim.advance(0.35)
+    assert sim.time_s[0] == np.float32(0.35) and sim.state().status[0] == "ok"
+
+
+def test_f32_adaptive_steps_between_close_records_are_solved(bounded_time):
+    """64 f32 roundings are 7.6e-6 s: with records every 5e-6 s (allowed: at least dt_min)
+    every step landed within them and was crossed by the clock as a sliver, and the robot stood
+    still, status ok (an audit). A sliver is at most half of dt_min now: every step is solved
+    (f32 steps this short lose much of the velocities to rounding: docs, Precision)."""
+    result = ts.simulate([ts.StarParams(gait="A1")], 0.004, ts.SolverConfig(
+        adaptive=True, precision="f32", newton_tol=1e-7), record_interval_s=5e-6)
+    summary = result.summary
+    assert summary.status[0] == "ok" and summary.steps[0] >= 800  # one step per record at least
+    assert abs(summary.displacement_x_mm[0]) > 0
 
 
 class _Accepted(Exception):

@@ -25,8 +25,8 @@ def _accepts(error: float, h: float, proposed: float) -> int:
 
 
 @ti.kernel
-def _is_sliver(start: float, end: float, target: float, limit: float) -> int:
-    return stepping.is_sliver(start, end, target, limit)
+def _is_sliver(start: float, end: float, target: float, limit: float, most: float) -> int:
+    return stepping.is_sliver(start, end, target, limit, most)
 
 
 @ti.kernel
@@ -110,5 +110,20 @@ SLIVER = 2 ** -46  # the relative limit of the sliver cases (64 f64 roundings, b
     (0.25, 0.25 + 2 * SLIVER, 0.25 + 2 * SLIVER, False),
 ])
 def test_is_sliver(taichi_cpu, start, end, target, sliver):
-    # binary-exact times and limits: the comparisons are exact, no tolerance involved
-    assert bool(_is_sliver(start, end, target, SLIVER)) is sliver
+    # binary-exact times and limits: the comparisons are exact, no tolerance involved (the
+    # longest sliver, 1 s, far above these)
+    assert bool(_is_sliver(start, end, target, SLIVER, 1.0)) is sliver
+
+
+MOST = 2 ** -21  # s, the longest sliver of these cases (half a binary-exact dt_min)
+
+
+@pytest.mark.parametrize("start, end, sliver", [
+    (1.0, 1.0 + MOST, True),             # exactly the longest: a sliver
+    (1.0, 1.0 + MOST + 2 ** -52, False),  # one rounding (at 1 s) longer: solved
+])
+def test_a_sliver_is_never_longer_than_its_share_of_dt_min(taichi_cpu, start, end, sliver):
+    """In f32, 64 roundings of the time can exceed real steps (7.6e-6 s below 1 s): a relative
+    limit far above the longest sliver (2^-10 here) stands for it, and the share of dt_min
+    bounds it (binary-exact values: exact comparisons)."""
+    assert bool(_is_sliver(start, end, end, 2 ** -10, MOST)) is sliver
