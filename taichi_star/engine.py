@@ -171,11 +171,13 @@ class BatchEngine:
         """Most steps an adaptive instance takes (MAX_STEPS_PER_INSTANCE: the int32 counters
         never overflow); one that reaches it stops with status step_limit."""
         self.sliver_limit = arena.field(float)
+        self.sliver_least = arena.field(float)
         self.sliver_most = arena.field(float)
-        """`stepping.SLIVER_ROUNDINGS` roundings of the precision, and the longest sliver, s
-        (`stepping.SLIVER_MOST_OF_DT_MIN` of dt_min): an adaptive step that lands on a stop at
-        most min(sliver_limit · max(|t|, 1 s), sliver_most) after its start is a rounding's
-        sliver (`stepping.is_sliver`), crossed by the clock alone."""
+        """`stepping.SLIVER_ROUNDINGS` roundings of the precision, and the shortest and longest
+        bound of a sliver, s (`stepping.SLIVER_LEAST_OF_DT_MIN` and `SLIVER_MOST_OF_DT_MIN` of
+        dt_min): an adaptive step that lands on a stop at most min(max(sliver_limit · max(|t|,
+        1 s), sliver_least), sliver_most) after its start is a rounding's sliver
+        (`stepping.is_sliver`), crossed by the clock alone."""
         self.kept_inertia_scale = arena.batch_field(float, capacity)
         self.kept_rate_gain = arena.batch_field(float, capacity)
         self.kept_age = arena.batch_field(ti.i32, capacity)
@@ -222,9 +224,8 @@ class BatchEngine:
         model_fields = {name: getattr(self, name)
                         for name in ("mass", "inertia", "primal_count", "tangent_count",
                                      "slot_stride", "group_count", "group_stride", "lockstep",
-                                     "step_limit", "sliver_limit", "sliver_most",
-                                     "kept_inertia_scale",
-                                     *SOLVER_SETTINGS)}
+                                     "step_limit", "sliver_limit", "sliver_least",
+                                     "sliver_most", "kept_inertia_scale", *SOLVER_SETTINGS)}
         for term in self.terms:
             model_fields.update({f"{term.name}.{name}": field
                                  for name, field in term.coefficient_fields().items()})
@@ -281,6 +282,7 @@ class BatchEngine:
                   "step_limit": MAX_STEPS_PER_INSTANCE,
                   "sliver_limit": stepping.SLIVER_ROUNDINGS * float(np.finfo(
                       np.float64 if solver.precision == "f64" else np.float32).eps),
+                  "sliver_least": stepping.SLIVER_LEAST_OF_DT_MIN * solver.dt_min,
                   "sliver_most": stepping.SLIVER_MOST_OF_DT_MIN * solver.dt_min,
                   # nothing kept: the weights and age of a factorisation are set with it
                   "kept_inertia_scale": np.zeros(capacity),
@@ -645,7 +647,7 @@ class BatchEngine:
             h = end - start
             self.state.schedule.fire_due(b, start, end, 0)
             if stepping.is_sliver(start, end, target, self.sliver_limit[None],
-                                  self.sliver_most[None]):
+                                  self.sliver_least[None], self.sliver_most[None]):
                 # a stop a rounding's width after the last (a record time k·interval an ulp
                 # off a cycle start): solved, a step this short turns the velocities into
                 # rounding noise; the positions would move by less than a rounding

@@ -31,22 +31,30 @@ SLIVER_ROUNDINGS = 64
 max(|t|, 1 s)) after its start is a sliver (`is_sliver`): stops that should coincide but were
 reached by different sums (6 × 0.05 = 0.30000000000000004 against a cycle start at 0.3) lie a
 few roundings apart; 64 allows for sums of many terms (1.4e-14 s in f64 below 1 s)..."""
+SLIVER_LEAST_OF_DT_MIN = 1e-4
+"""... and at least this share of dt_min (1e-10 s at the default 1e-6 s): a stop reached by a
+longer sum (a controller that adds its steps up to a firing time: 1,000 additions of 1 ms put
+it ~1e-13 s off a record) lies further than 64 roundings away, and the solved step of 2e-14 s
+left a velocity 1.5 % off 5 ms later (an audit). Crossing 1e-10 s by the clock alone leaves
+the positions ~1e-11 m short at 0.1 m/s, a tenth of Newton's default tolerance, where solving
+it costs ~3e-5 of the velocities to rounding..."""
 SLIVER_MOST_OF_DT_MIN = 0.5
-"""... but a sliver is never longer than this share of dt_min: in f32, 64 roundings are 7.6e-6 s
-below 1 s and 1.1e-3 s at 140 s, longer than the steps that the controller takes (dt_min 1e-6 s)
-or that records every 5e-6 s ask for, and such runs, taking every step for a sliver, stood
-still while reporting ok (an audit, before this bound)."""
+"""... but never more than this share of dt_min: in f32, 64 roundings are 7.6e-6 s below 1 s
+and 1.1e-3 s at 140 s, longer than the steps that the controller takes (dt_min 1e-6 s) or that
+records every 5e-6 s ask for, and such runs, taking every step for a sliver, stood still while
+reporting ok (an audit, before this bound)."""
 
 
 @ti.func
-def is_sliver(start, end, target, limit, most):
+def is_sliver(start, end, target, limit, least, most):
     """Whether the step from start to end (s) is a rounding's sliver: it lands on its target
-    (a stop) at most min(limit · max(|end|, 1 s), most) after start (limit: `SLIVER_ROUNDINGS`
-    roundings of the precision; most: `SLIVER_MOST_OF_DT_MIN` of dt_min, s). Solved, such a
-    step divides the positions' rounding by h: a 5.6e-17-s step after a firing set the
-    centroid's velocity from −5.2 to −2.7 mm/s (3.5 % off the displacement 0.05 s later), so
-    the clock crosses it alone."""
-    return end == target and end - start <= ti.min(limit * ti.max(ti.abs(end), 1.0), most)
+    (a stop) at most min(max(limit · max(|end|, 1 s), least), most) after start (limit:
+    `SLIVER_ROUNDINGS` roundings of the precision; least and most: `SLIVER_LEAST_OF_DT_MIN` and
+    `SLIVER_MOST_OF_DT_MIN` of dt_min, s). Solved, such a step divides the positions' rounding
+    by h: a 5.6e-17-s step after a firing set the centroid's velocity from −5.2 to −2.7 mm/s
+    (3.5 % off the displacement 0.05 s later), so the clock crosses it alone."""
+    return end == target and end - start <= ti.min(
+        ti.max(limit * ti.max(ti.abs(end), 1.0), least), most)
 
 
 @ti.func

@@ -173,3 +173,23 @@ def test_a_record_an_ulp_after_a_cycle_start_does_not_reset_the_velocities():
     assert abs(recorded.summary.displacement_x_mm[0] / alone - 1) < 1e-3
     # every step of both runs held the tolerance (none was kept over it at dt_min)
     assert recorded.summary.steps_over_tolerance[0] == 0
+
+
+def test_a_firing_a_long_sum_away_from_a_record_is_not_a_step_of_rounding_noise():
+    """A controller that adds its steps up to a firing time lands it ~1e-13 s off a record
+    (1,000 additions of 1 ms): more than 64 roundings, so that sliver of a step was solved,
+    and its velocities were rounding noise (1.5 % off 5 ms later; an audit). Robots fired
+    2e-14 s and 1e-11 s after a record (both slivers now, crossed by the clock) move alike."""
+    offsets = (2e-14, 1e-11)
+    sim = ts.Simulator([ts.StarParams()] * 2, ts.SolverConfig(adaptive=True))
+    sim.fire(["A1", "A1"])
+    for robot, offset in enumerate(offsets):
+        command = np.zeros((2, 8), dtype=bool)
+        command[robot, 1] = True
+        sim.fire(command, at_s=0.1 + offset)
+    records = sim.advance(0.105, record_interval_s=0.005)
+    after = records[records.record == records.record.max()]  # 5 ms after the firings
+    velocities = after[["velocity_x_mm_s", "velocity_y_mm_s"]].to_numpy()
+    # firings 1e-11 s apart move the actuation by ~1e-11 of its rate; the solved sliver moved
+    # the velocity by 1e-2 relative
+    np.testing.assert_allclose(velocities[0], velocities[1], rtol=1e-6)

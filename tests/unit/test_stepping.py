@@ -25,8 +25,9 @@ def _accepts(error: float, h: float, proposed: float) -> int:
 
 
 @ti.kernel
-def _is_sliver(start: float, end: float, target: float, limit: float, most: float) -> int:
-    return stepping.is_sliver(start, end, target, limit, most)
+def _is_sliver(start: float, end: float, target: float, limit: float, least: float,
+               most: float) -> int:
+    return stepping.is_sliver(start, end, target, limit, least, most)
 
 
 @ti.kernel
@@ -111,8 +112,8 @@ SLIVER = 2 ** -46  # the relative limit of the sliver cases (64 f64 roundings, b
 ])
 def test_is_sliver(taichi_cpu, start, end, target, sliver):
     # binary-exact times and limits: the comparisons are exact, no tolerance involved (the
-    # longest sliver, 1 s, far above these)
-    assert bool(_is_sliver(start, end, target, SLIVER, 1.0)) is sliver
+    # shortest bound, 0 s, and the longest, 1 s, leave the relative limit alone)
+    assert bool(_is_sliver(start, end, target, SLIVER, 0.0, 1.0)) is sliver
 
 
 MOST = 2 ** -21  # s, the longest sliver of these cases (half a binary-exact dt_min)
@@ -126,4 +127,18 @@ def test_a_sliver_is_never_longer_than_its_share_of_dt_min(taichi_cpu, start, en
     """In f32, 64 roundings of the time can exceed real steps (7.6e-6 s below 1 s): a relative
     limit far above the longest sliver (2^-10 here) stands for it, and the share of dt_min
     bounds it (binary-exact values: exact comparisons)."""
-    assert bool(_is_sliver(start, end, end, 2 ** -10, MOST)) is sliver
+    assert bool(_is_sliver(start, end, end, 2 ** -10, 0.0, MOST)) is sliver
+
+
+LEAST = 2 ** -33  # s, the shortest bound of these cases (~1.2e-10 s, binary-exact)
+
+
+@pytest.mark.parametrize("start, end, sliver", [
+    (1.0, 1.0 + LEAST, True),             # exactly the shortest bound: a sliver
+    (1.0, 1.0 + LEAST + 2 ** -52, False),  # one rounding (at 1 s) longer: solved
+])
+def test_a_stop_a_longer_sum_away_is_still_a_sliver(taichi_cpu, start, end, sliver):
+    """Far more than 64 roundings (2^-46 relative here) but at most the share of dt_min: a
+    stop that a sum of many steps put ~1e-13 s off another is crossed, not solved (binary-exact
+    values: exact comparisons)."""
+    assert bool(_is_sliver(start, end, end, SLIVER, LEAST, 1.0)) is sliver
