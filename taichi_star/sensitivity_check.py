@@ -82,12 +82,15 @@ def check_sensitivities(params: Sequence[StarParams], duration_s: float, solver:
     summary column): see `CHECK_COLUMNS`. Two `simulate` calls: the sensitivities and one batch
     of every moved run (`MULTIPLES`).
 
-    With adaptive steps hold them (a loose error_tol, dt_max the step: `python -m studies
-    sensitivity_check` uses 1e-3 m and 1 ms). The sensitivities are those of the instance's
-    accepted step sequence, frozen; a moved run on free steps chooses its own, whose sizes
-    move with the parameter, and its differences carry that too: 0.3 s of the accurate preset
-    (A1+A2, period 0.3 s) on its own adaptive steps checked α to 5e-6 and the joint radius to
-    7 % (differences spread 2.6 %), held at 1 ms to 9e-9 and 2.9e-7."""
+    With adaptive steps hold them: dt_min = dt_max = the step. The sensitivities are those of
+    the instance's accepted step sequence, frozen; a moved run on free steps chooses its own,
+    whose sizes move with the parameter, and its differences carry that too: 0.3 s of the
+    accurate preset (A1+A2, period 0.3 s) on its own adaptive steps checked α to 5e-6 and the
+    joint radius to 7 % (differences spread 2.6 %), held at 1 ms to 9e-9 and 2.9e-7. A loose
+    error_tol with dt_max the step (what `python -m studies sensitivity_check` uses, over
+    0.2 s from rest) holds them only while no step is rejected: a redo's size comes from the
+    error estimate, and a damped robot re-fired at 0.3 s was checked 1.2e-5 off for α that
+    way, 2.4e-7 with dt_min = dt_max (an audit, 2026-12)."""
     params = list(params)
     directions = parse_directions(names)
     result = simulate(params, duration_s, solver, arch=arch, sensitivities=names)
