@@ -436,8 +436,8 @@ class Simulator:
             snapshot = SimulatorSnapshot.read(snapshot)
         if snapshot.engine_key != repr(self.engine_key):
             raise ValueError(f"the saved state belongs to another engine (topology, terms, "
-                             f"integrator, capacity or stepping): {snapshot.engine_key} vs "
-                             f"{self.engine_key!r}")
+                             f"integrator, capacity, stepping or sensitivities): "
+                             f"{snapshot.engine_key} vs {self.engine_key!r}")
         if snapshot.n_instances != self.n_instances or snapshot.dt != self.solver.dt:
             raise ValueError(f"the saved state has {snapshot.n_instances} instances at dt = "
                              f"{snapshot.dt} s; this simulator {self.n_instances} at "

@@ -305,6 +305,12 @@ def test_a_simulator_gives_the_same_sensitivities_as_simulate(euler_run):
                                          r"state"):
         other.load(saved, other_params=True)
     assert all(np.array_equal(other.save().fields[name], unchanged[name]) for name in unchanged)
+    # nor does a Simulator of other sensitivities take it (its replicas are other directions')
+    del other
+    plain = Simulator(BATCH, SolverConfig(**TIGHT), sensitivities=("drag_perpendicular",))
+    with pytest.raises(ValueError, match=r"^the saved state belongs to another engine \(.*"
+                                         r"sensitivities\)"):
+        plain.load(saved)
 
 
 def test_steps_redone_with_substeps_are_followed(euler_run):
