@@ -19,8 +19,10 @@ On resume, a chunk file that is unreadable, truncated, empty, undecodable in any
 another run or whose content does not match its checksum is reported (a warning on the
 `taichi_star.batch` logger), deleted and recomputed, never loaded. A damaged manifest is an
 error (`RunStoreError`); a deleted one is not: resuming a folder of chunk files alone reuses the
-chunks whose own stamp (the run definition's SHA-256, the chunk's instances) matches the run. A
-file that cannot be written (a full disk) is a `RunStoreError` naming the folder.
+chunks whose own stamp (the run definition's SHA-256, the chunk's instances) matches the run,
+and refuses a folder holding a readable chunk of another run (without its manifest nothing says
+that those results may go). A file that cannot be written (a full disk) or removed (a read-only
+folder) is a `RunStoreError` naming it.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ import numpy as np
 import pandas as pd
 
 from ..actuation import CurvatureProfile
+from ..checks import is_whole
 from ..extras import require
 from ..provenance import code_version, write_atomic
 from .tasks import ChunkTask
@@ -138,6 +141,24 @@ def _decode(frame: pd.DataFrame, types: Dict[str, str]) -> pd.DataFrame:
     return frame
 
 
+def _is_temporary(path: Path) -> bool:
+    """Whether `path` is a temporary file of `write_atomic` (".NAME.tmp-PID"), left whole or
+    not by a killed run: never a result."""
+    return path.name.startswith(".") and ".tmp-" in path.name
+
+
+def _readable_stamp(path: Path) -> Optional[Dict]:
+    """The taichi_star stamp of a stored chunk file, None where it cannot be read (a damaged
+    file: the verification recomputes it)."""
+    pa, pq = _parquet()
+    try:
+        raw = (pq.read_schema(path).metadata or {}).get(METADATA_KEY)
+        stamp = json.loads(raw) if raw is not None else None
+    except Exception:  # noqa: BLE001 -- pyarrow's errors for a damaged file vary
+        return None
+    return stamp if isinstance(stamp, dict) else None
+
+
 def _parquet():
     """(pyarrow, pyarrow.parquet); ImportError naming the `io` extra where pyarrow is absent."""
     return require("pyarrow", "io"), require("pyarrow.parquet", "io")
@@ -176,6 +197,15 @@ class RunStore:
             manifest = json.loads(path.read_text())
             if not isinstance(manifest, dict) or not isinstance(manifest.get("definition"), dict):
                 raise ValueError("no run definition in it")
+            # valid JSON of the wrong kinds failed later with a TypeError ("resumed": 5) or
+            # another library's error (a chunk size "8")
+            if not isinstance(manifest.get("resumed", []), list):
+                raise ValueError("its resumed entry is not a list")
+            if not isinstance(manifest.get("complete", False), bool):
+                raise ValueError("its complete entry is not true or false")
+            size = manifest["definition"].get("chunk_size")
+            if size is not None and not (is_whole(size) and size >= 1):
+                raise ValueError(f"its chunk size {size!r} is not a whole number >= 1")
         except (OSError, UnicodeDecodeError, ValueError) as error:
             reason = str(error).splitlines()[0] if str(error) else type(error).__name__
             raise RunStoreError(f"{self.flag} {self.path}: {MANIFEST} is damaged ({reason}); "
@@ -197,7 +227,10 @@ class RunStore:
         now = datetime.datetime.now().isoformat(timespec="seconds")
         done: List[int] = []
         history: Dict = {}
-        if old is None and self.path.exists() and any(self.path.iterdir()):
+        # a folder holding only a killed run's temporary files (its first manifest was being
+        # written) is empty: they are removed below
+        if old is None and self.path.exists() and any(
+                not _is_temporary(entry) for entry in self.path.iterdir()):
             done = self._orphan_chunks(tasks, resume)
         if old is not None:
             finished = self._chunk_files()
@@ -221,14 +254,15 @@ class RunStore:
                     f"folder / choose another {self.flag} to start over")
             else:  # a finished (or empty) run is replaced by a fresh one
                 for path in finished + self._trajectory_files():
-                    path.unlink()
+                    self._remove(path)
         try:
             self.path.mkdir(parents=True, exist_ok=True)
         except OSError as error:
             raise RunStoreError(f"{self.flag} {self.path}: cannot create it ({error.strerror})") \
                 from None
-        for stale in self.path.glob(".*.tmp-*"):  # left by a killed run
-            stale.unlink()
+        for stale in self.path.iterdir():  # left by a killed run
+            if _is_temporary(stale):
+                self._remove(stale)
         self.manifest = {"definition": self.definition,
                          "definition_sha256": self.definition_sha256, "code": version,
                          "created": now, "complete": False, **history}
@@ -261,9 +295,33 @@ class RunStore:
             raise RunStoreError(f"{self.flag} {self.path} holds chunk files but no {MANIFEST}: "
                                 f"resume to reuse the chunks that belong to this run, or delete "
                                 f"the folder / choose another {self.flag} to start over")
+        indices = {task.index for task in tasks}
+        for path in sorted(chunks):
+            stamp = _readable_stamp(path)
+            foreign = stamp is not None and (
+                stamp.get("definition_sha256") != self.definition_sha256
+                or stamp.get("chunk") not in indices)
+            if foreign:
+                # without a manifest the folder's own run is unknown: its chunks are another
+                # run's results, deleted and replaced until 2026-12 (an audit)
+                raise RunStoreError(
+                    f"{self.flag} {self.path} has no {MANIFEST} and holds chunks of another run "
+                    f"({path.name}: its definition differs from this run's); refusing to "
+                    f"replace them: resume with that run's arguments, or delete the folder / "
+                    f"choose another {self.flag}")
         log.warning("%s has no %s: reusing the chunks whose stamp matches this run", self.path,
                     MANIFEST)
         return [task.index for task in tasks if self._verified(task)]
+
+    def _remove(self, path: Path):
+        """Delete one of the store's files; RunStoreError naming it where that fails (a
+        read-only folder gave a raw OSError)."""
+        try:
+            path.unlink(missing_ok=True)
+        except OSError as error:
+            raise RunStoreError(f"{self.flag} {self.path}: cannot remove {path.name} "
+                                f"({error.strerror}); make the folder writable or choose "
+                                f"another {self.flag}") from None
 
     def _write_manifest(self):
         self._write(self.path / MANIFEST,
@@ -273,8 +331,8 @@ class RunStore:
         """`write_atomic`, a failure (a full disk) a RunStoreError naming the folder: the files
         written before are whole, so the run can be resumed once there is room."""
         write_atomic(path, data, failure=lambda reason: RunStoreError(
-            f"{self.flag} {self.path}: {reason}; the chunks stored before are kept: make room "
-            f"and resume"))
+            f"{self.flag} {self.path}: {reason}; the chunks stored before are kept: resume "
+            f"once the folder can be written (room, permissions)"))
 
     def write(self, task: ChunkTask, summary: pd.DataFrame,
               trajectory: Optional[pd.DataFrame] = None) -> Path:
@@ -369,8 +427,8 @@ class RunStore:
             self._load(task)
         except ValueError as error:
             log.warning("%s: %s; recomputing it", path, error)
-            path.unlink()
-            self.trajectory_path(task.index).unlink(missing_ok=True)
+            self._remove(path)
+            self._remove(self.trajectory_path(task.index))
             return False
         return True
 

@@ -218,3 +218,81 @@ def test_a_full_disk_is_a_run_store_error_naming_the_folder(tmp_path, monkeypatc
     assert str(tmp_path / "run") in message and "No space left" in message
     assert "\n" not in message
     assert (tmp_path / "run" / "manifest.json").read_bytes() == manifest
+
+
+def test_without_a_manifest_another_runs_chunks_are_refused_not_replaced(finished, tmp_path,
+                                                                        monkeypatch):
+    """A folder of chunk files whose manifest is gone, resumed with other arguments: every
+    chunk was logged as "from another run", deleted and recomputed: the earlier run's results
+    lost (an audit). Now refused before anything is touched or computed."""
+    source, _ = finished
+    folder = tmp_path / "run"
+    folder.mkdir()
+    for path in source.glob("*.parquet"):
+        (folder / path.name).write_bytes(path.read_bytes())
+    before = {path.name: path.read_bytes() for path in folder.iterdir()}
+    monkeypatch.setattr("taichi_star.batch.tasks.simulate", _forbidden)
+    other = [p.replace(alpha=p.alpha + 0.1) for p in PARAMS]
+    with pytest.raises(RunStoreError, match=r"has no manifest.json and holds chunks of another "
+                                            r"run \(chunk_000000.parquet"):
+        run(folder, resume=True, params=other)
+    assert {path.name: path.read_bytes() for path in folder.iterdir()} == before
+
+
+def test_a_folder_left_with_only_a_killed_first_manifest_write_starts_afresh(finished,
+                                                                            tmp_path):
+    """A run killed while writing its first manifest left only ".manifest.json.tmp-PID": the
+    folder was "not a run folder" to a resume and to a new run alike (an audit). It is empty
+    to both now, and the temporary file goes."""
+    _, summary = finished
+    for resume in (False, True):
+        folder = tmp_path / f"run_{resume}"
+        folder.mkdir()
+        (folder / ".manifest.json.tmp-12345").write_bytes(b'{"defin')
+        pd.testing.assert_frame_equal(run(folder, resume=resume), summary, check_exact=True)
+        assert not list(folder.glob(".*.tmp-*"))
+
+
+@pytest.mark.parametrize("change, reason", [
+    (lambda manifest: manifest.update(resumed=5), "its resumed entry is not a list"),
+    (lambda manifest: manifest.update(complete="yes"), "its complete entry is not true or false"),
+    (lambda manifest: manifest["definition"].update(chunk_size="8"),
+     "its chunk size '8' is not a whole number >= 1"),
+    (lambda manifest: manifest["definition"].update(chunk_size=0),
+     "its chunk size 0 is not a whole number >= 1"),
+])
+def test_a_manifest_of_the_wrong_kinds_is_damage(finished, tmp_path, change, reason):
+    """Valid JSON with entries of the wrong kind raised a TypeError or another library's
+    ValueError (exit 1 with a traceback from the command line); now a one-line damage."""
+    source, _ = finished
+    folder = tmp_path / "run"
+    folder.mkdir()
+    manifest = json.loads((source / "manifest.json").read_text())
+    change(manifest)
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(RunStoreError, match=f"manifest.json is damaged \\({reason}\\)"):
+        run(folder, resume=True)
+
+
+def test_a_file_the_store_cannot_remove_is_a_run_store_error(finished, tmp_path, monkeypatch):
+    """A damaged chunk in a read-only folder: the unlink's OSError came raw (a 38-line
+    traceback from the command line; an audit); now one line naming the file."""
+    source, _ = finished
+    folder = tmp_path / "run"
+    folder.mkdir()
+    for path in source.iterdir():
+        (folder / path.name).write_bytes(path.read_bytes())
+    (folder / "chunk_000001.parquet").write_bytes(b"damaged")
+    real_unlink = type(folder).unlink
+
+    def read_only(path, missing_ok=False):
+        if path.parent == folder:
+            raise OSError(errno.EROFS, os.strerror(errno.EROFS))
+        return real_unlink(path, missing_ok=missing_ok)
+
+    monkeypatch.setattr(type(folder), "unlink", read_only)
+    with pytest.raises(RunStoreError) as error:
+        run(folder, resume=True)
+    message = str(error.value)
+    assert "cannot remove chunk_000001.parquet (Read-only file system)" in message
+    assert "\n" not in message
