@@ -202,12 +202,14 @@ def main(argv=None):
     sample_table.insert(0, "point", np.arange(len(units)))
     # connected first: an unreachable scheduler leaves the folder empty, and it is removed
     with cli.executor(args, out) as executor:
-        out.write_csv(sample_table, "sensitivity_samples.csv")
         summary = run_batch(params, **cli.run_length(args), solver=solver_config,
                             arch=args.arch,
                             chunk_size=cli.chunk_size(args, len(params), executor.n_workers),
                             executor=executor, run_dir=run_dir, resume=args.resume,
                             progress=not args.no_progress).summary
+    # after the run: a resume that the run store refuses (other arguments) leaves the folder's
+    # tables those of its own run (the samples were replaced before the refusal; an audit)
+    out.write_csv(sample_table, "sensitivity_samples.csv")
     ok = (summary["status"] == "ok").to_numpy()
     run_table = pd.DataFrame({
         "point": np.repeat(np.arange(len(units)), len(gaits)),

@@ -11,6 +11,7 @@ import pytest
 
 import taichi_star
 from taichi_star import SolverConfig, StarParams
+from taichi_star.batch import RunStoreError
 from taichi_star.experiment import (EXPERIMENT_PERIOD_S, PAPER_GAITS)
 
 from studies import calibrate, cli, identify, sensitivity
@@ -280,3 +281,9 @@ def test_sensitivity_quick_and_resumed(tmp_path, monkeypatch):
     sensitivity.main([*argv, "--resume"])
     pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "sensitivity_runs.csv"), runs)
     pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "sensitivity.csv"), indices)
+    # resumed with another seed: the run store refuses, and the folder's tables stay those of
+    # its run (the samples were replaced by the other seed's before the refusal; an audit)
+    tables = {path.name: path.read_bytes() for path in tmp_path.glob("sensitivity*")}
+    with pytest.raises(RunStoreError, match="another definition"):
+        sensitivity.main([*argv, "--seed", "2", "--resume"])
+    assert {path.name: path.read_bytes() for path in tmp_path.glob("sensitivity*")} == tables
