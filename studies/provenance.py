@@ -134,6 +134,8 @@ def record(study: str, argv: Sequence[str], model: Optional[Mapping] = None,
         "taichi_star_version": code["version"],
         "git_commit": code["commit"],
         "git_dirty": code["dirty"],
+        # which edits of the commit (a dirty checkout's), so that two are told apart
+        **({"git_changes_sha256": code["changes_sha256"]} if "changes_sha256" in code else {}),
         "model": _plain(model),
         "solver": _plain(solver),
         "taichi_version": taichi_version(),

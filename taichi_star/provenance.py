@@ -4,6 +4,7 @@ record, and `write_atomic`, which every writer of results uses."""
 
 from __future__ import annotations
 
+import hashlib
 import os
 import subprocess
 from pathlib import Path
@@ -12,10 +13,13 @@ from typing import Callable, Dict, Optional
 
 def code_version() -> Dict[str, object]:
     """{"version": the package version, "commit": git HEAD of the source checkout or None,
-    "dirty": whether tracked files differ from it (None outside git)}."""
+    "dirty": whether tracked files differ from it (None outside git)}, and where they do,
+    "changes_sha256": the SHA-256 of those differences (`git diff HEAD`), so that two edits of
+    one commit are two versions (a run resumed after another edit of a dirty checkout mixed
+    the two codes' chunks without the warning a version change gives; an audit)."""
     from . import __version__
     root = Path(__file__).resolve().parents[1]
-    commit = dirty = None
+    commit = dirty = changes = None
     try:
         head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True,
                               text=True, timeout=10)
@@ -24,9 +28,15 @@ def code_version() -> Dict[str, object]:
             status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
                                     cwd=root, capture_output=True, text=True, timeout=10)
             dirty = bool(status.stdout.strip()) if status.returncode == 0 else None
+            if dirty:
+                diff = subprocess.run(["git", "diff", "HEAD", "--no-color", "--no-ext-diff"],
+                                      cwd=root, capture_output=True, timeout=60)
+                if diff.returncode == 0:
+                    changes = hashlib.sha256(diff.stdout).hexdigest()
     except (OSError, subprocess.SubprocessError):
         pass
-    return {"version": __version__, "commit": commit, "dirty": dirty}
+    version = {"version": __version__, "commit": commit, "dirty": dirty}
+    return version if changes is None else {**version, "changes_sha256": changes}
 
 
 def file_path(path, what: str) -> Path:

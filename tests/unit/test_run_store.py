@@ -4,6 +4,7 @@ refused, what the manifest records) is checked in milliseconds."""
 
 import dataclasses
 import errno
+import hashlib
 import json
 import logging
 import os
@@ -507,8 +508,15 @@ def test_code_version_names_the_commit_and_whether_tracked_files_changed(checkou
     (checkout / "notes.txt").write_text("untracked files do not count")
     assert provenance.code_version()["dirty"] is False
     (checkout / "taichi_star" / "provenance.py").write_text("# changed\n")
+    diff = subprocess.run(["git", "diff", "HEAD", "--no-color", "--no-ext-diff"],
+                          cwd=checkout, capture_output=True, check=True).stdout
     assert provenance.code_version() == {"version": ts.__version__, "commit": head,
-                                        "dirty": True}
+                                        "dirty": True,
+                                        "changes_sha256": hashlib.sha256(diff).hexdigest()}
+    # another edit of the same commit is another version (a resume then warns)
+    first = provenance.code_version()
+    (checkout / "taichi_star" / "provenance.py").write_text("# changed again\n")
+    assert provenance.code_version()["changes_sha256"] != first["changes_sha256"]
 
 
 def test_code_version_with_a_damaged_git_index_names_the_commit_but_not_dirtiness(checkout):
