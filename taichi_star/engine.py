@@ -650,7 +650,7 @@ class BatchEngine:
                                   self.sliver_least[None], self.sliver_most[None]):
                 # a stop a rounding's width after the last (a record time k·interval an ulp
                 # off a cycle start): solved, a step this short turns the velocities into
-                # rounding noise; the positions would move by less than a rounding
+                # rounding noise; the positions would move by far less than Newton's tolerance
                 self.state.time[b] = end
                 continue
             use_history = self.state.history_valid[b]
