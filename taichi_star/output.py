@@ -23,9 +23,14 @@ from .provenance import code_version, file_path, write_atomic
 
 PROVENANCE_KEY = "taichi_star"
 """Key of the provenance in a Parquet file's schema metadata (JSON)."""
-TABLES = ("summary", "trajectory")
+TABLES = ("summary", "trajectory", "sensitivities", "trajectory_sensitivities")
+"""The tables `to_parquet` and `to_csv` write (the last two: a run with sensitivities)."""
 ANIMATION_FPS = (1, 1000)
-"""Allowed frame rates of `animate`, frames per second (lowest, highest)."""
+"""Allowed frame rates of `animate`, frames per second (lowest, highest)..."""
+GIF_MOST_FPS = 50
+"""... at most this for a GIF: its frame delays are whole hundredths of a second (15 fps plays
+at 16.7), and viewers play delays under 20 ms as 100 ms (an audit: 60 fps played at 100 and
+above 100 fps at ~10)."""
 ANIMATION_SIZE_PX = (100, 8192)
 """Allowed widths of `animate`'s movie, pixels (lowest, highest): a 1-inch figure at 100 dpi
 up to what a frame of 8192² RGBA pixels (268 MB) still holds in memory."""
@@ -91,7 +96,11 @@ def provenance(result) -> dict:
 def _table(result, table: str) -> pd.DataFrame:
     if table not in TABLES:
         raise ValueError(f"table must be one of {list(TABLES)}, got {table!r}")
-    return getattr(result, table)
+    frame = getattr(result, table)
+    if frame is None:  # the sensitivities of a run without them
+        raise ValueError(f"table {table!r}: this result has none (simulate with "
+                         f"sensitivities=... for it)")
+    return frame
 
 
 def parquet_bytes(frame: pd.DataFrame, metadata: Mapping) -> bytes:
@@ -114,8 +123,9 @@ def parquet_bytes(frame: pd.DataFrame, metadata: Mapping) -> bytes:
 
 
 def to_parquet(result, path, table: str = "summary") -> Path:
-    """Write the result's `table` ("summary" or "trajectory") as Parquet, whole or not at all,
-    its `provenance` in the file's metadata (`read_provenance`). Returns the path."""
+    """Write the result's `table` (one of `TABLES`: "summary", "trajectory", and for a run
+    with sensitivities "sensitivities" or "trajectory_sensitivities") as Parquet, whole or not
+    at all, its `provenance` in the file's metadata (`read_provenance`). Returns the path."""
     path = file_path(path, "path of the Parquet file")
     frame = _table(result, table)
     write_atomic(path, parquet_bytes(frame, provenance(result)), failure=OSError)
@@ -156,18 +166,36 @@ def to_netcdf(result, path) -> Path:
     return path
 
 
+def _file_kind(path: Path) -> str:
+    """"parquet", "netcdf" or "csv", by the file's first bytes where it can be read (the
+    writers take any name: "x.pq" was read as a CSV whose sidecar did not exist), else by its
+    suffix."""
+    try:
+        with open(path, "rb") as file:
+            head = file.read(8)
+    except OSError:
+        head = b""
+    if head.startswith(b"PAR1") or (not head and path.suffix.lower() == ".parquet"):
+        return "parquet"
+    if head.startswith((b"\x89HDF\r\n\x1a\n", b"CDF")) or (
+            not head and path.suffix.lower() == ".nc"):
+        return "netcdf"
+    return "csv"
+
+
 def read_provenance(path) -> dict:
     """The provenance written with a result file: from a Parquet file's metadata, a netCDF
     file's attributes (`provenance`) or a CSV file's sidecar. OSError where the file cannot be
     read; ValueError naming it where it holds no provenance (damaged, or not written by
     `to_parquet`, `to_netcdf` or `to_csv`)."""
     path = file_path(path, "path of a result file")
-    source = path if path.suffix in (".parquet", ".nc") else Path(f"{path}.json")
+    kind = _file_kind(path)
+    source = path if kind in ("parquet", "netcdf") else Path(f"{path}.json")
     try:
-        if path.suffix == ".parquet":
+        if kind == "parquet":
             pq = require("pyarrow.parquet", "io")
             return json.loads(pq.read_schema(path).metadata[PROVENANCE_KEY.encode()])
-        if path.suffix == ".nc":
+        if kind == "netcdf":
             xr = require("xarray", "io")
             with xr.open_dataset(path) as dataset:
                 return json.loads(dataset.attrs["provenance"])
@@ -269,6 +297,9 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
     if path.suffix.lower() not in (".mp4", ".gif"):
         raise ValueError(f"path must end in .mp4 or .gif, got {path.name!r}")
     fps = check_number("fps", fps, *ANIMATION_FPS, integer=True)
+    if path.suffix.lower() == ".gif" and fps > GIF_MOST_FPS:
+        raise ValueError(f"fps must be at most {GIF_MOST_FPS} for a GIF (its frame delays are "
+                         f"whole hundredths of a second), got {fps}: use a .mp4 path")
     size_px = check_number("size_px", size_px, *ANIMATION_SIZE_PX, integer=True)
     batch = result.shapes.shape[1]
     # whole numbers only: int() would take 0.5 for instance 0, True for 1

@@ -128,15 +128,16 @@ class SimulationResult:
         return output.to_netcdf(self, path)
 
     def to_parquet(self, path, table: str = "summary"):
-        """Save the summary (or table="trajectory") as Parquet, whole or not at all, with the
+        """Save the summary (or table="trajectory", and with sensitivities "sensitivities" or
+        "trajectory_sensitivities") as Parquet, whole or not at all, with the
         provenance (version, git commit, parameters, solver) in the file's metadata
         (`output.read_provenance`); returns the path. `self.summary.to_parquet(path)` (plain
         pandas) works too, without the provenance. Needs pyarrow (the `io` extra)."""
         return output.to_parquet(self, path, table)
 
     def to_csv(self, path, table: str = "summary"):
-        """Save the summary (or table="trajectory") as CSV with the provenance in a JSON
-        sidecar `<path>.json`, each whole or not at all; returns the path."""
+        """Save the summary (or another of `output.TABLES`) as CSV with the provenance in a
+        JSON sidecar `<path>.json`, each whole or not at all; returns the path."""
         return output.to_csv(self, path, table)
 
     def animate(self, path, instances=None, frame: str = "world", fps: int = 15,

@@ -91,6 +91,29 @@ def test_csv_parquet_and_netcdf_round_trip_with_the_same_provenance(recorded, tm
     assert json.loads(json.dumps(facts[0])) == facts[0]  # plain JSON values
     with pytest.raises(ValueError, match="table"):
         recorded.to_parquet(tmp_path / "x.parquet", table="shapes")
+    with pytest.raises(ValueError, match="table 'sensitivities': this result has none"):
+        recorded.to_parquet(tmp_path / "x.parquet", table="sensitivities")
+    # any name: the provenance is read by the file's content ("x.pq" was taken for a CSV)
+    renamed = {tmp_path / "summary.pq": parquet, tmp_path / "result.nc4": netcdf}
+    for name, written in renamed.items():
+        name.write_bytes(written.read_bytes())
+        assert read_provenance(name)["parameters"] == facts[0]["parameters"]
+
+
+def test_the_sensitivities_are_written_with_their_provenance(tmp_path):
+    """They were in no file (an audit): now tables of to_parquet and to_csv."""
+    from taichi_star.output import read_provenance
+
+    result = ts.simulate([ts.StarParams(gait="A1")], 0.01, ts.SolverConfig(dt=2e-3),
+                         record_interval_s=0.004, sensitivities=("alpha",))
+    for table in ("sensitivities", "trajectory_sensitivities"):
+        path = result.to_parquet(tmp_path / f"{table}.parquet", table=table)
+        pd.testing.assert_frame_equal(pd.read_parquet(path), getattr(result, table))
+        assert read_provenance(path)["solver"]["dt"] == 2e-3
+        csv = result.to_csv(tmp_path / f"{table}.csv", table=table)
+        back = pd.read_csv(csv)
+        np.testing.assert_array_equal(back.to_numpy(dtype=float),
+                                      getattr(result, table).to_numpy(dtype=float))
 
 
 def test_xarray_holds_the_tables_with_units_and_survives_netcdf(recorded, tmp_path):

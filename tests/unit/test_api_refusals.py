@@ -194,6 +194,7 @@ def recorded_result(instances=2):
 
 @pytest.mark.parametrize("keywords, name", [
     ({"fps": 0}, "fps"), ({"fps": -1}, "fps"), ({"fps": 1001}, "fps"), ({"fps": math.nan}, "fps"),
+    ({"fps": 51}, "fps"),  # a GIF's delays are hundredths of a second: 60 fps played at 100
     ({"fps": 1.5}, "fps"), ({"fps": "x"}, "fps"), ({"fps": True}, "fps"),
     ({"size_px": 99}, "size_px"), ({"size_px": 8193}, "size_px"), ({"size_px": 0}, "size_px"),
     ({"size_px": math.nan}, "size_px"),
@@ -208,13 +209,15 @@ def test_animate_refuses_bad_frame_rates_sizes_and_instances(tmp_path, keywords,
     assert not list(tmp_path.iterdir())
 
 
-@pytest.mark.parametrize("keywords", [{"fps": 1}, {"fps": 1000}, {"fps": np.int64(15)},
-                                      {"size_px": 100}, {"size_px": 8192}])
-def test_animate_accepts_its_boundaries(tmp_path, keywords):
+@pytest.mark.parametrize("keywords, name", [
+    ({"fps": 1}, "movie.gif"), ({"fps": 50}, "movie.gif"), ({"fps": 1000}, "movie.mp4"),
+    ({"fps": np.int64(15)}, "movie.gif"), ({"size_px": 100}, "movie.gif"),
+    ({"size_px": 8192}, "movie.gif")])
+def test_animate_accepts_its_boundaries(tmp_path, keywords, name):
     pytest.importorskip("matplotlib")
     # accepted: the instance out of range is refused next, before anything is drawn
     with pytest.raises(ValueError, match=r"^instances must be in \[0, 2\), got \[2\]"):
-        recorded_result().animate(tmp_path / "movie.gif", instances=[2], **keywords)
+        recorded_result().animate(tmp_path / name, instances=[2], **keywords)
 
 
 # ---------------------------------------------------------------- planner
