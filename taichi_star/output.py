@@ -167,20 +167,19 @@ def to_netcdf(result, path) -> Path:
 
 
 def _file_kind(path: Path) -> str:
-    """"parquet", "netcdf" or "csv", by the file's first bytes where it can be read (the
-    writers take any name: "x.pq" was read as a CSV whose sidecar did not exist), else by its
-    suffix."""
+    """"parquet", "netcdf" or "csv": by the file's first bytes where they say (the writers take
+    any name: "x.pq" was read as a CSV whose sidecar did not exist), else by its suffix (a
+    damaged ".parquet" is then named as one)."""
     try:
         with open(path, "rb") as file:
             head = file.read(8)
     except OSError:
         head = b""
-    if head.startswith(b"PAR1") or (not head and path.suffix.lower() == ".parquet"):
+    if head.startswith(b"PAR1"):
         return "parquet"
-    if head.startswith((b"\x89HDF\r\n\x1a\n", b"CDF")) or (
-            not head and path.suffix.lower() == ".nc"):
+    if head.startswith((b"\x89HDF\r\n\x1a\n", b"CDF")):
         return "netcdf"
-    return "csv"
+    return {".parquet": "parquet", ".nc": "netcdf"}.get(path.suffix.lower(), "csv")
 
 
 def read_provenance(path) -> dict:
