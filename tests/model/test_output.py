@@ -100,21 +100,6 @@ def test_csv_parquet_and_netcdf_round_trip_with_the_same_provenance(recorded, tm
         assert read_provenance(name)["parameters"] == facts[0]["parameters"]
 
 
-def test_the_sensitivities_are_written_with_their_provenance(tmp_path):
-    """They were in no file (an audit): now tables of to_parquet and to_csv."""
-    from taichi_star.output import read_provenance
-
-    result = ts.simulate([ts.StarParams(gait="A1")], 0.01, ts.SolverConfig(dt=2e-3),
-                         record_interval_s=0.004, sensitivities=("alpha",))
-    for table in ("sensitivities", "trajectory_sensitivities"):
-        path = result.to_parquet(tmp_path / f"{table}.parquet", table=table)
-        pd.testing.assert_frame_equal(pd.read_parquet(path), getattr(result, table))
-        assert read_provenance(path)["solver"]["dt"] == 2e-3
-        csv = result.to_csv(tmp_path / f"{table}.csv", table=table)
-        back = pd.read_csv(csv)
-        np.testing.assert_array_equal(back.to_numpy(dtype=float),
-                                      getattr(result, table).to_numpy(dtype=float))
-
 
 def test_xarray_holds_the_tables_with_units_and_survives_netcdf(recorded, tmp_path):
     import xarray as xr

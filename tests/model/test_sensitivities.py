@@ -4,6 +4,7 @@ differences of whole runs, and the rules of the API."""
 import dataclasses
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from taichi_star import SolverConfig, StarParams, sensitivities, simulate
@@ -395,3 +396,16 @@ def test_a_delay_on_the_step_grid_warns_and_one_off_it_is_differentiable(taichi_
         table = check_sensitivities([BASE.replace(gait="A1+A2", actuator_delays=off_grid)], 0.2,
                                     SolverConfig(**TIGHT), ("actuator_delays[1]",))
     assert_matches_differences(table)
+
+
+def test_the_sensitivities_are_written_with_their_provenance(euler_run, tmp_path):
+    """They were in no file (an audit): now tables of to_parquet and to_csv."""
+    from taichi_star.output import read_provenance
+
+    for table in ("sensitivities", "trajectory_sensitivities"):
+        path = euler_run.to_parquet(tmp_path / f"{table}.parquet", table=table)
+        pd.testing.assert_frame_equal(pd.read_parquet(path), getattr(euler_run, table))
+        assert read_provenance(path)["solver"]["newton_tol"] == TIGHT["newton_tol"]
+        csv = euler_run.to_csv(tmp_path / f"{table}.csv", table=table)
+        np.testing.assert_array_equal(pd.read_csv(csv).to_numpy(dtype=float),
+                                      getattr(euler_run, table).to_numpy(dtype=float))
