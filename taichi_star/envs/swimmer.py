@@ -426,8 +426,9 @@ class StarSwimmerVectorEnv(VectorEnv):
             raise ValueError(f"seed must be None, an int or a list of {self.num_envs} seeds, "
                              f"got {seed!r}")
         goals = goal_from_options(options, self.num_envs)
-        # the vector env's own generator takes an int seed only; the robots' are set below
-        super().reset(seed=seed if is_whole(seed) else None)
+        # the vector env's own generator takes a Python int seed only (a NumPy one raised
+        # gymnasium's error, not ValueError; an audit); the robots' are set below
+        super().reset(seed=seeds[0] if is_whole(seed) else None)
         rows = np.flatnonzero(mask)
         for b in rows:
             if seeds[b] is not None:  # as Env.reset: no seed keeps the robot's generator going
