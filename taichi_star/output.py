@@ -209,10 +209,13 @@ def read_provenance(path) -> dict:
 
 def summary_of_dataset(dataset) -> pd.DataFrame:
     """The per-instance table of a `to_xarray` Dataset (or one read from netCDF): every
-    variable and coordinate along `instance` alone, as columns; `StarParams.from_row` reads
-    its rows."""
+    variable and coordinate along `instance` alone, as columns (the `instance` coordinate
+    first where the summary had it as a column: a `run_batch` result's);
+    `StarParams.from_row` reads its rows."""
     names = [name for name in [*dataset.coords, *dataset.data_vars]
              if dataset[name].dims == ("instance",) and name != "instance"]
+    if dataset["instance"].attrs.get("summary_column") == 1:
+        names.insert(0, "instance")
     return pd.DataFrame({name: dataset[name].to_numpy() for name in names})
 
 
@@ -231,7 +234,10 @@ def to_xarray(result):
     # is the coordinate; a plain result's instances are its rows
     instances = (summary["instance"].to_numpy() if "instance" in summary
                  else np.arange(len(summary)))
-    coordinates = {"instance": instances}
+    # summary_column: whether the summary had the column, so that `summary_of_dataset` gives a
+    # batch's back (it dropped it) and adds none to a plain result's (1/0: netCDF has no bool)
+    coordinates = {"instance": ("instance", instances,
+                                {"summary_column": int("instance" in summary)})}
     variables = {}
     for name in summary.columns.drop("instance", errors="ignore"):
         values = summary[name].to_numpy()

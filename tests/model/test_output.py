@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 import taichi_star as ts
-from taichi_star.output import column_unit
+from taichi_star.output import column_unit, summary_of_dataset
 
 
 # the second robot's actuator profile is not the default: the files must carry it, not a name
@@ -138,6 +138,12 @@ def test_a_batchs_result_goes_to_xarray_by_its_instance_column(recorded, tmp_pat
         np.testing.assert_array_equal(dataset[name], plain[name])
     with xr.open_dataset(batch.to_netcdf(tmp_path / "batch.nc")) as back:
         np.testing.assert_array_equal(back.centroid_y_mm, plain.centroid_y_mm)
+        # the batch's summary back with its instance column first (it was dropped: an audit),
+        # a plain result's without one
+        table = summary_of_dataset(back)
+    assert list(table.columns[:2]) == list(batch.summary.columns[:2])
+    np.testing.assert_array_equal(table.instance, batch.summary.instance)
+    assert "instance" not in summary_of_dataset(plain).columns
     first_only = dataclasses.replace(batch, trajectory=batch.trajectory[
         batch.trajectory.instance == 0])
     partial = first_only.to_xarray()
