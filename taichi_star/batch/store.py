@@ -150,7 +150,7 @@ def _is_temporary(path: Path) -> bool:
 def _readable_stamp(path: Path) -> Optional[Dict]:
     """The taichi_star stamp of a stored chunk file, None where it cannot be read (a damaged
     file: the verification recomputes it)."""
-    pa, pq = _parquet()
+    _, pq = _parquet()
     try:
         raw = (pq.read_schema(path).metadata or {}).get(METADATA_KEY)
         stamp = json.loads(raw) if raw is not None else None
