@@ -47,13 +47,23 @@ def file_path(path, what: str) -> Path:
     return Path(path)
 
 
+TEMPORARY_MARK = ".tmp-"
+"""`write_atomic` writes NAME first as ".NAME.tmp-PID" (`is_temporary`)."""
+
+
+def is_temporary(path: Path) -> bool:
+    """Whether `path` names a temporary file of `write_atomic`, left whole or not by a killed
+    writer: never a result."""
+    return path.name.startswith(".") and TEMPORARY_MARK in path.name
+
+
 def write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception]] = None):
     """Write `data` to `path` whole or not at all: into a temporary file beside it, flushed to
     disk, then renamed over it; a kill or a full disk leaves any previous file untouched. With
     `failure`, an OSError (a full disk) is raised as `failure(reason)` instead, the reason one
     line naming the file and the error ("cannot write x.csv (No space left on device)")."""
     path = Path(path)
-    temporary = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    temporary = path.with_name(f".{path.name}{TEMPORARY_MARK}{os.getpid()}")
     try:
         with open(temporary, "wb") as handle:
             handle.write(data)

@@ -442,7 +442,10 @@ class Simulator:
             raise ValueError(f"the saved state has {snapshot.n_instances} instances at dt = "
                              f"{snapshot.dt} s; this simulator {self.n_instances} at "
                              f"{self.solver.dt} s")
-        for b, (saved, own) in enumerate(zip(snapshot.params or (), self._parameter_texts)):
+        # compared only where a difference is refused (other_params=True without sensitivities
+        # takes any parameters: no need to compare 65,536 instances' texts)
+        checked = snapshot.params if (self.directions or not other_params) else None
+        for b, (saved, own) in enumerate(zip(checked or (), self._parameter_texts)):
             changed = [name for name in own if saved.get(name) != own[name]]
             if changed and self.directions:
                 # the replicas carry their tangents as offsets of ±ε of the saved parameters,

@@ -41,7 +41,7 @@ import pandas as pd
 from ..actuation import CurvatureProfile
 from ..checks import is_whole
 from ..extras import require
-from ..provenance import code_version, write_atomic
+from ..provenance import code_version, is_temporary, write_atomic
 from .tasks import ChunkTask
 
 MANIFEST = "manifest.json"
@@ -141,12 +141,6 @@ def _decode(frame: pd.DataFrame, types: Dict[str, str]) -> pd.DataFrame:
     return frame
 
 
-def _is_temporary(path: Path) -> bool:
-    """Whether `path` is a temporary file of `write_atomic` (".NAME.tmp-PID"), left whole or
-    not by a killed run: never a result."""
-    return path.name.startswith(".") and ".tmp-" in path.name
-
-
 def _readable_stamp(path: Path) -> Optional[Dict]:
     """The taichi_star stamp of a stored chunk file, None where it cannot be read (a damaged
     file: the verification recomputes it)."""
@@ -230,7 +224,7 @@ class RunStore:
         # a folder holding only a killed run's temporary files (its first manifest was being
         # written) is empty: they are removed below
         if old is None and self.path.exists() and any(
-                not _is_temporary(entry) for entry in self.path.iterdir()):
+                not is_temporary(entry) for entry in self.path.iterdir()):
             done = self._orphan_chunks(tasks, resume)
         if old is not None:
             finished = self._chunk_files()
@@ -261,7 +255,7 @@ class RunStore:
             raise RunStoreError(f"{self.flag} {self.path}: cannot create it ({error.strerror})") \
                 from None
         for stale in self.path.iterdir():  # left by a killed run
-            if _is_temporary(stale):
+            if is_temporary(stale):
                 self._remove(stale)
         self.manifest = {"definition": self.definition,
                          "definition_sha256": self.definition_sha256, "code": version,
