@@ -139,6 +139,7 @@ class BatchEngine:
         if lanes > 1:
             for name, dtype in (("newton_iterations", ti.i32), ("newton_converged", ti.i32),
                                 ("newton_finite", ti.i32), ("newton_refactor", ti.i32),
+                                ("newton_every_iteration", ti.i32),
                                 ("newton_previous_update", float),
                                 ("newton_largest_residual", float), ("lane_phase", ti.i32),
                                 ("lane_last_step", ti.i32), ("lane_halvings", ti.i32),
@@ -407,15 +408,16 @@ class BatchEngine:
         (converged, finite); on failure the positions are restored to the start of the step."""
         inertia_scale, rate_gain = self.prepare_step(b, start_time, end_time, h, ratio, use_history,
                                                      extrapolate)
-        iterations, converged, finite, previous_update = 0, 0, 1, 0.0
+        iterations, converged, finite, previous_update, every_iteration = 0, 0, 1, 0.0, 0
         refactor = self.first_refactor(b, inertia_scale, rate_gain)
         while self.newton_goes_on(iterations, converged, finite):
             largest_residual = self.assemble_newton(b, inertia_scale, rate_gain, refactor)
             if refactor:
                 self.factor(b, inertia_scale, rate_gain)
             self.system.solve(b)
-            iterations, converged, finite, refactor, previous_update = self.newton_update(
-                b, iterations, previous_update, largest_residual)
+            iterations, converged, finite, refactor, previous_update, every_iteration = \
+                self.newton_iteration(b, iterations, previous_update, largest_residual,
+                                      every_iteration)
         return self.finish_newton(b, rate_gain, iterations, converged, finite)
 
     @ti.func
@@ -463,11 +465,35 @@ class BatchEngine:
         return largest_residual
 
     @ti.func
-    def newton_update(self, b, iterations, previous_update, largest_residual):
+    def newton_iteration(self, b, iterations, previous_update, largest_residual,
+                         every_iteration):
+        """End instance b's Newton iteration after the solve: `newton_update`, and where a
+        chord or lagged iteration (`every_iteration` 0) has failed, ran out of iterations or
+        made a non-finite update, the solve starts again from the step's start q_k with a
+        Jacobian factored every iteration (`every_iteration` 1, Newton's), its own max_newton
+        iterations. A chord update that fails to contract is applied before the iteration
+        refactors, and at a firing that can throw the iterate where no later update
+        converges although Newton's from the step's start does (a damped A1+A3 robot's
+        re-firing: the chord ran out of iterations, the step was redone in substeps, and the
+        shape ended 5·10⁻⁴ m off Newton's); the retry costs only solves that failed anyway,
+        so runs without such a failure keep their bits. Returns (iterations, converged,
+        finite, refactor, this update's size, every_iteration)."""
+        iterations, converged, finite, refactor, update_size = self.newton_update(
+            b, iterations, previous_update, largest_residual, every_iteration)
+        if self.jacobian_mode[None] != JACOBIAN_NEWTON and every_iteration == 0 \
+                and converged == 0 and not self.newton_goes_on(iterations, converged, finite):
+            self.count_solve(b, iterations)
+            for n in range(self.n_nodes):
+                self.state.positions[b, n] = self.state.previous[b, n]
+            iterations, finite, refactor, update_size, every_iteration = 0, 1, 1, 0.0, 1
+        return iterations, converged, finite, refactor, update_size, every_iteration
+
+    @ti.func
+    def newton_update(self, b, iterations, previous_update, largest_residual, every_iteration):
         """Apply the Newton update that rhs[b] holds (solved) to instance b's positions after
         `iterations` updates, the last of size `previous_update` (m). Returns (iterations,
-        converged, finite, refactor: for the chord and lagged Jacobians whether the next
-        iteration refactors, this update's size)."""
+        converged, finite, refactor: for the chord and lagged Jacobians, unless they factor
+        `every_iteration`, whether the next iteration refactors, this update's size)."""
         finite = 1
         largest_update = 0.0
         for n in range(self.n_nodes):
@@ -492,10 +518,17 @@ class BatchEngine:
         # at least 4× per iteration (then each kept iteration saves the Jacobian's assembly
         # and LU)
         refactor = 1
-        if self.jacobian_mode[None] != JACOBIAN_NEWTON \
+        if self.jacobian_mode[None] != JACOBIAN_NEWTON and every_iteration == 0 \
                 and (iterations == 1 or largest_update < 0.25 * previous_update):
             refactor = 0
         return iterations, converged, finite, refactor, largest_update
+
+    @ti.func
+    def count_solve(self, b, iterations):
+        """Count a Newton solve of instance b that made `iterations` updates."""
+        self.state.newton_total[b] = self.state.newton_total[b] + iterations
+        self.state.newton_solves[b] = self.state.newton_solves[b] + 1
+        self.state.newton_max[b] = ti.max(self.state.newton_max[b], iterations)
 
     @ti.func
     def finish_newton(self, b, rate_gain, iterations, converged, finite):
@@ -505,9 +538,7 @@ class BatchEngine:
         (converged, finite)."""
         if converged == 0 or iterations > LAGGED_KEEP_MAX_UPDATES:
             self.kept_inertia_scale[b] = 0.0
-        self.state.newton_total[b] = self.state.newton_total[b] + iterations
-        self.state.newton_solves[b] = self.state.newton_solves[b] + 1
-        self.state.newton_max[b] = ti.max(self.state.newton_max[b], iterations)
+        self.count_solve(b, iterations)
         for n in range(self.n_nodes):
             if converged == 1:
                 self.state.velocities[b, n] = self.implicit_velocity(b, n, rate_gain)
@@ -1018,10 +1049,13 @@ class BatchEngine:
             for lane in range(self.lanes):
                 b = self.group_member(g, lane)
                 if self.lane_iterates(b):
-                    iterations, converged, finite, refactor, largest_update = self.newton_update(
-                        b, self.newton_iterations[b], self.newton_previous_update[b],
-                        self.newton_largest_residual[b])
+                    iterations, converged, finite, refactor, largest_update, every_iteration = \
+                        self.newton_iteration(b, self.newton_iterations[b],
+                                              self.newton_previous_update[b],
+                                              self.newton_largest_residual[b],
+                                              self.newton_every_iteration[b])
                     self.newton_iterations[b] = iterations
+                    self.newton_every_iteration[b] = every_iteration
                     self.newton_converged[b] = converged
                     self.newton_finite[b] = finite
                     self.newton_refactor[b] = refactor
@@ -1082,6 +1116,7 @@ class BatchEngine:
         self.newton_converged[b] = 0
         self.newton_finite[b] = 1
         self.newton_refactor[b] = self.first_refactor(b, inertia_scale, rate_gain)
+        self.newton_every_iteration[b] = 0
         self.newton_previous_update[b] = 0.0
         self.lane_phase[b] = LANE_ITERATES
 

@@ -57,7 +57,7 @@ class SimulationResult:
     | newton_iterations_max | — | most Newton iterations of one solve (≥ the mean) |
     | factorisations_mean | — | Newton matrices assembled and factored per solve: newton_iterations_mean with Newton's Jacobian, fewer with the chord's (which keeps a factorisation while it contracts) |
     | substep_retries | — | steps redone with substeps |
-    | newton_capped | — | a Newton solve used all max_newton iterations (ran out of them, or converged on the last; for an "ok" instance that ran out: a step accepted only after a retry rescued it; in f32 also a RuntimeWarning). A retry for a non-finite update counts in substep_retries without it |
+    | newton_capped | — | a Newton solve used all max_newton iterations (ran out of them, or converged on the last; for an "ok" instance that ran out: a step accepted only after a retry rescued it, with the chord or lagged Jacobian maybe the same step's solve started again with Newton's; in f32 also a RuntimeWarning). A retry for a non-finite update counts in substep_retries without it |
     | status | — | "ok", "newton_failed", "non_finite" or (adaptive steps) "step_limit" |
     | failure_time_s | s | simulated time of the failure (NaN when ok) |
 

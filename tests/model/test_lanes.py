@@ -68,15 +68,19 @@ def test_chord_and_lagged_jacobians_in_an_engine_with_lanes_as_each_instance_alo
     """The chord and lagged Jacobians keep or refactor each instance's factorisation as that
     instance's iteration contracts (the lagged one also from step to step); in an engine with
     lanes their groups hold one instance each, and every instance gets the bits of the engine
-    without lanes, retries included."""
-    solver = ts.SolverConfig(integrator="bdf2", dt=0.01, max_newton=4, max_substep_halvings=2,
+    without lanes, retries included: at most 3 iterations, the heating robots' solves run out,
+    start again with Newton's Jacobian, run out again, and are retried in substeps (some
+    rescued, some frozen)."""
+    solver = ts.SolverConfig(integrator="bdf2", dt=0.01, max_newton=3, max_substep_halvings=2,
                              jacobian=jacobian)
     # the batch of the test above, whose engines this one shares (the chord is a setting)
     params = [p.replace(damping_time=1e-3) for p in BATCH]
     alone = run(1, params, 0.1, solver, record_interval_s=0.05)
     together = run(8, params, 0.1, solver, record_interval_s=0.05)
     assert_same_bits(alone, together)
-    assert together.summary["substep_retries"].sum() > 0
+    summary = together.summary
+    frozen = (summary["status"] != "ok").sum()
+    assert summary["newton_capped"].any() and summary["substep_retries"].sum() > frozen > 0
 
 
 @pytest.mark.parametrize("count, jacobian, lockstep", [
