@@ -3,7 +3,8 @@
 The sidecar of `fig4c.csv` is `fig4c.csv.json`: the study and its command line, the package
 version, git commit and dirty flag, the model (preset and every StarParams field) and solver
 configuration, Taichi and Python versions, the machine (CPU model, cores, vector instruction
-sets, cache sizes, GPU) and the date.
+sets, cache sizes, GPU), the date and the wall seconds the study had run when it wrote the
+table.
 """
 
 from __future__ import annotations
@@ -15,10 +16,15 @@ import os
 import platform
 import shlex
 import subprocess
+import time
 from pathlib import Path
 from typing import Dict, Mapping, Optional, Sequence
 
 from taichi_star.batch import code_version
+
+STARTED = time.monotonic()
+"""When the study's process imported this module (the command line imports it first): a
+sidecar's `elapsed_s` counts from here."""
 
 
 def cpuinfo_text() -> str:
@@ -126,7 +132,8 @@ def taichi_version() -> str:
 def record(study: str, argv: Sequence[str], model: Optional[Mapping] = None,
            solver=None, extra: Optional[Mapping] = None) -> Dict[str, object]:
     """The provenance of one study run. `model`: the preset name and the base StarParams (or
-    any description of the instances); `solver`: a SolverConfig (or a description)."""
+    any description of the instances); `solver`: a SolverConfig (or a description);
+    `elapsed_s`: wall seconds from the study's start to this record (its table's writing)."""
     code = code_version()
     return {
         "study": study,
@@ -142,6 +149,7 @@ def record(study: str, argv: Sequence[str], model: Optional[Mapping] = None,
         "python_version": platform.python_version(),
         "machine": machine(),
         "date": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
+        "elapsed_s": round(time.monotonic() - STARTED, 1),
         **({"details": _plain(extra)} if extra else {}),
     }
 

@@ -36,7 +36,9 @@ COMMANDS = {
     "stability": ["--workers", "2"],
     "scaling": [],
     "sensitivity": ["--preset", "accurate"],
-    "elasticities": ["--check", "alpha,drag_perpendicular"],
+    "elasticities": ["--check", "alpha,drag_perpendicular,joint_radius,tip_radius,cylinder_drag,"
+                     "cylinder_diameter,fluid_density,limb_stiffness_ratio,youngs_modulus,"
+                     "added_mass_coeff,thickness"],
     "elasticities_accurate": ["elasticities", "--preset", "accurate", "--prefix",
                               "elasticities_accurate", "--check", "alpha,drag_perpendicular"],
 }

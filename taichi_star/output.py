@@ -35,9 +35,11 @@ ANIMATION_SIZE_PX = (100, 8192)
 """Allowed widths of `animate`'s movie, pixels (lowest, highest): a 1-inch figure at 100 dpi
 up to what a frame of 8192² RGBA pixels (268 MB) still holds in memory."""
 
-UNITS = {"_per_wall_s": "1/s", "_per_s": "1/s", "_gb_s": "GB/s", "_mm_s": "mm/s", "_mm": "mm",
-         "_deg": "degree", "_ms": "ms", "_us": "us", "_s": "s", "_m": "m"}
-"""Units of result columns by name suffix, the first match counting (longer suffixes first)."""
+UNITS = {"_seconds_per_wall_s": "1", "_seconds_per_s": "1", "_per_wall_s": "1/s", "_per_s": "1/s",
+         "_gb_s": "GB/s", "_mm_s": "mm/s", "_mm": "mm", "_deg": "degree", "_ms": "ms", "_us": "us",
+         "_s": "s", "_m": "m"}
+"""Units of result columns by name suffix, the first match counting (longer suffixes first):
+simulated seconds per wall second are a ratio, robot-steps per second a rate."""
 PARAMETER_COLUMN_UNITS = {parameter_column(name): unit for name, unit in PARAMETER_UNITS.items()}
 """Units of the numeric parameter columns (youngs_modulus_pa: Pa, alpha: 1)."""
 

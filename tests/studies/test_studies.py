@@ -5,6 +5,9 @@ packaged experiment data."""
 
 import json
 import os
+import shlex
+import time
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -17,7 +20,9 @@ from taichi_star import provenance
 from taichi_star.gait import Gait, symmetry_classes
 from taichi_star.experiment import (FIG4C_COLUMNS, PAPER_GAITS)
 
-from studies import cli, gaits as gaits_study, provenance as study_provenance, study_names
+from studies import (cli, gaits as gaits_study, provenance as study_provenance, reproduce,
+                     study_names)
+from studies.cli import COMMITTED_RESULTS
 from studies.__main__ import main as studies_main
 
 QUICK = ["--quick", "--no-progress"]
@@ -249,12 +254,41 @@ def test_reproduce_lists_one_command_per_committed_result(capsys):
     assert any(line.startswith("python -m studies fig4c --preset accurate") for line in lines)
 
 
+SIDECAR_OF = {"calibrate": "calibration"}
+"""The committed table of a reproduce entry named otherwise."""
+
+
+def _run_flags(command):
+    """A study command's words without where it wrote (--out, --run-dir) and --no-progress."""
+    words, kept = shlex.split(command), []
+    while words:
+        word = words.pop(0)
+        if word in ("--out", "--run-dir"):
+            words.pop(0)
+        elif word != "--no-progress":
+            kept.append(word)
+    return kept
+
+
+@pytest.mark.parametrize("name", [n for n in reproduce.COMMANDS if n != "animate"])
+def test_reproduce_runs_each_committed_result_as_its_sidecar_says_it_was_made(name):
+    """`reproduce` regenerates what the docs quote only if it runs each study with the flags
+    of the committed run (its elasticities check once named 2 of the 11 parameters whose
+    cells the docs quote). `animate` writes animations, which carry no sidecar."""
+    sidecar = COMMITTED_RESULTS / f"{SIDECAR_OF.get(name, name)}.csv.json"
+    made_with = json.loads(sidecar.read_text())["command"]
+    assert _run_flags(" ".join(reproduce.command(name, Path("x"))[1:])) == \
+        _run_flags(made_with.removeprefix("python "))
+
+
 # ----------------------------------------------------------------------------- studies, quick
 
 def test_fig4c_quick_into_a_fresh_run_folder(tmp_path, monkeypatch):
     from studies import fig4c
     monkeypatch.chdir(tmp_path)
+    started = time.monotonic() - study_provenance.STARTED
     fig4c.main(QUICK)
+    finished = time.monotonic() - study_provenance.STARTED
     (folder,) = (tmp_path / "runs" / "fig4c").iterdir()  # runs/fig4c/<timestamp>/
     table = pd.read_csv(folder / "fig4c.csv")
     assert list(table.columns) == FIG4C_COLUMNS
@@ -279,6 +313,9 @@ def test_fig4c_quick_into_a_fresh_run_folder(tmp_path, monkeypatch):
                 "taichi_version", "machine", "date"):
         assert key in sidecar, key
     assert sidecar["taichi_star_version"] == taichi_star.__version__
+    # the study's wall time when it wrote the table, counted from the study's start (in a test
+    # process: the module's import; rounded to 0.1 s)
+    assert started - 0.05 <= sidecar["elapsed_s"] <= finished + 0.05
     assert sidecar["command"] == "python -m studies fig4c --quick --no-progress"
     assert sidecar["model"]["preset"] == "paper" and sidecar["solver"]["dt"] == cli.QUICK_DT
     assert sidecar["model"]["params"]["alpha"] == StarParams().alpha

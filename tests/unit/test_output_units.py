@@ -10,7 +10,7 @@ from taichi_star.params import PARAMETER_UNITS, PER_ACTUATOR_FIELDS, StarParams
 @pytest.mark.parametrize("name, unit", [
     ("speed_mm_s", "mm/s"), ("displacement_x_mm", "mm"), ("heading_deg", "degree"),
     ("failure_time_s", "s"), ("robot_steps_per_s", "1/s"),
-    ("timing_robot_seconds_per_wall_s", "1/s"), ("bandwidth_gb_s", "GB/s"), ("h_ms", "ms"),
+    ("timing_robot_seconds_per_wall_s", "1"), ("robot_seconds_per_s", "1"), ("bandwidth_gb_s", "GB/s"), ("h_ms", "ms"),
     ("step_us", "us"), ("youngs_modulus_pa", "Pa"), ("fluid_density_kg_m3", "kg/m^3"),
     ("cylinder_mass_per_height_kg_m", "kg/m"), ("joint_radius_m", "m"), ("status", ""),
     ("gait", "")])
