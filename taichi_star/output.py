@@ -8,6 +8,7 @@ import dataclasses
 import datetime
 import json
 import platform
+import re
 import tempfile
 from pathlib import Path
 from typing import Mapping, Optional, Sequence
@@ -19,7 +20,7 @@ from .checks import is_whole
 from .extras import require
 from .geometry import CENTRE
 from .params import PARAMETER_UNITS, StarParams, check_number, parameter_column
-from .provenance import code_version, file_path, write_atomic
+from .provenance import code_version, file_path, require_folder, write_atomic
 
 PROVENANCE_KEY = "taichi_star"
 """Key of the provenance in a Parquet file's schema metadata (JSON)."""
@@ -44,8 +45,23 @@ PARAMETER_COLUMN_UNITS = {parameter_column(name): unit for name, unit in PARAMET
 """Units of the numeric parameter columns (youngs_modulus_pa: Pa, alpha: 1)."""
 
 
+DERIVATIVE_COLUMN = re.compile(r"^d\((?P<output>.+)\)/d\((?P<field>[a-z_]+)(\[\d+\])?\)$")
+"""A sensitivity column's name, "d(x_mm)/d(youngs_modulus)" or "d(x_mm)/d(actuator_gains[3])"."""
+
+
 def column_unit(name: str) -> str:
-    """The unit of a result column, from the parameter columns or its suffix ("" if none)."""
+    """The unit of a result column, from the parameter columns or its suffix ("" if none); a
+    sensitivity column's is its output's over its field's ("mm/Pa", "(mm/s)/m"; the output's
+    alone for a dimensionless field)."""
+    derivative = DERIVATIVE_COLUMN.match(name)
+    if derivative:
+        output = column_unit(derivative["output"])
+        field = PARAMETER_UNITS.get(derivative["field"], "")
+        if not output or not field:
+            return ""
+        if field == "1":
+            return output
+        return "/".join(f"({unit})" if "/" in unit else unit for unit in (output, field))
     if name in PARAMETER_COLUMN_UNITS:
         return PARAMETER_COLUMN_UNITS[name]
     for suffix, unit in UNITS.items():
@@ -59,11 +75,12 @@ def column_units(columns) -> dict:
     return {name: column_unit(name) for name in columns if column_unit(name)}
 
 
-def provenance(result) -> dict:
+def provenance(result, columns=None) -> dict:
     """What produced `result`, as the studies' CSV sidecars record it: taichi_star_version,
     git_commit, git_dirty; solver (every SolverConfig field); parameters (the StarParams
     fields equal across the instances, by field name) and varying_parameters (the fields that
-    differ, whose values are in the table's columns); units of the summary's columns; Taichi
+    differ, whose values are in the table's columns); units of the table's `columns` (default
+    the summary's); Taichi
     and Python versions; date; with the result's `timing` (a `simulate` call's), its phases in
     s (compilation apart), its robot-steps and robot_steps_per_s."""
     import taichi
@@ -87,7 +104,7 @@ def provenance(result) -> dict:
     return {"taichi_star_version": code["version"], "git_commit": code["commit"],
             "git_dirty": code["dirty"], "solver": dataclasses.asdict(result.solver),
             "parameters": parameters, "varying_parameters": varying,
-            "units": column_units(summary.columns),
+            "units": column_units(summary.columns if columns is None else columns),
             "taichi_version": ".".join(map(str, version)) if isinstance(version, (tuple, list))
             else str(version),
             "python_version": platform.python_version(),
@@ -130,7 +147,7 @@ def to_parquet(result, path, table: str = "summary") -> Path:
     at all, its `provenance` in the file's metadata (`read_provenance`). Returns the path."""
     path = file_path(path, "path of the Parquet file")
     frame = _table(result, table)
-    write_atomic(path, parquet_bytes(frame, provenance(result)), failure=OSError)
+    write_atomic(path, parquet_bytes(frame, provenance(result, frame.columns)), failure=OSError)
     return path
 
 
@@ -144,8 +161,9 @@ def to_csv(result, path, table: str = "summary") -> Path:
     sidecar = Path(f"{path}.json")
     write_atomic(path, frame.to_csv(index=False).encode(), failure=OSError)
     try:
-        write_atomic(sidecar, (json.dumps(provenance(result), indent=2, default=str)
-                               + "\n").encode(), failure=OSError)
+        facts = provenance(result, frame.columns)
+        write_atomic(sidecar, (json.dumps(facts, indent=2, default=str) + "\n").encode(),
+                     failure=OSError)
     except OSError:
         sidecar.unlink(missing_ok=True)
         raise
@@ -155,6 +173,7 @@ def to_csv(result, path, table: str = "summary") -> Path:
 def to_netcdf(result, path) -> Path:
     """Write `to_xarray(result)` as a netCDF file, whole or not at all. Returns the path."""
     path = file_path(path, "path of the netCDF file")
+    require_folder(path)
     require("netCDF4", "io")
     dataset = to_xarray(result)
     try:
@@ -296,6 +315,7 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
     from . import drawing
 
     path = file_path(path, "path of the .mp4 or .gif file")
+    require_folder(path)
     if result.shapes is None or result.topology is None:
         raise ValueError("animate needs recorded shapes of one topology: simulate with "
                          "record_interval_s > 0 and record_shapes=True")
@@ -377,7 +397,6 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
         writer = animation.FFMpegWriter(fps=fps)
     else:
         writer = animation.PillowWriter(fps=fps)
-    path.parent.mkdir(parents=True, exist_ok=True)
     # drawn into a scratch folder beside the path, then written whole or not at all: a kill or
     # a full disk leaves a movie already there as it was
     with tempfile.TemporaryDirectory(dir=path.parent) as folder:

@@ -57,12 +57,26 @@ def is_temporary(path: Path) -> bool:
     return path.name.startswith(".") and TEMPORARY_MARK in path.name
 
 
+def require_folder(path: Path, failure: Callable[[str], Exception] = OSError):
+    """Raise `failure(reason)` unless the folder `path` goes into is one ("cannot write x.csv:
+    its folder /data/run does not exist"): the writers create no folders, and a message naming
+    only the file does not say which folder is missing. Call it before computing what to
+    write."""
+    folder = path.parent
+    if not folder.is_dir():
+        reason = "is not a folder" if folder.exists() else "does not exist"
+        raise failure(f"cannot write {path.name}: its folder {folder} {reason}")
+
+
 def write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception]] = None):
     """Write `data` to `path` whole or not at all: into a temporary file beside it, flushed to
     disk, then renamed over it; a kill or a full disk leaves any previous file untouched. With
     `failure`, an OSError (a full disk) is raised as `failure(reason)` instead, the reason one
-    line naming the file and the error ("cannot write x.csv (No space left on device)")."""
+    line naming the file and the error ("cannot write x.csv (No space left on device)"), or
+    its folder where that is missing (`require_folder`)."""
     path = Path(path)
+    if failure is not None:
+        require_folder(path, failure)
     temporary = path.with_name(f".{path.name}{TEMPORARY_MARK}{os.getpid()}")
     try:
         with open(temporary, "wb") as handle:

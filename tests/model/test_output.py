@@ -77,6 +77,9 @@ def test_csv_parquet_and_netcdf_round_trip_with_the_same_provenance(recorded, tm
     assert_same_summary(back[summary.columns], summary)
     trajectory = recorded.to_parquet(tmp_path / "trajectory.parquet", table="trajectory")
     pd.testing.assert_frame_equal(pd.read_parquet(trajectory), recorded.trajectory)
+    # the units of the table written (the summary's were, 2026-12)
+    assert read_provenance(trajectory)["units"] == {"t_s": "s", "x_mm": "mm", "y_mm": "mm",
+                                                    "heading_deg": "degree"}
     facts = [read_provenance(path) for path in (csv, parquet, netcdf)]
     for fact in facts:
         for key in ("taichi_star_version", "git_commit", "git_dirty", "solver", "parameters",

@@ -7,6 +7,7 @@ naming it."""
 import dataclasses
 import errno
 import os
+import re
 import stat
 
 import numpy as np
@@ -93,11 +94,16 @@ def test_result_files_on_a_full_disk_or_in_a_missing_folder_name_the_file(result
             with pytest.raises(OSError, match=rf"^cannot write {name} \(No space left"):
                 write(tmp_path / name)
     assert {path.name: path.read_bytes() for path in tmp_path.iterdir()} == written
+    missing = tmp_path / "missing"
     for name, write in (("r.csv", second.to_csv), ("r.parquet", second.to_parquet),
-                        ("r.nc", second.to_netcdf)):
-        with pytest.raises(OSError, match=rf"^cannot write {name} \(No such file or directory\)$"):
-            write(tmp_path / "missing" / name)
-    assert not (tmp_path / "missing").exists()
+                        ("r.nc", second.to_netcdf), ("r.gif", second.animate)):
+        with pytest.raises(OSError, match=rf"^cannot write {name}: its folder "
+                                          rf"{re.escape(str(missing))} does not exist$"):
+            write(missing / name)
+    assert not missing.exists()  # animate made it until 2026-12
+    (tmp_path / "a_file").write_text("")
+    with pytest.raises(OSError, match=r"^cannot write r.csv: its folder .*a_file is not a folder$"):
+        second.to_csv(tmp_path / "a_file" / "r.csv")
 
 
 def test_a_csv_whose_sidecar_cannot_be_written_keeps_no_sidecar_of_another_result(

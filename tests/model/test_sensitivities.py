@@ -399,13 +399,24 @@ def test_a_delay_on_the_step_grid_warns_and_one_off_it_is_differentiable(taichi_
 
 
 def test_the_sensitivities_are_written_with_their_provenance(euler_run, tmp_path):
-    """They were in no file (an audit): now tables of to_parquet and to_csv."""
+    """They were in no file (an audit): now tables of to_parquet and to_csv, with the units of
+    their columns (the summary's were written, 2026-12): the directions are dimensionless, so
+    each derivative has its output's unit."""
     from taichi_star.output import read_provenance
 
+    trajectory_units = {"t_s": "s", **{f"d({output})/d({field})": unit for field in DIRECTIONS
+                                       for output, unit in (("x_mm", "mm"), ("y_mm", "mm"),
+                                                            ("heading_deg", "degree"))}}
     for table in ("sensitivities", "trajectory_sensitivities"):
         path = euler_run.to_parquet(tmp_path / f"{table}.parquet", table=table)
         pd.testing.assert_frame_equal(pd.read_parquet(path), getattr(euler_run, table))
         assert read_provenance(path)["solver"]["newton_tol"] == TIGHT["newton_tol"]
+        units = read_provenance(path)["units"]
+        if table == "trajectory_sensitivities":
+            assert units == trajectory_units
+        else:
+            assert units["d(signed_speed_mm_s)/d(alpha)"] == "mm/s"
+            assert len(units) == len(euler_run.sensitivities.columns)
         csv = euler_run.to_csv(tmp_path / f"{table}.csv", table=table)
         np.testing.assert_array_equal(pd.read_csv(csv).to_numpy(dtype=float),
                                       getattr(euler_run, table).to_numpy(dtype=float))

@@ -13,7 +13,14 @@ from taichi_star.params import PARAMETER_UNITS, PER_ACTUATOR_FIELDS, StarParams
     ("timing_robot_seconds_per_wall_s", "1"), ("robot_seconds_per_s", "1"), ("bandwidth_gb_s", "GB/s"), ("h_ms", "ms"),
     ("step_us", "us"), ("youngs_modulus_pa", "Pa"), ("fluid_density_kg_m3", "kg/m^3"),
     ("cylinder_mass_per_height_kg_m", "kg/m"), ("joint_radius_m", "m"), ("status", ""),
-    ("gait", "")])
+    ("gait", ""),
+    # sensitivities: the output's unit over the field's, the output's alone for a
+    # dimensionless field, none where either has none
+    ("d(x_mm)/d(alpha)", "mm"), ("d(x_mm)/d(youngs_modulus)", "mm/Pa"),
+    ("d(speed_mm_s)/d(joint_radius)", "(mm/s)/m"),
+    ("d(displacement_x_mm)/d(fluid_density)", "mm/(kg/m^3)"),
+    ("d(x_mm)/d(actuator_delays[2])", "mm/s"), ("d(heading_deg)/d(actuator_gains[3])", "degree"),
+    ("d(status)/d(alpha)", ""), ("d(x_mm)/d(gait)", "")])
 def test_column_unit_by_parameter_or_suffix(name, unit):
     assert column_unit(name) == unit
 
