@@ -614,34 +614,36 @@ class Output:
                                    f"({error.strerror or error})") from None
         return path
 
-    def _write(self, path: Path, data: bytes):
-        """`write_atomic`; a failure (a full disk) is a StudyOutputError naming the folder."""
-        write_atomic(path, data, failure=lambda reason: StudyOutputError(
-            f"--out {self.folder}: {reason}; the files written before are intact"))
-
     def write_csv(self, frame: pd.DataFrame, name: str, extra: Optional[Mapping] = None) -> Path:
-        """Write a table (no index, floats to 10 significant digits) and its JSON sidecar, each
-        whole or not at all (a kill or a full disk leaves the previous files)."""
-        path = self.path(name)
-        self._write(path, frame.to_csv(index=False, float_format="%.10g").encode())
-        return self._described(path, extra, frame)
+        """Write a table (no index, floats to 10 significant digits) and its JSON sidecar, both
+        whole or not at all (`_write_described`)."""
+        return self._write_described(
+            self.path(name), frame.to_csv(index=False, float_format="%.10g").encode(), extra,
+            frame)
 
     def write_parquet(self, frame: pd.DataFrame, name: str,
                       extra: Optional[Mapping] = None) -> Path:
         """Write a table as Parquet (typed columns, every float bit for bit) and its JSON
         sidecar; the provenance is also in the file's own metadata (key "taichi_star")."""
-        path = self.path(name)
-        self._write(path, parquet_bytes(frame, self._details(extra)))
-        return self._described(path, extra, frame)
+        return self._write_described(self.path(name), parquet_bytes(frame, self._details(extra)),
+                                     extra, frame)
 
     def _details(self, extra: Optional[Mapping]) -> dict:
         details = {**self.provenance.get("details", {}), **(extra or {})}
         return {**self.provenance, **({"details": details} if details else {})}
 
-    def _described(self, path: Path, extra: Optional[Mapping], frame: pd.DataFrame) -> Path:
-        self._write(provenance.sidecar_path(path),
-                    provenance.sidecar_text({**self._details(extra),
-                                             "units": column_units(frame.columns)}))
+    def _write_described(self, path: Path, data: bytes, extra: Optional[Mapping],
+                         frame: pd.DataFrame) -> Path:
+        """`write_atomic` of a table and its sidecar (the provenance, the study's wall time so
+        far and the unit of every column): a full disk leaves the previous pair, a kill at worst the new table without
+        a sidecar, never beside the previous run's; a failure is a StudyOutputError naming the
+        folder."""
+        sidecar = provenance.sidecar_text({**self._details(extra),
+                                           "elapsed_s": provenance.elapsed_s(),
+                                           "units": column_units(frame.columns)})
+        write_atomic(path, data, sidecar=(provenance.sidecar_path(path), sidecar),
+                     failure=lambda reason: StudyOutputError(
+                         f"--out {self.folder}: {reason}; the files written before are intact"))
         self.wrote(path)
         return path
 

@@ -132,8 +132,8 @@ def taichi_version() -> str:
 def record(study: str, argv: Sequence[str], model: Optional[Mapping] = None,
            solver=None, extra: Optional[Mapping] = None) -> Dict[str, object]:
     """The provenance of one study run. `model`: the preset name and the base StarParams (or
-    any description of the instances); `solver`: a SolverConfig (or a description);
-    `elapsed_s`: wall seconds from the study's start to this record (its table's writing)."""
+    any description of the instances); `solver`: a SolverConfig (or a description). A table's
+    sidecar adds `elapsed_s`, the wall seconds the study had run when it was written."""
     code = code_version()
     return {
         "study": study,
@@ -149,9 +149,13 @@ def record(study: str, argv: Sequence[str], model: Optional[Mapping] = None,
         "python_version": platform.python_version(),
         "machine": machine(),
         "date": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
-        "elapsed_s": round(time.monotonic() - STARTED, 1),
         **({"details": _plain(extra)} if extra else {}),
     }
+
+
+def elapsed_s() -> float:
+    """Wall seconds since the study started (`STARTED`), to 0.1 s."""
+    return round(time.monotonic() - STARTED, 1)
 
 
 def _plain(value):

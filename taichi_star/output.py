@@ -4,11 +4,14 @@ and an animation of the recorded shapes (MP4 through imageio-ffmpeg, or GIF)."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import datetime
+import hashlib
 import json
 import platform
 import re
+import subprocess
 import tempfile
 from pathlib import Path
 from typing import Mapping, Optional, Sequence
@@ -20,7 +23,7 @@ from .checks import is_whole
 from .extras import require
 from .geometry import CENTRE
 from .params import PARAMETER_UNITS, StarParams, check_number, parameter_column
-from .provenance import code_version, file_path, require_folder, write_atomic
+from .provenance import TEMPORARY_MARK, code_version, file_path, require_folder, write_atomic
 
 PROVENANCE_KEY = "taichi_star"
 """Key of the provenance in a Parquet file's schema metadata (JSON)."""
@@ -153,20 +156,18 @@ def to_parquet(result, path, table: str = "summary") -> Path:
 
 def to_csv(result, path, table: str = "summary") -> Path:
     """Write the result's `table` as CSV (floats to the last bit: pandas' `read_csv` gives them
-    back exactly) and its `provenance` as the JSON sidecar `<path>.json`, each whole or not
-    at all (a sidecar that cannot be written, the table written, is removed: the one there
-    before would describe another result). Returns the path."""
+    back exactly) and its `provenance` as the JSON sidecar `<path>.json`, with the table's
+    rows and SHA-256 (`read_provenance` checks them), both whole or not at all: a full disk
+    leaves the previous pair, a kill at worst the new table without a sidecar, never beside
+    the previous one's (`write_atomic`). Returns the path."""
     path = file_path(path, "path of the CSV file")
     frame = _table(result, table)
-    sidecar = Path(f"{path}.json")
-    write_atomic(path, frame.to_csv(index=False).encode(), failure=OSError)
-    try:
-        facts = provenance(result, frame.columns)
-        write_atomic(sidecar, (json.dumps(facts, indent=2, default=str) + "\n").encode(),
-                     failure=OSError)
-    except OSError:
-        sidecar.unlink(missing_ok=True)
-        raise
+    data = frame.to_csv(index=False).encode()
+    facts = {**provenance(result, frame.columns), "table_rows": len(frame),
+             "table_sha256": hashlib.sha256(data).hexdigest()}
+    write_atomic(path, data, failure=OSError,
+                 sidecar=(Path(f"{path}.json"),
+                          (json.dumps(facts, indent=2, default=str) + "\n").encode()))
     return path
 
 
@@ -176,15 +177,33 @@ def to_netcdf(result, path) -> Path:
     require_folder(path)
     require("netCDF4", "io")
     dataset = to_xarray(result)
-    try:
-        with tempfile.TemporaryDirectory(dir=path.parent) as folder:
-            scratch = Path(folder) / "result.nc"
-            dataset.to_netcdf(scratch)
-            data = scratch.read_bytes()
-    except OSError as error:  # naming the file asked for, not the scratch folder beside it
-        raise OSError(f"cannot write {path.name} ({error.strerror or error})") from None
+    # netCDF's library reports a full disk as a RuntimeError ("NetCDF: HDF error")
+    with _scratch_file(path, (OSError, RuntimeError)) as scratch:
+        dataset.to_netcdf(scratch)
+        data = scratch.read_bytes()
     write_atomic(path, data, failure=OSError)
     return path
+
+
+@contextlib.contextmanager
+def _scratch_file(path: Path, failures: tuple):
+    """A file to draw `path` into first, in a scratch folder beside it (".NAME.tmp-...":
+    `provenance.is_temporary`, removed after, left by a kill); `failures` raised while it is
+    written become an OSError naming `path` ("cannot write r.nc (No space left on device)"),
+    not the scratch folder."""
+    try:
+        with tempfile.TemporaryDirectory(dir=path.parent,
+                                         prefix=f".{path.name}{TEMPORARY_MARK}") as folder:
+            yield Path(folder) / path.name
+    except failures as error:
+        if isinstance(error, subprocess.CalledProcessError):
+            program = Path(str(error.cmd[0])).name if error.cmd else "the encoder"
+            reason = f"{program} exited with status {error.returncode}"
+        elif isinstance(error, OSError) and error.strerror:
+            reason = error.strerror
+        else:
+            reason = (str(error).splitlines() or [type(error).__name__])[0]
+        raise OSError(f"cannot write {path.name} ({reason})") from None
 
 
 def _file_kind(path: Path) -> str:
@@ -207,7 +226,8 @@ def read_provenance(path) -> dict:
     """The provenance written with a result file: from a Parquet file's metadata, a netCDF
     file's attributes (`provenance`) or a CSV file's sidecar. OSError where the file cannot be
     read; ValueError naming it where it holds no provenance (damaged, or not written by
-    `to_parquet`, `to_netcdf` or `to_csv`)."""
+    `to_parquet`, `to_netcdf` or `to_csv`), or where a CSV is no longer the table its
+    sidecar describes (its SHA-256 differs: damaged or edited since)."""
     path = file_path(path, "path of a result file")
     kind = _file_kind(path)
     source = path if kind in ("parquet", "netcdf") else Path(f"{path}.json")
@@ -219,13 +239,25 @@ def read_provenance(path) -> dict:
             xr = require("xarray", "io")
             with xr.open_dataset(path) as dataset:
                 return json.loads(dataset.attrs["provenance"])
-        return json.loads(source.read_text())
-    except (OSError, ImportError):
+        facts = json.loads(source.read_text())
+    except ImportError:
         raise
+    except OSError as error:
+        if error.errno is None or error.errno >= 0:
+            raise
+        # netCDF's library reports a damaged file as a negative error number ("NetCDF: HDF
+        # error"), not as an operating-system error
+        raise ValueError(f"{source}: no taichi_star provenance in it (damaged: "
+                         f"{error.strerror or error})") from None
     except Exception as error:  # noqa: BLE001 -- pyarrow's, xarray's and json's errors vary
         reason = str(error).splitlines()[0] if str(error) else ""
         raise ValueError(f"{source}: no taichi_star provenance in it ({type(error).__name__}"
                          f"{': ' + reason if reason else ''})") from None
+    written = facts.get("table_sha256") if isinstance(facts, dict) else None
+    if written is not None and hashlib.sha256(path.read_bytes()).hexdigest() != written:
+        raise ValueError(f"{path}: not the table its provenance {source.name} describes (its "
+                         f"SHA-256 differs: damaged or edited since it was written)")
+    return facts
 
 
 def summary_of_dataset(dataset) -> pd.DataFrame:
@@ -398,14 +430,15 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
     else:
         writer = animation.PillowWriter(fps=fps)
     # drawn into a scratch folder beside the path, then written whole or not at all: a kill or
-    # a full disk leaves a movie already there as it was
-    with tempfile.TemporaryDirectory(dir=path.parent) as folder:
-        scratch = Path(folder) / path.name
+    # a full disk leaves a movie already there as it was (ffmpeg reports a full disk by its
+    # exit status)
+    with _scratch_file(path, (OSError, subprocess.CalledProcessError)) as scratch:
         try:
             movie.save(scratch, writer=writer)
         finally:
             plt.close(fig)
-        write_atomic(path, scratch.read_bytes(), failure=OSError)
+        data = scratch.read_bytes()
+    write_atomic(path, data, failure=OSError)
     return path
 
 

@@ -4,11 +4,12 @@ record, and `write_atomic`, which every writer of results uses."""
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import os
 import subprocess
 from pathlib import Path
-from typing import Callable, Dict, Optional
+from typing import Callable, Dict, Optional, Tuple
 
 
 def code_version() -> Dict[str, object]:
@@ -68,30 +69,57 @@ def require_folder(path: Path, failure: Callable[[str], Exception] = OSError):
         raise failure(f"cannot write {path.name}: its folder {folder} {reason}")
 
 
-def write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception]] = None):
+def write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception]] = None,
+                 sidecar: Optional[Tuple[Path, bytes]] = None):
     """Write `data` to `path` whole or not at all: into a temporary file beside it, flushed to
     disk, then renamed over it; a kill or a full disk leaves any previous file untouched. With
     `failure`, an OSError (a full disk) is raised as `failure(reason)` instead, the reason one
     line naming the file and the error ("cannot write x.csv (No space left on device)"), or
-    its folder where that is missing (`require_folder`)."""
-    path = Path(path)
+    its folder where that is missing (`require_folder`).
+
+    `sidecar` (its path and data: the file's description) is written with it: both go to
+    temporary files first, then the previous sidecar is moved aside, the file renamed into
+    place (the previous sidecar put back if that fails) and the sidecar after it. A full disk
+    then leaves both previous files as they were, and a kill at worst the new file without a
+    sidecar, never beside the previous one's (which describes another result)."""
+    targets = [(Path(path), data)] + ([(Path(sidecar[0]), sidecar[1])] if sidecar else [])
+    temporaries = [target.with_name(f".{target.name}{TEMPORARY_MARK}{os.getpid()}")
+                   for target, _ in targets]
+    previous = temporaries[-1].with_name(f"{temporaries[-1].name}.previous")
     if failure is not None:
-        require_folder(path, failure)
-    temporary = path.with_name(f".{path.name}{TEMPORARY_MARK}{os.getpid()}")
+        for target, _ in targets:
+            require_folder(target, failure)
+    current = targets[0][0]
     try:
-        with open(temporary, "wb") as handle:
-            handle.write(data)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(temporary, path)
+        for current, _ in targets:
+            if current.is_dir():  # before anything moves (a folder would be moved aside)
+                raise IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR))
+        for (current, content), temporary in zip(targets, temporaries):
+            with open(temporary, "wb") as handle:
+                handle.write(content)
+                handle.flush()
+                os.fsync(handle.fileno())
+        current = targets[0][0]  # moving the previous sidecar aside is part of the table's write
+        if sidecar and os.path.lexists(targets[1][0]):
+            os.replace(targets[1][0], previous)
+        try:
+            os.replace(temporaries[0], current)
+        except OSError:
+            if os.path.lexists(previous):
+                os.replace(previous, targets[1][0])
+            raise
+        if sidecar:
+            current = targets[1][0]
+            os.replace(temporaries[1], current)
     except OSError as error:
         if failure is None:
             raise
-        raise failure(f"cannot write {path.name} ({error.strerror or error})") from None
+        raise failure(f"cannot write {current.name} ({error.strerror or error})") from None
     finally:
-        if temporary.exists():
-            temporary.unlink()
-    _sync_folder(path.parent)
+        for temporary in (*temporaries, previous):
+            if os.path.lexists(temporary):
+                os.unlink(temporary)
+    _sync_folder(targets[0][0].parent)
 
 
 def _sync_folder(folder: Path):

@@ -3,6 +3,7 @@
 
 import dataclasses
 import json
+import re
 
 import subprocess
 import sys
@@ -194,6 +195,28 @@ def test_a_movie_is_written_whole_or_leaves_the_previous_one(recorded, tmp_path,
             recorded.animate(path, instances=[1], size_px=200)
     assert path.read_bytes() == written
     assert [p.name for p in tmp_path.iterdir()] == ["movie.gif"]
+
+
+@pytest.mark.parametrize("name, failing, error, reason", [
+    ("r.nc", "xarray.Dataset.to_netcdf", RuntimeError("NetCDF: HDF error"), "NetCDF: HDF error"),
+    ("r.gif", "matplotlib.animation.Animation.save", OSError(28, "No space left on device"),
+     "No space left on device"),
+    ("r.mp4", "matplotlib.animation.Animation.save",
+     subprocess.CalledProcessError(1, ["/opt/bin/ffmpeg", "-y"]), "ffmpeg exited with status 1")])
+def test_a_file_drawn_beside_first_fails_naming_the_file_asked_for(recorded, tmp_path,
+                                                                   monkeypatch, name, failing,
+                                                                   error, reason):
+    """On a real full disk the scratch copy fails first (an audit): netCDF's library raised
+    "RuntimeError: NetCDF: HDF error", a GIF an OSError naming no file, ffmpeg a
+    CalledProcessError. Each is now an OSError naming the file asked for, and the scratch
+    folder beside it is gone."""
+    def fail(*args, **kwargs):
+        raise error
+    monkeypatch.setattr(failing, fail)
+    write = recorded.to_netcdf if name.endswith(".nc") else recorded.animate
+    with pytest.raises(OSError, match=rf"^cannot write {re.escape(name)} \({reason}\)$"):
+        write(tmp_path / name)
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_animation_refuses_results_without_shapes(tmp_path):

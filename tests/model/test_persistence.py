@@ -8,6 +8,7 @@ import dataclasses
 import errno
 import os
 import re
+from pathlib import Path
 import stat
 
 import numpy as np
@@ -106,14 +107,17 @@ def test_result_files_on_a_full_disk_or_in_a_missing_folder_name_the_file(result
         second.to_csv(tmp_path / "a_file" / "r.csv")
 
 
-def test_a_csv_whose_sidecar_cannot_be_written_keeps_no_sidecar_of_another_result(
-        results, tmp_path, monkeypatch):
-    """The table is written, then the disk is full for its sidecar: the sidecar of the previous
-    result (its provenance, another run's) was left beside the new table; now there is none,
-    and reading the provenance fails instead of telling another run's."""
+def test_a_csv_and_its_sidecar_are_replaced_as_a_pair(results, tmp_path, monkeypatch):
+    """The table was renamed into place before its provenance was even made, and a kill
+    between the two left the new table beside the previous run's sidecar (an audit: a CSV of
+    alpha 0.9 whose provenance said 0.8). Now both are written to temporary files first: a
+    full disk at the sidecar leaves the previous pair; a failure (or a kill) after the table's
+    rename leaves the new table without a sidecar, so that reading its provenance fails
+    instead of telling another run's; a failed table rename puts the previous sidecar back."""
     first, second = results
     path = first.to_csv(tmp_path / "r.csv")
-    fsync = provenance.os.fsync
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    fsync, replace = provenance.os.fsync, provenance.os.replace
     writes = []
 
     def full_at_the_second_file(descriptor):
@@ -125,16 +129,62 @@ def test_a_csv_whose_sidecar_cannot_be_written_keeps_no_sidecar_of_another_resul
     monkeypatch.setattr(provenance.os, "fsync", full_at_the_second_file)
     with pytest.raises(OSError, match=r"^cannot write r.csv.json \(No space left"):
         second.to_csv(path)
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+    monkeypatch.setattr(provenance.os, "fsync", fsync)
+
+    def failing_rename_into(name):
+        def rename(source, target):
+            if Path(target).name == name:
+                raise OSError(errno.EIO, "Input/output error")
+            replace(source, target)
+        return rename
+    monkeypatch.setattr(provenance.os, "replace", failing_rename_into("r.csv"))
+    with pytest.raises(OSError, match=r"^cannot write r.csv \(Input/output error\)$"):
+        second.to_csv(path)
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+    monkeypatch.setattr(provenance.os, "replace", failing_rename_into("r.csv.json"))
+    with pytest.raises(OSError, match=r"^cannot write r.csv.json \(Input/output error\)$"):
+        second.to_csv(path)
     pd.testing.assert_frame_equal(pd.read_csv(path), second.summary.reset_index(drop=True),
                                   check_dtype=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.csv"]
     with pytest.raises(OSError):
         read_provenance(path)
+    # a folder where the sidecar goes: refused before the table changes
+    monkeypatch.setattr(provenance.os, "replace", replace)
+    first.to_csv(path)
+    (tmp_path / "r.csv.json").unlink()
+    (tmp_path / "r.csv.json").mkdir()
+    table = path.read_bytes()
+    with pytest.raises(OSError, match=r"^cannot write r.csv.json \(Is a directory\)$"):
+        second.to_csv(path)
+    assert path.read_bytes() == table
 
 
-def test_the_provenance_of_a_damaged_or_foreign_file_is_a_value_error_naming_it(tmp_path):
-    """pyarrow's ArrowInvalid, a KeyError of the metadata key, xarray's backend message and a
-    bare JSONDecodeError were what these raised."""
+def test_a_csv_changed_since_it_was_written_is_not_vouched_for(results, tmp_path):
+    """The sidecar records the table's rows and SHA-256: a truncated, flipped or edited CSV
+    read back other numbers with its provenance read as if it described them (an audit: 140 of
+    150 single-bit flips); `read_provenance` now refuses it, naming the file."""
+    path = results[0].to_csv(tmp_path / "r.csv")
+    facts = read_provenance(path)
+    assert facts["table_rows"] == 1
+    data = path.read_bytes()
+    for damaged in (data[:-1], data.replace(b",", b";", 1), data + b"\n"):
+        path.write_bytes(damaged)
+        with pytest.raises(ValueError, match=rf"^{re.escape(str(path))}: not the table its "
+                                             r"provenance r.csv.json describes"):
+            read_provenance(path)
+    path.write_bytes(data)
+    assert read_provenance(path) == facts
+
+
+def test_the_provenance_of_a_damaged_or_foreign_file_is_a_value_error_naming_it(results,
+                                                                                tmp_path):
+    """pyarrow's ArrowInvalid, a KeyError of the metadata key, xarray's backend message, a
+    bare JSONDecodeError and, for a truncated netCDF file, an OSError of error number -101
+    ("NetCDF: HDF error", an audit) were what these raised."""
+    whole = results[0].to_netcdf(tmp_path / "whole.nc").read_bytes()
+    (tmp_path / "truncated.nc").write_bytes(whole[:len(whole) // 2])
     (tmp_path / "garbage.parquet").write_bytes(b"garbage")
     pd.DataFrame({"a": [1]}).to_parquet(tmp_path / "foreign.parquet")
     (tmp_path / "garbage.nc").write_bytes(b"garbage")
@@ -142,6 +192,6 @@ def test_the_provenance_of_a_damaged_or_foreign_file_is_a_value_error_naming_it(
     (tmp_path / "r.csv.json").write_text('{"taichi_star_version": ')
     for name, source in (("garbage.parquet", "garbage.parquet"),
                          ("foreign.parquet", "foreign.parquet"), ("garbage.nc", "garbage.nc"),
-                         ("r.csv", "r.csv.json")):
+                         ("truncated.nc", "truncated.nc"), ("r.csv", "r.csv.json")):
         with pytest.raises(ValueError, match=rf"{source}: no taichi_star provenance in it \("):
             read_provenance(tmp_path / name)
