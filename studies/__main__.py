@@ -12,7 +12,8 @@ from taichi_star.batch import RunStoreError
 from taichi_star.extras import missing_extra
 
 from . import EXTRA_OF_STUDY, study_names
-from .cli import StudyArgumentError, StudyOutputError, configure_logging
+from . import cli
+from .cli import StudyArgumentError, StudyOutputError, configure_logging, interrupted
 
 
 FULL_DISK = (errno.ENOSPC, errno.EDQUOT)
@@ -74,6 +75,7 @@ def main(argv=None) -> int:
         return 2
     configure_logging()
     module = importlib.import_module(f"{__package__}.{name}")
+    cli.OPENED.clear()  # this run's output folders alone (`interrupted`)
     try:
         module.main(rest)
     except (StudyArgumentError, StudyOutputError, RunStoreError) as error:
@@ -91,6 +93,11 @@ def main(argv=None) -> int:
         print(f"{program()} {name}: error: cannot write {error.filename or 'a file'} "
               f"({error.strerror}); the files written before are intact", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        # Ctrl-C: one line saying what is kept, not the traceback of wherever the run was, and
+        # a shell's exit status for it (128 + SIGINT)
+        print(f"{program()} {name}: interrupted; {interrupted()}", file=sys.stderr)
+        return 130
     except SystemExit as exit_:  # argparse's --help (its refusals are StudyArgumentError)
         return exit_.code if isinstance(exit_.code, int) else 2
     return 0

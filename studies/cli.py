@@ -526,6 +526,7 @@ def run_store(args, out: "Output") -> Path:
     """The run store of --run-dir, else `<out>/chunks`; when resuming without --chunk-size,
     sets args.chunk_size to the stored run's own (its chunks must be cut the same way)."""
     run_dir = Path(args.run_dir) if args.run_dir is not None else out.folder / "chunks"
+    out.run_store = run_dir
     if args.resume and args.chunk_size is None:
         args.chunk_size = stored_chunk_size(run_dir)
     return run_dir
@@ -577,6 +578,24 @@ def axis_label(column: str) -> str:
     return f"{fields.get(column, column)} ({unit})" if unit not in ("", "1") else column
 
 
+OPENED: List["Output"] = []
+"""The study's output folders opened in this process, for `interrupted`."""
+
+
+def interrupted() -> str:
+    """After Ctrl-C: remove the output folders the run made and left empty; return what is
+    kept, in one line ("the files written before are whole", and where a run store holds
+    finished chunks, the command that continues it)."""
+    for out in OPENED:
+        out.remove_if_unused()
+    stores = [out.run_store for out in OPENED
+              if out.run_store is not None and out.run_store.is_dir()]
+    if stores:
+        return (f"the finished chunks in {stores[0]} are kept: the same command with --resume "
+                f"continues the run")
+    return "the files written before are whole"
+
+
 class Output:
     """The output folder of one study run, checked before any compute: --out or a fresh
     runs/<study>/<timestamp>/. `write_csv` writes a table and its provenance sidecar (with the
@@ -590,11 +609,14 @@ class Output:
         self.provenance = provenance.record(study, list(argv), model=model, solver=solver,
                                             extra=extra)
         self.written: List[Path] = []
+        self.run_store: Optional[Path] = None
+        """The run store of the run's finished chunks, if it has one (`run_store`)."""
+        OPENED.append(self)
 
     def remove_if_unused(self):
         """Remove the folder if this run made it and it is still empty (a run refused after the
         folder was made); a folder that was there before is left as it was."""
-        if self.made_folder and not any(self.folder.iterdir()):
+        if self.made_folder and self.folder.is_dir() and not any(self.folder.iterdir()):
             self.folder.rmdir()
 
     def path(self, name: str) -> Path:

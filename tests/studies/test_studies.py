@@ -23,7 +23,7 @@ from taichi_star.experiment import (FIG4C_COLUMNS, PAPER_GAITS)
 from studies import (cli, gaits as gaits_study, provenance as study_provenance, reproduce,
                      study_names)
 from studies.cli import COMMITTED_RESULTS
-from studies.__main__ import main as studies_main
+from studies.__main__ import main as studies_main, program as main_program
 
 QUICK = ["--quick", "--no-progress"]
 QUICK_SOLVER = SolverConfig(dt=cli.QUICK_DT)
@@ -454,6 +454,32 @@ def test_a_failed_table_write_leaves_the_previous_table_and_sidecar(tmp_path, mo
     pd.testing.assert_frame_equal(pd.read_csv(path), first)
     assert (tmp_path / "table.csv.json").read_text() == sidecar
     assert sorted(p.name for p in tmp_path.iterdir()) == ["table.csv", "table.csv.json"]
+
+
+def test_ctrl_c_is_one_line_saying_what_is_kept(tmp_path, monkeypatch, capsys):
+    """Ctrl-C printed the traceback of wherever the run was (35 lines, an audit) and left the
+    folder the run had made. Now: one line, exit 130 (a shell's for SIGINT), the run's empty
+    folder removed; a study with a run store names its finished chunks and --resume."""
+    def interrupt(*args, **kwargs):
+        raise KeyboardInterrupt
+    monkeypatch.setattr("studies.figures.run_fig4c", interrupt)
+    out = tmp_path / "fig4c"
+    assert studies_main(["fig4c", "--out", str(out), *QUICK]) == 130
+    error = capsys.readouterr().err
+    assert error == (f"{main_program()} fig4c: interrupted; the files written before are "
+                     f"whole\n")
+    assert not out.exists()
+
+    def interrupt_after_a_chunk(*args, run_dir, **kwargs):
+        Path(run_dir).mkdir(parents=True)
+        raise KeyboardInterrupt
+    monkeypatch.setattr("studies.sweep.run_batch", interrupt_after_a_chunk)
+    out = tmp_path / "sweep"
+    assert studies_main(["sweep", "--out", str(out), *QUICK]) == 130
+    error = capsys.readouterr().err
+    assert error == (f"{main_program()} sweep: interrupted; the finished chunks in "
+                     f"{out / 'chunks'} are kept: the same command with --resume continues "
+                     f"the run\n")
 
 
 def test_a_full_disk_is_a_one_line_error_naming_the_folder(tmp_path, monkeypatch, capsys):
