@@ -154,6 +154,22 @@ class FieldStore:
         """(shape, [(field, kind, offset, components), ...]) for each shape of the fields."""
         self.totals = {kind: max(total, 1) for kind, total in totals.items()}
 
+    def check_saved(self, saved: Dict[str, np.ndarray], prefix: str = ""):
+        """ValueError naming the first field of the store (`prefix` + name, as a saved state
+        calls it) that `saved` lacks or holds in another shape or type: `write` would cast
+        silently, and an f32 state would go on in f64 (or an f64 one be rounded to f32) as no
+        run did, a damaged file's integers pass for positions."""
+        for name, shape in self.shapes.items():
+            if name not in saved:
+                raise ValueError(f"saved state has no field {prefix + name!r}")
+            if saved[name].shape != shape:
+                raise ValueError(f"saved state field {prefix + name!r} has shape "
+                                 f"{saved[name].shape}, this engine {shape}")
+            if saved[name].dtype != self.dtypes[name]:
+                raise ValueError(f"saved state field {prefix + name!r} has type "
+                                 f"{saved[name].dtype}, this engine {self.dtypes[name]} (another "
+                                 f"precision, or a damaged file)")
+
     def flat_arrays(self) -> Dict[bool, np.ndarray]:
         """Zeroed packing arrays: float64 (key True) and int64 (key False)."""
         return {kind: np.zeros(self.totals[kind], dtype=np.float64 if kind else np.int64)

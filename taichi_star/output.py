@@ -264,7 +264,13 @@ def summary_of_dataset(dataset) -> pd.DataFrame:
     """The per-instance table of a `to_xarray` Dataset (or one read from netCDF): every
     variable and coordinate along `instance` alone, as columns (the `instance` coordinate
     first where the summary had it as a column: a `run_batch` result's);
-    `StarParams.from_row` reads its rows."""
+    `StarParams.from_row` reads its rows. ValueError for anything else (a path: open it with
+    `xarray.open_dataset` first)."""
+    xr = require("xarray", "io")
+    if not isinstance(dataset, xr.Dataset) or "instance" not in dataset.coords:
+        raise ValueError(f"dataset must be an xarray Dataset of `to_xarray` (or read from "
+                         f"`to_netcdf`'s file with xarray.open_dataset), with an 'instance' "
+                         f"coordinate; got {type(dataset).__name__}")
     names = [name for name in [*dataset.coords, *dataset.data_vars]
              if dataset[name].dims == ("instance",) and name != "instance"]
     if dataset["instance"].attrs.get("summary_column") == 1:

@@ -106,13 +106,17 @@ class SimulatorSnapshot:
 
     @classmethod
     def read(cls, path) -> "SimulatorSnapshot":
-        """A snapshot from an .npz file written by `write`. ValueError naming the file when it
-        cannot be read or is not such a file."""
+        """A snapshot from an .npz file written by `write` (".npz" is added to a path without it
+        that names no file, as `write` adds it). ValueError naming the file when it cannot be
+        read or is not such a file."""
         if not isinstance(path, (str, os.PathLike)):
             raise ValueError(f"snapshot must be a SimulatorSnapshot or the path of its .npz "
                              f"file, got {type(path).__name__}")
+        path = Path(path)
+        if path.suffix != ".npz" and not path.exists():
+            path = path.with_name(path.name + ".npz")
         try:
-            with np.load(Path(path), allow_pickle=False) as archive:
+            with np.load(path, allow_pickle=False) as archive:
                 header = json.loads(str(archive["__header__"]))
                 fields = {name: archive[name] for name in archive.files if name != "__header__"}
             snapshot = cls(fields=fields, engine_key=str(header["engine_key"]),
@@ -445,6 +449,10 @@ class Simulator:
         # compared only where a difference is refused (other_params=True without sensitivities
         # takes any parameters: no need to compare 65,536 instances' texts)
         checked = snapshot.params if (self.directions or not other_params) else None
+        if checked and len(checked) != self.n_instances:
+            # zip would compare the first instances alone (a damaged header)
+            raise ValueError(f"the saved state records the parameters of {len(checked)} "
+                             f"instances for its {snapshot.n_instances} (a damaged snapshot)")
         for b, (saved, own) in enumerate(zip(checked or (), self._parameter_texts)):
             changed = [name for name in own if saved.get(name) != own[name]]
             if changed and self.directions:

@@ -177,14 +177,5 @@ class BatchState:
         if set(saved) != set(shapes):
             raise ValueError(f"saved state has fields {sorted(saved)}, this engine "
                              f"{sorted(shapes)} (another topology or term set)")
-        for name, shape in shapes.items():
-            if saved[name].shape != shape:
-                raise ValueError(f"saved state field {name!r} has shape {saved[name].shape}, "
-                                 f"this engine {shape}")
-            # the store would cast silently: an f32 state would go on in f64 (or an f64 one be
-            # rounded to f32) as no run did, and a damaged file's integers pass for positions
-            if saved[name].dtype != self.store.dtypes[name]:
-                raise ValueError(f"saved state field {name!r} has type {saved[name].dtype}, "
-                                 f"this engine {self.store.dtypes[name]} (another precision, "
-                                 f"or a damaged file)")
+        self.store.check_saved(saved)
         self.store.write(saved)

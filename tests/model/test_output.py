@@ -156,6 +156,16 @@ def test_a_batchs_result_goes_to_xarray_by_its_instance_column(recorded, tmp_pat
     assert np.isnan(partial.centroid_x_mm.sel(instance=1)).all()
 
 
+def test_summary_of_dataset_refuses_what_is_not_a_result_dataset(recorded, tmp_path):
+    """A path, None or a foreign Dataset raised AttributeError or KeyError (an audit)."""
+    import xarray as xr
+
+    path = recorded.to_netcdf(tmp_path / "r.nc")
+    for wrong in (path, None, xr.Dataset({"a": ("x", [1.0])})):
+        with pytest.raises(ValueError, match=r"^dataset must be an xarray Dataset of "):
+            summary_of_dataset(wrong)
+
+
 @pytest.mark.parametrize("name,frame", [("shapes.gif", "world"), ("shapes.mp4", "body")])
 def test_animation_writes_a_movie_of_every_record(recorded, tmp_path, name, frame):
     path = recorded.animate(tmp_path / name, frame=frame, size_px=300)

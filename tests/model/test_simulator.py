@@ -478,6 +478,12 @@ def test_a_state_of_other_parameters_is_refused_naming_them_unless_asked_for(tmp
                                              r"parameters: instance 1's alpha is 0.8 there, "
                                              r"1.7 here \(1 field\(s\) differ\); "):
             other.load(source)
+    # a damaged header recording the first instance alone: zip compared it alone and loaded
+    # the state of instance 1's alpha 0.8 under 1.7 (an audit)
+    short = dataclasses.replace(snapshot, params=snapshot.params[:1])
+    with pytest.raises(ValueError, match=r"^the saved state records the parameters of 1 "
+                                         r"instances for its 3 \(a damaged snapshot\)$"):
+        other.load(short)
     after = other.save().fields
     assert all(np.array_equal(after[name], before[name]) for name in before)
     other.load(path, other_params=True)
@@ -523,6 +529,10 @@ def test_a_snapshot_without_parameters_loads_as_before(tmp_path):
     other = ts.Simulator([p.replace(alpha=2.0) for p in params])
     other.load(earlier.write(tmp_path / "earlier"))
     np.testing.assert_array_equal(other.time_s, times)
+    # the name it was saved under, without the ".npz" write added (numpy's "No such file")
+    other.load(tmp_path / "earlier")
+    with pytest.raises(ValueError, match=r"^snapshot .*missing.npz: cannot read it \(No such"):
+        other.load(tmp_path / "missing")
 
 
 def test_mixed_commands_and_a_missing_folder_are_named_in_plain_words(tmp_path):
