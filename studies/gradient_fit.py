@@ -532,8 +532,9 @@ def main(argv=None):
                         ("--polish-evaluations", args.polish_evaluations)):
         if value < 0:
             raise cli.StudyArgumentError(f"{flag} must be >= 0, got {value}")
-    identify.CMASettings(popsize=args.popsize, max_generations=args.cma_generations,
-                         seed=args.seed).validate()
+    cma_settings = identify.CMASettings(popsize=args.popsize, max_generations=args.cma_generations,
+                                        seed=args.seed)
+    cma_settings.validate()
     train, validate = identify.parse_windows(args.train_cycles, args.validate_cycles)
     gaits = identify.measured_gaits(args.gaits)
     base = cli.base_params(args)
@@ -541,6 +542,16 @@ def main(argv=None):
              for name in sets}
     for name, box in boxes.items():
         identify.note_unfired_axes("gradient_fit", f"set {name}", box, gaits)
+        # a gradient's evaluation runs each gait with two replicas per axis (`sensitivities`)
+        gradient = args.starts * (args.lbfgs_evaluations + args.least_squares_evaluations) \
+            + args.polish_evaluations
+        identify.check_instances(
+            (cma_settings.evaluations(len(box)) + gradient * (1 + 2 * len(box))) * len(gaits),
+            f"set {name}: (--cma-generations {args.cma_generations} × population "
+            f"{cma_settings.population(len(box), 0)} + (--starts {args.starts} × "
+            f"(--lbfgs-evaluations {args.lbfgs_evaluations} + --least-squares-evaluations "
+            f"{args.least_squares_evaluations}) + --polish-evaluations "
+            f"{args.polish_evaluations}) × {1 + 2 * len(box)}) × {len(gaits)} gaits")
     for box in boxes.values():  # every corner of each group of CORNER_GROUP axes (2^20 is
         for group in range(0, len(box), CORNER_GROUP):  # too many; the groups share no limit)
             identify.check_box(box[group:group + CORNER_GROUP], base, "--sets")

@@ -278,6 +278,22 @@ class CMASettings:
     def population(self, dimension: int, restart: int) -> int:
         return (self.popsize or 4 + int(3 * math.log(dimension))) * 2 ** restart
 
+    def evaluations(self, dimension: int) -> int:
+        """The most evaluations a fit of `dimension` axes makes: every generation of every
+        restart."""
+        return sum(self.max_generations * self.population(dimension, restart)
+                   for restart in range(self.restarts + 1))
+
+
+def check_instances(instances: int, what: str):
+    """StudyArgumentError unless a fit's simulated instances (evaluations × the instances of
+    one) are at most cli.MAX_INSTANCES, the most a study runs: `what` says how they add up
+    and names the flags (a billion generations, or a population of a billion, started and ran
+    out of time or memory)."""
+    if instances > cli.MAX_INSTANCES:
+        raise cli.StudyArgumentError(f"{what}: {instances:,} instances, more than the "
+                                     f"{cli.MAX_INSTANCES:,} a study runs")
+
 
 def _cma_seed(seed: int, restart: int) -> int:
     # cma treats seed 0 as "randomise": derive a positive seed per (seed, restart)

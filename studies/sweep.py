@@ -66,7 +66,7 @@ def build_parser():
                         help="paper (the five Fig. 4 gaits, default), all (255), or a list "
                              "A1,A1+A2")
     parser.add_argument("--max-instances", type=int, default=cli.MAX_INSTANCES,
-                        help=f"refuse larger products (default {cli.MAX_INSTANCES})")
+                        help=f"refuse larger products (default and most {cli.MAX_INSTANCES})")
     cli.add_resume_flags(parser)
     cli.add_model_flags(parser)
     cli.add_dt_flag(parser)
@@ -163,10 +163,12 @@ def plot_sweep(csv_path, out: cli.Output, prefix: str = "sweep"):
 
 def main(argv=None):
     args = cli.parse(build_parser(), argv)
-    if args.max_instances < 1:
-        raise cli.StudyArgumentError(f"--max-instances must be >= 1, got {args.max_instances}")
+    if not 1 <= args.max_instances <= cli.MAX_INSTANCES:
+        raise cli.StudyArgumentError(f"--max-instances must be in [1, {cli.MAX_INSTANCES}] (the "
+                                     f"most instances a study runs), got {args.max_instances}")
     axes = sweep_axes(args)
-    size = int(np.prod([len(v) for v in axes.values()]))
+    # Python's integers: NumPy's int64 product of four axes of 65,536 points wrapped to 0
+    size = math.prod(len(v) for v in axes.values())
     if size > args.max_instances:
         raise cli.StudyArgumentError(
             f"the product has {size} instances, more than --max-instances {args.max_instances}")

@@ -35,7 +35,24 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
     ("sensitivity_check", ["--duration", "1e12"], "--duration 1e+12 s at --dt 0.001 s"),
     ("sensitivity_check", ["--duration", "1e-9"], "--duration 1e-09 s is less than one step"),
     ("simd", ["--matmul-size", "10000000"], "--matmul-size must be in [16, 8192], got 10000000"),
-    ("sweep", ["--max-instances", "0"], "--max-instances must be >= 1, got 0"),
+    ("sweep", ["--max-instances", "0"], "--max-instances must be in [1, 1000000] (the most "
+                                        "instances a study runs), got 0"),
+    ("sweep", ["--max-instances", "1000001"], "--max-instances must be in [1, 1000000]"),
+    # four axes of 65,536 points and five gaits (2^64 × 5): NumPy's int64 product wrapped and
+    # the run started
+    ("sweep", ["--alpha", "0.2:1.2:65536", "--added-mass", "0:2:65536", "--youngs-modulus",
+               "2e6:1e7:65536", "--param", "drag_parallel=0:0.1:65536"],
+     "the product has 92233720368547758080 instances, more than --max-instances 1000000"),
+    # a fit's generations and population: a billion generations ran, a population of a
+    # billion ran out of memory in cma
+    ("calibrate", ["--max-generations", "1000000000"],
+     "--max-generations 1000000000 × the population (4, doubled at each of --restarts 0) × 5 "
+     "gaits: 20,000,000,000 instances, more than the 1,000,000 a study runs"),
+    ("calibrate", ["--popsize", "1000000000"], "instances, more than the 1,000,000 a study runs"),
+    ("gradient_fit", ["--cma-generations", "1000000000"],
+     "instances, more than the 1,000,000 a study runs"),
+    ("gradient_fit", ["--lbfgs-evaluations", "1000000000"],
+     "instances, more than the 1,000,000 a study runs"),
     # a sample that would not fit in memory (224 GiB), counted before it is drawn
     ("sensitivity", ["--base-samples", "1073741824"],
      "--base-samples 1073741824: 85,899,345,920 instances (1073741824 × (14 + 2) points × 5 "

@@ -287,3 +287,15 @@ def test_sensitivity_quick_and_resumed(tmp_path, monkeypatch):
     with pytest.raises(RunStoreError, match="another definition"):
         sensitivity.main([*argv, "--seed", "2", "--resume"])
     assert {path.name: path.read_bytes() for path in tmp_path.glob("sensitivity*")} == tables
+
+
+def test_a_fit_of_at_most_the_studys_instances_is_accepted_and_one_more_refused():
+    """check_instances' boundary: cli.MAX_INSTANCES simulated instances run, one more is
+    refused naming how they add up."""
+    identify.check_instances(cli.MAX_INSTANCES, "the fit")
+    with pytest.raises(cli.StudyArgumentError, match=r"^the fit: 1,000,001 instances, more than "
+                                                     r"the 1,000,000 a study runs$"):
+        identify.check_instances(cli.MAX_INSTANCES + 1, "the fit")
+    # the evaluations it counts: every generation of every restart, the population doubling
+    settings = identify.CMASettings(popsize=3, max_generations=5, restarts=2)
+    assert settings.evaluations(4) == 5 * (3 + 6 + 12)
