@@ -53,7 +53,7 @@ from .. import drawing, metrics
 from ..metrics import rotate
 from ..params import SolverConfig, StarParams
 from ..simulator import ACTUATOR_COLUMNS, Simulator
-from ..timegrid import whole_steps
+from ..timegrid import check_work, steps_in, whole_steps
 
 OBSERVATION_NAMES = ("goal_x_body_mm", "goal_y_body_mm", "heading_sin", "heading_cos",
                      "velocity_x_body_mm_s", "velocity_y_body_mm_s", "angular_velocity_deg_s",
@@ -176,13 +176,17 @@ def goal_from_options(options, count: int) -> Optional[np.ndarray]:
 def control_period(params: StarParams, solver: SolverConfig,
                    control_period_s: Optional[float] = None) -> float:
     """The control period, s: control_period_s, or the actuation period of `params` when None;
-    ValueError unless it is a positive whole number of solver steps. No compute: a command
-    line checks its input with this before building an environment."""
+    ValueError unless it is a positive whole number of solver steps, at most the steps a run
+    may take (`timegrid.check_work`: a period of 1e7 s was refused only at the first step,
+    naming duration_s). No compute: a command line checks its input with this before building
+    an environment."""
     period = params.period if control_period_s is None else control_period_s
     if not is_real(period) or not math.isfinite(period) or period <= 0 \
             or whole_steps(period, solver.dt) is None:
         raise ValueError(f"control_period_s must be a positive whole number of steps "
                          f"(dt = {solver.dt} s), got {control_period_s!r}")
+    check_work(f"control_period_s = {period:g} s at dt = {solver.dt:g} s",
+               steps_in(period, solver.dt))
     return float(period)
 
 

@@ -246,6 +246,10 @@ def test_bad_input_raises_value_error_and_changes_nothing():
         StarSwimmerEnv(**KWARGS, control_period_s=1.0021)
     with pytest.raises(ValueError, match="control_period_s"):
         StarSwimmerEnv(**KWARGS, control_period_s=-3.15)
+    # past the steps a run may take: refused when the environment is made (at its first step
+    # before, naming duration_s)
+    with pytest.raises(ValueError, match=r"^control_period_s = 1e\+08 s at dt = 0.005 s"):
+        StarSwimmerEnv(**KWARGS, control_period_s=1e8)
     after = envs.batch.simulator.save()
     for name, values in before.fields.items():
         np.testing.assert_array_equal(values, after.fields[name], err_msg=name)
