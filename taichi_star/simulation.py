@@ -297,6 +297,10 @@ def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, reco
 
     centroids, rotations, shapes = [], [], []
     state = engine.state
+    # the instances the caller asked for; a sensitive batch's replicas follow them, and their
+    # shapes would only be dropped (kept, they held 17× the memory of the result's)
+    primal = len(params) // (1 + tangents.REPLICAS_PER_DIRECTION * len(directions)) \
+        if directions else batch
 
     def take(stop):
         now = engine.centroids_of(batch)
@@ -308,7 +312,7 @@ def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, reco
             rotations.append(metrics.body_rotation(positions, model.rest_positions,
                                                    model.topology.joints, CENTRE))
             if record_shapes:
-                shapes.append(positions.astype(np.float64))
+                shapes.append(positions[:primal].astype(np.float64))
 
     start_centroids = engine.centroids_of(batch)
     # fixed steps never end a step early for a stop: only adaptive ones need each its own
@@ -321,12 +325,10 @@ def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, reco
     result = _collect(engine, model, solver, clock.time_of(clock.end), record_times,
                       start_centroids, centroids, rotations, shapes, boundaries, steady_from_cycle)
     if directions:
-        count = len(params) // (1 + tangents.REPLICAS_PER_DIRECTION * len(directions))
         summary, trajectory, sensitivities, trajectory_sensitivities = tangents.split_result(
             result.summary, result.trajectory, directions, steps)
         result = SimulationResult(
-            summary=summary, trajectory=trajectory,
-            shapes=None if result.shapes is None else result.shapes[:, :count],
+            summary=summary, trajectory=trajectory, shapes=result.shapes,
             topology=result.topology, solver=solver, sensitivities=sensitivities,
             trajectory_sensitivities=trajectory_sensitivities)
     result.timing = RunTiming(setup_s=set_up - started, compile_s=compiled - set_up,
@@ -444,6 +446,7 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
         })
         if shapes:
             shape_array = np.stack(shapes)
-            shape_array[after_failure.T] = np.nan
+            # the first instances' (a sensitive batch keeps no shapes of its replicas)
+            shape_array[after_failure.T[:, :shape_array.shape[1]]] = np.nan
     return SimulationResult(summary=summary, trajectory=trajectory, shapes=shape_array,
                             topology=model.topology, solver=solver)
