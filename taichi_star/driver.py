@@ -183,9 +183,9 @@ NANOSECONDS = 1e9
 """Ticks per simulated second of an adaptive run's progress bar."""
 
 
-def robots_label(count: int) -> str:
-    """A progress bar's description of a batch: "1 robot", "64 robots"."""
-    return f"{count} robot" + ("" if count == 1 else "s")
+def robots_label(count: int, noun: str = "robot") -> str:
+    """A progress bar's description of a batch: "1 robot", "1,024 robots" (or of `noun`s)."""
+    return f"{count:,} {noun}" + ("" if count == 1 else "s")
 
 
 def progress_bar(clock: Clock, label: str):

@@ -185,6 +185,20 @@ def check_memory(model: BatchModel, precision: str, arch: str):
             f"available (the memory budget); free memory or run fewer instances")
 
 
+def check_records_memory(what: str, records: int, record_bytes: float):
+    """ValueError, before any compute, when `records` records of `record_bytes` bytes each (a
+    run's records on the host: `what` says of which run and how many) would take more than
+    MEMORY_SHARE of the available memory: the run would end in a MemoryError after its
+    compute, or before it while listing its stops (an audit: a 26-s run's shapes lost so)."""
+    available = available_memory_bytes()
+    needed = records * record_bytes
+    if available is not None and needed > MEMORY_SHARE * available:
+        raise ValueError(
+            f"record_interval_s: {what} take about {needed / 2**30:.3g} GiB in memory, more "
+            f"than {MEMORY_SHARE:.0%} of the {available / 2**30:.2f} GiB available: record less "
+            f"often, fewer instances or a shorter run")
+
+
 CPU_ENGINE_BUDGET_BYTES = 512 * 2**20
 """Largest CPU engine `simulate` builds (bytes): a larger batch is streamed through one engine of
 at most this size, chunk by chunk (on the CPU the throughput stops growing with the batch at a

@@ -15,15 +15,15 @@ import pandas as pd
 
 from . import metrics, output
 from .checks import check_flag, is_real, is_whole
-from .geometry import CENTRE, Topology
+from .geometry import CENTRE, Topology, build_topology
 from .model import validate_batch
 from .params import (PER_ACTUATOR_FIELDS, SolverConfig, StarParams, check_precision,
                      parameter_column)
 from .driver import Clock, RunTiming, check_run, drive, robots_label
 from . import sensitivities as tangents
-from .runtime import Runtime, check_arch, stream_chunk_size
+from .runtime import Runtime, check_arch, check_records_memory, stream_chunk_size
 from .state import STATUS_NAMES, STATUS_OK
-from .timegrid import whole_steps
+from .timegrid import multiples_within, whole_steps
 
 
 @dataclass
@@ -163,19 +163,39 @@ def _check_real(name, value, lowest, allow_equal=False):
     return float(value)
 
 
-def validate_call(params, duration_s, solver, record_interval_s, record_shapes, steady_from_cycle):
+RECORD_ROW_BYTES = 160
+"""Host memory (bytes) a record of one instance takes in `simulate` at its peak (its centroid
+and heading, the arrays made of them, its row of the trajectory table): measured 103 (f64,
+B = 64, 10,001 records; docs/reliability.md), with room."""
+RECORD_NODE_BYTES = 40
+"""... and a recorded shape's, per node (two f64 as recorded and as stacked: measured 32.6)."""
+RECORD_BYTES = 1024
+"""... and each record whatever the batch (its stop in the clock's lists: measured 540)."""
+
+
+def validate_call(params, duration_s, solver, record_interval_s, record_shapes, steady_from_cycle,
+                  replicas: int = 1):
     """Check simulate's arguments before any compute; returns (params tuple, duration in s,
     record interval in s or 0). With fixed steps the duration is rounded to whole steps and the
-    record interval must be a whole number of steps."""
+    record interval must be a whole number of steps. `replicas`: the instances simulated per
+    instance asked for (sensitivities add replicas): the work and the records count them."""
     params = validate_batch(params)
     duration_s = _check_real("duration_s", duration_s, 0.0)
     if not isinstance(solver, SolverConfig):
         raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
     check_precision(params, solver)
     record_interval_s = _check_real("record_interval_s", record_interval_s, 0.0, allow_equal=True)
-    check_run(solver, duration_s, record_interval_s, len(params))
+    check_run(solver, duration_s, record_interval_s, len(params) * replicas)
     if check_flag("record_shapes", record_shapes) and record_interval_s == 0:
         raise ValueError("record_shapes needs record_interval_s > 0 (the spacing of the records)")
+    if record_interval_s:
+        records = multiples_within(duration_s, record_interval_s) + 1
+        nodes = build_topology(params[0]).n_nodes if record_shapes else 0
+        check_records_memory(
+            f"{records:,} records of {robots_label(len(params) * replicas, 'instance')}"
+            f"{' with their shapes' if record_shapes else ''}", records,
+            len(params) * (replicas * RECORD_ROW_BYTES + nodes * RECORD_NODE_BYTES)
+            + RECORD_BYTES)
     if not is_whole(steady_from_cycle) or steady_from_cycle < 0:
         raise ValueError(f"steady_from_cycle must be an integer >= 0, got {steady_from_cycle!r}")
     return params, duration_s, record_interval_s
@@ -210,19 +230,19 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     streamed through such an engine in equal chunks, one after the other; the result is the
     same, bit for bit, as in one engine (instances never interact), and the memory a batch
     needs grows only with its tables."""
+    directions = tangents.parse_directions(sensitivities)
+    # replicas travel in their instance's chunk: a chunk holds (1 + 2·directions) × its instances
+    per_instance = 1 + tangents.REPLICAS_PER_DIRECTION * len(directions)
     params, duration_s, record_interval_s = validate_call(params, duration_s, solver,
                                                           record_interval_s, record_shapes,
-                                                          steady_from_cycle)
+                                                          steady_from_cycle, per_instance)
     check_flag("progress", progress)
-    directions = tangents.parse_directions(sensitivities)
     tangents.check_directions(directions, params, solver)
     check_arch(arch)
     started = time.perf_counter()
     runtime = Runtime.current()
     runtime.ensure(arch, solver.precision)
     initialise_s = time.perf_counter() - started
-    # replicas travel in their instance's chunk: a chunk holds (1 + 2·directions) × its instances
-    per_instance = 1 + tangents.REPLICAS_PER_DIRECTION * len(directions)
     chunk = max(1, stream_chunk_size(params * per_instance, solver.precision, arch) // per_instance)
     starts = range(0, len(params), chunk)
     results = []

@@ -45,9 +45,9 @@ from .geometry import CENTRE
 from .model import validate_batch
 from .params import SolverConfig, StarParams, check_precision
 from .provenance import file_path, write_atomic
-from .runtime import Runtime, check_arch
+from .runtime import Runtime, check_arch, check_records_memory
 from .state import STATUS_NAMES, STATUS_OK
-from .timegrid import MAX_STEPS_PER_INSTANCE, check_work, whole_steps
+from .timegrid import MAX_STEPS_PER_INSTANCE, check_work, multiples_within, whole_steps
 
 ACTUATOR_COLUMNS = tuple(f"since_A{m + 1}_s" for m in range(N_ACTUATORS))
 STATE_COLUMNS = ("instance", "t_s", "centroid_x_mm", "centroid_y_mm", "heading_deg",
@@ -57,6 +57,12 @@ STATE_COLUMNS = ("instance", "t_s", "centroid_x_mm", "centroid_y_mm", "heading_d
 DIFFERENTIABLE_STATE_COLUMNS = ("centroid_x_mm", "centroid_y_mm", "heading_deg",
                                 "velocity_x_mm_s", "velocity_y_mm_s", "angular_velocity_deg_s")
 """The `state()` columns `Simulator.sensitivity` differentiates."""
+STATE_ROW_BYTES = 640
+"""Host memory (bytes) a record of one instance takes in `Simulator.advance` at its peak (its
+`state()` columns as recorded and as the table): measured 440 (B = 64, 10,001 records), with
+room."""
+STATE_RECORD_BYTES = 6144
+"""... and each record whatever the batch (its columns' arrays: measured 3.6 kB)."""
 
 
 def parameter_texts(params: Sequence[StarParams]) -> Tuple[Dict[str, str], ...]:
@@ -277,16 +283,22 @@ class Simulator:
         check_flag("progress", progress)
         check_run(self.solver, duration_s, record_interval_s, self.n_instances,
                   steps_taken=int(self._steps().max(initial=0)))
+        if record_interval_s:
+            records = multiples_within(duration_s, record_interval_s)
+            check_records_memory(f"{records:,} records of "
+                                 f"{robots_label(self.n_instances, 'instance')}",
+                                 records, self.n_instances * STATE_ROW_BYTES + STATE_RECORD_BYTES)
         clock = Clock(self.solver, duration_s)
         record_stops = clock.stops_every(record_interval_s, first=1) if record_interval_s else []
         record_numbers = {stop: number + 1 for number, stop in enumerate(record_stops)}
         stops = record_stops + ([clock.end] if not record_stops or record_stops[-1] < clock.end
                                 else [])
-        records = []
+        records, numbers = [], []
 
         def take(stop):
             if stop in record_numbers:
-                records.append(self.state().assign(record=record_numbers[stop]))
+                records.append(self._state_columns(self.n_instances))
+                numbers.append(record_numbers[stop])
 
         compile_s = 0.0
         if not self._compiled:
@@ -302,8 +314,11 @@ class Simulator:
         self.timing = self.timing + RunTiming(
             setup_s=0.0, compile_s=compile_s, run_s=time.perf_counter() - started, collect_s=0.0,
             robot_steps=int((self._steps() - steps_before).sum()))
-        return pd.concat(records, ignore_index=True) if records else pd.DataFrame(
-            columns=[*STATE_COLUMNS, "record"])
+        if not records:
+            return pd.DataFrame(columns=[*STATE_COLUMNS, "record"])
+        return pd.DataFrame({**{name: np.concatenate([record[name] for record in records])
+                                for name in records[0]},
+                             "record": np.repeat(numbers, self.n_instances)})
 
     def reset(self, instances: Optional[Sequence[int]] = None):
         """Put instances (all by default) back at rest in their rest shape at t = 0, nothing
@@ -357,6 +372,11 @@ class Simulator:
     def _state_of(self, batch: int) -> pd.DataFrame:
         """`state()` of the engine's first `batch` instances (with sensitivities: the
         replicas too)."""
+        return pd.DataFrame(self._state_columns(batch))
+
+    def _state_columns(self, batch: int) -> Dict[str, np.ndarray]:
+        """`_state_of`'s columns, one array each (`advance` keeps its records so: a table per
+        record cost ~30 kB of overhead)."""
         values = self.engine.state.read(("positions", "velocities", "time", "fire_time", "status"),
                                         batch)
         positions = values["positions"].astype(np.float64)
@@ -377,7 +397,7 @@ class Simulator:
         times = values["time"].astype(np.float64)
         fired = values["fire_time"].astype(np.float64)
         since = np.where(fired == NEVER, np.nan, times[:, None] - fired)
-        frame = pd.DataFrame({
+        columns = {
             "instance": np.arange(batch), "t_s": times,
             "centroid_x_mm": (centroid[:, 0] - self._start_centroids[:batch, 0]) * metrics.METERS_TO_MM,
             "centroid_y_mm": (centroid[:, 1] - self._start_centroids[:batch, 1]) * metrics.METERS_TO_MM,
@@ -386,11 +406,11 @@ class Simulator:
             "velocity_x_mm_s": velocity[:, 0] * metrics.METERS_TO_MM,
             "velocity_y_mm_s": velocity[:, 1] * metrics.METERS_TO_MM,
             "angular_velocity_deg_s": np.degrees(spin_sum / spin.shape[1]),
-        })
+        }
         for m, column in enumerate(ACTUATOR_COLUMNS):
-            frame[column] = since[:, m]
-        frame["status"] = [STATUS_NAMES[s] for s in values["status"]]
-        return frame
+            columns[column] = since[:, m]
+        columns["status"] = np.array([STATUS_NAMES[s] for s in values["status"]], dtype=object)
+        return columns
 
     @property
     def ok(self) -> np.ndarray:

@@ -41,3 +41,48 @@ def test_a_machine_without_room_for_the_smallest_engine_refuses_before_compute(m
     with pytest.raises(ValueError, match=r"params: a batch of 3 .*the memory budget"):
         ts.simulate([ts.StarParams(n_arc=11)] * 3, 0.001)
     assert set(runtime.Runtime.current().engines) == before
+
+
+def test_records_that_would_not_fit_in_memory_are_refused_before_compute(monkeypatch):
+    """A run's records were never estimated: 2e9 records of one robot failed listing its stops,
+    512 robots' shapes after 26 s of compute (an audit). Now the host memory of the records is
+    estimated (`simulation.RECORD_ROW_BYTES` a record of an instance, RECORD_NODE_BYTES a node
+    of its shape, RECORD_BYTES a record) and refused past MEMORY_SHARE of the available
+    memory, before anything runs: at the budget accepted, a byte over refused."""
+    from taichi_star import simulation
+    params = [ts.StarParams()] * 4
+    records = 11  # 0.1 s every 10 ms, the start included
+    needed = records * (4 * (simulation.RECORD_ROW_BYTES + 193 * simulation.RECORD_NODE_BYTES)
+                        + simulation.RECORD_BYTES)
+    class Ran(Exception):
+        """The run got past the checks (stubbed: nothing is simulated)."""
+
+    def run(*args, **kwargs):
+        raise Ran
+    monkeypatch.setattr(simulation, "_simulate_chunk", run)
+    for available, refused in ((needed / runtime.MEMORY_SHARE, False),
+                               ((needed + 1) / runtime.MEMORY_SHARE, False),
+                               ((needed - 1) / runtime.MEMORY_SHARE, True)):
+        monkeypatch.setattr(runtime, "available_memory_bytes", lambda: available)
+        if refused:
+            with pytest.raises(ValueError, match=r"^record_interval_s: 11 records of 4 instances "
+                                                 r"with their shapes take about "):
+                ts.simulate(params, 0.1, record_interval_s=0.01, record_shapes=True)
+        else:
+            with pytest.raises(Ran):
+                ts.simulate(params, 0.1, record_interval_s=0.01, record_shapes=True)
+
+
+def test_a_simulators_records_that_would_not_fit_are_refused_before_it_steps(monkeypatch):
+    """`Simulator.advance` estimates its records (`simulator.STATE_ROW_BYTES` a record of an
+    instance, STATE_RECORD_BYTES a record) the same way; the state is left as it was."""
+    from taichi_star import simulator as simulator_module
+    robots = ts.Simulator([ts.StarParams()] * 2)
+    needed = 10 * (2 * simulator_module.STATE_ROW_BYTES + simulator_module.STATE_RECORD_BYTES)
+    monkeypatch.setattr(runtime, "available_memory_bytes",
+                        lambda: (needed - 1) / runtime.MEMORY_SHARE)
+    with pytest.raises(ValueError, match=r"^record_interval_s: 10 records of 2 instances take "):
+        robots.advance(0.1, record_interval_s=0.01)
+    assert (robots.time_s == 0).all()
+    monkeypatch.setattr(runtime, "available_memory_bytes", lambda: needed / runtime.MEMORY_SHARE)
+    assert len(robots.advance(0.1, record_interval_s=0.01)) == 20
