@@ -69,6 +69,18 @@ class RunTiming:
                 f"{self.collect_s:.2f} s")
 
 
+def fewest_steps(solver: SolverConfig, duration_s: float, record_interval_s: float):
+    """(The fewest steps an instance takes in duration_s (s), what bounds them): with fixed
+    steps duration_s / dt; with adaptive ones the steps at dt_max, or at the record interval
+    (s; 0 = none) where that is shorter (each record ends a step)."""
+    if not solver.adaptive:
+        return duration_s / solver.dt, f"dt = {solver.dt:g} s"
+    if record_interval_s and record_interval_s < solver.dt_max:
+        return (duration_s / record_interval_s,
+                f"a record every {record_interval_s:g} s, each a step end")
+    return duration_s / solver.dt_max, f"dt_max = {solver.dt_max:g} s"
+
+
 def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float, batch: int,
               steps_taken: Optional[int] = None):
     """ValueError before any compute unless a run of `batch` instances for duration_s (s) with
@@ -96,12 +108,7 @@ def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float,
             raise ValueError(f"record_interval_s must be at least dt_min = {solver.dt_min:g} s "
                              f"with adaptive steps (a step ends on every record), got "
                              f"{record_interval_s!r}")
-        if record_interval_s and record_interval_s < solver.dt_max:
-            bound = f"a record every {record_interval_s:g} s, each a step end"
-            fewest = duration_s / record_interval_s
-        else:
-            bound = f"dt_max = {solver.dt_max:g} s"
-            fewest = duration_s / solver.dt_max
+        fewest, bound = fewest_steps(solver, duration_s, record_interval_s)
         check_work(f"duration_s = {duration_s:g} s at {bound} (the adaptive lower bound"
                    f"{', ' + after if after else ''})", taken + fewest, batch)
         most = taken + duration_s / solver.dt_min

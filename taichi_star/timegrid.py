@@ -141,9 +141,14 @@ def check_work(name: str, steps: float, batch: Optional[int] = None):
             f" ({steps * batch:.3g} robot-steps for {batch} instance{'' if batch == 1 else 's'})"
         raise ValueError(f"{name} is {steps:.3g} time steps per instance{total}; the limit is "
                          f"{MAX_STEPS_PER_INSTANCE} steps per instance (the int32 step counter)")
-    robot_steps = round(steps) * (batch or 1)
+    warn_long_work(name, round(steps) * (batch or 1), stacklevel=4)
+
+
+def warn_long_work(name: str, robot_steps: float, stacklevel: int = 3):
+    """A RuntimeWarning with the estimated wall time when `robot_steps` (steps × instances) is
+    over WARN_ROBOT_STEPS; `name` says which arguments gave them."""
     if robot_steps > WARN_ROBOT_STEPS:
         hours = robot_steps / ESTIMATE_ROBOT_STEPS_PER_S / 3600
         warnings.warn(f"{name} is {robot_steps:.3g} robot-steps: about {hours:.3g} h at "
                       f"{ESTIMATE_ROBOT_STEPS_PER_S:g} robot-steps/s (on a 2-core CPU; a GPU or "
-                      f"more cores run faster)", RuntimeWarning, stacklevel=3)
+                      f"more cores run faster)", RuntimeWarning, stacklevel=stacklevel)

@@ -9,6 +9,7 @@ the instances numbered by their position in the whole batch.
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from dataclasses import dataclass
 from typing import Dict, List, Optional, Sequence, Tuple
 
@@ -16,13 +17,13 @@ import numpy as np
 import pandas as pd
 
 from ..checks import is_real, is_whole
-from ..driver import RunTiming
+from ..driver import RunTiming, fewest_steps
 from ..geometry import Topology
 from ..model import instances_of
 from ..params import SolverConfig, StarParams
-from ..runtime import check_arch
-from ..simulation import simulate, validate_call
-from ..timegrid import steps_in
+from ..runtime import check_arch, check_records_memory
+from ..simulation import RECORD_ROW_BYTES, simulate, validate_call
+from ..timegrid import multiples_within, steps_in, warn_long_work
 
 
 @dataclass(frozen=True)
@@ -96,18 +97,43 @@ def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None
                              f"{duration:.3g} s, got cycles = {cycles!r}")
         groups.setdefault((p.topology_key, round(float(duration), 12)), []).append(position)
     tasks = []
-    for (_, duration), positions in groups.items():
-        for start in range(0, len(positions), chunk_size):
-            members = tuple(positions[start:start + chunk_size])
-            chunk = tuple(params[m] for m in members)
-            validate_call(chunk, duration, solver, record_interval_s, record_shapes,
-                          steady_from_cycle)
-            tasks.append(ChunkTask(index=len(tasks), members=members, params=chunk,
-                                   duration_s=duration, solver=solver, arch=arch,
-                                   record_interval_s=record_interval_s,
-                                   record_shapes=record_shapes,
-                                   steady_from_cycle=steady_from_cycle))
+    with warnings.catch_warnings():
+        # a chunk's long-run warning tells one chunk's hours: the batch's are told below
+        warnings.filterwarnings("ignore", message=LONG_WORK_MESSAGE, category=RuntimeWarning)
+        for (_, duration), positions in groups.items():
+            for start in range(0, len(positions), chunk_size):
+                members = tuple(positions[start:start + chunk_size])
+                chunk = tuple(params[m] for m in members)
+                validate_call(chunk, duration, solver, record_interval_s, record_shapes,
+                              steady_from_cycle)
+                tasks.append(ChunkTask(index=len(tasks), members=members, params=chunk,
+                                       duration_s=duration, solver=solver, arch=arch,
+                                       record_interval_s=record_interval_s,
+                                       record_shapes=record_shapes,
+                                       steady_from_cycle=steady_from_cycle))
+    check_batch_work(tasks, len(params))
     return tasks
+
+
+LONG_WORK_MESSAGE = r".* robot-steps: about .* h at "
+"""The message of `timegrid.warn_long_work`."""
+
+
+def check_batch_work(tasks: Sequence[ChunkTask], instances: int):
+    """What a whole batch asks for, beyond each chunk's own checks: its robot-steps (a
+    RuntimeWarning with the estimated hours past timegrid.WARN_ROBOT_STEPS; each chunk's
+    warning told one chunk's, an audit: 448 h of a 2-year sweep) and, with records, the
+    memory of the trajectory the batch gathers (`runtime.check_records_memory`: a million
+    instances recorded every millisecond for three cycles are 352 GiB)."""
+    robot_steps = sum(len(task.params) * fewest_steps(task.solver, task.duration_s,
+                                                      task.record_interval_s)[0]
+                      for task in tasks)
+    warn_long_work(f"the batch of {instances:,} instances", robot_steps, stacklevel=4)
+    if tasks and tasks[0].record_interval_s:
+        rows = sum(len(task.params) * (multiples_within(task.duration_s,
+                                                        task.record_interval_s) + 1)
+                   for task in tasks)
+        check_records_memory(f"the batch's {rows:,} trajectory rows", rows, RECORD_ROW_BYTES)
 
 
 def run_chunk(task: ChunkTask, progress: bool = False) -> ChunkResult:

@@ -6,6 +6,7 @@ import os
 import subprocess
 import sys
 import textwrap
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -148,3 +149,34 @@ def test_a_script_without_main_guard_gets_an_error_explaining_it(tmp_path):
     run = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True,
                          text=True, timeout=300, env=dict(os.environ, PYTHONPATH=str(REPO)))
     assert run.returncode == 0, run.stderr[-2000:]
+
+
+def test_a_batchs_work_and_trajectory_are_judged_whole_not_by_chunk(monkeypatch):
+    """Each chunk checked its own work and records, so a 2-year sweep warned of one chunk's
+    448 h (an audit) and a batch's gathered trajectory was never estimated. The batch's
+    robot-steps warn once past WARN_ROBOT_STEPS (here 1,500: four instances of 500 steps, in
+    chunks of one that stay below it; three of them, at it, do not), and its trajectory rows
+    (`simulation.RECORD_ROW_BYTES` each) are refused past the memory budget, a byte over it."""
+    from taichi_star import runtime, simulation, timegrid
+    monkeypatch.setattr(timegrid, "WARN_ROBOT_STEPS", 1500)
+    for count, warned in ((4, True), (3, False)):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            plan_chunks([ts.StarParams()] * count, 0.5, chunk_size=1)
+        messages = [str(w.message) for w in caught if w.category is RuntimeWarning]
+        assert messages == ([f"the batch of {count} instances is {500 * count:.3g} robot-steps: "
+                             f"about {500 * count / 5e4 / 3600:.3g} h at 50000 robot-steps/s (on "
+                             f"a 2-core CPU; a GPU or more cores run faster)"] if warned else [])
+    rows = 40 * 51  # 0.5 s recorded every 10 ms, the start included
+    needed = rows * simulation.RECORD_ROW_BYTES
+    assert 51 * (10 * simulation.RECORD_ROW_BYTES + simulation.RECORD_BYTES) < needed - 1
+    for available, refused in ((needed / runtime.MEMORY_SHARE, False),
+                               ((needed - 1) / runtime.MEMORY_SHARE, True)):
+        # the chunks' own records (51 of 10 instances, asserted above) fit within either
+        monkeypatch.setattr(runtime, "available_memory_bytes", lambda: available)
+        if refused:
+            with pytest.raises(ValueError, match=r"^record_interval_s: the batch's 2,040 "
+                                                 r"trajectory rows take about "):
+                plan_chunks([ts.StarParams()] * 40, 0.5, chunk_size=10, record_interval_s=0.01)
+        else:
+            plan_chunks([ts.StarParams()] * 40, 0.5, chunk_size=10, record_interval_s=0.01)
