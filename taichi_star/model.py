@@ -39,6 +39,13 @@ class BatchModel:
         return len(self.params)
 
     @property
+    def nbytes(self) -> int:
+        """Host memory of the per-instance arrays (rest shape, masses, coefficients), bytes."""
+        return (self.rest_positions.nbytes + self.mass.nbytes + self.inertia.nbytes
+                + sum(np.asarray(values).nbytes for table in self.coefficients.values()
+                      for values in table.values()))
+
+    @property
     def engine_key(self) -> Tuple:
         """What a compiled engine depends on: topology and the terms used with their switches."""
         return (self.params[0].topology_key,

@@ -185,18 +185,37 @@ def check_memory(model: BatchModel, precision: str, arch: str):
             f"available (the memory budget); free memory or run fewer instances")
 
 
-def check_records_memory(what: str, records: int, record_bytes: float):
-    """ValueError, before any compute, when `records` records of `record_bytes` bytes each (a
-    run's records on the host: `what` says of which run and how many) would take more than
-    MEMORY_SHARE of the available memory: the run would end in a MemoryError after its
-    compute, or before it while listing its stops (an audit: a 26-s run's shapes lost so)."""
+def check_host_memory(name: str, what: str, needed: float, remedy: str):
+    """ValueError naming the argument `name`, before any compute, when `needed` bytes of host
+    memory (`what` says for what) are more than MEMORY_SHARE of the available memory: the run
+    would end in a MemoryError after its compute, or before it while listing its stops (an
+    audit: a 26-s run's shapes lost so); `remedy` says what to change."""
     available = available_memory_bytes()
-    needed = records * record_bytes
     if available is not None and needed > MEMORY_SHARE * available:
         raise ValueError(
-            f"record_interval_s: {what} take about {needed / 2**30:.3g} GiB in memory, more "
-            f"than {MEMORY_SHARE:.0%} of the {available / 2**30:.2f} GiB available: record less "
-            f"often, fewer instances or a shorter run")
+            f"{name}: {what} would need about {needed / 2**30:.3g} GiB of memory, more than "
+            f"{MEMORY_SHARE:.0%} of the {available / 2**30:.2f} GiB available: {remedy}")
+
+
+def check_batch_memory(params, precision: str, arch: str, replicas: int = 1):
+    """ValueError, before the batch's model is built, when a CPU engine holding all of
+    `params` (each with `replicas` instances: sensitivities add them) and the model's arrays
+    would take more than MEMORY_SHARE of the available memory; both are measured on the first
+    MIN_CAPACITY instances' model, as `stream_chunk_size` does (a Simulator of 10^6 robots
+    built its model for 49 s and 6 GB, then failed in NumPy; an audit). Smaller batches are
+    left to `check_memory`, on the model itself."""
+    count = len(params) * replicas
+    if arch != "cpu" or count <= MIN_CAPACITY:
+        return
+    probe = build_model(params[:MIN_CAPACITY])
+    per_instance = engine_bytes(probe, precision) / batch_capacity(probe.batch_size)
+    needed = per_instance * batch_capacity(count) + probe.nbytes / probe.batch_size * count
+    check_host_memory("params", f"an engine and model of {count:,} instances", needed,
+                      "run fewer instances at once (simulate streams a batch in chunks that fit)")
+
+
+RECORDS_REMEDY = "record less often, fewer instances or a shorter run"
+"""What to change when a run's records would not fit (`check_host_memory`)."""
 
 
 CPU_ENGINE_BUDGET_BYTES = 512 * 2**20

@@ -21,7 +21,8 @@ from .params import (PER_ACTUATOR_FIELDS, SolverConfig, StarParams, check_precis
                      parameter_column)
 from .driver import Clock, RunTiming, check_run, drive, robots_label
 from . import sensitivities as tangents
-from .runtime import Runtime, check_arch, check_records_memory, stream_chunk_size
+from .runtime import (RECORDS_REMEDY, Runtime, check_arch, check_host_memory,
+                      stream_chunk_size)
 from .state import STATUS_NAMES, STATUS_OK
 from .timegrid import multiples_within, whole_steps
 
@@ -171,6 +172,9 @@ RECORD_NODE_BYTES = 40
 """... and a recorded shape's, per node (two f64 as recorded and as stacked: measured 32.6)."""
 RECORD_BYTES = 1024
 """... and each record whatever the batch (its stop in the clock's lists: measured 540)."""
+SUMMARY_ROW_BYTES = 1024
+"""Host memory (bytes) of an instance's row of the summary (about 60 columns, the parameters'
+texts among them): measured 659 (`memory_usage(deep=True)`, 4,096 instances)."""
 
 
 def validate_call(params, duration_s, solver, record_interval_s, record_shapes, steady_from_cycle,
@@ -188,14 +192,19 @@ def validate_call(params, duration_s, solver, record_interval_s, record_shapes, 
     check_run(solver, duration_s, record_interval_s, len(params) * replicas)
     if check_flag("record_shapes", record_shapes) and record_interval_s == 0:
         raise ValueError("record_shapes needs record_interval_s > 0 (the spacing of the records)")
+    instances = robots_label(len(params) * replicas, "instance")
+    # the engine is streamed in chunks that fit (`stream_chunk_size`); the tables are not
+    check_host_memory("params", f"the summary of {instances}",
+                      len(params) * replicas * SUMMARY_ROW_BYTES,
+                      "run the batch with taichi_star.batch.run_batch into a run_dir, in parts")
     if record_interval_s:
         records = multiples_within(duration_s, record_interval_s) + 1
         nodes = build_topology(params[0]).n_nodes if record_shapes else 0
-        check_records_memory(
-            f"{records:,} records of {robots_label(len(params) * replicas, 'instance')}"
-            f"{' with their shapes' if record_shapes else ''}", records,
-            len(params) * (replicas * RECORD_ROW_BYTES + nodes * RECORD_NODE_BYTES)
-            + RECORD_BYTES)
+        check_host_memory(
+            "record_interval_s",
+            f"{records:,} records of {instances}{' with their shapes' if record_shapes else ''}",
+            records * (len(params) * (replicas * RECORD_ROW_BYTES + nodes * RECORD_NODE_BYTES)
+                       + RECORD_BYTES), RECORDS_REMEDY)
     if not is_whole(steady_from_cycle) or steady_from_cycle < 0:
         raise ValueError(f"steady_from_cycle must be an integer >= 0, got {steady_from_cycle!r}")
     return params, duration_s, record_interval_s

@@ -45,7 +45,8 @@ from .geometry import CENTRE
 from .model import validate_batch
 from .params import SolverConfig, StarParams, check_precision
 from .provenance import file_path, write_atomic
-from .runtime import Runtime, check_arch, check_records_memory
+from .runtime import (RECORDS_REMEDY, Runtime, check_arch, check_batch_memory,
+                      check_host_memory)
 from .state import STATUS_NAMES, STATUS_OK
 from .timegrid import MAX_STEPS_PER_INSTANCE, check_work, multiples_within, whole_steps
 
@@ -161,6 +162,8 @@ class Simulator:
         """The parameters the state is differentiated by (`sensitivities.Direction`)."""
         tangents.check_directions(self.directions, params, solver)
         check_arch(arch)
+        check_batch_memory(params, solver.precision, arch,
+                           1 + tangents.REPLICAS_PER_DIRECTION * len(self.directions))
         self.params = params
         self.solver = solver
         self.model, self._steps_of_directions = tangents.replica_model(params, self.directions,
@@ -285,9 +288,10 @@ class Simulator:
                   steps_taken=int(self._steps().max(initial=0)))
         if record_interval_s:
             records = multiples_within(duration_s, record_interval_s)
-            check_records_memory(f"{records:,} records of "
-                                 f"{robots_label(self.n_instances, 'instance')}",
-                                 records, self.n_instances * STATE_ROW_BYTES + STATE_RECORD_BYTES)
+            check_host_memory("record_interval_s", f"{records:,} records of "
+                              f"{robots_label(self.n_instances, 'instance')}",
+                              records * (self.n_instances * STATE_ROW_BYTES + STATE_RECORD_BYTES),
+                              RECORDS_REMEDY)
         clock = Clock(self.solver, duration_s)
         record_stops = clock.stops_every(record_interval_s, first=1) if record_interval_s else []
         record_numbers = {stop: number + 1 for number, stop in enumerate(record_stops)}

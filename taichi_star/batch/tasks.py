@@ -21,7 +21,7 @@ from ..driver import RunTiming, fewest_steps
 from ..geometry import Topology
 from ..model import instances_of
 from ..params import SolverConfig, StarParams
-from ..runtime import check_arch, check_records_memory
+from ..runtime import RECORDS_REMEDY, check_arch, check_host_memory
 from ..simulation import RECORD_ROW_BYTES, simulate, validate_call
 from ..timegrid import multiples_within, steps_in, warn_long_work
 
@@ -123,7 +123,7 @@ def check_batch_work(tasks: Sequence[ChunkTask], instances: int):
     """What a whole batch asks for, beyond each chunk's own checks: its robot-steps (a
     RuntimeWarning with the estimated hours past timegrid.WARN_ROBOT_STEPS; each chunk's
     warning told one chunk's, an audit: 448 h of a 2-year sweep) and, with records, the
-    memory of the trajectory the batch gathers (`runtime.check_records_memory`: a million
+    memory of the trajectory the batch gathers (`runtime.check_host_memory`: a million
     instances recorded every millisecond for three cycles are 352 GiB)."""
     robot_steps = sum(len(task.params) * fewest_steps(task.solver, task.duration_s,
                                                       task.record_interval_s)[0]
@@ -133,7 +133,8 @@ def check_batch_work(tasks: Sequence[ChunkTask], instances: int):
         rows = sum(len(task.params) * (multiples_within(task.duration_s,
                                                         task.record_interval_s) + 1)
                    for task in tasks)
-        check_records_memory(f"the batch's {rows:,} trajectory rows", rows, RECORD_ROW_BYTES)
+        check_host_memory("record_interval_s", f"the batch's {rows:,} trajectory rows",
+                          rows * RECORD_ROW_BYTES, RECORDS_REMEDY)
 
 
 def run_chunk(task: ChunkTask, progress: bool = False) -> ChunkResult:

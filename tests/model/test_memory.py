@@ -66,7 +66,7 @@ def test_records_that_would_not_fit_in_memory_are_refused_before_compute(monkeyp
         monkeypatch.setattr(runtime, "available_memory_bytes", lambda: available)
         if refused:
             with pytest.raises(ValueError, match=r"^record_interval_s: 11 records of 4 instances "
-                                                 r"with their shapes take about "):
+                                                 r"with their shapes would need about "):
                 ts.simulate(params, 0.1, record_interval_s=0.01, record_shapes=True)
         else:
             with pytest.raises(Ran):
@@ -81,8 +81,50 @@ def test_a_simulators_records_that_would_not_fit_are_refused_before_it_steps(mon
     needed = 10 * (2 * simulator_module.STATE_ROW_BYTES + simulator_module.STATE_RECORD_BYTES)
     monkeypatch.setattr(runtime, "available_memory_bytes",
                         lambda: (needed - 1) / runtime.MEMORY_SHARE)
-    with pytest.raises(ValueError, match=r"^record_interval_s: 10 records of 2 instances take "):
+    with pytest.raises(ValueError, match=r"^record_interval_s: 10 records of 2 instances would "):
         robots.advance(0.1, record_interval_s=0.01)
     assert (robots.time_s == 0).all()
     monkeypatch.setattr(runtime, "available_memory_bytes", lambda: needed / runtime.MEMORY_SHARE)
     assert len(robots.advance(0.1, record_interval_s=0.01)) == 20
+
+
+def test_a_batchs_summary_and_a_simulators_engine_are_estimated_before_they_are_built(
+        monkeypatch):
+    """10^8 robots ran for hours towards a summary of ~95 GiB, and a Simulator of 10^6 built
+    its model for 49 s and 6 GB, then failed in NumPy (an audit). Now `simulate` estimates the
+    summary (`simulation.SUMMARY_ROW_BYTES` a row; measured 659) and a Simulator its engine
+    and model from its first MIN_CAPACITY instances' model (`runtime.check_batch_memory`),
+    refused past the budget before anything is built, at it accepted."""
+    from taichi_star import simulation
+    from taichi_star.model import build_model
+
+    class Ran(Exception):
+        """Past the checks (stubbed: nothing is simulated)."""
+
+    def run(*args, **kwargs):
+        raise Ran
+    monkeypatch.setattr(simulation, "_simulate_chunk", run)
+    params = [ts.StarParams()] * 100
+    summary = 100 * simulation.SUMMARY_ROW_BYTES
+    for available, refused in ((summary / runtime.MEMORY_SHARE, False),
+                               ((summary - 1) / runtime.MEMORY_SHARE, True)):
+        monkeypatch.setattr(runtime, "available_memory_bytes", lambda: available)
+        if refused:
+            with pytest.raises(ValueError, match=r"^params: the summary of 100 instances would "
+                                                 r"need about "):
+                ts.simulate(params, 0.01)
+        else:
+            with pytest.raises(Ran):
+                ts.simulate(params, 0.01)
+    probe = build_model(params[:runtime.MIN_CAPACITY])
+    engine = (engine_bytes(probe, "f64") / runtime.batch_capacity(runtime.MIN_CAPACITY)
+              * runtime.batch_capacity(100) + probe.nbytes / runtime.MIN_CAPACITY * 100)
+    built = []
+    monkeypatch.setattr(runtime.Runtime, "lease_engine", lambda *args, **kwargs: built.append(1))
+    monkeypatch.setattr(runtime, "available_memory_bytes",
+                        lambda: (engine - 1) / runtime.MEMORY_SHARE)
+    with pytest.raises(ValueError, match=r"^params: an engine and model of 100 instances would "):
+        ts.Simulator(params)
+    assert not built
+    # a batch the smallest engine holds is left to check_memory, on its own model
+    runtime.check_batch_memory(params[:runtime.MIN_CAPACITY], "f64", "cpu")

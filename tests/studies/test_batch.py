@@ -176,7 +176,7 @@ def test_a_batchs_work_and_trajectory_are_judged_whole_not_by_chunk(monkeypatch)
         monkeypatch.setattr(runtime, "available_memory_bytes", lambda: available)
         if refused:
             with pytest.raises(ValueError, match=r"^record_interval_s: the batch's 2,040 "
-                                                 r"trajectory rows take about "):
+                                                 r"trajectory rows would need about "):
                 plan_chunks([ts.StarParams()] * 40, 0.5, chunk_size=10, record_interval_s=0.01)
         else:
             plan_chunks([ts.StarParams()] * 40, 0.5, chunk_size=10, record_interval_s=0.01)
