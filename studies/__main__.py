@@ -80,6 +80,8 @@ def main(argv=None) -> int:
         module.main(rest)
     except (StudyArgumentError, StudyOutputError, RunStoreError) as error:
         print(f"{program()} {name}: error: {error}", file=sys.stderr)
+        for out in cli.OPENED:  # a refusal leaves no empty folder the run made
+            out.remove_if_unused()
         return 2
     except BrokenPipeError:
         # the reader of the study's printed output left (`| head`): stop quietly, as a Unix

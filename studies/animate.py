@@ -25,6 +25,11 @@ from . import cli
 DESCRIPTION = "GIF of the robot's rod shape over one actuation cycle, for one or more gaits."
 
 
+MAX_FRAMES = 10_000
+"""The most frames of one movie: almost three minutes at 60 frames per second (each frame is a
+recorded shape and a drawn picture; a billion ran out of memory, an audit)."""
+
+
 def edges_table(topology) -> pd.DataFrame:
     """The robot's edges from its limb and arc node chains: node_a, node_b, kind (spoke from the
     hub to a joint, limb, arc), actuator (1..8 for arc edges, 0 otherwise)."""
@@ -69,8 +74,8 @@ def build_parser():
 
 def main(argv=None):
     args = cli.parse(build_parser(), argv)
-    if args.frames < 2:
-        raise cli.StudyArgumentError(f"--frames must be >= 2, got {args.frames}")
+    if not 2 <= args.frames <= MAX_FRAMES:
+        raise cli.StudyArgumentError(f"--frames must be in [2, {MAX_FRAMES}], got {args.frames}")
     if args.fps < 1:
         raise cli.StudyArgumentError(f"--fps must be >= 1, got {args.fps}")
     gaits = cli.resolve_gaits(args.gait, "--gait")

@@ -26,6 +26,7 @@ import pandas as pd
 
 from taichi_star import JACOBIANS, PRESETS, SolverConfig, StarParams
 from taichi_star.envs import StarSwimmerVectorEnv, control_period
+from taichi_star.runtime import check_batch_memory
 
 from . import cli, provenance
 
@@ -103,6 +104,11 @@ def main(argv=None):
             duration = (args.steps + 1) * period
             cli.check_run(f"--steps {args.steps} (+1 compiling) of --control-period {period:g} s "
                           f"({duration:.3g} s)", duration, solvers[preset, jacobian])
+        try:  # a million robots' engine: 116 GiB, failed after two minutes (an audit)
+            check_batch_memory([StarParams.preset(preset)] * args.num_envs,
+                               solvers[preset, jacobians[0]].precision, args.arch)
+        except ValueError as error:
+            raise cli.StudyArgumentError(f"--num-envs: {error}") from None
     out = cli.Output(args, argv or [], model={"presets": presets},
                      solver={f"{preset}, {jacobian}": solver
                              for (preset, jacobian), solver in solvers.items()},

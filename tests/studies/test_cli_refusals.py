@@ -89,6 +89,7 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
     ("simd", ["--repeats", "1000000"], "--repeats must be in [1, 100], got 1000000"),
     ("jacobians", ["--rounds", "1000000"], "--rounds must be in [1, 100], got 1000000"),
     ("jacobians", ["--batch", "2000000000"], "--batch must be in [1, 1048576], got 2000000000"),
+    ("animate", ["--frames", "1000000000"], "--frames must be in [2, 10000], got 1000000000"),
     ("jacobians", ["--modes", "bogus"],
      "--modes: 'bogus' is not MODE:TOL (MODE one of newton, chord, lagged, TOL Newton's "
      "tolerance in m, e.g. lagged:1e-10)"),
@@ -100,6 +101,20 @@ def test_study_flags_are_refused_before_the_output_folder(no_compute, tmp_path, 
     error = capsys.readouterr().err
     assert message in error and len(error.strip().splitlines()) == 1, error
     assert "Traceback" not in error
+    assert not out.exists()
+
+
+def test_an_engine_that_would_not_fit_is_refused_before_the_output_folder(no_compute, tmp_path,
+                                                                          monkeypatch, capsys):
+    """env_bench's most robots (1,048,576: ~116 GiB of engine) ran two minutes, then failed
+    with a traceback and left its folder (an audit); with 8 GiB available now one line."""
+    from taichi_star import runtime
+    monkeypatch.setattr(runtime, "available_memory_bytes", lambda: 8 * 2**30)
+    out = tmp_path / "out"
+    assert studies_main(["env_bench", "--num-envs", "1048576", "--out", str(out), *QUICK]) == 2
+    error = capsys.readouterr().err
+    assert ("--num-envs: params: an engine and model of 1,048,576 instances would need about "
+            in error) and len(error.strip().splitlines()) == 1
     assert not out.exists()
 
 

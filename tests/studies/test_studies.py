@@ -482,6 +482,23 @@ def test_ctrl_c_is_one_line_saying_what_is_kept(tmp_path, monkeypatch, capsys):
                      f"the run\n")
 
 
+def test_a_refusal_after_the_output_folder_was_made_removes_it_if_empty(tmp_path, monkeypatch,
+                                                                       capsys):
+    """A check that can only run once the folder is made (a study's own) left it empty; a
+    folder that was there before stays."""
+    def refuse(*args, **kwargs):
+        raise cli.StudyArgumentError("--flag: refused")
+    monkeypatch.setattr("studies.figures.run_fig4c", refuse)
+    out = tmp_path / "new"
+    assert studies_main(["fig4c", "--out", str(out), *QUICK]) == 2
+    assert capsys.readouterr().err == f"{main_program()} fig4c: error: --flag: refused\n"
+    assert not out.exists()
+    there = tmp_path / "there"
+    there.mkdir()
+    assert studies_main(["fig4c", "--out", str(there), *QUICK]) == 2
+    assert there.is_dir()
+
+
 def test_a_full_disk_is_a_one_line_error_naming_the_folder(tmp_path, monkeypatch, capsys):
     """ENOSPC while a study writes its table: exit 2, one line naming --out's folder, no
     traceback; the file is not left half-written."""
