@@ -121,7 +121,7 @@ def test_quick_defaults_and_presets():
     ("sensitivity", ["--vary", "alpha=0.2"], "--vary alpha: malformed bounds"),
     ("gaits", ["--cycles", "0"], "--cycles must be > 0"),
     ("animate", ["--gait", "A0"], "--gait"),
-    ("animate", ["--frames", "1"], "--frames must be >= 2"),
+    ("animate", ["--frames", "1"], "--frames must be in [2, 10000], got 1"),
     ("convergence", ["--n-arc", "18,30,60"], "--n-arc"),
     ("convergence", ["--n-arc", "18,36"], "--n-arc"),
     ("scaling", ["--workers-list", "0"], "--workers-list"),
