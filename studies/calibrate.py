@@ -264,12 +264,14 @@ def main(argv=None):
     if args.cross_validate and len(gaits) < 2:
         raise cli.StudyArgumentError("--cross-validate: needs at least two gaits in --gaits")
     box = [identify.parse_range_spec(text, "--fit") for text in args.fit]
-    folds = len(gaits) if args.cross_validate else 1
+    # a cross-validation fits each gait's fold on the others, then predicts the held-out one
+    fitted, folds = (len(gaits) - 1, len(gaits)) if args.cross_validate else (len(gaits), 1)
     identify.check_instances(
-        settings.evaluations(len(box)) * len(gaits) * folds,
+        (settings.evaluations(len(box)) * fitted + (len(gaits) if folds > 1 else 0)) * folds,
         f"--max-generations {settings.max_generations} × the population "
         f"({settings.population(len(box), 0)}, doubled at each of --restarts {settings.restarts}) "
-        f"× {len(gaits)} gaits" + (f" × {folds} folds" if folds > 1 else ""))
+        f"× {fitted} gaits" + (f" (and the held-out one's prediction) × {folds} folds"
+                               if folds > 1 else ""))
     base = identify.model_with_box(args, box, "--fit")
     identify.note_unfired_axes("calibrate", "--fit", box, gaits)
     measurements = identify.measurement_table(gaits, args.weights)

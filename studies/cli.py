@@ -18,6 +18,7 @@ import collections
 import contextlib
 import datetime
 import difflib
+import hashlib
 import itertools
 import json
 import logging
@@ -33,7 +34,7 @@ import pandas as pd
 from taichi_star import (JACOBIANS, PER_ACTUATOR_FIELDS, PRESETS, SolverConfig, StarParams,
                          check_work)
 from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, MAX_LOCAL_WORKERS,
-                               executor_for, stored_chunk_size, write_atomic)
+                               executor_for, has_chunks, stored_chunk_size, write_atomic)
 from taichi_star.experiment import PAPER_GAITS
 from taichi_star.extras import require
 from taichi_star.gait import Gait
@@ -589,7 +590,7 @@ def interrupted() -> str:
     for out in OPENED:
         out.remove_if_unused()
     stores = [out.run_store for out in OPENED
-              if out.run_store is not None and out.run_store.is_dir()]
+              if out.run_store is not None and has_chunks(out.run_store)]
     if stores:
         return (f"the finished chunks in {stores[0]} are kept: the same command with --resume "
                 f"continues the run")
@@ -660,8 +661,13 @@ class Output:
         far and the unit of every column): a full disk leaves the previous pair, a kill at worst the new table without
         a sidecar, never beside the previous run's; a failure is a StudyOutputError naming the
         folder."""
+        # the table's SHA-256: `read_provenance` refuses a table that is no longer the one
+        # described (two runs writing into one folder could pair one's table with the other's
+        # sidecar)
         sidecar = provenance.sidecar_text({**self._details(extra),
                                            "elapsed_s": provenance.elapsed_s(),
+                                           "table_rows": len(frame),
+                                           "table_sha256": hashlib.sha256(data).hexdigest(),
                                            "units": column_units(frame.columns)})
         write_atomic(path, data, sidecar=(provenance.sidecar_path(path), sidecar),
                      failure=lambda reason: StudyOutputError(

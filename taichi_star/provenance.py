@@ -104,7 +104,7 @@ def write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception]
             os.replace(targets[1][0], previous)
         try:
             os.replace(temporaries[0], current)
-        except OSError:
+        except BaseException:  # Ctrl-C too: the previous table keeps its sidecar
             if os.path.lexists(previous):
                 os.replace(previous, targets[1][0])
             raise
@@ -116,9 +116,15 @@ def write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception]
             raise
         raise failure(f"cannot write {current.name} ({error.strerror or error})") from None
     finally:
+        # what is left is never a result: the new data unrenamed, or a sidecar moved aside
+        # whose table has been replaced (a kill between the two renames leaves it, named
+        # `.NAME.tmp-PID.previous`: the sidecar of the table still there)
         for temporary in (*temporaries, previous):
-            if os.path.lexists(temporary):
-                os.unlink(temporary)
+            try:
+                if os.path.lexists(temporary):
+                    os.unlink(temporary)
+            except OSError:  # best effort: the write itself is done or has failed already
+                pass
     _sync_folder(targets[0][0].parent)
 
 

@@ -202,15 +202,19 @@ def check_batch_memory(params, precision: str, arch: str, replicas: int = 1):
     `params` (each with `replicas` instances: sensitivities add them) and the model's arrays
     would take more than MEMORY_SHARE of the available memory; both are measured on the first
     MIN_CAPACITY instances' model, as `stream_chunk_size` does (a Simulator of 10^6 robots
-    built its model for 49 s and 6 GB, then failed in NumPy; an audit). Smaller batches are
-    left to `check_memory`, on the model itself."""
+    built its model for 49 s and 6 GB, then failed in NumPy; an audit). Off the CPU the engine
+    is on the device and the model alone is counted. Smaller batches are left to
+    `check_memory`, on the model itself."""
     count = len(params) * replicas
-    if arch != "cpu" or count <= MIN_CAPACITY:
+    if count <= MIN_CAPACITY:
         return
     probe = build_model(params[:MIN_CAPACITY])
-    per_instance = engine_bytes(probe, precision) / batch_capacity(probe.batch_size)
-    needed = per_instance * batch_capacity(count) + probe.nbytes / probe.batch_size * count
-    check_host_memory("params", f"an engine and model of {count:,} instances", needed,
+    needed = probe.nbytes / probe.batch_size * count
+    if arch == "cpu":
+        per_instance = engine_bytes(probe, precision) / batch_capacity(probe.batch_size)
+        needed += per_instance * batch_capacity(count)
+    check_host_memory("params", f"an engine and model of {count:,} instances"
+                      if arch == "cpu" else f"a model of {count:,} instances", needed,
                       "run fewer instances at once (simulate streams a batch in chunks that fit)")
 
 

@@ -177,6 +177,39 @@ SUMMARY_ROW_BYTES = 1024
 texts among them): measured 659 (`memory_usage(deep=True)`, 4,096 instances)."""
 
 
+def tables_bytes(params, duration_s: float, record_interval_s: float, record_shapes: bool,
+                 replicas: int = 1) -> float:
+    """Host memory (bytes) of a run's tables at their peak: the summary, and with records
+    (every record_interval_s s; 0 = none) the trajectory and the shapes (`SUMMARY_ROW_BYTES`,
+    `RECORD_ROW_BYTES`, `RECORD_NODE_BYTES`, `RECORD_BYTES`); `replicas` instances simulated
+    per instance (sensitivities add them; shapes are kept of the first alone)."""
+    needed = len(params) * replicas * SUMMARY_ROW_BYTES
+    if record_interval_s:
+        records = multiples_within(duration_s, record_interval_s) + 1
+        nodes = build_topology(params[0]).n_nodes if record_shapes else 0
+        needed += records * (len(params) * (replicas * RECORD_ROW_BYTES
+                                            + nodes * RECORD_NODE_BYTES) + RECORD_BYTES)
+    return needed
+
+
+def check_tables_memory(params, duration_s: float, record_interval_s: float,
+                        record_shapes: bool, replicas: int = 1):
+    """ValueError before any compute when a run's tables (`tables_bytes`) would not fit in the
+    memory budget (`runtime.check_host_memory`; the engine is streamed in chunks that fit,
+    `stream_chunk_size`, the tables are not)."""
+    instances = robots_label(len(params) * replicas, "instance")
+    if record_interval_s:
+        records = multiples_within(duration_s, record_interval_s) + 1
+        name, what, remedy = (
+            "record_interval_s", f"the summary and {records:,} records of {instances}"
+            f"{' with their shapes' if record_shapes else ''}", RECORDS_REMEDY)
+    else:
+        name, what, remedy = "params", f"the summary of {instances}", \
+            "simulate the batch in parts"
+    check_host_memory(name, what, tables_bytes(params, duration_s, record_interval_s,
+                                                record_shapes, replicas), remedy)
+
+
 def validate_call(params, duration_s, solver, record_interval_s, record_shapes, steady_from_cycle,
                   replicas: int = 1):
     """Check simulate's arguments before any compute; returns (params tuple, duration in s,
@@ -192,19 +225,7 @@ def validate_call(params, duration_s, solver, record_interval_s, record_shapes, 
     check_run(solver, duration_s, record_interval_s, len(params) * replicas)
     if check_flag("record_shapes", record_shapes) and record_interval_s == 0:
         raise ValueError("record_shapes needs record_interval_s > 0 (the spacing of the records)")
-    instances = robots_label(len(params) * replicas, "instance")
-    # the engine is streamed in chunks that fit (`stream_chunk_size`); the tables are not
-    check_host_memory("params", f"the summary of {instances}",
-                      len(params) * replicas * SUMMARY_ROW_BYTES,
-                      "run the batch with taichi_star.batch.run_batch into a run_dir, in parts")
-    if record_interval_s:
-        records = multiples_within(duration_s, record_interval_s) + 1
-        nodes = build_topology(params[0]).n_nodes if record_shapes else 0
-        check_host_memory(
-            "record_interval_s",
-            f"{records:,} records of {instances}{' with their shapes' if record_shapes else ''}",
-            records * (len(params) * (replicas * RECORD_ROW_BYTES + nodes * RECORD_NODE_BYTES)
-                       + RECORD_BYTES), RECORDS_REMEDY)
+    check_tables_memory(params, duration_s, record_interval_s, record_shapes, replicas)
     if not is_whole(steady_from_cycle) or steady_from_cycle < 0:
         raise ValueError(f"steady_from_cycle must be an integer >= 0, got {steady_from_cycle!r}")
     return params, duration_s, record_interval_s

@@ -17,10 +17,11 @@ Dask is imported only when a scheduler is used.
 
 from .executors import DEFAULT_RETRIES, MAX_LOCAL_WORKERS, Executor, InProcess, LocalProcesses
 from .run import DEFAULT_CHUNK_SIZE, executor_for, run_batch
-from .store import RunStore, RunStoreError, code_version, stored_chunk_size, write_atomic
+from .store import (RunStore, RunStoreError, code_version, has_chunks, stored_chunk_size,
+                    write_atomic)
 from .tasks import ChunkResult, ChunkTask, plan_chunks, run_chunk
 
 __all__ = ["run_batch", "plan_chunks", "run_chunk", "ChunkTask", "ChunkResult", "Executor",
            "InProcess", "LocalProcesses", "executor_for", "RunStore", "RunStoreError",
-           "code_version", "stored_chunk_size", "write_atomic", "DEFAULT_CHUNK_SIZE",
-           "DEFAULT_RETRIES", "MAX_LOCAL_WORKERS"]
+           "code_version", "has_chunks", "stored_chunk_size", "write_atomic",
+           "DEFAULT_CHUNK_SIZE", "DEFAULT_RETRIES", "MAX_LOCAL_WORKERS"]

@@ -158,6 +158,15 @@ def _parquet():
     return require("pyarrow", "io"), require("pyarrow.parquet", "io")
 
 
+CHUNK_FILES = "chunk_*.parquet"
+"""The names of a run folder's chunk files (`RunStore.chunk_path`)."""
+
+
+def has_chunks(path) -> bool:
+    """Whether the run folder `path` holds chunk files (finished chunks a resume keeps)."""
+    return Path(path).is_dir() and any(Path(path).glob(CHUNK_FILES))
+
+
 class RunStore:
     """A run folder for one run definition. `open` it (it returns the chunks already finished
     and verified), `write` each finished chunk, `read` them back, `finish` marks it complete.
@@ -177,7 +186,7 @@ class RunStore:
         return self.path / f"trajectory_{index:06d}.parquet"
 
     def _chunk_files(self) -> List[Path]:
-        return sorted(self.path.glob("chunk_*.parquet"))
+        return sorted(self.path.glob(CHUNK_FILES))
 
     def _trajectory_files(self) -> List[Path]:
         return sorted(self.path.glob("trajectory_*.parquet"))

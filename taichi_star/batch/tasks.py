@@ -22,8 +22,8 @@ from ..geometry import Topology
 from ..model import instances_of
 from ..params import SolverConfig, StarParams
 from ..runtime import RECORDS_REMEDY, check_arch, check_host_memory
-from ..simulation import RECORD_ROW_BYTES, simulate, validate_call
-from ..timegrid import multiples_within, steps_in, warn_long_work
+from ..simulation import simulate, tables_bytes, validate_call
+from ..timegrid import steps_in, warn_long_work
 
 
 @dataclass(frozen=True)
@@ -122,19 +122,22 @@ LONG_WORK_MESSAGE = r".* robot-steps: about .* h at "
 def check_batch_work(tasks: Sequence[ChunkTask], instances: int):
     """What a whole batch asks for, beyond each chunk's own checks: its robot-steps (a
     RuntimeWarning with the estimated hours past timegrid.WARN_ROBOT_STEPS; each chunk's
-    warning told one chunk's, an audit: 448 h of a 2-year sweep) and, with records, the
-    memory of the trajectory the batch gathers (`runtime.check_host_memory`: a million
-    instances recorded every millisecond for three cycles are 352 GiB)."""
+    warning told one chunk's, an audit: 448 h of a 2-year sweep) and the memory of the tables
+    it gathers, its summary and records (`simulation.tables_bytes` of each chunk;
+    `runtime.check_host_memory`: a million instances recorded every millisecond for three
+    cycles are 1.4 TiB)."""
     robot_steps = sum(len(task.params) * fewest_steps(task.solver, task.duration_s,
                                                       task.record_interval_s)[0]
                       for task in tasks)
     warn_long_work(f"the batch of {instances:,} instances", robot_steps, stacklevel=4)
-    if tasks and tasks[0].record_interval_s:
-        rows = sum(len(task.params) * (multiples_within(task.duration_s,
-                                                        task.record_interval_s) + 1)
-                   for task in tasks)
-        check_host_memory("record_interval_s", f"the batch's {rows:,} trajectory rows",
-                          rows * RECORD_ROW_BYTES, RECORDS_REMEDY)
+    if not tasks:
+        return
+    recorded = tasks[0].record_interval_s
+    needed = sum(tables_bytes(task.params, task.duration_s, task.record_interval_s,
+                              task.record_shapes) for task in tasks)
+    check_host_memory("record_interval_s" if recorded else "params",
+                      f"the tables of the batch of {instances:,} instances", needed,
+                      RECORDS_REMEDY if recorded else "run the batch in parts")
 
 
 def run_chunk(task: ChunkTask, progress: bool = False) -> ChunkResult:

@@ -47,13 +47,16 @@ def test_records_that_would_not_fit_in_memory_are_refused_before_compute(monkeyp
     """A run's records were never estimated: 2e9 records of one robot failed listing its stops,
     512 robots' shapes after 26 s of compute (an audit). Now the host memory of the records is
     estimated (`simulation.RECORD_ROW_BYTES` a record of an instance, RECORD_NODE_BYTES a node
-    of its shape, RECORD_BYTES a record) and refused past MEMORY_SHARE of the available
-    memory, before anything runs: at the budget accepted, a byte over refused."""
+    of its shape, RECORD_BYTES a record) with the summary's (SUMMARY_ROW_BYTES a row), in one
+    sum (checked apart, each could take the whole budget: an audit), and refused past
+    MEMORY_SHARE of the available memory, before anything runs: at the budget accepted, a
+    byte over refused."""
     from taichi_star import simulation
     params = [ts.StarParams()] * 4
     records = 11  # 0.1 s every 10 ms, the start included
-    needed = records * (4 * (simulation.RECORD_ROW_BYTES + 193 * simulation.RECORD_NODE_BYTES)
-                        + simulation.RECORD_BYTES)
+    needed = 4 * simulation.SUMMARY_ROW_BYTES + records * (
+        4 * (simulation.RECORD_ROW_BYTES + 193 * simulation.RECORD_NODE_BYTES)
+        + simulation.RECORD_BYTES)
     class Ran(Exception):
         """The run got past the checks (stubbed: nothing is simulated)."""
 
@@ -65,8 +68,9 @@ def test_records_that_would_not_fit_in_memory_are_refused_before_compute(monkeyp
                                ((needed - 1) / runtime.MEMORY_SHARE, True)):
         monkeypatch.setattr(runtime, "available_memory_bytes", lambda: available)
         if refused:
-            with pytest.raises(ValueError, match=r"^record_interval_s: 11 records of 4 instances "
-                                                 r"with their shapes would need about "):
+            with pytest.raises(ValueError, match=r"^record_interval_s: the summary and 11 "
+                                                 r"records of 4 instances with their shapes "
+                                                 r"would need about "):
                 ts.simulate(params, 0.1, record_interval_s=0.01, record_shapes=True)
         else:
             with pytest.raises(Ran):
@@ -128,3 +132,12 @@ def test_a_batchs_summary_and_a_simulators_engine_are_estimated_before_they_are_
     assert not built
     # a batch the smallest engine holds is left to check_memory, on its own model
     runtime.check_batch_memory(params[:runtime.MIN_CAPACITY], "f64", "cpu")
+    # off the CPU the engine is on the device: the model's host memory alone is counted (it
+    # was not checked at all)
+    model = probe.nbytes / runtime.MIN_CAPACITY * 100
+    monkeypatch.setattr(runtime, "available_memory_bytes",
+                        lambda: (model - 1) / runtime.MEMORY_SHARE)
+    with pytest.raises(ValueError, match=r"^params: a model of 100 instances would need "):
+        runtime.check_batch_memory(params, "f64", "gpu")
+    monkeypatch.setattr(runtime, "available_memory_bytes", lambda: model / runtime.MEMORY_SHARE)
+    runtime.check_batch_memory(params, "f64", "gpu")

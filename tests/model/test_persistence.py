@@ -132,14 +132,20 @@ def test_a_csv_and_its_sidecar_are_replaced_as_a_pair(results, tmp_path, monkeyp
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
     monkeypatch.setattr(provenance.os, "fsync", fsync)
 
-    def failing_rename_into(name):
+    def failing_rename_into(name, error=OSError(errno.EIO, "Input/output error")):
         def rename(source, target):
             if Path(target).name == name:
-                raise OSError(errno.EIO, "Input/output error")
+                raise error
             replace(source, target)
         return rename
     monkeypatch.setattr(provenance.os, "replace", failing_rename_into("r.csv"))
     with pytest.raises(OSError, match=r"^cannot write r.csv \(Input/output error\)$"):
+        second.to_csv(path)
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+    # Ctrl-C there too (the sidecar moved aside was deleted, an audit)
+    monkeypatch.setattr(provenance.os, "replace",
+                        failing_rename_into("r.csv", KeyboardInterrupt()))
+    with pytest.raises(KeyboardInterrupt):
         second.to_csv(path)
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
     monkeypatch.setattr(provenance.os, "replace", failing_rename_into("r.csv.json"))

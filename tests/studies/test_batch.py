@@ -156,7 +156,9 @@ def test_a_batchs_work_and_trajectory_are_judged_whole_not_by_chunk(monkeypatch)
     448 h (an audit) and a batch's gathered trajectory was never estimated. The batch's
     robot-steps warn once past WARN_ROBOT_STEPS (here 1,500: four instances of 500 steps, in
     chunks of one that stay below it; three of them, at it, do not), and its trajectory rows
-    (`simulation.RECORD_ROW_BYTES` each) are refused past the memory budget, a byte over it."""
+    and summary rows, the tables it gathers (`simulation.tables_bytes` of each chunk: the
+    shapes and summary were left out, an audit), are refused past the memory budget, a byte
+    over it."""
     from taichi_star import runtime, simulation, timegrid
     monkeypatch.setattr(timegrid, "WARN_ROBOT_STEPS", 1500)
     for count, warned in ((4, True), (3, False)):
@@ -167,16 +169,26 @@ def test_a_batchs_work_and_trajectory_are_judged_whole_not_by_chunk(monkeypatch)
         assert messages == ([f"the batch of {count} instances is {500 * count:.3g} robot-steps: "
                              f"about {500 * count / 5e4 / 3600:.3g} h at 50000 robot-steps/s (on "
                              f"a 2-core CPU; a GPU or more cores run faster)"] if warned else [])
-    rows = 40 * 51  # 0.5 s recorded every 10 ms, the start included
-    needed = rows * simulation.RECORD_ROW_BYTES
-    assert 51 * (10 * simulation.RECORD_ROW_BYTES + simulation.RECORD_BYTES) < needed - 1
+    # four chunks of ten instances, 51 records each (0.5 s every 10 ms, the start included)
+    chunk = 10 * simulation.SUMMARY_ROW_BYTES + 51 * (10 * simulation.RECORD_ROW_BYTES
+                                                      + simulation.RECORD_BYTES)
+    needed = 4 * chunk
     for available, refused in ((needed / runtime.MEMORY_SHARE, False),
                                ((needed - 1) / runtime.MEMORY_SHARE, True)):
-        # the chunks' own records (51 of 10 instances, asserted above) fit within either
+        # each chunk's own tables fit within either
         monkeypatch.setattr(runtime, "available_memory_bytes", lambda: available)
         if refused:
-            with pytest.raises(ValueError, match=r"^record_interval_s: the batch's 2,040 "
-                                                 r"trajectory rows would need about "):
+            with pytest.raises(ValueError, match=r"^record_interval_s: the tables of the batch "
+                                                 r"of 40 instances would need about "):
                 plan_chunks([ts.StarParams()] * 40, 0.5, chunk_size=10, record_interval_s=0.01)
         else:
             plan_chunks([ts.StarParams()] * 40, 0.5, chunk_size=10, record_interval_s=0.01)
+    # with shapes (193 nodes) the stacked shapes count too: refused a byte under their total
+    shaped = 4 * (10 * simulation.SUMMARY_ROW_BYTES + 51 * (
+        10 * (simulation.RECORD_ROW_BYTES + 193 * simulation.RECORD_NODE_BYTES)
+        + simulation.RECORD_BYTES))
+    monkeypatch.setattr(runtime, "available_memory_bytes",
+                        lambda: (shaped - 1) / runtime.MEMORY_SHARE)
+    with pytest.raises(ValueError, match=r"^record_interval_s: the tables of the batch of 40 "):
+        plan_chunks([ts.StarParams()] * 40, 0.5, chunk_size=10, record_interval_s=0.01,
+                    record_shapes=True)

@@ -50,6 +50,11 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
      "--max-generations 1000000000 × the population (4, doubled at each of --restarts 0) × 5 "
      "gaits: 20,000,000,000 instances, more than the 1,000,000 a study runs"),
     ("calibrate", ["--popsize", "1000000000"], "instances, more than the 1,000,000 a study runs"),
+    # a cross-validation's fold fits the other gaits (counted as all of them, an audit)
+    ("calibrate", ["--cross-validate", "--gaits", "A1,A1+A2", "--fit", "alpha=0.5:2",
+                   "--popsize", "500", "--max-generations", "1001"],
+     "--max-generations 1001 × the population (500, doubled at each of --restarts 0) × 1 gaits "
+     "(and the held-out one's prediction) × 2 folds: 1,001,004 instances"),
     ("gradient_fit", ["--cma-generations", "1000000000"],
      "instances, more than the 1,000,000 a study runs"),
     ("gradient_fit", ["--lbfgs-evaluations", "1000000000"],

@@ -470,10 +470,19 @@ def test_ctrl_c_is_one_line_saying_what_is_kept(tmp_path, monkeypatch, capsys):
                      f"whole\n")
     assert not out.exists()
 
-    def interrupt_after_a_chunk(*args, run_dir, **kwargs):
-        Path(run_dir).mkdir(parents=True)
-        raise KeyboardInterrupt
-    monkeypatch.setattr("studies.sweep.run_batch", interrupt_after_a_chunk)
+    def interrupt_after(chunks):
+        def run_batch(*args, run_dir, **kwargs):
+            Path(run_dir).mkdir(parents=True)
+            for index in range(chunks):
+                (Path(run_dir) / f"chunk_{index:06d}.parquet").write_bytes(b"")
+            raise KeyboardInterrupt
+        return run_batch
+    # interrupted before the first chunk ended: the store holds no chunk to resume from (it
+    # said it did, an audit)
+    monkeypatch.setattr("studies.sweep.run_batch", interrupt_after(0))
+    assert studies_main(["sweep", "--out", str(tmp_path / "first"), *QUICK]) == 130
+    assert capsys.readouterr().err.endswith("interrupted; the files written before are whole\n")
+    monkeypatch.setattr("studies.sweep.run_batch", interrupt_after(1))
     out = tmp_path / "sweep"
     assert studies_main(["sweep", "--out", str(out), *QUICK]) == 130
     error = capsys.readouterr().err
