@@ -3,6 +3,7 @@ checked against a direct `simulate` of the same instances, argument and output-f
 before any compute, provenance sidecars, the gait-symmetry basis of the gaits study, and the
 packaged experiment data."""
 
+import hashlib
 import json
 import os
 import shlex
@@ -316,6 +317,9 @@ def test_fig4c_quick_into_a_fresh_run_folder(tmp_path, monkeypatch):
     # the study's wall time when it wrote the table, counted from the study's start (in a test
     # process: the module's import; rounded to 0.1 s)
     assert started - 0.05 <= sidecar["elapsed_s"] <= finished + 0.05
+    # the table it describes, by content: read_provenance checks it
+    assert sidecar["table_sha256"] == hashlib.sha256((folder / "fig4c.csv").read_bytes()).hexdigest()
+    assert sidecar["table_rows"] == len(table)
     assert sidecar["command"] == "python -m studies fig4c --quick --no-progress"
     assert sidecar["model"]["preset"] == "paper" and sidecar["solver"]["dt"] == cli.QUICK_DT
     assert sidecar["model"]["params"]["alpha"] == StarParams().alpha
