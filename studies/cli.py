@@ -91,7 +91,8 @@ class OneLineParser(argparse.ArgumentParser):
 class StudyParser(OneLineParser):
     """The parser of one study, with the flags every study takes (--out, --quick, --arch,
     --no-progress). `add_argument(..., quick=VALUE)` gives a flag another default under
-    --quick; both defaults are shown in its help."""
+    --quick; both defaults are shown in its help, as any other flag's default is where its
+    help does not already say it (docs/studies.md promises every flag's default)."""
 
     def __init__(self, study: str, description: str, archs=("cpu", "gpu")):
         super().__init__(prog=f"python -m studies {study}", description=description,
@@ -109,6 +110,12 @@ class StudyParser(OneLineParser):
 
     def add_argument(self, *names, quick=_UNSET, **kwargs):
         if quick is _UNSET:
+            default = kwargs.get("default")
+            if default not in (None, []) \
+                    and kwargs.get("action") not in ("store_true", "store_false") \
+                    and "help" in kwargs and "default" not in kwargs["help"]:
+                kwargs["help"] = (kwargs["help"] + f" (default {_shown(default)})").replace(
+                    "%", "%%")
             return super().add_argument(*names, **kwargs)
         full = kwargs.pop("default", None)
         kwargs["help"] = (kwargs.get("help", "") + f" (default {_shown(full)}; --quick "

@@ -70,9 +70,11 @@ def default_parameters(base: StarParams) -> List[str]:
 
 def resolve_parameters(text, base: StarParams, flag: str) -> List[str]:
     """The parameters a flag names (a comma list as `simulate(sensitivities=...)` takes them,
-    "actuator_gains" standing for its eight), as single labels ("actuator_gains[2]");
+    "actuator_gains" standing for its eight, "all" for every differentiable field, as
+    sensitivity_check's --parameters), as single labels ("actuator_gains[2]");
     StudyArgumentError naming the flag for an unknown or non-differentiable one."""
-    names = cli.parse_values(text, flag, str)
+    names = list(DIFFERENTIABLE_FIELDS) if text.strip() == "all" \
+        else cli.parse_values(text, flag, str)
     try:
         return [direction.label for direction in parse_directions(names)]
     except ValueError as error:
@@ -213,12 +215,14 @@ def build_parser():
                         help="parameters to differentiate by, as simulate(sensitivities=...) "
                              "names them, an actuator by its Python index (actuator_gains[0] "
                              "is A1's) (default: every differentiable field and each "
-                             "actuator's gain and delay, less component heights at 0)")
+                             "actuator's gain and delay, less component heights at 0; all: "
+                             "every differentiable field)")
     parser.add_argument("--sobol", default=str(SOBOL_TABLE), metavar="CSV",
                         help="the Sobol indices to set beside (default results/sensitivity.csv)")
     parser.add_argument("--check", default=None, metavar="NAME,...",
                         help="also compare these parameters' derivatives with whole-run central "
-                             "differences (<prefix>_check.csv; each must be non-zero)")
+                             "differences (<prefix>_check.csv; each must be non-zero; all: "
+                             "every differentiable field)")
     parser.add_argument("--prefix", default="elasticities",
                         help="output file prefix (default elasticities)")
     cli.add_model_flags(parser, fixed=("gait",))

@@ -59,7 +59,8 @@ def build_parser():
         forms = "list a,b,c" if cli.field_kind(field) is str else \
             "list a,b,c or range start:stop:n[:log]"
         parser.add_argument(f"--{flag}", dest=field, default=None, metavar="VALUES",
-                            help=f"values of StarParams.{field} ({forms})")
+                            help=f"values of StarParams.{field} ({forms}; default: not swept, "
+                                 f"the base model's)")
     parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUES",
                         help="sweep any StarParams field, e.g. --param drag_parallel=0,0.01,0.1")
     parser.add_argument("--gaits", default="paper",

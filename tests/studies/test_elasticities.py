@@ -137,3 +137,18 @@ def test_bad_flags_fail_before_compute(no_compute, tmp_path, capsys, flags, mess
     error = capsys.readouterr().err
     assert message in error and len(error.strip().splitlines()) == 1
     assert not (tmp_path / "elasticities.csv").exists()
+
+
+def test_all_names_every_differentiable_field_as_sensitivity_check_takes_it():
+    """numerics.md quotes the all-terms run with --parameters all (it was refused: 'all' was
+    not a field); it stands for every differentiable field, each per-actuator one as its
+    eight actuators, in the field order the committed run's sidecar lists them."""
+    import json
+    import shlex
+
+    sidecar = cli.COMMITTED_RESULTS / "elasticities_all_terms" / "elasticities_all_terms.csv.json"
+    words = shlex.split(json.loads(sidecar.read_text())["command"])
+    listed = words[words.index("--parameters") + 1]
+    labels = study.resolve_parameters("all", None, "--parameters")
+    assert labels == study.resolve_parameters(listed, None, "--parameters")
+    assert len(labels) == 27 - 2 + 2 * 8  # the two per-actuator fields as eight labels each
