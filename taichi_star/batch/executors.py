@@ -117,6 +117,18 @@ class LocalProcesses:
             self.n_workers, mp_context=multiprocessing.get_context("spawn"),
             initializer=configure_worker_process)
         atexit.register(self.shutdown)
+        # a worker re-imports the main script: where that fails (code after the guard that
+        # needs what the guard made), every worker dies at once, and the retries blamed
+        # memory (an audit); a task that does nothing tells that apart before any chunk runs
+        try:
+            self._pool.submit(int).result()
+        except BrokenProcessPool:
+            self.shutdown()
+            path = getattr(sys.modules.get("__main__"), "__file__", "the main script")
+            raise RuntimeError(f"worker processes could not start: each re-imports {path}, and "
+                               f"that failed (a worker's traceback is above); its code outside "
+                               f"the 'if __name__ == \"__main__\":' guard must run in a fresh "
+                               f"process") from None
 
     def run(self, tasks: Sequence[ChunkTask], progress: bool = False) -> Iterator[ChunkResult]:
         pending = {task.index: task for task in tasks}

@@ -192,3 +192,22 @@ def test_a_batchs_work_and_trajectory_are_judged_whole_not_by_chunk(monkeypatch)
     with pytest.raises(ValueError, match=r"^record_interval_s: the tables of the batch of 40 "):
         plan_chunks([ts.StarParams()] * 40, 0.5, chunk_size=10, record_interval_s=0.01,
                     record_shapes=True)
+
+
+def test_a_worker_that_cannot_import_the_script_is_named_so_not_retried(tmp_path):
+    """Code after the guard that needs the guard's names (a print of the result) fails in
+    every worker's import of the script: the pool broke, was retried, and the error blamed
+    memory (an audit). Now one error says the workers could not start."""
+    script = tmp_path / "after_guard.py"
+    script.write_text(textwrap.dedent("""
+        import taichi_star as ts
+        from taichi_star.batch import run_batch
+        if __name__ == "__main__":
+            result = run_batch([ts.StarParams()] * 2, 0.01, workers=2)
+        print(result.summary)
+    """))
+    run = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True,
+                         text=True, timeout=300, env=dict(os.environ, PYTHONPATH=str(REPO)))
+    assert run.returncode != 0
+    assert "worker processes could not start: each re-imports" in run.stderr
+    assert "out of memory or killed" not in run.stderr
