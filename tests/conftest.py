@@ -31,6 +31,21 @@ def full_disk(monkeypatch):
     return patched
 
 
+@pytest.fixture
+def memory_budget(monkeypatch):
+    """`memory_budget(needed)` yields False, then True: the available memory set so that
+    `needed` bytes are exactly the budget (MEMORY_SHARE of it: accepted), then a byte over it
+    (refused); the boundary of every memory refusal."""
+    from taichi_star import runtime
+
+    def cases(needed: float):
+        for available, refused in ((needed / runtime.MEMORY_SHARE, False),
+                                   ((needed - 1) / runtime.MEMORY_SHARE, True)):
+            monkeypatch.setattr(runtime, "available_memory_bytes", lambda: available)
+            yield refused
+    return cases
+
+
 def pytest_addoption(parser):
     parser.addoption("--arch", default="cpu",
                      help="Taichi arch for the engine tests that take the `arch` fixture "

@@ -43,7 +43,8 @@ def test_a_machine_without_room_for_the_smallest_engine_refuses_before_compute(m
     assert set(runtime.Runtime.current().engines) == before
 
 
-def test_records_that_would_not_fit_in_memory_are_refused_before_compute(monkeypatch):
+def test_records_that_would_not_fit_in_memory_are_refused_before_compute(monkeypatch,
+                                                                           memory_budget):
     """A run's records were never estimated: 2e9 records of one robot failed listing its stops,
     512 robots' shapes after 26 s of compute (an audit). Now the host memory of the records is
     estimated (`simulation.RECORD_ROW_BYTES` a record of an instance, RECORD_NODE_BYTES a node
@@ -63,10 +64,7 @@ def test_records_that_would_not_fit_in_memory_are_refused_before_compute(monkeyp
     def run(*args, **kwargs):
         raise Ran
     monkeypatch.setattr(simulation, "_simulate_chunk", run)
-    for available, refused in ((needed / runtime.MEMORY_SHARE, False),
-                               ((needed + 1) / runtime.MEMORY_SHARE, False),
-                               ((needed - 1) / runtime.MEMORY_SHARE, True)):
-        monkeypatch.setattr(runtime, "available_memory_bytes", lambda: available)
+    for refused in memory_budget(needed):
         if refused:
             with pytest.raises(ValueError, match=r"^record_interval_s: the summary and 11 "
                                                  r"records of 4 instances with their shapes "
@@ -93,7 +91,7 @@ def test_a_simulators_records_that_would_not_fit_are_refused_before_it_steps(mon
 
 
 def test_a_batchs_summary_and_a_simulators_engine_are_estimated_before_they_are_built(
-        monkeypatch):
+        monkeypatch, memory_budget):
     """10^8 robots ran for hours towards a summary of ~95 GiB, and a Simulator of 10^6 built
     its model for 49 s and 6 GB, then failed in NumPy (an audit). Now `simulate` estimates the
     summary (`simulation.SUMMARY_ROW_BYTES` a row; measured 659) and a Simulator its engine
@@ -109,10 +107,7 @@ def test_a_batchs_summary_and_a_simulators_engine_are_estimated_before_they_are_
         raise Ran
     monkeypatch.setattr(simulation, "_simulate_chunk", run)
     params = [ts.StarParams()] * 100
-    summary = 100 * simulation.SUMMARY_ROW_BYTES
-    for available, refused in ((summary / runtime.MEMORY_SHARE, False),
-                               ((summary - 1) / runtime.MEMORY_SHARE, True)):
-        monkeypatch.setattr(runtime, "available_memory_bytes", lambda: available)
+    for refused in memory_budget(100 * simulation.SUMMARY_ROW_BYTES):
         if refused:
             with pytest.raises(ValueError, match=r"^params: the summary of 100 instances would "
                                                  r"need about "):

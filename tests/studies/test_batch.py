@@ -151,7 +151,8 @@ def test_a_script_without_main_guard_gets_an_error_explaining_it(tmp_path):
     assert run.returncode == 0, run.stderr[-2000:]
 
 
-def test_a_batchs_work_and_trajectory_are_judged_whole_not_by_chunk(monkeypatch):
+def test_a_batchs_work_and_trajectory_are_judged_whole_not_by_chunk(monkeypatch,
+                                                                  memory_budget):
     """Each chunk checked its own work and records, so a 2-year sweep warned of one chunk's
     448 h (an audit) and a batch's gathered trajectory was never estimated. The batch's
     robot-steps warn once past WARN_ROBOT_STEPS (here 1,500: four instances of 500 steps, in
@@ -172,11 +173,7 @@ def test_a_batchs_work_and_trajectory_are_judged_whole_not_by_chunk(monkeypatch)
     # four chunks of ten instances, 51 records each (0.5 s every 10 ms, the start included)
     chunk = 10 * simulation.SUMMARY_ROW_BYTES + 51 * (10 * simulation.RECORD_ROW_BYTES
                                                       + simulation.RECORD_BYTES)
-    needed = 4 * chunk
-    for available, refused in ((needed / runtime.MEMORY_SHARE, False),
-                               ((needed - 1) / runtime.MEMORY_SHARE, True)):
-        # each chunk's own tables fit within either
-        monkeypatch.setattr(runtime, "available_memory_bytes", lambda: available)
+    for refused in memory_budget(4 * chunk):  # each chunk's own tables fit within either
         if refused:
             with pytest.raises(ValueError, match=r"^record_interval_s: the tables of the batch "
                                                  r"of 40 instances would need about "):
