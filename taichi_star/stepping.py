@@ -8,15 +8,15 @@ import taichi as ti
 
 
 @ti.func
-def step_end(start, proposed, target, firing, firing_step):
+def step_end(start, proposed, target, firing, firing_step, slack):
     """The end of a step of the `proposed` size from `start` towards `target` (the next stop,
     or with `firing` = 1 the next firing): exactly on it when the step would pass it, and
     never a sliver under a quarter step before it (the rest is split in two instead), so that
     a rejected step always shrinks. A firing makes the forcing jump within the step that ends
-    on it: that step is at most `firing_step` long (dt, as a run's first step), so the steps
-    before it end firing_step short of it (or halfway there)."""
+    on it: that step is at most `firing_step` long (dt, as a run's first step) give or take
+    `slack` (s), so the steps before it end firing_step short of it (or halfway there)."""
     limit = target
-    if firing == 1 and target - start > firing_step:
+    if firing == 1 and target - start > firing_step + slack:
         limit = ti.max(target - firing_step, start + 0.5 * (target - start))
     end = start + proposed
     if end >= limit:

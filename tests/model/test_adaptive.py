@@ -193,3 +193,24 @@ def test_a_firing_a_long_sum_away_from_a_record_is_not_a_step_of_rounding_noise(
     # firings 1e-11 s apart move the actuation by ~1e-11 of its rate; the solved sliver moved
     # the velocity by 1e-2 relative
     np.testing.assert_allclose(velocities[0], velocities[1], rtol=1e-6)
+
+
+def test_with_dt_min_equal_to_dt_max_every_step_is_that_long_a_firings_too():
+    """The step before a firing ends dt short of it, and the firing's own step, a difference of
+    two sums (0.4 − 0.399), can exceed dt by a rounding: it was split into two halves below
+    dt_min (an audit: a damped robot 1.2e-3 relative off the fixed-step run). With dt_min =
+    dt_max that rounding is slack: firings at 0, 0.2 and 0.4 s and records every 0.05 s (each
+    a step end, as the audit's stops), 450 steps of 1 ms to 0.45 s (451 before), and the
+    fixed-step run's path (the same steps from other Newton starts, each converged to
+    newton_tol = 1e-10 m: within 450 × 1e-10 m = 4.5e-5 mm)."""
+    held = ts.SolverConfig(adaptive=True, dt=1e-3, dt_min=1e-3, dt_max=1e-3)
+    paths = {}
+    for name, solver in (("held", held), ("fixed", ts.SolverConfig(dt=1e-3))):
+        sim = ts.Simulator([ts.StarParams(damping_time=1e-3)], solver)
+        sim.fire(["A1"])
+        for at in (0.2, 0.4):
+            sim.fire(["A1"], at_s=at)
+        sim.advance(0.45, record_interval_s=0.05)
+        assert sim.save().fields["steps_done"][0] == 450
+        paths[name] = sim.state()[["centroid_x_mm", "centroid_y_mm"]].to_numpy()[0]
+    np.testing.assert_allclose(paths["held"], paths["fixed"], rtol=0, atol=4.5e-5)

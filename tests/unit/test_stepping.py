@@ -14,9 +14,13 @@ DT_MIN = 2 ** -20  # s, the smallest step of the acceptance cases (binary-exact)
 
 
 @ti.kernel
-def _step_end(start: float, proposed: float, target: float, firing: int,
-              firing_step: float) -> float:
-    return stepping.step_end(start, proposed, target, firing, firing_step)
+def _step_end_kernel(start: float, proposed: float, target: float, firing: int,
+                     firing_step: float, slack: float) -> float:
+    return stepping.step_end(start, proposed, target, firing, firing_step, slack)
+
+
+def _step_end(start, proposed, target, firing, firing_step, slack=0.0):
+    return _step_end_kernel(start, proposed, target, firing, firing_step, slack)
 
 
 @ti.kernel
@@ -61,6 +65,10 @@ def test_a_firing_exactly_one_firing_step_away_is_reached_in_one_step(taichi_cpu
     away = 2 ** -10
     assert _step_end(0.0, 0.01, away, 1, away) == away
     assert _step_end(0.0, 0.01, away, 1, away * (1 - 2 ** -52)) == away / 2
+    # with a slack (dt_min = dt_max: a rounding's), a firing that far past firing_step is
+    # still reached in one step, one a hair farther is not
+    assert _step_end(0.0, 0.01, away, 1, away * (1 - 2 ** -52), away * 2 ** -52) == away
+    assert _step_end(0.0, 0.01, away, 1, away * (1 - 2 ** -51), away * 2 ** -52) == away / 2
 
 
 @pytest.mark.parametrize("h, proposed, error, firing, expected", [
