@@ -111,8 +111,8 @@ class StudyParser(OneLineParser):
     def add_argument(self, *names, quick=_UNSET, **kwargs):
         if quick is _UNSET:
             default = kwargs.get("default")
-            if default not in (None, []) \
-                    and kwargs.get("action") not in ("store_true", "store_false") \
+            if default not in (None, [], argparse.SUPPRESS) \
+                    and kwargs.get("action") not in ("store_true", "store_false", "help") \
                     and "help" in kwargs and "default" not in kwargs["help"]:
                 kwargs["help"] = (kwargs["help"] + f" (default {_shown(default)})").replace(
                     "%", "%%")

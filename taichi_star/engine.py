@@ -667,12 +667,12 @@ class BatchEngine:
             if due >= 0.0 and due <= target:
                 target = due
                 firing = 1
-            # with dt_min = dt_max every step is that long, the firing's too, whose distance
-            # from the start (a difference of two sums) may pass dt by a rounding: that split
-            # the step into two halves below dt_min (an audit: 0.399 to 0.4 s in two)
+            # with dt_min = dt_max every step is that long: a stop or firing on the dt grid
+            # lies a few roundings of the time from where the steps' sum lands
+            # (`stepping.HELD_STEP_SLACK`)
             slack = 0.0
             if dt_min == dt_max:
-                slack = self.sliver_limit[None] * ti.max(ti.abs(target), 1.0)
+                slack = stepping.HELD_STEP_SLACK * dt_min
             end = stepping.step_end(start, proposed, target, firing, first_step, slack)
             if self.state.steps_done[b] >= self.step_limit[None] or end <= start:
                 # the counter is full, or the step is below the time's rounding: stop here

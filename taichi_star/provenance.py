@@ -100,12 +100,15 @@ def write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception]
                 handle.flush()
                 os.fsync(handle.fileno())
         current = targets[0][0]  # moving the previous sidecar aside is part of the table's write
-        if sidecar and os.path.lexists(targets[1][0]):
-            os.replace(targets[1][0], previous)
         try:
+            if sidecar and os.path.lexists(targets[1][0]):
+                os.replace(targets[1][0], previous)
             os.replace(temporaries[0], current)
-        except BaseException:  # Ctrl-C too: the previous table keeps its sidecar
-            if os.path.lexists(previous):
+        except BaseException:
+            # Ctrl-C too, which Python raises after the system call in progress: the table's
+            # temporary still there says its rename did not happen, and the previous table
+            # keeps its sidecar; renamed, the new table stands without one
+            if os.path.lexists(temporaries[0]) and os.path.lexists(previous):
                 os.replace(previous, targets[1][0])
             raise
         if sidecar:
@@ -117,8 +120,9 @@ def write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception]
         raise failure(f"cannot write {current.name} ({error.strerror or error})") from None
     finally:
         # what is left is never a result: the new data unrenamed, or a sidecar moved aside
-        # whose table has been replaced (a kill between the two renames leaves it, named
-        # `.NAME.tmp-PID.previous`: the sidecar of the table still there)
+        # whose table has been replaced (a kill between the move and the table's rename
+        # leaves it as `.NAME.tmp-PID.previous`, the table's temporary beside it: then it is
+        # the sidecar of the table still there)
         for temporary in (*temporaries, previous):
             try:
                 if os.path.lexists(temporary):

@@ -178,17 +178,19 @@ texts among them): measured 659 (`memory_usage(deep=True)`, 4,096 instances)."""
 
 
 def tables_bytes(params, duration_s: float, record_interval_s: float, record_shapes: bool,
-                 replicas: int = 1) -> float:
+                 replicas: int = 1, per_call: bool = True) -> float:
     """Host memory (bytes) of a run's tables at their peak: the summary, and with records
     (every record_interval_s s; 0 = none) the trajectory and the shapes (`SUMMARY_ROW_BYTES`,
-    `RECORD_ROW_BYTES`, `RECORD_NODE_BYTES`, `RECORD_BYTES`); `replicas` instances simulated
+    `RECORD_ROW_BYTES`, `RECORD_NODE_BYTES`, and with `per_call` the run's own `RECORD_BYTES`,
+    which a batch gathering its chunks' tables does not keep); `replicas` instances simulated
     per instance (sensitivities add them; shapes are kept of the first alone)."""
     needed = len(params) * replicas * SUMMARY_ROW_BYTES
     if record_interval_s:
         records = multiples_within(duration_s, record_interval_s) + 1
         nodes = build_topology(params[0]).n_nodes if record_shapes else 0
         needed += records * (len(params) * (replicas * RECORD_ROW_BYTES
-                                            + nodes * RECORD_NODE_BYTES) + RECORD_BYTES)
+                                            + nodes * RECORD_NODE_BYTES)
+                             + (RECORD_BYTES if per_call else 0))
     return needed
 
 

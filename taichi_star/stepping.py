@@ -13,18 +13,28 @@ def step_end(start, proposed, target, firing, firing_step, slack):
     or with `firing` = 1 the next firing): exactly on it when the step would pass it, and
     never a sliver under a quarter step before it (the rest is split in two instead), so that
     a rejected step always shrinks. A firing makes the forcing jump within the step that ends
-    on it: that step is at most `firing_step` long (dt, as a run's first step) give or take
-    `slack` (s), so the steps before it end firing_step short of it (or halfway there)."""
+    on it: that step is at most `firing_step` long (dt, as a run's first step), so the steps
+    before it end firing_step short of it (or halfway there). `slack` (s; `HELD_STEP_SLACK`
+    of dt_min where steps are held, else 0) is how far these comparisons look past the
+    times' rounding: a step that ends within it of its limit ends on it."""
     limit = target
     if firing == 1 and target - start > firing_step + slack:
         limit = ti.max(target - firing_step, start + 0.5 * (target - start))
     end = start + proposed
-    if end >= limit:
+    if end >= limit - slack:
         end = limit
     elif limit - end < 0.25 * proposed:
         end = start + 0.5 * (limit - start)
     return end
 
+
+HELD_STEP_SLACK = 1e-6
+"""`step_end`'s slack as a share of dt_min where steps are held (dt_min = dt_max): every step is
+then dt long, and a stop or firing on the dt grid lies a few roundings of the time away from
+where the steps' sum lands, which split the last step before it into halves below dt_min (an
+audit: 0.399 to 0.4 s, and past 1 s the approach to every stop; 2,020 steps for 2,000). The
+times' roundings grow with the sum (1,000 steps at 2 s: ~4e-13 s); 1e-6 of the step is far
+beyond them and changes a step's length by a share the motion does not see."""
 
 SLIVER_ROUNDINGS = 64
 """A step that lands on a stop within this many roundings of the time (relative to

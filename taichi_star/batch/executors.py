@@ -110,6 +110,8 @@ class LocalProcesses:
         self.n_workers = int(n_workers)
         self.retries = int(retries)
         self._pool: Optional[concurrent.futures.ProcessPoolExecutor] = None
+        self._started = False
+        """Whether a pool has started (its workers imported the main script)."""
 
     def _start(self):
         check_main_guard()
@@ -119,9 +121,13 @@ class LocalProcesses:
         atexit.register(self.shutdown)
         # a worker re-imports the main script: where that fails (code after the guard that
         # needs what the guard made), every worker dies at once, and the retries blamed
-        # memory (an audit); a task that does nothing tells that apart before any chunk runs
+        # memory (an audit); a task that does nothing tells that apart before any chunk runs,
+        # once (a restart after a worker died has imported the script before)
+        if self._started:
+            return
         try:
             self._pool.submit(int).result()
+            self._started = True
         except BrokenProcessPool:
             self.shutdown()
             path = getattr(sys.modules.get("__main__"), "__file__", "the main script")

@@ -133,8 +133,10 @@ def check_batch_work(tasks: Sequence[ChunkTask], instances: int):
     if not tasks:
         return
     recorded = tasks[0].record_interval_s
+    # each chunk's run checks its own peak; what stays is its tables' rows (a chunk's
+    # per-record overhead counted once per chunk refused small chunks, an audit)
     needed = sum(tables_bytes(task.params, task.duration_s, task.record_interval_s,
-                              task.record_shapes) for task in tasks)
+                              task.record_shapes, per_call=False) for task in tasks)
     check_host_memory("record_interval_s" if recorded else "params",
                       f"the tables of the batch of {instances:,} instances", needed,
                       RECORDS_REMEDY if recorded else "run the batch in parts")

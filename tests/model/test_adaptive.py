@@ -198,19 +198,20 @@ def test_a_firing_a_long_sum_away_from_a_record_is_not_a_step_of_rounding_noise(
 def test_with_dt_min_equal_to_dt_max_every_step_is_that_long_a_firings_too():
     """The step before a firing ends dt short of it, and the firing's own step, a difference of
     two sums (0.4 − 0.399), can exceed dt by a rounding: it was split into two halves below
-    dt_min (an audit: a damped robot 1.2e-3 relative off the fixed-step run). With dt_min =
-    dt_max that rounding is slack: firings at 0, 0.2 and 0.4 s and records every 0.05 s (each
-    a step end, as the audit's stops), 450 steps of 1 ms to 0.45 s (451 before), and the
-    fixed-step run's path (the same steps from other Newton starts, each converged to
-    newton_tol = 1e-10 m: within 450 × 1e-10 m = 4.5e-5 mm)."""
+    dt_min (an audit: a damped robot 1.2e-3 relative off the fixed-step run), and past 1 s the
+    last step before any stop was (a second audit). With dt_min = dt_max that rounding is
+    slack: firings at 0, 0.2, 0.4 and 1.3 s and records every 0.05 s (each a step end, as the
+    audits' stops), 1,500 steps of 1 ms to 1.5 s (1,502 before), and the fixed-step run's path
+    (the same steps from other Newton starts, each converged to newton_tol = 1e-10 m: within
+    1,500 × 1e-10 m = 1.5e-4 mm)."""
     held = ts.SolverConfig(adaptive=True, dt=1e-3, dt_min=1e-3, dt_max=1e-3)
     paths = {}
     for name, solver in (("held", held), ("fixed", ts.SolverConfig(dt=1e-3))):
         sim = ts.Simulator([ts.StarParams(damping_time=1e-3)], solver)
         sim.fire(["A1"])
-        for at in (0.2, 0.4):
+        for at in (0.2, 0.4, 1.3):
             sim.fire(["A1"], at_s=at)
-        sim.advance(0.45, record_interval_s=0.05)
-        assert sim.save().fields["steps_done"][0] == 450
+        sim.advance(1.5, record_interval_s=0.05)
+        assert sim.save().fields["steps_done"][0] == 1500
         paths[name] = sim.state()[["centroid_x_mm", "centroid_y_mm"]].to_numpy()[0]
-    np.testing.assert_allclose(paths["held"], paths["fixed"], rtol=0, atol=4.5e-5)
+    np.testing.assert_allclose(paths["held"], paths["fixed"], rtol=0, atol=1.5e-4)

@@ -148,6 +148,31 @@ def test_a_csv_and_its_sidecar_are_replaced_as_a_pair(results, tmp_path, monkeyp
     with pytest.raises(KeyboardInterrupt):
         second.to_csv(path)
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+    def interrupted_after_renaming_into(name):
+        """Python raises Ctrl-C after the system call in progress returns: the rename done."""
+        def rename(source, target):
+            replace(source, target)
+            if Path(target).name == name:
+                raise KeyboardInterrupt
+        return rename
+    # after the old sidecar was moved aside: put back, the previous pair as it was
+    moved = next(p.name for p in tmp_path.iterdir() if p.name.endswith(".json"))
+    monkeypatch.setattr(provenance.os, "replace", lambda source, target: (
+        interrupted_after_renaming_into(Path(target).name)(source, target)
+        if Path(source).name == moved else replace(source, target)))
+    with pytest.raises(KeyboardInterrupt):
+        second.to_csv(path)
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+    # after the table's rename: the new table, without a sidecar (it stood beside the previous
+    # one's, a second audit)
+    monkeypatch.setattr(provenance.os, "replace", interrupted_after_renaming_into("r.csv"))
+    with pytest.raises(KeyboardInterrupt):
+        second.to_csv(path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.csv"]
+    monkeypatch.setattr(provenance.os, "replace", replace)
+    first.to_csv(path)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
     monkeypatch.setattr(provenance.os, "replace", failing_rename_into("r.csv.json"))
     with pytest.raises(OSError, match=r"^cannot write r.csv.json \(Input/output error\)$"):
         second.to_csv(path)

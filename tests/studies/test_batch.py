@@ -170,9 +170,9 @@ def test_a_batchs_work_and_trajectory_are_judged_whole_not_by_chunk(monkeypatch,
         assert messages == ([f"the batch of {count} instances is {500 * count:.3g} robot-steps: "
                              f"about {500 * count / 5e4 / 3600:.3g} h at 50000 robot-steps/s (on "
                              f"a 2-core CPU; a GPU or more cores run faster)"] if warned else [])
-    # four chunks of ten instances, 51 records each (0.5 s every 10 ms, the start included)
-    chunk = 10 * simulation.SUMMARY_ROW_BYTES + 51 * (10 * simulation.RECORD_ROW_BYTES
-                                                      + simulation.RECORD_BYTES)
+    # four chunks of ten instances, 51 records each (0.5 s every 10 ms, the start included);
+    # what the batch keeps of a chunk is its rows (its run's per-record overhead is transient)
+    chunk = 10 * simulation.SUMMARY_ROW_BYTES + 51 * 10 * simulation.RECORD_ROW_BYTES
     for refused in memory_budget(4 * chunk):  # each chunk's own tables fit within either
         if refused:
             with pytest.raises(ValueError, match=r"^record_interval_s: the tables of the batch "
@@ -180,10 +180,11 @@ def test_a_batchs_work_and_trajectory_are_judged_whole_not_by_chunk(monkeypatch,
                 plan_chunks([ts.StarParams()] * 40, 0.5, chunk_size=10, record_interval_s=0.01)
         else:
             plan_chunks([ts.StarParams()] * 40, 0.5, chunk_size=10, record_interval_s=0.01)
+            # in chunks of one the same rows: accepted too (each chunk's overhead was added)
+            plan_chunks([ts.StarParams()] * 40, 0.5, chunk_size=1, record_interval_s=0.01)
     # with shapes (193 nodes) the stacked shapes count too: refused a byte under their total
-    shaped = 4 * (10 * simulation.SUMMARY_ROW_BYTES + 51 * (
-        10 * (simulation.RECORD_ROW_BYTES + 193 * simulation.RECORD_NODE_BYTES)
-        + simulation.RECORD_BYTES))
+    shaped = 4 * (10 * simulation.SUMMARY_ROW_BYTES + 51 * 10 * (
+        simulation.RECORD_ROW_BYTES + 193 * simulation.RECORD_NODE_BYTES))
     monkeypatch.setattr(runtime, "available_memory_bytes",
                         lambda: (shaped - 1) / runtime.MEMORY_SHARE)
     with pytest.raises(ValueError, match=r"^record_interval_s: the tables of the batch of 40 "):

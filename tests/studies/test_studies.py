@@ -639,4 +639,6 @@ def test_every_study_flag_with_a_default_shows_it_in_its_help():
             if action.option_strings and shown and "default" not in (action.help or "") \
                     and not isinstance(action, argparse._HelpAction):
                 unsaid.append(f"{name} {action.option_strings[0]}")
+            # argparse's own flags keep their words (-h showed "(default ==SUPPRESS==)")
+            assert "SUPPRESS" not in (action.help or ""), (name, action.option_strings)
     assert unsaid == []

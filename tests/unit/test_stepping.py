@@ -69,6 +69,11 @@ def test_a_firing_exactly_one_firing_step_away_is_reached_in_one_step(taichi_cpu
     # still reached in one step, one a hair farther is not
     assert _step_end(0.0, 0.01, away, 1, away * (1 - 2 ** -52), away * 2 ** -52) == away
     assert _step_end(0.0, 0.01, away, 1, away * (1 - 2 ** -51), away * 2 ** -52) == away / 2
+    # and a step that ends within it short of a stop ends on the stop (without: the rest,
+    # under a quarter step, is split in two)
+    short = away * (1 - 2 ** -52)
+    assert _step_end(0.0, short, away, 0, 0.001, away * 2 ** -52) == away
+    assert _step_end(0.0, short, away, 0, 0.001) == away / 2
 
 
 @pytest.mark.parametrize("h, proposed, error, firing, expected", [
