@@ -517,7 +517,9 @@ class SolverConfig:
     kept from step to step while the step size and integrator weights stay the same (opt-in:
     fixed steps about 2.5× as fast over a cycle, converged to newton_tol like the others, but
     not to Newton's far smaller actual error; a Simulator's snapshot holds the kept
-    factorisations, so a loaded one continues bitwise)."""
+    factorisations, so a loaded one continues bitwise). A chord or lagged solve that runs out
+    of iterations starts again from the step's start with Newton's Jacobian before the step
+    is retried."""
     max_substep_halvings: int = 4
     """A failed step is retried as 2, 4, ... 2^max_substep_halvings substeps before the instance
     is declared failed; 0 disables retries; [0, 10]. (Fixed steps only.)"""
