@@ -60,6 +60,12 @@ class SB3VectorAdapter:
         if not isinstance(native, StarSwimmerVectorEnv):
             raise ValueError(f"envs must be a StarSwimmerVectorEnv (gymnasium.make_vec("
                              f"'StarSwimmer-v0', ...)), got {type(envs).__name__}")
+        if envs is not native:
+            # the adapter steps the native env: gymnasium's wrappers around it would be
+            # skipped without a word (a reward scaled by 1000 came back unscaled, an audit)
+            raise ValueError(f"envs must be the bare StarSwimmerVectorEnv, got it wrapped in "
+                             f"{type(envs).__name__}: wrap to_sb3's result in SB3's own "
+                             f"wrappers instead (VecNormalize, VecMonitor, ...)")
         self.envs = native
         self.num_envs = native.num_envs
         self.observation_space = native.single_observation_space
@@ -116,8 +122,8 @@ class SB3VectorAdapter:
         """Seeds for the next reset: robot b gets seed + b (a random seed when None)."""
         if seed is None:
             seed = int(np.random.randint(0, np.iinfo(np.uint32).max, dtype=np.uint32))
-        if not is_whole(seed):
-            raise ValueError(f"seed must be an int or None, got {seed!r}")
+        if not is_whole(seed) or seed < 0:
+            raise ValueError(f"seed must be an int >= 0 or None, got {seed!r}")
         self._seeds = [int(seed) + b for b in range(self.num_envs)]
         return self._seeds
 

@@ -36,6 +36,7 @@ terminated = truncated = False). `reset(seed=s)` seeds robot b with s + b, as
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Mapping, Optional, Sequence
@@ -48,6 +49,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from ..checks import is_real, is_whole
+from ..extras import require
 from ..gait import N_ACTUATORS
 from .. import drawing, metrics
 from ..metrics import rotate
@@ -328,11 +330,27 @@ class GoalReachingBatch:
 
 
 def checked_render_mode(render_mode):
-    """render_mode, which must be None or "rgb_array" (ValueError naming it otherwise)."""
+    """render_mode, which must be None or "rgb_array" (ValueError naming it otherwise); the
+    pictures need matplotlib: an ImportError naming the extra when it is missing, now, not at
+    the first `render()` after the run (SB3's `make_vec_env` asks for "rgb_array" by default:
+    an audit)."""
     if render_mode not in RENDER_MODES + (None,):
         raise ValueError(f"render_mode must be None or one of {list(RENDER_MODES)}, got "
                          f"{render_mode!r}")
+    if render_mode == "rgb_array":
+        require("matplotlib", "plots")
     return render_mode
+
+
+def checked_task(task: dict) -> "SwimmerTask":
+    """The SwimmerTask of an environment's task keywords; ValueError naming an unknown one and
+    the keywords there are (a TypeError of the dataclass before)."""
+    known = [field.name for field in dataclasses.fields(SwimmerTask)]
+    unknown = [name for name in task if name not in known]
+    if unknown:
+        raise ValueError(f"unknown keyword {unknown[0]!r}: an environment takes params, solver, "
+                         f"control_period_s, arch, render_mode and the task's {known}")
+    return SwimmerTask(**task)
 
 
 class StarSwimmerEnv(gym.Env):
@@ -352,7 +370,7 @@ class StarSwimmerEnv(gym.Env):
         if params is not None and not isinstance(params, StarParams):
             raise ValueError(f"params must be a StarParams, got {type(params).__name__}")
         self.render_mode = checked_render_mode(render_mode)
-        self.batch = GoalReachingBatch(1, params, solver, control_period_s, SwimmerTask(**task),
+        self.batch = GoalReachingBatch(1, params, solver, control_period_s, checked_task(task),
                                        arch)
         self.observation_space = observation_space(self.batch.task)
         self.action_space = spaces.MultiBinary(N_ACTUATORS)
@@ -399,7 +417,7 @@ class StarSwimmerVectorEnv(VectorEnv):
                  render_mode: Optional[str] = None, **task):
         self.render_mode = checked_render_mode(render_mode)
         self.batch = GoalReachingBatch(num_envs, params, solver, control_period_s,
-                                       SwimmerTask(**task), arch)
+                                       checked_task(task), arch)
         self.num_envs = num_envs
         self.single_observation_space = observation_space(self.batch.task)
         self.single_action_space = spaces.MultiBinary(N_ACTUATORS)

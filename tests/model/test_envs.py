@@ -6,6 +6,7 @@ libraries emit them; the rgb_array render; the Stable-Baselines3 adapter against
 contract (same-step autoreset, terminal_observation), and, when stable-baselines3 is installed,
 PPO on both paths."""
 
+import sys
 import warnings
 
 import gymnasium as gym
@@ -256,6 +257,22 @@ def test_bad_input_raises_value_error_and_changes_nothing():
 
 
 
+def test_an_unknown_keyword_and_a_render_mode_without_matplotlib_are_refused_when_made(
+        monkeypatch):
+    """An unknown keyword was a TypeError of the task's dataclass; "rgb_array" without
+    matplotlib (not in the envs or rl extras) failed at the first render, after the run, with a
+    bare ModuleNotFoundError (an audit)."""
+    with pytest.raises(ValueError, match=r"^unknown keyword 'goal_mm': an environment takes "
+                                         r"params, solver, control_period_s, arch, render_mode "
+                                         r"and the task's \['goal_distance_mm'"):
+        StarSwimmerEnv(goal_mm=3, **SHORT)
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    for make in (lambda: StarSwimmerEnv(render_mode="rgb_array", **SHORT),
+                 lambda: StarSwimmerVectorEnv(2, render_mode="rgb_array", **SHORT)):
+        with pytest.raises(ImportError, match=r"taichi_star\[plots\]"):
+            make()
+
+
 def test_single_env_refuses_unknown_reset_options(single):
     with pytest.raises(ValueError, match=r"unknown keys \['gaol'\]; the allowed keys are \['goal'\]"):
         single.reset(options={"gaol": (10.0, 0.0)})
@@ -336,6 +353,16 @@ def test_sb3_adapter_resets_in_the_same_step_and_keeps_the_final_observation():
     assert adapter.env_method("render", indices=[0]) == [None]
     with pytest.raises(ValueError, match="StarSwimmerVectorEnv"):
         SB3VectorAdapter(StarSwimmerEnv(**SHORT))
+    # gymnasium's wrappers around the vector env: refused, not skipped without a word (a
+    # reward wrapper's scaling was lost, an audit); a negative seed: refused at `seed`, not at
+    # every later reset
+    wrapped = gym.wrappers.vector.RecordEpisodeStatistics(adapter.envs)
+    with pytest.raises(ValueError, match=r"^envs must be the bare StarSwimmerVectorEnv, got it "
+                                         r"wrapped in RecordEpisodeStatistics"):
+        SB3VectorAdapter(wrapped)
+    with pytest.raises(ValueError, match=r"^seed must be an int >= 0 or None, got -1"):
+        adapter.seed(-1)
+    adapter.reset()  # the refused seed left nothing behind
 
 
 def test_ppo_runs_on_both_paths_without_warnings():
