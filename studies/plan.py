@@ -36,16 +36,21 @@ one of settling.
 
 from __future__ import annotations
 
+import hashlib
+import json
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 import pandas as pd
 
+from taichi_star import StarParams
+from taichi_star.metrics import MAX_GOAL_MM
 from taichi_star.planner import (MAX_DEFAULT_GOALS, SETTLE_CYCLES, PrimitiveModel, check_drive,
                                  closed_loop_gain, default_goals, drive)
 from taichi_star.primitives import GLIDE_CYCLES, measure_primitives
 
-from . import cli
+from . import cli, provenance
 
 DESCRIPTION = ("Drive the robot to goal points by choosing a gait per cycle from the motion "
                "primitives: open loop against closed loop, in one batch.")
@@ -124,13 +129,30 @@ def build_parser():
     return parser
 
 
-def read_primitive_model(path, period: float, dt: float) -> PrimitiveModel:
-    """The planner's model from a primitive CSV made at this period and step
-    (StudyArgumentError naming --primitives otherwise)."""
+def read_primitive_model(path, period: float, dt: float,
+                         base: Optional[StarParams] = None) -> PrimitiveModel:
+    """The planner's model from a primitive CSV made at this period and step, and where its
+    provenance sidecar records the robot's parameters, for `base`'s (every field but the gait:
+    a paper table drove the identified robot without a word, an audit); StudyArgumentError
+    naming --primitives otherwise."""
     try:
         table = pd.read_csv(path)
     except (OSError, ValueError) as error:
         raise cli.StudyArgumentError(f"--primitives {path}: {error}") from None
+    sidecar = provenance.sidecar_path(path)
+    if base is not None and sidecar.is_file():
+        try:
+            recorded = json.loads(sidecar.read_text())["model"]["params"]
+        except (OSError, ValueError, KeyError, TypeError):
+            recorded = None
+        own = provenance.plain(base)
+        differing = [name for name in own if name != "gait" and isinstance(recorded, dict)
+                     and name in recorded and recorded[name] != own[name]]
+        if differing:
+            raise cli.StudyArgumentError(
+                f"--primitives {path}: measured on a robot whose {differing[0]} is "
+                f"{recorded[differing[0]]}, this run's {own[differing[0]]} ({len(differing)} "
+                f"field(s) differ; its sidecar records them): measure this robot's")
     needed = {"gait", "step_x_mm", "step_y_mm", "turn_deg", "status", "period_s", "dt_s"}
     if table.empty or not needed <= set(table.columns):
         raise cli.StudyArgumentError(f"--primitives {path}: not a primitives table (needs "
@@ -154,10 +176,13 @@ def main(argv=None):
         if value < lowest:
             raise cli.StudyArgumentError(f"{flag} must be >= {lowest}, got {value}")
     cli.check_count(args.directions, "--directions", 0, MAX_DEFAULT_GOALS)
-    cli.check_positive(args.distance, "--distance")
     cli.check_positive(args.tolerance, "--tolerance")
-    if not (np.isfinite(args.far) and args.far >= 0):
-        raise cli.StudyArgumentError(f"--far must be >= 0, got {args.far}")
+    # within metrics.MAX_GOAL_MM: 1e308 ran every plan, then failed plotting (an audit)
+    if not (np.isfinite(args.distance) and 0 < args.distance <= MAX_GOAL_MM):
+        raise cli.StudyArgumentError(f"--distance must be in (0, {MAX_GOAL_MM:g}] mm, got "
+                                     f"{args.distance}")
+    if not (np.isfinite(args.far) and 0 <= args.far <= MAX_GOAL_MM):
+        raise cli.StudyArgumentError(f"--far must be in [0, {MAX_GOAL_MM:g}] mm, got {args.far}")
     if args.directions == 0 and args.far == 0:
         raise cli.StudyArgumentError("no goals: --directions 0 and --far 0")
     base = cli.base_params(args)
@@ -172,7 +197,7 @@ def main(argv=None):
     except ValueError as error:
         raise cli.StudyArgumentError(f"--dt, --set period: {error}") from None
     if args.primitives is not None:
-        model = read_primitive_model(args.primitives, base.period, solver.dt)
+        model = read_primitive_model(args.primitives, base.period, solver.dt, base)
     else:  # the primitives' longest run, as that study checks it
         cli.check_cycles({"--cycles": args.cycles, "--glide-cycles": args.glide_cycles},
                          base.period, solver)
@@ -180,7 +205,11 @@ def main(argv=None):
                      solver=solver,
                      extra={"tolerance_mm": args.tolerance, "max_cycles": args.max_cycles,
                             "settle_cycles": args.settle_cycles,
-                            "primitives": args.primitives or "measured in this run"})
+                            "primitives": (str(Path(args.primitives).resolve())
+                                           if args.primitives else "measured in this run"),
+                            **({"primitives_sha256": hashlib.sha256(
+                                Path(args.primitives).read_bytes()).hexdigest()}
+                               if args.primitives else {})})
     if args.primitives is None:
         primitives, _ = measure_primitives(base, solver, cycles=args.cycles,
                                            first_cycle=PRIMITIVES_FIRST_CYCLE, arch=args.arch,

@@ -143,13 +143,13 @@ def record(study: str, argv: Sequence[str], model: Optional[Mapping] = None,
         "git_dirty": code["dirty"],
         # which edits of the commit (a dirty checkout's), so that two are told apart
         **({"git_changes_sha256": code["changes_sha256"]} if "changes_sha256" in code else {}),
-        "model": _plain(model),
-        "solver": _plain(solver),
+        "model": plain(model),
+        "solver": plain(solver),
         "taichi_version": taichi_version(),
         "python_version": platform.python_version(),
         "machine": machine(),
         "date": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
-        **({"details": _plain(extra)} if extra else {}),
+        **({"details": plain(extra)} if extra else {}),
     }
 
 
@@ -158,14 +158,14 @@ def elapsed_s() -> float:
     return round(time.monotonic() - STARTED, 1)
 
 
-def _plain(value):
+def plain(value):
     """JSON-ready copy: dataclasses as dicts, tuples as lists."""
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return _plain(dataclasses.asdict(value))
+        return plain(dataclasses.asdict(value))
     if isinstance(value, Mapping):
-        return {str(k): _plain(v) for k, v in value.items()}
+        return {str(k): plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
+        return [plain(v) for v in value]
     return value
 
 

@@ -19,6 +19,9 @@ from .gait import Gait
 from .geometry import Topology, edge_curvature
 
 METERS_TO_MM = 1e3
+MAX_GOAL_MM = 1e3
+"""Largest goal distance an environment's task or a plan may ask for, mm (a metre: ~100 body
+lengths, tens of minutes of swimming)."""
 SPEED_COLUMNS = ("displacement_x_mm", "displacement_y_mm", "speed_mm_s", "signed_speed_mm_s",
                  "travel_direction_deg")
 """Columns of `swimming_metrics`."""

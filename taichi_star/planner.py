@@ -42,7 +42,7 @@ import pandas as pd
 
 from .checks import check_flag, is_real, is_whole
 from .gait import NO_GAIT, Gait
-from .metrics import rotate
+from .metrics import MAX_GOAL_MM, rotate
 from .params import SolverConfig, StarParams
 from .primitives import glide_columns, streak_step_columns
 from .runtime import check_arch
@@ -136,7 +136,13 @@ class PrimitiveModel:
         the columns `primitives.glide_columns(k)` where it has them (none: steady steps, no
         glide). ValueError for a
         table with the single glide_x_mm/glide_y_mm of earlier versions (measured after
-        several firings only): measure it again."""
+        several firings only): measure it again, and for a table without the columns it reads.
+        """
+        missing = [column for column in ("gait", "status", "step_x_mm", "step_y_mm", "turn_deg")
+                   if column not in table.columns]
+        if missing:
+            raise ValueError(f"table: not a primitive table (taichi_star.primitives): no column "
+                             f"{missing[0]!r}")
         usable = table[(table["status"] == "ok") & np.isfinite(table["step_x_mm"])
                        & np.isfinite(table["turn_deg"])]
         streaks = 0
@@ -267,7 +273,7 @@ def default_goals(distance_mm: float = 50.0, count: int = 8,
     """(count [+1], 2) goals, mm: `count` at distance_mm in directions 0, 360/count, ... deg,
     then one far_mm straight behind the robot (-x), unless far_mm is None. ValueError naming
     count unless it is an integer from 0 (1 without far_mm: some goal) to `MAX_DEFAULT_GOALS`,
-    distance_mm unless a finite number > 0 mm, far_mm unless None or one."""
+    distance_mm unless a number in (0, MAX_GOAL_MM] mm, far_mm unless None or one."""
     lowest = 1 if far_mm is None else 0
     if not is_whole(count) or not lowest <= count <= MAX_DEFAULT_GOALS:
         rule = ("far_mm is None: no goal otherwise" if far_mm is None
@@ -277,8 +283,8 @@ def default_goals(distance_mm: float = 50.0, count: int = 8,
     for name, value in (("distance_mm", distance_mm), ("far_mm", far_mm)):
         if name == "far_mm" and value is None:
             continue
-        if not is_real(value) or not (math.isfinite(value) and value > 0):
-            raise ValueError(f"{name} must be a finite number > 0 mm"
+        if not is_real(value) or not (math.isfinite(value) and 0 < value <= MAX_GOAL_MM):
+            raise ValueError(f"{name} must be a number in (0, {MAX_GOAL_MM:g}] mm"
                              f"{' or None' if name == 'far_mm' else ''}, got {value!r}")
     angles = np.radians(np.arange(count) * 360.0 / count)
     goals = distance_mm * np.stack([np.cos(angles), np.sin(angles)], axis=1)
@@ -306,6 +312,10 @@ def check_drive(goals_mm, params: StarParams, solver: SolverConfig, tolerance_mm
         goals = np.empty(0)
     if goals.ndim != 2 or goals.shape[1] != 2 or not len(goals) or not np.isfinite(goals).all():
         raise ValueError(f"goals_mm must be a finite (G, 2) array, got {goals_mm!r}")
+    if (np.hypot(goals[:, 0], goals[:, 1]) > MAX_GOAL_MM).any():
+        # a goal at 1e308 mm ran every plan, then its plot failed on a NaN (an audit)
+        raise ValueError(f"goals_mm must be within {MAX_GOAL_MM:g} mm (metrics.MAX_GOAL_MM) of "
+                         f"the start, got {goals_mm!r}")
     if not isinstance(params, StarParams):
         raise ValueError(f"params must be a StarParams, got {type(params).__name__}")
     if not isinstance(solver, SolverConfig):

@@ -53,15 +53,18 @@ representative, rotation 0, not reflected, class size 1); step_x/step_y_mm, the 
 displacement per cycle over cycles first_cycle..cycles-1 (0-based; the default 1..4 is the
 paper's "cycles 2-5"), and its sample standard deviation (*_std_mm); step_mm its length and
 direction_deg its direction in the body frame (NaN below ZERO_STEP_MM); turn_deg the mean
-rotation per cycle and turn_std_deg its sample standard deviation."""
+rotation per cycle and turn_std_deg its sample standard deviation; status the step run's, or
+where that is ok and the table has glides, the first failed glide run's (its glides are NaN:
+the planner leaves the gait out)."""
 
 GLIDE_COLUMNS = ["gait", "glide_fire_cycles", "glide_x_mm", "glide_y_mm", "glide_mm",
-                 "glide_turn_deg", "glide_cycles"]
+                 "glide_turn_deg", "glide_cycles", "status"]
 """Columns of the glide table (one row per gait and number of firings): glide_x/glide_y_mm,
 the centroid's displacement from the end of the last firing cycle over the glide_cycles cycles
 after it, in the body frame at that moment, the robot having fired the gait at the start of
 each of glide_fire_cycles cycles from rest (it builds up momentum over the first cycles, so the
-glide grows with them); glide_mm its length; glide_turn_deg the rotation over the glide."""
+glide grows with them); glide_mm its length; glide_turn_deg the rotation over the glide;
+status the robot's (a failed one's glide is NaN)."""
 GLIDE_CYCLES = 4
 """Cycles of coasting over which a glide is measured (the planner lets robots settle as
 long)."""
@@ -319,6 +322,12 @@ def primitives_from_sources(base: StarParams, solver: SolverConfig,
                                      progress)
         table = table.merge(widen_glides(glides), on="gait", how="left",
                             validate="one_to_one")
+        # a gait whose glide run failed has NaN glides: its status says so (every row said
+        # "ok" beside them, an audit), and the planner leaves it out
+        failed = glides[glides["status"] != "ok"].groupby("gait")["status"].first().to_dict()
+        stepped_ok = table["status"] == "ok"
+        table.loc[stepped_ok, "status"] = [failed.get(gait, "ok")
+                                           for gait in table.loc[stepped_ok, "gait"]]
     return table, expanded
 
 
@@ -366,6 +375,7 @@ def glides_from_sources(base: StarParams, solver: SolverConfig,
     body = rotate(end[:, :2] - stop[:, :2], -np.radians(stop[:, 2]))
     turn = wrap_degrees(end[:, 2] - stop[:, 2])
     ok = simulator.ok
+    status = simulator.state()["status"].to_numpy()
     body[~ok], turn[~ok] = np.nan, np.nan
     index = {representative: i for i, representative in enumerate(representatives)}
     rows = []
@@ -376,5 +386,5 @@ def glides_from_sources(base: StarParams, solver: SolverConfig,
             rows.append({"gait": gait, "glide_fire_cycles": k, "glide_x_mm": glide[0],
                          "glide_y_mm": glide[1], "glide_mm": float(np.hypot(*glide)),
                          "glide_turn_deg": -turn[source] if reflect else turn[source],
-                         "glide_cycles": glide_cycles})
+                         "glide_cycles": glide_cycles, "status": status[source]})
     return sort_gaits(pd.DataFrame(rows), extra=["glide_fire_cycles"])[GLIDE_COLUMNS]

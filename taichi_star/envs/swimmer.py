@@ -52,7 +52,7 @@ from ..checks import is_real, is_whole
 from ..extras import require
 from ..gait import N_ACTUATORS
 from .. import drawing, metrics
-from ..metrics import rotate
+from ..metrics import MAX_GOAL_MM, rotate
 from ..params import SolverConfig, StarParams
 from ..simulator import ACTUATOR_COLUMNS, Simulator
 from ..timegrid import check_work, steps_in, whole_steps
@@ -68,8 +68,6 @@ VELOCITY_BOUND_MM_S = 1e3
 """Bound of the velocity entries, mm/s (the robot swims at < 10 mm/s, its limbs at < 100)."""
 ANGULAR_VELOCITY_BOUND_DEG_S = 1e4
 """Bound of the angular velocity entry, deg/s."""
-MAX_GOAL_MM = 1e3
-"""Largest goal distance a task may ask for, mm."""
 DEFAULT_MAX_EPISODE_STEPS = 40
 """The registered step budget (control periods) of StarSwimmer-v0."""
 RENDER_MODES = ("rgb_array",)

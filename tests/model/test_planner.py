@@ -7,7 +7,8 @@ import pytest
 import taichi_star as ts
 from taichi_star.metrics import rotate
 from taichi_star.planner import PrimitiveModel, default_goals, drive
-from taichi_star.primitives import GLIDE_COLUMNS, measure_glides, widen_glides
+from taichi_star.primitives import (GLIDE_COLUMNS, measure_glides, measure_primitives,
+                                    widen_glides)
 
 
 @pytest.fixture(scope="module")
@@ -97,3 +98,34 @@ def test_glides_per_streak_equal_a_robot_run_alone(quick_glides):
                                    rtol=1e-9, atol=1e-9, err_msg=str(key))
     # the robot builds up momentum: a longer glide after two firings than after one
     assert glides.loc[("A1+A3", 2), "glide_mm"] > glides.loc[("A1+A3", 1), "glide_mm"]
+
+
+def test_a_failed_glide_run_marks_its_gaits_and_the_planner_leaves_them_out():
+    """A glide run that failed left NaN glides under status "ok" in every row, and
+    PrimitiveModel.from_table refused the whole table (an audit): a step of 9 ms with at most
+    5 Newton iterations and no substeps fails the second firing's glide of 234 of the 255
+    gaits. Their status now says so, and the model takes the others."""
+    solver = ts.SolverConfig(dt=0.009, max_newton=5, max_substep_halvings=0)
+    table, _ = measure_primitives(ts.StarParams(), solver, cycles=2, first_cycle=1,
+                                  glide_cycles=1)
+    no_glide = ~np.isfinite(table["glide2_x_mm"])
+    assert no_glide.any() and not no_glide.all()  # the case exercises both
+    assert ((table["status"] != "ok") == no_glide).all()
+    model = PrimitiveModel.from_table(table)
+    assert sorted(g for g in model.gaits if g != "none") == sorted(table.loc[~no_glide, "gait"])
+
+
+def test_a_table_without_the_columns_and_goals_beyond_a_metre_are_refused():
+    """A table without `status` was a KeyError; a goal at 1e308 mm ran every plan and failed
+    plotting (an audit). Goals are bounded by metrics.MAX_GOAL_MM = 1000 mm, at it accepted."""
+    import pandas as pd
+    from taichi_star.planner import check_drive
+    with pytest.raises(ValueError, match=r"^table: not a primitive table .* no column 'status'"):
+        PrimitiveModel.from_table(pd.DataFrame({"gait": ["A1"]}))
+    params, solver = ts.StarParams(), ts.SolverConfig()
+    check_drive([[1000.0, 0.0]], params, solver)
+    with pytest.raises(ValueError, match=r"^goals_mm must be within 1000 mm"):
+        check_drive([[1000.0, 1e-3]], params, solver)
+    assert len(default_goals(1000.0, 2, 1000.0)) == 3
+    with pytest.raises(ValueError, match=r"^distance_mm must be a number in \(0, 1000\] mm"):
+        default_goals(1000.5)

@@ -2,7 +2,9 @@
 a plot, provenance), plan (with the primitives given), env_bench; their argument errors on
 one line with exit code 2 before any compute."""
 
+import hashlib
 import json
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -94,7 +96,22 @@ def test_plan_quick_with_given_primitives(primitives_run, tmp_path):
     assert {"open_mean_error_mm", "closed_mean_error_mm"} <= set(gain.columns)
     for name in ("plan.csv", "plan_gain.csv", "plan_cycles.csv", "plan_paths.csv"):
         sidecar = json.loads((tmp_path / f"{name}.json").read_text())
-        assert sidecar["details"]["primitives"] == primitives and sidecar["study"] == "plan"
+        # the table given, by its whole path and content (a relative path was all, an audit)
+        assert sidecar["details"]["primitives"] == str(Path(primitives).resolve())
+        assert sidecar["details"]["primitives_sha256"] == hashlib.sha256(
+            Path(primitives).read_bytes()).hexdigest() and sidecar["study"] == "plan"
+
+
+def test_plan_refuses_primitives_of_another_robot(primitives_run, tmp_path, capsys):
+    """The paper robot's table drove the identified one without a word, reaching 0 of 9
+    goals (an audit): the table's sidecar records its robot, and another is refused."""
+    out = tmp_path / "out"
+    code = studies_main(["plan", *QUICK, "--primitives", str(primitives_run / "primitives.csv"),
+                         "--set", "alpha=1.2", "--out", str(out)])
+    assert code == 2
+    error = capsys.readouterr().err
+    assert "measured on a robot whose alpha is 0.8, this run's 1.2 (1 field(s) differ" in error
+    assert len(error.strip().splitlines()) == 1 and not out.exists()
 
 
 def test_env_bench_quick_into_a_fresh_run_folder(tmp_path, monkeypatch):
