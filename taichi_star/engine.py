@@ -669,10 +669,11 @@ class BatchEngine:
                 firing = 1
             # with dt_min = dt_max every step is that long: a stop or firing on the dt grid
             # lies a few roundings of the time from where the steps' sum lands
-            # (`stepping.HELD_STEP_SLACK`)
+            # (`stepping.HELD_STEP_SLACK`; in f32 the time's roundings, 64 of them, are larger)
             slack = 0.0
             if dt_min == dt_max:
-                slack = stepping.HELD_STEP_SLACK * dt_min
+                slack = ti.max(stepping.HELD_STEP_SLACK * dt_min,
+                               self.sliver_limit[None] * ti.max(ti.abs(target), 1.0))
             end = stepping.step_end(start, proposed, target, firing, first_step, slack)
             if self.state.steps_done[b] >= self.step_limit[None] or end <= start:
                 # the counter is full, or the step is below the time's rounding: stop here

@@ -312,7 +312,8 @@ def check_drive(goals_mm, params: StarParams, solver: SolverConfig, tolerance_mm
         goals = np.empty(0)
     if goals.ndim != 2 or goals.shape[1] != 2 or not len(goals) or not np.isfinite(goals).all():
         raise ValueError(f"goals_mm must be a finite (G, 2) array, got {goals_mm!r}")
-    if (np.hypot(goals[:, 0], goals[:, 1]) > MAX_GOAL_MM).any():
+    # a rounding over the bound is within it: default_goals(1000, 5) puts one 1.1e-13 mm past
+    if (np.hypot(goals[:, 0], goals[:, 1]) > MAX_GOAL_MM * (1 + 1e-12)).any():
         # a goal at 1e308 mm ran every plan, then its plot failed on a NaN (an audit)
         raise ValueError(f"goals_mm must be within {MAX_GOAL_MM:g} mm (metrics.MAX_GOAL_MM) of "
                          f"the start, got {goals_mm!r}")

@@ -124,8 +124,9 @@ def test_a_table_without_the_columns_and_goals_beyond_a_metre_are_refused():
         PrimitiveModel.from_table(pd.DataFrame({"gait": ["A1"]}))
     params, solver = ts.StarParams(), ts.SolverConfig()
     check_drive([[1000.0, 0.0]], params, solver)
+    check_drive(default_goals(1000.0, 5), params, solver)  # one goal a rounding past 1000 mm
     with pytest.raises(ValueError, match=r"^goals_mm must be within 1000 mm"):
-        check_drive([[1000.0, 1e-3]], params, solver)
+        check_drive([[1000.0, 1.0]], params, solver)  # 1000.0005 mm
     assert len(default_goals(1000.0, 2, 1000.0)) == 3
     with pytest.raises(ValueError, match=r"^distance_mm must be a number in \(0, 1000\] mm"):
         default_goals(1000.5)
