@@ -195,17 +195,23 @@ def test_a_firing_a_long_sum_away_from_a_record_is_not_a_step_of_rounding_noise(
     np.testing.assert_allclose(velocities[0], velocities[1], rtol=1e-6)
 
 
+def _fired_robot_after_1_5_s(solver):
+    """A damped robot fired at 0, 0.2, 0.4 and 1.3 s, advanced to 1.5 s with records every
+    0.05 s (each a step end with adaptive steps)."""
+    sim = ts.Simulator([ts.StarParams(damping_time=1e-3)], solver)
+    sim.fire(["A1"])
+    for at in (0.2, 0.4, 1.3):
+        sim.fire(["A1"], at_s=at)
+    sim.advance(1.5, record_interval_s=0.05)
+    return sim
+
+
 def test_with_dt_min_equal_to_dt_max_every_step_is_that_long_in_f32_too():
     """In f32 the time's roundings (~1e-7 of it) pass 1e-6 of the step: the slack is also 64 of
     them there (1,516 steps to 1.5 s before, a review)."""
     held = ts.SolverConfig(adaptive=True, dt=1e-3, dt_min=1e-3, dt_max=1e-3, precision="f32",
                            newton_tol=1e-7)
-    sim = ts.Simulator([ts.StarParams(damping_time=1e-3)], held)
-    sim.fire(["A1"])
-    for at in (0.2, 0.4, 1.3):
-        sim.fire(["A1"], at_s=at)
-    sim.advance(1.5, record_interval_s=0.05)
-    assert sim.save().fields["steps_done"][0] == 1500
+    assert _fired_robot_after_1_5_s(held).save().fields["steps_done"][0] == 1500
 
 
 def test_with_dt_min_equal_to_dt_max_every_step_is_that_long_a_firings_too():
@@ -220,11 +226,7 @@ def test_with_dt_min_equal_to_dt_max_every_step_is_that_long_a_firings_too():
     held = ts.SolverConfig(adaptive=True, dt=1e-3, dt_min=1e-3, dt_max=1e-3)
     paths = {}
     for name, solver in (("held", held), ("fixed", ts.SolverConfig(dt=1e-3))):
-        sim = ts.Simulator([ts.StarParams(damping_time=1e-3)], solver)
-        sim.fire(["A1"])
-        for at in (0.2, 0.4, 1.3):
-            sim.fire(["A1"], at_s=at)
-        sim.advance(1.5, record_interval_s=0.05)
+        sim = _fired_robot_after_1_5_s(solver)
         assert sim.save().fields["steps_done"][0] == 1500
         paths[name] = sim.state()[["centroid_x_mm", "centroid_y_mm"]].to_numpy()[0]
     np.testing.assert_allclose(paths["held"], paths["fixed"], rtol=0, atol=1.5e-4)
