@@ -18,7 +18,6 @@ import collections
 import contextlib
 import datetime
 import difflib
-import hashlib
 import itertools
 import json
 import logging
@@ -38,7 +37,7 @@ from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, MAX_LOCAL_WO
 from taichi_star.experiment import PAPER_GAITS
 from taichi_star.extras import require
 from taichi_star.gait import Gait
-from taichi_star.output import column_unit, column_units, parquet_bytes
+from taichi_star.output import column_unit, column_units, parquet_bytes, table_stamp
 from taichi_star.timegrid import steps_in
 
 from . import provenance
@@ -665,16 +664,15 @@ class Output:
     def _write_described(self, path: Path, data: bytes, extra: Optional[Mapping],
                          frame: pd.DataFrame) -> Path:
         """`write_atomic` of a table and its sidecar (the provenance, the study's wall time so
-        far and the unit of every column): a full disk leaves the previous pair, a kill at worst the new table without
-        a sidecar, never beside the previous run's; a failure is a StudyOutputError naming the
-        folder."""
-        # the table's SHA-256: `read_provenance` refuses a table that is no longer the one
+        far, the table's stamp and the unit of every column): a full disk leaves the previous
+        pair, a kill at worst the new table without a sidecar, never beside the previous run's;
+        a failure is a StudyOutputError naming the folder."""
+        # the table's stamp: `read_provenance` refuses a table that is no longer the one
         # described (two runs writing into one folder could pair one's table with the other's
         # sidecar)
         sidecar = provenance.sidecar_text({**self._details(extra),
                                            "elapsed_s": provenance.elapsed_s(),
-                                           "table_rows": len(frame),
-                                           "table_sha256": hashlib.sha256(data).hexdigest(),
+                                           **table_stamp(len(frame), data),
                                            "units": column_units(frame.columns)})
         write_atomic(path, data, sidecar=(provenance.sidecar_path(path), sidecar),
                      failure=lambda reason: StudyOutputError(

@@ -70,7 +70,7 @@ import numpy as np
 import pandas as pd
 
 from taichi_star import identification, simulate
-from taichi_star.sensitivities import REPLICAS_PER_DIRECTION
+from taichi_star.sensitivities import REPLICAS_PER_DIRECTION, instances_per_instance
 from taichi_star.timegrid import nearest_interval
 
 from . import cli, identify
@@ -545,13 +545,14 @@ def main(argv=None):
         # a gradient's evaluation runs each gait with two replicas per axis (`sensitivities`)
         gradient = args.starts * (args.lbfgs_evaluations + args.least_squares_evaluations) \
             + args.polish_evaluations
+        per_gradient = instances_per_instance(len(box))
         identify.check_instances(
-            (cma_settings.evaluations(len(box)) + gradient * (1 + 2 * len(box))) * len(gaits),
+            (cma_settings.evaluations(len(box)) + gradient * per_gradient) * len(gaits),
             f"set {name}: (--cma-generations {args.cma_generations} × population "
             f"{cma_settings.population(len(box), 0)} + (--starts {args.starts} × "
             f"(--lbfgs-evaluations {args.lbfgs_evaluations} + --least-squares-evaluations "
             f"{args.least_squares_evaluations}) + --polish-evaluations "
-            f"{args.polish_evaluations}) × {1 + 2 * len(box)}) × {len(gaits)} gaits")
+            f"{args.polish_evaluations}) × {per_gradient}) × {len(gaits)} gaits")
     for box in boxes.values():  # every corner of each group of CORNER_GROUP axes (2^20 is
         for group in range(0, len(box), CORNER_GROUP):  # too many; the groups share no limit)
             identify.check_box(box[group:group + CORNER_GROUP], base, "--sets")

@@ -673,7 +673,7 @@ class BatchEngine:
             slack = 0.0
             if dt_min == dt_max:
                 slack = ti.max(stepping.HELD_STEP_SLACK * dt_min,
-                               self.sliver_limit[None] * ti.max(ti.abs(target), 1.0))
+                               stepping.roundings(self.sliver_limit[None], target))
             end = stepping.step_end(start, proposed, target, firing, first_step, slack)
             if self.state.steps_done[b] >= self.step_limit[None] or end <= start:
                 # the counter is full, or the step is below the time's rounding: stop here

@@ -23,7 +23,8 @@ from .checks import is_whole
 from .extras import require
 from .geometry import CENTRE
 from .params import PARAMETER_UNITS, StarParams, check_number, parameter_column
-from .provenance import TEMPORARY_MARK, code_version, file_path, require_folder, write_atomic
+from .provenance import (TABLE_SHA256, TEMPORARY_MARK, code_version, file_path, require_folder,
+                         table_stamp, write_atomic)
 
 PROVENANCE_KEY = "taichi_star"
 """Key of the provenance in a Parquet file's schema metadata (JSON)."""
@@ -163,8 +164,7 @@ def to_csv(result, path, table: str = "summary") -> Path:
     path = file_path(path, "path of the CSV file")
     frame = _table(result, table)
     data = frame.to_csv(index=False).encode()
-    facts = {**provenance(result, frame.columns), "table_rows": len(frame),
-             "table_sha256": hashlib.sha256(data).hexdigest()}
+    facts = {**provenance(result, frame.columns), **table_stamp(len(frame), data)}
     write_atomic(path, data, failure=OSError,
                  sidecar=(Path(f"{path}.json"),
                           (json.dumps(facts, indent=2, default=str) + "\n").encode()))
@@ -253,7 +253,7 @@ def read_provenance(path) -> dict:
         reason = str(error).splitlines()[0] if str(error) else ""
         raise ValueError(f"{source}: no taichi_star provenance in it ({type(error).__name__}"
                          f"{': ' + reason if reason else ''})") from None
-    written = facts.get("table_sha256") if isinstance(facts, dict) else None
+    written = facts.get(TABLE_SHA256) if isinstance(facts, dict) else None
     if written is not None and hashlib.sha256(path.read_bytes()).hexdigest() != written:
         raise ValueError(f"{path}: not the table its provenance {source.name} describes (its "
                          f"SHA-256 differs: damaged or edited since it was written)")

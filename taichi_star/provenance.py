@@ -58,6 +58,16 @@ def is_temporary(path: Path) -> bool:
     return path.name.startswith(".") and TEMPORARY_MARK in path.name
 
 
+TABLE_SHA256 = "table_sha256"
+"""The key of a CSV sidecar's stamp of its table (`table_stamp`)."""
+
+
+def table_stamp(rows: int, data: bytes) -> Dict[str, object]:
+    """What a CSV's sidecar records of the table it describes: its rows and the SHA-256 of its
+    bytes (`output.read_provenance` refuses a table that is no longer that one)."""
+    return {"table_rows": rows, TABLE_SHA256: hashlib.sha256(data).hexdigest()}
+
+
 def require_folder(path: Path, failure: Callable[[str], Exception] = OSError):
     """Raise `failure(reason)` unless the folder `path` goes into is one ("cannot write x.csv:
     its folder /data/run does not exist"): the writers create no folders, and a message naming

@@ -84,6 +84,12 @@ and 1.2e-6 (BDF2). 1e-3 rather than 1e-2 because `sensitivity_check` differences
 at the same step, and at 1e-2 the runs' curvature in τ spreads those by up to 1e-3."""
 REPLICAS_PER_DIRECTION = 2
 """Replica instances each direction adds per instance: the pair at ±ε."""
+
+
+def instances_per_instance(directions: int) -> int:
+    """How many instances a batch simulates for each one asked for with `directions`
+    directions: itself and REPLICAS_PER_DIRECTION replicas per direction."""
+    return 1 + REPLICAS_PER_DIRECTION * directions
 ZERO_VALUE_SCALE = 0.01
 """For a parameter at 0, ε is RELATIVE_STEP times this share of the top of its range (for a
 per-actuator delay: of the period)."""
@@ -301,7 +307,7 @@ def derivatives(values: np.ndarray, directions: Sequence[Direction], steps: np.n
     """d(output)/d(direction) for every direction, label -> (B, ...) array, from `values`
     (B_all, ...): the output of every instance of a `replica_batch` batch in its order (an
     angle's differences, output in degrees, taken the short way round)."""
-    count = len(values) // (1 + REPLICAS_PER_DIRECTION * len(directions))
+    count = len(values) // instances_per_instance(len(directions))
     result = {}
     for j, direction in enumerate(directions):
         plus, minus = (values[side] for side in pair_slices(j, count))
@@ -316,7 +322,7 @@ def split_result(summary: pd.DataFrame, trajectory: pd.DataFrame,
     alone, sensitivities: one row per instance with a column `sensitivity_column(output,
     direction)` per SUMMARY_OUTPUTS × direction, trajectory sensitivities: the trajectory's
     instance and t_s with one column per TRAJECTORY_OUTPUTS × direction)."""
-    count = len(summary) // (1 + REPLICAS_PER_DIRECTION * len(directions))
+    count = len(summary) // instances_per_instance(len(directions))
     sensitivities = {}
     by_instance = trajectory.sort_values(["instance", "t_s"], kind="stable")
     records = len(by_instance) // len(summary) if len(summary) else 0

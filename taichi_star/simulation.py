@@ -264,7 +264,7 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     needs grows only with its tables."""
     directions = tangents.parse_directions(sensitivities)
     # replicas travel in their instance's chunk: a chunk holds (1 + 2·directions) × its instances
-    per_instance = 1 + tangents.REPLICAS_PER_DIRECTION * len(directions)
+    per_instance = tangents.instances_per_instance(len(directions))
     params, duration_s, record_interval_s = validate_call(params, duration_s, solver,
                                                           record_interval_s, record_shapes,
                                                           steady_from_cycle, per_instance)
@@ -351,8 +351,7 @@ def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, reco
     state = engine.state
     # the instances the caller asked for; a sensitive batch's replicas follow them, and their
     # shapes would only be dropped (kept, they held 17× the memory of the result's)
-    primal = len(params) // (1 + tangents.REPLICAS_PER_DIRECTION * len(directions)) \
-        if directions else batch
+    primal = len(params) // tangents.instances_per_instance(len(directions))
 
     def take(stop):
         now = engine.centroids_of(batch)

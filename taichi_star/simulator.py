@@ -163,7 +163,7 @@ class Simulator:
         tangents.check_directions(self.directions, params, solver)
         check_arch(arch)
         check_batch_memory(params, solver.precision, arch,
-                           1 + tangents.REPLICAS_PER_DIRECTION * len(self.directions))
+                           tangents.instances_per_instance(len(self.directions)))
         self.params = params
         self.solver = solver
         self.model, self._steps_of_directions = tangents.replica_model(params, self.directions,

@@ -14,9 +14,10 @@ def step_end(start, proposed, target, firing, firing_step, slack):
     never a sliver under a quarter step before it (the rest is split in two instead), so that
     a rejected step always shrinks. A firing makes the forcing jump within the step that ends
     on it: that step is at most `firing_step` long (dt, as a run's first step), so the steps
-    before it end firing_step short of it (or halfway there). `slack` (s; `HELD_STEP_SLACK`
-    of dt_min where steps are held, else 0) is how far these comparisons look past the
-    times' rounding: a step that ends within it of its limit ends on it."""
+    before it end firing_step short of it (or halfway there). `slack` (s; where steps are
+    held, the larger of `HELD_STEP_SLACK` of dt_min and the time's `roundings`, else 0) is how
+    far these comparisons look past the times' rounding: a step that ends within it of its
+    limit ends on it."""
     limit = target
     if firing == 1 and target - start > firing_step + slack:
         limit = ti.max(target - firing_step, start + 0.5 * (target - start))
@@ -56,6 +57,13 @@ reporting ok (an audit, before this bound)."""
 
 
 @ti.func
+def roundings(limit, t):
+    """`limit` (a count of roundings times the precision's epsilon) as seconds at time t (s):
+    relative to max(|t|, 1 s)."""
+    return limit * ti.max(ti.abs(t), 1.0)
+
+
+@ti.func
 def is_sliver(start, end, target, limit, least, most):
     """Whether the step from start to end (s) is a rounding's sliver: it lands on its target
     (a stop) at most min(max(limit · max(|end|, 1 s), least), most) after start (limit:
@@ -63,8 +71,7 @@ def is_sliver(start, end, target, limit, least, most):
     `SLIVER_MOST_OF_DT_MIN` of dt_min, s). Solved, such a step divides the positions' rounding
     by h: a 5.6e-17-s step after a firing set the centroid's velocity from −5.2 to −2.7 mm/s
     (3.5 % off the displacement 0.05 s later), so the clock crosses it alone."""
-    return end == target and end - start <= ti.min(
-        ti.max(limit * ti.max(ti.abs(end), 1.0), least), most)
+    return end == target and end - start <= ti.min(ti.max(roundings(limit, end), least), most)
 
 
 @ti.func

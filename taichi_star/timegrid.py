@@ -144,6 +144,11 @@ def check_work(name: str, steps: float, batch: Optional[int] = None):
     warn_long_work(name, round(steps) * (batch or 1), stacklevel=4)
 
 
+LONG_WORK_MESSAGE = r".* robot-steps: about .* h at "
+"""A pattern of `warn_long_work`'s message (a caller that tells the hours of a whole batch
+filters its parts' warnings with it)."""
+
+
 def warn_long_work(name: str, robot_steps: float, stacklevel: int = 3):
     """A RuntimeWarning with the estimated wall time when `robot_steps` (steps × instances) is
     over WARN_ROBOT_STEPS; `name` says which arguments gave them."""

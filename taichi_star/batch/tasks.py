@@ -23,7 +23,7 @@ from ..model import instances_of
 from ..params import SolverConfig, StarParams
 from ..runtime import RECORDS_REMEDY, check_arch, check_host_memory
 from ..simulation import simulate, tables_bytes, validate_call
-from ..timegrid import steps_in, warn_long_work
+from ..timegrid import LONG_WORK_MESSAGE, steps_in, warn_long_work
 
 
 @dataclass(frozen=True)
@@ -113,10 +113,6 @@ def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None
                                        steady_from_cycle=steady_from_cycle))
     check_batch_work(tasks, len(params))
     return tasks
-
-
-LONG_WORK_MESSAGE = r".* robot-steps: about .* h at "
-"""The message of `timegrid.warn_long_work`."""
 
 
 def check_batch_work(tasks: Sequence[ChunkTask], instances: int):
