@@ -457,18 +457,17 @@ def build_parser():
                              f"none")
     parser.add_argument("--process-batch", type=int, default=PROCESS_BATCH, quick=2,
                         help=f"batch size of the processes and plain sections, at most "
-                             f"{cli.MAX_BATCH_SIZE} (default {PROCESS_BATCH})")
+                             f"{cli.MAX_BATCH_SIZE}")
     parser.add_argument("--no-plain-call", dest="plain_call", action="store_false",
                         help="skip the plain section: simulate(params, duration) with the "
                              "default solver at the process batch size (CPU)")
     parser.add_argument("--plain-jacobians", default="newton", quick="newton",
                         help="comma list of Jacobian modes of the plain call and the "
-                             "sensitivities sections: newton (the default solver's), chord, "
+                             "sensitivities sections: newton (SolverConfig's own), chord, "
                              "lagged (opt-in: kept across steps)")
     parser.add_argument("--plain-duration", type=float, default=PLAIN_DURATION,
                         quick=(WARMUP_STEPS + QUICK_STEPS) * DT,
-                        help=f"simulated seconds of the plain call (default one period, "
-                             f"{PLAIN_DURATION} s)")
+                        help="simulated seconds of the plain call (one period)")
     parser.add_argument("--sensitivity-counts", default="0,1,2,4", quick="none",
                         help=f"comma list of how many parameters ({', '.join(SENSITIVITY_PARAMETERS)}, "
                              f"in this order) the plain call differentiates by, at "

@@ -45,7 +45,7 @@ import pandas as pd
 from taichi_star import SolverConfig, StarParams
 
 from . import cli, figures, identify
-from .identify import DEFAULT_MAX_GENERATIONS, CMASettings, best_row
+from .identify import DEFAULT_MAX_GENERATIONS, CMASettings, best_row, best_units
 
 DESCRIPTION = ("Fit StarParams fields to the measured speeds and directions of the paper's gaits "
                "with CMA-ES (one batched simulation per generation); --cross-validate: "
@@ -79,12 +79,6 @@ def fit_cmaes(box: Sequence[identify.ParameterRange], base: StarParams,
         box, identify.start_units(box, base),
         lambda units: identify.evaluate_points(box, units, base, measurements, run_kwargs),
         settings, progress=progress, on_generation=on_generation).evaluations
-
-
-def best_units(evaluations: pd.DataFrame, box) -> np.ndarray:
-    """Unit coordinates (D,) of the best evaluation."""
-    row = best_row(evaluations)
-    return np.array([row[f"u_{spec.key}"] for spec in box], dtype=float)
 
 
 # --------------------------------------------------------------------------- cross-validation

@@ -31,13 +31,14 @@ import numpy as np
 import pandas as pd
 
 from taichi_star import (JACOBIANS, PER_ACTUATOR_FIELDS, PRESETS, SolverConfig, StarParams,
-                         check_work)
+                         check_work, fewest_steps)
 from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, MAX_LOCAL_WORKERS,
                                executor_for, has_chunks, stored_chunk_size, write_atomic)
 from taichi_star.experiment import PAPER_GAITS
 from taichi_star.extras import require
 from taichi_star.gait import Gait
-from taichi_star.output import column_unit, column_units, parquet_bytes, table_stamp
+from taichi_star.output import column_unit, column_units, parquet_bytes
+from taichi_star.provenance import table_stamp
 from taichi_star.timegrid import steps_in
 
 from . import provenance
@@ -90,8 +91,9 @@ class OneLineParser(argparse.ArgumentParser):
 class StudyParser(OneLineParser):
     """The parser of one study, with the flags every study takes (--out, --quick, --arch,
     --no-progress). `add_argument(..., quick=VALUE)` gives a flag another default under
-    --quick; both defaults are shown in its help, as any other flag's default is where its
-    help does not already say it (docs/studies.md promises every flag's default)."""
+    --quick; both defaults are shown in its help, as any other flag's default is, each once:
+    where the help already says the default, only the --quick one is added (docs/studies.md
+    promises every flag's default)."""
 
     def __init__(self, study: str, description: str, archs=("cpu", "gpu")):
         super().__init__(prog=f"python -m studies {study}", description=description,
@@ -117,8 +119,10 @@ class StudyParser(OneLineParser):
                     "%", "%%")
             return super().add_argument(*names, **kwargs)
         full = kwargs.pop("default", None)
-        kwargs["help"] = (kwargs.get("help", "") + f" (default {_shown(full)}; --quick "
-                          f"{_shown(quick)})").replace("%", "%%")
+        text = kwargs.get("help", "")
+        # a help that states the default itself gets only the --quick one, said once
+        stated = "" if "default" in text else f"default {_shown(full)}; "
+        kwargs["help"] = (text + f" ({stated}--quick {_shown(quick)})").replace("%", "%%")
         action = super().add_argument(*names, default=None, **kwargs)
         self.quick_defaults[action.dest] = (full, quick)
         return action
@@ -252,22 +256,31 @@ def check_file_name(name: str, flag: str):
                                  f"'\\' or '..': files go into --out)")
 
 
-def check_length(length: str, duration_s: float, step_s: float, step_name: str):
-    """StudyArgumentError (one line) unless a run of duration_s (s, what `length` says, e.g.
-    "--cycles 3 (9.45 s)") at steps of step_s (s, named `step_name`) stays within the step
-    counter (`check_work`, which also warns with an estimate when it is long)."""
+def check_steps(what: str, steps: float):
+    """StudyArgumentError (one line) unless `steps` time steps per instance (what `what` says
+    gave them, e.g. "--cycles 3 (9.45 s) at dt = 0.001 s") stay within the step counter
+    (`check_work`, which also warns with an estimate when it is long)."""
     try:
-        check_work(f"{length} at {step_name} {step_s:g} s", duration_s / step_s)
+        check_work(what, steps)
     except ValueError as error:
         raise StudyArgumentError(str(error)) from None
 
 
-def check_run(length: str, duration_s: float, config: SolverConfig):
-    """`check_length` of a run of duration_s (s, what `length` says, e.g. "--cycles 3 +
-    --glide-cycles 4 (22 s)") with this solver: its fixed steps, or its dt_max steps (the
-    fewest) when adaptive, as the library refuses them; and at least one fixed step."""
-    step, step_name = (config.dt_max, "dt_max") if config.adaptive else (config.dt, "--dt")
-    check_length(length, duration_s, step, step_name)
+def check_length(length: str, duration_s: float, step_s: float, step_name: str):
+    """`check_steps` of a run of duration_s (s, what `length` says, e.g. "--cycles 3 (9.45
+    s)") at steps of step_s (s, named `step_name`)."""
+    check_steps(f"{length} at {step_name} {step_s:g} s", duration_s / step_s)
+
+
+def check_run(length: str, duration_s: float, config: SolverConfig,
+              record_interval_s: float = 0.0):
+    """`check_steps` of a run of duration_s (s, what `length` says, e.g. "--cycles 3 +
+    --glide-cycles 4 (22 s)") with this solver and records every record_interval_s (s; 0 =
+    none), counted by the library's rule (`fewest_steps`: the fixed steps; adaptive ones at
+    dt_max, or one per record where records are closer), so that the command line refuses what
+    the library would, before any folder is made; and at least one fixed step."""
+    steps, bound = fewest_steps(config, duration_s, record_interval_s)
+    check_steps(f"{length} at {bound}", steps)
     if not config.adaptive and steps_in(duration_s, config.dt) < 1:
         raise StudyArgumentError(f"{length} is less than one step (dt = {config.dt:g} s)")
 

@@ -37,11 +37,11 @@ from typing import Dict, List, Sequence
 import numpy as np
 import pandas as pd
 
-from taichi_star import Gait, SolverConfig, StarParams, simulate
+from taichi_star import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS, Gait, SolverConfig,
+                         StarParams, simulate)
 from taichi_star.output import column_unit
 from taichi_star.sensitivity_check import difference_step, extrapolated_difference
-from taichi_star.sensitivities import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS,
-                                       REPLICAS_PER_DIRECTION, parse_directions)
+from taichi_star.sensitivities import REPLICAS_PER_DIRECTION, parse_directions
 
 from . import cli
 

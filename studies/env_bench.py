@@ -56,7 +56,7 @@ def measure(preset: str, solver: SolverConfig, num_envs: int, steps: int,
     robot_seconds = num_envs * steps * period
     return {"preset": preset, "jacobian": solver.jacobian, "num_envs": num_envs, "steps": steps,
             "control_period_s": period, "dt_s": solver.dt,
-            "n_nodes": envs.batch.simulator.model.topology.n_nodes, "wall_s": wall,
+            "n_nodes": envs.batch.simulator.n_nodes, "wall_s": wall,
             "robot_seconds_per_s": robot_seconds / wall,
             "robot_steps_per_s": robot_seconds / solver.dt / wall, "cores": os.cpu_count(),
             "load_average_1min": load, "cpu_model": provenance.cpu_model(), "arch": arch}

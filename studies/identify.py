@@ -385,6 +385,13 @@ def best_row(evaluations: pd.DataFrame) -> Optional[pd.Series]:
     return None if finite.empty else finite.loc[finite["objective"].idxmin()]
 
 
+def best_units(evaluations: pd.DataFrame, box) -> np.ndarray:
+    """Unit coordinates (D,) of the best evaluation (`best_row`: one with a finite objective
+    must be there) in the box's D axes (its u_KEY columns)."""
+    row = best_row(evaluations)
+    return np.array([row[f"u_{spec.key}"] for spec in box], dtype=float)
+
+
 # --------------------------------------------------------------------------- the objective
 
 def measured_gaits(text: str, flag: str = "--gaits") -> List[str]:

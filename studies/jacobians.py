@@ -47,8 +47,8 @@ def build_parser():
     parser.add_argument("--modes", default=DEFAULT_MODES, quick="newton:1e-10,lagged:1e-10",
                         help=f"comma list of MODE:TOL configurations, MODE one of "
                              f"{', '.join(JACOBIANS)} and TOL Newton's tolerance, m (the "
-                             f"reference, {REFERENCE[0]}:{REFERENCE[1]:g}, and the default, "
-                             f"{DEFAULT[0]}:{DEFAULT[1]:g}, are always run)")
+                             f"reference, {REFERENCE[0]}:{REFERENCE[1]:g}, and SolverConfig's "
+                             f"own, {DEFAULT[0]}:{DEFAULT[1]:g}, are always run)")
     parser.add_argument("--batch", type=int, default=512, quick=5,
                         help=f"instances (the five gaits repeated; at most {cli.MAX_BATCH_SIZE})")
     parser.add_argument("--duration", type=float, default=StarParams().period, quick=0.05,

@@ -267,11 +267,6 @@ def evaluate(box, units, model: StarParams, gaits: Sequence[str], setup: Setup) 
     return table
 
 
-def best_units(evaluations: pd.DataFrame, box) -> np.ndarray:
-    row = identify.best_row(evaluations)
-    return np.array([row[f"u_{spec.key}"] for spec in box], dtype=float)
-
-
 # --------------------------------------------------------------------------- one candidate
 
 def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMASettings,
@@ -297,7 +292,7 @@ def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMA
                         "fit_time_s": time.perf_counter() - start},
                 "parameters": pd.DataFrame(), "gaits": pd.DataFrame(), "folds": pd.DataFrame(),
                 "evaluations": evaluations, "best": None, "identified": None}
-    units = best_units(evaluations, box)
+    units = identify.best_units(evaluations, box)
     values = identify.box_values(box, units)[0]
     best = model.replace(**identify.point_changes(box, values, model))
     # training and validation windows from one simulation of the best point
@@ -412,8 +407,8 @@ def leave_one_gait_out(box, units, model: StarParams, settings: identify.CMASett
                 fold_box, start, lambda u: evaluate(fold_box, u, model, fitted, fold_setup),
                 fold_settings)
             if identify.best_row(fold.evaluations) is not None:
-                fold_values = identify.box_values(fold_box, best_units(fold.evaluations,
-                                                                       fold_box))[0]
+                fold_units = identify.best_units(fold.evaluations, fold_box)
+                fold_values = identify.box_values(fold_box, fold_units)[0]
                 point = identify.point_changes(fold_box, fold_values, model)
         predictions.append(model.replace(gait=held_out, **point))
         notes.append((held_out, len(fold_box), " ".join(frozen)))
@@ -535,16 +530,14 @@ def build_parser():
                         help="generations of each leave-one-gait-out fit (0: no folds)")
     parser.add_argument("--refine-top", type=int, default=DEFAULT_REFINE_TOP,
                         quick=QUICK_REFINE_TOP,
-                        help=f"refit the K best screened forms at the refine budget (0: no "
-                             f"refine stage; default {DEFAULT_REFINE_TOP})")
+                        help="refit the K best screened forms at the refine budget (0: no "
+                             "refine stage)")
     parser.add_argument("--refine-popsize", type=int, default=DEFAULT_REFINE_POPSIZE,
                         quick=QUICK_REFINE_POPSIZE,
-                        help=f"CMA-ES population of the refine stage (default "
-                             f"{DEFAULT_REFINE_POPSIZE})")
+                        help="CMA-ES population of the refine stage")
     parser.add_argument("--refine-generations", type=int, default=DEFAULT_REFINE_GENERATIONS,
                         quick=QUICK_REFINE_GENERATIONS,
-                        help=f"generations per CMA-ES run of the refine stage (default "
-                             f"{DEFAULT_REFINE_GENERATIONS})")
+                        help="generations per CMA-ES run of the refine stage")
     parser.add_argument("--restarts", type=int, default=1, quick=0,
                         help=f"extra CMA-ES runs from random points (multi-start, IPOP; at most "
                              f"{identify.MAX_RESTARTS})")

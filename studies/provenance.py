@@ -10,7 +10,6 @@ table.
 from __future__ import annotations
 
 import dataclasses
-import datetime
 import json
 import os
 import platform
@@ -20,7 +19,7 @@ import time
 from pathlib import Path
 from typing import Dict, Mapping, Optional, Sequence
 
-from taichi_star.batch import code_version
+from taichi_star.provenance import code_record, code_version
 
 STARTED = time.monotonic()
 """When the study's process imported this module (the command line imports it first): a
@@ -123,32 +122,18 @@ def short_commit() -> str:
     return code["commit"][:7] + ("-dirty" if code["dirty"] else "")
 
 
-def taichi_version() -> str:
-    import taichi
-    version = taichi.__version__
-    return ".".join(map(str, version)) if isinstance(version, (tuple, list)) else str(version)
-
-
 def record(study: str, argv: Sequence[str], model: Optional[Mapping] = None,
            solver=None, extra: Optional[Mapping] = None) -> Dict[str, object]:
     """The provenance of one study run. `model`: the preset name and the base StarParams (or
     any description of the instances); `solver`: a SolverConfig (or a description). A table's
     sidecar adds `elapsed_s`, the wall seconds the study had run when it was written."""
-    code = code_version()
     return {
         "study": study,
         "command": " ".join(["python -m studies", study, *map(shlex.quote, argv)]),
-        "taichi_star_version": code["version"],
-        "git_commit": code["commit"],
-        "git_dirty": code["dirty"],
-        # which edits of the commit (a dirty checkout's), so that two are told apart
-        **({"git_changes_sha256": code["changes_sha256"]} if "changes_sha256" in code else {}),
+        **code_record(),
         "model": plain(model),
         "solver": plain(solver),
-        "taichi_version": taichi_version(),
-        "python_version": platform.python_version(),
         "machine": machine(),
-        "date": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
         **({"details": plain(extra)} if extra else {}),
     }
 

@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from taichi_star import SolverConfig, StarParams
-from taichi_star.sensitivities import DIFFERENTIABLE_FIELDS, parse_directions
+from taichi_star import DIFFERENTIABLE_FIELDS, SolverConfig, StarParams
+from taichi_star.sensitivities import parse_directions
 from taichi_star.sensitivity_check import check_sensitivities
 
 from . import cli

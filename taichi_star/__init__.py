@@ -13,16 +13,19 @@ os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "false")
 
 from .actuation import CurvatureProfile
 from .gait import Gait, symmetry_classes
-from .params import JACOBIANS, PER_ACTUATOR_FIELDS, PRESETS, STAR_RANGES, SolverConfig, StarParams
+from .params import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS, JACOBIANS, PER_ACTUATOR_FIELDS,
+                     PRESETS, STAR_RANGES, SolverConfig, StarParams)
 from .profiling import EngineProfile
 from .runtime import available_archs
-from .driver import RunTiming
+from .driver import RunTiming, fewest_steps
 from .simulation import SimulationResult, simulate
 from .timegrid import MAX_STEPS_PER_INSTANCE, check_work
 from .simulator import Simulator, SimulatorSnapshot
 
 __version__ = "0.3.0"
 
-__all__ = ["simulate", "SimulationResult", "RunTiming", "MAX_STEPS_PER_INSTANCE", "check_work", "Simulator", "SimulatorSnapshot", "available_archs", "StarParams", "STAR_RANGES", "SolverConfig", "PRESETS", "JACOBIANS",
-           "PER_ACTUATOR_FIELDS",
+__all__ = ["simulate", "SimulationResult", "RunTiming", "MAX_STEPS_PER_INSTANCE", "check_work",
+           "fewest_steps", "Simulator", "SimulatorSnapshot", "available_archs", "StarParams",
+           "STAR_RANGES", "SolverConfig", "PRESETS", "JACOBIANS",
+           "PER_ACTUATOR_FIELDS", "COMPONENT_HEIGHTS", "DIFFERENTIABLE_FIELDS",
            "CurvatureProfile", "Gait", "symmetry_classes", "EngineProfile", "__version__"]

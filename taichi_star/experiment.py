@@ -26,6 +26,11 @@ import pandas as pd
 from .checks import check_flag, is_real
 from .gait import canonical_gait
 
+# every public name: docs/api.md documents the whole module
+__all__ = ["PAPER_GAITS", "PAPER_DIRECTIONS", "EXPERIMENT_PERIOD_S", "MAX_PATH_CYCLES",
+           "FIG4C_COLUMNS", "experimental_speeds", "experimental_speed", "experimental_trajectory",
+           "cycle_speeds", "experimental_cycle_speeds", "direction_of", "compare_with_experiment"]
+
 PAPER_GAITS = ("A1", "A1+A2", "A1+A3", "A1+A4", "A1+A3+A5")
 """The five gaits of the paper's Fig. 4, in its order."""
 

@@ -22,6 +22,9 @@ import importlib
 import importlib.util
 from types import ModuleType
 
+# the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
+__all__ = ["require", "missing_extra"]
+
 EXTRA_MODULES = {
     "plots": ("matplotlib",),
     "envs": ("gymnasium",),

@@ -16,6 +16,9 @@ from typing import List, Optional, Tuple, Union
 import numpy as np
 from .checks import check_flag, is_whole
 
+# the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
+__all__ = ["Gait", "symmetry_classes", "N_ACTUATORS"]
+
 N_ACTUATORS = 8
 NO_GAIT = "none"
 _ALLOWED = 'allowed: "none" or actuators "A1".."A8" joined by "+", each at most once'

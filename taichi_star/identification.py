@@ -84,6 +84,18 @@ from .checks import is_real, is_whole
 from .experiment import EXPERIMENT_PERIOD_S, PAPER_DIRECTIONS, PAPER_GAITS, experimental_trajectory
 from .gait import Gait
 
+# every public name: docs/api.md documents the whole module
+__all__ = ["TRAINING_CYCLES", "VALIDATION_CYCLES", "SAMPLES_PER_CYCLE", "MAX_CYCLE",
+           "MAX_SAMPLES_PER_CYCLE", "PHASE_GRID", "DISPLACEMENT_FLOOR_MM", "PHASE_STEP_S",
+           "PHASE_KINK_RATIO", "GOLDEN_ITERATIONS", "UNCERTAINTY_RCOND", "UNCERTAINTY_SHARE",
+           "UNCERTAINTY_COLUMNS", "TRIAL_COLUMNS", "CentroidPath", "Trial", "SimulatedRun",
+           "TrialFit", "measured_trial", "check_window", "check_samples", "tau_grid",
+           "cycle_curves", "latest_phase", "align_phase", "trial_fit", "trajectory_objective",
+           "objective_of", "measured_trials", "simulated_runs", "distance_derivative",
+           "path_derivative", "residual_count", "trial_residuals", "objective_residuals",
+           "trial_phase_motion", "objective_and_gradient", "phase_motion", "parameter_uncertainty",
+           "record_derivatives"]
+
 TRAINING_CYCLES = (1, 3)
 """The fit window, cycles 1–3 of every trial (the paper's three cycles from rest)."""
 VALIDATION_CYCLES = (4, 6)

@@ -18,6 +18,14 @@ import pandas as pd
 from .gait import Gait
 from .geometry import Topology, edge_curvature
 
+# every public name: docs/api.md documents the whole module
+__all__ = ["METERS_TO_MM", "MAX_GOAL_MM", "SPEED_COLUMNS", "centroid", "rotate", "wrap_degrees",
+           "body_rotation", "forward_directions", "swimming_metrics", "cycle_window_speeds",
+           "SPEED_ERROR_FLOOR_MM_S", "speed_error", "observed_order", "richardson_limit",
+           "STRAIN_LIMIT", "PARALLEL_TOLERANCE", "segments_cross", "CROSSING_SLICE", "BOX_MARGIN",
+           "ORDINARY_SCALE", "limbs_cross", "arc_mean_curvature", "arcs_inverted", "edge_lengths",
+           "edge_strain", "SHAPE_SLICE", "shape_checks"]
+
 METERS_TO_MM = 1e3
 MAX_GOAL_MM = 1e3
 """Largest goal distance an environment's task or a plan may ask for, mm (a metre: ~100 body
@@ -40,9 +48,12 @@ def rotate(vectors: np.ndarray, angle_rad) -> np.ndarray:
                      sin * vectors[..., 0] + cos * vectors[..., 1]], axis=-1)
 
 
-def wrap_degrees(angle):
-    """Angles (deg) wrapped to [-180, 180)."""
-    return (np.asarray(angle) + 180.0) % 360.0 - 180.0
+def wrap_degrees(angle, include_180: bool = False):
+    """Angles (deg, any shape) wrapped to [-180, 180) (+180 and every odd multiple go to -180),
+    or with `include_180` to (-180, 180] (they go to +180: the gaits table's directions, where
+    a gait travelling straight back reads 180); NaN and ±inf give NaN."""
+    wrapped = (np.asarray(angle) + 180.0) % 360.0 - 180.0
+    return np.where(wrapped == -180.0, 180.0, wrapped) if include_180 else wrapped
 
 
 def body_rotation(positions: np.ndarray, rest_positions: np.ndarray, joints: np.ndarray,

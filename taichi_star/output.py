@@ -6,10 +6,8 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import datetime
 import hashlib
 import json
-import platform
 import re
 import subprocess
 import tempfile
@@ -23,8 +21,12 @@ from .checks import is_whole
 from .extras import require
 from .geometry import CENTRE
 from .params import PARAMETER_UNITS, StarParams, check_number, parameter_column
-from .provenance import (TABLE_SHA256, TEMPORARY_MARK, code_version, file_path, require_folder,
+from .provenance import (TABLE_SHA256, TEMPORARY_MARK, code_record, file_path, require_folder,
                          table_stamp, write_atomic)
+
+# the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
+__all__ = ["to_xarray", "summary_of_dataset", "read_provenance", "animate", "column_unit",
+           "column_units", "parquet_bytes"]
 
 PROVENANCE_KEY = "taichi_star"
 """Key of the provenance in a Parquet file's schema metadata (JSON)."""
@@ -80,16 +82,14 @@ def column_units(columns) -> dict:
 
 
 def provenance(result, columns=None) -> dict:
-    """What produced `result`, as the studies' CSV sidecars record it: taichi_star_version,
-    git_commit, git_dirty; solver (every SolverConfig field); parameters (the StarParams
-    fields equal across the instances, by field name) and varying_parameters (the fields that
-    differ, whose values are in the table's columns); units of the table's `columns` (default
-    the summary's); Taichi
-    and Python versions; date; with the result's `timing` (a `simulate` call's), its phases in
-    s (compilation apart), its robot-steps and robot_steps_per_s."""
-    import taichi
-
-    code = code_version()
+    """What produced `result`, as the studies' CSV sidecars record it: the code and runtime
+    (`provenance.code_record`: taichi_star_version, git_commit, git_dirty, a dirty checkout's
+    git_changes_sha256, Taichi and Python versions, date); solver (every SolverConfig field);
+    parameters (the StarParams fields equal across the instances, by field name) and
+    varying_parameters (the fields that differ, whose values are in the table's columns);
+    units of the table's `columns` (default the summary's); with the result's `timing` (a
+    `simulate` call's), its phases in s (compilation apart), its robot-steps and
+    robot_steps_per_s."""
     summary = result.summary
     parameters, varying = {}, []
     for name, column in StarParams.columns().items():
@@ -100,20 +100,13 @@ def provenance(result, columns=None) -> dict:
             parameters[name] = value.item() if isinstance(value, np.generic) else value
         else:
             varying.append(name)
-    version = taichi.__version__
     timing = {}
     if result.timing is not None:
         timing = {"timing": {**dataclasses.asdict(result.timing),
                              "robot_steps_per_s": result.timing.robot_steps_per_s}}
-    return {"taichi_star_version": code["version"], "git_commit": code["commit"],
-            "git_dirty": code["dirty"], "solver": dataclasses.asdict(result.solver),
+    return {**code_record(), "solver": dataclasses.asdict(result.solver),
             "parameters": parameters, "varying_parameters": varying,
-            "units": column_units(summary.columns if columns is None else columns),
-            "taichi_version": ".".join(map(str, version)) if isinstance(version, (tuple, list))
-            else str(version),
-            "python_version": platform.python_version(),
-            "date": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
-            **timing}
+            "units": column_units(summary.columns if columns is None else columns), **timing}
 
 
 def _table(result, table: str) -> pd.DataFrame:

@@ -49,6 +49,10 @@ from .runtime import check_arch
 from .simulator import Simulator
 from .timegrid import check_work, whole_steps
 
+# the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
+__all__ = ["PrimitiveModel", "drive", "check_drive", "default_goals", "closed_loop_gain",
+           "SETTLE_CYCLES", "MAX_DEFAULT_GOALS", "PLAN_COLUMNS", "CYCLE_COLUMNS"]
+
 MODES = ("open", "closed")
 
 PLAN_COLUMNS = ["goal", "goal_x_mm", "goal_y_mm", "goal_distance_mm", "mode", "reached",

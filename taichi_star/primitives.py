@@ -31,6 +31,13 @@ from .simulation import simulate
 from .simulator import Simulator
 from .timegrid import check_work, on_grid, whole_steps
 
+# the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
+__all__ = ["measure_primitives", "measure_glides", "check_measurement", "PRIMITIVE_COLUMNS",
+           "CYCLE_COLUMNS", "GLIDE_COLUMNS", "GLIDE_CYCLES", "actuators_equal", "gait_sources",
+           "GaitSources", "simulated_gaits", "primitives_from_sources", "glides_from_sources",
+           "class_symmetries", "transform_vectors", "cycle_displacements", "expand_cycles",
+           "summarise_cycles"]
+
 GaitSources = Dict[str, Tuple[str, int, bool, int]]
 """gait -> (source, rotation, reflect, class size): the gait whose simulation a gait's steps are
 read from and the symmetry mapping them onto it (`gait_sources`)."""

@@ -27,6 +27,9 @@ from .runtime import Runtime, check_arch
 from .state import STATUS_OK
 from .timegrid import STEPS_PER_LAUNCH, check_work
 
+# the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
+__all__ = ["EngineProfile", "step_phases", "matmul_gflops", "device_bandwidth"]
+
 PROFILE_LAUNCHES = 3
 """`phase_split` times each phase as the best of this many launches (the differences of noisy
 timings would be noisier still)."""

@@ -1,15 +1,21 @@
 """Where results come from, and writing files whole: the code version (package version, git
-commit, dirty flag) that the run store, the studies' sidecars and `SimulationResult`'s files
-record, and `write_atomic`, which every writer of results uses."""
+commit, dirty flag) that the run store records, the code and runtime record (`code_record`)
+that the studies' sidecars and `SimulationResult`'s files share, and `write_atomic`, which every
+writer of results uses."""
 
 from __future__ import annotations
 
+import datetime
 import errno
 import hashlib
 import os
+import platform
 import subprocess
 from pathlib import Path
 from typing import Callable, Dict, Optional, Tuple
+
+# the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
+__all__ = ["code_record", "code_version", "table_stamp", "write_atomic"]
 
 
 def code_version() -> Dict[str, object]:
@@ -38,6 +44,28 @@ def code_version() -> Dict[str, object]:
         pass
     version = {"version": __version__, "commit": commit, "dirty": dirty}
     return version if changes is None else {**version, "changes_sha256": changes}
+
+
+def taichi_version() -> str:
+    """The installed Taichi's version, "1.7.3" (Taichi gives it as a tuple or a string)."""
+    import taichi
+
+    version = taichi.__version__
+    return ".".join(map(str, version)) if isinstance(version, (tuple, list)) else str(version)
+
+
+def code_record() -> Dict[str, object]:
+    """What made a result, as every sidecar records it (`output.provenance`, the studies'
+    `record`): taichi_star_version, git_commit, git_dirty (`code_version`), and for a dirty
+    checkout git_changes_sha256 (which edits of the commit, so that two are told apart);
+    taichi_version, python_version, and the date (ISO 8601, local time, to the second)."""
+    code = code_version()
+    return {"taichi_star_version": code["version"], "git_commit": code["commit"],
+            "git_dirty": code["dirty"],
+            **({"git_changes_sha256": code["changes_sha256"]} if "changes_sha256" in code
+               else {}),
+            "taichi_version": taichi_version(), "python_version": platform.python_version(),
+            "date": datetime.datetime.now().astimezone().isoformat(timespec="seconds")}
 
 
 def file_path(path, what: str) -> Path:

@@ -46,6 +46,11 @@ from .metrics import wrap_degrees
 from .model import build_model
 from .timegrid import on_grid
 
+# the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
+__all__ = ["SUMMARY_OUTPUTS", "TRAJECTORY_OUTPUTS", "RELATIVE_STEP", "FIELD_RELATIVE_STEPS",
+           "delay_on_step_grid", "REPLICAS_PER_DIRECTION", "instances_per_instance",
+           "parse_directions"]
+
 RELATIVE_STEP = 1e-4
 """ε of a direction relative to the parameter's value. Each direction has one replica pair, at
 ±ε; its derivative is the pair's central difference, D(ε). Where the replicas' residual is

@@ -23,6 +23,9 @@ from .params import SolverConfig, StarParams
 from .sensitivities import RELATIVE_STEP, Direction, parse_directions
 from .simulation import simulate
 
+# the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
+__all__ = ["check_sensitivities", "extrapolated_difference", "difference_step"]
+
 TAYLOR_MULTIPLE = 100.0
 """H of the Taylor test in multiples of the differences' h (1e-2 of the value for ε = 1e-4):
 its remainder, ~H² relative, stays far above the Newton noise of the runs (1e-12 m against

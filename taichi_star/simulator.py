@@ -187,6 +187,11 @@ class Simulator:
         return len(self.params)
 
     @property
+    def n_nodes(self) -> int:
+        """N, the nodes of each robot (the middle axis of `shapes`' (B, N, 2))."""
+        return self.model.topology.n_nodes
+
+    @property
     def engine_key(self) -> tuple:
         """What a saved state must match: the engine (topology and terms), the integrator, the
         capacity, the stepping (fixed or adaptive: what the clock of pending firings reads,

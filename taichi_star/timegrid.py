@@ -16,6 +16,10 @@ from typing import Optional
 import numpy as np
 from .checks import is_real, is_whole
 
+# the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
+__all__ = ["nearest_interval", "interval_for_count", "whole_steps", "steps_in", "STEP_TOLERANCE",
+           "MAX_STEPS_PER_INSTANCE", "check_work"]
+
 STEP_TOLERANCE = 1e-9
 """Relative tolerance within which a time is taken to be a whole number of steps (and a
 duration a whole number of record intervals): far above the rounding of a time built from

@@ -2,6 +2,7 @@
 API of taichi_star, taichi_star never imports studies, no study imports another, no import
 cycles between sibling modules."""
 
+import ast
 import os
 import shutil
 import subprocess
@@ -33,3 +34,86 @@ def test_every_study_is_in_the_independence_contract():
         "contracts"]
     (independent,) = [c for c in contracts if c["name"] == "no study imports another study"]
     assert sorted(independent["modules"]) == [f"studies.{name}" for name in study_names()]
+
+
+# simd.py is a measured prototype of the engine's own LU and force terms: it reaches the
+# engine's plan and compiler settings on purpose (its module docstring), and is exempt here
+NAMES_CHECK_EXEMPT = ("simd.py",)
+
+
+def module_source(module: str) -> Path:
+    """The source file of a taichi_star module or package, found without importing it (some
+    need an optional extra: the batch's Dask cluster)."""
+    base = REPO.joinpath(*module.split("."))
+    return base / "__init__.py" if base.is_dir() else base.with_suffix(".py")
+
+
+def public_names(module: str):
+    """The module's `__all__` (a literal list), read from its source; None where it has none."""
+    for node in ast.parse(module_source(module).read_text()).body:
+        if isinstance(node, ast.Assign) and any(getattr(target, "id", None) == "__all__"
+                                                for target in node.targets):
+            return set(ast.literal_eval(node.value))
+    return None
+
+
+def taichi_star_names(tree: ast.Module):
+    """(line, module, name) of every name a study takes from taichi_star: each `from
+    taichi_star... import name` and each attribute of a taichi_star module bound to a name
+    (`import taichi_star`, `from taichi_star import metrics`, then `metrics.speed_error`)."""
+    modules = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "taichi_star":
+            for alias in node.names:
+                yield node.lineno, node.module, alias.name
+                if module_source(f"{node.module}.{alias.name}").exists():
+                    modules[alias.asname or alias.name] = f"{node.module}.{alias.name}"
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.split(".")[0] == "taichi_star":  # bare, it binds the package
+                    modules[alias.asname or "taichi_star"] = (alias.name if alias.asname
+                                                              else "taichi_star")
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) \
+                and node.value.id in modules:
+            yield node.lineno, modules[node.value.id], node.attr
+
+
+def hidden_names(tree: ast.Module):
+    """"line: module.name" of each name in `taichi_star_names` that is not public: not in its
+    module's `__all__`, or a module without one."""
+    hidden = []
+    for line, module, name in taichi_star_names(tree):
+        if module_source(f"{module}.{name}").exists():
+            if public_names(f"{module}.{name}") is None:
+                hidden.append(f"{line}: {module}.{name} (a module without __all__)")
+        elif name not in (public_names(module) or set()):
+            hidden.append(f"{line}: {module}.{name}")
+    return hidden
+
+
+def test_studies_take_only_public_names_from_taichi_star():
+    """The import contracts see modules, not names: a study importing an internal through a
+    public module's namespace (`from taichi_star.sensitivities import COMPONENT_HEIGHTS`, a
+    params constant) kept them (an audit). Each name a study takes from a taichi_star module
+    is in that module's `__all__` (what docs/api.md documents, the names studies use among
+    them); a module taken as a name declares one."""
+    hidden = [f"studies/{path.name}:{name}" for path in sorted((REPO / "studies").glob("*.py"))
+              if path.name not in NAMES_CHECK_EXEMPT
+              for name in hidden_names(ast.parse(path.read_text()))]
+    assert hidden == []
+
+
+@pytest.mark.parametrize("source, hidden", [
+    ("from taichi_star.sensitivities import COMPONENT_HEIGHTS", True),
+    ("from taichi_star import COMPONENT_HEIGHTS", False),
+    ("from taichi_star import model", True),                  # an engine module: no __all__
+    ("from taichi_star import metrics\nmetrics.speed_error", False),
+    ("import taichi_star.runtime as runtime\nruntime.PARALLEL_LOOP_MINIMUM", True),
+    ("import taichi_star\ntaichi_star.simulate", False),
+    ("import taichi_star.runtime\ntaichi_star.simulate", False),
+])
+def test_the_names_check_sees_imports_and_module_attributes(source, hidden):
+    """The check above on one case each: a name re-exported by accident, a module without
+    `__all__`, a module's attribute that is not public."""
+    assert bool(hidden_names(ast.parse(source))) == hidden

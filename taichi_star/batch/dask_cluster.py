@@ -24,6 +24,9 @@ from ..checks import is_real
 from .executors import DEFAULT_RETRIES, configure_worker_process
 from .tasks import ChunkResult, ChunkTask, run_chunk
 
+# the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
+__all__ = ["DaskExecutor", "ADDRESS", "local_executor"]
+
 ADDRESS = re.compile(r"^[a-z][a-z0-9+.-]*://\S+$", re.IGNORECASE)
 """A scheduler address such as tcp://HOST:PORT."""
 

@@ -3,6 +3,7 @@ tolerance shrinks (the accurate physics on the paper mesh, short periods to keep
 
 import numpy as np
 import pandas as pd
+import pytest
 
 import taichi_star as ts
 from taichi_star.physics.base import load_field
@@ -13,15 +14,10 @@ PARAMS = [ts.StarParams.preset("accurate", gait=g, n_arc=18, period=PERIOD) for 
 SOLVER = ts.SolverConfig.preset("accurate")
 
 
-def accepted_steps_around_a_firing(solver):
-    """(start, end) times (s) of the accepted steps of a commanded A1+A2 robot fired at 0 and
-    at PERIOD (a scheduled firing, like a cycle start), advanced one attempt at a time up to
-    PERIOD + 20 ms."""
-    sim = ts.Simulator([PARAMS[0].replace(gait="none")], solver)
-    sim.fire([GAITS[0]])
-    sim.fire([GAITS[0]], at_s=PERIOD)
+def accepted_steps(sim, stop):
+    """((steps, 2) array of the (start, end) times (s) of the accepted steps, attempts) of the
+    first robot of `sim`, advanced one attempt at a time up to `stop` (s)."""
     engine = sim.engine
-    stop = PERIOD + 0.02
     stops = engine.state.stop_time.to_numpy()
     stops[0] = stop
     load_field(engine.state.stop_time, stops)
@@ -33,9 +29,20 @@ def accepted_steps_around_a_firing(solver):
         attempts += 1
         if sim.time_s[0] > start:
             steps.append((start, sim.time_s[0]))
+    return np.array(steps), attempts
+
+
+def accepted_steps_around_a_firing(solver):
+    """(start, end) times (s) of the accepted steps of a commanded A1+A2 robot fired at 0 and
+    at PERIOD (a scheduled firing, like a cycle start), advanced one attempt at a time up to
+    PERIOD + 20 ms."""
+    sim = ts.Simulator([PARAMS[0].replace(gait="none")], solver)
+    sim.fire([GAITS[0]])
+    sim.fire([GAITS[0]], at_s=PERIOD)
+    steps, attempts = accepted_steps(sim, PERIOD + 0.02)
     # every attempt that did not advance the time was a rejection, and is counted as one
-    assert engine.state.rejected_steps.to_numpy()[0] == attempts - len(steps) > 0
-    return np.array(steps)
+    assert sim.engine.state.rejected_steps.to_numpy()[0] == attempts - len(steps) > 0
+    return steps
 
 
 def test_the_step_that_ends_on_a_firing_is_at_most_dt_and_the_coast_stops_dt_short():
@@ -230,3 +237,23 @@ def test_with_dt_min_equal_to_dt_max_every_step_is_that_long_a_firings_too():
         assert sim.save().fields["steps_done"][0] == 1500
         paths[name] = sim.state()[["centroid_x_mm", "centroid_y_mm"]].to_numpy()[0]
     np.testing.assert_allclose(paths["held"], paths["fixed"], rtol=0, atol=1.5e-4)
+
+
+@pytest.mark.parametrize("offset_s, steps", [(1e-11, 200), (1e-7, 201)])
+def test_with_dt_min_equal_to_dt_max_a_firing_within_the_slack_of_the_grid_is_absorbed(
+        offset_s, steps):
+    """A firing a controller's running sum puts just off the 1-ms grid: 1e-11 s past 0.1 s is
+    within the held step's slack, 1e-6 of the step (1e-9 s; the time's 64 roundings are only
+    1.4e-14 s there), so every step is 1 ms (200 to 0.2 s; with the roundings alone as slack
+    the approach to it was split, 201). 1e-7 s past it (1e-4 of the step) is beyond the slack:
+    the approach is split (201 steps), as no step may exceed dt_max by more than the slack (a
+    slack of 1e-3 of the step took one step of 1.0001 ms instead)."""
+    held = ts.SolverConfig(adaptive=True, dt=1e-3, dt_min=1e-3, dt_max=1e-3)
+    sim = ts.Simulator([ts.StarParams(damping_time=1e-3)], held)
+    sim.fire(["A1"])
+    sim.fire(["A1"], at_s=0.1 + offset_s)
+    taken, _ = accepted_steps(sim, 0.2)
+    assert len(taken) == steps
+    # the slack written out (not stepping.HELD_STEP_SLACK: its value is what this guards); at
+    # 1e-11 s the step that lands on the firing is 1e-11 s longer than dt_max
+    assert np.diff(taken, axis=1).max() <= held.dt_max + 1e-6 * held.dt

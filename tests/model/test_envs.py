@@ -18,7 +18,8 @@ from gymnasium.vector.utils import batch_space
 
 import taichi_star as ts
 from taichi_star.envs import (DEFAULT_MAX_EPISODE_STEPS, ENV_ID, OBSERVATION_NAMES,
-                              SB3VectorAdapter, StarSwimmerEnv, StarSwimmerVectorEnv, to_sb3)
+                              SB3VectorAdapter, StarSwimmerEnv, StarSwimmerVectorEnv, SwimmerTask,
+                              to_sb3)
 
 # the paper's actuation period at a coarse step: 630 steps per control period
 KWARGS = dict(solver=ts.SolverConfig(dt=5e-3))
@@ -255,6 +256,24 @@ def test_bad_input_raises_value_error_and_changes_nothing():
     for name, values in before.fields.items():
         np.testing.assert_array_equal(values, after.fields[name], err_msg=name)
 
+
+
+@pytest.mark.parametrize("distance_mm, refused", [(1000.0, False), (1000.5, True)])
+def test_a_goal_a_metre_away_is_accepted_and_one_past_it_refused(single, distance_mm, refused):
+    """metrics.MAX_GOAL_MM (1 m) bounds a goal, the metre itself included: a task's
+    goal_distance_mm and a reset's options['goal'] of exactly 1000 mm are accepted, 1000.5 mm
+    refused naming the field and its range."""
+    if refused:
+        with pytest.raises(ValueError, match=r"^goal_distance_mm must be a number in \(0, "
+                                             r"1000\], got 1000.5$"):
+            SwimmerTask(goal_distance_mm=distance_mm)
+        with pytest.raises(ValueError, match=r"^options\['goal'\] must be within 1000 mm of "
+                                             r"the start, got \(1000.5, 0.0\)$"):
+            single.reset(options={"goal": (distance_mm, 0.0)})
+    else:
+        assert SwimmerTask(goal_distance_mm=distance_mm).goal_distance_mm == distance_mm
+        _, info = single.reset(options={"goal": (distance_mm, 0.0)})
+        np.testing.assert_array_equal(info["goal_mm"], [distance_mm, 0.0])
 
 
 def test_an_unknown_keyword_and_a_render_mode_without_matplotlib_are_refused_when_made(

@@ -1,12 +1,23 @@
 """The memory guard: an engine's size is known before it is allocated, and a batch too large for
 the machine is refused with the way to run it (chunks) instead of exhausting memory."""
 
+import warnings
+
 import pytest
 
 import taichi_star as ts
 from taichi_star import runtime
 from taichi_star.model import build_model
 from taichi_star.runtime import engine_bytes, prepare_engine
+
+
+class Ran(Exception):
+    """The run got past the checks (stubbed: nothing is simulated)."""
+
+
+def ran(*args, **kwargs):
+    """A stand-in for the first step after the checks: it raises Ran."""
+    raise Ran
 
 
 @pytest.mark.parametrize("preset", ["paper", "accurate"])
@@ -43,36 +54,57 @@ def test_a_machine_without_room_for_the_smallest_engine_refuses_before_compute(m
     assert set(runtime.Runtime.current().engines) == before
 
 
+@pytest.mark.parametrize("sensitivities, replicas", [((), 1), (("alpha",), 3)])
 def test_records_that_would_not_fit_in_memory_are_refused_before_compute(monkeypatch,
-                                                                           memory_budget):
+                                                                           memory_budget,
+                                                                           sensitivities,
+                                                                           replicas):
     """A run's records were never estimated: 2e9 records of one robot failed listing its stops,
     512 robots' shapes after 26 s of compute (an audit). Now the host memory of the records is
     estimated (`simulation.RECORD_ROW_BYTES` a record of an instance, RECORD_NODE_BYTES a node
     of its shape, RECORD_BYTES a record) with the summary's (SUMMARY_ROW_BYTES a row), in one
     sum (checked apart, each could take the whole budget: an audit), and refused past
     MEMORY_SHARE of the available memory, before anything runs: at the budget accepted, a
-    byte over refused."""
+    byte over refused. A sensitive run (one direction: each instance and its two replicas)
+    counts its replicas' summary and trajectory rows, not their shapes (the replicas' are not
+    kept): counted without them, it passed the check short of its need."""
     from taichi_star import simulation
     params = [ts.StarParams()] * 4
     records = 11  # 0.1 s every 10 ms, the start included
-    needed = 4 * simulation.SUMMARY_ROW_BYTES + records * (
-        4 * (simulation.RECORD_ROW_BYTES + 193 * simulation.RECORD_NODE_BYTES)
+    needed = 4 * replicas * simulation.SUMMARY_ROW_BYTES + records * (
+        4 * (replicas * simulation.RECORD_ROW_BYTES + 193 * simulation.RECORD_NODE_BYTES)
         + simulation.RECORD_BYTES)
-    class Ran(Exception):
-        """The run got past the checks (stubbed: nothing is simulated)."""
-
-    def run(*args, **kwargs):
-        raise Ran
-    monkeypatch.setattr(simulation, "_simulate_chunk", run)
+    monkeypatch.setattr(simulation, "_simulate_chunk", ran)
     for refused in memory_budget(needed):
         if refused:
-            with pytest.raises(ValueError, match=r"^record_interval_s: the summary and 11 "
-                                                 r"records of 4 instances with their shapes "
-                                                 r"would need about "):
-                ts.simulate(params, 0.1, record_interval_s=0.01, record_shapes=True)
+            with pytest.raises(ValueError, match=rf"^record_interval_s: the summary and 11 "
+                                                 rf"records of {4 * replicas} instances with "
+                                                 rf"their shapes would need about "):
+                ts.simulate(params, 0.1, record_interval_s=0.01, record_shapes=True,
+                            sensitivities=sensitivities)
         else:
             with pytest.raises(Ran):
-                ts.simulate(params, 0.1, record_interval_s=0.01, record_shapes=True)
+                ts.simulate(params, 0.1, record_interval_s=0.01, record_shapes=True,
+                            sensitivities=sensitivities)
+
+
+@pytest.mark.parametrize("warn_robot_steps, warned", [(1199, True), (1200, False)])
+def test_a_sensitive_runs_long_work_warning_counts_its_replicas(monkeypatch, warn_robot_steps,
+                                                                warned):
+    """The long-run warning counts the instances simulated: 4 instances with one direction
+    are 12, 1,200 robot-steps in 0.1 s of 1-ms steps, warned past WARN_ROBOT_STEPS (1,199), not
+    at it (1,200); the 400 of the instances asked for alone would stay under both."""
+    from taichi_star import simulation, timegrid
+    monkeypatch.setattr(simulation, "_simulate_chunk", ran)
+    monkeypatch.setattr(timegrid, "WARN_ROBOT_STEPS", warn_robot_steps)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with pytest.raises(Ran):
+            ts.simulate([ts.StarParams()] * 4, 0.1, sensitivities=["alpha"])
+    messages = [str(w.message) for w in caught if w.category is RuntimeWarning]
+    assert messages == ([f"duration_s = 0.1 s at dt = 0.001 s is 1.2e+03 robot-steps: about "
+                         f"{1200 / 5e4 / 3600:.3g} h at 50000 robot-steps/s (on a 2-core CPU; "
+                         f"a GPU or more cores run faster)"] if warned else [])
 
 
 def test_a_simulators_records_that_would_not_fit_are_refused_before_it_steps(monkeypatch):
@@ -98,14 +130,8 @@ def test_a_batchs_summary_and_a_simulators_engine_are_estimated_before_they_are_
     and model from its first MIN_CAPACITY instances' model (`runtime.check_batch_memory`),
     refused past the budget before anything is built, at it accepted."""
     from taichi_star import simulation
-    from taichi_star.model import build_model
 
-    class Ran(Exception):
-        """Past the checks (stubbed: nothing is simulated)."""
-
-    def run(*args, **kwargs):
-        raise Ran
-    monkeypatch.setattr(simulation, "_simulate_chunk", run)
+    monkeypatch.setattr(simulation, "_simulate_chunk", ran)
     params = [ts.StarParams()] * 100
     for refused in memory_budget(100 * simulation.SUMMARY_ROW_BYTES):
         if refused:
@@ -125,8 +151,6 @@ def test_a_batchs_summary_and_a_simulators_engine_are_estimated_before_they_are_
     with pytest.raises(ValueError, match=r"^params: an engine and model of 100 instances would "):
         ts.Simulator(params)
     assert not built
-    # a batch the smallest engine holds is left to check_memory, on its own model
-    runtime.check_batch_memory(params[:runtime.MIN_CAPACITY], "f64", "cpu")
     # off the CPU the engine is on the device: the model's host memory alone is counted (it
     # was not checked at all)
     model = probe.nbytes / runtime.MIN_CAPACITY * 100
@@ -136,3 +160,40 @@ def test_a_batchs_summary_and_a_simulators_engine_are_estimated_before_they_are_
         runtime.check_batch_memory(params, "f64", "gpu")
     monkeypatch.setattr(runtime, "available_memory_bytes", lambda: model / runtime.MEMORY_SHARE)
     runtime.check_batch_memory(params, "f64", "gpu")
+
+
+def test_a_sensitive_simulators_engine_and_model_count_its_replicas(monkeypatch, memory_budget):
+    """A Simulator of 100 instances with one direction builds an engine and model of 300 (each
+    instance and its two replicas): its estimate is theirs, at the budget accepted, a byte over
+    refused (counted without the replicas, as 100, it passed short of its need)."""
+    from taichi_star import sensitivities as tangents
+    params = [ts.StarParams()] * 100
+    probe = build_model(params[:runtime.MIN_CAPACITY])
+    needed = (engine_bytes(probe, "f64") / runtime.batch_capacity(runtime.MIN_CAPACITY)
+              * runtime.batch_capacity(300) + probe.nbytes / runtime.MIN_CAPACITY * 300)
+    monkeypatch.setattr(tangents, "replica_model", ran)  # the model is built after the check
+    for refused in memory_budget(needed):
+        if refused:
+            with pytest.raises(ValueError, match=r"^params: an engine and model of 300 "
+                                                 r"instances would need about "):
+                ts.Simulator(params, sensitivities=["alpha"])
+        else:
+            with pytest.raises(Ran):
+                ts.Simulator(params, sensitivities=["alpha"])
+
+
+@pytest.mark.parametrize("count, refused", [(runtime.MIN_CAPACITY, False),
+                                            (runtime.MIN_CAPACITY + 1, True)])
+def test_a_batch_the_smallest_engine_holds_is_left_to_check_memory(monkeypatch, count,
+                                                                   refused):
+    """`check_batch_memory` estimates batches larger than the smallest engine (MIN_CAPACITY
+    instances) from the first MIN_CAPACITY instances' model; up to that size it leaves the
+    batch to `check_memory`, on the model itself: with a byte available, 64 instances pass it
+    and 65 are refused."""
+    monkeypatch.setattr(runtime, "available_memory_bytes", lambda: 1.0)
+    if refused:
+        with pytest.raises(ValueError, match=rf"^params: an engine and model of {count} "
+                                             rf"instances would need about "):
+            runtime.check_batch_memory([ts.StarParams()] * count, "f64", "cpu")
+    else:
+        runtime.check_batch_memory([ts.StarParams()] * count, "f64", "cpu")

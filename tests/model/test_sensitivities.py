@@ -330,16 +330,27 @@ def test_steps_redone_with_substeps_are_followed(euler_run):
     assert_matches_differences(table)
 
 
-def test_a_failed_instance_has_no_derivatives_and_leaves_its_neighbour_alone(taichi_cpu):
-    """5-ms steps, at most three Newton updates, no substeps: A1+A3+A5's first step fails and
-    the instance is frozen; its replicas share its status, so every derivative of it is NaN
-    (not its replicas' frozen offsets divided by 2ε). A softer A1+A2 beside it swims on and
-    keeps exactly the derivatives of a run of its own."""
-    solver = SolverConfig(dt=0.005, max_newton=3, max_substep_halvings=0)
-    failing = BASE.replace(gait="A1+A3+A5")
-    swimming = BASE.replace(gait="A1+A2", youngs_modulus=2e5)
-    both = simulate([failing, swimming], 0.1, solver, sensitivities=("alpha",))
-    alone = simulate([swimming], 0.1, solver, sensitivities=("alpha",))
+FAILING_SOLVER = SolverConfig(dt=0.005, max_newton=3, max_substep_halvings=0)
+"""5-ms steps, at most three Newton updates, no substeps: A1+A3+A5's first step fails."""
+SWIMMING = BASE.replace(gait="A1+A2", youngs_modulus=2e5)
+"""A softer robot that swims on under FAILING_SOLVER."""
+
+
+@pytest.fixture(scope="module")
+def failed_beside_swimming(taichi_cpu):
+    """A1+A3+A5 (failing at its first step) beside SWIMMING, differentiated by alpha, 0.1 s
+    under FAILING_SOLVER with its shapes recorded at every step end (5 ms)."""
+    return simulate([BASE.replace(gait="A1+A3+A5"), SWIMMING], 0.1, FAILING_SOLVER,
+                    sensitivities=("alpha",), record_interval_s=0.005, record_shapes=True)
+
+
+def test_a_failed_instance_has_no_derivatives_and_leaves_its_neighbour_alone(
+        failed_beside_swimming):
+    """A1+A3+A5's first step fails and the instance is frozen; its replicas share its status,
+    so every derivative of it is NaN (not its replicas' frozen offsets divided by 2ε). A softer
+    A1+A2 beside it swims on and keeps exactly the derivatives of a run of its own."""
+    both = failed_beside_swimming
+    alone = simulate([SWIMMING], 0.1, FAILING_SOLVER, sensitivities=("alpha",))
     assert both.summary["status"].tolist() == ["newton_failed", "ok"]
     assert both.summary["failure_time_s"].iloc[0] == 0.005
     assert both.sensitivities.iloc[0].isna().all()
@@ -347,6 +358,20 @@ def test_a_failed_instance_has_no_derivatives_and_leaves_its_neighbour_alone(tai
     assert np.isfinite(moving).all() and (moving != 0.0).all()
     np.testing.assert_array_equal(both.sensitivities.iloc[1].to_numpy(),
                                   alone.sensitivities.iloc[0].to_numpy())
+
+
+def test_a_failed_instances_shapes_are_nan_from_its_failure_on(failed_beside_swimming):
+    """A failed instance's recorded shapes are NaN from its failure time on, the record at
+    that time included (its trajectory's rows are NaN there too), not its last good shape
+    frozen; the shapes are of the instances asked for alone (not their replicas), and the
+    neighbour's stay finite."""
+    shapes = failed_beside_swimming.shapes
+    assert shapes.shape[:2] == (21, 2)  # 0 to 0.1 s every 5 ms; the instances asked for
+    times = failed_beside_swimming.trajectory.query("instance == 0")["t_s"].to_numpy()
+    failed = times >= failed_beside_swimming.summary["failure_time_s"].iloc[0]
+    assert failed.tolist() == [False] + [True] * 20  # the failure at the first step's end
+    assert np.isnan(shapes[failed, 0]).all() and np.isfinite(shapes[~failed, 0]).all()
+    assert np.isfinite(shapes[:, 1]).all()
 
 
 def test_the_check_study_writes_what_it_measured(euler_run, tmp_path):

@@ -533,6 +533,11 @@ def test_a_snapshot_without_parameters_loads_as_before(tmp_path):
     other.load(tmp_path / "earlier")
     with pytest.raises(ValueError, match=r"^snapshot .*missing.npz: cannot read it \(No such"):
         other.load(tmp_path / "missing")
+    # a file that is there under a name without the suffix (renamed) is read as named
+    (tmp_path / "earlier.npz").rename(tmp_path / "renamed")
+    other.advance(0.01)
+    other.load(tmp_path / "renamed")
+    np.testing.assert_array_equal(other.time_s, times)
 
 
 def test_mixed_commands_and_a_missing_folder_are_named_in_plain_words(tmp_path):

@@ -192,6 +192,37 @@ def test_a_batchs_work_and_trajectory_are_judged_whole_not_by_chunk(monkeypatch,
                     record_shapes=True)
 
 
+def test_a_batch_in_chunks_of_two_warns_once_with_all_its_robot_steps(monkeypatch):
+    """In chunks of more than one, counting per chunk is not counting per instance, and a
+    chunk can warn on its own: with WARN_ROBOT_STEPS at 999, each chunk of two robots (1,000
+    robot-steps in 0.5 s) is past it alone, and the batch of four (2,000) is told once, whole
+    (counted per chunk it said 1e+03; unfiltered, each chunk added its own warning)."""
+    from taichi_star import timegrid
+    monkeypatch.setattr(timegrid, "WARN_ROBOT_STEPS", 999)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        plan_chunks([ts.StarParams()] * 4, 0.5, chunk_size=2)
+    messages = [str(w.message) for w in caught if w.category is RuntimeWarning]
+    assert messages == [f"the batch of 4 instances is 2e+03 robot-steps: about "
+                        f"{2000 / 5e4 / 3600:.3g} h at 50000 robot-steps/s (on a 2-core CPU; a "
+                        f"GPU or more cores run faster)"]
+
+
+def test_a_batch_without_records_past_the_memory_budget_names_params(memory_budget):
+    """Without records the batch's tables are its summary rows, and the argument to change
+    is params (record_interval_s is not given): four rows refused a byte under their total,
+    accepted at it, while each chunk of two rows fits its own check in either case."""
+    from taichi_star import simulation
+    for refused in memory_budget(4 * simulation.SUMMARY_ROW_BYTES):
+        if refused:
+            with pytest.raises(ValueError, match=r"^params: the tables of the batch of 4 "
+                                                 r"instances would need about .*: run the "
+                                                 r"batch in parts$"):
+                plan_chunks([ts.StarParams()] * 4, 0.5, chunk_size=2)
+        else:
+            assert len(plan_chunks([ts.StarParams()] * 4, 0.5, chunk_size=2)) == 2
+
+
 def test_a_worker_that_cannot_import_the_script_is_named_so_not_retried(tmp_path):
     """Code after the guard that needs the guard's names (a print of the result) fails in
     every worker's import of the script: the pool broke, was retried, and the error blamed

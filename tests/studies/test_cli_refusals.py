@@ -5,8 +5,12 @@ refused only after making the output folder). Also what a refused or finished ru
 output folder after an unreachable --scheduler, no library's INFO log on stderr."""
 
 import logging
+import warnings
 
 import pytest
+
+from taichi_star import MAX_STEPS_PER_INSTANCE, SolverConfig
+from taichi_star.driver import check_run
 
 from studies import cli
 from studies.__main__ import main as studies_main
@@ -33,7 +37,7 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
     ("model_select", ["--restarts", "1000000"], "--restarts must be <= 10"),
     ("gradient_fit", ["--seed", "-1"], "--seed must be >= 0, got -1"),
     ("sensitivity_check", ["--parameters", "bogus"], "--parameters: sensitivities: 'bogus'"),
-    ("sensitivity_check", ["--duration", "1e12"], "--duration 1e+12 s at --dt 0.001 s"),
+    ("sensitivity_check", ["--duration", "1e12"], "--duration 1e+12 s at dt = 0.001 s"),
     ("sensitivity_check", ["--duration", "1e-9"], "--duration 1e-09 s is less than one step"),
     ("simd", ["--matmul-size", "10000000"], "--matmul-size must be in [16, 8192], got 10000000"),
     ("sweep", ["--max-instances", "0"], "--max-instances must be in [1, 1000000] (the most "
@@ -90,11 +94,15 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
     ("gait_design", ["--iterations", "1000000000"],
      "--iterations must be in [1, 1000], got 1000000000"),
     ("plan", ["--directions", "100000"], "--directions must be in [0, 360], got 100000"),
+    # a goal past a metre (metrics.MAX_GOAL_MM); 1e308 ran every plan, then failed plotting
+    ("plan", ["--distance", "1000.5"], "--distance must be in (0, 1000] mm, got 1000.5"),
+    ("plan", ["--far", "1000.5"], "--far must be in [0, 1000] mm, got 1000.5"),
     ("bench", ["--repeats", "101"], "--repeats must be in [1, 100], got 101"),
     ("simd", ["--repeats", "1000000"], "--repeats must be in [1, 100], got 1000000"),
     ("jacobians", ["--rounds", "1000000"], "--rounds must be in [1, 100], got 1000000"),
     ("jacobians", ["--batch", "2000000000"], "--batch must be in [1, 1048576], got 2000000000"),
     ("animate", ["--frames", "1000000000"], "--frames must be in [2, 10000], got 1000000000"),
+    ("animate", ["--frames", "10001"], "--frames must be in [2, 10000], got 10001"),
     ("jacobians", ["--modes", "bogus"],
      "--modes: 'bogus' is not MODE:TOL (MODE one of newton, chord, lagged, TOL Newton's "
      "tolerance in m, e.g. lagged:1e-10)"),
@@ -106,6 +114,33 @@ def test_study_flags_are_refused_before_the_output_folder(no_compute, tmp_path, 
     error = capsys.readouterr().err
     assert message in error and len(error.strip().splitlines()) == 1, error
     assert "Traceback" not in error
+    assert not out.exists()
+
+
+class PastTheFlagChecks(Exception):
+    """The study got past its flags' checks (the next step is stubbed: nothing runs)."""
+
+
+def past_the_flag_checks(*args, **kwargs):
+    """A stand-in for a study's first step after its flags' checks: it raises
+    PastTheFlagChecks."""
+    raise PastTheFlagChecks
+
+
+@pytest.mark.parametrize("study, argv, next_step", [
+    ("plan", ["--distance", "1000"], "studies.plan.default_goals"),
+    ("plan", ["--far", "1000"], "studies.plan.default_goals"),
+    ("animate", ["--frames", "10000"], "studies.cli.resolve_gaits"),
+])
+def test_study_flags_at_the_end_of_their_range_are_accepted(no_compute, monkeypatch, tmp_path,
+                                                            study, argv, next_step):
+    """The closed ends of the ranges the refusals above name: a goal of exactly a metre
+    (--distance, --far: (0, 1000] and [0, 1000] mm) and 10,000 frames get past the flag
+    checks to the study's next step (stubbed, so no plan or animation runs)."""
+    monkeypatch.setattr(next_step, past_the_flag_checks)
+    out = tmp_path / "out"
+    with pytest.raises(PastTheFlagChecks):
+        studies_main([study, *argv, "--out", str(out), *QUICK])
     assert not out.exists()
 
 
@@ -121,6 +156,41 @@ def test_an_engine_that_would_not_fit_is_refused_before_the_output_folder(no_com
     assert ("--num-envs: params: an engine and model of 1,048,576 instances would need about "
             in error) and len(error.strip().splitlines()) == 1
     assert not out.exists()
+
+
+ADAPTIVE = SolverConfig(adaptive=True, dt_max=0.05, dt_min=1e-6, dt=1e-3)
+RECORD_S = 1e-5
+
+
+@pytest.mark.parametrize("duration_s, record_interval_s, refused", [
+    # an audit's case: 3e9 step ends at a record every 10 µs; the study counted 6e5 of dt_max
+    (3.0e4, RECORD_S, True),
+    (3.0e4, 0.0, False),                               # no records: steps of dt_max
+    (3.0e4, ADAPTIVE.dt_max, False),                   # records as far apart as dt_max: same
+    (MAX_STEPS_PER_INSTANCE * RECORD_S, RECORD_S, False),        # the limit's step itself
+    ((MAX_STEPS_PER_INSTANCE + 1) * RECORD_S, RECORD_S, True),   # one record past it
+])
+def test_check_run_counts_steps_as_the_library_does(duration_s, record_interval_s, refused):
+    """cli.check_run refuses a run exactly when the library would (`fewest_steps`, also
+    driver.check_run's count): with adaptive steps and records closer than dt_max, a step per
+    record."""
+    def outcome(check, error):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # the long-run estimate
+            try:
+                check()
+            except error as raised:
+                return str(raised)
+        return None
+
+    library = outcome(lambda: check_run(ADAPTIVE, duration_s, record_interval_s, batch=1),
+                      ValueError)
+    study = outcome(lambda: cli.check_run("--duration", duration_s, ADAPTIVE, record_interval_s),
+                    cli.StudyArgumentError)
+    assert (library is not None, study is not None) == (refused, refused)
+    if refused:
+        assert study.startswith(f"--duration at a record every {RECORD_S:g} s, each a step "
+                                f"end is ") and STEP_LIMIT in study, study
 
 
 def test_the_step_limit_is_named_with_the_estimate(no_compute, tmp_path, capsys):

@@ -121,6 +121,7 @@ def test_env_bench_quick_into_a_fresh_run_folder(tmp_path, monkeypatch):
     table = pd.read_csv(folder / "env_bench.csv")
     assert list(table["preset"]) == ["paper"] and (table["robot_seconds_per_s"] > 0).all()
     assert table["num_envs"].tolist() == [4] and table["dt_s"].tolist() == [5e-3]
+    assert table["n_nodes"].tolist() == [193]  # the paper robot's (Simulator.n_nodes)
     assert (folder / "env_bench.csv.json").exists()
 
 

@@ -5,6 +5,7 @@ packaged experiment data."""
 
 import hashlib
 import json
+import math
 import os
 import shlex
 import time
@@ -17,8 +18,9 @@ import pytest
 
 import taichi_star
 from taichi_star import SolverConfig, StarParams
-from taichi_star import provenance
+from taichi_star import metrics, provenance
 from taichi_star.gait import Gait, symmetry_classes
+from taichi_star.primitives import class_symmetries, transform_vectors
 from taichi_star.experiment import (FIG4C_COLUMNS, PAPER_GAITS)
 
 from studies import (cli, gaits as gaits_study, provenance as study_provenance, reproduce,
@@ -427,17 +429,37 @@ def test_symmetry_reduction_is_exact():
     travel = summary["travel_direction_deg"]
     for (rotation, reflect), direction, heading in zip(images, travel, summary["heading_deg"]):
         expected = gaits_study.transform_direction(travel.iloc[0], rotation, reflect)
-        assert abs(gaits_study.wrap_degrees(direction - expected)) < 1e-4
+        assert abs(metrics.wrap_degrees(direction - expected)) < 1e-4
         assert heading == pytest.approx(
             gaits_study.transform_rotation(summary["heading_deg"].iloc[0], reflect), abs=1e-9)
     # and the class expansion agrees with these direct simulations
     rep_class = next(c for c in symmetry_classes() if source in c[1])
     assert set(gaits) <= set(rep_class[1])
+    sources = class_symmetries()
     for gait, direction in zip(gaits, travel):
-        mapping = gaits_study.symmetry_map(source, gait)
+        representative, *mapping, _ = sources[gait]
+        assert representative == source
         assert Gait.parse(source).transform(*mapping).name == gait
-        assert abs(gaits_study.wrap_degrees(
+        assert abs(metrics.wrap_degrees(
             gaits_study.transform_direction(travel.iloc[0], *mapping) - direction)) < 1e-4
+
+
+@pytest.mark.parametrize("direction_deg", [0.0, 22.5, 180.0, -180.0, -135.0, 37.3, -0.4])
+@pytest.mark.parametrize("rotation, reflect", [(0, False), (4, False), (3, True), (0, True),
+                                               (7, True)])
+def test_gaits_direction_images_are_the_library_symmetry_in_minus_180_to_180_included(
+        direction_deg, rotation, reflect):
+    """gaits.csv's directions: the angle of `primitives.transform_vectors`'s image (1e-12 deg:
+    atan2 of a unit vector rounded at 1e-16, in degrees), exact on 45° multiples, and in
+    (-180, 180]: a gait travelling straight back reads 180, as the committed table does."""
+    image = gaits_study.transform_direction(direction_deg, rotation, reflect)
+    angle = math.radians(direction_deg)
+    vector = transform_vectors(np.array([math.cos(angle), math.sin(angle)]), rotation, reflect)
+    assert abs(metrics.wrap_degrees(image - math.degrees(math.atan2(vector[1], vector[0])))) \
+        < 1e-12
+    assert -180.0 < image <= 180.0
+    if direction_deg % 45.0 == 0.0:
+        assert image % 45.0 == 0.0
 
 
 def test_a_failed_table_write_leaves_the_previous_table_and_sidecar(tmp_path, monkeypatch):
@@ -493,6 +515,22 @@ def test_ctrl_c_is_one_line_saying_what_is_kept(tmp_path, monkeypatch, capsys):
     assert error == (f"{main_program()} sweep: interrupted; the finished chunks in "
                      f"{out / 'chunks'} are kept: the same command with --resume continues "
                      f"the run\n")
+
+
+def test_ctrl_c_after_the_output_folder_was_removed_is_still_one_line(tmp_path, monkeypatch,
+                                                                      capsys):
+    """Ctrl-C removes the empty folders the run made, and one may be gone already (removed
+    from another shell while the run went on): the interrupt is still one line and exit 130,
+    not a FileNotFoundError from looking into the missing folder."""
+    def removed_then_interrupted(out, *args, **kwargs):
+        out.folder.rmdir()
+        raise KeyboardInterrupt
+    monkeypatch.setattr("studies.figures.run_fig4c", removed_then_interrupted)
+    out = tmp_path / "fig4c"
+    assert studies_main(["fig4c", "--out", str(out), *QUICK]) == 130
+    assert capsys.readouterr().err == (f"{main_program()} fig4c: interrupted; the files "
+                                       f"written before are whole\n")
+    assert not out.exists()
 
 
 def test_a_refusal_after_the_output_folder_was_made_removes_it_if_empty(tmp_path, monkeypatch,
@@ -553,15 +591,15 @@ def test_cycles_shorter_than_a_step_is_an_error_naming_cycles(no_compute, tmp_pa
 
 
 @pytest.mark.parametrize("flags, message", [
-    (["--cycles", "1e9"], "--cycles 1e+09 (3.15e+09 s) at --dt 0.001 s is 3.15e+12 time steps per "
+    (["--cycles", "1e9"], "--cycles 1e+09 (3.15e+09 s) at dt = 0.001 s is 3.15e+12 time steps per "
                           "instance; the limit is 2147483647"),
-    (["--dt", "1e-12"], "--cycles 3 (9.45 s) at --dt 1e-12 s is 9.45e+12 time steps"),
+    (["--dt", "1e-12"], "--cycles 3 (9.45 s) at dt = 1e-12 s is 9.45e+12 time steps"),
     # adaptive: refused by the fewest steps, at dt_max (1e4 cycles at the accurate preset's
     # 0.05 s are 6.3e5 steps: accepted)
-    (["--preset", "accurate", "--cycles", "1e9"], "--cycles 1e+09 (3.15e+09 s) at dt_max 0.05 s "
-                                                  "is 6.3e+10 time steps"),
+    (["--preset", "accurate", "--cycles", "1e9"], "--cycles 1e+09 (3.15e+09 s) at dt_max = 0.05 "
+                                                  "s is 6.3e+10 time steps"),
     # --quick runs 0.2 s whatever --cycles says: its length is what is checked
-    (["--quick", "--dt", "1e-12"], "--quick (0.2 s) at --dt 1e-12 s is 2e+11 time steps")])
+    (["--quick", "--dt", "1e-12"], "--quick (0.2 s) at dt = 1e-12 s is 2e+11 time steps")])
 def test_unbounded_runs_are_a_one_line_error_with_the_estimate(no_compute, tmp_path, capsys,
                                                                flags, message):
     assert studies_main(["fig4c", *flags, "--out", str(tmp_path / "out"), "--no-progress"]) == 2
@@ -642,3 +680,35 @@ def test_every_study_flag_with_a_default_shows_it_in_its_help():
             # argparse's own flags keep their words (-h showed "(default ==SUPPRESS==)")
             assert "SUPPRESS" not in (action.help or ""), (name, action.option_strings)
     assert unsaid == []
+
+
+@pytest.mark.parametrize("quick_flags", [False, True])
+def test_no_flag_says_its_default_twice(quick_flags):
+    """Each flag's help says "default" once: the parser adds a default only where the help
+    does not say it (a flag with a --quick default said it twice, "(default 512) (default
+    512; --quick 2)": an audit), for the flags without a --quick default and with one."""
+    import importlib
+
+    twice = []
+    for name in study_names():
+        module = importlib.import_module(f"studies.{name}")
+        if not hasattr(module, "build_parser"):  # reproduce: its own small parser
+            continue
+        parser = module.build_parser()
+        for action in parser._actions:
+            if (action.dest in getattr(parser, "quick_defaults", {})) != quick_flags:
+                continue
+            if (action.help or "").count("default") > 1:
+                twice.append((name, action.option_strings, action.help))
+    assert twice == []
+
+
+@pytest.mark.parametrize("help_text, shown", [
+    ("batch size", "batch size (default 512; --quick 2)"),
+    ("batch size (default 512)", "batch size (default 512) (--quick 2)"),
+])
+def test_a_quick_flag_says_both_defaults_once(help_text, shown):
+    parser = cli.StudyParser("sweep", "a study")
+    action = parser.add_argument("--batch", type=int, default=512, quick=2, help=help_text)
+    assert action.help == shown
+    assert parser.parse_args(["--quick"]).batch == 2 and parser.parse_args([]).batch == 512

@@ -1036,3 +1036,19 @@ def test_body_rotation_of_a_rigidly_turned_rest_shape_is_its_angle(topology, deg
 def test_wrap_degrees_lands_in_minus_180_to_180_excluded(angle, wrapped):
     """[-180, 180): -180 itself stays, +180 and every odd multiple go to -180."""
     assert metrics.wrap_degrees(angle) == wrapped
+
+
+@pytest.mark.parametrize("angle, wrapped", [
+    (180.0, 180.0), (-180.0, 180.0), (179.5, 179.5), (-179.5, -179.5), (-181.0, 179.0),
+    (540.0, 180.0), (-540.0, 180.0), (359.0, -1.0), (0.0, 0.0)])
+def test_wrap_degrees_including_180_lands_in_minus_180_excluded_to_180(angle, wrapped):
+    """(-180, 180] (the gaits table's convention): +180 stays, -180 and every odd multiple go
+    to +180; elementwise on arrays too."""
+    assert metrics.wrap_degrees(angle, include_180=True) == wrapped
+    assert metrics.wrap_degrees([angle, 0.0], include_180=True).tolist() == [wrapped, 0.0]
+
+
+def test_wrap_degrees_of_nan_or_infinity_is_nan():
+    for include_180 in (False, True):
+        assert np.isnan(metrics.wrap_degrees([np.nan, np.inf, -np.inf],
+                                             include_180=include_180)).all()

@@ -11,6 +11,7 @@ import os
 import re
 import shutil
 import subprocess
+import types
 from pathlib import Path
 
 import numpy as np
@@ -517,6 +518,27 @@ def test_code_version_names_the_commit_and_whether_tracked_files_changed(checkou
     first = provenance.code_version()
     (checkout / "taichi_star" / "provenance.py").write_text("# changed again\n")
     assert provenance.code_version()["changes_sha256"] != first["changes_sha256"]
+
+
+def test_a_csv_sidecar_of_a_dirty_checkout_records_which_edits(checkout, tmp_path):
+    """`SimulationResult.to_csv`'s sidecar records the hash of a dirty checkout's changes, as a
+    study's sidecar does (both from `provenance.code_record`; the library's dropped it); a
+    clean checkout's records none. A result built by hand: no simulation."""
+    from taichi_star.output import read_provenance, to_csv
+
+    git(checkout, "add", "-A")
+    git(checkout, "commit", "-q", "-m", "first")
+    result = types.SimpleNamespace(summary=pd.DataFrame({"gait": ["A1"], "alpha": [0.4]}),
+                                   solver=SOLVER, timing=None)
+    clean = read_provenance(to_csv(result, tmp_path / "clean.csv"))
+    assert clean["git_dirty"] is False and "git_changes_sha256" not in clean
+    (checkout / "taichi_star" / "provenance.py").write_text("# changed\n")
+    diff = subprocess.run(["git", "diff", "HEAD", "--no-color", "--no-ext-diff"],
+                          cwd=checkout, capture_output=True, check=True).stdout
+    dirty = read_provenance(to_csv(result, tmp_path / "dirty.csv"))
+    assert dirty["git_dirty"] is True
+    assert dirty["git_changes_sha256"] == hashlib.sha256(diff).hexdigest()
+    assert dirty["git_commit"] == git(checkout, "rev-parse", "HEAD")
 
 
 def test_code_version_with_a_damaged_git_index_names_the_commit_but_not_dirtiness(checkout):
