@@ -199,7 +199,9 @@ def _inward_arc(start, end, curvature, n_edges):
     half_chord = 0.5 * np.linalg.norm(chord)
     midpoint = 0.5 * (start + end)
     outward = midpoint / np.linalg.norm(midpoint)
-    centre = midpoint + math.sqrt(radius ** 2 - half_chord ** 2) * outward
+    # a joint_radius just under its bound makes the arc a half circle, radius = half_chord,
+    # where rounding can leave the difference a few ulps below zero
+    centre = midpoint + math.sqrt(max(radius ** 2 - half_chord ** 2, 0.0)) * outward
     angle_start = math.atan2(*(start - centre)[::-1])
     sweep = math.atan2(*(end - centre)[::-1]) - angle_start
     sweep = (sweep + math.pi) % (2 * math.pi) - math.pi

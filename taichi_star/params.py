@@ -95,10 +95,10 @@ def _check_actuator_values(name, values, lowest, highest, highest_included):
         raise ValueError(f"{name} must have {N_ACTUATORS} entries (A1..A8), got {len(values)}")
     checked = []
     for index, value in enumerate(values):
-        if not is_real(value) or not math.isfinite(value) or not lowest <= value <= highest \
-                or (value == highest and not highest_included):
+        if not is_real(value) or not _in_span(value, lowest, highest,
+                                              highest_included=highest_included):
             raise ValueError(f"{name}[{index}] (A{index + 1}) must be a real number in {span}, "
-                             f"got {value!r}")
+                             f"got {_shown(value)}")
         checked.append(float(value) + 0.0)  # a zero as +0.0, as `check_number`
     return tuple(checked)
 
@@ -130,14 +130,32 @@ def check_number(name, value, lowest, highest, lowest_included=True, integer=Fal
     kind = "an integer" if integer else "a real number"
     if not (is_whole(value) if integer else is_real(value)):
         raise ValueError(f"{name} must be {kind} in {span}, got {value!r}")
+    if not _in_span(value, lowest, highest, lowest_included, highest_included):
+        raise ValueError(f"{name} must be {kind} in {span}, got {_shown(value)}")
     # + 0.0 stores a zero as +0.0: parameters that compare equal are then the same bits
     # (build_model builds equal instances once)
-    value = int(value) if integer else float(value) + 0.0
-    if not math.isfinite(value) or value > highest or value < lowest or (
-            value == lowest and not lowest_included) or (
-            value == highest and not highest_included):
-        raise ValueError(f"{name} must be {kind} in {span}, got {value!r}")
-    return value
+    return int(value) if integer else float(value) + 0.0
+
+
+def _shown(value) -> str:
+    """`value` as an error message shows it: its repr, an integer too long to read (10**400) by
+    its number of digits."""
+    text = repr(value)
+    if is_whole(value) and len(text) > 32:
+        return f"an integer of {len(str(abs(int(value))))} digits"
+    return text
+
+
+def _in_span(value, lowest, highest, lowest_included=True, highest_included=True) -> bool:
+    """Whether the real number `value` is finite and within [lowest, highest] (an end
+    excluded where not `..._included`). Compares before any conversion to float: an integer
+    beyond float's range (10**400) is out of the span, not an OverflowError."""
+    try:
+        finite = math.isfinite(value)
+    except OverflowError:
+        return False
+    return finite and lowest <= value <= highest and not (
+        (value == lowest and not lowest_included) or (value == highest and not highest_included))
 
 
 def _named_fields_only(cls):

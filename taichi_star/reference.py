@@ -438,7 +438,17 @@ class ReferenceSimulator:
     the Young's modulus of each edge and triplet (elasticity and damping alike).
     """
 
+    UNIMPLEMENTED_SOLVER = {"precision": "f64", "adaptive": False, "jacobian": "newton"}
+    """The SolverConfig fields the reference does not implement, each with the one value it
+    runs: it always runs f64, fixed steps and Newton's Jacobian, so another value would be
+    compared against a run it does not make."""
+
     def __init__(self, params: StarParams, solver: SolverConfig = SolverConfig()):
+        for name, value in self.UNIMPLEMENTED_SOLVER.items():
+            if getattr(solver, name) != value:
+                raise ValueError(f"the reference implements only {name} = {value!r} (it runs "
+                                 f"f64, fixed steps and Newton's Jacobian), got "
+                                 f"{getattr(solver, name)!r}")
         self.params = params
         self.solver = solver
         topo = build_topology(params)

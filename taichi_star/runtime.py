@@ -32,6 +32,7 @@ from __future__ import annotations
 import atexit
 import contextlib
 import functools
+import gc
 import io
 import os
 import weakref
@@ -46,6 +47,10 @@ from .engine import LOCKSTEP_MINIMUM_BATCH, BatchEngine, elimination_plan
 from .integrators import INTEGRATORS
 from .model import BatchModel, build_model
 from .params import SolverConfig
+
+# the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
+__all__ = ["Runtime", "available_archs", "CPU_LANES", "LANES_MINIMUM_WORK", "GPU_BLOCK_DIM",
+           "GPU_INSTANCE_MINOR", "kernel_optimisation_default", "check_batch_memory"]
 
 ARCHS = ("cpu", "gpu", "cuda", "vulkan", "metal")
 MIN_CAPACITY = 64
@@ -356,6 +361,17 @@ class Runtime:
         Simulator, or held by a living Simulator (`free_engine`)."""
         self.slot_counts: Dict[tuple, int] = {}
         """Newton-matrix blocks per model engine key (`matrix_slots`)."""
+        self.forked_after_start = False
+        """Whether this process is a fork of one in which Taichi had started (`_after_fork`):
+        then it cannot run Taichi (`ensure` says so)."""
+
+    @classmethod
+    def _after_fork(cls):
+        """In a forked child: a runtime whose Taichi had started is marked unusable (Taichi's
+        thread pool is not in the child, and its first kernel launch hung: an audit, 2026-12,
+        a multiprocessing Pool after one `simulate`, gymnasium's AsyncVectorEnv)."""
+        if cls._current is not None and cls._current.arch is not None:
+            cls._current.forked_after_start = True
 
     @classmethod
     def current(cls) -> "Runtime":
@@ -376,8 +392,16 @@ class Runtime:
         """Initialise Taichi for arch and precision unless it already is (ValueError for an
         arch this machine does not have)."""
         check_arch(arch)
+        if self.forked_after_start:
+            raise RuntimeError(
+                "this process was forked from one in which Taichi had started, and Taichi's "
+                "threads do not survive a fork (its first kernel would wait for ever): start "
+                "worker processes with the 'spawn' or 'forkserver' method "
+                "(multiprocessing.get_context('spawn'), gymnasium's "
+                "AsyncVectorEnv(..., context='spawn')), or before the first simulation")
         if self.arch == arch and self.precision == precision:
             return
+        self.check_no_simulator_lives(arch, precision)
         threads = {} if self.cpu_threads is None else {"cpu_max_num_threads": self.cpu_threads}
         memoise_source_positions()
         # ti.init prints "[Taichi] Starting on arch=..." unconditionally; warnings still go to
@@ -393,6 +417,26 @@ class Runtime:
         atexit.register(_quiet_exit)
         self.arch, self.precision = arch, precision
         self.engines.clear()
+
+    def check_no_simulator_lives(self, arch: str, precision: str):
+        """RuntimeError, before Taichi is initialised again (for another arch, precision or
+        compiler setting), where a living Simulator (an environment's too) holds an engine:
+        `ti.init` destroys the program its kernels and fields live in, and the Simulator would
+        then crash the process at its next call or go on from another Simulator's state (an
+        audit, 2026-12: an f32 `simulate` beside an f64 Simulator). A Simulator let go but not
+        yet collected (a reference cycle) does not count."""
+        if not any(slot.held() for slots in self.engines.values() for slot in slots):
+            return
+        gc.collect()
+        held = sum(slot.held() for slots in self.engines.values() for slot in slots)
+        if held:
+            raise RuntimeError(
+                f"cannot start Taichi for {arch} in {precision}: {held} living Simulator(s) "
+                f"(or environments) hold engines of the Taichi program this process runs "
+                f"({self.precision}), and starting another (a run in another precision, arch "
+                f"or compiler setting) would destroy them; let them go first (del the "
+                f"Simulator, env.close()), or make this run in {self.precision} or in another "
+                f"process")
 
     def configure_gpu(self, block_dim: int = GPU_BLOCK_DIM, instance_minor: bool = GPU_INSTANCE_MINOR):
         """GPU launch and layout settings of the engines built from now on (for benchmarks that
@@ -525,3 +569,6 @@ def prepare_engine(params, solver: SolverConfig = SolverConfig(), arch: str = "c
     runtime = Runtime.current()
     runtime.ensure(arch, solver.precision)
     return runtime.engine_for(model, solver)
+
+
+os.register_at_fork(after_in_child=Runtime._after_fork)

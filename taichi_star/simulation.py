@@ -415,6 +415,30 @@ SUMMARY_STATE = ("status", "failure_time", "steps_done", "rejected_steps",
 """The state fields a run's summary reads at its end (`BatchState.read`)."""
 
 
+def _warn_capped(capped: np.ndarray, solver: SolverConfig):
+    """RuntimeWarning where "ok" instances (`capped`: (B,) bool, True for an ok instance with
+    newton_capped) needed a Newton solve of all max_newton iterations: the step was then redone
+    (a retry) and accepted, and such a run can be off by far more than newton_tol. In f32 the
+    precision barely resolves newton_tol; in f64 an audit found two causes (docs/numerics.md,
+    "What ok promises"): steps that converge to another solution of their equations (at a
+    re-firing whose natural curvature jumps, period 0.2 s: a centroid 13 mm away in one 2-ms
+    step) and a robot whose shortest edge is thousands of times below its size (8-90 % off)."""
+    count = int(np.count_nonzero(capped))
+    if not count:
+        return
+    first = int(np.flatnonzero(capped)[0])
+    if solver.precision == "f32":
+        reason = (f"f32 barely resolves newton_tol = {solver.newton_tol:g} m for them, and their "
+                  f"results can be far off; run them in f64")
+    else:
+        reason = ("such runs can have converged to another solution of a step's equations "
+                  "(at a re-firing's jump) or more loosely than newton_tol (where the robot's "
+                  "shortest edge is far below its size): check them with a smaller dt")
+    warnings.warn(f"{count} of {len(capped)} {solver.precision} instances (the first: instance "
+                  f"{first}) are 'ok' only after a Newton solve used all its {solver.max_newton} "
+                  f"iterations (newton_capped): {reason}", RuntimeWarning, stacklevel=5)
+
+
 def _collect(engine, model, solver, duration, record_times, start, centroids, rotations, shapes,
              boundaries, steady_from_cycle):
     batch = model.batch_size
@@ -461,12 +485,7 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
     metric_columns = [*metrics.SPEED_COLUMNS, "heading_deg", "steady_speed_mm_s",
                       "steady_signed_speed_mm_s"]
     summary.loc[failed, metric_columns] = np.nan
-    capped = int((summary["newton_capped"] & ~failed).sum())
-    if capped and solver.precision == "f32":
-        warnings.warn(f"{capped} of {batch} f32 instances are 'ok' only after a Newton solve ran "
-                      f"out of its {solver.max_newton} iterations (newton_capped): f32 barely "
-                      f"resolves newton_tol = {solver.newton_tol:g} m for them, and their results "
-                      f"can be far off; run them in f64", RuntimeWarning, stacklevel=4)
+    _warn_capped(summary["newton_capped"].to_numpy() & ~failed, solver)
     unphysical = summary["status"].eq("ok") & ~summary["shape_sane"].astype(bool)
     if unphysical.any():
         first = int(np.flatnonzero(unphysical.to_numpy())[0])

@@ -1020,3 +1020,17 @@ def test_shared_ends_keep_the_limb_at_its_angle_to_the_arc_tangent_to_second_ord
     half_edge = 0.5 * sim.topology.rest_length[sim.topology.edge_kind == ARC].mean()
     delta_k = CurvatureProfile().curvature(0.03) - CurvatureProfile().rest_curvature
     assert clamped[-1] == pytest.approx(half_edge * abs(delta_k), rel=0.1)
+
+
+@pytest.mark.parametrize("field, value", [("precision", "f32"), ("adaptive", True),
+                                          ("jacobian", "chord"), ("jacobian", "lagged")])
+def test_the_reference_refuses_solver_options_it_does_not_implement(field, value):
+    """The reference runs f64, fixed steps and Newton's Jacobian whatever it is given; a test
+    that handed it f32, adaptive steps or the chord would compare the engine against a run the
+    reference never made (it ran them as f64 fixed Newton steps, bit for bit, without a word:
+    an audit, 2026-12). Refused, naming the field; the values it implements are taken."""
+    extra = {"newton_tol": 1e-7} if value == "f32" else {}
+    with pytest.raises(ValueError, match=f"only {field} = "):
+        ReferenceSimulator(StarParams(), SolverConfig(**{field: value}, **extra))
+    ReferenceSimulator(StarParams(), SolverConfig(precision="f64", adaptive=False,
+                                                  jacobian="newton"))

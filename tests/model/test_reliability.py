@@ -4,8 +4,10 @@ resolve the robot, and the public doors of Simulator snapshots: tests that kill 
 hand-made engine mutants (`halvings <= max` → `<`, an under-counted substep_retries, a changed
 Newton stopping rule, a +20 % costlier Newton)."""
 
+import multiprocessing
 import pickle
 import signal
+import sys
 import warnings
 
 import numpy as np
@@ -155,11 +157,83 @@ def test_f32_agrees_with_f64_or_flags_the_iteration_cap():
     fine = ts.simulate(batch, 0.1, f32.replace(dt=1e-3)).summary
     assert not fine.newton_capped.any()
     np.testing.assert_allclose(fine.speed_mm_s, f64["fine"].speed_mm_s, rtol=0.01)
-    with pytest.warns(RuntimeWarning, match="2 of 2 f32 instances are 'ok' only after a Newton "
-                                            "solve ran out of its 25 iterations"):
+    with pytest.warns(RuntimeWarning, match=r"2 of 2 f32 instances \(the first: instance 0\) "
+                                            r"are 'ok' only after a Newton solve used all its 25 "
+                                            r"iterations"):
         coarse = ts.simulate(batch, 1.0, f32.replace(dt=0.05)).summary
     assert (coarse.status == "ok").all() and coarse.newton_capped.all()
     assert (coarse.newton_iterations_max == 25).all() and (coarse.substep_retries > 0).all()
+
+
+def test_a_precision_switch_is_refused_while_a_simulator_lives_and_allowed_once_let_go():
+    """Taichi runs one program per process, and `ti.init` for another precision destroys the
+    one a living Simulator's engine lives in: the Simulator then crashed the process (an LLVM
+    assertion, exit 134) or went on from another Simulator's state with status ok (an audit,
+    2026-12). An f32 run beside a living f64 Simulator is refused before anything is touched,
+    and the Simulator goes on bit for bit as if nothing had been asked; once it is let go, the
+    f32 run is made."""
+    robots = ts.Simulator([ts.StarParams(gait="A1+A3")] * 2)
+    alone = ts.Simulator([ts.StarParams(gait="A1+A3")] * 2)
+    for simulator in (robots, alone):
+        simulator.advance(0.02)
+    f32 = ts.SolverConfig(precision="f32", newton_tol=1e-7)
+    with pytest.raises(RuntimeError, match=r"2 living Simulator\(s\) \(or environments\) hold "
+                                           r"engines .* \(f64\)"):
+        ts.simulate([ts.StarParams()], 0.01, f32)
+    for simulator in (robots, alone):
+        simulator.advance(0.02)
+    pd.testing.assert_frame_equal(robots.state(), alone.state())
+    del robots, alone, simulator  # the loop's name holds the last one too
+    assert ts.simulate([ts.StarParams()], 0.01, f32).summary.status.eq("ok").all()
+
+
+def _simulate_in_child(messages):
+    """A forked child's work: a plain call, reporting what came of it."""
+    try:
+        ts.simulate([ts.StarParams()], 0.01)
+        messages.put("ran")
+    except RuntimeError as error:
+        messages.put(str(error))
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="fork is the start method in question on Linux")
+def test_a_process_forked_after_taichi_started_is_told_to_use_spawn_instead_of_hanging():
+    """Taichi's threads do not survive a fork: a child forked after a simulation waited for
+    ever in its first kernel (an audit, 2026-12: a multiprocessing Pool after one `simulate`,
+    gymnasium's AsyncVectorEnv). It is refused at once, naming the start methods that work.
+    The child's 60 s are a hang's bound, not a timing: it answers before any kernel runs."""
+    ts.simulate([ts.StarParams()], 0.01)
+    context = multiprocessing.get_context("fork")
+    messages = context.Queue()
+    child = context.Process(target=_simulate_in_child, args=(messages,))
+    child.start()
+    child.join(60)
+    hung = child.is_alive()
+    if hung:
+        child.kill()
+    assert not hung
+    message = messages.get(timeout=10)
+    assert "forked from one in which Taichi had started" in message and "'spawn'" in message
+
+
+def test_f64_instances_ok_only_after_a_solve_used_all_its_iterations_are_warned_about():
+    """An f64 instance whose Newton solve used all max_newton iterations is "ok" only because a
+    retry rescued the step, and such a run can be off by far more than newton_tol: limbs of
+    2e-5 m (tip_radius just past joint_radius, allowed) are retried at every step, and over
+    0.05 s their displacement came out 2.2e-8 m from a run at newton_tol 1e-13 against the
+    5e-9 m that 50 steps at 1e-10 m allow (an audit, 2026-12; docs/numerics.md, "What ok
+    promises"). Warned, naming the first such instance; a batch without one is not."""
+    paper = ts.StarParams(gait="A1+A3")
+    tiny_limbs = paper.replace(tip_radius=paper.joint_radius + 2e-5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        plain = ts.simulate([paper], 0.05).summary
+    assert not plain.newton_capped.any()
+    with pytest.warns(RuntimeWarning, match=r"1 of 2 f64 instances \(the first: instance 1\) "
+                                            r"are 'ok' only after a Newton solve used all its 25 "
+                                            r"iterations \(newton_capped\): such runs can"):
+        summary = ts.simulate([paper, tiny_limbs], 0.05).summary
+    assert summary.status.eq("ok").all() and summary.newton_capped.tolist() == [False, True]
 
 
 def test_an_f32_simulator_refuses_a_firing_at_a_step_its_clock_cannot_hold():

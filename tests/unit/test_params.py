@@ -650,3 +650,34 @@ def test_f32s_refusals_at_their_boundaries():
     check_precision([small.replace(tip_radius=size)], f32)
     with pytest.raises(ValueError, match=r"^precision 'f32' cannot resolve params\[0\]"):
         check_precision([small.replace(tip_radius=size * (1 + 1e-12))], f32)
+
+
+@pytest.mark.parametrize("cls, field, value", [
+    (ts.StarParams, "alpha", 10 ** 400), (ts.StarParams, "alpha", -(10 ** 400)),
+    (ts.StarParams, "n_arc", 10 ** 400), (ts.SolverConfig, "dt", 10 ** 400),
+    (ts.SolverConfig, "max_newton", 10 ** 400),
+    (ts.StarParams, "actuator_gains", (10 ** 400,) + (1.0,) * 7),
+    (ts.StarParams, "actuator_delays", (0.0,) * 7 + (10 ** 400,)),
+], ids=["alpha", "minus alpha", "n_arc", "dt", "max_newton", "a gain", "a delay"])
+def test_an_integer_beyond_floats_range_is_refused_naming_the_field(cls, field, value):
+    """An integer past float's range (10**400) was an OverflowError naming no field (its
+    conversion to float came before the range test), and in the CLI a traceback with exit
+    status 1 (an audit, 2026-12): it is out of range like any other value, its digits
+    counted rather than printed."""
+    with pytest.raises(ValueError, match=f"^{field}(\\[\\d\\] \\(A\\d\\))? must be .* got an "
+                                         f"integer of 401 digits$"):
+        cls(**{field: value})
+
+
+def test_a_joint_radius_just_under_its_bound_builds_a_half_circle_arc():
+    """Just under its open bound joint_radius makes each rest arc a half circle, its radius
+    the half chord; the 3 nearest allowed values made the difference of their squares a few
+    ulps negative and simulate failed with a bare "math domain error" (an audit, 2026-12);
+    the topology is built, every node finite."""
+    rest = ts.StarParams().actuator_profile.rest_curvature
+    widest = 1.0 / (rest * math.sin(math.radians(22.5)))
+    radius = widest
+    for _ in range(3):
+        radius = math.nextafter(radius, 0.0)
+        topology = build_topology(ts.StarParams(joint_radius=radius, tip_radius=0.2))
+        assert np.isfinite(topology.rest_positions).all()
