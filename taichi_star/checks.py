@@ -2,8 +2,14 @@
 of the package, so the lowest (`gait`, `timegrid`) can use it too."""
 
 import numbers
+import os
+import sys
+import warnings
 
 import numpy as np
+
+PACKAGE_FOLDER = os.path.dirname(os.path.abspath(__file__)) + os.sep
+"""The package's source folder: the frames of its own code (`warn_user`)."""
 
 
 def is_whole(value) -> bool:
@@ -24,3 +30,14 @@ def check_flag(name: str, value) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise ValueError(f"{name} must be True or False, got {value!r}")
     return bool(value)
+
+
+def warn_user(message: str, category=RuntimeWarning):
+    """`warnings.warn` attributed to the first caller outside the package: the user's line (a
+    script's, a notebook cell's, a study's), whichever public route led here. Fixed stack
+    levels pointed inside the library on some routes (an audit, 2026-12: simulate's record and
+    long-work warnings, Simulator.advance's, run_batch's)."""
+    level, frame = 2, sys._getframe(1)
+    while frame is not None and frame.f_code.co_filename.startswith(PACKAGE_FOLDER):
+        level, frame = level + 1, frame.f_back
+    warnings.warn(message, category, stacklevel=level)

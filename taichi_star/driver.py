@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import warnings
 from dataclasses import dataclass
 from typing import Callable, Optional, Sequence, Tuple
 
 import numpy as np
 
+from .checks import warn_user
 from .params import SolverConfig
 from .timegrid import (MAX_STEPS_PER_INSTANCE, STEPS_PER_LAUNCH, check_duration, check_steps,
                        check_work, multiples_within, steps_in, whole_steps)
@@ -92,10 +92,10 @@ def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float,
     and a record interval of whole steps. A record interval longer than the run warns: no
     record falls after its start."""
     if record_interval_s and multiples_within(duration_s, record_interval_s) == 0:
-        warnings.warn(f"record_interval_s = {record_interval_s:g} s is longer than duration_s = "
+        warn_user(f"record_interval_s = {record_interval_s:g} s is longer than duration_s = "
                       f"{duration_s:g} s: no record falls after the start (simulate's trajectory "
                       f"holds the start alone, Simulator.advance returns no rows)",
-                      RuntimeWarning, stacklevel=3)
+                      )
     after = "" if steps_taken is None else f"after the {steps_taken} steps taken"
     taken = steps_taken or 0
     if solver.adaptive:
@@ -113,10 +113,10 @@ def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float,
                    f"{', ' + after if after else ''})", taken + fewest, batch)
         most = taken + duration_s / solver.dt_min
         if not most <= MAX_STEPS_PER_INSTANCE:
-            warnings.warn(f"duration_s = {duration_s:g} s at dt_min = {solver.dt_min:g} s could "
+            warn_user(f"duration_s = {duration_s:g} s at dt_min = {solver.dt_min:g} s could "
                           f"take {most:.3g} steps per instance: an instance that reaches "
                           f"{MAX_STEPS_PER_INSTANCE} (the int32 step counter) stops there with "
-                          f"status step_limit", RuntimeWarning, stacklevel=3)
+                          f"status step_limit")
         return
     check_work(f"duration_s = {duration_s:g} s at dt = {solver.dt:g} s"
                f"{f' ({after})' if after else ''}", taken + duration_s / solver.dt, batch)

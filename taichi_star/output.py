@@ -255,7 +255,7 @@ def read_provenance(path) -> dict:
 
 def summary_of_dataset(dataset) -> pd.DataFrame:
     """The per-instance table of a `to_xarray` Dataset (or one read from netCDF): every
-    variable and coordinate along `instance` alone, as columns (the `instance` coordinate
+    variable and coordinate along `instance` alone but the sensitivities, as columns (the `instance` coordinate
     first where the summary had it as a column: a `run_batch` result's);
     `StarParams.from_row` reads its rows. ValueError for anything else (a path: open it with
     `xarray.open_dataset` first)."""
@@ -265,16 +265,27 @@ def summary_of_dataset(dataset) -> pd.DataFrame:
                          f"`to_netcdf`'s file with xarray.open_dataset), with an 'instance' "
                          f"coordinate; got {type(dataset).__name__}")
     names = [name for name in [*dataset.coords, *dataset.data_vars]
-             if dataset[name].dims == ("instance",) and name != "instance"]
+             if dataset[name].dims == ("instance",) and name != "instance"
+             and not dataset[name].attrs.get("sensitivity")]
     if dataset["instance"].attrs.get("summary_column") == 1:
         names.insert(0, "instance")
     return pd.DataFrame({name: dataset[name].to_numpy() for name in names})
 
 
+def _variable_of_column(column: str) -> str:
+    """A sensitivity column's name as a netCDF variable's, which cannot hold "/":
+    "d(x_mm)/d(actuator_gains[2])" → "d_x_mm__d_actuator_gains_2"."""
+    output, direction = column[2:-1].split(")/d(")
+    return f"d_{output}__d_{direction.replace('[', '_').replace(']', '')}"
+
+
 def to_xarray(result):
     """The result as an xarray Dataset: per instance (dim `instance`) every summary column, the
     parameters as coordinates; per record (dims `instance`, `time`) the centroid and heading;
-    with recorded shapes, `positions` (time, instance, node, xy) in m. Every variable carries a
+    with recorded shapes, `positions` (time, instance, node, xy) in m; with sensitivities,
+    each of their columns (`sensitivities` per instance, `trajectory_sensitivities` per record)
+    as a variable "d_OUTPUT__d_PARAMETER" whose attributes hold the column's name ("column"),
+    its units and sensitivity = 1 (`summary_of_dataset` leaves them out). Every variable carries a
     `units` attribute; the dataset's attributes hold the `provenance` as JSON (`provenance`)
     and its main entries one by one (taichi_star_version, git_commit, git_dirty, the solver's
     integrator, dt_s, adaptive, precision)."""
@@ -309,6 +320,19 @@ def to_xarray(result):
                 ("instance", "time"),
                 table[name].reindex(index=instances, columns=times).to_numpy(),
                 {"units": column_unit(name)})
+    if result.sensitivities is not None:
+        for name in result.sensitivities.columns:
+            variables[_variable_of_column(name)] = (
+                "instance", result.sensitivities[name].to_numpy(),
+                {"units": column_unit(name), "column": name, "sensitivity": 1})
+        derivatives = result.trajectory_sensitivities
+        if len(derivatives):
+            table = derivatives.pivot(index="instance", columns="t_s")
+            for name in derivatives.columns.drop(["instance", "t_s"]):
+                variables[_variable_of_column(name)] = (
+                    ("instance", "time"),
+                    table[name].reindex(index=instances, columns=times).to_numpy(),
+                    {"units": column_unit(name), "column": name, "sensitivity": 1})
     if result.shapes is not None:
         coordinates["node"] = np.arange(result.shapes.shape[2])
         coordinates["xy"] = ["x", "y"]

@@ -32,13 +32,13 @@ from __future__ import annotations
 import copy
 import dataclasses
 import difflib
-import warnings
 from dataclasses import dataclass
 from typing import Dict, List, Sequence, Tuple
 
 import numpy as np
 import pandas as pd
 
+from .checks import warn_user
 from .params import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS, PER_ACTUATOR_FIELDS, STAR_RANGES,
                      SolverConfig, StarParams)
 from .gait import N_ACTUATORS, Gait
@@ -217,14 +217,14 @@ def check_directions(directions: Sequence[Direction], params: Sequence[StarParam
                        if delay_on_step_grid(p, direction.index, solver.dt)]
             if jumping:
                 p = params[jumping[0]]
-                warnings.warn(
+                warn_user(
                     f"sensitivities: {direction.label} = {direction.value(p):g} s (instance "
                     f"{jumping[0]}, {len(jumping)} in all) puts the actuation profile's switch, "
                     f"{p.actuator_profile.switch_time:g} s after a firing, where the fitted "
                     f"curvature jumps by {p.actuator_profile.switch_jump:.2g} 1/m, on a step "
                     f"end: the run jumps there as the delay passes, and its derivative by the "
                     f"delay is not defined; move the delay off the step grid (e.g. by dt/2)",
-                    stacklevel=3)
+                    UserWarning)
 
 
 def delay_on_step_grid(params: StarParams, actuator: int, dt: float) -> bool:

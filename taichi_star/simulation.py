@@ -6,7 +6,6 @@ import dataclasses
 import math
 import operator
 import time
-import warnings
 from dataclasses import dataclass, field
 from typing import Optional, Sequence
 
@@ -14,7 +13,7 @@ import numpy as np
 import pandas as pd
 
 from . import metrics, output
-from .checks import check_flag, is_real, is_whole
+from .checks import check_flag, is_real, is_whole, warn_user
 from .geometry import CENTRE, Topology, build_topology
 from .model import validate_batch
 from .params import (PER_ACTUATOR_FIELDS, SolverConfig, StarParams, check_precision,
@@ -434,9 +433,9 @@ def _warn_capped(capped: np.ndarray, solver: SolverConfig):
         reason = ("such runs can have converged to another solution of a step's equations "
                   "(at a re-firing's jump) or more loosely than newton_tol (where the robot's "
                   "shortest edge is far below its size): check them with a smaller dt")
-    warnings.warn(f"{count} of {len(capped)} {solver.precision} instances (the first: instance "
+    warn_user(f"{count} of {len(capped)} {solver.precision} instances (the first: instance "
                   f"{first}) are 'ok' only after a Newton solve used all its {solver.max_newton} "
-                  f"iterations (newton_capped): {reason}", RuntimeWarning, stacklevel=5)
+                  f"iterations (newton_capped): {reason}")
 
 
 def _collect(engine, model, solver, duration, record_times, start, centroids, rotations, shapes,
@@ -489,11 +488,11 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
     unphysical = summary["status"].eq("ok") & ~summary["shape_sane"].astype(bool)
     if unphysical.any():
         first = int(np.flatnonzero(unphysical.to_numpy())[0])
-        warnings.warn(f"{int(unphysical.sum())} of {batch} 'ok' instances (the first: instance "
+        warn_user(f"{int(unphysical.sum())} of {batch} 'ok' instances (the first: instance "
                       f"{first}) end in a shape that is not physical (shape_sane False, "
                       f"max_strain up to {summary.loc[unphysical, 'max_strain'].max():.3g}): "
                       f"every step was solved, but their parameters or time step take the "
-                      f"rods beyond what the model describes", RuntimeWarning, stacklevel=4)
+                      f"rods beyond what the model describes")
 
     trajectory = pd.DataFrame({"instance": pd.Series(dtype=int), "t_s": pd.Series(dtype=float),
                                "x_mm": pd.Series(dtype=float), "y_mm": pd.Series(dtype=float),

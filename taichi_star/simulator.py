@@ -27,7 +27,6 @@ import json
 import math
 import os
 import time
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, Optional, Sequence, Tuple, Union
@@ -38,7 +37,7 @@ import pandas as pd
 from . import metrics
 from . import sensitivities as tangents
 from .actuation import NEVER
-from .checks import check_flag, is_real
+from .checks import check_flag, is_real, warn_user
 from .driver import Clock, RunTiming, check_run, drive, robots_label
 from .gait import N_ACTUATORS, Gait
 from .geometry import CENTRE
@@ -504,11 +503,11 @@ class Simulator:
         changed = [name for name in own
                    if snapshot.solver and snapshot.solver.get(name) != own[name]]
         if changed:
-            warnings.warn(f"the saved state was stepped with {changed[0]} = "
+            warn_user(f"the saved state was stepped with {changed[0]} = "
                           f"{snapshot.solver.get(changed[0], 'not recorded')}, this simulator's "
                           f"is {own[changed[0]]} ({len(changed)} setting(s) differ): it goes on "
                           f"under this simulator's settings, not bit for bit as the saved run "
-                          f"would have", RuntimeWarning, stacklevel=2)
+                          f"would have")
 
     def __repr__(self) -> str:
         times = self.time_s

@@ -10,11 +10,10 @@ ValueError naming it); `nearest_interval` and `interval_for_count` give one that
 from __future__ import annotations
 
 import math
-import warnings
 from typing import Optional
 
 import numpy as np
-from .checks import is_real, is_whole
+from .checks import is_real, is_whole, warn_user
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
 __all__ = ["nearest_interval", "interval_for_count", "whole_steps", "steps_in", "STEP_TOLERANCE",
@@ -145,7 +144,7 @@ def check_work(name: str, steps: float, batch: Optional[int] = None):
             f" ({steps * batch:.3g} robot-steps for {batch} instance{'' if batch == 1 else 's'})"
         raise ValueError(f"{name} is {steps:.3g} time steps per instance{total}; the limit is "
                          f"{MAX_STEPS_PER_INSTANCE} steps per instance (the int32 step counter)")
-    warn_long_work(name, round(steps) * (batch or 1), stacklevel=4)
+    warn_long_work(name, round(steps) * (batch or 1))
 
 
 LONG_WORK_MESSAGE = r".* robot-steps: about .* h at "
@@ -153,11 +152,11 @@ LONG_WORK_MESSAGE = r".* robot-steps: about .* h at "
 filters its parts' warnings with it)."""
 
 
-def warn_long_work(name: str, robot_steps: float, stacklevel: int = 3):
+def warn_long_work(name: str, robot_steps: float):
     """A RuntimeWarning with the estimated wall time when `robot_steps` (steps × instances) is
     over WARN_ROBOT_STEPS; `name` says which arguments gave them."""
     if robot_steps > WARN_ROBOT_STEPS:
         hours = robot_steps / ESTIMATE_ROBOT_STEPS_PER_S / 3600
-        warnings.warn(f"{name} is {robot_steps:.3g} robot-steps: about {hours:.3g} h at "
+        warn_user(f"{name} is {robot_steps:.3g} robot-steps: about {hours:.3g} h at "
                       f"{ESTIMATE_ROBOT_STEPS_PER_S:g} robot-steps/s (on a 2-core CPU; a GPU or "
-                      f"more cores run faster)", RuntimeWarning, stacklevel=stacklevel)
+                      f"more cores run faster)")

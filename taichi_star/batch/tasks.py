@@ -125,7 +125,7 @@ def check_batch_work(tasks: Sequence[ChunkTask], instances: int):
     robot_steps = sum(len(task.params) * fewest_steps(task.solver, task.duration_s,
                                                       task.record_interval_s)[0]
                       for task in tasks)
-    warn_long_work(f"the batch of {instances:,} instances", robot_steps, stacklevel=4)
+    warn_long_work(f"the batch of {instances:,} instances", robot_steps)
     if not tasks:
         return
     recorded = tasks[0].record_interval_s

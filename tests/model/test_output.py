@@ -123,6 +123,30 @@ def test_xarray_holds_the_tables_with_units_and_survives_netcdf(recorded, tmp_pa
         assert list(back.gait.values) == ["A1+A2", "A3"]
 
 
+def test_sensitivities_go_to_xarray_and_netcdf_beside_the_summary_not_into_it(tmp_path):
+    """to_xarray left the sensitivities out without a word, though to_csv and to_parquet write
+    them (an audit, 2026-12): each column is a variable (netCDF names hold no "/"), per
+    instance or per record, with its units and its column's name; the summary read back is
+    the run's without them."""
+    import xarray as xr
+
+    result = ts.simulate([ts.StarParams(), ts.StarParams(gait="A1+A2")], 0.02,
+                         record_interval_s=0.01, sensitivities=("alpha", "actuator_gains[1]"))
+    path = result.to_netcdf(tmp_path / "sensitive.nc")
+    with xr.open_dataset(path) as back:
+        speed = back["d_displacement_x_mm__d_alpha"]
+        np.testing.assert_array_equal(speed, result.sensitivity("displacement_x_mm", "alpha"))
+        assert speed.attrs["units"] == column_unit("d(displacement_x_mm)/d(alpha)")
+        assert speed.attrs["column"] == "d(displacement_x_mm)/d(alpha)"
+        path_derivative = back["d_y_mm__d_actuator_gains_1"]
+        assert path_derivative.dims == ("instance", "time")
+        np.testing.assert_array_equal(path_derivative, result.sensitivity(
+            "y_mm", "actuator_gains[1]"))
+        summary = summary_of_dataset(back)
+        assert list(summary.columns) == list(result.summary.columns)
+        np.testing.assert_array_equal(summary.speed_mm_s, result.summary.speed_mm_s)
+
+
 def test_a_batchs_result_goes_to_xarray_by_its_instance_column(recorded, tmp_path):
     """`run_batch` names its instances in a summary column: that is the coordinate (it also
     was a variable, and xarray refused the dataset), and an instance without records (a

@@ -395,3 +395,34 @@ def test_an_ok_instance_with_an_unphysical_shape_is_reported_in_a_warning():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         ts.simulate([ts.StarParams()], 0.2)
+
+
+def _warned_here(call) -> list:
+    """The RuntimeWarnings `call()` emits, each asserted to point at this file, where the
+    user's line is (not inside the library)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        call()
+    runtime_warnings = [w for w in caught if issubclass(w.category, RuntimeWarning)]
+    assert runtime_warnings
+    for warning in runtime_warnings:
+        assert warning.filename == __file__, (warning.filename, str(warning.message)[:60])
+    return runtime_warnings
+
+
+def test_warnings_point_at_the_users_line_whichever_route_led_to_them(monkeypatch):
+    """Fixed stack levels pointed some warnings inside the library (simulation.py, driver.py,
+    batch/run.py: an audit, 2026-12), where a user's filter or a notebook's message cannot
+    tell which of their lines asked: every route names the caller's file."""
+    from taichi_star import timegrid
+    from taichi_star.batch import run_batch
+
+    paper = ts.StarParams(gait="A1+A3")
+    _warned_here(lambda: ts.simulate([paper], 0.01, record_interval_s=0.02))
+    monkeypatch.setattr(timegrid, "WARN_ROBOT_STEPS", 5)
+    _warned_here(lambda: ts.simulate([paper], 0.01))
+    robots = ts.Simulator([paper])
+    _warned_here(lambda: robots.advance(0.01))
+    _warned_here(lambda: run_batch([paper] * 2, 0.01, chunk_size=1))
+    monkeypatch.undo()
+    _warned_here(lambda: ts.simulate([paper.replace(tip_radius=paper.joint_radius + 2e-5)], 0.01))
