@@ -17,10 +17,11 @@ from typing import Callable, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .checks import warn_user
+from .checks import check_flag, warn_user
 from .params import SolverConfig
-from .timegrid import (MAX_STEPS_PER_INSTANCE, STEPS_PER_LAUNCH, check_duration, check_steps,
-                       check_work, multiples_within, steps_in, whole_steps)
+from .timegrid import (ESTIMATE_ROBOT_STEPS_PER_S, MAX_STEPS_PER_INSTANCE, STEPS_PER_LAUNCH,
+                       check_duration, check_steps, check_work, multiples_within, steps_in,
+                       whole_steps)
 
 
 @dataclass(frozen=True)
@@ -79,6 +80,24 @@ def fewest_steps(solver: SolverConfig, duration_s: float, record_interval_s: flo
         return (duration_s / record_interval_s,
                 f"a record every {record_interval_s:g} s, each a step end")
     return duration_s / solver.dt_max, f"dt_max = {solver.dt_max:g} s"
+
+
+AUTO_PROGRESS_S = 30.0
+"""With `progress=None` (the default of simulate and Simulator.advance) a run
+estimated at this many wall seconds or more (its fewest robot-steps at
+`timegrid.ESTIMATE_ROBOT_STEPS_PER_S`) shows a progress bar, a shorter one stays silent: a long
+run said nothing about where it was unless asked (an audit, 2026-12)."""
+
+
+def shows_progress(progress, solver: SolverConfig, duration_s: float, record_interval_s: float,
+                   instances: int) -> bool:
+    """Whether a run of `instances` (replicas included) over duration_s (s) shows a progress
+    bar: `progress` if a bool (ValueError otherwise), for None whether the run is estimated at
+    AUTO_PROGRESS_S or more."""
+    if progress is None:
+        steps, _ = fewest_steps(solver, duration_s, record_interval_s)
+        return steps * instances / ESTIMATE_ROBOT_STEPS_PER_S >= AUTO_PROGRESS_S
+    return check_flag("progress", progress)
 
 
 def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float, batch: int,

@@ -18,7 +18,7 @@ from .geometry import CENTRE, Topology, build_topology
 from .model import validate_batch
 from .params import (PER_ACTUATOR_FIELDS, SolverConfig, StarParams, check_precision,
                      parameter_column)
-from .driver import Clock, RunTiming, check_run, drive, robots_label
+from .driver import Clock, RunTiming, check_run, drive, robots_label, shows_progress
 from . import sensitivities as tangents
 from .runtime import (RECORDS_REMEDY, Runtime, check_arch, check_host_memory,
                       stream_chunk_size)
@@ -234,7 +234,7 @@ def validate_call(params, duration_s, solver, record_interval_s, record_shapes, 
 
 def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConfig = SolverConfig(),
              *, arch: str = "cpu", record_interval_s: float = 0.0, record_shapes: bool = False,
-             steady_from_cycle: int = 1, progress: bool = False,
+             steady_from_cycle: int = 1, progress: Optional[bool] = None,
              sensitivities: Sequence[str] = ()) -> SimulationResult:
     """Simulate a batch of robot instances (a sequence of StarParams; a single StarParams is a
     batch of one) from rest in their rest shape for duration_s seconds and return a `SimulationResult` (see there for every column, with units).
@@ -249,8 +249,9 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     instance chooses its own steps, which land exactly on the records, the cycle starts and the
     end. record_shapes adds the node positions at the records. The centroid is also taken at
     every cycle start (with fixed steps: those that fall on a step) for the steady speeds from
-    cycle `steady_from_cycle` on. Raises ValueError for any bad argument before computing
-    anything.
+    cycle `steady_from_cycle` on. `progress`: a progress bar in simulated seconds (None: where
+    the run is estimated at `driver.AUTO_PROGRESS_S` or more). Raises ValueError for any bad
+    argument before computing anything.
 
     `sensitivities`: StarParams fields (`params.DIFFERENTIABLE_FIELDS`; "actuator_gains" for
     all eight, "actuator_gains[3]" for one) to differentiate every output by, for every
@@ -267,7 +268,8 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     params, duration_s, record_interval_s = validate_call(params, duration_s, solver,
                                                           record_interval_s, record_shapes,
                                                           steady_from_cycle, per_instance)
-    check_flag("progress", progress)
+    progress = shows_progress(progress, solver, duration_s, record_interval_s,
+                              len(params) * per_instance)
     tangents.check_directions(directions, params, solver)
     check_arch(arch)
     started = time.perf_counter()

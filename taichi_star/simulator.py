@@ -38,7 +38,7 @@ from . import metrics
 from . import sensitivities as tangents
 from .actuation import NEVER
 from .checks import check_flag, is_real, warn_user
-from .driver import Clock, RunTiming, check_run, drive, robots_label
+from .driver import Clock, RunTiming, check_run, drive, robots_label, shows_progress
 from .gait import N_ACTUATORS, Gait
 from .geometry import CENTRE
 from .model import validate_batch
@@ -272,12 +272,12 @@ class Simulator:
         schedule.command(mask, due, self._steps(), step_s=self.solver.dt)
 
     def advance(self, duration_s: float, record_interval_s: float = 0.0,
-                progress: bool = False) -> pd.DataFrame:
+                progress: Optional[bool] = None) -> pd.DataFrame:
         """Advance every live instance by duration_s (with fixed steps rounded to whole steps).
         Returns the `state()` rows at every multiple of record_interval_s after now (s, with
         fixed steps a whole number of steps: `timegrid.nearest_interval` gives one; 0 = none),
         with a `record` column; empty without records. `progress`: a progress bar in simulated
-        seconds. With adaptive steps the end ends a step (as a record time does): pieces give
+        seconds (None: where the call is estimated at `driver.AUTO_PROGRESS_S` or more). With adaptive steps the end ends a step (as a record time does): pieces give
         one call's bits where they end on its step ends (docs: Control, The Simulator)."""
         if not is_real(duration_s) or not math.isfinite(duration_s) or duration_s <= 0:
             raise ValueError(f"duration_s must be a finite number > 0 s, got {duration_s!r}")
@@ -287,7 +287,8 @@ class Simulator:
                 or not (record_interval_s == 0 or 0 < record_interval_s < math.inf):
             raise ValueError(f"record_interval_s must be a finite number > 0 s (or 0: no "
                              f"records), got {record_interval_s!r}")
-        check_flag("progress", progress)
+        progress = shows_progress(progress, self.solver, duration_s, record_interval_s,
+                                  self.n_instances)
         check_run(self.solver, duration_s, record_interval_s, self.n_instances,
                   steps_taken=int(self._steps().max(initial=0)))
         if record_interval_s:

@@ -88,7 +88,7 @@ def test_the_residual_test_is_opt_in():
     (dict(record_shapes="no", record_interval_s=0.005), r"^record_shapes must be True or False, "
                                                         r"got 'no'$"),
     (dict(progress="yes"), r"^progress must be True or False, got 'yes'$"),
-    (dict(progress=None), r"^progress must be True or False, got None$"),
+    (dict(progress=0), r"^progress must be True or False, got 0$"),
 ])
 def test_simulate_rejects_bad_arguments(kwargs, match):
     arguments = dict(params=[ts.StarParams()], duration_s=0.01)
