@@ -378,8 +378,9 @@ def measure_plain(batch: int, duration: float, repeats: int, sensitivities=(),
     steps = round(duration / DT)
     solver = SolverConfig(jacobian=jacobian)
     result, timed, first = best_of_calls(
-        lambda: simulate(params, duration, solver, sensitivities=sensitivities), repeats,
-        warmup=lambda: simulate(params, DT, solver, sensitivities=sensitivities))
+        lambda: simulate(params, duration, solver, sensitivities=sensitivities, progress=False),
+        repeats, warmup=lambda: simulate(params, DT, solver, sensitivities=sensitivities,
+                                         progress=False))
     return {"gait": "paper_gaits", "jacobian": jacobian, "workers": 1,
             "n_nodes": result.topology.n_nodes, "steps": steps, "time_to_first_step_s": first,
             "final_state": state_digest(np.column_stack(

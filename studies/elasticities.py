@@ -147,7 +147,8 @@ def finite_difference_check(params: Sequence[StarParams], labels: Sequence[str],
             steps.append(step)
             batch += [direction(label).moved(p, value + sign * scale * step)
                       for scale in scales for sign in (1.0, -1.0)]
-    speeds = simulate(batch, duration_s, tight, arch=arch).summary[OUTPUT].to_numpy()
+    speeds = simulate(batch, duration_s, tight, arch=arch,
+                      progress=False).summary[OUTPUT].to_numpy()
     speeds = speeds.reshape(len(steps), len(scales), 2)
     quotients = (speeds[:, :, 0] - speeds[:, :, 1]) / (2.0 * np.array(steps)[:, None]
                                                          * np.array(scales))

@@ -108,7 +108,7 @@ def optimise(base, solver, starts, goal, direction_deg, cycles, iterations, arch
         params = [base.replace(gait=gait, actuator_delays=tuple(row))
                   for gait, row in zip(gaits, delays)]
         result = simulate(params, duration_s, solver, arch=arch,
-                          sensitivities=("actuator_delays",))
+                          sensitivities=("actuator_delays",), progress=False)
         value = objective_of(result, goal, direction_deg, duration_s, cycles)
         gradient = objective_of(result, goal, direction_deg, duration_s, cycles,
                                 read=lambda output: result.sensitivity(output, "actuator_delays"))
@@ -138,7 +138,7 @@ def robustness(base, solver, patterns, goal, direction_deg, cycles, arch) -> pd.
     params = [base.replace(gait=gait, actuator_delays=tuple(delays), alpha=base.alpha * a,
                            drag_perpendicular=base.drag_perpendicular * c)
               for _, gait, delays, a, c in cases]
-    result = simulate(params, duration_s, solver, arch=arch)
+    result = simulate(params, duration_s, solver, arch=arch, progress=False)
     value = objective_of(result, goal, direction_deg, duration_s, cycles)
     return pd.DataFrame([{"pattern": name, "gait": gait, "alpha_factor": a,
                           "drag_perpendicular_factor": c, "objective": v,
@@ -154,7 +154,7 @@ def synchronous_objectives(base, solver, gaits, goal, direction_deg, cycles,
     is judged against is the best of them."""
     duration_s = cycles * base.period
     params = [base.replace(gait=gait, actuator_delays=(0.0,) * 8) for gait in gaits]
-    result = simulate(params, duration_s, solver, arch=arch)
+    result = simulate(params, duration_s, solver, arch=arch, progress=False)
     return pd.DataFrame({"gait": list(gaits),
                          "objective": objective_of(result, goal, direction_deg, duration_s,
                                                    cycles),

@@ -185,7 +185,8 @@ class Problem:
 
     def runs(self, params, cycles, sensitivities=()):
         result = simulate(params, cycles * self.base.period, self.solver, arch=self.arch,
-                          record_interval_s=self.record, sensitivities=sensitivities)
+                          record_interval_s=self.record, sensitivities=sensitivities,
+                          progress=False)
         runs = identification.simulated_runs(result.trajectory, [p.gait for p in params],
                                              [p.period for p in params])
         ok = result.summary["status"].to_numpy() == "ok"

@@ -94,7 +94,8 @@ def run_configuration(params, duration: float, mode: str, tol: float):
     """(wall time s, final node positions (B, N, 2) m, summary) of one run."""
     solver = SolverConfig(jacobian=mode, newton_tol=tol)
     start = time.perf_counter()
-    result = simulate(params, duration, solver, record_interval_s=duration, record_shapes=True)
+    result = simulate(params, duration, solver, record_interval_s=duration, record_shapes=True,
+                      progress=False)
     wall = time.perf_counter() - start
     failed = result.summary[result.summary["status"] != "ok"]
     if len(failed):
@@ -108,7 +109,7 @@ def jacobians_table(params, duration: float, configurations, rounds: int,
     """One row per configuration: best wall time, robot-steps/s, Newton iterations and
     factorisations per solve, the errors against the reference (the last configuration)."""
     # the engine is the same for every mode (the mode is loaded, not compiled): compile once
-    simulate(params, SolverConfig().dt)
+    simulate(params, SolverConfig().dt, progress=False)
     best, shapes, summaries = {}, {}, {}
     for round_number in range(rounds):
         for configuration in configurations:

@@ -275,9 +275,10 @@ def run_config(config: Config, gaits, duration_s, arch):
     """(summary, run time s) of one batch of the gaits: a one-step call compiles, then the
     timed call simulates duration_s."""
     params = config.params(gaits)
-    taichi_star.simulate(params, config.solver.dt, config.solver, arch=arch)
+    taichi_star.simulate(params, config.solver.dt, config.solver, arch=arch, progress=False)
     start = time.perf_counter()
-    summary = taichi_star.simulate(params, duration_s, config.solver, arch=arch).summary
+    summary = taichi_star.simulate(params, duration_s, config.solver, arch=arch,
+                                   progress=False).summary
     return summary, time.perf_counter() - start
 
 
@@ -289,14 +290,14 @@ def time_presets(gaits, duration_s, batch, arch):
     for model in MODEL_PRESETS:
         config = preset_config(model)
         params = config.params([gaits[i % len(gaits)] for i in range(batch)])
-        taichi_star.simulate(params, config.solver.dt, config.solver, arch=arch)
+        taichi_star.simulate(params, config.solver.dt, config.solver, arch=arch, progress=False)
         batches[MODEL_PRESETS[model]] = (params, config.solver)
     load_average = os.getloadavg()[0]
     run_times = {name: [] for name in batches}
     for _ in range(TIMING_ROUNDS):
         for name, (params, solver) in batches.items():
             start = time.perf_counter()
-            taichi_star.simulate(params, duration_s, solver, arch=arch)
+            taichi_star.simulate(params, duration_s, solver, arch=arch, progress=False)
             run_times[name].append(time.perf_counter() - start)
     return run_times, load_average
 

@@ -83,20 +83,18 @@ def fewest_steps(solver: SolverConfig, duration_s: float, record_interval_s: flo
 
 
 AUTO_PROGRESS_S = 30.0
-"""With `progress=None` (the default of simulate and Simulator.advance) a run
+"""With `progress=None` (the default of simulate, Simulator.advance and run_batch) a run
 estimated at this many wall seconds or more (its fewest robot-steps at
 `timegrid.ESTIMATE_ROBOT_STEPS_PER_S`) shows a progress bar, a shorter one stays silent: a long
 run said nothing about where it was unless asked (an audit, 2026-12)."""
 
 
-def shows_progress(progress, solver: SolverConfig, duration_s: float, record_interval_s: float,
-                   instances: int) -> bool:
-    """Whether a run of `instances` (replicas included) over duration_s (s) shows a progress
-    bar: `progress` if a bool (ValueError otherwise), for None whether the run is estimated at
-    AUTO_PROGRESS_S or more."""
+def shows_progress(progress, robot_steps: float) -> bool:
+    """Whether a run of `robot_steps` (its fewest: `fewest_steps` × its instances, replicas
+    included) shows a progress bar: `progress` if a bool (ValueError otherwise), for None
+    whether the run is estimated at AUTO_PROGRESS_S or more."""
     if progress is None:
-        steps, _ = fewest_steps(solver, duration_s, record_interval_s)
-        return steps * instances / ESTIMATE_ROBOT_STEPS_PER_S >= AUTO_PROGRESS_S
+        return robot_steps / ESTIMATE_ROBOT_STEPS_PER_S >= AUTO_PROGRESS_S
     return check_flag("progress", progress)
 
 

@@ -18,7 +18,8 @@ from .geometry import CENTRE, Topology, build_topology
 from .model import validate_batch
 from .params import (PER_ACTUATOR_FIELDS, SolverConfig, StarParams, check_precision,
                      parameter_column)
-from .driver import Clock, RunTiming, check_run, drive, robots_label, shows_progress
+from .driver import (Clock, RunTiming, check_run, drive, fewest_steps, robots_label,
+                     shows_progress)
 from . import sensitivities as tangents
 from .runtime import (RECORDS_REMEDY, Runtime, check_arch, check_host_memory,
                       stream_chunk_size)
@@ -268,8 +269,8 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     params, duration_s, record_interval_s = validate_call(params, duration_s, solver,
                                                           record_interval_s, record_shapes,
                                                           steady_from_cycle, per_instance)
-    progress = shows_progress(progress, solver, duration_s, record_interval_s,
-                              len(params) * per_instance)
+    progress = shows_progress(progress, fewest_steps(solver, duration_s, record_interval_s)[0]
+                              * len(params) * per_instance)
     tangents.check_directions(directions, params, solver)
     check_arch(arch)
     started = time.perf_counter()

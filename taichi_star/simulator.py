@@ -38,7 +38,8 @@ from . import metrics
 from . import sensitivities as tangents
 from .actuation import NEVER
 from .checks import check_flag, is_real, warn_user
-from .driver import Clock, RunTiming, check_run, drive, robots_label, shows_progress
+from .driver import (Clock, RunTiming, check_run, drive, fewest_steps, robots_label,
+                     shows_progress)
 from .gait import N_ACTUATORS, Gait
 from .geometry import CENTRE
 from .model import validate_batch
@@ -287,8 +288,8 @@ class Simulator:
                 or not (record_interval_s == 0 or 0 < record_interval_s < math.inf):
             raise ValueError(f"record_interval_s must be a finite number > 0 s (or 0: no "
                              f"records), got {record_interval_s!r}")
-        progress = shows_progress(progress, self.solver, duration_s, record_interval_s,
-                                  self.n_instances)
+        progress = shows_progress(progress, self.n_instances * fewest_steps(
+            self.solver, duration_s, record_interval_s)[0])
         check_run(self.solver, duration_s, record_interval_s, self.n_instances,
                   steps_taken=int(self._steps().max(initial=0)))
         if record_interval_s:

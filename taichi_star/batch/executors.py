@@ -36,7 +36,9 @@ Dask cluster)."""
 
 
 class Executor(Protocol):
-    """Runs chunk tasks somewhere and yields their results as they complete."""
+    """Runs chunk tasks somewhere and yields their results as they complete. Where `run` is a
+    generator (as every executor here), `run_batch` closes it on an error or an interrupt before
+    its end: that should stop the chunks still running."""
 
     n_workers: int
 
@@ -99,7 +101,8 @@ class LocalProcesses:
     method (a fresh interpreter: no Taichi state is inherited), each configured by
     `configure_worker_process`. A worker that dies costs only the chunks it was running: the
     pool is restarted and the unfinished chunks resubmitted, up to `retries` times. Shut down by
-    `shutdown`, at the end of a `with` block, or at interpreter exit."""
+    `shutdown`, at the end of a `with` block, or at interpreter exit; stopped at once by
+    `terminate`, which an error or an interrupt during `run` or in the `with` block calls."""
 
     def __init__(self, n_workers: int, retries: int = DEFAULT_RETRIES):
         if not is_whole(n_workers) or not 1 <= n_workers <= MAX_LOCAL_WORKERS:
@@ -139,35 +142,60 @@ class LocalProcesses:
     def run(self, tasks: Sequence[ChunkTask], progress: bool = False) -> Iterator[ChunkResult]:
         pending = {task.index: task for task in tasks}
         tries = 0
-        while pending:
-            if self._pool is None:
-                self._start()
-            futures = {self._pool.submit(run_chunk, task): index for index, task in pending.items()}
-            try:
-                for future in concurrent.futures.as_completed(futures):
-                    result = future.result()
-                    del pending[futures[future]]
-                    yield result
-            except BrokenProcessPool:
-                self.shutdown()
-                tries += 1
-                if tries > self.retries:
-                    raise RuntimeError(f"a worker process died {tries} times while running "
-                                       f"{len(pending)} chunk(s) (out of memory or killed?); "
-                                       f"giving up") from None
-            finally:
-                for future in futures:
-                    future.cancel()
+        try:
+            while pending:
+                if self._pool is None:
+                    self._start()
+                futures = {self._pool.submit(run_chunk, task): index
+                           for index, task in pending.items()}
+                try:
+                    for future in concurrent.futures.as_completed(futures):
+                        result = future.result()
+                        del pending[futures[future]]
+                        yield result
+                except BrokenProcessPool:
+                    self.shutdown()
+                    tries += 1
+                    if tries > self.retries:
+                        raise RuntimeError(f"a worker process died {tries} times while running "
+                                           f"{len(pending)} chunk(s) (out of memory or "
+                                           f"killed?); giving up") from None
+        except BaseException:
+            # an error, an interrupt (Ctrl-C; a notebook's "interrupt kernel" signals this
+            # process alone) or a caller that closed this generator: the running chunks'
+            # results would be thrown away, and waiting for them took up to a chunk's run time
+            # (hours; an audit)
+            self.terminate()
+            raise
 
     def shutdown(self):
-        """Stop the worker processes (if started)."""
+        """Stop the worker processes (if started) once their running chunks end: the end of a
+        run that finished."""
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
             atexit.unregister(self.shutdown)
 
+    def terminate(self):
+        """Stop the worker processes (if started) now: the queued chunks are cancelled and the
+        running ones lost (on an error or an interrupt, whose results no one would read).
+        Returns once every worker process has exited; the next `run` starts a new pool."""
+        if self._pool is None:
+            return
+        pool, self._pool = self._pool, None
+        atexit.unregister(self.shutdown)
+        # ProcessPoolExecutor stops busy workers only from Python 3.14 (terminate_workers):
+        # its own processes, terminated, are found dead by its manager thread, which fails
+        # their futures and joins them; shutdown(wait=True) waits for that thread alone
+        for process in list(pool._processes.values()):
+            process.terminate()
+        pool.shutdown(wait=True, cancel_futures=True)
+
     def __enter__(self) -> "LocalProcesses":
         return self
 
-    def __exit__(self, *exc_info):
-        self.shutdown()
+    def __exit__(self, exc_type, exc_value, traceback):
+        if exc_type is None:
+            self.shutdown()
+        else:
+            self.terminate()

@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 
 from ..checks import check_flag, is_whole
-from ..driver import RunTiming
+from ..driver import RunTiming, shows_progress
 from ..extras import require
 from ..geometry import build_topology
 from ..model import instances_of
@@ -19,7 +19,7 @@ from ..params import SolverConfig, StarParams
 from ..simulation import SimulationResult
 from .executors import DEFAULT_RETRIES, Executor, InProcess, LocalProcesses
 from .store import RunStore, run_definition
-from .tasks import plan_chunks
+from .tasks import batch_robot_steps, plan_chunks
 
 DEFAULT_CHUNK_SIZE = 2048
 """Instances per chunk on the CPU: one compiled engine's worth, large enough to keep a process
@@ -36,7 +36,7 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
               record_interval_s: float = 0.0, record_shapes: bool = False,
               steady_from_cycle: int = 1, workers: Optional[int] = None,
               executor: Optional[Executor] = None, run_dir=None, resume: bool = False,
-              progress: bool = False) -> SimulationResult:
+              progress: Optional[bool] = None) -> SimulationResult:
     """Simulate any number of instances, each from rest, for `duration_s` seconds or for
     `cycles` of its own actuation period, and return one `SimulationResult`.
 
@@ -51,6 +51,10 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     Where the chunks run: in this process (default), on `workers` local worker processes
     (`LocalProcesses`, started and stopped by this call), or on an `executor` you keep across
     calls (`LocalProcesses`, `executor_for`, a `DaskExecutor`).
+
+    `progress`: a bar of chunks (and, in this process, of each chunk's simulated seconds);
+    None, the default: where the chunks to compute are estimated at `driver.AUTO_PROGRESS_S`
+    or more.
 
     `run_dir`: a run store (`RunStore`): every finished chunk's summary is written there as it
     arrives; with `resume` (which needs `run_dir`), verified chunks already there are not
@@ -71,7 +75,8 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
                          f"DaskExecutor: see executor_for(scheduler=...)), got {executor!r}")
     # flags and the run folder's path before the folder is touched: resume="no" would resume
     check_flag("resume", resume)
-    check_flag("progress", progress)
+    if progress is not None:  # None: decided by the work, once the chunks to run are known
+        check_flag("progress", progress)
     if run_dir is not None and not isinstance(run_dir, (str, os.PathLike)):
         raise ValueError(f"run_dir must be the path of the run store's folder, got "
                          f"{type(run_dir).__name__}")
@@ -98,6 +103,7 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
             log.warning("resuming %s: %d of %d chunks already done", store.path, len(done),
                         len(tasks))
     todo = [task for task in tasks if task.index not in set(done)]
+    progress = shows_progress(progress, batch_robot_steps(todo))
 
     executor = owned if owned is not None else executor if executor is not None else InProcess()
     summaries, trajectories, shapes = {}, [], {}
@@ -106,8 +112,9 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     if progress and len(tasks) > 1:
         from tqdm.auto import tqdm
         outer = tqdm(total=len(tasks), initial=len(done), desc="chunks", unit="chunk")
+    results = executor.run(todo, progress=progress and isinstance(executor, InProcess))
     try:
-        for result in executor.run(todo, progress=progress and isinstance(executor, InProcess)):
+        for result in results:
             task = tasks[result.index]
             if store is not None:
                 store.write(task, result.summary, result.trajectory)
@@ -120,6 +127,12 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
             if outer is not None:
                 outer.update(1)
     finally:
+        # closed first: after an error or an interrupt here (Ctrl-C, a notebook's "interrupt
+        # kernel") the executor's generator stops its running chunks at once
+        # (`LocalProcesses.terminate`; an executor's plain iterator has nothing to close);
+        # shutdown then waits only at the end of a whole run, with nothing left running
+        if hasattr(results, "close"):
+            results.close()
         if outer is not None:
             outer.close()
         if owned is not None:

@@ -115,6 +115,13 @@ def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None
     return tasks
 
 
+def batch_robot_steps(tasks: Sequence[ChunkTask]) -> float:
+    """The fewest robot-steps of a batch's chunks together (`driver.fewest_steps` of each
+    chunk × its instances)."""
+    return sum(len(task.params) * fewest_steps(task.solver, task.duration_s,
+                                               task.record_interval_s)[0] for task in tasks)
+
+
 def check_batch_work(tasks: Sequence[ChunkTask], instances: int):
     """What a whole batch asks for, beyond each chunk's own checks: its robot-steps (a
     RuntimeWarning with the estimated hours past timegrid.WARN_ROBOT_STEPS; each chunk's
@@ -122,10 +129,7 @@ def check_batch_work(tasks: Sequence[ChunkTask], instances: int):
     it gathers, its summary and records (`simulation.tables_bytes` of each chunk;
     `runtime.check_host_memory`: a million instances recorded every millisecond for three
     cycles are 1.4 TiB)."""
-    robot_steps = sum(len(task.params) * fewest_steps(task.solver, task.duration_s,
-                                                      task.record_interval_s)[0]
-                      for task in tasks)
-    warn_long_work(f"the batch of {instances:,} instances", robot_steps)
+    warn_long_work(f"the batch of {instances:,} instances", batch_robot_steps(tasks))
     if not tasks:
         return
     recorded = tasks[0].record_interval_s

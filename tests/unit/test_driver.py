@@ -183,12 +183,12 @@ def test_a_run_estimated_at_thirty_seconds_or_more_shows_progress_by_default(ins
     """progress=None (the default) draws a bar from AUTO_PROGRESS_S = 30 s of estimated work
     on: one second of 1-ms steps is 1,000 steps, and 1,500 instances of it 1.5e6 robot-steps,
     30 s at the estimate's 5e4 robot-steps/s; a bool is taken as given, anything else refused."""
-    from taichi_star.driver import AUTO_PROGRESS_S, shows_progress
+    from taichi_star.driver import AUTO_PROGRESS_S, fewest_steps, shows_progress
     from taichi_star.timegrid import ESTIMATE_ROBOT_STEPS_PER_S
 
     assert AUTO_PROGRESS_S * ESTIMATE_ROBOT_STEPS_PER_S == 1500 * 1000
-    solver = SolverConfig(dt=1e-3)
-    assert shows_progress(None, solver, 1.0, 0.0, instances) is shown
-    assert shows_progress(not shown, solver, 1.0, 0.0, instances) is (not shown)
+    robot_steps = instances * fewest_steps(SolverConfig(dt=1e-3), 1.0, 0.0)[0]
+    assert shows_progress(None, robot_steps) is shown
+    assert shows_progress(not shown, robot_steps) is (not shown)
     with pytest.raises(ValueError, match="^progress must be True or False, got 'no'$"):
-        shows_progress("no", solver, 1.0, 0.0, instances)
+        shows_progress("no", robot_steps)
