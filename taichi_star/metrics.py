@@ -52,7 +52,8 @@ def wrap_degrees(angle, include_180: bool = False):
     """Angles (deg, any shape) wrapped to [-180, 180) (+180 and every odd multiple go to -180),
     or with `include_180` to (-180, 180] (they go to +180: the gaits table's directions, where
     a gait travelling straight back reads 180); NaN and ±inf give NaN."""
-    wrapped = (np.asarray(angle) + 180.0) % 360.0 - 180.0
+    with np.errstate(invalid="ignore"):  # ±inf % 360 is NaN, as documented, not a warning
+        wrapped = (np.asarray(angle) + 180.0) % 360.0 - 180.0
     return np.where(wrapped == -180.0, 180.0, wrapped) if include_180 else wrapped
 
 

@@ -6,6 +6,7 @@ import math
 import os
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -1049,6 +1050,9 @@ def test_wrap_degrees_including_180_lands_in_minus_180_excluded_to_180(angle, wr
 
 
 def test_wrap_degrees_of_nan_or_infinity_is_nan():
-    for include_180 in (False, True):
-        assert np.isnan(metrics.wrap_degrees([np.nan, np.inf, -np.inf],
-                                             include_180=include_180)).all()
+    """NaN for NaN and ±inf, as documented, and without NumPy's "invalid value" warning."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for include_180 in (False, True):
+            assert np.isnan(metrics.wrap_degrees([np.nan, np.inf, -np.inf],
+                                                 include_180=include_180)).all()
