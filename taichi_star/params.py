@@ -49,11 +49,12 @@ def parameter_column(name: str) -> str:
 
 def parameter(default, unit: str = "1", lowest=None, highest=None, lowest_included=True,
               choices=None, differentiable: bool = True):
-    """A StarParams field with its unit and allowed values declared once, in its metadata:
-    "unit" ("1": dimensionless or a count), "range" (lowest, highest, lowest included) for a
-    number (an integer if the default is one), "choices" for a word. `STAR_RANGES`,
-    `PARAMETER_UNITS`, `STAR_CHOICES`, the validation, the column names and the field table of
-    `help(StarParams)` are all read from it. `differentiable=False` marks a real number that
+    """A StarParams (or SolverConfig) field with its unit and allowed values declared once, in
+    its metadata: "unit" ("1": dimensionless or a count), "range" (lowest, highest, lowest
+    included) for a number (an integer if the default is one), "choices" for a word.
+    `STAR_RANGES`, `SOLVER_RANGES`, `PARAMETER_UNITS`, `STAR_CHOICES`, the validation, the
+    column names and the field tables of `help(StarParams)` and `help(SolverConfig)` are all
+    read from it. `differentiable=False` marks a real number that
     `simulate(sensitivities=...)` refuses (one that moves events rather than coefficients)."""
     metadata = {"unit": unit}
     if not differentiable:
@@ -473,9 +474,14 @@ def _unit(f) -> str:
     return f.metadata["unit"] if "range" in f.metadata or "per_actuator" in f.metadata else "—"
 
 
-StarParams.__doc__ += "\n\n    | field | unit | allowed | default |\n    |---|---|---|---|\n" + "".join(
-    f"    | {f.name} | {_unit(f)} | {_allowed(f)} | {_default(f)!r} |\n"
-    for f in fields(StarParams))
+def _add_field_table(cls):
+    """Append the table of `cls`'s fields (unit, allowed values, default), read from their
+    declarations, to its docstring (what `help` and the API reference show)."""
+    cls.__doc__ += "\n\n    | field | unit | allowed | default |\n    |---|---|---|---|\n" + "".join(
+        f"    | {f.name} | {_unit(f)} | {_allowed(f)} | {_default(f)!r} |\n" for f in fields(cls))
+
+
+_add_field_table(StarParams)
 
 
 IDENTIFIED_FIELDS = {"alpha": 1.067728543, "drag_perpendicular": 2.707613657,
@@ -501,34 +507,41 @@ PRESET_FIELDS = {
 """StarParams fields of each preset (the rest are the defaults)."""
 
 
+MAX_DT = 0.05
+"""Largest time step, s: under a third of the heating pulse, so a step cannot skip it."""
+
+F32_NEWTON_TOL_MIN = 1e-7
+"""Smallest newton_tol in f32, m: its rounding of ~5 cm positions is ~4e-9 m."""
+
+
 @_named_fields_only
 @dataclass(frozen=True)
 class SolverConfig:
     """Time integration and Newton settings, shared by the batch."""
 
-    dt: float = 1e-3
-    """Time step h, s; (0, 0.05] (at most a third of the 0.163-s heating pulse)."""
-    newton_tol: float = 1e-10
-    """Convergence: the largest position error left after a Newton update, m; [1e-14, 1e-6] (a
-    micrometre is 1e-5 of the robot's size: any looser and "converged" would not mean the step
-    was solved). The error left is bounded by max |Δq_k| and, once the updates contract
+    dt: float = parameter(1e-3, "s", 0.0, MAX_DT, lowest_included=False)
+    """Time step h, s (at most a third of the 0.163-s heating pulse: `MAX_DT`)."""
+    newton_tol: float = parameter(1e-10, "m", 1e-14, 1e-6)
+    """Convergence: the largest position error left after a Newton update, m (at most a
+    micrometre, 1e-5 of the robot's size: any looser and "converged" would not mean the step
+    was solved; in f32 at least `F32_NEWTON_TOL_MIN`). The error left is bounded by max |Δq_k| and, once the updates contract
     (θ = max |Δq_k| / max |Δq_{k−1}| < 1), by θ/(1 − θ)·max |Δq_k| — the standard estimate for a
     contracting iteration, which spares the step an iteration that would only confirm it."""
-    residual_tol: Optional[float] = None
+    residual_tol: Optional[float] = parameter(None, "N", 1e-8, 1000.0)
     """Convergence judged on the residual as well (opt-in; None: the update test alone): the
     largest component of the residual (a node's force imbalance, N) that the accepted update was
-    computed from must be at most this; [1e-8, 1000] N. The robot's largest nodal forces are tens
+    computed from must be at most this. The robot's largest nodal forces are tens
     of newtons, and the round-off floor of the residual is the stiffness times the rounding of
     the positions: ~1e-9 N in f64, but newtons in f32 (stiff limbs), where it is unusable."""
-    max_newton: int = 25
-    """Newton iterations per step before the instance is declared newton_failed; [1, 200]."""
-    precision: str = "f64"
-    """Floating point type of the engine: "f64" or "f32"."""
-    integrator: str = "euler"
+    max_newton: int = parameter(25, "1", 1, 200)
+    """Newton iterations per step before the instance is declared newton_failed."""
+    precision: str = parameter("f64", choices=PRECISIONS)
+    """Floating point type of the engine."""
+    integrator: str = parameter("euler", choices=INTEGRATORS)
     """"euler": implicit Euler (the paper's scheme, first order); "bdf2": second-order BDF (its
     first step, a step after a retry and a step after a rejected adaptive step are implicit
     Euler)."""
-    jacobian: str = "newton"
+    jacobian: str = parameter("newton", choices=JACOBIANS)
     """"newton": a fresh Jacobian and LU every iteration; "chord": the step's first Jacobian is
     reused while it contracts the update ≥ 4× per iteration (same converged solution to
     newton_tol, fewer factorisations); "lagged": the chord's rule across steps, a factorisation
@@ -538,48 +551,43 @@ class SolverConfig:
     factorisations, so a loaded one continues bitwise). A chord or lagged solve that runs out
     of iterations starts again from the step's start with Newton's Jacobian before the step
     is retried."""
-    max_substep_halvings: int = 4
+    max_substep_halvings: int = parameter(4, "1", 0, 10)
     """A failed step is retried as 2, 4, ... 2^max_substep_halvings substeps before the instance
-    is declared failed; 0 disables retries; [0, 10]. (Fixed steps only.)"""
-    adaptive: bool = False
+    is declared failed; 0 disables retries. (Fixed steps only.)"""
+    adaptive: bool = field(default=False, metadata={"unit": "—", "allowed": "True or False"})
     """Adaptive stepping: each instance chooses its own step size from a local error estimate
     (dt is then the first step's size, and the largest of a step that ends on a firing, where
     the actuation jumps); steps land exactly on record times, cycle starts and firings."""
-    error_tol: float = 1e-7
-    """Adaptive stepping: largest local error per step of any node position, m; [1e-12, 1e-3]."""
-    dt_min: float = 1e-6
-    """Adaptive stepping: smallest step, s; (0, 0.05], at most dt_max, and at most dt when
-    adaptive (unused with fixed steps)."""
-    dt_max: float = 0.05
-    """Adaptive stepping: largest step, s; (0, 0.05], and at least dt when adaptive (unused
-    with fixed steps)."""
+    error_tol: float = parameter(1e-7, "m", 1e-12, 1e-3)
+    """Adaptive stepping: largest local error per step of any node position, m."""
+    dt_min: float = parameter(1e-6, "s", 0.0, MAX_DT, lowest_included=False)
+    """Adaptive stepping: smallest step, s; at most dt_max, and at most dt when adaptive
+    (unused with fixed steps)."""
+    dt_max: float = parameter(MAX_DT, "s", 0.0, MAX_DT, lowest_included=False)
+    """Adaptive stepping: largest step, s; at least dt when adaptive (unused with fixed
+    steps)."""
 
     def __post_init__(self):
-        object.__setattr__(self, "dt", check_number("dt", self.dt, 0.0, MAX_DT, False))
-        object.__setattr__(self, "newton_tol", check_number("newton_tol", self.newton_tol,
-                                                            1e-14, 1e-6))
-        if self.residual_tol is not None:
-            object.__setattr__(self, "residual_tol", check_number(
-                "residual_tol", self.residual_tol, 1e-8, 1000.0))
-        object.__setattr__(self, "max_newton", check_number("max_newton", self.max_newton, 1,
-                                                            200, integer=True))
-        object.__setattr__(self, "max_substep_halvings", check_number(
-            "max_substep_halvings", self.max_substep_halvings, 0, 10, integer=True))
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if "range" in f.metadata and value is not None:  # residual_tol None: off
+                lowest, highest, included = f.metadata["range"]
+                object.__setattr__(self, f.name, check_number(
+                    f.name, value, lowest, highest, included, isinstance(f.default, int)))
         object.__setattr__(self, "adaptive", check_flag("adaptive", self.adaptive))
-        object.__setattr__(self, "error_tol", check_number("error_tol", self.error_tol, 1e-12, 1e-3))
-        object.__setattr__(self, "dt_min", check_number("dt_min", self.dt_min, 0.0, MAX_DT, False))
-        object.__setattr__(self, "dt_max", check_number("dt_max", self.dt_max, 0.0, MAX_DT, False))
         if self.dt_min > self.dt_max:
             raise ValueError(f"dt_min must be <= dt_max = {self.dt_max:g} s, got {self.dt_min!r}")
         if self.adaptive and not self.dt_min <= self.dt <= self.dt_max:
             raise ValueError(f"dt (the first adaptive step) must be in [dt_min, dt_max] = "
                              f"[{self.dt_min:g}, {self.dt_max:g}] s, got {self.dt!r}")
-        _check_choice("precision", self.precision, PRECISIONS)
-        _check_choice("integrator", self.integrator, INTEGRATORS)
-        _check_choice("jacobian", self.jacobian, JACOBIANS)
-        if self.precision == "f32" and self.newton_tol < 1e-7:
-            raise ValueError(f"newton_tol must be in [1e-07, 1e-06] m with precision 'f32' (its "
-                             f"rounding of ~5 cm positions is ~4e-9 m), got {self.newton_tol!r}")
+        for f in fields(self):
+            if "choices" in f.metadata:
+                _check_choice(f.name, getattr(self, f.name), f.metadata["choices"])
+        if self.precision == "f32" and self.newton_tol < F32_NEWTON_TOL_MIN:
+            highest = SolverConfig.__dataclass_fields__["newton_tol"].metadata["range"][1]
+            raise ValueError(f"newton_tol must be in [{F32_NEWTON_TOL_MIN:g}, {highest:g}] m with "
+                             f"precision 'f32' (its rounding of ~5 cm positions is ~4e-9 m), got "
+                             f"{self.newton_tol!r}")
 
     @classmethod
     def preset(cls, name: str = "paper", **overrides) -> "SolverConfig":
@@ -599,8 +607,12 @@ class SolverConfig:
         return dataclasses.replace(self, **changes)
 
 
-MAX_DT = 0.05
-"""Largest time step, s: under a third of the heating pulse, so a step cannot skip it."""
+_add_field_table(SolverConfig)
+SOLVER_RANGES: Dict[str, Tuple[float, float, bool]] = {
+    f.name: f.metadata["range"] for f in fields(SolverConfig) if "range" in f.metadata}
+"""Allowed range of every numeric SolverConfig field (lowest, highest, lowest included), from
+the fields' declarations (`parameter`); an adaptive dt also lies in [dt_min, dt_max]."""
+
 
 F32_UNIT_ROUNDOFF = 2.0 ** -24
 """Relative rounding of an f32 number (half its ulp at most)."""

@@ -11,7 +11,7 @@ import taichi_star as ts
 from taichi_star.params import PARAMETER_UNITS
 from taichi_star.gait import Gait, symmetry_classes
 from taichi_star.geometry import build_topology
-from taichi_star.params import PER_ACTUATOR_FIELDS
+from taichi_star.params import PER_ACTUATOR_FIELDS, SOLVER_RANGES
 
 
 @pytest.mark.parametrize("field,value", [
@@ -681,3 +681,32 @@ def test_a_joint_radius_just_under_its_bound_builds_a_half_circle_arc():
         radius = math.nextafter(radius, 0.0)
         topology = build_topology(ts.StarParams(joint_radius=radius, tip_radius=0.2))
         assert np.isfinite(topology.rest_positions).all()
+
+
+@pytest.mark.parametrize("name", sorted(SOLVER_RANGES))
+def test_every_declared_solver_range_is_the_validated_range_at_both_ends(name):
+    """SolverConfig's ranges are declared once with their fields (they were literals in
+    __post_init__, again in the docstrings: a review, 2026-12): both ends accepted (the lowest
+    only where it is included), one ulp beyond either end refused naming the field. dt_min
+    goes with the largest dt_max and dt_max with a dt_min of 1e-300 s, so that their ordering
+    rule holds at every end."""
+    lowest, highest, included = SOLVER_RANGES[name]
+    integer = isinstance(ts.SolverConfig.__dataclass_fields__[name].default, int)
+
+    def config(value):
+        paired = {"dt_min": {"dt_max": ts.params.MAX_DT}, "dt_max": {"dt_min": 1e-300}}
+        return ts.SolverConfig(**{name: value, **paired.get(name, {})})
+
+    def beyond(end, direction):
+        return end + direction if integer else math.nextafter(end, direction * math.inf)
+
+    assert getattr(config(highest), name) == highest
+    with pytest.raises(ValueError, match=f"^{name} must be"):
+        config(beyond(highest, 1))
+    if included:
+        assert getattr(config(lowest), name) == lowest
+    else:
+        with pytest.raises(ValueError, match=f"^{name} must be"):
+            config(lowest)
+    with pytest.raises(ValueError, match=f"^{name} must be"):
+        config(beyond(lowest, -1))
