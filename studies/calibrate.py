@@ -42,7 +42,7 @@ from typing import Callable, Sequence
 import numpy as np
 import pandas as pd
 
-from taichi_star import SolverConfig, StarParams
+from taichi_star import SolverConfig, StarParams, experiment
 
 from . import cli, figures, identify
 from .identify import DEFAULT_MAX_GENERATIONS, CMASettings, best_row, best_units
@@ -67,7 +67,7 @@ def fit_cmaes(box: Sequence[identify.ParameterRange], base: StarParams,
               measurements: pd.DataFrame, settings: CMASettings = CMASettings(),
               run_kwargs: dict = None, progress: bool = False,
               on_generation: Callable[[pd.DataFrame], None] = None) -> pd.DataFrame:
-    """Minimise `identify.objective_values` over the box with CMA-ES (`identify.minimise_cmaes`,
+    """Minimise `experiment.objective_values` over the box with CMA-ES (`identify.minimise_cmaes`,
     from the base model's coordinates) and return every evaluation: columns evaluation,
     restart, generation, candidate, then those of `identify.evaluate_points`. `run_kwargs`:
     keyword arguments of `taichi_star.batch.run_batch` (run length, solver, arch, executor,
@@ -97,7 +97,7 @@ def cross_validate(box, base: StarParams, gaits: Sequence[str], weights: str,
     folds, units, objectives = [], [], []
     for held_out in gaits:
         fitted = [g for g in gaits if g != held_out]
-        evaluations = fit_cmaes(box, base, identify.measurement_table(fitted, weights), settings,
+        evaluations = fit_cmaes(box, base, experiment.measurement_table(fitted, weights), settings,
                                 run_kwargs, progress=progress)
         evaluations.insert(0, "held_out_gait", held_out)
         folds.append(evaluations)
@@ -108,7 +108,7 @@ def cross_validate(box, base: StarParams, gaits: Sequence[str], weights: str,
             continue
         units.append(best_units(evaluations, box))
         objectives.append(float(row["objective"]))
-    measured = identify.measurement_table(gaits, weights)
+    measured = experiment.measurement_table(gaits, weights)
     runnable = [i for i, u in enumerate(units) if np.isfinite(u).all()]
     predicted = (identify.evaluate_points(box, [units[i] for i in runnable], base, measured,
                                           run_kwargs) if runnable else None)
@@ -226,7 +226,7 @@ def build_parser():
                         help="a real-valued StarParams field and its bounds, repeatable")
     parser.add_argument("--gaits", default="paper",
                         help="measured gaits to fit: paper (all five, default) or a comma list")
-    parser.add_argument("--weights", choices=identify.WEIGHT_SCHEMES, default="experimental",
+    parser.add_argument("--weights", choices=experiment.WEIGHT_SCHEMES, default="experimental",
                         help="experimental: gait weight ∝ (speed / per-cycle std)² (default); "
                              "uniform: all 1")
     parser.add_argument("--popsize", type=int, default=None, quick=QUICK_POPSIZE,
@@ -268,7 +268,7 @@ def main(argv=None):
                                if folds > 1 else ""))
     base = identify.model_with_box(args, box, "--fit")
     identify.note_unfired_axes("calibrate", "--fit", box, gaits)
-    measurements = identify.measurement_table(gaits, args.weights)
+    measurements = experiment.measurement_table(gaits, args.weights)
     solver = cli.solver(args)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"fit": [spec.spec for spec in box], "gaits": gaits,

@@ -1,22 +1,17 @@
 """Model identification shared by `calibrate` and `sensitivity`: parameter boxes mapped from the
-unit cube, and the calibration objective against the measured speeds of the paper's gaits.
+unit cube, and the calibration objective evaluated over them.
 
 A box is a list of `ParameterRange` (a StarParams field, its bounds, linear or log). Optimisers
 and samplers work in unit coordinates u ∈ [0, 1] per axis; a parameter value is always computed
 from u by `ParameterRange.values` (an interpolation between the bounds, clipped to them), never
 as a leftover of a subtraction, so a value is in its range by construction::
 
-    from studies.identify import parse_range_spec, objective_values
+    from studies.identify import parse_range_spec
     box = [parse_range_spec("alpha=0.2:1.5"), parse_range_spec("cylinder_drag=1:100:log")]
     box[1].values([0.0, 0.5, 1.0])          # -> [1, 10, 100]
 
-Objective (`objective_values`): for gait g with measured full-trial speed v_g > 0 and the paper's
-direction s_g = ±1, the relative signed error of a simulated signed speed u_g is
-r_g = (u_g − s_g v_g) / v_g, so r_g = 0 at the measurement and r_g ≤ −1 (forward gait) or
-≥ +1 (reverse gait) whenever the direction is wrong. The objective is the weighted mean of r_g²
-over the gaits, with weights w_g ∝ (v_g / σ_g)² normalised to mean 1, σ_g the spread of the
-measured per-cycle speeds (`experimental_cycle_speeds`): the squared error in units of the
-measurement's own relative spread. `weights="uniform"` gives every gait weight 1.
+The objective (`taichi_star.experiment.objective_values`, with `measurement_table`) is the
+library's; this module evaluates it over boxes of points.
 """
 
 from __future__ import annotations
@@ -32,8 +27,7 @@ import pandas as pd
 
 from taichi_star import PER_ACTUATOR_FIELDS, STAR_RANGES, Gait, StarParams, identification
 from taichi_star.batch import run_batch
-from taichi_star.experiment import (PAPER_DIRECTIONS, PAPER_GAITS, experimental_cycle_speeds,
-                                    experimental_speeds)
+from taichi_star.experiment import PAPER_GAITS, objective_values
 
 from . import cli
 
@@ -43,7 +37,6 @@ MAX_RESTARTS = 10
 first's; more is work that cannot finish (and overflows the run-time estimate)."""
 FAILED_PENALTY = 1e6
 """Objective told to CMA-ES for a failed candidate (it needs finite values; the CSV keeps inf)."""
-WEIGHT_SCHEMES = ("experimental", "uniform")
 TOPOLOGY_FIELDS = ("n_arc", "n_limb")
 """Integer fields fixing the topology (shared by a batch): not fittable."""
 
@@ -458,45 +451,6 @@ def check_trials_cover(trials, validate: Tuple[int, int], validate_text: str):
             identification.latest_phase(trial, validate)
         except ValueError as error:
             raise cli.StudyArgumentError(f"--validate-cycles {validate_text}: {error}") from None
-
-
-def measurement_table(gaits: Sequence[str] = PAPER_GAITS,
-                      weights: str = "experimental") -> pd.DataFrame:
-    """What the objective compares with, indexed by gait: exp_speed_mm_s (full trial),
-    paper_sign (+1 forward, −1 reverse), target_signed_mm_s = sign × speed, cycle_std_mm_s
-    (spread of the per-cycle speeds), weight (mean 1 over `gaits`)."""
-    if weights not in WEIGHT_SCHEMES:
-        raise ValueError(f"weights must be one of {list(WEIGHT_SCHEMES)}, got {weights!r}")
-    gaits = list(gaits)
-    if not gaits:
-        raise ValueError("gaits: empty gait list")
-    unknown = [g for g in gaits if g not in PAPER_GAITS]
-    if unknown:
-        raise ValueError(f"gaits: {unknown[0]!r} was not measured; measured: {list(PAPER_GAITS)}")
-    speed = experimental_speeds().loc[gaits, "speed_mm_s"].to_numpy(dtype=float)
-    spread = experimental_cycle_speeds().loc[gaits, "cycle_speed_std_mm_s"].to_numpy(dtype=float)
-    sign = np.array([1.0 if PAPER_DIRECTIONS[g] == "forward" else -1.0 for g in gaits])
-    raw = (speed / spread) ** 2 if weights == "experimental" else np.ones(len(gaits))
-    return pd.DataFrame({"exp_speed_mm_s": speed, "paper_sign": sign,
-                         "target_signed_mm_s": sign * speed, "cycle_std_mm_s": spread,
-                         "weight": raw / raw.mean()}, index=pd.Index(gaits, name="gait"))
-
-
-def relative_signed_errors(signed_speeds, measurements: pd.DataFrame) -> np.ndarray:
-    """(u_g − s_g v_g) / v_g for simulated signed speeds (..., G) in mm/s, G = the rows of
-    `measurements` in order."""
-    signed_speeds = np.asarray(signed_speeds, dtype=np.float64)
-    target = measurements["target_signed_mm_s"].to_numpy()
-    return (signed_speeds - target) / measurements["exp_speed_mm_s"].to_numpy()
-
-
-def objective_values(signed_speeds, measurements: pd.DataFrame) -> np.ndarray:
-    """Weighted mean squared relative signed error, one value per point: signed speeds (P, G)
-    -> (P,); inf for a point with any non-finite speed (a failed simulation)."""
-    errors = np.atleast_2d(relative_signed_errors(signed_speeds, measurements))
-    weights = measurements["weight"].to_numpy()
-    values = (errors ** 2 * weights).sum(axis=1) / weights.sum()
-    return np.where(np.isfinite(values), values, np.inf)
 
 
 def evaluate_points(box: Sequence[ParameterRange], unit_points, base: StarParams,

@@ -19,6 +19,7 @@ from __future__ import annotations
 import functools
 import math
 from importlib import resources
+from typing import Sequence
 
 import numpy as np
 import pandas as pd
@@ -29,7 +30,8 @@ from .gait import canonical_gait
 # every public name: docs/api.md documents the whole module
 __all__ = ["PAPER_GAITS", "PAPER_DIRECTIONS", "EXPERIMENT_PERIOD_S", "MAX_PATH_CYCLES",
            "FIG4C_COLUMNS", "experimental_speeds", "experimental_speed", "experimental_trajectory",
-           "cycle_speeds", "experimental_cycle_speeds", "direction_of", "compare_with_experiment"]
+           "cycle_speeds", "experimental_cycle_speeds", "direction_of", "compare_with_experiment",
+           "WEIGHT_SCHEMES", "measurement_table", "relative_signed_errors", "objective_values"]
 
 PAPER_GAITS = ("A1", "A1+A2", "A1+A3", "A1+A4", "A1+A3+A5")
 """The five gaits of the paper's Fig. 4, in its order."""
@@ -232,3 +234,57 @@ def compare_with_experiment(summary: pd.DataFrame,
             "status": row.get("status", "ok"),
         })
     return pd.DataFrame(rows, columns=FIG4C_COLUMNS)
+
+
+WEIGHT_SCHEMES = ("experimental", "uniform")
+"""How `measurement_table` weighs the gaits: by their measured speed over its per-cycle spread,
+squared ("experimental"), or equally ("uniform")."""
+
+
+def measurement_table(gaits: Sequence[str] = PAPER_GAITS,
+                      weights: str = "experimental") -> pd.DataFrame:
+    """What the objective compares with, indexed by gait: exp_speed_mm_s (full trial),
+    paper_sign (+1 forward, −1 reverse), target_signed_mm_s = sign × speed, cycle_std_mm_s
+    (spread of the per-cycle speeds), weight (mean 1 over `gaits`)."""
+    if weights not in WEIGHT_SCHEMES:
+        raise ValueError(f"weights must be one of {list(WEIGHT_SCHEMES)}, got {weights!r}")
+    gaits = list(gaits)
+    if not gaits:
+        raise ValueError("gaits: empty gait list")
+    unknown = [g for g in gaits if g not in PAPER_GAITS]
+    if unknown:
+        raise ValueError(f"gaits: {unknown[0]!r} was not measured; measured: {list(PAPER_GAITS)}")
+    speed = experimental_speeds().loc[gaits, "speed_mm_s"].to_numpy(dtype=float)
+    spread = experimental_cycle_speeds().loc[gaits, "cycle_speed_std_mm_s"].to_numpy(dtype=float)
+    sign = np.array([1.0 if PAPER_DIRECTIONS[g] == "forward" else -1.0 for g in gaits])
+    raw = (speed / spread) ** 2 if weights == "experimental" else np.ones(len(gaits))
+    return pd.DataFrame({"exp_speed_mm_s": speed, "paper_sign": sign,
+                         "target_signed_mm_s": sign * speed, "cycle_std_mm_s": spread,
+                         "weight": raw / raw.mean()}, index=pd.Index(gaits, name="gait"))
+
+
+def relative_signed_errors(signed_speeds, measurements: pd.DataFrame) -> np.ndarray:
+    """(u_g − s_g v_g) / v_g for simulated signed speeds (..., G) in mm/s, G = the rows of
+    `measurements` in order."""
+    signed_speeds = np.asarray(signed_speeds, dtype=np.float64)
+    target = measurements["target_signed_mm_s"].to_numpy()
+    return (signed_speeds - target) / measurements["exp_speed_mm_s"].to_numpy()
+
+
+def objective_values(signed_speeds, measurements: pd.DataFrame) -> np.ndarray:
+    """Weighted mean squared relative signed error, one value per point: signed speeds (P, G)
+    -> (P,); inf for a point with any non-finite speed (a failed simulation) (the calibration
+    objective of `python -m studies calibrate`).
+
+    For gait g with measured full-trial speed v_g > 0 and the paper's
+    direction s_g = ±1, the relative signed error of a simulated signed speed u_g is
+    r_g = (u_g − s_g v_g) / v_g, so r_g = 0 at the measurement and r_g ≤ −1 (forward gait) or
+    ≥ +1 (reverse gait) whenever the direction is wrong. The objective is the weighted mean of r_g²
+    over the gaits, with weights w_g ∝ (v_g / σ_g)² normalised to mean 1, σ_g the spread of the
+    measured per-cycle speeds (`experimental_cycle_speeds`): the squared error in units of the
+    measurement's own relative spread. `weights="uniform"` gives every gait weight 1.
+    """
+    errors = np.atleast_2d(relative_signed_errors(signed_speeds, measurements))
+    weights = measurements["weight"].to_numpy()
+    values = (errors ** 2 * weights).sum(axis=1) / weights.sum()
+    return np.where(np.isfinite(values), values, np.inf)

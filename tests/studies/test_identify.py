@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 import taichi_star
-from taichi_star import SolverConfig, StarParams
+from taichi_star import SolverConfig, StarParams, experiment
 from taichi_star.batch import RunStoreError
 from taichi_star.experiment import (EXPERIMENT_PERIOD_S, PAPER_GAITS)
 
@@ -24,31 +24,31 @@ T = EXPERIMENT_PERIOD_S
 # ----------------------------------------------------------------------------- objective
 
 def test_objective_zero_at_measurement_and_grows_when_a_direction_flips():
-    table = identify.measurement_table(PAPER_GAITS)
+    table = experiment.measurement_table(PAPER_GAITS)
     assert table["weight"].mean() == pytest.approx(1.0)
     # the best-measured gait (smallest relative spread) weighs most: A1+A4
     assert table["weight"].idxmax() == "A1+A4"
     target = table["target_signed_mm_s"].to_numpy()
     assert list(np.sign(target)) == [1, 1, -1, -1, -1]
-    assert identify.objective_values(target[None, :], table)[0] == 0.0
+    assert experiment.objective_values(target[None, :], table)[0] == 0.0
     for g, gait in enumerate(PAPER_GAITS):
         flipped = target.copy()
         flipped[g] = -flipped[g]
         # r_g = -2 for the flipped gait, 0 elsewhere: objective = 4 w_g / sum(w)
-        value = identify.objective_values(flipped[None, :], table)[0]
+        value = experiment.objective_values(flipped[None, :], table)[0]
         assert value == pytest.approx(4 * table["weight"].iloc[g] / table["weight"].sum())
         # a flipped direction costs more than any speed error of the right sign up to ×2
         half, double = target.copy(), target.copy()
         half[g] *= 0.5
         double[g] *= 2.0
-        assert value > identify.objective_values(np.stack([half, double]), table).max()
+        assert value > experiment.objective_values(np.stack([half, double]), table).max()
     failed = target.copy()
     failed[0] = np.nan
-    assert identify.objective_values(failed[None, :], table)[0] == math.inf
-    uniform = identify.measurement_table(["A1", "A1+A4"], weights="uniform")
+    assert experiment.objective_values(failed[None, :], table)[0] == math.inf
+    uniform = experiment.measurement_table(["A1", "A1+A4"], weights="uniform")
     assert list(uniform["weight"]) == [1.0, 1.0]
     with pytest.raises(ValueError, match="empty gait list"):
-        identify.measurement_table([])
+        experiment.measurement_table([])
 
 
 # ----------------------------------------------------------------------------- boxes
@@ -123,12 +123,12 @@ def test_api_bad_input_raises_value_error(no_compute):
     with pytest.raises(ValueError, match="alpha: reversed"):
         identify.parse_range_spec("alpha=2:1")
     with pytest.raises(ValueError, match="no parameters to vary"):
-        calibrate.fit_cmaes([], base, identify.measurement_table(["A1"]))
+        calibrate.fit_cmaes([], base, experiment.measurement_table(["A1"]))
     with pytest.raises(ValueError, match="tip_radius must be a real number in"):
         identify.check_box([identify.ParameterRange("tip_radius", 0.01, 0.06)], base)
     with pytest.raises(ValueError, match="--popsize must be >= 2"):
         calibrate.fit_cmaes([identify.ParameterRange("alpha", 0.2, 1.0)], base,
-                            identify.measurement_table(["A1"]), calibrate.CMASettings(popsize=1))
+                            experiment.measurement_table(["A1"]), calibrate.CMASettings(popsize=1))
 
 
 # ----------------------------------------------------------------------------- studies, quick
@@ -149,7 +149,7 @@ def test_calibrate_names_fitted_gains_no_gait_fires_before_it_fits(no_compute, m
 
     def stop(*args, **kwargs):
         raise Stop
-    monkeypatch.setattr(identify, "measurement_table", stop)  # the step after the note
+    monkeypatch.setattr(experiment, "measurement_table", stop)  # the step after the note
     for fit, note in (("actuator_gains[7]=0.3:2", "--fit: actuator_gains[7] belongs to an "
                                                   "actuator that no fitted gait fires (A1, "
                                                   "A1+A2): the fit does not depend on it"),
@@ -182,8 +182,8 @@ def test_calibrate_quick_against_a_direct_simulation(tmp_path):
     direct = quick_speeds([point], PAPER_GAITS)[0]
     stored = [best[f"signed_speed_{g}"] for g in PAPER_GAITS]
     assert direct == pytest.approx(stored, rel=1e-6)
-    measurements = identify.measurement_table(PAPER_GAITS)
-    assert identify.objective_values(direct[None, :], measurements)[0] == pytest.approx(
+    measurements = experiment.measurement_table(PAPER_GAITS)
+    assert experiment.objective_values(direct[None, :], measurements)[0] == pytest.approx(
         best["objective"], rel=1e-6)
     assert best["all_directions_match"] == all(
         np.sign(direct) == measurements["paper_sign"].to_numpy())
