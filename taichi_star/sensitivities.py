@@ -44,6 +44,7 @@ from .params import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS, PER_ACTUATOR_FIEL
 from .gait import N_ACTUATORS, Gait
 from .metrics import wrap_degrees
 from .model import build_model
+from .physics import TERMS
 from .timegrid import on_grid
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
@@ -69,24 +70,13 @@ the limbs' stiffness ratio 3.2e-5), at 1e-3 the radii to truncation (joint 1.6e-
 1.0e-5). Before the expansion (the replicas used their own |v|·v, taking only their
 instance's side of the kinks) the error was O(ε²) with a constant that grows as the velocity
 nears zero, and no single ε served every parameter over long runs."""
-FIELD_RELATIVE_STEPS = {"drag_parallel": 1e-2, "damping_time": 1e-3}
-"""Fields whose ε departs from RELATIVE_STEP: two that barely move the robot, whose replicas'
-offsets at RELATIVE_STEP are too few roundings of a position. Each multiplies its own force
-(C∥ the rod drag's tangential part, the damping time τ the damping force −τ·γ·k·(s − s*)·∇s),
-so the residual is linear in it and a larger ε adds no truncation from the parameter itself
-(docs: numerics, sensitivities).
-C∥ (its derivative is ~1e-2 mm of displacement per unit over 0.3 s from rest, α's ~1): at
-1e-5 its replicas' offsets were ~1e-12 m, 1e5 roundings of a position, and its derivative
-6e-5 to 1.6e-3 off (0.3 s of A1, A1+A2 and A1+A3 at C∥ = 0.01 and 0.1, implicit Euler, fixed
-1-ms steps, against Richardson differences at h = 1e-2 and 3e-2 of C∥, which agree with each
-other to 3e-7); at 1e-2 all six are within 1e-6.
-τ (elasticities d ln v / d ln τ of 5e-5 to 3.5e-3 at 0.94 ms, every optional term on, three
-cycles of the five Fig. 4c gaits, Newton to 1e-12 m): at 1e-4 its derivative was 2.6e-4 and
-4.3e-4 off for A1+A3 and A1+A3+A5 (implicit Euler) and moved with ε; at 1e-3 and 1e-2 the
-derivatives agree with each other to 1.3e-5 (Euler) and 4e-7 (BDF2), and at 1e-3 with
-differences of whole runs at 1e-3 within 2.6e-5 (Euler, where those spread by up to 3.9e-5)
-and 1.2e-6 (BDF2). 1e-3 rather than 1e-2 because `sensitivity_check` differences whole runs
-at the same step, and at 1e-2 the runs' curvature in τ spreads those by up to 1e-3."""
+FIELD_RELATIVE_STEPS = {field: step for term in TERMS
+                        for field, step in term.sensitivity_steps.items()}
+"""Fields whose ε departs from RELATIVE_STEP, gathered from the terms that own them
+(`physics.base.Term.sensitivity_steps`, where each says why): two that barely move the robot,
+whose replicas' offsets at RELATIVE_STEP are too few roundings of a position (C∥ 1e-2, the
+damping time τ 1e-3). Each multiplies its own force, so the residual is linear in it and a
+larger ε adds no truncation from the parameter itself (docs: numerics, sensitivities)."""
 REPLICAS_PER_DIRECTION = 2
 """Replica instances each direction adds per instance: the pair at ±ε."""
 

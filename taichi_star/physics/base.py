@@ -81,6 +81,10 @@ class Term:
     (an elastic energy) gives a sensitivities' replica the residual of its instance wherever
     their coefficients agree and no term that reads it reshapes the two (`start_reshapers`,
     `reshaping`; `engine.BatchEngine.replica_sameness`)."""
+    sensitivity_steps: ClassVar[Dict[str, float]] = {}
+    """StarParams fields of this term whose sensitivities' ε (relative to the value) departs
+    from `sensitivities.RELATIVE_STEP`, with the ε and, in the subclass, why
+    (`sensitivities.FIELD_RELATIVE_STEPS` gathers them from `physics.TERMS`)."""
 
     @staticmethod
     def coefficients(params: Sequence, topologies: Sequence, topology) -> Dict[str, np.ndarray]:

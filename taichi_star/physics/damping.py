@@ -26,6 +26,15 @@ from .strain import StrainTerm
 class MaterialDamping(Term):
     name = "damping"
     internal = True  # a pseudo-energy of the strain elements' rates
+    # τ barely moves the robot (elasticities d ln v / d ln τ of 5e-5 to 3.5e-3 at 0.94 ms, every
+    # optional term on, three cycles of the five Fig. 4c gaits, Newton to 1e-12 m): at ε = 1e-4
+    # its derivative was 2.6e-4 and 4.3e-4 off for A1+A3 and A1+A3+A5 (implicit Euler) and
+    # moved with ε; at 1e-3 and 1e-2 the derivatives agree with each other to 1.3e-5 (Euler)
+    # and 4e-7 (BDF2), and at 1e-3 with differences of whole runs at 1e-3 within 2.6e-5 (Euler,
+    # where those spread by up to 3.9e-5) and 1.2e-6 (BDF2). 1e-3 rather than 1e-2 because
+    # `sensitivity_check` differences whole runs at the same step, and at 1e-2 the runs'
+    # curvature in τ spreads those by up to 1e-3. The force is linear in τ
+    sensitivity_steps = {"damping_time": 1e-3}
 
     @classmethod
     def reshapes(cls, other):

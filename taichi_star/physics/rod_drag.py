@@ -76,6 +76,13 @@ class RodEdgeTerm(Term):
 @ti.data_oriented
 class RodDrag(RodEdgeTerm):
     name = "rod_drag"
+    # C∥ barely moves the robot (its derivative ~1e-2 mm of displacement per unit over 0.3 s
+    # from rest, α's ~1): at ε = 1e-5 its replicas' offsets were ~1e-12 m, 1e5 roundings of a
+    # position, and its derivative 6e-5 to 1.6e-3 off (0.3 s of A1, A1+A2 and A1+A3 at C∥ =
+    # 0.01 and 0.1, implicit Euler, fixed 1-ms steps, against Richardson differences at h =
+    # 1e-2 and 3e-2 of C∥, which agree with each other to 3e-7); at 1e-2 all six are within
+    # 1e-6. The force is linear in C∥, so a larger ε adds no truncation of its own
+    sensitivity_steps = {"drag_parallel": 1e-2}
 
     @staticmethod
     def coefficients(params, topologies, topology):
