@@ -52,11 +52,11 @@ def measure(preset: str, solver: SolverConfig, num_envs: int, steps: int,
     for _ in range(steps):
         envs.step(envs.action_space.sample())
     wall = time.perf_counter() - start
-    period = envs.batch.control_period_s
+    period = envs.control_period_s
     robot_seconds = num_envs * steps * period
     return {"preset": preset, "jacobian": solver.jacobian, "num_envs": num_envs, "steps": steps,
             "control_period_s": period, "dt_s": solver.dt,
-            "n_nodes": envs.batch.simulator.n_nodes, "wall_s": wall,
+            "n_nodes": envs.simulator.n_nodes, "wall_s": wall,
             "robot_seconds_per_s": robot_seconds / wall,
             "robot_steps_per_s": robot_seconds / solver.dt / wall, "cores": os.cpu_count(),
             "load_average_1min": load, "cpu_model": provenance.cpu_model(), "arch": arch}

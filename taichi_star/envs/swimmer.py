@@ -373,6 +373,18 @@ class StarSwimmerEnv(gym.Env):
         self.observation_space = observation_space(self.batch.task)
         self.action_space = spaces.MultiBinary(N_ACTUATORS)
 
+    @property
+    def simulator(self) -> Simulator:
+        """The `Simulator` that holds the robots (read its `state()`, `n_nodes` or shapes;
+        stepping it directly bypasses the episodes). RuntimeError once the environment is
+        closed."""
+        return self.batch.simulator
+
+    @property
+    def control_period_s(self) -> float:
+        """The simulated seconds one `step` advances, s."""
+        return self.batch.control_period_s
+
     def _observe(self):
         observation, info = self.batch.observe(self.observation_space)
         return observation[0], {key: value[0] for key, value in info.items()}
@@ -423,6 +435,18 @@ class StarSwimmerVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, num_envs)
         self._generators = [seeding.np_random(None)[0] for _ in range(num_envs)]
         self._autoreset = np.zeros(num_envs, dtype=bool)
+
+    @property
+    def simulator(self) -> Simulator:
+        """The `Simulator` that holds the robots (read its `state()`, `n_nodes` or shapes;
+        stepping it directly bypasses the episodes). RuntimeError once the environment is
+        closed."""
+        return self.batch.simulator
+
+    @property
+    def control_period_s(self) -> float:
+        """The simulated seconds one `step` advances, s."""
+        return self.batch.control_period_s
 
     def reset(self, *, seed=None, options: Optional[dict] = None):
         """Reset every robot, or those of `options["reset_mask"]` ((num_envs,) bool). seed:

@@ -54,7 +54,7 @@ def test_a_closed_env_hands_its_engine_to_the_next_and_refuses_to_step():
     first = gym.make(ENV_ID, **SHORT)
     first.reset(seed=5)
     expected = [first.step(FORWARD)[0] for _ in range(2)]
-    engine = first.unwrapped.batch.simulator.engine
+    engine = first.unwrapped.simulator.engine
     first.close()
     first.close()  # gymnasium allows closing twice
     for call in (lambda: first.reset(seed=5), lambda: first.step(FORWARD)):
@@ -63,16 +63,19 @@ def test_a_closed_env_hands_its_engine_to_the_next_and_refuses_to_step():
     # the same topology, terms, integrator and capacity (every batch up to 64 robots): the
     # closed env's engine, not a new compilation, and from a reset it gives the same bits
     second = gym.make(ENV_ID, **SHORT)
-    assert second.unwrapped.batch.simulator.engine is engine
+    assert second.unwrapped.simulator.engine is engine
     second.reset(seed=5)
     np.testing.assert_array_equal([second.step(FORWARD)[0] for _ in range(2)], expected)
     # while `second` is open its engine is its own: the vector env gets another
     vector = StarSwimmerVectorEnv(2, **SHORT)
-    assert vector.batch.simulator.engine is not engine
+    assert vector.simulator.engine is not engine
     vector.close()
     assert vector.closed
     with pytest.raises(RuntimeError, match="closed"):
         vector.reset(seed=5)
+    # the public Simulator is gone with it, as the episodes are
+    with pytest.raises(RuntimeError, match="closed"):
+        vector.simulator
     second.close()
 
 
@@ -139,7 +142,10 @@ def test_a_bad_seed_is_a_value_error_and_changes_no_robot(single):
 def test_make_vec_builds_the_native_vector_env():
     envs = gym.make_vec(ENV_ID, num_envs=2, **KWARGS)
     assert isinstance(envs, StarSwimmerVectorEnv)
-    assert envs.batch.simulator.n_instances == 2  # one engine for all robots, not copies
+    assert envs.simulator.n_instances == 2  # one engine for all robots, not copies
+    # one step is one control period, by default the actuation period of the robot
+    assert envs.control_period_s == ts.StarParams().period
+    assert envs.simulator.n_nodes == 193  # the paper robot's 8 × (18 + 6) + 1 nodes
     assert envs.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP
     assert envs.batch.task.max_episode_steps == DEFAULT_MAX_EPISODE_STEPS
 
