@@ -1,6 +1,7 @@
 """Checks of an argument's kind that modules at every level share: this module imports nothing
 of the package, so the lowest (`gait`, `timegrid`) can use it too."""
 
+import math
 import numbers
 import os
 import sys
@@ -22,6 +23,30 @@ def is_real(value) -> bool:
     """Whether `value` is a real number, Python's or NumPy's, and not a bool (a flag is no
     quantity here)."""
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+def is_finite_real(value) -> bool:
+    """Whether `value` is a real number (`is_real`) that a float holds as a finite number: NaN,
+    ±inf and an integer or fraction beyond float's range (10**400: an OverflowError in float)
+    are not."""
+    if not is_real(value):
+        return False
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:
+        return False
+
+
+def shown(value) -> str:
+    """`value` as an error message shows it: its repr, a number too long to read by its length
+    (10**400: "an integer of 401 digits"; a fraction of such numbers: its first characters and
+    their count)."""
+    text = repr(value)
+    if len(text) <= 40:
+        return text
+    if is_whole(value):
+        return f"an integer of {len(str(abs(int(value))))} digits"
+    return f"{text[:24]}... ({len(text)} characters)"
 
 
 def check_flag(name: str, value) -> bool:

@@ -22,7 +22,7 @@ from typing import Dict, Optional, Tuple
 import numpy as np
 
 from .actuation import PROFILE_CLOSURES, CurvatureProfile
-from .checks import check_flag, is_real, is_whole
+from .checks import check_flag, is_real, is_whole, shown
 from .gait import N_ACTUATORS, Gait
 
 JET_MODES = ("contract", "always")
@@ -99,7 +99,7 @@ def _check_actuator_values(name, values, lowest, highest, highest_included):
         if not is_real(value) or not _in_span(value, lowest, highest,
                                               highest_included=highest_included):
             raise ValueError(f"{name}[{index}] (A{index + 1}) must be a real number in {span}, "
-                             f"got {_shown(value)}")
+                             f"got {shown(value)}")
         checked.append(float(value) + 0.0)  # a zero as +0.0, as `check_number`
     return tuple(checked)
 
@@ -131,32 +131,29 @@ def check_number(name, value, lowest, highest, lowest_included=True, integer=Fal
     kind = "an integer" if integer else "a real number"
     if not (is_whole(value) if integer else is_real(value)):
         raise ValueError(f"{name} must be {kind} in {span}, got {value!r}")
-    if not _in_span(value, lowest, highest, lowest_included, highest_included):
-        raise ValueError(f"{name} must be {kind} in {span}, got {_shown(value)}")
+    if not _in_span(value, lowest, highest, lowest_included, highest_included, integer):
+        raise ValueError(f"{name} must be {kind} in {span}, got {shown(value)}")
     # + 0.0 stores a zero as +0.0: parameters that compare equal are then the same bits
     # (build_model builds equal instances once)
     return int(value) if integer else float(value) + 0.0
 
 
-def _shown(value) -> str:
-    """`value` as an error message shows it: its repr, an integer too long to read (10**400) by
-    its number of digits."""
-    text = repr(value)
-    if is_whole(value) and len(text) > 32:
-        return f"an integer of {len(str(abs(int(value))))} digits"
-    return text
-
-
-def _in_span(value, lowest, highest, lowest_included=True, highest_included=True) -> bool:
+def _in_span(value, lowest, highest, lowest_included=True, highest_included=True,
+             integer=False) -> bool:
     """Whether the real number `value` is finite and within [lowest, highest] (an end
-    excluded where not `..._included`). Compares before any conversion to float: an integer
-    beyond float's range (10**400) is out of the span, not an OverflowError."""
+    excluded where not `..._included`), both as given and, unless an `integer`, as the float
+    it is stored as: an integer beyond float's range (10**400) is out of the span (not an
+    OverflowError), and a value that rounds onto an excluded end (Fraction(1, 10**400) for a
+    dt in (0, 0.05] becomes 0.0) is refused (a review, 2026-12)."""
+    def within(number):
+        return math.isfinite(number) and lowest <= number <= highest and not (
+            (number == lowest and not lowest_included)
+            or (number == highest and not highest_included))
+
     try:
-        finite = math.isfinite(value)
+        return within(value) and (integer or within(float(value)))
     except OverflowError:
         return False
-    return finite and lowest <= value <= highest and not (
-        (value == lowest and not lowest_included) or (value == highest and not highest_included))
 
 
 def _named_fields_only(cls):

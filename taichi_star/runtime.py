@@ -361,17 +361,32 @@ class Runtime:
         Simulator, or held by a living Simulator (`free_engine`)."""
         self.slot_counts: Dict[tuple, int] = {}
         """Newton-matrix blocks per model engine key (`matrix_slots`)."""
+        self.started = False
+        """Whether Taichi has been started in this process (`ensure`; a re-initialisation
+        asked for by `configure` leaves it True)."""
         self.forked_after_start = False
         """Whether this process is a fork of one in which Taichi had started (`_after_fork`):
-        then it cannot run Taichi (`ensure` says so)."""
+        then it cannot run Taichi (`check_not_forked`)."""
 
     @classmethod
     def _after_fork(cls):
         """In a forked child: a runtime whose Taichi had started is marked unusable (Taichi's
         thread pool is not in the child, and its first kernel launch hung: an audit, 2026-12,
         a multiprocessing Pool after one `simulate`, gymnasium's AsyncVectorEnv)."""
-        if cls._current is not None and cls._current.arch is not None:
+        if cls._current is not None and cls._current.started:
             cls._current.forked_after_start = True
+
+    def check_not_forked(self):
+        """RuntimeError in a process forked after Taichi had started in its parent (`ensure`,
+        and every use of a Simulator's engine: one made by the parent and stepped in the
+        child hung)."""
+        if self.forked_after_start:
+            raise RuntimeError(
+                "this process was forked from one in which Taichi had started, and Taichi's "
+                "threads do not survive a fork (its first kernel would wait for ever): start "
+                "worker processes with the 'spawn' or 'forkserver' method "
+                "(multiprocessing.get_context('spawn'), gymnasium's "
+                "AsyncVectorEnv(..., context='spawn')), or before the first simulation")
 
     @classmethod
     def current(cls) -> "Runtime":
@@ -392,13 +407,7 @@ class Runtime:
         """Initialise Taichi for arch and precision unless it already is (ValueError for an
         arch this machine does not have)."""
         check_arch(arch)
-        if self.forked_after_start:
-            raise RuntimeError(
-                "this process was forked from one in which Taichi had started, and Taichi's "
-                "threads do not survive a fork (its first kernel would wait for ever): start "
-                "worker processes with the 'spawn' or 'forkserver' method "
-                "(multiprocessing.get_context('spawn'), gymnasium's "
-                "AsyncVectorEnv(..., context='spawn')), or before the first simulation")
+        self.check_not_forked()
         if self.arch == arch and self.precision == precision:
             return
         self.check_no_simulator_lives(arch, precision)
@@ -416,6 +425,7 @@ class Runtime:
         atexit.unregister(_quiet_exit)
         atexit.register(_quiet_exit)
         self.arch, self.precision = arch, precision
+        self.started = True
         self.engines.clear()
 
     def check_no_simulator_lives(self, arch: str, precision: str):

@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 
 from . import metrics, output
-from .checks import check_flag, is_real, is_whole, warn_user
+from .checks import check_flag, is_finite_real, is_whole, shown, warn_user
 from .geometry import CENTRE, Topology, build_topology
 from .model import validate_batch
 from .params import (PER_ACTUATOR_FIELDS, SolverConfig, StarParams, check_precision,
@@ -157,11 +157,13 @@ class SimulationResult:
 
 
 def _check_real(name, value, lowest, allow_equal=False):
-    if not is_real(value) or not math.isfinite(value) \
-            or value < lowest or (value == lowest and not allow_equal):
+    """`value` as a float, judged as the float it becomes (10**400 is not finite, a fraction
+    that rounds to the bound is at it); ValueError naming `name` otherwise."""
+    number = float(value) if is_finite_real(value) else math.nan
+    if not (number > lowest or (allow_equal and number == lowest)):
         bound = f">= {lowest}" if allow_equal else f"> {lowest}"
-        raise ValueError(f"{name} must be a finite number {bound}, got {value!r}")
-    return float(value)
+        raise ValueError(f"{name} must be a finite number {bound}, got {shown(value)}")
+    return number
 
 
 RECORD_ROW_BYTES = 160
@@ -417,28 +419,50 @@ SUMMARY_STATE = ("status", "failure_time", "steps_done", "rejected_steps",
 """The state fields a run's summary reads at its end (`BatchState.read`)."""
 
 
-def _warn_capped(capped: np.ndarray, solver: SolverConfig):
-    """RuntimeWarning where "ok" instances (`capped`: (B,) bool, True for an ok instance with
-    newton_capped) needed a Newton solve of all max_newton iterations: the step was then redone
-    (a retry) and accepted, and such a run can be off by far more than newton_tol. In f32 the
-    precision barely resolves newton_tol; in f64 an audit found two causes (docs/numerics.md,
-    "What ok promises"): steps that converge to another solution of their equations (at a
-    re-firing whose natural curvature jumps, period 0.2 s: a centroid 13 mm away in one 2-ms
-    step) and a robot whose shortest edge is thousands of times below its size (8-90 % off)."""
-    count = int(np.count_nonzero(capped))
-    if not count:
-        return
-    first = int(np.flatnonzero(capped)[0])
-    if solver.precision == "f32":
-        reason = (f"f32 barely resolves newton_tol = {solver.newton_tol:g} m for them, and their "
-                  f"results can be far off; run them in f64")
-    else:
-        reason = ("such runs can have converged to another solution of a step's equations "
-                  "(at a re-firing's jump) or more loosely than newton_tol (where the robot's "
-                  "shortest edge is far below its size): check them with a smaller dt")
-    warn_user(f"{count} of {len(capped)} {solver.precision} instances (the first: instance "
-                  f"{first}) are 'ok' only after a Newton solve used all its {solver.max_newton} "
-                  f"iterations (newton_capped): {reason}")
+OK_INSTANCE_WARNINGS = (r".* instances \(the first: instance .*\) are 'ok' only after",
+                        r".* 'ok' instances \(the first: instance .*\) end in a shape")
+"""Patterns of `warn_about_ok_instances`' messages (`batch.run_batch` silences its chunks'
+and warns once with the batch's numbers)."""
+
+
+def warn_about_ok_instances(summary: pd.DataFrame, solver: SolverConfig):
+    """RuntimeWarnings about "ok" instances of a summary (its rows in order: the first named
+    by its row, or by its `instance` column where it has one, a batch's) that need a second
+    look, each naming how many and the first:
+
+    - a Newton solve that used all max_newton iterations (newton_capped): the step was then
+      redone (a retry) and accepted, and such a run can be off by far more than newton_tol.
+      In f32 the precision barely resolves newton_tol; in f64 an audit found two causes
+      (docs/numerics.md, "What ok promises"): steps that converge to another solution of
+      their equations (at a re-firing whose natural curvature jumps, period 0.2 s: a
+      centroid 13 mm away in one 2-ms step) and a robot whose shortest edge is thousands of
+      times below its size (8-90 % off);
+    - a final shape that is not physical (shape_sane False)."""
+    ok = summary["status"].eq("ok").to_numpy()
+    names = (summary["instance"].to_numpy() if "instance" in summary
+             else np.arange(len(summary)))
+    capped = ok & summary["newton_capped"].to_numpy(dtype=bool)
+    if capped.any():
+        if solver.precision == "f32":
+            reason = (f"f32 barely resolves newton_tol = {solver.newton_tol:g} m for them, and "
+                      f"their results can be far off; run them in f64")
+        else:
+            reason = ("such runs can have converged to another solution of a step's equations "
+                      "(at a re-firing's jump) or more loosely than newton_tol (where the "
+                      "robot's shortest edge is far below its size): check them with a "
+                      "smaller dt")
+        warn_user(f"{int(capped.sum())} of {len(summary)} {solver.precision} instances (the "
+                  f"first: instance {names[np.flatnonzero(capped)[0]]}) are 'ok' only after a "
+                  f"Newton solve used all its {solver.max_newton} iterations (newton_capped): "
+                  f"{reason}")
+    unphysical = ok & ~summary["shape_sane"].to_numpy(dtype=bool)
+    if unphysical.any():
+        warn_user(f"{int(unphysical.sum())} of {len(summary)} 'ok' instances (the first: "
+                  f"instance {names[np.flatnonzero(unphysical)[0]]}) end in a shape that is not "
+                  f"physical (shape_sane False, max_strain up to "
+                  f"{summary['max_strain'].to_numpy()[unphysical].max():.3g}): every step was "
+                  f"solved, but their parameters or time step take the rods beyond what the "
+                  f"model describes")
 
 
 def _collect(engine, model, solver, duration, record_times, start, centroids, rotations, shapes,
@@ -487,15 +511,7 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
     metric_columns = [*metrics.SPEED_COLUMNS, "heading_deg", "steady_speed_mm_s",
                       "steady_signed_speed_mm_s"]
     summary.loc[failed, metric_columns] = np.nan
-    _warn_capped(summary["newton_capped"].to_numpy() & ~failed, solver)
-    unphysical = summary["status"].eq("ok") & ~summary["shape_sane"].astype(bool)
-    if unphysical.any():
-        first = int(np.flatnonzero(unphysical.to_numpy())[0])
-        warn_user(f"{int(unphysical.sum())} of {batch} 'ok' instances (the first: instance "
-                      f"{first}) end in a shape that is not physical (shape_sane False, "
-                      f"max_strain up to {summary.loc[unphysical, 'max_strain'].max():.3g}): "
-                      f"every step was solved, but their parameters or time step take the "
-                      f"rods beyond what the model describes")
+    warn_about_ok_instances(summary, solver)
 
     trajectory = pd.DataFrame({"instance": pd.Series(dtype=int), "t_s": pd.Series(dtype=float),
                                "x_mm": pd.Series(dtype=float), "y_mm": pd.Series(dtype=float),

@@ -24,7 +24,6 @@ import dataclasses
 import functools
 import io
 import json
-import math
 import os
 import time
 from dataclasses import dataclass
@@ -37,7 +36,7 @@ import pandas as pd
 from . import metrics
 from . import sensitivities as tangents
 from .actuation import NEVER
-from .checks import check_flag, is_real, warn_user
+from .checks import check_flag, is_finite_real, shown, warn_user
 from .driver import (Clock, RunTiming, check_run, drive, fewest_steps, robots_label,
                      shows_progress)
 from .gait import N_ACTUATORS, Gait
@@ -172,7 +171,7 @@ class Simulator:
         runtime = Runtime.current()
         runtime.ensure(arch, solver.precision)
         carried = len(self.directions)
-        self.engine = runtime.lease_engine(self.model, solver, self, sensitive=carried > 0)
+        self._engine = runtime.lease_engine(self.model, solver, self, sensitive=carried > 0)
         self.engine.load(self.model, solver, periodic_gaits=False, tangents=carried)
         self._initial = self.engine.save_state()
         self._start_centroids = self.engine.centroids_of(self.model.batch_size)
@@ -185,6 +184,14 @@ class Simulator:
     @property
     def n_instances(self) -> int:
         return len(self.params)
+
+    @property
+    def engine(self):
+        """The engine that holds the robots (`engine.BatchEngine`). RuntimeError in a process
+        forked from the one that made the Simulator, where its kernels would wait for ever
+        (`runtime.Runtime.check_not_forked`)."""
+        Runtime.current().check_not_forked()
+        return self._engine
 
     @property
     def n_nodes(self) -> int:
@@ -246,8 +253,9 @@ class Simulator:
         if at_s is None:
             schedule.command(mask)
             return
-        if not is_real(at_s) or not math.isfinite(at_s):
-            raise ValueError(f"at_s must be a finite time in s, got {at_s!r}")
+        if not is_finite_real(at_s):
+            raise ValueError(f"at_s must be a finite time in s, got {shown(at_s)}")
+        at_s = float(at_s)
         # a firing beyond the step counter is never reached (adaptive: even at dt_max)
         step, step_name = ((self.solver.dt_max, "dt_max") if self.solver.adaptive
                            else (self.solver.dt, "dt"))
@@ -280,18 +288,19 @@ class Simulator:
         with a `record` column; empty without records. `progress`: a progress bar in simulated
         seconds (None: where the call is estimated at `driver.AUTO_PROGRESS_S` or more). With adaptive steps the end ends a step (as a record time does): pieces give
         one call's bits where they end on its step ends (docs: Control, The Simulator)."""
-        if not is_real(duration_s) or not math.isfinite(duration_s) or duration_s <= 0:
-            raise ValueError(f"duration_s must be a finite number > 0 s, got {duration_s!r}")
+        if not (is_finite_real(duration_s) and float(duration_s) > 0):
+            raise ValueError(f"duration_s must be a finite number > 0 s, got {shown(duration_s)}")
         # the kind first: an empty text or list, None or False is not 0, and an array has no
         # truth value
-        if not is_real(record_interval_s) \
-                or not (record_interval_s == 0 or 0 < record_interval_s < math.inf):
+        if not (is_finite_real(record_interval_s)
+                and (record_interval_s == 0 or float(record_interval_s) > 0)):
             raise ValueError(f"record_interval_s must be a finite number > 0 s (or 0: no "
-                             f"records), got {record_interval_s!r}")
-        progress = shows_progress(progress, self.n_instances * fewest_steps(
-            self.solver, duration_s, record_interval_s)[0])
+                             f"records), got {shown(record_interval_s)}")
+        duration_s, record_interval_s = float(duration_s), float(record_interval_s)
         check_run(self.solver, duration_s, record_interval_s, self.n_instances,
                   steps_taken=int(self._steps().max(initial=0)))
+        progress = shows_progress(progress, self.model.batch_size * fewest_steps(
+            self.solver, duration_s, record_interval_s)[0])  # the replicas counted too
         if record_interval_s:
             records = multiples_within(duration_s, record_interval_s)
             check_host_memory("record_interval_s", f"{records:,} records of "

@@ -13,7 +13,7 @@ import math
 from typing import Optional
 
 import numpy as np
-from .checks import is_real, is_whole, warn_user
+from .checks import is_finite_real, is_real, is_whole, shown, warn_user
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
 __all__ = ["nearest_interval", "interval_for_count", "whole_steps", "steps_in", "STEP_TOLERANCE",
@@ -102,16 +102,16 @@ def nearest_interval(interval_s: float, dt: float) -> float:
     > 0 s."""
     for name, value in (("interval_s", interval_s), ("dt", dt)):
         if not _positive_number(value):
-            raise ValueError(f"{name} must be a finite number > 0 s, got {value!r}")
-    steps = interval_s / dt
+            raise ValueError(f"{name} must be a finite number > 0 s, got {shown(value)}")
+    steps = float(interval_s) / float(dt)
     if not math.isfinite(steps):
         raise ValueError(f"interval_s = {interval_s!r} s is {steps} steps of dt = {dt!r} s")
     return max(1, round(steps)) * dt
 
 
 def _positive_number(value) -> bool:
-    """Whether `value` is a finite real number > 0 (NumPy's included), not a bool."""
-    return is_real(value) and math.isfinite(value) and value > 0
+    """Whether `value` is a finite real number > 0 (NumPy's included) as a float, not a bool."""
+    return is_finite_real(value) and float(value) > 0
 
 
 def interval_for_count(duration_s: float, count: int, dt: float) -> float:
@@ -121,9 +121,9 @@ def interval_for_count(duration_s: float, count: int, dt: float) -> float:
     duration_s (a finite number > 0)."""
     if not is_whole(count) or count < 1:
         raise ValueError(f"count must be an integer >= 1, got {count!r}")
-    if not is_real(duration_s) or not (math.isfinite(duration_s) and duration_s > 0):
-        raise ValueError(f"duration_s must be a finite number > 0 s, got {duration_s!r}")
-    return max(1, steps_in(duration_s, dt) // count) * dt
+    if not _positive_number(duration_s):
+        raise ValueError(f"duration_s must be a finite number > 0 s, got {shown(duration_s)}")
+    return max(1, steps_in(float(duration_s), dt) // count) * dt
 
 
 def check_work(name: str, steps: float, batch: Optional[int] = None):
@@ -135,7 +135,8 @@ def check_work(name: str, steps: float, batch: Optional[int] = None):
     ValueError naming `steps` (a real number >= 0) or `batch` (an integer >= 1) otherwise."""
     if not is_real(steps) or steps < 0:
         raise ValueError(f"steps must be a real number >= 0 (time steps per instance), got "
-                         f"{steps!r}")
+                         f"{shown(steps)}")
+    steps = float(steps) if is_finite_real(steps) else math.inf  # 10**400 steps: too many
     if batch is not None and (not is_whole(batch)
                               or batch < 1):
         raise ValueError(f"batch must be an integer >= 1 (instances) or None, got {batch!r}")

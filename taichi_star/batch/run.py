@@ -16,7 +16,7 @@ from ..extras import require
 from ..geometry import build_topology
 from ..model import instances_of
 from ..params import SolverConfig, StarParams
-from ..simulation import SimulationResult
+from ..simulation import SimulationResult, warn_about_ok_instances
 from .executors import DEFAULT_RETRIES, Executor, InProcess, LocalProcesses
 from .store import RunStore, run_definition
 from .tasks import batch_robot_steps, plan_chunks
@@ -147,6 +147,7 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     summary = pd.concat([summaries[task.index] for task in tasks], ignore_index=True)
     order = np.argsort(summary["instance"].to_numpy(), kind="stable")
     summary = summary.iloc[order].reset_index(drop=True)
+    warn_about_ok_instances(summary, solver)
     trajectory = (pd.concat(trajectories, ignore_index=True) if trajectories
                   else pd.DataFrame(columns=TRAJECTORY_COLUMNS))
     trajectory = trajectory.sort_values(["instance", "t_s"], kind="stable").reset_index(drop=True)

@@ -16,13 +16,13 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 import pandas as pd
 
-from ..checks import is_real, is_whole
+from ..checks import is_finite_real, is_whole, shown
 from ..driver import RunTiming, fewest_steps
 from ..geometry import Topology
 from ..model import instances_of
 from ..params import SolverConfig, StarParams
 from ..runtime import RECORDS_REMEDY, check_arch, check_host_memory
-from ..simulation import simulate, tables_bytes, validate_call
+from ..simulation import OK_INSTANCE_WARNINGS, simulate, tables_bytes, validate_call
 from ..timegrid import LONG_WORK_MESSAGE, steps_in, warn_long_work
 
 
@@ -66,9 +66,8 @@ def _check_duration(duration_s, cycles):
         raise ValueError("give exactly one of duration_s (s, the same for every instance) and "
                          "cycles (actuation periods of each instance)")
     name, value = ("duration_s", duration_s) if duration_s is not None else ("cycles", cycles)
-    if not is_real(value) or not value > 0 \
-            or not np.isfinite(value):
-        raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+    if not (is_finite_real(value) and float(value) > 0):
+        raise ValueError(f"{name} must be a finite number > 0, got {shown(value)}")
 
 
 def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None, *,
@@ -143,10 +142,16 @@ def check_batch_work(tasks: Sequence[ChunkTask], instances: int):
 
 
 def run_chunk(task: ChunkTask, progress: bool = False) -> ChunkResult:
-    """Simulate one chunk (in whatever process calls it) and number its rows by `members`."""
-    result = simulate(list(task.params), task.duration_s, task.solver, arch=task.arch,
-                      record_interval_s=task.record_interval_s, record_shapes=task.record_shapes,
-                      steady_from_cycle=task.steady_from_cycle, progress=progress)
+    """Simulate one chunk (in whatever process calls it) and number its rows by `members`. Its
+    warnings about "ok" instances are left to `run_batch`, which tells the batch's numbers
+    once (a chunk's named its own rows, and on a worker process went to the worker's stderr)."""
+    with warnings.catch_warnings():
+        for pattern in OK_INSTANCE_WARNINGS:
+            warnings.filterwarnings("ignore", message=pattern, category=RuntimeWarning)
+        result = simulate(list(task.params), task.duration_s, task.solver, arch=task.arch,
+                          record_interval_s=task.record_interval_s,
+                          record_shapes=task.record_shapes,
+                          steady_from_cycle=task.steady_from_cycle, progress=progress)
     members = np.asarray(task.members)
     summary = result.summary
     summary.insert(0, "instance", members)

@@ -50,6 +50,9 @@ def _rows_of(info: Dict[str, np.ndarray], count: int) -> List[Dict[str, Any]]:
             for row in range(count)]
 
 
+# the public names (docs/api.md)
+__all__ = ["to_sb3", "SB3VectorAdapter"]
+
 class SB3VectorAdapter:
     """SB3's VecEnv interface over a `StarSwimmerVectorEnv` (see the module docstring).
     `to_sb3` makes one that is also an instance of SB3's `VecEnv` class, which SB3's algorithms

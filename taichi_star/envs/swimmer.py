@@ -57,6 +57,10 @@ from ..params import SolverConfig, StarParams
 from ..simulator import ACTUATOR_COLUMNS, Simulator
 from ..timegrid import check_work, steps_in, whole_steps
 
+# the public names (docs/api.md documents these; the rest are the environments' parts)
+__all__ = ["StarSwimmerEnv", "StarSwimmerVectorEnv", "SwimmerTask", "GoalReachingBatch",
+           "control_period", "OBSERVATION_NAMES", "DEFAULT_MAX_EPISODE_STEPS", "RENDER_MODES"]
+
 OBSERVATION_NAMES = ("goal_x_body_mm", "goal_y_body_mm", "heading_sin", "heading_cos",
                      "velocity_x_body_mm_s", "velocity_y_body_mm_s", "angular_velocity_deg_s",
                      *ACTUATOR_COLUMNS)
@@ -270,7 +274,8 @@ class GoalReachingBatch:
         """Fire `fire` ((B, 8) bool) now and advance one control period. Returns rewards (B,)
         float64, terminated (B,), truncated (B,)."""
         self.simulator.fire(fire)
-        self.simulator.advance(self.control_period_s)
+        # no progress bar for a control period, however many robots: an agent steps many
+        self.simulator.advance(self.control_period_s, progress=False)
         before = self.distances.copy()
         state = self.simulator.state()
         position = state[["centroid_x_mm", "centroid_y_mm"]].to_numpy()

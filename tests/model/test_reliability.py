@@ -4,6 +4,7 @@ resolve the robot, and the public doors of Simulator snapshots: tests that kill 
 hand-made engine mutants (`halvings <= max` → `<`, an under-counted substep_retries, a changed
 Newton stopping rule, a +20 % costlier Newton)."""
 
+import math
 import multiprocessing
 import pickle
 import signal
@@ -16,7 +17,7 @@ import pytest
 
 import taichi_star as ts
 from taichi_star.reference import ReferenceSimulator
-from taichi_star.runtime import prepare_engine
+from taichi_star.runtime import Runtime, prepare_engine
 from taichi_star.state import STATUS_OK
 
 
@@ -187,33 +188,46 @@ def test_a_precision_switch_is_refused_while_a_simulator_lives_and_allowed_once_
     assert ts.simulate([ts.StarParams()], 0.01, f32).summary.status.eq("ok").all()
 
 
-def _simulate_in_child(messages):
-    """A forked child's work: a plain call, reporting what came of it."""
-    try:
-        ts.simulate([ts.StarParams()], 0.01)
-        messages.put("ran")
-    except RuntimeError as error:
-        messages.put(str(error))
-
-
-@pytest.mark.skipif(sys.platform != "linux", reason="fork is the start method in question on Linux")
-def test_a_process_forked_after_taichi_started_is_told_to_use_spawn_instead_of_hanging():
-    """Taichi's threads do not survive a fork: a child forked after a simulation waited for
-    ever in its first kernel (an audit, 2026-12: a multiprocessing Pool after one `simulate`,
-    gymnasium's AsyncVectorEnv). It is refused at once, naming the start methods that work.
-    The child's 60 s are a hang's bound, not a timing: it answers before any kernel runs."""
-    ts.simulate([ts.StarParams()], 0.01)
+def _in_forked_child(work) -> str:
+    """What `work()` came to in a child forked from this process: "ran", or the RuntimeError's
+    message. A child still busy after 60 s (a hang's bound, not a timing: a refusal comes
+    before any kernel runs) is killed and the test fails."""
     context = multiprocessing.get_context("fork")
     messages = context.Queue()
-    child = context.Process(target=_simulate_in_child, args=(messages,))
+
+    def child_work():
+        try:
+            work()
+            messages.put("ran")
+        except RuntimeError as error:
+            messages.put(str(error))
+
+    child = context.Process(target=child_work)
     child.start()
     child.join(60)
     hung = child.is_alive()
     if hung:
         child.kill()
     assert not hung
-    message = messages.get(timeout=10)
-    assert "forked from one in which Taichi had started" in message and "'spawn'" in message
+    return messages.get(timeout=10)
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="fork is the start method in question on Linux")
+def test_a_process_forked_after_taichi_started_is_told_to_use_spawn_instead_of_hanging(
+        monkeypatch):
+    """Taichi's threads do not survive a fork: a child forked after a simulation waited for
+    ever in its first kernel (an audit, 2026-12: a multiprocessing Pool after one `simulate`,
+    gymnasium's AsyncVectorEnv). It is refused at once, naming the start methods that work:
+    a plain call, a Simulator the parent made (it never asks Taichi to start), and a call after
+    the parent asked for a re-initialisation (`configure_compiler` forgets the arch; a review,
+    2026-12)."""
+    robots = ts.Simulator([ts.StarParams()])
+    refused = "forked from one in which Taichi had started"
+    for work in (lambda: ts.simulate([ts.StarParams()], 0.01), lambda: robots.advance(0.01)):
+        message = _in_forked_child(work)
+        assert refused in message and "'spawn'" in message
+    monkeypatch.setattr(Runtime.current(), "arch", None)  # as configure_compiler leaves it
+    assert refused in _in_forked_child(lambda: ts.simulate([ts.StarParams()], 0.01))
 
 
 def test_f64_instances_ok_only_after_a_solve_used_all_its_iterations_are_warned_about():
@@ -234,6 +248,23 @@ def test_f64_instances_ok_only_after_a_solve_used_all_its_iterations_are_warned_
                                             r"iterations \(newton_capped\): such runs can"):
         summary = ts.simulate([paper, tiny_limbs], 0.05).summary
     assert summary.status.eq("ok").all() and summary.newton_capped.tolist() == [False, True]
+
+
+def test_a_batchs_capped_instances_are_warned_about_once_with_the_batchs_numbers():
+    """run_batch told each chunk's capped instances by the chunk's own rows ("1 of 2 ...
+    instance 1" for the batch's fourth), and on worker processes not at all (a review,
+    2026-12): one warning from the whole summary, naming the batch's instance."""
+    from taichi_star.batch import run_batch
+
+    paper = ts.StarParams(gait="A1+A3")
+    tiny_limbs = paper.replace(tip_radius=paper.joint_radius + 2e-5)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = run_batch([paper, paper, paper, tiny_limbs], 0.02, chunk_size=2)
+    messages = [str(w.message) for w in caught if "newton_capped" in str(w.message)]
+    assert len(messages) == 1
+    assert messages[0].startswith("1 of 4 f64 instances (the first: instance 3) are 'ok' only")
+    assert result.summary.newton_capped.tolist() == [False, False, False, True]
 
 
 def test_an_f32_simulator_refuses_a_firing_at_a_step_its_clock_cannot_hold():
@@ -426,3 +457,30 @@ def test_warnings_point_at_the_users_line_whichever_route_led_to_them(monkeypatc
     _warned_here(lambda: run_batch([paper] * 2, 0.01, chunk_size=1))
     monkeypatch.undo()
     _warned_here(lambda: ts.simulate([paper.replace(tip_radius=paper.joint_radius + 2e-5)], 0.01))
+
+
+@pytest.mark.parametrize("auto_progress_s, shown", [(0.0, True), (math.inf, False)])
+def test_the_default_progress_follows_the_estimated_work_on_every_route(monkeypatch, capsys,
+                                                                        auto_progress_s, shown):
+    """progress=None, the default of simulate, Simulator.advance and run_batch, draws a bar
+    (tqdm's, on stderr) exactly where the work is estimated at AUTO_PROGRESS_S or more: with
+    the threshold at 0 s every call draws one, at infinity none (a review, 2026-12: a mutant
+    that never drew the bar passed every test). The environments never draw one: an agent
+    steps them many times a second."""
+    from taichi_star import driver
+    from taichi_star.batch import run_batch
+    from taichi_star.envs import StarSwimmerVectorEnv
+
+    monkeypatch.setattr(driver, "AUTO_PROGRESS_S", auto_progress_s)
+    paper = ts.StarParams(gait="A1+A3")
+    robots = ts.Simulator([paper])
+    envs = StarSwimmerVectorEnv(1, control_period_s=0.01)
+    capsys.readouterr()
+    envs.reset(seed=0)
+    envs.step(np.ones((1, 8), dtype=np.int8))
+    assert "robot" not in capsys.readouterr().err
+    for call in (lambda: ts.simulate([paper], 0.01), lambda: robots.advance(0.01),
+                 lambda: run_batch([paper] * 2, 0.01, chunk_size=1)):
+        call()
+        assert ("robot" in capsys.readouterr().err) is shown
+    envs.close()

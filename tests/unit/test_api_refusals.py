@@ -5,6 +5,7 @@ reaches it has accepted its arguments (and one that should have refused them fai
 
 import math
 import types
+from fractions import Fraction
 
 import numpy as np
 import pandas as pd
@@ -619,3 +620,38 @@ def test_cycle_curvature_refuses_a_period_that_is_not_a_time(period):
 def test_cycle_curvature_accepts_a_short_period():
     profile = CurvatureProfile()
     assert profile.cycle_curvature(0.0, np.float64(1e-3), "ramp") == profile.rest_curvature
+
+
+HUGE = 10 ** 400
+"""An integer beyond float's range: an OverflowError or a TypeError naming nothing before
+(a review, 2026-12), now refused like any other bad number, naming its argument."""
+TINY = Fraction(1, 10 ** 400)
+"""A positive number that rounds to 0.0 as the float it is stored as."""
+
+
+@pytest.mark.parametrize("call, name", [
+    (lambda: ts.simulate([P], HUGE), "duration_s"),
+    (lambda: ts.simulate([P], TINY), "duration_s"),
+    (lambda: ts.simulate([P], 0.01, record_interval_s=HUGE), "record_interval_s"),
+    (lambda: run_batch([P], HUGE), "duration_s"),
+    (lambda: run_batch([P], cycles=HUGE), "cycles"),
+    (lambda: run_batch([P], cycles=TINY), "cycles"),
+    (lambda: bare_simulator().advance(HUGE), "duration_s"),
+    (lambda: bare_simulator().advance(TINY), "duration_s"),
+    (lambda: bare_simulator().advance(0.01, record_interval_s=HUGE), "record_interval_s"),
+    (lambda: nearest_interval(HUGE, 1e-3), "interval_s"),
+    (lambda: interval_for_count(HUGE, 3, 1e-3), "duration_s"),
+    (lambda: ts.SolverConfig(dt=TINY), "dt"),
+    (lambda: ts.SolverConfig(dt=np.longdouble("1e-330")), "dt"),
+], ids=["simulate huge", "simulate tiny", "records huge", "run_batch huge", "cycles huge",
+        "cycles tiny", "advance huge", "advance tiny", "advance records huge",
+        "nearest_interval", "interval_for_count", "dt tiny", "dt longdouble"])
+def test_numbers_beyond_or_below_floats_reach_are_refused_naming_the_argument(no_compute, call,
+                                                                              name):
+    with pytest.raises(ValueError, match=f"^{name} must be"):
+        call()
+
+
+def test_a_step_count_beyond_floats_range_is_too_many_steps():
+    with pytest.raises(ValueError, match="is inf time steps per instance; the limit is"):
+        check_work("duration_s = 1e400 s", HUGE)
