@@ -99,7 +99,7 @@ def _check_actuator_values(name, values, lowest, highest, highest_included):
         if not is_real(value) or not _in_span(value, lowest, highest,
                                               highest_included=highest_included):
             raise ValueError(f"{name}[{index}] (A{index + 1}) must be a real number in {span}, "
-                             f"got {shown(value)}")
+                             f"got {_as_stored(value)}")
         checked.append(float(value) + 0.0)  # a zero as +0.0, as `check_number`
     return tuple(checked)
 
@@ -132,10 +132,26 @@ def check_number(name, value, lowest, highest, lowest_included=True, integer=Fal
     if not (is_whole(value) if integer else is_real(value)):
         raise ValueError(f"{name} must be {kind} in {span}, got {value!r}")
     if not _in_span(value, lowest, highest, lowest_included, highest_included, integer):
-        raise ValueError(f"{name} must be {kind} in {span}, got {shown(value)}")
+        raise ValueError(f"{name} must be {kind} in {span}, got {_as_stored(value)}")
     # + 0.0 stores a zero as +0.0: parameters that compare equal are then the same bits
     # (build_model builds equal instances once)
     return int(value) if integer else float(value) + 0.0
+
+
+def _as_stored(value) -> str:
+    """A refused number as the message shows it (`checks.shown`), and where the float it would
+    be stored as differs from it, that too: np.float32(0.05) is 0.05000000074505806, past a
+    bound of 0.05 (a review, 2026-12)."""
+    text = shown(value)
+    if is_whole(value):  # an integer is stored as itself
+        return text
+    try:
+        stored = float(value)
+    except (OverflowError, TypeError, ValueError):
+        return text
+    if math.isfinite(stored) and repr(stored) not in text:
+        return f"{text} ({stored!r} as a float)"
+    return text
 
 
 def _in_span(value, lowest, highest, lowest_included=True, highest_included=True,

@@ -289,6 +289,8 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
                                        record_interval_s, record_shapes, steady_from_cycle,
                                        label if progress else None, directions))
     result = results[0] if len(results) == 1 else _concatenate(results)
+    # once for the whole batch, its rows renumbered (each chunk named its own rows)
+    warn_about_ok_instances(result.summary, solver)
     result.timing = dataclasses.replace(result.timing, setup_s=result.timing.setup_s + initialise_s)
     return result
 
@@ -511,7 +513,6 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
     metric_columns = [*metrics.SPEED_COLUMNS, "heading_deg", "steady_speed_mm_s",
                       "steady_signed_speed_mm_s"]
     summary.loc[failed, metric_columns] = np.nan
-    warn_about_ok_instances(summary, solver)
 
     trajectory = pd.DataFrame({"instance": pd.Series(dtype=int), "t_s": pd.Series(dtype=float),
                                "x_mm": pd.Series(dtype=float), "y_mm": pd.Series(dtype=float),

@@ -105,7 +105,8 @@ def nearest_interval(interval_s: float, dt: float) -> float:
             raise ValueError(f"{name} must be a finite number > 0 s, got {shown(value)}")
     steps = float(interval_s) / float(dt)
     if not math.isfinite(steps):
-        raise ValueError(f"interval_s = {interval_s!r} s is {steps} steps of dt = {dt!r} s")
+        raise ValueError(f"interval_s = {shown(interval_s)} s is {steps} steps of dt = "
+                         f"{shown(dt)} s")
     return max(1, round(steps)) * dt
 
 
@@ -136,7 +137,10 @@ def check_work(name: str, steps: float, batch: Optional[int] = None):
     if not is_real(steps) or steps < 0:
         raise ValueError(f"steps must be a real number >= 0 (time steps per instance), got "
                          f"{shown(steps)}")
-    steps = float(steps) if is_finite_real(steps) else math.inf  # 10**400 steps: too many
+    try:
+        steps = float(steps)
+    except OverflowError:  # 10**400 steps: too many
+        steps = math.inf
     if batch is not None and (not is_whole(batch)
                               or batch < 1):
         raise ValueError(f"batch must be an integer >= 1 (instances) or None, got {batch!r}")

@@ -356,7 +356,26 @@ def checked_task(task: dict) -> "SwimmerTask":
     return SwimmerTask(**task)
 
 
-class StarSwimmerEnv(gym.Env):
+class RobotsView:
+    """What both environments show of their robots: the Simulator and the control period
+    (their `batch`, a `GoalReachingBatch`, holds them)."""
+
+    batch: GoalReachingBatch
+
+    @property
+    def simulator(self) -> Simulator:
+        """The `Simulator` that holds the robots (read its `state()`, `n_nodes` or shapes;
+        stepping it directly bypasses the episodes). RuntimeError once the environment is
+        closed."""
+        return self.batch.simulator
+
+    @property
+    def control_period_s(self) -> float:
+        """The simulated seconds one `step` advances, s."""
+        return self.batch.control_period_s
+
+
+class StarSwimmerEnv(RobotsView, gym.Env):
     """One star robot swimming to a goal point (see the module docstring for the spaces,
     reward and episode ends). Keyword arguments: params (a StarParams; default the paper
     preset), solver (SolverConfig; default the paper preset), control_period_s, arch, and the
@@ -377,18 +396,6 @@ class StarSwimmerEnv(gym.Env):
                                        arch)
         self.observation_space = observation_space(self.batch.task)
         self.action_space = spaces.MultiBinary(N_ACTUATORS)
-
-    @property
-    def simulator(self) -> Simulator:
-        """The `Simulator` that holds the robots (read its `state()`, `n_nodes` or shapes;
-        stepping it directly bypasses the episodes). RuntimeError once the environment is
-        closed."""
-        return self.batch.simulator
-
-    @property
-    def control_period_s(self) -> float:
-        """The simulated seconds one `step` advances, s."""
-        return self.batch.control_period_s
 
     def _observe(self):
         observation, info = self.batch.observe(self.observation_space)
@@ -418,7 +425,7 @@ class StarSwimmerEnv(gym.Env):
         self.batch.close()
 
 
-class StarSwimmerVectorEnv(VectorEnv):
+class StarSwimmerVectorEnv(RobotsView, VectorEnv):
     """num_envs star robots in one Simulator, each with its own goal and episode (NEXT_STEP
     autoreset; see the module docstring). Keyword arguments as `StarSwimmerEnv`, except that
     params may also be a sequence of num_envs StarParams sharing a topology; with render_mode
@@ -440,18 +447,6 @@ class StarSwimmerVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, num_envs)
         self._generators = [seeding.np_random(None)[0] for _ in range(num_envs)]
         self._autoreset = np.zeros(num_envs, dtype=bool)
-
-    @property
-    def simulator(self) -> Simulator:
-        """The `Simulator` that holds the robots (read its `state()`, `n_nodes` or shapes;
-        stepping it directly bypasses the episodes). RuntimeError once the environment is
-        closed."""
-        return self.batch.simulator
-
-    @property
-    def control_period_s(self) -> float:
-        """The simulated seconds one `step` advances, s."""
-        return self.batch.control_period_s
 
     def reset(self, *, seed=None, options: Optional[dict] = None):
         """Reset every robot, or those of `options["reset_mask"]` ((num_envs,) bool). seed:

@@ -55,6 +55,9 @@ def test_a_closed_env_hands_its_engine_to_the_next_and_refuses_to_step():
     first.reset(seed=5)
     expected = [first.step(FORWARD)[0] for _ in range(2)]
     engine = first.unwrapped.simulator.engine
+    # make's environment is wrapped: its properties are the unwrapped one's (docs/control.md)
+    assert first.get_wrapper_attr("simulator") is first.unwrapped.simulator
+    assert first.unwrapped.control_period_s == SHORT["control_period_s"]
     first.close()
     first.close()  # gymnasium allows closing twice
     for call in (lambda: first.reset(seed=5), lambda: first.step(FORWARD)):

@@ -267,6 +267,24 @@ def test_a_batchs_capped_instances_are_warned_about_once_with_the_batchs_numbers
     assert result.summary.newton_capped.tolist() == [False, False, False, True]
 
 
+def test_a_streamed_batchs_capped_instances_are_warned_about_once_with_its_numbers(
+        monkeypatch):
+    """simulate streams a batch too large for one engine through it in chunks, and each chunk
+    warned with its own rows (a review, 2026-12): one warning for the whole batch. Chunks of
+    two forced (the batch would need more than an engine's budget otherwise)."""
+    from taichi_star import simulation
+
+    monkeypatch.setattr(simulation, "stream_chunk_size", lambda *args: 2)
+    paper = ts.StarParams(gait="A1+A3")
+    tiny_limbs = paper.replace(tip_radius=paper.joint_radius + 2e-5)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ts.simulate([paper, paper, paper, tiny_limbs], 0.02)
+    messages = [str(w.message) for w in caught if "newton_capped" in str(w.message)]
+    assert messages and messages[0].startswith("1 of 4 f64 instances (the first: instance 3)")
+    assert len(messages) == 1
+
+
 def test_an_f32_simulator_refuses_a_firing_at_a_step_its_clock_cannot_hold():
     """With fixed steps a pending firing is kept as its step number in the engine's float: f32
     holds every whole number up to 2²⁴ (accepted), not 2²⁴ + 1 (refused, nothing changed).

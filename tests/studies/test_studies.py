@@ -659,18 +659,24 @@ def test_the_machine_record_names_the_vector_sets_and_the_caches(tmp_path):
     assert {"vector_extensions", "caches"} <= set(study_provenance.machine())
 
 
+def study_parsers():
+    """(name, parser) of every study built on `build_parser` (reproduce has its own small
+    parser)."""
+    import importlib
+
+    for name in study_names():
+        module = importlib.import_module(f"studies.{name}")
+        if hasattr(module, "build_parser"):
+            yield name, module.build_parser()
+
+
 def test_every_study_flag_with_a_default_shows_it_in_its_help():
     """docs/studies.md: `--help` gives each flag's default (five flags did not say theirs: an
     audit); the parser adds it where the help text does not."""
     import argparse
-    import importlib
 
     unsaid = []
-    for name in study_names():
-        module = importlib.import_module(f"studies.{name}")
-        if not hasattr(module, "build_parser"):  # reproduce: its own small parser
-            continue
-        parser = module.build_parser()
+    for name, parser in study_parsers():
         for action in parser._actions:
             shown = action.default not in (None, [], False) or (
                 isinstance(parser, cli.StudyParser) and action.dest in parser.quick_defaults)
@@ -687,14 +693,8 @@ def test_no_flag_says_its_default_twice(quick_flags):
     """Each flag's help says "default" once: the parser adds a default only where the help
     does not say it (a flag with a --quick default said it twice, "(default 512) (default
     512; --quick 2)": an audit), for the flags without a --quick default and with one."""
-    import importlib
-
     twice = []
-    for name in study_names():
-        module = importlib.import_module(f"studies.{name}")
-        if not hasattr(module, "build_parser"):  # reproduce: its own small parser
-            continue
-        parser = module.build_parser()
+    for name, parser in study_parsers():
         for action in parser._actions:
             if (action.dest in getattr(parser, "quick_defaults", {})) != quick_flags:
                 continue

@@ -710,3 +710,15 @@ def test_every_declared_solver_range_is_the_validated_range_at_both_ends(name):
             config(lowest)
     with pytest.raises(ValueError, match=f"^{name} must be"):
         config(beyond(lowest, -1))
+
+
+def test_a_float32_past_a_bound_as_a_float_is_refused_saying_what_it_became():
+    """np.float32(0.05) is 0.05000000074505806 as the float it would be stored as, past dt's
+    bound of 0.05: refused (it was stored, past MAX_DT), and the message says what it became
+    (it read "got np.float32(0.05)", a value in range: a review, 2026-12); float32 values that
+    stay within the range are taken as their floats."""
+    with pytest.raises(ValueError, match=r"^dt must be a real number in \(0, 0\.05\], got "
+                                         r"np\.float32\(0\.05\) \(0\.05000000074505806 as a "
+                                         r"float\)$"):
+        ts.SolverConfig(dt=np.float32(0.05))
+    assert ts.SolverConfig(dt=np.float32(0.04)).dt == float(np.float32(0.04))
