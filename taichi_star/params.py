@@ -583,7 +583,8 @@ class SolverConfig:
     def __post_init__(self):
         for f in fields(self):
             value = getattr(self, f.name)
-            if "range" in f.metadata and value is not None:  # residual_tol None: off
+            # None is a value only where it is the default (residual_tol: the test off)
+            if "range" in f.metadata and not (value is None and f.default is None):
                 lowest, highest, included = f.metadata["range"]
                 object.__setattr__(self, f.name, check_number(
                     f.name, value, lowest, highest, included, isinstance(f.default, int)))

@@ -722,3 +722,13 @@ def test_a_float32_past_a_bound_as_a_float_is_refused_saying_what_it_became():
                                          r"float\)$"):
         ts.SolverConfig(dt=np.float32(0.05))
     assert ts.SolverConfig(dt=np.float32(0.04)).dt == float(np.float32(0.04))
+
+
+@pytest.mark.parametrize("name", sorted(set(SOLVER_RANGES) - {"residual_tol"}))
+def test_none_is_refused_where_it_is_not_the_default(name):
+    """None switches residual_tol's test off, and is no value of any other numeric field (the
+    first form of the declared ranges let None through for all of them: caught by the
+    hypothesis test of bad solver fields)."""
+    with pytest.raises(ValueError, match=f"^{name} must be .* got None$"):
+        ts.SolverConfig(**{name: None})
+    assert ts.SolverConfig(residual_tol=None).residual_tol is None
