@@ -27,7 +27,7 @@ duration = 0.3 if quick else 3 * params[0].period                     # s
 result = ts.simulate(params, duration, progress=not quick)            # one batch, one engine
 table = result.summary                                                # one row per robot
 assert (table.status == "ok").all(), table[table.status != "ok"]
-table.to_csv("sweep_alpha.csv", index=False)
+result.to_csv("sweep_alpha.csv")                                      # with its provenance sidecar
 
 table = pd.read_csv("sweep_alpha.csv")                                # plot from the CSV only
 fig, ax = plt.subplots(figsize=(5, 3.5), layout="constrained")

@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from taichi_star.batch import run_batch
+from taichi_star.output import GIF_MOST_FPS
 from taichi_star.timegrid import interval_for_count
 
 from . import cli
@@ -65,7 +66,8 @@ def build_parser():
     parser.add_argument("--frames", type=int, default=60,
                         help="frames per GIF (default 60): at least this many where the run has "
                              "as many steps, fewer than twice as many")
-    parser.add_argument("--fps", type=int, default=15, help="GIF frame rate (default 15)")
+    parser.add_argument("--fps", type=int, default=15,
+                        help=f"GIF frame rate, 1 to {GIF_MOST_FPS} (default 15)")
     cli.add_model_flags(parser, fixed=("gait",))
     cli.add_dt_flag(parser)
     cli.add_cycles_flag(parser, default=1.0)
@@ -76,8 +78,7 @@ def main(argv=None):
     args = cli.parse(build_parser(), argv)
     if not 2 <= args.frames <= MAX_FRAMES:
         raise cli.StudyArgumentError(f"--frames must be in [2, {MAX_FRAMES}], got {args.frames}")
-    if args.fps < 1:
-        raise cli.StudyArgumentError(f"--fps must be >= 1, got {args.fps}")
+    cli.check_count(args.fps, "--fps", 1, GIF_MOST_FPS)  # a GIF's frame delays: the library's
     gaits = cli.resolve_gaits(args.gait, "--gait")
     base = cli.base_params(args)
     params = [base.replace(gait=g) for g in gaits]

@@ -233,13 +233,14 @@ def parse(parser: StudyParser, argv) -> argparse.Namespace:
                                  "or a Dask cluster), not both")
     if getattr(args, "scheduler", None) is not None:
         try:
-            from taichi_star.batch.dask_cluster import ADDRESS
+            from taichi_star.batch.dask_cluster import check_address
         except ImportError:
             raise StudyArgumentError("--scheduler needs Dask: pip install "
                                      "'taichi_star[dask]'") from None
-        if not ADDRESS.match(args.scheduler.strip()):
-            raise StudyArgumentError(f"--scheduler: expected an address like tcp://HOST:PORT, "
-                                     f"got {args.scheduler!r}")
+        try:
+            check_address(args.scheduler)
+        except ValueError as error:
+            raise StudyArgumentError(f"--{error}") from None
     if args.arch != "cpu":
         from taichi_star.runtime import available_archs
         if args.arch not in available_archs():

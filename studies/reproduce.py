@@ -49,7 +49,10 @@ def command(name: str, into: Path):
     flags = COMMANDS[name]
     study, flags = (flags[0], flags[1:]) if flags and not flags[0].startswith("-") \
         else (name, flags)
-    return [sys.executable, "-m", "studies", study, *flags, "--no-progress", "--out", str(into)]
+    # the package this module runs in: `studies` in the checkout, `taichi_star.studies` once
+    # installed (`python -m studies` failed outside the checkout: an audit, 2026-12)
+    return [sys.executable, "-m", __package__, study, *flags, "--no-progress", "--out",
+            str(into)]
 
 
 def main(argv=None):
@@ -65,9 +68,16 @@ def main(argv=None):
     if unknown:
         raise StudyArgumentError(f"--only: unknown result {unknown[0]!r}; choose from "
                                  f"{', '.join(COMMANDS)}")
+    into = Path(args.into)
+    if into.exists() and not into.is_dir():
+        raise StudyArgumentError(f"--into: {into} is not a folder")
     for name in names:
-        line = command(name, Path(args.into))
+        line = command(name, into)
         # as a user types it (the run itself uses this interpreter, `line[0]`)
         print(" ".join(map(shlex.quote, ["python", *line[1:]])), flush=True)
         if not args.dry_run:
-            subprocess.run(line, check=True)
+            status = subprocess.run(line).returncode
+            if status != 0:  # the study said why, in its own line above
+                print(f"reproduce: {name} failed (exit status {status}); the results written "
+                      f"before it are kept", file=sys.stderr)
+                raise SystemExit(status)

@@ -26,7 +26,7 @@ from .provenance import (TABLE_SHA256, TEMPORARY_MARK, code_record, file_path, r
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
 __all__ = ["to_xarray", "summary_of_dataset", "read_provenance", "animate", "column_unit",
-           "column_units", "parquet_bytes"]
+           "column_units", "parquet_bytes", "GIF_MOST_FPS"]
 
 PROVENANCE_KEY = "taichi_star"
 """Key of the provenance in a Parquet file's schema metadata (JSON)."""

@@ -103,6 +103,8 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
     ("jacobians", ["--batch", "2000000000"], "--batch must be in [1, 1048576], got 2000000000"),
     ("animate", ["--frames", "1000000000"], "--frames must be in [2, 10000], got 1000000000"),
     ("animate", ["--frames", "10001"], "--frames must be in [2, 10000], got 10001"),
+    # the library's GIF bound (it was checked after the run: a traceback, the tables left)
+    ("animate", ["--fps", "51"], "--fps must be in [1, 50], got 51"),
     ("jacobians", ["--modes", "bogus"],
      "--modes: 'bogus' is not MODE:TOL (MODE one of newton, chord, lagged, TOL Newton's "
      "tolerance in m, e.g. lagged:1e-10)"),
@@ -226,6 +228,39 @@ def test_reproduce_refuses_a_result_listed_twice(tmp_path, capsys):
     error = capsys.readouterr().err
     assert "--only: 'sweep' is listed twice in 'sweep,sweep'" in error, error
     assert len(error.strip().splitlines()) == 1
+
+
+def test_reproduce_refuses_an_into_that_is_a_file(tmp_path, capsys):
+    """--into was not checked: the first study refused it, then reproduce added a traceback."""
+    into = tmp_path / "a_file"
+    into.write_text("")
+    assert studies_main(["reproduce", "--only", "fig4c", "--into", str(into)]) == 2
+    error = capsys.readouterr().err
+    assert f"--into: {into} is not a folder" in error and len(error.strip().splitlines()) == 1
+
+
+def test_reproduce_stops_at_a_failed_study_in_one_line_with_its_status(tmp_path, capsys,
+                                                                       monkeypatch):
+    """A study that fails (it says why itself) ended reproduce in a CalledProcessError
+    traceback, exit 1 (an audit, 2026-12): one line naming it, its exit status passed on, the
+    studies after it not run. The command runs this package's studies (`studies` here,
+    `taichi_star.studies` once installed: `python -m studies` failed there)."""
+    import subprocess
+
+    from studies import reproduce
+
+    ran = []
+
+    def failing(line, **kwargs):
+        ran.append(line)
+        return subprocess.CompletedProcess(line, 3)
+    monkeypatch.setattr(subprocess, "run", failing)
+    into = tmp_path / "into"
+    assert studies_main(["reproduce", "--only", "fig4c,convergence", "--into", str(into)]) == 3
+    error = capsys.readouterr().err
+    assert error.strip() == "reproduce: fig4c failed (exit status 3); the results written " \
+                            "before it are kept"
+    assert len(ran) == 1 and ran[0][1:4] == ["-m", reproduce.__package__, "fig4c"]
 
 
 def unreachable_scheduler(**settings):

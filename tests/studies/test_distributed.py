@@ -82,6 +82,9 @@ def test_killed_dask_worker_costs_only_its_chunk(reference, cluster, tmp_path):
     (["--workers", "0"], "--workers must be >= 1"),
     (["--workers", "2", "--scheduler", "tcp://127.0.0.1:8786"], "give one"),
     (["--scheduler", "localhost"], "--scheduler: expected an address like tcp://HOST:PORT"),
+    # refused at once (it waited 31 s for the connection's timeout), and the port named
+    (["--scheduler", "tcp://127.0.0.1:65536"],
+     "--scheduler: the port of 'tcp://127.0.0.1:65536' must be in 1..65535"),
     (["--retries", "-1"], "--retries must be >= 0"),
     (["--chunk-size", "0", "--workers", "2"], "--chunk-size must be >= 1"),
 ])
