@@ -349,6 +349,16 @@ def to_xarray(result):
     return dataset
 
 
+def _held_after_failure(shapes: np.ndarray) -> np.ndarray:
+    """Shapes (T, B, N, 2) with each instance's records after its failure (NaN) replaced by
+    its last finite one: the frozen robot stays drawn, its panel title saying why."""
+    held = shapes.copy()
+    for index in range(1, len(held)):
+        lost = ~np.isfinite(held[index]).all(axis=(1, 2))
+        held[index, lost] = held[index - 1, lost]
+    return held
+
+
 def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str = "world",
             fps: int = 15, size_px: int = 720, title: Optional[str] = None):
     """Write the recorded shapes of some instances (default: all, up to 16; one panel each) as
@@ -358,8 +368,10 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
     `simulate` fires them at 0, T, 2T, ...), labels A1..A8, the central cylinder and a scale
     bar. `frame` "world" (lab axes, mm, with the centroid's path so far drawn in blue) or
     "body" (following the hub and the body's rotation; no path). `title` heads the movie
-    (default none) above the time. Returns the path. Raises ValueError without recorded
-    shapes, for an unknown frame or suffix, or for instances out of range."""
+    (default none) above the time. A failed instance's panel names its status and failure
+    time and holds its last shape after it (it was an empty panel). Returns the path. Raises
+    ValueError without recorded shapes, for an unknown frame or suffix, or for instances out
+    of range."""
     matplotlib = require("matplotlib", "video")
     require("PIL", "video")
 
@@ -397,7 +409,7 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
     chosen = [int(i) for i in chosen]
     topology = result.topology
     times = np.sort(result.trajectory["t_s"].unique())
-    shapes = result.shapes[:, chosen] * 1e3  # mm
+    shapes = _held_after_failure(result.shapes[:, chosen] * 1e3)  # mm
     paths = None
     if frame == "body":
         shapes = _body_frame(shapes, topology)
@@ -428,7 +440,11 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
             continue
         ax.set_xlim(centre[0] - half, centre[0] + half)
         ax.set_ylim(centre[1] - half, centre[1] + half)
-        ax.set_title(f"#{chosen[slot]} {params[slot].gait}", fontsize=9)
+        row = result.summary.iloc[chosen[slot]]
+        # a failed instance is said so, not left as an empty panel (an audit, 2026-12)
+        failed = "" if row["status"] == "ok" else \
+            f": {row['status']} at {row['failure_time_s']:.3g} s, held"
+        ax.set_title(f"#{chosen[slot]} {params[slot].gait}{failed}", fontsize=9)
         drawing.add_scale_bar(ax, drawing.nice_length(2 * half))
         robots.append(drawing.RobotArtist(ax, topology, params[slot].cylinder_diameter * 1e3,
                                           labels=len(chosen) <= 4, path=frame == "world"))

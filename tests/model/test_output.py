@@ -277,3 +277,18 @@ def test_the_documented_result_columns_are_the_summary_columns_with_their_units(
     assert [name for name, _ in documented] == results
     for name, unit in documented:
         assert unit == (column_unit(name) or "—"), name
+
+
+def test_a_failed_instance_is_held_at_its_last_shape_in_an_animation():
+    """A failed instance's records are NaN from its failure on, and its panel went empty
+    without a word (an audit, 2026-12): its frames hold the last finite shape (the panel's
+    title says the status and time); a running instance's frames are untouched."""
+    from taichi_star.output import _held_after_failure
+
+    shapes = np.arange(3 * 2 * 4 * 2, dtype=float).reshape(3, 2, 4, 2)
+    shapes[1:, 1] = np.nan  # instance 1 failed after the first record
+    held = _held_after_failure(shapes)
+    np.testing.assert_array_equal(held[:, 0], shapes[:, 0])
+    np.testing.assert_array_equal(held[1], np.stack([shapes[1, 0], shapes[0, 1]]))
+    np.testing.assert_array_equal(held[2, 1], shapes[0, 1])
+    assert np.isnan(shapes[2, 1]).all()  # a copy: the result's shapes stay NaN
