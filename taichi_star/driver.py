@@ -110,9 +110,8 @@ def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float,
     record falls after its start."""
     if record_interval_s and multiples_within(duration_s, record_interval_s) == 0:
         warn_user(f"record_interval_s = {record_interval_s:g} s is longer than duration_s = "
-                      f"{duration_s:g} s: no record falls after the start (simulate's trajectory "
-                      f"holds the start alone, Simulator.advance returns no rows)",
-                      )
+                  f"{duration_s:g} s: no record falls after the start (simulate's trajectory "
+                  f"holds the start alone, Simulator.advance returns no rows)")
     after = "" if steps_taken is None else f"after the {steps_taken} steps taken"
     taken = steps_taken or 0
     if solver.adaptive:
@@ -131,9 +130,9 @@ def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float,
         most = taken + duration_s / solver.dt_min
         if not most <= MAX_STEPS_PER_INSTANCE:
             warn_user(f"duration_s = {duration_s:g} s at dt_min = {solver.dt_min:g} s could "
-                          f"take {most:.3g} steps per instance: an instance that reaches "
-                          f"{MAX_STEPS_PER_INSTANCE} (the int32 step counter) stops there with "
-                          f"status step_limit")
+                      f"take {most:.3g} steps per instance: an instance that reaches "
+                      f"{MAX_STEPS_PER_INSTANCE} (the int32 step counter) stops there with "
+                      f"status step_limit")
         return
     check_work(f"duration_s = {duration_s:g} s at dt = {solver.dt:g} s"
                f"{f' ({after})' if after else ''}", taken + duration_s / solver.dt, batch)

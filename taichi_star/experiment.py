@@ -276,14 +276,13 @@ def objective_values(signed_speeds, measurements: pd.DataFrame) -> np.ndarray:
     -> (P,); inf for a point with any non-finite speed (a failed simulation) (the calibration
     objective of `python -m studies calibrate`).
 
-    For gait g with measured full-trial speed v_g > 0 and the paper's
-    direction s_g = ±1, the relative signed error of a simulated signed speed u_g is
-    r_g = (u_g − s_g v_g) / v_g, so r_g = 0 at the measurement and r_g ≤ −1 (forward gait) or
-    ≥ +1 (reverse gait) whenever the direction is wrong. The objective is the weighted mean of r_g²
-    over the gaits, with weights w_g ∝ (v_g / σ_g)² normalised to mean 1, σ_g the spread of the
-    measured per-cycle speeds (`experimental_cycle_speeds`): the squared error in units of the
-    measurement's own relative spread. `weights="uniform"` gives every gait weight 1.
-    """
+    For gait g with measured full-trial speed v_g > 0 and the paper's direction s_g = ±1, the
+    relative signed error of a simulated signed speed u_g is r_g = (u_g − s_g v_g) / v_g, so
+    r_g = 0 at the measurement and r_g ≤ −1 (forward gait) or ≥ +1 (reverse gait) whenever the
+    direction is wrong. The objective is the weighted mean of r_g² over the gaits, with weights
+    w_g ∝ (v_g / σ_g)² normalised to mean 1, σ_g the spread of the measured per-cycle speeds
+    (`experimental_cycle_speeds`): the squared error in units of the measurement's own
+    relative spread. `weights="uniform"` gives every gait weight 1."""
     errors = np.atleast_2d(relative_signed_errors(signed_speeds, measurements))
     weights = measurements["weight"].to_numpy()
     values = (errors ** 2 * weights).sum(axis=1) / weights.sum()

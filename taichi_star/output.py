@@ -51,7 +51,8 @@ PARAMETER_COLUMN_UNITS = {parameter_column(name): unit for name, unit in PARAMET
 """Units of the numeric parameter columns (youngs_modulus_pa: Pa, alpha: 1)."""
 
 
-DERIVATIVE_COLUMN = re.compile(r"^d\((?P<output>.+)\)/d\((?P<field>[a-z_]+)(\[\d+\])?\)$")
+DERIVATIVE_COLUMN = re.compile(r"^d\((?P<output>.+)\)/d\((?P<field>[a-z_]+)"
+                               r"(\[(?P<index>\d+)\])?\)$")
 """A sensitivity column's name, "d(x_mm)/d(youngs_modulus)" or "d(x_mm)/d(actuator_gains[3])"."""
 
 
@@ -255,9 +256,9 @@ def read_provenance(path) -> dict:
 
 def summary_of_dataset(dataset) -> pd.DataFrame:
     """The per-instance table of a `to_xarray` Dataset (or one read from netCDF): every
-    variable and coordinate along `instance` alone but the sensitivities, as columns (the `instance` coordinate
-    first where the summary had it as a column: a `run_batch` result's);
-    `StarParams.from_row` reads its rows. ValueError for anything else (a path: open it with
+    variable and coordinate along `instance` alone but the sensitivities, as columns (the
+    `instance` coordinate first where the summary had it as a column: a `run_batch`
+    result's); `StarParams.from_row` reads its rows. ValueError for anything else (a path: open it with
     `xarray.open_dataset` first)."""
     xr = require("xarray", "io")
     if not isinstance(dataset, xr.Dataset) or "instance" not in dataset.coords:
@@ -275,8 +276,9 @@ def summary_of_dataset(dataset) -> pd.DataFrame:
 def _variable_of_column(column: str) -> str:
     """A sensitivity column's name as a netCDF variable's, which cannot hold "/":
     "d(x_mm)/d(actuator_gains[2])" → "d_x_mm__d_actuator_gains_2"."""
-    output, direction = column[2:-1].split(")/d(")
-    return f"d_{output}__d_{direction.replace('[', '_').replace(']', '')}"
+    parts = DERIVATIVE_COLUMN.match(column)
+    index = "" if parts["index"] is None else f"_{parts['index']}"
+    return f"d_{parts['output']}__d_{parts['field']}{index}"
 
 
 def to_xarray(result):
@@ -285,9 +287,9 @@ def to_xarray(result):
     with recorded shapes, `positions` (time, instance, node, xy) in m; with sensitivities,
     each of their columns (`sensitivities` per instance, `trajectory_sensitivities` per record)
     as a variable "d_OUTPUT__d_PARAMETER" whose attributes hold the column's name ("column"),
-    its units and sensitivity = 1 (`summary_of_dataset` leaves them out). Every variable carries a
-    `units` attribute; the dataset's attributes hold the `provenance` as JSON (`provenance`)
-    and its main entries one by one (taichi_star_version, git_commit, git_dirty, the solver's
+    its units and sensitivity = 1 (`summary_of_dataset` leaves them out). Every variable
+    carries a `units` attribute; the dataset's attributes hold the `provenance` as JSON
+    (`provenance`) and its main entries one by one (taichi_star_version, git_commit, git_dirty, the solver's
     integrator, dt_s, adaptive, precision)."""
     xr = require("xarray", "io")
 

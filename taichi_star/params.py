@@ -147,7 +147,7 @@ def _as_stored(value) -> str:
         return text
     try:
         stored = float(value)
-    except (OverflowError, TypeError, ValueError):
+    except OverflowError:  # a real number past float's range (10**400 / 3)
         return text
     if math.isfinite(stored) and repr(stored) not in text:
         return f"{text} ({stored!r} as a float)"
@@ -537,9 +537,10 @@ class SolverConfig:
     newton_tol: float = parameter(1e-10, "m", 1e-14, 1e-6)
     """Convergence: the largest position error left after a Newton update, m (at most a
     micrometre, 1e-5 of the robot's size: any looser and "converged" would not mean the step
-    was solved; in f32 at least `F32_NEWTON_TOL_MIN`). The error left is bounded by max |Δq_k| and, once the updates contract
-    (θ = max |Δq_k| / max |Δq_{k−1}| < 1), by θ/(1 − θ)·max |Δq_k| — the standard estimate for a
-    contracting iteration, which spares the step an iteration that would only confirm it."""
+    was solved; in f32 at least `F32_NEWTON_TOL_MIN`). The error left is bounded by
+    max |Δq_k| and, once the updates contract (θ = max |Δq_k| / max |Δq_{k−1}| < 1), by
+    θ/(1 − θ)·max |Δq_k| — the standard estimate for a contracting iteration, which spares the
+    step an iteration that would only confirm it."""
     residual_tol: Optional[float] = parameter(None, "N", 1e-8, 1000.0)
     """Convergence judged on the residual as well (opt-in; None: the update test alone): the
     largest component of the residual (a node's force imbalance, N) that the accepted update was

@@ -286,8 +286,9 @@ class Simulator:
         Returns the `state()` rows at every multiple of record_interval_s after now (s, with
         fixed steps a whole number of steps: `timegrid.nearest_interval` gives one; 0 = none),
         with a `record` column; empty without records. `progress`: a progress bar in simulated
-        seconds (None: where the call is estimated at `driver.AUTO_PROGRESS_S` or more). With adaptive steps the end ends a step (as a record time does): pieces give
-        one call's bits where they end on its step ends (docs: Control, The Simulator)."""
+        seconds (None: where the call is estimated at `driver.AUTO_PROGRESS_S` or more). With
+        adaptive steps the end ends a step (as a record time does): pieces give one call's bits
+        where they end on its step ends (docs: Control, The Simulator)."""
         if not (is_finite_real(duration_s) and float(duration_s) > 0):
             raise ValueError(f"duration_s must be a finite number > 0 s, got {shown(duration_s)}")
         # the kind first: an empty text or list, None or False is not 0, and an array has no
@@ -515,10 +516,10 @@ class Simulator:
                    if snapshot.solver and snapshot.solver.get(name) != own[name]]
         if changed:
             warn_user(f"the saved state was stepped with {changed[0]} = "
-                          f"{snapshot.solver.get(changed[0], 'not recorded')}, this simulator's "
-                          f"is {own[changed[0]]} ({len(changed)} setting(s) differ): it goes on "
-                          f"under this simulator's settings, not bit for bit as the saved run "
-                          f"would have")
+                      f"{snapshot.solver.get(changed[0], 'not recorded')}, this simulator's "
+                      f"is {own[changed[0]]} ({len(changed)} setting(s) differ): it goes on "
+                      f"under this simulator's settings, not bit for bit as the saved run "
+                      f"would have")
 
     def __repr__(self) -> str:
         times = self.time_s
