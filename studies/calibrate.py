@@ -267,7 +267,7 @@ def main(argv=None):
         f"× {fitted} gaits" + (f" (and the held-out one's prediction) × {folds} folds"
                                if folds > 1 else ""))
     base = identify.model_with_box(args, box, "--fit")
-    identify.note_unfired_axes("calibrate", "--fit", box, gaits)
+    identify.check_unfired_axes("calibrate", "--fit", box, gaits)
     measurements = experiment.measurement_table(gaits, args.weights)
     solver = cli.solver(args)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},

@@ -220,6 +220,8 @@ def parse(parser: StudyParser, argv) -> argparse.Namespace:
         if value is not None and not value.strip():
             raise StudyArgumentError(f"--{flag.replace('_', '-')}: an empty folder name (give "
                                      f"a folder, e.g. runs/mine)")
+    if getattr(args, "run_dir", None) is not None:
+        check_future_folder(Path(args.run_dir), args.quick, "--run-dir")
     if getattr(args, "prefix", None) is not None:
         check_file_name(args.prefix, "--prefix")
     if getattr(args, "resume", False) and args.out is None \
@@ -490,6 +492,8 @@ def base_params(args) -> StarParams:
             raise StudyArgumentError(f"--set {name}: give exactly one value, got {values}")
         if name in args.fixed_fields:
             raise StudyArgumentError(f"--set {name}: set by the {args.study} study itself")
+        if name in overrides:
+            raise StudyArgumentError(f"--set {name}: given twice")
         overrides[name] = values[0]
     try:
         return StarParams.preset(args.preset, **overrides)
@@ -711,15 +715,37 @@ def _fresh_run_folder(study: str) -> Path:
         folder = RUNS_FOLDER / study / f"{stamp}-{suffix}"
 
 
+def check_folder_name(folder: Path, quick: bool, flag: str):
+    """StudyArgumentError naming `flag` where `folder` is a file, or --quick would write into the
+    committed results/ or any folder in it; creates nothing."""
+    resolved = folder.resolve()
+    if quick and (resolved == COMMITTED_RESULTS or COMMITTED_RESULTS in resolved.parents):
+        raise StudyArgumentError(f"{flag} {folder}: --quick runs never write into the committed "
+                                 f"results/ (give another folder)")
+    if folder.exists() and not folder.is_dir():
+        raise StudyArgumentError(f"{flag} {folder}: exists and is not a folder")
+
+
+def check_future_folder(folder: Path, quick: bool, flag: str):
+    """A folder that a run makes later (the run store of --run-dir, reproduce's --into) checked
+    before any compute, creating nothing (StudyArgumentError naming `flag`): as
+    `check_folder_name`, and the folder, or the nearest folder above it that exists,
+    writable."""
+    check_folder_name(folder, quick, flag)
+    existing = next(path for path in (folder.absolute(), *folder.absolute().parents)
+                    if path.exists())
+    try:
+        with tempfile.TemporaryFile(dir=existing):  # as root, os.access says yes to /proc
+            pass
+    except OSError as error:
+        raise StudyArgumentError(f"{flag} {folder}: cannot write into {existing} "
+                                 f"({error.strerror})") from None
+
+
 def check_output_folder(folder: Path, quick: bool):
     """Create the output folder or fail with a StudyArgumentError naming --out: not a folder,
     cannot be created, not writable; --quick into the committed results/ or any folder in it."""
-    resolved = folder.resolve()
-    if quick and (resolved == COMMITTED_RESULTS or COMMITTED_RESULTS in resolved.parents):
-        raise StudyArgumentError(f"--out {folder}: --quick runs never write into the committed "
-                                 f"results/ (give another folder)")
-    if folder.exists() and not folder.is_dir():
-        raise StudyArgumentError(f"--out {folder}: exists and is not a folder")
+    check_folder_name(folder, quick, "--out")
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as error:

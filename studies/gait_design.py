@@ -30,7 +30,6 @@ Writes into --out (default runs/gait_design/<timestamp>/), each CSV with its pro
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
@@ -217,9 +216,12 @@ def main(argv=None):
                                   ("random_starts", 0, MAX_RANDOM_STARTS),
                                   ("iterations", 1, MAX_ITERATIONS)):
         cli.check_count(getattr(args, flag), f"--{flag.replace('_', '-')}", lowest, highest)
-    if args.direction is not None and not math.isfinite(args.direction):
-        raise cli.StudyArgumentError(f"--direction must be a finite angle (deg), got "
+    if args.direction is not None and not -360 <= args.direction <= 360:
+        raise cli.StudyArgumentError(f"--direction must be an angle in [-360, 360] deg, got "
                                      f"{args.direction}")
+    if args.direction is not None and args.goal == "turn":
+        raise cli.StudyArgumentError("--direction: only with --goal speed (turning has no "
+                                     "direction)")
     try:
         primitives = pd.read_csv(args.primitives)
     except (OSError, ValueError) as error:

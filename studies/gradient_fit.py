@@ -542,7 +542,7 @@ def main(argv=None):
     boxes = {name: [identify.parse_range_spec(text, "--sets") for text in PARAMETER_SETS[name]]
              for name in sets}
     for name, box in boxes.items():
-        identify.note_unfired_axes("gradient_fit", f"set {name}", box, gaits)
+        identify.check_unfired_axes("gradient_fit", f"set {name}", box, gaits)
         # a gradient's evaluation runs each gait with two replicas per axis (`sensitivities`)
         gradient = args.starts * (args.lbfgs_evaluations + args.least_squares_evaluations) \
             + args.polish_evaluations

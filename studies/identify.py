@@ -408,11 +408,18 @@ def unfired_axes(box: Sequence[ParameterRange], gaits: Sequence[str]) -> List[st
             if axis.name in PER_ACTUATOR_FIELDS and axis.index not in fired]
 
 
-def note_unfired_axes(study: str, what: str, box: Sequence[ParameterRange],
-                      gaits: Sequence[str]):
+def check_unfired_axes(study: str, what: str, box: Sequence[ParameterRange],
+                       gaits: Sequence[str]):
     """Name on stderr, before a fit starts, the box's axes that the fitted gaits cannot move
-    (`unfired_axes`); `what` names the box ("--fit", "set 20")."""
+    (`unfired_axes`); `what` names the box ("--fit", "set 20"). A box of such axes alone is
+    refused (StudyArgumentError): its objective is flat, nothing to fit (and cma's bound
+    handling fails on a flat objective in one dimension, a traceback: an audit, 2026-12)."""
     idle = unfired_axes(box, gaits)
+    if idle and len(idle) == len(box):
+        raise cli.StudyArgumentError(f"{what}: {', '.join(idle)}: no fitted gait fires "
+                                     f"{'its actuator' if len(idle) == 1 else 'their actuators'}"
+                                     f" ({', '.join(gaits)}), so the fit depends on none of "
+                                     f"its parameters")
     if idle:
         one = len(idle) == 1
         print(f"{study}: note: {what}: {', '.join(idle)} "

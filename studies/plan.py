@@ -185,6 +185,12 @@ def main(argv=None):
         raise cli.StudyArgumentError(f"--far must be in [0, {MAX_GOAL_MM:g}] mm, got {args.far}")
     if args.directions == 0 and args.far == 0:
         raise cli.StudyArgumentError("no goals: --directions 0 and --far 0")
+    nearest_goal, flag = min((args.distance, "--distance") if args.directions else (np.inf, ""),
+                             (args.far, "--far") if args.far else (np.inf, ""))
+    if args.tolerance >= nearest_goal:
+        # every such goal counts as reached before the robot moves
+        raise cli.StudyArgumentError(f"--tolerance must be below {flag} ({nearest_goal:g} mm), "
+                                     f"got {args.tolerance:g}")
     base = cli.base_params(args)
     solver = cli.solver(args)
     goals = default_goals(args.distance, args.directions, args.far or None)

@@ -16,7 +16,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from .cli import COMMITTED_RESULTS, OneLineParser, StudyArgumentError, parse_values
+from .cli import (COMMITTED_RESULTS, OneLineParser, StudyArgumentError, check_future_folder,
+                  parse_values)
 
 DESCRIPTION = "Regenerate the main committed results/ with their studies' full runs (hours)."
 
@@ -68,9 +69,10 @@ def main(argv=None):
     if unknown:
         raise StudyArgumentError(f"--only: unknown result {unknown[0]!r}; choose from "
                                  f"{', '.join(COMMANDS)}")
+    if not args.into.strip():  # Path("") is the current folder
+        raise StudyArgumentError("--into: an empty folder name (give a folder, e.g. runs/mine)")
     into = Path(args.into)
-    if into.exists() and not into.is_dir():
-        raise StudyArgumentError(f"--into: {into} is not a folder")
+    check_future_folder(into, False, "--into")
     for name in names:
         line = command(name, into)
         # as a user types it (the run itself uses this interpreter, `line[0]`)

@@ -69,7 +69,7 @@ def build_parser():
     parser.add_argument("--max-instances", type=int, default=cli.MAX_INSTANCES,
                         help=f"refuse larger products (default and most {cli.MAX_INSTANCES})")
     cli.add_resume_flags(parser)
-    cli.add_model_flags(parser)
+    cli.add_model_flags(parser, fixed=("gait",))
     cli.add_dt_flag(parser)
     cli.add_cycles_flag(parser)
     cli.add_execution_flags(parser, chunk_size=CPU_CHUNK)
@@ -88,6 +88,11 @@ def sweep_axes(args) -> dict:
         if name in axes:
             raise cli.StudyArgumentError(f"--param {name}: parameter given twice")
         axes[name] = values
+    for item in args.set:
+        name, _ = cli.parse_assignment(item, "--set")
+        if name in axes:
+            raise cli.StudyArgumentError(f"--set {name}: swept as well (fix it or sweep it, "
+                                         f"not both)")
     return axes
 
 

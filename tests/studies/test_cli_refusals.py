@@ -26,7 +26,25 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
     ("env_bench", ["--control-period", "1e12"],
      "--control-period: control_period_s = 1e+12 s at dt = 0.005 s is 2e+14 time steps"),
     ("env_bench", ["--steps", "1000000000"], "--steps 1000000000 (+1 compiling)"),
-    ("gait_design", ["--direction", "nan"], "--direction must be a finite angle (deg), got nan"),
+    ("gait_design", ["--direction", "nan"],
+     "--direction must be an angle in [-360, 360] deg, got nan"),
+    # an angle of 1e300 deg was wrapped to some direction; a turn has none (it was ignored)
+    ("gait_design", ["--direction=-360.5"],
+     "--direction must be an angle in [-360, 360] deg, got -360.5"),
+    ("gait_design", ["--goal", "turn", "--direction", "45"],
+     "--direction: only with --goal speed (turning has no direction)"),
+    # a reach tolerance at the goals' distance: every goal counted as reached before a move
+    ("plan", ["--tolerance", "50", "--distance", "50"],
+     "--tolerance must be below --distance (50 mm), got 50"),
+    ("plan", ["--tolerance", "30", "--directions", "0", "--far", "30"],
+     "--tolerance must be below --far (30 mm), got 30"),
+    # the last --set of a field won without a word; a swept field's --set was dropped
+    ("fig4c", ["--set", "alpha=0.5", "--set", "alpha=0.9"], "--set alpha: given twice"),
+    ("sweep", ["--gaits", "A1", "--alpha", "0.5,0.6", "--set", "alpha=0.9"],
+     "--set alpha: swept as well (fix it or sweep it, not both)"),
+    ("sweep", ["--gaits", "A1+A2", "--set", "gait=A1"],
+     "--set gait: swept as well (fix it or sweep it, not both)"),
+    ("model_select", ["--candidates", " "], "--candidates: an empty file name"),
     ("gait_design", ["--seed", "-1"], "--seed must be >= 0, got -1"),
     # --quick runs whole --cycles here, not --quick's 0.2 s
     ("gait_design", ["--cycles", "1000000000"], "--cycles 1000000000 (3.15e+09 s)"),
@@ -133,6 +151,11 @@ def past_the_flag_checks(*args, **kwargs):
     ("plan", ["--distance", "1000"], "studies.plan.default_goals"),
     ("plan", ["--far", "1000"], "studies.plan.default_goals"),
     ("animate", ["--frames", "10000"], "studies.cli.resolve_gaits"),
+    ("plan", ["--tolerance", "49.99", "--distance", "50"], "studies.plan.default_goals"),
+    ("plan", ["--tolerance", "29.99", "--directions", "0", "--far", "30"],
+     "studies.plan.default_goals"),
+    ("gait_design", ["--direction=-360"], "studies.cli.check_cycles"),
+    ("gait_design", ["--direction", "360"], "studies.cli.check_cycles"),
 ])
 def test_study_flags_at_the_end_of_their_range_are_accepted(no_compute, monkeypatch, tmp_path,
                                                             study, argv, next_step):
@@ -236,7 +259,45 @@ def test_reproduce_refuses_an_into_that_is_a_file(tmp_path, capsys):
     into.write_text("")
     assert studies_main(["reproduce", "--only", "fig4c", "--into", str(into)]) == 2
     error = capsys.readouterr().err
-    assert f"--into: {into} is not a folder" in error and len(error.strip().splitlines()) == 1
+    assert f"--into {into}: exists and is not a folder" in error
+    assert len(error.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("into, message", [
+    # Path("") is the current folder: hours of results written wherever the shell stood
+    ("", "--into: an empty folder name"),
+    # below a file: the first study refused it after reproduce had printed its command
+    ("a_file/results", "a_file/results: cannot write into"),
+])
+def test_reproduce_refuses_an_into_it_could_not_write_before_any_study(tmp_path, capsys,
+                                                                        monkeypatch, into,
+                                                                        message):
+    (tmp_path / "a_file").write_text("")
+    monkeypatch.chdir(tmp_path)
+    assert studies_main(["reproduce", "--only", "fig4c", "--into", into]) == 2
+    captured = capsys.readouterr()
+    assert message in captured.err and len(captured.err.strip().splitlines()) == 1
+    assert captured.out == ""  # no study's command printed, none started
+
+
+@pytest.mark.parametrize("run_dir, message", [
+    # --quick wrote its chunks into the committed results/ through --run-dir
+    (cli.COMMITTED_RESULTS / "chunks_of_a_quick_run",
+     "--quick runs never write into the committed results/"),
+    ("a_file", "exists and is not a folder"),
+    ("a_file/chunks", "cannot write into"),
+])
+def test_a_run_store_folder_is_checked_before_any_compute(no_compute, tmp_path, capsys,
+                                                          monkeypatch, run_dir, message):
+    (tmp_path / "a_file").write_text("")
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "out"
+    assert studies_main(["sweep", "--gaits", "A1", "--run-dir", str(run_dir), "--out", str(out),
+                         *QUICK]) == 2
+    error = capsys.readouterr().err
+    assert f"--run-dir {run_dir}: {message}" in error, error
+    assert len(error.strip().splitlines()) == 1
+    assert not out.exists() and not (cli.COMMITTED_RESULTS / "chunks_of_a_quick_run").exists()
 
 
 def test_reproduce_stops_at_a_failed_study_in_one_line_with_its_status(tmp_path, capsys,

@@ -150,15 +150,28 @@ def test_calibrate_names_fitted_gains_no_gait_fires_before_it_fits(no_compute, m
     def stop(*args, **kwargs):
         raise Stop
     monkeypatch.setattr(experiment, "measurement_table", stop)  # the step after the note
-    for fit, note in (("actuator_gains[7]=0.3:2", "--fit: actuator_gains[7] belongs to an "
-                                                  "actuator that no fitted gait fires (A1, "
-                                                  "A1+A2): the fit does not depend on it"),
-                      ("actuator_gains[2]=0.3:2", None)):
+    for fits, note in ((["actuator_gains[7]=0.3:2", "alpha=0.5:2"],
+                        "--fit: actuator_gains[7] belongs to an actuator that no fitted gait "
+                        "fires (A1, A1+A2): the fit does not depend on it"),
+                       (["actuator_gains[2]=0.3:2"], None)):
         with pytest.raises(Stop):
-            calibrate.main(["--fit", fit, "--gaits", "A1,A1+A2", "--out", str(tmp_path),
-                            "--no-progress"])
+            calibrate.main([*(f"--fit={fit}" for fit in fits), "--gaits", "A1,A1+A2", "--out",
+                            str(tmp_path), "--no-progress"])
         error = capsys.readouterr().err
         assert (note in error) if note else ("note" not in error), error
+
+
+def test_calibrate_refuses_a_box_no_fitted_gait_moves(no_compute, tmp_path, capsys):
+    """A box of unfired gains alone: a flat objective, on which cma failed in one dimension
+    with a traceback after the first generations (an audit, 2026-12)."""
+    out = tmp_path / "out"
+    assert studies_main(["calibrate", "--fit", "actuator_gains[8]=0.5:1.5", "--fit",
+                         "actuator_gains[7]=0.5:1.5", "--out", str(out), "--no-progress"]) == 2
+    error = capsys.readouterr().err
+    assert ("--fit: actuator_gains[8], actuator_gains[7]: no fitted gait fires their actuators "
+            "(A1, A1+A2, A1+A3, A1+A4, A1+A3+A5), so the fit depends on none of its parameters"
+            in error), error
+    assert len(error.strip().splitlines()) == 1 and not out.exists()
 
 
 def test_calibrate_quick_against_a_direct_simulation(tmp_path):

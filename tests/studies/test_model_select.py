@@ -222,3 +222,15 @@ def test_quick_run_against_a_direct_simulation(tmp_path, capsys, monkeypatch):
     assert "paper (screen): read back from" in printed
     assert f"{best['candidate']} (refine): read back from" in printed
     pd.testing.assert_frame_equal(written, pd.read_csv(tmp_path / "model_select.csv"))
+
+
+def test_a_budget_spent_before_the_first_fit_still_runs_that_fit(tmp_path, capsys):
+    """--budget-hours 1e-9 skipped every candidate and wrote tables of skipped rows with exit
+    status 0 (an audit, 2026-12): the first fit of a run always runs, the next one, starting
+    after the spent budget, is skipped with the note."""
+    model_select.main(["--out", str(tmp_path), "--budget-hours", "1e-9", "--refine-top", "0",
+                       *QUICK])
+    written = pd.read_csv(tmp_path / "model_select.csv").set_index("candidate")
+    assert written.loc["paper", "status"] == "ok"
+    assert written.loc["ramp", "status"] == "skipped"
+    assert written.loc["ramp", "note"] == "budget of 1e-09 h spent"
