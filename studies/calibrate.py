@@ -230,16 +230,16 @@ def build_parser():
                         help="experimental: gait weight ∝ (speed / per-cycle std)² (default); "
                              "uniform: all 1")
     parser.add_argument("--popsize", type=int, default=None, quick=QUICK_POPSIZE,
-                        help="CMA-ES population (none: cma's 4 + 3 ln D), doubled at each "
-                             "restart")
+                        help="CMA-ES population, >= 2 (none: cma's 4 + 3 ln D), doubled at "
+                             "each restart")
     parser.add_argument("--max-generations", type=int, default=DEFAULT_MAX_GENERATIONS,
-                        quick=QUICK_MAX_GENERATIONS, help="generations per CMA-ES run")
+                        quick=QUICK_MAX_GENERATIONS, help="generations per CMA-ES run, >= 1")
     parser.add_argument("--restarts", type=int, default=0,
                         help=f"extra CMA-ES runs from random points, population doubled (IPOP; at "
                              f"most {identify.MAX_RESTARTS})")
     parser.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
     parser.add_argument("--sigma0", type=float, default=0.25,
-                        help="initial CMA-ES step in unit coordinates (default 0.25)")
+                        help="initial CMA-ES step in unit coordinates, in (0, 1] (default 0.25)")
     parser.add_argument("--cross-validate", action="store_true",
                         help="leave one gait out: fit on the others, predict it, for every gait")
     cli.add_model_flags(parser, fixed=("gait",))

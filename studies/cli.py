@@ -30,8 +30,8 @@ from typing import Dict, List, Mapping, Optional, Sequence
 import numpy as np
 import pandas as pd
 
-from taichi_star import (JACOBIANS, PER_ACTUATOR_FIELDS, PRESETS, SolverConfig, StarParams,
-                         check_work, fewest_steps)
+from taichi_star import (JACOBIANS, PER_ACTUATOR_FIELDS, PRESETS, SOLVER_RANGES, SolverConfig,
+                         StarParams, check_work, fewest_steps)
 from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, MAX_LOCAL_WORKERS,
                                executor_for, has_chunks, stored_chunk_size, write_atomic)
 from taichi_star.experiment import PAPER_GAITS
@@ -160,7 +160,8 @@ def add_dt_flag(parser: StudyParser, quick: float = QUICK_DT, jacobian: bool = T
     instances must step whole cycles may take a coarser one). A study that sets the Jacobian
     mode itself, or times several, passes jacobian=False."""
     parser.add_argument("--dt", type=float, quick=quick,
-                        help="time step, s (none: the preset's)")
+                        help=f"time step, s, in (0, {SOLVER_RANGES['dt'][1]:g}] (none: the "
+                             f"preset's)")
     if jacobian:
         parser.add_argument("--jacobian", choices=JACOBIANS, default=None,
                             help="Newton's Jacobian mode (default: the preset's); lagged keeps "

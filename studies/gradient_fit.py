@@ -515,7 +515,7 @@ def build_parser():
                              f"(optimiser '{POLISH}', its costs counted on top of CMA-ES's); "
                              "0 (default) leaves it out")
     parser.add_argument("--popsize", type=int, default=None,
-                        help="CMA-ES population (default cma's 4 + 3 ln D)")
+                        help="CMA-ES population, >= 2 (default cma's 4 + 3 ln D)")
     parser.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
     cli.add_model_flags(parser, fixed=("gait",))
     cli.add_dt_flag(parser)

@@ -522,9 +522,9 @@ def build_parser():
     parser.add_argument("--validate-cycles", default="4:6", quick="2:2",
                         help="the validation window FIRST:LAST")
     parser.add_argument("--popsize", type=int, default=DEFAULT_POPSIZE, quick=QUICK_POPSIZE,
-                        help="CMA-ES population, doubled at each restart")
+                        help="CMA-ES population, >= 2, doubled at each restart")
     parser.add_argument("--max-generations", type=int, default=DEFAULT_MAX_GENERATIONS,
-                        quick=QUICK_MAX_GENERATIONS, help="generations per CMA-ES run")
+                        quick=QUICK_MAX_GENERATIONS, help="generations per CMA-ES run, >= 1")
     parser.add_argument("--fold-generations", type=int, default=DEFAULT_FOLD_GENERATIONS,
                         quick=QUICK_FOLD_GENERATIONS,
                         help="generations of each leave-one-gait-out fit (0: no folds)")
@@ -543,7 +543,7 @@ def build_parser():
                              f"{identify.MAX_RESTARTS})")
     parser.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
     parser.add_argument("--sigma0", type=float, default=0.25,
-                        help="initial CMA-ES step in unit coordinates (default 0.25)")
+                        help="initial CMA-ES step in unit coordinates, in (0, 1] (default 0.25)")
     parser.add_argument("--budget-hours", type=float, default=2.0,
                         help="wall-clock budget: candidates that would start after it are "
                              "skipped; the first fit always runs (default 2)")

@@ -38,7 +38,7 @@ from typing import Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from taichi_star import SolverConfig
+from taichi_star import SOLVER_RANGES, SolverConfig
 from taichi_star.batch import run_batch
 from taichi_star.extras import require
 from taichi_star.output import column_unit
@@ -162,7 +162,8 @@ def build_parser():
     parser.add_argument("--seed", type=int, default=1, help="sampling and bootstrap seed")
     cli.add_model_flags(parser, fixed=("gait",))
     parser.add_argument("--dt", type=float, default=DEFAULT_DT, quick=cli.QUICK_DT,
-                        help="time step, s, with either preset")
+                        help=f"time step, s, in (0, {SOLVER_RANGES['dt'][1]:g}], with either "
+                             f"preset")
     cli.add_cycles_flag(parser)
     cli.add_resume_flags(parser)
     cli.add_execution_flags(parser, chunk_size=CHUNK)
