@@ -427,6 +427,26 @@ OK_INSTANCE_WARNINGS = (r".* instances \(the first: instance .*\) are 'ok' only 
 and warns once with the batch's numbers)."""
 
 
+def warn_about_capped(capped: np.ndarray, names: np.ndarray, solver: SolverConfig):
+    """The RuntimeWarning of `warn_about_ok_instances` about "ok" instances whose Newton solves
+    used all max_newton iterations: `capped` (B,) bool marks them, `names` (B,) names the
+    instances (the first capped one is named); nothing where none is capped."""
+    if not capped.any():
+        return
+    if solver.precision == "f32":
+        reason = (f"f32 barely resolves newton_tol = {solver.newton_tol:g} m for them, and "
+                  f"their results can be far off; run them in f64")
+    else:
+        reason = ("such runs can have converged to another solution of a step's equations "
+                  "(at a re-firing's jump) or more loosely than newton_tol (where the "
+                  "robot's shortest edge is far below its size): check them with a "
+                  "smaller dt")
+    warn_user(f"{int(capped.sum())} of {len(capped)} {solver.precision} instances (the "
+              f"first: instance {names[np.flatnonzero(capped)[0]]}) are 'ok' only after a "
+              f"Newton solve used all its {solver.max_newton} iterations (newton_capped): "
+              f"{reason}")
+
+
 def warn_about_ok_instances(summary: pd.DataFrame, solver: SolverConfig):
     """RuntimeWarnings about "ok" instances of a summary (its rows in order: the first named
     by its row, or by its `instance` column where it has one, a batch's) that need a second
@@ -443,20 +463,7 @@ def warn_about_ok_instances(summary: pd.DataFrame, solver: SolverConfig):
     ok = summary["status"].eq("ok").to_numpy()
     names = (summary["instance"].to_numpy() if "instance" in summary
              else np.arange(len(summary)))
-    capped = ok & summary["newton_capped"].to_numpy(dtype=bool)
-    if capped.any():
-        if solver.precision == "f32":
-            reason = (f"f32 barely resolves newton_tol = {solver.newton_tol:g} m for them, and "
-                      f"their results can be far off; run them in f64")
-        else:
-            reason = ("such runs can have converged to another solution of a step's equations "
-                      "(at a re-firing's jump) or more loosely than newton_tol (where the "
-                      "robot's shortest edge is far below its size): check them with a "
-                      "smaller dt")
-        warn_user(f"{int(capped.sum())} of {len(summary)} {solver.precision} instances (the "
-                  f"first: instance {names[np.flatnonzero(capped)[0]]}) are 'ok' only after a "
-                  f"Newton solve used all its {solver.max_newton} iterations (newton_capped): "
-                  f"{reason}")
+    warn_about_capped(ok & summary["newton_capped"].to_numpy(dtype=bool), names, solver)
     unphysical = ok & ~summary["shape_sane"].to_numpy(dtype=bool)
     if unphysical.any():
         warn_user(f"{int(unphysical.sum())} of {len(summary)} 'ok' instances (the first: "

@@ -44,6 +44,7 @@ from .geometry import CENTRE
 from .model import validate_batch
 from .params import SolverConfig, StarParams, check_precision
 from .provenance import file_path, write_atomic
+from .simulation import warn_about_capped
 from .runtime import (RECORDS_REMEDY, Runtime, check_arch, check_batch_memory,
                       check_host_memory)
 from .state import STATUS_NAMES, STATUS_OK
@@ -52,7 +53,7 @@ from .timegrid import MAX_STEPS_PER_INSTANCE, check_work, multiples_within, whol
 ACTUATOR_COLUMNS = tuple(f"since_A{m + 1}_s" for m in range(N_ACTUATORS))
 STATE_COLUMNS = ("instance", "t_s", "centroid_x_mm", "centroid_y_mm", "heading_deg",
                  "velocity_x_mm_s", "velocity_y_mm_s", "angular_velocity_deg_s",
-                 *ACTUATOR_COLUMNS, "status")
+                 *ACTUATOR_COLUMNS, "status", "failure_time_s", "newton_capped")
 """Columns of `Simulator.state()`."""
 DIFFERENTIABLE_STATE_COLUMNS = ("centroid_x_mm", "centroid_y_mm", "heading_deg",
                                 "velocity_x_mm_s", "velocity_y_mm_s", "angular_velocity_deg_s")
@@ -63,6 +64,12 @@ STATE_ROW_BYTES = 640
 room."""
 STATE_RECORD_BYTES = 6144
 """... and each record whatever the batch (its columns' arrays: measured 3.6 kB)."""
+
+
+NOT_COPIED = ("a Simulator is not copied or pickled (its robots live in the engine's device "
+              "memory): save() its state and load() it into a Simulator of the same "
+              "parameters, or make another Simulator")
+"""The TypeError of copying, deep-copying or pickling a Simulator (or an environment)."""
 
 
 def parameter_texts(params: Sequence[StarParams]) -> Tuple[Dict[str, str], ...]:
@@ -100,6 +107,9 @@ class SimulatorSnapshot:
         it), whole or not at all (`provenance.write_atomic`: a kill or a full disk leaves a
         snapshot already there as it was). Returns the file's path."""
         path = file_path(path, "path of the snapshot's .npz file")
+        if path.is_dir():  # "runs/mine" wrote runs/mine.npz beside the folder
+            raise ValueError(f"path {str(path)!r} is a folder: give the snapshot's file, e.g. "
+                             f"{str(path / 'state.npz')!r}")
         path = path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
         header = json.dumps({"engine_key": self.engine_key, "n_instances": self.n_instances,
                              "dt": self.dt, "params": list(self.params),
@@ -177,6 +187,9 @@ class Simulator:
         self._start_centroids = self.engine.centroids_of(self.model.batch_size)
         self._compiled = False
         """Whether `advance` has had the stepping kernel compiled (timed apart, once)."""
+        self._capped_named = np.zeros(self.n_instances, dtype=bool)
+        """Instances whose capped Newton solves a warning of `advance` has named (each once,
+        until it is reset)."""
         self.timing = RunTiming(setup_s=time.perf_counter() - started, compile_s=0.0,
                                 run_s=0.0, collect_s=0.0, robot_steps=0)
 
@@ -246,9 +259,10 @@ class Simulator:
         fire at that time, so the step ending then already sees K̄(0). Firings at different
         times are all kept, each actuator any number of them (an instance holds
         `actuation.PENDING_CAPACITY` distinct pending times); the same time again adds
-        actuators to that firing. Failed instances ignore commands. Raises ValueError (state
-        unchanged) for a bad shape, dtype, gait or time, or a full queue of pending firings."""
-        mask = self._command_mask(commands)
+        actuators to that firing. Failed instances ignore commands (their `since_A*_s` stay
+        as they were). Raises ValueError (state unchanged) for a bad shape, dtype, gait or
+        time, or a full queue of pending firings."""
+        mask = self._command_mask(commands) & self.ok[:, None]
         schedule = self.engine.state.schedule
         if at_s is None:
             schedule.command(mask)
@@ -288,7 +302,10 @@ class Simulator:
         with a `record` column; empty without records. `progress`: a progress bar in simulated
         seconds (None: where the call is estimated at `driver.AUTO_PROGRESS_S` or more). With
         adaptive steps the end ends a step (as a record time does): pieces give one call's bits
-        where they end on its step ends (docs: Control, The Simulator)."""
+        where they end on its step ends (docs: Control, The Simulator). A RuntimeWarning names
+        the instances still "ok" whose Newton solves first used all max_newton iterations in
+        this call (`state()`'s newton_capped; as `simulate` warns: such a result can be far
+        off)."""
         if not (is_finite_real(duration_s) and float(duration_s) > 0):
             raise ValueError(f"duration_s must be a finite number > 0 s, got {shown(duration_s)}")
         # the kind first: an empty text or list, None or False is not 0, and an array has no
@@ -334,22 +351,27 @@ class Simulator:
         self.timing = self.timing + RunTiming(
             setup_s=0.0, compile_s=compile_s, run_s=time.perf_counter() - started, collect_s=0.0,
             robot_steps=int((self._steps() - steps_before).sum()))
+        capped = self._newton_capped() & self.ok & ~self._capped_named
+        self._capped_named |= capped
+        warn_about_capped(capped, np.arange(self.n_instances), self.solver)
         if not records:
             return pd.DataFrame(columns=[*STATE_COLUMNS, "record"])
         return pd.DataFrame({**{name: np.concatenate([record[name] for record in records])
                                 for name in records[0]},
                              "record": np.repeat(numbers, self.n_instances)})
 
-    def reset(self, instances: Optional[Sequence[int]] = None):
-        """Put instances (all by default) back at rest in their rest shape at t = 0, nothing
-        fired, status ok; the others are untouched."""
-        rows = np.arange(self.n_instances) if instances is None else np.asarray(instances)
+    def reset(self, instances: Union[None, int, Sequence[int]] = None):
+        """Put instances (all by default; one index or a sequence of them) back at rest in
+        their rest shape at t = 0, nothing fired, status ok; the others are untouched."""
+        rows = (np.arange(self.n_instances) if instances is None
+                else np.atleast_1d(np.asarray(instances)))
         if rows.size == 0:  # no instance to reset (an RL loop where none finished): [] is float
             return
         if rows.ndim != 1 or rows.dtype.kind not in "iu" or (
                 rows.min() < 0 or rows.max() >= self.n_instances):
-            raise ValueError(f"instances must be integers in [0, {self.n_instances}), got "
-                             f"{instances!r}")
+            raise ValueError(f"instances must be an integer or a sequence of integers in [0, "
+                             f"{self.n_instances}), got {instances!r}")
+        self._capped_named[rows] = False
         # each instance's replicas (every n_instances rows after it) go back with it
         copies = self.model.batch_size // self.n_instances
         rows = (rows[None, :] + self.n_instances * np.arange(copies)[:, None]).ravel()
@@ -387,6 +409,9 @@ class Simulator:
         derivatives = tangents.derivatives(values, self.directions, self._steps_of_directions,
                                            column)
         stacked = np.stack([derivatives[d.label] for d in wanted], axis=1)
+        # a failed instance's tangents are void, as in `simulate` (they held the frozen
+        # state's derivative, finite, with nothing to say so: an audit, 2026-12)
+        stacked[~self.ok] = np.nan
         return stacked if len(wanted) > 1 else stacked[:, 0]
 
     def _state_of(self, batch: int) -> pd.DataFrame:
@@ -397,8 +422,8 @@ class Simulator:
     def _state_columns(self, batch: int) -> Dict[str, np.ndarray]:
         """`_state_of`'s columns, one array each (`advance` keeps its records so: a table per
         record cost ~30 kB of overhead)."""
-        values = self.engine.state.read(("positions", "velocities", "time", "fire_time", "status"),
-                                        batch)
+        values = self.engine.state.read(("positions", "velocities", "time", "fire_time", "status",
+                                         "failure_time", "newton_max"), batch)
         positions = values["positions"].astype(np.float64)
         velocities = values["velocities"].astype(np.float64)
         mass = self.model.mass[:batch]
@@ -430,7 +455,16 @@ class Simulator:
         for m, column in enumerate(ACTUATOR_COLUMNS):
             columns[column] = since[:, m]
         columns["status"] = np.array([STATUS_NAMES[s] for s in values["status"]], dtype=object)
+        columns["failure_time_s"] = np.where(values["status"] == STATUS_OK, np.nan,
+                                             values["failure_time"].astype(np.float64))
+        columns["newton_capped"] = values["newton_max"] >= self.solver.max_newton
         return columns
+
+    def _newton_capped(self) -> np.ndarray:
+        """(B,) bool: instances a Newton solve of which used all max_newton iterations since
+        their start or reset."""
+        maxima = self.engine.state.read(("newton_max",), self.n_instances)["newton_max"]
+        return maxima >= self.solver.max_newton
 
     @property
     def ok(self) -> np.ndarray:
@@ -511,6 +545,8 @@ class Simulator:
                     f"{own[changed[0]]} here ({len(changed)} field(s) differ); load(..., "
                     f"other_params=True) continues it under this simulator's parameters")
         self.engine.restore_state(snapshot.fields)
+        # the saved run's capped solves are its history, shown in state(), not news
+        self._capped_named = self._newton_capped()
         own = solver_texts(self.solver)
         changed = [name for name in own
                    if snapshot.solver and snapshot.solver.get(name) != own[name]]
@@ -520,6 +556,15 @@ class Simulator:
                       f"is {own[changed[0]]} ({len(changed)} setting(s) differ): it goes on "
                       f"under this simulator's settings, not bit for bit as the saved run "
                       f"would have")
+
+    def __copy__(self):
+        raise TypeError(NOT_COPIED)
+
+    def __deepcopy__(self, memo):
+        raise TypeError(NOT_COPIED)
+
+    def __reduce_ex__(self, protocol):
+        raise TypeError(NOT_COPIED)
 
     def __repr__(self) -> str:
         times = self.time_s

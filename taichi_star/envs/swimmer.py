@@ -290,7 +290,8 @@ class GoalReachingBatch:
 
     def observe(self, space: spaces.Box):
         """(B, 15) float32 observations (clipped to `space`) and the info dict of arrays:
-        position_mm (B, 2), goal_mm (B, 2), heading_deg, distance_mm, time_s, status."""
+        position_mm (B, 2), goal_mm (B, 2), heading_deg, distance_mm, time_s, status,
+        newton_capped (`Simulator.state()`'s)."""
         state = self.simulator.state()
         heading = np.radians(state["heading_deg"].to_numpy())
         position = state[["centroid_x_mm", "centroid_y_mm"]].to_numpy()
@@ -306,7 +307,8 @@ class GoalReachingBatch:
         info = {"position_mm": position, "goal_mm": self.goals.copy(),
                 "heading_deg": state["heading_deg"].to_numpy(),
                 "distance_mm": self.distances.copy(), "time_s": state["t_s"].to_numpy(),
-                "status": state["status"].to_numpy()}
+                "status": state["status"].to_numpy(),
+                "newton_capped": state["newton_capped"].to_numpy()}
         return observation, info
 
 
@@ -356,6 +358,12 @@ def checked_task(task: dict) -> "SwimmerTask":
     return SwimmerTask(**task)
 
 
+ENV_NOT_COPIED = ("an environment is not copied or pickled (its robots live in one "
+                  "Simulator's engine): make another one, or save() env.simulator's state and "
+                  "load() it into the other's simulator")
+"""The TypeError of copying, deep-copying or pickling an environment."""
+
+
 class RobotsView:
     """What both environments show of their robots: the Simulator and the control period
     (their `batch`, a `GoalReachingBatch`, holds them)."""
@@ -373,6 +381,17 @@ class RobotsView:
     def control_period_s(self) -> float:
         """The simulated seconds one `step` advances, s."""
         return self.batch.control_period_s
+
+    # a shallow copy shared the robots (stepping the copy moved the original) and a deep copy
+    # or a pickle failed in Taichi's words (an audit, 2026-12)
+    def __copy__(self):
+        raise TypeError(ENV_NOT_COPIED)
+
+    def __deepcopy__(self, memo):
+        raise TypeError(ENV_NOT_COPIED)
+
+    def __reduce_ex__(self, protocol):
+        raise TypeError(ENV_NOT_COPIED)
 
 
 class StarSwimmerEnv(RobotsView, gym.Env):

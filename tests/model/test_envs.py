@@ -410,3 +410,25 @@ def test_ppo_runs_on_both_paths_without_warnings():
                         device="cpu", seed=0)
             model.learn(256)
             assert model.num_timesteps == 256
+
+
+def test_an_env_is_not_copied_or_pickled_and_its_info_tells_capped_solves():
+    """copy.copy of an environment shared its robot (stepping the copy moved the original),
+    copy.deepcopy and pickle failed in Taichi's words (an audit, 2026-12): TypeErrors saying
+    what to do, the original untouched. `info` names robots whose Newton solves were capped
+    (`Simulator.state()`'s newton_capped), False for a plain robot."""
+    import copy
+    import pickle
+
+    env = StarSwimmerEnv(**SHORT)
+    try:
+        env.reset(seed=0)
+        for attempt in (copy.copy, copy.deepcopy, pickle.dumps):
+            with pytest.raises(TypeError, match=r"an environment is not copied or pickled"):
+                attempt(env)
+        assert env.simulator.time_s.tolist() == [0.0]
+        _, _, _, _, info = env.step(FORWARD)
+        assert info["newton_capped"] is np.False_ or info["newton_capped"] == False  # noqa: E712
+        assert info["status"] == "ok"
+    finally:
+        env.close()

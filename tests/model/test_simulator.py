@@ -342,7 +342,7 @@ def test_bad_durations_times_and_foreign_states_are_refused():
     sim.reset([])   # no instance: a plain empty list (float to NumPy) is accepted, nothing reset
     sim.reset(np.array([], dtype=int))
     assert all(np.array_equal(sim.save().fields[name], before[name]) for name in before)
-    with pytest.raises(ValueError, match=r"instances must be integers in \[0, 3\), got \[0.5\]"):
+    with pytest.raises(ValueError, match=r"instances must be an integer or a sequence of integers in \[0, 3\), got \[0.5\]"):
         sim.reset([0.5])
     with pytest.raises(ValueError, match=r"at_s = 0.005 s is not after the current time of "
                                          r"instance 0 \(0.01 s\)"):
@@ -554,3 +554,88 @@ def test_mixed_commands_and_a_missing_folder_are_named_in_plain_words(tmp_path):
                                       r"exist$"):
         sim.save(tmp_path / "missing" / "state")
     assert not (tmp_path / "missing").exists()
+
+
+def _capped_warnings(caught):
+    return [str(w.message) for w in caught if "newton_capped" in str(w.message)]
+
+
+def test_advance_names_ok_robots_whose_newton_solves_were_capped_once_until_reset():
+    """simulate warned about "ok" instances whose Newton solves used all max_newton iterations
+    (a result that can be far off: docs/numerics.md, "What ok promises"); the Simulator, the
+    environments and the planner said nothing, and state() could not tell (an audit,
+    2026-12: limbs of 2e-5 m, allowed, came out 9 % off a run at newton_tol 1e-13 with status
+    ok). Now state() has newton_capped and advance warns once per robot, again after a
+    reset."""
+    paper = ts.StarParams(gait="A1+A3")
+    tiny_limbs = paper.replace(tip_radius=paper.joint_radius + 2e-5)
+    sim = ts.Simulator([paper, tiny_limbs])
+    sim.fire(["A1+A3", "A1+A3"])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        sim.advance(0.01)
+        first = _capped_warnings(caught)
+        sim.advance(0.01)  # the same robot again: already named
+        second = _capped_warnings(caught)[len(first):]
+    assert len(first) == 1 and first[0].startswith(
+        "1 of 2 f64 instances (the first: instance 1) are 'ok' only after a Newton solve used "
+        "all its 25 iterations (newton_capped)"), first
+    assert second == []
+    state = sim.state()
+    assert state["status"].tolist() == ["ok", "ok"]
+    assert state["newton_capped"].tolist() == [False, True]
+    sim.reset(1)  # a single index resets one robot (it said "must be integers ..., got 1")
+    assert sim.state()["newton_capped"].tolist() == [False, False]
+    sim.fire(["none", "A1+A3"])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        sim.advance(0.01)
+    assert len(_capped_warnings(caught)) == 1
+
+
+def test_a_failed_robot_shows_its_failure_time_ignores_commands_and_has_no_derivative():
+    """A robot whose solve fails beside one that goes on (5-ms Newton capped at 5 iterations,
+    one halving, 50-ms steps): state() had no failure time (t_s is the last good state's),
+    sensitivity() gave the frozen state's finite derivative where simulate gives NaN, and a
+    fire() it is documented to ignore showed in since_A3_s (an audit, 2026-12). Each now as
+    simulate has it."""
+    params = ts.StarParams.preset("paper")
+    solver = ts.SolverConfig(dt=0.05, max_newton=5, max_substep_halvings=1)
+    reference = ts.simulate([params.replace(gait="A1"), params.replace(gait="A1+A2")], 1.0,
+                            solver, sensitivities=["alpha"], progress=False)
+    assert reference.summary["status"].tolist()[1] == "ok"
+    assert reference.summary["status"].tolist()[0] != "ok"
+    sim = ts.Simulator([params, params], solver, sensitivities=["alpha"])
+    sim.fire(["A1", "A1+A2"])
+    sim.advance(1.0)
+    state = sim.state()
+    assert state["status"].tolist() == reference.summary["status"].tolist()
+    assert state["failure_time_s"].iloc[0] == reference.summary["failure_time_s"].iloc[0]
+    assert state["t_s"].iloc[0] < state["failure_time_s"].iloc[0]  # the last good state's
+    assert np.isnan(state["failure_time_s"].iloc[1])
+    derivative = sim.sensitivity("centroid_x_mm", "alpha")
+    assert np.isnan(derivative[0]) and np.isfinite(derivative[1])
+    assert np.isnan(reference.sensitivity("displacement_x_mm", "alpha")[0])
+    since_before = sim.state()["since_A3_s"].tolist()
+    sim.fire(["A3", "A3"])
+    since_after = sim.state()["since_A3_s"].tolist()
+    assert np.isnan(since_before[0]) and np.isnan(since_after[0])  # the failed one: ignored
+    assert since_after[1] == 0.0  # the running one fired now
+
+
+def test_a_simulator_is_not_copied_or_pickled_and_save_refuses_a_folder(tmp_path):
+    """copy.deepcopy and pickle failed in Taichi's words ("cannot pickle ... SNode"), and
+    save("a folder") wrote "a folder.npz" beside it, which load("a folder") could not read (an
+    audit, 2026-12): TypeErrors naming save()/load(), a ValueError naming the folder."""
+    import copy
+    import pickle
+
+    sim = ts.Simulator([ts.StarParams()])
+    for attempt in (copy.copy, copy.deepcopy, pickle.dumps):
+        with pytest.raises(TypeError, match=r"a Simulator is not copied or pickled .*save\(\) "
+                                            r"its state and load\(\) it"):
+            attempt(sim)
+    with pytest.raises(ValueError, match=r"is a folder: give the snapshot's file, e.g. "):
+        sim.save(tmp_path)
+    assert list(tmp_path.parent.glob(f"{tmp_path.name}.npz")) == []
+    assert sim.save(tmp_path / "state").name == "state.npz"  # a name that is no folder
