@@ -40,11 +40,11 @@ from typing import Optional, Sequence
 import numpy as np
 import pandas as pd
 
-from .checks import check_flag, is_real, is_whole
+from .checks import check_flag, is_real, is_whole, warn_user
 from .gait import NO_GAIT, Gait
 from .metrics import MAX_GOAL_MM, rotate
 from .params import SolverConfig, StarParams
-from .primitives import glide_columns, streak_step_columns
+from .primitives import GLIDE_CYCLES, glide_columns, streak_step_columns
 from .runtime import check_arch
 from .simulator import Simulator
 from .timegrid import check_work, whole_steps
@@ -138,7 +138,8 @@ class PrimitiveModel:
         step_y_mm and turn_deg, the steps of the k-th firing in a row from rest in the columns
         `primitives.streak_step_columns(k)` and the glides after k = 1, 2, ... firings in
         the columns `primitives.glide_columns(k)` where it has them (none: steady steps, no
-        glide). ValueError for a
+        glide, and a RuntimeWarning: the robot glides on after its last firing, and a plan
+        without glides overshoots its goals). ValueError for a
         table with the single glide_x_mm/glide_y_mm of earlier versions (measured after
         several firings only): measure it again, and for a table without the columns it reads.
         """
@@ -155,6 +156,13 @@ class PrimitiveModel:
         if not streaks and "glide_x_mm" in table.columns:
             raise ValueError("the primitive table has one glide per gait (glide_x_mm), not one "
                              "per streak of firings (glide1_x_mm, ...): measure it again")
+        if not streaks:
+            # measure_primitives' default measures none: a plan from such a table put the
+            # robot on its goals when it stopped firing and it glided on, missing every goal
+            # by ~25 mm without a word (an audit, 2026-12)
+            warn_user(f"the primitive table has no glides: plans from it ignore the glide "
+                      f"after the last firing and overshoot their goals; measure them with "
+                      f"measure_primitives(..., glide_cycles={GLIDE_CYCLES})")
         glides = (np.stack([usable[list(glide_columns(k))].to_numpy()
                             for k in range(1, streaks + 1)]) if streaks else None)
         stepped = 0

@@ -29,7 +29,10 @@ def test_drive_plans_for_the_glide_and_judges_goals_at_rest(quick_primitives, qu
     assert list(glides.columns) == GLIDE_COLUMNS and len(glides) == 2 * 255
     aware = PrimitiveModel.from_table(table.merge(widen_glides(glides), on="gait"))
     assert aware.glides_mm.shape[0] == 2 and aware.streak_steps_mm.shape[0] == 3
-    blind = PrimitiveModel.from_table(table)
+    # a table without glides plans as if the robot stopped when it stops firing: warned
+    with pytest.warns(RuntimeWarning, match=r"the primitive table has no glides: plans from "
+                                            r"it ignore the glide .* glide_cycles=4\)"):
+        blind = PrimitiveModel.from_table(table)
     goals = default_goals(40.0, count=2, far_mm=None)
     summary, cycles, path = drive(aware, goals, solver=solver, max_cycles=3,
                                   frames_per_cycle=3, settle_cycles=1)

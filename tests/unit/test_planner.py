@@ -2,6 +2,7 @@
 the body frame, open-loop plans to a lattice goal."""
 
 import math
+import warnings
 
 import numpy as np
 import pandas as pd
@@ -159,11 +160,18 @@ def test_glides_are_read_from_a_primitive_table_and_checked():
     # a streak of 0 (nothing fired yet) glides as one firing
     np.testing.assert_array_equal(model.glide(np.array([1]), np.array([0])), [(5, 0)])
     table = table.drop(columns=["glide3_x_mm", "glide3_y_mm"])
-    without = PrimitiveModel.from_table(table.drop(columns=["glide1_x_mm", "glide1_y_mm",
-                                                            "glide2_x_mm", "glide2_y_mm"]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # one streak of glides: no warning
+        one = PrimitiveModel.from_table(table.drop(columns=["glide2_x_mm", "glide2_y_mm"]))
+    assert one.glides_mm.shape == (1, 3, 2) and one.glides_mm.any()
+    # none: plans from it overshoot, warned
+    with pytest.warns(RuntimeWarning, match="the primitive table has no glides"):
+        without = PrimitiveModel.from_table(table.drop(columns=["glide1_x_mm", "glide1_y_mm",
+                                                                "glide2_x_mm", "glide2_y_mm"]))
     assert without.glides_mm.shape == (1, 3, 2) and not without.glides_mm.any()
     # a gap in the streaks: only those before it are read
-    gap = PrimitiveModel.from_table(table.drop(columns=["glide1_x_mm", "glide1_y_mm"]))
+    with pytest.warns(RuntimeWarning, match="the primitive table has no glides"):
+        gap = PrimitiveModel.from_table(table.drop(columns=["glide1_x_mm", "glide1_y_mm"]))
     assert not gap.glides_mm.any()
     legacy = table.drop(columns=["glide2_x_mm", "glide2_y_mm"]).rename(
         columns={"glide1_x_mm": "glide_x_mm", "glide1_y_mm": "glide_y_mm"})
