@@ -30,8 +30,8 @@ from typing import Dict, List, Mapping, Optional, Sequence
 import numpy as np
 import pandas as pd
 
-from taichi_star import (JACOBIANS, PER_ACTUATOR_FIELDS, PRESETS, SOLVER_RANGES, SolverConfig,
-                         StarParams, check_work, fewest_steps)
+from taichi_star import (JACOBIANS, PER_ACTUATOR_FIELDS, PRESETS, SOLVER_RANGES, STAR_RANGES,
+                         SolverConfig, StarParams, check_work, fewest_steps)
 from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, MAX_LOCAL_WORKERS,
                                executor_for, has_chunks, stored_chunk_size, write_atomic)
 from taichi_star.experiment import PAPER_GAITS
@@ -428,9 +428,24 @@ def parse_assignment(text: str, flag: str):
                                  f"(e.g. {example}), got {text!r}")
     name, values = text.split("=", 1)
     name = name.strip().replace("-", "_")
-    # a per-actuator field's values are its eight, A1..A8, which may be equal
-    return name, parse_values(values, f"{flag} {name}", field_kind(name, flag),
-                              repeats=name in PER_ACTUATOR_FIELDS)
+    return name, parse_field_values(values, f"{flag} {name}", name, flag)
+
+
+def parse_field_values(text: str, flag: str, name: str, unknown_flag: Optional[str] = None):
+    """The values of StarParams field `name` in `text` (`parse_values`: a list or a range;
+    StudyArgumentError naming `flag`, and the field's allowed range where it has one;
+    `unknown_flag` names an unknown field)."""
+    kind = field_kind(name, unknown_flag or flag)
+    try:
+        # a per-actuator field's values are its eight, A1..A8, which may be equal
+        return parse_values(text, flag, kind, repeats=name in PER_ACTUATOR_FIELDS)
+    except StudyArgumentError as error:
+        if name not in STAR_RANGES:
+            raise
+        # "'nan' is not a finite number" named no range, where the API's message does
+        lowest, highest, lowest_included = STAR_RANGES[name]
+        raise StudyArgumentError(f"{error} ({name} must be in {'[' if lowest_included else '('}"
+                                 f"{lowest:g}, {highest:g}])") from None
 
 
 def resolve_gaits(text: str, flag: str = "--gaits") -> List[str]:

@@ -82,7 +82,7 @@ def sweep_axes(args) -> dict:
     for flag, field in NAMED_FLAGS.items():
         text = getattr(args, field)
         if text is not None:
-            axes[field] = cli.parse_values(text, f"--{flag}", cli.field_kind(field))
+            axes[field] = cli.parse_field_values(text, f"--{flag}", field)
     for item in args.param:
         name, values = cli.parse_assignment(item, "--param")
         if name in axes:

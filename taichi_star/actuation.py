@@ -329,9 +329,14 @@ class Schedule:
                                  ("pending_due", "pending_actuators", "pending_count"))
         at = dues.dtype.type(due)
         seconds = float(due) * (step_s if step_s is not None else 1.0)
-        if step_s is not None and float(at) != due:
+        # every step up to 2^(mantissa + 1) is a whole float; past it `fire_due` compares the
+        # step numbers as that float, rounded to even neighbours, and an even due step past
+        # 2^24 in f32 (held exactly, accepted: an audit, 2026-12) could fire a step early
+        exact_steps = 2 ** (np.finfo(dues.dtype).nmant + 1)
+        if step_s is not None and (float(at) != due or due > exact_steps):
             raise ValueError(f"at_s = {seconds:.6g} s is step {due}, which the clock's "
-                             f"{dues.dtype} steps do not hold exactly; use precision 'f64'")
+                             f"{dues.dtype} steps do not hold exactly (at most step "
+                             f"{exact_steps}); use precision 'f64'")
         rows = np.flatnonzero(bits)
         late = rows[~(clock[rows] < at)]
         if len(late):

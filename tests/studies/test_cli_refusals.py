@@ -45,6 +45,11 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
     ("sweep", ["--gaits", "A1+A2", "--set", "gait=A1"],
      "--set gait: swept as well (fix it or sweep it, not both)"),
     ("model_select", ["--candidates", " "], "--candidates: an empty file name"),
+    # a value that is no number named no range, where the API's message does
+    ("fig4c", ["--set", "alpha=nan"],
+     "--set alpha: 'nan' is not a finite number (alpha must be in [0, 10])"),
+    ("sweep", ["--gaits", "A1", "--alpha", "0.5,x"],
+     "--alpha: 'x' is not a number (alpha must be in [0, 10])"),
     ("gait_design", ["--seed", "-1"], "--seed must be >= 0, got -1"),
     # --quick runs whole --cycles here, not --quick's 0.2 s
     ("gait_design", ["--cycles", "1000000000"], "--cycles 1000000000 (3.15e+09 s)"),
