@@ -33,7 +33,9 @@ JOINT_STIFFNESSES = ("limb", "series")
 PRECISIONS = ("f64", "f32")
 INTEGRATORS = ("euler", "bdf2")
 JACOBIANS = ("newton", "chord", "lagged")
+"""The Newton Jacobian modes of `SolverConfig.jacobian` (docs: Numerics, Newton's method)."""
 PRESETS = ("paper", "accurate", "identified")
+"""The names `StarParams.preset` and `SolverConfig.preset` take."""
 
 UNIT_SUFFIXES = {"Pa": "_pa", "s": "_s", "m": "_m", "kg/m^3": "_kg_m3", "kg/m": "_kg_m",
                  "Pa*s/m": "_pa_s_m", "Pa*s": "_pa_s"}

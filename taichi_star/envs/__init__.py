@@ -26,6 +26,7 @@ from .swimmer import (DEFAULT_MAX_EPISODE_STEPS, OBSERVATION_NAMES, RENDER_MODES
                       control_period)
 
 ENV_ID = "StarSwimmer-v0"
+"""The id `gymnasium.make` and `gymnasium.make_vec` take (registered on import)."""
 
 if ENV_ID not in gymnasium.registry:
     gymnasium.register(id=ENV_ID, entry_point="taichi_star.envs.swimmer:StarSwimmerEnv",
