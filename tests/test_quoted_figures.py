@@ -101,3 +101,17 @@ def test_a_sidecar_with_vector_sets_and_caches_names_the_widest_and_the_last_lev
     # a sidecar from before they were recorded reads as it did
     older = {key: machine[key] for key in ("cpu_model", "cores", "gpus")}
     assert results_page._provenance({"machine": older}).endswith("Some CPU, 2 cores")
+
+
+def test_every_committed_table_has_its_provenance_sidecar():
+    """Results record how they were made: two committed CSVs had no sidecar (an audit,
+    2026-12; theirs are now written from the tables' own columns, with a note saying so)."""
+    without = [path.relative_to(REPO).as_posix() for path in sorted((REPO / "results").rglob("*.csv"))
+               if not path.with_name(path.name + ".json").exists()]
+    assert without == []
+
+
+def test_a_sidecars_note_is_shown_with_its_provenance(results_page):
+    text = results_page._provenance({"command": "python -m studies bench", "git_commit": "abc1234f",
+                                     "note": "written after the run"})
+    assert text == "`python -m studies bench`; commit abc1234; note: written after the run"

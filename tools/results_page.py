@@ -249,6 +249,7 @@ def _provenance(sidecar: dict) -> str:
     if sidecar.get("date"):
         parts.append(sidecar["date"][:10])
     machine = sidecar.get("machine") or {}
+    note = sidecar.get("note")  # a sidecar written after the run says how it was made
     if machine.get("cpu_model"):
         gpus = ", ".join(gpu if isinstance(gpu, str) else str(gpu.get("name", gpu))
                          for gpu in machine.get("gpus") or [])
@@ -261,6 +262,8 @@ def _provenance(sidecar: dict) -> str:
                      + (f", {vectors[-1]}" if vectors else "")
                      + (f", {last_level} {caches[last_level]}" if last_level else "")
                      + (f", {gpus}" if gpus else ""))
+    if note:
+        parts.append(f"note: {note}")
     return "; ".join(parts)
 
 
