@@ -5,9 +5,9 @@ The data are the authors' public thesis recordings of the five gaits of the pape
 it. Camera axes are not robot axes: compare speeds and path shapes, not headings.
 
     >>> from taichi_star import experiment
-    >>> experiment.experimental_speeds().loc["A1+A2", "speed_mm_s"]
+    >>> float(experiment.experimental_speeds().loc["A1+A2", "speed_mm_s"])
     2.85
-    >>> experiment.experimental_trajectory("A1+A3").head()      # t_s, x_mm, y_mm
+    >>> experiment.experimental_trajectory("A1+A3").head()      # t_s, x_mm, y_mm, displacement_mm
     >>> experiment.experimental_cycle_speeds()    # per-cycle mean, std, n_cycles of each gait
 
 `compare_with_experiment(summary)` turns a `simulate(...).summary` of the paper gaits into the
