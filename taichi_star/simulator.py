@@ -190,6 +190,9 @@ class Simulator:
         self._capped_named = np.zeros(self.n_instances, dtype=bool)
         """Instances whose capped Newton solves a warning of `advance` has named (each once,
         until it is reset)."""
+        self._running = np.ones(self.n_instances, dtype=bool)
+        """`ok` as of the last `advance`, `reset` or `load` (where a status can change), for
+        `fire` to skip failed instances without reading the device at every command."""
         self.timing = RunTiming(setup_s=time.perf_counter() - started, compile_s=0.0,
                                 run_s=0.0, collect_s=0.0, robot_steps=0)
 
@@ -262,7 +265,7 @@ class Simulator:
         actuators to that firing. Failed instances ignore commands (their `since_A*_s` stay
         as they were). Raises ValueError (state unchanged) for a bad shape, dtype, gait or
         time, or a full queue of pending firings."""
-        mask = self._command_mask(commands) & self.ok[:, None]
+        mask = self._command_mask(commands) & self._running[:, None]
         schedule = self.engine.state.schedule
         if at_s is None:
             schedule.command(mask)
@@ -348,10 +351,15 @@ class Simulator:
         drive(self.engine, clock, stops, take, self.n_instances,
               start_times=self.time_s if self.solver.adaptive else None,
               progress_label=robots_label(self.n_instances) if progress else None)
+        run_s = time.perf_counter() - started
+        # one read for the step count, the statuses and the capped solves
+        after = self.engine.state.read(("steps_done", "status", "newton_max"), self.n_instances)
         self.timing = self.timing + RunTiming(
-            setup_s=0.0, compile_s=compile_s, run_s=time.perf_counter() - started, collect_s=0.0,
-            robot_steps=int((self._steps() - steps_before).sum()))
-        capped = self._newton_capped() & self.ok & ~self._capped_named
+            setup_s=0.0, compile_s=compile_s, run_s=run_s, collect_s=0.0,
+            robot_steps=int((after["steps_done"].astype(np.int64) - steps_before).sum()))
+        self._running = after["status"] == STATUS_OK
+        capped = (after["newton_max"] >= self.solver.max_newton) & self._running \
+            & ~self._capped_named
         self._capped_named |= capped
         warn_about_capped(capped, np.arange(self.n_instances), self.solver)
         if not records:
@@ -372,6 +380,7 @@ class Simulator:
             raise ValueError(f"instances must be an integer or a sequence of integers in [0, "
                              f"{self.n_instances}), got {instances!r}")
         self._capped_named[rows] = False
+        self._running[rows] = True
         # each instance's replicas (every n_instances rows after it) go back with it
         copies = self.model.batch_size // self.n_instances
         rows = (rows[None, :] + self.n_instances * np.arange(copies)[:, None]).ravel()
@@ -460,12 +469,6 @@ class Simulator:
         columns["newton_capped"] = values["newton_max"] >= self.solver.max_newton
         return columns
 
-    def _newton_capped(self) -> np.ndarray:
-        """(B,) bool: instances a Newton solve of which used all max_newton iterations since
-        their start or reset."""
-        maxima = self.engine.state.read(("newton_max",), self.n_instances)["newton_max"]
-        return maxima >= self.solver.max_newton
-
     @property
     def ok(self) -> np.ndarray:
         """(B,) bool: instances still running."""
@@ -545,8 +548,10 @@ class Simulator:
                     f"{own[changed[0]]} here ({len(changed)} field(s) differ); load(..., "
                     f"other_params=True) continues it under this simulator's parameters")
         self.engine.restore_state(snapshot.fields)
+        loaded = self.engine.state.read(("status", "newton_max"), self.n_instances)
+        self._running = loaded["status"] == STATUS_OK
         # the saved run's capped solves are its history, shown in state(), not news
-        self._capped_named = self._newton_capped()
+        self._capped_named = loaded["newton_max"] >= self.solver.max_newton
         own = solver_texts(self.solver)
         changed = [name for name in own
                    if snapshot.solver and snapshot.solver.get(name) != own[name]]

@@ -617,10 +617,17 @@ def test_a_failed_robot_shows_its_failure_time_ignores_commands_and_has_no_deriv
     assert np.isnan(derivative[0]) and np.isfinite(derivative[1])
     assert np.isnan(reference.sensitivity("displacement_x_mm", "alpha")[0])
     since_before = sim.state()["since_A3_s"].tolist()
+    failed = sim.save()
     sim.fire(["A3", "A3"])
     since_after = sim.state()["since_A3_s"].tolist()
     assert np.isnan(since_before[0]) and np.isnan(since_after[0])  # the failed one: ignored
     assert since_after[1] == 0.0  # the running one fired now
+    sim.reset(0)  # running again: it takes commands
+    sim.fire(["A3", "none"])
+    assert sim.state()["since_A3_s"].iloc[0] == 0.0
+    sim.load(failed)  # failed again, as saved: ignores them
+    sim.fire(["A2", "none"])
+    assert np.isnan(sim.state()["since_A2_s"].iloc[0])
 
 
 def test_a_simulator_is_not_copied_or_pickled_and_save_refuses_a_folder(tmp_path):
