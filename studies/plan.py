@@ -222,7 +222,8 @@ def main(argv=None):
                                            progress=not args.no_progress,
                                            glide_cycles=args.glide_cycles)
         out.write_csv(primitives, "primitives.csv")
-        model = PrimitiveModel.from_table(primitives)
+        # --glide-cycles 0 plans without glides on purpose
+        model = PrimitiveModel.from_table(primitives, expect_glides=args.glide_cycles > 0)
     summary, per_cycle, path = drive(model, goals, base, solver,
                                      tolerance_mm=args.tolerance, max_cycles=args.max_cycles,
                                      arch=args.arch, progress=not args.no_progress,

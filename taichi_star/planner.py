@@ -133,13 +133,13 @@ class PrimitiveModel:
         self.masks = np.stack([Gait.parse(g).mask.astype(bool) for g in self.gaits])
 
     @classmethod
-    def from_table(cls, table: pd.DataFrame) -> "PrimitiveModel":
+    def from_table(cls, table: pd.DataFrame, expect_glides: bool = True) -> "PrimitiveModel":
         """From a primitive table (`taichi_star.primitives`): its ok gaits' step_x_mm,
         step_y_mm and turn_deg, the steps of the k-th firing in a row from rest in the columns
         `primitives.streak_step_columns(k)` and the glides after k = 1, 2, ... firings in
         the columns `primitives.glide_columns(k)` where it has them (none: steady steps, no
-        glide, and a RuntimeWarning: the robot glides on after its last firing, and a plan
-        without glides overshoots its goals). ValueError for a
+        glide, and, with `expect_glides`, a RuntimeWarning: the robot glides on after its last
+        firing, and a plan without glides overshoots its goals). ValueError for a
         table with the single glide_x_mm/glide_y_mm of earlier versions (measured after
         several firings only): measure it again, and for a table without the columns it reads.
         """
@@ -156,13 +156,17 @@ class PrimitiveModel:
         if not streaks and "glide_x_mm" in table.columns:
             raise ValueError("the primitive table has one glide per gait (glide_x_mm), not one "
                              "per streak of firings (glide1_x_mm, ...): measure it again")
-        if not streaks:
+        check_flag("expect_glides", expect_glides)
+        if not streaks and expect_glides:
             # measure_primitives' default measures none: a plan from such a table put the
             # robot on its goals when it stopped firing and it glided on, missing every goal
             # by ~25 mm without a word (an audit, 2026-12)
-            warn_user(f"the primitive table has no glides: plans from it ignore the glide "
-                      f"after the last firing and overshoot their goals; measure them with "
-                      f"measure_primitives(..., glide_cycles={GLIDE_CYCLES})")
+            warn_user(f"the primitive table has no glides from one firing "
+                      f"({', '.join(glide_columns(1))}; they are read from one up): plans "
+                      f"from it ignore the glide after the last firing and overshoot their "
+                      f"goals; measure them (measure_primitives(..., glide_cycles="
+                      f"{GLIDE_CYCLES}), the primitives study's --glide-cycles) or pass "
+                      f"expect_glides=False to plan without them")
         glides = (np.stack([usable[list(glide_columns(k))].to_numpy()
                             for k in range(1, streaks + 1)]) if streaks else None)
         stepped = 0
@@ -314,7 +318,7 @@ def check_drive(goals_mm, params: StarParams, solver: SolverConfig, tolerance_mm
                 settle_cycles: int = SETTLE_CYCLES) -> np.ndarray:
     """The goals as a (G, 2) float array, or ValueError naming the argument unless `drive`
     can run with these: finite goals, max_cycles an integer >= 1, settle_cycles an integer
-    >= 0, tolerance_mm > 0, frames_per_cycle an integer >= 1, the period and period /
+    >= 0, tolerance_mm > 0 and below every goal's distance, frames_per_cycle an integer >= 1, the period and period /
     frames_per_cycle whole numbers of steps, and max_cycles + settle_cycles periods within the
     step counter (`timegrid.check_work`).
     No compute: a command line checks its input with this before starting."""
@@ -339,6 +343,13 @@ def check_drive(goals_mm, params: StarParams, solver: SolverConfig, tolerance_mm
         raise ValueError(f"settle_cycles must be an integer >= 0, got {settle_cycles!r}")
     if not is_real(tolerance_mm) or not math.isfinite(tolerance_mm) or tolerance_mm <= 0:
         raise ValueError(f"tolerance_mm must be a number > 0, got {tolerance_mm!r}")
+    distances = np.hypot(goals[:, 0], goals[:, 1])
+    if (distances <= tolerance_mm).any():
+        # reached before the robot moves: a plan of nothing, counted as a success
+        near = int(np.flatnonzero(distances <= tolerance_mm)[0])
+        raise ValueError(f"tolerance_mm = {tolerance_mm:g} mm reaches goal {near} "
+                         f"({distances[near]:g} mm from the start) before the robot moves: "
+                         f"give goals farther than the tolerance")
     if not is_whole(frames_per_cycle) or frames_per_cycle < 1:
         raise ValueError(f"frames_per_cycle must be an integer >= 1, got {frames_per_cycle!r}")
     period = params.period

@@ -30,8 +30,8 @@ def test_drive_plans_for_the_glide_and_judges_goals_at_rest(quick_primitives, qu
     aware = PrimitiveModel.from_table(table.merge(widen_glides(glides), on="gait"))
     assert aware.glides_mm.shape[0] == 2 and aware.streak_steps_mm.shape[0] == 3
     # a table without glides plans as if the robot stopped when it stops firing: warned
-    with pytest.warns(RuntimeWarning, match=r"the primitive table has no glides: plans from "
-                                            r"it ignore the glide .* glide_cycles=4\)"):
+    with pytest.warns(RuntimeWarning, match=r"the primitive table has no glides from one "
+                                            r"firing .* glide_cycles=4\)"):
         blind = PrimitiveModel.from_table(table)
     goals = default_goals(40.0, count=2, far_mm=None)
     summary, cycles, path = drive(aware, goals, solver=solver, max_cycles=3,
@@ -133,3 +133,16 @@ def test_a_table_without_the_columns_and_goals_beyond_a_metre_are_refused():
     assert len(default_goals(1000.0, 2, 1000.0)) == 3
     with pytest.raises(ValueError, match=r"^distance_mm must be a number in \(0, 1000\] mm"):
         default_goals(1000.5)
+
+
+def test_a_goal_within_the_reach_tolerance_is_refused_and_one_just_past_it_accepted():
+    """A goal 3 mm away with a 5-mm tolerance counted as reached in 0 cycles (the plan study
+    refused it, the API not: a review, 2026-12). At the tolerance refused, just past accepted."""
+    from taichi_star.planner import check_drive
+    params, solver = ts.StarParams(), ts.SolverConfig()
+    with pytest.raises(ValueError, match=r"^tolerance_mm = 5 mm reaches goal 1 \(3 mm from the "
+                                         r"start\) before the robot moves"):
+        check_drive([[40.0, 0.0], [3.0, 0.0]], params, solver, tolerance_mm=5.0)
+    with pytest.raises(ValueError, match=r"reaches goal 0 \(5 mm"):
+        check_drive([[0.0, 5.0]], params, solver, tolerance_mm=5.0)
+    assert check_drive([[0.0, 5.000001]], params, solver, tolerance_mm=5.0).shape == (1, 2)

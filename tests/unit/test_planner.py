@@ -165,12 +165,17 @@ def test_glides_are_read_from_a_primitive_table_and_checked():
         one = PrimitiveModel.from_table(table.drop(columns=["glide2_x_mm", "glide2_y_mm"]))
     assert one.glides_mm.shape == (1, 3, 2) and one.glides_mm.any()
     # none: plans from it overshoot, warned
-    with pytest.warns(RuntimeWarning, match="the primitive table has no glides"):
+    with pytest.warns(RuntimeWarning, match="the primitive table has no glides from one firing"):
         without = PrimitiveModel.from_table(table.drop(columns=["glide1_x_mm", "glide1_y_mm",
                                                                 "glide2_x_mm", "glide2_y_mm"]))
     assert without.glides_mm.shape == (1, 3, 2) and not without.glides_mm.any()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # planning without glides on purpose (plan's 0)
+        PrimitiveModel.from_table(table.drop(columns=["glide1_x_mm", "glide1_y_mm",
+                                                      "glide2_x_mm", "glide2_y_mm"]),
+                                  expect_glides=False)
     # a gap in the streaks: only those before it are read
-    with pytest.warns(RuntimeWarning, match="the primitive table has no glides"):
+    with pytest.warns(RuntimeWarning, match="the primitive table has no glides from one firing"):
         gap = PrimitiveModel.from_table(table.drop(columns=["glide1_x_mm", "glide1_y_mm"]))
     assert not gap.glides_mm.any()
     legacy = table.drop(columns=["glide2_x_mm", "glide2_y_mm"]).rename(
@@ -326,9 +331,9 @@ def test_a_drive_is_checked_at_the_ends_of_its_ranges_before_any_compute():
     from taichi_star.planner import check_drive
 
     params, solver = StarParams(), SolverConfig()
-    goals = check_drive([[40, 0], [0, -5]], params, solver, tolerance_mm=1e-9, max_cycles=1,
+    goals = check_drive([[40, 0], [0, -6]], params, solver, tolerance_mm=1e-9, max_cycles=1,
                         settle_cycles=0, frames_per_cycle=1)
-    assert goals.dtype == np.float64 and goals.tolist() == [[40.0, 0.0], [0.0, -5.0]]
+    assert goals.dtype == np.float64 and goals.tolist() == [[40.0, 0.0], [0.0, -6.0]]
     # 3.15 s is 3150 steps of 1 ms: 10 frames of 315 steps, 7 of 450 (whole), 4 of 787.5 (not)
     check_drive(goals, params, solver, frames_per_cycle=7)
     refused = [
