@@ -72,6 +72,11 @@ class StudyArgumentError(ValueError):
     """A study argument is invalid; raised before any computation, naming the flag."""
 
 
+class NotANumber(StudyArgumentError):
+    """A value that should be a (finite) number or an integer is not one (`parse_number`,
+    `parse_values`): the message can name the field's allowed range (`parse_field_values`)."""
+
+
 class StudyOutputError(RuntimeError):
     """An output file cannot be written (a full disk, a folder gone); names the folder. The
     files written before are whole (each is written atomically)."""
@@ -319,9 +324,9 @@ def parse_number(text: str, flag: str) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise StudyArgumentError(f"{flag}: {text!r} is not a number") from None
+        raise NotANumber(f"{flag}: {text!r} is not a number") from None
     if not math.isfinite(value):
-        raise StudyArgumentError(f"{flag}: {text!r} is not a finite number")
+        raise NotANumber(f"{flag}: {text!r} is not a finite number")
     return value
 
 
@@ -375,7 +380,7 @@ def parse_values(text: str, flag: str = "value", kind: type = float,
                 values = [int(item) for item in items]
             except ValueError as error:
                 bad = str(error).rsplit(": ", 1)[-1]
-                raise StudyArgumentError(f"{flag}: {bad} is not an integer") from None
+                raise NotANumber(f"{flag}: {bad} is not an integer") from None
         else:
             values = items
     if not repeats and len(set(values)) < len(values):
@@ -439,13 +444,21 @@ def parse_field_values(text: str, flag: str, name: str, unknown_flag: Optional[s
     try:
         # a per-actuator field's values are its eight, A1..A8, which may be equal
         return parse_values(text, flag, kind, repeats=name in PER_ACTUATOR_FIELDS)
-    except StudyArgumentError as error:
-        if name not in STAR_RANGES:
-            raise
-        # "'nan' is not a finite number" named no range, where the API's message does
+    except NotANumber as error:
+        raise with_allowed_values(error, name) from None
+
+
+def with_allowed_values(error: NotANumber, name: str) -> StudyArgumentError:
+    """`error` with StarParams field `name`'s allowed values added ("'nan' is not a finite
+    number" named none, where the API's message does: an audit, 2026-12)."""
+    if name in STAR_RANGES:
         lowest, highest, lowest_included = STAR_RANGES[name]
-        raise StudyArgumentError(f"{error} ({name} must be in {'[' if lowest_included else '('}"
-                                 f"{lowest:g}, {highest:g}])") from None
+        allowed = f"in {'[' if lowest_included else '('}{lowest:g}, {highest:g}]"
+    elif name in PER_ACTUATOR_FIELDS:
+        allowed = StarParams.__dataclass_fields__[name].metadata["allowed"]
+    else:
+        return error
+    return StudyArgumentError(f"{error} ({name} must be {allowed})")
 
 
 def resolve_gaits(text: str, flag: str = "--gaits") -> List[str]:
@@ -503,7 +516,10 @@ def base_params(args) -> StarParams:
         name, values = parse_assignment(item, "--set")
         if name in PER_ACTUATOR_FIELDS:
             # one value is the whole tuple, A1..A8 (StarParams checks the count and range)
-            values = [tuple(parse_number(value, f"--set {name}") for value in values)]
+            try:
+                values = [tuple(parse_number(value, f"--set {name}") for value in values)]
+            except NotANumber as error:
+                raise with_allowed_values(error, name) from None
         if len(values) != 1:
             raise StudyArgumentError(f"--set {name}: give exactly one value, got {values}")
         if name in args.fixed_fields:

@@ -598,8 +598,21 @@ def main(argv=None):
                          "fit": candidate.fit, "set": candidate.set,
                          "description": candidate.description})
             continue
-        candidate.box(base)
+        box = candidate.box(base)
+        idle = identify.unfired_axes(box, gaits)
+        if len(idle) == len(box):
+            # a flat objective: its fit was ranked and "identified" from CMA-ES's random points
+            # (a review, 2026-12)
+            rows.append({"candidate": candidate.name, "status": "skipped",
+                         "note": f"no fitted gait fires the actuators of {', '.join(idle)}",
+                         "fit": candidate.fit, "set": candidate.set,
+                         "description": candidate.description})
+            continue
+        identify.check_unfired_axes("model_select", f"candidate {candidate.name}", box, gaits)
         runnable.append(candidate)
+    if not runnable:  # tables of skipped rows, exit status 0, before
+        raise cli.StudyArgumentError(f"--candidates: none can be fitted ({rows[0]['candidate']}:"
+                                     f" {rows[0]['note']})")
     trials = identification.measured_trials(gaits)
     identify.check_trials_cover(trials, validate, args.validate_cycles)
     solver = cli.solver(args)
@@ -615,12 +628,13 @@ def main(argv=None):
     started = time.perf_counter()
     rows, parameters, gait_tables, fold_tables, identified = list(rows), [], [], [], {}
     budget_s = 3600 * args.budget_hours
-    fitted: List[str] = []
+    first_fit_done = False
 
     def fit_or_read_back(candidate: Candidate, stage_settings, stage: str, setup: Setup,
                          work_left):
         """One candidate at one stage: read back from done/ (--resume, same definition) or
         fitted, assessed and stored; skipped with a note once the budget is spent."""
+        nonlocal first_fit_done
         definition = definition_of(candidate, args, stage_settings, base, solver, gaits)
         subfolder = "" if stage == "screen" else f"{stage}/"
         done = out.folder / "done" / subfolder / f"{candidate.name}.json"
@@ -645,7 +659,7 @@ def main(argv=None):
                 return
         # the first fit of a run always runs: a budget spent before it (--budget-hours 1e-9)
         # skipped every candidate and wrote empty tables with exit status 0 (an audit, 2026-12)
-        if fitted and time.perf_counter() - started > budget_s:
+        if first_fit_done and time.perf_counter() - started > budget_s:
             rows.append({"stage": stage, "candidate": candidate.name, "status": "skipped",
                          "note": f"budget of {args.budget_hours:g} h spent",
                          "fit": candidate.fit, "set": candidate.set,
@@ -673,7 +687,7 @@ def main(argv=None):
 
         result = fit_candidate(candidate, base, stage_settings, args.fold_generations, setup,
                                on_generation=on_generation, progress=progress)
-        fitted.append(label)
+        first_fit_done = True
         result["row"].update(definition=definition, stage=stage)
         rows.append(result["row"])
         for store, table in zip(tables, (result["parameters"], result["gaits"],

@@ -315,8 +315,8 @@ class Schedule:
         the fixed step (s) when the clock counts steps, None when it reads seconds.
 
         Raises ValueError, nothing changed, where `due` is not after the clock of an instance
-        with actuators to fire, is a step number the clock's float type does not hold exactly
-        (f32: beyond 2²⁴ steps), or would be a firing beyond the `PENDING_CAPACITY` an
+        with actuators to fire, is a step number past those the clock's float type counts
+        exactly (f32: beyond 2²⁴ steps), or would be a firing beyond the `PENDING_CAPACITY` an
         instance holds pending."""
         actuators = np.asarray(actuators, dtype=bool)
         bits = (actuators.astype(np.int32) << np.arange(N_ACTUATORS, dtype=np.int32)).sum(
@@ -334,8 +334,8 @@ class Schedule:
         # 2^24 in f32 (held exactly, accepted: an audit, 2026-12) could fire a step early
         exact_steps = 2 ** (np.finfo(dues.dtype).nmant + 1)
         if step_s is not None and (float(at) != due or due > exact_steps):
-            raise ValueError(f"at_s = {seconds:.6g} s is step {due}, which the clock's "
-                             f"{dues.dtype} steps do not hold exactly (at most step "
+            raise ValueError(f"at_s = {seconds:.6g} s is step {due}, past the steps the "
+                             f"clock's {dues.dtype} counts exactly (at most step "
                              f"{exact_steps}); use precision 'f64'")
         rows = np.flatnonzero(bits)
         late = rows[~(clock[rows] < at)]

@@ -69,7 +69,8 @@ STATE_RECORD_BYTES = 6144
 NOT_COPIED = ("a Simulator is not copied or pickled (its robots live in the engine's device "
               "memory): save() its state and load() it into a Simulator of the same "
               "parameters, or make another Simulator")
-"""The TypeError of copying, deep-copying or pickling a Simulator (or an environment)."""
+"""The TypeError of copying, deep-copying or pickling a Simulator (an environment raises its
+own, `envs.swimmer.ENV_NOT_COPIED`)."""
 
 
 def parameter_texts(params: Sequence[StarParams]) -> Tuple[Dict[str, str], ...]:
@@ -399,7 +400,9 @@ class Simulator:
         its start (mm, the frame of `simulate`'s displacement); heading_deg (body rotation,
         counter-clockwise); the centroid's velocity (mm/s) and the body's angular velocity
         (deg/s); since_A1_s..since_A8_s, the time since each actuator last fired (NaN: never);
-        status."""
+        status; failure_time_s (s, when a failed instance stopped; NaN while it runs);
+        newton_capped (bool: a Newton solve used all max_newton iterations since the start or
+        a reset)."""
         return self._state_of(self.n_instances)
 
     def sensitivity(self, column: str, parameter: str) -> np.ndarray:

@@ -294,14 +294,14 @@ def test_an_f32_simulator_refuses_a_firing_at_a_step_its_clock_cannot_hold():
     sim = ts.Simulator([ts.StarParams()], ts.SolverConfig(dt=dt, precision="f32", newton_tol=1e-6))
     sim.fire(["A1"], at_s=2 ** 24 * dt)
     before = sim.save().fields
-    with pytest.raises(ValueError, match=r"at_s = 16384 s is step 16777217, which the clock's "
-                                         r"float32 steps do not hold exactly \(at most step "
+    with pytest.raises(ValueError, match=r"at_s = 16384 s is step 16777217, past the steps the "
+                                         r"clock's float32 counts exactly \(at most step "
                                          r"16777216\); use precision 'f64'"):
         sim.fire(["A2"], at_s=(2 ** 24 + 1) * dt)
     # an even step past 2^24 is a whole float32, but the step numbers, compared as float32,
     # round there (a firing could come a step early): refused too (it was accepted, an audit)
-    with pytest.raises(ValueError, match=r"is step 16777226, which the clock's float32 steps do "
-                                         r"not hold exactly \(at most step 16777216\)"):
+    with pytest.raises(ValueError, match=r"is step 16777226, past the steps the clock's "
+                                         r"float32 counts exactly \(at most step 16777216\)"):
         sim.fire(["A2"], at_s=(2 ** 24 + 10) * dt)
     after = sim.save().fields
     assert all(np.array_equal(after[name], before[name]) for name in before)

@@ -584,6 +584,16 @@ def test_advance_names_ok_robots_whose_newton_solves_were_capped_once_until_rese
     state = sim.state()
     assert state["status"].tolist() == ["ok", "ok"]
     assert state["newton_capped"].tolist() == [False, True]
+    # a loaded run's capped solves are its history (state() shows them), not news: a new
+    # Simulator that loads it names them no more than the one that ran it
+    resumed = ts.Simulator([paper, tiny_limbs])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        resumed.load(sim.save())
+        resumed.advance(0.01)
+    assert _capped_warnings(caught) == []
+    assert resumed.state()["newton_capped"].tolist() == [False, True]
+    del resumed
     sim.reset(1)  # a single index resets one robot (it said "must be integers ..., got 1")
     assert sim.state()["newton_capped"].tolist() == [False, False]
     sim.fire(["none", "A1+A3"])

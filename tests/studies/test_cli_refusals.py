@@ -50,6 +50,9 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
      "--set alpha: 'nan' is not a finite number (alpha must be in [0, 10])"),
     ("sweep", ["--gaits", "A1", "--alpha", "0.5,x"],
      "--alpha: 'x' is not a number (alpha must be in [0, 10])"),
+    ("fig4c", ["--set", "actuator_gains=1,1,1,1,1,1,1,nan"],
+     "--set actuator_gains: 'nan' is not a finite number (actuator_gains must be 8 numbers in "
+     "[0, 5])"),
     ("gait_design", ["--seed", "-1"], "--seed must be >= 0, got -1"),
     # --quick runs whole --cycles here, not --quick's 0.2 s
     ("gait_design", ["--cycles", "1000000000"], "--cycles 1000000000 (3.15e+09 s)"),
@@ -377,3 +380,17 @@ def test_library_info_logs_stay_off_stderr(monkeypatch, capsys):
         chatty.info("Batched Comm Closed", exc_info=True)
     logging.getLogger("taichi_star.batch").warning("a damaged chunk is recomputed")
     assert capsys.readouterr().err == "a damaged chunk is recomputed\n"
+
+
+@pytest.mark.parametrize("study, argv, message", [
+    ("fig4c", ["--set", "alpha="], "--set alpha: empty value list"),
+    ("sweep", ["--gaits", "A1", "--param", "alpha=0.5,0.5"],
+     "--param alpha: 0.5 is listed twice in '0.5,0.5' (give each value once)"),
+])
+def test_a_field_range_is_named_for_a_value_that_is_no_number_only(no_compute, tmp_path, capsys,
+                                                                    study, argv, message):
+    """The range is what a value that is no number needs; an empty list or a repeated value
+    is another mistake, whose message stays as it was (a review, 2026-12)."""
+    assert studies_main([study, *argv, "--out", str(tmp_path / "out"), *QUICK]) == 2
+    error = capsys.readouterr().err.strip()
+    assert error.endswith(message), error

@@ -234,3 +234,20 @@ def test_a_budget_spent_before_the_first_fit_still_runs_that_fit(tmp_path, capsy
     assert written.loc["paper", "status"] == "ok"
     assert written.loc["ramp", "status"] == "skipped"
     assert written.loc["ramp", "note"] == "budget of 1e-09 h spent"
+
+
+def test_a_candidate_whose_axes_no_fitted_gait_moves_is_skipped_and_none_left_is_refused(
+        no_compute, tmp_path, capsys):
+    """A candidate fitting only gains of actuators the fitted gaits never fire was fitted on a
+    flat objective, ranked first and written as the identified model (a review, 2026-12):
+    skipped with a note; a table with nothing left to fit is refused before any compute."""
+    table = tmp_path / "candidates.csv"
+    table.write_text("name,set,fit,description\n"
+                     "idle,,actuator_gains[8]=0.5:1.5 actuator_gains[7]=0.5:1.5,never fired\n")
+    out = tmp_path / "out"
+    assert studies_main(["model_select", "--candidates", str(table), "--gaits", "A1+A2,A1+A4",
+                         "--out", str(out), *QUICK]) == 2
+    error = capsys.readouterr().err
+    assert ("--candidates: none can be fitted (idle: no fitted gait fires the actuators of "
+            "actuator_gains[8], actuator_gains[7])") in error, error
+    assert len(error.strip().splitlines()) == 1 and not out.exists()
