@@ -798,7 +798,7 @@ def plot_bench(csv_path, png_path):
         axes[2].text(0.5, 0.5, "no scenarios in this run", ha="center", va="center",
                      transform=axes[2].transAxes)
         axes[2].set_axis_off()
-    fig.savefig(png_path, dpi=120)
+    cli.write_figure(fig, png_path, dpi=120)
     plt.close(fig)
     return png_path
 

@@ -177,7 +177,7 @@ def draw_convergence(evaluations: pd.DataFrame, names: Sequence[str]):
 
 def plot_convergence(csv_path, png_path, names: Sequence[str]) -> Path:
     fig = draw_convergence(pd.read_csv(csv_path), names)
-    fig.savefig(png_path, dpi=130)
+    cli.write_figure(fig, png_path, dpi=130)
     cli.use_agg().close(fig)
     return Path(png_path)
 

@@ -18,6 +18,7 @@ import collections
 import contextlib
 import datetime
 import difflib
+import io
 import itertools
 import json
 import logging
@@ -797,11 +798,23 @@ def use_agg():
     return plt
 
 
+def write_figure(fig, png_path, dpi: int = 130, **savefig) -> Path:
+    """Write a figure as a PNG whole or not at all (`write_atomic`; matplotlib's `savefig`
+    into the file itself left a truncated picture over the previous one on a full disk, and an
+    error naming no file: an audit, 2026-12); StudyOutputError naming the file. `savefig`:
+    matplotlib's other options (bbox_inches, ...). Returns the path."""
+    picture = io.BytesIO()
+    fig.savefig(picture, format="png", dpi=dpi, **savefig)
+    write_atomic(png_path, picture.getvalue(), failure=lambda reason: StudyOutputError(
+        f"{reason}; the files written before are intact"))
+    return Path(png_path)
+
+
 def save_figure(fig, png_path, dpi: int = 130) -> Path:
-    """Lay out, write and close a figure; returns its path."""
+    """Lay out, write (`write_figure`) and close a figure; returns its path."""
     import matplotlib.pyplot as plt
     fig.tight_layout()
-    fig.savefig(png_path, dpi=dpi)
+    write_figure(fig, png_path, dpi=dpi)
     plt.close(fig)
     return Path(png_path)
 

@@ -116,7 +116,7 @@ def plot_convergence(csv_path, png_path):
     settings = cli.run_settings(csv_path, mesh=False)
     ax.set_title("discretisation convergence of the speed" + (f" ({settings})" if settings
                                                               else ""), fontsize=9)
-    fig.savefig(png_path, dpi=120)
+    cli.write_figure(fig, png_path, dpi=120)
     plt.close(fig)
     return png_path
 

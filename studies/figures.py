@@ -88,7 +88,7 @@ def plot_fig4c(csv_path, png_path, title: str = None, caption: str = None):
     ax.set_title(title or fig4_titles()[0], fontsize=9)
     ax.legend()
     _caption(fig, csv_path, caption)
-    fig.savefig(png_path, dpi=130)
+    cli.write_figure(fig, png_path, dpi=130)
     plt.close(fig)
     return Path(png_path)
 
@@ -128,7 +128,7 @@ def plot_fig4b(csv_path, png_path, title: str = None, caption: str = None):
         axes[0, 0].legend(fontsize=7)
     fig.suptitle(title or fig4_titles()[1], fontsize=10)
     _caption(fig, csv_path, caption)
-    fig.savefig(png_path, dpi=130)
+    cli.write_figure(fig, png_path, dpi=130)
     plt.close(fig)
     return Path(png_path)
 

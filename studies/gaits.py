@@ -156,7 +156,7 @@ def plot_gaits(csv_path, png_path):
     settings = cli.run_settings(csv_path)
     ax.set_title(f"{n} gait classes ranked by speed over {duration:g} s from rest"
                  + (f"\n{settings}" if settings else ""), fontsize=9)
-    fig.savefig(png_path, dpi=130, bbox_inches="tight")
+    cli.write_figure(fig, png_path, dpi=130, bbox_inches="tight")
     plt.close(fig)
     return Path(png_path)
 

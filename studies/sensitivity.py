@@ -206,7 +206,8 @@ def main(argv=None):
         summary = run_batch(params, **cli.run_length(args), solver=solver_config,
                             arch=args.arch,
                             chunk_size=cli.chunk_size(args, len(params), executor.n_workers),
-                            executor=executor, run_dir=run_dir, resume=args.resume,
+                            executor=executor, run_dir=run_dir, run_dir_flag="--run-dir",
+                            resume=args.resume,
                             progress=not args.no_progress).summary
     # after the run: a resume that the run store refuses (other arguments) leaves the folder's
     # tables those of its own run (the samples were replaced before the refusal; an audit)

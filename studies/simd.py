@@ -1003,7 +1003,7 @@ def plot_speedups(csv_path, png_path):
         made = json.loads(sidecar.read_text())
         fig.suptitle(f"{made.get('machine', {}).get('cpu_model', '')}, commit "
                      f"{str(made.get('git_commit', ''))[:7]}", fontsize=9)
-    fig.savefig(png_path, dpi=110)
+    cli.write_figure(fig, png_path, dpi=110)
     plt.close(fig)
     return png_path
 

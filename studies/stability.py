@@ -386,7 +386,7 @@ def plot_maps(table: pd.DataFrame, path) -> Path:
                  f"cycle(s) from rest\ncell = C_a × period × gait, text = "
                  f"ok/retried/insane/failed", fontsize=8)
     path = Path(path)
-    fig.savefig(path, dpi=130)
+    cli.write_figure(fig, path, dpi=130)
     plt.close(fig)
     return path
 

@@ -161,7 +161,7 @@ def plot_sweep(csv_path, out: cli.Output, prefix: str = "sweep"):
                      fontsize=9)
         fig.tight_layout()
         path = out.path(f"{prefix}_{swept[name]}.png")
-        fig.savefig(path, dpi=120)
+        cli.write_figure(fig, path, dpi=120)
         plt.close(fig)
         paths.append(path)
     return paths
@@ -187,7 +187,8 @@ def main(argv=None):
     with cli.executor(args, out) as executor:
         result = run_batch(grid, **cli.run_length(args), solver=solver, arch=args.arch,
                            chunk_size=cli.chunk_size(args, len(grid), executor.n_workers),
-                           executor=executor, run_dir=run_dir, resume=args.resume,
+                           executor=executor, run_dir=run_dir, run_dir_flag="--run-dir",
+                           resume=args.resume,
                            progress=not args.no_progress)
     csv = out.write_csv(result.summary, "sweep.csv")
     out.write_parquet(result.summary, "sweep.parquet")

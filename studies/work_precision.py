@@ -514,7 +514,7 @@ def plot_work_precision(summary_csv, png_path):
     legend_panel.legend(*pareto.get_legend_handles_labels(), fontsize=8, loc="center left")
     for ax in (by_h, by_tol, by_mesh):
         ax.legend(fontsize=7)
-    fig.savefig(png_path, dpi=110)
+    cli.write_figure(fig, png_path, dpi=110)
     plt.close(fig)
     return png_path
 

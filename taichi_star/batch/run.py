@@ -36,7 +36,7 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
               record_interval_s: float = 0.0, record_shapes: bool = False,
               steady_from_cycle: int = 1, workers: Optional[int] = None,
               executor: Optional[Executor] = None, run_dir=None, resume: bool = False,
-              progress: Optional[bool] = None) -> SimulationResult:
+              progress: Optional[bool] = None, run_dir_flag: str = "run_dir") -> SimulationResult:
     """Simulate any number of instances, each from rest, for `duration_s` seconds or for
     `cycles` of its own actuation period, and return one `SimulationResult`.
 
@@ -61,6 +61,7 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     recomputed (damaged or foreign ones are reported and recomputed), and the summary and the
     trajectory are read back from the store (a chunk stored before the store kept trajectories
     has none). The store's chunks are Parquet files: `run_dir` needs pyarrow (the `io` extra).
+    `run_dir_flag`: how the store's messages name `run_dir` (a command line's "--run-dir").
 
     `timing` sums the `RunTiming` of the chunks computed by this call (not those a resume
     read back; chunks on worker processes overlap, so its phases add up to more than the
@@ -97,7 +98,8 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
         raise ValueError("record_shapes cannot be combined with run_dir (shapes are not stored)")
     store, done = None, []
     if run_dir is not None:
-        store = RunStore(run_dir, run_definition(params, tasks, chunk_size, cycles, duration_s))
+        store = RunStore(run_dir, run_definition(params, tasks, chunk_size, cycles, duration_s),
+                         flag=run_dir_flag)
         done = store.open(tasks, resume)
         if done:
             log.warning("resuming %s: %d of %d chunks already done", store.path, len(done),

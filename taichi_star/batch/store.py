@@ -211,8 +211,12 @@ class RunStore:
                 raise ValueError(f"its chunk size {size!r} is not a whole number >= 1")
         except (OSError, UnicodeDecodeError, ValueError) as error:
             reason = str(error).splitlines()[0] if str(error) else type(error).__name__
+            # "delete the folder" threw away finished chunks a resume without the manifest
+            # keeps (an audit, 2026-12)
             raise RunStoreError(f"{self.flag} {self.path}: {MANIFEST} is damaged ({reason}); "
-                                f"delete the folder or choose another {self.flag}") from None
+                                f"delete {MANIFEST} and resume to keep the chunks whose stamps "
+                                f"match this run, or delete the folder (or choose another "
+                                f"{self.flag}) to start over") from None
         return manifest
 
     def open(self, tasks: Sequence[ChunkTask], resume: bool) -> List[int]:

@@ -482,6 +482,31 @@ def test_a_failed_table_write_leaves_the_previous_table_and_sidecar(tmp_path, mo
     assert sorted(p.name for p in tmp_path.iterdir()) == ["table.csv", "table.csv.json"]
 
 
+def test_a_failed_figure_write_leaves_the_previous_figure_and_names_the_file(tmp_path,
+                                                                              monkeypatch):
+    """matplotlib wrote a study's PNG into the file itself: a full disk left a truncated
+    picture over the previous one and an OSError naming no file, under "the files written
+    before are intact" (an audit, 2026-12). Written whole or not at all, the error names it."""
+    plt = cli.use_agg()
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1])
+    path = cli.write_figure(fig, tmp_path / "speeds.png", dpi=50)
+    before = path.read_bytes()
+    assert before.startswith(b"\x89PNG")
+
+    def full_disk(source, target):
+        raise OSError(28, os.strerror(28))
+    monkeypatch.setattr(provenance.os, "replace", full_disk)
+    ax.plot([0, 1], [1, 0])
+    with pytest.raises(cli.StudyOutputError, match=r"cannot write speeds.png \(No space left on "
+                                                   r"device\); the files written before are "
+                                                   r"intact"):
+        cli.write_figure(fig, path, dpi=80)
+    plt.close(fig)
+    assert path.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["speeds.png"]
+
+
 def test_ctrl_c_is_one_line_saying_what_is_kept(tmp_path, monkeypatch, capsys):
     """Ctrl-C printed the traceback of wherever the run was (35 lines, an audit) and left the
     folder the run had made. Now: one line, exit 130 (a shell's for SIGINT), the run's empty

@@ -465,7 +465,11 @@ def test_a_damaged_manifest_is_a_one_line_error_naming_the_reason(tmp_path, text
         RunStore(folder, {}, flag="--run-dir").read_manifest()
     message = str(error.value)
     assert message.startswith(f"--run-dir {folder}: manifest.json is damaged {reason}")
-    assert message.endswith("; delete the folder or choose another --run-dir")
+    # deleting the folder threw away the finished chunks that a resume without the manifest
+    # keeps (an audit, 2026-12)
+    assert message.endswith("; delete manifest.json and resume to keep the chunks whose stamps "
+                            "match this run, or delete the folder (or choose another --run-dir) "
+                            "to start over")
     assert "\n" not in message
 
 
