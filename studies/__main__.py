@@ -7,13 +7,19 @@ import os
 import sys
 from pathlib import Path
 
-import taichi_star
-from taichi_star.batch import RunStoreError
-from taichi_star.extras import missing_extra
+try:
+    import taichi_star
+    from taichi_star.batch import RunStoreError
+    from taichi_star.extras import missing_extra
 
-from . import EXTRA_OF_STUDY, study_names
-from . import cli
-from .cli import StudyArgumentError, StudyOutputError, configure_logging, interrupted
+    from . import EXTRA_OF_STUDY, study_names
+    from . import cli
+    from .cli import StudyArgumentError, StudyOutputError, configure_logging, interrupted
+except KeyboardInterrupt:
+    # Ctrl-C while the libraries load (a second or more): one line, as during a study, not the
+    # traceback of pandas' or pyarrow's import (an audit, 2026-12)
+    print("interrupted while loading; nothing was run", file=sys.stderr)
+    raise SystemExit(130) from None
 
 
 FULL_DISK = (errno.ENOSPC, errno.EDQUOT)
@@ -74,10 +80,10 @@ def main(argv=None) -> int:
         print(f"{program()} {name}: error: {missing}", file=sys.stderr)
         return 2
     configure_logging()
-    module = importlib.import_module(f"{__package__}.{name}")
     cli.OPENED.clear()  # this run's output folders alone (`interrupted`)
     try:
-        module.main(rest)
+        # the study's import inside: Ctrl-C while it loads its libraries is one line too
+        importlib.import_module(f"{__package__}.{name}").main(rest)
     except (StudyArgumentError, StudyOutputError, RunStoreError) as error:
         print(f"{program()} {name}: error: {error}", file=sys.stderr)
         for out in cli.OPENED:  # a refusal leaves no empty folder the run made

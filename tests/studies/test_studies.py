@@ -542,6 +542,19 @@ def test_ctrl_c_is_one_line_saying_what_is_kept(tmp_path, monkeypatch, capsys):
                      f"the run\n")
 
 
+def test_ctrl_c_while_a_study_loads_its_libraries_is_one_line(monkeypatch, capsys):
+    """A study's import (pandas, pyarrow, SciPy: a second or more) sat outside the interrupt's
+    handler: Ctrl-C there was a 40-line traceback (an audit, 2026-12)."""
+    import studies.__main__ as entry
+
+    def interrupted_import(name):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(entry.importlib, "import_module", interrupted_import)
+    assert studies_main(["fig4c", *QUICK]) == 130
+    assert capsys.readouterr().err == (f"{main_program()} fig4c: interrupted; the files "
+                                       f"written before are whole\n")
+
+
 def test_ctrl_c_after_the_output_folder_was_removed_is_still_one_line(tmp_path, monkeypatch,
                                                                       capsys):
     """Ctrl-C removes the empty folders the run made, and one may be gone already (removed
