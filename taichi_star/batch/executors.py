@@ -16,10 +16,8 @@ from __future__ import annotations
 import ast
 import atexit
 import concurrent.futures
-import ctypes
 import multiprocessing
 import os
-import signal
 import sys
 import threading
 import time
@@ -74,22 +72,17 @@ def configure_worker_process(parent_pid: Optional[int] = None):
 
 
 PARENT_POLL_S = 1.0
-"""How often a worker off Linux looks whether its parent still lives (s)."""
+"""How often a worker looks whether its parent still lives (s)."""
 
 
 def end_with_parent(parent_pid: int):
     """Make this process end when process `parent_pid`, its parent, does: a pool's workers
     outlived a main process killed with SIGKILL (or by the OOM killer), each finishing its chunk
     for nobody and then waiting for ever, competing with the resumed run for the cores (an
-    audit, 2026-12: 58 left after 30 kills). On Linux the kernel kills it
-    (prctl PR_SET_PDEATHSIG, even inside a kernel launch); elsewhere a daemon thread polls."""
-    if sys.platform.startswith("linux"):
-        pr_set_pdeathsig = 1
-        ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, signal.SIGKILL)
-        if os.getppid() != parent_pid:  # the parent died before the call
-            os._exit(1)
-        return
-
+    audit, 2026-12: 58 left after 30 kills). A daemon thread polls every `PARENT_POLL_S`; it
+    runs between kernel launches, so a worker in a chunk ends within a launch. (Linux's
+    PR_SET_PDEATHSIG would be immediate, but it fires when the *thread* that started the
+    worker ends, which a pool used from a short-lived thread would take for its death.)"""
     def watch():
         while os.getppid() == parent_pid:
             time.sleep(PARENT_POLL_S)
