@@ -151,7 +151,24 @@ class SimulatorSnapshot:
         return snapshot
 
 
-class Simulator:
+class NotCopied:
+    """A holder of robots that live in an engine: copying, deep-copying or pickling it is a
+    TypeError with `not_copied` (a shallow copy would share the robots, the others failed in
+    Taichi's words: an audit, 2026-12)."""
+
+    not_copied: str = NOT_COPIED
+
+    def __copy__(self):
+        raise TypeError(self.not_copied)
+
+    def __deepcopy__(self, memo):
+        raise TypeError(self.not_copied)
+
+    def __reduce_ex__(self, protocol):
+        raise TypeError(self.not_copied)
+
+
+class Simulator(NotCopied):
     """A batch of robot instances driven by commands (see the module docstring).
 
     params: a sequence of StarParams sharing n_arc and n_limb (their `gait` is ignored);
@@ -564,15 +581,6 @@ class Simulator:
                       f"is {own[changed[0]]} ({len(changed)} setting(s) differ): it goes on "
                       f"under this simulator's settings, not bit for bit as the saved run "
                       f"would have")
-
-    def __copy__(self):
-        raise TypeError(NOT_COPIED)
-
-    def __deepcopy__(self, memo):
-        raise TypeError(NOT_COPIED)
-
-    def __reduce_ex__(self, protocol):
-        raise TypeError(NOT_COPIED)
 
     def __repr__(self) -> str:
         times = self.time_s

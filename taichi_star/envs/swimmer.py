@@ -54,7 +54,7 @@ from ..gait import N_ACTUATORS
 from .. import drawing, metrics
 from ..metrics import MAX_GOAL_MM, rotate
 from ..params import SolverConfig, StarParams
-from ..simulator import ACTUATOR_COLUMNS, Simulator
+from ..simulator import ACTUATOR_COLUMNS, NotCopied, Simulator
 from ..timegrid import check_work, steps_in, whole_steps
 
 # the public names (docs/api.md documents these; the rest are the environments' parts)
@@ -364,11 +364,12 @@ ENV_NOT_COPIED = ("an environment is not copied or pickled (its robots live in o
 """The TypeError of copying, deep-copying or pickling an environment."""
 
 
-class RobotsView:
+class RobotsView(NotCopied):
     """What both environments show of their robots: the Simulator and the control period
-    (their `batch`, a `GoalReachingBatch`, holds them)."""
+    (their `batch`, a `GoalReachingBatch`, holds them). Not copied or pickled (`NotCopied`)."""
 
     batch: GoalReachingBatch
+    not_copied = ENV_NOT_COPIED
 
     @property
     def simulator(self) -> Simulator:
@@ -381,17 +382,6 @@ class RobotsView:
     def control_period_s(self) -> float:
         """The simulated seconds one `step` advances, s."""
         return self.batch.control_period_s
-
-    # a shallow copy shared the robots (stepping the copy moved the original) and a deep copy
-    # or a pickle failed in Taichi's words (an audit, 2026-12)
-    def __copy__(self):
-        raise TypeError(ENV_NOT_COPIED)
-
-    def __deepcopy__(self, memo):
-        raise TypeError(ENV_NOT_COPIED)
-
-    def __reduce_ex__(self, protocol):
-        raise TypeError(ENV_NOT_COPIED)
 
 
 class StarSwimmerEnv(RobotsView, gym.Env):
