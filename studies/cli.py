@@ -586,7 +586,7 @@ def run_store(args, out: "Output") -> Path:
     run_dir = Path(args.run_dir) if args.run_dir is not None else out.folder / "chunks"
     out.run_store = run_dir
     if args.resume and args.chunk_size is None:
-        args.chunk_size = stored_chunk_size(run_dir)
+        args.chunk_size = stored_chunk_size(run_dir, flag="--run-dir")
     return run_dir
 
 

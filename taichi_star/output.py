@@ -226,12 +226,28 @@ def _file_kind(path: Path) -> str:
     return {".parquet": "parquet", ".nc": "netcdf"}.get(path.suffix.lower(), "csv")
 
 
+def _verify_page_checksums(path: Path):
+    """ValueError naming the Parquet file `path` where a page of its values fails its CRC
+    (`parquet_bytes` writes them), read a batch at a time (a whole table could need gigabytes
+    of memory: a review, 2026-12); a file written without CRCs passes."""
+    pq = require("pyarrow.parquet", "io")
+    pyarrow = require("pyarrow", "io")
+    try:
+        for _ in pq.ParquetFile(path, page_checksum_verification=True).iter_batches():
+            pass
+    except (OSError, pyarrow.ArrowException) as error:
+        if isinstance(error, OSError) and "checksum" not in str(error).lower():
+            raise  # the file cannot be read (an I/O error), not damaged values
+        raise ValueError(f"{path}: its values are damaged ({str(error).splitlines()[0]}); its "
+                         f"provenance is intact but describes other values") from None
+
+
 def read_provenance(path) -> dict:
     """The provenance written with a result file: from a Parquet file's metadata, a netCDF
     file's attributes (`provenance`) or a CSV file's sidecar. OSError where the file cannot be
     read; ValueError naming it where it holds no provenance (damaged, or not written by
     `to_parquet`, `to_netcdf` or `to_csv`), where a Parquet file's values fail their page
-    checksums, or where a CSV is no longer the table its sidecar describes (its SHA-256
+    checksums (`_verify_page_checksums`), or where a CSV is no longer the table its sidecar describes (its SHA-256
     differs: damaged or edited since). A netCDF file's values carry checksums that HDF5
     checks whenever they are read (an error, from any reader)."""
     path = file_path(path, "path of a result file")
@@ -241,16 +257,12 @@ def read_provenance(path) -> dict:
         if kind == "parquet":
             pq = require("pyarrow.parquet", "io")
             facts = json.loads(pq.read_schema(path).metadata[PROVENANCE_KEY.encode()])
-            try:
-                pq.read_table(path, page_checksum_verification=True)  # the values' page CRCs
-            except OSError as error:  # pyarrow reports a failed CRC as an OSError
-                raise ValueError(f"damaged: {str(error).splitlines()[0]}") from None
-            return facts
-        if kind == "netcdf":
+        elif kind == "netcdf":
             xr = require("xarray", "io")
             with xr.open_dataset(path) as dataset:
                 return json.loads(dataset.attrs["provenance"])
-        facts = json.loads(source.read_text())
+        else:
+            facts = json.loads(source.read_text())
     except ImportError:
         raise
     except OSError as error:
@@ -264,6 +276,8 @@ def read_provenance(path) -> dict:
         reason = str(error).splitlines()[0] if str(error) else ""
         raise ValueError(f"{source}: no taichi_star provenance in it ({type(error).__name__}"
                          f"{': ' + reason if reason else ''})") from None
+    if kind == "parquet":
+        _verify_page_checksums(path)
     written = facts.get(TABLE_SHA256) if isinstance(facts, dict) else None
     if written is not None and hashlib.sha256(path.read_bytes()).hexdigest() != written:
         raise ValueError(f"{path}: not the table its provenance {source.name} describes (its "

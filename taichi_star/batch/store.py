@@ -214,9 +214,10 @@ class RunStore:
             # "delete the folder" threw away finished chunks a resume without the manifest
             # keeps (an audit, 2026-12)
             raise RunStoreError(f"{self.flag} {self.path}: {MANIFEST} is damaged ({reason}); "
-                                f"delete {MANIFEST} and resume to keep the chunks whose stamps "
-                                f"match this run, or delete the folder (or choose another "
-                                f"{self.flag}) to start over") from None
+                                f"delete {MANIFEST} and resume with the run's own arguments "
+                                f"(its chunk size too) to keep the chunks whose stamps match "
+                                f"it, or delete the folder (or choose another {self.flag}) to "
+                                f"start over") from None
         return manifest
 
     def open(self, tasks: Sequence[ChunkTask], resume: bool) -> List[int]:
@@ -458,8 +459,9 @@ class RunStore:
         self._write_manifest()
 
 
-def stored_chunk_size(path) -> Optional[int]:
+def stored_chunk_size(path, flag: str = "run_dir") -> Optional[int]:
     """The chunk size recorded in the manifest of the run in `path` (to resume it without
-    repeating it), None when there is none."""
-    manifest = RunStore(path, {}).read_manifest() if Path(path).is_dir() else None
+    repeating it), None when there is none; `flag` names `path` in a RunStoreError (a damaged
+    manifest), as `RunStore`'s."""
+    manifest = RunStore(path, {}, flag=flag).read_manifest() if Path(path).is_dir() else None
     return None if manifest is None else manifest["definition"].get("chunk_size")

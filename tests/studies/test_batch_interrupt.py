@@ -124,13 +124,40 @@ def test_a_pools_worker_ends_with_its_main_process_killed_with_sigkill(tmp_path)
     script = tmp_path / "parent.py"
     script.write_text(PARENT_OF_A_POOL)
     parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
+    worker = None
     try:
         worker = psutil.Process(int(parent.stdout.readline()))
         assert worker.is_running() and worker.ppid() == parent.pid
         parent.kill()
         parent.wait(timeout=10)
-        # the kernel ends it at once on Linux; a poll of PARENT_POLL_S elsewhere
+        # its watcher looks every PARENT_POLL_S (1 s)
         gone, _ = psutil.wait_procs([worker], timeout=20)
         assert gone, "the worker outlived its killed parent"
     finally:
         parent.kill()
+        if worker is not None and worker.is_running():
+            worker.kill()
+
+
+def test_a_pools_worker_started_from_a_thread_that_ended_lives_on():
+    """A worker that ended with the *thread* that started it (Linux's PR_SET_PDEATHSIG, tried
+    first: a review, 2026-12) broke a pool first used from a short-lived thread: its next task
+    raised BrokenProcessPool. The worker watches its parent process instead."""
+    import concurrent.futures
+    import multiprocessing
+    import threading
+
+    from taichi_star.batch.executors import configure_worker_process
+
+    pool = concurrent.futures.ProcessPoolExecutor(
+        1, mp_context=multiprocessing.get_context("spawn"),
+        initializer=configure_worker_process, initargs=(os.getpid(),))
+    try:
+        first = []
+        starter = threading.Thread(target=lambda: first.append(pool.submit(os.getpid).result()))
+        starter.start()
+        starter.join()
+        time.sleep(1.5)  # past a poll of the worker's watcher
+        assert pool.submit(os.getpid).result(timeout=60) == first[0]
+    finally:
+        pool.shutdown()

@@ -124,6 +124,9 @@ def test_damaged_manifest_is_a_one_line_error(finished, tmp_path, text, monkeypa
     assert code == 2
     err = capsys.readouterr().err.strip()
     assert "manifest.json is damaged" in err and len(err.splitlines()) == 1
+    # named by the study's flag, also where the resume reads the stored chunk size first
+    # (it said run_dir there: a review, 2026-12)
+    assert f"--run-dir {folder}: manifest.json is damaged" in err, err
 
 
 def test_another_definition_or_an_unfinished_run_is_refused(finished, tmp_path, monkeypatch):

@@ -467,9 +467,9 @@ def test_a_damaged_manifest_is_a_one_line_error_naming_the_reason(tmp_path, text
     assert message.startswith(f"--run-dir {folder}: manifest.json is damaged {reason}")
     # deleting the folder threw away the finished chunks that a resume without the manifest
     # keeps (an audit, 2026-12)
-    assert message.endswith("; delete manifest.json and resume to keep the chunks whose stamps "
-                            "match this run, or delete the folder (or choose another --run-dir) "
-                            "to start over")
+    assert message.endswith("; delete manifest.json and resume with the run's own arguments "
+                            "(its chunk size too) to keep the chunks whose stamps match it, or "
+                            "delete the folder (or choose another --run-dir) to start over")
     assert "\n" not in message
 
 
