@@ -31,8 +31,8 @@ from typing import Dict, List, Mapping, Optional, Sequence
 import numpy as np
 import pandas as pd
 
-from taichi_star import (JACOBIANS, PER_ACTUATOR_FIELDS, PRESETS, SOLVER_RANGES, STAR_RANGES,
-                         SolverConfig, StarParams, check_work, fewest_steps)
+from taichi_star import (JACOBIANS, PER_ACTUATOR_FIELDS, PRESETS, SOLVER_RANGES, SolverConfig,
+                         StarParams, allowed_values, check_work, fewest_steps)
 from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, MAX_LOCAL_WORKERS,
                                executor_for, has_chunks, stored_chunk_size, write_atomic)
 from taichi_star.experiment import PAPER_GAITS
@@ -450,16 +450,11 @@ def parse_field_values(text: str, flag: str, name: str, unknown_flag: Optional[s
 
 
 def with_allowed_values(error: NotANumber, name: str) -> StudyArgumentError:
-    """`error` with StarParams field `name`'s allowed values added ("'nan' is not a finite
-    number" named none, where the API's message does: an audit, 2026-12)."""
-    if name in STAR_RANGES:
-        lowest, highest, lowest_included = STAR_RANGES[name]
-        allowed = f"in {'[' if lowest_included else '('}{lowest:g}, {highest:g}]"
-    elif name in PER_ACTUATOR_FIELDS:
-        allowed = StarParams.__dataclass_fields__[name].metadata["allowed"]
-    else:
-        return error
-    return StudyArgumentError(f"{error} ({name} must be {allowed})")
+    """`error` with StarParams field `name`'s allowed values added (`allowed_values`: "'nan'
+    is not a finite number" named none, where the API's message does: an audit, 2026-12)."""
+    allowed = allowed_values(name)
+    return StudyArgumentError(f"{error} ({name} must be "
+                              f"{'in ' if allowed[0] in '[(' else ''}{allowed})")
 
 
 def resolve_gaits(text: str, flag: str = "--gaits") -> List[str]:

@@ -159,6 +159,11 @@ class Candidate:
         except (ValueError, TypeError) as error:
             raise cli.StudyArgumentError(f"candidate {self.name}: {error}") from None
 
+    def skipped(self, note: str) -> dict:
+        """The study's row of this candidate, skipped before any compute for `note`."""
+        return {"candidate": self.name, "status": "skipped", "note": note, "fit": self.fit,
+                "set": self.set, "description": self.description}
+
     def box(self, base: StarParams) -> List[identify.ParameterRange]:
         """The fitted axes, checked on the candidate's model."""
         box = [identify.parse_range_spec(text, f"candidate {self.name}: fit")
@@ -593,20 +598,15 @@ def main(argv=None):
     for candidate in candidates:  # every runnable candidate checked before any compute
         missing = candidate.missing_fields()
         if missing:
-            rows.append({"candidate": candidate.name, "status": "skipped",
-                         "note": f"StarParams has no field {', '.join(missing)}",
-                         "fit": candidate.fit, "set": candidate.set,
-                         "description": candidate.description})
+            rows.append(candidate.skipped(f"StarParams has no field {', '.join(missing)}"))
             continue
         box = candidate.box(base)
         idle = identify.unfired_axes(box, gaits)
         if len(idle) == len(box):
             # a flat objective: its fit was ranked and "identified" from CMA-ES's random points
             # (a review, 2026-12)
-            rows.append({"candidate": candidate.name, "status": "skipped",
-                         "note": f"no fitted gait fires the actuators of {', '.join(idle)}",
-                         "fit": candidate.fit, "set": candidate.set,
-                         "description": candidate.description})
+            rows.append(candidate.skipped(f"no fitted gait fires the actuators of "
+                                          f"{', '.join(idle)}"))
             continue
         identify.check_unfired_axes("model_select", f"candidate {candidate.name}", box, gaits)
         runnable.append(candidate)
@@ -660,10 +660,9 @@ def main(argv=None):
         # the first fit of a run always runs: a budget spent before it (--budget-hours 1e-9)
         # skipped every candidate and wrote empty tables with exit status 0 (an audit, 2026-12)
         if first_fit_done and time.perf_counter() - started > budget_s:
-            rows.append({"stage": stage, "candidate": candidate.name, "status": "skipped",
-                         "note": f"budget of {args.budget_hours:g} h spent",
-                         "fit": candidate.fit, "set": candidate.set,
-                         "description": candidate.description, "definition": definition})
+            rows.append({"stage": stage, **candidate.skipped(f"budget of "
+                                                             f"{args.budget_hours:g} h spent"),
+                         "definition": definition})
             return
         timing = {"last": time.perf_counter(), "generations": 0}
         label = candidate.name if stage == "screen" else f"{candidate.name} ({stage})"

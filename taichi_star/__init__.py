@@ -14,7 +14,8 @@ os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "false")
 from .actuation import CurvatureProfile
 from .gait import Gait, symmetry_classes
 from .params import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS, JACOBIANS, PER_ACTUATOR_FIELDS,
-                     PRESETS, SOLVER_RANGES, STAR_RANGES, SolverConfig, StarParams)
+                     PRESETS, SOLVER_RANGES, STAR_RANGES, SolverConfig, StarParams,
+                     allowed_values)
 from .profiling import EngineProfile
 from .runtime import available_archs
 from .driver import RunTiming, fewest_steps
@@ -26,6 +27,6 @@ __version__ = "0.3.0"
 
 __all__ = ["simulate", "SimulationResult", "RunTiming", "MAX_STEPS_PER_INSTANCE", "check_work",
            "fewest_steps", "Simulator", "SimulatorSnapshot", "available_archs", "StarParams",
-           "STAR_RANGES", "SolverConfig", "SOLVER_RANGES", "PRESETS", "JACOBIANS",
+           "STAR_RANGES", "allowed_values", "SolverConfig", "SOLVER_RANGES", "PRESETS", "JACOBIANS",
            "PER_ACTUATOR_FIELDS", "COMPONENT_HEIGHTS", "DIFFERENTIABLE_FIELDS",
            "CurvatureProfile", "Gait", "symmetry_classes", "EngineProfile", "__version__"]

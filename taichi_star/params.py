@@ -470,6 +470,12 @@ STAR_CHOICES: Dict[str, Tuple[str, ...]] = {
 """The allowed words of every StarParams field that takes one of a list."""
 
 
+def allowed_values(name: str) -> str:
+    """The allowed values of StarParams field `name` in words, as `help(StarParams)` shows
+    them ("[0, 10]", '"jump" or "ramp"', "8 numbers in [0, 5]"); KeyError for no such field."""
+    return _allowed(StarParams.__dataclass_fields__[name])
+
+
 def _allowed(f) -> str:
     """The allowed values of field `f` in words, from its metadata."""
     if "range" in f.metadata:

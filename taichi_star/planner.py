@@ -318,9 +318,9 @@ def check_drive(goals_mm, params: StarParams, solver: SolverConfig, tolerance_mm
                 settle_cycles: int = SETTLE_CYCLES) -> np.ndarray:
     """The goals as a (G, 2) float array, or ValueError naming the argument unless `drive`
     can run with these: finite goals, max_cycles an integer >= 1, settle_cycles an integer
-    >= 0, tolerance_mm > 0 and below every goal's distance, frames_per_cycle an integer >= 1, the period and period /
-    frames_per_cycle whole numbers of steps, and max_cycles + settle_cycles periods within the
-    step counter (`timegrid.check_work`).
+    >= 0, tolerance_mm > 0 and below every goal's distance, frames_per_cycle an integer >= 1,
+    the period and period / frames_per_cycle whole numbers of steps, and max_cycles +
+    settle_cycles periods within the step counter (`timegrid.check_work`).
     No compute: a command line checks its input with this before starting."""
     try:
         goals = np.asarray(goals_mm, dtype=np.float64)

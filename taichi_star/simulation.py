@@ -427,6 +427,12 @@ OK_INSTANCE_WARNINGS = (r".* instances \(the first: instance .*\) are 'ok' only 
 and warns once with the batch's numbers)."""
 
 
+def newton_capped(newton_max: np.ndarray, solver: SolverConfig) -> np.ndarray:
+    """(B,) bool: instances a Newton solve of which used all the solver's max_newton iterations
+    (`newton_max`: (B,) each one's most iterations in a solve)."""
+    return np.asarray(newton_max) >= solver.max_newton
+
+
 def warn_about_capped(capped: np.ndarray, names: np.ndarray, solver: SolverConfig):
     """The RuntimeWarning of `warn_about_ok_instances` about "ok" instances whose Newton solves
     used all max_newton iterations: `capped` (B,) bool marks them, `names` (B,) names the
@@ -513,7 +519,7 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
     rows["newton_iterations_max"] = counts["newton_max"]
     rows["factorisations_mean"] = counts["factorisations"] / np.maximum(newton_solves, 1)
     rows["substep_retries"] = counts["substep_retries"]
-    rows["newton_capped"] = rows["newton_iterations_max"] >= solver.max_newton
+    rows["newton_capped"] = newton_capped(rows["newton_iterations_max"], solver)
     rows["status"] = [STATUS_NAMES[s] for s in status]
     rows["failure_time_s"] = np.where(failed, failure_time, np.nan)
     summary = pd.DataFrame(rows)

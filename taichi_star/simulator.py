@@ -44,9 +44,9 @@ from .geometry import CENTRE
 from .model import validate_batch
 from .params import SolverConfig, StarParams, check_precision
 from .provenance import file_path, write_atomic
-from .simulation import warn_about_capped
 from .runtime import (RECORDS_REMEDY, Runtime, check_arch, check_batch_memory,
                       check_host_memory)
+from .simulation import newton_capped, warn_about_capped
 from .state import STATUS_NAMES, STATUS_OK
 from .timegrid import MAX_STEPS_PER_INSTANCE, check_work, multiples_within, whole_steps
 
@@ -376,7 +376,7 @@ class Simulator(NotCopied):
             setup_s=0.0, compile_s=compile_s, run_s=run_s, collect_s=0.0,
             robot_steps=int((after["steps_done"].astype(np.int64) - steps_before).sum()))
         self._running = after["status"] == STATUS_OK
-        capped = (after["newton_max"] >= self.solver.max_newton) & self._running \
+        capped = newton_capped(after["newton_max"], self.solver) & self._running \
             & ~self._capped_named
         self._capped_named |= capped
         warn_about_capped(capped, np.arange(self.n_instances), self.solver)
@@ -486,7 +486,7 @@ class Simulator(NotCopied):
         columns["status"] = np.array([STATUS_NAMES[s] for s in values["status"]], dtype=object)
         columns["failure_time_s"] = np.where(values["status"] == STATUS_OK, np.nan,
                                              values["failure_time"].astype(np.float64))
-        columns["newton_capped"] = values["newton_max"] >= self.solver.max_newton
+        columns["newton_capped"] = newton_capped(values["newton_max"], self.solver)
         return columns
 
     @property
@@ -571,7 +571,7 @@ class Simulator(NotCopied):
         loaded = self.engine.state.read(("status", "newton_max"), self.n_instances)
         self._running = loaded["status"] == STATUS_OK
         # the saved run's capped solves are its history, shown in state(), not news
-        self._capped_named = loaded["newton_max"] >= self.solver.max_newton
+        self._capped_named = newton_capped(loaded["newton_max"], self.solver)
         own = solver_texts(self.solver)
         changed = [name for name in own
                    if snapshot.solver and snapshot.solver.get(name) != own[name]]
