@@ -797,11 +797,17 @@ def write_figure(fig, png_path, dpi: int = 130, **savefig) -> Path:
     """Write a figure as a PNG whole or not at all (`write_atomic`; matplotlib's `savefig`
     into the file itself left a truncated picture over the previous one on a full disk, and an
     error naming no file: an audit, 2026-12); StudyOutputError naming the file. `savefig`:
-    matplotlib's other options (bbox_inches, ...). Returns the path."""
-    picture = io.BytesIO()
-    fig.savefig(picture, format="png", dpi=dpi, **savefig)
-    write_atomic(png_path, picture.getvalue(), failure=lambda reason: StudyOutputError(
-        f"{reason}; the files written before are intact"))
+    matplotlib's other options (bbox_inches, ...). A figure that cannot be written is closed
+    (pyplot keeps every open figure for the process: a notebook that catches the error would
+    hold it for ever); one written stays open for its caller. Returns the path."""
+    try:
+        picture = io.BytesIO()
+        fig.savefig(picture, format="png", dpi=dpi, **savefig)
+        write_atomic(png_path, picture.getvalue(), failure=lambda reason: StudyOutputError(
+            f"{reason}; the files written before are intact"))
+    except BaseException:
+        use_agg().close(fig)
+        raise
     return Path(png_path)
 
 

@@ -493,6 +493,7 @@ def test_a_failed_figure_write_leaves_the_previous_figure_and_names_the_file(tmp
     path = cli.write_figure(fig, tmp_path / "speeds.png", dpi=50)
     before = path.read_bytes()
     assert before.startswith(b"\x89PNG")
+    assert plt.fignum_exists(fig.number)  # written: its caller closes it
 
     def full_disk(source, target):
         raise OSError(28, os.strerror(28))
@@ -502,7 +503,7 @@ def test_a_failed_figure_write_leaves_the_previous_figure_and_names_the_file(tmp
                                                    r"device\); the files written before are "
                                                    r"intact"):
         cli.write_figure(fig, path, dpi=80)
-    plt.close(fig)
+    assert not plt.fignum_exists(fig.number)  # closed: a caller catching the error keeps none
     assert path.read_bytes() == before
     assert [p.name for p in tmp_path.iterdir()] == ["speeds.png"]
 
