@@ -25,6 +25,16 @@ engine's functions are inlined wherever they are called, so the same positions a
 and over: the paper preset's sensitive engine asks for ~80,000 of them, ~6,000 distinct, and
 writing them took 15-20 % of its first call. `memoise_source_positions` makes Taichi write each
 distinct one once per process; the texts, and so Taichi's messages, are unchanged.
+
+Taichi's runtime is one per process and not safe for calls from several threads at once: two
+`simulate` calls from two threads drew the same free engine and interleaved their kernels, and
+both returned other numbers with status "ok" (an audit, 2026-12: four threads, four gaits, every
+speed wrong, e.g. A1+A2 -7.8 mm/s against 2.0 alone). Every public call that uses Taichi
+(`simulate`, each method of a `Simulator` that reads or moves its robots, so every environment
+step) holds `RUNTIME_LOCK` while it runs (`one_call_at_a_time`): calls from several threads
+(Dask's threaded scheduler, a thread pool, a notebook's background thread) take turns and each
+gets the numbers it would get alone. Runs in parallel belong in one batch or in worker
+processes (`batch.run_batch(workers=N)`).
 """
 
 from __future__ import annotations
@@ -35,6 +45,7 @@ import functools
 import gc
 import io
 import os
+import threading
 import weakref
 from dataclasses import dataclass
 from typing import Dict, List, Optional
@@ -50,9 +61,23 @@ from .params import SolverConfig
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
 __all__ = ["Runtime", "available_archs", "CPU_LANES", "LANES_MINIMUM_WORK", "GPU_BLOCK_DIM",
-           "GPU_INSTANCE_MINOR", "kernel_optimisation_default", "check_batch_memory"]
+           "GPU_INSTANCE_MINOR", "kernel_optimisation_default", "check_batch_memory",
+           "RUNTIME_LOCK", "one_call_at_a_time"]
 
 ARCHS = ("cpu", "gpu", "cuda", "vulkan", "metal")
+RUNTIME_LOCK = threading.RLock()
+"""Held by every public call that uses Taichi while it runs (module docstring); re-entrant, so
+a call may make others (a planner's `simulate`, an environment's Simulator)."""
+
+
+def one_call_at_a_time(function):
+    """`function`, run holding `RUNTIME_LOCK`: a call from another thread waits for it."""
+    @functools.wraps(function)
+    def holding_the_runtime(*args, **kwargs):
+        with RUNTIME_LOCK:
+            return function(*args, **kwargs)
+    return holding_the_runtime
+
 MIN_CAPACITY = 64
 PARALLEL_LOOP_MINIMUM = 1024
 """Taichi 1.7's CPU backend parallelises a range-for only from about this many iterations."""
@@ -364,6 +389,9 @@ class Runtime:
         self.started = False
         """Whether Taichi has been started in this process (`ensure`; a re-initialisation
         asked for by `configure` leaves it True)."""
+        self.taichi_thread: Optional[int] = None
+        """The thread that started Taichi (`ensure`): the only one it builds fields on
+        (`build_here`)."""
         self.forked_after_start = False
         """Whether this process is a fork of one in which Taichi had started (`_after_fork`):
         then it cannot run Taichi (`check_not_forked`)."""
@@ -425,12 +453,35 @@ class Runtime:
         atexit.unregister(_quiet_exit)
         atexit.register(_quiet_exit)
         self.arch, self.precision = arch, precision
+        self.taichi_thread = threading.get_ident()
         self.started = True
         self.engines.clear()
 
-    def check_no_simulator_lives(self, arch: str, precision: str):
+    def build_here(self):
+        """Make this thread the one Taichi builds on, before an engine is built. Taichi builds
+        fields only on the thread that started it (its LLVM backend asserts otherwise, and the
+        half-built fields broke every later call of the process: an audit, 2026-12, a
+        `simulate` of a new topology from a thread pool); the engines it built run from any
+        thread. From another thread, Taichi is started again on this one (the engines built so
+        far are dropped; their kernels come back from the offline cache), unless a living
+        Simulator holds one (RuntimeError, `check_no_simulator_lives`)."""
+        if self.taichi_thread == threading.get_ident():
+            return
+        arch, precision = self.arch, self.precision
+        self.check_no_simulator_lives(
+            arch, precision, "a new engine built from a thread other than the one that started "
+            "Taichi, the only one it builds on",
+            "make this call from the thread that started Taichi (the first to simulate)")
+        self.arch = None
+        self.ensure(arch, precision)
+
+    def check_no_simulator_lives(self, arch: str, precision: str,
+                                 why: str = "a run in another precision, arch or compiler "
+                                            "setting",
+                                 remedy: Optional[str] = None):
         """RuntimeError, before Taichi is initialised again (for another arch, precision or
-        compiler setting), where a living Simulator (an environment's too) holds an engine:
+        compiler setting, or on another thread: `why`), where a living Simulator (an
+        environment's too) holds an engine:
         `ti.init` destroys the program its kernels and fields live in, and the Simulator would
         then crash the process at its next call or go on from another Simulator's state (an
         audit, 2026-12: an f32 `simulate` beside an f64 Simulator). A Simulator let go but not
@@ -439,13 +490,13 @@ class Runtime:
             return
         gc.collect()
         held = sum(slot.held() for slots in self.engines.values() for slot in slots)
+        remedy = remedy or f"make this run in {self.precision}"
         if held:
             raise RuntimeError(
                 f"cannot start Taichi for {arch} in {precision}: {held} living Simulator(s) "
                 f"(or environments) hold engines of the Taichi program this process runs "
-                f"({self.precision}), and starting another (a run in another precision, arch "
-                f"or compiler setting) would destroy them; let them go first (del the "
-                f"Simulator, env.close()), or make this run in {self.precision} or in another "
+                f"({self.precision}), and starting another ({why}) would destroy them; let "
+                f"them go first (del the Simulator, env.close()), or {remedy} or in another "
                 f"process")
 
     def configure_gpu(self, block_dim: int = GPU_BLOCK_DIM, instance_minor: bool = GPU_INSTANCE_MINOR):
@@ -545,6 +596,7 @@ class Runtime:
         for slot in self.engines.get(key, []):
             if not slot.held():
                 return slot
+        self.build_here()
         # may refuse: no entry
         slot = EngineSlot(self.new_engine(model, solver, sensitive, lanes))
         self.engines.setdefault(key, []).append(slot)

@@ -22,7 +22,7 @@ from .driver import (Clock, RunTiming, check_run, drive, fewest_steps, robots_la
                      shows_progress)
 from . import sensitivities as tangents
 from .runtime import (RECORDS_REMEDY, Runtime, check_arch, check_host_memory,
-                      stream_chunk_size)
+                      one_call_at_a_time, stream_chunk_size)
 from .state import STATUS_NAMES, STATUS_OK
 from .timegrid import multiples_within, whole_steps
 
@@ -235,6 +235,7 @@ def validate_call(params, duration_s, solver, record_interval_s, record_shapes, 
     return params, duration_s, record_interval_s
 
 
+@one_call_at_a_time
 def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConfig = SolverConfig(),
              *, arch: str = "cpu", record_interval_s: float = 0.0, record_shapes: bool = False,
              steady_from_cycle: int = 1, progress: Optional[bool] = None,

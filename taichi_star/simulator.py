@@ -45,7 +45,7 @@ from .model import validate_batch
 from .params import SolverConfig, StarParams, check_precision
 from .provenance import file_path, write_atomic
 from .runtime import (RECORDS_REMEDY, Runtime, check_arch, check_batch_memory,
-                      check_host_memory)
+                      check_host_memory, one_call_at_a_time)
 from .simulation import newton_capped, warn_about_capped
 from .state import STATUS_NAMES, STATUS_OK
 from .timegrid import MAX_STEPS_PER_INSTANCE, check_work, multiples_within, whole_steps
@@ -178,6 +178,7 @@ class Simulator(NotCopied):
     has gone so far (`RunTiming`: the setup here, the stepping kernel's compilation at the first
     `advance`, the steps of every `advance`)."""
 
+    @one_call_at_a_time
     def __init__(self, params: Sequence[StarParams], solver: SolverConfig = SolverConfig(),
                  *, arch: str = "cpu", sensitivities: Sequence[str] = ()):
         started = time.perf_counter()
@@ -245,6 +246,7 @@ class Simulator(NotCopied):
         return self.engine.state.steps_done.to_numpy()[:self.n_instances].astype(np.int64)
 
     @property
+    @one_call_at_a_time
     def time_s(self) -> np.ndarray:
         """(B,) each instance's current time, s."""
         return self.engine.state.time.to_numpy()[:self.n_instances].astype(np.float64)
@@ -272,6 +274,7 @@ class Simulator(NotCopied):
             return array.astype(bool)
         raise ValueError(f"commands must be boolean (or 0/1 integers), got dtype {array.dtype}")
 
+    @one_call_at_a_time
     def fire(self, commands, at_s: Optional[float] = None):
         """Fire actuators: `commands` is a (B, 8) boolean array (column m = actuator A(m+1)) or
         a list of B gait texts ("A1+A3", "none"). With at_s None they fire now (each instance
@@ -315,6 +318,7 @@ class Simulator(NotCopied):
                              f"s), got {at_s!r}")
         schedule.command(mask, due, self._steps(), step_s=self.solver.dt)
 
+    @one_call_at_a_time
     def advance(self, duration_s: float, record_interval_s: float = 0.0,
                 progress: Optional[bool] = None) -> pd.DataFrame:
         """Advance every live instance by duration_s (with fixed steps rounded to whole steps).
@@ -386,6 +390,7 @@ class Simulator(NotCopied):
                                 for name in records[0]},
                              "record": np.repeat(numbers, self.n_instances)})
 
+    @one_call_at_a_time
     def reset(self, instances: Union[None, int, Sequence[int]] = None):
         """Put instances (all by default; one index or a sequence of them) back at rest in
         their rest shape at t = 0, nothing fired, status ok; the others are untouched."""
@@ -408,10 +413,12 @@ class Simulator(NotCopied):
         self.engine.restore_state(fields)
 
     # ---------------------------------------------------------------- observations
+    @one_call_at_a_time
     def shapes(self) -> np.ndarray:
         """(B, N, 2) node positions now, m."""
         return self.engine.state.positions.to_numpy()[:self.n_instances].astype(np.float64)
 
+    @one_call_at_a_time
     def state(self) -> pd.DataFrame:
         """One row per instance now (columns `STATE_COLUMNS`): t_s; the centroid relative to
         its start (mm, the frame of `simulate`'s displacement); heading_deg (body rotation,
@@ -422,6 +429,7 @@ class Simulator(NotCopied):
         a reset)."""
         return self._state_of(self.n_instances)
 
+    @one_call_at_a_time
     def sensitivity(self, column: str, parameter: str) -> np.ndarray:
         """d(column of `state()`)/d(parameter) now for every instance, (B,) ((B, 8) for a whole
         per-actuator field): column one of `DIFFERENTIABLE_STATE_COLUMNS`, parameter one the
@@ -490,6 +498,7 @@ class Simulator(NotCopied):
         return columns
 
     @property
+    @one_call_at_a_time
     def ok(self) -> np.ndarray:
         """(B,) bool: instances still running."""
         return self.engine.state.status.to_numpy()[:self.n_instances] == STATUS_OK
@@ -501,6 +510,7 @@ class Simulator(NotCopied):
         a Simulator never change)."""
         return parameter_texts(self.params)
 
+    @one_call_at_a_time
     def save(self, path=None) -> Union[SimulatorSnapshot, Path]:
         """The whole batch state as a SimulatorSnapshot; with `path`, written to an .npz file
         (returns its path). With SolverConfig(jacobian="lagged") it holds the kept
@@ -514,6 +524,7 @@ class Simulator(NotCopied):
                                      solver=solver_texts(self.solver))
         return snapshot.write(path) if path is not None else snapshot
 
+    @one_call_at_a_time
     def load(self, snapshot: Union[SimulatorSnapshot, str, Path], *,
              other_params: bool = False):
         """Continue from a saved state, bit for bit as if never interrupted (with

@@ -9,6 +9,7 @@ import multiprocessing
 import pickle
 import signal
 import sys
+import threading
 import warnings
 
 import numpy as np
@@ -228,6 +229,76 @@ def test_a_process_forked_after_taichi_started_is_told_to_use_spawn_instead_of_h
         assert refused in message and "'spawn'" in message
     monkeypatch.setattr(Runtime.current(), "arch", None)  # as configure_compiler leaves it
     assert refused in _in_forked_child(lambda: ts.simulate([ts.StarParams()], 0.01))
+
+
+def _in_threads(works):
+    """Each work's return value, the works run from threads started together (a barrier)."""
+    start = threading.Barrier(len(works))
+    values = [None] * len(works)
+
+    def run(index):
+        start.wait()
+        values[index] = works[index]()
+    threads = [threading.Thread(target=run, args=(index,)) for index in range(len(works))]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    return values
+
+
+def test_calls_from_several_threads_take_turns_and_get_the_numbers_of_a_call_alone():
+    """Taichi's runtime is one per process: four `simulate` calls from four threads at once
+    drew the same free engine, interleaved their kernels and all returned other speeds as
+    "ok" (an audit, 2026-12: A1+A2 -7.8 mm/s against 2.0 alone). With `RUNTIME_LOCK` the
+    calls take turns: every table, and a Simulator driven from a fifth thread meanwhile, the
+    same to the last bit as run one after the other (an engine's bits do not depend on what
+    ran before on it: test_determinism). Run alone first, on this thread, beside a second
+    Simulator: the two engines (the Simulator's and the calls') are built here, and the threads
+    run them (building one elsewhere: the test below)."""
+    gaits = ("A1+A2", "A1+A3", "A1+A4", "A1+A3+A5")
+
+    def call(gait):
+        return lambda: ts.simulate([ts.StarParams(gait=gait)], 0.1).summary
+
+    def drive():
+        robots = ts.Simulator([ts.StarParams(), ts.StarParams(alpha=1.2)])
+        for _ in range(4):
+            robots.fire(["A1+A2", "A1+A3"])
+            robots.advance(0.025)
+        return robots.state()
+    works = [call(gait) for gait in gaits] + [drive]
+    beside = ts.Simulator([ts.StarParams()])
+    alone = [work() for work in works]
+    del beside
+    for one, concurrent in zip(alone, _in_threads(works)):
+        pd.testing.assert_frame_equal(concurrent, one, check_exact=True)
+
+
+def test_an_engine_needed_on_another_thread_restarts_taichi_there_unless_a_simulator_lives():
+    """Taichi builds fields only on the thread that started it: a `simulate` of a new
+    topology from another thread raised LLVM's "Assertion failure: std::this_thread::get_id()
+    == main_thread_id_" and left the process's Taichi broken for every call after (an audit,
+    2026-12). Now Taichi is started again on that thread and the call gets the numbers it gets
+    on the first; back here, the next new engine does the same. Where a Simulator lives, that
+    would destroy its engine: refused, naming the thread, and the Simulator goes on."""
+    first = ts.simulate([ts.StarParams(gait="A1+A3")], 0.05).summary
+    coarse = [ts.StarParams(gait="A1+A3", n_arc=10)]
+    (elsewhere,) = _in_threads([lambda: ts.simulate(coarse, 0.05).summary])
+    assert Runtime.current().taichi_thread != threading.get_ident()
+    # its engine runs here too (not rebuilt); the paper engine was dropped and is built here
+    pd.testing.assert_frame_equal(elsewhere, ts.simulate(coarse, 0.05).summary, check_exact=True)
+    assert Runtime.current().taichi_thread != threading.get_ident()
+    pd.testing.assert_frame_equal(ts.simulate([ts.StarParams(gait="A1+A3")], 0.05).summary,
+                                  first, check_exact=True)
+    assert Runtime.current().taichi_thread == threading.get_ident()
+    robots = ts.Simulator([ts.StarParams()])
+    robots.fire(["A1"])
+    (refusal,) = _in_threads([lambda: pytest.raises(RuntimeError, ts.simulate,
+                                                    [ts.StarParams(n_arc=11)], 0.01)])
+    assert "from a thread other than the one that started Taichi" in str(refusal.value)
+    robots.advance(0.01)
+    assert robots.ok.all()
 
 
 def test_f64_instances_ok_only_after_a_solve_used_all_its_iterations_are_warned_about():
