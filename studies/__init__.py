@@ -19,7 +19,7 @@ EXTRA_OF_STUDY = {
     "gaits": "plots", "gradient_fit": "studies", "jacobians": "plots", "model_select": "studies",
     "plan": "plots", "primitives": "plots", "reproduce": "studies", "scaling": None,
     "sensitivity": "studies", "sensitivity_check": "plots", "simd": "plots", "stability": "plots",
-    "sweep": "studies",
+    "strokes": "plots", "sweep": "studies",
     "work_precision": "plots",
 }
 """The extra of pyproject.toml each study needs beyond the core (None: the core alone), checked

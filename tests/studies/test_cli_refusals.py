@@ -34,6 +34,11 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
     ("gait_design", ["--goal", "turn", "--direction", "45"],
      "--direction: only with --goal speed (turning has no direction)"),
     # a reach tolerance at the goals' distance: every goal counted as reached before a move
+    ("strokes", ["--window", "0"], "--window must be in (0, 1.575] s (half the period), got 0"),
+    ("strokes", ["--window", "1.6"], "--window must be in (0, 1.575] s (half the period)"),
+    ("strokes", ["--cycles", "2"], "--cycles must be a whole number >= 3 (the fit's cycles 1-3)"),
+    ("strokes", ["--cycles", "3.5"], "--cycles must be a whole number >= 3"),
+    ("strokes", ["--set", "period=3.2"], "--set period: set by the strokes study itself"),
     ("plan", ["--tolerance", "50", "--distance", "50"],
      "--tolerance must be below --distance (50 mm), got 50"),
     ("plan", ["--tolerance", "30", "--directions", "0", "--far", "30"],

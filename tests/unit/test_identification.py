@@ -431,3 +431,89 @@ def test_uncertainty_refuses_what_it_cannot_estimate():
         ident.parameter_uncertainty(np.ones(9), np.ones((9, 1)), ["a"], [1.0, 2.0])
     with pytest.raises(ValueError, match="must match the 1 names"):
         ident.parameter_uncertainty(np.ones((9, 1)), np.ones((9, 1)), ["a"], [1.0])
+
+
+# ----------------------------------------------------------------------------- strokes
+
+PULSE_MM, PULSE_WIDTH_S, DRIFT_MM_S = 2.0, 0.02, 0.5
+
+
+def pulsed_path(stroke_times, duration_s, period_s=3.15, step_s=1e-3):
+    """A path that drifts at DRIFT_MM_S along x and surges by PULSE_MM along y at each of
+    `stroke_times` (a Gaussian velocity pulse of PULSE_WIDTH_S), sampled every `step_s`."""
+    t = np.arange(0.0, duration_s + step_s / 2, step_s)
+    surge = sum(PULSE_MM * 0.5 * (1 + np.vectorize(math.erf)((t - s) / (PULSE_WIDTH_S
+                                                                      * math.sqrt(2))))
+                for s in stroke_times)
+    return ident.CentroidPath(t, DRIFT_MM_S * t, surge, period_s)
+
+
+def test_strokes_find_each_periods_surge_its_size_and_the_pulses_period():
+    """Pulses every T + 0.02 s from 0.7 s: a window centred on each surge moves farthest, so
+    each period's stroke starts window/2 before it (to the 1-ms sampling); the unwrapped
+    phases grow by exactly the 0.02 s per period; the jump is the pulse's share inside the
+    window with the drift's, and a window elsewhere moves by the drift alone."""
+    period, drift, window = 3.15, 0.02, 0.1
+    pulses = 0.7 + (period + drift) * np.arange(6)
+    found = ident.strokes(pulsed_path(pulses, 6 * period + 0.5), window)
+    assert found.cycles == 6 and found.consistent_cycles == 6
+    expected = pulses - window / 2 - period * np.arange(6)
+    # 1e-3 s: the sampling (a tie between neighbouring starts goes to the earlier)
+    np.testing.assert_allclose(found.cycle_phases_s, expected, atol=1.01e-3)
+    # 2e-3: two phases each within the 1-ms sampling, a slope over at least one period
+    assert found.drift_s == pytest.approx(drift, abs=2e-3)
+    assert found.phase_s == pytest.approx(np.mean(expected), abs=1.1e-3)
+    inside = PULSE_MM * math.erf(window / 2 / (PULSE_WIDTH_S * math.sqrt(2)))
+    assert found.jump_mm == pytest.approx(math.hypot(inside, DRIFT_MM_S * window), rel=1e-4)
+    assert found.typical_mm == pytest.approx(DRIFT_MM_S * window, rel=1e-6)
+
+
+def test_strokes_either_side_of_a_period_start_average_to_it_not_to_its_middle():
+    """Two strokes 0.03 s after a period's start and two 0.03 s before one (each near a
+    boundary of its own): their circular mean is the period start (the arithmetic mean of the
+    phases, 0.03 and 3.12, would put it at the period's middle), and every one lies within the
+    tolerance."""
+    period, window = 3.15, 0.1
+    starts = period * np.arange(4) + np.array([0.03, 0.03, period - 0.03, period - 0.03])
+    found = ident.strokes(pulsed_path(starts + window / 2, 4 * period + 0.5), window)
+    np.testing.assert_allclose(found.cycle_phases_s, starts - period * np.arange(4),
+                               atol=1.01e-3)  # the sampling, as above
+    assert min(found.phase_s, period - found.phase_s) <= 1.1e-3
+    assert found.consistent_cycles == found.cycles == 4
+
+
+def test_a_stroke_exactly_the_tolerance_away_is_consistent():
+    """≤, not <: with the tolerance at the farthest stroke's distance from the mean phase every
+    stroke counts; a tolerance one rounding below it leaves that one out."""
+    pulses = 0.7 + 3.15 * np.arange(5) + np.array([0.0, 0.0, 0.0, 0.0, 0.3])
+    path = pulsed_path(pulses, 5 * 3.15 + 0.5)
+    found = ident.strokes(path)
+    farthest = np.max(np.abs((found.cycle_phases_s - found.phase_s + 3.15 / 2) % 3.15
+                             - 3.15 / 2))
+    assert ident.strokes(path, tolerance_s=farthest).consistent_cycles == 5
+    assert ident.strokes(path, tolerance_s=np.nextafter(farthest, 0)).consistent_cycles == 4
+
+
+def test_strokes_refuse_windows_tolerances_and_paths_they_cannot_read():
+    path = pulsed_path([0.7], 3.25)
+    for window in (0.0, -0.1, math.nan, np.nextafter(3.15 / 2, 4)):
+        with pytest.raises(ValueError, match=r"window_s must be in \(0, 1.575\] s"):
+            ident.strokes(path, window)
+    for tolerance in (-1e-9, math.nan, 1.6):
+        with pytest.raises(ValueError, match=r"tolerance_s must be in \[0, 1.575\] s"):
+            ident.strokes(path, tolerance_s=tolerance)
+    with pytest.raises(ValueError, match=r"covers 3.1 s: strokes needs at least one period "
+                                         r"and one window \(3.25 s\)"):
+        ident.strokes(pulsed_path([0.7], 3.1))
+    # exactly one period and one window: one stroke, no drift to read; half a period's window
+    one = ident.strokes(path)
+    assert one.cycles == 1 and math.isnan(one.drift_s)
+    assert ident.strokes(pulsed_path([0.7], 3.15 + 1.575), 1.575).cycles == 1
+
+
+def test_the_recorded_strokes_of_a1_a4_are_all_at_one_phase_and_jump_far():
+    """Known data: the A1+A4 track jumps at every one of its 9 strokes, within 0.2 s of one
+    phase, five times as far as it moves in 0.1 s otherwise (results/strokes.csv)."""
+    found = ident.strokes(ident.measured_trial("A1+A4").path)
+    assert found.cycles == 9 and found.consistent_cycles == 9
+    assert found.jump_mm > 4 * found.typical_mm

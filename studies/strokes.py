@@ -1,0 +1,163 @@
+"""Strokes: when each measured trial's pulses fire, read off its track, against the phase the
+trajectory fit chooses.
+
+    python -m studies strokes [--preset identified|paper|accurate] [--set NAME=VALUE ...]
+                              [--cycles 3] [--window 0.1] [--out DIR] [--quick]
+
+The videos do not record when the heating pulses fire, so the trajectory objective fits that
+phase per trial to the simulation it compares (`identification.align_phase`). The tracks show
+it themselves: at each stroke the robot's centroid jumps. `identification.strokes` finds, in
+every period of a trial, the `--window` in which the centroid moves farthest, and their circular
+mean phase; the same on the simulated path of the `--preset` model (`--cycles` from rest) gives
+the model's own lag from a firing to its farthest move, and the difference is the firing phase
+that the track implies for that model. Beside it, the phase that the trajectory fit chooses
+for the same model on cycles 1–3 (`identification.trajectory_objective`). The strokes also
+drift from period to period where the pulses do not come exactly every 3.15 s
+(`Strokes.drift_s`): that gives their period as measured.
+
+Writes `strokes.csv` (one row per gait: the measured strokes and their period, the model's,
+the implied firing phase, the fitted phase and the gap between them), `strokes_moves.csv`
+(every measured move: gait, cycle, phase_s in the period from the track's start, move_mm) and
+`strokes.png` (per gait, the moves folded over the period with each period's farthest marked,
+the stroke phase, the implied firing and the fitted phase), each with its provenance sidecar.
+
+--quick: gait A1+A2, 2-ms steps.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from taichi_star import identification, simulate
+from taichi_star.experiment import PAPER_GAITS
+
+from . import cli
+
+DESCRIPTION = ("Strokes: when each measured trial's pulses fire, read off its track (the "
+               "centroid's jumps), against the phase the trajectory fit chooses.")
+QUICK_GAITS = ("A1+A2",)
+MODEL_COLUMNS = ("model_stroke_phase_s", "model_consistent_cycles", "model_cycles",
+                 "model_jump_mm", "model_typical_move_mm", "firing_phase_s", "fitted_phase_s",
+                 "phase_gap_s")
+"""Columns of `strokes.csv` that need the simulated run (NaN where it failed)."""
+RECORD_INTERVAL_S = 0.01
+"""The simulated path's records, s: under a video frame (16.7 ms), a whole number of any
+preset's steps."""
+
+
+def build_parser():
+    parser = cli.StudyParser("strokes", DESCRIPTION)
+    parser.add_argument("--window", type=float, default=identification.STROKE_WINDOW_S,
+                        help=f"window of a stroke's jump, s, in (0, T/2] (default "
+                             f"{identification.STROKE_WINDOW_S:g}: six video frames)")
+    cli.add_model_flags(parser, fixed=("gait", "period"))
+    parser.set_defaults(preset="identified")
+    cli.add_dt_flag(parser)
+    cli.add_cycles_flag(parser, default=3.0)
+    return parser
+
+
+def circular_gap(later: float, earlier: float, period: float) -> float:
+    """later − earlier on a circle of `period`, in (−period/2, period/2], s."""
+    gap = (later - earlier) % period
+    return gap - period if gap > period / 2 else gap
+
+
+def strokes_table(trials, runs, fits: pd.DataFrame, window_s: float):
+    """(one row per gait, every measured move) from the measured trials, the simulated runs
+    (`identification.SimulatedRun`, same gaits; None for a failed run, whose model columns are
+    NaN) and the trajectory fit's table (a row per gait that ran)."""
+    rows, moves = [], []
+    for gait, trial in trials.items():
+        measured = identification.strokes(trial.path, window_s)
+        row = {"gait": gait, "cycles": measured.cycles, "stroke_phase_s": measured.phase_s,
+               "consistent_cycles": measured.consistent_cycles, "jump_mm": measured.jump_mm,
+               "typical_move_mm": measured.typical_mm,
+               "jump_ratio": measured.jump_mm / measured.typical_mm,
+               "drift_s": measured.drift_s,
+               "pulse_period_s": trial.path.period_s + measured.drift_s}
+        row.update(dict.fromkeys(MODEL_COLUMNS, math.nan))
+        if runs[gait] is not None:
+            model = identification.strokes(runs[gait].path, window_s)
+            period = trial.path.period_s
+            firing = (measured.phase_s - model.phase_s) % period
+            fitted = float(fits.loc[fits["gait"] == gait, "phase_s"].iloc[0])
+            row.update({"model_stroke_phase_s": model.phase_s,
+                        "model_consistent_cycles": model.consistent_cycles,
+                        "model_cycles": model.cycles, "model_jump_mm": model.jump_mm,
+                        "model_typical_move_mm": model.typical_mm, "firing_phase_s": firing,
+                        "fitted_phase_s": fitted,
+                        "phase_gap_s": circular_gap(fitted, firing, period)})
+        rows.append(row)
+        path = trial.path
+        times = path.t_s[path.t_s <= path.t_s[-1] - window_s]
+        offset = times - path.t_s[0]
+        move = np.linalg.norm(path.position(times + window_s) - path.position(times), axis=-1)
+        moves.append(pd.DataFrame({"gait": gait, "cycle": (offset // period).astype(int) + 1,
+                                   "phase_s": offset % period, "move_mm": move}))
+    return pd.DataFrame(rows), pd.concat(moves, ignore_index=True)
+
+
+def plot_strokes(csv_path, moves_path, png_path, period_s: float):
+    table, moves = pd.read_csv(csv_path), pd.read_csv(moves_path)
+    plt = cli.use_agg()
+    fig, axes = plt.subplots(len(table), 1, figsize=(7.5, 1.9 * len(table) + 0.6),
+                             sharex=True, squeeze=False)
+    for ax, row in zip(axes[:, 0], table.itertuples()):
+        gait_moves = moves[moves["gait"] == row.gait]
+        ax.scatter(gait_moves["phase_s"], gait_moves["move_mm"], s=2, color="0.6",
+                   label="move within the window")
+        farthest = gait_moves.loc[gait_moves.groupby("cycle")["move_mm"].idxmax()]
+        ax.scatter(farthest["phase_s"], farthest["move_mm"], s=14, color="tab:red",
+                   label="each period's farthest")
+        ax.axvline(row.stroke_phase_s, color="tab:red", lw=1, label="stroke phase")
+        ax.axvline(row.firing_phase_s, color="tab:blue", lw=1.2, ls="--",
+                   label="firing implied (model's lag)")
+        ax.axvline(row.fitted_phase_s, color="tab:green", lw=1.2, ls=":",
+                   label="phase the fit chose")
+        ax.set_ylabel("mm")
+        ax.set_title(f"{row.gait}: {row.consistent_cycles} of {row.cycles} strokes within "
+                     f"{identification.STROKE_TOLERANCE_S:g} s; fit − implied "
+                     f"{row.phase_gap_s:+.2f} s", fontsize=9)
+    axes[-1, 0].set_xlim(0, period_s)
+    axes[-1, 0].set_xlabel("time in the period from the track's start, s")
+    axes[-1, 0].legend(fontsize=7, ncol=2, loc="upper right")  # the coast's moves are small
+    settings = cli.run_settings(csv_path, mesh=False)
+    fig.suptitle("measured strokes against the fitted phase" + (f"; {settings}" if settings
+                                                                 else ""), fontsize=9)
+    return cli.save_figure(fig, png_path)
+
+
+def main(argv=None):
+    args = cli.parse(build_parser(), argv)
+    base = cli.base_params(args)
+    if not (math.isfinite(args.window) and 0 < args.window <= base.period / 2):
+        raise cli.StudyArgumentError(f"--window must be in (0, {base.period / 2:g}] s (half "
+                                     f"the period), got {args.window:g}")
+    first, last = identification.TRAINING_CYCLES
+    if args.cycles < last or args.cycles != int(args.cycles):
+        raise cli.StudyArgumentError(f"--cycles must be a whole number >= {last} (the fit's "
+                                     f"cycles {first}-{last}), got {args.cycles:g}")
+    gaits = list(QUICK_GAITS if args.quick else PAPER_GAITS)
+    params = [base.replace(gait=gait) for gait in gaits]
+    solver = cli.solver(args)
+    out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
+                     solver=solver)
+    result = simulate(params, args.cycles * base.period, solver, arch=args.arch,
+                      record_interval_s=RECORD_INTERVAL_S, progress=not args.no_progress)
+    trials = identification.measured_trials(gaits)
+    runs = dict(zip(trials, identification.simulated_runs(result.trajectory, list(trials),
+                                                           [p.period for p in params])))
+    ran = [gait for gait, run in runs.items() if run is not None]
+    fits = identification.trajectory_objective({g: runs[g] for g in ran},
+                                               {g: trials[g] for g in ran}) if ran else None
+    table, moves = strokes_table(trials, runs, fits, args.window)
+    table.insert(1, "status", result.summary["status"].to_numpy())
+    csv_path = out.write_csv(table, "strokes.csv")
+    moves_path = out.write_csv(moves, "strokes_moves.csv")
+    out.wrote(plot_strokes(csv_path, moves_path, out.path("strokes.png"), base.period))
+    out.report()
+    return table

@@ -1,0 +1,61 @@
+"""The strokes study in --quick mode against the library run directly: the measured trial's
+strokes, a direct simulation's and the trajectory fit's phase, and the circular gap."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import taichi_star
+from taichi_star import SolverConfig, StarParams, identification
+
+from studies import strokes
+
+
+@pytest.mark.parametrize("later, earlier, gap", [(0.2, 3.1, 0.25), (3.1, 0.2, -0.25),
+                                                 (1.0, 0.2, 0.8), (0.2 + 1.575, 0.2, 1.575)])
+def test_the_circular_gap_lies_in_minus_half_to_half_the_period(later, earlier, gap):
+    """(−T/2, T/2]: half a period exactly is +T/2 (the boundary), 0.25 s across the period's
+    start is 0.25 s, not 2.9."""
+    assert strokes.circular_gap(later, earlier, 3.15) == pytest.approx(gap, abs=1e-12)
+
+
+def test_quick_run_against_the_library(tmp_path):
+    table = strokes.main(["--quick", "--out", str(tmp_path), "--no-progress"])
+    written = pd.read_csv(tmp_path / "strokes.csv")
+    assert written["gait"].tolist() == ["A1+A2"] and written["status"].tolist() == ["ok"]
+    pd.testing.assert_frame_equal(written, table, check_exact=False, rtol=1e-9)
+    row = written.iloc[0]
+    trial = identification.measured_trial("A1+A2")
+    measured = identification.strokes(trial.path)
+    # the CSV keeps 10 significant digits
+    assert row["stroke_phase_s"] == pytest.approx(measured.phase_s, rel=1e-9)
+    assert row["drift_s"] == pytest.approx(measured.drift_s, rel=1e-9)
+    assert row["pulse_period_s"] == pytest.approx(3.15 + measured.drift_s, rel=1e-9)
+    assert (row["cycles"], row["consistent_cycles"]) == (measured.cycles,
+                                                         measured.consistent_cycles)
+    assert row["jump_ratio"] == pytest.approx(measured.jump_mm / measured.typical_mm, rel=1e-9)
+    # the model: the identified preset at --quick's 2-ms steps, three cycles from rest
+    params = StarParams.preset("identified", gait="A1+A2")
+    result = taichi_star.simulate([params], 3 * params.period,
+                                  SolverConfig.preset("identified", dt=2e-3),
+                                  record_interval_s=strokes.RECORD_INTERVAL_S)
+    runs = dict(zip(["A1+A2"], identification.simulated_runs(result.trajectory, ["A1+A2"],
+                                                             [params.period])))
+    model = identification.strokes(runs["A1+A2"].path)
+    assert row["model_stroke_phase_s"] == pytest.approx(model.phase_s, rel=1e-9, abs=1e-12)
+    assert row["model_jump_mm"] == pytest.approx(model.jump_mm, rel=1e-9)
+    fitted = identification.trajectory_objective(runs, {"A1+A2": trial})["phase_s"].iloc[0]
+    assert row["fitted_phase_s"] == pytest.approx(fitted, rel=1e-9)
+    firing = (measured.phase_s - model.phase_s) % 3.15
+    assert row["firing_phase_s"] == pytest.approx(firing, rel=1e-9)
+    assert row["phase_gap_s"] == pytest.approx(strokes.circular_gap(fitted, firing, 3.15),
+                                               rel=1e-9)
+    moves = pd.read_csv(tmp_path / "strokes_moves.csv")
+    kept = trial.path.t_s[trial.path.t_s <= trial.path.t_s[-1] - 0.1]
+    # 22.5 s: seven whole periods and part of an eighth, whose moves are plotted too
+    assert len(moves) == len(kept) and set(moves["cycle"]) == set(range(1, 9))
+    # each period's farthest move is the stroke's jump: their median is the table's
+    farthest = moves.groupby("cycle")["move_mm"].max()
+    assert np.median(farthest[farthest.index <= measured.cycles]) == pytest.approx(
+        row["jump_mm"], rel=1e-9)
+    assert (tmp_path / "strokes.png").stat().st_size > 1000
