@@ -3,6 +3,7 @@ well they predict what they were not fitted to.
 
     python -m studies model_select [--candidates CSV] [--only NAME,...] [--preset paper|accurate]
                                    [--set NAME=VALUE ...] [--gaits paper|A1,A1+A2,...]
+                                   [--phases fitted|strokes]
                                    [--train-cycles 1:3] [--validate-cycles 4:6]
                                    [--popsize P] [--max-generations G] [--restarts R]
                                    [--fold-generations F] [--seed S] [--sigma0 0.25] [--dt S]
@@ -23,7 +24,10 @@ per generation, all points × all gaits; IPOP restarts) to the trajectory object
 `taichi_star.identification` on the training cycles (`--train-cycles`, the paper's 1–3): per
 gait, the simulated against the measured displacement-from-cycle-start curves, the trial's
 pulse phase fitted as a nuisance, residuals in units of the measured spread across cycles,
-plus a penalty on wrong-way travel. Then, per candidate:
+plus a penalty on wrong-way travel. `--phases strokes` holds each trial's phase instead where
+the simulated strokes meet the measured ones (`identification.stroke_aligned_phase`: the tracks
+show when the pulses fire, docs: Results, "When the pulses fire"), in each window its own. Then,
+per candidate:
 
 - training error: the objective on the training cycles at the best point (re-simulated);
 - validation error: the objective on `--validate-cycles` (4–6) with the training phases;
@@ -33,9 +37,9 @@ plus a penalty on wrong-way travel. Then, per candidate:
   model's value): an element INDEX of a per-actuator field (a tuple of 8) is informed only by
   gaits that fire actuator A<INDEX>;
 - directions right (training and validation windows), the parameter count k (fitted axes plus
-  one phase per gait), χ² = Σ over the gaits of the squared residuals (curve samples and the
-  direction residual, weighted as in the fit: as much as a whole curve), AIC = χ² + 2k and
-  BIC = χ² + k ln n (n the number of curve samples).
+  one phase per gait with `--phases fitted`), χ² = Σ over the gaits of the squared residuals
+  (curve samples and the direction residual, weighted as in the fit: as much as a whole
+  curve), AIC = χ² + 2k and BIC = χ² + k ln n (n the number of curve samples).
   The curve samples of a trial are correlated (one path), so χ², AIC and BIC overstate the
   evidence; they rank, they do not test.
 
@@ -110,6 +114,12 @@ QUICK_REFINE_TOP, QUICK_REFINE_POPSIZE, QUICK_REFINE_GENERATIONS = 1, 4, 3
 QUICK_DT = 5e-3
 """--quick: time step, s (630 steps per 3.15-s cycle): the quick run checks the study's
 pipeline, whose fits simulate whole cycles."""
+PHASE_MODES = ("fitted", "strokes")
+"""--phases: each trial's pulse phase fitted, or aligned on the measured strokes (`Setup`)."""
+STROKE_TAIL_CYCLES = 0.05
+"""--phases strokes: cycles simulated past a window's last, 0.16 s of the paper's period: the
+last period's strokes are read over `identification.STROKE_WINDOW_S` past its end, on records
+of `RECORD_INTERVAL_S`."""
 STAGES = ("refine", "screen")
 """The stages in ranking order: a refined form above every screened one."""
 RECORD_INTERVAL_S = 0.01
@@ -220,12 +230,18 @@ class Setup:
     validate: Tuple[int, int]
     run_kwargs: dict
     record_interval_s: float
+    phases: str = "fitted"
+    """"fitted": each trial's phase fitted per window (the validation window holds the
+    training one's); "strokes": put where the simulated strokes meet the measured ones
+    (`identification.stroke_aligned_phase`), in every window."""
 
 
 def simulate_points(params: Sequence[StarParams], last_cycle: int, setup: Setup) -> list:
     """`identification.SimulatedRun` of every model (None where it failed), simulated from rest
     for `last_cycle` cycles in one batch."""
-    result = run_batch(list(params), cycles=float(last_cycle),
+    # the strokes of the window's last period are read over a window past its end
+    tail = STROKE_TAIL_CYCLES if setup.phases == "strokes" else 0.0
+    result = run_batch(list(params), cycles=float(last_cycle) + tail,
                        record_interval_s=setup.record_interval_s, **setup.run_kwargs)
     runs = identification.simulated_runs(result.trajectory, [p.gait for p in params],
                                          [p.period for p in params])
@@ -235,9 +251,13 @@ def simulate_points(params: Sequence[StarParams], last_cycle: int, setup: Setup)
 
 def score(runs: Sequence, gaits: Sequence[str], setup: Setup, cycles,
           phases: Optional[Dict[str, float]] = None) -> Optional[pd.DataFrame]:
-    """The trajectory objective's per-gait table of one point's runs (None if any failed)."""
+    """The trajectory objective's per-gait table of one point's runs (None if any failed);
+    with `setup.phases` "strokes" at the stroke-aligned phases (`phases` then unused)."""
     if any(run is None for run in runs):
         return None
+    if setup.phases == "strokes":
+        phases = {gait: identification.stroke_aligned_phase(run, setup.trials[gait], cycles)
+                  for gait, run in zip(gaits, runs)}
     return identification.trajectory_objective(dict(zip(gaits, runs)), setup.trials, cycles,
                                                phases=phases)
 
@@ -290,7 +310,8 @@ def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMA
     evaluations = fit.evaluations
     row = {"candidate": candidate.name, "fit": candidate.fit, "set": candidate.set,
            "description": candidate.description, "n_fitted": len(box),
-           "n_parameters": len(box) + len(gaits), "n_gaits": len(gaits),
+           "n_parameters": len(box) + (len(gaits) if setup.phases == "fitted" else 0),
+           "n_gaits": len(gaits),
            "n_evaluations": len(evaluations)}
     if identify.best_row(evaluations) is None:
         return {"row": {**row, "status": "fit_failed", "note": "every candidate point failed",
@@ -305,7 +326,7 @@ def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMA
     train = score(runs, gaits, setup, setup.train)
     validate = (score(runs, gaits, setup, setup.validate, dict(zip(train["gait"],
                                                                     train["phase_s"])))
-                if train is not None else None)
+                if train is not None else None)  # strokes: each window its own phases
     folds = leave_one_gait_out(box, units, model, settings, fold_generations, setup)
     n_samples = len(gaits) * (setup.train[1] - setup.train[0] + 1) * \
         identification.SAMPLES_PER_CYCLE
@@ -474,11 +495,14 @@ def definition_of(candidate: Candidate, args, settings, base: StarParams,
     defaults = StarParams()
     base_changes = {f.name: repr(getattr(base, f.name)) for f in dataclasses.fields(base)
                     if getattr(base, f.name) != getattr(defaults, f.name)}
+    # --phases enters only where it is not the default, which earlier results were made with
+    phases = {} if args.phases == "fitted" else {"phases": args.phases}
     text = json.dumps({"candidate": dataclasses.asdict(candidate),
                        "settings": dataclasses.asdict(settings),
                        "fold_generations": args.fold_generations, "gaits": list(gaits),
                        "train": args.train_cycles, "validate": args.validate_cycles,
-                       "base": base_changes, "solver": repr(solver)}, sort_keys=True)
+                       "base": base_changes, "solver": repr(solver), **phases},
+                      sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -522,6 +546,10 @@ def build_parser():
                         help="comma list of candidate names to run (default: all)")
     parser.add_argument("--gaits", default="paper", quick=QUICK_GAITS,
                         help="measured gaits to fit: paper (all five) or a comma list")
+    parser.add_argument("--phases", choices=PHASE_MODES, default="fitted",
+                        help="each trial's pulse phase: fitted per window (the validation "
+                             "window holds the training one's), or strokes: where the "
+                             "simulated strokes meet the measured ones, in every window")
     parser.add_argument("--train-cycles", default="1:3", quick="1:1",
                         help="the fit window FIRST:LAST (cycles from 1)")
     parser.add_argument("--validate-cycles", default="4:6", quick="2:2",
@@ -714,7 +742,7 @@ def main(argv=None):
         setup = Setup(tuple(gaits), trials, train, validate,
                       dict(solver=solver, arch=args.arch, executor=executor,
                            chunk_size=cli.chunk_size(args, largest, executor.n_workers)),
-                      record)
+                      record, args.phases)
         for position, candidate in enumerate(runnable):
             fit_or_read_back(candidate, settings, "screen", setup, work[position:])
         refined = refined_candidates(ranked(rows), runnable, args.refine_top)

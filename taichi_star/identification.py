@@ -94,7 +94,8 @@ __all__ = ["TRAINING_CYCLES", "VALIDATION_CYCLES", "SAMPLES_PER_CYCLE", "MAX_CYC
            "objective_of", "measured_trials", "simulated_runs", "distance_derivative",
            "path_derivative", "residual_count", "trial_residuals", "objective_residuals",
            "trial_phase_motion", "objective_and_gradient", "phase_motion", "parameter_uncertainty",
-           "record_derivatives", "STROKE_WINDOW_S", "STROKE_TOLERANCE_S", "Strokes", "strokes"]
+           "record_derivatives", "STROKE_WINDOW_S", "STROKE_TOLERANCE_S", "Strokes", "strokes",
+           "stroke_aligned_phase"]
 
 TRAINING_CYCLES = (1, 3)
 """The fit window, cycles 1–3 of every trial (the paper's three cycles from rest)."""
@@ -144,79 +145,6 @@ UNCERTAINTY_COLUMNS = ["parameter", "value", "standard_error", "relative_standar
                        "identifiable", "unresolved_share", "most_correlated_with",
                        "correlation", "rank", "condition_number", "residual_dof"]
 """Columns of `parameter_uncertainty`'s table, one row per parameter."""
-
-STROKE_WINDOW_S = 0.1
-"""Window of `strokes`, s: six video frames, under the heating pulse (0.15 s), over which the
-measured robot jumps by 2.5–2.7 mm at the strokes of A1+A2 and A1+A4 against ~0.5 mm at other
-times (`results/strokes.csv`)."""
-STROKE_TOLERANCE_S = 0.2
-"""A cycle's stroke within this of the path's stroke phase (circularly, ≤) is consistent with
-it (`strokes`): a third of a heating-and-recovery surge, well inside the 3.15-s period."""
-
-
-@dataclass(frozen=True)
-class Strokes:
-    """The strokes of a path (`strokes`): per whole period k (from the path's first time t₀, over
-    [t₀ + kT, t₀ + (k+1)T)), the window start at which the centroid moves farthest within
-    `window_s`.
-
-    phase_s: their circular mean over the periods, in [0, T) from t₀, s; cycle_phases_s (K,):
-    each period's, s; cycles K; consistent_cycles: those within `STROKE_TOLERANCE_S` of phase_s
-    (circularly); jump_mm: the median over the periods of the farthest move within a window,
-    mm; typical_mm: the median move within a window over the whole path, mm (how far the robot
-    goes in `window_s` anyway); drift_s: how much later each period's stroke comes than the
-    one before, s per period (the Theil–Sen slope of the cycle phases unwrapped from period to
-    period, NaN for one period): the pulses come every T + drift_s."""
-
-    phase_s: float
-    cycle_phases_s: np.ndarray
-    cycles: int
-    consistent_cycles: int
-    jump_mm: float
-    typical_mm: float
-    drift_s: float
-
-
-def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
-            tolerance_s: float = STROKE_TOLERANCE_S) -> Strokes:
-    """When a path jumps in each period (`Strokes`): a model-free reading of when a measured
-    trial's pulses fire, which the video does not record (`align_phase` fits the phase to a
-    simulation instead). The moves are taken between every sample time t and t + window_s
-    (linear between samples). ValueError for a window outside (0, T/2], a tolerance outside
-    [0, T/2] or a path shorter than one period and one window."""
-    period = path.period_s
-    if not (is_real(window_s) and math.isfinite(window_s) and 0 < window_s <= period / 2):
-        raise ValueError(f"window_s must be in (0, {period / 2:g}] s (half the period), got "
-                         f"{window_s!r}")
-    if not (is_real(tolerance_s) and math.isfinite(tolerance_s)
-            and 0 <= tolerance_s <= period / 2):
-        raise ValueError(f"tolerance_s must be in [0, {period / 2:g}] s (half the period), got "
-                         f"{tolerance_s!r}")
-    start = path.t_s[0]
-    cycles = int((path.t_s[-1] - window_s - start) // period)
-    if cycles < 1:
-        raise ValueError(f"the path covers {path.t_s[-1] - start:g} s: strokes needs at least "
-                         f"one period and one window ({period + window_s:g} s)")
-    times = path.t_s[path.t_s <= path.t_s[-1] - window_s]
-    moves = np.linalg.norm(path.position(times + window_s) - path.position(times), axis=-1)
-    cycle_of = np.floor((times - start) / period).astype(np.int64)
-    phases, jumps = np.empty(cycles), np.empty(cycles)
-    for cycle in range(cycles):
-        inside = np.flatnonzero(cycle_of == cycle)
-        farthest = inside[np.argmax(moves[inside])]
-        phases[cycle] = times[farthest] - start - cycle * period
-        jumps[cycle] = moves[farthest]
-    turns = np.exp(2j * np.pi * phases / period)
-    phase = float(np.angle(turns.mean()) % (2 * np.pi) * period / (2 * np.pi)) % period
-    apart = np.abs((phases - phase + period / 2) % period - period / 2)
-    steps = (np.diff(phases) + period / 2) % period - period / 2
-    unwrapped = np.concatenate([[phases[0]], phases[0] + np.cumsum(steps)])
-    first, second = np.triu_indices(cycles, k=1)  # every pair of periods, first < second
-    drift = float(np.median((unwrapped[second] - unwrapped[first]) / (second - first))
-                  ) if cycles > 1 else math.nan
-    return Strokes(phase, phases, cycles, int(np.sum(apart <= tolerance_s)),
-                   float(np.median(jumps)), float(np.median(moves)), drift)
-
 
 TRIAL_COLUMNS = ["gait", "first_cycle", "last_cycle", "phase_s", "sigma_mm",
                  "trajectory_error", "direction_residual", "objective", "sim_net_signed_mm",
@@ -495,6 +423,114 @@ def simulated_runs(trajectory: pd.DataFrame, gaits: Sequence[str],
                                       part["y_mm"].to_numpy(), float(period)),
                                  (float(forward[0]), float(forward[1]))))
     return runs
+
+
+# --------------------------------------------------------------------------- strokes
+
+STROKE_WINDOW_S = 0.1
+"""Window of `strokes`, s: six video frames, under the heating pulse (0.15 s), over which the
+measured robot jumps by 2.5–2.7 mm at the strokes of A1+A2 and A1+A4 against ~0.5 mm at other
+times (`results/strokes.csv`)."""
+STROKE_TOLERANCE_S = 0.2
+"""A cycle's stroke within this of the path's stroke phase (circularly, ≤) is consistent with
+it (`strokes`): a third of a heating-and-recovery surge, well inside the 3.15-s period."""
+
+
+@dataclass(frozen=True)
+class Strokes:
+    """The strokes of a path (`strokes`): per whole period k (from the path's first time t₀, over
+    [t₀ + kT, t₀ + (k+1)T)), the window start at which the centroid moves farthest within
+    `window_s`.
+
+    phase_s: their circular mean over the periods, in [0, T) from t₀, s; cycle_phases_s (K,):
+    each period's, s; cycles K; consistent_cycles: those within `STROKE_TOLERANCE_S` of phase_s
+    (circularly); jump_mm: the median over the periods of the farthest move within a window,
+    mm; typical_mm: the median move within a window over the whole path, mm (how far the robot
+    goes in `window_s` anyway); drift_s: how much later each period's stroke comes than the
+    one before, s per period (the Theil–Sen slope of the cycle phases unwrapped from period to
+    period, NaN for one period): the pulses come every T + drift_s."""
+
+    phase_s: float
+    cycle_phases_s: np.ndarray
+    cycles: int
+    consistent_cycles: int
+    jump_mm: float
+    typical_mm: float
+    drift_s: float
+
+
+def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
+            tolerance_s: float = STROKE_TOLERANCE_S) -> Strokes:
+    """When a path jumps in each period (`Strokes`): a model-free reading of when a measured
+    trial's pulses fire, which the video does not record (`align_phase` fits the phase to a
+    simulation instead). The moves are taken between every sample time t and t + window_s
+    (linear between samples). ValueError for a window outside (0, T/2], a tolerance outside
+    [0, T/2] or a path shorter than one period and one window."""
+    period = path.period_s
+    if not (is_real(window_s) and math.isfinite(window_s) and 0 < window_s <= period / 2):
+        raise ValueError(f"window_s must be in (0, {period / 2:g}] s (half the period), got "
+                         f"{window_s!r}")
+    if not (is_real(tolerance_s) and math.isfinite(tolerance_s)
+            and 0 <= tolerance_s <= period / 2):
+        raise ValueError(f"tolerance_s must be in [0, {period / 2:g}] s (half the period), got "
+                         f"{tolerance_s!r}")
+    start = path.t_s[0]
+    cycles = int((path.t_s[-1] - window_s - start) // period)
+    if cycles < 1:
+        raise ValueError(f"the path covers {path.t_s[-1] - start:g} s: strokes needs at least "
+                         f"one period and one window ({period + window_s:g} s)")
+    times = path.t_s[path.t_s <= path.t_s[-1] - window_s]
+    moves = np.linalg.norm(path.position(times + window_s) - path.position(times), axis=-1)
+    cycle_of = np.floor((times - start) / period).astype(np.int64)
+    phases, jumps = np.empty(cycles), np.empty(cycles)
+    for cycle in range(cycles):
+        inside = np.flatnonzero(cycle_of == cycle)
+        farthest = inside[np.argmax(moves[inside])]
+        phases[cycle] = times[farthest] - start - cycle * period
+        jumps[cycle] = moves[farthest]
+    phase = _circular_mean(phases, period)
+    apart = np.abs((phases - phase + period / 2) % period - period / 2)
+    steps = (np.diff(phases) + period / 2) % period - period / 2
+    unwrapped = np.concatenate([[phases[0]], phases[0] + np.cumsum(steps)])
+    first, second = np.triu_indices(cycles, k=1)  # every pair of periods, first < second
+    drift = float(np.median((unwrapped[second] - unwrapped[first]) / (second - first))
+                  ) if cycles > 1 else math.nan
+    return Strokes(phase, phases, cycles, int(np.sum(apart <= tolerance_s)),
+                   float(np.median(jumps)), float(np.median(moves)), drift)
+
+
+def _circular_mean(phases: np.ndarray, period: float) -> float:
+    """The circular mean of phases (s) on a circle of `period`, in [0, period)."""
+    turns = np.exp(2j * np.pi * np.asarray(phases) / period)
+    return float(np.angle(turns.mean()) % (2 * np.pi) * period / (2 * np.pi)) % period
+
+
+def stroke_aligned_phase(simulated: SimulatedRun, trial: Trial, cycles=TRAINING_CYCLES,
+                         measured: Optional[Strokes] = None,
+                         window_s: float = STROKE_WINDOW_S) -> float:
+    """The trial's phase (s) that puts the simulation's strokes on the measured ones over the
+    cycle window, for `trajectory_objective(..., phases=...)` instead of fitting it: the
+    circular mean of the trial's strokes in the window's periods minus the simulated strokes'
+    phase (`strokes`; the simulation must cover one window past its last whole period),
+    in [0, T). The window's periods are the track's periods first−1..last−1
+    (from its start), or first..last where the strokes come earlier in the period than the
+    simulated lag (cycle k then starts just before the track's period k ends). `measured`:
+    the trial's `strokes`, if already taken. A model-free constraint where the fitted phase
+    can slide a model's strokes onto other moments of the cycle (results: the strokes in the
+    tracks); the period stays the trial's (its pulses drift by ~0.03 s a period: over a
+    3-cycle window, ±0.03 s)."""
+    first, last = check_window(cycles)
+    measured = strokes(trial.path, window_s) if measured is None else measured
+    if measured.cycles < last + 1:
+        raise ValueError(f"{trial.gait}: the track's strokes cover {measured.cycles} periods, "
+                         f"the window ends at cycle {last} (one period more is needed)")
+    period = trial.path.period_s
+    lag = strokes(simulated.path, window_s).phase_s
+    phase = _circular_mean(measured.cycle_phases_s[first - 1:last], period) - lag
+    if phase < 0:
+        phase = _circular_mean(measured.cycle_phases_s[first:last + 1], period) - lag
+    # in [0, T) <= latest_phase: the track covers one period past the window's last
+    return float(phase % period)
 
 
 # --------------------------------------------------------------------------- gradient

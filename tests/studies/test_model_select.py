@@ -79,9 +79,10 @@ def test_a_refined_form_ranks_above_every_screened_one():
 def test_a_resumed_candidate_is_reused_only_for_the_same_model():
     """The definition names the base model by the fields that differ from the defaults: a field
     set to its default value (as a model option added later, off by default) changes nothing; a
-    changed coefficient does."""
+    changed coefficient does, and so do phases held on the strokes."""
     candidate = model_select.Candidate("paper", "", "alpha=0.2:1.5 cylinder_drag=1:100:log")
-    args = types.SimpleNamespace(fold_generations=2, train_cycles="1:3", validate_cycles="4:6")
+    args = types.SimpleNamespace(fold_generations=2, train_cycles="1:3", validate_cycles="4:6",
+                                 phases="fitted")
     settings, solver = identify.CMASettings(), SolverConfig()
     base = StarParams.preset("paper")
 
@@ -90,6 +91,9 @@ def test_a_resumed_candidate_is_reused_only_for_the_same_model():
     assert definition(base) == definition(StarParams.preset("paper", jet_mode="contract"))
     assert definition(base) != definition(StarParams.preset("paper", alpha=0.81))
     assert definition(base) != definition(StarParams.preset("paper", jet_mode="always"))
+    fitted = definition(base)
+    args.phases = "strokes"
+    assert definition(base) != fitted
 
 
 def test_a_per_actuator_axis_is_informed_only_by_gaits_that_fire_it():
@@ -251,3 +255,37 @@ def test_a_candidate_whose_axes_no_fitted_gait_moves_is_skipped_and_none_left_is
     assert ("--candidates: none can be fitted (idle: no fitted gait fires the actuators of "
             "actuator_gains[8], actuator_gains[7])") in error, error
     assert len(error.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_phases_held_on_the_strokes_in_every_window(tmp_path):
+    """--phases strokes: no phase is fitted (k = the fitted axes), and each window's phases
+    are where a direct simulation's strokes meet the measured ones, the validation window
+    its own; its objectives are the trajectory objective at those phases."""
+    model_select.main(["--out", str(tmp_path), "--only", "paper", "--refine-top", "0",
+                       "--phases", "strokes", *QUICK])
+    row = pd.read_csv(tmp_path / "model_select.csv").iloc[0]
+    assert (row["candidate"], row["status"], row["n_parameters"]) == ("paper", "ok", 2)
+    values = pd.read_csv(tmp_path / "model_select_parameters.csv").set_index(
+        "parameter")["value"]
+    gaits = ["A1+A2", "A1+A4"]  # --quick
+    params = [StarParams(gait=g, **values.to_dict()) for g in gaits]
+    # the windows' last cycle (2) and the strokes' tail past it
+    duration = (2 + model_select.STROKE_TAIL_CYCLES) * params[0].period
+    result = taichi_star.simulate(params, duration, SolverConfig(dt=model_select.QUICK_DT),
+                                  record_interval_s=nearest_interval(
+                                      model_select.RECORD_INTERVAL_S, model_select.QUICK_DT))
+    runs = dict(zip(gaits, identification.simulated_runs(result.trajectory, gaits,
+                                                          [p.period for p in params])))
+    trials = identification.measured_trials(gaits)
+    stored = pd.read_csv(tmp_path / "model_select_gaits.csv")
+    for window, cycles, column in (("train", (1, 1), "train_objective"),
+                                   ("validate", (2, 2), "validate_objective")):
+        phases = {g: identification.stroke_aligned_phase(runs[g], trials[g], cycles)
+                  for g in gaits}
+        part = stored[stored["window"] == window].set_index("gait")
+        # 10 significant digits in the CSV
+        assert part.loc[gaits, "phase_s"].to_numpy() == pytest.approx(
+            [phases[g] for g in gaits], rel=1e-9, abs=1e-12)
+        direct = identification.trajectory_objective(runs, trials, cycles, phases=phases)
+        # the parameters' 10 digits move the objective far less than 1e-6
+        assert row[column] == pytest.approx(identification.objective_of(direct), rel=1e-6)

@@ -517,3 +517,40 @@ def test_the_recorded_strokes_of_a1_a4_are_all_at_one_phase_and_jump_far():
     found = ident.strokes(ident.measured_trial("A1+A4").path)
     assert found.cycles == 9 and found.consistent_cycles == 9
     assert found.jump_mm > 4 * found.typical_mm
+
+
+def _sim_and_trial(lag_s, stroke_phase_s, drift_s=0.0, cycles=4, period=3.15):
+    """A simulated run whose strokes come `lag_s` after each firing (0, T, ...) and a trial
+    whose strokes come at `stroke_phase_s` in its track's first period and `drift_s` later in
+    each next one, both pulsed paths."""
+    simulated = ident.SimulatedRun("A1+A2", pulsed_path(lag_s + period * np.arange(cycles),
+                                                         cycles * period + 0.2),
+                                   (1.0, 0.0))
+    trial = ident.Trial("A1+A2", pulsed_path(
+        stroke_phase_s + (period + drift_s) * np.arange(cycles + 3), (cycles + 3) * period), 1.0)
+    return simulated, trial
+
+
+@pytest.mark.parametrize("lag, stroke, drift, expected", [(0.05, 0.9, 0.0, 0.85),
+                                                         (0.3, 0.1, 0.03, 0.16 - 0.3 + 3.15)])
+def test_the_stroke_aligned_phase_puts_the_simulated_strokes_on_the_measured_ones(
+        lag, stroke, drift, expected):
+    """Strokes 0.05 s after each firing against measured ones at 0.9 s: the firings at 0.85 s.
+    Measured strokes earlier in the period than the lag (0.1 s and 0.03 s later per period,
+    against 0.3 s): cycle 1 starts at the end of the track's first period, so the window's
+    strokes are those of the track's periods 1..3 (mean 0.16 s), not 0..2 (0.13 s)."""
+    simulated, trial = _sim_and_trial(lag, stroke, drift)
+    phase = ident.stroke_aligned_phase(simulated, trial, (1, 3))
+    # both strokes to the 1-ms sampling (their window centres: the same half window off)
+    assert phase == pytest.approx(expected, abs=2.1e-3)
+
+
+def test_the_stroke_aligned_phase_needs_a_stroke_one_period_past_the_window():
+    """A track of 7 periods has 6 strokes read whole (the last wants a window past its end):
+    cycles 3–5 have theirs and the one after, cycles 4–6 not (the wrap above may need it)."""
+    simulated, trial = _sim_and_trial(0.05, 0.9)
+    assert ident.stroke_aligned_phase(simulated, trial, (3, 5)) == pytest.approx(0.85,
+                                                                                abs=2.1e-3)
+    with pytest.raises(ValueError, match=r"A1\+A2: the track's strokes cover 6 periods, the "
+                                         r"window ends at cycle 6 \(one period more"):
+        ident.stroke_aligned_phase(simulated, trial, (4, 6))
