@@ -1,11 +1,14 @@
 """Checks of an argument's kind that modules at every level share: this module imports nothing
 of the package, so the lowest (`gait`, `timegrid`) can use it too."""
 
+import contextlib
+import contextvars
 import math
 import numbers
 import os
 import sys
 import warnings
+from typing import Optional
 
 import numpy as np
 
@@ -57,11 +60,34 @@ def check_flag(name: str, value) -> bool:
     return bool(value)
 
 
-def warn_user(message: str, category=RuntimeWarning):
+_TOLD_BY_CALLER: contextvars.ContextVar = contextvars.ContextVar("told_by_caller",
+                                                                default=frozenset())
+"""Kinds of `warn_user` warnings that a caller up the stack tells itself (`told_by_caller`)."""
+
+
+@contextlib.contextmanager
+def told_by_caller(*kinds: str):
+    """Within it, `warn_user(..., kind=k)` of a listed kind says nothing in this thread: the
+    caller tells it itself (`run_batch` tells its chunks' long-run and "ok"-instance warnings
+    once, with the batch's numbers). A context variable, per thread: `warnings.catch_warnings`,
+    used before, swaps the filters of the whole process, and two threads' batches left each
+    other's "ignore" filters installed for good (an audit, 2026-12: a capped run afterwards
+    warned nothing)."""
+    token = _TOLD_BY_CALLER.set(_TOLD_BY_CALLER.get() | frozenset(kinds))
+    try:
+        yield
+    finally:
+        _TOLD_BY_CALLER.reset(token)
+
+
+def warn_user(message: str, category=RuntimeWarning, kind: Optional[str] = None):
     """`warnings.warn` attributed to the first caller outside the package: the user's line (a
     script's, a notebook cell's, a study's), whichever public route led here. Fixed stack
     levels pointed inside the library on some routes (an audit, 2026-12: simulate's record and
-    long-work warnings, Simulator.advance's, run_batch's)."""
+    long-work warnings, Simulator.advance's, run_batch's). `kind`: what a caller may tell
+    itself instead (`told_by_caller`)."""
+    if kind is not None and kind in _TOLD_BY_CALLER.get():
+        return
     level, frame = 2, sys._getframe(1)
     while frame is not None and frame.f_code.co_filename.startswith(PACKAGE_FOLDER):
         level, frame = level + 1, frame.f_back

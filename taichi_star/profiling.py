@@ -23,7 +23,7 @@ import taichi as ti
 from .checks import is_whole
 from .model import build_model, validate_batch
 from .params import SolverConfig, StarParams, check_precision
-from .runtime import Runtime, check_arch
+from .runtime import Runtime, check_arch, one_call_at_a_time
 from .state import STATUS_OK
 from .timegrid import STEPS_PER_LAUNCH, check_work
 
@@ -114,9 +114,12 @@ def _check_steps(name: str, value, lowest: int, batch: int):
 
 class EngineProfile:
     """The engine of one batch (`params`, a sequence of StarParams; `solver`, fixed steps) on
-    `arch`, loaded at rest. `setup_s`: the time this took (Taichi initialised if it was not,
+    `arch`, loaded at rest, its own while the profile lives (as a Simulator's: no call or
+    Simulator uses it meanwhile; a precision switch is refused), each method holding the
+    runtime's lock (`runtime.one_call_at_a_time`). `setup_s`: the time this took (Taichi initialised if it was not,
     the engine built or taken from the runtime's cache, the batch loaded)."""
 
+    @one_call_at_a_time
     def __init__(self, params: Sequence[StarParams], solver: SolverConfig = SolverConfig(),
                  arch: str = "cpu"):
         if not isinstance(solver, SolverConfig):
@@ -133,7 +136,10 @@ class EngineProfile:
         self.solver = solver
         runtime = Runtime.current()
         runtime.ensure(arch, solver.precision)
-        self.engine = runtime.engine_for(self.model, solver)
+        # its own while it lives, as a Simulator's: a call or Simulator of the same batch drew
+        # it too and moved its robots, a precision switch destroyed it (an audit, 2026-12)
+        self.engine = runtime.lease_engine(self.model, solver, self)
+        self.engine.load(self.model, solver)
         ti.sync()
         self.setup_s = time.perf_counter() - start
 
@@ -182,10 +188,12 @@ class EngineProfile:
         scalar = 8 if self.solver.precision == "f64" else 4
         return 4 * self.n_slots * 4 * scalar + 6 * self.n_nodes * 2 * scalar
 
+    @one_call_at_a_time
     def restart(self):
         """Every instance back at rest, as after loading."""
         self.engine.load(self.model, self.solver)
 
+    @one_call_at_a_time
     def advance(self, n_steps: int):
         """n_steps steps of every live instance, in launches of `simulate`'s size; finished
         (synchronised) when this returns. ValueError naming n_steps unless it is an integer >= 0
@@ -198,6 +206,7 @@ class EngineProfile:
             done += count
         ti.sync()
 
+    @one_call_at_a_time
     def first_launch(self) -> Tuple[float, float]:
         """(compile_s, first_s): the first one-step launch (compilation and a step), less the
         time of a second one-step launch. Call it once, before any other stepping."""
@@ -209,19 +218,23 @@ class EngineProfile:
         again = time.perf_counter() - again
         return max(first - again, 0.0), first
 
+    @one_call_at_a_time
     def newton_iterations(self) -> np.ndarray:
         """(B,) Newton iterations of every instance so far."""
         return self.engine.state.newton_total.to_numpy()[:self.batch_size]
 
+    @one_call_at_a_time
     def factorisations(self) -> np.ndarray:
         """(B,) Newton matrices assembled and factored by every instance so far (one per
         iteration with Newton's Jacobian, fewer with the chord's)."""
         return self.engine.state.factorisations.to_numpy()[:self.batch_size]
 
+    @one_call_at_a_time
     def positions(self) -> np.ndarray:
         """(B, N, 2) node positions now, m (the engine's precision)."""
         return self.engine.state.positions.to_numpy()[:self.batch_size]
 
+    @one_call_at_a_time
     def timed_window(self, warmup_steps: int, steps: int) -> Tuple[float, float, float]:
         """From rest, `warmup_steps` untimed steps, then `steps` timed ones: (seconds, Newton
         iterations and factorisations per instance-step of the timed steps). RuntimeError if
@@ -244,6 +257,7 @@ class EngineProfile:
         return (seconds, (self.newton_iterations().sum() - iterations) / instance_steps,
                 (self.factorisations().sum() - factorisations) / instance_steps)
 
+    @one_call_at_a_time
     def phase_split(self, time_s: float, iteration_s: float, profile_seconds: float) -> Dict[str, float]:
         """µs per instance and Newton iteration of the assembly, the factorisation and the
         solve as the engine's fixed steps run them (in an engine with lanes by groups, the

@@ -11,6 +11,7 @@ import hashlib
 import os
 import platform
 import subprocess
+import threading
 from pathlib import Path
 from typing import Callable, Dict, Optional, Tuple
 
@@ -77,7 +78,18 @@ def file_path(path, what: str) -> Path:
 
 
 TEMPORARY_MARK = ".tmp-"
-"""`write_atomic` writes NAME first as ".NAME.tmp-PID" (`is_temporary`)."""
+"""`write_atomic` writes NAME first as ".NAME.tmp-PID-THREAD" (`is_temporary`)."""
+_WRITE_LOCKS: Dict[str, threading.Lock] = {}
+"""One lock per file `write_atomic` writes in this process (`_write_lock`)."""
+_WRITE_LOCKS_GUARD = threading.Lock()
+
+
+def _write_lock(path: Path) -> threading.Lock:
+    """The lock of writes to `path` in this process: two threads writing one file (a table and
+    its sidecar) take turns. Without it, each deleted the other's temporaries and 158 of 800
+    writes failed, and 6 of 40 rounds left a table without its sidecar (an audit, 2026-12)."""
+    with _WRITE_LOCKS_GUARD:
+        return _WRITE_LOCKS.setdefault(os.path.abspath(path), threading.Lock())
 
 
 def is_temporary(path: Path) -> bool:
@@ -120,8 +132,16 @@ def write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception]
     place (the previous sidecar put back if that fails) and the sidecar after it. A full disk
     then leaves both previous files as they were, and a kill at worst the new file without a
     sidecar, never beside the previous one's (which describes another result)."""
+    with _write_lock(Path(path)):
+        _write_atomic(path, data, failure, sidecar)
+
+
+def _write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception]],
+                  sidecar: Optional[Tuple[Path, bytes]]):
+    """`write_atomic`, its file's lock held."""
     targets = [(Path(path), data)] + ([(Path(sidecar[0]), sidecar[1])] if sidecar else [])
-    temporaries = [target.with_name(f".{target.name}{TEMPORARY_MARK}{os.getpid()}")
+    writer = f"{os.getpid()}-{threading.get_ident()}"
+    temporaries = [target.with_name(f".{target.name}{TEMPORARY_MARK}{writer}")
                    for target, _ in targets]
     previous = temporaries[-1].with_name(f"{temporaries[-1].name}.previous")
     if failure is not None:
@@ -159,7 +179,7 @@ def write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception]
     finally:
         # what is left is never a result: the new data unrenamed, or a sidecar moved aside
         # whose table has been replaced (a kill between the move and the table's rename
-        # leaves it as `.NAME.tmp-PID.previous`, the table's temporary beside it: then it is
+        # leaves it as `.NAME.tmp-PID-THREAD.previous`, the table's temporary beside it: then it is
         # the sidecar of the table still there)
         for temporary in (*temporaries, previous):
             try:

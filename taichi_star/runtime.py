@@ -389,6 +389,9 @@ class Runtime:
         self.started = False
         """Whether Taichi has been started in this process (`ensure`; a re-initialisation
         asked for by `configure` leaves it True)."""
+        self.restart_reason: Optional[str] = None
+        """Why Taichi must be started again though arch and precision are as asked (a build
+        stopped half way), for `check_no_simulator_lives`' message; None otherwise."""
         self.taichi_thread: Optional[int] = None
         """The thread that started Taichi (`ensure`): the only one it builds fields on
         (`build_here`)."""
@@ -438,9 +441,19 @@ class Runtime:
         self.check_not_forked()
         if self.arch == arch and self.precision == precision:
             return
-        self.check_no_simulator_lives(arch, precision)
+        if self.restart_reason is None:
+            self.check_no_simulator_lives(arch, precision)
+        else:
+            self.check_no_simulator_lives(arch, precision, self.restart_reason,
+                                          "restart the Python process (their engines cannot "
+                                          "run either)")
         threads = {} if self.cpu_threads is None else {"cpu_max_num_threads": self.cpu_threads}
         memoise_source_positions()
+        # forgotten before ti.init destroys them: a Ctrl-C inside it left the engines of the
+        # destroyed program handed out to the next call, which crashed the process (an audit,
+        # 2026-12); now that call starts Taichi again
+        self.arch = self.precision = None
+        self.engines.clear()
         # ti.init prints "[Taichi] Starting on arch=..." unconditionally; warnings still go to
         # Taichi's logger, except a taken cache lock's (module docstring)
         with contextlib.redirect_stdout(io.StringIO()):
@@ -453,6 +466,7 @@ class Runtime:
         atexit.unregister(_quiet_exit)
         atexit.register(_quiet_exit)
         self.arch, self.precision = arch, precision
+        self.restart_reason = None
         self.taichi_thread = threading.get_ident()
         self.started = True
         self.engines.clear()
@@ -471,7 +485,8 @@ class Runtime:
         self.check_no_simulator_lives(
             arch, precision, "a new engine built from a thread other than the one that started "
             "Taichi, the only one it builds on",
-            "make this call from the thread that started Taichi (the first to simulate)")
+            "make this call from the thread that started Taichi (the first to simulate) or in "
+            "another process")
         self.arch = None
         self.ensure(arch, precision)
 
@@ -490,14 +505,13 @@ class Runtime:
             return
         gc.collect()
         held = sum(slot.held() for slots in self.engines.values() for slot in slots)
-        remedy = remedy or f"make this run in {self.precision}"
+        remedy = remedy or f"make this run in {self.precision} or in another process"
         if held:
             raise RuntimeError(
                 f"cannot start Taichi for {arch} in {precision}: {held} living Simulator(s) "
                 f"(or environments) hold engines of the Taichi program this process runs "
                 f"({self.precision}), and starting another ({why}) would destroy them; let "
-                f"them go first (del the Simulator, env.close()), or {remedy} or in another "
-                f"process")
+                f"them go first (del the Simulator, env.close()), or {remedy}")
 
     def configure_gpu(self, block_dim: int = GPU_BLOCK_DIM, instance_minor: bool = GPU_INSTANCE_MINOR):
         """GPU launch and layout settings of the engines built from now on (for benchmarks that
@@ -569,11 +583,20 @@ class Runtime:
         check_memory(model, solver.precision, self.arch)
         capacity = batch_capacity(model.batch_size)
         gpu = self.arch != "cpu"
-        return BatchEngine(model, capacity, INTEGRATORS[solver.integrator](),
-                           instances_per_block=self.gpu_block_dim if gpu else 1,
-                           loop_spread=self.loop_spread(capacity), even_spread=not gpu,
-                           instance_minor=gpu and self.gpu_instance_minor, sensitive=sensitive,
-                           lanes=lanes)
+        try:
+            return BatchEngine(model, capacity, INTEGRATORS[solver.integrator](),
+                               instances_per_block=self.gpu_block_dim if gpu else 1,
+                               loop_spread=self.loop_spread(capacity), even_spread=not gpu,
+                               instance_minor=gpu and self.gpu_instance_minor,
+                               sensitive=sensitive, lanes=lanes)
+        except BaseException:
+            # a build stopped half way (Ctrl-C, an error) leaves Taichi's field builder
+            # unfinished, and every later kernel launch of the process failed (an audit,
+            # 2026-12): the next call starts Taichi again (or says why it cannot)
+            self.arch = None
+            self.restart_reason = ("the last engine's build stopped half way, which leaves "
+                                   "Taichi unable to run any kernel")
+            raise
 
     def engine_key(self, model: BatchModel, solver: SolverConfig, sensitive: bool = False,
                    lanes: int = 1) -> tuple:

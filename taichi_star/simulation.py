@@ -422,12 +422,6 @@ SUMMARY_STATE = ("status", "failure_time", "steps_done", "rejected_steps",
 """The state fields a run's summary reads at its end (`BatchState.read`)."""
 
 
-OK_INSTANCE_WARNINGS = (r".* instances \(the first: instance .*\) are 'ok' only after",
-                        r".* 'ok' instances \(the first: instance .*\) end in a shape")
-"""Patterns of `warn_about_ok_instances`' messages (`batch.run_batch` silences its chunks'
-and warns once with the batch's numbers)."""
-
-
 def newton_capped(newton_max: np.ndarray, solver: SolverConfig) -> np.ndarray:
     """(B,) bool: instances a Newton solve of which used all the solver's max_newton iterations
     (`newton_max`: (B,) each one's most iterations in a solve)."""
@@ -451,7 +445,7 @@ def warn_about_capped(capped: np.ndarray, names: np.ndarray, solver: SolverConfi
     warn_user(f"{int(capped.sum())} of {len(capped)} {solver.precision} instances (the "
               f"first: instance {names[np.flatnonzero(capped)[0]]}) are 'ok' only after a "
               f"Newton solve used all its {solver.max_newton} iterations (newton_capped): "
-              f"{reason}")
+              f"{reason}", kind="ok_instances")
 
 
 def warn_about_ok_instances(summary: pd.DataFrame, solver: SolverConfig):
@@ -466,7 +460,10 @@ def warn_about_ok_instances(summary: pd.DataFrame, solver: SolverConfig):
       their equations (at a re-firing whose natural curvature jumps, period 0.2 s: a
       centroid 13 mm away in one 2-ms step) and a robot whose shortest edge is thousands of
       times below its size (8-90 % off);
-    - a final shape that is not physical (shape_sane False)."""
+    - a final shape that is not physical (shape_sane False).
+
+    Of kind "ok_instances" (`batch.run_batch` keeps its chunks' to itself and warns once with
+    the batch's numbers: `checks.told_by_caller`)."""
     ok = summary["status"].eq("ok").to_numpy()
     names = (summary["instance"].to_numpy() if "instance" in summary
              else np.arange(len(summary)))
@@ -478,7 +475,7 @@ def warn_about_ok_instances(summary: pd.DataFrame, solver: SolverConfig):
                   f"physical (shape_sane False, max_strain up to "
                   f"{summary['max_strain'].to_numpy()[unphysical].max():.3g}): every step was "
                   f"solved, but their parameters or time step take the rods beyond what the "
-                  f"model describes")
+                  f"model describes", kind="ok_instances")
 
 
 def _collect(engine, model, solver, duration, record_times, start, centroids, rotations, shapes,

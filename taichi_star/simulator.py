@@ -370,16 +370,21 @@ class Simulator(NotCopied):
             self._compiled = True
         steps_before = self._steps()
         started = time.perf_counter()
-        drive(self.engine, clock, stops, take, self.n_instances,
-              start_times=self.time_s if self.solver.adaptive else None,
-              progress_label=robots_label(self.n_instances) if progress else None)
-        run_s = time.perf_counter() - started
-        # one read for the step count, the statuses and the capped solves
-        after = self.engine.state.read(("steps_done", "status", "newton_max"), self.n_instances)
-        self.timing = self.timing + RunTiming(
-            setup_s=0.0, compile_s=compile_s, run_s=run_s, collect_s=0.0,
-            robot_steps=int((after["steps_done"].astype(np.int64) - steps_before).sum()))
-        self._running = after["status"] == STATUS_OK
+        try:
+            drive(self.engine, clock, stops, take, self.n_instances,
+                  start_times=self.time_s if self.solver.adaptive else None,
+                  progress_label=robots_label(self.n_instances) if progress else None)
+        finally:
+            # after a Ctrl-C too: the steps taken count, and `fire` must know who failed
+            # meanwhile (an interrupted advance left a failed robot taking commands: an audit,
+            # 2026-12). One read for the step count, the statuses and the capped solves
+            run_s = time.perf_counter() - started
+            after = self.engine.state.read(("steps_done", "status", "newton_max"),
+                                           self.n_instances)
+            self.timing = self.timing + RunTiming(
+                setup_s=0.0, compile_s=compile_s, run_s=run_s, collect_s=0.0,
+                robot_steps=int((after["steps_done"].astype(np.int64) - steps_before).sum()))
+            self._running = after["status"] == STATUS_OK
         capped = newton_capped(after["newton_max"], self.solver) & self._running \
             & ~self._capped_named
         self._capped_named |= capped

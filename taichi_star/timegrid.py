@@ -152,16 +152,12 @@ def check_work(name: str, steps: float, batch: Optional[int] = None):
     warn_long_work(name, round(steps) * (batch or 1))
 
 
-LONG_WORK_MESSAGE = r".* robot-steps: about .* h at "
-"""A pattern of `warn_long_work`'s message (a caller that tells the hours of a whole batch
-filters its parts' warnings with it)."""
-
-
 def warn_long_work(name: str, robot_steps: float):
     """A RuntimeWarning with the estimated wall time when `robot_steps` (steps × instances) is
-    over WARN_ROBOT_STEPS; `name` says which arguments gave them."""
+    over WARN_ROBOT_STEPS; `name` says which arguments gave them. Of kind "long_work" (a
+    caller that tells a whole batch's hours keeps its parts' to itself: `told_by_caller`)."""
     if robot_steps > WARN_ROBOT_STEPS:
         hours = robot_steps / ESTIMATE_ROBOT_STEPS_PER_S / 3600
         warn_user(f"{name} is {robot_steps:.3g} robot-steps: about {hours:.3g} h at "
-                      f"{ESTIMATE_ROBOT_STEPS_PER_S:g} robot-steps/s (on a 2-core CPU; a GPU or "
-                      f"more cores run faster)")
+                  f"{ESTIMATE_ROBOT_STEPS_PER_S:g} robot-steps/s (on a 2-core CPU; a GPU or "
+                  f"more cores run faster)", kind="long_work")

@@ -9,21 +9,20 @@ the instances numbered by their position in the whole batch.
 from __future__ import annotations
 
 import dataclasses
-import warnings
 from dataclasses import dataclass
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import pandas as pd
 
-from ..checks import is_finite_real, is_whole, shown
+from ..checks import is_finite_real, is_whole, shown, told_by_caller
 from ..driver import RunTiming, fewest_steps
 from ..geometry import Topology
 from ..model import instances_of
 from ..params import SolverConfig, StarParams
 from ..runtime import RECORDS_REMEDY, check_arch, check_host_memory
-from ..simulation import OK_INSTANCE_WARNINGS, simulate, tables_bytes, validate_call
-from ..timegrid import LONG_WORK_MESSAGE, steps_in, warn_long_work
+from ..simulation import simulate, tables_bytes, validate_call
+from ..timegrid import steps_in, warn_long_work
 
 
 @dataclass(frozen=True)
@@ -96,9 +95,8 @@ def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None
                              f"{duration:.3g} s, got cycles = {cycles!r}")
         groups.setdefault((p.topology_key, round(float(duration), 12)), []).append(position)
     tasks = []
-    with warnings.catch_warnings():
-        # a chunk's long-run warning tells one chunk's hours: the batch's are told below
-        warnings.filterwarnings("ignore", message=LONG_WORK_MESSAGE, category=RuntimeWarning)
+    # a chunk's long-run warning tells one chunk's hours: the batch's are told below
+    with told_by_caller("long_work"):
         for (_, duration), positions in groups.items():
             for start in range(0, len(positions), chunk_size):
                 members = tuple(positions[start:start + chunk_size])
@@ -145,9 +143,7 @@ def run_chunk(task: ChunkTask, progress: bool = False) -> ChunkResult:
     """Simulate one chunk (in whatever process calls it) and number its rows by `members`. Its
     warnings about "ok" instances are left to `run_batch`, which tells the batch's numbers
     once (a chunk's named its own rows, and on a worker process went to the worker's stderr)."""
-    with warnings.catch_warnings():
-        for pattern in OK_INSTANCE_WARNINGS:
-            warnings.filterwarnings("ignore", message=pattern, category=RuntimeWarning)
+    with told_by_caller("ok_instances"):
         result = simulate(list(task.params), task.duration_s, task.solver, arch=task.arch,
                           record_interval_s=task.record_interval_s,
                           record_shapes=task.record_shapes,

@@ -17,6 +17,9 @@ import pandas as pd
 import pytest
 
 import taichi_star as ts
+from taichi_star import engine as engine_module
+from taichi_star import runtime
+from taichi_star.profiling import EngineProfile
 from taichi_star.reference import ReferenceSimulator
 from taichi_star.runtime import Runtime, prepare_engine
 from taichi_star.state import STATUS_OK
@@ -301,6 +304,68 @@ def test_an_engine_needed_on_another_thread_restarts_taichi_there_unless_a_simul
     assert robots.ok.all()
 
 
+def _interrupt(*args, **kwargs):
+    raise KeyboardInterrupt
+
+
+def test_a_ctrl_c_while_taichi_starts_leaves_the_next_call_a_fresh_start(monkeypatch):
+    """Ctrl-C inside `ti.init` (an f32 call after f64 ones) left the runtime believing in the
+    destroyed f64 program: the next f64 call handed out its engines and crashed the process
+    (an audit, 2026-12: an LLVM assertion, rc 134). Now that call starts Taichi again and
+    gets the same bits as before."""
+    before = ts.simulate([ts.StarParams(gait="A1+A2")], 0.05).summary
+    monkeypatch.setattr(runtime, "_open_kernel_cache", _interrupt)  # inside ti.init's block
+    with pytest.raises(KeyboardInterrupt):
+        ts.simulate([ts.StarParams()], 0.01, ts.SolverConfig(precision="f32", newton_tol=1e-6))
+    monkeypatch.undo()
+    pd.testing.assert_frame_equal(ts.simulate([ts.StarParams(gait="A1+A2")], 0.05).summary,
+                                  before, check_exact=True)
+
+
+def test_an_engine_build_stopped_half_way_leaves_the_next_call_a_fresh_start(monkeypatch):
+    """Ctrl-C while a new engine declares its fields left Taichi's field builder unfinished,
+    and every later call failed, of any batch ("Field builder ... is not finalized": an
+    audit, 2026-12). Now the next call starts Taichi again, with the same bits as before; where
+    a Simulator lives (its engine cannot run either) it says so."""
+    before = ts.simulate([ts.StarParams(gait="A1+A2")], 0.05).summary
+    monkeypatch.setattr(engine_module, "BlockSystem", _interrupt)  # after the field arena
+    with pytest.raises(KeyboardInterrupt):
+        ts.simulate([ts.StarParams(n_arc=9)], 0.01)
+    monkeypatch.undo()
+    pd.testing.assert_frame_equal(ts.simulate([ts.StarParams(gait="A1+A2")], 0.05).summary,
+                                  before, check_exact=True)
+    robots = ts.Simulator([ts.StarParams()])
+    monkeypatch.setattr(engine_module, "BlockSystem", _interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        ts.simulate([ts.StarParams(n_arc=9)], 0.01)
+    monkeypatch.undo()
+    with pytest.raises(RuntimeError, match="the last engine's build stopped half way, which "
+                                           "leaves Taichi unable to run any kernel.*restart "
+                                           "the Python process"):
+        ts.simulate([ts.StarParams(gait="A1+A2")], 0.05)
+    del robots
+    pd.testing.assert_frame_equal(ts.simulate([ts.StarParams(gait="A1+A2")], 0.05).summary,
+                                  before, check_exact=True)
+
+
+def test_an_engine_profile_holds_its_engine_while_it_lives():
+    """`EngineProfile` took a free engine and left it free: a `simulate` of the same batch
+    meanwhile moved its robots (7.4 mm), a Simulator shared it, an f32 call destroyed it and
+    its next step aborted the process (an audit, 2026-12). It holds it now, as a Simulator."""
+    params = [ts.StarParams(gait="A1+A2")]
+    profile = EngineProfile(params)
+    profile.advance(20)
+    positions = profile.positions().copy()
+    ts.simulate(params, 0.05)
+    robots = ts.Simulator(params)
+    assert robots.engine is not profile.engine
+    np.testing.assert_array_equal(profile.positions(), positions)
+    del robots
+    with pytest.raises(RuntimeError, match="living Simulator"):
+        ts.simulate(params, 0.01, ts.SolverConfig(precision="f32", newton_tol=1e-6))
+    np.testing.assert_array_equal(profile.positions(), positions)
+
+
 def test_f64_instances_ok_only_after_a_solve_used_all_its_iterations_are_warned_about():
     """An f64 instance whose Newton solve used all max_newton iterations is "ok" only because a
     retry rescued the step, and such a run can be off by far more than newton_tol: limbs of
@@ -336,6 +401,52 @@ def test_a_batchs_capped_instances_are_warned_about_once_with_the_batchs_numbers
     assert len(messages) == 1
     assert messages[0].startswith("1 of 4 f64 instances (the first: instance 3) are 'ok' only")
     assert result.summary.newton_capped.tolist() == [False, False, False, True]
+
+
+def test_a_warning_a_caller_tells_itself_is_kept_back_in_its_thread_alone():
+    """run_batch kept its chunks' "ok"-instance and long-run warnings back with
+    warnings.catch_warnings, which swaps the whole process's filters: two threads' batches
+    left "ignore" filters installed for good, and a capped run afterwards warned nothing (an
+    audit, 2026-12). `told_by_caller` keeps them back in its own thread: another thread's
+    warning meanwhile is told, and no filter changes."""
+    from taichi_star.checks import told_by_caller
+    from taichi_star.simulation import warn_about_capped
+
+    filters = list(warnings.filters)
+    inside, told = threading.Barrier(2), threading.Barrier(2)
+
+    def keep_back():
+        with told_by_caller("ok_instances"):
+            inside.wait()
+            told.wait()
+    thread = threading.Thread(target=keep_back)
+    thread.start()
+    inside.wait()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        warn_about_capped(np.array([True]), np.array([0]), ts.SolverConfig())
+        with told_by_caller("ok_instances"):
+            warn_about_capped(np.array([True]), np.array([0]), ts.SolverConfig())
+    told.wait()
+    thread.join()
+    assert len([w for w in caught if "newton_capped" in str(w.message)]) == 1
+    assert warnings.filters == filters
+
+
+def test_batches_on_two_threads_leave_the_warnings_of_later_calls_alone():
+    """The audit's case: two in-process run_batch calls from two threads, then a capped run
+    on this one is warned about (and the process's warning filters are as before)."""
+    from taichi_star.batch import run_batch
+
+    paper = ts.StarParams(gait="A1+A3")
+    tiny_limbs = paper.replace(tip_radius=paper.joint_radius + 2e-5)
+    filters = list(warnings.filters)
+    with warnings.catch_warnings(record=True):
+        warnings.simplefilter("always")
+        _in_threads([lambda: run_batch([paper, tiny_limbs], 0.02, chunk_size=1)] * 2)
+    assert warnings.filters == filters
+    with pytest.warns(RuntimeWarning, match="newton_capped"):
+        ts.simulate([tiny_limbs], 0.02)
 
 
 def test_a_streamed_batchs_capped_instances_are_warned_about_once_with_its_numbers(

@@ -640,6 +640,34 @@ def test_a_failed_robot_shows_its_failure_time_ignores_commands_and_has_no_deriv
     assert np.isnan(sim.state()["since_A2_s"].iloc[0])
 
 
+def test_an_interrupted_advance_counts_its_steps_and_knows_who_failed(monkeypatch):
+    """Ctrl-C in an advance skipped its bookkeeping: the steps taken were not in `timing`,
+    and a robot that failed before the interrupt went on taking commands (`fire` reads the
+    statuses kept from the last advance: an audit, 2026-12). Both now as after a whole
+    advance. The robots of the test above; 20 steps of 50 ms, then the interrupt."""
+    from taichi_star import simulator as simulator_module
+
+    params = ts.StarParams.preset("paper")
+    solver = ts.SolverConfig(dt=0.05, max_newton=5, max_substep_halvings=1)
+    sim = ts.Simulator([params, params], solver)
+    sim.fire(["A1", "A1+A2"])
+
+    def interrupted(engine, *args, **kwargs):
+        engine.advance(20)
+        raise KeyboardInterrupt
+    monkeypatch.setattr(simulator_module, "drive", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        sim.advance(5.0)
+    monkeypatch.undo()
+    state = sim.state()
+    assert state["status"].tolist()[1] == "ok" and state["status"].tolist()[0] != "ok"
+    taken = np.rint(state["t_s"].to_numpy() / solver.dt).astype(int)
+    assert taken[1] == 20 and sim.timing.robot_steps == taken.sum()
+    sim.fire(["A3", "A3"])
+    since = sim.state()["since_A3_s"].tolist()
+    assert np.isnan(since[0]) and since[1] == 0.0
+
+
 def test_a_simulator_is_not_copied_or_pickled_and_save_refuses_a_folder(tmp_path):
     """copy.deepcopy and pickle failed in Taichi's words ("cannot pickle ... SNode"), and
     save("a folder") wrote "a folder.npz" beside it, which load("a folder") could not read (an
