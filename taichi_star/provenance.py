@@ -84,6 +84,15 @@ _WRITE_LOCKS: Dict[str, threading.Lock] = {}
 _WRITE_LOCKS_GUARD = threading.Lock()
 
 
+def _fresh_write_locks_in_child():
+    """A forked child's own write locks (the parent's threads holding them are not in it)."""
+    global _WRITE_LOCKS, _WRITE_LOCKS_GUARD
+    _WRITE_LOCKS, _WRITE_LOCKS_GUARD = {}, threading.Lock()
+
+
+os.register_at_fork(after_in_child=_fresh_write_locks_in_child)
+
+
 def _write_lock(path: Path) -> threading.Lock:
     """The lock of writes to `path` in this process: two threads writing one file (a table and
     its sidecar) take turns. Without it, each deleted the other's temporaries and 158 of 800

@@ -656,4 +656,13 @@ def prepare_engine(params, solver: SolverConfig = SolverConfig(), arch: str = "c
     return runtime.engine_for(model, solver)
 
 
+def _fresh_lock_in_child():
+    """A forked child's own `RUNTIME_LOCK`: the parent's, taken by another of its threads at
+    the fork, would be held for ever by a thread the child does not have, and the child's
+    first call waited for ever instead of being told to use spawn (a review, 2026-12)."""
+    global RUNTIME_LOCK
+    RUNTIME_LOCK = threading.RLock()
+
+
+os.register_at_fork(after_in_child=_fresh_lock_in_child)
 os.register_at_fork(after_in_child=Runtime._after_fork)

@@ -234,6 +234,34 @@ def test_a_process_forked_after_taichi_started_is_told_to_use_spawn_instead_of_h
     assert refused in _in_forked_child(lambda: ts.simulate([ts.StarParams()], 0.01))
 
 
+@pytest.mark.skipif(sys.platform != "linux", reason="fork is the start method in question on Linux")
+def test_a_fork_while_another_thread_holds_the_runtime_or_a_file_does_not_hang_the_child(
+        tmp_path):
+    """A child forked while another thread of its parent held the runtime's lock (a background
+    simulation, then a fork-based Pool) waited for ever on it at its first call, never told to
+    use spawn (a review, 2026-12); a file's write lock likewise. The child has its own."""
+    from taichi_star import provenance
+
+    ts.simulate([ts.StarParams()], 0.01)  # Taichi started in the parent
+    path = tmp_path / "table.csv"
+    holding, done = threading.Event(), threading.Event()
+
+    def hold():
+        with runtime.RUNTIME_LOCK, provenance._write_lock(path):
+            holding.set()
+            done.wait()
+    thread = threading.Thread(target=hold)
+    thread.start()
+    holding.wait()
+    try:
+        assert "forked from one in which Taichi had started" in _in_forked_child(
+            lambda: ts.simulate([ts.StarParams()], 0.01))
+        assert _in_forked_child(lambda: provenance.write_atomic(path, b"a\n")) == "ran"
+    finally:
+        done.set()
+        thread.join()
+
+
 def _in_threads(works):
     """Each work's return value, the works run from threads started together (a barrier)."""
     start = threading.Barrier(len(works))
