@@ -537,6 +537,24 @@ def planned_work(runnable: Sequence[Candidate], settings: identify.CMASettings,
             + [(candidate, refine_settings) for candidate in largest])
 
 
+def check_strokes_hold_phases(trials, last_cycle: int):
+    """--phases strokes, before any compute: StudyArgumentError naming a gait whose strokes
+    lie on no period (`identification.Strokes.periodic`: A1+A3's do not) or end before the
+    windows' last cycle (and one period more)."""
+    for gait, trial in trials.items():
+        measured = identification.strokes(trial.path)
+        if not measured.periodic:
+            raise cli.StudyArgumentError(
+                f"--phases strokes: {gait}'s strokes do not lie on one period "
+                f"({measured.on_line_cycles} of {measured.cycles} within "
+                f"{identification.STROKE_TOLERANCE_S:g} s of their line), so there is no "
+                f"phase to hold; leave it out with --gaits")
+        if measured.cycles < last_cycle + 1:
+            raise cli.StudyArgumentError(
+                f"--phases strokes: {gait}'s track has {measured.cycles} strokes, the windows "
+                f"end at cycle {last_cycle} (one period more is needed)")
+
+
 def build_parser():
     parser = cli.StudyParser("model_select", DESCRIPTION)
     parser.add_argument("--candidates", default=None, metavar="CSV",
@@ -643,6 +661,8 @@ def main(argv=None):
                                      f" {rows[0]['note']})")
     trials = identification.measured_trials(gaits)
     identify.check_trials_cover(trials, validate, args.validate_cycles)
+    if args.phases == "strokes":
+        check_strokes_hold_phases(trials, max(train[1], validate[1]))
     solver = cli.solver(args)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"gaits": gaits, "train_cycles": list(train),

@@ -8,12 +8,13 @@ The videos do not record when the heating pulses fire, so the trajectory objecti
 phase per trial to the simulation it compares (`identification.align_phase`). The tracks show
 it themselves: at each stroke the robot's centroid jumps. `identification.strokes` finds, in
 every period of a trial, the `--window` in which the centroid moves farthest, and their circular
-mean phase; the same on the simulated path of the `--preset` model (`--cycles` from rest) gives
-the model's own lag from a firing to its farthest move, and the difference is the firing phase
-that the track implies for that model. Beside it, the phase that the trajectory fit chooses
-for the same model on cycles 1–3 (`identification.trajectory_objective`). The strokes also
-drift from period to period where the pulses do not come exactly every 3.15 s
-(`Strokes.drift_s`): that gives their period as measured.
+mean phase. The strokes also drift from period to period where the pulses do not come exactly
+every 3.15 s: where more than half lie on one line (`Strokes.periodic`), its slope gives their
+period as measured. The same reading of the simulated path of the `--preset` model (`--cycles`
+from rest, and a window more to read the last period's) gives the model's own lag from a
+firing to its farthest move; the line over cycles 1–3 less that lag is the firing that the
+track implies for that model (`identification.stroke_aligned_phase`), set beside the phase
+that the trajectory fit chooses for it on cycles 1–3 (`identification.trajectory_objective`).
 
 Writes `strokes.csv` (one row per gait: the measured strokes and their period, the model's,
 the implied firing phase, the fitted phase and the gap between them), `strokes_moves.csv`
@@ -77,13 +78,16 @@ def strokes_table(trials, runs, fits: pd.DataFrame, window_s: float):
                "consistent_cycles": measured.consistent_cycles, "jump_mm": measured.jump_mm,
                "typical_move_mm": measured.typical_mm,
                "jump_ratio": measured.jump_mm / measured.typical_mm,
-               "drift_s": measured.drift_s,
+               "on_line_cycles": measured.on_line_cycles, "periodic": measured.periodic,
+               "line_phase_s": measured.line_phase_s, "drift_s": measured.drift_s,
                "pulse_period_s": trial.path.period_s + measured.drift_s}
         row.update(dict.fromkeys(MODEL_COLUMNS, math.nan))
         if runs[gait] is not None:
             model = identification.strokes(runs[gait].path, window_s)
             period = trial.path.period_s
-            firing = (measured.phase_s - model.phase_s) % period
+            firing = identification.stroke_aligned_phase(
+                runs[gait], trial, identification.TRAINING_CYCLES, measured,
+                window_s) if measured.periodic else math.nan
             fitted = float(fits.loc[fits["gait"] == gait, "phase_s"].iloc[0])
             row.update({"model_stroke_phase_s": model.phase_s,
                         "model_consistent_cycles": model.consistent_cycles,
@@ -113,15 +117,18 @@ def plot_strokes(csv_path, moves_path, png_path, period_s: float):
         farthest = gait_moves.loc[gait_moves.groupby("cycle")["move_mm"].idxmax()]
         ax.scatter(farthest["phase_s"], farthest["move_mm"], s=14, color="tab:red",
                    label="each period's farthest")
-        ax.axvline(row.stroke_phase_s, color="tab:red", lw=1, label="stroke phase")
-        ax.axvline(row.firing_phase_s, color="tab:blue", lw=1.2, ls="--",
-                   label="firing implied (model's lag)")
+        ax.axvline(row.stroke_phase_s, color="tab:red", lw=1, label="stroke phase (mean)")
+        if row.periodic:
+            ax.axvline(row.firing_phase_s, color="tab:blue", lw=1.2, ls="--",
+                       label="firing implied, cycles 1-3")
         ax.axvline(row.fitted_phase_s, color="tab:green", lw=1.2, ls=":",
-                   label="phase the fit chose")
+                   label="phase the fit chose, cycles 1-3")
         ax.set_ylabel("mm")
-        ax.set_title(f"{row.gait}: {row.consistent_cycles} of {row.cycles} strokes within "
-                     f"{identification.STROKE_TOLERANCE_S:g} s; fit − implied "
-                     f"{row.phase_gap_s:+.2f} s", fontsize=9)
+        reading = (f"pulses every {row.pulse_period_s:.3f} s; fit − implied "
+                   f"{row.phase_gap_s:+.2f} s" if row.periodic
+                   else "strokes on no period: no firing to imply")
+        ax.set_title(f"{row.gait}: {row.on_line_cycles} of {row.cycles} strokes on their line "
+                     f"(within {identification.STROKE_TOLERANCE_S:g} s); {reading}", fontsize=9)
     axes[-1, 0].set_xlim(0, period_s)
     axes[-1, 0].set_xlabel("time in the period from the track's start, s")
     axes[-1, 0].legend(fontsize=7, ncol=2, loc="upper right")  # the coast's moves are small
@@ -146,7 +153,9 @@ def main(argv=None):
     solver = cli.solver(args)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver)
-    result = simulate(params, args.cycles * base.period, solver, arch=args.arch,
+    # a window and a record past the last period: its stroke is read too
+    duration = args.cycles * base.period + args.window + RECORD_INTERVAL_S
+    result = simulate(params, duration, solver, arch=args.arch,
                       record_interval_s=RECORD_INTERVAL_S, progress=not args.no_progress)
     trials = identification.measured_trials(gaits)
     runs = dict(zip(trials, identification.simulated_runs(result.trajectory, list(trials),

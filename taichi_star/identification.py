@@ -433,7 +433,8 @@ measured robot jumps by 2.5–2.7 mm at the strokes of A1+A2 and A1+A4 against ~
 times (`results/strokes.csv`)."""
 STROKE_TOLERANCE_S = 0.2
 """A cycle's stroke within this of the path's stroke phase (circularly, ≤) is consistent with
-it (`strokes`): a third of a heating-and-recovery surge, well inside the 3.15-s period."""
+it, and within this of the strokes' line on it (`strokes`): a third of a heating-and-recovery
+surge, well inside the 3.15-s period."""
 
 
 @dataclass(frozen=True)
@@ -446,9 +447,15 @@ class Strokes:
     each period's, s; cycles K; consistent_cycles: those within `STROKE_TOLERANCE_S` of phase_s
     (circularly); jump_mm: the median over the periods of the farthest move within a window,
     mm; typical_mm: the median move within a window over the whole path, mm (how far the robot
-    goes in `window_s` anyway); drift_s: how much later each period's stroke comes than the
-    one before, s per period (the Theil–Sen slope of the cycle phases unwrapped from period to
-    period, NaN for one period): the pulses come every T + drift_s."""
+    goes in `window_s` anyway).
+
+    The strokes' line: drift_s, how much later each period's stroke comes than the one before,
+    s per period (the Theil–Sen slope of the cycle phases unwrapped from period to period; 0
+    for one period), and line_phase_s, its phase in period 0, in [0, T) (the median of the
+    unwrapped phases less the drift's share); on_line_cycles: the strokes within
+    `STROKE_TOLERANCE_S` of it (circularly, ≤). `periodic`: more than half of them are, and
+    the pulses come every T + drift_s; where not (strokes scattered over the period), drift_s
+    and line_phase_s are NaN: no period to read."""
 
     phase_s: float
     cycle_phases_s: np.ndarray
@@ -457,6 +464,21 @@ class Strokes:
     jump_mm: float
     typical_mm: float
     drift_s: float
+    line_phase_s: float
+    on_line_cycles: int
+    period_s: float
+    """T, the period the path was read with, s."""
+
+    @property
+    def periodic(self) -> bool:
+        """Whether more than half the strokes lie on their line (see the class docstring)."""
+        return 2 * self.on_line_cycles > self.cycles
+
+    def line_phases(self, periods) -> np.ndarray:
+        """The line's phase (s, in [0, T)) at period indices `periods` (from 0); NaN where the
+        strokes are not `periodic`."""
+        return (self.line_phase_s + self.drift_s * np.asarray(periods, dtype=float)
+                ) % self.period_s
 
 
 def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
@@ -465,7 +487,8 @@ def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
     trial's pulses fire, which the video does not record (`align_phase` fits the phase to a
     simulation instead). The moves are taken between every sample time t and t + window_s
     (linear between samples). ValueError for a window outside (0, T/2], a tolerance outside
-    [0, T/2] or a path shorter than one period and one window."""
+    [0, T/2], a path shorter than one period and one window, or one with a gap between samples
+    longer than the window (a period's farthest move would be read across it)."""
     period = path.period_s
     if not (is_real(window_s) and math.isfinite(window_s) and 0 < window_s <= period / 2):
         raise ValueError(f"window_s must be in (0, {period / 2:g}] s (half the period), got "
@@ -479,6 +502,12 @@ def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
     if cycles < 1:
         raise ValueError(f"the path covers {path.t_s[-1] - start:g} s: strokes needs at least "
                          f"one period and one window ({period + window_s:g} s)")
+    gaps = np.diff(path.t_s)
+    if gaps.max() > window_s * (1 + 1e-9):  # a gap of the window itself, rounded, is read
+        at = int(np.argmax(gaps))
+        raise ValueError(f"path has a gap of {gaps[at]:g} s after t = {path.t_s[at]:g} s, "
+                         f"longer than window_s = {window_s:g} s: its moves there are not "
+                         f"measured")
     times = path.t_s[path.t_s <= path.t_s[-1] - window_s]
     moves = np.linalg.norm(path.position(times + window_s) - path.position(times), axis=-1)
     cycle_of = np.floor((times - start) / period).astype(np.int64)
@@ -494,9 +523,16 @@ def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
     unwrapped = np.concatenate([[phases[0]], phases[0] + np.cumsum(steps)])
     first, second = np.triu_indices(cycles, k=1)  # every pair of periods, first < second
     drift = float(np.median((unwrapped[second] - unwrapped[first]) / (second - first))
-                  ) if cycles > 1 else math.nan
+                  ) if cycles > 1 else 0.0
+    numbers = np.arange(cycles)
+    line = float(np.median(unwrapped - drift * numbers))
+    off_line = np.abs((phases - line - drift * numbers + period / 2) % period - period / 2)
+    on_line = int(np.sum(off_line <= tolerance_s))
+    if 2 * on_line <= cycles:
+        drift = line = math.nan
     return Strokes(phase, phases, cycles, int(np.sum(apart <= tolerance_s)),
-                   float(np.median(jumps)), float(np.median(moves)), drift)
+                   float(np.median(jumps)), float(np.median(moves)), drift,
+                   line % period if math.isfinite(line) else line, on_line, period)
 
 
 def _circular_mean(phases: np.ndarray, period: float) -> float:
@@ -510,25 +546,30 @@ def stroke_aligned_phase(simulated: SimulatedRun, trial: Trial, cycles=TRAINING_
                          window_s: float = STROKE_WINDOW_S) -> float:
     """The trial's phase (s) that puts the simulation's strokes on the measured ones over the
     cycle window, for `trajectory_objective(..., phases=...)` instead of fitting it: the
-    circular mean of the trial's strokes in the window's periods minus the simulated strokes'
-    phase (`strokes`; the simulation must cover one window past its last whole period),
-    in [0, T). The window's periods are the track's periods first−1..last−1
+    circular mean of the measured strokes' line (`Strokes.line_phases`: robust to a stroke
+    read off elsewhere, and drifting as the pulses do) over the window's periods, minus the
+    simulated strokes' phase (`strokes`; the simulation must cover one window past its last
+    whole period), in [0, T). The window's periods are the track's periods first−1..last−1
     (from its start), or first..last where the strokes come earlier in the period than the
     simulated lag (cycle k then starts just before the track's period k ends). `measured`:
-    the trial's `strokes`, if already taken. A model-free constraint where the fitted phase
-    can slide a model's strokes onto other moments of the cycle (results: the strokes in the
-    tracks); the period stays the trial's (its pulses drift by ~0.03 s a period: over a
-    3-cycle window, ±0.03 s)."""
+    the trial's `strokes`, if already taken. ValueError where the trial's strokes are not
+    `periodic` (no phase to hold) or end before the window. A model-free constraint where the
+    fitted phase can slide a model's strokes onto other moments of the cycle (results: the
+    strokes in the tracks); the period stays the trial's."""
     first, last = check_window(cycles)
     measured = strokes(trial.path, window_s) if measured is None else measured
+    if not measured.periodic:
+        raise ValueError(f"{trial.gait}: its strokes do not lie on one period "
+                         f"({measured.on_line_cycles} of {measured.cycles} within "
+                         f"{STROKE_TOLERANCE_S:g} s of their line): no phase to hold")
     if measured.cycles < last + 1:
         raise ValueError(f"{trial.gait}: the track's strokes cover {measured.cycles} periods, "
                          f"the window ends at cycle {last} (one period more is needed)")
     period = trial.path.period_s
     lag = strokes(simulated.path, window_s).phase_s
-    phase = _circular_mean(measured.cycle_phases_s[first - 1:last], period) - lag
+    phase = _circular_mean(measured.line_phases(range(first - 1, last)), period) - lag
     if phase < 0:
-        phase = _circular_mean(measured.cycle_phases_s[first:last + 1], period) - lag
+        phase = _circular_mean(measured.line_phases(range(first, last + 1)), period) - lag
     # in [0, T) <= latest_phase: the track covers one period past the window's last
     return float(phase % period)
 

@@ -34,19 +34,23 @@ def test_quick_run_against_the_library(tmp_path):
     assert (row["cycles"], row["consistent_cycles"]) == (measured.cycles,
                                                          measured.consistent_cycles)
     assert row["jump_ratio"] == pytest.approx(measured.jump_mm / measured.typical_mm, rel=1e-9)
-    # the model: the identified preset at --quick's 2-ms steps, three cycles from rest
+    assert (row["on_line_cycles"], row["periodic"]) == (measured.on_line_cycles, True)
+    assert row["line_phase_s"] == pytest.approx(measured.line_phase_s, rel=1e-9)
+    # the model: the identified preset at --quick's 2-ms steps, three cycles from rest and
+    # a window and a record more (its third stroke is read too)
     params = StarParams.preset("identified", gait="A1+A2")
-    result = taichi_star.simulate([params], 3 * params.period,
+    result = taichi_star.simulate([params], 3 * params.period + 0.1 + 0.01,
                                   SolverConfig.preset("identified", dt=2e-3),
                                   record_interval_s=strokes.RECORD_INTERVAL_S)
     runs = dict(zip(["A1+A2"], identification.simulated_runs(result.trajectory, ["A1+A2"],
                                                              [params.period])))
     model = identification.strokes(runs["A1+A2"].path)
+    assert model.cycles == row["model_cycles"] == 3
     assert row["model_stroke_phase_s"] == pytest.approx(model.phase_s, rel=1e-9, abs=1e-12)
     assert row["model_jump_mm"] == pytest.approx(model.jump_mm, rel=1e-9)
     fitted = identification.trajectory_objective(runs, {"A1+A2": trial})["phase_s"].iloc[0]
     assert row["fitted_phase_s"] == pytest.approx(fitted, rel=1e-9)
-    firing = (measured.phase_s - model.phase_s) % 3.15
+    firing = identification.stroke_aligned_phase(runs["A1+A2"], trial, (1, 3))
     assert row["firing_phase_s"] == pytest.approx(firing, rel=1e-9)
     assert row["phase_gap_s"] == pytest.approx(strokes.circular_gap(fitted, firing, 3.15),
                                                rel=1e-9)

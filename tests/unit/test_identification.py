@@ -505,10 +505,46 @@ def test_strokes_refuse_windows_tolerances_and_paths_they_cannot_read():
     with pytest.raises(ValueError, match=r"covers 3.1 s: strokes needs at least one period "
                                          r"and one window \(3.25 s\)"):
         ident.strokes(pulsed_path([0.7], 3.1))
-    # exactly one period and one window: one stroke, no drift to read; half a period's window
+    # exactly one period and one window: one stroke, its own line (no drift); half a period's
+    # window
     one = ident.strokes(path)
-    assert one.cycles == 1 and math.isnan(one.drift_s)
+    assert (one.cycles, one.drift_s, one.on_line_cycles, one.periodic) == (1, 0.0, 1, True)
+    assert one.line_phase_s == one.phase_s
     assert ident.strokes(pulsed_path([0.7], 3.15 + 1.575), 1.575).cycles == 1
+
+
+def test_a_path_with_a_gap_longer_than_the_window_is_refused_naming_it():
+    """A move read across a gap is not measured (a period without samples gave numpy's
+    "argmax of an empty sequence", a gap inside one a made-up stroke: a review, 2026-12); a
+    gap of exactly the window is read."""
+    path = pulsed_path([0.7, 3.85], 6.5, step_s=0.05)
+    keep = (path.t_s < 3.2) | (path.t_s >= 3.2 + 0.3)
+    gapped = ident.CentroidPath(path.t_s[keep], path.x_mm[keep], path.y_mm[keep], 3.15)
+    with pytest.raises(ValueError, match=r"path has a gap of 0.35 s after t = 3.15 s, longer "
+                                         r"than window_s = 0.1 s"):
+        ident.strokes(gapped)
+    assert ident.strokes(path, window_s=0.05).cycles == 2  # gaps of 0.05 s, the window
+
+
+@pytest.mark.parametrize("scattered, periodic", [(2, True), (3, False)])
+def test_strokes_are_periodic_when_more_than_half_lie_on_their_line(scattered, periodic):
+    """Six periods, their strokes on a line drifting 0.02 s a period but `scattered` of them
+    moved 1 s off it: with two off (4 of 6 on) the line, its drift and phase are those of the
+    four (the medians are not pulled); with three off, no line holds more than half: no
+    period to read, drift and line NaN."""
+    pulses = 0.7 + (3.15 + 0.02) * np.arange(6)
+    pulses[[1, 3, 5][:scattered]] += 1.0
+    found = ident.strokes(pulsed_path(pulses, 6 * 3.15 + 0.5))
+    assert found.periodic is periodic
+    if periodic:
+        assert found.on_line_cycles == 4
+        assert found.drift_s == pytest.approx(0.02, abs=2e-3)  # the sampling, as above
+        assert found.line_phase_s == pytest.approx(0.65, abs=2e-3)
+        np.testing.assert_allclose(found.line_phases([0, 2, 4]), found.cycle_phases_s[[0, 2, 4]],
+                                   atol=2e-3)
+    else:
+        assert found.on_line_cycles <= 3
+        assert math.isnan(found.drift_s) and math.isnan(found.line_phase_s)
 
 
 def test_the_recorded_strokes_of_a1_a4_are_all_at_one_phase_and_jump_far():
@@ -543,6 +579,23 @@ def test_the_stroke_aligned_phase_puts_the_simulated_strokes_on_the_measured_one
     phase = ident.stroke_aligned_phase(simulated, trial, (1, 3))
     # both strokes to the 1-ms sampling (their window centres: the same half window off)
     assert phase == pytest.approx(expected, abs=2.1e-3)
+
+
+def test_the_stroke_aligned_phase_follows_the_line_not_a_stroke_read_elsewhere():
+    """A1's track: its first strokes read 0.0 and 2.04 s, the line through its other 17 about
+    0.2 s (a review, 2026-12: the window's own three moved its phase 0.35 s). One stroke of the
+    window 1 s off the line moves the phase not at all; strokes off any line are refused."""
+    simulated, trial = _sim_and_trial(0.05, 0.9)
+    pulses = 0.9 + 3.15 * np.arange(7)
+    pulses[1] += 1.0
+    moved = ident.Trial("A1+A2", pulsed_path(pulses, 7 * 3.15), 1.0)
+    assert ident.stroke_aligned_phase(simulated, moved, (1, 3)) == pytest.approx(
+        ident.stroke_aligned_phase(simulated, trial, (1, 3)), abs=1e-9)
+    pulses[[3, 5]] += 1.0  # three of the six read whole off the line: not periodic
+    scattered = ident.Trial("A1+A2", pulsed_path(pulses, 7 * 3.15), 1.0)
+    with pytest.raises(ValueError, match=r"A1\+A2: its strokes do not lie on one period \(\d "
+                                         r"of 6 within 0.2 s of their line\): no phase to hold"):
+        ident.stroke_aligned_phase(simulated, scattered, (1, 3))
 
 
 def test_the_stroke_aligned_phase_needs_a_stroke_one_period_past_the_window():
