@@ -53,7 +53,7 @@ from typing import Dict, List, Optional
 import numpy as np
 import taichi as ti
 
-from .checks import check_flag
+from .checks import check_flag, warn_user
 from .engine import LOCKSTEP_MINIMUM_BATCH, BatchEngine, elimination_plan
 from .integrators import INTEGRATORS
 from .model import BatchModel, build_model
@@ -389,6 +389,8 @@ class Runtime:
         self.started = False
         """Whether Taichi has been started in this process (`ensure`; a re-initialisation
         asked for by `configure` leaves it True)."""
+        self.thread_restarts = 0
+        """How many times Taichi was started again on another thread (`build_here`)."""
         self.restart_reason: Optional[str] = None
         """Why Taichi must be started again though arch and precision are as asked (a build
         stopped half way), for `check_no_simulator_lives`' message; None otherwise."""
@@ -478,9 +480,21 @@ class Runtime:
         `simulate` of a new topology from a thread pool); the engines it built run from any
         thread. From another thread, Taichi is started again on this one (the engines built so
         far are dropped; their kernels come back from the offline cache), unless a living
-        Simulator holds one (RuntimeError, `check_no_simulator_lives`)."""
+        Simulator holds one (RuntimeError, `check_no_simulator_lives`). From the second such
+        restart on, a RuntimeWarning (once per process): threads that take turns building
+        engines restart Taichi at every turn, ~2 s each (a review, 2026-12: 180 times the
+        calls' own time), where engines built once from one thread serve every thread."""
         if self.taichi_thread == threading.get_ident():
             return
+        self.thread_restarts += 1
+        if self.thread_restarts == 2:
+            warn_user("Taichi was started again on another thread to build an engine, a second "
+                      "time (it builds engines only on the thread that started it, and each "
+                      "restart drops the engines built so far: ~2 s each); threads that take "
+                      "turns building engines of different batches restart it at every turn. "
+                      "Make the first call of each batch shape (topology, integrator, "
+                      "precision, size) from one thread: the engines it builds run from any "
+                      "thread")
         arch, precision = self.arch, self.precision
         self.check_no_simulator_lives(
             arch, precision, "a new engine built from a thread other than the one that started "

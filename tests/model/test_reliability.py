@@ -306,22 +306,30 @@ def test_calls_from_several_threads_take_turns_and_get_the_numbers_of_a_call_alo
         pd.testing.assert_frame_equal(concurrent, one, check_exact=True)
 
 
-def test_an_engine_needed_on_another_thread_restarts_taichi_there_unless_a_simulator_lives():
+def test_an_engine_needed_on_another_thread_restarts_taichi_there_unless_a_simulator_lives(
+        monkeypatch):
     """Taichi builds fields only on the thread that started it: a `simulate` of a new
     topology from another thread raised LLVM's "Assertion failure: std::this_thread::get_id()
     == main_thread_id_" and left the process's Taichi broken for every call after (an audit,
     2026-12). Now Taichi is started again on that thread and the call gets the numbers it gets
     on the first; back here, the next new engine does the same. Where a Simulator lives, that
-    would destroy its engine: refused, naming the thread, and the Simulator goes on."""
+    would destroy its engine: refused, naming the thread, and the Simulator goes on. The
+    second restart warns (threads taking turns restart Taichi at every turn, ~2 s each: a
+    review, 2026-12), the first not."""
+    monkeypatch.setattr(Runtime.current(), "thread_restarts", 0)
     first = ts.simulate([ts.StarParams(gait="A1+A3")], 0.05).summary
     coarse = [ts.StarParams(gait="A1+A3", n_arc=10)]
-    (elsewhere,) = _in_threads([lambda: ts.simulate(coarse, 0.05).summary])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the first restart: no warning
+        (elsewhere,) = _in_threads([lambda: ts.simulate(coarse, 0.05).summary])
     assert Runtime.current().taichi_thread != threading.get_ident()
     # its engine runs here too (not rebuilt); the paper engine was dropped and is built here
     pd.testing.assert_frame_equal(elsewhere, ts.simulate(coarse, 0.05).summary, check_exact=True)
     assert Runtime.current().taichi_thread != threading.get_ident()
-    pd.testing.assert_frame_equal(ts.simulate([ts.StarParams(gait="A1+A3")], 0.05).summary,
-                                  first, check_exact=True)
+    with pytest.warns(RuntimeWarning, match="started again on another thread to build an "
+                                            "engine, a second time"):
+        again = ts.simulate([ts.StarParams(gait="A1+A3")], 0.05).summary
+    pd.testing.assert_frame_equal(again, first, check_exact=True)
     assert Runtime.current().taichi_thread == threading.get_ident()
     robots = ts.Simulator([ts.StarParams()])
     robots.fire(["A1"])
