@@ -230,17 +230,18 @@ class Setup:
     validate: Tuple[int, int]
     run_kwargs: dict
     record_interval_s: float
-    phases: str = "fitted"
-    """"fitted": each trial's phase fitted per window (the validation window holds the
-    training one's); "strokes": put where the simulated strokes meet the measured ones
-    (`identification.stroke_aligned_phase`), in every window."""
+    strokes: Optional[Dict[str, identification.Strokes]] = None
+    """--phases strokes: each trial's measured strokes, read once, on which its phase is put
+    where the simulated strokes meet them (`identification.stroke_aligned_phase`), in every
+    window; None: each trial's phase fitted per window (the validation window holds the
+    training one's)."""
 
 
 def simulate_points(params: Sequence[StarParams], last_cycle: int, setup: Setup) -> list:
     """`identification.SimulatedRun` of every model (None where it failed), simulated from rest
     for `last_cycle` cycles in one batch."""
     # the strokes of the window's last period are read over a window past its end
-    tail = STROKE_TAIL_CYCLES if setup.phases == "strokes" else 0.0
+    tail = STROKE_TAIL_CYCLES if setup.strokes is not None else 0.0
     result = run_batch(list(params), cycles=float(last_cycle) + tail,
                        record_interval_s=setup.record_interval_s, **setup.run_kwargs)
     runs = identification.simulated_runs(result.trajectory, [p.gait for p in params],
@@ -252,11 +253,12 @@ def simulate_points(params: Sequence[StarParams], last_cycle: int, setup: Setup)
 def score(runs: Sequence, gaits: Sequence[str], setup: Setup, cycles,
           phases: Optional[Dict[str, float]] = None) -> Optional[pd.DataFrame]:
     """The trajectory objective's per-gait table of one point's runs (None if any failed);
-    with `setup.phases` "strokes" at the stroke-aligned phases (`phases` then unused)."""
+    with `setup.strokes` at the stroke-aligned phases (`phases` then unused)."""
     if any(run is None for run in runs):
         return None
-    if setup.phases == "strokes":
-        phases = {gait: identification.stroke_aligned_phase(run, setup.trials[gait], cycles)
+    if setup.strokes is not None:
+        phases = {gait: identification.stroke_aligned_phase(run, setup.trials[gait], cycles,
+                                                            setup.strokes[gait])
                   for gait, run in zip(gaits, runs)}
     return identification.trajectory_objective(dict(zip(gaits, runs)), setup.trials, cycles,
                                                phases=phases)
@@ -310,7 +312,7 @@ def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMA
     evaluations = fit.evaluations
     row = {"candidate": candidate.name, "fit": candidate.fit, "set": candidate.set,
            "description": candidate.description, "n_fitted": len(box),
-           "n_parameters": len(box) + (len(gaits) if setup.phases == "fitted" else 0),
+           "n_parameters": len(box) + (len(gaits) if setup.strokes is None else 0),
            "n_gaits": len(gaits),
            "n_evaluations": len(evaluations)}
     if identify.best_row(evaluations) is None:
@@ -537,10 +539,11 @@ def planned_work(runnable: Sequence[Candidate], settings: identify.CMASettings,
             + [(candidate, refine_settings) for candidate in largest])
 
 
-def check_strokes_hold_phases(trials, last_cycle: int):
-    """--phases strokes, before any compute: StudyArgumentError naming a gait whose strokes
-    lie on no period (`identification.Strokes.periodic`: A1+A3's do not) or end before the
-    windows' last cycle (and one period more)."""
+def measured_strokes(trials, last_cycle: int) -> Dict[str, identification.Strokes]:
+    """--phases strokes, before any compute: each trial's `identification.strokes`;
+    StudyArgumentError naming a gait whose strokes lie on no period (`Strokes.periodic`:
+    A1+A3's do not) or end before the windows' last cycle (and one period more)."""
+    read = {}
     for gait, trial in trials.items():
         measured = identification.strokes(trial.path)
         if not measured.periodic:
@@ -553,6 +556,8 @@ def check_strokes_hold_phases(trials, last_cycle: int):
             raise cli.StudyArgumentError(
                 f"--phases strokes: {gait}'s track has {measured.cycles} strokes, the windows "
                 f"end at cycle {last_cycle} (one period more is needed)")
+        read[gait] = measured
+    return read
 
 
 def build_parser():
@@ -661,8 +666,8 @@ def main(argv=None):
                                      f" {rows[0]['note']})")
     trials = identification.measured_trials(gaits)
     identify.check_trials_cover(trials, validate, args.validate_cycles)
-    if args.phases == "strokes":
-        check_strokes_hold_phases(trials, max(train[1], validate[1]))
+    strokes = (measured_strokes(trials, max(train[1], validate[1]))
+               if args.phases == "strokes" else None)
     solver = cli.solver(args)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"gaits": gaits, "train_cycles": list(train),
@@ -762,7 +767,7 @@ def main(argv=None):
         setup = Setup(tuple(gaits), trials, train, validate,
                       dict(solver=solver, arch=args.arch, executor=executor,
                            chunk_size=cli.chunk_size(args, largest, executor.n_workers)),
-                      record, args.phases)
+                      record, strokes)
         for position, candidate in enumerate(runnable):
             fit_or_read_back(candidate, settings, "screen", setup, work[position:])
         refined = refined_candidates(ranked(rows), runnable, args.refine_top)

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import pandas as pd
 
 from taichi_star import identification, simulate
@@ -61,18 +60,13 @@ def build_parser():
     return parser
 
 
-def circular_gap(later: float, earlier: float, period: float) -> float:
-    """later − earlier on a circle of `period`, in (−period/2, period/2], s."""
-    gap = (later - earlier) % period
-    return gap - period if gap > period / 2 else gap
-
-
 def strokes_table(trials, runs, fits: pd.DataFrame, window_s: float):
     """(one row per gait, every measured move) from the measured trials, the simulated runs
     (`identification.SimulatedRun`, same gaits; None for a failed run, whose model columns are
     NaN) and the trajectory fit's table (a row per gait that ran)."""
     rows, moves = [], []
     for gait, trial in trials.items():
+        period = trial.path.period_s
         measured = identification.strokes(trial.path, window_s)
         row = {"gait": gait, "cycles": measured.cycles, "stroke_phase_s": measured.phase_s,
                "consistent_cycles": measured.consistent_cycles, "jump_mm": measured.jump_mm,
@@ -84,7 +78,6 @@ def strokes_table(trials, runs, fits: pd.DataFrame, window_s: float):
         row.update(dict.fromkeys(MODEL_COLUMNS, math.nan))
         if runs[gait] is not None:
             model = identification.strokes(runs[gait].path, window_s)
-            period = trial.path.period_s
             firing = identification.stroke_aligned_phase(
                 runs[gait], trial, identification.TRAINING_CYCLES, measured,
                 window_s) if measured.periodic else math.nan
@@ -94,12 +87,11 @@ def strokes_table(trials, runs, fits: pd.DataFrame, window_s: float):
                         "model_cycles": model.cycles, "model_jump_mm": model.jump_mm,
                         "model_typical_move_mm": model.typical_mm, "firing_phase_s": firing,
                         "fitted_phase_s": fitted,
-                        "phase_gap_s": circular_gap(fitted, firing, period)})
+                        "phase_gap_s": float(identification.circular_difference(
+                            fitted, firing, period))})
         rows.append(row)
-        path = trial.path
-        times = path.t_s[path.t_s <= path.t_s[-1] - window_s]
-        offset = times - path.t_s[0]
-        move = np.linalg.norm(path.position(times + window_s) - path.position(times), axis=-1)
+        times, move = identification.window_moves(trial.path, window_s)
+        offset = times - trial.path.t_s[0]
         moves.append(pd.DataFrame({"gait": gait, "cycle": (offset // period).astype(int) + 1,
                                    "phase_s": offset % period, "move_mm": move}))
     return pd.DataFrame(rows), pd.concat(moves, ignore_index=True)

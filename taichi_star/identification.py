@@ -94,7 +94,8 @@ __all__ = ["TRAINING_CYCLES", "VALIDATION_CYCLES", "SAMPLES_PER_CYCLE", "MAX_CYC
            "objective_of", "measured_trials", "simulated_runs", "distance_derivative",
            "path_derivative", "residual_count", "trial_residuals", "objective_residuals",
            "trial_phase_motion", "objective_and_gradient", "phase_motion", "parameter_uncertainty",
-           "record_derivatives", "STROKE_WINDOW_S", "STROKE_TOLERANCE_S", "Strokes", "strokes",
+           "record_derivatives", "STROKE_WINDOW_S", "STROKE_TOLERANCE_S", "Strokes", "window_moves",
+           "circular_difference", "strokes",
            "stroke_aligned_phase"]
 
 TRAINING_CYCLES = (1, 3)
@@ -481,6 +482,22 @@ class Strokes:
                 ) % self.period_s
 
 
+def window_moves(path: CentroidPath, window_s: float) -> Tuple[np.ndarray, np.ndarray]:
+    """(times (n,) s, moves (n,) mm): how far the path goes between each sample time t and
+    t + window_s (linear between samples), for every sample at least a window before its
+    end."""
+    times = path.t_s[path.t_s <= path.t_s[-1] - window_s]
+    return times, np.linalg.norm(path.position(times + window_s) - path.position(times),
+                                 axis=-1)
+
+
+def circular_difference(later, earlier, period: float):
+    """later − earlier (s, arrays or numbers) on a circle of `period`, in (−period/2,
+    period/2]."""
+    gap = np.mod(np.subtract(later, earlier) + period / 2, period) - period / 2
+    return np.where(gap == -period / 2, period / 2, gap)
+
+
 def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
             tolerance_s: float = STROKE_TOLERANCE_S) -> Strokes:
     """When a path jumps in each period (`Strokes`): a model-free reading of when a measured
@@ -508,8 +525,7 @@ def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
         raise ValueError(f"path has a gap of {gaps[at]:g} s after t = {path.t_s[at]:g} s, "
                          f"longer than window_s = {window_s:g} s: its moves there are not "
                          f"measured")
-    times = path.t_s[path.t_s <= path.t_s[-1] - window_s]
-    moves = np.linalg.norm(path.position(times + window_s) - path.position(times), axis=-1)
+    times, moves = window_moves(path, window_s)
     cycle_of = np.floor((times - start) / period).astype(np.int64)
     phases, jumps = np.empty(cycles), np.empty(cycles)
     for cycle in range(cycles):
@@ -518,15 +534,15 @@ def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
         phases[cycle] = times[farthest] - start - cycle * period
         jumps[cycle] = moves[farthest]
     phase = _circular_mean(phases, period)
-    apart = np.abs((phases - phase + period / 2) % period - period / 2)
-    steps = (np.diff(phases) + period / 2) % period - period / 2
+    apart = np.abs(circular_difference(phases, phase, period))
+    steps = circular_difference(phases[1:], phases[:-1], period)
     unwrapped = np.concatenate([[phases[0]], phases[0] + np.cumsum(steps)])
     first, second = np.triu_indices(cycles, k=1)  # every pair of periods, first < second
     drift = float(np.median((unwrapped[second] - unwrapped[first]) / (second - first))
                   ) if cycles > 1 else 0.0
     numbers = np.arange(cycles)
     line = float(np.median(unwrapped - drift * numbers))
-    off_line = np.abs((phases - line - drift * numbers + period / 2) % period - period / 2)
+    off_line = np.abs(circular_difference(phases, line + drift * numbers, period))
     on_line = int(np.sum(off_line <= tolerance_s))
     if 2 * on_line <= cycles:
         drift = line = math.nan

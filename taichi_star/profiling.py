@@ -116,8 +116,9 @@ class EngineProfile:
     """The engine of one batch (`params`, a sequence of StarParams; `solver`, fixed steps) on
     `arch`, loaded at rest, its own while the profile lives (as a Simulator's: no call or
     Simulator uses it meanwhile; a precision switch is refused), each method holding the
-    runtime's lock (`runtime.one_call_at_a_time`). `setup_s`: the time this took (Taichi initialised if it was not,
-    the engine built or taken from the runtime's cache, the batch loaded)."""
+    runtime's lock (`runtime.one_call_at_a_time`). `setup_s`: the time this took (Taichi
+    initialised if it was not, the engine built or taken from the runtime's cache, the batch
+    loaded)."""
 
     @one_call_at_a_time
     def __init__(self, params: Sequence[StarParams], solver: SolverConfig = SolverConfig(),

@@ -188,8 +188,8 @@ def _write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception
     finally:
         # what is left is never a result: the new data unrenamed, or a sidecar moved aside
         # whose table has been replaced (a kill between the move and the table's rename
-        # leaves it as `.NAME.tmp-PID-THREAD.previous`, the table's temporary beside it: then it is
-        # the sidecar of the table still there)
+        # leaves it as `.NAME.tmp-PID-THREAD.previous`, the table's temporary beside it: then
+        # it is the sidecar of the table still there)
         for temporary in (*temporaries, previous):
             try:
                 if os.path.lexists(temporary):

@@ -471,7 +471,6 @@ class Runtime:
         self.restart_reason = None
         self.taichi_thread = threading.get_ident()
         self.started = True
-        self.engines.clear()
 
     def build_here(self):
         """Make this thread the one Taichi builds on, before an engine is built. Taichi builds

@@ -16,7 +16,8 @@ from studies import strokes
 def test_the_circular_gap_lies_in_minus_half_to_half_the_period(later, earlier, gap):
     """(−T/2, T/2]: half a period exactly is +T/2 (the boundary), 0.25 s across the period's
     start is 0.25 s, not 2.9."""
-    assert strokes.circular_gap(later, earlier, 3.15) == pytest.approx(gap, abs=1e-12)
+    assert identification.circular_difference(later, earlier, 3.15) == pytest.approx(gap,
+                                                                                     abs=1e-12)
 
 
 def test_quick_run_against_the_library(tmp_path):
@@ -52,8 +53,8 @@ def test_quick_run_against_the_library(tmp_path):
     assert row["fitted_phase_s"] == pytest.approx(fitted, rel=1e-9)
     firing = identification.stroke_aligned_phase(runs["A1+A2"], trial, (1, 3))
     assert row["firing_phase_s"] == pytest.approx(firing, rel=1e-9)
-    assert row["phase_gap_s"] == pytest.approx(strokes.circular_gap(fitted, firing, 3.15),
-                                               rel=1e-9)
+    assert row["phase_gap_s"] == pytest.approx(
+        identification.circular_difference(fitted, firing, 3.15), rel=1e-9)
     moves = pd.read_csv(tmp_path / "strokes_moves.csv")
     kept = trial.path.t_s[trial.path.t_s <= trial.path.t_s[-1] - 0.1]
     # 22.5 s: seven whole periods and part of an eighth, whose moves are plotted too
