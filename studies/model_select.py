@@ -3,7 +3,7 @@ well they predict what they were not fitted to.
 
     python -m studies model_select [--candidates CSV] [--only NAME,...] [--preset paper|accurate]
                                    [--set NAME=VALUE ...] [--gaits paper|A1,A1+A2,...]
-                                   [--phases fitted|strokes]
+                                   [--phases fitted|strokes] [--periods nominal|strokes]
                                    [--train-cycles 1:3] [--validate-cycles 4:6]
                                    [--popsize P] [--max-generations G] [--restarts R]
                                    [--fold-generations F] [--seed S] [--sigma0 0.25] [--dt S]
@@ -26,8 +26,10 @@ gait, the simulated against the measured displacement-from-cycle-start curves, t
 pulse phase fitted as a nuisance, residuals in units of the measured spread across cycles,
 plus a penalty on wrong-way travel. `--phases strokes` holds each trial's phase instead where
 the simulated strokes meet the measured ones (`identification.stroke_aligned_phase`: the tracks
-show when the pulses fire, docs: Results, "When the pulses fire"), in each window its own. Then,
-per candidate:
+show when the pulses fire, docs: Results, "When the pulses fire"), in each window its own;
+with it, `--periods strokes` fires each trial's model at the period its strokes' line gives
+(3.13–3.18 s, where the file names say 3.15) and cuts its track into periods of that length.
+Then, per candidate:
 
 - training error: the objective on the training cycles at the best point (re-simulated);
 - validation error: the objective on `--validate-cycles` (4–6) with the training phases;
@@ -116,6 +118,9 @@ QUICK_DT = 5e-3
 pipeline, whose fits simulate whole cycles."""
 PHASE_MODES = ("fitted", "strokes")
 """--phases: each trial's pulse phase fitted, or aligned on the measured strokes (`Setup`)."""
+PERIOD_MODES = ("nominal", "strokes")
+"""--periods: every trial at the nominal pulse period (3.15 s, the file names' 150 + 3000 ms),
+or each at the period its strokes' line gives (`Setup.periods`; with --phases strokes)."""
 STROKE_TAIL_CYCLES = 0.05
 """--phases strokes: cycles simulated past a window's last, 0.16 s of the paper's period: the
 last period's strokes are read over `identification.STROKE_WINDOW_S` past its end, on records
@@ -235,6 +240,10 @@ class Setup:
     where the simulated strokes meet them (`identification.stroke_aligned_phase`), in every
     window; None: each trial's phase fitted per window (the validation window holds the
     training one's)."""
+    periods: Optional[Dict[str, float]] = None
+    """--periods strokes: each gait's pulse period, s, read off its strokes' line (`Strokes`:
+    period_s + drift_s): its model fires at that period and its track is cut into periods of
+    it (the trials and strokes above were read with it); None: the model's own period."""
 
 
 def simulate_points(params: Sequence[StarParams], last_cycle: int, setup: Setup) -> list:
@@ -242,6 +251,8 @@ def simulate_points(params: Sequence[StarParams], last_cycle: int, setup: Setup)
     for `last_cycle` cycles in one batch."""
     # the strokes of the window's last period are read over a window past its end
     tail = STROKE_TAIL_CYCLES if setup.strokes is not None else 0.0
+    if setup.periods is not None:
+        params = [p.replace(period=setup.periods[p.gait]) for p in params]
     result = run_batch(list(params), cycles=float(last_cycle) + tail,
                        record_interval_s=setup.record_interval_s, **setup.run_kwargs)
     runs = identification.simulated_runs(result.trajectory, [p.gait for p in params],
@@ -499,11 +510,12 @@ def definition_of(candidate: Candidate, args, settings, base: StarParams,
                     if getattr(base, f.name) != getattr(defaults, f.name)}
     # --phases enters only where it is not the default, which earlier results were made with
     phases = {} if args.phases == "fitted" else {"phases": args.phases}
+    periods = {} if args.periods == "nominal" else {"periods": args.periods}
     text = json.dumps({"candidate": dataclasses.asdict(candidate),
                        "settings": dataclasses.asdict(settings),
                        "fold_generations": args.fold_generations, "gaits": list(gaits),
                        "train": args.train_cycles, "validate": args.validate_cycles,
-                       "base": base_changes, "solver": repr(solver), **phases},
+                       "base": base_changes, "solver": repr(solver), **phases, **periods},
                       sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -573,6 +585,10 @@ def build_parser():
                         help="each trial's pulse phase: fitted per window (the validation "
                              "window holds the training one's), or strokes: where the "
                              "simulated strokes meet the measured ones, in every window")
+    parser.add_argument("--periods", choices=PERIOD_MODES, default="nominal",
+                        help="each trial's pulse period: nominal (the model's, 3.15 s), or "
+                             "strokes: the period its strokes' line gives (with --phases "
+                             "strokes), at which its model fires and its track is cut")
     parser.add_argument("--train-cycles", default="1:3", quick="1:1",
                         help="the fit window FIRST:LAST (cycles from 1)")
     parser.add_argument("--validate-cycles", default="4:6", quick="2:2",
@@ -641,6 +657,9 @@ def main(argv=None):
         raise cli.StudyArgumentError(f"--fold-generations must be >= 0, got "
                                      f"{args.fold_generations}")
     cli.check_positive(args.budget_hours, "--budget-hours")
+    if args.periods == "strokes" and args.phases != "strokes":
+        raise cli.StudyArgumentError("--periods strokes needs --phases strokes (the periods "
+                                     "are read off the strokes' lines)")
     train, validate = identify.parse_windows(args.train_cycles, args.validate_cycles)
     gaits = identify.measured_gaits(args.gaits)
     base = cli.base_params(args)
@@ -666,8 +685,15 @@ def main(argv=None):
                                      f" {rows[0]['note']})")
     trials = identification.measured_trials(gaits)
     identify.check_trials_cover(trials, validate, args.validate_cycles)
-    strokes = (measured_strokes(trials, max(train[1], validate[1]))
-               if args.phases == "strokes" else None)
+    last_cycle = max(train[1], validate[1])
+    strokes = measured_strokes(trials, last_cycle) if args.phases == "strokes" else None
+    periods = None
+    if args.periods == "strokes":
+        periods = {gait: read.period_s + read.drift_s for gait, read in strokes.items()}
+        trials = {gait: identification.measured_trial(gait, period)
+                  for gait, period in periods.items()}
+        identify.check_trials_cover(trials, validate, args.validate_cycles)
+        strokes = measured_strokes(trials, last_cycle)  # their lines read anew, ~flat
     solver = cli.solver(args)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"gaits": gaits, "train_cycles": list(train),
@@ -675,7 +701,9 @@ def main(argv=None):
                                            "cma": dataclasses.asdict(settings),
                                            "refine_top": args.refine_top,
                                            "refine_cma": dataclasses.asdict(refine_settings),
-                                           "fold_generations": args.fold_generations})
+                                           "fold_generations": args.fold_generations,
+                                           **({"pulse_periods_s": periods} if periods
+                                              else {})})
     progress = not args.no_progress
     record = nearest_interval(RECORD_INTERVAL_S, solver.dt)
     started = time.perf_counter()
@@ -767,7 +795,7 @@ def main(argv=None):
         setup = Setup(tuple(gaits), trials, train, validate,
                       dict(solver=solver, arch=args.arch, executor=executor,
                            chunk_size=cli.chunk_size(args, largest, executor.n_workers)),
-                      record, strokes)
+                      record, strokes, periods)
         for position, candidate in enumerate(runnable):
             fit_or_read_back(candidate, settings, "screen", setup, work[position:])
         refined = refined_candidates(ranked(rows), runnable, args.refine_top)

@@ -17,7 +17,8 @@ track implies for that model (`identification.stroke_aligned_phase`), set beside
 that the trajectory fit chooses for it on cycles 1–3 (`identification.trajectory_objective`).
 
 Writes `strokes.csv` (one row per gait: the measured strokes and their period, the model's,
-the implied firing phase, the fitted phase and the gap between them), `strokes_moves.csv`
+the jump of the model's hub, the implied firing phase, the fitted phase and the gap between
+them), `strokes_moves.csv`
 (every measured move: gait, cycle, phase_s in the period from the track's start, move_mm) and
 `strokes.png` (per gait, the moves folded over the period with each period's farthest marked,
 the stroke phase, the implied firing and the fitted phase), each with its provenance sidecar.
@@ -31,7 +32,7 @@ import math
 
 import pandas as pd
 
-from taichi_star import identification, simulate
+from taichi_star import identification, metrics, simulate
 from taichi_star.experiment import PAPER_GAITS
 
 from . import cli
@@ -40,8 +41,8 @@ DESCRIPTION = ("Strokes: when each measured trial's pulses fire, read off its tr
                "centroid's jumps), against the phase the trajectory fit chooses.")
 QUICK_GAITS = ("A1+A2",)
 MODEL_COLUMNS = ("model_stroke_phase_s", "model_consistent_cycles", "model_cycles",
-                 "model_jump_mm", "model_typical_move_mm", "firing_phase_s", "fitted_phase_s",
-                 "phase_gap_s")
+                 "model_jump_mm", "model_hub_jump_mm", "model_typical_move_mm", "firing_phase_s",
+                 "fitted_phase_s", "phase_gap_s")
 """Columns of `strokes.csv` that need the simulated run (NaN where it failed)."""
 RECORD_INTERVAL_S = 0.01
 """The simulated path's records, s: under a video frame (16.7 ms), a whole number of any
@@ -60,10 +61,11 @@ def build_parser():
     return parser
 
 
-def strokes_table(trials, runs, fits: pd.DataFrame, window_s: float):
+def strokes_table(trials, runs, hub_paths, fits: pd.DataFrame, window_s: float):
     """(one row per gait, every measured move) from the measured trials, the simulated runs
     (`identification.SimulatedRun`, same gaits; None for a failed run, whose model columns are
-    NaN) and the trajectory fit's table (a row per gait that ran)."""
+    NaN), the paths of their hubs (`identification.CentroidPath` per gait that ran) and the
+    trajectory fit's table (a row per gait that ran)."""
     rows, moves = [], []
     for gait, trial in trials.items():
         period = trial.path.period_s
@@ -85,6 +87,8 @@ def strokes_table(trials, runs, fits: pd.DataFrame, window_s: float):
             row.update({"model_stroke_phase_s": model.phase_s,
                         "model_consistent_cycles": model.consistent_cycles,
                         "model_cycles": model.cycles, "model_jump_mm": model.jump_mm,
+                        "model_hub_jump_mm": identification.strokes(hub_paths[gait],
+                                                                    window_s).jump_mm,
                         "model_typical_move_mm": model.typical_mm, "firing_phase_s": firing,
                         "fitted_phase_s": fitted,
                         "phase_gap_s": float(identification.circular_difference(
@@ -95,6 +99,17 @@ def strokes_table(trials, runs, fits: pd.DataFrame, window_s: float):
         moves.append(pd.DataFrame({"gait": gait, "cycle": (offset // period).astype(int) + 1,
                                    "phase_s": offset % period, "move_mm": move}))
     return pd.DataFrame(rows), pd.concat(moves, ignore_index=True)
+
+
+def hub_paths(result, runs) -> dict:
+    """The path of the hub (`metrics.HUB_NODE`, mm) of every gait that ran, at its run's record
+    times: the robot's central cylinder, the point a tracker may follow instead of the
+    centroid."""
+    return {gait: identification.CentroidPath(
+                run.path.t_s, *(metrics.METERS_TO_MM * result.shapes[:, instance,
+                                                                    metrics.HUB_NODE].T),
+                run.path.period_s)
+            for instance, (gait, run) in enumerate(runs.items()) if run is not None}
 
 
 def plot_strokes(csv_path, moves_path, png_path, period_s: float):
@@ -148,14 +163,15 @@ def main(argv=None):
     # a window and a record past the last period: its stroke is read too
     duration = args.cycles * base.period + args.window + RECORD_INTERVAL_S
     result = simulate(params, duration, solver, arch=args.arch,
-                      record_interval_s=RECORD_INTERVAL_S, progress=not args.no_progress)
+                      record_interval_s=RECORD_INTERVAL_S, record_shapes=True,
+                      progress=not args.no_progress)
     trials = identification.measured_trials(gaits)
     runs = dict(zip(trials, identification.simulated_runs(result.trajectory, list(trials),
                                                            [p.period for p in params])))
     ran = [gait for gait, run in runs.items() if run is not None]
     fits = identification.trajectory_objective({g: runs[g] for g in ran},
                                                {g: trials[g] for g in ran}) if ran else None
-    table, moves = strokes_table(trials, runs, fits, args.window)
+    table, moves = strokes_table(trials, runs, hub_paths(result, runs), fits, args.window)
     table.insert(1, "status", result.summary["status"].to_numpy())
     csv_path = out.write_csv(table, "strokes.csv")
     moves_path = out.write_csv(moves, "strokes_moves.csv")

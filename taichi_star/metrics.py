@@ -16,17 +16,21 @@ import numpy as np
 import pandas as pd
 
 from .gait import Gait
-from .geometry import Topology, edge_curvature
+from .geometry import CENTRE, Topology, edge_curvature
 
 # every public name: docs/api.md documents the whole module
-__all__ = ["METERS_TO_MM", "MAX_GOAL_MM", "SPEED_COLUMNS", "centroid", "rotate", "wrap_degrees",
-           "body_rotation", "forward_directions", "swimming_metrics", "cycle_window_speeds",
+__all__ = ["METERS_TO_MM", "HUB_NODE", "MAX_GOAL_MM", "SPEED_COLUMNS", "centroid", "rotate",
+           "wrap_degrees", "body_rotation", "forward_directions", "swimming_metrics",
+           "cycle_window_speeds",
            "SPEED_ERROR_FLOOR_MM_S", "speed_error", "observed_order", "richardson_limit",
            "STRAIN_LIMIT", "PARALLEL_TOLERANCE", "segments_cross", "CROSSING_SLICE", "BOX_MARGIN",
            "ORDINARY_SCALE", "limbs_cross", "arc_mean_curvature", "arcs_inverted", "edge_lengths",
            "edge_strain", "SHAPE_SLICE", "shape_checks"]
 
 METERS_TO_MM = 1e3
+HUB_NODE = CENTRE
+"""Index of the hub (the central cylinder) among a shape's nodes:
+`SimulationResult.shapes[..., HUB_NODE, :]` is its position, m."""
 MAX_GOAL_MM = 1e3
 """Largest goal distance an environment's task or a plan may ask for, mm (a metre: ~100 body
 lengths, tens of minutes of swimming)."""

@@ -3,6 +3,7 @@ leave-one-gait-out rule for per-actuator axes, bad arguments before compute, and
 run checked against a direct simulation of its identified parameters."""
 
 import ast
+import json
 import types
 
 import numpy as np
@@ -82,7 +83,7 @@ def test_a_resumed_candidate_is_reused_only_for_the_same_model():
     changed coefficient does, and so do phases held on the strokes."""
     candidate = model_select.Candidate("paper", "", "alpha=0.2:1.5 cylinder_drag=1:100:log")
     args = types.SimpleNamespace(fold_generations=2, train_cycles="1:3", validate_cycles="4:6",
-                                 phases="fitted")
+                                 phases="fitted", periods="nominal")
     settings, solver = identify.CMASettings(), SolverConfig()
     base = StarParams.preset("paper")
 
@@ -93,7 +94,10 @@ def test_a_resumed_candidate_is_reused_only_for_the_same_model():
     assert definition(base) != definition(StarParams.preset("paper", jet_mode="always"))
     fitted = definition(base)
     args.phases = "strokes"
-    assert definition(base) != fitted
+    held = definition(base)
+    assert held != fitted
+    args.periods = "strokes"
+    assert definition(base) != held
 
 
 def test_a_per_actuator_axis_is_informed_only_by_gaits_that_fire_it():
@@ -257,26 +261,42 @@ def test_a_candidate_whose_axes_no_fitted_gait_moves_is_skipped_and_none_left_is
     assert len(error.strip().splitlines()) == 1 and not out.exists()
 
 
-def test_phases_held_on_the_strokes_in_every_window(tmp_path):
+@pytest.mark.parametrize("periods", ["nominal", "strokes"])
+def test_phases_held_on_the_strokes_in_every_window(tmp_path, periods):
     """--phases strokes: no phase is fitted (k = the fitted axes), and each window's phases
     are where a direct simulation's strokes meet the measured ones, the validation window
-    its own; its objectives are the trajectory objective at those phases."""
+    its own; its objectives are the trajectory objective at those phases. --periods strokes:
+    each gait's model fires at the period of its strokes' line and its track is cut into
+    periods of it."""
     model_select.main(["--out", str(tmp_path), "--only", "paper", "--refine-top", "0",
-                       "--phases", "strokes", *QUICK])
+                       "--phases", "strokes", "--periods", periods, *QUICK])
     row = pd.read_csv(tmp_path / "model_select.csv").iloc[0]
     assert (row["candidate"], row["status"], row["n_parameters"]) == ("paper", "ok", 2)
     values = pd.read_csv(tmp_path / "model_select_parameters.csv").set_index(
         "parameter")["value"]
     gaits = ["A1+A2", "A1+A4"]  # --quick
-    params = [StarParams(gait=g, **values.to_dict()) for g in gaits]
-    # the windows' last cycle (2) and the strokes' tail past it
-    duration = (2 + model_select.STROKE_TAIL_CYCLES) * params[0].period
-    result = taichi_star.simulate(params, duration, SolverConfig(dt=model_select.QUICK_DT),
-                                  record_interval_s=nearest_interval(
-                                      model_select.RECORD_INTERVAL_S, model_select.QUICK_DT))
-    runs = dict(zip(gaits, identification.simulated_runs(result.trajectory, gaits,
-                                                          [p.period for p in params])))
-    trials = identification.measured_trials(gaits)
+    nominal = identification.measured_trials(gaits)
+    lines = {g: identification.strokes(nominal[g].path) for g in gaits}
+    period = {g: (lines[g].period_s + lines[g].drift_s if periods == "strokes" else 3.15)
+              for g in gaits}
+    if periods == "strokes":
+        # A1+A2's strokes come every 3.128 s, A1+A4's every 3.178 s (results/strokes.csv)
+        assert period["A1+A2"] == pytest.approx(3.128, abs=1e-3)
+        assert period["A1+A4"] == pytest.approx(3.178, abs=1e-3)
+    sidecar = json.loads((tmp_path / "model_select.csv.json").read_text())
+    assert sidecar["details"].get("pulse_periods_s") == (period if periods == "strokes" else None)
+    runs = {}
+    for gait in gaits:
+        params = StarParams(gait=gait, period=period[gait], **values.to_dict())
+        # the windows' last cycle (2) and the strokes' tail past it
+        result = taichi_star.simulate(
+            [params], (2 + model_select.STROKE_TAIL_CYCLES) * params.period,
+            SolverConfig(dt=model_select.QUICK_DT),
+            record_interval_s=nearest_interval(model_select.RECORD_INTERVAL_S,
+                                               model_select.QUICK_DT))
+        runs[gait] = identification.simulated_runs(result.trajectory, [gait],
+                                                   [params.period])[0]
+    trials = {g: identification.measured_trial(g, period[g]) for g in gaits}
     stored = pd.read_csv(tmp_path / "model_select_gaits.csv")
     for window, cycles, column in (("train", (1, 1), "train_objective"),
                                    ("validate", (2, 2), "validate_objective")):
@@ -289,3 +309,14 @@ def test_phases_held_on_the_strokes_in_every_window(tmp_path):
         direct = identification.trajectory_objective(runs, trials, cycles, phases=phases)
         # the parameters' 10 digits move the objective far less than 1e-6
         assert row[column] == pytest.approx(identification.objective_of(direct), rel=1e-6)
+
+
+def test_periods_from_the_strokes_need_the_strokes_phases(tmp_path, capsys):
+    """--periods strokes reads the periods off the strokes' lines: with fitted phases it is
+    refused before any compute, in one line."""
+    out = tmp_path / "out"
+    assert studies_main(["model_select", "--periods", "strokes", "--out", str(out),
+                         *QUICK]) == 2
+    error = capsys.readouterr().err
+    assert "--periods strokes needs --phases strokes" in error, error
+    assert len(error.strip().splitlines()) == 1 and not out.exists()

@@ -42,13 +42,21 @@ def test_quick_run_against_the_library(tmp_path):
     params = StarParams.preset("identified", gait="A1+A2")
     result = taichi_star.simulate([params], 3 * params.period + 0.1 + 0.01,
                                   SolverConfig.preset("identified", dt=2e-3),
-                                  record_interval_s=strokes.RECORD_INTERVAL_S)
+                                  record_interval_s=strokes.RECORD_INTERVAL_S, record_shapes=True)
     runs = dict(zip(["A1+A2"], identification.simulated_runs(result.trajectory, ["A1+A2"],
                                                              [params.period])))
     model = identification.strokes(runs["A1+A2"].path)
     assert model.cycles == row["model_cycles"] == 3
     assert row["model_stroke_phase_s"] == pytest.approx(model.phase_s, rel=1e-9, abs=1e-12)
     assert row["model_jump_mm"] == pytest.approx(model.jump_mm, rel=1e-9)
+    # the hub is node 0 (docs/model.md), its path in mm at the same records
+    hub = identification.CentroidPath(runs["A1+A2"].path.t_s, *(1e3 * result.shapes[:, 0, 0].T),
+                                      params.period)
+    assert row["model_hub_jump_mm"] == pytest.approx(identification.strokes(hub).jump_mm,
+                                                     rel=1e-9)
+    # the hub swings with the strokes: it jumps farther than the centroid (0.42 against 0.30
+    # mm at 1-ms steps), though nowhere near the measured 2.7 mm
+    assert model.jump_mm < row["model_hub_jump_mm"] < row["jump_mm"] / 2
     fitted = identification.trajectory_objective(runs, {"A1+A2": trial})["phase_s"].iloc[0]
     assert row["fitted_phase_s"] == pytest.approx(fitted, rel=1e-9)
     firing = identification.stroke_aligned_phase(runs["A1+A2"], trial, (1, 3))
