@@ -153,12 +153,15 @@ class Candidate:
     fit: str
     description: str = ""
 
+    def field_names(self) -> List[str]:
+        """The fields the candidate sets or fits, each once, in order."""
+        return list(dict.fromkeys(item.split("=", 1)[0].split("[", 1)[0].strip().replace("-", "_")
+                                  for item in (self.set.split() + self.fit.split())))
+
     def missing_fields(self) -> List[str]:
         """Fields the candidate names that StarParams does not have."""
         known = set(StarParams.field_names())
-        names = [item.split("=", 1)[0].split("[", 1)[0].strip().replace("-", "_")
-                 for item in (self.set.split() + self.fit.split())]
-        return [name for name in dict.fromkeys(names) if name not in known]
+        return [name for name in self.field_names() if name not in known]
 
     def model(self, base: StarParams) -> StarParams:
         """The base model with the candidate's fixed fields (StudyArgumentError naming the
@@ -399,14 +402,26 @@ def best_model(candidate: Candidate, base: StarParams, parameters: pd.DataFrame)
     return model.replace(**identify.point_changes(box, values.to_numpy(dtype=float), model))
 
 
-def identified_table(row: dict, fields: dict) -> pd.DataFrame:
+def identified_table(row: dict, fields: dict,
+                     periods: Optional[Dict[str, float]] = None) -> pd.DataFrame:
     """identified.csv: one row per field of the best candidate's model (field, value as Python
-    text, the candidate and its errors)."""
-    return pd.DataFrame([{"field": name, "value": repr(value), "candidate": row["candidate"],
-                          "stage": row["stage"], "train_objective": row["train_objective"],
-                          "validate_objective": row["validate_objective"],
-                          "logo_objective": row["logo_objective"]}
-                         for name, value in fields.items()])
+    text, the candidate and its errors); with --periods strokes (`periods`, s per gait) a
+    column fitted_at_periods saying at which periods the fields were fitted (the model's own
+    `period` is not among them)."""
+    table = pd.DataFrame([{"field": name, "value": repr(value), "candidate": row["candidate"],
+                           "stage": row["stage"], "train_objective": row["train_objective"],
+                           "validate_objective": row["validate_objective"],
+                           "logo_objective": row["logo_objective"]}
+                          for name, value in fields.items()])
+    if periods:
+        table["fitted_at_periods"] = periods_text(periods)
+    return table
+
+
+def periods_text(periods: Dict[str, float]) -> str:
+    """"each gait at its strokes' period: A1 3.182 s, ..." (s per gait)."""
+    return "each gait at its strokes' period: " + ", ".join(
+        f"{gait} {period:.3f} s" for gait, period in periods.items())
 
 
 def parameter_table(name: str, box, values, unit_std) -> pd.DataFrame:
@@ -551,23 +566,25 @@ def planned_work(runnable: Sequence[Candidate], settings: identify.CMASettings,
             + [(candidate, refine_settings) for candidate in largest])
 
 
-def measured_strokes(trials, last_cycle: int) -> Dict[str, identification.Strokes]:
+def measured_strokes(trials, last_cycle: int, flag: str = "--phases strokes"
+                     ) -> Dict[str, identification.Strokes]:
     """--phases strokes, before any compute: each trial's `identification.strokes`;
-    StudyArgumentError naming a gait whose strokes lie on no period (`Strokes.periodic`:
-    A1+A3's do not) or end before the windows' last cycle (and one period more)."""
+    StudyArgumentError (naming `flag`, the option that asked for them) naming a gait whose
+    strokes lie on no period (`Strokes.periodic`: A1+A3's do not) or end before the windows'
+    last cycle (and one period more)."""
     read = {}
     for gait, trial in trials.items():
         measured = identification.strokes(trial.path)
         if not measured.periodic:
             raise cli.StudyArgumentError(
-                f"--phases strokes: {gait}'s strokes do not lie on one period "
+                f"{flag}: {gait}'s strokes do not lie on one period "
                 f"({measured.on_line_cycles} of {measured.cycles} within "
                 f"{identification.STROKE_TOLERANCE_S:g} s of their line), so there is no "
                 f"phase to hold; leave it out with --gaits")
         if measured.cycles < last_cycle + 1:
             raise cli.StudyArgumentError(
-                f"--phases strokes: {gait}'s track has {measured.cycles} strokes, the windows "
-                f"end at cycle {last_cycle} (one period more is needed)")
+                f"{flag}: {gait}'s track has {measured.cycles} strokes, the windows end at "
+                f"cycle {last_cycle} (one period more is needed)")
         read[gait] = measured
     return read
 
@@ -664,6 +681,15 @@ def main(argv=None):
     gaits = identify.measured_gaits(args.gaits)
     base = cli.base_params(args)
     candidates = select_candidates(args)
+    if args.periods == "strokes":
+        # the measured periods replace every model's own: a period asked for would be dropped
+        asked = ["--set" for item in args.set
+                 if cli.parse_assignment(item, "--set")[0] == "period"]
+        asked += [f"candidate {c.name}" for c in candidates if "period" in c.field_names()]
+        if asked:
+            raise cli.StudyArgumentError(
+                f"{asked[0]}: sets or fits period, which --periods strokes reads off each "
+                f"trial's strokes instead; leave out one or the other")
     runnable, rows = [], []
     for candidate in candidates:  # every runnable candidate checked before any compute
         missing = candidate.missing_fields()
@@ -693,7 +719,8 @@ def main(argv=None):
         trials = {gait: identification.measured_trial(gait, period)
                   for gait, period in periods.items()}
         identify.check_trials_cover(trials, validate, args.validate_cycles)
-        strokes = measured_strokes(trials, last_cycle)  # their lines read anew, ~flat
+        # their lines read anew (~flat), the tracks being cut into the longer periods
+        strokes = measured_strokes(trials, last_cycle, "--periods strokes")
     solver = cli.solver(args)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"gaits": gaits, "train_cycles": list(train),
@@ -817,9 +844,10 @@ def main(argv=None):
     best = table.iloc[0]
     fields = identified.get((best["stage"], best["candidate"]))
     if best["status"] == "ok" and fields is not None:
-        out.write_csv(identified_table(best.to_dict(), fields), "identified.csv")
+        out.write_csv(identified_table(best.to_dict(), fields, periods), "identified.csv")
         print(f"identified preset (rank 1, {best['candidate']}, {best['stage']}): "
-              f"IDENTIFIED_FIELDS = {fields!r}")
+              f"IDENTIFIED_FIELDS = {fields!r}"
+              + (f" (fitted with {periods_text(periods)})" if periods else ""))
     out.report()
     print(table[["rank", "stage", "candidate", "status", "train_objective", "validate_objective",
                  "logo_objective", "logo_directions_right", "train_directions_right", "bic",

@@ -18,10 +18,10 @@ that the trajectory fit chooses for it on cycles 1–3 (`identification.trajecto
 
 Writes `strokes.csv` (one row per gait: the measured strokes and their period, the model's,
 the jump of the model's hub, the implied firing phase, the fitted phase and the gap between
-them), `strokes_moves.csv`
-(every measured move: gait, cycle, phase_s in the period from the track's start, move_mm) and
-`strokes.png` (per gait, the moves folded over the period with each period's farthest marked,
-the stroke phase, the implied firing and the fitted phase), each with its provenance sidecar.
+them), `strokes_moves.csv` (every measured move: gait, cycle, phase_s in the period from the
+track's start, move_mm) and `strokes.png` (per gait, the moves folded over the period with
+each period's farthest marked, the stroke phase, the implied firing and the fitted phase), each
+with its provenance sidecar.
 
 --quick: gait A1+A2, 2-ms steps.
 """
@@ -104,7 +104,8 @@ def strokes_table(trials, runs, hub_paths, fits: pd.DataFrame, window_s: float):
 def hub_paths(result, runs) -> dict:
     """The path of the hub (`metrics.HUB_NODE`, mm) of every gait that ran, at its run's record
     times: the robot's central cylinder, the point a tracker may follow instead of the
-    centroid."""
+    centroid. `runs`: {gait: `identification.SimulatedRun`, None where it failed} in the
+    batch's order (the k-th gait is instance k of `result.shapes`, (records, B, N, 2) m)."""
     return {gait: identification.CentroidPath(
                 run.path.t_s, *(metrics.METERS_TO_MM * result.shapes[:, instance,
                                                                     metrics.HUB_NODE].T),

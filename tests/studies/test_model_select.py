@@ -12,6 +12,7 @@ import pytest
 
 import taichi_star
 from taichi_star import SolverConfig, StarParams, identification
+from taichi_star.experiment import EXPERIMENT_PERIOD_S
 from taichi_star.timegrid import nearest_interval
 
 from studies import identify, model_select
@@ -277,12 +278,18 @@ def test_phases_held_on_the_strokes_in_every_window(tmp_path, periods):
     gaits = ["A1+A2", "A1+A4"]  # --quick
     nominal = identification.measured_trials(gaits)
     lines = {g: identification.strokes(nominal[g].path) for g in gaits}
-    period = {g: (lines[g].period_s + lines[g].drift_s if periods == "strokes" else 3.15)
-              for g in gaits}
+    period = {g: (lines[g].period_s + lines[g].drift_s if periods == "strokes"
+                  else EXPERIMENT_PERIOD_S) for g in gaits}
     if periods == "strokes":
         # A1+A2's strokes come every 3.128 s, A1+A4's every 3.178 s (results/strokes.csv)
         assert period["A1+A2"] == pytest.approx(3.128, abs=1e-3)
         assert period["A1+A4"] == pytest.approx(3.178, abs=1e-3)
+    identified = pd.read_csv(tmp_path / "identified.csv")
+    if periods == "strokes":  # the preset's fields were fitted at other periods than its own
+        assert (identified["fitted_at_periods"] == "each gait at its strokes' period: "
+                "A1+A2 3.128 s, A1+A4 3.178 s").all()
+    else:
+        assert "fitted_at_periods" not in identified
     sidecar = json.loads((tmp_path / "model_select.csv.json").read_text())
     assert sidecar["details"].get("pulse_periods_s") == (period if periods == "strokes" else None)
     runs = {}
@@ -311,12 +318,25 @@ def test_phases_held_on_the_strokes_in_every_window(tmp_path, periods):
         assert row[column] == pytest.approx(identification.objective_of(direct), rel=1e-6)
 
 
-def test_periods_from_the_strokes_need_the_strokes_phases(tmp_path, capsys):
-    """--periods strokes reads the periods off the strokes' lines: with fitted phases it is
-    refused before any compute, in one line."""
+@pytest.mark.parametrize("arguments, message", [
+    ([], "--periods strokes needs --phases strokes"),
+    (["--phases", "strokes", "--set", "period=3.3"],
+     "--set: sets or fits period, which --periods strokes reads off each trial's strokes"),
+    (["--phases", "strokes", "--candidates", "{table}"],
+     "candidate timed: sets or fits period, which --periods strokes reads off each trial's"),
+])
+def test_periods_from_the_strokes_refuse_what_they_would_override(tmp_path, capsys,
+                                                                   arguments, message):
+    """--periods strokes reads the periods off the strokes' lines: with fitted phases, or with
+    a period set (--set) or fitted (a candidate), which it would drop, it is refused before
+    any compute, in one line."""
+    table = tmp_path / "candidates.csv"
+    table.write_text("name,set,fit,description\n"
+                     "timed,,alpha=0.2:1.5 period=3.1:3.2,a fitted period\n")
     out = tmp_path / "out"
-    assert studies_main(["model_select", "--periods", "strokes", "--out", str(out),
-                         *QUICK]) == 2
+    arguments = [a.format(table=table) for a in arguments]
+    assert studies_main(["model_select", "--periods", "strokes", *arguments, "--out",
+                         str(out), *QUICK]) == 2
     error = capsys.readouterr().err
-    assert "--periods strokes needs --phases strokes" in error, error
+    assert message in error, error
     assert len(error.strip().splitlines()) == 1 and not out.exists()

@@ -1,6 +1,8 @@
 """The strokes study in --quick mode against the library run directly: the measured trial's
 strokes, a direct simulation's and the trajectory fit's phase, and the circular gap."""
 
+import types
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -18,6 +20,26 @@ def test_the_circular_gap_lies_in_minus_half_to_half_the_period(later, earlier, 
     start is 0.25 s, not 2.9."""
     assert identification.circular_difference(later, earlier, 3.15) == pytest.approx(gap,
                                                                                      abs=1e-12)
+
+
+def test_each_gaits_hub_path_is_read_off_its_own_instance():
+    """Gait k's hub is node 0 of instance k (m, read in mm) at its run's record times; a failed
+    run (None) has no hub path and shifts no other gait's instance."""
+    times = np.array([0.0, 0.5, 1.0])
+    shapes = np.zeros((3, 2, 4, 2))
+    shapes[:, 0] = 7.0  # the failed instance, every node
+    shapes[:, 1, 0, 0] = [0.001, 0.002, 0.004]  # instance 1's hub moves along x
+    shapes[:, 1, 1:] = 9.0  # its other nodes stand elsewhere
+    path = identification.CentroidPath(times, np.zeros(3), np.zeros(3), 3.15)
+    paths = strokes.hub_paths(types.SimpleNamespace(shapes=shapes),
+                              {"A1+A2": None,
+                               "A1+A4": identification.SimulatedRun("A1+A4", path, (1.0, 0.0))})
+    assert list(paths) == ["A1+A4"]
+    hub = paths["A1+A4"]
+    np.testing.assert_array_equal(hub.t_s, times)
+    np.testing.assert_allclose(hub.x_mm, [1.0, 2.0, 4.0], rtol=1e-15)  # mm from m: one rounding
+    np.testing.assert_array_equal(hub.y_mm, np.zeros(3))
+    assert hub.period_s == 3.15
 
 
 def test_quick_run_against_the_library(tmp_path):
