@@ -42,10 +42,6 @@ def test_an_interrupt_stops_the_workers_at_once_and_keeps_the_stored_chunk(tmp_p
     run_dir = tmp_path / "run"
     before = worker_processes()
     stop, sent = threading.Event(), {}
-    # a Ctrl-C reaches a process whose main thread takes SIGINT; a library an earlier test in
-    # this worker used may have left it blocked there (the suite failed here twice in one
-    # clone: the run went to its end, the signal pending), and threads started now inherit it
-    blocked = signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
     def interrupt_once_the_short_chunk_is_stored():
         while not stop.is_set():
@@ -66,7 +62,6 @@ def test_an_interrupt_stops_the_workers_at_once_and_keeps_the_stored_chunk(tmp_p
     finally:
         stop.set()
         interrupter.join()
-        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
     # terminating and joining the workers took 0.02-0.04 s (this 2-core box, a run of the
     # old code beside it); 10 s is 250 times that and under a tenth of the rest of the long
     # chunk, which the interrupt waited for before (104.5 s, the test run on the old code)
