@@ -44,21 +44,33 @@ def test_an_interrupt_stops_the_workers_at_once_and_keeps_the_stored_chunk(tmp_p
     stop, sent = threading.Event(), {}
 
     def interrupt_once_the_short_chunk_is_stored():
-        while not stop.is_set():
-            # the store writes a chunk's file last, by a rename: there, the chunk is whole
-            if (run_dir / "chunk_000000.parquet").exists():
-                sent["workers"] = worker_processes() - before
-                sent["at"] = time.monotonic()
-                os.kill(os.getpid(), signal.SIGINT)
-                return
-            stop.wait(0.01)
+        try:
+            while not stop.is_set():
+                # the store writes a chunk's file last, by a rename: there, the chunk is whole
+                if (run_dir / "chunk_000000.parquet").exists():
+                    sent["workers"] = worker_processes() - before
+                    sent["at"] = time.monotonic()
+                    os.kill(os.getpid(), signal.SIGINT)
+                    return
+                stop.wait(0.01)
+        except BaseException as error:  # reported by the failure below, not lost with the thread
+            sent["error"] = repr(error)
 
     interrupter = threading.Thread(target=interrupt_once_the_short_chunk_is_stored)
     interrupter.start()
+    started = time.monotonic()
     try:
-        with pytest.raises(KeyboardInterrupt):
-            run_batch(params, cycles=20, solver=SOLVER, run_dir=run_dir, workers=2)
+        run_batch(params, cycles=20, solver=SOLVER, run_dir=run_dir, workers=2)
+    except KeyboardInterrupt:
         raised_after_s = time.monotonic() - sent["at"]
+    else:
+        # the whole suite failed here three times in one clean clone (2026-12), never alone:
+        # whether the signal was sent, and when, tells a lost interrupt from a missed one
+        pytest.fail(f"run_batch ended after {time.monotonic() - started:.1f} s without the "
+                    f"interrupt: signal sent {sent.get('at', started) - started:.1f} s in "
+                    f"({'at' in sent}), interrupter error {sent.get('error')}, SIGINT handler "
+                    f"{signal.getsignal(signal.SIGINT)!r}, chunks "
+                    f"{sorted(path.name for path in run_dir.glob('chunk_*'))}")
     finally:
         stop.set()
         interrupter.join()
