@@ -1,5 +1,6 @@
-"""`runtime.memoise_source_positions`: Taichi's front end writes each distinct source position once
-per process, and the texts (so its debug information and error messages) stay those it writes."""
+"""`runtime.memoise_source_positions` and `runtime.memoise_function_sources`: Taichi's front end
+writes each distinct source position and reads each function's source once per process, and the
+texts (so its debug information and error messages) stay those it writes."""
 
 import ast
 from types import SimpleNamespace
@@ -153,3 +154,122 @@ def test_a_compile_error_reads_as_without_the_memo(monkeypatch):
     assert str(memoised_error.value) == str(original_error.value)
     assert "name_that_is_not_defined" in str(memoised_error.value)
     assert "^" in str(memoised_error.value)  # the excerpt with its caret line is there
+
+
+def fake_readers():
+    """A stand-in for Taichi's `kernel_impl`: source readers that count their reads."""
+    reads = []
+
+    def getsourcelines(function):
+        reads.append(function)
+        return [f"def {function.__name__}():\n", f"    return {function()}\n"], 7
+
+    def getsourcefile(function):
+        reads.append(function)
+        return f"{function.__name__}.py"
+
+    return SimpleNamespace(getsourcelines=getsourcelines, getsourcefile=getsourcefile), reads
+
+
+def test_each_functions_source_is_read_once_and_handed_out_as_a_copy():
+    module, reads = fake_readers()
+    assert runtime.memoise_function_sources(module, (1, 7, 4))
+
+    def one():
+        return 1
+
+    first = module.getsourcelines(one)
+    assert first == (["def one():\n", "    return 1\n"], 7)
+    first[0].append("changed by the caller\n")
+    assert module.getsourcelines(one) == (["def one():\n", "    return 1\n"], 7)
+    assert module.getsourcefile(one) == module.getsourcefile(one) == "one.py"
+    assert reads == [one, one]  # one read per reader
+
+
+def test_another_function_or_another_code_object_is_read_again():
+    module, reads = fake_readers()
+    runtime.memoise_function_sources(module, (1, 7, 4))
+
+    def one():
+        return 1
+
+    def two():
+        return 2
+
+    module.getsourcelines(one)
+    assert module.getsourcelines(two)[0][1] == "    return 2\n"
+    one.__code__ = two.__code__  # what a reloading tool does to a function it keeps
+    assert module.getsourcelines(one)[0][1] == "    return 2\n"
+    assert reads == [one, two, one]
+
+
+def test_a_function_that_cannot_be_held_weakly_is_read_every_time():
+    module, reads = fake_readers()
+    runtime.memoise_function_sources(module, (1, 7, 4))
+
+    class Unreferable:  # __slots__ without __weakref__: no weak reference can be made
+        __slots__ = ()
+        __name__ = "unreferable"
+
+        def __call__(self):
+            return 3
+
+    unreferable = Unreferable()
+    assert module.getsourcelines(unreferable) == (["def unreferable():\n", "    return 3\n"], 7)
+    assert module.getsourcelines(unreferable) == (["def unreferable():\n", "    return 3\n"], 7)
+    assert len(reads) == 2
+
+
+def test_readers_memoised_once_only_for_the_checked_taichi_and_only_where_both_exist():
+    module, _ = fake_readers()
+    original = module.getsourcelines
+    assert not runtime.memoise_function_sources(module, (1, 8, 0))
+    assert module.getsourcelines is original
+    assert runtime.memoise_function_sources(module, (1, 7, 0))
+    memoised = module.getsourcelines
+    assert memoised is not original and memoised.unmemoised is original
+    assert runtime.memoise_function_sources(module, (1, 7, 4))  # a second call: the same memo
+    assert module.getsourcelines is memoised
+    assert not runtime.memoise_function_sources(SimpleNamespace(getsourcelines=original),
+                                                (1, 7, 4))
+
+
+def test_taichis_reads_go_through_the_memo_and_its_compiles_and_errors_are_unchanged(
+        monkeypatch):
+    """After the runtime started, Taichi's front end reads through the memo. A memo over
+    counting readers in its place: a kernel that inlines one function three times computes the
+    right value with that function's source read once, and a compile error's message is the
+    one Taichi gives without the memo."""
+    from taichi.lang import kernel_impl
+
+    runtime.Runtime.current().ensure("cpu", "f64")
+    installed = (kernel_impl.getsourcelines, kernel_impl.getsourcefile)
+    assert all(hasattr(reader, "unmemoised") for reader in installed)
+    reads = []
+
+    def counting(read):
+        return lambda function: reads.append(function.__name__) or read(function)
+
+    readers = SimpleNamespace(getsourcelines=counting(installed[0].unmemoised),
+                              getsourcefile=counting(installed[1].unmemoised))
+    runtime.memoise_function_sources(readers, (1, 7, 4))
+    monkeypatch.setattr(kernel_impl, "getsourcelines", readers.getsourcelines)
+    monkeypatch.setattr(kernel_impl, "getsourcefile", readers.getsourcefile)
+    values = ti.field(ti.f64, shape=4)
+
+    @ti.kernel
+    def three_sums() -> ti.f64:
+        return clipped_sum(values, 4) + clipped_sum(values, 3) + clipped_sum(values, 2)
+
+    values.from_numpy(np.array([1.0, -2.0, 3.0, 7.0]))
+    assert three_sums() == 24.0  # 10 + 10 + 4, as in the positions' test above
+    assert reads.count("clipped_sum") == 2    # its lines once and its file once
+    assert reads.count("three_sums") == 2
+    with pytest.raises(Exception) as memoised_error:
+        broken_kernel()()
+    monkeypatch.setattr(kernel_impl, "getsourcelines", installed[0].unmemoised)
+    monkeypatch.setattr(kernel_impl, "getsourcefile", installed[1].unmemoised)
+    with pytest.raises(Exception) as original_error:
+        broken_kernel()()
+    assert str(memoised_error.value) == str(original_error.value)
+    assert "name_that_is_not_defined" in str(memoised_error.value)
