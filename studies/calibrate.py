@@ -277,8 +277,10 @@ def main(argv=None):
     progress = not args.no_progress
     with cli.executor(args, out) as executor:
         generation_size = settings.population(len(box), 0) * len(gaits)
+        # no bar per evaluation: the fit's own bar counts its generations (and --no-progress
+        # means none at all)
         run_kwargs = dict(**cli.run_length(args), solver=solver, arch=args.arch,
-                          executor=executor,
+                          executor=executor, progress=False,
                           chunk_size=cli.chunk_size(args, generation_size, executor.n_workers))
         if args.cross_validate:
             return _cross_validation_outputs(out, box, base, gaits, args.weights, settings,

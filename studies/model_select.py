@@ -820,7 +820,9 @@ def main(argv=None):
         largest = max((fit_settings.population(len(c.fit.split()), fit_settings.restarts)
                        for c, fit_settings in work), default=1) * len(gaits)
         setup = Setup(tuple(gaits), trials, train, validate,
-                      dict(solver=solver, arch=args.arch, executor=executor,
+                      # no bar per evaluation: the fit's own bar counts its generations (and
+                      # --no-progress means none at all)
+                      dict(solver=solver, arch=args.arch, executor=executor, progress=False,
                            chunk_size=cli.chunk_size(args, largest, executor.n_workers)),
                       record, strokes, periods)
         for position, candidate in enumerate(runnable):

@@ -76,7 +76,7 @@ def main(argv=None):
     duration = cli.QUICK_DURATION_S if args.quick else params[0].period
     sweep = {"gait": sorted({p.gait for p in params}), "alpha": sorted({p.alpha for p in params})}
     out = cli.Output(args, argv or [], model={"sweep": sweep}, solver=solver)
-    run_kwargs = dict(solver=solver, chunk_size=args.chunk_size)
+    run_kwargs = dict(solver=solver, chunk_size=args.chunk_size, progress=False)  # timed runs
     steps = steps_in(duration, solver.dt)
     rows, reference = [], None
     for mode, workers, context in modes(counts, dask=not args.no_dask):

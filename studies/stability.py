@@ -199,7 +199,8 @@ def run_grid(batches, arch="cpu", executor=None, chunk_size=None, progress=True)
         result = run_batch(batch["params"], batch["duration_s"], solver=batch["solver"],
                            arch=arch, record_interval_s=stride * batch["dt_s"],
                            record_shapes=True, executor=executor,
-                           chunk_size=chunk_size or len(batch["params"]))
+                           chunk_size=chunk_size or len(batch["params"]),
+                           progress=False)  # the grid's own bar counts the robot-steps
         wall = time.perf_counter() - started
         checks = shape_checks(result.shapes, result.topology)
         # the checks over every record replace the summary's final-shape ones
