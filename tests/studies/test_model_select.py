@@ -138,7 +138,12 @@ def test_invalid_arguments_fail_before_compute(no_compute, tmp_path, capsys, arg
 
 
 def test_quick_run_against_a_direct_simulation(tmp_path, capsys, monkeypatch):
+    # every run long enough for a progress bar of its own: --no-progress must still show none
+    # (a long run's evaluations each showed one)
+    from taichi_star import driver
+    monkeypatch.setattr(driver, "AUTO_PROGRESS_S", 0.0)
     table = model_select.main(["--out", str(tmp_path), *QUICK])
+    assert "simulated" not in capsys.readouterr().err
     written = pd.read_csv(tmp_path / "model_select.csv")
     assert list(written["candidate"]) == list(table["candidate"])
     assert set(written["candidate"]) == {"paper", "ramp"}
