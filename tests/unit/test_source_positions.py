@@ -75,17 +75,26 @@ def test_the_cache_keeps_up_to_its_size_then_starts_afresh(monkeypatch):
     assert context.writes == 4
 
 
-def test_installed_once_only_for_the_checked_taichi_and_only_where_the_writer_exists():
-    context = fake_context_class()
-    original = context.get_pos_info
-    assert not runtime.memoise_source_positions(context, (1, 8, 0))
-    assert context.get_pos_info is original
-    assert runtime.memoise_source_positions(context, (1, 7, 0))
-    memoised = context.get_pos_info
+@pytest.mark.parametrize("memoise, make_target, attribute, make_lacking", [
+    (runtime.memoise_source_positions, fake_context_class, "get_pos_info",
+     lambda: type("NoWriter", (), {})),
+    (runtime.memoise_function_sources, lambda: fake_readers()[0], "getsourcelines",
+     lambda: SimpleNamespace(getsourcelines=lambda function: ([], 0))),  # no getsourcefile
+], ids=["positions", "sources"])
+def test_installed_once_only_for_the_checked_taichi_and_only_where_its_target_exists(
+        memoise, make_target, attribute, make_lacking):
+    target = make_target()
+    original = getattr(target, attribute)
+    assert not memoise(target, (1, 8, 0))
+    assert getattr(target, attribute) is original
+    assert memoise(target, (1, 7, 0))
+    memoised = getattr(target, attribute)
     assert memoised is not original and memoised.unmemoised is original
-    assert runtime.memoise_source_positions(context, (1, 7, 4))  # a second call: the same memo
-    assert context.get_pos_info is memoised
-    assert not runtime.memoise_source_positions(type("NoWriter", (), {}), (1, 7, 4))
+    assert memoise(target, (1, 7, 4))  # a second call: the same memo
+    assert getattr(target, attribute) is memoised
+    lacking = make_lacking()
+    assert not memoise(lacking, (1, 7, 4))
+
 
 
 @ti.func
@@ -218,20 +227,6 @@ def test_a_function_that_cannot_be_held_weakly_is_read_every_time():
     assert module.getsourcelines(unreferable) == (["def unreferable():\n", "    return 3\n"], 7)
     assert module.getsourcelines(unreferable) == (["def unreferable():\n", "    return 3\n"], 7)
     assert len(reads) == 2
-
-
-def test_readers_memoised_once_only_for_the_checked_taichi_and_only_where_both_exist():
-    module, _ = fake_readers()
-    original = module.getsourcelines
-    assert not runtime.memoise_function_sources(module, (1, 8, 0))
-    assert module.getsourcelines is original
-    assert runtime.memoise_function_sources(module, (1, 7, 0))
-    memoised = module.getsourcelines
-    assert memoised is not original and memoised.unmemoised is original
-    assert runtime.memoise_function_sources(module, (1, 7, 4))  # a second call: the same memo
-    assert module.getsourcelines is memoised
-    assert not runtime.memoise_function_sources(SimpleNamespace(getsourcelines=original),
-                                                (1, 7, 4))
 
 
 def test_taichis_reads_go_through_the_memo_and_its_compiles_and_errors_are_unchanged(
