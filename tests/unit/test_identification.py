@@ -601,9 +601,32 @@ def test_the_stroke_aligned_phase_follows_the_line_not_a_stroke_read_elsewhere()
 def test_the_stroke_aligned_phase_needs_a_stroke_one_period_past_the_window():
     """A track of 7 periods has 6 strokes read whole (the last wants a window past its end):
     cycles 3–5 have theirs and the one after, cycles 4–6 not (the wrap above may need it)."""
-    simulated, trial = _sim_and_trial(0.05, 0.9)
+    _, trial = _sim_and_trial(0.05, 0.9)
+    simulated, _ = _sim_and_trial(0.05, 0.9, cycles=5)  # the simulation covers the window
     assert ident.stroke_aligned_phase(simulated, trial, (3, 5)) == pytest.approx(0.85,
                                                                                 abs=2.1e-3)
     with pytest.raises(ValueError, match=r"A1\+A2: the track's strokes cover 6 periods, the "
                                          r"window ends at cycle 6 \(one period more"):
         ident.stroke_aligned_phase(simulated, trial, (4, 6))
+
+
+def test_a_windows_stroke_aligned_phase_does_not_depend_on_how_long_the_simulation_runs():
+    """The simulated strokes of the window's cycles only: a simulation whose strokes come 0.05 s
+    after the firings in cycles 1-3 and 0.6 s after in cycles 4-6 gives window 1-3 the phase
+    of one that stops after cycle 3 (read over the whole run, the tables of a fit, simulated for
+    six cycles, scored its training window 0.93-2.78x the error the fit minimised); window 4-6
+    gets its own cycles' lag; a simulation that ends before the window's last cycle is
+    refused."""
+    period = 3.15
+    _, trial = _sim_and_trial(0.05, 0.9, cycles=6)
+    lags = np.array([0.05] * 3 + [0.6] * 3)
+    longer = ident.SimulatedRun("A1+A2", pulsed_path(lags + period * np.arange(6),
+                                                     6 * period + 0.2), (1.0, 0.0))
+    shorter, _ = _sim_and_trial(0.05, 0.9, cycles=3)
+    assert ident.stroke_aligned_phase(longer, trial, (1, 3)) == \
+        ident.stroke_aligned_phase(shorter, trial, (1, 3))
+    assert ident.stroke_aligned_phase(longer, trial, (1, 3)) == pytest.approx(0.85, abs=2.1e-3)
+    assert ident.stroke_aligned_phase(longer, trial, (4, 6)) == pytest.approx(0.3, abs=2.1e-3)
+    with pytest.raises(ValueError, match=r"A1\+A2: the simulation's strokes cover 3 periods, "
+                                         r"the window ends at cycle 4"):
+        ident.stroke_aligned_phase(shorter, trial, (2, 4))
