@@ -125,6 +125,11 @@ STROKE_TAIL_CYCLES = 0.05
 """--phases strokes: cycles simulated past a window's last, 0.16 s of the paper's period: the
 last period's strokes are read over `identification.STROKE_WINDOW_S` past its end, on records
 of `RECORD_INTERVAL_S`."""
+STROKE_ALIGNMENT = "window"
+"""How --phases strokes reads the simulated strokes, part of a held candidate's definition so
+that a resumed run does not reuse results scored another way: "window", over each window's own
+cycles (since eeefbb8; results stored before read them over the whole run, and their tables'
+errors differ)."""
 STAGES = ("refine", "screen")
 """The stages in ranking order: a refined form above every screened one."""
 RECORD_INTERVAL_S = 0.01
@@ -524,7 +529,8 @@ def definition_of(candidate: Candidate, args, settings, base: StarParams,
     base_changes = {f.name: repr(getattr(base, f.name)) for f in dataclasses.fields(base)
                     if getattr(base, f.name) != getattr(defaults, f.name)}
     # --phases enters only where it is not the default, which earlier results were made with
-    phases = {} if args.phases == "fitted" else {"phases": args.phases}
+    phases = ({} if args.phases == "fitted"
+              else {"phases": args.phases, "stroke_alignment": STROKE_ALIGNMENT})
     periods = {} if args.periods == "nominal" else {"periods": args.periods}
     text = json.dumps({"candidate": dataclasses.asdict(candidate),
                        "settings": dataclasses.asdict(settings),

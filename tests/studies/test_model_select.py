@@ -78,7 +78,7 @@ def test_a_refined_form_ranks_above_every_screened_one():
     assert list(table["rank"]) == [1, 2, 3, 4, 5, 6]
 
 
-def test_a_resumed_candidate_is_reused_only_for_the_same_model():
+def test_a_resumed_candidate_is_reused_only_for_the_same_model(monkeypatch):
     """The definition names the base model by the fields that differ from the defaults: a field
     set to its default value (as a model option added later, off by default) changes nothing; a
     changed coefficient does, and so do phases held on the strokes."""
@@ -99,6 +99,12 @@ def test_a_resumed_candidate_is_reused_only_for_the_same_model():
     assert held != fitted
     args.periods = "strokes"
     assert definition(base) != held
+    # held results scored with the strokes read another way (over the whole run, before
+    # eeefbb8) are not reused; fitted phases do not read the strokes at all
+    monkeypatch.setattr(model_select, "STROKE_ALIGNMENT", "whole run")
+    assert definition(base) != held
+    args.phases, args.periods = "fitted", "nominal"
+    assert definition(base) == fitted
 
 
 def test_a_per_actuator_axis_is_informed_only_by_gaits_that_fire_it():
