@@ -9,7 +9,8 @@ well they predict what they were not fitted to.
                                    [--fold-generations F] [--seed S] [--sigma0 0.25] [--dt S]
                                    [--refine-top K] [--refine-popsize P2]
                                    [--refine-generations G2]
-                                   [--budget-hours 2] [--resume] [--arch cpu|gpu] [--out DIR]
+                                   [--budget-hours 2] [--resume | --reassess]
+                                   [--arch cpu|gpu] [--out DIR]
                                    [--quick] [--workers N | --scheduler tcp://HOST:PORT]
 
 Candidates are data: a table (`--candidates`, default `studies/model_candidates.csv`) with one
@@ -67,6 +68,11 @@ best point (`fig4c_<candidate>.*`, `fig4b_<candidate>.*`; `fig4c_<candidate>_ref
 
 `--resume` (with `--out`): candidates whose rows are already in `done/` (`done/refine/`) with
 the same definition (candidate, settings, model, solver) are read back, not refitted.
+`--reassess` (with `--out`, the same flags as the run it assesses): their fits are read back
+(`done/`: the best point, exact) and everything after the fit is done again with today's code:
+both windows re-simulated and scored, the folds refitted from the best point, Fig. 4c/4b
+redrawn; the note names the fit's evaluations and commit. For a change to the assessment that
+leaves the fits as they were (eeefbb8, the strokes read over each window's own cycles).
 
 Cost: the study times its first generation, prints the estimate for the whole study (the
 refine stage counted for the `--refine-top` largest forms) and the `--budget-hours` it is held
@@ -320,7 +326,7 @@ def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMA
                   progress: bool = False) -> dict:
     """Fit one candidate and assess it (module docstring). Returns {"row": the result row
     (without rank), "parameters", "gaits", "folds", "evaluations": tables, "best": the
-    identified StarParams}."""
+    identified StarParams, "identified": its fields}."""
     start = time.perf_counter()
     model = candidate.model(base)
     box = candidate.box(base)
@@ -341,6 +347,43 @@ def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMA
                 "evaluations": evaluations, "best": None, "identified": None}
     units = identify.best_units(evaluations, box)
     values = identify.box_values(box, units)[0]
+    assessed = assess_point(candidate, base, units, values, settings, fold_generations, setup)
+    row.update(assessed.pop("row"), fit_time_s=time.perf_counter() - start)
+    return {"row": row, "parameters": parameter_table(candidate.name, box, values, fit.unit_std),
+            "evaluations": evaluations, **assessed}
+
+
+def reassess_candidate(candidate: Candidate, base: StarParams, settings: identify.CMASettings,
+                       fold_generations: int, setup: Setup, stored: dict, source: str) -> dict:
+    """--reassess: a finished fit (`stored`, its done/ record) assessed again at its best point
+    (its parameter table's values, exact in JSON) as `fit_candidate` assesses a new one: the
+    windows re-simulated and scored, the folds fitted anew from the point's unit coordinates
+    (`ParameterRange.unit` of its values: equal to the fit's to round-off). The fit's own
+    columns (n_evaluations, fit_time_s, the parameter table) are kept; the note names the fit's
+    `source`."""
+    parameters = pd.DataFrame(stored["parameters"])
+    box = candidate.box(base)
+    values = parameters.set_index("parameter").loc[[spec.label for spec in box], "value"]
+    values = values.to_numpy(dtype=float)
+    units = np.array([spec.unit(value) for spec, value in zip(box, values)])
+    assessed = assess_point(candidate, base, units, values, settings, fold_generations, setup)
+    row = {key: stored["row"][key] for key in ("candidate", "fit", "set", "description",
+                                               "n_fitted", "n_parameters", "n_gaits",
+                                               "n_evaluations", "fit_time_s")}
+    row.update(assessed.pop("row"), note=f"assessed again (--reassess), the fit read back from "
+                                         f"{source}")
+    return {"row": row, "parameters": parameters.drop(columns="stage", errors="ignore"),
+            "evaluations": pd.DataFrame(), **assessed}
+
+
+def assess_point(candidate: Candidate, base: StarParams, units: np.ndarray, values: np.ndarray,
+                 settings: identify.CMASettings, fold_generations: int, setup: Setup) -> dict:
+    """The assessment of a candidate's best point (units and values (D,) along its box's axes;
+    module docstring): {"row": status, errors, directions, information criteria; "gaits",
+    "folds": tables; "best": the identified StarParams; "identified": its fields}."""
+    model = candidate.model(base)
+    box = candidate.box(base)
+    gaits = list(setup.gaits)
     best = model.replace(**identify.point_changes(box, values, model))
     # training and validation windows from one simulation of the best point
     runs = simulate_points([best.replace(gait=g) for g in gaits], setup.validate[1], setup)
@@ -351,9 +394,9 @@ def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMA
     folds = leave_one_gait_out(box, units, model, settings, fold_generations, setup)
     n_samples = len(gaits) * (setup.train[1] - setup.train[0] + 1) * \
         identification.SAMPLES_PER_CYCLE
-    k = row["n_parameters"]
+    k = len(box) + (len(gaits) if setup.strokes is None else 0)
     held = folds[folds["status"] == "ok"] if len(folds) else folds
-    row.update({
+    row = {
         "status": "ok" if train is not None else "failed", "note": "",
         "train_objective": (identification.objective_of(train) if train is not None
                             else math.inf),
@@ -369,14 +412,13 @@ def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMA
         else 0,
         "validate_directions_right": int(validate["direction_matches"].sum())
         if validate is not None else 0,
-        **information_criteria(train, k, n_samples), "fit_time_s": time.perf_counter() - start})
+        **information_criteria(train, k, n_samples)}
     windows = [table.assign(window=name) for name, table in
                (("train", train), ("validate", validate)) if table is not None]
     gait_rows = pd.concat(windows, ignore_index=True) if windows else pd.DataFrame()
     gait_rows.insert(0, "candidate", candidate.name)
-    return {"row": row, "parameters": parameter_table(candidate.name, box, values, fit.unit_std),
-            "gaits": gait_rows, "folds": folds.assign(candidate=candidate.name),
-            "evaluations": evaluations, "best": best, "identified": identified_fields(best)}
+    return {"row": row, "gaits": gait_rows, "folds": folds.assign(candidate=candidate.name),
+            "best": best, "identified": identified_fields(best)}
 
 
 def information_criteria(train: Optional[pd.DataFrame], k: int, n_samples: int) -> dict:
@@ -521,7 +563,7 @@ def refined_candidates(screen: pd.DataFrame, runnable: Sequence[Candidate],
 
 
 def definition_of(candidate: Candidate, args, settings, base: StarParams,
-                  solver: SolverConfig, gaits) -> str:
+                  solver: SolverConfig, gaits, stroke_alignment: bool = True) -> str:
     """SHA-256 of what defines a candidate's result (a resumed run reuses it only if equal). The
     base model enters by its fields that differ from StarParams' defaults, so a field added to
     StarParams later (a new model option, off by default) leaves earlier results reusable."""
@@ -529,8 +571,9 @@ def definition_of(candidate: Candidate, args, settings, base: StarParams,
     base_changes = {f.name: repr(getattr(base, f.name)) for f in dataclasses.fields(base)
                     if getattr(base, f.name) != getattr(defaults, f.name)}
     # --phases enters only where it is not the default, which earlier results were made with
-    phases = ({} if args.phases == "fitted"
-              else {"phases": args.phases, "stroke_alignment": STROKE_ALIGNMENT})
+    phases = ({} if args.phases == "fitted" else
+              {"phases": args.phases} | ({"stroke_alignment": STROKE_ALIGNMENT}
+                                         if stroke_alignment else {}))
     periods = {} if args.periods == "nominal" else {"periods": args.periods}
     text = json.dumps({"candidate": dataclasses.asdict(candidate),
                        "settings": dataclasses.asdict(settings),
@@ -539,6 +582,34 @@ def definition_of(candidate: Candidate, args, settings, base: StarParams,
                        "base": base_changes, "solver": repr(solver), **phases, **periods},
                       sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def stored_fit_of(done: Path, folder: Path, evaluations: str, candidate: Candidate, args,
+                  settings, base: StarParams, solver: SolverConfig,
+                  gaits) -> Optional[Tuple[dict, str]]:
+    """--reassess: a candidate's finished fit, its record `done` (in `folder`/done/), with the
+    text naming it (`evaluations`, the CSV of its evaluations in `folder`, and the commit that
+    fitted them, from its sidecar) if it was fitted as today's run would fit
+    it, else None (it is fitted anew). Its definition must equal today's, or, where the
+    training window starts at cycle 1, today's but for the stroke alignment: a fit simulates
+    its training window alone (and the strokes' tail), so reading the strokes over the window
+    or over the whole run is the same reading (`STROKE_ALIGNMENT`); the assessment's longer
+    run is where they differed."""
+    if not done.exists():
+        return None
+    stored = json.loads(done.read_text())
+    if stored["row"].get("status") != "ok":
+        return None
+    definitions = {definition_of(candidate, args, settings, base, solver, gaits)}
+    if identify.parse_windows(args.train_cycles, args.validate_cycles)[0][0] == 1:
+        definitions.add(definition_of(candidate, args, settings, base, solver, gaits,
+                                      stroke_alignment=False))
+    if stored["row"].get("definition") not in definitions:
+        return None
+    sidecar = folder / f"{evaluations}.json"
+    commit = (json.loads(sidecar.read_text()).get("git_commit") or "")[:7] \
+        if sidecar.exists() else ""
+    return stored, evaluations + (f", fitted at {commit}" if commit else "")
 
 
 def estimate_seconds(seconds_per_instance_cycle: float,
@@ -644,6 +715,10 @@ def build_parser():
                              "skipped; the first fit always runs (default 2)")
     parser.add_argument("--resume", action="store_true",
                         help="reuse the finished candidates in --out (same definition)")
+    parser.add_argument("--reassess", action="store_true",
+                        help="assess the finished fits in --out again (same fit definition): "
+                             "their best points re-simulated and scored, folds refitted; "
+                             "candidates without one are fitted")
     cli.add_model_flags(parser, fixed=("gait",))
     cli.add_dt_flag(parser, quick=QUICK_DT)
     cli.add_execution_flags(parser)
@@ -680,6 +755,13 @@ def main(argv=None):
         raise cli.StudyArgumentError(f"--fold-generations must be >= 0, got "
                                      f"{args.fold_generations}")
     cli.check_positive(args.budget_hours, "--budget-hours")
+    if args.reassess:
+        if args.resume:
+            raise cli.StudyArgumentError("--resume and --reassess: give one (read the finished "
+                                         "candidates back, or assess their fits again)")
+        if args.out is None or not (Path(args.out) / "done").is_dir():
+            raise cli.StudyArgumentError(f"--reassess: give --out, a folder of an earlier run "
+                                         f"(with done/); {args.out} has none")
     if args.periods == "strokes" and args.phases != "strokes":
         raise cli.StudyArgumentError("--periods strokes needs --phases strokes (the periods "
                                      "are read off the strokes' lines)")
@@ -753,6 +835,9 @@ def main(argv=None):
         subfolder = "" if stage == "screen" else f"{stage}/"
         done = out.folder / "done" / subfolder / f"{candidate.name}.json"
         tables = (parameters, gait_tables, fold_tables)
+        stored_fit = (stored_fit_of(done, out.folder, f"fits/{subfolder}{candidate.name}.csv",
+                                    candidate, args, stage_settings, base, solver, gaits)
+                      if args.reassess else None)
         if args.resume and done.exists():
             stored = json.loads(done.read_text())
             if stored["row"].get("definition") == definition:
@@ -798,8 +883,13 @@ def main(argv=None):
                       f"{estimate / 60:.1f} min (budget left "
                       f"{(budget_s - (now - started)) / 60:.1f} min)")
 
-        result = fit_candidate(candidate, base, stage_settings, args.fold_generations, setup,
-                               on_generation=on_generation, progress=progress)
+        if stored_fit is not None:
+            print(f"{label}: assessed again, the fit read back from {stored_fit[1]}")
+            result = reassess_candidate(candidate, base, stage_settings, args.fold_generations,
+                                        setup, *stored_fit)
+        else:
+            result = fit_candidate(candidate, base, stage_settings, args.fold_generations,
+                                   setup, on_generation=on_generation, progress=progress)
         first_fit_done = True
         result["row"].update(definition=definition, stage=stage)
         rows.append(result["row"])

@@ -135,6 +135,8 @@ def test_a_per_actuator_axis_is_informed_only_by_gaits_that_fire_it():
     (["--candidates", "/nonexistent.csv"], "--candidates /nonexistent.csv: cannot read it"),
     (["--gaits", "A1+A6"], "--gaits A1+A6: not measured"),
     (["--validate-cycles", "4:40"], "shorter than cycles up to 40"),
+    (["--reassess"], "--reassess: give --out, a folder of an earlier run (with done/)"),
+    (["--reassess", "--resume"], "--resume and --reassess: give one"),
 ])
 def test_invalid_arguments_fail_before_compute(no_compute, tmp_path, capsys, argv, message):
     assert studies_main(["model_select", *argv, "--out", str(tmp_path), *QUICK]) == 2
@@ -355,3 +357,83 @@ def test_periods_from_the_strokes_refuse_what_they_would_override(tmp_path, caps
     error = capsys.readouterr().err
     assert message in error, error
     assert len(error.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_a_reassessed_fit_gets_the_tables_of_a_fresh_run(tmp_path, monkeypatch, capsys):
+    """--reassess reads a finished fit back and does everything after it again: a record
+    stored before eeefbb8 (its definition without the stroke alignment) whose tables were
+    scored another way is assessed again to the tables of a fresh run, without fitting it."""
+    argv = ["--out", str(tmp_path), "--only", "paper", "--refine-top", "0", "--phases",
+            "strokes", *QUICK]
+    today = model_select.definition_of
+    monkeypatch.setattr(model_select, "definition_of",
+                        lambda *args, **kwargs: today(*args, stroke_alignment=False))
+    model_select.main(argv)
+    monkeypatch.setattr(model_select, "definition_of", today)
+    fresh = {name: pd.read_csv(tmp_path / name) for name in
+             ("model_select.csv", "model_select_gaits.csv", "model_select_folds.csv",
+              "model_select_parameters.csv")}
+    done = tmp_path / "done" / "paper.json"
+    record = json.loads(done.read_text())
+    record["row"]["train_objective"] = 99.0  # scored another way
+    record["gaits"]["objective"] = [2 * value for value in record["gaits"]["objective"]]
+    done.write_text(json.dumps(record))
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("the stored fit was run again")
+    monkeypatch.setattr(model_select, "fit_candidate", forbidden)
+    capsys.readouterr()
+    model_select.main([*argv, "--reassess"])
+    assert "paper: assessed again, the fit read back from fits/paper.csv, fitted at" in \
+        capsys.readouterr().out
+    again = {name: pd.read_csv(tmp_path / name) for name in fresh}
+    note = again["model_select.csv"].pop("note").iloc[0]
+    assert note.startswith("assessed again (--reassess), the fit read back from fits/paper.csv")
+    # the fit's own columns kept; the definition is today's (with the stroke alignment)
+    assert again["model_select.csv"].pop("definition").iloc[0] != \
+        fresh["model_select.csv"].pop("definition").iloc[0]
+    fresh["model_select.csv"].pop("note")
+    for name in ("model_select.csv", "model_select_gaits.csv", "model_select_parameters.csv"):
+        pd.testing.assert_frame_equal(again[name], fresh[name], check_exact=True)
+    # the folds start from the best point's unit coordinates recovered from its values (one
+    # rounding each): their CMA-ES runs agree to far better than 1e-6
+    pd.testing.assert_frame_equal(again["model_select_folds.csv"],
+                                  fresh["model_select_folds.csv"], rtol=1e-6)
+
+
+def test_a_stored_fit_is_reassessed_only_if_fitted_as_today(tmp_path):
+    """A stored fit is reused by --reassess if its definition is today's, or today's but for
+    the stroke alignment where the training window starts at cycle 1 (the fit's simulation
+    is then its window, read alike either way); a later window, a failed fit, another
+    definition or no record: fitted anew (None)."""
+    candidate = model_select.Candidate("paper", "", "alpha=0.2:1.5 cylinder_drag=1:100:log")
+    args = types.SimpleNamespace(fold_generations=2, train_cycles="1:3", validate_cycles="4:6",
+                                 phases="strokes", periods="nominal")
+    settings, solver, base = identify.CMASettings(), SolverConfig(), StarParams.preset("paper")
+    done = tmp_path / "done" / "paper.json"
+    done.parent.mkdir()
+
+    def stored(definition, status="ok"):
+        done.write_text(json.dumps({"row": {"status": status, "definition": definition}}))
+        found = model_select.stored_fit_of(done, tmp_path, "fits/paper.csv", candidate, args,
+                                           settings, base, solver, ["A1"])
+        return None if found is None else found[1]
+
+    def definition(**kwargs):
+        return model_select.definition_of(candidate, args, settings, base, solver, ["A1"],
+                                          **kwargs)
+    assert model_select.stored_fit_of(done, tmp_path, "fits/paper.csv", candidate, args,
+                                      settings, base, solver, ["A1"]) is None  # no record
+    assert stored(definition()) == "fits/paper.csv"  # no sidecar: no commit to name
+    (tmp_path / "fits").mkdir()
+    (tmp_path / "fits" / "paper.csv.json").write_text(json.dumps({"git_commit": "0123456789"}))
+    assert stored(definition()) == "fits/paper.csv, fitted at 0123456"
+    assert stored(definition(stroke_alignment=False)) == "fits/paper.csv, fitted at 0123456"
+    assert stored(definition(), status="fit_failed") is None
+    args.train_cycles, args.validate_cycles = "2:3", "4:6"
+    assert stored(definition()) is not None
+    assert stored(definition(stroke_alignment=False)) is None  # the fit read cycle 1 too
+    args.train_cycles = "1:3"
+    earlier = definition()
+    args.fold_generations = 3  # today's run would assess with other folds
+    assert stored(earlier) is None
