@@ -135,7 +135,7 @@ STROKE_ALIGNMENT = "window"
 """How --phases strokes reads the simulated strokes, part of a held candidate's definition so
 that a resumed run does not reuse results scored another way: "window", over each window's own
 cycles (since eeefbb8; results stored before read them over the whole run, and their tables'
-errors differ)."""
+errors differ: `--reassess` assesses their fits again, `stored_fit_of`)."""
 STAGES = ("refine", "screen")
 """The stages in ranking order: a refined form above every screened one."""
 RECORD_INTERVAL_S = 0.01
@@ -363,8 +363,7 @@ def reassess_candidate(candidate: Candidate, base: StarParams, settings: identif
     `source`."""
     parameters = pd.DataFrame(stored["parameters"])
     box = candidate.box(base)
-    values = parameters.set_index("parameter").loc[[spec.label for spec in box], "value"]
-    values = values.to_numpy(dtype=float)
+    values = stored_values(box, parameters)
     units = np.array([spec.unit(value) for spec, value in zip(box, values)])
     assessed = assess_point(candidate, base, units, values, settings, fold_generations, setup)
     row = {key: stored["row"][key] for key in ("candidate", "fit", "set", "description",
@@ -372,8 +371,7 @@ def reassess_candidate(candidate: Candidate, base: StarParams, settings: identif
                                                "n_evaluations", "fit_time_s")}
     row.update(assessed.pop("row"), note=f"assessed again (--reassess), the fit read back from "
                                          f"{source}")
-    return {"row": row, "parameters": parameters.drop(columns="stage", errors="ignore"),
-            "evaluations": pd.DataFrame(), **assessed}
+    return {"row": row, "parameters": parameters, "evaluations": pd.DataFrame(), **assessed}
 
 
 def assess_point(candidate: Candidate, base: StarParams, units: np.ndarray, values: np.ndarray,
@@ -445,8 +443,14 @@ def best_model(candidate: Candidate, base: StarParams, parameters: pd.DataFrame)
     candidate read back)."""
     model = candidate.model(base)
     box = candidate.box(base)
-    values = parameters.set_index("parameter").loc[[spec.label for spec in box], "value"]
-    return model.replace(**identify.point_changes(box, values.to_numpy(dtype=float), model))
+    return model.replace(**identify.point_changes(box, stored_values(box, parameters), model))
+
+
+def stored_values(box, parameters: pd.DataFrame) -> np.ndarray:
+    """The identified values (D,) along the box's axes from a candidate's rows of the parameter
+    table."""
+    return parameters.set_index("parameter").loc[[spec.label for spec in box],
+                                                  "value"].to_numpy(dtype=float)
 
 
 def identified_table(row: dict, fields: dict,
