@@ -337,7 +337,7 @@ def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMA
     evaluations = fit.evaluations
     row = {"candidate": candidate.name, "fit": candidate.fit, "set": candidate.set,
            "description": candidate.description, "n_fitted": len(box),
-           "n_parameters": len(box) + (len(gaits) if setup.strokes is None else 0),
+           "n_parameters": parameter_count(box, setup),
            "n_gaits": len(gaits),
            "n_evaluations": len(evaluations)}
     if identify.best_row(evaluations) is None:
@@ -392,7 +392,7 @@ def assess_point(candidate: Candidate, base: StarParams, units: np.ndarray, valu
     folds = leave_one_gait_out(box, units, model, settings, fold_generations, setup)
     n_samples = len(gaits) * (setup.train[1] - setup.train[0] + 1) * \
         identification.SAMPLES_PER_CYCLE
-    k = len(box) + (len(gaits) if setup.strokes is None else 0)
+    k = parameter_count(box, setup)
     held = folds[folds["status"] == "ok"] if len(folds) else folds
     row = {
         "status": "ok" if train is not None else "failed", "note": "",
@@ -417,6 +417,12 @@ def assess_point(candidate: Candidate, base: StarParams, units: np.ndarray, valu
     gait_rows.insert(0, "candidate", candidate.name)
     return {"row": row, "gaits": gait_rows, "folds": folds.assign(candidate=candidate.name),
             "best": best, "identified": identified_fields(best)}
+
+
+def parameter_count(box, setup: Setup) -> int:
+    """k of a fit: its axes, plus one phase per gait where the phases are fitted (held on the
+    strokes, `setup.strokes`, they are not parameters)."""
+    return len(box) + (len(setup.gaits) if setup.strokes is None else 0)
 
 
 def information_criteria(train: Optional[pd.DataFrame], k: int, n_samples: int) -> dict:
