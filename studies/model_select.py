@@ -325,7 +325,7 @@ def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMA
                   fold_generations: int, setup: Setup, on_generation=None,
                   progress: bool = False) -> dict:
     """Fit one candidate and assess it (module docstring). Returns {"row": the result row
-    (without rank), "parameters", "gaits", "folds", "evaluations": tables, "best": the
+    (without rank), "parameters", "gaits", "folds": tables, "best": the
     identified StarParams, "identified": its fields}."""
     start = time.perf_counter()
     model = candidate.model(base)
@@ -344,13 +344,13 @@ def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMA
         return {"row": {**row, "status": "fit_failed", "note": "every candidate point failed",
                         "fit_time_s": time.perf_counter() - start},
                 "parameters": pd.DataFrame(), "gaits": pd.DataFrame(), "folds": pd.DataFrame(),
-                "evaluations": evaluations, "best": None, "identified": None}
+                "best": None, "identified": None}
     units = identify.best_units(evaluations, box)
     values = identify.box_values(box, units)[0]
     assessed = assess_point(candidate, base, units, values, settings, fold_generations, setup)
     row.update(assessed.pop("row"), fit_time_s=time.perf_counter() - start)
     return {"row": row, "parameters": parameter_table(candidate.name, box, values, fit.unit_std),
-            "evaluations": evaluations, **assessed}
+            **assessed}
 
 
 def reassess_candidate(candidate: Candidate, base: StarParams, settings: identify.CMASettings,
@@ -371,7 +371,7 @@ def reassess_candidate(candidate: Candidate, base: StarParams, settings: identif
                                                "n_evaluations", "fit_time_s")}
     row.update(assessed.pop("row"), note=f"assessed again (--reassess), the fit read back from "
                                          f"{source}")
-    return {"row": row, "parameters": parameters, "evaluations": pd.DataFrame(), **assessed}
+    return {"row": row, "parameters": parameters, **assessed}
 
 
 def assess_point(candidate: Candidate, base: StarParams, units: np.ndarray, values: np.ndarray,

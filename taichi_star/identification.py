@@ -590,7 +590,7 @@ def stroke_aligned_phase(simulated: SimulatedRun, trial: Trial, cycles=TRAINING_
                          f"{simulated_strokes.cycles} periods, the window ends at cycle {last}")
     # the simulated strokes of the window's own cycles: read over the whole run, a window's
     # phase moved with how long the run went on past it, and a fit's tables (cycles 1-6)
-    # scored its training window 0.93-2.78x the error the fit (cycles 1-3) had minimised
+    # scored its training window 0.89-2.78x the error the fit (cycles 1-3) had minimised
     lag = _circular_mean(simulated_strokes.cycle_phases_s[first - 1:last],
                          simulated.path.period_s)
     phase = _circular_mean(measured.line_phases(range(first - 1, last)), period) - lag
