@@ -11,8 +11,10 @@ import json
 import re
 import subprocess
 import tempfile
+import textwrap
+import warnings
 from pathlib import Path
-from typing import Mapping, Optional, Sequence
+from typing import Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 import pandas as pd
@@ -41,6 +43,16 @@ above 100 fps at ~10)."""
 ANIMATION_SIZE_PX = (100, 8192)
 """Allowed widths of `animate`'s movie, pixels (lowest, highest): a 1-inch figure at 100 dpi
 up to what a frame of 8192² RGBA pixels (268 MB) still holds in memory."""
+HEADING_LEAST_PT = 4.0
+"""Smallest font of an animation's heading, points: a heading that does not fit the movie's
+width at it is wrapped instead (`_fit_heading`)."""
+HEADING_WIDTH_SHARE = 0.96
+"""Share of the movie's width that its heading's widest line may take."""
+PANEL_TITLE_PT = 9.0
+"""Font of an animation's panel titles where its heading keeps its full size, points."""
+PANEL_TITLE_PAD_PT = 6.0
+"""Gap between a panel and its title at PANEL_TITLE_PT, points (matplotlib's default); it
+shrinks with the title."""
 
 UNITS = {"_seconds_per_wall_s": "1", "_seconds_per_s": "1", "_per_wall_s": "1/s", "_per_s": "1/s",
          "_gb_s": "GB/s", "_mm_s": "mm/s", "_mm": "mm", "_deg": "degree", "_ms": "ms", "_us": "us",
@@ -401,10 +413,11 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
     `simulate` fires them at 0, T, 2T, ...), labels A1..A8, the central cylinder and a scale
     bar. `frame` "world" (lab axes, mm, with the centroid's path so far drawn in blue) or
     "body" (following the hub and the body's rotation; no path). `title` heads the movie
-    (default none) above the time. A failed instance's panel names its status and failure
-    time and holds its last shape after it (it was an empty panel). Returns the path. Raises
-    ValueError without recorded shapes, for an unknown frame or suffix, or for instances out
-    of range."""
+    (default none) above the time; in a small movie the heading's font shrinks to fit its
+    width, and below HEADING_LEAST_PT its lines wrap. A failed instance's panel names its
+    status and failure time and holds its last shape after it (it was an empty panel).
+    Returns the path. Raises ValueError without recorded shapes, for an unknown frame or
+    suffix, or for instances out of range."""
     matplotlib = require("matplotlib", "video")
     require("PIL", "video")
 
@@ -460,6 +473,19 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
     inches = size_px / 100
     fig, axes = plt.subplots(rows, columns, figsize=(inches, inches * rows / columns), dpi=100,
                              squeeze=False)
+    label = fig.suptitle("")
+    heading = f"{title}\n" if title else ""
+
+    def heading_at(time_s: float) -> str:
+        return f"{heading}t = {time_s:.2f} s ({frame} frame; red: actuators heating)"
+
+    # the latest time writes the longest heading (the times are >= 0); at the smallest sizes
+    # a fixed font clipped it at both sides (an audit, 2026-12). The panels' titles shrink
+    # with it, or they would run into it
+    full_pt = label.get_fontsize()
+    wrap, heading_bottom = _fit_heading(fig, label, heading_at(times[-1]))
+    label.set_text("")  # the panels are placed below it by `top`, as before the fit
+    panel_pt = max(HEADING_LEAST_PT, PANEL_TITLE_PT * label.get_fontsize() / full_pt)
     low = np.nanmin(shapes, axis=(0, 1, 2))
     high = np.nanmax(shapes, axis=(0, 1, 2))
     centre, half = 0.5 * (low + high), 0.5 * float((high - low).max()) + 10.0
@@ -477,21 +503,21 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
         # a failed instance is said so, not left as an empty panel (an audit, 2026-12)
         failed = "" if row["status"] == "ok" else \
             f": {row['status']} at {row['failure_time_s']:.3g} s, held"
-        ax.set_title(f"#{chosen[slot]} {params[slot].gait}{failed}", fontsize=9)
+        ax.set_title(f"#{chosen[slot]} {params[slot].gait}{failed}", fontsize=panel_pt,
+                     pad=PANEL_TITLE_PAD_PT * panel_pt / PANEL_TITLE_PT)
         drawing.add_scale_bar(ax, drawing.nice_length(2 * half))
         robots.append(drawing.RobotArtist(ax, topology, params[slot].cylinder_diameter * 1e3,
                                           labels=len(chosen) <= 4, path=frame == "world"))
-    label = fig.suptitle("")
-    fig.tight_layout(rect=(0, 0, 1, 0.94))
-    heading = f"{title}\n" if title else ""
+    # the panels below the heading, but on at least half the height (a title of hundreds of
+    # characters in a small movie would leave them none)
+    _place_panels(fig, max(0.5, min(0.94, heading_bottom - 0.01)), panel_pt, rows)
 
     def draw(index):
         artists = []
         for slot, robot in enumerate(robots):
             artists += robot.update(shapes[index, slot], hot[slot][index],
                                     None if paths is None else paths[slot][:index + 1])
-        label.set_text(f"{heading}t = {times[index]:.2f} s ({frame} frame; red: actuators "
-                       f"heating)")
+        label.set_text(_wrapped(heading_at(times[index]), wrap))
         return artists
 
     movie = animation.FuncAnimation(fig, draw, frames=len(times), blit=False)
@@ -512,6 +538,55 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
         data = scratch.read_bytes()
     write_atomic(path, data, failure=OSError)
     return path
+
+
+def _place_panels(figure, top: float, title_pt: float, rows: int):
+    """The panels of `figure` (`rows` of them) below `top` (a share of its height) with
+    matplotlib's tight layout, or, where their decorations do not fit it (a movie of one or
+    two inches: matplotlib warns and leaves the panels over the heading), with fixed margins
+    that leave each panel's title of `title_pt` points its line and its gap."""
+    before = vars(figure.subplotpars).copy()
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Tight layout not applied")
+        figure.tight_layout(rect=(0, 0, 1, top))
+    if vars(figure.subplotpars) != before:
+        return
+    title_pt *= 1.2 + PANEL_TITLE_PAD_PT / PANEL_TITLE_PT  # a line of text and its gap
+    title_share = title_pt * figure.dpi / 72 / figure.bbox.height
+    figure.subplots_adjust(left=0.02, right=0.98, bottom=0.02, top=top - title_share,
+                           wspace=0.05, hspace=title_share * rows)
+
+
+def _wrapped(text: str, width: Optional[int]) -> str:
+    """`text` with each of its lines wrapped to `width` characters (None: as it is)."""
+    if width is None:
+        return text
+    return "\n".join(textwrap.fill(line, width) for line in text.splitlines())
+
+
+def _fit_heading(figure, label, longest: str) -> Tuple[Optional[int], float]:
+    """Fit `label`, a text of `figure` (the movie's heading), to HEADING_WIDTH_SHARE of the
+    figure's width for its longest text `longest`: its font shrunk as far as needed, not below
+    HEADING_LEAST_PT, and where that is not enough its lines wrapped to as many characters as
+    fit. A heading that fits is left as it is. Leaves `longest` (wrapped) in `label`; returns
+    (the wrap width in characters, None for no wrapping; the height of the heading's lowest
+    point as a share of the figure's)."""
+    renderer = figure.canvas.get_renderer()
+    room = HEADING_WIDTH_SHARE * figure.bbox.width
+    label.set_text(longest)
+    width = label.get_window_extent(renderer).width
+    # a text's width is about proportional to its font size; the hinting of small sizes
+    # makes it not quite so, hence a few rounds
+    while width > room and label.get_fontsize() > HEADING_LEAST_PT:
+        label.set_fontsize(max(HEADING_LEAST_PT, label.get_fontsize() * min(0.95, room / width)))
+        width = label.get_window_extent(renderer).width
+    wrap = None
+    while width > room and (wrap is None or wrap > 1):
+        characters = max(len(line) for line in label.get_text().splitlines())
+        wrap = max(1, min(characters - 1, int(characters * room / width)))
+        label.set_text(_wrapped(longest, wrap))
+        width = label.get_window_extent(renderer).width
+    return wrap, label.get_window_extent(renderer).y0 / figure.bbox.height
 
 
 def _body_frame(shapes_mm: np.ndarray, topology) -> np.ndarray:

@@ -279,6 +279,42 @@ def test_the_documented_result_columns_are_the_summary_columns_with_their_units(
         assert unit == (column_unit(name) or "—"), name
 
 
+@pytest.mark.parametrize("title", [None, "Gait A1+A3+A5 of the identified model, cycles 1 to 6"])
+@pytest.mark.parametrize("size_px", [100, 150, 300, 720])
+def test_an_animations_heading_fits_its_width_at_every_size(size_px, title):
+    """At the smallest sizes the heading's fixed font ran over both sides of the movie (an
+    audit, 2026-12). Now its font shrinks to fit, down to HEADING_LEAST_PT, and only there do
+    its lines wrap; every word stays; a heading that fits keeps its font (720 px, the
+    default, without a title)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from taichi_star.output import HEADING_LEAST_PT, HEADING_WIDTH_SHARE, _fit_heading
+
+    figure = Figure(figsize=(size_px / 100, size_px / 100), dpi=100)
+    FigureCanvasAgg(figure)  # as animate's figures are drawn
+    label = figure.suptitle("")
+    default_pt = label.get_fontsize()
+    heading = (f"{title}\n" if title else "") + \
+        "t = 12.00 s (world frame; red: actuators heating)"
+    wrap, heading_bottom = _fit_heading(figure, label, heading)
+    extent = label.get_window_extent(figure.canvas.get_renderer())
+    assert extent.width <= HEADING_WIDTH_SHARE * figure.bbox.width
+    assert 0 <= extent.x0 and extent.x1 <= figure.bbox.width and extent.y1 <= figure.bbox.height
+    assert heading_bottom == pytest.approx(extent.y0 / figure.bbox.height, rel=1e-12)
+    assert label.get_text().split() == heading.split()
+    assert HEADING_LEAST_PT <= label.get_fontsize() <= default_pt
+    if wrap is not None:
+        assert label.get_fontsize() == HEADING_LEAST_PT
+        assert max(map(len, label.get_text().splitlines())) <= wrap
+    if size_px == 720 and title is None:
+        assert (wrap, label.get_fontsize()) == (None, default_pt)
+    if size_px == 100:  # 50 characters do not fit an inch at 4 pt
+        assert wrap is not None
+
+
 def test_a_failed_instance_is_held_at_its_last_shape_in_an_animation():
     """A failed instance's records are NaN from its failure on, and its panel went empty
     without a word (an audit, 2026-12): its frames hold the last finite shape (the panel's
