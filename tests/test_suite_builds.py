@@ -32,6 +32,20 @@ def test_the_last_summary_line_gives_the_counts_and_seconds(suite_builds, line, 
     assert suite_builds.last_line_figures(output) == expected
 
 
+def test_the_failed_tests_are_named_from_the_short_summary(suite_builds):
+    """Every run of the suite at 723010f and bff1951 on 2026-12-03 reported one failure that
+    the table could not name (results/suite_time_since_stop61): FAILED and ERROR lines give
+    the node ids, in order; a test whose own output mentions FAILED mid-line is not one."""
+    output = ("..F.E [100%]\nsome test printed: FAILED to connect\n"
+              "=== short test summary info ===\n"
+              "FAILED tests/model/test_a.py::test_one[x-1] - AssertionError: 1 != 2\n"
+              "ERROR tests/studies/test_b.py::test_two - RuntimeError: boom\n"
+              "1 failed, 3 passed, 1 error in 2.0s\n")
+    assert suite_builds.failed_tests(output) == \
+        "tests/model/test_a.py::test_one[x-1] tests/studies/test_b.py::test_two"
+    assert suite_builds.failed_tests("3 passed in 1.0s\n") == ""
+
+
 def test_an_output_without_a_summary_line_is_refused(suite_builds):
     with pytest.raises(ValueError, match="no pytest summary line"):
         suite_builds.last_line_figures("collected 0 items\nINTERNALERROR\n")

@@ -4,7 +4,7 @@ about the suite's time rests on. Each build is a git worktree at its commit besi
 this checkout's `../shared` (as CI places it); the rounds alternate the builds, the second
 round in the opposite order, so that a drift of the machine's speed falls on both. Writes
 `suite.csv` into --out (one row per run: build, commit, round, wall and pytest's own seconds,
-the counts of its last line) with a provenance sidecar.
+the counts of its last line, the node ids of the tests that failed) with a provenance sidecar.
 
     python tools/suite_builds.py --before b62d281 --after HEAD --rounds 3 --out DIR
 """
@@ -47,6 +47,15 @@ def last_line_figures(output: str) -> dict:
     return figures
 
 
+def failed_tests(output: str) -> str:
+    """The node ids of the tests that failed or errored, from the short summary of `pytest -q`
+    ("FAILED tests/x.py::test_y - AssertionError: ..."), joined by spaces in the summary's
+    order ("" for none): a run with a failure says which, not only how many."""
+    ids = [line.split()[1] for line in output.splitlines()
+           if line.startswith(("FAILED ", "ERROR ")) and len(line.split()) > 1]
+    return " ".join(ids)
+
+
 def round_order(builds, round_number: int) -> list:
     """The builds in the order of this round: as given in odd rounds, reversed in even ones."""
     return list(builds) if round_number % 2 else list(reversed(builds))
@@ -60,7 +69,8 @@ def run_suite(tree: Path) -> dict:
                              cwd=tree, capture_output=True, text=True,
                              env={**os.environ, "HOME": home, "PYTHONPATH": str(tree)})
         wall = time.perf_counter() - started
-    return {"wall_s": wall, "returncode": run.returncode, **last_line_figures(run.stdout)}
+    return {"wall_s": wall, "returncode": run.returncode, **last_line_figures(run.stdout),
+            "failed_tests": failed_tests(run.stdout)}
 
 
 def main(argv=None):
