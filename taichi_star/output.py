@@ -484,7 +484,7 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
     # with it, or they would run into it
     full_pt = label.get_fontsize()
     wrap, heading_bottom = _fit_heading(fig, label, heading_at(times[-1]))
-    label.set_text("")  # the panels are placed below it by `top`, as before the fit
+    label.set_text("")  # empty while the panels are placed below `top`, as before the fit
     panel_pt = max(HEADING_LEAST_PT, PANEL_TITLE_PT * label.get_fontsize() / full_pt)
     low = np.nanmin(shapes, axis=(0, 1, 2))
     high = np.nanmax(shapes, axis=(0, 1, 2))
