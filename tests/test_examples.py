@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pytest
 
 import taichi_star as ts
 
@@ -35,6 +36,7 @@ def test_sweep_alpha_writes_the_library_table_and_a_plot(tmp_path):
     assert (tmp_path / "sweep_alpha.png").stat().st_size > 1000
 
 
+@pytest.mark.slow
 def test_compare_presets_prints_both_presets_for_the_five_gaits(tmp_path):
     output = run_example("compare_presets.py", tmp_path)
     for gait in ("A1", "A1+A2", "A1+A3", "A1+A4", "A1+A3+A5"):
@@ -43,6 +45,7 @@ def test_compare_presets_prints_both_presets_for_the_five_gaits(tmp_path):
     assert "directions as in the paper:" in output
 
 
+@pytest.mark.slow
 def test_fit_with_gradients_recovers_the_twin_experiments_values(tmp_path):
     """The exact derivatives it prints agree with the central differences it prints (whole
     runs at h = 1e-4 of α, plain simulate calls) to 1e-5, the sensitivities' stated accuracy,

@@ -2,6 +2,7 @@
 damping, series joints, shared actuated ends): the five paper gaits over one cycle."""
 
 import numpy as np
+import pytest
 
 import taichi_star as ts
 
@@ -10,6 +11,7 @@ SPEED_RESOLUTION_MM_S = 0.5
 """The speed-error metric's floor: errors are judged relative to max(|v|, 0.5 mm/s)."""
 
 
+@pytest.mark.slow
 def test_speeds_converge_at_second_order_in_n_arc():
     """Observed order p = log2(|v18 − v36| / |v36 − v72|) ≥ 1.7 for every gait whose mesh
     differences are resolved: a gait whose n_arc-18 error (against the Richardson limit of

@@ -63,6 +63,7 @@ def test_a_coast_after_the_pulse_keeps_its_sensitivities(taichi_cpu):
                                                    SolverConfig(**TIGHT), ("alpha",)))
 
 
+@pytest.mark.slow
 def test_a_glide_does_not_drift_the_tangents_rigid_motion(taichi_cpu):
     """With damping (the stiffness blocks ×(1 + τ/h)) and the rods' linear drag (a long glide),
     the Jacobian's column sums over the stiffness blocks keep a rounding that repeats from step

@@ -132,6 +132,7 @@ def test_wake_sensitivities_equal_finite_differences():
     assert_matches_differences(table)
 
 
+@pytest.mark.slow
 def test_wake_sensitivities_with_bdf2_and_adaptive_steps():
     """BDF2 (the water's rate from its last two values) with adaptive steps held at 1 ms, so
     that every run takes the same 100 steps (the frozen step sequence the differences see)."""

@@ -17,6 +17,9 @@ import pytest
 import taichi_star as ts
 from taichi_star.batch import RunStore, run_batch
 
+# every test starts worker processes and waits on signals: the slow tier
+pytestmark = pytest.mark.slow
+
 SOLVER = ts.SolverConfig(dt=2e-3)
 TINY = dict(n_arc=6, n_limb=2)
 

@@ -15,6 +15,7 @@ from studies import bench, cli, work_precision
 from studies.__main__ import main as studies_main
 
 
+@pytest.mark.slow
 def test_bench_quick(tmp_path, monkeypatch):
     written = []  # the row counts of every bench.csv written, in order
     write_csv = cli.Output.write_csv
@@ -86,6 +87,7 @@ def test_bench_quick(tmp_path, monkeypatch):
     assert (tmp_path / "bench.png").stat().st_size > 1000
 
 
+@pytest.mark.slow
 def test_the_plain_call_of_another_jacobian_mode_is_that_call_made_directly():
     """`--plain-jacobians lagged`: the plain (and sensitivities) section's call with
     SolverConfig(jacobian="lagged"), its iterations, factorisations and digest those of the same

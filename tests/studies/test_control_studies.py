@@ -27,6 +27,7 @@ def primitives_run(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_primitives_quick_writes_the_measurement_a_plot_and_provenance(primitives_run):
     table = pd.read_csv(primitives_run / "primitives.csv")
     assert len(table) == 255 and (table["status"] == "ok").all()
@@ -42,6 +43,7 @@ def test_primitives_quick_writes_the_measurement_a_plot_and_provenance(primitive
         assert sidecar["details"] == {"cycles": 2, "first_cycle": 1, "glide_cycles": 1}
 
 
+@pytest.mark.slow
 def test_primitives_quick_glides_follow_the_symmetries(primitives_run):
     """The glides after 1 and 2 firings in a row (one cycle of coasting under --quick): an
     image gait glides as its class representative turned by the symmetry, a symmetric gait not
@@ -68,6 +70,7 @@ def test_primitives_quick_glides_follow_the_symmetries(primitives_run):
     np.testing.assert_array_equal(table.loc[second.index, y], second["dy_body_mm"])
 
 
+@pytest.mark.slow
 def test_primitives_quick_equals_the_library_measurement(primitives_run):
     """The CSV is `measure_primitives` of the same robot and step (the library's own tests
     check the measurement)."""
@@ -80,6 +83,7 @@ def test_primitives_quick_equals_the_library_measurement(primitives_run):
         np.testing.assert_allclose(row[column], expected[column], rtol=1e-9, err_msg=column)
 
 
+@pytest.mark.slow
 def test_plan_quick_with_given_primitives(primitives_run, tmp_path):
     primitives = str(primitives_run / "primitives.csv")
     code = studies_main(["plan", *QUICK, "--primitives", primitives, "--directions", "2",
@@ -102,6 +106,7 @@ def test_plan_quick_with_given_primitives(primitives_run, tmp_path):
             Path(primitives).read_bytes()).hexdigest() and sidecar["study"] == "plan"
 
 
+@pytest.mark.slow
 def test_plan_refuses_primitives_of_another_robot(primitives_run, tmp_path, capsys):
     """The paper robot's table drove the identified one without a word, reaching 0 of 9
     goals (an audit): the table's sidecar records its robot, and another is refused."""

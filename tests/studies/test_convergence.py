@@ -32,6 +32,7 @@ def test_richardson_limit_and_order_are_exact_for_a_power_law(order):
     assert table.n_nodes.tolist()[:3] == [193, 337, 625]
 
 
+@pytest.mark.slow
 def test_quick_run_writes_table_and_plot(tmp_path):
     table = convergence.main(["--quick", "--out", str(tmp_path), "--no-progress"])
     assert {"observed_order", "limit_mm_s", "relative_error", "n_nodes"} <= set(table.columns)

@@ -145,6 +145,7 @@ def test_invalid_arguments_fail_before_compute(no_compute, tmp_path, capsys, arg
     assert error.count("\n") == 1 and "Traceback" not in error
 
 
+@pytest.mark.slow
 def test_quick_run_against_a_direct_simulation(tmp_path, capsys, monkeypatch):
     # every run long enough for a progress bar of its own: --no-progress must still show none
     # (a long run's evaluations each showed one)
@@ -359,6 +360,7 @@ def test_periods_from_the_strokes_refuse_what_they_would_override(tmp_path, caps
     assert len(error.strip().splitlines()) == 1 and not out.exists()
 
 
+@pytest.mark.slow
 def test_a_reassessed_fit_gets_the_tables_of_a_fresh_run(tmp_path, monkeypatch, capsys):
     """--reassess reads a finished fit back and does everything after it again: a record
     stored before eeefbb8 (its definition without the stroke alignment) whose tables were

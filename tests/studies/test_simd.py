@@ -28,6 +28,7 @@ def paper_plan():
     return EngineProfile([StarParams.preset("paper")], SolverConfig()).elimination_plan
 
 
+@pytest.mark.slow
 def test_simd_quick(tmp_path):
     # f64 only (suite time: each form compiles a kernel); f32 lanes are checked in the bending
     # assembly below, where their packed arithmetic rounds as in f64
@@ -55,6 +56,7 @@ def test_simd_quick(tmp_path):
     assert (tmp_path / "simd.png").stat().st_size > 1000
 
 
+@pytest.mark.slow
 def test_simd_quick_assemblies_in_f32(tmp_path):
     # the bending assembly through the study (f64, and the rod drag's, are tested directly
     # below; the rod drag's f32 forms through the study were left out for the suite's time:

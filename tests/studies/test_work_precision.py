@@ -36,6 +36,7 @@ def quick_run(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_quick_rows_and_a_direct_simulation(quick_run):
     rows = pd.read_csv(quick_run / "work_precision.csv")
     summary = pd.read_csv(quick_run / "work_precision_summary.csv")
@@ -56,6 +57,7 @@ def test_quick_rows_and_a_direct_simulation(quick_run):
     assert (quick_run / "work_precision.png").stat().st_size > 1000
 
 
+@pytest.mark.slow
 def test_quick_limits_and_errors_recomputed_from_the_speeds(quick_run):
     rows = pd.read_csv(quick_run / "work_precision.csv")
     gaits = list(wp.QUICK_GAITS)
@@ -98,6 +100,7 @@ def test_quick_limits_and_errors_recomputed_from_the_speeds(quick_run):
                 assert config["space_error"].isna().all()
 
 
+@pytest.mark.slow
 def test_quick_summary_and_timing(quick_run):
     rows = pd.read_csv(quick_run / "work_precision.csv")
     summary = pd.read_csv(quick_run / "work_precision_summary.csv")
