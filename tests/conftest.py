@@ -53,12 +53,13 @@ def pytest_addoption(parser):
 
 
 FIRST = (
-    # these re-initialise Taichi (the kernel optimisation switched on, f32): every engine the
+    # these re-initialise Taichi (the kernel optimisation switched on, f32: the bench and simd
+    # quick runs, in the slow tier, and test_reliability's precision switch): every engine the
     # worker compiled before is dropped, and the files after them compile theirs again
     "tests/studies/test_bench.py", "tests/studies/test_simd.py",
     "tests/model/test_reliability.py",
-    # then the longest files (measured: 20-100 s each on 2 cores), so that no long file is left
-    # to run alone at the end
+    # then the longest files (measured on both tiers: 20-100 s each on 2 cores), so that no long
+    # file is left to run alone at the end
     "tests/model/test_engine.py", "tests/model/test_wake.py", "tests/model/test_sensitivities.py",
     "tests/model/test_envs.py", "tests/studies/test_distributed.py",
     "tests/model/test_simulator.py", "tests/studies/test_work_precision.py",

@@ -55,3 +55,29 @@ def test_rounds_alternate_the_order_of_the_builds(suite_builds):
     builds = {"before": "a", "after": "b"}
     assert [suite_builds.round_order(builds, n) for n in (1, 2, 3)] == [
         ["before", "after"], ["after", "before"], ["before", "after"]]
+
+
+def test_a_runs_output_goes_to_its_log_and_the_row_names_it(suite_builds, tmp_path, monkeypatch):
+    """The log holds pytest's stdout then its stderr whole (the traceback of a failure that the
+    row only names); the run had the tree on PYTHONPATH and a HOME of its own (an empty Taichi
+    cache), gone after it."""
+    stdout = ("F. [100%]\n___ test_x ___\nE   Failed: SIGINT handler SIG_IGN\n"
+              "FAILED tests/test_x.py::test_x - Failed: SIGINT handler SIG_IGN\n"
+              "1 failed, 1 passed in 3.5s\n")
+    stderr = "a warning on stderr\n"
+    seen = {}
+
+    def fake_run(command, cwd, capture_output, text, env):
+        seen.update(cwd=cwd, home=env["HOME"], pythonpath=env["PYTHONPATH"])
+        assert Path(env["HOME"]).is_dir()
+        return suite_builds.subprocess.CompletedProcess(command, 1, stdout, stderr)
+
+    monkeypatch.setattr(suite_builds.subprocess, "run", fake_run)
+    tree = tmp_path / "tree"
+    row = suite_builds.run_suite(tree, tmp_path / "suite_after_round1.log")
+    assert (tmp_path / "suite_after_round1.log").read_text() == stdout + stderr
+    assert row["log"] == "suite_after_round1.log"
+    assert (row["returncode"], row["passed"], row["failed"], row["failed_tests"]) == (
+        1, 1, 1, "tests/test_x.py::test_x")
+    assert seen["cwd"] == tree and seen["pythonpath"] == str(tree)
+    assert seen["home"] != str(Path.home()) and not Path(seen["home"]).exists()

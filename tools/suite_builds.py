@@ -4,7 +4,8 @@ about the suite's time rests on. Each build is a git worktree at its commit besi
 this checkout's `../shared` (as CI places it); the rounds alternate the builds, the second
 round in the opposite order, so that a drift of the machine's speed falls on both. Writes
 `suite.csv` into --out (one row per run: build, commit, round, wall and pytest's own seconds,
-the counts of its last line, the node ids of the tests that failed) with a provenance sidecar.
+the counts of its last line, the node ids of the tests that failed, the name of its log:
+pytest's output, beside the table) with a provenance sidecar.
 
     python tools/suite_builds.py --before b62d281 --after HEAD --rounds 3 --out DIR
 """
@@ -61,16 +62,19 @@ def round_order(builds, round_number: int) -> list:
     return list(builds) if round_number % 2 else list(reversed(builds))
 
 
-def run_suite(tree: Path) -> dict:
-    """The README's test command in `tree` with an empty Taichi cache (a fresh HOME)."""
+def run_suite(tree: Path, log: Path) -> dict:
+    """The README's test command in `tree` with an empty Taichi cache (a fresh HOME); its
+    output (stdout, then stderr) goes to `log`, whose name the row keeps: a failure's traceback
+    is there to read (one that the table only named took a rerun to explain, 2026-12-03)."""
     with tempfile.TemporaryDirectory(prefix="suite_home_") as home:
         started = time.perf_counter()
         run = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider"],
                              cwd=tree, capture_output=True, text=True,
                              env={**os.environ, "HOME": home, "PYTHONPATH": str(tree)})
         wall = time.perf_counter() - started
+    log.write_text(run.stdout + run.stderr)
     return {"wall_s": wall, "returncode": run.returncode, **last_line_figures(run.stdout),
-            "failed_tests": failed_tests(run.stdout)}
+            "failed_tests": failed_tests(run.stdout), "log": log.name}
 
 
 def main(argv=None):
@@ -98,7 +102,9 @@ def main(argv=None):
                 for build in round_order(builds, round_number):
                     print(f"round {round_number}, {build} ({builds[build]})", flush=True)
                     rows.append({"build": build, "commit": builds[build], "round": round_number,
-                                 **run_suite(trees[build]), **machine})
+                                 **run_suite(trees[build],
+                                             out / f"suite_{build}_round{round_number}.log"),
+                                 **machine})
                     print(f"  {rows[-1]['wall_s']:.1f} s", flush=True)
         finally:
             for tree in trees.values():
