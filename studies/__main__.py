@@ -8,13 +8,18 @@ import sys
 from pathlib import Path
 
 try:
-    import taichi_star
-    from taichi_star.batch import RunStoreError
-    from taichi_star.extras import missing_extra
+    # taichi_star holds a Ctrl-C back while its libraries load (`interrupts`), and so do the
+    # studies while theirs load: raised once they have, never lost nor turned into an ImportError
+    from taichi_star.interrupts import deferred_interrupt
 
-    from . import EXTRA_OF_STUDY, study_names
-    from . import cli
-    from .cli import StudyArgumentError, StudyOutputError, configure_logging, interrupted
+    with deferred_interrupt():
+        import taichi_star
+        from taichi_star.batch import RunStoreError
+        from taichi_star.extras import missing_extra
+
+        from . import EXTRA_OF_STUDY, study_names
+        from . import cli
+        from .cli import StudyArgumentError, StudyOutputError, configure_logging, interrupted
 except KeyboardInterrupt:
     # Ctrl-C while the libraries load (a second or more): one line, as during a study, not the
     # traceback of pandas' or pyarrow's import (an audit, 2026-12)

@@ -9,19 +9,23 @@ import os
 
 os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "false")
 
-# the package's modules import taichi, which reads the variable above at its own import
+# the package's modules import taichi, which reads the variable above at its own import.
+# A Ctrl-C meanwhile is raised once they have loaded (`interrupts`: Taichi's import-time code
+# swallowed some)
+from .interrupts import deferred_interrupt
 
-from .actuation import CurvatureProfile
-from .gait import Gait, symmetry_classes
-from .params import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS, JACOBIANS, PER_ACTUATOR_FIELDS,
-                     PRESETS, SOLVER_RANGES, STAR_RANGES, SolverConfig, StarParams,
-                     allowed_values)
-from .profiling import EngineProfile
-from .runtime import available_archs
-from .driver import RunTiming, fewest_steps
-from .simulation import SimulationResult, simulate
-from .timegrid import MAX_STEPS_PER_INSTANCE, check_work
-from .simulator import Simulator, SimulatorSnapshot
+with deferred_interrupt():
+    from .actuation import CurvatureProfile
+    from .gait import Gait, symmetry_classes
+    from .params import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS, JACOBIANS,
+                         PER_ACTUATOR_FIELDS, PRESETS, SOLVER_RANGES, STAR_RANGES, SolverConfig,
+                         StarParams, allowed_values)
+    from .profiling import EngineProfile
+    from .runtime import available_archs
+    from .driver import RunTiming, fewest_steps
+    from .simulation import SimulationResult, simulate
+    from .timegrid import MAX_STEPS_PER_INSTANCE, check_work
+    from .simulator import Simulator, SimulatorSnapshot
 
 __version__ = "0.3.0"
 

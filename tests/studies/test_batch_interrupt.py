@@ -35,18 +35,6 @@ def worker_processes() -> set:
     return workers
 
 
-@pytest.fixture
-def interruptible():
-    """SIGINT raising KeyboardInterrupt in this process for the test, as in a terminal or a
-    notebook: a suite started in the background by a non-interactive shell (`pytest ... &`)
-    inherits SIGINT ignored (POSIX), and Python leaves an ignored SIGINT ignored, so the signal
-    never reached the run: every whole-suite run of tools/suite_builds.py, started so, failed
-    here with SIG_IGN in its message (2026-12-03)."""
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
-    yield
-    signal.signal(signal.SIGINT, previous)
-
-
 def test_an_interrupt_stops_the_workers_at_once_and_keeps_the_stored_chunk(tmp_path,
                                                                             interruptible):
     # a short chunk (20 cycles of 0.3 s: 3,000 steps, ~0.05 s once compiled) and a long one
