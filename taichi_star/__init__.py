@@ -26,6 +26,7 @@ with deferred_interrupt():
     from .simulation import SimulationResult, simulate
     from .timegrid import MAX_STEPS_PER_INSTANCE, check_work
     from .simulator import Simulator, SimulatorSnapshot
+del deferred_interrupt  # the package's namespace is its public API (`__all__`)
 
 __version__ = "0.3.0"
 
