@@ -308,6 +308,15 @@ class StarParams:
     (`physics.wake`)."""
     wake_time: float = parameter(1.0, "s", 0.0, 1e3, lowest_included=False)
     """Exchange time τ_w of the entrained water, s: its mass per unit height is c_w·τ_w."""
+    stroke_warming: float = parameter(0.0, "1", 0.0, 10.0)
+    """Warming w of the actuators' stroke (-): a firing's gain on its curvature change is
+    multiplied by 1 + w·θ, θ the heat the actuator keeps from its earlier firings (each left
+    one unit, decaying as exp(−t/τ_c), `cooling_time`): an SMA wire in its silicone cools
+    between pulses for longer than a period's rest, so a later pulse starts warmer and
+    transforms more (`physics.bending`). 0 = off (the paper's model: every pulse the first)."""
+    cooling_time: float = parameter(10.0, "s", 0.0, 1e3, lowest_included=False)
+    """Cooling time τ_c of the heat an actuator keeps between its firings, s (with
+    `stroke_warming`)."""
     actuator_gains: Tuple[float, ...] = per_actuator(1.0, "1",
                                                      f"8 numbers in [0, {MAX_ACTUATOR_GAIN:g}]")
     """Gain g_k (-) of actuator A_k (index k − 1) on its commanded curvature change: it follows

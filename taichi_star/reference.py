@@ -499,15 +499,24 @@ class ReferenceSimulator:
     def driven_curvature(self, t) -> np.ndarray:
         """K̄ (8,) in 1/m that the actuators A1..A8 follow, when fired, at time t (s): the
         profile with its closure at the time since the cycle's start less each actuator's delay
-        (K̄(0) during the delay), its change from K̄(0) scaled by each actuator's gain."""
+        (K̄(0) during the delay), its change from K̄(0) scaled by each actuator's gain (warmed by
+        the heat the earlier cycles' firings left, with `stroke_warming`)."""
         p = self.params
         rest = p.actuator_profile.rest_curvature
         since_firing = math.fmod(t, p.period)
+        warming = 1.0
+        if p.stroke_warming != 0.0:
+            # the heat kept from the earlier firings of this cycle's: θ_0 = 0,
+            # θ_k = (θ_{k−1} + 1)·exp(−T/τ_c)
+            heat = 0.0
+            for _ in range(round((t - since_firing) / p.period)):
+                heat = (heat + 1.0) * math.exp(-p.period / p.cooling_time)
+            warming = 1.0 + p.stroke_warming * heat
         driven = np.empty(len(p.actuator_gains))
         for actuator, (gain, delay) in enumerate(zip(p.actuator_gains, p.actuator_delays)):
             curvature = float(p.actuator_profile.cycle_curvature(
                 max(since_firing - delay, 0.0), p.period, p.profile_closure))
-            driven[actuator] = rest + gain * (curvature - rest)
+            driven[actuator] = rest + gain * warming * (curvature - rest)
         return driven
 
     def natural_curvature(self, t):

@@ -11,6 +11,14 @@ Per-actuator heterogeneity (`actuator_gains`, `actuator_delays`): actuator A_k f
 K̄(0) + g_k·(K̄(max(τ − d_k, 0)) − K̄(0)). The gain and the delay are applied only where they
 differ from 1 and 0, so that the default actuators compute exactly the arithmetic they computed
 without them (K̄(0) + 1·(K̄ − K̄(0)) is not always K̄ to the last bit).
+
+The stroke's warming (`stroke_warming` w, `cooling_time` τ_c): a firing's gain is g_k·(1 + w·θ),
+θ the heat the actuator keeps from its earlier firings: 0 at its first firing, and at each later
+one θ' = (θ + 1)·exp(−Δt/τ_c), Δt the time since the firing before (each firing adds one unit,
+which decays between firings). The term keeps θ per actuator as history, updated at the start
+of a step where the actuator's firing time has moved (`begin_step`), with the θ of the firing
+before for the times before the new one; a firing that a later one replaces before any step has
+begun from it adds nothing. Applied only where w differs from 0.
 """
 
 import numpy as np
@@ -116,11 +124,15 @@ class Bending(StrainTerm):
             "gait_mask": np.stack([Gait.parse(p.gait).mask for p in params]),
             "actuator_gain": np.array([p.actuator_gains for p in params]),
             "actuator_delay": np.array([p.actuator_delays for p in params]),
+            "stroke_warming": np.array([p.stroke_warming for p in params]),
+            "cooling_rate": np.array([1.0 / p.cooling_time for p in params]),
         }
     """gait_mask (B, 8): the actuators an instance fires (its gait, or all eight for a
     commanded batch: `commanded`); the firing itself is in the batch state (fire times).
     actuator_gain (B, 8) (-) and actuator_delay (B, 8) (s): each actuator's gain on its
-    curvature change and the delay of its profile after a firing."""
+    curvature change and the delay of its profile after a firing. stroke_warming (B,) (-)
+    and cooling_rate (B,) (1/s, 1/τ_c): the warming of the stroke by the heat kept from earlier
+    firings."""
 
     @staticmethod
     def commanded(coefficients):
@@ -147,8 +159,12 @@ class Bending(StrainTerm):
 
     @staticmethod
     def history(topology, terms=()):
-        # K̄ of each actuator at the start and the end of the current step
-        return {"start_curvature": (N_ACTUATORS,), "end_curvature": (N_ACTUATORS,)}
+        # K̄ of each actuator at the start and the end of the current step; the heat θ each
+        # actuator keeps, of its current firing and of the one before, and the firing time and
+        # count (0 or 1: whether one has been counted) the current θ belongs to
+        return {"start_curvature": (N_ACTUATORS,), "end_curvature": (N_ACTUATORS,),
+                "fire_heat": (N_ACTUATORS,), "previous_fire_heat": (N_ACTUATORS,),
+                "heat_fire_time": (N_ACTUATORS,), "heat_counted": (N_ACTUATORS,)}
 
     def build(self, topology):
         (self.actuated,) = self.configuration_switches
@@ -206,8 +222,10 @@ class Bending(StrainTerm):
         at its switch, which a replica pair at ±ε would straddle for the steps that end within
         ε of it."""
         fired = self.assembly.fire_time[b, m]
+        heat = self.fire_heat[b, m]
         if time < fired:
             fired = self.assembly.previous_fire_time[b, m]
+            heat = self.previous_fire_heat[b, m]
         value = NOT_FIRED
         if fired >= 0.0:
             since = time - fired
@@ -220,6 +238,8 @@ class Bending(StrainTerm):
                 tau, _ = self.since_firing(b, m, since)
                 value = self.profile_curvature(b, tau)
             gain = self.actuator_gain[b, m]
+            if self.stroke_warming[b] != 0.0:
+                gain *= 1.0 + self.stroke_warming[b] * heat
             if gain != 1.0:
                 value = self.profile_rest[b] + gain * (value - self.profile_rest[b])
         return value
@@ -228,8 +248,26 @@ class Bending(StrainTerm):
     def begin_step(self, b, start_time, end_time, h, ratio, rate_gain, use_history):
         if ti.static(self.actuated):
             for m in range(N_ACTUATORS):
+                self.count_firing(b, m)
                 self.start_curvature[b, m] = self.actuator_curvature(b, m, start_time)
                 self.end_curvature[b, m] = self.actuator_curvature(b, m, end_time)
+
+    @ti.func
+    def count_firing(self, b, m):
+        """Count actuator m's current firing into instance b's heat θ if it has not been: θ of
+        the firing before becomes `previous_fire_heat`, and the new θ is 0 for a first firing,
+        else (θ + 1)·exp(−Δt/τ_c) with Δt the time since the firing last counted. Counting a
+        firing again changes nothing, so a step redone from its start finds θ as it was."""
+        fired = self.assembly.fire_time[b, m]
+        if fired >= 0.0 and (self.heat_counted[b, m] == 0.0 or fired != self.heat_fire_time[b, m]):
+            heat = 0.0
+            if self.heat_counted[b, m] != 0.0:
+                heat = (self.fire_heat[b, m] + 1.0) * ti.exp(
+                    -(fired - self.heat_fire_time[b, m]) * self.cooling_rate[b])
+            self.previous_fire_heat[b, m] = self.fire_heat[b, m]
+            self.fire_heat[b, m] = heat
+            self.heat_fire_time[b, m] = fired
+            self.heat_counted[b, m] = 1.0
 
     @ti.func
     def natural_curvature(self, b, t, at_start):

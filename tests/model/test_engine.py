@@ -288,14 +288,19 @@ ACCURATE_PHYSICS_BATCH = [
     # tolerance)
     ts.StarParams(gait="A1+A2", wake_coupling=5.0, wake_time=0.05, hub_linear_drag=2.0,
                   **COARSE),
+    # the stroke's warming: the second firing, at 0.2 s, with the heat exp(−0.2/0.3) = 0.51 the
+    # first left, its stroke 1 + 0.8·0.51 = 1.41 times the first's (on A2's gain of 0.9 too)
+    ts.StarParams(gait="A1+A2", period=0.2, stroke_warming=0.8, cooling_time=0.3,
+                  actuator_gains=(1.0, 0.9, 1, 1, 1, 1, 1, 1), **COARSE),
 ]
 
 
 @pytest.mark.parametrize("integrator", ["euler", "bdf2"])
 def test_engine_matches_reference_with_damping_joints_ends_closure_and_extensions(integrator, arch):
     """Material damping (with the integrator's own strain rate), series joints, shared ends,
-    the ramp closure, linear drag, per-actuator gains and delays and the entrained water (two
-    more unknowns of each reference step, eliminated in the engine), implemented independently
+    the ramp closure, linear drag, per-actuator gains and delays, the entrained water (two
+    more unknowns of each reference step, eliminated in the engine) and the stroke's warming
+    (the engine counts firings as they come, the reference sums the cycles), implemented independently
     on both sides, agree to ≤ 1e-10 relative on
     positions after 130 steps of 2 ms (crossing the cycle boundaries of the 0.2 and 0.25 s
     periods). Newton converges both to 1e-12 m; what remains is round-off (~1e-14 m)."""
