@@ -7,6 +7,7 @@ well they predict what they were not fitted to.
                                    [--train-cycles 1:3] [--validate-cycles 4:6]
                                    [--popsize P] [--max-generations G] [--restarts R]
                                    [--fold-generations F] [--seed S] [--sigma0 0.25] [--dt S]
+                                   [--start IDENTIFIED_CSV]
                                    [--refine-top K] [--refine-popsize P2]
                                    [--refine-generations G2]
                                    [--budget-hours 2] [--resume | --reassess]
@@ -50,7 +51,10 @@ Two stages. The *screen* fits every candidate at the budget above (`--popsize`,
 `--max-generations`); it is too small to converge a form of eight or more axes, so its rank is
 partly the budget's. The *refine* stage fits the `--refine-top` best screened forms again, from
 the same start, at a larger budget (`--refine-popsize`, `--refine-generations`) and assesses
-them the same way. The ranking puts the refined forms first, in their own order, then every
+them the same way. The start is the base model's values, or with `--start` those of an
+earlier run's identified.csv (to continue a fit that stopped short of its optimum): the base
+model stays the prior that a held-out fold keeps, so a fold never keeps a value fitted to the
+gait it holds out. The ranking puts the refined forms first, in their own order, then every
 screened form in its own: rank 1, the form the `identified` preset is read from, is the best
 refined form (the best screened one with `--refine-top 0`).
 
@@ -81,6 +85,7 @@ to; a candidate that would start after the budget has run out is skipped with a 
 
 from __future__ import annotations
 
+import ast
 import dataclasses
 import hashlib
 import json
@@ -199,6 +204,35 @@ class Candidate:
                for text in self.fit.split()]
         identify.check_box(box, self.model(base), f"candidate {self.name}: fit")
         return box
+
+
+def read_start(path, base: StarParams) -> StarParams:
+    """--start: the model of an earlier run's identified.csv (columns field and value, the value
+    as Python text) on top of `base`; StudyArgumentError naming --start for a file that cannot
+    be read, a field StarParams does not have or a value out of its range."""
+    try:
+        table = pd.read_csv(path, dtype=str, keep_default_na=False)
+    except (OSError, pd.errors.ParserError) as error:
+        raise cli.StudyArgumentError(f"--start {path}: cannot read it ({error})") from None
+    missing = {"field", "value"} - set(table.columns)
+    if missing or not len(table):
+        raise cli.StudyArgumentError(f"--start {path}: not an identified.csv (rows of field, "
+                                     f"value; no column(s) {', '.join(sorted(missing))})"
+                                     if missing else f"--start {path}: no rows")
+    known = set(StarParams.field_names())
+    fields = {}
+    for name, text in zip(table["field"], table["value"]):
+        if name not in known or name == "gait":
+            raise cli.StudyArgumentError(f"--start {path}: {name!r} is not a model field")
+        try:
+            fields[name] = ast.literal_eval(text)
+        except (ValueError, SyntaxError):
+            raise cli.StudyArgumentError(f"--start {path}: {name} = {text!r} is not a "
+                                         f"value") from None
+    try:
+        return base.replace(**fields)
+    except (ValueError, TypeError) as error:
+        raise cli.StudyArgumentError(f"--start {path}: {error}") from None
 
 
 def read_candidates(path) -> List[Candidate]:
@@ -323,15 +357,17 @@ def evaluate(box, units, model: StarParams, gaits: Sequence[str], setup: Setup) 
 
 def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMASettings,
                   fold_generations: int, setup: Setup, on_generation=None,
-                  progress: bool = False) -> dict:
-    """Fit one candidate and assess it (module docstring). Returns {"row": the result row
+                  progress: bool = False, start_model: Optional[StarParams] = None) -> dict:
+    """Fit one candidate and assess it (module docstring), the search started at
+    `start_model`'s values (--start; default the base model's). Returns {"row": the result row
     (without rank), "parameters", "gaits", "folds": tables, "best": the
     identified StarParams, "identified": its fields}."""
     start = time.perf_counter()
     model = candidate.model(base)
     box = candidate.box(base)
     gaits = list(setup.gaits)
-    fit = identify.minimise_cmaes(box, identify.start_units(box, model),
+    start_point = candidate.model(start_model) if start_model is not None else model
+    fit = identify.minimise_cmaes(box, identify.start_units(box, start_point),
                                   lambda u: evaluate(box, u, model, gaits, setup), settings,
                                   progress=progress, on_generation=on_generation)
     evaluations = fit.evaluations
@@ -573,13 +609,19 @@ def refined_candidates(screen: pd.DataFrame, runnable: Sequence[Candidate],
 
 
 def definition_of(candidate: Candidate, args, settings, base: StarParams,
-                  solver: SolverConfig, gaits, stroke_alignment: bool = True) -> str:
+                  solver: SolverConfig, gaits, stroke_alignment: bool = True,
+                  start_model: Optional[StarParams] = None) -> str:
     """SHA-256 of what defines a candidate's result (a resumed run reuses it only if equal). The
-    base model enters by its fields that differ from StarParams' defaults, so a field added to
-    StarParams later (a new model option, off by default) leaves earlier results reusable."""
+    base model (and --start's, where given) enters by its fields that differ from StarParams'
+    defaults, so a field added to StarParams later (a new model option, off by default) leaves
+    earlier results reusable."""
     defaults = StarParams()
-    base_changes = {f.name: repr(getattr(base, f.name)) for f in dataclasses.fields(base)
-                    if getattr(base, f.name) != getattr(defaults, f.name)}
+
+    def changes(model: StarParams) -> dict:
+        return {f.name: repr(getattr(model, f.name)) for f in dataclasses.fields(model)
+                if getattr(model, f.name) != getattr(defaults, f.name)}
+    base_changes = changes(base)
+    start = {} if start_model is None else {"start": changes(start_model)}
     # --phases enters only where it is not the default, which earlier results were made with
     phases = ({} if args.phases == "fitted" else
               {"phases": args.phases} | ({"stroke_alignment": STROKE_ALIGNMENT}
@@ -589,14 +631,15 @@ def definition_of(candidate: Candidate, args, settings, base: StarParams,
                        "settings": dataclasses.asdict(settings),
                        "fold_generations": args.fold_generations, "gaits": list(gaits),
                        "train": args.train_cycles, "validate": args.validate_cycles,
-                       "base": base_changes, "solver": repr(solver), **phases, **periods},
+                       "base": base_changes, "solver": repr(solver), **phases, **periods,
+                       **start},
                       sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 def stored_fit_of(done: Path, folder: Path, evaluations: str, candidate: Candidate, args,
-                  settings, base: StarParams, solver: SolverConfig,
-                  gaits) -> Optional[Tuple[dict, str]]:
+                  settings, base: StarParams, solver: SolverConfig, gaits,
+                  start_model: Optional[StarParams] = None) -> Optional[Tuple[dict, str]]:
     """--reassess: a candidate's finished fit, its record `done` (in `folder`/done/), with the
     text naming it (`evaluations`, the CSV of its evaluations in `folder`, and the commit that
     fitted them, from its sidecar) if it was fitted as today's run would fit
@@ -610,10 +653,11 @@ def stored_fit_of(done: Path, folder: Path, evaluations: str, candidate: Candida
     stored = json.loads(done.read_text())
     if stored["row"].get("status") != "ok":
         return None
-    definitions = {definition_of(candidate, args, settings, base, solver, gaits)}
+    definitions = {definition_of(candidate, args, settings, base, solver, gaits,
+                                 start_model=start_model)}
     if identify.parse_windows(args.train_cycles, args.validate_cycles)[0][0] == 1:
         definitions.add(definition_of(candidate, args, settings, base, solver, gaits,
-                                      stroke_alignment=False))
+                                      stroke_alignment=False, start_model=start_model))
     if stored["row"].get("definition") not in definitions:
         return None
     sidecar = folder / f"{evaluations}.json"
@@ -717,6 +761,10 @@ def build_parser():
     parser.add_argument("--restarts", type=int, default=1, quick=0,
                         help=f"extra CMA-ES runs from random points (multi-start, IPOP; at most "
                              f"{identify.MAX_RESTARTS})")
+    parser.add_argument("--start", default=None, metavar="CSV",
+                        help="start every search at the model of an earlier run's "
+                             "identified.csv (its fields on --preset's model; the prior that "
+                             "a held-out fold keeps stays --preset's)")
     parser.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
     parser.add_argument("--sigma0", type=float, default=0.25,
                         help="initial CMA-ES step in unit coordinates, in (0, 1] (default 0.25)")
@@ -778,6 +826,7 @@ def main(argv=None):
     train, validate = identify.parse_windows(args.train_cycles, args.validate_cycles)
     gaits = identify.measured_gaits(args.gaits)
     base = cli.base_params(args)
+    start_model = read_start(args.start, base) if args.start is not None else None
     candidates = select_candidates(args)
     if args.periods == "strokes":
         # the measured periods replace every model's own: a period asked for would be dropped
@@ -827,6 +876,10 @@ def main(argv=None):
                                            "refine_top": args.refine_top,
                                            "refine_cma": dataclasses.asdict(refine_settings),
                                            "fold_generations": args.fold_generations,
+                                           **({"start": {"file": str(args.start),
+                                                         "fields": identified_fields(
+                                                             start_model)}}
+                                              if start_model is not None else {}),
                                            **({"pulse_periods_s": periods} if periods
                                               else {})})
     progress = not args.no_progress
@@ -841,12 +894,14 @@ def main(argv=None):
         """One candidate at one stage: read back from done/ (--resume, same definition) or
         fitted, assessed and stored; skipped with a note once the budget is spent."""
         nonlocal first_fit_done
-        definition = definition_of(candidate, args, stage_settings, base, solver, gaits)
+        definition = definition_of(candidate, args, stage_settings, base, solver, gaits,
+                                   start_model=start_model)
         subfolder = "" if stage == "screen" else f"{stage}/"
         done = out.folder / "done" / subfolder / f"{candidate.name}.json"
         tables = (parameters, gait_tables, fold_tables)
         stored_fit = (stored_fit_of(done, out.folder, f"fits/{subfolder}{candidate.name}.csv",
-                                    candidate, args, stage_settings, base, solver, gaits)
+                                    candidate, args, stage_settings, base, solver, gaits,
+                                    start_model)
                       if args.reassess else None)
         if args.resume and done.exists():
             stored = json.loads(done.read_text())
@@ -899,7 +954,8 @@ def main(argv=None):
                                         setup, *stored_fit)
         else:
             result = fit_candidate(candidate, base, stage_settings, args.fold_generations,
-                                   setup, on_generation=on_generation, progress=progress)
+                                   setup, on_generation=on_generation, progress=progress,
+                                   start_model=start_model)
         first_fit_done = True
         result["row"].update(definition=definition, stage=stage)
         rows.append(result["row"])

@@ -439,3 +439,64 @@ def test_a_stored_fit_is_reassessed_only_if_fitted_as_today(tmp_path):
     earlier = definition()
     args.fold_generations = 3  # today's run would assess with other folds
     assert stored(earlier) is None
+
+
+def test_start_reads_an_identified_table_and_moves_only_the_search_start(tmp_path, monkeypatch):
+    """--start: the search begins at the identified.csv's values (the committed rank-1 fit
+    here), while the base model, the prior a held-out fold keeps, stays --preset's; the
+    definition names the start, so a resumed run does not reuse a fit started elsewhere."""
+    from pathlib import Path
+    committed = Path(__file__).resolve().parents[2] / "results" / "model_select" / "identified.csv"
+    base = StarParams.preset("paper")
+    start = model_select.read_start(committed, base)
+    table = pd.read_csv(committed, dtype={"value": str})
+    for name, text in zip(table["field"], table["value"]):
+        assert getattr(start, name) == ast.literal_eval(text)
+    candidate = model_select.Candidate("gains", "", "alpha=0.2:1.5 actuator_gains[4]=0.3:2")
+    box = candidate.box(base)
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def stub(box_, start_units, *args, **kwargs):
+        seen["start"] = start_units
+        raise Stop
+    monkeypatch.setattr(identify, "minimise_cmaes", stub)
+    setup = types.SimpleNamespace(gaits=("A1+A4",))
+    for start_model, expected in ((None, base), (start, start)):
+        with pytest.raises(Stop):
+            model_select.fit_candidate(candidate, base, identify.CMASettings(), 0, setup,
+                                       start_model=start_model)
+        np.testing.assert_array_equal(seen["start"], [box[0].unit(expected.alpha),
+                                                      box[1].unit(expected.actuator_gains[3])])
+    # the fitted start is not the prior: A4's unit coordinate moved from 1 to ~1.99
+    assert box[1].unit(start.actuator_gains[3]) > box[1].unit(base.actuator_gains[3])
+    args = types.SimpleNamespace(fold_generations=2, train_cycles="1:3", validate_cycles="4:6",
+                                 phases="fitted", periods="nominal")
+
+    def definition(start_model):
+        return model_select.definition_of(candidate, args, identify.CMASettings(), base,
+                                          SolverConfig(), ["A1"], start_model=start_model)
+    assert definition(None) != definition(start)
+    assert definition(start) == definition(model_select.read_start(committed, base))
+
+
+@pytest.mark.parametrize("text, message", [
+    (None, "cannot read it"),
+    ("field,value\n", "no rows"),
+    ("name,value\nalpha,1.0\n", "not an identified.csv (rows of field, value; no column(s) "
+                                "field)"),
+    ("field,value\nspeed,1.0\n", "'speed' is not a model field"),
+    ("field,value\nalpha,one\n", "alpha = 'one' is not a value"),
+    ("field,value\nalpha,-1.0\n", "alpha must be a real number in [0, 10], got -1.0"),
+])
+def test_a_bad_start_table_fails_before_compute(no_compute, tmp_path, capsys, text, message):
+    path = tmp_path / "identified.csv"
+    if text is not None:
+        path.write_text(text)
+    out = tmp_path / "out"
+    assert studies_main(["model_select", "--start", str(path), "--out", str(out), *QUICK]) == 2
+    error = capsys.readouterr().err
+    assert f"--start {path}: " in error and message in error, error
+    assert error.count("\n") == 1 and "Traceback" not in error
