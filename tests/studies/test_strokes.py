@@ -46,7 +46,10 @@ def test_quick_run_against_the_library(tmp_path):
     table = strokes.main(["--quick", "--out", str(tmp_path), "--no-progress"])
     written = pd.read_csv(tmp_path / "strokes.csv")
     assert written["gait"].tolist() == ["A1+A2"] and written["status"].tolist() == ["ok"]
-    pd.testing.assert_frame_equal(written, table, check_exact=False, rtol=1e-9)
+    # check_dtype off: the CSV keeps 10 significant digits, so a float that is a whole number
+    # (the identified model's fitted phase is 0 s on this track) reads back as an integer
+    pd.testing.assert_frame_equal(written, table, check_exact=False, rtol=1e-9,
+                                  check_dtype=False)
     row = written.iloc[0]
     trial = identification.measured_trial("A1+A2")
     measured = identification.strokes(trial.path)

@@ -475,21 +475,36 @@ def test_component_heights_are_all_off_or_all_in_their_range():
 
 
 def test_identified_preset_equals_the_committed_study_result():
-    """IDENTIFIED_FIELDS are the committed model_select run's identified.csv, to the 10
-    significant digits the preset keeps (so rtol 1e-9), field by field."""
+    """IDENTIFIED_FIELDS are the identified.csv of the committed continued fit that fits the
+    training cycles best among its seeds (results/model_select_continued/seed*/), to the 10
+    significant digits the preset keeps (so rtol 1e-9), field by field; and that fit started
+    at the model selection run's rank-1 point (results/model_select/identified.csv)."""
     import ast
+    import json
     from pathlib import Path
 
     import pandas as pd
 
     from taichi_star.params import IDENTIFIED_FIELDS
 
-    table = pd.read_csv(Path(__file__).resolve().parents[2] / "results" / "model_select"
-                        / "identified.csv")
+    results = Path(__file__).resolve().parents[2] / "results"
+    runs = sorted((results / "model_select_continued").glob("seed*"))
+    assert len(runs) == 3
+    train = [pd.read_csv(run / "model_select.csv").set_index("stage").loc["refine",
+                                                                          "train_objective"]
+             for run in runs]
+    best = runs[int(np.argmin(train))]
+    table = pd.read_csv(best / "identified.csv")
     assert set(table["field"]) == set(IDENTIFIED_FIELDS)
     for field, text in zip(table["field"], table["value"]):
         value = ast.literal_eval(str(text))
         assert np.asarray(IDENTIFIED_FIELDS[field]) == pytest.approx(np.asarray(value), rel=1e-9)
+    start = json.loads((best / "identified.csv.json").read_text())["details"]["start"]
+    assert start["file"] == "results/model_select/identified.csv"
+    started = pd.read_csv(results / "model_select" / "identified.csv")
+    for field, text in zip(started["field"], started["value"]):
+        assert np.asarray(start["fields"][field]) == pytest.approx(
+            np.asarray(ast.literal_eval(str(text))), rel=1e-15)
 
 
 def test_a_choice_field_given_an_array_or_a_list_names_the_field():
