@@ -7,18 +7,23 @@ residuals, against CMA-ES on the same objective, box and start, for two paramete
                                    [--starts 2] [--lbfgs-evaluations 8]
                                    [--least-squares-evaluations 8]
                                    [--cma-generations 8] [--polish-evaluations 0]
-                                   [--popsize P] [--seed S]
+                                   [--popsize P] [--sigma0 0.25] [--seed S]
+                                   [--start IDENTIFIED_CSV]
                                    [--preset paper|accurate] [--set NAME=VALUE ...] [--dt S]
                                    [--arch cpu|gpu] [--out DIR] [--quick]
 
 The objective is `taichi_star.identification`'s trajectory objective on the training window
 (`--train-cycles`), every gait's phase fitted as a nuisance. The box is in unit coordinates
 (`studies.identify.ParameterRange`: `:log` axes in the logarithm, as the CMA-ES studies fit
-them). Sets: "6", the six axes of `calibrate` (α, rod added mass, C⊥, C∥, C_c, limb stiffness);
+them). Every optimiser starts at --preset/--set's model, or with `--start` at an earlier
+model_select run's identified point (to compare the optimisers on continuing a fit). Sets: "6",
+the six axes of `calibrate` (α, rod added mass, C⊥, C∥, C_c, limb stiffness);
 "20", those six, the eight actuator gains and six more per-robot fields (hub added mass,
 Young's modulus, the two densities, hub mass per height, thickness); "20fired", twenty that the
 measured gaits can all move (the six, the gains of A1-A5, the delays of A2-A4, the six
-per-robot fields: no measured gait fires A6-A8, so their gains have zero derivatives).
+per-robot fields: no measured gait fires A6-A8, so their gains have zero derivatives);
+"gains_with_a1", the eight axes of the `identified` preset's form (α, C⊥, C_c, the gains of
+A1-A5).
 
 - L-BFGS-B (scipy, bounds [0, 1] per axis) gets the objective and its gradient from one run
   with sensitivities (`simulate(..., sensitivities=...)`, `identification.objective_and_gradient`,
@@ -29,7 +34,7 @@ per-robot fields: no measured gait fires A6-A8, so their gains have zero derivat
   gait), and a run with sensitivities gives the residuals' Jacobian and a Gauss-Newton step;
   every trial point is a run without sensitivities, the Jacobian a run with them at the points
   scipy accepts; `--least-squares-evaluations` trial points per start (0: not run).
-- CMA-ES (`studies.identify.minimise_cmaes`) from the base model, step 0.25, population
+- CMA-ES (`studies.identify.minimise_cmaes`) from the base model, step `--sigma0`, population
   `--popsize` (cma's default 4 + 3 ln D when not given), `--cma-generations` generations, one
   batched run per generation.
 - CMA-ES + least squares (`--polish-evaluations`, off by default): the least-squares fit from
@@ -93,12 +98,17 @@ PARAMETER_SETS["20"] = PARAMETER_SETS["6"] + [
     f"actuator_gains[{k}]=0.3:2" for k in range(1, 9)] + ROBOT_FIELDS
 FIRED_ACTUATORS = range(1, 6)
 """The actuators the measured gaits fire (A1-A5: A1, A1+A2, A1+A3, A1+A4, A1+A3+A5)."""
+PARAMETER_SETS["gains_with_a1"] = ["alpha=0.2:1.5", "drag_perpendicular=0.3:3:log",
+                                   "cylinder_drag=1:100:log"] + [
+    f"actuator_gains[{k}]=0.3:2" for k in FIRED_ACTUATORS]
 PARAMETER_SETS["20fired"] = PARAMETER_SETS["6"] + [
     f"actuator_gains[{k}]=0.3:2" for k in FIRED_ACTUATORS] + [
     f"actuator_delays[{k}]=0.0005:0.2995" for k in (2, 3, 4)] + ROBOT_FIELDS
 """The fitted boxes by name: calibrate's six axes; "20", six + eight gains + six per-robot
 fields; "20fired", twenty that the five measured gaits can all move. Set "20" has the gains of
-A6-A8, which no measured gait fires (their derivatives are exactly zero); "20fired" has the
+A6-A8, which no measured gait fires (their derivatives are exactly zero); "gains_with_a1" is
+the box of model_select's form of that name (studies/model_candidates.csv), the `identified`
+preset's; "20fired" has the
 gains of the fired actuators and the firing delays of A2-A4 after A1 (A1's own delay is a
 shift of the whole gait, which the fitted phase absorbs; A5 fires only with A3). Both ends of
 the delays' box lie half a default step (0.5 ms) off the step grid: a delay on the grid puts
@@ -516,6 +526,12 @@ def build_parser():
                              "0 (default) leaves it out")
     parser.add_argument("--popsize", type=int, default=None,
                         help="CMA-ES population, >= 2 (default cma's 4 + 3 ln D)")
+    parser.add_argument("--sigma0", type=float, default=0.25,
+                        help="CMA-ES's initial step in unit coordinates, in (0, 1] (default "
+                             "0.25)")
+    parser.add_argument("--start", default=None, metavar="CSV",
+                        help="start every optimiser at the model of an earlier run's "
+                             "identified.csv (model_select's) instead of --preset's")
     parser.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
     cli.add_model_flags(parser, fixed=("gait",))
     cli.add_dt_flag(parser)
@@ -534,11 +550,13 @@ def main(argv=None):
         if value < 0:
             raise cli.StudyArgumentError(f"{flag} must be >= 0, got {value}")
     cma_settings = identify.CMASettings(popsize=args.popsize, max_generations=args.cma_generations,
-                                        seed=args.seed)
+                                        seed=args.seed, sigma0=args.sigma0)
     cma_settings.validate()
     train, validate = identify.parse_windows(args.train_cycles, args.validate_cycles)
     gaits = identify.measured_gaits(args.gaits)
     base = cli.base_params(args)
+    if args.start is not None:
+        base = identify.read_start(args.start, base)
     boxes = {name: [identify.parse_range_spec(text, "--sets") for text in PARAMETER_SETS[name]]
              for name in sets}
     for name, box in boxes.items():
@@ -570,6 +588,7 @@ def main(argv=None):
                                            "cma_generations": args.cma_generations,
                                            "polish_evaluations": args.polish_evaluations,
                                            "popsize": args.popsize, "seed": args.seed,
+                                           "sigma0": args.sigma0, "start": args.start,
                                            "sets": {n: PARAMETER_SETS[n] for n in sets}})
     problems, recorders, cost_ratios = {}, [], {}
 

@@ -16,6 +16,7 @@ library's; this module evaluates it over boxes of points.
 
 from __future__ import annotations
 
+import ast
 import dataclasses
 import math
 import sys
@@ -302,6 +303,36 @@ class CMAResult:
     of how well the data pin each axis down near the optimum, not a posterior."""
     evaluations: pd.DataFrame
     unit_std: np.ndarray
+
+
+def read_start(path, base: StarParams) -> StarParams:
+    """--start: the model of an earlier run's identified.csv (columns field and value, the value
+    as Python text; model_select writes it) on top of `base`; StudyArgumentError naming --start
+    for a file that cannot be read, a field StarParams does not have or a value out of its
+    range."""
+    try:
+        table = pd.read_csv(path, dtype=str, keep_default_na=False)
+    except (OSError, pd.errors.ParserError) as error:
+        raise cli.StudyArgumentError(f"--start {path}: cannot read it ({error})") from None
+    missing = {"field", "value"} - set(table.columns)
+    if missing or not len(table):
+        raise cli.StudyArgumentError(f"--start {path}: not an identified.csv (rows of field, "
+                                     f"value; no column(s) {', '.join(sorted(missing))})"
+                                     if missing else f"--start {path}: no rows")
+    known = set(StarParams.field_names())
+    fields = {}
+    for name, text in zip(table["field"], table["value"]):
+        if name not in known or name == "gait":
+            raise cli.StudyArgumentError(f"--start {path}: {name!r} is not a model field")
+        try:
+            fields[name] = ast.literal_eval(text)
+        except (ValueError, SyntaxError):
+            raise cli.StudyArgumentError(f"--start {path}: {name} = {text!r} is not a "
+                                         f"value") from None
+    try:
+        return base.replace(**fields)
+    except (ValueError, TypeError) as error:
+        raise cli.StudyArgumentError(f"--start {path}: {error}") from None
 
 
 def start_units(box: Sequence[ParameterRange], base: StarParams) -> np.ndarray:

@@ -85,7 +85,6 @@ to; a candidate that would start after the budget has run out is skipped with a 
 
 from __future__ import annotations
 
-import ast
 import dataclasses
 import hashlib
 import json
@@ -204,35 +203,6 @@ class Candidate:
                for text in self.fit.split()]
         identify.check_box(box, self.model(base), f"candidate {self.name}: fit")
         return box
-
-
-def read_start(path, base: StarParams) -> StarParams:
-    """--start: the model of an earlier run's identified.csv (columns field and value, the value
-    as Python text) on top of `base`; StudyArgumentError naming --start for a file that cannot
-    be read, a field StarParams does not have or a value out of its range."""
-    try:
-        table = pd.read_csv(path, dtype=str, keep_default_na=False)
-    except (OSError, pd.errors.ParserError) as error:
-        raise cli.StudyArgumentError(f"--start {path}: cannot read it ({error})") from None
-    missing = {"field", "value"} - set(table.columns)
-    if missing or not len(table):
-        raise cli.StudyArgumentError(f"--start {path}: not an identified.csv (rows of field, "
-                                     f"value; no column(s) {', '.join(sorted(missing))})"
-                                     if missing else f"--start {path}: no rows")
-    known = set(StarParams.field_names())
-    fields = {}
-    for name, text in zip(table["field"], table["value"]):
-        if name not in known or name == "gait":
-            raise cli.StudyArgumentError(f"--start {path}: {name!r} is not a model field")
-        try:
-            fields[name] = ast.literal_eval(text)
-        except (ValueError, SyntaxError):
-            raise cli.StudyArgumentError(f"--start {path}: {name} = {text!r} is not a "
-                                         f"value") from None
-    try:
-        return base.replace(**fields)
-    except (ValueError, TypeError) as error:
-        raise cli.StudyArgumentError(f"--start {path}: {error}") from None
 
 
 def read_candidates(path) -> List[Candidate]:
@@ -826,7 +796,7 @@ def main(argv=None):
     train, validate = identify.parse_windows(args.train_cycles, args.validate_cycles)
     gaits = identify.measured_gaits(args.gaits)
     base = cli.base_params(args)
-    start_model = read_start(args.start, base) if args.start is not None else None
+    start_model = identify.read_start(args.start, base) if args.start is not None else None
     candidates = select_candidates(args)
     if args.periods == "strokes":
         # the measured periods replace every model's own: a period asked for would be dropped

@@ -186,6 +186,38 @@ def test_the_twenty_parameter_set_extends_the_six():
     assert gradient_fit.PARAMETER_SETS["20"][:6] == gradient_fit.PARAMETER_SETS["6"]
 
 
+def test_the_identified_forms_set_is_the_model_selection_candidates_box():
+    """Set "gains_with_a1" and model_select's candidate of that name fit the same axes over the
+    same ranges (one definition each, kept equal here)."""
+    from studies import model_select
+    (candidate,) = [c for c in model_select.read_candidates(model_select.CANDIDATES_CSV)
+                    if c.name == "gains_with_a1"]
+    assert gradient_fit.PARAMETER_SETS["gains_with_a1"] == candidate.fit.split()
+
+
+def test_start_moves_every_optimisers_start(tmp_path, monkeypatch):
+    """--start: the base model of the whole study becomes the identified.csv's model (the
+    provenance names the file); a bad table is refused before compute, naming --start."""
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def trials(gaits, period):  # the first use of the base model after the checks
+        seen["period"] = period
+        raise Stop
+    monkeypatch.setattr(gradient_fit.identification, "measured_trials", trials)
+    table = tmp_path / "identified.csv"
+    table.write_text("field,value\nalpha,0.9\nperiod,4.0\n")
+    with pytest.raises(Stop):
+        gradient_fit.main(["--start", str(table), "--out", str(tmp_path / "out"),
+                           "--quick", "--no-progress"])
+    assert seen["period"] == 4.0  # the start's period reached the measured trials
+    table.write_text("field,value\nalpha,-1\n")
+    assert studies_main(["gradient_fit", "--start", str(table), "--out", str(tmp_path / "o2"),
+                         "--quick", "--no-progress"]) == 2
+
+
 def box_of(name):
     return [identify.parse_range_spec(text, "--sets") for text in gradient_fit.PARAMETER_SETS[name]]
 

@@ -448,7 +448,7 @@ def test_start_reads_an_identified_table_and_moves_only_the_search_start(tmp_pat
     from pathlib import Path
     committed = Path(__file__).resolve().parents[2] / "results" / "model_select" / "identified.csv"
     base = StarParams.preset("paper")
-    start = model_select.read_start(committed, base)
+    start = identify.read_start(committed, base)
     table = pd.read_csv(committed, dtype={"value": str})
     for name, text in zip(table["field"], table["value"]):
         assert getattr(start, name) == ast.literal_eval(text)
@@ -479,7 +479,7 @@ def test_start_reads_an_identified_table_and_moves_only_the_search_start(tmp_pat
         return model_select.definition_of(candidate, args, identify.CMASettings(), base,
                                           SolverConfig(), ["A1"], start_model=start_model)
     assert definition(None) != definition(start)
-    assert definition(start) == definition(model_select.read_start(committed, base))
+    assert definition(start) == definition(identify.read_start(committed, base))
 
 
 @pytest.mark.parametrize("text, message", [
