@@ -1,16 +1,18 @@
 """Gait design beyond synchronous firing: a firing offset (delay) per actuator within the
 period, optimised by L-BFGS-B on the exact sensitivities, against the best synchronous gait.
 
-    python -m studies gait_design [--goal speed|turn] [--direction DEG] [--cycles 2]
+    python -m studies gait_design [--goal speed|turn|turn_cw] [--direction DEG] [--cycles 2]
                                   [--synchronous-starts 3] [--random-starts 3] [--iterations 6]
                                   [--seed 0] [--primitives results/primitives.csv]
                                   [--preset ...] [--set NAME=VALUE] [--dt S] [--out DIR] [--quick]
 
 The starts: the `--synchronous-starts` best synchronous gaits of `--primitives` for the goal
 (largest step projected on `--direction`, default the direction of the fastest gait; or largest
-ccw turn per cycle), delays 0, and `--random-starts` random delay patterns in [0, period) on the
+turn per cycle, counter-clockwise for `turn`, clockwise for `turn_cw`), delays 0, and `--random-starts` random delay patterns in [0, period) on the
 same actuator sets. The objective of a start: its displacement from rest over `--cycles` cycles
-projected on the direction, per simulated second (mm/s), or its heading change per cycle (deg).
+projected on the direction, per simulated second (mm/s), or its heading change per cycle (deg,
+counter-clockwise positive; clockwise positive for `turn_cw`: a robot whose actuators differ,
+as the identified preset's gains do, turns more one way than the other).
 All starts form one batch: one `simulate(..., sensitivities=("actuator_delays",))` call per
 evaluation gives every start's objective and its gradient in the 8 delays. L-BFGS-B maximises
 their sum over the 8·starts delays bounded to [0, period); the sum is separable, so every
@@ -52,6 +54,10 @@ DELAY_MARGIN = 1e-6
 """The delays' upper bound is period·(1 − DELAY_MARGIN): StarParams wants them < period."""
 QUICK_DT = 5e-3
 QUICK_CYCLES = 1
+TURN_SIGNS = {"turn": 1.0, "turn_cw": -1.0}
+"""The turning goals: the sign that makes their turn per cycle positive (heading_deg is
+counter-clockwise positive)."""
+GOALS = ("speed", *TURN_SIGNS)
 MAX_SYNCHRONOUS_STARTS = 255
 """The most synchronous starts (--synchronous-starts): every non-empty gait, the most rows a
 primitives table has."""
@@ -70,8 +76,8 @@ def objective_of(result, goal: str, direction_deg: float, duration_s: float, cyc
     (default: the summary column); with `read = lambda output: result.sensitivity(output,
     "actuator_delays")` the same linear map gives the gradient in the 8 delays (B, 8)."""
     read = read or (lambda output: result.summary[output].to_numpy())
-    if goal == "turn":
-        return read("heading_deg") / cycles
+    if goal in TURN_SIGNS:
+        return TURN_SIGNS[goal] * read("heading_deg") / cycles
     cosine, sine = np.cos(np.radians(direction_deg)), np.sin(np.radians(direction_deg))
     return (cosine * read("displacement_x_mm") + sine * read("displacement_y_mm")) / duration_s
 
@@ -79,8 +85,8 @@ def objective_of(result, goal: str, direction_deg: float, duration_s: float, cyc
 def choose_starts(primitives: pd.DataFrame, goal: str, direction_deg: float, n_synchronous: int,
                   n_random: int, period: float, seed: int) -> pd.DataFrame:
     """The starts: gait, origin ("synchronous" or "random k"), delays (tuple of 8, s)."""
-    if goal == "turn":
-        score = primitives["turn_deg"]
+    if goal in TURN_SIGNS:
+        score = TURN_SIGNS[goal] * primitives["turn_deg"]
     else:
         score = (primitives["step_x_mm"] * np.cos(np.radians(direction_deg))
                  + primitives["step_y_mm"] * np.sin(np.radians(direction_deg)))
@@ -186,8 +192,9 @@ def build_parser():
     parser = cli.StudyParser("gait_design", DESCRIPTION)
     cli.add_model_flags(parser, fixed=("gait", "actuator_delays"))
     cli.add_dt_flag(parser, quick=QUICK_DT)
-    parser.add_argument("--goal", choices=("speed", "turn"), default="speed",
-                        help="maximise speed along --direction, or ccw turning per cycle")
+    parser.add_argument("--goal", choices=GOALS, default="speed",
+                        help="maximise speed along --direction, or turning per cycle: "
+                             "counter-clockwise (turn) or clockwise (turn_cw)")
     parser.add_argument("--direction", type=float, default=None,
                         help="direction of travel, deg (none: the fastest synchronous gait's)")
     parser.add_argument("--cycles", type=int, default=2, quick=QUICK_CYCLES,
@@ -219,7 +226,7 @@ def main(argv=None):
     if args.direction is not None and not -360 <= args.direction <= 360:
         raise cli.StudyArgumentError(f"--direction must be an angle in [-360, 360] deg, got "
                                      f"{args.direction}")
-    if args.direction is not None and args.goal == "turn":
+    if args.direction is not None and args.goal in TURN_SIGNS:
         raise cli.StudyArgumentError("--direction: only with --goal speed (turning has no "
                                      "direction)")
     try:
@@ -254,7 +261,8 @@ def main(argv=None):
                 ("synchronous", reference["gait"], (0.0,) * 8)]
     table = robustness(base, solver, patterns, args.goal, direction, args.cycles, args.arch)
     table_csv = out.write_csv(table, "gait_design.csv")
-    unit = "deg per cycle" if args.goal == "turn" else "mm/s along the direction"
+    unit = (f"deg per cycle ({'clockwise' if TURN_SIGNS[args.goal] < 0 else 'counter-clockwise'})"
+            if args.goal in TURN_SIGNS else "mm/s along the direction")
     out.wrote(plot_design(paths_csv, table_csv, out.path("gait_design.png"), unit))
     shown = simulate(base.replace(gait=winner["gait"], actuator_delays=patterns[0][2]),
                      args.cycles * base.period, solver, arch=args.arch,

@@ -31,6 +31,9 @@ def test_starts_follow_the_goal():
     assert along_x["delays"][0] == (0.0,) * 8
     assert gait_design.choose_starts(primitives, "speed", 180.0, 1, 0, 3.0, 0)["gait"][0] == "A3"
     assert gait_design.choose_starts(primitives, "turn", 0.0, 1, 0, 3.0, 0)["gait"][0] == "A3"
+    # clockwise: the most negative turn (A2, -4 deg) ranks first, then A1 (0.5) before A3 (3)
+    clockwise = gait_design.choose_starts(primitives, "turn_cw", 0.0, 3, 0, 3.0, 0)
+    assert list(clockwise["gait"]) == ["A2", "A1", "A3"]
 
 
 @pytest.mark.slow
@@ -79,3 +82,13 @@ def test_the_synchronous_table_holds_every_gait_at_offsets_zero():
     assert abs(table["objective"][0]) > 0.05
     assert table["objective"][0] == pytest.approx(table["objective"][2], abs=1e-9)
     assert abs(table["objective"][1]) < 1e-9
+    clockwise = gait_design.synchronous_objectives(base, solver, gaits, "turn_cw", 0.0, 1, "cpu")
+    # the same runs, read with the other sign: exact negation
+    assert (clockwise["objective"].to_numpy() == -table["objective"].to_numpy()).all()
+
+
+def test_a_turning_goal_takes_no_direction(no_compute, tmp_path, capsys):
+    for goal in ("turn", "turn_cw"):
+        assert studies_main(["gait_design", "--out", str(tmp_path / goal), "--goal", goal,
+                             "--direction", "30"]) == 2
+        assert "--direction" in capsys.readouterr().err
