@@ -8,7 +8,7 @@ residuals, against CMA-ES on the same objective, box and start, for two paramete
                                    [--least-squares-evaluations 8]
                                    [--cma-generations 8] [--polish-evaluations 0]
                                    [--popsize P] [--sigma0 0.25] [--seed S]
-                                   [--start IDENTIFIED_CSV]
+                                   [--start IDENTIFIED_CSV] [--held-out-gaits GAITS]
                                    [--preset paper|accurate] [--set NAME=VALUE ...] [--dt S]
                                    [--arch cpu|gpu] [--out DIR] [--quick]
 
@@ -60,8 +60,14 @@ counts), `gradient_fit_history.csv` (every evaluation: cumulative cost and best 
 far), `gradient_fit_uncertainty.csv` (per set, optimiser and parameter, at the optimiser's best
 point: `identification.parameter_uncertainty` from one run with the sensitivities there, not
 counted in any cost: which parameters the training data determine, their standard errors and
-correlations) and `gradient_fit.png` (best objective against robot-seconds, drawn from the
-history).
+correlations), `gradient_fit.png` (best objective against robot-seconds, drawn from the
+history) and, with `--held-out-gaits` (measured gaits that no optimiser fits),
+`gradient_fit_held_out.csv`: per set, the start point and every optimiser's best point scored
+on each held-out gait's training window, its phase fitted there (as model_select's
+leave-one-gait-out folds score the gait they hold out), one row per point and gait with
+`identification.trial_fit`'s columns: whether what the fits did to the point carries over to
+a gait they did not see. The start itself is not held out from anything: a start taken from a
+fit that saw the gait (`--start`) tests the optimisers' moves, not the start.
 """
 
 from __future__ import annotations
@@ -271,17 +277,24 @@ class Problem:
         return np.array([value * math.log(spec.high / spec.low) if spec.log
                          else spec.high - spec.low for spec, value in zip(self.box, values)])
 
-    def objectives(self, unit_points) -> np.ndarray:
-        """The objective of every point (P, D) on the training window, one batched run."""
+    def gait_tables(self, unit_points) -> list:
+        """Per point (P, D): `identification.trajectory_objective`'s per-gait table on the
+        training window (each gait's phase fitted), None where a simulation failed; one batched
+        run."""
         unit_points = np.atleast_2d(unit_points)
         runs, _ = self.runs(self.params(unit_points), self.train[1])
-        values = []
+        tables = []
         for p in range(len(unit_points)):
             part = runs[p * len(self.gaits):(p + 1) * len(self.gaits)]
-            values.append(math.inf if any(r is None for r in part) else
-                          identification.objective_of(identification.trajectory_objective(
-                              dict(zip(self.gaits, part)), self.trials, self.train)))
-        return np.array(values)
+            tables.append(None if any(r is None for r in part) else
+                          identification.trajectory_objective(dict(zip(self.gaits, part)),
+                                                              self.trials, self.train))
+        return tables
+
+    def objectives(self, unit_points) -> np.ndarray:
+        """The objective of every point (P, D) on the training window, one batched run."""
+        return np.array([math.inf if table is None else identification.objective_of(table)
+                         for table in self.gait_tables(unit_points)])
 
     def validate(self, units, validate) -> float:
         """The objective on the validation window with the phases fitted on training."""
@@ -472,6 +485,26 @@ def summarise(recorders: Sequence[Recorder], problem_of, validate,
     return table.reindex(columns=RESULT_COLUMNS)
 
 
+def held_out_scores(held_out: Problem, recorders: Sequence[Recorder]) -> pd.DataFrame:
+    """The start and every recorder's best point (one set's; `held_out` is that set's box on
+    the held-out gaits) scored on the held-out gaits in one batched run: one row per point
+    and gait, columns parameter_set, point ("start" or the optimiser), then
+    `identification.TRIAL_COLUMNS` (objective inf and the rest NaN where the point's
+    simulation failed)."""
+    points = [("start", identify.start_units(held_out.box, held_out.base))] + [
+        (recorder.optimiser, recorder.best_units) for recorder in recorders]
+    tables = held_out.gait_tables(np.array([units for _, units in points]))
+    parameter_set = recorders[0].parameter_set
+    rows = []
+    for (point, _), table in zip(points, tables):
+        if table is None:
+            table = pd.DataFrame({"gait": held_out.gaits, "objective": math.inf},
+                                 columns=identification.TRIAL_COLUMNS)
+        rows.append(table.assign(parameter_set=parameter_set, point=point))
+    return pd.concat(rows, ignore_index=True)[["parameter_set", "point",
+                                               *identification.TRIAL_COLUMNS]]
+
+
 def plot_history(csv_path, png_path) -> Path:
     """Best objective so far against robot-seconds, one column of panels per parameter set, one
     line per optimiser (from gradient_fit_history.csv): above with every replica counted as an
@@ -532,6 +565,10 @@ def build_parser():
     parser.add_argument("--start", default=None, metavar="CSV",
                         help="start every optimiser at the model of an earlier run's "
                              "identified.csv (model_select's) instead of --preset's")
+    parser.add_argument("--held-out-gaits", default="", metavar="GAITS",
+                        help="measured gaits, none of --gaits, on which the start and every "
+                             "optimiser's best point are scored (gradient_fit_held_out.csv); "
+                             "default none")
     parser.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
     cli.add_model_flags(parser, fixed=("gait",))
     cli.add_dt_flag(parser)
@@ -554,6 +591,13 @@ def main(argv=None):
     cma_settings.validate()
     train, validate = identify.parse_windows(args.train_cycles, args.validate_cycles)
     gaits = identify.measured_gaits(args.gaits)
+    held_out_gaits = (identify.measured_gaits(args.held_out_gaits, "--held-out-gaits")
+                      if args.held_out_gaits else [])
+    fitted_too = [gait for gait in held_out_gaits if gait in gaits]
+    if fitted_too:
+        raise cli.StudyArgumentError(f"--held-out-gaits {', '.join(fitted_too)}: fitted as "
+                                     f"well (--gaits {', '.join(gaits)}); a held-out gait must "
+                                     f"be one the fits do not see")
     base = cli.base_params(args)
     if args.start is not None:
         base = identify.read_start(args.start, base)
@@ -577,6 +621,9 @@ def main(argv=None):
             identify.check_box(box[group:group + CORNER_GROUP], base, "--sets")
     trials = identification.measured_trials(gaits, base.period)
     identify.check_trials_cover(trials, validate, args.validate_cycles)
+    held_out_trials = identification.measured_trials(held_out_gaits, base.period)
+    # a held-out gait is scored on the training window
+    identify.check_trials_cover(held_out_trials, train, args.train_cycles, "--train-cycles")
     solver = cli.solver(args)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"gaits": gaits, "train_cycles": list(train),
@@ -589,6 +636,7 @@ def main(argv=None):
                                            "polish_evaluations": args.polish_evaluations,
                                            "popsize": args.popsize, "seed": args.seed,
                                            "sigma0": args.sigma0, "start": args.start,
+                                           "held_out_gaits": held_out_gaits,
                                            "sets": {n: PARAMETER_SETS[n] for n in sets}})
     problems, recorders, cost_ratios = {}, [], {}
 
@@ -622,6 +670,11 @@ def main(argv=None):
                              for r in recorders], ignore_index=True)
                   [["parameter_set", "optimiser", *identification.UNCERTAINTY_COLUMNS]],
                   "gradient_fit_uncertainty.csv")
+    if held_out_gaits:
+        out.write_csv(pd.concat([held_out_scores(
+            Problem(boxes[name], base, held_out_gaits, held_out_trials, train, solver,
+                    args.arch), [r for r in recorders if r.parameter_set == name])
+            for name in sets], ignore_index=True), "gradient_fit_held_out.csv")
     out.wrote(plot_history(out.path("gradient_fit_history.csv"),
                            out.path("gradient_fit.png")))
     out.report()

@@ -481,14 +481,16 @@ def parse_windows(train_text: str, validate_text: str) -> Tuple[Tuple[int, int],
     return windows[0], windows[1]
 
 
-def check_trials_cover(trials, validate: Tuple[int, int], validate_text: str):
-    """StudyArgumentError naming --validate-cycles unless every measured trial
-    (`identification.Trial`s) covers the validation window (the later of the two)."""
+def check_trials_cover(trials, window: Tuple[int, int], window_text: str,
+                       flag: str = "--validate-cycles"):
+    """StudyArgumentError naming `flag` (the window's: by default --validate-cycles, the later
+    of the two windows) unless every measured trial (`identification.Trial`s) covers the
+    window."""
     for trial in trials.values():
         try:
-            identification.latest_phase(trial, validate)
+            identification.latest_phase(trial, window)
         except ValueError as error:
-            raise cli.StudyArgumentError(f"--validate-cycles {validate_text}: {error}") from None
+            raise cli.StudyArgumentError(f"{flag} {window_text}: {error}") from None
 
 
 def evaluate_points(box: Sequence[ParameterRange], unit_points, base: StarParams,

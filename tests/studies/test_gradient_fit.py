@@ -8,6 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+import taichi_star
 from studies import gradient_fit, identify
 from studies.__main__ import main as studies_main
 from taichi_star import SolverConfig, StarParams, identification
@@ -167,6 +168,9 @@ def test_the_history_plot_draws_both_counts_from_the_csv(tmp_path, monkeypatch):
     (["--validate-cycles", "4:1001"], "1 <= FIRST <= LAST <= 1000, got '4:1001'"),
     (["--validate-cycles", "4:1000"], "shorter than cycles up to 1000"),
     (["--gaits", "A1+A6"], "--gaits A1+A6: not measured"),
+    (["--held-out-gaits", "A1+A6"], "--held-out-gaits A1+A6: not measured"),
+    # --quick fits A1+A2: holding it out as well is refused, naming it
+    (["--held-out-gaits", "A1,A1+A2"], "--held-out-gaits A1+A2: fitted as well"),
 ])
 def test_invalid_arguments_fail_before_compute(no_compute, monkeypatch, tmp_path, capsys, argv,
                                                message):
@@ -383,3 +387,31 @@ def test_least_squares_finds_a_linear_minimum_and_differentiates_only_where_aske
     jacobians = calls.count("jacobian")
     assert recorder.robot_seconds == pytest.approx((len(points) + 13 * jacobians) * window)
     assert recorder.cost_equivalent == pytest.approx((len(points) + 2.5 * jacobians) * window)
+
+
+def test_held_out_scores_are_fresh_fits_of_the_start_and_each_best_point(monkeypatch):
+    """gradient_fit_held_out.csv: the start (the base model) and every optimiser's best point
+    scored on a gait no optimiser fits, each equal to a fresh simulation of that model on that
+    gait with its phase fitted (batch-position independence is bitwise, so exactly); a point
+    whose simulation failed scores inf."""
+    box = [identify.parse_range_spec("alpha=0.2:1.5", "--sets")]
+    base, solver, window = StarParams(), SolverConfig(dt=5e-3), (1, 1)
+    trials = identification.measured_trials(["A1+A2"], base.period)
+    held_out = gradient_fit.Problem(box, base, ["A1+A2"], trials, window, solver, "cpu")
+    fitted = gradient_fit.Recorder("one", "L-BFGS-B")
+    fitted.add([0.3], 1.0, 0.0, 0.0)
+    table = gradient_fit.held_out_scores(held_out, [fitted])
+    assert list(table["point"]) == ["start", "L-BFGS-B"]
+    assert list(table["gait"]) == ["A1+A2"] * 2 and (table["parameter_set"] == "one").all()
+    for row, alpha in zip(table.itertuples(), (base.alpha,
+                                               identify.box_values(box, [[0.3]])[0, 0])):
+        fresh = taichi_star.simulate(base.replace(gait="A1+A2", alpha=alpha), base.period,
+                                     solver, record_interval_s=held_out.record, progress=False)
+        (run,) = identification.simulated_runs(fresh.trajectory, ["A1+A2"], [base.period])
+        expected = identification.trajectory_objective({"A1+A2": run}, trials, window)
+        assert row.objective == expected["objective"].iloc[0]
+        assert row.phase_s == expected["phase_s"].iloc[0]
+    assert table["objective"].iloc[0] != table["objective"].iloc[1]  # two different points
+    monkeypatch.setattr(held_out, "gait_tables", lambda units: [None] * len(units))
+    failed = gradient_fit.held_out_scores(held_out, [fitted])
+    assert np.isinf(failed["objective"]).all() and failed["phase_s"].isna().all()
