@@ -13,10 +13,12 @@ same actuator sets. The objective of a start: its displacement from rest over `-
 projected on the direction, per simulated second (mm/s), or its heading change per cycle (deg,
 counter-clockwise positive; clockwise positive for `turn_cw`: a robot whose actuators differ,
 as the identified preset's gains do, turns more one way than the other).
-All starts form one batch: one `simulate(..., sensitivities=("actuator_delays",))` call per
-evaluation gives every start's objective and its gradient in the 8 delays. L-BFGS-B maximises
-their sum over the 8·starts delays bounded to [0, period); the sum is separable, so every
-start's gradient is its own, only the line search is shared.
+Each start has its own L-BFGS-B search over its 8 delays, bounded to [0, period), with its
+own line search (`studies.optimise.minimise_lbfgsb_batched`; until 2026-12 one search maximised
+the starts' sum, whose shared line search tied their step lengths). The searches' evaluations
+are batched: one `simulate(..., sensitivities=("actuator_delays",))` call per round gives every
+running start's objective and its gradient in the 8 delays; a search that has stopped drops
+out of the later rounds.
 
 Writes into --out (default runs/gait_design/<timestamp>/), each CSV with its provenance sidecar:
 - `gait_design_paths.csv`: every evaluation of every start (evaluation, start, gait, origin,
@@ -36,12 +38,12 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy.optimize import minimize
 
 from taichi_star import simulate
 from taichi_star.timegrid import nearest_interval
 
 from . import cli
+from .optimise import minimise_lbfgsb_batched
 
 DESCRIPTION = ("Firing offsets per actuator optimised by L-BFGS-B on the exact sensitivities "
                "for speed in a direction or turning, against the best synchronous gait.")
@@ -101,35 +103,37 @@ def choose_starts(primitives: pd.DataFrame, goal: str, direction_deg: float, n_s
 
 
 def optimise(base, solver, starts, goal, direction_deg, cycles, iterations, arch):
-    """L-BFGS-B over every start's delays at once; returns (paths table, best delays per start
-    (S, 8), their objective (S,))."""
+    """One L-BFGS-B search per start over its 8 delays, each with its own line search, their
+    evaluations batched (`optimise.minimise_lbfgsb_batched`: one simulation with the delay
+    sensitivities per round, holding every search still running); returns (paths table, best
+    row per start)."""
     period = base.period
     duration_s = cycles * period
     gaits = list(starts["gait"])
+    upper = period * (1 - DELAY_MARGIN)
     path_rows = []
 
-    def evaluate(flat):
-        delays = np.clip(flat.reshape(len(gaits), 8), 0.0, period * (1 - DELAY_MARGIN))
-        params = [base.replace(gait=gait, actuator_delays=tuple(row))
-                  for gait, row in zip(gaits, delays)]
+    def evaluate(indices, points):
+        delays = np.clip(points, 0.0, upper)
+        params = [base.replace(gait=gaits[start], actuator_delays=tuple(row))
+                  for start, row in zip(indices, delays)]
         result = simulate(params, duration_s, solver, arch=arch,
                           sensitivities=("actuator_delays",), progress=False)
         value = objective_of(result, goal, direction_deg, duration_s, cycles)
         gradient = objective_of(result, goal, direction_deg, duration_s, cycles,
                                 read=lambda output: result.sensitivity(output, "actuator_delays"))
-        evaluation = len(path_rows) // len(gaits)
-        for start, (gait, row) in enumerate(zip(gaits, delays)):
-            path_rows.append({"evaluation": evaluation, "start": start, "gait": gait,
+        evaluation = len({row["evaluation"] for row in path_rows})
+        for position, (start, row) in enumerate(zip(indices, delays)):
+            path_rows.append({"evaluation": evaluation, "start": start, "gait": gaits[start],
                               "origin": starts["origin"].iloc[start],
-                              "objective": value[start],
-                              "gradient_norm": float(np.linalg.norm(gradient[start])),
+                              "objective": value[position],
+                              "gradient_norm": float(np.linalg.norm(gradient[position])),
                               **{f"delay{k + 1}_s": row[k] for k in range(8)}})
-        return -float(np.sum(value)), -gradient.ravel()
+        return -value, -gradient  # the searches minimise
 
-    initial = np.array([list(d) for d in starts["delays"]], dtype=float).ravel()
-    bounds = [(0.0, period * (1 - DELAY_MARGIN))] * len(initial)
-    minimize(evaluate, initial, jac=True, method="L-BFGS-B", bounds=bounds,
-             options={"maxiter": iterations, "maxfun": iterations + 3})
+    initial = [np.array(d, dtype=float) for d in starts["delays"]]
+    minimise_lbfgsb_batched(evaluate, initial, [(0.0, upper)] * 8, max_iterations=iterations,
+                            max_evaluations=iterations + 3)
     paths = pd.DataFrame(path_rows)
     best = paths.loc[paths.groupby("start")["objective"].idxmax()].sort_values("start")
     return paths, best
