@@ -5,12 +5,13 @@ Each study is a module of this package with a `DESCRIPTION` and a `main(argv)`: 
 `taichi_star.batch.run_batch` -> tables (CSV, each with a JSON provenance sidecar) -> plots drawn
 from those tables. Studies use only the public API of taichi_star; what they share is in
 `studies.cli` (flags, output folders), `studies.provenance`, `studies.figures` (the Fig. 4c/4b
-tables and plots) and `studies.identify` (parameter boxes and the calibration objective).
+tables and plots), `studies.identify` (parameter boxes and the calibration objective) and
+`studies.optimise` (independent gradient searches with batched evaluations).
 """
 
 import pkgutil
 
-HELPERS = ("cli", "provenance", "figures", "identify", "__main__")
+HELPERS = ("cli", "provenance", "figures", "identify", "optimise", "__main__")
 """Modules of this package that are not studies."""
 
 EXTRA_OF_STUDY = {
