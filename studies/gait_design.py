@@ -8,9 +8,10 @@ period, optimised by L-BFGS-B on the exact sensitivities, against the best synch
 
 The starts: the `--synchronous-starts` best synchronous gaits of `--primitives` for the goal
 (largest step projected on `--direction`, default the direction of the fastest gait; or largest
-turn per cycle, counter-clockwise for `turn`, clockwise for `turn_cw`), delays 0, and `--random-starts` random delay patterns in [0, period) on the
-same actuator sets. The objective of a start: its displacement from rest over `--cycles` cycles
-projected on the direction, per simulated second (mm/s), or its heading change per cycle (deg,
+turn per cycle, counter-clockwise for `turn`, clockwise for `turn_cw`), delays 0, and
+`--random-starts` random delay patterns in [0, period) on the same actuator sets. The
+objective of a start: its displacement from rest over `--cycles` cycles projected on the
+direction, per simulated second (mm/s), or its heading change per cycle (deg,
 counter-clockwise positive; clockwise positive for `turn_cw`: a robot whose actuators differ,
 as the identified preset's gains do, turns more one way than the other).
 Each start has its own L-BFGS-B search over its 8 delays, bounded to [0, period), with its
@@ -122,7 +123,7 @@ def optimise(base, solver, starts, goal, direction_deg, cycles, iterations, arch
         value = objective_of(result, goal, direction_deg, duration_s, cycles)
         gradient = objective_of(result, goal, direction_deg, duration_s, cycles,
                                 read=lambda output: result.sensitivity(output, "actuator_delays"))
-        evaluation = len({row["evaluation"] for row in path_rows})
+        evaluation = path_rows[-1]["evaluation"] + 1 if path_rows else 0
         for position, (start, row) in enumerate(zip(indices, delays)):
             path_rows.append({"evaluation": evaluation, "start": start, "gait": gaits[start],
                               "origin": starts["origin"].iloc[start],

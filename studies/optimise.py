@@ -62,7 +62,7 @@ def minimise_lbfgsb_batched(
                                                "maxfun": max_evaluations})
         except SearchAborted:
             pass
-        except BaseException as error:  # noqa: BLE001 (raised again on the calling thread)
+        except BaseException as error:  # any: raised again on the calling thread
             failures.append(error)
         finally:
             with condition:
@@ -89,16 +89,12 @@ def minimise_lbfgsb_batched(
                     answers[index] = (float(values[row]),
                                       np.array(gradients[row], dtype=float))
                 condition.notify_all()
-    except BaseException:
+    finally:
+        # searches still waiting for an answer (the evaluation or another search failed) end;
+        # after a normal finish none is left
         aborted.set()
         with condition:
             condition.notify_all()
-        raise
-    finally:
-        if failures:
-            aborted.set()
-            with condition:
-                condition.notify_all()
         for thread in threads:
             thread.join()
     if failures:
