@@ -4,6 +4,7 @@ period, optimised by L-BFGS-B on the exact sensitivities, against the best synch
     python -m studies gait_design [--goal speed|turn|turn_cw] [--direction DEG] [--cycles 2]
                                   [--synchronous-starts 3] [--random-starts 3] [--iterations 6]
                                   [--seed 0] [--primitives results/primitives.csv]
+                                  [--sample 0] [--sample-starts 1]
                                   [--preset ...] [--set NAME=VALUE] [--dt S] [--out DIR] [--quick]
 
 The starts: the `--synchronous-starts` best synchronous gaits of `--primitives` for the goal
@@ -21,6 +22,12 @@ are batched: one `simulate(..., sensitivities=("actuator_delays",))` call per ro
 running start's objective and its gradient in the 8 delays; a search that has stopped drops
 out of the later rounds.
 
+`--sample N` first simulates N random patterns in one batch (no gradients), a picture of the
+whole landscape that a few local searches cannot give: pattern k fires a gait drawn uniformly
+from the primitives table, its actuators' offsets uniform within SAMPLE_SPREADS[k mod 5] of the
+period (1 % to all of it), shifted so that the first fires at 0. The best `--sample-starts` of
+them join the starts (origin "sample k").
+
 Writes into --out (default runs/gait_design/<timestamp>/), each CSV with its provenance sidecar:
 - `gait_design_paths.csv`: every evaluation of every start (evaluation, start, gait, origin,
   objective, gradient norm, the 8 delays in s);
@@ -30,17 +37,21 @@ Writes into --out (default runs/gait_design/<timestamp>/), each CSV with its pro
   ("synchronous"), each simulated over the same cycles with the same solver, at α and
   drag_perpendicular × 0.8, 1 and 1.2 (the centre and 4 corners; one batch): objective per case;
 - `gait_design.png` (objective per evaluation per start, and the robustness), drawn from the
-  CSVs; `gait_design.gif`, the best pattern's animation over its cycles.
+  CSVs; `gait_design.gif`, the best pattern's animation over its cycles;
+- with `--sample`: `gait_design_sample.csv` (sample, gait, spread, objective, its turn per
+  cycle, status, the 8 delays in s) and `gait_design_sample.png` (objective against spread,
+  the best synchronous gait's as a line), drawn from it and the synchronous table.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 import pandas as pd
 
-from taichi_star import simulate
+from taichi_star import Gait, simulate
 from taichi_star.timegrid import nearest_interval
 
 from . import cli
@@ -61,6 +72,8 @@ TURN_SIGNS = {"turn": 1.0, "turn_cw": -1.0}
 """The turning goals: the sign that makes their turn per cycle positive (heading_deg is
 counter-clockwise positive)."""
 GOALS = ("speed", *TURN_SIGNS)
+DELAY_COLUMNS = [f"delay{k + 1}_s" for k in range(8)]
+"""The tables' columns of the 8 actuators' offsets (s)."""
 MAX_SYNCHRONOUS_STARTS = 255
 """The most synchronous starts (--synchronous-starts): every non-empty gait, the most rows a
 primitives table has."""
@@ -70,6 +83,13 @@ committed runs: 2 and 3)."""
 MAX_ITERATIONS = 1000
 """The most L-BFGS-B iterations (--iterations), each a batch simulated with its sensitivities
 (the committed runs: 3 and 6)."""
+SAMPLE_SPREADS = (0.01, 0.03, 0.1, 0.3, 1.0)
+"""Shares of the period within which a sampled pattern's offsets are drawn (--sample), in
+turn: from a few time steps off synchronous firing, where the local searches look, to
+anywhere in the period."""
+MAX_SAMPLE = 100_000
+"""The most sampled patterns (--sample), one batch without gradients: about 40 minutes on 2
+cores at h = 5 ms over 2 cycles."""
 
 
 def objective_of(result, goal: str, direction_deg: float, duration_s: float, cycles: int,
@@ -86,8 +106,10 @@ def objective_of(result, goal: str, direction_deg: float, duration_s: float, cyc
 
 
 def choose_starts(primitives: pd.DataFrame, goal: str, direction_deg: float, n_synchronous: int,
-                  n_random: int, period: float, seed: int) -> pd.DataFrame:
-    """The starts: gait, origin ("synchronous" or "random k"), delays (tuple of 8, s)."""
+                  n_random: int, period: float, seed: int,
+                  sample: pd.DataFrame = None, n_sample: int = 0) -> pd.DataFrame:
+    """The starts: gait, origin ("synchronous", "random k" or "sample k"), delays (tuple of 8,
+    s); the last are the `n_sample` best finished rows of `sample` (`sample_objectives`)."""
     if goal in TURN_SIGNS:
         score = TURN_SIGNS[goal] * primitives["turn_deg"]
     else:
@@ -100,7 +122,48 @@ def choose_starts(primitives: pd.DataFrame, goal: str, direction_deg: float, n_s
     for k in range(n_random):
         gait = best["gait"].iloc[k % len(best)]
         rows.append((gait, f"random {k}", tuple(rng.uniform(0, period * (1 - DELAY_MARGIN), 8))))
+    if n_sample:
+        finished = sample[sample["status"] == "ok"]
+        for _, row in finished.nlargest(n_sample, "objective", keep="first").iterrows():
+            rows.append((row["gait"], f"sample {int(row['sample'])}",
+                         tuple(float(row[column]) for column in DELAY_COLUMNS)))
     return pd.DataFrame(rows, columns=["gait", "origin", "delays"])
+
+
+def draw_sample(gaits: Sequence[str], n: int, period: float, seed: int) -> pd.DataFrame:
+    """`n` random firing patterns (sample, gait, spread, the 8 delays in s): pattern k fires a
+    gait drawn uniformly from `gaits`, each of its actuators at an offset uniform in
+    [0, spread·period), spread = SAMPLE_SPREADS[k mod 5], the offsets then shifted so that the
+    earliest is 0 (a pattern that starts late only loses time against one that starts at 0);
+    actuators the gait does not fire keep offset 0."""
+    rng = np.random.default_rng([seed, 1])  # a stream apart from the random starts' (seed)
+    rows = []
+    for k in range(n):
+        gait = gaits[rng.integers(len(gaits))]
+        spread = SAMPLE_SPREADS[k % len(SAMPLE_SPREADS)]
+        fired = Gait.parse(gait).mask.astype(bool)
+        offsets = np.where(fired, rng.uniform(0.0, spread * period * (1 - DELAY_MARGIN), 8), 0.0)
+        offsets[fired] -= offsets[fired].min()
+        rows.append({"sample": k, "gait": gait, "spread": spread,
+                     **dict(zip(DELAY_COLUMNS, offsets))})
+    return pd.DataFrame(rows, columns=["sample", "gait", "spread", *DELAY_COLUMNS])
+
+
+def sample_objectives(base, solver, sample: pd.DataFrame, goal, direction_deg, cycles,
+                      arch) -> pd.DataFrame:
+    """`sample` (`draw_sample`) with each pattern's objective, its turn per cycle
+    (turn_deg_per_cycle, counter-clockwise positive: what a speed lost to asynchronous firing
+    went into) and status, from one batch under the study's conditions."""
+    duration_s = cycles * base.period
+    params = [base.replace(gait=gait, actuator_delays=tuple(delays))
+              for gait, delays in zip(sample["gait"], sample[DELAY_COLUMNS].to_numpy())]
+    result = simulate(params, duration_s, solver, arch=arch)
+    return sample.assign(
+        objective=objective_of(result, goal, direction_deg, duration_s, cycles),
+        turn_deg_per_cycle=result.summary["heading_deg"].to_numpy() / cycles,
+        status=result.summary["status"].to_numpy())[
+            ["sample", "gait", "spread", "objective", "turn_deg_per_cycle", "status",
+             *DELAY_COLUMNS]]
 
 
 def optimise(base, solver, starts, goal, direction_deg, cycles, iterations, arch):
@@ -129,7 +192,7 @@ def optimise(base, solver, starts, goal, direction_deg, cycles, iterations, arch
                               "origin": starts["origin"].iloc[start],
                               "objective": value[position],
                               "gradient_norm": float(np.linalg.norm(gradient[position])),
-                              **{f"delay{k + 1}_s": row[k] for k in range(8)}})
+                              **dict(zip(DELAY_COLUMNS, row))})
         return -value, -gradient  # the searches minimise
 
     initial = [np.array(d, dtype=float) for d in starts["delays"]]
@@ -152,7 +215,7 @@ def robustness(base, solver, patterns, goal, direction_deg, cycles, arch) -> pd.
     value = objective_of(result, goal, direction_deg, duration_s, cycles)
     return pd.DataFrame([{"pattern": name, "gait": gait, "alpha_factor": a,
                           "drag_perpendicular_factor": c, "objective": v,
-                          "status": status, **{f"delay{k + 1}_s": delays[k] for k in range(8)}}
+                          "status": status, **dict(zip(DELAY_COLUMNS, delays))}
                          for (name, gait, delays, a, c), v, status
                          in zip(cases, value, result.summary["status"])])
 
@@ -193,6 +256,26 @@ def plot_design(paths_csv, table_csv, png_path, unit: str) -> Path:
     return cli.save_figure(fig, png_path, dpi=120)
 
 
+def plot_sample(sample_csv, synchronous_csv, png_path, unit: str) -> Path:
+    """Every sampled pattern's objective against its spread (log axis, each spread's points
+    jittered), the best synchronous gait's objective as a line."""
+    plt = cli.use_agg()
+    sample, synchronous = pd.read_csv(sample_csv), pd.read_csv(synchronous_csv)
+    fig, axes = plt.subplots(figsize=(6, 4))
+    finished = sample[sample["status"] == "ok"]
+    jitter = np.random.default_rng(0).uniform(0.85, 1.15, len(finished))
+    axes.scatter(finished["spread"] * jitter, finished["objective"], s=3, alpha=0.3,
+                 label=f"random patterns ({len(finished)})")
+    best = synchronous.loc[synchronous[synchronous["status"] == "ok"]["objective"].idxmax()]
+    axes.axhline(best["objective"], color="k", linestyle="--",
+                 label=f"best synchronous ({best['gait']})")
+    axes.set_xscale("log")
+    axes.set(xlabel="offsets drawn within this share of the period",
+             ylabel=f"objective ({unit})", title="random firing patterns")
+    axes.legend(fontsize=7)
+    return cli.save_figure(fig, png_path, dpi=120)
+
+
 def build_parser():
     parser = cli.StudyParser("gait_design", DESCRIPTION)
     cli.add_model_flags(parser, fixed=("gait", "actuator_delays"))
@@ -215,6 +298,11 @@ def build_parser():
     parser.add_argument("--seed", type=int, default=0, help="seed of the random starts")
     parser.add_argument("--primitives", default=str(DEFAULT_PRIMITIVES),
                         help="the synchronous gaits' primitives CSV")
+    parser.add_argument("--sample", type=int, default=0,
+                        help=f"random patterns simulated first, one batch, at most {MAX_SAMPLE}")
+    parser.add_argument("--sample-starts", type=int, default=None,
+                        help="the sample's best patterns that join the starts, at most --sample "
+                             "(default 1 with a sample)")
     return parser
 
 
@@ -226,8 +314,12 @@ def main(argv=None):
         raise cli.StudyArgumentError(f"--seed must be >= 0, got {args.seed}")
     for flag, lowest, highest in (("synchronous_starts", 1, MAX_SYNCHRONOUS_STARTS),
                                   ("random_starts", 0, MAX_RANDOM_STARTS),
-                                  ("iterations", 1, MAX_ITERATIONS)):
+                                  ("iterations", 1, MAX_ITERATIONS),
+                                  ("sample", 0, MAX_SAMPLE)):
         cli.check_count(getattr(args, flag), f"--{flag.replace('_', '-')}", lowest, highest)
+    if args.sample_starts is None:
+        args.sample_starts = min(args.sample, 1)
+    cli.check_count(args.sample_starts, "--sample-starts", 0, args.sample)
     if args.direction is not None and not -360 <= args.direction <= 360:
         raise cli.StudyArgumentError(f"--direction must be an angle in [-360, 360] deg, got "
                                      f"{args.direction}")
@@ -250,24 +342,34 @@ def main(argv=None):
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"goal": args.goal, "direction_deg": direction,
                                            "cycles": args.cycles})
+    unit = (f"deg per cycle ({'clockwise' if TURN_SIGNS[args.goal] < 0 else 'counter-clockwise'})"
+            if args.goal in TURN_SIGNS else "mm/s along the direction")
+    sample = None
+    if args.sample:
+        sample = sample_objectives(base, solver,
+                                   draw_sample(list(primitives["gait"]), args.sample,
+                                               base.period, args.seed),
+                                   args.goal, direction, args.cycles, args.arch)
+        sample_csv = out.write_csv(sample, "gait_design_sample.csv")
     starts = choose_starts(primitives, args.goal, direction, args.synchronous_starts,
-                           args.random_starts, base.period, args.seed)
+                           args.random_starts, base.period, args.seed, sample,
+                           args.sample_starts)
     paths, best = optimise(base, solver, starts, args.goal, direction, args.cycles,
                            args.iterations, args.arch)
     paths_csv = out.write_csv(paths, "gait_design_paths.csv")
     winner = best.loc[best["objective"].idxmax()]
     synchronous = synchronous_objectives(base, solver, list(primitives["gait"]), args.goal,
                                          direction, args.cycles, args.arch)
-    out.write_csv(synchronous, "gait_design_synchronous.csv")
+    synchronous_csv = out.write_csv(synchronous, "gait_design_synchronous.csv")
+    if args.sample:
+        out.wrote(plot_sample(sample_csv, synchronous_csv, out.path("gait_design_sample.png"),
+                              unit))
     finished = synchronous[synchronous["status"] == "ok"]
     reference = finished.loc[finished["objective"].idxmax()]
-    delay_columns = [f"delay{k + 1}_s" for k in range(8)]
-    patterns = [("designed", winner["gait"], tuple(winner[delay_columns])),
+    patterns = [("designed", winner["gait"], tuple(winner[DELAY_COLUMNS])),
                 ("synchronous", reference["gait"], (0.0,) * 8)]
     table = robustness(base, solver, patterns, args.goal, direction, args.cycles, args.arch)
     table_csv = out.write_csv(table, "gait_design.csv")
-    unit = (f"deg per cycle ({'clockwise' if TURN_SIGNS[args.goal] < 0 else 'counter-clockwise'})"
-            if args.goal in TURN_SIGNS else "mm/s along the direction")
     out.wrote(plot_design(paths_csv, table_csv, out.path("gait_design.png"), unit))
     shown = simulate(base.replace(gait=winner["gait"], actuator_delays=patterns[0][2]),
                      args.cycles * base.period, solver, arch=args.arch,
@@ -280,4 +382,10 @@ def main(argv=None):
     print(f"direction {direction:g} deg, {unit}: best designed {designed:.4g} "
           f"({winner['gait']}), best synchronous {plain:.4g} ({reference['gait']}), "
           f"ratio {designed / plain:.3f}")
+    if args.sample:
+        finished = sample[sample["status"] == "ok"]
+        top = finished.loc[finished["objective"].idxmax()]
+        print(f"sample: best {top['objective']:.4g} ({top['gait']}, offsets within "
+              f"{top['spread']:g} of the period), {int((finished['objective'] > plain).sum())} "
+              f"of {len(finished)} finished patterns above the best synchronous gait")
     return table

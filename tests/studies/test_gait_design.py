@@ -92,3 +92,61 @@ def test_a_turning_goal_takes_no_direction(no_compute, tmp_path, capsys):
         assert studies_main(["gait_design", "--out", str(tmp_path / goal), "--goal", goal,
                              "--direction", "30"]) == 2
         assert "--direction" in capsys.readouterr().err
+
+
+def test_the_sample_draws_each_spread_in_turn_and_starts_its_patterns_at_zero():
+    gaits = ["A1", "A1+A3+A5", "A2+A4+A6+A8", "A1+A2+A3+A4+A5+A6+A7+A8"]
+    period = 2.0
+    sample = gait_design.draw_sample(gaits, 40, period, seed=3)
+    assert list(sample["sample"]) == list(range(40))
+    assert list(sample["spread"]) == list(gait_design.SAMPLE_SPREADS) * 8
+    assert set(sample["gait"]) <= set(gaits) and sample["gait"].nunique() > 1
+    for _, row in sample.iterrows():
+        fired = taichi_star.Gait.parse(row["gait"]).mask.astype(bool)
+        delays = row[gait_design.DELAY_COLUMNS].to_numpy(dtype=float)
+        assert (delays[~fired] == 0).all()  # what the gait does not fire stays at 0
+        assert delays[fired].min() == 0  # the earliest firing is at 0: the shift is exact
+        # the shift keeps every offset within the spread, below the period as StarParams wants
+        assert (delays < row["spread"] * period).all()
+    several_fired = sample[sample["gait"] != "A1"]
+    assert (several_fired[gait_design.DELAY_COLUMNS].max(axis=1) > 0).all()
+    again = gait_design.draw_sample(gaits, 40, period, seed=3)
+    pd.testing.assert_frame_equal(sample, again)
+    other = gait_design.draw_sample(gaits, 40, period, seed=4)
+    assert not other[gait_design.DELAY_COLUMNS].equals(sample[gait_design.DELAY_COLUMNS])
+
+
+def test_the_sample_scores_each_pattern_as_a_run_of_its_own_and_its_best_join_the_starts():
+    """Each row's objective and turn are those of a fresh run of that pattern alone (bitwise:
+    batch-position independence), and the best finished rows become starts, in order."""
+    base = StarParams(period=0.5)
+    solver = SolverConfig(dt=5e-3)
+    sample = gait_design.draw_sample(["A1+A2", "A1+A3+A4", "A2+A5"], 5, base.period, seed=0)
+    scored = gait_design.sample_objectives(base, solver, sample, "speed", 45.0, 1, "cpu")
+    assert (scored["status"] == "ok").all()
+    for _, row in scored.iterrows():
+        delays = tuple(row[gait_design.DELAY_COLUMNS].to_numpy(dtype=float))
+        alone = taichi_star.simulate(base.replace(gait=row["gait"], actuator_delays=delays),
+                                     base.period, solver)
+        assert row["objective"] == gait_design.objective_of(alone, "speed", 45.0,
+                                                            base.period, 1)[0]
+        assert row["turn_deg_per_cycle"] == alone.summary["heading_deg"][0]
+    primitives = pd.DataFrame({"gait": ["A1"], "step_x_mm": [1.0], "step_y_mm": [0.0],
+                               "turn_deg": [0.0]})
+    # a failed pattern, however large its objective, is never a start
+    failed = scored.assign(status=["failed"] + ["ok"] * 4)
+    failed.loc[0, "objective"] = 1e9
+    starts = gait_design.choose_starts(primitives, "speed", 0.0, 1, 0, base.period, 0,
+                                       failed, 2)
+    order = failed.iloc[1:].sort_values("objective", ascending=False)
+    assert list(starts["origin"]) == ["synchronous"] + [f"sample {k}" for k in order["sample"][:2]]
+    assert starts["delays"][1] == tuple(order[gait_design.DELAY_COLUMNS].iloc[0])
+
+
+def test_sample_flags_fail_before_compute(no_compute, tmp_path, capsys):
+    for bad, named in ((["--sample", "-1"], "--sample"),
+                       (["--sample", str(gait_design.MAX_SAMPLE + 1)], "--sample"),
+                       (["--sample-starts", "1"], "--sample-starts"),  # no sample to start from
+                       (["--sample", "2", "--sample-starts", "3"], "--sample-starts")):
+        assert studies_main(["gait_design", "--out", str(tmp_path / "out"), *bad]) == 2
+        assert named in capsys.readouterr().err
