@@ -39,7 +39,7 @@ Writes into --out (default runs/gait_design/<timestamp>/), each CSV with its pro
 - `gait_design.png` (objective per evaluation per start, and the robustness), drawn from the
   CSVs; `gait_design.gif`, the best pattern's animation over its cycles;
 - with `--sample`: `gait_design_sample.csv` (sample, gait, spread, objective, its turn per
-  cycle, status, the 8 delays in s) and `gait_design_sample.png` (objective against spread,
+  cycle, status, newton_capped, the 8 delays in s) and `gait_design_sample.png` (objective against spread,
   the best synchronous gait's as a line), drawn from it and the synchronous table.
 """
 
@@ -153,7 +153,8 @@ def sample_objectives(base, solver, sample: pd.DataFrame, goal, direction_deg, c
                       arch) -> pd.DataFrame:
     """`sample` (`draw_sample`) with each pattern's objective, its turn per cycle
     (turn_deg_per_cycle, counter-clockwise positive: what a speed lost to asynchronous firing
-    went into) and status, from one batch under the study's conditions."""
+    went into), status and newton_capped (an 'ok' run with a Newton solve that used all its
+    iterations, to be checked at a smaller dt), from one batch under the study's conditions."""
     duration_s = cycles * base.period
     params = [base.replace(gait=gait, actuator_delays=tuple(delays))
               for gait, delays in zip(sample["gait"], sample[DELAY_COLUMNS].to_numpy())]
@@ -161,9 +162,10 @@ def sample_objectives(base, solver, sample: pd.DataFrame, goal, direction_deg, c
     return sample.assign(
         objective=objective_of(result, goal, direction_deg, duration_s, cycles),
         turn_deg_per_cycle=result.summary["heading_deg"].to_numpy() / cycles,
-        status=result.summary["status"].to_numpy())[
+        status=result.summary["status"].to_numpy(),
+        newton_capped=result.summary["newton_capped"].to_numpy())[
             ["sample", "gait", "spread", "objective", "turn_deg_per_cycle", "status",
-             *DELAY_COLUMNS]]
+             "newton_capped", *DELAY_COLUMNS]]
 
 
 def optimise(base, solver, starts, goal, direction_deg, cycles, iterations, arch):

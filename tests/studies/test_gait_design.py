@@ -131,6 +131,7 @@ def test_the_sample_scores_each_pattern_as_a_run_of_its_own_and_its_best_join_th
         assert row["objective"] == gait_design.objective_of(alone, "speed", 45.0,
                                                             base.period, 1)[0]
         assert row["turn_deg_per_cycle"] == alone.summary["heading_deg"][0]
+        assert row["newton_capped"] == alone.summary["newton_capped"][0]
     primitives = pd.DataFrame({"gait": ["A1"], "step_x_mm": [1.0], "step_y_mm": [0.0],
                                "turn_deg": [0.0]})
     # a failed pattern, however large its objective, is never a start
