@@ -4,7 +4,7 @@ period, optimised by L-BFGS-B on the exact sensitivities, against the best synch
     python -m studies gait_design [--goal speed|turn|turn_cw] [--direction DEG] [--cycles 2]
                                   [--synchronous-starts 3] [--random-starts 3] [--iterations 6]
                                   [--seed 0] [--primitives results/primitives.csv]
-                                  [--sample 0] [--sample-starts 1]
+                                  [--sample 0] [--sample-starts 1] [--sample-gaits 255]
                                   [--preset ...] [--set NAME=VALUE] [--dt S] [--out DIR] [--quick]
 
 The starts: the `--synchronous-starts` best synchronous gaits of `--primitives` for the goal
@@ -24,7 +24,7 @@ out of the later rounds.
 
 `--sample N` first simulates N random patterns in one batch (no gradients), a picture of the
 whole landscape that a few local searches cannot give: pattern k fires a gait drawn uniformly
-from the primitives table, its actuators' offsets uniform within SAMPLE_SPREADS[k mod 5] of the
+from the primitives table (from its `--sample-gaits` best for the goal), its actuators' offsets uniform within SAMPLE_SPREADS[k mod 5] of the
 period (1 % to all of it), shifted so that the first fires at 0. The best `--sample-starts` of
 them join the starts (origin "sample k").
 
@@ -105,22 +105,28 @@ def objective_of(result, goal: str, direction_deg: float, duration_s: float, cyc
     return (cosine * read("displacement_x_mm") + sine * read("displacement_y_mm")) / duration_s
 
 
-def choose_starts(primitives: pd.DataFrame, goal: str, direction_deg: float, n_synchronous: int,
-                  n_random: int, period: float, seed: int,
-                  sample: pd.DataFrame = None, n_sample: int = 0) -> pd.DataFrame:
-    """The starts: gait, origin ("synchronous", "random k" or "sample k"), delays (tuple of 8,
-    s); the last are the `n_sample` best finished rows of `sample` (`sample_objectives`)."""
+def ranked_gaits(primitives: pd.DataFrame, goal: str, direction_deg: float) -> list:
+    """The primitives table's gaits, best first for the goal: by step projected on
+    direction_deg, or by turn per cycle in the goal's sense (ties in the table's order)."""
     if goal in TURN_SIGNS:
         score = TURN_SIGNS[goal] * primitives["turn_deg"]
     else:
         score = (primitives["step_x_mm"] * np.cos(np.radians(direction_deg))
                  + primitives["step_y_mm"] * np.sin(np.radians(direction_deg)))
-    best = primitives.assign(score=score).sort_values("score", ascending=False,
-                                                      kind="stable").head(n_synchronous)
-    rows = [(gait, "synchronous", (0.0,) * 8) for gait in best["gait"]]
+    return list(primitives.assign(score=score).sort_values("score", ascending=False,
+                                                           kind="stable")["gait"])
+
+
+def choose_starts(primitives: pd.DataFrame, goal: str, direction_deg: float, n_synchronous: int,
+                  n_random: int, period: float, seed: int,
+                  sample: pd.DataFrame = None, n_sample: int = 0) -> pd.DataFrame:
+    """The starts: gait, origin ("synchronous", "random k" or "sample k"), delays (tuple of 8,
+    s); the last are the `n_sample` best finished rows of `sample` (`sample_objectives`)."""
+    best = ranked_gaits(primitives, goal, direction_deg)[:n_synchronous]
+    rows = [(gait, "synchronous", (0.0,) * 8) for gait in best]
     rng = np.random.default_rng(seed)
     for k in range(n_random):
-        gait = best["gait"].iloc[k % len(best)]
+        gait = best[k % len(best)]
         rows.append((gait, f"random {k}", tuple(rng.uniform(0, period * (1 - DELAY_MARGIN), 8))))
     if n_sample:
         finished = sample[sample["status"] == "ok"]
@@ -150,7 +156,7 @@ def draw_sample(gaits: Sequence[str], n: int, period: float, seed: int) -> pd.Da
 
 
 def sample_objectives(base, solver, sample: pd.DataFrame, goal, direction_deg, cycles,
-                      arch) -> pd.DataFrame:
+                      arch, progress: bool = True) -> pd.DataFrame:
     """`sample` (`draw_sample`) with each pattern's objective, its turn per cycle
     (turn_deg_per_cycle, counter-clockwise positive: what a speed lost to asynchronous firing
     went into), status and newton_capped (an 'ok' run with a Newton solve that used all its
@@ -158,7 +164,7 @@ def sample_objectives(base, solver, sample: pd.DataFrame, goal, direction_deg, c
     duration_s = cycles * base.period
     params = [base.replace(gait=gait, actuator_delays=tuple(delays))
               for gait, delays in zip(sample["gait"], sample[DELAY_COLUMNS].to_numpy())]
-    result = simulate(params, duration_s, solver, arch=arch)
+    result = simulate(params, duration_s, solver, arch=arch, progress=progress)
     return sample.assign(
         objective=objective_of(result, goal, direction_deg, duration_s, cycles),
         turn_deg_per_cycle=result.summary["heading_deg"].to_numpy() / cycles,
@@ -305,6 +311,9 @@ def build_parser():
     parser.add_argument("--sample-starts", type=int, default=None,
                         help="the sample's best patterns that join the starts, at most --sample "
                              "(default 1 with a sample)")
+    parser.add_argument("--sample-gaits", type=int, default=None,
+                        help="the sample draws from this many of the best synchronous gaits for "
+                             "the goal (default: every gait of --primitives)")
     return parser
 
 
@@ -322,6 +331,10 @@ def main(argv=None):
     if args.sample_starts is None:
         args.sample_starts = min(args.sample, 1)
     cli.check_count(args.sample_starts, "--sample-starts", 0, args.sample)
+    if args.sample_gaits is not None:
+        cli.check_count(args.sample_gaits, "--sample-gaits", 1, MAX_SYNCHRONOUS_STARTS)
+        if not args.sample:
+            raise cli.StudyArgumentError("--sample-gaits: only with --sample N (N >= 1)")
     if args.direction is not None and not -360 <= args.direction <= 360:
         raise cli.StudyArgumentError(f"--direction must be an angle in [-360, 360] deg, got "
                                      f"{args.direction}")
@@ -349,9 +362,11 @@ def main(argv=None):
     sample = None
     if args.sample:
         sample = sample_objectives(base, solver,
-                                   draw_sample(list(primitives["gait"]), args.sample,
-                                               base.period, args.seed),
-                                   args.goal, direction, args.cycles, args.arch)
+                                   draw_sample(ranked_gaits(primitives, args.goal,
+                                                            direction)[:args.sample_gaits],
+                                               args.sample, base.period, args.seed),
+                                   args.goal, direction, args.cycles, args.arch,
+                                   progress=not args.no_progress)
         sample_csv = out.write_csv(sample, "gait_design_sample.csv")
     starts = choose_starts(primitives, args.goal, direction, args.synchronous_starts,
                            args.random_starts, base.period, args.seed, sample,

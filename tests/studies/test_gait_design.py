@@ -34,6 +34,9 @@ def test_starts_follow_the_goal():
     # clockwise: the most negative turn (A2, -4 deg) ranks first, then A1 (0.5) before A3 (3)
     clockwise = gait_design.choose_starts(primitives, "turn_cw", 0.0, 3, 0, 3.0, 0)
     assert list(clockwise["gait"]) == ["A2", "A1", "A3"]
+    # the ranking the sample's --sample-gaits cuts: every gait, best first
+    assert gait_design.ranked_gaits(primitives, "speed", 90.0) == ["A2", "A1", "A3"]
+    assert gait_design.ranked_gaits(primitives, "turn", 0.0) == ["A3", "A1", "A2"]
 
 
 @pytest.mark.slow
@@ -148,6 +151,9 @@ def test_sample_flags_fail_before_compute(no_compute, tmp_path, capsys):
     for bad, named in ((["--sample", "-1"], "--sample"),
                        (["--sample", str(gait_design.MAX_SAMPLE + 1)], "--sample"),
                        (["--sample-starts", "1"], "--sample-starts"),  # no sample to start from
-                       (["--sample", "2", "--sample-starts", "3"], "--sample-starts")):
+                       (["--sample", "2", "--sample-starts", "3"], "--sample-starts"),
+                       (["--sample-gaits", "3"], "--sample-gaits"),  # no sample to draw
+                       (["--sample", "2", "--sample-gaits", "0"], "--sample-gaits"),
+                       (["--sample", "2", "--sample-gaits", "256"], "--sample-gaits")):
         assert studies_main(["gait_design", "--out", str(tmp_path / "out"), *bad]) == 2
         assert named in capsys.readouterr().err
