@@ -280,7 +280,7 @@ def plot_sample(sample_csv, synchronous_csv, png_path, unit: str) -> Path:
     axes.set_xscale("log")
     axes.set(xlabel="offsets drawn within this share of the period",
              ylabel=f"objective ({unit})", title="random firing patterns")
-    axes.legend(fontsize=7)
+    axes.legend(fontsize=7, loc="lower left")  # the best patterns lie near the top
     return cli.save_figure(fig, png_path, dpi=120)
 
 
