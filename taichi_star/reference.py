@@ -599,11 +599,7 @@ class ReferenceSimulator:
                                              p.cylinder_drag, p.cylinder_diameter)
         quads = topo.jet_quads
         centre = np.zeros((len(quads), 1), dtype=quads.dtype)
-        if area_old is None:
-            area_old = self.areas(q_old)
-        f_jet, k_jet = jet_element(*[q_new[quads[:, m]] for m in range(4)], q_new[centre[:, 0]],
-                                   area_old, dt, p.fluid_density * self.foam_scale, p.alpha,
-                                   p.jet_mode == "contract", p.jet_inflow, p.jet_direction)
+        f_jet, k_jet = self.space_jets(q_new, q_old, dt, area_old)
         jet_nodes = np.concatenate([quads, centre], axis=1)
         if p.jet_application == "spread":
             # a quarter of each space's force on each of its four corners
@@ -621,6 +617,19 @@ class ReferenceSimulator:
             f_hub, k_hub = hub_linear_drag_element(q_new[0], q_old[0], dt, p.hub_linear_drag)
             terms.append((centre[:1], centre[:1], f_hub[None], k_hub[None]))
         return terms
+
+    def space_jets(self, q_new, q_old, dt, area_old=None):
+        """Each inter-limb space's jet (or inflow) force on the robot (8, 2), N/m, and its
+        Jacobian (8, 2, 10) in the space's corners and the centre, for the area rates
+        (S(q_new) − area_old)/dt (area_old defaults to the areas of q_old); space k lies between
+        limbs k and k+1 and holds actuator A(k+1)."""
+        p, quads = self.params, self.topology.jet_quads
+        if area_old is None:
+            area_old = self.areas(q_old)
+        centre = q_new[np.zeros(len(quads), dtype=quads.dtype)]
+        return jet_element(*[q_new[quads[:, m]] for m in range(4)], centre, area_old, dt,
+                           p.fluid_density * self.foam_scale, p.alpha, p.jet_mode == "contract",
+                           p.jet_inflow, p.jet_direction)
 
     def areas(self, q) -> np.ndarray:
         """Areas S (8,), m², of the eight inter-limb spaces (jet quadrilaterals) of q (N, 2) m."""

@@ -12,7 +12,7 @@ from typing import Optional, Sequence
 import numpy as np
 import pandas as pd
 
-from . import metrics, output
+from . import diagnostics, metrics, output
 from .checks import check_flag, is_finite_real, is_whole, shown, warn_user
 from .geometry import CENTRE, Topology, build_topology
 from .model import validate_batch
@@ -140,6 +140,12 @@ class SimulationResult:
         """Save the summary (or another of `output.TABLES`) as CSV with the provenance in a
         JSON sidecar `<path>.json`, each whole or not at all; returns the path."""
         return output.to_csv(self, path, table)
+
+    def jet_impulses(self) -> pd.DataFrame:
+        """Each inter-limb space's jet impulse on the robot over the run, one row per instance
+        and space (`diagnostics.jet_impulses`: needs shapes recorded at every step of a
+        fixed-step implicit Euler run)."""
+        return diagnostics.jet_impulses(self)
 
     def animate(self, path, instances=None, frame: str = "world", fps: int = 15,
                 size_px: int = 720, title=None):
