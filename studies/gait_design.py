@@ -4,7 +4,7 @@ period, optimised by L-BFGS-B on the exact sensitivities, against the best synch
     python -m studies gait_design [--goal speed|turn|turn_cw] [--direction DEG] [--cycles 2]
                                   [--synchronous-starts 3] [--random-starts 3] [--iterations 6]
                                   [--seed 0] [--primitives results/primitives.csv]
-                                  [--sample 0] [--sample-starts 1] [--sample-gaits 255]
+                                  [--sample 0] [--sample-starts 1] [--sample-gaits 255] [--jets]
                                   [--preset ...] [--set NAME=VALUE] [--dt S] [--out DIR] [--quick]
 
 The starts: the `--synchronous-starts` best synchronous gaits of `--primitives` for the goal
@@ -40,7 +40,11 @@ Writes into --out (default runs/gait_design/<timestamp>/), each CSV with its pro
   CSVs; `gait_design.gif`, the best pattern's animation over its cycles;
 - with `--sample`: `gait_design_sample.csv` (sample, gait, spread, objective, its turn per
   cycle, status, newton_capped, the 8 delays in s) and `gait_design_sample.png` (objective against spread,
-  the best synchronous gait's as a line), drawn from it and the synchronous table.
+  the best synchronous gait's as a line), drawn from it and the synchronous table;
+- with `--jets`: `gait_design_jets.csv`, where the thrust comes from: the designed pattern's,
+  the best synchronous gait's and (with `--sample`) each spread's best sampled pattern's jet
+  impulse per inter-limb space (`SimulationResult.jet_impulses`, one batch recorded at every
+  step; implicit Euler with fixed steps only), also projected on the direction.
 """
 
 from __future__ import annotations
@@ -242,6 +246,28 @@ def synchronous_objectives(base, solver, gaits, goal, direction_deg, cycles,
                          "status": result.summary["status"].to_numpy()})
 
 
+def jet_table(base, solver, patterns, direction_deg, cycles, arch) -> pd.DataFrame:
+    """Each (name, gait, spread, delays) of `patterns` run once over the study's cycles with a
+    record at every step; one row per pattern and inter-limb space: pattern, gait, spread,
+    objective (speed along direction_deg, mm/s), space, impulse_x_n_s_m, impulse_y_n_s_m,
+    impulse_along_n_s_m (on direction_deg), jetting_s (`SimulationResult.jet_impulses`)."""
+    duration_s = cycles * base.period
+    params = [base.replace(gait=gait, actuator_delays=tuple(delays))
+              for _, gait, _, delays in patterns]
+    result = simulate(params, duration_s, solver, arch=arch, record_interval_s=solver.dt,
+                      record_shapes=True, progress=False)
+    speed = objective_of(result, "speed", direction_deg, duration_s, cycles)
+    impulses = result.jet_impulses()
+    cosine, sine = np.cos(np.radians(direction_deg)), np.sin(np.radians(direction_deg))
+    names = pd.DataFrame([{"instance": k, "pattern": name, "gait": gait, "spread": spread,
+                           "objective": speed[k]}
+                          for k, (name, gait, spread, _) in enumerate(patterns)])
+    table = names.merge(impulses, on="instance").drop(columns="instance")
+    table["impulse_along_n_s_m"] = (cosine * table["impulse_x_n_s_m"]
+                                    + sine * table["impulse_y_n_s_m"])
+    return table
+
+
 def plot_design(paths_csv, table_csv, png_path, unit: str) -> Path:
     """Left: every start's objective per evaluation; right: best pattern vs best synchronous
     gait at the robustness cases."""
@@ -314,6 +340,10 @@ def build_parser():
     parser.add_argument("--sample-gaits", type=int, default=None,
                         help="the sample draws from this many of the best synchronous gaits for "
                              "the goal (default: every gait of --primitives)")
+    parser.add_argument("--jets", action="store_true",
+                        help="each inter-limb space's jet impulse for the designed, the best "
+                             "synchronous and each spread's best sampled pattern "
+                             "(gait_design_jets.csv; implicit Euler with fixed steps)")
     return parser
 
 
@@ -350,6 +380,11 @@ def main(argv=None):
                                      f"(needs rows with {sorted(PRIMITIVE_COLUMNS)})")
     base = cli.base_params(args)
     solver = cli.solver(args)
+    if args.jets and (solver.adaptive or solver.integrator != "euler"):
+        raise cli.StudyArgumentError("--jets: needs implicit Euler with fixed steps (the jets "
+                                     "are recomputed from every step's shapes), got "
+                                     f"integrator {solver.integrator!r}, adaptive "
+                                     f"{solver.adaptive}")
     # every evaluation runs --cycles from rest, even under --quick
     cli.check_cycles({"--cycles": args.cycles}, base.period, solver)
     fastest = primitives.loc[primitives["step_mm"].idxmax()]
@@ -387,6 +422,15 @@ def main(argv=None):
                 ("synchronous", reference["gait"], (0.0,) * 8)]
     table = robustness(base, solver, patterns, args.goal, direction, args.cycles, args.arch)
     table_csv = out.write_csv(table, "gait_design.csv")
+    if args.jets:
+        shown_patterns = [(name, gait, np.nan, delays) for name, gait, delays in patterns]
+        if args.sample:
+            done = sample[sample["status"] == "ok"]
+            for _, row in done.loc[done.groupby("spread")["objective"].idxmax()].iterrows():
+                shown_patterns.append((f"sample {int(row['sample'])}", row["gait"],
+                                       row["spread"], tuple(row[DELAY_COLUMNS])))
+        out.write_csv(jet_table(base, solver, shown_patterns, direction, args.cycles, args.arch),
+                      "gait_design_jets.csv")
     out.wrote(plot_design(paths_csv, table_csv, out.path("gait_design.png"), unit))
     shown = simulate(base.replace(gait=winner["gait"], actuator_delays=patterns[0][2]),
                      args.cycles * base.period, solver, arch=args.arch,

@@ -157,3 +157,36 @@ def test_sample_flags_fail_before_compute(no_compute, tmp_path, capsys):
                        (["--sample", "2", "--sample-gaits", "256"], "--sample-gaits")):
         assert studies_main(["gait_design", "--out", str(tmp_path / "out"), *bad]) == 2
         assert named in capsys.readouterr().err
+
+
+def test_the_jet_table_is_each_patterns_own_run_projected_on_the_direction():
+    """Every pattern's rows are the jet impulses of a run of it alone (bitwise: batch-position
+    independence), eight spaces each, their projection on the direction the dot product, the
+    objective the pattern's speed along it."""
+    base = StarParams(period=0.5)
+    solver = SolverConfig(dt=5e-3)
+    patterns = [("designed", "A1+A2+A4", np.nan, (0.0, 0.02, 0.0, 0.01, 0.0, 0.0, 0.0, 0.0)),
+                ("sample 3", "A2+A6", 0.03, (0.0,) * 8)]
+    table = gait_design.jet_table(base, solver, patterns, 60.0, 1, "cpu")
+    assert list(table["pattern"]) == ["designed"] * 8 + ["sample 3"] * 8
+    assert list(table["space"]) == list(range(1, 9)) * 2
+    for name, gait, _, delays in patterns:
+        alone = taichi_star.simulate(base.replace(gait=gait, actuator_delays=delays),
+                                     base.period, solver, record_interval_s=solver.dt,
+                                     record_shapes=True)
+        rows = table[table["pattern"] == name]
+        expected = alone.jet_impulses()
+        assert (rows["impulse_x_n_s_m"].to_numpy() == expected["impulse_x_n_s_m"].to_numpy()).all()
+        assert (rows["impulse_y_n_s_m"].to_numpy() == expected["impulse_y_n_s_m"].to_numpy()).all()
+        assert (rows["objective"] == gait_design.objective_of(alone, "speed", 60.0,
+                                                              base.period, 1)[0]).all()
+    along = (np.cos(np.radians(60.0)) * table["impulse_x_n_s_m"]
+             + np.sin(np.radians(60.0)) * table["impulse_y_n_s_m"])
+    assert (table["impulse_along_n_s_m"] == along).all()
+    assert np.abs(table["impulse_along_n_s_m"]).max() > 0
+
+
+def test_jets_need_fixed_euler_steps_before_compute(no_compute, tmp_path, capsys):
+    assert studies_main(["gait_design", "--out", str(tmp_path / "out"), "--jets",
+                         "--preset", "accurate"]) == 2
+    assert "--jets" in capsys.readouterr().err
