@@ -190,3 +190,25 @@ def test_jets_need_fixed_euler_steps_before_compute(no_compute, tmp_path, capsys
     assert studies_main(["gait_design", "--out", str(tmp_path / "out"), "--jets",
                          "--preset", "accurate"]) == 2
     assert "--jets" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_a_quick_run_with_a_sample_and_jets_writes_every_table(tmp_path):
+    """The whole path of --sample and --jets: five sampled patterns, one per spread, each
+    scored; the best one a start; the jet table holds the designed pattern, the best
+    synchronous gait and each spread's best sampled pattern, eight spaces each."""
+    out = tmp_path / "run"
+    assert studies_main(["gait_design", "--quick", "--no-progress", "--sample", "5",
+                         "--jets", "--out", str(out)]) == 0
+    sample = pd.read_csv(out / "gait_design_sample.csv")
+    assert list(sample["spread"]) == list(gait_design.SAMPLE_SPREADS)
+    paths = pd.read_csv(out / "gait_design_paths.csv")
+    best = sample.loc[sample["objective"].idxmax()]
+    assert f"sample {best['sample']}" in set(paths["origin"])  # --sample-starts 1 by default
+    jets = pd.read_csv(out / "gait_design_jets.csv")
+    assert list(jets["pattern"].unique()) == ["designed", "synchronous",
+                                              *[f"sample {k}" for k in sample["sample"]]]
+    assert (jets.groupby("pattern")["space"].count() == 8).all()
+    for name in ("gait_design_sample.png", "gait_design_jets.csv.json",
+                 "gait_design_sample.csv.json"):
+        assert (out / name).is_file()
