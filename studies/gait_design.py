@@ -159,6 +159,15 @@ def draw_sample(gaits: Sequence[str], n: int, period: float, seed: int) -> pd.Da
     return pd.DataFrame(rows, columns=["sample", "gait", "spread", *DELAY_COLUMNS])
 
 
+def best_per_spread(sample: pd.DataFrame) -> pd.DataFrame:
+    """The best finished pattern of each spread of a scored sample (`sample_objectives`), in
+    increasing spread."""
+    finished = sample[sample["status"] == "ok"]
+    # by position, not by index label: a table put together from pieces may repeat labels
+    best_first = finished.sort_values("objective", ascending=False, kind="stable")
+    return best_first.groupby("spread").head(1).sort_values("spread", kind="stable")
+
+
 def sample_objectives(base, solver, sample: pd.DataFrame, goal, direction_deg, cycles,
                       arch, progress: bool = True) -> pd.DataFrame:
     """`sample` (`draw_sample`) with each pattern's objective, its turn per cycle
@@ -423,13 +432,12 @@ def main(argv=None):
     table = robustness(base, solver, patterns, args.goal, direction, args.cycles, args.arch)
     table_csv = out.write_csv(table, "gait_design.csv")
     if args.jets:
-        shown_patterns = [(name, gait, np.nan, delays) for name, gait, delays in patterns]
+        jet_patterns = [(name, gait, np.nan, delays) for name, gait, delays in patterns]
         if args.sample:
-            done = sample[sample["status"] == "ok"]
-            for _, row in done.loc[done.groupby("spread")["objective"].idxmax()].iterrows():
-                shown_patterns.append((f"sample {int(row['sample'])}", row["gait"],
-                                       row["spread"], tuple(row[DELAY_COLUMNS])))
-        out.write_csv(jet_table(base, solver, shown_patterns, direction, args.cycles, args.arch),
+            jet_patterns += [(f"sample {int(row['sample'])}", row["gait"], row["spread"],
+                              tuple(row[DELAY_COLUMNS]))
+                             for _, row in best_per_spread(sample).iterrows()]
+        out.write_csv(jet_table(base, solver, jet_patterns, direction, args.cycles, args.arch),
                       "gait_design_jets.csv")
     out.wrote(plot_design(paths_csv, table_csv, out.path("gait_design.png"), unit))
     shown = simulate(base.replace(gait=winner["gait"], actuator_delays=patterns[0][2]),
@@ -444,8 +452,8 @@ def main(argv=None):
           f"({winner['gait']}), best synchronous {plain:.4g} ({reference['gait']}), "
           f"ratio {designed / plain:.3f}")
     if args.sample:
+        top = best_per_spread(sample).nlargest(1, "objective").iloc[0]
         finished = sample[sample["status"] == "ok"]
-        top = finished.loc[finished["objective"].idxmax()]
         print(f"sample: best {top['objective']:.4g} ({top['gait']}, offsets within "
               f"{top['spread']:g} of the period), {int((finished['objective'] > plain).sum())} "
               f"of {len(finished)} finished patterns above the best synchronous gait")

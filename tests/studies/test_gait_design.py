@@ -137,9 +137,15 @@ def test_the_sample_scores_each_pattern_as_a_run_of_its_own_and_its_best_join_th
         assert row["newton_capped"] == alone.summary["newton_capped"][0]
     primitives = pd.DataFrame({"gait": ["A1"], "step_x_mm": [1.0], "step_y_mm": [0.0],
                                "turn_deg": [0.0]})
-    # a failed pattern, however large its objective, is never a start
+    # a failed pattern, however large its objective, is never a start nor a spread's best
     failed = scored.assign(status=["failed"] + ["ok"] * 4)
     failed.loc[0, "objective"] = 1e9
+    assert list(gait_design.best_per_spread(failed)["sample"]) == [1, 2, 3, 4]
+    # a second pattern per spread, better by 1 (its index labels repeat the first's): it wins
+    # each spread but the first, where both failed
+    two_per_spread = pd.concat([failed, failed.assign(sample=failed["sample"] + 5,
+                                                      objective=failed["objective"] + 1)])
+    assert list(gait_design.best_per_spread(two_per_spread)["sample"]) == [6, 7, 8, 9]
     starts = gait_design.choose_starts(primitives, "speed", 0.0, 1, 0, base.period, 0,
                                        failed, 2)
     order = failed.iloc[1:].sort_values("objective", ascending=False)
