@@ -49,15 +49,13 @@ def jet_impulses(result) -> pd.DataFrame:
     for instance, row in result.summary.iterrows():
         twin = ReferenceSimulator(StarParams.from_row(row))
         shapes = result.shapes[:, instance]
-        impulse = np.zeros((N_ACTUATORS, 2))
-        jetting = np.zeros(N_ACTUATORS)
         if np.isfinite(shapes).all():
-            for before, after in zip(shapes[:-1], shapes[1:]):
-                force = twin.space_jets(after, before, solver.dt)[0]
-                impulse += force * solver.dt
-                jetting += solver.dt * (np.abs(force).sum(axis=1) > 0.0)
+            # every step at once: forces (steps, 8, 2)
+            force = twin.space_jets(shapes[1:], shapes[:-1], solver.dt)[0]
+            impulse = (force * solver.dt).sum(axis=0)
+            jetting = solver.dt * (np.abs(force).sum(axis=2) > 0.0).sum(axis=0)
         else:
-            impulse[:] = jetting[:] = np.nan
+            impulse, jetting = np.full((N_ACTUATORS, 2), np.nan), np.full(N_ACTUATORS, np.nan)
         for space in range(N_ACTUATORS):
             rows.append({"instance": instance, "space": space + 1,
                          "impulse_x_n_s_m": impulse[space, 0],

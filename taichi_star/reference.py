@@ -619,22 +619,24 @@ class ReferenceSimulator:
         return terms
 
     def space_jets(self, q_new, q_old, dt, area_old=None):
-        """Each inter-limb space's jet (or inflow) force on the robot (8, 2), N/m, and its
-        Jacobian (8, 2, 10) in the space's corners and the centre, for the area rates
-        (S(q_new) − area_old)/dt (area_old defaults to the areas of q_old); space k lies between
-        limbs k and k+1 and holds actuator A(k+1)."""
+        """Each inter-limb space's jet (or inflow) force on the robot (..., 8, 2), N/m, and its
+        Jacobian (..., 8, 2, 10) in the space's corners and the centre, for the area rates
+        (S(q_new) − area_old)/dt (area_old defaults to the areas of q_old); q_new, q_old
+        (..., N, 2) m, any leading axes (a run's steps at once); space k lies between limbs k
+        and k+1 and holds actuator A(k+1)."""
         p, quads = self.params, self.topology.jet_quads
         if area_old is None:
             area_old = self.areas(q_old)
-        centre = q_new[np.zeros(len(quads), dtype=quads.dtype)]
-        return jet_element(*[q_new[quads[:, m]] for m in range(4)], centre, area_old, dt,
+        centre = q_new[..., np.zeros(len(quads), dtype=quads.dtype), :]
+        return jet_element(*[q_new[..., quads[:, m], :] for m in range(4)], centre, area_old, dt,
                            p.fluid_density * self.foam_scale, p.alpha, p.jet_mode == "contract",
                            p.jet_inflow, p.jet_direction)
 
     def areas(self, q) -> np.ndarray:
-        """Areas S (8,), m², of the eight inter-limb spaces (jet quadrilaterals) of q (N, 2) m."""
+        """Areas S (..., 8), m², of the eight inter-limb spaces (jet quadrilaterals) of q
+        (..., N, 2) m."""
         q = np.asarray(q, dtype=np.float64)
-        return quad_area(*[q[self.topology.jet_quads[:, m]] for m in range(4)])
+        return quad_area(*[q[..., self.topology.jet_quads[:, m], :] for m in range(4)])
 
     def fluid_forces(self, q_new, q_old, dt) -> np.ndarray:
         """Rod drag + cylinder drag + jet (N, 2), N/m, for the step q_old -> q_new (m) of dt s."""
