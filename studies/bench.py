@@ -82,7 +82,11 @@ rest (pulse and coast: the B sweep's window is the hardest part of the pulse) (C
 --no-plain-call).
 
 Section "sensitivities": the plain call at B = 64 over the pulse, differentiating by 0, 1, 2
-and 4 parameters (`simulate(..., sensitivities=...)`; its cost against the same call without).
+and 4 parameters (`simulate(..., sensitivities=...)`; its cost against the same call without),
+every count and Jacobian mode timed in the same rounds (`--repeats` of them, interleaved), and
+each differentiating row's cost in runs of the forward call (Newton's Jacobian, no
+sensitivities): `cost_in_forward_runs` (the ratio of the best calls) and
+`cost_in_forward_runs_median` (the median of the rounds' ratios).
 Both sections run once per Jacobian mode of --plain-jacobians (default Newton's alone).
 In both sections `time_to_first_step_s` is the first call's (one step, compilation included).
 
@@ -100,7 +104,8 @@ copy of the group's systems into the lanes), matmul_gflops (NumPy's matrix produ
 MATMUL_SIZE, quick: QUICK_MATMUL_SIZE, in the row's precision, best of three, timed just before
 the row's engine: the machine's attainable rate in the same run; CPU paper rows only),
 factor_fraction_of_matmul (their ratio), bytes_per_step, bandwidth_gb_s,
-bandwidth_fraction. And `bench.png` (`bench_gpu.png`): throughput
+bandwidth_fraction, cost_in_forward_runs, cost_in_forward_runs_median (the sensitivities
+section). And `bench.png` (`bench_gpu.png`): throughput
 against B (log-log, one line per precision, the design target dashed), the phase split and
 the scenarios.
 """
@@ -199,7 +204,8 @@ COLUMNS = ["machine", "cpu_model", "cores", "gpu", "gpu_driver", "arch", "preset
            "residual_us", "factor_us", "solve_us",
            "bookkeeping_us", "factor_flops", "factor_gflops", "matmul_gflops",
            "factor_fraction_of_matmul", "bytes_per_step",
-           "bandwidth_gb_s", "bandwidth_fraction", "final_state"]
+           "bandwidth_gb_s", "bandwidth_fraction", "cost_in_forward_runs",
+           "cost_in_forward_runs_median", "final_state"]
 
 
 def timestamp() -> str:
@@ -326,17 +332,33 @@ def best_of_calls(call, repeats: int, warmup=None):
     """(result of `call()`, best wall time (s) of `repeats` calls, wall time (s) of the
     `warmup()` (default: `call()`) before them, which starts and compiles what they need).
     Raises if an instance failed (the timing would not be valid)."""
-    start = time.perf_counter()
-    (warmup or call)()
-    first = time.perf_counter() - start
-    timed = math.inf
-    for _ in range(repeats):
+    results, times, firsts = interleaved_calls([call], repeats, [warmup])
+    return results[0], times[:, 0].min(), firsts[0]
+
+
+def interleaved_calls(calls, repeats: int, warmups):
+    """Time several calls in rounds: each `warmups[i]()` (None: `calls[i]()`) once first, which
+    starts and compiles what call i needs, then `repeats` rounds that each make every call once,
+    in turn, so that the machine's drifts (other jobs, clocks) reach them all alike. Returns
+    (the last result of each call, wall times (s) as a (repeats, len(calls)) array, each
+    warm-up's wall time (s)). Raises if an instance failed (the timing would not be valid)."""
+    firsts = []
+    for call, warmup in zip(calls, warmups):
         start = time.perf_counter()
-        result = call()
-        timed = min(timed, time.perf_counter() - start)
-    if (result.summary["status"] != "ok").any():
-        raise RuntimeError("an instance failed during the benchmark: its timing is not valid")
-    return result, timed, first
+        (warmup or call)()
+        firsts.append(time.perf_counter() - start)
+    times = np.empty((repeats, len(calls)))
+    results = [None] * len(calls)
+    for round_index in range(repeats):
+        for index, call in enumerate(calls):
+            start = time.perf_counter()
+            results[index] = call()
+            times[round_index, index] = time.perf_counter() - start
+    for result in results:
+        if (result.summary["status"] != "ok").any():
+            raise RuntimeError("an instance failed during the benchmark: its timing is not "
+                               "valid")
+    return results, times, firsts
 
 
 def end_to_end_figures(result, robot_steps: float, timed: float) -> dict:
@@ -366,28 +388,53 @@ def measure_processes(batch: int, workers: int, jacobian: str, steps: int, repea
 def measure_plain(batch: int, duration: float, repeats: int, sensitivities=(),
                   jacobian: str = "newton") -> dict:
     """End-to-end throughput of the plain call a user writes, `simulate(params, duration)` with
-    the default SolverConfig (or its `jacobian` mode), in this process: the five Fig. 4c gaits
-    repeated to `batch` instances from rest, the best of `repeats` calls after one that
-    compiles the engine; with `sensitivities` (parameter names) the same call differentiating
-    by them (the robot-steps counted are the instances', not their replicas').
-    `time_to_first_step_s` is
-    that first call's, one step: the engine's compilation where this process has not built
-    one of its size and kind before (the sections run in order), its loading and a step;
-    `final_state` a digest of the displacements and of their sensitivities."""
+    the default SolverConfig (or its `jacobian` mode), in this process: `measure_plains` of
+    that one call."""
+    return measure_plains(batch, duration, repeats, [(tuple(sensitivities), jacobian)])[0]
+
+
+def measure_plains(batch: int, duration: float, repeats: int, configurations) -> list:
+    """End-to-end throughput of the plain call a user writes, `simulate(params, duration)`, in
+    this process, for each (sensitivities, jacobian) of `configurations` (parameter names the
+    call differentiates by, and the SolverConfig's Jacobian mode): the five Fig. 4c gaits
+    repeated to `batch` instances from rest, one call of each (one step) that compiles its
+    engine, then `repeats` rounds timing every configuration's call once in turn
+    (`interleaved_calls`); each figure is its configuration's best call (the robot-steps
+    counted are the instances', not their replicas'). `time_to_first_step_s` is that first
+    call's: the engine's compilation where this process has not built one of its size and kind
+    before (the sections run in order), its loading and a step; `final_state` a digest of the
+    displacements and of their sensitivities. A configuration differentiating by parameters
+    also gets its cost in runs of the forward call, Newton's Jacobian and no sensitivities,
+    where that is among `configurations`: `cost_in_forward_runs` (the ratio of the best calls)
+    and `cost_in_forward_runs_median` (the median over the rounds of each round's ratio)."""
     params = cli.paper_gaits_batch(batch)
     steps = round(duration / DT)
-    solver = SolverConfig(jacobian=jacobian)
-    result, timed, first = best_of_calls(
-        lambda: simulate(params, duration, solver, sensitivities=sensitivities, progress=False),
-        repeats, warmup=lambda: simulate(params, DT, solver, sensitivities=sensitivities,
-                                         progress=False))
-    return {"gait": "paper_gaits", "jacobian": jacobian, "workers": 1,
-            "n_nodes": result.topology.n_nodes, "steps": steps, "time_to_first_step_s": first,
-            "final_state": state_digest(np.column_stack(
-                [result.summary[output].to_numpy() for output in DISPLACEMENTS]
-                + [result.sensitivity(output, name) for output in DISPLACEMENTS
-                   for name in sensitivities])),
-            **end_to_end_figures(result, batch * steps, timed)}
+    calls, warmups = [], []
+    for sensitivities, jacobian in configurations:
+        solver = SolverConfig(jacobian=jacobian)
+        calls.append(lambda solver=solver, names=sensitivities: simulate(
+            params, duration, solver, sensitivities=names, progress=False))
+        warmups.append(lambda solver=solver, names=sensitivities: simulate(
+            params, DT, solver, sensitivities=names, progress=False))
+    results, times, firsts = interleaved_calls(calls, repeats, warmups)
+    forward = [index for index, (names, jacobian) in enumerate(configurations)
+               if not names and jacobian == "newton"]
+    rows = []
+    for index, ((sensitivities, jacobian), result) in enumerate(zip(configurations, results)):
+        row = {"gait": "paper_gaits", "jacobian": jacobian, "workers": 1,
+               "n_nodes": result.topology.n_nodes, "steps": steps,
+               "time_to_first_step_s": firsts[index],
+               "final_state": state_digest(np.column_stack(
+                   [result.summary[output].to_numpy() for output in DISPLACEMENTS]
+                   + [result.sensitivity(output, name) for output in DISPLACEMENTS
+                      for name in sensitivities])),
+               **end_to_end_figures(result, batch * steps, times[:, index].min())}
+        if sensitivities and forward:
+            row["cost_in_forward_runs"] = times[:, index].min() / times[:, forward[0]].min()
+            row["cost_in_forward_runs_median"] = float(np.median(
+                times[:, index] / times[:, forward[0]]))
+        rows.append(row)
+    return rows
 
 
 PROBE_CODE = f"""
@@ -668,12 +715,17 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
                          args.process_batch, SolverConfig(jacobian=jacobian),
                          robot_steps=args.process_batch * figures["steps"])})
         Runtime.current().configure_lanes()
-    for count in args.sensitivity_counts:
-        for jacobian in args.plain_jacobians:
-            add({"section": "sensitivities", "scenario": f"sensitivities_{count}",
+    configurations = [(SENSITIVITY_PARAMETERS[:count], jacobian)
+                      for count in args.sensitivity_counts for jacobian in args.plain_jacobians]
+    if configurations:
+        # every count and Jacobian timed in the same rounds: their costs are ratios of calls
+        # made minutes apart otherwise, and this machine's speed drifts by 20 % in that time
+        measured = measure_plains(SENSITIVITY_BATCH, args.sensitivity_duration, args.repeats,
+                                  configurations)
+        for (names, _), figures in zip(configurations, measured):
+            add({"section": "sensitivities", "scenario": f"sensitivities_{len(names)}",
                  "preset": "paper", "batch_size": SENSITIVITY_BATCH, "precision": "f64",
-                 **measure_plain(SENSITIVITY_BATCH, args.sensitivity_duration, args.repeats,
-                                 SENSITIVITY_PARAMETERS[:count], jacobian=jacobian)})
+                 **figures})
     for workers in args.workers_list:
         for jacobian in args.jacobians:
             figures = measure_processes(args.process_batch, workers, jacobian, args.steps,

@@ -3,6 +3,8 @@ counts, plots), and the benchmark and work-precision studies' argument errors, r
 any computation (the work-precision study itself: test_work_precision.py). No timing is
 asserted."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -105,6 +107,62 @@ def test_the_plain_call_of_another_jacobian_mode_is_that_call_made_directly():
     assert figures["final_state"] == bench.state_digest(np.column_stack(
         [direct.summary[output].to_numpy() for output in bench.DISPLACEMENTS]
         + [direct.sensitivity(output, "alpha") for output in bench.DISPLACEMENTS]))
+
+
+class _Result:
+    """What the plain sections read of a `SimulationResult`: its summary, topology and
+    sensitivities (values of no meaning: the digest's input)."""
+
+    def __init__(self, status="ok"):
+        self.summary = pd.DataFrame({"status": [status] * 2, "displacement_x_mm": [1.0, 2.0],
+                                     "displacement_y_mm": [3.0, 4.0],
+                                     "newton_iterations_mean": [2.0, 2.0],
+                                     "factorisations_mean": [1.0, 1.0]})
+        self.topology = SimpleNamespace(n_nodes=7)
+
+    def sensitivity(self, output, name):
+        return np.array([0.5, 0.25])
+
+
+def test_interleaved_calls_warm_each_call_then_time_every_call_in_each_round():
+    log = []
+
+    def call(label, status="ok"):
+        def made():
+            log.append(label)
+            return _Result(status)
+        return made
+
+    results, times, firsts = bench.interleaved_calls(
+        [call("a"), call("b")], 3, [call("warm a"), None])
+    # b has no warm-up of its own: its call warms it; then a, b in every round, in turn
+    assert log == ["warm a", "b", "a", "b", "a", "b", "a", "b"]
+    assert times.shape == (3, 2) and (times >= 0).all() and len(firsts) == 2
+    assert all(isinstance(result, _Result) for result in results)
+    with pytest.raises(RuntimeError, match="not valid"):
+        bench.interleaved_calls([call("a"), call("c", status="failed")], 1, [None, None])
+
+
+def test_sensitivity_costs_are_ratios_to_newtons_forward_call_in_the_same_rounds(monkeypatch):
+    # rounds (rows) of three calls: the forward call (Newton, none), and two differentiating
+    times = np.array([[1.0, 2.0, 1.5],
+                      [2.0, 3.0, 2.5]])
+    monkeypatch.setattr(bench, "interleaved_calls", lambda calls, repeats, warmups: (
+        [_Result() for _ in calls], times, [0.1] * len(calls)))
+    rows = bench.measure_plains(2, 0.002, 2, [((), "newton"), (("alpha",), "lagged"),
+                                              (("alpha",), "newton")])
+    assert "cost_in_forward_runs" not in rows[0]
+    # the ratio of the best calls, and the median of the rounds' ratios (2 and 1.5; 1.5 and 1.25)
+    assert rows[1]["cost_in_forward_runs"] == pytest.approx(2.0, rel=1e-12)
+    assert rows[1]["cost_in_forward_runs_median"] == pytest.approx(1.75, rel=1e-12)
+    assert rows[2]["cost_in_forward_runs"] == pytest.approx(1.5, rel=1e-12)
+    assert rows[2]["cost_in_forward_runs_median"] == pytest.approx(1.375, rel=1e-12)
+    # each row's throughput from its own best call: 2 instances × 2 steps
+    assert [row["robot_steps_per_s"] for row in rows] == pytest.approx([4 / 1.0, 4 / 2.0, 4 / 1.5])
+    # without Newton's forward call among them, no cost (a lagged forward call is not it)
+    rows = bench.measure_plains(2, 0.002, 2, [((), "lagged"), (("alpha",), "lagged"),
+                                              (("alpha",), "newton")])
+    assert not any("cost_in_forward_runs" in row for row in rows)
 
 
 def test_step_phases_count_the_jacobian_only_where_the_matrix_is_refreshed():
