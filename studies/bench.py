@@ -87,7 +87,8 @@ every count and Jacobian mode timed in the same rounds (`--repeats` of them, int
 each differentiating row's cost in runs of the forward call (Newton's Jacobian, no
 sensitivities): `cost_in_forward_runs` (the ratio of the best calls) and
 `cost_in_forward_runs_median` (the median of the rounds' ratios).
-Both sections run once per Jacobian mode of --plain-jacobians (default Newton's alone).
+Both sections run once per Jacobian mode of --plain-jacobians (default Newton's alone), the
+modes' calls in the same rounds.
 In both sections `time_to_first_step_s` is the first call's (one step, compilation included).
 
 Writes `bench.csv` (`bench_gpu.csv` for --arch gpu): one row per measurement; `section` is
@@ -226,7 +227,7 @@ def on_off(flag: bool) -> str:
 
 
 DISPLACEMENTS = ("displacement_x_mm", "displacement_y_mm")
-"""The outputs whose values (and sensitivities) `measure_plain`'s digest covers."""
+"""The outputs whose values (and sensitivities) `measure_plains`'s digest covers."""
 
 
 def state_digest(values: np.ndarray) -> str:
@@ -383,14 +384,6 @@ def measure_processes(batch: int, workers: int, jacobian: str, steps: int, repea
             params, duration, solver=solver, chunk_size=chunk, executor=executor), repeats)
     return {"gait": GAIT, "jacobian": jacobian, "workers": workers,
             **end_to_end_figures(result, batch * (WARMUP_STEPS + steps), timed)}
-
-
-def measure_plain(batch: int, duration: float, repeats: int, sensitivities=(),
-                  jacobian: str = "newton") -> dict:
-    """End-to-end throughput of the plain call a user writes, `simulate(params, duration)` with
-    the default SolverConfig (or its `jacobian` mode), in this process: `measure_plains` of
-    that one call."""
-    return measure_plains(batch, duration, repeats, [(tuple(sensitivities), jacobian)])[0]
 
 
 def measure_plains(batch: int, duration: float, repeats: int, configurations) -> list:
@@ -706,9 +699,9 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
     if args.plain_call and not gpu:
         for lanes in args.lanes:
             Runtime.current().configure_lanes(lanes)
-            for jacobian in args.plain_jacobians:
-                figures = measure_plain(args.process_batch, args.plain_duration, args.repeats,
-                                        jacobian=jacobian)
+            measured = measure_plains(args.process_batch, args.plain_duration, args.repeats,
+                                      [((), jacobian) for jacobian in args.plain_jacobians])
+            for jacobian, figures in zip(args.plain_jacobians, measured):
                 add({"section": "plain", "scenario": "all_terms", "preset": "paper",
                      "batch_size": args.process_batch, "precision": "f64", **figures,
                      "lanes": Runtime.current().engine_lanes(

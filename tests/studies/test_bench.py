@@ -94,7 +94,7 @@ def test_the_plain_call_of_another_jacobian_mode_is_that_call_made_directly():
     """`--plain-jacobians lagged`: the plain (and sensitivities) section's call with
     SolverConfig(jacobian="lagged"), its iterations, factorisations and digest those of the same
     call made here (and not those of Newton's Jacobian)."""
-    figures = bench.measure_plain(5, 0.05, 1, sensitivities=("alpha",), jacobian="lagged")
+    (figures,) = bench.measure_plains(5, 0.05, 1, [(("alpha",), "lagged")])
     params = [StarParams(gait=PAPER_GAITS[i % 5]) for i in range(5)]
     direct = taichi_star.simulate(params, 0.05, taichi_star.SolverConfig(jacobian="lagged"),
                                   sensitivities=("alpha",))
