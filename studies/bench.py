@@ -86,7 +86,8 @@ and 4 parameters (`simulate(..., sensitivities=...)`; its cost against the same 
 every count and Jacobian mode timed in the same rounds (`--repeats` of them, interleaved), and
 each differentiating row's cost in runs of the forward call (Newton's Jacobian, no
 sensitivities): `cost_in_forward_runs` (the ratio of the best calls) and
-`cost_in_forward_runs_median` (the median of the rounds' ratios).
+`cost_in_forward_runs_median` (the median of the rounds' ratios), and against the call of
+its own Jacobian mode without sensitivities, `cost_in_own_forward_runs`.
 Both sections run once per Jacobian mode of --plain-jacobians (default Newton's alone), the
 modes' calls in the same rounds.
 In both sections `time_to_first_step_s` is the first call's (one step, compilation included).
@@ -105,8 +106,8 @@ copy of the group's systems into the lanes), matmul_gflops (NumPy's matrix produ
 MATMUL_SIZE, quick: QUICK_MATMUL_SIZE, in the row's precision, best of three, timed just before
 the row's engine: the machine's attainable rate in the same run; CPU paper rows only),
 factor_fraction_of_matmul (their ratio), bytes_per_step, bandwidth_gb_s,
-bandwidth_fraction, cost_in_forward_runs, cost_in_forward_runs_median (the sensitivities
-section). And `bench.png` (`bench_gpu.png`): throughput
+bandwidth_fraction, cost_in_forward_runs, cost_in_forward_runs_median,
+cost_in_own_forward_runs (the sensitivities section). And `bench.png` (`bench_gpu.png`): throughput
 against B (log-log, one line per precision, the design target dashed), the phase split and
 the scenarios.
 """
@@ -206,7 +207,7 @@ COLUMNS = ["machine", "cpu_model", "cores", "gpu", "gpu_driver", "arch", "preset
            "bookkeeping_us", "factor_flops", "factor_gflops", "matmul_gflops",
            "factor_fraction_of_matmul", "bytes_per_step",
            "bandwidth_gb_s", "bandwidth_fraction", "cost_in_forward_runs",
-           "cost_in_forward_runs_median", "final_state"]
+           "cost_in_forward_runs_median", "cost_in_own_forward_runs", "final_state"]
 
 
 def timestamp() -> str:
@@ -399,7 +400,9 @@ def measure_plains(batch: int, duration: float, repeats: int, configurations) ->
     displacements and of their sensitivities. A configuration differentiating by parameters
     also gets its cost in runs of the forward call, Newton's Jacobian and no sensitivities,
     where that is among `configurations`: `cost_in_forward_runs` (the ratio of the best calls)
-    and `cost_in_forward_runs_median` (the median over the rounds of each round's ratio)."""
+    and `cost_in_forward_runs_median` (the median over the rounds of each round's ratio); and
+    `cost_in_own_forward_runs`, the ratio of its best call to that of the call with its own
+    Jacobian mode and no sensitivities, where that is among them."""
     params = cli.paper_gaits_batch(batch)
     steps = round(duration / DT)
     calls, warmups = [], []
@@ -410,8 +413,9 @@ def measure_plains(batch: int, duration: float, repeats: int, configurations) ->
         warmups.append(lambda solver=solver, names=sensitivities: simulate(
             params, DT, solver, sensitivities=names, progress=False))
     results, times, firsts = interleaved_calls(calls, repeats, warmups)
-    forward = [index for index, (names, jacobian) in enumerate(configurations)
-               if not names and jacobian == "newton"]
+    forward = {jacobian: index for index, (names, jacobian) in enumerate(configurations)
+               if not names}
+    best = times.min(axis=0)
     rows = []
     for index, ((sensitivities, jacobian), result) in enumerate(zip(configurations, results)):
         row = {"gait": "paper_gaits", "jacobian": jacobian, "workers": 1,
@@ -421,11 +425,13 @@ def measure_plains(batch: int, duration: float, repeats: int, configurations) ->
                    [result.summary[output].to_numpy() for output in DISPLACEMENTS]
                    + [result.sensitivity(output, name) for output in DISPLACEMENTS
                       for name in sensitivities])),
-               **end_to_end_figures(result, batch * steps, times[:, index].min())}
-        if sensitivities and forward:
-            row["cost_in_forward_runs"] = times[:, index].min() / times[:, forward[0]].min()
+               **end_to_end_figures(result, batch * steps, best[index])}
+        if sensitivities and "newton" in forward:
+            row["cost_in_forward_runs"] = best[index] / best[forward["newton"]]
             row["cost_in_forward_runs_median"] = float(np.median(
-                times[:, index] / times[:, forward[0]]))
+                times[:, index] / times[:, forward["newton"]]))
+        if sensitivities and jacobian in forward:
+            row["cost_in_own_forward_runs"] = best[index] / best[forward[jacobian]]
         rows.append(row)
     return rows
 

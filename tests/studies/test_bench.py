@@ -157,12 +157,18 @@ def test_sensitivity_costs_are_ratios_to_newtons_forward_call_in_the_same_rounds
     assert rows[1]["cost_in_forward_runs_median"] == pytest.approx(1.75, rel=1e-12)
     assert rows[2]["cost_in_forward_runs"] == pytest.approx(1.5, rel=1e-12)
     assert rows[2]["cost_in_forward_runs_median"] == pytest.approx(1.375, rel=1e-12)
+    # against the call of its own mode: Newton's is the forward call, lagged has none here
+    assert rows[2]["cost_in_own_forward_runs"] == pytest.approx(1.5, rel=1e-12)
+    assert "cost_in_own_forward_runs" not in rows[1]
     # each row's throughput from its own best call: 2 instances × 2 steps
     assert [row["robot_steps_per_s"] for row in rows] == pytest.approx([4 / 1.0, 4 / 2.0, 4 / 1.5])
-    # without Newton's forward call among them, no cost (a lagged forward call is not it)
+    # without Newton's forward call among them, no cost in forward runs (a lagged forward call
+    # is not it), but the lagged row's cost in its own: 2 and 3 against 1 and 2, the best 2 / 1
     rows = bench.measure_plains(2, 0.002, 2, [((), "lagged"), (("alpha",), "lagged"),
                                               (("alpha",), "newton")])
     assert not any("cost_in_forward_runs" in row for row in rows)
+    assert rows[1]["cost_in_own_forward_runs"] == pytest.approx(2.0, rel=1e-12)
+    assert "cost_in_own_forward_runs" not in rows[2]
 
 
 def test_step_phases_count_the_jacobian_only_where_the_matrix_is_refreshed():
