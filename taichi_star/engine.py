@@ -208,9 +208,16 @@ class BatchEngine:
         then the instance's, the same for both replicas of a pair, and `assemble` leaves it out
         of their difference (0 for the simulated instances, which assemble every term)."""
         if sensitive:
-            self.slot_nodes = arena.index(sorted(
-                ([slot, i, j] for (i, j), slot in self.plan.slot.items())))
-            """(slots, 3): each Jacobian slot with its block's row and column node."""
+            external_pairs = {frozenset(pair) for pair in coupled_node_pairs(
+                model.topology, [term for term in model.terms_used if not term[0].internal])}
+            external_slots = sorted([slot, i, j] for (i, j), slot in self.plan.slot.items()
+                                    if i == j or frozenset((i, j)) in external_pairs)
+            self.external_slot_nodes = arena.index(external_slots)
+            """(slots, 3): the Jacobian slots that the inertia (the diagonal) and the terms
+            that are not `internal` can fill, each with its block's row and column node, in
+            slot order: what `rigid_projector_of` reads after the external terms' assembly,
+            every other block being still zero then (609 of the paper robot's 1,675 slots)."""
+            self.n_external_slots = len(external_slots)
             self.rigid_projector = arena.batch_field(float, (capacity, self.n_nodes),
                                                      matrix=(3, 2))
             """Per simulated instance and node m, the 3×2 map of a tangent step's x_m to its
@@ -918,9 +925,10 @@ class BatchEngine:
         if ti.static(external_pass):
             for m in range(self.n_nodes):
                 self.rigid_projector[b, m] = ti.Matrix.zero(float, 3, 2)
-            for entry in range(self.system.n_slots):
-                slot, row, column = (self.slot_nodes[entry, 0], self.slot_nodes[entry, 1],
-                                     self.slot_nodes[entry, 2])
+            for entry in range(self.n_external_slots):
+                slot, row, column = (self.external_slot_nodes[entry, 0],
+                                     self.external_slot_nodes[entry, 1],
+                                     self.external_slot_nodes[entry, 2])
                 block = self.system.blocks[b, slot]
                 arm = self.state.positions[b, row] - centre
                 share = ti.Matrix.zero(float, 3, 2)

@@ -7,7 +7,7 @@ import pytest
 import taichi as ti
 
 import taichi_star as ts
-from taichi_star.engine import BatchEngine
+from taichi_star.engine import EXTERNAL_TERMS, BatchEngine
 from taichi_star.integrators import INTEGRATORS
 from taichi_star.metrics import shape_checks
 from taichi_star.model import build_model
@@ -550,6 +550,13 @@ def _rigid_projectors(engine: ti.template(), count: ti.i32, h: ti.f64):
         engine.assemble_with_rigid_projector(b, inertia_scale, rate_gain, centre)
 
 
+@ti.kernel
+def _external_assembly(engine: ti.template(), count: ti.i32, h: ti.f64):
+    for b in range(count):
+        inertia_scale, rate_gain = engine.integrator.weights(h, 1.0, 0)
+        engine.assemble_forces(b, inertia_scale, rate_gain, 1, EXTERNAL_TERMS)
+
+
 def test_the_rigid_projector_gives_the_net_force_and_torque_of_the_jacobian(taichi_cpu):
     """`BatchEngine.rigid_projector_of` (the tangent step's rigid correction): Σ_m P_m·x_m
     equals the net force and the torque about the mass centre of J·x, J the full assembled
@@ -562,7 +569,8 @@ def test_the_rigid_projector_gives_the_net_force_and_torque_of_the_jacobian(taic
     blocks (up to ~1e7 times the inertia's M/h² at this damping) keep a rounding of ~1e-16 of
     themselves in their column sums, which is what the projector exists to avoid; measured
     here 4e-13 to 2.3e-12 (2e-13 to 7e-13 at τ = 0.94 ms with the linear drags, the wake and
-    the jet's variants on as well, a scratch run)."""
+    the jet's variants on as well, a scratch run). The external pass reads only the blocks the
+    inertia and the external terms can fill: every other is exactly zero after their assembly."""
     solver = ts.SolverConfig()
     runtime = Runtime.current()
     runtime.ensure("cpu", solver.precision)
@@ -593,3 +601,12 @@ def test_the_rigid_projector_gives_the_net_force_and_torque_of_the_jacobian(taic
             inertia_share = np.abs(inertia[b][:, None] * x).sum() / solver.dt ** 2
             np.testing.assert_allclose(projected, expected, rtol=0, atol=1e-11 * inertia_share)
             assert np.abs(expected).max() > 1e-3 * inertia_share  # not a trivial zero
+    # the projector's external pass reads only the slots that the inertia and the external
+    # terms declare (`external_slot_nodes`): after their assembly every other block is exactly 0
+    _external_assembly(engine, len(params), solver.dt)
+    blocks = engine.system.blocks.to_numpy()
+    read = engine.external_slot_nodes.to_numpy()[:, 0]
+    assert len(set(read)) == len(read) == engine.n_external_slots < engine.system.n_slots
+    unread = np.setdiff1d(np.arange(engine.system.n_slots), read)
+    assert not blocks[:len(params)][:, unread].any()
+    assert (np.abs(blocks[:len(params)][:, read]).max(axis=(2, 3)) > 0).mean() > 0.5
