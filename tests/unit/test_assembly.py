@@ -364,3 +364,41 @@ def test_a_replica_pair_differences_the_drags_derivative_exactly(taichi_cpu, ter
         > 1e-5 * np.abs(derivative).max()
     exact = difference(at_kink, 1e-2, True)
     assert np.abs(difference(at_kink, 1e-2, False) - exact).max() > 1e-2 * np.abs(exact).max()
+
+
+def _external_coefficients(term_class):
+    """The toy chain's coefficients of an external term, every part of it switched on."""
+    rest_length = np.linalg.norm(REST[EDGES[:, 1]] - REST[EDGES[:, 0]], axis=1)
+    if term_class is LinearDrag:
+        return LinearDrag.coefficients(
+            [StarParams(linear_drag=40.0, hub_linear_drag=3.0)],
+            InstanceTopologies([SimpleNamespace(rest_length=rest_length)]),
+            SimpleNamespace(edge_kind=TOY_EDGE_KIND))
+    if term_class is Wake:
+        return Wake.coefficients([StarParams(wake_coupling=4.0, wake_time=0.02)], None, None)
+    return DRAG_COEFFICIENTS[term_class]
+
+
+@pytest.mark.parametrize("term_class", [RodDrag, CylinderDrag, LinearDrag, Wake])
+def test_an_external_term_fills_only_the_diagonal_and_the_pairs_it_declares(taichi_cpu,
+                                                                            term_class):
+    """On the toy chain's dense slots, a moving chain (every velocity non-zero): the term's
+    Jacobian blocks off the diagonal and off its declared node pairs (`configured_pairs`) are
+    exactly zero. The engine's elimination plan and its tangent's rigid projector, whose first
+    pass reads only those slots (`BatchEngine.external_slot_nodes`), rely on it; the jet, which
+    needs the robot's spaces, is held to it in tests/model/test_engine.py."""
+    terms, assembly = toy_system([term_class], {term_class.name: _external_coefficients(
+        term_class)}, {term_class.name: ()})
+    h = 1e-3
+    velocities = 0.03 * np.random.default_rng(3).normal(size=REST.shape)
+    positions = deformed()
+    load_field(assembly.previous, (positions - h * velocities)[None])
+    _, jacobian = residual_and_jacobian(terms[term_class.name], assembly, positions, 1.0 / h)
+    declared = {frozenset(pair) for pair in term_class.configured_pairs(assembly.topology, ())}
+    filled = {(i, j) for i in range(N_NODES) for j in range(N_NODES)
+              if jacobian[2 * i:2 * i + 2, 2 * j:2 * j + 2].any()}
+    assert filled, "nothing assembled: the check would be vacuous"
+    assert {(i, j) for i, j in filled if i != j and frozenset((i, j)) not in declared} == set()
+    # the declared pairs are filled, not only allowed (the drags on the edges; the hub terms
+    # declare none)
+    assert {frozenset((i, j)) for i, j in filled if i != j} == declared
