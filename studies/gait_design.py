@@ -24,8 +24,9 @@ out of the later rounds.
 
 `--sample N` first simulates N random patterns in one batch (no gradients), a picture of the
 whole landscape that a few local searches cannot give: pattern k fires a gait drawn uniformly
-from the primitives table (from its `--sample-gaits` best for the goal), its actuators' offsets uniform within SAMPLE_SPREADS[k mod 5] of the
-period (1 % to all of it), shifted so that the first fires at 0. The best `--sample-starts` of
+from the primitives table (from its `--sample-gaits` best for the goal), its actuators'
+offsets uniform within SAMPLE_SPREADS[k mod 5] of the period (1 % to all of it), shifted so
+that the first fires at 0. The best `--sample-starts` of
 them join the starts (origin "sample k").
 
 Writes into --out (default runs/gait_design/<timestamp>/), each CSV with its provenance sidecar:
@@ -56,6 +57,7 @@ import numpy as np
 import pandas as pd
 
 from taichi_star import Gait, simulate
+from taichi_star.diagnostics import check_jet_solver
 from taichi_star.timegrid import nearest_interval
 
 from . import cli
@@ -389,11 +391,11 @@ def main(argv=None):
                                      f"(needs rows with {sorted(PRIMITIVE_COLUMNS)})")
     base = cli.base_params(args)
     solver = cli.solver(args)
-    if args.jets and (solver.adaptive or solver.integrator != "euler"):
-        raise cli.StudyArgumentError("--jets: needs implicit Euler with fixed steps (the jets "
-                                     "are recomputed from every step's shapes), got "
-                                     f"integrator {solver.integrator!r}, adaptive "
-                                     f"{solver.adaptive}")
+    if args.jets:
+        try:
+            check_jet_solver(solver)
+        except ValueError as error:
+            raise cli.StudyArgumentError(f"--jets: {error}") from None
     # every evaluation runs --cycles from rest, even under --quick
     cli.check_cycles({"--cycles": args.cycles}, base.period, solver)
     fastest = primitives.loc[primitives["step_mm"].idxmax()]
@@ -453,8 +455,8 @@ def main(argv=None):
           f"ratio {designed / plain:.3f}")
     if args.sample:
         top = best_per_spread(sample).nlargest(1, "objective").iloc[0]
-        finished = sample[sample["status"] == "ok"]
+        sampled = sample[sample["status"] == "ok"]
         print(f"sample: best {top['objective']:.4g} ({top['gait']}, offsets within "
-              f"{top['spread']:g} of the period), {int((finished['objective'] > plain).sum())} "
-              f"of {len(finished)} finished patterns above the best synchronous gait")
+              f"{top['spread']:g} of the period), {int((sampled['objective'] > plain).sum())} "
+              f"of {len(sampled)} finished patterns above the best synchronous gait")
     return table

@@ -19,6 +19,16 @@ ROUND_OFF = 1e-9
 sums of steps, rounded)."""
 
 
+def check_jet_solver(solver) -> None:
+    """ValueError unless `solver` (a SolverConfig) runs implicit Euler with fixed steps, the
+    only runs whose jets `jet_impulses` recomputes as the engine applied them (elsewhere the
+    engine's area rate is not the difference quotient of two recorded shapes)."""
+    if solver.adaptive or solver.integrator != "euler":
+        raise ValueError(f"jet_impulses needs implicit Euler with fixed steps (its area rates "
+                         f"are the engine's only there), got integrator={solver.integrator!r}, "
+                         f"adaptive={solver.adaptive}")
+
+
 def jet_impulses(result) -> pd.DataFrame:
     """One row per instance and inter-limb space: instance, space (1..8: the space between two
     limbs whose arc holds actuator A<space>), impulse_x_n_s_m and impulse_y_n_s_m (the impulse
@@ -35,10 +45,7 @@ def jet_impulses(result) -> pd.DataFrame:
         raise ValueError("jet_impulses needs recorded shapes of one topology: simulate with "
                          "record_interval_s = dt and record_shapes=True")
     solver = result.solver
-    if solver.adaptive or solver.integrator != "euler":
-        raise ValueError(f"jet_impulses needs implicit Euler with fixed steps (its area rates "
-                         f"are the engine's only there), got integrator={solver.integrator!r}, "
-                         f"adaptive={solver.adaptive}")
+    check_jet_solver(solver)
     times = np.sort(result.trajectory["t_s"].unique())
     spacing = np.diff(times)
     if len(times) < 2 or not np.allclose(spacing, solver.dt, rtol=ROUND_OFF, atol=0.0):
