@@ -14,6 +14,8 @@ from .gait import N_ACTUATORS
 from .params import StarParams
 from .reference import ReferenceSimulator
 
+__all__ = ["check_jet_solver", "jet_impulses"]
+
 ROUND_OFF = 1e-9
 """Relative tolerance within which the records' spacing must equal the time step (they are
 sums of steps, rounded)."""
