@@ -131,32 +131,39 @@ class Assembly:
         self.rhs[b, n] = self.rhs[b, n] + value
 
     @ti.func
+    def add_blocks(self, b, slots: ti.template(), row, values: ti.template(), jacobian):
+        """Add `values` (a list of 2×2 blocks) to the Jacobian blocks `slots[row, 0..]` of
+        instance b (distinct slots) when `jacobian` is set: every block is loaded before any is
+        stored, the same sums as one `add_block` each. Stores through table-read slots keep the
+        compiler from moving a later load above an earlier store, so added one by one each block
+        is a round trip to memory waiting for the last; loaded together, a GPU thread has them
+        all in flight at once."""
+        if jacobian:
+            slot = [slots[row, k] for k in ti.static(range(len(values)))]
+            old = [self.blocks[b, slot[k]] for k in ti.static(range(len(values)))]
+            for k in ti.static(range(len(values))):
+                self.blocks[b, slot[k]] = old[k] + values[k]
+
+    @ti.func
     def scatter_edge(self, b, slots: ti.template(), e, i, j, gradient, hessian, jacobian):
         """Scatter a term that depends on e = x_j − x_i alone, with gradient (2,) and Hessian
-        (2, 2) with respect to e (∂/∂x_i = −∂/∂e); `slots` from `pair_slots`, row e."""
-        self.add_residual(b, i, -gradient)
-        self.add_residual(b, j, gradient)
-        self.add_block(b, slots[e, 0], hessian, jacobian)
-        self.add_block(b, slots[e, 1], -hessian, jacobian)
-        self.add_block(b, slots[e, 2], -hessian, jacobian)
-        self.add_block(b, slots[e, 3], hessian, jacobian)
+        (2, 2) with respect to e (∂/∂x_i = −∂/∂e); `slots` from `pair_slots`, row e (its
+        blocks and the two nodes' residuals each loaded together, `add_blocks`)."""
+        residual_i, residual_j = self.rhs[b, i], self.rhs[b, j]
+        self.rhs[b, i] = residual_i - gradient
+        self.rhs[b, j] = residual_j + gradient
+        self.add_blocks(b, slots, e, [hessian, -hessian, -hessian, hessian], jacobian)
 
     @ti.func
     def scatter_triplet(self, b, slots: ti.template(), t, i, j, k, g1, g2, h11, h12, h22, jacobian):
         """Scatter a term of the two edges e1 = x_j − x_i, e2 = x_k − x_j of triplet t (gradients
         g1, g2; Hessian blocks h11, h12, h22, h21 = h12ᵀ): node derivatives by the incidence of
-        the edges; `slots` from `triplet_slots`, row t."""
-        self.add_residual(b, i, -g1)
-        self.add_residual(b, j, g1)
-        self.add_residual(b, j, -g2)
-        self.add_residual(b, k, g2)
+        the edges; `slots` from `triplet_slots`, row t (its blocks and the three nodes'
+        residuals each loaded together, `add_blocks`)."""
+        residual_i, residual_j, residual_k = self.rhs[b, i], self.rhs[b, j], self.rhs[b, k]
+        self.rhs[b, i] = residual_i - g1
+        self.rhs[b, j] = (residual_j + g1) - g2
+        self.rhs[b, k] = residual_k + g2
         h21 = h12.transpose()
-        self.add_block(b, slots[t, 0], h11, jacobian)
-        self.add_block(b, slots[t, 1], h12 - h11, jacobian)
-        self.add_block(b, slots[t, 2], -h12, jacobian)
-        self.add_block(b, slots[t, 3], h21 - h11, jacobian)
-        self.add_block(b, slots[t, 4], h11 - h12 - h21 + h22, jacobian)
-        self.add_block(b, slots[t, 5], h12 - h22, jacobian)
-        self.add_block(b, slots[t, 6], -h21, jacobian)
-        self.add_block(b, slots[t, 7], h21 - h22, jacobian)
-        self.add_block(b, slots[t, 8], h22, jacobian)
+        self.add_blocks(b, slots, t, [h11, h12 - h11, -h12, h21 - h11, h11 - h12 - h21 + h22,
+                                      h12 - h22, -h21, h21 - h22, h22], jacobian)
