@@ -24,8 +24,20 @@
 #                then with a baseline commit's source exported into .base/ (ignored by git):
 #                  mkdir .base && git archive BASE taichi_star studies | tar -x -C .base
 #                back to back on the same card, LIMIT seconds each
+#   ab           a change against .base/ (as for compare) at one size, alternated: ROUNDS rounds
+#                (default 2) of this checkout then .base/, each one `bench` of PRESETS (default
+#                paper), SIZES (default 65536), JACOBIANS (default newton), f64; each run's table
+#                goes to $OUT as r<round>_after.csv, r<round>_before.csv (+ sidecars) as soon as
+#                it is written, so a run cut short keeps what it measured (its log is the
+#                call's output: the device returns at most eight files)
 #   occupancy    Nsight Compute's launch and occupancy figures of the accurate preset's two step
 #                kernels (adaptive and fixed steps, tools/gpu_kernels.py at BATCH instances)
+# The tracked tree with results/ is larger than the device's 64 MiB transfer: call the device
+# tool with results/ out of git's index but for results/fig4c.csv, which correctness reads (no
+# other phase reads results/), and put it back after:
+#   git rm -r -q --cached results && git reset -q results/fig4c.csv \
+#       && echo /results/ >> .git/info/exclude                               # before
+#   git reset -q results && sed -i '\#^/results/$#d' .git/info/exclude      # after
 # Correctness runs at most LIMIT seconds of tests (default 300) and FIG4C=0 skips its study.
 # Everything it writes is packed into $OUT/PHASE.tar.gz (the device returns few files).
 set -o pipefail
@@ -91,6 +103,22 @@ compare)
     (cd .base && PYTHONPATH=/tmp/site:$PWD timeout "${LIMIT:-120}" python3 -m studies bench \
         "${sweep[@]}" --out "$work/base" 2>&1 | tee "$work/base.log")
     ;;
+ab)
+    for round in $(seq "${ROUNDS:-2}"); do
+        for build in after before; do
+            tree=$PWD
+            [ "$build" = before ] && tree=$PWD/.base
+            (cd "$tree" && PYTHONPATH=/tmp/site:$tree timeout "${LIMIT:-70}" python3 -m studies \
+                bench --arch gpu --batch-sizes "${SIZES:-65536}" --precisions f64 \
+                --presets "${PRESETS:-paper}" --jacobians "${JACOBIANS:-newton}" --scenarios none \
+                --workers-list none --no-cache-probe --no-plain-call --sensitivity-counts none \
+                --repeats 2 --out "$work/r${round}_$build" 2>&1 | tee -a "$work/ab.log")
+            for file in bench_gpu.csv bench_gpu.csv.json; do
+                cp "$work/r${round}_$build/$file" "$OUT/r${round}_$build${file#bench_gpu}"
+            done
+        done
+    done
+    ;;
 occupancy)
     ncu=$(command -v ncu || ls /opt/nvidia/nsight-compute/*/ncu 2>/dev/null | head -1)
     timeout "${LIMIT:-150}" "$ncu" --target-processes all --kernel-name regex:advance \
@@ -104,5 +132,7 @@ gpu__time_duration.sum,l1tex__t_bytes_pipe_lsu_mem_local_op_ld.sum,dram__bytes.s
     echo "unknown phase $phase"; exit 2 ;;
 esac
 status=$?
+# ab's eight tables are all the files the device returns
+[ "$phase" = ab ] && exit $status
 tar -czf "$OUT/$phase${PRESETS:+_${PRESETS//,/_}}${PRECISIONS:+_${PRECISIONS//,/_}}.tar.gz" -C "$work" .
 exit $status

@@ -19,9 +19,10 @@ and in its `@ti.func`s, for instance b,
 - `primal_instance(b)`: in an engine with sensitivities, the simulated instance that b is a
   replica of (b itself for a simulated one; `replicated`: whether there are any replicas);
 - the scatter of its residual and Jacobian: `add_residual(b, n, value)` for node n,
-  `add_block(b, slot, value, jacobian)` for one block, and for a term of one edge vector or of
-  the two edge vectors of a triplet `scatter_edge` and `scatter_triplet`, which apply the
-  incidence (∂/∂x_i = −∂/∂e) themselves.
+  `add_block(b, slot, value, jacobian)` for one block, `add_blocks` for a row of a slot table
+  at once (all loaded before any is stored: on a GPU they are then in flight together), and for
+  a term of one edge vector or of the two edge vectors of a triplet `scatter_edge` and
+  `scatter_triplet`, which apply the incidence (∂/∂x_i = −∂/∂e) themselves.
 
 The engine makes one `Assembly` from its state, linear system and integrator and hands it to
 each term; a test can make one of a toy topology and assemble a single term on its own

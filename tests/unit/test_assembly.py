@@ -402,3 +402,43 @@ def test_an_external_term_fills_only_the_diagonal_and_the_pairs_it_declares(taic
     # the declared pairs are filled, not only allowed (the drags on the edges; the hub terms
     # declare none)
     assert {frozenset((i, j)) for i, j in filled if i != j} == declared
+
+
+@ti.kernel
+def _scatter_triplet(assembly: ti.template(), slots: ti.template(), g: ti.types.ndarray(),
+                     h: ti.types.ndarray(), jacobian: ti.i32):
+    g1, g2 = ti.Vector([g[0, 0], g[0, 1]]), ti.Vector([g[1, 0], g[1, 1]])
+    h11 = ti.Matrix([[h[0, 0, 0], h[0, 0, 1]], [h[0, 1, 0], h[0, 1, 1]]])
+    h12 = ti.Matrix([[h[1, 0, 0], h[1, 0, 1]], [h[1, 1, 0], h[1, 1, 1]]])
+    h22 = ti.Matrix([[h[2, 0, 0], h[2, 0, 1]], [h[2, 1, 0], h[2, 1, 1]]])
+    assembly.scatter_triplet(0, slots, 1, 1, 2, 3, g1, g2, h11, h12, h22, jacobian)
+
+
+@pytest.mark.parametrize("jacobian", [0, 1])
+def test_a_triplet_scatters_the_sums_of_one_add_at_a_time_bit_for_bit(taichi_cpu, jacobian):
+    """`scatter_triplet` loads an element's nine blocks and three residuals before it stores any
+    (`Assembly.add_blocks`): the result must be, bit for bit, that of adding each block and
+    residual on its own in the incidence's order (what the engine did before, and what its
+    bits were checked against), onto a system that already holds other terms' values; without
+    `jacobian` the blocks stay as they were, to the bit."""
+    terms, assembly = toy_system([Bending], {"bending": BENDING}, {"bending": (False,)})
+    rng = np.random.default_rng(11)
+    rhs = rng.normal(size=(1, N_NODES, 2))
+    blocks = rng.normal(size=(1, N_NODES * N_NODES, 2, 2))
+    g, h = rng.normal(size=(2, 2)), rng.normal(size=(3, 2, 2))
+    load_field(assembly.rhs, rhs)
+    load_field(assembly.blocks, blocks)
+    _scatter_triplet(assembly, terms["bending"].triplet_slot, g, h, jacobian)
+    expected_rhs, expected_blocks = rhs[0].copy(), blocks[0].copy()
+    (g1, g2), (h11, h12, h22), h21 = g, h, h[1].T
+    for node, value in ((1, -g1), (2, g1), (2, -g2), (3, g2)):
+        expected_rhs[node] = expected_rhs[node] + value
+    values = [h11, h12 - h11, -h12, h21 - h11, h11 - h12 - h21 + h22, h12 - h22, -h21, h21 - h22,
+              h22]
+    nodes = TRIPLETS[1]
+    for (a, c), value in zip([(a, c) for a in nodes for c in nodes], values):
+        if jacobian:
+            expected_blocks[assembly.slot(a, c)] = expected_blocks[assembly.slot(a, c)] + value
+    np.testing.assert_array_equal(assembly.rhs.to_numpy()[0], expected_rhs)
+    np.testing.assert_array_equal(assembly.blocks.to_numpy()[0], expected_blocks)
+    assert not np.array_equal(expected_rhs, rhs[0])  # the scatter did add
