@@ -33,6 +33,18 @@ given: a term assembled through it computes the same arithmetic as one written i
 import taichi as ti
 
 
+def distinct_rows(rows, element: str):
+    """`rows` (lists of Jacobian slots, one element each), checked to repeat no slot within a
+    row: `add_blocks` loads a row's blocks before it stores any, so a slot twice in a row would
+    keep only its last sum (an element whose nodes are not distinct). ValueError naming the
+    element otherwise."""
+    for index, row in enumerate(rows):
+        if len(set(row)) != len(row):
+            raise ValueError(f"{element} {index} repeats a Jacobian slot ({row}): its nodes must "
+                             f"be distinct")
+    return rows
+
+
 @ti.data_oriented
 class Assembly:
     """The view of one batch system that its force terms assemble into.
@@ -82,12 +94,14 @@ class Assembly:
 
     def pair_slots(self, pairs) -> ti.Field:
         """(P, 4) Jacobian slots of the blocks (i,i), (i,j), (j,i), (j,j) of node pairs (i, j)."""
-        return self.index([[self.slot(i, i), self.slot(i, j), self.slot(j, i), self.slot(j, j)]
-                           for i, j in pairs])
+        return self.index(distinct_rows(
+            [[self.slot(i, i), self.slot(i, j), self.slot(j, i), self.slot(j, j)]
+             for i, j in pairs], "pair"))
 
     def triplet_slots(self, triplets) -> ti.Field:
         """(T, 9) Jacobian slots of the blocks (a, c) of each triplet's nodes, row-major."""
-        return self.index([[self.slot(a, c) for a in nodes for c in nodes] for nodes in triplets])
+        return self.index(distinct_rows(
+            [[self.slot(a, c) for a in nodes for c in nodes] for nodes in triplets], "triplet"))
 
     # ---------------------------------------------------------------- device side
     @ti.func

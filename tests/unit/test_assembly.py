@@ -442,3 +442,17 @@ def test_a_triplet_scatters_the_sums_of_one_add_at_a_time_bit_for_bit(taichi_cpu
     np.testing.assert_array_equal(assembly.rhs.to_numpy()[0], expected_rhs)
     np.testing.assert_array_equal(assembly.blocks.to_numpy()[0], expected_blocks)
     assert not np.array_equal(expected_rhs, rhs[0])  # the scatter did add
+
+
+def test_an_element_whose_nodes_repeat_is_refused_before_its_slot_table_is_built(taichi_cpu):
+    """`add_blocks` stores a row's blocks after loading them all, so a row must not repeat a
+    slot: a pair (2, 2) or a triplet (1, 2, 1) is refused naming it; distinct nodes pass."""
+    from taichi_star.physics.assembly import distinct_rows
+    slot = {(i, j): i * N_NODES + j for i in range(N_NODES) for j in range(N_NODES)}
+    pair_rows = [[slot[i, i], slot[i, j], slot[j, i], slot[j, j]] for i, j in ((0, 1), (2, 2))]
+    with pytest.raises(ValueError, match="pair 1 repeats a Jacobian slot"):
+        distinct_rows(pair_rows, "pair")
+    triplet_rows = [[slot[a, c] for a in nodes for c in nodes] for nodes in ((0, 1, 2), (1, 2, 1))]
+    with pytest.raises(ValueError, match="triplet 1 repeats a Jacobian slot"):
+        distinct_rows(triplet_rows, "triplet")
+    assert distinct_rows(triplet_rows[:1], "triplet") == triplet_rows[:1]
