@@ -29,7 +29,7 @@
 #                paper), SIZES (default 65536), JACOBIANS (default newton), f64; each run's table
 #                goes to $OUT as r<round>_after.csv, r<round>_before.csv (+ sidecars) as soon as
 #                it is written, so a run cut short keeps what it measured (its log is the
-#                call's output: the device returns at most eight files)
+#                call's output: the device returns at most eight files, so at most 2 rounds)
 #   occupancy    Nsight Compute's launch and occupancy figures of the accurate preset's two step
 #                kernels (adaptive and fixed steps, tools/gpu_kernels.py at BATCH instances)
 # The tracked tree with results/ is larger than the device's 64 MiB transfer: call the device
