@@ -22,7 +22,7 @@ from taichi_star.model import InstanceTopologies
 from taichi_star.geometry import LIMB
 from taichi_star.physics import (Bending, CylinderDrag, LinearDrag, MaterialDamping, RodDrag,
                                   Stretching, Wake)
-from taichi_star.physics.assembly import Assembly
+from taichi_star.physics.assembly import Assembly, distinct_rows
 from taichi_star.params import StarParams
 from taichi_star.physics.base import connect_terms, load_field, numpy_to_field_type
 
@@ -447,7 +447,6 @@ def test_a_triplet_scatters_the_sums_of_one_add_at_a_time_bit_for_bit(taichi_cpu
 def test_an_element_whose_nodes_repeat_is_refused_before_its_slot_table_is_built(taichi_cpu):
     """`add_blocks` stores a row's blocks after loading them all, so a row must not repeat a
     slot: a pair (2, 2) or a triplet (1, 2, 1) is refused naming it; distinct nodes pass."""
-    from taichi_star.physics.assembly import distinct_rows
     slot = {(i, j): i * N_NODES + j for i in range(N_NODES) for j in range(N_NODES)}
     pair_rows = [[slot[i, i], slot[i, j], slot[j, i], slot[j, j]] for i, j in ((0, 1), (2, 2))]
     with pytest.raises(ValueError, match="pair 1 repeats a Jacobian slot"):
