@@ -56,7 +56,8 @@ Writes into --out (default runs/gradient_fit/<timestamp>/), each CSV with its pr
 sidecar: `gradient_fit.csv` (per set and optimiser: the cost columns, objective reached,
 validation objective on `--validate-cycles` with the training phases, robot-seconds each
 gradient fit needed to reach CMA-ES's objective and their ratio to CMA-ES's total, both
-counts), `gradient_fit_history.csv` (every evaluation: cumulative cost and best objective so
+counts, and `stop_reasons`: why each start or restart ended, in its library's words, or that
+a least-squares start spent its trial points), `gradient_fit_history.csv` (every evaluation: cumulative cost and best objective so
 far), `gradient_fit_uncertainty.csv` (per set, optimiser and parameter, at the optimiser's best
 point: `identification.parameter_uncertainty` from one run with the sensitivities there, not
 counted in any cost: which parameters the training data determine, their standard errors and
@@ -142,7 +143,7 @@ RESULT_COLUMNS = ["parameter_set", "n_parameters", "optimiser", "starts", "evalu
                   "robot_seconds", "robot_seconds_cost_equivalent", "wall_s", "objective",
                   "validate_objective", "robot_seconds_to_cma_objective",
                   "share_of_cma_robot_seconds", "cost_equivalent_to_cma_objective",
-                  "share_of_cma_cost_equivalent", "gradient_cost_ratio"]
+                  "share_of_cma_cost_equivalent", "gradient_cost_ratio", "stop_reasons"]
 
 
 class Recorder:
@@ -154,6 +155,7 @@ class Recorder:
         self.started = time.perf_counter()
         self.best_objective, self.best_units = math.inf, None
         self.robot_seconds = self.cost_equivalent = 0.0
+        self.stop_reasons: List[str] = []
 
     @classmethod
     def continuing(cls, previous: "Recorder", optimiser: str, on_add=None) -> "Recorder":
@@ -168,6 +170,11 @@ class Recorder:
         recorder.best_objective = previous.best_objective
         recorder.best_units = np.array(previous.best_units, dtype=float)
         return recorder
+
+    def stopped(self, start: int, reason: str):
+        """Record why the optimiser's run from start `start` (a CMA-ES restart) ended: its
+        library's own words (scipy's message, cma's termination conditions)."""
+        self.stop_reasons.append(f"start {start}: {reason}")
 
     def add(self, units, objective, robot_seconds, cost_equivalent, start=0):
         self.robot_seconds += robot_seconds
@@ -371,8 +378,10 @@ def fit_lbfgs(problem: Problem, starts: int, max_evaluations: int, seed: int,
                   f"|gradient| {np.linalg.norm(gradient):.3g}", flush=True)
             return value, gradient
 
-        minimize(fun, x0, jac=True, method="L-BFGS-B", bounds=[(0.0, 1.0)] * len(problem.box),
-                 options={"maxfun": max_evaluations, "maxiter": max_evaluations})
+        result = minimize(fun, x0, jac=True, method="L-BFGS-B",
+                          bounds=[(0.0, 1.0)] * len(problem.box),
+                          options={"maxfun": max_evaluations, "maxiter": max_evaluations})
+        recorder.stopped(start, str(result.message))
     return recorder
 
 
@@ -397,6 +406,7 @@ def fit_least_squares(problem: Problem, points, max_evaluations: int, recorder: 
     parameter_set = recorder.parameter_set
     for start, x0 in enumerate(points):
         trial_points = []
+        spent = []
 
         def residuals(units, start=start):
             values = problem.residuals(units)
@@ -411,14 +421,18 @@ def fit_least_squares(problem: Problem, points, max_evaluations: int, recorder: 
             if len(trial_points) == max_evaluations:
                 # the budget is spent: scipy asks only to test convergence before it stops, and
                 # no step will use this Jacobian, so none is simulated (zeros end the fit)
+                spent.append(True)
                 return np.zeros((len(trial_points[-1]), len(problem.box)))
             values, derivatives = problem.residuals_and_jacobian(units)
             record_gradient_call(recorder, problem, units, float(values @ values), cost_ratio,
                                  start)
             return derivatives
 
-        least_squares(residuals, x0, jac=jacobian, bounds=(0.0, 1.0), method="dogbox",
-                      x_scale="jac", max_nfev=max_evaluations)
+        result = least_squares(residuals, x0, jac=jacobian, bounds=(0.0, 1.0), method="dogbox",
+                               x_scale="jac", max_nfev=max_evaluations)
+        # the zeros that end a spent budget read to scipy as a zero gradient: say what it was
+        recorder.stopped(start, f"its {max_evaluations} trial points were spent" if spent
+                         else str(result.message))
     return recorder
 
 
@@ -436,10 +450,12 @@ def fit_cma(problem: Problem, generations: int, popsize, seed: int,
         print(f"set {parameter_set} CMA-ES: best {recorder.best_objective:.5g}", flush=True)
         return pd.DataFrame({"objective": values})
 
-    identify.minimise_cmaes(problem.box, identify.start_units(problem.box, problem.base),
-                            evaluate, identify.CMASettings(popsize=popsize,
-                                                           max_generations=generations,
-                                                           seed=seed))
+    result = identify.minimise_cmaes(problem.box, identify.start_units(problem.box, problem.base),
+                                     evaluate, identify.CMASettings(popsize=popsize,
+                                                                    max_generations=generations,
+                                                                    seed=seed))
+    for restart, reason in enumerate(result.stop_reasons):
+        recorder.stopped(restart, reason)
     return recorder
 
 
@@ -461,7 +477,8 @@ def summarise(recorders: Sequence[Recorder], problem_of, validate,
                          recorder.best_units, validate),
                      "gradient_cost_ratio": (cost_ratios[recorder.parameter_set]
                                              if recorder.optimiser in GRADIENT_OPTIMISERS
-                                             else 1.0)})
+                                             else 1.0),
+                     "stop_reasons": "; ".join(recorder.stop_reasons)})
     table = pd.DataFrame(rows)
     for parameter_set, part in table.groupby("parameter_set", sort=False):
         cma = part[part["optimiser"] == "CMA-ES"]

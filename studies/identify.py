@@ -300,9 +300,11 @@ class CMAResult:
     generation, candidate, then those of the evaluate callable, which must include
     "objective"), and the search distribution's standard deviation per axis in unit
     coordinates (σ·√diag C of the restart that found the best point, when it stopped): a scale
-    of how well the data pin each axis down near the optimum, not a posterior."""
+    of how well the data pin each axis down near the optimum, not a posterior; and per restart
+    why it stopped (cma's termination conditions, e.g. "maxiter=8")."""
     evaluations: pd.DataFrame
     unit_std: np.ndarray
+    stop_reasons: List[str]
 
 
 def read_start(path, base: StarParams) -> StarParams:
@@ -357,6 +359,7 @@ def minimise_cmaes(box: Sequence[ParameterRange], start, evaluate: Callable[[np.
     start = np.asarray(start, dtype=np.float64)
     parts: List[pd.DataFrame] = []
     spreads: List[np.ndarray] = []
+    stop_reasons: List[str] = []
     bar = None
     if progress:
         from tqdm.auto import tqdm
@@ -386,6 +389,7 @@ def minimise_cmaes(box: Sequence[ParameterRange], start, evaluate: Callable[[np.
             if on_generation is not None:
                 on_generation(_numbered(parts))
         spreads.append(es.sigma * np.sqrt(np.diag(es.C)))
+        stop_reasons.append(", ".join(f"{name}={value}" for name, value in es.stop().items()))
         if bar is not None:  # an early stop leaves generations of this run unused
             bar.total -= settings.max_generations - generation
             bar.refresh()
@@ -394,7 +398,7 @@ def minimise_cmaes(box: Sequence[ParameterRange], start, evaluate: Callable[[np.
     evaluations = _numbered(parts)
     best = best_row(evaluations)
     restart = int(best["restart"]) if best is not None else 0
-    return CMAResult(evaluations, spreads[restart])
+    return CMAResult(evaluations, spreads[restart], stop_reasons)
 
 
 def _numbered(parts: List[pd.DataFrame]) -> pd.DataFrame:

@@ -334,6 +334,15 @@ def test_the_summary_counts_the_cost_to_cma_objective_both_ways():
     assert row["gradient_cost_ratio"] == 3.5 and row["objective"] == 1.0
     assert row["validate_objective"] == 1.0  # the best point's units, validated
     assert table[table["optimiser"] == "CMA-ES"].iloc[0]["gradient_cost_ratio"] == 1.0
+    # why each run stopped, every start's reason in order; none recorded: empty
+    assert row["stop_reasons"] == ""
+    lbfgs.stopped(0, "CONVERGENCE: NORM OF PROJECTED GRADIENT <= PGTOL")
+    lbfgs.stopped(1, "STOP: TOTAL NO. OF F,G EVALUATIONS EXCEEDS LIMIT")
+    table = gradient_fit.summarise([cma, lbfgs], {"6": FakeProblem()}, (4, 6), {"6": 3.5})
+    assert table[table["optimiser"] == "L-BFGS-B"].iloc[0]["stop_reasons"] == (
+        "start 0: CONVERGENCE: NORM OF PROJECTED GRADIENT <= PGTOL; "
+        "start 1: STOP: TOTAL NO. OF F,G EVALUATIONS EXCEEDS LIMIT")
+    assert list(table.columns) == gradient_fit.RESULT_COLUMNS
 
 
 def test_least_squares_finds_a_linear_minimum_and_differentiates_only_where_asked(
@@ -387,6 +396,20 @@ def test_least_squares_finds_a_linear_minimum_and_differentiates_only_where_aske
     jacobians = calls.count("jacobian")
     assert recorder.robot_seconds == pytest.approx((len(points) + 13 * jacobians) * window)
     assert recorder.cost_equivalent == pytest.approx((len(points) + 2.5 * jacobians) * window)
+    # converged before its cap: scipy's own reason, one of its tolerance tests
+    assert len(recorder.stop_reasons) == 1
+    assert recorder.stop_reasons[0].startswith("start 0: ")
+    assert "termination condition" in recorder.stop_reasons[0]
+    assert "maximum number of function evaluations" not in recorder.stop_reasons[0]
+    # the same fit capped at its second trial point says so
+    points.clear()
+    calls.clear()
+    capped = gradient_fit.fit_least_squares(
+        problem, gradient_fit.start_points(problem, 1, 0), 2,
+        gradient_fit.Recorder("6", gradient_fit.LEAST_SQUARES), cost_ratio=2.5)
+    assert len(points) == 2
+    # (scipy itself reads the zeros that end a spent budget as a zero gradient, "gtol")
+    assert capped.stop_reasons == ["start 0: its 2 trial points were spent"]
 
 
 def test_held_out_scores_are_fresh_fits_of_the_start_and_each_best_point(monkeypatch):

@@ -312,3 +312,23 @@ def test_a_fit_of_at_most_the_studys_instances_is_accepted_and_one_more_refused(
     # the evaluations it counts: every generation of every restart, the population doubling
     settings = identify.CMASettings(popsize=3, max_generations=5, restarts=2)
     assert settings.evaluations(4) == 5 * (3 + 6 + 12)
+
+
+def test_cma_es_reports_why_each_restart_stopped():
+    """minimise_cmaes on a quadratic in two unit axes (no simulation): with a cap of 3
+    generations and no restart it stops on cma's iteration cap, and says so; with one restart,
+    one reason per restart, in order."""
+    box = [identify.parse_range_spec("alpha=0.2:1.5", "--fit"),
+           identify.parse_range_spec("drag_perpendicular=0.3:3", "--fit")]
+
+    def evaluate(units):
+        return pd.DataFrame({"objective": np.sum((units - 0.3) ** 2, axis=1)})
+
+    result = identify.minimise_cmaes(box, np.full(2, 0.5), evaluate,
+                                     identify.CMASettings(max_generations=3, seed=1))
+    assert result.stop_reasons == ["maxiter=3"]
+    assert result.evaluations["generation"].max() == 2  # generations 0, 1, 2: the cap
+    restarted = identify.minimise_cmaes(box, np.full(2, 0.5), evaluate,
+                                        identify.CMASettings(max_generations=2, seed=1,
+                                                             restarts=1))
+    assert restarted.stop_reasons == ["maxiter=2", "maxiter=2"]
