@@ -57,8 +57,8 @@ sidecar: `gradient_fit.csv` (per set and optimiser: the cost columns, objective 
 validation objective on `--validate-cycles` with the training phases, robot-seconds each
 gradient fit needed to reach CMA-ES's objective and their ratio to CMA-ES's total, both
 counts, and `stop_reasons`: why each start or restart ended, in its library's words, or that
-a least-squares start spent its trial points), `gradient_fit_history.csv` (every evaluation: cumulative cost and best objective so
-far), `gradient_fit_uncertainty.csv` (per set, optimiser and parameter, at the optimiser's best
+a least-squares start spent its trial points), `gradient_fit_history.csv` (every evaluation:
+cumulative cost and best objective so far), `gradient_fit_uncertainty.csv` (per set, optimiser and parameter, at the optimiser's best
 point: `identification.parameter_uncertainty` from one run with the sensitivities there, not
 counted in any cost: which parameters the training data determine, their standard errors and
 correlations), `gradient_fit.png` (best objective against robot-seconds, drawn from the
