@@ -55,20 +55,20 @@ simulation without, measured in this run at the base point (`measure_cost_ratio`
 Writes into --out (default runs/gradient_fit/<timestamp>/), each CSV with its provenance
 sidecar: `gradient_fit.csv` (per set and optimiser: the cost columns, objective reached,
 validation objective on `--validate-cycles` with the training phases, robot-seconds each
-gradient fit needed to reach CMA-ES's objective and their ratio to CMA-ES's total, both
-counts, and `stop_reasons`: why each start or restart ended, in its library's words, or that
-a least-squares start spent its trial points), `gradient_fit_history.csv` (every evaluation:
-cumulative cost and best objective so far), `gradient_fit_uncertainty.csv` (per set, optimiser and parameter, at the optimiser's best
-point: `identification.parameter_uncertainty` from one run with the sensitivities there, not
-counted in any cost: which parameters the training data determine, their standard errors and
-correlations), `gradient_fit.png` (best objective against robot-seconds, drawn from the
-history) and, with `--held-out-gaits` (measured gaits that no optimiser fits),
-`gradient_fit_held_out.csv`: per set, the start point and every optimiser's best point scored
-on each held-out gait's training window, its phase fitted there (as model_select's
-leave-one-gait-out folds score the gait they hold out), one row per point and gait with
-`identification.trial_fit`'s columns: whether what the fits did to the point carries over to
-a gait they did not see. The start itself is not held out from anything: a start taken from a
-fit that saw the gait (`--start`) tests the optimisers' moves, not the start.
+gradient fit needed to reach CMA-ES's objective and their ratio to CMA-ES's total, both counts,
+and `stop_reasons`: why each start or restart ended, in its library's words, or that a
+least-squares start spent its trial points), `gradient_fit_history.csv` (every evaluation:
+cumulative cost and best objective so far), `gradient_fit_uncertainty.csv` (per set, optimiser
+and parameter, at the optimiser's best point: `identification.parameter_uncertainty` from one
+run with the sensitivities there, not counted in any cost: which parameters the training data
+determine, their standard errors and correlations), `gradient_fit.png` (best objective against
+robot-seconds, drawn from the history) and, with `--held-out-gaits` (measured gaits that no
+optimiser fits), `gradient_fit_held_out.csv`: per set, the start point and every optimiser's
+best point scored on each held-out gait's training window, its phase fitted there (as
+model_select's leave-one-gait-out folds score the gait they hold out), one row per point and
+gait with `identification.trial_fit`'s columns: whether what the fits did to the point carries
+over to a gait they did not see. The start itself is not held out from anything: a start taken
+from a fit that saw the gait (`--start`) tests the optimisers' moves, not the start.
 """
 
 from __future__ import annotations
