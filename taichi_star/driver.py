@@ -17,7 +17,7 @@ from typing import Callable, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .checks import check_flag, warn_user
+from .checks import check_flag, is_finite_real, shown, warn_user
 from .params import SolverConfig
 from .timegrid import (ESTIMATE_ROBOT_STEPS_PER_S, MAX_STEPS_PER_INSTANCE, STEPS_PER_LAUNCH,
                        check_duration, check_steps, check_work, multiples_within, steps_in,
@@ -73,7 +73,13 @@ class RunTiming:
 def fewest_steps(solver: SolverConfig, duration_s: float, record_interval_s: float):
     """(The fewest steps an instance takes in duration_s (s), what bounds them): with fixed
     steps duration_s / dt; with adaptive ones the steps at dt_max, or at the record interval
-    (s; 0 = none) where that is shorter (each record ends a step)."""
+    (s; 0 = none) where that is shorter (each record ends a step). ValueError naming an
+    argument that is not a SolverConfig or a finite time >= 0 s."""
+    if not isinstance(solver, SolverConfig):
+        raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
+    for name, value in (("duration_s", duration_s), ("record_interval_s", record_interval_s)):
+        if not (is_finite_real(value) and float(value) >= 0):
+            raise ValueError(f"{name} must be a finite number >= 0 s, got {shown(value)}")
     if not solver.adaptive:
         return duration_s / solver.dt, f"dt = {solver.dt:g} s"
     if record_interval_s and record_interval_s < solver.dt_max:

@@ -50,15 +50,19 @@ def parameter_column(name: str) -> str:
 
 
 def parameter(default, unit: str = "1", lowest=None, highest=None, lowest_included=True,
-              choices=None, differentiable: bool = True):
+              choices=None, differentiable: bool = True, narrowed_by: str = ""):
     """A StarParams (or SolverConfig) field with its unit and allowed values declared once, in
     its metadata: "unit" ("1": dimensionless or a count), "range" (lowest, highest, lowest
     included) for a number (an integer if the default is one), "choices" for a word.
     `STAR_RANGES`, `SOLVER_RANGES`, `PARAMETER_UNITS`, `STAR_CHOICES`, the validation, the
     column names and the field tables of `help(StarParams)` and `help(SolverConfig)` are all
     read from it. `differentiable=False` marks a real number that
-    `simulate(sensitivities=...)` refuses (one that moves events rather than coefficients)."""
+    `simulate(sensitivities=...)` refuses (one that moves events rather than coefficients).
+    `narrowed_by`: how other fields narrow the declared range, in words, which the allowed
+    values state after it (the range itself, `STAR_RANGES`, stays the declared one)."""
     metadata = {"unit": unit}
+    if narrowed_by:
+        metadata["narrowed_by"] = narrowed_by
     if not differentiable:
         metadata["differentiable"] = False
     if lowest is not None:
@@ -119,6 +123,13 @@ COMPONENT_HEIGHTS = ("hub_height", "foam_height", "actuator_height")
 """The StarParams fields of the component heights (2.5-D model): all 0 (off) or all set."""
 COMPONENT_HEIGHT_MINIMUM = 1e-3
 """Smallest component height, m (a millimetre: no part of the robot is thinner)."""
+
+_DEFAULT_PROFILE = CurvatureProfile()
+PROFILE_BOUNDED = ("period", "joint_radius")
+"""The StarParams fields whose range the actuation profile narrows (the period must outlast
+its heating phase t0; a rest arc of its K̄(0) must span two neighbouring joints)."""
+_HEIGHT_RULE = (f"0 (off) or at least {COMPONENT_HEIGHT_MINIMUM:g}, the three heights all set or "
+                f"all 0")
 
 
 def check_number(name, value, lowest, highest, lowest_included=True, integer=False,
@@ -226,7 +237,9 @@ class StarParams:
     """Normal rod drag coefficient C⊥ (-)."""
     cylinder_drag: float = parameter(10.0, "1", 0.0, 1000.0)
     """Drag coefficient C_c (-) of the central cylinder."""
-    period: float = parameter(3.15, "s", 0.0, 1000.0, lowest_included=False, differentiable=False)
+    period: float = parameter(3.15, "s", 0.0, 1000.0, lowest_included=False, differentiable=False,
+                              narrowed_by=f"longer than the profile's heating phase t0 "
+                                          f"({_DEFAULT_PROFILE.switch_time:g} s by default)")
     """Actuation period T, s (150 ms heating pulse + 3 s rest); longer than the heating time t0."""
     jet_mode: str = parameter("contract", choices=JET_MODES)
     """"contract": jet only while an inter-limb space shrinks; "always": the paper's formula
@@ -264,10 +277,14 @@ class StarParams:
                                                metadata={"allowed": "a CurvatureProfile"})
     """The actuators' natural-curvature profile K̄(τ) (default: the paper's fit); its K̄(0) is
     the rest curvature of the arcs."""
-    joint_radius: float = parameter(0.024, "m", 1e-3, 1.0)
+    joint_radius: float = parameter(
+        0.024, "m", 1e-3, 1.0,
+        narrowed_by=f"below 1/(K̄(0)·sin 22.5°), the widest a rest arc spans "
+                    f"({1.0 / (_DEFAULT_PROFILE.rest_curvature * math.sin(math.pi / 8)):.5g} m "
+                    f"with the default profile)")
     """Radius of the eight joints from the centre, m; must let an arc of curvature K̄(0) span
     two neighbouring joints."""
-    tip_radius: float = parameter(0.052, "m", 1e-3, 2.0)
+    tip_radius: float = parameter(0.052, "m", 1e-3, 2.0, narrowed_by="beyond joint_radius")
     """Radius of the limb tips, m (diameter L = 104 mm); beyond joint_radius."""
     n_arc: int = parameter(18, "1", 2, 1000)
     """Edges per actuator arc (topology: equal across a batch)."""
@@ -286,14 +303,14 @@ class StarParams:
     """Inflow ratio α_in (-): while a space opens (Ṡ > 0) the water drawn in through its
     opening pulls the robot towards it with f = (ρ_f/L)(α_in·Ṡ)²·t (0 = none, the paper's
     model). Needs jet_mode "contract" (with "always" an opening space already jets)."""
-    hub_height: float = parameter(0.0, "m", 0.0, 0.5)
+    hub_height: float = parameter(0.0, "m", 0.0, 0.5, narrowed_by=_HEIGHT_RULE)
     """Height of the hub (the central cylinder), m: with foam_height and actuator_height, the
     2.5-D model (docs/model.md "Component heights"): each component's mass, drag, added mass and
     jet scale with its height over the hub's. 0 (default) = off, every component one unit height
     (the paper); else at least COMPONENT_HEIGHT_MINIMUM (1 mm), and all three must be set."""
-    foam_height: float = parameter(0.0, "m", 0.0, 0.5)
+    foam_height: float = parameter(0.0, "m", 0.0, 0.5, narrowed_by=_HEIGHT_RULE)
     """Height of the foam limbs, m (the paper's robot: 24 mm); 0 = off, else ≥ 1 mm."""
-    actuator_height: float = parameter(0.0, "m", 0.0, 0.5)
+    actuator_height: float = parameter(0.0, "m", 0.0, 0.5, narrowed_by=_HEIGHT_RULE)
     """Height of the actuator arcs, m; 0 = off, else ≥ 1 mm."""
     # ---- model extensions (docs/model.md), off by default: the defaults change no result
     linear_drag: float = parameter(0.0, "Pa*s/m", 0.0, 1e4)
@@ -306,17 +323,18 @@ class StarParams:
     c_w·(u − v) per unit height on the centre node, v its velocity, u that of the water the
     robot has set moving, which follows it as u̇ = (v − u)/τ_w and takes the opposite force
     (`physics.wake`)."""
-    wake_time: float = parameter(1.0, "s", 0.0, 1e3, lowest_included=False)
-    """Exchange time τ_w of the entrained water, s: its mass per unit height is c_w·τ_w."""
+    wake_time: float = parameter(1.0, "s", 1e-9, 1e3)
+    """Exchange time τ_w of the entrained water, s: its mass per unit height is c_w·τ_w (at
+    least 1 ns: the term divides by it, and a subnormal τ_w made 1/τ_w infinite)."""
     stroke_warming: float = parameter(0.0, "1", 0.0, 10.0)
     """Warming w of the actuators' stroke (-): a firing's gain on its curvature change is
     multiplied by 1 + w·θ, θ the heat the actuator keeps from its earlier firings (each left
     one unit, decaying as exp(−t/τ_c), `cooling_time`): an SMA wire in its silicone cools
     between pulses for longer than a period's rest, so a later pulse starts warmer and
     transforms more (`physics.bending`). 0 = off (the paper's model: every pulse the first)."""
-    cooling_time: float = parameter(10.0, "s", 0.0, 1e3, lowest_included=False)
+    cooling_time: float = parameter(10.0, "s", 1e-9, 1e3)
     """Cooling time τ_c of the heat an actuator keeps between its firings, s (with
-    `stroke_warming`)."""
+    `stroke_warming`; at least 1 ns: the term divides by it)."""
     actuator_gains: Tuple[float, ...] = per_actuator(1.0, "1",
                                                      f"8 numbers in [0, {MAX_ACTUATOR_GAIN:g}]")
     """Gain g_k (-) of actuator A_k (index k − 1) on its commanded curvature change: it follows
@@ -348,6 +366,14 @@ class StarParams:
             elif name == "tip_radius":
                 lowest, included = self.joint_radius, False
                 reason = "beyond joint_radius: the limbs point outwards"
+            if name in PROFILE_BOUNDED and not lowest < highest:
+                # the profile leaves the field no value at all: blame the profile, not the field
+                declared = _declared_range(type(self).__dataclass_fields__[name])
+                bound = (f"its heating phase t0 = {lowest:g} s outlasts every period" if
+                         name == "period" else f"a rest arc of its K̄(0) = {rest:.5g} 1/m spans "
+                         f"joints at most {highest:.3g} m from the centre")
+                raise ValueError(f"actuator_profile leaves {name} no value in its declared "
+                                 f"{declared}: {bound}")
             object.__setattr__(self, name, check_number(
                 name, getattr(self, name), lowest, highest, included, name in INTEGER_FIELDS,
                 reason, highest_included))
@@ -488,11 +514,18 @@ def allowed_values(name: str) -> str:
 def _allowed(f) -> str:
     """The allowed values of field `f` in words, from its metadata."""
     if "range" in f.metadata:
-        lowest, highest, included = f.metadata["range"]
-        return f"{'[' if included else '('}{lowest:g}, {highest:g}]"
+        narrowed = f", and {f.metadata['narrowed_by']}" if "narrowed_by" in f.metadata else ""
+        return _declared_range(f) + narrowed
     if "choices" in f.metadata:
         return " or ".join(f'"{choice}"' for choice in f.metadata["choices"])
     return f.metadata["allowed"]
+
+
+def _declared_range(f) -> str:
+    """The range declared with numeric field `f`, as "[lowest, highest]" ("(" where the lowest
+    is excluded)."""
+    lowest, highest, included = f.metadata["range"]
+    return f"{'[' if included else '('}{lowest:g}, {highest:g}]"
 
 
 def _default(f):
@@ -610,7 +643,10 @@ class SolverConfig:
                     f.name, value, lowest, highest, included, isinstance(f.default, int)))
         object.__setattr__(self, "adaptive", check_flag("adaptive", self.adaptive))
         if self.dt_min > self.dt_max:
-            raise ValueError(f"dt_min must be <= dt_max = {self.dt_max:g} s, got {self.dt_min!r}")
+            # either may be the one the caller set: both are named
+            raise ValueError(f"dt_min must be <= dt_max (the adaptive step's bounds, checked with "
+                             f"fixed steps too), got dt_min = {self.dt_min!r} s and dt_max = "
+                             f"{self.dt_max!r} s")
         if self.adaptive and not self.dt_min <= self.dt <= self.dt_max:
             raise ValueError(f"dt (the first adaptive step) must be in [dt_min, dt_max] = "
                              f"[{self.dt_min:g}, {self.dt_max:g}] s, got {self.dt!r}")

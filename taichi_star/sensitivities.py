@@ -151,9 +151,10 @@ def parse_directions(names) -> Tuple[Direction, ...]:
     ("actuator_gains[3]": A4's, as `StarParams.actuator_gains[3]`; the studies' parameter boxes,
     NAME[INDEX] on their command lines, count from 1 instead: actuator_gains[4] there is A4).
     ValueError naming an unknown, repeated or non-differentiable one."""
-    if isinstance(names, str) or not hasattr(names, "__iter__"):
-        raise ValueError(f"sensitivities must be a sequence of StarParams field names, got "
-                         f"{names!r}")
+    # a set or a mapping would be taken in no defined order, or by its keys alone
+    if isinstance(names, (str, bytes, set, frozenset, dict)) or not hasattr(names, "__iter__"):
+        raise ValueError(f"sensitivities must be a sequence of StarParams field names (a list "
+                         f"or tuple; not a set or a mapping), got {names!r}")
     directions: List[Direction] = []
     for name in names:
         if not isinstance(name, str):
@@ -164,7 +165,9 @@ def parse_directions(names) -> Tuple[Direction, ...]:
             indices = list(range(N_ACTUATORS))
             if rest:
                 index = rest[:-1]
-                if not (rest.endswith("]") and index.isdigit() and int(index) < N_ACTUATORS):
+                # isdigit() also takes digits such as "²" that int() refuses
+                if not (rest.endswith("]") and index.isascii() and index.isdigit()
+                        and int(index) < N_ACTUATORS):
                     raise ValueError(f"sensitivities: {name!r} must name an actuator index in "
                                      f"[0, {N_ACTUATORS - 1}] (Python's: {field}[0] is A1's, "
                                      f"{field}[{N_ACTUATORS - 1}] A{N_ACTUATORS}'s)")

@@ -99,6 +99,7 @@ class SimulationResult:
         if self.sensitivities is None:
             raise ValueError("this result has no sensitivities: pass sensitivities=(...) to "
                              "simulate")
+        trajectory = check_flag("trajectory", trajectory)
         outputs = list(dict.fromkeys(tangents.SUMMARY_OUTPUTS + tangents.TRAJECTORY_OUTPUTS))
         if output not in outputs:   # before the parameter: swapped arguments name the output
             raise ValueError(f"output must be one of {outputs}, got {output!r}")

@@ -17,7 +17,7 @@ from .checks import is_finite_real, is_real, is_whole, shown, warn_user
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
 __all__ = ["nearest_interval", "interval_for_count", "whole_steps", "steps_in", "STEP_TOLERANCE",
-           "MAX_STEPS_PER_INSTANCE", "check_work"]
+           "MAX_STEPS_PER_INSTANCE", "REFUSE_ROBOT_STEPS", "check_work"]
 
 STEP_TOLERANCE = 1e-9
 """Relative tolerance within which a time is taken to be a whole number of steps (and a
@@ -42,6 +42,17 @@ giving its estimated duration: about 2.3 days at `ESTIMATE_ROBOT_STEPS_PER_S`.""
 ESTIMATE_ROBOT_STEPS_PER_S = 5e4
 """The rate the warning's estimate assumes: the plain `simulate` call of the paper preset at
 B = 512 measured 51,000 and 90,000 robot-steps/s on two 2-core machines; the slower one."""
+FASTEST_ROBOT_STEPS_PER_S = 3.6e6
+"""The fastest rate measured on any machine, rounded up: one H100, the paper preset in f32
+with the chord Jacobian at B = 65,536, 3,442,872 robot-steps/s (results/bench_gpu.csv; 3,564,046
+in a run cut off before its table, results/bench_gpu_cutoff.log). tests/unit/test_timegrid.py
+keeps it at least every rate in results/."""
+REFUSE_DAYS = 30
+REFUSE_ROBOT_STEPS = FASTEST_ROBOT_STEPS_PER_S * REFUSE_DAYS * 86400.0
+"""A call of more robot-steps (9.3e12) is refused before any compute, with its estimate: even
+the fastest machine measured would need more than REFUSE_DAYS for it (a 2-core CPU over four
+years). One call runs on one machine; `run_batch` only warns about its whole batch, whose
+chunks may run on many (each chunk is held to this)."""
 
 
 def on_grid(times_s, interval_s: float) -> np.ndarray:
@@ -122,9 +133,14 @@ def interval_for_count(duration_s: float, count: int, dt: float) -> float:
     duration_s (a finite number > 0)."""
     if not is_whole(count) or count < 1:
         raise ValueError(f"count must be an integer >= 1, got {count!r}")
-    if not _positive_number(duration_s):
-        raise ValueError(f"duration_s must be a finite number > 0 s, got {shown(duration_s)}")
-    return max(1, steps_in(float(duration_s), dt) // count) * dt
+    for name, value in (("duration_s", duration_s), ("dt", dt)):
+        if not _positive_number(value):
+            raise ValueError(f"{name} must be a finite number > 0 s, got {shown(value)}")
+    steps = float(duration_s) / float(dt)
+    if not math.isfinite(steps):
+        raise ValueError(f"duration_s = {shown(duration_s)} s is {steps} steps of dt = "
+                         f"{shown(dt)} s")
+    return max(1, round(steps) // count) * dt
 
 
 def check_work(name: str, steps: float, batch: Optional[int] = None):
@@ -132,8 +148,10 @@ def check_work(name: str, steps: float, batch: Optional[int] = None):
     rounded to whole steps as the drivers round a duration, is over MAX_STEPS_PER_INSTANCE;
     `name` says which arguments gave it (e.g. "duration_s = 1e9 s at dt = 0.001 s"), the
     message the estimate (times `batch`, the number of instances, if given) and the limit.
-    A RuntimeWarning with the estimated wall time when steps × batch is over WARN_ROBOT_STEPS.
-    ValueError naming `steps` (a real number >= 0) or `batch` (an integer >= 1) otherwise."""
+    A RuntimeWarning with the estimated wall time when steps × batch is over WARN_ROBOT_STEPS;
+    ValueError with it past REFUSE_ROBOT_STEPS (work no machine measured finishes in
+    REFUSE_DAYS). ValueError naming `steps` (a real number >= 0) or `batch` (an integer >= 1)
+    otherwise."""
     if not is_real(steps) or steps < 0:
         raise ValueError(f"steps must be a real number >= 0 (time steps per instance), got "
                          f"{shown(steps)}")
@@ -149,7 +167,17 @@ def check_work(name: str, steps: float, batch: Optional[int] = None):
             f" ({steps * batch:.3g} robot-steps for {batch} instance{'' if batch == 1 else 's'})"
         raise ValueError(f"{name} is {steps:.3g} time steps per instance{total}; the limit is "
                          f"{MAX_STEPS_PER_INSTANCE} steps per instance (the int32 step counter)")
-    warn_long_work(name, round(steps) * (batch or 1))
+    robot_steps = round(steps) * (batch or 1)
+    if robot_steps > REFUSE_ROBOT_STEPS:
+        days = robot_steps / FASTEST_ROBOT_STEPS_PER_S / 86400
+        years = robot_steps / ESTIMATE_ROBOT_STEPS_PER_S / (365.25 * 86400)
+        raise ValueError(f"{name} is {robot_steps:.3g} robot-steps: about {days:.3g} days even at "
+                         f"{FASTEST_ROBOT_STEPS_PER_S:.3g} robot-steps/s (the fastest measured, "
+                         f"one H100 in f32) and {years:.3g} years on a 2-core CPU; the limit is "
+                         f"{REFUSE_ROBOT_STEPS:.3g} robot-steps a call ({REFUSE_DAYS} days at that "
+                         f"rate): run fewer instances or a shorter duration, or a run_batch "
+                         f"spread over several machines")
+    warn_long_work(name, robot_steps)
 
 
 def warn_long_work(name: str, robot_steps: float):

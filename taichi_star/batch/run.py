@@ -43,9 +43,10 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     Unlike `simulate`, the instances may differ in topology (n_arc, n_limb) and period: they are
     grouped and cut into chunks of at most `chunk_size` (`plan_chunks`), each one `simulate`
     call. The summary has simulate's columns plus `instance` (position in `params`) first and
-    `duration_s`, in input order; the trajectory's instances are positions in `params`; shapes
-    (n_records, B, N, 2), m, need one topology and one duration for the whole batch. `topology`
-    is the batch's when it has one, else None. Results are bitwise those of `simulate` on the
+    `duration_s` (the time simulated, over which the speeds are taken: with fixed steps the
+    duration rounded to whole steps), in input order; the trajectory's instances are positions
+    in `params`; shapes (n_records, B, N, 2), m, need one topology and one duration for the
+    whole batch. `topology` is the batch's when it has one, else None. Results are bitwise those of `simulate` on the
     same instances, whatever the chunking and the executor (on one arch).
 
     Where the chunks run: in this process (default), on `workers` local worker processes

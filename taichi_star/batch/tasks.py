@@ -9,6 +9,7 @@ the instances numbered by their position in the whole batch.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Dict, List, Optional, Sequence, Tuple
 
@@ -16,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from ..checks import is_finite_real, is_whole, shown, told_by_caller
-from ..driver import RunTiming, fewest_steps
+from ..driver import Clock, RunTiming, fewest_steps
 from ..geometry import Topology
 from ..model import instances_of
 from ..params import SolverConfig, StarParams
@@ -89,7 +90,12 @@ def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None
     groups: Dict[tuple, List[int]] = {}
     for position, p in enumerate(params):
         duration = duration_s if duration_s is not None else cycles * p.period
-        if duration_s is None and not solver.adaptive and steps_in(duration, solver.dt) < 1:
+        if not math.isfinite(duration):
+            raise ValueError(f"cycles must give a finite duration: {cycles!r} periods of "
+                             f"params[{position}] ({p.period:g} s) overflow a float")
+        # past a float's range in steps the run is refused below, by its step count
+        if duration_s is None and not solver.adaptive \
+                and math.isfinite(duration / solver.dt) and steps_in(duration, solver.dt) < 1:
             raise ValueError(f"cycles must give at least one step (dt = {solver.dt:g} s): "
                              f"{cycles:g} periods of params[{position}] ({p.period:g} s) are "
                              f"{duration:.3g} s, got cycles = {cycles!r}")
@@ -101,8 +107,15 @@ def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None
             for start in range(0, len(positions), chunk_size):
                 members = tuple(positions[start:start + chunk_size])
                 chunk = tuple(params[m] for m in members)
-                validate_call(chunk, duration, solver, record_interval_s, record_shapes,
-                              steady_from_cycle)
+                try:
+                    validate_call(chunk, duration, solver, record_interval_s, record_shapes,
+                                  steady_from_cycle)
+                except ValueError as error:
+                    if duration_s is not None or not str(error).startswith("duration_s"):
+                        raise
+                    # the duration is the caller's cycles: name them, not duration_s
+                    raise ValueError(f"cycles = {cycles!r} ({duration:.6g} s for "
+                                     f"params[{members[0]}]): {error}") from None
                 tasks.append(ChunkTask(index=len(tasks), members=members, params=chunk,
                                        duration_s=duration, solver=solver, arch=arch,
                                        record_interval_s=record_interval_s,
@@ -143,7 +156,8 @@ def run_chunk(task: ChunkTask, progress: bool = False) -> ChunkResult:
     """Simulate one chunk (in whatever process calls it) and number its rows by `members`. Its
     warnings about "ok" instances are left to `run_batch`, which tells the batch's numbers
     once (a chunk's named its own rows, and on a worker process went to the worker's stderr)."""
-    with told_by_caller("ok_instances"):
+    # the batch's long-run warning was told when it was planned (`check_batch_work`)
+    with told_by_caller("ok_instances", "long_work"):
         result = simulate(list(task.params), task.duration_s, task.solver, arch=task.arch,
                           record_interval_s=task.record_interval_s,
                           record_shapes=task.record_shapes,
@@ -151,7 +165,11 @@ def run_chunk(task: ChunkTask, progress: bool = False) -> ChunkResult:
     members = np.asarray(task.members)
     summary = result.summary
     summary.insert(0, "instance", members)
-    summary.insert(summary.columns.get_loc("displacement_x_mm"), "duration_s", task.duration_s)
+    # the time simulated, over which the speeds are taken: with fixed steps the duration
+    # rounded to whole steps (0.0126 s asked at 1-ms steps is 0.013 s)
+    clock = Clock(task.solver, task.duration_s)
+    summary.insert(summary.columns.get_loc("displacement_x_mm"), "duration_s",
+                   clock.time_of(clock.end))
     trajectory = result.trajectory
     trajectory["instance"] = members[trajectory["instance"].to_numpy(dtype=int)]
     return ChunkResult(index=task.index, summary=summary, trajectory=trajectory,

@@ -218,6 +218,11 @@ def test_a_bad_output_is_named_before_the_parameter(euler_run):
     assert len(listed) == len(set(listed)) and "'heading_deg'" in listed
     with pytest.raises(ValueError, match=r"^output 'signed_speed_mm_s' is a summary output"):
         euler_run.sensitivity("signed_speed_mm_s", "alpha", trajectory=True)
+    # a text for the flag: named as such (it had been read as True, and the output blamed)
+    with pytest.raises(ValueError, match=r"^trajectory must be True or False, got 'yes'$"):
+        euler_run.sensitivity("speed_mm_s", "alpha", "yes")
+    assert np.array_equal(euler_run.sensitivity("heading_deg", "alpha", np.bool_(True)),
+                          euler_run.sensitivity("heading_deg", "alpha", trajectory=True))
 
 
 def test_a_per_actuator_field_gives_one_column_per_actuator(euler_run):

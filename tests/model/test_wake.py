@@ -32,8 +32,11 @@ def test_the_wake_is_off_by_default_and_compiled_out():
 @pytest.mark.parametrize("changes,message", [
     ({"wake_coupling": -1e-9}, r"wake_coupling must be a real number in \[0, 1000\]"),
     ({"wake_coupling": 1000.5}, r"wake_coupling must be a real number in \[0, 1000\]"),
-    ({"wake_time": 0.0}, r"wake_time must be a real number in \(0, 1000\]"),
-    ({"wake_time": 1000.5}, r"wake_time must be a real number in \(0, 1000\]"),
+    ({"wake_time": 0.0}, r"wake_time must be a real number in \[1e-09, 1000\]"),
+    ({"wake_time": 1000.5}, r"wake_time must be a real number in \[1e-09, 1000\]"),
+    # a subnormal τ_w had been accepted, and 1/τ_w = inf made every such run non_finite
+    ({"wake_time": 5e-324}, r"wake_time must be a real number in \[1e-09, 1000\]"),
+    ({"wake_time": 0.999e-9}, r"wake_time must be a real number in \[1e-09, 1000\]"),
     ({"wake_time": float("nan")}, r"wake_time must be a real number"),
 ])
 def test_wake_fields_refuse_values_out_of_range(changes, message):

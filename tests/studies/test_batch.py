@@ -151,6 +151,26 @@ def test_a_script_without_main_guard_gets_an_error_explaining_it(tmp_path):
     assert run.returncode == 0, run.stderr[-2000:]
 
 
+def test_a_batch_tells_its_long_work_once_and_records_the_time_it_simulated(monkeypatch):
+    """Planning warned of the batch's robot-steps and then each chunk's run warned of its own
+    again, with other numbers (an audit, 2026-12): one warning now, the batch's. And the
+    `duration_s` column is the time simulated, over which the speeds are taken: 0.0126 s asked
+    at 1-ms steps is 13 steps, 0.013 s (it gave the 0.0126 asked, so speed × duration_s missed
+    the displacement by 3 %)."""
+    from taichi_star import timegrid
+    monkeypatch.setattr(timegrid, "WARN_ROBOT_STEPS", 15)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = run_batch([ts.StarParams(gait="A1+A3")] * 4, 0.0126, chunk_size=2)
+    told = [str(w.message) for w in caught if "robot-steps: about" in str(w.message)]
+    assert len(told) == 1 and told[0].startswith("the batch of 4 instances is "), told
+    summary = result.summary
+    np.testing.assert_allclose(summary["duration_s"], 0.013, rtol=1e-15)   # 13 × 0.001 s
+    displacement = np.hypot(summary["displacement_x_mm"], summary["displacement_y_mm"])
+    np.testing.assert_allclose(summary["speed_mm_s"] * summary["duration_s"], displacement,
+                               rtol=1e-12)   # both from the same time, to rounding
+
+
 def test_a_batchs_work_and_trajectory_are_judged_whole_not_by_chunk(monkeypatch,
                                                                   memory_budget):
     """Each chunk checked its own work and records, so a 2-year sweep warned of one chunk's

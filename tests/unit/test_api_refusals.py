@@ -154,6 +154,19 @@ def test_interval_for_count_refuses_a_duration_that_is_not_one(duration):
         interval_for_count(duration, 10, 1e-3)
 
 
+@pytest.mark.parametrize("dt", [0.0, -1e-3, math.inf, math.nan, "1e-3", True])
+def test_interval_for_count_refuses_a_dt_that_is_not_a_step(dt):
+    """dt = 0 was a ZeroDivisionError, a negative or infinite one gave a negative or infinite
+    interval."""
+    with pytest.raises(ValueError, match=r"^dt must be a finite number > 0 s"):
+        interval_for_count(1.0, 10, dt)
+
+
+def test_interval_for_count_refuses_a_duration_of_more_steps_than_a_float_holds():
+    with pytest.raises(ValueError, match=r"^duration_s = 1e\+308 s is inf steps of dt = 1e-300 s"):
+        interval_for_count(1e308, 1, 1e-300)
+
+
 def test_interval_for_count_accepts_one_record():
     assert interval_for_count(1.0, 1, 1e-3) == pytest.approx(1.0)
 
@@ -650,6 +663,47 @@ def test_numbers_beyond_or_below_floats_reach_are_refused_naming_the_argument(no
                                                                               name):
     with pytest.raises(ValueError, match=f"^{name} must be"):
         call()
+
+
+def test_cycles_whose_duration_overflows_are_refused_naming_cycles(no_compute):
+    """1e306 cycles of 3.15 s are a finite duration but inf steps (an OverflowError had come
+    through); 1e308 overflow the duration itself; a count past the step counter from cycles
+    names the cycles, not a duration_s the caller never passed."""
+    with pytest.raises(ValueError, match=r"^cycles = 1e\+306 \(3\.15e\+306 s for params\[0\]\): "
+                                         r"duration_s = .* is inf time steps per instance"):
+        run_batch([P], cycles=1e306)
+    with pytest.raises(ValueError, match=r"^cycles must give a finite duration: 1e\+308 periods of "
+                                         r"params\[0\] \(3\.15 s\) overflow a float$"):
+        run_batch([P], cycles=1e308)
+    with pytest.raises(ValueError, match=r"^cycles = 1000000000\.0 \(3\.15e\+09 s for "
+                                         r"params\[0\]\): duration_s = 3\.15e\+09 s at dt_max"):
+        run_batch([P], cycles=1e9, solver=ts.SolverConfig.preset("accurate"))
+
+
+def test_a_call_no_machine_finishes_in_30_days_is_refused_before_compute(no_compute):
+    """100,000 robots for 1e6 s are 1e14 robot-steps: about 322 days at the fastest rate
+    measured. It had started, with only a warning."""
+    with pytest.raises(ValueError, match=r"^duration_s = 1e\+06 s at dt = 0\.001 s is 1e\+14 "
+                                         r"robot-steps: about 322 days even at"):
+        ts.simulate([P] * 100_000, 1e6)
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: ts.fewest_steps(None, 1.0, 0.0), "^solver must be a SolverConfig, got NoneType$"),
+    (lambda: ts.fewest_steps(S, -1.0, 0.0), "^duration_s must be a finite number >= 0 s"),
+    (lambda: ts.fewest_steps(S, math.nan, 0.0), "^duration_s must be a finite number >= 0 s"),
+    (lambda: ts.fewest_steps(S, 1.0, -0.1), "^record_interval_s must be a finite number >= 0 s"),
+    (lambda: ts.fewest_steps(S, 1.0, math.inf), "^record_interval_s must be a finite number"),
+], ids=["solver", "negative", "nan", "records negative", "records inf"])
+def test_fewest_steps_refuses_what_is_not_a_run(call, message):
+    with pytest.raises(ValueError, match=message):
+        call()
+
+
+def test_fewest_steps_accepts_its_boundaries():
+    assert ts.fewest_steps(S, 0.0, 0.0) == (0.0, "dt = 0.001 s")
+    adaptive = ts.SolverConfig.preset("accurate")
+    assert ts.fewest_steps(adaptive, 1.0, 0.0)[0] == pytest.approx(1.0 / adaptive.dt_max)
 
 
 def test_a_step_count_beyond_floats_range_is_too_many_steps():

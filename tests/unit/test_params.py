@@ -133,8 +133,13 @@ def test_default_topology_is_the_papers():
 def test_adaptive_step_bounds_must_be_ordered():
     """dt_min ≤ dt_max, and an adaptive first step dt within [dt_min, dt_max]: each end
     accepted, just past either refused with the bounds named; a fixed step ignores them."""
-    with pytest.raises(ValueError, match=r"^dt_min must be <= dt_max = 0.005 s, got 0.01$"):
+    with pytest.raises(ValueError, match=r"^dt_min must be <= dt_max .*, got dt_min = 0.01 s and "
+                                         r"dt_max = 0.005 s$"):
         ts.SolverConfig(adaptive=True, dt_min=0.01, dt_max=0.005)
+    # with fixed steps too, and a dt_max set below the default dt_min is named as well
+    with pytest.raises(ValueError, match=r"got dt_min = 1e-06 s and dt_max = 1e-07 s$"):
+        ts.SolverConfig(dt_max=1e-7)
+    assert ts.SolverConfig(dt_max=1e-6).dt_max == 1e-6   # equal bounds: allowed
     bounds = dict(adaptive=True, dt_min=1e-4, dt_max=0.01)
     assert ts.SolverConfig(dt=1e-4, **bounds).dt == 1e-4
     assert ts.SolverConfig(dt=0.01, **bounds).dt == 0.01
@@ -383,6 +388,53 @@ def test_a_single_star_params_is_a_batch_of_one():
     assert validate_batch([one, one]) == (one, one)
 
 
+def test_the_allowed_values_of_a_narrowed_field_state_what_narrows_it_and_its_default_bound():
+    """allowed_values (help's table, the API reference) gave the declared [0.001, 1] for
+    joint_radius, 40× what the default profile allows (an audit, 2026-12); the narrowing and
+    the bound it makes with the default profile are now stated, and that bound is the one
+    enforced: just inside it accepted, at it refused."""
+    profile = ts.StarParams().actuator_profile
+    widest = 1.0 / (profile.rest_curvature * math.sin(math.pi / 8))
+    assert ts.allowed_values("joint_radius") == (
+        f"[0.001, 1], and below 1/(K̄(0)·sin 22.5°), the widest a rest arc spans "
+        f"({widest:.5g} m with the default profile)")
+    stated = float(f"{widest:.5g}")
+    assert ts.StarParams(joint_radius=stated * 0.9999).joint_radius == stated * 0.9999
+    with pytest.raises(ValueError, match="^joint_radius must be"):
+        ts.StarParams(joint_radius=stated * 1.0001)
+    assert ts.allowed_values("period") == (
+        f"(0, 1000], and longer than the profile's heating phase t0 ({profile.switch_time:g} s by "
+        f"default)")
+    assert ts.allowed_values("tip_radius") == "[0.001, 2], and beyond joint_radius"
+    assert ts.allowed_values("hub_height").startswith("[0, 0.5], and 0 (off) or at least 0.001")
+    assert ts.allowed_values("alpha") == "[0, 10]"   # a field nothing narrows: the declared range
+
+
+def test_a_profile_that_leaves_a_field_no_value_is_named_as_the_cause():
+    """The period's range starts at the profile's t0 and the joint radius's ends at the widest
+    chord of its rest arc; where that leaves nothing ("(2000, 1000]" had been the message, naming
+    the period), the profile is refused. t0 at the period's top, 1000 s, leaves nothing (the
+    period must exceed t0); a hair below it leaves 1000 s itself."""
+    for switch_time in (2000.0, 1000.0):
+        profile = ts.CurvatureProfile(switch_time=switch_time)
+        with pytest.raises(ValueError) as error:
+            ts.StarParams(actuator_profile=profile)
+        assert str(error.value) == (f"actuator_profile leaves period no value in its declared "
+                                    f"(0, 1000]: its heating phase t0 = {switch_time:g} s "
+                                    f"outlasts every period")
+    late = ts.CurvatureProfile(switch_time=999.9)
+    assert ts.StarParams(actuator_profile=late, period=1000.0).period == 1000.0
+    # K̄(0) = 5000 1/m: a rest arc 0.2 mm across spans joints 0.52 mm from the centre at most
+    tight = ts.CurvatureProfile(heating=(-89.827, 62.724, 0.061, 5000.0))
+    widest = 1.0 / (tight.rest_curvature * math.sin(math.pi / 8))
+    with pytest.raises(ValueError) as error:
+        ts.StarParams(actuator_profile=tight)
+    assert str(error.value) == (f"actuator_profile leaves joint_radius no value in its declared "
+                                f"[0.001, 1]: a rest arc of its K̄(0) = "
+                                f"{tight.rest_curvature:.5g} 1/m spans joints at most "
+                                f"{widest:.3g} m from the centre")
+
+
 CROSS_CONSTRAINED = {"period", "joint_radius", "tip_radius", "hub_height", "foam_height",
                      "actuator_height"}
 """Fields whose declared range is narrowed by another field (tested on their own: the radii,
@@ -420,7 +472,9 @@ def test_help_lists_every_field_with_its_declared_unit_and_allowed_values():
         if f.name in ts.STAR_RANGES:
             lowest, highest, included = ts.STAR_RANGES[f.name]
             unit = PARAMETER_UNITS[f.name]
-            assert f"| {unit} | {'[' if included else '('}{lowest:g}, {highest:g}] |" in row
+            narrowed = f", and {f.metadata['narrowed_by']}" if "narrowed_by" in f.metadata else ""
+            assert (f"| {unit} | {'[' if included else '('}{lowest:g}, {highest:g}]{narrowed} |"
+                    in row)
         elif "choices" in f.metadata:
             assert all(f'"{choice}"' in row for choice in f.metadata["choices"])
 

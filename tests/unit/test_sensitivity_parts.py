@@ -71,14 +71,27 @@ def test_an_unknown_name_gets_the_closest_fields_and_no_hint_when_nothing_is_clo
         parse_directions(["zzzz"])
 
 
+SEQUENCE = "sensitivities must be a sequence of StarParams field names (a list or tuple; not a " \
+    "set or a mapping), got "
+
+
 @pytest.mark.parametrize("names, message", [
-    ("alpha", "sensitivities must be a sequence of StarParams field names, got 'alpha'"),
-    (5, "sensitivities must be a sequence of StarParams field names, got 5"),
+    ("alpha", SEQUENCE + "'alpha'"),
+    (5, SEQUENCE + "5"),
+    # a set has no order (the columns' would change from run to run), a mapping's values would
+    # be dropped unread
+    ({"alpha"}, SEQUENCE + "{'alpha'}"),
+    (frozenset(["alpha"]), SEQUENCE + "frozenset({'alpha'})"),
+    ({"alpha": 1}, SEQUENCE + "{'alpha': 1}"),
+    (b"alpha", SEQUENCE + "b'alpha'"),
+    # str.isdigit() takes "²", which int() refuses: Python's own message had come through
+    (["actuator_gains[²]"], "sensitivities: 'actuator_gains[²]' must name an actuator index in "
+                            "[0, 7] (Python's: actuator_gains[0] is A1's, actuator_gains[7] A8's)"),
     (["alpha", 3], "sensitivities must hold field names, got 3"),
     (["alpha", "alpha"], "sensitivities: 'alpha' is named twice"),
     (["actuator_gains", "actuator_gains[2]"], "sensitivities: 'actuator_gains[2]' is named twice"),
 ])
-def test_a_string_a_number_a_non_name_and_a_repeat_are_refused(names, message):
+def test_a_string_a_set_a_mapping_a_number_a_non_name_and_a_repeat_are_refused(names, message):
     with pytest.raises(ValueError) as error:
         parse_directions(names)
     assert str(error.value) == message

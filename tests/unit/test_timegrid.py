@@ -94,6 +94,43 @@ def test_long_but_possible_work_starts_with_a_warning_giving_its_estimate():
         check_work("duration_s = x", 1e9 + 1, 10)
 
 
+def test_work_no_machine_measured_finishes_in_30_days_is_refused_with_its_estimate():
+    """Past REFUSE_ROBOT_STEPS (3.6e6 robot-steps/s × 30 days = 9.3312e12) a call is refused
+    before any compute, with its days at the fastest rate and its years on a 2-core CPU; at
+    exactly the limit it starts (with the long-work warning). 933,120,000 steps × 10,000
+    instances is the limit to the step, under the step counter's 2.1e9 per instance."""
+    from taichi_star.timegrid import REFUSE_ROBOT_STEPS
+
+    assert REFUSE_ROBOT_STEPS == 9_331_200_000_000.0
+    with pytest.warns(RuntimeWarning, match="robot-steps: about"):
+        check_work("x", 933_120_000, 10_000)
+    with pytest.raises(ValueError) as error:
+        check_work("x", 933_120_001, 10_000)
+    # 9.3312e12 / 5e4 robot-steps/s is 5.91 years
+    assert str(error.value) == (
+        "x is 9.33e+12 robot-steps: about 30 days even at 3.6e+06 robot-steps/s (the fastest "
+        "measured, one H100 in f32) and 5.91 years on a 2-core CPU; the limit is 9.33e+12 "
+        "robot-steps a call (30 days at that rate): run fewer instances or a shorter duration, "
+        "or a run_batch spread over several machines")
+
+
+def test_the_refusals_rate_is_at_least_every_rate_measured():
+    """The refusal assumes the fastest machine measured: no committed benchmark row may be
+    faster (else work that machine finishes within the 30 days would be refused)."""
+    from pathlib import Path
+
+    import pandas as pd
+
+    from taichi_star.timegrid import FASTEST_ROBOT_STEPS_PER_S
+
+    results = Path(__file__).resolve().parents[2] / "results"
+    rates = [pd.read_csv(path, usecols=["robot_steps_per_s"])["robot_steps_per_s"].max()
+             for path in results.rglob("*.csv")
+             if "robot_steps_per_s" in path.open().readline().split(",")]
+    assert len(rates) > 20 and max(rates) > 3.4e6   # the H100's f32 chord row is among them
+    assert max(rates) <= FASTEST_ROBOT_STEPS_PER_S
+
+
 def test_work_up_to_exactly_the_step_counter_is_accepted_and_past_it_refused():
     """MAX_STEPS_PER_INSTANCE steps (2³¹ − 1: the int32 counter) are allowed, one more or an
     infinite estimate is refused with the estimate, the batch's total and the limit."""
