@@ -115,6 +115,11 @@ def main(argv=None) -> int:
         return 130
     except SystemExit as exit_:  # argparse's --help (its refusals are StudyArgumentError)
         return exit_.code if isinstance(exit_.code, int) else 2
+    except Exception:
+        # a fault's traceback is shown as it is, but leaves no empty folder the run made
+        for out in cli.OPENED:
+            out.remove_if_unused()
+        raise
     return 0
 
 

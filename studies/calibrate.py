@@ -269,7 +269,7 @@ def main(argv=None):
     base = identify.model_with_box(args, box, "--fit")
     identify.check_unfired_axes("calibrate", "--fit", box, gaits)
     measurements = experiment.measurement_table(gaits, args.weights)
-    solver = cli.solver(args)
+    solver = cli.solver(args, periods=cli.range_periods(box))
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"fit": [spec.spec for spec in box], "gaits": gaits,
                                            "weights": args.weights,

@@ -291,8 +291,16 @@ def check_run(length: str, duration_s: float, config: SolverConfig,
     the library would, before any folder is made; and at least one fixed step."""
     steps, bound = fewest_steps(config, duration_s, record_interval_s)
     check_steps(f"{length} at {bound}", steps)
-    if not config.adaptive and steps_in(duration_s, config.dt) < 1:
-        raise StudyArgumentError(f"{length} is less than one step (dt = {config.dt:g} s)")
+    if not config.adaptive:
+        check_one_step(length, duration_s, config.dt)
+
+
+def check_one_step(length: str, duration_s: float, step_s: float, step_name: str = "dt ="):
+    """StudyArgumentError unless a run of duration_s (s, what `length` says) is at least one
+    fixed step of step_s (s, named `step_name`) once rounded to whole steps, as the library
+    rounds it (`steps_in`)."""
+    if steps_in(duration_s, step_s) < 1:
+        raise StudyArgumentError(f"{length} is less than one step ({step_name} {step_s:g} s)")
 
 
 def check_cycles(cycles: Mapping[str, int], period: float, config: SolverConfig):
@@ -529,11 +537,14 @@ def base_params(args) -> StarParams:
         raise StudyArgumentError(f"--set: {error}") from None
 
 
-def solver(args) -> SolverConfig:
+def solver(args, periods: Sequence[float] = ()) -> SolverConfig:
     """SolverConfig of --preset with --dt and --jacobian (StudyArgumentError naming --dt); with
     the model flags, checks that the run's length (--cycles of the model's period, or
     --quick's) is at least one fixed step and at most MAX_STEPS_PER_INSTANCE steps (dt_max
-    steps, the fewest, when adaptive) (StudyArgumentError naming the flags and the step)."""
+    steps, the fewest, when adaptive) (StudyArgumentError naming the flags and the step).
+    `periods`: the actuation periods, s, of a study that varies them (a sweep's values, the
+    bounds of a --fit or --vary range: `range_periods`); --cycles of the longest must stay
+    within the step limit and --cycles of the shortest make a step (default: the model's)."""
     try:
         changes = {} if args.dt is None else {"dt": args.dt}
         if getattr(args, "jacobian", None) is not None:
@@ -543,12 +554,27 @@ def solver(args) -> SolverConfig:
         raise StudyArgumentError(f"--dt: {error}") from None
     if hasattr(args, "set") and (args.quick or getattr(args, "cycles", None) is not None):
         if args.quick:
-            duration, length = QUICK_DURATION_S, f"--quick ({QUICK_DURATION_S:g} s)"
-        else:
+            check_run(f"--quick ({QUICK_DURATION_S:g} s)", QUICK_DURATION_S, config)
+        elif not periods:
             duration = args.cycles * base_params(args).period
-            length = f"--cycles {args.cycles:g} ({duration:.3g} s)"
-        check_run(length, duration, config)
+            check_run(f"--cycles {args.cycles:g} ({duration:.3g} s)", duration, config)
+        else:
+            # each instance runs --cycles of its own period (run_batch's cycles): the longest
+            # takes the most steps, the shortest the fewest
+            longest, shortest = max(periods), min(periods)
+            check_run(f"--cycles {args.cycles:g} of the longest period, {longest:g} s "
+                      f"({args.cycles * longest:.3g} s)", args.cycles * longest, config)
+            if not config.adaptive:
+                check_one_step(f"--cycles {args.cycles:g} of the shortest period, "
+                               f"{shortest:g} s ({args.cycles * shortest:.3g} s)",
+                               args.cycles * shortest, config.dt)
     return config
+
+
+def range_periods(ranges) -> List[float]:
+    """The bounds, s, of the `period` axis among --fit or --vary ranges
+    (`identify.ParameterRange`s), for `solver`'s periods; [] when none varies the period."""
+    return [bound for axis in ranges if axis.name == "period" for bound in (axis.low, axis.high)]
 
 
 def run_length(args) -> Dict[str, float]:

@@ -43,7 +43,7 @@ from taichi_star.output import column_unit
 from taichi_star.sensitivity_check import difference_step, extrapolated_difference
 from taichi_star.sensitivities import REPLICAS_PER_DIRECTION, parse_directions
 
-from . import cli
+from . import cli, identify, provenance
 
 DESCRIPTION = ("Elasticities d ln|v| / d ln p of each paper gait's signed speed to every "
                "parameter (exact sensitivities), beside the Sobol indices.")
@@ -90,14 +90,28 @@ def direction(label: str):
 
 def sobol_table(path: Path) -> tuple:
     """(the Sobol table's gait, parameter and SOBOL_COLUMNS, the preset it was computed with
-    from its sidecar, "" without one)."""
-    table = pd.read_csv(path)[["gait", "parameter", *SOBOL_COLUMNS]]
-    sidecar = Path(f"{path}.json")
-    preset = ""
-    if sidecar.exists():
-        model = json.loads(sidecar.read_text()).get("model") or {}
-        preset = model.get("preset", "") if isinstance(model, dict) else ""
-    return table, preset
+    from its provenance sidecar, "" without one or without a preset in it); StudyArgumentError
+    naming --sobol for a file that cannot be read (`identify.read_csv_file`), a table without
+    those columns, or a sidecar that cannot be read or is not a JSON object."""
+    table = identify.read_csv_file(path, "--sobol")
+    columns = ["gait", "parameter", *SOBOL_COLUMNS]
+    missing = [column for column in columns if column not in table.columns]
+    if missing:
+        raise cli.StudyArgumentError(f"--sobol {path}: not a Sobol table with columns "
+                                     f"{', '.join(columns)} (no {', '.join(missing)})")
+    sidecar = provenance.sidecar_path(path)
+    if not sidecar.exists():
+        return table[columns], ""
+    try:
+        recorded = json.loads(sidecar.read_text())
+    except (OSError, ValueError) as error:  # a folder, no permission, not JSON, not UTF-8
+        raise cli.StudyArgumentError(f"--sobol {path}: its provenance sidecar {sidecar} cannot "
+                                     f"be read ({error})") from None
+    if not isinstance(recorded, dict):
+        raise cli.StudyArgumentError(f"--sobol {path}: its provenance sidecar {sidecar} is not "
+                                     f"a JSON object but a {type(recorded).__name__}")
+    model = recorded.get("model") or {}
+    return table[columns], model.get("preset", "") if isinstance(model, dict) else ""
 
 
 def elasticity_table(params: Sequence[StarParams], parameters: Sequence[str],
@@ -256,12 +270,7 @@ def main(argv=None):
     sobol_path = Path(args.sobol)
     if not sobol_path.is_file():
         raise cli.StudyArgumentError(f"--sobol: no such file {sobol_path}")
-    try:
-        sobol, sobol_preset = sobol_table(sobol_path)
-    except (KeyError, ValueError, pd.errors.ParserError) as error:
-        raise cli.StudyArgumentError(f"--sobol {sobol_path}: not a Sobol table with columns "
-                                     f"gait, parameter, {', '.join(SOBOL_COLUMNS)} ({error})") \
-            from None
+    sobol, sobol_preset = sobol_table(sobol_path)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver,
                      extra={"gaits": gaits, "parameters": parameters, "output": OUTPUT,

@@ -62,12 +62,14 @@ from taichi_star.timegrid import nearest_interval
 
 from . import cli
 from .optimise import minimise_lbfgsb_batched
+from .plan import primitive_numbers, read_primitives
 
 DESCRIPTION = ("Firing offsets per actuator optimised by L-BFGS-B on the exact sensitivities "
                "for speed in a direction or turning, against the best synchronous gait.")
 DEFAULT_PRIMITIVES = Path(__file__).resolve().parent.parent / "results" / "primitives.csv"
-PRIMITIVE_COLUMNS = {"gait", "step_mm", "direction_deg", "step_x_mm", "step_y_mm", "turn_deg"}
-"""The columns of the --primitives table this study reads."""
+PRIMITIVE_NUMBERS = ["step_mm", "direction_deg", "step_x_mm", "step_y_mm", "turn_deg"]
+"""The columns of the --primitives table this study reads besides gait: numbers, NaN where the
+table has none (a failed gait's steps, the direction of a step too short to have one)."""
 ROBUSTNESS_SCALES = ((1.0, 1.0), (0.8, 0.8), (0.8, 1.2), (1.2, 0.8), (1.2, 1.2))
 """(α factor, drag_perpendicular factor): the centre, then the 4 corners of ±20 %."""
 DELAY_MARGIN = 1e-6
@@ -382,13 +384,17 @@ def main(argv=None):
     if args.direction is not None and args.goal in TURN_SIGNS:
         raise cli.StudyArgumentError("--direction: only with --goal speed (turning has no "
                                      "direction)")
-    try:
-        primitives = pd.read_csv(args.primitives)
-    except (OSError, ValueError) as error:
-        raise cli.StudyArgumentError(f"--primitives {args.primitives}: {error}") from None
-    if primitives.empty or not PRIMITIVE_COLUMNS <= set(primitives.columns):
-        raise cli.StudyArgumentError(f"--primitives {args.primitives}: not a primitives table "
-                                     f"(needs rows with {sorted(PRIMITIVE_COLUMNS)})")
+    # its period, step and robot are not checked against this run's, as plan checks them: the
+    # table only ranks the gaits to start from, and every gait is simulated again here (the
+    # default, results/primitives.csv at 1 ms, serves --quick's 5 ms as well)
+    primitives = read_primitives(args.primitives, PRIMITIVE_NUMBERS)
+    primitive_numbers(primitives, PRIMITIVE_NUMBERS, args.primitives)
+    usable = primitives[np.isfinite(primitives[PRIMITIVE_NUMBERS]).all(axis=1)]
+    if usable.empty:
+        # the default direction is the fastest such gait's; NaN alone ranks no gait
+        raise cli.StudyArgumentError(f"--primitives {args.primitives}: no gait whose "
+                                     f"{', '.join(PRIMITIVE_NUMBERS[:-1])} and "
+                                     f"{PRIMITIVE_NUMBERS[-1]} are all finite")
     base = cli.base_params(args)
     solver = cli.solver(args)
     if args.jets:
@@ -398,7 +404,7 @@ def main(argv=None):
             raise cli.StudyArgumentError(f"--jets: {error}") from None
     # every evaluation runs --cycles from rest, even under --quick
     cli.check_cycles({"--cycles": args.cycles}, base.period, solver)
-    fastest = primitives.loc[primitives["step_mm"].idxmax()]
+    fastest = usable.loc[usable["step_mm"].idxmax()]
     direction = float(fastest["direction_deg"]) if args.direction is None else args.direction
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"goal": args.goal, "direction_deg": direction,

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import ast
 import dataclasses
+import difflib
 import math
 import sys
 from dataclasses import dataclass
@@ -140,12 +141,25 @@ def parse_range_spec(text: str, flag: str = "--fit") -> ParameterRange:
     return spec
 
 
+def fittable_fields() -> List[str]:
+    """The fields a box may vary: the real-valued ones but the topology's, and the per-actuator
+    ones element by element (NAME[INDEX])."""
+    return [*(name for name in StarParams.numeric_field_names() if name not in TOPOLOGY_FIELDS),
+            *(f"{name}[INDEX]" for name in PER_ACTUATOR_FIELDS)]
+
+
 def check_field_range(spec: ParameterRange, flag: str):
-    """StudyArgumentError naming `flag` and the field unless the field is a real-valued
-    StarParams field, LOW < HIGH, both finite and inside the field's valid range, and LOW > 0 for
-    a log axis. An element axis (NAME[INDEX]) needs a tuple-valued field and an INDEX within
-    it; its range is checked by the model's own validation (`check_box`)."""
-    kind = cli.field_kind(spec.name)  # unknown field -> error naming it
+    """StudyArgumentError naming `flag` and the field (an unknown one with the closest
+    `fittable_fields`) unless the field is a real-valued StarParams field, LOW < HIGH, both
+    finite and inside the field's valid range, and LOW > 0 for a log axis. An element axis
+    (NAME[INDEX]) needs a tuple-valued field and an INDEX within it; its range is checked by
+    the model's own validation (`check_box`)."""
+    if spec.name not in StarParams.field_names():
+        close = difflib.get_close_matches(spec.name, fittable_fields(), n=3)
+        hint = (f"did you mean {', '.join(close)}?" if close
+                else f"fittable fields: {', '.join(fittable_fields())}")
+        raise cli.StudyArgumentError(f"{flag}: unknown parameter {spec.name!r}; {hint}")
+    kind = cli.field_kind(spec.name)
     where = f"{flag} {spec.label}"
     if spec.index is not None:
         default = getattr(StarParams(), spec.name)
@@ -155,9 +169,9 @@ def check_field_range(spec: ParameterRange, flag: str):
         if not 1 <= spec.index <= len(default):
             raise cli.StudyArgumentError(f"{where}: INDEX must be in [1, {len(default)}]")
     elif kind is not float or spec.name in TOPOLOGY_FIELDS or spec.name not in STAR_RANGES:
-        numeric = [n for n in StarParams.numeric_field_names() if n not in TOPOLOGY_FIELDS]
         raise cli.StudyArgumentError(f"{where}: not a real-valued numeric field (fix it with "
-                                     f"--set); fittable fields: {', '.join(numeric)}")
+                                     f"--set); fittable fields: "
+                                     f"{', '.join(fittable_fields())}")
     if not (math.isfinite(spec.low) and math.isfinite(spec.high)):
         raise cli.StudyArgumentError(f"{where}: bounds must be finite, got "
                                      f"{spec.low}:{spec.high}")
@@ -307,15 +321,30 @@ class CMAResult:
     stop_reasons: List[str]
 
 
+def read_csv_file(path, flag: str, **options) -> pd.DataFrame:
+    """The CSV file `path` that `flag` names, read by `pandas.read_csv(path, **options)`;
+    StudyArgumentError naming the flag and the file, in one line, for a file that cannot be
+    read (missing, a folder, no permission), is empty, is not text or is not CSV."""
+    try:
+        return pd.read_csv(path, **options)
+    except pd.errors.EmptyDataError:
+        raise cli.StudyArgumentError(f"{flag} {path}: empty (not even a header row)") from None
+    except UnicodeDecodeError as error:
+        raise cli.StudyArgumentError(f"{flag} {path}: not a UTF-8 text file (byte "
+                                     f"{error.object[error.start]:#04x} at {error.start}: "
+                                     f"{error.reason})") from None
+    except (OSError, ValueError) as error:  # ValueError: pandas' ParserError among them
+        # the tokenizer's message ends in a newline: the refusal stays one line
+        reason = " ".join(str(error).split())
+        raise cli.StudyArgumentError(f"{flag} {path}: cannot read it ({reason})") from None
+
+
 def read_start(path, base: StarParams) -> StarParams:
     """--start: the model of an earlier run's identified.csv (columns field and value, the value
     as Python text; model_select writes it) on top of `base`; StudyArgumentError naming --start
     for a file that cannot be read, a field StarParams does not have or a value out of its
     range."""
-    try:
-        table = pd.read_csv(path, dtype=str, keep_default_na=False)
-    except (OSError, pd.errors.ParserError) as error:
-        raise cli.StudyArgumentError(f"--start {path}: cannot read it ({error})") from None
+    table = read_csv_file(path, "--start", dtype=str, keep_default_na=False)
     missing = {"field", "value"} - set(table.columns)
     if missing or not len(table):
         raise cli.StudyArgumentError(f"--start {path}: not an identified.csv (rows of field, "

@@ -207,11 +207,9 @@ class Candidate:
 
 def read_candidates(path) -> List[Candidate]:
     """The candidate table (columns name, set, fit, description); StudyArgumentError naming
-    --candidates for a missing file, column or name, or a name given twice."""
-    try:
-        table = pd.read_csv(path, dtype=str, keep_default_na=False)
-    except (OSError, pd.errors.ParserError) as error:
-        raise cli.StudyArgumentError(f"--candidates {path}: cannot read it ({error})") from None
+    --candidates for a file that cannot be read (`identify.read_csv_file`: missing, empty, not
+    text), a missing column or name, or a name given twice."""
+    table = identify.read_csv_file(path, "--candidates", dtype=str, keep_default_na=False)
     missing = {"name", "set", "fit"} - set(table.columns)
     if missing:
         raise cli.StudyArgumentError(f"--candidates {path}: no column(s) "
@@ -667,6 +665,22 @@ def planned_work(runnable: Sequence[Candidate], settings: identify.CMASettings,
             + [(candidate, refine_settings) for candidate in largest])
 
 
+def planned_instances(work: Sequence[Tuple[Candidate, identify.CMASettings]],
+                      fold_generations: int, n_gaits: int) -> int:
+    """The instances the fits in `work` (`planned_work`) simulate at most, for the cap on a
+    study's work (`identify.check_instances`): every generation of every restart on every gait,
+    and with folds (`leave_one_gait_out`) each held-out gait's fit of fold_generations on the
+    others and its prediction; the assessment's runs of the best point aside (a few per fit)."""
+    instances = 0
+    for candidate, settings in work:
+        dimension = len(candidate.fit.split())
+        instances += settings.evaluations(dimension) * n_gaits
+        if fold_generations and n_gaits > 1:
+            instances += n_gaits * (fold_generations * settings.population(dimension, 0)
+                                    * (n_gaits - 1) + 1)
+    return instances
+
+
 def measured_strokes(trials, last_cycle: int, flag: str = "--phases strokes"
                      ) -> Dict[str, identification.Strokes]:
     """--phases strokes, before any compute: each trial's `identification.strokes`;
@@ -826,6 +840,14 @@ def main(argv=None):
     if not runnable:  # tables of skipped rows, exit status 0, before
         raise cli.StudyArgumentError(f"--candidates: none can be fitted ({rows[0]['candidate']}:"
                                      f" {rows[0]['note']})")
+    identify.check_instances(
+        planned_instances(planned_work(runnable, settings, refine_settings, args.refine_top),
+                          args.fold_generations, len(gaits)),
+        f"{len(runnable)} candidate(s) × {len(gaits)} gait(s) × --max-generations "
+        f"{settings.max_generations} × --popsize {settings.popsize} (doubled at each of "
+        f"--restarts {settings.restarts}), with --fold-generations {args.fold_generations} per "
+        f"held-out gait and the --refine-top {args.refine_top} refitted at --refine-generations "
+        f"{refine_settings.max_generations} × --refine-popsize {refine_settings.popsize}")
     trials = identification.measured_trials(gaits)
     identify.check_trials_cover(trials, validate, args.validate_cycles)
     last_cycle = max(train[1], validate[1])

@@ -12,7 +12,8 @@ Goals: --directions points at --distance mm in every direction (0°, 45°, ... f
 --far mm straight behind the robot (0: none). The primitive table is read from --primitives
 (a `python -m studies primitives` CSV made with the same period and step) or measured first
 (--cycles cycles from rest, statistics from the second cycle on, and each gait's glide after
-k = 1..--cycles firings in a row over --glide-cycles cycles). The planner follows how many
+k = 1..--cycles firings in a row over --glide-cycles cycles; both flags of the measurement
+are refused with --primitives). The planner follows how many
 cycles in a row a gait has fired (the robot builds up momentum: steps and glides grow over
 the first cycles) and plans for the glide (it stops firing when the robot would coast to rest
 within the tolerance; primitives without glide columns: no glide); after the last controller
@@ -36,21 +37,23 @@ one of settling.
 
 from __future__ import annotations
 
+import argparse
 import hashlib
 import json
 from pathlib import Path
-from typing import Optional
+from typing import List, Optional, Sequence
 
 import numpy as np
 import pandas as pd
 
-from taichi_star import StarParams
+from taichi_star import Gait, StarParams
 from taichi_star.metrics import MAX_GOAL_MM
 from taichi_star.planner import (MAX_DEFAULT_GOALS, SETTLE_CYCLES, PrimitiveModel, check_drive,
                                  closed_loop_gain, default_goals, drive)
-from taichi_star.primitives import GLIDE_CYCLES, measure_primitives
+from taichi_star.primitives import (GLIDE_CYCLES, glide_columns, measure_primitives,
+                                    streak_step_columns)
 
-from . import cli, provenance
+from . import cli, identify, provenance
 
 DESCRIPTION = ("Drive the robot to goal points by choosing a gait per cycle from the motion "
                "primitives: open loop against closed loop, in one batch.")
@@ -60,6 +63,15 @@ QUICK_MAX_CYCLES = 2
 QUICK_GLIDE_CYCLES = QUICK_SETTLE_CYCLES = 1
 PRIMITIVES_FIRST_CYCLE = 1
 """Primitives measured here: statistics from the second cycle on."""
+
+
+class MeasurementFlag(argparse.Action):
+    """Stores a flag of the primitives' measurement and notes it in args.measurement_flags:
+    --primitives replaces that measurement, and a flag given with it would be ignored."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, values)
+        namespace.measurement_flags = [*namespace.measurement_flags, option_string]
 
 
 def plot_paths(paths_csv, plan_csv, png_path) -> Path:
@@ -118,27 +130,102 @@ def build_parser():
     parser.add_argument("--max-cycles", type=int, default=25, quick=QUICK_MAX_CYCLES,
                         help="cycle budget per goal")
     parser.add_argument("--cycles", type=int, default=5, quick=QUICK_CYCLES,
-                        help="cycles of the primitive measurement when no --primitives is given")
+                        action=MeasurementFlag,
+                        help="cycles of the primitive measurement (not with --primitives)")
     parser.add_argument("--glide-cycles", type=int, default=GLIDE_CYCLES,
-                        quick=QUICK_GLIDE_CYCLES,
-                        help="cycles of coasting of the glide measurement when no --primitives "
-                             "is given (0: plan without glide)")
+                        quick=QUICK_GLIDE_CYCLES, action=MeasurementFlag,
+                        help="cycles of coasting of the glide measurement (0: plan without "
+                             "glide; not with --primitives)")
+    parser.set_defaults(measurement_flags=[])
     parser.add_argument("--settle-cycles", type=int, default=SETTLE_CYCLES,
                         quick=QUICK_SETTLE_CYCLES,
                         help="cycles the robots coast to rest after the last controller stops")
     return parser
 
 
+def read_primitives(path, columns: Sequence[str], flag: str = "--primitives") -> pd.DataFrame:
+    """The primitives CSV (`python -m studies primitives`) at `path`, with rows and at least
+    the columns gait and `columns`; StudyArgumentError naming `flag` and the file for one that
+    cannot be read (`identify.read_csv_file`), has no rows or lacks a column, or names a gait
+    that is not one, or one twice. Shared with gait_design, which reads other columns of the
+    same tables; `primitive_numbers` then checks the columns a study computes with."""
+    table = identify.read_csv_file(path, flag)
+    needed = ["gait", *columns]
+    missing = [column for column in needed if column not in table.columns]
+    if table.empty or missing:
+        raise cli.StudyArgumentError(f"{flag} {path}: not a primitives table (needs rows with "
+                                     f"{sorted(needed)}; "
+                                     f"{'no ' + ', '.join(missing) if missing else 'no rows'})")
+    listed = set()
+    for gait in table["gait"]:
+        try:
+            name = Gait.parse(gait).name
+        except ValueError as error:
+            raise cli.StudyArgumentError(f"{flag} {path}: {error}") from None
+        if name in listed:
+            raise cli.StudyArgumentError(f"{flag} {path}: gait {name} is listed twice")
+        listed.add(name)
+    return table
+
+
+def primitive_numbers(table: pd.DataFrame, columns: Sequence[str], path,
+                      flag: str = "--primitives"):
+    """Turn the `columns` of a primitives table (`read_primitives`) into numbers, in place (an
+    empty cell is NaN, as a failed gait's steps are); StudyArgumentError naming `flag`, the
+    file, the column, the gait and the value of the first cell that is no number."""
+    for column in columns:
+        values = pd.to_numeric(table[column], errors="coerce")
+        wrong = values.isna() & table[column].notna()
+        if wrong.any():
+            row = table[wrong].iloc[0]
+            raise cli.StudyArgumentError(f"{flag} {path}: {column} of gait {row['gait']} is "
+                                         f"{row[column]!r}, not a number")
+        table[column] = values
+
+
+def planned_columns(table: pd.DataFrame) -> List[str]:
+    """The columns of a primitives table `PrimitiveModel.from_table` reads numbers from: the
+    steady step and turn, then the steps of streaks of 1, 2, ... firings and the glides after
+    them, as far as the table has both columns (x, y) of each."""
+    columns = ["step_x_mm", "step_y_mm", "turn_deg"]
+    for pair_columns in (streak_step_columns, glide_columns):
+        fired = 1
+        while set(pair_columns(fired)) <= set(table.columns):
+            columns += pair_columns(fired)
+            fired += 1
+    return columns
+
+
 def read_primitive_model(path, period: float, dt: float,
                          base: Optional[StarParams] = None) -> PrimitiveModel:
-    """The planner's model from a primitive CSV made at this period and step, and where its
-    provenance sidecar records the robot's parameters, for `base`'s (every field but the gait:
-    a paper table drove the identified robot without a word, an audit); StudyArgumentError
-    naming --primitives otherwise."""
-    try:
-        table = pd.read_csv(path)
-    except (OSError, ValueError) as error:
-        raise cli.StudyArgumentError(f"--primitives {path}: {error}") from None
+    """The planner's model from a primitives CSV (`read_primitives`) made at this period and
+    step in every row, with a gait of status ok and finite steps, turns and glides in each such
+    row, and where its provenance sidecar records the robot's parameters, for `base`'s (every
+    field but the gait: a paper table drove the identified robot without a word, an audit);
+    StudyArgumentError naming --primitives otherwise, all checked before the model is built
+    (its warning of a table without glides came before the refusal of a bad table: an audit)."""
+    table = read_primitives(path, ["status", "period_s", "dt_s", "step_x_mm", "step_y_mm",
+                                   "turn_deg"])
+    planned = planned_columns(table)
+    primitive_numbers(table, ["period_s", "dt_s", *planned], path)
+    measured = table[table["status"] == "ok"]
+    if measured.empty:
+        raise cli.StudyArgumentError(f"--primitives {path}: no gait of status ok to plan with")
+    for column in planned:
+        # the planner drops such a row without a word where it reads step_x_mm or turn_deg
+        # and refuses it elsewhere: a row of status ok is a measured gait, its numbers finite
+        bad = ~np.isfinite(measured[column])
+        if bad.any():
+            row = measured[bad].iloc[0]
+            raise cli.StudyArgumentError(f"--primitives {path}: {column} of gait {row['gait']} "
+                                         f"(status ok) is {row[column]}, not a finite number")
+    made = table[["period_s", "dt_s"]].to_numpy()
+    elsewhere = ~np.isclose(made, (period, dt), rtol=1e-12, atol=0).all(axis=1)
+    if elsewhere.any():
+        row = table[elsewhere].iloc[0]
+        raise cli.StudyArgumentError(f"--primitives {path}: made at period {row['period_s']} s, "
+                                     f"dt {row['dt_s']} s (gait {row['gait']}); this run has "
+                                     f"{period} s, {dt} s")
     sidecar = provenance.sidecar_path(path)
     if base is not None and sidecar.is_file():
         try:
@@ -153,14 +240,6 @@ def read_primitive_model(path, period: float, dt: float,
                 f"--primitives {path}: measured on a robot whose {differing[0]} is "
                 f"{recorded[differing[0]]}, this run's {own[differing[0]]} ({len(differing)} "
                 f"field(s) differ; its sidecar records them): measure this robot's")
-    needed = {"gait", "step_x_mm", "step_y_mm", "turn_deg", "status", "period_s", "dt_s"}
-    if table.empty or not needed <= set(table.columns):
-        raise cli.StudyArgumentError(f"--primitives {path}: not a primitives table (needs "
-                                     f"rows with {sorted(needed)})")
-    made = (float(table["period_s"].iloc[0]), float(table["dt_s"].iloc[0]))
-    if not np.allclose(made, (period, dt), rtol=1e-12, atol=0):
-        raise cli.StudyArgumentError(f"--primitives {path}: made at period {made[0]} s, "
-                                     f"dt {made[1]} s; this run has {period} s, {dt} s")
     try:
         return PrimitiveModel.from_table(table)
     except ValueError as error:
@@ -169,6 +248,11 @@ def read_primitive_model(path, period: float, dt: float,
 
 def main(argv=None):
     args = cli.parse(build_parser(), argv)
+    if args.primitives is not None and args.measurement_flags:
+        # they set the measurement a given table replaces: ignored, yet range-checked (an audit)
+        raise cli.StudyArgumentError(f"{args.measurement_flags[0]}: not with --primitives (it "
+                                     f"sets the primitives' measurement, which the table given "
+                                     f"replaces)")
     for value, flag, lowest in ((args.max_cycles, "--max-cycles", 1),
                                 (args.cycles, "--cycles", 2),
                                 (args.glide_cycles, "--glide-cycles", 0),

@@ -74,6 +74,9 @@ def main(argv=None):
     solver = cli.solver(args)
     params = sweep_params(args.quick)
     duration = cli.QUICK_DURATION_S if args.quick else params[0].period
+    # the study has no --cycles for cli.solver to check its run against
+    cli.check_length(f"--quick ({duration:g} s)" if args.quick
+                     else f"the sweep's cycle ({duration:g} s)", duration, solver.dt, "--dt")
     sweep = {"gait": sorted({p.gait for p in params}), "alpha": sorted({p.alpha for p in params})}
     out = cli.Output(args, argv or [], model={"sweep": sweep}, solver=solver)
     run_kwargs = dict(solver=solver, chunk_size=args.chunk_size, progress=False)  # timed runs

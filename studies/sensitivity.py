@@ -10,12 +10,13 @@ Saltelli sampling (`SALib.sample.sobol`, first-order and total indices only) of 
 in the unit cube of the `--vary` box gives N (D + 2) parameter points; each point is simulated
 on every gait (N (D + 2) × gaits instances, one `taichi_star.batch.run_batch` in resumable
 chunks with a progress bar), and `SALib.analyze.sobol` turns each gait's signed speed (over
-`--cycles` cycles from rest, the Fig. 4c metric) into S1 (first-order: the share of the variance explained by the
-parameter alone) and ST (total: including all its interactions), with bootstrap 95 % confidence
-half-widths. Log axes are sampled uniformly in the logarithm, so the indices are those of a
-log-uniform parameter. The default box (`DEFAULT_BOX`) spans each fluid and material
-coefficient a factor of about 2-3 either side of the paper's value, damping from none to 2 ms and
-the measured radii by a few millimetres and the thickness and masses by 10-30 %.
+`--cycles` cycles from rest, the Fig. 4c metric) into S1 (first-order: the share of the
+variance explained by the parameter alone) and ST (total: including all its interactions), with
+bootstrap 95 % confidence half-widths. Log axes are sampled uniformly in the logarithm, so the
+indices are those of a log-uniform parameter. The default box (`DEFAULT_BOX`) spans each fluid
+and material coefficient a factor of about 2-3 either side of the paper's value, damping from
+none to 2 ms and the measured radii by a few millimetres and the thickness and masses by
+10-30 %.
 
 Writes into `--out` (default a fresh `runs/sensitivity/<timestamp>/`), each table with its
 provenance sidecar: `sensitivity_samples.csv` (every point: unit coordinates u_<name> and the
@@ -142,10 +143,11 @@ def plot_sensitivity(csv_path, png_path) -> Path:
     return cli.save_figure(fig, png_path)
 
 
-def solver(args) -> SolverConfig:
+def solver(args, box: Sequence[identify.ParameterRange] = ()) -> SolverConfig:
     """The study's solver: the --preset's with the chord Jacobian (the same converged steps to
-    newton_tol as Newton, faster) at --dt (default DEFAULT_DT, QUICK_DT under --quick)."""
-    return cli.solver(args).replace(jacobian="chord")
+    newton_tol as Newton, faster) at --dt (default DEFAULT_DT, QUICK_DT under --quick); the
+    run's length checked at the periods of the `box` (`cli.solver`)."""
+    return cli.solver(args, periods=cli.range_periods(box)).replace(jacobian="chord")
 
 
 def build_parser():
@@ -186,7 +188,7 @@ def main(argv=None):
             f"--base-samples {samples}: {instances:,} instances ({samples} × ({len(box)} + 2) "
             f"points × {len(gaits)} gaits), more than the {cli.MAX_INSTANCES:,} a study runs")
     base = identify.model_with_box(args, box, "--vary")
-    solver_config = solver(args)
+    solver_config = solver(args, box)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver_config,
                      extra={"box": [spec.spec for spec in box], "gaits": gaits,

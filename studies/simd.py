@@ -104,6 +104,10 @@ VECTOR_FORMS = ("lane_vector", "lane_vector_masked")
 PRECISIONS = ("f64", "f32")
 MAX_MATMUL_SIZE = 8192
 """The largest --matmul-size: its three n × n f64 matrices take 1.5 GiB."""
+MAX_LANES = 16
+"""The most instances per loop iteration (--lanes): the most lanes an engine takes
+(`Runtime.configure_lanes`, bench's --lanes); the kernels unroll every lane (`ti.static`), so
+a wider group only lengthens their compilation."""
 DISTINCT_MATRICES = 64
 """Random matrices generated per configuration, repeated over the batch (the timing does not
 depend on the values; generating 4,096 matrices of the accurate pattern would take longer than
@@ -1024,9 +1028,11 @@ def build_parser():
     parser.add_argument("--precisions", default="f64,f32",
                         help="comma list of f64 and/or f32")
     parser.add_argument("--batch-sizes", default="64,512,4096", quick="8,16",
-                        help="comma list of batch sizes (multiples of every lane count)")
+                        help=f"comma list of batch sizes, each in [1, {cli.MAX_BATCH_SIZE}] "
+                             f"(multiples of every lane count)")
     parser.add_argument("--lanes", default="4,8", quick="4",
-                        help="comma list of instances per loop iteration of the grouped forms")
+                        help=f"comma list of instances per loop iteration of the grouped forms, "
+                             f"each in [1, {MAX_LANES}]")
     parser.add_argument("--repeats", type=int, default=7, quick=2,
                         help=f"interleaved timing rounds (each form's best is kept; at most "
                              f"{cli.MAX_REPEATS})")
@@ -1042,8 +1048,8 @@ def main(argv=None):
     args = cli.parse(build_parser(), argv)
     presets = cli.parse_choices(args.presets, "--presets", PRESETS)
     precisions = cli.parse_choices(args.precisions, "--precisions", PRECISIONS)
-    batch_sizes = cli.parse_counts(args.batch_sizes, "--batch-sizes")
-    lanes_list = cli.parse_counts(args.lanes, "--lanes")
+    batch_sizes = cli.parse_counts(args.batch_sizes, "--batch-sizes", cli.MAX_BATCH_SIZE)
+    lanes_list = cli.parse_counts(args.lanes, "--lanes", MAX_LANES)
     kernels = cli.parse_choices(args.kernels, "--kernels", KERNELS)
     for batch in batch_sizes:
         if any(batch % lanes for lanes in lanes_list):

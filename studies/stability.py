@@ -58,7 +58,7 @@ from taichi_star import metrics
 from taichi_star.metrics import shape_checks
 from taichi_star.timegrid import whole_steps
 
-from . import cli
+from . import cli, identify
 
 DESCRIPTION = ("Numerical stability stress grid: dt x stiffness x alpha x C_a x period x gait x "
                "precision; status, retries, strain and shape sanity per instance; stable-region "
@@ -155,6 +155,11 @@ def plan(args):
         if precision not in TOLERANCE:
             raise cli.StudyArgumentError(f"--precisions: {precision!r} is not one of "
                                             f"{list(TOLERANCE)}")
+    # counted before any instance is built (a grid of three million was built for a minute)
+    axes = {"--dts-ms": dts, "--stiffness": stiffness, "--alphas": alphas, "--added-mass": added,
+            "--periods": periods, "--gaits": gaits, "--precisions": precisions}
+    identify.check_instances(math.prod(len(values) for values in axes.values()),
+                             " × ".join(f"{flag} {len(values)}" for flag, values in axes.items()))
     base = cli.base_params(args)
     batches = []
     for precision in precisions:          # one precision after the other: one Taichi re-init

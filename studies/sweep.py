@@ -10,9 +10,9 @@ Values: a comma list (`0,0.5,1`) or a range `start:stop:n` (n points, both ends 
 `start:stop:n:log` (geometric). `--param NAME=VALUES` sweeps any other StarParams field.
 Writes `sweep.csv` (one row per instance: every parameter, whole-run and steady speeds, heading,
 Newton statistics, status), the same table as `sweep.parquet` (typed, full precision, the
-provenance in its metadata; `pandas.read_parquet`) and `sweep_<parameter>.png` for every swept parameter: speed against
-the parameter, one line per gait, the other swept parameters held at the value closest to the
-default.
+provenance in its metadata; `pandas.read_parquet`) and `sweep_<parameter>.png` for every swept
+parameter: speed against the parameter, one line per gait, the other swept parameters held at
+the value closest to the default.
 
 Resumable: every finished chunk is stored, verified, in the run store (`--run-dir`, default
 `<out>/chunks/`). After a crash or a kill, the same command with `--out` of the killed run and
@@ -179,8 +179,9 @@ def main(argv=None):
         raise cli.StudyArgumentError(
             f"the product has {size} instances, more than --max-instances {args.max_instances}")
     base = cli.base_params(args)
+    # checked before the grid is built: a swept period sets the longest and the shortest run
+    solver = cli.solver(args, periods=axes.get("period", ()))
     grid = cli.param_product(axes, base=base)
-    solver = cli.solver(args)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"axes": axes})
     run_dir = cli.run_store(args, out)

@@ -537,11 +537,12 @@ def main(argv=None):
     grid = QUICK_GRID if args.quick else FULL_GRID
     duration = (QUICK_DURATION_S if args.quick
                 else args.cycles * StarParams.preset("paper").period)
-    # the finest fixed step of the grid takes the most steps
-    finest = 1e-3 * min(grid.euler_h_ms + grid.bdf2_h_ms + (grid.space_h_ms,))
-    cli.check_length(f"--cycles {args.cycles:g} ({duration:.3g} s)", duration, finest,
-                     "the grid's finest step")
     configs = configurations(grid)
+    # the finest fixed step of the grid takes the most steps, the coarsest the fewest
+    fixed_steps = [config.solver.dt for config in configs if not config.solver.adaptive]
+    length = f"--cycles {args.cycles:g} ({duration:.3g} s)"
+    cli.check_length(length, duration, min(fixed_steps), "the grid's finest step")
+    cli.check_one_step(length, duration, max(fixed_steps), "the grid's coarsest step")
     out = cli.Output(args, argv or [], model={"models": MODEL_PRESETS, "gaits": gaits},
                      solver={"grid": grid, "configurations": [c.label() for c in configs]})
     machine = provenance.machine_columns(args.arch)

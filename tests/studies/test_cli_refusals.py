@@ -142,6 +142,50 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
     ("jacobians", ["--modes", "bogus"],
      "--modes: 'bogus' is not MODE:TOL (MODE one of newton, chord, lagged, TOL Newton's "
      "tolerance in m, e.g. lagged:1e-10)"),
+    # work that could not finish, counted before any instance is built: a model selection had
+    # no cap (a population of a million started CMA-ES), jacobians counted no rounds (3e11
+    # robot-steps started silently) and stability built a grid of three million for a minute
+    ("model_select", ["--only", "ramp", "--gaits", "A1", "--popsize", "1000000",
+                      "--max-generations", "1000000", "--fold-generations", "0",
+                      "--refine-top", "0"],
+     "1 candidate(s) × 1 gait(s) × --max-generations 1000000 × --popsize 1000000 (doubled at "
+     "each of --restarts 0), with --fold-generations 0 per held-out gait and the --refine-top 0 "
+     "refitted at --refine-generations 3 × --refine-popsize 4: 1,000,000,000,000 instances, "
+     "more than the 1,000,000 a study runs"),
+    # one past the cap (101 × 9901); 1000 × 1000 is accepted below
+    ("model_select", ["--only", "ramp", "--gaits", "A1", "--popsize", "101",
+                      "--max-generations", "9901", "--fold-generations", "0", "--refine-top", "0"],
+     "--popsize 101 (doubled at each of --restarts 0), with --fold-generations 0 per held-out "
+     "gait and the --refine-top 0 refitted at --refine-generations 3 × --refine-popsize 4: "
+     "1,000,001 instances"),
+    # the folds and the refine stage count: the screens alone are 2 × 2 × 249 × 1000 = 996,000
+    # instances; the folds add 2 × 2 × (1 × 1000 × 1 + 1) and the refine stage (--quick: the
+    # top 1 at 3 generations of 4) 3 × 4 × 2 + 2 × (1 × 4 × 1 + 1)
+    ("model_select", ["--popsize", "1000", "--max-generations", "249"],
+     "2 candidate(s) × 2 gait(s) × --max-generations 249 × --popsize 1000 (doubled at each of "
+     "--restarts 0), with --fold-generations 1 per held-out gait and the --refine-top 1 "
+     "refitted at --refine-generations 3 × --refine-popsize 4: 1,000,038 instances"),
+    # --quick's modes: the default (newton:1e-10), lagged:1e-10 and the reference
+    ("jacobians", ["--batch", "5000", "--duration", "100", "--rounds", "100"],
+     "--batch 5000 × --rounds 100 × 3 configurations (--modes, with the default and the "
+     "reference): 1,500,000 instances, more than the 1,000,000 a study runs"),
+    # two configurations (the default and the reference): 500,000 is accepted below
+    ("jacobians", ["--batch", "500001", "--rounds", "1", "--modes", "newton:1e-10"],
+     "--batch 500001 × --rounds 1 × 2 configurations (--modes, with the default and the "
+     "reference): 1,000,002 instances"),
+    ("stability", ["--stiffness", "0.5:2:1000", "--alphas", "0:1:1000", "--added-mass", "0,1,5",
+                   "--dts-ms", "1", "--periods", "3.15", "--precisions", "f64", "--gaits", "A1"],
+     "--dts-ms 1 × --stiffness 1000 × --alphas 1000 × --added-mass 3 × --periods 1 × --gaits 1 "
+     "× --precisions 1: 3,000,000 instances, more than the 1,000,000 a study runs"),
+    # one past the cap (101 × 9901); 1000 × 1000 is accepted below
+    ("stability", ["--stiffness", "1:2:101", "--alphas", "0:1:9901", "--added-mass", "1",
+                   "--dts-ms", "1", "--periods", "3.15", "--precisions", "f64", "--gaits", "A1"],
+     "--dts-ms 1 × --stiffness 101 × --alphas 9901 × --added-mass 1 × --periods 1 × --gaits 1 "
+     "× --precisions 1: 1,000,001 instances"),
+    # bench's bounds: the most instances of one engine, the most lanes of one
+    ("simd", ["--batch-sizes", "16,1048577"],
+     "--batch-sizes: every value must be in [1, 1048576], got 1048577"),
+    ("simd", ["--lanes", "4,17"], "--lanes: every value must be in [1, 16], got 17"),
 ])
 def test_study_flags_are_refused_before_the_output_folder(no_compute, tmp_path, capsys, study,
                                                           argv, message):
@@ -172,12 +216,22 @@ def past_the_flag_checks(*args, **kwargs):
      "studies.plan.default_goals"),
     ("gait_design", ["--direction=-360"], "studies.cli.check_cycles"),
     ("gait_design", ["--direction", "360"], "studies.cli.check_cycles"),
+    ("model_select", ["--only", "ramp", "--gaits", "A1", "--popsize", "1000",
+                      "--max-generations", "1000", "--fold-generations", "0", "--refine-top", "0"],
+     "taichi_star.identification.measured_trials"),
+    ("jacobians", ["--batch", "500000", "--rounds", "1", "--modes", "newton:1e-10"],
+     "studies.cli.paper_gaits_batch"),
+    ("stability", ["--stiffness", "0.5:2:1000", "--alphas", "0:1:1000", "--added-mass", "1",
+                   "--dts-ms", "1", "--periods", "3.15", "--precisions", "f64", "--gaits", "A1"],
+     "studies.cli.base_params"),
+    ("simd", ["--batch-sizes", "1048576", "--lanes", "16"], "studies.cli.Output"),
 ])
 def test_study_flags_at_the_end_of_their_range_are_accepted(no_compute, monkeypatch, tmp_path,
                                                             study, argv, next_step):
     """The closed ends of the ranges the refusals above name: a goal of exactly a metre
-    (--distance, --far: (0, 1000] and [0, 1000] mm) and 10,000 frames get past the flag
-    checks to the study's next step (stubbed, so no plan or animation runs)."""
+    (--distance, --far: (0, 1000] and [0, 1000] mm), 10,000 frames, exactly the 1,000,000
+    instances a study runs and bench's largest batch and lanes get past the flag checks to the
+    study's next step (stubbed, so nothing is built or run)."""
     monkeypatch.setattr(next_step, past_the_flag_checks)
     out = tmp_path / "out"
     with pytest.raises(PastTheFlagChecks):
@@ -196,6 +250,87 @@ def test_an_engine_that_would_not_fit_is_refused_before_the_output_folder(no_com
     error = capsys.readouterr().err
     assert ("--num-envs: params: an engine and model of 1,048,576 instances would need about "
             in error) and len(error.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+FULL = ["--no-progress"]
+"""A full run's flags (not --quick, whose 0.2 s replaces --cycles and the run's own length)."""
+STEP_LIMIT_END = f"{STEP_LIMIT} (the int32 step counter)"
+"""How a refusal of a run past the step limit ends."""
+# --cycles of a 1000-s period at 1 ms: 2147.483647 are the step limit's 2147483647 steps
+# (rounded), 2147.483648 one step more
+PAST_THE_LONGEST = ["--cycles", "2147.483648"]
+AT_THE_LONGEST = ["--cycles", "2147.483647"]
+
+
+@pytest.mark.parametrize("study, argv, message", [
+    # a period that varies per instance was checked at the model's own (3.15 s): the library
+    # refused the run with a traceback, calibrate's after CMA-ES had started
+    ("sweep", ["--gaits", "A1", "--period", "900", "--cycles", "1e4"],
+     "--cycles 10000 of the longest period, 900 s (9e+06 s) at dt = 0.001 s is 9e+09 time "
+     "steps per instance; " + STEP_LIMIT_END),
+    ("sweep", ["--gaits", "A1", "--period", "2,1000", *PAST_THE_LONGEST],
+     "--cycles 2147.48 of the longest period, 1000 s (2.15e+06 s) at dt = 0.001 s is 2.15e+09 "
+     "time steps per instance; " + STEP_LIMIT_END),
+    # half a step (0.5 ms of 1 ms) rounds to none, as the library rounds (half to even)
+    ("sweep", ["--gaits", "A1", "--period", "0.5,3.15", "--cycles", "0.001"],
+     "--cycles 0.001 of the shortest period, 0.5 s (0.0005 s) is less than one step "
+     "(dt = 0.001 s)"),
+    ("sensitivity", ["--gaits", "A1", "--base-samples", "2", "--vary", "period=900:1000",
+                     "--dt", "0.001", *PAST_THE_LONGEST],
+     "--cycles 2147.48 of the longest period, 1000 s (2.15e+06 s) at dt = 0.001 s is 2.15e+09 "
+     "time steps per instance; " + STEP_LIMIT_END),
+    ("calibrate", ["--gaits", "A1", "--fit", "period=900:1000", "--popsize", "2",
+                   "--max-generations", "1", *PAST_THE_LONGEST],
+     "--cycles 2147.48 of the longest period, 1000 s (2.15e+06 s) at dt = 0.001 s is 2.15e+09 "
+     "time steps per instance; " + STEP_LIMIT_END),
+    # only the upper bound was checked: a progress bar, then a traceback
+    ("work_precision", ["--cycles", "1e-9"],
+     "--cycles 1e-09 (3.15e-09 s) is less than one step (the grid's coarsest step 0.004 s)"),
+    # 0.00063492 of 3.15 s are 0.49999995 steps of 4 ms: none once rounded
+    ("work_precision", ["--cycles", "0.00063492"],
+     "--cycles 0.00063492 (0.002 s) is less than one step (the grid's coarsest step 0.004 s)"),
+    # scaling has no --cycles, and cli.solver checked no run: the library's traceback
+    ("scaling", ["--no-dask", "--dt", "1e-9"],
+     "the sweep's cycle (3.15 s) at --dt 1e-09 s is 3.15e+09 time steps per instance; "
+     + STEP_LIMIT_END),
+    # 3.15 s / 1.46683e-9 s are 2147488121 steps, past the limit
+    ("scaling", ["--no-dask", "--dt", "1.46683e-9"],
+     "the sweep's cycle (3.15 s) at --dt 1.46683e-09 s is 2.15e+09 time steps per instance; "
+     + STEP_LIMIT_END),
+])
+def test_run_lengths_are_refused_before_the_output_folder(no_compute, tmp_path, capsys, study,
+                                                          argv, message):
+    out = tmp_path / "out"
+    assert studies_main([study, *argv, "--out", str(out), *FULL]) == 2
+    error = capsys.readouterr().err
+    assert error.strip().endswith(message) and len(error.strip().splitlines()) == 1, error
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("study, argv, next_step", [
+    ("sweep", ["--gaits", "A1", "--period", "2,1000", *AT_THE_LONGEST],
+     "studies.cli.param_product"),
+    # 0.50005 steps: one once rounded
+    ("sweep", ["--gaits", "A1", "--period", "0.5,3.15", "--cycles", "0.0010001"],
+     "studies.cli.param_product"),
+    ("sensitivity", ["--gaits", "A1", "--base-samples", "2", "--vary", "period=900:1000",
+                     "--dt", "0.001", *AT_THE_LONGEST], "studies.cli.Output"),
+    ("calibrate", ["--gaits", "A1", "--fit", "period=900:1000", "--popsize", "2",
+                   "--max-generations", "1", *AT_THE_LONGEST], "studies.cli.Output"),
+    # 0.50000029 steps of 4 ms: one once rounded
+    ("work_precision", ["--cycles", "0.000634921"], "studies.cli.Output"),
+    # 2147473480 steps
+    ("scaling", ["--no-dask", "--dt", "1.46684e-9"], "studies.cli.Output"),
+])
+def test_run_lengths_at_the_end_of_their_range_are_accepted(no_compute, monkeypatch, tmp_path,
+                                                            study, argv, next_step):
+    """The last run lengths the refusals above accept get past the checks to the study's next
+    step (stubbed: nothing is built or run)."""
+    monkeypatch.setattr(next_step, past_the_flag_checks)
+    out = tmp_path / "out"
+    with pytest.raises(PastTheFlagChecks):
+        studies_main([study, *argv, "--out", str(out), *FULL])
     assert not out.exists()
 
 

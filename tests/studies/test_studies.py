@@ -249,6 +249,30 @@ def test_a_reader_that_leaves_ends_the_study_quietly(capfd, monkeypatch):
     assert "after" not in out and "Traceback" not in err
 
 
+def test_a_fault_in_a_study_keeps_its_traceback_and_leaves_no_empty_folder(tmp_path,
+                                                                           monkeypatch):
+    """A study that fails on its own fault (not on bad input) shows its traceback, and the
+    output folder the run made is removed while still empty (an audit, 2026-12: it stayed);
+    one the run had written into, or one that was there before, is kept."""
+    from studies import fig4c
+
+    made, written, there = tmp_path / "made", tmp_path / "written", tmp_path / "there"
+    there.mkdir()
+
+    def failing(argv):
+        for folder in (made, written, there):
+            out = cli.Output(SimpleNamespace(study="fig4c", out=str(folder), quick=False), argv)
+            if folder is written:
+                out.path("table.csv").write_text("a\n")
+        raise ZeroDivisionError("a fault of the study")
+
+    monkeypatch.setattr(fig4c, "main", failing)
+    with pytest.raises(ZeroDivisionError, match="a fault of the study"):
+        studies_main(["fig4c"])
+    assert not made.exists()
+    assert (written / "table.csv").exists() and there.is_dir()
+
+
 def test_reproduce_lists_one_command_per_committed_result(capsys):
     assert studies_main(["reproduce", "--dry-run", "--into", "elsewhere"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
