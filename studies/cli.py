@@ -282,6 +282,49 @@ def check_length(length: str, duration_s: float, step_s: float, step_name: str):
     check_steps(f"{length} at {step_name} {step_s:g} s", duration_s / step_s)
 
 
+def read_csv_file(path, flag: str, **options) -> pd.DataFrame:
+    """The CSV file `path` that `flag` names, read by `pandas.read_csv(path, **options)`;
+    StudyArgumentError naming the flag and the file, in one line, for a file that cannot be
+    read (missing, a folder, no permission), is empty, is not text or is not CSV."""
+    try:
+        return pd.read_csv(path, **options)
+    except pd.errors.EmptyDataError:
+        raise StudyArgumentError(f"{flag} {path}: empty (not even a header row)") from None
+    except UnicodeDecodeError as error:
+        raise StudyArgumentError(f"{flag} {path}: not a UTF-8 text file (byte "
+                                     f"{error.object[error.start]:#04x} at {error.start}: "
+                                     f"{error.reason})") from None
+    except (OSError, ValueError) as error:  # ValueError: pandas' ParserError among them
+        # the tokenizer's message ends in a newline: the refusal stays one line
+        reason = " ".join(str(error).split())
+        raise StudyArgumentError(f"{flag} {path}: cannot read it ({reason})") from None
+
+
+def read_table(path, flag: str, columns: Sequence[str], what: str) -> pd.DataFrame:
+    """`read_csv_file`, with rows and at least `columns`; StudyArgumentError naming `flag`, the
+    file and `what` the table should be ("a primitives table") otherwise."""
+    table = read_csv_file(path, flag)
+    missing = [column for column in columns if column not in table.columns]
+    if table.empty or missing:
+        raise StudyArgumentError(f"{flag} {path}: not {what} (needs rows with {sorted(columns)}; "
+                                 f"{'no ' + ', '.join(missing) if missing else 'no rows'})")
+    return table
+
+
+def numeric_columns(table: pd.DataFrame, columns: Sequence[str], path, flag: str):
+    """Turn `columns` of a table read from the file `path` into numbers, in place (an empty
+    cell is NaN); StudyArgumentError naming `flag`, the file, the column, the row's gait and
+    the value of the first cell that is no number."""
+    for column in columns:
+        values = pd.to_numeric(table[column], errors="coerce")
+        wrong = values.isna() & table[column].notna()
+        if wrong.any():
+            row = table[wrong].iloc[0]
+            raise StudyArgumentError(f"{flag} {path}: {column} of gait {row['gait']} is "
+                                     f"{row[column]!r}, not a number")
+        table[column] = values
+
+
 def check_run(length: str, duration_s: float, config: SolverConfig,
               record_interval_s: float = 0.0):
     """`check_steps` of a run of duration_s (s, what `length` says, e.g. "--cycles 3 +
@@ -492,22 +535,40 @@ def paper_gaits_batch(size: int) -> List[StarParams]:
     return [StarParams(gait=PAPER_GAITS[i % len(PAPER_GAITS)]) for i in range(size)]
 
 
-def param_product(axes: Mapping[str, Sequence],
-                  base: StarParams = StarParams()) -> List[StarParams]:
-    """Every combination of the given StarParams field values (the last axis varies fastest),
-    on top of `base`; StudyArgumentError naming the parameter for an unknown field, an invalid
-    value or an empty axis."""
-    names = list(axes)
-    for name in names:
-        field_kind(name)
+def check_axis_values(axes: Mapping[str, Sequence], base: StarParams = StarParams(),
+                      flags: Mapping[str, str] = {}):
+    """StudyArgumentError for an axis of StarParams field values (`param_product`'s) that
+    names an unknown field, is empty or holds a value the field refuses on top of `base`,
+    naming the flag that gave it (`flags`: {field: flag}; the field's name where none is
+    given); each value alone, before any combination is built."""
+    for name in axes:
+        field_kind(name, flags.get(name))
         if len(axes[name]) == 0:
             raise StudyArgumentError(f"empty product: parameter {name!r} has no values")
+    for name in axes:
+        for value in axes[name]:
+            try:
+                base.replace(**{name: value})
+            except (ValueError, TypeError) as error:
+                raise StudyArgumentError(f"{flags.get(name, name)}: {error}") from None
+
+
+def param_product(axes: Mapping[str, Sequence], base: StarParams = StarParams(),
+                  flags: Mapping[str, str] = {}) -> List[StarParams]:
+    """Every combination of the given StarParams field values (the last axis varies fastest),
+    on top of `base`; StudyArgumentError for an unknown field, an empty axis or an invalid
+    value, naming the flag that gave the axis (`flags`: {field: flag}; the field's name where
+    none is given): each value on its own first, then the combinations, where two fields'
+    values may not fit together (a tip radius inside a swept joint radius)."""
+    check_axis_values(axes, base, flags)
+    names = list(axes)
     combos = []
     for values in itertools.product(*(axes[name] for name in names)):
         try:
             combos.append(base.replace(**dict(zip(names, values))))
         except (ValueError, TypeError) as error:
-            raise StudyArgumentError(f"invalid parameter value: {error}") from None
+            given = ", ".join(flags.get(name, name) for name in names)
+            raise StudyArgumentError(f"{given} together: {error}") from None
     return combos
 
 

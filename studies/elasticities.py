@@ -43,7 +43,7 @@ from taichi_star.output import column_unit
 from taichi_star.sensitivity_check import difference_step, extrapolated_difference
 from taichi_star.sensitivities import REPLICAS_PER_DIRECTION, parse_directions
 
-from . import cli, identify, provenance
+from . import cli, provenance
 
 DESCRIPTION = ("Elasticities d ln|v| / d ln p of each paper gait's signed speed to every "
                "parameter (exact sensitivities), beside the Sobol indices.")
@@ -91,9 +91,9 @@ def direction(label: str):
 def sobol_table(path: Path) -> tuple:
     """(the Sobol table's gait, parameter and SOBOL_COLUMNS, the preset it was computed with
     from its provenance sidecar, "" without one or without a preset in it); StudyArgumentError
-    naming --sobol for a file that cannot be read (`identify.read_csv_file`), a table without
+    naming --sobol for a file that cannot be read (`cli.read_csv_file`), a table without
     those columns, or a sidecar that cannot be read or is not a JSON object."""
-    table = identify.read_csv_file(path, "--sobol")
+    table = cli.read_csv_file(path, "--sobol")
     columns = ["gait", "parameter", *SOBOL_COLUMNS]
     missing = [column for column in columns if column not in table.columns]
     if missing:

@@ -62,7 +62,6 @@ from taichi_star.timegrid import nearest_interval
 
 from . import cli
 from .optimise import minimise_lbfgsb_batched
-from .plan import primitive_numbers, read_primitives
 
 DESCRIPTION = ("Firing offsets per actuator optimised by L-BFGS-B on the exact sensitivities "
                "for speed in a direction or turning, against the best synchronous gait.")
@@ -387,8 +386,9 @@ def main(argv=None):
     # its period, step and robot are not checked against this run's, as plan checks them: the
     # table only ranks the gaits to start from, and every gait is simulated again here (the
     # default, results/primitives.csv at 1 ms, serves --quick's 5 ms as well)
-    primitives = read_primitives(args.primitives, PRIMITIVE_NUMBERS)
-    primitive_numbers(primitives, PRIMITIVE_NUMBERS, args.primitives)
+    primitives = cli.read_table(args.primitives, "--primitives", ["gait", *PRIMITIVE_NUMBERS],
+                                "a primitives table")
+    cli.numeric_columns(primitives, PRIMITIVE_NUMBERS, args.primitives, "--primitives")
     usable = primitives[np.isfinite(primitives[PRIMITIVE_NUMBERS]).all(axis=1)]
     if usable.empty:
         # the default direction is the fastest such gait's; NaN alone ranks no gait

@@ -321,30 +321,12 @@ class CMAResult:
     stop_reasons: List[str]
 
 
-def read_csv_file(path, flag: str, **options) -> pd.DataFrame:
-    """The CSV file `path` that `flag` names, read by `pandas.read_csv(path, **options)`;
-    StudyArgumentError naming the flag and the file, in one line, for a file that cannot be
-    read (missing, a folder, no permission), is empty, is not text or is not CSV."""
-    try:
-        return pd.read_csv(path, **options)
-    except pd.errors.EmptyDataError:
-        raise cli.StudyArgumentError(f"{flag} {path}: empty (not even a header row)") from None
-    except UnicodeDecodeError as error:
-        raise cli.StudyArgumentError(f"{flag} {path}: not a UTF-8 text file (byte "
-                                     f"{error.object[error.start]:#04x} at {error.start}: "
-                                     f"{error.reason})") from None
-    except (OSError, ValueError) as error:  # ValueError: pandas' ParserError among them
-        # the tokenizer's message ends in a newline: the refusal stays one line
-        reason = " ".join(str(error).split())
-        raise cli.StudyArgumentError(f"{flag} {path}: cannot read it ({reason})") from None
-
-
 def read_start(path, base: StarParams) -> StarParams:
     """--start: the model of an earlier run's identified.csv (columns field and value, the value
     as Python text; model_select writes it) on top of `base`; StudyArgumentError naming --start
     for a file that cannot be read, a field StarParams does not have or a value out of its
     range."""
-    table = read_csv_file(path, "--start", dtype=str, keep_default_na=False)
+    table = cli.read_csv_file(path, "--start", dtype=str, keep_default_na=False)
     missing = {"field", "value"} - set(table.columns)
     if missing or not len(table):
         raise cli.StudyArgumentError(f"--start {path}: not an identified.csv (rows of field, "

@@ -207,9 +207,9 @@ class Candidate:
 
 def read_candidates(path) -> List[Candidate]:
     """The candidate table (columns name, set, fit, description); StudyArgumentError naming
-    --candidates for a file that cannot be read (`identify.read_csv_file`: missing, empty, not
+    --candidates for a file that cannot be read (`cli.read_csv_file`: missing, empty, not
     text), a missing column or name, or a name given twice."""
-    table = identify.read_csv_file(path, "--candidates", dtype=str, keep_default_na=False)
+    table = cli.read_csv_file(path, "--candidates", dtype=str, keep_default_na=False)
     missing = {"name", "set", "fit"} - set(table.columns)
     if missing:
         raise cli.StudyArgumentError(f"--candidates {path}: no column(s) "
@@ -861,6 +861,15 @@ def main(argv=None):
         # their lines read anew (~flat), the tracks being cut into the longer periods
         strokes = measured_strokes(trials, last_cycle, "--periods strokes")
     solver = cli.solver(args)
+    # every fit runs each model from rest over the windows' last cycle (and the strokes'
+    # tail): at the longest period a model can have (its own, a fitted one's upper bound, or
+    # the strokes') it must stay within the step counter (--dt 1e-9 was a traceback)
+    cycles = last_cycle + (STROKE_TAIL_CYCLES if strokes is not None else 0.0)
+    longest = max(periods.values()) if periods is not None else max(
+        period for candidate in runnable
+        for period in (candidate.model(base).period, *cli.range_periods(candidate.box(base))))
+    cli.check_run(f"--train-cycles, --validate-cycles ({cycles:g} cycles of the longest period, "
+                  f"{longest:g} s: {cycles * longest:.3g} s)", cycles * longest, solver)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"gaits": gaits, "train_cycles": list(train),
                                            "validate_cycles": list(validate),

@@ -41,19 +41,18 @@ import argparse
 import hashlib
 import json
 from pathlib import Path
-from typing import List, Optional, Sequence
+from typing import Optional
 
 import numpy as np
 import pandas as pd
 
-from taichi_star import Gait, StarParams
+from taichi_star import StarParams
 from taichi_star.metrics import MAX_GOAL_MM
 from taichi_star.planner import (MAX_DEFAULT_GOALS, SETTLE_CYCLES, PrimitiveModel, check_drive,
                                  closed_loop_gain, default_goals, drive)
-from taichi_star.primitives import (GLIDE_CYCLES, glide_columns, measure_primitives,
-                                    streak_step_columns)
+from taichi_star.primitives import GLIDE_CYCLES, measure_primitives
 
-from . import cli, identify, provenance
+from . import cli, provenance
 
 DESCRIPTION = ("Drive the robot to goal points by choosing a gait per cycle from the motion "
                "primitives: open loop against closed loop, in one batch.")
@@ -143,83 +142,20 @@ def build_parser():
     return parser
 
 
-def read_primitives(path, columns: Sequence[str], flag: str = "--primitives") -> pd.DataFrame:
-    """The primitives CSV (`python -m studies primitives`) at `path`, with rows and at least
-    the columns gait and `columns`; StudyArgumentError naming `flag` and the file for one that
-    cannot be read (`identify.read_csv_file`), has no rows or lacks a column, or names a gait
-    that is not one, or one twice. Shared with gait_design, which reads other columns of the
-    same tables; `primitive_numbers` then checks the columns a study computes with."""
-    table = identify.read_csv_file(path, flag)
-    needed = ["gait", *columns]
-    missing = [column for column in needed if column not in table.columns]
-    if table.empty or missing:
-        raise cli.StudyArgumentError(f"{flag} {path}: not a primitives table (needs rows with "
-                                     f"{sorted(needed)}; "
-                                     f"{'no ' + ', '.join(missing) if missing else 'no rows'})")
-    listed = set()
-    for gait in table["gait"]:
-        try:
-            name = Gait.parse(gait).name
-        except ValueError as error:
-            raise cli.StudyArgumentError(f"{flag} {path}: {error}") from None
-        if name in listed:
-            raise cli.StudyArgumentError(f"{flag} {path}: gait {name} is listed twice")
-        listed.add(name)
-    return table
-
-
-def primitive_numbers(table: pd.DataFrame, columns: Sequence[str], path,
-                      flag: str = "--primitives"):
-    """Turn the `columns` of a primitives table (`read_primitives`) into numbers, in place (an
-    empty cell is NaN, as a failed gait's steps are); StudyArgumentError naming `flag`, the
-    file, the column, the gait and the value of the first cell that is no number."""
-    for column in columns:
-        values = pd.to_numeric(table[column], errors="coerce")
-        wrong = values.isna() & table[column].notna()
-        if wrong.any():
-            row = table[wrong].iloc[0]
-            raise cli.StudyArgumentError(f"{flag} {path}: {column} of gait {row['gait']} is "
-                                         f"{row[column]!r}, not a number")
-        table[column] = values
-
-
-def planned_columns(table: pd.DataFrame) -> List[str]:
-    """The columns of a primitives table `PrimitiveModel.from_table` reads numbers from: the
-    steady step and turn, then the steps of streaks of 1, 2, ... firings and the glides after
-    them, as far as the table has both columns (x, y) of each."""
-    columns = ["step_x_mm", "step_y_mm", "turn_deg"]
-    for pair_columns in (streak_step_columns, glide_columns):
-        fired = 1
-        while set(pair_columns(fired)) <= set(table.columns):
-            columns += pair_columns(fired)
-            fired += 1
-    return columns
-
-
 def read_primitive_model(path, period: float, dt: float,
                          base: Optional[StarParams] = None) -> PrimitiveModel:
-    """The planner's model from a primitives CSV (`read_primitives`) made at this period and
-    step in every row, with a gait of status ok and finite steps, turns and glides in each such
-    row, and where its provenance sidecar records the robot's parameters, for `base`'s (every
-    field but the gait: a paper table drove the identified robot without a word, an audit);
-    StudyArgumentError naming --primitives otherwise, all checked before the model is built
-    (its warning of a table without glides came before the refusal of a bad table: an audit)."""
-    table = read_primitives(path, ["status", "period_s", "dt_s", "step_x_mm", "step_y_mm",
-                                   "turn_deg"])
-    planned = planned_columns(table)
-    primitive_numbers(table, ["period_s", "dt_s", *planned], path)
-    measured = table[table["status"] == "ok"]
-    if measured.empty:
-        raise cli.StudyArgumentError(f"--primitives {path}: no gait of status ok to plan with")
-    for column in planned:
-        # the planner drops such a row without a word where it reads step_x_mm or turn_deg
-        # and refuses it elsewhere: a row of status ok is a measured gait, its numbers finite
-        bad = ~np.isfinite(measured[column])
-        if bad.any():
-            row = measured[bad].iloc[0]
-            raise cli.StudyArgumentError(f"--primitives {path}: {column} of gait {row['gait']} "
-                                         f"(status ok) is {row[column]}, not a finite number")
+    """The planner's model from a primitives CSV made at this period and step in every row,
+    and where its provenance sidecar records the robot's parameters, for `base`'s (every field
+    but the gait: a paper table drove the identified robot without a word, an audit);
+    StudyArgumentError naming --primitives otherwise, or for a table the planner refuses
+    (`PrimitiveModel.from_table`: a cell that is no number, a measured gait's that is not
+    finite, gaits that are none or listed twice), all before the model is built."""
+    table = cli.read_table(path, "--primitives", ["gait", "status", "period_s", "dt_s",
+                                                  "step_x_mm", "step_y_mm", "turn_deg"],
+                           "a primitives table")
+    cli.numeric_columns(table, ["period_s", "dt_s"], path, "--primitives")
     made = table[["period_s", "dt_s"]].to_numpy()
+    # every row's (only the first row's had been compared)
     elsewhere = ~np.isclose(made, (period, dt), rtol=1e-12, atol=0).all(axis=1)
     if elsewhere.any():
         row = table[elsewhere].iloc[0]
@@ -243,7 +179,8 @@ def read_primitive_model(path, period: float, dt: float,
     try:
         return PrimitiveModel.from_table(table)
     except ValueError as error:
-        raise cli.StudyArgumentError(f"--primitives {path}: {error}") from None
+        raise cli.StudyArgumentError(f"--primitives {path}: "
+                                     f"{str(error).removeprefix('table: ')}") from None
 
 
 def main(argv=None):

@@ -131,8 +131,10 @@ def grid_params(gaits, stiffness, alphas, added_mass, period, base: StarParams):
                     try:
                         params.append(base.replace(gait=gait, youngs_modulus=factor * BASE_MODULUS,
                                                    alpha=alpha, added_mass_coeff=ca, period=period))
-                    except ValueError as error:
-                        raise cli.StudyArgumentError(f"invalid grid value: {error}") from None
+                    except ValueError as error:  # values that do not fit together
+                        raise cli.StudyArgumentError(f"--gaits, --stiffness, --alphas, "
+                                                     f"--added-mass, --periods together: "
+                                                     f"{error}") from None
                     factors.append(factor)
     return params, factors
 
@@ -161,6 +163,12 @@ def plan(args):
     identify.check_instances(math.prod(len(values) for values in axes.values()),
                              " × ".join(f"{flag} {len(values)}" for flag, values in axes.items()))
     base = cli.base_params(args)
+    # each value on its own, named by its flag (the grid's refusal named none)
+    cli.check_axis_values(
+        {"gait": gaits, "youngs_modulus": [f * BASE_MODULUS for f in stiffness],
+         "alpha": alphas, "added_mass_coeff": added, "period": periods}, base,
+        {"gait": "--gaits", "youngs_modulus": "--stiffness", "alpha": "--alphas",
+         "added_mass_coeff": "--added-mass", "period": "--periods"})
     batches = []
     for precision in precisions:          # one precision after the other: one Taichi re-init
         for period in periods:

@@ -96,6 +96,14 @@ def sweep_axes(args) -> dict:
     return axes
 
 
+def axis_flags(args, axes) -> dict:
+    """{field: the flag that gave its axis} of `sweep_axes`' axes, for the refusals."""
+    named = {field: f"--{flag}" for flag, field in NAMED_FLAGS.items()
+             if getattr(args, field) is not None}
+    return {name: "--gaits" if name == "gait" else named.get(name, f"--param {name}")
+            for name in axes}
+
+
 def swept_parameters(table: pd.DataFrame):
     """{column: StarParams field} of the parameters (other than gait) that take more than one
     value in a sweep table."""
@@ -181,7 +189,7 @@ def main(argv=None):
     base = cli.base_params(args)
     # checked before the grid is built: a swept period sets the longest and the shortest run
     solver = cli.solver(args, periods=axes.get("period", ()))
-    grid = cli.param_product(axes, base=base)
+    grid = cli.param_product(axes, base=base, flags=axis_flags(args, axes))
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"axes": axes})
     run_dir = cli.run_store(args, out)

@@ -141,41 +141,66 @@ class PrimitiveModel:
         glide, and, with `expect_glides`, a RuntimeWarning: the robot glides on after its last
         firing, and a plan without glides overshoots its goals). ValueError for a
         table with the single glide_x_mm/glide_y_mm of earlier versions (measured after
-        several firings only): measure it again, and for a table without the columns it reads.
+        several firings only): measure it again, for a table without the columns it reads,
+        for a cell of them that is no number, for a kept gait's that is not finite, and for
+        gaits that are none or listed twice (all before the warning). An ok gait without a
+        finite step_x_mm or turn_deg is left out.
         """
         missing = [column for column in ("gait", "status", "step_x_mm", "step_y_mm", "turn_deg")
                    if column not in table.columns]
         if missing:
             raise ValueError(f"table: not a primitive table (taichi_star.primitives): no column "
                              f"{missing[0]!r}")
-        usable = table[(table["status"] == "ok") & np.isfinite(table["step_x_mm"])
-                       & np.isfinite(table["turn_deg"])]
+        check_flag("expect_glides", expect_glides)
         streaks = 0
         while set(glide_columns(streaks + 1)) <= set(table.columns):
             streaks += 1
         if not streaks and "glide_x_mm" in table.columns:
             raise ValueError("the primitive table has one glide per gait (glide_x_mm), not one "
                              "per streak of firings (glide1_x_mm, ...): measure it again")
-        check_flag("expect_glides", expect_glides)
+        stepped = 0
+        while set(streak_step_columns(stepped + 1)) <= set(table.columns):
+            stepped += 1
+        read = ["step_x_mm", "step_y_mm", "turn_deg",
+                *(c for k in range(1, stepped + 1) for c in streak_step_columns(k)),
+                *(c for k in range(1, streaks + 1) for c in glide_columns(k))]
+        numbers = table[read].apply(pd.to_numeric, errors="coerce")
+        # the gaits measured with a steady step and turn; a failed gait's numbers may be
+        # missing, and so the steady ones of too short a measurement (such gaits are left out)
+        kept = ((table["status"] == "ok") & np.isfinite(numbers["step_x_mm"])
+                & np.isfinite(numbers["turn_deg"])).to_numpy()
+        # a cell that is no number (a TypeError from NumPy had come through), or a kept gait's
+        # number that is not finite (refused by the constructor, after the glides' warning),
+        # is named before anything is built or warned of
+        for column in read:
+            text = (numbers[column].isna() & table[column].notna()).to_numpy()
+            lost = ~np.isfinite(numbers[column].to_numpy()) & kept
+            for wrong, what in ((text, "not a number"), (lost, "not a finite number (status ok)")):
+                if wrong.any():
+                    row = table[wrong].iloc[0]
+                    value = row[column]
+                    shown = repr(value) if isinstance(value, str) else value  # a text quoted
+                    raise ValueError(f"table: {column} of gait {row['gait']} is {shown}, "
+                                     f"{what}")
+        usable = numbers[kept]
+        model = cls(list(table["gait"][kept]), usable[["step_x_mm", "step_y_mm"]].to_numpy(),
+                    usable["turn_deg"].to_numpy(),
+                    np.stack([usable[list(glide_columns(k))].to_numpy()
+                              for k in range(1, streaks + 1)]) if streaks else None,
+                    np.stack([usable[list(streak_step_columns(k))].to_numpy()
+                              for k in range(1, stepped + 1)]) if stepped else None)
         if not streaks and expect_glides:
             # measure_primitives' default measures none: a plan from such a table put the
             # robot on its goals when it stopped firing and it glided on, missing every goal
-            # by ~25 mm without a word (an audit, 2026-12)
+            # by ~25 mm without a word (an audit, 2026-12); warned of once the table is known
+            # to be one the planner can use
             warn_user(f"the primitive table has no glides from one firing "
                       f"({', '.join(glide_columns(1))}; they are read from one up): plans "
                       f"from it ignore the glide after the last firing and overshoot their "
                       f"goals; measure them (measure_primitives(..., glide_cycles="
                       f"{GLIDE_CYCLES}), the primitives study's --glide-cycles) or pass "
                       f"expect_glides=False to plan without them")
-        glides = (np.stack([usable[list(glide_columns(k))].to_numpy()
-                            for k in range(1, streaks + 1)]) if streaks else None)
-        stepped = 0
-        while set(streak_step_columns(stepped + 1)) <= set(table.columns):
-            stepped += 1
-        streak_steps = np.stack([usable[list(streak_step_columns(k))].to_numpy()
-                                 for k in range(1, stepped + 1)]) if stepped else None
-        return cls(list(usable["gait"]), usable[["step_x_mm", "step_y_mm"]].to_numpy(),
-                   usable["turn_deg"].to_numpy(), glides, streak_steps)
+        return model
 
     def step(self, gait: np.ndarray, streak: Optional[np.ndarray] = None) -> np.ndarray:
         """(..., 2) body-frame steps (mm) of gait indices `gait` (...) fired as the streak-th

@@ -58,6 +58,19 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
      "--set alpha: 'nan' is not a finite number (alpha must be in [0, 10])"),
     ("sweep", ["--gaits", "A1", "--alpha", "0.5,x"],
      "--alpha: 'x' is not a number (alpha must be in [0, 10])"),
+    # a value out of its range named no flag ("invalid parameter value: ..."), an audit
+    ("sweep", ["--gaits", "A1", "--alpha", "0,50"],
+     "--alpha: alpha must be a real number in [0, 10], got 50.0"),
+    ("sweep", ["--gaits", "A1", "--param", "drag_parallel=0,-1"],
+     "--param drag_parallel: drag_parallel must be a real number in [0, 100], got -1.0"),
+    # each value fits the base model alone (a joint radius of 0.025 m, a tip at 0.0245 m),
+    # not together: the flags of the combination are named
+    ("sweep", ["--gaits", "A1", "--param", "joint_radius=0.02,0.025", "--param",
+               "tip_radius=0.0245"],
+     "--gaits, --param joint_radius, --param tip_radius together: tip_radius must be a real "
+     "number in (0.025, 2] (beyond joint_radius: the limbs point outwards), got 0.0245"),
+    ("stability", ["--alphas", "0.5,50"],
+     "--alphas: alpha must be a real number in [0, 10], got 50.0"),
     ("fig4c", ["--set", "actuator_gains=1,1,1,1,1,1,1,nan"],
      "--set actuator_gains: 'nan' is not a finite number (actuator_gains must be 8 numbers in "
      "[0, 5])"),
@@ -298,6 +311,11 @@ AT_THE_LONGEST = ["--cycles", "2147.483647"]
     ("scaling", ["--no-dask", "--dt", "1.46683e-9"],
      "the sweep's cycle (3.15 s) at --dt 1.46683e-09 s is 2.15e+09 time steps per instance; "
      + STEP_LIMIT_END),
+    # model_select has no --cycles: its windows' 6 cycles were not checked (a traceback, with
+    # CMA-ES's bar drawn); 18.9 s / 8.80099e-9 s are 2147485681 steps, past the limit
+    ("model_select", ["--dt", "8.80099e-9"],
+     "--train-cycles, --validate-cycles (6 cycles of the longest period, 3.15 s: 18.9 s) at "
+     "dt = 8.80099e-09 s is 2.15e+09 time steps per instance; " + STEP_LIMIT_END),
 ])
 def test_run_lengths_are_refused_before_the_output_folder(no_compute, tmp_path, capsys, study,
                                                           argv, message):
@@ -322,6 +340,8 @@ def test_run_lengths_are_refused_before_the_output_folder(no_compute, tmp_path, 
     ("work_precision", ["--cycles", "0.000634921"], "studies.cli.Output"),
     # 2147473480 steps
     ("scaling", ["--no-dask", "--dt", "1.46684e-9"], "studies.cli.Output"),
+    # 2147483241 steps
+    ("model_select", ["--dt", "8.801e-9"], "studies.cli.Output"),
 ])
 def test_run_lengths_at_the_end_of_their_range_are_accepted(no_compute, monkeypatch, tmp_path,
                                                             study, argv, next_step):

@@ -63,8 +63,10 @@ def test_param_product_order_and_validation():
         cli.param_product({"beta": [1.0]})
     with pytest.raises(cli.StudyArgumentError, match="empty product"):
         cli.param_product({"alpha": []})
-    with pytest.raises(cli.StudyArgumentError, match="alpha must be"):
+    with pytest.raises(cli.StudyArgumentError, match="^alpha: alpha must be"):
         cli.param_product({"alpha": [-1.0]})
+    with pytest.raises(cli.StudyArgumentError, match="^--alpha: alpha must be"):
+        cli.param_product({"alpha": [-1.0]}, flags={"alpha": "--alpha"})
 
 
 def test_quick_defaults_and_presets():

@@ -190,6 +190,38 @@ def test_glides_are_read_from_a_primitive_table_and_checked():
         PrimitiveModel(["A1"], [(10, 0)], [0.0], glides_mm=[(np.nan, 0)])
 
 
+def test_a_primitive_table_is_checked_cell_by_cell_before_the_glides_warning():
+    """A text where a number belongs (a TypeError from NumPy before), a kept gait's NaN or
+    inf in another column the planner reads (its streak's step or its step_y_mm: refused
+    after the warning of missing glides), a gait listed twice: each refused naming the column
+    and the gait, and before any warning. A failed gait's missing numbers are no fault; nor
+    is a column the planner does not read (`..._keeps_only_ok_and_finite_rows`: an ok gait
+    without a steady step or turn is left out)."""
+    table = pd.DataFrame({"gait": ["A1", "A5", "A3"], "step_x_mm": [10.0, -10.0, np.nan],
+                          "step_y_mm": [0.0, 0.0, np.nan], "turn_deg": [0.0, 0.0, np.nan],
+                          "status": ["ok", "ok", "newton_failed"],
+                          "step1_x_mm": [6.0, -6.0, np.nan], "step1_y_mm": [0.0, 0.0, np.nan],
+                          "direction_deg": ["east", "west", "x"]})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert PrimitiveModel.from_table(table, expect_glides=False).gaits == ["none", "A1", "A5"]
+    for column, value, message in (
+            ("step_x_mm", "abc", "'abc', not a number"),
+            ("step_y_mm", np.nan, "nan, not a finite number (status ok)"),
+            ("step1_y_mm", np.inf, "inf, not a finite number (status ok)")):
+        broken = table.astype({column: object})
+        broken.loc[1, column] = value
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")   # refused before the glides' warning
+            with pytest.raises(ValueError) as error:
+                PrimitiveModel.from_table(broken)
+        assert str(error.value) == f"table: {column} of gait A5 is {message}"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match="^gaits must name each gait once, got A1"):
+            PrimitiveModel.from_table(table.assign(gait=["A1", "A1", "A3"]))
+
+
 def test_steps_of_a_streak_speed_up_to_the_steady_step():
     """A1's first firing from rest steps 6 mm, its second 9 mm, every later one its steady
     10 mm; the glide is 2 mm after any streak."""
