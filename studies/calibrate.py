@@ -260,7 +260,7 @@ def main(argv=None):
     box = [identify.parse_range_spec(text, "--fit") for text in args.fit]
     # a cross-validation fits each gait's fold on the others, then predicts the held-out one
     fitted, folds = (len(gaits) - 1, len(gaits)) if args.cross_validate else (len(gaits), 1)
-    identify.check_instances(
+    cli.check_instances(
         (settings.evaluations(len(box)) * fitted + (len(gaits) if folds > 1 else 0)) * folds,
         f"--max-generations {settings.max_generations} × the population "
         f"({settings.population(len(box), 0)}, doubled at each of --restarts {settings.restarts}) "

@@ -354,6 +354,16 @@ def check_cycles(cycles: Mapping[str, int], period: float, config: SolverConfig)
     check_run(f"{named} ({total * period:.3g} s)", total * period, config)
 
 
+def check_instances(instances: int, what: str):
+    """StudyArgumentError unless a study's simulated instances (a fit's evaluations × the
+    instances of one, a grid's points) are at most MAX_INSTANCES, the most a study runs: `what`
+    says how they add up and names the flags (a billion generations, or a population of a
+    billion, started and ran out of time or memory)."""
+    if instances > MAX_INSTANCES:
+        raise StudyArgumentError(f"{what}: {instances:,} instances, more than the "
+                                 f"{MAX_INSTANCES:,} a study runs")
+
+
 def check_count(value: int, flag: str, lowest: int, highest: int):
     """StudyArgumentError naming the flag unless lowest <= value <= highest (a count whose
     upper bound keeps the run finite: a study's MAX_ constant)."""

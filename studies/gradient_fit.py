@@ -626,7 +626,7 @@ def main(argv=None):
         gradient = args.starts * (args.lbfgs_evaluations + args.least_squares_evaluations) \
             + args.polish_evaluations
         per_gradient = instances_per_instance(len(box))
-        identify.check_instances(
+        cli.check_instances(
             (cma_settings.evaluations(len(box)) + gradient * per_gradient) * len(gaits),
             f"set {name}: (--cma-generations {args.cma_generations} × population "
             f"{cma_settings.population(len(box), 0)} + (--starts {args.starts} × "

@@ -293,16 +293,6 @@ class CMASettings:
                    for restart in range(self.restarts + 1))
 
 
-def check_instances(instances: int, what: str):
-    """StudyArgumentError unless a fit's simulated instances (evaluations × the instances of
-    one) are at most cli.MAX_INSTANCES, the most a study runs: `what` says how they add up
-    and names the flags (a billion generations, or a population of a billion, started and ran
-    out of time or memory)."""
-    if instances > cli.MAX_INSTANCES:
-        raise cli.StudyArgumentError(f"{what}: {instances:,} instances, more than the "
-                                     f"{cli.MAX_INSTANCES:,} a study runs")
-
-
 def _cma_seed(seed: int, restart: int) -> int:
     # cma treats seed 0 as "randomise": derive a positive seed per (seed, restart)
     return int(np.random.SeedSequence([seed, restart]).generate_state(1)[0]) % (2 ** 31 - 2) + 1

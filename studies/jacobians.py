@@ -30,7 +30,7 @@ import pandas as pd
 from taichi_star import JACOBIANS, SolverConfig, StarParams, simulate
 from taichi_star.experiment import PAPER_GAITS
 
-from . import cli, identify
+from . import cli
 
 DESCRIPTION = ("Newton Jacobian modes (newton, chord, lagged): speed against the solver's "
                "error over a cycle of the Fig. 4c gaits.")
@@ -171,7 +171,7 @@ def main(argv=None):
     configurations = parse_modes(args.modes)
     # every round simulates the batch once per configuration (the compiling call's one step
     # aside): counted before the batch is built, which took a minute at the most --batch
-    identify.check_instances(
+    cli.check_instances(
         args.batch * args.rounds * len(configurations),
         f"--batch {args.batch} × --rounds {args.rounds} × {len(configurations)} configurations "
         f"(--modes, with the default and the reference)")

@@ -668,7 +668,7 @@ def planned_work(runnable: Sequence[Candidate], settings: identify.CMASettings,
 def planned_instances(work: Sequence[Tuple[Candidate, identify.CMASettings]],
                       fold_generations: int, n_gaits: int) -> int:
     """The instances the fits in `work` (`planned_work`) simulate at most, for the cap on a
-    study's work (`identify.check_instances`): every generation of every restart on every gait,
+    study's work (`cli.check_instances`): every generation of every restart on every gait,
     and with folds (`leave_one_gait_out`) each held-out gait's fit of fold_generations on the
     others and its prediction; the assessment's runs of the best point aside (a few per fit)."""
     instances = 0
@@ -840,7 +840,7 @@ def main(argv=None):
     if not runnable:  # tables of skipped rows, exit status 0, before
         raise cli.StudyArgumentError(f"--candidates: none can be fitted ({rows[0]['candidate']}:"
                                      f" {rows[0]['note']})")
-    identify.check_instances(
+    cli.check_instances(
         planned_instances(planned_work(runnable, settings, refine_settings, args.refine_top),
                           args.fold_generations, len(gaits)),
         f"{len(runnable)} candidate(s) × {len(gaits)} gait(s) × --max-generations "

@@ -58,7 +58,7 @@ from taichi_star import metrics
 from taichi_star.metrics import shape_checks
 from taichi_star.timegrid import whole_steps
 
-from . import cli, identify
+from . import cli
 
 DESCRIPTION = ("Numerical stability stress grid: dt x stiffness x alpha x C_a x period x gait x "
                "precision; status, retries, strain and shape sanity per instance; stable-region "
@@ -160,7 +160,7 @@ def plan(args):
     # counted before any instance is built (a grid of three million was built for a minute)
     axes = {"--dts-ms": dts, "--stiffness": stiffness, "--alphas": alphas, "--added-mass": added,
             "--periods": periods, "--gaits": gaits, "--precisions": precisions}
-    identify.check_instances(math.prod(len(values) for values in axes.values()),
+    cli.check_instances(math.prod(len(values) for values in axes.values()),
                              " × ".join(f"{flag} {len(values)}" for flag, values in axes.items()))
     base = cli.base_params(args)
     # each value on its own, named by its flag (the grid's refusal named none)

@@ -305,10 +305,10 @@ def test_sensitivity_quick_and_resumed(tmp_path, monkeypatch):
 def test_a_fit_of_at_most_the_studys_instances_is_accepted_and_one_more_refused():
     """check_instances' boundary: cli.MAX_INSTANCES simulated instances run, one more is
     refused naming how they add up."""
-    identify.check_instances(cli.MAX_INSTANCES, "the fit")
+    cli.check_instances(cli.MAX_INSTANCES, "the fit")
     with pytest.raises(cli.StudyArgumentError, match=r"^the fit: 1,000,001 instances, more than "
                                                      r"the 1,000,000 a study runs$"):
-        identify.check_instances(cli.MAX_INSTANCES + 1, "the fit")
+        cli.check_instances(cli.MAX_INSTANCES + 1, "the fit")
     # the evaluations it counts: every generation of every restart, the population doubling
     settings = identify.CMASettings(popsize=3, max_generations=5, restarts=2)
     assert settings.evaluations(4) == 5 * (3 + 6 + 12)
