@@ -111,14 +111,7 @@ def nearest_interval(interval_s: float, dt: float) -> float:
     at least one step: what `simulate` and `Simulator.advance` accept as record_interval_s
     with fixed steps. ValueError naming interval_s or dt unless each is a finite number
     > 0 s."""
-    for name, value in (("interval_s", interval_s), ("dt", dt)):
-        if not _positive_number(value):
-            raise ValueError(f"{name} must be a finite number > 0 s, got {shown(value)}")
-    steps = float(interval_s) / float(dt)
-    if not math.isfinite(steps):
-        raise ValueError(f"interval_s = {shown(interval_s)} s is {steps} steps of dt = "
-                         f"{shown(dt)} s")
-    return max(1, round(steps)) * dt
+    return max(1, round(_steps_of("interval_s", interval_s, dt))) * dt
 
 
 def _positive_number(value) -> bool:
@@ -126,21 +119,27 @@ def _positive_number(value) -> bool:
     return is_finite_real(value) and float(value) > 0
 
 
+def _steps_of(name: str, time_s, dt) -> float:
+    """time_s / dt, the steps of dt (s) in the time `name` gives (s), as a float; ValueError
+    naming `name` or dt unless each is a finite number > 0 s, and `name` where the quotient
+    passes a float's range."""
+    for argument, value in ((name, time_s), ("dt", dt)):
+        if not _positive_number(value):
+            raise ValueError(f"{argument} must be a finite number > 0 s, got {shown(value)}")
+    steps = float(time_s) / float(dt)
+    if not math.isfinite(steps):
+        raise ValueError(f"{name} = {shown(time_s)} s is {steps} steps of dt = {shown(dt)} s")
+    return steps
+
+
 def interval_for_count(duration_s: float, count: int, dt: float) -> float:
     """A record interval (s, a whole number of steps of dt, at least one) giving `count` to
     2·count − 1 records after the start over duration_s (s) when the run has at least `count`
-    steps (one per step when it has fewer). ValueError naming count (an integer >= 1) or
-    duration_s (a finite number > 0)."""
+    steps (one per step when it has fewer). ValueError naming count (an integer >= 1),
+    duration_s or dt (each a finite number > 0 s)."""
     if not is_whole(count) or count < 1:
         raise ValueError(f"count must be an integer >= 1, got {count!r}")
-    for name, value in (("duration_s", duration_s), ("dt", dt)):
-        if not _positive_number(value):
-            raise ValueError(f"{name} must be a finite number > 0 s, got {shown(value)}")
-    steps = float(duration_s) / float(dt)
-    if not math.isfinite(steps):
-        raise ValueError(f"duration_s = {shown(duration_s)} s is {steps} steps of dt = "
-                         f"{shown(dt)} s")
-    return max(1, round(steps) // count) * dt
+    return max(1, round(_steps_of("duration_s", duration_s, dt)) // count) * dt
 
 
 def check_work(name: str, steps: float, batch: Optional[int] = None):
