@@ -66,6 +66,19 @@ STATE_RECORD_BYTES = 6144
 """... and each record whatever the batch (its columns' arrays: measured 3.6 kB)."""
 
 
+def empty_records() -> pd.DataFrame:
+    """`Simulator.advance`'s table without records: its columns with the types a recorded
+    one has (untyped, every column was object, and a concatenation with recorded tables turned
+    their numbers into objects: an audit, 2026-12)."""
+    # one row of each column's kind, dropped: pandas infers the status's text type as it
+    # does for a recorded table (object in pandas 2, str in pandas 3)
+    sample = {"instance": np.zeros(1, dtype=np.int64), "record": np.zeros(1, dtype=np.int64),
+              "status": np.array([STATUS_NAMES[STATUS_OK]], dtype=object),
+              "newton_capped": np.zeros(1, dtype=bool)}
+    return pd.DataFrame({name: sample.get(name, np.zeros(1)) for name in
+                         (*STATE_COLUMNS, "record")}).iloc[:0]
+
+
 NOT_COPIED = ("a Simulator is not copied or pickled (its robots live in the engine's device "
               "memory): save() its state and load() it into a Simulator of the same "
               "parameters, or make another Simulator")
@@ -390,7 +403,7 @@ class Simulator(NotCopied):
         self._capped_named |= capped
         warn_about_capped(capped, np.arange(self.n_instances), self.solver)
         if not records:
-            return pd.DataFrame(columns=[*STATE_COLUMNS, "record"])
+            return empty_records()
         return pd.DataFrame({**{name: np.concatenate([record[name] for record in records])
                                 for name in records[0]},
                              "record": np.repeat(numbers, self.n_instances)})
@@ -562,6 +575,16 @@ class Simulator(NotCopied):
         # compared only where a difference is refused (other_params=True without sensitivities
         # takes any parameters: no need to compare 65,536 instances' texts)
         checked = snapshot.params if (self.directions or not other_params) else None
+        if checked is not None and not checked:
+            # a header without the parameters (a snapshot from before they were recorded, or
+            # a damaged one) had skipped the comparison without a word (an audit, 2026-12)
+            if self.directions:
+                raise ValueError("the saved state records no parameters: a Simulator with "
+                                 "sensitivities continues only its own parameters' state, "
+                                 "which this snapshot cannot show")
+            warn_user("the saved state records no parameters, so they cannot be compared with "
+                      "this simulator's: it goes on under this simulator's parameters "
+                      "(load(..., other_params=True) says that is meant)")
         if checked and len(checked) != self.n_instances:
             # zip would compare the first instances alone (a damaged header)
             raise ValueError(f"the saved state records the parameters of {len(checked)} "

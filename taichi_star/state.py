@@ -15,7 +15,7 @@ import numpy as np
 import taichi as ti
 from taichi.lang.field import Field
 
-from .actuation import NEVER, Schedule
+from .actuation import NEVER, PENDING_CAPACITY, Schedule
 from .fields import FieldArena, FieldStore, array_dtype, array_shape
 
 STATUS_OK, STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_INACTIVE, STATUS_STEP_LIMIT = range(5)
@@ -27,6 +27,37 @@ time (a step below the time's rounding)."""
 LATER_COUNTERS = ("factorisations", "steps_over_tolerance")
 """Work counters the state gained after states were first saved (`Simulator.save`): a saved
 state without one (from an earlier version) restores with it at zero."""
+
+
+SAVED_COUNTS = ("steps_done", "rejected_steps", "steps_over_tolerance", "newton_total",
+                "newton_solves", "newton_max", "factorisations", "substep_retries",
+                "gait_cycle_steps", "gait_cycles", "pending_count")
+"""The counters of a saved state, each at least 0 (`check_saved_values`)."""
+
+
+def check_saved_values(saved: Dict[str, np.ndarray]):
+    """ValueError naming the first field of a saved state (`BatchState.save`'s, its shapes and
+    types already checked) whose values no run holds: a status code past `STATUS_NAMES`, a
+    negative counter, more pending firings than a schedule holds (`PENDING_CAPACITY`), a time
+    that is negative or not finite. Such a state had loaded and then broken `state()` (an
+    unknown status) or let the kernel read past a schedule's firings (an audit, 2026-12)."""
+    status = saved["status"]
+    unknown = status[(status < 0) | (status >= len(STATUS_NAMES))]
+    if unknown.size:
+        raise ValueError(f"saved state field 'status' holds {unknown[0]}, not a status code in "
+                         f"[0, {len(STATUS_NAMES) - 1}] (a damaged file)")
+    for name in SAVED_COUNTS:
+        if (saved[name] < 0).any():
+            raise ValueError(f"saved state field {name!r} holds {saved[name].min()}, not a count "
+                             f">= 0 (a damaged file)")
+    if (saved["pending_count"] > PENDING_CAPACITY).any():
+        raise ValueError(f"saved state field 'pending_count' holds {saved['pending_count'].max()}, "
+                         f"more than the {PENDING_CAPACITY} firings a schedule holds (a damaged "
+                         f"file)")
+    times = saved["time"]
+    if not (np.isfinite(times) & (times >= 0)).all():
+        raise ValueError("saved state field 'time' holds a time that is negative or not finite "
+                         "(a damaged file)")
 
 
 @ti.data_oriented
@@ -178,4 +209,5 @@ class BatchState:
             raise ValueError(f"saved state has fields {sorted(saved)}, this engine "
                              f"{sorted(shapes)} (another topology or term set)")
         self.store.check_saved(saved)
+        check_saved_values(saved)
         self.store.write(saved)

@@ -58,6 +58,46 @@ def test_a_snapshot_with_fields_of_another_type_is_refused_and_changes_nothing(s
         assert all(np.array_equal(after[name], before[name]) for name in before)
 
 
+@pytest.mark.parametrize("field, value, message", [
+    ("status", 5, r"'status' holds 5, not a status code in \[0, 4\]"),
+    ("status", -1, r"'status' holds -1, not a status code in \[0, 4\]"),
+    ("steps_done", -5, r"'steps_done' holds -5, not a count >= 0"),
+    ("newton_total", -1, r"'newton_total' holds -1, not a count >= 0"),
+    ("pending_count", 17, r"'pending_count' holds 17, more than the 16 firings a schedule holds"),
+    ("time", -1e-3, r"'time' holds a time that is negative or not finite"),
+    ("time", np.inf, r"'time' holds a time that is negative or not finite"),
+])
+def test_a_snapshot_with_values_no_run_holds_is_refused_and_changes_nothing(simulator, tmp_path,
+                                                                             field, value,
+                                                                             message):
+    """A file whose numbers were changed (its shapes and types intact) loaded: an unknown
+    status broke state(), a negative step count turned the robot's clock back, a pending count
+    past the schedule's 16 let the kernel read past its firings (an audit, 2026-12). Each is
+    refused naming the field, the state unchanged; the largest allowed values load (status 4,
+    16 pending, t = 0)."""
+    saved = simulator.save()
+    before = saved.fields
+    damaged = {**saved.fields, field: saved.fields[field].copy()}
+    damaged[field][0] = value
+    with pytest.raises(ValueError, match=message + r" \(a damaged file\)$"):
+        simulator.load(dataclasses.replace(saved, fields=damaged))
+    after = simulator.save().fields
+    assert all(np.array_equal(after[name], before[name]) for name in before)
+
+
+def test_a_snapshot_at_the_ends_of_its_values_loads():
+    from taichi_star.actuation import PENDING_CAPACITY
+    from taichi_star.state import STATUS_NAMES, check_saved_values
+
+    sim = ts.Simulator([ts.StarParams(gait="none")], SOLVER)
+    fields = dict(sim.save().fields)
+    for name, value in (("status", len(STATUS_NAMES) - 1), ("pending_count", PENDING_CAPACITY),
+                        ("time", 0.0), ("steps_done", 0)):
+        fields[name] = fields[name].copy()
+        fields[name][:] = value
+    check_saved_values(fields)
+
+
 def test_saving_to_a_non_path_is_a_value_error_naming_the_argument(simulator):
     with pytest.raises(ValueError, match="^path must be the path of the snapshot's .npz file, "
                                          "got int$"):

@@ -311,6 +311,10 @@ def test_a_simulator_gives_the_same_sensitivities_as_simulate(euler_run):
                                          r"sensitivities continues only its own parameters' "
                                          r"state"):
         other.load(saved, other_params=True)
+    # nor one that records no parameters to compare (its header damaged or older)
+    with pytest.raises(ValueError, match=r"^the saved state records no parameters: a Simulator "
+                                         r"with sensitivities"):
+        other.load(dataclasses.replace(saved, params=()), other_params=True)
     assert all(np.array_equal(other.save().fields[name], unchanged[name]) for name in unchanged)
     # nor does a Simulator of other sensitivities take it (its replicas are other directions')
     del other

@@ -486,6 +486,15 @@ def test_a_state_of_other_parameters_is_refused_naming_them_unless_asked_for(tmp
         other.load(short)
     after = other.save().fields
     assert all(np.array_equal(after[name], before[name]) for name in before)
+    # a header without parameters skipped the comparison without a word (an audit): loaded
+    # with a warning that they cannot be compared; silently with other_params=True
+    bare = dataclasses.replace(snapshot, params=())
+    with pytest.warns(RuntimeWarning, match=r"^the saved state records no parameters, so they "
+                                            r"cannot be compared"):
+        other.load(bare)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        other.load(bare, other_params=True)
     other.load(path, other_params=True)
     np.testing.assert_array_equal(other.time_s, [0.01] * 3)
 
@@ -518,8 +527,9 @@ def test_a_state_stepped_under_other_solver_settings_loads_with_a_warning_naming
 
 
 def test_a_snapshot_without_parameters_loads_as_before(tmp_path):
-    """Snapshots written before the parameters were recorded hold none: they load unchecked
-    (the engine, batch size and step are still checked)."""
+    """Snapshots written before the parameters were recorded hold none: they load with a
+    warning that the parameters cannot be compared (the engine, batch size and step are still
+    checked)."""
     sim = commanded()
     sim.advance(0.01)
     snapshot, times, params = sim.save(), sim.time_s, sim.params
@@ -527,17 +537,29 @@ def test_a_snapshot_without_parameters_loads_as_before(tmp_path):
     earlier = ts.SimulatorSnapshot(fields=snapshot.fields, engine_key=snapshot.engine_key,
                                    n_instances=snapshot.n_instances, dt=snapshot.dt)
     other = ts.Simulator([p.replace(alpha=2.0) for p in params])
-    other.load(earlier.write(tmp_path / "earlier"))
+    with pytest.warns(RuntimeWarning, match="records no parameters"):
+        other.load(earlier.write(tmp_path / "earlier"))
     np.testing.assert_array_equal(other.time_s, times)
     # the name it was saved under, without the ".npz" write added (numpy's "No such file")
-    other.load(tmp_path / "earlier")
+    other.load(tmp_path / "earlier", other_params=True)
     with pytest.raises(ValueError, match=r"^snapshot .*missing.npz: cannot read it \(No such"):
         other.load(tmp_path / "missing")
     # a file that is there under a name without the suffix (renamed) is read as named
     (tmp_path / "earlier.npz").rename(tmp_path / "renamed")
     other.advance(0.01)
-    other.load(tmp_path / "renamed")
+    other.load(tmp_path / "renamed", other_params=True)
     np.testing.assert_array_equal(other.time_s, times)
+
+
+def test_an_advance_without_records_returns_a_table_of_the_recorded_types():
+    """Its empty table had untyped columns (object), and a concatenation with recorded tables
+    turned their numbers into objects (an audit, 2026-12)."""
+    sim = commanded()
+    recorded = sim.advance(0.01, record_interval_s=0.005)
+    empty = sim.advance(0.005)
+    assert empty.empty and list(empty.columns) == list(recorded.columns)
+    pd.testing.assert_series_equal(empty.dtypes, recorded.dtypes)
+    assert pd.concat([recorded, empty]).dtypes.equals(recorded.dtypes)
 
 
 def test_mixed_commands_and_a_missing_folder_are_named_in_plain_words(tmp_path):
