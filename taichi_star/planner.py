@@ -92,10 +92,18 @@ class PrimitiveModel:
 
     def __init__(self, gaits: Sequence[str], steps_mm, turns_deg, glides_mm=None,
                  streak_steps_mm=None):
-        steps = np.asarray(steps_mm, dtype=np.float64)
+        if isinstance(gaits, str) or not hasattr(gaits, "__iter__"):
+            raise ValueError(f"gaits must be a sequence of gait texts, got {gaits!r}")
+        arrays = {}
+        for name, values in (("steps_mm", steps_mm), ("turns_deg", turns_deg),
+                             ("glides_mm", glides_mm), ("streak_steps_mm", streak_steps_mm)):
+            try:  # NumPy's "could not convert string to float" named no argument
+                arrays[name] = None if values is None else np.asarray(values, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise ValueError(f"{name} must hold numbers (mm or deg), got {values!r}") from None
+        steps, turns = arrays["steps_mm"], arrays["turns_deg"]
         streak_steps = (np.zeros((0, *steps.shape)) if streak_steps_mm is None
-                        else np.asarray(streak_steps_mm, dtype=np.float64))
-        turns = np.asarray(turns_deg, dtype=np.float64)
+                        else arrays["streak_steps_mm"])
         names = [Gait.parse(g).name for g in gaits]
         repeated = sorted({name for name in names if names.count(name) > 1})
         if repeated:
@@ -104,8 +112,7 @@ class PrimitiveModel:
         if not [name for name in names if name != NO_GAIT]:
             raise ValueError(f"gaits must name at least one gait other than {NO_GAIT!r} (from "
                              f"a primitive table: its rows of status ok), got {names}")
-        glides = (np.zeros_like(steps) if glides_mm is None
-                  else np.asarray(glides_mm, dtype=np.float64))
+        glides = np.zeros_like(steps) if glides_mm is None else arrays["glides_mm"]
         if glides.ndim == 2:
             glides = glides[None]
         if steps.shape != (len(names), 2) or turns.shape != (len(names),) \
@@ -146,6 +153,9 @@ class PrimitiveModel:
         gaits that are none or listed twice (all before the warning). An ok gait without a
         finite step_x_mm or turn_deg is left out.
         """
+        if not isinstance(table, pd.DataFrame):  # a path had failed on its .columns
+            raise ValueError(f"table must be a pandas DataFrame (pandas.read_csv of a "
+                             f"primitives CSV), got {type(table).__name__}")
         missing = [column for column in ("gait", "status", "step_x_mm", "step_y_mm", "turn_deg")
                    if column not in table.columns]
         if missing:
@@ -504,6 +514,10 @@ def closed_loop_gain(summary: pd.DataFrame) -> dict:
     """Open against closed loop over a `drive` summary: goals reached, mean and largest final
     error (mm), mean error at the end of the run (mm), mean cycles to the goal over the goals
     both reached."""
+    needed = ("goal", "mode", "reached", "final_error_mm", "end_error_mm", "cycles_to_goal")
+    if not isinstance(summary, pd.DataFrame) or not set(needed) <= set(summary.columns):
+        raise ValueError(f"summary must be drive's summary (a DataFrame with columns "
+                         f"{', '.join(needed)}), got {type(summary).__name__}")
     result = {}
     for mode in MODES:
         part = summary[summary["mode"] == mode]

@@ -251,16 +251,18 @@ def summarise_cycles(cycles: pd.DataFrame, first_cycle: int,
     return sort_gaits(pd.DataFrame(rows))
 
 
-def check_measurement(base: StarParams, solver: SolverConfig, cycles: int, first_cycle: int):
+def check_measurement(base: StarParams, solver: SolverConfig, cycles: int, first_cycle: int,
+                      cycles_name: str = "cycles"):
     """ValueError naming the argument unless `measure_primitives` can run with these: cycles
-    an integer >= 1, first_cycle in [0, cycles - 1], the period a whole number of steps. No
-    compute: a command line checks its input with this before starting."""
+    (called `cycles_name` by the caller) an integer >= 1, first_cycle in [0, cycles - 1], the
+    period a whole number of steps. No compute: a command line checks its input with this
+    before starting."""
     if not isinstance(base, StarParams):
         raise ValueError(f"base must be a StarParams, got {type(base).__name__}")
     if not isinstance(solver, SolverConfig):
         raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
     if not is_whole(cycles) or cycles < 1:
-        raise ValueError(f"cycles must be an integer >= 1, got {cycles!r}")
+        raise ValueError(f"{cycles_name} must be an integer >= 1, got {cycles!r}")
     if not is_whole(first_cycle) or not 0 <= first_cycle < cycles:
         raise ValueError(f"first_cycle must be an integer in [0, {cycles - 1}], got "
                          f"{first_cycle!r}")
@@ -348,7 +350,7 @@ def measure_glides(base: StarParams = StarParams(), solver: SolverConfig = Solve
     cycles from rest, then coasts `glide_cycles` cycles. Returns the glide table
     (`GLIDE_COLUMNS`, k in glide_fire_cycles) over all 255 gaits and every k, image gaits by
     symmetry as for the steps. ValueError for bad arguments."""
-    check_measurement(base, solver, fire_cycles, 0)
+    check_measurement(base, solver, fire_cycles, 0, "fire_cycles")
     check_glides(base, solver, fire_cycles, glide_cycles)
     check_flag("progress", progress)
     return glides_from_sources(base, solver, gait_sources(actuators_equal(base)), fire_cycles,

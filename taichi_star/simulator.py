@@ -283,9 +283,11 @@ class Simulator(NotCopied):
                              f"of {batch} gaits, got shape {array.shape}")
         if array.dtype == bool:
             return array
-        if array.dtype.kind in "iu" and np.isin(array, (0, 1)).all():
+        # as the environments take actions: NumPy's own arrays (np.ones) are floats
+        if array.dtype.kind in "iuf" and np.isin(array, (0, 1)).all():
             return array.astype(bool)
-        raise ValueError(f"commands must be boolean (or 0/1 integers), got dtype {array.dtype}")
+        raise ValueError(f"commands must be boolean (or numbers that are exactly 0 or 1), got "
+                         f"dtype {array.dtype}")
 
     @one_call_at_a_time
     def fire(self, commands, at_s: Optional[float] = None):

@@ -215,6 +215,8 @@ class GoalReachingBatch:
         if len(params) != n_robots:
             raise ValueError(f"params must be one StarParams or {n_robots}, got {len(params)}")
         solver = SolverConfig.preset("paper") if solver is None else solver
+        if not isinstance(solver, SolverConfig):  # read (its dt) before the Simulator checks it
+            raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
         if not isinstance(task, SwimmerTask):
             raise ValueError(f"task must be a SwimmerTask, got {type(task).__name__}")
         period = control_period(params[0], solver, control_period_s)
@@ -226,6 +228,8 @@ class GoalReachingBatch:
         self.goals = np.zeros((n_robots, 2))
         self.distances = np.zeros(n_robots)
         self.episode_steps = np.zeros(n_robots, dtype=np.int64)
+        self.started = np.zeros(n_robots, dtype=bool)
+        """Whether each robot has had its first reset (a goal to swim to)."""
 
     @property
     def simulator(self) -> Simulator:
@@ -253,6 +257,7 @@ class GoalReachingBatch:
         self.goals[rows] = goals
         self.distances[rows] = np.hypot(goals[:, 0], goals[:, 1])
         self.episode_steps[rows] = 0
+        self.started[rows] = True
 
     @staticmethod
     def firing_mask(actions, shape) -> np.ndarray:
@@ -272,7 +277,12 @@ class GoalReachingBatch:
 
     def step(self, fire: np.ndarray):
         """Fire `fire` ((B, 8) bool) now and advance one control period. Returns rewards (B,)
-        float64, terminated (B,), truncated (B,)."""
+        float64, terminated (B,), truncated (B,). RuntimeError for a robot never reset: it
+        has no goal yet (a vector env stepped before reset ended every episode at once, at the
+        goal (0, 0) it starts on; gymnasium's wrappers enforce the order, a bare env did not)."""
+        if not self.started.all():
+            raise RuntimeError(f"call reset() before step(): robot "
+                               f"{np.flatnonzero(~self.started)[0]} has no episode yet")
         self.simulator.fire(fire)
         # no progress bar for a control period, however many robots: an agent steps many
         self.simulator.advance(self.control_period_s, progress=False)

@@ -227,6 +227,26 @@ def test_vector_env_api():
     np.testing.assert_array_equal(envs.batch.simulator.time_s, [0.0, 3.15])
 
 
+def test_a_robot_is_stepped_only_after_its_first_reset_and_a_solver_must_be_one():
+    """A bare vector env stepped before reset ended every episode at once, at the goal (0, 0)
+    the robots start on (gymnasium's wrappers enforce the order; the bare env did not); a
+    solver given as a text failed reading its dt (AttributeError). An audit, 2026-12."""
+    envs = StarSwimmerVectorEnv(2, **SHORT)
+    actions = np.zeros((2, 8), np.int8)
+    with pytest.raises(RuntimeError, match=r"^call reset\(\) before step\(\): robot 0 has no "
+                                           r"episode yet$"):
+        envs.step(actions)
+    assert envs.batch.simulator.time_s.tolist() == [0.0, 0.0]   # nothing fired or advanced
+    envs.reset(seed=0)
+    _, _, terminated, truncated, _ = envs.step(actions)
+    assert not (terminated | truncated).any()
+    envs.close()
+    for make in (lambda: StarSwimmerVectorEnv(2, solver="paper"),
+                 lambda: StarSwimmerEnv(solver="paper")):
+        with pytest.raises(ValueError, match="^solver must be a SolverConfig, got str$"):
+            make()
+
+
 def test_bad_input_raises_value_error_and_changes_nothing():
     envs = StarSwimmerVectorEnv(2, **KWARGS)
     envs.reset(seed=0)

@@ -312,6 +312,22 @@ def test_velocities_are_the_backward_differences_of_every_step():
     np.testing.assert_array_equal(np.sign(spin[turning]), np.sign(turn[turning]))
 
 
+def test_commands_of_zeros_and_ones_of_any_number_type_fire_as_booleans():
+    """NumPy's own arrays are floats (np.ones((B, 8))): they were refused, though the
+    environments take float 0./1. actions (an audit, 2026-12); each fires as its booleans."""
+    masks = np.array([[1, 0, 1, 0, 0, 0, 0, 0], [0, 1, 0, 0, 0, 0, 0, 0],
+                      [1, 0, 1, 0, 1, 0, 0, 0]])
+    shapes = []
+    for commands in (masks.astype(bool), masks.astype(np.float32), masks.astype(np.int8)):
+        sim = commanded()
+        sim.fire(commands)
+        sim.advance(0.01)
+        shapes.append(sim.shapes())
+        del sim
+    np.testing.assert_array_equal(shapes[0], shapes[1])
+    np.testing.assert_array_equal(shapes[0], shapes[2])
+
+
 @pytest.mark.parametrize("commands,match", [
     (np.zeros((3, 7), dtype=bool), "shape"),
     (np.full((3, 8), 0.5), "dtype"),

@@ -295,6 +295,31 @@ def test_primitive_model_refuses_repeated_gaits_or_none(gaits, match):
         planner.PrimitiveModel(gaits, np.full((len(gaits), 2), 10.0), np.zeros(len(gaits)))
 
 
+@pytest.mark.parametrize("call, message", [
+    (lambda: planner.PrimitiveModel.from_table("results/primitives.csv"),
+     r"^table must be a pandas DataFrame \(pandas.read_csv of a primitives CSV\), got str$"),
+    (lambda: planner.PrimitiveModel(["A1"], [["a", "b"]], [0.0]),
+     r"^steps_mm must hold numbers \(mm or deg\), got \[\['a', 'b'\]\]$"),
+    (lambda: planner.PrimitiveModel(["A1"], [[1.0, 0.0]], [0.0], glides_mm=[["x", 0]]),
+     r"^glides_mm must hold numbers"),
+    (lambda: planner.PrimitiveModel(None, [[1.0, 0.0]], [0.0]),
+     r"^gaits must be a sequence of gait texts, got None$"),
+    (lambda: planner.PrimitiveModel("A1", [[1.0, 0.0]], [0.0]),
+     r"^gaits must be a sequence of gait texts, got 'A1'$"),
+    (lambda: planner.closed_loop_gain(pd.DataFrame()), r"^summary must be drive's summary"),
+    (lambda: planner.closed_loop_gain(None), r"^summary must be drive's summary .*NoneType$"),
+    (lambda: primitives.measure_glides(fire_cycles=0),
+     r"^fire_cycles must be an integer >= 1, got 0$"),
+], ids=["table path", "steps text", "glides text", "gaits None", "gaits text", "empty summary",
+        "no summary", "fire_cycles"])
+def test_planner_and_primitives_name_a_bad_argument(no_compute, call, message):
+    """Each was another library's error naming no argument (AttributeError, NumPy's "could not
+    convert string to float", KeyError 'mode'), or named `cycles` for fire_cycles (an audit,
+    2026-12)."""
+    with pytest.raises(ValueError, match=message):
+        call()
+
+
 def test_primitive_model_from_a_table_without_ok_gaits_is_refused():
     table = pd.DataFrame({"gait": ["A1", "A2"], "step_x_mm": [10.0, math.nan],
                           "step_y_mm": [0.0, 0.0], "turn_deg": [0.0, 0.0],
