@@ -787,10 +787,20 @@ class Output:
         return path
 
     def write_csv(self, frame: pd.DataFrame, name: str, extra: Optional[Mapping] = None) -> Path:
-        """Write a table (no index, floats to 10 significant digits) and its JSON sidecar, both
-        whole or not at all (`_write_described`)."""
+        """Write a table (no index) and its JSON sidecar, both whole or not at all
+        (`_write_described`): the parameter columns (`StarParams.columns()`) exact, each float
+        the shortest text that reads back to it, so that `StarParams.from_row` of a row gives
+        back the simulated robot (10 digits gave another: an audit); the other floats to 10
+        significant digits, which keeps a rerun's table from differing in the last bits
+        another CPU changes."""
+        parameters = [column for column in StarParams.columns().values()
+                      if column in frame and frame[column].dtype.kind == "f"]
+        # repr of a float is its shortest round-tripping text; NaN stays an empty cell
+        exact = frame.assign(**{column: frame[column].map(
+            lambda value: "" if np.isnan(value) else repr(float(value)))
+            for column in parameters})
         return self._write_described(
-            self.path(name), frame.to_csv(index=False, float_format="%.10g").encode(), extra,
+            self.path(name), exact.to_csv(index=False, float_format="%.10g").encode(), extra,
             frame)
 
     def write_parquet(self, frame: pd.DataFrame, name: str,
@@ -894,12 +904,15 @@ def write_figure(fig, png_path, dpi: int = 130, **savefig) -> Path:
     """Write a figure as a PNG whole or not at all (`write_atomic`; matplotlib's `savefig`
     into the file itself left a truncated picture over the previous one on a full disk, and an
     error naming no file: an audit, 2026-12); StudyOutputError naming the file. `savefig`:
-    matplotlib's other options (bbox_inches, ...). A figure that cannot be written is closed
-    (pyplot keeps every open figure for the process: a notebook that catches the error would
-    hold it for ever); one written stays open for its caller. Returns the path."""
+    matplotlib's other options (bbox_inches, ...). The PNG's text entries name the study,
+    command, commit and dirty flag (`provenance.figure_metadata`). A figure that cannot be
+    written is closed (pyplot keeps every open figure for the process: a notebook that catches
+    the error would hold it for ever); one written stays open for its caller. Returns the
+    path."""
     try:
         picture = io.BytesIO()
-        fig.savefig(picture, format="png", dpi=dpi, **savefig)
+        fig.savefig(picture, format="png", dpi=dpi, metadata=provenance.figure_metadata(),
+                    **savefig)
         write_atomic(png_path, picture.getvalue(), failure=lambda reason: StudyOutputError(
             f"{reason}; the files written before are intact"))
     except BaseException:

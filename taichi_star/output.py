@@ -23,8 +23,8 @@ from .checks import is_whole
 from .extras import require
 from .geometry import CENTRE
 from .params import PARAMETER_UNITS, StarParams, check_number, parameter_column
-from .provenance import (TABLE_SHA256, TEMPORARY_MARK, code_record, file_path, require_folder,
-                         table_stamp, write_atomic)
+from .provenance import (TABLE_SHA256, TEMPORARY_MARK, code_record, file_path, machine,
+                         provenance_json, require_folder, table_stamp, write_atomic)
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
 __all__ = ["to_xarray", "summary_of_dataset", "read_provenance", "animate", "column_unit",
@@ -56,9 +56,10 @@ shrinks with the title."""
 
 UNITS = {"_seconds_per_wall_s": "1", "_seconds_per_s": "1", "_per_wall_s": "1/s", "_per_s": "1/s",
          "_gb_s": "GB/s", "_mm_s": "mm/s", "_mm": "mm", "_deg": "degree", "_ms": "ms", "_us": "us",
-         "_s": "s", "_m": "m"}
-"""Units of result columns by name suffix, the first match counting (longer suffixes first):
-simulated seconds per wall second are a ratio, robot-steps per second a rate."""
+         "_n_s_m": "N*s/m", "_s": "s", "_m": "m"}
+"""Units of result columns by name suffix, the longest match counting (`column_unit`):
+simulated seconds per wall second are a ratio, robot-steps per second a rate, a jet's impulse
+N·s per metre of height."""
 PARAMETER_COLUMN_UNITS = {parameter_column(name): unit for name, unit in PARAMETER_UNITS.items()}
 """Units of the numeric parameter columns (youngs_modulus_pa: Pa, alpha: 1)."""
 
@@ -83,9 +84,11 @@ def column_unit(name: str) -> str:
         return "/".join(f"({unit})" if "/" in unit else unit for unit in (output, field))
     if name in PARAMETER_COLUMN_UNITS:
         return PARAMETER_COLUMN_UNITS[name]
-    for suffix, unit in UNITS.items():
+    # the longest first, whatever the table's order (the first match counted, and
+    # impulse_x_n_s_m, matching "_m", was in metres: an audit)
+    for suffix in sorted(UNITS, key=len, reverse=True):
         if name.endswith(suffix):
-            return unit
+            return UNITS[suffix]
     return ""
 
 
@@ -97,12 +100,17 @@ def column_units(columns) -> dict:
 def provenance(result, columns=None) -> dict:
     """What produced `result`, as the studies' CSV sidecars record it: the code and runtime
     (`provenance.code_record`: taichi_star_version, git_commit, git_dirty, a dirty checkout's
-    git_changes_sha256, Taichi and Python versions, date); solver (every SolverConfig field);
+    git_changes_sha256, Taichi and Python versions, date); the `machine` (`provenance.machine`:
+    CPU model, cores, vector instruction sets, caches, GPUs, platform) and the `arch` the run
+    used (None for a result that does not say); for a `run_batch` result whose run store
+    more than one code version wrote, `code_versions` (each with the chunks it made: the code
+    record above is the writer's alone); solver (every SolverConfig field);
     parameters (the StarParams fields equal across the instances, by field name) and
     varying_parameters (the fields that differ, whose values are in the table's columns);
     units of the table's `columns` (default the summary's); with the result's `timing` (a
     `simulate` call's), its phases in s (compilation apart), its robot-steps and
-    robot_steps_per_s."""
+    robot_steps_per_s (null for a run of no measurable time: every number JSON cannot hold
+    is written as null, `provenance.provenance_json`)."""
     summary = result.summary
     parameters, varying = {}, []
     for name, column in StarParams.columns().items():
@@ -117,7 +125,9 @@ def provenance(result, columns=None) -> dict:
     if result.timing is not None:
         timing = {"timing": {**dataclasses.asdict(result.timing),
                              "robot_steps_per_s": result.timing.robot_steps_per_s}}
-    return {**code_record(), "solver": dataclasses.asdict(result.solver),
+    mixed = {} if result.code_versions is None else {"code_versions": result.code_versions}
+    return {**code_record(), **mixed, "machine": machine(), "arch": result.arch,
+            "solver": dataclasses.asdict(result.solver),
             "parameters": parameters, "varying_parameters": varying,
             "units": column_units(summary.columns if columns is None else columns), **timing}
 
@@ -145,7 +155,7 @@ def parquet_bytes(frame: pd.DataFrame, metadata: Mapping) -> bytes:
                             and not frame[column].map(lambda v: isinstance(v, str)).all()})
     table = pa.Table.from_pandas(frame, preserve_index=False)
     schema_metadata = {**(table.schema.metadata or {}),
-                       PROVENANCE_KEY.encode(): json.dumps(metadata, default=str).encode()}
+                       PROVENANCE_KEY.encode(): provenance_json(metadata).encode()}
     sink = pa.BufferOutputStream()
     # a CRC per data page: `read_provenance` verifies them, so that a flipped byte in the
     # values is an error rather than another number (390 of a file's 42,648 single-byte
@@ -177,7 +187,7 @@ def to_csv(result, path, table: str = "summary") -> Path:
     facts = {**provenance(result, frame.columns), **table_stamp(len(frame), data)}
     write_atomic(path, data, failure=OSError,
                  sidecar=(Path(f"{path}.json"),
-                          (json.dumps(facts, indent=2, default=str) + "\n").encode()))
+                          (provenance_json(facts, indent=2) + "\n").encode()))
     return path
 
 
@@ -187,7 +197,8 @@ def to_netcdf(result, path) -> Path:
     require_folder(path)
     require("netCDF4", "io")
     dataset = to_xarray(result)
-    # netCDF's library reports a full disk as a RuntimeError ("NetCDF: HDF error")
+    # netCDF's library reports a full disk as a RuntimeError ("NetCDF: HDF error") or as a
+    # PermissionError (below)
     # a Fletcher-32 checksum per chunk of every numeric variable: HDF5 checks it whenever the
     # file is read, by any reader (a flipped byte read back as another value: an audit)
     # (checksums need chunked variables: a small file's per-variable chunk indexes make it
@@ -195,7 +206,13 @@ def to_netcdf(result, path) -> Path:
     encoding = {name: {"fletcher32": True} for name, variable in dataset.variables.items()
                 if variable.dtype.kind in "biufc" and variable.ndim}
     with _scratch_file(path, (OSError, RuntimeError)) as scratch:
-        dataset.to_netcdf(scratch, encoding=encoding)
+        try:
+            dataset.to_netcdf(scratch, encoding=encoding)
+        except PermissionError as error:
+            # netCDF4 reports a full disk (ENOSPC) as EACCES, "Permission denied" (an audit);
+            # the scratch folder it writes into was created just now, so it is writable
+            raise OSError(error.errno, f"netCDF4 reported: {error.strerror}; the folder is "
+                                       f"writable, so the disk may be full") from None
         data = scratch.read_bytes()
     write_atomic(path, data, failure=OSError)
     return path
@@ -316,6 +333,16 @@ def summary_of_dataset(dataset) -> pd.DataFrame:
     return pd.DataFrame({name: dataset[name].to_numpy() for name in names})
 
 
+def _netcdf_units(name: str, values: np.ndarray) -> str:
+    """The `units` attribute of a per-instance variable: its column's unit, else "1" for
+    numbers (dimensionless, counts, flags: the project's unit of a pure number) and "" for
+    text, which has no unit."""
+    unit = column_unit(name)
+    if unit:
+        return unit
+    return "1" if values.dtype.kind in "biuf" else ""
+
+
 def _variable_of_column(column: str) -> str:
     """A sensitivity column's name as a netCDF variable's, which cannot hold "/":
     "d(x_mm)/d(actuator_gains[2])" → "d_x_mm__d_actuator_gains_2"."""
@@ -330,10 +357,12 @@ def to_xarray(result):
     with recorded shapes, `positions` (time, instance, node, xy) in m; with sensitivities,
     each of their columns (`sensitivities` per instance, `trajectory_sensitivities` per record)
     as a variable "d_OUTPUT__d_PARAMETER" whose attributes hold the column's name ("column"),
-    its units and sensitivity = 1 (`summary_of_dataset` leaves them out). Every variable
-    carries a `units` attribute; the dataset's attributes hold the `provenance` as JSON
-    (`provenance`) and its main entries one by one (taichi_star_version, git_commit, git_dirty, the solver's
-    integrator, dt_s, adaptive, precision)."""
+    its units and sensitivity = 1 (`summary_of_dataset` leaves them out). Every variable and
+    coordinate carries a `units` attribute: its column's (`column_unit`), "1" for a
+    dimensionless number, count, flag or index (instance, node), "" for text (gait, status,
+    the labels of xy); the dataset's attributes hold the `provenance` as JSON (`provenance`)
+    and its main entries one by one (taichi_star_version, git_commit, git_dirty, arch, the
+    solver's integrator, dt_s, adaptive, precision)."""
     xr = require("xarray", "io")
 
     summary = result.summary.reset_index(drop=True)
@@ -345,14 +374,14 @@ def to_xarray(result):
     # summary_column: whether the summary had the column, so that `summary_of_dataset` gives a
     # batch's back (it dropped it) and adds none to a plain result's (1/0: netCDF has no bool)
     coordinates = {"instance": ("instance", instances,
-                                {"summary_column": int("instance" in summary)})}
+                                {"units": "1", "summary_column": int("instance" in summary)})}
     variables = {}
     for name in summary.columns.drop("instance", errors="ignore"):
         values = summary[name].to_numpy()
         if values.dtype == object or pd.api.types.is_string_dtype(summary[name]):
             values = summary[name].astype(str).to_numpy()
         into = coordinates if name in parameter_columns else variables
-        into[name] = ("instance", values, {"units": column_unit(name)})
+        into[name] = ("instance", values, {"units": _netcdf_units(name, values)})
     trajectory = result.trajectory
     if len(trajectory):
         times = np.sort(trajectory["t_s"].unique())
@@ -379,15 +408,16 @@ def to_xarray(result):
                     table[name].reindex(index=instances, columns=times).to_numpy(),
                     {"units": column_unit(name), "column": name, "sensitivity": 1})
     if result.shapes is not None:
-        coordinates["node"] = np.arange(result.shapes.shape[2])
-        coordinates["xy"] = ["x", "y"]
+        coordinates["node"] = ("node", np.arange(result.shapes.shape[2]), {"units": "1"})
+        coordinates["xy"] = ("xy", ["x", "y"], {"units": ""})
         variables["positions"] = (("time", "instance", "node", "xy"), result.shapes, {"units": "m"})
     dataset = xr.Dataset(variables, coords=coordinates)
     facts = provenance(result)
-    dataset.attrs.update({"provenance": json.dumps(facts, default=str),
+    dataset.attrs.update({"provenance": provenance_json(facts),
                           "taichi_star_version": facts["taichi_star_version"],
                           "git_commit": facts["git_commit"] or "unknown",
                           "git_dirty": str(facts["git_dirty"]).lower(),
+                          "arch": facts["arch"] or "unknown",
                           "integrator": result.solver.integrator, "dt_s": result.solver.dt,
                           "adaptive": int(result.solver.adaptive),
                           "precision": result.solver.precision})

@@ -456,8 +456,9 @@ class StarParams:
     @classmethod
     def from_row(cls, row, **overrides) -> "StarParams":
         """The parameters of one row of a result table (a pandas Series or a mapping with the
-        parameter columns of `columns`, e.g. `result.summary.iloc[3]`, or a row read back
-        from a CSV, Parquet or netCDF file), with some fields changed. The actuator profile may
+        parameter columns of `columns`, e.g. `result.summary.iloc[3]`, a row read back from a
+        CSV, Parquet or netCDF file, or an xarray Dataset's row, `dataset.isel(instance=3)`
+        of `to_xarray` or of a netCDF file), with some fields changed. The actuator profile may
         be a CurvatureProfile or its text (`CurvatureProfile.to_text`, as result tables hold
         it); the per-actuator tuples (`actuator_gains`, ...) tuples or their text, read back
         exactly. Raises ValueError naming a missing column or an unreadable profile."""
@@ -473,10 +474,12 @@ class StarParams:
             if column not in row:
                 raise ValueError(f"row has no column {column!r} (StarParams field {name!r})")
             value = row[column]
+            # a NumPy scalar, or a 0-d array of an xarray Dataset's row (`to_xarray`, netCDF:
+            # `dataset.isel(instance=3)`): its Python value
+            if hasattr(value, "item") and np.ndim(value) == 0:
+                value = value.item()
             if name == "actuator_profile" and not isinstance(value, CurvatureProfile):
                 value = CurvatureProfile.from_text(value)
-            if isinstance(value, np.generic):
-                value = value.item()
             values[name] = value
         return cls(**{**values, **overrides})
 

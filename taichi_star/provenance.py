@@ -8,41 +8,87 @@ from __future__ import annotations
 import datetime
 import errno
 import hashlib
+import json
+import math
 import os
 import platform
 import subprocess
 import threading
 from pathlib import Path
-from typing import Callable, Dict, Optional, Tuple
+from typing import Callable, Dict, List, Mapping, Optional, Tuple
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
-__all__ = ["code_record", "code_version", "table_stamp", "write_atomic"]
+__all__ = ["code_record", "code_version", "machine", "cpu_model", "vector_extensions",
+           "cache_sizes", "nvidia_smi", "table_stamp", "write_atomic", "finite_json",
+           "provenance_json"]
+
+
+def _git(root: Path, *arguments: str, timeout: float = 10) -> Optional[bytes]:
+    """The output of `git ARGUMENTS` run in `root`, None where git fails or is missing."""
+    try:
+        done = subprocess.run(["git", *arguments], cwd=root, capture_output=True, timeout=timeout)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return done.stdout if done.returncode == 0 else None
+
+
+PACKAGE_FOLDERS = ("taichi_star", "studies")
+"""The folders of a checkout whose untracked files are code (`code_version`): a new module
+changes what runs; an untracked file elsewhere (notes, a scratch table) does not."""
+
+
+def _source_checkout(root: Path) -> bool:
+    """Whether `root` (the folder above the package) is the top of a git checkout whose HEAD
+    holds this module: a taichi_star installed into someone else's repository (its .venv/
+    inside that repository) recorded that repository's commit and dirty flag (an audit). HEAD's
+    tree, not the index, so that a damaged index still names the commit."""
+    top = _git(root, "rev-parse", "--show-toplevel")
+    if top is None or Path(os.fsdecode(top.strip())).resolve() != root:
+        return False
+    module = Path(__file__).resolve().relative_to(root).as_posix()
+    return bool(_git(root, "ls-tree", "--name-only", "HEAD", "--", module))
+
+
+def _untracked_package_files(root: Path) -> Optional[List[str]]:
+    """The untracked (not ignored) files under `PACKAGE_FOLDERS`, paths relative to `root`
+    in git's order; None where git cannot list them."""
+    listed = _git(root, "ls-files", "-z", "--others", "--exclude-standard", "--",
+                  *PACKAGE_FOLDERS)
+    return None if listed is None else [os.fsdecode(name) for name in listed.split(b"\0")
+                                        if name]
 
 
 def code_version() -> Dict[str, object]:
-    """{"version": the package version, "commit": git HEAD of the source checkout or None,
-    "dirty": whether tracked files differ from it (None outside git)}, and where they do,
-    "changes_sha256": the SHA-256 of those differences (`git diff HEAD`), so that two edits of
-    one commit are two versions (a run resumed after another edit of a dirty checkout mixed
-    the two codes' chunks without the warning a version change gives; an audit)."""
+    """{"version": the package version, "commit": git HEAD of the package's own checkout or
+    None, "dirty": whether its tracked files differ from that commit or untracked files lie in
+    taichi_star/ or studies/ (None outside git)}, and where it is dirty, "changes_sha256": the
+    SHA-256 of those differences (`git diff HEAD`, then each untracked file's path and
+    content), so that two edits of one commit are two versions (a run resumed after another
+    edit of a dirty checkout mixed the two codes' chunks without the warning a version change
+    gives; an audit). The commit is None where the folder above the package is not the top
+    of a checkout tracking it: a package installed inside another repository records that
+    repository's nothing, only its own version."""
     from . import __version__
     root = Path(__file__).resolve().parents[1]
     commit = dirty = changes = None
-    try:
-        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True,
-                              text=True, timeout=10)
-        if head.returncode == 0 and head.stdout.strip():
-            commit = head.stdout.strip()
-            status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
-                                    cwd=root, capture_output=True, text=True, timeout=10)
-            dirty = bool(status.stdout.strip()) if status.returncode == 0 else None
-            if dirty:
-                diff = subprocess.run(["git", "diff", "HEAD", "--no-color", "--no-ext-diff"],
-                                      cwd=root, capture_output=True, timeout=60)
-                if diff.returncode == 0:
-                    changes = hashlib.sha256(diff.stdout).hexdigest()
-    except (OSError, subprocess.SubprocessError):
-        pass
+    head = _git(root, "rev-parse", "HEAD") if _source_checkout(root) else None
+    if head and head.strip():
+        commit = head.decode().strip()
+        status = _git(root, "status", "--porcelain", "--untracked-files=no")
+        untracked = _untracked_package_files(root)
+        if status is not None and untracked is not None:
+            dirty = bool(status.strip() or untracked)
+        if dirty:
+            diff = _git(root, "diff", "HEAD", "--no-color", "--no-ext-diff", timeout=60)
+            if diff is not None:
+                digest = hashlib.sha256(diff)
+                for name in untracked:
+                    try:
+                        content = (root / name).read_bytes()
+                    except OSError:  # removed since it was listed: counted as gone
+                        content = b""
+                    digest.update(b"\0untracked\0" + name.encode() + b"\0" + content)
+                changes = digest.hexdigest()
     version = {"version": __version__, "commit": commit, "dirty": dirty}
     return version if changes is None else {**version, "changes_sha256": changes}
 
@@ -69,11 +115,114 @@ def code_record() -> Dict[str, object]:
             "date": datetime.datetime.now().astimezone().isoformat(timespec="seconds")}
 
 
+def cpuinfo_text() -> str:
+    """The text of /proc/cpuinfo ("" where there is none)."""
+    try:
+        return Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return ""
+
+
+def cpu_model(cpuinfo: Optional[str] = None) -> str:
+    """The CPU model name from the text of /proc/cpuinfo (read when not given;
+    platform.processor() where it names none)."""
+    for line in (cpuinfo_text() if cpuinfo is None else cpuinfo).splitlines():
+        if line.lower().startswith("model name"):
+            return line.split(":", 1)[1].strip()
+    return platform.processor() or platform.machine() or "unknown"
+
+
+VECTOR_EXTENSIONS = ("sse2", "avx", "fma", "avx2", "avx512f", "asimd", "sve")
+"""The CPU's vector instruction sets a sidecar names, from /proc/cpuinfo's flags (x86) or
+features (Arm), each family from the narrowest to the widest, so that the last one a CPU has
+is its widest: which lanes LLVM can use for a kernel, why one machine's figures differ from
+another's."""
+
+
+def vector_extensions(cpuinfo: str) -> list:
+    """The VECTOR_EXTENSIONS among the first processor's flags (or features) in the text of
+    /proc/cpuinfo, in VECTOR_EXTENSIONS's order."""
+    for line in cpuinfo.splitlines():
+        name, _, value = line.partition(":")
+        if name.strip().lower() in ("flags", "features"):
+            flags = set(value.split())
+            return [extension for extension in VECTOR_EXTENSIONS if extension in flags]
+    return []
+
+
+def cache_sizes(cache_folder: Path) -> Dict[str, str]:
+    """{"L1d", "L1i", "L2", "L3": size as the kernel writes it, "48K"} of the caches in a
+    /sys/devices/system/cpu/cpuN/cache folder (empty where there is none): with the cores, what
+    decides whether a batch's matrices stay in cache."""
+    sizes = {}
+    for index in sorted(cache_folder.glob("index*")):
+        try:
+            level = (index / "level").read_text().strip()
+            kind = (index / "type").read_text().strip()
+            size = (index / "size").read_text().strip()
+        except OSError:
+            continue
+        suffix = {"Data": "d", "Instruction": "i"}.get(kind, "")
+        sizes[f"L{level}{suffix}"] = size
+    return sizes
+
+
+def nvidia_smi(query: str) -> list:
+    """One line per NVIDIA GPU of `nvidia-smi --query-gpu=query` (empty without nvidia-smi)."""
+    try:
+        output = subprocess.run(["nvidia-smi", f"--query-gpu={query}", "--format=csv,noheader"],
+                                capture_output=True, text=True, timeout=30, check=True).stdout
+    except (OSError, subprocess.SubprocessError):
+        return []
+    return [line.strip() for line in output.splitlines() if line.strip()]
+
+
+def gpu_names() -> list:
+    """The names of the NVIDIA GPUs nvidia-smi lists (empty without nvidia-smi)."""
+    return nvidia_smi("name")
+
+
+def machine() -> Dict[str, object]:
+    """cpu_model, cores, vector_extensions, caches (`cache_sizes`), gpus, platform of this
+    machine."""
+    cpuinfo = cpuinfo_text()
+    return {"cpu_model": cpu_model(cpuinfo), "cores": os.cpu_count(),
+            "vector_extensions": vector_extensions(cpuinfo),
+            "caches": cache_sizes(Path("/sys/devices/system/cpu/cpu0/cache")),
+            "gpus": gpu_names(), "platform": platform.platform()}
+
+
+def finite_json(value):
+    """`value` (mappings, lists and tuples of numbers and text) with every non-finite float
+    (NaN, ±inf) as None, for JSON: Python's json writes NaN, which is not JSON (a run of no
+    measurable time made `"robot_steps_per_s": NaN`, and JSON readers refused the sidecar: an
+    audit)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, Mapping):
+        return {key: finite_json(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite_json(item) for item in value]
+    return value
+
+
+def provenance_json(facts: Mapping, indent: Optional[int] = None,
+                    default: Callable[[object], str] = str) -> str:
+    """`facts` as strict JSON text: non-finite numbers as null (`finite_json`), anything JSON
+    has no type for as `default(value)` (its text), and a ValueError rather than a NaN should
+    one be left."""
+    return json.dumps(finite_json(facts), indent=indent, default=default, allow_nan=False)
+
+
 def file_path(path, what: str) -> Path:
     """`path` as a Path; ValueError naming `what` (e.g. "path of the CSV file") unless it is
-    a str or an os.PathLike, before anything is computed or written."""
+    a str or an os.PathLike naming a file ("", ".", "/" name none), before anything is
+    computed or written."""
     if not isinstance(path, (str, os.PathLike)):
         raise ValueError(f"path must be the {what}, got {type(path).__name__}")
+    if Path(path).name == "":  # "" is Path("."): pathlib's error named no argument
+        raise ValueError(f"path must be the {what}, got {os.fspath(path)!r}, which names no "
+                         f"file")
     return Path(path)
 
 

@@ -7,7 +7,7 @@ import math
 import operator
 import time
 from dataclasses import dataclass, field
-from typing import Optional, Sequence
+from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 import pandas as pd
@@ -88,6 +88,13 @@ class SimulationResult:
     sensitivities: Optional[pd.DataFrame] = field(default=None, repr=False)
     trajectory_sensitivities: Optional[pd.DataFrame] = field(default=None, repr=False)
     timing: Optional[RunTiming] = field(default=None, repr=False)
+    arch: Optional[str] = field(default=None, repr=False)
+    """The arch the run used ("cpu", "gpu", ...; `simulate`'s and `run_batch`'s argument), which
+    the result files record (results on two archs may differ in the last bits)."""
+    code_versions: Optional[List[Dict]] = field(default=None, repr=False)
+    """A `run_batch` result read from a run store that more than one code version wrote: each
+    version (`provenance.code_version`) with the indices of the chunks it made ("chunks"), as
+    the store's manifest keeps them; None for a result of one code version."""
 
     def sensitivity(self, output: str, parameter: str, trajectory: bool = False) -> np.ndarray:
         """d(output)/d(parameter) for every instance: (B,) for a summary output
@@ -300,6 +307,7 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     # once for the whole batch, its rows renumbered (each chunk named its own rows)
     warn_about_ok_instances(result.summary, solver)
     result.timing = dataclasses.replace(result.timing, setup_s=result.timing.setup_s + initialise_s)
+    result.arch = arch
     return result
 
 

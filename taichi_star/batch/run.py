@@ -160,8 +160,11 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
         members = np.concatenate([task.members for task in tasks])
         shape_array = stacked[:, np.argsort(members, kind="stable")]
     topology = build_topology(params[0]) if len(topology_keys) == 1 else None
+    # a store resumed under another code holds chunks of each: the result files say which
+    makers = store.code_versions() if store is not None else []
     return SimulationResult(summary=summary, trajectory=trajectory, shapes=shape_array,
-                            topology=topology, solver=solver, timing=timing)
+                            topology=topology, solver=solver, timing=timing, arch=arch,
+                            code_versions=makers if len(makers) > 1 else None)
 
 
 @contextlib.contextmanager

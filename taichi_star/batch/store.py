@@ -3,7 +3,9 @@ long batch can be resumed after a crash or a kill.
 
 - `manifest.json`: the run's *definition* (instance count, SHA-256 of every instance's
   parameters, the chunk plan, duration or cycles, solver, arch, records, steady window), its
-  SHA-256, and for information the code version and the times.
+  SHA-256, and for information the code version of its latest opening (`code`), every code
+  version that made its chunks with the chunks each made (`code_versions`, brought up to date
+  as each chunk is stored), and the times.
 - `chunk_<index>.parquet`: one finished chunk's summary table (Parquet: a portable format that
   keeps every float bit and dtype; it needs pyarrow, the `io` extra, which `RunStore.open`
   asks for before any compute). Its schema metadata carries the definition's SHA-256, the
@@ -39,7 +41,7 @@ import numpy as np
 import pandas as pd
 
 from ..actuation import CurvatureProfile
-from ..checks import is_whole
+from ..checks import is_whole, warn_user
 from ..extras import require
 from ..provenance import code_version, is_temporary, write_atomic
 from .tasks import ChunkTask
@@ -206,6 +208,12 @@ class RunStore:
                 raise ValueError("its resumed entry is not a list")
             if not isinstance(manifest.get("complete", False), bool):
                 raise ValueError("its complete entry is not true or false")
+            versions = manifest.get("code_versions", [])
+            if not isinstance(versions, list) or not all(
+                    isinstance(entry, dict) and isinstance(entry.get("chunks"), list)
+                    and all(is_whole(chunk) for chunk in entry["chunks"]) for entry in versions):
+                raise ValueError("its code_versions entry is not a list of code versions, each "
+                                 "with its chunks")
             size = manifest["definition"].get("chunk_size")
             if size is not None and not (is_whole(size) and size >= 1):
                 raise ValueError(f"its chunk size {size!r} is not a whole number >= 1")
@@ -251,8 +259,12 @@ class RunStore:
                         f"delete the folder")
                 done = [task.index for task in tasks if self._verified(task)]
                 if old.get("code") != version:
-                    log.warning("resuming a run started with code %s; now %s", old.get("code"),
-                                version)
+                    # allowed (a typo fixed), but its table then mixes two codes' chunks: said
+                    # to the user, and recorded in `code_versions` (a log line alone before,
+                    # and the manifest kept only the last code: an audit)
+                    warn_user(f"resuming a run started with code {old.get('code')}; now "
+                              f"{version}: the manifest's code_versions records which chunks "
+                              f"each made")
                 history = {"created": old.get("created", now),
                            "resumed": list(old.get("resumed", [])) + [now]}
             elif not old.get("complete") and finished:
@@ -273,9 +285,15 @@ class RunStore:
                 self._remove(stale)
         self.manifest = {"definition": self.definition,
                          "definition_sha256": self.definition_sha256, "code": version,
+                         "code_versions": makers_of_chunks(old, done),
                          "created": now, "complete": False, **history}
         self._write_manifest()
         return done
+
+    def code_versions(self) -> List[Dict]:
+        """Every code version that made the stored chunks, each {"code": the version, "chunks":
+        the indices it made} in the order they first ran (`makers_of_chunks`)."""
+        return self.manifest.get("code_versions", [])
 
     def _refuse_entries_that_are_not_files(self):
         """RunStoreError naming the first of the store's names (its manifest, a chunk's or a
@@ -351,6 +369,10 @@ class RunStore:
             extra["trajectory_sha256"] = self._write_table(self.trajectory_path(task.index),
                                                            task, trajectory)
         self._write_table(self.chunk_path(task.index), task, summary, extra)
+        if self.manifest:  # opened: a store written without `open` has no manifest to keep
+            self.manifest["code_versions"] = _with_chunks(self.code_versions(),
+                                                          self.manifest["code"], [task.index])
+            self._write_manifest()
         return self.chunk_path(task.index)
 
     def _write_table(self, path: Path, task: ChunkTask, frame: pd.DataFrame,
@@ -457,6 +479,34 @@ class RunStore:
         self.manifest["complete"] = True
         self.manifest["finished"] = datetime.datetime.now().isoformat(timespec="seconds")
         self._write_manifest()
+
+
+def makers_of_chunks(manifest: Optional[Dict], chunks: Sequence[int]) -> List[Dict]:
+    """The code versions that made `chunks` (those kept of a run: finished and verified), from
+    its `manifest` (None: none was there): each of its `code_versions` entries with those of
+    its chunks that are kept (a damaged chunk recomputed is no longer its maker's; an entry
+    left without chunks is dropped); a kept chunk listed under none (a manifest from before
+    code_versions, or a kill between storing the chunk and the manifest) under the manifest's
+    `code`, the version that opened the run last (None without a manifest: unknown)."""
+    kept, listed, makers = set(chunks), set(), []
+    for entry in (manifest or {}).get("code_versions", []):
+        made = sorted((kept & set(entry["chunks"])) - listed)
+        listed.update(made)
+        if made:
+            makers.append({"code": entry.get("code"), "chunks": made})
+    unlisted = sorted(kept - listed)
+    return _with_chunks(makers, (manifest or {}).get("code"), unlisted) if unlisted else makers
+
+
+def _with_chunks(makers: List[Dict], code: Optional[Dict], chunks: Sequence[int]) -> List[Dict]:
+    """`makers` (`makers_of_chunks`) with `chunks` added to `code`'s entry, which is appended
+    where it has none."""
+    makers = [dict(entry) for entry in makers]
+    for entry in makers:
+        if entry["code"] == code:
+            entry["chunks"] = sorted(set(entry["chunks"]) | set(chunks))
+            return makers
+    return makers + [{"code": code, "chunks": sorted(set(chunks))}]
 
 
 def stored_chunk_size(path, flag: str = "run_dir") -> Optional[int]:

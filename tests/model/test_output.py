@@ -123,6 +123,34 @@ def test_xarray_holds_the_tables_with_units_and_survives_netcdf(recorded, tmp_pa
         assert list(back.gait.values) == ["A1+A2", "A3"]
 
 
+def test_every_netcdf_variable_and_coordinate_has_units_one_for_pure_numbers(recorded, tmp_path):
+    """The docstring promises a `units` attribute on every variable: the coordinates instance,
+    node and xy had none, and pure numbers had "" where the project writes "1"; text (gait,
+    status, the xy labels) has no unit, ""."""
+    import xarray as xr
+
+    with xr.open_dataset(recorded.to_netcdf(tmp_path / "result.nc")) as back:
+        units = {name: back[name].attrs.get("units") for name in [*back.coords, *back.data_vars]}
+    assert None not in units.values(), [name for name, unit in units.items() if unit is None]
+    assert {name: units[name] for name in ("instance", "node", "xy", "time", "steps",
+                                           "shape_sane", "alpha", "n_arc", "gait", "status",
+                                           "speed_mm_s")} == {
+        "instance": "1", "node": "1", "xy": "", "time": "s", "steps": "1", "shape_sane": "1",
+        "alpha": "1", "n_arc": "1", "gait": "", "status": "", "speed_mm_s": "mm/s"}
+
+
+def test_a_row_of_an_xarray_dataset_gives_its_parameters_back(recorded, tmp_path):
+    """`dataset.isel(instance=i)` (of `to_xarray`, or read from netCDF) holds 0-d arrays:
+    `StarParams.from_row` failed on them with a confusing message (an audit)."""
+    import xarray as xr
+
+    dataset = recorded.to_xarray()
+    assert [ts.StarParams.from_row(dataset.isel(instance=i)) for i in (0, 1)] == RECORDED_PARAMS
+    with xr.open_dataset(recorded.to_netcdf(tmp_path / "result.nc")) as back:
+        assert ts.StarParams.from_row(back.isel(instance=1), alpha=0.3) == \
+            RECORDED_PARAMS[1].replace(alpha=0.3)
+
+
 def test_sensitivities_go_to_xarray_and_netcdf_beside_the_summary_not_into_it(tmp_path):
     """to_xarray left the sensitivities out without a word, though to_csv and to_parquet write
     them (an audit, 2026-12): each column is a variable (netCDF names hold no "/"), per
@@ -233,6 +261,9 @@ def test_a_movie_is_written_whole_or_leaves_the_previous_one(recorded, tmp_path,
 
 @pytest.mark.parametrize("name, failing, error, reason", [
     ("r.nc", "xarray.Dataset.to_netcdf", RuntimeError("NetCDF: HDF error"), "NetCDF: HDF error"),
+    # netCDF4's word for ENOSPC; the folder was just written into, so the disk is the suspect
+    ("r.nc", "xarray.Dataset.to_netcdf", PermissionError(13, "Permission denied"),
+     "netCDF4 reported: Permission denied; the folder is writable, so the disk may be full"),
     ("r.gif", "matplotlib.animation.Animation.save", OSError(28, "No space left on device"),
      "No space left on device"),
     ("r.mp4", "matplotlib.animation.Animation.save",
@@ -241,9 +272,10 @@ def test_a_file_drawn_beside_first_fails_naming_the_file_asked_for(recorded, tmp
                                                                    monkeypatch, name, failing,
                                                                    error, reason):
     """On a real full disk the scratch copy fails first (an audit): netCDF's library raised
-    "RuntimeError: NetCDF: HDF error", a GIF an OSError naming no file, ffmpeg a
-    CalledProcessError. Each is now an OSError naming the file asked for, and the scratch
-    folder beside it is gone."""
+    "RuntimeError: NetCDF: HDF error" or a PermissionError ("Permission denied", which sent
+    users after permissions), a GIF an OSError naming no file, ffmpeg a CalledProcessError.
+    Each is now an OSError naming the file asked for, and the scratch folder beside it is
+    gone."""
     def fail(*args, **kwargs):
         raise error
     monkeypatch.setattr(failing, fail)

@@ -116,6 +116,85 @@ def test_a_result_file_that_is_not_a_path_is_a_value_error_naming_the_argument(r
         write(results[0])
 
 
+@pytest.mark.parametrize("write, what", [
+    (lambda result, path: result.to_csv(path), "the CSV file"),
+    (lambda result, path: result.to_parquet(path), "the Parquet file"),
+    (lambda result, path: result.to_netcdf(path), "the netCDF file"),
+    (lambda result, path: result.animate(path), "the .mp4 or .gif file")])
+@pytest.mark.parametrize("path", ["", ".", Path("/")])
+def test_a_result_file_path_that_names_no_file_is_a_value_error_naming_the_argument(
+        results, tmp_path, monkeypatch, write, what, path):
+    """"" was pathlib's "PosixPath('.') has an empty name" (an audit); a path naming a file
+    is written (the other side of the boundary)."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ValueError, match=rf"^path must be the path of {re.escape(what)}, got "
+                                         rf"'{re.escape(os.fspath(path))}', which names no "
+                                         rf"file$"):
+        write(results[0], path)
+    assert list(tmp_path.iterdir()) == []
+    if what != "the .mp4 or .gif file":  # a movie needs shapes; its path is checked first
+        assert write(results[0], "r.file") == Path("r.file")
+
+
+def strict_json(text: str):
+    """`text` as JSON, refusing NaN and Infinity (Python's json reads them; JSON has none)."""
+    def refuse(constant):
+        raise ValueError(f"not JSON: {constant}")
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_provenance_of_a_run_of_no_time_is_json_with_null_rates(results, tmp_path):
+    """robot_steps_per_s is NaN for a run of no measurable time: the sidecar, the Parquet
+    metadata and the netCDF attribute held `NaN`, which JSON readers refuse (an audit)."""
+    import pyarrow.parquet as pq
+    import xarray as xr
+
+    result = dataclasses.replace(results[0],
+                                 timing=dataclasses.replace(results[0].timing, run_s=0.0))
+    write_all(result, tmp_path)
+    with xr.open_dataset(tmp_path / "r.nc") as dataset:
+        netcdf = dataset.attrs["provenance"]
+    texts = {"csv": (tmp_path / "r.csv.json").read_text(), "netcdf": netcdf,
+             "parquet": pq.read_schema(tmp_path / "r.parquet").metadata[b"taichi_star"].decode()}
+    for kind, text in texts.items():
+        facts = strict_json(text)
+        assert facts["timing"]["robot_steps_per_s"] is None, kind
+        assert facts["timing"]["robot_steps"] == result.timing.robot_steps, kind
+    # a run of measurable time keeps its number
+    write_all(results[0], tmp_path)
+    facts = strict_json((tmp_path / "r.csv.json").read_text())
+    assert facts["timing"]["robot_steps_per_s"] == results[0].timing.robot_steps_per_s > 0
+
+
+def test_finite_json_writes_null_for_every_non_finite_number_and_refuses_what_is_left():
+    facts = {"a": float("nan"), "b": [1.5, float("inf"), (-float("inf"), 2)], "c": "NaN",
+             "d": np.float64("nan"), "e": 3}
+    assert json.loads(provenance.provenance_json(facts)) == {
+        "a": None, "b": [1.5, None, [None, 2]], "c": "NaN", "d": None, "e": 3}
+    # allow_nan=False: a NaN that gets past finite_json (here through `default`) is an error
+    with pytest.raises(ValueError, match="Out of range float values are not JSON compliant"):
+        provenance.provenance_json({"a": object()}, default=lambda value: float("nan"))
+
+
+def test_library_result_files_record_the_machine_and_the_arch(results, tmp_path):
+    """Only the studies' sidecars recorded the machine, and no file the arch (the result did
+    not keep it: an audit); both are in every file's provenance now."""
+    import xarray as xr
+
+    assert results[0].arch == "cpu"
+    write_all(results[0], tmp_path)
+    machine = provenance.machine()
+    for name in ("r.csv", "r.parquet", "r.nc"):
+        facts = read_provenance(tmp_path / name)
+        assert facts["arch"] == "cpu" and facts["machine"] == machine, name
+    assert set(machine) == {"cpu_model", "cores", "vector_extensions", "caches", "gpus",
+                            "platform"}
+    with xr.open_dataset(tmp_path / "r.nc") as dataset:
+        assert dataset.attrs["arch"] == "cpu"
+    unknown = dataclasses.replace(results[0], arch=None)  # a result built by hand
+    assert read_provenance(unknown.to_csv(tmp_path / "u.csv"))["arch"] is None
+
+
 def write_all(result, folder):
     result.to_csv(folder / "r.csv")
     result.to_parquet(folder / "r.parquet")

@@ -17,6 +17,8 @@ import taichi_star as ts
 from taichi_star.actuation import CurvatureProfile
 from taichi_star.batch import RunStore, RunStoreError, run_batch
 from taichi_star.batch.tasks import ChunkTask
+from taichi_star import provenance
+from taichi_star.output import read_provenance
 
 from studies.__main__ import main as studies_main
 
@@ -263,6 +265,10 @@ def test_a_folder_left_with_only_a_killed_first_manifest_write_starts_afresh(fin
      "its chunk size '8' is not a whole number >= 1"),
     (lambda manifest: manifest["definition"].update(chunk_size=0),
      "its chunk size 0 is not a whole number >= 1"),
+    (lambda manifest: manifest.update(code_versions={"code": None}),
+     "its code_versions entry is not a list of code versions, each with its chunks"),
+    (lambda manifest: manifest.update(code_versions=[{"code": None, "chunks": ["0"]}]),
+     "its code_versions entry is not a list of code versions, each with its chunks"),
 ])
 def test_a_manifest_of_the_wrong_kinds_is_damage(finished, tmp_path, change, reason):
     """Valid JSON with entries of the wrong kind raised a TypeError or another library's
@@ -275,6 +281,35 @@ def test_a_manifest_of_the_wrong_kinds_is_damage(finished, tmp_path, change, rea
     (folder / "manifest.json").write_text(json.dumps(manifest))
     with pytest.raises(RunStoreError, match=f"manifest.json is damaged \\({reason}\\)"):
         run(folder, resume=True)
+
+
+def test_a_batch_resumed_under_other_code_says_so_in_its_result_files(finished, tmp_path):
+    """A resumed store mixing two codes' chunks: the manifest kept only the last code, and the
+    result's files named only the writer's (an audit). The result and its files list each
+    code with its chunks; a store of one code adds nothing (the other side)."""
+    source, summary = finished
+    folder = tmp_path / "run"
+    folder.mkdir()
+    for path in source.iterdir():
+        (folder / path.name).write_bytes(path.read_bytes())
+    manifest = json.loads((folder / "manifest.json").read_text())
+    old = {"version": "0.0.1", "commit": "abc", "dirty": False}
+    manifest.update(complete=False, code=old, code_versions=[{"code": old, "chunks": [0, 1, 2]}])
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    (folder / "chunk_000002.parquet").unlink()
+    with pytest.warns(RuntimeWarning, match="resuming a run started with code"):
+        result = run_batch(PARAMS, DURATION, solver=SOLVER, chunk_size=CHUNK, run_dir=folder,
+                           resume=True)
+    pd.testing.assert_frame_equal(result.summary, summary, check_exact=True)
+    now = provenance.code_version()
+    makers = [{"code": old, "chunks": [0, 1]}, {"code": now, "chunks": [2]}]
+    assert result.code_versions == makers and result.arch == "cpu"
+    assert json.loads((folder / "manifest.json").read_text())["code_versions"] == makers
+    assert read_provenance(result.to_csv(tmp_path / "r.csv"))["code_versions"] == makers
+    one_code = run_batch(PARAMS, DURATION, solver=SOLVER, chunk_size=CHUNK,
+                         run_dir=tmp_path / "fresh")
+    assert one_code.code_versions is None
+    assert "code_versions" not in read_provenance(one_code.to_csv(tmp_path / "fresh.csv"))
 
 
 def test_a_file_the_store_cannot_remove_is_a_run_store_error(finished, tmp_path, monkeypatch):

@@ -20,6 +20,7 @@ import taichi_star
 from taichi_star import SolverConfig, StarParams
 from taichi_star import metrics, provenance
 from taichi_star.gait import Gait, symmetry_classes
+from taichi_star.params import PER_ACTUATOR_FIELDS, parameter_column
 from taichi_star.primitives import class_symmetries, transform_vectors
 from taichi_star.experiment import (FIG4C_COLUMNS, PAPER_GAITS)
 
@@ -486,6 +487,49 @@ def test_gaits_direction_images_are_the_library_symmetry_in_minus_180_to_180_inc
     assert -180.0 < image <= 180.0
     if direction_deg % 45.0 == 0.0:
         assert image % 45.0 == 0.0
+
+
+def test_a_study_csv_keeps_the_parameters_exact_and_rounds_the_other_floats(tmp_path):
+    """Every float was written to 10 digits, so `StarParams.from_row` of a study's row was not
+    the robot simulated (an audit): the parameter columns are exact (the shortest text that
+    reads back to the float, an empty cell for NaN), the other floats keep 10 digits (a rerun
+    on another CPU differs only where the results do)."""
+    out = cli.Output(SimpleNamespace(study="fig4c", out=str(tmp_path), quick=False), [])
+    robot = StarParams(alpha=0.1234567890123, youngs_modulus=5e6 + 1e-3)
+    # a summary's row: the profile and the per-actuator tuples as text, as `simulate` writes
+    row = {column: getattr(robot, name) for name, column in StarParams.columns().items()}
+    row.update({parameter_column(name): str(getattr(robot, name)) for name in PER_ACTUATOR_FIELDS},
+               actuator_profile=robot.actuator_profile.to_text(), speed_mm_s=0.1234567890123,
+               steady_speed_mm_s=np.nan)
+    row = pd.DataFrame([row])
+    text = out.write_csv(row, "table.csv").read_text()
+    assert ",0.1234567890123," in text and ",0.123456789," in text
+    back = pd.read_csv(tmp_path / "table.csv")
+    assert back["alpha"][0] == robot.alpha and back["youngs_modulus_pa"][0] == 5e6 + 1e-3
+    assert np.isnan(back["steady_speed_mm_s"][0])
+    assert StarParams.from_row(back.iloc[0]) == robot
+
+
+def test_a_study_figure_names_the_study_command_and_commit_in_its_png(tmp_path):
+    """A study's PNG carried nothing of what made it (an audit): its text entries name the
+    study and command of the process's run (`provenance.record`), and the code version."""
+    from PIL import Image
+
+    cli.Output(SimpleNamespace(study="fig4c", out=str(tmp_path), quick=False),
+               ["--quick", "--out", "x y"])
+    plt = cli.use_agg()
+    fig, ax = plt.subplots()
+    path = cli.save_figure(fig, tmp_path / "f.png", dpi=30)
+    code = provenance.code_version()
+    with Image.open(path) as image:
+        entries = dict(image.text)
+    assert {key: entries[key] for key in ("study", "command", "git_commit", "git_dirty",
+                                          "taichi_star_version")} == {
+        "study": "fig4c", "command": "python -m studies fig4c --quick --out 'x y'",
+        "git_commit": code["commit"] or "unknown",
+        "git_dirty": {True: "true", False: "false", None: "unknown"}[code["dirty"]],
+        "taichi_star_version": taichi_star.__version__}
+    assert entries.get("git_changes_sha256") == code.get("changes_sha256")
 
 
 def test_a_failed_table_write_leaves_the_previous_table_and_sidecar(tmp_path, monkeypatch):

@@ -12,7 +12,7 @@ import re
 import shutil
 import subprocess
 import threading
-import types
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -377,21 +377,62 @@ def test_resuming_keeps_the_creation_time_and_lists_each_resumption(written):
     assert manifest["complete"] is False
 
 
-def test_resuming_a_run_of_other_code_warns_naming_both(written, caplog):
+OLD_CODE = {"version": "0.0.1", "commit": "abc", "dirty": False}
+
+
+def test_resuming_a_run_of_other_code_warns_naming_both(written):
+    """Allowed (a typo fixed), but a RuntimeWarning to the user (a log line before)."""
     folder, tasks = written
-    old = {"version": "0.0.1", "commit": "abc", "dirty": False}
-    set_manifest(folder, code=old)
-    with caplog.at_level(logging.WARNING, logger="taichi_star.batch"):
-        store_in(folder).open(tasks, resume=True)
-    [warning] = [r.getMessage() for r in caplog.records]
-    assert warning == f"resuming a run started with code {old}; now {run_store.code_version()}"
+    set_manifest(folder, code=OLD_CODE, code_versions=[{"code": OLD_CODE, "chunks": [0, 1]}])
+    with pytest.warns(RuntimeWarning) as warned:
+        assert store_in(folder).open(tasks, resume=True) == [0, 1]
+    assert [str(w.message) for w in warned] == [
+        f"resuming a run started with code {OLD_CODE}; now {run_store.code_version()}: the "
+        f"manifest's code_versions records which chunks each made"]
 
 
 def test_resuming_the_same_code_does_not_warn(written, caplog):
     folder, tasks = written
-    with caplog.at_level(logging.WARNING, logger="taichi_star.batch"):
+    with caplog.at_level(logging.WARNING, logger="taichi_star.batch"), warnings.catch_warnings():
+        warnings.simplefilter("error")
         assert store_in(folder).open(tasks, resume=True) == [0, 1]
     assert caplog.text == ""
+    assert manifest_of(folder)["code_versions"] == [{"code": run_store.code_version(),
+                                                     "chunks": [0, 1]}]
+
+
+def test_a_store_resumed_under_other_code_keeps_every_code_and_the_chunks_it_made(written):
+    """The manifest kept only the last code, so a table of two codes' chunks named one (an
+    audit): each chunk is listed under the code that made it, a recomputed chunk under its new
+    maker alone."""
+    folder, tasks = written
+    set_manifest(folder, code=OLD_CODE, code_versions=[{"code": OLD_CODE, "chunks": [0, 1]}])
+    store_in(folder).chunk_path(1).unlink()  # lost: recomputed by today's code
+    store = store_in(folder)
+    with pytest.warns(RuntimeWarning):
+        assert store.open(tasks, resume=True) == [0]
+    now = run_store.code_version()
+    assert manifest_of(folder)["code_versions"] == [{"code": OLD_CODE, "chunks": [0]}]
+    store.write(tasks[1], summary_of(tasks[1]))
+    assert manifest_of(folder)["code_versions"] == store.code_versions() == [
+        {"code": OLD_CODE, "chunks": [0]}, {"code": now, "chunks": [1]}]
+    assert manifest_of(folder)["code"] == now  # the latest opening's, as before
+
+
+def test_chunks_a_manifest_lists_under_no_code_are_its_last_openings(written):
+    """A manifest from before code_versions (or a kill between a chunk and the manifest's
+    update) lists some chunks under no code: they were made by its `code`, the version that
+    opened the run last; without a manifest their maker is unknown (None)."""
+    folder, tasks = written
+    manifest = manifest_of(folder)
+    del manifest["code_versions"]
+    manifest["code"] = OLD_CODE
+    assert run_store.makers_of_chunks(manifest, [0, 1]) == [{"code": OLD_CODE, "chunks": [0, 1]}]
+    manifest["code_versions"] = [{"code": {"version": "x"}, "chunks": [1, 5]}]
+    assert run_store.makers_of_chunks(manifest, [0, 1]) == [
+        {"code": {"version": "x"}, "chunks": [1]}, {"code": OLD_CODE, "chunks": [0]}]
+    assert run_store.makers_of_chunks(None, [1]) == [{"code": None, "chunks": [1]}]
+    assert run_store.makers_of_chunks(manifest, []) == []
 
 
 def test_resuming_another_definition_is_refused_naming_the_differences(written):
@@ -533,8 +574,9 @@ def test_a_csv_sidecar_of_a_dirty_checkout_records_which_edits(checkout, tmp_pat
 
     git(checkout, "add", "-A")
     git(checkout, "commit", "-q", "-m", "first")
-    result = types.SimpleNamespace(summary=pd.DataFrame({"gait": ["A1"], "alpha": [0.4]}),
-                                   solver=SOLVER, timing=None)
+    result = ts.SimulationResult(summary=pd.DataFrame({"gait": ["A1"], "alpha": [0.4]}),
+                                 trajectory=pd.DataFrame(), shapes=None, topology=None,
+                                 solver=SOLVER)
     clean = read_provenance(to_csv(result, tmp_path / "clean.csv"))
     assert clean["git_dirty"] is False and "git_changes_sha256" not in clean
     (checkout / "taichi_star" / "provenance.py").write_text("# changed\n")
@@ -544,6 +586,64 @@ def test_a_csv_sidecar_of_a_dirty_checkout_records_which_edits(checkout, tmp_pat
     assert dirty["git_dirty"] is True
     assert dirty["git_changes_sha256"] == hashlib.sha256(diff).hexdigest()
     assert dirty["git_commit"] == git(checkout, "rev-parse", "HEAD")
+
+
+def test_untracked_files_in_the_package_are_changes_and_in_their_hash(checkout):
+    """A new module in taichi_star/ or studies/ changes what runs, but `git status
+    --untracked-files=no` and `git diff HEAD` did not see it (an audit): dirty and hashed now,
+    an ignored file there (bytecode) and an untracked file elsewhere not."""
+    (checkout / ".gitignore").write_text("__pycache__/\n")
+    git(checkout, "add", "-A")
+    git(checkout, "commit", "-q", "-m", "first")
+    head = git(checkout, "rev-parse", "HEAD")
+    (checkout / "taichi_star" / "__pycache__").mkdir()
+    (checkout / "taichi_star" / "__pycache__" / "x.pyc").write_bytes(b"ignored")
+    (checkout / "notes.txt").write_text("not code")
+    clean = {"version": ts.__version__, "commit": head, "dirty": False}
+    assert provenance.code_version() == clean
+    module = checkout / "taichi_star" / "newmod.py"
+    module.write_text("A = 1\n")
+    # the (empty) diff, then the file's path and content
+    expected = hashlib.sha256(b"\0untracked\0taichi_star/newmod.py\0A = 1\n").hexdigest()
+    assert provenance.code_version() == {**clean, "dirty": True, "changes_sha256": expected}
+    module.write_text("A = 2\n")
+    assert provenance.code_version()["changes_sha256"] not in (expected, None)
+    module.unlink()
+    (checkout / "studies").mkdir()
+    (checkout / "studies" / "new_study.py").write_text("")
+    assert provenance.code_version()["dirty"] is True
+
+
+def test_a_package_inside_another_repository_records_no_commit(tmp_path, monkeypatch):
+    """taichi_star installed into a .venv inside someone else's repository recorded that
+    repository's commit, dirty flag and diff hash (an audit): the package's own checkout is a
+    folder at the top of its repository whose HEAD holds this module; elsewhere the commit is
+    unknown (None) and the package version alone says which code ran."""
+    if shutil.which("git") is None:
+        pytest.skip("needs git")
+    other = tmp_path / "other"
+    other.mkdir()
+    git(other, "init", "-q")
+    (other / ".gitignore").write_text(".venv/\n")
+    (other / "tracked.txt").write_text("theirs\n")
+    git(other, "add", "-A")
+    git(other, "commit", "-q", "-m", "theirs")
+    (other / "tracked.txt").write_text("edited\n")  # their checkout is dirty
+    module = other / ".venv" / "site-packages" / "taichi_star" / "provenance.py"
+    module.parent.mkdir(parents=True)
+    module.write_text("# the module\n")
+    monkeypatch.setattr(provenance, "__file__", str(module))
+    unknown = {"version": ts.__version__, "commit": None, "dirty": None}
+    assert provenance.code_version() == unknown
+    # at their top level but not in their commits (copied in, untracked): not its checkout
+    vendored = other / "taichi_star" / "provenance.py"
+    vendored.parent.mkdir()
+    vendored.write_text("# the module\n")
+    monkeypatch.setattr(provenance, "__file__", str(vendored))
+    assert provenance.code_version() == unknown
+    git(other, "add", "taichi_star")  # committed there, it is that checkout's code
+    git(other, "commit", "-q", "-m", "vendored")
+    assert provenance.code_version()["commit"] == git(other, "rev-parse", "HEAD")
 
 
 def test_code_version_with_a_damaged_git_index_names_the_commit_but_not_dirtiness(checkout):
