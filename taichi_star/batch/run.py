@@ -129,6 +129,11 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
                 shapes[result.index] = result.shapes
             if outer is not None:
                 outer.update(1)
+    except BaseException:
+        # the folder is free again for a resume (in this process too: a notebook's retry)
+        if store is not None:
+            store.release()
+        raise
     finally:
         # closed first: after an error or an interrupt here (Ctrl-C, a notebook's "interrupt
         # kernel") the executor's generator stops its running chunks at once
@@ -141,11 +146,16 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
         if owned is not None:
             owned.shutdown()
     if store is not None:
-        # every chunk's summary and records from the store, those a resume did not compute too
-        stored = {task.index: store.read_chunk(task) for task in tasks}
-        summaries = {index: summary for index, (summary, _) in stored.items()}
-        trajectories = [trajectory for _, trajectory in stored.values() if trajectory is not None]
-        store.finish()
+        try:
+            # every chunk's summary and records from the store, those a resume did not
+            # compute too
+            stored = {task.index: store.read_chunk(task) for task in tasks}
+            summaries = {index: summary for index, (summary, _) in stored.items()}
+            trajectories = [trajectory for _, trajectory in stored.values()
+                            if trajectory is not None]
+            store.finish()
+        finally:
+            store.release()
 
     summary = pd.concat([summaries[task.index] for task in tasks], ignore_index=True)
     order = np.argsort(summary["instance"].to_numpy(), kind="stable")

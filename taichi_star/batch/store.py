@@ -34,6 +34,9 @@ import datetime
 import hashlib
 import json
 import logging
+import os
+import socket
+import weakref
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
 
@@ -160,6 +163,13 @@ def _parquet():
     return require("pyarrow", "io"), require("pyarrow.parquet", "io")
 
 
+_HOLDERS: Dict[Path, "weakref.ref[RunStore]"] = {}
+"""The run folders this process's RunStores hold (`RunStore.lock`): a lock that names this
+process but no living store of it is one a store dropped without releasing (taken over)."""
+LOCK = ".run.lock"
+"""The file that marks a run folder in use (the process and machine of the run that opened it),
+made when a run opens the folder and removed when it ends: two runs in one folder had replaced
+each other's manifest and chunks without a word (an audit, 2026-12)."""
 CHUNK_FILES = "chunk_*.parquet"
 """The names of a run folder's chunk files (`RunStore.chunk_path`)."""
 
@@ -180,6 +190,8 @@ class RunStore:
         self.definition_sha256 = _sha256(_canonical(definition))
         self.flag = flag
         self.manifest: Dict = {}
+        self.locked = False
+        """Whether this run holds the folder (`LOCK`)."""
 
     def chunk_path(self, index: int) -> Path:
         return self.path / f"chunk_{index:06d}.parquet"
@@ -238,6 +250,17 @@ class RunStore:
         if self.path.exists() and not self.path.is_dir():
             raise RunStoreError(f"{self.flag} {self.path}: exists and is not a folder")
         self._refuse_entries_that_are_not_files()
+        try:
+            return self._open(tasks, resume)
+        except BaseException:
+            self.release()
+            raise
+
+    def _open(self, tasks: Sequence[ChunkTask], resume: bool) -> List[int]:
+        """`open` of a folder that is one or is not there yet, its manifest read once this
+        run holds the folder (`lock`)."""
+        if self.path.is_dir():
+            self.lock()
         old = self.read_manifest() if self.path.exists() else None
         version = code_version()
         now = datetime.datetime.now().isoformat(timespec="seconds")
@@ -246,7 +269,7 @@ class RunStore:
         # a folder holding only a killed run's temporary files (its first manifest was being
         # written) is empty: they are removed below
         if old is None and self.path.exists() and any(
-                not is_temporary(entry) for entry in self.path.iterdir()):
+                not is_temporary(entry) and entry.name != LOCK for entry in self.path.iterdir()):
             done = self._orphan_chunks(tasks, resume)
         if old is not None:
             finished = self._chunk_files()
@@ -258,6 +281,12 @@ class RunStore:
                         f"to resume it ({'; '.join(differences)}): use another {self.flag} or "
                         f"delete the folder")
                 done = [task.index for task in tasks if self._verified(task)]
+                if old.get("complete") and len(done) == len(tasks):
+                    # a finished run read back: nothing to compute or record, so nothing is
+                    # written (its manifest was, and a store on read-only media could not be
+                    # read back: an audit, 2026-12)
+                    self.manifest = {**old, "code_versions": makers_of_chunks(old, done)}
+                    return done
                 if old.get("code") != version:
                     # allowed (a typo fixed), but its table then mixes two codes' chunks: said
                     # to the user, and recorded in `code_versions` (a log line alone before,
@@ -280,6 +309,8 @@ class RunStore:
         except OSError as error:
             raise RunStoreError(f"{self.flag} {self.path}: cannot create it ({error.strerror})") \
                 from None
+        if not self.locked:  # a folder made just now
+            self.lock()
         for stale in self.path.iterdir():  # left by a killed run
             if is_temporary(stale):
                 self._remove(stale)
@@ -475,10 +506,80 @@ class RunStore:
         except ValueError as error:
             raise RunStoreError(f"{self.chunk_path(task.index)}: {error}") from None
 
+    def lock(self):
+        """Hold the folder for this run (`LOCK`, with this process and machine); RunStoreError
+        naming the run that holds it where that run may still go on: a process of this machine
+        that is alive (this one too: another call in it), or any process of another machine.
+        A lock whose process on this machine has ended (a killed run's) is taken over. A
+        folder where no file can be made is not locked: no run can write into it either."""
+        path = self.path / LOCK
+        for _ in range(2):  # a second try after removing an ended process's lock
+            try:
+                descriptor = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+            except FileExistsError:
+                holder = lock_holder(path)
+                if holder is not None and holder.endswith(OWN_PROCESS):
+                    held = _HOLDERS.get(self.path.resolve())
+                    holder = None if held is None or held() in (None, self) else holder
+                if holder is None:
+                    self._remove(path)
+                    continue
+                raise RunStoreError(f"{self.flag} {self.path} is in use by another run "
+                                    f"({holder}); wait for it to end or choose another "
+                                    f"{self.flag} (if no run uses the folder, delete {path})") \
+                    from None
+            except OSError:  # a read-only folder
+                return
+            with os.fdopen(descriptor, "w") as handle:
+                handle.write(f"{os.getpid()} {socket.gethostname()}")
+            self.locked = True
+            _HOLDERS[self.path.resolve()] = weakref.ref(self)
+            return
+
+    def release(self):
+        """Let go of the folder (remove this run's `LOCK`); nothing where it holds none."""
+        if self.locked:
+            self.locked = False
+            _HOLDERS.pop(self.path.resolve(), None)
+            try:
+                (self.path / LOCK).unlink(missing_ok=True)
+            except OSError:  # the folder gone or read-only since: the next run takes it over
+                pass
+
     def finish(self):
+        """Mark the run complete in its manifest and let go of the folder (`release`); a run
+        read back (`open` of a finished run) writes nothing."""
+        if self.manifest.get("complete"):
+            self.release()
+            return
         self.manifest["complete"] = True
         self.manifest["finished"] = datetime.datetime.now().isoformat(timespec="seconds")
-        self._write_manifest()
+        try:
+            self._write_manifest()
+        finally:
+            self.release()
+
+
+OWN_PROCESS = " (this one: another call in it holds the folder)"
+
+
+def lock_holder(path: Path) -> Optional[str]:
+    """Who holds the run folder lock at `path` ("process N on this machine", "process N on
+    machine H"), None where its process on this machine has ended (or the lock names none)."""
+    try:
+        process, _, machine = path.read_text().partition(" ")
+    except OSError:
+        return "a run whose lock cannot be read"
+    if machine != socket.gethostname():
+        return f"process {process} on machine {machine}"
+    try:
+        os.kill(int(process), 0)
+    except (ValueError, ProcessLookupError):
+        return None
+    except PermissionError:  # alive, another user's
+        pass
+    return f"process {process} on this machine" + (OWN_PROCESS if int(process) == os.getpid()
+                                                    else "")
 
 
 def makers_of_chunks(manifest: Optional[Dict], chunks: Sequence[int]) -> List[Dict]:

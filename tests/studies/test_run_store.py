@@ -6,6 +6,7 @@ import errno
 import json
 import logging
 import os
+import socket
 
 import numpy as np
 import pandas as pd
@@ -334,3 +335,82 @@ def test_a_file_the_store_cannot_remove_is_a_run_store_error(finished, tmp_path,
     message = str(error.value)
     assert "cannot remove chunk_000001.parquet (Read-only file system)" in message
     assert "\n" not in message
+
+
+def test_a_folder_in_use_by_another_run_is_refused_and_free_once_it_ends(tmp_path):
+    """Two runs in one folder replaced each other's manifest and chunks without a word (an
+    audit, 2026-12): a run holds its folder (`LOCK`, its process and machine) until it ends;
+    another is refused naming the holder, and takes the folder once the first let go."""
+    from taichi_star.batch.store import LOCK
+
+    task = ChunkTask(0, (0,), (ts.StarParams(),), DURATION, SOLVER)
+    folder = tmp_path / "run"
+    first = RunStore(folder, {"a": "definition"})
+    first.open([task], resume=False)
+    assert (folder / LOCK).read_text() == f"{os.getpid()} {socket.gethostname()}"
+    with pytest.raises(RunStoreError) as error:
+        RunStore(folder, {"b": "definition"}).open([task], resume=False)
+    assert str(error.value) == (
+        f"run_dir {folder} is in use by another run (process {os.getpid()} on this machine "
+        f"(this one: another call in it holds the folder)); wait for it to end or choose "
+        f"another run_dir (if no run uses the folder, delete {folder / LOCK})")
+    assert json.loads((folder / "manifest.json").read_text())["definition"] == {
+        "a": "definition"}   # untouched
+    first.release()
+    assert not (folder / LOCK).exists()
+    second = RunStore(folder, {"a": "definition"})
+    assert second.open([task], resume=True) == []
+    second.release()
+
+
+def test_a_lock_of_an_ended_process_is_taken_over_and_one_of_another_machine_refused(tmp_path):
+    """A killed run leaves its lock: a process of this machine that has ended holds nothing
+    (taken over); one of another machine may still run (refused, named)."""
+    import subprocess
+    import sys
+    from taichi_star.batch.store import LOCK
+
+    task = ChunkTask(0, (0,), (ts.StarParams(),), DURATION, SOLVER)
+    folder = tmp_path / "run"
+    folder.mkdir()
+    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                           capture_output=True, text=True, check=True).stdout.strip()
+    (folder / LOCK).write_text(f"{ended} {socket.gethostname()}")
+    store = RunStore(folder, {"a": "definition"})
+    assert store.open([task], resume=False) == []
+    assert (folder / LOCK).read_text() == f"{os.getpid()} {socket.gethostname()}"
+    store.release()
+    (folder / LOCK).write_text("123 another-machine")
+    with pytest.raises(RunStoreError, match=r"is in use by another run \(process 123 on machine "
+                                            r"another-machine\)"):
+        RunStore(folder, {"a": "definition"}).open([task], resume=True)
+
+
+def test_run_batch_lets_go_of_its_folder_after_a_failure_and_reads_a_finished_run_back_read_only(
+        tmp_path, monkeypatch):
+    """A run_batch that fails lets go of its folder (a retry in the same process, a notebook's,
+    resumes it); one that ends too. Reading a finished run back writes nothing: a store on
+    read-only media could not be read back (its manifest was rewritten: an audit, 2026-12)."""
+    from taichi_star.batch import store as run_store
+
+    folder = tmp_path / "run"
+    original = run_store.RunStore.write
+
+    def failing_second(self, task, *args, **kwargs):
+        if task.index == 1:
+            raise OSError("a fault in the middle of the run")
+        return original(self, task, *args, **kwargs)
+
+    monkeypatch.setattr(run_store.RunStore, "write", failing_second)
+    with pytest.raises(OSError, match="a fault in the middle"):
+        run(folder)
+    assert not (folder / run_store.LOCK).exists()
+    monkeypatch.undo()
+    summary = run(folder, resume=True)
+    assert not (folder / run_store.LOCK).exists()
+
+    def no_writes(*args, **kwargs):
+        raise OSError(errno.EROFS, os.strerror(errno.EROFS))
+    monkeypatch.setattr(run_store, "write_atomic", no_writes)
+    monkeypatch.setattr(run_store.os, "open", no_writes)   # nor a lock file
+    pd.testing.assert_frame_equal(run(folder, resume=True), summary, check_exact=True)

@@ -25,7 +25,7 @@ import taichi_star as ts
 from taichi_star import provenance
 from taichi_star.actuation import CurvatureProfile
 from taichi_star.batch import store as run_store
-from taichi_star.batch.store import (RunStore, RunStoreError, definition_differences,
+from taichi_star.batch.store import (LOCK, RunStore, RunStoreError, definition_differences,
                                      run_definition, stored_chunk_size, table_checksum)
 from taichi_star.batch.tasks import plan_chunks
 
@@ -174,8 +174,9 @@ def test_chunk_round_trip_keeps_every_bit_dtype_and_value_object(written):
         pd.testing.assert_frame_equal(stored, expected, check_exact=True)
         assert isinstance(stored["actuator_profile"].iloc[0], CurvatureProfile)
     assert store.chunk_path(1) == folder / "chunk_000001.parquet"
+    # and the lock of the run that wrote them, which has not ended (`LOCK`, hidden)
     assert sorted(p.name for p in folder.iterdir()) == [
-        "chunk_000000.parquet", "chunk_000001.parquet", "manifest.json"]
+        LOCK, "chunk_000000.parquet", "chunk_000001.parquet", "manifest.json"]
 
 
 def test_a_chunk_without_value_objects_or_rows_round_trips(tmp_path):
@@ -779,7 +780,9 @@ def test_a_chunks_trajectory_is_stored_beside_it_and_read_back_bitwise(tmp_path)
     pd.testing.assert_frame_equal(trajectory, trajectory_of(tasks[0]), check_exact=True)
     pd.testing.assert_frame_equal(summary, store.read(tasks[0]), check_exact=True)
     assert store.read_chunk(tasks[1])[1] is None
-    # the stamp ties the summary to its trajectory: resuming verifies both
+    # the stamp ties the summary to its trajectory: resuming verifies both (once the first
+    # run has let go of the folder, as its end or a kill of its process does)
+    store.release()
     again = store_in(folder)
     assert again.open(tasks, resume=True) == [0, 1]
 
@@ -798,6 +801,7 @@ def test_a_damaged_or_swapped_trajectory_recomputes_its_chunk(tmp_path, caplog):
     path.write_bytes(path.read_bytes()[:-20])
     shutil.copy(store.trajectory_path(2), store.trajectory_path(1))
     store.trajectory_path(2).unlink()
+    store.release()   # the run ends
     with caplog.at_level(logging.WARNING, logger="taichi_star.batch"):
         done = RunStore(folder, definition_of(params=PARAMS * 3)).open(tasks, resume=True)
     assert done == [3]   # the one chunk left whole
@@ -821,7 +825,8 @@ def written_with_trajectories(folder):
 
 def test_a_folder_of_chunks_and_trajectories_without_a_manifest_is_resumable(tmp_path):
     folder = tmp_path / "run"
-    _, tasks = written_with_trajectories(folder)
+    store, tasks = written_with_trajectories(folder)
+    store.release()   # the run ends
     (folder / "manifest.json").unlink()
     assert store_in(folder).open(tasks, resume=True) == [0, 1]
 
