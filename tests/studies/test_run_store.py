@@ -41,6 +41,18 @@ def finished(tmp_path_factory):
     return folder, run(folder)
 
 
+def unfinished_copy(source, folder, **manifest_changes):
+    """`folder`, a copy of the finished run folder `source` whose manifest says it is not
+    finished (a run to resume), with `manifest_changes` to its manifest."""
+    folder.mkdir()
+    for path in source.iterdir():
+        (folder / path.name).write_bytes(path.read_bytes())
+    manifest = json.loads((folder / "manifest.json").read_text())
+    manifest.update(complete=False, **manifest_changes)
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    return folder
+
+
 def test_stored_run_equals_a_plain_run(finished):
     folder, summary = finished
     plain = run_batch(PARAMS, DURATION, solver=SOLVER, chunk_size=CHUNK).summary
@@ -85,13 +97,7 @@ def damage_tampered(path, other):
 def test_damaged_chunk_is_reported_and_recomputed(finished, tmp_path, damage, caplog,
                                                   monkeypatch):
     source, summary = finished
-    folder = tmp_path / "run"
-    folder.mkdir()
-    for path in source.iterdir():
-        (folder / path.name).write_bytes(path.read_bytes())
-    manifest = json.loads((folder / "manifest.json").read_text())
-    manifest["complete"] = False
-    (folder / "manifest.json").write_text(json.dumps(manifest))
+    folder = unfinished_copy(source, tmp_path / "run")
     other = tmp_path / "other"  # same chunking, other parameters
     run(other, params=[p.replace(cylinder_drag=20.0) for p in PARAMS])
     damage(folder / "chunk_000001.parquet", other)
@@ -289,14 +295,9 @@ def test_a_batch_resumed_under_other_code_says_so_in_its_result_files(finished, 
     result's files named only the writer's (an audit). The result and its files list each
     code with its chunks; a store of one code adds nothing (the other side)."""
     source, summary = finished
-    folder = tmp_path / "run"
-    folder.mkdir()
-    for path in source.iterdir():
-        (folder / path.name).write_bytes(path.read_bytes())
-    manifest = json.loads((folder / "manifest.json").read_text())
     old = {"version": "0.0.1", "commit": "abc", "dirty": False}
-    manifest.update(complete=False, code=old, code_versions=[{"code": old, "chunks": [0, 1, 2]}])
-    (folder / "manifest.json").write_text(json.dumps(manifest))
+    folder = unfinished_copy(source, tmp_path / "run", code=old,
+                             code_versions=[{"code": old, "chunks": [0, 1, 2]}])
     (folder / "chunk_000002.parquet").unlink()
     with pytest.warns(RuntimeWarning, match="resuming a run started with code"):
         result = run_batch(PARAMS, DURATION, solver=SOLVER, chunk_size=CHUNK, run_dir=folder,
