@@ -26,9 +26,10 @@ import pandas as pd
 
 from taichi_star import JACOBIANS, PRESETS, SolverConfig, StarParams
 from taichi_star.envs import StarSwimmerVectorEnv, control_period
+from taichi_star.provenance import cpu_model
 from taichi_star.runtime import check_batch_memory
 
-from . import cli, provenance
+from . import cli
 
 DESCRIPTION = "Vector environment throughput: simulated robot-seconds per wall second."
 QUICK_NUM_ENVS = 4
@@ -59,7 +60,7 @@ def measure(preset: str, solver: SolverConfig, num_envs: int, steps: int,
             "n_nodes": envs.simulator.n_nodes, "wall_s": wall,
             "robot_seconds_per_s": robot_seconds / wall,
             "robot_steps_per_s": robot_seconds / solver.dt / wall, "cores": os.cpu_count(),
-            "load_average_1min": load, "cpu_model": provenance.cpu_model(), "arch": arch}
+            "load_average_1min": load, "cpu_model": cpu_model(), "arch": arch}
 
 
 def build_parser():

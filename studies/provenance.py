@@ -16,11 +16,9 @@ import time
 from pathlib import Path
 from typing import Dict, Mapping, Optional, Sequence
 
-# the machine's description is the library's (its result files record it too); the studies
-# (env_bench, simd) and their tests read these names here
-from taichi_star.provenance import (cache_sizes, code_record, code_version,  # noqa: F401
-                                    cpu_model, machine, nvidia_smi, provenance_json,
-                                    vector_extensions)
+# the machine's description is the library's (its result files record it too)
+from taichi_star.provenance import (code_record, code_version, machine, nvidia_smi,
+                                    provenance_json)
 
 STARTED = time.monotonic()
 """When the study's process imported this module (the command line imports it first): a

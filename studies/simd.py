@@ -89,6 +89,7 @@ import taichi as ti
 
 from taichi_star import PRESETS, EngineProfile, SolverConfig, StarParams
 from taichi_star.profiling import matmul_gflops
+from taichi_star.provenance import cpu_model
 from taichi_star.runtime import PARALLEL_LOOP_MINIMUM, Runtime
 
 from . import cli, provenance
@@ -1063,7 +1064,7 @@ def main(argv=None):
                      extra={"precisions": precisions, "batch_sizes": batch_sizes,
                             "lanes": lanes_list, "repeats": args.repeats,
                             "matmul_size": args.matmul_size, "kernels": kernels,
-                            "cpu_model": provenance.cpu_model(),
+                            "cpu_model": cpu_model(),
                             "cores": os.cpu_count()})
     plans = elimination_plans(presets)
     rows = {kernel: [] for kernel in kernels}

@@ -747,11 +747,11 @@ def test_the_machine_record_names_the_vector_sets_and_the_caches(tmp_path):
     x86 = ("processor : 0\nflags : fpu sse sse2 avx fma avx2\n\n"
            "processor : 1\nflags : fpu sse2 avx avx2 fma avx512f\n")
     # the first processor's flags, in the order of VECTOR_EXTENSIONS (the widest last)
-    assert study_provenance.vector_extensions(x86) == ["sse2", "avx", "fma", "avx2"]
-    assert study_provenance.cpu_model("model name : Some CPU\n" + x86) == "Some CPU"
-    assert study_provenance.vector_extensions("Features : fp asimd evtstrm sve") == ["asimd",
+    assert provenance.vector_extensions(x86) == ["sse2", "avx", "fma", "avx2"]
+    assert provenance.cpu_model("model name : Some CPU\n" + x86) == "Some CPU"
+    assert provenance.vector_extensions("Features : fp asimd evtstrm sve") == ["asimd",
                                                                                     "sve"]
-    assert study_provenance.vector_extensions("model name : a CPU") == []
+    assert provenance.vector_extensions("model name : a CPU") == []
     for index, (level, kind, size) in enumerate([("1", "Data", "48K"),
                                                  ("1", "Instruction", "64K"),
                                                  ("2", "Unified", "2048K"),
@@ -763,9 +763,9 @@ def test_the_machine_record_names_the_vector_sets_and_the_caches(tmp_path):
         if size:
             (folder / "size").write_text(size + "\n")
     # a cache whose size cannot be read is left out, not guessed
-    assert study_provenance.cache_sizes(tmp_path) == {"L1d": "48K", "L1i": "64K", "L2": "2048K"}
-    assert study_provenance.cache_sizes(tmp_path / "missing") == {}
-    assert {"vector_extensions", "caches"} <= set(study_provenance.machine())
+    assert provenance.cache_sizes(tmp_path) == {"L1d": "48K", "L1i": "64K", "L2": "2048K"}
+    assert provenance.cache_sizes(tmp_path / "missing") == {}
+    assert {"vector_extensions", "caches"} <= set(provenance.machine())
 
 
 def study_parsers():
