@@ -147,9 +147,10 @@ def _shown(value) -> str:
     return "none" if value is None else str(value)
 
 
-def add_model_flags(parser: StudyParser, fixed: Sequence[str] = ()):
-    """--preset and --set; `fixed`: fields the study sets itself (refused in --set)."""
-    parser.add_argument("--preset", choices=PRESETS, default="paper",
+def add_model_flags(parser: StudyParser, fixed: Sequence[str] = (), preset: str = "paper"):
+    """--preset (default `preset`: its help states it, as a default set afterwards would not)
+    and --set; `fixed`: fields the study sets itself (refused in --set)."""
+    parser.add_argument("--preset", choices=PRESETS, default=preset,
                         help="paper: the model as published (N = 193 nodes, implicit Euler at "
                              "1 ms); accurate: damping, series joints, shared ends, n_arc 48, "
                              "adaptive BDF2; identified: the model selection study's best model "

@@ -54,8 +54,9 @@ def build_parser():
     parser.add_argument("--window", type=float, default=identification.STROKE_WINDOW_S,
                         help=f"window of a stroke's jump, s, in (0, T/2] (default "
                              f"{identification.STROKE_WINDOW_S:g}: six video frames)")
-    cli.add_model_flags(parser, fixed=("gait", "period"))
-    parser.set_defaults(preset="identified")
+    # the identified model's strokes are the ones compared with the measured (strokes' help
+    # said "default paper" while it ran the identified preset: an audit)
+    cli.add_model_flags(parser, fixed=("gait", "period"), preset="identified")
     cli.add_dt_flag(parser)
     cli.add_cycles_flag(parser, default=3.0)
     return parser

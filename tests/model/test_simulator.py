@@ -318,7 +318,7 @@ def test_commands_of_zeros_and_ones_of_any_number_type_fire_as_booleans():
     masks = np.array([[1, 0, 1, 0, 0, 0, 0, 0], [0, 1, 0, 0, 0, 0, 0, 0],
                       [1, 0, 1, 0, 1, 0, 0, 0]])
     shapes = []
-    for commands in (masks.astype(bool), masks.astype(np.float32), masks.astype(np.int8)):
+    for commands in (masks.astype(bool), masks.astype(np.float64), masks.astype(np.int8)):
         sim = commanded()
         sim.fire(commands)
         sim.advance(0.01)

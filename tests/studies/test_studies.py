@@ -797,6 +797,19 @@ def test_every_study_flag_with_a_default_shows_it_in_its_help():
     assert unsaid == []
 
 
+def test_every_studys_preset_help_states_the_preset_it_runs():
+    """strokes ran the identified preset while its help said "default paper" (its default was
+    set after the help was written: an audit, 2026-12)."""
+    checked = []
+    for name, parser in study_parsers():
+        for action in parser._actions:
+            if "--preset" in action.option_strings:
+                default = parser.parse_args([]).preset
+                assert f"(default {default})" in action.help, (name, action.help)
+                checked.append((name, default))
+    assert ("strokes", "identified") in checked and ("fig4c", "paper") in checked
+
+
 @pytest.mark.parametrize("quick_flags", [False, True])
 def test_no_flag_says_its_default_twice(quick_flags):
     """Each flag's help says "default" once: the parser adds a default only where the help
