@@ -99,6 +99,7 @@ import pandas as pd
 from taichi_star import SolverConfig, StarParams, identification
 from taichi_star.batch import run_batch
 from taichi_star.gait import Gait
+from taichi_star.provenance import write_atomic
 from taichi_star.timegrid import nearest_interval
 
 from . import cli, figures, identify
@@ -616,10 +617,8 @@ def stored_fit_of(done: Path, folder: Path, evaluations: str, candidate: Candida
     its training window alone (and the strokes' tail), so reading the strokes over the window
     or over the whole run is the same reading (`STROKE_ALIGNMENT`); the assessment's longer
     run is where they differed."""
-    if not done.exists():
-        return None
-    stored = json.loads(done.read_text())
-    if stored["row"].get("status") != "ok":
+    stored = read_done(done)
+    if stored is None or stored["row"].get("status") != "ok":
         return None
     definitions = {definition_of(candidate, args, settings, base, solver, gaits,
                                  start_model=start_model)}
@@ -632,6 +631,22 @@ def stored_fit_of(done: Path, folder: Path, evaluations: str, candidate: Candida
     commit = (json.loads(sidecar.read_text()).get("git_commit") or "")[:7] \
         if sidecar.exists() else ""
     return stored, evaluations + (f", fitted at {commit}" if commit else "")
+
+
+def read_done(done: Path) -> Optional[dict]:
+    """A finished fit's record in done/ (`fit_or_read_back` writes it), None where there is
+    none or it cannot be read (a record damaged by hand, or left half-written before records
+    were written whole): that candidate is fitted again, which is said."""
+    if not done.exists():
+        return None
+    try:
+        stored = json.loads(done.read_text())
+        if not isinstance(stored, dict) or not isinstance(stored.get("row"), dict):
+            raise ValueError("not a fit's record")
+    except (OSError, ValueError) as error:
+        print(f"{done}: unreadable ({str(error).splitlines()[0]}); its candidate is fitted again")
+        return None
+    return stored
 
 
 def estimate_seconds(seconds_per_instance_cycle: float,
@@ -904,8 +919,8 @@ def main(argv=None):
                                     candidate, args, stage_settings, base, solver, gaits,
                                     start_model)
                       if args.reassess else None)
-        if args.resume and done.exists():
-            stored = json.loads(done.read_text())
+        stored = read_done(done) if args.resume else None
+        if stored is not None:
             if stored["row"].get("definition") == definition:
                 stored_gaits = pd.DataFrame(stored["gaits"])
                 if stored["row"]["status"] == "ok":
@@ -972,11 +987,15 @@ def main(argv=None):
                               arch=args.arch, prefix=f"fig4c_{candidate.name}{suffix}",
                               progress=False, title_note=f"model {label}")
         done.parent.mkdir(parents=True, exist_ok=True)
-        done.write_text(json.dumps({
+        # whole or not at all: a kill mid-write left a record --resume could not read (an
+        # audit, 2026-12)
+        write_atomic(done, json.dumps({
             "row": result["row"],
             "parameters": result["parameters"].to_dict(orient="list"),
             "gaits": result["gaits"].to_dict(orient="list"),
-            "folds": result["folds"].to_dict(orient="list")}, default=_json_value))
+            "folds": result["folds"].to_dict(orient="list")}, default=_json_value).encode(),
+            failure=lambda reason: cli.StudyOutputError(
+                f"{reason}; the fits recorded before are kept: --resume continues"))
 
     with cli.executor(args, out) as executor:
         work = planned_work(runnable, settings, refine_settings, args.refine_top)

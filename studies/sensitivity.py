@@ -198,8 +198,11 @@ def main(argv=None):
     units = saltelli_units(len(box), samples, args.seed)
     values = identify.box_values(box, units)
     params = identify.box_params(box, values, base, gaits)
-    names = [spec.name for spec in box]
-    sample_table = pd.DataFrame({f"u_{n}": units[:, d] for d, n in enumerate(names)})
+    # each axis by its own label and columns: two elements of one field (actuator_gains[1],
+    # actuator_gains[2]) shared the field's name, and one's range and column overwrote the
+    # other's (an audit, 2026-12)
+    names = [spec.label for spec in box]
+    sample_table = pd.DataFrame({f"u_{spec.key}": units[:, d] for d, spec in enumerate(box)})
     for d, spec in enumerate(box):
         sample_table[spec.column] = values[:, d]
     sample_table.insert(0, "point", np.arange(len(units)))
@@ -225,7 +228,7 @@ def main(argv=None):
     outputs = {gait: run_table.loc[run_table["gait"] == gait, "signed_speed_mm_s"].to_numpy()
                for gait in gaits}
     indices = sobol_indices(names, outputs, seed=args.seed).rename(columns={"output": "gait"})
-    ranges = {spec.name: spec for spec in box}
+    ranges = {spec.label: spec for spec in box}
     indices.insert(2, "low", [ranges[n].low for n in indices["parameter"]])
     indices.insert(3, "high", [ranges[n].high for n in indices["parameter"]])
     indices.insert(4, "log", [ranges[n].log for n in indices["parameter"]])

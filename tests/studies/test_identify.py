@@ -2,6 +2,7 @@
 boxes (values from unit coordinates), argument validation before compute, and the calibrate /
 cross-validation / sensitivity studies in --quick mode with value checks."""
 
+import ast
 import json
 import math
 
@@ -174,6 +175,22 @@ def test_calibrate_refuses_a_box_no_fitted_gait_moves(no_compute, tmp_path, caps
     assert len(error.strip().splitlines()) == 1 and not out.exists()
 
 
+def test_calibrate_fits_one_actuators_gain_end_to_end(tmp_path):
+    """--fit NAME[INDEX]: the plot and the best model read that axis' own columns
+    (actuator_gains_1, u_actuator_gains_1); the field's name had been used, a KeyError after
+    the whole fit (an audit, 2026-12). The calibrated robot runs with the fitted A1 gain."""
+    calibrate.main(["--quick", "--fit", "actuator_gains[1]=0.5:1.5", "--gaits", "A1",
+                    "--popsize", "2", "--max-generations", "1", "--out", str(tmp_path),
+                    "--no-progress"])
+    gain = pd.read_csv(tmp_path / "calibration_best.csv")["actuator_gains_1"].iloc[0]
+    assert 0.5 <= gain <= 1.5
+    assert (tmp_path / "calibration.png").stat().st_size > 1000
+    calibrated = pd.read_csv(tmp_path / "fig4c_calibrated_summary.csv")["actuator_gains"]
+    # the tuple's text, A1 first; the CSV's 10 digits of the fitted value
+    gains = ast.literal_eval(calibrated.iloc[0])
+    assert gains[0] == pytest.approx(gain, rel=1e-9) and gains[1:] == (1.0,) * 7
+
+
 def test_calibrate_quick_against_a_direct_simulation(tmp_path):
     calibrate.main(["--out", str(tmp_path), *QUICK])
     evaluations = pd.read_csv(tmp_path / "calibration.csv")
@@ -205,7 +222,7 @@ def test_calibrate_quick_against_a_direct_simulation(tmp_path):
     assert sidecar["study"] == "calibrate" and sidecar["solver"]["dt"] == cli.QUICK_DT
     assert sidecar["details"]["fit"] == calibrate.QUICK_FIT
 
-    figure = calibrate.draw_convergence(evaluations, [spec.name for spec in box])
+    figure = calibrate.draw_convergence(evaluations, box)
     top, bottom = figure.axes[:2]
     low, high = top.get_ylim()  # a log axis around the objectives, not down to 1e-16
     finite = evaluations["objective"][np.isfinite(evaluations["objective"])]
@@ -300,6 +317,24 @@ def test_sensitivity_quick_and_resumed(tmp_path, monkeypatch):
     with pytest.raises(RunStoreError, match="another definition"):
         sensitivity.main([*argv, "--seed", "2", "--resume"])
     assert {path.name: path.read_bytes() for path in tmp_path.glob("sensitivity*")} == tables
+
+
+def test_sensitivity_keeps_two_elements_of_one_field_apart(tmp_path):
+    """Two axes of one per-actuator field: their unit coordinates, values and Sobol rows had
+    shared the field's name, one axis' range and columns overwriting the other's (an audit,
+    2026-12); each is named by its label (NAME[INDEX], the command line's) and its own columns."""
+    sensitivity.main(["--vary", "actuator_gains[1]=0.5:1.5", "--vary",
+                      "actuator_gains[3]=0.8:1.2", "--gaits", "A1+A3", "--base-samples", "2",
+                      "--out", str(tmp_path), *QUICK])
+    samples = pd.read_csv(tmp_path / "sensitivity_samples.csv")
+    assert {"u_actuator_gains_1", "u_actuator_gains_3", "actuator_gains_1",
+            "actuator_gains_3"} <= set(samples.columns)
+    assert samples["actuator_gains_1"].between(0.5, 1.5).all()
+    assert samples["actuator_gains_3"].between(0.8, 1.2).all()
+    indices = pd.read_csv(tmp_path / "sensitivity.csv").set_index("parameter")
+    assert list(indices.index) == ["actuator_gains[1]", "actuator_gains[3]"]
+    assert indices.loc["actuator_gains[1]", ["low", "high"]].tolist() == [0.5, 1.5]
+    assert indices.loc["actuator_gains[3]", ["low", "high"]].tolist() == [0.8, 1.2]
 
 
 def test_a_fit_of_at_most_the_studys_instances_is_accepted_and_one_more_refused():

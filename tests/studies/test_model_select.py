@@ -500,3 +500,17 @@ def test_a_bad_start_table_fails_before_compute(no_compute, tmp_path, capsys, te
     error = capsys.readouterr().err
     assert f"--start {path}: " in error and message in error, error
     assert error.count("\n") == 1 and "Traceback" not in error
+
+
+def test_a_fit_record_that_cannot_be_read_is_fitted_again_not_a_traceback(tmp_path, capsys):
+    """done/ records were written in place: a kill mid-write left one that --resume and
+    --reassess read with json.loads and failed on (an audit, 2026-12). They are written whole
+    now; one damaged otherwise is said and its candidate fitted again."""
+    done = tmp_path / "paper.json"
+    assert model_select.read_done(done) is None   # none yet
+    for text in ('{"row": {"status": "ok"', "[1, 2]", ""):
+        done.write_text(text)
+        assert model_select.read_done(done) is None
+        assert capsys.readouterr().out.startswith(f"{done}: unreadable (")
+    done.write_text('{"row": {"status": "ok"}, "parameters": {}}')
+    assert model_select.read_done(done)["row"] == {"status": "ok"}
