@@ -40,7 +40,7 @@ import pandas as pd
 from taichi_star import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS, Gait, SolverConfig,
                          StarParams, simulate)
 from taichi_star.output import column_unit
-from taichi_star.sensitivity_check import difference_step, extrapolated_difference
+from taichi_star.sensitivity_check import extrapolated_difference, whole_run_differences
 from taichi_star.sensitivities import REPLICAS_PER_DIRECTION, parse_directions
 
 from . import cli, provenance
@@ -152,23 +152,12 @@ def finite_difference_check(params: Sequence[StarParams], labels: Sequence[str],
     for most, larger for the two that barely move the robot, whose runs at 1e-4 differ by
     little more than their Newton noise). Columns gait, parameter, finite_difference."""
     tight = solver.replace(newton_tol=min(solver.newton_tol, CHECK_NEWTON_TOL))
-    scales = (1.0, 2.0, 4.0)
-    batch, steps = [], []
-    for label in labels:
-        for p in params:
-            value = direction(label).value(p)
-            step = difference_step(direction(label), p)
-            steps.append(step)
-            batch += [direction(label).moved(p, value + sign * scale * step)
-                      for scale in scales for sign in (1.0, -1.0)]
-    speeds = simulate(batch, duration_s, tight, arch=arch,
-                      progress=False).summary[OUTPUT].to_numpy()
-    speeds = speeds.reshape(len(steps), len(scales), 2)
-    quotients = (speeds[:, :, 0] - speeds[:, :, 1]) / (2.0 * np.array(steps)[:, None]
-                                                         * np.array(scales))
+    differences = whole_run_differences(params, duration_s, tight,
+                                        [direction(label) for label in labels], OUTPUT, arch)
     return pd.DataFrame({"gait": [p.gait for _ in labels for p in params],
                          "parameter": [label for label in labels for _ in params],
-                         "finite_difference": extrapolated_difference(*quotients.T)})
+                         "finite_difference": extrapolated_difference(
+                             *differences.reshape(-1, 3).T)})
 
 
 def plot_elasticities(csv_path, png_path) -> Path:

@@ -24,7 +24,8 @@ from .sensitivities import RELATIVE_STEP, Direction, parse_directions
 from .simulation import simulate
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
-__all__ = ["check_sensitivities", "extrapolated_difference", "difference_step"]
+__all__ = ["check_sensitivities", "whole_run_differences", "extrapolated_difference",
+           "difference_step"]
 
 TAYLOR_MULTIPLE = 100.0
 """H of the Taylor test in multiples of the differences' h (1e-2 of the value for ε = 1e-4):
@@ -42,8 +43,7 @@ conditioned); taylor_ratio = r(2H) / r(H)."""
 
 
 MULTIPLES = (1.0, -1.0, 2.0, -2.0, 4.0, -4.0)
-"""The differences' runs, in multiples of h: ±h, ±2h and ±4h (then the Taylor test's H and
-2H)."""
+"""The differences' runs, in multiples of h: ±h, ±2h and ±4h (`whole_run_differences`)."""
 
 
 def extrapolated_difference(small, large, largest):
@@ -78,12 +78,30 @@ def taylor_step(h: float, value: float) -> float:
     return min(step, TAYLOR_MOST * abs(value)) if value else step
 
 
+def whole_run_differences(params: Sequence[StarParams], duration_s: float, solver: SolverConfig,
+                          directions, output: str, arch: str = "cpu") -> np.ndarray:
+    """(D, B, 3): the central differences of `output` (a summary column) of whole runs at
+    ±h, ±2h and ±4h for every direction × instance, h each one's `difference_step`, from one
+    `simulate` batch of every moved run (`MULTIPLES`); `extrapolated_difference` of the last
+    axis is the derivative they give."""
+    params = list(params)
+    steps = np.array([[difference_step(direction, p) for p in params]
+                      for direction in directions])
+    moved = [direction.moved(p, direction.value(p) + multiple * h)
+             for direction, row in zip(directions, steps) for multiple in MULTIPLES
+             for p, h in zip(params, row)]
+    runs = simulate(moved, duration_s, solver, arch=arch).summary[output].to_numpy(dtype=float)
+    plus, minus = runs.reshape(len(directions), len(MULTIPLES) // 2, 2, len(params)) \
+        .transpose(2, 0, 3, 1)
+    return (plus - minus) / (2.0 * steps[..., None] * np.array([1.0, 2.0, 4.0]))
+
+
 def check_sensitivities(params: Sequence[StarParams], duration_s: float, solver: SolverConfig,
                         names: Sequence[str], output: str = "displacement_x_mm",
                         arch: str = "cpu") -> pd.DataFrame:
     """One row per (instance, direction) of `names` (as `simulate` takes them), for `output` (a
-    summary column): see `CHECK_COLUMNS`. Two `simulate` calls: the sensitivities and one batch
-    of every moved run (`MULTIPLES`).
+    summary column): see `CHECK_COLUMNS`. Three `simulate` calls: the sensitivities, the
+    differences' moved runs (`whole_run_differences`) and the Taylor test's (H and 2H).
 
     With adaptive steps hold them: dt_min = dt_max = the step. The sensitivities are those of
     the instance's accepted step sequence, frozen; a moved run on free steps chooses its own,
@@ -98,24 +116,18 @@ def check_sensitivities(params: Sequence[StarParams], duration_s: float, solver:
     directions = parse_directions(names)
     result = simulate(params, duration_s, solver, arch=arch, sensitivities=names)
     centre = result.summary[output].to_numpy(dtype=float)
-    moved, steps, taylor_steps = [], [], []
-    for direction in directions:
-        row = [difference_step(direction, p) for p in params]
-        taylor_row = [taylor_step(h, direction.value(p)) for p, h in zip(params, row)]
-        steps.append(row)
-        taylor_steps.append(taylor_row)
-        for offsets in [[m * h for h in row] for m in MULTIPLES] + [taylor_row,
-                                                                    [2 * H for H in taylor_row]]:
-            moved += [direction.moved(p, direction.value(p) + offset)
-                      for p, offset in zip(params, offsets)]
-    runs = simulate(moved, duration_s, solver, arch=arch).summary[output].to_numpy(dtype=float)
-    runs = runs.reshape(len(directions), len(MULTIPLES) + 2, len(params))
+    differences = whole_run_differences(params, duration_s, solver, directions, output, arch)
+    taylor_steps = [[taylor_step(difference_step(direction, p), direction.value(p))
+                     for p in params] for direction in directions]
+    moved = [direction.moved(p, direction.value(p) + multiple * H)
+             for direction, row in zip(directions, taylor_steps) for multiple in (1.0, 2.0)
+             for p, H in zip(params, row)]
+    taylor_runs = simulate(moved, duration_s, solver, arch=arch).summary[output] \
+        .to_numpy(dtype=float).reshape(len(directions), 2, len(params))
     rows = []
     for j, direction in enumerate(directions):
-        h = np.array(steps[j])
-        plus, minus, plus2, minus2, plus4, minus4, taylor, taylor2 = runs[j]
-        small, large = (plus - minus) / (2 * h), (plus2 - minus2) / (4 * h)
-        largest = (plus4 - minus4) / (8 * h)
+        small, large, largest = differences[j].T
+        taylor, taylor2 = taylor_runs[j]
         extrapolated = extrapolated_difference(small, large, largest)
         sensitivity = result.sensitivity(output, direction.label)
         step = np.array(taylor_steps[j])
