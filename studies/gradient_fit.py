@@ -128,16 +128,12 @@ CORNER_GROUP = 10
 groups; no limit between fields ties an axis of one group to one of the other."""
 COST_REPEATS = 3
 """Interleaved timings of the gradient's simulation and the plain one (`measure_cost_ratio`)."""
-RECORD_INTERVAL_S = 0.01
-"""Centroid records, s (as model_select's fits)."""
 LEAST_SQUARES = "least-squares"
 """The least-squares optimiser's name in the tables."""
 POLISH = "CMA-ES + least-squares"
 """Least squares from CMA-ES's best point (`--polish-evaluations`): its costs include CMA-ES's."""
 GRADIENT_OPTIMISERS = ("L-BFGS-B", LEAST_SQUARES, POLISH)
 """Optimisers whose evaluations are runs with sensitivities."""
-FAILED_OBJECTIVE = 1e6
-"""Objective told to the gradient fits for a failed simulation (with a zero gradient)."""
 QUICK_GAITS, QUICK_TRAIN, QUICK_VALIDATE = "A1+A2", "1:1", "2:2"
 RESULT_COLUMNS = ["parameter_set", "n_parameters", "optimiser", "starts", "evaluations",
                   "robot_seconds", "robot_seconds_cost_equivalent", "wall_s", "objective",
@@ -198,7 +194,7 @@ class Problem:
     def __init__(self, box, base, gaits, trials, train, solver, arch):
         self.box, self.base, self.gaits, self.trials = box, base, list(gaits), trials
         self.train, self.solver, self.arch = train, solver, arch
-        self.record = nearest_interval(RECORD_INTERVAL_S, solver.dt)
+        self.record = nearest_interval(identify.RECORD_INTERVAL_S, solver.dt)
         self.window_s = train[1] * base.period
         self.names = [spec.sensitivity_name for spec in box]
 
@@ -230,9 +226,9 @@ class Problem:
         return residuals
 
     def failed_residuals(self) -> np.ndarray:
-        """R equal residuals whose squares sum to FAILED_OBJECTIVE."""
+        """R equal residuals whose squares sum to `identify.FAILED_PENALTY`."""
         count = identification.residual_count(len(self.gaits), self.train)
-        return np.full(count, math.sqrt(FAILED_OBJECTIVE / count))
+        return np.full(count, math.sqrt(identify.FAILED_PENALTY / count))
 
     def fit_terms(self, units):
         """The objective as a sum of squares at a point, from one run with sensitivities:
@@ -240,7 +236,7 @@ class Problem:
         (`identification.objective_residuals`) and the gradient's part from the phases moving
         with the point (D,; `identification.phase_motion`, zero on a one-cycle window), both in
         unit coordinates; for a failed simulation R equal residuals whose squares sum to
-        FAILED_OBJECTIVE, and zero derivatives."""
+        `identify.FAILED_PENALTY`, and zero derivatives."""
         units = np.clip(np.asarray(units, dtype=float), 0.0, 1.0)
         runs, result = self.runs(self.params(units[None, :]), self.train[1], self.names)
         if any(run is None for run in runs):

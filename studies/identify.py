@@ -38,7 +38,13 @@ MAX_RESTARTS = 10
 """The most CMA-ES restarts: each doubles the population (IPOP), the last's is 2^10 times the
 first's; more is work that cannot finish (and overflows the run-time estimate)."""
 FAILED_PENALTY = 1e6
-"""Objective told to CMA-ES for a failed candidate (it needs finite values; the CSV keeps inf)."""
+"""Objective told to an optimiser for a failed candidate: CMA-ES needs finite values, and the
+gradient fits get it with a zero gradient (the CSVs keep inf)."""
+RECORD_INTERVAL_S = 0.01
+"""Centroid records of a simulated path that is fitted to or read like the measured tracks
+(model_select's and gradient_fit's fits, the strokes read off a path), s: a whole number of
+any preset's steps (the fits round it to their --dt's), at least 4 per sample of a cycle
+curve, under a video frame (16.7 ms)."""
 TOPOLOGY_FIELDS = ("n_arc", "n_limb")
 """Integer fields fixing the topology (shared by a batch): not fittable."""
 

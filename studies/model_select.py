@@ -135,7 +135,7 @@ or each at the period its strokes' line gives (`Setup.periods`; with --phases st
 STROKE_TAIL_CYCLES = 0.05
 """--phases strokes: cycles simulated past a window's last, 0.16 s of the paper's period: the
 last period's strokes are read over `identification.STROKE_WINDOW_S` past its end, on records
-of `RECORD_INTERVAL_S`."""
+of `identify.RECORD_INTERVAL_S`."""
 STROKE_ALIGNMENT = "window"
 """How --phases strokes reads the simulated strokes, part of a held candidate's definition so
 that a resumed run does not reuse results scored another way: "window", over each window's own
@@ -143,8 +143,6 @@ cycles (since eeefbb8; results stored before read them over the whole run, and t
 errors differ: `--reassess` assesses their fits again, `stored_fit_of`)."""
 STAGES = ("refine", "screen")
 """The stages in ranking order: a refined form above every screened one."""
-RECORD_INTERVAL_S = 0.01
-"""Centroid records of the fits, s (rounded to whole steps): ≥ 4 per sample of a cycle curve."""
 PER_ACTUATOR = 8
 """A tuple-valued field of this length holds one value per actuator (A1..A8)."""
 RESULT_COLUMNS = ["rank", "stage", "candidate", "status", "note", "n_fitted", "n_parameters",
@@ -899,7 +897,7 @@ def main(argv=None):
                                            **({"pulse_periods_s": periods} if periods
                                               else {})})
     progress = not args.no_progress
-    record = nearest_interval(RECORD_INTERVAL_S, solver.dt)
+    record = nearest_interval(identify.RECORD_INTERVAL_S, solver.dt)
     started = time.perf_counter()
     rows, parameters, gait_tables, fold_tables, identified = list(rows), [], [], [], {}
     budget_s = 3600 * args.budget_hours

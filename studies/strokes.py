@@ -35,7 +35,7 @@ import pandas as pd
 from taichi_star import identification, metrics, simulate
 from taichi_star.experiment import PAPER_GAITS
 
-from . import cli
+from . import cli, identify
 
 DESCRIPTION = ("Strokes: when each measured trial's pulses fire, read off its track (the "
                "centroid's jumps), against the phase the trajectory fit chooses.")
@@ -44,9 +44,6 @@ MODEL_COLUMNS = ("model_stroke_phase_s", "model_consistent_cycles", "model_cycle
                  "model_jump_mm", "model_hub_jump_mm", "model_typical_move_mm", "firing_phase_s",
                  "fitted_phase_s", "phase_gap_s")
 """Columns of `strokes.csv` that need the simulated run (NaN where it failed)."""
-RECORD_INTERVAL_S = 0.01
-"""The simulated path's records, s: under a video frame (16.7 ms), a whole number of any
-preset's steps."""
 
 
 def build_parser():
@@ -163,9 +160,9 @@ def main(argv=None):
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver)
     # a window and a record past the last period: its stroke is read too
-    duration = args.cycles * base.period + args.window + RECORD_INTERVAL_S
+    duration = args.cycles * base.period + args.window + identify.RECORD_INTERVAL_S
     result = simulate(params, duration, solver, arch=args.arch,
-                      record_interval_s=RECORD_INTERVAL_S, record_shapes=True,
+                      record_interval_s=identify.RECORD_INTERVAL_S, record_shapes=True,
                       progress=not args.no_progress)
     trials = identification.measured_trials(gaits)
     runs = dict(zip(trials, identification.simulated_runs(result.trajectory, list(trials),

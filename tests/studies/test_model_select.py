@@ -192,7 +192,7 @@ def test_quick_run_against_a_direct_simulation(tmp_path, capsys, monkeypatch):
         result = taichi_star.simulate(params, 2 * params[0].period,
                                       SolverConfig(dt=model_select.QUICK_DT),
                                       record_interval_s=nearest_interval(
-                                          model_select.RECORD_INTERVAL_S, model_select.QUICK_DT))
+                                          identify.RECORD_INTERVAL_S, model_select.QUICK_DT))
         runs = identification.simulated_runs(result.trajectory, gaits,
                                              [p.period for p in params])
         trials = identification.measured_trials(gaits)
@@ -317,7 +317,7 @@ def test_phases_held_on_the_strokes_in_every_window(tmp_path, periods):
         result = taichi_star.simulate(
             [params], (2 + model_select.STROKE_TAIL_CYCLES) * params.period,
             SolverConfig(dt=model_select.QUICK_DT),
-            record_interval_s=nearest_interval(model_select.RECORD_INTERVAL_S,
+            record_interval_s=nearest_interval(identify.RECORD_INTERVAL_S,
                                                model_select.QUICK_DT))
         runs[gait] = identification.simulated_runs(result.trajectory, [gait],
                                                    [params.period])[0]

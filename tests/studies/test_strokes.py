@@ -10,7 +10,7 @@ import pytest
 import taichi_star
 from taichi_star import SolverConfig, StarParams, identification
 
-from studies import strokes
+from studies import identify, strokes
 
 
 @pytest.mark.parametrize("later, earlier, gap", [(0.2, 3.1, 0.25), (3.1, 0.2, -0.25),
@@ -67,7 +67,7 @@ def test_quick_run_against_the_library(tmp_path):
     params = StarParams.preset("identified", gait="A1+A2")
     result = taichi_star.simulate([params], 3 * params.period + 0.1 + 0.01,
                                   SolverConfig.preset("identified", dt=2e-3),
-                                  record_interval_s=strokes.RECORD_INTERVAL_S, record_shapes=True)
+                                  record_interval_s=identify.RECORD_INTERVAL_S, record_shapes=True)
     runs = dict(zip(["A1+A2"], identification.simulated_runs(result.trajectory, ["A1+A2"],
                                                              [params.period])))
     model = identification.strokes(runs["A1+A2"].path)
