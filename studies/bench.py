@@ -295,8 +295,6 @@ def measure_accurate(batch: int, arch: str, precision: str, duration: float,
     `accurate_phase_split`'s per iteration, taken as many times per accepted step as the run
     iterated and factored (`step_phases`; rejected steps' solves included), bookkeeping the
     rest of the measured step (error estimate, step-size control, records)."""
-    from taichi_star import simulate
-
     params = [StarParams.preset("accurate", gait=GAIT)] * batch
     solver = SolverConfig.preset("accurate", precision=precision,
                                  newton_tol=bench_solver(precision).newton_tol)

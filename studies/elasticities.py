@@ -68,7 +68,7 @@ def default_parameters(base: StarParams) -> List[str]:
     return [direction.label for direction in parse_directions(names)]
 
 
-def resolve_parameters(text, base: StarParams, flag: str) -> List[str]:
+def resolve_parameters(text, flag: str) -> List[str]:
     """The parameters a flag names (a comma list as `simulate(sensitivities=...)` takes them,
     "actuator_gains" standing for its eight, "all" for every differentiable field, as
     sensitivity_check's --parameters), as single labels ("actuator_gains[2]");
@@ -241,7 +241,7 @@ def main(argv=None):
     base = cli.base_params(args)
     solver = cli.solver(args)
     parameters = (default_parameters(base) if args.parameters is None
-                  else resolve_parameters(args.parameters, base, "--parameters"))
+                  else resolve_parameters(args.parameters, "--parameters"))
     heights = [label for label in parameters if label in COMPONENT_HEIGHTS
                and direction(label).value(base) == 0.0]
     if heights:
@@ -249,7 +249,7 @@ def main(argv=None):
                                      f"in this model; set the component heights with --set")
     if solver.precision != "f64":
         raise cli.StudyArgumentError("sensitivities need precision f64")
-    checked = [] if args.check is None else resolve_parameters(args.check, base, "--check")
+    checked = [] if args.check is None else resolve_parameters(args.check, "--check")
     for label in checked:
         if label not in parameters:
             raise cli.StudyArgumentError(f"--check: {label} is not among the parameters")

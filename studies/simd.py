@@ -706,9 +706,10 @@ def packed_ops(ir_folder: Path) -> dict[str, int]:
     return {"count": count, "width": width}
 
 
-def init_taichi(precision: str, ir_folder: Path):
+def init_taichi(precision: str):
     """Taichi on the CPU as the engine runs it (no fast math), printing the optimised LLVM IR
-    of every kernel it compiles into ir_folder (the working directory while compiling)."""
+    of every kernel it compiles into the working directory of the compilation (the callers
+    compile inside `working_directory(ir_folder)`)."""
     with contextlib.redirect_stdout(io.StringIO()):
         ti.init(arch=ti.cpu, default_fp=ti.f64 if precision == "f64" else ti.f32,
                 fast_math=False, offline_cache=False, log_level=ti.ERROR,
@@ -738,7 +739,7 @@ def forms_of(lanes_list: list[int]):
 def measure(plans: dict, precision: str, batch_sizes: list[int], lanes_list: list[int],
             repeats: int, matmul_size: int, ir_folder: Path) -> list[dict]:
     """Rows of simd.csv for one precision (see the module docstring)."""
-    init_taichi(precision, ir_folder)
+    init_taichi(precision)
     rng = np.random.default_rng(0)
     rows = []
     for preset, plan in plans.items():
@@ -917,7 +918,7 @@ def measure_assembly(kernel: str, plans: dict, precision: str, batch_sizes: list
                      lanes_list: list[int], repeats: int, ir_folder: Path) -> list[dict]:
     """Rows of simd_assembly.csv for one assembly kernel (ASSEMBLIES) and one precision (module
     docstring)."""
-    init_taichi(precision, ir_folder)
+    init_taichi(precision)
     assembly = ASSEMBLIES[kernel]
     rows = []
     for preset, plan in plans.items():

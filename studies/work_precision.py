@@ -331,7 +331,7 @@ def config_rows(config: Config, grid: Grid, summary: pd.DataFrame, run_time: flo
         "robot_seconds_per_wall_s": len(summary) * duration_s / run_time})
 
 
-def add_errors(table: pd.DataFrame, refs: pd.DataFrame, gaits) -> pd.DataFrame:
+def add_errors(table: pd.DataFrame, refs: pd.DataFrame) -> pd.DataFrame:
     """The limit and error columns of every row: time (preset mesh only), space (space series
     only) and total (against the continuum limit); NaN for a failed instance."""
     table = table.copy()
@@ -575,7 +575,7 @@ def main(argv=None):
     refs = references(speeds, grid, gaits)
     table = pd.concat(parts, ignore_index=True)
     table.insert(0, "config", np.repeat(np.arange(len(parts)), len(gaits)))
-    table = add_errors(table, refs, gaits)
+    table = add_errors(table, refs)
     for name, value in provenance_columns.items():
         table[name] = value
     summary = summarise(table, run_times, load_average, grid.timing_batch)

@@ -81,7 +81,7 @@ def assembled_in(assembly, n_nodes, batch, state, element, forms):
     """{form: the `assembly` (simd.LaneBending, LaneRodDrag) of state and element assembled in
     that form} (f64, `forms` of (form, lanes)); the caller destroys them."""
     systems = {}
-    simd.init_taichi("f64", Path.cwd())
+    simd.init_taichi("f64")
     for form, lanes in forms:
         systems[form] = assembly(n_nodes, batch, form, lanes)
         systems[form].load(state, element)
