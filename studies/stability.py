@@ -491,13 +491,14 @@ def main(argv=None):
     summary = outcome_summary(table)
     paper = paper_summary(table)
     f32 = f32_summary(table)
-    out.write_csv(table, "stability.csv")
+    csv = out.write_csv(table, "stability.csv")
     out.write_csv(summary, "stability_summary.csv")
     if len(paper):
         out.write_csv(paper, "stability_paper.csv")
     if len(f32):
         out.write_csv(f32, "stability_f32.csv")
-    out.wrote(plot_maps(table, out.path("stability.png")))
+    # drawn from the table as written, so that the CSV redraws it
+    out.wrote(plot_maps(pd.read_csv(csv), out.path("stability.png")))
     text = report(table, summary, paper, f32)
     notes = out.path("stability_notes.txt")
     notes.write_text(text + "\n")
