@@ -72,8 +72,7 @@ def convergence_table(summary: pd.DataFrame) -> pd.DataFrame:
     actuation_ends, n_arc, n_limb, speed_mm_s, signed_speed_mm_s, status."""
     rows = summary[["gait", "actuation_ends", "n_arc", "n_limb", "speed_mm_s", "signed_speed_mm_s",
                     "status"]].copy()
-    # the hub, and per joint: the joint, its limb's nodes and its arc's interior nodes
-    rows["n_nodes"] = 1 + 8 * (rows.n_limb + rows.n_arc)
+    rows["n_nodes"] = StarParams.node_count(rows.n_arc, rows.n_limb)
     rows["observed_order"] = np.nan
     rows["limit_mm_s"] = np.nan
     for (gait, ends), part in rows.groupby(["gait", "actuation_ends"], sort=False):

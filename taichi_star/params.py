@@ -434,6 +434,18 @@ class StarParams:
         """The fields that fix the topology; a batch must agree on them."""
         return (self.n_arc, self.n_limb)
 
+    @staticmethod
+    def node_count(n_arc, n_limb):
+        """Nodes N of a robot of n_arc edges per arc and n_limb per limb (numbers or arrays):
+        the hub, and per actuator its joint, its limb's n_limb nodes and its arc's n_arc − 1
+        interior ones (N = 193 at the paper's 18 and 6)."""
+        return 1 + N_ACTUATORS * (n_limb + n_arc)
+
+    @property
+    def n_nodes(self) -> int:
+        """N, the robot's nodes (`node_count`)."""
+        return self.node_count(self.n_arc, self.n_limb)
+
     def replace(self, **changes) -> "StarParams":
         """A copy with some fields changed (validated again)."""
         return dataclasses.replace(self, **changes)

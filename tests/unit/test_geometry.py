@@ -24,6 +24,10 @@ def test_counts_of_nodes_edges_and_triplets(shape):
     params, topology = shape
     n_arc, n_limb = params.n_arc, params.n_limb
     assert topology.n_nodes == 1 + 8 * (n_limb + n_arc)      # hub; per actuator J, limb, arc
+    # the count the studies read without building a topology (convergence's table)
+    assert params.n_nodes == topology.n_nodes == len(topology.rest_positions)
+    assert StarParams.node_count(np.array([n_arc, 2 * n_arc]), n_limb).tolist() == [
+        topology.n_nodes, topology.n_nodes + 8 * n_arc]
     assert topology.n_edges == 8 * (1 + n_limb + n_arc)      # spoke, limb edges, arc edges
     assert topology.n_triplets == 8 * ((n_limb - 1) + 2 + (n_arc - 1))
     assert np.bincount(topology.edge_kind, minlength=3).tolist() == [8, 8 * n_limb, 8 * n_arc]
