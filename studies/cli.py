@@ -796,10 +796,9 @@ class Output:
         another CPU changes."""
         parameters = [column for column in StarParams.columns().values()
                       if column in frame and frame[column].dtype.kind == "f"]
-        # repr of a float is its shortest round-tripping text; NaN stays an empty cell
-        exact = frame.assign(**{column: frame[column].map(
-            lambda value: "" if np.isnan(value) else repr(float(value)))
-            for column in parameters})
+        # a float's text (str, as repr) is its shortest round-tripping one; NaN stays empty
+        exact = frame.assign(**{column: frame[column].astype(str).where(frame[column].notna(), "")
+                                for column in parameters})
         return self._write_described(
             self.path(name), exact.to_csv(index=False, float_format="%.10g").encode(), extra,
             frame)

@@ -180,8 +180,8 @@ class PrimitiveModel:
         kept = ((table["status"] == "ok") & np.isfinite(numbers["step_x_mm"])
                 & np.isfinite(numbers["turn_deg"])).to_numpy()
         # a cell that is no number (a TypeError from NumPy had come through), or a kept gait's
-        # number that is not finite (refused by the constructor, after the glides' warning),
-        # is named before anything is built or warned of
+        # number that is not finite, named by its column and gait (the constructor's refusal
+        # names neither)
         for column in read:
             text = (numbers[column].isna() & table[column].notna()).to_numpy()
             lost = ~np.isfinite(numbers[column].to_numpy()) & kept
