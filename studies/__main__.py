@@ -1,10 +1,13 @@
 """`python -m studies <name> [options]`; `python -m studies <name> --help` for a study's flags."""
 
 import ast
+import contextlib
 import errno
 import importlib
 import os
+import signal
 import sys
+import threading
 from pathlib import Path
 
 try:
@@ -31,6 +34,33 @@ except KeyboardInterrupt:
 
 FULL_DISK = (errno.ENOSPC, errno.EDQUOT)
 """Errors of a write that found no room: a one-line error, not a traceback."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (`kill`, a batch scheduler's stop, a container's shutdown) raised in the study as
+    an interrupt: Python's default for SIGTERM ends the process at once, so the run store's lock
+    stayed and the run's empty output folder with it (an audit, 2026-12). As a KeyboardInterrupt
+    it takes Ctrl-C's way out: every handler that keeps a run's work on Ctrl-C keeps it here."""
+
+
+def _raise_terminated(signum, frame):
+    raise Terminated
+
+
+@contextlib.contextmanager
+def sigterm_as_interrupt():
+    """Run the block with SIGTERM raised as `Terminated`, where Python's default handler is in
+    place and this is the main thread (only it may set a handler); a handler of the program
+    that called `main` is left alone. The previous handler is back afterwards."""
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL):
+        yield
+        return
+    signal.signal(signal.SIGTERM, _raise_terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def program() -> str:
@@ -90,7 +120,8 @@ def main(argv=None) -> int:
     cli.OPENED.clear()  # this run's output folders alone (`interrupted`)
     try:
         # the study's import inside: Ctrl-C while it loads its libraries is one line too
-        importlib.import_module(f"{__package__}.{name}").main(rest)
+        with sigterm_as_interrupt():
+            importlib.import_module(f"{__package__}.{name}").main(rest)
     except (StudyArgumentError, StudyOutputError, RunStoreError) as error:
         print(f"{program()} {name}: error: {error}", file=sys.stderr)
         for out in cli.OPENED:  # a refusal leaves no empty folder the run made
@@ -108,11 +139,13 @@ def main(argv=None) -> int:
         print(f"{program()} {name}: error: cannot write {error.filename or 'a file'} "
               f"({error.strerror}); the files written before are intact", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        # Ctrl-C: one line saying what is kept, not the traceback of wherever the run was, and
-        # a shell's exit status for it (128 + SIGINT)
-        print(f"{program()} {name}: interrupted; {interrupted()}", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as stop:
+        # Ctrl-C or SIGTERM: one line saying what is kept, not the traceback of wherever the run
+        # was, and a shell's exit status for it (128 + the signal's number)
+        terminated = isinstance(stop, Terminated)
+        print(f"{program()} {name}: {'terminated' if terminated else 'interrupted'}; "
+              f"{interrupted()}", file=sys.stderr)
+        return 128 + (signal.SIGTERM if terminated else signal.SIGINT)
     except SystemExit as exit_:  # argparse's --help (its refusals are StudyArgumentError)
         return exit_.code if isinstance(exit_.code, int) else 2
     except Exception:

@@ -613,6 +613,51 @@ def test_ctrl_c_is_one_line_saying_what_is_kept(tmp_path, monkeypatch, capsys):
                      f"the run\n")
 
 
+def test_sigterm_is_one_line_saying_what_is_kept(tmp_path, monkeypatch, capsys):
+    """SIGTERM (`kill`, a scheduler's stop) ended a study at once with Python's default
+    handler: the run's empty folder and a run store's lock stayed (an audit, 2026-12). Now it
+    takes Ctrl-C's way out with its own word and a shell's status for it (128 + 15); a real
+    signal, sent to this process mid-study."""
+    import signal
+
+    def killed(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(30)  # the handler raises as soon as the signal arrives, ending the sleep
+    monkeypatch.setattr("studies.figures.run_fig4c", killed)
+    out = tmp_path / "fig4c"
+    started = time.perf_counter()
+    assert studies_main(["fig4c", "--out", str(out), *QUICK]) == 143
+    assert time.perf_counter() - started < 25  # the sleep was cut short, not waited out
+    assert capsys.readouterr().err == (f"{main_program()} fig4c: terminated; the files "
+                                       f"written before are whole\n")
+    assert not out.exists()
+    # the default handler is back once the study has ended (a later SIGTERM ends the process)
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+
+
+def test_sigterm_handler_of_the_calling_program_is_left_alone(tmp_path, monkeypatch, capsys):
+    """A program that handles SIGTERM itself and calls the studies' main keeps its handler: it
+    is neither replaced during the study nor reset after."""
+    import signal
+
+    def own_handler(signum, frame):
+        raise AssertionError("not called: no signal is sent")
+    seen = {}
+
+    def record_handler(*args, **kwargs):
+        seen["during"] = signal.getsignal(signal.SIGTERM)
+        raise KeyboardInterrupt
+    monkeypatch.setattr("studies.figures.run_fig4c", record_handler)
+    previous = signal.signal(signal.SIGTERM, own_handler)
+    try:
+        assert studies_main(["fig4c", "--out", str(tmp_path / "fig4c"), *QUICK]) == 130
+        assert seen["during"] is own_handler
+        assert signal.getsignal(signal.SIGTERM) is own_handler
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert capsys.readouterr().err.endswith("interrupted; the files written before are whole\n")
+
+
 def test_ctrl_c_while_a_study_loads_its_libraries_is_one_line(monkeypatch, capsys):
     """A study's import (pandas, pyarrow, SciPy: a second or more) sat outside the interrupt's
     handler: Ctrl-C there was a 40-line traceback (an audit, 2026-12)."""
