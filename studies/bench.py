@@ -128,7 +128,8 @@ import pandas as pd
 
 from taichi_star import SolverConfig, StarParams, simulate
 from taichi_star.batch import MAX_LOCAL_WORKERS, LocalProcesses, run_batch
-from taichi_star.profiling import EngineProfile, device_bandwidth, matmul_gflops, step_phases
+from taichi_star.profiling import (EngineProfile, device_bandwidth, interleaved_rounds,
+                                   matmul_gflops, step_phases)
 from taichi_star.runtime import (CPU_LANES, GPU_BLOCK_DIM, GPU_INSTANCE_MINOR, Runtime,
                                  kernel_optimisation_default)
 
@@ -337,23 +338,11 @@ def best_of_calls(call, repeats: int, warmup=None):
 
 
 def interleaved_calls(calls, repeats: int, warmups):
-    """Time several calls in rounds: each `warmups[i]()` (None: `calls[i]()`) once first, which
-    starts and compiles what call i needs, then `repeats` rounds that each make every call once,
-    in turn, so that the machine's drifts (other jobs, clocks) reach them all alike. Returns
-    (the last result of each call, wall times (s) as a (repeats, len(calls)) array, each
-    warm-up's wall time (s)). Raises if an instance failed (the timing would not be valid)."""
-    firsts = []
-    for call, warmup in zip(calls, warmups):
-        start = time.perf_counter()
-        (warmup or call)()
-        firsts.append(time.perf_counter() - start)
-    times = np.empty((repeats, len(calls)))
-    results = [None] * len(calls)
-    for round_index in range(repeats):
-        for index, call in enumerate(calls):
-            start = time.perf_counter()
-            results[index] = call()
-            times[round_index, index] = time.perf_counter() - start
+    """`profiling.interleaved_rounds` of `calls` (each a `simulate` or `run_batch`), `repeats`
+    rounds after `warmups` (None: the call itself): (the last result of each call, wall times
+    (s) as a (repeats, len(calls)) array, each warm-up's wall time (s)). Raises if an instance
+    failed (the timing would not be valid)."""
+    results, times, firsts = interleaved_rounds(calls, repeats, warmups)
     for result in results:
         if (result.summary["status"] != "ok").any():
             raise RuntimeError("an instance failed during the benchmark: its timing is not "

@@ -22,13 +22,12 @@ whether the final positions equal those of the default solver, Newton's Jacobian
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pandas as pd
 
 from taichi_star import JACOBIANS, SolverConfig, StarParams, simulate
 from taichi_star.experiment import PAPER_GAITS
+from taichi_star.profiling import interleaved_rounds
 
 from . import cli
 
@@ -90,35 +89,41 @@ def check_args(args):
                                      f"{args.duration:g}")
 
 
-def run_configuration(params, duration: float, mode: str, tol: float):
-    """(wall time s, final node positions (B, N, 2) m, summary) of one run."""
-    solver = SolverConfig(jacobian=mode, newton_tol=tol)
-    start = time.perf_counter()
-    result = simulate(params, duration, solver, record_interval_s=duration, record_shapes=True,
-                      progress=False)
-    wall = time.perf_counter() - start
+def final_state(result, mode: str, tol: float):
+    """(final node positions (B, N, 2) m, summary) of a configuration's run (`result`, its
+    shapes recorded); RuntimeError naming the configuration if an instance failed (its time
+    would not be valid)."""
     failed = result.summary[result.summary["status"] != "ok"]
     if len(failed):
         raise RuntimeError(f"{mode}:{tol:g}: instance {failed.index[0]} "
                            f"{failed['status'].iloc[0]}; its time would not be valid")
-    return wall, result.shapes[-1], result.summary
+    return result.shapes[-1], result.summary
 
 
 def jacobians_table(params, duration: float, configurations, rounds: int,
                     progress: bool = True) -> pd.DataFrame:
     """One row per configuration: best wall time, robot-steps/s, Newton iterations and
-    factorisations per solve, the errors against the reference (the last configuration)."""
-    # the engine is the same for every mode (the mode is loaded, not compiled): compile once
-    simulate(params, SolverConfig().dt, progress=False)
-    best, shapes, summaries = {}, {}, {}
-    for round_number in range(rounds):
-        for configuration in configurations:
-            wall, shapes[configuration], summaries[configuration] = run_configuration(
-                params, duration, *configuration)
-            best[configuration] = min(wall, best.get(configuration, np.inf))
-            if progress:
-                print(f"round {round_number + 1}, {configuration[0]}:{configuration[1]:g}: "
-                      f"{wall:.2f} s", flush=True)
+    factorisations per solve, the errors against the reference (the last configuration).
+    The configurations' runs interleaved in `rounds` rounds (`profiling.interleaved_rounds`),
+    each after a one-step call: the engine is the same for every mode (the mode is loaded, not
+    compiled), so the first compiles it and the others load their mode."""
+    solvers = [SolverConfig(jacobian=mode, newton_tol=tol) for mode, tol in configurations]
+    calls = [lambda solver=solver: simulate(params, duration, solver, record_interval_s=duration,
+                                            record_shapes=True, progress=False)
+             for solver in solvers]
+    warmups = [lambda solver=solver: simulate(params, solver.dt, solver, progress=False)
+               for solver in solvers]
+
+    def report(round_index: int, index: int, wall: float):
+        mode, tol = configurations[index]
+        print(f"round {round_index + 1}, {mode}:{tol:g}: {wall:.2f} s", flush=True)
+
+    results, times, _ = interleaved_rounds(calls, rounds, warmups,
+                                           progress=report if progress else None)
+    best = dict(zip(configurations, times.min(axis=0)))
+    shapes, summaries = {}, {}
+    for configuration, result in zip(configurations, results):
+        shapes[configuration], summaries[configuration] = final_state(result, *configuration)
     reference = configurations[-1]
     steps = int(summaries[reference]["steps"].iloc[0])
     displacement = ["displacement_x_mm", "displacement_y_mm"]
@@ -169,7 +174,7 @@ def main(argv=None):
     args = cli.parse(build_parser(), argv)
     check_args(args)
     configurations = parse_modes(args.modes)
-    # every round simulates the batch once per configuration (the compiling call's one step
+    # every round simulates the batch once per configuration (the warm-ups' one step each
     # aside): counted before the batch is built, which took a minute at the most --batch
     cli.check_instances(
         args.batch * args.rounds * len(configurations),

@@ -62,7 +62,6 @@ from __future__ import annotations
 
 import math
 import os
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -70,6 +69,7 @@ import pandas as pd
 
 import taichi_star
 from taichi_star import SolverConfig, StarParams, metrics
+from taichi_star.profiling import interleaved_rounds
 
 from . import cli, provenance
 
@@ -273,33 +273,34 @@ def references(speeds, grid: Grid, gaits):
 
 def run_config(config: Config, gaits, duration_s, arch):
     """(summary, run time s) of one batch of the gaits: a one-step call compiles, then the
-    timed call simulates duration_s."""
+    timed call simulates duration_s (`profiling.interleaved_rounds`, one round)."""
     params = config.params(gaits)
-    taichi_star.simulate(params, config.solver.dt, config.solver, arch=arch, progress=False)
-    start = time.perf_counter()
-    summary = taichi_star.simulate(params, duration_s, config.solver, arch=arch,
-                                   progress=False).summary
-    return summary, time.perf_counter() - start
+    solver = config.solver
+    results, times, _ = interleaved_rounds(
+        [lambda: taichi_star.simulate(params, duration_s, solver, arch=arch, progress=False)], 1,
+        [lambda: taichi_star.simulate(params, solver.dt, solver, arch=arch, progress=False)])
+    return results[0].summary, float(times[0, 0])
 
 
 def time_presets(gaits, duration_s, batch, arch):
     """Run times (s) of `batch` instances (the gaits repeated) of each preset, its model's
-    configuration and solver, in alternation TIMING_ROUNDS times after one compiling call each;
-    and the 1-minute load average just before the first timed call."""
-    batches = {}
+    configuration and solver, in alternation TIMING_ROUNDS times after one compiling call each
+    (`profiling.interleaved_rounds`); and the 1-minute load average just before the first timed
+    call."""
+    calls, warmups = [], []
     for model in MODEL_PRESETS:
         config = preset_config(model)
         params = config.params([gaits[i % len(gaits)] for i in range(batch)])
-        taichi_star.simulate(params, config.solver.dt, config.solver, arch=arch, progress=False)
-        batches[MODEL_PRESETS[model]] = (params, config.solver)
-    load_average = os.getloadavg()[0]
-    run_times = {name: [] for name in batches}
-    for _ in range(TIMING_ROUNDS):
-        for name, (params, solver) in batches.items():
-            start = time.perf_counter()
-            taichi_star.simulate(params, duration_s, solver, arch=arch, progress=False)
-            run_times[name].append(time.perf_counter() - start)
-    return run_times, load_average
+        calls.append(lambda params=params, solver=config.solver: taichi_star.simulate(
+            params, duration_s, solver, arch=arch, progress=False))
+        warmups.append(lambda params=params, solver=config.solver: taichi_star.simulate(
+            params, solver.dt, solver, arch=arch, progress=False))
+    load = []
+    _, times, _ = interleaved_rounds(calls, TIMING_ROUNDS, warmups,
+                                     before_rounds=lambda: load.append(os.getloadavg()[0]))
+    run_times = {MODEL_PRESETS[model]: times[:, index].tolist()
+                 for index, model in enumerate(MODEL_PRESETS)}
+    return run_times, load[0]
 
 
 def series_of(config: Config, grid: Grid) -> str:

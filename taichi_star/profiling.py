@@ -7,7 +7,8 @@ rest (`timed_window`), the split of a Newton iteration into assembly, factorisat
 (`phase_split`, by groups in an engine with lanes), and the engine's facts (its terms, node
 count, Jacobian blocks, the FLOPs of one factorisation); `device_bandwidth` measures a GPU's
 memory bandwidth and `matmul_gflops` NumPy's matrix-product rate (the CPU's attainable
-floating-point rate).
+floating-point rate); `interleaved_rounds` times whole calls (a `simulate`, a `run_batch`)
+against each other, in rounds after a warm-up of each.
 
 All times are wall-clock seconds of the whole machine (so they include the parallel speed-up
 over cores).
@@ -15,7 +16,7 @@ over cores).
 
 import math
 import time
-from typing import Dict, Sequence, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import taichi as ti
@@ -28,7 +29,8 @@ from .state import STATUS_OK
 from .timegrid import STEPS_PER_LAUNCH, check_work
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
-__all__ = ["EngineProfile", "step_phases", "matmul_gflops", "device_bandwidth"]
+__all__ = ["EngineProfile", "step_phases", "matmul_gflops", "device_bandwidth",
+           "interleaved_rounds"]
 
 PROFILE_LAUNCHES = 3
 """`phase_split` times each phase as the best of this many launches (the differences of noisy
@@ -299,6 +301,58 @@ def step_phases(phase: Dict[str, float], iterations: float,
     return {"residual": residual,
             "assembly": residual + factorisations * (phase["assembly"] - phase["residual"]),
             "factor": factorisations * phase["factor"], "solve": iterations * phase["solve"]}
+
+
+def interleaved_rounds(calls: Sequence[Callable[[], object]], rounds: int,
+                       warmups: Optional[Sequence[Optional[Callable[[], object]]]] = None,
+                       before_rounds: Optional[Callable[[], object]] = None,
+                       progress: Optional[Callable[[int, int, float], object]] = None
+                       ) -> Tuple[List[object], np.ndarray, np.ndarray]:
+    """Time K calls (functions of no argument) against each other in interleaved rounds.
+
+    First a warm-up of each call, in order: `warmups[k]()`, or `calls[k]()` itself where that
+    entry (or `warmups`) is None. A warm-up starts and compiles what call k needs (Taichi's
+    kernels, worker processes), so that no round pays for it, and its time is kept apart from
+    the rounds'; a one-step `simulate` of the same batch and solver is one. Then `before_rounds()` if
+    given (e.g. a reading of the machine's load just before the timings), then `rounds` rounds
+    that each make every call once, in order, so that the machine's drifts (other jobs, clock
+    speeds) reach them all alike; `progress(round, k, seconds)` after each timed call if given
+    (round and k from 0).
+
+    Returns (results, times, warmup_times): each call's result in the last round (a list of
+    K), the wall time of every timed call, s, a (rounds, K) array (`times.min(axis=0)`: each
+    call's best, the least disturbed by the rest of the machine), and each warm-up's wall time,
+    s, a (K,) array. Wall-clock seconds of `time.perf_counter`.
+
+    ValueError naming calls (empty), rounds (not an integer >= 1) or warmups (not K entries).
+    """
+    calls = list(calls)
+    if not calls:
+        raise ValueError("calls must hold at least one call, got none")
+    if not is_whole(rounds) or rounds < 1:
+        raise ValueError(f"rounds must be an integer >= 1, got {rounds!r}")
+    warmups = [None] * len(calls) if warmups is None else list(warmups)
+    if len(warmups) != len(calls):
+        raise ValueError(f"warmups must have one entry per call ({len(calls)}, None: the call "
+                         f"itself), got {len(warmups)}")
+    warmup_times = np.empty(len(calls))
+    for index, (call, warmup) in enumerate(zip(calls, warmups)):
+        start = time.perf_counter()
+        (warmup or call)()
+        warmup_times[index] = time.perf_counter() - start
+    if before_rounds is not None:
+        before_rounds()
+    times = np.empty((rounds, len(calls)))
+    results = [None] * len(calls)
+    for round_index in range(rounds):
+        for index, call in enumerate(calls):
+            start = time.perf_counter()
+            results[index] = call()
+            seconds = time.perf_counter() - start
+            times[round_index, index] = seconds
+            if progress is not None:
+                progress(round_index, index, seconds)
+    return results, times, warmup_times
 
 
 def matmul_gflops(size: int, precision: str, rng: np.random.Generator) -> float:
