@@ -82,6 +82,7 @@ import numpy as np
 import pandas as pd
 
 from taichi_star import identification, simulate
+from taichi_star.profiling import interleaved_rounds
 from taichi_star.sensitivities import REPLICAS_PER_DIRECTION, instances_per_instance
 from taichi_star.timegrid import nearest_interval
 
@@ -206,10 +207,7 @@ class Problem:
         result = simulate(params, cycles * self.base.period, self.solver, arch=self.arch,
                           record_interval_s=self.record, sensitivities=sensitivities,
                           progress=False)
-        runs = identification.simulated_runs(result.trajectory, [p.gait for p in params],
-                                             [p.period for p in params])
-        ok = result.summary["status"].to_numpy() == "ok"
-        return [run if good else None for run, good in zip(runs, ok)], result
+        return identification.result_runs(result, params), result
 
     def residuals(self, units) -> np.ndarray:
         """Residuals (R,) of `fit_terms` from a run without sensitivities (an instance's rows
@@ -249,7 +247,8 @@ class Problem:
             simulated, derivatives, self.trials, self.train)
         motion = identification.phase_motion(simulated, derivatives, self.trials, table,
                                              self.train)
-        per_unit = self.value_per_unit(identify.box_values(self.box, units[None, :])[0])
+        per_unit = identify.box_value_per_unit(
+            self.box, identify.box_values(self.box, units[None, :])[0])
         return residuals, jacobian * per_unit, motion * per_unit
 
     def residuals_and_jacobian(self, units):
@@ -271,14 +270,9 @@ class Problem:
         values = identify.box_values(self.box, units[None, :])[0]
         residuals, jacobian, _ = self.fit_terms(units)
         # labelled as the box's axes (NAME[INDEX] from 1), like the study's other tables
-        return identification.parameter_uncertainty(residuals,
-                                                    jacobian / self.value_per_unit(values),
+        per_unit = identify.box_value_per_unit(self.box, values)
+        return identification.parameter_uncertainty(residuals, jacobian / per_unit,
                                                     [spec.label for spec in self.box], values)
-
-    def value_per_unit(self, values) -> np.ndarray:
-        """d value / d u per axis: high − low, or value × ln(high / low) for a log axis."""
-        return np.array([value * math.log(spec.high / spec.low) if spec.log
-                         else spec.high - spec.low for spec, value in zip(self.box, values)])
 
     def gait_tables(self, unit_points) -> list:
         """Per point (P, D): `identification.trajectory_objective`'s per-gait table on the
@@ -316,7 +310,7 @@ def measure_cost_ratio(problem: Problem, repeats: int = COST_REPEATS) -> float:
     `Problem.value_and_gradient` (every gait with the box's sensitivities) over that of the same
     simulation without them, at the base point. Each is run once first (compilation, not
     counted), then `repeats` times interleaved; the ratio of the fastest of each (the least
-    disturbed by the rest of the machine)."""
+    disturbed by the rest of the machine; `profiling.interleaved_rounds`)."""
     params = problem.params(identify.start_units(problem.box, problem.base)[None, :])
     window = problem.train[1] * problem.base.period
     calls = {"plain": lambda: simulate(params, window, problem.solver, arch=problem.arch,
@@ -324,15 +318,9 @@ def measure_cost_ratio(problem: Problem, repeats: int = COST_REPEATS) -> float:
              "gradient": lambda: simulate(params, window, problem.solver, arch=problem.arch,
                                           record_interval_s=problem.record, progress=False,
                                           sensitivities=problem.names)}
-    best = {}
-    for name, call in calls.items():
-        call()
-    for _ in range(repeats):
-        for name, call in calls.items():
-            started = time.perf_counter()
-            call()
-            best[name] = min(best.get(name, math.inf), time.perf_counter() - started)
-    return best["gradient"] / best["plain"]
+    _, times, _ = interleaved_rounds(list(calls.values()), repeats)
+    best = dict(zip(calls, times.min(axis=0)))
+    return float(best["gradient"] / best["plain"])
 
 
 def start_points(problem: Problem, starts: int, seed: int):

@@ -85,6 +85,11 @@ class ParameterRange:
             u = (value - self.low) / (self.high - self.low)
         return float(min(1.0, max(0.0, u)))
 
+    def value_per_unit(self, value) -> float:
+        """d value / d u at `value`: high − low, or value·ln(high / low) on a log axis (the
+        scale between unit coordinates and the parameter's, for gradients and spreads)."""
+        return value * math.log(self.high / self.low) if self.log else self.high - self.low
+
     @property
     def key(self) -> str:
         """The axis' name in table columns: the field's name, with _INDEX for an element."""
@@ -236,6 +241,12 @@ def box_values(box: Sequence[ParameterRange], unit_points) -> np.ndarray:
     """Unit points (P, D) -> parameter values (P, D), column d from box[d]."""
     unit_points = np.atleast_2d(np.asarray(unit_points, dtype=np.float64))
     return np.column_stack([spec.values(unit_points[:, d]) for d, spec in enumerate(box)])
+
+
+def box_value_per_unit(box: Sequence[ParameterRange], values) -> np.ndarray:
+    """d value / d u of every axis (D,) at the point's values (D,)
+    (`ParameterRange.value_per_unit`)."""
+    return np.array([spec.value_per_unit(value) for spec, value in zip(box, values)])
 
 
 def box_params(box: Sequence[ParameterRange], values, base: StarParams,

@@ -91,8 +91,8 @@ __all__ = ["TRAINING_CYCLES", "VALIDATION_CYCLES", "SAMPLES_PER_CYCLE", "MAX_CYC
            "UNCERTAINTY_COLUMNS", "TRIAL_COLUMNS", "CentroidPath", "Trial", "SimulatedRun",
            "TrialFit", "measured_trial", "check_window", "check_samples", "tau_grid",
            "cycle_curves", "latest_phase", "align_phase", "trial_fit", "trajectory_objective",
-           "objective_of", "measured_trials", "simulated_runs", "distance_derivative",
-           "path_derivative", "residual_count", "trial_residuals", "objective_residuals",
+           "objective_of", "measured_trials", "simulated_runs", "result_runs",
+           "distance_derivative", "path_derivative", "residual_count", "trial_residuals", "objective_residuals",
            "trial_phase_motion", "objective_and_gradient", "phase_motion", "parameter_uncertainty",
            "record_derivatives", "STROKE_WINDOW_S", "STROKE_TOLERANCE_S", "Strokes", "window_moves",
            "circular_difference", "strokes",
@@ -424,6 +424,15 @@ def simulated_runs(trajectory: pd.DataFrame, gaits: Sequence[str],
                                       part["y_mm"].to_numpy(), float(period)),
                                  (float(forward[0]), float(forward[1]))))
     return runs
+
+
+def result_runs(result, params: Sequence) -> list:
+    """`simulated_runs` of a simulation's result (`simulate`'s or `run_batch`'s: its
+    `trajectory` and `summary`) for the models `params` it ran (instance b = params[b]), None
+    also where an instance's status is not "ok" (a flagged instance's records can be finite)."""
+    runs = simulated_runs(result.trajectory, [p.gait for p in params], [p.period for p in params])
+    ok = result.summary["status"].to_numpy() == "ok"
+    return [run if good else None for run, good in zip(runs, ok)]
 
 
 # --------------------------------------------------------------------------- strokes

@@ -70,6 +70,24 @@ def test_parameter_values_come_from_unit_coordinates_and_stay_in_range():
     assert linear.unit(0.0) == 0.0 and linear.unit(5.0) == 1.0  # outside the box: clipped
 
 
+def test_value_per_unit_is_the_derivative_of_the_values_in_unit_coordinates():
+    """The scale that turns gradients and spreads between unit coordinates and values
+    (gradient_fit, model_select): against central differences of `values` inside the box
+    (relative 1e-8: a step of 1e-5 in u leaves a truncation of (1e-5)²·ln(100)²/6 ≈ 4e-10 on
+    the log axis and round-off of 1e-16/1e-5)."""
+    linear = identify.parse_range_spec("alpha=0.4:1.2")
+    log = identify.parse_range_spec("cylinder_drag=1:100:log")
+    h = 1e-5
+    for spec in (linear, log):
+        for u in (0.1, 0.5, 0.9):
+            value = float(spec.values(u))
+            central = float(spec.values(u + h) - spec.values(u - h)) / (2 * h)
+            assert spec.value_per_unit(value) == pytest.approx(central, rel=1e-8)
+    assert linear.value_per_unit(0.7) == pytest.approx(0.8, abs=1e-15)  # high − low anywhere
+    assert identify.box_value_per_unit([linear, log], [0.7, 10.0]).tolist() == [
+        linear.value_per_unit(0.7), log.value_per_unit(10.0)]
+
+
 @pytest.mark.parametrize("study, argv, message", [
     # argparse's own refusals, one line like the studies' checks (cli.OneLineParser)
     ("fig4c", ["--no-such-flag"], "unrecognized arguments: --no-such-flag (see --help)"),

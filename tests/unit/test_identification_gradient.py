@@ -4,6 +4,7 @@ synthetic paths whose parameter derivatives are known in closed form (no simulat
 sensitivities themselves are tested in tests/model/test_sensitivities.py)."""
 
 import dataclasses
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -328,3 +329,19 @@ def test_residuals_square_to_the_objective_and_their_jacobian_equals_central_dif
     scale = np.abs(residuals).max()
     np.testing.assert_allclose(jacobian, np.stack(columns, axis=-1), rtol=1e-7,
                                atol=1e-8 * scale)
+
+
+def test_result_runs_drop_instances_whose_status_is_not_ok():
+    """An instance flagged by the engine can have finite records (frozen at its last state):
+    `result_runs` gives None for it, as for a non-finite one, and a run for the others."""
+    t = np.linspace(0.0, 6.3, 4)
+    trajectory = pd.DataFrame({"instance": np.repeat([0, 1, 2], 4), "t_s": np.tile(t, 3),
+                               "x_mm": np.r_[t, 2 * t, np.nan * t], "y_mm": np.zeros(12)})
+    summary = pd.DataFrame({"status": ["ok", "non_finite", "ok"]})
+    result = SimpleNamespace(trajectory=trajectory, summary=summary)
+    params = [SimpleNamespace(gait="A1+A2", period=3.15)] * 3
+    runs = ident.result_runs(result, params)
+    assert runs[1] is None and runs[2] is None  # flagged; non-finite records
+    assert runs[0].path.x_mm.tolist() == t.tolist() and runs[0].path.period_s == 3.15
+    # the flagged instance's records alone would have made a run
+    assert ident.simulated_runs(trajectory, ["A1+A2"] * 3, [3.15] * 3)[1] is not None
