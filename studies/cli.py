@@ -20,7 +20,6 @@ import datetime
 import difflib
 import io
 import itertools
-import json
 import logging
 import math
 import tempfile
@@ -31,15 +30,17 @@ from typing import Dict, List, Mapping, Optional, Sequence
 import numpy as np
 import pandas as pd
 
-from taichi_star import (JACOBIANS, PER_ACTUATOR_FIELDS, PRESETS, SOLVER_RANGES, SolverConfig,
-                         StarParams, allowed_values, check_work, fewest_steps)
+from taichi_star import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS, JACOBIANS,
+                         PER_ACTUATOR_FIELDS, PRESETS, SOLVER_RANGES, SolverConfig, StarParams,
+                         allowed_values, check_work, fewest_steps)
 from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, MAX_LOCAL_WORKERS,
                                executor_for, has_chunks, stored_chunk_size, write_atomic)
 from taichi_star.experiment import PAPER_GAITS
 from taichi_star.extras import require
 from taichi_star.gait import Gait
-from taichi_star.output import column_unit, column_units, parquet_bytes
+from taichi_star.output import column_unit, column_units, parquet_bytes, read_provenance
 from taichi_star.provenance import table_stamp
+from taichi_star.sensitivities import parse_directions
 from taichi_star.timegrid import steps_in
 
 from . import provenance
@@ -474,6 +475,38 @@ def parse_choices(text: str, flag: str, choices: Sequence[str]) -> List[str]:
     return values
 
 
+HEIGHTS_IN_ALL = ("with", "without", "only")
+"""What "all" of `sensitivity_parameters` does with the component heights."""
+
+
+def sensitivity_parameters(text: str, flag: str, heights: str = "with") -> List[str]:
+    """The parameters `flag` names for `simulate(sensitivities=...)`, one label each ("alpha",
+    "actuator_gains[2]"; a per-actuator field stands for its eight, in actuator order): a comma
+    list of names as `simulate` takes them, each once (an actuator by its Python index:
+    actuator_gains[0] is A1's), or "all", every differentiable StarParams field
+    (`DIFFERENTIABLE_FIELDS`, in its order). The component heights (`COMPONENT_HEIGHTS`) have a
+    derivative only with the 2.5-D model on (> 0), so which of them "all" holds depends on the
+    study's robot, and `heights` says it: "with" the other fields (elasticities: the user's
+    model, whose heights at 0 it refuses after), "without" them (a robot with the heights off:
+    sensitivity_check's paper robot, elasticities' default on such a model) or "only" them
+    (sensitivity_check's one setting with the heights on, which checks them alone: every other
+    field is checked in its other settings). A list is taken as it is, whatever `heights`.
+    StudyArgumentError naming `flag` for an empty list or item or a name listed twice
+    (`parse_values`), and for an unknown or non-differentiable name or an actuator named twice
+    ("actuator_gains,actuator_gains[2]": `parse_directions`)."""
+    if heights not in HEIGHTS_IN_ALL:
+        raise ValueError(f"heights must be one of {HEIGHTS_IN_ALL}, got {heights!r}")
+    if text.strip() == "all":
+        names = [name for name in DIFFERENTIABLE_FIELDS if heights == "with"
+                 or (name in COMPONENT_HEIGHTS) == (heights == "only")]
+    else:
+        names = parse_values(text, flag, str)
+    try:
+        return [direction.label for direction in parse_directions(names)]
+    except ValueError as error:
+        raise StudyArgumentError(f"{flag}: {error}") from None
+
+
 def field_kind(name: str, flag: Optional[str] = None) -> type:
     """float, int or str: the type of a StarParams field (StudyArgumentError if unknown, naming
     `flag` when given and the closest fields)."""
@@ -701,14 +734,28 @@ def executor(args, out: Output):
 
 # --------------------------------------------------------------------------- output
 
+def written_provenance(csv_path) -> dict:
+    """The provenance sidecar of a table this run wrote (`Output.write_csv`), {} without one;
+    `read_provenance` checks that the table is still the one it describes. StudyOutputError
+    naming the file where the sidecar cannot be read, is damaged or describes another table
+    (another run writing into the same folder): a plot's title from it would describe a run
+    that did not make the table."""
+    sidecar = provenance.sidecar_path(csv_path)
+    if not sidecar.exists():
+        return {}
+    try:
+        return read_provenance(csv_path)
+    except OSError as error:  # a folder, no permission
+        raise StudyOutputError(f"{sidecar}: cannot read it ({error.strerror or error})") from None
+    except ValueError as error:
+        raise StudyOutputError(str(error)) from None
+
+
 def run_settings(csv_path, mesh: bool = True) -> str:
     """"<preset> preset, n_arc N, <integrator> h = X ms" (adaptive: "tol = E m"; without the
-    n_arc where the study varies it: `mesh` False) from a table's provenance sidecar, for plot
-    titles; "" without one."""
-    sidecar = Path(f"{csv_path}.json")
-    if not sidecar.exists():
-        return ""
-    recorded = json.loads(sidecar.read_text())
+    n_arc where the study varies it: `mesh` False) from the provenance sidecar of a table this
+    run wrote (`written_provenance`), for plot titles; "" without one."""
+    recorded = written_provenance(csv_path)
     model, solver = recorded.get("model") or {}, recorded.get("solver") or {}
     if not isinstance(model, dict) or "dt" not in solver:
         return ""

@@ -29,7 +29,6 @@ step (`<prefix>_check.csv`; the measured agreement over 3 cycles is in docs/resu
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 from typing import Dict, List, Sequence
@@ -37,9 +36,8 @@ from typing import Dict, List, Sequence
 import numpy as np
 import pandas as pd
 
-from taichi_star import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS, Gait, SolverConfig,
-                         StarParams, simulate)
-from taichi_star.output import column_unit
+from taichi_star import COMPONENT_HEIGHTS, Gait, SolverConfig, StarParams, simulate
+from taichi_star.output import column_unit, read_provenance
 from taichi_star.sensitivity_check import extrapolated_difference, whole_run_differences
 from taichi_star.sensitivities import REPLICAS_PER_DIRECTION, parse_directions
 
@@ -59,26 +57,10 @@ CHECK_NEWTON_TOL = 1e-12
 
 def default_parameters(base: StarParams) -> List[str]:
     """Every differentiable field, per-actuator ones as their eight numbers, less the component
-    heights where they are 0 (`simulate` refuses a derivative across the 2.5-D switch)."""
-    names = []
-    for field in DIFFERENTIABLE_FIELDS:
-        if field in COMPONENT_HEIGHTS and getattr(base, field) == 0.0:
-            continue
-        names.append(field)
-    return [direction.label for direction in parse_directions(names)]
-
-
-def resolve_parameters(text, flag: str) -> List[str]:
-    """The parameters a flag names (a comma list as `simulate(sensitivities=...)` takes them,
-    "actuator_gains" standing for its eight, "all" for every differentiable field, as
-    sensitivity_check's --parameters), as single labels ("actuator_gains[2]");
-    StudyArgumentError naming the flag for an unknown or non-differentiable one."""
-    names = list(DIFFERENTIABLE_FIELDS) if text.strip() == "all" \
-        else cli.parse_values(text, flag, str)
-    try:
-        return [direction.label for direction in parse_directions(names)]
-    except ValueError as error:
-        raise cli.StudyArgumentError(f"{flag}: {error}") from None
+    heights where they are 0 (`simulate` refuses a derivative across the 2.5-D switch; the
+    heights are all 0 or all set)."""
+    return cli.sensitivity_parameters("all", "--parameters",
+                                      heights="with" if base.hub_height > 0 else "without")
 
 
 def direction(label: str):
@@ -92,7 +74,9 @@ def sobol_table(path: Path) -> tuple:
     """(the Sobol table's gait, parameter and SOBOL_COLUMNS, the preset it was computed with
     from its provenance sidecar, "" without one or without a preset in it); StudyArgumentError
     naming --sobol for a file that cannot be read (`cli.read_csv_file`), a table without
-    those columns, or a sidecar that cannot be read or is not a JSON object."""
+    those columns, or a sidecar that cannot be read, is not a JSON object or no longer
+    describes the table (`read_provenance`: its SHA-256 differs, the table edited since, whose
+    indices may no longer be that preset's; the message says how to use it without)."""
     table = cli.read_csv_file(path, "--sobol")
     columns = ["gait", "parameter", *SOBOL_COLUMNS]
     missing = [column for column in columns if column not in table.columns]
@@ -103,13 +87,13 @@ def sobol_table(path: Path) -> tuple:
     if not sidecar.exists():
         return table[columns], ""
     try:
-        recorded = json.loads(sidecar.read_text())
-    except (OSError, ValueError) as error:  # a folder, no permission, not JSON, not UTF-8
+        recorded = read_provenance(path)
+    except OSError as error:  # a folder, no permission
         raise cli.StudyArgumentError(f"--sobol {path}: its provenance sidecar {sidecar} cannot "
-                                     f"be read ({error})") from None
-    if not isinstance(recorded, dict):
-        raise cli.StudyArgumentError(f"--sobol {path}: its provenance sidecar {sidecar} is not "
-                                     f"a JSON object but a {type(recorded).__name__}")
+                                     f"be read ({error.strerror or error})") from None
+    except ValueError as error:  # not a JSON object, or a table edited since its sidecar
+        raise cli.StudyArgumentError(f"--sobol {error}; remove {sidecar.name} to use the table "
+                                     f"without its preset") from None
     model = recorded.get("model") or {}
     return table[columns], model.get("preset", "") if isinstance(model, dict) else ""
 
@@ -241,7 +225,7 @@ def main(argv=None):
     base = cli.base_params(args)
     solver = cli.solver(args)
     parameters = (default_parameters(base) if args.parameters is None
-                  else resolve_parameters(args.parameters, "--parameters"))
+                  else cli.sensitivity_parameters(args.parameters, "--parameters"))
     heights = [label for label in parameters if label in COMPONENT_HEIGHTS
                and direction(label).value(base) == 0.0]
     if heights:
@@ -249,7 +233,7 @@ def main(argv=None):
                                      f"in this model; set the component heights with --set")
     if solver.precision != "f64":
         raise cli.StudyArgumentError("sensitivities need precision f64")
-    checked = [] if args.check is None else resolve_parameters(args.check, "--check")
+    checked = [] if args.check is None else cli.sensitivity_parameters(args.check, "--check")
     for label in checked:
         if label not in parameters:
             raise cli.StudyArgumentError(f"--check: {label} is not among the parameters")

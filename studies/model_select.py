@@ -99,6 +99,7 @@ import pandas as pd
 from taichi_star import SolverConfig, StarParams, identification
 from taichi_star.batch import run_batch
 from taichi_star.gait import Gait
+from taichi_star.output import read_provenance
 from taichi_star.provenance import write_atomic
 from taichi_star.timegrid import nearest_interval
 
@@ -270,10 +271,7 @@ def simulate_points(params: Sequence[StarParams], last_cycle: int, setup: Setup)
         params = [p.replace(period=setup.periods[p.gait]) for p in params]
     result = run_batch(list(params), cycles=float(last_cycle) + tail,
                        record_interval_s=setup.record_interval_s, **setup.run_kwargs)
-    runs = identification.simulated_runs(result.trajectory, [p.gait for p in params],
-                                         [p.period for p in params])
-    ok = result.summary["status"].to_numpy() == "ok"
-    return [run if good else None for run, good in zip(runs, ok)]
+    return identification.result_runs(result, params)
 
 
 def score(runs: Sequence, gaits: Sequence[str], setup: Setup, cycles,
@@ -489,7 +487,7 @@ def parameter_table(name: str, box, values, unit_std) -> pd.DataFrame:
     axis' scale, (high − low)·σ_u or value·ln(high/low)·σ_u for a log axis."""
     rows = []
     for spec, value, spread in zip(box, values, unit_std):
-        scale = (value * math.log(spec.high / spec.low)) if spec.log else (spec.high - spec.low)
+        scale = spec.value_per_unit(value)
         rows.append({"candidate": name, "parameter": spec.label, "column": spec.column,
                      "value": float(value), "std": float(scale * spread), "unit_std": float(spread),
                      "low": spec.low, "high": spec.high, "log": spec.log})
@@ -609,12 +607,12 @@ def stored_fit_of(done: Path, folder: Path, evaluations: str, candidate: Candida
                   start_model: Optional[StarParams] = None) -> Optional[Tuple[dict, str]]:
     """--reassess: a candidate's finished fit, its record `done` (in `folder`/done/), with the
     text naming it (`evaluations`, the CSV of its evaluations in `folder`, and the commit that
-    fitted them, from its sidecar) if it was fitted as today's run would fit
-    it, else None (it is fitted anew). Its definition must equal today's, or, where the
-    training window starts at cycle 1, today's but for the stroke alignment: a fit simulates
-    its training window alone (and the strokes' tail), so reading the strokes over the window
-    or over the whole run is the same reading (`STROKE_ALIGNMENT`); the assessment's longer
-    run is where they differed."""
+    fitted them, from its sidecar where `read_provenance` reads it) if it was fitted as today's
+    run would fit it, else None (it is fitted anew). Its definition must equal today's, or,
+    where the training window starts at cycle 1, today's but for the stroke alignment: a fit
+    simulates its training window alone (and the strokes' tail), so reading the strokes over
+    the window or over the whole run is the same reading (`STROKE_ALIGNMENT`); the
+    assessment's longer run is where they differed."""
     stored = read_done(done)
     if stored is None or stored["row"].get("status") != "ok":
         return None
@@ -625,9 +623,14 @@ def stored_fit_of(done: Path, folder: Path, evaluations: str, candidate: Candida
                                       stroke_alignment=False, start_model=start_model))
     if stored["row"].get("definition") not in definitions:
         return None
-    sidecar = folder / f"{evaluations}.json"
-    commit = (json.loads(sidecar.read_text()).get("git_commit") or "")[:7] \
-        if sidecar.exists() else ""
+    commit = ""
+    if (folder / f"{evaluations}.json").exists():
+        try:
+            commit = (read_provenance(folder / evaluations).get("git_commit") or "")[:7]
+        except (OSError, ValueError) as error:
+            # the commit only names the fit (done/ holds it): a sidecar damaged, or the
+            # evaluations edited since, leave it out, which is said
+            print(f"{str(error).splitlines()[0]}; the fit is named without its commit")
     return stored, evaluations + (f", fitted at {commit}" if commit else "")
 
 

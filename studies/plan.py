@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import json
 from pathlib import Path
 from typing import Optional
 
@@ -48,6 +47,7 @@ import pandas as pd
 
 from taichi_star import StarParams
 from taichi_star.metrics import MAX_GOAL_MM
+from taichi_star.output import read_provenance
 from taichi_star.planner import (MAX_DEFAULT_GOALS, SETTLE_CYCLES, PrimitiveModel, check_drive,
                                  closed_loop_gain, default_goals, drive)
 from taichi_star.primitives import GLIDE_CYCLES, measure_primitives
@@ -149,7 +149,10 @@ def read_primitive_model(path, period: float, dt: float,
     but the gait: a paper table drove the identified robot without a word, an audit);
     StudyArgumentError naming --primitives otherwise, or for a table the planner refuses
     (`PrimitiveModel.from_table`: a cell that is no number, a measured gait's that is not
-    finite, gaits that are none or listed twice), all before the model is built."""
+    finite, gaits that are none or listed twice), all before the model is built. A sidecar that
+    cannot be read or no longer describes the table (`read_provenance`: its SHA-256 differs,
+    the table edited since) records no robot: the table is read as one without a sidecar, and
+    a printed line says so."""
     table = cli.read_table(path, "--primitives", ["gait", "status", "period_s", "dt_s",
                                                   "step_x_mm", "step_y_mm", "turn_deg"],
                            "a primitives table")
@@ -165,8 +168,16 @@ def read_primitive_model(path, period: float, dt: float,
     sidecar = provenance.sidecar_path(path)
     if base is not None and sidecar.is_file():
         try:
-            recorded = json.loads(sidecar.read_text())["model"]["params"]
-        except (OSError, ValueError, KeyError, TypeError):
+            recorded = read_provenance(path)["model"]["params"]
+        except (KeyError, TypeError):  # a record of no robot
+            recorded = None
+        except (OSError, ValueError) as error:
+            # a sidecar unreadable, damaged, or describing the table before an edit (gaits left
+            # out, say): no record of the robot, as without a sidecar, and said
+            reason = (f"{sidecar}: cannot read it ({error.strerror or error})"
+                      if isinstance(error, OSError) else str(error))
+            print(f"--primitives {reason}; the robot it was measured on is not compared with "
+                  f"this run's")
             recorded = None
         own = provenance.plain(base)
         differing = [name for name in own if name != "gait" and isinstance(recorded, dict)

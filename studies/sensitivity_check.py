@@ -30,8 +30,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from taichi_star import DIFFERENTIABLE_FIELDS, SolverConfig, StarParams
-from taichi_star.sensitivities import parse_directions
+from taichi_star import SolverConfig, StarParams
 from taichi_star.sensitivity_check import check_sensitivities
 
 from . import cli
@@ -103,25 +102,17 @@ def build_parser():
     return parser
 
 
-def parameters_of(text: str, heights: bool):
-    """The parameter names of one setting (`--parameters`): all = every differentiable field,
-    the component heights only in the heights setting."""
-    if text.strip() != "all":
-        return tuple(item.strip() for item in text.split(","))
-    names = [name for name in DIFFERENTIABLE_FIELDS if name not in HEIGHTS]
-    return tuple(HEIGHTS) if heights else tuple(names)
-
-
 def main(argv=None):
     args = cli.parse(build_parser(), argv)
     cli.check_positive(args.duration, "--duration")
     gaits = cli.resolve_gaits(args.gaits)
     base = StarParams.preset("paper", actuator_delays=(OFF_GRID_DELAY_S,) * 8)
+    # each setting's parameters: "all" is every differentiable field but the component
+    # heights, off in the paper robot, and the heights alone in the setting that sets them
+    parameters = {}
     for _, integrator, _, adaptive, heights in settings(args.quick):  # before the output folder
-        try:
-            parse_directions(parameters_of(args.parameters, heights))
-        except ValueError as error:
-            raise cli.StudyArgumentError(f"--parameters: {error}") from None
+        parameters[heights] = cli.sensitivity_parameters(args.parameters, "--parameters",
+                                                         heights="only" if heights else "without")
         cli.check_run(f"--duration {args.duration:g} s", args.duration,
                       solver_of(integrator, adaptive))
     out = cli.Output(args, argv or [], model={"preset": "paper", "params": base},
@@ -132,7 +123,7 @@ def main(argv=None):
         params = [base.replace(gait=gait, damping_time=damping, **extra) for gait in gaits]
         try:
             table = check_sensitivities(params, args.duration, solver_of(integrator, adaptive),
-                                        parameters_of(args.parameters, heights))
+                                        parameters[heights])
         except ValueError as error:
             raise cli.StudyArgumentError(str(error)) from None
         tables.append(table.assign(setting=name, integrator=integrator, damping_time_s=damping,

@@ -76,7 +76,6 @@ the grouped forms' speed-ups against the batch size, drawn from the CSV.
 
 import contextlib
 import io
-import json
 import os
 import re
 import tempfile
@@ -92,7 +91,7 @@ from taichi_star.profiling import matmul_gflops
 from taichi_star.provenance import cpu_model
 from taichi_star.runtime import PARALLEL_LOOP_MINIMUM, Runtime
 
-from . import cli, provenance
+from . import cli
 
 DESCRIPTION = ("SIMD across instances: the Newton matrix's block LU in today's layout against "
                "lane-grouped forms, with the LLVM IR checked for vector instructions.")
@@ -1004,9 +1003,8 @@ def plot_speedups(csv_path, png_path):
     for ax in list(axes.flat)[len(panels):]:
         ax.set_axis_off()
     axes.flat[0].legend(fontsize=7)
-    sidecar = provenance.sidecar_path(csv_path)
-    if sidecar.exists():
-        made = json.loads(sidecar.read_text())
+    made = cli.written_provenance(csv_path)
+    if made:
         fig.suptitle(f"{made.get('machine', {}).get('cpu_model', '')}, commit "
                      f"{str(made.get('git_commit', ''))[:7]}", fontsize=9)
     cli.write_figure(fig, png_path, dpi=110)

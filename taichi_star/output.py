@@ -274,11 +274,11 @@ def _verify_page_checksums(path: Path):
 def read_provenance(path) -> dict:
     """The provenance written with a result file: from a Parquet file's metadata, a netCDF
     file's attributes (`provenance`) or a CSV file's sidecar. OSError where the file cannot be
-    read; ValueError naming it where it holds no provenance (damaged, or not written by
-    `to_parquet`, `to_netcdf` or `to_csv`), where a Parquet file's values fail their page
-    checksums (`_verify_page_checksums`), or where a CSV is no longer the table its sidecar describes (its SHA-256
-    differs: damaged or edited since). A netCDF file's values carry checksums that HDF5
-    checks whenever they are read (an error, from any reader)."""
+    read; ValueError naming it where it holds no provenance (damaged, not a JSON object, or not
+    written by `to_parquet`, `to_netcdf` or `to_csv`), where a Parquet file's values fail their
+    page checksums (`_verify_page_checksums`), or where a CSV is no longer the table its sidecar
+    describes (its SHA-256 differs: damaged or edited since). A netCDF file's values carry
+    checksums that HDF5 checks whenever they are read (an error, from any reader)."""
     path = file_path(path, "path of a result file")
     kind = _file_kind(path)
     source = path if kind in ("parquet", "netcdf") else Path(f"{path}.json")
@@ -305,9 +305,11 @@ def read_provenance(path) -> dict:
         reason = str(error).splitlines()[0] if str(error) else ""
         raise ValueError(f"{source}: no taichi_star provenance in it ({type(error).__name__}"
                          f"{': ' + reason if reason else ''})") from None
+    if not isinstance(facts, dict):  # valid JSON, yet no record ("[1]"): its readers call .get
+        raise ValueError(f"{source}: no taichi_star provenance in it (not a JSON object)")
     if kind == "parquet":
         _verify_page_checksums(path)
-    written = facts.get(TABLE_SHA256) if isinstance(facts, dict) else None
+    written = facts.get(TABLE_SHA256)
     if written is not None and hashlib.sha256(path.read_bytes()).hexdigest() != written:
         raise ValueError(f"{path}: not the table its provenance {source.name} describes (its "
                          f"SHA-256 differs: damaged or edited since it was written)")

@@ -6,10 +6,13 @@ the file and what is wrong, exit code 2, no traceback (each case below crashed w
 traceback, printed a warning before its refusal, left out the flag, or ran a malformed table
 to the end: an audit, 2026-12); and the input just inside each limit accepted."""
 
+import json
 import warnings
 
 import pandas as pd
 import pytest
+
+from taichi_star.provenance import table_stamp
 
 from studies import cli, elasticities, identify, plan
 from studies.__main__ import main as studies_main
@@ -203,14 +206,18 @@ def test_a_header_alone_is_read_and_refused_as_a_table_without_rows(no_compute, 
 
 # --------------------------------------------------------------------------- elasticities --sobol
 
-@pytest.mark.parametrize("sidecar, problem", [
-    ("[1]", "is not a JSON object but a list"),
-    ("{", "cannot be read (Expecting property name enclosed in double quotes: line 1 column 2 "
-          "(char 1))"),
-    (None, "cannot be read ([Errno 21] Is a directory: '{sidecar}')"),
+REMOVE_IT = "; remove sobol.csv.json to use the table without its preset"
+"""How a refused --sobol sidecar's message ends: the table is served without it."""
+
+
+@pytest.mark.parametrize("sidecar, message", [
+    ("[1]", "{sidecar}: no taichi_star provenance in it (not a JSON object)" + REMOVE_IT),
+    ("{", "{sidecar}: no taichi_star provenance in it (JSONDecodeError: Expecting property name "
+          "enclosed in double quotes: line 1 column 2 (char 1))" + REMOVE_IT),
+    (None, "{table}: its provenance sidecar {sidecar} cannot be read (Is a directory)"),
 ])
 def test_elasticities_refuses_a_sobol_sidecar_that_is_no_record(no_compute, tmp_path, capsys,
-                                                                sidecar, problem):
+                                                                sidecar, message):
     table = tmp_path / "sobol.csv"
     table.write_bytes((cli.COMMITTED_RESULTS / "sensitivity.csv").read_bytes())
     path = tmp_path / "sobol.csv.json"
@@ -219,7 +226,26 @@ def test_elasticities_refuses_a_sobol_sidecar_that_is_no_record(no_compute, tmp_
     else:
         path.write_text(sidecar)
     assert refusal(["elasticities", "--quick", "--sobol", str(table)], tmp_path, capsys) == \
-        f"--sobol {table}: its provenance sidecar {path} {problem.format(sidecar=path)}"
+        "--sobol " + message.format(table=table, sidecar=path)
+
+
+def test_elasticities_refuses_a_sobol_table_edited_since_its_sidecar(no_compute, tmp_path,
+                                                                    capsys):
+    """The sidecar's preset is that of the indices it describes by their SHA-256: a table
+    edited since (its values, or another table beside the sidecar) is not labelled with it.
+    Served without it once the sidecar is removed."""
+    table = tmp_path / "sobol.csv"
+    data = (cli.COMMITTED_RESULTS / "sensitivity.csv").read_bytes()
+    table.write_bytes(data)
+    (tmp_path / "sobol.csv.json").write_text(json.dumps(
+        {"model": {"preset": "accurate"}, **table_stamp(0, data)}))
+    assert elasticities.sobol_table(table)[1] == "accurate"  # the table it describes
+    table.write_bytes(data.replace(b"A1+A3", b"A1+A4", 1))
+    assert refusal(["elasticities", "--quick", "--sobol", str(table)], tmp_path, capsys) == \
+        (f"--sobol {table}: not the table its provenance sobol.csv.json describes (its SHA-256 "
+         f"differs: damaged or edited since it was written)" + REMOVE_IT)
+    (tmp_path / "sobol.csv.json").unlink()
+    assert elasticities.sobol_table(table)[1] == ""
 
 
 @pytest.mark.parametrize("sidecar, preset", [

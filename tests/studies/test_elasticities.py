@@ -152,9 +152,9 @@ def test_all_names_every_differentiable_field_as_sensitivity_check_takes_it():
     sidecar = cli.COMMITTED_RESULTS / "elasticities_all_terms" / "elasticities_all_terms.csv.json"
     words = shlex.split(json.loads(sidecar.read_text())["command"])
     listed = words[words.index("--parameters") + 1]
-    labels = study.resolve_parameters("all", "--parameters")
+    labels = cli.sensitivity_parameters("all", "--parameters")
     added_since = ("stroke_warming", "cooling_time")
     assert [label for label in labels if label not in added_since] == \
-        study.resolve_parameters(listed, "--parameters")
+        cli.sensitivity_parameters(listed, "--parameters")
     assert set(added_since) <= set(labels)
     assert len(labels) == 29 - 2 + 2 * 8  # the two per-actuator fields as eight labels each

@@ -1,0 +1,153 @@
+"""The provenance sidecars the studies read, through `taichi_star.output.read_provenance`, which
+checks the table's SHA-256 against its sidecar: of a table the run wrote (plot titles:
+`cli.run_settings`, simd's; a sidecar damaged or describing another table is a one-line error
+naming the file), of an earlier run's table (model_select --reassess: the fit is named without
+the commit, and that is said) and of a table the user gives (plan --primitives: read as a table
+without a sidecar, and that is said; elasticities --sobol: refused, in
+test_cli_input_files.py)."""
+
+import json
+import re
+import types
+
+import pandas as pd
+import pytest
+
+from taichi_star import SolverConfig, StarParams
+from taichi_star.provenance import table_stamp
+
+from studies import cli, identify, model_select, plan, provenance, simd
+
+COMMITTED_PRIMITIVES = cli.COMMITTED_RESULTS / "primitives.csv"
+EDITED = ("not the table its provenance {name} describes (its SHA-256 differs: damaged or "
+          "edited since it was written)")
+"""`read_provenance`'s reason for a table whose sidecar describes it before an edit."""
+
+
+def output(tmp_path, **record) -> cli.Output:
+    """The output folder `tmp_path`/out of a study run, whose tables `write_csv` writes with
+    their stamped sidecars; `record`: model, solver, extra."""
+    args = types.SimpleNamespace(study="sweep", out=str(tmp_path / "out"), quick=False)
+    return cli.Output(args, [], **record)
+
+
+def damage(sidecar):
+    """Cut the sidecar's JSON in half."""
+    text = sidecar.read_text()
+    sidecar.write_text(text[:len(text) // 2])
+
+
+# --------------------------------------------------------------------------- the run's own tables
+
+def test_a_plot_title_is_read_from_the_sidecar_of_the_table_it_describes(tmp_path):
+    out = output(tmp_path, model={"preset": "paper", "params": StarParams.preset("paper")},
+                 solver=SolverConfig(dt=2e-3))
+    csv = out.write_csv(pd.DataFrame({"speed_mm_s": [1.5, 2.5]}), "sweep.csv")
+    assert cli.run_settings(csv) == "paper preset, n_arc 18, euler h = 2 ms"
+    data, sidecar = csv.read_bytes(), provenance.sidecar_path(csv)
+    csv.write_bytes(data.replace(b"1.5", b"1.6"))  # another run's table beside this sidecar
+    edited = f"{csv}: {EDITED.format(name=sidecar.name)}"
+    with pytest.raises(cli.StudyOutputError, match=f"^{re.escape(edited)}$"):
+        cli.run_settings(csv)
+    csv.write_bytes(data)
+    damage(sidecar)
+    with pytest.raises(cli.StudyOutputError, match=rf"^{re.escape(str(sidecar))}: no taichi_star "
+                                                   r"provenance in it \(JSONDecodeError: "):
+        cli.run_settings(csv)
+    sidecar.unlink()
+    sidecar.mkdir()
+    with pytest.raises(cli.StudyOutputError,
+                       match=rf"^{re.escape(str(sidecar))}: cannot read it \(Is a directory\)$"):
+        cli.run_settings(csv)
+    sidecar.rmdir()
+    assert cli.run_settings(csv) == ""  # none: no title
+
+
+def speedups(out):
+    """A simd table of one panel (today's form and one grouped form), written by `out`."""
+    return out.write_csv(pd.DataFrame({
+        "preset": ["paper", "paper"], "precision": ["f64", "f64"], "n_slots": [1, 1],
+        "form": ["instance_major", "lane_vector"], "lanes": [1, 4], "batch_size": [8, 8],
+        "speedup_median_of_rounds": [1.0, 1.25]}), "simd.csv")
+
+
+def test_simd_titles_its_plot_from_the_tables_sidecar(tmp_path, monkeypatch):
+    titles = []
+    monkeypatch.setattr(cli, "write_figure",
+                        lambda fig, path, **kwargs: titles.append(fig.get_suptitle()))
+    out = output(tmp_path, model={"presets": ["paper"]})
+    csv = speedups(out)
+    facts = json.loads(provenance.sidecar_path(csv).read_text())
+    simd.plot_speedups(csv, tmp_path / "simd.png")
+    assert titles == [f"{facts['machine']['cpu_model']}, commit {str(facts['git_commit'])[:7]}"]
+    csv.write_bytes(csv.read_bytes().replace(b"1.25", b"1.5"))
+    with pytest.raises(cli.StudyOutputError, match=re.escape(EDITED.format(name="simd.csv.json"))):
+        simd.plot_speedups(csv, tmp_path / "simd.png")
+    provenance.sidecar_path(csv).unlink()
+    simd.plot_speedups(csv, tmp_path / "simd.png")
+    assert titles[-1] == ""  # no sidecar: no title
+
+
+# --------------------------------------------------------------------------- an earlier run's
+
+def test_a_reassessed_fit_is_named_without_a_commit_its_sidecar_no_longer_vouches_for(
+        tmp_path, capsys):
+    candidate = model_select.Candidate("paper", "", "alpha=0.2:1.5 cylinder_drag=1:100:log")
+    args = types.SimpleNamespace(fold_generations=2, train_cycles="1:3", validate_cycles="4:6",
+                                 phases="strokes", periods="nominal")
+    settings, solver, base = identify.CMASettings(), SolverConfig(), StarParams.preset("paper")
+    done = tmp_path / "done" / "paper.json"
+    done.parent.mkdir()
+    done.write_text(json.dumps({"row": {"status": "ok", "definition": model_select.definition_of(
+        candidate, args, settings, base, solver, ["A1"])}}))
+    csv = tmp_path / "fits" / "paper.csv"
+    csv.parent.mkdir()
+    data = b"generation,objective\n0,1.5\n"
+    csv.write_bytes(data)
+    sidecar = provenance.sidecar_path(csv)
+    sidecar.write_text(json.dumps({"git_commit": "0123456789", **table_stamp(1, data)}))
+
+    def named():
+        return model_select.stored_fit_of(done, tmp_path, "fits/paper.csv", candidate, args,
+                                          settings, base, solver, ["A1"])[1]
+    assert named() == "fits/paper.csv, fitted at 0123456"
+    assert capsys.readouterr().out == ""
+    csv.write_bytes(data + b"1,1.25\n")  # edited since
+    assert named() == "fits/paper.csv"
+    assert capsys.readouterr().out == (f"{csv}: {EDITED.format(name='paper.csv.json')}; the fit "
+                                       f"is named without its commit\n")
+    csv.write_bytes(data)
+    damage(sidecar)
+    assert named() == "fits/paper.csv"
+    assert capsys.readouterr().out.startswith(f"{sidecar}: no taichi_star provenance in it "
+                                              f"(JSONDecodeError: ")
+
+
+# --------------------------------------------------------------------------- the user's tables
+
+def test_plan_compares_the_robot_only_of_a_sidecar_that_describes_the_primitives(tmp_path,
+                                                                                 capsys):
+    """A sidecar records the robot its table was measured on: another robot's is refused (an
+    audit); once the table is edited (a gait left out) or the sidecar damaged, the record no
+    longer vouches for it, and the table is read as one without a sidecar, which is said."""
+    paper = StarParams.preset("paper")
+    out = output(tmp_path, model={"preset": "paper", "params": paper.replace(alpha=1.2)})
+    path = out.write_csv(pd.read_csv(COMMITTED_PRIMITIVES), "primitives.csv")
+    with pytest.raises(cli.StudyArgumentError, match=re.escape(
+            f"--primitives {path}: measured on a robot whose alpha is 1.2, this run's 0.8 (1 "
+            f"field(s) differ")):
+        plan.read_primitive_model(path, 3.15, 1e-3, base=paper)
+    assert capsys.readouterr().out == ""
+    lines = path.read_text().splitlines(keepends=True)
+    assert lines[4].startswith("A4,")
+    path.write_text("".join(lines[:4] + lines[5:]))  # A4 left out
+    model = plan.read_primitive_model(path, 3.15, 1e-3, base=paper)
+    assert len(model.gaits) == 255 and "A4" not in model.gaits
+    assert capsys.readouterr().out == (f"--primitives {path}: "
+                                       f"{EDITED.format(name='primitives.csv.json')}; the robot "
+                                       f"it was measured on is not compared with this run's\n")
+    sidecar = provenance.sidecar_path(path)
+    damage(sidecar)
+    assert len(plan.read_primitive_model(path, 3.15, 1e-3, base=paper).gaits) == 255
+    assert capsys.readouterr().out.startswith(f"--primitives {sidecar}: no taichi_star "
+                                              f"provenance in it (JSONDecodeError: ")
