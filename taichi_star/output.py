@@ -289,7 +289,7 @@ def read_provenance(path) -> dict:
         elif kind == "netcdf":
             xr = require("xarray", "io")
             with xr.open_dataset(path) as dataset:
-                return json.loads(dataset.attrs["provenance"])
+                facts = json.loads(dataset.attrs["provenance"])
         else:
             facts = json.loads(source.read_text())
     except ImportError:
