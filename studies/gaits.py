@@ -13,8 +13,10 @@ move), heading (body rotation at the end), status),
 ranked by speed, each bar with an actuator pictogram).
 
 From Python: `expand_classes(summary)` maps a summary of the class representatives onto all 255
-gaits (`taichi_star.primitives.class_symmetries` gives the octagon symmetry taking each
-representative onto its gaits).
+gaits with the symmetry functions of `taichi_star.primitives`, which the motion primitives use
+too: `class_symmetries` gives the octagon symmetry taking each representative onto its gaits,
+`transform_direction` and `transform_rotation` map a direction and a body rotation by it, and
+`sort_gaits` orders the rows.
 """
 
 from __future__ import annotations
@@ -29,7 +31,8 @@ from taichi_star import StarParams
 from taichi_star.batch import run_batch
 from taichi_star.gait import N_ACTUATORS, Gait, symmetry_classes
 from taichi_star.metrics import wrap_degrees
-from taichi_star.primitives import class_symmetries
+from taichi_star.primitives import (class_symmetries, sort_gaits, transform_direction,
+                                    transform_rotation)
 
 from . import cli
 
@@ -44,22 +47,6 @@ GAITS_COLUMNS = ["gait", "class_representative", "class_size", "rotation", "refl
                  "speed_mm_s", "signed_speed_mm_s", "steady_speed_mm_s",
                  "steady_signed_speed_mm_s", "travel_direction_deg",
                  "travel_direction_relative_deg", "heading_deg", "n_actuators", "status"]
-
-
-def transform_direction(direction_deg: float, rotation: int, reflect: bool) -> float:
-    """Image of a direction (degrees from +x) under the symmetry of `Gait.transform`, in
-    (-180, 180]: the angle of `primitives.transform_vectors`'s image of its unit vector (a
-    test holds them equal). Computed on the angle, not through cos and sin, so that a
-    direction on a 45° multiple stays exact (through them, 20 rows of gaits.csv changed in
-    their tenth digit: a direction 0 read -2.8e-14)."""
-    angle = (-direction_deg if reflect else direction_deg) + 45.0 * rotation
-    return float(wrap_degrees(angle, include_180=True))
-
-
-def transform_rotation(rotation_deg: float, reflect: bool) -> float:
-    """Image of a body rotation (counter-clockwise, degrees) under the symmetry: a rotation of
-    the gait leaves it unchanged, a reflection reverses it."""
-    return -rotation_deg if reflect else rotation_deg
 
 
 def relative_direction(gait: str, direction_deg: float) -> float:
@@ -80,8 +67,9 @@ def class_params(base: StarParams = StarParams()):
 def expand_classes(summary: pd.DataFrame) -> pd.DataFrame:
     """All gaits from a summary of the class representatives (rows matched by gait), each
     read from its representative by `primitives.class_symmetries`: the same speeds, the travel
-    direction and the heading mapped by the symmetry. Columns GAITS_COLUMNS; 255 rows sorted
-    by (number of actuators, bitmask)."""
+    direction and the heading mapped by the symmetry (`primitives.transform_direction`,
+    `primitives.transform_rotation`). Columns GAITS_COLUMNS; 255 rows sorted by (number of
+    actuators, bitmask): `primitives.sort_gaits`."""
     by_gait = {row["gait"]: row for _, row in summary.iterrows()}
     rows = []
     for gait, (rep, rotation, reflect, class_size) in class_symmetries().items():
@@ -105,10 +93,7 @@ def expand_classes(summary: pd.DataFrame) -> pd.DataFrame:
             "n_actuators": len(Gait.parse(gait).actuators),
             "status": source["status"],
         })
-    table = pd.DataFrame(rows, columns=GAITS_COLUMNS)
-    table["_key"] = [Gait.parse(g).bits + 256 * len(Gait.parse(g).actuators)
-                     for g in table["gait"]]
-    return table.sort_values("_key").drop(columns="_key").reset_index(drop=True)
+    return sort_gaits(pd.DataFrame(rows, columns=GAITS_COLUMNS))
 
 
 def plot_gaits(csv_path, png_path):

@@ -1,10 +1,13 @@
 """taichi_star.primitives without simulation: the body-frame vectors follow the gait symmetry."""
 
+import math
+
 import numpy as np
 import pytest
 
 import taichi_star as ts
-from taichi_star.primitives import transform_vectors
+from taichi_star.metrics import wrap_degrees
+from taichi_star.primitives import transform_direction, transform_rotation, transform_vectors
 
 
 def test_transform_vectors_follows_the_gait_symmetry():
@@ -14,6 +17,32 @@ def test_transform_vectors_follows_the_gait_symmetry():
             image = ts.Gait.parse("A1+A2").transform(rotation, reflect).forward
             vector = transform_vectors(ts.Gait.parse("A1+A2").forward, rotation, reflect)
             np.testing.assert_allclose(vector, image, atol=1e-15)
+
+
+@pytest.mark.parametrize("direction_deg", [0.0, 22.5, 180.0, -180.0, -135.0, 37.3, -0.4])
+@pytest.mark.parametrize("rotation, reflect", [(0, False), (4, False), (3, True), (0, True),
+                                               (7, True)])
+def test_direction_images_are_the_vector_symmetry_in_minus_180_to_180_included(
+        direction_deg, rotation, reflect):
+    """A direction's image: the angle of `transform_vectors`'s image of its unit vector (1e-12
+    deg: atan2 of a unit vector rounded at 1e-16, in degrees), exact on 45° multiples, and in
+    (-180, 180]: a gait travelling straight back reads 180, as the gaits study's committed
+    table does."""
+    image = transform_direction(direction_deg, rotation, reflect)
+    angle = math.radians(direction_deg)
+    vector = transform_vectors(np.array([math.cos(angle), math.sin(angle)]), rotation, reflect)
+    assert abs(wrap_degrees(image - math.degrees(math.atan2(vector[1], vector[0])))) < 1e-12
+    assert -180.0 < image <= 180.0
+    if direction_deg % 45.0 == 0.0:
+        assert image % 45.0 == 0.0
+
+
+def test_a_body_rotation_is_reversed_by_a_reflection_alone():
+    """A turn keeps its sign under a rotation of the gait and flips under a reflection, for a
+    number and for an array (the per-cycle table's column)."""
+    assert transform_rotation(12.5, False) == 12.5 and transform_rotation(12.5, True) == -12.5
+    np.testing.assert_array_equal(transform_rotation(np.array([3.0, -1.5]), True), [-3.0, 1.5])
+    np.testing.assert_array_equal(transform_rotation(np.array([3.0, -1.5]), False), [3.0, -1.5])
 
 
 def test_actuators_equal_decides_between_the_symmetry_classes_and_all_gaits():
