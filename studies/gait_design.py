@@ -6,6 +6,7 @@ period, optimised by L-BFGS-B on the exact sensitivities, against the best synch
                                   [--seed 0] [--primitives results/primitives.csv]
                                   [--sample 0] [--sample-starts 1] [--sample-gaits 255] [--jets]
                                   [--preset ...] [--set NAME=VALUE] [--dt S] [--out DIR] [--quick]
+    python -m studies gait_design --redraw FOLDER [--out DIR]
 
 The starts: the `--synchronous-starts` best synchronous gaits of `--primitives` for the goal
 (largest step projected on `--direction`, default the direction of the fastest gait; or largest
@@ -38,7 +39,12 @@ Writes into --out (default runs/gait_design/<timestamp>/), each CSV with its pro
   ("synchronous"), each simulated over the same cycles with the same solver, at α and
   drag_perpendicular × 0.8, 1 and 1.2 (the centre and 4 corners; one batch): objective per case;
 - `gait_design.png` (objective per evaluation per start, and the robustness), drawn from the
-  CSVs; `gait_design.gif`, the best pattern's animation over its cycles;
+  CSVs;
+- `gait_design_shapes.csv` (gait, frame, t_s, node, x_mm, y_mm: every node of the best
+  pattern's robot at 30 records a cycle over its cycles) and `gait_design_centroid.csv`
+  (gait, frame, t_s, x_mm, y_mm: its centroid relative to its start), the tables of
+  `taichi_star.output.animation_tables`, and `gait_design.gif`, the best pattern's animation,
+  drawn from them as written (read back and replayed into the run, `taichi_star.output.replay`);
 - with `--sample`: `gait_design_sample.csv` (sample, gait, spread, objective, its turn per
   cycle, status, newton_capped, the 8 delays in s) and `gait_design_sample.png` (objective against spread,
   the best synchronous gait's as a line), drawn from it and the synchronous table;
@@ -46,6 +52,13 @@ Writes into --out (default runs/gait_design/<timestamp>/), each CSV with its pro
   the best synchronous gait's and (with `--sample`) each spread's best sampled pattern's jet
   impulse per inter-limb space (`SimulationResult.jet_impulses`, one batch recorded at every
   step; implicit Euler with fixed steps only), also projected on the direction.
+
+`--redraw FOLDER` optimises nothing: it simulates an earlier run's designed pattern again (the
+"designed" row of FOLDER/gait_design.csv at α and C⊥ × 1, with the model, solver and cycles of
+the command its sidecar records, parsed by today's flags) and writes its animation tables and
+`gait_design.gif` into --out (default FOLDER itself), for a run drawn before a change to the
+drawing (until 2026-12 the animation drew every actuator heating at the cycle's start, its
+delay ignored).
 """
 
 from __future__ import annotations
@@ -53,11 +66,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Sequence
 
+import shlex
+
 import numpy as np
 import pandas as pd
 
 from taichi_star import Gait, simulate
 from taichi_star.diagnostics import check_jet_solver
+from taichi_star.output import animation_tables, read_provenance, replay
 from taichi_star.timegrid import nearest_interval
 
 from . import cli
@@ -356,11 +372,82 @@ def build_parser():
                         help="each inter-limb space's jet impulse for the designed, the best "
                              "synchronous and each spread's best sampled pattern "
                              "(gait_design_jets.csv; implicit Euler with fixed steps)")
+    parser.add_argument("--redraw", default=None, metavar="FOLDER",
+                        help="optimise nothing: draw an earlier run's designed pattern again "
+                             "(FOLDER/gait_design.csv and the command its sidecar records) into "
+                             "--out (default FOLDER)")
     return parser
+
+
+REDRAW_FLAGS = ("redraw", "out", "arch", "no_progress")
+"""The flags `--redraw` takes (every other setting comes from the earlier run's command)."""
+
+
+def animate_pattern(out, base, solver, gait: str, delays, cycles: int, arch):
+    """Simulate the pattern (`gait` firing with `delays` (8,) s) over `cycles` from rest,
+    recorded 30 times a cycle, and write its animation tables (gait_design_shapes.csv,
+    gait_design_centroid.csv) and gait_design.gif drawn from them as written."""
+    shown = simulate(base.replace(gait=gait, actuator_delays=tuple(delays)),
+                     cycles * base.period, solver, arch=arch,
+                     record_interval_s=nearest_interval(base.period / 30, solver.dt),
+                     record_shapes=True)
+    shapes, centroid = animation_tables(shown, [gait])
+    shapes_csv = out.write_csv(shapes, "gait_design_shapes.csv")
+    centroid_csv = out.write_csv(centroid, "gait_design_centroid.csv")
+    drawn = replay(shown, pd.read_csv(shapes_csv), pd.read_csv(centroid_csv))
+    out.wrote(drawn.animate(out.path("gait_design.gif"), title=f"designed: {gait}"))
+
+
+def redraw(args, argv):
+    """--redraw: the designed pattern of an earlier run drawn again (`animate_pattern`) with
+    the model, solver and cycles of its recorded command; StudyArgumentError naming --redraw
+    for a folder without a readable gait_design.csv and sidecar, and naming any other flag
+    given beside it (the run's own settings would silently replace it)."""
+    parser = build_parser()
+    # --quick changes other flags' defaults: named alone
+    alone = vars(parser.parse_args(["--redraw", args.redraw]))
+    given = ["--quick"] if args.quick else [
+        f"--{name.replace('_', '-')}" for name, value in vars(args).items()
+        if name not in REDRAW_FLAGS and value != alone[name]]
+    if given:
+        raise cli.StudyArgumentError(f"--redraw takes the earlier run's settings from its "
+                                     f"command: drop {', '.join(given)}")
+    table_path = Path(args.redraw) / "gait_design.csv"
+    table = cli.read_table(table_path, "--redraw", ["pattern", "gait", "alpha_factor",
+                                                    "drag_perpendicular_factor", *DELAY_COLUMNS],
+                           "a gait_design.csv")
+    try:
+        command = read_provenance(table_path)["command"]
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        raise cli.StudyArgumentError(f"--redraw {table_path}: no recorded command to take the "
+                                     f"run's settings from ({error})") from None
+    words = shlex.split(command)
+    if "gait_design" not in words:
+        raise cli.StudyArgumentError(f"--redraw {table_path}: its command is not a gait_design "
+                                     f"run: {command}")
+    run = cli.parse(parser, words[words.index("gait_design") + 1:])
+    centre = table[(table["pattern"] == "designed") & (table["alpha_factor"] == 1)
+                   & (table["drag_perpendicular_factor"] == 1)]
+    if len(centre) != 1:
+        raise cli.StudyArgumentError(f"--redraw {table_path}: no single designed row at "
+                                     f"alpha and drag_perpendicular factors 1")
+    designed = centre.iloc[0]
+    base, solver = cli.base_params(run), cli.solver(run)
+    if args.out is None:
+        args.out = args.redraw
+    out = cli.Output(args, argv or [], model={"preset": run.preset, "params": base},
+                     solver=solver, extra={"redrawn_from": str(table_path),
+                                           "command_of_run": command, "cycles": run.cycles})
+    animate_pattern(out, base, solver, str(designed["gait"]),
+                    designed[DELAY_COLUMNS].to_numpy(dtype=float), run.cycles, args.arch)
+    out.report()
 
 
 def main(argv=None):
     args = cli.parse(build_parser(), argv)
+    if args.redraw is not None:
+        redraw(args, argv)
+        return
     if args.cycles < 1:
         raise cli.StudyArgumentError(f"--cycles must be >= 1, got {args.cycles}")
     if args.seed < 0:
@@ -448,11 +535,7 @@ def main(argv=None):
         out.write_csv(jet_table(base, solver, jet_patterns, direction, args.cycles, args.arch),
                       "gait_design_jets.csv")
     out.wrote(plot_design(paths_csv, table_csv, out.path("gait_design.png"), unit))
-    shown = simulate(base.replace(gait=winner["gait"], actuator_delays=patterns[0][2]),
-                     args.cycles * base.period, solver, arch=args.arch,
-                     record_interval_s=nearest_interval(base.period / 30, solver.dt),
-                     record_shapes=True)
-    out.wrote(shown.animate(out.path("gait_design.gif"), title=f"designed: {winner['gait']}"))
+    animate_pattern(out, base, solver, winner["gait"], patterns[0][2], args.cycles, args.arch)
     out.report()
     centre = table[(table["alpha_factor"] == 1) & (table["drag_perpendicular_factor"] == 1)]
     designed, plain = centre["objective"].to_numpy()

@@ -37,19 +37,24 @@ def edge_actuators(topology) -> np.ndarray:
                      for (a, b), kind in zip(topology.edges, topology.edge_kind)])
 
 
-def hot_actuators(since_fired_s, heating_s: float) -> np.ndarray:
-    """Bool array, True where an actuator fired less than `heating_s` ago (0 <= since <
-    heating_s); NaN (never fired) is not hot. `since_fired_s` (..., 8) s."""
-    since = np.asarray(since_fired_s, dtype=np.float64)
+def hot_actuators(since_fired_s, heating_s: float, delays_s=0.0) -> np.ndarray:
+    """Bool array, True where an actuator heats: its profile started less than `heating_s`
+    ago, `delays_s` (8,) s after its firing (`StarParams.actuator_delays`: the profile waits
+    that long), so 0 <= since − delay < heating_s; NaN (never fired) is not hot.
+    `since_fired_s` (..., 8) s."""
+    since = np.asarray(since_fired_s, dtype=np.float64) - np.asarray(delays_s, dtype=np.float64)
     with np.errstate(invalid="ignore"):
         return (since >= 0.0) & (since < heating_s)
 
 
-def periodic_hot_actuators(times_s, fired, period_s: float, heating_s: float) -> np.ndarray:
+def periodic_hot_actuators(times_s, fired, period_s: float, heating_s: float,
+                           delays_s=0.0) -> np.ndarray:
     """(R, 8) bool: the actuators of a periodic gait that are hot at each time, a gait firing
-    the `fired` (8,) bool actuators at 0, T, 2T, ... (as `simulate` does)."""
+    the `fired` (8,) bool actuators at 0, T, 2T, ... (as `simulate` does), each heating
+    `delays_s` (8,) s after it fires (`hot_actuators`)."""
     phase = np.mod(np.asarray(times_s, dtype=np.float64), period_s)
-    return (phase < heating_s)[:, None] & np.asarray(fired, dtype=bool)[None, :]
+    return hot_actuators(phase[:, None], heating_s, delays_s) & \
+        np.asarray(fired, dtype=bool)[None, :]
 
 
 def nice_length(span: float) -> float:

@@ -1,6 +1,8 @@
 """Files and video of a SimulationResult: CSV (with a JSON sidecar), Parquet and netCDF (an
 xarray Dataset), each carrying the same provenance (`provenance`), written whole or not at all;
-and an animation of the recorded shapes (MP4 through imageio-ffmpeg, or GIF)."""
+and an animation of the recorded shapes (MP4 through imageio-ffmpeg, or GIF), with the tables
+it draws (`animation_tables`, the robot's `edge_table`) and those tables, as written and read
+back, put into a result to draw from (`replay`)."""
 
 from __future__ import annotations
 
@@ -21,14 +23,16 @@ import pandas as pd
 
 from .checks import is_whole
 from .extras import require
-from .geometry import CENTRE
+from . import drawing
+from .geometry import ARC, CENTRE, LIMB, SPOKE, build_topology
 from .params import PARAMETER_UNITS, StarParams, check_number, parameter_column
 from .provenance import (TABLE_SHA256, TEMPORARY_MARK, code_record, file_path, machine,
                          provenance_json, require_folder, table_stamp, write_atomic)
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
 __all__ = ["to_xarray", "summary_of_dataset", "read_provenance", "animate", "column_unit",
-           "column_units", "parquet_bytes", "GIF_MOST_FPS"]
+           "column_units", "parquet_bytes", "GIF_MOST_FPS", "edge_table", "animation_tables",
+           "replay", "SHAPE_DECIMALS"]
 
 PROVENANCE_KEY = "taichi_star"
 """Key of the provenance in a Parquet file's schema metadata (JSON)."""
@@ -436,14 +440,101 @@ def _held_after_failure(shapes: np.ndarray) -> np.ndarray:
     return held
 
 
+EDGE_KIND_NAMES = {SPOKE: "spoke", LIMB: "limb", ARC: "arc"}
+"""The words of `edge_table`'s kind column."""
+SHAPE_DECIMALS = 5
+"""Decimals (of mm) of the node positions in `animation_tables`: 10 nm, under 1e-4 of a pixel
+of a 600-pixel movie of the robot (a view ~120 mm wide). Such a number has at most 10
+significant digits below 1e5 mm, so a table written at 10 digits reads back exactly; a movie
+drawn from it differs from one drawn from the unrounded records only where the GIF's palette
+of a frame picks another colour for an anti-aliased edge pixel."""
+
+
+
+def edge_table(params: StarParams) -> pd.DataFrame:
+    """The edges of the robot `params` (its n_arc and n_limb fix them), one row each in the
+    engine's order (for each joint J_k, k = 0..7: the spoke from the hub, the limb from the
+    joint outwards, actuator A_{k+1}'s arc towards J_{k+1}): node_a, node_b (node numbers, as
+    the recorded shapes' node axis), kind ("spoke", "limb" or "arc"), actuator (m for the
+    edges of A_m's arc, 1..8; 0 for spokes and limbs). The (E, 2) node pairs:
+    `table[["node_a", "node_b"]].to_numpy()`. ValueError naming params unless it is a
+    StarParams."""
+    if not isinstance(params, StarParams):
+        raise ValueError(f"params must be a StarParams, got {type(params).__name__}")
+    topology = build_topology(params)
+    return pd.DataFrame({"node_a": topology.edges[:, 0], "node_b": topology.edges[:, 1],
+                         "kind": [EDGE_KIND_NAMES[kind] for kind in topology.edge_kind],
+                         "actuator": drawing.edge_actuators(topology) + 1})
+
+
+def animation_tables(result, labels: Sequence[str]) -> Tuple[pd.DataFrame, pd.DataFrame]:
+    """What an animation of `result` (a `SimulationResult` with recorded shapes) draws, as two
+    long tables, instance b named labels[b] (its gait) in the column gait: the shapes (gait,
+    frame, t_s, node, x_mm, y_mm: every node at every record, mm to SHAPE_DECIMALS decimals,
+    NaN after a failure) and the centroid (gait, frame, t_s, x_mm, y_mm: relative to its
+    start, the result's trajectory). `replay` puts them back into a result; `animate` draws them. ValueError
+    without recorded shapes, or unless there is one label per instance, no two alike."""
+    if result.shapes is None:
+        raise ValueError("result has no recorded shapes: simulate with record_interval_s > 0 "
+                         "and record_shapes=True")
+    labels = list(labels)
+    frames, batch, nodes = result.shapes.shape[:3]
+    if len(labels) != batch or len(set(labels)) != batch:
+        raise ValueError(f"labels must name the {batch} instances, each once, got {labels!r}")
+    times = np.sort(result.trajectory["t_s"].unique())
+    shapes = result.shapes.transpose(1, 0, 2, 3)                      # (B, frames, N, 2)
+    shape_table = pd.DataFrame({
+        "gait": np.repeat(labels, frames * nodes),
+        "frame": np.tile(np.repeat(np.arange(frames), nodes), batch),
+        "t_s": np.tile(np.repeat(times, nodes), batch),
+        "node": np.tile(np.arange(nodes), frames * batch),
+        "x_mm": np.round(1e3 * shapes[..., 0].ravel(), SHAPE_DECIMALS),
+        "y_mm": np.round(1e3 * shapes[..., 1].ravel(), SHAPE_DECIMALS)})
+    trajectory = result.trajectory.sort_values(["instance", "t_s"], kind="stable")
+    centroid = pd.DataFrame({
+        "gait": np.asarray(labels, dtype=object)[trajectory["instance"].to_numpy()],
+        "frame": trajectory.groupby("instance").cumcount().to_numpy(),
+        "t_s": trajectory["t_s"].to_numpy(), "x_mm": trajectory["x_mm"].to_numpy(),
+        "y_mm": trajectory["y_mm"].to_numpy()})
+    return shape_table, centroid
+
+
+def replay(result, shapes: pd.DataFrame, centroid: pd.DataFrame):
+    """`result` (a `SimulationResult` of the same robots: its summary and topology are kept)
+    with its recorded shapes and trajectory read from the tables of `animation_tables`, as
+    written and read back (CSV): `SimulationResult.animate` of it draws the tables. The
+    tables' gaits, in order of first appearance, are the instances 0, 1, ...; the trajectory
+    holds instance, t_s, x_mm, y_mm. ValueError unless the shapes hold every node of every
+    frame of each gait once, and the gaits are the result's instances."""
+    labels = list(dict.fromkeys(shapes["gait"]))
+    if len(labels) != len(result.summary):
+        raise ValueError(f"shapes hold {len(labels)} gaits, the result "
+                         f"{len(result.summary)} instances")
+    instance = {label: index for index, label in enumerate(labels)}
+    frames, nodes = int(shapes["frame"].max()) + 1, int(shapes["node"].max()) + 1
+    index = (shapes["frame"].to_numpy(), shapes["gait"].map(instance).to_numpy(),
+             shapes["node"].to_numpy())
+    positions = np.full((frames, len(labels), nodes, 2), np.nan)
+    positions[index] = shapes[["x_mm", "y_mm"]].to_numpy() / 1e3      # m, as recorded
+    counts = np.zeros(positions.shape[:3], dtype=int)
+    np.add.at(counts, index, 1)
+    if not (counts == 1).all():
+        raise ValueError("shapes must hold every node of every frame of each gait once")
+    trajectory = pd.DataFrame({"instance": centroid["gait"].map(instance).to_numpy(),
+                               "t_s": centroid["t_s"].to_numpy(),
+                               "x_mm": centroid["x_mm"].to_numpy(),
+                               "y_mm": centroid["y_mm"].to_numpy()})
+    return dataclasses.replace(result, shapes=positions, trajectory=trajectory)
+
+
 def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str = "world",
             fps: int = 15, size_px: int = 720, title: Optional[str] = None):
     """Write the recorded shapes of some instances (default: all, up to 16; one panel each) as
     an animation: MP4 (through imageio-ffmpeg's ffmpeg) for a `.mp4` path, GIF for `.gif`.
     Drawn with `taichi_star.drawing`: limbs brown, actuator arcs gray and red while they heat
-    (the first t0 = `CurvatureProfile.switch_time` s of each cycle, for the gait's actuators:
-    `simulate` fires them at 0, T, 2T, ...), labels A1..A8, the central cylinder and a scale
-    bar. `frame` "world" (lab axes, mm, with the centroid's path so far drawn in blue) or
+    (for t0 = `CurvatureProfile.switch_time` s, the gait's actuators: `simulate` fires them at
+    0, T, 2T, ..., each heating its `actuator_delays` later), labels A1..A8, the central
+    cylinder and a scale bar. `frame` "world" (lab axes, mm, with the centroid's path so far drawn in blue) or
     "body" (following the hub and the body's rotation; no path). `title` heads the movie
     (default none) above the time; in a small movie the heading's font shrinks to fit its
     width, and below HEADING_LEAST_PT its lines wrap. A failed instance's panel names its
@@ -456,8 +547,6 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib import animation
-
-    from . import drawing
 
     path = file_path(path, "path of the .mp4 or .gif file")
     require_folder(path)
@@ -499,7 +588,8 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
                  [["x_mm", "y_mm"]].to_numpy() + start for i in chosen]
     params = [StarParams.from_row(result.summary.iloc[i]) for i in chosen]
     hot = [drawing.periodic_hot_actuators(times, p.gait_value.mask, p.period,
-                                          p.actuator_profile.switch_time) for p in params]
+                                          p.actuator_profile.switch_time, p.actuator_delays)
+           for p in params]
     columns = int(np.ceil(np.sqrt(len(chosen))))
     rows = int(np.ceil(len(chosen) / columns))
     inches = size_px / 100

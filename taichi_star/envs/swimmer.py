@@ -338,7 +338,8 @@ class GoalReachingBatch:
             params = self.params[row]
             pictures.append(drawing.robot_image(
                 shapes_mm[row] - absolute[row] + relative[row], self.simulator.model.topology,
-                drawing.hot_actuators(since[row], params.actuator_profile.switch_time),
+                drawing.hot_actuators(since[row], params.actuator_profile.switch_time,
+                                      params.actuator_delays),
                 params.cylinder_diameter * metrics.METERS_TO_MM, goal_mm=self.goals[row],
                 title=f"t = {state['t_s'].iloc[row]:.2f} s, {self.distances[row]:.1f} mm to go"))
         return pictures

@@ -10,6 +10,7 @@ import taichi_star
 from studies import gait_design
 from studies.__main__ import main as studies_main
 from taichi_star import SolverConfig, StarParams
+from taichi_star.output import replay
 
 
 def test_arguments_fail_before_compute(no_compute, tmp_path, capsys):
@@ -216,5 +217,92 @@ def test_a_quick_run_with_a_sample_and_jets_writes_every_table(tmp_path):
                                               *[f"sample {k}" for k in sample["sample"]]]
     assert (jets.groupby("pattern")["space"].count() == 8).all()
     for name in ("gait_design_sample.png", "gait_design_jets.csv.json",
-                 "gait_design_sample.csv.json"):
+                 "gait_design_sample.csv.json", "gait_design_shapes.csv.json",
+                 "gait_design_centroid.csv.json"):
         assert (out / name).is_file()
+    # the GIF is drawn from its tables as written: replayed into a run of the same robot
+    # recorded over two steps alone, they redraw it byte for byte (31 frames: 30 a cycle)
+    shapes = pd.read_csv(out / "gait_design_shapes.csv")
+    (gait,) = shapes["gait"].unique()
+    assert gait == paths.loc[paths["objective"].idxmax(), "gait"]
+    assert shapes["frame"].max() == 30
+    other = taichi_star.simulate([StarParams(gait=gait)], 2 * gait_design.QUICK_DT,
+                                 SolverConfig(dt=gait_design.QUICK_DT),
+                                 record_interval_s=gait_design.QUICK_DT, record_shapes=True)
+    drawn = replay(other, shapes, pd.read_csv(out / "gait_design_centroid.csv"))
+    drawn.animate(tmp_path / "again.gif", title=f"designed: {gait}")
+    assert (tmp_path / "again.gif").read_bytes() == (out / "gait_design.gif").read_bytes()
+
+
+def earlier_run(folder, command, delays=(0.0, 0.5, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0)):
+    """A folder as an earlier gait_design run left it: gait_design.csv (a designed row at
+    factors 1 with `delays` and one at 0.8, a synchronous row) and a sidecar recording
+    `command` (no table stamp: a run of before the stamps)."""
+    import json
+    folder.mkdir(parents=True, exist_ok=True)
+    rows = [("designed", "A1+A2+A4", 1.0, 1.0, delays), ("designed", "A1+A2+A4", 0.8, 0.8, delays),
+            ("synchronous", "A1+A3", 1.0, 1.0, (0.0,) * 8)]
+    table = pd.DataFrame([{"pattern": p, "gait": g, "alpha_factor": a,
+                           "drag_perpendicular_factor": c, "objective": 1.0, "status": "ok",
+                           **dict(zip(gait_design.DELAY_COLUMNS, d))}
+                          for p, g, a, c, d in rows])
+    table.to_csv(folder / "gait_design.csv", index=False)
+    (folder / "gait_design.csv.json").write_text(json.dumps({"command": command}))
+
+
+def test_redraw_animates_the_earlier_runs_designed_pattern_with_its_settings(tmp_path,
+                                                                             monkeypatch):
+    """--redraw simulates the designed row (factors 1) with the model, step and cycles of the
+    recorded command (here --set alpha=0.5, --dt 5 ms, 1 cycle): its shapes table is that of a
+    direct run of the pattern, and the movie heats each actuator its delay after the firing
+    (the delays reach the drawing; they were ignored until 2026-12)."""
+    from taichi_star import drawing
+    folder = tmp_path / "earlier"
+    earlier_run(folder, "python -m studies gait_design --set alpha=0.5 --dt 5e-3 --cycles 1 "
+                        "--out somewhere/else")
+    drawn_delays = []
+    heat = drawing.periodic_hot_actuators
+
+    def spy(times, fired, period, heating, delays=0.0):
+        drawn_delays.append(tuple(delays))
+        return heat(times, fired, period, heating, delays)
+    monkeypatch.setattr(drawing, "periodic_hot_actuators", spy)
+    assert studies_main(["gait_design", "--redraw", str(folder), "--no-progress"]) == 0
+    delays = (0.0, 0.5, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0)
+    assert drawn_delays == [delays]
+    assert (folder / "gait_design.gif").is_file()
+    shapes = pd.read_csv(folder / "gait_design_shapes.csv")
+    robot = StarParams(gait="A1+A2+A4", alpha=0.5, actuator_delays=delays)
+    direct = taichi_star.simulate([robot], robot.period, SolverConfig(dt=5e-3),
+                                  record_interval_s=0.105, record_shapes=True)
+    expected, _ = taichi_star.output.animation_tables(direct, ["A1+A2+A4"])
+    # the table as written at 10 digits reads back to the recorded positions (SHAPE_DECIMALS)
+    pd.testing.assert_frame_equal(shapes, expected, check_dtype=False)
+    import json
+    written = json.loads((folder / "gait_design_shapes.csv.json").read_text())
+    assert written["details"]["redrawn_from"] == str(folder / "gait_design.csv")
+    assert written["details"]["cycles"] == 1 and written["model"]["params"]["alpha"] == 0.5
+
+
+@pytest.mark.parametrize("case, argv, message", [
+    ("other flag", ["--cycles", "3"], "--redraw takes the earlier run's settings from its "
+                                      "command: drop --cycles"),
+    ("quick", ["--quick"], "drop --quick"),
+    ("no table", [], "gait_design.csv"),
+    ("no command", [], "no recorded command"),
+    ("another study", [], "is not a gait_design run"),
+])
+def test_redraw_refusals_are_one_line_before_compute(no_compute, tmp_path, capsys, case, argv,
+                                                     message):
+    folder = tmp_path / "earlier"
+    if case == "no command":
+        earlier_run(folder, "x")
+        (folder / "gait_design.csv.json").write_text("{}")
+    elif case == "another study":
+        earlier_run(folder, "python -m studies primitives --dt 5e-3")
+    elif case != "no table":
+        earlier_run(folder, "python -m studies gait_design --dt 5e-3 --cycles 1")
+    assert studies_main(["gait_design", "--redraw", str(folder), *argv]) == 2
+    error = capsys.readouterr().err
+    assert message in error and error.count("\n") == 1
+    assert not (folder / "gait_design.gif").exists()
