@@ -13,6 +13,7 @@ import pytest
 import taichi_star
 from taichi_star import SolverConfig, StarParams, identification
 from taichi_star.experiment import EXPERIMENT_PERIOD_S
+from taichi_star.provenance import table_stamp
 from taichi_star.timegrid import nearest_interval
 
 from studies import identify, model_select
@@ -403,29 +404,49 @@ def test_a_reassessed_fit_gets_the_tables_of_a_fresh_run(tmp_path, monkeypatch, 
                                   fresh["model_select_folds.csv"], rtol=1e-6)
 
 
+class StoredFit:
+    """A --reassess setting in `folder`: one candidate (the paper model, two axes) on gait A1,
+    its record done/paper.json (`record`) and its evaluations fits/paper.csv; `name()` is what
+    `stored_fit_of` names the stored fit (None: fitted anew)."""
+
+    def __init__(self, folder):
+        self.folder = folder
+        self.candidate = model_select.Candidate("paper", "",
+                                                "alpha=0.2:1.5 cylinder_drag=1:100:log")
+        self.args = types.SimpleNamespace(fold_generations=2, train_cycles="1:3",
+                                          validate_cycles="4:6", phases="strokes",
+                                          periods="nominal")
+        self.settings, self.solver = identify.CMASettings(), SolverConfig()
+        self.base = StarParams.preset("paper")
+        self.done = folder / "done" / "paper.json"
+        self.done.parent.mkdir()
+
+    def definition(self, **kwargs) -> str:
+        return model_select.definition_of(self.candidate, self.args, self.settings, self.base,
+                                          self.solver, ["A1"], **kwargs)
+
+    def record(self, definition: str, status: str = "ok"):
+        self.done.write_text(json.dumps({"row": {"status": status, "definition": definition}}))
+
+    def name(self):
+        found = model_select.stored_fit_of(self.done, self.folder, "fits/paper.csv",
+                                           self.candidate, self.args, self.settings, self.base,
+                                           self.solver, ["A1"])
+        return None if found is None else found[1]
+
+
 def test_a_stored_fit_is_reassessed_only_if_fitted_as_today(tmp_path):
     """A stored fit is reused by --reassess if its definition is today's, or today's but for
     the stroke alignment where the training window starts at cycle 1 (the fit's simulation
     is then its window, read alike either way); a later window, a failed fit, another
     definition or no record: fitted anew (None)."""
-    candidate = model_select.Candidate("paper", "", "alpha=0.2:1.5 cylinder_drag=1:100:log")
-    args = types.SimpleNamespace(fold_generations=2, train_cycles="1:3", validate_cycles="4:6",
-                                 phases="strokes", periods="nominal")
-    settings, solver, base = identify.CMASettings(), SolverConfig(), StarParams.preset("paper")
-    done = tmp_path / "done" / "paper.json"
-    done.parent.mkdir()
+    setting = StoredFit(tmp_path)
+    args, definition = setting.args, setting.definition
 
     def stored(definition, status="ok"):
-        done.write_text(json.dumps({"row": {"status": status, "definition": definition}}))
-        found = model_select.stored_fit_of(done, tmp_path, "fits/paper.csv", candidate, args,
-                                           settings, base, solver, ["A1"])
-        return None if found is None else found[1]
-
-    def definition(**kwargs):
-        return model_select.definition_of(candidate, args, settings, base, solver, ["A1"],
-                                          **kwargs)
-    assert model_select.stored_fit_of(done, tmp_path, "fits/paper.csv", candidate, args,
-                                      settings, base, solver, ["A1"]) is None  # no record
+        setting.record(definition, status)
+        return setting.name()
+    assert setting.name() is None  # no record
     assert stored(definition()) == "fits/paper.csv"  # no sidecar: no commit to name
     (tmp_path / "fits").mkdir()
     (tmp_path / "fits" / "paper.csv.json").write_text(json.dumps({"git_commit": "0123456789"}))
@@ -439,6 +460,33 @@ def test_a_stored_fit_is_reassessed_only_if_fitted_as_today(tmp_path):
     earlier = definition()
     args.fold_generations = 3  # today's run would assess with other folds
     assert stored(earlier) is None
+
+
+def test_a_reassessed_fit_is_named_without_a_commit_its_sidecar_no_longer_vouches_for(
+        tmp_path, capsys):
+    """The commit that names a stored fit comes from its evaluations' sidecar through
+    `read_provenance`: once the evaluations are edited since, or the sidecar damaged, the fit
+    is named without it, and that is said (a damaged sidecar was a traceback mid-run)."""
+    setting = StoredFit(tmp_path)
+    setting.record(setting.definition())
+    csv = tmp_path / "fits" / "paper.csv"
+    csv.parent.mkdir()
+    data = b"generation,objective\n0,1.5\n"
+    csv.write_bytes(data)
+    sidecar = tmp_path / "fits" / "paper.csv.json"
+    sidecar.write_text(json.dumps({"git_commit": "0123456789", **table_stamp(1, data)}))
+    assert setting.name() == "fits/paper.csv, fitted at 0123456"
+    assert capsys.readouterr().out == ""
+    csv.write_bytes(data + b"1,1.25\n")  # edited since
+    assert setting.name() == "fits/paper.csv"
+    assert capsys.readouterr().out == (
+        f"{csv}: not the table its provenance paper.csv.json describes (its SHA-256 differs: "
+        f"damaged or edited since it was written); the fit is named without its commit\n")
+    csv.write_bytes(data)
+    sidecar.write_text(sidecar.read_text()[:10])  # cut: no longer JSON
+    assert setting.name() == "fits/paper.csv"
+    assert capsys.readouterr().out.startswith(f"{sidecar}: no taichi_star provenance in it "
+                                              f"(JSONDecodeError: ")
 
 
 def test_start_reads_an_identified_table_and_moves_only_the_search_start(tmp_path, monkeypatch):

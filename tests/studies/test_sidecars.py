@@ -1,10 +1,9 @@
 """The provenance sidecars the studies read, through `taichi_star.output.read_provenance`, which
 checks the table's SHA-256 against its sidecar: of a table the run wrote (plot titles:
 `cli.run_settings`, simd's; a sidecar damaged or describing another table is a one-line error
-naming the file), of an earlier run's table (model_select --reassess: the fit is named without
-the commit, and that is said) and of a table the user gives (plan --primitives: read as a table
-without a sidecar, and that is said; elasticities --sobol: refused, in
-test_cli_input_files.py)."""
+naming the file; model_select --reassess's earlier run's table: in test_model_select.py) and of
+a table the user gives (plan --primitives: read as a table without a sidecar, and that is said;
+elasticities --sobol: refused, in test_cli_input_files.py)."""
 
 import json
 import re
@@ -14,9 +13,8 @@ import pandas as pd
 import pytest
 
 from taichi_star import SolverConfig, StarParams
-from taichi_star.provenance import table_stamp
 
-from studies import cli, identify, model_select, plan, provenance, simd
+from studies import cli, plan, provenance, simd
 
 COMMITTED_PRIMITIVES = cli.COMMITTED_RESULTS / "primitives.csv"
 EDITED = ("not the table its provenance {name} describes (its SHA-256 differs: damaged or "
@@ -86,41 +84,6 @@ def test_simd_titles_its_plot_from_the_tables_sidecar(tmp_path, monkeypatch):
     provenance.sidecar_path(csv).unlink()
     simd.plot_speedups(csv, tmp_path / "simd.png")
     assert titles[-1] == ""  # no sidecar: no title
-
-
-# --------------------------------------------------------------------------- an earlier run's
-
-def test_a_reassessed_fit_is_named_without_a_commit_its_sidecar_no_longer_vouches_for(
-        tmp_path, capsys):
-    candidate = model_select.Candidate("paper", "", "alpha=0.2:1.5 cylinder_drag=1:100:log")
-    args = types.SimpleNamespace(fold_generations=2, train_cycles="1:3", validate_cycles="4:6",
-                                 phases="strokes", periods="nominal")
-    settings, solver, base = identify.CMASettings(), SolverConfig(), StarParams.preset("paper")
-    done = tmp_path / "done" / "paper.json"
-    done.parent.mkdir()
-    done.write_text(json.dumps({"row": {"status": "ok", "definition": model_select.definition_of(
-        candidate, args, settings, base, solver, ["A1"])}}))
-    csv = tmp_path / "fits" / "paper.csv"
-    csv.parent.mkdir()
-    data = b"generation,objective\n0,1.5\n"
-    csv.write_bytes(data)
-    sidecar = provenance.sidecar_path(csv)
-    sidecar.write_text(json.dumps({"git_commit": "0123456789", **table_stamp(1, data)}))
-
-    def named():
-        return model_select.stored_fit_of(done, tmp_path, "fits/paper.csv", candidate, args,
-                                          settings, base, solver, ["A1"])[1]
-    assert named() == "fits/paper.csv, fitted at 0123456"
-    assert capsys.readouterr().out == ""
-    csv.write_bytes(data + b"1,1.25\n")  # edited since
-    assert named() == "fits/paper.csv"
-    assert capsys.readouterr().out == (f"{csv}: {EDITED.format(name='paper.csv.json')}; the fit "
-                                       f"is named without its commit\n")
-    csv.write_bytes(data)
-    damage(sidecar)
-    assert named() == "fits/paper.csv"
-    assert capsys.readouterr().out.startswith(f"{sidecar}: no taichi_star provenance in it "
-                                              f"(JSONDecodeError: ")
 
 
 # --------------------------------------------------------------------------- the user's tables
