@@ -8,6 +8,7 @@ import os
 import signal
 import threading
 import time
+from types import SimpleNamespace
 
 import pandas as pd
 import pytest
@@ -100,24 +101,70 @@ def test_distributed_flags_fail_before_compute(monkeypatch, tmp_path, capsys, st
     assert not out.exists()
 
 
-def test_default_chunk_size_feeds_every_worker():
-    class Args:
-        chunk_size, arch, default_chunk_size, quick = None, "cpu", 2048, False
-    assert cli.chunk_size(Args, 29, 1) == 2048
-    assert cli.chunk_size(Args, 29, 2) == 4  # 8 chunks for 2 workers
-    Args.chunk_size = 3
-    assert cli.chunk_size(Args, 29, 2) == 3
+def chunk_args(**changes):
+    """The flags cli.chunk_size reads: no --chunk-size, a CPU run's default of 2048, not quick."""
+    return SimpleNamespace(**{"chunk_size": None, "arch": "cpu", "default_chunk_size": 2048,
+                              "quick": False, **changes})
+
+
+@pytest.mark.parametrize("changes, n_instances, n_workers, size", [
+    ({}, 29, 1, 2048),          # one worker: the default, uncut
+    ({}, 29, 2, 4),             # ceil(29 / 8): 8 chunks for 2 workers
+    ({}, 32, 2, 4),             # 4 w divides n: exactly 4 chunks a worker
+    ({}, 33, 2, 5),             # one instance more: ceil(33 / 8)
+    ({}, 3, 2, 1),              # fewer instances than 4 w: chunks of one
+    ({}, 0, 2, 1),              # ceil gives 0 only here: the floor of 1 instance
+    ({"default_chunk_size": 3}, 100, 2, 3),    # the default caps ceil(100 / 8) = 13
+    ({"default_chunk_size": 13}, 100, 2, 13),  # the cap equal to the cut
+    ({"default_chunk_size": 12}, 100, 2, 12),  # one below it
+    ({"arch": "gpu"}, 29, 1, cli.GPU_CHUNK_SIZE),
+    ({"arch": "gpu"}, 10**5, 3, 8334),       # ceil(10**5 / 12), below the GPU's default
+    ({"arch": "gpu"}, 10**6, 3, cli.GPU_CHUNK_SIZE),  # 83334 capped by it
+    ({"quick": True}, 29, 1, cli.QUICK_CHUNK_SIZE),
+    ({"quick": True}, 29, 2, 4),
+    ({"chunk_size": 3}, 29, 2, 3),   # --chunk-size wins over the cut
+    ({"chunk_size": 3}, 29, 1, 3),
+])
+def test_default_chunk_size_feeds_every_worker(changes, n_instances, n_workers, size):
+    assert cli.chunk_size(chunk_args(**changes), n_instances, n_workers) == size
 
 
 @pytest.mark.slow
-def test_scaling_quick(tmp_path):
+def test_scaling_quick(tmp_path, monkeypatch):
     from studies import scaling
+    from taichi_star import SolverConfig, StarParams
+    from taichi_star.batch import run_batch
+    from taichi_star.experiment import PAPER_GAITS
+    calls = []
+
+    def recording_run_batch(params, duration_s, *, executor, **kwargs):
+        result = run_batch(params, duration_s, executor=executor, **kwargs)
+        calls.append((type(executor).__name__, list(params), duration_s, result.summary))
+        return result
+
+    monkeypatch.setattr(scaling, "run_batch", recording_run_batch)
     table = scaling.main(["--quick", "--workers-list", "2", "--no-dask", "--out", str(tmp_path),
                           "--no-progress"])
     written = pd.read_csv(tmp_path / "scaling.csv")
     assert written["mode"].tolist() == ["in-process", "processes"]
     assert written["workers"].tolist() == [0, 2]
-    # the modes' tables are bitwise the in-process one (the study checks it itself)
+    # each mode: an untimed call on one chunk per worker (of 1 instance under --quick), then
+    # the timed sweep of 2 gaits × 2 alphas
+    assert [(executor, len(params)) for executor, params, _, _ in calls] == [
+        ("InProcess", 1), ("InProcess", 4), ("LocalProcesses", 2), ("LocalProcesses", 4)]
+    params = calls[1][1]
+    assert params == calls[3][1]
+    assert sorted((p.gait, p.alpha) for p in params) == sorted(
+        (gait, alpha) for gait in list(PAPER_GAITS)[:2] for alpha in (0.2, 0.4))
+    assert all(p == StarParams(gait=p.gait, alpha=p.alpha) for p in params)
+    assert {duration for _, _, duration, _ in calls} == {cli.QUICK_DURATION_S}
+    # every mode's table bitwise that of an in-process run made here, in one chunk, with the
+    # quick solver built here (the study's own same_table_as_in_process flag compares the
+    # modes with each other only)
+    reference = run_batch(params, cli.QUICK_DURATION_S, progress=False,
+                          solver=SolverConfig.preset("paper", dt=cli.QUICK_DT)).summary
+    for _, _, _, summary in (calls[1], calls[3]):
+        pd.testing.assert_frame_equal(summary, reference, check_exact=True)
     assert written["same_table_as_in_process"].all()
     assert (written["wall_s"] > 0).all()
     sidecar = json.loads((tmp_path / "scaling.csv.json").read_text())

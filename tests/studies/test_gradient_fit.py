@@ -112,6 +112,16 @@ def test_a_polish_starts_at_cma_best_point_and_counts_its_cost_on_top(monkeypatc
     # a budget of one trial point: no step can follow it, so no Jacobian is simulated
     assert len(kept.rows) == 1
     assert kept.rows[0]["robot_seconds"] == pytest.approx(40.0 + window)
+    # "beats" is strictly below: a call with CMA-ES's best objective exactly leaves CMA-ES's
+    # point the best; one an ulp below it replaces it
+    tie = gradient_fit.Recorder.continuing(cma, gradient_fit.POLISH)
+    tie.add(np.full(6, 0.2), 0.1, 1.0, 1.0)
+    assert tie.rows[-1]["best_objective"] == tie.best_objective == 0.1
+    np.testing.assert_array_equal(tie.best_units, np.full(6, 0.45))
+    just_below = np.nextafter(0.1, 0.0)
+    tie.add(np.full(6, 0.25), just_below, 1.0, 1.0)
+    assert tie.rows[-1]["best_objective"] == tie.best_objective == just_below
+    np.testing.assert_array_equal(tie.best_units, np.full(6, 0.25))
 
 
 def test_the_history_plot_draws_both_counts_from_the_csv(tmp_path, monkeypatch):

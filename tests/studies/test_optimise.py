@@ -50,8 +50,9 @@ def test_each_search_takes_its_own_path_and_rounds_hold_the_running_searches():
     sizes = [len(members) for members in rounds]
     assert sizes == sorted(sizes, reverse=True) and sizes[0] == 3 and sizes[-1] >= 1
     assert len(set(r.nfev for r in results)) > 1  # the searches did stop at different times
-    # the bounded minima: the second search ends on its upper bound in x (centre at 2.0)
-    assert results[1].x[0] == pytest.approx(1.0)
+    # the bounded minima: the second search ends on its upper bound in x (centre at 2.0),
+    # exactly (L-BFGS-B projects its points onto the bounds)
+    assert results[1].x[0] == 1.0
 
 
 def test_a_failing_evaluation_ends_every_search_and_reaches_the_caller():
@@ -71,7 +72,37 @@ def test_a_failing_evaluation_ends_every_search_and_reaches_the_caller():
     assert threading.active_count() == before  # every search's thread has ended
 
 
-def test_a_failing_search_ends_the_others_and_reaches_the_caller():
+def recording_searches(monkeypatch, starts, fail_at_call=None):
+    """Patch scipy's minimize, as the searches call it, to record how the search from each of
+    `starts` ends ("finished", or the name of the exception that ended it); with fail_at_call,
+    the third search's objective raises ValueError("search 2 broke") at that call (scipy's
+    call of it, in its thread) instead of asking for its point."""
+    ended = {}
+
+    def recording_minimize(fun, x0, *args, **kwargs):
+        index = next(i for i, start in enumerate(starts) if np.array_equal(start, x0))
+        if index == 2 and fail_at_call is not None:
+            calls = []
+
+            def failing(point, ask=fun):
+                calls.append(point)
+                if len(calls) == fail_at_call:
+                    raise ValueError("search 2 broke")
+                return ask(point)
+            fun = failing
+        try:
+            result = minimize(fun, x0, *args, **kwargs)
+        except BaseException as error:
+            ended[index] = type(error).__name__
+            raise
+        ended[index] = "finished"
+        return result
+
+    monkeypatch.setattr("scipy.optimize.minimize", recording_minimize)
+    return ended
+
+
+def test_a_failing_search_ends_the_others_and_reaches_the_caller(monkeypatch):
     """A search whose scipy call raises in its thread (here: a start of three values against
     two bounds, refused before it asks for a point) ends the round trip of the others."""
     evaluated = []
@@ -81,9 +112,33 @@ def test_a_failing_search_ends_the_others_and_reaches_the_caller():
         pairs = [value_and_gradient(index, point) for index, point in zip(indices, points)]
         return np.array([v for v, _ in pairs]), np.array([g for _, g in pairs])
 
-    before = threading.active_count()
     starts = [STARTS[0], STARTS[1], np.array([0.9, -0.8, 0.0])]
-    with pytest.raises(ValueError):
+    ended = recording_searches(monkeypatch, starts)
+    before = threading.active_count()
+    with pytest.raises(ValueError, match=r"number of bounds is not compatible with the length"):
         minimise_lbfgsb_batched(evaluate, starts, BOUNDS, max_iterations=50, max_evaluations=60)
     assert threading.active_count() == before
-    assert all(2 not in members for members in evaluated)
+    # the first round waits for every search still running, and the third never asks: its
+    # failure ends the others (waiting for their first point) before any evaluation
+    assert evaluated == []
+    assert ended == {0: "SearchAborted", 1: "SearchAborted", 2: "ValueError"}
+
+
+def test_a_search_failing_midway_ends_the_others_and_reaches_the_caller(monkeypatch):
+    """The third search fails at its fourth objective call, after three rounds: no round
+    follows, the first search (still running: 11 evaluations alone) is ended, the second had
+    stopped on its own after two."""
+    evaluated = []
+
+    def evaluate(indices, points):
+        evaluated.append(list(indices))
+        pairs = [value_and_gradient(index, point) for index, point in zip(indices, points)]
+        return np.array([v for v, _ in pairs]), np.array([g for _, g in pairs])
+
+    ended = recording_searches(monkeypatch, STARTS, fail_at_call=4)
+    before = threading.active_count()
+    with pytest.raises(ValueError, match="search 2 broke"):
+        minimise_lbfgsb_batched(evaluate, STARTS, BOUNDS, max_iterations=50, max_evaluations=60)
+    assert threading.active_count() == before
+    assert evaluated == [[0, 1, 2], [0, 1, 2], [0, 2]]
+    assert ended == {0: "SearchAborted", 1: "finished", 2: "ValueError"}

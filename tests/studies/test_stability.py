@@ -34,15 +34,60 @@ def test_record_stride_divides_the_run(n_steps, dt, stride):
     assert n_steps % stride == 0
 
 
+SCOPES = {"precision": ["precision"], "precision x dt": ["precision", "dt_ms"],
+          "precision x dt x stiffness": ["precision", "dt_ms", "stiffness_factor"]}
+COUNT_COLUMNS = {f"n_{name.replace('-', '_')}": name for name in stability.OUTCOMES}
+
+
+def assert_outcome_counts(summary, table):
+    """Every scope's n_* columns of an outcome summary against counts of the table's outcomes
+    made here by value_counts over the scope's groups (one row per group, no other)."""
+    assert list(summary["scope"].unique()) == ["all", *SCOPES]
+    total = summary[summary["scope"] == "all"]
+    assert len(total) == 1
+    counts = table["outcome"].value_counts()
+    assert {column: total[column].iloc[0] for column in COUNT_COLUMNS} == \
+        {column: counts.get(name, 0) for column, name in COUNT_COLUMNS.items()}
+    assert total["n_total"].iloc[0] == len(table)
+    for scope, keys in SCOPES.items():
+        got = summary[summary["scope"] == scope].set_index(keys)
+        expected = (table.groupby(keys)["outcome"].value_counts().unstack(fill_value=0)
+                    .reindex(columns=stability.OUTCOMES, fill_value=0))
+        assert len(got) == len(expected)
+        got = got.loc[expected.index]  # KeyError for a group missing from the summary
+        for column, name in COUNT_COLUMNS.items():
+            assert got[column].tolist() == expected[name].tolist(), (scope, column)
+        assert got["n_total"].tolist() == table.groupby(keys).size()[expected.index].tolist()
+
+
 def test_paper_and_f32_summaries_from_a_synthetic_table():
     rows = []
+    base = dict(alpha=0.8, added_mass_coeff=1.0, period_s=3.15)
     outcomes = {("f64", 1.0): "ok", ("f64", 5.0): "retried-then-ok", ("f64", 20.0): "failed",
                 ("f32", 1.0): "insane", ("f32", 5.0): "ok", ("f32", 20.0): "failed"}
     for (precision, dt), outcome in outcomes.items():
-        rows.append(dict(gait="A1", stiffness_factor=1.0, alpha=0.8, added_mass_coeff=1.0,
-                         period_s=3.15, dt_ms=dt, precision=precision, outcome=outcome,
-                         substep_retries=int(outcome == "retried-then-ok"),
+        rows.append(dict(gait="A1", stiffness_factor=1.0, **base, dt_ms=dt, precision=precision,
+                         outcome=outcome, substep_retries=int(outcome == "retried-then-ok"),
                          speed_mm_s=1.0 if precision == "f64" else 1.05))
+    # stiffness x10 (not the paper's): cells where both precisions are stable, for the retry
+    # and speed clauses of f32_breaks_down; gait -> (f64 (outcome, speed), f32 (outcome, speed))
+    retried, ok = "retried-then-ok", "ok"
+    stable_cells = {
+        1.0: {"A1": ((ok, 1.0), (retried, 1.0))},        # f32 retried, f64 not
+        2.0: {"A1": ((retried, 1.0), (retried, 1.0))},   # both retried: as many retries
+        # relative speed differences 0, 0.1 (|11 − 10| / 10 is 0.1 in IEEE), 0.5: median 0.1,
+        # on the limit (mean and max are above it)
+        5.0: {"A1": ((ok, 10.0), (ok, 10.0)), "A2": ((ok, 10.0), (ok, 11.0)),
+              "A3": ((ok, 10.0), (ok, 15.0))},
+        # the same with 0.1000001: the median is just above the limit (and below 0.5)
+        10.0: {"A1": ((ok, 10.0), (ok, 10.0)), "A2": ((ok, 10.0), (ok, 11.000001)),
+               "A3": ((ok, 10.0), (ok, 15.0))}}
+    for dt, gaits in stable_cells.items():
+        for gait, pair in gaits.items():
+            for precision, (outcome, speed) in zip(("f64", "f32"), pair):
+                rows.append(dict(gait=gait, stiffness_factor=10.0, **base, dt_ms=dt,
+                                 precision=precision, outcome=outcome,
+                                 substep_retries=int(outcome == retried), speed_mm_s=speed))
     table = pd.DataFrame(rows)
     paper = stability.paper_summary(table).set_index("precision")
     assert paper.loc["f64", "largest_ok_dt_ms"] == 1.0
@@ -52,17 +97,31 @@ def test_paper_and_f32_summaries_from_a_synthetic_table():
     assert math.isnan(paper.loc["f32", "stable_up_to_dt_ms"])  # insane at the smallest dt
     assert paper.loc["f32", "f32_rel_speed_diff_dt_5ms"] == pytest.approx(0.05)
     assert math.isnan(paper.loc["f32", "f32_rel_speed_diff_dt_1ms"])  # f32 not ok there
-    f32 = stability.f32_summary(table).set_index("dt_ms")
-    assert f32.loc[1.0, "n_f32_worse"] == 1 and f32.loc[5.0, "n_f32_better"] == 0
-    assert f32.loc[20.0, "n_f32_worse"] == 0 and f32.loc[20.0, "n_f64_stable"] == 0
+    f32 = stability.f32_summary(table).set_index(["stiffness_factor", "dt_ms"])
+    paper_cells = f32.loc[1.0]
+    assert paper_cells.loc[1.0, "n_f32_worse"] == 1 and paper_cells.loc[5.0, "n_f32_better"] == 0
+    assert paper_cells.loc[20.0, "n_f32_worse"] == 0 and paper_cells.loc[20.0, "n_f64_stable"] == 0
     # f32 breaks down where it is unstable and f64 is not (dt 1); not at dt 5 (stable, fewer
     # retries than f64, a 5 % speed difference is below the 10 % limit), nor where both
     # fail (dt 20)
-    assert f32["f32_breaks_down"].to_dict() == {1.0: True, 5.0: False, 20.0: False}
+    assert paper_cells["f32_breaks_down"].to_dict() == {1.0: True, 5.0: False, 20.0: False}
+    stiff = f32.loc[10.0]
+    assert (stiff["n_f32_worse"] == 0).all()
+    assert stiff["n_f32_retried"].tolist() == [1, 1, 0, 0]
+    assert stiff["n_f64_retried"].tolist() == [0, 1, 0, 0]
+    # the boundary is exact: the median at dt 5 is 0.1 itself, not a rounding of it
+    assert stiff.loc[5.0, "median_rel_speed_diff"] == stability.F32_SPEED_LIMIT == 0.1
+    assert stiff.loc[10.0, "median_rel_speed_diff"] > stability.F32_SPEED_LIMIT
+    # more f32 retries than f64 breaks down (dt 1), as many does not (dt 2); a median relative
+    # speed difference of exactly 10 % does not (dt 5), one just above it does (dt 10)
+    assert stiff["f32_breaks_down"].to_dict() == {1.0: True, 2.0: False, 5.0: False,
+                                                  10.0: True}
     counts = stability.outcome_summary(table)
     total = counts[counts["scope"] == "all"].iloc[0]
+    # counted by hand: 2 + 1 + 6 + 6 ok, 1 + 1 + 2 retried, the insane f32 at dt 1, 2 failed
     assert (total["n_ok"], total["n_retried_then_ok"], total["n_insane"], total["n_failed"]) == \
-        (2, 1, 1, 2)
+        (15, 4, 1, 2)
+    assert_outcome_counts(counts, table)
 
 
 # ----------------------------------------------------------------------------- the study
@@ -93,12 +152,21 @@ def test_quick_stability_study(tmp_path):
     checks = shape_checks(direct.shapes, direct.topology).iloc[0]
     assert first["max_strain"] == pytest.approx(checks["max_strain"], rel=1e-9)
     assert first["sane"] == checks["sane"]
+    # its outcome from the direct run's status, retries and sanity (the module docstring's
+    # rule, written out here): the paper's settings at the default dt run clean
+    status = direct.summary["status"].iloc[0]
+    retries = direct.summary["substep_retries"].iloc[0]
+    assert (first["status"], first["substep_retries"]) == (status, retries)
+    expected = ("failed" if status != "ok" else "insane" if not checks["sane"]
+                else "retried-then-ok" if retries > 0 else "ok")
+    assert first["outcome"] == expected == "ok"
     assert (csv["outcome"] == stability.classify(csv["status"], csv["substep_retries"],
                                                  csv["sane"])).all()
     summary = pd.read_csv(tmp_path / "stability_summary.csv")
     total = summary[summary["scope"] == "all"].iloc[0]
     assert total["n_total"] == 4
     assert total[["n_ok", "n_retried_then_ok", "n_insane", "n_failed"]].sum() == 4
+    assert_outcome_counts(summary, csv)
     png = tmp_path / "stability.png"
     assert png.exists() and png.stat().st_size > 1000
     assert (tmp_path / "stability_notes.txt").read_text().startswith("outcome counts")
