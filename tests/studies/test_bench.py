@@ -253,8 +253,15 @@ def test_gpu_arch_without_a_gpu_lists_the_available_archs(monkeypatch, tmp_path,
     assert not any(tmp_path.iterdir())
 
 
-def test_engine_profile_refuses_an_adaptive_solver_before_compute():
+def test_engine_profile_refuses_an_adaptive_solver_before_compute(monkeypatch):
     """EngineProfile times fixed steps: an adaptive solver is a ValueError naming `solver`,
     raised before Taichi or an engine is touched."""
-    with pytest.raises(ValueError, match="solver"):
+    def forbidden(*args, **kwargs):
+        raise AssertionError("the model was built or Taichi started despite the refusal")
+
+    monkeypatch.setattr(profiling, "build_model", forbidden)
+    monkeypatch.setattr(profiling.Runtime, "ensure", forbidden)
+    with pytest.raises(ValueError, match=r"^solver: EngineProfile times fixed steps; got an "
+                                         r"adaptive solver \(profile it end to end with "
+                                         r"simulate\)$"):
         taichi_star.EngineProfile([StarParams()], SolverConfig.preset("accurate"))

@@ -77,6 +77,36 @@ def test_simd_quick_assemblies_in_f32(tmp_path):
     assert (tmp_path / "simd_assembly.png").stat().st_size > 1000
 
 
+def test_every_form_of_the_block_lu_solves_as_numpy_does(paper_plan, tmp_path):
+    """The study's LaneSystem in each form, directly (not through its own error column): the
+    paper pattern's random systems of 8 instances factored and solved equal
+    numpy.linalg.solve on their dense matrices to TOLERANCE (see above), and the forms'
+    solutions equal bit for bit."""
+    blocks, rhs = simd.random_system(paper_plan, 8, seed=5)
+    exact = np.stack([np.linalg.solve(simd.dense_matrix(paper_plan, blocks[b]),
+                                      rhs[b].ravel()).reshape(-1, 2) for b in range(8)])
+    systems = {}
+    with simd.working_directory(tmp_path):
+        try:
+            simd.init_taichi("f64")
+            for form, lanes in simd.forms_of([4]):
+                systems[form] = simd.LaneSystem(paper_plan, 8, form, lanes)
+                systems[form].load(blocks, rhs)
+                systems[form].restore()
+                systems[form].factor_solve()
+            assert set(systems) == set(simd.FORMS)
+            scale = np.abs(exact).max(axis=(1, 2))
+            for form, system in systems.items():
+                solution = system.solution()
+                error = np.abs(solution - exact).max(axis=(1, 2)) / scale
+                assert (error < TOLERANCE).all(), (form, error)
+                assert np.array_equal(solution, systems["instance_major"].solution()), form
+        finally:
+            for system in systems.values():
+                system.destroy()
+            Runtime.current().configure_compiler()
+
+
 def assembled_in(assembly, n_nodes, batch, state, element, forms):
     """{form: the `assembly` (simd.LaneBending, LaneRodDrag) of state and element assembled in
     that form} (f64, `forms` of (form, lanes)); the caller destroys them."""

@@ -298,8 +298,14 @@ def test_the_period_must_outlast_the_heating_pulse():
         with pytest.raises(ValueError) as error:
             ts.StarParams(period=value)
         assert str(error.value) == whole_range + repr(float(value))
-    assert ts.StarParams(period=heating * 1.001).period == pytest.approx(heating * 1.001)
+    # the next double above the end: the open side is the end alone
+    above = float(np.nextafter(heating, np.inf))
+    assert ts.StarParams(period=above).period == above
     assert ts.StarParams(period=1000.0).period == 1000.0
+    beyond = float(np.nextafter(1000.0, np.inf))
+    with pytest.raises(ValueError) as error:
+        ts.StarParams(period=beyond)
+    assert str(error.value) == whole_range + repr(beyond)
     shorter = dataclasses.replace(ts.StarParams().actuator_profile, switch_time=0.05)
     assert ts.StarParams(period=0.1, actuator_profile=shorter).period == 0.1
 
@@ -321,11 +327,14 @@ def test_joint_radius_is_bounded_by_the_widest_chord_a_rest_arc_spans():
     """Neighbouring joints 45° apart at radius r are a chord 2·r·sin(22.5°) apart; an arc of
     curvature K̄(0) spans at most its diameter 2/K̄(0), so r < 1/(K̄(0)·sin(22.5°))."""
     rest = ts.StarParams().actuator_profile.rest_curvature
-    widest = 1.0 / (rest * math.sin(math.radians(22.5)))
-    assert ts.StarParams(joint_radius=widest * 0.999).joint_radius == pytest.approx(widest * 0.999)
+    # the bound as the library computes it: the double refused below and the next one down,
+    # accepted, pin it to the last bit
+    widest = 1.0 / (rest * math.sin(math.pi / 8))
+    below = float(np.nextafter(widest, 0.0))
+    assert ts.StarParams(joint_radius=below).joint_radius == below
     # the widest itself is refused (open), and so is 1.5 m, inside the declared [0.001, 1]: the
     # message states the range the profile makes, whichever end a value misses
-    for radius in (widest, widest * 1.001, 1.5, 5e-4):
+    for radius in (widest, widest * 1.001, 1.5, float(np.nextafter(0.001, 0.0)), 5e-4):
         with pytest.raises(ValueError) as error:
             ts.StarParams(joint_radius=radius)
         assert str(error.value) == (

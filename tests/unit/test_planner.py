@@ -163,7 +163,8 @@ def test_glides_are_read_from_a_primitive_table_and_checked():
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # one streak of glides: no warning
         one = PrimitiveModel.from_table(table.drop(columns=["glide2_x_mm", "glide2_y_mm"]))
-    assert one.glides_mm.shape == (1, 3, 2) and one.glides_mm.any()
+    # the first streak's glides of the table: none without firing, then A1's and A5's
+    np.testing.assert_array_equal(one.glides_mm, [[(0, 0), (5, 0), (-5, 1)]])
     # none: plans from it overshoot, warned
     with pytest.warns(RuntimeWarning, match="the primitive table has no glides from one firing"):
         without = PrimitiveModel.from_table(table.drop(columns=["glide1_x_mm", "glide1_y_mm",
