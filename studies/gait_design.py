@@ -63,10 +63,9 @@ delay ignored).
 
 from __future__ import annotations
 
+import shlex
 from pathlib import Path
 from typing import Sequence
-
-import shlex
 
 import numpy as np
 import pandas as pd
@@ -400,7 +399,9 @@ def animate_pattern(out, base, solver, gait: str, delays, cycles: int, arch):
 
 def redraw(args, argv):
     """--redraw: the designed pattern of an earlier run drawn again (`animate_pattern`) with
-    the model, solver and cycles of its recorded command; StudyArgumentError naming --redraw
+    the model, solver and cycles of its recorded command, its delays as gait_design.csv keeps
+    them (10 significant digits: the run's objective again to about that many);
+    StudyArgumentError naming --redraw
     for a folder without a readable gait_design.csv and sidecar, and naming any other flag
     given beside it (the run's own settings would silently replace it)."""
     parser = build_parser()
