@@ -21,9 +21,9 @@ from typing import Mapping, Optional, Sequence, Tuple
 import numpy as np
 import pandas as pd
 
+from . import drawing
 from .checks import is_whole
 from .extras import require
-from . import drawing
 from .geometry import ARC, CENTRE, LIMB, SPOKE, build_topology
 from .params import PARAMETER_UNITS, StarParams, check_number, parameter_column
 from .provenance import (TABLE_SHA256, TEMPORARY_MARK, code_record, file_path, machine,
@@ -450,7 +450,6 @@ drawn from it differs from one drawn from the unrounded records only where the G
 of a frame picks another colour for an anti-aliased edge pixel."""
 
 
-
 def edge_table(params: StarParams) -> pd.DataFrame:
     """The edges of the robot `params` (its n_arc and n_limb fix them), one row each in the
     engine's order (for each joint J_k, k = 0..7: the spoke from the hub, the limb from the
@@ -472,8 +471,9 @@ def animation_tables(result, labels: Sequence[str]) -> Tuple[pd.DataFrame, pd.Da
     long tables, instance b named labels[b] (its gait) in the column gait: the shapes (gait,
     frame, t_s, node, x_mm, y_mm: every node at every record, mm to SHAPE_DECIMALS decimals,
     NaN after a failure) and the centroid (gait, frame, t_s, x_mm, y_mm: relative to its
-    start, the result's trajectory). `replay` puts them back into a result; `animate` draws them. ValueError
-    without recorded shapes, or unless there is one label per instance, no two alike."""
+    start, the result's trajectory). `replay` puts them back into a result, which `animate`
+    draws. ValueError without recorded shapes, or unless there is one label per instance, no
+    two alike."""
     if result.shapes is None:
         raise ValueError("result has no recorded shapes: simulate with record_interval_s > 0 "
                          "and record_shapes=True")
@@ -534,10 +534,10 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
     Drawn with `taichi_star.drawing`: limbs brown, actuator arcs gray and red while they heat
     (for t0 = `CurvatureProfile.switch_time` s, the gait's actuators: `simulate` fires them at
     0, T, 2T, ..., each heating its `actuator_delays` later), labels A1..A8, the central
-    cylinder and a scale bar. `frame` "world" (lab axes, mm, with the centroid's path so far drawn in blue) or
-    "body" (following the hub and the body's rotation; no path). `title` heads the movie
-    (default none) above the time; in a small movie the heading's font shrinks to fit its
-    width, and below HEADING_LEAST_PT its lines wrap. A failed instance's panel names its
+    cylinder and a scale bar. `frame` "world" (lab axes, mm, with the centroid's path so far
+    drawn in blue) or "body" (following the hub and the body's rotation; no path). `title`
+    heads the movie (default none) above the time; in a small movie the heading's font shrinks
+    to fit its width, and below HEADING_LEAST_PT its lines wrap. A failed instance's panel names its
     status and failure time and holds its last shape after it (it was an empty panel).
     Returns the path. Raises ValueError without recorded shapes, for an unknown frame or
     suffix, or for instances out of range."""

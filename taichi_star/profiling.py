@@ -313,11 +313,11 @@ def interleaved_rounds(calls: Sequence[Callable[[], object]], rounds: int,
     First a warm-up of each call, in order: `warmups[k]()`, or `calls[k]()` itself where that
     entry (or `warmups`) is None. A warm-up starts and compiles what call k needs (Taichi's
     kernels, worker processes), so that no round pays for it, and its time is kept apart from
-    the rounds'; a one-step `simulate` of the same batch and solver is one. Then `before_rounds()` if
-    given (e.g. a reading of the machine's load just before the timings), then `rounds` rounds
-    that each make every call once, in order, so that the machine's drifts (other jobs, clock
-    speeds) reach them all alike; `progress(round, k, seconds)` after each timed call if given
-    (round and k from 0).
+    the rounds'; a one-step `simulate` of the same batch and solver is one. Then
+    `before_rounds()` if given (e.g. a reading of the machine's load just before the timings),
+    then `rounds` rounds that each make every call once, in order, so that the machine's
+    drifts (other jobs, clock speeds) reach them all alike; `progress(round, k, seconds)` after
+    each timed call if given (round and k from 0).
 
     Returns (results, times, warmup_times): each call's result in the last round (a list of
     K), the wall time of every timed call, s, a (rounds, K) array (`times.min(axis=0)`: each
