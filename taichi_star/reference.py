@@ -290,6 +290,11 @@ def _unit_with_derivative(v):
     return u, (np.eye(2) - _outer(u, u)) / length[..., None, None]
 
 
+FIRING_SNAP = 1e-9
+"""A time within this share of the period (≤) below a cycle's start is that start (rounding of
+a summed step time, ~1e-16 relative; the shortest step allowed, `dt_min` 1 µs, is over 1e-6 of
+any period, which is longer than the profile's heating time of ~0.16 s)."""
+
 _QUARTER_TURN = np.array([[0.0, -1.0], [1.0, 0.0]])
 """R with R a = _perp(a)."""
 
@@ -504,6 +509,12 @@ class ReferenceSimulator:
         p = self.params
         rest = p.actuator_profile.rest_curvature
         since_firing = math.fmod(t, p.period)
+        if p.period - since_firing <= FIRING_SNAP * p.period:
+            # a step's end time summed in floats (k·h + h) can land a rounding below a cycle's
+            # start k·T: it is that start, whose firing the step ending there already sees
+            # (the engine counts steps: `ActuationSchedule.fire_due`); fmod read the cooling
+            # tail K̄(T⁻) there instead of K̄(0) (an audit, 2026-12)
+            since_firing = 0.0
         warming = 1.0
         if p.stroke_warming != 0.0:
             # the heat kept from the earlier firings of this cycle's: θ_0 = 0,

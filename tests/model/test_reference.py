@@ -20,10 +20,11 @@ import scipy.linalg
 from taichi_star.actuation import CurvatureProfile
 from taichi_star.geometry import ARC, ARC_BEND, JOINT_BEND, LIMB, SPOKE, discrete_curvature
 from taichi_star.params import SolverConfig, StarParams
-from taichi_star.reference import (NewtonDidNotConverge, ReferenceSimulator, bend_element,
-                                   bend_strain, cylinder_drag_element, damping_element,
-                                   hub_linear_drag_element, jet_element, linear_rod_drag_element,
-                                   quad_area, rod_drag_element, stretch_element, stretch_strain)
+from taichi_star.reference import (FIRING_SNAP, NewtonDidNotConverge, ReferenceSimulator,
+                                   bend_element, bend_strain, cylinder_drag_element,
+                                   damping_element, hub_linear_drag_element, jet_element,
+                                   linear_rod_drag_element, quad_area, rod_drag_element,
+                                   stretch_element, stretch_strain)
 
 FD_RTOL = 1e-6
 
@@ -398,6 +399,28 @@ def test_reference_actuators_follow_their_gain_and_delay():
     arc = actuated & (sim.topology.triplet_kind == ARC_BEND)
     assert np.allclose(np.abs(natural[arc]), sim.driven_curvature(t)[1], rtol=1e-14)
     assert not np.isclose(sim.driven_curvature(t)[1], sim.driven_curvature(t)[0])
+def test_reference_fires_at_a_cycle_start_reached_a_rounding_below_it():
+    """A step's end time summed in floats can land one rounding below k·T (t = 3T at the
+    defaults, an audit: fmod read K̄(T⁻), the cooling tail, and counted one firing fewer); the
+    reference fires there as the engine does (which counts steps), and a real step before the
+    start (1 µs, the shortest allowed) still reads the tail."""
+    params = StarParams(gait="A1")
+    sim = ReferenceSimulator(params)
+    start = 3 * params.period
+    below = np.nextafter(start, 0.0)
+    # the case fmod misread (so does 3T itself: 3·T in floats is not 3 periods of fmod's T)
+    assert math.fmod(below, params.period) > 0.99 * params.period
+    assert sim.driven_curvature(below).tolist() == sim.driven_curvature(start).tolist()
+    assert sim.driven_curvature(start)[0] == params.actuator_profile.rest_curvature
+    tail = sim.driven_curvature(start - 1e-6)[0]
+    assert abs(tail - params.actuator_profile.rest_curvature) > 1.0  # the 3.35 1/m closure gap
+    # the boundary of the snap (≤): at FIRING_SNAP of the period below the start, and just past
+    snap = FIRING_SNAP * params.period
+    assert sim.driven_curvature(start - 0.5 * snap).tolist() == \
+        sim.driven_curvature(start).tolist()
+    assert sim.driven_curvature(start - 2.0 * snap)[0] != sim.driven_curvature(start)[0]
+
+
 def test_assembled_jacobian_with_jet_variants_is_exact():
     """Spread application (corners coupled to each other and the hub), normal direction and
     inflow in the whole fluid Jacobian, on the coarse mesh; δ as in the check above."""
