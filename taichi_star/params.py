@@ -6,8 +6,8 @@ sequence of them and every field except the topology (`n_arc`, `n_limb`) may dif
 outside it (orders of magnitude beyond any real robot) are refused with the range named. NumPy
 scalars are accepted wherever Python numbers are.
 
-Presets: `StarParams.preset("paper" | "accurate", **overrides)` and
-`SolverConfig.preset("paper" | "accurate")`.
+Presets: `StarParams.preset("paper" | "accurate" | "identified", **overrides)` and
+`SolverConfig.preset("paper" | "accurate" | "identified")`.
 """
 
 from __future__ import annotations
@@ -276,7 +276,8 @@ class StarParams:
     actuator_profile: CurvatureProfile = field(default_factory=CurvatureProfile,
                                                metadata={"allowed": "a CurvatureProfile"})
     """The actuators' natural-curvature profile K̄(τ) (default: the paper's fit); its K̄(0) is
-    the rest curvature of the arcs."""
+    the curvature of the circles the rest arcs are built on (their discrete curvature exceeds
+    it at second order in the edge: 0.23 % at n_arc 18; docs/model.md)."""
     joint_radius: float = parameter(
         0.024, "m", 1e-3, 1.0,
         narrowed_by=f"below 1/(K̄(0)·sin 22.5°), the widest a rest arc spans "
@@ -401,8 +402,9 @@ class StarParams:
 
     @classmethod
     def preset(cls, name: str = "paper", **overrides) -> "StarParams":
-        """A named model with some fields changed. "paper": the paper's model as published
-        (N = 193 nodes, no damping, clamped ends, limb-stiff joints). "accurate": material
+        """A named model with some fields changed. "paper": the paper's model as published,
+        read where it leaves a choice open (N = 193 nodes, no damping, clamped ends, limb-stiff
+        joints, the jet only while a space closes: docs/model.md). "accurate": material
         damping τ = 0.94 ms, series joints and shared ends, which converge at second order in
         the mesh, on n_arc 48 (N = 433). "identified": the best model form of the model
         selection study (`IDENTIFIED_FIELDS`), e.g. `StarParams.preset("identified",

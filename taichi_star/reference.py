@@ -302,8 +302,9 @@ _QUARTER_TURN = np.array([[0.0, -1.0], [1.0, 0.0]])
 def jet_direction(x1, x2, x3, x4, xc, direction):
     """Unit jet direction t (..., 2) of a space and ∂t/∂(x1, x2, x3, x4, xc) (..., 2, 10).
 
-    "hub": from xc to ½(x2 + x3). "normal": the unit normal of the opening x2–x3 on the side
-    away from xc. "bisector": the bisector of the limb directions (x2 − x1)/|x2 − x1| and
+    "hub": from xc to ½(x2 + x3). "normal": the unit normal R₉₀·(x2 − x3)/|x2 − x3| of the
+    opening (outwards while the corners run counter-clockwise around the hub; as the engine,
+    whatever the hub's position). "bisector": the bisector of the limb directions (x2 − x1)/|x2 − x1| and
     (x3 − x4)/|x3 − x4| (each joint → tip).
     """
     zero = np.zeros(np.shape(x1)[:-1] + (2, 2))
@@ -311,12 +312,9 @@ def jet_direction(x1, x2, x3, x4, xc, direction):
         t, d_reach = _unit_with_derivative(0.5 * (x2 + x3) - xc)
         return t, np.concatenate([zero, 0.5 * d_reach, 0.5 * d_reach, zero, -d_reach], axis=-1)
     if direction == "normal":
-        along, d_along = _unit_with_derivative(x3 - x2)
-        # the normal on the side away from xc (the side is fixed near the rest shape)
-        side = np.sign(_dot(_perp(along), 0.5 * (x2 + x3) - xc))
-        d_x3 = side[..., None, None] * (_QUARTER_TURN @ d_along)
-        return side[..., None] * _perp(along), np.concatenate([zero, -d_x3, d_x3, zero, zero],
-                                                              axis=-1)
+        along, d_along = _unit_with_derivative(x2 - x3)
+        d_x2 = _QUARTER_TURN @ d_along
+        return _perp(along), np.concatenate([zero, d_x2, -d_x2, zero, zero], axis=-1)
     first, d_first = _unit_with_derivative(x2 - x1)
     second, d_second = _unit_with_derivative(x3 - x4)
     t, d_sum = _unit_with_derivative(first + second)

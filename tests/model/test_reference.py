@@ -421,6 +421,20 @@ def test_reference_fires_at_a_cycle_start_reached_a_rounding_below_it():
     assert sim.driven_curvature(start - 2.0 * snap)[0] != sim.driven_curvature(start)[0]
 
 
+def test_the_normal_jet_direction_is_the_openings_own_wherever_the_hub_is():
+    """"normal": t = R₉₀·(x2 − x3)/L, as the engine (`physics.jet`), with the hub on either
+    side of the opening (the reference chose the side away from the hub: the two differed once
+    an opening swung past the hub); its derivative is zero in x1, x4 and the hub's position."""
+    from taichi_star.reference import jet_direction
+    x1, x4 = np.array([0.0, -1.0]), np.array([0.0, 1.0])
+    x2, x3 = np.array([2.0, -0.5]), np.array([2.0, 0.5])
+    expected = np.array([1.0, 0.0])  # R₉₀·(0, −1) = (1, 0): out of the space, along +x
+    for hub in (np.array([0.0, 0.0]), np.array([3.0, 0.0])):  # inside, then past the opening
+        t, jacobian = jet_direction(x1, x2, x3, x4, hub, "normal")
+        assert t.tolist() == expected.tolist()
+        assert not jacobian[:, [0, 1, 6, 7, 8, 9]].any()
+
+
 def test_assembled_jacobian_with_jet_variants_is_exact():
     """Spread application (corners coupled to each other and the hub), normal direction and
     inflow in the whole fluid Jacobian, on the coarse mesh; δ as in the check above."""
