@@ -220,13 +220,16 @@ def test_a_quick_run_with_a_sample_and_jets_writes_every_table(tmp_path):
                  "gait_design_sample.csv.json", "gait_design_shapes.csv.json",
                  "gait_design_centroid.csv.json"):
         assert (out / name).is_file()
-    # the GIF is drawn from its tables as written: replayed into a run of the same robot
-    # recorded over two steps alone, they redraw it byte for byte (31 frames: 30 a cycle)
+    # the GIF is drawn from its tables as written: replayed into a run of the same robot (the
+    # designed pattern: its delays colour the heating actuators) recorded over two steps
+    # alone, they redraw it byte for byte (31 frames: 30 a cycle)
     shapes = pd.read_csv(out / "gait_design_shapes.csv")
     (gait,) = shapes["gait"].unique()
-    assert gait == paths.loc[paths["objective"].idxmax(), "gait"]
+    best = paths.loc[paths["objective"].idxmax()]
+    assert gait == best["gait"]
     assert shapes["frame"].max() == 30
-    other = taichi_star.simulate([StarParams(gait=gait)], 2 * gait_design.QUICK_DT,
+    robot = StarParams(gait=gait, actuator_delays=tuple(best[gait_design.DELAY_COLUMNS]))
+    other = taichi_star.simulate([robot], 2 * gait_design.QUICK_DT,
                                  SolverConfig(dt=gait_design.QUICK_DT),
                                  record_interval_s=gait_design.QUICK_DT, record_shapes=True)
     drawn = replay(other, shapes, pd.read_csv(out / "gait_design_centroid.csv"))
