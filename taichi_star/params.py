@@ -29,6 +29,8 @@ JET_MODES = ("contract", "always")
 JET_DIRECTIONS = ("hub", "normal", "bisector")
 JET_APPLICATIONS = ("hub", "spread")
 ACTUATION_ENDS = ("clamped", "shared")
+ACTUATION_ORIGINS = ("profile", "rest")
+"""What a fired actuator's natural curvature is measured from (`StarParams.actuation_origin`)."""
 JOINT_STIFFNESSES = ("limb", "series")
 PRECISIONS = ("f64", "f32")
 INTEGRATORS = ("euler", "bdf2")
@@ -343,6 +345,12 @@ class StarParams:
     actuator_delays: Tuple[float, ...] = per_actuator(0.0, "s", "8 numbers in [0, period)")
     """Delay d_k of actuator A_k (index k − 1), s: its profile starts d_k after each firing
     (K̄(0) until then), K̄(max(τ − d_k, 0))."""
+    actuation_origin: str = parameter("profile", choices=ACTUATION_ORIGINS)
+    """What a fired arc triplet's natural curvature κ⁰ is measured from: "profile" = ±K̄_k(τ),
+    Eq. 5 as written (the paper's model; the rest arc's discrete curvature exceeds K̄(0) at
+    second order in the edge, 0.23 % at n_arc 18, so κ⁰ steps by that at the first firing);
+    "rest" = the rest κ⁰ plus the profile's change ±(K̄_k(τ) − K̄(0)): no step at the first
+    firing, and a gain of 0 leaves the arc exactly at rest (docs/model.md)."""
 
     def __post_init__(self):
         object.__setattr__(self, "gait", Gait.parse(self.gait).name)

@@ -530,15 +530,20 @@ class ReferenceSimulator:
 
     def natural_curvature(self, t):
         """κ⁰ (T,) in 1/m at time t (s): rest curvature, or ±K̄(t mod T) of its actuator on
-        actuated triplets, and with "shared" ends the joints turned with the arc's end
+        actuated triplets (with `actuation_origin` "rest": the rest curvature plus
+        ±(K̄ − K̄(0))), and with "shared" ends the joints turned with the arc's end
         half-edges."""
         topo = self.topology
         kappa0 = topo.rest_curvature.copy()
         driven = self.driven_curvature(t)
         if self._actuated.any():
             actuated = self._actuated
-            kappa0[actuated] = (np.sign(kappa0[actuated])
-                                * driven[topo.triplet_actuator[actuated]])
+            target = driven[topo.triplet_actuator[actuated]]
+            if self.params.actuation_origin == "rest":
+                change = target - self.params.actuator_profile.rest_curvature
+                kappa0[actuated] = kappa0[actuated] + np.sign(kappa0[actuated]) * change
+            else:
+                kappa0[actuated] = np.sign(kappa0[actuated]) * target
         if self._shared_ends.any():
             ends = self._shared_ends
             voronoi = topo.voronoi_length[ends]

@@ -126,13 +126,16 @@ class Bending(StrainTerm):
             "actuator_delay": np.array([p.actuator_delays for p in params]),
             "stroke_warming": np.array([p.stroke_warming for p in params]),
             "cooling_rate": np.array([1.0 / p.cooling_time for p in params]),
+            "from_rest": np.array([p.actuation_origin == "rest" for p in params],
+                                  dtype=np.float64),
         }
     """gait_mask (B, 8): the actuators an instance fires (its gait, or all eight for a
     commanded batch: `commanded`); the firing itself is in the batch state (fire times).
     actuator_gain (B, 8) (-) and actuator_delay (B, 8) (s): each actuator's gain on its
     curvature change and the delay of its profile after a firing. stroke_warming (B,) (-)
     and cooling_rate (B,) (1/s, 1/τ_c): the warming of the stroke by the heat kept from earlier
-    firings."""
+    firings. from_rest (B,): 1 where a fired triplet's κ⁰ is its rest κ⁰ plus the profile's
+    change (`actuation_origin` "rest"), 0 where it is the profile's ±K̄ itself."""
 
     @staticmethod
     def commanded(coefficients):
@@ -279,7 +282,12 @@ class Bending(StrainTerm):
             if actuator >= 0:
                 target = self.target_curvature(b, actuator, at_start)
                 if target != NOT_FIRED:
-                    natural = target if natural >= 0.0 else -target
+                    if self.from_rest[b] != 0.0:
+                        # the rest arc's own discrete curvature, moved by the profile's change
+                        change = target - self.profile_rest[b]
+                        natural += change if natural >= 0.0 else -change
+                    else:
+                        natural = target if natural >= 0.0 else -target
             clamped = self.joint_actuator[t]
             if clamped >= 0 and self.end_turning_length[b, t] != 0.0:
                 target = self.target_curvature(b, clamped, at_start)

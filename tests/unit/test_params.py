@@ -261,6 +261,7 @@ def test_solver_config_stores_numpy_scalars_as_python_numbers():
     (ts.StarParams, "actuation_ends", ["clamped", "shared"]),
     (ts.StarParams, "joint_stiffness", ["limb", "series"]),
     (ts.StarParams, "profile_closure", ["jump", "ramp"]),
+    (ts.StarParams, "actuation_origin", ["profile", "rest"]),
     (ts.StarParams, "jet_direction", ["hub", "normal", "bisector"]),
     (ts.StarParams, "jet_application", ["hub", "spread"]),
     (ts.SolverConfig, "precision", ["f64", "f32"]),
@@ -359,7 +360,7 @@ def test_numeric_fields_are_all_fields_but_the_texts_and_the_profile():
     names = ts.StarParams.field_names()
     assert names[0] == "gait" and len(names) == len(set(names))
     texts = {"gait", "jet_mode", "actuation_ends", "joint_stiffness", "profile_closure",
-             "actuator_profile", "jet_direction", "jet_application"}
+             "actuator_profile", "jet_direction", "jet_application", "actuation_origin"}
     vectors = set(PER_ACTUATOR_FIELDS)  # one number per actuator
     numeric = ts.StarParams.numeric_field_names()
     assert set(numeric) == set(names) - texts - vectors
