@@ -414,11 +414,12 @@ def test_reference_fires_at_a_cycle_start_reached_a_rounding_below_it():
     assert sim.driven_curvature(start)[0] == params.actuator_profile.rest_curvature
     tail = sim.driven_curvature(start - 1e-6)[0]
     assert abs(tail - params.actuator_profile.rest_curvature) > 1.0  # the 3.35 1/m closure gap
-    # the boundary of the snap (≤): at FIRING_SNAP of the period below the start, and just past
+    # the boundary of the snap (≤): 1e-4 of the snap inside and outside it (3e-13 s, a hundred
+    # ulps of t = 9.45 s, so the rounding of 3T and of the subtraction cannot cross it)
     snap = FIRING_SNAP * params.period
-    assert sim.driven_curvature(start - 0.5 * snap).tolist() == \
+    assert sim.driven_curvature(start - snap * (1.0 - 1e-4)).tolist() == \
         sim.driven_curvature(start).tolist()
-    assert sim.driven_curvature(start - 2.0 * snap)[0] != sim.driven_curvature(start)[0]
+    assert sim.driven_curvature(start - snap * (1.0 + 1e-4))[0] != sim.driven_curvature(start)[0]
 
 
 def test_the_normal_jet_direction_is_the_openings_own_wherever_the_hub_is():
