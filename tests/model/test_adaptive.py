@@ -239,7 +239,8 @@ def test_with_dt_min_equal_to_dt_max_every_step_is_that_long_a_firings_too():
     np.testing.assert_allclose(paths["held"], paths["fixed"], rtol=0, atol=1.5e-4)
 
 
-@pytest.mark.parametrize("offset_s, steps", [(1e-11, 200), (1e-7, 201)])
+@pytest.mark.parametrize("offset_s, steps", [(1e-11, 200), (0.5e-9, 200), (2e-9, 201),
+                                             (1e-7, 201)])
 def test_with_dt_min_equal_to_dt_max_a_firing_within_the_slack_of_the_grid_is_absorbed(
         offset_s, steps):
     """A firing a controller's running sum puts just off the 1-ms grid: 1e-11 s past 0.1 s is
@@ -247,7 +248,14 @@ def test_with_dt_min_equal_to_dt_max_a_firing_within_the_slack_of_the_grid_is_ab
     1.4e-14 s there), so every step is 1 ms (200 to 0.2 s; with the roundings alone as slack
     the approach to it was split, 201). 1e-7 s past it (1e-4 of the step) is beyond the slack:
     the approach is split (201 steps), as no step may exceed dt_max by more than the slack (a
-    slack of 1e-3 of the step took one step of 1.0001 ms instead)."""
+    slack of 1e-3 of the step took one step of 1.0001 ms instead).
+
+    The slack's own size, from either side (`stepping.step_end`, slack s = 1e-9 s, firing
+    0.1 s + δ): at δ = 0.5e-9 s (s/2) the step from 0.098 s ends within s of its limit
+    0.099 s + δ, so on it, and the next, 1 ms + δ ≤ dt + s long, lands on the firing: 200
+    steps (a slack of 1e-11 s would split the step from 0.098 s: 201). At δ = 2e-9 s (2s) the
+    step from 0.098 s ends 2e-9 s short of its limit, more than s, so it is split into halves
+    (0.0985 s, then 0.099 s + δ): 201 steps (a slack of 1e-8 s would absorb it: 200)."""
     held = ts.SolverConfig(adaptive=True, dt=1e-3, dt_min=1e-3, dt_max=1e-3)
     sim = ts.Simulator([ts.StarParams(damping_time=1e-3)], held)
     sim.fire(["A1"])

@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 
 import taichi_star as ts
-from taichi_star import runtime
+from taichi_star import runtime, simulation
 from taichi_star.runtime import prepare_engine
 
 PARAMS = [ts.StarParams(gait="A1+A2", alpha=0.5), ts.StarParams(gait="A1+A3+A5"),
@@ -89,7 +89,19 @@ def test_a_batch_streamed_in_chunks_equals_one_engine_bitwise(monkeypatch):
     whole = run()
     monkeypatch.setattr(runtime, "CPU_ENGINE_BUDGET_BYTES", 1)
     assert runtime.stream_chunk_size(PADDED, "f64", "cpu") == 50
+    # `simulate` runs each chunk through `_simulate_chunk`: spied on, so that a batch run whole
+    # (equal to itself, bitwise) cannot pass for a streamed one
+    chunks = []
+    chunk = simulation._simulate_chunk
+
+    def spy(params, *args, **kwargs):
+        chunks.append(list(params))
+        return chunk(params, *args, **kwargs)
+
+    monkeypatch.setattr(simulation, "_simulate_chunk", spy)
     streamed = run()
+    assert chunks == [PADDED[:50], PADDED[50:]]
+    assert [[p.damping_time > 0 for p in params].count(True) for params in chunks] == [0, 1]
     pd.testing.assert_frame_equal(streamed.summary, whole.summary, check_exact=True)
     pd.testing.assert_frame_equal(streamed.trajectory, whole.trajectory, check_exact=True)
     np.testing.assert_array_equal(streamed.shapes, whole.shapes)

@@ -37,19 +37,22 @@ def _final_shapes(params, n_steps, solver, arch="cpu"):
 
 
 def test_engine_matches_reference_after_200_steps(arch):
-    """≤ 1e-8 relative on positions after 200 steps, every actuator fired by some instance.
-    Both sides converge Newton to
-    1e-12 m, so what remains is round-off accumulated over 200 steps (~1e-13 m), far inside
-    1e-8 × 5 cm; we also hold the error against the motion itself (the displacement from rest)."""
+    """≤ 1e-10 relative on positions after 200 steps, every actuator fired by some instance.
+    Both sides converge Newton to 1e-12 m, so what remains is round-off accumulated over 200
+    steps: measured 3.4e-15 to 2.5e-14 of the largest coordinate, 1.5e-14 to 1.2e-13 of the
+    motion itself (the displacement from rest, ~1.1 cm). 1e-10 and 5e-10 (the same bound: the
+    motion is ~1/4.4 of the coordinates) leave ~4000× for another platform's rounding, and
+    fail an engine whose inertia alone is off by 5e-7 (measured 1.9e-10 to 8.9e-9 of the
+    coordinates)."""
     solver = ts.SolverConfig(newton_tol=1e-12)
     engine = _final_shapes(MIXED_BATCH, 200, solver, arch)
     for index, params in enumerate(MIXED_BATCH):
         reference = ReferenceSimulator(params, solver).run(200)
         error = np.abs(engine[index] - reference[-1]).max()
-        assert error <= 1e-8 * np.abs(reference[-1]).max(), (params.gait, error)
+        assert error <= 1e-10 * np.abs(reference[-1]).max(), (params.gait, error)
         motion = np.abs(reference[-1] - reference[0]).max()
         if motion > 1e-9:  # the unactuated instance does not move; its motion is round-off
-            assert error <= 1e-6 * motion, (params.gait, error, motion)
+            assert error <= 5e-10 * motion, (params.gait, error, motion)
 
 
 def test_instance_alone_equals_instance_in_batch_bitwise(arch):
@@ -100,7 +103,27 @@ def test_paper_gaits_move_in_the_directions_of_an_independent_implementation():
     assert signed["A1"] > 0 and signed["A1+A2"] > 0 and signed["A1+A4"] > 0
     assert signed["A1+A3"] < 0 and signed["A1+A3+A5"] < 0
     assert summary.speed_mm_s.idxmax() == gaits.index("A1+A3+A5")
+    # a regression guard, not a check of the scheme (the reference's cycle is in the slow tier
+    # below): this engine's own figure since its first version
     assert signed["A1+A2"] == pytest.approx(1.5767, abs=1e-4)
+
+
+@pytest.mark.slow
+def test_a_whole_cycle_of_a1_a2_swims_at_the_references_speed():
+    """The paper preset's A1+A2 over its whole 3.15-s cycle (3150 steps of 1 ms; ~8 s of the
+    NumPy reference): the engine's signed speed is the reference's (measured 1.5766153584 mm/s,
+    3.7e-12 apart: Newton's 1e-10 m on both sides and the round-off of 3150 steps; 5e-11 is
+    13×)."""
+    from taichi_star.metrics import swimming_metrics
+
+    params, solver = ts.StarParams(gait="A1+A2"), ts.SolverConfig()
+    duration_s = 3.15
+    engine = ts.simulate([params], duration_s, solver).summary.signed_speed_mm_s.iloc[0]
+    simulator = ReferenceSimulator(params, solver)
+    positions = simulator.run(round(duration_s / solver.dt))
+    displacement = simulator.centroid(positions[-1]) - simulator.centroid(positions[0])
+    reference = swimming_metrics(displacement[None], duration_s, [params.gait])
+    assert engine == pytest.approx(reference["signed_speed_mm_s"][0], rel=5e-11)
 
 
 def test_failing_instance_is_flagged_and_isolated():
@@ -369,7 +392,11 @@ def test_damping_is_compiled_out_and_changes_nothing_when_zero():
     mixed = ts.simulate(damped, 0.2).summary
     pd.testing.assert_frame_equal(mixed.iloc[[0, 2]].reset_index(drop=True), alone,
                                   check_exact=True)
-    assert mixed.speed_mm_s.iloc[1] != mixed.speed_mm_s.iloc[0]
+    # the sign of the change is not derivable (the damper's lag of ~τ works against the
+    # stroke's bending and its recoil alike), its size is: τ = 1 ms against the pulse's 16-ms
+    # heating bounds it by ~τ/16 ms = 6e-2 (measured 4.7e-4: 2.0865 against 2.0875 mm/s)
+    change = abs(mixed.speed_mm_s.iloc[1] / mixed.speed_mm_s.iloc[0] - 1.0)
+    assert 1e-5 < change < 1e-2, change
 
 
 def test_damping_reshapes_the_elastic_elements_it_damps():

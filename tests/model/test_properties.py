@@ -309,10 +309,14 @@ def test_every_mass_and_force_scaled_together_leave_the_motion_unchanged(alpha_p
     jet force is ∝ α²) scale the residual by λ, so the path is the same: kinematic data cannot
     fix the absolute scale (docs/results.md, "What the data determine"). The two runs' Newton
     iterations see the same updates up to rounding, so the paths agree to far inside 1e-6 mm
-    (10 × newton_tol; 8e-12 mm measured over a period); α × λ instead moves them by
-    millimetres."""
+    (10 × newton_tol; 8e-12 mm measured over a period; 2.5e-13 mm over these 0.3 s, the hub's
+    added mass and the damping on); α × λ instead moves them by millimetres (1.3 mm), and a hub
+    added mass not linear in its coefficient by 0.09 mm."""
     options = {**OPTIONAL_FORCES, "jet_inflow": 0.3} if optional_terms else {}
-    base = ts.StarParams(gait="A1+A3", **options)
+    # the hub's added mass and the rods' damping are 0 by default, which λ leaves 0: on, so
+    # that their scaling is exercised (the damping's force is ∝ E·τ: τ, a time, is not scaled)
+    base = ts.StarParams(gait="A1+A3", cylinder_added_mass_coeff=1.0, damping_time=1e-3,
+                         **options)
     lam = 2.0
     scaled_names = SCALED_BY_LAMBDA + (tuple(OPTIONAL_FORCES) if optional_terms else ())
     changes = {name: getattr(base, name) * lam for name in scaled_names}

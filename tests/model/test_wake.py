@@ -52,17 +52,22 @@ def test_wake_fields_accept_their_bounds():
 
 def test_an_instance_with_water_leaves_its_neighbours_bitwise_unchanged():
     """One thread per instance, its water in its own fields: the instances without it run as
-    they would alone, to the bit; the water changes the robot's swimming."""
+    they would alone, to the bit (their whole summary rows: motion, steps, Newton counts); the
+    water slows the robot's swimming. The water starts at rest and, through the 0.2-s stroke
+    from rest, lags the hub, so its force on the hub opposes the motion: a shorter displacement
+    (measured 0.32 against 0.42 mm, 23 % shorter; 10 % leaves room, and a water that did not act
+    would be bitwise the plain run). It pulls along the hub's own velocity, so it cannot turn
+    A1+A2's travel off the gait's mirror axis, 22.5°, which both keep to round-off."""
     plain = [ts.StarParams(gait="A1+A2"), ts.StarParams(gait="A1+A3")]
     watered = plain[:1] + [plain[0].replace(wake_coupling=20.0, wake_time=0.05)] + plain[1:]
     alone = ts.simulate(plain, 0.2).summary
     together = ts.simulate(watered, 0.2).summary
-    columns = ["displacement_x_mm", "displacement_y_mm", "heading_deg", "newton_iterations"]
-    columns = [c for c in columns if c in alone]
-    pd.testing.assert_frame_equal(alone.loc[[0, 1], columns].reset_index(drop=True),
-                                  together.loc[[0, 2], columns].reset_index(drop=True),
+    pd.testing.assert_frame_equal(alone.loc[[0, 1]].reset_index(drop=True),
+                                  together.loc[[0, 2]].reset_index(drop=True),
                                   check_exact=True)
-    assert together.displacement_x_mm[1] != together.displacement_x_mm[0]
+    length = np.hypot(together.displacement_x_mm, together.displacement_y_mm)
+    assert length[1] < 0.9 * length[0]
+    np.testing.assert_allclose(together.travel_direction_deg[[0, 1]], 22.5, rtol=0, atol=1e-9)
 
 
 @pytest.mark.parametrize("integrator", ["euler", "bdf2"])
@@ -129,10 +134,13 @@ def assert_matches_differences(table, tolerance=1e-5):
 def test_wake_sensitivities_equal_finite_differences():
     """d(displacement)/d(c_w, τ_w, α) through the water: the replicas carry their own water,
     committed with each accepted step, so its tangent follows the implicit function theorem like
-    the positions'. 1e-5: the sensitivities' target (measured ≤ 2.5e-6 here and with BDF2)."""
+    the positions'. 2e-8: 10 × the relative error measured here (≤ 1.9e-9 over the three
+    directions; the extrapolated differences' own spread reaches 4.5e-9, so that error is
+    theirs), far inside the sensitivities' general target 1e-5: a tangent off by more than
+    ~1e-8 of the total fails."""
     table = check_sensitivities(WATERED, 0.1, ts.SolverConfig(**TIGHT),
                                 ("wake_coupling", "wake_time", "alpha"))
-    assert_matches_differences(table)
+    assert_matches_differences(table, tolerance=2e-8)
 
 
 @pytest.mark.slow

@@ -101,7 +101,7 @@ def test_warming_sensitivities_equal_finite_differences(taichi_cpu):
     the firings with its own τ_c), over the first two firings and 0.1 s of the second pulse."""
     table = check_sensitivities([WARM], 0.3, ts.SolverConfig(dt=2e-3, newton_tol=1e-12),
                                 ("stroke_warming", "cooling_time"))
-    # 1e-5: the target of the sensitivities (docs: numerics, sensitivities); measured 1.6e-9
-    # (w) and 2.4e-9 (τ_c)
-    assert (table["relative_error"] <= 1e-5).all(), table
+    # measured 1.6e-9 (w) and 2.4e-9 (τ_c): 2.5e-8, 10× (the docs' target, 1e-5, would pass
+    # a sensitivity off by a few parts in a million)
+    assert (table["relative_error"] <= 2.5e-8).all(), table
     assert table["taylor_ratio"].between(3.0, 5.0).all(), table
