@@ -28,34 +28,21 @@ and the finite differences' alike, takes the same 100 steps of 1 ms over DURATIO
 frozen step sequence is the one the differences see."""
 
 
-def assert_matches_differences(table, tolerance):
-    """Every row of a `check_sensitivities` table: the sensitivity within `tolerance` of the
-    extrapolated differences, and a Taylor remainder of second order. Each caller sets
-    `tolerance` at about 10× the largest relative error it measured (1e-5, the target of the
-    docs, only where the measured error is itself ~1e-6): a sensitivity scaled by (1 + 5e-6)
-    then fails wherever the error measured is ~1e-7 or below."""
-    assert len(table) and np.isfinite(table["relative_error"]).all(), table
-    assert (table["relative_error"] <= tolerance).all(), table
-    # r(2h)/r(h) = 4 for a second-order remainder, 2 if the sensitivity were off by more
-    # than O(h); 3-5 leaves room for the remainder's own round-off
-    assert table["taylor_ratio"].between(3.0, 5.0).all(), table
-
-
 @pytest.fixture(scope="module")
 def euler_run(taichi_cpu):
     return simulate(BATCH, DURATION_S, SolverConfig(**TIGHT), record_interval_s=0.05,
                     record_shapes=True, sensitivities=DIRECTIONS)
 
 
-def test_euler_sensitivities_equal_finite_differences(arch):
+def test_euler_sensitivities_equal_finite_differences(arch, matches_differences):
     # measured 1.0e-8 at most (C⊥ of A1+A3; α 4.7e-9; the extrapolated difference's own
     # truncation and the Newton noise of the runs): 1e-7, 10×
-    assert_matches_differences(check_sensitivities(BATCH, DURATION_S, SolverConfig(**TIGHT),
+    matches_differences(check_sensitivities(BATCH, DURATION_S, SolverConfig(**TIGHT),
                                                    ("alpha", "drag_perpendicular"), arch=arch),
                                1e-7)
 
 
-def test_a_coast_after_the_pulse_keeps_its_sensitivities(taichi_cpu):
+def test_a_coast_after_the_pulse_keeps_its_sensitivities(taichi_cpu, matches_differences):
     """Over 0.84 s the A1 robot coasts after its pulse: many rod-edge velocity components creep
     past zero, within a replica pair's ε·v̇ of it, for many steps. A pair differencing the drag
     |v|·v across its kink there got an error ε²-small per step that built up (measured when
@@ -63,12 +50,12 @@ def test_a_coast_after_the_pulse_keeps_its_sensitivities(taichi_cpu):
     instance's side of the kink: 8e-8 here; expanding the drag about the instance's velocity,
     `Assembly.primal_instance`: 5e-9)."""
     # measured 6.2e-9: 1e-7, 16× (and 1/200 of the error of a pair across the kink)
-    assert_matches_differences(check_sensitivities([BASE.replace(gait="A1")], 0.84,
+    matches_differences(check_sensitivities([BASE.replace(gait="A1")], 0.84,
                                                    SolverConfig(**TIGHT), ("alpha",)), 1e-7)
 
 
 @pytest.mark.slow
-def test_a_glide_does_not_drift_the_tangents_rigid_motion(taichi_cpu):
+def test_a_glide_does_not_drift_the_tangents_rigid_motion(taichi_cpu, matches_differences):
     """With damping (the stiffness blocks ×(1 + τ/h)) and the rods' linear drag (a long glide),
     the Jacobian's column sums over the stiffness blocks keep a rounding that repeats from step
     to step while the shape is still, and the tangent's rigid-body velocity drifts unless the
@@ -78,10 +65,10 @@ def test_a_glide_does_not_drift_the_tangents_rigid_motion(taichi_cpu):
     tools/engine_mutants.py); the differences' own spread 4.8e-9. 2e-8 sits between them."""
     glide = [BASE.replace(gait="A1+A2", damping_time=DAMPING_TIME, linear_drag=1.0)]
     table = check_sensitivities(glide, 2.2, SolverConfig(**TIGHT), ("alpha",))
-    assert_matches_differences(table, tolerance=2e-8)
+    matches_differences(table, tolerance=2e-8)
 
 
-def test_c_parallel_takes_its_own_step_and_then_matches_its_differences(taichi_cpu):
+def test_c_parallel_takes_its_own_step_and_then_matches_its_differences(taichi_cpu, matches_differences):
     """C∥ barely moves the robot, so at an ε of 1e-5 of the value its replicas' offsets are a
     few thousand roundings of a position: here its derivative was 4e-4 and 3.6e-3 off, with
     Taylor ratios of 2.0 (measured). At its own ε, 1e-2 of the value, 2.2e-7 and 1.8e-6,
@@ -90,11 +77,11 @@ def test_c_parallel_takes_its_own_step_and_then_matches_its_differences(taichi_c
     assert direction.step(BASE) == pytest.approx(1e-2 * BASE.drag_parallel, rel=1e-15)
     assert difference_step(direction, BASE) == direction.step(BASE)
     # 1e-5: the target, 5× the larger measured error (2.0e-6)
-    assert_matches_differences(check_sensitivities(BATCH, DURATION_S, SolverConfig(**TIGHT),
+    matches_differences(check_sensitivities(BATCH, DURATION_S, SolverConfig(**TIGHT),
                                                    ("drag_parallel",)), 1e-5)
 
 
-def test_the_damping_time_takes_its_own_step_and_then_matches_its_differences(taichi_cpu):
+def test_the_damping_time_takes_its_own_step_and_then_matches_its_differences(taichi_cpu, matches_differences):
     """τ barely moves the robot, so at the default ε of 1e-4 of its value its replicas are near
     the rounding of the positions: on the damped batch and adaptive BDF2 steps of the test
     below (whose engines this one shares), A1+A2's derivative was 1.7e-5 off (Taylor ratio
@@ -105,7 +92,7 @@ def test_the_damping_time_takes_its_own_step_and_then_matches_its_differences(ta
     damped = [p.replace(damping_time=DAMPING_TIME) for p in BATCH]
     assert direction.step(damped[0]) == pytest.approx(1e-3 * DAMPING_TIME, rel=1e-15)
     # 1e-5: the target, 5.6× the larger measured error (1.8e-6)
-    assert_matches_differences(check_sensitivities(damped, DURATION_S, SolverConfig(**ADAPTIVE),
+    matches_differences(check_sensitivities(damped, DURATION_S, SolverConfig(**ADAPTIVE),
                                                    ("damping_time",)), 1e-5)
 
 
@@ -184,12 +171,12 @@ def test_the_taylor_step_is_a_hundred_differences_steps_at_most_a_tenth_of_the_v
     assert taylor_step(2e-3, 0.0) == pytest.approx(0.2, rel=1e-15)  # at 0: no value to bound
 
 
-def test_an_actuator_the_gait_never_fires_has_no_influence(euler_run):
+def test_an_actuator_the_gait_never_fires_has_no_influence(euler_run, matches_differences):
     gains = euler_run.sensitivity("displacement_x_mm", "actuator_gains[1]")
     # A1+A3 never fires A2: its replicas differ only in a coefficient no kernel reads
     assert gains[1] == 0.0
     # measured 7.2e-10: 1e-8, 14×
-    assert_matches_differences(check_sensitivities(BATCH[:1], DURATION_S, SolverConfig(**TIGHT),
+    matches_differences(check_sensitivities(BATCH[:1], DURATION_S, SolverConfig(**TIGHT),
                                                    ("actuator_gains[1]",)), 1e-8)
 
 
@@ -238,24 +225,24 @@ def test_a_per_actuator_field_gives_one_column_per_actuator(euler_run):
     assert len(table) == len(BATCH)
 
 
-def test_bdf2_with_damping_chord_and_adaptive_steps(arch):
+def test_bdf2_with_damping_chord_and_adaptive_steps(arch, matches_differences):
     batch = [dataclasses.replace(p, damping_time=DAMPING_TIME) for p in BATCH]
     table = check_sensitivities(batch, DURATION_S, SolverConfig(jacobian="chord", **ADAPTIVE),
                                 ("alpha", "drag_perpendicular"), arch=arch)
     steps = simulate(batch, DURATION_S, SolverConfig(**ADAPTIVE), arch=arch).summary["steps"]
     assert (steps == 100).all()
     # measured 3.8e-8 at most (C⊥ of A1+A2; α 3.0e-8): 4e-7, 11×
-    assert_matches_differences(table, 4e-7)
+    matches_differences(table, 4e-7)
 
 
-def test_the_lagged_jacobian_gets_the_exact_tangent_too(taichi_cpu):
+def test_the_lagged_jacobian_gets_the_exact_tangent_too(taichi_cpu, matches_differences):
     """The tangent's Jacobian is assembled and factored at each converged step whatever the
     forward iteration used (and the lagged Jacobian's next step starts with it), so the
     sensitivities match the differences of whole lagged runs as Newton's do (measured
     2.0e-8 at newton_tol 1e-12 m; held to 2e-7, 10×)."""
     table = check_sensitivities(BATCH, DURATION_S, SolverConfig(jacobian="lagged", **TIGHT),
                                 ("alpha", "drag_perpendicular"))
-    assert_matches_differences(table, 2e-7)
+    matches_differences(table, 2e-7)
 
 
 @pytest.mark.parametrize("names, message", [
@@ -329,7 +316,7 @@ def test_a_simulator_gives_the_same_sensitivities_as_simulate(euler_run):
         plain.load(saved)
 
 
-def test_steps_redone_with_substeps_are_followed(euler_run):
+def test_steps_redone_with_substeps_are_followed(euler_run, matches_differences):
     # 20-ms steps with 4 Newton iterations at most: the pulse's steps fail and are redone in
     # substeps, which the replicas follow (and are restored with their instance between tries)
     solver = SolverConfig(dt=0.02, max_newton=4, **TIGHT)
@@ -343,7 +330,7 @@ def test_steps_redone_with_substeps_are_followed(euler_run):
     # the moved runs retry the same steps: the differences are those of one substep sequence
     assert plus["substep_retries"].iloc[0] == result.summary["substep_retries"].iloc[0]
     # measured 3.5e-9: 5e-8, 14×
-    assert_matches_differences(table, 5e-8)
+    matches_differences(table, 5e-8)
 
 
 FAILING_SOLVER = SolverConfig(dt=0.005, max_newton=3, max_substep_halvings=0)
@@ -415,7 +402,7 @@ def test_the_check_study_writes_what_it_measured(euler_run, tmp_path):
     assert (tmp_path / "sensitivity_check.png").stat().st_size > 0
 
 
-def test_a_delay_on_the_step_grid_warns_and_one_off_it_is_differentiable(taichi_cpu):
+def test_a_delay_on_the_step_grid_warns_and_one_off_it_is_differentiable(taichi_cpu, matches_differences):
     """The fitted profile's branches miss each other at the switch t0 = 0.163 s by
     `switch_jump` (K̄ just after minus just before). With A2's delay a whole number of 1-ms steps
     (0 included) the switch lies on a step end and the run jumps as the delay moves: a warning,
@@ -436,7 +423,7 @@ def test_a_delay_on_the_step_grid_warns_and_one_off_it_is_differentiable(taichi_
         simulate([BASE.replace(gait="A1+A3")], 0.002, sensitivities=("actuator_delays[1]",))
         table = check_sensitivities([BASE.replace(gait="A1+A2", actuator_delays=off_grid)], 0.2,
                                     SolverConfig(**TIGHT), ("actuator_delays[1]",))
-    assert_matches_differences(table, 1e-6)
+    matches_differences(table, 1e-6)
 
 
 def test_recorded_shapes_are_the_callers_instances_alone(euler_run):
