@@ -108,7 +108,8 @@ def provenance(result, columns=None) -> dict:
     CPU model, cores, vector instruction sets, caches, GPUs, platform) and the `arch` the run
     used (None for a result that does not say); for a `run_batch` result whose run store
     more than one code version wrote, `code_versions` (each with the chunks it made: the code
-    record above is the writer's alone); solver (every SolverConfig field);
+    record above is the writer's alone); the call's `arguments` (`SimulationResult.arguments`:
+    duration, records, steady_from_cycle, sensitivities, ...); solver (every SolverConfig field);
     parameters (the StarParams fields equal across the instances, by field name) and
     varying_parameters (the fields that differ, whose values are in the table's columns);
     units of the table's `columns` (default the summary's); with the result's `timing` (a
@@ -130,8 +131,9 @@ def provenance(result, columns=None) -> dict:
         timing = {"timing": {**dataclasses.asdict(result.timing),
                              "robot_steps_per_s": result.timing.robot_steps_per_s}}
     mixed = {} if result.code_versions is None else {"code_versions": result.code_versions}
+    called = {} if result.arguments is None else {"arguments": result.arguments}
     return {**code_record(), **mixed, "machine": machine(), "arch": result.arch,
-            "solver": dataclasses.asdict(result.solver),
+            **called, "solver": dataclasses.asdict(result.solver),
             "parameters": parameters, "varying_parameters": varying,
             "units": column_units(summary.columns if columns is None else columns), **timing}
 

@@ -95,6 +95,14 @@ class SimulationResult:
     """A `run_batch` result read from a run store that more than one code version wrote: each
     version (`provenance.code_version`) with the indices of the chunks it made ("chunks"), as
     the store's manifest keeps them; None for a result of one code version."""
+    arguments: Optional[Dict] = field(default=None, repr=False)
+    """The call that made the result, as its files record it (`output.provenance`): "function"
+    ("simulate" or "run_batch") and the arguments its tables do not hold: duration_s (s, as
+    simulated: with fixed steps the whole steps it was rounded to; run_batch's as given, None
+    with cycles), cycles (run_batch's; None with duration_s), record_interval_s (s),
+    record_shapes, steady_from_cycle (which the steady speeds are measured from), sensitivities
+    (the parameters differentiated by, as labels: "actuator_gains[0]", ...) and chunk_size
+    (run_batch's). None for a result built otherwise."""
 
     def sensitivity(self, output: str, parameter: str, trajectory: bool = False) -> np.ndarray:
         """d(output)/d(parameter) for every instance: (B,) for a summary output
@@ -308,6 +316,13 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     warn_about_ok_instances(result.summary, solver)
     result.timing = dataclasses.replace(result.timing, setup_s=result.timing.setup_s + initialise_s)
     result.arch = arch
+    clock = Clock(solver, duration_s)
+    result.arguments = {"function": "simulate", "duration_s": clock.time_of(clock.end),
+                        "cycles": None, "record_interval_s": record_interval_s,
+                        "record_shapes": bool(record_shapes),
+                        "steady_from_cycle": int(steady_from_cycle),
+                        "sensitivities": [direction.label for direction in directions],
+                        "chunk_size": None}
     return result
 
 

@@ -225,6 +225,11 @@ class Simulator(NotCopied):
         self._running = np.ones(self.n_instances, dtype=bool)
         """`ok` as of the last `advance`, `reset` or `load` (where a status can change), for
         `fire` to skip failed instances without reading the device at every command."""
+        self._behind = np.zeros(self.n_instances)
+        """How far each instance's clock lags the one it would show had it run on (steps with
+        fixed steps, s with adaptive ones): a failed instance's stops at its failure, and
+        `advance` records it at the times it would show (`_record_columns`). 0 for one that
+        runs, and after `reset` or `load` (a snapshot holds the frozen clock alone)."""
         self.timing = RunTiming(setup_s=time.perf_counter() - started, compile_s=0.0,
                                 run_s=0.0, collect_s=0.0, robot_steps=0)
 
@@ -339,7 +344,9 @@ class Simulator(NotCopied):
         """Advance every live instance by duration_s (with fixed steps rounded to whole steps).
         Returns the `state()` rows at every multiple of record_interval_s after now (s, with
         fixed steps a whole number of steps: `timegrid.nearest_interval` gives one; 0 = none),
-        with a `record` column; empty without records. `progress`: a progress bar in simulated
+        with a `record` column; empty without records. An instance failed by a record has
+        that record's time and NaN in its measured columns (as `simulate`'s records from a
+        failure on); its status and failure_time_s say why. `progress`: a progress bar in simulated
         seconds (None: where the call is estimated at `driver.AUTO_PROGRESS_S` or more). With
         adaptive steps the end ends a step (as a record time does): pieces give one call's bits
         where they end on its step ends (docs: Control, The Simulator). A RuntimeWarning names
@@ -371,10 +378,11 @@ class Simulator(NotCopied):
         stops = record_stops + ([clock.end] if not record_stops or record_stops[-1] < clock.end
                                 else [])
         records, numbers = [], []
+        start_steps, start_times = self._steps(), self.time_s
 
         def take(stop):
             if stop in record_numbers:
-                records.append(self._state_columns(self.n_instances))
+                records.append(self._record_columns(clock, stop, start_steps, start_times))
                 numbers.append(record_numbers[stop])
 
         compile_s = 0.0
@@ -383,7 +391,6 @@ class Simulator(NotCopied):
             self.engine.compile_stepping(self.solver.adaptive)
             compile_s = time.perf_counter() - started
             self._compiled = True
-        steps_before = self._steps()
         started = time.perf_counter()
         try:
             drive(self.engine, clock, stops, take, self.n_instances,
@@ -394,12 +401,18 @@ class Simulator(NotCopied):
             # meanwhile (an interrupted advance left a failed robot taking commands: an audit,
             # 2026-12). One read for the step count, the statuses and the capped solves
             run_s = time.perf_counter() - started
-            after = self.engine.state.read(("steps_done", "status", "newton_max"),
+            after = self.engine.state.read(("steps_done", "status", "newton_max", "time"),
                                            self.n_instances)
             self.timing = self.timing + RunTiming(
                 setup_s=0.0, compile_s=compile_s, run_s=run_s, collect_s=0.0,
-                robot_steps=int((after["steps_done"].astype(np.int64) - steps_before).sum()))
+                robot_steps=int((after["steps_done"].astype(np.int64) - start_steps).sum()))
             self._running = after["status"] == STATUS_OK
+        # reached only by a whole advance: the clock's end is where the others now are
+        stopped = ~self._running
+        ran = (after["time"].astype(np.float64) - start_times if clock.adaptive
+               else after["steps_done"].astype(np.int64) - start_steps)
+        self._behind[stopped] += (clock.time_of(clock.end) if clock.adaptive
+                                  else clock.end) - ran[stopped]
         capped = newton_capped(after["newton_max"], self.solver) & self._running \
             & ~self._capped_named
         self._capped_named |= capped
@@ -424,6 +437,7 @@ class Simulator(NotCopied):
                              f"{self.n_instances}), got {instances!r}")
         self._capped_named[rows] = False
         self._running[rows] = True
+        self._behind[rows] = 0.0
         # each instance's replicas (every n_instances rows after it) go back with it
         copies = self.model.batch_size // self.n_instances
         rows = (rows[None, :] + self.n_instances * np.arange(copies)[:, None]).ravel()
@@ -470,6 +484,26 @@ class Simulator(NotCopied):
         # state's derivative, finite, with nothing to say so: an audit, 2026-12)
         stacked[~self.ok] = np.nan
         return stacked if len(wanted) > 1 else stacked[:, 0]
+
+    def _record_columns(self, clock: Clock, stop, start_steps: np.ndarray,
+                        start_times: np.ndarray) -> Dict[str, np.ndarray]:
+        """`_state_columns` at a record of `advance` (`stop` of its `clock`, which started
+        with each instance at start_steps steps and start_times s): an instance that has failed
+        by then is at the record's time like the others and its measured columns are NaN, as
+        `simulate`'s records from a failure on (its frozen state, repeated with its frozen
+        time, broke a table pivoted on t_s: an audit, 2026-12)."""
+        columns = self._state_columns(self.n_instances)
+        failed = columns["status"] != STATUS_NAMES[STATUS_OK]
+        if failed.any():
+            real = np.float32 if self.solver.precision == "f32" else np.float64
+            # the engine's own arithmetic: a fixed step's time is its number × dt, an adaptive
+            # run's stop its start time + the stop; from the clock it would show (`_behind`)
+            at = (real(start_times + self._behind + clock.time_of(stop)) if clock.adaptive
+                  else (start_steps + self._behind + stop).astype(real) * real(clock.dt))
+            columns["t_s"] = np.where(failed, at.astype(np.float64), columns["t_s"])
+            for name in (*DIFFERENTIABLE_STATE_COLUMNS, *ACTUATOR_COLUMNS):
+                columns[name] = np.where(failed, np.nan, columns[name])
+        return columns
 
     def _state_of(self, batch: int) -> pd.DataFrame:
         """`state()` of the engine's first `batch` instances (with sensitivities: the
@@ -611,6 +645,7 @@ class Simulator(NotCopied):
         self.engine.restore_state(snapshot.fields)
         loaded = self.engine.state.read(("status", "newton_max"), self.n_instances)
         self._running = loaded["status"] == STATUS_OK
+        self._behind[:] = 0.0
         # the saved run's capped solves are its history, shown in state(), not news
         self._capped_named = newton_capped(loaded["newton_max"], self.solver)
         own = solver_texts(self.solver)

@@ -98,12 +98,27 @@ def check_steps(name: str, time_s: float, dt: float) -> int:
 
 
 def check_duration(duration_s: float, dt: float) -> int:
-    """`steps_in(duration_s, dt)`; ValueError naming duration_s unless it is at least one."""
+    """`steps_in(duration_s, dt)`; ValueError naming duration_s unless it is at least one. A
+    duration off the grid of dt (`on_grid`) is rounded to whole steps, and a RuntimeWarning
+    (kind "off_grid_duration") says so with the time simulated: repeated, the rounding adds
+    up (ten `Simulator.advance(0.0015)` at 1-ms steps advance 0.02 s, an audit)."""
     steps = steps_in(duration_s, dt)
     if steps < 1:
         raise ValueError(f"duration_s must be at least one step (dt = {dt} s), got "
                          f"{duration_s!r}")
+    warn_off_grid(duration_s, dt)
     return steps
+
+
+def warn_off_grid(duration_s: float, dt: float):
+    """`check_duration`'s RuntimeWarning (kind "off_grid_duration") where duration_s (s) is
+    not a whole number of steps of dt (s)."""
+    if not on_grid(duration_s, dt):
+        steps = steps_in(duration_s, dt)
+        warn_user(f"duration_s = {duration_s!r} s is not a whole number of steps (dt = {dt:g} "
+                  f"s): {steps} steps, {steps * dt!r} s, are simulated "
+                  f"(timegrid.nearest_interval gives a duration on the grid)",
+                  kind="off_grid_duration")
 
 
 def nearest_interval(interval_s: float, dt: float) -> float:

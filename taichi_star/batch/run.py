@@ -172,9 +172,16 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     topology = build_topology(params[0]) if len(topology_keys) == 1 else None
     # a store resumed under another code holds chunks of each: the result files say which
     makers = store.code_versions() if store is not None else []
+    arguments = {"function": "run_batch",
+                 "duration_s": None if duration_s is None else float(duration_s),
+                 "cycles": None if cycles is None else float(cycles),
+                 "record_interval_s": float(record_interval_s), "record_shapes": bool(record_shapes),
+                 "steady_from_cycle": int(steady_from_cycle), "sensitivities": [],
+                 "chunk_size": int(chunk_size)}
     return SimulationResult(summary=summary, trajectory=trajectory, shapes=shape_array,
                             topology=topology, solver=solver, timing=timing, arch=arch,
-                            code_versions=makers if len(makers) > 1 else None)
+                            code_versions=makers if len(makers) > 1 else None,
+                            arguments=arguments)
 
 
 @contextlib.contextmanager

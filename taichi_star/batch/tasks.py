@@ -23,7 +23,7 @@ from ..model import instances_of
 from ..params import SolverConfig, StarParams
 from ..runtime import RECORDS_REMEDY, check_arch, check_host_memory
 from ..simulation import simulate, tables_bytes, validate_call
-from ..timegrid import steps_in, warn_long_work
+from ..timegrid import steps_in, warn_long_work, warn_off_grid
 
 
 @dataclass(frozen=True)
@@ -101,8 +101,10 @@ def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None
                              f"{duration:.3g} s, got cycles = {cycles!r}")
         groups.setdefault((p.topology_key, round(float(duration), 12)), []).append(position)
     tasks = []
-    # a chunk's long-run warning tells one chunk's hours: the batch's are told below
-    with told_by_caller("long_work"):
+    # a chunk's long-run warning tells one chunk's hours: the batch's are told below, and a
+    # duration_s off the step grid once for the batch (cycles off it are rounded as the
+    # summary's duration_s column says: a warning would name a duration_s not given)
+    with told_by_caller("long_work", "off_grid_duration"):
         for (_, duration), positions in groups.items():
             for start in range(0, len(positions), chunk_size):
                 members = tuple(positions[start:start + chunk_size])
@@ -122,6 +124,8 @@ def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None
                                        record_shapes=record_shapes,
                                        steady_from_cycle=steady_from_cycle))
     check_batch_work(tasks, len(params))
+    if duration_s is not None and not solver.adaptive:
+        warn_off_grid(float(duration_s), solver.dt)
     return tasks
 
 
@@ -156,8 +160,9 @@ def run_chunk(task: ChunkTask, progress: bool = False) -> ChunkResult:
     """Simulate one chunk (in whatever process calls it) and number its rows by `members`. Its
     warnings about "ok" instances are left to `run_batch`, which tells the batch's numbers
     once (a chunk's named its own rows, and on a worker process went to the worker's stderr)."""
-    # the batch's long-run warning was told when it was planned (`check_batch_work`)
-    with told_by_caller("ok_instances", "long_work"):
+    # the batch's long-run warning was told when it was planned (`check_batch_work`), and so
+    # was a duration off the step grid (`plan_chunks`)
+    with told_by_caller("ok_instances", "long_work", "off_grid_duration"):
         result = simulate(list(task.params), task.duration_s, task.solver, arch=task.arch,
                           record_interval_s=task.record_interval_s,
                           record_shapes=task.record_shapes,

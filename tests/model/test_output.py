@@ -84,8 +84,13 @@ def test_csv_parquet_and_netcdf_round_trip_with_the_same_provenance(recorded, tm
     facts = [read_provenance(path) for path in (csv, parquet, netcdf)]
     for fact in facts:
         for key in ("taichi_star_version", "git_commit", "git_dirty", "solver", "parameters",
-                    "varying_parameters", "timing"):
+                    "varying_parameters", "timing", "arguments"):
             assert fact[key] == facts[0][key], key
+    # the call's own arguments, which no column holds (the steady speeds' first cycle, the
+    # records: an audit, 2026-12, found none of them in the files)
+    assert facts[0]["arguments"] == {
+        "function": "simulate", "duration_s": 0.2, "cycles": None, "record_interval_s": 0.04,
+        "record_shapes": True, "steady_from_cycle": 1, "sensitivities": [], "chunk_size": None}
     assert facts[0]["timing"] == {**dataclasses.asdict(recorded.timing),
                                   "robot_steps_per_s": recorded.timing.robot_steps_per_s}
     assert facts[0]["taichi_star_version"] == ts.__version__
@@ -206,6 +211,37 @@ def test_a_batchs_result_goes_to_xarray_by_its_instance_column(recorded, tmp_pat
     np.testing.assert_array_equal(partial.centroid_x_mm.sel(instance=0),
                                   plain.centroid_x_mm.sel(instance=0))
     assert np.isnan(partial.centroid_x_mm.sel(instance=1)).all()
+
+
+def test_a_batchs_files_record_its_call_and_an_off_grid_duration_is_told_once(tmp_path):
+    """run_batch's arguments in its files (cycles or duration_s as given, the chunks), and a
+    duration_s off the step grid told in one warning for the batch, not one per chunk (its
+    chunks are `simulate` calls, each of which would tell it); cycles off the grid are rounded
+    silently, as the summary's duration_s column says (a warning would name a duration_s the
+    call did not give)."""
+    import warnings
+
+    from taichi_star.batch import run_batch
+    from taichi_star.output import read_provenance
+
+    solver = ts.SolverConfig(dt=2e-3)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        batch = run_batch(RECORDED_PARAMS, 0.0051, solver=solver, chunk_size=1)
+    assert [str(warning.message) for warning in caught] == [
+        "duration_s = 0.0051 s is not a whole number of steps (dt = 0.002 s): 3 steps, "
+        "0.006 s, are simulated (timegrid.nearest_interval gives a duration on the grid)"]
+    assert batch.summary["duration_s"].tolist() == [0.006, 0.006]
+    assert read_provenance(batch.to_csv(tmp_path / "batch.csv"))["arguments"] == {
+        "function": "run_batch", "duration_s": 0.0051, "cycles": None, "record_interval_s": 0.0,
+        "record_shapes": False, "steady_from_cycle": 1, "sensitivities": [], "chunk_size": 1}
+    short = [params.replace(period=0.3337) for params in RECORDED_PARAMS]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cycled = run_batch(short, cycles=0.02, solver=solver)
+    assert caught == []
+    assert cycled.summary["duration_s"].tolist() == [0.006, 0.006]  # 0.006674 s rounded
+    assert cycled.arguments["cycles"] == 0.02 and cycled.arguments["duration_s"] is None
 
 
 def test_summary_of_dataset_refuses_what_is_not_a_result_dataset(recorded, tmp_path):

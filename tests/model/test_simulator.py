@@ -678,6 +678,50 @@ def test_a_failed_robot_shows_its_failure_time_ignores_commands_and_has_no_deriv
     assert np.isnan(sim.state()["since_A2_s"].iloc[0])
 
 
+def test_a_failed_robots_records_are_at_the_record_times_with_nan_as_in_simulate():
+    """advance's records of a robot failed by then: the record's time, like its neighbour's,
+    and NaN where simulate's trajectory has NaN (they repeated its frozen state and frozen
+    time, so a table pivoted on t_s had duplicate entries: an audit, 2026-12); its status and
+    failure time stay, also in a later advance (its clock stopped at the failure) and until a
+    reset starts its clock again. The same robots and solver as the test above."""
+    params = ts.StarParams.preset("paper")
+    solver = ts.SolverConfig(dt=0.05, max_newton=5, max_substep_halvings=1)
+    reference = ts.simulate([params.replace(gait="A1"), params.replace(gait="A1+A2")], 1.0,
+                            solver, record_interval_s=0.2, progress=False)
+    sim = ts.Simulator([params, params], solver)
+    sim.fire(["A1", "A1+A2"])
+    records = pd.concat([sim.advance(0.4, record_interval_s=0.2),
+                         sim.advance(0.6, record_interval_s=0.2)], ignore_index=True)
+    failed, running = records[records.instance == 0], records[records.instance == 1]
+    assert (failed["status"] == "newton_failed").all() and (running["status"] == "ok").all()
+    np.testing.assert_array_equal(failed["t_s"], running["t_s"])
+    expected = reference.trajectory[reference.trajectory.t_s > 0]
+    np.testing.assert_array_equal(running["t_s"], expected[expected.instance == 0]["t_s"])
+    measured = ["centroid_x_mm", "centroid_y_mm", "heading_deg", "velocity_x_mm_s",
+                "velocity_y_mm_s", "angular_velocity_deg_s", "since_A1_s"]
+    assert failed[measured].isna().all().all()
+    assert expected[expected.instance == 0][["x_mm", "y_mm"]].isna().all().all()
+    np.testing.assert_array_equal(running["centroid_x_mm"],
+                                  expected[expected.instance == 1]["x_mm"])
+    assert (failed["failure_time_s"] == reference.summary["failure_time_s"].iloc[0]).all()
+    assert records.pivot(index="t_s", columns="instance", values="centroid_x_mm").shape == (5, 2)
+    sim.reset(0)  # its clock starts again at 0, the other's goes on
+    assert sim.advance(0.1, record_interval_s=0.05)["t_s"].tolist() == [0.05, 1.05, 0.1, 1.1]
+
+
+def test_advances_off_the_step_grid_say_the_time_each_simulates():
+    """Ten advance(0.0015) at 1-ms steps advance 0.02 s, not 0.015 (each rounded to 2 steps):
+    each call says so, and one on the grid says nothing."""
+    sim = ts.Simulator([ts.StarParams()])
+    with pytest.warns(RuntimeWarning, match=r"duration_s = 0.0015 s is not a whole number of "
+                                            r"steps \(dt = 0.001 s\): 2 steps, 0.002 s"):
+        sim.advance(0.0015)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sim.advance(0.003)
+    assert sim.time_s.tolist() == [0.005]
+
+
 def test_an_interrupted_advance_counts_its_steps_and_knows_who_failed(monkeypatch):
     """Ctrl-C in an advance skipped its bookkeeping: the steps taken were not in `timing`,
     and a robot that failed before the interrupt went on taking commands (`fire` reads the

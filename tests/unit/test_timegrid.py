@@ -74,9 +74,35 @@ def test_check_steps_names_the_parameter_and_the_nearest_valid_interval():
 
 
 def test_check_duration_refuses_less_than_one_step():
-    assert check_duration(0.0006, 1e-3) == 1  # rounded to whole steps
+    with pytest.warns(RuntimeWarning, match="not a whole number of steps"):
+        assert check_duration(0.0006, 1e-3) == 1  # rounded to whole steps
     with pytest.raises(ValueError, match=r"duration_s must be at least one step \(dt = 0.001 s\)"):
         check_duration(0.0004, 1e-3)
+
+
+@pytest.mark.parametrize("duration_s, dt, steps, warned", [
+    (3.3, 1e-3, 3300, False),           # 3299.9999999999995 steps in floats: on the grid
+    (1000.0 + 5e-7, 1.0, 1000, False),  # within STEP_TOLERANCE × 1000 steps (1e-6): on it
+    (1000.0 + 1.5e-6, 1.0, 1000, True),  # just past it
+    (0.0015, 1e-3, 2, True),            # half a step: rounded up (to even)
+    (0.0025, 1e-3, 2, True),            # rounded down (to even)
+])
+def test_a_duration_off_the_step_grid_is_rounded_with_a_warning_saying_what_is_simulated(
+        duration_s, dt, steps, warned):
+    """A duration off the grid of dt is rounded to whole steps, and the warning names the
+    duration asked and the steps and time simulated (ten Simulator.advance(0.0015) at 1-ms steps
+    advanced 0.02 s without a word: an audit, 2026-12); one on the grid is silent (the
+    tolerance's edge as in test_on_grid_tolerance_is_relative_but_at_least_one_step)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert check_duration(duration_s, dt) == steps
+    messages = [str(warning.message) for warning in caught]
+    if warned:
+        assert messages == [f"duration_s = {duration_s!r} s is not a whole number of steps "
+                            f"(dt = {dt:g} s): {steps} steps, {steps * dt!r} s, are simulated "
+                            f"(timegrid.nearest_interval gives a duration on the grid)"]
+    else:
+        assert messages == []
 
 
 def test_long_but_possible_work_starts_with_a_warning_giving_its_estimate():
@@ -123,10 +149,14 @@ def test_the_refusals_rate_is_at_least_every_rate_measured():
 
     from taichi_star.timegrid import FASTEST_ROBOT_STEPS_PER_S
 
+    def header(path):
+        with path.open() as table:
+            return table.readline()
+
     results = Path(__file__).resolve().parents[2] / "results"
     rates = [pd.read_csv(path, usecols=["robot_steps_per_s"])["robot_steps_per_s"].max()
              for path in results.rglob("*.csv")
-             if "robot_steps_per_s" in path.open().readline().split(",")]
+             if "robot_steps_per_s" in header(path).split(",")]
     assert len(rates) > 20 and max(rates) > 3.4e6   # the H100's f32 chord row is among them
     assert max(rates) <= FASTEST_ROBOT_STEPS_PER_S
 
