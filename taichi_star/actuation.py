@@ -28,9 +28,23 @@ from .gait import N_ACTUATORS
 PROFILE_CLOSURES = ("jump", "ramp")
 NEVER = -1.0
 """fire_time of an actuator that has not fired; the due time of no firing."""
+SWITCH_SNAP = 1e-12
+"""A time since firing τ within this share of max(|t|, 1 s) of the profile's switch t0 (t the
+time, s) is t0, on the cooling branch (Eq. 5: τ ≥ t0). Fixed steps end exactly on t0 after a
+firing on the step grid, but τ, a difference of two step ends (or the time modulo the period),
+rounds to either side of it, so the branch read there depended on the rounding: the engine
+read heating at 8 of the paper robot's first 20 cycles and the NumPy reference at 6, not the
+same ones (an audit, 2026-12; Eq. 5 jumps by 0.0064 1/m there, a custom profile by any
+amount). 1e-12 of the time is thousands of f64 roundings and far less than any step; in f32
+the rounding is larger, and τ is read as it comes."""
 PENDING_CAPACITY = 16
 """Commanded firings an instance holds pending: distinct times, each firing any set of its
 actuators."""
+
+
+def snapped_to_switch(tau: float, switch_time: float, time_s: float) -> float:
+    """τ (s), or the switch t0 (s) where τ lies within SWITCH_SNAP × max(|time_s|, 1 s) of it."""
+    return switch_time if abs(tau - switch_time) <= SWITCH_SNAP * max(abs(time_s), 1.0) else tau
 
 
 def _logistic(constants, tau):

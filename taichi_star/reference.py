@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .actuation import snapped_to_switch
 from .extras import require
 from .gait import Gait
 from .geometry import ARC, ARC_BEND, JOINT_BEND, SPOKE, build_topology
@@ -523,8 +524,10 @@ class ReferenceSimulator:
             warming = 1.0 + p.stroke_warming * heat
         driven = np.empty(len(p.actuator_gains))
         for actuator, (gain, delay) in enumerate(zip(p.actuator_gains, p.actuator_delays)):
-            curvature = float(p.actuator_profile.cycle_curvature(
-                max(since_firing - delay, 0.0), p.period, p.profile_closure))
+            tau = snapped_to_switch(max(since_firing - delay, 0.0),
+                                    p.actuator_profile.switch_time, t)
+            curvature = float(p.actuator_profile.cycle_curvature(tau, p.period,
+                                                                 p.profile_closure))
             driven[actuator] = rest + gain * warming * (curvature - rest)
         return driven
 

@@ -24,6 +24,7 @@ begun from it adds nothing. Applied only where w differs from 0.
 import numpy as np
 import taichi as ti
 
+from ..actuation import SWITCH_SNAP
 from ..gait import N_ACTUATORS, Gait
 from ..geometry import ARC_BEND, JOINT_BEND
 from .strain import StrainTerm
@@ -204,9 +205,12 @@ class Bending(StrainTerm):
         return rate
 
     @ti.func
-    def since_firing(self, b, m, since):
-        """τ (s) of actuator m of instance b's profile, `since` s after its firing: its delay
-        later, and 0 until then. Returns (τ, dτ/d(delay): −1, or 0 while it waits)."""
+    def since_firing(self, b, m, since, time):
+        """τ (s) of actuator m of instance b's profile, `since` s after its firing at `time`
+        (s): its delay later, and 0 until then; within `actuation.SWITCH_SNAP` of the time of
+        the profile's switch, the switch (a step that ends on it reads the cooling branch,
+        whichever side the subtraction rounded to). Returns (τ, dτ/d(delay): −1, or 0 while it
+        waits)."""
         delay = self.actuator_delay[b, m]
         tau = since
         slope = -1.0
@@ -214,6 +218,9 @@ class Bending(StrainTerm):
             tau = ti.max(since - delay, 0.0)
             if since - delay <= 0.0:
                 slope = 0.0
+        switch = self.profile[b, 8]
+        if ti.abs(tau - switch) <= SWITCH_SNAP * ti.max(ti.abs(time), 1.0):
+            tau = switch
         return tau, slope
 
     @ti.func
@@ -234,11 +241,11 @@ class Bending(StrainTerm):
             since = time - fired
             primal = self.assembly.primal_instance(b)
             if primal != b:
-                tau, slope = self.since_firing(primal, m, since)
+                tau, slope = self.since_firing(primal, m, since, time)
                 value = self.profile_curvature(b, tau) + self.profile_rate(b, tau) * slope * (
                     self.actuator_delay[b, m] - self.actuator_delay[primal, m])
             else:
-                tau, _ = self.since_firing(b, m, since)
+                tau, _ = self.since_firing(b, m, since, time)
                 value = self.profile_curvature(b, tau)
             gain = self.actuator_gain[b, m]
             if self.stroke_warming[b] != 0.0:

@@ -457,6 +457,24 @@ def test_a_period_of_no_whole_number_of_steps_fires_at_its_exact_time():
     assert np.abs(engine - late).max() > 100 * error
 
 
+def test_a_step_ending_on_the_profiles_switch_reads_cooling_in_the_engine_and_the_reference():
+    """Actuator 1 delayed 13 ms: the step ending at 0.176 s puts its τ on t0 = 0.163 s, but
+    0.176 − 0.013 rounds to 0.16299999999999998, on the heating side. Both sides snap τ within
+    SWITCH_SNAP of t0 to t0 and read the cooling branch (Eq. 5: τ ≥ t0 cools), so they agree
+    to round-off (measured 1.6e-14 relative after 176 steps); before the snap the engine read
+    one branch and the reference the other there: 8.1e-7 apart, 8,000 times the bound of
+    1e-10 (that of the 200-step test above). A coarse robot (n_arc 6, n_limb 2) keeps it
+    quick."""
+    assert 0.176 - 0.013 != 0.163
+    solver = ts.SolverConfig(newton_tol=1e-12, max_substep_halvings=0)
+    params = ts.StarParams(gait="A1+A2", actuator_delays=(0.013,) + (0.0,) * 7, n_arc=6,
+                           n_limb=2)
+    engine = _final_shapes([params], 176, solver)[0]
+    reference = ReferenceSimulator(params, solver).run(176)[-1]
+    error = np.abs(engine - reference).max()
+    assert error <= 1e-10 * np.abs(reference).max(), error
+
+
 @ti.kernel
 def _slot_instances(engine: ti.template(), instances: ti.types.ndarray(dtype=ti.i32, ndim=1)):
     for slot in range(engine.capacity * engine.loop_spread):

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from taichi_star.actuation import CurvatureProfile
+from taichi_star.actuation import SWITCH_SNAP, CurvatureProfile, snapped_to_switch
 
 PERIOD = 3.15  # s, the paper's cycle
 
@@ -42,6 +42,48 @@ def test_the_switch_time_belongs_to_the_cooling_branch():
     assert profile.curvature(np.nextafter(t0, 0.0)) == pytest.approx(heating, rel=1e-14)
     assert profile.switch_jump == pytest.approx(cooling - heating, rel=1e-9)
     assert abs(cooling - heating) > 1e-3
+
+
+def _last_within(t0, window, direction):
+    """The float furthest from t0 towards `direction` whose computed |τ − t0| is ≤ window."""
+    tau = t0 + direction * window
+    while abs(tau - t0) > window:
+        tau = np.nextafter(tau, t0)
+    while abs(np.nextafter(tau, direction * np.inf) - t0) <= window:
+        tau = np.nextafter(tau, direction * np.inf)
+    return float(tau)
+
+
+@pytest.mark.parametrize("time_s, window", [(0.5, SWITCH_SNAP), (-1.0, SWITCH_SNAP),
+                                             (40.0, 40.0 * SWITCH_SNAP)])
+def test_a_time_since_firing_within_the_snap_of_the_switch_is_the_switch(time_s, window):
+    """|τ − t0| ≤ SWITCH_SNAP·max(|t|, 1 s) is t0, on either side: the last float within the
+    window snaps (≤, not <), the next one out is τ unchanged. Below |t| = 1 s the window is
+    that of 1 s, above it grows with |t| (a step's τ is a difference of times of size t)."""
+    t0 = CurvatureProfile().switch_time
+    for direction in (-1.0, 1.0):
+        edge = _last_within(t0, window, direction)
+        assert edge != t0
+        assert snapped_to_switch(edge, t0, time_s) == t0
+        outside = float(np.nextafter(edge, direction * np.inf))
+        assert snapped_to_switch(outside, t0, time_s) == outside
+    assert snapped_to_switch(0.1, t0, time_s) == 0.1
+
+
+def test_a_time_since_firing_exactly_the_window_from_the_switch_is_the_switch():
+    """The bound itself: a τ whose distance d from t0 is exactly SWITCH_SNAP·t at the time t
+    = d/SWITCH_SNAP snaps (≤), and the same τ at the float just before that t (a window one
+    rounding narrower) does not. τ is searched from t0 + 1e-12 outwards for such a d."""
+    t0 = CurvatureProfile().switch_time
+    tau = _last_within(t0, SWITCH_SNAP, 1.0)
+    while True:
+        tau = float(np.nextafter(tau, np.inf))
+        time_s = (tau - t0) / SWITCH_SNAP
+        if SWITCH_SNAP * time_s == tau - t0:
+            break
+    assert time_s > 1.0  # the window grows with the time here, not held at that of 1 s
+    assert snapped_to_switch(tau, t0, time_s) == t0
+    assert snapped_to_switch(tau, t0, float(np.nextafter(time_s, 0.0))) == tau
 
 
 def test_the_ramp_closure_meets_the_next_cycles_start_and_the_jump_is_the_fit():
