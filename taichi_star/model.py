@@ -75,7 +75,8 @@ def validate_batch(params) -> Tuple[StarParams, ...]:
     keys = {p.topology_key for p in params}
     if len(keys) > 1:
         raise ValueError(f"all instances of a batch must share n_arc and n_limb (the topology); "
-                         f"got (n_arc, n_limb) in {sorted(keys)}")
+                         f"got (n_arc, n_limb) in {sorted(keys)}: run_batch runs such a batch, "
+                         f"an engine for each topology")
     return params
 
 

@@ -735,8 +735,21 @@ class ReferenceSimulator:
         θ = max|Δq_k|/max|Δq_{k−1}| < 1, θ/(1 − θ)·max|Δq_k| if smaller, is <= newton_tol and
         the residual before that update has max|r| <= residual_tol (when it is set). Raises
         NewtonDidNotConverge if not after max_newton iterations, or if a non-finite value
-        appears.
+        appears, from the plain start q + dt·v: a step from the carried start that fails is
+        solved again from there as an implicit Euler step, as the engine redoes it (the
+        carried acceleration is a poor start where the forcing jumps) before its substeps,
+        which this reference does not take.
         """
+        try:
+            return self._solve(q, v, t, dt, previous, water)
+        except NewtonDidNotConverge:
+            if previous is None:
+                raise
+            return self._solve(q, v, t, dt, None, water)
+
+    def _solve(self, q, v, t, dt, previous, water):
+        """`step`'s one solve: Newton from q + dt·v, or from q + dt·(2v − v_prev) when
+        `previous` is given (BDF2 then if the solver's integrator is)."""
         h = self.solver.dt if dt is None else dt
         q = np.asarray(q, dtype=np.float64)
         v = np.asarray(v, dtype=np.float64)

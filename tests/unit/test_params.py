@@ -3,6 +3,7 @@ ValueError naming the field, raised before any compute."""
 
 import dataclasses
 import math
+import re
 
 import numpy as np
 import pytest
@@ -396,6 +397,18 @@ def test_a_single_star_params_is_a_batch_of_one():
     one = ts.StarParams(gait="A1+A2")
     assert validate_batch(one) == (one,)
     assert validate_batch([one, one]) == (one, one)
+
+
+def test_a_batch_of_two_topologies_is_refused_naming_both_and_run_batch():
+    """One engine is compiled for one mesh: instances of another n_arc or n_limb are refused
+    naming each (n_arc, n_limb) found and pointing at run_batch, which groups them."""
+    from taichi_star.model import validate_batch
+    one = ts.StarParams(gait="A1+A2")
+    finer = one.replace(n_arc=one.n_arc + 2)
+    with pytest.raises(ValueError, match=re.escape(
+            f"got (n_arc, n_limb) in {sorted([one.topology_key, finer.topology_key])}: "
+            f"run_batch runs such a batch")):
+        validate_batch([one, finer, one])
 
 
 def test_the_allowed_values_of_a_narrowed_field_state_what_narrows_it_and_its_default_bound():
