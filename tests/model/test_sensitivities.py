@@ -81,6 +81,20 @@ def test_c_parallel_takes_its_own_step_and_then_matches_its_differences(taichi_c
                                                    ("drag_parallel",)), 1e-5)
 
 
+def test_the_cylinders_drag_takes_its_own_step_and_then_matches_its_differences(
+        taichi_cpu, matches_differences):
+    """The hub's drag coefficient C_c barely moves the robot: a coarse A1 robot at C_c = 10,
+    over 0.687 s, was 1.05e-5 off its extrapolated differences at the default ε of 1e-4 of the
+    value (Taylor ratio 3.94; a fuzz audit), beyond the 1e-5 held to. At its own ε, 1e-2 of
+    the value, 1.5e-8 (ratio 4.00), measured."""
+    (direction,) = parse_directions(["cylinder_drag"])
+    robot = BASE.replace(gait="A1", cylinder_drag=10.0, n_arc=6, n_limb=2)
+    assert direction.step(robot) == pytest.approx(1e-2 * 10.0, rel=1e-15)
+    # 1.5e-7: 10× the measured error, 70× below the default step's
+    matches_differences(check_sensitivities([robot], 0.687, SolverConfig(**TIGHT),
+                                            ("cylinder_drag",)), 1.5e-7)
+
+
 def test_the_damping_time_takes_its_own_step_and_then_matches_its_differences(taichi_cpu, matches_differences):
     """τ barely moves the robot, so at the default ε of 1e-4 of its value its replicas are near
     the rounding of the positions: on the damped batch and adaptive BDF2 steps of the test
