@@ -158,11 +158,14 @@ class Clock:
         """The last stop."""
 
     def stops_every(self, interval_s: float, first: int = 0) -> list:
-        """Stops at first·interval_s, (first + 1)·interval_s, ... up to the end (adaptive:
-        the last one may be within STEP_TOLERANCE after it). With fixed steps interval_s must
-        be a whole number of steps."""
+        """Stops at first·interval_s, (first + 1)·interval_s, ... up to the end (adaptive: a
+        multiple within STEP_TOLERANCE after the end, a rounding past it, is the end: 3 × 0.2 s
+        is 0.6000000000000001 s, which made a run of 0.6 s take a last step of 1e-16 s, and a
+        batch of periods 0.2 and 0.17 s refused as the groups' last stops differed, until
+        2026-12). With fixed steps interval_s must be a whole number of steps."""
         if self.adaptive:
-            return [k * interval_s for k in range(first, multiples_within(self.end, interval_s) + 1)]
+            return [min(k * interval_s, self.end)
+                    for k in range(first, multiples_within(self.end, interval_s) + 1)]
         stride = whole_steps(interval_s, self.dt)
         return list(range(first * stride, self.end + 1, stride))
 

@@ -117,6 +117,26 @@ def test_an_adaptive_instance_keeps_its_steps_beside_another_period():
     assert np.isfinite(beside["steady_speed_mm_s"].iloc[0])
 
 
+def test_a_cycle_boundary_a_rounding_past_the_end_is_the_end():
+    """3 × 0.2 s is 0.6000000000000001 s: over 0.6 s the 0.2-s robot's last cycle boundary lay
+    a rounding past the end. Beside a 0.17-s robot the groups' last stops then differed and
+    simulate refused the batch with an internal error; alone, the run took a last step of
+    1e-16 s. The boundary is now the end: the batch runs, each robot bitwise as alone, and the
+    records end at 0.6 s (a fuzz audit, 2026-12). Coarse robots keep it quick."""
+    solver = ts.SolverConfig(adaptive=True, dt=5e-3, dt_max=2e-2, error_tol=1e-6)
+    robots = [ts.StarParams(gait="A1+A3", period=0.2, n_arc=6, n_limb=2),
+              ts.StarParams(gait="A2", period=0.17, n_arc=6, n_limb=2)]
+    assert 3 * 0.2 > 0.6
+    both = ts.simulate(robots, 0.6, solver)
+    assert (both.summary.status == "ok").all()
+    for index, robot in enumerate(robots):
+        alone = ts.simulate([robot], 0.6, solver)
+        pd.testing.assert_frame_equal(both.summary.iloc[[index]].reset_index(drop=True),
+                                      alone.summary, check_exact=True)
+    recorded = ts.simulate(robots[:1], 0.6, solver, record_interval_s=0.2)
+    assert recorded.trajectory.t_s.tolist() == [0.0, 0.2, 0.4, 0.6]
+
+
 def test_adaptive_steps_converge_to_the_fixed_step_solution_as_the_tolerance_shrinks():
     """Against fixed-step BDF2 at h = 62.5 µs (within 0.6 µm of h = 125 µs here), the
     displacement error after one period falls as error_tol goes from 1e-5 to 1e-7 m (measured

@@ -181,6 +181,38 @@ def test_reset_puts_instances_back_at_rest_and_leaves_others():
     assert state.iloc[1][list(ts.simulator.ACTUATOR_COLUMNS)].isna().all()
 
 
+def test_a_firing_on_a_failed_step_never_happened_in_the_state():
+    """A firing due at the end of a step that fails is recorded by the schedule but never
+    drove the robot: state() reads the time since the firing before, as the bending term does
+    (since_A1_s was time − the failed firing's time, < 0, until a fuzz audit, 2026-12). Fixed
+    20-ms steps of 5 Newton iterations, no substeps: A1 fired at 0.02 s runs; fired again at
+    0.2 s (τ = 0.18 s, the profile's trough, back to K̄(0)) the step fails, and the frozen state
+    at 0.18 s is 0.16 s after the first firing. A robot whose first firing fails (one
+    iteration) has fired nothing: NaN, on fixed steps and adaptive ones alike."""
+    robot = [ts.StarParams(n_arc=6, n_limb=2)]
+    a1 = [[True] + [False] * 7]
+    simulator = ts.Simulator(robot, ts.SolverConfig(dt=0.02, max_newton=5,
+                                                    max_substep_halvings=0))
+    simulator.fire(a1, at_s=0.02)
+    simulator.advance(0.18)
+    simulator.fire(a1, at_s=0.2)
+    simulator.advance(0.1)
+    state = simulator.state().iloc[0]
+    assert (state.status, state.failure_time_s, state.t_s) == ("newton_failed", 0.2, 0.18)
+    assert state.since_A1_s == 0.18 - 0.02
+    for solver in (ts.SolverConfig(dt=0.02, max_newton=1, max_substep_halvings=0),
+                   ts.SolverConfig(adaptive=True, dt=0.02, dt_max=0.02, dt_min=5e-3,
+                                   max_newton=1, error_tol=1e-3)):
+        simulator = ts.Simulator(robot, solver)
+        simulator.advance(0.04)
+        simulator.fire([[True] * 8], at_s=0.1)
+        simulator.advance(0.2)
+        state = simulator.state().iloc[0]
+        assert state.status == "newton_failed" and state.failure_time_s == 0.1
+        assert state.t_s < 0.1
+        assert np.isnan(simulator.state().filter(like="since_").to_numpy()).all()
+
+
 def test_firing_a_hot_actuator_restarts_its_profile():
     """Firing again at 50 ms (inside the heating pulse) restarts τ at 0, and the arc's natural
     curvature jumps back towards K̄(0): the robot's motion differs from a single firing."""
