@@ -426,7 +426,8 @@ class Simulator(NotCopied):
     @one_call_at_a_time
     def reset(self, instances: Union[None, int, Sequence[int]] = None):
         """Put instances (all by default; one index or a sequence of them) back at rest in
-        their rest shape at t = 0, nothing fired, status ok; the others are untouched."""
+        their rest shape at t = 0, nothing fired, no firing pending (those `fire` scheduled
+        with at_s are dropped), status ok; the others are untouched."""
         rows = (np.arange(self.n_instances) if instances is None
                 else np.atleast_1d(np.asarray(instances)))
         if rows.size == 0:  # no instance to reset (an RL loop where none finished): [] is float

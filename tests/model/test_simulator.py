@@ -181,6 +181,21 @@ def test_reset_puts_instances_back_at_rest_and_leaves_others():
     assert state.iloc[1][list(ts.simulator.ACTUATOR_COLUMNS)].isna().all()
 
 
+def test_reset_drops_the_firings_pending_for_the_robots_it_resets():
+    """A firing commanded with at_s for a robot that is then reset never comes (reset: nothing
+    fired, nothing pending); the same firing of a robot not reset comes at its time."""
+    sim = commanded()
+    sim.fire(GAITS, at_s=0.05)
+    sim.reset([1])
+    sim.advance(0.1)
+    fired = sim.state()[list(ts.simulator.ACTUATOR_COLUMNS)]
+    assert fired.iloc[1].isna().all()
+    for robot in (0, 2):
+        since = fired.iloc[robot].dropna()
+        # 0.05 s to the rounding of step counts × dt (1e-12 s: far below a step)
+        assert len(since) > 0 and np.allclose(since, 0.05, rtol=0.0, atol=1e-12)
+
+
 def test_a_firing_on_a_failed_step_never_happened_in_the_state():
     """A firing due at the end of a step that fails is recorded by the schedule but never
     drove the robot: state() reads the time since the firing before, as the bending term does
