@@ -6,6 +6,7 @@ import contextvars
 import math
 import numbers
 import os
+import struct
 import sys
 import warnings
 from typing import Optional
@@ -26,6 +27,24 @@ def is_real(value) -> bool:
     """Whether `value` is a real number, Python's or NumPy's, and not a bool (a flag is no
     quantity here)."""
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+def is_subnormal(value) -> bool:
+    """Whether the real number `value`, as the float it is stored as, is subnormal: not 0 and
+    below 2.2e-308 in magnitude. Read from its bits, which no CPU mode changes: once Taichi has
+    started, arithmetic flushes such a number to 0 (docs: numerics, "Subnormals in the rest of
+    the process")."""
+    try:
+        bits = struct.unpack("<Q", struct.pack("<d", float(value)))[0]
+    except OverflowError:
+        return False
+    return (bits >> 52) & 0x7FF == 0 and bits & ((1 << 52) - 1) != 0
+
+
+SUBNORMAL_REASON = (f"a subnormal number (not 0 and below {sys.float_info.min:g} in magnitude), "
+                    f"which arithmetic flushes to 0 once Taichi has started: the same value would "
+                    f"mean another number before and after")
+"""Why a subnormal number is refused (`is_subnormal`), after "must not be"."""
 
 
 def is_finite_real(value) -> bool:

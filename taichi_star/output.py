@@ -351,12 +351,22 @@ def _netcdf_units(name: str, values: np.ndarray) -> str:
     return "1" if values.dtype.kind in "biuf" else ""
 
 
-def _variable_of_column(column: str) -> str:
+RECORD_VARIABLES = {"x_mm": "centroid_x_mm", "y_mm": "centroid_y_mm",
+                    "heading_deg": "record_heading_deg"}
+"""The Dataset's variable of each trajectory column: apart from the summary's (its
+heading_deg is the whole run's rotation, the record's the rotation at each record)."""
+
+
+def _variable_of_column(column: str, per_record: bool = False) -> str:
     """A sensitivity column's name as a netCDF variable's, which cannot hold "/":
-    "d(x_mm)/d(actuator_gains[2])" → "d_x_mm__d_actuator_gains_2"."""
+    "d(displacement_x_mm)/d(actuator_gains[2])" → "d_displacement_x_mm__d_actuator_gains_2";
+    `per_record` (a trajectory sensitivity) names the output by its trajectory variable
+    (`RECORD_VARIABLES`): "d(heading_deg)/d(alpha)" → "d_record_heading_deg__d_alpha", apart
+    from the summary's "d_heading_deg__d_alpha" (which it overwrote until 2026-12)."""
     parts = DERIVATIVE_COLUMN.match(column)
     index = "" if parts["index"] is None else f"_{parts['index']}"
-    return f"d_{parts['output']}__d_{parts['field']}{index}"
+    output = RECORD_VARIABLES[parts["output"]] if per_record else parts["output"]
+    return f"d_{output}__d_{parts['field']}{index}"
 
 
 def to_xarray(result):
@@ -364,7 +374,9 @@ def to_xarray(result):
     parameters as coordinates; per record (dims `instance`, `time`) the centroid and heading;
     with recorded shapes, `positions` (time, instance, node, xy) in m; with sensitivities,
     each of their columns (`sensitivities` per instance, `trajectory_sensitivities` per record)
-    as a variable "d_OUTPUT__d_PARAMETER" whose attributes hold the column's name ("column"),
+    as a variable "d_OUTPUT__d_PARAMETER" (a record's OUTPUT named by its variable:
+    centroid_x_mm, centroid_y_mm, record_heading_deg) whose attributes hold the column's name
+    ("column"),
     its units and sensitivity = 1 (`summary_of_dataset` leaves them out). Every variable and
     coordinate carries a `units` attribute: its column's (`column_unit`), "1" for a
     dimensionless number, count, flag or index (instance, node), "" for text (gait, status,
@@ -395,10 +407,10 @@ def to_xarray(result):
         times = np.sort(trajectory["t_s"].unique())
         coordinates["time"] = ("time", times, {"units": "s"})
         table = trajectory.pivot(index="instance", columns="t_s")
-        for name in ("x_mm", "y_mm", "heading_deg"):
+        for name, variable in RECORD_VARIABLES.items():
             # an instance without records (a resumed batch's chunk stored before the run store
             # kept trajectories has its summary alone) gets NaN rows
-            variables[f"centroid_{name}" if name != "heading_deg" else "record_heading_deg"] = (
+            variables[variable] = (
                 ("instance", "time"),
                 table[name].reindex(index=instances, columns=times).to_numpy(),
                 {"units": column_unit(name)})
@@ -411,7 +423,7 @@ def to_xarray(result):
         if len(derivatives):
             table = derivatives.pivot(index="instance", columns="t_s")
             for name in derivatives.columns.drop(["instance", "t_s"]):
-                variables[_variable_of_column(name)] = (
+                variables[_variable_of_column(name, per_record=True)] = (
                     ("instance", "time"),
                     table[name].reindex(index=instances, columns=times).to_numpy(),
                     {"units": column_unit(name), "column": name, "sensitivity": 1})

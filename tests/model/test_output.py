@@ -171,10 +171,23 @@ def test_sensitivities_go_to_xarray_and_netcdf_beside_the_summary_not_into_it(tm
         np.testing.assert_array_equal(speed, result.sensitivity("displacement_x_mm", "alpha"))
         assert speed.attrs["units"] == column_unit("d(displacement_x_mm)/d(alpha)")
         assert speed.attrs["column"] == "d(displacement_x_mm)/d(alpha)"
-        path_derivative = back["d_y_mm__d_actuator_gains_1"]
+        path_derivative = back["d_centroid_y_mm__d_actuator_gains_1"]
         assert path_derivative.dims == ("instance", "time")
         np.testing.assert_array_equal(path_derivative, result.sensitivity(
             "y_mm", "actuator_gains[1]"))
+        # the summary's heading and the records' share a column name, d(heading_deg)/d(alpha),
+        # in the two tables: each its own variable (the records' overwrote the summary's until
+        # 2026-12, an audit), every column of both tables there once
+        turn = back["d_heading_deg__d_alpha"]
+        assert turn.dims == ("instance",)
+        np.testing.assert_array_equal(turn, result.sensitivity("heading_deg", "alpha"))
+        np.testing.assert_array_equal(back["d_record_heading_deg__d_alpha"], result.sensitivity(
+            "heading_deg", "alpha", trajectory=True))
+        columns = [back[name].attrs["column"] for name in back.data_vars
+                   if back[name].attrs.get("sensitivity")]
+        assert sorted(columns) == sorted([*result.sensitivities.columns,
+                                          *result.trajectory_sensitivities.columns.drop(
+                                              ["instance", "t_s"])])
         summary = summary_of_dataset(back)
         assert list(summary.columns) == list(result.summary.columns)
         np.testing.assert_array_equal(summary.speed_mm_s, result.summary.speed_mm_s)

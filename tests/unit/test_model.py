@@ -140,6 +140,12 @@ def test_a_replica_models_tables_lie_on_their_instances_tangent():
                                steps[1], rtol=1e-9)
 
 
+def unsigned(highest):
+    """Floats in [0, highest] but the subnormal ones, which StarParams refuses (arithmetic
+    flushes them to 0 once Taichi has started)."""
+    return st.floats(0.0, highest, allow_subnormal=False)
+
+
 @st.composite
 def mixed_instance(draw):
     """StarParams differing in every field that shapes a table: rest geometry, every option,
@@ -149,12 +155,12 @@ def mixed_instance(draw):
     period = draw(st.floats(0.5, 5.0))
     return StarParams(
         gait=draw(st.sampled_from(["A1", "A1+A3", "A2+A5+A8", "none"])),
-        alpha=draw(st.floats(0.0, 2.0)), youngs_modulus=draw(st.floats(1e6, 1e7)),
+        alpha=draw(unsigned(2.0)), youngs_modulus=draw(st.floats(1e6, 1e7)),
         limb_stiffness_ratio=draw(st.floats(1.0, 300.0)), thickness=draw(st.floats(2e-3, 5e-3)),
         period=period, joint_radius=joint_radius,
         tip_radius=joint_radius + draw(st.floats(0.015, 0.04)),
         cylinder_diameter=draw(st.floats(0.015, 0.04)),
-        added_mass_coeff=draw(st.floats(0.0, 3.0)), fluid_density=draw(st.floats(800.0, 1200.0)),
+        added_mass_coeff=draw(unsigned(3.0)), fluid_density=draw(st.floats(800.0, 1200.0)),
         jet_mode=draw(st.sampled_from(params_module.JET_MODES)),
         jet_direction=draw(st.sampled_from(params_module.JET_DIRECTIONS)),
         jet_application=draw(st.sampled_from(params_module.JET_APPLICATIONS)),
@@ -165,9 +171,8 @@ def mixed_instance(draw):
         hub_height=heights[0], foam_height=heights[1], actuator_height=heights[2],
         linear_drag=draw(st.sampled_from([0.0, 5.0])),
         wake_coupling=draw(st.sampled_from([0.0, 2.0])),
-        actuator_gains=tuple(draw(st.lists(st.floats(0.0, 2.0), min_size=8, max_size=8))),
-        actuator_delays=tuple(draw(st.lists(st.floats(0.0, 0.9 * period), min_size=8,
-                                            max_size=8))))
+        actuator_gains=tuple(draw(st.lists(unsigned(2.0), min_size=8, max_size=8))),
+        actuator_delays=tuple(draw(st.lists(unsigned(0.9 * period), min_size=8, max_size=8))))
 
 
 @settings(max_examples=25, deadline=None)

@@ -4,6 +4,8 @@ ValueError naming the field, raised before any compute."""
 import dataclasses
 import math
 import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -390,6 +392,53 @@ def test_a_word_like_no_field_gets_no_suggestion_and_real_fields_still_work():
         ts.StarParams(zzz=1)
     assert ts.StarParams(alpha=0.5, gait="A1+A2").alpha == 0.5
     assert ts.StarParams("A1+A2", 0.5) == ts.StarParams(gait="A1+A2", alpha=0.5)  # positional
+
+
+SMALLEST_NORMAL = sys.float_info.min
+LARGEST_SUBNORMAL = float(np.nextafter(SMALLEST_NORMAL, 0.0))
+
+
+@pytest.mark.parametrize("value, refused", [
+    (5e-324, True), (LARGEST_SUBNORMAL, True), (SMALLEST_NORMAL, False), (0.0, False)])
+def test_a_subnormal_number_is_refused_in_a_field_and_per_actuator(value, refused):
+    """Taichi's start makes arithmetic flush subnormal numbers to 0 for the whole process, so
+    such a value gave one robot before it and another after (an audit, 2026-12): a value within a
+    field's range is refused if subnormal, naming the field (and the actuator); one outside it
+    gets the range's message as before. The bound: the largest subnormal refused, the smallest
+    normal number kept as it is."""
+    cases = {"alpha": lambda x: dict(alpha=x),
+             r"actuator_delays\[2\] \(A3\)": lambda x: dict(
+                 actuator_delays=(0.0, 0.0, x) + (0.0,) * 5)}
+    for name, fields in cases.items():
+        if refused:
+            with pytest.raises(ValueError, match=f"^{name} must not be a subnormal number"):
+                ts.StarParams(**fields(value))
+        else:
+            built = ts.StarParams(**fields(value))
+            assert (built.alpha if "alpha" in name else built.actuator_delays[2]) == value
+    with pytest.raises(ValueError, match=r"^alpha must be a real number in \[0, "):
+        ts.StarParams(alpha=-5e-324)  # below the range: its message, before Taichi or after
+
+
+def test_a_subnormal_number_is_refused_before_and_after_taichi_starts():
+    """The refusal reads the number's bits, which no CPU mode changes: the same in a fresh
+    interpreter before Taichi starts and after."""
+    script = (
+        "import taichi as ti, taichi_star as ts\n"
+        "def refused():\n"
+        "    try:\n"
+        "        ts.StarParams(alpha=5e-324)\n"
+        "    except ValueError as error:\n"
+        "        return 'subnormal' in str(error)\n"
+        "    return False\n"
+        "before = refused()\n"
+        "ti.init(arch=ti.cpu)\n"
+        "tiny = float('1e-160')\n"
+        "assert tiny * tiny == 0.0, 'Taichi did not flush subnormals here'\n"
+        "print(before, refused())\n")
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.stdout.split()[-2:] == ["True", "True"]
 
 
 def test_a_single_star_params_is_a_batch_of_one():
