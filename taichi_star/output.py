@@ -247,8 +247,10 @@ def _scratch_file(path: Path, failures: tuple):
 
 def _file_kind(path: Path) -> str:
     """"parquet", "netcdf" or "csv": by the file's first bytes where they say (the writers take
-    any name: "x.pq" was read as a CSV whose sidecar did not exist), else by its suffix (a
-    damaged ".parquet" is then named as one)."""
+    any name: "x.pq" was read as a CSV whose sidecar did not exist), else a CSV where its
+    sidecar lies beside it (a table written as "x.parquet" by `to_csv` was read as a damaged
+    Parquet file: an audit, 2026-12), else by its suffix (a damaged ".parquet" is then named
+    as one)."""
     try:
         with open(path, "rb") as file:
             head = file.read(8)
@@ -258,6 +260,8 @@ def _file_kind(path: Path) -> str:
         return "parquet"
     if head.startswith((b"\x89HDF\r\n\x1a\n", b"CDF")):
         return "netcdf"
+    if Path(f"{path}.json").is_file():
+        return "csv"
     return {".parquet": "parquet", ".nc": "netcdf"}.get(path.suffix.lower(), "csv")
 
 

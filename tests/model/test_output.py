@@ -107,7 +107,11 @@ def test_csv_parquet_and_netcdf_round_trip_with_the_same_provenance(recorded, tm
     for name, written in renamed.items():
         name.write_bytes(written.read_bytes())
         assert read_provenance(name)["parameters"] == facts[0]["parameters"]
-
+    # a CSV under a Parquet or netCDF name is read as the CSV its sidecar describes (it was
+    # taken for a damaged Parquet or netCDF file: an audit, 2026-12)
+    for name in ("table.parquet", "table.nc"):
+        written = recorded.to_csv(tmp_path / name)
+        assert read_provenance(written)["parameters"] == facts[0]["parameters"]
 
 
 def test_xarray_holds_the_tables_with_units_and_survives_netcdf(recorded, tmp_path):
