@@ -607,6 +607,15 @@ def parse_args(argv):
     if args.workers_list and args.arch != "cpu":
         raise cli.StudyArgumentError("--workers-list: worker processes run on the CPU; use "
                                      "--workers-list none with --arch gpu")
+    # the batch section's work, before any of it: every batch size, warm-up and --steps,
+    # --repeats times, for each preset, precision, Jacobian and lanes setting (each flag within
+    # its range, 1,048,576 robots × 100,000 steps × 100 repeats started silently: an audit,
+    # 2026-12); the other sections are smaller
+    settings = len(args.presets) * len(args.precisions) * len(args.jacobians) * len(args.lanes)
+    cli.check_steps(f"the batch section (--batch-sizes summing to {sum(args.batch_sizes):,} "
+                    f"robots, {WARMUP_STEPS} warm-up + --steps {args.steps}, --repeats "
+                    f"{args.repeats}, {settings} setting(s))",
+                    (WARMUP_STEPS + args.steps) * args.repeats * settings, sum(args.batch_sizes))
     args.cache_probe = not (args.no_cache_probe or args.quick)
     return args
 

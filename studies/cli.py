@@ -268,12 +268,13 @@ def check_file_name(name: str, flag: str):
                                  f"'\\' or '..': files go into --out)")
 
 
-def check_steps(what: str, steps: float):
+def check_steps(what: str, steps: float, batch=None):
     """StudyArgumentError (one line) unless `steps` time steps per instance (what `what` says
-    gave them, e.g. "--cycles 3 (9.45 s) at dt = 0.001 s") stay within the step counter
-    (`check_work`, which also warns with an estimate when it is long)."""
+    gave them, e.g. "--cycles 3 (9.45 s) at dt = 0.001 s") stay within the step counter and,
+    with `batch` instances, their robot-steps within what can finish (`check_work`, which also
+    warns with an estimate when it is long)."""
     try:
-        check_work(what, steps)
+        check_work(what, steps, batch)
     except ValueError as error:
         raise StudyArgumentError(str(error)) from None
 

@@ -145,6 +145,10 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
     ("plan", ["--distance", "1000.5"], "--distance must be in (0, 1000] mm, got 1000.5"),
     ("plan", ["--far", "1000.5"], "--far must be in [0, 1000] mm, got 1000.5"),
     ("bench", ["--repeats", "101"], "--repeats must be in [1, 100], got 101"),
+    # each flag within its range, the whole past what can finish: it started silently
+    ("bench", ["--batch-sizes", "1048576", "--steps", "100000", "--repeats", "100"],
+     "the batch section (--batch-sizes summing to 1,048,576 robots, 10 warm-up + --steps "
+     "100000, --repeats 100, 1 setting(s)) is 1.05e+13 robot-steps"),
     ("simd", ["--repeats", "1000000"], "--repeats must be in [1, 100], got 1000000"),
     ("jacobians", ["--rounds", "1000000"], "--rounds must be in [1, 100], got 1000000"),
     ("jacobians", ["--batch", "2000000000"], "--batch must be in [1, 1048576], got 2000000000"),
