@@ -89,7 +89,7 @@ import taichi as ti
 from taichi_star import PRESETS, EngineProfile, SolverConfig, StarParams
 from taichi_star.profiling import matmul_gflops
 from taichi_star.provenance import cpu_model
-from taichi_star.runtime import PARALLEL_LOOP_MINIMUM, Runtime
+from taichi_star.runtime import PARALLEL_LOOP_MINIMUM, Runtime, check_host_memory
 
 from . import cli
 
@@ -1021,6 +1021,23 @@ def elimination_plans(presets: list[str]) -> dict:
     return plans
 
 
+def check_lu_memory(plans: dict, batch_sizes: list[int], lanes_list: list[int]):
+    """StudyArgumentError naming --batch-sizes, before any timing or output, where the largest
+    batch's systems would not fit in memory (1,048,576 of the paper robot's took 52 GiB for one
+    host copy and ended in NumPy's MemoryError: an audit, 2026-12): `measure` holds about three
+    float64 host copies of the blocks and right-hand sides and every form's two Taichi copies
+    at once, counted here in float64."""
+    forms = len(list(forms_of(lanes_list)))
+    largest = max(batch_sizes)
+    for preset, plan in plans.items():
+        per_instance = 8 * (4 * plan.n_slots + 2 * plan.n_nodes) * (3 + 2 * forms)
+        try:
+            check_host_memory("--batch-sizes", f"{largest:,} {preset} systems in {forms} forms",
+                              largest * per_instance, "give smaller --batch-sizes")
+        except ValueError as error:
+            raise cli.StudyArgumentError(str(error)) from None
+
+
 def build_parser():
     parser = cli.StudyParser("simd", DESCRIPTION, archs=("cpu",))
     parser.add_argument("--presets", default="paper,accurate", quick="paper",
@@ -1059,13 +1076,15 @@ def main(argv=None):
     if not 16 <= args.matmul_size <= MAX_MATMUL_SIZE:
         raise cli.StudyArgumentError(f"--matmul-size must be in [16, {MAX_MATMUL_SIZE}], got "
                                      f"{args.matmul_size}")
+    plans = elimination_plans(presets)
+    if "factor_solve" in kernels:
+        check_lu_memory(plans, batch_sizes, lanes_list)
     out = cli.Output(args, argv or [], model={"presets": presets},
                      extra={"precisions": precisions, "batch_sizes": batch_sizes,
                             "lanes": lanes_list, "repeats": args.repeats,
                             "matmul_size": args.matmul_size, "kernels": kernels,
                             "cpu_model": cpu_model(),
                             "cores": os.cpu_count()})
-    plans = elimination_plans(presets)
     rows = {kernel: [] for kernel in kernels}
     try:
         with tempfile.TemporaryDirectory(prefix="simd-ir-") as ir_folder:

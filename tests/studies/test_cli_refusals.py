@@ -150,6 +150,9 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
      "the batch section (--batch-sizes summing to 1,048,576 robots, 10 warm-up + --steps "
      "100000, --repeats 100, 1 setting(s)) is 1.05e+13 robot-steps"),
     ("simd", ["--repeats", "1000000"], "--repeats must be in [1, 100], got 1000000"),
+    # within the range, past any memory: NumPy's MemoryError (a traceback) after the folder
+    ("simd", ["--batch-sizes", "1048576"],
+     "--batch-sizes: 1,048,576 paper systems in 4 forms would need about 609 GiB of memory"),
     ("jacobians", ["--rounds", "1000000"], "--rounds must be in [1, 100], got 1000000"),
     ("jacobians", ["--batch", "2000000000"], "--batch must be in [1, 1048576], got 2000000000"),
     ("animate", ["--frames", "1000000000"], "--frames must be in [2, 10000], got 1000000000"),
@@ -241,7 +244,7 @@ def past_the_flag_checks(*args, **kwargs):
     ("stability", ["--stiffness", "0.5:2:1000", "--alphas", "0:1:1000", "--added-mass", "1",
                    "--dts-ms", "1", "--periods", "3.15", "--precisions", "f64", "--gaits", "A1"],
      "studies.cli.base_params"),
-    ("simd", ["--batch-sizes", "1048576", "--lanes", "16"], "studies.cli.Output"),
+    ("simd", ["--batch-sizes", "1048576", "--lanes", "16"], "studies.simd.elimination_plans"),
 ])
 def test_study_flags_at_the_end_of_their_range_are_accepted(no_compute, monkeypatch, tmp_path,
                                                             study, argv, next_step):
