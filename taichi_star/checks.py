@@ -41,10 +41,14 @@ def is_subnormal(value) -> bool:
     return (bits >> 52) & 0x7FF == 0 and bits & ((1 << 52) - 1) != 0
 
 
-SUBNORMAL_REASON = (f"a subnormal number (not 0 and below {sys.float_info.min:g} in magnitude), "
-                    f"which arithmetic flushes to 0 once Taichi has started: the same value would "
-                    f"mean another number before and after")
-"""Why a subnormal number is refused (`is_subnormal`), after "must not be"."""
+def check_not_subnormal(name: str, value):
+    """ValueError naming `name` where the real number `value` is subnormal (`is_subnormal`):
+    stored, it would be one number before Taichi's start and 0 after."""
+    if is_subnormal(value):
+        raise ValueError(f"{name} must not be a subnormal number (not 0 and below "
+                         f"{sys.float_info.min:g} in magnitude), which arithmetic flushes to 0 "
+                         f"once Taichi has started: the same value would mean another number "
+                         f"before and after; got {value!r}")
 
 
 def is_finite_real(value) -> bool:

@@ -22,7 +22,7 @@ from typing import Dict, Optional, Tuple
 import numpy as np
 
 from .actuation import PROFILE_CLOSURES, CurvatureProfile
-from .checks import SUBNORMAL_REASON, check_flag, is_real, is_subnormal, is_whole, shown
+from .checks import check_flag, check_not_subnormal, is_real, is_whole, shown
 from .gait import N_ACTUATORS, Gait
 
 JET_MODES = ("contract", "always")
@@ -108,9 +108,7 @@ def _check_actuator_values(name, values, lowest, highest, highest_included):
                                               highest_included=highest_included):
             raise ValueError(f"{name}[{index}] (A{index + 1}) must be a real number in {span}, "
                              f"got {_as_stored(value)}")
-        if is_subnormal(value):
-            raise ValueError(f"{name}[{index}] (A{index + 1}) must not be {SUBNORMAL_REASON}; "
-                             f"got {value!r}")
+        check_not_subnormal(f"{name}[{index}] (A{index + 1})", value)
         checked.append(float(value) + 0.0)  # a zero as +0.0, as `check_number`
     return tuple(checked)
 
@@ -151,8 +149,8 @@ def check_number(name, value, lowest, highest, lowest_included=True, integer=Fal
         raise ValueError(f"{name} must be {kind} in {span}, got {value!r}")
     if not _in_span(value, lowest, highest, lowest_included, highest_included, integer):
         raise ValueError(f"{name} must be {kind} in {span}, got {_as_stored(value)}")
-    if not integer and is_subnormal(value):
-        raise ValueError(f"{name} must not be {SUBNORMAL_REASON}; got {value!r}")
+    if not integer:
+        check_not_subnormal(name, value)
     # + 0.0 stores a zero as +0.0: parameters that compare equal are then the same bits
     # (build_model builds equal instances once)
     return int(value) if integer else float(value) + 0.0

@@ -75,8 +75,9 @@ FIELD_RELATIVE_STEPS = {field: step for term in TERMS
 """Fields whose ε departs from RELATIVE_STEP, gathered from the terms that own them
 (`physics.base.Term.sensitivity_steps`, where each says why): three that barely move the
 robot, whose replicas' offsets at RELATIVE_STEP are too few roundings of a position (C∥ and the
-cylinder's drag C_c 1e-2, the damping time τ 1e-3). Each multiplies its own force, so the residual is linear in it and a
-larger ε adds no truncation from the parameter itself (docs: numerics, sensitivities)."""
+cylinder's drag C_c 1e-2, the damping time τ 1e-3). Each multiplies its own force, so the
+residual is linear in it and a larger ε adds no truncation from the parameter itself (docs:
+numerics, sensitivities)."""
 REPLICAS_PER_DIRECTION = 2
 """Replica instances each direction adds per instance: the pair at ±ε."""
 

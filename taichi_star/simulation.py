@@ -317,13 +317,22 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     result.timing = dataclasses.replace(result.timing, setup_s=result.timing.setup_s + initialise_s)
     result.arch = arch
     clock = Clock(solver, duration_s)
-    result.arguments = {"function": "simulate", "duration_s": clock.time_of(clock.end),
-                        "cycles": None, "record_interval_s": record_interval_s,
-                        "record_shapes": bool(record_shapes),
-                        "steady_from_cycle": int(steady_from_cycle),
-                        "sensitivities": [direction.label for direction in directions],
-                        "chunk_size": None}
+    result.arguments = call_arguments("simulate", clock.time_of(clock.end), None,
+                                      record_interval_s, record_shapes, steady_from_cycle,
+                                      [direction.label for direction in directions], None)
     return result
+
+
+def call_arguments(function: str, duration_s, cycles, record_interval_s, record_shapes,
+                   steady_from_cycle, sensitivities, chunk_size) -> Dict:
+    """`SimulationResult.arguments` of a call of `function` ("simulate" or "run_batch"), as
+    plain JSON values (None where the call has no such argument)."""
+    return {"function": function,
+            "duration_s": None if duration_s is None else float(duration_s),
+            "cycles": None if cycles is None else float(cycles),
+            "record_interval_s": float(record_interval_s), "record_shapes": bool(record_shapes),
+            "steady_from_cycle": int(steady_from_cycle), "sensitivities": list(sensitivities),
+            "chunk_size": None if chunk_size is None else int(chunk_size)}
 
 
 def _concatenate(results: Sequence[SimulationResult]) -> SimulationResult:

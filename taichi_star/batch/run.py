@@ -16,7 +16,7 @@ from ..extras import require
 from ..geometry import build_topology
 from ..model import instances_of
 from ..params import SolverConfig, StarParams
-from ..simulation import SimulationResult, warn_about_ok_instances
+from ..simulation import SimulationResult, call_arguments, warn_about_ok_instances
 from .executors import DEFAULT_RETRIES, Executor, InProcess, LocalProcesses
 from .store import RunStore, run_definition
 from .tasks import batch_robot_steps, plan_chunks
@@ -172,12 +172,8 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     topology = build_topology(params[0]) if len(topology_keys) == 1 else None
     # a store resumed under another code holds chunks of each: the result files say which
     makers = store.code_versions() if store is not None else []
-    arguments = {"function": "run_batch",
-                 "duration_s": None if duration_s is None else float(duration_s),
-                 "cycles": None if cycles is None else float(cycles),
-                 "record_interval_s": float(record_interval_s), "record_shapes": bool(record_shapes),
-                 "steady_from_cycle": int(steady_from_cycle), "sensitivities": [],
-                 "chunk_size": int(chunk_size)}
+    arguments = call_arguments("run_batch", duration_s, cycles, record_interval_s,
+                               record_shapes, steady_from_cycle, [], chunk_size)
     return SimulationResult(summary=summary, trajectory=trajectory, shapes=shape_array,
                             topology=topology, solver=solver, timing=timing, arch=arch,
                             code_versions=makers if len(makers) > 1 else None,
