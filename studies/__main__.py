@@ -8,6 +8,7 @@ import os
 import signal
 import sys
 import threading
+import warnings
 from pathlib import Path
 
 try:
@@ -61,6 +62,28 @@ def sigterm_as_interrupt():
         yield
     finally:
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+@contextlib.contextmanager
+def one_line_warnings(name: str):
+    """Within it, a RuntimeWarning (the library's word to the user: a long run's hours,
+    instances "ok" after capped solves) is printed as one line, "taichi-star sweep: warning:
+    ...", as the errors are, not Python's two lines of file, line and source (an audit,
+    2026-12); other categories (a library's deprecation, a fault of code) keep Python's format,
+    which says where. Only the printing changes: a caller recording warnings (pytest, a
+    notebook's `catch_warnings`) gets the same warnings."""
+    python_format = warnings.formatwarning
+
+    def formatted(message, category, filename, lineno, line=None):
+        if issubclass(category, RuntimeWarning):
+            return f"{program()} {name}: warning: {message}\n"
+        return python_format(message, category, filename, lineno, line)
+
+    warnings.formatwarning = formatted
+    try:
+        yield
+    finally:
+        warnings.formatwarning = python_format
 
 
 def program() -> str:
@@ -120,7 +143,7 @@ def main(argv=None) -> int:
     cli.OPENED.clear()  # this run's output folders alone (`interrupted`)
     try:
         # the study's import inside: Ctrl-C while it loads its libraries is one line too
-        with sigterm_as_interrupt():
+        with sigterm_as_interrupt(), one_line_warnings(name):
             importlib.import_module(f"{__package__}.{name}").main(rest)
     except (StudyArgumentError, StudyOutputError, RunStoreError) as error:
         print(f"{program()} {name}: error: {error}", file=sys.stderr)

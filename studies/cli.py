@@ -24,6 +24,7 @@ import logging
 import math
 import tempfile
 import typing
+import warnings
 from pathlib import Path
 from typing import Dict, List, Mapping, Optional, Sequence
 
@@ -41,7 +42,7 @@ from taichi_star.gait import Gait
 from taichi_star.output import column_unit, column_units, parquet_bytes, read_provenance
 from taichi_star.provenance import table_stamp
 from taichi_star.sensitivities import parse_directions
-from taichi_star.timegrid import steps_in
+from taichi_star.timegrid import LongWorkWarning, steps_in, warn_long_work
 
 from . import provenance
 
@@ -177,10 +178,19 @@ def add_dt_flag(parser: StudyParser, quick: float = QUICK_DT, jacobian: bool = T
                                  "as fast, each converged to newton_tol but not to Newton's bits")
 
 
-def add_cycles_flag(parser: StudyParser, default: float = 3.0):
-    parser.add_argument("--cycles", type=float, default=default,
+def add_cycles_flag(parser: StudyParser, default: float = 3.0,
+                    quick_s: Optional[float] = QUICK_DURATION_S):
+    """--cycles (actuation cycles from rest per instance). `quick_s`: the seconds --quick
+    simulates instead, a --cycles given with --quick then refused by `parse` (it was ignored
+    without a word, an audit, 2026-12); None: --quick runs the cycles too."""
+    if quick_s is None:
+        parser.add_argument("--cycles", type=float, default=default,
+                            help=f"actuation cycles from rest per instance (default {default:g})")
+        return
+    parser.add_argument("--cycles", type=float, default=None,
                         help=f"actuation cycles from rest per instance (default {default:g}; "
-                             f"--quick simulates {QUICK_DURATION_S} s)")
+                             f"--quick simulates {quick_s:g} s instead)")
+    parser.set_defaults(cycles_without_quick=default)
 
 
 def add_execution_flags(parser: StudyParser, chunk_size: int = DEFAULT_CHUNK_SIZE):
@@ -214,10 +224,20 @@ def add_resume_flags(parser: StudyParser):
 def parse(parser: StudyParser, argv) -> argparse.Namespace:
     """Parse and check the shared flags (StudyArgumentError naming the flag)."""
     args = parser.parse_args(argv)
+    if hasattr(args, "cycles_without_quick"):
+        if args.cycles is None:
+            args.cycles = args.cycles_without_quick
+        elif args.quick:
+            check_positive(args.cycles, "--cycles")
+            raise StudyArgumentError("--cycles: not with --quick, which simulates a short time "
+                                     "from rest instead of the cycles (give one of them)")
     if hasattr(args, "cycles"):
         check_positive(args.cycles, "--cycles")
     if getattr(args, "dt", None) is not None:
-        check_positive(args.dt, "--dt")
+        longest = SOLVER_RANGES["dt"][1]
+        # both ends named (a zero step was told "> 0" alone, a huge one the range: an audit)
+        if not (math.isfinite(args.dt) and 0 < args.dt <= longest):
+            raise StudyArgumentError(f"--dt must be in (0, {longest:g}] s, got {args.dt:g}")
     if getattr(args, "workers", None) is not None:
         check_count(args.workers, "--workers", 1, MAX_LOCAL_WORKERS)
     if getattr(args, "chunk_size", None) is not None and args.chunk_size < 1:
@@ -355,6 +375,35 @@ def check_cycles(cycles: Mapping[str, int], period: float, config: SolverConfig)
     total = sum(cycles.values())
     named = " + ".join(f"{flag} {count}" for flag, count in cycles.items())
     check_run(f"{named} ({total * period:.3g} s)", total * period, config)
+
+
+def tell_batch_work(args, config: SolverConfig, instances: int,
+                    periods: Sequence[float] = ()) -> float:
+    """Warn (`LongWorkWarning`, with the hours) of a `run_batch` of `instances` robots, each run
+    for `run_length(args)` with this solver, before the study builds them: `run_batch` tells
+    its estimate only once it has them, and a product near the studies' million instances
+    took about two minutes to build (an audit, 2026-12). `periods`: the actuation periods, s,
+    that the instances share equally (a swept period's values; default: the model's).
+    Returns the robot-steps (`fewest_steps` of each run, `run_batch`'s count). Run the batch
+    within `batch_work_told()`, which keeps it from telling the same hours again."""
+    periods = list(periods) or [base_params(args).period]
+    durations = [duration_s(args, period) for period in periods]
+    robot_steps = sum(fewest_steps(config, duration, 0.0)[0] for duration in durations) \
+        * instances / len(periods)
+    length = (f"--quick ({QUICK_DURATION_S:g} s)" if args.quick else
+              f"--cycles {args.cycles:g} of {'each' if len(periods) > 1 else 'its'} period")
+    warn_long_work(f"the batch of {instances:,} instances ({length})", robot_steps)
+    return robot_steps
+
+
+@contextlib.contextmanager
+def batch_work_told():
+    """Within it, a `LongWorkWarning` says nothing: the study told the batch's estimate itself
+    (`tell_batch_work`). The CLI's main thread alone runs a study, so the process's filters
+    are the ones to change."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", LongWorkWarning)
+        yield
 
 
 def check_instances(instances: int, what: str):

@@ -473,7 +473,7 @@ def build_parser():
                         help="f64 and/or f32")
     cli.add_model_flags(parser, fixed=("gait", "youngs_modulus", "alpha", "added_mass_coeff",
                                        "period"))
-    cli.add_cycles_flag(parser, default=CYCLES)
+    cli.add_cycles_flag(parser, default=CYCLES, quick_s=QUICK_DURATION_S)
     cli.add_execution_flags(parser)
     return parser
 

@@ -55,7 +55,7 @@ def build_parser():
     # said "default paper" while it ran the identified preset: an audit)
     cli.add_model_flags(parser, fixed=("gait", "period"), preset="identified")
     cli.add_dt_flag(parser)
-    cli.add_cycles_flag(parser, default=3.0)
+    cli.add_cycles_flag(parser, default=3.0, quick_s=None)
     return parser
 
 

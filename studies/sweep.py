@@ -189,11 +189,12 @@ def main(argv=None):
     base = cli.base_params(args)
     # checked before the grid is built: a swept period sets the longest and the shortest run
     solver = cli.solver(args, periods=axes.get("period", ()))
+    cli.tell_batch_work(args, solver, size, periods=axes.get("period", ()))
     grid = cli.param_product(axes, base=base, flags=axis_flags(args, axes))
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"axes": axes})
     run_dir = cli.run_store(args, out)
-    with cli.executor(args, out) as executor:
+    with cli.executor(args, out) as executor, cli.batch_work_told():
         result = run_batch(grid, **cli.run_length(args), solver=solver, arch=args.arch,
                            chunk_size=cli.chunk_size(args, len(grid), executor.n_workers),
                            executor=executor, run_dir=run_dir, run_dir_flag="--run-dir",

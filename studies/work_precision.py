@@ -526,9 +526,7 @@ def build_parser():
     parser = cli.StudyParser("work_precision", DESCRIPTION)
     parser.add_argument("--gaits", default="paper", quick=",".join(QUICK_GAITS),
                         help="paper (the five Fig. 4 gaits) or a list A1,A1+A2")
-    parser.add_argument("--cycles", type=float, default=3.0,
-                        help=f"cycles from rest (default 3; --quick simulates "
-                             f"{QUICK_DURATION_S} s)")
+    cli.add_cycles_flag(parser, default=3.0, quick_s=QUICK_DURATION_S)
     return parser
 
 
@@ -541,7 +539,8 @@ def main(argv=None):
     configs = configurations(grid)
     # the finest fixed step of the grid takes the most steps, the coarsest the fewest
     fixed_steps = [config.solver.dt for config in configs if not config.solver.adaptive]
-    length = f"--cycles {args.cycles:g} ({duration:.3g} s)"
+    length = (f"--quick ({duration:g} s)" if args.quick
+              else f"--cycles {args.cycles:g} ({duration:.3g} s)")
     cli.check_length(length, duration, min(fixed_steps), "the grid's finest step")
     cli.check_one_step(length, duration, max(fixed_steps), "the grid's coarsest step")
     out = cli.Output(args, argv or [], model={"models": MODEL_PRESETS, "gaits": gaits},

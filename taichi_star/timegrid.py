@@ -17,7 +17,8 @@ from .checks import is_finite_real, is_real, is_whole, shown, warn_user
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
 __all__ = ["nearest_interval", "interval_for_count", "whole_steps", "steps_in", "STEP_TOLERANCE",
-           "MAX_STEPS_PER_INSTANCE", "REFUSE_ROBOT_STEPS", "check_work"]
+           "MAX_STEPS_PER_INSTANCE", "REFUSE_ROBOT_STEPS", "check_work", "warn_long_work",
+           "LongWorkWarning"]
 
 STEP_TOLERANCE = 1e-9
 """Relative tolerance within which a time is taken to be a whole number of steps (and a
@@ -194,12 +195,20 @@ def check_work(name: str, steps: float, batch: Optional[int] = None):
     warn_long_work(name, robot_steps)
 
 
+class LongWorkWarning(RuntimeWarning):
+    """A run estimated to take long (past WARN_ROBOT_STEPS robot-steps), with its hours: a
+    category of its own, so that a script that means a long run can silence it alone
+    (`warnings.simplefilter("ignore", LongWorkWarning)`) and a caller that told the estimate
+    itself (a study, before it builds its instances) need not hear it twice."""
+
+
 def warn_long_work(name: str, robot_steps: float):
-    """A RuntimeWarning with the estimated wall time when `robot_steps` (steps × instances) is
-    over WARN_ROBOT_STEPS; `name` says which arguments gave them. Of kind "long_work" (a
-    caller that tells a whole batch's hours keeps its parts' to itself: `told_by_caller`)."""
+    """A LongWorkWarning with the estimated wall time when `robot_steps` (steps × instances,
+    a real number >= 0) is over WARN_ROBOT_STEPS; `name` says which arguments gave them. Of
+    kind "long_work" (a caller that tells a whole batch's hours keeps its parts' to itself:
+    `told_by_caller`)."""
     if robot_steps > WARN_ROBOT_STEPS:
         hours = robot_steps / ESTIMATE_ROBOT_STEPS_PER_S / 3600
         warn_user(f"{name} is {robot_steps:.3g} robot-steps: about {hours:.3g} h at "
                   f"{ESTIMATE_ROBOT_STEPS_PER_S:g} robot-steps/s (on a 2-core CPU; a GPU or "
-                  f"more cores run faster)", kind="long_work")
+                  f"more cores run faster)", LongWorkWarning, kind="long_work")

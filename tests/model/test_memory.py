@@ -101,7 +101,7 @@ def test_a_sensitive_runs_long_work_warning_counts_its_replicas(monkeypatch, war
         warnings.simplefilter("always")
         with pytest.raises(Ran):
             ts.simulate([ts.StarParams()] * 4, 0.1, sensitivities=["alpha"])
-    messages = [str(w.message) for w in caught if w.category is RuntimeWarning]
+    messages = [str(w.message) for w in caught if w.category is ts.LongWorkWarning]
     assert messages == ([f"duration_s = 0.1 s at dt = 0.001 s is 1.2e+03 robot-steps: about "
                          f"{1200 / 5e4 / 3600:.3g} h at 50000 robot-steps/s (on a 2-core CPU; "
                          f"a GPU or more cores run faster)"] if warned else [])

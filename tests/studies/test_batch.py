@@ -186,7 +186,7 @@ def test_a_batchs_work_and_trajectory_are_judged_whole_not_by_chunk(monkeypatch,
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             plan_chunks([ts.StarParams()] * count, 0.5, chunk_size=1)
-        messages = [str(w.message) for w in caught if w.category is RuntimeWarning]
+        messages = [str(w.message) for w in caught if w.category is ts.LongWorkWarning]
         assert messages == ([f"the batch of {count} instances is {500 * count:.3g} robot-steps: "
                              f"about {500 * count / 5e4 / 3600:.3g} h at 50000 robot-steps/s (on "
                              f"a 2-core CPU; a GPU or more cores run faster)"] if warned else [])
@@ -222,7 +222,7 @@ def test_a_batch_in_chunks_of_two_warns_once_with_all_its_robot_steps(monkeypatc
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         plan_chunks([ts.StarParams()] * 4, 0.5, chunk_size=2)
-    messages = [str(w.message) for w in caught if w.category is RuntimeWarning]
+    messages = [str(w.message) for w in caught if w.category is ts.LongWorkWarning]
     assert messages == [f"the batch of 4 instances is 2e+03 robot-steps: about "
                         f"{2000 / 5e4 / 3600:.3g} h at 50000 robot-steps/s (on a 2-core CPU; a "
                         f"GPU or more cores run faster)"]
@@ -260,3 +260,44 @@ def test_a_worker_that_cannot_import_the_script_is_named_so_not_retried(tmp_path
     assert run.returncode != 0
     assert "worker processes could not start: each re-imports" in run.stderr
     assert "out of memory or killed" not in run.stderr
+
+
+def test_a_sweep_tells_its_batchs_hours_once_before_it_builds_the_instances(monkeypatch,
+                                                                          tmp_path):
+    """A sweep near the studies' million instances built them (about two minutes) before
+    run_batch told its hours (an audit, 2026-12); now the study tells them first, counted as
+    run_batch counts them (`batch_robot_steps` of its chunks: each instance's steps at its own
+    period), and run_batch's own telling is kept back: one warning. Two periods of 0.5 and 1 s
+    at 1-ms steps for one cycle are 1,500 robot-steps: told past a limit of 1,499, not at
+    1,500 (the rule is "over")."""
+    from taichi_star import timegrid
+    from studies import cli, sweep
+
+    built = []
+    product = cli.param_product
+
+    def remembering_product(*args, **kwargs):
+        built.append([str(w.message) for w in caught])
+        return product(*args, **kwargs)
+
+    monkeypatch.setattr(cli, "param_product", remembering_product)
+    argv = ["--gaits", "A1", "--period", "0.5,1", "--cycles", "1", "--no-progress"]
+    expected = (f"the batch of 2 instances (--cycles 1 of each period) is 1.5e+03 robot-steps: "
+                f"about {1500 / 5e4 / 3600:.3g} h at 50000 robot-steps/s (on a 2-core CPU; a "
+                f"GPU or more cores run faster)")
+    for limit, told in ((1499, [expected]), (1500, [])):
+        monkeypatch.setattr(timegrid, "WARN_ROBOT_STEPS", limit)
+        built.clear()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            table = sweep.main([*argv, "--out", str(tmp_path / str(limit))])
+        assert [str(w.message) for w in caught if w.category is ts.LongWorkWarning] == told
+        assert built == [told]  # told before the instances were built
+    # the study's count is run_batch's
+    params = [ts.StarParams(gait="A1", period=p) for p in (0.5, 1.0)]
+    tasks = plan_chunks(params, cycles=1)
+    from taichi_star.batch.tasks import batch_robot_steps
+    arguments = cli.parse(sweep.build_parser(), argv)
+    assert cli.tell_batch_work(arguments, ts.SolverConfig(), 2, periods=[0.5, 1.0]) \
+        == batch_robot_steps(tasks) == 1500
+    assert table["duration_s"].tolist() == [0.5, 1.0]

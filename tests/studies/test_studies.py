@@ -123,7 +123,12 @@ def test_quick_defaults_and_presets():
     ("sweep", ["--param", "alpha"], "--param: expected NAME=VALUES (e.g. alpha=0.2:1.2:6)"),
     ("fig4c", ["--set", "alpha=1,2"], "exactly one value"),
     ("fig4c", ["--set", "gait=A1"], "--set gait"),
-    ("fig4c", ["--dt", "0.5"], "--dt: dt must be"),
+    # both ends of the step's range named (a zero step was told "> 0" alone)
+    ("fig4c", ["--dt", "0.5"], "--dt must be in (0, 0.05] s, got 0.5"),
+    ("fig4c", ["--dt", "0"], "--dt must be in (0, 0.05] s, got 0"),
+    # --quick runs 0.2 s instead of the cycles: a --cycles given with it was ignored
+    ("fig4c", ["--cycles", "2"], "--cycles: not with --quick, which simulates a short time"),
+    ("work_precision", ["--cycles", "2"], "--cycles: not with --quick"),
     ("fig4c", ["--cycles", "nan"], "--cycles must be > 0"),
     ("fig4c", ["--prefix", "../../escape"], "--prefix: '../../escape' is not a file name"),
     ("fig4c", ["--prefix", "sub/fig"], "--prefix: 'sub/fig' is not a file name"),
@@ -148,6 +153,19 @@ def test_invalid_arguments_fail_before_compute(no_compute, tmp_path, capsys, stu
     error = capsys.readouterr().err
     assert message in error and len(error.strip().splitlines()) == 1, error
     assert not out.exists()  # nothing written
+
+
+def test_the_cycles_and_the_step_are_taken_where_they_are_meant():
+    """The allowed sides of the refusals above: --cycles without --quick, the default under
+    --quick, --cycles with --quick where --quick runs the cycles (strokes: it was told that
+    --quick simulates 0.2 s, which it does not), and the longest step."""
+    from studies import fig4c, strokes
+
+    assert cli.parse(fig4c.build_parser(), ["--cycles", "2"]).cycles == 2
+    assert cli.parse(fig4c.build_parser(), ["--quick"]).cycles == 3
+    assert cli.parse(strokes.build_parser(), ["--quick", "--cycles", "4"]).cycles == 4
+    assert "--quick simulates" not in strokes.build_parser().format_help()
+    assert cli.parse(fig4c.build_parser(), ["--dt", "0.05"]).dt == 0.05
 
 
 def test_resume_needs_the_folder_of_the_run(no_compute, tmp_path, monkeypatch, capsys):
@@ -652,6 +670,58 @@ def test_sigterm_is_one_line_saying_what_is_kept(tmp_path, monkeypatch, capsys):
     assert not out.exists()
     # the default handler is back once the study has ended (a later SIGTERM ends the process)
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+
+
+def test_a_sweeps_long_work_is_one_line_told_before_its_million_instances_are_built(tmp_path):
+    """A sweep of a million instances (1000 × 200 values, five gaits) for four cycles (of
+    3.15 s at 1-ms steps: 12,600 steps each) is 1.26e10 robot-steps, past the warning's 1e10: told in one line as the errors are, the study's name first (Python's two
+    lines of file and source until 2026-12), and at once, before the instances are built
+    (about two minutes, after which run_batch told it, an audit). The run is then stopped
+    with SIGTERM while it builds them."""
+    import signal
+    import subprocess
+    import sys
+
+    out = tmp_path / "sweep"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "studies", "sweep", "--alpha", "0.2:1.2:1000", "--added-mass",
+         "0:1:200", "--cycles", "4", "--out", str(out)],
+        cwd=Path(__file__).resolve().parents[2], stderr=subprocess.PIPE, text=True)
+    try:
+        first = process.stderr.readline()
+    finally:
+        process.send_signal(signal.SIGTERM)
+        rest = process.communicate(timeout=120)[1]
+    hours = 1_000_000 * 12_600 / 5e4 / 3600
+    assert first == (f"python -m studies sweep: warning: the batch of 1,000,000 instances "
+                     f"(--cycles 4 of its period) is 1.26e+10 robot-steps: about {hours:.3g} h "
+                     f"at 50000 robot-steps/s (on a 2-core CPU; a GPU or more cores run "
+                     f"faster)\n")
+    assert rest == "python -m studies sweep: terminated; the files written before are whole\n"
+    assert process.returncode == 143 and not out.exists()
+
+
+def test_only_the_librarys_runtime_warnings_are_one_line_in_a_study(tmp_path, monkeypatch):
+    """Within a study a RuntimeWarning prints as one line naming the study; another category
+    (a library's deprecation) keeps Python's format, which says where it came from; and after
+    the study the format is Python's again."""
+    import warnings
+    import studies.__main__ as entry
+
+    python_format = warnings.formatwarning
+    shown = {}
+
+    def formats(*args, **kwargs):
+        shown["runtime"] = warnings.formatwarning("slow", RuntimeWarning, "x.py", 3, "line")
+        shown["long"] = warnings.formatwarning("slow", taichi_star.LongWorkWarning, "x.py", 3)
+        shown["deprecation"] = warnings.formatwarning("old", DeprecationWarning, "x.py", 3, "")
+        raise KeyboardInterrupt  # the study stops here: its format was what this test asks
+    monkeypatch.setattr("studies.figures.run_fig4c", formats)
+    assert entry.main(["fig4c", "--out", str(tmp_path / "fig4c"), *QUICK]) == 130
+    assert shown == {"runtime": f"{main_program()} fig4c: warning: slow\n",
+                     "long": f"{main_program()} fig4c: warning: slow\n",
+                     "deprecation": "x.py:3: DeprecationWarning: old\n"}
+    assert warnings.formatwarning is python_format
 
 
 def test_sigterm_handler_of_the_calling_program_is_left_alone(tmp_path, monkeypatch, capsys):

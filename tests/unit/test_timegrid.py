@@ -8,8 +8,8 @@ import warnings
 import numpy as np
 import pytest
 
-from taichi_star.timegrid import (MAX_STEPS_PER_INSTANCE, STEP_TOLERANCE, check_duration,
-                                  check_steps, check_work, interval_for_count, multiples_within,
+from taichi_star.timegrid import (MAX_STEPS_PER_INSTANCE, STEP_TOLERANCE, LongWorkWarning,
+                                  check_duration, check_steps, check_work, interval_for_count, multiples_within,
                                   nearest_interval, on_grid, step_counts, whole_steps)
 
 
@@ -115,8 +115,15 @@ def test_long_but_possible_work_starts_with_a_warning_giving_its_estimate():
         warnings.simplefilter("error")
         check_work("duration_s = 1e6 s at dt = 0.001 s", 1e9, 10)  # exactly at the threshold
         check_work("duration_s = 2e6 s at dt = 0.001 s", 2e9)  # one instance, under it
-    with pytest.warns(RuntimeWarning, match=r"duration_s = x is 1e\+10 robot-steps: about 55.6 h "
-                                            r"at 50000 robot-steps/s"):
+    # of its own category, a RuntimeWarning, so that a script meaning a long run silences it
+    # alone
+    with pytest.warns(LongWorkWarning, match=r"duration_s = x is 1e\+10 robot-steps: about "
+                                             r"55.6 h at 50000 robot-steps/s"):
+        check_work("duration_s = x", 1e9 + 1, 10)
+    assert issubclass(LongWorkWarning, RuntimeWarning)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        warnings.simplefilter("ignore", LongWorkWarning)
         check_work("duration_s = x", 1e9 + 1, 10)
 
 
