@@ -19,7 +19,8 @@ What the adapter does, as SB3's own `DummyVecEnv` does for single environments:
 - rewards float32 (num_envs,), dones bool (num_envs,) = terminated | truncated, infos a list of
   num_envs dicts (the vector env's info arrays, row by row);
 - `seed(s)` seeds robot b with s + b at the next `reset()`, `set_options(...)` gives the next
-  reset's options (the same for every robot: `goal`), both used once, as in SB3;
+  reset's options (one dict for every robot, or a list of num_envs dicts: equal ones, or each
+  with its own `goal`), both used once, as in SB3;
 - `get_attr` / `set_attr` / `env_method` act on the one vector environment (every index sees
   the same attribute; a method is called once and its result listed for each index);
   `env_is_wrapped` is False (the robots are not separate gymnasium.Env objects);
@@ -42,6 +43,31 @@ import numpy as np
 
 from ..checks import is_whole
 from .swimmer import StarSwimmerVectorEnv
+
+
+def _same_options(first: Dict[str, Any], other: Dict[str, Any]) -> bool:
+    """Whether two options dicts hold the same keys and values, arrays compared element by
+    element (`!=` of two dicts holding arrays raised NumPy's "truth value of an array is
+    ambiguous"; an audit, 2026-12)."""
+    return first.keys() == other.keys() and all(
+        np.array_equal(np.asarray(first[key], dtype=object), np.asarray(other[key], dtype=object))
+        for key in first)
+
+
+def _native_options(per_robot: List[Dict[str, Any]]) -> Dict[str, Any]:
+    """The native vector env's one options dict from SB3's list of one per robot: equal dicts
+    as they are; dicts of a goal each ((2,) mm) as options["goal"] (num_envs, 2). ValueError
+    otherwise."""
+    first = per_robot[0]
+    if all(_same_options(first, other) for other in per_robot[1:]):
+        return first
+    if all(options.keys() == {"goal"} for options in per_robot):
+        goals = [np.asarray(options["goal"]) for options in per_robot]
+        if all(goal.shape == (2,) for goal in goals):
+            return {"goal": np.stack(goals)}
+    raise ValueError("set_options: the robots' options may differ only in their goals "
+                     "({'goal': (x_mm, y_mm)} each); the native vector env takes one options "
+                     "dict for every robot, per-robot goals as options['goal'] (num_envs, 2)")
 
 
 def _rows_of(info: Dict[str, np.ndarray], count: int) -> List[Dict[str, Any]]:
@@ -84,10 +110,7 @@ class SB3VectorAdapter:
     def reset(self) -> np.ndarray:
         """Reset every robot (with the seeds and options set since the last reset, then
         forgotten); returns the (num_envs, 15) float32 observations."""
-        options = self._options[0]
-        if any(other != options for other in self._options[1:]):
-            raise ValueError("set_options: the native vector env takes one options dict for "
-                             "every robot; per-robot goals go in options['goal'] as (num_envs, 2)")
+        options = _native_options(self._options)
         seeds = None if all(s is None for s in self._seeds) else list(self._seeds)
         observation, info = self.envs.reset(seed=seeds, options=options or None)
         self.reset_infos = _rows_of(info, self.num_envs)
@@ -131,8 +154,8 @@ class SB3VectorAdapter:
         return self._seeds
 
     def set_options(self, options=None) -> None:
-        """Options for the next reset: one dict for every robot, or a list of num_envs equal
-        dicts (what SB3 passes)."""
+        """Options for the next reset: one dict for every robot, or a list of num_envs dicts
+        (what SB3 passes): equal ones, or each with its own goal ({"goal": (x_mm, y_mm)})."""
         if options is None:
             options = {}
         self._options = ([dict(options) for _ in range(self.num_envs)]

@@ -20,8 +20,9 @@ the space's bounds (a robot 10 m from its goal) are clipped to them.
 
 Reward per step: progress toward the goal (mm: distance before the step minus distance after)
 minus `firing_cost_mm` per actuator fired. Terminated when the centroid is within
-`goal_tolerance_mm` of the goal; truncated after `max_episode_steps` steps, or when the
-instance's solver failed (its robot is frozen; `info["status"]` says why). Made through
+`goal_tolerance_mm` of the goal; truncated after `max_episode_steps` steps (the last one
+truncated even when it reached the goal, as gymnasium's TimeLimit), or when the instance's
+solver failed short of its goal (its robot is frozen; `info["status"]` says why). Made through
 `gymnasium.make`, the single env gets its step budget as gymnasium's TimeLimit wrapper
 (`DEFAULT_MAX_EPISODE_STEPS` unless `gymnasium.make(..., max_episode_steps=N)`), and
 `gymnasium.make_vec` hands the same budget to the vector env; built directly, either env has
@@ -238,6 +239,10 @@ class GoalReachingBatch:
             raise RuntimeError("this environment is closed; make a new one to go on")
         return self._simulator
 
+    def check_open(self):
+        """RuntimeError once the batch is closed (as `simulator`)."""
+        self.simulator
+
     def close(self):
         """Let go of the Simulator: once nothing else refers to it, its engine (compiled
         kernels, device memory) is free in the process's runtime, which gives it to the next
@@ -263,31 +268,49 @@ class GoalReachingBatch:
     def firing_mask(actions, shape) -> np.ndarray:
         """Bool mask of `actions`: exactly `shape`, of any type `MultiBinary` accepts (boolean,
         or integers or floats that are exactly 0 or 1: RL libraries emit float32 0./1.);
-        ValueError naming the action otherwise (0.5, 2, NaN, text)."""
-        array = np.asarray(actions)
+        ValueError naming the action otherwise (0.5, 2, NaN, text, None, ragged lists: these
+        were a TypeError or NumPy's own words, and a list of Python objects 0 and 1, which the
+        space holds, was refused; an audit, 2026-12)."""
+        try:
+            array = np.asarray(actions)
+        except (TypeError, ValueError):  # ragged: [0, [1, 2]]
+            raise ValueError(f"action must be an array of shape {shape} of 0 and 1, got a "
+                             f"ragged {type(actions).__name__}") from None
         if array.shape != shape:
             raise ValueError(f"action must have shape {shape} (one 0/1 per actuator A1..A8), "
                              f"got {array.shape}")
         if array.dtype == bool:
             return array.copy()
-        if array.dtype.kind in "iuf" and np.isin(array, (0, 1)).all():
-            return array.astype(bool)
+        numbers = array
+        if array.dtype.kind == "O":  # Python objects, as MultiBinary.contains takes them
+            try:
+                numbers = array.astype(float)
+            except (TypeError, ValueError):
+                numbers = None
+        if numbers is not None and numbers.dtype.kind in "iuf":
+            binary = np.isin(numbers, (0, 1))
+            if binary.all():
+                return numbers.astype(bool)
+            wrong = array[~binary].ravel()
+        else:
+            wrong = array.ravel()
         raise ValueError(f"action must hold only 0 and 1 (boolean, integer or float), got "
-                         f"dtype {array.dtype} with values {np.unique(array)[:4]}")
+                         f"dtype {array.dtype} with values {wrong[:4].tolist()}")
 
     def step(self, fire: np.ndarray):
         """Fire `fire` ((B, 8) bool) now and advance one control period. Returns rewards (B,)
         float64, terminated (B,), truncated (B,). RuntimeError for a robot never reset: it
         has no goal yet (a vector env stepped before reset ended every episode at once, at the
         goal (0, 0) it starts on; gymnasium's wrappers enforce the order, a bare env did not)."""
+        simulator = self.simulator  # a closed environment says so first (an audit, 2026-12)
         if not self.started.all():
             raise RuntimeError(f"call reset() before step(): robot "
                                f"{np.flatnonzero(~self.started)[0]} has no episode yet")
-        self.simulator.fire(fire)
+        simulator.fire(fire)
         # no progress bar for a control period, however many robots: an agent steps many
-        self.simulator.advance(self.control_period_s, progress=False)
+        simulator.advance(self.control_period_s, progress=False)
         before = self.distances.copy()
-        state = self.simulator.state()
+        state = simulator.state()
         position = state[["centroid_x_mm", "centroid_y_mm"]].to_numpy()
         self.distances = np.hypot(*(self.goals - position).T)
         self.episode_steps += 1
@@ -295,7 +318,11 @@ class GoalReachingBatch:
         terminated = self.distances <= self.task.goal_tolerance_mm
         out_of_steps = (self.episode_steps >= self.task.max_episode_steps
                         if self.task.max_episode_steps is not None else False)
-        truncated = ~terminated & (out_of_steps | ~self.simulator.ok)
+        # as gymnasium's TimeLimit: the step budget's last step is truncated whether or not
+        # the goal was reached on it (a reached goal was not truncated here, so `make_vec` and
+        # a SyncVectorEnv of `make`'s envs differed; an audit, 2026-12); a failed solver
+        # truncates an episode that did not end at its goal
+        truncated = out_of_steps | (~terminated & ~simulator.ok)
         return rewards, terminated, truncated
 
     def observe(self, space: spaces.Box):
@@ -423,8 +450,10 @@ class StarSwimmerEnv(RobotsView, gym.Env):
 
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
         options = checked_options(options, ("goal",))
-        super().reset(seed=checked_seed(seed))
-        self.batch.reset([0], [self.np_random], goal_from_options(options, 1))
+        # every argument checked before the generator is replaced: a bad one changes nothing
+        seed, goal = checked_seed(seed), goal_from_options(options, 1)
+        super().reset(seed=seed)
+        self.batch.reset([0], [self.np_random], goal)
         return self._observe()
 
     def step(self, action):
@@ -435,7 +464,8 @@ class StarSwimmerEnv(RobotsView, gym.Env):
 
     def render(self):
         """With render_mode "rgb_array": the robot now as a (400, 400, 3) uint8 array (see
-        `GoalReachingBatch.pictures`); None without a render mode."""
+        `GoalReachingBatch.pictures`); None without a render mode. RuntimeError once closed."""
+        self.batch.check_open()  # whatever the render mode
         return self.batch.pictures([0])[0] if self.render_mode == "rgb_array" else None
 
     def close(self):
@@ -500,22 +530,31 @@ class StarSwimmerVectorEnv(RobotsView, VectorEnv):
         self.batch.reset(rows, [self._generators[b] for b in rows],
                          None if goals is None else goals[rows])
         self._autoreset[rows] = False
-        return self._observe()
+        return self._observe(mask)
 
-    def _observe(self):
+    def _observe(self, reset=None):
+        """Observations and info of every robot; `reset`: the (num_envs,) mask of the robots a
+        partial reset reset, those whose info is given (SyncVectorEnv's convention: the info
+        masks marked every robot after a partial reset; an audit, 2026-12)."""
         observation, info = self.batch.observe(self.single_observation_space)
         # gymnasium's vector info convention: every key has a "_key" mask of the robots it holds
-        info.update({f"_{key}": np.ones(self.num_envs, dtype=bool) for key in list(info)})
+        given = np.ones(self.num_envs, dtype=bool) if reset is None else reset.copy()
+        info.update({f"_{key}": given.copy() for key in list(info)})
         return observation, info
 
     def step(self, actions):
         fire = self.batch.firing_mask(actions, (self.num_envs, N_ACTUATORS))
         restarting = np.flatnonzero(self._autoreset)
         fire[restarting] = False
+        if len(restarting):
+            # they swim this period with the others (one batch), from rest unfired rather than
+            # from their finished episode's end (a failed or wild state's warnings came from a
+            # robot in no episode; an audit, 2026-12); their goals are drawn below
+            self.batch.simulator.reset(restarting)
         rewards, terminated, truncated = self.batch.step(fire)
         if len(restarting):
-            # these robots swam this period from their finished episode's end; putting them
-            # back at the start afterwards gives exactly the first observation of a new episode
+            # putting them back at the start afterwards gives exactly the first observation of
+            # a new episode
             self.batch.reset(restarting, [self._generators[b] for b in restarting])
             rewards[restarting] = 0.0
             terminated[restarting] = False
@@ -526,13 +565,14 @@ class StarSwimmerVectorEnv(RobotsView, VectorEnv):
 
     def render(self):
         """With render_mode "rgb_array": a tuple of num_envs (400, 400, 3) uint8 pictures (see
-        `GoalReachingBatch.pictures`); None without a render mode."""
+        `GoalReachingBatch.pictures`); None without a render mode. RuntimeError once closed."""
+        self.batch.check_open()  # whatever the render mode
         if self.render_mode != "rgb_array":
             return None
         return tuple(self.batch.pictures(range(self.num_envs)))
 
     def close_extras(self, **kwargs):
         """`close()`: release the robots' engine for the next environment made in this process
-        (`GoalReachingBatch.close`); a closed environment raises RuntimeError when stepped or
-        reset."""
+        (`GoalReachingBatch.close`); a closed environment raises RuntimeError when stepped,
+        reset or rendered."""
         self.batch.close()

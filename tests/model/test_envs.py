@@ -164,6 +164,95 @@ def test_make_and_make_vec_take_the_step_budget():
     envs.close()
 
 
+def test_a_goal_reached_on_the_budgets_last_step_is_terminated_and_truncated_everywhere():
+    """As gymnasium's TimeLimit: the budget's last step is truncated even when the goal is
+    reached on it. The native vector env said truncated = False there, while `make`'s wrapped
+    env and so a SyncVectorEnv of them said True (an audit, 2026-12); all three agree now, and
+    a robot reaching its goal with budget left is terminated alone. The SB3 adapter's
+    TimeLimit.truncated stays False (the episode ended at its goal)."""
+    zeros = np.zeros((2, 8), np.int8)
+    native = gym.make_vec(ENV_ID, num_envs=2, max_episode_steps=1, **SHORT)
+    synchronous = gym.make_vec(ENV_ID, num_envs=2, max_episode_steps=1,
+                               vectorization_mode="sync", **SHORT)
+    for envs in (native, synchronous):
+        envs.reset(seed=0, options={"goal": (2.0, 0.0)})
+        terminated, truncated = envs.step(zeros)[2:4]
+        assert terminated.tolist() == truncated.tolist() == [True, True]
+        envs.close()
+    roomy = StarSwimmerVectorEnv(2, max_episode_steps=2, **SHORT)
+    roomy.reset(seed=0, options={"goal": (2.0, 0.0)})
+    terminated, truncated = roomy.step(zeros)[2:4]
+    assert terminated.tolist() == [True, True] and truncated.tolist() == [False, False]
+    roomy.close()
+    adapter = SB3VectorAdapter(StarSwimmerVectorEnv(2, max_episode_steps=1, **SHORT))
+    adapter.set_options({"goal": (2.0, 0.0)})
+    adapter.reset()
+    _, _, dones, infos = adapter.step(zeros)
+    assert dones.all() and [info["TimeLimit.truncated"] for info in infos] == [False, False]
+    adapter.close()
+
+
+def test_a_refused_reset_leaves_the_generator_and_a_closed_env_says_closed_first():
+    """A reset refused for its goal had already replaced the single env's generator (an
+    audit, 2026-12); a closed vector env never reset answered "call reset() before step()",
+    and a closed env without a render mode rendered None, where the docs promise "closed"."""
+    env = StarSwimmerEnv(**SHORT)
+    env.reset(seed=1)
+    state = env.np_random.bit_generator.state
+    with pytest.raises(ValueError, match="goal"):
+        env.reset(seed=99, options={"goal": (np.nan, 0.0)})
+    assert env.np_random.bit_generator.state == state
+    env.close()
+    with pytest.raises(RuntimeError, match="closed"):
+        env.render()
+    envs = StarSwimmerVectorEnv(2, **SHORT)
+    envs.close()
+    for call in (lambda: envs.step(np.zeros((2, 8), np.int8)), envs.render):
+        with pytest.raises(RuntimeError, match="^this environment is closed"):
+            call()
+
+
+def test_a_partial_resets_info_marks_the_robots_it_reset():
+    """SyncVectorEnv's info after a reset of some robots holds those robots alone (its "_key"
+    masks); the native env marked every robot. The values themselves are every robot's."""
+    envs = StarSwimmerVectorEnv(2, **SHORT)
+    _, info = envs.reset(seed=0)
+    assert info["_goal_mm"].tolist() == [True, True]
+    _, info = envs.reset(options={"reset_mask": np.array([False, True])})
+    assert all(info[f"_{key}"].tolist() == [False, True] for key in info
+               if not key.startswith("_"))
+    reference = SyncVectorEnv([lambda: StarSwimmerEnv(**SHORT) for _ in range(2)])
+    reference.reset(seed=0)
+    _, expected = reference.reset(options={"reset_mask": np.array([False, True])})
+    assert expected["_goal_mm"].tolist() == [False, True]
+    np.testing.assert_array_equal(info["goal_mm"][1], expected["goal_mm"][1])
+    envs.close()
+    reference.close()
+
+
+def test_sb3s_per_robot_options_are_one_options_dict_or_per_robot_goals():
+    """SB3's `set_options(list)` gives one dict per robot: equal dicts holding arrays raised
+    NumPy's "truth value of an array is ambiguous" (an audit, 2026-12), and a goal per robot
+    was refused; both reach the native env now, and dicts that differ in more than their goal
+    are refused naming set_options."""
+    adapter = SB3VectorAdapter(StarSwimmerVectorEnv(2, **SHORT))
+    goal = np.array([10.0, 0.0])
+    adapter.set_options([{"goal": goal}, {"goal": goal.copy()}])
+    adapter.reset()
+    np.testing.assert_array_equal([info["goal_mm"] for info in adapter.reset_infos], [goal] * 2)
+    adapter.set_options([{"goal": (10.0, 0.0)}, {"goal": np.array([0.0, -20.0])}])
+    observation = adapter.reset()
+    np.testing.assert_array_equal([info["goal_mm"] for info in adapter.reset_infos],
+                                  [[10.0, 0.0], [0.0, -20.0]])
+    np.testing.assert_allclose(np.hypot(observation[:, 0], observation[:, 1]), [10.0, 20.0],
+                               rtol=1e-6)   # float32 observations of the robots at rest
+    adapter.set_options([{"goal": goal}, {"goal": goal, "reset_mask": np.array([True, True])}])
+    with pytest.raises(ValueError, match=r"^set_options: the robots' options may differ only in "
+                                         r"their goals"):
+        adapter.reset()
+    adapter.close()
+
+
 def actions_schedule(steps, num_envs):
     """Per step a (num_envs, 8) action: robot 0 never fires (its goal 2 mm away: it terminates
     at once), the others fire a fixed pattern (their episodes are truncated)."""
@@ -257,7 +346,11 @@ def test_bad_input_raises_value_error_and_changes_nothing():
                            (np.full((2, 8), 2), "0 and 1"),
                            (np.full((2, 8), 2.0, np.float32), "0 and 1"),
                            (np.full((2, 8), np.nan), "0 and 1"),
-                           (np.full((2, 8), "1"), "0 and 1")):
+                           (np.full((2, 8), "1"), "0 and 1"),
+                           # a TypeError and NumPy's words, naming no action (an audit, 2026-12)
+                           ([[0, 1, 0, 0, 0, 0, 0, None]] * 2, r"0 and 1 .* values \[None, None\]$"),
+                           ([[0, [1, 2]]] * 2, r"^action must be an array of shape \(2, 8\) of 0 and 1, "
+                                             r"got a ragged list$")):
         with pytest.raises(ValueError, match=words):
             envs.step(actions)
     for goal in ((np.nan, 0.0), (np.inf, 1.0), (1.0, 2.0, 3.0), (5e3, 0.0)):
@@ -344,6 +437,14 @@ def test_float_actions_of_a_policy_equal_integer_actions():
         np.testing.assert_array_equal(observation, results[0][0])
         np.testing.assert_array_equal(reward, results[0][1])
     assert results[0][0][0, 7] < 0.1 and results[0][0][1, 7] == 10.0  # A1 fired by robot 0 only
+    # Python objects 0 and 1, which MultiBinary holds, too (refused until 2026-12)
+    envs.reset(seed=5)
+    actions = np.array([[1, 1, 0, 0, 0, 0, 0, 1], [0, 0, 0, 1, 1, 1, 0, 0]], dtype=object)
+    assert actions[0] in envs.single_action_space
+    observation, reward = envs.step(actions)[:2]
+    np.testing.assert_array_equal(observation, results[0][0])
+    np.testing.assert_array_equal(reward, results[0][1])
+    envs.close()
 
 
 def red_pixels(picture):
