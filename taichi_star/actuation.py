@@ -21,7 +21,7 @@ import numpy as np
 import taichi as ti
 from taichi.lang.field import Field
 
-from .checks import is_real
+from .checks import check_not_subnormal, is_real
 from .fields import FieldStore
 from .gait import N_ACTUATORS
 
@@ -88,11 +88,15 @@ class CurvatureProfile:
             if len(values) != 4 or not all(math.isfinite(v) for v in values):
                 raise ValueError(f"CurvatureProfile.{name} must be 4 finite numbers, got "
                                  f"{given!r}")
+            # as StarParams' fields: one number before Taichi's start and 0 after otherwise
+            for index, value in enumerate(values):
+                check_not_subnormal(f"CurvatureProfile.{name}[{index}]", value)
             object.__setattr__(self, name, values)
         if not (_real_numbers([self.switch_time]) and math.isfinite(self.switch_time)
                 and self.switch_time > 0):
             raise ValueError(f"CurvatureProfile.switch_time must be a finite number > 0 s, got "
                              f"{self.switch_time!r}")
+        check_not_subnormal("CurvatureProfile.switch_time", self.switch_time)
         object.__setattr__(self, "switch_time", float(self.switch_time))
         if not self.rest_curvature > 0:
             raise ValueError(f"CurvatureProfile: K̄(0) must be > 0 1/m (the rest arc), got "

@@ -418,6 +418,17 @@ def test_a_subnormal_number_is_refused_in_a_field_and_per_actuator(value, refuse
             assert (built.alpha if "alpha" in name else built.actuator_delays[2]) == value
     with pytest.raises(ValueError, match=r"^alpha must be a real number in \[0, "):
         ts.StarParams(alpha=-5e-324)  # below the range: its message, before Taichi or after
+    # the actuators' profile too (its constants were taken as given until 2026-12)
+    profiles = {r"CurvatureProfile.cooling\[1\]": ("cooling", (94.777, value, 1.019, 4.445),
+                                                    lambda profile: profile.cooling[1]),
+                "CurvatureProfile.switch_time": ("switch_time", value,
+                                                 lambda profile: profile.switch_time)}
+    for name, (field, given, kept) in profiles.items():
+        if refused:
+            with pytest.raises(ValueError, match=f"^{name} must not be a subnormal number"):
+                ts.CurvatureProfile(**{field: given})
+        elif value > 0 or field == "cooling":  # a switch time of 0 is refused as not > 0
+            assert kept(ts.CurvatureProfile(**{field: given})) == value
 
 
 def test_a_subnormal_number_is_refused_before_and_after_taichi_starts():
