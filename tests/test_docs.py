@@ -188,3 +188,34 @@ def test_the_api_reference_lists_every_public_name_of_the_packages(module):
     missing = [name for name in public
                if name not in members and not any(entry.endswith(f".{name}") for entry in entries)]
     assert missing == [], f"{module}: not in docs/api.md: {missing}"
+
+
+def python_blocks(page: Path) -> list:
+    """The ```python blocks of a Markdown page, in order, dedented (a block may sit in a list
+    item)."""
+    import textwrap
+
+    blocks = re.findall(r"^( *)```python\n(.*?)^\1```", page.read_text(encoding="utf-8"),
+                        re.M | re.S)
+    return [textwrap.dedent(body) for _, body in blocks]
+
+
+@pytest.mark.parametrize("page", ["README.md", *sorted(
+    str(path.relative_to(REPO_ROOT)) for path in (REPO_ROOT / "docs").glob("*.md")
+    if path.name != "result_files.md")])
+def test_a_pages_python_examples_define_every_name_they_use(page):
+    """A reader copies a page's examples in order: together they compile, and every name
+    their top level reads is imported or assigned by one of them or is a builtin (the
+    numerics page's time-step check read `ts`, `params` and `duration` from nowhere: a
+    NameError; an audit of the docs' examples, 2026-12, which ran every example)."""
+    import builtins
+    import symtable
+
+    source = "\n".join(python_blocks(REPO_ROOT / page))
+    compile(source, page, "exec")
+    table = symtable.symtable(source, page, "exec")
+    unbound = sorted(symbol.get_name() for symbol in table.get_symbols()
+                     if symbol.is_referenced() and not (symbol.is_assigned()
+                                                        or symbol.is_imported())
+                     and not hasattr(builtins, symbol.get_name()))
+    assert unbound == [], f"{page}: names read but never defined: {unbound}"
