@@ -197,6 +197,10 @@ def main(argv=None):
 
     units = saltelli_units(len(box), samples, args.seed)
     values = identify.box_values(box, units)
+    # the batch's hours before its instances are built (as sweep: a million took minutes)
+    periods = [values[:, d] for d, spec in enumerate(box) if spec.name == "period"]
+    cli.tell_batch_work(args, solver_config, len(units) * len(gaits),
+                        periods=periods[0] if periods else ())
     params = identify.box_params(box, values, base, gaits)
     # each axis by its own label and columns: two elements of one field (actuator_gains[1],
     # actuator_gains[2]) shared the field's name, and one's range and column overwrote the
@@ -207,7 +211,7 @@ def main(argv=None):
         sample_table[spec.column] = values[:, d]
     sample_table.insert(0, "point", np.arange(len(units)))
     # connected first: an unreachable scheduler leaves the folder empty, and it is removed
-    with cli.executor(args, out) as executor:
+    with cli.executor(args, out) as executor, cli.batch_work_told():
         summary = run_batch(params, **cli.run_length(args), solver=solver_config,
                             arch=args.arch,
                             chunk_size=cli.chunk_size(args, len(params), executor.n_workers),
