@@ -177,8 +177,22 @@ def to_parquet(result, path, table: str = "summary") -> Path:
     at all, its `provenance` in the file's metadata (`read_provenance`). Returns the path."""
     path = file_path(path, "path of the Parquet file")
     frame = _table(result, table)
-    write_atomic(path, parquet_bytes(frame, provenance(result, frame.columns)), failure=OSError)
+    write_atomic(path, parquet_bytes(frame, provenance(result, frame.columns)), failure=OSError,
+                 sidecar=_stale_csv_sidecar(path))
     return path
+
+
+def _stale_csv_sidecar(path: Path) -> Optional[Tuple[Path, None]]:
+    """`write_atomic`'s sidecar to remove where an earlier CSV of this name left its sidecar
+    (a JSON object with the table's SHA-256): a Parquet or netCDF file written over it
+    describes itself, and the sidecar would describe a table no longer there (it stayed; an
+    audit, 2026-12). None otherwise: a JSON file of any other kind is left alone."""
+    sidecar = Path(f"{path}.json")
+    try:
+        facts = json.loads(sidecar.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return (sidecar, None) if isinstance(facts, dict) and TABLE_SHA256 in facts else None
 
 
 def to_csv(result, path, table: str = "summary") -> Path:
@@ -220,7 +234,7 @@ def to_netcdf(result, path) -> Path:
             raise OSError(error.errno, f"netCDF4 reported: {error.strerror}; the folder is "
                                        f"writable, so the disk may be full") from None
         data = scratch.read_bytes()
-    write_atomic(path, data, failure=OSError)
+    write_atomic(path, data, failure=OSError, sidecar=_stale_csv_sidecar(path))
     return path
 
 
@@ -676,7 +690,7 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
         finally:
             plt.close(fig)
         data = scratch.read_bytes()
-    write_atomic(path, data, failure=OSError)
+    write_atomic(path, data, failure=OSError, sidecar=_stale_csv_sidecar(path))
     return path
 
 

@@ -278,7 +278,7 @@ def require_folder(path: Path, failure: Callable[[str], Exception] = OSError):
 
 
 def write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception]] = None,
-                 sidecar: Optional[Tuple[Path, bytes]] = None):
+                 sidecar: Optional[Tuple[Path, Optional[bytes]]] = None):
     """Write `data` to `path` whole or not at all: into a temporary file beside it, flushed to
     disk, then renamed over it; a kill or a full disk leaves any previous file untouched. With
     `failure`, an OSError (a full disk) is raised as `failure(reason)` instead, the reason one
@@ -289,19 +289,23 @@ def write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception]
     temporary files first, then the previous sidecar is moved aside, the file renamed into
     place (the previous sidecar put back if that fails) and the sidecar after it. A full disk
     then leaves both previous files as they were, and a kill at worst the new file without a
-    sidecar, never beside the previous one's (which describes another result)."""
+    sidecar, never beside the previous one's (which describes another result). A sidecar of
+    data None is the previous file's to remove: the new file describes itself (a Parquet file
+    written over an earlier CSV's name)."""
     with _write_lock(Path(path)):
         _write_atomic(path, data, failure, sidecar)
 
 
 def _write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception]],
-                  sidecar: Optional[Tuple[Path, bytes]]):
+                  sidecar: Optional[Tuple[Path, Optional[bytes]]]):
     """`write_atomic`, its file's lock held."""
-    targets = [(Path(path), data)] + ([(Path(sidecar[0]), sidecar[1])] if sidecar else [])
+    writes_sidecar = sidecar is not None and sidecar[1] is not None
+    targets = [(Path(path), data)] + ([(Path(sidecar[0]), sidecar[1])] if writes_sidecar else [])
     writer = f"{os.getpid()}-{threading.get_ident()}"
     temporaries = [target.with_name(f".{target.name}{TEMPORARY_MARK}{writer}")
                    for target, _ in targets]
-    previous = temporaries[-1].with_name(f"{temporaries[-1].name}.previous")
+    previous = (Path(sidecar[0]) if sidecar else targets[0][0]).with_name(
+        f".{Path(sidecar[0] if sidecar else path).name}{TEMPORARY_MARK}{writer}.previous")
     if failure is not None:
         for target, _ in targets:
             require_folder(target, failure)
@@ -317,17 +321,17 @@ def _write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception
                 os.fsync(handle.fileno())
         current = targets[0][0]  # moving the previous sidecar aside is part of the table's write
         try:
-            if sidecar and os.path.lexists(targets[1][0]):
-                os.replace(targets[1][0], previous)
+            if sidecar and os.path.lexists(sidecar[0]):
+                os.replace(sidecar[0], previous)
             os.replace(temporaries[0], current)
         except BaseException:
             # Ctrl-C too, which Python raises after the system call in progress: the table's
             # temporary still there says its rename did not happen, and the previous table
             # keeps its sidecar; renamed, the new table stands without one
             if os.path.lexists(temporaries[0]) and os.path.lexists(previous):
-                os.replace(previous, targets[1][0])
+                os.replace(previous, sidecar[0])
             raise
-        if sidecar:
+        if writes_sidecar:
             current = targets[1][0]
             os.replace(temporaries[1], current)
     except OSError as error:

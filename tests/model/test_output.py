@@ -112,6 +112,16 @@ def test_csv_parquet_and_netcdf_round_trip_with_the_same_provenance(recorded, tm
     for name in ("table.parquet", "table.nc"):
         written = recorded.to_csv(tmp_path / name)
         assert read_provenance(written)["parameters"] == facts[0]["parameters"]
+    # and a Parquet or netCDF file written over such a CSV takes its sidecar away (it stayed,
+    # describing a table no longer there); a JSON file of another kind beside one is left
+    recorded.to_parquet(tmp_path / "table.parquet")
+    recorded.to_netcdf(tmp_path / "table.nc")
+    assert not (tmp_path / "table.parquet.json").exists()
+    assert not (tmp_path / "table.nc.json").exists()
+    assert read_provenance(tmp_path / "table.parquet")["parameters"] == facts[0]["parameters"]
+    (tmp_path / "notes.parquet.json").write_text('{"mine": true}')
+    recorded.to_parquet(tmp_path / "notes.parquet")
+    assert json.loads((tmp_path / "notes.parquet.json").read_text()) == {"mine": True}
 
 
 def test_xarray_holds_the_tables_with_units_and_survives_netcdf(recorded, tmp_path):

@@ -227,6 +227,32 @@ def test_result_files_on_a_full_disk_or_in_a_missing_folder_name_the_file(result
         second.to_csv(tmp_path / "a_file" / "r.csv")
 
 
+def test_a_parquet_file_over_a_csv_takes_its_sidecar_away_whole_or_not_at_all(results, tmp_path,
+                                                                             monkeypatch):
+    """A Parquet file written over a CSV's name removes the CSV's sidecar (it describes a table
+    no longer there) by the pair's own steps: the sidecar moved aside, the file renamed into
+    place, the moved sidecar then deleted. A failed rename puts the sidecar back beside the
+    CSV still there, a rename done leaves the Parquet file alone."""
+    pytest.importorskip("pyarrow")
+    first, second = results
+    path = first.to_csv(tmp_path / "r.data")
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    replace = provenance.os.replace
+
+    def failing_rename(source, target):
+        if Path(target).name == "r.data":
+            raise OSError(errno.EIO, "Input/output error")
+        replace(source, target)
+    monkeypatch.setattr(provenance.os, "replace", failing_rename)
+    with pytest.raises(OSError, match=r"^cannot write r.data \(Input/output error\)$"):
+        second.to_parquet(path)
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+    monkeypatch.setattr(provenance.os, "replace", replace)
+    second.to_parquet(path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.data"]
+    assert read_provenance(path)["parameters"]["gait"] == "A1+A3"  # the second run's
+
+
 def test_a_csv_and_its_sidecar_are_replaced_as_a_pair(results, tmp_path, monkeypatch):
     """The table was renamed into place before its provenance was even made, and a kill
     between the two left the new table beside the previous run's sidecar (an audit: a CSV of
