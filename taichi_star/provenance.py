@@ -304,8 +304,9 @@ def _write_atomic(path, data: bytes, failure: Optional[Callable[[str], Exception
     writer = f"{os.getpid()}-{threading.get_ident()}"
     temporaries = [target.with_name(f".{target.name}{TEMPORARY_MARK}{writer}")
                    for target, _ in targets]
-    previous = (Path(sidecar[0]) if sidecar else targets[0][0]).with_name(
-        f".{Path(sidecar[0] if sidecar else path).name}{TEMPORARY_MARK}{writer}.previous")
+    # where the previous sidecar waits while the file is renamed (named after the sidecar)
+    aside = Path(sidecar[0]) if sidecar else Path(path)
+    previous = aside.with_name(f".{aside.name}{TEMPORARY_MARK}{writer}.previous")
     if failure is not None:
         for target, _ in targets:
             require_folder(target, failure)
