@@ -507,12 +507,21 @@ def check_trials_cover(trials, window: Tuple[int, int], window_text: str,
                        flag: str = "--validate-cycles"):
     """StudyArgumentError naming `flag` (the window's: by default --validate-cycles, the later
     of the two windows) unless every measured trial (`identification.Trial`s) covers the
-    window."""
+    window from every phase of a period: the phase fitted on the earlier window may be any,
+    and a window the trial covered only for early phases failed after the whole fit (an
+    audit, 2026-12: A1+A3's cycles 13-15 only up to 0.21 s)."""
     for trial in trials.values():
         try:
-            identification.latest_phase(trial, window)
+            latest = identification.latest_phase(trial, window)
         except ValueError as error:
             raise cli.StudyArgumentError(f"{flag} {window_text}: {error}") from None
+        period, end = trial.path.period_s, trial.path.t_s[-1]
+        if latest < period:
+            raise cli.StudyArgumentError(
+                f"{flag} {window_text}: the {trial.gait} trial ({end:g} s) covers these cycles "
+                f"only from a phase up to {latest:.3g} s, not from every phase of its "
+                f"{period:g}-s period; its windows end at cycle {math.floor(end / period) - 1} "
+                f"at the latest")
 
 
 def evaluate_points(box: Sequence[ParameterRange], unit_points, base: StarParams,

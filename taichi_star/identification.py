@@ -11,10 +11,12 @@ axes are not robot axes, so headings are never compared.
 
 - The simulation starts from rest with a pulse at t = 0: its cycle k starts at (k − 1)·T.
 - The video does not start at a pulse: a trial's pulses fire at φ + (k − 1)·T with an unknown
-  phase φ ∈ [0, T), a nuisance parameter fitted per trial (`align_phase`): the φ that minimises
+  phase φ ∈ [0, T] (both ends: φ = T is φ = 0 on the window a cycle later), a nuisance
+  parameter fitted per trial (`align_phase`): the φ that minimises
   the squared difference between the measured and simulated cycle curves over the cycle
-  window, found on a grid of `PHASE_GRID` phases, then refined by golden-section search in the
-  grid cell on either side of the best grid point.
+  window, found on a grid of `PHASE_GRID` phases (about two per video frame), then refined by
+  golden-section search in the grid cells on either side of each of the grid's
+  `PHASE_VALLEYS` lowest local minima.
 - Residuals are in units of the measurement's own spread across cycles: σ = the root mean
   over τ of the variance of the measured d_k(τ) across the window's cycles (ddof = 1), at least
   `DISPLACEMENT_FLOOR_MM` (the tracking noise; the floor alone for a one-cycle window).
@@ -32,7 +34,7 @@ window is `TRAINING_CYCLES` = cycles 1–3; `VALIDATION_CYCLES` (4–6) is held 
     >>> trials = identification.measured_trials()                 # the five paper gaits
     >>> params = [StarParams(gait=g) for g in trials]
     >>> result = simulate(params, 3 * 3.15, record_interval_s=0.01)
-    >>> runs = identification.simulated_runs(result.trajectory, list(trials), [3.15] * 5)
+    >>> runs = identification.result_runs(result, params)       # None for a failed robot
     >>> table = identification.trajectory_objective(dict(zip(trials, runs)), trials)
     >>> identification.objective_of(table)      # ≈ 60 for the paper's model on cycles 1-3
 
@@ -56,8 +58,13 @@ to the sensitivities' own accuracy:
   those of the records. The term is zero, and left out, when σ is at its floor
   `DISPLACEMENT_FLOOR_MM` (always on a one-cycle window), when the phase is given (held), at
   the edge of its range (0 or `latest_phase`), where the bound holds it, and where the fitted
-  phase sits at a kink of the interpolated track, which holds it too (`PHASE_KINK_RATIO`; on
-  the measured trials the fitted phase often lies on a frame time). On the synthetic
+  phase sits at a kink of the interpolated track (`PHASE_KINK_RATIO`; on the measured trials
+  the fitted phase often lies on a frame time). There the re-fitted objective is in general
+  differentiable from one side only (the phase stays on the kink for θ moved one way and
+  slides off it the other way), and the gradient returned is that of the phase held, the
+  side where it stays: an audit (2026-12, with the earlier phase search) measured the paper
+  model's A1 α derivative on cycles 1–3 2.2 % off the central difference there and within
+  2·10⁻⁴ of the one-sided one. On the synthetic
   three-cycle window of tests/unit/test_identification_gradient.py it is 14–40 % of the
   gradient, which then equals central differences of the re-fitted objective.
 
@@ -86,7 +93,7 @@ from .gait import Gait
 
 # every public name: docs/api.md documents the whole module
 __all__ = ["TRAINING_CYCLES", "VALIDATION_CYCLES", "SAMPLES_PER_CYCLE", "MAX_CYCLE",
-           "MAX_SAMPLES_PER_CYCLE", "PHASE_GRID", "DISPLACEMENT_FLOOR_MM", "PHASE_STEP_S",
+           "MAX_SAMPLES_PER_CYCLE", "PHASE_GRID", "PHASE_VALLEYS", "DISPLACEMENT_FLOOR_MM", "PHASE_STEP_S",
            "PHASE_KINK_RATIO", "GOLDEN_ITERATIONS", "UNCERTAINTY_RCOND", "UNCERTAINTY_SHARE",
            "UNCERTAINTY_COLUMNS", "TRIAL_COLUMNS", "CentroidPath", "Trial", "SimulatedRun",
            "TrialFit", "measured_trial", "check_window", "check_samples", "tau_grid",
@@ -112,8 +119,16 @@ MAX_SAMPLES_PER_CYCLE = 1024
 """The most points of a cycle curve (`samples`): 5 times the video frames of a 3.15-s cycle
 (59.94 frames/s: 189; between frames the track is linear, so more points add nothing). With
 `MAX_CYCLE` a window's curves hold at most ~1e6 points (16 MB), a phase fit seconds."""
-PHASE_GRID = 64
-"""Phases of the grid search of `align_phase` (the refinement then resolves ~1e-6 s)."""
+PHASE_GRID = 384
+"""Phases of the grid search of `align_phase`, about two per video frame of the paper's period
+(59.94 frames/s × 3.15 s = 189 frames): the misfit ripples from frame to frame, and a grid of
+64 (until 2026-12) missed valleys narrower than its cells (an audit: the `identified` preset's
+A1 on cycles 1–3 fitted 2.3 % above its best phase, 0.81 s away). Over 160 windows of the
+measured tracks fitted to one another, the 64-point search was up to 19 % above the best of
+20,001 phases, one of 192 points up to 1.9 %, this one at most 0.09 % (about 20 ms a fit)."""
+PHASE_VALLEYS = 4
+"""The lowest local minima of the phase grid that `align_phase` refines, the best of them
+returned: the valley of the best grid point is not always the deepest."""
 DISPLACEMENT_FLOOR_MM = 0.05
 """Smallest spread σ, mm: the centroid tracking jitters by a few hundredths of a millimetre
 from frame to frame (the median frame-to-frame speed change of the recordings is 2–2.7 mm/s,
@@ -190,11 +205,20 @@ class CentroidPath:
 @dataclass(frozen=True)
 class Trial:
     """A measured trial: its gait (canonical name), its path and the paper's direction sign
-    (+1 forward, −1 reverse)."""
+    (+1 forward, −1 reverse). The path starts at t = 0 s, the time its phases are counted from
+    (a track starting later was compared from 0 all the same, and refused only as too short;
+    an audit, 2026-12): ValueError otherwise."""
 
     gait: str
     path: CentroidPath
     paper_sign: float
+
+    def __post_init__(self):
+        if not isinstance(self.path, CentroidPath):
+            raise ValueError(f"path must be a CentroidPath, got {type(self.path).__name__}")
+        if self.path.t_s[0] != 0.0:
+            raise ValueError(f"the {self.gait} trial's path must start at t = 0 s (its phases "
+                             f"count from there), got t_s[0] = {self.path.t_s[0]:g} s")
 
 
 @dataclass(frozen=True)
@@ -302,22 +326,42 @@ def _misfit(simulated_curves: np.ndarray, trial: Trial, phase_s, cycles, samples
 def align_phase(simulated_curves: np.ndarray, trial: Trial, cycles=TRAINING_CYCLES,
                 samples: int = SAMPLES_PER_CYCLE, grid: int = PHASE_GRID) -> float:
     """The trial's pulse phase φ (s) in [0, `latest_phase`] minimising the squared difference
-    between its cycle curves and `simulated_curves` (n_cycles, samples) over `cycles`: the best
-    of `grid` phases, refined by golden-section search over the grid cells on either side of it
-    (the misfit is smooth in φ between video frames: linear interpolation of the path).
+    between its cycle curves and `simulated_curves` (n_cycles, samples) over `cycles`: the
+    `PHASE_VALLEYS` lowest local minima of a grid of `grid` phases, each refined by
+    golden-section search over the grid cells on either side of it (the misfit is smooth in φ
+    between video frames: linear interpolation of the path), the best of them (or of the grid)
+    returned.
 
-    A local search: where the misfit has several valleys within those cells (the frames make
-    it ripple), the search may settle in a shallower one and the grid phase is returned, and a
-    valley narrower than a grid cell can be missed. An audit (2026-12) measured the phase's
-    misfit 0.05 % and 0.1 % above the best in its neighbourhood for two of the paper model's
-    ten gait windows, and 1–2 % for 2 of 40 synthetic shifted tracks; the objective is that of
-    the phase returned."""
+    Still a search, not a proof: a valley narrower than a grid cell, or deeper than the
+    refined ones but higher on the grid, can be missed (`PHASE_GRID` gives the figures: at
+    most 0.09 % above the best of 20,001 phases over 160 windows, the earlier 64-point search
+    with one refinement up to 19 %)."""
     latest = latest_phase(trial, cycles)
-    phases = np.linspace(0.0, latest, grid, endpoint=False) if latest > 0 else np.zeros(1)
-    misfits = [_misfit(simulated_curves, trial, phase, cycles, samples) for phase in phases]
-    best = int(np.argmin(misfits))
+    if not latest > 0:
+        return 0.0
+    phases = np.linspace(0.0, latest, grid, endpoint=False)
+    misfits = np.array([_misfit(simulated_curves, trial, phase, cycles, samples)
+                        for phase in phases])
+    # the grid's local minima (an end where its one neighbour is not lower; a plateau once)
+    minima = np.flatnonzero(np.r_[True, misfits[1:] < misfits[:-1]]
+                            & np.r_[misfits[:-1] <= misfits[1:], True])
     step = latest / grid
-    low, high = max(0.0, phases[best] - step), min(latest, phases[best] + step)
+    best = int(np.argmin(misfits))
+    best_phase, best_misfit = phases[best], misfits[best]
+    for index in minima[np.argsort(misfits[minima], kind="stable")][:PHASE_VALLEYS]:
+        phase, misfit = _refined_phase(simulated_curves, trial, cycles, samples,
+                                       max(0.0, phases[index] - step),
+                                       min(latest, phases[index] + step))
+        # a grid point itself where no refinement beats it (an exact match on the grid)
+        if misfit < best_misfit:
+            best_phase, best_misfit = phase, misfit
+    return float(best_phase)
+
+
+def _refined_phase(simulated_curves: np.ndarray, trial: Trial, cycles, samples, low: float,
+                   high: float) -> Tuple[float, float]:
+    """(phase s, misfit mm²) of a golden-section search of `GOLDEN_ITERATIONS` steps for the
+    misfit's minimum over [low, high] s."""
     ratio = (math.sqrt(5.0) - 1.0) / 2.0
     a, b = high - ratio * (high - low), low + ratio * (high - low)
     fa = _misfit(simulated_curves, trial, a, cycles, samples)
@@ -331,9 +375,7 @@ def align_phase(simulated_curves: np.ndarray, trial: Trial, cycles=TRAINING_CYCL
             low, a, fa = a, b, fb
             b = low + ratio * (high - low)
             fb = _misfit(simulated_curves, trial, b, cycles, samples)
-    refined, refined_misfit = (a, fa) if fa <= fb else (b, fb)
-    # the grid point itself when the refinement does not beat it (an exact match on the grid)
-    return float(refined) if refined_misfit < misfits[best] else float(phases[best])
+    return (float(a), fa) if fa <= fb else (float(b), fb)
 
 
 def trial_fit(simulated: SimulatedRun, trial: Trial, cycles=TRAINING_CYCLES,
@@ -341,7 +383,9 @@ def trial_fit(simulated: SimulatedRun, trial: Trial, cycles=TRAINING_CYCLES,
     """Compare one simulated trial with the measured one over the cycle window (module
     docstring). `phase_s`: the trial's phase, fitted here when None (`align_phase`); give the
     phase fitted on the training window to validate on later cycles. ValueError for gaits that
-    differ or a window the simulation or the trial does not cover."""
+    differ or a window the simulation or the trial does not cover. Each path's cycles are its
+    own period's: a simulation at another period than the trial's (a fitted period) is compared
+    sample for sample on the cycle's fraction, its curves' shape, not at equal times."""
     first, last = check_window(cycles)
     samples = check_samples(samples)
     if not isinstance(simulated, SimulatedRun):
@@ -380,7 +424,10 @@ def trajectory_objective(simulated: Mapping[str, SimulatedRun], trials: Mapping[
                          phases: Optional[Mapping[str, float]] = None) -> pd.DataFrame:
     """`trial_fit` of every gait of `simulated` against its trial: one row per gait
     (`TRIAL_COLUMNS`); the objective of the whole set is the mean of the `objective` column
-    (`objective_of`). `phases`: gait -> phase (s) to use instead of fitting it."""
+    (`objective_of`). `phases`: gait -> phase (s) to use instead of fitting it. A failed run
+    (None, as `result_runs` gives it) scores an objective of inf, its other numbers NaN (it
+    was a ValueError about its type)."""
+    first, last = check_window(cycles)
     rows = []
     for gait, run in simulated.items():
         if gait not in trials:
@@ -388,14 +435,20 @@ def trajectory_objective(simulated: Mapping[str, SimulatedRun], trials: Mapping[
         if phases is not None and gait not in phases:
             raise ValueError(f"phases has no phase for gait {gait!r}; phases: "
                              f"{', '.join(phases)}")
+        if run is None:
+            rows.append({**dict.fromkeys(TRIAL_COLUMNS, math.nan), "gait": gait,
+                         "first_cycle": first, "last_cycle": last, "objective": math.inf,
+                         "direction_matches": False})
+            continue
         phase = None if phases is None else phases[gait]
         rows.append(dataclasses.asdict(trial_fit(run, trials[gait], cycles, samples, phase)))
     return pd.DataFrame(rows, columns=TRIAL_COLUMNS)
 
 
 def objective_of(table: pd.DataFrame) -> float:
-    """The set's objective: the mean of the gaits' objectives (inf if any is not finite)."""
-    value = float(table["objective"].mean())
+    """The set's objective: the mean of the gaits' objectives (inf if any is not finite: a
+    NaN among finite ones was skipped by the mean until 2026-12)."""
+    value = float(table["objective"].mean(skipna=False))
     return value if math.isfinite(value) else math.inf
 
 

@@ -173,6 +173,12 @@ def test_the_history_plot_draws_both_counts_from_the_csv(tmp_path, monkeypatch):
     (["--train-cycles", "1:2", "--validate-cycles", "2:3"], "--validate-cycles 2:3: must start "
                                                              "after"),
     (["--validate-cycles", "4:40"], "shorter than cycles up to 40"),
+    # covered from early phases only: the fit's phase could lie beyond (it failed after the
+    # whole fit)
+    (["--validate-cycles", "5:7"], "--validate-cycles 5:7: the A1+A2 trial (22.4891 s) covers "
+                                   "these cycles only from a phase up to 0.439 s, not from "
+                                   "every phase of its 3.15-s period; its windows end at cycle "
+                                   "6 at the latest"),
     # the window's bound (MAX_CYCLE 1000) named; at the bound the window parses and the
     # recordings' length refuses it
     (["--validate-cycles", "4:1001"], "1 <= FIRST <= LAST <= 1000, got '4:1001'"),

@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 import taichi_star
-from taichi_star import SolverConfig, StarParams, experiment
+from taichi_star import SolverConfig, StarParams, experiment, identification
 from taichi_star.batch import RunStoreError
 from taichi_star.experiment import (EXPERIMENT_PERIOD_S, PAPER_GAITS)
 
@@ -423,3 +423,14 @@ def test_a_sobol_batch_tells_its_hours_once_before_its_instances_are_built(tmp_p
                     f"robot-steps: about {steps / 5e4 / 3600:.3g} h at 50000 robot-steps/s (on "
                     f"a 2-core CPU; a GPU or more cores run faster)"]
     assert built == [told]
+
+
+def test_a_window_must_be_covered_from_every_phase_of_a_period():
+    """A1+A2's track (22.49 s, 7.14 periods of 3.15 s) covers cycles 4-6 from every phase
+    and cycles 5-7 only from phases up to 0.44 s: the first accepted, the second refused
+    naming the gait and the last window that works."""
+    trials = identification.measured_trials(["A1+A2"])
+    identify.check_trials_cover(trials, (4, 6), "4:6")
+    with pytest.raises(cli.StudyArgumentError, match=r"^--validate-cycles 5:7: the A1\+A2 "
+                                                     r"trial .* end at cycle 6 at the latest$"):
+        identify.check_trials_cover(trials, (5, 7), "5:7")

@@ -136,6 +136,12 @@ def test_a_per_actuator_axis_is_informed_only_by_gaits_that_fire_it():
     (["--candidates", "/nonexistent.csv"], "--candidates /nonexistent.csv: cannot read it"),
     (["--gaits", "A1+A6"], "--gaits A1+A6: not measured"),
     (["--validate-cycles", "4:40"], "shorter than cycles up to 40"),
+    # covered from early phases only: the fit's phase could lie beyond (it failed after the
+    # whole fit)
+    (["--validate-cycles", "5:7"], "--validate-cycles 5:7: the A1+A2 trial (22.4891 s) covers "
+                                   "these cycles only from a phase up to 0.439 s, not from "
+                                   "every phase of its 3.15-s period; its windows end at cycle "
+                                   "6 at the latest"),
     (["--reassess"], "--reassess: give --out, a folder of an earlier run (with done/)"),
     (["--reassess", "--resume"], "--resume and --reassess: give one"),
 ])

@@ -122,7 +122,13 @@ def test_gradient_on_three_cycles_follows_the_refitted_phase(forward_sign):
     smaller one is swamped by the refit's own precision (~1e-9 s × ∂J/∂φ ≈ 16 / step); at 1e-3
     the quotients' truncation was ~1e-6 of the largest component (measured 6e-7, 2e-6 and
     5.6e-6 absolute on -6.5, -4.7 and -0.061). Backwards (forward_sign −1) the wrong-way
-    residual ρ = max(0, −sΔ)/σ(φ) moves with the phase too."""
+    residual ρ = max(0, −sΔ)/σ(φ) moves with the phase too, and the objective (6,609) is
+    dominated by it: there both sides carry noise of ~1e-5 of the largest component, the
+    quotients the re-fitted phases' (1e-3 and 3e-4 steps differ by 2.4e-5 relative) and the
+    gradient the phase's second difference at PHASE_STEP_S (two searches' phases 9e-10 s apart
+    moved it 1.7e-5): measured 1.7e-5 of the largest component with the 192-point phase
+    search, 5.8e-6 with the 64-point one: 5e-5 there, 1e-5 forwards (leaving the phase's
+    motion out misses by 14-40 %, the assertion before)."""
     trials = {"A1+A2": measured_trial()}
     theta = (2.5, 1.2, 0.1)
     run, derivative = model_path(theta, forward_sign)
@@ -136,7 +142,9 @@ def test_gradient_on_three_cycles_follows_the_refitted_phase(forward_sign):
     assert np.all(np.abs(gradient - held) > 0.1 * np.abs(gradient))
     assert (table["direction_residual"].iloc[0] > 0) == (forward_sign < 0)
     expected = central_difference(theta, trials, (1, 3), forward_sign=forward_sign, step=1e-3)
-    np.testing.assert_allclose(gradient, expected, rtol=0, atol=1e-5 * np.abs(expected).max())
+    tolerance = 1e-5 if forward_sign > 0 else 5e-5
+    np.testing.assert_allclose(gradient, expected, rtol=0,
+                               atol=tolerance * np.abs(expected).max())
 
 
 def measured_track_run(theta, first_frame=30):
