@@ -180,13 +180,19 @@ def read_primitive_model(path, period: float, dt: float,
                   f"this run's")
             recorded = None
         own = provenance.plain(base)
+        if isinstance(recorded, dict):
+            # a field the sidecar does not record came after the table: the robot had its
+            # default, which keeps the earlier robots as they were (it was skipped, so
+            # --set wake_coupling=5 planned with another robot's steps; an audit, 2026-12)
+            recorded = {**provenance.plain(StarParams()), **recorded}
         differing = [name for name in own if name != "gait" and isinstance(recorded, dict)
-                     and name in recorded and recorded[name] != own[name]]
+                     and recorded.get(name) != own[name]]
         if differing:
             raise cli.StudyArgumentError(
                 f"--primitives {path}: measured on a robot whose {differing[0]} is "
                 f"{recorded[differing[0]]}, this run's {own[differing[0]]} ({len(differing)} "
-                f"field(s) differ; its sidecar records them): measure this robot's")
+                f"field(s) differ; its sidecar records them, a field it does not record at its "
+                f"default): measure this robot's")
     try:
         return PrimitiveModel.from_table(table)
     except ValueError as error:

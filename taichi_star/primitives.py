@@ -164,6 +164,7 @@ def class_symmetries() -> GaitSources:
 def transform_vectors(vectors: np.ndarray, rotation: int, reflect: bool) -> np.ndarray:
     """(..., 2) body-frame vectors under the symmetry of `Gait.transform`: mirrored across the
     x axis (y -> -y) when `reflect`, then turned by rotation·45°."""
+    _check_symmetry(rotation, reflect)
     mirrored = vectors * np.array([1.0, -1.0]) if reflect else vectors
     return rotate(mirrored, math.radians(45.0 * rotation))
 
@@ -174,15 +175,40 @@ def transform_direction(direction_deg: float, rotation: int, reflect: bool) -> f
     angle, not through cos and sin, so that a direction on a 45° multiple stays exact (through
     them, 20 rows of the gaits study's gaits.csv changed in their tenth digit: a direction 0
     read -2.8e-14)."""
+    _check_symmetry(rotation, reflect)
     angle = (-direction_deg if reflect else direction_deg) + 45.0 * rotation
     return float(wrap_degrees(angle, include_180=True))
+
+
+def _check_symmetry(rotation, reflect):
+    """ValueError naming the argument unless `rotation` is a whole number of 45° turns and
+    `reflect` True or False, as `Gait.transform` takes them (a rotation of 1.5 gave a direction
+    no symmetry gives, and reflect="no" reflected; an audit, 2026-12)."""
+    if not is_whole(rotation):
+        raise ValueError(f"rotation must be an integer (turns of 45°), got {rotation!r}")
+    check_flag("reflect", reflect)
 
 
 def transform_rotation(rotation_deg, reflect: bool):
     """Image of a body rotation (counter-clockwise, degrees; a number or an array of them)
     under the symmetry of `Gait.transform`: a rotation of the gait leaves it unchanged, a
     reflection reverses it."""
+    check_flag("reflect", reflect)
     return -rotation_deg if reflect else rotation_deg
+
+
+def _step_direction(step_mm) -> float:
+    """Direction (degrees from +x, in (-180, 180]) of a body-frame step (2,) mm; NaN below
+    ZERO_STEP_MM. A side component within 1e-9 of the step's length is the rounding of a gait
+    symmetric about the x axis (its mirror image is itself) and counts as 0, so that such a
+    gait's direction is 0 or 180, never -180 (five gaits along -x read -180 or 180 by the
+    sign of their rounding; an audit, 2026-12)."""
+    x, y = float(step_mm[0]), float(step_mm[1])
+    length = math.hypot(x, y)
+    if length < ZERO_STEP_MM:
+        return math.nan
+    side = 0.0 if abs(y) <= 1e-9 * length else y
+    return float(wrap_degrees(math.degrees(math.atan2(side, x)), include_180=True))
 
 
 def cycle_displacements(trajectory: pd.DataFrame, period: float) -> pd.DataFrame:
@@ -261,8 +287,7 @@ def summarise_cycles(cycles: pd.DataFrame, first_cycle: int,
             "step_x_std_mm": step[:, 0].std(ddof=1) if len(step) > 1 else math.nan,
             "step_y_std_mm": step[:, 1].std(ddof=1) if len(step) > 1 else math.nan,
             "step_mm": length,
-            "direction_deg": (math.degrees(math.atan2(mean[1], mean[0]))
-                              if length >= ZERO_STEP_MM else math.nan),
+            "direction_deg": _step_direction(mean),
             "turn_deg": turn.mean(),
             "turn_std_deg": turn.std(ddof=1) if len(turn) > 1 else math.nan,
             "first_cycle": first_cycle, "cycles": int(cycles["cycle"].max()) + 1,

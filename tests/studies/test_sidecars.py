@@ -8,6 +8,7 @@ elasticities --sobol: refused, in test_cli_input_files.py)."""
 import json
 import re
 import types
+from pathlib import Path
 
 import pandas as pd
 import pytest
@@ -87,6 +88,24 @@ def test_simd_titles_its_plot_from_the_tables_sidecar(tmp_path, monkeypatch):
 
 
 # --------------------------------------------------------------------------- the user's tables
+
+def test_plan_compares_a_field_its_sidecar_does_not_record_at_its_default(tmp_path):
+    """The committed table's sidecar predates wake_coupling and four other fields: they were
+    skipped, so --set wake_coupling=5 (A1+A3's first step 31 % shorter) planned with the
+    paper robot's steps without a word (an audit, 2026-12). A field the sidecar does not
+    record is compared at its default: the paper robot passes, the other is refused naming
+    the field."""
+    recorded = json.loads(Path(f"{COMMITTED_PRIMITIVES}.json").read_text())["model"]["params"]
+    assert "wake_coupling" not in recorded
+    paper = StarParams.preset("paper")
+    assert len(plan.read_primitive_model(COMMITTED_PRIMITIVES, 3.15, 1e-3, base=paper).gaits) \
+        == 256
+    with pytest.raises(cli.StudyArgumentError, match=re.escape(
+            "measured on a robot whose wake_coupling is 0.0, this run's 5.0 (1 field(s) "
+            "differ")):
+        plan.read_primitive_model(COMMITTED_PRIMITIVES, 3.15, 1e-3,
+                                  base=paper.replace(wake_coupling=5.0))
+
 
 def test_plan_compares_the_robot_only_of_a_sidecar_that_describes_the_primitives(tmp_path,
                                                                                  capsys):

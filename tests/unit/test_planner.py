@@ -3,12 +3,15 @@ the body frame, open-loop plans to a lattice goal."""
 
 import math
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
 from taichi_star.planner import ALIGNED_DEG, PrimitiveModel
+
+COMMITTED_PRIMITIVES = Path(__file__).resolve().parents[2] / "results" / "primitives.csv"
 
 
 def square_model(turn_deg=0.0):
@@ -120,6 +123,30 @@ def test_next_streak_counts_a_gait_or_one_stepping_the_same_way_fired_in_a_row()
     np.testing.assert_array_equal(model.next_streak(last, streak, choice),
                                   [4, 4, 1, 0, 1, 3, 1, 1])
     assert ALIGNED_DEG == 45.0
+
+
+def test_gaits_the_symmetry_puts_exactly_45_degrees_apart_continue_the_streak():
+    """Pairs exactly ALIGNED_DEG apart by the robot's symmetry measure that angle to the
+    rounding of their steps, whose sign decided (half the 3,072 pairs each way, mirror images
+    unlike; A1+A2 then A2+A3, which the robot swims 9.4 mm a cycle, was predicted at 4.97 mm:
+    an audit, 2026-12): the angle itself is within, so every such pair of the committed table
+    continues, mirror images alike, and 45° plus the slack's worth more does not."""
+    table = pd.read_csv(COMMITTED_PRIMITIVES)
+    model = PrimitiveModel.from_table(table)
+    index = {gait: model.gaits.index(gait) for gait in model.gaits}
+    for first, second in (("A1+A2", "A2+A3"), ("A1+A7", "A6+A8"), ("A1+A3", "A2+A4"),
+                          ("A1+A8", "A7+A8")):
+        before, after = model.steps_mm[index[first]], model.steps_mm[index[second]]
+        angle = math.degrees(math.acos(before @ after / np.hypot(*before) / np.hypot(*after)))
+        assert angle == pytest.approx(45.0, abs=1e-6), (first, second)
+        assert model.next_streak(np.array([index[first]]), np.array([3]),
+                                 np.array([index[second]])).tolist() == [4], (first, second)
+    # just outside: a step turned by 45° and a relative 1e-8 more starts a new streak
+    turned = math.radians(45.0) * (1 + 1e-8)
+    steps = [(10.0, 0.0), (10 * math.cos(turned), 10 * math.sin(turned))]
+    outside = PrimitiveModel(["A1", "A2"], steps, [0.0, 0.0])
+    a1, a2 = outside.gaits.index("A1"), outside.gaits.index("A2")
+    assert outside.next_streak(np.array([a1]), np.array([3]), np.array([a2])).tolist() == [1]
 
 
 def test_plan_and_choice_use_the_glide_of_the_streak():
@@ -347,13 +374,52 @@ def test_tolerance_boundaries_of_the_choice():
 
 
 def test_a_primitive_table_keeps_only_ok_and_finite_rows():
+    """A failed gait is left out without a word; an ok one without a steady step or turn (a
+    measurement too short for one) with a warning naming it (it was silent: an audit,
+    2026-12)."""
     table = pd.DataFrame({"gait": ["A1", "A2", "A3", "A4"],
                           "step_x_mm": [10.0, 5.0, np.nan, 3.0], "step_y_mm": [0.0] * 4,
                           "turn_deg": [0.0, 10.0, 0.0, np.nan],
                           "status": ["ok", "nan_state", "ok", "ok"]})
-    model = PrimitiveModel.from_table(table)
+    with pytest.warns(RuntimeWarning, match=r"gaits A3, A4 \(2 of status ok\) have no finite "
+                                            r"step_x_mm or turn_deg"):
+        model = PrimitiveModel.from_table(table, expect_glides=False)
     assert model.gaits == ["none", "A1"]
     np.testing.assert_array_equal(model.steps_mm, [(0, 0), (10, 0)])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the failed gait alone: nothing to say
+        PrimitiveModel.from_table(table.iloc[:2], expect_glides=False)
+
+
+def test_plans_and_choices_refuse_what_they_cannot_plan_with():
+    """A NaN goal planned "stop" as if reached, a (2,) goal was two goals, a tolerance of 0
+    or NaN was taken, max_cycles 2.5 a TypeError, last = -1 the last gait and 999 an
+    IndexError (an audit, 2026-12): each a ValueError naming the argument."""
+    model = PrimitiveModel(["A1", "A2"], [(10, 0), (0, 10)], [0.0, 0.0])
+    good = np.array([[30.0, 0.0]])
+    assert model.plan(good, 0.5, 1).shape == (1, 1)
+    for goal in (np.array([[np.nan, 0.0]]), np.array([50.0, 0.0]), np.array([[2000.0, 0.0]])):
+        with pytest.raises(ValueError, match="^goal_mm must be"):
+            model.plan(goal, 0.5, 3)
+    for tolerance in (0.0, -1.0, np.nan, "5"):
+        with pytest.raises(ValueError, match="^tolerance_mm must be a number > 0"):
+            model.plan(good, tolerance, 3)
+    for cycles in (0, 2.5, True):
+        with pytest.raises(ValueError, match="^max_cycles must be an integer >= 1"):
+            model.plan(good, 0.5, cycles)
+    at, heading = np.zeros((1, 2)), np.zeros(1)
+    assert model.choose(at, heading, good, 0.5, np.array([2]), np.array([1])).shape == (1,)
+    for last, message in ((np.array([-1]), r"^last must be \(1,\) integers >= 0"),
+                          (np.array([3]), r"^last must hold gait indices in \[0, 2\]"),
+                          (np.array([0.5]), r"^last must be \(1,\) integers")):
+        with pytest.raises(ValueError, match=message):
+            model.choose(at, heading, good, 0.5, last)
+    with pytest.raises(ValueError, match=r"^streak must be \(1,\) integers >= 0"):
+        model.choose(at, heading, good, 0.5, np.array([1]), np.array([-2]))
+    with pytest.raises(ValueError, match=r"^heading_rad must be a finite array of shape \(1\)"):
+        model.choose(at, np.zeros(2), good, 0.5)
+    with pytest.raises(ValueError, match=r"^goal_mm must be a finite array of shape \(1, 2\)"):
+        model.choose(at, heading, np.zeros((2, 2)), 0.5)
 
 
 def test_a_drive_is_checked_at_the_ends_of_its_ranges_before_any_compute():

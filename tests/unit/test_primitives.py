@@ -45,6 +45,37 @@ def test_a_body_rotation_is_reversed_by_a_reflection_alone():
     np.testing.assert_array_equal(transform_rotation(np.array([3.0, -1.5]), False), [3.0, -1.5])
 
 
+def test_the_symmetry_helpers_take_a_symmetry_or_refuse_naming_the_argument():
+    """A rotation of 1.5 turns gave a direction no symmetry gives, and reflect="yes" or "no"
+    reflected (an audit, 2026-12); as `Gait.transform`, a whole number of 45° turns and a
+    boolean are taken (numpy's too), anything else is refused naming the argument."""
+    assert transform_direction(10.0, np.int64(2), np.bool_(True)) == 80.0
+    for rotation in (1.5, "1", None):
+        with pytest.raises(ValueError, match="^rotation must be an integer"):
+            transform_direction(10.0, rotation, False)
+        with pytest.raises(ValueError, match="^rotation must be an integer"):
+            transform_vectors(np.array([1.0, 0.0]), rotation, False)
+    for reflect in ("yes", "no", 1, None):
+        with pytest.raises(ValueError, match="^reflect must be True or False"):
+            transform_direction(10.0, 1, reflect)
+        with pytest.raises(ValueError, match="^reflect must be True or False"):
+            transform_rotation(3.0, reflect)
+
+
+@pytest.mark.parametrize("side, direction", [(1e-13, 180.0), (-1e-13, 180.0), (0.0, 180.0),
+                                             (-0.0, 180.0), (-1e-8, 180.0),
+                                             (2e-8, 180.0 - math.degrees(2e-9)),
+                                             (-2e-8, -180.0 + math.degrees(2e-9))])
+def test_a_step_along_minus_x_points_at_180_whatever_the_sign_of_its_rounding(side, direction):
+    """A gait symmetric about the x axis stepping along -x has a side component of rounding
+    (1e-13 mm), whose sign made its direction -180 or 180 (five gaits flipped between two
+    measurements; an audit, 2026-12): within 1e-9 of the step's length (1e-8 of 10 mm, the
+    bound included) it is 0, the direction 180; beyond it (2e-8) it keeps its side."""
+    from taichi_star.primitives import _step_direction
+
+    assert _step_direction(np.array([-10.0, side])) == pytest.approx(direction, abs=1e-12)
+
+
 def test_actuators_equal_decides_between_the_symmetry_classes_and_all_gaits():
     """One gait per symmetry class stands for its images only if every per-actuator field
     holds one value: exactly equal values (non-default ones too) keep the 29 classes; a gain
