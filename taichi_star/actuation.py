@@ -88,8 +88,9 @@ class CurvatureProfile:
             if len(values) != 4 or not all(math.isfinite(v) for v in values):
                 raise ValueError(f"CurvatureProfile.{name} must be 4 finite numbers, got "
                                  f"{given!r}")
-            # as StarParams' fields: one number before Taichi's start and 0 after otherwise
-            for index, value in enumerate(values):
+            # as StarParams' fields: one number before Taichi's start and 0 after otherwise;
+            # read from the values given (the + 0.0 above flushes them once Taichi has started)
+            for index, value in enumerate(given):
                 check_not_subnormal(f"CurvatureProfile.{name}[{index}]", value)
             object.__setattr__(self, name, values)
         if not (_real_numbers([self.switch_time]) and math.isfinite(self.switch_time)

@@ -3,6 +3,7 @@ paper's Eq. 5 written out from its published constants, the switch between its b
 closures of a cycle, its validation and its text."""
 
 import math
+import sys
 
 import numpy as np
 import pytest
@@ -126,9 +127,10 @@ def test_a_profile_outside_its_ranges_is_refused_naming_the_constant(changes, me
 
 
 def test_a_profile_at_the_open_ends_of_its_ranges_is_accepted():
-    """The smallest positive switch time and the smallest positive rest curvature are allowed
-    (both ranges are open at 0 only)."""
-    assert CurvatureProfile(switch_time=5e-324).switch_time == 5e-324
+    """The smallest positive normal switch time and the smallest positive rest curvature are
+    allowed (both ranges are open at 0 only; a subnormal constant is refused as StarParams'
+    fields are, tests/unit/test_params.py)."""
+    assert CurvatureProfile(switch_time=sys.float_info.min).switch_time == sys.float_info.min
     barely_bent = CurvatureProfile(heating=(-1.0, 0.0, 0.0, 0.5 + 2 ** -40))
     assert barely_bent.rest_curvature == 2 ** -40
 
