@@ -94,10 +94,12 @@ class PrimitiveModel:
     step of the k-th consecutive firing from rest, k = 1..S (the robot speeds up over its
     first cycles), the steady step after (None: S = 0). Attributes: gaits (G' names, "none"
     first), steps_mm (G', 2), streak_steps_mm (S + 1, G', 2), turns_rad (G',), glides_mm
-    (K, G', 2), masks (G', 8)."""
+    (K, G', 2), masks (G', 8), glide_cycles (the cycles of coasting the glides span, where
+    the table says: `drive` judges its robots as many cycles after their controllers stop;
+    None otherwise)."""
 
     def __init__(self, gaits: Sequence[str], steps_mm, turns_deg, glides_mm=None,
-                 streak_steps_mm=None):
+                 streak_steps_mm=None, glide_cycles: Optional[int] = None):
         if isinstance(gaits, str) or not hasattr(gaits, "__iter__"):
             raise ValueError(f"gaits must be a sequence of gait texts, got {gaits!r}")
         arrays = {}
@@ -144,6 +146,10 @@ class PrimitiveModel:
                                         axis=1)
         self.turns_rad = np.radians(np.concatenate([[0.0], turns[keep]]))
         self.masks = np.stack([Gait.parse(g).mask.astype(bool) for g in self.gaits])
+        if glide_cycles is not None and (not is_whole(glide_cycles) or glide_cycles < 1):
+            raise ValueError(f"glide_cycles must be None or an integer >= 1, got "
+                             f"{glide_cycles!r}")
+        self.glide_cycles = None if glide_cycles is None else int(glide_cycles)
 
     @classmethod
     def from_table(cls, table: pd.DataFrame, expect_glides: bool = True) -> "PrimitiveModel":
@@ -212,7 +218,8 @@ class PrimitiveModel:
                     np.stack([usable[list(glide_columns(k))].to_numpy()
                               for k in range(1, streaks + 1)]) if streaks else None,
                     np.stack([usable[list(streak_step_columns(k))].to_numpy()
-                              for k in range(1, stepped + 1)]) if stepped else None)
+                              for k in range(1, stepped + 1)]) if stepped else None,
+                    _glide_cycles(table[kept]) if streaks else None)
         if not streaks and expect_glides:
             # measure_primitives' default measures none: a plan from such a table put the
             # robot on its goals when it stopped firing and it glided on, missing every goal
@@ -225,6 +232,18 @@ class PrimitiveModel:
                       f"{GLIDE_CYCLES}), the primitives study's --glide-cycles) or pass "
                       f"expect_glides=False to plan without them")
         return model
+
+    def check_settle(self, settle_cycles: int):
+        """A RuntimeWarning when `drive` would judge its robots `settle_cycles` after their
+        controllers stop while the table's glides span another number of coasting cycles: a
+        coasting robot still moves (A1+A3 about 3 mm in its fifth cycle), so the judge and the
+        model's rest would be at different times (an audit, 2026-12: judged at 12 cycles
+        instead of 4, the same plans missed goals they reach)."""
+        if self.glide_cycles is not None and settle_cycles != self.glide_cycles:
+            warn_user(f"settle_cycles = {settle_cycles} judges the robots {settle_cycles} "
+                      f"cycles after their controllers stop, while the table's glides span "
+                      f"{self.glide_cycles}: a coasting robot still moves, so the robots are "
+                      f"judged off the model's rest; give settle_cycles={self.glide_cycles}")
 
     def step(self, gait: np.ndarray, streak: Optional[np.ndarray] = None) -> np.ndarray:
         """(..., 2) body-frame steps (mm) of gait indices `gait` (...) fired as the streak-th
@@ -354,6 +373,16 @@ class PrimitiveModel:
             raise ValueError(f"last must hold gait indices in [0, {len(self.gaits) - 1}] (0 = "
                              f"{NO_GAIT!r}), got {int(indices.max())}")
         return indices
+
+
+def _glide_cycles(table: pd.DataFrame) -> Optional[int]:
+    """The coasting cycles a primitive table's glides span (its glide_cycles column), where
+    it has one value for every gait; None otherwise."""
+    if "glide_cycles" not in table.columns:
+        return None
+    values = pd.to_numeric(table["glide_cycles"], errors="coerce").dropna().unique()
+    return int(values[0]) if len(values) == 1 and values[0] >= 1 and values[0] % 1 == 0 \
+        else None
 
 
 def _finite_rows(values, name: str, count: Optional[int] = None, row=(2,)) -> np.ndarray:
@@ -492,6 +521,7 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
     goals = check_drive(goals_mm, params, solver, tolerance_mm, max_cycles, frames_per_cycle,
                         settle_cycles)
     check_flag("progress", progress)
+    model.check_settle(settle_cycles)
     check_arch(arch)
     period = params.period
     goal_index = np.repeat(np.arange(len(goals)), len(MODES))

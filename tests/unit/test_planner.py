@@ -454,3 +454,34 @@ def test_a_drive_is_checked_at_the_ends_of_its_ranges_before_any_compute():
         arguments = {"goals_mm": goals, "params": params, "solver": solver, **changes}
         with pytest.raises(ValueError, match="^" + message):
             check_drive(**arguments)
+
+
+def test_drive_is_told_when_it_judges_off_the_tables_glide_horizon(monkeypatch):
+    """A coasting robot still moves, so a robot judged 12 cycles after its controller stopped,
+    where the table's glides span 4, missed goals it reaches at 4 (an audit, 2026-12): the
+    model keeps the table's glide_cycles and `drive` warns, before any compute, when
+    settle_cycles differs; the same horizon, or a table that does not say, is silent."""
+    from taichi_star import planner
+
+    model = PrimitiveModel.from_table(pd.read_csv(COMMITTED_PRIMITIVES))
+    assert model.glide_cycles == 4
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        model.check_settle(4)
+        PrimitiveModel(["A1"], [(10, 0)], [0.0]).check_settle(12)
+    for settle in (3, 12):
+        with pytest.warns(RuntimeWarning, match=rf"^settle_cycles = {settle} judges the robots "
+                                                rf"{settle} cycles .* glides span 4"):
+            model.check_settle(settle)
+
+    class Started(Exception):
+        pass
+
+    def no_simulator(*args, **kwargs):
+        raise Started
+    monkeypatch.setattr(planner, "Simulator", no_simulator)
+    with pytest.warns(RuntimeWarning, match="^settle_cycles = 12"):
+        with pytest.raises(Started):
+            planner.drive(model, [[50.0, 0.0]], settle_cycles=12)
+    with pytest.raises(ValueError, match="^glide_cycles must be None or an integer >= 1"):
+        PrimitiveModel(["A1"], [(10, 0)], [0.0], glide_cycles=0)
