@@ -7,8 +7,11 @@ it. Camera axes are not robot axes: compare speeds and path shapes, not headings
     >>> from taichi_star import experiment
     >>> float(experiment.experimental_speeds().loc["A1+A2", "speed_mm_s"])
     2.85
-    >>> experiment.experimental_trajectory("A1+A3").head()      # t_s, x_mm, y_mm, displacement_mm
-    >>> experiment.experimental_cycle_speeds()    # per-cycle mean, std, n_cycles of each gait
+    >>> experiment.experimental_trajectory("A1+A3").head()  # doctest: +SKIP
+    >>> experiment.experimental_cycle_speeds()  # doctest: +SKIP
+
+(the trajectory's columns t_s, x_mm, y_mm, displacement_mm; the per-cycle mean, std and
+n_cycles of each gait)
 
 `compare_with_experiment(summary)` turns a `simulate(...).summary` of the paper gaits into the
 Fig. 4c table (simulated vs measured speed, direction against the paper's).
@@ -38,11 +41,16 @@ PAPER_GAITS = ("A1", "A1+A2", "A1+A3", "A1+A4", "A1+A3+A5")
 
 PAPER_DIRECTIONS = {"A1": "forward", "A1+A2": "forward", "A1+A3": "reverse",
                     "A1+A4": "reverse", "A1+A3+A5": "reverse"}
-"""Swimming direction of each Fig. 4 gait stated in the paper's text: "forward" is
-along the gait's forward direction (the sum of its actuators' bisectors), "reverse" against it."""
+"""Swimming direction of each Fig. 4 gait as the paper's text states it (A1 and A1+A2 forward,
+the others reverse). The paper does not define "forward"; this library takes it as the gait's
+forward direction, the sum of its actuators' bisectors (`Gait.forward`), "reverse" against
+it."""
 
 EXPERIMENT_PERIOD_S = 3.15
-"""Actuation period of the physical robot's trials, s (150 ms heating pulse + 3 s rest)."""
+"""Nominal actuation period of the physical robot's trials, s: the 150-ms heating pulse and
+3-s rest they were programmed with. The tracks' strokes come a little slower, every
+3.174–3.182 s (docs: Results, "the strokes in the tracks"); the per-cycle speeds cut windows
+of this nominal period."""
 
 MAX_PATH_CYCLES = 10 ** 6
 """The most cycles `cycle_speeds` cuts a path into (a few arrays of this many edges, 8 MB
@@ -67,8 +75,10 @@ def _canonical(gait: str) -> str:
 def experimental_speeds() -> pd.DataFrame:
     """Measured net speeds of the five gaits, indexed by canonical gait name.
 
-    Columns: frames, duration_s, net_displacement_mm, speed_mm_s (full trial: net displacement /
-    duration), excerpt_duration_s, excerpt_speed_mm_s (the shorter excerpt the authors processed).
+    Columns: frames (the tracked frames, the rows of the trajectory: A1+A3+A5's trial spans 8
+    more, which the tracker lost), duration_s, net_displacement_mm, speed_mm_s (full trial: net
+    displacement / duration), excerpt_duration_s, excerpt_speed_mm_s (the shorter excerpt the
+    authors processed).
     """
     with _data_dir().joinpath("speeds.csv").open("r") as handle:
         return pd.read_csv(handle).set_index("gait")     # the file's gaits are canonical
@@ -111,7 +121,9 @@ def cycle_speeds(t_s: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray,
     edge is linearly interpolated between the two video frames around it (frames are 1/59.94 s
     apart, under 1 % of a period). A cycle's speed is |p((k+1)T) − p(kT)| / T: a magnitude,
     because camera axes are not robot axes. The phase of the actuation within a window does not
-    matter for a steadily repeating stroke, since every window spans exactly one period."""
+    matter for a steadily repeating stroke whose period is T; the measured trials' strokes come
+    every 3.174–3.182 s against the nominal 3.15 s (`EXPERIMENT_PERIOD_S`), so their windows
+    drift through the stroke by about 0.03 s a cycle."""
     t_s, x_mm, y_mm = (np.asarray(a, dtype=np.float64) for a in (t_s, x_mm, y_mm))
     if not (len(t_s) == len(x_mm) == len(y_mm)) or len(t_s) < 2 or np.any(np.diff(t_s) <= 0):
         raise ValueError("cycle_speeds needs equal-length t, x, y with t strictly increasing")
@@ -148,7 +160,8 @@ def experimental_cycle_speeds(period_s: float = EXPERIMENT_PERIOD_S) -> pd.DataF
     Columns: n_cycles, cycle_speed_mean_mm_s, cycle_speed_std_mm_s (sample standard deviation,
     ddof = 1), cycle_speed_min_mm_s, cycle_speed_max_mm_s. The spread is that of the cycles of
     one trial: it includes the robot's speed-up from rest over the first cycles and any slow-down
-    at the end (A1+A3's last cycle), and is used as the measurement's uncertainty. It is not
+    at the end (A1+A3 stops for its last 3.3 s: its last cycle reads 0.10 mm/s, and its spread
+    is 1.31 mm/s with that cycle, 0.98 without), and is used as the measurement's uncertainty. It is not
     divided by √n: successive cycles of one trial are strongly correlated (a trend, not noise).
     By the triangle inequality the mean per-cycle speed is at least the net speed over the same
     whole cycles; it exceeds the full-trial speed when the path wanders sideways (A1, slow).
@@ -200,7 +213,11 @@ def compare_with_experiment(summary: pd.DataFrame,
     against `PAPER_DIRECTIONS`, exp_cycle_speed_std_mm_s = the spread of the measured per-cycle
     speeds (`experimental_cycle_speeds`, the error bar), speed_ratio = sim_speed / exp_speed,
     status of the simulation.
-    Speeds of instances whose status is not "ok" are reported as NaN, never as numbers.
+    Speeds of instances whose status is not "ok" are reported as NaN, never as numbers; their
+    sim_direction is "undefined" and direction_matches False (so a count of the directions
+    that match counts them as not matching: filter on status first). ValueError naming the
+    argument for a column summary lacks, and the column and gait for a speed that is no
+    number.
     """
     if not isinstance(summary, pd.DataFrame):
         raise ValueError(f"summary must be a simulate(...).summary table, got "
@@ -208,16 +225,22 @@ def compare_with_experiment(summary: pd.DataFrame,
     missing = [column for column in ("gait", speed_column, signed_column)
                if column not in summary.columns]
     if missing:
-        raise ValueError(f"summary has no column {missing[0]!r} (a simulate(...).summary has "
-                         f"gait, {speed_column} and {signed_column})")
+        name = {speed_column: "speed_column", signed_column: "signed_column"}.get(missing[0])
+        given = f"{name} = {missing[0]!r} is not a column of summary" if name else \
+            f"summary has no column {missing[0]!r}"
+        raise ValueError(f"{given} (a simulate(...).summary has gait, speed_mm_s and "
+                         f"signed_speed_mm_s)")
     speeds = experimental_speeds()
     spread = experimental_cycle_speeds()["cycle_speed_std_mm_s"]
     rows = []
     for _, row in summary.iterrows():
-        gait = _canonical(row["gait"])
+        try:
+            gait = _canonical(row["gait"])
+        except ValueError as error:
+            raise ValueError(f"summary: {error}") from None
         ok = row.get("status", "ok") == "ok"
-        sim_speed = float(row[speed_column]) if ok else math.nan
-        sim_signed = float(row[signed_column]) if ok else math.nan
+        sim_speed, sim_signed = (_speed(row, column, gait) if ok else math.nan
+                                 for column in (speed_column, signed_column))
         exp_speed = float(speeds.loc[gait, "speed_mm_s"]) if gait in speeds.index else math.nan
         sim_direction = direction_of(sim_signed)
         paper_direction = PAPER_DIRECTIONS.get(gait, "unknown")
@@ -236,6 +259,16 @@ def compare_with_experiment(summary: pd.DataFrame,
     return pd.DataFrame(rows, columns=FIG4C_COLUMNS)
 
 
+def _speed(row, column: str, gait: str) -> float:
+    """The row's `column` as a float, mm/s; ValueError naming the column and the gait for a
+    cell that is no number (NumPy's "could not convert string to float" named neither)."""
+    try:
+        return float(row[column])
+    except (TypeError, ValueError):
+        raise ValueError(f"summary: {column} of gait {gait} is {row[column]!r}, not a "
+                         f"number") from None
+
+
 WEIGHT_SCHEMES = ("experimental", "uniform")
 """How `measurement_table` weighs the gaits: by their measured speed over its per-cycle spread,
 squared ("experimental"), or equally ("uniform")."""
@@ -248,7 +281,10 @@ def measurement_table(gaits: Sequence[str] = PAPER_GAITS,
     (spread of the per-cycle speeds), weight (mean 1 over `gaits`)."""
     if weights not in WEIGHT_SCHEMES:
         raise ValueError(f"weights must be one of {list(WEIGHT_SCHEMES)}, got {weights!r}")
-    gaits = list(gaits)
+    if isinstance(gaits, str):  # its letters were taken for gaits ('A' was not measured)
+        raise ValueError(f"gaits must be a list of gait names, got the text {gaits!r}")
+    # any spelling the other functions take ("a2+a1"), by its canonical name
+    gaits = [_canonical(g) for g in gaits]
     if not gaits:
         raise ValueError("gaits: empty gait list")
     unknown = [g for g in gaits if g not in PAPER_GAITS]

@@ -170,7 +170,10 @@ def fig4c_table() -> str:
             direction = f"**{direction}**"
         lines.append(f"| {gait} | {fixed(row['sim_speed_mm_s'], 3)} | "
                      f"{fixed(other['sim_speed_mm_s'], 3)} | {direction} | "
-                     f"{row['exp_speed_mm_s']} ± {fixed(row['exp_cycle_speed_std_mm_s'], 2)} | "
+                     # 3 decimals, as speeds.csv holds them (its trailing zeros dropped:
+                     # "2.85" beside "3.349" read as less precise; an audit, 2026-12)
+                     f"{fixed(row['exp_speed_mm_s'], 3)} ± "
+                     f"{fixed(row['exp_cycle_speed_std_mm_s'], 2)} | "
                      f"{row['paper_direction']} |")
     return "\n".join(lines) + "\n"
 
