@@ -29,7 +29,9 @@ step (`<prefix>_check.csv`; the measured agreement over 3 cycles is in docs/resu
 
 from __future__ import annotations
 
+import hashlib
 import time
+import warnings
 from pathlib import Path
 from typing import Dict, List, Sequence
 
@@ -41,7 +43,7 @@ from taichi_star.output import column_unit, read_provenance
 from taichi_star.sensitivity_check import extrapolated_difference, whole_run_differences
 from taichi_star.sensitivities import REPLICAS_PER_DIRECTION, parse_directions
 
-from . import cli, provenance
+from . import cli, identify, provenance
 
 DESCRIPTION = ("Elasticities d ln|v| / d ln p of each paper gait's signed speed to every "
                "parameter (exact sensitivities), beside the Sobol indices.")
@@ -85,7 +87,7 @@ def sobol_table(path: Path) -> tuple:
                                      f"{', '.join(columns)} (no {', '.join(missing)})")
     sidecar = provenance.sidecar_path(path)
     if not sidecar.exists():
-        return table[columns], ""
+        return _by_sensitivity_name(table[columns]), ""
     try:
         recorded = read_provenance(path)
     except OSError as error:  # a folder, no permission
@@ -95,7 +97,17 @@ def sobol_table(path: Path) -> tuple:
         raise cli.StudyArgumentError(f"--sobol {error}; remove {sidecar.name} to use the table "
                                      f"without its preset") from None
     model = recorded.get("model") or {}
-    return table[columns], model.get("preset", "") if isinstance(model, dict) else ""
+    return _by_sensitivity_name(table[columns]), \
+        model.get("preset", "") if isinstance(model, dict) else ""
+
+
+def _by_sensitivity_name(table: pd.DataFrame) -> pd.DataFrame:
+    """The Sobol table with its parameters named as the sensitivities name them: the sensitivity
+    study writes an element by its actuator's number (actuator_gains[1] is A1, the command
+    line's), the sensitivities by Python's index (actuator_gains[0]), and the join put A1's
+    indices on A2's row (an audit, 2026-12)."""
+    return table.assign(parameter=[identify.sensitivity_name(label)
+                                   for label in table["parameter"]])
 
 
 def elasticity_table(params: Sequence[StarParams], parameters: Sequence[str],
@@ -244,10 +256,19 @@ def main(argv=None):
     if not sobol_path.is_file():
         raise cli.StudyArgumentError(f"--sobol: no such file {sobol_path}")
     sobol, sobol_preset = sobol_table(sobol_path)
+    if sobol_preset and sobol_preset != args.preset:
+        # set beside them on purpose or not: said, as the table's column says it (it was
+        # joined without a word; an audit, 2026-12)
+        warnings.warn(f"--sobol {sobol_path}: its indices are of the {sobol_preset} preset, "
+                      f"these elasticities of the {args.preset} preset (the column "
+                      f"sobol_preset says so in the table)", RuntimeWarning, stacklevel=2)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver,
                      extra={"gaits": gaits, "parameters": parameters, "output": OUTPUT,
-                            "sobol_table": str(sobol_path), "sobol_preset": sobol_preset})
+                            "sobol_table": str(sobol_path.resolve()),
+                            "sobol_table_sha256": hashlib.sha256(
+                                sobol_path.read_bytes()).hexdigest(),
+                            "sobol_preset": sobol_preset})
     params = [base.replace(gait=gait) for gait in gaits]
     duration_s = cli.duration_s(args, base.period)
     started = time.perf_counter()

@@ -20,6 +20,7 @@ import ast
 import dataclasses
 import difflib
 import math
+import re
 import sys
 from dataclasses import dataclass
 from typing import Callable, List, Optional, Sequence, Tuple
@@ -105,7 +106,7 @@ class ParameterRange:
         """The axis as `simulate(sensitivities=...)` names it: NAME, or NAME[INDEX − 1] for an
         element (the sensitivities take Python's index, the command line the actuator's
         number)."""
-        return self.name if self.index is None else f"{self.name}[{self.index - 1}]"
+        return sensitivity_name(self.label)
 
     @property
     def column(self) -> str:
@@ -501,6 +502,14 @@ def parse_windows(train_text: str, validate_text: str) -> Tuple[Tuple[int, int],
         raise cli.StudyArgumentError(f"--validate-cycles {validate_text}: must start after the "
                                      f"training window {train_text}")
     return windows[0], windows[1]
+
+
+def sensitivity_name(label: str) -> str:
+    """A box axis's command-line label (NAME, or NAME[INDEX] with the actuator's number,
+    `ParameterRange.label`) as `simulate(sensitivities=...)` names it (NAME[INDEX − 1],
+    `ParameterRange.sensitivity_name`); any other text as it is."""
+    match = re.fullmatch(r"(\w+)\[(\d+)\]", str(label))
+    return f"{match[1]}[{int(match[2]) - 1}]" if match else str(label)
 
 
 def check_trials_cover(trials, window: Tuple[int, int], window_text: str,

@@ -1,6 +1,7 @@
 """Global sensitivity: Sobol indices of each gait's signed speed to the model's parameters.
 
-    python -m studies sensitivity [--vary NAME=LOW:HIGH[:log] ...] [--preset paper|accurate]
+    python -m studies sensitivity [--vary NAME=LOW:HIGH[:log] ...]
+                                  [--preset paper|accurate|identified]
                                   [--set NAME=VALUE ...] [--gaits paper|A1,...]
                                   [--base-samples 128] [--cycles 3] [--dt 3.15e-3] [--seed 1]
                                   [--out DIR] [--run-dir DIR] [--resume] [--quick]
@@ -79,9 +80,20 @@ CONF_LEVEL = 0.95
 BOOTSTRAP_RESAMPLES = 200
 
 
+def check_seed(seed):
+    """ValueError naming seed unless it is an integer >= 1: SALib seeds its sampling and its
+    bootstrap only for a seed that is true, so 0 gave other confidence intervals at every run
+    (an audit, 2026-12)."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 1:
+        raise ValueError(f"seed must be an integer >= 1 (SALib takes 0 for no seed), got "
+                         f"{seed!r}")
+
+
 def saltelli_units(dimension: int, base_samples: int, seed: int) -> np.ndarray:
     """Saltelli's sample of the unit cube for first-order and total indices:
-    (base_samples × (dimension + 2), dimension), scrambled Sobol' sequence seeded by `seed`."""
+    (base_samples × (dimension + 2), dimension), scrambled Sobol' sequence seeded by `seed`
+    (an integer >= 1: `check_seed`)."""
+    check_seed(seed)
     sobol_sample = require("SALib.sample.sobol", "studies")
     problem = {"num_vars": dimension, "names": [f"u{d}" for d in range(dimension)],
                "bounds": [[0.0, 1.0]] * dimension}
@@ -94,7 +106,9 @@ def sobol_indices(names: Sequence[str], outputs: Mapping[str, np.ndarray],
     outputs evaluated on `saltelli_units(len(names), N, ...)` in its row order: outputs maps an
     output name (e.g. a gait) to an array (N (D + 2),). Returns one row per output × input
     (columns output, parameter, S1, S1_conf, ST, ST_conf, n_failed); an output with a non-finite
-    value gets NaN indices and its count of such values in n_failed."""
+    value gets NaN indices and its count of such values in n_failed. `seed`: the bootstrap's,
+    an integer >= 1 (`check_seed`)."""
+    check_seed(seed)
     sobol = require("SALib.analyze.sobol", "studies")
     problem = {"num_vars": len(names), "names": list(names),
                "bounds": [[0.0, 1.0]] * len(names)}
@@ -178,8 +192,9 @@ def main(argv=None):
     if samples < 2 or samples & (samples - 1):
         raise cli.StudyArgumentError(f"--base-samples must be a power of 2 >= 2 (Sobol' "
                                      f"sequence balance), got {samples}")
-    if args.seed < 0:
-        raise cli.StudyArgumentError(f"--seed must be >= 0, got {args.seed}")
+    if args.seed < 1:
+        # SALib seeds nothing for 0: another sample and other intervals at every run
+        raise cli.StudyArgumentError(f"--seed must be >= 1, got {args.seed}")
     gaits = cli.resolve_gaits(args.gaits)
     box = [identify.parse_range_spec(text, "--vary") for text in (args.vary or DEFAULT_BOX)]
     instances = samples * (len(box) + 2) * len(gaits)

@@ -83,6 +83,8 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
     ("calibrate", ["--restarts", "11"], "--restarts must be <= 10"),
     ("model_select", ["--restarts", "1000000"], "--restarts must be <= 10"),
     ("gradient_fit", ["--seed", "-1"], "--seed must be >= 0, got -1"),
+    # SALib seeds nothing for 0: another sample and other intervals at every run
+    ("sensitivity", ["--seed", "0"], "--seed must be >= 1, got 0"),
     ("sensitivity_check", ["--parameters", "bogus"], "--parameters: sensitivities: 'bogus'"),
     ("sensitivity_check", ["--duration", "1e12"], "--duration 1e+12 s at dt = 0.001 s"),
     ("sensitivity_check", ["--duration", "1e-9"], "--duration 1e-09 s is less than one step"),

@@ -434,3 +434,18 @@ def test_a_window_must_be_covered_from_every_phase_of_a_period():
     with pytest.raises(cli.StudyArgumentError, match=r"^--validate-cycles 5:7: the A1\+A2 "
                                                      r"trial .* end at cycle 6 at the latest$"):
         identify.check_trials_cover(trials, (5, 7), "5:7")
+
+
+def test_a_sobol_seed_of_zero_is_refused_since_salib_seeds_nothing_for_it():
+    """SALib seeds its sample and its bootstrap only for a true seed: 0 gave other confidence
+    intervals at every call (an audit, 2026-12). Refused in the library and on the command
+    line; 1 reproduces bit for bit."""
+    x = sensitivity.saltelli_units(3, 64, seed=1)
+    y = {"f": x[:, 0] + 2 * x[:, 1] * x[:, 2]}
+    first, again = (sensitivity.sobol_indices(["a", "b", "c"], y, seed=1) for _ in range(2))
+    pd.testing.assert_frame_equal(first, again)
+    for call in (lambda: sensitivity.saltelli_units(3, 64, seed=0),
+                 lambda: sensitivity.sobol_indices(["a", "b", "c"], y, seed=0),
+                 lambda: sensitivity.sobol_indices(["a", "b", "c"], y, seed=True)):
+        with pytest.raises(ValueError, match=r"^seed must be an integer >= 1 \(SALib takes 0 "):
+            call()
