@@ -69,7 +69,9 @@ def convergence_params(base, n_arcs, gaits):
 
 def convergence_table(summary: pd.DataFrame) -> pd.DataFrame:
     """Observed order, Richardson limit and relative errors from a summary with columns gait,
-    actuation_ends, n_arc, n_limb, speed_mm_s, signed_speed_mm_s, status."""
+    actuation_ends, n_arc, n_limb, speed_mm_s, signed_speed_mm_s, status: of the signed speeds
+    (the magnitudes hid a robot that reverses between meshes, A1 with shared ends, and read
+    a reversal as convergence; an audit, 2026-12), so limit_mm_s is signed too."""
     rows = summary[["gait", "actuation_ends", "n_arc", "n_limb", "speed_mm_s", "signed_speed_mm_s",
                     "status"]].copy()
     rows["n_nodes"] = StarParams.node_count(rows.n_arc, rows.n_limb)
@@ -77,7 +79,7 @@ def convergence_table(summary: pd.DataFrame) -> pd.DataFrame:
     rows["limit_mm_s"] = np.nan
     for (gait, ends), part in rows.groupby(["gait", "actuation_ends"], sort=False):
         series = part.sort_values("n_arc")
-        speeds = series.speed_mm_s.to_numpy()
+        speeds = series.signed_speed_mm_s.to_numpy()
         doubling = np.diff(series.n_arc.to_numpy()) == series.n_arc.to_numpy()[:-1]
         if len(speeds) < 3 or not doubling[-2:].all():
             continue
@@ -91,8 +93,8 @@ def convergence_table(summary: pd.DataFrame) -> pd.DataFrame:
     reference = {gait: limits.get((gait, "clamped"), limits.get((gait, "shared"), math.nan))
                  for gait in rows.gait.unique()}
     rows["reference_limit_mm_s"] = rows.gait.map(reference)
-    rows["relative_error"] = metrics.speed_error(rows.speed_mm_s, rows.reference_limit_mm_s,
-                                                 floor_mm_s=0.0)
+    rows["relative_error"] = metrics.speed_error(rows.signed_speed_mm_s,
+                                                 rows.reference_limit_mm_s, floor_mm_s=0.0)
     return rows.reset_index(drop=True)
 
 

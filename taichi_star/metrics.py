@@ -15,6 +15,7 @@ from typing import Dict, Optional, Sequence
 import numpy as np
 import pandas as pd
 
+from .checks import is_real
 from .gait import Gait
 from .geometry import CENTRE, Topology, edge_curvature
 
@@ -157,7 +158,9 @@ def observed_order(coarse_change, fine_change, refinement: float = 2.0):
     """Observed order of convergence of a ladder refined by `refinement` per level, from the
     change between its two coarser levels and the change between its two finer ones (arrays
     broadcast): log(coarse_change / fine_change) / log(refinement). NaN where the changes
-    differ in sign or one is zero (no monotone convergence to read an order from)."""
+    differ in sign or one is zero (no monotone convergence to read an order from). ValueError
+    for a refinement that is not a number > 1."""
+    _check_refinement(refinement)
     coarse_change = np.asarray(coarse_change, dtype=np.float64)
     fine_change = np.asarray(fine_change, dtype=np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -168,10 +171,23 @@ def observed_order(coarse_change, fine_change, refinement: float = 2.0):
 def richardson_limit(middle, fine, order, refinement: float = 2.0):
     """Richardson extrapolation of a quantity computed on two levels refined by `refinement`,
     its error ∝ (level size)^order: v_f + (v_f − v_m) / (refinement^order − 1) (arrays
-    broadcast; NaN where the order is NaN)."""
+    broadcast). NaN where the order is NaN or not > 0: a ladder whose changes grow diverges,
+    and the formula put its "limit" on the far side of both levels (order −2) or at infinity
+    (order 0; an audit, 2026-12). ValueError for a refinement that is not a number > 1."""
+    _check_refinement(refinement)
     fine = np.asarray(fine, dtype=np.float64)
-    return fine + (fine - np.asarray(middle, dtype=np.float64)) / (refinement ** np.asarray(
-        order, dtype=np.float64) - 1.0)
+    order = np.asarray(order, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        limit = fine + (fine - np.asarray(middle, dtype=np.float64)) / (
+            refinement ** order - 1.0)
+    return np.where(order > 0, limit, np.nan)
+
+
+def _check_refinement(refinement):
+    """ValueError unless the refinement per level is a finite number > 1 (1 gave inf, 0.5 a
+    negative order)."""
+    if not (is_real(refinement) and math.isfinite(refinement) and refinement > 1):
+        raise ValueError(f"refinement must be a finite number > 1, got {refinement!r}")
 
 
 # --------------------------------------------------------------------------- shape checks

@@ -36,6 +36,26 @@ def test_richardson_limit_and_order_are_exact_for_a_power_law(order):
     assert table.n_nodes.tolist()[:3] == [193, 337, 625]
 
 
+def test_a_robot_that_reverses_between_meshes_is_not_read_as_converging():
+    """The magnitudes of signed speeds −0.02, 0.06, 0.10 mm/s (a robot that swims the other
+    way on the coarsest mesh) gave an order of −5e-16, a limit of −1.2e14 mm/s and every error
+    1.0 (an audit, 2026-12); the signed speeds give order 1 and limit 0.14 mm/s, and the
+    coarsest mesh's error is then its signed distance from it, 114 %."""
+    rows = [{"gait": "A1", "actuation_ends": "clamped", "n_arc": n, "n_limb": 6,
+             "speed_mm_s": abs(v), "signed_speed_mm_s": v, "status": "ok"}
+            for n, v in ((18, -0.02), (36, 0.06), (72, 0.10))]
+    table = convergence.convergence_table(pd.DataFrame(rows)).sort_values("n_arc")
+    assert table.observed_order.iloc[0] == pytest.approx(1.0, rel=1e-12)
+    assert table.limit_mm_s.iloc[0] == pytest.approx(0.14, rel=1e-12)
+    assert table.relative_error.iloc[0] == pytest.approx(0.16 / 0.14, rel=1e-12)
+    # growing changes (a diverging ladder): no order to trust, no limit, no errors
+    rows = [dict(row, signed_speed_mm_s=v, speed_mm_s=v)
+            for row, v in zip(rows, (0.10, 0.11, 0.15))]
+    diverging = convergence.convergence_table(pd.DataFrame(rows))
+    assert (diverging.observed_order < 0).all() and diverging.limit_mm_s.isna().all()
+    assert diverging.relative_error.isna().all()
+
+
 @pytest.mark.slow
 def test_quick_run_writes_table_and_plot(tmp_path):
     table = convergence.main(["--quick", "--out", str(tmp_path), "--no-progress"])

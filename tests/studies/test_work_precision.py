@@ -166,3 +166,16 @@ def test_pareto_front():
     assert list(wp.pareto_front([1.0, 1.0], [0.1, 0.2])) == [True, False]
     # a slower point one ulp better in error is on the front too
     assert list(wp.pareto_front([1.0, 2.0], [0.1, np.nextafter(0.1, 0.0)])) == [True, True]
+
+
+def test_a_gaits_order_is_read_from_its_signed_changes():
+    """Each gait's order came from the magnitudes of its ladder's changes, so an oscillating
+    ladder (A1+A4's undamped time: 0.8646, 0.9011, 0.8470) and one whose changes flip sign got
+    an order (−0.56, 3.45; an audit, 2026-12): from the signed changes they have none (NaN),
+    while a monotone ladder keeps its order (changes 0.04 then 0.01: 2)."""
+    speeds = np.array([[0.8646, -0.2052, 1.00], [0.9011, -0.1916, 1.04], [0.8470, -0.1929, 1.05]])
+    table = wp.ladder_reference("undamped", "time", (1.0, 0.5, 0.25), speeds,
+                                ["A1+A4", "A1", "A1+A2"])
+    orders = table.set_index("gait")["gait_order"]
+    assert np.isnan(orders["A1+A4"]) and np.isnan(orders["A1"])
+    assert orders["A1+A2"] == pytest.approx(2.0, rel=1e-12)

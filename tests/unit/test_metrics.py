@@ -935,6 +935,35 @@ def test_observed_order_needs_monotone_changes():
     assert np.isnan(metrics.richardson_limit(1.0, 1.1, np.nan))
 
 
+@pytest.mark.parametrize("order, limit", [(-2.0, np.nan), (0.0, np.nan), (-1e-300, np.nan),
+                                          (2.0, 1.04 + 0.04 / 3), (1e-9, None)])
+def test_a_diverging_ladder_has_no_richardson_limit(order, limit):
+    """Changes that grow (an observed order of −2) put the formula's "limit" below both levels
+    of a rising ladder, 0.9867, and an order of 0 at infinity (an audit, 2026-12): NaN for an
+    order that is not > 0; any positive order extrapolates, a tiny one far (1e-9: 1.04 + 0.04
+    / (2^1e-9 − 1), 5.8e7)."""
+    got = float(metrics.richardson_limit(1.0, 1.04, order))
+    if limit is None:
+        assert got == pytest.approx(1.04 + 0.04 / (2.0 ** 1e-9 - 1.0), rel=1e-6) and got > 5e7
+    elif np.isnan(limit):
+        assert np.isnan(got)
+    else:
+        assert got == pytest.approx(limit, rel=1e-15)
+    np.testing.assert_array_equal(np.isnan(metrics.richardson_limit(
+        [1.0, 1.0], [1.04, 1.04], [-2.0, 2.0])), [True, False])
+
+
+@pytest.mark.parametrize("refinement", [1.0, 0.5, 0.0, -2.0, np.nan, np.inf, "2"])
+def test_a_refinement_that_refines_nothing_is_refused(refinement):
+    """A refinement of 1 gave inf and one of 0.5 a negative order: both helpers take only a
+    finite number > 1."""
+    for call in (lambda: metrics.observed_order(0.4, 0.1, refinement),
+                 lambda: metrics.richardson_limit(1.0, 1.1, 2.0, refinement)):
+        with pytest.raises(ValueError, match="^refinement must be a finite number > 1"):
+            call()
+    assert metrics.observed_order(0.9, 0.1, 3.0) == pytest.approx(2.0, rel=1e-12)
+
+
 def test_shape_checks_need_at_least_one_record_of_instances(topology):
     n_nodes = len(topology.rest_positions)
     with pytest.raises(ValueError, match="at least one record"):
