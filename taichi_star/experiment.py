@@ -225,7 +225,11 @@ def compare_with_experiment(summary: pd.DataFrame,
     missing = [column for column in ("gait", speed_column, signed_column)
                if column not in summary.columns]
     if missing:
-        name = {speed_column: "speed_column", signed_column: "signed_column"}.get(missing[0])
+        # an argument given another name than its default is named; a default column missing
+        # is the summary's fault
+        given_names = {speed_column: "speed_column", signed_column: "signed_column"}
+        name = given_names.get(missing[0]) if missing[0] not in (
+            "speed_mm_s", "signed_speed_mm_s") else None
         given = f"{name} = {missing[0]!r} is not a column of summary" if name else \
             f"summary has no column {missing[0]!r}"
         raise ValueError(f"{given} (a simulate(...).summary has gait, speed_mm_s and "
