@@ -377,6 +377,36 @@ def check_cycles(cycles: Mapping[str, int], period: float, config: SolverConfig)
     check_run(f"{named} ({total * period:.3g} s)", total * period, config)
 
 
+def primitives_robot_differences(path, base: StarParams) -> tuple:
+    """(the robot's parameters a primitives table's sidecar records, the fields other than
+    gait in which `base` differs from them): a field the sidecar does not record came after
+    the table, and the robot had its default (skipped until 2026-12, so --set wake_coupling=5
+    planned with another robot's steps). (None, []) where the sidecar is missing or records no
+    robot; one that cannot be read or no longer describes the table (`read_provenance`: its
+    SHA-256 differs, the table edited since) records none either, and a printed line says
+    so."""
+    sidecar = provenance.sidecar_path(path)
+    if not sidecar.is_file():
+        return None, []
+    try:
+        recorded = read_provenance(path)["model"]["params"]
+    except (KeyError, TypeError):  # a record of no robot
+        return None, []
+    except (OSError, ValueError) as error:
+        # a sidecar unreadable, damaged, or describing the table before an edit (gaits left
+        # out, say): no record of the robot, as without a sidecar, and said
+        reason = (f"{sidecar}: cannot read it ({error.strerror or error})"
+                  if isinstance(error, OSError) else str(error))
+        print(f"--primitives {reason}; the robot it was measured on is not compared with "
+              f"this run's")
+        return None, []
+    if not isinstance(recorded, dict):
+        return None, []
+    recorded = {**provenance.plain(StarParams()), **recorded}
+    own = provenance.plain(base)
+    return recorded, [name for name in own if name != "gait" and recorded.get(name) != own[name]]
+
+
 def tell_batch_work(args, config: SolverConfig, instances: int,
                     periods: Sequence[float] = ()) -> float:
     """Warn (`LongWorkWarning`, with the hours) of a `run_batch` of `instances` robots, each run

@@ -64,6 +64,8 @@ delay ignored).
 from __future__ import annotations
 
 import shlex
+import sys
+import warnings
 from pathlib import Path
 from typing import Sequence
 
@@ -101,16 +103,16 @@ MAX_SYNCHRONOUS_STARTS = 255
 primitives table has."""
 MAX_RANDOM_STARTS = 1000
 """The most random starts (--random-starts), each an instance of every evaluation's batch (the
-committed runs: 2 and 3)."""
+committed runs: 0 and 2)."""
 MAX_ITERATIONS = 1000
 """The most L-BFGS-B iterations (--iterations), each a batch simulated with its sensitivities
-(the committed runs: 3 and 6)."""
+(the committed runs: 3 and 10)."""
 SAMPLE_SPREADS = (0.01, 0.03, 0.1, 0.3, 1.0)
 """Shares of the period within which a sampled pattern's offsets are drawn (--sample), in
 turn: from a few time steps off synchronous firing, where the local searches look, to
 anywhere in the period."""
 MAX_SAMPLE = 100_000
-"""The most sampled patterns (--sample), one batch without gradients: about 40 minutes on 2
+"""The most sampled patterns (--sample), one batch without gradients: about an hour on 2
 cores at h = 5 ms over 2 cycles."""
 
 
@@ -120,11 +122,28 @@ def objective_of(result, goal: str, direction_deg: float, duration_s: float, cyc
     (mm/s), or the heading change per cycle (deg). `read(output)` gives an output's values
     (default: the summary column); with `read = lambda output: result.sensitivity(output,
     "actuator_delays")` the same linear map gives the gradient in the 8 delays (B, 8)."""
-    read = read or (lambda output: result.summary[output].to_numpy())
     if goal in TURN_SIGNS:
-        return TURN_SIGNS[goal] * read("heading_deg") / cycles
+        # the summary's heading is folded into (-180, 180]: past half a turn it read a turn of
+        # 201° as -159° (an audit, 2026-12); the derivative is that of the unfolded heading
+        turned = (read("heading_deg") if read is not None
+                  else result.summary["heading_deg"].to_numpy() + 360.0 * whole_turns(result))
+        return TURN_SIGNS[goal] * turned / cycles
+    read = read or (lambda output: result.summary[output].to_numpy())
     cosine, sine = np.cos(np.radians(direction_deg)), np.sin(np.radians(direction_deg))
     return (cosine * read("displacement_x_mm") + sine * read("displacement_y_mm")) / duration_s
+
+
+def whole_turns(result) -> np.ndarray:
+    """(B,) whole turns to add to each instance's summary heading (folded into (-180, 180])
+    to get the heading it reached, from its records (at least one per cycle: each cycle's
+    turn, far below half a turn, is read unfolded); 0 for an instance without records."""
+    turns = np.zeros(len(result.summary))
+    final = result.summary["heading_deg"].to_numpy()
+    for instance, part in result.trajectory.groupby("instance"):
+        heading = part.sort_values("t_s")["heading_deg"].to_numpy()
+        steps = (np.diff(heading) + 180.0) % 360.0 - 180.0
+        turns[instance] = np.round((heading[0] + steps.sum() - final[instance]) / 360.0)
+    return turns
 
 
 def ranked_gaits(primitives: pd.DataFrame, goal: str, direction_deg: float) -> list:
@@ -195,10 +214,12 @@ def sample_objectives(base, solver, sample: pd.DataFrame, goal, direction_deg, c
     duration_s = cycles * base.period
     params = [base.replace(gait=gait, actuator_delays=tuple(delays))
               for gait, delays in zip(sample["gait"], sample[DELAY_COLUMNS].to_numpy())]
-    result = simulate(params, duration_s, solver, arch=arch, progress=progress)
+    # a record at every cycle's end: the headings unfolded past half a turn (`whole_turns`)
+    result = simulate(params, duration_s, solver, arch=arch, progress=progress,
+                      record_interval_s=base.period)
     return sample.assign(
         objective=objective_of(result, goal, direction_deg, duration_s, cycles),
-        turn_deg_per_cycle=result.summary["heading_deg"].to_numpy() / cycles,
+        turn_deg_per_cycle=objective_of(result, "turn", direction_deg, duration_s, cycles),
         status=result.summary["status"].to_numpy(),
         newton_capped=result.summary["newton_capped"].to_numpy())[
             ["sample", "gait", "spread", "objective", "turn_deg_per_cycle", "status",
@@ -220,7 +241,7 @@ def optimise(base, solver, starts, goal, direction_deg, cycles, iterations, arch
         delays = np.clip(points, 0.0, upper)
         params = [base.replace(gait=gaits[start], actuator_delays=tuple(row))
                   for start, row in zip(indices, delays)]
-        result = simulate(params, duration_s, solver, arch=arch,
+        result = simulate(params, duration_s, solver, arch=arch, record_interval_s=period,
                           sensitivities=("actuator_delays",), progress=False)
         value = objective_of(result, goal, direction_deg, duration_s, cycles)
         gradient = objective_of(result, goal, direction_deg, duration_s, cycles,
@@ -250,7 +271,8 @@ def robustness(base, solver, patterns, goal, direction_deg, cycles, arch) -> pd.
     params = [base.replace(gait=gait, actuator_delays=tuple(delays), alpha=base.alpha * a,
                            drag_perpendicular=base.drag_perpendicular * c)
               for _, gait, delays, a, c in cases]
-    result = simulate(params, duration_s, solver, arch=arch, progress=False)
+    result = simulate(params, duration_s, solver, arch=arch, progress=False,
+                      record_interval_s=base.period)
     value = objective_of(result, goal, direction_deg, duration_s, cycles)
     return pd.DataFrame([{"pattern": name, "gait": gait, "alpha_factor": a,
                           "drag_perpendicular_factor": c, "objective": v,
@@ -266,7 +288,8 @@ def synchronous_objectives(base, solver, gaits, goal, direction_deg, cycles,
     is judged against is the best of them."""
     duration_s = cycles * base.period
     params = [base.replace(gait=gait, actuator_delays=(0.0,) * 8) for gait in gaits]
-    result = simulate(params, duration_s, solver, arch=arch, progress=False)
+    result = simulate(params, duration_s, solver, arch=arch, progress=False,
+                      record_interval_s=base.period)
     return pd.DataFrame({"gait": list(gaits),
                          "objective": objective_of(result, goal, direction_deg, duration_s,
                                                    cycles),
@@ -405,11 +428,16 @@ def redraw(args, argv):
     for a folder without a readable gait_design.csv and sidecar, and naming any other flag
     given beside it (the run's own settings would silently replace it)."""
     parser = build_parser()
-    # --quick changes other flags' defaults: named alone
+    # --quick changes other flags' defaults: named alone; a flag given at its default value
+    # is named too (it was compared by value, so `--preset paper` beside a run of the
+    # identified preset drew that run without a word; an audit, 2026-12)
     alone = vars(parser.parse_args(["--redraw", args.redraw]))
+    words = list(argv) if argv is not None else sys.argv[1:]
+    written = {word[2:].split("=", 1)[0].replace("-", "_") for word in words
+               if word.startswith("--")}
     given = ["--quick"] if args.quick else [
         f"--{name.replace('_', '-')}" for name, value in vars(args).items()
-        if name not in REDRAW_FLAGS and value != alone[name]]
+        if name not in REDRAW_FLAGS and (value != alone[name] or name in written)]
     if given:
         raise cli.StudyArgumentError(f"--redraw takes the earlier run's settings from its "
                                      f"command: drop {', '.join(given)}")
@@ -471,9 +499,11 @@ def main(argv=None):
     if args.direction is not None and args.goal in TURN_SIGNS:
         raise cli.StudyArgumentError("--direction: only with --goal speed (turning has no "
                                      "direction)")
-    # its period, step and robot are not checked against this run's, as plan checks them: the
-    # table only ranks the gaits to start from, and every gait is simulated again here (the
-    # default, results/primitives.csv at 1 ms, serves --quick's 5 ms as well)
+    # its period, step and robot are not refused as plan refuses them: the table only ranks
+    # the gaits to start from, and every gait is simulated again here (the default,
+    # results/primitives.csv at 1 ms, serves --quick's 5 ms as well); another robot is said,
+    # since it ranks the starts by its own steps (the no-jet run started from the jet
+    # model's best gaits without a word; an audit, 2026-12)
     primitives = cli.read_table(args.primitives, "--primitives", ["gait", *PRIMITIVE_NUMBERS],
                                 "a primitives table")
     cli.numeric_columns(primitives, PRIMITIVE_NUMBERS, args.primitives, "--primitives")
@@ -484,6 +514,12 @@ def main(argv=None):
                                      f"{', '.join(PRIMITIVE_NUMBERS[:-1])} and "
                                      f"{PRIMITIVE_NUMBERS[-1]} are all finite")
     base = cli.base_params(args)
+    recorded, differing = cli.primitives_robot_differences(args.primitives, base)
+    if differing:
+        warnings.warn(f"--primitives {args.primitives}: measured on a robot whose "
+                      f"{differing[0]} is {recorded[differing[0]]} ({len(differing)} field(s) "
+                      f"differ from this run's): its gaits rank the starts by that robot's "
+                      f"steps", RuntimeWarning, stacklevel=2)
     solver = cli.solver(args)
     if args.jets:
         try:

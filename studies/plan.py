@@ -47,7 +47,6 @@ import pandas as pd
 
 from taichi_star import StarParams
 from taichi_star.metrics import MAX_GOAL_MM
-from taichi_star.output import read_provenance
 from taichi_star.planner import (MAX_DEFAULT_GOALS, SETTLE_CYCLES, PrimitiveModel, check_drive,
                                  closed_loop_gain, default_goals, drive)
 from taichi_star.primitives import GLIDE_CYCLES, measure_primitives
@@ -165,29 +164,10 @@ def read_primitive_model(path, period: float, dt: float,
         raise cli.StudyArgumentError(f"--primitives {path}: made at period {row['period_s']} s, "
                                      f"dt {row['dt_s']} s (gait {row['gait']}); this run has "
                                      f"{period} s, {dt} s")
-    sidecar = provenance.sidecar_path(path)
-    if base is not None and sidecar.is_file():
-        try:
-            recorded = read_provenance(path)["model"]["params"]
-        except (KeyError, TypeError):  # a record of no robot
-            recorded = None
-        except (OSError, ValueError) as error:
-            # a sidecar unreadable, damaged, or describing the table before an edit (gaits left
-            # out, say): no record of the robot, as without a sidecar, and said
-            reason = (f"{sidecar}: cannot read it ({error.strerror or error})"
-                      if isinstance(error, OSError) else str(error))
-            print(f"--primitives {reason}; the robot it was measured on is not compared with "
-                  f"this run's")
-            recorded = None
-        own = provenance.plain(base)
-        if isinstance(recorded, dict):
-            # a field the sidecar does not record came after the table: the robot had its
-            # default, which keeps the earlier robots as they were (it was skipped, so
-            # --set wake_coupling=5 planned with another robot's steps; an audit, 2026-12)
-            recorded = {**provenance.plain(StarParams()), **recorded}
-        differing = [name for name in own if name != "gait" and isinstance(recorded, dict)
-                     and recorded.get(name) != own[name]]
+    if base is not None:
+        recorded, differing = cli.primitives_robot_differences(path, base)
         if differing:
+            own = provenance.plain(base)
             raise cli.StudyArgumentError(
                 f"--primitives {path}: measured on a robot whose {differing[0]} is "
                 f"{recorded[differing[0]]}, this run's {own[differing[0]]} ({len(differing)} "

@@ -291,6 +291,10 @@ def test_redraw_animates_the_earlier_runs_designed_pattern_with_its_settings(tmp
     ("other flag", ["--cycles", "3"], "--redraw takes the earlier run's settings from its "
                                       "command: drop --cycles"),
     ("quick", ["--quick"], "drop --quick"),
+    # at their default values too (compared by value, they were taken without a word, and
+    # the earlier run's preset drawn: an audit, 2026-12)
+    ("a default preset", ["--preset", "paper"], "command: drop --preset"),
+    ("a default goal", ["--goal=speed"], "command: drop --goal"),
     ("no table", [], "gait_design.csv"),
     ("no command", [], "no recorded command"),
     ("another study", [], "is not a gait_design run"),
@@ -309,3 +313,51 @@ def test_redraw_refusals_are_one_line_before_compute(no_compute, tmp_path, capsy
     error = capsys.readouterr().err
     assert message in error and error.count("\n") == 1
     assert not (folder / "gait_design.gif").exists()
+
+
+def test_a_turn_past_half_a_turn_is_read_unfolded_from_the_cycle_records():
+    """The turning objective was the summary's heading, folded into (-180, 180], over the
+    cycles: the paper model's designed turner over 9 cycles (201.2°) scored -17.6° a cycle
+    instead of +22.4 (an audit, 2026-12). The records at every cycle's end unfold it: each
+    cycle's turn is far below half a turn. Clockwise past -180 likewise; a robot that never
+    passes ±180 keeps its summary's heading to the bit, and one without records its summary's
+    heading."""
+    import types
+
+    per_cycle = 201.211 / 9
+    unfolded = per_cycle * np.arange(10)                    # 0 .. 201.211 over 9 cycles
+    folded = (unfolded + 180.0) % 360.0 - 180.0
+    clockwise = -1.5 * unfolded                             # 0 .. -301.8
+    rows = [(0, k * 3.15, h) for k, h in enumerate(folded)] + \
+        [(1, k * 3.15, (h + 180.0) % 360.0 - 180.0) for k, h in enumerate(clockwise)] + \
+        [(2, k * 3.15, 5.0 * k) for k in range(10)]
+    result = types.SimpleNamespace(
+        summary=pd.DataFrame({"heading_deg": [folded[-1], (clockwise[-1] + 180) % 360 - 180,
+                                              45.0]}),
+        trajectory=pd.DataFrame(rows, columns=["instance", "t_s", "heading_deg"]))
+    turn = gait_design.objective_of(result, "turn", 0.0, 9 * 3.15, 9)
+    np.testing.assert_allclose(turn, [per_cycle, -1.5 * per_cycle, 5.0], rtol=1e-12)
+    assert turn[2] == 45.0 / 9  # unfolded by nothing: the summary's heading, to the bit
+    assert gait_design.objective_of(result, "turn_cw", 0.0, 9 * 3.15, 9)[1] == -turn[1]
+    bare = types.SimpleNamespace(summary=result.summary,
+                                 trajectory=pd.DataFrame(columns=["instance", "t_s",
+                                                                  "heading_deg"]))
+    assert gait_design.objective_of(bare, "turn", 0.0, 9 * 3.15, 9)[0] == folded[-1] / 9
+
+
+def test_starts_ranked_by_another_robots_primitives_are_said(no_compute, tmp_path):
+    """The primitives only rank the starts, so another robot's table is not refused; but the
+    no-jet run (--set alpha=0) started from the jet model's best gaits without a word (an
+    audit, 2026-12): a warning names the first field that differs, before any compute. The
+    table's own robot says nothing."""
+    import warnings
+
+    argv = ["--quick", "--no-progress", "--out", str(tmp_path / "run")]
+    with pytest.warns(RuntimeWarning, match=r"measured on a robot whose alpha is 0.8 \(1 "
+                                            r"field\(s\) differ from this run's\)"):
+        with pytest.raises(AssertionError, match="simulate was called"):
+            gait_design.main([*argv, "--set", "alpha=0"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        with pytest.raises(AssertionError, match="simulate was called"):
+            gait_design.main(argv)
