@@ -1,6 +1,8 @@
 """Fixtures shared by the study tests."""
 
+import contextlib
 import importlib
+import warnings
 
 import pytest
 
@@ -35,3 +37,24 @@ def no_compute(monkeypatch):
     for module in modules:
         if getattr(module, "simulate", None) is taichi_star.simulation.simulate:
             monkeypatch.setattr(module, "simulate", forbidden)
+
+
+@pytest.fixture
+def warnings_before_call(monkeypatch):
+    """A context manager (owner, name) -> (caught, seen): every warning of its block recorded
+    ("always"), and in `seen`, per call of `owner.name` in the block, the messages told before
+    that call; `owner.name` is restored when the block ends. For a study that must tell
+    something before it builds what the call builds."""
+    @contextlib.contextmanager
+    def recording(owner, name):
+        seen = []
+        original = getattr(owner, name)
+        with monkeypatch.context() as patch, warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+
+            def spy(*args, **kwargs):
+                seen.append([str(w.message) for w in caught])
+                return original(*args, **kwargs)
+            patch.setattr(owner, name, spy)
+            yield caught, seen
+    return recording

@@ -262,8 +262,8 @@ def test_a_worker_that_cannot_import_the_script_is_named_so_not_retried(tmp_path
     assert "out of memory or killed" not in run.stderr
 
 
-def test_a_sweep_tells_its_batchs_hours_once_before_it_builds_the_instances(monkeypatch,
-                                                                          tmp_path):
+def test_a_sweep_tells_its_batchs_hours_once_before_it_builds_the_instances(
+        monkeypatch, tmp_path, warnings_before_call):
     """A sweep near the studies' million instances built them (about two minutes) before
     run_batch told its hours (an audit, 2026-12); now the study tells them first, counted as
     run_batch counts them (`batch_robot_steps` of its chunks: each instance's steps at its own
@@ -273,23 +273,13 @@ def test_a_sweep_tells_its_batchs_hours_once_before_it_builds_the_instances(monk
     from taichi_star import timegrid
     from studies import cli, sweep
 
-    built = []
-    product = cli.param_product
-
-    def remembering_product(*args, **kwargs):
-        built.append([str(w.message) for w in caught])
-        return product(*args, **kwargs)
-
-    monkeypatch.setattr(cli, "param_product", remembering_product)
     argv = ["--gaits", "A1", "--period", "0.5,1", "--cycles", "1", "--no-progress"]
     expected = (f"the batch of 2 instances (--cycles 1 of each period) is 1.5e+03 robot-steps: "
                 f"about {1500 / 5e4 / 3600:.3g} h at 50000 robot-steps/s (on a 2-core CPU; a "
                 f"GPU or more cores run faster)")
     for limit, told in ((1499, [expected]), (1500, [])):
         monkeypatch.setattr(timegrid, "WARN_ROBOT_STEPS", limit)
-        built.clear()
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
+        with warnings_before_call(cli, "param_product") as (caught, built):
             table = sweep.main([*argv, "--out", str(tmp_path / str(limit))])
         assert [str(w.message) for w in caught if w.category is ts.LongWorkWarning] == told
         assert built == [told]  # told before the instances were built

@@ -387,30 +387,20 @@ def test_cma_es_reports_why_each_restart_stopped():
     assert restarted.stop_reasons == ["maxiter=2", "maxiter=2"]
 
 
-def test_a_sobol_batch_tells_its_hours_once_before_its_instances_are_built(tmp_path,
-                                                                         monkeypatch):
+def test_a_sobol_batch_tells_its_hours_once_before_its_instances_are_built(
+        tmp_path, monkeypatch, warnings_before_call):
     """As sweep's: the Sobol batch's robot-steps are told from its sampled points before their
     robots are built (a million took minutes before run_batch told them), each point at its
     own sampled period, and once (run_batch's own telling kept back). Six points of A1 for
     0.1 cycle of their periods (0.5-1 s) at the study's 3.15-ms steps: the sum of
     0.1·T_i/3.15 ms, 133 robot-steps, told past a limit of 100 (each instance's at most 32,
     below it, tells nothing of its own)."""
-    import warnings
     from taichi_star import timegrid
     from taichi_star.batch import plan_chunks
     from taichi_star.batch.tasks import batch_robot_steps
 
-    built = []
-    box_params = identify.box_params
-
-    def remembering_box_params(*args, **kwargs):
-        built.append([str(w.message) for w in caught])
-        return box_params(*args, **kwargs)
-
-    monkeypatch.setattr(identify, "box_params", remembering_box_params)
     monkeypatch.setattr(timegrid, "WARN_ROBOT_STEPS", 100)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    with warnings_before_call(identify, "box_params") as (caught, built):
         sensitivity.main(["--vary", "period=0.5:1", "--gaits", "A1", "--base-samples", "2",
                           "--cycles", "0.1", "--out", str(tmp_path), "--no-progress"])
     told = [str(w.message) for w in caught if w.category is taichi_star.LongWorkWarning]
