@@ -59,6 +59,9 @@ def wrap_degrees(angle, include_180: bool = False):
     a gait travelling straight back reads 180); NaN and ±inf give NaN."""
     with np.errstate(invalid="ignore"):  # ±inf % 360 is NaN, as documented, not a warning
         wrapped = (np.asarray(angle) + 180.0) % 360.0 - 180.0
+    # (x + 180) % 360 rounds to 360 for an x a hair below -180 (-180.00000000000003 gave +180;
+    # an audit, 2026-12)
+    wrapped = np.where(wrapped >= 180.0, wrapped - 360.0, wrapped)
     return np.where(wrapped == -180.0, 180.0, wrapped) if include_180 else wrapped
 
 
@@ -70,7 +73,10 @@ def body_rotation(positions: np.ndarray, rest_positions: np.ndarray, joints: np.
     now = positions[..., joints, :] - positions[..., hub:hub + 1, :]
     rest = rest_positions[..., joints, :] - rest_positions[..., hub:hub + 1, :]
     turn = (np.arctan2(now[..., 1], now[..., 0]) - np.arctan2(rest[..., 1], rest[..., 0]))
-    return np.arctan2(_ordered_sum(np.sin(turn)), _ordered_sum(np.cos(turn)))
+    heading = np.arctan2(_ordered_sum(np.sin(turn)), _ordered_sum(np.cos(turn)))
+    # arctan2(−0.0, x < 0) is −π, outside (−π, π]: a body turned by half a turn read −π or π
+    # by the sign of a zero (an audit, 2026-12)
+    return np.where(heading == -np.pi, np.pi, heading)
 
 
 def _ordered_sum(values: np.ndarray) -> np.ndarray:
@@ -147,7 +153,7 @@ def speed_error(speed_mm_s, reference_mm_s, floor_mm_s: float = SPEED_ERROR_FLOO
     """|v − v_ref| / max(|v_ref|, floor), speeds in mm/s (arrays broadcast; NaN stays NaN).
     The default floor is the design's 0.5 mm/s; floor_mm_s = 0 gives the plain relative error
     |v − v_ref| / |v_ref|. ValueError for a negative or non-finite floor."""
-    if not (math.isfinite(floor_mm_s) and floor_mm_s >= 0):
+    if not (is_real(floor_mm_s) and math.isfinite(floor_mm_s) and floor_mm_s >= 0):
         raise ValueError(f"floor_mm_s must be a finite number >= 0, got {floor_mm_s!r}")
     reference = np.asarray(reference_mm_s, dtype=np.float64)
     return np.abs(np.asarray(speed_mm_s, dtype=np.float64) - reference) / np.maximum(

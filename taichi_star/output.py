@@ -536,8 +536,10 @@ def replay(result, shapes: pd.DataFrame, centroid: pd.DataFrame):
     with its recorded shapes and trajectory read from the tables of `animation_tables`, as
     written and read back (CSV): `SimulationResult.animate` of it draws the tables. The
     tables' gaits, in order of first appearance, are the instances 0, 1, ...; the trajectory
-    holds instance, t_s, x_mm, y_mm. ValueError unless the shapes hold every node of every
-    frame of each gait once, and the gaits are the result's instances."""
+    holds instance, t_s, x_mm, y_mm and heading_deg, NaN (the tables do not hold it; without
+    the column `to_xarray` of the result failed: an audit, 2026-12). ValueError unless the
+    shapes hold every node of every frame of each gait once, and the gaits are the result's
+    instances."""
     labels = list(dict.fromkeys(shapes["gait"]))
     if len(labels) != len(result.summary):
         raise ValueError(f"shapes hold {len(labels)} gaits, the result "
@@ -555,7 +557,8 @@ def replay(result, shapes: pd.DataFrame, centroid: pd.DataFrame):
     trajectory = pd.DataFrame({"instance": centroid["gait"].map(instance).to_numpy(),
                                "t_s": centroid["t_s"].to_numpy(),
                                "x_mm": centroid["x_mm"].to_numpy(),
-                               "y_mm": centroid["y_mm"].to_numpy()})
+                               "y_mm": centroid["y_mm"].to_numpy(),
+                               "heading_deg": np.full(len(centroid), np.nan)})
     return dataclasses.replace(result, shapes=positions, trajectory=trajectory)
 
 

@@ -372,9 +372,13 @@ class StarParams:
                 # the rest shape's actuator arcs, of the profile's rest curvature, must reach
                 # from one joint to the next
                 rest = self.actuator_profile.rest_curvature
-                highest, highest_included = 1.0 / (rest * math.sin(math.pi / 8)), False
-                reason = (f"an actuator arc of rest curvature {rest:.5g} 1/m cannot span "
-                          f"joints further apart")
+                # the smaller of the two bounds: a profile of small rest curvature let the arc's
+                # bound replace the declared one (1.5 m was taken; an audit, 2026-12)
+                arc_bound = 1.0 / (rest * math.sin(math.pi / 8))
+                if arc_bound <= highest:
+                    highest, highest_included = arc_bound, False
+                    reason = (f"an actuator arc of rest curvature {rest:.5g} 1/m cannot span "
+                              f"joints further apart")
             elif name == "tip_radius":
                 lowest, included = self.joint_radius, False
                 reason = "beyond joint_radius: the limbs point outwards"

@@ -127,7 +127,8 @@ def nearest_interval(interval_s: float, dt: float) -> float:
     at least one step: what `simulate` and `Simulator.advance` accept as record_interval_s
     with fixed steps. ValueError naming interval_s or dt unless each is a finite number
     > 0 s."""
-    return max(1, round(_steps_of("interval_s", interval_s, dt))) * dt
+    # a Python float whatever dt's type (a NumPy float32 dt gave a float32 interval)
+    return float(max(1, round(_steps_of("interval_s", interval_s, dt))) * dt)
 
 
 def _positive_number(value) -> bool:
@@ -167,7 +168,9 @@ def check_work(name: str, steps: float, batch: Optional[int] = None):
     ValueError with it past REFUSE_ROBOT_STEPS (work no machine measured finishes in
     REFUSE_DAYS). ValueError naming `steps` (a real number >= 0) or `batch` (an integer >= 1)
     otherwise."""
-    if not is_real(steps) or steps < 0:
+    # steps != steps: NaN, named as steps (it was named as `name`'s count; an audit, 2026-12),
+    # without a conversion that 10**400 would overflow
+    if not is_real(steps) or steps != steps or steps < 0:
         raise ValueError(f"steps must be a real number >= 0 (time steps per instance), got "
                          f"{shown(steps)}")
     try:

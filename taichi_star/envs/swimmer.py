@@ -85,11 +85,11 @@ class SwimmerTask:
     """The goal-reaching task's settings (validated; ValueError names the field).
 
     goal_distance_mm: distance of a randomly drawn goal from the start, mm, (0, 1000];
-    goal_tolerance_mm: the episode terminates within this distance of the goal, mm, > 0;
-    firing_cost_mm: reward subtracted per fired actuator, mm of progress, >= 0;
+    goal_tolerance_mm: the episode terminates within this distance of the goal, mm, (0, 1000];
+    firing_cost_mm: reward subtracted per fired actuator, mm of progress, [0, 1000];
     max_episode_steps: control periods before truncation, >= 1, or None (no budget);
     since_fired_cap_s: the largest time-since-fired observed (and that of a never-fired
-    actuator), s, > 0."""
+    actuator), s, (0, 1e6]."""
 
     goal_distance_mm: float = 50.0
     goal_tolerance_mm: float = 5.0

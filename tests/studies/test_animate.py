@@ -38,6 +38,9 @@ def test_each_gif_is_redrawn_from_the_tables_alone(tmp_path):
                                  record_interval_s=cli.QUICK_DURATION_S, record_shapes=True)
     assert other.shapes.shape[0] == 2
     drawn = replay(other, shapes, pd.read_csv(folder / "centroid.csv"))
+    # a whole result: its headings NaN (the tables hold none), its xarray form made (without
+    # the column it failed; an audit, 2026-12)
+    assert drawn.to_xarray().sizes["instance"] == len(GAITS)
     for instance, gait in enumerate(GAITS):
         name = f"{gait.replace('+', '_')}.gif"
         drawn.animate(tmp_path / name, instances=[instance], fps=15, size_px=600,

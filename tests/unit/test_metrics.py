@@ -1085,3 +1085,22 @@ def test_wrap_degrees_of_nan_or_infinity_is_nan():
         for include_180 in (False, True):
             assert np.isnan(metrics.wrap_degrees([np.nan, np.inf, -np.inf],
                                                  include_180=include_180)).all()
+
+
+def test_angles_a_rounding_past_half_a_turn_stay_in_their_range():
+    """(x + 180) % 360 rounds to 360 for x a hair below -180: -180.00000000000003 wrapped to
+    +180, outside [-180, 180); and a body turned by half a turn read -π by the sign of a zero,
+    outside (-π, π] (an audit, 2026-12)."""
+    assert metrics.wrap_degrees(-180.00000000000003) == -180.0
+    assert metrics.wrap_degrees(-180.00000000000003, include_180=True) == 180.0
+    rest = build_topology(StarParams(n_arc=6, n_limb=2))
+    turned = metrics.rotate(rest.rest_positions, -math.pi)
+    assert metrics.body_rotation(turned, rest.rest_positions, rest.joints) == math.pi
+    assert metrics.body_rotation(rest.rest_positions, rest.rest_positions, rest.joints) == 0.0
+
+
+@pytest.mark.parametrize("floor", [True, None, "0.5", -1.0, math.nan])
+def test_a_speed_errors_floor_is_a_number(floor):
+    """A bool was taken as a floor of 1, None or text a TypeError: ValueError naming it."""
+    with pytest.raises(ValueError, match="^floor_mm_s must be a finite number >= 0"):
+        metrics.speed_error(1.0, 2.0, floor_mm_s=floor)

@@ -884,3 +884,18 @@ def test_none_is_refused_where_it_is_not_the_default(name):
     with pytest.raises(ValueError, match=f"^{name} must be .* got None$"):
         ts.SolverConfig(**{name: None})
     assert ts.SolverConfig(residual_tol=None).residual_tol is None
+
+
+def test_the_joint_radius_keeps_its_declared_top_when_the_profile_allows_more():
+    """A profile of small rest curvature (K̄(0) ≈ 0.99 1/m: its arc bound 2.6 m) replaced the
+    declared top of 1 m instead of narrowing it, so 1.5 m was taken (an audit, 2026-12): the
+    smaller bound holds, the declared top itself accepted, a hair above refused with the
+    declared range; the paper's profile (arc bound 0.18 m) still narrows it."""
+    flat = ts.CurvatureProfile(heating=(-0.5, 62.724, 0.061, 1.0))
+    assert ts.StarParams(actuator_profile=flat, joint_radius=1.0, tip_radius=1.5).joint_radius \
+        == 1.0
+    with pytest.raises(ValueError, match=r"^joint_radius must be a real number in \[0.001, 1\], "
+                                         r"got 1.0000001$"):
+        ts.StarParams(actuator_profile=flat, joint_radius=1.0000001, tip_radius=1.5)
+    with pytest.raises(ValueError, match=r"cannot span joints further apart"):
+        ts.StarParams(joint_radius=0.5, tip_radius=0.6)

@@ -3,6 +3,7 @@
 Exact checks: the intervals are compared with the integer multiples of dt they must be, and the
 tolerance cases sit far inside and far outside STEP_TOLERANCE (1e-9 relative)."""
 
+import math
 import warnings
 
 import numpy as np
@@ -181,3 +182,12 @@ def test_work_up_to_exactly_the_step_counter_is_accepted_and_past_it_refused():
         check_work("duration_s = x", MAX_STEPS_PER_INSTANCE + 1, 2)
     with pytest.raises(ValueError, match=r"^duration_s = y is inf time steps per instance; the"):
         check_work("duration_s = y", float("inf"))
+
+
+def test_a_nan_step_count_is_named_and_an_interval_is_a_python_float():
+    """check_work named `name`'s count for steps = NaN ("x is nan time steps"), and
+    nearest_interval gave a NumPy float32 for a float32 dt (an audit, 2026-12)."""
+    with pytest.raises(ValueError, match=r"^steps must be a real number >= 0 .*got nan$"):
+        check_work("x", math.nan)
+    interval = nearest_interval(1e-3, np.float32(1e-3))
+    assert type(interval) is float and interval == float(np.float32(1e-3))
