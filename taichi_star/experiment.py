@@ -161,8 +161,8 @@ def experimental_cycle_speeds(period_s: float = EXPERIMENT_PERIOD_S) -> pd.DataF
     ddof = 1), cycle_speed_min_mm_s, cycle_speed_max_mm_s. The spread is that of the cycles of
     one trial: it includes the robot's speed-up from rest over the first cycles and any slow-down
     at the end (A1+A3 stops for its last 3.3 s: its last cycle reads 0.10 mm/s, and its spread
-    is 1.31 mm/s with that cycle, 0.98 without), and is used as the measurement's uncertainty. It is not
-    divided by √n: successive cycles of one trial are strongly correlated (a trend, not noise).
+    is 1.31 mm/s with that cycle, 0.98 without), and is used as the measurement's uncertainty.
+    It is not divided by √n: successive cycles of one trial are strongly correlated (a trend, not noise).
     By the triangle inequality the mean per-cycle speed is at least the net speed over the same
     whole cycles; it exceeds the full-trial speed when the path wanders sideways (A1, slow).
     ValueError naming period_s unless every trial holds at least two whole periods (the

@@ -93,7 +93,8 @@ from .gait import Gait
 
 # every public name: docs/api.md documents the whole module
 __all__ = ["TRAINING_CYCLES", "VALIDATION_CYCLES", "SAMPLES_PER_CYCLE", "MAX_CYCLE",
-           "MAX_SAMPLES_PER_CYCLE", "PHASE_GRID", "PHASE_VALLEYS", "DISPLACEMENT_FLOOR_MM", "PHASE_STEP_S",
+           "MAX_SAMPLES_PER_CYCLE", "PHASE_GRID", "PHASE_VALLEYS", "DISPLACEMENT_FLOOR_MM",
+           "PHASE_STEP_S",
            "PHASE_KINK_RATIO", "GOLDEN_ITERATIONS", "UNCERTAINTY_RCOND", "UNCERTAINTY_SHARE",
            "UNCERTAINTY_COLUMNS", "TRIAL_COLUMNS", "CentroidPath", "Trial", "SimulatedRun",
            "TrialFit", "measured_trial", "check_window", "check_samples", "tau_grid",

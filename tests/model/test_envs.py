@@ -348,9 +348,11 @@ def test_bad_input_raises_value_error_and_changes_nothing():
                            (np.full((2, 8), np.nan), "0 and 1"),
                            (np.full((2, 8), "1"), "0 and 1"),
                            # a TypeError and NumPy's words, naming no action (an audit, 2026-12)
-                           ([[0, 1, 0, 0, 0, 0, 0, None]] * 2, r"0 and 1 .* values \[None, None\]$"),
-                           ([[0, [1, 2]]] * 2, r"^action must be an array of shape \(2, 8\) of 0 and 1, "
-                                             r"got a ragged list$")):
+                           ([[0, 1, 0, 0, 0, 0, 0, None]] * 2,
+                            r"0 and 1 .* values \[None, None\]$"),
+                           ([[0, [1, 2]]] * 2,
+                            r"^action must be an array of shape \(2, 8\) of 0 and 1, got a "
+                            r"ragged list$")):
         with pytest.raises(ValueError, match=words):
             envs.step(actions)
     for goal in ((np.nan, 0.0), (np.inf, 1.0), (1.0, 2.0, 3.0), (5e3, 0.0)):

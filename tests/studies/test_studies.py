@@ -674,8 +674,9 @@ def test_sigterm_is_one_line_saying_what_is_kept(tmp_path, monkeypatch, capsys):
 
 def test_a_sweeps_long_work_is_one_line_told_before_its_million_instances_are_built(tmp_path):
     """A sweep of a million instances (1000 × 200 values, five gaits) for four cycles (of
-    3.15 s at 1-ms steps: 12,600 steps each) is 1.26e10 robot-steps, past the warning's 1e10: told in one line as the errors are, the study's name first (Python's two
-    lines of file and source until 2026-12), and at once, before the instances are built
+    3.15 s at 1-ms steps: 12,600 steps each) is 1.26e10 robot-steps, past the warning's 1e10:
+    told in one line as the errors are, the study's name first (Python's two lines of file
+    and source until 2026-12), and at once, before the instances are built
     (about two minutes, after which run_batch told it, an audit). The run is then stopped
     with SIGTERM while it builds them."""
     import signal

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from taichi_star.timegrid import (MAX_STEPS_PER_INSTANCE, STEP_TOLERANCE, LongWorkWarning,
-                                  check_duration, check_steps, check_work, interval_for_count, multiples_within,
-                                  nearest_interval, on_grid, step_counts, whole_steps)
+                                  check_duration, check_steps, check_work, interval_for_count,
+                                  multiples_within, nearest_interval, on_grid, step_counts,
+                                  whole_steps)
 
 
 @pytest.mark.parametrize("time_s, dt, expected", [
