@@ -1,6 +1,7 @@
 """Calibration: fit StarParams fields to the measured speeds of the paper's gaits with CMA-ES.
 
-    python -m studies calibrate [--fit NAME=LOW:HIGH[:log] ...] [--preset paper|accurate]
+    python -m studies calibrate [--fit NAME=LOW:HIGH[:log] ...]
+                                [--preset paper|accurate|identified]
                                 [--set NAME=VALUE ...] [--gaits paper|A1,A1+A2,...]
                                 [--weights experimental|uniform] [--popsize P]
                                 [--max-generations G] [--restarts R] [--seed S] [--sigma0 0.25]
@@ -322,7 +323,10 @@ def best_point_table(row: pd.Series, box, table4c: pd.DataFrame, args, settings:
                      n_evaluations: int) -> pd.DataFrame:
     """One row: the best point (values, objective, where it was found), the five paper gaits at
     that point (signed speed in mm/s, speed ratio to the experiment, direction match, and
-    all_directions_match) and the run's settings (duration_s and dt_s in s)."""
+    all_directions_match, from the Fig. 4c run made at that point afterwards: with adaptive
+    steps up to 0.3 % off the evaluation's own speeds, whose objective the row records) and
+    the run's settings (duration_s and dt_s in s; cycles NaN under --quick, which runs a
+    duration)."""
     record = {"evaluation": int(row["evaluation"]), "restart": int(row["restart"]),
               "generation": int(row["generation"]), "objective": float(row["objective"]),
               **{spec.column: float(row[spec.column]) for spec in box}}
@@ -334,7 +338,9 @@ def best_point_table(row: pd.Series, box, table4c: pd.DataFrame, args, settings:
     record["all_directions_match"] = bool(table4c["direction_matches"].astype(bool).all())
     record.update({
         "fit_box": " ".join(spec.spec for spec in box), "fixed": " ".join(args.set),
-        "gaits": " ".join(gaits), "weights": args.weights, "cycles": args.cycles,
+        # --quick runs a duration (duration_s), not cycles: 3 was recorded (an audit, 2026-12)
+        "gaits": " ".join(gaits), "weights": args.weights,
+        "cycles": math.nan if args.quick else args.cycles,
         "duration_s": duration_s, "dt_s": solver.dt, "preset": args.preset,
         "seed": settings.seed, "popsize": settings.population(len(box), 0),
         "restarts": settings.restarts, "max_generations": settings.max_generations,

@@ -236,6 +236,8 @@ def test_calibrate_quick_against_a_direct_simulation(tmp_path):
     assert best["all_directions_match"] == all(
         np.sign(direct) == measurements["paper_sign"].to_numpy())
     assert best["fit_box"] == " ".join(spec.spec for spec in box) and best["seed"] == 1
+    # --quick runs a duration, not cycles (3 was recorded; an audit, 2026-12)
+    assert math.isnan(best["cycles"]) and best["duration_s"] == cli.QUICK_DURATION_S
     sidecar = json.loads((tmp_path / "calibration_best.csv.json").read_text())
     assert sidecar["study"] == "calibrate" and sidecar["solver"]["dt"] == cli.QUICK_DT
     assert sidecar["details"]["fit"] == calibrate.QUICK_FIT

@@ -192,3 +192,23 @@ def test_bad_arguments_fail_before_compute(tmp_path, argv, match, monkeypatch, c
     assert studies_main(["stability", "--quick", "--no-progress", "--out", str(out), *argv]) == 2
     assert match in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_the_notes_f32_median_is_over_the_pairs_not_the_cells_medians():
+    """At one stiffness, a cell of three pairs that agree (relative difference 0) and a cell of
+    one pair 100 % apart: the pairs' median is 0, the median of the cells' medians 0.5, which
+    the notes printed (108 % and 2,440 % for the committed grid's 80 % and 1,010 %; an audit,
+    2026-12)."""
+    rows = []
+    base = dict(alpha=0.8, added_mass_coeff=1.0, period_s=3.15, stiffness_factor=10.0)
+    for dt, gaits in ((1.0, {"A1": 1.0, "A2": 1.0, "A3": 1.0}), (5.0, {"A1": 2.0})):
+        for gait, f32_speed in gaits.items():
+            for precision, speed in (("f64", 1.0), ("f32", f32_speed)):
+                rows.append(dict(gait=gait, **base, dt_ms=dt, precision=precision,
+                                 outcome="ok", substep_retries=0, speed_mm_s=speed,
+                                 status="ok", sane=True, max_strain=0.01, cycles=2.0))
+    table = pd.DataFrame(rows)
+    notes = stability.report(table, stability.outcome_summary(table),
+                             stability.paper_summary(table), stability.f32_summary(table))
+    (line,) = [line for line in notes.splitlines() if line.strip().startswith("x10 ")]
+    assert "median 0.00e+00," in line and "max 1.00e+00" in line
