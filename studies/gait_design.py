@@ -74,6 +74,7 @@ import pandas as pd
 
 from taichi_star import Gait, simulate
 from taichi_star.diagnostics import check_jet_solver
+from taichi_star.metrics import wrap_degrees
 from taichi_star.output import animation_tables, read_provenance, replay
 from taichi_star.timegrid import nearest_interval
 
@@ -141,7 +142,7 @@ def whole_turns(result) -> np.ndarray:
     final = result.summary["heading_deg"].to_numpy()
     for instance, part in result.trajectory.groupby("instance"):
         heading = part.sort_values("t_s")["heading_deg"].to_numpy()
-        steps = (np.diff(heading) + 180.0) % 360.0 - 180.0
+        steps = wrap_degrees(np.diff(heading))
         turns[instance] = np.round((heading[0] + steps.sum() - final[instance]) / 360.0)
     return turns
 
