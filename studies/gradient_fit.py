@@ -29,11 +29,16 @@ A1-A5).
   with sensitivities (`simulate(..., sensitivities=...)`, `identification.objective_and_gradient`,
   chain rule through the box's map u -> value); `--starts` starts: the base model, then uniform
   random points (seeded); each stops at `--lbfgs-evaluations` evaluations or when it stalls.
-- least squares (scipy's `least_squares`, dogbox, same bounds and starts): the objective is a
-  sum of squares (`identification.objective_residuals`: the curve residuals and ρ of every
-  gait), and a run with sensitivities gives the residuals' Jacobian and a Gauss-Newton step;
-  every trial point is a run without sensitivities, the Jacobian a run with them at the points
-  scipy accepts; `--least-squares-evaluations` trial points per start (0: not run).
+- least squares (scipy's `least_squares`, `--least-squares-method` trf or dogbox, same bounds
+  and starts): the objective is a sum of squares (`identification.objective_residuals`: the
+  curve residuals and ρ of every gait), and a run with sensitivities gives the residuals'
+  Jacobian and a Gauss-Newton step; a start's first point is a run with sensitivities, every
+  later trial point a run without, the Jacobian a run with them at the points scipy accepts;
+  `--least-squares-evaluations` trial points per start (0: not run).
+
+A run with sensitivities leaves out the per-actuator axes of actuators no fitted gait fires
+(their derivatives are exactly zero; `Problem.moved_names`): the study names them on stderr
+before it starts.
 - CMA-ES (`studies.identify.minimise_cmaes`) from the base model, step `--sigma0`, population
   `--popsize` (cma's default 4 + 3 ln D when not given), `--cma-generations` generations, one
   batched run per generation.
@@ -129,6 +134,19 @@ CORNER_GROUP = 10
 groups; no limit between fields ties an axis of one group to one of the other."""
 COST_REPEATS = 3
 """Interleaved timings of the gradient's simulation and the plain one (`measure_cost_ratio`)."""
+LEAST_SQUARES_METHODS = ("trf", "dogbox")
+"""scipy `least_squares` methods the fit may use (--least-squares-method). trf (scipy's default,
+reflective steps within an elliptic trust region) by default since this commit: from the base
+model and from the seeded random start, over eight trial points, with the objective's 384-point
+phase search, it reached a lower objective than dogbox (a dogleg within a rectangular trust
+region that drops axes at a bound) on sets 20 (78.7 against 93.7 after four points from the
+base model; 115.4 against 129.3 after eight from the random start) and 20fired (249.2 against
+798.2 after eight from the base model, five gaits), and on set 6 it ended lower (50.6 against
+51.5) though dogbox's first step went further (63.5 against 411.5); measured at fc798ce with
+a scratch script, each start's first point a residual run of its own. Until then dogbox,
+chosen under the earlier 64-point phase search, where its first step from the base model went
+further on sets 20 and 6 (5,550 → 57.5 and → 67.6; trf → 374 and → 412)."""
+DEFAULT_LEAST_SQUARES_METHOD = "trf"
 LEAST_SQUARES = "least-squares"
 """The least-squares optimiser's name in the tables."""
 POLISH = "CMA-ES + least-squares"
@@ -198,6 +216,12 @@ class Problem:
         self.record = nearest_interval(identify.RECORD_INTERVAL_S, solver.dt)
         self.window_s = train[1] * base.period
         self.names = [spec.sensitivity_name for spec in box]
+        idle = set(identify.unfired_axes(box, self.gaits))
+        self.moved = np.array([spec.label not in idle for spec in box])
+        """(D,) whether any gait moves the axis: the per-actuator axes of actuators no gait
+        fires have derivatives exactly zero, so a run with sensitivities leaves them out
+        (`moved_names`) and their Jacobian columns are zeros."""
+        self.moved_names = [name for name, moved in zip(self.names, self.moved) if moved]
 
     def params(self, units) -> list:
         return identify.box_params(self.box, identify.box_values(self.box, units), self.base,
@@ -236,17 +260,22 @@ class Problem:
         unit coordinates; for a failed simulation R equal residuals whose squares sum to
         `identify.FAILED_PENALTY`, and zero derivatives."""
         units = np.clip(np.asarray(units, dtype=float), 0.0, 1.0)
-        runs, result = self.runs(self.params(units[None, :]), self.train[1], self.names)
+        runs, result = self.runs(self.params(units[None, :]), self.train[1], self.moved_names)
         if any(run is None for run in runs):
             failed = self.failed_residuals()
             return failed, np.zeros((len(failed), len(self.box))), np.zeros(len(self.box))
         derivatives = {gait: identification.record_derivatives(
-            result.trajectory_sensitivities, b, self.names) for b, gait in enumerate(self.gaits)}
+            result.trajectory_sensitivities, b, self.moved_names)
+            for b, gait in enumerate(self.gaits)}
         simulated = dict(zip(self.gaits, runs))
-        residuals, jacobian, table = identification.objective_residuals(
+        residuals, moved_jacobian, table = identification.objective_residuals(
             simulated, derivatives, self.trials, self.train)
-        motion = identification.phase_motion(simulated, derivatives, self.trials, table,
-                                             self.train)
+        moved_motion = identification.phase_motion(simulated, derivatives, self.trials, table,
+                                                   self.train)
+        jacobian = np.zeros((len(residuals), len(self.box)))
+        jacobian[:, self.moved] = moved_jacobian
+        motion = np.zeros(len(self.box))
+        motion[self.moved] = moved_motion
         per_unit = identify.box_value_per_unit(
             self.box, identify.box_values(self.box, units[None, :])[0])
         return residuals, jacobian * per_unit, motion * per_unit
@@ -317,7 +346,7 @@ def measure_cost_ratio(problem: Problem, repeats: int = COST_REPEATS) -> float:
                                        record_interval_s=problem.record, progress=False),
              "gradient": lambda: simulate(params, window, problem.solver, arch=problem.arch,
                                           record_interval_s=problem.record, progress=False,
-                                          sensitivities=problem.names)}
+                                          sensitivities=problem.moved_names)}
     _, times, _ = interleaved_rounds(list(calls.values()), repeats)
     best = dict(zip(calls, times.min(axis=0)))
     return float(best["gradient"] / best["plain"])
@@ -335,9 +364,11 @@ def start_points(problem: Problem, starts: int, seed: int):
 def record_gradient_call(recorder: Recorder, problem: Problem, units, value: float,
                          cost_ratio: float, start: int):
     """Add one simulation with the box's sensitivities to `recorder`: (1 + 2·D) instances per
-    gait with the replicas counted, `cost_ratio` runs cost-equivalent."""
+    gait with the replicas counted (D the axes a gait moves, `Problem.moved_names`),
+    `cost_ratio` runs cost-equivalent."""
     per_evaluation = problem.window_s * len(problem.gaits)
-    recorder.add(units, value, per_evaluation * (1 + REPLICAS_PER_DIRECTION * len(problem.box)),
+    recorder.add(units, value, per_evaluation * (1 + REPLICAS_PER_DIRECTION
+                                                 * len(problem.moved_names)),
                  per_evaluation * cost_ratio, start)
 
 
@@ -370,38 +401,47 @@ def fit_lbfgs(problem: Problem, starts: int, max_evaluations: int, seed: int,
 
 
 def fit_least_squares(problem: Problem, points, max_evaluations: int, recorder: Recorder,
-                      cost_ratio: float) -> Recorder:
+                      cost_ratio: float, method: str = DEFAULT_LEAST_SQUARES_METHOD) -> Recorder:
     """Multi-start trust-region least squares over the unit box (scipy's `least_squares`,
-    method "dogbox": Gauss-Newton steps on the residuals' Jacobian, a dogleg within a
-    rectangular trust region that the bounds [0, 1] of each axis clip; axes scaled by the
-    Jacobian's columns), from each of `points` (unit coordinates: `start_points`, as
-    `fit_lbfgs`, or another optimiser's best point to polish), `max_evaluations` residual
-    evaluations per start. Each trial point costs one run without sensitivities (its
-    residuals); the run with sensitivities (the Jacobian) is made only where scipy asks for it,
-    at the points it accepts and not at the last one a start's budget allows (no step follows
-    it): a rejected trial point, and the last, cost one run instead of `cost_ratio`, an
-    accepted one 1 + `cost_ratio` (at 1595fb0 and before, every point got the Jacobian with its
-    residuals, `cost_ratio` runs). Every simulation goes into
-    `recorder` (a Jacobian's row with its point's objective). Dogbox rather than scipy's
-    default "trf": from the base model (two gaits, one cycle) trf went 5,550 → 374 → 95 on the
-    20-parameter set and 5,550 → 412 → 66 on the six, dogbox 5,550 → 57.5 and 5,550 → 67.6
-    (measured before choosing)."""
+    `method` one of LEAST_SQUARES_METHODS: Gauss-Newton steps on the residuals' Jacobian within
+    a trust region that the bounds [0, 1] of each axis limit; axes scaled by the Jacobian's
+    columns), from each of `points` (unit coordinates: `start_points`, as `fit_lbfgs`, or
+    another optimiser's best point to polish), `max_evaluations` residual evaluations per
+    start. A start's first point costs one run with sensitivities (`cost_ratio` runs: its
+    residuals and the Jacobian scipy's first step needs; one run without them when the budget
+    is one point, which no step follows). Every later trial point costs one run without
+    sensitivities (its residuals); the run with sensitivities (the Jacobian) is made only where
+    scipy asks for it, at the points it accepts and not at the last one a start's budget allows
+    (no step follows it): a rejected trial point, and the last, cost one run, an accepted one
+    1 + `cost_ratio` (at 1595fb0 and before, every point got the Jacobian with its residuals;
+    until this commit's parent the first point's residuals were a run of their own too). Every
+    simulation goes into `recorder` (a Jacobian's row with its point's objective). Why trf by
+    default: `LEAST_SQUARES_METHODS`."""
     from scipy.optimize import least_squares
     parameter_set = recorder.parameter_set
     for start, x0 in enumerate(points):
         trial_points = []
         spent = []
+        start_jacobian = {}
 
         def residuals(units, start=start):
-            values = problem.residuals(units)
+            if not trial_points and max_evaluations > 1:
+                # scipy's first step needs the start's Jacobian: one run gives both
+                values, start_jacobian[units.tobytes()] = problem.residuals_and_jacobian(units)
+                record_gradient_call(recorder, problem, units, float(values @ values),
+                                     cost_ratio, start)
+            else:
+                values = problem.residuals(units)
+                record_plain_call(recorder, problem, units, float(values @ values), start)
             value = float(values @ values)
             trial_points.append(values)
-            record_plain_call(recorder, problem, units, value, start)
             print(f"set {parameter_set} {LEAST_SQUARES} start {start}: objective {value:.5g}",
                   flush=True)
             return values
 
         def jacobian(units, start=start):
+            if units.tobytes() in start_jacobian:
+                return start_jacobian.pop(units.tobytes())
             if len(trial_points) == max_evaluations:
                 # the budget is spent: scipy asks only to test convergence before it stops, and
                 # no step will use this Jacobian, so none is simulated (zeros end the fit)
@@ -412,7 +452,7 @@ def fit_least_squares(problem: Problem, points, max_evaluations: int, recorder: 
                                  start)
             return derivatives
 
-        result = least_squares(residuals, x0, jac=jacobian, bounds=(0.0, 1.0), method="dogbox",
+        result = least_squares(residuals, x0, jac=jacobian, bounds=(0.0, 1.0), method=method,
                                x_scale="jac", max_nfev=max_evaluations)
         # the zeros that end a spent budget read to scipy as a zero gradient: say what it was
         recorder.stopped(start, f"its {max_evaluations} trial points were spent" if spent
@@ -552,6 +592,10 @@ def build_parser():
     parser.add_argument("--least-squares-evaluations", type=int, default=8, quick=2,
                         help="trial points (residuals; the Jacobian where accepted) per "
                              "least-squares start; 0 leaves the least-squares fit out")
+    parser.add_argument("--least-squares-method", default=DEFAULT_LEAST_SQUARES_METHOD,
+                        choices=LEAST_SQUARES_METHODS,
+                        help="scipy least_squares method of the least-squares fits (default "
+                             f"{DEFAULT_LEAST_SQUARES_METHOD})")
     parser.add_argument("--cma-generations", type=int, default=8, quick=2,
                         help="CMA-ES generations")
     parser.add_argument("--polish-evaluations", type=int, default=0,
@@ -609,7 +653,7 @@ def main(argv=None):
         # a gradient's evaluation runs each gait with two replicas per axis (`sensitivities`)
         gradient = args.starts * (args.lbfgs_evaluations + args.least_squares_evaluations) \
             + args.polish_evaluations
-        per_gradient = instances_per_instance(len(box))
+        per_gradient = instances_per_instance(len(box) - len(identify.unfired_axes(box, gaits)))
         cli.check_instances(
             (cma_settings.evaluations(len(box)) + gradient * per_gradient) * len(gaits),
             f"set {name}: (--cma-generations {args.cma_generations} × population "
@@ -633,6 +677,7 @@ def main(argv=None):
                                            "lbfgs_evaluations": args.lbfgs_evaluations,
                                            "least_squares_evaluations":
                                                args.least_squares_evaluations,
+                                           "least_squares_method": args.least_squares_method,
                                            "cma_generations": args.cma_generations,
                                            "polish_evaluations": args.polish_evaluations,
                                            "popsize": args.popsize, "seed": args.seed,
@@ -659,11 +704,12 @@ def main(argv=None):
             recorders.append(Recorder(name, LEAST_SQUARES, write_history))
             fit_least_squares(problems[name], start_points(problems[name], args.starts,
                                                            args.seed),
-                              args.least_squares_evaluations, recorders[-1], cost_ratios[name])
+                              args.least_squares_evaluations, recorders[-1], cost_ratios[name],
+                              args.least_squares_method)
         if args.polish_evaluations:
             recorders.append(Recorder.continuing(cma, POLISH, write_history))
             fit_least_squares(problems[name], [cma.best_units], args.polish_evaluations,
-                              recorders[-1], cost_ratios[name])
+                              recorders[-1], cost_ratios[name], args.least_squares_method)
     table = summarise(recorders, problems, validate, cost_ratios)
     out.write_csv(table, "gradient_fit.csv")
     out.write_csv(pd.concat([problems[r.parameter_set].uncertainty(r.best_units)

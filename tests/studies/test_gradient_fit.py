@@ -88,18 +88,20 @@ def test_a_polish_starts_at_cma_best_point_and_counts_its_cost_on_top(monkeypatc
     monkeypatch.setattr(problem, "residuals",
                         lambda units: points.append(np.array(units)) or np.asarray(units) - 0.5)
     monkeypatch.setattr(problem, "residuals_and_jacobian",
-                        lambda units: (np.asarray(units) - 0.5, np.eye(6)))
+                        lambda units: points.append(np.array(units))
+                        or (np.asarray(units) - 0.5, np.eye(6)))
     gradient_fit.fit_least_squares(problem, [polish.best_units], 5, polish, cost_ratio=2.0)
     np.testing.assert_array_equal(points[0], cma_best)
-    first, its_jacobian = polish.rows[:2]
+    first, second = polish.rows[:2]
     # the point's own value (6 · 0.2² = 0.24), below CMA-ES's 4.0: it becomes the best
     assert first["objective"] == pytest.approx(0.24) == first["best_objective"]
     window = base.period
-    # its residuals: one run; its Jacobian: 1 + 2·6 instances, 2 runs cost-equivalent
-    assert first["robot_seconds"] == pytest.approx(30.0 + window)
-    assert first["robot_seconds_cost_equivalent"] == pytest.approx(30.0 + window)
-    assert its_jacobian["robot_seconds"] == pytest.approx(30.0 + window * (1 + 13))
-    assert its_jacobian["robot_seconds_cost_equivalent"] == pytest.approx(30.0 + window * 3.0)
+    # its residuals and Jacobian: one run with the sensitivities, 1 + 2·6 instances, 2 runs
+    # cost-equivalent; the next trial point's residuals: one run
+    assert first["robot_seconds"] == pytest.approx(30.0 + window * 13)
+    assert first["robot_seconds_cost_equivalent"] == pytest.approx(30.0 + window * 2.0)
+    assert second["robot_seconds"] == pytest.approx(30.0 + window * 14)
+    assert second["robot_seconds_cost_equivalent"] == pytest.approx(30.0 + window * 3.0)
     assert polish.best_objective == pytest.approx(0.0, abs=1e-12)
     np.testing.assert_allclose(polish.best_units, 0.5, atol=1e-6)
     # a call that does not beat CMA-ES's best (0.1 here) leaves it the best
@@ -366,9 +368,10 @@ def test_least_squares_finds_a_linear_minimum_and_differentiates_only_where_aske
     """On residuals linear in the units, r = A·u − y with the minimum u* inside the box, the
     Gauss-Newton step is exact: the fit reaches Σ r² at u* (to the solver's tolerances) from
     the base model's units. Every trial point is simulated once without sensitivities (one
-    run: gaits × window robot-seconds); the Jacobian's simulation ((1 + 2·6) × gaits × window,
-    `cost_ratio` runs) only where scipy asks for it: at points whose residuals it has just had,
-    right after them."""
+    run: gaits × window robot-seconds) but the start, whose residuals come with the Jacobian the
+    first step needs; the Jacobian's simulation ((1 + 2·6) × gaits × window, `cost_ratio` runs)
+    is made at the start and then only where scipy asks for it: at points whose residuals it
+    has just had, right after them."""
     box = [identify.parse_range_spec(text, "--sets") for text in gradient_fit.PARAMETER_SETS["6"]]
     base = StarParams(gait="A1+A2")
     problem = gradient_fit.Problem(box, base, ["A1+A2"], {}, (1, 1), SolverConfig(), "cpu")
@@ -400,14 +403,17 @@ def test_least_squares_finds_a_linear_minimum_and_differentiates_only_where_aske
     assert recorder.best_objective == pytest.approx(minimum, rel=1e-6)
     np.testing.assert_allclose(recorder.best_units, best_units + np.linalg.lstsq(
         matrix, offset, rcond=None)[0], atol=1e-5)
-    assert len({p.tobytes() for p in points}) == len(points) >= 2
-    assert calls[0] == "residuals" and 1 <= len(differentiated) <= len(points)
+    # the start: one run with the sensitivities (its residuals and the first step's Jacobian)
+    assert calls[0] == "jacobian"
+    np.testing.assert_array_equal(differentiated[0], identify.start_units(box, base))
+    trial_points = [differentiated[0]] + points
+    assert len({p.tobytes() for p in trial_points}) == len(trial_points) >= 2
     assert len(recorder.rows) == len(points) + len(differentiated)
-    for k, call in enumerate(calls):
-        if call == "jacobian":
+    later = differentiated[1:]
+    for k, call in enumerate(calls[1:], start=1):
+        if call == "jacobian":  # only at the point whose residuals scipy has just had
             assert calls[k - 1] == "residuals"
-            np.testing.assert_array_equal(differentiated.pop(0), points[calls[:k].count(
-                "residuals") - 1])
+            np.testing.assert_array_equal(later.pop(0), points[calls[:k].count("residuals") - 1])
     window = base.period
     jacobians = calls.count("jacobian")
     assert recorder.robot_seconds == pytest.approx((len(points) + 13 * jacobians) * window)
@@ -423,7 +429,7 @@ def test_least_squares_finds_a_linear_minimum_and_differentiates_only_where_aske
     capped = gradient_fit.fit_least_squares(
         problem, gradient_fit.start_points(problem, 1, 0), 2,
         gradient_fit.Recorder("6", gradient_fit.LEAST_SQUARES), cost_ratio=2.5)
-    assert len(points) == 2
+    assert calls == ["jacobian", "residuals"]  # two trial points: the start, one step
     # (scipy itself reads the zeros that end a spent budget as a zero gradient, "gtol")
     assert capped.stop_reasons == ["start 0: its 2 trial points were spent"]
 
@@ -454,3 +460,43 @@ def test_held_out_scores_are_fresh_fits_of_the_start_and_each_best_point(monkeyp
     monkeypatch.setattr(held_out, "gait_tables", lambda units: [None] * len(units))
     failed = gradient_fit.held_out_scores(held_out, [fitted])
     assert np.isinf(failed["objective"]).all() and failed["phase_s"].isna().all()
+
+
+def test_a_run_with_sensitivities_leaves_out_the_axes_no_gait_moves(monkeypatch):
+    """A4's gain with A1+A2 fitted: A4 never fires, so its Jacobian column is exactly zero and
+    the run with sensitivities asks only for α's (the replicas counted for α alone). The
+    columns land on their axes: the same point with both sensitivities simulated gives the
+    same Jacobian, bit for bit (the unfired axis first in the box, so a shifted column
+    shows)."""
+    box = [identify.parse_range_spec(text, "--sets")
+           for text in ("actuator_gains[4]=0.3:2", "alpha=0.2:1.5")]
+    base = StarParams(gait="A1+A2")
+    problem = gradient_fit.Problem(box, base, ["A1+A2"],
+                                   identification.measured_trials(["A1+A2"], base.period),
+                                   (1, 1), SolverConfig(), "cpu")
+    assert problem.names == ["actuator_gains[3]", "alpha"]
+    assert problem.moved_names == ["alpha"]
+    asked = []
+    simulate = gradient_fit.simulate
+
+    def spy(*args, sensitivities=(), **kwargs):
+        asked.append(list(sensitivities))
+        return simulate(*args, sensitivities=sensitivities, **kwargs)
+
+    monkeypatch.setattr(gradient_fit, "simulate", spy)
+    units = np.array([0.4, 0.5])
+    residuals, jacobian, motion = problem.fit_terms(units)
+    assert asked == [["alpha"]]
+    assert np.all(jacobian[:, 0] == 0.0) and motion[0] == 0.0
+    assert np.any(jacobian[:, 1] != 0.0)
+    monkeypatch.setattr(problem, "moved", np.array([True, True]))
+    monkeypatch.setattr(problem, "moved_names", problem.names)
+    every_residual, every_column, every_motion = problem.fit_terms(units)
+    assert asked[-1] == problem.names
+    np.testing.assert_array_equal(every_residual, residuals)
+    np.testing.assert_array_equal(every_column, jacobian)
+    np.testing.assert_array_equal(every_motion, motion)
+    recorder = gradient_fit.Recorder("test", gradient_fit.LEAST_SQUARES)
+    monkeypatch.setattr(problem, "moved_names", ["alpha"])
+    gradient_fit.record_gradient_call(recorder, problem, units, 1.0, 2.0, 0)
+    assert recorder.robot_seconds == pytest.approx(base.period * (1 + 2))
