@@ -35,16 +35,16 @@ A1-A5).
   Jacobian and a Gauss-Newton step; a start's first point is a run with sensitivities, every
   later trial point a run without, the Jacobian a run with them at the points scipy accepts;
   `--least-squares-evaluations` trial points per start (0: not run).
-
-A run with sensitivities leaves out the per-actuator axes of actuators no fitted gait fires
-(their derivatives are exactly zero; `Problem.moved_names`): the study names them on stderr
-before it starts.
 - CMA-ES (`studies.identify.minimise_cmaes`) from the base model, step `--sigma0`, population
   `--popsize` (cma's default 4 + 3 ln D when not given), `--cma-generations` generations, one
   batched run per generation.
 - CMA-ES + least squares (`--polish-evaluations`, off by default): the least-squares fit from
   CMA-ES's best point, its rows' costs and wall time counted on top of CMA-ES's whole run (a
   global search, then Gauss-Newton steps to polish its result).
+
+A run with sensitivities leaves out the per-actuator axes of actuators no fitted gait fires
+(their derivatives are exactly zero; `Problem.moved_names`): the study names them on stderr
+before it starts.
 
 Cost, per optimiser: evaluations (a CMA-ES point; a gradient optimiser's simulation with
 sensitivities), wall time, and simulated robot-seconds = instances × simulated seconds,
@@ -136,7 +136,7 @@ COST_REPEATS = 3
 """Interleaved timings of the gradient's simulation and the plain one (`measure_cost_ratio`)."""
 LEAST_SQUARES_METHODS = ("trf", "dogbox")
 """scipy `least_squares` methods the fit may use (--least-squares-method). trf (scipy's default,
-reflective steps within an elliptic trust region) by default since this commit: from the base
+reflective steps within an elliptic trust region) by default since cb4f234: from the base
 model and from the seeded random start, over eight trial points, with the objective's 384-point
 phase search, it reached a lower objective than dogbox (a dogleg within a rectangular trust
 region that drops axes at a bound) on sets 20 (78.7 against 93.7 after four points from the
@@ -417,7 +417,7 @@ def fit_least_squares(problem: Problem, points, max_evaluations: int, recorder: 
     scipy asks for it, at the points it accepts and not at the last one a start's budget allows
     (no step follows it): a rejected trial point, and the last, cost one run, an accepted one
     1 + `cost_ratio` (at 1595fb0 and before, every point got the Jacobian with its residuals;
-    until this commit's parent the first point's residuals were a run of their own too). Every
+    before cb4f234 the first point's residuals were a run of their own too). Every
     simulation goes into `recorder` (a Jacobian's row with its point's objective). Why trf by
     default: `LEAST_SQUARES_METHODS`."""
     from scipy.optimize import least_squares

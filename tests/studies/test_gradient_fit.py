@@ -171,6 +171,7 @@ def test_the_history_plot_draws_both_counts_from_the_csv(tmp_path, monkeypatch):
     (["--polish-evaluations", "-1"], "--polish-evaluations must be >= 0"),
     (["--cma-generations", "0"], "--cma-generations must be >= 1"),
     (["--popsize", "1"], "--popsize must be >= 2"),
+    (["--least-squares-method", "lm"], "--least-squares-method"),
     (["--train-cycles", "0:3"], "--train-cycles: expected FIRST:LAST"),
     (["--train-cycles", "1:2", "--validate-cycles", "2:3"], "--validate-cycles 2:3: must start "
                                                              "after"),
