@@ -6,6 +6,8 @@ residuals, against CMA-ES on the same objective, box and start, for two paramete
                                    [--train-cycles 1:3] [--validate-cycles 4:6]
                                    [--starts 2] [--lbfgs-evaluations 8]
                                    [--least-squares-evaluations 8]
+                                   [--broyden-evaluations 16]
+                                   [--least-squares-method trf|dogbox]
                                    [--cma-generations 8] [--polish-evaluations 0]
                                    [--popsize P] [--sigma0 0.25] [--seed S]
                                    [--start IDENTIFIED_CSV] [--held-out-gaits GAITS]
@@ -35,6 +37,12 @@ A1-A5).
   Jacobian and a Gauss-Newton step; a start's first point is a run with sensitivities, every
   later trial point a run without, the Jacobian a run with them at the points scipy accepts;
   `--least-squares-evaluations` trial points per start (0: not run).
+- least squares with Broyden's updates ("least-squares-broyden", `--broyden-evaluations` trial
+  points per start, 0: not run): the same fit, whose Jacobian is simulated at each start and
+  then only where the last one served badly (a step refused since, or a step that achieved
+  less than `SECANT_AGREEMENT` of its predicted reduction), and elsewhere updated by Broyden's
+  rank-one rule from the step and the change of the residuals its trial point's run gave: most
+  of its points cost one run.
 - CMA-ES (`studies.identify.minimise_cmaes`) from the base model, step `--sigma0`, population
   `--popsize` (cma's default 4 + 3 ln D when not given), `--cma-generations` generations, one
   batched run per generation.
@@ -81,7 +89,7 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
-from typing import List, Sequence
+from typing import List, Optional, Sequence
 
 import numpy as np
 import pandas as pd
@@ -152,9 +160,17 @@ further on sets 20 and 6 (5,550 → 57.5 and → 67.6; trf → 374 and → 412).
 DEFAULT_LEAST_SQUARES_METHOD = "trf"
 LEAST_SQUARES = "least-squares"
 """The least-squares optimiser's name in the tables."""
+BROYDEN = "least-squares-broyden"
+"""The least-squares fit whose Jacobian is simulated at its start and updated by Broyden's rule
+between simulated ones (`fit_least_squares(secant=True)`; --broyden-evaluations)."""
+SECANT_AGREEMENT = 0.25
+"""The least share of the reduction a step's linear model predicted that the step must achieve
+for the secant fit to update its Jacobian by Broyden's rule rather than simulate it (with no
+trial point since the last simulated Jacobian worse than that point): trust-region methods'
+usual threshold of a poor model (scipy's trf shrinks its region below it)."""
 POLISH = "CMA-ES + least-squares"
 """Least squares from CMA-ES's best point (`--polish-evaluations`): its costs include CMA-ES's."""
-GRADIENT_OPTIMISERS = ("L-BFGS-B", LEAST_SQUARES, POLISH)
+GRADIENT_OPTIMISERS = ("L-BFGS-B", LEAST_SQUARES, BROYDEN, POLISH)
 """Optimisers whose evaluations are runs with sensitivities."""
 QUICK_GAITS, QUICK_TRAIN, QUICK_VALIDATE = "A1+A2", "1:1", "2:2"
 RESULT_COLUMNS = ["parameter_set", "n_parameters", "optimiser", "starts", "evaluations",
@@ -403,8 +419,46 @@ def fit_lbfgs(problem: Problem, starts: int, max_evaluations: int, seed: int,
     return recorder
 
 
+def broyden_update(jacobian: np.ndarray, step: np.ndarray,
+                   residual_change: np.ndarray) -> np.ndarray:
+    """Broyden's rank-one update of a Jacobian (R, D) after a step (D,) that changed the
+    residuals by `residual_change` (R,): the least change (in the Frobenius norm) that makes the
+    Jacobian map the step to the change (the secant condition); in directions orthogonal to the
+    step it maps as before."""
+    step = np.asarray(step, dtype=float)
+    mismatch = np.asarray(residual_change, dtype=float) - jacobian @ step
+    return jacobian + np.outer(mismatch, step) / float(step @ step)
+
+
+def step_agreement(residuals_before: np.ndarray, residuals_after: np.ndarray,
+                   jacobian: np.ndarray, step: np.ndarray) -> float:
+    """The reduction of Σ r² a step achieved over the reduction the linear model r + J·s
+    predicted (trust-region methods' ρ); 0 where the model predicted none."""
+    before = float(residuals_before @ residuals_before)
+    predicted = before - float(np.sum((residuals_before + jacobian @ step) ** 2))
+    achieved = before - float(residuals_after @ residuals_after)
+    return achieved / predicted if predicted > 0.0 else 0.0
+
+
+def secant_jacobian(last_units, last_residuals, last_jacobian, refused: bool, units,
+                    residuals) -> Optional[np.ndarray]:
+    """The secant fit's Jacobian at an accepted point `units` (D,) with `residuals` (R,), from
+    the last Jacobian (R, D), simulated or updated, at `last_units` with `last_residuals`: its
+    Broyden update with the step between them (`broyden_update`), or None, to simulate it, where
+    the last one served badly: a trial point since scored no better than its point (`refused`)
+    or the step achieved less than SECANT_AGREEMENT of the reduction it predicted
+    (`step_agreement`; at the threshold itself the update is taken)."""
+    if refused:
+        return None
+    step = np.asarray(units, dtype=float) - last_units
+    if step_agreement(last_residuals, residuals, last_jacobian, step) < SECANT_AGREEMENT:
+        return None
+    return broyden_update(last_jacobian, step, residuals - last_residuals)
+
+
 def fit_least_squares(problem: Problem, points, max_evaluations: int, recorder: Recorder,
-                      cost_ratio: float, method: str = DEFAULT_LEAST_SQUARES_METHOD) -> Recorder:
+                      cost_ratio: float, method: str = DEFAULT_LEAST_SQUARES_METHOD,
+                      secant: bool = False) -> Recorder:
     """Multi-start trust-region least squares over the unit box (scipy's `least_squares`,
     `method` one of LEAST_SQUARES_METHODS: Gauss-Newton steps on the residuals' Jacobian within
     a trust region that the bounds [0, 1] of each axis limit; axes scaled by the Jacobian's
@@ -419,13 +473,25 @@ def fit_least_squares(problem: Problem, points, max_evaluations: int, recorder: 
     1 + `cost_ratio` (at 1595fb0 and before, every point got the Jacobian with its residuals;
     before cb4f234 the first point's residuals were a run of their own too). Every
     simulation goes into `recorder` (a Jacobian's row with its point's objective). Why trf by
-    default: `LEAST_SQUARES_METHODS`."""
+    default: `LEAST_SQUARES_METHODS`.
+
+    With `secant`, the Jacobian scipy asks for at an accepted point is simulated only where the
+    last one served badly: where a trial point since the last simulated Jacobian scored no
+    better than the point it was simulated at (a step was refused), or the step to this point
+    achieved less than SECANT_AGREEMENT of the reduction its linear model predicted. Elsewhere
+    it is the last Jacobian updated by Broyden's rule (`broyden_update`) with the step and the
+    change of the residuals the trial point's own run gave, no simulation. (The residuals'
+    actual change includes the phases' re-fit, which the simulated Jacobian, at the phases
+    held, does not.)"""
     from scipy.optimize import least_squares
     parameter_set = recorder.parameter_set
     for start, x0 in enumerate(points):
         trial_points = []
         spent = []
         start_jacobian = {}
+        # the secant fit's last Jacobian: its point, that point's residuals, the matrix, and
+        # whether a trial point since has scored no better than that point
+        last = {}
 
         def residuals(units, start=start):
             if not trial_points and max_evaluations > 1:
@@ -433,13 +499,17 @@ def fit_least_squares(problem: Problem, points, max_evaluations: int, recorder: 
                 values, start_jacobian[units.tobytes()] = problem.residuals_and_jacobian(units)
                 record_gradient_call(recorder, problem, units, float(values @ values),
                                      cost_ratio, start)
+                last.update(units=np.array(units), residuals=values,
+                            jacobian=start_jacobian[units.tobytes()], refused=False)
             else:
                 values = problem.residuals(units)
                 record_plain_call(recorder, problem, units, float(values @ values), start)
+                if last and values @ values >= last["residuals"] @ last["residuals"]:
+                    last["refused"] = True
             value = float(values @ values)
-            trial_points.append(values)
-            print(f"set {parameter_set} {LEAST_SQUARES} start {start}: objective {value:.5g}",
-                  flush=True)
+            trial_points.append((np.array(units), values))
+            print(f"set {parameter_set} {recorder.optimiser} start {start}: objective "
+                  f"{value:.5g}", flush=True)
             return values
 
         def jacobian(units, start=start):
@@ -449,10 +519,18 @@ def fit_least_squares(problem: Problem, points, max_evaluations: int, recorder: 
                 # the budget is spent: scipy asks only to test convergence before it stops, and
                 # no step will use this Jacobian, so none is simulated (zeros end the fit)
                 spent.append(True)
-                return np.zeros((len(trial_points[-1]), len(problem.box)))
-            values, derivatives = problem.residuals_and_jacobian(units)
-            record_gradient_call(recorder, problem, units, float(values @ values), cost_ratio,
-                                 start)
+                return np.zeros((len(trial_points[-1][1]), len(problem.box)))
+            point, values = trial_points[-1]
+            # scipy asks at the trial point it has just had; anywhere else, simulate
+            derivatives = (secant_jacobian(last["units"], last["residuals"], last["jacobian"],
+                                           last["refused"], point, values)
+                           if secant and np.array_equal(point, units) else None)
+            if derivatives is None:
+                values, derivatives = problem.residuals_and_jacobian(units)
+                record_gradient_call(recorder, problem, units, float(values @ values),
+                                     cost_ratio, start)
+            last.update(units=np.array(units), residuals=values, jacobian=derivatives,
+                        refused=False)
             return derivatives
 
         result = least_squares(residuals, x0, jac=jacobian, bounds=(0.0, 1.0), method=method,
@@ -595,6 +673,11 @@ def build_parser():
     parser.add_argument("--least-squares-evaluations", type=int, default=8, quick=2,
                         help="trial points (residuals; the Jacobian where accepted) per "
                              "least-squares start; 0 leaves the least-squares fit out")
+    parser.add_argument("--broyden-evaluations", type=int, default=16, quick=2,
+                        help="trial points per start of the least-squares fit whose Jacobian "
+                             "is simulated at its start and where the last served badly, "
+                             f"Broyden-updated elsewhere (optimiser '{BROYDEN}'); 0 leaves "
+                             "it out")
     parser.add_argument("--least-squares-method", default=DEFAULT_LEAST_SQUARES_METHOD,
                         choices=LEAST_SQUARES_METHODS,
                         help="scipy least_squares method of the least-squares fits (default "
@@ -631,6 +714,7 @@ def main(argv=None):
         if value < 1:
             raise cli.StudyArgumentError(f"{flag} must be >= 1, got {value}")
     for flag, value in (("--least-squares-evaluations", args.least_squares_evaluations),
+                        ("--broyden-evaluations", args.broyden_evaluations),
                         ("--polish-evaluations", args.polish_evaluations)):
         if value < 0:
             raise cli.StudyArgumentError(f"{flag} must be >= 0, got {value}")
@@ -654,15 +738,17 @@ def main(argv=None):
     for name, box in boxes.items():
         identify.check_unfired_axes("gradient_fit", f"set {name}", box, gaits)
         # a gradient's evaluation runs each gait with two replicas per axis (`sensitivities`)
-        gradient = args.starts * (args.lbfgs_evaluations + args.least_squares_evaluations) \
-            + args.polish_evaluations
+        # (at most: the secant fit simulates a Jacobian only at some of its points)
+        gradient = args.starts * (args.lbfgs_evaluations + args.least_squares_evaluations
+                                  + args.broyden_evaluations) + args.polish_evaluations
         per_gradient = instances_per_instance(len(box) - len(identify.unfired_axes(box, gaits)))
         cli.check_instances(
             (cma_settings.evaluations(len(box)) + gradient * per_gradient) * len(gaits),
             f"set {name}: (--cma-generations {args.cma_generations} × population "
             f"{cma_settings.population(len(box), 0)} + (--starts {args.starts} × "
             f"(--lbfgs-evaluations {args.lbfgs_evaluations} + --least-squares-evaluations "
-            f"{args.least_squares_evaluations}) + --polish-evaluations "
+            f"{args.least_squares_evaluations} + --broyden-evaluations "
+            f"{args.broyden_evaluations}) + --polish-evaluations "
             f"{args.polish_evaluations}) × {per_gradient}) × {len(gaits)} gaits")
     for box in boxes.values():  # every corner of each group of CORNER_GROUP axes (2^20 is
         for group in range(0, len(box), CORNER_GROUP):  # too many; the groups share no limit)
@@ -681,6 +767,7 @@ def main(argv=None):
                                            "least_squares_evaluations":
                                                args.least_squares_evaluations,
                                            "least_squares_method": args.least_squares_method,
+                                           "broyden_evaluations": args.broyden_evaluations,
                                            "cma_generations": args.cma_generations,
                                            "polish_evaluations": args.polish_evaluations,
                                            "popsize": args.popsize, "seed": args.seed,
@@ -709,6 +796,12 @@ def main(argv=None):
                                                            args.seed),
                               args.least_squares_evaluations, recorders[-1], cost_ratios[name],
                               args.least_squares_method)
+        if args.broyden_evaluations:
+            recorders.append(Recorder(name, BROYDEN, write_history))
+            fit_least_squares(problems[name], start_points(problems[name], args.starts,
+                                                           args.seed),
+                              args.broyden_evaluations, recorders[-1], cost_ratios[name],
+                              args.least_squares_method, secant=True)
         if args.polish_evaluations:
             recorders.append(Recorder.continuing(cma, POLISH, write_history))
             fit_least_squares(problems[name], [cma.best_units], args.polish_evaluations,
