@@ -39,10 +39,10 @@ A1-A5).
   `--least-squares-evaluations` trial points per start (0: not run).
 - least squares with Broyden's updates ("least-squares-broyden", `--broyden-evaluations` trial
   points per start, 0: not run): the same fit, whose Jacobian is simulated at each start and
-  then only where the last one served badly (a step refused since, or a step that achieved
-  less than `SECANT_AGREEMENT` of its predicted reduction), and elsewhere updated by Broyden's
-  rank-one rule from the step and the change of the residuals its trial point's run gave: most
-  of its points cost one run.
+  then only where the last one (simulated or updated) served badly (a step refused since, or a
+  step that achieved less than `SECANT_AGREEMENT` of its predicted reduction), and elsewhere
+  updated by Broyden's rank-one rule from the step and the change of the residuals its trial
+  point's run gave: most of its points cost one run.
 - CMA-ES (`studies.identify.minimise_cmaes`) from the base model, step `--sigma0`, population
   `--popsize` (cma's default 4 + 3 ln D when not given), `--cma-generations` generations, one
   batched run per generation.
@@ -51,12 +51,13 @@ A1-A5).
   global search, then Gauss-Newton steps to polish its result).
 
 A run with sensitivities leaves out the per-actuator axes of actuators no fitted gait fires
-(their derivatives are exactly zero; `Problem.moved_names`): the study names them on stderr
-before it starts.
+(their derivatives are exactly zero; `Problem.moved_names`), and the gradient fits search the
+other axes alone (the left-out ones held at the start's values; CMA-ES searches every axis):
+the study names them on stderr before it starts.
 
-Cost, per optimiser: evaluations (a CMA-ES point; a gradient optimiser's simulation with
-sensitivities), wall time, and simulated robot-seconds = instances × simulated seconds,
-counted two ways. A run with n sensitivities carries 2n replica instances per instance (the
+Cost, per optimiser: evaluations (a CMA-ES point; an L-BFGS-B call; a least-squares fit's
+runs, with and without sensitivities), wall time, and simulated robot-seconds = instances ×
+simulated seconds, counted two ways. A run with n sensitivities carries 2n replica instances per instance (the
 ±ε pairs): they are never solved, only assembled at the solved state, so they cost less than
 an instance;
 `robot_seconds` counts each replica as a full instance ((1 + 2n) × gaits × window), the
@@ -166,8 +167,9 @@ between simulated ones (`fit_least_squares(secant=True)`; --broyden-evaluations)
 SECANT_AGREEMENT = 0.25
 """The least share of the reduction a step's linear model predicted that the step must achieve
 for the secant fit to update its Jacobian by Broyden's rule rather than simulate it (with no
-trial point since the last simulated Jacobian worse than that point): trust-region methods'
-usual threshold of a poor model (scipy's trf shrinks its region below it)."""
+trial point since the last Jacobian, simulated or updated, scoring no better than its point):
+trust-region methods' usual threshold of a poor model (scipy's trf shrinks its region below
+it)."""
 POLISH = "CMA-ES + least-squares"
 """Least squares from CMA-ES's best point (`--polish-evaluations`): its costs include CMA-ES's."""
 GRADIENT_OPTIMISERS = ("L-BFGS-B", LEAST_SQUARES, BROYDEN, POLISH)
@@ -242,6 +244,13 @@ class Problem:
         (`moved_names`) and their Jacobian columns are zeros."""
         self.moved_names = [name for name, moved in zip(self.names, self.moved) if moved]
 
+    def embedded(self, moved_units, around) -> np.ndarray:
+        """A point of the whole box (D,) in unit coordinates: the moved axes' units (the
+        gradient fits search those alone), the others as in `around` (D,)."""
+        units = np.array(around, dtype=float)
+        units[self.moved] = moved_units
+        return units
+
     def params(self, units) -> list:
         return identify.box_params(self.box, identify.box_values(self.box, units), self.base,
                                    self.gaits)
@@ -254,11 +263,14 @@ class Problem:
 
     def residuals(self, units) -> np.ndarray:
         """Residuals (R,) of `fit_terms` from a run without sensitivities (an instance's rows
-        are bitwise those of the run with them); a failed simulation as in `fit_terms`."""
+        are bitwise those of the run with them); for a failed simulation R residuals of inf (a
+        trial point scipy's trust region shrinks away from, its objective inf as CMA-ES's
+        failed points: the finite penalty of `fit_terms` was accepted as a step from a point
+        scoring above it, an audit, 2026-12)."""
         units = np.clip(np.asarray(units, dtype=float), 0.0, 1.0)
         runs, _ = self.runs(self.params(units[None, :]), self.train[1])
         if any(run is None for run in runs):
-            return self.failed_residuals()
+            return np.full(identification.residual_count(len(self.gaits), self.train), math.inf)
         # the residuals need no derivatives: one zero column stands in for them
         no_derivatives = {gait: np.zeros((len(run.path.t_s), 2, 1))
                           for gait, run in zip(self.gaits, runs)}
@@ -400,20 +412,22 @@ def record_plain_call(recorder: Recorder, problem: Problem, units, value: float,
 def fit_lbfgs(problem: Problem, starts: int, max_evaluations: int, seed: int,
               recorder: Recorder, cost_ratio: float) -> Recorder:
     """Multi-start L-BFGS-B over the unit box (module docstring), every evaluation into
-    `recorder`, a call counted as `cost_ratio` runs in the cost-equivalent robot-seconds."""
+    `recorder`, a call counted as `cost_ratio` runs in the cost-equivalent robot-seconds. It
+    searches the axes a fitted gait moves (`Problem.moved`), the others held at the start's."""
     from scipy.optimize import minimize
     parameter_set = recorder.parameter_set
     for start, x0 in enumerate(start_points(problem, starts, seed)):
 
-        def fun(units, start=start):
+        def fun(moved_units, start=start, x0=x0):
+            units = problem.embedded(moved_units, x0)
             value, gradient = problem.value_and_gradient(units)
             record_gradient_call(recorder, problem, units, value, cost_ratio, start)
             print(f"set {parameter_set} L-BFGS-B start {start}: objective {value:.5g}, "
                   f"|gradient| {np.linalg.norm(gradient):.3g}", flush=True)
-            return value, gradient
+            return value, gradient[problem.moved]
 
-        result = minimize(fun, x0, jac=True, method="L-BFGS-B",
-                          bounds=[(0.0, 1.0)] * len(problem.box),
+        result = minimize(fun, x0[problem.moved], jac=True, method="L-BFGS-B",
+                          bounds=[(0.0, 1.0)] * int(problem.moved.sum()),
                           options={"maxfun": max_evaluations, "maxiter": max_evaluations})
         recorder.stopped(start, str(result.message))
     return recorder
@@ -456,6 +470,30 @@ def secant_jacobian(last_units, last_residuals, last_jacobian, refused: bool, un
     return broyden_update(last_jacobian, step, residuals - last_residuals)
 
 
+class SecantState:
+    """The secant fit's last Jacobian (simulated or updated) at scipy's current point, and
+    whether a trial point since has scored no better than that point (`fit_least_squares`)."""
+
+    def __init__(self, units, residuals, jacobian):
+        self.moved_to(units, residuals, jacobian)
+
+    def moved_to(self, units, residuals, jacobian):
+        """scipy accepted `units` (its residuals, the Jacobian it gets there)."""
+        self.units, self.residuals = np.array(units, dtype=float), residuals
+        self.jacobian, self.refused = jacobian, False
+
+    def tried(self, residuals):
+        """A trial point's residuals: one scoring no better than the current point's (a step
+        scipy refuses: its objective not below) marks the Jacobian as having served badly."""
+        if residuals @ residuals >= self.residuals @ self.residuals:
+            self.refused = True
+
+    def jacobian_at(self, units, residuals) -> Optional[np.ndarray]:
+        """The Jacobian at the accepted point `units`: `secant_jacobian` from this state."""
+        return secant_jacobian(self.units, self.residuals, self.jacobian, self.refused, units,
+                               residuals)
+
+
 def fit_least_squares(problem: Problem, points, max_evaluations: int, recorder: Recorder,
                       cost_ratio: float, method: str = DEFAULT_LEAST_SQUARES_METHOD,
                       secant: bool = False) -> Recorder:
@@ -475,10 +513,17 @@ def fit_least_squares(problem: Problem, points, max_evaluations: int, recorder: 
     simulation goes into `recorder` (a Jacobian's row with its point's objective). Why trf by
     default: `LEAST_SQUARES_METHODS`.
 
+    The fit searches the axes a fitted gait moves (`Problem.moved`; the others held at the
+    start's values: their columns are zero, and trf's steps wandered along them, an audit,
+    2026-12). A trial point whose run fails scores inf (`Problem.residuals`): scipy shrinks
+    its trust region and tries again; a start whose run fails gets `Problem.failed_residuals`
+    (scipy needs a finite start).
+
     With `secant`, the Jacobian scipy asks for at an accepted point is simulated only where the
-    last one served badly: where a trial point since the last simulated Jacobian scored no
-    better than the point it was simulated at (a step was refused), or the step to this point
-    achieved less than SECANT_AGREEMENT of the reduction its linear model predicted. Elsewhere
+    last one served badly: where a trial point since the last Jacobian (simulated or updated,
+    at scipy's current point) scored no better than that point (a step was refused), or the
+    step to this point achieved less than SECANT_AGREEMENT of the reduction its linear model
+    predicted. Elsewhere
     it is the last Jacobian updated by Broyden's rule (`broyden_update`) with the step and the
     change of the residuals the trial point's own run gave, no simulation. (The residuals'
     actual change includes the phases' re-fit, which the simulated Jacobian, at the phases
@@ -486,55 +531,58 @@ def fit_least_squares(problem: Problem, points, max_evaluations: int, recorder: 
     from scipy.optimize import least_squares
     parameter_set = recorder.parameter_set
     for start, x0 in enumerate(points):
+        x0 = np.asarray(x0, dtype=float)
         trial_points = []
         spent = []
         start_jacobian = {}
-        # the secant fit's last Jacobian: its point, that point's residuals, the matrix, and
-        # whether a trial point since has scored no better than that point
-        last = {}
+        state = []  # the secant fit's SecantState, from the start's Jacobian on
 
-        def residuals(units, start=start):
+        def residuals(moved_units, start=start, x0=x0):
+            units = problem.embedded(moved_units, x0)
             if not trial_points and max_evaluations > 1:
                 # scipy's first step needs the start's Jacobian: one run gives both
-                values, start_jacobian[units.tobytes()] = problem.residuals_and_jacobian(units)
+                values, derivatives = problem.residuals_and_jacobian(units)
+                start_jacobian[moved_units.tobytes()] = derivatives[:, problem.moved]
                 record_gradient_call(recorder, problem, units, float(values @ values),
                                      cost_ratio, start)
-                last.update(units=np.array(units), residuals=values,
-                            jacobian=start_jacobian[units.tobytes()], refused=False)
+                state.append(SecantState(moved_units, values,
+                                         start_jacobian[moved_units.tobytes()]))
             else:
                 values = problem.residuals(units)
+                if not trial_points and not np.all(np.isfinite(values)):
+                    values = problem.failed_residuals()  # scipy needs a finite start
                 record_plain_call(recorder, problem, units, float(values @ values), start)
-                if last and values @ values >= last["residuals"] @ last["residuals"]:
-                    last["refused"] = True
+                if state:
+                    state[0].tried(values)
             value = float(values @ values)
-            trial_points.append((np.array(units), values))
+            trial_points.append((np.array(moved_units), values))
             print(f"set {parameter_set} {recorder.optimiser} start {start}: objective "
                   f"{value:.5g}", flush=True)
             return values
 
-        def jacobian(units, start=start):
-            if units.tobytes() in start_jacobian:
-                return start_jacobian.pop(units.tobytes())
+        def jacobian(moved_units, start=start, x0=x0):
+            if moved_units.tobytes() in start_jacobian:
+                return start_jacobian.pop(moved_units.tobytes())
             if len(trial_points) == max_evaluations:
                 # the budget is spent: scipy asks only to test convergence before it stops, and
                 # no step will use this Jacobian, so none is simulated (zeros end the fit)
                 spent.append(True)
-                return np.zeros((len(trial_points[-1][1]), len(problem.box)))
+                return np.zeros((len(trial_points[-1][1]), len(moved_units)))
             point, values = trial_points[-1]
             # scipy asks at the trial point it has just had; anywhere else, simulate
-            derivatives = (secant_jacobian(last["units"], last["residuals"], last["jacobian"],
-                                           last["refused"], point, values)
-                           if secant and np.array_equal(point, units) else None)
+            derivatives = (state[0].jacobian_at(point, values)
+                           if secant and np.array_equal(point, moved_units) else None)
             if derivatives is None:
+                units = problem.embedded(moved_units, x0)
                 values, derivatives = problem.residuals_and_jacobian(units)
+                derivatives = derivatives[:, problem.moved]
                 record_gradient_call(recorder, problem, units, float(values @ values),
                                      cost_ratio, start)
-            last.update(units=np.array(units), residuals=values, jacobian=derivatives,
-                        refused=False)
+            state[0].moved_to(moved_units, values, derivatives)
             return derivatives
 
-        result = least_squares(residuals, x0, jac=jacobian, bounds=(0.0, 1.0), method=method,
-                               x_scale="jac", max_nfev=max_evaluations)
+        result = least_squares(residuals, x0[problem.moved], jac=jacobian, bounds=(0.0, 1.0),
+                               method=method, x_scale="jac", max_nfev=max_evaluations)
         # the zeros that end a spent budget read to scipy as a zero gradient: say what it was
         recorder.stopped(start, f"its {max_evaluations} trial points were spent" if spent
                          else str(result.message))

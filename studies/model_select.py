@@ -155,7 +155,8 @@ RESULT_COLUMNS = ["rank", "stage", "candidate", "status", "note", "n_fitted", "n
 """Columns of model_select.csv. logo_within_35pct: held-out gaits in the right direction with
 a speed within ±35 % of the measured one over the training window. held_out_objective: the
 error on what the fit did not see, the held-out gaits (logo_objective) plus the later cycles
-(validate_objective); the rank follows it within a stage (`STAGES`)."""
+(validate_objective), or the later cycles alone where there are no folds (--fold-generations
+0, one gait); the rank follows it within a stage (`STAGES`)."""
 
 
 # --------------------------------------------------------------------------- candidates
@@ -201,6 +202,12 @@ class Candidate:
         """The fitted axes, checked on the candidate's model."""
         box = [identify.parse_range_spec(text, f"candidate {self.name}: fit")
                for text in self.fit.split()]
+        if len(box) < 2:
+            # cma's sampler is undefined in one dimension: it failed after the first
+            # generation with a traceback (an audit, 2026-12)
+            raise cli.StudyArgumentError(f"candidate {self.name}: fit {self.fit!r}: CMA-ES "
+                                         f"needs two axes at least, got {len(box)} (fit a second"
+                                         f" one, or set this one)")
         identify.check_box(box, self.model(base), f"candidate {self.name}: fit")
         return box
 
@@ -395,13 +402,19 @@ def assess_point(candidate: Candidate, base: StarParams, units: np.ndarray, valu
         identification.SAMPLES_PER_CYCLE
     k = parameter_count(box, setup)
     held = folds[folds["status"] == "ok"] if len(folds) else folds
+    failed_folds = list(folds.loc[folds["status"] != "ok", "held_out_gait"]) if len(folds) else []
     row = {
-        "status": "ok" if train is not None else "failed", "note": "",
+        "status": "ok" if train is not None else "failed",
+        # a held-out gait the fold could not predict counts: it scored only the others, and a
+        # form whose prediction failed ranked above one that predicted badly (an audit, 2026-12)
+        "note": (f"held-out prediction failed: {', '.join(failed_folds)}" if failed_folds
+                 else ""),
         "train_objective": (identification.objective_of(train) if train is not None
                             else math.inf),
         "validate_objective": (identification.objective_of(validate) if validate is not None
                                else math.inf),
-        "logo_objective": float(held["objective"].mean()) if len(held) else math.nan,
+        "logo_objective": (math.inf if failed_folds else float(held["objective"].mean())
+                           if len(held) else math.nan),
         "logo_directions_right": int(held["direction_matches"].sum()) if len(held) else 0,
         "logo_within_35pct": int((held["direction_matches"]
                                   & (held["speed_ratio"].sub(1).abs() <= 0.35)).sum())
@@ -497,9 +510,13 @@ def parameter_table(name: str, box, values, unit_std) -> pd.DataFrame:
 def leave_one_gait_out(box, units, model: StarParams, settings: identify.CMASettings,
                        generations: int, setup: Setup) -> pd.DataFrame:
     """One row per held-out gait: held_out_gait, n_fold_axes (axes its fold fitted),
-    frozen_axes (left at their prior), objective (the held-out gait on the training cycles),
+    frozen_axes (left at their prior), fold_move_units (how far the fold's best point lies from
+    its start, the full fit's point, the largest move along an axis in unit coordinates: the
+    fold starts where the fit that saw the held-out gait ended, and a fold that hardly moves
+    predicts with that fit's point), objective (the held-out gait on the training cycles),
     sim_speed_mm_s (signed), meas_speed_mm_s, speed_ratio (|sim| / meas), direction_matches,
-    status. Every fold's prediction is simulated in one batch."""
+    status ("ok"; "failed" where the prediction's run failed; "fit_failed" where every point of
+    the fold's fit failed). Every fold's prediction is simulated in one batch."""
     gaits = list(setup.gaits)
     if generations == 0 or len(gaits) < 2:
         return pd.DataFrame()
@@ -511,29 +528,36 @@ def leave_one_gait_out(box, units, model: StarParams, settings: identify.CMASett
         informed = informed_axes(box, model, fitted)
         fold_box = [spec for spec, keep in zip(box, informed) if keep]
         frozen = [spec.label for spec, keep in zip(box, informed) if not keep]
-        point = {}
+        point, move, fit_failed = {}, 0.0, False
         if fold_box:
             fold_setup = dataclasses.replace(setup, gaits=tuple(fitted))
             start = np.array([u for u, keep in zip(units, informed) if keep])
             fold = identify.minimise_cmaes(
                 fold_box, start, lambda u: evaluate(fold_box, u, model, fitted, fold_setup),
                 fold_settings)
-            if identify.best_row(fold.evaluations) is not None:
+            fit_failed = identify.best_row(fold.evaluations) is None
+            if not fit_failed:
                 fold_units = identify.best_units(fold.evaluations, fold_box)
                 fold_values = identify.box_values(fold_box, fold_units)[0]
                 point = identify.point_changes(fold_box, fold_values, model)
+                move = float(np.max(np.abs(fold_units - start)))
         predictions.append(model.replace(gait=held_out, **point))
-        notes.append((held_out, len(fold_box), " ".join(frozen)))
+        notes.append((held_out, len(fold_box), " ".join(frozen), move, fit_failed))
     runs = simulate_points(predictions, setup.train[1], setup)
     rows = []
-    for (held_out, n_axes, frozen), run in zip(notes, runs):
-        scored = score([run], [held_out], setup, setup.train)
+    for (held_out, n_axes, frozen, move, fit_failed), run in zip(notes, runs):
+        scored = None if fit_failed else score([run], [held_out], setup, setup.train)
         if scored is None:
+            # a fold whose every point failed predicts nothing (it predicted from the prior
+            # before, silently: an audit, 2026-12)
             rows.append({"held_out_gait": held_out, "n_fold_axes": n_axes, "frozen_axes": frozen,
-                         "status": "failed", "objective": math.inf})
+                         "fold_move_units": move,
+                         "status": "fit_failed" if fit_failed else "failed",
+                         "objective": math.inf})
             continue
         line = scored.iloc[0]
         rows.append({"held_out_gait": held_out, "n_fold_axes": n_axes, "frozen_axes": frozen,
+                     "fold_move_units": move,
                      "objective": float(line["objective"]),
                      "sim_speed_mm_s": float(line["sim_speed_mm_s"]),
                      "meas_speed_mm_s": float(line["meas_speed_mm_s"]),
@@ -556,7 +580,10 @@ def ranked(rows: Sequence[dict]) -> pd.DataFrame:
     table["stage"] = table["stage"].where(table["stage"].isin(STAGES), "screen")
     table["_stage"] = table["stage"].map(STAGES.index)
     table["_ok"] = table["status"] == "ok"
-    held_out = table["logo_objective"].astype(float) + table["validate_objective"].astype(float)
+    # no folds (--fold-generations 0, a single gait: logo_objective NaN): the later cycles
+    # alone (the sum was NaN for every row, and the rank fell through to BIC: an audit, 2026-12)
+    held_out = (table["logo_objective"].astype(float).fillna(0.0)
+                + table["validate_objective"].astype(float))
     table["held_out_objective"] = held_out
     table["_held_out"] = held_out.where(np.isfinite(held_out), math.inf)
     table = table.sort_values(["_stage", "_ok", "_held_out", "bic", "train_objective"],
@@ -623,6 +650,12 @@ def stored_fit_of(done: Path, folder: Path, evaluations: str, candidate: Candida
                                       stroke_alignment=False, start_model=start_model))
     if stored["row"].get("definition") not in definitions:
         return None
+    return stored, fit_named(folder, evaluations)
+
+
+def fit_named(folder: Path, evaluations: str) -> str:
+    """The text naming a stored fit: `evaluations` (the CSV of its evaluations in `folder`)
+    and the commit that fitted them, from its sidecar where `read_provenance` reads it."""
     commit = ""
     if (folder / f"{evaluations}.json").exists():
         try:
@@ -631,7 +664,7 @@ def stored_fit_of(done: Path, folder: Path, evaluations: str, candidate: Candida
             # the commit only names the fit (done/ holds it): a sidecar damaged, or the
             # evaluations edited since, leave it out, which is said
             print(f"{str(error).splitlines()[0]}; the fit is named without its commit")
-    return stored, evaluations + (f", fitted at {commit}" if commit else "")
+    return evaluations + (f", fitted at {commit}" if commit else "")
 
 
 def read_done(done: Path) -> Optional[dict]:
@@ -818,8 +851,11 @@ def main(argv=None):
             raise cli.StudyArgumentError("--resume and --reassess: give one (read the finished "
                                          "candidates back, or assess their fits again)")
         if args.out is None or not (Path(args.out) / "done").is_dir():
-            raise cli.StudyArgumentError(f"--reassess: give --out, a folder of an earlier run "
-                                         f"(with done/); {args.out} has none")
+            raise cli.StudyArgumentError(
+                "--reassess: give --out, a folder of an earlier run (with done/)"
+                if args.out is None else
+                f"--reassess: --out {args.out} has no done/ folder (give the folder of an "
+                f"earlier run)")
     if args.periods == "strokes" and args.phases != "strokes":
         raise cli.StudyArgumentError("--periods strokes needs --phases strokes (the periods "
                                      "are read off the strokes' lines)")
@@ -893,12 +929,18 @@ def main(argv=None):
                                            "refine_top": args.refine_top,
                                            "refine_cma": dataclasses.asdict(refine_settings),
                                            "fold_generations": args.fold_generations,
+                                           "phases": args.phases, "periods": args.periods,
+                                           "stroke_alignment": STROKE_ALIGNMENT,
+                                           "budget_hours": args.budget_hours,
+                                           "resume": bool(args.resume),
+                                           "reassess": bool(args.reassess),
                                            **({"start": {"file": str(args.start),
                                                          "fields": identified_fields(
                                                              start_model)}}
                                               if start_model is not None else {}),
                                            **({"pulse_periods_s": periods} if periods
                                               else {})})
+    out.resume_records = out.folder / "done"
     progress = not args.no_progress
     record = nearest_interval(identify.RECORD_INTERVAL_S, solver.dt)
     started = time.perf_counter()
@@ -928,7 +970,13 @@ def main(argv=None):
                     stored["row"].update(information_criteria(
                         stored_gaits[stored_gaits["window"] == "train"],
                         stored["row"]["n_parameters"], stored["row"]["n_samples"]))
-                rows.append({**stored["row"], "stage": stage})
+                # the row says where it came from: the run's sidecar names only the commit
+                # that read it back (an audit, 2026-12)
+                origin = "read back: " + fit_named(out.folder,
+                                                   f"fits/{subfolder}{candidate.name}.csv")
+                note = "; ".join(part for part in (stored["row"].get("note") or "", origin)
+                                 if part)
+                rows.append({**stored["row"], "note": note, "stage": stage})
                 stored_parameters = pd.DataFrame(stored["parameters"])
                 for store, table in zip(tables, (stored_parameters, stored_gaits,
                                                  pd.DataFrame(stored["folds"]))):

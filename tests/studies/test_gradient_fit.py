@@ -2,6 +2,7 @@
 on stderr, exit code 2 (its numbers come from identification.objective_and_gradient, tested in
 tests/unit/test_identification_gradient.py, and from the committed run in results/)."""
 
+import math
 import time
 
 import numpy as np
@@ -610,3 +611,160 @@ def test_the_secant_fit_reaches_the_exact_fits_minimum_with_fewer_jacobians(monk
         if kind == "jacobian":
             assert secant_calls[k - 1][0] == "residuals"
             np.testing.assert_array_equal(units, secant_calls[k - 1][1])
+
+
+def test_the_secant_state_serves_until_a_step_is_refused_and_again_after_a_jacobian():
+    """A trial point scoring no better than the current point (equal counts: scipy refuses a
+    step that does not lower the objective) makes the next accepted point's Jacobian a
+    simulated one (None); once scipy moves on with a Jacobian the state serves again."""
+    jacobian = np.array([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+    start = np.array([1.0, 1.0, 2.0])
+    state = gradient_fit.SecantState(np.zeros(2), start, jacobian)
+    units = np.array([-0.5, -0.5])
+    good = start + jacobian @ units  # the linear model's own prediction: agreement 1
+    assert state.jacobian_at(units, good) is not None
+    state.tried(start * 1.0)  # exactly the current objective: refused
+    assert state.refused and state.jacobian_at(units, good) is None
+    state.moved_to(units, good, jacobian)
+    assert not state.refused
+    state.tried(good * 0.5)  # better: not refused
+    assert not state.refused
+    np.testing.assert_array_equal(state.jacobian_at(np.array([-1.0, -0.5]), good + jacobian[:, 0]
+                                                    * -0.5), jacobian)
+
+
+def test_the_gradient_fits_hold_the_axes_no_gait_moves(monkeypatch):
+    """Set 20 on A1+A2 and A1+A3: the gains of A4-A8 have zero columns; every point L-BFGS-B
+    and both least-squares fits try keeps them at the start's values (trf's steps wandered
+    along them, and Broyden's updates gave them derivatives: an audit, 2026-12), and the fits
+    still reach the minimum over the other axes."""
+    box = box_of("20")
+    base = StarParams(gait="A1+A2")
+    problem = gradient_fit.Problem(box, base, ["A1+A2", "A1+A3"], {}, (1, 1), SolverConfig(),
+                                   "cpu")
+    dead = ~problem.moved
+    assert dead.sum() == 5
+    rng = np.random.default_rng(14)
+    linear = rng.normal(size=(40, 20)) * problem.moved
+    target = linear @ rng.uniform(0.3, 0.7, 20) + rng.normal(scale=0.05, size=40)
+    tried = []
+
+    def values(units):
+        tried.append(np.array(units))
+        return linear @ units + 0.2 * np.sin(3 * units) @ (linear.T * 0.1) - target
+
+    def derivatives(units):
+        return linear + 0.2 * (linear * 0.1) * (3 * np.cos(3 * units))[None, :]
+
+    monkeypatch.setattr(problem, "residuals", values)
+    monkeypatch.setattr(problem, "residuals_and_jacobian",
+                        lambda units: (values(units), derivatives(units)))
+    monkeypatch.setattr(problem, "value_and_gradient", lambda units: (
+        float(values(units) @ values(units)), 2.0 * derivatives(units).T @ values(units)))
+    start = identify.start_units(box, base)
+    from scipy.optimize import least_squares
+    minimum = 2 * least_squares(
+        lambda moved: values(problem.embedded(moved, start)), start[problem.moved],
+        jac=lambda moved: derivatives(problem.embedded(moved, start))[:, problem.moved],
+        bounds=(0.0, 1.0), xtol=1e-15, ftol=1e-15, gtol=1e-15).cost
+    for fit in (lambda recorder: gradient_fit.fit_least_squares(problem, [start], 30, recorder,
+                                                                2.0),
+                lambda recorder: gradient_fit.fit_least_squares(problem, [start], 30, recorder,
+                                                                2.0, secant=True),
+                lambda recorder: gradient_fit.fit_lbfgs(problem, 1, 30, 0, recorder, 2.0)):
+        tried.clear()
+        recorder = fit(gradient_fit.Recorder("20", "fit"))
+        assert len(tried) > 3
+        for units in tried:
+            np.testing.assert_array_equal(units[dead], start[dead])
+        # the minimum over the moved axes (a direct fit of the same residuals to scipy's
+        # tightest tolerances), to 1e-6: the fits stop at scipy's default tolerances or their
+        # 30 points (measured 2e-15, 9e-13 and 1.8e-9 above it)
+        assert recorder.best_objective == pytest.approx(minimum, rel=1e-6)
+
+
+def test_a_failed_trial_point_scores_inf_and_the_fit_goes_on(monkeypatch):
+    """A trial point whose run fails gives residuals of inf (`Problem.residuals`): recorded
+    with objective inf, never the best, and scipy shrinks its step and reaches the minimum
+    (the finite penalty was taken as a step from a point scoring above it: an audit,
+    2026-12); a start whose run fails gets the finite penalty (scipy needs a finite start)."""
+    box = [identify.parse_range_spec(text, "--sets") for text in gradient_fit.PARAMETER_SETS["6"]]
+    base = StarParams(gait="A1+A2")
+    problem = gradient_fit.Problem(box, base, ["A1+A2"], {}, (1, 1), SolverConfig(), "cpu")
+    monkeypatch.setattr(problem, "runs", lambda params, cycles, sensitivities=(): ([None], None))
+    failed = problem.residuals(np.full(6, 0.5))
+    assert failed.shape == (identification.residual_count(1, (1, 1)),)
+    assert np.all(failed == math.inf)
+    rng = np.random.default_rng(15)
+    matrix = rng.normal(size=(15, 6))
+    target = matrix @ rng.uniform(0.3, 0.7, 6)
+    calls = []
+
+    def residuals(units):
+        calls.append(np.array(units))
+        # the first trial after the start fails
+        return np.full(15, math.inf) if len(calls) == 1 else matrix @ units - target
+
+    monkeypatch.setattr(problem, "residuals", residuals)
+    monkeypatch.setattr(problem, "residuals_and_jacobian",
+                        lambda units: (matrix @ units - target, matrix))
+    recorder = gradient_fit.fit_least_squares(problem, [np.full(6, 0.9)], 20,
+                                              gradient_fit.Recorder("6", "fit"), 2.0)
+    assert recorder.rows[1]["objective"] == math.inf
+    assert recorder.rows[1]["best_objective"] == recorder.rows[0]["objective"]
+    assert recorder.best_objective == pytest.approx(0.0, abs=1e-12)
+    # a start that fails: the finite penalty, and the budget of one point ends there
+    monkeypatch.setattr(problem, "residuals", lambda units: np.full(15, math.inf))
+    monkeypatch.setattr(problem, "failed_residuals", lambda: np.full(15, 10.0))
+    alone = gradient_fit.fit_least_squares(problem, [np.full(6, 0.9)], 1,
+                                           gradient_fit.Recorder("6", "fit"), 2.0)
+    assert [row["objective"] for row in alone.rows] == [1500.0]
+
+
+def test_the_cost_ratio_simulates_only_the_axes_a_gait_moves(monkeypatch):
+    """measure_cost_ratio times the run a fit makes: the sensitivities of the moved axes (A4's
+    gain left out with A1+A2 fitted)."""
+    box = [identify.parse_range_spec(text, "--sets")
+           for text in ("alpha=0.2:1.5", "actuator_gains[4]=0.3:2")]
+    problem = gradient_fit.Problem(box, StarParams(gait="A1+A2"), ["A1+A2"], {}, (1, 1),
+                                   SolverConfig(), "cpu")
+    asked = []
+    monkeypatch.setattr(gradient_fit, "simulate",
+                        lambda params, duration_s, solver, sensitivities=(), **kwargs:
+                        asked.append(tuple(sensitivities)))
+    gradient_fit.measure_cost_ratio(problem, repeats=1)
+    assert set(asked) == {(), ("alpha",)}
+
+
+def test_main_runs_each_optimiser_with_its_own_flags(tmp_path, monkeypatch):
+    """The least-squares fit with --least-squares-evaluations, the secant one with
+    --broyden-evaluations, the polish with --polish-evaluations, all with
+    --least-squares-method; only the secant one with secant=True."""
+    calls = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_cma(problem, generations, popsize, seed, recorder):
+        recorder.add(np.full(len(problem.box), 0.5), 1.0, 1.0, 1.0)
+        return recorder
+
+    def fake_least_squares(problem, points, max_evaluations, recorder, cost_ratio, method,
+                           secant=False):
+        calls.append((recorder.optimiser, max_evaluations, method, secant))
+        return recorder
+
+    def stop(*args, **kwargs):
+        raise Stop
+    monkeypatch.setattr(gradient_fit, "fit_cma", fake_cma)
+    monkeypatch.setattr(gradient_fit, "measure_cost_ratio", lambda problem: 2.0)
+    monkeypatch.setattr(gradient_fit, "fit_lbfgs", lambda *args: calls.append(("L-BFGS-B",)))
+    monkeypatch.setattr(gradient_fit, "fit_least_squares", fake_least_squares)
+    monkeypatch.setattr(gradient_fit, "summarise", stop)
+    with pytest.raises(Stop):
+        gradient_fit.main(["--least-squares-evaluations", "5", "--broyden-evaluations", "3",
+                           "--polish-evaluations", "4", "--least-squares-method", "dogbox",
+                           "--out", str(tmp_path / "out"), "--quick", "--no-progress"])
+    assert calls == [("L-BFGS-B",), (gradient_fit.LEAST_SQUARES, 5, "dogbox", False),
+                     (gradient_fit.BROYDEN, 3, "dogbox", True),
+                     (gradient_fit.POLISH, 4, "dogbox", False)]

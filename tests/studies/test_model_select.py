@@ -4,6 +4,7 @@ run checked against a direct simulation of its identified parameters."""
 
 import ast
 import json
+import math
 import types
 
 import numpy as np
@@ -142,7 +143,7 @@ def test_a_per_actuator_axis_is_informed_only_by_gaits_that_fire_it():
                                    "these cycles only from a phase up to 0.439 s, not from "
                                    "every phase of its 3.15-s period; its windows end at cycle "
                                    "6 at the latest"),
-    (["--reassess"], "--reassess: give --out, a folder of an earlier run (with done/)"),
+    (["--reassess"], "has no done/ folder (give the folder of an earlier run)"),
     (["--reassess", "--resume"], "--resume and --reassess: give one"),
 ])
 def test_invalid_arguments_fail_before_compute(no_compute, tmp_path, capsys, argv, message):
@@ -568,3 +569,66 @@ def test_a_fit_record_that_cannot_be_read_is_fitted_again_not_a_traceback(tmp_pa
         assert capsys.readouterr().out.startswith(f"{done}: unreadable (")
     done.write_text('{"row": {"status": "ok"}, "parameters": {}}')
     assert model_select.read_done(done)["row"] == {"status": "ok"}
+
+
+def test_a_candidate_with_one_axis_is_refused_before_compute(no_compute, tmp_path, capsys):
+    """CMA-ES needs two axes: a one-axis candidate failed after its first generation with a
+    traceback (an audit, 2026-12); now one line, exit 2, naming it."""
+    table = tmp_path / "one.csv"
+    table.write_text("name,set,fit,description\none,,alpha=0.2:1.5,x\n")
+    assert studies_main(["model_select", "--candidates", str(table), "--out",
+                         str(tmp_path / "out"), *QUICK]) == 2
+    error = capsys.readouterr().err
+    assert "candidate one: fit 'alpha=0.2:1.5': CMA-ES needs two axes at least, got 1" in error
+    assert error.count("\n") == 1 and "Traceback" not in error
+    two = model_select.Candidate("two", "", "alpha=0.2:1.5 cylinder_drag=1:100:log")
+    assert len(two.box(StarParams())) == 2  # two axes: the least accepted
+
+
+def test_without_folds_the_rank_follows_the_later_cycles():
+    """No held-out gaits (--fold-generations 0, one gait: logo_objective NaN): the held-out
+    error is the later cycles' alone, so a form far worse there but better in BIC ranks below
+    (the sum was NaN and the rank fell to BIC: an audit, 2026-12); a failed fold (inf) ranks
+    after every finite one."""
+    rows = [{"candidate": "bic_best", "status": "ok", "logo_objective": math.nan,
+             "validate_objective": 500.0, "bic": 100.0, "train_objective": 1.0},
+            {"candidate": "later_best", "status": "ok", "logo_objective": math.nan,
+             "validate_objective": 5.0, "bic": 200.0, "train_objective": 2.0}]
+    table = model_select.ranked(rows)
+    assert list(table["candidate"]) == ["later_best", "bic_best"]
+    assert list(table["held_out_objective"]) == [5.0, 500.0]
+    rows.append({"candidate": "fold_failed", "status": "ok", "logo_objective": math.inf,
+                 "validate_objective": 1.0, "bic": 1.0, "train_objective": 0.5})
+    assert list(model_select.ranked(rows)["candidate"]) == ["later_best", "bic_best",
+                                                            "fold_failed"]
+
+
+def test_a_failed_held_out_prediction_counts_and_is_named(monkeypatch):
+    """A fold whose prediction failed makes logo_objective inf and is named in the note (the
+    mean of the other folds stood for it: an audit, 2026-12); the counts take the ok folds."""
+    candidate = model_select.Candidate("c", "", "alpha=0.2:1.5 cylinder_drag=1:100:log")
+    setup = types.SimpleNamespace(gaits=("A1", "A1+A2", "A1+A4"), train=(1, 1),
+                                  validate=(2, 2), strokes=None)
+    per_gait = pd.DataFrame({"gait": list(setup.gaits), "objective": [1.0, 2.0, 3.0],
+                             "phase_s": 0.0, "direction_matches": True})
+    folds = pd.DataFrame([
+        {"held_out_gait": "A1", "status": "ok", "objective": 4.0, "speed_ratio": 1.1,
+         "direction_matches": True},
+        {"held_out_gait": "A1+A2", "status": "failed", "objective": math.inf},
+        {"held_out_gait": "A1+A4", "status": "ok", "objective": 6.0, "speed_ratio": 2.0,
+         "direction_matches": True}])
+    monkeypatch.setattr(model_select, "simulate_points", lambda params, last, setup: [None] * 3)
+    monkeypatch.setattr(model_select, "score", lambda *args, **kwargs: per_gait)
+    monkeypatch.setattr(model_select, "leave_one_gait_out", lambda *args: folds)
+    row = model_select.assess_point(candidate, StarParams(), np.array([0.5, 0.5]),
+                                    np.array([0.8, 10.0]), identify.CMASettings(), 2,
+                                    setup)["row"]
+    assert row["logo_objective"] == math.inf
+    assert row["note"] == "held-out prediction failed: A1+A2"
+    assert (row["logo_directions_right"], row["logo_within_35pct"], row["n_folds"]) == (2, 1, 3)
+    every_fold_ok = folds.drop(index=1)
+    monkeypatch.setattr(model_select, "leave_one_gait_out", lambda *args: every_fold_ok)
+    row = model_select.assess_point(candidate, StarParams(), np.array([0.5, 0.5]),
+                                    np.array([0.8, 10.0]), identify.CMASettings(), 2,
+                                    setup)["row"]
+    assert (row["logo_objective"], row["note"]) == (5.0, "")
