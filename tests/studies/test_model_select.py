@@ -252,7 +252,12 @@ def test_quick_run_against_a_direct_simulation(tmp_path, capsys, monkeypatch):
     printed = capsys.readouterr().out
     assert "paper (screen): read back from" in printed
     assert f"{best['candidate']} (refine): read back from" in printed
-    pd.testing.assert_frame_equal(written, pd.read_csv(tmp_path / "model_select.csv"))
+    resumed = pd.read_csv(tmp_path / "model_select.csv")
+    pd.testing.assert_frame_equal(written.drop(columns="note"), resumed.drop(columns="note"))
+    # each row read back names its fit (the run's sidecar names only the reading commit)
+    for stage, name, note in zip(resumed["stage"], resumed["candidate"], resumed["note"]):
+        folder = "fits/" if stage == "screen" else f"fits/{stage}/"
+        assert note.startswith(f"read back: {folder}{name}.csv, fitted at "), note
 
 
 def test_a_budget_spent_before_the_first_fit_still_runs_that_fit(tmp_path, capsys):

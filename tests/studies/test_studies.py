@@ -646,6 +646,25 @@ def test_ctrl_c_is_one_line_saying_what_is_kept(tmp_path, monkeypatch, capsys):
     assert error == (f"{main_program()} sweep: interrupted; the finished chunks in "
                      f"{out / 'chunks'} are kept: the same command with --resume continues "
                      f"the run\n")
+    # model_select keeps its finished candidates in done/ (it said only that the files were
+    # whole: an audit, 2026-12); before the first is done there is nothing to resume from
+    out = tmp_path / "model_select"
+
+    def interrupt_with_records(records):
+        def fit_candidate(*args, **kwargs):
+            for name in records:
+                (out / "done").mkdir(parents=True, exist_ok=True)
+                (out / "done" / f"{name}.json").write_text("{}")
+            raise KeyboardInterrupt
+        return fit_candidate
+    monkeypatch.setattr("studies.model_select.fit_candidate", interrupt_with_records([]))
+    assert studies_main(["model_select", "--out", str(out), *QUICK]) == 130
+    assert capsys.readouterr().err.endswith("interrupted; the files written before are whole\n")
+    monkeypatch.setattr("studies.model_select.fit_candidate", interrupt_with_records(["paper"]))
+    assert studies_main(["model_select", "--out", str(out), *QUICK]) == 130
+    assert capsys.readouterr().err == (f"{main_program()} model_select: interrupted; the "
+                                       f"finished work in {out / 'done'} is kept: the same "
+                                       f"command with --resume continues the run\n")
 
 
 def test_sigterm_is_one_line_saying_what_is_kept(tmp_path, monkeypatch, capsys):
