@@ -974,8 +974,9 @@ def main(argv=None):
                 # that read it back (an audit, 2026-12)
                 origin = "read back: " + fit_named(out.folder,
                                                    f"fits/{subfolder}{candidate.name}.csv")
-                note = "; ".join(part for part in (stored["row"].get("note") or "", origin)
-                                 if part)
+                earlier = stored["row"].get("note")
+                note = "; ".join(part for part in (earlier if isinstance(earlier, str) else "",
+                                                   origin) if part)
                 rows.append({**stored["row"], "note": note, "stage": stage})
                 stored_parameters = pd.DataFrame(stored["parameters"])
                 for store, table in zip(tables, (stored_parameters, stored_gaits,
