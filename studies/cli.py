@@ -22,6 +22,7 @@ import io
 import itertools
 import logging
 import math
+import sys
 import tempfile
 import typing
 import warnings
@@ -136,11 +137,30 @@ class StudyParser(OneLineParser):
         return action
 
     def parse_args(self, args=None, namespace=None):
+        self.refuse_repeated_flags(sys.argv[1:] if args is None else list(args))
         parsed = super().parse_args(args, namespace)
         for dest, (full, quick) in self.quick_defaults.items():
             if getattr(parsed, dest) is None:
                 setattr(parsed, dest, quick if parsed.quick else full)
         return parsed
+
+
+    def refuse_repeated_flags(self, argv: Sequence[str]):
+        """A flag that takes one value (not a repeatable one such as --set) given twice is
+        refused: argparse keeps the last, and `--alpha 0.4,0.5 --alpha 0.8` swept 0.8 alone
+        without a word (an audit, 2026-12)."""
+        seen = set()
+        for token in argv:
+            if token == "--":
+                break
+            name = token.split("=", 1)[0]
+            action = self._option_string_actions.get(name)
+            if type(action) is not argparse._StoreAction:
+                continue
+            if action.dest in seen:
+                self.error(f"{name} given twice (the second would replace the first): give it "
+                           f"once")
+            seen.add(action.dest)
 
 
 def _shown(value) -> str:

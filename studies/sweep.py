@@ -27,7 +27,7 @@ import math
 import numpy as np
 import pandas as pd
 
-from taichi_star import StarParams
+from taichi_star import PER_ACTUATOR_FIELDS, StarParams
 from taichi_star.batch import run_batch
 
 from . import cli
@@ -84,6 +84,14 @@ def sweep_axes(args) -> dict:
         if text is not None:
             axes[field] = cli.parse_field_values(text, f"--{flag}", field)
     for item in args.param:
+        field = item.split("=", 1)[0].strip().replace("-", "_")
+        if field in PER_ACTUATOR_FIELDS:
+            # its eight values were read as eight values of an axis, each refused as "1 entry"
+            # (an audit, 2026-12)
+            raise cli.StudyArgumentError(
+                f"--param {field}: a per-actuator field (eight values, A1..A8, a robot) is not an "
+                f"axis of a sweep: give it to every instance with --set {field}=1,1,0.5,1,1,1,1,1,"
+                f" or vary one actuator's value with `sensitivity --vary {field}[K]=LOW:HIGH`")
         name, values = cli.parse_assignment(item, "--param")
         if name in axes:
             raise cli.StudyArgumentError(f"--param {name}: parameter given twice")

@@ -48,6 +48,18 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
      "--tolerance must be below --far (30 mm), got 30"),
     # the last --set of a field won without a word; a swept field's --set was dropped
     ("fig4c", ["--set", "alpha=0.5", "--set", "alpha=0.9"], "--set alpha: given twice"),
+    # a flag of one value given twice: argparse kept the last, and the first's values were
+    # dropped without a word (an audit, 2026-12); both spellings, and in any study
+    ("sweep", ["--gaits", "A1", "--alpha", "0.4,0.5", "--alpha", "0.8"],
+     "--alpha given twice (the second would replace the first): give it once"),
+    ("sweep", ["--gaits", "A1", "--alpha=0.4", "--alpha", "0.8"], "--alpha given twice"),
+    ("sensitivity", ["--seed", "1", "--seed", "2"], "--seed given twice"),
+    ("gradient_fit", ["--sets", "6", "--sets", "20"], "--sets given twice"),
+    # a per-actuator field's eight values were read as eight values of an axis, each refused
+    # as "got 1" entry (an audit, 2026-12)
+    ("sweep", ["--gaits", "A1", "--param", "actuator_gains=1,1,0.5,1,1,1,1,1"],
+     "--param actuator_gains: a per-actuator field (eight values, A1..A8, a robot) is not an "
+     "axis of a sweep: give it to every instance with --set actuator_gains=1,1,0.5,1,1,1,1,1"),
     ("sweep", ["--gaits", "A1", "--alpha", "0.5,0.6", "--set", "alpha=0.9"],
      "--set alpha: swept as well (fix it or sweep it, not both)"),
     ("sweep", ["--gaits", "A1+A2", "--set", "gait=A1"],

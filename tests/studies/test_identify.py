@@ -311,6 +311,8 @@ def test_sensitivity_quick_and_resumed(tmp_path, monkeypatch):
     assert (runs["status"] == "ok").all()
     assert set(indices["gait"]) == {"A1", "A1+A4"} and len(indices) == 4
     assert (indices["n_instances"] == len(runs)).all()
+    # --quick simulates 0.2 s from rest, not the cycles (3 were recorded: an audit, 2026-12)
+    assert indices["cycles"].isna().all() and indices["quick"].all()
     # the runs are the sampled robots: two points simulated directly
     points = [{n: float(samples.loc[i, n]) for n in ("alpha", "cylinder_drag")} for i in (0, 5)]
     direct = quick_speeds(points, ["A1", "A1+A4"])
