@@ -74,7 +74,8 @@ def test_killed_sweep_resumes_to_the_uninterrupted_table(tmp_path, capsys, caplo
         assert "unfinished run" in error and "resume" in error
         # named by the flag the user has (the library's argument, run_dir, before)
         assert f"--run-dir {run_dir} holds an unfinished run" in error, error
-        assert studies_main(["sweep", *SWEEP, "--dt", "0.001", "--out", str(killed_out),
+        finer = [a if a != "0.002" else "0.001" for a in SWEEP]  # --dt 0.001
+        assert studies_main(["sweep", *finer, "--out", str(killed_out),
                              "--run-dir", str(run_dir), "--resume"]) == 2
         assert "solver.dt: 0.002 -> 0.001" in capsys.readouterr().err
     assert chunk_files(run_dir) == done  # nothing touched
