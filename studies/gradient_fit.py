@@ -59,7 +59,8 @@ Cost, per optimiser: evaluations (a CMA-ES point; an L-BFGS-B call; a least-squa
 runs, with and without sensitivities), wall time, and simulated robot-seconds = instances ×
 simulated seconds, counted two ways. A run with n sensitivities carries 2n replica instances
 per instance (the ±ε pairs): they are never solved, only assembled at the solved state, so
-they cost less than an instance; `robot_seconds` counts each replica as a full instance ((1 + 2n) × gaits × window), the
+they cost less than an instance; `robot_seconds` counts each replica as a full instance
+((1 + 2n) × gaits × window), the
 conservative count, and `robot_seconds_cost_equivalent` counts a call as `gradient_cost_ratio`
 runs: the wall time of the call's simulation (with the n sensitivities) over that of the same
 simulation without, measured in this run at the base point (`measure_cost_ratio`; column
