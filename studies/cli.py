@@ -144,7 +144,6 @@ class StudyParser(OneLineParser):
                 setattr(parsed, dest, quick if parsed.quick else full)
         return parsed
 
-
     def refuse_repeated_flags(self, argv: Sequence[str]):
         """A flag that takes one value (not a repeatable one such as --set) given twice is
         refused: argparse keeps the last, and `--alpha 0.4,0.5 --alpha 0.8` swept 0.8 alone

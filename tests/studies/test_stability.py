@@ -3,6 +3,7 @@ mode (values against a direct simulation, outcome columns, plot). The shape chec
 tested in tests/unit/test_metrics.py."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -212,3 +213,13 @@ def test_the_notes_f32_median_is_over_the_pairs_not_the_cells_medians():
                              stability.paper_summary(table), stability.f32_summary(table))
     (line,) = [line for line in notes.splitlines() if line.strip().startswith("x10 ")]
     assert "median 0.00e+00," in line and "max 1.00e+00" in line
+
+
+def test_the_committed_notes_are_the_reports_of_the_committed_tables():
+    """results/stability_notes.txt is what `report` writes for the committed tables (its f32
+    medians were a median of the cells' medians, which the study no longer takes, until the
+    notes were rewritten from the tables: an audit, 2026-12)."""
+    results = Path(__file__).resolve().parents[2] / "results"
+    tables = [pd.read_csv(results / f"stability{suffix}.csv")
+              for suffix in ("", "_summary", "_paper", "_f32")]
+    assert (results / "stability_notes.txt").read_text() == stability.report(*tables) + "\n"
