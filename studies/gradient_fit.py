@@ -76,7 +76,11 @@ cumulative cost and best objective so far), `gradient_fit_uncertainty.csv` (per 
 and parameter, at the optimiser's best point: `identification.parameter_uncertainty` from one
 run with the sensitivities there, not counted in any cost: which parameters the training data
 determine, their standard errors and correlations), `gradient_fit.png` (best objective against
-robot-seconds, drawn from the history) and, with `--held-out-gaits` (measured gaits that no
+robot-seconds, drawn from the history), `gradient_fit_segments.csv` and its plot
+`gradient_fit_segments.png` (per set, the objective and each gait's along the straight segment
+from each optimiser's best point to the set's lowest, `segment_scores`: whether a fit that
+stopped higher stopped in another valley, one batched run not counted in any cost) and, with
+`--held-out-gaits` (measured gaits that no
 optimiser fits), `gradient_fit_held_out.csv`: per set, the start point and every optimiser's
 best point scored on each held-out gait's training window, its phase fitted there (as
 model_select's leave-one-gait-out folds score the gait they hold out), one row per point and
@@ -675,6 +679,82 @@ def held_out_scores(held_out: Problem, recorders: Sequence[Recorder]) -> pd.Data
                                                *identification.TRIAL_COLUMNS]]
 
 
+SEGMENT_FRACTIONS = np.linspace(0.0, 1.0, 11)
+"""Where `segment_scores` scores each segment: fractions of the way from an optimiser's best
+point (0) to the best point of its set (1)."""
+
+
+def segment_scores(problem: Problem, recorders: Sequence[Recorder],
+                   fractions=SEGMENT_FRACTIONS) -> pd.DataFrame:
+    """The objective along the straight segment, in unit coordinates, from each recorder's
+    best point to the lowest of them (one set's recorders; `problem` is its box), at
+    `fractions` of the way, in one batched run: whether the optimisers that stopped higher
+    stopped in another valley (the objective rises on the way, at least along this line) or
+    short of the same one (it falls all the way). One row per segment and fraction, columns
+    parameter_set, optimiser (the segment's start), best_optimiser (its end), fraction,
+    objective, then `objective_<gait>` per fitted gait (the gait's objective, its phase
+    fitted at that point); objective inf and the gaits' NaN where a simulation failed. A
+    recorder with no finite point, or whose best point is the best one, has no segment."""
+    scored = [r for r in recorders if r.best_units is not None]
+    if not scored:
+        return pd.DataFrame()
+    best = min(scored, key=lambda r: r.best_objective)
+    segments = [r for r in scored if not np.array_equal(r.best_units, best.best_units)]
+    # (1 − f)·a + f·b: each end is its point exactly
+    points = [(1.0 - fraction) * r.best_units + fraction * best.best_units
+              for r in segments for fraction in fractions]
+    tables = problem.gait_tables(np.array(points)) if points else []
+    rows = []
+    for index, table in enumerate(tables):
+        recorder = segments[index // len(fractions)]
+        row = {"parameter_set": recorder.parameter_set, "optimiser": recorder.optimiser,
+               "best_optimiser": best.optimiser, "fraction": fractions[index % len(fractions)],
+               "objective": (math.inf if table is None
+                             else identification.objective_of(table))}
+        gaits = (dict(zip(table["gait"], table["objective"])) if table is not None else {})
+        row.update({f"objective_{gait}": gaits.get(gait, math.nan) for gait in problem.gaits})
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def plot_segments(csv_path, png_path) -> Path:
+    """From gradient_fit_segments.csv: one row of panels per parameter set, one panel per
+    segment (an optimiser's best point to its set's best), the objective (black) and each
+    gait's against the fraction of the way, on a log scale."""
+    plt = cli.use_agg()
+    table = pd.read_csv(csv_path, dtype={"parameter_set": str})
+    sets = list(dict.fromkeys(table["parameter_set"]))
+    width = max(table.groupby("parameter_set")["optimiser"].nunique())
+    fig, axes = plt.subplots(len(sets), width, figsize=(4.6 * width, 3.6 * len(sets)),
+                             squeeze=False)
+    gait_columns = [c for c in table.columns if c.startswith("objective_")]
+    for row, parameter_set in enumerate(sets):
+        part = table[table["parameter_set"] == parameter_set]
+        segments = list(dict.fromkeys(part["optimiser"]))
+        for column in range(width):
+            ax = axes[row, column]
+            if column >= len(segments):
+                ax.set_visible(False)
+                continue
+            segment = part[part["optimiser"] == segments[column]]
+            for gait_column in gait_columns:
+                ax.plot(segment["fraction"], segment[gait_column], lw=1.0,
+                        label=gait_column.removeprefix("objective_"))
+            ax.plot(segment["fraction"], segment["objective"], color="black", lw=2.0,
+                    label="objective (mean)")
+            ax.set_yscale("log")
+            ax.set_xlabel(f"fraction of the way to {segment['best_optimiser'].iloc[0]}'s "
+                          "point")
+            ax.set_ylabel("trajectory objective")
+            ax.set_title(f"{parameter_set} parameters: from {segments[column]}'s point",
+                         fontsize=9)
+            ax.legend(fontsize=7)
+    settings = cli.run_settings(csv_path)
+    if settings:
+        fig.suptitle(settings, fontsize=8)
+    return cli.save_figure(fig, png_path, dpi=120)
+
+
 def plot_history(csv_path, png_path) -> Path:
     """Best objective so far against robot-seconds, one column of panels per parameter set, one
     line per optimiser (from gradient_fit_history.csv): above with every replica counted as an
@@ -866,6 +946,13 @@ def main(argv=None):
             Problem(boxes[name], base, held_out_gaits, held_out_trials, train, solver,
                     args.arch), [r for r in recorders if r.parameter_set == name])
             for name in sets], ignore_index=True), "gradient_fit_held_out.csv")
+    segments = pd.concat([segment_scores(problems[name], [r for r in recorders
+                                                          if r.parameter_set == name])
+                          for name in sets], ignore_index=True)
+    if not segments.empty:
+        out.write_csv(segments, "gradient_fit_segments.csv")
+        out.wrote(plot_segments(out.path("gradient_fit_segments.csv"),
+                                out.path("gradient_fit_segments.png")))
     out.wrote(plot_history(out.path("gradient_fit_history.csv"),
                            out.path("gradient_fit.png")))
     out.report()

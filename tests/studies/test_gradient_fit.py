@@ -768,3 +768,77 @@ def test_main_runs_each_optimiser_with_its_own_flags(tmp_path, monkeypatch):
     assert calls == [("L-BFGS-B",), (gradient_fit.LEAST_SQUARES, 5, "dogbox", False),
                      (gradient_fit.BROYDEN, 3, "dogbox", True),
                      (gradient_fit.POLISH, 4, "dogbox", False)]
+
+
+def test_segments_score_the_way_from_each_best_point_to_the_lowest(monkeypatch):
+    """gradient_fit_segments.csv: from each optimiser's best point to the set's lowest (its own
+    segment left out, as is a recorder that never scored), each row equal to a fresh batched
+    scoring of its point on the segment (batch-position independence is bitwise, so exactly),
+    the ends those points' own objectives; a failed point scores inf, its gaits NaN."""
+    box = [identify.parse_range_spec("alpha=0.2:1.5", "--sets")]
+    base, solver, window = StarParams(), SolverConfig(dt=5e-3), (1, 1)
+    gaits = ["A1+A2", "A1+A3"]
+    trials = identification.measured_trials(gaits, base.period)
+    problem = gradient_fit.Problem(box, base, gaits, trials, window, solver, "cpu")
+    ends = {"CMA-ES": 0.2, "L-BFGS-B": 0.8, gradient_fit.LEAST_SQUARES: 0.5}
+    recorders = []
+    for optimiser, unit in ends.items():
+        recorder = gradient_fit.Recorder("one", optimiser)
+        recorder.add([unit], problem.objectives([[unit]])[0], 0.0, 0.0)
+        recorders.append(recorder)
+    never = gradient_fit.Recorder("one", gradient_fit.BROYDEN)
+    never.add([0.1], math.inf, 0.0, 0.0)
+    recorders.append(never)
+    lowest = min(recorders, key=lambda r: r.best_objective)
+    fractions = np.array([0.0, 0.25, 1.0])
+    table = gradient_fit.segment_scores(problem, recorders, fractions)
+    starts = [r for r in recorders if r is not lowest and r is not never]
+    assert list(table["optimiser"]) == [r.optimiser for r in starts for _ in fractions]
+    assert (table["best_optimiser"] == lowest.optimiser).all()
+    assert list(table["fraction"]) == list(fractions) * len(starts)
+    points = [[(1 - f) * ends[r.optimiser] + f * ends[lowest.optimiser]]
+              for r in starts for f in fractions]
+    fresh = problem.gait_tables(np.array(points))
+    assert list(table["objective"]) == [identification.objective_of(t) for t in fresh]
+    for gait in gaits:
+        expected_column = [float(t.set_index("gait").loc[gait, "objective"]) for t in fresh]
+        assert list(table[f"objective_{gait}"]) == expected_column
+    first = table[table["optimiser"] == starts[0].optimiser]
+    assert first["objective"].iloc[0] == starts[0].best_objective
+    assert first["objective"].iloc[-1] == lowest.best_objective
+    monkeypatch.setattr(problem, "gait_tables", lambda units: [None] * len(units))
+    failed = gradient_fit.segment_scores(problem, recorders, fractions)
+    assert np.isinf(failed["objective"]).all()
+    assert failed[[f"objective_{gait}" for gait in gaits]].isna().all().all()
+
+
+def test_the_segments_plot_draws_each_segment_from_the_csv(tmp_path, monkeypatch):
+    """One row of panels per set, one panel per segment (a set with fewer segments leaves the
+    rest hidden), each with a line per gait and the objective, their points the CSV's."""
+    rows = []
+    for parameter_set, optimisers in (("6", ["CMA-ES", "L-BFGS-B"]), ("20", ["CMA-ES"])):
+        for optimiser in optimisers:
+            for fraction, value in ((0.0, 9.0), (0.5, 12.0), (1.0, 3.0)):
+                rows.append({"parameter_set": parameter_set, "optimiser": optimiser,
+                             "best_optimiser": gradient_fit.LEAST_SQUARES,
+                             "fraction": fraction, "objective": value,
+                             "objective_A1": value / 2, "objective_A1+A2": value * 1.5})
+    csv_path = tmp_path / "gradient_fit_segments.csv"
+    pd.DataFrame(rows).to_csv(csv_path, index=False)
+    drawn = {}
+
+    def keep(fig, png_path, dpi=130):
+        drawn["axes"] = fig.axes
+        return png_path
+
+    monkeypatch.setattr(gradient_fit.cli, "save_figure", keep)
+    gradient_fit.plot_segments(csv_path, tmp_path / "gradient_fit_segments.png")
+    axes = drawn["axes"]
+    assert len(axes) == 4 and not axes[3].get_visible()
+    for ax, (parameter_set, optimiser) in zip(axes[:3], [("6", "CMA-ES"), ("6", "L-BFGS-B"),
+                                                         ("20", "CMA-ES")]):
+        assert ax.get_title() == f"{parameter_set} parameters: from {optimiser}'s point"
+        lines = {line.get_label(): line for line in ax.get_lines()}
+        assert set(lines) == {"A1", "A1+A2", "objective (mean)"}
+        assert list(lines["objective (mean)"].get_ydata()) == [9.0, 12.0, 3.0]
+        assert list(lines["A1+A2"].get_ydata()) == [13.5, 18.0, 4.5]
