@@ -255,6 +255,15 @@ class Problem:
         units[self.moved] = moved_units
         return units
 
+    def moved_columns(self, jacobian) -> np.ndarray:
+        """The moved axes' columns (R, D_moved) of a Jacobian (R, D), row-major as the whole:
+        a boolean column index gives them column-major, and scipy's trust-region steps on
+        the same numbers in the other layout differ in the last bits (its products sum in
+        another order), which the fits' ill-conditioned steps (condition numbers ~1e9) carry
+        into visibly other paths (an audit, 2026-12: on "20fired", where every axis moves,
+        the secant fit's sixth point 845.3 against 839.3 and its end 841.9 against 808.2)."""
+        return np.ascontiguousarray(jacobian[:, self.moved])
+
     def params(self, units) -> list:
         return identify.box_params(self.box, identify.box_values(self.box, units), self.base,
                                    self.gaits)
@@ -546,7 +555,7 @@ def fit_least_squares(problem: Problem, points, max_evaluations: int, recorder: 
             if not trial_points and max_evaluations > 1:
                 # scipy's first step needs the start's Jacobian: one run gives both
                 values, derivatives = problem.residuals_and_jacobian(units)
-                start_jacobian[moved_units.tobytes()] = derivatives[:, problem.moved]
+                start_jacobian[moved_units.tobytes()] = problem.moved_columns(derivatives)
                 record_gradient_call(recorder, problem, units, float(values @ values),
                                      cost_ratio, start)
                 state.append(SecantState(moved_units, values,
@@ -579,7 +588,7 @@ def fit_least_squares(problem: Problem, points, max_evaluations: int, recorder: 
             if derivatives is None:
                 units = problem.embedded(moved_units, x0)
                 values, derivatives = problem.residuals_and_jacobian(units)
-                derivatives = derivatives[:, problem.moved]
+                derivatives = problem.moved_columns(derivatives)
                 record_gradient_call(recorder, problem, units, float(values @ values),
                                      cost_ratio, start)
             state[0].moved_to(moved_units, values, derivatives)

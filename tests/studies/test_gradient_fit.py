@@ -842,3 +842,46 @@ def test_the_segments_plot_draws_each_segment_from_the_csv(tmp_path, monkeypatch
         assert set(lines) == {"A1", "A1+A2", "objective (mean)"}
         assert list(lines["objective (mean)"].get_ydata()) == [9.0, 12.0, 3.0]
         assert list(lines["A1+A2"].get_ydata()) == [13.5, 18.0, 4.5]
+
+
+def test_where_every_axis_moves_the_fit_is_scipys_on_the_whole_box_bit_for_bit(monkeypatch):
+    """Holding the axes no gait moves must change nothing where every axis moves: the fit's
+    trial points are those of scipy's least_squares on the whole box with the Jacobian as the
+    problem gives it (row-major), bit for bit. The moved columns were once passed column-major
+    (a boolean index), and on these ill-conditioned residuals (column scales 1 to 1e-6, like
+    the study's) scipy's steps then differ in the last bits from the second on (an audit,
+    2026-12: on "20fired" that took the secant fit to 841.9 instead of 808.2)."""
+    box = [identify.parse_range_spec(text, "--sets") for text in gradient_fit.PARAMETER_SETS["6"]]
+    base = StarParams(gait="A1+A2")
+    problem = gradient_fit.Problem(box, base, ["A1+A2"], {}, (1, 1), SolverConfig(), "cpu")
+    assert problem.moved.all()
+    rng = np.random.default_rng(3)
+    matrix = rng.normal(size=(330, 6)) @ np.diag(np.logspace(0, -6, 6))
+    target = rng.normal(size=330)
+
+    def values(units):
+        return matrix @ np.tanh(3 * units) - target + 0.1 * np.sin(5 * (matrix @ units))
+
+    def jacobian(units):
+        return (matrix * (3 / np.cosh(3 * units) ** 2)
+                + 0.5 * np.cos(5 * (matrix @ units))[:, None] * matrix)
+
+    monkeypatch.setattr(problem, "residuals", values)
+    monkeypatch.setattr(problem, "residuals_and_jacobian",
+                        lambda units: (values(units), jacobian(units)))
+    recorder = gradient_fit.fit_least_squares(
+        problem, gradient_fit.start_points(problem, 1, 0), 12,
+        gradient_fit.Recorder("6", gradient_fit.LEAST_SQUARES), cost_ratio=2.0)
+    from scipy.optimize import least_squares
+    direct = []
+
+    def residuals(units):
+        direct.append(float(values(units) @ values(units)))
+        return values(units)
+
+    least_squares(residuals, identify.start_units(box, base), jac=jacobian, bounds=(0.0, 1.0),
+                  method=gradient_fit.DEFAULT_LEAST_SQUARES_METHOD, x_scale="jac", max_nfev=12)
+    fitted = [row["objective"] for row in recorder.rows if row["robot_seconds"]]
+    trial_objectives = list(dict.fromkeys(fitted))
+    assert len(direct) >= 4
+    assert trial_objectives == list(dict.fromkeys(direct))
