@@ -524,7 +524,8 @@ def parse_range(text: str, flag: str = "value") -> List[float]:
 def parse_values(text: str, flag: str = "value", kind: type = float,
                  repeats: bool = False) -> list:
     """A comma-separated list ("0,0.5,1", "contract,always") or, for numbers, a range
-    ("0.2:1.2:11", "1e6:1e7:5:log"). StudyArgumentError naming `flag` when malformed or empty,
+    ("0.2:1.2:11", "1e6:1e7:5:log"; of integers, one whose every value is an integer:
+    "10:20:3"). StudyArgumentError naming `flag` when malformed or empty,
     or when a value is listed twice (it would only repeat the work) unless `repeats` (a list
     whose values may repeat: a per-actuator field's eight)."""
     if text is None or not str(text).strip():
@@ -532,6 +533,8 @@ def parse_values(text: str, flag: str = "value", kind: type = float,
     text = str(text).strip()
     if kind is float and ":" in text:
         values = parse_range(text, flag)
+    elif kind is int and ":" in text:
+        values = integer_range(text, flag)
     else:
         items = [item.strip() for item in text.split(",")]
         if any(not item for item in items):
@@ -551,6 +554,19 @@ def parse_values(text: str, flag: str = "value", kind: type = float,
         raise StudyArgumentError(f"{flag}: {repeated!r} is listed twice in {text!r} (give each "
                                  f"value once)")
     return values
+
+
+def integer_range(text: str, flag: str) -> List[int]:
+    """A range of integers ("10:20:3" -> [10, 15, 20]; `parse_range`'s forms): each value
+    must be an integer (within rounding: 1e-9 of its magnitude), else StudyArgumentError
+    naming the first that is not."""
+    values = parse_range(text, flag)
+    for value in values:
+        if abs(value - round(value)) > 1e-9 * max(1.0, abs(value)):
+            raise StudyArgumentError(f"{flag}: the range {text!r} gives {value:.6g}, not an "
+                                     f"integer (choose its ends and count so that every "
+                                     f"value is one, or give a comma list)")
+    return [int(round(value)) for value in values]
 
 
 def parse_counts(text: str, flag: str, highest: Optional[int] = None) -> List[int]:
@@ -649,6 +665,11 @@ def with_allowed_values(error: NotANumber, name: str) -> StudyArgumentError:
     allowed = allowed_values(name)
     return StudyArgumentError(f"{error} ({name} must be "
                               f"{'in ' if allowed[0] in '[(' else ''}{allowed})")
+
+
+GAITS_HELP = ("paper (the five Fig. 4c gaits), all (the 255 non-empty gaits) or a comma list "
+              "such as A1,A1+A2")
+"""The help of a --gaits flag that `resolve_gaits` reads (every form it accepts)."""
 
 
 def resolve_gaits(text: str, flag: str = "--gaits") -> List[str]:

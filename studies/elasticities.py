@@ -210,7 +210,7 @@ def plot_elasticities(csv_path, png_path) -> Path:
 def build_parser():
     parser = cli.StudyParser("elasticities", DESCRIPTION)
     parser.add_argument("--gaits", default="paper",
-                        help="gaits: paper (the five, default) or a comma list")
+                        help=cli.GAITS_HELP)
     parser.add_argument("--parameters", default=None, metavar="NAME,...",
                         help="parameters to differentiate by, as simulate(sensitivities=...) "
                              "names them, an actuator by its Python index (actuator_gains[0] "

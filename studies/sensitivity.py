@@ -171,7 +171,7 @@ def build_parser():
                         help="a real-valued StarParams field and its range, repeatable "
                              "(default: the 14 of DEFAULT_BOX: " + " ".join(DEFAULT_BOX) + ")")
     parser.add_argument("--gaits", default="paper",
-                        help="gaits: paper (the five, default) or a comma list")
+                        help=cli.GAITS_HELP)
     parser.add_argument("--base-samples", type=int, default=DEFAULT_BASE_SAMPLES,
                         quick=QUICK_BASE_SAMPLES,
                         help=f"Saltelli base samples N, a power of 2; instances = N (D + 2) × "

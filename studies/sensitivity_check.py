@@ -94,7 +94,7 @@ def build_parser():
     parser.add_argument("--duration", type=float, default=0.2, quick=QUICK_DURATION_S,
                         help="simulated seconds from rest per run")
     parser.add_argument("--gaits", default="A1+A2,A1+A3", quick="A1+A3",
-                        help="comma list of gaits, or paper (the five Fig. 4c gaits)")
+                        help=cli.GAITS_HELP)
     parser.add_argument("--parameters", default="all", quick=",".join(QUICK_PARAMETERS),
                         help="comma list of parameters as simulate's sensitivities take them "
                              "(an actuator by its Python index: actuator_gains[0] is A1's), "

@@ -471,7 +471,7 @@ def build_parser():
     parser.add_argument("--periods", default=numbers(PERIODS), quick=numbers([PAPER["period_s"]]),
                         help="periods, s")
     parser.add_argument("--gaits", default=",".join(GAITS), quick=",".join(QUICK_GAITS),
-                        help="gaits")
+                        help=cli.GAITS_HELP)
     parser.add_argument("--precisions", default=",".join(PRECISIONS), quick="f64",
                         help="f64 and/or f32")
     cli.add_model_flags(parser, fixed=("gait", "youngs_modulus", "alpha", "added_mass_coeff",

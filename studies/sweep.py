@@ -64,8 +64,7 @@ def build_parser():
     parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUES",
                         help="sweep any StarParams field, e.g. --param drag_parallel=0,0.01,0.1")
     parser.add_argument("--gaits", default="paper",
-                        help="paper (the five Fig. 4 gaits, default), all (255), or a list "
-                             "A1,A1+A2")
+                        help=cli.GAITS_HELP)
     parser.add_argument("--max-instances", type=int, default=cli.MAX_INSTANCES,
                         help=f"refuse larger products (default and most {cli.MAX_INSTANCES})")
     cli.add_resume_flags(parser)

@@ -528,7 +528,7 @@ def plot_work_precision(summary_csv, png_path):
 def build_parser():
     parser = cli.StudyParser("work_precision", DESCRIPTION)
     parser.add_argument("--gaits", default="paper", quick=",".join(QUICK_GAITS),
-                        help="paper (the five Fig. 4 gaits) or a list A1,A1+A2")
+                        help=cli.GAITS_HELP)
     cli.add_cycles_flag(parser, default=3.0, quick_s=QUICK_DURATION_S)
     return parser
 

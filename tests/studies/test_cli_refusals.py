@@ -578,3 +578,34 @@ def test_a_field_range_is_named_for_a_value_that_is_no_number_only(no_compute, t
     assert studies_main([study, *argv, "--out", str(tmp_path / "out"), *QUICK]) == 2
     error = capsys.readouterr().err.strip()
     assert error.endswith(message), error
+
+
+def study_gaits_flags():
+    """(study, the help of its --gaits flag) of every study that has one."""
+    import importlib
+    import studies
+    flags = []
+    for name in studies.study_names():
+        try:
+            parser = importlib.import_module(f"studies.{name}").build_parser()
+        except (ImportError, AttributeError):
+            continue
+        flags += [(name, action.help)
+                  for action in parser._actions if "--gaits" in action.option_strings]
+    return flags
+
+
+def test_every_gaits_flag_names_what_it_accepts(no_compute, tmp_path, capsys):
+    """A --gaits flag read by `cli.resolve_gaits` accepts paper, all and a list, and its help
+    names the three (sensitivity's and four others' left out "all", which they took); one
+    that fits the measured gaits says so, and refuses "all" naming the gait that is not
+    measured, before any compute."""
+    flags = study_gaits_flags()
+    assert {"sweep", "sensitivity", "gradient_fit"} <= {study for study, _ in flags}
+    for study, text in flags:
+        if "measured" in text:
+            assert studies_main([study, "--gaits", "all", "--out", str(tmp_path / study),
+                                 *QUICK]) == 2
+            assert "A2: not measured" in capsys.readouterr().err, study
+        else:
+            assert all(form in text for form in ("paper", "all", "comma list")), (study, text)

@@ -64,6 +64,22 @@ def test_parse_values_and_ranges():
             cli.parse_values(bad, "--alpha")
 
 
+def test_an_integer_field_takes_a_range_whose_every_value_is_an_integer():
+    """sweep --param n_arc=10:20:3 was refused as "not an integer" (the range form was read as
+    one number); a range of integers is taken when it lands on integers, exact ints, and one
+    that does not is refused naming the first value that is not one (a comma list stays)."""
+    assert cli.parse_values("10:20:3", "--param n_arc", int) == [10, 15, 20]
+    assert all(type(v) is int for v in cli.parse_values("10:20:3", "--param n_arc", int))
+    assert cli.parse_values("7:7:1", "--param n_arc", int) == [7]
+    assert cli.parse_values("2:128:7:log", "--param n_arc", int) == [2, 4, 8, 16, 32, 64, 128]
+    assert cli.parse_values("10,15", "--param n_arc", int) == [10, 15]
+    with pytest.raises(cli.StudyArgumentError,
+                       match=r"^--param n_arc: the range '10:20:4' gives 13.3333, not an "):
+        cli.parse_values("10:20:4", "--param n_arc", int)
+    with pytest.raises(cli.StudyArgumentError, match="malformed range"):
+        cli.parse_values("10:20", "--param n_arc", int)
+
+
 def test_param_product_order_and_validation():
     grid = cli.param_product({"gait": ["A1", "A1+A2"], "alpha": [0.5, 1.0]})
     assert [(p.gait, p.alpha) for p in grid] == [("A1", 0.5), ("A1", 1.0), ("A1+A2", 0.5),
