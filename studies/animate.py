@@ -34,7 +34,7 @@ recorded shape and a drawn picture; a billion ran out of memory, an audit)."""
 def build_parser():
     parser = cli.StudyParser("animate", DESCRIPTION)
     parser.add_argument("--gait", default="paper", quick="A1+A2",
-                        help="gait(s): A1+A2, a comma list, or paper (the five Fig. 4 gaits)")
+                        help=cli.GAITS_HELP)
     parser.add_argument("--frames", type=int, default=60,
                         help="frames per GIF (default 60): at least this many where the run has "
                              "as many steps, fewer than twice as many")

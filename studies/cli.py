@@ -558,19 +558,23 @@ def parse_values(text: str, flag: str = "value", kind: type = float,
 
 def integer_range(text: str, flag: str) -> List[int]:
     """A range of integers ("10:20:3" -> [10, 15, 20]; `parse_range`'s forms): each value
-    must be an integer (within rounding: 1e-9 of its magnitude), else StudyArgumentError
-    naming the first that is not."""
+    must be an integer to within the range's rounding (1e-9, or 1e-12 of its magnitude where
+    larger: a log range's values are off an integer by a few units of the last place), else
+    StudyArgumentError naming the first that is not (1e-9 of the magnitude let 1000000001.5
+    pass as an integer: an audit, 2026-12)."""
     values = parse_range(text, flag)
     for value in values:
-        if abs(value - round(value)) > 1e-9 * max(1.0, abs(value)):
-            raise StudyArgumentError(f"{flag}: the range {text!r} gives {value:.6g}, not an "
-                                     f"integer (choose its ends and count so that every "
-                                     f"value is one, or give a comma list)")
+        if abs(value - round(value)) > max(1e-9, 1e-12 * abs(value)):
+            digits = max(6, len(str(int(abs(value)))) + 2)  # enough to show the fraction
+            raise StudyArgumentError(f"{flag}: the range {text!r} gives {value:.{digits}g}, "
+                                     f"not an integer (choose its ends and count so that "
+                                     f"every value is one, or give a comma list)")
     return [int(round(value)) for value in values]
 
 
 def parse_counts(text: str, flag: str, highest: Optional[int] = None) -> List[int]:
-    """A comma list of integers >= 1 ("1,8,64"), each at most `highest` when given."""
+    """A comma list of integers >= 1 ("1,8,64") or a range of them ("64:4096:7:log",
+    `integer_range`), each at most `highest` when given."""
     values = parse_values(text, flag, int)
     if any(v < 1 for v in values):
         raise StudyArgumentError(f"{flag}: every value must be >= 1, got {text!r}")

@@ -703,7 +703,8 @@ def segment_scores(problem: Problem, recorders: Sequence[Recorder],
     parameter_set, optimiser (the segment's start), best_optimiser (its end), fraction,
     objective, then `objective_<gait>` per fitted gait (the gait's objective, its phase
     fitted at that point); objective inf and the gaits' NaN where a simulation failed. A
-    recorder with no finite point, or whose best point is the best one, has no segment."""
+    recorder with no finite point, or whose best point is the best one, has no segment (an
+    empty table when no recorder has one); a point on two segments is simulated once."""
     scored = [r for r in recorders if r.best_units is not None]
     if not scored:
         return pd.DataFrame()
@@ -712,7 +713,12 @@ def segment_scores(problem: Problem, recorders: Sequence[Recorder],
     # (1 − f)·a + f·b: each end is its point exactly
     points = [(1.0 - fraction) * r.best_units + fraction * best.best_units
               for r in segments for fraction in fractions]
-    tables = problem.gait_tables(np.array(points)) if points else []
+    # each distinct point simulated once (a polish that kept CMA-ES's point, two fits ending
+    # at one point: an audit, 2026-12)
+    distinct = {point.tobytes(): point for point in points}
+    scored_tables = dict(zip(distinct, problem.gait_tables(np.array(list(distinct.values())))
+                             if distinct else []))
+    tables = [scored_tables[point.tobytes()] for point in points]
     rows = []
     for index, table in enumerate(tables):
         recorder = segments[index // len(fractions)]

@@ -581,7 +581,8 @@ def test_a_field_range_is_named_for_a_value_that_is_no_number_only(no_compute, t
 
 
 def study_gaits_flags():
-    """(study, the help of its --gaits flag) of every study that has one."""
+    """(study, the help of its --gaits flag, or animate's --gait) of every study that has
+    one."""
     import importlib
     import studies
     flags = []
@@ -591,17 +592,19 @@ def study_gaits_flags():
         except (ImportError, AttributeError):
             continue
         flags += [(name, action.help)
-                  for action in parser._actions if "--gaits" in action.option_strings]
+                  for action in parser._actions
+                  if {"--gaits", "--gait"} & set(action.option_strings)]
     return flags
 
 
 def test_every_gaits_flag_names_what_it_accepts(no_compute, tmp_path, capsys):
     """A --gaits flag read by `cli.resolve_gaits` accepts paper, all and a list, and its help
-    names the three (sensitivity's and four others' left out "all", which they took); one
+    names the three (sensitivity's, animate's and four others' left out "all", which they
+    took); one
     that fits the measured gaits says so, and refuses "all" naming the gait that is not
     measured, before any compute."""
     flags = study_gaits_flags()
-    assert {"sweep", "sensitivity", "gradient_fit"} <= {study for study, _ in flags}
+    assert {"sweep", "sensitivity", "gradient_fit", "animate"} <= {study for study, _ in flags}
     for study, text in flags:
         if "measured" in text:
             assert studies_main([study, "--gaits", "all", "--out", str(tmp_path / study),

@@ -885,3 +885,33 @@ def test_where_every_axis_moves_the_fit_is_scipys_on_the_whole_box_bit_for_bit(m
     trial_objectives = list(dict.fromkeys(fitted))
     assert len(direct) >= 4
     assert trial_objectives == list(dict.fromkeys(direct))
+
+
+def test_a_point_on_two_segments_is_simulated_once(monkeypatch):
+    """A polish that kept CMA-ES's point (and two fits ending at one point) has CMA-ES's
+    segment: its rows are CMA-ES's, and the batch simulates each distinct point once (an
+    audit: the quick run simulated 22 of its 33 points twice)."""
+    box = [identify.parse_range_spec("alpha=0.2:1.5", "--sets")]
+    base = StarParams()
+    problem = gradient_fit.Problem(box, base, ["A1+A2"], {}, (1, 1), SolverConfig(), "cpu")
+    batches = []
+
+    def gait_tables(unit_points):
+        batches.append(np.array(unit_points))
+        return [pd.DataFrame({"gait": ["A1+A2"], "objective": [float(u[0]) + 1.0]})
+                for u in unit_points]
+
+    monkeypatch.setattr(problem, "gait_tables", gait_tables)
+    recorders = []
+    for optimiser, unit, objective in (("CMA-ES", 0.2, 5.0), (gradient_fit.POLISH, 0.2, 5.0),
+                                       (gradient_fit.LEAST_SQUARES, 0.6, 1.0)):
+        recorder = gradient_fit.Recorder("one", optimiser)
+        recorder.add([unit], objective, 0.0, 0.0)
+        recorders.append(recorder)
+    fractions = np.array([0.0, 0.5, 1.0])
+    table = gradient_fit.segment_scores(problem, recorders, fractions)
+    assert len(batches) == 1 and len(batches[0]) == len(fractions)
+    cma = table[table["optimiser"] == "CMA-ES"].drop(columns="optimiser")
+    polish = table[table["optimiser"] == gradient_fit.POLISH].drop(columns="optimiser")
+    assert cma.reset_index(drop=True).equals(polish.reset_index(drop=True))
+    np.testing.assert_allclose(cma["objective"], [1.2, 1.4, 1.6])

@@ -78,6 +78,11 @@ def test_an_integer_field_takes_a_range_whose_every_value_is_an_integer():
         cli.parse_values("10:20:4", "--param n_arc", int)
     with pytest.raises(cli.StudyArgumentError, match="malformed range"):
         cli.parse_values("10:20", "--param n_arc", int)
+    # a large range's half-integer is no integer (1e-9 of the magnitude let it pass)
+    with pytest.raises(cli.StudyArgumentError, match="gives 1000000001.5, not an integer"):
+        cli.parse_values("1000000000:1000000003:3", "--param n_arc", int)
+    assert cli.parse_counts("64:4096:7:log", "--batch-sizes") == [64, 128, 256, 512, 1024,
+                                                                    2048, 4096]
 
 
 def test_param_product_order_and_validation():
