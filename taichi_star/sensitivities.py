@@ -166,9 +166,10 @@ def parse_directions(names) -> Tuple[Direction, ...]:
             indices = list(range(N_ACTUATORS))
             if rest:
                 index = rest[:-1]
-                # isdigit() also takes digits such as "²" that int() refuses
+                # isdigit() also takes digits such as "²" that int() refuses; "01" is not a
+                # label this field is written with (it was read as 1: an audit, 2026-12)
                 if not (rest.endswith("]") and index.isascii() and index.isdigit()
-                        and int(index) < N_ACTUATORS):
+                        and str(int(index)) == index and int(index) < N_ACTUATORS):
                     raise ValueError(f"sensitivities: {name!r} must name an actuator index in "
                                      f"[0, {N_ACTUATORS - 1}] (Python's: {field}[0] is A1's, "
                                      f"{field}[{N_ACTUATORS - 1}] A{N_ACTUATORS}'s)")
@@ -191,11 +192,12 @@ def parse_directions(names) -> Tuple[Direction, ...]:
 
 
 def check_directions(directions: Sequence[Direction], params: Sequence[StarParams],
-                     solver: SolverConfig):
+                     solver: SolverConfig, commanded: bool = False):
     """ValueError, before any compute, where the sensitivities are not defined: in f32 (a
     central difference needs f64's digits) and for a component height at 0 (0 turns the 2.5-D
     model off: no derivative across that switch). A warning (`delay_on_step_grid`) for a delay
-    at which the run has a jump, not a slope."""
+    at which the run has a jump, not a slope; with `commanded` (a `Simulator`, which fires what
+    it is told, whatever the `gait` field says) for any actuator's delay."""
     if directions and solver.precision != "f64":
         raise ValueError(f"sensitivities need precision 'f64' (central differences lose f32's "
                          f"digits), got {solver.precision!r}")
@@ -208,7 +210,7 @@ def check_directions(directions: Sequence[Direction], params: Sequence[StarParam
                                  f"with the component heights set (> 0)")
         if direction.field == "actuator_delays" and not solver.adaptive:
             jumping = [b for b, p in enumerate(params)
-                       if delay_on_step_grid(p, direction.index, solver.dt)]
+                       if delay_on_step_grid(p, direction.index, solver.dt, commanded)]
             if jumping:
                 p = params[jumping[0]]
                 warn_user(
@@ -221,14 +223,17 @@ def check_directions(directions: Sequence[Direction], params: Sequence[StarParam
                     UserWarning)
 
 
-def delay_on_step_grid(params: StarParams, actuator: int, dt: float) -> bool:
+def delay_on_step_grid(params: StarParams, actuator: int, dt: float,
+                       commanded: bool = False) -> bool:
     """Whether a fixed-step run of `params` (steps of dt s) has no derivative by the delay of
-    `actuator` (index k − 1 for A_k): the gait fires it, the profile's branches do not meet at
-    their switch (`CurvatureProfile.switch_jump`), and the switch, delay + t0 after a firing (a
-    step end), falls on a step end. Moving the delay by any ε then moves the switch across that
-    step end and the curvature there by the jump."""
+    `actuator` (index k − 1 for A_k): the gait fires it (with `commanded`, a Simulator's run,
+    any actuator may be fired, whatever the gait: its firings are commands, the `gait` field
+    unread), the profile's branches do not meet at their switch
+    (`CurvatureProfile.switch_jump`), and the switch, delay + t0 after a firing (a step end),
+    falls on a step end. Moving the delay by any ε then moves the switch across that step end
+    and the curvature there by the jump."""
     profile = params.actuator_profile
-    fired = Gait.parse(params.gait).mask[actuator] == 1
+    fired = commanded or Gait.parse(params.gait).mask[actuator] == 1
     return bool(fired and profile.switch_jump != 0.0 and on_grid(
         params.actuator_delays[actuator] + profile.switch_time, dt))
 

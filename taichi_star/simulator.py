@@ -201,7 +201,9 @@ class Simulator(NotCopied):
         check_precision(params, solver)
         self.directions = tangents.parse_directions(sensitivities)
         """The parameters the state is differentiated by (`sensitivities.Direction`)."""
-        tangents.check_directions(self.directions, params, solver)
+        # its firings are commands: any actuator's delay may put a switch on a step end (the
+        # warning followed the unread gait field: an audit, 2026-12)
+        tangents.check_directions(self.directions, params, solver, commanded=True)
         check_arch(arch)
         check_batch_memory(params, solver.precision, arch,
                            tangents.instances_per_instance(len(self.directions)))
@@ -467,8 +469,9 @@ class Simulator(NotCopied):
     @one_call_at_a_time
     def sensitivity(self, column: str, parameter: str) -> np.ndarray:
         """d(column of `state()`)/d(parameter) now for every instance, (B,) ((B, 8) for a whole
-        per-actuator field): column one of `DIFFERENTIABLE_STATE_COLUMNS`, parameter one the
-        Simulator was built with (`sensitivities`). ValueError otherwise."""
+        per-actuator field), in the column's unit per the parameter's SI unit (e.g. mm per
+        unit of α): column one of `DIFFERENTIABLE_STATE_COLUMNS`, parameter one the Simulator
+        was built with (`sensitivities`). ValueError otherwise; NaN for a failed instance."""
         if column not in DIFFERENTIABLE_STATE_COLUMNS:
             raise ValueError(f"column must be one of {DIFFERENTIABLE_STATE_COLUMNS}, got "
                              f"{column!r}")

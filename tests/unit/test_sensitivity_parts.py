@@ -12,6 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+import taichi_star
 from taichi_star import SolverConfig, StarParams
 from taichi_star.actuation import CurvatureProfile, _logistic
 from taichi_star.model import build_model
@@ -40,7 +41,8 @@ def test_fields_and_actuator_numbers_become_directions_in_the_order_named():
 
 @pytest.mark.parametrize("name", ["actuator_gains[8]", "actuator_gains[-1]", "actuator_gains[1",
                                   "actuator_gains[]", "actuator_gains[x]", "actuator_gains[ 1]",
-                                  "actuator_gains[12]", "actuator_gains[10]"])
+                                  "actuator_gains[12]", "actuator_gains[10]",
+                                  "actuator_gains[01]", "actuator_gains[00]"])
 def test_an_actuator_index_outside_0_to_7_or_not_a_number_is_refused(name):
     with pytest.raises(ValueError) as error:
         parse_directions([name])
@@ -182,6 +184,26 @@ def test_a_delay_puts_the_switch_on_a_step_end_only_when_fired_and_on_the_grid()
     smooth = dataclasses.replace(meeting, cooling=(0.0, 1.0, 0.0, level))
     assert smooth.switch_jump == 0.0
     assert not sens.delay_on_step_grid(fired.replace(actuator_profile=smooth), 2, dt)
+
+
+def test_a_simulators_commanded_firings_make_any_actuators_delay_count():
+    """A Simulator fires what it is told and reads no gait: A1's delay on the grid has no
+    derivative there though the gait field (A2) does not fire A1 (the warning followed the
+    gait: it said nothing here, and warned for a gait's actuator a Simulator may never fire)."""
+    dt = 1e-3
+    quiet = BASE.replace(gait="A2", actuator_delays=(on_grid_delay(dt, 400),) + (0.0,) * 7)
+    assert not sens.delay_on_step_grid(quiet, 0, dt)
+    assert sens.delay_on_step_grid(quiet, 0, dt, commanded=True)
+    moved = quiet.replace(actuator_delays=(on_grid_delay(dt, 400) + 0.5 * dt,) + (0.0,) * 7)
+    assert not sens.delay_on_step_grid(moved, 0, dt, commanded=True)
+    directions = parse_directions(["actuator_delays[0]"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sens.check_directions(directions, [quiet], SolverConfig(dt=dt))
+    with pytest.warns(UserWarning, match=r"^sensitivities: actuator_delays\[0\] = 0.237 s"):
+        sens.check_directions(directions, [quiet], SolverConfig(dt=dt), commanded=True)
+    with pytest.warns(UserWarning, match=r"^sensitivities: actuator_delays\[0\] = 0.237 s"):
+        taichi_star.Simulator([quiet], SolverConfig(dt=dt), sensitivities=["actuator_delays[0]"])
 
 
 def test_a_delay_on_the_grid_warns_with_fixed_steps_only():
