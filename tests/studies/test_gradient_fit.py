@@ -127,6 +127,19 @@ def test_a_polish_starts_at_cma_best_point_and_counts_its_cost_on_top(monkeypatc
     np.testing.assert_array_equal(tie.best_units, np.full(6, 0.25))
 
 
+def drawn_axes(monkeypatch, plot, csv_path) -> list:
+    """The axes of the figure `plot(csv_path, png_path)` draws, kept instead of saved."""
+    drawn = {}
+
+    def keep(fig, png_path, dpi=130):
+        drawn["axes"] = fig.axes
+        return png_path
+
+    monkeypatch.setattr(gradient_fit.cli, "save_figure", keep)
+    plot(csv_path, csv_path.with_suffix(".png"))
+    return drawn["axes"]
+
+
 def test_the_history_plot_draws_both_counts_from_the_csv(tmp_path, monkeypatch):
     """Two parameter sets, two optimisers each: a column of two panels per set, the robot-seconds
     with replicas counted above and the cost-equivalent ones below, one step line per
@@ -140,15 +153,7 @@ def test_the_history_plot_draws_both_counts_from_the_csv(tmp_path, monkeypatch):
             rows += recorder.rows
     csv_path = tmp_path / "gradient_fit_history.csv"
     pd.DataFrame(rows).to_csv(csv_path, index=False)
-    drawn = {}
-
-    def keep(fig, png_path, dpi=130):
-        drawn["axes"] = fig.axes
-        return png_path
-
-    monkeypatch.setattr(gradient_fit.cli, "save_figure", keep)
-    gradient_fit.plot_history(csv_path, tmp_path / "gradient_fit.png")
-    axes = drawn["axes"]
+    axes = drawn_axes(monkeypatch, gradient_fit.plot_history, csv_path)
     assert len(axes) == 4
     table = pd.read_csv(csv_path, dtype={"parameter_set": str})
     for ax, (parameter_set, count) in zip(axes, [("6", "robot_seconds"), ("20", "robot_seconds"),
@@ -825,15 +830,7 @@ def test_the_segments_plot_draws_each_segment_from_the_csv(tmp_path, monkeypatch
                              "objective_A1": value / 2, "objective_A1+A2": value * 1.5})
     csv_path = tmp_path / "gradient_fit_segments.csv"
     pd.DataFrame(rows).to_csv(csv_path, index=False)
-    drawn = {}
-
-    def keep(fig, png_path, dpi=130):
-        drawn["axes"] = fig.axes
-        return png_path
-
-    monkeypatch.setattr(gradient_fit.cli, "save_figure", keep)
-    gradient_fit.plot_segments(csv_path, tmp_path / "gradient_fit_segments.png")
-    axes = drawn["axes"]
+    axes = drawn_axes(monkeypatch, gradient_fit.plot_segments, csv_path)
     assert len(axes) == 4 and not axes[3].get_visible()
     for ax, (parameter_set, optimiser) in zip(axes[:3], [("6", "CMA-ES"), ("6", "L-BFGS-B"),
                                                          ("20", "CMA-ES")]):
