@@ -55,6 +55,11 @@ from typing import Dict, List, Optional
 
 import numpy as np
 import taichi as ti
+# Taichi imports its matrix functions at the first kernel compile, and their decorators inspect
+# frames inside a bare `except:`, which swallowed a Ctrl-C landing there (0.9 s into `python -m
+# studies fig4c`, which then ran whole: an audit, 2026-12): imported here, while the package's
+# import holds Ctrl-C back (`interrupts`)
+import taichi.lang.matrix_ops  # noqa: F401
 
 from .checks import check_flag, warn_user
 from .engine import LOCKSTEP_MINIMUM_BATCH, BatchEngine, elimination_plan

@@ -110,3 +110,14 @@ def test_a_ctrl_c_swallowed_at_import_still_stops_the_cli(module):
     assert result.stdout == ""
     assert result.stderr.strip().splitlines() == [
         "python -m studies: interrupted while loading; nothing was run"]
+
+
+def test_taichis_matrix_functions_load_with_the_package_not_at_the_first_compile():
+    """Taichi imports its matrix functions at the first kernel compile, and their decorators
+    inspect frames inside a bare `except:` that swallowed a Ctrl-C landing there (0.9 s into
+    `python -m studies fig4c`, which then ran whole and exited 0: an audit). The package
+    imports them while its import holds Ctrl-C back, so no compile imports them later."""
+    probe = "import sys, taichi_star; print('taichi.lang.matrix_ops' in sys.modules)"
+    result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                            cwd=REPO, timeout=120, env=dict(os.environ, PYTHONPATH=str(REPO)))
+    assert result.stdout.strip() == "True", result.stderr[-2000:]
