@@ -1,16 +1,19 @@
 """Every gait: the 255 non-empty actuator sets, simulated once per symmetry class (29 classes
-under the octagon's 8 rotations and 8 reflections) and expanded back.
+under the octagon's 8 rotations and 8 reflections) and expanded back; where the eight actuators
+differ (`primitives.actuators_equal` false: the identified preset's gains, a --set of one
+actuator's field) a gait and its images are different robots, and every gait is simulated, its
+own class (as the motion primitives do: `primitives.gait_sources`).
 
     python -m studies gaits [--cycles 3] [--arch cpu|gpu] [--out DIR] [--quick]
-                            [--preset paper|accurate] [--set NAME=VALUE ...]
+                            [--preset paper|accurate|identified] [--set NAME=VALUE ...]
                             [--workers N | --scheduler tcp://HOST:PORT]
 
 Writes `gaits.csv` (one row per gait: gait, class_representative, class_size, rotation and
 reflection mapping the representative onto it, whole-run and steady speeds, travel direction
 and travel direction relative to the gait's forward direction (NaN for a gait that does not
 move), heading (body rotation at the end), status),
-`gaits_classes.csv` (the 29 simulated instances, full summary) and `gaits.png` (the classes
-ranked by speed, each bar with an actuator pictogram).
+`gaits_classes.csv` (the 29 simulated instances, or 255, full summary) and `gaits.png` (the
+classes ranked by speed, each bar with an actuator pictogram).
 
 From Python: `expand_classes(summary)` maps a summary of the class representatives onto all 255
 gaits with the symmetry functions of `taichi_star.primitives`, which the motion primitives use
@@ -23,20 +26,23 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 import pandas as pd
 
 from taichi_star import StarParams
 from taichi_star.batch import run_batch
-from taichi_star.gait import N_ACTUATORS, Gait, symmetry_classes
+from taichi_star.gait import N_ACTUATORS, Gait
 from taichi_star.metrics import wrap_degrees
-from taichi_star.primitives import (class_symmetries, sort_gaits, transform_direction,
-                                    transform_rotation)
+from taichi_star.primitives import (GaitSources, actuators_equal, class_symmetries,
+                                    gait_sources, simulated_gaits, sort_gaits,
+                                    transform_direction, transform_rotation)
 
 from . import cli
 
-DESCRIPTION = "All 255 gaits, one simulation per octagon symmetry class (29), ranked by speed."
+DESCRIPTION = ("All 255 gaits, one simulation per octagon symmetry class (29; every gait where "
+               "the actuators differ), ranked by speed.")
 
 ZERO_SPEED_MM_S = 1e-9
 """Below this speed (mm/s; ~1e-8 mm over a few cycles, the solver's resolution) a gait is taken
@@ -60,19 +66,24 @@ def relative_direction(gait: str, direction_deg: float) -> float:
 
 
 def class_params(base: StarParams = StarParams()):
-    """One StarParams per symmetry class representative."""
-    return [base.replace(gait=rep) for rep, _ in symmetry_classes()]
+    """One StarParams per gait to simulate: each symmetry class representative, or every
+    gait where the actuators differ (`primitives.gait_sources`; the gaits read from them once
+    copied the representatives' runs onto robots that are not their images: an audit,
+    2026-12)."""
+    return [base.replace(gait=gait)
+            for gait in simulated_gaits(gait_sources(actuators_equal(base)))]
 
 
-def expand_classes(summary: pd.DataFrame) -> pd.DataFrame:
-    """All gaits from a summary of the class representatives (rows matched by gait), each
-    read from its representative by `primitives.class_symmetries`: the same speeds, the travel
-    direction and the heading mapped by the symmetry (`primitives.transform_direction`,
-    `primitives.transform_rotation`). Columns GAITS_COLUMNS; 255 rows sorted by (number of
-    actuators, bitmask): `primitives.sort_gaits`."""
+def expand_classes(summary: pd.DataFrame, sources: Optional[GaitSources] = None) -> pd.DataFrame:
+    """All gaits from a summary of the simulated gaits (rows matched by gait), each read from
+    its source by `sources` (default `primitives.class_symmetries`, the representatives; for
+    a robot whose actuators differ `primitives.gait_sources(False)`, each gait its own): the same
+    speeds, the travel direction and the heading mapped by the symmetry
+    (`primitives.transform_direction`, `primitives.transform_rotation`). Columns
+    GAITS_COLUMNS; 255 rows sorted by (number of actuators, bitmask): `primitives.sort_gaits`."""
     by_gait = {row["gait"]: row for _, row in summary.iterrows()}
     rows = []
-    for gait, (rep, rotation, reflect, class_size) in class_symmetries().items():
+    for gait, (rep, rotation, reflect, class_size) in (sources or class_symmetries()).items():
         source = by_gait[rep]
         ok = source["status"] == "ok"
         moving = ok and float(source["speed_mm_s"]) >= ZERO_SPEED_MM_S
@@ -167,7 +178,7 @@ def main(argv=None):
                            chunk_size=cli.chunk_size(args, len(params), executor.n_workers),
                            executor=executor, progress=not args.no_progress)
     out.write_csv(result.summary, "gaits_classes.csv")
-    table = expand_classes(result.summary)
+    table = expand_classes(result.summary, gait_sources(actuators_equal(base)))
     csv = out.write_csv(table, "gaits.csv")
     out.wrote(plot_gaits(csv, out.path("gaits.png")))
     out.report()
