@@ -401,25 +401,28 @@ def primitives_robot_differences(path, base: StarParams) -> tuple:
     gait in which `base` differs from them): a field the sidecar does not record came after
     the table, and the robot had its default (skipped until 2026-12, so --set wake_coupling=5
     planned with another robot's steps). (None, []) where the sidecar is missing or records no
-    robot; one that cannot be read or no longer describes the table (`read_provenance`: its
-    SHA-256 differs, the table edited since) records none either, and a printed line says
-    so."""
+    robot, and a printed line says so (a table copied without its sidecar planned silently:
+    an audit, 2026-12); one that cannot be read or no longer describes the table
+    (`read_provenance`: its SHA-256 differs, the table edited since) records none either, said
+    the same way."""
     sidecar = provenance.sidecar_path(path)
+    not_compared = "the robot it was measured on is not compared with this run's"
     if not sidecar.is_file():
+        print(f"--primitives {path}: no sidecar {sidecar.name} beside it; {not_compared}")
         return None, []
     try:
         recorded = read_provenance(path)["model"]["params"]
     except (KeyError, TypeError):  # a record of no robot
-        return None, []
+        recorded = None
     except (OSError, ValueError) as error:
         # a sidecar unreadable, damaged, or describing the table before an edit (gaits left
         # out, say): no record of the robot, as without a sidecar, and said
         reason = (f"{sidecar}: cannot read it ({error.strerror or error})"
                   if isinstance(error, OSError) else str(error))
-        print(f"--primitives {reason}; the robot it was measured on is not compared with "
-              f"this run's")
+        print(f"--primitives {reason}; {not_compared}")
         return None, []
     if not isinstance(recorded, dict):
+        print(f"--primitives {path}: its sidecar records no robot; {not_compared}")
         return None, []
     recorded = {**provenance.plain(StarParams()), **recorded}
     own = provenance.plain(base)

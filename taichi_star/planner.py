@@ -162,8 +162,9 @@ class PrimitiveModel:
         table with the single glide_x_mm/glide_y_mm of earlier versions (measured after
         several firings only): measure it again, for a table without the columns it reads,
         for a cell of them that is no number, for a kept gait's that is not finite, and for
-        gaits that are none or listed twice (all before the warning). An ok gait without a
-        finite step_x_mm or turn_deg is left out, with a RuntimeWarning naming it.
+        gaits that are none or listed twice (all before the warning). A gait whose status is
+        not ok, and an ok gait without a finite step_x_mm or turn_deg, is left out, with a
+        RuntimeWarning naming it (the failed ones were left out silently: an audit, 2026-12).
         """
         if not isinstance(table, pd.DataFrame):  # a path had failed on its .columns
             raise ValueError(f"table must be a pandas DataFrame (pandas.read_csv of a "
@@ -204,14 +205,6 @@ class PrimitiveModel:
                     shown = repr(value) if isinstance(value, str) else value  # a text quoted
                     raise ValueError(f"table: {column} of gait {row['gait']} is {shown}, "
                                      f"{what}")
-        dropped = ((table["status"] == "ok").to_numpy() & ~kept)
-        if dropped.any():
-            # left out, as the docstring says, but not without a word (an audit, 2026-12)
-            names = table["gait"][dropped].tolist()
-            warn_user(f"the primitive table's gaits {', '.join(map(str, names[:5]))}"
-                      f"{' ...' if len(names) > 5 else ''} ({len(names)} of status ok) have no "
-                      f"finite step_x_mm or turn_deg (a measurement too short for a steady "
-                      f"step): left out of the model")
         usable = numbers[kept]
         model = cls(list(table["gait"][kept]), usable[["step_x_mm", "step_y_mm"]].to_numpy(),
                     usable["turn_deg"].to_numpy(),
@@ -220,6 +213,19 @@ class PrimitiveModel:
                     np.stack([usable[list(streak_step_columns(k))].to_numpy()
                               for k in range(1, stepped + 1)]) if stepped else None,
                     _glide_cycles(table[kept]) if streaks else None)
+        # left out, as the docstring says, but not without a word (audits, 2026-12: the ok
+        # gaits without a step, then the failed ones), once the table is known to be usable
+        failed = (table["status"] != "ok").to_numpy()
+        if failed.any():
+            statuses = sorted(set(map(str, table["status"][failed])))
+            warn_user(f"the primitive table's gaits {_some_gaits(table['gait'][failed])} "
+                      f"({failed.sum()} of status {', '.join(statuses)}) failed their "
+                      f"measurement: left out of the model")
+        dropped = ((table["status"] == "ok").to_numpy() & ~kept)
+        if dropped.any():
+            warn_user(f"the primitive table's gaits {_some_gaits(table['gait'][dropped])} "
+                      f"({dropped.sum()} of status ok) have no finite step_x_mm or turn_deg (a "
+                      f"measurement too short for a steady step): left out of the model")
         if not streaks and expect_glides:
             # measure_primitives' default measures none: a plan from such a table put the
             # robot on its goals when it stopped firing and it glided on, missing every goal
@@ -373,6 +379,12 @@ class PrimitiveModel:
             raise ValueError(f"last must hold gait indices in [0, {len(self.gaits) - 1}] (0 = "
                              f"{NO_GAIT!r}), got {int(indices.max())}")
         return indices
+
+
+def _some_gaits(gaits) -> str:
+    """The first five of some gaits, comma-separated, "..." after them if there are more."""
+    names = [str(gait) for gait in gaits]
+    return ", ".join(names[:5]) + (" ..." if len(names) > 5 else "")
 
 
 def _glide_cycles(table: pd.DataFrame) -> Optional[int]:

@@ -8,7 +8,6 @@ elasticities --sobol: refused, in test_cli_input_files.py)."""
 import json
 import re
 import types
-from pathlib import Path
 
 import pandas as pd
 import pytest
@@ -90,21 +89,24 @@ def test_simd_titles_its_plot_from_the_tables_sidecar(tmp_path, monkeypatch):
 # --------------------------------------------------------------------------- the user's tables
 
 def test_plan_compares_a_field_its_sidecar_does_not_record_at_its_default(tmp_path):
-    """The committed table's sidecar predates wake_coupling and four other fields: they were
+    """A table's sidecar written before a field existed (the committed table's, until its
+    rerun, predated wake_coupling and four other fields) does not record it: such fields were
     skipped, so --set wake_coupling=5 (A1+A3's first step 31 % shorter) planned with the
     paper robot's steps without a word (an audit, 2026-12). A field the sidecar does not
     record is compared at its default: the paper robot passes, the other is refused naming
     the field."""
-    recorded = json.loads(Path(f"{COMMITTED_PRIMITIVES}.json").read_text())["model"]["params"]
-    assert "wake_coupling" not in recorded
     paper = StarParams.preset("paper")
-    assert len(plan.read_primitive_model(COMMITTED_PRIMITIVES, 3.15, 1e-3, base=paper).gaits) \
-        == 256
+    older = {name: value for name, value in provenance.plain(paper).items()
+             if name != "wake_coupling"}
+    path = output(tmp_path, model={"preset": "paper", "params": older}).write_csv(
+        pd.read_csv(COMMITTED_PRIMITIVES), "primitives.csv")
+    recorded = json.loads(provenance.sidecar_path(path).read_text())["model"]["params"]
+    assert "wake_coupling" not in recorded
+    assert len(plan.read_primitive_model(path, 3.15, 1e-3, base=paper).gaits) == 256
     with pytest.raises(cli.StudyArgumentError, match=re.escape(
             "measured on a robot whose wake_coupling is 0.0, this run's 5.0 (1 field(s) "
             "differ")):
-        plan.read_primitive_model(COMMITTED_PRIMITIVES, 3.15, 1e-3,
-                                  base=paper.replace(wake_coupling=5.0))
+        plan.read_primitive_model(path, 3.15, 1e-3, base=paper.replace(wake_coupling=5.0))
 
 
 def test_plan_compares_the_robot_only_of_a_sidecar_that_describes_the_primitives(tmp_path,
@@ -133,3 +135,9 @@ def test_plan_compares_the_robot_only_of_a_sidecar_that_describes_the_primitives
     assert len(plan.read_primitive_model(path, 3.15, 1e-3, base=paper).gaits) == 255
     assert capsys.readouterr().out.startswith(f"--primitives {sidecar}: no taichi_star "
                                               f"provenance in it (JSONDecodeError: ")
+    # without a sidecar (a table copied alone) the same is said (it planned silently: an audit)
+    sidecar.unlink()
+    assert len(plan.read_primitive_model(path, 3.15, 1e-3, base=paper).gaits) == 255
+    assert capsys.readouterr().out == (f"--primitives {path}: no sidecar primitives.csv.json "
+                                       f"beside it; the robot it was measured on is not compared "
+                                       f"with this run's\n")

@@ -222,17 +222,20 @@ def test_a_primitive_table_is_checked_cell_by_cell_before_the_glides_warning():
     """A text where a number belongs (a TypeError from NumPy before), a kept gait's NaN or
     inf in another column the planner reads (its streak's step or its step_y_mm: refused
     after the warning of missing glides), a gait listed twice: each refused naming the column
-    and the gait, and before any warning. A failed gait's missing numbers are no fault; nor
-    is a column the planner does not read (`..._keeps_only_ok_and_finite_rows`: an ok gait
-    without a steady step or turn is left out)."""
+    and the gait, and before any warning. A failed gait's missing numbers are no fault (it is
+    left out, with a warning saying so); nor is a column the planner does not read
+    (`..._keeps_only_ok_and_finite_rows`: an ok gait without a steady step or turn is left
+    out)."""
     table = pd.DataFrame({"gait": ["A1", "A5", "A3"], "step_x_mm": [10.0, -10.0, np.nan],
                           "step_y_mm": [0.0, 0.0, np.nan], "turn_deg": [0.0, 0.0, np.nan],
                           "status": ["ok", "ok", "newton_failed"],
                           "step1_x_mm": [6.0, -6.0, np.nan], "step1_y_mm": [0.0, 0.0, np.nan],
                           "direction_deg": ["east", "west", "x"]})
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
+    with pytest.warns(RuntimeWarning) as told:
         assert PrimitiveModel.from_table(table, expect_glides=False).gaits == ["none", "A1", "A5"]
+    assert [str(w.message) for w in told] == [
+        "the primitive table's gaits A3 (1 of status newton_failed) failed their measurement: "
+        "left out of the model"]
     for column, value, message in (
             ("step_x_mm", "abc", "'abc', not a number"),
             ("step_y_mm", np.nan, "nan, not a finite number (status ok)"),
@@ -374,21 +377,28 @@ def test_tolerance_boundaries_of_the_choice():
 
 
 def test_a_primitive_table_keeps_only_ok_and_finite_rows():
-    """A failed gait is left out without a word; an ok one without a steady step or turn (a
-    measurement too short for one) with a warning naming it (it was silent: an audit,
-    2026-12)."""
+    """A failed gait, and an ok one without a steady step or turn (a measurement too short for
+    one), are left out, each with a warning naming it (both were silent: audits, 2026-12; a
+    table whose fastest class had failed planned with the other 248 gaits without a word);
+    a table of ok gaits says nothing."""
     table = pd.DataFrame({"gait": ["A1", "A2", "A3", "A4"],
                           "step_x_mm": [10.0, 5.0, np.nan, 3.0], "step_y_mm": [0.0] * 4,
                           "turn_deg": [0.0, 10.0, 0.0, np.nan],
                           "status": ["ok", "nan_state", "ok", "ok"]})
-    with pytest.warns(RuntimeWarning, match=r"gaits A3, A4 \(2 of status ok\) have no finite "
-                                            r"step_x_mm or turn_deg"):
+    with pytest.warns(RuntimeWarning) as told:
         model = PrimitiveModel.from_table(table, expect_glides=False)
+    assert [str(w.message) for w in told] == [
+        "the primitive table's gaits A2 (1 of status nan_state) failed their measurement: left "
+        "out of the model",
+        "the primitive table's gaits A3, A4 (2 of status ok) have no finite step_x_mm or "
+        "turn_deg (a measurement too short for a steady step): left out of the model"]
     assert model.gaits == ["none", "A1"]
     np.testing.assert_array_equal(model.steps_mm, [(0, 0), (10, 0)])
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")  # the failed gait alone: nothing to say
+    with pytest.warns(RuntimeWarning, match=r"gaits A2 \(1 of status nan_state\) failed"):
         PrimitiveModel.from_table(table.iloc[:2], expect_glides=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # only ok gaits with steps: nothing to say
+        PrimitiveModel.from_table(table.iloc[:1], expect_glides=False)
 
 
 def test_plans_and_choices_refuse_what_they_cannot_plan_with():
