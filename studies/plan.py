@@ -28,7 +28,8 @@ sidecar (`.csv.json`):
 - `plan_gain.csv`: open against closed loop: goals reached, mean and largest final error,
   mean cycles to the goal where both reached it;
 - `plan_cycles.csv`: the state at each cycle boundary, the gait fired and the model's
-  prediction; `plan_paths.csv`: the centroid paths;
+  prediction; `plan_paths.csv`: the centroid paths (10 records a cycle, or the most below
+  that split the cycle into whole steps: 9 at 2 ms);
 - `primitives.csv` when measured here; `plan.png`: the paths, drawn from the CSVs.
 
 --quick: dt = 5 ms, 2 cycles of primitives and one of glide, at most 2 cycles of driving and
@@ -50,6 +51,7 @@ from taichi_star.metrics import MAX_GOAL_MM
 from taichi_star.planner import (MAX_DEFAULT_GOALS, SETTLE_CYCLES, PrimitiveModel, check_drive,
                                  closed_loop_gain, default_goals, drive)
 from taichi_star.primitives import GLIDE_CYCLES, measure_primitives
+from taichi_star.timegrid import whole_steps
 
 from . import cli, provenance
 
@@ -180,6 +182,21 @@ def read_primitive_model(path, period: float, dt: float,
                                      f"{str(error).removeprefix('table: ')}") from None
 
 
+PATH_FRAMES = 10
+"""Path records per cycle in plan_paths.csv where the cycle's steps allow (`path_frames`)."""
+
+
+def path_frames(period: float, dt: float) -> int:
+    """Path records per cycle: the most, up to PATH_FRAMES, that split the cycle into whole
+    steps (3.15 s at 2 ms, 1,575 steps, was refused for 10 frames, naming the library's
+    frames_per_cycle: an audit, 2026-12; it takes 9); PATH_FRAMES where the period is not
+    whole steps (`check_drive` refuses that, naming the period)."""
+    steps = whole_steps(period, dt)
+    if steps is None:
+        return PATH_FRAMES
+    return next(frames for frames in range(PATH_FRAMES, 0, -1) if steps % frames == 0)
+
+
 def main(argv=None):
     args = cli.parse(build_parser(), argv)
     if args.primitives is not None and args.measurement_flags:
@@ -215,9 +232,10 @@ def main(argv=None):
     # named by its flags before check_drive refuses the same run in the library's words
     cli.check_cycles({"--max-cycles": args.max_cycles, "--settle-cycles": args.settle_cycles},
                      base.period, solver)
+    frames = path_frames(base.period, solver.dt)
     try:
         check_drive(goals, base, solver, args.tolerance, args.max_cycles,
-                    settle_cycles=args.settle_cycles)
+                    frames_per_cycle=frames, settle_cycles=args.settle_cycles)
     except ValueError as error:
         raise cli.StudyArgumentError(f"--dt, --set period: {error}") from None
     if args.primitives is not None:
@@ -244,7 +262,8 @@ def main(argv=None):
         model = PrimitiveModel.from_table(primitives, expect_glides=args.glide_cycles > 0)
     summary, per_cycle, path = drive(model, goals, base, solver,
                                      tolerance_mm=args.tolerance, max_cycles=args.max_cycles,
-                                     arch=args.arch, progress=not args.no_progress,
+                                     frames_per_cycle=frames, arch=args.arch,
+                                     progress=not args.no_progress,
                                      settle_cycles=args.settle_cycles)
     gain = pd.DataFrame([closed_loop_gain(summary)])
     plan_csv = out.write_csv(summary, "plan.csv")

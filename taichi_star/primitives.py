@@ -135,8 +135,9 @@ def gait_sources(symmetric: bool) -> GaitSources:
     """For every one of the 255 gaits: (source, rotation, reflect, class size), the gait whose
     simulation it is read from and the symmetry that maps the source's cycles onto it.
     symmetric: one source per symmetry class (`class_symmetries`); otherwise every gait is
-    simulated, its own source: (gait, 0, False, 1)."""
-    if symmetric:
+    simulated, its own source: (gait, 0, False, 1). ValueError unless `symmetric` is a bool
+    ("no" read as True: an audit, 2026-12)."""
+    if check_flag("symmetric", symmetric):
         return class_symmetries()
     return {gait: (gait, 0, False, 1) for _, members in symmetry_classes() for gait in members}
 
@@ -214,13 +215,21 @@ def _step_direction(step_mm) -> float:
 def cycle_displacements(trajectory: pd.DataFrame, period: float) -> pd.DataFrame:
     """Per-cycle body-frame displacement and rotation of every instance from a trajectory
     recorded at every cycle boundary (columns instance, t_s, x_mm, y_mm, heading_deg). Returns
-    instance, cycle, dx_body_mm, dy_body_mm, rotation_deg (NaN after a failure)."""
+    instance, cycle, dx_body_mm, dy_body_mm, rotation_deg (NaN after a failure). ValueError
+    naming the instance and the boundary where one is missing between the first and the last
+    (two cycles were read as one: an audit, 2026-12)."""
     rows = []
     for instance, part in trajectory.groupby("instance", sort=True):
         part = part.sort_values("t_s")
         cycle_of = np.rint(part["t_s"].to_numpy() / period).astype(int)
         on_boundary = on_grid(part["t_s"].to_numpy(), period)
         part, cycle_of = part[on_boundary], cycle_of[on_boundary]
+        gaps = np.flatnonzero(np.diff(cycle_of) != 1)
+        if gaps.size:
+            raise ValueError(f"trajectory: instance {instance} has no record at the cycle "
+                             f"boundary after t = {cycle_of[gaps[0]] * period:g} s (records at "
+                             f"every boundary, each once, are needed: record_interval_s = "
+                             f"period or a divisor of it)")
         xy = part[["x_mm", "y_mm"]].to_numpy()
         heading = np.radians(part["heading_deg"].to_numpy())
         # the displacement in the frame the body had when the cycle began
@@ -238,9 +247,14 @@ def expand_cycles(representatives: pd.DataFrame,
     """The per-cycle table (CYCLE_COLUMNS) of all 255 gaits from that of the simulated gaits
     (columns gait, cycle, dx_body_mm, dy_body_mm, rotation_deg, status), each gait read from
     its source in `sources` (`gait_sources`; None: the 29 class representatives,
-    `class_symmetries`)."""
+    `class_symmetries`). ValueError naming a source gait the table lacks (a raw KeyError
+    before: an audit, 2026-12)."""
     sources = class_symmetries() if sources is None else sources
     by_gait = {gait: part for gait, part in representatives.groupby("gait", sort=False)}
+    missing = [source for source in simulated_gaits(sources) if source not in by_gait]
+    if missing:
+        raise ValueError(f"representatives: no rows of gait {missing[0]} ({len(missing)} "
+                         f"source gait(s) missing), whose cycles other gaits are read from")
     parts = []
     for gait, (representative, rotation, reflect, _) in sources.items():
         source = by_gait[representative]
@@ -268,7 +282,13 @@ def summarise_cycles(cycles: pd.DataFrame, first_cycle: int,
                      ) -> pd.DataFrame:
     """The primitive table (PRIMITIVE_COLUMNS but the run's period_s/dt_s) from a per-cycle
     table: mean and sample standard deviation over cycles >= first_cycle; class_size from
-    `sources` (`gait_sources`; None: the symmetry classes, `class_symmetries`)."""
+    `sources` (`gait_sources`; None: the symmetry classes, `class_symmetries`). ValueError
+    unless first_cycle is an integer from 0 to the table's last cycle (-3 was taken, 9 of a
+    five-cycle table a raw KeyError: an audit, 2026-12)."""
+    last = int(cycles["cycle"].max()) if len(cycles) else -1
+    if not is_whole(first_cycle) or not 0 <= first_cycle <= last:
+        raise ValueError(f"first_cycle must be an integer in [0, {last}] (the table's cycles), "
+                         f"got {first_cycle!r}")
     sources = class_symmetries() if sources is None else sources
     sizes = {gait: size for gait, (_, _, _, size) in sources.items()}
     steady = cycles[cycles["cycle"] >= first_cycle]

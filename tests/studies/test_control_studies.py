@@ -13,7 +13,7 @@ import pytest
 import taichi_star
 from taichi_star.primitives import glide_columns, measure_primitives, streak_step_columns
 
-from studies import cli
+from studies import cli, plan
 from studies.__main__ import main as studies_main
 
 QUICK = ["--quick", "--no-progress"]
@@ -153,7 +153,7 @@ def no_compute(monkeypatch):
     (["plan", "--max-cycles", "0"], "--max-cycles must be >= 1"),
     (["plan", "--directions", "0", "--far", "0"], "no goals"),
     (["plan", "--set", "gait=A1"], "--set gait: set by the plan study"),
-    (["plan", "--dt", "2e-3"], "--dt, --set period"),
+    (["plan", "--set", "period=3.1234"], "--dt, --set period"),  # off the step grid
     (["primitives", "--first-cycle", "5"], "--first-cycle must be in [0, --cycles - 1 = 1]"),
     (["primitives", "--cycles", "0"], "--cycles must be > 0"),
     (["primitives", "--set", "period=3.1234"], "--dt, --set period"),
@@ -174,3 +174,13 @@ def test_invalid_arguments_fail_before_compute(no_compute, tmp_path, capsys, arg
 def test_quick_never_writes_into_the_committed_results(no_compute, capsys, study):
     assert studies_main([study, "--out", str(cli.COMMITTED_RESULTS), *QUICK]) == 2
     assert "never write into the committed results/" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("period, dt, frames", [(3.15, 1e-3, 10), (3.15, 2e-3, 9),
+                                                (3.15, 5e-3, 10), (3.0, 7e-3, 10)])
+def test_the_paths_are_recorded_as_often_as_whole_steps_allow(period, dt, frames):
+    """At 2 ms a 3.15-s cycle is 1,575 steps, not a multiple of 10: the study was refused,
+    naming the library's frames_per_cycle (an audit, 2026-12); it records 9 frames a cycle
+    there, 10 where they divide the cycle, and leaves a period off the step grid (3 s at 7 ms)
+    to the library's refusal, which names the period."""
+    assert plan.path_frames(period, dt) == frames

@@ -195,6 +195,37 @@ def test_a_summary_averages_the_cycles_from_the_first_one_counted():
     assert math.isnan(one.loc["A1+A2", "turn_std_deg"])
 
 
+def test_the_cycle_helpers_refuse_what_would_read_wrong_cycles():
+    """A trajectory without a record at a cycle boundary read two cycles as one (records at 0,
+    2T, 4T gave "cycles" 0 and 2, 10 mm each), summarise_cycles took first_cycle -3 and gave
+    a raw KeyError for one past the table, expand_cycles a raw KeyError for a source it lacks,
+    gait_sources took "no" for True (an audit, 2026-12): each a ValueError naming it; the
+    last cycle itself is a first_cycle it takes."""
+    import pandas as pd
+
+    from taichi_star.primitives import (cycle_displacements, expand_cycles, gait_sources,
+                                        summarise_cycles)
+
+    skipping = pd.DataFrame({"instance": 0, "t_s": [0.0, 4.0, 8.0], "x_mm": [0.0, 10.0, 20.0],
+                             "y_mm": 0.0, "heading_deg": 0.0})
+    with pytest.raises(ValueError, match=r"^trajectory: instance 0 has no record at the cycle "
+                                         r"boundary after t = 0 s"):
+        cycle_displacements(skipping, 2.0)
+    assert cycle_displacements(skipping, 4.0).cycle.tolist() == [0, 1]
+    cycles = cycles_of("A1", [(1.0, 0.0), (2.0, 0.0), (3.0, 0.0)], [0.0] * 3).assign(
+        class_representative="A1", symmetry_rotation=0, reflected=False)
+    sources = {"A1": ("A1", 0, False, 1)}
+    assert summarise_cycles(cycles, 2, sources).step_x_mm.tolist() == [3.0]
+    for first_cycle in (-1, 3, 1.0, True):
+        with pytest.raises(ValueError, match=rf"^first_cycle must be an integer in \[0, 2\] "
+                                             rf"\(the table's cycles\), got {first_cycle!r}$"):
+            summarise_cycles(cycles, first_cycle, sources)
+    with pytest.raises(ValueError, match=r"^representatives: no rows of gait A1\+A3 \(1 "):
+        expand_cycles(cycles, {"A1": ("A1", 0, False, 1), "A3": ("A1+A3", 1, False, 1)})
+    with pytest.raises(ValueError, match=r"^symmetric must be True or False, got 'no'$"):
+        gait_sources("no")
+
+
 def test_widened_tables_put_each_streak_in_its_own_columns():
     import pandas as pd
 
