@@ -44,4 +44,7 @@ def main(argv=None):
     out.report()
     with pd.option_context("display.width", 160, "display.max_columns", 20):
         print(table.to_string(index=False))
+    if args.quick:  # its ratios compare 0.2 s from rest with whole trials (an audit, 2026-12)
+        print(f"--quick: {cli.duration_s(args, base.period):g} s from rest, a smoke test: its "
+              f"speeds and ratios are not comparable with the experiment's whole trials")
     return table

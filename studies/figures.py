@@ -173,6 +173,8 @@ def fig4_titles(duration_s: float = None):
     """(Fig. 4c title, Fig. 4b title) in plain words; the model and solver settings go in the
     caption (and the sidecar), not the title."""
     span = f"the first {duration_s:g} s from rest" if duration_s else "from rest"
-    return (f"How fast each gait swims: simulation vs. experiment ({span})\n"
+    # the experiment's bars are whole trials' speeds (22-61 s), not the simulated span (the
+    # title gave both the span: an audit, 2026-12)
+    return (f"How fast each gait swims: simulation ({span}) vs. experiment (whole trials)\n"
             "labels: swimming direction (fwd/rev); red = opposite to the paper",
             f"How far each gait's centre moves ({span}): simulation vs. experiment")
