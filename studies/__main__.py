@@ -19,6 +19,7 @@ try:
     with deferred_interrupt():
         import taichi_star
         from taichi_star.batch import RunStoreError
+        from taichi_star.runtime import MemoryBudgetError
         from taichi_star.extras import missing_extra
 
         from . import EXTRA_OF_STUDY, study_names
@@ -145,7 +146,8 @@ def main(argv=None) -> int:
         # the study's import inside: Ctrl-C while it loads its libraries is one line too
         with sigterm_as_interrupt(), one_line_warnings(name):
             importlib.import_module(f"{__package__}.{name}").main(rest)
-    except (StudyArgumentError, StudyOutputError, RunStoreError) as error:
+    except (StudyArgumentError, StudyOutputError, RunStoreError, MemoryBudgetError) as error:
+        # a run too large for memory is refused before any compute, naming the argument
         print(f"{program()} {name}: error: {error}", file=sys.stderr)
         for out in cli.OPENED:  # a refusal leaves no empty folder the run made
             out.remove_if_unused()

@@ -19,6 +19,7 @@ import pandas as pd
 
 from taichi_star.batch import run_batch
 from taichi_star.output import GIF_MOST_FPS, animation_tables, edge_table, replay
+from taichi_star.runtime import MemoryBudgetError
 from taichi_star.timegrid import interval_for_count
 
 from . import cli
@@ -58,10 +59,14 @@ def main(argv=None):
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver)
     duration = cli.duration_s(args, base.period)
-    result = run_batch(params, duration, solver=solver, arch=args.arch,
-                       record_interval_s=interval_for_count(duration, args.frames, solver.dt),
-                       record_shapes=True,
-                       progress=not args.no_progress)
+    try:
+        result = run_batch(params, duration, solver=solver, arch=args.arch,
+                           record_interval_s=interval_for_count(duration, args.frames,
+                                                                solver.dt),
+                           record_shapes=True, progress=not args.no_progress)
+    except MemoryBudgetError as error:  # refused before any compute: the frames are the flag
+        raise cli.StudyArgumentError(f"--frames {args.frames} of {len(gaits)} gait(s) over "
+                                     f"{duration:g} s: {error}") from None
     shapes, centroid = animation_tables(result, gaits)
     shapes_csv = out.write_csv(shapes, "animations/shapes.csv")
     centroid_csv = out.write_csv(centroid, "animations/centroid.csv")

@@ -70,7 +70,7 @@ from .params import SolverConfig
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
 __all__ = ["Runtime", "available_archs", "CPU_LANES", "LANES_MINIMUM_WORK", "GPU_BLOCK_DIM",
            "GPU_INSTANCE_MINOR", "kernel_optimisation_default", "check_batch_memory",
-           "RUNTIME_LOCK", "one_call_at_a_time"]
+           "MemoryBudgetError", "RUNTIME_LOCK", "one_call_at_a_time"]
 
 ARCHS = ("cpu", "gpu", "cuda", "vulkan", "metal")
 RUNTIME_LOCK = threading.RLock()
@@ -223,14 +223,22 @@ def check_memory(model: BatchModel, precision: str, arch: str):
             f"available (the memory budget); free memory or run fewer instances")
 
 
+class MemoryBudgetError(ValueError):
+    """A run refused before any compute because it would not fit in memory
+    (`check_host_memory`): a ValueError naming the argument to change, which a command line
+    can report as a refused input (an animation of 10,000 frames of 255 gaits ended the
+    animate study in a traceback: an audit, 2026-12)."""
+
+
 def check_host_memory(name: str, what: str, needed: float, remedy: str):
-    """ValueError naming the argument `name`, before any compute, when `needed` bytes of host
-    memory (`what` says for what) are more than MEMORY_SHARE of the available memory: the run
-    would end in a MemoryError after its compute, or before it while listing its stops (an
-    audit: a 26-s run's shapes lost so); `remedy` says what to change."""
+    """MemoryBudgetError (a ValueError) naming the argument `name`, before any compute, when
+    `needed` bytes of host memory (`what` says for what) are more than MEMORY_SHARE of the
+    available memory: the run would end in a MemoryError after its compute, or before it
+    while listing its stops (an audit: a 26-s run's shapes lost so); `remedy` says what to
+    change."""
     available = available_memory_bytes()
     if available is not None and needed > MEMORY_SHARE * available:
-        raise ValueError(
+        raise MemoryBudgetError(
             f"{name}: {what} would need about {needed / 2**30:.3g} GiB of memory, more than "
             f"{MEMORY_SHARE:.0%} of the {available / 2**30:.2f} GiB available: {remedy}")
 

@@ -612,3 +612,22 @@ def test_every_gaits_flag_names_what_it_accepts(no_compute, tmp_path, capsys):
             assert "A2: not measured" in capsys.readouterr().err, study
         else:
             assert all(form in text for form in ("paper", "all", "comma list")), (study, text)
+
+
+def test_a_run_too_large_for_memory_is_one_line_naming_the_flag(monkeypatch, tmp_path, capsys):
+    """animate with more frames than memory holds ended in the library's ValueError with a
+    traceback and exit 1 (an audit, 2026-12): the memory refusal (`MemoryBudgetError`, before
+    any compute) is one line naming --frames, exit 2, and no folder is made; any study's such
+    refusal is one line too."""
+    import taichi_star.runtime
+    monkeypatch.setattr(taichi_star.runtime, "available_memory_bytes", lambda: 1e5)
+    out = tmp_path / "out"
+    assert studies_main(["animate", "--out", str(out), *QUICK]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1
+    assert lines[0].startswith("python -m studies animate: error: --frames 60 of 1 gait(s) "
+                               "over 0.2 s: record_interval_s: the summary and ")
+    assert "would need about" in lines[0] and not out.exists()
+    assert studies_main(["fig4c", "--out", str(out), *QUICK]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "would need about" in lines[0] and not out.exists()
