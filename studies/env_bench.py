@@ -12,13 +12,17 @@ engine compiles on the first advance) and then times --steps steps of seeded ran
 Jacobian: preset, jacobian, num_envs, steps, control_period_s, dt_s, n_nodes, wall_s,
 robot_seconds_per_s, robot_steps_per_s, cores, load_average_1min (before the run), cpu_model,
 arch) with its provenance sidecar (`.csv.json`) into --out (default a fresh
-runs/env_bench/<timestamp>/).
+runs/env_bench/<timestamp>/). robot_steps_per_s counts steps of dt_s, so it is NaN for a solver
+with adaptive steps (the accurate preset's), which take steps of their own length: counted in
+1-ms steps it was about 11 times the steps taken (an audit, 2026-12; results/env_bench.csv,
+written before, still holds such a figure for the accurate rows, quoted nowhere).
 
 --quick: 4 environments, one 0.2-s step at dt = 5 ms.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import time
 
@@ -59,7 +63,9 @@ def measure(preset: str, solver: SolverConfig, num_envs: int, steps: int,
             "control_period_s": period, "dt_s": solver.dt,
             "n_nodes": envs.simulator.n_nodes, "wall_s": wall,
             "robot_seconds_per_s": robot_seconds / wall,
-            "robot_steps_per_s": robot_seconds / solver.dt / wall, "cores": os.cpu_count(),
+            "robot_steps_per_s": (math.nan if solver.adaptive
+                                  else robot_seconds / solver.dt / wall),
+            "cores": os.cpu_count(),
             "load_average_1min": load, "cpu_model": cpu_model(), "arch": arch}
 
 
@@ -119,8 +125,9 @@ def main(argv=None):
     for (preset, jacobian), solver in solvers.items():
         rows.append(measure(preset, solver, args.num_envs, args.steps, args.control_period,
                             args.arch))
-        print(f"{preset}, {jacobian}: {rows[-1]['robot_seconds_per_s']:.1f} robot-s per "
-              f"wall s ({rows[-1]['robot_steps_per_s']:,.0f} robot-steps/s)")
+        steps_rate = rows[-1]["robot_steps_per_s"]
+        print(f"{preset}, {jacobian}: {rows[-1]['robot_seconds_per_s']:.1f} robot-s per wall s"
+              + ("" if math.isnan(steps_rate) else f" ({steps_rate:,.0f} robot-steps/s)"))
     table = pd.DataFrame(rows)
     out.write_csv(table, "env_bench.csv")
     out.report()

@@ -101,3 +101,41 @@ def test_a_case_only_the_after_build_ran_has_its_figures_and_no_ratio(bench_buil
     assert np.isnan(summary.loc["lagged", "before_robot_steps_per_s"])
     assert np.isnan(summary.loc["lagged", "ratio_after_to_before"])
     assert summary.loc["lagged", "same_bits"] == ""
+
+
+def test_the_summary_keeps_each_setting_apart(bench_builds):
+    """One and two worker processes (or the IR optimisation on and off, the GPU layouts and
+    block sizes) are separate cases, each compared with its own (they were merged into one row
+    whose best came from either: an audit, 2026-12)."""
+    table = pd.DataFrame([
+        {**_row("before", 1, 64, 100.0, "aa"), "workers": 1},
+        {**_row("after", 1, 64, 110.0, "aa"), "workers": 1},
+        {**_row("before", 1, 64, 190.0, "aa"), "workers": 2},
+        {**_row("after", 1, 64, 209.0, "aa"), "workers": 2}])
+    summary = bench_builds.summarise(table).set_index("workers")
+    assert len(summary) == 2
+    assert summary.loc[1, "before_robot_steps_per_s"] == 100.0
+    assert summary.loc[2, "after_robot_steps_per_s"] == 209.0
+    assert summary["ratio_after_to_before"].tolist() == pytest.approx([1.1, 1.1])
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--before", "no-such-revision", "--out", "{out}"],
+     "--before no-such-revision: no such commit in "),
+    (["--before", "HEAD", "--out", "{out}"], "are the same commit"),
+    (["--before", "HEAD~1", "--rounds", "0", "--out", "{out}"], "--rounds must be >= 1, got 0"),
+    (["--before", "HEAD~1", "--out", "{results}", "--", "--quick"],
+     "runs with --quick never write into the committed results/"),
+])
+def test_bad_arguments_are_refused_before_anything_is_made(bench_builds, tmp_path, capsys, argv,
+                                                           message):
+    """A revision git does not know was a traceback after --out was made; the same commit twice
+    left stale worktrees; --quick into results/ replaced the committed bench.csv (audits,
+    2026-12): each is one refusal, exit 2, and no folder made."""
+    out = tmp_path / "out"
+    argv = [part.format(out=out, results=REPO / "results" / "scratch_bench") for part in argv]
+    with pytest.raises(SystemExit) as stopped:
+        bench_builds.main(argv)
+    assert stopped.value.code == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists() and not (REPO / "results" / "scratch_bench").exists()

@@ -35,6 +35,13 @@ REPO = Path(__file__).resolve().parents[1]
 CASE = ["section", "scenario", "preset", "batch_size", "precision", "jacobian", "lanes"]
 """The columns that name one measured case of the bench study (tables without `lanes` ran one
 instance at a time: 1)."""
+SETTINGS = ["workers", "kernel_optimisation", "layout", "block_dim"]
+"""More columns that tell cases apart where a table has them (one and two worker processes,
+the IR optimisation on and off, the GPU layouts and block sizes were merged into one row, and
+their best compared across settings: an audit, 2026-12)."""
+COMMITTED_RESULTS = REPO / "results"
+"""The committed results: a run with the bench's --quick never writes there (the studies'
+rule, `studies.cli.check_folder_name`)."""
 
 
 def worktree(revision: str, parent: Path) -> Path:
@@ -46,8 +53,32 @@ def worktree(revision: str, parent: Path) -> Path:
 
 
 def commit_of(revision: str) -> str:
-    return subprocess.run(["git", "rev-parse", "--short", revision], cwd=REPO, check=True,
-                          capture_output=True, text=True).stdout.strip()
+    """The short hash of `revision`, or "" where git knows no such commit."""
+    found = subprocess.run(["git", "rev-parse", "--verify", "--quiet", "--short",
+                            f"{revision}^{{commit}}"], cwd=REPO, capture_output=True, text=True)
+    return found.stdout.strip() if found.returncode == 0 else ""
+
+
+def check_arguments(parser, args, bench_args) -> dict:
+    """{"before": commit, "after": commit}, or the parser's one-line refusal (exit 2) before
+    anything is made: a revision git does not know (a traceback after --out was made), the
+    same commit twice (its second worktree failed and left stale entries), --rounds below 1,
+    or the bench's --quick into the committed results/ (it replaced results/bench.csv: audits,
+    2026-12)."""
+    if args.rounds < 1:
+        parser.error(f"--rounds must be >= 1, got {args.rounds}")
+    builds = {build: commit_of(getattr(args, build)) for build in ("before", "after")}
+    for build, commit in builds.items():
+        if not commit:
+            parser.error(f"--{build} {getattr(args, build)}: no such commit in {REPO}")
+    if builds["before"] == builds["after"]:
+        parser.error(f"--before {args.before} and --after {args.after} are the same commit "
+                     f"({builds['after']}): nothing to compare")
+    out = Path(args.out).resolve()
+    if "--quick" in bench_args and (out == COMMITTED_RESULTS or COMMITTED_RESULTS in out.parents):
+        parser.error(f"--out {args.out}: runs with --quick never write into the committed "
+                     f"results/ (give another folder)")
+    return builds
 
 
 def bits_agree(rows: pd.DataFrame) -> str:
@@ -65,14 +96,15 @@ def summarise(table: pd.DataFrame) -> pd.DataFrame:
     # a row without lanes (a build from before the setting, a section that does not record
     # it) ran one instance at a time
     table = table.assign(lanes=table["lanes"].fillna(1) if "lanes" in table else 1)
-    keyed = table.assign(**{c: table[c].fillna("") for c in CASE})
-    best = keyed.pivot_table(index=CASE, columns="build", values="robot_steps_per_s",
+    case = CASE + [c for c in SETTINGS if c in table.columns]
+    keyed = table.assign(**{c: table[c].fillna("") for c in case})
+    best = keyed.pivot_table(index=case, columns="build", values="robot_steps_per_s",
                              aggfunc="max")
     summary = best.rename(columns=lambda b: f"{b}_robot_steps_per_s").reset_index()
     summary["ratio_after_to_before"] = (summary["after_robot_steps_per_s"]
                                         / summary["before_robot_steps_per_s"])
-    digests = keyed.groupby(CASE)[["build", "final_state"]].apply(bits_agree)
-    return summary.merge(digests.rename("same_bits").reset_index(), on=CASE)
+    digests = keyed.groupby(case)[["build", "final_state"]].apply(bits_agree)
+    return summary.merge(digests.rename("same_bits").reset_index(), on=case)
 
 
 def bench_command(build: str, bench_args, after_args, run_out: Path):
@@ -94,12 +126,10 @@ def main(argv=None):
     parser.add_argument("--after-args", default="",
                         help="bench flags for the after build's runs alone (one quoted string)")
     args = parser.parse_args(argv[:split])
-    if args.rounds < 1:
-        parser.error(f"--rounds must be >= 1, got {args.rounds}")
     bench_args = argv[split + 1:]
+    builds = check_arguments(parser, args, bench_args)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    builds = {"before": commit_of(args.before), "after": commit_of(args.after)}
     frames, runs = [], []
     with tempfile.TemporaryDirectory() as scratch:
         trees = {build: worktree(commit, Path(scratch)) for build, commit in builds.items()}

@@ -184,3 +184,40 @@ def test_the_paths_are_recorded_as_often_as_whole_steps_allow(period, dt, frames
     there, 10 where they divide the cycle, and leaves a period off the step grid (3 s at 7 ms)
     to the library's refusal, which names the period."""
     assert plan.path_frames(period, dt) == frames
+
+
+def test_env_bench_counts_robot_steps_only_of_fixed_steps(monkeypatch):
+    """robot_steps_per_s counts steps of dt: with adaptive steps (the accurate preset's) that
+    counted 1-ms steps the robots did not take, about 11 times too many (an audit, 2026-12):
+    NaN there; with fixed steps robot-seconds / dt / wall."""
+    from studies import env_bench
+
+    class Space:
+        def seed(self, seed):
+            pass
+
+        def sample(self):
+            return None
+
+    class FakeEnvs:
+        control_period_s = 0.5
+        action_space = Space()
+        simulator = type("Sim", (), {"n_nodes": 7})()
+
+        def __init__(self, num_envs, **kwargs):
+            pass
+
+        def reset(self, seed):
+            pass
+
+        def step(self, action):
+            pass
+
+    monkeypatch.setattr(env_bench, "StarSwimmerVectorEnv", FakeEnvs)
+    adaptive = taichi_star.SolverConfig.preset("accurate")
+    assert adaptive.adaptive
+    row = env_bench.measure("accurate", adaptive, num_envs=4, steps=3)
+    assert np.isnan(row["robot_steps_per_s"]) and row["robot_seconds_per_s"] > 0
+    fixed = taichi_star.SolverConfig(dt=5e-3)
+    row = env_bench.measure("paper", fixed, num_envs=4, steps=3)
+    assert row["robot_steps_per_s"] == pytest.approx(4 * 3 * 0.5 / 5e-3 / row["wall_s"])
