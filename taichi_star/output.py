@@ -103,15 +103,18 @@ def column_units(columns) -> dict:
 
 def provenance(result, columns=None) -> dict:
     """What produced `result`, as the studies' CSV sidecars record it: the code and runtime
-    (`provenance.code_record`: taichi_star_version, git_commit, git_dirty, a dirty checkout's
-    git_changes_sha256, Taichi and Python versions, date); the `machine` (`provenance.machine`:
+    (`provenance.code_record`, taken as the file is written: taichi_star_version, git_commit,
+    git_dirty, a dirty checkout's git_changes_sha256, Taichi and Python versions), the `date`
+    the result was made (`SimulationResult.made_at`) and the date the file was `written`; the
+    `machine` (`provenance.machine`:
     CPU model, cores, vector instruction sets, caches, GPUs, platform) and the `arch` the run
     used (None for a result that does not say); for a `run_batch` result whose run store
     more than one code version wrote, `code_versions` (each with the chunks it made: the code
     record above is the writer's alone); the call's `arguments` (`SimulationResult.arguments`:
     duration, records, steady_from_cycle, sensitivities, ...); solver (every SolverConfig field);
     parameters (the StarParams fields equal across the instances, by field name) and
-    varying_parameters (the fields that differ, whose values are in the table's columns);
+    varying_parameters (the fields that differ, whose values are in the summary's columns: the
+    other tables name each row's instance, or, the sensitivities', are in instance order);
     units of the table's `columns` (default the summary's); with the result's `timing` (a
     `simulate` call's), its phases in s (compilation apart), its robot-steps and
     robot_steps_per_s (null for a run of no measurable time: every number JSON cannot hold
@@ -132,7 +135,11 @@ def provenance(result, columns=None) -> dict:
                              "robot_steps_per_s": result.timing.robot_steps_per_s}}
     mixed = {} if result.code_versions is None else {"code_versions": result.code_versions}
     called = {} if result.arguments is None else {"arguments": result.arguments}
-    return {**code_record(), **mixed, "machine": machine(), "arch": result.arch,
+    # the run's own date; the file's is `written`
+    record = code_record()
+    dates = {"date": getattr(result, "made_at", None) or record["date"],
+             "written": record["date"]}
+    return {**record, **dates, **mixed, "machine": machine(), "arch": result.arch,
             **called, "solver": dataclasses.asdict(result.solver),
             "parameters": parameters, "varying_parameters": varying,
             "units": column_units(summary.columns if columns is None else columns), **timing}
@@ -387,6 +394,21 @@ def _variable_of_column(column: str, per_record: bool = False) -> str:
     return f"d_{output}__d_{parts['field']}{index}"
 
 
+def in_instance_order(frame: pd.DataFrame, name: str) -> pd.DataFrame:
+    """One of a result's tables (`name`: "summary", "sensitivities", ...) in the order the run
+    made it, its rows numbered from 0 again: a user's `sort_values(inplace=True)` on the
+    result's own frame keeps the rows' labels, and readers that match rows by position
+    (`to_xarray`, `SimulationResult.sensitivity`) gave every instance another's values (an
+    audit, 2026-12). ValueError where the labels no longer number the rows 0, 1, ... (a reset
+    or new index set in place), naming the table."""
+    ordered = frame.sort_index()
+    if not ordered.index.equals(pd.RangeIndex(len(ordered))):
+        raise ValueError(f"result.{name}: its rows are no longer labelled 0..{len(frame) - 1} "
+                         f"in the run's order (its index was changed in place); work on a copy "
+                         f"(result.{name}.sort_values(...) without inplace)")
+    return ordered.reset_index(drop=True)
+
+
 def to_xarray(result):
     """The result as an xarray Dataset: per instance (dim `instance`) every summary column, the
     parameters as coordinates; per record (dims `instance`, `time`) the centroid and heading;
@@ -403,7 +425,7 @@ def to_xarray(result):
     solver's integrator, dt_s, adaptive, precision)."""
     xr = require("xarray", "io")
 
-    summary = result.summary.reset_index(drop=True)
+    summary = in_instance_order(result.summary, "summary")
     parameter_columns = set(StarParams.columns().values())
     # a batch's summary (`batch.run_batch`) names its instances in a column of its own: that
     # is the coordinate; a plain result's instances are its rows
@@ -433,9 +455,10 @@ def to_xarray(result):
                 table[name].reindex(index=instances, columns=times).to_numpy(),
                 {"units": column_unit(name)})
     if result.sensitivities is not None:
-        for name in result.sensitivities.columns:
+        sensitivities = in_instance_order(result.sensitivities, "sensitivities")
+        for name in sensitivities.columns:
             variables[_variable_of_column(name)] = (
-                "instance", result.sensitivities[name].to_numpy(),
+                "instance", sensitivities[name].to_numpy(),
                 {"units": column_unit(name), "column": name, "sensitivity": 1})
         derivatives = result.trajectory_sensitivities
         if len(derivatives):
@@ -448,7 +471,10 @@ def to_xarray(result):
     if result.shapes is not None:
         coordinates["node"] = ("node", np.arange(result.shapes.shape[2]), {"units": "1"})
         coordinates["xy"] = ("xy", ["x", "y"], {"units": ""})
-        variables["positions"] = (("time", "instance", "node", "xy"), result.shapes, {"units": "m"})
+        # a copy: the dataset's variable was the result's own array, so editing it changed
+        # the result's shapes (an audit, 2026-12)
+        variables["positions"] = (("time", "instance", "node", "xy"), np.array(result.shapes),
+                                  {"units": "m"})
     dataset = xr.Dataset(variables, coords=coordinates)
     facts = provenance(result)
     dataset.attrs.update({"provenance": provenance_json(facts),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import datetime
 import math
 import operator
 import time
@@ -13,6 +14,7 @@ import numpy as np
 import pandas as pd
 
 from . import diagnostics, metrics, output
+from .output import in_instance_order
 from .checks import check_flag, is_finite_real, is_whole, shown, warn_user
 from .geometry import CENTRE, Topology, build_topology
 from .model import validate_batch
@@ -95,6 +97,10 @@ class SimulationResult:
     """A `run_batch` result read from a run store that more than one code version wrote: each
     version (`provenance.code_version`) with the indices of the chunks it made ("chunks"), as
     the store's manifest keeps them; None for a result of one code version."""
+    made_at: Optional[str] = field(default=None, repr=False)
+    """When the result was made (ISO 8601, local time, to the second; set when it is built),
+    which its files record as their `date` (they gave the moment a file was written: an audit,
+    2026-12); the code and machine they record are those of the writing process."""
     arguments: Optional[Dict] = field(default=None, repr=False)
     """The call that made the result, as its files record it (`output.provenance`): "function"
     ("simulate" or "run_batch") and the arguments its tables do not hold: duration_s (s, as
@@ -103,6 +109,10 @@ class SimulationResult:
     record_shapes, steady_from_cycle (which the steady speeds are measured from), sensitivities
     (the parameters differentiated by, as labels: "actuator_gains[0]", ...) and chunk_size
     (run_batch's). None for a result built otherwise."""
+
+    def __post_init__(self):
+        if self.made_at is None:
+            self.made_at = datetime.datetime.now().astimezone().isoformat(timespec="seconds")
 
     def sensitivity(self, output: str, parameter: str, trajectory: bool = False) -> np.ndarray:
         """d(output)/d(parameter) for every instance: (B,) for a summary output
@@ -120,9 +130,11 @@ class SimulationResult:
             raise ValueError(f"output must be one of {outputs}, got {output!r}")
         directions = tangents.parse_directions([parameter])
         if output in tangents.SUMMARY_OUTPUTS and not trajectory:
-            table, shape = self.sensitivities, (len(self.summary),)
+            table = in_instance_order(self.sensitivities, "sensitivities")
+            shape = (len(self.summary),)
         elif output in tangents.TRAJECTORY_OUTPUTS:
-            table = self.trajectory_sensitivities
+            table = in_instance_order(self.trajectory_sensitivities,
+                                      "trajectory_sensitivities")
             shape = (len(self.summary), len(table) // max(len(self.summary), 1))
         else:
             raise ValueError(f"output {output!r} is a summary output, not one of the trajectory's "

@@ -302,6 +302,10 @@ class RunStore:
                     f"{old['definition'].get('n_chunks')} chunks done): resume it, or delete the "
                     f"folder / choose another {self.flag} to start over")
             else:  # a finished (or empty) run is replaced by a fresh one
+                if finished:  # said, not silent (an audit, 2026-12)
+                    warn_user(f"{self.flag} {self.path} held a finished run ({len(finished)} "
+                              f"chunk(s), created {old.get('created', 'at an unknown time')}): "
+                              f"replaced by this one (resume reads a finished run back)")
                 for path in finished + self._trajectory_files():
                     self._remove(path)
         try:

@@ -465,3 +465,41 @@ def test_a_flipped_value_in_a_parquet_or_netcdf_file_is_an_error_not_another_num
     with pytest.raises(RuntimeError, match=r"^NetCDF: HDF error$"):
         with xr.open_dataset(damaged) as dataset:
             dataset["centroid_x_mm"].values
+
+
+def test_a_table_sorted_in_place_keeps_each_instance_its_own_values():
+    """A user's `result.summary.sort_values(..., inplace=True)` (or the sensitivities') kept
+    the rows' labels, and `to_xarray` and `sensitivity` matched rows by position: every
+    instance got another's values (an audit, 2026-12). Both read the tables in the run's order
+    now, the dataset's positions are a copy (editing them changed the result's shapes), and
+    a table whose labels no longer number its rows is refused, naming it (labels renumbered
+    after a sort, `reset_index(inplace=True)`, cannot be told from the run's own)."""
+    params = [ts.StarParams(gait="A1+A2", alpha=alpha) for alpha in (0.6, 0.8, 1.0)]
+    result = ts.simulate(params, 0.1, ts.SolverConfig(dt=5e-3), record_interval_s=0.05,
+                         record_shapes=True, sensitivities=("alpha",))
+    before = result.to_xarray()
+    derivative = result.sensitivity("speed_mm_s", "alpha")
+    result.summary.sort_values("alpha", ascending=False, inplace=True)
+    result.sensitivities.sort_values(result.sensitivities.columns[0], inplace=True)
+    after = result.to_xarray()
+    for name in ("alpha", "speed_mm_s", "centroid_x_mm", "d_speed_mm_s__d_alpha"):
+        np.testing.assert_array_equal(after[name].values, before[name].values, err_msg=name)
+    np.testing.assert_array_equal(result.sensitivity("speed_mm_s", "alpha"), derivative)
+    after["positions"][0, 0, 0, 0] = -5.0
+    assert result.shapes[0, 0, 0, 0] != -5.0
+    result.summary.index = [5, 6, 7]  # labels that no longer number the rows: refused
+    with pytest.raises(ValueError, match=r"^result.summary: its rows are no longer labelled "
+                                         r"0..2 in the run's order"):
+        result.to_xarray()
+
+
+def test_the_files_record_when_the_result_was_made_and_when_written(recorded, tmp_path):
+    """The files' `date` was the moment each was written, so a result saved later claimed a
+    later run (an audit, 2026-12): `date` is the result's own (`made_at`, set when it is built),
+    `written` the file's."""
+    assert recorded.made_at is not None
+    made = dataclasses.replace(recorded, made_at="2020-01-02T03:04:05+00:00")
+    path = made.to_parquet(tmp_path / "made.parquet")
+    facts = ts.output.read_provenance(path)
+    assert facts["date"] == "2020-01-02T03:04:05+00:00"
+    assert facts["written"] != facts["date"] and facts["written"].startswith("20")

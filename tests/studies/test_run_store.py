@@ -415,3 +415,23 @@ def test_run_batch_lets_go_of_its_folder_after_a_failure_and_reads_a_finished_ru
     monkeypatch.setattr(run_store, "write_atomic", no_writes)
     monkeypatch.setattr(run_store.os, "open", no_writes)   # nor a lock file
     pd.testing.assert_frame_equal(run(folder, resume=True), summary, check_exact=True)
+
+
+def test_a_finished_run_replaced_by_a_new_one_is_said(finished, tmp_path):
+    """run_batch(run_dir=D) without resume replaces a finished run in D (resume reads it back);
+    it did so without a word (an audit, 2026-12): a RuntimeWarning names the folder and the
+    chunks replaced. An empty folder is taken without one."""
+    source, _ = finished
+    folder = tmp_path / "run"
+    folder.mkdir()
+    for path in source.iterdir():
+        (folder / path.name).write_bytes(path.read_bytes())
+    with pytest.warns(RuntimeWarning, match=rf"^run_dir {folder} held a finished run \(3 "
+                                            rf"chunk\(s\), created .*\): replaced by this one"):
+        run(folder, params=PARAMS[:1])
+    assert sorted(p.name for p in folder.iterdir() if p.suffix == ".parquet") == [
+        "chunk_000000.parquet"]
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        run(tmp_path / "empty", params=PARAMS[:1])
