@@ -29,8 +29,9 @@ from ..checks import is_whole
 from .tasks import ChunkResult, ChunkTask, run_chunk
 
 DEFAULT_RETRIES = 2
-"""Extra tries of a chunk whose worker process died (a chunk that raises is not retried: its
-error is deterministic)."""
+"""Extra tries after a worker process died (a chunk that raises is not retried: its error is
+deterministic): per chunk on a Dask cluster, per run with `LocalProcesses`, whose pool cannot
+tell which chunk a death came from."""
 MAX_LOCAL_WORKERS = 256
 """The most local worker processes: each is a process with a single-threaded Taichi runtime
 (some 200 MB), so more than one per core only competes for the cores; 256 is 16 times the most
@@ -124,8 +125,12 @@ def check_main_guard():
 class LocalProcesses:
     """`n_workers` worker processes on this machine, started on first use with the "spawn" start
     method (a fresh interpreter: no Taichi state is inherited), each configured by
-    `configure_worker_process`. A worker that dies costs only the chunks it was running: the
-    pool is restarted and the unfinished chunks resubmitted, up to `retries` times. Shut down by
+    `configure_worker_process`. A worker that dies costs the unfinished chunks (the pool
+    breaks as a whole): the pool is restarted and they are resubmitted, up to `retries` times
+    in the whole run, not per chunk (three deaths on three chunks, or one chunk that always
+    kills its worker, stop the run, its finished chunks kept in a run_dir; a Dask cluster
+    retries each chunk on its own and names the one whose worker died: an audit, 2026-12).
+    Shut down by
     `shutdown`, at the end of a `with` block, or at interpreter exit; stopped at once by
     `terminate`, which an error or an interrupt during `run` or in the `with` block calls."""
 
@@ -182,9 +187,14 @@ class LocalProcesses:
                     self.shutdown()
                     tries += 1
                     if tries > self.retries:
-                        raise RuntimeError(f"a worker process died {tries} times while running "
-                                           f"{len(pending)} chunk(s) (out of memory or "
-                                           f"killed?); giving up") from None
+                        # the deaths are the pool's, not a chunk's: any of the chunks left may
+                        # have caused them (a Dask cluster names the chunk whose worker died)
+                        left = ", ".join(str(index) for index in sorted(pending)[:10])
+                        raise RuntimeError(f"worker processes died {tries} times in this run "
+                                           f"(out of memory or killed?), with {len(pending)} "
+                                           f"chunk(s) not done (chunk "
+                                           f"{left}{' ...' if len(pending) > 10 else ''}); "
+                                           f"giving up") from None
         except BaseException:
             # an error, an interrupt (Ctrl-C; a notebook's "interrupt kernel" signals this
             # process alone) or a caller that closed this generator: the running chunks'

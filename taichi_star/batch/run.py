@@ -72,7 +72,10 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     naming the extra for a `run_dir` without pyarrow, before any compute."""
     if workers is not None and executor is not None:
         raise ValueError("give workers (local processes for this call) or executor, not both")
-    if executor is not None and not callable(getattr(executor, "run", None)):
+    # a class has a callable run too: it failed at the first chunk with a TypeError and left
+    # its run folder locked (an audit, 2026-12)
+    if executor is not None and (isinstance(executor, type)
+                                 or not callable(getattr(executor, "run", None))):
         raise ValueError(f"executor must be an Executor (InProcess, LocalProcesses, a "
                          f"DaskExecutor: see executor_for(scheduler=...)), got {executor!r}")
     # flags and the run folder's path before the folder is touched: resume="no" would resume
@@ -115,8 +118,10 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     if progress and len(tasks) > 1:
         from tqdm.auto import tqdm
         outer = tqdm(total=len(tasks), initial=len(done), desc="chunks", unit="chunk")
-    results = executor.run(todo, progress=progress and isinstance(executor, InProcess))
+    results = None
     try:
+        # inside: an executor failing as it starts lets go of the folder too
+        results = executor.run(todo, progress=progress and isinstance(executor, InProcess))
         for result in results:
             task = tasks[result.index]
             if store is not None:

@@ -435,3 +435,27 @@ def test_a_finished_run_replaced_by_a_new_one_is_said(finished, tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         run(tmp_path / "empty", params=PARAMS[:1])
+
+
+@pytest.mark.parametrize("executor", ["class", "no_results"])
+def test_an_executor_that_fails_as_it_starts_is_refused_or_lets_go_of_the_folder(tmp_path,
+                                                                                 executor):
+    """The class instead of an instance passed the "has a run" check, failed with a TypeError
+    at the first chunk and left the run folder locked (an audit, 2026-12): refused before any
+    folder is made; an executor whose run fails as it starts lets go of the folder."""
+    from taichi_star.batch import InProcess
+
+    class Broken:
+        def run(self, tasks, progress=False):
+            raise TypeError("fails as the run starts")  # a call, not a generator: at once
+
+    folder = tmp_path / "run"
+    if executor == "class":
+        with pytest.raises(ValueError, match=r"^executor must be an Executor"):
+            run_batch(PARAMS[:1], DURATION, solver=SOLVER, run_dir=folder, executor=InProcess)
+        assert not folder.exists()
+        return
+    with pytest.raises(TypeError):
+        run_batch(PARAMS[:1], DURATION, solver=SOLVER, run_dir=folder, executor=Broken())
+    from taichi_star.batch.store import LOCK
+    assert not (folder / LOCK).exists()
