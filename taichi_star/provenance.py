@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Callable, Dict, List, Mapping, Optional, Tuple
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
-__all__ = ["code_record", "code_version", "machine", "cpu_model", "vector_extensions",
+__all__ = ["code_record", "code_version", "local_time", "machine", "cpu_model", "vector_extensions",
            "cache_sizes", "nvidia_smi", "table_stamp", "write_atomic", "finite_json",
            "provenance_json"]
 
@@ -101,18 +101,24 @@ def taichi_version() -> str:
     return ".".join(map(str, version)) if isinstance(version, (tuple, list)) else str(version)
 
 
+def local_time() -> str:
+    """Now, as the result files record a date: ISO 8601, local time with its offset, to the
+    second."""
+    return datetime.datetime.now().astimezone().isoformat(timespec="seconds")
+
+
 def code_record() -> Dict[str, object]:
     """What made a result, as every sidecar records it (`output.provenance`, the studies'
     `record`): taichi_star_version, git_commit, git_dirty (`code_version`), and for a dirty
     checkout git_changes_sha256 (which edits of the commit, so that two are told apart);
-    taichi_version, python_version, and the date (ISO 8601, local time, to the second)."""
+    taichi_version, python_version, and the date (`local_time`)."""
     code = code_version()
     return {"taichi_star_version": code["version"], "git_commit": code["commit"],
             "git_dirty": code["dirty"],
             **({"git_changes_sha256": code["changes_sha256"]} if "changes_sha256" in code
                else {}),
             "taichi_version": taichi_version(), "python_version": platform.python_version(),
-            "date": datetime.datetime.now().astimezone().isoformat(timespec="seconds")}
+            "date": local_time()}
 
 
 def cpuinfo_text() -> str:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import datetime
 import math
 import operator
 import time
@@ -15,6 +14,7 @@ import pandas as pd
 
 from . import diagnostics, metrics, output
 from .output import in_instance_order
+from .provenance import local_time
 from .checks import check_flag, is_finite_real, is_whole, shown, warn_user
 from .geometry import CENTRE, Topology, build_topology
 from .model import validate_batch
@@ -98,7 +98,7 @@ class SimulationResult:
     version (`provenance.code_version`) with the indices of the chunks it made ("chunks"), as
     the store's manifest keeps them; None for a result of one code version."""
     made_at: Optional[str] = field(default=None, repr=False)
-    """When the result was made (ISO 8601, local time, to the second; set when it is built),
+    """When the result was made (`provenance.local_time`, set when it is built),
     which its files record as their `date` (they gave the moment a file was written: an audit,
     2026-12); the code and machine they record are those of the writing process."""
     arguments: Optional[Dict] = field(default=None, repr=False)
@@ -112,7 +112,7 @@ class SimulationResult:
 
     def __post_init__(self):
         if self.made_at is None:
-            self.made_at = datetime.datetime.now().astimezone().isoformat(timespec="seconds")
+            self.made_at = local_time()
 
     def sensitivity(self, output: str, parameter: str, trajectory: bool = False) -> np.ndarray:
         """d(output)/d(parameter) for every instance: (B,) for a summary output
