@@ -30,7 +30,8 @@ plus a penalty on wrong-way travel. `--phases strokes` holds each trial's phase 
 the simulated strokes meet the measured ones (`identification.stroke_aligned_phase`: the tracks
 show when the pulses fire, docs: Results, "When the pulses fire"), in each window its own;
 with it, `--periods strokes` fires each trial's model at the period its strokes' line gives
-(3.13–3.18 s, where the file names say 3.15) and cuts its track into periods of that length.
+(3.168–3.181 s, where the file names say 3.15) and cuts its track into periods of that
+length.
 Then, per candidate:
 
 - training error: the objective on the training cycles at the best point (re-simulated);
@@ -76,7 +77,8 @@ the same definition (candidate, settings, model, solver) are read back, not refi
 (`done/`: the best point, exact) and everything after the fit is done again with today's code:
 both windows re-simulated and scored, the folds refitted from the best point, Fig. 4c/4b
 redrawn; the note names the fit's evaluations and commit. For a change to the assessment that
-leaves the fits as they were (eeefbb8, the strokes read over each window's own cycles).
+leaves the fits as they were (eeefbb8, the strokes read over each window's own cycles); a fit
+whose held phases were read another way (`STROKE_ALIGNMENT`) is made anew.
 
 Cost: the study times its first generation, prints the estimate for the whole study (the
 refine stage counted for the `--refine-top` largest forms) and the `--budget-hours` it is held
@@ -137,11 +139,13 @@ STROKE_TAIL_CYCLES = 0.05
 """--phases strokes: cycles simulated past a window's last, 0.16 s of the paper's period: the
 last period's strokes are read over `identification.STROKE_WINDOW_S` past its end, on records
 of `identify.RECORD_INTERVAL_S`."""
-STROKE_ALIGNMENT = "window"
-"""How --phases strokes reads the simulated strokes, part of a held candidate's definition so
-that a resumed run does not reuse results scored another way: "window", over each window's own
-cycles (since eeefbb8; results stored before read them over the whole run, and their tables'
-errors differ: `--reassess` assesses their fits again, `stored_fit_of`)."""
+STROKE_ALIGNMENT = "onsets"
+"""How --phases strokes reads the strokes, part of a held candidate's definition so that a
+resumed or reassessed run does not reuse results scored another way: "onsets", where each
+period's stroke begins, the simulated ones over each window's own cycles (`identification.
+strokes`, since 2026-12-05). Results stored before read each period's farthest move instead
+("window", over each window's cycles, since eeefbb8; before it, no key, over the whole run):
+their phases were held elsewhere, and their fits are made anew."""
 STAGES = ("refine", "screen")
 """The stages in ranking order: a refined form above every screened one."""
 PER_ACTUATOR = 8
@@ -601,7 +605,7 @@ def refined_candidates(screen: pd.DataFrame, runnable: Sequence[Candidate],
 
 
 def definition_of(candidate: Candidate, args, settings, base: StarParams,
-                  solver: SolverConfig, gaits, stroke_alignment: bool = True,
+                  solver: SolverConfig, gaits,
                   start_model: Optional[StarParams] = None) -> str:
     """SHA-256 of what defines a candidate's result (a resumed run reuses it only if equal). The
     base model (and --start's, where given) enters by its fields that differ from StarParams'
@@ -616,8 +620,7 @@ def definition_of(candidate: Candidate, args, settings, base: StarParams,
     start = {} if start_model is None else {"start": changes(start_model)}
     # --phases enters only where it is not the default, which earlier results were made with
     phases = ({} if args.phases == "fitted" else
-              {"phases": args.phases} | ({"stroke_alignment": STROKE_ALIGNMENT}
-                                         if stroke_alignment else {}))
+              {"phases": args.phases, "stroke_alignment": STROKE_ALIGNMENT})
     periods = {} if args.periods == "nominal" else {"periods": args.periods}
     text = json.dumps({"candidate": dataclasses.asdict(candidate),
                        "settings": dataclasses.asdict(settings),
@@ -635,20 +638,13 @@ def stored_fit_of(done: Path, folder: Path, evaluations: str, candidate: Candida
     """--reassess: a candidate's finished fit, its record `done` (in `folder`/done/), with the
     text naming it (`evaluations`, the CSV of its evaluations in `folder`, and the commit that
     fitted them, from its sidecar where `read_provenance` reads it) if it was fitted as today's
-    run would fit it, else None (it is fitted anew). Its definition must equal today's, or,
-    where the training window starts at cycle 1, today's but for the stroke alignment: a fit
-    simulates its training window alone (and the strokes' tail), so reading the strokes over
-    the window or over the whole run is the same reading (`STROKE_ALIGNMENT`); the
-    assessment's longer run is where they differed."""
+    run would fit it (its definition today's: `definition_of`), else None (it is fitted
+    anew)."""
     stored = read_done(done)
     if stored is None or stored["row"].get("status") != "ok":
         return None
-    definitions = {definition_of(candidate, args, settings, base, solver, gaits,
-                                 start_model=start_model)}
-    if identify.parse_windows(args.train_cycles, args.validate_cycles)[0][0] == 1:
-        definitions.add(definition_of(candidate, args, settings, base, solver, gaits,
-                                      stroke_alignment=False, start_model=start_model))
-    if stored["row"].get("definition") not in definitions:
+    if stored["row"].get("definition") != definition_of(candidate, args, settings, base, solver,
+                                                        gaits, start_model=start_model):
         return None
     return stored, fit_named(folder, evaluations)
 
@@ -734,7 +730,7 @@ def measured_strokes(trials, last_cycle: int, flag: str = "--phases strokes"
                      ) -> Dict[str, identification.Strokes]:
     """--phases strokes, before any compute: each trial's `identification.strokes`;
     StudyArgumentError (naming `flag`, the option that asked for them) naming a gait whose
-    strokes lie on no period (`Strokes.periodic`: A1+A3's do not) or end before the windows'
+    strokes lie on no period (`Strokes.periodic`) or end before the windows'
     last cycle (and one period more)."""
     read = {}
     for gait, trial in trials.items():

@@ -7,20 +7,23 @@ trajectory fit chooses.
 The videos do not record when the heating pulses fire, so the trajectory objective fits that
 phase per trial to the simulation it compares (`identification.align_phase`). The tracks show
 it themselves: at each stroke the robot's centroid jumps. `identification.strokes` finds, in
-every period of a trial, the `--window` in which the centroid moves farthest, and their circular
-mean phase. The strokes also drift from period to period where the pulses do not come exactly
-every 3.15 s: where more than half lie on one line (`Strokes.periodic`), its slope gives their
-period as measured. The same reading of the simulated path of the `--preset` model (`--cycles`
-from rest, and a window more to read the last period's) gives the model's own lag from a
-firing to its farthest move; the line over cycles 1–3 less that lag is the firing that the
-track implies for that model (`identification.stroke_aligned_phase`), set beside the phase
-that the trajectory fit chooses for it on cycles 1–3 (`identification.trajectory_objective`).
+every period of a trial, where the stroke begins: the first `--window` whose move rises to
+halfway from the track's typical move to that period's farthest (`Strokes.cycle_onsets_mm`),
+and their circular mean phase. The strokes also drift from period to period where the pulses
+do not come exactly every 3.15 s: where more than half lie on one line (`Strokes.periodic`),
+its slope gives their period as measured. The same reading of the simulated path of the
+`--preset` model (`--cycles` from rest, and a window more to read the last period's) gives the
+model's own lag from a firing to the onset of its stroke; the line over cycles 1–3 less that
+lag is the firing that the track implies for that model (`identification.stroke_aligned_phase`),
+set beside the phase that the trajectory fit chooses for it on cycles 1–3
+(`identification.trajectory_objective`).
 
 Writes `strokes.csv` (one row per gait: the measured strokes and their period, the model's,
 the jump of the model's hub, the implied firing phase, the fitted phase and the gap between
 them), `strokes_moves.csv` (every measured move: gait, cycle, phase_s in the period from the
-track's start, move_mm) and `strokes.png` (per gait, the moves folded over the period with
-each period's farthest marked, the stroke phase, the implied firing and the fitted phase), each
+track's start, move_mm, the period's onset_mm and whether its stroke begins there) and
+`strokes.png` (per gait, the moves folded over the period with where each period's stroke
+begins and its onset marked, the stroke phase, the implied firing and the fitted phase), each
 with its provenance sidecar.
 
 --quick: gait A1+A2, 2-ms steps.
@@ -30,6 +33,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pandas as pd
 
 from taichi_star import identification, metrics, simulate
@@ -77,7 +81,7 @@ def strokes_table(trials, runs, hub_paths, fits: pd.DataFrame, window_s: float):
                "pulse_period_s": trial.path.period_s + measured.drift_s}
         row.update(dict.fromkeys(MODEL_COLUMNS, math.nan))
         if runs[gait] is not None:
-            model = identification.strokes(runs[gait].path, window_s)
+            model = identification.strokes(runs[gait].path, window_s, from_rest=True)
             firing = identification.stroke_aligned_phase(
                 runs[gait], trial, identification.TRAINING_CYCLES, measured,
                 window_s) if measured.periodic else math.nan
@@ -85,8 +89,8 @@ def strokes_table(trials, runs, hub_paths, fits: pd.DataFrame, window_s: float):
             row.update({"model_stroke_phase_s": model.phase_s,
                         "model_consistent_cycles": model.consistent_cycles,
                         "model_cycles": model.cycles, "model_jump_mm": model.jump_mm,
-                        "model_hub_jump_mm": identification.strokes(hub_paths[gait],
-                                                                    window_s).jump_mm,
+                        "model_hub_jump_mm": identification.strokes(
+                            hub_paths[gait], window_s, from_rest=True).jump_mm,
                         "model_typical_move_mm": model.typical_mm, "firing_phase_s": firing,
                         "fitted_phase_s": fitted,
                         "phase_gap_s": float(identification.circular_difference(
@@ -94,8 +98,13 @@ def strokes_table(trials, runs, hub_paths, fits: pd.DataFrame, window_s: float):
         rows.append(row)
         times, move = identification.window_moves(trial.path, window_s)
         offset = times - trial.path.t_s[0]
-        moves.append(pd.DataFrame({"gait": gait, "cycle": (offset // period).astype(int) + 1,
-                                   "phase_s": offset % period, "move_mm": move}))
+        cycle = (offset // period).astype(int) + 1
+        read = cycle <= measured.cycles  # the last, partial period has no stroke read
+        onset = np.full(times.size, math.nan)
+        onset[read] = measured.cycle_onsets_mm[cycle[read] - 1]
+        moves.append(pd.DataFrame({"gait": gait, "cycle": cycle, "phase_s": offset % period,
+                                   "move_mm": move, "onset_mm": onset,
+                                   "stroke": np.isin(times, measured.stroke_times_s)}))
     return pd.DataFrame(rows), pd.concat(moves, ignore_index=True)
 
 
@@ -120,9 +129,11 @@ def plot_strokes(csv_path, moves_path, png_path, period_s: float):
         gait_moves = moves[moves["gait"] == row.gait]
         ax.scatter(gait_moves["phase_s"], gait_moves["move_mm"], s=2, color="0.6",
                    label="move within the window")
-        farthest = gait_moves.loc[gait_moves.groupby("cycle")["move_mm"].idxmax()]
-        ax.scatter(farthest["phase_s"], farthest["move_mm"], s=14, color="tab:red",
-                   label="each period's farthest")
+        starts = gait_moves[gait_moves["stroke"]]
+        ax.scatter(starts["phase_s"], starts["onset_mm"], s=14, marker="_", color="0.2",
+                   label="its period's onset")
+        ax.scatter(starts["phase_s"], starts["move_mm"], s=14, color="tab:red",
+                   label="where each period's stroke begins")
         ax.axvline(row.stroke_phase_s, color="tab:red", lw=1, label="stroke phase (mean)")
         if row.periodic:
             ax.axvline(row.firing_phase_s, color="tab:blue", lw=1.2, ls="--",

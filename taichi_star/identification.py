@@ -87,7 +87,7 @@ from typing import Mapping, Optional, Sequence, Tuple
 import numpy as np
 import pandas as pd
 
-from .checks import is_real, is_whole
+from .checks import check_flag, is_real, is_whole
 from .experiment import EXPERIMENT_PERIOD_S, PAPER_DIRECTIONS, PAPER_GAITS, experimental_trajectory
 from .gait import Gait
 
@@ -102,7 +102,8 @@ __all__ = ["TRAINING_CYCLES", "VALIDATION_CYCLES", "SAMPLES_PER_CYCLE", "MAX_CYC
            "objective_of", "measured_trials", "simulated_runs", "result_runs",
            "distance_derivative", "path_derivative", "residual_count", "trial_residuals", "objective_residuals",
            "trial_phase_motion", "objective_and_gradient", "phase_motion", "parameter_uncertainty",
-           "record_derivatives", "STROKE_WINDOW_S", "STROKE_TOLERANCE_S", "Strokes", "window_moves",
+           "record_derivatives", "STROKE_WINDOW_S", "STROKE_TOLERANCE_S", "STROKE_ONSET_SHARE",
+           "Strokes", "window_moves",
            "circular_difference", "strokes",
            "stroke_aligned_phase"]
 
@@ -501,25 +502,41 @@ it, and within this of the strokes' line on it (`strokes`): a third of a heating
 surge, well inside the 3.15-s period."""
 
 
+STROKE_ONSET_SHARE = 0.5
+"""A period's stroke starts at the first window whose move rises to this share of the way from
+the path's typical move to the period's farthest move (`strokes`): halfway. Read at its farthest
+move instead, A1+A2's first two strokes came ~0.25 s late (a second surge after the first, in a
+noisy start), which tilted its line to a period of 3.128 s where its onsets give 3.176 s (an
+audit, 2026-12-05). Each period's own farthest move, not the strokes' median, sets its onset:
+a simulation from rest strokes more weakly in its first cycle, whose moves may not reach the
+later cycles' onset (results/strokes.csv)."""
+
+
 @dataclass(frozen=True)
 class Strokes:
     """The strokes of a path (`strokes`): per whole period k (from the path's first time t₀, over
-    [t₀ + kT, t₀ + (k+1)T)), the window start at which the centroid moves farthest within
-    `window_s`.
+    [t₀ + kT, t₀ + (k+1)T)), the window start at which the stroke begins: the first window in
+    the period that moves at least its onset within `window_s` where the window before it
+    moved less (the moves rise to it there), NaN for a period where none does.
 
-    phase_s: their circular mean over the periods, in [0, T) from t₀, s; cycle_phases_s (K,):
-    each period's, s; cycles K; consistent_cycles: those within `STROKE_TOLERANCE_S` of phase_s
-    (circularly); jump_mm: the median over the periods of the farthest move within a window,
-    mm; typical_mm: the median move within a window over the whole path, mm (how far the robot
-    goes in `window_s` anyway).
+    phase_s: their circular mean over the periods with a stroke, in [0, T) from t₀, s;
+    cycle_phases_s (K,): each period's, s (NaN: no stroke); cycles K; consistent_cycles: those
+    within `STROKE_TOLERANCE_S` of phase_s (circularly, ≤); jump_mm: the median over the
+    periods of the farthest move within a window, mm; typical_mm: the median move within a
+    window over the whole path, mm (how far the robot goes in `window_s` anyway);
+    cycle_onsets_mm (K,): each period's onset, typical_mm + `STROKE_ONSET_SHARE` × (the
+    period's farthest move − typical_mm), mm; stroke_times_s (K,): where each period's stroke
+    begins on the path's clock (the window start, one of the path's sample times), s (NaN: no
+    stroke).
 
     The strokes' line: drift_s, how much later each period's stroke comes than the one before,
-    s per period (the Theil–Sen slope of the cycle phases unwrapped from period to period; 0
-    for one period), and line_phase_s, its phase in period 0, in [0, T) (the median of the
+    s per period (the Theil–Sen slope of the periods' phases unwrapped from stroke to stroke; 0
+    for one stroke), and line_phase_s, its phase in period 0, in [0, T) (the median of the
     unwrapped phases less the drift's share); on_line_cycles: the strokes within
-    `STROKE_TOLERANCE_S` of it (circularly, ≤). `periodic`: more than half of them are, and
-    the pulses come every T + drift_s; where not (strokes scattered over the period), drift_s
-    and line_phase_s are NaN: no period to read."""
+    `STROKE_TOLERANCE_S` of it (circularly, ≤). `periodic`: more than half the periods' strokes
+    are, and the pulses come every T + drift_s; where not (strokes scattered over the period,
+    or missing), drift_s and line_phase_s are NaN: no period to read (and phase_s too where no
+    period has a stroke)."""
 
     phase_s: float
     cycle_phases_s: np.ndarray
@@ -532,6 +549,8 @@ class Strokes:
     on_line_cycles: int
     period_s: float
     """T, the period the path was read with, s."""
+    cycle_onsets_mm: np.ndarray
+    stroke_times_s: np.ndarray
 
     @property
     def periodic(self) -> bool:
@@ -562,13 +581,18 @@ def circular_difference(later, earlier, period: float):
 
 
 def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
-            tolerance_s: float = STROKE_TOLERANCE_S) -> Strokes:
-    """When a path jumps in each period (`Strokes`): a model-free reading of when a measured
-    trial's pulses fire, which the video does not record (`align_phase` fits the phase to a
-    simulation instead). The moves are taken between every sample time t and t + window_s
-    (linear between samples). ValueError for a window outside (0, T/2], a tolerance outside
-    [0, T/2], a path shorter than one period and one window, or one with a gap between samples
-    longer than the window (a period's farthest move would be read across it)."""
+            tolerance_s: float = STROKE_TOLERANCE_S, from_rest: bool = False) -> Strokes:
+    """When a path's stroke begins in each period (`Strokes`): a model-free reading of when a
+    measured trial's pulses fire, which the video does not record (`align_phase` fits the phase
+    to a simulation instead). The moves are taken between every sample time t and t + window_s
+    (linear between samples); a stroke begins at the first window start of its period whose
+    move rises to the period's onset (≥, from below it at the sample before), halfway from the
+    typical move to the period's farthest (`STROKE_ONSET_SHARE`, `Strokes.cycle_onsets_mm`).
+    The path's first window rises to it only `from_rest` (a simulation from rest: nothing
+    moved before it); a track's does not (what moved before it is not known). ValueError for a
+    window outside (0, T/2], a tolerance outside [0, T/2], a `from_rest` that is not a flag, a
+    path shorter than one period and one window, or one with a gap between samples longer than
+    the window (a period's farthest move would be read across it)."""
     period = path.period_s
     if not (is_real(window_s) and math.isfinite(window_s) and 0 < window_s <= period / 2):
         raise ValueError(f"window_s must be in (0, {period / 2:g}] s (half the period), got "
@@ -577,6 +601,7 @@ def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
             and 0 <= tolerance_s <= period / 2):
         raise ValueError(f"tolerance_s must be in [0, {period / 2:g}] s (half the period), got "
                          f"{tolerance_s!r}")
+    from_rest = check_flag("from_rest", from_rest)
     start = path.t_s[0]
     cycles = int((path.t_s[-1] - window_s - start) // period)
     if cycles < 1:
@@ -590,28 +615,40 @@ def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
                          f"measured")
     times, moves = window_moves(path, window_s)
     cycle_of = np.floor((times - start) / period).astype(np.int64)
-    phases, jumps = np.empty(cycles), np.empty(cycles)
-    for cycle in range(cycles):
-        inside = np.flatnonzero(cycle_of == cycle)
-        farthest = inside[np.argmax(moves[inside])]
-        phases[cycle] = times[farthest] - start - cycle * period
-        jumps[cycle] = moves[farthest]
-    phase = _circular_mean(phases, period)
-    apart = np.abs(circular_difference(phases, phase, period))
-    steps = circular_difference(phases[1:], phases[:-1], period)
-    unwrapped = np.concatenate([[phases[0]], phases[0] + np.cumsum(steps)])
-    first, second = np.triu_indices(cycles, k=1)  # every pair of periods, first < second
-    drift = float(np.median((unwrapped[second] - unwrapped[first]) / (second - first))
-                  ) if cycles > 1 else 0.0
-    numbers = np.arange(cycles)
-    line = float(np.median(unwrapped - drift * numbers))
-    off_line = np.abs(circular_difference(phases, line + drift * numbers, period))
+    inside = [np.flatnonzero(cycle_of == cycle) for cycle in range(cycles)]
+    jumps = np.array([moves[window].max() for window in inside])
+    typical = float(np.median(moves))
+    onsets = typical + STROKE_ONSET_SHARE * (jumps - typical)
+    before = np.concatenate([[0.0 if from_rest else math.inf], moves[:-1]])
+    stroke_times = np.full(cycles, math.nan)
+    for cycle, window in enumerate(inside):
+        # a stroke begins where the moves rise to the onset: a period that opens on a stroke
+        # begun in the one before is not one of its own
+        reaching = window[(moves[window] >= onsets[cycle]) & (before[window] < onsets[cycle])]
+        if reaching.size:
+            stroke_times[cycle] = times[reaching[0]]
+    phases = stroke_times - start - period * np.arange(cycles)
+    stroked = np.flatnonzero(np.isfinite(phases))
+    if not stroked.size:  # one period that opens on its stroke (its moves never rise)
+        return Strokes(math.nan, phases, cycles, 0, float(np.median(jumps)), typical, math.nan,
+                       math.nan, 0, period, onsets, stroke_times)
+    phase = _circular_mean(phases[stroked], period)
+    apart = np.abs(circular_difference(phases[stroked], phase, period))
+    read = phases[stroked]
+    steps = circular_difference(read[1:], read[:-1], period)
+    unwrapped = read[0] + np.concatenate([[0.0], np.cumsum(steps)])
+    first, second = np.triu_indices(stroked.size, k=1)  # every pair of strokes, first < second
+    drift = float(np.median((unwrapped[second] - unwrapped[first])
+                            / (stroked[second] - stroked[first]))) if stroked.size > 1 else 0.0
+    line = float(np.median(unwrapped - drift * stroked))
+    off_line = np.abs(circular_difference(read, line + drift * stroked, period))
     on_line = int(np.sum(off_line <= tolerance_s))
     if 2 * on_line <= cycles:
         drift = line = math.nan
     return Strokes(phase, phases, cycles, int(np.sum(apart <= tolerance_s)),
-                   float(np.median(jumps)), float(np.median(moves)), drift,
-                   line % period if math.isfinite(line) else line, on_line, period)
+                   float(np.median(jumps)), typical, drift,
+                   line % period if math.isfinite(line) else line, on_line, period, onsets,
+                   stroke_times)
 
 
 def _circular_mean(phases: np.ndarray, period: float) -> float:
@@ -627,14 +664,16 @@ def stroke_aligned_phase(simulated: SimulatedRun, trial: Trial, cycles=TRAINING_
     cycle window, for `trajectory_objective(..., phases=...)` instead of fitting it: the
     circular mean of the measured strokes' line (`Strokes.line_phases`: robust to a stroke
     read off elsewhere, and drifting as the pulses do) over the window's periods, minus the
-    circular mean of the simulated strokes of the window's cycles (`strokes`; the simulation
-    must cover one window past the window's last cycle, and may run longer: the phase does
-    not depend on it), in [0, T). The window's periods are the track's periods first−1..last−1
+    circular mean of the simulated strokes of the window's cycles (`strokes` from rest, read
+    over the run through the window's last cycle and one window more, which the simulation
+    must cover: it may run longer, the phase does not depend on it; a cycle without a stroke
+    is left out of the mean), in [0, T). The window's periods are the track's periods
+    first−1..last−1
     (from its start), or first..last where the strokes come earlier in the period than the
     simulated lag (cycle k then starts just before the track's period k ends). `measured`:
     the trial's `strokes`, if already taken. ValueError where the trial's strokes are not
     `periodic` (no phase to hold) or end before the window, or where the simulation ends
-    before the window's last cycle. A model-free constraint where the
+    before the window's last cycle or has no stroke in it. A model-free constraint where the
     fitted phase can slide a model's strokes onto other moments of the cycle (results: the
     strokes in the tracks); the period stays the trial's."""
     first, last = check_window(cycles)
@@ -647,15 +686,27 @@ def stroke_aligned_phase(simulated: SimulatedRun, trial: Trial, cycles=TRAINING_
         raise ValueError(f"{trial.gait}: the track's strokes cover {measured.cycles} periods, "
                          f"the window ends at cycle {last} (one period more is needed)")
     period = trial.path.period_s
-    simulated_strokes = strokes(simulated.path, window_s)
+    # the simulated strokes of the window's own cycles, read over the run through them alone:
+    # read over the whole run, a window's phase moved with how long the run went on past it
+    # (its typical move, and so its onsets, do), and a fit's tables (cycles 1-6) scored its
+    # training window 0.89-2.78x the error the fit (cycles 1-3) had minimised
+    path = simulated.path
+    through = np.searchsorted(path.t_s, path.t_s[0] + last * path.period_s + window_s,
+                              side="right") + 1
+    if through < path.t_s.size:  # up to the first sample past the last cycle's window
+        path = CentroidPath(path.t_s[:through], path.x_mm[:through], path.y_mm[:through],
+                            path.period_s)
+    simulated_strokes = strokes(path, window_s, from_rest=True)
     if simulated_strokes.cycles < last:
         raise ValueError(f"{trial.gait}: the simulation's strokes cover "
                          f"{simulated_strokes.cycles} periods, the window ends at cycle {last}")
-    # the simulated strokes of the window's own cycles: read over the whole run, a window's
-    # phase moved with how long the run went on past it, and a fit's tables (cycles 1-6)
-    # scored its training window 0.89-2.78x the error the fit (cycles 1-3) had minimised
-    lag = _circular_mean(simulated_strokes.cycle_phases_s[first - 1:last],
-                         simulated.path.period_s)
+    window_strokes = simulated_strokes.cycle_phases_s[first - 1:last]
+    window_strokes = window_strokes[np.isfinite(window_strokes)]
+    if not window_strokes.size:
+        raise ValueError(f"{trial.gait}: the simulation has no stroke in cycles {first}-{last} "
+                         f"(no window's move rises to halfway up its cycle's farthest): no lag "
+                         f"to hold the phase by")
+    lag = _circular_mean(window_strokes, simulated.path.period_s)
     phase = _circular_mean(measured.line_phases(range(first - 1, last)), period) - lag
     if phase < 0:
         phase = _circular_mean(measured.line_phases(range(first, last + 1)), period) - lag

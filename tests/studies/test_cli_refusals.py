@@ -34,9 +34,6 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
     ("gait_design", ["--goal", "turn", "--direction", "45"],
      "--direction: only with --goal speed (turning has no direction)"),
     # a reach tolerance at the goals' distance: every goal counted as reached before a move
-    ("model_select", ["--phases", "strokes", "--gaits", "A1+A2,A1+A3"],
-     "--phases strokes: A1+A3's strokes do not lie on one period (5 of 15 within 0.2 s of their "
-     "line), so there is no phase to hold; leave it out with --gaits"),
     ("strokes", ["--window", "0"], "--window must be in (0, 1.575] s (half the period), got 0"),
     ("strokes", ["--window", "1.6"], "--window must be in (0, 1.575] s (half the period)"),
     ("strokes", ["--cycles", "2"], "--cycles must be a whole number >= 3 (the fit's cycles 1-3)"),

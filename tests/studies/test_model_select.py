@@ -101,12 +101,35 @@ def test_a_resumed_candidate_is_reused_only_for_the_same_model(monkeypatch):
     assert held != fitted
     args.periods = "strokes"
     assert definition(base) != held
-    # held results scored with the strokes read another way (over the whole run, before
-    # eeefbb8) are not reused; fitted phases do not read the strokes at all
-    monkeypatch.setattr(model_select, "STROKE_ALIGNMENT", "whole run")
+    # held results scored with the strokes read another way (their farthest moves, before
+    # 2026-12-05) are not reused; fitted phases do not read the strokes at all
+    monkeypatch.setattr(model_select, "STROKE_ALIGNMENT", "window")
     assert definition(base) != held
     args.phases, args.periods = "fitted", "nominal"
     assert definition(base) == fitted
+
+
+def test_held_phases_refuse_a_trial_whose_strokes_lie_on_no_period_or_end_too_soon():
+    """--phases strokes, before any compute: a trial whose strokes lie on no line (three of six
+    pulses a second off it) is refused naming the gait and the flag, and one with too few
+    strokes for the windows; every measured trial's strokes lie on one (results/strokes.csv:
+    read where they begin, A1+A3's too)."""
+    t = np.arange(0.0, 6 * 3.15 + 0.5, 1e-3)
+    pulses = 0.7 + 3.15 * np.arange(6) + np.array([0.0, 1.0, 0.0, 1.0, 0.0, 1.0])
+    surge = sum(1.0 + np.vectorize(math.erf)((t - pulse) / (0.02 * math.sqrt(2)))
+                for pulse in pulses)
+    trial = identification.Trial("A1+A2", identification.CentroidPath(t, 0.5 * t, surge, 3.15),
+                                 1.0)
+    with pytest.raises(model_select.cli.StudyArgumentError,
+                       match=r"--periods strokes: A1\+A2's strokes do not lie on one period "
+                             r"\(\d of 6 within 0.2 s of their line\)"):
+        model_select.measured_strokes({"A1+A2": trial}, 3, "--periods strokes")
+    measured = identification.measured_trials()
+    assert all(read.periodic for read in model_select.measured_strokes(measured, 6).values())
+    with pytest.raises(model_select.cli.StudyArgumentError,
+                       match=r"--phases strokes: A1\+A2's track has 7 strokes, the windows end "
+                             r"at cycle 7 \(one period more is needed\)"):
+        model_select.measured_strokes(measured, 7)
 
 
 def test_a_per_actuator_axis_is_informed_only_by_gaits_that_fire_it():
@@ -312,13 +335,13 @@ def test_phases_held_on_the_strokes_in_every_window(tmp_path, periods):
     period = {g: (lines[g].period_s + lines[g].drift_s if periods == "strokes"
                   else EXPERIMENT_PERIOD_S) for g in gaits}
     if periods == "strokes":
-        # A1+A2's strokes come every 3.128 s, A1+A4's every 3.178 s (results/strokes.csv)
-        assert period["A1+A2"] == pytest.approx(3.128, abs=1e-3)
-        assert period["A1+A4"] == pytest.approx(3.178, abs=1e-3)
+        # A1+A2's strokes come every 3.178 s, A1+A4's every 3.177 s (results/strokes.csv)
+        assert period["A1+A2"] == pytest.approx(3.178, abs=1e-3)
+        assert period["A1+A4"] == pytest.approx(3.177, abs=1e-3)
     identified = pd.read_csv(tmp_path / "identified.csv")
     if periods == "strokes":  # the preset's fields were fitted at other periods than its own
         assert (identified["fitted_at_periods"] == "each gait at its strokes' period: "
-                "A1+A2 3.128 s, A1+A4 3.178 s").all()
+                "A1+A2 3.178 s, A1+A4 3.177 s").all()
     else:
         assert "fitted_at_periods" not in identified
     sidecar = json.loads((tmp_path / "model_select.csv.json").read_text())
@@ -376,15 +399,11 @@ def test_periods_from_the_strokes_refuse_what_they_would_override(tmp_path, caps
 @pytest.mark.slow
 def test_a_reassessed_fit_gets_the_tables_of_a_fresh_run(tmp_path, monkeypatch, capsys):
     """--reassess reads a finished fit back and does everything after it again: a record
-    stored before eeefbb8 (its definition without the stroke alignment) whose tables were
-    scored another way is assessed again to the tables of a fresh run, without fitting it."""
+    whose tables were scored another way is assessed again to the tables of a fresh run,
+    without fitting it."""
     argv = ["--out", str(tmp_path), "--only", "paper", "--refine-top", "0", "--phases",
             "strokes", *QUICK]
-    today = model_select.definition_of
-    monkeypatch.setattr(model_select, "definition_of",
-                        lambda *args, **kwargs: today(*args, stroke_alignment=False))
     model_select.main(argv)
-    monkeypatch.setattr(model_select, "definition_of", today)
     fresh = {name: pd.read_csv(tmp_path / name) for name in
              ("model_select.csv", "model_select_gaits.csv", "model_select_folds.csv",
               "model_select_parameters.csv")}
@@ -404,8 +423,8 @@ def test_a_reassessed_fit_gets_the_tables_of_a_fresh_run(tmp_path, monkeypatch, 
     again = {name: pd.read_csv(tmp_path / name) for name in fresh}
     note = again["model_select.csv"].pop("note").iloc[0]
     assert note.startswith("assessed again (--reassess), the fit read back from fits/paper.csv")
-    # the fit's own columns kept; the definition is today's (with the stroke alignment)
-    assert again["model_select.csv"].pop("definition").iloc[0] != \
+    # the fit's own columns kept, its definition today's
+    assert again["model_select.csv"].pop("definition").iloc[0] == \
         fresh["model_select.csv"].pop("definition").iloc[0]
     fresh["model_select.csv"].pop("note")
     for name in ("model_select.csv", "model_select_gaits.csv", "model_select_parameters.csv"):
@@ -447,11 +466,10 @@ class StoredFit:
         return None if found is None else found[1]
 
 
-def test_a_stored_fit_is_reassessed_only_if_fitted_as_today(tmp_path):
-    """A stored fit is reused by --reassess if its definition is today's, or today's but for
-    the stroke alignment where the training window starts at cycle 1 (the fit's simulation
-    is then its window, read alike either way); a later window, a failed fit, another
-    definition or no record: fitted anew (None)."""
+def test_a_stored_fit_is_reassessed_only_if_fitted_as_today(tmp_path, monkeypatch):
+    """A stored fit is reused by --reassess if its definition is today's; one whose strokes
+    were read at their farthest moves (before 2026-12-05), a failed fit, another definition or
+    no record: fitted anew (None)."""
     setting = StoredFit(tmp_path)
     args, definition = setting.args, setting.definition
 
@@ -463,11 +481,13 @@ def test_a_stored_fit_is_reassessed_only_if_fitted_as_today(tmp_path):
     (tmp_path / "fits").mkdir()
     (tmp_path / "fits" / "paper.csv.json").write_text(json.dumps({"git_commit": "0123456789"}))
     assert stored(definition()) == "fits/paper.csv, fitted at 0123456"
-    assert stored(definition(stroke_alignment=False)) == "fits/paper.csv, fitted at 0123456"
+    with monkeypatch.context() as farthest:
+        farthest.setattr(model_select, "STROKE_ALIGNMENT", "window")
+        read_at_farthest = definition()
+    assert stored(read_at_farthest) is None
     assert stored(definition(), status="fit_failed") is None
     args.train_cycles, args.validate_cycles = "2:3", "4:6"
     assert stored(definition()) is not None
-    assert stored(definition(stroke_alignment=False)) is None  # the fit read cycle 1 too
     args.train_cycles = "1:3"
     earlier = definition()
     args.fold_generations = 3  # today's run would assess with other folds

@@ -70,7 +70,7 @@ def test_quick_run_against_the_library(tmp_path):
                                   record_interval_s=identify.RECORD_INTERVAL_S, record_shapes=True)
     runs = dict(zip(["A1+A2"], identification.simulated_runs(result.trajectory, ["A1+A2"],
                                                              [params.period])))
-    model = identification.strokes(runs["A1+A2"].path)
+    model = identification.strokes(runs["A1+A2"].path, from_rest=True)
     assert model.cycles == row["model_cycles"] == 3
     assert row["model_stroke_phase_s"] == pytest.approx(model.phase_s, rel=1e-9, abs=1e-12)
     assert row["model_jump_mm"] == pytest.approx(model.jump_mm, rel=1e-9)
@@ -96,4 +96,11 @@ def test_quick_run_against_the_library(tmp_path):
     farthest = moves.groupby("cycle")["move_mm"].max()
     assert np.median(farthest[farthest.index <= measured.cycles]) == pytest.approx(
         row["jump_mm"], rel=1e-9)
+    # the moves mark where the library reads each period's stroke, and its onset
+    starts = moves[moves["stroke"]]
+    assert starts["cycle"].tolist() == list(range(1, measured.cycles + 1))
+    np.testing.assert_allclose(starts["phase_s"], measured.cycle_phases_s, rtol=1e-9)
+    np.testing.assert_allclose(starts["onset_mm"], measured.cycle_onsets_mm, rtol=1e-9)
+    assert (starts["move_mm"] >= starts["onset_mm"]).all()
+    assert moves.loc[moves["cycle"] > measured.cycles, "onset_mm"].isna().all()
     assert (tmp_path / "strokes.png").stat().st_size > 1000

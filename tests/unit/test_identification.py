@@ -503,50 +503,126 @@ def pulsed_path(stroke_times, duration_s, period_s=3.15, step_s=1e-3):
     return ident.CentroidPath(t, DRIFT_MM_S * t, surge, period_s)
 
 
+def analytic_onset_s(pulse_s, window_s):
+    """Where a window of `pulsed_path` starts to move `STROKE_ONSET_SHARE` of the way from the
+    drift's move to the pulse's farthest move (both exact: the pulse's share of a window is
+    PULSE_MM·(Φ(end) − Φ(start)), the drift's along the other axis), for an isolated pulse: the
+    onset `strokes` reads, before the 1-ms sampling."""
+    from scipy.optimize import brentq
+
+    def move(start):
+        share = 0.5 * (math.erf((start + window_s - pulse_s) / (PULSE_WIDTH_S * math.sqrt(2)))
+                       - math.erf((start - pulse_s) / (PULSE_WIDTH_S * math.sqrt(2))))
+        return math.hypot(PULSE_MM * share, DRIFT_MM_S * window_s)
+
+    typical, jump = DRIFT_MM_S * window_s, move(pulse_s - window_s / 2)
+    onset = typical + ident.STROKE_ONSET_SHARE * (jump - typical)
+    return brentq(lambda start: move(start) - onset, pulse_s - window_s - 6 * PULSE_WIDTH_S,
+                  pulse_s - window_s / 2, xtol=1e-12)
+
+
 def test_strokes_find_each_periods_surge_its_size_and_the_pulses_period():
-    """Pulses every T + 0.02 s from 0.7 s: a window centred on each surge moves farthest, so
-    each period's stroke starts window/2 before it (to the 1-ms sampling); the unwrapped
-    phases grow by exactly the 0.02 s per period; the jump is the pulse's share inside the
-    window with the drift's, and a window elsewhere moves by the drift alone."""
+    """Pulses every T + 0.02 s from 0.7 s: each period's stroke begins at the first window
+    start (on the 1-ms samples) whose move reaches halfway from the drift's to the surge's,
+    about a window before the pulse; the unwrapped phases grow by exactly the 0.02 s per
+    period; the jump is the pulse's share inside the window with the drift's, and a window
+    elsewhere moves by the drift alone."""
     period, drift, window = 3.15, 0.02, 0.1
     pulses = 0.7 + (period + drift) * np.arange(6)
     found = ident.strokes(pulsed_path(pulses, 6 * period + 0.5), window)
     assert found.cycles == 6 and found.consistent_cycles == 6
-    expected = pulses - window / 2 - period * np.arange(6)
-    # 1e-3 s: the sampling (a tie between neighbouring starts goes to the earlier)
-    np.testing.assert_allclose(found.cycle_phases_s, expected, atol=1.01e-3)
+    onsets = np.array([analytic_onset_s(pulse, window) for pulse in pulses])
+    expected = onsets - period * np.arange(6)
+    # the first sample at or after the onset: within one 1-ms sample after it; 1e-5 s before
+    # it for the sampled farthest move, within 1e-4 of the exact one, which moves the onset by
+    # ~3e-6 s on a rise of ~40 mm/s
+    early = found.cycle_phases_s - expected
+    assert np.all(early >= -1e-5) and np.all(early <= 1.01e-3)
     # 2e-3: two phases each within the 1-ms sampling, a slope over at least one period
     assert found.drift_s == pytest.approx(drift, abs=2e-3)
     assert found.phase_s == pytest.approx(np.mean(expected), abs=1.1e-3)
     inside = PULSE_MM * math.erf(window / 2 / (PULSE_WIDTH_S * math.sqrt(2)))
     assert found.jump_mm == pytest.approx(math.hypot(inside, DRIFT_MM_S * window), rel=1e-4)
     assert found.typical_mm == pytest.approx(DRIFT_MM_S * window, rel=1e-6)
+    np.testing.assert_allclose(found.cycle_onsets_mm, found.typical_mm + ident.STROKE_ONSET_SHARE
+                               * (found.jump_mm - found.typical_mm), rtol=1e-4)  # as the jump
+    np.testing.assert_array_equal(found.stroke_times_s - found.cycle_phases_s,
+                                  3.15 * np.arange(6))
 
 
 def test_strokes_either_side_of_a_period_start_average_to_it_not_to_its_middle():
-    """Two strokes 0.03 s after a period's start and two 0.03 s before one (each near a
-    boundary of its own): their circular mean is the period start (the arithmetic mean of the
-    phases, 0.03 and 3.12, would put it at the period's middle), and every one lies within the
-    tolerance."""
+    """Two strokes beginning 0.03 s after a period's start and two 0.03 s before one (each near
+    a boundary of its own): their circular mean is the period start (the arithmetic mean of
+    the phases, 0.03 and 3.12, would put it at the period's middle), and every one lies within
+    the tolerance. The strokes begun 0.03 s before a period's end go on into the next period,
+    whose first windows move past the onset: not a stroke of that period's own (its moves did
+    not rise to the onset there), whose stroke is its own pulse's."""
     period, window = 3.15, 0.1
     starts = period * np.arange(4) + np.array([0.03, 0.03, period - 0.03, period - 0.03])
-    found = ident.strokes(pulsed_path(starts + window / 2, 4 * period + 0.5), window)
-    np.testing.assert_allclose(found.cycle_phases_s, starts - period * np.arange(4),
-                               atol=1.01e-3)  # the sampling, as above
-    assert min(found.phase_s, period - found.phase_s) <= 1.1e-3
+    pulses = starts + window  # each onset about a window before its pulse
+    found = ident.strokes(pulsed_path(pulses, 4 * period + 0.5), window)
+    onsets = np.array([analytic_onset_s(pulse, window) for pulse in pulses])
+    # the sampling, as above, and 1.3 ms for the period whose stroke peaks in the next: its
+    # own farthest move, its last window, is shorter, and so is its onset
+    np.testing.assert_allclose(found.cycle_phases_s, onsets - period * np.arange(4),
+                               atol=2.5e-3)
+    assert min(found.phase_s, period - found.phase_s) <= 1.5e-3
     assert found.consistent_cycles == found.cycles == 4
 
 
-def test_a_stroke_exactly_the_tolerance_away_is_consistent():
-    """≤, not <: with the tolerance at the farthest stroke's distance from the mean phase every
-    stroke counts; a tolerance one rounding below it leaves that one out."""
-    pulses = 0.7 + 3.15 * np.arange(5) + np.array([0.0, 0.0, 0.0, 0.0, 0.3])
-    path = pulsed_path(pulses, 5 * 3.15 + 0.5)
-    found = ident.strokes(path)
-    farthest = np.max(np.abs((found.cycle_phases_s - found.phase_s + 3.15 / 2) % 3.15
-                             - 3.15 / 2))
-    assert ident.strokes(path, tolerance_s=farthest).consistent_cycles == 5
-    assert ident.strokes(path, tolerance_s=np.nextafter(farthest, 0)).consistent_cycles == 4
+def test_a_stroke_begins_at_its_first_surge_not_its_farthest():
+    """A period whose stroke surges twice, the second farther (A1+A2's first two periods in the
+    track, a review, 2026-12-05): its stroke is read where the first begins, on the line of the
+    others, not at the farther one 0.25 s later."""
+    period, window = 3.15, 0.1
+    pulses = 0.7 + period * np.arange(5)
+    path = pulsed_path(pulses, 5 * period + 0.5)
+    second = pulsed_path([pulses[1] + 0.25], 5 * period + 0.5)
+    twice = ident.CentroidPath(path.t_s, path.x_mm, path.y_mm + 1.5 * second.y_mm, period)
+    found = ident.strokes(twice, window)
+    # the second surge raises the period's onset: the first is crossed higher up its rise,
+    # 13 ms later than the others, where the farthest move lies 0.25 s later
+    np.testing.assert_allclose(found.cycle_phases_s, found.cycle_phases_s[0], atol=0.02)
+    assert found.on_line_cycles == 5 and found.drift_s == pytest.approx(0.0, abs=1e-3)
+
+
+def test_a_move_exactly_at_the_onset_begins_the_stroke_and_one_just_below_does_not():
+    """≥, not <. A path along y in dyadic steps (0.125-s samples, a 0.25-s window, exact moves):
+    1 mm a window at rest, strokes whose windows move 1.5, 3, 5 and 3.5 mm: the onset is
+    1 + ½·(5 − 1) = 3 mm, reached exactly at the stroke's second window; in the period where
+    that window moves 2^-40 mm less (and its farthest too: its onset 2^-41 mm lower), the
+    stroke begins a sample later."""
+    step, window, period = 0.125, 0.25, 4.0
+    per_period = int(period / step)
+    increments = np.full(5 * per_period + 4, 0.5)
+    for cycle in range(5):
+        at = cycle * per_period + 8
+        increments[at:at + 3] = [1.0, 2.0, 3.0]
+    # 2^-40 mm: the smallest step below that the running sums (up to ~100 mm, spaced 2^-46)
+    # keep exactly
+    increments[3 * per_period + 9] = 2.0 - 2.0 ** -40
+    y = np.concatenate([[0.0], np.cumsum(increments)])
+    t = step * np.arange(y.size)
+    found = ident.strokes(ident.CentroidPath(t, np.zeros_like(y), y, period), window)
+    assert (found.typical_mm, found.jump_mm) == (1.0, 5.0)
+    np.testing.assert_array_equal(found.cycle_onsets_mm, [3.0, 3.0, 3.0, 3.0 - 2.0 ** -41, 3.0])
+    np.testing.assert_array_equal(found.cycle_phases_s, [1.0, 1.0, 1.0, 1.125, 1.0])
+
+
+def test_a_weaker_stroke_is_read_where_it_begins_as_a_strong_one():
+    """Each period's onset is halfway up its own farthest move: pulses of a tenth of the
+    others' size in two of six periods (a simulation's first stroke from rest is weaker) begin
+    where theirs would, on the line, not where a period's noise first rises."""
+    pulses = 0.7 + 3.15 * np.arange(6)
+    path = pulsed_path(pulses, 6 * 3.15 + 0.5)
+    weak = pulsed_path(pulses[[1, 4]], 6 * 3.15 + 0.5)
+    mixed = ident.CentroidPath(path.t_s, path.x_mm, path.y_mm - 0.9 * weak.y_mm, 3.15)
+    found = ident.strokes(mixed)
+    assert found.on_line_cycles == found.consistent_cycles == 6
+    assert np.all(found.cycle_onsets_mm[[1, 4]] < found.cycle_onsets_mm[0] / 5)
+    # the weak pulse's onset is its own halfway point: its window starts a little later on
+    # the same rise, within 5 ms of the others'
+    np.testing.assert_allclose(found.cycle_phases_s, found.cycle_phases_s[0], atol=5e-3)
 
 
 def test_strokes_refuse_windows_tolerances_and_paths_they_cannot_read():
@@ -565,7 +641,28 @@ def test_strokes_refuse_windows_tolerances_and_paths_they_cannot_read():
     one = ident.strokes(path)
     assert (one.cycles, one.drift_s, one.on_line_cycles, one.periodic) == (1, 0.0, 1, True)
     assert one.line_phase_s == one.phase_s
-    assert ident.strokes(pulsed_path([0.7], 3.15 + 1.575), 1.575).cycles == 1
+    # half a period's window over one period: its first window already holds the pulse, so
+    # the moves never rise to the onset: no stroke, no phase, no period
+    opened = ident.strokes(pulsed_path([0.7], 3.15 + 1.575), 1.575)
+    assert (opened.cycles, opened.on_line_cycles, opened.periodic) == (1, 0, False)
+    assert np.isnan([opened.phase_s, opened.drift_s, *opened.cycle_phases_s]).all()
+
+
+def test_a_path_that_opens_on_a_stroke_starts_one_only_from_rest():
+    """A pulse 0.02 s after the path's start: its first window already moves past the onset.
+    A track's (what moved before it is not known) starts no stroke there: its first period
+    reads the next period's onset, a window before its end; a simulation from rest starts
+    one at 0 (nothing moved before). A from_rest that is not a flag is refused."""
+    period, window = 3.15, 0.1
+    path = pulsed_path(0.02 + period * np.arange(3), 3 * period + 0.5)
+    track, simulated = ident.strokes(path, window), ident.strokes(path, window, from_rest=True)
+    assert track.cycle_phases_s[0] == pytest.approx(period + analytic_onset_s(0.02, window),
+                                                    abs=1.01e-3)  # the sampling, as above
+    assert simulated.cycle_phases_s[0] == 0.0
+    np.testing.assert_array_equal(track.cycle_phases_s[1:], simulated.cycle_phases_s[1:])
+    for flag in (1, "yes", None):
+        with pytest.raises(ValueError, match="from_rest"):
+            ident.strokes(path, window, from_rest=flag)
 
 
 def test_a_path_with_a_gap_longer_than_the_window_is_refused_naming_it():
@@ -585,7 +682,8 @@ def test_a_path_with_a_gap_longer_than_the_window_is_refused_naming_it():
 def test_strokes_are_periodic_when_more_than_half_lie_on_their_line(scattered, periodic):
     """Six periods, their strokes on a line drifting 0.02 s a period but `scattered` of them
     moved 1 s off it: with two off (4 of 6 on) the line, its drift and phase are those of the
-    four (the medians are not pulled); with three off, no line holds more than half: no
+    four (the medians are not pulled), each beginning where the window's move reaches the
+    onset, about a window before its pulse; with three off, no line holds more than half: no
     period to read, drift and line NaN."""
     pulses = 0.7 + (3.15 + 0.02) * np.arange(6)
     pulses[[1, 3, 5][:scattered]] += 1.0
@@ -594,7 +692,7 @@ def test_strokes_are_periodic_when_more_than_half_lie_on_their_line(scattered, p
     if periodic:
         assert found.on_line_cycles == 4
         assert found.drift_s == pytest.approx(0.02, abs=2e-3)  # the sampling, as above
-        assert found.line_phase_s == pytest.approx(0.65, abs=2e-3)
+        assert found.line_phase_s == pytest.approx(analytic_onset_s(0.7, 0.1), abs=2e-3)
         np.testing.assert_allclose(found.line_phases([0, 2, 4]), found.cycle_phases_s[[0, 2, 4]],
                                    atol=2e-3)
     else:
@@ -610,6 +708,24 @@ def test_the_recorded_strokes_of_a1_a4_are_all_at_one_phase_and_jump_far():
     assert found.jump_mm > 4 * found.typical_mm
 
 
+def test_the_a1_a2_tracks_strokes_come_at_the_period_a_fixed_threshold_reads():
+    """Known data, read another way: the first 0.1-s move of more than 1.2 mm in each period
+    of the A1+A2 track (a fixed threshold, not the path's own onset) and a least-squares line
+    through them give the period `strokes` reads within 5 ms (the farthest moves gave 3.128
+    s, 48 ms short: a review, 2026-12-05); every stroke lies within 0.05 s of the line."""
+    path = ident.measured_trial("A1+A2").path
+    found = ident.strokes(path)
+    times, moves = ident.window_moves(path, ident.STROKE_WINDOW_S)
+    offset = times - path.t_s[0]
+    firsts = [offset[(offset // 3.15 == cycle) & (moves > 1.2)][0] for cycle in
+              range(found.cycles)]
+    period = np.polyfit(np.arange(found.cycles), firsts, 1)[0]
+    assert found.periodic
+    # 5 ms: the two readings' onsets differ by up to a few 1/60-s frames, over 6 periods
+    assert 3.15 + found.drift_s == pytest.approx(period, abs=5e-3)
+    assert ident.strokes(path, tolerance_s=0.05).on_line_cycles == found.cycles == 7
+
+
 def _sim_and_trial(lag_s, stroke_phase_s, drift_s=0.0, cycles=4, period=3.15):
     """A simulated run whose strokes come `lag_s` after each firing (0, T, ...) and a trial
     whose strokes come at `stroke_phase_s` in its track's first period and `drift_s` later in
@@ -622,17 +738,17 @@ def _sim_and_trial(lag_s, stroke_phase_s, drift_s=0.0, cycles=4, period=3.15):
     return simulated, trial
 
 
-@pytest.mark.parametrize("lag, stroke, drift, expected", [(0.05, 0.9, 0.0, 0.85),
+@pytest.mark.parametrize("lag, stroke, drift, expected", [(0.25, 0.9, 0.0, 0.65),
                                                          (0.3, 0.1, 0.03, 0.16 - 0.3 + 3.15)])
 def test_the_stroke_aligned_phase_puts_the_simulated_strokes_on_the_measured_ones(
         lag, stroke, drift, expected):
-    """Strokes 0.05 s after each firing against measured ones at 0.9 s: the firings at 0.85 s.
+    """Strokes 0.25 s after each firing against measured ones at 0.9 s: the firings at 0.65 s.
     Measured strokes earlier in the period than the lag (0.1 s and 0.03 s later per period,
     against 0.3 s): cycle 1 starts at the end of the track's first period, so the window's
     strokes are those of the track's periods 1..3 (mean 0.16 s), not 0..2 (0.13 s)."""
     simulated, trial = _sim_and_trial(lag, stroke, drift)
     phase = ident.stroke_aligned_phase(simulated, trial, (1, 3))
-    # both strokes to the 1-ms sampling (their window centres: the same half window off)
+    # both strokes to the 1-ms sampling (their onsets: the same ~window before their pulses)
     assert phase == pytest.approx(expected, abs=2.1e-3)
 
 
@@ -640,7 +756,7 @@ def test_the_stroke_aligned_phase_follows_the_line_not_a_stroke_read_elsewhere()
     """A1's track: its first strokes read 0.0 and 2.04 s, the line through its other 17 about
     0.2 s (a review, 2026-12: the window's own three moved its phase 0.35 s). One stroke of the
     window 1 s off the line moves the phase not at all; strokes off any line are refused."""
-    simulated, trial = _sim_and_trial(0.05, 0.9)
+    simulated, trial = _sim_and_trial(0.25, 0.9)
     pulses = 0.9 + 3.15 * np.arange(7)
     pulses[1] += 1.0
     moved = ident.Trial("A1+A2", pulsed_path(pulses, 7 * 3.15), 1.0)
@@ -656,17 +772,34 @@ def test_the_stroke_aligned_phase_follows_the_line_not_a_stroke_read_elsewhere()
 def test_the_stroke_aligned_phase_needs_a_stroke_one_period_past_the_window():
     """A track of 7 periods has 6 strokes read whole (the last wants a window past its end):
     cycles 3–5 have theirs and the one after, cycles 4–6 not (the wrap above may need it)."""
-    _, trial = _sim_and_trial(0.05, 0.9)
-    simulated, _ = _sim_and_trial(0.05, 0.9, cycles=5)  # the simulation covers the window
-    assert ident.stroke_aligned_phase(simulated, trial, (3, 5)) == pytest.approx(0.85,
+    _, trial = _sim_and_trial(0.25, 0.9)
+    simulated, _ = _sim_and_trial(0.25, 0.9, cycles=5)  # the simulation covers the window
+    assert ident.stroke_aligned_phase(simulated, trial, (3, 5)) == pytest.approx(0.65,
                                                                                 abs=2.1e-3)
     with pytest.raises(ValueError, match=r"A1\+A2: the track's strokes cover 6 periods, the "
                                          r"window ends at cycle 6 \(one period more"):
         ident.stroke_aligned_phase(simulated, trial, (4, 6))
 
 
+def test_a_simulation_without_a_stroke_in_the_window_has_no_phase_to_hold():
+    """A simulation at rest through cycles 1–3 and moving from 0.2 s into cycle 4 (its strokes
+    0.4 s into each cycle from there): no window of the first three moves at all, so none
+    rises to its onset: refused, naming the cycles; cycles 4–6 get theirs."""
+    period, moving = 3.15, 3 * 3.15 + 0.2
+    _, trial = _sim_and_trial(0.25, 0.9, cycles=6)
+    stroking = pulsed_path(0.4 + period * np.arange(3, 7), 7 * period + 0.2)
+    still = stroking.t_s < moving
+    late = ident.SimulatedRun("A1+A2", ident.CentroidPath(
+        stroking.t_s, np.where(still, 0.0, stroking.x_mm - DRIFT_MM_S * moving),
+        np.where(still, 0.0, stroking.y_mm), period), (1.0, 0.0))
+    with pytest.raises(ValueError, match=r"A1\+A2: the simulation has no stroke in cycles "
+                                         r"1-3 \(no window's move rises"):
+        ident.stroke_aligned_phase(late, trial, (1, 3))
+    assert ident.stroke_aligned_phase(late, trial, (4, 6)) == pytest.approx(0.5, abs=2.1e-3)
+
+
 def test_a_windows_stroke_aligned_phase_does_not_depend_on_how_long_the_simulation_runs():
-    """The simulated strokes of the window's cycles only: a simulation whose strokes come 0.05 s
+    """The simulated strokes of the window's cycles only: a simulation whose strokes come 0.25 s
     after the firings in cycles 1-3 and 0.6 s after in cycles 4-6 gives window 1-3 the phase
     of one that stops after cycle 3 (read over the whole run, the tables of a fit, simulated for
     six cycles, scored its training window 0.93-2.78x the error the fit minimised); window 4-6
@@ -674,13 +807,13 @@ def test_a_windows_stroke_aligned_phase_does_not_depend_on_how_long_the_simulati
     refused."""
     period = 3.15
     _, trial = _sim_and_trial(0.05, 0.9, cycles=6)
-    lags = np.array([0.05] * 3 + [0.6] * 3)
+    lags = np.array([0.25] * 3 + [0.6] * 3)
     longer = ident.SimulatedRun("A1+A2", pulsed_path(lags + period * np.arange(6),
                                                      6 * period + 0.2), (1.0, 0.0))
-    shorter, _ = _sim_and_trial(0.05, 0.9, cycles=3)
+    shorter, _ = _sim_and_trial(0.25, 0.9, cycles=3)
     assert ident.stroke_aligned_phase(longer, trial, (1, 3)) == \
         ident.stroke_aligned_phase(shorter, trial, (1, 3))
-    assert ident.stroke_aligned_phase(longer, trial, (1, 3)) == pytest.approx(0.85, abs=2.1e-3)
+    assert ident.stroke_aligned_phase(longer, trial, (1, 3)) == pytest.approx(0.65, abs=2.1e-3)
     assert ident.stroke_aligned_phase(longer, trial, (4, 6)) == pytest.approx(0.3, abs=2.1e-3)
     with pytest.raises(ValueError, match=r"A1\+A2: the simulation's strokes cover 3 periods, "
                                          r"the window ends at cycle 4"):
