@@ -30,7 +30,7 @@ plus a penalty on wrong-way travel. `--phases strokes` holds each trial's phase 
 the simulated strokes meet the measured ones (`identification.stroke_aligned_phase`: the tracks
 show when the pulses fire, docs: Results, "When the pulses fire"), in each window its own;
 with it, `--periods strokes` fires each trial's model at the period its strokes' line gives
-(3.168–3.181 s, where the file names say 3.15) and cuts its track into periods of that
+(3.171–3.181 s, where the file names say 3.15) and cuts its track into periods of that
 length.
 Then, per candidate:
 
