@@ -506,8 +506,8 @@ STROKE_ONSET_SHARE = 0.5
 """A period's stroke starts at the first window whose move rises to this share of the way from
 the path's typical move to the period's farthest move (`strokes`): halfway. Read at its farthest
 move instead, A1+A2's first two strokes came ~0.25 s late (a second surge after the first, in a
-noisy start), which tilted its line to a period of 3.128 s where its onsets give 3.176 s (an
-audit, 2026-12-05). Each period's own farthest move, not the strokes' median, sets its onset:
+noisy start), which tilted its line to a period of 3.128 s where its onsets give 3.178 s
+(results/strokes.csv; an audit, 2026-12-05, read 3.176 s at a fixed 1.2-mm threshold). Each period's own farthest move, not the strokes' median, sets its onset:
 a simulation from rest strokes more weakly in its first cycle, whose moves may not reach the
 later cycles' onset (results/strokes.csv)."""
 
