@@ -81,7 +81,9 @@ def strokes_table(trials, runs, hub_paths, fits: pd.DataFrame, window_s: float):
                "pulse_period_s": trial.path.period_s + measured.drift_s}
         row.update(dict.fromkeys(MODEL_COLUMNS, math.nan))
         if runs[gait] is not None:
-            model = identification.strokes(runs[gait].path, window_s, from_rest=True)
+            # a simulation has no tracking noise: every stroke is read, its first from rest too
+            model = identification.strokes(runs[gait].path, window_s, from_rest=True,
+                                           min_jump_ratio=1.0)
             firing = identification.stroke_aligned_phase(
                 runs[gait], trial, identification.TRAINING_CYCLES, measured,
                 window_s) if measured.periodic else math.nan
@@ -90,7 +92,8 @@ def strokes_table(trials, runs, hub_paths, fits: pd.DataFrame, window_s: float):
                         "model_consistent_cycles": model.consistent_cycles,
                         "model_cycles": model.cycles, "model_jump_mm": model.jump_mm,
                         "model_hub_jump_mm": identification.strokes(
-                            hub_paths[gait], window_s, from_rest=True).jump_mm,
+                            hub_paths[gait], window_s, from_rest=True,
+                            min_jump_ratio=1.0).jump_mm,
                         "model_typical_move_mm": model.typical_mm, "firing_phase_s": firing,
                         "fitted_phase_s": fitted,
                         "phase_gap_s": float(identification.circular_difference(

@@ -103,6 +103,7 @@ __all__ = ["TRAINING_CYCLES", "VALIDATION_CYCLES", "SAMPLES_PER_CYCLE", "MAX_CYC
            "distance_derivative", "path_derivative", "residual_count", "trial_residuals", "objective_residuals",
            "trial_phase_motion", "objective_and_gradient", "phase_motion", "parameter_uncertainty",
            "record_derivatives", "STROKE_WINDOW_S", "STROKE_TOLERANCE_S", "STROKE_ONSET_SHARE",
+           "STROKE_MIN_JUMP_RATIO",
            "Strokes", "window_moves",
            "circular_difference", "strokes",
            "stroke_aligned_phase"]
@@ -511,13 +512,23 @@ noisy start), which tilted its line to a period of 3.128 s where its onsets give
 a simulation from rest strokes more weakly in its first cycle, whose moves may not reach the
 later cycles' onset (results/strokes.csv)."""
 
+STROKE_MIN_JUMP_RATIO = 1.2
+"""A period has a stroke only where its farthest move is at least this many times the path's
+typical move (≥): else its halfway point lies in the noise, whose first crossing comes early
+in every period and lines up as strokes that are not there (a drift with a 1-µm jitter read as
+periodic in nearly every draw: an audit, 2026-12-05). Such a jitter's periods reach 1.06–1.10,
+the measured tracks' 2.1–6.5. A simulation has no such noise: its readings take every stroke
+(`strokes(..., min_jump_ratio=1)` in `stroke_aligned_phase` and the strokes study), its first
+from rest too, whose ratio is 1.06–1.54 (the identified and paper presets)."""
+
 
 @dataclass(frozen=True)
 class Strokes:
     """The strokes of a path (`strokes`): per whole period k (from the path's first time t₀, over
     [t₀ + kT, t₀ + (k+1)T)), the window start at which the stroke begins: the first window in
     the period that moves at least its onset within `window_s` where the window before it
-    moved less (the moves rise to it there), NaN for a period where none does.
+    moved less (the moves rise to it there), NaN for a period where none does or whose
+    farthest move does not stand out (`strokes`' min_jump_ratio).
 
     phase_s: their circular mean over the periods with a stroke, in [0, T) from t₀, s;
     cycle_phases_s (K,): each period's, s (NaN: no stroke); cycles K; consistent_cycles: those
@@ -581,17 +592,19 @@ def circular_difference(later, earlier, period: float):
 
 
 def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
-            tolerance_s: float = STROKE_TOLERANCE_S, from_rest: bool = False) -> Strokes:
+            tolerance_s: float = STROKE_TOLERANCE_S, from_rest: bool = False,
+            min_jump_ratio: float = STROKE_MIN_JUMP_RATIO) -> Strokes:
     """When a path's stroke begins in each period (`Strokes`): a model-free reading of when a
     measured trial's pulses fire, which the video does not record (`align_phase` fits the phase
     to a simulation instead). The moves are taken between every sample time t and t + window_s
     (linear between samples); a stroke begins at the first window start of its period whose
     move rises to the period's onset (≥, from below it at the sample before), halfway from the
-    typical move to the period's farthest (`STROKE_ONSET_SHARE`, `Strokes.cycle_onsets_mm`).
-    The path's first window rises to it only `from_rest` (a simulation from rest: nothing
+    typical move to the period's farthest (`STROKE_ONSET_SHARE`, `Strokes.cycle_onsets_mm`),
+    in a period whose farthest is at least `min_jump_ratio` times the typical move (≥;
+    `STROKE_MIN_JUMP_RATIO`; 1 takes every period's). The path's first window rises to it only `from_rest` (a simulation from rest: nothing
     moved before it); a track's does not (what moved before it is not known). ValueError for a
     window outside (0, T/2], a tolerance outside [0, T/2], a `from_rest` that is not a flag, a
-    path shorter than one period and one window, or one with a gap between samples longer than
+    `min_jump_ratio` not a finite number ≥ 1, a path shorter than one period and one window, or one with a gap between samples longer than
     the window (a period's farthest move would be read across it)."""
     period = path.period_s
     if not (is_real(window_s) and math.isfinite(window_s) and 0 < window_s <= period / 2):
@@ -602,8 +615,12 @@ def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
         raise ValueError(f"tolerance_s must be in [0, {period / 2:g}] s (half the period), got "
                          f"{tolerance_s!r}")
     from_rest = check_flag("from_rest", from_rest)
+    if not (is_real(min_jump_ratio) and math.isfinite(min_jump_ratio) and min_jump_ratio >= 1):
+        raise ValueError(f"min_jump_ratio must be a finite number >= 1, got {min_jump_ratio!r}")
     start = path.t_s[0]
-    cycles = int((path.t_s[-1] - window_s - start) // period)
+    # a path that ends a window after a period's end covers that period (the floor of the
+    # quotient, rounded just below the whole number, was one short: an audit, 2026-12-05)
+    cycles = math.floor((path.t_s[-1] - window_s - start) / period + 1e-9)
     if cycles < 1:
         raise ValueError(f"the path covers {path.t_s[-1] - start:g} s: strokes needs at least "
                          f"one period and one window ({period + window_s:g} s)")
@@ -625,7 +642,7 @@ def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
         # a stroke begins where the moves rise to the onset: a period that opens on a stroke
         # begun in the one before is not one of its own
         reaching = window[(moves[window] >= onsets[cycle]) & (before[window] < onsets[cycle])]
-        if reaching.size:
+        if reaching.size and jumps[cycle] >= min_jump_ratio * typical:
             stroke_times[cycle] = times[reaching[0]]
     phases = stroke_times - start - period * np.arange(cycles)
     stroked = np.flatnonzero(np.isfinite(phases))
@@ -696,7 +713,7 @@ def stroke_aligned_phase(simulated: SimulatedRun, trial: Trial, cycles=TRAINING_
     if through < path.t_s.size:  # up to the first sample past the last cycle's window
         path = CentroidPath(path.t_s[:through], path.x_mm[:through], path.y_mm[:through],
                             path.period_s)
-    simulated_strokes = strokes(path, window_s, from_rest=True)
+    simulated_strokes = strokes(path, window_s, from_rest=True, min_jump_ratio=1.0)
     if simulated_strokes.cycles < last:
         raise ValueError(f"{trial.gait}: the simulation's strokes cover "
                          f"{simulated_strokes.cycles} periods, the window ends at cycle {last}")

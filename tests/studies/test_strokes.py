@@ -70,7 +70,7 @@ def test_quick_run_against_the_library(tmp_path):
                                   record_interval_s=identify.RECORD_INTERVAL_S, record_shapes=True)
     runs = dict(zip(["A1+A2"], identification.simulated_runs(result.trajectory, ["A1+A2"],
                                                              [params.period])))
-    model = identification.strokes(runs["A1+A2"].path, from_rest=True)
+    model = identification.strokes(runs["A1+A2"].path, from_rest=True, min_jump_ratio=1.0)
     assert model.cycles == row["model_cycles"] == 3
     assert row["model_stroke_phase_s"] == pytest.approx(model.phase_s, rel=1e-9, abs=1e-12)
     assert row["model_jump_mm"] == pytest.approx(model.jump_mm, rel=1e-9)

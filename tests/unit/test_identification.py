@@ -648,6 +648,42 @@ def test_strokes_refuse_windows_tolerances_and_paths_they_cannot_read():
     assert np.isnan([opened.phase_s, opened.drift_s, *opened.cycle_phases_s]).all()
 
 
+def test_a_drift_with_a_jitter_has_no_strokes_and_no_period():
+    """A slow drift sampled at 60 frames a second with a 1-µm jitter and no stroke: every
+    period's farthest move is within a tenth of the typical one, so no period has a stroke (its
+    halfway point lies in the noise, whose first crossing came early in every period and read
+    as periodic in nearly every draw: an audit, 2026-12-05)."""
+    rng = np.random.default_rng(1)
+    t = np.arange(0.0, 6 * 3.15 + 0.5, 1 / 60)
+    jitter = ident.CentroidPath(t, DRIFT_MM_S * t + rng.normal(0.0, 1e-3, t.size),
+                                rng.normal(0.0, 1e-3, t.size), 3.15)
+    found = ident.strokes(jitter)
+    assert found.cycles == 6 and np.isnan(found.cycle_phases_s).all()
+    assert not found.periodic and math.isnan(found.phase_s)
+
+
+def test_a_period_has_a_stroke_only_where_its_farthest_move_stands_out():
+    """≥, not <, at a ratio the sums keep exact (1.25): 1 mm a window at rest (0.125-s samples,
+    0.25-s windows), one period whose farthest move is exactly 1.25 mm has its stroke, another
+    whose farthest is 2^-40 mm less has none; with a ratio of 1 both have theirs. A ratio below
+    1 or not finite is refused."""
+    step, window, period = 0.125, 0.25, 4.0
+    increments = np.full(5 * 32 + 4, 0.5)
+    for cycle in range(5):
+        increments[cycle * 32 + 8:cycle * 32 + 11] = [1.0, 2.0, 3.0]  # strokes of 5 mm
+    increments[2 * 32 + 8:2 * 32 + 11] = [0.5, 0.75, 0.5]  # farthest 1.25 mm
+    increments[3 * 32 + 8:3 * 32 + 11] = [0.5, 0.75 - 2.0 ** -40, 0.5]
+    y = np.concatenate([[0.0], np.cumsum(increments)])
+    path = ident.CentroidPath(step * np.arange(y.size), np.zeros_like(y), y, period)
+    found = ident.strokes(path, window, min_jump_ratio=1.25)
+    assert found.typical_mm == 1.0
+    assert np.isfinite(found.cycle_phases_s).tolist() == [True, True, True, False, True]
+    assert np.isfinite(ident.strokes(path, window, min_jump_ratio=1.0).cycle_phases_s).all()
+    for ratio in (np.nextafter(1.0, 0.0), math.inf, math.nan, "2"):
+        with pytest.raises(ValueError, match="min_jump_ratio must be a finite number >= 1"):
+            ident.strokes(path, window, min_jump_ratio=ratio)
+
+
 def test_a_path_that_opens_on_a_stroke_starts_one_only_from_rest():
     """A pulse 0.02 s after the path's start: its first window already moves past the onset.
     A track's (what moved before it is not known) starts no stroke there: its first period
@@ -796,6 +832,18 @@ def test_a_simulation_without_a_stroke_in_the_window_has_no_phase_to_hold():
                                          r"1-3 \(no window's move rises"):
         ident.stroke_aligned_phase(late, trial, (1, 3))
     assert ident.stroke_aligned_phase(late, trial, (4, 6)) == pytest.approx(0.5, abs=2.1e-3)
+
+
+def test_a_run_that_ends_a_window_after_the_windows_last_cycle_covers_it():
+    """6T + 0.1 s exactly (the window after cycle 6's end): its six cycles are read (the floor
+    of (6T + 0.1 − 0.1)/T rounded to 5 and refused it: an audit, 2026-12-05)."""
+    period = 3.15
+    _, trial = _sim_and_trial(0.25, 0.9, cycles=6)
+    exact = ident.SimulatedRun("A1+A2", pulsed_path(0.25 + period * np.arange(6),
+                                                    6 * period + 0.1), (1.0, 0.0))
+    assert exact.path.t_s[-1] == 6 * period + 0.1
+    assert ident.strokes(exact.path, from_rest=True).cycles == 6
+    assert ident.stroke_aligned_phase(exact, trial, (4, 6)) == pytest.approx(0.65, abs=2.1e-3)
 
 
 def test_a_windows_stroke_aligned_phase_does_not_depend_on_how_long_the_simulation_runs():
