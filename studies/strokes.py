@@ -18,7 +18,8 @@ lag is the firing that the track implies for that model (`identification.stroke_
 set beside the phase that the trajectory fit chooses for it on cycles 1–3
 (`identification.trajectory_objective`).
 
-Writes `strokes.csv` (one row per gait: the measured strokes and their period, the model's,
+Writes `strokes.csv` (one row per gait: the measured strokes and their period, the period read
+with the onset a tenth lower and higher up the rise (`ONSET_SHARES_CHECKED`), the model's,
 the jump of the model's hub, the implied firing phase, the fitted phase and the gap between
 them), `strokes_moves.csv` (every measured move: gait, cycle, phase_s in the period from the
 track's start, move_mm, the period's onset_mm and whether its stroke begins there) and
@@ -44,6 +45,10 @@ from . import cli, identify
 DESCRIPTION = ("Strokes: when each measured trial's pulses fire, read off its track (the "
                "centroid's jumps), against the phase the trajectory fit chooses.")
 QUICK_GAITS = ("A1+A2",)
+ONSET_SHARES_CHECKED = (0.4, 0.6)
+"""The onset shares at which each trial's pulse period is read again beside the default's
+(`pulse_period_low_onset_s`, `pulse_period_high_onset_s`): how much the period depends on how
+far up its rise a stroke is said to begin (A1+A3's the most: an audit, 2026-12-05)."""
 MODEL_COLUMNS = ("model_stroke_phase_s", "model_consistent_cycles", "model_cycles",
                  "model_jump_mm", "model_hub_jump_mm", "model_typical_move_mm", "firing_phase_s",
                  "fitted_phase_s", "phase_gap_s")
@@ -79,6 +84,10 @@ def strokes_table(trials, runs, hub_paths, fits: pd.DataFrame, window_s: float):
                "on_line_cycles": measured.on_line_cycles, "periodic": measured.periodic,
                "line_phase_s": measured.line_phase_s, "drift_s": measured.drift_s,
                "pulse_period_s": trial.path.period_s + measured.drift_s}
+        for column, share in zip(("pulse_period_low_onset_s", "pulse_period_high_onset_s"),
+                                 ONSET_SHARES_CHECKED):
+            row[column] = period + identification.strokes(trial.path, window_s,
+                                                          onset_share=share).drift_s
         row.update(dict.fromkeys(MODEL_COLUMNS, math.nan))
         if runs[gait] is not None:
             # a simulation has no tracking noise: every stroke is read, its first from rest too

@@ -535,7 +535,7 @@ class Strokes:
     within `STROKE_TOLERANCE_S` of phase_s (circularly, ≤); jump_mm: the median over the
     periods of the farthest move within a window, mm; typical_mm: the median move within a
     window over the whole path, mm (how far the robot goes in `window_s` anyway);
-    cycle_onsets_mm (K,): each period's onset, typical_mm + `STROKE_ONSET_SHARE` × (the
+    cycle_onsets_mm (K,): each period's onset, typical_mm + onset_share (`strokes`) × (the
     period's farthest move − typical_mm), mm; stroke_times_s (K,): where each period's stroke
     begins on the path's clock (the window start, one of the path's sample times), s (NaN: no
     stroke).
@@ -593,19 +593,21 @@ def circular_difference(later, earlier, period: float):
 
 def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
             tolerance_s: float = STROKE_TOLERANCE_S, from_rest: bool = False,
-            min_jump_ratio: float = STROKE_MIN_JUMP_RATIO) -> Strokes:
+            min_jump_ratio: float = STROKE_MIN_JUMP_RATIO,
+            onset_share: float = STROKE_ONSET_SHARE) -> Strokes:
     """When a path's stroke begins in each period (`Strokes`): a model-free reading of when a
     measured trial's pulses fire, which the video does not record (`align_phase` fits the phase
     to a simulation instead). The moves are taken between every sample time t and t + window_s
     (linear between samples); a stroke begins at the first window start of its period whose
-    move rises to the period's onset (≥, from below it at the sample before), halfway from the
-    typical move to the period's farthest (`STROKE_ONSET_SHARE`, `Strokes.cycle_onsets_mm`),
+    move rises to the period's onset (≥, from below it at the sample before), `onset_share` of
+    the way from the typical move to the period's farthest (`STROKE_ONSET_SHARE`, halfway;
+    `Strokes.cycle_onsets_mm`),
     in a period whose farthest is at least `min_jump_ratio` times the typical move (≥;
     `STROKE_MIN_JUMP_RATIO`; 1 takes every period's). The path's first window rises to it only
     `from_rest` (a simulation from rest: nothing moved before it); a track's does not (what
     moved before it is not known). ValueError for a window outside (0, T/2], a tolerance
     outside [0, T/2], a `from_rest` that is not a flag, a `min_jump_ratio` not a finite number
-    ≥ 1, a path shorter than one period and one window, or one with a gap between samples
+    ≥ 1, an `onset_share` outside (0, 1), a path shorter than one period and one window, or one with a gap between samples
     longer than the window (a period's farthest move would be read across it)."""
     period = path.period_s
     if not (is_real(window_s) and math.isfinite(window_s) and 0 < window_s <= period / 2):
@@ -618,6 +620,8 @@ def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
     from_rest = check_flag("from_rest", from_rest)
     if not (is_real(min_jump_ratio) and math.isfinite(min_jump_ratio) and min_jump_ratio >= 1):
         raise ValueError(f"min_jump_ratio must be a finite number >= 1, got {min_jump_ratio!r}")
+    if not (is_real(onset_share) and 0 < onset_share < 1):
+        raise ValueError(f"onset_share must be in (0, 1), got {onset_share!r}")
     start = path.t_s[0]
     # a path that ends a window after a period's end covers that period (the floor of the
     # quotient, rounded just below the whole number, was one short: an audit, 2026-12-05)
@@ -636,7 +640,7 @@ def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
     inside = [np.flatnonzero(cycle_of == cycle) for cycle in range(cycles)]
     jumps = np.array([moves[window].max() for window in inside])
     typical = float(np.median(moves))
-    onsets = typical + STROKE_ONSET_SHARE * (jumps - typical)
+    onsets = typical + onset_share * (jumps - typical)
     before = np.concatenate([[0.0 if from_rest else math.inf], moves[:-1]])
     stroke_times = np.full(cycles, math.nan)
     for cycle, window in enumerate(inside):

@@ -62,6 +62,9 @@ def test_quick_run_against_the_library(tmp_path):
     assert row["jump_ratio"] == pytest.approx(measured.jump_mm / measured.typical_mm, rel=1e-9)
     assert (row["on_line_cycles"], row["periodic"]) == (measured.on_line_cycles, True)
     assert row["line_phase_s"] == pytest.approx(measured.line_phase_s, rel=1e-9)
+    for column, share in (("pulse_period_low_onset_s", 0.4), ("pulse_period_high_onset_s", 0.6)):
+        assert row[column] == pytest.approx(
+            3.15 + identification.strokes(trial.path, onset_share=share).drift_s, rel=1e-9)
     # the model: the identified preset at --quick's 2-ms steps, three cycles from rest and
     # a window and a record more (its third stroke is read too)
     params = StarParams.preset("identified", gait="A1+A2")

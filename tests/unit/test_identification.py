@@ -503,8 +503,8 @@ def pulsed_path(stroke_times, duration_s, period_s=3.15, step_s=1e-3):
     return ident.CentroidPath(t, DRIFT_MM_S * t, surge, period_s)
 
 
-def analytic_onset_s(pulse_s, window_s):
-    """Where a window of `pulsed_path` starts to move `STROKE_ONSET_SHARE` of the way from the
+def analytic_onset_s(pulse_s, window_s, share=ident.STROKE_ONSET_SHARE):
+    """Where a window of `pulsed_path` starts to move `share` of the way from the
     drift's move to the pulse's farthest move (both exact: the pulse's share of a window is
     PULSE_MM·(Φ(end) − Φ(start)), the drift's along the other axis), for an isolated pulse: the
     onset `strokes` reads, before the 1-ms sampling."""
@@ -516,7 +516,7 @@ def analytic_onset_s(pulse_s, window_s):
         return math.hypot(PULSE_MM * share, DRIFT_MM_S * window_s)
 
     typical, jump = DRIFT_MM_S * window_s, move(pulse_s - window_s / 2)
-    onset = typical + ident.STROKE_ONSET_SHARE * (jump - typical)
+    onset = typical + share * (jump - typical)
     return brentq(lambda start: move(start) - onset, pulse_s - window_s - 6 * PULSE_WIDTH_S,
                   pulse_s - window_s / 2, xtol=1e-12)
 
@@ -548,6 +548,24 @@ def test_strokes_find_each_periods_surge_its_size_and_the_pulses_period():
                                * (found.jump_mm - found.typical_mm), rtol=1e-4)  # as the jump
     np.testing.assert_array_equal(found.stroke_times_s - found.cycle_phases_s,
                                   3.15 * np.arange(6))
+
+
+@pytest.mark.parametrize("share", [0.25, 0.75])
+def test_the_onset_share_sets_how_far_up_the_rise_a_stroke_begins(share):
+    """A quarter or three quarters of the way up: each stroke begins where the analytic move
+    reaches that share (to the 1-ms sampling, as above), later the higher the share; a share
+    outside (0, 1) is refused."""
+    pulses = 0.7 + 3.15 * np.arange(4)
+    path = pulsed_path(pulses, 4 * 3.15 + 0.5)
+    found = ident.strokes(path, onset_share=share)
+    expected = np.array([analytic_onset_s(pulse, 0.1, share) for pulse in pulses])
+    early = found.cycle_phases_s - (expected - 3.15 * np.arange(4))
+    assert np.all(early >= -1e-5) and np.all(early <= 1.01e-3)
+    halfway = ident.strokes(path).cycle_phases_s
+    assert np.all(np.sign(found.cycle_phases_s - halfway) == np.sign(share - 0.5))
+    for bad in (0.0, 1.0, math.nan, -0.1):
+        with pytest.raises(ValueError, match=r"onset_share must be in \(0, 1\)"):
+            ident.strokes(path, onset_share=bad)
 
 
 def test_strokes_either_side_of_a_period_start_average_to_it_not_to_its_middle():
