@@ -504,13 +504,15 @@ surge, well inside the 3.15-s period."""
 
 
 STROKE_ONSET_SHARE = 0.5
-"""A period's stroke starts at the first window whose move rises to this share of the way from
-the path's typical move to the period's farthest move (`strokes`): halfway. Read at its farthest
+"""`strokes`' default onset_share: a period's stroke starts at the first window whose move
+rises halfway from the path's typical move to the period's farthest move. Read at its farthest
 move instead, A1+A2's first two strokes came ~0.25 s late (a second surge after the first, in a
 noisy start), which tilted its line to a period of 3.128 s where its onsets give 3.178 s
-(results/strokes.csv; an audit, 2026-12-05, read 3.176 s at a fixed 1.2-mm threshold). Each period's own farthest move, not the strokes' median, sets its onset:
-a simulation from rest strokes more weakly in its first cycle, whose moves may not reach the
-later cycles' onset (results/strokes.csv)."""
+(results/strokes.csv; an audit, 2026-12-05, read 3.176 s at a fixed 1.2-mm threshold). Each
+period's own farthest move, not the strokes' median, sets its onset: a simulation from rest
+strokes more weakly in its first cycle, whose moves may not reach the later cycles' onset. At
+0.4 or 0.6 instead the measured periods move by at most 3 ms but A1+A3's, by up to 11 ms
+(results/strokes.csv's pulse_period_low/high_onset_s)."""
 
 STROKE_MIN_JUMP_RATIO = 1.2
 """A period has a stroke only where its farthest move is at least this many times the path's
