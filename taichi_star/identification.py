@@ -511,7 +511,7 @@ noisy start), which tilted its line to a period of 3.128 s where its onsets give
 (results/strokes.csv; an audit, 2026-12-05, read 3.176 s at a fixed 1.2-mm threshold). Each
 period's own farthest move, not the strokes' median, sets its onset: a simulation from rest
 strokes more weakly in its first cycle, whose moves may not reach the later cycles' onset. At
-0.4 or 0.6 instead the measured periods move by at most 3 ms but A1+A3's, by up to 11 ms
+0.4 or 0.6 instead the measured periods move by at most 3 ms but A1+A3's, by about 11 ms
 (results/strokes.csv's pulse_period_low/high_onset_s)."""
 
 STROKE_MIN_JUMP_RATIO = 1.2
