@@ -603,9 +603,8 @@ def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
     (linear between samples); a stroke begins at the first window start of its period whose
     move rises to the period's onset (≥, from below it at the sample before), `onset_share` of
     the way from the typical move to the period's farthest (`STROKE_ONSET_SHARE`, halfway;
-    `Strokes.cycle_onsets_mm`),
-    in a period whose farthest is at least `min_jump_ratio` times the typical move (≥;
-    `STROKE_MIN_JUMP_RATIO`; 1 takes every period's). The path's first window rises to it only
+    `Strokes.cycle_onsets_mm`), in a period whose farthest is at least `min_jump_ratio` times
+    the typical move (≥; `STROKE_MIN_JUMP_RATIO`; 1 takes every period's). The path's first window rises to it only
     `from_rest` (a simulation from rest: nothing moved before it); a track's does not (what
     moved before it is not known). ValueError for a window outside (0, T/2], a tolerance
     outside [0, T/2], a `from_rest` that is not a flag, a `min_jump_ratio` not a finite number
@@ -657,9 +656,9 @@ def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
     if not stroked.size:  # one period that opens on its stroke (its moves never rise)
         return Strokes(math.nan, phases, cycles, 0, float(np.median(jumps)), typical, math.nan,
                        math.nan, 0, period, onsets, stroke_times)
-    phase = _circular_mean(phases[stroked], period)
-    apart = np.abs(circular_difference(phases[stroked], phase, period))
     read = phases[stroked]
+    phase = _circular_mean(read, period)
+    apart = np.abs(circular_difference(read, phase, period))
     steps = circular_difference(read[1:], read[:-1], period)
     unwrapped = read[0] + np.concatenate([[0.0], np.cumsum(steps)])
     first, second = np.triu_indices(stroked.size, k=1)  # every pair of strokes, first < second
