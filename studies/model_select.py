@@ -6,7 +6,8 @@ well they predict what they were not fitted to.
                                    [--phases fitted|strokes] [--periods nominal|strokes]
                                    [--train-cycles 1:3] [--validate-cycles 4:6]
                                    [--popsize P] [--max-generations G] [--restarts R]
-                                   [--fold-generations F] [--seed S] [--sigma0 0.25] [--dt S]
+                                   [--fold-generations F] [--folds warm|cold]
+                                   [--seed S] [--sigma0 0.25] [--dt S]
                                    [--start IDENTIFIED_CSV]
                                    [--refine-top K] [--refine-popsize P2]
                                    [--refine-generations G2]
@@ -36,11 +37,15 @@ Then, per candidate:
 
 - training error: the objective on the training cycles at the best point (re-simulated);
 - validation error: the objective on `--validate-cycles` (4–6) with the training phases;
-- leave-one-gait-out: for each gait, a fit on the others (warm-started at the full fit's best
-  point with half its step, `--fold-generations` generations; 0 skips the folds) predicts the
-  held-out gait. An axis that only the held-out gait informs stays at its prior (the base
-  model's value): an element INDEX of a per-actuator field (a tuple of 8) is informed only by
-  gaits that fire actuator A<INDEX>;
+- leave-one-gait-out: for each gait, a fit on the others predicts the held-out gait. With
+  `--folds warm` (the default) the fold starts at the full fit's best point with half its step
+  and runs `--fold-generations` generations (0 skips the folds): cheap, but its start saw the
+  held-out gait. With `--folds cold` each fold is a fit of its own from the search's start
+  (the base model's values, or --start's) at the stage's whole budget (population,
+  generations, restarts, step), about (gaits - 1) / gaits of the stage's fit per held-out gait:
+  nothing in it saw the gait it predicts. An axis that only the held-out gait informs stays at
+  its prior (the base model's value): an element INDEX of a per-actuator field (a tuple of 8)
+  is informed only by gaits that fire actuator A<INDEX>;
 - directions right (training and validation windows), the parameter count k (fitted axes plus
   one phase per gait with `--phases fitted`), χ² = Σ over the gaits of the squared residuals
   (curve samples and the direction residual, weighted as in the fit: as much as a whole
@@ -75,7 +80,8 @@ best point (`fig4c_<candidate>.*`, `fig4b_<candidate>.*`; `fig4c_<candidate>_ref
 the same definition (candidate, settings, model, solver) are read back, not refitted.
 `--reassess` (with `--out`, the same flags as the run it assesses): their fits are read back
 (`done/`: the best point, exact) and everything after the fit is done again with today's code:
-both windows re-simulated and scored, the folds refitted from the best point, Fig. 4c/4b
+both windows re-simulated and scored, the folds refitted (as --folds says: a fit assessed with
+warm folds can be assessed again with cold ones), Fig. 4c/4b
 redrawn; the note names the fit's evaluations and commit. For a change to the assessment that
 leaves the fits as they were (eeefbb8, the strokes read over each window's own cycles); a fit
 whose held phases were read another way (`STROKE_ALIGNMENT`) is made anew.
@@ -87,6 +93,7 @@ to; a candidate that would start after the budget has run out is skipped with a 
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import hashlib
 import json
@@ -132,6 +139,9 @@ QUICK_DT = 5e-3
 pipeline, whose fits simulate whole cycles."""
 PHASE_MODES = ("fitted", "strokes")
 """--phases: each trial's pulse phase fitted, or aligned on the measured strokes (`Setup`)."""
+FOLD_MODES = ("warm", "cold")
+"""--folds: each leave-one-gait-out fit started at the full fit's point, or fitted from the
+search's start at the stage's budget (`FoldPlan`)."""
 PERIOD_MODES = ("nominal", "strokes")
 """--periods: every trial at the nominal pulse period (3.15 s, the file names' 150 + 3000 ms),
 or each at the period its strokes' line gives (`Setup.periods`; with --phases strokes)."""
@@ -254,6 +264,35 @@ def informed_axes(box: Sequence[identify.ParameterRange], base: StarParams,
 # --------------------------------------------------------------------------- evaluation
 
 @dataclasses.dataclass(frozen=True)
+class FoldPlan:
+    """How the leave-one-gait-out folds are fitted (`leave_one_gait_out`): `generations`
+    (--fold-generations; 0: no folds) and `mode` (--folds, `FOLD_MODES`): "warm", each fold
+    from the full fit's best point with half its step, `generations` generations, no restart
+    (cheap, but its start saw the held-out gait); "cold", each fold a fit of its own from the
+    search's start at the stage's whole budget (nothing in it saw the gait it predicts)."""
+    generations: int = DEFAULT_FOLD_GENERATIONS
+    mode: str = "warm"
+
+    def __post_init__(self):
+        if self.generations < 0:
+            raise ValueError(f"fold generations must be >= 0, got {self.generations}")
+        if self.mode not in FOLD_MODES:
+            raise ValueError(f"folds must be one of {', '.join(FOLD_MODES)}, got {self.mode!r}")
+
+    def settings(self, stage: identify.CMASettings) -> identify.CMASettings:
+        """The CMA-ES settings of a fold of a fit made with `stage`."""
+        if self.mode == "cold":
+            return stage
+        return dataclasses.replace(stage, max_generations=self.generations, restarts=0,
+                                   sigma0=stage.sigma0 / 2)
+
+    def start(self, best_units: np.ndarray, start_units: np.ndarray) -> np.ndarray:
+        """Where a fold's search starts (unit coordinates along the whole box): the full fit's
+        best point (warm) or the search's own start (cold)."""
+        return start_units if self.mode == "cold" else best_units
+
+
+@dataclasses.dataclass(frozen=True)
 class Setup:
     """What every evaluation of the study shares."""
     gaits: Tuple[str, ...]
@@ -332,7 +371,7 @@ def evaluate(box, units, model: StarParams, gaits: Sequence[str], setup: Setup) 
 # --------------------------------------------------------------------------- one candidate
 
 def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMASettings,
-                  fold_generations: int, setup: Setup, on_generation=None,
+                  fold_plan: FoldPlan, setup: Setup, on_generation=None,
                   progress: bool = False, start_model: Optional[StarParams] = None) -> dict:
     """Fit one candidate and assess it (module docstring), the search started at
     `start_model`'s values (--start; default the base model's). Returns {"row": the result row
@@ -342,8 +381,8 @@ def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMA
     model = candidate.model(base)
     box = candidate.box(base)
     gaits = list(setup.gaits)
-    start_point = candidate.model(start_model) if start_model is not None else model
-    fit = identify.minimise_cmaes(box, identify.start_units(box, start_point),
+    start_units = search_start(candidate, base, start_model)
+    fit = identify.minimise_cmaes(box, start_units,
                                   lambda u: evaluate(box, u, model, gaits, setup), settings,
                                   progress=progress, on_generation=on_generation)
     evaluations = fit.evaluations
@@ -359,25 +398,29 @@ def fit_candidate(candidate: Candidate, base: StarParams, settings: identify.CMA
                 "best": None, "identified": None}
     units = identify.best_units(evaluations, box)
     values = identify.box_values(box, units)[0]
-    assessed = assess_point(candidate, base, units, values, settings, fold_generations, setup)
+    assessed = assess_point(candidate, base, units, values, settings, fold_plan, setup,
+                            start_units)
     row.update(assessed.pop("row"), fit_time_s=time.perf_counter() - start)
     return {"row": row, "parameters": parameter_table(candidate.name, box, values, fit.unit_std),
             **assessed}
 
 
 def reassess_candidate(candidate: Candidate, base: StarParams, settings: identify.CMASettings,
-                       fold_generations: int, setup: Setup, stored: dict, source: str) -> dict:
+                       fold_plan: FoldPlan, setup: Setup, stored: dict, source: str,
+                       start_model: Optional[StarParams] = None) -> dict:
     """--reassess: a finished fit (`stored`, its done/ record) assessed again at its best point
     (its parameter table's values, exact in JSON) as `fit_candidate` assesses a new one: the
-    windows re-simulated and scored, the folds fitted anew from the point's unit coordinates
-    (`ParameterRange.unit` of its values: equal to the fit's to round-off). The fit's own
-    columns (n_evaluations, fit_time_s, the parameter table) are kept; the note names the fit's
-    `source`."""
+    windows re-simulated and scored, the folds fitted anew as `fold_plan` says: warm, from the
+    point's unit coordinates (`ParameterRange.unit` of its values: equal to the fit's to
+    round-off); cold, from the search's start (`start_model`'s or the base model's values). The
+    fit's own columns (n_evaluations, fit_time_s, the parameter table) are kept; the note names
+    the fit's `source`."""
     parameters = pd.DataFrame(stored["parameters"])
     box = candidate.box(base)
     values = stored_values(box, parameters)
     units = np.array([spec.unit(value) for spec, value in zip(box, values)])
-    assessed = assess_point(candidate, base, units, values, settings, fold_generations, setup)
+    assessed = assess_point(candidate, base, units, values, settings, fold_plan, setup,
+                            search_start(candidate, base, start_model))
     row = {key: stored["row"][key] for key in ("candidate", "fit", "set", "description",
                                                "n_fitted", "n_parameters", "n_gaits",
                                                "n_evaluations", "fit_time_s")}
@@ -386,11 +429,21 @@ def reassess_candidate(candidate: Candidate, base: StarParams, settings: identif
     return {"row": row, "parameters": parameters, **assessed}
 
 
+def search_start(candidate: Candidate, base: StarParams,
+                 start_model: Optional[StarParams] = None) -> np.ndarray:
+    """(D,) unit coordinates along the candidate's box where its search starts: --start's
+    model (`start_model`) or the base model's values."""
+    point = candidate.model(start_model if start_model is not None else base)
+    return identify.start_units(candidate.box(base), point)
+
+
 def assess_point(candidate: Candidate, base: StarParams, units: np.ndarray, values: np.ndarray,
-                 settings: identify.CMASettings, fold_generations: int, setup: Setup) -> dict:
+                 settings: identify.CMASettings, fold_plan: FoldPlan, setup: Setup,
+                 start_units: np.ndarray) -> dict:
     """The assessment of a candidate's best point (units and values (D,) along its box's axes;
-    module docstring): {"row": status, errors, directions, information criteria; "gaits",
-    "folds": tables; "best": the identified StarParams; "identified": its fields}."""
+    module docstring; `start_units` (D,) where its search started, for cold folds):
+    {"row": status, errors, directions, information criteria; "gaits", "folds": tables;
+    "best": the identified StarParams; "identified": its fields}."""
     model = candidate.model(base)
     box = candidate.box(base)
     gaits = list(setup.gaits)
@@ -401,7 +454,8 @@ def assess_point(candidate: Candidate, base: StarParams, units: np.ndarray, valu
     validate = (score(runs, gaits, setup, setup.validate, dict(zip(train["gait"],
                                                                     train["phase_s"])))
                 if train is not None else None)  # strokes: each window its own phases
-    folds = leave_one_gait_out(box, units, model, settings, fold_generations, setup)
+    folds = leave_one_gait_out(box, fold_plan.start(units, start_units), model, settings,
+                               fold_plan, setup)
     n_samples = len(gaits) * (setup.train[1] - setup.train[0] + 1) * \
         identification.SAMPLES_PER_CYCLE
     k = parameter_count(box, setup)
@@ -512,21 +566,22 @@ def parameter_table(name: str, box, values, unit_std) -> pd.DataFrame:
 
 
 def leave_one_gait_out(box, units, model: StarParams, settings: identify.CMASettings,
-                       generations: int, setup: Setup) -> pd.DataFrame:
-    """One row per held-out gait: held_out_gait, n_fold_axes (axes its fold fitted),
-    frozen_axes (left at their prior), fold_move_units (how far the fold's best point lies from
-    its start, the full fit's point, the largest move along an axis in unit coordinates: the
-    fold starts where the fit that saw the held-out gait ended, and a fold that hardly moves
-    predicts with that fit's point), objective (the held-out gait on the training cycles),
+                       fold_plan: FoldPlan, setup: Setup) -> pd.DataFrame:
+    """The folds (`fold_plan`: how they are fitted) of a fit made with `settings`, each started at
+    `units` (D,) along the box (`FoldPlan.start`). One row per held-out gait: held_out_gait,
+    n_fold_axes (axes its fold fitted), frozen_axes (left at their prior), fold_move_units (how
+    far the fold's best point lies from its start, the largest move along an axis in unit
+    coordinates: a warm fold starts where the fit that saw the held-out gait ended, and one
+    that hardly moves predicts with that fit's point), objective (the held-out gait on the
+    training cycles),
     sim_speed_mm_s (signed), meas_speed_mm_s, speed_ratio (|sim| / meas), direction_matches,
     status ("ok"; "failed" where the prediction's run failed; "fit_failed" where every point of
     the fold's fit failed). Every fold's prediction is simulated in one batch."""
     gaits = list(setup.gaits)
-    if generations == 0 or len(gaits) < 2:
+    if fold_plan.generations == 0 or len(gaits) < 2:
         return pd.DataFrame()
     predictions, notes = [], []
-    fold_settings = dataclasses.replace(settings, max_generations=generations, restarts=0,
-                                        sigma0=settings.sigma0 / 2)
+    fold_settings = fold_plan.settings(settings)
     for held_out in gaits:
         fitted = [g for g in gaits if g != held_out]
         informed = informed_axes(box, model, fitted)
@@ -622,12 +677,14 @@ def definition_of(candidate: Candidate, args, settings, base: StarParams,
     phases = ({} if args.phases == "fitted" else
               {"phases": args.phases, "stroke_alignment": STROKE_ALIGNMENT})
     periods = {} if args.periods == "nominal" else {"periods": args.periods}
+    # and --folds (cold folds, added later; every earlier result had warm ones)
+    fold_mode = {} if args.folds == "warm" else {"folds": args.folds}
     text = json.dumps({"candidate": dataclasses.asdict(candidate),
                        "settings": dataclasses.asdict(settings),
                        "fold_generations": args.fold_generations, "gaits": list(gaits),
                        "train": args.train_cycles, "validate": args.validate_cycles,
                        "base": base_changes, "solver": repr(solver), **phases, **periods,
-                       **start},
+                       **fold_mode, **start},
                       sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -638,13 +695,15 @@ def stored_fit_of(done: Path, folder: Path, evaluations: str, candidate: Candida
     """--reassess: a candidate's finished fit, its record `done` (in `folder`/done/), with the
     text naming it (`evaluations`, the CSV of its evaluations in `folder`, and the commit that
     fitted them, from its sidecar where `read_provenance` reads it) if it was fitted as today's
-    run would fit it (its definition today's: `definition_of`), else None (it is fitted
-    anew)."""
+    run would fit it (its definition today's: `definition_of`, whichever --folds it was
+    assessed with, the folds being done again), else None (it is fitted anew)."""
     stored = read_done(done)
     if stored is None or stored["row"].get("status") != "ok":
         return None
-    if stored["row"].get("definition") != definition_of(candidate, args, settings, base, solver,
-                                                        gaits, start_model=start_model):
+    definitions = {definition_of(candidate, argparse.Namespace(**{**vars(args), "folds": mode}),
+                                 settings, base, solver, gaits, start_model=start_model)
+                   for mode in FOLD_MODES}
+    if stored["row"].get("definition") not in definitions:
         return None
     return stored, fit_named(folder, evaluations)
 
@@ -681,20 +740,19 @@ def read_done(done: Path) -> Optional[dict]:
 
 def estimate_seconds(seconds_per_instance_cycle: float,
                      work: Sequence[Tuple[Candidate, identify.CMASettings]],
-                     fold_generations: int, n_gaits: int, train_last: int,
+                     fold_plan: FoldPlan, n_gaits: int, train_last: int,
                      validate_last: int) -> float:
     """Predicted run time (s) of the fits in `work` ((candidate, settings) pairs) from the
     measured cost of one simulated instance-cycle: every generation of every restart, the
-    folds, the assessment runs and the Fig. 4c runs, at each candidate's population."""
+    folds (`fold_plan`: how they are fitted), the assessment runs and the Fig. 4c runs, at each
+    candidate's population."""
     cycles = 0.0
     for candidate, settings in work:
         dimension = len(candidate.fit.split())
-        for restart in range(settings.restarts + 1):
-            cycles += (settings.max_generations * settings.population(dimension, restart)
-                       * n_gaits * train_last)
-        if n_gaits > 1:
-            cycles += (n_gaits * fold_generations * settings.population(dimension, 0)
-                       * (n_gaits - 1) * train_last + n_gaits * train_last)
+        cycles += settings.evaluations(dimension) * n_gaits * train_last
+        if fold_plan.generations and n_gaits > 1:
+            cycles += n_gaits * (fold_plan.settings(settings).evaluations(dimension)
+                                 * (n_gaits - 1) + 1) * train_last
         cycles += n_gaits * validate_last + 5 * train_last
     return cycles * seconds_per_instance_cycle
 
@@ -711,17 +769,18 @@ def planned_work(runnable: Sequence[Candidate], settings: identify.CMASettings,
 
 
 def planned_instances(work: Sequence[Tuple[Candidate, identify.CMASettings]],
-                      fold_generations: int, n_gaits: int) -> int:
+                      fold_plan: FoldPlan, n_gaits: int) -> int:
     """The instances the fits in `work` (`planned_work`) simulate at most, for the cap on a
     study's work (`cli.check_instances`): every generation of every restart on every gait,
-    and with folds (`leave_one_gait_out`) each held-out gait's fit of fold_generations on the
-    others and its prediction; the assessment's runs of the best point aside (a few per fit)."""
+    and with folds (`leave_one_gait_out`, fitted as `fold_plan` says) each held-out gait's fit on
+    the others and its prediction; the assessment's runs of the best point aside (a few per
+    fit)."""
     instances = 0
     for candidate, settings in work:
         dimension = len(candidate.fit.split())
         instances += settings.evaluations(dimension) * n_gaits
-        if fold_generations and n_gaits > 1:
-            instances += n_gaits * (fold_generations * settings.population(dimension, 0)
+        if fold_plan.generations and n_gaits > 1:
+            instances += n_gaits * (fold_plan.settings(settings).evaluations(dimension)
                                     * (n_gaits - 1) + 1)
     return instances
 
@@ -776,7 +835,13 @@ def build_parser():
                         quick=QUICK_MAX_GENERATIONS, help="generations per CMA-ES run, >= 1")
     parser.add_argument("--fold-generations", type=int, default=DEFAULT_FOLD_GENERATIONS,
                         quick=QUICK_FOLD_GENERATIONS,
-                        help="generations of each leave-one-gait-out fit (0: no folds)")
+                        help="generations of each leave-one-gait-out fit with --folds warm "
+                             "(0: no folds, with either --folds)")
+    parser.add_argument("--folds", choices=FOLD_MODES, default="warm",
+                        help="warm: each fold starts at the full fit's best point with half its "
+                             "step (cheap; its start saw the held-out gait); cold: each fold is "
+                             "a fit of its own from the search's start at the stage's budget "
+                             "(default warm)")
     parser.add_argument("--refine-top", type=int, default=DEFAULT_REFINE_TOP,
                         quick=QUICK_REFINE_TOP,
                         help="refit the K best screened forms at the refine budget (0: no "
@@ -841,6 +906,7 @@ def main(argv=None):
     if args.fold_generations < 0:
         raise cli.StudyArgumentError(f"--fold-generations must be >= 0, got "
                                      f"{args.fold_generations}")
+    fold_plan = FoldPlan(args.fold_generations, args.folds)
     cli.check_positive(args.budget_hours, "--budget-hours")
     if args.reassess:
         if args.resume:
@@ -890,12 +956,15 @@ def main(argv=None):
                                      f" {rows[0]['note']})")
     cli.check_instances(
         planned_instances(planned_work(runnable, settings, refine_settings, args.refine_top),
-                          args.fold_generations, len(gaits)),
+                          fold_plan, len(gaits)),
         f"{len(runnable)} candidate(s) × {len(gaits)} gait(s) × --max-generations "
         f"{settings.max_generations} × --popsize {settings.popsize} (doubled at each of "
-        f"--restarts {settings.restarts}), with --fold-generations {args.fold_generations} per "
-        f"held-out gait and the --refine-top {args.refine_top} refitted at --refine-generations "
-        f"{refine_settings.max_generations} × --refine-popsize {refine_settings.popsize}")
+        f"--restarts {settings.restarts}), with "
+        + (f"--fold-generations {args.fold_generations}" if args.folds == "warm"
+           else "--folds cold (a whole fit)")
+        + f" per held-out gait and the --refine-top {args.refine_top} refitted at "
+        f"--refine-generations {refine_settings.max_generations} × --refine-popsize "
+        f"{refine_settings.popsize}")
     trials = identification.measured_trials(gaits)
     identify.check_trials_cover(trials, validate, args.validate_cycles)
     last_cycle = max(train[1], validate[1])
@@ -925,6 +994,7 @@ def main(argv=None):
                                            "refine_top": args.refine_top,
                                            "refine_cma": dataclasses.asdict(refine_settings),
                                            "fold_generations": args.fold_generations,
+                                           "folds": args.folds,
                                            "phases": args.phases, "periods": args.periods,
                                            "stroke_alignment": STROKE_ALIGNMENT,
                                            "budget_hours": args.budget_hours,
@@ -1001,7 +1071,7 @@ def main(argv=None):
             if timing["generations"] <= 2:  # the first compiles; the second is steady
                 points = len(table) // timing["generations"]
                 per = seconds / (points * len(gaits) * train[1])
-                estimate = estimate_seconds(per, work_left, args.fold_generations, len(gaits),
+                estimate = estimate_seconds(per, work_left, fold_plan, len(gaits),
                                             train[1], validate[1])
                 print(f"{label}: generation {timing['generations']} took {seconds:.1f} s "
                       f"({points} points x {len(gaits)} gaits x {train[1]} cycles"
@@ -1012,10 +1082,10 @@ def main(argv=None):
 
         if stored_fit is not None:
             print(f"{label}: assessed again, the fit read back from {stored_fit[1]}")
-            result = reassess_candidate(candidate, base, stage_settings, args.fold_generations,
-                                        setup, *stored_fit)
+            result = reassess_candidate(candidate, base, stage_settings, fold_plan, setup,
+                                        *stored_fit, start_model=start_model)
         else:
-            result = fit_candidate(candidate, base, stage_settings, args.fold_generations,
+            result = fit_candidate(candidate, base, stage_settings, fold_plan,
                                    setup, on_generation=on_generation, progress=progress,
                                    start_model=start_model)
         first_fit_done = True

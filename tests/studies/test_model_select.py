@@ -17,7 +17,7 @@ from taichi_star.experiment import EXPERIMENT_PERIOD_S
 from taichi_star.provenance import table_stamp
 from taichi_star.timegrid import nearest_interval
 
-from studies import identify, model_select
+from studies import cli, identify, model_select
 from studies.__main__ import main as studies_main
 
 QUICK = ["--quick", "--no-progress"]
@@ -86,7 +86,7 @@ def test_a_resumed_candidate_is_reused_only_for_the_same_model(monkeypatch):
     changed coefficient does, and so do phases held on the strokes."""
     candidate = model_select.Candidate("paper", "", "alpha=0.2:1.5 cylinder_drag=1:100:log")
     args = types.SimpleNamespace(fold_generations=2, train_cycles="1:3", validate_cycles="4:6",
-                                 phases="fitted", periods="nominal")
+                                 phases="fitted", periods="nominal", folds="warm")
     settings, solver = identify.CMASettings(), SolverConfig()
     base = StarParams.preset("paper")
 
@@ -107,6 +107,9 @@ def test_a_resumed_candidate_is_reused_only_for_the_same_model(monkeypatch):
     assert definition(base) != held
     args.phases, args.periods = "fitted", "nominal"
     assert definition(base) == fitted
+    # cold folds assess another way: their results are not the warm folds'
+    args.folds = "cold"
+    assert definition(base) != fitted
 
 
 def test_held_phases_refuse_a_trial_whose_strokes_lie_on_no_period_or_end_too_soon():
@@ -446,7 +449,7 @@ class StoredFit:
                                                 "alpha=0.2:1.5 cylinder_drag=1:100:log")
         self.args = types.SimpleNamespace(fold_generations=2, train_cycles="1:3",
                                           validate_cycles="4:6", phases="strokes",
-                                          periods="nominal")
+                                          periods="nominal", folds="warm")
         self.settings, self.solver = identify.CMASettings(), SolverConfig()
         self.base = StarParams.preset("paper")
         self.done = folder / "done" / "paper.json"
@@ -492,6 +495,16 @@ def test_a_stored_fit_is_reassessed_only_if_fitted_as_today(tmp_path, monkeypatc
     earlier = definition()
     args.fold_generations = 3  # today's run would assess with other folds
     assert stored(earlier) is None
+    # but --folds is the assessment's alone: a fit assessed with warm folds is reassessed with
+    # cold ones, and one assessed with cold folds with warm ones, without fitting it again
+    args.fold_generations = 2
+    args.folds = "cold"
+    assert definition() != earlier
+    assert stored(earlier) is not None
+    assert stored(definition()) is not None
+    cold = definition()
+    args.folds = "warm"
+    assert stored(cold) is not None
 
 
 def test_a_reassessed_fit_is_named_without_a_commit_its_sidecar_no_longer_vouches_for(
@@ -546,14 +559,14 @@ def test_start_reads_an_identified_table_and_moves_only_the_search_start(tmp_pat
     setup = types.SimpleNamespace(gaits=("A1+A4",))
     for start_model, expected in ((None, base), (start, start)):
         with pytest.raises(Stop):
-            model_select.fit_candidate(candidate, base, identify.CMASettings(), 0, setup,
-                                       start_model=start_model)
+            model_select.fit_candidate(candidate, base, identify.CMASettings(),
+                                       model_select.FoldPlan(0), setup, start_model=start_model)
         np.testing.assert_array_equal(seen["start"], [box[0].unit(expected.alpha),
                                                       box[1].unit(expected.actuator_gains[3])])
     # the fitted start is not the prior: A4's unit coordinate moved from 1 to ~1.99
     assert box[1].unit(start.actuator_gains[3]) > box[1].unit(base.actuator_gains[3])
     args = types.SimpleNamespace(fold_generations=2, train_cycles="1:3", validate_cycles="4:6",
-                                 phases="fitted", periods="nominal")
+                                 phases="fitted", periods="nominal", folds="warm")
 
     def definition(start_model):
         return model_select.definition_of(candidate, args, identify.CMASettings(), base,
@@ -646,14 +659,122 @@ def test_a_failed_held_out_prediction_counts_and_is_named(monkeypatch):
     monkeypatch.setattr(model_select, "score", lambda *args, **kwargs: per_gait)
     monkeypatch.setattr(model_select, "leave_one_gait_out", lambda *args: folds)
     row = model_select.assess_point(candidate, StarParams(), np.array([0.5, 0.5]),
-                                    np.array([0.8, 10.0]), identify.CMASettings(), 2,
-                                    setup)["row"]
+                                    np.array([0.8, 10.0]), identify.CMASettings(),
+                                    model_select.FoldPlan(2), setup, np.array([0.4, 0.4]))["row"]
     assert row["logo_objective"] == math.inf
     assert row["note"] == "held-out prediction failed: A1+A2"
     assert (row["logo_directions_right"], row["logo_within_35pct"], row["n_folds"]) == (2, 1, 3)
     every_fold_ok = folds.drop(index=1)
     monkeypatch.setattr(model_select, "leave_one_gait_out", lambda *args: every_fold_ok)
     row = model_select.assess_point(candidate, StarParams(), np.array([0.5, 0.5]),
-                                    np.array([0.8, 10.0]), identify.CMASettings(), 2,
-                                    setup)["row"]
+                                    np.array([0.8, 10.0]), identify.CMASettings(),
+                                    model_select.FoldPlan(2), setup, np.array([0.4, 0.4]))["row"]
     assert (row["logo_objective"], row["note"]) == (5.0, "")
+
+
+@pytest.mark.parametrize("stage", [identify.CMASettings(popsize=6, max_generations=8, restarts=1,
+                                                        seed=3, sigma0=0.25)])
+def test_a_fold_plan_gives_each_fold_its_start_and_budget(stage):
+    """Warm folds: the full fit's best point, half its step, --fold-generations generations, no
+    restart, its population and seed; cold folds: the search's start at the stage's own
+    settings. 0 generations (no folds) is allowed, -1 and an unknown mode are not."""
+    best, start = np.array([0.7, 0.2]), np.array([0.5, 0.5])
+    warm = model_select.FoldPlan(2, "warm")
+    assert warm.settings(stage) == identify.CMASettings(popsize=6, max_generations=2, restarts=0,
+                                                        seed=3, sigma0=0.125)
+    assert warm.start(best, start) is best
+    cold = model_select.FoldPlan(2, "cold")
+    assert cold.settings(stage) == stage
+    assert cold.start(best, start) is start
+    assert model_select.FoldPlan(0).generations == 0
+    with pytest.raises(ValueError, match="fold generations must be >= 0, got -1"):
+        model_select.FoldPlan(-1)
+    with pytest.raises(ValueError, match="folds must be one of warm, cold, got 'hot'"):
+        model_select.FoldPlan(2, "hot")
+
+
+@pytest.mark.parametrize("mode", model_select.FOLD_MODES)
+def test_each_fold_searches_from_its_plan_s_start_along_its_informed_axes(monkeypatch, mode):
+    """leave_one_gait_out hands each fold's search the start it is given (`FoldPlan.start`),
+    cut to the axes its gaits inform, with `FoldPlan.settings`: the fold without A1+A4 leaves
+    A4's gain out; a fold whose every point failed is recorded so, not predicted."""
+    base = StarParams.preset("paper")
+    candidate = model_select.Candidate("g", "", "alpha=0.2:1.5 actuator_gains[4]=0.3:2")
+    box = candidate.box(base)
+    stage = identify.CMASettings(popsize=4, max_generations=3, restarts=1, seed=2)
+    plan = model_select.FoldPlan(1, mode)
+    searches = []
+
+    def search(fold_box, start, objective, settings):
+        searches.append(([spec.label for spec in fold_box], start, settings))
+        return types.SimpleNamespace(evaluations=pd.DataFrame({"objective": [math.inf]}))
+    monkeypatch.setattr(identify, "minimise_cmaes", search)
+    monkeypatch.setattr(model_select, "simulate_points", lambda params, last, setup: [None] * 2)
+    setup = model_select.Setup(gaits=("A1", "A1+A4"), trials={}, train=(1, 1), validate=(2, 2),
+                               run_kwargs={}, record_interval_s=0.1)
+    units = np.array([0.3, 0.9])
+    folds = model_select.leave_one_gait_out(box, units, candidate.model(base), stage, plan,
+                                            setup)
+    assert list(folds["held_out_gait"]) == ["A1", "A1+A4"]
+    assert list(folds["status"]) == ["fit_failed", "fit_failed"]
+    assert list(folds["frozen_axes"]) == ["", box[1].label]
+    assert [labels for labels, _, _ in searches] == [[box[0].label, box[1].label],
+                                                     [box[0].label]]
+    np.testing.assert_array_equal(searches[0][1], units)
+    np.testing.assert_array_equal(searches[1][1], units[:1])
+    assert all(settings == plan.settings(stage) for _, _, settings in searches)
+
+
+def test_cold_folds_are_counted_as_whole_fits():
+    """The work a run plans (the instance cap) and its estimate count a cold fold as a fit of
+    the stage's budget on the other gaits, a warm one as its generations at the first
+    population; no folds with 0 generations or one gait."""
+    candidate = model_select.Candidate("c", "", "alpha=0.2:1.5 cylinder_drag=1:100:log")
+    stage = identify.CMASettings(popsize=4, max_generations=3, restarts=1)
+    work = [(candidate, stage)]
+    fit = (3 * 4 + 3 * 8) * 3  # every generation of both runs, on three gaits
+    warm = 3 * (2 * 4 * 2 + 1)  # per held-out gait: 2 generations of 4 on two gaits, + 1
+    cold = 3 * ((3 * 4 + 3 * 8) * 2 + 1)
+    for mode, folds in (("warm", warm), ("cold", cold)):
+        plan = model_select.FoldPlan(2, mode)
+        assert model_select.planned_instances(work, plan, 3) == fit + folds
+        # the estimate: the same instances over 3 training cycles, then the assessment's 3
+        # gaits over 6 cycles and 5 Fig. 4c gaits over 3, at 1 s per instance-cycle
+        assert model_select.estimate_seconds(1.0, work, plan, 3, 3, 6) == \
+            3 * (fit + folds) + 3 * 6 + 5 * 3
+    for plan, gaits in ((model_select.FoldPlan(0, "cold"), 3), (model_select.FoldPlan(2), 1)):
+        assert model_select.planned_instances(work, plan, gaits) == fit // 3 * gaits
+
+
+def test_a_cold_fold_is_the_fit_on_the_other_gaits_from_the_start(tmp_path):
+    """--folds cold: the fold that holds A1+A2 out is the fit a run on A1+A4 alone makes (the
+    same start, settings and seed), so it moves from the start exactly as far as that fit's
+    best point lies from it; the run records its folds; --reassess --folds warm of it fits
+    nothing again and gives the warm folds of a fresh warm run."""
+    common = ["--only", "paper", "--refine-top", "0", *QUICK]
+    cold_dir, alone_dir, warm_dir = tmp_path / "cold", tmp_path / "alone", tmp_path / "warm"
+    model_select.main(["--out", str(cold_dir), "--folds", "cold", *common])
+    model_select.main(["--out", str(alone_dir), "--gaits", "A1+A4", *common])
+    folds = pd.read_csv(cold_dir / "model_select_folds.csv").set_index("held_out_gait")
+    assert set(folds.index) == {"A1+A2", "A1+A4"} and (folds["status"] == "ok").all()
+    alone = pd.read_csv(alone_dir / "model_select_parameters.csv")
+    base = StarParams.preset("paper")
+    candidate = model_select.select_candidates(
+        cli.parse(model_select.build_parser(), ["--quick", "--only", "paper"]))[0]
+    box = candidate.box(base)
+    values = model_select.stored_values(box, alone)
+    start = model_select.search_start(candidate, base)
+    move = max(abs(spec.unit(value) - u) for spec, value, u in zip(box, values, start))
+    # the CSVs keep 10 significant digits (5e-10 relative each); a fold started elsewhere or
+    # with other settings moves by another amount altogether
+    assert folds.loc["A1+A2", "fold_move_units"] == pytest.approx(move, rel=2e-9)
+    sidecar = json.loads((cold_dir / "model_select.csv.json").read_text())
+    assert sidecar["details"]["folds"] == "cold"
+    model_select.main(["--out", str(warm_dir), *common])
+    cold_row = pd.read_csv(cold_dir / "model_select.csv").iloc[0]
+    warm_row = pd.read_csv(warm_dir / "model_select.csv").iloc[0]
+    assert cold_row["definition"] != warm_row["definition"]
+    assert cold_row["train_objective"] == warm_row["train_objective"]  # the same fit
+    model_select.main(["--out", str(cold_dir), "--reassess", *common])
+    pd.testing.assert_frame_equal(pd.read_csv(cold_dir / "model_select_folds.csv"),
+                                  pd.read_csv(warm_dir / "model_select_folds.csv"), rtol=1e-6)
