@@ -672,12 +672,11 @@ def test_a_failed_held_out_prediction_counts_and_is_named(monkeypatch):
     assert (row["logo_objective"], row["note"]) == (5.0, "")
 
 
-@pytest.mark.parametrize("stage", [identify.CMASettings(popsize=6, max_generations=8, restarts=1,
-                                                        seed=3, sigma0=0.25)])
-def test_a_fold_plan_gives_each_fold_its_start_and_budget(stage):
+def test_a_fold_plan_gives_each_fold_its_start_and_budget():
     """Warm folds: the full fit's best point, half its step, --fold-generations generations, no
     restart, its population and seed; cold folds: the search's start at the stage's own
     settings. 0 generations (no folds) is allowed, -1 and an unknown mode are not."""
+    stage = identify.CMASettings(popsize=6, max_generations=8, restarts=1, seed=3, sigma0=0.25)
     best, start = np.array([0.7, 0.2]), np.array([0.5, 0.5])
     warm = model_select.FoldPlan(2, "warm")
     assert warm.settings(stage) == identify.CMASettings(popsize=6, max_generations=2, restarts=0,
@@ -694,10 +693,11 @@ def test_a_fold_plan_gives_each_fold_its_start_and_budget(stage):
 
 
 @pytest.mark.parametrize("mode", model_select.FOLD_MODES)
-def test_each_fold_searches_from_its_plan_s_start_along_its_informed_axes(monkeypatch, mode):
-    """leave_one_gait_out hands each fold's search the start it is given (`FoldPlan.start`),
-    cut to the axes its gaits inform, with `FoldPlan.settings`: the fold without A1+A4 leaves
-    A4's gain out; a fold whose every point failed is recorded so, not predicted."""
+def test_each_fold_searches_from_its_start_along_its_informed_axes(monkeypatch, mode):
+    """leave_one_gait_out hands each fold's search the start it is given, cut to the axes its
+    gaits inform, with the plan's settings (warm: 1 generation, no restart, half the step;
+    cold: the stage's): the fold without A1+A4 leaves A4's gain out; a fold whose every point
+    failed is recorded so, not predicted."""
     base = StarParams.preset("paper")
     candidate = model_select.Candidate("g", "", "alpha=0.2:1.5 actuator_gains[4]=0.3:2")
     box = candidate.box(base)
@@ -722,7 +722,66 @@ def test_each_fold_searches_from_its_plan_s_start_along_its_informed_axes(monkey
                                                      [box[0].label]]
     np.testing.assert_array_equal(searches[0][1], units)
     np.testing.assert_array_equal(searches[1][1], units[:1])
-    assert all(settings == plan.settings(stage) for _, _, settings in searches)
+    expected = (stage if mode == "cold" else
+                identify.CMASettings(popsize=4, max_generations=1, restarts=0, seed=2,
+                                     sigma0=0.125))
+    assert all(settings == expected for _, _, settings in searches)
+
+
+@pytest.mark.parametrize("mode", model_select.FOLD_MODES)
+def test_the_folds_start_at_the_best_point_warm_and_at_the_search_s_start_cold(monkeypatch,
+                                                                               mode):
+    """assess_point gives the folds the best point (warm) or the search's start (cold), and
+    --reassess's search start is --start's model where given, else the base model's."""
+    candidate = model_select.Candidate("c", "", "alpha=0.2:1.5 cylinder_drag=1:100:log")
+    setup = types.SimpleNamespace(gaits=("A1", "A1+A2"), train=(1, 1), validate=(2, 2),
+                                  strokes=None)
+    per_gait = pd.DataFrame({"gait": list(setup.gaits), "objective": [1.0, 2.0],
+                             "phase_s": 0.0, "direction_matches": True})
+    handed = []
+    monkeypatch.setattr(model_select, "simulate_points", lambda params, last, setup: [None] * 2)
+    monkeypatch.setattr(model_select, "score", lambda *args, **kwargs: per_gait)
+    monkeypatch.setattr(model_select, "leave_one_gait_out",
+                        lambda box, units, *args: handed.append(units) or pd.DataFrame())
+    best, start = np.array([0.7, 0.2]), np.array([0.5, 0.5])
+    plan = model_select.FoldPlan(2, mode)
+    model_select.assess_point(candidate, StarParams(), best, np.array([0.8, 10.0]),
+                              identify.CMASettings(), plan, setup, start)
+    assert handed.pop() is (start if mode == "cold" else best)
+    base = StarParams.preset("paper")
+    box = candidate.box(base)
+    elsewhere = base.replace(alpha=1.2, cylinder_drag=30.0)
+    stored = {"parameters": model_select.parameter_table("c", box, [0.9, 20.0], [0.1, 0.1]),
+              "row": {key: 0 for key in ("candidate", "fit", "set", "description", "n_fitted",
+                                         "n_parameters", "n_gaits", "n_evaluations",
+                                         "fit_time_s")}}
+    for start_model, point in ((None, base), (elsewhere, elsewhere)):
+        model_select.reassess_candidate(candidate, base, identify.CMASettings(), plan, setup,
+                                        stored, "fits/c.csv", start_model=start_model)
+        reached = handed.pop()
+        if mode == "cold":
+            np.testing.assert_array_equal(reached, [box[0].unit(point.alpha),
+                                                    box[1].unit(point.cylinder_drag)])
+        else:  # the stored best point, recovered from its values
+            np.testing.assert_allclose(reached, [box[0].unit(0.9), box[1].unit(20.0)])
+
+
+def test_the_definitions_of_committed_fits_are_today_s():
+    """A committed fit's definition recomputed from its run's flags (warm folds, the default)
+    equals the one it was stored with: a change to what a definition hashes would make every
+    stored fit one that --resume and --reassess fit again."""
+    from pathlib import Path
+    folder = (Path(__file__).resolve().parents[2] / "results" / "model_select_onsets" / "seeds"
+              / "paper_seed4")
+    command = json.loads((folder / "model_select.csv.json").read_text())["command"].split()
+    args = cli.parse(model_select.build_parser(), command[command.index("model_select") + 1:])
+    settings = identify.CMASettings(popsize=args.popsize, max_generations=args.max_generations,
+                                    restarts=args.restarts, seed=args.seed, sigma0=args.sigma0)
+    candidate = model_select.select_candidates(args)[0]
+    stored = json.loads((folder / "done" / f"{candidate.name}.json").read_text())
+    assert model_select.definition_of(
+        candidate, args, settings, cli.base_params(args), cli.solver(args),
+        identify.measured_gaits(args.gaits)) == stored["row"]["definition"]
 
 
 def test_cold_folds_are_counted_as_whole_fits():
@@ -776,5 +835,7 @@ def test_a_cold_fold_is_the_fit_on_the_other_gaits_from_the_start(tmp_path):
     assert cold_row["definition"] != warm_row["definition"]
     assert cold_row["train_objective"] == warm_row["train_objective"]  # the same fit
     model_select.main(["--out", str(cold_dir), "--reassess", *common])
+    assert pd.read_csv(cold_dir / "model_select.csv")["note"].iloc[0].startswith(
+        "assessed again (--reassess), the fit read back from fits/paper.csv")
     pd.testing.assert_frame_equal(pd.read_csv(cold_dir / "model_select_folds.csv"),
                                   pd.read_csv(warm_dir / "model_select_folds.csv"), rtol=1e-6)
