@@ -567,16 +567,16 @@ def parameter_table(name: str, box, values, unit_std) -> pd.DataFrame:
 
 def leave_one_gait_out(box, units, model: StarParams, settings: identify.CMASettings,
                        fold_plan: FoldPlan, setup: Setup) -> pd.DataFrame:
-    """The folds (`fold_plan`: how they are fitted) of a fit made with `settings`, each started at
-    `units` (D,) along the box (`FoldPlan.start`). One row per held-out gait: held_out_gait,
-    n_fold_axes (axes its fold fitted), frozen_axes (left at their prior), fold_move_units (how
-    far the fold's best point lies from its start, the largest move along an axis in unit
-    coordinates: a warm fold starts where the fit that saw the held-out gait ended, and one
-    that hardly moves predicts with that fit's point), objective (the held-out gait on the
-    training cycles),
-    sim_speed_mm_s (signed), meas_speed_mm_s, speed_ratio (|sim| / meas), direction_matches,
-    status ("ok"; "failed" where the prediction's run failed; "fit_failed" where every point of
-    the fold's fit failed). Every fold's prediction is simulated in one batch."""
+    """The folds (`fold_plan`: how they are fitted) of a fit made with `settings`, each
+    started at `units` (D,) along the box (`FoldPlan.start`). One row per held-out gait:
+    held_out_gait, n_fold_axes (axes its fold fitted), frozen_axes (left at their prior),
+    fold_move_units (how far the fold's best point lies from its start, the largest move along
+    an axis in unit coordinates: a warm fold starts where the fit that saw the held-out gait
+    ended, and one that hardly moves predicts with that fit's point), objective (the held-out
+    gait on the training cycles), sim_speed_mm_s (signed), meas_speed_mm_s, speed_ratio
+    (|sim| / meas), direction_matches, status ("ok"; "failed" where the prediction's run
+    failed; "fit_failed" where every point of the fold's fit failed). Every fold's prediction
+    is simulated in one batch."""
     gaits = list(setup.gaits)
     if fold_plan.generations == 0 or len(gaits) < 2:
         return pd.DataFrame()
