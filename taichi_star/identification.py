@@ -604,9 +604,9 @@ def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
     move rises to the period's onset (≥, from below it at the sample before), `onset_share` of
     the way from the typical move to the period's farthest (`STROKE_ONSET_SHARE`, halfway;
     `Strokes.cycle_onsets_mm`), in a period whose farthest is at least `min_jump_ratio` times
-    the typical move (≥; `STROKE_MIN_JUMP_RATIO`; 1 takes every period's). The path's first window rises to it only
-    `from_rest` (a simulation from rest: nothing moved before it); a track's does not (what
-    moved before it is not known). ValueError for a window outside (0, T/2], a tolerance
+    the typical move (≥; `STROKE_MIN_JUMP_RATIO`; 1 takes every period's). The path's first
+    window rises to it only `from_rest` (a simulation from rest: nothing moved before it); a
+    track's does not (what moved before it is not known). ValueError for a window outside (0, T/2], a tolerance
     outside [0, T/2], a `from_rest` that is not a flag, a `min_jump_ratio` not a finite number
     ≥ 1, an `onset_share` outside (0, 1), a path shorter than one period and one window, or
     one with a gap between samples longer than the window (a period's farthest move would be
