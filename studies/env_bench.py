@@ -14,8 +14,7 @@ robot_seconds_per_s, robot_steps_per_s, cores, load_average_1min (before the run
 arch) with its provenance sidecar (`.csv.json`) into --out (default a fresh
 runs/env_bench/<timestamp>/). robot_steps_per_s counts steps of dt_s, so it is NaN for a solver
 with adaptive steps (the accurate preset's), which take steps of their own length: counted in
-1-ms steps it was about 11 times the steps taken (an audit, 2026-12; results/env_bench.csv,
-written before, still holds such a figure for the accurate rows, quoted nowhere).
+1-ms steps it was about 11 times the steps taken (an audit, 2026-12).
 
 --quick: 4 environments, one 0.2-s step at dt = 5 ms.
 """
