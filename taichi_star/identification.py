@@ -606,11 +606,11 @@ def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
     `Strokes.cycle_onsets_mm`), in a period whose farthest is at least `min_jump_ratio` times
     the typical move (≥; `STROKE_MIN_JUMP_RATIO`; 1 takes every period's). The path's first
     window rises to it only `from_rest` (a simulation from rest: nothing moved before it); a
-    track's does not (what moved before it is not known). ValueError for a window outside (0, T/2], a tolerance
-    outside [0, T/2], a `from_rest` that is not a flag, a `min_jump_ratio` not a finite number
-    ≥ 1, an `onset_share` outside (0, 1), a path shorter than one period and one window, or
-    one with a gap between samples longer than the window (a period's farthest move would be
-    read across it)."""
+    track's does not (what moved before it is not known). ValueError for a window outside
+    (0, T/2], a tolerance outside [0, T/2], a `from_rest` that is not a flag, a
+    `min_jump_ratio` not a finite number ≥ 1, an `onset_share` outside (0, 1), a path shorter
+    than one period and one window, or one with a gap between samples longer than the window
+    (a period's farthest move would be read across it)."""
     period = path.period_s
     if not (is_real(window_s) and math.isfinite(window_s) and 0 < window_s <= period / 2):
         raise ValueError(f"window_s must be in (0, {period / 2:g}] s (half the period), got "
