@@ -21,17 +21,18 @@ import os
 import sys
 import threading
 import time
+from collections import deque
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
-from typing import Iterator, Optional, Protocol, Sequence
+from typing import Deque, Dict, Iterator, List, Optional, Protocol, Sequence, Tuple
 
 from ..checks import is_whole
 from .tasks import ChunkResult, ChunkTask, run_chunk
 
 DEFAULT_RETRIES = 2
-"""Extra tries after a worker process died (a chunk that raises is not retried: its error is
-deterministic): per chunk on a Dask cluster, per run with `LocalProcesses`, whose pool cannot
-tell which chunk a death came from."""
+"""Extra tries of a chunk after a worker process running it died (a chunk that raises is not
+retried: its error is deterministic), on a Dask cluster and with `LocalProcesses` (there the
+deaths of a chunk running alone, `LocalProcesses`)."""
 MAX_LOCAL_WORKERS = 256
 """The most local worker processes: each is a process with a single-threaded Taichi runtime
 (some 200 MB), so more than one per core only competes for the cores; 256 is 16 times the most
@@ -125,14 +126,19 @@ def check_main_guard():
 class LocalProcesses:
     """`n_workers` worker processes on this machine, started on first use with the "spawn" start
     method (a fresh interpreter: no Taichi state is inherited), each configured by
-    `configure_worker_process`. A worker that dies costs the unfinished chunks (the pool
-    breaks as a whole): the pool is restarted and they are resubmitted, up to `retries` times
-    in the whole run, not per chunk (three deaths on three chunks, or one chunk that always
-    kills its worker, stop the run, its finished chunks kept in a run_dir; a Dask cluster
-    retries each chunk on its own and names the one whose worker died: an audit, 2026-12).
-    Shut down by
-    `shutdown`, at the end of a `with` block, or at interpreter exit; stopped at once by
+    `configure_worker_process`. A worker that dies breaks the whole pool, which cannot tell
+    whose chunk killed it, so the rest of the run goes on isolated: `n_workers` pools of one
+    worker each, one chunk at a time, where a death is its chunk's alone. A chunk whose worker
+    died more than `retries` times there is given up: the others run to the end (kept in a
+    run_dir), then a RuntimeError names it. (Until 2026-12 the deaths counted for the whole
+    run: three on three chunks, or one chunk that always killed its worker, stopped it at once,
+    naming no chunk: an audit.) Shut down
+    by `shutdown`, at the end of a `with` block, or at interpreter exit; stopped at once by
     `terminate`, which an error or an interrupt during `run` or in the `with` block calls."""
+
+    chunk_function = staticmethod(run_chunk)
+    """What a worker runs on each task (`tasks.run_chunk`; a module-level function, which a
+    worker imports by name)."""
 
     def __init__(self, n_workers: int, retries: int = DEFAULT_RETRIES):
         if not is_whole(n_workers) or not 1 <= n_workers <= MAX_LOCAL_WORKERS:
@@ -143,13 +149,18 @@ class LocalProcesses:
         self.n_workers = int(n_workers)
         self.retries = int(retries)
         self._pool: Optional[concurrent.futures.ProcessPoolExecutor] = None
+        """The shared pool of `n_workers` workers."""
+        self._isolated: List[Optional[concurrent.futures.ProcessPoolExecutor]] = []
+        """After a death, the pools of one worker each (None where none runs)."""
         self._started = False
         """Whether a pool has started (its workers imported the main script)."""
 
-    def _start(self):
+    def _new_pool(self, n_workers: int) -> concurrent.futures.ProcessPoolExecutor:
+        """A pool of `n_workers` spawned workers; the first pool of this executor is tried
+        with a task that does nothing before any chunk runs."""
         check_main_guard()
-        self._pool = concurrent.futures.ProcessPoolExecutor(
-            self.n_workers, mp_context=multiprocessing.get_context("spawn"),
+        pool = concurrent.futures.ProcessPoolExecutor(
+            n_workers, mp_context=multiprocessing.get_context("spawn"),
             initializer=configure_worker_process, initargs=(os.getpid(),))
         atexit.register(self.shutdown)
         # a worker re-imports the main script: where that fails (code after the guard that
@@ -157,44 +168,25 @@ class LocalProcesses:
         # memory (an audit); a task that does nothing tells that apart before any chunk runs,
         # once (a restart after a worker died has imported the script before)
         if self._started:
-            return
+            return pool
         try:
-            self._pool.submit(int).result()
+            pool.submit(int).result()
             self._started = True
         except BrokenProcessPool:
-            self.shutdown()
+            pool.shutdown(wait=True, cancel_futures=True)
             path = getattr(sys.modules.get("__main__"), "__file__", "the main script")
             raise RuntimeError(f"worker processes could not start: each re-imports {path}, and "
                                f"that failed (a worker's traceback is above); its code outside "
                                f"the 'if __name__ == \"__main__\":' guard must run in a fresh "
                                f"process") from None
+        return pool
 
     def run(self, tasks: Sequence[ChunkTask], progress: bool = False) -> Iterator[ChunkResult]:
         pending = {task.index: task for task in tasks}
-        tries = 0
         try:
-            while pending:
-                if self._pool is None:
-                    self._start()
-                futures = {self._pool.submit(run_chunk, task): index
-                           for index, task in pending.items()}
-                try:
-                    for future in concurrent.futures.as_completed(futures):
-                        result = future.result()
-                        del pending[futures[future]]
-                        yield result
-                except BrokenProcessPool:
-                    self.shutdown()
-                    tries += 1
-                    if tries > self.retries:
-                        # the deaths are the pool's, not a chunk's: any of the chunks left may
-                        # have caused them (a Dask cluster names the chunk whose worker died)
-                        left = ", ".join(str(index) for index in sorted(pending)[:10])
-                        raise RuntimeError(f"worker processes died {tries} times in this run "
-                                           f"(out of memory or killed?), with {len(pending)} "
-                                           f"chunk(s) not done (chunk "
-                                           f"{left}{' ...' if len(pending) > 10 else ''}); "
-                                           f"giving up") from None
+            yield from self._run_shared(pending)
+            if pending:
+                yield from self._run_isolated(pending)
         except BaseException:
             # an error, an interrupt (Ctrl-C; a notebook's "interrupt kernel" signals this
             # process alone) or a caller that closed this generator: the running chunks'
@@ -203,28 +195,86 @@ class LocalProcesses:
             self.terminate()
             raise
 
+    def _run_shared(self, pending: Dict[int, ChunkTask]) -> Iterator[ChunkResult]:
+        """The chunks `pending` (by index; each removed as its result is yielded) on the shared
+        pool, until they are done or a worker dies (then the pool is shut down)."""
+        if self._pool is None:
+            self._pool = self._new_pool(self.n_workers)
+        futures = {self._pool.submit(self.chunk_function, task): index
+                   for index, task in pending.items()}
+        try:
+            for future in concurrent.futures.as_completed(futures):
+                result = future.result()
+                del pending[futures[future]]
+                yield result
+        except BrokenProcessPool:
+            self.shutdown()
+
+    def _run_isolated(self, pending: Dict[int, ChunkTask]) -> Iterator[ChunkResult]:
+        """The chunks `pending` after the shared pool broke (any of them may have caused it, so
+        none is blamed), each on a pool of its own, retried where its worker dies, given up
+        after `retries` retries; a RuntimeError at the end names the chunks given up."""
+        deaths = dict.fromkeys(pending, 0)
+        waiting: Deque[int] = deque(sorted(pending))
+        given_up: List[int] = []
+        self._isolated = [None] * self.n_workers
+        running: Dict[concurrent.futures.Future, Tuple[int, int]] = {}
+        while waiting or running:
+            for slot, pool in enumerate(self._isolated):
+                busy = any(used == slot for used, _ in running.values())
+                if waiting and not busy:
+                    if pool is None:
+                        pool = self._isolated[slot] = self._new_pool(1)
+                    index = waiting.popleft()
+                    running[pool.submit(self.chunk_function, pending[index])] = (slot, index)
+            finished, _ = concurrent.futures.wait(
+                running, return_when=concurrent.futures.FIRST_COMPLETED)
+            for future in finished:
+                slot, index = running.pop(future)
+                try:
+                    result = future.result()
+                except BrokenProcessPool:
+                    self._isolated[slot].shutdown(wait=True, cancel_futures=True)
+                    self._isolated[slot] = None
+                    deaths[index] += 1
+                    (given_up if deaths[index] > self.retries else waiting).append(index)
+                    continue
+                del pending[index]
+                yield result
+        self.shutdown()
+        if given_up:
+            named = ", ".join(f"{index} ({deaths[index]} deaths)"
+                              for index in sorted(given_up)[:10])
+            raise RuntimeError(f"chunk(s) {named}{' ...' if len(given_up) > 10 else ''} given "
+                               f"up: the worker process running each alone died more than "
+                               f"retries = {self.retries} times (out of memory or killed?); the "
+                               f"other chunks are done")
+
+    def _take_pools(self) -> List[concurrent.futures.ProcessPoolExecutor]:
+        """The started pools (shared and isolated), no longer this executor's."""
+        pools = [pool for pool in (self._pool, *self._isolated) if pool is not None]
+        self._pool, self._isolated = None, []
+        if pools:
+            atexit.unregister(self.shutdown)
+        return pools
+
     def shutdown(self):
         """Stop the worker processes (if started) once their running chunks end: the end of a
         run that finished."""
-        if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
-            self._pool = None
-            atexit.unregister(self.shutdown)
+        for pool in self._take_pools():
+            pool.shutdown(wait=True, cancel_futures=True)
 
     def terminate(self):
         """Stop the worker processes (if started) now: the queued chunks are cancelled and the
         running ones lost (on an error or an interrupt, whose results no one would read).
         Returns once every worker process has exited; the next `run` starts a new pool."""
-        if self._pool is None:
-            return
-        pool, self._pool = self._pool, None
-        atexit.unregister(self.shutdown)
-        # ProcessPoolExecutor stops busy workers only from Python 3.14 (terminate_workers):
-        # its own processes, terminated, are found dead by its manager thread, which fails
-        # their futures and joins them; shutdown(wait=True) waits for that thread alone
-        for process in list(pool._processes.values()):
-            process.terminate()
-        pool.shutdown(wait=True, cancel_futures=True)
+        for pool in self._take_pools():
+            # ProcessPoolExecutor stops busy workers only from Python 3.14 (terminate_workers):
+            # its own processes, terminated, are found dead by its manager thread, which fails
+            # their futures and joins them; shutdown(wait=True) waits for that thread alone
+            for process in list(pool._processes.values()):
+                process.terminate()
+            pool.shutdown(wait=True, cancel_futures=True)
 
     def __enter__(self) -> "LocalProcesses":
         return self

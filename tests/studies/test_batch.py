@@ -85,6 +85,69 @@ def test_local_worker_processes_give_the_in_process_tables(direct):
                                   direct.summary.iloc[:1], check_exact=True)
 
 
+@pytest.fixture
+def deaths(tmp_path, monkeypatch):
+    """(DyingProcesses, marker folder): `LocalProcesses` whose workers run
+    `worker_deaths.run_chunk_or_die`, the chunks to die marked in the folder."""
+    monkeypatch.syspath_prepend(str(Path(__file__).parent))  # the spawned workers inherit it
+    import worker_deaths
+
+    folder = tmp_path / "deaths"
+    folder.mkdir()
+    monkeypatch.setenv(worker_deaths.FOLDER_VARIABLE, str(folder))
+
+    class DyingProcesses(LocalProcesses):
+        chunk_function = staticmethod(worker_deaths.run_chunk_or_die)
+    return DyingProcesses, folder
+
+
+@pytest.mark.slow
+def test_a_worker_death_on_each_of_four_chunks_is_each_chunks_own(deaths, direct):
+    """Four chunks whose workers die on their first try, on two workers with one retry: the
+    pool cannot tell whose death broke it, and at most two chunks run at once, so their deaths
+    broke it at least twice, which stopped the run when deaths counted for the whole run (an
+    audit, 2026-12). Now the rest of the run goes on one chunk per worker, where each death is
+    its chunk's: each chunk dies at most once, is retried, and the tables are bitwise
+    `simulate`'s."""
+    processes, folder = deaths
+    for index in range(len(PARAMS)):
+        (folder / f"chunk_{index}").write_text("1")
+    with processes(2, retries=1) as executor:
+        result = run_batch(PARAMS, DURATION, solver=SOLVER, chunk_size=1,
+                           record_interval_s=0.1, executor=executor)
+    assert [(folder / f"chunk_{i}").read_text() for i in range(len(PARAMS))] == ["0"] * 4
+    pd.testing.assert_frame_equal(result.summary.drop(columns=["instance", "duration_s"]),
+                                  direct.summary, check_exact=True)
+    pd.testing.assert_frame_equal(result.trajectory, direct.trajectory, check_exact=True)
+
+
+@pytest.mark.slow
+def test_a_chunk_that_always_kills_its_worker_is_named_after_the_others_are_done(deaths,
+                                                                                 tmp_path,
+                                                                                 direct):
+    """Chunk 1 kills every worker that runs it: with one retry it dies twice running alone
+    (the shared pool's death, anyone's, is not counted), then the error names it, and the
+    other three chunks are done and stored in the run folder first; a resume without the
+    marker computes chunk 1 alone and gives `simulate`'s tables."""
+    processes, folder = deaths
+    (folder / "chunk_1").write_text("always")
+    run_dir = tmp_path / "run"
+    with processes(2, retries=1) as executor:
+        with pytest.raises(RuntimeError, match=r"^chunk\(s\) 1 \(2 deaths\) given up: the "
+                                               r"worker process running each alone died more "
+                                               r"than retries = 1 times"):
+            run_batch(PARAMS, DURATION, solver=SOLVER, chunk_size=1, executor=executor,
+                      run_dir=run_dir)
+    stored = sorted(path.name for path in run_dir.glob("chunk_*.parquet"))
+    assert stored == ["chunk_000000.parquet", "chunk_000002.parquet", "chunk_000003.parquet"]
+    (folder / "chunk_1").unlink()
+    resumed = run_batch(PARAMS, DURATION, solver=SOLVER, chunk_size=1, run_dir=run_dir,
+                        resume=True)
+    assert resumed.timing.robot_steps == 300   # chunk 1 alone was computed
+    pd.testing.assert_frame_equal(resumed.summary.drop(columns=["instance", "duration_s"]),
+                                  direct.summary, check_exact=True)
+
+
 def test_instances_of_several_topologies_and_periods_are_grouped_in_input_order():
     # n_arc 18 (the default) and 8 with shared ends: engines the other tests compile too
     params = [ts.StarParams(gait="A1", period=0.3),
