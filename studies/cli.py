@@ -222,8 +222,9 @@ def add_execution_flags(parser: StudyParser, chunk_size: int = DEFAULT_CHUNK_SIZ
                         help="run the chunks on an existing Dask cluster (docs/studies.md, "
                              "the common flags)")
     parser.add_argument("--retries", type=int, default=DEFAULT_RETRIES,
-                        help=f"extra tries of a chunk whose worker died or whose Dask task "
-                             f"failed (default {DEFAULT_RETRIES})")
+                        help=f"extra tries of a chunk whose worker process died running it "
+                             f"alone (--workers) or whose Dask task raised (--scheduler) "
+                             f"(default {DEFAULT_RETRIES})")
     parser.add_argument("--chunk-size", type=int, default=None,
                         help=f"instances per chunk: one simulate call, one task (default "
                              f"{chunk_size} cpu, {GPU_CHUNK_SIZE} gpu, fewer to give every "

@@ -30,9 +30,9 @@ from ..checks import is_whole
 from .tasks import ChunkResult, ChunkTask, run_chunk
 
 DEFAULT_RETRIES = 2
-"""Extra tries of a chunk after a worker process running it died (a chunk that raises is not
-retried: its error is deterministic), on a Dask cluster and with `LocalProcesses` (there the
-deaths of a chunk running alone, `LocalProcesses`)."""
+"""Extra tries of a chunk. With `LocalProcesses`: after the worker process running it alone
+died (a chunk that raises is not retried there: its error is deterministic). On a Dask cluster:
+after its task raised (`DaskExecutor`; a worker's death is the scheduler's to rerun)."""
 MAX_LOCAL_WORKERS = 256
 """The most local worker processes: each is a process with a single-threaded Taichi runtime
 (some 200 MB), so more than one per core only competes for the cores; 256 is 16 times the most
@@ -123,22 +123,33 @@ def check_main_guard():
             f"process (workers=None)")
 
 
+def _stop_now(pool: concurrent.futures.ProcessPoolExecutor):
+    """Stop `pool`'s worker processes now, busy or not, and wait until they have exited.
+    ProcessPoolExecutor stops busy workers only from Python 3.14 (terminate_workers): its own
+    processes, terminated, are found dead by its manager thread, which fails their futures and
+    joins them; shutdown(wait=True) waits for that thread alone."""
+    for process in list((pool._processes or {}).values()):  # None once shut down
+        process.terminate()
+    pool.shutdown(wait=True, cancel_futures=True)
+
+
 class LocalProcesses:
     """`n_workers` worker processes on this machine, started on first use with the "spawn" start
     method (a fresh interpreter: no Taichi state is inherited), each configured by
     `configure_worker_process`. A worker that dies breaks the whole pool, which cannot tell
     whose chunk killed it, so the rest of the run goes on isolated: `n_workers` pools of one
     worker each, one chunk at a time, where a death is its chunk's alone. A chunk whose worker
-    died more than `retries` times there is given up: the others run to the end (kept in a
-    run_dir), then a RuntimeError names it. (Until 2026-12 the deaths counted for the whole
-    run: three on three chunks, or one chunk that always killed its worker, stopped it at once,
-    naming no chunk: an audit.) Shut down
-    by `shutdown`, at the end of a `with` block, or at interpreter exit; stopped at once by
-    `terminate`, which an error or an interrupt during `run` or in the `with` block calls."""
+    died there more than `retries` times is given up: the others run to the end (kept in a
+    run_dir), then a RuntimeError names it. With `retries` 0 the first death stops the run, as
+    no chunk may be tried again. (Until 2026-12 the deaths counted for the whole run: three on
+    three chunks, or one chunk that always killed its worker, stopped it, naming no chunk: an
+    audit.) Shut down by `shutdown`, at the end of a `with` block, or at interpreter exit;
+    stopped at once by `terminate`, which an error or an interrupt during `run` or in the
+    `with` block calls."""
 
     chunk_function = staticmethod(run_chunk)
-    """What a worker runs on each task (`tasks.run_chunk`; a module-level function, which a
-    worker imports by name)."""
+    """What a worker runs on each task (`tasks.run_chunk`): a module-level function, which a
+    worker imports by name. Tests put one there that kills its worker."""
 
     def __init__(self, n_workers: int, retries: int = DEFAULT_RETRIES):
         if not is_whole(n_workers) or not 1 <= n_workers <= MAX_LOCAL_WORKERS:
@@ -157,12 +168,12 @@ class LocalProcesses:
 
     def _new_pool(self, n_workers: int) -> concurrent.futures.ProcessPoolExecutor:
         """A pool of `n_workers` spawned workers; the first pool of this executor is tried
-        with a task that does nothing before any chunk runs."""
+        with a task that does nothing before any chunk runs. Stopped at once if that try
+        fails or is interrupted (a Ctrl-C there left a worker running)."""
         check_main_guard()
         pool = concurrent.futures.ProcessPoolExecutor(
             n_workers, mp_context=multiprocessing.get_context("spawn"),
             initializer=configure_worker_process, initargs=(os.getpid(),))
-        atexit.register(self.shutdown)
         # a worker re-imports the main script: where that fails (code after the guard that
         # needs what the guard made), every worker dies at once, and the retries blamed
         # memory (an audit); a task that does nothing tells that apart before any chunk runs,
@@ -172,8 +183,10 @@ class LocalProcesses:
         try:
             pool.submit(int).result()
             self._started = True
-        except BrokenProcessPool:
-            pool.shutdown(wait=True, cancel_futures=True)
+        except BaseException as error:
+            _stop_now(pool)
+            if not isinstance(error, BrokenProcessPool):
+                raise
             path = getattr(sys.modules.get("__main__"), "__file__", "the main script")
             raise RuntimeError(f"worker processes could not start: each re-imports {path}, and "
                                f"that failed (a worker's traceback is above); its code outside "
@@ -183,8 +196,19 @@ class LocalProcesses:
 
     def run(self, tasks: Sequence[ChunkTask], progress: bool = False) -> Iterator[ChunkResult]:
         pending = {task.index: task for task in tasks}
+        if not pending:  # a resumed run with every chunk done starts no workers
+            return
+        # at interpreter exit the workers are stopped (registered once: a second registration
+        # is removed by the same unregister)
+        atexit.register(self.shutdown)
         try:
             yield from self._run_shared(pending)
+            if pending and self.retries == 0:
+                left = ", ".join(str(index) for index in sorted(pending)[:10])
+                raise RuntimeError(f"a worker process died (out of memory or killed?) with "
+                                   f"{len(pending)} chunk(s) not done (chunk "
+                                   f"{left}{' ...' if len(pending) > 10 else ''}), and "
+                                   f"retries = 0 tries none again")
             if pending:
                 yield from self._run_isolated(pending)
         except BaseException:
@@ -197,18 +221,28 @@ class LocalProcesses:
 
     def _run_shared(self, pending: Dict[int, ChunkTask]) -> Iterator[ChunkResult]:
         """The chunks `pending` (by index; each removed as its result is yielded) on the shared
-        pool, until they are done or a worker dies (then the pool is shut down)."""
-        if self._pool is None:
-            self._pool = self._new_pool(self.n_workers)
-        futures = {self._pool.submit(self.chunk_function, task): index
-                   for index, task in pending.items()}
+        pool, until they are done or a worker dies (then the pool is shut down, and the chunks
+        that had finished before are yielded too)."""
+        futures: Dict[concurrent.futures.Future, int] = {}
         try:
+            if self._pool is None:
+                self._pool = self._new_pool(self.n_workers)
+            # inside the try: a worker that died while the pool stood idle between two runs
+            # breaks it at the first submit
+            for index, task in pending.items():
+                futures[self._pool.submit(self.chunk_function, task)] = index
             for future in concurrent.futures.as_completed(futures):
                 result = future.result()
                 del pending[futures[future]]
                 yield result
         except BrokenProcessPool:
-            self.shutdown()
+            pool, self._pool = self._pool, None
+            pool.shutdown(wait=True, cancel_futures=True)
+            for future, index in futures.items():
+                if index in pending and future.done() and not future.cancelled() \
+                        and future.exception() is None:
+                    del pending[index]
+                    yield future.result()
 
     def _run_isolated(self, pending: Dict[int, ChunkTask]) -> Iterator[ChunkResult]:
         """The chunks `pending` after the shared pool broke (any of them may have caused it, so
@@ -219,14 +253,16 @@ class LocalProcesses:
         given_up: List[int] = []
         self._isolated = [None] * self.n_workers
         running: Dict[concurrent.futures.Future, Tuple[int, int]] = {}
+        """(slot, chunk index) of each running chunk's future."""
         while waiting or running:
-            for slot, pool in enumerate(self._isolated):
-                busy = any(used == slot for used, _ in running.values())
-                if waiting and not busy:
-                    if pool is None:
-                        pool = self._isolated[slot] = self._new_pool(1)
+            busy_slots = {slot for slot, _ in running.values()}
+            for slot in range(self.n_workers):
+                if waiting and slot not in busy_slots:
+                    if self._isolated[slot] is None:
+                        self._isolated[slot] = self._new_pool(1)
                     index = waiting.popleft()
-                    running[pool.submit(self.chunk_function, pending[index])] = (slot, index)
+                    future = self._isolated[slot].submit(self.chunk_function, pending[index])
+                    running[future] = (slot, index)
             finished, _ = concurrent.futures.wait(
                 running, return_when=concurrent.futures.FIRST_COMPLETED)
             for future in finished:
@@ -243,38 +279,37 @@ class LocalProcesses:
                 yield result
         self.shutdown()
         if given_up:
-            named = ", ".join(f"{index} ({deaths[index]} deaths)"
+            named = ", ".join(f"{index} ({deaths[index]} deaths running alone)"
                               for index in sorted(given_up)[:10])
             raise RuntimeError(f"chunk(s) {named}{' ...' if len(given_up) > 10 else ''} given "
                                f"up: the worker process running each alone died more than "
-                               f"retries = {self.retries} times (out of memory or killed?); the "
-                               f"other chunks are done")
+                               f"retries = {self.retries} times (out of memory or killed?); "
+                               f"the other chunks are done (a run_dir keeps them for a resume)")
 
-    def _take_pools(self) -> List[concurrent.futures.ProcessPoolExecutor]:
-        """The started pools (shared and isolated), no longer this executor's."""
-        pools = [pool for pool in (self._pool, *self._isolated) if pool is not None]
+    def _pools(self) -> List[concurrent.futures.ProcessPoolExecutor]:
+        """The started pools, shared and isolated."""
+        return [pool for pool in (self._pool, *self._isolated) if pool is not None]
+
+    def _forget_pools(self):
         self._pool, self._isolated = None, []
-        if pools:
-            atexit.unregister(self.shutdown)
-        return pools
+        atexit.unregister(self.shutdown)
 
     def shutdown(self):
         """Stop the worker processes (if started) once their running chunks end: the end of a
-        run that finished."""
-        for pool in self._take_pools():
+        run that finished. The pools stay this executor's until they have ended, so that an
+        interrupt meanwhile still reaches them (`terminate`)."""
+        for pool in self._pools():
             pool.shutdown(wait=True, cancel_futures=True)
+        self._forget_pools()
 
     def terminate(self):
         """Stop the worker processes (if started) now: the queued chunks are cancelled and the
         running ones lost (on an error or an interrupt, whose results no one would read).
         Returns once every worker process has exited; the next `run` starts a new pool."""
-        for pool in self._take_pools():
-            # ProcessPoolExecutor stops busy workers only from Python 3.14 (terminate_workers):
-            # its own processes, terminated, are found dead by its manager thread, which fails
-            # their futures and joins them; shutdown(wait=True) waits for that thread alone
-            for process in list(pool._processes.values()):
-                process.terminate()
-            pool.shutdown(wait=True, cancel_futures=True)
+        pools = self._pools()
+        self._forget_pools()
+        for pool in pools:
+            _stop_now(pool)
 
     def __enter__(self) -> "LocalProcesses":
         return self

@@ -102,6 +102,7 @@ def deaths(tmp_path, monkeypatch):
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(300)  # an executor that never gave up would retry for ever
 def test_a_worker_death_on_each_of_four_chunks_is_each_chunks_own(deaths, direct):
     """Four chunks whose workers die on their first try, on two workers with one retry: the
     pool cannot tell whose death broke it, and at most two chunks run at once, so their deaths
@@ -122,6 +123,7 @@ def test_a_worker_death_on_each_of_four_chunks_is_each_chunks_own(deaths, direct
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(300)
 def test_a_chunk_that_always_kills_its_worker_is_named_after_the_others_are_done(deaths,
                                                                                  tmp_path,
                                                                                  direct):
@@ -133,9 +135,9 @@ def test_a_chunk_that_always_kills_its_worker_is_named_after_the_others_are_done
     (folder / "chunk_1").write_text("always")
     run_dir = tmp_path / "run"
     with processes(2, retries=1) as executor:
-        with pytest.raises(RuntimeError, match=r"^chunk\(s\) 1 \(2 deaths\) given up: the "
-                                               r"worker process running each alone died more "
-                                               r"than retries = 1 times"):
+        with pytest.raises(RuntimeError, match=r"^chunk\(s\) 1 \(2 deaths running alone\) "
+                                               r"given up: the worker process running each "
+                                               r"alone died more than retries = 1 times"):
             run_batch(PARAMS, DURATION, solver=SOLVER, chunk_size=1, executor=executor,
                       run_dir=run_dir)
     stored = sorted(path.name for path in run_dir.glob("chunk_*.parquet"))
@@ -146,6 +148,29 @@ def test_a_chunk_that_always_kills_its_worker_is_named_after_the_others_are_done
     assert resumed.timing.robot_steps == 300   # chunk 1 alone was computed
     pd.testing.assert_frame_equal(resumed.summary.drop(columns=["instance", "duration_s"]),
                                   direct.summary, check_exact=True)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_with_no_retries_the_first_worker_death_stops_the_run(deaths):
+    """retries = 0, the boundary: no chunk may be tried again, so the first death stops the
+    run, naming the chunks not done (isolated, each would have run again)."""
+    processes, folder = deaths
+    (folder / "chunk_0").write_text("1")
+    with processes(2, retries=0) as executor:
+        with pytest.raises(RuntimeError, match=r"^a worker process died \(out of memory or "
+                                               r"killed\?\) with \d chunk\(s\) not done "
+                                               r"\(chunk 0[,)].*retries = 0 tries none again$"):
+            run_batch(PARAMS, DURATION, solver=SOLVER, chunk_size=1, executor=executor)
+    assert (folder / "chunk_0").read_text() == "0"
+
+
+def test_a_run_with_no_chunks_left_starts_no_workers():
+    """A resumed run whose chunks are all done hands the executor no task: no pool (the
+    first pool's start spawns workers and reads the main script)."""
+    executor = LocalProcesses(2)
+    assert list(executor.run([])) == []
+    assert executor._pool is None
 
 
 def test_instances_of_several_topologies_and_periods_are_grouped_in_input_order():
