@@ -252,8 +252,8 @@ class LocalProcesses:
         waiting: Deque[int] = deque(sorted(pending))
         given_up: List[int] = []
         self._isolated = [None] * self.n_workers
+        # each running chunk's future: (its slot in _isolated, its chunk index)
         running: Dict[concurrent.futures.Future, Tuple[int, int]] = {}
-        """(slot, chunk index) of each running chunk's future."""
         while waiting or running:
             busy_slots = {slot for slot, _ in running.values()}
             for slot in range(self.n_workers):
@@ -291,6 +291,7 @@ class LocalProcesses:
         return [pool for pool in (self._pool, *self._isolated) if pool is not None]
 
     def _forget_pools(self):
+        """No pool is this executor's any more (nothing for the exit handler to stop)."""
         self._pool, self._isolated = None, []
         atexit.unregister(self.shutdown)
 
