@@ -102,7 +102,8 @@ __all__ = ["TRAINING_CYCLES", "VALIDATION_CYCLES", "SAMPLES_PER_CYCLE", "MAX_CYC
            "objective_of", "measured_trials", "simulated_runs", "result_runs",
            "distance_derivative", "path_derivative", "residual_count", "trial_residuals", "objective_residuals",
            "trial_phase_motion", "objective_and_gradient", "phase_motion", "parameter_uncertainty",
-           "record_derivatives", "STROKE_WINDOW_S", "STROKE_TOLERANCE_S", "STROKE_ONSET_SHARE",
+           "record_derivatives", "PredictionUncertainty", "prediction_uncertainty",
+           "PREDICTION_COLUMNS", "window_speed", "gait_predictions", "STROKE_WINDOW_S", "STROKE_TOLERANCE_S", "STROKE_ONSET_SHARE",
            "STROKE_MIN_JUMP_RATIO",
            "Strokes", "window_moves",
            "circular_difference", "strokes",
@@ -776,6 +777,20 @@ def _curve_derivative(path: CentroidPath, derivative_xy, cycles, samples) -> np.
     return distance_derivative(delta, derivative)
 
 
+def _net_displacement(simulated: SimulatedRun, derivative_xy: np.ndarray, cycles
+                      ) -> Tuple[float, np.ndarray]:
+    """A simulated run's net displacement over the cycle window along its gait's forward
+    axis (mm; `TrialFit.sim_net_signed_mm`) and its derivative (P,) from the records'
+    derivatives derivative_xy (n_records, 2, P)."""
+    first, last = check_window(cycles)
+    path, forward = simulated.path, np.asarray(simulated.forward)
+    times = np.array([first - 1, last]) * path.period_s
+    positions = path.position(times)
+    ends = path_derivative(path, derivative_xy, times)
+    return (float(np.dot(positions[1] - positions[0], forward)),
+            np.einsum("c,cp->p", forward, ends[1] - ends[0]))
+
+
 def residual_count(gaits: int, cycles=TRAINING_CYCLES, samples: int = SAMPLES_PER_CYCLE) -> int:
     """The number of residuals of `objective_residuals` for `gaits` gaits on the window
     `cycles`: per gait its cycles × samples curve residuals and ρ. ValueError naming gaits
@@ -805,13 +820,12 @@ def trial_residuals(simulated: SimulatedRun, derivative_xy: np.ndarray, trial: T
                          f"{derivative_xy.shape}")
     fit = trial_fit(simulated, trial, cycles, samples, phase_s)
     first, last = check_window(cycles)
-    path, forward = simulated.path, np.asarray(simulated.forward)
+    path = simulated.path
     sim_curves = cycle_curves(path, 0.0, (first, last), samples)
     curve_derivative = _curve_derivative(path, derivative_xy, (first, last), samples)
     measured = cycle_curves(trial.path, fit.phase_s, (first, last), samples)
     scale = 1.0 / (fit.sigma_mm * math.sqrt(sim_curves.size))
-    ends = path_derivative(path, derivative_xy, np.array([first - 1, last]) * path.period_s)
-    net_derivative = np.einsum("c,cp->p", forward, ends[1] - ends[0])
+    _, net_derivative = _net_displacement(simulated, derivative_xy, (first, last))
     wrong_way = -trial.paper_sign * fit.sim_net_signed_mm > 0
     direction_row = (-trial.paper_sign * net_derivative / fit.sigma_mm if wrong_way
                      else np.zeros_like(net_derivative))
@@ -907,6 +921,49 @@ def phase_motion(simulated: Mapping[str, SimulatedRun], derivatives: Mapping[str
     return np.mean(motions, axis=0)
 
 
+@dataclass(frozen=True)
+class _LocalFit:
+    """A least-squares fit's Jacobian split by its singular values (`_local_fit`)."""
+
+    scale: np.ndarray        # (P,) |value|, or 1 where the value is 0: the relative units
+    singular: np.ndarray     # (P,) singular values of J·diag(scale), largest first
+    directions: np.ndarray   # (P, P) their right singular vectors, one per row
+    kept: np.ndarray         # (P,) whether each direction is resolved
+    variance: float          # s² = Σr² / (R − rank)
+    dof: int                 # R − rank
+
+def _local_fit(residuals, jacobian, values, count: int, rcond: float, share: float
+               ) -> _LocalFit:
+    """Check a fit's residuals (R,), Jacobian (R, P) and values (P,) for `count` = P
+    parameters, and split J·diag(|value|) by its singular values (`parameter_uncertainty`)."""
+    residuals = np.asarray(residuals, dtype=np.float64)
+    jacobian = np.asarray(jacobian, dtype=np.float64)
+    values = np.asarray(values, dtype=np.float64)
+    if not count or residuals.ndim != 1 or jacobian.shape != (len(residuals), count) \
+            or values.shape != (count,):
+        raise ValueError(f"residuals (R,), jacobian (R, P) and values (P,) must match the "
+                         f"{count} names (at least one); got {residuals.shape}, "
+                         f"{jacobian.shape} and {values.shape}")
+    if not (np.isfinite(residuals).all() and np.isfinite(jacobian).all()
+            and np.isfinite(values).all()):
+        raise ValueError("residuals, jacobian and values must be finite")
+    for label, number in (("rcond", rcond), ("share", share)):
+        if not 0.0 < number < 1.0:
+            raise ValueError(f"{label} must be in (0, 1), got {number!r}")
+    scale = np.where(values != 0.0, np.abs(values), 1.0)
+    relative = jacobian * scale
+    if len(relative) < count:  # zero rows: all P directions, those R rows cannot see too
+        relative = np.vstack([relative, np.zeros((count - len(relative), count))])
+    _, singular, directions = np.linalg.svd(relative, full_matrices=False)
+    kept = singular > rcond * singular[0]        # none when J = 0: 0 > 0 is false
+    rank = int(kept.sum())
+    dof = len(residuals) - rank
+    if dof <= 0:
+        raise ValueError(f"{len(residuals)} residuals for {rank} resolved directions: no "
+                         f"residual degree of freedom to estimate their scatter")
+    return _LocalFit(scale, singular, directions, kept, float(residuals @ residuals) / dof, dof)
+
+
 def parameter_uncertainty(residuals: np.ndarray, jacobian: np.ndarray, names: Sequence[str],
                           values: Sequence[float], rcond: float = UNCERTAINTY_RCOND,
                           share: float = UNCERTAINTY_SHARE) -> pd.DataFrame:
@@ -931,39 +988,17 @@ def parameter_uncertainty(residuals: np.ndarray, jacobian: np.ndarray, names: Se
 
     ValueError for mismatched shapes, non-finite entries, rcond or share outside (0, 1), or
     R ≤ rank (no residual left to estimate s²)."""
-    residuals = np.asarray(residuals, dtype=np.float64)
-    jacobian = np.asarray(jacobian, dtype=np.float64)
-    values = np.asarray(values, dtype=np.float64)
     names = list(names)
-    if not names or residuals.ndim != 1 or jacobian.shape != (len(residuals), len(names)) \
-            or values.shape != (len(names),):
-        raise ValueError(f"residuals (R,), jacobian (R, P) and values (P,) must match the "
-                         f"{len(names)} names (at least one); got {residuals.shape}, {jacobian.shape} and "
-                         f"{values.shape}")
-    if not (np.isfinite(residuals).all() and np.isfinite(jacobian).all()
-            and np.isfinite(values).all()):
-        raise ValueError("residuals, jacobian and values must be finite")
-    for label, number in (("rcond", rcond), ("share", share)):
-        if not 0.0 < number < 1.0:
-            raise ValueError(f"{label} must be in (0, 1), got {number!r}")
-    scale = np.where(values != 0.0, np.abs(values), 1.0)
-    relative = jacobian * scale
-    if len(relative) < len(names):  # zero rows: all P directions, those R rows cannot see too
-        relative = np.vstack([relative, np.zeros((len(names) - len(relative), len(names)))])
-    _, singular, directions = np.linalg.svd(relative, full_matrices=False)
-    kept = singular > rcond * singular[0]        # none when J = 0: 0 > 0 is false
-    rank = int(kept.sum())
-    dof = len(residuals) - rank
-    if dof <= 0:
-        raise ValueError(f"{len(residuals)} residuals for {rank} resolved directions: no "
-                         f"residual degree of freedom to estimate their scatter")
-    unresolved = np.sqrt((directions[~kept] ** 2).sum(axis=0))
+    fit = _local_fit(residuals, jacobian, values, len(names), rcond, share)
+    values = np.asarray(values, dtype=np.float64)
+    singular, kept, scale = fit.singular, fit.kept, fit.scale
+    unresolved = np.sqrt((fit.directions[~kept] ** 2).sum(axis=0))
     identifiable = unresolved <= share
-    variance = float(residuals @ residuals) / dof
-    basis = directions[kept].T / singular[kept]                   # V S⁻¹, (P, rank)
-    relative_covariance = variance * basis @ basis.T              # of value_j / |value_j|
+    basis = fit.directions[kept].T / singular[kept]               # V S⁻¹, (P, rank)
+    relative_covariance = fit.variance * basis @ basis.T          # of value_j / |value_j|
     spread = np.sqrt(np.diag(relative_covariance))
     condition = singular[0] / singular[-1] if singular[-1] > 0.0 else math.inf
+    rank, dof = int(kept.sum()), fit.dof
     rows = []
     for j, name in enumerate(names):
         row = {"parameter": name, "value": values[j], "identifiable": bool(identifiable[j]),
@@ -984,6 +1019,151 @@ def parameter_uncertainty(residuals: np.ndarray, jacobian: np.ndarray, names: Se
                 row["correlation"] = float(correlations[best])
         rows.append(row)
     return pd.DataFrame(rows, columns=UNCERTAINTY_COLUMNS)
+
+
+@dataclass(frozen=True)
+class PredictionUncertainty:
+    """`prediction_uncertainty`'s answer: the prediction's standard error (its units; inf
+    where the fit leaves it undetermined), its unresolved share, and the fit's resolved
+    directions (`rank`) and residual degrees of freedom (R − rank)."""
+
+    standard_error: float
+    unresolved_share: float
+    rank: int
+    residual_dof: int
+
+    @property
+    def determined(self) -> bool:
+        """Whether the fit's data determine the prediction (its standard error is finite)."""
+        return math.isfinite(self.standard_error)
+
+
+def prediction_uncertainty(residuals: np.ndarray, jacobian: np.ndarray,
+                           values: Sequence[float], gradient: Sequence[float],
+                           rcond: float = UNCERTAINTY_RCOND,
+                           share: float = UNCERTAINTY_SHARE) -> PredictionUncertainty:
+    """How well a least-squares fit's data determine a prediction y(θ) made with the fitted
+    parameters, locally, from the fit's residuals (R,) and Jacobian (R, P) as in
+    `parameter_uncertainty` and y's gradient (P,) with respect to the same parameter values
+    (per unit of each).
+
+    y moves along the parameters' relative directions as g = gradient·|value|. Its
+    `unresolved_share` is the norm of g/|g|'s components along the directions the data do
+    not resolve (0 when g = 0: nothing y depends on is fitted); above `share` the data
+    leave y undetermined and its standard error is inf. Otherwise it is that of the
+    Gauss-Newton covariance on the resolved directions, √(s²·gᵀ(JᵀJ)⁺g) in relative units,
+    with the same s² = Σr² / (R − rank): like the parameters', a lower bound where the
+    residuals are correlated. The same ValueErrors as `parameter_uncertainty`, and one
+    for a gradient that is not P finite numbers."""
+    values = np.asarray(values, dtype=np.float64)
+    gradient = np.asarray(gradient, dtype=np.float64)
+    if values.ndim != 1 or gradient.shape != values.shape or not np.isfinite(gradient).all():
+        raise ValueError(f"gradient must hold one finite number per value; got shape "
+                         f"{gradient.shape} for values of shape {values.shape}")
+    fit = _local_fit(residuals, jacobian, values, len(values), rcond, share)
+    rank = int(fit.kept.sum())
+    relative = gradient * fit.scale
+    size = float(np.linalg.norm(relative))
+    if size == 0.0:
+        return PredictionUncertainty(0.0, 0.0, rank, fit.dof)
+    unresolved = float(np.linalg.norm(fit.directions[~fit.kept] @ relative)) / size
+    if unresolved > share:
+        return PredictionUncertainty(math.inf, unresolved, rank, fit.dof)
+    along = fit.directions[fit.kept] @ relative / fit.singular[fit.kept]
+    return PredictionUncertainty(math.sqrt(fit.variance * float(along @ along)), unresolved,
+                                 rank, fit.dof)
+
+
+PREDICTION_COLUMNS = ["gait", "role", "training_gaits", "predicted_speed_mm_s",
+                      "standard_error_mm_s", "unresolved_share", "determined",
+                      "measured_speed_mm_s", "z_score", "within_two_standard_errors",
+                      "training_objective", "rank", "residual_dof"]
+"""Columns of `gait_predictions`' table, one row per gait and role: "fitted" (a measured gait
+with every measured gait in the fit), "held_out" (a measured gait, the fit on the others) or
+"unmeasured" (the fit on every measured gait); the gaits fitted (joined by spaces); the
+simulated speed over the window along the gait's forward axis (mm/s) and its standard error
+(`prediction_uncertainty`; inf where the fit leaves it undetermined); the measured speed
+along the same axis (the paper's direction, NaN when unmeasured), (measured − predicted) /
+standard error (NaN where it is inf or 0), whether the measured speed lies within two
+standard errors (≤; always where undetermined, empty when unmeasured); the fit's objective on its gaits
+(`objective_of`), its resolved directions and residual degrees of freedom."""
+
+
+def window_speed(simulated: SimulatedRun, derivative_xy: np.ndarray, cycles=TRAINING_CYCLES
+                 ) -> Tuple[float, np.ndarray]:
+    """A simulated run's speed over the cycle window along its gait's forward axis (mm/s;
+    `TrialFit.sim_speed_mm_s`, signed) and its derivative (P,) from the records' derivatives
+    derivative_xy (n_records, 2, P)."""
+    first, last = check_window(cycles)
+    net, derivative = _net_displacement(simulated, np.asarray(derivative_xy, np.float64),
+                                        cycles)
+    duration = (last - first + 1) * simulated.path.period_s
+    return net / duration, derivative / duration
+
+
+def gait_predictions(simulated: Mapping[str, SimulatedRun],
+                     derivatives: Mapping[str, np.ndarray], trials: Mapping[str, Trial],
+                     values: Sequence[float], cycles=TRAINING_CYCLES,
+                     samples: int = SAMPLES_PER_CYCLE, rcond: float = UNCERTAINTY_RCOND,
+                     share: float = UNCERTAINTY_SHARE) -> pd.DataFrame:
+    """Which gaits' speeds the measured trials determine, at one model point: a linearised
+    leave-one-gait-out with the exact sensitivities. `simulated`: gait -> run at the point
+    (every gait of `trials`, and others to predict), `derivatives`: gait -> its records'
+    derivatives (n_records, 2, P) with respect to the P fitted parameters, whose `values`
+    (P,) the point holds. Every measured gait gets a "fitted" row (the fit on every trial)
+    and a "held_out" one (the fit on the others), every other gait an "unmeasured" row (the
+    fit on every trial): its `window_speed` and the `prediction_uncertainty` of the
+    fit's `objective_residuals` (each trial's phase fitted at the point, then held) on the
+    window. One table row per gait and role (`PREDICTION_COLUMNS`).
+
+    The fit is not redone without the held-out gait: the point is the same, only the data
+    that determine it change, so a "held_out" row says how far the other gaits pin down
+    what the held-out one needs, not where a fit without it would go. ValueError for a
+    measured gait missing from `simulated`, fewer than two measured gaits, or as
+    `prediction_uncertainty`."""
+    measured = [gait for gait in trials]
+    missing = [gait for gait in measured if gait not in simulated]
+    if missing:
+        raise ValueError(f"no simulated run for the measured gait(s) {', '.join(missing)}")
+    if len(measured) < 2:
+        raise ValueError(f"gait_predictions needs at least two measured gaits (one held out, "
+                         f"one fitted), got {len(measured)}")
+    fits = {}
+
+    def fit_of(training):
+        if training not in fits:
+            residuals, jacobian, table = objective_residuals(
+                {g: simulated[g] for g in training}, derivatives,
+                {g: trials[g] for g in training}, cycles, samples)
+            fits[training] = residuals, jacobian, objective_of(table)
+        return fits[training]
+
+    cases = ([(gait, "fitted", tuple(measured)) for gait in measured]
+             + [(gait, "held_out", tuple(g for g in measured if g != gait)) for gait in measured]
+             + [(gait, "unmeasured", tuple(measured)) for gait in simulated
+                if gait not in trials])
+    rows = []
+    for gait, role, training in cases:
+        residuals, jacobian, objective = fit_of(training)
+        speed, gradient = window_speed(simulated[gait], derivatives[gait], cycles)
+        uncertainty = prediction_uncertainty(residuals, jacobian, values, gradient, rcond,
+                                             share)
+        error = uncertainty.standard_error
+        measured_speed, gap, within = math.nan, math.nan, None
+        if gait in trials:
+            fit = trial_fit(simulated[gait], trials[gait], cycles, samples)
+            measured_speed = trials[gait].paper_sign * fit.meas_speed_mm_s
+            gap = measured_speed - speed
+            within = bool(abs(gap) <= 2.0 * error)
+        rows.append({"gait": gait, "role": role, "training_gaits": " ".join(training),
+                     "predicted_speed_mm_s": speed, "standard_error_mm_s": error,
+                     "unresolved_share": uncertainty.unresolved_share,
+                     "determined": uncertainty.determined,
+                     "measured_speed_mm_s": measured_speed,
+                     "z_score": gap / error if 0.0 < error < math.inf else math.nan,
+                     "within_two_standard_errors": within, "training_objective": objective,
+                     "rank": uncertainty.rank, "residual_dof": uncertainty.residual_dof})
+    return pd.DataFrame(rows, columns=PREDICTION_COLUMNS)
 
 
 def record_derivatives(trajectory_sensitivities: pd.DataFrame, instance: int,

@@ -1,0 +1,225 @@
+"""Predictability: which gaits' speeds the measured trials determine, at one model point, and
+whether each measured gait held out lies within what the others allow.
+
+    python -m studies predictability [--preset identified|paper|accurate] [--set NAME=VALUE ...]
+                                     [--parameters alpha,drag_perpendicular,...]
+                                     [--gaits paper|A1,A1+A2,...] [--predict A2,A3,...]
+                                     [--window 1:3] [--dt S] [--out DIR] [--quick]
+
+A model fitted to the measured trials is judged on the gaits it was not fitted to. Whether it
+can predict one at all is a question of the data before it is one of the model: a gait whose
+speed moves with parameter combinations that the other gaits leave free is not predicted by
+any fit to them, whatever the model. This study answers that question locally, with one run:
+the measured gaits (`--gaits`) and the gaits to predict (`--predict`) simulated at the model
+point (`--preset`/`--set`) with the exact sensitivities of `--parameters`, over the cycle
+window `--window` from rest. `identification.gait_predictions` then forms, from the
+trajectory objective's residuals and their Jacobian (each trial's phase fitted at the point),
+the Gauss-Newton covariance of the parameters fitted to every measured gait, and to every
+measured gait but one, and carries it to each gait's speed over the window along its forward
+axis (`identification.prediction_uncertainty`): a standard error, or "undetermined" where the
+speed moves along directions the fitted gaits do not resolve (`UNCERTAINTY_RCOND`,
+`UNCERTAINTY_SHARE`). The point is not refitted: a held-out row says how far the other gaits
+pin down what the held-out one needs, not where a fit without it would land (model_select's
+cold folds do that, at 20 minutes a fold). The standard errors take the curve residuals as
+independent, and samples of one measured curve are correlated: they are lower bounds, and the
+share of measured speeds within two of them says how far.
+
+Writes `predictability.csv` (one row per gait and role, `identification.PREDICTION_COLUMNS`
+and the gait's simulation status), `predictability_parameters.csv`
+(`identification.parameter_uncertainty` of the fit on every measured gait: which of
+`--parameters` they determine) and `predictability.png` (per gait and role the predicted speed
+with two standard errors, the measured one beside it), each table with its provenance sidecar.
+
+--quick: gaits A1+A2 and A1+A3, A2 predicted, α and C⊥, cycle 1, 2-ms steps.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pandas as pd
+
+from taichi_star import Gait, identification, simulate
+from taichi_star.sensitivities import parse_directions
+
+from . import cli, identify
+
+DESCRIPTION = ("Predictability: which gaits' speeds the measured trials determine at a model "
+               "point (a linearised leave-one-gait-out on the exact sensitivities), against the "
+               "measured speeds.")
+IDENTIFIED_FORM = ("alpha,drag_perpendicular,cylinder_drag,actuator_gains[0],actuator_gains[1],"
+                   "actuator_gains[2],actuator_gains[3],actuator_gains[4]")
+"""The `identified` preset's fitted parameters (model_select's `gains_with_a1`: α, C⊥, C_c and
+the gains of A1–A5), by Python's index as `simulate` names them."""
+SINGLE_ACTUATORS = "A2,A3,A4,A5"
+"""The default gaits to predict: each fires one of the actuators whose gain the identified form
+fits, alone; no measured trial does (A1 is measured)."""
+QUICK = {"gaits": "A1+A2,A1+A3", "predict": "A2", "parameters": "alpha,drag_perpendicular",
+         "window": "1:1"}
+ROLE_ORDER = ("fitted", "held_out", "unmeasured")
+ROLE_COLOURS = {"fitted": "tab:blue", "held_out": "tab:orange", "unmeasured": "tab:green"}
+
+
+def build_parser():
+    parser = cli.StudyParser("predictability", DESCRIPTION)
+    parser.add_argument("--parameters", default=IDENTIFIED_FORM, quick=QUICK["parameters"],
+                        help="the fitted parameters, a comma list of StarParams fields as "
+                             "simulate's sensitivities name them (an actuator by its Python "
+                             "index: actuator_gains[0] is A1's; default: the identified "
+                             "preset's form)")
+    parser.add_argument("--gaits", default="paper", quick=QUICK["gaits"],
+                        help="the measured gaits fitted: paper (all five) or a comma list, at "
+                             "least two")
+    parser.add_argument("--predict", default=SINGLE_ACTUATORS, quick=QUICK["predict"],
+                        help="unmeasured gaits to predict from every measured one, a comma list "
+                             "of gaits with a forward axis, or none")
+    parser.add_argument("--window", default="1:3", quick=QUICK["window"],
+                        help="the cycle window FIRST:LAST (1-based, from rest) of the fit and "
+                             "of the speeds")
+    cli.add_model_flags(parser, fixed=("gait",), preset="identified")
+    cli.add_dt_flag(parser)
+    return parser
+
+
+def parse_window(text: str):
+    """--window FIRST:LAST -> (first, last) (StudyArgumentError naming the flag)."""
+    try:
+        first, last = (int(part) for part in text.split(":"))
+        return identification.check_window((first, last))
+    except ValueError as error:
+        reason = str(error) if ":" in text and "invalid literal" not in str(error) else (
+            f"expected FIRST:LAST, two whole numbers, e.g. 1:3, got {text!r}")
+        raise cli.StudyArgumentError(f"--window: {reason}") from None
+
+
+def predicted_gaits(text: str, measured) -> list:
+    """--predict -> canonical gait names: none, or gaits that are not measured and have a
+    forward axis (a gait with none, e.g. all eight, has no speed to predict)."""
+    if text.strip().lower() == "none":
+        return []
+    gaits = cli.resolve_gaits(text, "--predict")
+    for gait in gaits:
+        if gait in measured:
+            raise cli.StudyArgumentError(f"--predict {gait}: it is one of --gaits (measured "
+                                         f"gaits are held out of the fit in turn already)")
+        if Gait.parse(gait).forward is None:
+            raise cli.StudyArgumentError(f"--predict {gait}: a gait with no forward axis (its "
+                                         f"symmetry leaves no direction to swim)")
+    return gaits
+
+
+def parameter_values(base, names) -> np.ndarray:
+    """The values (P,) of `names` (simulate's labels) in the model `base`."""
+    return np.array([direction.value(base) for direction in parse_directions(list(names))])
+
+
+def predictability_table(result, params, measured, names, values, window) -> tuple:
+    """(predictions, parameter uncertainty) from the run with the sensitivities: the rows of
+    `identification.gait_predictions` with each gait's simulation status; a gait whose run
+    failed, and every row whose fit would need it, is left out of the computation with its
+    reason in `status` (the others use the measured gaits that ran)."""
+    gaits = [p.gait for p in params]
+    runs = dict(zip(gaits, identification.result_runs(result, params)))
+    summary = result.summary
+    status = {}
+    for b, gait in enumerate(gaits):
+        row = summary.iloc[b]
+        status[gait] = ("ok" if runs[gait] is not None else
+                        f"{row['status']} at {row['failure_time_s']:.3g} s")
+    failed = [gait for gait in gaits if status[gait] != "ok"]
+    for gait in failed:
+        warnings.warn(f"{gait}: the simulation {status[gait]}; left out of the fits and "
+                      f"predictions", RuntimeWarning)
+    ran = [gait for gait in gaits if gait not in failed]
+    trials = {gait: identification.measured_trial(gait) for gait in measured if gait in ran}
+    if len(trials) < 2:
+        raise cli.StudyOutputError(f"fewer than two measured gaits ran ({', '.join(failed)} "
+                                   f"failed): nothing to fit")
+    derivatives = {gait: identification.record_derivatives(result.trajectory_sensitivities,
+                                                           gaits.index(gait), names)
+                   for gait in ran}
+    table = identification.gait_predictions({g: runs[g] for g in ran}, derivatives, trials,
+                                            values, window)
+    table.insert(1, "status", [status[g] for g in table["gait"]])
+    left_out = [{"gait": gait, "status": status[gait], "role": role}
+                for gait in failed
+                for role in (("fitted", "held_out") if gait in measured else ("unmeasured",))]
+    if failed:
+        table = pd.concat([table, pd.DataFrame(left_out)], ignore_index=True)
+    residuals, jacobian, _ = identification.objective_residuals(
+        {g: runs[g] for g in trials}, derivatives, trials, window)
+    parameters = identification.parameter_uncertainty(residuals, jacobian, names, values)
+    return table, parameters
+
+
+def plot_predictability(csv_path, png_path):
+    table = pd.read_csv(csv_path)
+    table = table[table["predicted_speed_mm_s"].notna()]
+    plt = cli.use_agg()
+    fig, ax = plt.subplots(figsize=(7.5, 0.42 * len(table) + 1.6))
+    labels = []
+    finite = table.loc[np.isfinite(table["standard_error_mm_s"])]
+    spans = pd.concat([finite["predicted_speed_mm_s"] + 2 * sign * finite["standard_error_mm_s"]
+                       for sign in (-1, 1)] + [table["measured_speed_mm_s"].dropna(),
+                                               table["predicted_speed_mm_s"]])
+    low, high = float(spans.min()), float(spans.max())
+    margin = 0.1 * (high - low or 1.0)
+    low, high = low - margin, high + margin
+    for y, row in enumerate(table.itertuples()):
+        colour = ROLE_COLOURS[row.role]
+        if math.isfinite(row.standard_error_mm_s):
+            ax.errorbar(row.predicted_speed_mm_s, y, xerr=2 * row.standard_error_mm_s, fmt="o",
+                        color=colour, capsize=3, ms=4)
+        else:  # the data leave it undetermined: the whole line
+            ax.plot([low, high], [y, y], color=colour, ls=":", lw=1)
+            ax.plot(row.predicted_speed_mm_s, y, "o", color=colour, ms=4, mfc="white")
+        if not math.isnan(row.measured_speed_mm_s):
+            ax.plot(row.measured_speed_mm_s, y, "kx", ms=6)
+        labels.append(f"{row.gait} ({row.role.replace('_', ' ')})")
+    ax.set_yticks(range(len(table)), labels, fontsize=8)
+    ax.invert_yaxis()
+    ax.axvline(0.0, color="0.7", lw=0.8)
+    ax.set_xlim(low, high)
+    ax.set_xlabel("speed over the window along the gait's forward axis, mm/s")
+    handles = [plt.Line2D([], [], color=ROLE_COLOURS[r], marker="o", ls="", label=r.replace(
+        "_", " ")) for r in ROLE_ORDER if r in set(table["role"])]
+    handles += [plt.Line2D([], [], color="k", marker="x", ls="", label="measured"),
+                plt.Line2D([], [], color="0.4", ls=":", label="undetermined by the fit")]
+    ax.legend(handles=handles, fontsize=7, loc="lower right")
+    settings = cli.run_settings(csv_path, mesh=False)
+    ax.set_title("predicted speed ± 2 standard errors (lower bounds)"
+                 + (f"\n{settings}" if settings else ""), fontsize=9)
+    fig.tight_layout()
+    return cli.save_figure(fig, png_path)
+
+
+def main(argv=None):
+    args = cli.parse(build_parser(), argv)
+    base = cli.base_params(args)
+    names = cli.sensitivity_parameters(args.parameters, "--parameters")
+    measured = identify.measured_gaits(args.gaits)
+    if len(measured) < 2:
+        raise cli.StudyArgumentError(f"--gaits: at least two measured gaits (one held out, one "
+                                     f"fitted), got {', '.join(measured)}")
+    predict = predicted_gaits(args.predict, measured)
+    window = parse_window(args.window)
+    identify.check_trials_cover(identification.measured_trials(measured), window, args.window,
+                                "--window")
+    solver = cli.solver(args)
+    duration = window[1] * base.period
+    cli.check_run(f"--window {args.window} ({duration:.3g} s)", duration, solver)
+    values = parameter_values(base, names)
+    params = [base.replace(gait=gait) for gait in measured + predict]
+    out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
+                     solver=solver, extra={"parameters": names, "window": list(window)})
+    result = simulate(params, duration, solver, arch=args.arch,
+                      record_interval_s=identify.RECORD_INTERVAL_S, sensitivities=names,
+                      progress=not args.no_progress)
+    table, parameters = predictability_table(result, params, measured, names, values, window)
+    csv_path = out.write_csv(table, "predictability.csv")
+    out.write_csv(parameters, "predictability_parameters.csv")
+    out.wrote(plot_predictability(csv_path, out.path("predictability.png")))
+    out.report()
+    return table

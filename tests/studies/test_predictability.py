@@ -1,0 +1,135 @@
+"""The predictability study: its quick run against plain simulations and a finite-difference
+Jacobian (the standard errors by another route than the sensitivities), and its refusals."""
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from taichi_star import SolverConfig, StarParams, identification, simulate
+
+from studies import cli, identify
+from studies import predictability as study
+from studies.__main__ import main as studies_main
+
+QUICK_GAITS = ("A1+A2", "A1+A3")
+QUICK_NAMES = ("alpha", "drag_perpendicular")
+WINDOW = (1, 1)
+STEP = 1e-3
+"""Relative step of the central differences. The runs converge each step to newton_tol 1e-10 m,
+and a step moves the path by ~1e-3 × 1 mm = 1e-6 m: noise ~1e-4 of a difference, truncation
+(the step squared) ~1e-6."""
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    """One quick run: A1+A2 and A1+A3 measured, A2 predicted, α and C⊥, cycle 1 at 2 ms. Its cost
+    is the compilation of the engine that carries tangents (about a minute on 2 cores)."""
+    out = tmp_path_factory.mktemp("predictability")
+    table = study.main(["--quick", "--no-progress", "--out", str(out)])
+    return out, table
+
+
+def _runs(params, base_solver):
+    result = simulate(params, WINDOW[1] * params[0].period, base_solver,
+                      record_interval_s=identify.RECORD_INTERVAL_S, progress=False)
+    return identification.result_runs(result, params)
+
+
+@pytest.mark.slow
+def test_quick_run_against_plain_runs_and_a_finite_difference_jacobian(run):
+    out, table = run
+    written = pd.read_csv(out / "predictability.csv")
+    assert list(zip(written["gait"], written["role"])) == [
+        ("A1+A2", "fitted"), ("A1+A3", "fitted"), ("A1+A2", "held_out"), ("A1+A3", "held_out"),
+        ("A2", "unmeasured")]
+    assert (written["status"] == "ok").all()
+    base = StarParams.preset("identified")
+    solver = SolverConfig.preset("identified", dt=cli.QUICK_DT)
+    gaits = list(QUICK_GAITS) + ["A2"]
+    trials = identification.measured_trials(QUICK_GAITS)
+    centre = dict(zip(gaits, _runs([base.replace(gait=g) for g in gaits], solver)))
+    fits = identification.trajectory_objective({g: centre[g] for g in QUICK_GAITS}, trials,
+                                               WINDOW)
+    phases = dict(zip(fits["gait"], fits["phase_s"]))
+    for row in written.itertuples():
+        # the instances of a run with sensitivities are bitwise those of the run without; the
+        # CSV keeps 10 significant digits
+        fit = identification.trial_fit(centre[row.gait], trials[row.gait], WINDOW) \
+            if row.gait in trials else None
+        speed = (fit.sim_speed_mm_s if fit else
+                 identification.window_speed(centre[row.gait],
+                                             np.zeros((len(centre[row.gait].path.t_s), 2, 1)),
+                                             WINDOW)[0])
+        assert row.predicted_speed_mm_s == pytest.approx(speed, rel=1e-9)
+        if fit:
+            assert row.measured_speed_mm_s == pytest.approx(
+                trials[row.gait].paper_sign * fit.meas_speed_mm_s, rel=1e-9)
+    # the residuals' Jacobian (phases held at the centre's) and A2's speed gradient by central
+    # differences of whole runs, one batch of the four moved points
+    values = np.array([base.alpha, base.drag_perpendicular])
+    moved = [base.replace(**{name: value * (1 + sign * STEP)})
+             for name, value in zip(QUICK_NAMES, values) for sign in (1.0, -1.0)]
+    runs = _runs([p.replace(gait=g) for p in moved for g in gaits], solver)
+    columns, speed_gradient = [], []
+    for k in range(len(QUICK_NAMES)):
+        ends = []
+        for side in range(2):
+            part = dict(zip(gaits, runs[(2 * k + side) * 3:(2 * k + side + 1) * 3]))
+            residuals, _, _ = identification.objective_residuals(
+                {g: part[g] for g in QUICK_GAITS},
+                {g: np.zeros((len(part[g].path.t_s), 2, 1)) for g in QUICK_GAITS}, trials,
+                WINDOW, phases=phases)
+            ends.append((residuals, identification.window_speed(
+                part["A2"], np.zeros((len(part["A2"].path.t_s), 2, 1)), WINDOW)[0]))
+        width = 2 * STEP * values[k]
+        columns.append((ends[0][0] - ends[1][0]) / width)
+        speed_gradient.append((ends[0][1] - ends[1][1]) / width)
+    jacobian, gradient = np.stack(columns, axis=1), np.array(speed_gradient)
+    residuals, _, _ = identification.objective_residuals(
+        {g: centre[g] for g in QUICK_GAITS},
+        {g: np.zeros((len(centre[g].path.t_s), 2, 1)) for g in QUICK_GAITS}, trials, WINDOW,
+        phases=phases)
+    variance = residuals @ residuals / (len(residuals) - 2)
+    expected = math.sqrt(variance * gradient @ np.linalg.inv(jacobian.T @ jacobian) @ gradient)
+    a2 = written[written["role"] == "unmeasured"].iloc[0]
+    # the differences' noise (~1e-4, STEP) carried through an inverse of condition ~4
+    assert a2["standard_error_mm_s"] == pytest.approx(expected, rel=2e-3)
+    parameters = pd.read_csv(out / "predictability_parameters.csv")
+    assert parameters["parameter"].tolist() == list(QUICK_NAMES)
+    np.testing.assert_allclose(parameters["value"], values, rtol=1e-9)
+    errors = np.sqrt(variance * np.diag(np.linalg.inv(jacobian.T @ jacobian)))
+    np.testing.assert_allclose(parameters["standard_error"], errors, rtol=2e-3)
+    assert (out / "predictability.png").stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_the_returned_table_is_the_written_one(run):
+    out, table = run
+    written = pd.read_csv(out / "predictability.csv")
+    within = "within_two_standard_errors"  # empty for an unmeasured gait: None, read as NaN
+    pd.testing.assert_frame_equal(written.drop(columns=within), table.drop(columns=within),
+                                  check_exact=False, rtol=1e-9, check_dtype=False)
+    assert written[within].isna().tolist() == table[within].isna().tolist() == [False] * 4 + [
+        True]
+    assert written[within].iloc[:4].tolist() == table[within].iloc[:4].tolist()
+
+
+@pytest.mark.parametrize("flags, message", [
+    (["--window", "3:2"], "--window: "),
+    (["--window", "1-3"], "--window: expected FIRST:LAST"),
+    (["--gaits", "A1"], "--gaits: at least two measured gaits"),
+    (["--gaits", "A1,A2"], "--gaits A2: not measured"),
+    (["--predict", "A1+A2"], "--predict A1+A2: it is one of --gaits"),
+    (["--predict", "A1+A2+A3+A4+A5+A6+A7+A8"], "a gait with no forward axis"),
+    (["--parameters", "alpha,nope"], "--parameters: "),
+    (["--window", "1:40"], "--window 1:40: "),
+])
+def test_bad_flags_are_refused_in_one_line_before_any_compute(flags, message, tmp_path,
+                                                                capsys):
+    out = tmp_path / "out"
+    assert studies_main(["predictability", "--no-progress", "--out", str(out)] + flags) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and message in error and "Traceback" not in error
+    assert not out.exists()

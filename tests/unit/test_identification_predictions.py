@@ -1,0 +1,196 @@
+"""How far a fit's data determine a prediction (identification.prediction_uncertainty) and the
+linearised leave-one-gait-out built on it (identification.gait_predictions): against the
+normal equations of linear fits, on exactly unresolved directions and at the share's
+boundary, and on synthetic paths whose derivatives are known in closed form (no simulation)."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from taichi_star import identification as ident
+
+from .test_identification_gradient import measured_trial, model_path
+
+
+def _linear_fit(rng, rows=40):
+    """A linear model's Jacobian (its design), values of three scales and residuals."""
+    design = rng.normal(size=(rows, 3)) / np.array([2.0, 0.5, 30.0])
+    return rng.normal(size=rows), design, np.array([2.0, -0.5, 30.0])
+
+
+def test_a_prediction_of_a_full_rank_fit_has_the_gauss_newton_variance():
+    """Against s²·gᵀ(JᵀJ)⁻¹g from the normal equations (numpy's inverse, another route than
+    the scaled SVD; cond(JᵀJ) ~10, so 1e-12 leaves room for rounding). A prediction that is a
+    parameter itself has that parameter's standard error from `parameter_uncertainty`, and
+    the error does not depend on the parameters' units (a column × 1e3, its value / 1e3, its
+    gradient entry × 1e3)."""
+    residuals, jacobian, values = _linear_fit(np.random.default_rng(7))
+    gradient = np.array([0.3, -2.0, 0.01])
+    got = ident.prediction_uncertainty(residuals, jacobian, values, gradient)
+    variance = residuals @ residuals / (len(residuals) - 3)
+    expected = math.sqrt(variance * gradient @ np.linalg.inv(jacobian.T @ jacobian) @ gradient)
+    assert got.standard_error == pytest.approx(expected, rel=1e-12)
+    assert got.unresolved_share < 1e-12 and got.determined
+    assert (got.rank, got.residual_dof) == (3, len(residuals) - 3)
+    table = ident.parameter_uncertainty(residuals, jacobian, ["a", "b", "c"], values)
+    for j in range(3):
+        own = ident.prediction_uncertainty(residuals, jacobian, values, np.eye(3)[j])
+        assert own.standard_error == pytest.approx(table.standard_error[j], rel=1e-12)
+    units = np.array([1.0, 1.0, 1e3])
+    rescaled = ident.prediction_uncertainty(residuals, jacobian * units, values / units,
+                                            gradient * units)
+    assert rescaled.standard_error == pytest.approx(expected, rel=1e-12)
+
+
+def test_a_prediction_along_a_direction_the_data_cannot_see_is_undetermined():
+    """Column c = 2 × column a leaves (2, 0, −1) (relative units: values 1) unseen. A
+    prediction along it is undetermined (inf, share 1); one orthogonal to it (b alone, or
+    a + 2c, which moves the residuals as 5a does) keeps the pseudo-inverse's variance,
+    s²·gᵀ(JᵀJ)⁺g over R − 2 degrees of freedom; a zero gradient is known exactly."""
+    residuals, jacobian, _ = _linear_fit(np.random.default_rng(11))
+    jacobian[:, 2] = 2.0 * jacobian[:, 0]
+    values = np.ones(3)
+    unseen = ident.prediction_uncertainty(residuals, jacobian, values, [2.0, 0.0, -1.0])
+    assert unseen.standard_error == math.inf and not unseen.determined
+    assert unseen.unresolved_share == pytest.approx(1.0, rel=1e-12)
+    variance = residuals @ residuals / (len(residuals) - 2)
+    inverse = np.linalg.pinv(jacobian.T @ jacobian)
+    for gradient in ([0.0, 1.0, 0.0], [1.0, 0.0, 2.0]):
+        seen = ident.prediction_uncertainty(residuals, jacobian, values, gradient)
+        gradient = np.array(gradient)
+        assert seen.standard_error == pytest.approx(
+            math.sqrt(variance * gradient @ inverse @ gradient), rel=1e-9)
+        assert seen.unresolved_share < 1e-12 and seen.rank == 2
+    zero = ident.prediction_uncertainty(residuals, jacobian, values, np.zeros(3))
+    assert (zero.standard_error, zero.unresolved_share, zero.rank) == (0.0, 0.0, 2)
+
+
+def test_a_prediction_is_determined_up_to_exactly_its_unresolved_share():
+    """A diagonal Jacobian whose second direction (1e-7 of the first) is unresolved, and a
+    prediction turned from the first axis by a small angle: its share is sin(angle); with
+    `share` at exactly that it is determined (≤), just below not."""
+    jacobian = np.vstack([np.diag([1.0, 1e-7]), np.zeros((4, 2))])
+    residuals = np.arange(6.0)
+    angle = 0.004
+    gradient = [math.cos(angle), math.sin(angle)]
+    first = ident.prediction_uncertainty(residuals, jacobian, [1.0, 1.0], gradient)
+    assert first.unresolved_share == pytest.approx(math.sin(angle), rel=1e-12)
+    at = ident.prediction_uncertainty(residuals, jacobian, [1.0, 1.0], gradient,
+                                      share=first.unresolved_share)
+    below = ident.prediction_uncertainty(residuals, jacobian, [1.0, 1.0], gradient,
+                                         share=first.unresolved_share * (1 - 1e-12))
+    assert at.determined and not below.determined
+    # determined: the resolved part alone, s·cos(angle)/1 with s² = Σr²/(6 − 1)
+    assert at.standard_error == pytest.approx(math.sqrt(55.0 / 5) * math.cos(angle), rel=1e-12)
+
+
+@pytest.mark.parametrize("gradient, message", [
+    ([1.0, 2.0], "one finite number per value"),
+    ([1.0, math.nan, 0.0], "one finite number per value"),
+    ([[1.0, 0.0, 0.0]], "one finite number per value"),
+])
+def test_a_gradient_that_does_not_match_the_values_is_refused(gradient, message):
+    residuals, jacobian, values = _linear_fit(np.random.default_rng(2))
+    with pytest.raises(ValueError, match=message):
+        ident.prediction_uncertainty(residuals, jacobian, values, gradient)
+
+
+def test_the_fit_is_checked_as_parameter_uncertainty_checks_it():
+    residuals, jacobian, values = _linear_fit(np.random.default_rng(2))
+    with pytest.raises(ValueError, match="share must be in"):
+        ident.prediction_uncertainty(residuals, jacobian, values, np.ones(3), share=1.0)
+    with pytest.raises(ValueError, match="no residual degree of freedom"):
+        ident.prediction_uncertainty(residuals[:3], jacobian[:3], values, np.ones(3))
+
+
+# ------------------------------------------------------------------ on paths
+
+def test_window_speed_and_its_derivative_against_the_path_itself():
+    """The speed is the forward net move over the window / its duration (trial_fit's
+    simulated speed), and the model path is linear in θ = (a, b, c), so its derivative
+    equals a central difference of the speed to rounding (1e-9 of a step 1e-3)."""
+    theta = np.array([2.0, 0.7, 0.2])
+    run, derivative = model_path(theta, forward_sign=-1.0)
+    speed, gradient = ident.window_speed(run, derivative, (2, 3))
+    fit = ident.trial_fit(dataclasses.replace(run), measured_trial(), (2, 3))
+    assert speed == pytest.approx(fit.sim_speed_mm_s, rel=1e-14)
+    assert speed < 0  # the path runs against its forward axis
+    for p in range(3):
+        moved = [ident.window_speed(model_path(theta + sign * 1e-3 * np.eye(3)[p], -1.0)[0],
+                                    derivative, (2, 3))[0] for sign in (1.0, -1.0)]
+        assert gradient[p] == pytest.approx((moved[0] - moved[1]) / 2e-3, rel=1e-9, abs=1e-12)
+
+
+def _gaits_and_trials():
+    """Three synthetic "gaits" at θ = (a, b, c, d): A1 and A1+A2 the model path (d moves
+    nothing), A1+A3 the path with its surge a + d (so only it sees d); trials of each made
+    from the measured_trial path (measured forward, paper sign +1)."""
+    theta = (2.6, 0.8, 0.25)
+    runs, derivatives, trials = {}, {}, {}
+    for gait, forward_sign in (("A1", 1.0), ("A1+A2", 1.0), ("A1+A3", -1.0)):
+        run, derivative = model_path(theta, forward_sign)
+        runs[gait] = dataclasses.replace(run, gait=gait)
+        d_column = derivative[:, :, :1] if gait == "A1+A3" else np.zeros_like(derivative[:, :, :1])
+        derivatives[gait] = np.concatenate([derivative, d_column], axis=-1)
+        trials[gait] = dataclasses.replace(measured_trial(), gait=gait)
+    return runs, derivatives, trials
+
+
+def test_gait_predictions_hold_a_gait_out_of_the_fit_and_say_what_the_others_determine():
+    runs, derivatives, trials = _gaits_and_trials()
+    values = np.array([2.6, 0.8, 0.25, 1.0])
+    extra, extra_derivative = model_path((2.6, 0.8, 0.25))
+    runs["A2"] = dataclasses.replace(extra, gait="A2")
+    derivatives["A2"] = np.concatenate([extra_derivative, np.zeros((len(extra.path.t_s), 2, 1))],
+                                       axis=-1)
+    table = ident.gait_predictions(runs, derivatives, trials, values, (1, 3))
+    assert list(table.columns) == ident.PREDICTION_COLUMNS
+    assert list(zip(table.gait, table.role)) == [
+        ("A1", "fitted"), ("A1+A2", "fitted"), ("A1+A3", "fitted"), ("A1", "held_out"),
+        ("A1+A2", "held_out"), ("A1+A3", "held_out"), ("A2", "unmeasured")]
+    rows = {(row.gait, row.role): row for row in table.itertuples()}
+    # only A1+A3 moves with d: held out, the others leave its speed undetermined
+    held = rows[("A1+A3", "held_out")]
+    assert held.standard_error_mm_s == math.inf and not held.determined
+    assert held.within_two_standard_errors and math.isnan(held.z_score)
+    assert held.training_gaits == "A1 A1+A2" and held.rank == 3
+    # the unresolved direction is d's axis exactly (its column is zero without A1+A3)
+    _, gradient = ident.window_speed(runs["A1+A3"], derivatives["A1+A3"], (1, 3))
+    scaled = gradient * values
+    assert held.unresolved_share == pytest.approx(abs(scaled[3]) / np.linalg.norm(scaled),
+                                                  rel=1e-12)
+    # the same gait in the fit: its standard error is that of the normal equations
+    residuals, jacobian, _ = ident.objective_residuals(
+        {g: runs[g] for g in trials}, derivatives, trials, (1, 3))
+    for gait in trials:
+        row = rows[(gait, "fitted")]
+        speed, gradient = ident.window_speed(runs[gait], derivatives[gait], (1, 3))
+        scaled = gradient * np.abs(values)
+        relative = jacobian * np.abs(values)
+        variance = residuals @ residuals / (len(residuals) - 4)
+        expected = math.sqrt(variance * scaled @ np.linalg.inv(relative.T @ relative) @ scaled)
+        assert row.determined and row.standard_error_mm_s == pytest.approx(expected, rel=1e-8)
+        fit = ident.trial_fit(runs[gait], trials[gait], (1, 3))
+        assert row.predicted_speed_mm_s == pytest.approx(fit.sim_speed_mm_s, rel=1e-14)
+        assert row.measured_speed_mm_s == pytest.approx(fit.meas_speed_mm_s, rel=1e-14)
+        gap = row.measured_speed_mm_s - row.predicted_speed_mm_s
+        assert row.z_score == pytest.approx(gap / row.standard_error_mm_s, rel=1e-12)
+        assert row.within_two_standard_errors == (abs(gap) <= 2 * row.standard_error_mm_s)
+    # A1 held out: A1+A2 is the same path, so the others determine it, d aside
+    assert rows[("A1", "held_out")].determined
+    unmeasured = rows[("A2", "unmeasured")]
+    assert unmeasured.determined and math.isnan(unmeasured.measured_speed_mm_s)
+    assert unmeasured.within_two_standard_errors is None
+    assert unmeasured.training_gaits == "A1 A1+A2 A1+A3"
+
+
+def test_gait_predictions_refuse_what_they_cannot_answer():
+    runs, derivatives, trials = _gaits_and_trials()
+    values = np.array([2.6, 0.8, 0.25, 1.0])
+    with pytest.raises(ValueError, match="no simulated run for the measured gait"):
+        ident.gait_predictions({g: runs[g] for g in ("A1", "A1+A2")}, derivatives, trials,
+                               values)
+    with pytest.raises(ValueError, match="at least two measured gaits"):
+        ident.gait_predictions(runs, derivatives, {"A1": trials["A1"]}, values)
