@@ -2,6 +2,7 @@
 Jacobian (the standard errors by another route than the sensitivities), and its refusals."""
 
 import math
+import types
 
 import numpy as np
 import pandas as pd
@@ -133,3 +134,46 @@ def test_bad_flags_are_refused_in_one_line_before_any_compute(flags, message, tm
     error = capsys.readouterr().err
     assert error.count("\n") == 1 and message in error and "Traceback" not in error
     assert not out.exists()
+
+
+def _with_status(result, instance: int, status: str, time_s: float):
+    """The result with one instance's summary marked failed (its records stay as they ran: a
+    flagged instance's records can be finite, and `result_runs` reads the status)."""
+    summary = result.summary.copy()
+    summary.loc[instance, "status"] = status
+    summary.loc[instance, "failure_time_s"] = time_s
+    return types.SimpleNamespace(trajectory=result.trajectory, summary=summary,
+                                 trajectory_sensitivities=result.trajectory_sensitivities)
+
+
+@pytest.mark.slow
+def test_a_failed_run_is_named_and_left_out_never_dropped(run):
+    """A predicted gait whose run failed keeps its row, with the failure's reason and time and
+    no numbers, and the others are computed as without it; a measured gait that failed leaves
+    fewer than two to fit: refused, naming it."""
+    base = StarParams.preset("identified")
+    solver = SolverConfig.preset("identified", dt=cli.QUICK_DT)
+    gaits = list(QUICK_GAITS) + ["A2"]
+    params = [base.replace(gait=g) for g in gaits]
+    result = simulate(params, WINDOW[1] * base.period, solver,
+                      record_interval_s=identify.RECORD_INTERVAL_S, sensitivities=QUICK_NAMES,
+                      progress=False)
+    values = study.parameter_values(base, QUICK_NAMES)
+    whole, _ = study.predictability_table(result, params, list(QUICK_GAITS), list(QUICK_NAMES),
+                                          values, WINDOW)
+    with pytest.warns(RuntimeWarning, match=r"A2: the simulation diverged at 1\.23 s; left out"):
+        table, _ = study.predictability_table(_with_status(result, 2, "diverged", 1.234),
+                                              params, list(QUICK_GAITS), list(QUICK_NAMES),
+                                              values, WINDOW)
+    failed = table[table["gait"] == "A2"]
+    assert failed["status"].tolist() == ["diverged at 1.23 s"]
+    assert failed["role"].tolist() == ["unmeasured"]
+    assert failed["predicted_speed_mm_s"].isna().all()
+    kept = table[table["gait"] != "A2"].reset_index(drop=True)
+    pd.testing.assert_frame_equal(kept, whole[whole["gait"] != "A2"].reset_index(drop=True),
+                                  check_dtype=False)
+    with pytest.warns(RuntimeWarning, match="A1\\+A3: the simulation"), \
+            pytest.raises(cli.StudyOutputError, match=r"fewer than two measured gaits ran "
+                                                      r"\(A1\+A3 failed\)"):
+        study.predictability_table(_with_status(result, 1, "diverged", 0.5), params,
+                                   list(QUICK_GAITS), list(QUICK_NAMES), values, WINDOW)
