@@ -4,7 +4,8 @@ whether each measured gait held out lies within what the others allow.
     python -m studies predictability [--preset identified|paper|accurate] [--set NAME=VALUE ...]
                                      [--parameters alpha,drag_perpendicular,...]
                                      [--gaits paper|A1,A1+A2,...] [--predict A2,A3,...]
-                                     [--window 1:3] [--dt S] [--out DIR] [--quick]
+                                     [--window 1:3] [--predict-window 4:6] [--dt S]
+                                     [--out DIR] [--quick]
 
 A model fitted to the measured trials is judged on the gaits it was not fitted to. Whether it
 can predict one at all is a question of the data before it is one of the model: a gait whose
@@ -15,8 +16,10 @@ point (`--preset`/`--set`) with the exact sensitivities of `--parameters`, over 
 window `--window` from rest. `identification.gait_predictions` then forms, from the
 trajectory objective's residuals and their Jacobian (each trial's phase fitted at the point),
 the Gauss-Newton covariance of the parameters fitted to every measured gait, and to every
-measured gait but one, and carries it to each gait's speed over the window along its forward
-axis (`identification.prediction_uncertainty`): a standard error, or "undetermined" where the
+measured gait but one, and carries it to each gait's speed along its forward axis over
+`--predict-window` (default the fit's window; a later one, e.g. 4:6, asks what the fit says of
+cycles it did not see, the measured speed read there with the phase fitted on the fit's window)
+(`identification.prediction_uncertainty`): a standard error, or "undetermined" where the
 speed moves along directions the fitted gaits do not resolve (`UNCERTAINTY_RCOND`,
 `UNCERTAINTY_SHARE`). The point is not refitted: a held-out row says how far the other gaits
 pin down what the held-out one needs, not where a fit without it would land (model_select's
@@ -76,22 +79,24 @@ def build_parser():
                         help="unmeasured gaits to predict from every measured one, a comma list "
                              "of gaits with a forward axis, or none")
     parser.add_argument("--window", default="1:3", quick=QUICK["window"],
-                        help="the cycle window FIRST:LAST (1-based, from rest) of the fit and "
-                             "of the speeds")
+                        help="the cycle window FIRST:LAST (1-based, from rest) of the fit")
+    parser.add_argument("--predict-window", default=None,
+                        help="the cycle window FIRST:LAST of the speeds predicted (default: "
+                             "--window's)")
     cli.add_model_flags(parser, fixed=("gait",), preset="identified")
     cli.add_dt_flag(parser)
     return parser
 
 
-def parse_window(text: str):
-    """--window FIRST:LAST -> (first, last) (StudyArgumentError naming the flag)."""
+def parse_window(text: str, flag: str = "--window"):
+    """FIRST:LAST -> (first, last) (StudyArgumentError naming `flag`)."""
     try:
         first, last = (int(part) for part in text.split(":"))
         return identification.check_window((first, last))
     except ValueError as error:
         reason = str(error) if ":" in text and "invalid literal" not in str(error) else (
             f"expected FIRST:LAST, two whole numbers, e.g. 1:3, got {text!r}")
-        raise cli.StudyArgumentError(f"--window: {reason}") from None
+        raise cli.StudyArgumentError(f"{flag}: {reason}") from None
 
 
 def predicted_gaits(text: str, measured) -> list:
@@ -115,7 +120,8 @@ def parameter_values(base, names) -> np.ndarray:
     return np.array([direction.value(base) for direction in parse_directions(list(names))])
 
 
-def predictability_table(result, params, measured, names, values, window) -> tuple:
+def predictability_table(result, params, measured, names, values, window,
+                         predict_window=None) -> tuple:
     """(predictions, parameter uncertainty) from the run with the sensitivities: the rows of
     `identification.gait_predictions` with each gait's simulation status; a gait whose run
     failed, and every row whose fit would need it, is left out of the computation with its
@@ -141,9 +147,11 @@ def predictability_table(result, params, measured, names, values, window) -> tup
                                                            gaits.index(gait), names)
                    for gait in ran}
     table = identification.gait_predictions({g: runs[g] for g in ran}, derivatives, trials,
-                                            values, window)
+                                            values, window, predict_cycles=predict_window)
     table.insert(1, "status", [status[g] for g in table["gait"]])
-    left_out = [{"gait": gait, "status": status[gait], "role": role}
+    first, last = window if predict_window is None else predict_window
+    left_out = [{"gait": gait, "status": status[gait], "role": role, "first_cycle": first,
+                 "last_cycle": last}
                 for gait in failed
                 for role in (("fitted", "held_out") if gait in measured else ("unmeasured",))]
     if failed:
@@ -182,7 +190,8 @@ def plot_predictability(csv_path, png_path):
     ax.invert_yaxis()
     ax.axvline(0.0, color="0.7", lw=0.8)
     ax.set_xlim(low, high)
-    ax.set_xlabel("speed over the window along the gait's forward axis, mm/s")
+    first, last = int(table["first_cycle"].iloc[0]), int(table["last_cycle"].iloc[0])
+    ax.set_xlabel(f"speed over cycles {first}-{last} along the gait's forward axis, mm/s")
     handles = [plt.Line2D([], [], color=ROLE_COLOURS[r], marker="o", ls="", label=r.replace(
         "_", " ")) for r in ROLE_ORDER if r in set(table["role"])]
     handles += [plt.Line2D([], [], color="k", marker="x", ls="", label="measured"),
@@ -205,19 +214,26 @@ def main(argv=None):
                                      f"fitted), got {', '.join(measured)}")
     predict = predicted_gaits(args.predict, measured)
     window = parse_window(args.window)
-    identify.check_trials_cover(identification.measured_trials(measured), window, args.window,
-                                "--window")
+    predict_text = args.window if args.predict_window is None else args.predict_window
+    predict_window = parse_window(predict_text, "--predict-window")
+    trials = identification.measured_trials(measured)
+    identify.check_trials_cover(trials, window, args.window, "--window")
+    # the measured speeds of the later window are read at the phase fitted on --window
+    identify.check_trials_cover(trials, predict_window, predict_text, "--predict-window")
     solver = cli.solver(args)
-    duration = window[1] * base.period
-    cli.check_run(f"--window {args.window} ({duration:.3g} s)", duration, solver)
+    duration = max(window[1], predict_window[1]) * base.period
+    cli.check_run(f"--window {args.window}, --predict-window {predict_text} "
+                  f"({duration:.3g} s)", duration, solver)
     values = parameter_values(base, names)
     params = [base.replace(gait=gait) for gait in measured + predict]
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
-                     solver=solver, extra={"parameters": names, "window": list(window)})
+                     solver=solver, extra={"parameters": names, "window": list(window),
+                                           "predict_window": list(predict_window)})
     result = simulate(params, duration, solver, arch=args.arch,
                       record_interval_s=identify.RECORD_INTERVAL_S, sensitivities=names,
                       progress=not args.no_progress)
-    table, parameters = predictability_table(result, params, measured, names, values, window)
+    table, parameters = predictability_table(result, params, measured, names, values, window,
+                                             predict_window)
     csv_path = out.write_csv(table, "predictability.csv")
     out.write_csv(parameters, "predictability_parameters.csv")
     out.wrote(plot_predictability(csv_path, out.path("predictability.png")))

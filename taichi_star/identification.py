@@ -781,10 +781,15 @@ def _net_displacement(simulated: SimulatedRun, derivative_xy: np.ndarray, cycles
                       ) -> Tuple[float, np.ndarray]:
     """A simulated run's net displacement over the cycle window along its gait's forward
     axis (mm; `TrialFit.sim_net_signed_mm`) and its derivative (P,) from the records'
-    derivatives derivative_xy (n_records, 2, P)."""
+    derivatives derivative_xy (n_records, 2, P). ValueError when the path does not cover the
+    window."""
     first, last = check_window(cycles)
     path, forward = simulated.path, np.asarray(simulated.forward)
     times = np.array([first - 1, last]) * path.period_s
+    if times[0] < path.t_s[0] or times[1] > path.t_s[-1] * (1 + 1e-12):
+        # as `cycle_curves`: the interpolation would hold the path's last point silently
+        raise ValueError(f"cycles {first}-{last} need the simulated path over [{times[0]:g}, "
+                         f"{times[1]:g}] s; it covers [{path.t_s[0]:g}, {path.t_s[-1]:g}] s")
     positions = path.position(times)
     ends = path_derivative(path, derivative_xy, times)
     return (float(np.dot(positions[1] - positions[0], forward)),
@@ -1074,14 +1079,16 @@ def prediction_uncertainty(residuals: np.ndarray, jacobian: np.ndarray,
                                  rank, fit.dof)
 
 
-PREDICTION_COLUMNS = ["gait", "role", "training_gaits", "predicted_speed_mm_s",
+PREDICTION_COLUMNS = ["gait", "role", "training_gaits", "first_cycle", "last_cycle",
+                      "predicted_speed_mm_s",
                       "standard_error_mm_s", "unresolved_share", "determined",
                       "measured_speed_mm_s", "z_score", "within_two_standard_errors",
                       "training_objective", "rank", "residual_dof"]
 """Columns of `gait_predictions`' table, one row per gait and role: "fitted" (a measured gait
 with every measured gait in the fit), "held_out" (a measured gait, the fit on the others) or
 "unmeasured" (the fit on every measured gait); the gaits fitted (joined by spaces); the
-simulated speed over the window along the gait's forward axis (mm/s) and its standard error
+window of the speeds (1-based cycles, inclusive); the simulated speed over it along the gait's
+forward axis (mm/s) and its standard error
 (`prediction_uncertainty`; inf where the fit leaves it undetermined); the measured speed
 along the same axis (the paper's direction, NaN when unmeasured), (measured − predicted) /
 standard error (NaN where it is inf or 0), whether the measured speed lies within two
@@ -1105,7 +1112,8 @@ def gait_predictions(simulated: Mapping[str, SimulatedRun],
                      derivatives: Mapping[str, np.ndarray], trials: Mapping[str, Trial],
                      values: Sequence[float], cycles=TRAINING_CYCLES,
                      samples: int = SAMPLES_PER_CYCLE, rcond: float = UNCERTAINTY_RCOND,
-                     share: float = UNCERTAINTY_SHARE) -> pd.DataFrame:
+                     share: float = UNCERTAINTY_SHARE,
+                     predict_cycles=None) -> pd.DataFrame:
     """Which gaits' speeds the measured trials determine, at one model point: a linearised
     leave-one-gait-out with the exact sensitivities. `simulated`: gait -> run at the point
     (every gait of `trials`, and others to predict), `derivatives`: gait -> its records'
@@ -1114,13 +1122,17 @@ def gait_predictions(simulated: Mapping[str, SimulatedRun],
     and a "held_out" one (the fit on the others), every other gait an "unmeasured" row (the
     fit on every trial): its `window_speed` and the `prediction_uncertainty` of the
     fit's `objective_residuals` (each trial's phase fitted at the point, then held) on the
-    window. One table row per gait and role (`PREDICTION_COLUMNS`).
+    window `cycles`. The speeds are those of `predict_cycles` (default `cycles`): a later
+    window asks what the fit predicts of cycles it did not see, the measured speed then read
+    there with the phase fitted on `cycles`. One table row per gait and role
+    (`PREDICTION_COLUMNS`).
 
     The fit is not redone without the held-out gait: the point is the same, only the data
     that determine it change, so a "held_out" row says how far the other gaits pin down
     what the held-out one needs, not where a fit without it would go. ValueError for a
     measured gait missing from `simulated`, fewer than two measured gaits, or as
     `prediction_uncertainty`."""
+    predicted = check_window(cycles if predict_cycles is None else predict_cycles)
     measured = [gait for gait in trials]
     missing = [gait for gait in measured if gait not in simulated]
     if missing:
@@ -1145,17 +1157,19 @@ def gait_predictions(simulated: Mapping[str, SimulatedRun],
     rows = []
     for gait, role, training in cases:
         residuals, jacobian, objective = fit_of(training)
-        speed, gradient = window_speed(simulated[gait], derivatives[gait], cycles)
+        speed, gradient = window_speed(simulated[gait], derivatives[gait], predicted)
         uncertainty = prediction_uncertainty(residuals, jacobian, values, gradient, rcond,
                                              share)
         error = uncertainty.standard_error
         measured_speed, gap, within = math.nan, math.nan, None
         if gait in trials:
-            fit = trial_fit(simulated[gait], trials[gait], cycles, samples)
+            phase = trial_fit(simulated[gait], trials[gait], cycles, samples).phase_s
+            fit = trial_fit(simulated[gait], trials[gait], predicted, samples, phase)
             measured_speed = trials[gait].paper_sign * fit.meas_speed_mm_s
             gap = measured_speed - speed
             within = bool(abs(gap) <= 2.0 * error)
         rows.append({"gait": gait, "role": role, "training_gaits": " ".join(training),
+                     "first_cycle": predicted[0], "last_cycle": predicted[1],
                      "predicted_speed_mm_s": speed, "standard_error_mm_s": error,
                      "unresolved_share": uncertainty.unresolved_share,
                      "determined": uncertainty.determined,

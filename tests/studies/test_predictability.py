@@ -126,6 +126,8 @@ def test_the_returned_table_is_the_written_one(run):
     (["--predict", "A1+A2+A3+A4+A5+A6+A7+A8"], "a gait with no forward axis"),
     (["--parameters", "alpha,nope"], "--parameters: "),
     (["--window", "1:40"], "--window 1:40: "),
+    (["--predict-window", "4:x"], "--predict-window: expected FIRST:LAST"),
+    (["--predict-window", "30:31"], "--predict-window 30:31: "),
 ])
 def test_bad_flags_are_refused_in_one_line_before_any_compute(flags, message, tmp_path,
                                                                 capsys):

@@ -194,3 +194,41 @@ def test_gait_predictions_refuse_what_they_cannot_answer():
                                values)
     with pytest.raises(ValueError, match="at least two measured gaits"):
         ident.gait_predictions(runs, derivatives, {"A1": trials["A1"]}, values)
+
+
+def test_gait_predictions_of_a_later_window_read_it_at_the_phase_fitted_on_the_fit_window():
+    """Fitted on cycle 1, predicted over cycles 2-3: the speeds are those of cycles 2-3, the
+    measured one read there at the phase fitted on cycle 1; the standard errors are the fit's
+    covariance carried to the later speed (the same rows as over cycle 1 otherwise)."""
+    runs, derivatives, trials = _gaits_and_trials()
+    values = np.array([2.6, 0.8, 0.25, 1.0])
+    later = ident.gait_predictions(runs, derivatives, trials, values, (1, 1),
+                                   predict_cycles=(2, 3))
+    same = ident.gait_predictions(runs, derivatives, trials, values, (1, 1))
+    assert (later.first_cycle == 2).all() and (later.last_cycle == 3).all()
+    assert (same.first_cycle == 1).all() and (same.last_cycle == 1).all()
+    residuals, jacobian, _ = ident.objective_residuals(
+        {g: runs[g] for g in ("A1", "A1+A2")}, derivatives,
+        {g: trials[g] for g in ("A1", "A1+A2")}, (1, 1))
+    for row in later.itertuples():
+        speed, gradient = ident.window_speed(runs[row.gait], derivatives[row.gait], (2, 3))
+        assert row.predicted_speed_mm_s == pytest.approx(speed, rel=1e-14)
+        phase = ident.trial_fit(runs[row.gait], trials[row.gait], (1, 1)).phase_s
+        fit = ident.trial_fit(runs[row.gait], trials[row.gait], (2, 3), phase_s=phase)
+        assert row.measured_speed_mm_s == pytest.approx(fit.meas_speed_mm_s, rel=1e-14)
+        if row.role == "held_out" and row.gait == "A1+A3":
+            expected = ident.prediction_uncertainty(residuals, jacobian, values, gradient)
+            assert row.standard_error_mm_s == expected.standard_error == math.inf
+    np.testing.assert_array_equal(later.training_objective, same.training_objective)
+    # the model path repeats each cycle; the "measurement" grows 4 % a cycle
+    np.testing.assert_allclose(later.predicted_speed_mm_s, same.predicted_speed_mm_s, rtol=1e-9)
+    assert (later.measured_speed_mm_s.abs() > 1.03 * same.measured_speed_mm_s.abs()).all()
+
+
+def test_a_window_the_simulated_path_does_not_cover_is_refused():
+    """The path ends at 3T: cycles 3-4 need it to 4T (np.interp would hold its last point);
+    cycles 3-3 end exactly at its last record, which is allowed (≤)."""
+    run, derivative = model_path((2.0, 0.7, 0.2))
+    with pytest.raises(ValueError, match=r"cycles 3-4 need the simulated path over \[4, 8\] s"):
+        ident.window_speed(run, derivative, (3, 4))
+    assert math.isfinite(ident.window_speed(run, derivative, (3, 3))[0])
