@@ -1,5 +1,5 @@
 """Predictability: which gaits' speeds the measured trials determine, at one model point, and
-whether each measured gait held out lies within what the others allow.
+how far each measured gait's speed lies from the prediction there.
 
     python -m studies predictability [--preset identified|paper|accurate] [--set NAME=VALUE ...]
                                      [--parameters alpha,drag_perpendicular,...]
@@ -18,14 +18,18 @@ trajectory objective's residuals and their Jacobian (each trial's phase fitted a
 the Gauss-Newton covariance of the parameters fitted to every measured gait, and to every
 measured gait but one, and carries it to each gait's speed along its forward axis over
 `--predict-window` (default the fit's window; a later one, e.g. 4:6, asks what the fit says of
-cycles it did not see, the measured speed read there with the phase fitted on the fit's window)
-(`identification.prediction_uncertainty`): a standard error, or "undetermined" where the
-speed moves along directions the fitted gaits do not resolve (`UNCERTAINTY_RCOND`,
-`UNCERTAINTY_SHARE`). The point is not refitted: a held-out row says how far the other gaits
-pin down what the held-out one needs, not where a fit without it would land (model_select's
-cold folds do that, at 20 minutes a fold). The standard errors take the curve residuals as
-independent, and samples of one measured curve are correlated: they are lower bounds, and the
-share of measured speeds within two of them says how far.
+cycles it did not see, the measured speed read there with the phase fitted on the fit's
+window; `identification.prediction_uncertainty`): a standard error, or "undetermined" where
+the speed moves along directions the fitted gaits do not resolve (`UNCERTAINTY_RCOND`,
+`UNCERTAINTY_SHARE`). The point is not refitted: a held-out row keeps the speed of the point
+fitted with every gait, and says how far the other gaits pin down what the held-out one needs,
+not where a fit without it would land (model_select's cold folds do that, at 18-26 minutes
+for a form's four folds at both stages). The standard errors are of the simulated speed: they
+take the curve residuals as independent (samples of one measured curve are correlated, so
+they are lower bounds) and leave out the measured speed's own scatter from cycle to cycle. The
+measured speed is the distance covered (the tracks have no robot axes), signed by the paper's
+direction; the simulated one is along the gait's forward axis, so a simulated robot that veers
+off its axis counts as slow (`distance_speed_mm_s` gives its distance covered).
 
 Writes `predictability.csv` (one row per gait and role, `identification.PREDICTION_COLUMNS`
 and the gait's simulation status), `predictability_parameters.csv`
@@ -90,13 +94,14 @@ def build_parser():
 
 def parse_window(text: str, flag: str = "--window"):
     """FIRST:LAST -> (first, last) (StudyArgumentError naming `flag`)."""
+    parts = text.split(":")
+    if len(parts) != 2 or not all(part.strip().isdigit() for part in parts):
+        raise cli.StudyArgumentError(f"{flag}: expected FIRST:LAST, two whole numbers, e.g. "
+                                     f"1:3, got {text!r}")
     try:
-        first, last = (int(part) for part in text.split(":"))
-        return identification.check_window((first, last))
+        return identification.check_window((int(parts[0]), int(parts[1])))
     except ValueError as error:
-        reason = str(error) if ":" in text and "invalid literal" not in str(error) else (
-            f"expected FIRST:LAST, two whole numbers, e.g. 1:3, got {text!r}")
-        raise cli.StudyArgumentError(f"{flag}: {reason}") from None
+        raise cli.StudyArgumentError(f"{flag}: {error}") from None
 
 
 def predicted_gaits(text: str, measured) -> list:
@@ -104,6 +109,9 @@ def predicted_gaits(text: str, measured) -> list:
     forward axis (a gait with none, e.g. all eight, has no speed to predict)."""
     if text.strip().lower() == "none":
         return []
+    if "none" in [item.strip().lower() for item in text.split(",")]:
+        raise cli.StudyArgumentError(f"--predict {text}: none stands alone (no gait to "
+                                     f"predict), not in a list")
     gaits = cli.resolve_gaits(text, "--predict")
     for gait in gaits:
         if gait in measured:
@@ -191,14 +199,18 @@ def plot_predictability(csv_path, png_path):
     ax.axvline(0.0, color="0.7", lw=0.8)
     ax.set_xlim(low, high)
     first, last = int(table["first_cycle"].iloc[0]), int(table["last_cycle"].iloc[0])
-    ax.set_xlabel(f"speed over cycles {first}-{last} along the gait's forward axis, mm/s")
+    ax.set_xlabel(f"speed over cycles {first}-{last}, mm/s (simulated: along the gait's forward "
+                  f"axis; measured: the distance covered, signed by the paper's direction)",
+                  fontsize=8)
     handles = [plt.Line2D([], [], color=ROLE_COLOURS[r], marker="o", ls="", label=r.replace(
         "_", " ")) for r in ROLE_ORDER if r in set(table["role"])]
     handles += [plt.Line2D([], [], color="k", marker="x", ls="", label="measured"),
                 plt.Line2D([], [], color="0.4", ls=":", label="undetermined by the fit")]
     ax.legend(handles=handles, fontsize=7, loc="lower right")
     settings = cli.run_settings(csv_path, mesh=False)
-    ax.set_title("predicted speed ± 2 standard errors (lower bounds)"
+    fitted = cli.written_provenance(csv_path).get("details", {}).get("window")
+    on = f", fitted on cycles {fitted[0]}-{fitted[1]}" if fitted else ""
+    ax.set_title(f"predicted speed ± 2 standard errors (lower bounds){on}"
                  + (f"\n{settings}" if settings else ""), fontsize=9)
     fig.tight_layout()
     return cli.save_figure(fig, png_path)

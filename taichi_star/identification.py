@@ -94,19 +94,17 @@ from .gait import Gait
 # every public name: docs/api.md documents the whole module
 __all__ = ["TRAINING_CYCLES", "VALIDATION_CYCLES", "SAMPLES_PER_CYCLE", "MAX_CYCLE",
            "MAX_SAMPLES_PER_CYCLE", "PHASE_GRID", "PHASE_VALLEYS", "DISPLACEMENT_FLOOR_MM",
-           "PHASE_STEP_S",
-           "PHASE_KINK_RATIO", "GOLDEN_ITERATIONS", "UNCERTAINTY_RCOND", "UNCERTAINTY_SHARE",
-           "UNCERTAINTY_COLUMNS", "TRIAL_COLUMNS", "CentroidPath", "Trial", "SimulatedRun",
-           "TrialFit", "measured_trial", "check_window", "check_samples", "tau_grid",
-           "cycle_curves", "latest_phase", "align_phase", "trial_fit", "trajectory_objective",
-           "objective_of", "measured_trials", "simulated_runs", "result_runs",
-           "distance_derivative", "path_derivative", "residual_count", "trial_residuals", "objective_residuals",
-           "trial_phase_motion", "objective_and_gradient", "phase_motion", "parameter_uncertainty",
-           "record_derivatives", "PredictionUncertainty", "prediction_uncertainty",
-           "PREDICTION_COLUMNS", "window_speed", "gait_predictions", "STROKE_WINDOW_S", "STROKE_TOLERANCE_S", "STROKE_ONSET_SHARE",
-           "STROKE_MIN_JUMP_RATIO",
-           "Strokes", "window_moves",
-           "circular_difference", "strokes",
+           "PHASE_STEP_S", "PHASE_KINK_RATIO", "GOLDEN_ITERATIONS", "UNCERTAINTY_RCOND",
+           "UNCERTAINTY_SHARE", "UNCERTAINTY_COLUMNS", "TRIAL_COLUMNS", "CentroidPath", "Trial",
+           "SimulatedRun", "TrialFit", "measured_trial", "check_window", "check_samples",
+           "tau_grid", "cycle_curves", "latest_phase", "align_phase", "trial_fit",
+           "trajectory_objective", "objective_of", "measured_trials", "simulated_runs",
+           "result_runs", "distance_derivative", "path_derivative", "residual_count",
+           "trial_residuals", "objective_residuals", "trial_phase_motion",
+           "objective_and_gradient", "phase_motion", "parameter_uncertainty", "record_derivatives",
+           "PredictionUncertainty", "prediction_uncertainty", "PREDICTION_COLUMNS", "window_speed",
+           "gait_predictions", "STROKE_WINDOW_S", "STROKE_TOLERANCE_S", "STROKE_ONSET_SHARE",
+           "STROKE_MIN_JUMP_RATIO", "Strokes", "window_moves", "circular_difference", "strokes",
            "stroke_aligned_phase"]
 
 TRAINING_CYCLES = (1, 3)
@@ -411,8 +409,7 @@ def trial_fit(simulated: SimulatedRun, trial: Trial, cycles=TRAINING_CYCLES,
     sigma = max(spread, DISPLACEMENT_FLOOR_MM)
     error = float(np.mean(((sim_curves - measured) / sigma) ** 2))
     period, meas_period = simulated.path.period_s, trial.path.period_s
-    sim_ends = simulated.path.position(np.array([first - 1, last]) * period)
-    sim_net = float(np.dot(sim_ends[1] - sim_ends[0], simulated.forward))
+    sim_net, _ = _net_displacement(simulated, None, (first, last))
     meas_ends = trial.path.position(phase_s + np.array([first - 1, last]) * meas_period)
     meas_net = float(np.hypot(*(meas_ends[1] - meas_ends[0])))
     rho = max(0.0, -trial.paper_sign * sim_net) / sigma
@@ -777,12 +774,12 @@ def _curve_derivative(path: CentroidPath, derivative_xy, cycles, samples) -> np.
     return distance_derivative(delta, derivative)
 
 
-def _net_displacement(simulated: SimulatedRun, derivative_xy: np.ndarray, cycles
-                      ) -> Tuple[float, np.ndarray]:
+def _net_displacement(simulated: SimulatedRun, derivative_xy: Optional[np.ndarray], cycles
+                      ) -> Tuple[float, Optional[np.ndarray]]:
     """A simulated run's net displacement over the cycle window along its gait's forward
     axis (mm; `TrialFit.sim_net_signed_mm`) and its derivative (P,) from the records'
-    derivatives derivative_xy (n_records, 2, P). ValueError when the path does not cover the
-    window."""
+    derivatives derivative_xy (n_records, 2, P; None: no derivative, None returned).
+    ValueError when the path does not cover the window."""
     first, last = check_window(cycles)
     path, forward = simulated.path, np.asarray(simulated.forward)
     times = np.array([first - 1, last]) * path.period_s
@@ -791,9 +788,11 @@ def _net_displacement(simulated: SimulatedRun, derivative_xy: np.ndarray, cycles
         raise ValueError(f"cycles {first}-{last} need the simulated path over [{times[0]:g}, "
                          f"{times[1]:g}] s; it covers [{path.t_s[0]:g}, {path.t_s[-1]:g}] s")
     positions = path.position(times)
+    net = float(np.dot(positions[1] - positions[0], forward))
+    if derivative_xy is None:
+        return net, None
     ends = path_derivative(path, derivative_xy, times)
-    return (float(np.dot(positions[1] - positions[0], forward)),
-            np.einsum("c,cp->p", forward, ends[1] - ends[0]))
+    return net, np.einsum("c,cp->p", forward, ends[1] - ends[0])
 
 
 def residual_count(gaits: int, cycles=TRAINING_CYCLES, samples: int = SAMPLES_PER_CYCLE) -> int:
@@ -937,6 +936,12 @@ class _LocalFit:
     variance: float          # s² = Σr² / (R − rank)
     dof: int                 # R − rank
 
+    @property
+    def rank(self) -> int:
+        """The resolved directions."""
+        return int(self.kept.sum())
+
+
 def _local_fit(residuals, jacobian, values, count: int, rcond: float, share: float
                ) -> _LocalFit:
     """Check a fit's residuals (R,), Jacobian (R, P) and values (P,) for `count` = P
@@ -947,7 +952,7 @@ def _local_fit(residuals, jacobian, values, count: int, rcond: float, share: flo
     if not count or residuals.ndim != 1 or jacobian.shape != (len(residuals), count) \
             or values.shape != (count,):
         raise ValueError(f"residuals (R,), jacobian (R, P) and values (P,) must match the "
-                         f"{count} names (at least one); got {residuals.shape}, "
+                         f"{count} parameters (at least one); got {residuals.shape}, "
                          f"{jacobian.shape} and {values.shape}")
     if not (np.isfinite(residuals).all() and np.isfinite(jacobian).all()
             and np.isfinite(values).all()):
@@ -1003,7 +1008,7 @@ def parameter_uncertainty(residuals: np.ndarray, jacobian: np.ndarray, names: Se
     relative_covariance = fit.variance * basis @ basis.T          # of value_j / |value_j|
     spread = np.sqrt(np.diag(relative_covariance))
     condition = singular[0] / singular[-1] if singular[-1] > 0.0 else math.inf
-    rank, dof = int(kept.sum()), fit.dof
+    rank, dof = fit.rank, fit.dof
     rows = []
     for j, name in enumerate(names):
         row = {"parameter": name, "value": values[j], "identifiable": bool(identifiable[j]),
@@ -1058,42 +1063,57 @@ def prediction_uncertainty(residuals: np.ndarray, jacobian: np.ndarray,
     leave y undetermined and its standard error is inf. Otherwise it is that of the
     Gauss-Newton covariance on the resolved directions, √(s²·gᵀ(JᵀJ)⁺g) in relative units,
     with the same s² = Σr² / (R − rank): like the parameters', a lower bound where the
-    residuals are correlated. The same ValueErrors as `parameter_uncertainty`, and one
-    for a gradient that is not P finite numbers."""
+    residuals are correlated; and a share above 0 (up to `share`) is left out of it: a move
+    of the unresolved parameters moves y by up to that share of g's size besides. The same
+    ValueErrors as `parameter_uncertainty`, and one for values that are not 1-D, a gradient
+    that is not P finite numbers, or a product gradient·|value| that overflows."""
     values = np.asarray(values, dtype=np.float64)
     gradient = np.asarray(gradient, dtype=np.float64)
-    if values.ndim != 1 or gradient.shape != values.shape or not np.isfinite(gradient).all():
+    if values.ndim != 1:
+        raise ValueError(f"values must be a 1-D array (P,), got shape {values.shape}")
+    if gradient.shape != values.shape or not np.isfinite(gradient).all():
         raise ValueError(f"gradient must hold one finite number per value; got shape "
                          f"{gradient.shape} for values of shape {values.shape}")
     fit = _local_fit(residuals, jacobian, values, len(values), rcond, share)
-    rank = int(fit.kept.sum())
-    relative = gradient * fit.scale
-    size = float(np.linalg.norm(relative))
-    if size == 0.0:
+    rank = fit.rank
+    with np.errstate(over="ignore"):
+        relative = gradient * fit.scale
+    if not np.isfinite(relative).all():
+        raise ValueError("gradient × |value| overflows: give the gradient and values in units "
+                         "where their product is finite")
+    # scaled by its largest entry, so that squares of entries near the float range's end do
+    # not overflow the norms
+    largest = float(np.max(np.abs(relative)))
+    if largest == 0.0:
         return PredictionUncertainty(0.0, 0.0, rank, fit.dof)
-    unresolved = float(np.linalg.norm(fit.directions[~fit.kept] @ relative)) / size
+    direction = relative / largest
+    unresolved = (float(np.linalg.norm(fit.directions[~fit.kept] @ direction))
+                  / float(np.linalg.norm(direction)))
     if unresolved > share:
         return PredictionUncertainty(math.inf, unresolved, rank, fit.dof)
-    along = fit.directions[fit.kept] @ relative / fit.singular[fit.kept]
-    return PredictionUncertainty(math.sqrt(fit.variance * float(along @ along)), unresolved,
-                                 rank, fit.dof)
+    along = fit.directions[fit.kept] @ direction / fit.singular[fit.kept]
+    return PredictionUncertainty(largest * math.sqrt(fit.variance * float(along @ along)),
+                                 unresolved, rank, fit.dof)
 
 
 PREDICTION_COLUMNS = ["gait", "role", "training_gaits", "first_cycle", "last_cycle",
-                      "predicted_speed_mm_s",
-                      "standard_error_mm_s", "unresolved_share", "determined",
+                      "predicted_speed_mm_s", "standard_error_mm_s", "distance_speed_mm_s",
+                      "unresolved_share", "determined",
                       "measured_speed_mm_s", "z_score", "within_two_standard_errors",
                       "training_objective", "rank", "residual_dof"]
 """Columns of `gait_predictions`' table, one row per gait and role: "fitted" (a measured gait
 with every measured gait in the fit), "held_out" (a measured gait, the fit on the others) or
 "unmeasured" (the fit on every measured gait); the gaits fitted (joined by spaces); the
 window of the speeds (1-based cycles, inclusive); the simulated speed over it along the gait's
-forward axis (mm/s) and its standard error
-(`prediction_uncertainty`; inf where the fit leaves it undetermined); the measured speed
-along the same axis (the paper's direction, NaN when unmeasured), (measured − predicted) /
-standard error (NaN where it is inf or 0), whether the measured speed lies within two
-standard errors (≤; always where undetermined, empty when unmeasured); the fit's objective on its gaits
-(`objective_of`), its resolved directions and residual degrees of freedom."""
+forward axis (mm/s; `TrialFit.sim_speed_mm_s`) and its standard error
+(`prediction_uncertainty`; inf where the fit leaves it undetermined); the simulated distance
+covered over it / its duration (mm/s, unsigned: what the measured speed is, the tracks having
+no robot axes; above |predicted| where the robot veers off its axis); the measured speed (the
+distance covered signed by the paper's direction, `TrialFit.meas_speed_mm_s`; NaN when
+unmeasured), (measured − predicted) / standard error (NaN where it is inf or 0), whether the
+measured speed lies within two standard errors (≤; always where undetermined, empty when
+unmeasured); the fit's objective on its gaits (`objective_of`), its resolved directions and
+residual degrees of freedom."""
 
 
 def window_speed(simulated: SimulatedRun, derivative_xy: np.ndarray, cycles=TRAINING_CYCLES
@@ -1133,7 +1153,7 @@ def gait_predictions(simulated: Mapping[str, SimulatedRun],
     measured gait missing from `simulated`, fewer than two measured gaits, or as
     `prediction_uncertainty`."""
     predicted = check_window(cycles if predict_cycles is None else predict_cycles)
-    measured = [gait for gait in trials]
+    measured = list(trials)
     missing = [gait for gait in measured if gait not in simulated]
     if missing:
         raise ValueError(f"no simulated run for the measured gait(s) {', '.join(missing)}")
@@ -1147,8 +1167,12 @@ def gait_predictions(simulated: Mapping[str, SimulatedRun],
             residuals, jacobian, table = objective_residuals(
                 {g: simulated[g] for g in training}, derivatives,
                 {g: trials[g] for g in training}, cycles, samples)
-            fits[training] = residuals, jacobian, objective_of(table)
+            fits[training] = residuals, jacobian, table
         return fits[training]
+
+    # each trial's phase, fitted on `cycles` at the point: the same in every fit that holds it
+    _, _, everyone = fit_of(tuple(measured))
+    phases = dict(zip(everyone["gait"], everyone["phase_s"]))
 
     cases = ([(gait, "fitted", tuple(measured)) for gait in measured]
              + [(gait, "held_out", tuple(g for g in measured if g != gait)) for gait in measured]
@@ -1156,26 +1180,30 @@ def gait_predictions(simulated: Mapping[str, SimulatedRun],
                 if gait not in trials])
     rows = []
     for gait, role, training in cases:
-        residuals, jacobian, objective = fit_of(training)
-        speed, gradient = window_speed(simulated[gait], derivatives[gait], predicted)
+        residuals, jacobian, table = fit_of(training)
+        run = simulated[gait]
+        speed, gradient = window_speed(run, derivatives[gait], predicted)
+        ends = run.path.position(np.array([predicted[0] - 1, predicted[1]]) * run.path.period_s)
+        duration = (predicted[1] - predicted[0] + 1) * run.path.period_s
         uncertainty = prediction_uncertainty(residuals, jacobian, values, gradient, rcond,
                                              share)
         error = uncertainty.standard_error
         measured_speed, gap, within = math.nan, math.nan, None
         if gait in trials:
-            phase = trial_fit(simulated[gait], trials[gait], cycles, samples).phase_s
-            fit = trial_fit(simulated[gait], trials[gait], predicted, samples, phase)
+            fit = trial_fit(run, trials[gait], predicted, samples, phases[gait])
             measured_speed = trials[gait].paper_sign * fit.meas_speed_mm_s
             gap = measured_speed - speed
             within = bool(abs(gap) <= 2.0 * error)
         rows.append({"gait": gait, "role": role, "training_gaits": " ".join(training),
                      "first_cycle": predicted[0], "last_cycle": predicted[1],
                      "predicted_speed_mm_s": speed, "standard_error_mm_s": error,
+                     "distance_speed_mm_s": float(np.hypot(*(ends[1] - ends[0]))) / duration,
                      "unresolved_share": uncertainty.unresolved_share,
                      "determined": uncertainty.determined,
                      "measured_speed_mm_s": measured_speed,
                      "z_score": gap / error if 0.0 < error < math.inf else math.nan,
-                     "within_two_standard_errors": within, "training_objective": objective,
+                     "within_two_standard_errors": within,
+                     "training_objective": objective_of(table),
                      "rank": uncertainty.rank, "residual_dof": uncertainty.residual_dof})
     return pd.DataFrame(rows, columns=PREDICTION_COLUMNS)
 

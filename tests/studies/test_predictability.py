@@ -40,7 +40,7 @@ def _runs(params, base_solver):
 
 @pytest.mark.slow
 def test_quick_run_against_plain_runs_and_a_finite_difference_jacobian(run):
-    out, table = run
+    out, _ = run
     written = pd.read_csv(out / "predictability.csv")
     assert list(zip(written["gait"], written["role"])) == [
         ("A1+A2", "fitted"), ("A1+A3", "fitted"), ("A1+A2", "held_out"), ("A1+A3", "held_out"),
@@ -64,6 +64,11 @@ def test_quick_run_against_plain_runs_and_a_finite_difference_jacobian(run):
                                              np.zeros((len(centre[row.gait].path.t_s), 2, 1)),
                                              WINDOW)[0])
         assert row.predicted_speed_mm_s == pytest.approx(speed, rel=1e-9)
+        path = centre[row.gait].path
+        ends = path.position(np.array([WINDOW[0] - 1, WINDOW[1]]) * path.period_s)
+        distance = np.hypot(*(ends[1] - ends[0])) / ((WINDOW[1] - WINDOW[0] + 1) * path.period_s)
+        assert row.distance_speed_mm_s == pytest.approx(distance, rel=1e-9)
+        assert row.distance_speed_mm_s >= abs(row.predicted_speed_mm_s) * (1 - 1e-9)
         if fit:
             assert row.measured_speed_mm_s == pytest.approx(
                 trials[row.gait].paper_sign * fit.meas_speed_mm_s, rel=1e-9)
@@ -128,6 +133,9 @@ def test_the_returned_table_is_the_written_one(run):
     (["--window", "1:40"], "--window 1:40: "),
     (["--predict-window", "4:x"], "--predict-window: expected FIRST:LAST"),
     (["--predict-window", "30:31"], "--predict-window 30:31: "),
+    (["--window", "1:3:5"], "--window: expected FIRST:LAST, two whole numbers"),
+    (["--window", "1.5:3"], "--window: expected FIRST:LAST, two whole numbers"),
+    (["--predict", "none,A2"], "--predict none,A2: none stands alone"),
 ])
 def test_bad_flags_are_refused_in_one_line_before_any_compute(flags, message, tmp_path,
                                                                 capsys):

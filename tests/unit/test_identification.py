@@ -466,14 +466,14 @@ def test_uncertainty_refuses_what_it_cannot_estimate():
     residuals, jacobian, values = _linear_fit(np.random.default_rng(7), rows=3)
     with pytest.raises(ValueError, match="no residual degree of freedom"):
         ident.parameter_uncertainty(residuals, jacobian, ["a", "b", "c"], values)
-    with pytest.raises(ValueError, match="must match the 2 names"):
+    with pytest.raises(ValueError, match="must match the 2 parameters"):
         ident.parameter_uncertainty(residuals, jacobian, ["a", "b"], values)
     jacobian[0, 0] = np.nan
     with pytest.raises(ValueError, match="must be finite"):
         ident.parameter_uncertainty(residuals, jacobian, ["a", "b", "c"], values)
     with pytest.raises(ValueError, match="rcond must be in"):
         ident.parameter_uncertainty(np.ones(9), np.ones((9, 1)), ["a"], [1.0], rcond=1.0)
-    with pytest.raises(ValueError, match="must match the 0 names"):
+    with pytest.raises(ValueError, match="must match the 0 parameters"):
         ident.parameter_uncertainty(np.ones(9), np.ones((9, 0)), [], [])
     with pytest.raises(ValueError, match="share must be in"):
         ident.parameter_uncertainty(np.ones(9), np.ones((9, 1)), ["a"], [1.0], share=0.0)
@@ -482,9 +482,9 @@ def test_uncertainty_refuses_what_it_cannot_estimate():
     with pytest.raises(ValueError, match="rcond must be in"):
         ident.parameter_uncertainty(np.ones(9), np.ones((9, 1)), ["a"], [1.0], rcond=0.0)
     # each shape on its own: values, then residuals as a column
-    with pytest.raises(ValueError, match="must match the 1 names"):
+    with pytest.raises(ValueError, match="must match the 1 parameters"):
         ident.parameter_uncertainty(np.ones(9), np.ones((9, 1)), ["a"], [1.0, 2.0])
-    with pytest.raises(ValueError, match="must match the 1 names"):
+    with pytest.raises(ValueError, match="must match the 1 parameters"):
         ident.parameter_uncertainty(np.ones((9, 1)), np.ones((9, 1)), ["a"], [1.0])
 
 

@@ -86,15 +86,30 @@ def test_a_prediction_is_determined_up_to_exactly_its_unresolved_share():
     assert at.standard_error == pytest.approx(math.sqrt(55.0 / 5) * math.cos(angle), rel=1e-12)
 
 
-@pytest.mark.parametrize("gradient, message", [
-    ([1.0, 2.0], "one finite number per value"),
-    ([1.0, math.nan, 0.0], "one finite number per value"),
-    ([[1.0, 0.0, 0.0]], "one finite number per value"),
-])
-def test_a_gradient_that_does_not_match_the_values_is_refused(gradient, message):
+@pytest.mark.parametrize("gradient", [[1.0, 2.0], [1.0, math.nan, 0.0], [[1.0, 0.0, 0.0]]])
+def test_a_gradient_that_does_not_match_the_values_is_refused(gradient):
     residuals, jacobian, values = _linear_fit(np.random.default_rng(2))
-    with pytest.raises(ValueError, match=message):
+    with pytest.raises(ValueError, match="one finite number per value"):
         ident.prediction_uncertainty(residuals, jacobian, values, gradient)
+
+
+def test_a_gradient_near_the_float_range_is_scaled_not_overflowed():
+    """The standard error is linear in the gradient: 1e300 × (1, 1, 1) (squares beyond the
+    float range) gives 1e300 × the error of (1, 1, 1), to rounding (1e-12); a gradient whose
+    product with |value| (2) overflows is refused, naming it."""
+    residuals, jacobian, values = _linear_fit(np.random.default_rng(2))
+    unit = ident.prediction_uncertainty(residuals, jacobian, values, np.ones(3))
+    huge = ident.prediction_uncertainty(residuals, jacobian, values, np.full(3, 1e300))
+    assert huge.standard_error == pytest.approx(1e300 * unit.standard_error, rel=1e-12)
+    assert huge.unresolved_share == unit.unresolved_share
+    with pytest.raises(ValueError, match="overflows"):
+        ident.prediction_uncertainty(residuals, jacobian, values, [1e308, 0.0, 0.0])
+
+
+def test_values_that_are_not_one_dimensional_are_refused_as_values():
+    residuals, jacobian, values = _linear_fit(np.random.default_rng(2))
+    with pytest.raises(ValueError, match=r"values must be a 1-D array \(P,\)"):
+        ident.prediction_uncertainty(residuals, jacobian, values[None, :], np.ones(3))
 
 
 def test_the_fit_is_checked_as_parameter_uncertainty_checks_it():
@@ -125,8 +140,9 @@ def test_window_speed_and_its_derivative_against_the_path_itself():
 
 def _gaits_and_trials():
     """Three synthetic "gaits" at θ = (a, b, c, d): A1 and A1+A2 the model path (d moves
-    nothing), A1+A3 the path with its surge a + d (so only it sees d); trials of each made
-    from the measured_trial path (measured forward, paper sign +1)."""
+    nothing), A1+A3 the path run backwards along its forward axis with its surge a + d (so only
+    it sees d); trials of each made from the measured_trial path, A1+A3's with the paper's
+    sign −1 (its robot measured swimming in reverse, as the simulated one does)."""
     theta = (2.6, 0.8, 0.25)
     runs, derivatives, trials = {}, {}, {}
     for gait, forward_sign in (("A1", 1.0), ("A1+A2", 1.0), ("A1+A3", -1.0)):
@@ -134,7 +150,8 @@ def _gaits_and_trials():
         runs[gait] = dataclasses.replace(run, gait=gait)
         d_column = derivative[:, :, :1] if gait == "A1+A3" else np.zeros_like(derivative[:, :, :1])
         derivatives[gait] = np.concatenate([derivative, d_column], axis=-1)
-        trials[gait] = dataclasses.replace(measured_trial(), gait=gait)
+        trials[gait] = dataclasses.replace(measured_trial(), gait=gait,
+                                           paper_sign=forward_sign)
     return runs, derivatives, trials
 
 
@@ -174,7 +191,13 @@ def test_gait_predictions_hold_a_gait_out_of_the_fit_and_say_what_the_others_det
         assert row.determined and row.standard_error_mm_s == pytest.approx(expected, rel=1e-8)
         fit = ident.trial_fit(runs[gait], trials[gait], (1, 3))
         assert row.predicted_speed_mm_s == pytest.approx(fit.sim_speed_mm_s, rel=1e-14)
-        assert row.measured_speed_mm_s == pytest.approx(fit.meas_speed_mm_s, rel=1e-14)
+        # the distance covered, signed by the paper's direction: A1+A3 measured in reverse
+        assert row.measured_speed_mm_s == pytest.approx(trials[gait].paper_sign
+                                                        * fit.meas_speed_mm_s, rel=1e-14)
+        assert np.sign(row.measured_speed_mm_s) == (-1 if gait == "A1+A3" else 1)
+        # the model path runs along its forward axis with a sideways wobble that returns each
+        # cycle: the distance covered equals |speed| to rounding
+        assert row.distance_speed_mm_s == pytest.approx(abs(speed), rel=1e-12)
         gap = row.measured_speed_mm_s - row.predicted_speed_mm_s
         assert row.z_score == pytest.approx(gap / row.standard_error_mm_s, rel=1e-12)
         assert row.within_two_standard_errors == (abs(gap) <= 2 * row.standard_error_mm_s)
@@ -215,7 +238,8 @@ def test_gait_predictions_of_a_later_window_read_it_at_the_phase_fitted_on_the_f
         assert row.predicted_speed_mm_s == pytest.approx(speed, rel=1e-14)
         phase = ident.trial_fit(runs[row.gait], trials[row.gait], (1, 1)).phase_s
         fit = ident.trial_fit(runs[row.gait], trials[row.gait], (2, 3), phase_s=phase)
-        assert row.measured_speed_mm_s == pytest.approx(fit.meas_speed_mm_s, rel=1e-14)
+        assert row.measured_speed_mm_s == pytest.approx(
+            trials[row.gait].paper_sign * fit.meas_speed_mm_s, rel=1e-14)
         if row.role == "held_out" and row.gait == "A1+A3":
             expected = ident.prediction_uncertainty(residuals, jacobian, values, gradient)
             assert row.standard_error_mm_s == expected.standard_error == math.inf
