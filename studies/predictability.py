@@ -131,9 +131,10 @@ def parameter_values(base, names) -> np.ndarray:
 def predictability_table(result, params, measured, names, values, window,
                          predict_window=None) -> tuple:
     """(predictions, parameter uncertainty) from the run with the sensitivities: the rows of
-    `identification.gait_predictions` with each gait's simulation status; a gait whose run
-    failed, and every row whose fit would need it, is left out of the computation with its
-    reason in `status` (the others use the measured gaits that ran)."""
+    `identification.gait_predictions` with each gait's simulation status. A gait whose run
+    failed keeps its rows, with the failure and its time in `status` and no numbers (a warning
+    names it), and every fit uses the measured gaits that ran; with fewer than two of them
+    there is nothing to fit (StudyOutputError, one line)."""
     gaits = [p.gait for p in params]
     runs = dict(zip(gaits, identification.result_runs(result, params)))
     summary = result.summary
