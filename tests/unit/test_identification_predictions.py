@@ -11,7 +11,7 @@ import pytest
 
 from taichi_star import identification as ident
 
-from .test_identification_gradient import measured_trial, model_path
+from .test_identification_gradient import T, measured_trial, model_path
 
 
 def _linear_fit(rng, rows=40):
@@ -54,6 +54,7 @@ def test_a_prediction_along_a_direction_the_data_cannot_see_is_undetermined():
     values = np.ones(3)
     unseen = ident.prediction_uncertainty(residuals, jacobian, values, [2.0, 0.0, -1.0])
     assert unseen.standard_error == math.inf and not unseen.determined
+    assert (unseen.rank, unseen.residual_dof) == (2, len(residuals) - 2)
     assert unseen.unresolved_share == pytest.approx(1.0, rel=1e-12)
     variance = residuals @ residuals / (len(residuals) - 2)
     inverse = np.linalg.pinv(jacobian.T @ jacobian)
@@ -65,6 +66,7 @@ def test_a_prediction_along_a_direction_the_data_cannot_see_is_undetermined():
         assert seen.unresolved_share < 1e-12 and seen.rank == 2
     zero = ident.prediction_uncertainty(residuals, jacobian, values, np.zeros(3))
     assert (zero.standard_error, zero.unresolved_share, zero.rank) == (0.0, 0.0, 2)
+    assert zero.residual_dof == len(residuals) - 2
 
 
 def test_a_prediction_is_determined_up_to_exactly_its_unresolved_share():
@@ -102,7 +104,8 @@ def test_a_gradient_near_the_float_range_is_scaled_not_overflowed():
     huge = ident.prediction_uncertainty(residuals, jacobian, values, np.full(3, 1e300))
     assert huge.standard_error == pytest.approx(1e300 * unit.standard_error, rel=1e-12)
     assert huge.unresolved_share == unit.unresolved_share
-    with pytest.raises(ValueError, match="overflows"):
+    with pytest.raises(ValueError, match=r"gradient × \|value\| overflows: give the gradient "
+                                         r"and values in units where their product is finite"):
         ident.prediction_uncertainty(residuals, jacobian, values, [1e308, 0.0, 0.0])
 
 
@@ -114,6 +117,9 @@ def test_values_that_are_not_one_dimensional_are_refused_as_values():
 
 def test_the_fit_is_checked_as_parameter_uncertainty_checks_it():
     residuals, jacobian, values = _linear_fit(np.random.default_rng(2))
+    with pytest.raises(ValueError, match="^residuals, jacobian and values must be finite$"):
+        ident.prediction_uncertainty(np.full_like(residuals, np.nan), jacobian, values,
+                                     np.ones(3))
     with pytest.raises(ValueError, match="share must be in"):
         ident.prediction_uncertainty(residuals, jacobian, values, np.ones(3), share=1.0)
     with pytest.raises(ValueError, match="no residual degree of freedom"):
@@ -212,9 +218,9 @@ def test_gait_predictions_hold_a_gait_out_of_the_fit_and_say_what_the_others_det
 def test_gait_predictions_refuse_what_they_cannot_answer():
     runs, derivatives, trials = _gaits_and_trials()
     values = np.array([2.6, 0.8, 0.25, 1.0])
-    with pytest.raises(ValueError, match="no simulated run for the measured gait"):
-        ident.gait_predictions({g: runs[g] for g in ("A1", "A1+A2")}, derivatives, trials,
-                               values)
+    with pytest.raises(ValueError, match=r"no simulated run for the measured gait\(s\) "
+                                         r"A1\+A2, A1\+A3$"):
+        ident.gait_predictions({"A1": runs["A1"]}, derivatives, trials, values)
     with pytest.raises(ValueError, match="at least two measured gaits"):
         ident.gait_predictions(runs, derivatives, {"A1": trials["A1"]}, values)
 
@@ -256,3 +262,90 @@ def test_a_window_the_simulated_path_does_not_cover_is_refused():
     with pytest.raises(ValueError, match=r"cycles 3-4 need the simulated path over \[4, 8\] s"):
         ident.window_speed(run, derivative, (3, 4))
     assert math.isfinite(ident.window_speed(run, derivative, (3, 3))[0])
+
+
+def test_a_window_before_the_path_starts_is_refused_naming_what_the_path_covers():
+    """A path recorded from T on cannot give cycle 1 (from 0); the message names the window
+    needed and the path's own span."""
+    run, derivative = model_path((2.0, 0.7, 0.2))
+    late = dataclasses.replace(run, path=ident.CentroidPath(
+        run.path.t_s[64:], run.path.x_mm[64:], run.path.y_mm[64:], T))
+    with pytest.raises(ValueError, match=r"cycles 1-1 need the simulated path over \[0, 2\] s; "
+                                         r"it covers \[1, 6\] s"):
+        ident.window_speed(late, derivative[64:], (1, 1))
+
+
+def _growing(run, derivative, rate=0.1):
+    """The run with every record scaled by 1 + rate·(cycle − 1), its derivatives likewise (the
+    path stays linear in θ): a robot that speeds up from cycle to cycle."""
+    factor = 1.0 + rate * np.floor(run.path.t_s / run.path.period_s + 1e-9)
+    path = ident.CentroidPath(run.path.t_s, run.path.x_mm * factor, run.path.y_mm * factor,
+                              run.path.period_s)
+    return dataclasses.replace(run, path=path), derivative * factor[:, None, None]
+
+
+def test_gait_predictions_of_a_robot_that_speeds_up_use_the_predicted_window_throughout():
+    """On paths that speed up from cycle to cycle each window has its own speed and distance:
+    the rows of cycles 2-3 are those of cycles 2-3, not of the fit's cycle 1 nor of cycles 1-3
+    (the distance over [T, 3T], its start not at the origin); the fits' objectives and residual
+    degrees of freedom are those of their own gaits, on `samples` points per cycle."""
+    runs, derivatives, trials = _gaits_and_trials()
+    for gait in runs:
+        runs[gait], derivatives[gait] = _growing(runs[gait], derivatives[gait])
+    values = np.array([2.6, 0.8, 0.25, 1.0])
+    table = ident.gait_predictions(runs, derivatives, trials, values, (1, 1), samples=32,
+                                   predict_cycles=(2, 3))
+    for row in table.itertuples():
+        run = runs[row.gait]
+        speed, _ = ident.window_speed(run, derivatives[row.gait], (2, 3))
+        assert row.predicted_speed_mm_s == pytest.approx(speed, rel=1e-14)
+        assert speed != pytest.approx(ident.window_speed(run, derivatives[row.gait], (1, 3))[0],
+                                      rel=1e-3)
+        ends = run.path.position(np.array([1.0, 3.0]) * T)
+        assert row.distance_speed_mm_s == pytest.approx(
+            np.hypot(*(ends[1] - ends[0])) / (2 * T), rel=1e-14)
+        training = row.training_gaits.split()
+        objective = ident.objective_of(ident.trajectory_objective(
+            {g: runs[g] for g in training}, {g: trials[g] for g in training}, (1, 1), 32))
+        assert row.training_objective == pytest.approx(objective, rel=1e-14)
+        assert row.residual_dof == len(training) * (32 + 1) - row.rank
+
+
+def test_gait_predictions_pass_the_share_on_and_take_exactly_two_measured_gaits():
+    """A1+A3 held out has an unresolved share of ~0.3 (d's axis): undetermined at the default
+    share (1 %), determined at share 0.99; two measured gaits (the fewest) are enough."""
+    runs, derivatives, trials = _gaits_and_trials()
+    values = np.array([2.6, 0.8, 0.25, 1.0])
+    loose = ident.gait_predictions(runs, derivatives, trials, values, (1, 3), share=0.99)
+    held = loose[(loose.gait == "A1+A3") & (loose.role == "held_out")].iloc[0]
+    assert held.determined and 0.01 < held.unresolved_share < 0.99
+    two = ident.gait_predictions({g: runs[g] for g in ("A1", "A1+A2")}, derivatives,
+                                 {g: trials[g] for g in ("A1", "A1+A2")}, values, (1, 3))
+    assert list(two.role) == ["fitted", "fitted", "held_out", "held_out"]
+
+
+def test_within_two_standard_errors_includes_the_boundary_and_a_zero_error_gives_no_z(
+        monkeypatch):
+    """The rule is |measured − predicted| ≤ 2 s.e.: a standard error of exactly half the gap
+    (halving is exact in binary) is within, one a hair smaller is not; an error of 0 (a speed
+    no fitted parameter moves) gives no z-score, and within only for an exact match."""
+    runs, derivatives, trials = _gaits_and_trials()
+    values = np.array([2.6, 0.8, 0.25, 1.0])
+    plain = ident.gait_predictions(runs, derivatives, trials, values, (1, 3))
+    gaps = dict(zip(plain.gait + plain.role, plain.measured_speed_mm_s
+                    - plain.predicted_speed_mm_s))
+
+    def table_with(error_of_gap):
+        calls = iter(plain.gait + plain.role)
+
+        def fixed(residuals, jacobian, values, gradient, rcond, share):
+            return ident.PredictionUncertainty(error_of_gap(abs(gaps[next(calls)])), 0.0, 4, 1)
+        monkeypatch.setattr(ident, "prediction_uncertainty", fixed)
+        return ident.gait_predictions(runs, derivatives, trials, values, (1, 3))
+
+    at = table_with(lambda gap: gap / 2.0)
+    assert at.within_two_standard_errors[:6].all()
+    below = table_with(lambda gap: np.nextafter(gap / 2.0, 0.0))
+    assert not below.within_two_standard_errors[:6].any()
+    zero = table_with(lambda gap: 0.0)
+    assert zero.z_score.isna().all() and not zero.within_two_standard_errors[:6].any()
