@@ -774,19 +774,26 @@ def _curve_derivative(path: CentroidPath, derivative_xy, cycles, samples) -> np.
     return distance_derivative(delta, derivative)
 
 
+def _window_ends(path: CentroidPath, cycles) -> np.ndarray:
+    """The start and end (2,) s of the cycle window on a simulated path (its cycle k from
+    (k − 1)T). ValueError when the path does not cover the window."""
+    first, last = check_window(cycles)
+    times = np.array([first - 1, last]) * path.period_s
+    if times[0] < path.t_s[0] or times[1] > path.t_s[-1] * (1 + 1e-12):
+        # as `cycle_curves`: the interpolation would hold the path's last point silently
+        raise ValueError(f"cycles {first}-{last} need the simulated path over [{times[0]:g}, "
+                         f"{times[1]:g}] s; it covers [{path.t_s[0]:g}, {path.t_s[-1]:g}] s")
+    return times
+
+
 def _net_displacement(simulated: SimulatedRun, derivative_xy: Optional[np.ndarray], cycles
                       ) -> Tuple[float, Optional[np.ndarray]]:
     """A simulated run's net displacement over the cycle window along its gait's forward
     axis (mm; `TrialFit.sim_net_signed_mm`) and its derivative (P,) from the records'
     derivatives derivative_xy (n_records, 2, P; None: no derivative, None returned).
     ValueError when the path does not cover the window."""
-    first, last = check_window(cycles)
     path, forward = simulated.path, np.asarray(simulated.forward)
-    times = np.array([first - 1, last]) * path.period_s
-    if times[0] < path.t_s[0] or times[1] > path.t_s[-1] * (1 + 1e-12):
-        # as `cycle_curves`: the interpolation would hold the path's last point silently
-        raise ValueError(f"cycles {first}-{last} need the simulated path over [{times[0]:g}, "
-                         f"{times[1]:g}] s; it covers [{path.t_s[0]:g}, {path.t_s[-1]:g}] s")
+    times = _window_ends(path, cycles)
     positions = path.position(times)
     net = float(np.dot(positions[1] - positions[0], forward))
     if derivative_xy is None:
@@ -1183,7 +1190,7 @@ def gait_predictions(simulated: Mapping[str, SimulatedRun],
         residuals, jacobian, table = fit_of(training)
         run = simulated[gait]
         speed, gradient = window_speed(run, derivatives[gait], predicted)
-        ends = run.path.position(np.array([predicted[0] - 1, predicted[1]]) * run.path.period_s)
+        ends = run.path.position(_window_ends(run.path, predicted))
         duration = (predicted[1] - predicted[0] + 1) * run.path.period_s
         uncertainty = prediction_uncertainty(residuals, jacobian, values, gradient, rcond,
                                              share)
