@@ -4,7 +4,8 @@ how far each measured gait's speed lies from the prediction there.
     python -m studies predictability [--preset identified|paper|accurate] [--set NAME=VALUE ...]
                                      [--parameters alpha,drag_perpendicular,...]
                                      [--gaits paper|A1,A1+A2,...] [--predict A2,A3,...]
-                                     [--window 1:3] [--predict-window 4:6] [--dt S]
+                                     [--window 1:3] [--predict-window 4:6]
+                                     [--trial-sigma MM] [--every-subset] [--dt S]
                                      [--out DIR] [--quick]
 
 A model fitted to the measured trials is judged on the gaits it was not fitted to. Whether it
@@ -31,11 +32,22 @@ measured speed is the distance covered (the tracks have no robot axes), signed b
 direction; the simulated one is along the gait's forward axis, so a simulated robot that veers
 off its axis counts as slow (`distance_speed_mm_s` gives its distance covered).
 
+Which trial to measure next: the gaits of `--predict` are the candidate trials. For each, alone,
+and for all of them together, `identification.trial_design` takes its trial as made (its curve
+rows in every fit, spread `--trial-sigma` mm, default the measured trials' median σ at the
+point, residuals scattering as the fit's own) and says again what each fit determines: a
+held-out gait that becomes determined is one that trial would let the model predict.
+`--every-subset`: every subset of the candidates instead, the smaller first (the fewest trials
+that determine each gait).
+
 Writes `predictability.csv` (one row per gait and role, `identification.PREDICTION_COLUMNS`
 and the gait's simulation status), `predictability_parameters.csv`
 (`identification.parameter_uncertainty` of the fit on every measured gait: which of
 `--parameters` they determine) and `predictability.png` (per gait and role the predicted speed
-with two standard errors, the measured one beside it), each table with its provenance sidecar.
+with two standard errors, the measured one beside it), and, with gaits to predict,
+`predictability_design.csv` (`identification.DESIGN_COLUMNS`, with each gait's simulation
+status) and `predictability_design.png` (two standard errors of each held-out and unmeasured
+gait's speed against the trials added), each table with its provenance sidecar.
 
 --quick: gaits A1+A2 and A1+A3, A2 predicted, α and C⊥, cycle 1, 2-ms steps.
 """
@@ -87,6 +99,13 @@ def build_parser():
     parser.add_argument("--predict-window", default=None,
                         help="the cycle window FIRST:LAST of the speeds predicted (default: "
                              "--window's)")
+    parser.add_argument("--trial-sigma", default=None,
+                        help="the spread (mm) expected of a candidate trial, each --predict "
+                             "gait's, taken as made in the design table (default: the measured "
+                             "trials' median spread at the point)")
+    parser.add_argument("--every-subset", action="store_true",
+                        help="the design table over every subset of the --predict gaits, the "
+                             "smaller first, instead of each alone and all together")
     cli.add_model_flags(parser, fixed=("gait",), preset="identified")
     cli.add_dt_flag(parser)
     return parser
@@ -128,13 +147,11 @@ def parameter_values(base, names) -> np.ndarray:
     return np.array([direction.value(base) for direction in parse_directions(list(names))])
 
 
-def predictability_table(result, params, measured, names, values, window,
-                         predict_window=None) -> tuple:
-    """(predictions, parameter uncertainty) from the run with the sensitivities: the rows of
-    `identification.gait_predictions` with each gait's simulation status. A gait whose run
-    failed keeps its rows, with the failure and its time in `status` and no numbers (a warning
-    names it), and every fit uses the measured gaits that ran; with fewer than two of them
-    there is nothing to fit (StudyOutputError, one line)."""
+def _ran(result, params, measured, names):
+    """What the fits can use of the run: (runs, status, failed gaits, trials, derivatives),
+    every gait's status "ok" or its failure and time (a warning names each failure), the
+    measured trials and derivatives of the gaits that ran. StudyOutputError (one line) with
+    fewer than two measured gaits that ran."""
     gaits = [p.gait for p in params]
     runs = dict(zip(gaits, identification.result_runs(result, params)))
     summary = result.summary
@@ -155,20 +172,56 @@ def predictability_table(result, params, measured, names, values, window,
     derivatives = {gait: identification.record_derivatives(result.trajectory_sensitivities,
                                                            gaits.index(gait), names)
                    for gait in ran}
-    table = identification.gait_predictions({g: runs[g] for g in ran}, derivatives, trials,
-                                            values, window, predict_cycles=predict_window)
-    table.insert(1, "status", [status[g] for g in table["gait"]])
-    first, last = window if predict_window is None else predict_window
-    left_out = [{"gait": gait, "status": status[gait], "role": role, "first_cycle": first,
-                 "last_cycle": last}
+    return {g: runs[g] for g in ran}, status, failed, trials, derivatives
+
+
+def _with_failures(table, status, failed, measured, cycles):
+    """The table with each failed gait's rows (its status, role and window, no numbers) after
+    the others."""
+    table.insert(table.columns.get_loc("gait") + 1, "status",
+                 [status[g] for g in table["gait"]])
+    left_out = [{"gait": gait, "status": status[gait], "role": role, "first_cycle": cycles[0],
+                 "last_cycle": cycles[1]}
                 for gait in failed
                 for role in (("fitted", "held_out") if gait in measured else ("unmeasured",))]
     if failed:
         table = pd.concat([table, pd.DataFrame(left_out)], ignore_index=True)
+    return table
+
+
+def predictability_table(result, params, measured, names, values, window,
+                         predict_window=None) -> tuple:
+    """(predictions, parameter uncertainty) from the run with the sensitivities: the rows of
+    `identification.gait_predictions` with each gait's simulation status. A gait whose run
+    failed keeps its rows, with the failure and its time in `status` and no numbers (a warning
+    names it), and every fit uses the measured gaits that ran; with fewer than two of them
+    there is nothing to fit (StudyOutputError, one line)."""
+    runs, status, failed, trials, derivatives = _ran(result, params, measured, names)
+    table = identification.gait_predictions(runs, derivatives, trials, values, window,
+                                            predict_cycles=predict_window)
+    table = _with_failures(table, status, failed, measured,
+                           window if predict_window is None else predict_window)
     residuals, jacobian, _ = identification.objective_residuals(
         {g: runs[g] for g in trials}, derivatives, trials, window)
     parameters = identification.parameter_uncertainty(residuals, jacobian, names, values)
     return table, parameters
+
+
+def design_table(result, params, measured, candidates, names, values, window,
+                 predict_window=None, trial_sigma=None, every_subset=False) -> pd.DataFrame:
+    """`identification.trial_design` of the candidate trials that ran, with each gait's
+    simulation status; a failed gait (warned of, as in `predictability_table`) keeps rows with
+    no numbers, once, under no added trial ("none")."""
+    runs, status, failed, trials, derivatives = _ran(result, params, measured, names)
+    ran = [gait for gait in candidates if gait in runs]
+    table = identification.trial_design(runs, derivatives, trials, values, ran, window,
+                                        predict_cycles=predict_window,
+                                        added_sigma_mm=trial_sigma,
+                                        every_subset=every_subset)
+    table = _with_failures(table, status, failed, measured,
+                           window if predict_window is None else predict_window)
+    table["added_trials"] = table["added_trials"].fillna("none")
+    return table
 
 
 def plot_predictability(csv_path, png_path):
@@ -217,6 +270,49 @@ def plot_predictability(csv_path, png_path):
     return cli.save_figure(fig, png_path)
 
 
+def plot_design(csv_path, png_path):
+    """Two standard errors of each held-out and unmeasured gait's speed (columns) with the
+    trials taken as made (rows): colour log10 of it, "undetermined" where the fits leave the
+    speed free, * where the gait's own trial is among those taken as made."""
+    table = pd.read_csv(csv_path)
+    table = table[table["role"].isin(("held_out", "unmeasured", "added"))
+                  & table["predicted_speed_mm_s"].notna()]
+    sets = list(dict.fromkeys(table["added_trials"]))
+    gaits = list(dict.fromkeys(table["gait"]))
+    errors = np.full((len(sets), len(gaits)), np.nan)
+    own = np.zeros_like(errors, dtype=bool)
+    for row in table.itertuples():
+        i, j = sets.index(row.added_trials), gaits.index(row.gait)
+        errors[i, j] = 2 * row.standard_error_mm_s
+        own[i, j] = row.role == "added"
+    plt = cli.use_agg()
+    fig, ax = plt.subplots(figsize=(1.05 * len(gaits) + 3.2, 0.3 * len(sets) + 2.2))
+    finite = np.isfinite(errors) & (errors > 0)
+    shown = np.where(finite, np.log10(np.where(finite, errors, 1.0)), np.nan)
+    image = ax.imshow(shown, cmap="viridis_r", aspect="auto")
+    for i in range(len(sets)):
+        for j in range(len(gaits)):
+            text = "undet." if np.isinf(errors[i, j]) else f"±{errors[i, j]:.2g}"
+            # dark text on the light (small) end of the colour map, light on the dark end
+            light = finite[i, j] and image.norm(shown[i, j]) > 0.55
+            ax.text(j, i, text + (" *" if own[i, j] else ""), ha="center", va="center",
+                    fontsize=7, color="w" if light else "k")
+    held = set(table.loc[table["role"] == "held_out", "gait"])
+    ax.set_xticks(range(len(gaits)), [f"{g}\n({'held out' if g in held else 'unmeasured'})"
+                                      for g in gaits], fontsize=7)
+    ax.set_yticks(range(len(sets)), sets, fontsize=7)
+    ax.set_ylabel("trials taken as made (* the gait's own)", fontsize=8)
+    fig.colorbar(image, ax=ax, label="log10 of 2 s.e., mm/s", shrink=0.8)
+    sigma = table["added_sigma_mm"].dropna()
+    spread = f"; a trial's spread {sigma.iloc[0]:.3g} mm" if len(sigma) else ""
+    first, last = int(table["first_cycle"].iloc[0]), int(table["last_cycle"].iloc[0])
+    settings = cli.run_settings(csv_path, mesh=False)
+    ax.set_title(f"2 s.e. of the speed over cycles {first}-{last} (lower bounds){spread}"
+                 + (f"\n{settings}" if settings else ""), fontsize=8)
+    fig.tight_layout()
+    return cli.save_figure(fig, png_path)
+
+
 def main(argv=None):
     args = cli.parse(build_parser(), argv)
     base = cli.base_params(args)
@@ -229,6 +325,10 @@ def main(argv=None):
     window = parse_window(args.window)
     predict_text = args.window if args.predict_window is None else args.predict_window
     predict_window = parse_window(predict_text, "--predict-window")
+    trial_sigma = None
+    if args.trial_sigma is not None:
+        trial_sigma = cli.parse_number(args.trial_sigma, "--trial-sigma")
+        cli.check_positive(trial_sigma, "--trial-sigma")
     trials = identification.measured_trials(measured)
     identify.check_trials_cover(trials, window, args.window, "--window")
     # the measured speeds of the later window are read at the phase fitted on --window
@@ -241,7 +341,9 @@ def main(argv=None):
     params = [base.replace(gait=gait) for gait in measured + predict]
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"parameters": names, "window": list(window),
-                                           "predict_window": list(predict_window)})
+                                           "predict_window": list(predict_window),
+                                           "trial_sigma_mm": trial_sigma,
+                                           "every_subset": args.every_subset})
     result = simulate(params, duration, solver, arch=args.arch,
                       record_interval_s=identify.RECORD_INTERVAL_S, sensitivities=names,
                       progress=not args.no_progress)
@@ -250,5 +352,10 @@ def main(argv=None):
     csv_path = out.write_csv(table, "predictability.csv")
     out.write_csv(parameters, "predictability_parameters.csv")
     out.wrote(plot_predictability(csv_path, out.path("predictability.png")))
+    if predict:
+        design = design_table(result, params, measured, predict, names, values, window,
+                              predict_window, trial_sigma, args.every_subset)
+        design_path = out.write_csv(design, "predictability_design.csv")
+        out.wrote(plot_design(design_path, out.path("predictability_design.png")))
     out.report()
     return table

@@ -80,6 +80,7 @@ window.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from dataclasses import dataclass
 from typing import Mapping, Optional, Sequence, Tuple
@@ -103,7 +104,8 @@ __all__ = ["TRAINING_CYCLES", "VALIDATION_CYCLES", "SAMPLES_PER_CYCLE", "MAX_CYC
            "trial_residuals", "objective_residuals", "trial_phase_motion",
            "objective_and_gradient", "phase_motion", "parameter_uncertainty", "record_derivatives",
            "PredictionUncertainty", "prediction_uncertainty", "PREDICTION_COLUMNS", "window_speed",
-           "gait_predictions", "STROKE_WINDOW_S", "STROKE_TOLERANCE_S", "STROKE_ONSET_SHARE",
+           "gait_predictions", "trial_rows", "DESIGN_COLUMNS", "trial_design",
+           "STROKE_WINDOW_S", "STROKE_TOLERANCE_S", "STROKE_ONSET_SHARE",
            "STROKE_MIN_JUMP_RATIO", "Strokes", "window_moves", "circular_difference", "strokes",
            "stroke_aligned_phase"]
 
@@ -814,6 +816,34 @@ def residual_count(gaits: int, cycles=TRAINING_CYCLES, samples: int = SAMPLES_PE
     return int(gaits) * ((last - first + 1) * samples + 1)
 
 
+def _checked_derivative(simulated: SimulatedRun, derivative_xy) -> np.ndarray:
+    """derivative_xy as float64 (n_records, 2, P), or ValueError naming its shape."""
+    derivative_xy = np.asarray(derivative_xy, dtype=np.float64)
+    if derivative_xy.ndim != 3 or derivative_xy.shape[:2] != (len(simulated.path.t_s), 2):
+        raise ValueError(f"derivative_xy must have shape ({len(simulated.path.t_s)}, 2, P), got "
+                         f"{derivative_xy.shape}")
+    return derivative_xy
+
+
+def trial_rows(simulated: SimulatedRun, derivative_xy: np.ndarray, sigma_mm: float,
+               cycles=TRAINING_CYCLES, samples: int = SAMPLES_PER_CYCLE) -> np.ndarray:
+    """The curve rows (cycles × samples, P) of `trial_residuals`' Jacobian for a trial of this
+    simulated run whose spread is σ = sigma_mm (mm): d(cycle curves)/dθ / (σ·√(cycles·samples)),
+    from the records' derivatives derivative_xy (n_records, 2, P). They depend on the simulated
+    path and σ alone (the measured curves do not move with θ), so they also say what a trial not
+    yet measured would add to a fit, given the spread expected of it (`gait_predictions`'
+    `added`). ValueError unless sigma_mm is a positive finite number, or naming derivative_xy's
+    shape."""
+    if not is_real(sigma_mm) or not (math.isfinite(sigma_mm) and sigma_mm > 0.0):
+        raise ValueError(f"sigma_mm must be a positive finite number of mm, got {sigma_mm!r}")
+    derivative_xy = _checked_derivative(simulated, derivative_xy)
+    first, last = check_window(cycles)
+    samples = check_samples(samples)
+    curve_derivative = _curve_derivative(simulated.path, derivative_xy, (first, last), samples)
+    size = (last - first + 1) * samples
+    return (curve_derivative * (1.0 / (sigma_mm * math.sqrt(size)))).reshape(size, -1)
+
+
 def trial_residuals(simulated: SimulatedRun, derivative_xy: np.ndarray, trial: Trial,
                     cycles=TRAINING_CYCLES, samples: int = SAMPLES_PER_CYCLE,
                     phase_s: Optional[float] = None
@@ -825,15 +855,10 @@ def trial_residuals(simulated: SimulatedRun, derivative_xy: np.ndarray, trial: T
     (n_records, 2, P): column 0 d x_mm/dθ, column 1 d y_mm/dθ (module docstring, "Gradient";
     ρ's row is 0 where −sΔ ≤ 0). With `phase_s` given the phase is held (its derivative
     is 0). The form a Gauss-Newton or trust-region least-squares method takes."""
-    derivative_xy = np.asarray(derivative_xy, dtype=np.float64)
-    if derivative_xy.ndim != 3 or derivative_xy.shape[:2] != (len(simulated.path.t_s), 2):
-        raise ValueError(f"derivative_xy must have shape ({len(simulated.path.t_s)}, 2, P), got "
-                         f"{derivative_xy.shape}")
+    derivative_xy = _checked_derivative(simulated, derivative_xy)
     fit = trial_fit(simulated, trial, cycles, samples, phase_s)
     first, last = check_window(cycles)
-    path = simulated.path
-    sim_curves = cycle_curves(path, 0.0, (first, last), samples)
-    curve_derivative = _curve_derivative(path, derivative_xy, (first, last), samples)
+    sim_curves = cycle_curves(simulated.path, 0.0, (first, last), samples)
     measured = cycle_curves(trial.path, fit.phase_s, (first, last), samples)
     scale = 1.0 / (fit.sigma_mm * math.sqrt(sim_curves.size))
     _, net_derivative = _net_displacement(simulated, derivative_xy, (first, last))
@@ -841,8 +866,8 @@ def trial_residuals(simulated: SimulatedRun, derivative_xy: np.ndarray, trial: T
     direction_row = (-trial.paper_sign * net_derivative / fit.sigma_mm if wrong_way
                      else np.zeros_like(net_derivative))
     residuals = np.append(((sim_curves - measured) * scale).ravel(), fit.direction_residual)
-    jacobian = np.vstack([(curve_derivative * scale).reshape(sim_curves.size, -1),
-                          direction_row[None, :]])
+    jacobian = np.vstack([trial_rows(simulated, derivative_xy, fit.sigma_mm, (first, last),
+                                     samples), direction_row[None, :]])
     return fit, residuals, jacobian
 
 
@@ -940,8 +965,8 @@ class _LocalFit:
     singular: np.ndarray     # (P,) singular values of J·diag(scale), largest first
     directions: np.ndarray   # (P, P) their right singular vectors, one per row
     kept: np.ndarray         # (P,) whether each direction is resolved
-    variance: float          # s² = Σr² / (R − rank)
-    dof: int                 # R − rank
+    variance: float          # s² = Σr² / (R − rank of the fit's own Jacobian)
+    dof: int                 # R − rank of the fit's own Jacobian
 
     @property
     def rank(self) -> int:
@@ -949,10 +974,22 @@ class _LocalFit:
         return int(self.kept.sum())
 
 
-def _local_fit(residuals, jacobian, values, count: int, rcond: float, share: float
-               ) -> _LocalFit:
+def _split(relative: np.ndarray, count: int, rcond: float):
+    """Singular values, right singular vectors (rows) and which are resolved, of a relative
+    Jacobian (rows, count); fewer rows than columns are padded with zeros, rows that cannot see
+    the directions beyond them."""
+    if len(relative) < count:
+        relative = np.vstack([relative, np.zeros((count - len(relative), count))])
+    _, singular, directions = np.linalg.svd(relative, full_matrices=False)
+    return singular, directions, singular > rcond * singular[0]  # none when J = 0: 0 > 0
+
+
+def _local_fit(residuals, jacobian, values, count: int, rcond: float, share: float,
+               added_jacobian=None) -> _LocalFit:
     """Check a fit's residuals (R,), Jacobian (R, P) and values (P,) for `count` = P
-    parameters, and split J·diag(|value|) by its singular values (`parameter_uncertainty`)."""
+    parameters, and split J·diag(|value|) by its singular values (`parameter_uncertainty`).
+    With `added_jacobian` (A, P), the split is of J with those rows below it, while s² and the
+    residual degrees of freedom stay the fit's own."""
     residuals = np.asarray(residuals, dtype=np.float64)
     jacobian = np.asarray(jacobian, dtype=np.float64)
     values = np.asarray(values, dtype=np.float64)
@@ -967,23 +1004,32 @@ def _local_fit(residuals, jacobian, values, count: int, rcond: float, share: flo
     for label, number in (("rcond", rcond), ("share", share)):
         if not 0.0 < number < 1.0:
             raise ValueError(f"{label} must be in (0, 1), got {number!r}")
+    if added_jacobian is not None:
+        added_jacobian = np.asarray(added_jacobian, dtype=np.float64)
+        if added_jacobian.ndim != 2 or added_jacobian.shape[1] != count:
+            raise ValueError(f"added_jacobian must have shape (A, {count}), one column per "
+                             f"parameter, got {added_jacobian.shape}")
+        if not np.isfinite(added_jacobian).all():
+            raise ValueError("added_jacobian must be finite")
     scale = np.where(values != 0.0, np.abs(values), 1.0)
     relative = jacobian * scale
-    if len(relative) < count:  # zero rows: all P directions, those R rows cannot see too
-        relative = np.vstack([relative, np.zeros((count - len(relative), count))])
-    _, singular, directions = np.linalg.svd(relative, full_matrices=False)
-    kept = singular > rcond * singular[0]        # none when J = 0: 0 > 0 is false
+    singular, directions, kept = _split(relative, count, rcond)
     rank = int(kept.sum())
     dof = len(residuals) - rank
     if dof <= 0:
         raise ValueError(f"{len(residuals)} residuals for {rank} resolved directions: no "
                          f"residual degree of freedom to estimate their scatter")
-    return _LocalFit(scale, singular, directions, kept, float(residuals @ residuals) / dof, dof)
+    variance = float(residuals @ residuals) / dof
+    if added_jacobian is not None and len(added_jacobian):
+        singular, directions, kept = _split(np.vstack([relative, added_jacobian * scale]),
+                                            count, rcond)
+    return _LocalFit(scale, singular, directions, kept, variance, dof)
 
 
 def parameter_uncertainty(residuals: np.ndarray, jacobian: np.ndarray, names: Sequence[str],
                           values: Sequence[float], rcond: float = UNCERTAINTY_RCOND,
-                          share: float = UNCERTAINTY_SHARE) -> pd.DataFrame:
+                          share: float = UNCERTAINTY_SHARE,
+                          added_jacobian: Optional[np.ndarray] = None) -> pd.DataFrame:
     """How well a least-squares fit's data determine its parameters, locally: from the
     residuals r (R,) at the fitted point and their Jacobian J (R, P) with respect to the
     parameters' values (per unit of each; `objective_residuals` gives both), one row per
@@ -1003,10 +1049,16 @@ def parameter_uncertainty(residuals: np.ndarray, jacobian: np.ndarray, names: Se
     measured curve are correlated, so they are lower bounds, while the rank, the conditioning
     and the correlations do not depend on that.
 
+    `added_jacobian` (A, P): rows of trials not yet measured (`trial_rows`, in the units of
+    J), as if they were in the fit, their residuals scattering as the fit's own do: the
+    split, `rank` and `condition_number` are then of J with those rows below it, while s² and
+    `residual_dof` stay the fit's (R − the rank of J alone). What a fit would determine after
+    those trials, before they are made.
+
     ValueError for mismatched shapes, non-finite entries, rcond or share outside (0, 1), or
     R ≤ rank (no residual left to estimate s²)."""
     names = list(names)
-    fit = _local_fit(residuals, jacobian, values, len(names), rcond, share)
+    fit = _local_fit(residuals, jacobian, values, len(names), rcond, share, added_jacobian)
     values = np.asarray(values, dtype=np.float64)
     singular, kept, scale = fit.singular, fit.kept, fit.scale
     unresolved = np.sqrt((fit.directions[~kept] ** 2).sum(axis=0))
@@ -1058,7 +1110,9 @@ class PredictionUncertainty:
 def prediction_uncertainty(residuals: np.ndarray, jacobian: np.ndarray,
                            values: Sequence[float], gradient: Sequence[float],
                            rcond: float = UNCERTAINTY_RCOND,
-                           share: float = UNCERTAINTY_SHARE) -> PredictionUncertainty:
+                           share: float = UNCERTAINTY_SHARE,
+                           added_jacobian: Optional[np.ndarray] = None
+                           ) -> PredictionUncertainty:
     """How well a least-squares fit's data determine a prediction y(θ) made with the fitted
     parameters, locally, from the fit's residuals (R,) and Jacobian (R, P) as in
     `parameter_uncertainty` and y's gradient (P,) with respect to the same parameter values
@@ -1071,9 +1125,11 @@ def prediction_uncertainty(residuals: np.ndarray, jacobian: np.ndarray,
     Gauss-Newton covariance on the resolved directions, √(s²·gᵀ(JᵀJ)⁺g) in relative units,
     with the same s² = Σr² / (R − rank): like the parameters', a lower bound where the
     residuals are correlated; and a share above 0 (up to `share`) is left out of it: a move
-    of the unresolved parameters moves y by up to that share of g's size besides. The same
-    ValueErrors as `parameter_uncertainty`, and one for values that are not 1-D, a gradient
-    that is not P finite numbers, or a product gradient·|value| that overflows."""
+    of the unresolved parameters moves y by up to that share of g's size besides.
+    `added_jacobian` (A, P): rows of trials not yet measured, as in `parameter_uncertainty`
+    (the split and `rank` with them, s² and `residual_dof` the fit's own). The same ValueErrors
+    as `parameter_uncertainty`, and one for values that are not 1-D, a gradient that is not P
+    finite numbers, or a product gradient·|value| that overflows."""
     values = np.asarray(values, dtype=np.float64)
     gradient = np.asarray(gradient, dtype=np.float64)
     if values.ndim != 1:
@@ -1081,7 +1137,7 @@ def prediction_uncertainty(residuals: np.ndarray, jacobian: np.ndarray,
     if gradient.shape != values.shape or not np.isfinite(gradient).all():
         raise ValueError(f"gradient must hold one finite number per value; got shape "
                          f"{gradient.shape} for values of shape {values.shape}")
-    fit = _local_fit(residuals, jacobian, values, len(values), rcond, share)
+    fit = _local_fit(residuals, jacobian, values, len(values), rcond, share, added_jacobian)
     rank = fit.rank
     with np.errstate(over="ignore"):
         relative = gradient * fit.scale
@@ -1109,8 +1165,10 @@ PREDICTION_COLUMNS = ["gait", "role", "training_gaits", "first_cycle", "last_cyc
                       "measured_speed_mm_s", "z_score", "within_two_standard_errors",
                       "training_objective", "rank", "residual_dof"]
 """Columns of `gait_predictions`' table, one row per gait and role: "fitted" (a measured gait
-with every measured gait in the fit), "held_out" (a measured gait, the fit on the others) or
-"unmeasured" (the fit on every measured gait); the gaits fitted (joined by spaces); the
+with every measured gait in the fit), "held_out" (a measured gait, the fit on the others),
+"unmeasured" (the fit on every measured gait) or "added" (a gait not measured whose trial the
+fits take as made: the fit on every measured gait and it); the measured gaits fitted (joined
+by spaces; every fit holds the added trials too); the
 window of the speeds (1-based cycles, inclusive); the simulated speed over it along the gait's
 forward axis (mm/s; `TrialFit.sim_speed_mm_s`) and its standard error
 (`prediction_uncertainty`; inf where the fit leaves it undetermined); the simulated distance
@@ -1139,8 +1197,9 @@ def gait_predictions(simulated: Mapping[str, SimulatedRun],
                      derivatives: Mapping[str, np.ndarray], trials: Mapping[str, Trial],
                      values: Sequence[float], cycles=TRAINING_CYCLES,
                      samples: int = SAMPLES_PER_CYCLE, rcond: float = UNCERTAINTY_RCOND,
-                     share: float = UNCERTAINTY_SHARE,
-                     predict_cycles=None) -> pd.DataFrame:
+                     share: float = UNCERTAINTY_SHARE, predict_cycles=None,
+                     added: Sequence[str] = (), added_sigma_mm: Optional[float] = None
+                     ) -> pd.DataFrame:
     """Which gaits' speeds the measured trials determine, at one model point: a linearised
     leave-one-gait-out with the exact sensitivities. `simulated`: gait -> run at the point
     (every gait of `trials`, and others to predict), `derivatives`: gait -> its records'
@@ -1154,11 +1213,19 @@ def gait_predictions(simulated: Mapping[str, SimulatedRun],
     there with the phase fitted on `cycles`. One table row per gait and role
     (`PREDICTION_COLUMNS`).
 
+    `added`: gaits of `simulated` not measured whose trials every fit takes as made (role
+    "added" instead of "unmeasured"): what measuring them would determine, before they are
+    measured. Each adds its `trial_rows` on `cycles` with spread `added_sigma_mm` (mm; default
+    the median σ of the measured trials at the point), weighted as a measured gait is; their
+    residuals are taken to scatter as the fit's own (`prediction_uncertainty`'s
+    `added_jacobian`), and a trial whose robot goes the model's way adds no direction residual.
+
     The fit is not redone without the held-out gait: the point is the same, only the data
     that determine it change, so a "held_out" row says how far the other gaits pin down
     what the held-out one needs, not where a fit without it would go. ValueError for a
-    measured gait missing from `simulated`, fewer than two measured gaits, or as
-    `prediction_uncertainty`."""
+    measured gait missing from `simulated`, fewer than two measured gaits, an added gait that
+    is measured, not simulated or repeated, an added_sigma_mm that is not a positive finite
+    number, or as `prediction_uncertainty`."""
     predicted = check_window(cycles if predict_cycles is None else predict_cycles)
     measured = list(trials)
     missing = [gait for gait in measured if gait not in simulated]
@@ -1167,6 +1234,7 @@ def gait_predictions(simulated: Mapping[str, SimulatedRun],
     if len(measured) < 2:
         raise ValueError(f"gait_predictions needs at least two measured gaits (one held out, "
                          f"one fitted), got {len(measured)}")
+    added = _checked_added(added, simulated, measured)
     fits = {}
 
     def fit_of(training):
@@ -1180,11 +1248,15 @@ def gait_predictions(simulated: Mapping[str, SimulatedRun],
     # each trial's phase, fitted on `cycles` at the point: the same in every fit that holds it
     _, _, everyone = fit_of(tuple(measured))
     phases = dict(zip(everyone["gait"], everyone["phase_s"]))
+    if added_sigma_mm is None:
+        added_sigma_mm = _median_sigma(everyone)
+    added_rows = (np.vstack([trial_rows(simulated[g], derivatives[g], added_sigma_mm, cycles,
+                                        samples) for g in added]) if added else None)
 
     cases = ([(gait, "fitted", tuple(measured)) for gait in measured]
              + [(gait, "held_out", tuple(g for g in measured if g != gait)) for gait in measured]
-             + [(gait, "unmeasured", tuple(measured)) for gait in simulated
-                if gait not in trials])
+             + [(gait, "added" if gait in added else "unmeasured", tuple(measured))
+                for gait in simulated if gait not in trials])
     rows = []
     for gait, role, training in cases:
         residuals, jacobian, table = fit_of(training)
@@ -1192,8 +1264,10 @@ def gait_predictions(simulated: Mapping[str, SimulatedRun],
         speed, gradient = window_speed(run, derivatives[gait], predicted)
         ends = run.path.position(_window_ends(run.path, predicted))
         duration = (predicted[1] - predicted[0] + 1) * run.path.period_s
-        uncertainty = prediction_uncertainty(residuals, jacobian, values, gradient, rcond,
-                                             share)
+        # weighted as one more gait of the fit's mean: objective_residuals' 1/√(gaits)
+        uncertainty = prediction_uncertainty(
+            residuals, jacobian, values, gradient, rcond, share,
+            None if added_rows is None else added_rows / math.sqrt(len(training)))
         error = uncertainty.standard_error
         measured_speed, gap, within = math.nan, math.nan, None
         if gait in trials:
@@ -1213,6 +1287,77 @@ def gait_predictions(simulated: Mapping[str, SimulatedRun],
                      "training_objective": objective_of(table),
                      "rank": uncertainty.rank, "residual_dof": uncertainty.residual_dof})
     return pd.DataFrame(rows, columns=PREDICTION_COLUMNS)
+
+
+def _checked_added(added, simulated, measured) -> tuple:
+    """`gait_predictions`' added gaits as a tuple, or ValueError naming the one refused."""
+    if isinstance(added, str):
+        raise ValueError(f"added must be a sequence of gait names, not the string {added!r}")
+    added = tuple(added)
+    for gait in added:
+        if gait in measured:
+            raise ValueError(f"added gait {gait!r} is measured: its trial is in the fits already")
+        if gait not in simulated:
+            raise ValueError(f"added gait {gait!r} has no simulated run")
+    if len(set(added)) != len(added):
+        raise ValueError(f"added gaits repeat: {', '.join(added)}")
+    return added
+
+
+DESIGN_COLUMNS = ["added_trials", "added_sigma_mm"] + PREDICTION_COLUMNS
+"""Columns of `trial_design`'s table: the trials taken as made (joined by spaces; "none" for
+none: an empty cell would read back as a missing value), the spread given them (mm; NaN for
+none), then `gait_predictions`' columns."""
+
+
+def trial_design(simulated: Mapping[str, SimulatedRun], derivatives: Mapping[str, np.ndarray],
+                 trials: Mapping[str, Trial], values: Sequence[float],
+                 candidates: Sequence[str], cycles=TRAINING_CYCLES,
+                 samples: int = SAMPLES_PER_CYCLE, rcond: float = UNCERTAINTY_RCOND,
+                 share: float = UNCERTAINTY_SHARE, predict_cycles=None,
+                 added_sigma_mm: Optional[float] = None, every_subset: bool = False
+                 ) -> pd.DataFrame:
+    """Which trial to measure next: `gait_predictions` with no trial added, with each of
+    `candidates` (gaits of `simulated` not measured) added alone, and with all of them (when
+    more than one), stacked (`DESIGN_COLUMNS`); with `every_subset`, every subset of them
+    instead, the smaller first (2^n − 1 sets: the fewest trials that determine a gait). A
+    held-out gait that the measured gaits leave
+    undetermined and a candidate determines is one that trial would let the model predict;
+    the standard errors say how closely, as far as the linearisation at this point and the
+    spread expected of the trial (`added_sigma_mm`, default the measured trials' median σ)
+    reach. With trials added, `z_score` and `within_two_standard_errors` are left empty: the
+    point is not refitted to trials not yet made, so they would set its speeds against the
+    precision that a refit on those trials would have. The arguments and ValueErrors are
+    `gait_predictions`', and one for every_subset not a bool."""
+    if isinstance(candidates, str):
+        raise ValueError(f"candidates must be a sequence of gait names, not the string "
+                         f"{candidates!r}")
+    every_subset = check_flag("every_subset", every_subset)
+    candidates = list(candidates)
+    sizes = range(1, len(candidates) + 1) if every_subset else sorted({1, len(candidates)} - {0})
+    sets = [added for size in sizes for added in itertools.combinations(candidates, size)]
+    arguments = (simulated, derivatives, trials, values, cycles, samples, rcond, share,
+                 predict_cycles)
+    tables = [gait_predictions(*arguments)]       # with nothing added; checks the arguments
+    tables[0].insert(0, "added_trials", "none")
+    tables[0].insert(1, "added_sigma_mm", math.nan)
+    if added_sigma_mm is None and candidates:
+        added_sigma_mm = _median_sigma(trajectory_objective(
+            {g: simulated[g] for g in trials}, trials, cycles, samples))
+    for added in sets:
+        table = gait_predictions(*arguments, added, added_sigma_mm)
+        table["z_score"] = math.nan
+        table["within_two_standard_errors"] = None
+        table.insert(0, "added_trials", " ".join(added))
+        table.insert(1, "added_sigma_mm", added_sigma_mm)
+        tables.append(table)
+    return pd.concat(tables, ignore_index=True)
+
+
+def _median_sigma(table: pd.DataFrame) -> float:
+    """The spread expected of a trial not yet measured (mm): the median σ of a table of
+    `trajectory_objective` (the measured trials' cycle-to-cycle spread at the point)."""
+    return float(np.median(table["sigma_mm"]))
 
 
 def record_derivatives(trajectory_sensitivities: pd.DataFrame, instance: int,

@@ -78,7 +78,7 @@ def test_quick_run_against_plain_runs_and_a_finite_difference_jacobian(run):
     moved = [base.replace(**{name: value * (1 + sign * STEP)})
              for name, value in zip(QUICK_NAMES, values) for sign in (1.0, -1.0)]
     runs = _runs([p.replace(gait=g) for p in moved for g in gaits], solver)
-    columns, speed_gradient = [], []
+    columns, speed_gradient, curve_columns = [], [], []
     for k in range(len(QUICK_NAMES)):
         ends = []
         for side in range(2):
@@ -88,10 +88,13 @@ def test_quick_run_against_plain_runs_and_a_finite_difference_jacobian(run):
                 {g: np.zeros((len(part[g].path.t_s), 2, 1)) for g in QUICK_GAITS}, trials,
                 WINDOW, phases=phases)
             ends.append((residuals, identification.window_speed(
-                part["A2"], np.zeros((len(part["A2"].path.t_s), 2, 1)), WINDOW)[0]))
+                part["A2"], np.zeros((len(part["A2"].path.t_s), 2, 1)), WINDOW)[0],
+                identification.cycle_curves(part["A2"].path, 0.0, WINDOW,
+                                            identification.SAMPLES_PER_CYCLE).ravel()))
         width = 2 * STEP * values[k]
         columns.append((ends[0][0] - ends[1][0]) / width)
         speed_gradient.append((ends[0][1] - ends[1][1]) / width)
+        curve_columns.append((ends[0][2] - ends[1][2]) / width)
     jacobian, gradient = np.stack(columns, axis=1), np.array(speed_gradient)
     residuals, _, _ = identification.objective_residuals(
         {g: centre[g] for g in QUICK_GAITS},
@@ -108,6 +111,27 @@ def test_quick_run_against_plain_runs_and_a_finite_difference_jacobian(run):
     errors = np.sqrt(variance * np.diag(np.linalg.inv(jacobian.T @ jacobian)))
     np.testing.assert_allclose(parameters["standard_error"], errors, rtol=2e-3)
     assert (out / "predictability.png").stat().st_size > 0
+    # the design: A2's trial taken as made, its rows the differences of its cycle curves over
+    # σ·√(samples) (σ the measured trials' median, at its floor on one cycle), over √2 as
+    # the fit of two gaits weighs each; the fit's own s²
+    design = pd.read_csv(out / "predictability_design.csv")
+    assert list(dict.fromkeys(design["added_trials"])) == ["none", "A2"]
+    sigma = float(np.median(fits["sigma_mm"]))
+    assert (design.loc[design["added_trials"] == "A2", "added_sigma_mm"] == sigma).all()
+    curves = np.stack(curve_columns, axis=1)
+    added = curves / (sigma * math.sqrt(len(curves))) / math.sqrt(2)
+    normal = jacobian.T @ jacobian + added.T @ added
+    expected = math.sqrt(variance * gradient @ np.linalg.inv(normal) @ gradient)
+    own = design[(design["added_trials"] == "A2") & (design["role"] == "added")].iloc[0]
+    assert own["gait"] == "A2"
+    # as above: the differences' noise through an inverse of condition ~4
+    assert own["standard_error_mm_s"] == pytest.approx(expected, rel=2e-3)
+    assert own["standard_error_mm_s"] < a2["standard_error_mm_s"]
+    none = design[design["added_trials"] == "none"].drop(columns=["added_trials",
+                                                                  "added_sigma_mm"])
+    pd.testing.assert_frame_equal(none.reset_index(drop=True), written, check_exact=False,
+                                  rtol=1e-12)
+    assert (out / "predictability_design.png").stat().st_size > 0
 
 
 @pytest.mark.slow
@@ -136,6 +160,10 @@ def test_the_returned_table_is_the_written_one(run):
     (["--window", "1:3:5"], "--window: expected FIRST:LAST, two whole numbers"),
     (["--window", "1.5:3"], "--window: expected FIRST:LAST, two whole numbers"),
     (["--predict", "none,A2"], "--predict none,A2: none stands alone"),
+    (["--trial-sigma", "0"], "--trial-sigma must be > 0, got 0.0"),
+    (["--trial-sigma", "-0.1"], "--trial-sigma must be > 0, got -0.1"),
+    (["--trial-sigma", "nan"], "--trial-sigma: 'nan' is not a finite number"),
+    (["--trial-sigma", "wide"], "--trial-sigma: 'wide' is not a number"),
 ])
 def test_bad_flags_are_refused_in_one_line_before_any_compute(flags, message, tmp_path,
                                                                 capsys):

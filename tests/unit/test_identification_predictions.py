@@ -7,6 +7,7 @@ import dataclasses
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from taichi_star import identification as ident
@@ -338,7 +339,7 @@ def test_within_two_standard_errors_includes_the_boundary_and_a_zero_error_gives
     def table_with(error_of_gap):
         calls = iter(plain.gait + plain.role)
 
-        def fixed(residuals, jacobian, values, gradient, rcond, share):
+        def fixed(residuals, jacobian, values, gradient, rcond, share, added_jacobian):
             return ident.PredictionUncertainty(error_of_gap(abs(gaps[next(calls)])), 0.0, 4, 1)
         monkeypatch.setattr(ident, "prediction_uncertainty", fixed)
         return ident.gait_predictions(runs, derivatives, trials, values, (1, 3))
@@ -349,3 +350,227 @@ def test_within_two_standard_errors_includes_the_boundary_and_a_zero_error_gives
     assert not below.within_two_standard_errors[:6].any()
     zero = table_with(lambda gap: 0.0)
     assert zero.z_score.isna().all() and not zero.within_two_standard_errors[:6].any()
+
+
+# ------------------------------------------------------------------ trials not yet measured
+
+def test_added_rows_give_the_normal_equations_with_them_and_the_fits_own_scatter():
+    """Rows of a trial not yet measured join the Jacobian, not the residuals: against
+    s²·gᵀ(JᵀJ + AᵀA)⁻¹g with s² = Σr²/(R − 3) of the fit alone (numpy's inverse, another route
+    than the SVD; cond ~10: 1e-12); the parameters' standard errors likewise; the rank is of J
+    and A together, the residual degrees of freedom the fit's own. The added rows halve
+    nothing for free: with A = J (the same trial twice) the variance halves exactly."""
+    residuals, jacobian, values = _linear_fit(np.random.default_rng(7))
+    added = np.random.default_rng(8).normal(size=(25, 3)) / np.array([2.0, 0.5, 30.0])
+    gradient = np.array([0.3, -2.0, 0.01])
+    got = ident.prediction_uncertainty(residuals, jacobian, values, gradient,
+                                       added_jacobian=added)
+    variance = residuals @ residuals / (len(residuals) - 3)
+    inverse = np.linalg.inv(jacobian.T @ jacobian + added.T @ added)
+    assert got.standard_error == pytest.approx(math.sqrt(variance * gradient @ inverse @ gradient),
+                                               rel=1e-12)
+    assert (got.rank, got.residual_dof) == (3, len(residuals) - 3)
+    table = ident.parameter_uncertainty(residuals, jacobian, ["a", "b", "c"], values,
+                                        added_jacobian=added)
+    np.testing.assert_allclose(table.standard_error, np.sqrt(variance * np.diag(inverse)),
+                               rtol=1e-12)
+    assert (table.residual_dof == len(residuals) - 3).all()
+    alone = ident.prediction_uncertainty(residuals, jacobian, values, gradient)
+    twice = ident.prediction_uncertainty(residuals, jacobian, values, gradient,
+                                         added_jacobian=jacobian)
+    assert twice.standard_error == pytest.approx(alone.standard_error / math.sqrt(2), rel=1e-12)
+
+
+def test_an_added_trial_resolves_a_direction_the_fit_cannot_see():
+    """Column c = 2 × column a leaves (2, 0, −1) unseen (values 1): a prediction along it is
+    undetermined by the fit alone and determined once rows that see c on its own are added,
+    with the variance of the normal equations of J and A over the fit's R − 2 degrees of
+    freedom; the rank rises to 3, the degrees of freedom do not move."""
+    residuals, jacobian, _ = _linear_fit(np.random.default_rng(11))
+    jacobian[:, 2] = 2.0 * jacobian[:, 0]
+    values = np.ones(3)
+    gradient = np.array([2.0, 0.0, -1.0])
+    assert not ident.prediction_uncertainty(residuals, jacobian, values, gradient).determined
+    added = np.zeros((4, 3))
+    added[:, 2] = [1.0, -0.5, 0.25, 2.0]
+    got = ident.prediction_uncertainty(residuals, jacobian, values, gradient,
+                                       added_jacobian=added)
+    variance = residuals @ residuals / (len(residuals) - 2)
+    expected = math.sqrt(variance * gradient @ np.linalg.inv(jacobian.T @ jacobian
+                                                             + added.T @ added) @ gradient)
+    assert got.determined and got.standard_error == pytest.approx(expected, rel=1e-9)
+    assert (got.rank, got.residual_dof) == (3, len(residuals) - 2)
+    table = ident.parameter_uncertainty(residuals, jacobian, ["a", "b", "c"], values,
+                                        added_jacobian=added)
+    assert table.identifiable.all() and (table["rank"] == 3).all()
+
+
+def test_no_added_rows_or_zero_rows_change_nothing():
+    """An empty (0, P) block is no trial: the same bits as none; rows of zeros (a trial that
+    moves with no parameter) the same numbers to rounding (another SVD: 1e-12)."""
+    residuals, jacobian, values = _linear_fit(np.random.default_rng(3))
+    gradient = np.array([1.0, 0.5, -0.2])
+    plain = ident.prediction_uncertainty(residuals, jacobian, values, gradient)
+    empty = ident.prediction_uncertainty(residuals, jacobian, values, gradient,
+                                         added_jacobian=np.zeros((0, 3)))
+    zeros = ident.prediction_uncertainty(residuals, jacobian, values, gradient,
+                                         added_jacobian=np.zeros((6, 3)))
+    assert empty == plain
+    assert zeros.standard_error == pytest.approx(plain.standard_error, rel=1e-12)
+    assert (zeros.rank, zeros.residual_dof) == (plain.rank, plain.residual_dof)
+
+
+@pytest.mark.parametrize("added, message", [
+    (np.ones((2, 4)), r"added_jacobian must have shape \(A, 3\), one column per parameter, "
+                      r"got \(2, 4\)"),
+    (np.ones(3), r"added_jacobian must have shape \(A, 3\).*got \(3,\)"),
+    (np.full((2, 3), np.inf), "^added_jacobian must be finite$")])
+def test_added_rows_that_do_not_fit_the_parameters_are_refused(added, message):
+    residuals, jacobian, values = _linear_fit(np.random.default_rng(2))
+    with pytest.raises(ValueError, match=message):
+        ident.prediction_uncertainty(residuals, jacobian, values, np.ones(3),
+                                     added_jacobian=added)
+    with pytest.raises(ValueError, match=message):
+        ident.parameter_uncertainty(residuals, jacobian, ["a", "b", "c"], values,
+                                    added_jacobian=added)
+
+
+def test_trial_rows_are_the_curve_rows_of_trial_residuals_and_scale_as_one_over_sigma():
+    """At the trial's own σ the rows are those of `trial_residuals`' Jacobian (its last row,
+    the direction residual's, aside), bit for bit; at 3σ a third of them (rounding: 1e-15)."""
+    run, derivative = model_path((2.6, 0.8, 0.25))
+    fit, _, jacobian = ident.trial_residuals(run, derivative, measured_trial(), (1, 3), 32)
+    rows = ident.trial_rows(run, derivative, fit.sigma_mm, (1, 3), 32)
+    assert rows.shape == (3 * 32, 3)
+    np.testing.assert_array_equal(rows, jacobian[:-1])
+    np.testing.assert_allclose(ident.trial_rows(run, derivative, 3 * fit.sigma_mm, (1, 3), 32),
+                               rows / 3, rtol=1e-15)
+
+
+@pytest.mark.parametrize("sigma", [0.0, -1.0, math.nan, math.inf, "1", True])
+def test_trial_rows_refuse_a_spread_that_is_not_a_positive_number(sigma):
+    run, derivative = model_path((2.6, 0.8, 0.25))
+    with pytest.raises(ValueError, match="sigma_mm must be a positive finite number of mm"):
+        ident.trial_rows(run, derivative, sigma)
+
+
+def _with_candidates():
+    """`_gaits_and_trials` and two unmeasured gaits: A2 (the model path, blind to d) and A4
+    (the path backwards, its surge a + d: it sees d as A1+A3 does)."""
+    runs, derivatives, trials = _gaits_and_trials()
+    for gait, sign in (("A2", 1.0), ("A4", -1.0)):
+        run, derivative = model_path((2.6, 0.8, 0.25), sign)
+        runs[gait] = dataclasses.replace(run, gait=gait)
+        d_column = derivative[:, :, :1] if gait == "A4" else np.zeros_like(derivative[:, :, :1])
+        derivatives[gait] = np.concatenate([derivative, d_column], axis=-1)
+    return runs, derivatives, trials, np.array([2.6, 0.8, 0.25, 1.0])
+
+
+def test_an_added_trial_lets_the_fits_determine_what_only_it_and_the_held_out_gait_see():
+    """Only A1+A3 moves with d among the measured gaits: held out, its speed is undetermined;
+    with A4's trial added (it sees d too) it is determined, with the normal equations' error of
+    the other two gaits' Jacobian and A4's rows (`trial_rows` at the measured trials' median σ,
+    over √2 as the fit of two gaits weighs each), the fit's own s². A2 added (blind to d)
+    leaves it undetermined. The added gait's row says "added"; the other stays "unmeasured"."""
+    runs, derivatives, trials, values = _with_candidates()
+    plain = ident.gait_predictions(runs, derivatives, trials, values, (1, 3))
+    with_a4 = ident.gait_predictions(runs, derivatives, trials, values, (1, 3), added=("A4",))
+    with_a2 = ident.gait_predictions(runs, derivatives, trials, values, (1, 3), added=["A2"])
+
+    def row(table, gait, role):
+        return table[(table.gait == gait) & (table.role == role)].iloc[0]
+
+    assert not row(plain, "A1+A3", "held_out").determined
+    assert not row(with_a2, "A1+A3", "held_out").determined
+    held = row(with_a4, "A1+A3", "held_out")
+    assert held.determined and held["rank"] == 4
+    sigma = float(np.median(ident.trajectory_objective(
+        {g: runs[g] for g in trials}, trials, (1, 3))["sigma_mm"]))
+    training = {g: runs[g] for g in ("A1", "A1+A2")}
+    residuals, jacobian, _ = ident.objective_residuals(
+        training, derivatives, {g: trials[g] for g in training}, (1, 3))
+    added = ident.trial_rows(runs["A4"], derivatives["A4"], sigma, (1, 3)) / math.sqrt(2)
+    _, gradient = ident.window_speed(runs["A1+A3"], derivatives["A1+A3"], (1, 3))
+    scaled, relative = gradient * values, np.vstack([jacobian, added]) * values
+    variance = residuals @ residuals / (len(residuals) - 3)      # the two gaits' rank: 3
+    expected = math.sqrt(variance * scaled @ np.linalg.inv(relative.T @ relative) @ scaled)
+    assert held.standard_error_mm_s == pytest.approx(expected, rel=1e-8)
+    assert held.residual_dof == len(residuals) - 3
+    assert list(with_a4.role[with_a4.gait.isin(["A2", "A4"])]) == ["unmeasured", "added"]
+    # the predictions themselves do not move: only what determines them
+    np.testing.assert_array_equal(with_a4.predicted_speed_mm_s, plain.predicted_speed_mm_s)
+    np.testing.assert_array_equal(with_a4.training_objective, plain.training_objective)
+    # a smaller expected spread weighs the trial more: the error shrinks
+    tight = ident.gait_predictions(runs, derivatives, trials, values, (1, 3), added=("A4",),
+                                   added_sigma_mm=sigma / 10)
+    assert row(tight, "A1+A3", "held_out").standard_error_mm_s < held.standard_error_mm_s
+
+
+@pytest.mark.parametrize("added, sigma, message", [
+    (("A1",), None, "added gait 'A1' is measured: its trial is in the fits already"),
+    (("A3",), None, "added gait 'A3' has no simulated run"),
+    (("A4", "A4"), None, "added gaits repeat: A4, A4"),
+    ("A4", None, "added must be a sequence of gait names, not the string 'A4'"),
+    (("A4",), 0.0, "sigma_mm must be a positive finite number of mm, got 0.0")])
+def test_gait_predictions_refuse_an_added_trial_they_cannot_take(added, sigma, message):
+    runs, derivatives, trials, values = _with_candidates()
+    with pytest.raises(ValueError, match=f"^{message}$"):
+        ident.gait_predictions(runs, derivatives, trials, values, (1, 3), added=added,
+                               added_sigma_mm=sigma)
+
+
+def test_trial_design_stacks_nothing_added_each_candidate_and_all_of_them():
+    """The sets in order: none, A2, A4, both; each set's rows are `gait_predictions`' with it
+    added, at one σ: the measured trials' median unless given; none added has no σ and is
+    named "none" (an empty cell would read back from a CSV as missing)."""
+    runs, derivatives, trials, values = _with_candidates()
+    design = ident.trial_design(runs, derivatives, trials, values, ["A2", "A4"], (1, 3))
+    assert list(design.columns) == ident.DESIGN_COLUMNS
+    assert list(dict.fromkeys(design.added_trials)) == ["none", "A2", "A4", "A2 A4"]
+    sigma = float(np.median(ident.trajectory_objective(
+        {g: runs[g] for g in trials}, trials, (1, 3))["sigma_mm"]))
+    assert design.added_sigma_mm[design.added_trials == "none"].isna().all()
+    assert (design.added_sigma_mm[design.added_trials != "none"] == sigma).all()
+    comparisons = ["z_score", "within_two_standard_errors"]
+    for text in ("none", "A2", "A4", "A2 A4"):
+        part = design[design.added_trials == text].drop(columns=["added_trials",
+                                                                 "added_sigma_mm"])
+        added = () if text == "none" else tuple(text.split())
+        expected = ident.gait_predictions(runs, derivatives, trials, values, (1, 3),
+                                          added=added)
+        if added:  # the point is not refitted to trials not made: no comparison with them
+            assert part.z_score.isna().all() and part.within_two_standard_errors.isna().all()
+            part, expected = part.drop(columns=comparisons), expected.drop(columns=comparisons)
+        else:
+            assert part.within_two_standard_errors.iloc[:6].notna().all()
+        pd.testing.assert_frame_equal(part.reset_index(drop=True), expected)
+    given = ident.trial_design(runs, derivatives, trials, values, ["A4"], (1, 3),
+                               added_sigma_mm=0.5)
+    assert list(dict.fromkeys(given.added_trials)) == ["none", "A4"]  # one candidate: no "all"
+    assert (given.added_sigma_mm[given.added_trials == "A4"] == 0.5).all()
+    with pytest.raises(ValueError, match="candidates must be a sequence of gait names"):
+        ident.trial_design(runs, derivatives, trials, values, "A4", (1, 3))
+
+
+def test_trial_design_of_every_subset_takes_the_smaller_sets_first():
+    """Three candidates: 2³ − 1 = 7 sets after none, singles, then pairs, then all three, in
+    the candidates' order; a set's rows equal `gait_predictions`' with it added; a text for
+    every_subset is refused, naming it."""
+    runs, derivatives, trials, values = _with_candidates()
+    run, derivative = model_path((2.6, 0.8, 0.25))
+    runs["A5"] = dataclasses.replace(run, gait="A5")
+    derivatives["A5"] = np.concatenate([derivative, np.zeros_like(derivative[:, :, :1])], -1)
+    design = ident.trial_design(runs, derivatives, trials, values, ["A2", "A4", "A5"], (1, 3),
+                                every_subset=True)
+    assert list(dict.fromkeys(design.added_trials)) == [
+        "none", "A2", "A4", "A5", "A2 A4", "A2 A5", "A4 A5", "A2 A4 A5"]
+    part = design[design.added_trials == "A4 A5"].drop(columns=["added_trials",
+                                                                "added_sigma_mm"])
+    comparisons = ["z_score", "within_two_standard_errors"]
+    pd.testing.assert_frame_equal(part.drop(columns=comparisons).reset_index(drop=True),
+                                  ident.gait_predictions(runs, derivatives, trials, values,
+                                                         (1, 3), added=("A4", "A5"))
+                                  .drop(columns=comparisons))
+    with pytest.raises(ValueError, match="every_subset must be True or False, got 'yes'"):
+        ident.trial_design(runs, derivatives, trials, values, ["A4"], (1, 3),
+                           every_subset="yes")
