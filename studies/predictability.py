@@ -46,8 +46,10 @@ and the gait's simulation status), `predictability_parameters.csv`
 `--parameters` they determine) and `predictability.png` (per gait and role the predicted speed
 with two standard errors, the measured one beside it), and, with gaits to predict,
 `predictability_design.csv` (`identification.DESIGN_COLUMNS`, with each gait's simulation
-status) and `predictability_design.png` (two standard errors of each held-out and unmeasured
-gait's speed against the trials added), each table with its provenance sidecar.
+status), `predictability_design_parameters.csv` (`identification.parameter_design`: what the
+fit on every measured gait would determine of `--parameters` with those trials) and
+`predictability_design.png` (two standard errors of each held-out and unmeasured gait's speed
+against the trials added), each table with its provenance sidecar.
 
 --quick: gaits A1+A2 and A1+A3, A2 predicted, α and C⊥, cycle 1, 2-ms steps.
 """
@@ -207,11 +209,12 @@ def predictability_table(result, params, measured, names, values, window,
     return table, parameters
 
 
-def design_table(result, params, measured, candidates, names, values, window,
-                 predict_window=None, trial_sigma=None, every_subset=False) -> pd.DataFrame:
-    """`identification.trial_design` of the candidate trials that ran, with each gait's
-    simulation status; a failed gait (warned of, as in `predictability_table`) keeps rows with
-    no numbers, once, under no added trial ("none")."""
+def design_tables(result, params, measured, candidates, names, values, window,
+                  predict_window=None, trial_sigma=None, every_subset=False) -> tuple:
+    """(`identification.trial_design`, `identification.parameter_design`) of the candidate
+    trials that ran; the first with each gait's simulation status, a failed gait (warned of,
+    as in `predictability_table`) keeping rows with no numbers, once, under no added trial
+    ("none")."""
     runs, status, failed, trials, derivatives = _ran(result, params, measured, names)
     ran = [gait for gait in candidates if gait in runs]
     table = identification.trial_design(runs, derivatives, trials, values, ran, window,
@@ -221,7 +224,10 @@ def design_table(result, params, measured, candidates, names, values, window,
     table = _with_failures(table, status, failed, measured,
                            window if predict_window is None else predict_window)
     table["added_trials"] = table["added_trials"].fillna("none")
-    return table
+    parameters = identification.parameter_design(runs, derivatives, trials, names, values, ran,
+                                                 window, added_sigma_mm=trial_sigma,
+                                                 every_subset=every_subset)
+    return table, parameters
 
 
 def plot_predictability(csv_path, png_path):
@@ -353,9 +359,11 @@ def main(argv=None):
     out.write_csv(parameters, "predictability_parameters.csv")
     out.wrote(plot_predictability(csv_path, out.path("predictability.png")))
     if predict:
-        design = design_table(result, params, measured, predict, names, values, window,
-                              predict_window, trial_sigma, args.every_subset)
+        design, parameter_design = design_tables(result, params, measured, predict, names,
+                                                 values, window, predict_window, trial_sigma,
+                                                 args.every_subset)
         design_path = out.write_csv(design, "predictability_design.csv")
+        out.write_csv(parameter_design, "predictability_design_parameters.csv")
         out.wrote(plot_design(design_path, out.path("predictability_design.png")))
     out.report()
     return table

@@ -105,6 +105,7 @@ __all__ = ["TRAINING_CYCLES", "VALIDATION_CYCLES", "SAMPLES_PER_CYCLE", "MAX_CYC
            "objective_and_gradient", "phase_motion", "parameter_uncertainty", "record_derivatives",
            "PredictionUncertainty", "prediction_uncertainty", "PREDICTION_COLUMNS", "window_speed",
            "gait_predictions", "trial_rows", "DESIGN_COLUMNS", "trial_design",
+           "parameter_design",
            "STROKE_WINDOW_S", "STROKE_TOLERANCE_S", "STROKE_ONSET_SHARE",
            "STROKE_MIN_JUMP_RATIO", "Strokes", "window_moves", "circular_difference", "strokes",
            "stroke_aligned_phase"]
@@ -1250,8 +1251,7 @@ def gait_predictions(simulated: Mapping[str, SimulatedRun],
     phases = dict(zip(everyone["gait"], everyone["phase_s"]))
     if added_sigma_mm is None:
         added_sigma_mm = _median_sigma(everyone)
-    added_rows = (np.vstack([trial_rows(simulated[g], derivatives[g], added_sigma_mm, cycles,
-                                        samples) for g in added]) if added else None)
+    added_rows = _added_rows(simulated, derivatives, added, added_sigma_mm, cycles, samples)
 
     cases = ([(gait, "fitted", tuple(measured)) for gait in measured]
              + [(gait, "held_out", tuple(g for g in measured if g != gait)) for gait in measured]
@@ -1329,19 +1329,13 @@ def trial_design(simulated: Mapping[str, SimulatedRun], derivatives: Mapping[str
     point is not refitted to trials not yet made, so they would set its speeds against the
     precision that a refit on those trials would have. The arguments and ValueErrors are
     `gait_predictions`', and one for every_subset not a bool."""
-    if isinstance(candidates, str):
-        raise ValueError(f"candidates must be a sequence of gait names, not the string "
-                         f"{candidates!r}")
-    every_subset = check_flag("every_subset", every_subset)
-    candidates = list(candidates)
-    sizes = range(1, len(candidates) + 1) if every_subset else sorted({1, len(candidates)} - {0})
-    sets = [added for size in sizes for added in itertools.combinations(candidates, size)]
+    sets = _design_sets(candidates, every_subset)
     arguments = (simulated, derivatives, trials, values, cycles, samples, rcond, share,
                  predict_cycles)
     tables = [gait_predictions(*arguments)]       # with nothing added; checks the arguments
     tables[0].insert(0, "added_trials", "none")
     tables[0].insert(1, "added_sigma_mm", math.nan)
-    if added_sigma_mm is None and candidates:
+    if added_sigma_mm is None and sets:
         added_sigma_mm = _median_sigma(trajectory_objective(
             {g: simulated[g] for g in trials}, trials, cycles, samples))
     for added in sets:
@@ -1352,6 +1346,58 @@ def trial_design(simulated: Mapping[str, SimulatedRun], derivatives: Mapping[str
         table.insert(1, "added_sigma_mm", added_sigma_mm)
         tables.append(table)
     return pd.concat(tables, ignore_index=True)
+
+
+def parameter_design(simulated: Mapping[str, SimulatedRun],
+                     derivatives: Mapping[str, np.ndarray], trials: Mapping[str, Trial],
+                     names: Sequence[str], values: Sequence[float], candidates: Sequence[str],
+                     cycles=TRAINING_CYCLES, samples: int = SAMPLES_PER_CYCLE,
+                     rcond: float = UNCERTAINTY_RCOND, share: float = UNCERTAINTY_SHARE,
+                     added_sigma_mm: Optional[float] = None, every_subset: bool = False
+                     ) -> pd.DataFrame:
+    """What the fit on every measured trial would determine of its parameters with trials of
+    `candidates` taken as made: `parameter_uncertainty` of its `objective_residuals` (each
+    trial's phase fitted at the point) with nothing added, then with the sets of
+    `trial_design` (each alone and all, or `every_subset`) added as `gait_predictions` adds
+    them (spread `added_sigma_mm`, default the measured trials' median σ; weighted as a
+    measured gait). One row per set and parameter: `DESIGN_COLUMNS`' first two, then
+    `UNCERTAINTY_COLUMNS`. ValueError as `trial_design` and `parameter_uncertainty`."""
+    sets = _design_sets(candidates, every_subset)
+    measured = {g: simulated[g] for g in trials}
+    residuals, jacobian, table = objective_residuals(measured, derivatives, trials, cycles,
+                                                     samples)
+    if added_sigma_mm is None:
+        added_sigma_mm = _median_sigma(table)
+    tables = []
+    for added in [()] + sets:
+        _checked_added(added, simulated, list(trials))
+        rows = _added_rows(simulated, derivatives, added, added_sigma_mm, cycles, samples)
+        part = parameter_uncertainty(residuals, jacobian, names, values, rcond, share,
+                                     None if rows is None else rows / math.sqrt(len(trials)))
+        part.insert(0, "added_trials", " ".join(added) or "none")
+        part.insert(1, "added_sigma_mm", added_sigma_mm if added else math.nan)
+        tables.append(part)
+    return pd.concat(tables, ignore_index=True)
+
+
+def _design_sets(candidates, every_subset) -> list:
+    """The sets of candidate trials a design takes as made, beyond none: each alone and all
+    (more than one), or every subset, the smaller first."""
+    if isinstance(candidates, str):
+        raise ValueError(f"candidates must be a sequence of gait names, not the string "
+                         f"{candidates!r}")
+    every_subset = check_flag("every_subset", every_subset)
+    candidates = list(candidates)
+    sizes = range(1, len(candidates) + 1) if every_subset else sorted({1, len(candidates)} - {0})
+    return [added for size in sizes for added in itertools.combinations(candidates, size)]
+
+
+def _added_rows(simulated, derivatives, added, sigma_mm, cycles, samples):
+    """The `trial_rows` of the added gaits, stacked (None for none), at one spread."""
+    if not added:
+        return None
+    return np.vstack([trial_rows(simulated[g], derivatives[g], sigma_mm, cycles, samples)
+                      for g in added])
 
 
 def _median_sigma(table: pd.DataFrame) -> float:

@@ -132,6 +132,15 @@ def test_quick_run_against_plain_runs_and_a_finite_difference_jacobian(run):
     pd.testing.assert_frame_equal(none.reset_index(drop=True), written, check_exact=False,
                                   rtol=1e-12)
     assert (out / "predictability_design.png").stat().st_size > 0
+    # the parameters with A2's trial: the normal equations' errors of the same matrices
+    parameter_design = pd.read_csv(out / "predictability_design_parameters.csv")
+    with_a2 = parameter_design[parameter_design["added_trials"] == "A2"]
+    assert with_a2["parameter"].tolist() == list(QUICK_NAMES)
+    np.testing.assert_allclose(with_a2["standard_error"],
+                               np.sqrt(variance * np.diag(np.linalg.inv(normal))), rtol=2e-3)
+    plain = parameter_design[parameter_design["added_trials"] == "none"]
+    np.testing.assert_allclose(plain["standard_error"], parameters["standard_error"],
+                               rtol=1e-12)
 
 
 @pytest.mark.slow

@@ -574,3 +574,41 @@ def test_trial_design_of_every_subset_takes_the_smaller_sets_first():
     with pytest.raises(ValueError, match="every_subset must be True or False, got 'yes'"):
         ident.trial_design(runs, derivatives, trials, values, ["A4"], (1, 3),
                            every_subset="yes")
+
+
+def test_parameter_design_says_which_parameters_a_trial_would_determine():
+    """Measured A1 and A1+A2 leave d free (neither moves with it): not identifiable with
+    nothing added, nor with A2's trial (blind to d); with A4's (it sees d) every parameter is,
+    with the normal equations' errors of J and A4's rows over √2 and the fit's own s². With
+    nothing added the rows are `parameter_uncertainty`'s of the fit, the same bits."""
+    runs, derivatives, trials, values = _with_candidates()
+    trials = {g: trials[g] for g in ("A1", "A1+A2")}
+    names = ["a", "b", "c", "d"]
+    design = ident.parameter_design(runs, derivatives, trials, names, values, ["A2", "A4"],
+                                    (1, 3))
+    assert list(design.columns) == ident.DESIGN_COLUMNS[:2] + ident.UNCERTAINTY_COLUMNS
+    assert list(dict.fromkeys(design.added_trials)) == ["none", "A2", "A4", "A2 A4"]
+    residuals, jacobian, table = ident.objective_residuals(
+        {g: runs[g] for g in trials}, derivatives, trials, (1, 3))
+    plain = design[design.added_trials == "none"].drop(columns=["added_trials",
+                                                                "added_sigma_mm"])
+    pd.testing.assert_frame_equal(plain.reset_index(drop=True), ident.parameter_uncertainty(
+        residuals, jacobian, names, values))
+
+    def identifiable(text):
+        return design.identifiable[design.added_trials == text].tolist()
+
+    assert identifiable("none") == identifiable("A2") == [True, True, True, False]
+    assert identifiable("A4") == identifiable("A2 A4") == [True] * 4
+    sigma = float(np.median(table["sigma_mm"]))
+    assert (design.added_sigma_mm[design.added_trials != "none"] == sigma).all()
+    added = ident.trial_rows(runs["A4"], derivatives["A4"], sigma, (1, 3)) / math.sqrt(2)
+    relative = np.vstack([jacobian, added]) * values
+    variance = residuals @ residuals / (len(residuals) - 3)
+    errors = np.sqrt(variance * np.diag(np.linalg.inv(relative.T @ relative))) * values
+    np.testing.assert_allclose(design.standard_error[design.added_trials == "A4"], errors,
+                               rtol=1e-8)
+    with pytest.raises(ValueError, match="added gait 'A1' is measured"):
+        ident.parameter_design(runs, derivatives, trials, names, values, ["A1"], (1, 3))
+    with pytest.raises(ValueError, match="candidates must be a sequence of gait names"):
+        ident.parameter_design(runs, derivatives, trials, names, values, "A4", (1, 3))
