@@ -1228,10 +1228,7 @@ def gait_predictions(simulated: Mapping[str, SimulatedRun],
     is measured, not simulated or repeated, an added_sigma_mm that is not a positive finite
     number, or as `prediction_uncertainty`."""
     predicted = check_window(cycles if predict_cycles is None else predict_cycles)
-    measured = list(trials)
-    missing = [gait for gait in measured if gait not in simulated]
-    if missing:
-        raise ValueError(f"no simulated run for the measured gait(s) {', '.join(missing)}")
+    measured = _checked_measured(simulated, trials)
     if len(measured) < 2:
         raise ValueError(f"gait_predictions needs at least two measured gaits (one held out, "
                          f"one fitted), got {len(measured)}")
@@ -1287,6 +1284,14 @@ def gait_predictions(simulated: Mapping[str, SimulatedRun],
                      "training_objective": objective_of(table),
                      "rank": uncertainty.rank, "residual_dof": uncertainty.residual_dof})
     return pd.DataFrame(rows, columns=PREDICTION_COLUMNS)
+
+
+def _checked_measured(simulated, trials) -> list:
+    """The measured gaits (`trials`' keys), or ValueError naming those `simulated` lacks."""
+    missing = [gait for gait in trials if gait not in simulated]
+    if missing:
+        raise ValueError(f"no simulated run for the measured gait(s) {', '.join(missing)}")
+    return list(trials)
 
 
 def _checked_added(added, simulated, measured) -> tuple:
@@ -1361,16 +1366,17 @@ def parameter_design(simulated: Mapping[str, SimulatedRun],
     `trial_design` (each alone and all, or `every_subset`) added as `gait_predictions` adds
     them (spread `added_sigma_mm`, default the measured trials' median σ; weighted as a
     measured gait). One row per set and parameter: `DESIGN_COLUMNS`' first two, then
-    `UNCERTAINTY_COLUMNS`. ValueError as `trial_design` and `parameter_uncertainty`."""
+    `UNCERTAINTY_COLUMNS`. ValueError for a measured gait missing from `simulated`, and as
+    `trial_design` and `parameter_uncertainty`."""
     sets = _design_sets(candidates, every_subset)
-    measured = {g: simulated[g] for g in trials}
+    measured = {g: simulated[g] for g in _checked_measured(simulated, trials)}
     residuals, jacobian, table = objective_residuals(measured, derivatives, trials, cycles,
                                                      samples)
     if added_sigma_mm is None:
         added_sigma_mm = _median_sigma(table)
     tables = []
     for added in [()] + sets:
-        _checked_added(added, simulated, list(trials))
+        _checked_added(added, simulated, list(measured))
         rows = _added_rows(simulated, derivatives, added, added_sigma_mm, cycles, samples)
         part = parameter_uncertainty(residuals, jacobian, names, values, rcond, share,
                                      None if rows is None else rows / math.sqrt(len(trials)))

@@ -612,3 +612,6 @@ def test_parameter_design_says_which_parameters_a_trial_would_determine():
         ident.parameter_design(runs, derivatives, trials, names, values, ["A1"], (1, 3))
     with pytest.raises(ValueError, match="candidates must be a sequence of gait names"):
         ident.parameter_design(runs, derivatives, trials, names, values, "A4", (1, 3))
+    with pytest.raises(ValueError, match=r"^no simulated run for the measured gait\(s\) A1\+A2$"):
+        ident.parameter_design({g: runs[g] for g in ("A1", "A4")}, derivatives, trials, names,
+                               values, ["A4"], (1, 3))
