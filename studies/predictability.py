@@ -5,7 +5,7 @@ how far each measured gait's speed lies from the prediction there.
                                      [--parameters alpha,drag_perpendicular,...]
                                      [--gaits paper|A1,A1+A2,...] [--predict A2,A3,...]
                                      [--window 1:3] [--predict-window 4:6]
-                                     [--trial-sigma MM] [--every-subset] [--dt S]
+                                     [--trial-sigma MM] [--max-trials K] [--dt S]
                                      [--out DIR] [--quick]
 
 A model fitted to the measured trials is judged on the gaits it was not fitted to. Whether it
@@ -37,8 +37,8 @@ and for all of them together, `identification.trial_design` takes its trial as m
 rows in every fit, spread `--trial-sigma` mm, default the measured trials' median σ at the
 point, residuals scattering as the fit's own) and says again what each fit determines: a
 held-out gait that becomes determined is one that trial would let the model predict.
-`--every-subset`: every subset of the candidates instead, the smaller first (the fewest trials
-that determine each gait).
+`--max-trials K`: every set of at most K candidates instead, the smaller first (the fewest
+trials that determine each gait; K at least their number: every subset).
 
 Writes `predictability.csv` (one row per gait and role, `identification.PREDICTION_COLUMNS`
 and the gait's simulation status), `predictability_parameters.csv`
@@ -105,9 +105,9 @@ def build_parser():
                         help="the spread (mm) expected of a candidate trial, each --predict "
                              "gait's, taken as made in the design table (default: the measured "
                              "trials' median spread at the point)")
-    parser.add_argument("--every-subset", action="store_true",
-                        help="the design table over every subset of the --predict gaits, the "
-                             "smaller first, instead of each alone and all together")
+    parser.add_argument("--max-trials", type=int, default=None, metavar="K",
+                        help="the design table over every set of at most K of the --predict "
+                             "gaits, the smaller first (default: each alone and all together)")
     cli.add_model_flags(parser, fixed=("gait",), preset="identified")
     cli.add_dt_flag(parser)
     return parser
@@ -142,6 +142,19 @@ def predicted_gaits(text: str, measured) -> list:
             raise cli.StudyArgumentError(f"--predict {gait}: a gait with no forward axis (its "
                                          f"symmetry leaves no direction to swim)")
     return gaits
+
+
+def check_design_size(max_trials: int, candidates: int):
+    """--max-trials: a whole number >= 1 whose sets of candidate trials number at most
+    `identification.MAX_DESIGN_SETS` (StudyArgumentError naming it, before any compute)."""
+    if max_trials < 1:
+        raise cli.StudyArgumentError(f"--max-trials must be >= 1, got {max_trials}")
+    sets = sum(math.comb(candidates, size) for size in range(1, min(max_trials, candidates) + 1))
+    if sets > identification.MAX_DESIGN_SETS:
+        raise cli.StudyArgumentError(
+            f"--max-trials {max_trials} over the {candidates} --predict gaits asks for {sets} "
+            f"sets of trials, more than {identification.MAX_DESIGN_SETS}: lower it or predict "
+            f"fewer gaits")
 
 
 def parameter_values(base, names) -> np.ndarray:
@@ -210,7 +223,7 @@ def predictability_table(result, params, measured, names, values, window,
 
 
 def design_tables(result, params, measured, candidates, names, values, window,
-                  predict_window=None, trial_sigma=None, every_subset=False) -> tuple:
+                  predict_window=None, trial_sigma=None, max_trials=None) -> tuple:
     """(`identification.trial_design`, `identification.parameter_design`) of the candidate
     trials that ran; the first with each gait's simulation status, a failed gait (warned of,
     as in `predictability_table`) keeping rows with no numbers, once, under no added trial
@@ -220,13 +233,13 @@ def design_tables(result, params, measured, candidates, names, values, window,
     table = identification.trial_design(runs, derivatives, trials, values, ran, window,
                                         predict_cycles=predict_window,
                                         added_sigma_mm=trial_sigma,
-                                        every_subset=every_subset)
+                                        max_trials=max_trials)
     table = _with_failures(table, status, failed, measured,
                            window if predict_window is None else predict_window)
     table["added_trials"] = table["added_trials"].fillna("none")
     parameters = identification.parameter_design(runs, derivatives, trials, names, values, ran,
                                                  window, added_sigma_mm=trial_sigma,
-                                                 every_subset=every_subset)
+                                                 max_trials=max_trials)
     return table, parameters
 
 
@@ -331,6 +344,8 @@ def main(argv=None):
     window = parse_window(args.window)
     predict_text = args.window if args.predict_window is None else args.predict_window
     predict_window = parse_window(predict_text, "--predict-window")
+    if args.max_trials is not None:
+        check_design_size(args.max_trials, len(predict))
     trial_sigma = None
     if args.trial_sigma is not None:
         trial_sigma = cli.parse_number(args.trial_sigma, "--trial-sigma")
@@ -349,7 +364,7 @@ def main(argv=None):
                      solver=solver, extra={"parameters": names, "window": list(window),
                                            "predict_window": list(predict_window),
                                            "trial_sigma_mm": trial_sigma,
-                                           "every_subset": args.every_subset})
+                                           "max_trials": args.max_trials})
     result = simulate(params, duration, solver, arch=args.arch,
                       record_interval_s=identify.RECORD_INTERVAL_S, sensitivities=names,
                       progress=not args.no_progress)
@@ -361,7 +376,7 @@ def main(argv=None):
     if predict:
         design, parameter_design = design_tables(result, params, measured, predict, names,
                                                  values, window, predict_window, trial_sigma,
-                                                 args.every_subset)
+                                                 args.max_trials)
         design_path = out.write_csv(design, "predictability_design.csv")
         out.write_csv(parameter_design, "predictability_design_parameters.csv")
         out.wrote(plot_design(design_path, out.path("predictability_design.png")))

@@ -104,8 +104,8 @@ __all__ = ["TRAINING_CYCLES", "VALIDATION_CYCLES", "SAMPLES_PER_CYCLE", "MAX_CYC
            "trial_residuals", "objective_residuals", "trial_phase_motion",
            "objective_and_gradient", "phase_motion", "parameter_uncertainty", "record_derivatives",
            "PredictionUncertainty", "prediction_uncertainty", "PREDICTION_COLUMNS", "window_speed",
-           "gait_predictions", "trial_rows", "DESIGN_COLUMNS", "trial_design",
-           "parameter_design",
+           "gait_predictions", "trial_rows", "DESIGN_COLUMNS", "MAX_DESIGN_SETS",
+           "trial_design", "parameter_design",
            "STROKE_WINDOW_S", "STROKE_TOLERANCE_S", "STROKE_ONSET_SHARE",
            "STROKE_MIN_JUMP_RATIO", "Strokes", "window_moves", "circular_difference", "strokes",
            "stroke_aligned_phase"]
@@ -1227,12 +1227,21 @@ def gait_predictions(simulated: Mapping[str, SimulatedRun],
     measured gait missing from `simulated`, fewer than two measured gaits, an added gait that
     is measured, not simulated or repeated, an added_sigma_mm that is not a positive finite
     number, or as `prediction_uncertainty`."""
+    tables, _ = _predictions(simulated, derivatives, trials, values, cycles, samples, rcond,
+                             share, predict_cycles, [added], added_sigma_mm)
+    return tables[0]
+
+
+def _predictions(simulated, derivatives, trials, values, cycles, samples, rcond, share,
+                 predict_cycles, added_sets, added_sigma_mm) -> Tuple[list, float]:
+    """`gait_predictions`' table for each set of added gaits in `added_sets`, the fits (and
+    their phase searches) made once for all, and the spread given the added trials."""
     predicted = check_window(cycles if predict_cycles is None else predict_cycles)
     measured = _checked_measured(simulated, trials)
     if len(measured) < 2:
         raise ValueError(f"gait_predictions needs at least two measured gaits (one held out, "
                          f"one fitted), got {len(measured)}")
-    added = _checked_added(added, simulated, measured)
+    added_sets = [_checked_added(added, simulated, measured) for added in added_sets]
     fits = {}
 
     def fit_of(training):
@@ -1248,42 +1257,46 @@ def gait_predictions(simulated: Mapping[str, SimulatedRun],
     phases = dict(zip(everyone["gait"], everyone["phase_s"]))
     if added_sigma_mm is None:
         added_sigma_mm = _median_sigma(everyone)
-    added_rows = _added_rows(simulated, derivatives, added, added_sigma_mm, cycles, samples)
-
-    cases = ([(gait, "fitted", tuple(measured)) for gait in measured]
-             + [(gait, "held_out", tuple(g for g in measured if g != gait)) for gait in measured]
-             + [(gait, "added" if gait in added else "unmeasured", tuple(measured))
-                for gait in simulated if gait not in trials])
-    rows = []
-    for gait, role, training in cases:
-        residuals, jacobian, table = fit_of(training)
-        run = simulated[gait]
-        speed, gradient = window_speed(run, derivatives[gait], predicted)
-        ends = run.path.position(_window_ends(run.path, predicted))
-        duration = (predicted[1] - predicted[0] + 1) * run.path.period_s
-        # weighted as one more gait of the fit's mean: objective_residuals' 1/√(gaits)
-        uncertainty = prediction_uncertainty(
-            residuals, jacobian, values, gradient, rcond, share,
-            None if added_rows is None else added_rows / math.sqrt(len(training)))
-        error = uncertainty.standard_error
-        measured_speed, gap, within = math.nan, math.nan, None
-        if gait in trials:
-            fit = trial_fit(run, trials[gait], predicted, samples, phases[gait])
-            measured_speed = trials[gait].paper_sign * fit.meas_speed_mm_s
-            gap = measured_speed - speed
-            within = bool(abs(gap) <= 2.0 * error)
-        rows.append({"gait": gait, "role": role, "training_gaits": " ".join(training),
-                     "first_cycle": predicted[0], "last_cycle": predicted[1],
-                     "predicted_speed_mm_s": speed, "standard_error_mm_s": error,
-                     "distance_speed_mm_s": float(np.hypot(*(ends[1] - ends[0]))) / duration,
-                     "unresolved_share": uncertainty.unresolved_share,
-                     "determined": uncertainty.determined,
-                     "measured_speed_mm_s": measured_speed,
-                     "z_score": gap / error if 0.0 < error < math.inf else math.nan,
-                     "within_two_standard_errors": within,
-                     "training_objective": objective_of(table),
-                     "rank": uncertainty.rank, "residual_dof": uncertainty.residual_dof})
-    return pd.DataFrame(rows, columns=PREDICTION_COLUMNS)
+    tables = []
+    for added in added_sets:
+        added_rows = _added_rows(simulated, derivatives, added, added_sigma_mm, cycles, samples)
+        cases = ([(gait, "fitted", tuple(measured)) for gait in measured]
+                 + [(gait, "held_out", tuple(g for g in measured if g != gait))
+                    for gait in measured]
+                 + [(gait, "added" if gait in added else "unmeasured", tuple(measured))
+                    for gait in simulated if gait not in trials])
+        rows = []
+        for gait, role, training in cases:
+            residuals, jacobian, table = fit_of(training)
+            run = simulated[gait]
+            speed, gradient = window_speed(run, derivatives[gait], predicted)
+            ends = run.path.position(_window_ends(run.path, predicted))
+            duration = (predicted[1] - predicted[0] + 1) * run.path.period_s
+            # weighted as one more gait of the fit's mean: objective_residuals' 1/√(gaits)
+            uncertainty = prediction_uncertainty(
+                residuals, jacobian, values, gradient, rcond, share,
+                None if added_rows is None else added_rows / math.sqrt(len(training)))
+            error = uncertainty.standard_error
+            measured_speed, gap, within = math.nan, math.nan, None
+            if gait in trials:
+                fit = trial_fit(run, trials[gait], predicted, samples, phases[gait])
+                measured_speed = trials[gait].paper_sign * fit.meas_speed_mm_s
+                gap = measured_speed - speed
+                within = bool(abs(gap) <= 2.0 * error)
+            rows.append({"gait": gait, "role": role, "training_gaits": " ".join(training),
+                         "first_cycle": predicted[0], "last_cycle": predicted[1],
+                         "predicted_speed_mm_s": speed, "standard_error_mm_s": error,
+                         "distance_speed_mm_s": float(np.hypot(*(ends[1] - ends[0])))
+                         / duration,
+                         "unresolved_share": uncertainty.unresolved_share,
+                         "determined": uncertainty.determined,
+                         "measured_speed_mm_s": measured_speed,
+                         "z_score": gap / error if 0.0 < error < math.inf else math.nan,
+                         "within_two_standard_errors": within,
+                         "training_objective": objective_of(table),
+                         "rank": uncertainty.rank, "residual_dof": uncertainty.residual_dof})
+        tables.append(pd.DataFrame(rows, columns=PREDICTION_COLUMNS))
+    return tables, added_sigma_mm
 
 
 def _checked_measured(simulated, trials) -> list:
@@ -1315,41 +1328,42 @@ none: an empty cell would read back as a missing value), the spread given them (
 none), then `gait_predictions`' columns."""
 
 
+MAX_DESIGN_SETS = 1024
+"""The most sets of candidate trials a design scores (`trial_design`, `parameter_design`):
+each costs a few of `prediction_uncertainty`'s SVDs per gait, about 0.1–0.3 s for the five
+measured gaits and eight parameters, so this is minutes."""
+
+
 def trial_design(simulated: Mapping[str, SimulatedRun], derivatives: Mapping[str, np.ndarray],
                  trials: Mapping[str, Trial], values: Sequence[float],
                  candidates: Sequence[str], cycles=TRAINING_CYCLES,
                  samples: int = SAMPLES_PER_CYCLE, rcond: float = UNCERTAINTY_RCOND,
                  share: float = UNCERTAINTY_SHARE, predict_cycles=None,
-                 added_sigma_mm: Optional[float] = None, every_subset: bool = False
+                 added_sigma_mm: Optional[float] = None, max_trials: Optional[int] = None
                  ) -> pd.DataFrame:
-    """Which trial to measure next: `gait_predictions` with no trial added, with each of
-    `candidates` (gaits of `simulated` not measured) added alone, and with all of them (when
-    more than one), stacked (`DESIGN_COLUMNS`); with `every_subset`, every subset of them
-    instead, the smaller first (2^n − 1 sets: the fewest trials that determine a gait). A
-    held-out gait that the measured gaits leave
-    undetermined and a candidate determines is one that trial would let the model predict;
-    the standard errors say how closely, as far as the linearisation at this point and the
-    spread expected of the trial (`added_sigma_mm`, default the measured trials' median σ)
-    reach. With trials added, `z_score` and `within_two_standard_errors` are left empty: the
-    point is not refitted to trials not yet made, so they would set its speeds against the
-    precision that a refit on those trials would have. The arguments and ValueErrors are
-    `gait_predictions`', and one for every_subset not a bool."""
-    sets = _design_sets(candidates, every_subset)
-    arguments = (simulated, derivatives, trials, values, cycles, samples, rcond, share,
-                 predict_cycles)
-    tables = [gait_predictions(*arguments)]       # with nothing added; checks the arguments
-    tables[0].insert(0, "added_trials", "none")
-    tables[0].insert(1, "added_sigma_mm", math.nan)
-    if added_sigma_mm is None and sets:
-        added_sigma_mm = _median_sigma(trajectory_objective(
-            {g: simulated[g] for g in trials}, trials, cycles, samples))
-    for added in sets:
-        table = gait_predictions(*arguments, added, added_sigma_mm)
-        table["z_score"] = math.nan
-        table["within_two_standard_errors"] = None
-        table.insert(0, "added_trials", " ".join(added))
-        table.insert(1, "added_sigma_mm", added_sigma_mm)
-        tables.append(table)
+    """Which trial to measure next: `gait_predictions` with no trial added, then with sets of
+    `candidates` (gaits of `simulated` not measured) added, stacked (`DESIGN_COLUMNS`): each
+    alone and all of them together (more than one) by default, or with `max_trials` = k every
+    set of at most k of them, the smaller first (the fewest trials that determine a gait;
+    k ≥ their number: every subset). A held-out gait that the measured gaits leave
+    undetermined and a set determines is one those trials would let the model predict; the
+    standard errors say how closely, as far as the linearisation at this point and the spread
+    expected of a trial (`added_sigma_mm`, default the measured trials' median σ) reach. With
+    trials added, `z_score` and `within_two_standard_errors` are left empty: the point is not
+    refitted to trials not yet made, so they would set its speeds against the precision that
+    a refit on those trials would have. The arguments and ValueErrors are
+    `gait_predictions`', and one for a max_trials that is not a whole number >= 1 or that asks
+    for more than `MAX_DESIGN_SETS` sets."""
+    sets = _design_sets(candidates, max_trials)
+    tables, added_sigma_mm = _predictions(simulated, derivatives, trials, values, cycles,
+                                          samples, rcond, share, predict_cycles, [()] + sets,
+                                          added_sigma_mm)
+    for added, table in zip([()] + sets, tables):
+        if added:
+            table["z_score"] = math.nan
+            table["within_two_standard_errors"] = None
+        table.insert(0, "added_trials", " ".join(added) or "none")
+        table.insert(1, "added_sigma_mm", added_sigma_mm if added else math.nan)
     return pd.concat(tables, ignore_index=True)
 
 
@@ -1358,17 +1372,17 @@ def parameter_design(simulated: Mapping[str, SimulatedRun],
                      names: Sequence[str], values: Sequence[float], candidates: Sequence[str],
                      cycles=TRAINING_CYCLES, samples: int = SAMPLES_PER_CYCLE,
                      rcond: float = UNCERTAINTY_RCOND, share: float = UNCERTAINTY_SHARE,
-                     added_sigma_mm: Optional[float] = None, every_subset: bool = False
+                     added_sigma_mm: Optional[float] = None, max_trials: Optional[int] = None
                      ) -> pd.DataFrame:
     """What the fit on every measured trial would determine of its parameters with trials of
     `candidates` taken as made: `parameter_uncertainty` of its `objective_residuals` (each
     trial's phase fitted at the point) with nothing added, then with the sets of
-    `trial_design` (each alone and all, or `every_subset`) added as `gait_predictions` adds
-    them (spread `added_sigma_mm`, default the measured trials' median σ; weighted as a
-    measured gait). One row per set and parameter: `DESIGN_COLUMNS`' first two, then
-    `UNCERTAINTY_COLUMNS`. ValueError for a measured gait missing from `simulated`, and as
-    `trial_design` and `parameter_uncertainty`."""
-    sets = _design_sets(candidates, every_subset)
+    `trial_design` (`max_trials`) added as `gait_predictions` adds them (spread
+    `added_sigma_mm`, default the measured trials' median σ; weighted as a measured gait).
+    One row per set and parameter: `DESIGN_COLUMNS`' first two, then `UNCERTAINTY_COLUMNS`.
+    ValueError for a measured gait missing from `simulated`, and as `trial_design` and
+    `parameter_uncertainty`."""
+    sets = _design_sets(candidates, max_trials)
     measured = {g: simulated[g] for g in _checked_measured(simulated, trials)}
     residuals, jacobian, table = objective_residuals(measured, derivatives, trials, cycles,
                                                      samples)
@@ -1386,15 +1400,26 @@ def parameter_design(simulated: Mapping[str, SimulatedRun],
     return pd.concat(tables, ignore_index=True)
 
 
-def _design_sets(candidates, every_subset) -> list:
+def _design_sets(candidates, max_trials) -> list:
     """The sets of candidate trials a design takes as made, beyond none: each alone and all
-    (more than one), or every subset, the smaller first."""
+    (more than one) for max_trials None, else every set of at most max_trials, the smaller
+    first."""
     if isinstance(candidates, str):
         raise ValueError(f"candidates must be a sequence of gait names, not the string "
                          f"{candidates!r}")
-    every_subset = check_flag("every_subset", every_subset)
     candidates = list(candidates)
-    sizes = range(1, len(candidates) + 1) if every_subset else sorted({1, len(candidates)} - {0})
+    if max_trials is None:
+        sizes = sorted({1, len(candidates)} - {0})
+    elif not is_whole(max_trials) or max_trials < 1:
+        raise ValueError(f"max_trials must be a whole number >= 1 (None: each candidate alone "
+                         f"and all together), got {max_trials!r}")
+    else:
+        sizes = range(1, min(int(max_trials), len(candidates)) + 1)
+    count = sum(math.comb(len(candidates), size) for size in sizes)
+    if count > MAX_DESIGN_SETS:
+        raise ValueError(f"max_trials {max_trials} over {len(candidates)} candidates asks for "
+                         f"{count} sets of trials, more than MAX_DESIGN_SETS = "
+                         f"{MAX_DESIGN_SETS}: lower it or give fewer candidates")
     return [added for size in sizes for added in itertools.combinations(candidates, size)]
 
 

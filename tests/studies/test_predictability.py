@@ -173,6 +173,11 @@ def test_the_returned_table_is_the_written_one(run):
     (["--trial-sigma", "-0.1"], "--trial-sigma must be > 0, got -0.1"),
     (["--trial-sigma", "nan"], "--trial-sigma: 'nan' is not a finite number"),
     (["--trial-sigma", "wide"], "--trial-sigma: 'wide' is not a number"),
+    (["--max-trials", "0"], "--max-trials must be >= 1, got 0"),
+    (["--max-trials", "two"], "--max-trials: invalid int value: 'two'"),
+    # 11 gaits, at most 5: 1,023 sets (allowed, ≤ 1,024); at most 6: 1,485
+    (["--predict", "A2,A3,A4,A5,A6,A7,A8,A2+A3,A2+A4,A2+A5,A3+A4", "--max-trials", "6"],
+     "--max-trials 6 over the 11 --predict gaits asks for 1485 sets of trials, more than 1024"),
 ])
 def test_bad_flags_are_refused_in_one_line_before_any_compute(flags, message, tmp_path,
                                                                 capsys):

@@ -552,28 +552,43 @@ def test_trial_design_stacks_nothing_added_each_candidate_and_all_of_them():
         ident.trial_design(runs, derivatives, trials, values, "A4", (1, 3))
 
 
-def test_trial_design_of_every_subset_takes_the_smaller_sets_first():
-    """Three candidates: 2³ − 1 = 7 sets after none, singles, then pairs, then all three, in
-    the candidates' order; a set's rows equal `gait_predictions`' with it added; a text for
-    every_subset is refused, naming it."""
+def test_trial_design_of_at_most_k_trials_takes_the_smaller_sets_first(monkeypatch):
+    """Three candidates: max_trials 3 (or more) gives the 2³ − 1 = 7 subsets after none,
+    singles, then pairs, then all three, in the candidates' order; max_trials 2 stops at the
+    pairs; a set's rows equal `gait_predictions`' with it added. A count that is not a whole
+    number >= 1 is refused naming max_trials, and so is one asking for more sets than
+    MAX_DESIGN_SETS (at exactly it, allowed: ≤)."""
     runs, derivatives, trials, values = _with_candidates()
     run, derivative = model_path((2.6, 0.8, 0.25))
     runs["A5"] = dataclasses.replace(run, gait="A5")
     derivatives["A5"] = np.concatenate([derivative, np.zeros_like(derivative[:, :, :1])], -1)
-    design = ident.trial_design(runs, derivatives, trials, values, ["A2", "A4", "A5"], (1, 3),
-                                every_subset=True)
-    assert list(dict.fromkeys(design.added_trials)) == [
-        "none", "A2", "A4", "A5", "A2 A4", "A2 A5", "A4 A5", "A2 A4 A5"]
+    candidates = ["A2", "A4", "A5"]
+    every = ["none", "A2", "A4", "A5", "A2 A4", "A2 A5", "A4 A5", "A2 A4 A5"]
+    for k, expected in ((3, every), (5, every), (2, every[:-1]), (1, every[:4])):
+        design = ident.trial_design(runs, derivatives, trials, values, candidates, (1, 3),
+                                    max_trials=k)
+        assert list(dict.fromkeys(design.added_trials)) == expected
+    comparisons = ["z_score", "within_two_standard_errors"]
+    design = ident.trial_design(runs, derivatives, trials, values, candidates, (1, 3),
+                                max_trials=np.int64(3))
     part = design[design.added_trials == "A4 A5"].drop(columns=["added_trials",
                                                                 "added_sigma_mm"])
-    comparisons = ["z_score", "within_two_standard_errors"]
     pd.testing.assert_frame_equal(part.drop(columns=comparisons).reset_index(drop=True),
                                   ident.gait_predictions(runs, derivatives, trials, values,
                                                          (1, 3), added=("A4", "A5"))
                                   .drop(columns=comparisons))
-    with pytest.raises(ValueError, match="every_subset must be True or False, got 'yes'"):
-        ident.trial_design(runs, derivatives, trials, values, ["A4"], (1, 3),
-                           every_subset="yes")
+    for bad in (0, -1, 1.5, True, "2"):
+        with pytest.raises(ValueError, match=r"max_trials must be a whole number >= 1 \(None: "
+                                             r"each candidate alone and all together\), got"):
+            ident.trial_design(runs, derivatives, trials, values, candidates, (1, 3),
+                               max_trials=bad)
+    monkeypatch.setattr(ident, "MAX_DESIGN_SETS", 6)
+    at = ident.trial_design(runs, derivatives, trials, values, candidates, (1, 3), max_trials=2)
+    assert at.added_trials.nunique() == 7          # none and the 6 sets
+    with pytest.raises(ValueError, match="max_trials 3 over 3 candidates asks for 7 sets of "
+                                         "trials, more than MAX_DESIGN_SETS = 6"):
+        ident.parameter_design(runs, derivatives, trials, ["a", "b", "c", "d"], values,
+                               candidates, (1, 3), max_trials=3)
 
 
 def test_parameter_design_says_which_parameters_a_trial_would_determine():
