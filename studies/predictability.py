@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
@@ -102,9 +103,10 @@ def build_parser():
                         help="the cycle window FIRST:LAST of the speeds predicted (default: "
                              "--window's)")
     parser.add_argument("--trial-sigma", default=None,
-                        help="the spread (mm) expected of a candidate trial, each --predict "
-                             "gait's, taken as made in the design table (default: the measured "
-                             "trials' median spread at the point)")
+                        help="the spread (mm, at least the tracking floor 0.05) expected of a "
+                             "candidate trial, each --predict gait's, taken as made in the "
+                             "design table (default: the measured trials' median spread at "
+                             "the point)")
     parser.add_argument("--max-trials", type=int, default=None, metavar="K",
                         help="the design table over every set of at most K of the --predict "
                              "gaits, the smaller first (default: each alone and all together)")
@@ -162,10 +164,20 @@ def parameter_values(base, names) -> np.ndarray:
     return np.array([direction.value(base) for direction in parse_directions(list(names))])
 
 
-def _ran(result, params, measured, names):
-    """What the fits can use of the run: (runs, status, failed gaits, trials, derivatives),
-    every gait's status "ok" or its failure and time (a warning names each failure), the
-    measured trials and derivatives of the gaits that ran. StudyOutputError (one line) with
+@dataclass(frozen=True)
+class Ran:
+    """What the fits can use of a run with the sensitivities (`runs_that_ran`)."""
+
+    runs: dict          # gait -> identification.SimulatedRun, the gaits that ran
+    status: dict        # gait -> "ok", or its failure and time ("diverged at 1.23 s")
+    failed: list        # the gaits that did not run to the end
+    trials: dict        # measured gait -> identification.Trial, those that ran
+    derivatives: dict   # gait -> (n_records, 2, P) record derivatives, those that ran
+
+
+def runs_that_ran(result, params, measured, names) -> Ran:
+    """The run's gaits that ran to the end, with their measured trials and derivatives, and
+    every gait's status; a warning names each failure (once). StudyOutputError (one line) with
     fewer than two measured gaits that ran."""
     gaits = [p.gait for p in params]
     runs = dict(zip(gaits, identification.result_runs(result, params)))
@@ -187,58 +199,54 @@ def _ran(result, params, measured, names):
     derivatives = {gait: identification.record_derivatives(result.trajectory_sensitivities,
                                                            gaits.index(gait), names)
                    for gait in ran}
-    return {g: runs[g] for g in ran}, status, failed, trials, derivatives
+    return Ran({g: runs[g] for g in ran}, status, failed, trials, derivatives)
 
 
-def _with_failures(table, status, failed, measured, cycles):
+def _with_failures(table, ran: Ran, measured, cycles):
     """The table with each failed gait's rows (its status, role and window, no numbers) after
     the others."""
     table.insert(table.columns.get_loc("gait") + 1, "status",
-                 [status[g] for g in table["gait"]])
-    left_out = [{"gait": gait, "status": status[gait], "role": role, "first_cycle": cycles[0],
-                 "last_cycle": cycles[1]}
-                for gait in failed
+                 [ran.status[g] for g in table["gait"]])
+    left_out = [{"gait": gait, "status": ran.status[gait], "role": role,
+                 "first_cycle": cycles[0], "last_cycle": cycles[1]}
+                for gait in ran.failed
                 for role in (("fitted", "held_out") if gait in measured else ("unmeasured",))]
-    if failed:
+    if ran.failed:
         table = pd.concat([table, pd.DataFrame(left_out)], ignore_index=True)
     return table
 
 
-def predictability_table(result, params, measured, names, values, window,
+def predictability_table(ran: Ran, measured, names, values, window,
                          predict_window=None) -> tuple:
-    """(predictions, parameter uncertainty) from the run with the sensitivities: the rows of
-    `identification.gait_predictions` with each gait's simulation status. A gait whose run
-    failed keeps its rows, with the failure and its time in `status` and no numbers (a warning
-    names it), and every fit uses the measured gaits that ran; with fewer than two of them
-    there is nothing to fit (StudyOutputError, one line)."""
-    runs, status, failed, trials, derivatives = _ran(result, params, measured, names)
-    table = identification.gait_predictions(runs, derivatives, trials, values, window,
-                                            predict_cycles=predict_window)
-    table = _with_failures(table, status, failed, measured,
+    """(predictions, parameter uncertainty) of the gaits that ran (`runs_that_ran`): the rows
+    of `identification.gait_predictions` with each gait's simulation status. A gait whose run
+    failed keeps its rows, with the failure and its time in `status` and no numbers, and every
+    fit uses the measured gaits that ran."""
+    table = identification.gait_predictions(ran.runs, ran.derivatives, ran.trials, values,
+                                            window, predict_cycles=predict_window)
+    table = _with_failures(table, ran, measured,
                            window if predict_window is None else predict_window)
     residuals, jacobian, _ = identification.objective_residuals(
-        {g: runs[g] for g in trials}, derivatives, trials, window)
+        {g: ran.runs[g] for g in ran.trials}, ran.derivatives, ran.trials, window)
     parameters = identification.parameter_uncertainty(residuals, jacobian, names, values)
     return table, parameters
 
 
-def design_tables(result, params, measured, candidates, names, values, window,
-                  predict_window=None, trial_sigma=None, max_trials=None) -> tuple:
+def design_tables(ran: Ran, measured, candidates, names, values, window, predict_window=None,
+                  trial_sigma=None, max_trials=None) -> tuple:
     """(`identification.trial_design`, `identification.parameter_design`) of the candidate
-    trials that ran; the first with each gait's simulation status, a failed gait (warned of,
-    as in `predictability_table`) keeping rows with no numbers, once, under no added trial
-    ("none")."""
-    runs, status, failed, trials, derivatives = _ran(result, params, measured, names)
-    ran = [gait for gait in candidates if gait in runs]
-    table = identification.trial_design(runs, derivatives, trials, values, ran, window,
-                                        predict_cycles=predict_window,
-                                        added_sigma_mm=trial_sigma,
-                                        max_trials=max_trials)
-    table = _with_failures(table, status, failed, measured,
+    trials that ran; the first with each gait's simulation status, a failed gait keeping rows
+    with no numbers, once, under no added trial ("none")."""
+    candidates = [gait for gait in candidates if gait in ran.runs]
+    table = identification.trial_design(ran.runs, ran.derivatives, ran.trials, values,
+                                        candidates, window, predict_cycles=predict_window,
+                                        added_sigma_mm=trial_sigma, max_trials=max_trials)
+    table = _with_failures(table, ran, measured,
                            window if predict_window is None else predict_window)
     table["added_trials"] = table["added_trials"].fillna("none")
-    parameters = identification.parameter_design(runs, derivatives, trials, names, values, ran,
-                                                 window, added_sigma_mm=trial_sigma,
+    parameters = identification.parameter_design(ran.runs, ran.derivatives, ran.trials, names,
+                                                 values, candidates, window,
+                                                 added_sigma_mm=trial_sigma,
                                                  max_trials=max_trials)
     return table, parameters
 
@@ -344,12 +352,20 @@ def main(argv=None):
     window = parse_window(args.window)
     predict_text = args.window if args.predict_window is None else args.predict_window
     predict_window = parse_window(predict_text, "--predict-window")
+    for flag, given in (("--max-trials", args.max_trials), ("--trial-sigma", args.trial_sigma)):
+        if given is not None and not predict:
+            raise cli.StudyArgumentError(f"{flag}: only with gaits to --predict (the candidate "
+                                         f"trials of the design table)")
     if args.max_trials is not None:
         check_design_size(args.max_trials, len(predict))
     trial_sigma = None
     if args.trial_sigma is not None:
         trial_sigma = cli.parse_number(args.trial_sigma, "--trial-sigma")
-        cli.check_positive(trial_sigma, "--trial-sigma")
+        if trial_sigma < identification.DISPLACEMENT_FLOOR_MM:
+            raise cli.StudyArgumentError(
+                f"--trial-sigma must be >= {identification.DISPLACEMENT_FLOOR_MM} mm (the "
+                f"tracking noise, where a measured trial's spread is floored), got "
+                f"{trial_sigma}")
     trials = identification.measured_trials(measured)
     identify.check_trials_cover(trials, window, args.window, "--window")
     # the measured speeds of the later window are read at the phase fitted on --window
@@ -368,15 +384,15 @@ def main(argv=None):
     result = simulate(params, duration, solver, arch=args.arch,
                       record_interval_s=identify.RECORD_INTERVAL_S, sensitivities=names,
                       progress=not args.no_progress)
-    table, parameters = predictability_table(result, params, measured, names, values, window,
+    ran = runs_that_ran(result, params, measured, names)
+    table, parameters = predictability_table(ran, measured, names, values, window,
                                              predict_window)
     csv_path = out.write_csv(table, "predictability.csv")
     out.write_csv(parameters, "predictability_parameters.csv")
     out.wrote(plot_predictability(csv_path, out.path("predictability.png")))
     if predict:
-        design, parameter_design = design_tables(result, params, measured, predict, names,
-                                                 values, window, predict_window, trial_sigma,
-                                                 args.max_trials)
+        design, parameter_design = design_tables(ran, measured, predict, names, values, window,
+                                                 predict_window, trial_sigma, args.max_trials)
         design_path = out.write_csv(design, "predictability_design.csv")
         out.write_csv(parameter_design, "predictability_design_parameters.csv")
         out.wrote(plot_design(design_path, out.path("predictability_design.png")))

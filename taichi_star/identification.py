@@ -833,16 +833,24 @@ def trial_rows(simulated: SimulatedRun, derivative_xy: np.ndarray, sigma_mm: flo
     from the records' derivatives derivative_xy (n_records, 2, P). They depend on the simulated
     path and σ alone (the measured curves do not move with θ), so they also say what a trial not
     yet measured would add to a fit, given the spread expected of it (`gait_predictions`'
-    `added`). ValueError unless sigma_mm is a positive finite number, or naming derivative_xy's
-    shape."""
-    if not is_real(sigma_mm) or not (math.isfinite(sigma_mm) and sigma_mm > 0.0):
-        raise ValueError(f"sigma_mm must be a positive finite number of mm, got {sigma_mm!r}")
+    `added`). ValueError unless sigma_mm is a finite number of mm at least
+    `DISPLACEMENT_FLOOR_MM` (where `trial_fit` floors a measured trial's spread), or naming
+    derivative_xy's shape."""
+    _check_sigma(sigma_mm, "sigma_mm")
     derivative_xy = _checked_derivative(simulated, derivative_xy)
     first, last = check_window(cycles)
     samples = check_samples(samples)
     curve_derivative = _curve_derivative(simulated.path, derivative_xy, (first, last), samples)
     size = (last - first + 1) * samples
     return (curve_derivative * (1.0 / (sigma_mm * math.sqrt(size)))).reshape(size, -1)
+
+
+def _check_sigma(value, name: str):
+    """ValueError naming `name` unless value is a finite number >= DISPLACEMENT_FLOOR_MM."""
+    if not is_real(value) or not (math.isfinite(value) and value >= DISPLACEMENT_FLOOR_MM):
+        raise ValueError(f"{name} must be a finite number of mm >= DISPLACEMENT_FLOOR_MM = "
+                         f"{DISPLACEMENT_FLOOR_MM} (the tracking noise, where a measured "
+                         f"trial's spread is floored), got {value!r}")
 
 
 def trial_residuals(simulated: SimulatedRun, derivative_xy: np.ndarray, trial: Trial,
@@ -960,10 +968,11 @@ def phase_motion(simulated: Mapping[str, SimulatedRun], derivatives: Mapping[str
 
 @dataclass(frozen=True)
 class _LocalFit:
-    """A least-squares fit's Jacobian split by its singular values (`_local_fit`)."""
+    """A least-squares fit's Jacobian split by its singular values (`_local_fit`): J's, or,
+    with rows of trials not yet made, those of J with them below it."""
 
     scale: np.ndarray        # (P,) |value|, or 1 where the value is 0: the relative units
-    singular: np.ndarray     # (P,) singular values of J·diag(scale), largest first
+    singular: np.ndarray     # (P,) singular values of (J; A)·diag(scale), largest first
     directions: np.ndarray   # (P, P) their right singular vectors, one per row
     kept: np.ndarray         # (P,) whether each direction is resolved
     variance: float          # s² = Σr² / (R − rank of the fit's own Jacobian)
@@ -975,14 +984,14 @@ class _LocalFit:
         return int(self.kept.sum())
 
 
-def _split(relative: np.ndarray, count: int, rcond: float):
-    """Singular values, right singular vectors (rows) and which are resolved, of a relative
-    Jacobian (rows, count); fewer rows than columns are padded with zeros, rows that cannot see
-    the directions beyond them."""
+def _split(relative: np.ndarray, count: int):
+    """Singular values (count,), largest first, and right singular vectors (count, count; one
+    per row) of a relative Jacobian (rows, count); fewer rows than columns are padded with
+    zeros, rows that cannot see the directions beyond them."""
     if len(relative) < count:
         relative = np.vstack([relative, np.zeros((count - len(relative), count))])
     _, singular, directions = np.linalg.svd(relative, full_matrices=False)
-    return singular, directions, singular > rcond * singular[0]  # none when J = 0: 0 > 0
+    return singular, directions
 
 
 def _local_fit(residuals, jacobian, values, count: int, rcond: float, share: float,
@@ -1014,7 +1023,9 @@ def _local_fit(residuals, jacobian, values, count: int, rcond: float, share: flo
             raise ValueError("added_jacobian must be finite")
     scale = np.where(values != 0.0, np.abs(values), 1.0)
     relative = jacobian * scale
-    singular, directions, kept = _split(relative, count, rcond)
+    singular, directions = _split(relative, count)
+    cut = rcond * singular[0]
+    kept = singular > cut                        # none when J = 0: 0 > 0 is false
     rank = int(kept.sum())
     dof = len(residuals) - rank
     if dof <= 0:
@@ -1022,8 +1033,11 @@ def _local_fit(residuals, jacobian, values, count: int, rcond: float, share: flo
                          f"residual degree of freedom to estimate their scatter")
     variance = float(residuals @ residuals) / dof
     if added_jacobian is not None and len(added_jacobian):
-        singular, directions, kept = _split(np.vstack([relative, added_jacobian * scale]),
-                                            count, rcond)
+        # the cut stays the fit's own: rows below J only raise its singular values (each of
+        # (J; A) is at least J's), so a trial taken as made adds resolved directions and never
+        # takes one away, however much its rows weigh
+        singular, directions = _split(np.vstack([relative, added_jacobian * scale]), count)
+        kept = singular > cut
     return _LocalFit(scale, singular, directions, kept, variance, dof)
 
 
@@ -1052,9 +1066,11 @@ def parameter_uncertainty(residuals: np.ndarray, jacobian: np.ndarray, names: Se
 
     `added_jacobian` (A, P): rows of trials not yet measured (`trial_rows`, in the units of
     J), as if they were in the fit, their residuals scattering as the fit's own do: the
-    split, `rank` and `condition_number` are then of J with those rows below it, while s² and
-    `residual_dof` stay the fit's (R − the rank of J alone). What a fit would determine after
-    those trials, before they are made.
+    split, `rank` and `condition_number` are then of J with those rows below it (the cut
+    between resolved and not still `rcond` × J's own largest singular value, so that rows
+    added never take a resolved direction away), while s² and `residual_dof` stay the fit's
+    (R − the rank of J alone). What a fit would determine after those trials, before they
+    are made.
 
     ValueError for mismatched shapes, non-finite entries, rcond or share outside (0, 1), or
     R ≤ rank (no residual left to estimate s²)."""
@@ -1095,7 +1111,8 @@ def parameter_uncertainty(residuals: np.ndarray, jacobian: np.ndarray, names: Se
 class PredictionUncertainty:
     """`prediction_uncertainty`'s answer: the prediction's standard error (its units; inf
     where the fit leaves it undetermined), its unresolved share, and the fit's resolved
-    directions (`rank`) and residual degrees of freedom (R − rank)."""
+    directions (`rank`; with rows of trials not yet made, those of J and them together) and
+    residual degrees of freedom (R − the rank of the fit's own J)."""
 
     standard_error: float
     unresolved_share: float
@@ -1242,6 +1259,8 @@ def _predictions(simulated, derivatives, trials, values, cycles, samples, rcond,
         raise ValueError(f"gait_predictions needs at least two measured gaits (one held out, "
                          f"one fitted), got {len(measured)}")
     added_sets = [_checked_added(added, simulated, measured) for added in added_sets]
+    if added_sigma_mm is not None:
+        _check_sigma(added_sigma_mm, "added_sigma_mm")
     fits = {}
 
     def fit_of(training):
@@ -1300,25 +1319,29 @@ def _predictions(simulated, derivatives, trials, values, cycles, samples, rcond,
 
 
 def _checked_measured(simulated, trials) -> list:
-    """The measured gaits (`trials`' keys), or ValueError naming those `simulated` lacks."""
-    missing = [gait for gait in trials if gait not in simulated]
+    """The measured gaits (`trials`' keys), or ValueError naming those `simulated` lacks (or
+    holds as None, a failed run's form in `result_runs`)."""
+    missing = [gait for gait in trials if simulated.get(gait) is None]
     if missing:
         raise ValueError(f"no simulated run for the measured gait(s) {', '.join(missing)}")
     return list(trials)
 
 
-def _checked_added(added, simulated, measured) -> tuple:
-    """`gait_predictions`' added gaits as a tuple, or ValueError naming the one refused."""
+def _checked_added(added, simulated, measured, name: str = "added") -> tuple:
+    """Added gaits (`name`: the argument that gave them) as a tuple, or ValueError naming the
+    one refused: measured, without a simulated run (missing or None), or repeated."""
     if isinstance(added, str):
-        raise ValueError(f"added must be a sequence of gait names, not the string {added!r}")
+        raise ValueError(f"{name} must be a sequence of gait names, not the string {added!r}")
     added = tuple(added)
     for gait in added:
         if gait in measured:
-            raise ValueError(f"added gait {gait!r} is measured: its trial is in the fits already")
-        if gait not in simulated:
-            raise ValueError(f"added gait {gait!r} has no simulated run")
+            raise ValueError(f"{name}: gait {gait!r} is measured: its trial is in the fits "
+                             f"already")
+        if simulated.get(gait) is None:
+            raise ValueError(f"{name}: gait {gait!r} has no simulated run (missing, or None: "
+                             f"failed)")
     if len(set(added)) != len(added):
-        raise ValueError(f"added gaits repeat: {', '.join(added)}")
+        raise ValueError(f"{name}: gaits repeat: {', '.join(added)}")
     return added
 
 
@@ -1330,8 +1353,9 @@ none), then `gait_predictions`' columns."""
 
 MAX_DESIGN_SETS = 1024
 """The most sets of candidate trials a design scores (`trial_design`, `parameter_design`):
-each costs a few of `prediction_uncertainty`'s SVDs per gait, about 0.1–0.3 s for the five
-measured gaits and eight parameters, so this is minutes."""
+a set costs an SVD per gait and role, about 10 ms for sixteen gaits and eight parameters (67
+sets in 1.2 s with the fits' phase searches, a scratch timing on 2 cores), so this is under a
+minute and a table of some 30,000 rows; the sets grow as 2^n with n candidates."""
 
 
 def trial_design(simulated: Mapping[str, SimulatedRun], derivatives: Mapping[str, np.ndarray],
@@ -1354,7 +1378,7 @@ def trial_design(simulated: Mapping[str, SimulatedRun], derivatives: Mapping[str
     a refit on those trials would have. The arguments and ValueErrors are
     `gait_predictions`', and one for a max_trials that is not a whole number >= 1 or that asks
     for more than `MAX_DESIGN_SETS` sets."""
-    sets = _design_sets(candidates, max_trials)
+    sets = _design_sets(candidates, max_trials, simulated, list(trials))
     tables, added_sigma_mm = _predictions(simulated, derivatives, trials, values, cycles,
                                           samples, rcond, share, predict_cycles, [()] + sets,
                                           added_sigma_mm)
@@ -1382,15 +1406,16 @@ def parameter_design(simulated: Mapping[str, SimulatedRun],
     One row per set and parameter: `DESIGN_COLUMNS`' first two, then `UNCERTAINTY_COLUMNS`.
     ValueError for a measured gait missing from `simulated`, and as `trial_design` and
     `parameter_uncertainty`."""
-    sets = _design_sets(candidates, max_trials)
     measured = {g: simulated[g] for g in _checked_measured(simulated, trials)}
+    sets = _design_sets(candidates, max_trials, simulated, list(measured))
+    if added_sigma_mm is not None:
+        _check_sigma(added_sigma_mm, "added_sigma_mm")
     residuals, jacobian, table = objective_residuals(measured, derivatives, trials, cycles,
                                                      samples)
     if added_sigma_mm is None:
         added_sigma_mm = _median_sigma(table)
     tables = []
     for added in [()] + sets:
-        _checked_added(added, simulated, list(measured))
         rows = _added_rows(simulated, derivatives, added, added_sigma_mm, cycles, samples)
         part = parameter_uncertainty(residuals, jacobian, names, values, rcond, share,
                                      None if rows is None else rows / math.sqrt(len(trials)))
@@ -1400,16 +1425,13 @@ def parameter_design(simulated: Mapping[str, SimulatedRun],
     return pd.concat(tables, ignore_index=True)
 
 
-def _design_sets(candidates, max_trials) -> list:
+def _design_sets(candidates, max_trials, simulated, measured) -> list:
     """The sets of candidate trials a design takes as made, beyond none: each alone and all
     (more than one) for max_trials None, else every set of at most max_trials, the smaller
-    first."""
-    if isinstance(candidates, str):
-        raise ValueError(f"candidates must be a sequence of gait names, not the string "
-                         f"{candidates!r}")
-    candidates = list(candidates)
+    first. ValueError naming candidates or max_trials before any compute."""
+    candidates = list(_checked_added(candidates, simulated, measured, "candidates"))
     if max_trials is None:
-        sizes = sorted({1, len(candidates)} - {0})
+        sizes = [1, len(candidates)] if len(candidates) > 1 else [1]
     elif not is_whole(max_trials) or max_trials < 1:
         raise ValueError(f"max_trials must be a whole number >= 1 (None: each candidate alone "
                          f"and all together), got {max_trials!r}")

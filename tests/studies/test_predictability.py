@@ -169,8 +169,10 @@ def test_the_returned_table_is_the_written_one(run):
     (["--window", "1:3:5"], "--window: expected FIRST:LAST, two whole numbers"),
     (["--window", "1.5:3"], "--window: expected FIRST:LAST, two whole numbers"),
     (["--predict", "none,A2"], "--predict none,A2: none stands alone"),
-    (["--trial-sigma", "0"], "--trial-sigma must be > 0, got 0.0"),
-    (["--trial-sigma", "-0.1"], "--trial-sigma must be > 0, got -0.1"),
+    (["--trial-sigma", "0.049"], "--trial-sigma must be >= 0.05 mm (the tracking noise"),
+    (["--trial-sigma", "-0.1"], "--trial-sigma must be >= 0.05 mm"),
+    (["--predict", "none", "--trial-sigma", "0.5"], "--trial-sigma: only with gaits to --predict"),
+    (["--predict", "none", "--max-trials", "2"], "--max-trials: only with gaits to --predict"),
     (["--trial-sigma", "nan"], "--trial-sigma: 'nan' is not a finite number"),
     (["--trial-sigma", "wide"], "--trial-sigma: 'wide' is not a number"),
     (["--max-trials", "0"], "--max-trials must be >= 1, got 0"),
@@ -211,12 +213,13 @@ def test_a_failed_run_is_named_and_left_out_never_dropped(run):
                       record_interval_s=identify.RECORD_INTERVAL_S, sensitivities=QUICK_NAMES,
                       progress=False)
     values = study.parameter_values(base, QUICK_NAMES)
-    whole, _ = study.predictability_table(result, params, list(QUICK_GAITS), list(QUICK_NAMES),
-                                          values, WINDOW)
+    measured, names = list(QUICK_GAITS), list(QUICK_NAMES)
+    whole, _ = study.predictability_table(study.runs_that_ran(result, params, measured, names),
+                                          measured, names, values, WINDOW)
     with pytest.warns(RuntimeWarning, match=r"A2: the simulation diverged at 1\.23 s; left out"):
-        table, _ = study.predictability_table(_with_status(result, 2, "diverged", 1.234),
-                                              params, list(QUICK_GAITS), list(QUICK_NAMES),
-                                              values, WINDOW)
+        ran = study.runs_that_ran(_with_status(result, 2, "diverged", 1.234), params, measured,
+                                  names)
+    table, _ = study.predictability_table(ran, measured, names, values, WINDOW)
     failed = table[table["gait"] == "A2"]
     assert failed["status"].tolist() == ["diverged at 1.23 s"]
     assert failed["role"].tolist() == ["unmeasured"]
@@ -224,8 +227,34 @@ def test_a_failed_run_is_named_and_left_out_never_dropped(run):
     kept = table[table["gait"] != "A2"].reset_index(drop=True)
     pd.testing.assert_frame_equal(kept, whole[whole["gait"] != "A2"].reset_index(drop=True),
                                   check_dtype=False)
+    # the design keeps the failed candidate's row once, under no trial added, and has no set
+    # with it
+    design, parameter_design = study.design_tables(ran, measured, ["A2"], names, values, WINDOW)
+    assert set(design["added_trials"]) == set(parameter_design["added_trials"]) == {"none"}
+    failed_rows = design[design["gait"] == "A2"]
+    assert failed_rows["status"].tolist() == ["diverged at 1.23 s"]
+    assert failed_rows["predicted_speed_mm_s"].isna().all()
     with pytest.warns(RuntimeWarning, match="A1\\+A3: the simulation"), \
             pytest.raises(cli.StudyOutputError, match=r"fewer than two measured gaits ran "
                                                       r"\(A1\+A3 failed\)"):
-        study.predictability_table(_with_status(result, 1, "diverged", 0.5), params,
-                                   list(QUICK_GAITS), list(QUICK_NAMES), values, WINDOW)
+        study.runs_that_ran(_with_status(result, 1, "diverged", 0.5), params, measured, names)
+
+
+@pytest.mark.slow
+def test_the_design_flags_reach_the_tables(tmp_path):
+    """--trial-sigma sets the spread of every trial taken as made, and --max-trials the sets:
+    with A2 and A3 predicted and at most one trial, none, A2 and A3 (no pair); a wider spread
+    weighs a trial less, so A2's own error grows."""
+    flags = ["--quick", "--no-progress", "--predict", "A2,A3"]
+    tables = {}
+    for sigma in ("0.05", "0.5"):
+        out = tmp_path / sigma
+        study.main(flags + ["--trial-sigma", sigma, "--max-trials", "1", "--out", str(out)])
+        tables[sigma] = pd.read_csv(out / "predictability_design.csv")
+        design = tables[sigma]
+        assert list(dict.fromkeys(design["added_trials"])) == ["none", "A2", "A3"]
+        assert (design.loc[design["added_trials"] != "none", "added_sigma_mm"]
+                == float(sigma)).all()
+    own = {sigma: table[(table["added_trials"] == "A2") & (table["role"] == "added")]
+           ["standard_error_mm_s"].iloc[0] for sigma, table in tables.items()}
+    assert own["0.5"] > own["0.05"]

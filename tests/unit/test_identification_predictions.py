@@ -435,23 +435,39 @@ def test_added_rows_that_do_not_fit_the_parameters_are_refused(added, message):
                                     added_jacobian=added)
 
 
-def test_trial_rows_are_the_curve_rows_of_trial_residuals_and_scale_as_one_over_sigma():
-    """At the trial's own σ the rows are those of `trial_residuals`' Jacobian (its last row,
-    the direction residual's, aside), bit for bit; at 3σ a third of them (rounding: 1e-15)."""
-    run, derivative = model_path((2.6, 0.8, 0.25))
-    fit, _, jacobian = ident.trial_residuals(run, derivative, measured_trial(), (1, 3), 32)
-    rows = ident.trial_rows(run, derivative, fit.sigma_mm, (1, 3), 32)
+def test_trial_rows_are_the_cycle_curves_derivatives_over_sigma_and_the_sample_count():
+    """The model path is linear in θ, so a central difference of its cycle curves (distances:
+    smooth away from zero, which they are after each pulse's first sample) is their derivative
+    to rounding and truncation of |Δp|'s curvature (step 1e-6: 1e-7); over σ·√(cycles ×
+    samples) that is the rows, at any σ; and they are `trial_residuals`' curve rows at the
+    trial's own σ, its last row (the direction residual's) aside."""
+    theta = np.array([2.6, 0.8, 0.25])
+    run, derivative = model_path(theta)
+    sigma, step = 0.3, 1e-6
+    columns = []
+    for p in range(3):
+        ends = [ident.cycle_curves(model_path(theta + sign * step * np.eye(3)[p])[0].path, 0.0,
+                                   (1, 3), 32).ravel() for sign in (1.0, -1.0)]
+        columns.append((ends[0] - ends[1]) / (2 * step))
+    expected = np.stack(columns, axis=1) / (sigma * math.sqrt(3 * 32))
+    rows = ident.trial_rows(run, derivative, sigma, (1, 3), 32)
     assert rows.shape == (3 * 32, 3)
-    np.testing.assert_array_equal(rows, jacobian[:-1])
-    np.testing.assert_allclose(ident.trial_rows(run, derivative, 3 * fit.sigma_mm, (1, 3), 32),
-                               rows / 3, rtol=1e-15)
+    np.testing.assert_allclose(rows, expected, rtol=1e-7, atol=1e-9 * np.abs(expected).max())
+    fit, _, jacobian = ident.trial_residuals(run, derivative, measured_trial(), (1, 3), 32)
+    np.testing.assert_array_equal(ident.trial_rows(run, derivative, fit.sigma_mm, (1, 3), 32),
+                                  jacobian[:-1])
 
 
-@pytest.mark.parametrize("sigma", [0.0, -1.0, math.nan, math.inf, "1", True])
-def test_trial_rows_refuse_a_spread_that_is_not_a_positive_number(sigma):
+@pytest.mark.parametrize("sigma", [0.0, -1.0, math.nan, math.inf, "1", True,
+                                   np.nextafter(ident.DISPLACEMENT_FLOOR_MM, 0.0)])
+def test_trial_rows_refuse_a_spread_below_the_tracking_floor_or_not_a_number(sigma):
+    """A trial's spread is at least the floor `trial_fit` puts under a measured one (exactly
+    the floor is allowed: ≥)."""
     run, derivative = model_path((2.6, 0.8, 0.25))
-    with pytest.raises(ValueError, match="sigma_mm must be a positive finite number of mm"):
+    with pytest.raises(ValueError, match=r"sigma_mm must be a finite number of mm >= "
+                                         r"DISPLACEMENT_FLOOR_MM = 0\.05 \(the tracking noise"):
         ident.trial_rows(run, derivative, sigma)
+    assert ident.trial_rows(run, derivative, ident.DISPLACEMENT_FLOOR_MM).shape == (3 * 64, 3)
 
 
 def _with_candidates():
@@ -502,18 +518,23 @@ def test_an_added_trial_lets_the_fits_determine_what_only_it_and_the_held_out_ga
     np.testing.assert_array_equal(with_a4.training_objective, plain.training_objective)
     # a smaller expected spread weighs the trial more: the error shrinks
     tight = ident.gait_predictions(runs, derivatives, trials, values, (1, 3), added=("A4",),
-                                   added_sigma_mm=sigma / 10)
+                                   added_sigma_mm=sigma / 2)
     assert row(tight, "A1+A3", "held_out").standard_error_mm_s < held.standard_error_mm_s
 
 
 @pytest.mark.parametrize("added, sigma, message", [
-    (("A1",), None, "added gait 'A1' is measured: its trial is in the fits already"),
-    (("A3",), None, "added gait 'A3' has no simulated run"),
-    (("A4", "A4"), None, "added gaits repeat: A4, A4"),
+    (("A1",), None, r"added: gait 'A1' is measured: its trial is in the fits already"),
+    (("A3",), None, r"added: gait 'A3' has no simulated run \(missing, or None: failed\)"),
+    (("A5",), None, r"added: gait 'A5' has no simulated run \(missing, or None: failed\)"),
+    (("A4", "A4"), None, "added: gaits repeat: A4, A4"),
     ("A4", None, "added must be a sequence of gait names, not the string 'A4'"),
-    (("A4",), 0.0, "sigma_mm must be a positive finite number of mm, got 0.0")])
+    (("A4",), 0.0, r"added_sigma_mm must be a finite number of mm >= DISPLACEMENT_FLOOR_MM .*"),
+    ((), -1.0, r"added_sigma_mm must be a finite number of mm >= .*got -1\.0")])
 def test_gait_predictions_refuse_an_added_trial_they_cannot_take(added, sigma, message):
+    """Refused naming the argument, a failed run (None, as `result_runs` gives it) as a
+    missing one, and a bad spread even with no trial added."""
     runs, derivatives, trials, values = _with_candidates()
+    runs["A5"] = None
     with pytest.raises(ValueError, match=f"^{message}$"):
         ident.gait_predictions(runs, derivatives, trials, values, (1, 3), added=added,
                                added_sigma_mm=sigma)
@@ -623,10 +644,72 @@ def test_parameter_design_says_which_parameters_a_trial_would_determine():
     errors = np.sqrt(variance * np.diag(np.linalg.inv(relative.T @ relative))) * values
     np.testing.assert_allclose(design.standard_error[design.added_trials == "A4"], errors,
                                rtol=1e-8)
-    with pytest.raises(ValueError, match="added gait 'A1' is measured"):
+    with pytest.raises(ValueError, match="candidates: gait 'A1' is measured"):
         ident.parameter_design(runs, derivatives, trials, names, values, ["A1"], (1, 3))
     with pytest.raises(ValueError, match="candidates must be a sequence of gait names"):
         ident.parameter_design(runs, derivatives, trials, names, values, "A4", (1, 3))
     with pytest.raises(ValueError, match=r"^no simulated run for the measured gait\(s\) A1\+A2$"):
         ident.parameter_design({g: runs[g] for g in ("A1", "A4")}, derivatives, trials, names,
                                values, ["A4"], (1, 3))
+
+
+def test_heavy_added_rows_never_take_a_resolved_direction_away():
+    """The cut between resolved and not stays rcond × the fit's own largest singular value: rows
+    10⁶ × heavier than J along its first column (whose largest singular value they then
+    dominate) leave its weakest direction (10⁻³ of the largest) resolved, and a prediction
+    along it no less determined than without them (the rows do not see it: the same error to
+    rounding)."""
+    rng = np.random.default_rng(5)
+    jacobian = rng.normal(size=(30, 3)) * np.array([1.0, 1e-3, 1.0])
+    residuals = rng.normal(size=30)
+    heavy = np.zeros((4, 3))
+    heavy[:, 0] = 1e6
+    plain = ident.prediction_uncertainty(residuals, jacobian, np.ones(3), [0.0, 1.0, 0.0])
+    with_rows = ident.prediction_uncertainty(residuals, jacobian, np.ones(3), [0.0, 1.0, 0.0],
+                                             added_jacobian=heavy)
+    assert plain.rank == with_rows.rank == 3 and with_rows.determined
+    assert with_rows.standard_error <= plain.standard_error * (1 + 1e-9)
+    table = ident.parameter_uncertainty(residuals, jacobian, ["a", "b", "c"], np.ones(3),
+                                        added_jacobian=heavy)
+    assert table.identifiable.all() and (table["rank"] == 3).all()
+
+
+def test_the_default_spread_of_a_trial_is_the_median_of_the_measured_ones():
+    """Trials whose measured paths are scaled by 1, 2 and 4 have spreads about σ, 2σ and 4σ
+    (each phase is fitted again): a trial taken as made gets the middle one (the median, not
+    the mean nor the largest), in trial_design and parameter_design alike, and
+    gait_predictions' rows with it equal those given it."""
+    runs, derivatives, trials, values = _with_candidates()
+    for gait, factor in (("A1+A2", 2.0), ("A1+A3", 4.0)):
+        path = trials[gait].path
+        trials[gait] = dataclasses.replace(trials[gait], path=ident.CentroidPath(
+            path.t_s, path.x_mm * factor, path.y_mm * factor, path.period_s))
+    sigmas = ident.trajectory_objective({g: runs[g] for g in trials}, trials, (1, 3))["sigma_mm"]
+    low, middle, high = sorted(sigmas)
+    assert middle > 1.5 * low and high > 1.5 * middle and middle < 0.9 * np.mean(sigmas)
+    design = ident.trial_design(runs, derivatives, trials, values, ["A4"], (1, 3))
+    parameters = ident.parameter_design(runs, derivatives, trials, list("abcd"), values, ["A4"],
+                                        (1, 3))
+    median = middle
+    assert (design.added_sigma_mm[design.added_trials == "A4"] == median).all()
+    assert (parameters.added_sigma_mm[parameters.added_trials == "A4"] == median).all()
+    given = ident.gait_predictions(runs, derivatives, trials, values, (1, 3), added=("A4",),
+                                   added_sigma_mm=median)
+    np.testing.assert_array_equal(
+        design.standard_error_mm_s[design.added_trials == "A4"], given.standard_error_mm_s)
+
+
+def test_a_design_checks_its_candidates_before_any_fit_and_takes_none():
+    """A measured, missing or repeated candidate is refused naming candidates; no candidate
+    gives the rows with nothing added alone."""
+    runs, derivatives, trials, values = _with_candidates()
+    for candidates, message in ((["A4", "A1"], "candidates: gait 'A1' is measured"),
+                                (["A9"], "candidates: gait 'A9' has no simulated run"),
+                                (["A4", "A4"], "candidates: gaits repeat: A4, A4")):
+        with pytest.raises(ValueError, match=message):
+            ident.trial_design(runs, derivatives, trials, values, candidates, (1, 3))
+    empty = ident.trial_design(runs, derivatives, trials, values, [], (1, 3))
+    assert set(empty.added_trials) == {"none"} and empty.added_sigma_mm.isna().all()
+    pd.testing.assert_frame_equal(
+        empty.drop(columns=["added_trials", "added_sigma_mm"]),
+        ident.gait_predictions(runs, derivatives, trials, values, (1, 3)))
