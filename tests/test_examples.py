@@ -67,3 +67,33 @@ def test_fit_with_gradients_recovers_the_twin_experiments_values(tmp_path):
     alpha = float(recovered.split("alpha = ")[1].split()[0])
     drag = float(recovered.split("drag_perpendicular = ")[1].split()[0])
     assert abs(alpha - 1.1) <= 1e-6 and abs(drag - 1.3) <= 1e-6
+
+
+@pytest.mark.slow
+def test_which_trial_next_prints_what_its_design_table_says(tmp_path):
+    """Every line it prints agrees with the table it writes: per set of trials the held-out
+    gaits left undetermined and the widest two standard errors of the others (to the printed
+    three decimals), and the smallest sets that determine them all (none within two trials
+    in the quick run: A5's gain stays free without A5). The table is `trial_design`'s: its
+    columns, and with no trial added the same held-out gaits undetermined as the measured
+    data leave (A1+A2, A1+A4, A1+A3+A5: each fires an actuator no other measured gait fires)."""
+    output = run_example("which_trial_next.py", tmp_path)
+    from taichi_star import identification
+    table = pd.read_csv(tmp_path / "which_trial_next.csv")
+    assert list(table.columns) == identification.DESIGN_COLUMNS
+    held = table[table.role == "held_out"]
+    lines = [line for line in output.splitlines() if "undetermined" in line]
+    assert [line.split(":")[0].strip() for line in lines] == ["none", "A2", "A4", "A2 A4"]
+    for line in lines:
+        trials = line.split(":")[0].strip()
+        rows = held[held.added_trials == trials]
+        free = rows.gait[~rows.determined].tolist()
+        assert line.split("undetermined")[1].split("widest")[0].strip() == (
+            ", ".join(free) or "none")
+        widest = 2 * rows.standard_error_mm_s[rows.determined].max()
+        assert f"{widest:.3f} mm/s" in line
+    nothing_added = held[held.added_trials == "none"]
+    assert nothing_added.gait[~nothing_added.determined].tolist() == [
+        "A1+A2", "A1+A4", "A1+A3+A5"]
+    assert output.strip().endswith("smallest sets that determine every held-out gait: none "
+                                   "within two trials")
