@@ -713,3 +713,70 @@ def test_a_design_checks_its_candidates_before_any_fit_and_takes_none():
     pd.testing.assert_frame_equal(
         empty.drop(columns=["added_trials", "added_sigma_mm"]),
         ident.gait_predictions(runs, derivatives, trials, values, (1, 3)))
+
+
+def test_rows_added_to_a_fit_that_sees_nothing_resolve_only_what_they_see():
+    """J = 0 (the measured data move with no parameter): the cut is 0, and rows that see the
+    first parameter alone resolve it (a finite error, s² the fit's own over all R degrees of
+    freedom) and nothing else (the second stays undetermined: its singular value 0 is not
+    above the cut of 0)."""
+    residuals = np.arange(1.0, 7.0)
+    jacobian = np.zeros((6, 2))
+    added = np.array([[2.0, 0.0], [1.0, 0.0]])
+    first = ident.prediction_uncertainty(residuals, jacobian, [1.0, 1.0], [1.0, 0.0],
+                                         added_jacobian=added)
+    assert first.determined and (first.rank, first.residual_dof) == (1, 6)
+    assert first.standard_error == pytest.approx(math.sqrt(91.0 / 6 / 5.0), rel=1e-12)
+    second = ident.prediction_uncertainty(residuals, jacobian, [1.0, 1.0], [0.0, 1.0],
+                                          added_jacobian=added)
+    assert not second.determined and second.unresolved_share == pytest.approx(1.0, rel=1e-12)
+
+
+def test_a_design_passes_its_window_samples_and_spread_on_and_numbers_its_rows():
+    """trial_design with a later prediction window and 32 samples a cycle gives, per set, the
+    rows of gait_predictions with the same arguments; parameter_design with 32 samples those
+    of parameter_uncertainty on objective_residuals with 32 (and A4's trial_rows with 32), no
+    spread for nothing added; both tables are numbered 0..n−1 (one index, not one per set);
+    a bad spread is refused by parameter_design too, naming added_sigma_mm."""
+    runs, derivatives, trials, values = _with_candidates()
+    names = list("abcd")
+    design = ident.trial_design(runs, derivatives, trials, values, ["A4"], (1, 1), samples=32,
+                                predict_cycles=(2, 3))
+    assert design.index.tolist() == list(range(len(design)))
+    comparisons = ["z_score", "within_two_standard_errors"]
+    for added in ((), ("A4",)):
+        part = design[design.added_trials == (" ".join(added) or "none")]
+        expected = ident.gait_predictions(runs, derivatives, trials, values, (1, 1),
+                                          samples=32, predict_cycles=(2, 3), added=added)
+        part = part.drop(columns=["added_trials", "added_sigma_mm"]).reset_index(drop=True)
+        if added:
+            part, expected = part.drop(columns=comparisons), expected.drop(columns=comparisons)
+        pd.testing.assert_frame_equal(part, expected)
+    assert (design.first_cycle == 2).all()
+    parameters = ident.parameter_design(runs, derivatives, trials, names, values, ["A4"],
+                                        (1, 3), samples=32)
+    assert parameters.index.tolist() == list(range(len(parameters)))
+    assert parameters.added_sigma_mm[parameters.added_trials == "none"].isna().all()
+    residuals, jacobian, table = ident.objective_residuals(
+        {g: runs[g] for g in trials}, derivatives, trials, (1, 3), 32)
+    plain = parameters[parameters.added_trials == "none"].drop(
+        columns=["added_trials", "added_sigma_mm"]).reset_index(drop=True)
+    pd.testing.assert_frame_equal(plain, ident.parameter_uncertainty(residuals, jacobian, names,
+                                                                     values))
+    rows = ident.trial_rows(runs["A4"], derivatives["A4"], float(np.median(table.sigma_mm)),
+                            (1, 3), 32) / math.sqrt(3)
+    with_a4 = parameters[parameters.added_trials == "A4"].drop(
+        columns=["added_trials", "added_sigma_mm"]).reset_index(drop=True)
+    pd.testing.assert_frame_equal(with_a4, ident.parameter_uncertainty(
+        residuals, jacobian, names, values, added_jacobian=rows))
+    with pytest.raises(ValueError, match="^added_sigma_mm must be a finite number of mm >= "):
+        ident.parameter_design(runs, derivatives, trials, names, values, ["A4"], (1, 3),
+                               added_sigma_mm=0.01)
+    given = ident.parameter_design(runs, derivatives, trials, names, values, ["A4"], (1, 3),
+                                   samples=32, added_sigma_mm=0.5)
+    assert (given.added_sigma_mm[given.added_trials == "A4"] == 0.5).all()
+    rows = ident.trial_rows(runs["A4"], derivatives["A4"], 0.5, (1, 3), 32) / math.sqrt(3)
+    np.testing.assert_array_equal(
+        given.standard_error[given.added_trials == "A4"],
+        ident.parameter_uncertainty(residuals, jacobian, names, values,
+                                    added_jacobian=rows).standard_error)
