@@ -75,6 +75,16 @@ Gauss-Newton or trust-region least-squares fit (`scipy.optimize.least_squares(fu
 jac=...)`; holding the nuisance parameters in the Jacobian is Kaufman's form of variable
 projection); the gradient above is 2·Jᵀr plus `phase_motion`, which is zero on a one-cycle
 window.
+
+What the data determine, locally, from r and J at a fitted point: `parameter_uncertainty`
+(each parameter's Gauss-Newton standard error, or "not identifiable"), `prediction_uncertainty`
+(the same for any prediction y(θ) with its gradient), `gait_predictions` (every gait's speed
+with the fit on every measured gait and on all but one: a linearised leave-one-gait-out).
+Which trial to measure next: a trial's rows of J depend on the simulated path and its spread
+alone (`trial_rows`), so a trial not yet made can be taken as made, its rows below J and its
+residuals scattering as the fit's own (`added_jacobian`, `gait_predictions`' `added`):
+`trial_design` and `parameter_design` score sets of candidate trials by what the fits would
+then determine.
 """
 
 from __future__ import annotations
