@@ -42,15 +42,11 @@ design = identification.trial_design(runs, derivatives, identification.measured_
                                      values, candidates, window, max_trials=2)
 design.to_csv("which_trial_next.csv", index=False)
 
-held_out = design[design.role == "held_out"]
-complete = []
-for trials, rows in held_out.groupby("added_trials", sort=False):
-    free = rows.gait[~rows.determined].tolist()
-    widest = 2 * rows.standard_error_mm_s[rows.determined].max()
-    print(f"{trials:>10}: undetermined {', '.join(free) or 'none':<24} "
-          f"widest 2 s.e. of the rest {widest:.3f} mm/s")
-    if not free:
-        complete.append(trials)
-smallest = min((len(t.split()) for t in complete), default=None)
+summary = identification.design_summary(design)                # one row per set of trials
+for row in summary.itertuples():
+    print(f"{row.added_trials:>10}: undetermined {row.held_out_undetermined or 'none':<24} "
+          f"widest 2 s.e. of the rest {2 * row.widest_held_out_standard_error_mm_s:.3f} mm/s")
+complete = summary[summary.every_held_out_determined]
+fewest = complete[complete.trials == complete.trials.min()]
 print("smallest sets that determine every held-out gait:",
-      "; ".join(t for t in complete if len(t.split()) == smallest) or "none within two trials")
+      "; ".join(fewest.added_trials) or "none within two trials")

@@ -46,7 +46,9 @@ and the gait's simulation status), `predictability_parameters.csv`
 `--parameters` they determine) and `predictability.png` (per gait and role the predicted speed
 with two standard errors, the measured one beside it), and, with gaits to predict,
 `predictability_design.csv` (`identification.DESIGN_COLUMNS`, with each gait's simulation
-status), `predictability_design_parameters.csv` (`identification.parameter_design`: what the
+status), `predictability_design_summary.csv` (`identification.design_summary`: per set of
+trials, the held-out gaits it determines and the widest of their standard errors),
+`predictability_design_parameters.csv` (`identification.parameter_design`: what the
 fit on every measured gait would determine of `--parameters` with those trials) and
 `predictability_design.png` (two standard errors of each held-out and unmeasured gait's speed
 against the trials added), each table with its provenance sidecar.
@@ -394,6 +396,8 @@ def main(argv=None):
         design, parameter_design = design_tables(ran, measured, predict, names, values, window,
                                                  predict_window, trial_sigma, args.max_trials)
         design_path = out.write_csv(design, "predictability_design.csv")
+        out.write_csv(identification.design_summary(design),
+                      "predictability_design_summary.csv")
         out.write_csv(parameter_design, "predictability_design_parameters.csv")
         out.wrote(plot_design(design_path, out.path("predictability_design.png")))
     out.report()

@@ -115,7 +115,7 @@ __all__ = ["TRAINING_CYCLES", "VALIDATION_CYCLES", "SAMPLES_PER_CYCLE", "MAX_CYC
            "objective_and_gradient", "phase_motion", "parameter_uncertainty", "record_derivatives",
            "PredictionUncertainty", "prediction_uncertainty", "PREDICTION_COLUMNS", "window_speed",
            "gait_predictions", "trial_rows", "DESIGN_COLUMNS", "MAX_DESIGN_SETS",
-           "trial_design", "parameter_design",
+           "trial_design", "parameter_design", "DESIGN_SUMMARY_COLUMNS", "design_summary",
            "STROKE_WINDOW_S", "STROKE_TOLERANCE_S", "STROKE_ONSET_SHARE",
            "STROKE_MIN_JUMP_RATIO", "Strokes", "window_moves", "circular_difference", "strokes",
            "stroke_aligned_phase"]
@@ -1399,6 +1399,40 @@ def trial_design(simulated: Mapping[str, SimulatedRun], derivatives: Mapping[str
         table.insert(0, "added_trials", " ".join(added) or "none")
         table.insert(1, "added_sigma_mm", added_sigma_mm if added else math.nan)
     return pd.concat(tables, ignore_index=True)
+
+
+DESIGN_SUMMARY_COLUMNS = ["added_trials", "trials", "held_out_determined",
+                          "held_out_undetermined", "every_held_out_determined",
+                          "widest_held_out_standard_error_mm_s"]
+"""Columns of `design_summary`'s table, one row per set of trials taken as made: the set
+("none" for none) and its size, how many held-out gaits its fits determine, those they do not
+(joined by spaces), whether they determine all, and the largest standard error of the
+held-out speeds they determine (mm/s; NaN where none is)."""
+
+
+def design_summary(design: pd.DataFrame) -> pd.DataFrame:
+    """One row per set of trials of a `trial_design` table (`DESIGN_SUMMARY_COLUMNS`), in the
+    table's order, from its held-out rows (rows with no number, a failed gait's, are left
+    out): which sets of trials would let the model predict every held-out gait, and how
+    closely. ValueError for a table without `DESIGN_COLUMNS`."""
+    missing = [column for column in DESIGN_COLUMNS if column not in design.columns]
+    if missing:
+        raise ValueError(f"design must be a trial_design table; it lacks {', '.join(missing)}")
+    held = design[(design["role"] == "held_out") & design["predicted_speed_mm_s"].notna()]
+    rows = []
+    for trials in dict.fromkeys(design["added_trials"]):
+        part = held[held["added_trials"] == trials]
+        determined = part["determined"].astype(bool)
+        free = part.loc[~determined, "gait"].tolist()
+        errors = part.loc[determined, "standard_error_mm_s"]
+        rows.append({"added_trials": trials,
+                     "trials": 0 if trials == "none" else len(trials.split()),
+                     "held_out_determined": int(determined.sum()),
+                     "held_out_undetermined": " ".join(free),
+                     "every_held_out_determined": not free,
+                     "widest_held_out_standard_error_mm_s":
+                         float(errors.max()) if len(errors) else math.nan})
+    return pd.DataFrame(rows, columns=DESIGN_SUMMARY_COLUMNS)
 
 
 def parameter_design(simulated: Mapping[str, SimulatedRun],

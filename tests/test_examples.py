@@ -89,7 +89,7 @@ def test_which_trial_next_prints_what_its_design_table_says(tmp_path):
         rows = held[held.added_trials == trials]
         free = rows.gait[~rows.determined].tolist()
         assert line.split("undetermined")[1].split("widest")[0].strip() == (
-            ", ".join(free) or "none")
+            " ".join(free) or "none")
         widest = 2 * rows.standard_error_mm_s[rows.determined].max()
         assert f"{widest:.3f} mm/s" in line
     nothing_added = held[held.added_trials == "none"]

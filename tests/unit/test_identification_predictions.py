@@ -780,3 +780,30 @@ def test_a_design_passes_its_window_samples_and_spread_on_and_numbers_its_rows()
         given.standard_error[given.added_trials == "A4"],
         ident.parameter_uncertainty(residuals, jacobian, names, values,
                                     added_jacobian=rows).standard_error)
+
+
+def test_design_summary_counts_what_each_set_determines_of_the_held_out_gaits():
+    """From a design of A2 and A4 on the synthetic gaits: with nothing or A2 added, A1+A3 held
+    out is undetermined (only it and A4 see d), with A4 or both every held-out gait is
+    determined; the widest error is the largest of the determined held-out rows; a failed
+    gait's row (no numbers) counts for nothing; a table that is not a design is refused."""
+    runs, derivatives, trials, values = _with_candidates()
+    design = ident.trial_design(runs, derivatives, trials, values, ["A2", "A4"], (1, 3))
+    summary = ident.design_summary(design)
+    assert list(summary.columns) == ident.DESIGN_SUMMARY_COLUMNS
+    assert summary.added_trials.tolist() == ["none", "A2", "A4", "A2 A4"]
+    assert summary.trials.tolist() == [0, 1, 1, 2]
+    assert summary.held_out_determined.tolist() == [2, 2, 3, 3]
+    assert summary.held_out_undetermined.tolist() == ["A1+A3", "A1+A3", "", ""]
+    assert summary.every_held_out_determined.tolist() == [False, False, True, True]
+    for row in summary.itertuples():
+        held = design[(design.added_trials == row.added_trials) & (design.role == "held_out")
+                      & design.determined]
+        assert row.widest_held_out_standard_error_mm_s == held.standard_error_mm_s.max()
+    failed = pd.concat([design, pd.DataFrame([{"added_trials": "none", "gait": "A1+A4",
+                                                "role": "held_out", "determined": False}])],
+                       ignore_index=True)
+    pd.testing.assert_frame_equal(ident.design_summary(failed), summary)
+    with pytest.raises(ValueError, match="design must be a trial_design table; it lacks "
+                                         "added_trials, added_sigma_mm"):
+        ident.design_summary(design.drop(columns=["added_trials", "added_sigma_mm"]))
