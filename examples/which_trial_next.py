@@ -44,7 +44,7 @@ design.to_csv("which_trial_next.csv", index=False)
 
 summary = identification.design_summary(design)                # one row per set of trials
 for row in summary.itertuples():
-    print(f"{row.added_trials:>10}: undetermined {row.held_out_undetermined or 'none':<24} "
+    print(f"{row.added_trials:>10}: undetermined {row.held_out_undetermined:<24} "
           f"widest 2 s.e. of the rest {2 * row.widest_held_out_standard_error_mm_s:.3f} mm/s")
 complete = summary[summary.every_held_out_determined]
 fewest = complete[complete.trials == complete.trials.min()]

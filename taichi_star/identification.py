@@ -1406,7 +1406,8 @@ DESIGN_SUMMARY_COLUMNS = ["added_trials", "trials", "held_out_determined",
                           "widest_held_out_standard_error_mm_s"]
 """Columns of `design_summary`'s table, one row per set of trials taken as made: the set
 ("none" for none) and its size, how many held-out gaits its fits determine, those they do not
-(joined by spaces), whether they determine all, and the largest standard error of the
+(joined by spaces; "none" for none: an empty cell would read back as missing), whether they
+determine all, and the largest standard error of the
 held-out speeds they determine (mm/s; NaN where none is)."""
 
 
@@ -1428,7 +1429,7 @@ def design_summary(design: pd.DataFrame) -> pd.DataFrame:
         rows.append({"added_trials": trials,
                      "trials": 0 if trials == "none" else len(trials.split()),
                      "held_out_determined": int(determined.sum()),
-                     "held_out_undetermined": " ".join(free),
+                     "held_out_undetermined": " ".join(free) or "none",
                      "every_held_out_determined": not free,
                      "widest_held_out_standard_error_mm_s":
                          float(errors.max()) if len(errors) else math.nan})

@@ -794,7 +794,7 @@ def test_design_summary_counts_what_each_set_determines_of_the_held_out_gaits():
     assert summary.added_trials.tolist() == ["none", "A2", "A4", "A2 A4"]
     assert summary.trials.tolist() == [0, 1, 1, 2]
     assert summary.held_out_determined.tolist() == [2, 2, 3, 3]
-    assert summary.held_out_undetermined.tolist() == ["A1+A3", "A1+A3", "", ""]
+    assert summary.held_out_undetermined.tolist() == ["A1+A3", "A1+A3", "none", "none"]
     assert summary.every_held_out_determined.tolist() == [False, False, True, True]
     for row in summary.itertuples():
         held = design[(design.added_trials == row.added_trials) & (design.role == "held_out")
