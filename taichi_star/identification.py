@@ -1431,8 +1431,8 @@ def design_summary(design: pd.DataFrame) -> pd.DataFrame:
                      "held_out_determined": int(determined.sum()),
                      "held_out_undetermined": " ".join(free) or "none",
                      "every_held_out_determined": not free,
-                     "widest_held_out_standard_error_mm_s":
-                         float(errors.max()) if len(errors) else math.nan})
+                     # the max of none is NaN
+                     "widest_held_out_standard_error_mm_s": float(errors.max())})
     return pd.DataFrame(rows, columns=DESIGN_SUMMARY_COLUMNS)
 
 

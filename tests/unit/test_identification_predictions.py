@@ -807,3 +807,16 @@ def test_design_summary_counts_what_each_set_determines_of_the_held_out_gaits():
     with pytest.raises(ValueError, match="design must be a trial_design table; it lacks "
                                          "added_trials, added_sigma_mm"):
         ident.design_summary(design.drop(columns=["added_trials", "added_sigma_mm"]))
+
+
+def test_design_summary_joins_the_undetermined_and_has_no_widest_error_when_none_is():
+    """A hand-made design: a set that leaves two held-out gaits undetermined names both,
+    joined by a space in their table order, and its widest error is NaN (none determined)."""
+    rows = [{"added_trials": "none", "gait": gait, "role": "held_out", "determined": False,
+             "predicted_speed_mm_s": 1.0, "standard_error_mm_s": math.inf}
+            for gait in ("A1+A2", "A1+A4")]
+    design = pd.DataFrame(rows).reindex(columns=ident.DESIGN_COLUMNS)
+    summary = ident.design_summary(design)
+    assert summary.held_out_undetermined.tolist() == ["A1+A2 A1+A4"]
+    assert summary.held_out_determined.tolist() == [0]
+    assert math.isnan(summary.widest_held_out_standard_error_mm_s[0])
