@@ -153,7 +153,7 @@ def check_design_size(max_trials: int, candidates: int):
     `identification.MAX_DESIGN_SETS` (StudyArgumentError naming it, before any compute)."""
     if max_trials < 1:
         raise cli.StudyArgumentError(f"--max-trials must be >= 1, got {max_trials}")
-    sets = sum(math.comb(candidates, size) for size in range(1, min(max_trials, candidates) + 1))
+    sets = identification.design_set_count(candidates, max_trials)
     if sets > identification.MAX_DESIGN_SETS:
         raise cli.StudyArgumentError(
             f"--max-trials {max_trials} over the {candidates} --predict gaits asks for {sets} "

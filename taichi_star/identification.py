@@ -116,6 +116,7 @@ __all__ = ["TRAINING_CYCLES", "VALIDATION_CYCLES", "SAMPLES_PER_CYCLE", "MAX_CYC
            "PredictionUncertainty", "prediction_uncertainty", "PREDICTION_COLUMNS", "window_speed",
            "gait_predictions", "trial_rows", "DESIGN_COLUMNS", "MAX_DESIGN_SETS",
            "trial_design", "parameter_design", "DESIGN_SUMMARY_COLUMNS", "design_summary",
+           "design_set_count",
            "STROKE_WINDOW_S", "STROKE_TOLERANCE_S", "STROKE_ONSET_SHARE",
            "STROKE_MIN_JUMP_RATIO", "Strokes", "window_moves", "circular_difference", "strokes",
            "stroke_aligned_phase"]
@@ -1044,10 +1045,14 @@ def _local_fit(residuals, jacobian, values, count: int, rcond: float, share: flo
     variance = float(residuals @ residuals) / dof
     if added_jacobian is not None and len(added_jacobian):
         # the cut stays the fit's own: rows below J only raise its singular values (each of
-        # (J; A) is at least J's), so a trial taken as made adds resolved directions and never
-        # takes one away, however much its rows weigh
-        singular, directions = _split(np.vstack([relative, added_jacobian * scale]), count)
-        kept = singular > cut
+        # (J; A) is at least J's), so a trial taken as made never lowers the rank, however much
+        # its rows weigh (the resolved directions can still turn where one of J's singular
+        # values lies near the cut); above the stacked matrix's rounding (NumPy's rank
+        # tolerance), so that rows added to a J of zeros resolve only what they see
+        stacked = np.vstack([relative, added_jacobian * scale])
+        singular, directions = _split(stacked, count)
+        rounding = singular[0] * max(stacked.shape) * np.finfo(np.float64).eps
+        kept = singular > max(cut, rounding)
     return _LocalFit(scale, singular, directions, kept, variance, dof)
 
 
@@ -1078,8 +1083,8 @@ def parameter_uncertainty(residuals: np.ndarray, jacobian: np.ndarray, names: Se
     J), as if they were in the fit, their residuals scattering as the fit's own do: the
     split, `rank` and `condition_number` are then of J with those rows below it (the cut
     between resolved and not still `rcond` × J's own largest singular value, so that rows
-    added never take a resolved direction away), while s² and `residual_dof` stay the fit's
-    (R − the rank of J alone). What a fit would determine after those trials, before they
+    added never lower the rank, and at least the stacked matrix's rounding), while s² and
+    `residual_dof` stay the fit's (R − the rank of J alone). What a fit would determine after those trials, before they
     are made.
 
     ValueError for mismatched shapes, non-finite entries, rcond or share outside (0, 1), or
@@ -1252,8 +1257,8 @@ def gait_predictions(simulated: Mapping[str, SimulatedRun],
     that determine it change, so a "held_out" row says how far the other gaits pin down
     what the held-out one needs, not where a fit without it would go. ValueError for a
     measured gait missing from `simulated`, fewer than two measured gaits, an added gait that
-    is measured, not simulated or repeated, an added_sigma_mm that is not a positive finite
-    number, or as `prediction_uncertainty`."""
+    is measured, not simulated or repeated, an added_sigma_mm below `DISPLACEMENT_FLOOR_MM`
+    or not a finite number, or as `prediction_uncertainty`."""
     tables, _ = _predictions(simulated, derivatives, trials, values, cycles, samples, rcond,
                              share, predict_cycles, [added], added_sigma_mm)
     return tables[0]
@@ -1363,9 +1368,10 @@ none), then `gait_predictions`' columns."""
 
 MAX_DESIGN_SETS = 1024
 """The most sets of candidate trials a design scores (`trial_design`, `parameter_design`):
-a set costs an SVD per gait and role, about 10 ms for sixteen gaits and eight parameters (67
-sets in 1.2 s with the fits' phase searches, a scratch timing on 2 cores), so this is under a
-minute and a table of some 30,000 rows; the sets grow as 2^n with n candidates."""
+a set costs two SVDs per gait and role, about 10 ms for sixteen gaits and eight parameters
+(67 sets in 1.2 s with the fits' phase searches, a scratch timing on 2 cores), so this is under
+a minute and a table of some 20,000 rows; the sets grow as 2^n with n candidates
+(`design_set_count`)."""
 
 
 def trial_design(simulated: Mapping[str, SimulatedRun], derivatives: Mapping[str, np.ndarray],
@@ -1475,19 +1481,30 @@ def _design_sets(candidates, max_trials, simulated, measured) -> list:
     (more than one) for max_trials None, else every set of at most max_trials, the smaller
     first. ValueError naming candidates or max_trials before any compute."""
     candidates = list(_checked_added(candidates, simulated, measured, "candidates"))
-    if max_trials is None:
-        sizes = [1, len(candidates)] if len(candidates) > 1 else [1]
-    elif not is_whole(max_trials) or max_trials < 1:
-        raise ValueError(f"max_trials must be a whole number >= 1 (None: each candidate alone "
-                         f"and all together), got {max_trials!r}")
-    else:
-        sizes = range(1, min(int(max_trials), len(candidates)) + 1)
-    count = sum(math.comb(len(candidates), size) for size in sizes)
+    sizes = _set_sizes(len(candidates), max_trials)
+    count = design_set_count(len(candidates), max_trials)
     if count > MAX_DESIGN_SETS:
         raise ValueError(f"max_trials {max_trials} over {len(candidates)} candidates asks for "
                          f"{count} sets of trials, more than MAX_DESIGN_SETS = "
                          f"{MAX_DESIGN_SETS}: lower it or give fewer candidates")
     return [added for size in sizes for added in itertools.combinations(candidates, size)]
+
+
+def _set_sizes(candidates: int, max_trials) -> list:
+    """The sizes of the sets of trials a design takes (`trial_design`'s max_trials)."""
+    if max_trials is None:
+        return [1, candidates] if candidates > 1 else [1]
+    if not is_whole(max_trials) or max_trials < 1:
+        raise ValueError(f"max_trials must be a whole number >= 1 (None: each candidate alone "
+                         f"and all together), got {max_trials!r}")
+    return list(range(1, min(int(max_trials), candidates) + 1))
+
+
+def design_set_count(candidates: int, max_trials: Optional[int] = None) -> int:
+    """How many sets of trials, beyond none, `trial_design` scores for `candidates` candidate
+    trials and `max_trials` (None: each alone and all together; k: every set of at most k).
+    ValueError as `trial_design` for max_trials."""
+    return sum(math.comb(candidates, size) for size in _set_sizes(candidates, max_trials))
 
 
 def _added_rows(simulated, derivatives, added, sigma_mm, cycles, samples):

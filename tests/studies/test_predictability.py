@@ -258,3 +258,18 @@ def test_the_design_flags_reach_the_tables(tmp_path):
     own = {sigma: table[(table["added_trials"] == "A2") & (table["role"] == "added")]
            ["standard_error_mm_s"].iloc[0] for sigma, table in tables.items()}
     assert own["0.5"] > own["0.05"]
+    # the summary: one row per set, as design_summary makes it from the table, with its sidecar
+    summary = pd.read_csv(tmp_path / "0.5" / "predictability_design_summary.csv")
+    pd.testing.assert_frame_equal(summary, identification.design_summary(tables["0.5"]),
+                                  check_exact=False, rtol=1e-9)
+    assert summary["added_trials"].tolist() == ["none", "A2", "A3"]
+    assert (tmp_path / "0.5" / "predictability_design_summary.csv.json").exists()
+
+
+def test_the_design_size_is_checked_at_the_librarys_count():
+    """11 gaits to predict: at most 5 trials (1,023 sets) is allowed, 6 (1,485) refused; a
+    count above the candidates is every subset (4 gaits, at most 9: 15 sets, allowed)."""
+    study.check_design_size(5, 11)
+    study.check_design_size(9, 4)
+    with pytest.raises(cli.StudyArgumentError, match="asks for 1485 sets of trials"):
+        study.check_design_size(6, 11)

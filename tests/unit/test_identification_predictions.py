@@ -653,7 +653,7 @@ def test_parameter_design_says_which_parameters_a_trial_would_determine():
                                values, ["A4"], (1, 3))
 
 
-def test_heavy_added_rows_never_take_a_resolved_direction_away():
+def test_heavy_added_rows_never_lower_the_rank():
     """The cut between resolved and not stays rcond × the fit's own largest singular value: rows
     10⁶ × heavier than J along its first column (whose largest singular value they then
     dominate) leave its weakest direction (10⁻³ of the largest) resolved, and a prediction
@@ -820,3 +820,29 @@ def test_design_summary_joins_the_undetermined_and_has_no_widest_error_when_none
     assert summary.held_out_undetermined.tolist() == ["A1+A2 A1+A4"]
     assert summary.held_out_determined.tolist() == [0]
     assert math.isnan(summary.widest_held_out_standard_error_mm_s[0])
+
+
+def test_rows_added_to_a_fit_of_zeros_resolve_no_rounding_noise():
+    """J = 0 and a rank-1 block of rows (an outer product, whose SVD leaves ~1e-16 rounding on
+    the two directions it cannot see): only the direction it sees is resolved (rank 1, above
+    the stacked matrix's rounding), a prediction along another is undetermined."""
+    residuals = np.arange(1.0, 9.0)
+    added = np.outer([1.0, 2.0, 3.0, 0.5], [0.3, 0.7, 1.1])
+    along = ident.prediction_uncertainty(residuals, np.zeros((8, 3)), np.ones(3),
+                                         [0.3, 0.7, 1.1], added_jacobian=added)
+    across = ident.prediction_uncertainty(residuals, np.zeros((8, 3)), np.ones(3),
+                                          [0.7, -0.3, 0.0], added_jacobian=added)
+    assert along.rank == across.rank == 1
+    assert along.determined and not across.determined
+
+
+def test_design_set_count_is_the_number_of_sets_a_design_scores():
+    """Each alone and all: n + 1 (n ≥ 2), 1 for one, 0 for none; at most k: Σ C(n, i) for
+    i ≤ k, k beyond n the 2ⁿ − 1 subsets; the study's boundary: 11 candidates, at most 5 =
+    1,023 sets (≤ 1,024 allowed), at most 6 = 1,485."""
+    assert [ident.design_set_count(n) for n in (0, 1, 2, 4)] == [0, 1, 3, 5]
+    assert ident.design_set_count(4, 2) == 4 + 6 and ident.design_set_count(4, 9) == 15
+    assert ident.design_set_count(11, 5) == 1023 <= ident.MAX_DESIGN_SETS
+    assert ident.design_set_count(11, 6) == 1485
+    with pytest.raises(ValueError, match="max_trials must be a whole number >= 1"):
+        ident.design_set_count(4, 0)
