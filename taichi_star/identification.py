@@ -1084,8 +1084,8 @@ def parameter_uncertainty(residuals: np.ndarray, jacobian: np.ndarray, names: Se
     split, `rank` and `condition_number` are then of J with those rows below it (the cut
     between resolved and not still `rcond` × J's own largest singular value, so that rows
     added never lower the rank, and at least the stacked matrix's rounding), while s² and
-    `residual_dof` stay the fit's (R − the rank of J alone). What a fit would determine after those trials, before they
-    are made.
+    `residual_dof` stay the fit's (R − the rank of J alone). What a fit would determine after
+    those trials, before they are made.
 
     ValueError for mismatched shapes, non-finite entries, rcond or share outside (0, 1), or
     R ≤ rank (no residual left to estimate s²)."""
