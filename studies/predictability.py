@@ -72,7 +72,7 @@ from . import cli, identify
 
 DESCRIPTION = ("Predictability: which gaits' speeds the measured trials determine at a model "
                "point (a linearised leave-one-gait-out on the exact sensitivities), against the "
-               "measured speeds.")
+               "measured speeds, and which trials not yet made would determine the rest.")
 IDENTIFIED_FORM = ("alpha,drag_perpendicular,cylinder_drag,actuator_gains[0],actuator_gains[1],"
                    "actuator_gains[2],actuator_gains[3],actuator_gains[4]")
 """The `identified` preset's fitted parameters (model_select's `gains_with_a1`: α, C⊥, C_c and
