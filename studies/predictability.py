@@ -51,7 +51,8 @@ trials, the held-out gaits it determines and the widest of their standard errors
 `predictability_design_parameters.csv` (`identification.parameter_design`: what the
 fit on every measured gait would determine of `--parameters` with those trials) and
 `predictability_design.png` (two standard errors of each held-out and unmeasured gait's speed
-against the trials added), each table with its provenance sidecar.
+against the trials added) and `predictability_design_parameters.png` (each parameter's relative
+standard error against them), each table with its provenance sidecar.
 
 --quick: gaits A1+A2 and A1+A3, A2 predicted, α and C⊥, cycle 1, 2-ms steps.
 """
@@ -342,6 +343,38 @@ def plot_design(csv_path, png_path):
     return cli.save_figure(fig, png_path)
 
 
+def plot_parameter_design(csv_path, png_path):
+    """Each parameter's relative standard error (columns, %) with the trials taken as made
+    (rows): colour log10 of it, "not id." where the fit would not determine it."""
+    table = pd.read_csv(csv_path)
+    sets = list(dict.fromkeys(table["added_trials"]))
+    names = list(dict.fromkeys(table["parameter"]))
+    errors = np.full((len(sets), len(names)), np.nan)
+    for row in table.itertuples():
+        errors[sets.index(row.added_trials), names.index(row.parameter)] = (
+            100 * row.relative_standard_error if row.identifiable else math.inf)
+    plt = cli.use_agg()
+    fig, ax = plt.subplots(figsize=(0.95 * len(names) + 3.2, 0.3 * len(sets) + 2.2))
+    finite = np.isfinite(errors) & (errors > 0)
+    shown = np.where(finite, np.log10(np.where(finite, errors, 1.0)), np.nan)
+    image = ax.imshow(shown, cmap="viridis_r", aspect="auto")
+    for i in range(len(sets)):
+        for j in range(len(names)):
+            text = "not id." if np.isinf(errors[i, j]) else f"{errors[i, j]:.2g} %"
+            light = finite[i, j] and image.norm(shown[i, j]) > 0.55
+            ax.text(j, i, text, ha="center", va="center", fontsize=7,
+                    color="w" if light else "k")
+    ax.set_xticks(range(len(names)), names, fontsize=7, rotation=30, ha="right")
+    ax.set_yticks(range(len(sets)), sets, fontsize=7)
+    ax.set_ylabel("trials taken as made", fontsize=8)
+    fig.colorbar(image, ax=ax, label="log10 of the relative standard error, %", shrink=0.8)
+    settings = cli.run_settings(csv_path, mesh=False)
+    ax.set_title("the parameters' relative standard errors, the fit on every measured gait "
+                 "(lower bounds)" + (f"\n{settings}" if settings else ""), fontsize=8)
+    fig.tight_layout()
+    return cli.save_figure(fig, png_path)
+
+
 def main(argv=None):
     args = cli.parse(build_parser(), argv)
     base = cli.base_params(args)
@@ -398,7 +431,10 @@ def main(argv=None):
         design_path = out.write_csv(design, "predictability_design.csv")
         out.write_csv(identification.design_summary(design),
                       "predictability_design_summary.csv")
-        out.write_csv(parameter_design, "predictability_design_parameters.csv")
+        parameters_path = out.write_csv(parameter_design,
+                                        "predictability_design_parameters.csv")
         out.wrote(plot_design(design_path, out.path("predictability_design.png")))
+        out.wrote(plot_parameter_design(parameters_path,
+                                        out.path("predictability_design_parameters.png")))
     out.report()
     return table

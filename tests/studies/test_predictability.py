@@ -264,6 +264,20 @@ def test_the_design_flags_reach_the_tables(tmp_path):
                                   check_exact=False, rtol=1e-9)
     assert summary["added_trials"].tolist() == ["none", "A2", "A3"]
     assert (tmp_path / "0.5" / "predictability_design_summary.csv.json").exists()
+    assert (tmp_path / "0.5" / "predictability_design_parameters.png").stat().st_size > 0
+
+
+def test_the_parameter_plot_marks_a_parameter_the_fit_would_not_determine(tmp_path):
+    """A hand-made parameter design with a parameter not identifiable with nothing added and
+    identifiable with a trial: the plot is drawn (its cells "not id." and "12 %"), from a
+    table without a sidecar too."""
+    rows = [{"added_trials": trials, "parameter": "alpha", "identifiable": identifiable,
+             "relative_standard_error": error}
+            for trials, identifiable, error in (("none", False, math.inf), ("A4", True, 0.12))]
+    path = tmp_path / "design_parameters.csv"
+    pd.DataFrame(rows).to_csv(path, index=False)
+    written = study.plot_parameter_design(path, tmp_path / "design_parameters.png")
+    assert written.stat().st_size > 0
 
 
 def test_the_design_size_is_checked_at_the_librarys_count():
