@@ -300,6 +300,27 @@ def plot_predictability(csv_path, png_path):
     return cli.save_figure(fig, png_path)
 
 
+def _log_grid(values, texts, rows, columns, colour_label, column_width, rotation=0):
+    """A grid of values (len(rows), len(columns)) coloured by log10 (blank where not a positive
+    finite number), each cell's text over it, dark on the light (small) end of the colour map
+    and light on the dark end; returns (figure, axes)."""
+    plt = cli.use_agg()
+    fig, ax = plt.subplots(figsize=(column_width * len(columns) + 3.2, 0.3 * len(rows) + 2.2))
+    finite = np.isfinite(values) & (values > 0)
+    shown = np.where(finite, np.log10(np.where(finite, values, 1.0)), np.nan)
+    image = ax.imshow(shown, cmap="viridis_r", aspect="auto")
+    for i in range(len(rows)):
+        for j in range(len(columns)):
+            light = finite[i, j] and image.norm(shown[i, j]) > 0.55
+            ax.text(j, i, texts[i][j], ha="center", va="center", fontsize=7,
+                    color="w" if light else "k")
+    ax.set_xticks(range(len(columns)), columns, fontsize=7, rotation=rotation,
+                  ha="right" if rotation else "center")
+    ax.set_yticks(range(len(rows)), rows, fontsize=7)
+    fig.colorbar(image, ax=ax, label=colour_label, shrink=0.8)
+    return fig, ax
+
+
 def plot_design(csv_path, png_path):
     """Two standard errors of each held-out and unmeasured gait's speed (columns) with the
     trials taken as made (rows): colour log10 of it, "undetermined" where the fits leave the
@@ -315,24 +336,14 @@ def plot_design(csv_path, png_path):
         i, j = sets.index(row.added_trials), gaits.index(row.gait)
         errors[i, j] = 2 * row.standard_error_mm_s
         own[i, j] = row.role == "added"
-    plt = cli.use_agg()
-    fig, ax = plt.subplots(figsize=(1.05 * len(gaits) + 3.2, 0.3 * len(sets) + 2.2))
-    finite = np.isfinite(errors) & (errors > 0)
-    shown = np.where(finite, np.log10(np.where(finite, errors, 1.0)), np.nan)
-    image = ax.imshow(shown, cmap="viridis_r", aspect="auto")
-    for i in range(len(sets)):
-        for j in range(len(gaits)):
-            text = "undet." if np.isinf(errors[i, j]) else f"±{errors[i, j]:.2g}"
-            # dark text on the light (small) end of the colour map, light on the dark end
-            light = finite[i, j] and image.norm(shown[i, j]) > 0.55
-            ax.text(j, i, text + (" *" if own[i, j] else ""), ha="center", va="center",
-                    fontsize=7, color="w" if light else "k")
+    texts = [[("undet." if np.isinf(error) else f"±{error:.2g}") + (" *" if mine else "")
+              for error, mine in zip(error_row, own_row)]
+             for error_row, own_row in zip(errors, own)]
     held = set(table.loc[table["role"] == "held_out", "gait"])
-    ax.set_xticks(range(len(gaits)), [f"{g}\n({'held out' if g in held else 'unmeasured'})"
-                                      for g in gaits], fontsize=7)
-    ax.set_yticks(range(len(sets)), sets, fontsize=7)
+    fig, ax = _log_grid(errors, texts, sets,
+                        [f"{g}\n({'held out' if g in held else 'unmeasured'})" for g in gaits],
+                        "log10 of 2 s.e., mm/s", 1.05)
     ax.set_ylabel("trials taken as made (* the gait's own)", fontsize=8)
-    fig.colorbar(image, ax=ax, label="log10 of 2 s.e., mm/s", shrink=0.8)
     sigma = table["added_sigma_mm"].dropna()
     spread = f"; a trial's spread {sigma.iloc[0]:.3g} mm" if len(sigma) else ""
     first, last = int(table["first_cycle"].iloc[0]), int(table["last_cycle"].iloc[0])
@@ -353,21 +364,11 @@ def plot_parameter_design(csv_path, png_path):
     for row in table.itertuples():
         errors[sets.index(row.added_trials), names.index(row.parameter)] = (
             100 * row.relative_standard_error if row.identifiable else math.inf)
-    plt = cli.use_agg()
-    fig, ax = plt.subplots(figsize=(0.95 * len(names) + 3.2, 0.3 * len(sets) + 2.2))
-    finite = np.isfinite(errors) & (errors > 0)
-    shown = np.where(finite, np.log10(np.where(finite, errors, 1.0)), np.nan)
-    image = ax.imshow(shown, cmap="viridis_r", aspect="auto")
-    for i in range(len(sets)):
-        for j in range(len(names)):
-            text = "not id." if np.isinf(errors[i, j]) else f"{errors[i, j]:.2g} %"
-            light = finite[i, j] and image.norm(shown[i, j]) > 0.55
-            ax.text(j, i, text, ha="center", va="center", fontsize=7,
-                    color="w" if light else "k")
-    ax.set_xticks(range(len(names)), names, fontsize=7, rotation=30, ha="right")
-    ax.set_yticks(range(len(sets)), sets, fontsize=7)
+    texts = [["not id." if np.isinf(error) else f"{error:.2g} %" for error in error_row]
+             for error_row in errors]
+    fig, ax = _log_grid(errors, texts, sets, names,
+                        "log10 of the relative standard error, %", 0.95, rotation=30)
     ax.set_ylabel("trials taken as made", fontsize=8)
-    fig.colorbar(image, ax=ax, label="log10 of the relative standard error, %", shrink=0.8)
     settings = cli.run_settings(csv_path, mesh=False)
     ax.set_title("the parameters' relative standard errors, the fit on every measured gait "
                  "(lower bounds)" + (f"\n{settings}" if settings else ""), fontsize=8)
