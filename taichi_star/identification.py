@@ -1267,7 +1267,8 @@ def gait_predictions(simulated: Mapping[str, SimulatedRun],
 def _predictions(simulated, derivatives, trials, values, cycles, samples, rcond, share,
                  predict_cycles, added_sets, added_sigma_mm) -> Tuple[list, float]:
     """`gait_predictions`' table for each set of added gaits in `added_sets`, the fits (and
-    their phase searches) made once for all, and the spread given the added trials."""
+    their phase searches) and the speeds made once for all, and the spread given the added
+    trials."""
     predicted = check_window(cycles if predict_cycles is None else predict_cycles)
     measured = _checked_measured(simulated, trials)
     if len(measured) < 2:
@@ -1291,37 +1292,43 @@ def _predictions(simulated, derivatives, trials, values, cycles, samples, rcond,
     phases = dict(zip(everyone["gait"], everyone["phase_s"]))
     if added_sigma_mm is None:
         added_sigma_mm = _median_sigma(everyone)
+    cases = ([(gait, "fitted", tuple(measured)) for gait in measured]
+             + [(gait, "held_out", tuple(g for g in measured if g != gait)) for gait in measured]
+             + [(gait, "unmeasured", tuple(measured)) for gait in simulated if gait not in trials])
+    # what does not depend on the trials added, once for every set
+    speeds = {}
+    for gait in dict.fromkeys(gait for gait, _, _ in cases):
+        run = simulated[gait]
+        speed, gradient = window_speed(run, derivatives[gait], predicted)
+        ends = run.path.position(_window_ends(run.path, predicted))
+        duration = (predicted[1] - predicted[0] + 1) * run.path.period_s
+        measured_speed = math.nan
+        if gait in trials:
+            fit = trial_fit(run, trials[gait], predicted, samples, phases[gait])
+            measured_speed = trials[gait].paper_sign * fit.meas_speed_mm_s
+        speeds[gait] = (speed, gradient, float(np.hypot(*(ends[1] - ends[0]))) / duration,
+                        measured_speed)
     tables = []
     for added in added_sets:
         added_rows = _added_rows(simulated, derivatives, added, added_sigma_mm, cycles, samples)
-        cases = ([(gait, "fitted", tuple(measured)) for gait in measured]
-                 + [(gait, "held_out", tuple(g for g in measured if g != gait))
-                    for gait in measured]
-                 + [(gait, "added" if gait in added else "unmeasured", tuple(measured))
-                    for gait in simulated if gait not in trials])
         rows = []
         for gait, role, training in cases:
             residuals, jacobian, table = fit_of(training)
-            run = simulated[gait]
-            speed, gradient = window_speed(run, derivatives[gait], predicted)
-            ends = run.path.position(_window_ends(run.path, predicted))
-            duration = (predicted[1] - predicted[0] + 1) * run.path.period_s
+            speed, gradient, distance_speed, measured_speed = speeds[gait]
             # weighted as one more gait of the fit's mean: objective_residuals' 1/√(gaits)
             uncertainty = prediction_uncertainty(
                 residuals, jacobian, values, gradient, rcond, share,
                 None if added_rows is None else added_rows / math.sqrt(len(training)))
             error = uncertainty.standard_error
-            measured_speed, gap, within = math.nan, math.nan, None
+            gap, within = math.nan, None
             if gait in trials:
-                fit = trial_fit(run, trials[gait], predicted, samples, phases[gait])
-                measured_speed = trials[gait].paper_sign * fit.meas_speed_mm_s
                 gap = measured_speed - speed
                 within = bool(abs(gap) <= 2.0 * error)
-            rows.append({"gait": gait, "role": role, "training_gaits": " ".join(training),
+            rows.append({"gait": gait, "role": "added" if gait in added else role,
+                         "training_gaits": " ".join(training),
                          "first_cycle": predicted[0], "last_cycle": predicted[1],
                          "predicted_speed_mm_s": speed, "standard_error_mm_s": error,
-                         "distance_speed_mm_s": float(np.hypot(*(ends[1] - ends[0])))
-                         / duration,
+                         "distance_speed_mm_s": distance_speed,
                          "unresolved_share": uncertainty.unresolved_share,
                          "determined": uncertainty.determined,
                          "measured_speed_mm_s": measured_speed,
