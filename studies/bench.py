@@ -122,6 +122,7 @@ import tempfile
 import time
 from datetime import datetime, timezone
 from pathlib import Path
+from typing import List
 
 import numpy as np
 import pandas as pd
@@ -160,7 +161,8 @@ ACCURATE_PHASE_STEPS = 20
 PLAIN_DURATION = 3.15
 """Simulated seconds of the plain call (one period: the pulse and the coast)."""
 SENSITIVITY_PARAMETERS = ("alpha", "drag_perpendicular", "youngs_modulus", "cylinder_drag")
-"""What the sensitivities section differentiates by, the first n of them."""
+"""What the sensitivities section differentiates by by default, the first n of them
+(`--sensitivity-parameters`)."""
 SENSITIVITY_BATCH = 64
 """Instances of the sensitivities section (the cost goal is stated at B = 64)."""
 SENSITIVITY_DURATION = 0.3
@@ -503,10 +505,15 @@ def build_parser():
                         quick=(WARMUP_STEPS + QUICK_STEPS) * DT,
                         help="simulated seconds of the plain call (one period)")
     parser.add_argument("--sensitivity-counts", default="0,1,2,4", quick="none",
-                        help=f"comma list of how many parameters ({', '.join(SENSITIVITY_PARAMETERS)}, "
-                             f"in this order) the plain call differentiates by, at "
-                             f"B = {SENSITIVITY_BATCH} (0: none, the baseline), or none to skip "
-                             f"the section")
+                        help=f"comma list of how many of --sensitivity-parameters (the first n) "
+                             f"the plain call differentiates by, at B = {SENSITIVITY_BATCH} (0: "
+                             f"none, the baseline), or none to skip the section")
+    parser.add_argument("--sensitivity-parameters", default=",".join(SENSITIVITY_PARAMETERS),
+                        help="comma list of the parameters the sensitivities section "
+                             "differentiates by, in order, as simulate(sensitivities=...) names "
+                             "them (actuator_gains[1]: A2's gain; actuator_gains: all eight, "
+                             "in actuator order), or all; --sensitivity-counts counts them one "
+                             "number each")
     parser.add_argument("--sensitivity-duration", type=float, default=SENSITIVITY_DURATION,
                         help=f"simulated seconds of the sensitivities section (default "
                              f"{SENSITIVITY_DURATION} s: the pulse)")
@@ -549,13 +556,14 @@ def solver_choices(text: str, flag: str, field: str):
     return values
 
 
-def parse_sensitivity_counts(text: str, flag: str):
-    """Comma list of parameter counts in [0, len(SENSITIVITY_PARAMETERS)]."""
+def parse_sensitivity_counts(text: str, flag: str, parameters: List[str]):
+    """Comma list of parameter counts in [0, len(parameters)]."""
     counts = cli.parse_values(text, flag, int)
     for count in counts:
-        if not 0 <= count <= len(SENSITIVITY_PARAMETERS):
+        if not 0 <= count <= len(parameters):
             raise cli.StudyArgumentError(f"{flag}: each count must be in [0, "
-                                         f"{len(SENSITIVITY_PARAMETERS)}], got {count}")
+                                         f"{len(parameters)}] (--sensitivity-parameters), "
+                                         f"got {count}")
     return counts
 
 
@@ -575,8 +583,12 @@ def parse_args(argv):
     args.workers_list = optional_list(
         args.workers_list, "--workers-list",
         lambda text, flag: cli.parse_counts(text, flag, MAX_LOCAL_WORKERS))
-    args.sensitivity_counts = optional_list(args.sensitivity_counts, "--sensitivity-counts",
-                                            parse_sensitivity_counts)
+    # the bench's robot has the 2.5-D model off: "all" leaves the component heights out
+    args.sensitivity_parameters = cli.sensitivity_parameters(
+        args.sensitivity_parameters, "--sensitivity-parameters", heights="without")
+    args.sensitivity_counts = optional_list(
+        args.sensitivity_counts, "--sensitivity-counts",
+        lambda text, flag: parse_sensitivity_counts(text, flag, args.sensitivity_parameters))
     args.presets = cli.parse_choices(args.presets, "--presets", PRESETS)
     args.layouts = cli.parse_choices(args.layouts, "--layouts", LAYOUTS)
     args.gpu_block_dims = cli.parse_counts(args.gpu_block_dims, "--gpu-block-dims")
@@ -710,7 +722,7 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
                          args.process_batch, SolverConfig(jacobian=jacobian),
                          robot_steps=args.process_batch * figures["steps"])})
         Runtime.current().configure_lanes()
-    configurations = [(SENSITIVITY_PARAMETERS[:count], jacobian)
+    configurations = [(args.sensitivity_parameters[:count], jacobian)
                       for count in args.sensitivity_counts for jacobian in args.plain_jacobians]
     if configurations:
         # every count and Jacobian timed in the same rounds: their costs are ratios of calls

@@ -171,6 +171,16 @@ def test_sensitivity_costs_are_ratios_to_newtons_forward_call_in_the_same_rounds
     assert "cost_in_own_forward_runs" not in rows[2]
 
 
+def test_the_sensitivities_section_differentiates_by_the_first_n_parameters_named(monkeypatch):
+    """--sensitivity-parameters: one label per direction (a per-actuator field its eight, in
+    actuator order), every count from 0 to their number taken."""
+    args = bench.parse_args(["--sensitivity-parameters", "alpha,actuator_gains",
+                             "--sensitivity-counts", "0,1,9"])
+    assert args.sensitivity_parameters == ["alpha"] + [f"actuator_gains[{k}]" for k in range(8)]
+    assert args.sensitivity_counts == [0, 1, 9]
+    assert bench.parse_args([]).sensitivity_parameters == list(bench.SENSITIVITY_PARAMETERS)
+
+
 def test_step_phases_count_the_jacobian_only_where_the_matrix_is_refreshed():
     """Every iteration assembles its residual and solves; only the iterations that refresh the
     Newton matrix assemble the Jacobian (assembly − residual per iteration) and factor."""
@@ -216,6 +226,10 @@ def test_matmul_rate_is_the_products_flops_over_its_best_time(monkeypatch):
 
 @pytest.mark.parametrize("study, argv, message", [
     ("bench", ["--batch-sizes", "0"], "--batch-sizes: every value must be >= 1"),
+    ("bench", ["--sensitivity-parameters", "alpha,bogus"],
+     "--sensitivity-parameters: sensitivities: 'bogus' is not a StarParams field"),
+    ("bench", ["--sensitivity-parameters", "alpha", "--sensitivity-counts", "0,2"],
+     "--sensitivity-counts: each count must be in [0, 1] (--sensitivity-parameters), got 2"),
     ("bench", ["--batch-sizes", "8,x"], "--batch-sizes: 'x' is not an integer"),
     ("bench", ["--batch-sizes", ""], "--batch-sizes: empty"),
     ("bench", ["--precisions", "f16"], "--precisions: precision must be one of"),
