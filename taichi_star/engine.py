@@ -19,7 +19,10 @@ b's state ± ε_j times the state's derivative, which the implicit function theo
 from b's Jacobian at the converged state (see `tangent_step`), its rigid motion corrected so
 that it obeys the rigid-body equations, which the Jacobian's stiffness blocks hold only to their
 rounding (`rigid_correction`). Any output is then a smooth function of the replicas' states,
-and its derivative is the central difference of the pair.
+and its derivative is the central difference of the pair. A pair that moves only the gain or
+the delay of an actuator that b has not yet fired has b's residual, and a tangent exactly
+zero: it waits, its assembly and solve skipped, until that actuator first fires
+(`replica_waiting`, `tangent_moves`); the bits are those of the pair not waiting.
 """
 
 
@@ -207,6 +210,9 @@ class BatchEngine:
         whatever other instances the batch holds); its residual at the instance's positions is
         then the instance's, the same for both replicas of a pair, and `assemble` leaves it out
         of their difference (0 for the simulated instances, which assemble every term)."""
+        self.waiting_actuator = arena.batch_field(ti.i32, capacity) if sensitive else None
+        """Per replica: the actuator k (index k − 1 for A_k) whose first firing its direction
+        waits for, or −1 (`replica_waiting`); −1 for the simulated instances."""
         if sensitive:
             external_pairs = {frozenset(pair) for pair in coupled_node_pairs(
                 model.topology, [term for term in model.terms_used if not term[0].internal])}
@@ -239,6 +245,7 @@ class BatchEngine:
                                  for name, field in term.coefficient_fields().items()})
         if sensitive:
             model_fields["same_as_instance"] = self.same_as_instance
+            model_fields["waiting_actuator"] = self.waiting_actuator
         state_fields, zeroed = self.state.reset_fields()
         self.load_store = FieldStore(
             {**model_fields, **{name: field for name, (field, _) in arena.tables().items()},
@@ -303,6 +310,7 @@ class BatchEngine:
                            for name in term.coefficient_names})
         if self.sensitive:
             values["same_as_instance"] = self.replica_sameness(model, primal_count)
+            values["waiting_actuator"] = self.replica_waiting(model, primal_count)
         state = self.state.initial_values(pad_batch(model.rest_positions, capacity),
                                           model.batch_size)
         if periodic_gaits:
@@ -342,6 +350,39 @@ class BatchEngine:
                     equal &= ~reshaped[replicas] & ~reshaped[instances]
             same[replicas, k] = equal & equal[partner_rows]
         return same
+
+    def replica_waiting(self, model: BatchModel, primal_count: int) -> np.ndarray:
+        """(capacity,) values of `waiting_actuator` for a batch of `primal_count` instances
+        followed by their replicas: k where a replica's rest shape, masses and coefficients
+        are its instance's but for column k of the terms' `Term.fired_columns` (and its pair's
+        the same: a gain or a delay of A(k+1)), else −1. Such a pair's residual is its
+        instance's until actuator k first fires (the term reads that column only then), so
+        from rest, with the instance, the pair stays on it: its tangent is exactly zero."""
+        waiting = np.full(self.capacity, -1, dtype=np.int32)
+        replicas = np.arange(primal_count, model.batch_size)
+        if not len(replicas):
+            return waiting
+        instances = replicas % primal_count
+        # the other replica of each one's pair, as a row of `replicas` (`replica_sameness`)
+        partner_rows = (((replicas - primal_count) // primal_count) ^ 1) * primal_count \
+            + instances
+
+        def differs(values: np.ndarray) -> np.ndarray:
+            return (values[replicas] != values[instances]).reshape(len(replicas), -1).any(1)
+
+        elsewhere = differs(model.rest_positions) | differs(model.mass) | differs(model.inertia)
+        columns = np.zeros((len(replicas), N_ACTUATORS), dtype=bool)
+        for term in self.terms:
+            for name in term.coefficient_names:
+                values = model.coefficients[term.name][name]
+                if name in term.fired_columns:
+                    columns |= values[replicas] != values[instances]
+                else:
+                    elsewhere |= differs(values)
+        single = ~elsewhere & (columns.sum(axis=1) == 1)
+        actuator = np.where(single, columns.argmax(axis=1), -1)
+        waiting[replicas] = np.where(actuator == actuator[partner_rows], actuator, -1)
+        return waiting
 
     # ---------------------------------------------------------------- assembly
     @ti.func
@@ -854,6 +895,8 @@ class BatchEngine:
         self.assemble_with_rigid_projector(b, inertia_scale, rate_gain, centre)
         self.factor(b, inertia_scale, rate_gain)
         for j in range(self.tangent_count[None]):
+            plus, minus = self.replica(b, j, 0), self.replica(b, j, 1)
+            moving = self.tangent_moves(b, plus)
             # a loop, not unrolled: the replicas' preparation and assembly, every term inlined,
             # are compiled once, not twice (the sensitive kernel's compile time)
             for sign in range(2):
@@ -864,20 +907,38 @@ class BatchEngine:
                 self.prepare_step(r, start_time, end_time, h, ratio, use_history, 0)
                 for n in range(self.n_nodes):
                     self.state.positions[r, n] = self.state.positions[b, n]
-                self.assemble(r, inertia_scale, rate_gain, 0)
-            plus, minus = self.replica(b, j, 0), self.replica(b, j, 1)
+                if moving:
+                    self.assemble(r, inertia_scale, rate_gain, 0)
+            if moving:
+                for n in range(self.n_nodes):
+                    self.system.rhs[b, n] = 0.5 * (self.system.rhs[plus, n]
+                                                   - self.system.rhs[minus, n])
+                wanted_force, wanted_torque = self.rigid_parts(b, centre)
+                self.system.solve(b)
+                self.rigid_correction(b, centre, wanted_force, wanted_torque,
+                                      inertia_scale * total_mass, inertia_scale * moment)
             for n in range(self.n_nodes):
-                self.system.rhs[b, n] = 0.5 * (self.system.rhs[plus, n] - self.system.rhs[minus, n])
-            wanted_force, wanted_torque = self.rigid_parts(b, centre)
-            self.system.solve(b)
-            self.rigid_correction(b, centre, wanted_force, wanted_torque,
-                                  inertia_scale * total_mass, inertia_scale * moment)
-            for n in range(self.n_nodes):
-                shift = self.system.rhs[b, n]
+                # a waiting pair's difference would be exactly zero, and so its solve
+                shift = ti.Vector.zero(float, 2)
+                if moving:
+                    shift = self.system.rhs[b, n]
                 self.state.positions[plus, n] = self.state.positions[b, n] - shift
                 self.state.positions[minus, n] = self.state.positions[b, n] + shift
                 self.state.velocities[plus, n] = self.implicit_velocity(plus, n, rate_gain)
                 self.state.velocities[minus, n] = self.implicit_velocity(minus, n, rate_gain)
+
+    @ti.func
+    def tangent_moves(self, b, plus):
+        """Whether the replica pair of instance b whose +ε replica is `plus` needs its tangent
+        step: not while the actuator its direction waits for (`waiting_actuator`) has never
+        fired for b (its fire time, copied to the pair each step, still NEVER; a firing sets
+        it, due within the step or before, and only a reset to rest, with the replicas, clears
+        it)."""
+        actuator = self.waiting_actuator[plus]
+        moving = True
+        if actuator >= 0:
+            moving = self.state.fire_time[b, actuator] >= 0.0
+        return moving
 
     @ti.func
     def weighted_centre(self, b, weights: ti.template()):

@@ -85,6 +85,12 @@ class Term:
     """StarParams fields of this term whose sensitivities' ε (relative to the value) departs
     from `sensitivities.RELATIVE_STEP`, with the ε and, in the subclass, why
     (`sensitivities.FIELD_RELATIVE_STEPS` gathers them from `physics.TERMS`)."""
+    fired_columns: ClassVar[Tuple[str, ...]] = ()
+    """Its coefficients of one column per actuator ((B, 8), column k for A(k+1)) whose column k
+    it reads only once actuator k has fired. A sensitivities' replica that differs from its
+    instance in such a column alone keeps the instance's residual until that actuator first
+    fires, so its tangent is exactly zero until then and the engine skips its work
+    (`engine.BatchEngine.replica_waiting`)."""
 
     @staticmethod
     def coefficients(params: Sequence, topologies: Sequence, topology) -> Dict[str, np.ndarray]:

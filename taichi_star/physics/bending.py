@@ -105,6 +105,7 @@ class Bending(StrainTerm):
     """Strain elements: the triplets, s = κ, k = E·r0³/12 (its energy ½·k·(κ − κ⁰)²·Δl)."""
 
     name = "bending"
+    fired_columns = ("actuator_gain", "actuator_delay")  # read in actuator_curvature alone
 
     @staticmethod
     def coefficients(params, topologies, topology):

@@ -563,6 +563,45 @@ def test_replicas_leave_out_the_elastic_terms_their_instance_shares(taichi_cpu):
     assert not np.delete(same, elastic, axis=1).any()
 
 
+def test_a_replica_pair_waits_for_the_actuator_whose_gain_or_delay_alone_it_moves(taichi_cpu):
+    """`waiting_actuator`: k for the replicas of a direction that moves only A(k+1)'s gain or
+    delay (bending's `fired_columns`), −1 for every other row; the rule's edges: two columns,
+    a column and another coefficient, no difference at all, a pair whose replicas disagree.
+    That the waiting pairs' derivatives are those of finite differences once the actuator
+    fires: tests/model/test_sensitivities.py."""
+    solver = ts.SolverConfig()
+    runtime = Runtime.current()
+    runtime.ensure("cpu", solver.precision)
+    directions = ["alpha", "actuator_gains[1]", "actuator_delays[3]", "youngs_modulus"]
+    params = [ts.StarParams(gait="A1+A2"), ts.StarParams(gait="A1+A3", alpha=1.2)]
+    batch, _ = replica_batch(params, parse_directions(directions))
+    engine = runtime.engine_for(build_model(batch), solver, tangents=len(directions))
+    waiting = engine.waiting_actuator.to_numpy()[:len(batch)]
+    # the two instances, then each direction's +ε of both and −ε of both
+    np.testing.assert_array_equal(waiting, [-1, -1] + [-1] * 4 + [1] * 4 + [3] * 4 + [-1] * 4)
+
+    base = ts.StarParams(gait="A1")
+
+    def gains(**moved):
+        values = [1.0] * 8
+        for index, value in moved.items():
+            values[int(index[1:])] = value
+        return tuple(values)
+
+    def waiting_of(plus, minus):
+        engine = runtime.engine_for(build_model([base, plus, minus]), solver, tangents=1)
+        return list(engine.waiting_actuator.to_numpy()[:3])
+
+    one = base.replace(actuator_gains=gains(a1=1.1))
+    assert waiting_of(one, base.replace(actuator_gains=gains(a1=0.9))) == [-1, 1, 1]
+    two = base.replace(actuator_gains=gains(a1=1.1, a2=1.1))
+    assert waiting_of(two, two) == [-1, -1, -1]
+    with_alpha = one.replace(alpha=base.alpha * 1.01)
+    assert waiting_of(with_alpha, with_alpha) == [-1, -1, -1]
+    assert waiting_of(base, base) == [-1, -1, -1]
+    assert waiting_of(one, base.replace(actuator_gains=gains(a2=0.9))) == [-1, -1, -1]
+
+
 def test_a_gpu_engine_keeps_its_instances_contiguous(taichi_cpu):
     """Without even_spread (a GPU: whole warps of consecutive instances) instance b sits at
     slot b·loop_spread, the padding idle."""

@@ -194,6 +194,51 @@ def test_an_actuator_the_gait_never_fires_has_no_influence(euler_run, matches_di
                                                    ("actuator_gains[1]",)), 1e-8)
 
 
+def test_bending_reads_an_actuators_gain_and_delay_only_once_it_has_fired(taichi_cpu):
+    """What `Bending.fired_columns` declares, and the engine's skipping of a waiting pair's
+    tangent rests on: the gains and delays of actuators that never fire change no bit."""
+    other = BASE.replace(gait="A1", actuator_gains=(1.0,) + (1.7,) * 7,
+                         actuator_delays=(0.0,) + (0.01,) * 7)
+    runs = simulate([BASE.replace(gait="A1"), other], DURATION_S, record_interval_s=0.05,
+                    record_shapes=True)
+    np.testing.assert_array_equal(runs.shapes[:, 0], runs.shapes[:, 1])  # (records, B, N, 2)
+
+
+def test_a_direction_waiting_for_its_actuator_wakes_exact_when_it_fires(taichi_cpu):
+    """The pair of A2's gain or delay waits (no tangent work) while A2 has never fired, with
+    its derivative exactly zero, and takes it up from the step A2 first fires: then it equals
+    central differences of whole runs."""
+    from taichi_star import Simulator
+
+    params = BASE.replace(gait="A1+A2", actuator_delays=(0.0, 0.0005) + (0.0,) * 6)
+    solver = SolverConfig(**TIGHT)
+
+    def run(p, directions=()):
+        simulator = Simulator([p], solver, sensitivities=directions)
+        simulator.fire(["A1"])
+        simulator.advance(0.04)
+        early = [simulator.sensitivity("centroid_x_mm", name)[0] for name in directions]
+        simulator.fire(["A2"])
+        simulator.advance(0.06)
+        if directions:
+            return early, [simulator.sensitivity("centroid_x_mm", name)[0]
+                           for name in directions]
+        return simulator.state()["centroid_x_mm"].to_numpy()[0]
+
+    early, late = run(params, ("actuator_gains[1]", "actuator_delays[1]"))
+    assert early == [0.0, 0.0]
+    for value, (field, step) in zip(late, [("actuator_gains", 1e-3), ("actuator_delays", 1e-6)]):
+        moved = [list(getattr(params, field)) for _ in range(2)]
+        moved[0][1] += step
+        moved[1][1] -= step
+        difference = (run(params.replace(**{field: tuple(moved[0])}))
+                      - run(params.replace(**{field: tuple(moved[1])}))) / (2 * step)
+        # measured 5.4e-8 (the gain) and 5.0e-8 (the delay): the differences' truncation and
+        # Newton noise; 1e-6, ~20x. A pair that woke a step late, or from stale replicas,
+        # would be off by the first step's share of 0.06 s, percents
+        assert value != 0.0 and value == pytest.approx(difference, rel=1e-6), field
+
+
 def test_the_instances_rows_are_those_of_a_run_without_sensitivities(euler_run):
     plain = simulate(BATCH, DURATION_S, SolverConfig(**TIGHT), record_interval_s=0.05)
     for column in SUMMARY_OUTPUTS:
