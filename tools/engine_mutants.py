@@ -145,6 +145,34 @@ MUTANTS = [
     ("M26", "taichi_star/engine.py", "            store.write(kept)\n", "            pass\n",
      [LAGGED + "test_putting_back_some_instances_leaves_the_others_bitwise_alone"],
      "a lagged snapshot's kept factorisations not put back (the continuation refactors)"),
+    ("M27", "taichi_star/engine.py", "moving = self.state.fire_time[b, actuator] >= 0.0",
+     "moving = self.state.fire_time[b, actuator] > 0.0",
+     [SENSITIVITIES + "test_an_actuator_the_gait_never_fires_has_no_influence"],
+     "a pair waiting for an actuator fired at t = 0 waits until its next firing"),
+    ("M28", "taichi_star/engine.py", "moving = self.state.fire_time[b, actuator] >= 0.0",
+     "moving = False",
+     [SENSITIVITIES + "test_a_direction_waiting_for_its_actuator_wakes_exact_when_it_fires"],
+     "a waiting pair never wakes"),
+    ("M29", "taichi_star/engine.py",
+     "                shift = ti.Vector.zero(float, 2)\n                if moving:\n",
+     "                shift = ti.Vector.zero(float, 2)\n                if True:\n",
+     [SENSITIVITIES + "test_an_actuator_the_gait_never_fires_has_no_influence"],
+     "a waiting pair moved by the right-hand side its instance's previous pair left"),
+    ("M30", "taichi_star/engine.py",
+     "np.where(actuator == actuator[partner_rows], actuator, -1)", "actuator",
+     ["tests/model/test_engine.py::"
+      "test_a_replica_pair_waits_for_the_actuator_whose_gain_or_delay_alone_it_moves"],
+     "a pair waits though its replicas differ in different actuators' columns"),
+    ("M31", "taichi_star/engine.py", "single = ~elsewhere & (columns.sum(axis=1) == 1)",
+     "single = columns.sum(axis=1) == 1",
+     ["tests/model/test_engine.py::"
+      "test_a_replica_pair_waits_for_the_actuator_whose_gain_or_delay_alone_it_moves"],
+     "a pair waits though it also differs in a coefficient read before any firing"),
+    ("M32", "taichi_star/engine.py", "single = ~elsewhere & (columns.sum(axis=1) == 1)",
+     "single = ~elsewhere & (columns.sum(axis=1) >= 1)",
+     ["tests/model/test_engine.py::"
+      "test_a_replica_pair_waits_for_the_actuator_whose_gain_or_delay_alone_it_moves"],
+     "a pair waits for one actuator though it differs in two actuators' columns"),
 ]
 
 
