@@ -294,7 +294,9 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     `sensitivities`: StarParams fields (`params.DIFFERENTIABLE_FIELDS`; "actuator_gains" for
     all eight, "actuator_gains[3]" for one) to differentiate every output by, for every
     instance (`SimulationResult.sensitivity`; how: `taichi_star.sensitivities`). Each one costs
-    two replica instances per instance, which are moved along the exact tangent, not solved.
+    two replica instances per instance, which are moved along the exact tangent, not solved;
+    the gain or delay of an actuator an instance has not fired costs next to no time until it
+    fires (its derivative is exactly 0 until then).
 
     Memory: on the CPU a batch larger than one engine of `runtime.CPU_ENGINE_BUDGET_BYTES` is
     streamed through such an engine in equal chunks, one after the other; the result is the
