@@ -105,6 +105,17 @@ def elimination_plan(topology, terms_used) -> EliminationPlan:
                             order=order)
 
 
+def replica_rows(primal_count: int, batch_size: int):
+    """(replicas, instances, partners): the rows of the replicas of a batch of `primal_count`
+    instances followed by their replicas (`BatchEngine.replica`: pair j's +ε replicas, then its
+    −ε replicas), each one's simulated instance, and the other replica of each one's pair as an
+    index into `replicas`."""
+    replicas = np.arange(primal_count, batch_size)
+    count = max(primal_count, 1)
+    instances = replicas % count
+    return replicas, instances, (((replicas - count) // count) ^ 1) * count + instances
+
+
 @ti.data_oriented
 class BatchEngine:
     """Device model, state and solver for up to `capacity` instances of one topology and one
@@ -211,7 +222,7 @@ class BatchEngine:
         then the instance's, the same for both replicas of a pair, and `assemble` leaves it out
         of their difference (0 for the simulated instances, which assemble every term)."""
         self.waiting_actuator = arena.batch_field(ti.i32, capacity) if sensitive else None
-        """Per replica: the actuator k (index k − 1 for A_k) whose first firing its direction
+        """Per replica: the index k of the actuator A(k+1) whose first firing its direction
         waits for, or −1 (`replica_waiting`); −1 for the simulated instances."""
         if sensitive:
             external_pairs = {frozenset(pair) for pair in coupled_node_pairs(
@@ -330,11 +341,7 @@ class BatchEngine:
         into their difference: a damping time at 0 reshapes the +ε replica and not the −ε
         one)."""
         same = np.zeros((self.capacity, len(self.terms)), dtype=np.int32)
-        replicas = np.arange(primal_count, model.batch_size)
-        count = max(primal_count, 1)
-        instances = replicas % count
-        # the other replica of each one's pair (`replica`: pair j's +ε at 2j, −ε at 2j + 1)
-        partner_rows = (((replicas - count) // count) ^ 1) * count + instances
+        replicas, instances, partner_rows = replica_rows(primal_count, model.batch_size)
         for k, term in enumerate(self.terms):
             if term.reads_step_start:
                 continue
@@ -359,13 +366,9 @@ class BatchEngine:
         instance's until actuator k first fires (the term reads that column only then), so
         from rest, with the instance, the pair stays on it: its tangent is exactly zero."""
         waiting = np.full(self.capacity, -1, dtype=np.int32)
-        replicas = np.arange(primal_count, model.batch_size)
+        replicas, instances, partner_rows = replica_rows(primal_count, model.batch_size)
         if not len(replicas):
             return waiting
-        instances = replicas % primal_count
-        # the other replica of each one's pair, as a row of `replicas` (`replica_sameness`)
-        partner_rows = (((replicas - primal_count) // primal_count) ^ 1) * primal_count \
-            + instances
 
         def differs(values: np.ndarray) -> np.ndarray:
             return (values[replicas] != values[instances]).reshape(len(replicas), -1).any(1)
@@ -932,8 +935,8 @@ class BatchEngine:
         """Whether the replica pair of instance b whose +ε replica is `plus` needs its tangent
         step: not while the actuator its direction waits for (`waiting_actuator`) has never
         fired for b (its fire time, copied to the pair each step, still NEVER; a firing sets
-        it, due within the step or before, and only a reset to rest, with the replicas, clears
-        it)."""
+        it, due within the step or before, and only a reset to rest or the load of a saved
+        state clears it, each putting back the replicas with b)."""
         actuator = self.waiting_actuator[plus]
         moving = True
         if actuator >= 0:

@@ -175,6 +175,16 @@ MUTANTS = [
      ["tests/model/test_engine.py::"
       "test_a_replica_pair_waits_for_the_actuator_whose_gain_or_delay_alone_it_moves"],
      "a pair waits for one actuator though it differs in two actuators' columns"),
+    ("M33", "taichi_star/engine.py", "moving = self.state.fire_time[b, actuator] >= 0.0",
+     "moving = self.state.fire_time[plus, actuator] >= 0.0",
+     [SENSITIVITIES + "test_waiting_pairs_keep_every_bit_of_pairs_that_do_not_wait"],
+     "a pair wakes a step late (its replica's fire time, copied after this test)"),
+    ("M34", "taichi_star/engine.py",
+     "                self.prepare_step(r, start_time, end_time, h, ratio, use_history, 0)\n",
+     "                if moving:\n"
+     "                    self.prepare_step(r, start_time, end_time, h, ratio, use_history, 0)\n",
+     [SENSITIVITIES + "test_waiting_pairs_keep_every_bit_of_pairs_that_do_not_wait"],
+     "a waiting pair skips its preparation too (6e-9 off once it wakes)"),
 ]
 
 
