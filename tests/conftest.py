@@ -1,7 +1,9 @@
 import contextlib
 import errno
+import importlib.util
 import os
 import signal
+from pathlib import Path
 
 import pytest
 
@@ -14,6 +16,19 @@ def pytest_configure(config):
     # engine compiles in 0.45-0.7x the time (docs/reliability.md) and computes the same bits
     # (test_bench_quick checks); set here, it reaches every worker process the tests start
     os.environ.setdefault(KERNEL_OPTIMISATION_ENV, "0")
+
+
+@pytest.fixture(scope="session")
+def tool():
+    """A script of tools/ imported as a module, by name: tool("bench_builds")."""
+    def load(name: str):
+        path = Path(__file__).resolve().parents[1] / "tools" / f"{name}.py"
+        spec = importlib.util.spec_from_file_location(name, path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+
+    return load
 
 
 @pytest.fixture

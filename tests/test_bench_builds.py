@@ -1,7 +1,6 @@
 """tools/bench_builds.py's summary: the best of each build's rounds per measured case, the
 ratio after/before, and whether the builds' final states agree (synthetic runs)."""
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
@@ -12,12 +11,8 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
-def bench_builds():
-    spec = importlib.util.spec_from_file_location("bench_builds",
-                                                  REPO / "tools" / "bench_builds.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def bench_builds(tool):
+    return tool("bench_builds")
 
 
 def _row(build, round_number, batch, rate, digest, section="batch", lanes=1):

@@ -3,7 +3,6 @@ once in its file, and each one's tests existing, so that the committed table
 (results/mutation/engine_mutants.csv) can be made again (five texts had moved with the code
 unnoticed until the tool refused them, 2026-12)."""
 
-import importlib.util
 from pathlib import Path
 
 import pytest
@@ -12,12 +11,8 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
-def engine_mutants():
-    spec = importlib.util.spec_from_file_location("engine_mutants",
-                                                  REPO / "tools" / "engine_mutants.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def engine_mutants(tool):
+    return tool("engine_mutants")
 
 
 def test_every_mutants_text_is_found_once_and_changes_it(engine_mutants):

@@ -516,6 +516,19 @@ def test_a_sensitive_engine_spreads_its_instances_and_never_its_replicas(taichi_
     np.testing.assert_array_equal(slots, np.arange(5) * (iterations // 5))
 
 
+TWO_GAITS = (ts.StarParams(gait="A1+A2"), ts.StarParams(gait="A1+A3", alpha=1.2))
+
+
+def _sensitive_engine(directions, params=TWO_GAITS):
+    """(the CPU engine loaded with params and their replica pairs along directions, that
+    batch)."""
+    solver = ts.SolverConfig()
+    runtime = Runtime.current()
+    runtime.ensure("cpu", solver.precision)
+    batch, _ = replica_batch(params, parse_directions(directions))
+    return runtime.engine_for(build_model(batch), solver, tangents=len(directions)), batch
+
+
 def test_replicas_leave_out_the_elastic_terms_their_instance_shares(taichi_cpu):
     """A replica pair moved along α or C⊥ has its instance's stretching and bending
     coefficients, so those terms add the same residual to both replicas and are left out of
@@ -525,13 +538,8 @@ def test_replicas_leave_out_the_elastic_terms_their_instance_shares(taichi_cpu):
     batch with a damped one leave them out as they do alone (they assembled them until 2026-12,
     and their derivatives moved by up to 6e-8 with the company). The derivatives themselves:
     tests/model/test_sensitivities.py."""
-    solver = ts.SolverConfig()
-    runtime = Runtime.current()
-    runtime.ensure("cpu", solver.precision)
     directions = ["alpha", "drag_perpendicular", "youngs_modulus", "actuator_gains[0]"]
-    params = [ts.StarParams(gait="A1+A2"), ts.StarParams(gait="A1+A3", alpha=1.2)]
-    batch, _ = replica_batch(params, parse_directions(directions))
-    engine = runtime.engine_for(build_model(batch), solver, tangents=len(directions))
+    engine, batch = _sensitive_engine(directions)
     names = [term.name for term in engine.terms]
     same = engine.same_as_instance.to_numpy()[:len(batch)]
     stretching, bending = names.index("stretching"), names.index("bending")
@@ -547,9 +555,9 @@ def test_replicas_leave_out_the_elastic_terms_their_instance_shares(taichi_cpu):
                                       np.tile(expected[name], (4, 1)), err_msg=name)
         others = [k for k in range(len(names)) if k not in (stretching, bending)]
         assert not rows[:, others].any(), name
-    mixed = [params[0].replace(damping_time=0.01), params[1]]  # A1+A2 damped, A1+A3 not
-    batch, _ = replica_batch(mixed, parse_directions(["alpha", "damping_time"]))
-    engine = runtime.engine_for(build_model(batch), solver, tangents=2)
+    # A1+A2 damped, A1+A3 not
+    mixed = [TWO_GAITS[0].replace(damping_time=0.01), TWO_GAITS[1]]
+    engine, batch = _sensitive_engine(["alpha", "damping_time"], mixed)
     names = [term.name for term in engine.terms]
     assert "damping" in names
     same = engine.same_as_instance.to_numpy()[:len(batch)]
@@ -569,13 +577,8 @@ def test_a_replica_pair_waits_for_the_actuator_whose_gain_or_delay_alone_it_move
     a column and another coefficient, no difference at all, a pair whose replicas disagree.
     That the waiting pairs' derivatives are those of finite differences once the actuator
     fires: tests/model/test_sensitivities.py."""
-    solver = ts.SolverConfig()
-    runtime = Runtime.current()
-    runtime.ensure("cpu", solver.precision)
-    directions = ["alpha", "actuator_gains[1]", "actuator_delays[3]", "youngs_modulus"]
-    params = [ts.StarParams(gait="A1+A2"), ts.StarParams(gait="A1+A3", alpha=1.2)]
-    batch, _ = replica_batch(params, parse_directions(directions))
-    engine = runtime.engine_for(build_model(batch), solver, tangents=len(directions))
+    engine, batch = _sensitive_engine(["alpha", "actuator_gains[1]", "actuator_delays[3]",
+                                       "youngs_modulus"])
     waiting = engine.waiting_actuator.to_numpy()[:len(batch)]
     # the two instances, then each direction's +ε of both and −ε of both
     np.testing.assert_array_equal(waiting, [-1, -1] + [-1] * 4 + [1] * 4 + [3] * 4 + [-1] * 4)
@@ -589,7 +592,8 @@ def test_a_replica_pair_waits_for_the_actuator_whose_gain_or_delay_alone_it_move
         return tuple(values)
 
     def waiting_of(plus, minus):
-        engine = runtime.engine_for(build_model([base, plus, minus]), solver, tangents=1)
+        engine = Runtime.current().engine_for(build_model([base, plus, minus]), ts.SolverConfig(),
+                                              tangents=1)
         return list(engine.waiting_actuator.to_numpy()[:3])
 
     one = base.replace(actuator_gains=gains(a1=1.1))
