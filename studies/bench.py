@@ -107,7 +107,8 @@ MATMUL_SIZE, quick: QUICK_MATMUL_SIZE, in the row's precision, best of three, ti
 the row's engine: the machine's attainable rate in the same run; CPU paper rows only),
 factor_fraction_of_matmul (their ratio), bytes_per_step, bandwidth_gb_s,
 bandwidth_fraction, cost_in_forward_runs, cost_in_forward_runs_median,
-cost_in_own_forward_runs (the sensitivities section). And `bench.png` (`bench_gpu.png`): throughput
+cost_in_own_forward_runs, sensitivity_parameters (the sensitivities section; the parameters
+differentiated by, space-separated). And `bench.png` (`bench_gpu.png`): throughput
 against B (log-log, one line per precision, the design target dashed), the phase split and
 the scenarios.
 """
@@ -210,7 +211,8 @@ COLUMNS = ["machine", "cpu_model", "cores", "gpu", "gpu_driver", "arch", "preset
            "bookkeeping_us", "factor_flops", "factor_gflops", "matmul_gflops",
            "factor_fraction_of_matmul", "bytes_per_step",
            "bandwidth_gb_s", "bandwidth_fraction", "cost_in_forward_runs",
-           "cost_in_forward_runs_median", "cost_in_own_forward_runs", "final_state"]
+           "cost_in_forward_runs_median", "cost_in_own_forward_runs", "sensitivity_parameters",
+           "final_state"]
 
 
 def timestamp() -> str:
@@ -732,7 +734,7 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
         for (names, _), figures in zip(configurations, measured):
             add({"section": "sensitivities", "scenario": f"sensitivities_{len(names)}",
                  "preset": "paper", "batch_size": SENSITIVITY_BATCH, "precision": "f64",
-                 **figures})
+                 "sensitivity_parameters": " ".join(names), **figures})
     for workers in args.workers_list:
         for jacobian in args.jacobians:
             figures = measure_processes(args.process_batch, workers, jacobian, args.steps,

@@ -181,6 +181,25 @@ def test_the_sensitivities_section_differentiates_by_the_first_n_parameters_name
     assert bench.parse_args([]).sensitivity_parameters == list(bench.SENSITIVITY_PARAMETERS)
 
 
+def test_a_sensitivities_row_records_the_parameters_it_differentiated_by(tmp_path, monkeypatch):
+    calls = []
+
+    def measured(batch, duration, repeats, configurations):
+        calls.extend(configurations)
+        return [{"robot_steps_per_s": 1.0} for _ in configurations]
+
+    monkeypatch.setattr(bench, "measure_plains", measured)
+    bench.main(["--quick", "--no-progress", "--out", str(tmp_path), "--scenarios", "none",
+                "--no-plain-call", "--sensitivity-parameters", "alpha,actuator_gains[1]",
+                "--sensitivity-counts", "0,2"])
+    assert [(list(names), jacobian) for names, jacobian in calls] == [
+        ([], "newton"), (["alpha", "actuator_gains[1]"], "newton")]
+    rows = pd.read_csv(tmp_path / "bench.csv", keep_default_na=False)
+    rows = rows[rows["section"] == "sensitivities"]
+    assert list(rows["scenario"]) == ["sensitivities_0", "sensitivities_2"]
+    assert list(rows["sensitivity_parameters"]) == ["", "alpha actuator_gains[1]"]
+
+
 def test_step_phases_count_the_jacobian_only_where_the_matrix_is_refreshed():
     """Every iteration assembles its residual and solves; only the iterations that refresh the
     Newton matrix assemble the Jacobian (assembly − residual per iteration) and factor."""
