@@ -1308,9 +1308,11 @@ def _predictions(simulated, derivatives, trials, values, cycles, samples, rcond,
             measured_speed = trials[gait].paper_sign * fit.meas_speed_mm_s
         speeds[gait] = (speed, gradient, float(np.hypot(*(ends[1] - ends[0]))) / duration,
                         measured_speed)
+    rows_by_gait = _rows_by_gait(simulated, derivatives, added_sets, added_sigma_mm, cycles,
+                                 samples)
     tables = []
     for added in added_sets:
-        added_rows = _added_rows(simulated, derivatives, added, added_sigma_mm, cycles, samples)
+        added_rows = _added_rows(rows_by_gait, added)
         rows = []
         for gait, role, training in cases:
             residuals, jacobian, table = fit_of(training)
@@ -1472,9 +1474,10 @@ def parameter_design(simulated: Mapping[str, SimulatedRun],
                                                      samples)
     if added_sigma_mm is None:
         added_sigma_mm = _median_sigma(table)
+    rows_by_gait = _rows_by_gait(simulated, derivatives, sets, added_sigma_mm, cycles, samples)
     tables = []
     for added in [()] + sets:
-        rows = _added_rows(simulated, derivatives, added, added_sigma_mm, cycles, samples)
+        rows = _added_rows(rows_by_gait, added)
         part = parameter_uncertainty(residuals, jacobian, names, values, rcond, share,
                                      None if rows is None else rows / math.sqrt(len(trials)))
         part.insert(0, "added_trials", " ".join(added) or "none")
@@ -1514,12 +1517,19 @@ def design_set_count(candidates: int, max_trials: Optional[int] = None) -> int:
     return sum(math.comb(candidates, size) for size in _set_sizes(candidates, max_trials))
 
 
-def _added_rows(simulated, derivatives, added, sigma_mm, cycles, samples):
-    """The `trial_rows` of the added gaits, stacked (None for none), at one spread."""
+def _rows_by_gait(simulated, derivatives, added_sets, sigma_mm, cycles, samples) -> dict:
+    """The `trial_rows` of every gait in any set of `added_sets`, at one spread, each made once
+    however many sets hold it."""
+    gaits = dict.fromkeys(gait for added in added_sets for gait in added)
+    return {g: trial_rows(simulated[g], derivatives[g], sigma_mm, cycles, samples)
+            for g in gaits}
+
+
+def _added_rows(rows_by_gait, added):
+    """The rows (`_rows_by_gait`) of the added gaits, stacked (None for none)."""
     if not added:
         return None
-    return np.vstack([trial_rows(simulated[g], derivatives[g], sigma_mm, cycles, samples)
-                      for g in added])
+    return np.vstack([rows_by_gait[g] for g in added])
 
 
 def _median_sigma(table: pd.DataFrame) -> float:
