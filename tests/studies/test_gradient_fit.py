@@ -371,6 +371,33 @@ def test_the_summary_counts_the_cost_to_cma_objective_both_ways():
     assert list(table.columns) == gradient_fit.RESULT_COLUMNS
 
 
+def test_the_objective_at_cma_cost_counts_points_up_to_cma_whole_run_and_not_past_it():
+    """CMA-ES's three points cost 30 cost-equivalent robot-seconds, its best 2.0. Least squares
+    reaches 2.5 at exactly 30 (counted: the budget is CMA-ES's whole run, ≤) and 1.0 at 30.5
+    (not counted); a fit whose first call alone costs 31 reached nothing within it (NaN)."""
+    class FakeProblem:
+        box = [None] * 6
+
+        def validate(self, units, validate):
+            return 0.0
+
+    cma = gradient_fit.Recorder("6", "CMA-ES")
+    for objective in (5.0, 3.0, 2.0):
+        cma.add([objective], objective, 10.0, 10.0)
+    least_squares = gradient_fit.Recorder("6", "least-squares")
+    for objective, cost in ((4.0, 10.0), (2.5, 20.0), (1.0, 0.5)):
+        least_squares.add([objective], objective, 3.0 * cost, cost)
+    lbfgs = gradient_fit.Recorder("6", "L-BFGS-B")
+    lbfgs.add([0.5], 0.5, 100.0, 31.0)
+    table = gradient_fit.summarise([cma, least_squares, lbfgs], {"6": FakeProblem()}, (4, 6),
+                                   {"6": 3.0}).set_index("optimiser")
+    assert table.loc["least-squares", "objective_at_cma_cost"] == 2.5
+    assert table.loc["least-squares", "objective"] == 1.0  # its best, past the budget
+    assert math.isnan(table.loc["L-BFGS-B", "objective_at_cma_cost"])
+    # CMA-ES's own: its best over its whole run
+    assert table.loc["CMA-ES", "objective_at_cma_cost"] == 2.0
+
+
 def test_least_squares_finds_a_linear_minimum_and_differentiates_only_where_asked(
         monkeypatch):
     """On residuals linear in the units, r = A·u − y with the minimum u* inside the box, the
