@@ -71,7 +71,8 @@ sidecar: `gradient_fit.csv` (per set and optimiser: the cost columns, objective 
 validation objective on `--validate-cycles` with the training phases, robot-seconds each
 gradient fit needed to reach CMA-ES's objective and their ratio to CMA-ES's total, both counts,
 the best objective each optimiser reached within CMA-ES's cost-equivalent robot-seconds
-(`objective_at_cma_cost`: the optimisers compared on one budget), and `stop_reasons`: why
+(`objective_at_cma_cost`: the optimisers compared on one budget; for the polish, whose costs
+count on top of CMA-ES's run, CMA-ES's best), and `stop_reasons`: why
 each start or restart ended, in its library's words, or that a least-squares start spent its
 trial points), `gradient_fit_history.csv` (every evaluation:
 cumulative cost and best objective so far), `gradient_fit_uncertainty.csv` (per set, optimiser
@@ -199,6 +200,9 @@ class Recorder:
         self.best_objective, self.best_units = math.inf, None
         self.robot_seconds = self.cost_equivalent = 0.0
         self.stop_reasons: List[str] = []
+        self.carried: List[dict] = []
+        """Where a `continuing` recorder starts: one row of its predecessor's cost-equivalent
+        robot-seconds and best objective (empty for a recorder of its own)."""
 
     @classmethod
     def continuing(cls, previous: "Recorder", optimiser: str, on_add=None) -> "Recorder":
@@ -212,6 +216,8 @@ class Recorder:
         recorder.started -= last["wall_s"]
         recorder.best_objective = previous.best_objective
         recorder.best_units = np.array(previous.best_units, dtype=float)
+        recorder.carried = [{"objective": previous.best_objective,
+                             "robot_seconds_cost_equivalent": recorder.cost_equivalent}]
         return recorder
 
     def stopped(self, start: int, reason: str):
@@ -670,8 +676,8 @@ def summarise(recorders: Sequence[Recorder], problem_of, validate,
                 table.loc[index, share_column] = cost / cma_cost
             # the same budget for every optimiser: what each had reached once it had spent
             # CMA-ES's whole run, a call counted at its measured cost (NaN: its first call
-            # alone cost more)
-            within = [row["objective"] for row in recorder.rows
+            # alone cost more; a polish starts with CMA-ES's best at CMA-ES's cost)
+            within = [row["objective"] for row in recorder.carried + recorder.rows
                       if row["robot_seconds_cost_equivalent"] <= cma_cost]
             table.loc[index, "objective_at_cma_cost"] = min(within) if within else math.nan
     return table.reindex(columns=RESULT_COLUMNS)

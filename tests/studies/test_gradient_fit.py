@@ -373,8 +373,11 @@ def test_the_summary_counts_the_cost_to_cma_objective_both_ways():
 
 def test_the_objective_at_cma_cost_counts_points_up_to_cma_whole_run_and_not_past_it():
     """CMA-ES's three points cost 30 cost-equivalent robot-seconds, its best 2.0. Least squares
-    reaches 2.5 at exactly 30 (counted: the budget is CMA-ES's whole run, ≤) and 1.0 at 30.5
-    (not counted); a fit whose first call alone costs 31 reached nothing within it (NaN)."""
+    (two starts, a failed point among them) reaches 2.5 at exactly 30 (counted: the budget is
+    CMA-ES's whole run, ≤) and 1.0 at 30.5 (not counted); a fit whose first call alone costs
+    31 reached nothing within it (NaN); a polish, which starts at CMA-ES's whole run, has
+    CMA-ES's best there; another parameter set's points, cheap and low, count for none of
+    these, and without a CMA-ES run of its own that set has no budget (NaN)."""
     class FakeProblem:
         box = [None] * 6
 
@@ -385,17 +388,25 @@ def test_the_objective_at_cma_cost_counts_points_up_to_cma_whole_run_and_not_pas
     for objective in (5.0, 3.0, 2.0):
         cma.add([objective], objective, 10.0, 10.0)
     least_squares = gradient_fit.Recorder("6", "least-squares")
-    for objective, cost in ((4.0, 10.0), (2.5, 20.0), (1.0, 0.5)):
-        least_squares.add([objective], objective, 3.0 * cost, cost)
+    for start, objective, cost in ((0, 4.0, 10.0), (0, math.inf, 5.0), (1, 2.5, 15.0),
+                                   (1, 1.0, 0.5)):
+        least_squares.add([objective], objective, 3.0 * cost, cost, start)
     lbfgs = gradient_fit.Recorder("6", "L-BFGS-B")
     lbfgs.add([0.5], 0.5, 100.0, 31.0)
-    table = gradient_fit.summarise([cma, least_squares, lbfgs], {"6": FakeProblem()}, (4, 6),
-                                   {"6": 3.0}).set_index("optimiser")
-    assert table.loc["least-squares", "objective_at_cma_cost"] == 2.5
-    assert table.loc["least-squares", "objective"] == 1.0  # its best, past the budget
-    assert math.isnan(table.loc["L-BFGS-B", "objective_at_cma_cost"])
-    # CMA-ES's own: its best over its whole run
-    assert table.loc["CMA-ES", "objective_at_cma_cost"] == 2.0
+    polish = gradient_fit.Recorder.continuing(cma, "CMA-ES + least-squares")
+    polish.add([0.1], 0.1, 4.0, 4.0)
+    other = gradient_fit.Recorder("20", "least-squares")
+    other.add([0.01], 0.01, 1.0, 1.0)
+    table = gradient_fit.summarise([cma, least_squares, lbfgs, polish, other],
+                                   {"6": FakeProblem(), "20": FakeProblem()}, (4, 6),
+                                   {"6": 3.0, "20": 3.0}).set_index(["parameter_set", "optimiser"])
+    assert table.loc[("6", "least-squares"), "objective_at_cma_cost"] == 2.5
+    assert table.loc[("6", "least-squares"), "objective"] == 1.0  # its best, past the budget
+    assert math.isnan(table.loc[("6", "L-BFGS-B"), "objective_at_cma_cost"])
+    # CMA-ES's own: its best over its whole run; the polish: that, where it starts
+    assert table.loc[("6", "CMA-ES"), "objective_at_cma_cost"] == 2.0
+    assert table.loc[("6", "CMA-ES + least-squares"), "objective_at_cma_cost"] == 2.0
+    assert math.isnan(table.loc[("20", "least-squares"), "objective_at_cma_cost"])
 
 
 def test_least_squares_finds_a_linear_minimum_and_differentiates_only_where_asked(
