@@ -7,6 +7,7 @@ residuals, against CMA-ES on the same objective, box and start, for two paramete
                                    [--starts 2] [--lbfgs-evaluations 8]
                                    [--least-squares-evaluations 8]
                                    [--broyden-evaluations 16]
+                                   [--lm-iterations 4] [--lm-batch 7]
                                    [--least-squares-method trf|dogbox]
                                    [--cma-generations 8] [--polish-evaluations 0]
                                    [--popsize P] [--sigma0 0.25] [--seed S]
@@ -43,6 +44,15 @@ A1-A5).
   step that achieved less than `SECANT_AGREEMENT` of its predicted reduction), and elsewhere
   updated by Broyden's rank-one rule from the step and the change of the residuals its trial
   point's run gave: most of its points cost one run.
+- Levenberg-Marquardt in batches ("levenberg-marquardt-batch", `--lm-iterations` batches per
+  start, 0: not run): at each accepted point one run with sensitivities gives the residuals'
+  Jacobian, and one batched run without them scores `--lm-batch` damped steps from it at once
+  (dampings a decade apart, the box-constrained Levenberg-Marquardt step for each,
+  `damped_steps`); the best that improves is taken and the next grid centred on its damping.
+  Where a trust-region fit spends a run (and, on a shoulder, a Jacobian) on each step length
+  it tries, this one tries a grid of them per Jacobian, in one call of the batch simulator.
+  Same starts and bounds as the others; a batch counts every point's robot-seconds, all on its
+  first row.
 - CMA-ES (`studies.identify.minimise_cmaes`) from the base model, step `--sigma0`, population
   `--popsize` (cma's default 4 + 3 ln D when not given), `--cma-generations` generations, one
   batched run per generation.
@@ -177,9 +187,21 @@ for the secant fit to update its Jacobian by Broyden's rule rather than simulate
 trial point since the last Jacobian, simulated or updated, scoring no better than its point):
 trust-region methods' usual threshold of a poor model (scipy's trf shrinks its region below
 it)."""
+LEVENBERG_MARQUARDT = "levenberg-marquardt-batch"
+"""Levenberg-Marquardt with a batch of damped steps per Jacobian
+(`fit_levenberg_marquardt`; --lm-iterations)."""
+MARQUARDT_DAMPING = 0.01
+"""The damping the batches' grid of dampings is first centred on: Marquardt's own first λ
+(1963), the damping relative to each axis's curvature (the steps' scaling, `damped_steps`)."""
+DEFAULT_LM_BATCH = 7
+"""Damped steps per batch (--lm-batch): dampings a decade apart, three either way of the
+centre. On scratch fits of the other boxes and starts (set 6 and set 20 from the base model,
+"20fired" from the seeded random start, five batches each; 2026-12) the best damping of a
+batch lay three decades from its centre in five of fifteen batches: a narrower grid would have
+cut those steps short."""
 POLISH = "CMA-ES + least-squares"
 """Least squares from CMA-ES's best point (`--polish-evaluations`): its costs include CMA-ES's."""
-GRADIENT_OPTIMISERS = ("L-BFGS-B", LEAST_SQUARES, BROYDEN, POLISH)
+GRADIENT_OPTIMISERS = ("L-BFGS-B", LEAST_SQUARES, BROYDEN, LEVENBERG_MARQUARDT, POLISH)
 """Optimisers whose evaluations are runs with sensitivities."""
 QUICK_GAITS, QUICK_TRAIN, QUICK_VALIDATE = "A1+A2", "1:1", "2:2"
 RESULT_COLUMNS = ["parameter_set", "n_parameters", "optimiser", "starts", "evaluations",
@@ -611,6 +633,89 @@ def fit_least_squares(problem: Problem, points, max_evaluations: int, recorder: 
     return recorder
 
 
+def damping_grid(centre: float, batch: int) -> np.ndarray:
+    """`batch` dampings a decade apart around `centre`: centre · 10^k, k from -(batch // 2)
+    up, ascending (the longest step first)."""
+    return centre * 10.0 ** (np.arange(batch) - batch // 2)
+
+
+def damped_steps(residuals: np.ndarray, jacobian: np.ndarray, units: np.ndarray,
+                 dampings: Sequence[float]) -> np.ndarray:
+    """Levenberg-Marquardt's trial points (K, D) from `units` (D,) in the unit box, one per
+    damping λ: the step s minimising |r + J·s|² + λ·|diag(d)·s|² within the box (0 ≤ units +
+    s ≤ 1, scipy's bounded-variable least squares on the stacked system), d the Jacobian's
+    column norms (Marquardt's scaling: λ relative to each axis's curvature; a zero column's
+    d is 1). λ → 0 gives the box-constrained Gauss-Newton step, a large λ a short step down
+    the scaled gradient. `residuals` (R,), `jacobian` (R, D)."""
+    from scipy.optimize import lsq_linear
+    units = np.asarray(units, dtype=float)
+    scale = np.linalg.norm(jacobian, axis=0)
+    scale[scale == 0.0] = 1.0
+    stacked_residuals = np.concatenate([-np.asarray(residuals, dtype=float),
+                                        np.zeros(len(units))])
+    points = []
+    for damping in dampings:
+        stacked = np.vstack([jacobian, math.sqrt(damping) * np.diag(scale)])
+        step = lsq_linear(stacked, stacked_residuals, bounds=(-units, 1.0 - units),
+                          method="bvls").x
+        points.append(np.clip(units + step, 0.0, 1.0))  # bvls ends on a bound to round-off
+    return np.array(points)
+
+
+def record_batch(recorder: Recorder, problem: Problem, unit_points, objectives, start: int):
+    """Add one batched run without sensitivities of P points (P, D) to `recorder`: one row per
+    point, the whole batch's cost (P runs of every gait) on its first, since no point's
+    objective is known before the batch has run."""
+    per_batch = problem.window_s * len(problem.gaits) * len(unit_points)
+    for k, (units, value) in enumerate(zip(unit_points, objectives)):
+        cost = per_batch if k == 0 else 0.0
+        recorder.add(units, float(value), cost, cost, start)
+
+
+def fit_levenberg_marquardt(problem: Problem, points, iterations: int, batch: int,
+                            recorder: Recorder, cost_ratio: float) -> Recorder:
+    """Multi-start Levenberg-Marquardt over the unit box whose every Jacobian is tried with
+    `batch` dampings at once: from each of `points` (unit coordinates, `start_points`), one
+    run with sensitivities (residuals and Jacobian, `cost_ratio` runs), then `iterations`
+    times one batched run without them of the `damped_steps` at the `damping_grid` around the
+    last damping that served (MARQUARDT_DAMPING at first), scored by the trajectory objective
+    as CMA-ES's points are (`Problem.objectives`; failed runs score inf). The best point of a
+    batch that scores below the current point becomes the current one, the grid centred on
+    its damping, and the Jacobian is simulated there if another batch follows; a batch with
+    none below moves the grid `batch` decades up (shorter steps from the same Jacobian, no
+    simulation). A trust-region method tries one step length per run; the batch simulator
+    runs a grid of them in one call, at the robot-seconds of each (`record_batch`). It
+    searches the axes a fitted gait moves (`Problem.moved`), the others held at the start's."""
+    parameter_set = recorder.parameter_set
+    for start, x0 in enumerate(points):
+        units = np.asarray(x0, dtype=float)
+        residuals, jacobian = problem.residuals_and_jacobian(units)
+        value = float(residuals @ residuals)
+        record_gradient_call(recorder, problem, units, value, cost_ratio, start)
+        centre = MARQUARDT_DAMPING
+        for iteration in range(iterations):
+            dampings = damping_grid(centre, batch)
+            moved = damped_steps(residuals, problem.moved_columns(jacobian),
+                                 units[problem.moved], dampings)
+            trials = np.array([problem.embedded(point, units) for point in moved])
+            objectives = problem.objectives(trials)
+            record_batch(recorder, problem, trials, objectives, start)
+            best = int(np.argmin(objectives))
+            print(f"set {parameter_set} {recorder.optimiser} start {start}: batch "
+                  f"{iteration + 1}, best {objectives[best]:.5g} at damping "
+                  f"{dampings[best]:.0e}", flush=True)
+            if objectives[best] >= value:
+                centre *= 10.0 ** batch
+                continue
+            units, centre = trials[best], dampings[best]
+            if iteration + 1 < iterations:
+                residuals, jacobian = problem.residuals_and_jacobian(units)
+                value = float(residuals @ residuals)
+                record_gradient_call(recorder, problem, units, value, cost_ratio, start)
+        recorder.stopped(start, f"its {iterations} batches were spent")
+    return recorder
+
+
 def fit_cma(problem: Problem, generations: int, popsize, seed: int,
             recorder: Recorder) -> Recorder:
     """CMA-ES from the base model over the unit box (module docstring), every evaluation into
@@ -836,6 +941,13 @@ def build_parser():
                              "is simulated at its start and where the last served badly, "
                              f"Broyden-updated elsewhere (optimiser '{BROYDEN}'); 0 leaves "
                              "it out")
+    parser.add_argument("--lm-iterations", type=int, default=4, quick=1,
+                        help="batches of damped steps per start of the Levenberg-Marquardt "
+                             f"fit (optimiser '{LEVENBERG_MARQUARDT}'), a Jacobian before "
+                             "each that follows an improving one; 0 leaves it out")
+    parser.add_argument("--lm-batch", type=int, default=DEFAULT_LM_BATCH,
+                        help="damped steps per batch, dampings a decade apart (default "
+                             f"{DEFAULT_LM_BATCH})")
     parser.add_argument("--least-squares-method", default=DEFAULT_LEAST_SQUARES_METHOD,
                         choices=LEAST_SQUARES_METHODS,
                         help="scipy least_squares method of the least-squares fits (default "
@@ -868,11 +980,13 @@ def main(argv=None):
     args = cli.parse(build_parser(), argv)
     sets = cli.parse_choices(args.sets, "--sets", list(PARAMETER_SETS))
     for flag, value in (("--starts", args.starts), ("--lbfgs-evaluations", args.lbfgs_evaluations),
-                        ("--cma-generations", args.cma_generations)):
+                        ("--cma-generations", args.cma_generations),
+                        ("--lm-batch", args.lm_batch)):
         if value < 1:
             raise cli.StudyArgumentError(f"{flag} must be >= 1, got {value}")
     for flag, value in (("--least-squares-evaluations", args.least_squares_evaluations),
                         ("--broyden-evaluations", args.broyden_evaluations),
+                        ("--lm-iterations", args.lm_iterations),
                         ("--polish-evaluations", args.polish_evaluations)):
         if value < 0:
             raise cli.StudyArgumentError(f"{flag} must be >= 0, got {value}")
@@ -898,16 +1012,20 @@ def main(argv=None):
         # a gradient's evaluation runs each gait with two replicas per axis (`sensitivities`)
         # (at most: the secant fit simulates a Jacobian only at some of its points)
         gradient = args.starts * (args.lbfgs_evaluations + args.least_squares_evaluations
-                                  + args.broyden_evaluations) + args.polish_evaluations
+                                  + args.broyden_evaluations + args.lm_iterations
+                                  ) + args.polish_evaluations
         per_gradient = instances_per_instance(len(box) - len(identify.unfired_axes(box, gaits)))
+        batches = args.starts * args.lm_iterations * args.lm_batch
         cli.check_instances(
-            (cma_settings.evaluations(len(box)) + gradient * per_gradient) * len(gaits),
+            (cma_settings.evaluations(len(box)) + gradient * per_gradient + batches)
+            * len(gaits),
             f"set {name}: (--cma-generations {args.cma_generations} × population "
             f"{cma_settings.population(len(box), 0)} + (--starts {args.starts} × "
             f"(--lbfgs-evaluations {args.lbfgs_evaluations} + --least-squares-evaluations "
             f"{args.least_squares_evaluations} + --broyden-evaluations "
-            f"{args.broyden_evaluations}) + --polish-evaluations "
-            f"{args.polish_evaluations}) × {per_gradient}) × {len(gaits)} gaits")
+            f"{args.broyden_evaluations} + --lm-iterations {args.lm_iterations}) + "
+            f"--polish-evaluations {args.polish_evaluations}) × {per_gradient} + --starts × "
+            f"--lm-iterations × --lm-batch {args.lm_batch}) × {len(gaits)} gaits")
     for box in boxes.values():  # every corner of each group of CORNER_GROUP axes (2^20 is
         for group in range(0, len(box), CORNER_GROUP):  # too many; the groups share no limit)
             identify.check_box(box[group:group + CORNER_GROUP], base, "--sets")
@@ -926,6 +1044,8 @@ def main(argv=None):
                                                args.least_squares_evaluations,
                                            "least_squares_method": args.least_squares_method,
                                            "broyden_evaluations": args.broyden_evaluations,
+                                           "lm_iterations": args.lm_iterations,
+                                           "lm_batch": args.lm_batch,
                                            "cma_generations": args.cma_generations,
                                            "polish_evaluations": args.polish_evaluations,
                                            "popsize": args.popsize, "seed": args.seed,
@@ -960,6 +1080,12 @@ def main(argv=None):
                                                            args.seed),
                               args.broyden_evaluations, recorders[-1], cost_ratios[name],
                               args.least_squares_method, secant=True)
+        if args.lm_iterations:
+            recorders.append(Recorder(name, LEVENBERG_MARQUARDT, write_history))
+            fit_levenberg_marquardt(problems[name], start_points(problems[name], args.starts,
+                                                                 args.seed),
+                                    args.lm_iterations, args.lm_batch, recorders[-1],
+                                    cost_ratios[name])
         if args.polish_evaluations:
             recorders.append(Recorder.continuing(cma, POLISH, write_history))
             fit_least_squares(problems[name], [cma.best_units], args.polish_evaluations,

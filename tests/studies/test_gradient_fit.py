@@ -177,6 +177,8 @@ def test_the_history_plot_draws_both_counts_from_the_csv(tmp_path, monkeypatch):
     (["--polish-evaluations", "-1"], "--polish-evaluations must be >= 0"),
     (["--broyden-evaluations", "-1"], "--broyden-evaluations must be >= 0"),
     (["--cma-generations", "0"], "--cma-generations must be >= 1"),
+    (["--lm-iterations", "-1"], "--lm-iterations must be >= 0"),
+    (["--lm-batch", "0"], "--lm-batch must be >= 1"),
     (["--popsize", "1"], "--popsize must be >= 2"),
     (["--least-squares-method", "lm"], "--least-squares-method"),
     (["--train-cycles", "0:3"], "--train-cycles: expected FIRST:LAST"),
@@ -797,20 +799,34 @@ def test_main_runs_each_optimiser_with_its_own_flags(tmp_path, monkeypatch):
         calls.append((recorder.optimiser, max_evaluations, method, secant))
         return recorder
 
+    def fake_levenberg_marquardt(problem, points, iterations, batch, recorder, cost_ratio):
+        calls.append((recorder.optimiser, iterations, batch, cost_ratio))
+        return recorder
+
     def stop(*args, **kwargs):
         raise Stop
     monkeypatch.setattr(gradient_fit, "fit_cma", fake_cma)
     monkeypatch.setattr(gradient_fit, "measure_cost_ratio", lambda problem: 2.0)
     monkeypatch.setattr(gradient_fit, "fit_lbfgs", lambda *args: calls.append(("L-BFGS-B",)))
     monkeypatch.setattr(gradient_fit, "fit_least_squares", fake_least_squares)
+    monkeypatch.setattr(gradient_fit, "fit_levenberg_marquardt", fake_levenberg_marquardt)
     monkeypatch.setattr(gradient_fit, "summarise", stop)
     with pytest.raises(Stop):
         gradient_fit.main(["--least-squares-evaluations", "5", "--broyden-evaluations", "3",
                            "--polish-evaluations", "4", "--least-squares-method", "dogbox",
+                           "--lm-iterations", "6", "--lm-batch", "3",
                            "--out", str(tmp_path / "out"), "--quick", "--no-progress"])
     assert calls == [("L-BFGS-B",), (gradient_fit.LEAST_SQUARES, 5, "dogbox", False),
                      (gradient_fit.BROYDEN, 3, "dogbox", True),
+                     (gradient_fit.LEVENBERG_MARQUARDT, 6, 3, 2.0),
                      (gradient_fit.POLISH, 4, "dogbox", False)]
+    # 0 leaves the batched fit out
+    calls.clear()
+    with pytest.raises(Stop):
+        gradient_fit.main(["--lm-iterations", "0", "--out", str(tmp_path / "out0"), "--quick",
+                           "--no-progress"])
+    assert [call[0] for call in calls] == ["L-BFGS-B", gradient_fit.LEAST_SQUARES,
+                                           gradient_fit.BROYDEN]
 
 
 def test_segments_score_the_way_from_each_best_point_to_the_lowest(monkeypatch):
@@ -950,3 +966,173 @@ def test_a_point_on_two_segments_is_simulated_once(monkeypatch):
     polish = table[table["optimiser"] == gradient_fit.POLISH].drop(columns="optimiser")
     assert cma.reset_index(drop=True).equals(polish.reset_index(drop=True))
     np.testing.assert_allclose(cma["objective"], [1.2, 1.4, 1.6])
+
+
+def test_the_damping_grid_is_decades_around_its_centre():
+    np.testing.assert_allclose(gradient_fit.damping_grid(0.01, 7),
+                               [1e-5, 1e-4, 1e-3, 1e-2, 1e-1, 1.0, 10.0], rtol=1e-15)
+    # an even batch: one decade more below the centre than above
+    np.testing.assert_allclose(gradient_fit.damping_grid(2.0, 4), [0.02, 0.2, 2.0, 20.0],
+                               rtol=1e-15)
+    np.testing.assert_array_equal(gradient_fit.damping_grid(3.0, 1), [3.0])
+
+
+def damped_model_gradient(residuals, jacobian, units, point, damping):
+    """The gradient of |r + J·s|² + λ·|diag(d)·s|² / 2 at s = point - units (d the column
+    norms): zero on a free axis of the box-constrained minimum, of the sign that pushes
+    outwards on an axis at a bound (the KKT conditions)."""
+    step = point - units
+    scale = np.linalg.norm(jacobian, axis=0)
+    return jacobian.T @ (residuals + jacobian @ step) + damping * scale ** 2 * step
+
+
+def test_damped_steps_are_levenberg_marquardts_steps_within_the_box():
+    """Inside the box each point is Marquardt's step -(JᵀJ + λ·diag(JᵀJ))⁻¹ Jᵀr (a linear
+    solve of its own, not scipy's); λ → 0 reaches the minimum of the linear model; where the
+    model's minimum lies outside the box each point meets the box-constrained problem's KKT
+    conditions; a larger damping never gives a longer scaled step."""
+    rng = np.random.default_rng(7)
+    jacobian = rng.normal(size=(12, 4)) * np.array([1.0, 10.0, 0.1, 3.0])
+    units = np.full(4, 0.5)
+    inside = rng.normal(size=4) * 0.05
+    residuals = -jacobian @ inside + 0.01 * rng.normal(size=12)
+    dampings = [1e-12, 1e-2, 1.0, 100.0]
+    points = gradient_fit.damped_steps(residuals, jacobian, units, dampings)
+    curvature = jacobian.T @ jacobian
+    for point, damping in zip(points, dampings):
+        step = -np.linalg.solve(curvature + damping * np.diag(np.diag(curvature)),
+                                jacobian.T @ residuals)
+        assert np.all(np.abs(step) < 0.5)    # inside the box: the bounds are inactive
+        # bvls solves the stacked system by QR; the two agree to ~cond(JᵀJ)·eps ≈ 1e-12
+        np.testing.assert_allclose(point - units, step, rtol=1e-9, atol=1e-12)
+    # λ = 1e-12: the model's minimum (lstsq), to λ·cond relative
+    np.testing.assert_allclose(points[0] - units,
+                               np.linalg.lstsq(jacobian, -residuals, rcond=None)[0],
+                               rtol=1e-8, atol=1e-12)
+    scale = np.linalg.norm(jacobian, axis=0)
+    lengths = [np.linalg.norm(scale * (p - units)) for p in points]
+    assert all(a >= b for a, b in zip(lengths, lengths[1:]))
+    # the model's minimum far outside the box: every point inside it, some axis on a bound,
+    # and the KKT conditions of the damped problem on the box
+    far = -jacobian @ np.array([2.0, -3.0, 0.1, 0.05])
+    units = np.array([0.9, 0.1, 0.5, 0.0])
+    for damping in (1e-6, 1e-2, 1.0):
+        point = gradient_fit.damped_steps(far, jacobian, units, [damping])[0]
+        assert np.all((point >= 0.0) & (point <= 1.0))
+        gradient = damped_model_gradient(far, jacobian, units, point, damping)
+        # |g| relative to |Jᵀr|: bvls's optimality to round-off
+        tolerance = 1e-9 * np.linalg.norm(jacobian.T @ far)
+        at_lower, at_upper = point <= 1e-12, point >= 1.0 - 1e-12
+        assert at_lower.any() or at_upper.any()
+        free = ~(at_lower | at_upper)
+        assert np.all(np.abs(gradient[free]) <= tolerance)
+        assert np.all(gradient[at_lower] >= -tolerance)
+        assert np.all(gradient[at_upper] <= tolerance)
+
+
+def linear_levenberg_marquardt_problem(monkeypatch, seed=4):
+    """A Problem on set 6 whose residuals are linear in the units, r = A·u − y, the minimum
+    inside the box: (problem, calls, matrix, target), `calls` the fit's simulations in order
+    ("jacobian" at a point, or ("batch", points))."""
+    box = [identify.parse_range_spec(text, "--sets") for text in gradient_fit.PARAMETER_SETS["6"]]
+    problem = gradient_fit.Problem(box, StarParams(gait="A1+A2"), ["A1+A2"], {}, (1, 1),
+                                   SolverConfig(), "cpu")
+    rng = np.random.default_rng(seed)
+    matrix = rng.normal(size=(15, 6))
+    target = matrix @ rng.uniform(0.2, 0.8, 6) + rng.normal(scale=0.1, size=15)
+    calls = []
+
+    def residuals_and_jacobian(units):
+        calls.append(("jacobian", np.array(units)))
+        return matrix @ units - target, matrix
+
+    def objectives(points):
+        calls.append(("batch", np.array(points)))
+        return np.array([float(np.sum((matrix @ p - target) ** 2)) for p in points])
+
+    monkeypatch.setattr(problem, "residuals_and_jacobian", residuals_and_jacobian)
+    monkeypatch.setattr(problem, "objectives", objectives)
+    return problem, calls, matrix, target
+
+
+def test_levenberg_marquardt_reaches_a_linear_minimum_and_differentiates_only_where_it_moves(
+        monkeypatch):
+    """From the base model: a Jacobian, then a batch of `batch` damped steps, the best taken
+    and the Jacobian simulated there, the next grid centred on its damping; none after the
+    last batch. The linear minimum is reached (the small dampings' steps are Gauss-Newton's,
+    exact here). A batch's cost, all its points' runs, is on its first row."""
+    problem, calls, matrix, target = linear_levenberg_marquardt_problem(monkeypatch)
+    minimum_units = np.linalg.lstsq(matrix, target, rcond=None)[0]
+    minimum = float(np.sum((matrix @ minimum_units - target) ** 2))
+    grids = []
+    steps = gradient_fit.damped_steps
+
+    def spy(residuals, jacobian, units, dampings):
+        grids.append(np.array(dampings))
+        return steps(residuals, jacobian, units, dampings)
+
+    monkeypatch.setattr(gradient_fit, "damped_steps", spy)
+    recorder = gradient_fit.fit_levenberg_marquardt(
+        problem, gradient_fit.start_points(problem, 1, 0), 3, 5,
+        gradient_fit.Recorder("6", gradient_fit.LEVENBERG_MARQUARDT), cost_ratio=2.5)
+    kinds = [call[0] for call in calls]
+    assert kinds == ["jacobian", "batch", "jacobian", "batch", "jacobian", "batch"]
+    np.testing.assert_array_equal(calls[0][1], identify.start_units(problem.box, problem.base))
+    for k in (2, 4):  # each Jacobian at the best point of the batch before it
+        points = calls[k - 1][1]
+        best = points[np.argmin([np.sum((matrix @ p - target) ** 2) for p in points])]
+        np.testing.assert_array_equal(calls[k][1], best)
+    np.testing.assert_allclose(grids[0], gradient_fit.damping_grid(
+        gradient_fit.MARQUARDT_DAMPING, 5), rtol=1e-15)
+    for before, after, batch in zip(grids, grids[1:], (calls[1][1], calls[3][1])):
+        chosen = before[np.argmin([np.sum((matrix @ p - target) ** 2) for p in batch])]
+        np.testing.assert_allclose(after, gradient_fit.damping_grid(chosen, 5), rtol=1e-15)
+    # the smallest damping of the last grid is ≤ 1e-7 relative: its step reaches the minimum
+    # to ~1e-7 of the distance, the objective's excess to its square
+    assert recorder.best_objective == pytest.approx(minimum, rel=1e-9)
+    window = problem.base.period
+    assert recorder.robot_seconds == pytest.approx((3 * 5 + 3 * 13) * window)
+    assert recorder.cost_equivalent == pytest.approx((3 * 5 + 3 * 2.5) * window)
+    batch_rows = recorder.rows[1:6]
+    assert batch_rows[0]["robot_seconds"] - recorder.rows[0]["robot_seconds"] == \
+        pytest.approx(5 * window)
+    assert {row["robot_seconds"] for row in batch_rows} == {batch_rows[0]["robot_seconds"]}
+    assert len(recorder.rows) == 3 * 5 + 3
+    assert recorder.stop_reasons == ["start 0: its 3 batches were spent"]
+
+
+def test_a_batch_with_no_better_point_moves_the_grid_up_without_a_jacobian(monkeypatch):
+    """A batch whose every point scores no better than the current one (here: every run
+    failed, inf) keeps the point and its Jacobian: the next batch, from the same point, tries
+    the `batch` decades above the last grid; a point scoring exactly the current objective
+    does not move the fit either."""
+    problem, calls, matrix, target = linear_levenberg_marquardt_problem(monkeypatch)
+    grids = []
+    steps = gradient_fit.damped_steps
+    monkeypatch.setattr(gradient_fit, "damped_steps", lambda r, j, u, dampings: (
+        grids.append(np.array(dampings)), steps(r, j, u, dampings))[1])
+    scores = problem.objectives
+    start = identify.start_units(problem.box, problem.base)
+    residuals = matrix @ start - target
+    current = float(residuals @ residuals)  # as the fit computes it: a tie to the last bit
+    answers = iter([math.inf, current])
+
+    def objectives(points):  # two batches answered as above, the third scored
+        answer = next(answers, None)
+        if answer is None:
+            return scores(points)
+        calls.append(("batch", np.array(points)))
+        return np.full(len(points), answer)
+
+    monkeypatch.setattr(problem, "objectives", objectives)
+    recorder = gradient_fit.fit_levenberg_marquardt(
+        problem, [start], 3, 3, gradient_fit.Recorder("6", "fit"), cost_ratio=2.0)
+    assert [call[0] for call in calls] == ["jacobian", "batch", "batch", "batch"]
+    np.testing.assert_allclose(grids[0], [1e-3, 1e-2, 1e-1], rtol=1e-15)
+    np.testing.assert_allclose(grids[1], [1.0, 10.0, 100.0], rtol=1e-15)
+    np.testing.assert_allclose(grids[2], [1e3, 1e4, 1e5], rtol=1e-15)
+    assert [row["objective"] for row in recorder.rows[1:4]] == [math.inf] * 3
+    # after two batches the start is still the best (its Jacobian's row; a tie does not move)
+    assert recorder.rows[6]["best_objective"] == recorder.rows[0]["objective"]
+    # the third batch, scored for real, improves on the start
+    assert min(row["objective"] for row in recorder.rows[7:]) < current
