@@ -1,6 +1,6 @@
 """Gradient-based identification beside CMA-ES: L-BFGS-B on the exact gradient of the
-trajectory objective and a trust-region least-squares fit on the exact Jacobian of its
-residuals, against CMA-ES on the same objective, box and start, for two parameter sets.
+trajectory objective, a trust-region least-squares fit and Levenberg-Marquardt in batches on
+the exact Jacobian of its residuals, against CMA-ES on the same objective, box and start, for two parameter sets.
 
     python -m studies gradient_fit [--sets 6,20fired] [--gaits paper|A1,A1+A2,...]
                                    [--train-cycles 1:3] [--validate-cycles 4:6]
@@ -119,9 +119,9 @@ from taichi_star.timegrid import nearest_interval
 
 from . import cli, identify
 
-DESCRIPTION = ("L-BFGS-B and least squares on the exact gradient of the trajectory objective "
-               "beside CMA-ES, for 6 and 20 parameters: evaluations, robot-seconds, wall time, "
-               "objective reached.")
+DESCRIPTION = ("L-BFGS-B, least squares and Levenberg-Marquardt in batches on the exact "
+               "gradient of the trajectory objective beside CMA-ES, for 6 and 20 parameters: "
+               "evaluations, robot-seconds, wall time, objective reached.")
 
 PARAMETER_SETS = {
     "6": ["alpha=0.2:1.5", "added_mass_coeff=0:3", "drag_perpendicular=0.3:3:log",
@@ -644,13 +644,13 @@ def damped_steps(residuals: np.ndarray, jacobian: np.ndarray, units: np.ndarray,
     """Levenberg-Marquardt's trial points (K, D) from `units` (D,) in the unit box, one per
     damping λ: the step s minimising |r + J·s|² + λ·|diag(d)·s|² within the box (0 ≤ units +
     s ≤ 1, scipy's bounded-variable least squares on the stacked system), d the Jacobian's
-    column norms (Marquardt's scaling: λ relative to each axis's curvature; a zero column's
-    d is 1). λ → 0 gives the box-constrained Gauss-Newton step, a large λ a short step down
+    column norms (Marquardt's scaling: λ relative to each axis's curvature; an axis whose
+    column is zero, which the residuals do not see, is left where it is: bvls starts from the
+    minimum-norm least-squares solution, zero along it, and no gradient moves it). λ → 0 gives the box-constrained Gauss-Newton step, a large λ a short step down
     the scaled gradient. `residuals` (R,), `jacobian` (R, D)."""
     from scipy.optimize import lsq_linear
     units = np.asarray(units, dtype=float)
     scale = np.linalg.norm(jacobian, axis=0)
-    scale[scale == 0.0] = 1.0
     stacked_residuals = np.concatenate([-np.asarray(residuals, dtype=float),
                                         np.zeros(len(units))])
     points = []

@@ -1012,6 +1012,10 @@ def test_damped_steps_are_levenberg_marquardts_steps_within_the_box():
     scale = np.linalg.norm(jacobian, axis=0)
     lengths = [np.linalg.norm(scale * (p - units)) for p in points]
     assert all(a >= b for a, b in zip(lengths, lengths[1:]))
+    # an axis the residuals do not see (a zero column) does not move, whatever the damping
+    blind = np.hstack([jacobian, np.zeros((12, 1))])
+    for point in gradient_fit.damped_steps(residuals, blind, np.append(units, 0.3), dampings):
+        assert point[-1] == 0.3
     # the model's minimum far outside the box: every point inside it, some axis on a bound,
     # and the KKT conditions of the damped problem on the box
     far = -jacobian @ np.array([2.0, -3.0, 0.1, 0.05])
@@ -1103,36 +1107,39 @@ def test_levenberg_marquardt_reaches_a_linear_minimum_and_differentiates_only_wh
 
 def test_a_batch_with_no_better_point_moves_the_grid_up_without_a_jacobian(monkeypatch):
     """A batch whose every point scores no better than the current one (here: every run
-    failed, inf) keeps the point and its Jacobian: the next batch, from the same point, tries
-    the `batch` decades above the last grid; a point scoring exactly the current objective
-    does not move the fit either."""
+    failed, inf; then every point exactly the current objective, a tie) keeps the point and
+    its Jacobian: the next batch, from the same point, tries the `batch` decades above the
+    last grid. A batch whose best point is not its first moves the fit to that point (the
+    Jacobian simulated there) and centres the next grid on that point's damping."""
     problem, calls, matrix, target = linear_levenberg_marquardt_problem(monkeypatch)
-    grids = []
+    grids, batches = [], []
     steps = gradient_fit.damped_steps
     monkeypatch.setattr(gradient_fit, "damped_steps", lambda r, j, u, dampings: (
         grids.append(np.array(dampings)), steps(r, j, u, dampings))[1])
-    scores = problem.objectives
     start = identify.start_units(problem.box, problem.base)
     residuals = matrix @ start - target
     current = float(residuals @ residuals)  # as the fit computes it: a tie to the last bit
-    answers = iter([math.inf, current])
+    answers = iter([[math.inf] * 3, [current] * 3, [current + 1.0, current - 1.0, current]])
 
-    def objectives(points):  # two batches answered as above, the third scored
-        answer = next(answers, None)
-        if answer is None:
-            return scores(points)
+    def objectives(points):  # three batches answered as above, the fourth scored
         calls.append(("batch", np.array(points)))
-        return np.full(len(points), answer)
+        batches.append(np.array(points))
+        answer = next(answers, None)
+        return np.array(answer) if answer is not None else np.array(
+            [float(np.sum((matrix @ p - target) ** 2)) for p in points])
 
     monkeypatch.setattr(problem, "objectives", objectives)
     recorder = gradient_fit.fit_levenberg_marquardt(
-        problem, [start], 3, 3, gradient_fit.Recorder("6", "fit"), cost_ratio=2.0)
-    assert [call[0] for call in calls] == ["jacobian", "batch", "batch", "batch"]
+        problem, [start], 4, 3, gradient_fit.Recorder("6", "fit"), cost_ratio=2.0)
+    assert [call[0] for call in calls] == ["jacobian", "batch", "batch", "batch", "jacobian",
+                                           "batch"]
     np.testing.assert_allclose(grids[0], [1e-3, 1e-2, 1e-1], rtol=1e-15)
     np.testing.assert_allclose(grids[1], [1.0, 10.0, 100.0], rtol=1e-15)
     np.testing.assert_allclose(grids[2], [1e3, 1e4, 1e5], rtol=1e-15)
     assert [row["objective"] for row in recorder.rows[1:4]] == [math.inf] * 3
     # after two batches the start is still the best (its Jacobian's row; a tie does not move)
     assert recorder.rows[6]["best_objective"] == recorder.rows[0]["objective"]
-    # the third batch, scored for real, improves on the start
-    assert min(row["objective"] for row in recorder.rows[7:]) < current
+    # the third batch's middle point is taken: the Jacobian there, the grid around 1e4
+    np.testing.assert_array_equal(calls[4][1], batches[2][1])
+    np.testing.assert_allclose(grids[3], [1e3, 1e4, 1e5], rtol=1e-15)
+    assert recorder.rows[9]["best_objective"] == current - 1.0
