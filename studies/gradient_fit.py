@@ -1,6 +1,7 @@
 """Gradient-based identification beside CMA-ES: L-BFGS-B on the exact gradient of the
 trajectory objective, a trust-region least-squares fit and Levenberg-Marquardt in batches on
-the exact Jacobian of its residuals, against CMA-ES on the same objective, box and start, for two parameter sets.
+the exact Jacobian of its residuals, against CMA-ES on the same objective, box and start, for
+two parameter sets.
 
     python -m studies gradient_fit [--sets 6,20fired] [--gaits paper|A1,A1+A2,...]
                                    [--train-cycles 1:3] [--validate-cycles 4:6]
@@ -646,8 +647,9 @@ def damped_steps(residuals: np.ndarray, jacobian: np.ndarray, units: np.ndarray,
     s ≤ 1, scipy's bounded-variable least squares on the stacked system), d the Jacobian's
     column norms (Marquardt's scaling: λ relative to each axis's curvature; an axis whose
     column is zero, which the residuals do not see, is left where it is: bvls starts from the
-    minimum-norm least-squares solution, zero along it, and no gradient moves it). λ → 0 gives the box-constrained Gauss-Newton step, a large λ a short step down
-    the scaled gradient. `residuals` (R,), `jacobian` (R, D)."""
+    minimum-norm least-squares solution, zero along it, and no gradient moves it). λ → 0 gives
+    the box-constrained Gauss-Newton step, a large λ a short step down the scaled gradient.
+    `residuals` (R,), `jacobian` (R, D)."""
     from scipy.optimize import lsq_linear
     units = np.asarray(units, dtype=float)
     scale = np.linalg.norm(jacobian, axis=0)
