@@ -67,7 +67,8 @@ other axes alone (the left-out ones held at the start's values; CMA-ES searches 
 the study names them on stderr before it starts.
 
 Cost, per optimiser: evaluations (a CMA-ES point; an L-BFGS-B call; a least-squares fit's
-runs, with and without sensitivities), wall time, and simulated robot-seconds = instances ×
+runs, with and without sensitivities; each point of a Levenberg-Marquardt batch and each of
+its Jacobians), wall time, and simulated robot-seconds = instances ×
 simulated seconds, counted two ways. A run with n sensitivities carries 2n replica instances
 per instance (the ±ε pairs): they are never solved, only assembled at the solved state, so
 they cost less than an instance; `robot_seconds` counts each replica as a full instance
@@ -85,7 +86,10 @@ the best objective each optimiser reached within CMA-ES's cost-equivalent robot-
 (`objective_at_cma_cost`: the optimisers compared on one budget; for the polish, whose costs
 count on top of CMA-ES's run, CMA-ES's best), and `stop_reasons`: why
 each start or restart ended, in its library's words, or that a least-squares start spent its
-trial points), `gradient_fit_history.csv` (every evaluation:
+trial points), `gradient_fit_cma_budgets.csv` (`cma_budget_shares`: against CMA-ES's best
+after each of its generations, the cost-equivalent robot-seconds each other optimiser needed to
+reach it and their share of CMA-ES's: the comparison for every CMA-ES budget up to
+--cma-generations), `gradient_fit_history.csv` (every evaluation:
 cumulative cost and best objective so far), `gradient_fit_uncertainty.csv` (per set, optimiser
 and parameter, at the optimiser's best point: `identification.parameter_uncertainty` from one
 run with the sensitivities there, not counted in any cost: which parameters the training data
@@ -200,6 +204,13 @@ centre. On scratch fits of the other boxes and starts (set 6 and set 20 from the
 "20fired" from the seeded random start, five batches each; 2026-12) the best damping of a
 batch lay three decades from its centre in five of fifteen batches: a narrower grid would have
 cut those steps short."""
+MAX_LM_BATCH = 20
+"""The most damped steps a batch may try (--lm-batch): a grid wider than twenty decades reaches
+dampings whose steps vanish below a float's resolution of a unit coordinate."""
+VANISHED_STEP = 1e-12
+"""The length (largest axis, unit coordinates) at or below which every damped step of a grid
+ends a Levenberg-Marquardt start before its batch is run: at a stationary point, or with a zero
+Jacobian, the batch would only simulate the current point again."""
 POLISH = "CMA-ES + least-squares"
 """Least squares from CMA-ES's best point (`--polish-evaluations`): its costs include CMA-ES's."""
 GRADIENT_OPTIMISERS = ("L-BFGS-B", LEAST_SQUARES, BROYDEN, LEVENBERG_MARQUARDT, POLISH)
@@ -211,6 +222,10 @@ RESULT_COLUMNS = ["parameter_set", "n_parameters", "optimiser", "starts", "evalu
                   "share_of_cma_robot_seconds", "cost_equivalent_to_cma_objective",
                   "share_of_cma_cost_equivalent", "objective_at_cma_cost", "gradient_cost_ratio",
                   "stop_reasons"]
+CMA_BUDGET_COLUMNS = ["parameter_set", "cma_generations", "cma_robot_seconds", "cma_objective",
+                      "optimiser", "cost_equivalent_to_cma_objective",
+                      "share_of_cma_cost_equivalent"]
+"""The columns of `gradient_fit_cma_budgets.csv` (`cma_budget_shares`)."""
 
 
 class Recorder:
@@ -685,21 +700,27 @@ def fit_levenberg_marquardt(problem: Problem, points, iterations: int, batch: in
     batch that scores below the current point becomes the current one, the grid centred on
     its damping, and the Jacobian is simulated there if another batch follows; a batch with
     none below moves the grid `batch` decades up (shorter steps from the same Jacobian, no
-    simulation). A trust-region method tries one step length per run; the batch simulator
-    runs a grid of them in one call, at the robot-seconds of each (`record_batch`). It
-    searches the axes a fitted gait moves (`Problem.moved`), the others held at the start's."""
+    simulation). A start ends when its batches are spent, or before a batch whose every step
+    is at most VANISHED_STEP long. A trust-region method tries one step length per run; the
+    batch simulator runs a grid of them in one call, at the robot-seconds of each
+    (`record_batch`). It searches the axes a fitted gait moves (`Problem.moved`), the others
+    held at the start's."""
     parameter_set = recorder.parameter_set
     for start, x0 in enumerate(points):
         units = np.asarray(x0, dtype=float)
         residuals, jacobian = problem.residuals_and_jacobian(units)
         value = float(residuals @ residuals)
         record_gradient_call(recorder, problem, units, value, cost_ratio, start)
-        centre = MARQUARDT_DAMPING
+        centre, reason = MARQUARDT_DAMPING, f"its {iterations} batches were spent"
         for iteration in range(iterations):
             dampings = damping_grid(centre, batch)
-            moved = damped_steps(residuals, problem.moved_columns(jacobian),
-                                 units[problem.moved], dampings)
-            trials = np.array([problem.embedded(point, units) for point in moved])
+            moved_points = damped_steps(residuals, problem.moved_columns(jacobian),
+                                        units[problem.moved], dampings)
+            if np.max(np.abs(moved_points - units[problem.moved])) <= VANISHED_STEP:
+                reason = (f"its damped steps vanished (at most {VANISHED_STEP:g}) after "
+                          f"{iteration} batches")
+                break
+            trials = np.array([problem.embedded(point, units) for point in moved_points])
             objectives = problem.objectives(trials)
             record_batch(recorder, problem, trials, objectives, start)
             best = int(np.argmin(objectives))
@@ -714,7 +735,7 @@ def fit_levenberg_marquardt(problem: Problem, points, iterations: int, batch: in
                 residuals, jacobian = problem.residuals_and_jacobian(units)
                 value = float(residuals @ residuals)
                 record_gradient_call(recorder, problem, units, value, cost_ratio, start)
-        recorder.stopped(start, f"its {iterations} batches were spent")
+        recorder.stopped(start, reason)
     return recorder
 
 
@@ -739,6 +760,39 @@ def fit_cma(problem: Problem, generations: int, popsize, seed: int,
     for restart, reason in enumerate(result.stop_reasons):
         recorder.stopped(restart, reason)
     return recorder
+
+
+def cost_to_reach(recorder: Recorder, target: float, count: str) -> float:
+    """The cumulative cost `count` (a cost column of `Recorder.rows`) at the first evaluation
+    whose best objective so far is at or below `target`; NaN if none is."""
+    return next((row[count] for row in recorder.rows if row["best_objective"] <= target),
+                math.nan)
+
+
+def cma_budget_shares(recorders: Sequence[Recorder], populations: dict) -> pd.DataFrame:
+    """The goal's comparison against every CMA-ES budget up to the run's: per parameter set,
+    CMA-ES generation g (its first g whole generations, `populations[set]` points each) and
+    other optimiser, CMA-ES's best objective after g generations and its robot-seconds then,
+    and the cost-equivalent robot-seconds the optimiser needed to reach that objective
+    (`cost_to_reach`) with their share of CMA-ES's. CMA-ES's first g generations do not depend
+    on how many follow, so they are a g-generation run's. One row per set, g and optimiser
+    (CMA_BUDGET_COLUMNS); empty for sets without CMA-ES."""
+    rows = []
+    for cma in (r for r in recorders if r.optimiser == "CMA-ES"):
+        population = populations[cma.parameter_set]
+        others = [r for r in recorders
+                  if r.parameter_set == cma.parameter_set and r is not cma]
+        for generation in range(1, len(cma.rows) // population + 1):
+            last = cma.rows[generation * population - 1]
+            target, cma_cost = last["best_objective"], last["robot_seconds"]
+            for recorder in others:
+                cost = cost_to_reach(recorder, target, "robot_seconds_cost_equivalent")
+                rows.append({"parameter_set": cma.parameter_set, "cma_generations": generation,
+                             "cma_robot_seconds": cma_cost, "cma_objective": target,
+                             "optimiser": recorder.optimiser,
+                             "cost_equivalent_to_cma_objective": cost,
+                             "share_of_cma_cost_equivalent": cost / cma_cost})
+    return pd.DataFrame(rows, columns=CMA_BUDGET_COLUMNS)
 
 
 def summarise(recorders: Sequence[Recorder], problem_of, validate,
@@ -770,7 +824,6 @@ def summarise(recorders: Sequence[Recorder], problem_of, validate,
         for recorder in recorders:
             if recorder.parameter_set != parameter_set:
                 continue
-            reached = [row for row in recorder.rows if row["best_objective"] <= target]
             index = table.index[(table["parameter_set"] == parameter_set)
                                 & (table["optimiser"] == recorder.optimiser)]
             for count, cost_column, share_column in (
@@ -778,7 +831,7 @@ def summarise(recorders: Sequence[Recorder], problem_of, validate,
                      "share_of_cma_robot_seconds"),
                     ("robot_seconds_cost_equivalent", "cost_equivalent_to_cma_objective",
                      "share_of_cma_cost_equivalent")):
-                cost = reached[0][count] if reached else math.nan
+                cost = cost_to_reach(recorder, target, count)
                 table.loc[index, cost_column] = cost
                 table.loc[index, share_column] = cost / cma_cost
             # the same budget for every optimiser: what each had reached once it had spent
@@ -945,11 +998,12 @@ def build_parser():
                              "it out")
     parser.add_argument("--lm-iterations", type=int, default=4, quick=1,
                         help="batches of damped steps per start of the Levenberg-Marquardt "
-                             f"fit (optimiser '{LEVENBERG_MARQUARDT}'), a Jacobian before "
-                             "each that follows an improving one; 0 leaves it out")
+                             f"fit (optimiser '{LEVENBERG_MARQUARDT}'): a Jacobian at the "
+                             "start and where a batch improved, if another batch follows; 0 "
+                             "leaves it out")
     parser.add_argument("--lm-batch", type=int, default=DEFAULT_LM_BATCH,
-                        help="damped steps per batch, dampings a decade apart (default "
-                             f"{DEFAULT_LM_BATCH})")
+                        help=f"damped steps per batch, 1 to {MAX_LM_BATCH}, dampings a decade "
+                             f"apart (default {DEFAULT_LM_BATCH})")
     parser.add_argument("--least-squares-method", default=DEFAULT_LEAST_SQUARES_METHOD,
                         choices=LEAST_SQUARES_METHODS,
                         help="scipy least_squares method of the least-squares fits (default "
@@ -992,6 +1046,8 @@ def main(argv=None):
                         ("--polish-evaluations", args.polish_evaluations)):
         if value < 0:
             raise cli.StudyArgumentError(f"{flag} must be >= 0, got {value}")
+    if args.lm_batch > MAX_LM_BATCH:
+        raise cli.StudyArgumentError(f"--lm-batch must be <= {MAX_LM_BATCH}, got {args.lm_batch}")
     cma_settings = identify.CMASettings(popsize=args.popsize, max_generations=args.cma_generations,
                                         seed=args.seed, sigma0=args.sigma0)
     cma_settings.validate()
@@ -1026,8 +1082,9 @@ def main(argv=None):
             f"(--lbfgs-evaluations {args.lbfgs_evaluations} + --least-squares-evaluations "
             f"{args.least_squares_evaluations} + --broyden-evaluations "
             f"{args.broyden_evaluations} + --lm-iterations {args.lm_iterations}) + "
-            f"--polish-evaluations {args.polish_evaluations}) × {per_gradient} + --starts × "
-            f"--lm-iterations × --lm-batch {args.lm_batch}) × {len(gaits)} gaits")
+            f"--polish-evaluations {args.polish_evaluations}) × {per_gradient} + --starts "
+            f"{args.starts} × --lm-iterations {args.lm_iterations} × --lm-batch "
+            f"{args.lm_batch}) × {len(gaits)} gaits")
     for box in boxes.values():  # every corner of each group of CORNER_GROUP axes (2^20 is
         for group in range(0, len(box), CORNER_GROUP):  # too many; the groups share no limit)
             identify.check_box(box[group:group + CORNER_GROUP], base, "--sets")
@@ -1094,6 +1151,9 @@ def main(argv=None):
                               recorders[-1], cost_ratios[name], args.least_squares_method)
     table = summarise(recorders, problems, validate, cost_ratios)
     out.write_csv(table, "gradient_fit.csv")
+    out.write_csv(cma_budget_shares(recorders, {
+        name: cma_settings.population(len(boxes[name]), 0) for name in sets}),
+        "gradient_fit_cma_budgets.csv")
     out.write_csv(pd.concat([problems[r.parameter_set].uncertainty(r.best_units)
                              .assign(parameter_set=r.parameter_set, optimiser=r.optimiser)
                              for r in recorders], ignore_index=True)

@@ -179,6 +179,7 @@ def test_the_history_plot_draws_both_counts_from_the_csv(tmp_path, monkeypatch):
     (["--cma-generations", "0"], "--cma-generations must be >= 1"),
     (["--lm-iterations", "-1"], "--lm-iterations must be >= 0"),
     (["--lm-batch", "0"], "--lm-batch must be >= 1"),
+    (["--lm-batch", "21"], "--lm-batch must be <= 20, got 21"),
     (["--popsize", "1"], "--popsize must be >= 2"),
     (["--least-squares-method", "lm"], "--least-squares-method"),
     (["--train-cycles", "0:3"], "--train-cycles: expected FIRST:LAST"),
@@ -679,8 +680,9 @@ def test_the_secant_state_serves_until_a_step_is_refused_and_again_after_a_jacob
 
 
 def test_the_gradient_fits_hold_the_axes_no_gait_moves(monkeypatch):
-    """Set 20 on A1+A2 and A1+A3: the gains of A4-A8 have zero columns; every point L-BFGS-B
-    and both least-squares fits try keeps them at the start's values (trf's steps wandered
+    """Set 20 on A1+A2 and A1+A3: the gains of A4-A8 have zero columns; every point L-BFGS-B,
+    both least-squares fits and the batched Levenberg-Marquardt fit try keeps them at the
+    start's values (trf's steps wandered
     along them, and Broyden's updates gave them derivatives: an audit, 2026-12), and the fits
     still reach the minimum over the other axes."""
     box = box_of("20")
@@ -706,6 +708,8 @@ def test_the_gradient_fits_hold_the_axes_no_gait_moves(monkeypatch):
                         lambda units: (values(units), derivatives(units)))
     monkeypatch.setattr(problem, "value_and_gradient", lambda units: (
         float(values(units) @ values(units)), 2.0 * derivatives(units).T @ values(units)))
+    monkeypatch.setattr(problem, "objectives", lambda points: np.array(
+        [float(values(units) @ values(units)) for units in points]))
     start = identify.start_units(box, base)
     from scipy.optimize import least_squares
     minimum = 2 * least_squares(
@@ -716,7 +720,9 @@ def test_the_gradient_fits_hold_the_axes_no_gait_moves(monkeypatch):
                                                                 2.0),
                 lambda recorder: gradient_fit.fit_least_squares(problem, [start], 30, recorder,
                                                                 2.0, secant=True),
-                lambda recorder: gradient_fit.fit_lbfgs(problem, 1, 30, 0, recorder, 2.0)):
+                lambda recorder: gradient_fit.fit_lbfgs(problem, 1, 30, 0, recorder, 2.0),
+                lambda recorder: gradient_fit.fit_levenberg_marquardt(problem, [start], 30, 7,
+                                                                      recorder, 2.0)):
         tried.clear()
         recorder = fit(gradient_fit.Recorder("20", "fit"))
         assert len(tried) > 3
@@ -1137,9 +1143,62 @@ def test_a_batch_with_no_better_point_moves_the_grid_up_without_a_jacobian(monke
     np.testing.assert_allclose(grids[1], [1.0, 10.0, 100.0], rtol=1e-15)
     np.testing.assert_allclose(grids[2], [1e3, 1e4, 1e5], rtol=1e-15)
     assert [row["objective"] for row in recorder.rows[1:4]] == [math.inf] * 3
-    # after two batches the start is still the best (its Jacobian's row; a tie does not move)
+    # after two batches the start is still the best (a tie does not move the fit: the calls
+    # above, no Jacobian before the third batch)
     assert recorder.rows[6]["best_objective"] == recorder.rows[0]["objective"]
     # the third batch's middle point is taken: the Jacobian there, the grid around 1e4
     np.testing.assert_array_equal(calls[4][1], batches[2][1])
     np.testing.assert_allclose(grids[3], [1e3, 1e4, 1e5], rtol=1e-15)
     assert recorder.rows[9]["best_objective"] == current - 1.0
+
+
+def recorder_of(parameter_set, optimiser, objectives, costs):
+    """A Recorder with one row per objective, each costing `costs[k]` robot-seconds (both
+    counts)."""
+    recorder = gradient_fit.Recorder(parameter_set, optimiser)
+    for objective, cost in zip(objectives, costs):
+        recorder.add(np.zeros(2), objective, cost, cost)
+    return recorder
+
+
+def test_the_cma_budgets_compare_each_optimiser_with_cma_after_each_generation():
+    """After CMA-ES's generation g (two points each): its best so far and its robot-seconds;
+    each other optimiser's cost-equivalent robot-seconds at its first point at or below that
+    objective (a point equal to it counts), NaN where none is; an unfinished generation
+    gives no row."""
+    cma = recorder_of("6", "CMA-ES", [10.0, 8.0, 9.0, 7.0, 5.0, 6.0, 1.0], [1.0] * 7)
+    fit = recorder_of("6", "fit", [9.0, 7.0, 6.0], [3.0, 2.0, 4.0])
+    other_set = recorder_of("20", "fit", [0.0], [1.0])
+    table = gradient_fit.cma_budget_shares([cma, fit, other_set], {"6": 2, "20": 2})
+    assert list(table.columns) == gradient_fit.CMA_BUDGET_COLUMNS
+    assert table["cma_generations"].tolist() == [1, 2, 3]
+    assert table["cma_objective"].tolist() == [8.0, 7.0, 5.0]
+    assert table["cma_robot_seconds"].tolist() == [2.0, 4.0, 6.0]
+    assert set(table["optimiser"]) == {"fit"} and set(table["parameter_set"]) == {"6"}
+    # 8 is first passed at the fit's second point (7, cost 5); 7 is met there exactly
+    np.testing.assert_array_equal(table["cost_equivalent_to_cma_objective"], [5.0, 5.0, np.nan])
+    np.testing.assert_array_equal(table["share_of_cma_cost_equivalent"], [2.5, 1.25, np.nan])
+    assert gradient_fit.cma_budget_shares([fit], {"6": 2}).empty
+
+
+def test_a_start_whose_damped_steps_vanish_stops_before_its_batch(monkeypatch):
+    """A zero Jacobian (a start whose run failed) gives steps of length zero: the start ends
+    before its first batch, saying so, and the next start runs; at the minimum of a linear
+    problem the steps vanish too, and the fit stops there before its budget."""
+    problem, calls, matrix, target = linear_levenberg_marquardt_problem(monkeypatch)
+    fitted = problem.residuals_and_jacobian
+    answers = iter([(np.full(15, 10.0), np.zeros((15, 6)))])
+    monkeypatch.setattr(problem, "residuals_and_jacobian",
+                        lambda units: next(answers, None) or fitted(units))
+    start = identify.start_units(problem.box, problem.base)
+    recorder = gradient_fit.fit_levenberg_marquardt(
+        problem, [start, start], 40, 7, gradient_fit.Recorder("6", "fit"), cost_ratio=2.0)
+    assert recorder.rows[0]["objective"] == 1500.0 and recorder.rows[1]["start"] == 1
+    assert recorder.stop_reasons[0] == ("start 0: its damped steps vanished (at most 1e-12) "
+                                        "after 0 batches")
+    assert recorder.stop_reasons[1].startswith("start 1: its damped steps vanished")
+    batches = int(recorder.stop_reasons[1].split("after ")[1].split()[0])
+    assert 1 <= batches < 40
+    minimum_units = np.linalg.lstsq(matrix, target, rcond=None)[0]
+    minimum = float(np.sum((matrix @ minimum_units - target) ** 2))
+    assert recorder.best_objective == pytest.approx(minimum, rel=1e-12)
