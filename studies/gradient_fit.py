@@ -738,10 +738,9 @@ def fit_levenberg_marquardt(problem: Problem, points, iterations: int, batch: in
     return recorder
 
 
-def fit_cma(problem: Problem, generations: int, popsize, seed: int,
-            recorder: Recorder) -> Recorder:
-    """CMA-ES from the base model over the unit box (module docstring), every evaluation into
-    `recorder`."""
+def fit_cma(problem: Problem, settings: identify.CMASettings, recorder: Recorder) -> Recorder:
+    """CMA-ES from the base model over the unit box (module docstring) with `settings`
+    (population, generations, seed, σ0), every evaluation into `recorder`."""
     parameter_set = recorder.parameter_set
     per_point = problem.window_s * len(problem.gaits)
 
@@ -753,9 +752,7 @@ def fit_cma(problem: Problem, generations: int, popsize, seed: int,
         return pd.DataFrame({"objective": values})
 
     result = identify.minimise_cmaes(problem.box, identify.start_units(problem.box, problem.base),
-                                     evaluate, identify.CMASettings(popsize=popsize,
-                                                                    max_generations=generations,
-                                                                    seed=seed))
+                                     evaluate, settings)
     for restart, reason in enumerate(result.stop_reasons):
         recorder.stopped(restart, reason)
     return recorder
@@ -1120,7 +1117,7 @@ def main(argv=None):
         problems[name] = Problem(boxes[name], base, gaits, trials, train, solver, args.arch)
         cma = Recorder(name, "CMA-ES", write_history)
         recorders.append(cma)
-        fit_cma(problems[name], args.cma_generations, args.popsize, args.seed, cma)
+        fit_cma(problems[name], cma_settings, cma)
         cost_ratios[name] = measure_cost_ratio(problems[name])
         print(f"set {name}: a gradient call costs {cost_ratios[name]:.2f} runs", flush=True)
         recorders.append(Recorder(name, "L-BFGS-B", write_history))

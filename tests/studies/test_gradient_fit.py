@@ -788,15 +788,18 @@ def test_the_cost_ratio_simulates_only_the_axes_a_gait_moves(monkeypatch):
 
 
 def test_main_runs_each_optimiser_with_its_own_flags(tmp_path, monkeypatch):
-    """The least-squares fit with --least-squares-evaluations, the secant one with
-    --broyden-evaluations, the polish with --polish-evaluations, all with
-    --least-squares-method; only the secant one with secant=True."""
+    """CMA-ES with --popsize, --cma-generations, --seed and --sigma0 (σ0 was checked and
+    recorded but not passed on until an audit, 2026-12); the least-squares fit with
+    --least-squares-evaluations, the secant one with --broyden-evaluations, the polish with
+    --polish-evaluations, all with --least-squares-method; only the secant one with
+    secant=True."""
     calls = []
 
     class Stop(Exception):
         pass
 
-    def fake_cma(problem, generations, popsize, seed, recorder):
+    def fake_cma(problem, settings, recorder):
+        calls.append(("CMA-ES", settings))
         recorder.add(np.full(len(problem.box), 0.5), 1.0, 1.0, 1.0)
         return recorder
 
@@ -820,9 +823,12 @@ def test_main_runs_each_optimiser_with_its_own_flags(tmp_path, monkeypatch):
     with pytest.raises(Stop):
         gradient_fit.main(["--least-squares-evaluations", "5", "--broyden-evaluations", "3",
                            "--polish-evaluations", "4", "--least-squares-method", "dogbox",
-                           "--lm-iterations", "6", "--lm-batch", "3",
+                           "--lm-iterations", "6", "--lm-batch", "3", "--sigma0", "0.05",
+                           "--popsize", "5", "--cma-generations", "3", "--seed", "7",
                            "--out", str(tmp_path / "out"), "--quick", "--no-progress"])
-    assert calls == [("L-BFGS-B",), (gradient_fit.LEAST_SQUARES, 5, "dogbox", False),
+    assert calls[0] == ("CMA-ES", identify.CMASettings(popsize=5, max_generations=3, seed=7,
+                                                       sigma0=0.05))
+    assert calls[1:] == [("L-BFGS-B",), (gradient_fit.LEAST_SQUARES, 5, "dogbox", False),
                      (gradient_fit.BROYDEN, 3, "dogbox", True),
                      (gradient_fit.LEVENBERG_MARQUARDT, 6, 3, 2.0),
                      (gradient_fit.POLISH, 4, "dogbox", False)]
@@ -831,7 +837,7 @@ def test_main_runs_each_optimiser_with_its_own_flags(tmp_path, monkeypatch):
     with pytest.raises(Stop):
         gradient_fit.main(["--lm-iterations", "0", "--out", str(tmp_path / "out0"), "--quick",
                            "--no-progress"])
-    assert [call[0] for call in calls] == ["L-BFGS-B", gradient_fit.LEAST_SQUARES,
+    assert [call[0] for call in calls] == ["CMA-ES", "L-BFGS-B", gradient_fit.LEAST_SQUARES,
                                            gradient_fit.BROYDEN]
 
 
@@ -1202,3 +1208,21 @@ def test_a_start_whose_damped_steps_vanish_stops_before_its_batch(monkeypatch):
     minimum_units = np.linalg.lstsq(matrix, target, rcond=None)[0]
     minimum = float(np.sum((matrix @ minimum_units - target) ** 2))
     assert recorder.best_objective == pytest.approx(minimum, rel=1e-12)
+
+
+def test_cma_es_runs_with_the_settings_it_is_given(monkeypatch):
+    """fit_cma hands its settings, σ0 included, to the CMA-ES driver unchanged."""
+    box = box_of("6")
+    problem = gradient_fit.Problem(box, StarParams(gait="A1+A2"), ["A1+A2"], {}, (1, 1),
+                                   SolverConfig(), "cpu")
+    settings = identify.CMASettings(popsize=3, max_generations=2, seed=5, sigma0=0.05)
+    given = []
+
+    def driver(box, start, evaluate, settings):
+        given.append(settings)
+        return identify.CMAResult(pd.DataFrame(), None, ["maxiter=2"])
+
+    monkeypatch.setattr(identify, "minimise_cmaes", driver)
+    recorder = gradient_fit.fit_cma(problem, settings, gradient_fit.Recorder("6", "CMA-ES"))
+    assert given == [settings] and given[0].sigma0 == 0.05
+    assert recorder.stop_reasons == ["start 0: maxiter=2"]
