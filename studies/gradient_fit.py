@@ -200,12 +200,13 @@ MARQUARDT_DAMPING = 0.01
 (1963), the damping relative to each axis's curvature (the steps' scaling, `damped_steps`)."""
 DEFAULT_LM_BATCH = 7
 """Damped steps per batch (--lm-batch): dampings a decade apart, three either way of the
-centre, the only width tried. In the committed runs (results/gradient_fit/lm_batch/, 2026-12)
-the best damping of 9 of 51 distinct batches lay at an end of its grid, 4 at the longest step
-and 5 at the shortest: a narrower grid would have changed those steps."""
+centre, the only width tried. In the committed runs of results/gradient_fit/lm_batch/equal_cost/
+and broyden/ (2026-12) the best damping of 9 of 51 distinct batches lay at an end of its grid,
+4 at the longest step and 5 at the shortest: a narrower grid would have changed those steps."""
 MAX_LM_BATCH = 20
-"""The most damped steps a batch may try (--lm-batch): a grid wider than twenty decades reaches
-dampings whose steps vanish below a float's resolution of a unit coordinate."""
+"""The most damped steps a batch may try (--lm-batch), a cap: a batch that does not improve
+moves the grid `batch` decades up, and a wide grid's few such moves would overflow a float
+(10^308); twenty decades span far more dampings than change a step."""
 VANISHED_STEP = 1e-12
 """The length (largest axis, unit coordinates) at or below which every damped step of a grid
 ends a Levenberg-Marquardt start before its batch is run: at a stationary point, or with a zero
@@ -771,13 +772,14 @@ def cma_budget_shares(recorders: Sequence[Recorder], populations: dict) -> pd.Da
     other optimiser, CMA-ES's best objective after g generations and its robot-seconds then,
     and the cost-equivalent robot-seconds the optimiser needed to reach that objective
     (`cost_to_reach`) with their share of CMA-ES's. CMA-ES's first g generations do not depend
-    on how many follow, so they are a g-generation run's. One row per set, g and optimiser
-    (CMA_BUDGET_COLUMNS); empty for sets without CMA-ES."""
+    on how many follow, so they are a g-generation run's. The polish, whose costs include
+    CMA-ES's whole run, is left out. One row per set, g and optimiser (CMA_BUDGET_COLUMNS);
+    empty for sets without CMA-ES."""
     rows = []
     for cma in (r for r in recorders if r.optimiser == "CMA-ES"):
         population = populations[cma.parameter_set]
-        others = [r for r in recorders
-                  if r.parameter_set == cma.parameter_set and r is not cma]
+        others = [r for r in recorders if r.parameter_set == cma.parameter_set
+                  and r.optimiser not in ("CMA-ES", POLISH)]
         for generation in range(1, len(cma.rows) // population + 1):
             last = cma.rows[generation * population - 1]
             target, cma_cost = last["best_objective"], last["robot_seconds"]

@@ -730,7 +730,7 @@ def test_the_gradient_fits_hold_the_axes_no_gait_moves(monkeypatch):
             np.testing.assert_array_equal(units[dead], start[dead])
         # the minimum over the moved axes (a direct fit of the same residuals to scipy's
         # tightest tolerances), to 1e-6: the fits stop at scipy's default tolerances or their
-        # 30 points (measured 2e-15, 9e-13 and 1.8e-9 above it)
+        # 30 points (the scipy fits measured 2e-15, 9e-13 and 1.8e-9 above it)
         assert recorder.best_objective == pytest.approx(minimum, rel=1e-6)
 
 
@@ -1158,32 +1158,36 @@ def test_a_batch_with_no_better_point_moves_the_grid_up_without_a_jacobian(monke
     assert recorder.rows[9]["best_objective"] == current - 1.0
 
 
-def recorder_of(parameter_set, optimiser, objectives, costs):
-    """A Recorder with one row per objective, each costing `costs[k]` robot-seconds (both
-    counts)."""
+def recorder_of(parameter_set, optimiser, objectives, costs, equivalent_costs=None):
+    """A Recorder with one row per objective, each costing `costs[k]` robot-seconds counted
+    literally and `equivalent_costs[k]` (default the same) counted at a call's cost."""
     recorder = gradient_fit.Recorder(parameter_set, optimiser)
-    for objective, cost in zip(objectives, costs):
-        recorder.add(np.zeros(2), objective, cost, cost)
+    for objective, cost, equivalent in zip(objectives, costs, equivalent_costs or costs):
+        recorder.add(np.zeros(2), objective, cost, equivalent)
     return recorder
 
 
 def test_the_cma_budgets_compare_each_optimiser_with_cma_after_each_generation():
-    """After CMA-ES's generation g (two points each): its best so far and its robot-seconds;
-    each other optimiser's cost-equivalent robot-seconds at its first point at or below that
-    objective (a point equal to it counts), NaN where none is; an unfinished generation
-    gives no row."""
-    cma = recorder_of("6", "CMA-ES", [10.0, 8.0, 9.0, 7.0, 5.0, 6.0, 1.0], [1.0] * 7)
-    fit = recorder_of("6", "fit", [9.0, 7.0, 6.0], [3.0, 2.0, 4.0])
+    """After CMA-ES's generation g (two points each): its best so far (a worse later
+    generation keeps it) and its robot-seconds; each other optimiser's cost-equivalent
+    robot-seconds at its first point at or below that objective (a point equal to it counts),
+    NaN where none is; an unfinished generation gives no row; the polish, whose costs include
+    CMA-ES's whole run, has none."""
+    cma = recorder_of("6", "CMA-ES", [10.0, 8.0, 9.0, 7.0, 9.5, 9.0, 5.0, 6.0, 1.0], [1.0] * 9)
+    fit = recorder_of("6", "fit", [9.0, 7.0, 6.0], [30.0, 20.0, 40.0], [3.0, 2.0, 4.0])
+    polish = recorder_of("6", gradient_fit.POLISH, [0.5], [100.0])
     other_set = recorder_of("20", "fit", [0.0], [1.0])
-    table = gradient_fit.cma_budget_shares([cma, fit, other_set], {"6": 2, "20": 2})
+    table = gradient_fit.cma_budget_shares([cma, fit, polish, other_set], {"6": 2, "20": 2})
     assert list(table.columns) == gradient_fit.CMA_BUDGET_COLUMNS
-    assert table["cma_generations"].tolist() == [1, 2, 3]
-    assert table["cma_objective"].tolist() == [8.0, 7.0, 5.0]
-    assert table["cma_robot_seconds"].tolist() == [2.0, 4.0, 6.0]
+    assert table["cma_generations"].tolist() == [1, 2, 3, 4]
+    assert table["cma_objective"].tolist() == [8.0, 7.0, 7.0, 5.0]
+    assert table["cma_robot_seconds"].tolist() == [2.0, 4.0, 6.0, 8.0]
     assert set(table["optimiser"]) == {"fit"} and set(table["parameter_set"]) == {"6"}
-    # 8 is first passed at the fit's second point (7, cost 5); 7 is met there exactly
-    np.testing.assert_array_equal(table["cost_equivalent_to_cma_objective"], [5.0, 5.0, np.nan])
-    np.testing.assert_array_equal(table["share_of_cma_cost_equivalent"], [2.5, 1.25, np.nan])
+    # 8 is first passed at the fit's second point (7, cost-equivalent 3 + 2); 7 is met there
+    np.testing.assert_array_equal(table["cost_equivalent_to_cma_objective"],
+                                  [5.0, 5.0, 5.0, np.nan])
+    np.testing.assert_array_equal(table["share_of_cma_cost_equivalent"],
+                                  [2.5, 1.25, 5.0 / 6.0, np.nan])
     assert gradient_fit.cma_budget_shares([fit], {"6": 2}).empty
 
 
