@@ -832,6 +832,20 @@ def test_main_runs_each_optimiser_with_its_own_flags(tmp_path, monkeypatch):
                      (gradient_fit.BROYDEN, 3, "dogbox", True),
                      (gradient_fit.LEVENBERG_MARQUARDT, 6, 3, 2.0),
                      (gradient_fit.POLISH, 4, "dogbox", False)]
+    # the budgets table gets each set's CMA-ES population (--popsize given: 5)
+    populations = []
+
+    def budgets(recorders, given):
+        populations.append(given)
+        raise Stop
+
+    monkeypatch.setattr(gradient_fit, "summarise", lambda *args: pd.DataFrame({"a": [1.0]}))
+    monkeypatch.setattr(gradient_fit, "cma_budget_shares", budgets)
+    with pytest.raises(Stop):
+        gradient_fit.main(["--popsize", "5", "--out", str(tmp_path / "budgets"), "--quick",
+                           "--no-progress"])
+    assert populations == [{"6": 5}]
+    monkeypatch.setattr(gradient_fit, "summarise", stop)
     # 0 leaves the batched fit out
     calls.clear()
     with pytest.raises(Stop):
