@@ -89,7 +89,7 @@ each start or restart ended, in its library's words, or that a least-squares sta
 trial points), `gradient_fit_cma_budgets.csv` (`cma_budget_shares`: against CMA-ES's best
 after each of its generations, the cost-equivalent robot-seconds each other optimiser needed to
 reach it and their share of CMA-ES's: the comparison for every CMA-ES budget up to
---cma-generations), `gradient_fit_history.csv` (every evaluation:
+--cma-generations; drawn in `gradient_fit_cma_budgets.png`), `gradient_fit_history.csv` (every evaluation:
 cumulative cost and best objective so far), `gradient_fit_uncertainty.csv` (per set, optimiser
 and parameter, at the optimiser's best point: `identification.parameter_uncertainty` from one
 run with the sensitivities there, not counted in any cost: which parameters the training data
@@ -970,6 +970,32 @@ def plot_history(csv_path, png_path) -> Path:
     return cli.save_figure(fig, png_path, dpi=120)
 
 
+def plot_cma_budgets(csv_path, png_path) -> Path:
+    """The share of CMA-ES's robot-seconds (cost-equivalent) each optimiser needed to reach
+    CMA-ES's best after g generations, against g, one panel per parameter set, one line per
+    optimiser (from gradient_fit_cma_budgets.csv; a budget whose objective it never reached
+    leaves a gap), with the one-fifth share marked."""
+    plt = cli.use_agg()
+    table = pd.read_csv(csv_path, dtype={"parameter_set": str})
+    sets = list(dict.fromkeys(table["parameter_set"]))
+    fig, axes = plt.subplots(1, len(sets), figsize=(5.2 * len(sets), 4.2), squeeze=False)
+    for parameter_set, ax in zip(sets, axes[0]):
+        part = table[table["parameter_set"] == parameter_set]
+        for optimiser, rows in part.groupby("optimiser", sort=False):
+            ax.plot(rows["cma_generations"], rows["share_of_cma_cost_equivalent"], marker=".",
+                    label=optimiser)
+        ax.axhline(0.2, color="0.5", linestyle="--", linewidth=0.8, label="one fifth")
+        ax.set_yscale("log")
+        ax.set_xlabel("CMA-ES's generations")
+        ax.set_ylabel("share of CMA-ES's robot-seconds to reach its best")
+        ax.set_title(f"{parameter_set} parameters", fontsize=9)
+        ax.legend(fontsize=8)
+    settings = cli.run_settings(csv_path)
+    if settings:
+        fig.suptitle(settings, fontsize=8)
+    return cli.save_figure(fig, png_path, dpi=120)
+
+
 def build_parser():
     parser = cli.StudyParser("gradient_fit", DESCRIPTION)
     # the default gaits (all five measured) move every parameter of these two sets; set "20"
@@ -1149,9 +1175,12 @@ def main(argv=None):
                               recorders[-1], cost_ratios[name], args.least_squares_method)
     table = summarise(recorders, problems, validate, cost_ratios)
     out.write_csv(table, "gradient_fit.csv")
-    out.write_csv(cma_budget_shares(recorders, {
-        name: cma_settings.population(len(boxes[name]), 0) for name in sets}),
-        "gradient_fit_cma_budgets.csv")
+    budgets = cma_budget_shares(recorders, {
+        name: cma_settings.population(len(boxes[name]), 0) for name in sets})
+    out.write_csv(budgets, "gradient_fit_cma_budgets.csv")
+    if not budgets.empty:
+        out.wrote(plot_cma_budgets(out.path("gradient_fit_cma_budgets.csv"),
+                                   out.path("gradient_fit_cma_budgets.png")))
     out.write_csv(pd.concat([problems[r.parameter_set].uncertainty(r.best_units)
                              .assign(parameter_set=r.parameter_set, optimiser=r.optimiser)
                              for r in recorders], ignore_index=True)

@@ -169,6 +169,29 @@ def test_the_history_plot_draws_both_counts_from_the_csv(tmp_path, monkeypatch):
             np.testing.assert_array_equal(line.get_ydata(), [9.0, 4.0, 4.0])
 
 
+def test_the_budgets_plot_draws_each_optimisers_share_from_the_csv(tmp_path, monkeypatch):
+    """One panel per parameter set; per optimiser its (generation, share) pairs as the CSV
+    has them, NaN where it never reached CMA-ES's objective; the one-fifth line."""
+    table = pd.DataFrame({"parameter_set": ["6"] * 4 + ["20"] * 2,
+                          "cma_generations": [1, 1, 2, 2, 1, 2], "cma_robot_seconds": 1.0,
+                          "cma_objective": 1.0,
+                          "optimiser": ["a", "b", "a", "b", "a", "a"],
+                          "cost_equivalent_to_cma_objective": 1.0,
+                          "share_of_cma_cost_equivalent": [0.5, 0.1, np.nan, 0.3, 2.0, 0.25]})
+    csv_path = tmp_path / "gradient_fit_cma_budgets.csv"
+    table.to_csv(csv_path, index=False)
+    axes = drawn_axes(monkeypatch, gradient_fit.plot_cma_budgets, csv_path)
+    assert [ax.get_title() for ax in axes] == ["6 parameters", "20 parameters"]
+    expected = {("6", "a"): [0.5, np.nan], ("6", "b"): [0.1, 0.3], ("20", "a"): [2.0, 0.25]}
+    for ax, parameter_set in zip(axes, ("6", "20")):
+        lines = {line.get_label(): line for line in ax.get_lines()}
+        np.testing.assert_array_equal(lines["one fifth"].get_ydata(), [0.2, 0.2])
+        for (name, optimiser), shares in expected.items():
+            if name == parameter_set:
+                np.testing.assert_array_equal(lines[optimiser].get_xdata(), [1, 2])
+                np.testing.assert_array_equal(lines[optimiser].get_ydata(), shares)
+
+
 @pytest.mark.parametrize("argv, message", [
     (["--sets", "7"], "--sets: unknown value '7'"),
     (["--starts", "0"], "--starts must be >= 1"),
