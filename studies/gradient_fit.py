@@ -89,8 +89,8 @@ each start or restart ended, in its library's words, or that a least-squares sta
 trial points), `gradient_fit_cma_budgets.csv` (`cma_budget_shares`: against CMA-ES's best
 after each of its generations, the cost-equivalent robot-seconds each other optimiser needed to
 reach it and their share of CMA-ES's: the comparison for every CMA-ES budget up to
---cma-generations; drawn in `gradient_fit_cma_budgets.png`), `gradient_fit_history.csv` (every evaluation:
-cumulative cost and best objective so far), `gradient_fit_uncertainty.csv` (per set, optimiser
+--cma-generations; drawn in `gradient_fit_cma_budgets.png`), `gradient_fit_history.csv` (every
+evaluation: cumulative cost and best objective so far), `gradient_fit_uncertainty.csv` (per set, optimiser
 and parameter, at the optimiser's best point: `identification.parameter_uncertainty` from one
 run with the sensitivities there, not counted in any cost: which parameters the training data
 determine, their standard errors and correlations), `gradient_fit.png` (best objective against
