@@ -90,10 +90,10 @@ trial points), `gradient_fit_cma_budgets.csv` (`cma_budget_shares`: against CMA-
 after each of its generations, the cost-equivalent robot-seconds each other optimiser needed to
 reach it and their share of CMA-ES's: the comparison for every CMA-ES budget up to
 --cma-generations; drawn in `gradient_fit_cma_budgets.png`), `gradient_fit_history.csv` (every
-evaluation: cumulative cost and best objective so far), `gradient_fit_uncertainty.csv` (per set, optimiser
-and parameter, at the optimiser's best point: `identification.parameter_uncertainty` from one
-run with the sensitivities there, not counted in any cost: which parameters the training data
-determine, their standard errors and correlations), `gradient_fit.png` (best objective against
+evaluation: cumulative cost and best objective so far), `gradient_fit_uncertainty.csv` (per
+set, optimiser and parameter, at the optimiser's best point:
+`identification.parameter_uncertainty` from one run with the sensitivities there, not counted
+in any cost: which parameters the training data determine, their standard errors and correlations), `gradient_fit.png` (best objective against
 robot-seconds, drawn from the history), `gradient_fit_segments.csv` and its plot
 `gradient_fit_segments.png` (per set, the objective and each gait's along the straight segment
 from each optimiser's best point to the set's lowest, `segment_scores`: whether a fit that
@@ -905,6 +905,15 @@ def segment_scores(problem: Problem, recorders: Sequence[Recorder],
     return pd.DataFrame(rows)
 
 
+def save_titled(fig, csv_path, png_path) -> Path:
+    """Save a figure drawn from `csv_path` (dpi 120), titled with the run settings its
+    provenance sidecar records (`cli.run_settings`; none without a sidecar)."""
+    settings = cli.run_settings(csv_path)
+    if settings:
+        fig.suptitle(settings, fontsize=8)
+    return cli.save_figure(fig, png_path, dpi=120)
+
+
 def plot_segments(csv_path, png_path) -> Path:
     """From gradient_fit_segments.csv: one row of panels per parameter set, one panel per
     segment (an optimiser's best point to its set's best), the objective (black) and each
@@ -937,10 +946,7 @@ def plot_segments(csv_path, png_path) -> Path:
             ax.set_title(f"{parameter_set} parameters: from {segments[column]}'s point",
                          fontsize=9)
             ax.legend(fontsize=7)
-    settings = cli.run_settings(csv_path)
-    if settings:
-        fig.suptitle(settings, fontsize=8)
-    return cli.save_figure(fig, png_path, dpi=120)
+    return save_titled(fig, csv_path, png_path)
 
 
 def plot_history(csv_path, png_path) -> Path:
@@ -964,10 +970,7 @@ def plot_history(csv_path, png_path) -> Path:
             ax.set_ylabel("best trajectory objective so far")
             ax.set_title(f"{parameter_set} parameters", fontsize=9)
             ax.legend(fontsize=8)
-    settings = cli.run_settings(csv_path)
-    if settings:
-        fig.suptitle(settings, fontsize=8)
-    return cli.save_figure(fig, png_path, dpi=120)
+    return save_titled(fig, csv_path, png_path)
 
 
 def plot_cma_budgets(csv_path, png_path) -> Path:
@@ -990,10 +993,7 @@ def plot_cma_budgets(csv_path, png_path) -> Path:
         ax.set_ylabel("share of CMA-ES's robot-seconds to reach its best")
         ax.set_title(f"{parameter_set} parameters", fontsize=9)
         ax.legend(fontsize=8)
-    settings = cli.run_settings(csv_path)
-    if settings:
-        fig.suptitle(settings, fontsize=8)
-    return cli.save_figure(fig, png_path, dpi=120)
+    return save_titled(fig, csv_path, png_path)
 
 
 def build_parser():
