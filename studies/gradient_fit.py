@@ -93,8 +93,9 @@ reach it and their share of CMA-ES's: the comparison for every CMA-ES budget up 
 evaluation: cumulative cost and best objective so far), `gradient_fit_uncertainty.csv` (per
 set, optimiser and parameter, at the optimiser's best point:
 `identification.parameter_uncertainty` from one run with the sensitivities there, not counted
-in any cost: which parameters the training data determine, their standard errors and correlations), `gradient_fit.png` (best objective against
-robot-seconds, drawn from the history), `gradient_fit_segments.csv` and its plot
+in any cost: which parameters the training data determine, their standard errors and
+correlations), `gradient_fit.png` (best objective against robot-seconds, drawn from the
+history), `gradient_fit_segments.csv` and its plot
 `gradient_fit_segments.png` (per set, the objective and each gait's along the straight segment
 from each optimiser's best point to the set's lowest, `segment_scores`: whether a fit that
 stopped higher stopped in another valley, one batched run not counted in any cost) and, with
