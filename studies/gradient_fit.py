@@ -54,6 +54,13 @@ A1-A5).
   it tries, this one tries a grid of them per Jacobian, in one call of the batch simulator.
   Same starts and bounds as the others; a batch counts every point's robot-seconds, all on its
   first row.
+- Levenberg-Marquardt in batches with Broyden's updates ("levenberg-marquardt-broyden",
+  `--lm-broyden-iterations` batches per start, 0: not run): the same batches, each scoring its
+  points' residuals too, whose Jacobian is simulated at the start and then only where the last
+  one served badly (as the secant least-squares fit's: `secant_jacobian`), elsewhere
+  Broyden-updated along the step taken; a start's first batch has `--lm-batch` points, the
+  later ones `--lm-broyden-batch` (default 3: one decade either way of the damping that
+  served).
 - CMA-ES (`studies.identify.minimise_cmaes`) from the base model, step `--sigma0`, population
   `--popsize` (cma's default 4 + 3 ln D when not given), `--cma-generations` generations, one
   batched run per generation.
@@ -204,6 +211,13 @@ DEFAULT_LM_BATCH = 7
 centre, the only width tried. In the committed runs of results/gradient_fit/lm_batch/equal_cost/
 and broyden/ (2026-12) the best damping of 9 of 51 distinct batches lay at an end of its grid,
 4 at the longest step and 5 at the shortest: a narrower grid would have changed those steps."""
+LEVENBERG_MARQUARDT_BROYDEN = "levenberg-marquardt-broyden"
+"""Levenberg-Marquardt in batches whose Jacobian is Broyden-updated between simulated ones
+(`fit_levenberg_marquardt(secant=True)`; --lm-broyden-iterations)."""
+DEFAULT_LATER_LM_BATCH = 3
+"""Damped steps per batch after a start's first, of the Broyden-updated batches
+(--lm-broyden-batch): one decade either way of the damping that served, the narrowest grid
+around it; the first batch, with no damping known yet, has --lm-batch."""
 MAX_LM_BATCH = 20
 """The most damped steps a batch may try (--lm-batch), a cap: a batch that does not improve
 moves the grid `batch` decades up, and a wide grid's few such moves would overflow a float
@@ -214,7 +228,8 @@ ends a Levenberg-Marquardt start before its batch is run: at a stationary point,
 Jacobian, the batch would only simulate the current point again."""
 POLISH = "CMA-ES + least-squares"
 """Least squares from CMA-ES's best point (`--polish-evaluations`): its costs include CMA-ES's."""
-GRADIENT_OPTIMISERS = ("L-BFGS-B", LEAST_SQUARES, BROYDEN, LEVENBERG_MARQUARDT, POLISH)
+GRADIENT_OPTIMISERS = ("L-BFGS-B", LEAST_SQUARES, BROYDEN, LEVENBERG_MARQUARDT,
+                       LEVENBERG_MARQUARDT_BROYDEN, POLISH)
 """Optimisers whose evaluations are runs with sensitivities."""
 QUICK_GAITS, QUICK_TRAIN, QUICK_VALIDATE = "A1+A2", "1:1", "2:2"
 RESULT_COLUMNS = ["parameter_set", "n_parameters", "optimiser", "starts", "evaluations",
@@ -329,15 +344,29 @@ class Problem:
         failed points: the finite penalty of `fit_terms` was accepted as a step from a point
         scoring above it, an audit, 2026-12)."""
         units = np.clip(np.asarray(units, dtype=float), 0.0, 1.0)
-        runs, _ = self.runs(self.params(units[None, :]), self.train[1])
-        if any(run is None for run in runs):
-            return np.full(identification.residual_count(len(self.gaits), self.train), math.inf)
-        # the residuals need no derivatives: one zero column stands in for them
-        no_derivatives = {gait: np.zeros((len(run.path.t_s), 2, 1))
-                          for gait, run in zip(self.gaits, runs)}
-        residuals, _, _ = identification.objective_residuals(
-            dict(zip(self.gaits, runs)), no_derivatives, self.trials, self.train)
-        return residuals
+        return self.scored_points(units[None, :])[1][0]
+
+    def scored_points(self, unit_points):
+        """(objectives (P,), residuals (P, R)) of points (P, D) on the training window from one
+        batched run without sensitivities: each point's objective as `objectives` gives it (the
+        same per-gait fits) and its residuals as `residuals` does; inf, and a row of inf, where
+        a simulation failed."""
+        unit_points = np.atleast_2d(unit_points)
+        runs, _ = self.runs(self.params(unit_points), self.train[1])
+        count = identification.residual_count(len(self.gaits), self.train)
+        objectives = np.full(len(unit_points), math.inf)
+        residuals = np.full((len(unit_points), count), math.inf)
+        for p in range(len(unit_points)):
+            part = runs[p * len(self.gaits):(p + 1) * len(self.gaits)]
+            if any(run is None for run in part):
+                continue
+            # the residuals need no derivatives: one zero column stands in for them
+            no_derivatives = {gait: np.zeros((len(run.path.t_s), 2, 1))
+                              for gait, run in zip(self.gaits, part)}
+            residuals[p], _, table = identification.objective_residuals(
+                dict(zip(self.gaits, part)), no_derivatives, self.trials, self.train)
+            objectives[p] = identification.objective_of(table)
+        return objectives, residuals
 
     def failed_residuals(self) -> np.ndarray:
         """R equal residuals whose squares sum to `identify.FAILED_PENALTY`."""
@@ -691,7 +720,8 @@ def record_batch(recorder: Recorder, problem: Problem, unit_points, objectives, 
 
 
 def fit_levenberg_marquardt(problem: Problem, points, iterations: int, batch: int,
-                            recorder: Recorder, cost_ratio: float) -> Recorder:
+                            recorder: Recorder, cost_ratio: float, secant: bool = False,
+                            later_batch: Optional[int] = None) -> Recorder:
     """Multi-start Levenberg-Marquardt over the unit box whose every Jacobian is tried with
     `batch` dampings at once: from each of `points` (unit coordinates, `start_points`), one
     run with sensitivities (residuals and Jacobian, `cost_ratio` runs), then `iterations`
@@ -705,16 +735,28 @@ def fit_levenberg_marquardt(problem: Problem, points, iterations: int, batch: in
     is at most VANISHED_STEP long. A trust-region method tries one step length per run; the
     batch simulator runs a grid of them in one call, at the robot-seconds of each
     (`record_batch`). It searches the axes a fitted gait moves (`Problem.moved`), the others
-    held at the start's."""
+    held at the start's.
+
+    With `secant` (optimiser LEVENBERG_MARQUARDT_BROYDEN) a batch scores its points' residuals
+    too (`Problem.scored_points`, the same run), and at the point it moves to the Jacobian is
+    Broyden's update of the last one along the step (`secant_jacobian`), simulated only where
+    that one served badly (the step achieved less than SECANT_AGREEMENT of the reduction it
+    predicted); a batch with no better point from an updated Jacobian simulates the Jacobian
+    at the current point and tries the same grid again, one from a simulated Jacobian moves
+    the grid up. Every batch after a start's first has `later_batch` points (default `batch`):
+    the first grid brackets an unknown damping, the later ones follow the one that served."""
     parameter_set = recorder.parameter_set
+    later_batch = batch if later_batch is None else later_batch
     for start, x0 in enumerate(points):
         units = np.asarray(x0, dtype=float)
         residuals, jacobian = problem.residuals_and_jacobian(units)
         value = float(residuals @ residuals)
         record_gradient_call(recorder, problem, units, value, cost_ratio, start)
         centre, reason = MARQUARDT_DAMPING, f"its {iterations} batches were spent"
+        simulated = True  # the Jacobian is the one simulated at `units`, not an update
         for iteration in range(iterations):
-            dampings = damping_grid(centre, batch)
+            size = batch if iteration == 0 else later_batch
+            dampings = damping_grid(centre, size)
             moved_points = damped_steps(residuals, problem.moved_columns(jacobian),
                                         units[problem.moved], dampings)
             if np.max(np.abs(moved_points - units[problem.moved])) <= VANISHED_STEP:
@@ -722,20 +764,35 @@ def fit_levenberg_marquardt(problem: Problem, points, iterations: int, batch: in
                           f"{iteration} batches")
                 break
             trials = np.array([problem.embedded(point, units) for point in moved_points])
-            objectives = problem.objectives(trials)
+            if secant:
+                objectives, trial_residuals = problem.scored_points(trials)
+            else:
+                objectives = problem.objectives(trials)
             record_batch(recorder, problem, trials, objectives, start)
             best = int(np.argmin(objectives))
             print(f"set {parameter_set} {recorder.optimiser} start {start}: batch "
                   f"{iteration + 1}, best {objectives[best]:.5g} at damping "
                   f"{dampings[best]:.0e}", flush=True)
+            last = iteration + 1 == iterations
             if objectives[best] >= value:
-                centre *= 10.0 ** batch
+                if simulated:
+                    centre *= 10.0 ** size
+                elif not last:
+                    residuals, jacobian = problem.residuals_and_jacobian(units)
+                    record_gradient_call(recorder, problem, units, value, cost_ratio, start)
+                    simulated = True
                 continue
+            updated = None if not secant else secant_jacobian(
+                units, residuals, jacobian, False, trials[best], trial_residuals[best])
             units, centre = trials[best], dampings[best]
-            if iteration + 1 < iterations:
+            if updated is not None:
+                residuals, jacobian, simulated = trial_residuals[best], updated, False
+                value = float(objectives[best])
+            elif not last:
                 residuals, jacobian = problem.residuals_and_jacobian(units)
                 value = float(residuals @ residuals)
                 record_gradient_call(recorder, problem, units, value, cost_ratio, start)
+                simulated = True
         recorder.stopped(start, reason)
     return recorder
 
@@ -1029,6 +1086,15 @@ def build_parser():
     parser.add_argument("--lm-batch", type=int, default=DEFAULT_LM_BATCH,
                         help=f"damped steps per batch, 1 to {MAX_LM_BATCH}, dampings a decade "
                              f"apart (default {DEFAULT_LM_BATCH})")
+    parser.add_argument("--lm-broyden-iterations", type=int, default=4, quick=1,
+                        help="batches per start of the Levenberg-Marquardt fit whose Jacobian "
+                             "is simulated at its start and where the last served badly, "
+                             f"Broyden-updated elsewhere (optimiser "
+                             f"'{LEVENBERG_MARQUARDT_BROYDEN}'); 0 leaves it out")
+    parser.add_argument("--lm-broyden-batch", type=int, default=DEFAULT_LATER_LM_BATCH,
+                        help="damped steps per batch of that fit after a start's first (which "
+                             f"has --lm-batch), 1 to {MAX_LM_BATCH} (default "
+                             f"{DEFAULT_LATER_LM_BATCH})")
     parser.add_argument("--least-squares-method", default=DEFAULT_LEAST_SQUARES_METHOD,
                         choices=LEAST_SQUARES_METHODS,
                         help="scipy least_squares method of the least-squares fits (default "
@@ -1062,17 +1128,21 @@ def main(argv=None):
     sets = cli.parse_choices(args.sets, "--sets", list(PARAMETER_SETS))
     for flag, value in (("--starts", args.starts), ("--lbfgs-evaluations", args.lbfgs_evaluations),
                         ("--cma-generations", args.cma_generations),
-                        ("--lm-batch", args.lm_batch)):
+                        ("--lm-batch", args.lm_batch),
+                        ("--lm-broyden-batch", args.lm_broyden_batch)):
         if value < 1:
             raise cli.StudyArgumentError(f"{flag} must be >= 1, got {value}")
     for flag, value in (("--least-squares-evaluations", args.least_squares_evaluations),
                         ("--broyden-evaluations", args.broyden_evaluations),
                         ("--lm-iterations", args.lm_iterations),
+                        ("--lm-broyden-iterations", args.lm_broyden_iterations),
                         ("--polish-evaluations", args.polish_evaluations)):
         if value < 0:
             raise cli.StudyArgumentError(f"{flag} must be >= 0, got {value}")
-    if args.lm_batch > MAX_LM_BATCH:
-        raise cli.StudyArgumentError(f"--lm-batch must be <= {MAX_LM_BATCH}, got {args.lm_batch}")
+    for flag, value in (("--lm-batch", args.lm_batch),
+                        ("--lm-broyden-batch", args.lm_broyden_batch)):
+        if value > MAX_LM_BATCH:
+            raise cli.StudyArgumentError(f"{flag} must be <= {MAX_LM_BATCH}, got {value}")
     cma_settings = identify.CMASettings(popsize=args.popsize, max_generations=args.cma_generations,
                                         seed=args.seed, sigma0=args.sigma0)
     cma_settings.validate()
@@ -1096,9 +1166,11 @@ def main(argv=None):
         # (at most: the secant fit simulates a Jacobian only at some of its points)
         gradient = args.starts * (args.lbfgs_evaluations + args.least_squares_evaluations
                                   + args.broyden_evaluations + args.lm_iterations
-                                  ) + args.polish_evaluations
+                                  + args.lm_broyden_iterations) + args.polish_evaluations
         per_gradient = instances_per_instance(len(box) - len(identify.unfired_axes(box, gaits)))
-        batches = args.starts * args.lm_iterations * args.lm_batch
+        broyden_batches = args.lm_batch + (args.lm_broyden_iterations - 1) * args.lm_broyden_batch \
+            if args.lm_broyden_iterations else 0
+        batches = args.starts * (args.lm_iterations * args.lm_batch + broyden_batches)
         cli.check_instances(
             (cma_settings.evaluations(len(box)) + gradient * per_gradient + batches)
             * len(gaits),
@@ -1106,10 +1178,11 @@ def main(argv=None):
             f"{cma_settings.population(len(box), 0)} + (--starts {args.starts} × "
             f"(--lbfgs-evaluations {args.lbfgs_evaluations} + --least-squares-evaluations "
             f"{args.least_squares_evaluations} + --broyden-evaluations "
-            f"{args.broyden_evaluations} + --lm-iterations {args.lm_iterations}) + "
-            f"--polish-evaluations {args.polish_evaluations}) × {per_gradient} + --starts "
-            f"{args.starts} × --lm-iterations {args.lm_iterations} × --lm-batch "
-            f"{args.lm_batch}) × {len(gaits)} gaits")
+            f"{args.broyden_evaluations} + --lm-iterations {args.lm_iterations} + "
+            f"--lm-broyden-iterations {args.lm_broyden_iterations}) + --polish-evaluations "
+            f"{args.polish_evaluations}) × {per_gradient} + --starts {args.starts} × "
+            f"(--lm-iterations {args.lm_iterations} × --lm-batch {args.lm_batch} + "
+            f"{broyden_batches} Broyden batch points)) × {len(gaits)} gaits")
     for box in boxes.values():  # every corner of each group of CORNER_GROUP axes (2^20 is
         for group in range(0, len(box), CORNER_GROUP):  # too many; the groups share no limit)
             identify.check_box(box[group:group + CORNER_GROUP], base, "--sets")
@@ -1130,6 +1203,8 @@ def main(argv=None):
                                            "broyden_evaluations": args.broyden_evaluations,
                                            "lm_iterations": args.lm_iterations,
                                            "lm_batch": args.lm_batch,
+                                           "lm_broyden_iterations": args.lm_broyden_iterations,
+                                           "lm_broyden_batch": args.lm_broyden_batch,
                                            "cma_generations": args.cma_generations,
                                            "polish_evaluations": args.polish_evaluations,
                                            "popsize": args.popsize, "seed": args.seed,
@@ -1170,6 +1245,13 @@ def main(argv=None):
                                                                  args.seed),
                                     args.lm_iterations, args.lm_batch, recorders[-1],
                                     cost_ratios[name])
+        if args.lm_broyden_iterations:
+            recorders.append(Recorder(name, LEVENBERG_MARQUARDT_BROYDEN, write_history))
+            fit_levenberg_marquardt(problems[name], start_points(problems[name], args.starts,
+                                                                 args.seed),
+                                    args.lm_broyden_iterations, args.lm_batch, recorders[-1],
+                                    cost_ratios[name], secant=True,
+                                    later_batch=args.lm_broyden_batch)
         if args.polish_evaluations:
             recorders.append(Recorder.continuing(cma, POLISH, write_history))
             fit_least_squares(problems[name], [cma.best_units], args.polish_evaluations,

@@ -203,6 +203,9 @@ def test_the_budgets_plot_draws_each_optimisers_share_from_the_csv(tmp_path, mon
     (["--lm-iterations", "-1"], "--lm-iterations must be >= 0"),
     (["--lm-batch", "0"], "--lm-batch must be >= 1"),
     (["--lm-batch", "21"], "--lm-batch must be <= 20, got 21"),
+    (["--lm-broyden-iterations", "-1"], "--lm-broyden-iterations must be >= 0"),
+    (["--lm-broyden-batch", "0"], "--lm-broyden-batch must be >= 1"),
+    (["--lm-broyden-batch", "21"], "--lm-broyden-batch must be <= 20, got 21"),
     (["--popsize", "1"], "--popsize must be >= 2"),
     (["--least-squares-method", "lm"], "--least-squares-method"),
     (["--train-cycles", "0:3"], "--train-cycles: expected FIRST:LAST"),
@@ -815,7 +818,9 @@ def test_main_runs_each_optimiser_with_its_own_flags(tmp_path, monkeypatch):
     recorded but not passed on until an audit, 2026-12); the least-squares fit with
     --least-squares-evaluations, the secant one with --broyden-evaluations, the polish with
     --polish-evaluations, all with --least-squares-method; only the secant one with
-    secant=True."""
+    secant=True; the batched fits with --lm-iterations / --lm-broyden-iterations, both with
+    --lm-batch, only the Broyden-updated one secant, its later batches --lm-broyden-batch (20,
+    the largest allowed)."""
     calls = []
 
     class Stop(Exception):
@@ -831,8 +836,9 @@ def test_main_runs_each_optimiser_with_its_own_flags(tmp_path, monkeypatch):
         calls.append((recorder.optimiser, max_evaluations, method, secant))
         return recorder
 
-    def fake_levenberg_marquardt(problem, points, iterations, batch, recorder, cost_ratio):
-        calls.append((recorder.optimiser, iterations, batch, cost_ratio))
+    def fake_levenberg_marquardt(problem, points, iterations, batch, recorder, cost_ratio,
+                                 secant=False, later_batch=None):
+        calls.append((recorder.optimiser, iterations, batch, cost_ratio, secant, later_batch))
         return recorder
 
     def stop(*args, **kwargs):
@@ -847,13 +853,15 @@ def test_main_runs_each_optimiser_with_its_own_flags(tmp_path, monkeypatch):
         gradient_fit.main(["--least-squares-evaluations", "5", "--broyden-evaluations", "3",
                            "--polish-evaluations", "4", "--least-squares-method", "dogbox",
                            "--lm-iterations", "6", "--lm-batch", "3", "--sigma0", "0.05",
+                           "--lm-broyden-iterations", "5", "--lm-broyden-batch", "20",
                            "--popsize", "5", "--cma-generations", "3", "--seed", "7",
                            "--out", str(tmp_path / "out"), "--quick", "--no-progress"])
     assert calls[0] == ("CMA-ES", identify.CMASettings(popsize=5, max_generations=3, seed=7,
                                                        sigma0=0.05))
     assert calls[1:] == [("L-BFGS-B",), (gradient_fit.LEAST_SQUARES, 5, "dogbox", False),
                      (gradient_fit.BROYDEN, 3, "dogbox", True),
-                     (gradient_fit.LEVENBERG_MARQUARDT, 6, 3, 2.0),
+                     (gradient_fit.LEVENBERG_MARQUARDT, 6, 3, 2.0, False, None),
+                     (gradient_fit.LEVENBERG_MARQUARDT_BROYDEN, 5, 3, 2.0, True, 20),
                      (gradient_fit.POLISH, 4, "dogbox", False)]
     # the budgets table gets each set's CMA-ES population (--popsize given: 5)
     populations = []
@@ -869,13 +877,21 @@ def test_main_runs_each_optimiser_with_its_own_flags(tmp_path, monkeypatch):
                            "--no-progress"])
     assert populations == [{"6": 5}]
     monkeypatch.setattr(gradient_fit, "summarise", stop)
-    # 0 leaves the batched fit out
+    # 0 leaves a batched fit out (the other runs, with the least batch, 1)
     calls.clear()
     with pytest.raises(Stop):
-        gradient_fit.main(["--lm-iterations", "0", "--out", str(tmp_path / "out0"), "--quick",
-                           "--no-progress"])
+        gradient_fit.main(["--lm-iterations", "0", "--lm-broyden-batch", "1", "--out",
+                           str(tmp_path / "out0"), "--quick", "--no-progress"])
     assert [call[0] for call in calls] == ["CMA-ES", "L-BFGS-B", gradient_fit.LEAST_SQUARES,
-                                           gradient_fit.BROYDEN]
+                                           gradient_fit.BROYDEN,
+                                           gradient_fit.LEVENBERG_MARQUARDT_BROYDEN]
+    assert calls[-1][-1] == 1
+    calls.clear()
+    with pytest.raises(Stop):
+        gradient_fit.main(["--lm-broyden-iterations", "0", "--out", str(tmp_path / "out1"),
+                           "--quick", "--no-progress"])
+    assert [call[0] for call in calls] == ["CMA-ES", "L-BFGS-B", gradient_fit.LEAST_SQUARES,
+                                           gradient_fit.BROYDEN, gradient_fit.LEVENBERG_MARQUARDT]
 
 
 def test_segments_score_the_way_from_each_best_point_to_the_lowest(monkeypatch):
@@ -1103,8 +1119,14 @@ def linear_levenberg_marquardt_problem(monkeypatch, seed=4):
         calls.append(("batch", np.array(points)))
         return np.array([float(np.sum((matrix @ p - target) ** 2)) for p in points])
 
+    def scored_points(points):
+        calls.append(("batch", np.array(points)))
+        residuals = np.array([matrix @ p - target for p in points])
+        return np.array([float(np.sum(r ** 2)) for r in residuals]), residuals
+
     monkeypatch.setattr(problem, "residuals_and_jacobian", residuals_and_jacobian)
     monkeypatch.setattr(problem, "objectives", objectives)
+    monkeypatch.setattr(problem, "scored_points", scored_points)
     return problem, calls, matrix, target
 
 
@@ -1193,6 +1215,160 @@ def test_a_batch_with_no_better_point_moves_the_grid_up_without_a_jacobian(monke
     np.testing.assert_array_equal(calls[4][1], batches[2][1])
     np.testing.assert_allclose(grids[3], [1e3, 1e4, 1e5], rtol=1e-15)
     assert recorder.rows[9]["best_objective"] == current - 1.0
+
+
+def spied_grids(monkeypatch):
+    """The grids of dampings (and Jacobians) `damped_steps` is called with, in order."""
+    grids, jacobians = [], []
+    steps = gradient_fit.damped_steps
+
+    def spy(residuals, jacobian, units, dampings):
+        grids.append(np.array(dampings))
+        jacobians.append(np.array(jacobian))
+        return steps(residuals, jacobian, units, dampings)
+
+    monkeypatch.setattr(gradient_fit, "damped_steps", spy)
+    return grids, jacobians
+
+
+def test_broyden_batches_keep_an_exact_jacobian_and_simulate_only_at_the_start(monkeypatch):
+    """On linear residuals Broyden's update of the exact Jacobian along any step is that
+    Jacobian again (to round-off) and every step achieves the reduction it predicted, so the
+    Broyden-updated batches simulate the Jacobian at the start only: one run with
+    sensitivities, then batches of `batch` points first and `later_batch` after, each grid
+    centred on the damping that served, to the linear minimum. Costs: one call and every
+    batch point."""
+    problem, calls, matrix, target = linear_levenberg_marquardt_problem(monkeypatch)
+    grids, jacobians = spied_grids(monkeypatch)
+    minimum_units = np.linalg.lstsq(matrix, target, rcond=None)[0]
+    minimum = float(np.sum((matrix @ minimum_units - target) ** 2))
+    recorder = gradient_fit.fit_levenberg_marquardt(
+        problem, gradient_fit.start_points(problem, 1, 0), 4, 5,
+        gradient_fit.Recorder("6", gradient_fit.LEVENBERG_MARQUARDT_BROYDEN), cost_ratio=2.5,
+        secant=True, later_batch=3)
+    assert [call[0] for call in calls] == ["jacobian", "batch", "batch", "batch", "batch"]
+    assert [len(call[1]) for call in calls[1:]] == [5, 3, 3, 3]
+    np.testing.assert_allclose(grids[0], gradient_fit.damping_grid(
+        gradient_fit.MARQUARDT_DAMPING, 5), rtol=1e-15)
+    for before, after, batch in zip(grids, grids[1:], [call[1] for call in calls[1:]]):
+        chosen = before[np.argmin([np.sum((matrix @ p - target) ** 2) for p in batch])]
+        np.testing.assert_allclose(after, gradient_fit.damping_grid(chosen, 3), rtol=1e-15)
+    # the updates change the exact Jacobian by round-off only: the rounding of the residuals'
+    # change (~1e-16 of residuals ~1) over the step's length, ~1e-16 after the first step (~0.1
+    # long), growing as the steps shrink near the minimum (3.3e-8 measured after the third);
+    # a wrong Jacobian's error would be ~1
+    np.testing.assert_allclose(jacobians[1], matrix, rtol=0.0, atol=1e-12)
+    for jacobian in jacobians[2:]:
+        np.testing.assert_allclose(jacobian, matrix, rtol=0.0, atol=1e-6)
+    # the last grid's smallest damping is 1e-7 relative: the minimum to its square
+    assert recorder.best_objective == pytest.approx(minimum, rel=1e-9)
+    window = problem.base.period
+    assert recorder.robot_seconds == pytest.approx((13 + 5 + 3 * 3) * window)
+    assert recorder.cost_equivalent == pytest.approx((2.5 + 5 + 3 * 3) * window)
+    assert len(recorder.rows) == 1 + 5 + 3 * 3
+
+
+def test_a_broyden_jacobian_that_served_badly_is_simulated_where_the_fit_moved(monkeypatch):
+    """After each improving batch the fit asks `secant_jacobian` (the secant fit's rule) with
+    its point, residuals and Jacobian, no step refused, and the batch's best point and its
+    residuals: where it answers None the Jacobian is simulated at that best point before the
+    next batch; where it answers an update, the next batch steps with that update, no run."""
+    problem, calls, matrix, target = linear_levenberg_marquardt_problem(monkeypatch)
+    grids, jacobians = spied_grids(monkeypatch)
+    asked, answers = [], iter([None, "update"])
+    update = matrix + 0.5
+
+    def secant_jacobian(last_units, last_residuals, last_jacobian, refused, units, residuals):
+        asked.append((np.array(last_units), np.array(last_residuals), np.array(last_jacobian),
+                      refused, np.array(units), np.array(residuals)))
+        return None if next(answers) is None else update
+
+    monkeypatch.setattr(gradient_fit, "secant_jacobian", secant_jacobian)
+    start = identify.start_units(problem.box, problem.base)
+    gradient_fit.fit_levenberg_marquardt(problem, [start], 3, 5,
+                                         gradient_fit.Recorder("6", "fit"), cost_ratio=2.0,
+                                         secant=True, later_batch=3)
+    assert [call[0] for call in calls] == ["jacobian", "batch", "jacobian", "batch", "batch"]
+    first_best = calls[1][1][np.argmin([np.sum((matrix @ p - target) ** 2)
+                                        for p in calls[1][1]])]
+    np.testing.assert_array_equal(calls[2][1], first_best)
+    last_units, last_residuals, last_jacobian, refused, units, residuals = asked[0]
+    np.testing.assert_array_equal(last_units, start)
+    np.testing.assert_array_equal(last_residuals, matrix @ start - target)
+    np.testing.assert_array_equal(last_jacobian, matrix)
+    assert refused is False
+    np.testing.assert_array_equal(units, first_best)
+    np.testing.assert_array_equal(residuals, matrix @ first_best - target)
+    assert len(asked) == 2
+    np.testing.assert_array_equal(jacobians[1], matrix)  # simulated at the best point
+    np.testing.assert_array_equal(jacobians[2], update)  # the update, no run
+
+
+def test_a_broyden_batch_with_no_better_point_simulates_the_jacobian_where_the_fit_is(
+        monkeypatch):
+    """A batch with no better point from an updated Jacobian (every run failed) simulates the
+    Jacobian at the current point and retries the same grid; from that simulated Jacobian a
+    batch with none better (a tie with the current point's objective, as the batch scored it)
+    moves the grid up its size in decades, no run; on the last batch nothing is simulated."""
+    problem, calls, matrix, target = linear_levenberg_marquardt_problem(monkeypatch)
+    grids, _ = spied_grids(monkeypatch)
+    scored = problem.scored_points
+    batches = []
+
+    def scored_points(points):  # the 2nd and 5th batches fail, the 3rd ties
+        objectives, residuals = scored(points)
+        batches.append(np.array(points))
+        if len(batches) in (2, 5):
+            return np.full(len(points), math.inf), np.full(residuals.shape, math.inf)
+        if len(batches) == 3:
+            first = batches[0][np.argmin([np.sum((matrix @ p - target) ** 2)
+                                          for p in batches[0]])]
+            tie = float(np.sum((matrix @ first - target) ** 2))
+            return np.full(len(points), tie), residuals
+        return objectives, residuals
+
+    monkeypatch.setattr(problem, "scored_points", scored_points)
+    start = identify.start_units(problem.box, problem.base)
+    recorder = gradient_fit.fit_levenberg_marquardt(problem, [start], 5, 5,
+                                                    gradient_fit.Recorder("6", "fit"),
+                                                    cost_ratio=2.0, secant=True, later_batch=3)
+    assert [call[0] for call in calls] == ["jacobian", "batch", "batch", "jacobian", "batch",
+                                           "batch", "batch"]
+    first = batches[0][np.argmin([np.sum((matrix @ p - target) ** 2) for p in batches[0]])]
+    np.testing.assert_array_equal(calls[3][1], first)
+    np.testing.assert_array_equal(grids[2], grids[1])
+    np.testing.assert_allclose(grids[3], grids[2] * 1e3, rtol=1e-15)
+    assert recorder.rows[-1]["best_objective"] < recorder.rows[1 + 5]["best_objective"]
+    assert recorder.stop_reasons == ["start 0: its 5 batches were spent"]
+
+
+def test_scored_points_are_the_objectives_and_residuals_of_one_batched_run(monkeypatch):
+    """Each point's objective is `objectives`' and its residuals are `residuals`', bitwise (the
+    same per-gait fits), their squares summing to the objective; a point whose run failed
+    scores inf with a row of inf, the others as alone."""
+    box = [identify.parse_range_spec("alpha=0.2:1.5", "--sets")]
+    base, solver, window = StarParams(), SolverConfig(dt=5e-3), (1, 1)
+    gaits = ["A1+A2", "A1+A3"]
+    trials = identification.measured_trials(gaits, base.period)
+    problem = gradient_fit.Problem(box, base, gaits, trials, window, solver, "cpu")
+    points = np.array([[0.3], [0.7]])
+    objectives, residuals = problem.scored_points(points)
+    np.testing.assert_array_equal(objectives, problem.objectives(points))
+    for point, row in zip(points, residuals):
+        np.testing.assert_array_equal(row, problem.residuals(point))
+    # Σ r² and the mean of the gaits' objectives sum the same numbers in another order
+    np.testing.assert_allclose(np.sum(residuals ** 2, axis=1), objectives, rtol=1e-12)
+    runs = problem.runs
+
+    def second_point_fails(params, cycles, sensitivities=()):
+        simulated, result = runs(params, cycles, sensitivities)
+        return simulated[:2] + [None] + simulated[3:], result
+
+    monkeypatch.setattr(problem, "runs", second_point_fails)
+    failed_objectives, failed_residuals = problem.scored_points(points)
+    assert failed_objectives[0] == objectives[0] and failed_objectives[1] == math.inf
+    np.testing.assert_array_equal(failed_residuals[0], residuals[0])
+    assert np.all(failed_residuals[1] == math.inf)
 
 
 def recorder_of(parameter_set, optimiser, objectives, costs, equivalent_costs=None):
