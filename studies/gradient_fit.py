@@ -1,6 +1,6 @@
 """Gradient-based identification beside CMA-ES: L-BFGS-B on the exact gradient of the
 trajectory objective, a trust-region least-squares fit and Levenberg-Marquardt in batches on
-the exact Jacobian of its residuals, against CMA-ES on the same objective, box and start, for
+the exact (or Broyden-updated) Jacobian of its residuals, against CMA-ES on the same objective, box and start, for
 two parameter sets.
 
     python -m studies gradient_fit [--sets 6,20fired] [--gaits paper|A1,A1+A2,...]
@@ -9,6 +9,7 @@ two parameter sets.
                                    [--least-squares-evaluations 8]
                                    [--broyden-evaluations 16]
                                    [--lm-iterations 4] [--lm-batch 7]
+                                   [--lm-broyden-iterations 4] [--lm-broyden-batch 3]
                                    [--least-squares-method trf|dogbox]
                                    [--cma-generations 8] [--polish-evaluations 0]
                                    [--popsize P] [--sigma0 0.25] [--seed S]
@@ -207,8 +208,10 @@ MARQUARDT_DAMPING = 0.01
 """The damping the batches' grid of dampings is first centred on: Marquardt's own first λ
 (1963), the damping relative to each axis's curvature (the steps' scaling, `damped_steps`)."""
 DEFAULT_LM_BATCH = 7
-"""Damped steps per batch (--lm-batch): dampings a decade apart, three either way of the
-centre, the only width tried. In the committed runs of results/gradient_fit/lm_batch/equal_cost/
+"""Damped steps per batch (--lm-batch; the Broyden-updated fit's first batch): dampings a
+decade apart, three either way of the centre, the only width tried for the batches with a
+Jacobian at each accepted point (scratch runs of the Broyden-updated fit, 2026-12, tried 5 and
+7 for its first and 3, 5 and 7 for its later batches). In the committed runs of results/gradient_fit/lm_batch/equal_cost/
 and broyden/ (2026-12) the best damping of 9 of 51 distinct batches lay at an end of its grid,
 4 at the longest step and 5 at the shortest: a narrower grid would have changed those steps."""
 LEVENBERG_MARQUARDT_BROYDEN = "levenberg-marquardt-broyden"
@@ -730,9 +733,10 @@ def fit_levenberg_marquardt(problem: Problem, points, iterations: int, batch: in
     as CMA-ES's points are (`Problem.objectives`; failed runs score inf). The best point of a
     batch that scores below the current point becomes the current one, the grid centred on
     its damping, and the Jacobian is simulated there if another batch follows; a batch with
-    none below moves the grid `batch` decades up (shorter steps from the same Jacobian, no
-    simulation). A start ends when its batches are spent, or before a batch whose every step
-    is at most VANISHED_STEP long. A trust-region method tries one step length per run; the
+    none below moves the grid up (shorter steps from the same Jacobian, no simulation), the
+    next grid's least damping a decade above this one's largest (`batch` decades up). A start
+    ends when its batches are spent, or before a batch whose every step is at most
+    VANISHED_STEP long. A trust-region method tries one step length per run; the
     batch simulator runs a grid of them in one call, at the robot-seconds of each
     (`record_batch`). It searches the axes a fitted gait moves (`Problem.moved`), the others
     held at the start's.
@@ -743,8 +747,10 @@ def fit_levenberg_marquardt(problem: Problem, points, iterations: int, batch: in
     that one served badly (the step achieved less than SECANT_AGREEMENT of the reduction it
     predicted); a batch with no better point from an updated Jacobian simulates the Jacobian
     at the current point and tries the same grid again, one from a simulated Jacobian moves
-    the grid up. Every batch after a start's first has `later_batch` points (default `batch`):
-    the first grid brackets an unknown damping, the later ones follow the one that served."""
+    the grid up, and vanishing steps from an updated Jacobian are checked with the simulated
+    one before the start ends. Every batch after a start's first has `later_batch` points
+    (default `batch`): the first grid brackets an unknown damping, the later ones follow the
+    one that served."""
     parameter_set = recorder.parameter_set
     later_batch = batch if later_batch is None else later_batch
     for start, x0 in enumerate(points):
@@ -759,6 +765,13 @@ def fit_levenberg_marquardt(problem: Problem, points, iterations: int, batch: in
             dampings = damping_grid(centre, size)
             moved_points = damped_steps(residuals, problem.moved_columns(jacobian),
                                         units[problem.moved], dampings)
+            if np.max(np.abs(moved_points - units[problem.moved])) <= VANISHED_STEP \
+                    and not simulated:  # an updated Jacobian's stationary point: check it
+                residuals, jacobian = problem.residuals_and_jacobian(units)
+                record_gradient_call(recorder, problem, units, value, cost_ratio, start)
+                simulated = True
+                moved_points = damped_steps(residuals, problem.moved_columns(jacobian),
+                                            units[problem.moved], dampings)
             if np.max(np.abs(moved_points - units[problem.moved])) <= VANISHED_STEP:
                 reason = (f"its damped steps vanished (at most {VANISHED_STEP:g}) after "
                           f"{iteration} batches")
@@ -775,8 +788,8 @@ def fit_levenberg_marquardt(problem: Problem, points, iterations: int, batch: in
                   f"{dampings[best]:.0e}", flush=True)
             last = iteration + 1 == iterations
             if objectives[best] >= value:
-                if simulated:
-                    centre *= 10.0 ** size
+                if simulated:  # the next grid's least damping a decade above this one's most
+                    centre *= 10.0 ** (size - size // 2 + later_batch // 2)
                 elif not last:
                     residuals, jacobian = problem.residuals_and_jacobian(units)
                     record_gradient_call(recorder, problem, units, value, cost_ratio, start)

@@ -206,6 +206,10 @@ def test_the_budgets_plot_draws_each_optimisers_share_from_the_csv(tmp_path, mon
     (["--lm-broyden-iterations", "-1"], "--lm-broyden-iterations must be >= 0"),
     (["--lm-broyden-batch", "0"], "--lm-broyden-batch must be >= 1"),
     (["--lm-broyden-batch", "21"], "--lm-broyden-batch must be <= 20, got 21"),
+    # the Broyden batches' points count: 7 + 30,399 × 20 of them, with 30,407 Jacobians × 13
+    # instances and CMA-ES's 18 points, on one gait
+    (["--lm-broyden-iterations", "30400", "--lm-broyden-batch", "20"],
+     "607987 Broyden batch points)) × 1 gaits: 1,003,303 instances"),
     (["--popsize", "1"], "--popsize must be >= 2"),
     (["--least-squares-method", "lm"], "--least-squares-method"),
     (["--train-cycles", "0:3"], "--train-cycles: expected FIRST:LAST"),
@@ -1340,6 +1344,54 @@ def test_a_broyden_batch_with_no_better_point_simulates_the_jacobian_where_the_f
     np.testing.assert_allclose(grids[3], grids[2] * 1e3, rtol=1e-15)
     assert recorder.rows[-1]["best_objective"] < recorder.rows[1 + 5]["best_objective"]
     assert recorder.stop_reasons == ["start 0: its 5 batches were spent"]
+    # two Jacobians (13 instances each literally, 2 runs at cost) and 5 + 4 × 3 points
+    window = problem.base.period
+    assert recorder.robot_seconds == pytest.approx((2 * 13 + 5 + 4 * 3) * window)
+    assert recorder.cost_equivalent == pytest.approx((2 * 2.0 + 5 + 4 * 3) * window)
+    assert len(recorder.rows) == 2 + 5 + 4 * 3
+
+
+def test_a_failed_first_batch_moves_a_narrower_grid_to_just_above_it(monkeypatch):
+    """A start's first batch (5 dampings, 1e-4 to 1) with no better point from its simulated
+    Jacobian: the next grid (3 points) starts a decade above its largest damping, 10 to 1000,
+    none skipped (moving its centre 5 decades would leave 10 out)."""
+    problem, calls, matrix, target = linear_levenberg_marquardt_problem(monkeypatch)
+    grids, _ = spied_grids(monkeypatch)
+    scored = problem.scored_points
+    answered = []
+
+    def scored_points(points):  # the first batch fails, the second is scored
+        answered.append(len(points))
+        objectives, residuals = scored(points)
+        if len(answered) == 1:
+            return np.full(len(points), math.inf), np.full(residuals.shape, math.inf)
+        return objectives, residuals
+
+    monkeypatch.setattr(problem, "scored_points", scored_points)
+    gradient_fit.fit_levenberg_marquardt(problem, [identify.start_units(problem.box,
+                                                                        problem.base)], 2, 5,
+                                         gradient_fit.Recorder("6", "fit"), cost_ratio=2.0,
+                                         secant=True, later_batch=3)
+    np.testing.assert_allclose(grids[0], [1e-4, 1e-3, 1e-2, 1e-1, 1.0], rtol=1e-15)
+    np.testing.assert_allclose(grids[1], [10.0, 100.0, 1000.0], rtol=1e-15)
+    assert [call[0] for call in calls] == ["jacobian", "batch", "batch"]
+
+
+def test_vanishing_steps_from_an_updated_jacobian_are_checked_with_a_simulated_one(
+        monkeypatch):
+    """An update that leaves the Jacobian zero makes every damped step vanish: the fit
+    simulates the Jacobian where it is and steps with that before it would end the start (a
+    stationary point of the update need not be one of the residuals)."""
+    problem, calls, matrix, target = linear_levenberg_marquardt_problem(monkeypatch)
+    monkeypatch.setattr(gradient_fit, "secant_jacobian",
+                        lambda *args: np.zeros_like(matrix))
+    recorder = gradient_fit.fit_levenberg_marquardt(
+        problem, [identify.start_units(problem.box, problem.base)], 2, 5,
+        gradient_fit.Recorder("6", "fit"), cost_ratio=2.0, secant=True, later_batch=3)
+    assert [call[0] for call in calls] == ["jacobian", "batch", "jacobian", "batch"]
+    first = calls[1][1][np.argmin([np.sum((matrix @ p - target) ** 2) for p in calls[1][1]])]
+    np.testing.assert_array_equal(calls[2][1], first)
+    assert recorder.stop_reasons == ["start 0: its 2 batches were spent"]
 
 
 def test_scored_points_are_the_objectives_and_residuals_of_one_batched_run(monkeypatch):
