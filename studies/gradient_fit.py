@@ -1,7 +1,7 @@
 """Gradient-based identification beside CMA-ES: L-BFGS-B on the exact gradient of the
 trajectory objective, a trust-region least-squares fit and Levenberg-Marquardt in batches on
-the exact (or Broyden-updated) Jacobian of its residuals, against CMA-ES on the same objective, box and start, for
-two parameter sets.
+the exact (or Broyden-updated) Jacobian of its residuals, against CMA-ES on the same
+objective, box and start, for two parameter sets.
 
     python -m studies gradient_fit [--sets 6,20fired] [--gaits paper|A1,A1+A2,...]
                                    [--train-cycles 1:3] [--validate-cycles 4:6]
@@ -211,9 +211,10 @@ DEFAULT_LM_BATCH = 7
 """Damped steps per batch (--lm-batch; the Broyden-updated fit's first batch): dampings a
 decade apart, three either way of the centre, the only width tried for the batches with a
 Jacobian at each accepted point (scratch runs of the Broyden-updated fit, 2026-12, tried 5 and
-7 for its first and 3, 5 and 7 for its later batches). In the committed runs of results/gradient_fit/lm_batch/equal_cost/
-and broyden/ (2026-12) the best damping of 9 of 51 distinct batches lay at an end of its grid,
-4 at the longest step and 5 at the shortest: a narrower grid would have changed those steps."""
+7 for its first and 3, 5 and 7 for its later batches). In the committed runs of
+results/gradient_fit/lm_batch/equal_cost/ and broyden/ (2026-12) the best damping of 9 of 51
+distinct batches lay at an end of its grid, 4 at the longest step and 5 at the shortest: a
+narrower grid would have changed those steps."""
 LEVENBERG_MARQUARDT_BROYDEN = "levenberg-marquardt-broyden"
 """Levenberg-Marquardt in batches whose Jacobian is Broyden-updated between simulated ones
 (`fit_levenberg_marquardt(secant=True)`; --lm-broyden-iterations)."""
@@ -222,9 +223,9 @@ DEFAULT_LATER_LM_BATCH = 3
 (--lm-broyden-batch): one decade either way of the damping that served, the narrowest grid
 around it; the first batch, with no damping known yet, has --lm-batch."""
 MAX_LM_BATCH = 20
-"""The most damped steps a batch may try (--lm-batch), a cap: a batch that does not improve
-moves the grid `batch` decades up, and a wide grid's few such moves would overflow a float
-(10^308); twenty decades span far more dampings than change a step."""
+"""The most damped steps a batch may try (--lm-batch, --lm-broyden-batch), a cap: a batch that
+does not improve moves the grid about its width in decades up, and a wide grid's few such moves
+would overflow a float (10^308); twenty decades span far more dampings than change a step."""
 VANISHED_STEP = 1e-12
 """The length (largest axis, unit coordinates) at or below which every damped step of a grid
 ends a Levenberg-Marquardt start before its batch is run: at a stationary point, or with a zero
@@ -1181,8 +1182,8 @@ def main(argv=None):
                                   + args.broyden_evaluations + args.lm_iterations
                                   + args.lm_broyden_iterations) + args.polish_evaluations
         per_gradient = instances_per_instance(len(box) - len(identify.unfired_axes(box, gaits)))
-        broyden_batches = args.lm_batch + (args.lm_broyden_iterations - 1) * args.lm_broyden_batch \
-            if args.lm_broyden_iterations else 0
+        broyden_batches = (args.lm_batch + (args.lm_broyden_iterations - 1)
+                           * args.lm_broyden_batch if args.lm_broyden_iterations else 0)
         batches = args.starts * (args.lm_iterations * args.lm_batch + broyden_batches)
         cli.check_instances(
             (cma_settings.evaluations(len(box)) + gradient * per_gradient + batches)
