@@ -1141,9 +1141,7 @@ def main(argv=None):
     args = cli.parse(build_parser(), argv)
     sets = cli.parse_choices(args.sets, "--sets", list(PARAMETER_SETS))
     for flag, value in (("--starts", args.starts), ("--lbfgs-evaluations", args.lbfgs_evaluations),
-                        ("--cma-generations", args.cma_generations),
-                        ("--lm-batch", args.lm_batch),
-                        ("--lm-broyden-batch", args.lm_broyden_batch)):
+                        ("--cma-generations", args.cma_generations)):
         if value < 1:
             raise cli.StudyArgumentError(f"{flag} must be >= 1, got {value}")
     for flag, value in (("--least-squares-evaluations", args.least_squares_evaluations),
@@ -1155,8 +1153,7 @@ def main(argv=None):
             raise cli.StudyArgumentError(f"{flag} must be >= 0, got {value}")
     for flag, value in (("--lm-batch", args.lm_batch),
                         ("--lm-broyden-batch", args.lm_broyden_batch)):
-        if value > MAX_LM_BATCH:
-            raise cli.StudyArgumentError(f"{flag} must be <= {MAX_LM_BATCH}, got {value}")
+        cli.check_count(value, flag, 1, MAX_LM_BATCH)
     cma_settings = identify.CMASettings(popsize=args.popsize, max_generations=args.cma_generations,
                                         seed=args.seed, sigma0=args.sigma0)
     cma_settings.validate()

@@ -202,10 +202,10 @@ def test_the_budgets_plot_draws_each_optimisers_share_from_the_csv(tmp_path, mon
     (["--cma-generations", "0"], "--cma-generations must be >= 1"),
     (["--lm-iterations", "-1"], "--lm-iterations must be >= 0"),
     (["--lm-batch", "0"], "--lm-batch must be >= 1"),
-    (["--lm-batch", "21"], "--lm-batch must be <= 20, got 21"),
+    (["--lm-batch", "21"], "--lm-batch must be in [1, 20], got 21"),
     (["--lm-broyden-iterations", "-1"], "--lm-broyden-iterations must be >= 0"),
     (["--lm-broyden-batch", "0"], "--lm-broyden-batch must be >= 1"),
-    (["--lm-broyden-batch", "21"], "--lm-broyden-batch must be <= 20, got 21"),
+    (["--lm-broyden-batch", "21"], "--lm-broyden-batch must be in [1, 20], got 21"),
     # the Broyden batches' points count: 7 + 30,399 × 20 of them, with 30,407 Jacobians × 13
     # instances and CMA-ES's 18 points, on one gait
     (["--lm-broyden-iterations", "30400", "--lm-broyden-batch", "20"],
