@@ -8,6 +8,7 @@ from __future__ import annotations
 import datetime
 import errno
 import hashlib
+import importlib.metadata
 import json
 import math
 import os
@@ -18,7 +19,7 @@ from pathlib import Path
 from typing import Callable, Dict, List, Mapping, Optional, Tuple
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
-__all__ = ["code_record", "code_version", "local_time", "machine", "cpu_model", "vector_extensions",
+__all__ = ["code_record", "code_version", "library_versions", "local_time", "machine", "cpu_model", "vector_extensions",
            "cache_sizes", "nvidia_smi", "table_stamp", "write_atomic", "finite_json",
            "provenance_json"]
 
@@ -101,6 +102,25 @@ def taichi_version() -> str:
     return ".".join(map(str, version)) if isinstance(version, (tuple, list)) else str(version)
 
 
+RECORDED_LIBRARIES = ("numpy", "scipy", "pandas", "cma", "SALib")
+"""The distributions whose versions a result records (`library_versions`): a CMA-ES run's
+samples are cma's for a given seed, L-BFGS-B's and least squares' steps scipy's, the Sobol
+design SALib's, and every table's arithmetic NumPy's and pandas'; a new version of one can move
+a result that the same commit and seed made before."""
+
+
+def library_versions(names=RECORDED_LIBRARIES) -> Dict[str, Optional[str]]:
+    """The installed version of each distribution of `names` ({"numpy": "1.26.4", ...}), None
+    for one not installed (a plain install has no cma or SALib)."""
+    versions = {}
+    for name in names:
+        try:
+            versions[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            versions[name] = None
+    return versions
+
+
 def local_time() -> str:
     """Now, as the result files record a date: ISO 8601, local time with its offset, to the
     second."""
@@ -111,14 +131,15 @@ def code_record() -> Dict[str, object]:
     """What made a result, as every sidecar records it (`output.provenance`, the studies'
     `record`): taichi_star_version, git_commit, git_dirty (`code_version`), and for a dirty
     checkout git_changes_sha256 (which edits of the commit, so that two are told apart);
-    taichi_version, python_version, and the date (`local_time`)."""
+    taichi_version, python_version, library_versions (`library_versions`), and the date
+    (`local_time`)."""
     code = code_version()
     return {"taichi_star_version": code["version"], "git_commit": code["commit"],
             "git_dirty": code["dirty"],
             **({"git_changes_sha256": code["changes_sha256"]} if "changes_sha256" in code
                else {}),
             "taichi_version": taichi_version(), "python_version": platform.python_version(),
-            "date": local_time()}
+            "library_versions": library_versions(), "date": local_time()}
 
 
 def cpuinfo_text() -> str:

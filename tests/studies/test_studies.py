@@ -408,7 +408,7 @@ def test_fig4c_quick_into_a_fresh_run_folder(tmp_path, monkeypatch):
     pngs_written(folder / "fig4c.png", folder / "fig4b.png")
     sidecar = json.loads((folder / "fig4c.csv.json").read_text())
     for key in ("taichi_star_version", "git_commit", "git_dirty", "model", "solver", "command",
-                "taichi_version", "machine", "date"):
+                "taichi_version", "library_versions", "machine", "date"):
         assert key in sidecar, key
     assert sidecar["taichi_star_version"] == taichi_star.__version__
     # the study's wall time when it wrote the table, counted from the study's start (in a test

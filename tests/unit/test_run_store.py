@@ -567,6 +567,26 @@ def test_code_version_names_the_commit_and_whether_tracked_files_changed(checkou
     assert provenance.code_version()["changes_sha256"] != first["changes_sha256"]
 
 
+def test_a_sidecar_records_the_versions_of_the_libraries_that_shape_results(tmp_path):
+    """`code_record`, and with it every sidecar (here `to_csv`'s), records the installed
+    version of each library of `provenance.RECORDED_LIBRARIES`, and None for one that is not
+    installed rather than failing. A result built by hand: no simulation."""
+    import importlib.metadata
+
+    from taichi_star.output import read_provenance, to_csv
+
+    result = ts.SimulationResult(summary=pd.DataFrame({"gait": ["A1"], "alpha": [0.4]}),
+                                 trajectory=pd.DataFrame(), shapes=None, topology=None,
+                                 solver=SOLVER)
+    recorded = read_provenance(to_csv(result, tmp_path / "run.csv"))["library_versions"]
+    assert list(recorded) == list(provenance.RECORDED_LIBRARIES)
+    # numpy and pandas come with every install, the others with the test extra
+    for name in provenance.RECORDED_LIBRARIES:
+        assert recorded[name] == importlib.metadata.version(name), name
+    assert provenance.library_versions(("numpy", "no-such-distribution")) == {
+        "numpy": np.__version__, "no-such-distribution": None}
+
+
 def test_a_csv_sidecar_of_a_dirty_checkout_records_which_edits(checkout, tmp_path):
     """`SimulationResult.to_csv`'s sidecar records the hash of a dirty checkout's changes, as a
     study's sidecar does (both from `provenance.code_record`; the library's dropped it); a
