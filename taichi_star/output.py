@@ -152,7 +152,10 @@ def _table(result, table: str) -> pd.DataFrame:
     if frame is None:  # the sensitivities of a run without them
         raise ValueError(f"table {table!r}: this result has none (simulate with "
                          f"sensitivities=... for it)")
-    return frame
+    # the sensitivities name no instance: their rows are matched to the summary's by position,
+    # so they are written in the run's order whatever a user's sort did to the frame (a sort
+    # in place wrote another instance's derivatives on a row: an audit, 2026-12)
+    return in_instance_order(frame, table) if table == "sensitivities" else frame
 
 
 def parquet_bytes(frame: pd.DataFrame, metadata: Mapping) -> bytes:

@@ -33,7 +33,7 @@ import copy
 import dataclasses
 import difflib
 from dataclasses import dataclass
-from typing import Dict, List, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import pandas as pd
@@ -45,7 +45,7 @@ from .gait import N_ACTUATORS, Gait
 from .metrics import wrap_degrees
 from .model import build_model
 from .physics import TERMS
-from .timegrid import on_grid
+from .timegrid import on_grid, steps_in
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
 __all__ = ["SUMMARY_OUTPUTS", "TRAJECTORY_OUTPUTS", "RELATIVE_STEP", "FIELD_RELATIVE_STEPS",
@@ -146,20 +146,21 @@ class Direction:
         return self.relative_step * value
 
 
-def parse_directions(names) -> Tuple[Direction, ...]:
+def parse_directions(names, what: str = "sensitivities") -> Tuple[Direction, ...]:
     """The directions of `simulate`'s `sensitivities` argument: field names, a per-actuator
     field standing for its eight numbers ("actuator_gains") or one of them by its Python index
     ("actuator_gains[3]": A4's, as `StarParams.actuator_gains[3]`; the studies' parameter boxes,
     NAME[INDEX] on their command lines, count from 1 instead: actuator_gains[4] there is A4).
-    ValueError naming an unknown, repeated or non-differentiable one."""
+    ValueError naming an unknown, repeated or non-differentiable one, and the argument `what`
+    (a result's `sensitivity` names its `parameter`)."""
     # a set or a mapping would be taken in no defined order, or by its keys alone
     if isinstance(names, (str, bytes, set, frozenset, dict)) or not hasattr(names, "__iter__"):
-        raise ValueError(f"sensitivities must be a sequence of StarParams field names (a list "
+        raise ValueError(f"{what} must be a sequence of StarParams field names (a list "
                          f"or tuple; not a set or a mapping), got {names!r}")
     directions: List[Direction] = []
     for name in names:
         if not isinstance(name, str):
-            raise ValueError(f"sensitivities must hold field names, got {name!r}")
+            raise ValueError(f"{what} must hold field names, got {name!r}")
         field, _, rest = name.partition("[")
         indices = [-1]
         if field in PER_ACTUATOR_FIELDS:
@@ -170,33 +171,36 @@ def parse_directions(names) -> Tuple[Direction, ...]:
                 # label this field is written with (it was read as 1: an audit, 2026-12)
                 if not (rest.endswith("]") and index.isascii() and index.isdigit()
                         and str(int(index)) == index and int(index) < N_ACTUATORS):
-                    raise ValueError(f"sensitivities: {name!r} must name an actuator index in "
+                    raise ValueError(f"{what}: {name!r} must name an actuator index in "
                                      f"[0, {N_ACTUATORS - 1}] (Python's: {field}[0] is A1's, "
                                      f"{field}[{N_ACTUATORS - 1}] A{N_ACTUATORS}'s)")
                 indices = [int(index)]
         elif rest or field not in DIFFERENTIABLE_FIELDS:
             if field in StarParams.__dataclass_fields__:
-                raise ValueError(f"sensitivities: {name!r} is not differentiable (a word, a "
+                raise ValueError(f"{what}: {name!r} is not differentiable (a word, a "
                                  f"count, the profile, or the period, which moves the firings); "
                                  f"differentiable fields: {', '.join(DIFFERENTIABLE_FIELDS)}")
             close = difflib.get_close_matches(field, DIFFERENTIABLE_FIELDS, n=3)
             hint = f"; did you mean {', '.join(close)}?" if close else ""
-            raise ValueError(f"sensitivities: {name!r} is not a StarParams field{hint} "
+            raise ValueError(f"{what}: {name!r} is not a StarParams field{hint} "
                              f"(differentiable fields: {', '.join(DIFFERENTIABLE_FIELDS)})")
         for index in indices:
             direction = Direction(field, index)
             if direction in directions:
-                raise ValueError(f"sensitivities: {direction.label!r} is named twice")
+                raise ValueError(f"{what}: {direction.label!r} is named twice")
             directions.append(direction)
     return tuple(directions)
 
 
 def check_directions(directions: Sequence[Direction], params: Sequence[StarParams],
-                     solver: SolverConfig, commanded: bool = False):
+                     solver: SolverConfig, commanded: bool = False,
+                     duration_s: Optional[float] = None):
     """ValueError, before any compute, where the sensitivities are not defined: in f32 (a
     central difference needs f64's digits) and for a component height at 0 (0 turns the 2.5-D
     model off: no derivative across that switch). A warning (`delay_on_step_grid`) for a delay
-    at which the run has a jump, not a slope; with `commanded` (a `Simulator`, which fires what
+    at which the run has a jump, not a slope: where a run of `duration_s` reaches its first
+    switch, delay + switch time (a run that ends before it has none; None: a `Simulator`,
+    whose runs go on as long as it is told); with `commanded` (a `Simulator`, which fires what
     it is told, whatever the `gait` field says) for any actuator's delay."""
     if directions and solver.precision != "f64":
         raise ValueError(f"sensitivities need precision 'f64' (central differences lose f32's "
@@ -209,8 +213,13 @@ def check_directions(directions: Sequence[Direction], params: Sequence[StarParam
                                  f"for instance {at_zero[0]}; its derivative is defined only "
                                  f"with the component heights set (> 0)")
         if direction.field == "actuator_delays" and not solver.adaptive:
+            # in whole steps (the switch is on the grid): the run's last step is the first that
+            # jumps when it ends on the switch itself
             jumping = [b for b, p in enumerate(params)
-                       if delay_on_step_grid(p, direction.index, solver.dt, commanded)]
+                       if delay_on_step_grid(p, direction.index, solver.dt, commanded)
+                       and (duration_s is None or steps_in(
+                           direction.value(p) + p.actuator_profile.switch_time, solver.dt)
+                           <= steps_in(duration_s, solver.dt))]
             if jumping:
                 p = params[jumping[0]]
                 warn_user(

@@ -128,7 +128,9 @@ class SimulationResult:
         outputs = list(dict.fromkeys(tangents.SUMMARY_OUTPUTS + tangents.TRAJECTORY_OUTPUTS))
         if output not in outputs:   # before the parameter: swapped arguments name the output
             raise ValueError(f"output must be one of {outputs}, got {output!r}")
-        directions = tangents.parse_directions([parameter])
+        if not isinstance(parameter, str):
+            raise ValueError(f"parameter must be a StarParams field name, got {parameter!r}")
+        directions = tangents.parse_directions([parameter], "parameter")
         if output in tangents.SUMMARY_OUTPUTS and not trajectory:
             table = in_instance_order(self.sensitivities, "sensitivities")
             shape = (len(self.summary),)
@@ -136,14 +138,20 @@ class SimulationResult:
             table = in_instance_order(self.trajectory_sensitivities,
                                       "trajectory_sensitivities")
             shape = (len(self.summary), len(table) // max(len(self.summary), 1))
+            if shape[1] == 0:
+                raise ValueError(f"output {output!r}: this run recorded no trajectory "
+                                 f"(simulate with record_interval_s > 0 for it)")
         else:
             raise ValueError(f"output {output!r} is a summary output, not one of the trajectory's "
                              f"{list(tangents.TRAJECTORY_OUTPUTS)} (trajectory=True)")
         columns = [tangents.sensitivity_column(output, direction.label) for direction in directions]
         missing = [column for column in columns if column not in table]
         if missing:
+            prefix = tangents.sensitivity_column(output, "")[:-1]
+            differentiated = [column[len(prefix):-1] for column in table.columns
+                              if column.startswith(prefix)]
             raise ValueError(f"parameter {parameter!r} was not among this run's sensitivities "
-                             f"(columns: {list(self.sensitivities.columns[:3])}...)")
+                             f"{differentiated}")
         values = np.stack([table[column].to_numpy().reshape(shape) for column in columns], axis=1)
         return values if len(columns) > 1 else values[:, 0]
 
@@ -310,7 +318,7 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
                                                           steady_from_cycle, per_instance)
     progress = shows_progress(progress, fewest_steps(solver, duration_s, record_interval_s)[0]
                               * len(params) * per_instance)
-    tangents.check_directions(directions, params, solver)
+    tangents.check_directions(directions, params, solver, duration_s=duration_s)
     check_arch(arch)
     started = time.perf_counter()
     runtime = Runtime.current()

@@ -475,11 +475,14 @@ class Simulator(NotCopied):
         if column not in DIFFERENTIABLE_STATE_COLUMNS:
             raise ValueError(f"column must be one of {DIFFERENTIABLE_STATE_COLUMNS}, got "
                              f"{column!r}")
-        wanted = tangents.parse_directions([parameter])
+        if not isinstance(parameter, str):
+            raise ValueError(f"parameter must be a StarParams field name, got {parameter!r}")
+        wanted = tangents.parse_directions([parameter], "parameter")
         missing = [d.label for d in wanted if d not in self.directions]
         if missing:
-            raise ValueError(f"parameter {missing[0]!r} is not among this Simulator's "
-                             f"sensitivities {[d.label for d in self.directions]}")
+            which = "" if missing == [parameter] else f" ({missing[0]} is not)"
+            raise ValueError(f"parameter {parameter!r} is not among this Simulator's "
+                             f"sensitivities {[d.label for d in self.directions]}{which}")
         values = self._state_of(self.model.batch_size)[column].to_numpy(dtype=float)
         derivatives = tangents.derivatives(values, self.directions, self._steps_of_directions,
                                            column)

@@ -207,6 +207,32 @@ def test_sensitivities_go_to_xarray_and_netcdf_beside_the_summary_not_into_it(tm
         np.testing.assert_array_equal(summary.speed_mm_s, result.summary.speed_mm_s)
 
 
+def test_the_sensitivities_are_written_in_the_runs_order_and_a_run_without_records_has_no_path_derivatives(
+        tmp_path):
+    """The sensitivities table names no instance: to_csv and to_parquet write it in the run's
+    order after a user's sort in place (the sorted rows went out, each instance another's
+    derivative beside the summary: an audit, 2026-12). A run without records has no
+    derivatives of the path: a ValueError saying so (an empty array before)."""
+    result = ts.simulate([ts.StarParams(), ts.StarParams(gait="A1+A2")], 0.02,
+                         sensitivities=("alpha",))
+    column = "d(displacement_x_mm)/d(alpha)"
+    expected = result.sensitivity("displacement_x_mm", "alpha")
+    assert expected[0] != expected[1]  # an order that shows
+    # what a sort in place leaves (pandas deprecates inplace=): the rows reordered, their labels
+    # kept
+    result.sensitivities = result.sensitivities.sort_index(ascending=False)
+    back = pd.read_csv(result.to_csv(tmp_path / "sensitivities.csv", table="sensitivities"))
+    np.testing.assert_array_equal(back[column], expected)
+    stored = pd.read_parquet(result.to_parquet(tmp_path / "sensitivities.parquet",
+                                               table="sensitivities"))
+    np.testing.assert_array_equal(stored[column], expected)
+    for output, trajectory in (("x_mm", False), ("heading_deg", True)):
+        with pytest.raises(ValueError, match=rf"^output '{output}': this run recorded no "
+                                             rf"trajectory \(simulate with record_interval_s > "
+                                             rf"0 for it\)$"):
+            result.sensitivity(output, "alpha", trajectory=trajectory)
+
+
 def test_a_batchs_result_goes_to_xarray_by_its_instance_column(recorded, tmp_path):
     """`run_batch` names its instances in a summary column: that is the coordinate (it also
     was a variable, and xarray refused the dataset), and an instance without records (a

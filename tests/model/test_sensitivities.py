@@ -2,6 +2,7 @@
 differences of whole runs, and the rules of the API."""
 
 import dataclasses
+import re
 
 import numpy as np
 import pandas as pd
@@ -312,8 +313,20 @@ def test_a_bad_output_is_named_before_the_parameter(euler_run):
 
 
 def test_a_per_actuator_field_gives_one_column_per_actuator(euler_run):
-    with pytest.raises(ValueError, match="actuator_gains"):
-        euler_run.sensitivity("displacement_x_mm", "actuator_gains")  # only [1] was run
+    # only [1] was run: the error names the argument as given and lists what the run has
+    with pytest.raises(ValueError, match=re.escape(
+            "parameter 'actuator_gains' was not among this run's sensitivities "
+            "['alpha', 'actuator_gains[1]', 'drag_perpendicular']")):
+        euler_run.sensitivity("displacement_x_mm", "actuator_gains")
+    with pytest.raises(ValueError, match=re.escape(
+            "parameter 'thickness' was not among this run's sensitivities ['alpha', "
+            "'actuator_gains[1]', 'drag_perpendicular']")):
+        euler_run.sensitivity("x_mm", "thickness")
+    # the argument is `parameter`, not simulate's `sensitivities`
+    with pytest.raises(ValueError, match=r"^parameter: 'period' is not differentiable"):
+        euler_run.sensitivity("displacement_x_mm", "period")
+    with pytest.raises(ValueError, match=r"^parameter must be a StarParams field name, got 3$"):
+        euler_run.sensitivity("displacement_x_mm", 3)
     table = euler_run.sensitivities
     assert sensitivity_column("signed_speed_mm_s", "actuator_gains[1]") in table
     assert len(table) == len(BATCH)
@@ -383,8 +396,17 @@ def test_a_simulator_gives_the_same_sensitivities_as_simulate(euler_run):
     assert moved[1] == 0.0 and moved[0] == before[0]
     simulator.load(saved)  # the replicas are part of the saved state
     np.testing.assert_array_equal(simulator.sensitivity("centroid_x_mm", "alpha"), before)
-    with pytest.raises(ValueError, match="not among this Simulator's sensitivities"):
+    with pytest.raises(ValueError, match=re.escape(
+            "parameter 'drag_perpendicular' is not among this Simulator's sensitivities "
+            "['alpha']") + "$"):
         simulator.sensitivity("centroid_x_mm", "drag_perpendicular")
+    # a whole per-actuator field: named as given, then the first actuator missing
+    with pytest.raises(ValueError, match=re.escape(
+            "parameter 'actuator_gains' is not among this Simulator's sensitivities ['alpha'] "
+            "(actuator_gains[0] is not)")):
+        simulator.sensitivity("centroid_x_mm", "actuator_gains")
+    with pytest.raises(ValueError, match=r"^parameter: 'gait' is not differentiable"):
+        simulator.sensitivity("centroid_x_mm", "gait")
     with pytest.raises(ValueError, match="column must be one of"):
         simulator.sensitivity("since_A1_s", "alpha")
     # a state of other parameters would carry tangents scaled by their ε: refused (derivatives
@@ -499,8 +521,8 @@ def test_the_check_study_writes_what_it_measured(euler_run, tmp_path):
 def test_a_delay_on_the_step_grid_warns_and_one_off_it_is_differentiable(taichi_cpu, matches_differences):
     """The fitted profile's branches miss each other at the switch t0 = 0.163 s by
     `switch_jump` (K̄ just after minus just before). With A2's delay a whole number of 1-ms steps
-    (0 included) the switch lies on a step end and the run jumps as the delay moves: a warning,
-    for a gait that fires A2 only. Off the grid (12.3 ms) the derivative is one: within 1e-6 of
+    (0 included) the switch lies on a step end and a run that reaches it jumps as the delay
+    moves: a warning, for a gait that fires A2 only. Off the grid (12.3 ms) the derivative is one: within 1e-6 of
     the differences with a Taylor ratio of 4 (measured 1.0e-7 and 3.79; 1e-6 is 10×)."""
     profile = BASE.actuator_profile
     below = profile.curvature(np.nextafter(profile.switch_time, 0.0))
@@ -508,8 +530,10 @@ def test_a_delay_on_the_step_grid_warns_and_one_off_it_is_differentiable(taichi_
     assert profile.switch_jump == pytest.approx(profile.curvature(profile.switch_time) - below,
                                                 abs=1e-12)
     assert abs(profile.switch_jump) > 1e-3
+    # a run that reaches the switch (its last step ends on it; shorter ones have no jump)
     with pytest.warns(UserWarning, match=r"actuator_delays\[1\] = 0 s .* not defined"):
-        simulate([BASE.replace(gait="A1+A2")], 0.002, sensitivities=("actuator_delays[1]",))
+        simulate([BASE.replace(gait="A1+A2")], profile.switch_time,
+                 sensitivities=("actuator_delays[1]",))
     import warnings
     off_grid = (0.0, 0.0123, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     with warnings.catch_warnings():

@@ -206,6 +206,27 @@ def test_a_simulators_commanded_firings_make_any_actuators_delay_count():
         taichi_star.Simulator([quiet], SolverConfig(dt=dt), sensitivities=["actuator_delays[0]"])
 
 
+def test_a_delay_on_the_grid_warns_only_for_a_run_that_reaches_its_switch():
+    """The jump is at the first switch, delay + switch time after the start: a run that ends a
+    step before it has a derivative by the delay and no warning (every default setup warned,
+    however short the run); one whose last step ends on it warns, as a longer one does."""
+    dt = 1e-3
+    on = BASE.replace(actuator_delays=(0.0, 0.0, on_grid_delay(dt, 400)) + (0.0,) * 5)
+    directions = parse_directions(["actuator_delays[2]"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sens.check_directions(directions, [on], SolverConfig(dt=dt), duration_s=0.399)
+    for duration_s in (0.4, 0.401):
+        with pytest.warns(UserWarning, match=r"^sensitivities: actuator_delays\[2\] = 0.237 s"):
+            sens.check_directions(directions, [on], SolverConfig(dt=dt), duration_s=duration_s)
+    # simulate passes its duration: two steps from rest, no warning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        run = taichi_star.simulate([on], 2 * dt, SolverConfig(dt=dt),
+                                   sensitivities=["actuator_delays[2]"])
+    assert run.summary["status"].tolist() == ["ok"]
+
+
 def test_a_delay_on_the_grid_warns_with_fixed_steps_only():
     dt = 1e-3
     on = BASE.replace(actuator_delays=(0.0, 0.0, on_grid_delay(dt, 400)) + (0.0,) * 5)
