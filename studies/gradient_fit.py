@@ -280,7 +280,8 @@ class Recorder:
 
     def stopped(self, start: int, reason: str):
         """Record why the optimiser's run from start `start` (a CMA-ES restart) ended: its
-        library's own words (scipy's message, cma's termination conditions)."""
+        library's own words (scipy's message, cma's termination conditions), or the budget's
+        (`fit_lbfgs`)."""
         self.stop_reasons.append(f"start {start}: {reason}")
 
     def add(self, units, objective, robot_seconds, cost_equivalent, start=0):
@@ -503,16 +504,27 @@ def record_plain_call(recorder: Recorder, problem: Problem, units, value: float,
     recorder.add(units, value, per_evaluation, per_evaluation, start)
 
 
+class EvaluationsSpent(Exception):
+    """An L-BFGS-B start asked for an evaluation beyond its budget (`fit_lbfgs`)."""
+
+
 def fit_lbfgs(problem: Problem, starts: int, max_evaluations: int, seed: int,
               recorder: Recorder, cost_ratio: float) -> Recorder:
     """Multi-start L-BFGS-B over the unit box (module docstring), every evaluation into
     `recorder`, a call counted as `cost_ratio` runs in the cost-equivalent robot-seconds. It
-    searches the axes a fitted gait moves (`Problem.moved`), the others held at the start's."""
+    searches the axes a fitted gait moves (`Problem.moved`), the others held at the start's.
+    A start stops after `max_evaluations` evaluations at most: scipy checks its `maxfun` only
+    between iterations and finishes a line search past it (a cap of 6 made 9 calls), so the
+    call after the budget is refused here instead."""
     from scipy.optimize import minimize
     parameter_set = recorder.parameter_set
     for start, x0 in enumerate(start_points(problem, starts, seed)):
+        made = [0]
 
-        def fun(moved_units, start=start, x0=x0):
+        def fun(moved_units, start=start, x0=x0, made=made):
+            if made[0] == max_evaluations:
+                raise EvaluationsSpent
+            made[0] += 1
             units = problem.embedded(moved_units, x0)
             value, gradient = problem.value_and_gradient(units)
             record_gradient_call(recorder, problem, units, value, cost_ratio, start)
@@ -520,10 +532,14 @@ def fit_lbfgs(problem: Problem, starts: int, max_evaluations: int, seed: int,
                   f"|gradient| {np.linalg.norm(gradient):.3g}", flush=True)
             return value, gradient[problem.moved]
 
-        result = minimize(fun, x0[problem.moved], jac=True, method="L-BFGS-B",
-                          bounds=[(0.0, 1.0)] * int(problem.moved.sum()),
-                          options={"maxfun": max_evaluations, "maxiter": max_evaluations})
-        recorder.stopped(start, str(result.message))
+        try:
+            message = str(minimize(fun, x0[problem.moved], jac=True, method="L-BFGS-B",
+                                   bounds=[(0.0, 1.0)] * int(problem.moved.sum()),
+                                   options={"maxfun": max_evaluations,
+                                            "maxiter": max_evaluations}).message)
+        except EvaluationsSpent:
+            message = f"stopped after --lbfgs-evaluations ({max_evaluations}) evaluations"
+        recorder.stopped(start, message)
     return recorder
 
 

@@ -764,6 +764,39 @@ def test_the_gradient_fits_hold_the_axes_no_gait_moves(monkeypatch):
         assert recorder.best_objective == pytest.approx(minimum, rel=1e-6)
 
 
+def test_lbfgs_stops_at_its_evaluation_budget(monkeypatch):
+    """scipy's L-BFGS-B checks `maxfun` between iterations and finishes a line search past it
+    (a scaled Rosenbrock function from near a corner: 4 calls for a cap of 2, 7 for 6); a
+    start of `fit_lbfgs` makes at most its `max_evaluations`, and says why it stopped."""
+    from scipy.optimize import minimize, rosen, rosen_der
+
+    box = [identify.parse_range_spec(text, "--sets") for text in gradient_fit.PARAMETER_SETS["6"]]
+    problem = gradient_fit.Problem(box, StarParams(gait="A1+A2"), ["A1+A2"], {}, (1, 1),
+                                   SolverConfig(), "cpu")
+    corner = np.full(6, 0.05)
+    monkeypatch.setattr(gradient_fit, "start_points", lambda problem, starts, seed: [corner])
+    made = []
+
+    def value_and_gradient(units):
+        made.append(np.array(units))
+        return 30.0 * rosen(2.0 * units), 60.0 * rosen_der(2.0 * units)
+
+    monkeypatch.setattr(problem, "value_and_gradient", value_and_gradient)
+    overshoots = 0
+    for budget in range(1, 9):
+        made.clear()
+        minimize(value_and_gradient, corner, jac=True, method="L-BFGS-B",
+                 bounds=[(0.0, 1.0)] * 6, options={"maxfun": budget, "maxiter": budget})
+        overshoots += len(made) > budget
+        made.clear()
+        recorder = gradient_fit.fit_lbfgs(problem, 1, budget, 0,
+                                          gradient_fit.Recorder("6", "L-BFGS-B"), 2.0)
+        assert len(made) == len(recorder.rows) == budget
+        assert recorder.stop_reasons == [
+            f"start 0: stopped after --lbfgs-evaluations ({budget}) evaluations"]
+    assert overshoots >= 4  # what the guard is for (measured: 7 of the 8 budgets)
+
+
 def test_a_failed_trial_point_scores_inf_and_the_fit_goes_on(monkeypatch):
     """A trial point whose run fails gives residuals of inf (`Problem.residuals`): recorded
     with objective inf, never the best, and scipy shrinks its step and reaches the minimum
