@@ -369,14 +369,16 @@ def numeric_columns(table: pd.DataFrame, columns: Sequence[str], path, flag: str
 
 
 def check_run(length: str, duration_s: float, config: SolverConfig,
-              record_interval_s: float = 0.0):
+              record_interval_s: float = 0.0, batch: Optional[int] = None):
     """`check_steps` of a run of duration_s (s, what `length` says, e.g. "--cycles 3 +
     --glide-cycles 4 (22 s)") with this solver and records every record_interval_s (s; 0 =
     none), counted by the library's rule (`fewest_steps`: the fixed steps; adaptive ones at
     dt_max, or one per record where records are closer), so that the command line refuses what
-    the library would, before any folder is made; and at least one fixed step."""
+    the library would, before any folder is made; and at least one fixed step. With `batch`
+    (the instances of such runs a study makes) their robot-steps too: refused, or estimated
+    when long (`check_work`)."""
     steps, bound = fewest_steps(config, duration_s, record_interval_s)
-    check_steps(f"{length} at {bound}", steps)
+    check_steps(f"{length} at {bound}", steps, batch)
     if not config.adaptive:
         check_one_step(length, duration_s, config.dt)
 
@@ -472,9 +474,7 @@ def check_instances(instances: int, what: str):
 def check_count(value: int, flag: str, lowest: int, highest: int):
     """StudyArgumentError naming the flag unless lowest <= value <= highest (a count whose
     upper bound keeps the run finite: a study's MAX_ constant)."""
-    if value < lowest:
-        raise StudyArgumentError(f"{flag} must be >= {lowest}, got {value}")
-    if value > highest:
+    if not lowest <= value <= highest:
         raise StudyArgumentError(f"{flag} must be in [{lowest}, {highest}], got {value}")
 
 

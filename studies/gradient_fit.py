@@ -21,7 +21,11 @@ The objective is `taichi_star.identification`'s trajectory objective on the trai
 (`--train-cycles`), every gait's phase fitted as a nuisance. The box is in unit coordinates
 (`studies.identify.ParameterRange`: `:log` axes in the logarithm, as the CMA-ES studies fit
 them). Every optimiser starts at --preset/--set's model, or with `--start` at an earlier
-model_select run's identified point (to compare the optimisers on continuing a fit). Sets: "6",
+model_select run's identified point (to compare the optimisers on continuing a fit; a field
+both give is refused), clipped into the box (a note on stderr names the axes where the model
+lies outside it: set "20fired" starts the delays of A3-A5, 0 in the presets, at 0.0005 s).
+Before anything runs, the step is checked against the windows the study simulates and the
+instances of all sets together against the limit, their robot-steps estimated. Sets: "6",
 the six axes of `calibrate` (α, rod added mass, C⊥, C∥, C_c, limb stiffness);
 "20", those six, the eight actuator gains and six more per-robot fields (hub added mass,
 Young's modulus, the two densities, hub mass per height, thickness); "20fired", twenty that the
@@ -119,9 +123,10 @@ from a fit that saw the gait (`--start`) tests the optimisers' moves, not the st
 from __future__ import annotations
 
 import math
+import sys
 import time
 from pathlib import Path
-from typing import List, Optional, Sequence
+from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 import pandas as pd
@@ -1097,7 +1102,8 @@ def build_parser():
     parser.add_argument("--validate-cycles", default="4:6", quick=QUICK_VALIDATE,
                         help="the validation window FIRST:LAST")
     parser.add_argument("--starts", type=int, default=2, quick=1,
-                        help="L-BFGS-B starts: the base model, then random points")
+                        help="starts of every gradient fit (L-BFGS-B, least squares, the "
+                             "batches): the base model, then random points")
     parser.add_argument("--lbfgs-evaluations", type=int, default=8, quick=2,
                         help="evaluations (objective + gradient) per L-BFGS-B start")
     parser.add_argument("--least-squares-evaluations", type=int, default=8, quick=2,
@@ -1153,6 +1159,55 @@ def build_parser():
     return parser
 
 
+def note_start_outside(name: str, box, base):
+    """Name on stderr the axes of set `name`'s box whose value in the base model lies outside
+    it: every fit starts at the nearest bound there (`identify.start_units`), not at the
+    model's value (the delays of A3-A5 are 0 in every preset, and set 20fired's start at
+    0.0005 s)."""
+    outside = [f"{axis.label} = {axis.value_of(base):g} (starts at "
+               f"{axis.values(axis.unit(axis.value_of(base))):g}, in [{axis.low:g}, "
+               f"{axis.high:g}])" for axis in box
+               if not axis.low <= axis.value_of(base) <= axis.high]
+    if outside:
+        print(f"gradient_fit: note: set {name}: the model lies outside the box in "
+              f"{'; '.join(outside)}", file=sys.stderr)
+
+
+def planned_instances(args, cma_settings, box, gaits, held_out_gaits) -> Tuple[int, str]:
+    """(the instances one set's fits simulate at most, how they add up with the flags named):
+    CMA-ES's generations × population; every call with sensitivities (two replicas per axis a
+    fitted gait moves: the fits' evaluations, a second Jacobian per Broyden batch, the cost
+    ratio's four, each optimiser's uncertainty); the plain runs (least squares' trial points,
+    the batches' points, the cost ratio's four, each optimiser's validation and segments);
+    each on every fitted gait, and each optimiser's point and the start on the held-out
+    gaits."""
+    moved_axes = len(box) - len(identify.unfired_axes(box, gaits))
+    per_gradient = instances_per_instance(moved_axes)
+    optimisers = 2 + sum(count > 0 for count in (
+        args.least_squares_evaluations, args.broyden_evaluations, args.lm_iterations,
+        args.lm_broyden_iterations, args.polish_evaluations))
+    gradient = args.starts * (args.lbfgs_evaluations + args.least_squares_evaluations
+                              + args.broyden_evaluations + args.lm_iterations
+                              + 2 * args.lm_broyden_iterations) + args.polish_evaluations
+    broyden_batches = (args.lm_batch + (args.lm_broyden_iterations - 1) * args.lm_broyden_batch
+                       if args.lm_broyden_iterations else 0)
+    plain = (cma_settings.evaluations(len(box))
+             + args.starts * (args.least_squares_evaluations + args.broyden_evaluations
+                              + args.lm_iterations * args.lm_batch + broyden_batches)
+             + args.polish_evaluations)
+    # the cost ratio's calls: each run once first, then COST_REPEATS times
+    checks = (COST_REPEATS + 1) * (1 + per_gradient) + optimisers * (2 + per_gradient)
+    count = ((plain + gradient * per_gradient + checks) * len(gaits)
+             + (optimisers + 1) * len(held_out_gaits))
+    return count, (
+        f"(--cma-generations {args.cma_generations} × population "
+        f"{cma_settings.population(len(box), 0)} + --starts {args.starts} × the fits' "
+        f"evaluations and batch points + {gradient} calls with sensitivities × {per_gradient} "
+        f"+ {checks} for the cost ratio, validation and uncertainty) × {len(gaits)} gaits"
+        + (f" + {optimisers + 1} × {len(held_out_gaits)} held-out gaits" if held_out_gaits
+           else ""))
+
+
 def main(argv=None):
     args = cli.parse(build_parser(), argv)
     sets = cli.parse_choices(args.sets, "--sets", list(PARAMETER_SETS))
@@ -1184,32 +1239,26 @@ def main(argv=None):
                                      f"be one the fits do not see")
     base = cli.base_params(args)
     if args.start is not None:
-        base = identify.read_start(args.start, base)
+        base = identify.read_start(args.start, base, [
+            cli.parse_assignment(item, "--set")[0] for item in args.set])
     boxes = {name: [identify.parse_range_spec(text, "--sets") for text in PARAMETER_SETS[name]]
              for name in sets}
-    for name, box in boxes.items():
-        identify.check_unfired_axes("gradient_fit", f"set {name}", box, gaits)
-        # a gradient's evaluation runs each gait with two replicas per axis (`sensitivities`)
-        # (at most: the secant fit simulates a Jacobian only at some of its points)
-        gradient = args.starts * (args.lbfgs_evaluations + args.least_squares_evaluations
-                                  + args.broyden_evaluations + args.lm_iterations
-                                  + args.lm_broyden_iterations) + args.polish_evaluations
-        per_gradient = instances_per_instance(len(box) - len(identify.unfired_axes(box, gaits)))
-        broyden_batches = (args.lm_batch + (args.lm_broyden_iterations - 1)
-                           * args.lm_broyden_batch if args.lm_broyden_iterations else 0)
-        batches = args.starts * (args.lm_iterations * args.lm_batch + broyden_batches)
-        cli.check_instances(
-            (cma_settings.evaluations(len(box)) + gradient * per_gradient + batches)
-            * len(gaits),
-            f"set {name}: (--cma-generations {args.cma_generations} × population "
-            f"{cma_settings.population(len(box), 0)} + (--starts {args.starts} × "
-            f"(--lbfgs-evaluations {args.lbfgs_evaluations} + --least-squares-evaluations "
-            f"{args.least_squares_evaluations} + --broyden-evaluations "
-            f"{args.broyden_evaluations} + --lm-iterations {args.lm_iterations} + "
-            f"--lm-broyden-iterations {args.lm_broyden_iterations}) + --polish-evaluations "
-            f"{args.polish_evaluations}) × {per_gradient} + --starts {args.starts} × "
-            f"(--lm-iterations {args.lm_iterations} × --lm-batch {args.lm_batch} + "
-            f"{broyden_batches} Broyden batch points)) × {len(gaits)} gaits")
+    planned = {name: planned_instances(args, cma_settings, box, gaits, held_out_gaits)
+               for name, box in boxes.items()}
+    for name, (count, what) in planned.items():
+        cli.check_instances(count, f"set {name}: {what}")
+    total = sum(count for count, _ in planned.values())
+    if len(planned) > 1:
+        cli.check_instances(total, f"--sets {args.sets}: "
+                                   + " + ".join(f"{count:,}" for count, _ in planned.values()))
+    # every instance runs at most to the end of the longer window: a step too small for it is
+    # refused, and the whole study's robot-steps checked (refused or estimated when long)
+    # before any compute
+    solver = cli.solver(args)
+    cycles = max(train[1], validate[1])
+    cli.check_run(f"--train-cycles {args.train_cycles} and --validate-cycles "
+                  f"{args.validate_cycles} ({cycles:g} cycles, {cycles * base.period:.3g} s; "
+                  f"{total:,} instances)", cycles * base.period, solver, batch=total)
     for box in boxes.values():  # every corner of each group of CORNER_GROUP axes (2^20 is
         for group in range(0, len(box), CORNER_GROUP):  # too many; the groups share no limit)
             identify.check_box(box[group:group + CORNER_GROUP], base, "--sets")
@@ -1218,7 +1267,10 @@ def main(argv=None):
     held_out_trials = identification.measured_trials(held_out_gaits, base.period)
     # a held-out gait is scored on the training window
     identify.check_trials_cover(held_out_trials, train, args.train_cycles, "--train-cycles")
-    solver = cli.solver(args)
+    # last of the checks: its notes on stderr come only before a run that starts
+    for name, box in boxes.items():
+        identify.check_unfired_axes("gradient_fit", f"set {name}", box, gaits)
+        note_start_outside(name, box, base)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver, extra={"gaits": gaits, "train_cycles": list(train),
                                            "validate_cycles": list(validate),

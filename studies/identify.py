@@ -329,11 +329,12 @@ class CMAResult:
     stop_reasons: List[str]
 
 
-def read_start(path, base: StarParams) -> StarParams:
+def read_start(path, base: StarParams, set_fields: Sequence[str] = ()) -> StarParams:
     """--start: the model of an earlier run's identified.csv (columns field and value, the value
     as Python text; model_select writes it) on top of `base`; StudyArgumentError naming --start
-    for a file that cannot be read, a field StarParams does not have or a value out of its
-    range."""
+    for a file that cannot be read, a field StarParams does not have, a value out of its
+    range, or a field among `set_fields` (what --set gave `base`: the file's value would
+    replace it without a word)."""
     table = cli.read_csv_file(path, "--start", dtype=str, keep_default_na=False)
     missing = {"field", "value"} - set(table.columns)
     if missing or not len(table):
@@ -350,6 +351,9 @@ def read_start(path, base: StarParams) -> StarParams:
         except (ValueError, SyntaxError):
             raise cli.StudyArgumentError(f"--start {path}: {name} = {text!r} is not a "
                                          f"value") from None
+        if name in set_fields:
+            raise cli.StudyArgumentError(f"--start {path} sets {name}, which --set gives too: "
+                                         f"give it in one of them")
     try:
         return base.replace(**fields)
     except (ValueError, TypeError) as error:

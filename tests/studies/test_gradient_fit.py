@@ -201,15 +201,29 @@ def test_the_budgets_plot_draws_each_optimisers_share_from_the_csv(tmp_path, mon
     (["--broyden-evaluations", "-1"], "--broyden-evaluations must be >= 0"),
     (["--cma-generations", "0"], "--cma-generations must be >= 1"),
     (["--lm-iterations", "-1"], "--lm-iterations must be >= 0"),
-    (["--lm-batch", "0"], "--lm-batch must be >= 1"),
+    (["--lm-batch", "0"], "--lm-batch must be in [1, 20], got 0"),
     (["--lm-batch", "21"], "--lm-batch must be in [1, 20], got 21"),
     (["--lm-broyden-iterations", "-1"], "--lm-broyden-iterations must be >= 0"),
-    (["--lm-broyden-batch", "0"], "--lm-broyden-batch must be >= 1"),
+    (["--lm-broyden-batch", "0"], "--lm-broyden-batch must be in [1, 20], got 0"),
     (["--lm-broyden-batch", "21"], "--lm-broyden-batch must be in [1, 20], got 21"),
-    # the Broyden batches' points count: 7 + 30,399 × 20 of them, with 30,407 Jacobians × 13
-    # instances and CMA-ES's 18 points, on one gait
-    (["--lm-broyden-iterations", "30400", "--lm-broyden-batch", "20"],
-     "607987 Broyden batch points)) × 1 gaits: 1,003,303 instances"),
+    # everything a set simulates counts, on --quick's one gait, with N Broyden batches:
+    # CMA-ES's 18 points; the plain points, least squares' 2, the secant fit's 2, the batches'
+    # 7 and the Broyden batches' 7 + (N − 1) × 20; 2 + 2 + 2 + 1 + 2N calls with sensitivities
+    # (a second Jacobian per Broyden batch) × 13 instances; the cost ratio's 4 plain and 4
+    # sensitive calls (4 × 14) and six optimisers' validation, segments and uncertainty (6 ×
+    # 15): 253 + 46N, just over the limit at N = 21,734
+    (["--lm-broyden-iterations", "21734", "--lm-broyden-batch", "20"],
+     "43475 calls with sensitivities × 13 + 146 for the cost ratio, validation and "
+     "uncertainty) × 1 gaits: 1,000,017 instances, more than the 1,000,000"),
+    # the sets' instances together: each set alone is within the limit
+    (["--sets", "6,20", "--lm-broyden-iterations", "12000"],
+     "--sets 6,20: 348,270 + 732,548: 1,080,818 instances, more than the 1,000,000 a study "
+     "runs"),
+    # the step against the windows the study simulates (--quick's: to cycle 2), not against
+    # --quick's 0.2 s (checked there, then refused by simulate with a traceback)
+    (["--dt", "1e-9"], "--train-cycles 1:1 and --validate-cycles 2:2 (2 cycles, 6.3 s; 299 "
+                       "instances) at dt = 1e-09 s is 6.3e+09 time steps per instance (1.88e+12 "
+                       "robot-steps for 299 instances)"),
     (["--popsize", "1"], "--popsize must be >= 2"),
     (["--least-squares-method", "lm"], "--least-squares-method"),
     (["--train-cycles", "0:3"], "--train-cycles: expected FIRST:LAST"),
@@ -258,9 +272,10 @@ def test_the_identified_forms_set_is_the_model_selection_candidates_box():
     assert gradient_fit.PARAMETER_SETS["gains_with_a1"] == candidate.fit.split()
 
 
-def test_start_moves_every_optimisers_start(tmp_path, monkeypatch):
+def test_start_moves_every_optimisers_start(tmp_path, monkeypatch, capsys):
     """--start: the base model of the whole study becomes the identified.csv's model (the
-    provenance names the file); a bad table is refused before compute, naming --start."""
+    provenance names the file); a bad table, or one setting a field --set gives too, is
+    refused before compute, naming --start."""
     seen = {}
 
     class Stop(Exception):
@@ -279,6 +294,43 @@ def test_start_moves_every_optimisers_start(tmp_path, monkeypatch):
     table.write_text("field,value\nalpha,-1\n")
     assert studies_main(["gradient_fit", "--start", str(table), "--out", str(tmp_path / "o2"),
                          "--quick", "--no-progress"]) == 2
+    # a field both --start and --set give: refused (the file's value replaced --set's)
+    table.write_text("field,value\nalpha,0.9\n")
+    assert studies_main(["gradient_fit", "--start", str(table), "--set", "alpha=0.5",
+                         "--out", str(tmp_path / "o3"), "--quick", "--no-progress"]) == 2
+    assert capsys.readouterr().err.strip().endswith(
+        f"--start {table} sets alpha, which --set gives too: give it in one of them")
+    with pytest.raises(Stop):  # another field: both apply
+        gradient_fit.main(["--start", str(table), "--set", "period=4.0", "--out",
+                           str(tmp_path / "o4"), "--quick", "--no-progress"])
+    assert seen["period"] == 4.0
+
+
+def test_a_model_outside_a_sets_box_is_named_and_the_fits_start_at_its_bound(tmp_path,
+                                                                            monkeypatch, capsys):
+    """Every fit starts at the model's unit coordinates, clipped into the box: where the
+    model lies outside a set's box (α = 0.1 below set 6's 0.2) a note on stderr names the axis,
+    the value and the bound the fits start at, before anything runs; at the bound itself,
+    none."""
+    class Stop(Exception):
+        pass
+
+    def output(*args, **kwargs):  # the first thing after the checks and their notes
+        raise Stop
+    monkeypatch.setattr(gradient_fit.cli, "Output", output)
+    for alpha, note in ((0.1, "gradient_fit: note: set 6: the model lies outside the box in "
+                              "alpha = 0.1 (starts at 0.2, in [0.2, 1.5])\n"), (0.2, None)):
+        with pytest.raises(Stop):
+            gradient_fit.main(["--sets", "6", "--set", f"alpha={alpha}", "--out",
+                               str(tmp_path / "out"), "--quick", "--no-progress"])
+        error = capsys.readouterr().err
+        if note is None:
+            assert "outside the box" not in error
+        else:
+            assert note in error
+        box = box_of("6")
+        start = identify.start_units(box, StarParams.preset("paper", alpha=alpha))
+        assert box[0].name == "alpha" and start[0] == 0.0
 
 
 def box_of(name):
@@ -320,11 +372,16 @@ def test_a_set_with_unfired_axes_is_named_on_stderr_before_any_fit(monkeypatch, 
     assert ("set 20: actuator_gains[4], actuator_gains[5], actuator_gains[6], "
             "actuator_gains[7], actuator_gains[8] belong to actuators that no fitted gait "
             "fires (A1+A2, A1+A3)") in capsys.readouterr().err
-    # a set the gaits move all of gets no note
+    # a set the gaits move all of gets no such note; its delays of A3-A5 (0 in the model)
+    # start at the box's lower bound, which a note says
     with pytest.raises(Stop):
         gradient_fit.main(["--sets", "20fired", "--out", str(tmp_path / "fired"),
                            "--no-progress"])
-    assert "note" not in capsys.readouterr().err
+    error = capsys.readouterr().err
+    assert "belong to" not in error and "belongs to" not in error
+    assert error == ("gradient_fit: note: set 20fired: the model lies outside the box in "
+                     + "; ".join(f"actuator_delays[{k}] = 0 (starts at 0.0005, in [0.0005, "
+                                 f"0.2995])" for k in (2, 3, 4)) + "\n")
 
 
 
