@@ -159,7 +159,7 @@ def no_compute(monkeypatch):
     (["primitives", "--set", "period=3.1234"], "--dt, --set period"),
     (["env_bench", "--presets", "fast"], "--presets: unknown value 'fast'"),
     (["env_bench", "--jacobians", "broyden"], "--jacobians: unknown value 'broyden'"),
-    (["env_bench", "--num-envs", "0"], "--num-envs must be >= 1"),
+    (["env_bench", "--num-envs", "0"], "--num-envs must be in [1, "),
     (["env_bench", "--control-period", "0.0123"], "--control-period"),
 ])
 def test_invalid_arguments_fail_before_compute(no_compute, tmp_path, capsys, argv, message):

@@ -80,7 +80,7 @@ def test_killed_dask_worker_costs_only_its_chunk(reference, cluster, tmp_path):
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["--workers", "0"], "--workers must be >= 1"),
+    (["--workers", "0"], "--workers must be in [1, 256], got 0"),
     (["--workers", "2", "--scheduler", "tcp://127.0.0.1:8786"], "give one"),
     (["--scheduler", "localhost"], "--scheduler: expected an address like tcp://HOST:PORT"),
     # refused at once (it waited 31 s for the connection's timeout), and the port named
