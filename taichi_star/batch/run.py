@@ -16,6 +16,7 @@ from ..extras import require
 from ..geometry import build_topology
 from ..model import instances_of
 from ..params import SolverConfig, StarParams
+from ..provenance import code_version
 from ..simulation import SimulationResult, call_arguments, warn_about_ok_instances
 from .executors import DEFAULT_RETRIES, Executor, InProcess, LocalProcesses
 from .store import RunStore, run_definition
@@ -85,6 +86,11 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     if run_dir is not None and not isinstance(run_dir, (str, os.PathLike)):
         raise ValueError(f"run_dir must be the path of the run store's folder, got "
                          f"{type(run_dir).__name__}")
+    if isinstance(run_dir, str) and not run_dir.strip():
+        # "" was the current folder: a run's chunks written among the user's files, or a
+        # finished run there replaced (an audit, 2026-12)
+        raise ValueError(f"run_dir must be the path of the run store's folder, got "
+                         f"{run_dir!r} (the current folder is \".\")")
     if resume and run_dir is None:
         raise ValueError("resume=True needs run_dir (the run store to continue)")
     # the worker processes (started at their first chunk) before the run store is opened: a
@@ -105,22 +111,22 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
         store = RunStore(run_dir, run_definition(params, tasks, chunk_size, cycles, duration_s),
                          flag=run_dir_flag)
         done = store.open(tasks, resume)
-        if done:
-            log.warning("resuming %s: %d of %d chunks already done", store.path, len(done),
-                        len(tasks))
-    todo = [task for task in tasks if task.index not in set(done)]
-    progress = shows_progress(progress, batch_robot_steps(todo))
-
     executor = owned if owned is not None else executor if executor is not None else InProcess()
     summaries, trajectories, shapes = {}, [], {}
     timing = RunTiming(setup_s=0.0, compile_s=0.0, run_s=0.0, collect_s=0.0, robot_steps=0)
-    outer = None
-    if progress and len(tasks) > 1:
-        from tqdm.auto import tqdm
-        outer = tqdm(total=len(tasks), initial=len(done), desc="chunks", unit="chunk")
-    results = None
+    outer = results = None
     try:
-        # inside: an executor failing as it starts lets go of the folder too
+        # from the folder's opening on: an interrupt anywhere (the progress bar's set-up kept
+        # the folder locked: an audit, 2026-12), or an executor failing as it starts, lets go
+        # of the folder
+        if done:
+            log.warning("resuming %s: %d of %d chunks already done", store.path, len(done),
+                        len(tasks))
+        todo = [task for task in tasks if task.index not in set(done)]
+        progress = shows_progress(progress, batch_robot_steps(todo))
+        if progress and len(tasks) > 1:
+            from tqdm.auto import tqdm
+            outer = tqdm(total=len(tasks), initial=len(done), desc="chunks", unit="chunk")
         results = executor.run(todo, progress=progress and isinstance(executor, InProcess))
         for result in results:
             task = tasks[result.index]
@@ -175,13 +181,16 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
         members = np.concatenate([task.members for task in tasks])
         shape_array = stacked[:, np.argsort(members, kind="stable")]
     topology = build_topology(params[0]) if len(topology_keys) == 1 else None
-    # a store resumed under another code holds chunks of each: the result files say which
+    # a store resumed under another code holds chunks of each, and one read back another's:
+    # the result files say which
     makers = store.code_versions() if store is not None else []
+    current = code_version() if makers else None
+    foreign = any(maker["code"] != current for maker in makers)
     arguments = call_arguments("run_batch", duration_s, cycles, record_interval_s,
                                record_shapes, steady_from_cycle, [], chunk_size)
     return SimulationResult(summary=summary, trajectory=trajectory, shapes=shape_array,
                             topology=topology, solver=solver, timing=timing, arch=arch,
-                            code_versions=makers if len(makers) > 1 else None,
+                            code_versions=makers if len(makers) > 1 or foreign else None,
                             arguments=arguments)
 
 

@@ -35,6 +35,7 @@ import hashlib
 import json
 import logging
 import os
+import shutil
 import socket
 import weakref
 from pathlib import Path
@@ -172,6 +173,11 @@ made when a run opens the folder and removed when it ends: two runs in one folde
 each other's manifest and chunks without a word (an audit, 2026-12)."""
 CHUNK_FILES = "chunk_*.parquet"
 """The names of a run folder's chunk files (`RunStore.chunk_path`)."""
+REPLACED = "replaced_run"
+"""The subfolder where a finished run that a new run replaces (`open` without resume) waits,
+its manifest and files, until the new run finishes (`finish`), then deleted: they were deleted
+as the new run opened the folder, and a new run that then failed left neither (an audit,
+2026-12)."""
 
 
 def has_chunks(path) -> bool:
@@ -229,6 +235,12 @@ class RunStore:
             size = manifest["definition"].get("chunk_size")
             if size is not None and not (is_whole(size) and size >= 1):
                 raise ValueError(f"its chunk size {size!r} is not a whole number >= 1")
+            # its definition as written beside its hash: an edit of the one (a changed
+            # setting) was taken for another run, and the advice to delete the folder threw
+            # away chunks whose stamps match this run (an audit, 2026-12)
+            recorded = manifest.get("definition_sha256")
+            if recorded is not None and recorded != _sha256(_canonical(manifest["definition"])):
+                raise ValueError("its definition does not match its definition_sha256")
         except (OSError, UnicodeDecodeError, ValueError) as error:
             reason = str(error).splitlines()[0] if str(error) else type(error).__name__
             # "delete the folder" threw away finished chunks a resume without the manifest
@@ -267,9 +279,10 @@ class RunStore:
         done: List[int] = []
         history: Dict = {}
         # a folder holding only a killed run's temporary files (its first manifest was being
-        # written) is empty: they are removed below
+        # written), or a run set aside by one killed before its first manifest, is empty
         if old is None and self.path.exists() and any(
-                not is_temporary(entry) and entry.name != LOCK for entry in self.path.iterdir()):
+                not is_temporary(entry) and entry.name not in (LOCK, REPLACED)
+                for entry in self.path.iterdir()):
             done = self._orphan_chunks(tasks, resume)
         if old is not None:
             finished = self._chunk_files()
@@ -286,6 +299,13 @@ class RunStore:
                     # written (its manifest was, and a store on read-only media could not be
                     # read back: an audit, 2026-12)
                     self.manifest = {**old, "code_versions": makers_of_chunks(old, done)}
+                    if any(maker["code"] != version for maker in self.code_versions()):
+                        # its tables are the makers', which the result records (it named the
+                        # reading code alone, without a word: an audit, 2026-12)
+                        warn_user(f"reading back a run made with code "
+                                  f"{[maker['code'] for maker in self.code_versions()]}; now "
+                                  f"{version}: the result records the code that made its "
+                                  f"chunks (code_versions)")
                     return done
                 if old.get("code") != version:
                     # allowed (a typo fixed), but its table then mixes two codes' chunks: said
@@ -305,7 +325,9 @@ class RunStore:
                 if finished:  # said, not silent (an audit, 2026-12)
                     warn_user(f"{self.flag} {self.path} held a finished run ({len(finished)} "
                               f"chunk(s), created {old.get('created', 'at an unknown time')}): "
-                              f"replaced by this one (resume reads a finished run back)")
+                              f"replaced by this one, kept in {REPLACED}/ until this one "
+                              f"finishes (resume reads a finished run back)")
+                    self._set_aside(finished + self._trajectory_files() + [self.path / MANIFEST])
                 for path in finished + self._trajectory_files():
                     self._remove(path)
         try:
@@ -348,7 +370,7 @@ class RunStore:
         chunks = set(self._chunk_files())
         stored = chunks | set(self._trajectory_files())
         others = [p.name for p in self.path.iterdir()
-                  if p not in stored and not p.name.startswith(".")]
+                  if p not in stored and not p.name.startswith(".") and p.name != REPLACED]
         if others or not chunks:
             raise RunStoreError(f"{self.flag} {self.path}: not empty and has no {MANIFEST}; not "
                                 f"a run folder (choose another {self.flag})")
@@ -373,6 +395,21 @@ class RunStore:
         log.warning("%s has no %s: reusing the chunks whose stamp matches this run", self.path,
                     MANIFEST)
         return [task.index for task in tasks if self._verified(task)]
+
+    def _set_aside(self, paths: Sequence[Path]):
+        """Move a finished run's files into REPLACED (a replacement of it interrupted before:
+        the run set aside then is the one this finished run replaced, and goes)."""
+        aside = self.path / REPLACED
+        try:
+            if aside.is_dir():
+                shutil.rmtree(aside)
+            aside.mkdir()
+            for path in paths:
+                os.replace(path, aside / path.name)
+        except OSError as error:
+            raise RunStoreError(f"{self.flag} {self.path}: cannot set the finished run aside in "
+                                f"{REPLACED}/ ({error.strerror}); make the folder writable or "
+                                f"choose another {self.flag}") from None
 
     def _remove(self, path: Path):
         """Delete one of the store's files; RunStoreError naming it where that fails (a
@@ -560,6 +597,9 @@ class RunStore:
         self.manifest["finished"] = datetime.datetime.now().isoformat(timespec="seconds")
         try:
             self._write_manifest()
+            # the run this one replaced goes once this one is whole (left where that fails:
+            # the next replacement removes it)
+            shutil.rmtree(self.path / REPLACED, ignore_errors=True)
         finally:
             self.release()
 

@@ -43,12 +43,13 @@ def finished(tmp_path_factory):
 
 def unfinished_copy(source, folder, **manifest_changes):
     """`folder`, a copy of the finished run folder `source` whose manifest says it is not
-    finished (a run to resume), with `manifest_changes` to its manifest."""
+    finished (a run to resume), with `manifest_changes` to its manifest (complete=True: a
+    finished one)."""
     folder.mkdir()
     for path in source.iterdir():
         (folder / path.name).write_bytes(path.read_bytes())
     manifest = json.loads((folder / "manifest.json").read_text())
-    manifest.update(complete=False, **manifest_changes)
+    manifest.update({"complete": False, **manifest_changes})
     (folder / "manifest.json").write_text(json.dumps(manifest))
     return folder
 
@@ -312,6 +313,21 @@ def test_a_batch_resumed_under_other_code_says_so_in_its_result_files(finished, 
                          run_dir=tmp_path / "fresh")
     assert one_code.code_versions is None
     assert "code_versions" not in read_provenance(one_code.to_csv(tmp_path / "fresh.csv"))
+    # a finished run of another code read back: said, and its result names its maker (it named
+    # the reading code alone, without a word: an audit, 2026-12); of this code, nothing
+    made_before = unfinished_copy(source, tmp_path / "before", code=old, complete=True,
+                                  code_versions=[{"code": old, "chunks": [0, 1, 2]}])
+    with pytest.warns(RuntimeWarning, match=r"^reading back a run made with code \[\{"):
+        read_back = run_batch(PARAMS, DURATION, solver=SOLVER, chunk_size=CHUNK,
+                              run_dir=made_before, resume=True)
+    pd.testing.assert_frame_equal(read_back.summary, summary, check_exact=True)
+    assert read_back.code_versions == [{"code": old, "chunks": [0, 1, 2]}]
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        again = run_batch(PARAMS, DURATION, solver=SOLVER, chunk_size=CHUNK,
+                          run_dir=tmp_path / "fresh", resume=True)
+    assert again.code_versions is None
 
 
 def test_a_file_the_store_cannot_remove_is_a_run_store_error(finished, tmp_path, monkeypatch):
@@ -417,24 +433,61 @@ def test_run_batch_lets_go_of_its_folder_after_a_failure_and_reads_a_finished_ru
     pd.testing.assert_frame_equal(run(folder, resume=True), summary, check_exact=True)
 
 
-def test_a_finished_run_replaced_by_a_new_one_is_said(finished, tmp_path):
+def test_a_finished_run_replaced_by_a_new_one_is_said_and_kept_until_that_one_finishes(
+        finished, tmp_path):
     """run_batch(run_dir=D) without resume replaces a finished run in D (resume reads it back);
     it did so without a word (an audit, 2026-12): a RuntimeWarning names the folder and the
-    chunks replaced. An empty folder is taken without one."""
+    chunks replaced. The finished run waits in replaced_run/ until the new one finishes (it was
+    deleted as the new one began, and a new run that failed left neither: an audit, 2026-12),
+    its files and manifest as they were. An empty folder is taken without a warning."""
+    from taichi_star.batch.store import REPLACED
+
     source, _ = finished
     folder = tmp_path / "run"
     folder.mkdir()
     for path in source.iterdir():
         (folder / path.name).write_bytes(path.read_bytes())
+
+    class Failing:
+        def run(self, tasks, progress=False):
+            raise KeyboardInterrupt  # the new run stopped before its first chunk
+
     with pytest.warns(RuntimeWarning, match=rf"^run_dir {folder} held a finished run \(3 "
-                                            rf"chunk\(s\), created .*\): replaced by this one"):
-        run(folder, params=PARAMS[:1])
+                                            rf"chunk\(s\), created .*\): replaced by this one, "
+                                            rf"kept in {REPLACED}/ until this one finishes"):
+        with pytest.raises(KeyboardInterrupt):
+            run_batch(PARAMS[:1], DURATION, solver=SOLVER, chunk_size=CHUNK, run_dir=folder,
+                      executor=Failing())
+    for path in source.iterdir():
+        kept = folder / REPLACED / path.name
+        assert kept.read_bytes() == path.read_bytes(), path.name
+    # the new run, resumed, finishes: the finished run it replaced goes
+    run(folder, resume=True, params=PARAMS[:1])
+    assert not (folder / REPLACED).exists()
     assert sorted(p.name for p in folder.iterdir() if p.suffix == ".parquet") == [
         "chunk_000000.parquet"]
     import warnings
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         run(tmp_path / "empty", params=PARAMS[:1])
+
+
+def test_an_interrupt_before_the_first_chunk_lets_go_of_the_folder(tmp_path, monkeypatch):
+    """An interrupt between the folder's opening and the chunks' start (the progress bar's
+    set-up) kept the folder locked, and a retry in the same process was refused as another
+    run's (an audit, 2026-12): the lock goes, and the retry resumes."""
+    from taichi_star.batch import run as batch_run
+    from taichi_star.batch.store import LOCK
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+    folder = tmp_path / "run"
+    with monkeypatch.context() as patch:
+        patch.setattr(batch_run, "shows_progress", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            run(folder, params=PARAMS[:1])
+    assert not (folder / LOCK).exists()
+    assert len(run(folder, resume=True, params=PARAMS[:1])) == 1
 
 
 @pytest.mark.parametrize("executor", ["class", "no_results"])

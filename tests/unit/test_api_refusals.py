@@ -4,6 +4,7 @@ check. No engine is compiled here: `no_compute` makes Taichi's start an error, s
 reaches it has accepted its arguments (and one that should have refused them fails)."""
 
 import math
+import re
 import types
 from fractions import Fraction
 
@@ -91,10 +92,18 @@ def test_run_batch_accepts_one_worker_and_plain_flags(tmp_path, no_compute):
     assert not folder.exists()
 
 
-def test_run_batch_refuses_a_run_dir_that_is_not_a_path(no_compute):
+def test_run_batch_refuses_a_run_dir_that_is_not_a_path(no_compute, tmp_path, monkeypatch):
     with pytest.raises(ValueError, match="^run_dir must be the path of the run store's folder, "
                                          "got int$"):
         run_batch([P], 0.01, run_dir=5)
+    # "" was the current folder: refused, nothing written there
+    monkeypatch.chdir(tmp_path)
+    for empty in ("", "  "):
+        with pytest.raises(ValueError, match=re.escape(
+                f"run_dir must be the path of the run store's folder, got {empty!r} (the "
+                f"current folder is \".\")")):
+            run_batch([P], 0.01, run_dir=empty)
+    assert list(tmp_path.iterdir()) == []
 
 
 @pytest.mark.parametrize("keywords, name", [

@@ -493,6 +493,16 @@ def test_folders_that_are_not_run_folders_are_refused(tmp_path):
     empty = tmp_path / "empty"
     empty.mkdir()
     assert store_in(empty).open(tasks_of(), resume=True) == []
+    # a run set aside (`REPLACED`) by one killed before it wrote its first manifest: the folder
+    # is empty for the next run, which deletes that one once it finishes
+    from taichi_star.batch.store import REPLACED
+
+    aside = tmp_path / "aside"
+    (aside / REPLACED).mkdir(parents=True)
+    store = store_in(aside)
+    assert store.open(tasks_of(), resume=False) == []
+    store.finish()
+    assert not (aside / REPLACED).exists()
 
 
 @pytest.mark.parametrize("text,reason", [("{", "(Expecting property name"),
@@ -514,6 +524,23 @@ def test_a_damaged_manifest_is_a_one_line_error_naming_the_reason(tmp_path, text
                             "(its chunk size too) to keep the chunks whose stamps match it, or "
                             "delete the folder (or choose another --run-dir) to start over")
     assert "\n" not in message
+
+
+def test_a_manifest_whose_definition_was_edited_is_damaged_not_another_run(written):
+    """A manifest's definition no longer matching its own definition_sha256 (an edited setting)
+    is damage: the damaged-manifest error, whose advice keeps the chunks that match the run
+    (it was refused as another run, with the advice to delete the folder: an audit, 2026-12);
+    the manifest as written passes."""
+    folder, tasks = written
+    assert store_in(folder).read_manifest()["definition_sha256"] == \
+        store_in(folder).definition_sha256
+    definition = manifest_of(folder)["definition"]
+    set_manifest(folder, definition={**definition,
+                                     "chunk_size": definition["chunk_size"] + 1})
+    with pytest.raises(RunStoreError, match=re.escape(
+            f"run_dir {folder}: manifest.json is damaged (its definition does not match its "
+            f"definition_sha256); delete manifest.json and resume")):
+        store_in(folder).open(tasks, resume=True)
 
 
 def test_stored_chunk_size_reads_the_manifest(written, tmp_path):
