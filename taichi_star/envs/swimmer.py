@@ -110,6 +110,11 @@ class SwimmerTask:
                 raise ValueError(f"{name} must be a number in {bracket}{lowest:g}, {highest:g}], "
                                  f"got {value!r}")
             object.__setattr__(self, name, float(value))
+        if self.goal_distance_mm <= self.goal_tolerance_mm:
+            # every drawn goal would start reached: each episode over at its first step,
+            # whatever the agent does (an audit, 2026-12)
+            raise ValueError(f"goal_distance_mm must exceed goal_tolerance_mm "
+                             f"({self.goal_tolerance_mm:g} mm), got {self.goal_distance_mm:g}")
         steps = self.max_episode_steps
         if steps is not None:
             if not is_whole(steps) or steps < 1:
@@ -514,7 +519,9 @@ class StarSwimmerVectorEnv(RobotsView, VectorEnv):
             seeds = [None] * self.num_envs
         elif is_whole(seed):
             seeds = [checked_seed(seed) + b for b in range(self.num_envs)]
-        elif isinstance(seed, (list, tuple)) and len(seed) == self.num_envs:
+        elif (isinstance(seed, (list, tuple)) or (isinstance(seed, np.ndarray) and seed.ndim == 1)) \
+                and len(seed) == self.num_envs:
+            # a NumPy array of seeds too, as gymnasium's own vector envs take (an audit)
             seeds = [checked_seed(value, f"seed[{b}]") for b, value in enumerate(seed)]
         else:
             raise ValueError(f"seed must be None, an int or a list of {self.num_envs} seeds, "

@@ -6,6 +6,7 @@ libraries emit them; the rgb_array render; the Stable-Baselines3 adapter against
 contract (same-step autoreset, terminal_observation), and, when stable-baselines3 is installed,
 PPO on both paths."""
 
+import re
 import sys
 import warnings
 
@@ -139,7 +140,28 @@ def test_a_bad_seed_is_a_value_error_and_changes_no_robot(single):
     by_int, _ = envs.reset(seed=3)
     by_numpy, _ = envs.reset(seed=np.int64(3))
     np.testing.assert_array_equal(by_numpy, by_int)
+    # one seed per robot as a NumPy array, as gymnasium's vector envs take them (refused: an
+    # audit, 2026-12), the same as the list; a 2-D array or one of another length refused
+    by_list, _ = envs.reset(seed=[3, 7])
+    by_array, _ = envs.reset(seed=np.array([3, 7]))
+    np.testing.assert_array_equal(by_array, by_list)
+    for seed in (np.array([[3, 7]]), np.array([3, 7, 9])):
+        with pytest.raises(ValueError, match=r"^seed must be None, an int or a list of 2 seeds"):
+            envs.reset(seed=seed)
     envs.close()
+
+
+@pytest.mark.parametrize("distance_mm, refused", [(4.0, True), (5.0, True), (5.5, False)])
+def test_a_task_whose_goals_would_start_reached_is_refused(distance_mm, refused):
+    """Goals drawn at goal_distance_mm within goal_tolerance_mm (5 mm) of the start end every
+    episode at its first step, whatever the agent does (accepted: an audit, 2026-12): refused
+    at the tolerance itself too; just past it accepted."""
+    if refused:
+        with pytest.raises(ValueError, match=re.escape(
+                f"goal_distance_mm must exceed goal_tolerance_mm (5 mm), got {distance_mm:g}")):
+            SwimmerTask(goal_distance_mm=distance_mm)
+    else:
+        assert SwimmerTask(goal_distance_mm=distance_mm).goal_distance_mm == distance_mm
 
 
 def test_make_vec_builds_the_native_vector_env():
