@@ -84,7 +84,8 @@ actuators and its goal, drawn with matplotlib's Agg backend; no window)."""
 class SwimmerTask:
     """The goal-reaching task's settings (validated; ValueError names the field).
 
-    goal_distance_mm: distance of a randomly drawn goal from the start, mm, (0, 1000];
+    goal_distance_mm: distance of a randomly drawn goal from the start, mm, (0, 1000], more
+    than goal_tolerance_mm (a goal within it would start reached);
     goal_tolerance_mm: the episode terminates within this distance of the goal, mm, (0, 1000];
     firing_cost_mm: reward subtracted per fired actuator, mm of progress, [0, 1000];
     max_episode_steps: control periods before truncation, >= 1, or None (no budget);
