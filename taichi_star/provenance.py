@@ -19,9 +19,9 @@ from pathlib import Path
 from typing import Callable, Dict, List, Mapping, Optional, Tuple
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
-__all__ = ["code_record", "code_version", "library_versions", "local_time", "machine", "cpu_model", "vector_extensions",
-           "cache_sizes", "nvidia_smi", "table_stamp", "write_atomic", "finite_json",
-           "provenance_json"]
+__all__ = ["code_record", "code_version", "library_versions", "local_time", "machine",
+           "cpu_model", "vector_extensions", "cache_sizes", "nvidia_smi", "table_stamp",
+           "write_atomic", "finite_json", "provenance_json"]
 
 
 def _git(root: Path, *arguments: str, timeout: float = 10) -> Optional[bytes]:

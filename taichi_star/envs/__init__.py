@@ -11,8 +11,8 @@ Both take ``render_mode="rgb_array"`` (a picture of the robot from `render()`).
 
 Made by ``gymnasium.make`` or ``make_vec``, both stop an episode after
 DEFAULT_MAX_EPISODE_STEPS (40) control periods unless given `max_episode_steps=N`; built
-directly from their classes, neither has a budget unless given one. The keyword arguments, spaces and reward are described in
-`taichi_star.envs.swimmer`.
+directly from their classes, neither has a budget unless given one. The keyword arguments,
+spaces and reward are described in `taichi_star.envs.swimmer`.
 
 Gymnasium comes with the ``envs`` extra (``pip install "taichi_star[envs]"``).
 """

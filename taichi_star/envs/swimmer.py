@@ -520,8 +520,8 @@ class StarSwimmerVectorEnv(RobotsView, VectorEnv):
             seeds = [None] * self.num_envs
         elif is_whole(seed):
             seeds = [checked_seed(seed) + b for b in range(self.num_envs)]
-        elif (isinstance(seed, (list, tuple)) or (isinstance(seed, np.ndarray) and seed.ndim == 1)) \
-                and len(seed) == self.num_envs:
+        elif (isinstance(seed, (list, tuple))
+              or (isinstance(seed, np.ndarray) and seed.ndim == 1)) and len(seed) == self.num_envs:
             # a NumPy array of seeds too, as gymnasium's own vector envs take (an audit)
             seeds = [checked_seed(value, f"seed[{b}]") for b, value in enumerate(seed)]
         else:

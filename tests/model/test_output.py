@@ -207,8 +207,7 @@ def test_sensitivities_go_to_xarray_and_netcdf_beside_the_summary_not_into_it(tm
         np.testing.assert_array_equal(summary.speed_mm_s, result.summary.speed_mm_s)
 
 
-def test_the_sensitivities_are_written_in_the_runs_order_and_a_run_without_records_has_no_path_derivatives(
-        tmp_path):
+def test_sensitivities_written_in_run_order_and_no_path_derivatives_without_records(tmp_path):
     """The sensitivities table names no instance: to_csv and to_parquet write it in the run's
     order after a user's sort in place (the sorted rows went out, each instance another's
     derivative beside the summary: an audit, 2026-12). A run without records has no

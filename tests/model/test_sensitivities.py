@@ -515,11 +515,12 @@ def test_the_check_study_writes_what_it_measured(euler_run, tmp_path):
 
 
 def test_a_delay_on_the_step_grid_warns_and_one_off_it_is_differentiable(taichi_cpu, matches_differences):
-    """The fitted profile's branches miss each other at the switch t0 = 0.163 s by
-    `switch_jump` (K̄ just after minus just before). With A2's delay a whole number of 1-ms steps
-    (0 included) the switch lies on a step end and a run that reaches it jumps as the delay
-    moves: a warning, for a gait that fires A2 only. Off the grid (12.3 ms) the derivative is one: within 1e-6 of
-    the differences with a Taylor ratio of 4 (measured 1.0e-7 and 3.79; 1e-6 is 10×)."""
+    """The fitted profile's branches miss each other at the switch t0 = 0.163 s by `switch_jump`
+    (K̄ just after minus just before). With A2's delay a whole number of 1-ms steps (0
+    included) the switch lies on a step end and a run that reaches it jumps as the delay moves:
+    a warning, for a gait that fires A2 only. Off the grid (12.3 ms) the derivative is one:
+    within 1e-6 of the differences with a Taylor ratio of 4 (measured 1.0e-7 and 3.79; 1e-6 is
+    10×)."""
     profile = BASE.actuator_profile
     below = profile.curvature(np.nextafter(profile.switch_time, 0.0))
     # the slope times one ulp of t0 (~1e-15 1/m) is all that separates the two
