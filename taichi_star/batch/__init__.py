@@ -1,8 +1,8 @@
 """Batches of any size: chunks, executors, the resumable run store.
 
     from taichi_star.batch import run_batch
-    result = run_batch(params, cycles=3, workers=2)        # two local worker processes
-    result.summary                                          # one row per instance, input order
+    result = run_batch(params, cycles=3, workers=2)   # chunks (of 2048) on two worker processes
+    result.summary                                     # one row per instance, input order
 
 - `run_batch`: cut a batch into chunks (`plan_chunks`, `ChunkTask`), run them (`run_chunk`)
   on an executor and gather one `SimulationResult`.

@@ -124,7 +124,9 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
                         len(tasks))
         todo = [task for task in tasks if task.index not in set(done)]
         progress = shows_progress(progress, batch_robot_steps(todo))
-        if progress and len(tasks) > 1:
+        # a bar of chunks where the chunks' own bars are not shown (worker processes), even
+        # for one chunk: nothing was shown there (an audit, 2026-12)
+        if progress and (len(tasks) > 1 or not isinstance(executor, InProcess)):
             from tqdm.auto import tqdm
             outer = tqdm(total=len(tasks), initial=len(done), desc="chunks", unit="chunk")
         results = executor.run(todo, progress=progress and isinstance(executor, InProcess))
@@ -172,8 +174,12 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     order = np.argsort(summary["instance"].to_numpy(), kind="stable")
     summary = summary.iloc[order].reset_index(drop=True)
     warn_about_ok_instances(summary, solver)
+    # no records: the empty table with simulate's column types (object columns before: an
+    # audit, 2026-12)
     trajectory = (pd.concat(trajectories, ignore_index=True) if trajectories
-                  else pd.DataFrame(columns=TRAJECTORY_COLUMNS))
+                  else pd.DataFrame({column: pd.Series(dtype=np.int64 if column == "instance"
+                                                       else np.float64)
+                                     for column in TRAJECTORY_COLUMNS}))
     trajectory = trajectory.sort_values(["instance", "t_s"], kind="stable").reset_index(drop=True)
     shape_array = None
     if record_shapes:

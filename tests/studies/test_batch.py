@@ -379,3 +379,26 @@ def test_a_sweep_tells_its_batchs_hours_once_before_it_builds_the_instances(
     assert cli.tell_batch_work(arguments, ts.SolverConfig(), 2, periods=[0.5, 1.0]) \
         == batch_robot_steps(tasks) == 1500
     assert table["duration_s"].tolist() == [0.5, 1.0]
+
+
+def test_chunks_on_workers_show_a_bar_even_one_and_no_records_keep_simulates_types(tmp_path,
+                                                                                   capsys):
+    """With an executor that runs chunks elsewhere (worker processes show no bar of their own)
+    `progress=True` showed nothing for a batch of one chunk, the default chunk size's usual
+    case (an audit, 2026-12): a bar of chunks now. A run without records, stored or not, has
+    an empty trajectory of simulate's column types (object columns before)."""
+    from taichi_star.batch import InProcess
+
+    class Elsewhere:  # not an InProcess: as worker processes, no bars of the chunks' own
+        def run(self, tasks, progress=False):
+            assert progress is False
+            return InProcess().run(tasks)
+
+    run_batch(PARAMS[:1], 0.01, solver=SOLVER, executor=Elsewhere(), progress=True)
+    assert "chunks" in capsys.readouterr().err
+    run_batch(PARAMS[:1], 0.01, solver=SOLVER, executor=Elsewhere(), progress=False)
+    assert "chunks" not in capsys.readouterr().err
+    plain = ts.simulate(PARAMS[:1], 0.01, SOLVER, progress=False).trajectory
+    for run_dir in (None, tmp_path / "run"):
+        stored = run_batch(PARAMS[:1], 0.01, solver=SOLVER, run_dir=run_dir).trajectory
+        assert stored.empty and stored.dtypes.to_dict() == plain.dtypes.to_dict()
