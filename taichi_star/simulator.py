@@ -24,6 +24,7 @@ import dataclasses
 import functools
 import io
 import json
+import math
 import os
 import time
 from dataclasses import dataclass
@@ -107,7 +108,8 @@ class SimulatorSnapshot:
     """The whole state of a Simulator's batch (from `Simulator.save`): every device field as a
     NumPy array (padding included) and what the state belongs to: the engine, the batch size,
     the step, each instance's parameters (`parameter_texts`) and the solver's settings
-    (`solver_texts`); the last two empty in a snapshot written before they were recorded."""
+    (`solver_texts`), and how far each failed instance's clock lags (`behind`); the last
+    three empty in a snapshot written before they were recorded."""
 
     fields: Dict[str, np.ndarray]
     engine_key: str
@@ -115,6 +117,10 @@ class SimulatorSnapshot:
     dt: float
     params: Tuple[Dict[str, str], ...] = ()
     solver: Dict[str, str] = dataclasses.field(default_factory=dict)
+    behind: Tuple[float, ...] = ()
+    """How far each failed instance's clock lags the others' (`Simulator._behind`: steps, or
+    seconds with adaptive steps), which its later records' times add; empty in a snapshot
+    written before it was recorded."""
 
     def write(self, path) -> Path:
         """Save to an .npz file (arrays plus a JSON header; ".npz" is added to a path without
@@ -127,7 +133,7 @@ class SimulatorSnapshot:
         path = path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
         header = json.dumps({"engine_key": self.engine_key, "n_instances": self.n_instances,
                              "dt": self.dt, "params": list(self.params),
-                             "solver": dict(self.solver)})
+                             "solver": dict(self.solver), "behind": list(self.behind)})
         archive = io.BytesIO()
         np.savez(archive, __header__=np.array(header), **self.fields)
         # an OSError all the same, but naming the file asked for, not the temporary beside it
@@ -154,7 +160,8 @@ class SimulatorSnapshot:
                            params=tuple({str(name): str(text) for name, text in row.items()}
                                         for row in header.get("params", ())),
                            solver={str(name): str(text)
-                                   for name, text in header.get("solver", {}).items()})
+                                   for name, text in header.get("solver", {}).items()},
+                           behind=tuple(float(lag) for lag in header.get("behind", ())))
         except OSError as error:
             raise ValueError(f"snapshot {path}: cannot read it ({error.strerror or error})") \
                 from None
@@ -394,10 +401,12 @@ class Simulator(NotCopied):
             compile_s = time.perf_counter() - started
             self._compiled = True
         started = time.perf_counter()
+        whole = False
         try:
             drive(self.engine, clock, stops, take, self.n_instances,
                   start_times=self.time_s if self.solver.adaptive else None,
                   progress_label=robots_label(self.n_instances) if progress else None)
+            whole = True
         finally:
             # after a Ctrl-C too: the steps taken count, and `fire` must know who failed
             # meanwhile (an interrupted advance left a failed robot taking commands: an audit,
@@ -409,12 +418,16 @@ class Simulator(NotCopied):
                 setup_s=0.0, compile_s=compile_s, run_s=run_s, collect_s=0.0,
                 robot_steps=int((after["steps_done"].astype(np.int64) - start_steps).sum()))
             self._running = after["status"] == STATUS_OK
-        # reached only by a whole advance: the clock's end is where the others now are
-        stopped = ~self._running
-        ran = (after["time"].astype(np.float64) - start_times if clock.adaptive
-               else after["steps_done"].astype(np.int64) - start_steps)
-        self._behind[stopped] += (clock.time_of(clock.end) if clock.adaptive
-                                  else clock.end) - ran[stopped]
+            # how far the stopped robots' clocks fell behind in this advance: to its end, or
+            # where the running robots got when it was interrupted (after a Ctrl-C the failed
+            # robots' records lagged: an audit, 2026-12)
+            stopped = ~self._running
+            ran = (after["time"].astype(np.float64) - start_times if clock.adaptive
+                   else after["steps_done"].astype(np.int64) - start_steps)
+            reached = ((clock.time_of(clock.end) if clock.adaptive else clock.end) if whole
+                       else ran[self._running].max() if self._running.any() else None)
+            if reached is not None:
+                self._behind[stopped] += reached - ran[stopped]
         capped = newton_capped(after["newton_max"], self.solver) & self._running \
             & ~self._capped_named
         self._capped_named |= capped
@@ -434,10 +447,18 @@ class Simulator(NotCopied):
                 else np.atleast_1d(np.asarray(instances)))
         if rows.size == 0:  # no instance to reset (an RL loop where none finished): [] is float
             return
-        if rows.ndim != 1 or rows.dtype.kind not in "iu" or (
+        # a bool among integers is an int to NumPy ([0, True] reset instance 1: an audit)
+        mixed = isinstance(instances, (list, tuple)) and any(
+            isinstance(value, (bool, np.bool_)) for value in instances)
+        if rows.ndim != 1 or rows.dtype.kind not in "iu" or mixed or (
                 rows.min() < 0 or rows.max() >= self.n_instances):
             raise ValueError(f"instances must be an integer or a sequence of integers in [0, "
                              f"{self.n_instances}), got {instances!r}")
+        values, counts = np.unique(rows, return_counts=True)
+        if (counts > 1).any():
+            # a robot named twice is a slip in the caller's bookkeeping (accepted: an audit)
+            raise ValueError(f"instances names instance {values[counts > 1][0]} more than "
+                             f"once, got {instances!r}")
         self._capped_named[rows] = False
         self._running[rows] = True
         self._behind[rows] = 0.0
@@ -588,7 +609,8 @@ class Simulator(NotCopied):
                                      engine_key=repr(self.engine_key),
                                      n_instances=self.n_instances, dt=self.solver.dt,
                                      params=self._parameter_texts,
-                                     solver=solver_texts(self.solver))
+                                     solver=solver_texts(self.solver),
+                                     behind=tuple(self._behind.tolist()))
         return snapshot.write(path) if path is not None else snapshot
 
     @one_call_at_a_time
@@ -655,10 +677,17 @@ class Simulator(NotCopied):
                     f"{b}'s {changed[0]} is {saved.get(changed[0], 'not recorded')} there, "
                     f"{own[changed[0]]} here ({len(changed)} field(s) differ); load(..., "
                     f"other_params=True) continues it under this simulator's parameters")
+        if snapshot.behind and (len(snapshot.behind) != self.n_instances or not all(
+                math.isfinite(lag) and lag >= 0.0 for lag in snapshot.behind)):
+            raise ValueError(f"the saved state records {len(snapshot.behind)} clock lags for "
+                             f"its {snapshot.n_instances} instances, or one not finite and >= 0 "
+                             f"(a damaged snapshot)")
         self.engine.restore_state(snapshot.fields)
         loaded = self.engine.state.read(("status", "newton_max"), self.n_instances)
         self._running = loaded["status"] == STATUS_OK
-        self._behind[:] = 0.0
+        # a failed instance's records go on at the clock it would show (they fell back to its
+        # frozen clock after a load: an audit, 2026-12)
+        self._behind[:] = snapshot.behind if snapshot.behind else 0.0
         # the saved run's capped solves are its history, shown in state(), not news
         self._capped_named = newton_capped(loaded["newton_max"], self.solver)
         own = solver_texts(self.solver)

@@ -14,6 +14,7 @@ import pandas as pd
 import pytest
 
 import taichi_star as ts
+from taichi_star.simulator import SimulatorSnapshot
 from taichi_star.state import LATER_COUNTERS
 
 REPO = Path(__file__).resolve().parents[2]
@@ -407,6 +408,14 @@ def test_bad_durations_times_and_foreign_states_are_refused():
     assert all(np.array_equal(sim.save().fields[name], before[name]) for name in before)
     with pytest.raises(ValueError, match=r"instances must be an integer or a sequence of integers in \[0, 3\), got \[0.5\]"):
         sim.reset([0.5])
+    # a bool among the integers (NumPy reads [0, True] as [0, 1]) and an instance named twice
+    # (both accepted: an audit, 2026-12); refused before anything is reset
+    with pytest.raises(ValueError, match=r"instances must be an integer or a sequence of "
+                                         r"integers in \[0, 3\), got \[0, True\]"):
+        sim.reset([0, True])
+    with pytest.raises(ValueError, match=r"^instances names instance 0 more than once, got "
+                                         r"\[0, 0, 1\]$"):
+        sim.reset([0, 0, 1])
     with pytest.raises(ValueError, match=r"at_s = 0.005 s is not after the current time of "
                                          r"instance 0 \(0.01 s\)"):
         sim.fire(GAITS, at_s=0.005)
@@ -756,6 +765,40 @@ def test_a_failed_robots_records_are_at_the_record_times_with_nan_as_in_simulate
     assert sim.advance(0.1, record_interval_s=0.05)["t_s"].tolist() == [0.05, 1.05, 0.1, 1.1]
 
 
+def test_a_failed_robots_clock_goes_through_a_save_and_a_load(tmp_path):
+    """A snapshot records how far each failed robot's clock lags (its records' times): loaded,
+    into the same Simulator or another, from memory or a file, the next records are at the
+    uninterrupted run's times (they fell back to the frozen clock: an audit, 2026-12); a
+    snapshot whose lags do not fit its instances is refused as damaged. The robots of the
+    tests above."""
+    import json as json_module
+
+    params = ts.StarParams.preset("paper")
+    solver = ts.SolverConfig(dt=0.05, max_newton=5, max_substep_halvings=1)
+
+    def started():
+        sim = ts.Simulator([params, params], solver)
+        sim.fire(["A1", "A1+A2"])
+        sim.advance(0.4)
+        return sim
+
+    sim = started()
+    assert sim.state()["status"].tolist() == ["newton_failed", "ok"]
+    saved, path = sim.save(), sim.save(tmp_path / "state.npz")
+    expected = sim.advance(0.6, record_interval_s=0.2)
+    np.testing.assert_allclose(expected["t_s"], [0.6, 0.6, 0.8, 0.8, 1.0, 1.0])
+    for snapshot in (saved, path):
+        for target in (sim, started()):
+            target.load(snapshot)
+            pd.testing.assert_frame_equal(target.advance(0.6, record_interval_s=0.2), expected)
+    header = SimulatorSnapshot.read(path)
+    damaged = dataclasses.replace(header, behind=header.behind[:1])
+    with pytest.raises(ValueError, match=r"^the saved state records 1 clock lags for its 2 "
+                                         r"instances"):
+        sim.load(damaged)
+    assert json_module.loads(str(np.load(path)["__header__"]))["behind"] == list(header.behind)
+
+
 def test_advances_off_the_step_grid_say_the_time_each_simulates():
     """Ten advance(0.0015) at 1-ms steps advance 0.02 s, not 0.015 (each rounded to 2 steps):
     each call says so, and one on the grid says nothing."""
@@ -795,6 +838,12 @@ def test_an_interrupted_advance_counts_its_steps_and_knows_who_failed(monkeypatc
     sim.fire(["A3", "A3"])
     since = sim.state()["since_A3_s"].tolist()
     assert np.isnan(since[0]) and since[1] == 0.0
+    # the failed robot's records go on at the others' clock (its own frozen one, before: an
+    # audit, 2026-12)
+    times = sim.advance(0.2, record_interval_s=0.1).pivot(index="record", columns="instance",
+                                                          values="t_s")
+    np.testing.assert_array_equal(times[0], times[1])
+    np.testing.assert_allclose(times[1], [1.1, 1.2])
 
 
 def test_a_simulator_is_not_copied_or_pickled_and_save_refuses_a_folder(tmp_path):
