@@ -76,6 +76,7 @@ from taichi_star import Gait, simulate
 from taichi_star.diagnostics import check_jet_solver
 from taichi_star.metrics import wrap_degrees
 from taichi_star.output import animation_tables, read_provenance, replay
+from taichi_star.sensitivities import instances_per_instance
 from taichi_star.timegrid import nearest_interval
 
 from . import cli
@@ -106,8 +107,10 @@ MAX_RANDOM_STARTS = 1000
 """The most random starts (--random-starts), each an instance of every evaluation's batch (the
 committed runs: 0 and 2)."""
 MAX_ITERATIONS = 1000
-"""The most L-BFGS-B iterations (--iterations), each a batch simulated with its sensitivities
-(the committed runs: 3 and 10)."""
+"""The most L-BFGS-B iterations (--iterations; the committed runs: 3 and 10); each takes one
+or more evaluations (its line search), a batch of the searches' points simulated with their
+sensitivities, and a search stops after --iterations + 3 evaluations at most (until
+2026-12-06 scipy finished a line search past that: the committed runs count what they made)."""
 SAMPLE_SPREADS = (0.01, 0.03, 0.1, 0.3, 1.0)
 """Shares of the period within which a sampled pattern's offsets are drawn (--sample), in
 turn: from a few time steps off synchronous firing, where the local searches look, to
@@ -406,14 +409,15 @@ REDRAW_FLAGS = ("redraw", "out", "arch", "no_progress")
 """The flags `--redraw` takes (every other setting comes from the earlier run's command)."""
 
 
-def animate_pattern(out, base, solver, gait: str, delays, cycles: int, arch):
+def animate_pattern(out, base, solver, gait: str, delays, cycles: int, arch, progress: bool):
     """Simulate the pattern (`gait` firing with `delays` (8,) s) over `cycles` from rest,
-    recorded 30 times a cycle, and write its animation tables (gait_design_shapes.csv,
-    gait_design_centroid.csv) and gait_design.gif drawn from them as written."""
+    recorded 30 times a cycle (a progress bar with `progress`), and write its animation tables
+    (gait_design_shapes.csv, gait_design_centroid.csv) and gait_design.gif drawn from them as
+    written."""
     shown = simulate(base.replace(gait=gait, actuator_delays=tuple(delays)),
                      cycles * base.period, solver, arch=arch,
                      record_interval_s=nearest_interval(base.period / 30, solver.dt),
-                     record_shapes=True)
+                     record_shapes=True, progress=progress)
     shapes, centroid = animation_tables(shown, [gait])
     shapes_csv = out.write_csv(shapes, "gait_design_shapes.csv")
     centroid_csv = out.write_csv(centroid, "gait_design_centroid.csv")
@@ -469,7 +473,8 @@ def redraw(args, argv):
                      solver=solver, extra={"redrawn_from": str(table_path),
                                            "command_of_run": command, "cycles": run.cycles})
     animate_pattern(out, base, solver, str(designed["gait"]),
-                    designed[DELAY_COLUMNS].to_numpy(dtype=float), run.cycles, args.arch)
+                    designed[DELAY_COLUMNS].to_numpy(dtype=float), run.cycles, args.arch,
+                    progress=not args.no_progress)
     out.report()
 
 
@@ -508,6 +513,9 @@ def main(argv=None):
     primitives = cli.read_table(args.primitives, "--primitives", ["gait", *PRIMITIVE_NUMBERS],
                                 "a primitives table")
     cli.numeric_columns(primitives, PRIMITIVE_NUMBERS, args.primitives, "--primitives")
+    # its gaits are fired by name: one that names no gait, or twice, is refused here (it failed
+    # with a traceback inside the optimisation, after the compute: an audit, 2026-12)
+    cli.resolve_gaits(",".join(map(str, primitives["gait"])), f"--primitives {args.primitives}")
     usable = primitives[np.isfinite(primitives[PRIMITIVE_NUMBERS]).all(axis=1)]
     if usable.empty:
         # the default direction is the fastest such gait's; NaN alone ranks no gait
@@ -529,6 +537,19 @@ def main(argv=None):
             raise cli.StudyArgumentError(f"--jets: {error}") from None
     # every evaluation runs --cycles from rest, even under --quick
     cli.check_cycles({"--cycles": args.cycles}, base.period, solver)
+    # the whole study's instances, at most: each start's evaluations (the pattern and its
+    # delays' replica pairs), the sample, the synchronous gaits, the designed and the best
+    # synchronous pattern in every robustness case, the animation; their robot-steps refused
+    # or estimated before any compute (a run of years started without a word: an audit,
+    # 2026-12)
+    per_evaluation = instances_per_instance(len(DELAY_COLUMNS))
+    starts = args.synchronous_starts + args.random_starts + (args.sample_starts or 0)
+    instances = (starts * per_evaluation * (args.iterations + 3) + (args.sample or 0)
+                 + len(primitives) + 2 * len(ROBUSTNESS_SCALES) + 1)
+    cli.check_run(f"--cycles {args.cycles} ({args.cycles * base.period:.3g} s) for the study's "
+                  f"{instances:,} instances (each start's --iterations {args.iterations} + 3 "
+                  f"evaluations × {per_evaluation}, the sample, the synchronous gaits)",
+                  args.cycles * base.period, solver, batch=instances)
     fastest = usable.loc[usable["step_mm"].idxmax()]
     direction = float(fastest["direction_deg"]) if args.direction is None else args.direction
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
@@ -573,7 +594,8 @@ def main(argv=None):
         out.write_csv(jet_table(base, solver, jet_patterns, direction, args.cycles, args.arch),
                       "gait_design_jets.csv")
     out.wrote(plot_design(paths_csv, table_csv, out.path("gait_design.png"), unit))
-    animate_pattern(out, base, solver, winner["gait"], patterns[0][2], args.cycles, args.arch)
+    animate_pattern(out, base, solver, winner["gait"], patterns[0][2], args.cycles, args.arch,
+                    progress=not args.no_progress)
     out.report()
     centre = table[(table["alpha_factor"] == 1) & (table["drag_perpendicular_factor"] == 1)]
     designed, plain = centre["objective"].to_numpy()

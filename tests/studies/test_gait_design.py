@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 import taichi_star
-from studies import gait_design
+from studies import cli, gait_design
 from studies.__main__ import main as studies_main
 from taichi_star import SolverConfig, StarParams
 from taichi_star.output import replay
@@ -18,6 +18,34 @@ def test_arguments_fail_before_compute(no_compute, tmp_path, capsys):
                 ["--primitives", str(tmp_path / "missing.csv")]):
         assert studies_main(["gait_design", "--out", str(tmp_path / "out"), *bad]) == 2
         assert bad[0] in capsys.readouterr().err
+
+
+
+def test_a_primitives_gait_that_names_none_and_work_of_years_fail_before_compute(
+        no_compute, tmp_path, capsys):
+    """A --primitives table whose gait names no gait, or one gait twice, is refused naming the
+    file (a traceback inside the optimisation, after the compute: an audit, 2026-12); a study
+    whose robot-steps no machine finishes is refused with its estimate, naming the counts
+    (it started: the same audit)."""
+    table = pd.read_csv(cli.COMMITTED_RESULTS / "primitives.csv")
+    for gaits, reason in ((["A9"], "gait 'A9': unknown actuator 'A9'"),
+                          (["A1+A2"] * 2, "a gait is listed twice: A1+A2,A1+A2")):
+        path = tmp_path / "primitives.csv"
+        table.iloc[:len(gaits)].assign(gait=gaits).to_csv(path, index=False)
+        assert studies_main(["gait_design", "--quick", "--primitives", str(path), "--out",
+                             str(tmp_path / "out")]) == 2
+        error = capsys.readouterr().err
+        assert error.startswith(f"python -m studies gait_design: error: --primitives {path}")
+        assert reason in error and error.count("\n") == 1
+    # (255 + 1000) starts × 17 × 1003 evaluations + the rest, 630,000 steps each: 1.3e13
+    # robot-steps, past the 9.3e12 that even the fastest machine finishes in 30 days
+    assert studies_main(["gait_design", "--synchronous-starts", "255", "--random-starts",
+                         "1000", "--iterations", "1000", "--cycles", "200", "--out",
+                         str(tmp_path / "out")]) == 2
+    error = capsys.readouterr().err
+    assert ("--cycles 200 (630 s) for the study's 21,399,271 instances (each start's "
+            "--iterations 1000 + 3 evaluations × 17, the sample, the synchronous gaits) at "
+            "dt = 0.001 s is 1.35e+13 robot-steps") in error
 
 
 def test_starts_follow_the_goal():
@@ -361,3 +389,22 @@ def test_starts_ranked_by_another_robots_primitives_are_said(no_compute, tmp_pat
         warnings.simplefilter("error", RuntimeWarning)
         with pytest.raises(AssertionError, match="simulate was called"):
             gait_design.main(argv)
+
+
+def test_the_animation_follows_no_progress(monkeypatch):
+    """The designed pattern's animation run took the library's automatic progress whatever
+    --no-progress said (an audit, 2026-12): it is passed on."""
+    class Stop(Exception):
+        pass
+
+    seen = {}
+
+    def spy(*args, **kwargs):
+        seen.update(kwargs)
+        raise Stop
+    monkeypatch.setattr(gait_design, "simulate", spy)
+    for progress in (False, True):
+        with pytest.raises(Stop):
+            gait_design.animate_pattern(None, StarParams(), SolverConfig(), "A1", (0.0,) * 8, 1,
+                                        "cpu", progress=progress)
+        assert seen["progress"] is progress

@@ -142,3 +142,37 @@ def test_a_search_failing_midway_ends_the_others_and_reaches_the_caller(monkeypa
     assert threading.active_count() == before
     assert evaluated == [[0, 1, 2], [0, 1, 2], [0, 2]]
     assert ended == {0: "SearchAborted", 1: "finished", 2: "ValueError"}
+
+
+def test_a_search_stops_at_its_evaluation_budget_with_its_best_point():
+    """scipy's L-BFGS-B checks `maxfun` between iterations only and finishes a line search
+    past it (shown below on the same problems); each batched search asks for
+    `max_evaluations` points at most and reports its best point and why it stopped."""
+    overshoot = 0
+    for budget in range(1, 7):
+        made = {index: [] for index in range(len(STARTS))}
+
+        def evaluate(indices, points):
+            pairs = []
+            for index, point in zip(indices, points):
+                made[index].append(point)
+                pairs.append(value_and_gradient(index, point))
+            return np.array([v for v, _ in pairs]), np.array([g for _, g in pairs])
+
+        results = minimise_lbfgsb_batched(evaluate, STARTS, BOUNDS, max_iterations=budget,
+                                          max_evaluations=budget)
+        for index, result in enumerate(results):
+            alone = minimize(lambda x, index=index: value_and_gradient(index, x), STARTS[index],
+                             jac=True, method="L-BFGS-B", bounds=BOUNDS,
+                             options={"maxiter": budget, "maxfun": budget})
+            overshoot += alone.nfev > budget
+            assert len(made[index]) == result.nfev == min(alone.nfev, budget)
+            values = [value_and_gradient(index, point)[0] for point in made[index]]
+            if alone.nfev > budget:  # stopped here: its best point so far
+                assert result.message == (f"stopped after max_evaluations ({budget}) "
+                                          f"evaluations") and not result.success
+                assert result.fun == min(values)
+                np.testing.assert_array_equal(result.x, made[index][int(np.argmin(values))])
+            else:  # scipy stopped first: its own result, the same as alone
+                np.testing.assert_array_equal(result.x, alone.x)
+    assert overshoot >= 3  # what the budget is for
