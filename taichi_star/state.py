@@ -39,7 +39,8 @@ def check_saved_values(saved: Dict[str, np.ndarray]):
     """ValueError naming the first field of a saved state (`BatchState.save`'s, its shapes and
     types already checked) whose values no run holds: a status code past `STATUS_NAMES`, a
     negative counter, more pending firings than a schedule holds (`PENDING_CAPACITY`), a time
-    that is negative or not finite. Such a state had loaded and then broken `state()` (an
+    that is negative, any real number not finite, a history flag other than 0 or 1, a pending
+    firing of no actuator or out of time order. Such a state had loaded and then broken `state()` (an
     unknown status) or let the kernel read past a schedule's firings (an audit, 2026-12)."""
     status = saved["status"]
     unknown = status[(status < 0) | (status >= len(STATUS_NAMES))]
@@ -58,6 +59,27 @@ def check_saved_values(saved: Dict[str, np.ndarray]):
     if not (np.isfinite(times) & (times >= 0)).all():
         raise ValueError("saved state field 'time' holds a time that is negative or not finite "
                          "(a damaged file)")
+    # a run holds every real number finite (a failed step is undone to its start): a NaN
+    # position loaded as "ok", a NaN firing time dropped the firing (an audit, 2026-12)
+    for name, values in saved.items():
+        if values.dtype.kind == "f" and not np.isfinite(values).all():
+            raise ValueError(f"saved state field {name!r} holds a value that is not finite (a "
+                             f"damaged file)")
+    if not np.isin(saved["history_valid"], (0, 1)).all():
+        raise ValueError("saved state field 'history_valid' holds a value other than 0 or 1 (a "
+                         "damaged file)")
+    # the pending firings a schedule holds: each fires some of the eight actuators (a mask in
+    # [1, 255]; -1 had fired all eight), in the order of their times
+    held = np.arange(PENDING_CAPACITY)[None, :] < saved["pending_count"][:, None]
+    masks = saved["pending_actuators"][held]
+    outside = masks[(masks < 1) | (masks > 255)]
+    if outside.size:
+        raise ValueError(f"saved state field 'pending_actuators' holds {outside[0]}, not a set "
+                         f"of actuators in [1, 255] (a damaged file)")
+    due = saved["pending_due"]
+    if (due[:, 1:] < due[:, :-1])[held[:, 1:]].any():
+        raise ValueError("saved state field 'pending_due' holds firings out of the order of "
+                         "their times (a damaged file)")
 
 
 @ti.data_oriented

@@ -91,11 +91,53 @@ def test_a_snapshot_at_the_ends_of_its_values_loads():
 
     sim = ts.Simulator([ts.StarParams(gait="none")], SOLVER)
     fields = dict(sim.save().fields)
+    # a full schedule of firings of all eight actuators at one time (equal times are in order)
     for name, value in (("status", len(STATUS_NAMES) - 1), ("pending_count", PENDING_CAPACITY),
-                        ("time", 0.0), ("steps_done", 0)):
+                        ("pending_actuators", 255), ("time", 0.0), ("steps_done", 0)):
         fields[name] = fields[name].copy()
         fields[name][:] = value
     check_saved_values(fields)
+
+
+def test_a_snapshot_with_numbers_no_run_holds_is_refused():
+    """A snapshot's real numbers are finite in every run (a failed step is undone to its start),
+    its history flags 0 or 1, and each pending firing fires some actuators (a mask in [1, 255])
+    in time order: a NaN position had loaded as "ok", a mask of -1 fired all eight actuators
+    and a NaN firing time dropped its firing (an audit, 2026-12). Each is refused naming the
+    field; the edges load (masks 1 and 255, two firings at one time, entries past the count
+    holding anything)."""
+    from taichi_star.state import check_saved_values
+
+    fields = ts.Simulator([ts.StarParams(gait="none")], SOLVER).save().fields
+
+    def changed(**values):
+        """A copy of `fields` with instance 0's values set: None puts NaN in its first entry
+        alone, a number fills its row."""
+        copy = {name: array.copy() for name, array in fields.items()}
+        for name, value in values.items():
+            if value is None:
+                copy[name][(0,) * copy[name].ndim] = np.nan
+            else:
+                copy[name][0] = value
+        return copy
+
+    for values, reason in (
+            ({"positions": None}, "'positions' holds a value that is not finite"),
+            ({"fire_time": None}, "'fire_time' holds a value that is not finite"),
+            ({"history_valid": 7}, "'history_valid' holds a value other than 0 or 1"),
+            ({"pending_count": 1, "pending_actuators": -1},
+             "'pending_actuators' holds -1, not a set of actuators in [1, 255]"),
+            ({"pending_count": 1, "pending_actuators": 256},
+             "'pending_actuators' holds 256, not a set of actuators in [1, 255]"),
+            ({"pending_count": 2, "pending_actuators": 1, "pending_due": [0.5, 0.2] + [0.0] * 14},
+             "'pending_due' holds firings out of the order of their times")):
+        with pytest.raises(ValueError, match=re.escape(f"saved state field {reason} (a damaged "
+                                                       f"file)")):
+            check_saved_values(changed(**values))
+    edges = changed(pending_count=2, pending_due=[0.2, 0.2] + [0.0] * 14)
+    edges["pending_actuators"][0, :2] = (1, 255)
+    edges["pending_actuators"][0, 2:] = -7  # past the count: not a firing
+    check_saved_values(edges)
 
 
 def test_saving_to_a_non_path_is_a_value_error_naming_the_argument(simulator):
