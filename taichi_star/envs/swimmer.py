@@ -312,6 +312,9 @@ class GoalReachingBatch:
         if not self.started.all():
             raise RuntimeError(f"call reset() before step(): robot "
                                f"{np.flatnonzero(~self.started)[0]} has no episode yet")
+        # a failed robot fires nothing (the Simulator ignores its commands), so pays nothing
+        # (it paid for firings that never happened: an audit, 2026-12)
+        fired = fire & simulator.ok[:, None]
         simulator.fire(fire)
         # no progress bar for a control period, however many robots: an agent steps many
         simulator.advance(self.control_period_s, progress=False)
@@ -320,7 +323,7 @@ class GoalReachingBatch:
         position = state[["centroid_x_mm", "centroid_y_mm"]].to_numpy()
         self.distances = np.hypot(*(self.goals - position).T)
         self.episode_steps += 1
-        rewards = before - self.distances - self.task.firing_cost_mm * fire.sum(axis=1)
+        rewards = before - self.distances - self.task.firing_cost_mm * fired.sum(axis=1)
         terminated = self.distances <= self.task.goal_tolerance_mm
         out_of_steps = (self.episode_steps >= self.task.max_episode_steps
                         if self.task.max_episode_steps is not None else False)

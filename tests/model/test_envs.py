@@ -586,3 +586,22 @@ def test_an_env_is_not_copied_or_pickled_and_its_info_tells_capped_solves():
         assert info["status"] == "ok"
     finally:
         env.close()
+
+
+def test_a_failed_robot_stepped_again_pays_no_firing_cost():
+    """A robot whose solver failed ends its episode truncated; stepped again without a reset,
+    its firings are ignored (the Simulator takes no command from it), and it paid the firing
+    cost for them (an audit, 2026-12): its reward is now 0, its distance unchanged. The
+    failing robot of the Simulator's tests: 50-ms steps, five Newton iterations."""
+    env = StarSwimmerEnv(solver=ts.SolverConfig(dt=0.05, max_newton=5, max_substep_halvings=1),
+                         control_period_s=0.4)
+    env.reset(seed=0)
+    a1 = np.zeros(8, dtype=int)
+    a1[0] = 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # its capped solves
+        _, _, terminated, truncated, info = env.step(a1)
+        assert info["status"] == "newton_failed" and truncated and not terminated
+        _, reward, _, truncated, info = env.step(a1)
+    assert reward == 0.0 and truncated and info["status"] == "newton_failed"
+    env.close()
