@@ -40,8 +40,9 @@ def check_saved_values(saved: Dict[str, np.ndarray]):
     types already checked) whose values no run holds: a status code past `STATUS_NAMES`, a
     negative counter, more pending firings than a schedule holds (`PENDING_CAPACITY`), a time
     that is negative, any real number not finite, a history flag other than 0 or 1, a pending
-    firing of no actuator or out of time order. Such a state had loaded and then broken `state()` (an
-    unknown status) or let the kernel read past a schedule's firings (an audit, 2026-12)."""
+    firing of no actuator or out of time order. Such a state had loaded and then broken
+    `state()` (an unknown status) or let the kernel read past a schedule's firings (an audit,
+    2026-12)."""
     status = saved["status"]
     unknown = status[(status < 0) | (status >= len(STATUS_NAMES))]
     if unknown.size:
