@@ -230,11 +230,13 @@ def sample_objectives(base, solver, sample: pd.DataFrame, goal, direction_deg, c
              "newton_capped", *DELAY_COLUMNS]]
 
 
-def optimise(base, solver, starts, goal, direction_deg, cycles, iterations, arch):
+def optimise(base, solver, starts, goal, direction_deg, cycles, iterations, arch,
+             on_round=None):
     """One L-BFGS-B search per start over its 8 delays, each with its own line search, their
     evaluations batched (`optimise.minimise_lbfgsb_batched`: one simulation with the delay
     sensitivities per round, holding every search still running); returns (paths table, best
-    row per start)."""
+    row per start). `on_round(paths)`, if given, gets the paths table after every round (the
+    study writes it: a killed run keeps the rounds it made)."""
     period = base.period
     duration_s = cycles * period
     gaits = list(starts["gait"])
@@ -257,6 +259,8 @@ def optimise(base, solver, starts, goal, direction_deg, cycles, iterations, arch
                               "objective": value[position],
                               "gradient_norm": float(np.linalg.norm(gradient[position])),
                               **dict(zip(DELAY_COLUMNS, row))})
+        if on_round is not None:
+            on_round(pd.DataFrame(path_rows))
         return -value, -gradient  # the searches minimise
 
     initial = [np.array(d, dtype=float) for d in starts["delays"]]
@@ -522,6 +526,13 @@ def main(argv=None):
         raise cli.StudyArgumentError(f"--primitives {args.primitives}: no gait whose "
                                      f"{', '.join(PRIMITIVE_NUMBERS[:-1])} and "
                                      f"{PRIMITIVE_NUMBERS[-1]} are all finite")
+    # more starts or sample gaits than the table ranks were cut to it without a word (an
+    # audit, 2026-12)
+    for flag, value in (("--synchronous-starts", args.synchronous_starts),
+                        ("--sample-gaits", args.sample_gaits)):
+        if value is not None and value > len(primitives):
+            raise cli.StudyArgumentError(f"{flag} must be in [1, {len(primitives)}] (the gaits "
+                                         f"of --primitives {args.primitives}), got {value}")
     base = cli.base_params(args)
     recorded, differing = cli.primitives_robot_differences(args.primitives, base)
     if differing:
@@ -569,8 +580,11 @@ def main(argv=None):
     starts = choose_starts(primitives, args.goal, direction, args.synchronous_starts,
                            args.random_starts, base.period, args.seed, sample,
                            args.sample_starts)
+    # written after every round, whole (its sidecar with it): a killed run keeps the rounds it
+    # made (they were written at the end only: an audit, 2026-12)
     paths, best = optimise(base, solver, starts, args.goal, direction, args.cycles,
-                           args.iterations, args.arch)
+                           args.iterations, args.arch,
+                           on_round=lambda paths: out.write_csv(paths, "gait_design_paths.csv"))
     paths_csv = out.write_csv(paths, "gait_design_paths.csv")
     winner = best.loc[best["objective"].idxmax()]
     synchronous = synchronous_objectives(base, solver, list(primitives["gait"]), args.goal,

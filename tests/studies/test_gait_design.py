@@ -37,6 +37,15 @@ def test_a_primitives_gait_that_names_none_and_work_of_years_fail_before_compute
         error = capsys.readouterr().err
         assert error.startswith(f"python -m studies gait_design: error: --primitives {path}")
         assert reason in error and error.count("\n") == 1
+    # more starts or sample gaits than the table ranks (cut to it without a word before)
+    path = tmp_path / "three.csv"
+    table.iloc[:3].to_csv(path, index=False)
+    for flags in (["--synchronous-starts", "4"], ["--sample", "2", "--sample-gaits", "4"]):
+        assert studies_main(["gait_design", "--quick", "--primitives", str(path), *flags,
+                             "--out", str(tmp_path / "out")]) == 2
+        assert capsys.readouterr().err == (
+            f"python -m studies gait_design: error: {flags[-2]} must be in [1, 3] (the gaits of "
+            f"--primitives {path}), got 4\n")
     # (255 + 1000) starts × 17 × 1003 evaluations + the rest, 630,000 steps each: 1.3e13
     # robot-steps, past the 9.3e12 that even the fastest machine finishes in 30 days
     assert studies_main(["gait_design", "--synchronous-starts", "255", "--random-starts",
@@ -408,3 +417,27 @@ def test_the_animation_follows_no_progress(monkeypatch):
             gait_design.animate_pattern(None, StarParams(), SolverConfig(), "A1", (0.0,) * 8, 1,
                                         "cpu", progress=progress)
         assert seen["progress"] is progress
+
+
+def test_the_paths_are_handed_on_after_every_round(monkeypatch):
+    """`optimise` hands its paths table on after every round (the study writes it then: a
+    killed run kept nothing of its rounds, the table written at the end only; an audit,
+    2026-12); each table holds the rounds before it, and the last is the one returned. The
+    simulation replaced by a concave function of the delays (its maximum at 0.1 s)."""
+    def simulate(params, *args, **kwargs):
+        return np.array([p.actuator_delays for p in params])
+
+    def objective_of(delays, goal, direction_deg, duration_s, cycles, read=None):
+        return -2.0 * (delays - 0.1) if read is not None else -((delays - 0.1) ** 2).sum(axis=1)
+
+    monkeypatch.setattr(gait_design, "simulate", simulate)
+    monkeypatch.setattr(gait_design, "objective_of", objective_of)
+    starts = pd.DataFrame({"gait": ["A1", "A1+A2"], "origin": ["synchronous"] * 2,
+                           "delays": [(0.0,) * 8, (0.3,) * 8]})
+    handed = []
+    paths, _ = gait_design.optimise(StarParams(), SolverConfig(), starts, "speed", 0.0, 1,
+                                    iterations=5, arch="cpu", on_round=handed.append)
+    assert len(handed) == paths["evaluation"].nunique() > 1
+    for number, table in enumerate(handed):
+        assert table["evaluation"].max() == number
+        pd.testing.assert_frame_equal(table, paths[paths["evaluation"] <= number])
