@@ -137,6 +137,7 @@ from taichi_star.sensitivities import REPLICAS_PER_DIRECTION, instances_per_inst
 from taichi_star.timegrid import nearest_interval
 
 from . import cli, identify
+from .optimise import minimise_lbfgsb
 
 DESCRIPTION = ("L-BFGS-B, least squares and Levenberg-Marquardt in batches on the exact "
                "gradient of the trajectory objective beside CMA-ES, for 6 and 20 parameters: "
@@ -509,27 +510,17 @@ def record_plain_call(recorder: Recorder, problem: Problem, units, value: float,
     recorder.add(units, value, per_evaluation, per_evaluation, start)
 
 
-class EvaluationsSpent(Exception):
-    """An L-BFGS-B start asked for an evaluation beyond its budget (`fit_lbfgs`)."""
-
-
 def fit_lbfgs(problem: Problem, starts: int, max_evaluations: int, seed: int,
               recorder: Recorder, cost_ratio: float) -> Recorder:
     """Multi-start L-BFGS-B over the unit box (module docstring), every evaluation into
     `recorder`, a call counted as `cost_ratio` runs in the cost-equivalent robot-seconds. It
     searches the axes a fitted gait moves (`Problem.moved`), the others held at the start's.
-    A start stops after `max_evaluations` evaluations at most: scipy checks its `maxfun` only
-    between iterations and finishes a line search past it (a cap of 6 made 9 calls), so the
-    call after the budget is refused here instead."""
-    from scipy.optimize import minimize
+    A start stops after `max_evaluations` evaluations at most (`optimise.minimise_lbfgsb`:
+    scipy's own cap let a line search run past it, a cap of 6 made 9 calls)."""
     parameter_set = recorder.parameter_set
     for start, x0 in enumerate(start_points(problem, starts, seed)):
-        made = [0]
 
-        def fun(moved_units, start=start, x0=x0, made=made):
-            if made[0] == max_evaluations:
-                raise EvaluationsSpent
-            made[0] += 1
+        def fun(moved_units, start=start, x0=x0):
             units = problem.embedded(moved_units, x0)
             value, gradient = problem.value_and_gradient(units)
             record_gradient_call(recorder, problem, units, value, cost_ratio, start)
@@ -537,14 +528,9 @@ def fit_lbfgs(problem: Problem, starts: int, max_evaluations: int, seed: int,
                   f"|gradient| {np.linalg.norm(gradient):.3g}", flush=True)
             return value, gradient[problem.moved]
 
-        try:
-            message = str(minimize(fun, x0[problem.moved], jac=True, method="L-BFGS-B",
-                                   bounds=[(0.0, 1.0)] * int(problem.moved.sum()),
-                                   options={"maxfun": max_evaluations,
-                                            "maxiter": max_evaluations}).message)
-        except EvaluationsSpent:
-            message = f"stopped after --lbfgs-evaluations ({max_evaluations}) evaluations"
-        recorder.stopped(start, message)
+        result = minimise_lbfgsb(fun, x0[problem.moved], [(0.0, 1.0)] * int(problem.moved.sum()),
+                                 max_evaluations, max_evaluations, budget="--lbfgs-evaluations")
+        recorder.stopped(start, str(result.message))
     return recorder
 
 

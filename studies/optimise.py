@@ -20,13 +20,41 @@ import numpy as np
 
 
 class EvaluationsSpent(Exception):
-    """Raised inside a search's thread when it asks for a point beyond its `max_evaluations`
-    (scipy checks its `maxfun` only between iterations and finishes a line search past it)."""
+    """Raised in `minimise_lbfgsb` when a search asks for a point beyond its budget."""
 
 
 class SearchAborted(Exception):
     """Raised inside a search's thread when the batch evaluation failed on the calling thread
     (the search then ends, and the evaluation's own error is raised to the caller)."""
+
+
+def minimise_lbfgsb(objective: Callable[[np.ndarray], Tuple[float, np.ndarray]], start,
+                    bounds: Sequence[Tuple[float, float]], max_iterations: int,
+                    max_evaluations: int, budget: str = "max_evaluations"):
+    """scipy's L-BFGS-B from `start` (D,) within `bounds` on `objective(point)` -> (value,
+    gradient (D,)), asking for `max_evaluations` points at most: scipy checks its `maxfun` only
+    between iterations and finishes a line search past it (7 points for 4). Returns scipy's
+    `OptimizeResult`, or for a search stopped at the budget one of its best point (x, fun,
+    jac), nfev and the message "stopped after `budget` (N) evaluations" (`budget`: the name its
+    caller's user gives the cap)."""
+    from scipy.optimize import OptimizeResult, minimize
+    made, best = [0], {}
+
+    def counted(point):
+        if made[0] == max_evaluations:
+            raise EvaluationsSpent
+        made[0] += 1
+        value, gradient = objective(point)
+        if not best or value < best["fun"]:
+            best.update(x=np.array(point, dtype=float), fun=value, jac=gradient)
+        return value, gradient
+    try:
+        return minimize(counted, np.asarray(start, dtype=float), jac=True, method="L-BFGS-B",
+                        bounds=list(bounds),
+                        options={"maxiter": max_iterations, "maxfun": max_evaluations})
+    except EvaluationsSpent:
+        return OptimizeResult(**best, nfev=made[0], success=False,
+                              message=f"stopped after {budget} ({max_evaluations}) evaluations")
 
 
 def minimise_lbfgsb_batched(
@@ -39,12 +67,9 @@ def minimise_lbfgsb_batched(
     `evaluate_batch(indices, points)` gets the indices of the searches that ask for a point now
     (ascending) and those points (K, D), and returns their values (K,) and gradients (K, D). It
     is called on the calling thread only, once per round, every round holding every search that
-    has not stopped. A search asks for `max_evaluations` points at most (scipy's `maxfun` let
-    a line search run past it: 7 points for 4); one stopped there gets an `OptimizeResult` of
-    its best point (x, fun, jac), nfev and the message saying so. Returns scipy's
-    `OptimizeResult` of every search, in the starts' order. An exception raised by
+    has not stopped. A search asks for `max_evaluations` points at most (`minimise_lbfgsb`).
+    Returns the `OptimizeResult` of every search, in the starts' order. An exception raised by
     `evaluate_batch` ends every search and is raised here."""
-    from scipy.optimize import OptimizeResult, minimize
     condition = threading.Condition()
     asked: dict = {}
     answers: dict = {}
@@ -54,12 +79,7 @@ def minimise_lbfgsb_batched(
     aborted = threading.Event()
 
     def search(index: int):
-        made, best = [0], {}
-
         def objective(point):
-            if made[0] == max_evaluations:
-                raise EvaluationsSpent
-            made[0] += 1
             with condition:
                 asked[index] = np.array(point, dtype=float)
                 condition.notify_all()
@@ -67,19 +87,10 @@ def minimise_lbfgsb_batched(
                     condition.wait()
                 if aborted.is_set():
                     raise SearchAborted
-                value, gradient = answers.pop(index)
-            if not best or value < best["fun"]:
-                best.update(x=np.array(point, dtype=float), fun=value, jac=gradient)
-            return value, gradient
+                return answers.pop(index)
         try:
-            results[index] = minimize(objective, np.asarray(starts[index], dtype=float),
-                                      jac=True, method="L-BFGS-B", bounds=list(bounds),
-                                      options={"maxiter": max_iterations,
-                                               "maxfun": max_evaluations})
-        except EvaluationsSpent:
-            results[index] = OptimizeResult(
-                **best, nfev=made[0], success=False,
-                message=f"stopped after max_evaluations ({max_evaluations}) evaluations")
+            results[index] = minimise_lbfgsb(objective, starts[index], bounds, max_iterations,
+                                             max_evaluations)
         except SearchAborted:
             pass
         except BaseException as error:  # any: raised again on the calling thread

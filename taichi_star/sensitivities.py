@@ -192,6 +192,14 @@ def parse_directions(names, what: str = "sensitivities") -> Tuple[Direction, ...
     return tuple(directions)
 
 
+def parse_parameter(name) -> Tuple[Direction, ...]:
+    """The directions of the `parameter` of a result's or a Simulator's `sensitivity`: one
+    name as `parse_directions` reads it, ValueError naming `parameter` otherwise."""
+    if not isinstance(name, str):
+        raise ValueError(f"parameter must be a StarParams field name, got {name!r}")
+    return parse_directions([name], "parameter")
+
+
 def check_directions(directions: Sequence[Direction], params: Sequence[StarParams],
                      solver: SolverConfig, commanded: bool = False,
                      duration_s: Optional[float] = None):

@@ -128,9 +128,7 @@ class SimulationResult:
         outputs = list(dict.fromkeys(tangents.SUMMARY_OUTPUTS + tangents.TRAJECTORY_OUTPUTS))
         if output not in outputs:   # before the parameter: swapped arguments name the output
             raise ValueError(f"output must be one of {outputs}, got {output!r}")
-        if not isinstance(parameter, str):
-            raise ValueError(f"parameter must be a StarParams field name, got {parameter!r}")
-        directions = tangents.parse_directions([parameter], "parameter")
+        directions = tangents.parse_parameter(parameter)
         if output in tangents.SUMMARY_OUTPUTS and not trajectory:
             table = in_instance_order(self.sensitivities, "sensitivities")
             shape = (len(self.summary),)

@@ -496,9 +496,7 @@ class Simulator(NotCopied):
         if column not in DIFFERENTIABLE_STATE_COLUMNS:
             raise ValueError(f"column must be one of {DIFFERENTIABLE_STATE_COLUMNS}, got "
                              f"{column!r}")
-        if not isinstance(parameter, str):
-            raise ValueError(f"parameter must be a StarParams field name, got {parameter!r}")
-        wanted = tangents.parse_directions([parameter], "parameter")
+        wanted = tangents.parse_parameter(parameter)
         missing = [d.label for d in wanted if d not in self.directions]
         if missing:
             which = "" if missing == [parameter] else f" ({missing[0]} is not)"

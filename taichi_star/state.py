@@ -17,6 +17,7 @@ from taichi.lang.field import Field
 
 from .actuation import NEVER, PENDING_CAPACITY, Schedule
 from .fields import FieldArena, FieldStore, array_dtype, array_shape
+from .gait import N_ACTUATORS
 
 STATUS_OK, STATUS_NEWTON_FAILED, STATUS_NON_FINITE, STATUS_INACTIVE, STATUS_STEP_LIMIT = range(5)
 STATUS_NAMES = ("ok", "newton_failed", "non_finite", "inactive", "step_limit")
@@ -73,10 +74,11 @@ def check_saved_values(saved: Dict[str, np.ndarray]):
     # [1, 255]; -1 had fired all eight), in the order of their times
     held = np.arange(PENDING_CAPACITY)[None, :] < saved["pending_count"][:, None]
     masks = saved["pending_actuators"][held]
-    outside = masks[(masks < 1) | (masks > 255)]
+    every = (1 << N_ACTUATORS) - 1
+    outside = masks[(masks < 1) | (masks > every)]
     if outside.size:
         raise ValueError(f"saved state field 'pending_actuators' holds {outside[0]}, not a set "
-                         f"of actuators in [1, 255] (a damaged file)")
+                         f"of actuators in [1, {every}] (a damaged file)")
     due = saved["pending_due"]
     if (due[:, 1:] < due[:, :-1])[held[:, 1:]].any():
         raise ValueError("saved state field 'pending_due' holds firings out of the order of "

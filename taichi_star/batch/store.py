@@ -328,8 +328,9 @@ class RunStore:
                               f"replaced by this one, kept in {REPLACED}/ until this one "
                               f"finishes (resume reads a finished run back)")
                     self._set_aside(finished + self._trajectory_files() + [self.path / MANIFEST])
-                for path in finished + self._trajectory_files():
-                    self._remove(path)
+                else:  # a run of no chunks: its stray records go
+                    for path in self._trajectory_files():
+                        self._remove(path)
         try:
             self.path.mkdir(parents=True, exist_ok=True)
         except OSError as error:
