@@ -1194,6 +1194,27 @@ def planned_instances(args, cma_settings, box, gaits, held_out_gaits) -> Tuple[i
            else ""))
 
 
+def check_flags_of_fits_left_out(args):
+    """StudyArgumentError for a setting changed from its default whose every fit is left out
+    (its count flags at 0): it was taken and unused without a word (an audit, 2026-12), where
+    the user most likely meant the fit to run."""
+    least_squares_fits = (args.least_squares_evaluations, args.broyden_evaluations,
+                          args.polish_evaluations)
+    for flag, value, default, fits, counts in (
+            ("--lm-batch", args.lm_batch, DEFAULT_LM_BATCH,
+             "--lm-iterations and --lm-broyden-iterations",
+             (args.lm_iterations, args.lm_broyden_iterations)),
+            ("--lm-broyden-batch", args.lm_broyden_batch, DEFAULT_LATER_LM_BATCH,
+             "--lm-broyden-iterations", (args.lm_broyden_iterations,)),
+            ("--least-squares-method", args.least_squares_method,
+             DEFAULT_LEAST_SQUARES_METHOD,
+             "--least-squares-evaluations, --broyden-evaluations and --polish-evaluations",
+             least_squares_fits)):
+        if value != default and not any(counts):
+            raise cli.StudyArgumentError(f"{flag} {value}: unused, {fits} at 0 leave out every "
+                                         f"fit it sets")
+
+
 def main(argv=None):
     args = cli.parse(build_parser(), argv)
     sets = cli.parse_choices(args.sets, "--sets", list(PARAMETER_SETS))
@@ -1211,6 +1232,7 @@ def main(argv=None):
     for flag, value in (("--lm-batch", args.lm_batch),
                         ("--lm-broyden-batch", args.lm_broyden_batch)):
         cli.check_count(value, flag, 1, MAX_LM_BATCH)
+    check_flags_of_fits_left_out(args)
     cma_settings = identify.CMASettings(popsize=args.popsize, max_generations=args.cma_generations,
                                         seed=args.seed, sigma0=args.sigma0)
     cma_settings.validate()

@@ -1290,12 +1290,13 @@ class BatchEngine:
                           for name, values in self.factorisation_store().read().items()})
         return saved
 
-    def restore_state(self, saved: Dict[str, np.ndarray]):
+    def restore_state(self, saved: Dict[str, np.ndarray], check=None):
         """Put back a state from `save_state` (`BatchState.restore`, bitwise), and the kept
         factorisations where it holds them. Where it does not, an instance of a lagged run
         that this changes refactors at its next step (the others keep theirs, so that putting
         back some instances leaves the rest as they would have been). Raises ValueError, nothing
-        changed, for a state of another layout."""
+        changed, for a state of another layout, or one that `check` (a callable of the state's
+        fields, called after their layout and values are checked) refuses."""
         kept = {name[len(FACTORISATION_PREFIX):]: values for name, values in saved.items()
                 if name.startswith(FACTORISATION_PREFIX)}
         state = {name: values for name, values in saved.items()
@@ -1306,7 +1307,7 @@ class BatchEngine:
             store.check_saved(kept, FACTORISATION_PREFIX)
         changed = self.state.changed_instances(state) \
             if self.jacobian_mode[None] == JACOBIAN_LAGGED and store is None else None
-        self.state.restore(state)
+        self.state.restore(state, check)
         if store is not None:
             store.write(kept)
         elif changed is not None and changed.any():

@@ -48,7 +48,7 @@ from .provenance import file_path, write_atomic
 from .runtime import (RECORDS_REMEDY, Runtime, check_arch, check_batch_memory,
                       check_host_memory, one_call_at_a_time)
 from .simulation import newton_capped, warn_about_capped
-from .state import STATUS_NAMES, STATUS_OK
+from .state import STATUS_INACTIVE, STATUS_NAMES, STATUS_OK
 from .timegrid import MAX_STEPS_PER_INSTANCE, check_work, multiples_within, whole_steps
 
 ACTUATOR_COLUMNS = tuple(f"since_A{m + 1}_s" for m in range(N_ACTUATORS))
@@ -680,7 +680,7 @@ class Simulator(NotCopied):
             raise ValueError(f"the saved state records {len(snapshot.behind)} clock lags for "
                              f"its {snapshot.n_instances} instances, or one not finite and >= 0 "
                              f"(a damaged snapshot)")
-        self.engine.restore_state(snapshot.fields)
+        self.engine.restore_state(snapshot.fields, check=self._check_saved_clocks)
         loaded = self.engine.state.read(("status", "newton_max"), self.n_instances)
         self._running = loaded["status"] == STATUS_OK
         # a failed instance's records go on at the clock it would show (they fell back to its
@@ -697,6 +697,30 @@ class Simulator(NotCopied):
                       f"is {own[changed[0]]} ({len(changed)} setting(s) differ): it goes on "
                       f"under this simulator's settings, not bit for bit as the saved run "
                       f"would have")
+
+    def _check_saved_clocks(self, fields: Dict[str, np.ndarray]):
+        """ValueError for a saved state whose robots' rows no run of this simulator holds: a
+        robot marked "inactive" (the padding's status: it would never step again, and
+        `state()` would show it as a robot that is not there), or, with fixed steps, a time
+        other than the step count times dt, which is how the engine sets it (a clock edited
+        apart from its count had loaded, and the records then took one and the firings the
+        other: an audit, 2026-12)."""
+        status = fields["status"]
+        if (status[:self.n_instances] == STATUS_INACTIVE).any():
+            robot = int(np.flatnonzero(status[:self.n_instances] == STATUS_INACTIVE)[0])
+            raise ValueError(f"saved state field 'status' marks robot {robot} "
+                             f"{STATUS_NAMES[STATUS_INACTIVE]!r}, the status of a batch's "
+                             f"padding, not of a robot (a damaged file)")
+        if self.solver.adaptive:
+            return
+        times, steps = fields["time"], fields["steps_done"]
+        # the engine's own product: the step count in the state's precision times its dt
+        real = times.dtype.type
+        off = np.flatnonzero(times != steps.astype(times.dtype) * real(self.solver.dt))
+        if off.size:
+            raise ValueError(f"saved state field 'time' holds {float(times[off[0]])} s for row "
+                             f"{int(off[0])}, not its {int(steps[off[0]])} fixed steps of "
+                             f"{self.solver.dt} s (a damaged file)")
 
     def __repr__(self) -> str:
         times = self.time_s

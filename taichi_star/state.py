@@ -222,10 +222,12 @@ class BatchState:
             changed |= (bytes_per_instance(values) != bytes_per_instance(other)).any(axis=1)
         return changed
 
-    def restore(self, saved: Dict[str, np.ndarray]):
+    def restore(self, saved: Dict[str, np.ndarray], check=None):
         """Put back a state from `save` of an engine of the same layout, bitwise (a state saved
-        before a `LATER_COUNTERS` counter was kept restores with it at zero). Raises ValueError
-        naming the first field that does not match in shape or type."""
+        before a `LATER_COUNTERS` counter was kept restores with it at zero). Raises ValueError,
+        nothing written, naming the first field that does not match in shape or type, holds
+        values no run holds (`check_saved_values`), or that `check` (a callable of the fields,
+        called last: what only the caller knows, say its stepping) refuses."""
         shapes = self.store.shapes
         saved = {**{name: np.zeros(shapes[name], dtype=self.store.dtypes[name])
                     for name in LATER_COUNTERS},
@@ -235,4 +237,6 @@ class BatchState:
                              f"{sorted(shapes)} (another topology or term set)")
         self.store.check_saved(saved)
         check_saved_values(saved)
+        if check is not None:
+            check(saved)
         self.store.write(saved)

@@ -10,7 +10,7 @@ from typing import Optional, Sequence
 import numpy as np
 import pandas as pd
 
-from ..checks import check_flag, is_whole
+from ..checks import check_flag, is_whole, warn_user
 from ..driver import RunTiming, shows_progress
 from ..extras import require
 from ..geometry import build_topology
@@ -123,6 +123,12 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
             log.warning("resuming %s: %d of %d chunks already done", store.path, len(done),
                         len(tasks))
         todo = [task for task in tasks if task.index not in set(done)]
+        if isinstance(executor, LocalProcesses) and 0 < len(todo) < executor.n_workers:
+            # each chunk runs on one worker: the others were asked for and stay idle (they
+            # did so without a word: an audit, 2026-12)
+            warn_user(f"{executor.n_workers} worker processes for {len(todo)} chunk(s) to "
+                      f"compute: {executor.n_workers - len(todo)} stay idle (chunk_size="
+                      f"{chunk_size}; a smaller one gives each worker a share of the batch)")
         progress = shows_progress(progress, batch_robot_steps(todo))
         # a bar of chunks where the chunks' own bars are not shown (worker processes), even
         # for one chunk: nothing was shown there (an audit, 2026-12)

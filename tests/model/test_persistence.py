@@ -85,6 +85,53 @@ def test_a_snapshot_with_values_no_run_holds_is_refused_and_changes_nothing(simu
     assert all(np.array_equal(after[name], before[name]) for name in before)
 
 
+def test_a_snapshot_whose_robot_is_padding_or_whose_clock_left_its_steps_is_refused(simulator):
+    """A robot's row marked "inactive" (the padding's status) and, with fixed steps, a time
+    other than the step count times dt had loaded (an audit, 2026-12): each is refused naming
+    the field, the state unchanged. The neighbours load: the last ulp's difference is refused
+    too (the engine sets the time as exactly that product), and the statuses next to
+    "inactive" ("non_finite", "step_limit") load."""
+    from taichi_star.state import STATUS_INACTIVE
+
+    saved = simulator.save()
+    before = saved.fields
+    steps = int(before["steps_done"][0])
+    assert steps == 4 and before["time"][0] == steps * SOLVER.dt  # 0.02 s of 5-ms steps
+
+    def edited(field, value):
+        fields = {**before, field: before[field].copy()}
+        fields[field][0] = value
+        return dataclasses.replace(saved, fields=fields)
+
+    for field, value, message in (
+            ("status", STATUS_INACTIVE, r"'status' marks robot 0 'inactive', the status of a "
+                                        r"batch's padding"),
+            ("time", 0.025, r"'time' holds 0.025 s for row 0, not its 4 fixed steps of 0.005 s"),
+            ("time", np.nextafter(0.02, 1.0), r"'time' holds 0.02\d* s for row 0, not its 4"),
+            ("steps_done", 5, r"'time' holds 0.02 s for row 0, not its 5 fixed steps")):
+        with pytest.raises(ValueError, match=message + r".* \(a damaged file\)$"):
+            simulator.load(edited(field, value))
+        after = simulator.save().fields
+        assert all(np.array_equal(after[name], before[name]) for name in before)
+    for status in (STATUS_INACTIVE - 1, STATUS_INACTIVE + 1):
+        simulator.load(edited("status", status))
+        assert simulator.save().fields["status"][0] == status
+    simulator.load(saved)
+    assert simulator.save().fields["status"][0] == before["status"][0]
+
+
+def test_an_adaptive_snapshot_keeps_its_own_clock():
+    """With adaptive steps the time is not the step count times dt: a saved state's own time
+    loads (the fixed steps' rule above is not applied to it)."""
+    sim = ts.Simulator([ts.StarParams(gait="A1")], ts.SolverConfig(adaptive=True))
+    sim.advance(0.02)
+    saved = sim.save()
+    fields = saved.fields
+    assert fields["time"][0] != fields["steps_done"][0] * sim.solver.dt
+    sim.load(saved)
+    np.testing.assert_array_equal(sim.save().fields["time"], fields["time"])
+
+
 def test_a_snapshot_at_the_ends_of_its_values_loads():
     from taichi_star.actuation import PENDING_CAPACITY
     from taichi_star.state import STATUS_NAMES, check_saved_values

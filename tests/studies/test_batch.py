@@ -402,3 +402,27 @@ def test_chunks_on_workers_show_a_bar_even_one_and_no_records_keep_simulates_typ
     for run_dir in (None, tmp_path / "run"):
         stored = run_batch(PARAMS[:1], 0.01, solver=SOLVER, run_dir=run_dir).trajectory
         assert stored.empty and stored.dtypes.to_dict() == plain.dtypes.to_dict()
+
+
+@pytest.mark.parametrize("workers, chunks, idle", [(3, 2, 1), (2, 2, 0), (3, 3, 0)])
+def test_more_workers_than_chunks_are_named_idle_before_any_starts(workers, chunks, idle):
+    """More worker processes than chunks to compute: the idle ones are said before the run
+    (they stood idle without a word: an audit, 2026-12); as many workers as chunks, nothing.
+    The executor stops at its start, so nothing is computed."""
+
+    class Started(Exception):
+        pass
+
+    class StopsAtStart(LocalProcesses):
+        def run(self, tasks, progress=False):
+            raise Started(len(tasks))
+
+    params = [ts.StarParams(gait="A1")] * chunks
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with pytest.raises(Started):
+            run_batch(params, 0.01, solver=SOLVER, chunk_size=1, executor=StopsAtStart(workers))
+    said = [str(w.message) for w in caught if "stay idle" in str(w.message)]
+    assert said == ([f"{workers} worker processes for {chunks} chunk(s) to compute: {idle} stay "
+                     f"idle (chunk_size=1; a smaller one gives each worker a share of the "
+                     f"batch)"] if idle else [])

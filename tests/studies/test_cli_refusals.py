@@ -52,6 +52,15 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
     ("sweep", ["--gaits", "A1", "--alpha=0.4", "--alpha", "0.8"], "--alpha given twice"),
     ("sensitivity", ["--seed", "1", "--seed", "2"], "--seed given twice"),
     ("gradient_fit", ["--sets", "6", "--sets", "20"], "--sets given twice"),
+    # a setting of fits all left out was taken and unused without a word (an audit, 2026-12)
+    ("gradient_fit", ["--lm-batch", "3", "--lm-iterations", "0", "--lm-broyden-iterations", "0"],
+     "--lm-batch 3: unused, --lm-iterations and --lm-broyden-iterations at 0 leave out every fit"),
+    ("gradient_fit", ["--lm-broyden-batch", "2", "--lm-broyden-iterations", "0"],
+     "--lm-broyden-batch 2: unused, --lm-broyden-iterations at 0 leave out every fit it sets"),
+    ("gradient_fit", ["--least-squares-method", "dogbox", "--least-squares-evaluations", "0",
+                      "--broyden-evaluations", "0"],
+     "--least-squares-method dogbox: unused, --least-squares-evaluations, --broyden-evaluations "
+     "and --polish-evaluations at 0"),
     # a per-actuator field's eight values were read as eight values of an axis, each refused
     # as "got 1" entry (an audit, 2026-12)
     ("sweep", ["--gaits", "A1", "--param", "actuator_gains=1,1,0.5,1,1,1,1,1"],

@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 import taichi_star
-from studies import gradient_fit, identify
+from studies import cli, gradient_fit, identify
 from studies.__main__ import main as studies_main
 from taichi_star import SolverConfig, StarParams, identification
 from taichi_star.experiment import PAPER_GAITS
@@ -1585,3 +1585,30 @@ def test_cma_es_runs_with_the_settings_it_is_given(monkeypatch):
     recorder = gradient_fit.fit_cma(problem, settings, gradient_fit.Recorder("6", "CMA-ES"))
     assert given == [settings] and given[0].sigma0 == 0.05
     assert recorder.stop_reasons == ["start 0: maxiter=2"]
+
+
+@pytest.mark.parametrize("argv, refused", [
+    # a setting moves only with every fit it sets left out; one of its fits left is enough
+    (["--lm-batch", "3", "--lm-iterations", "0", "--lm-broyden-iterations", "0"], True),
+    (["--lm-batch", "3", "--lm-iterations", "0", "--lm-broyden-iterations", "1"], False),
+    (["--lm-batch", "3", "--lm-iterations", "1", "--lm-broyden-iterations", "0"], False),
+    (["--lm-batch", str(gradient_fit.DEFAULT_LM_BATCH), "--lm-iterations", "0",
+      "--lm-broyden-iterations", "0"], False),
+    (["--lm-broyden-batch", "2", "--lm-broyden-iterations", "0"], True),
+    (["--lm-broyden-batch", "2", "--lm-broyden-iterations", "1", "--lm-iterations", "0"], False),
+    (["--least-squares-method", "dogbox", "--least-squares-evaluations", "0",
+      "--broyden-evaluations", "0"], True),
+    (["--least-squares-method", "dogbox", "--least-squares-evaluations", "0",
+      "--broyden-evaluations", "0", "--polish-evaluations", "1"], False),
+    (["--least-squares-method", "dogbox", "--least-squares-evaluations", "1",
+      "--broyden-evaluations", "0"], False),
+])
+def test_a_setting_of_fits_all_left_out_is_refused_and_one_fit_left_keeps_it(argv, refused):
+    """The flags' edge: a changed setting is refused when every fit it sets is at 0 and taken
+    when one of them (any one) runs, or when it is the default."""
+    args = gradient_fit.build_parser().parse_args(argv)
+    if refused:
+        with pytest.raises(cli.StudyArgumentError, match=r"^--[\w-]+ \w+: unused"):
+            gradient_fit.check_flags_of_fits_left_out(args)
+    else:
+        gradient_fit.check_flags_of_fits_left_out(args)
