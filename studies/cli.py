@@ -117,6 +117,10 @@ class StudyParser(OneLineParser):
         super().add_argument("--arch", choices=archs, default="cpu",
                              help="Taichi backend (default cpu)")
         super().add_argument("--no-progress", action="store_true", help="no progress bars")
+        super().add_argument("--replace-committed", action="store_true",
+                             help="let --out in the committed results/ replace the files "
+                                  "there (without it only `python -m studies reproduce`'s "
+                                  "own runs do)")
 
     def add_argument(self, *names, quick=_UNSET, **kwargs):
         if quick is _UNSET:
@@ -936,6 +940,9 @@ class Output:
         study = args.study
         self.folder = Path(args.out) if args.out is not None else _fresh_run_folder(study)
         self.made_folder = not self.folder.exists()
+        check_folder_name(self.folder, args.quick, "--out")
+        check_committed_folder(self.folder, study, argv,
+                               getattr(args, "replace_committed", False))
         check_output_folder(self.folder, args.quick)
         self.provenance = provenance.record(study, list(argv), model=model, solver=solver,
                                             extra=extra)
@@ -1042,6 +1049,50 @@ def check_folder_name(folder: Path, quick: bool, flag: str):
                                  f"results/ (give another folder)")
     if folder.exists() and not folder.is_dir():
         raise StudyArgumentError(f"{flag} {folder}: exists and is not a folder")
+
+
+RUN_PLACE_FLAGS = ("--out", "--no-progress", "--replace-committed")
+"""Flags that say where a run writes and what it shows, not what it computes: left out where a
+run's flags are compared with `reproduce`'s (`check_committed_folder`)."""
+
+
+def flags_of_run(argv: Sequence[str]) -> List[str]:
+    """A study's command-line flags without `RUN_PLACE_FLAGS` (and --out's value)."""
+    flags, skip = [], False
+    for token in argv:
+        if skip:
+            skip = False
+        elif token == "--out":
+            skip = True
+        elif token.split("=", 1)[0] not in RUN_PLACE_FLAGS:
+            flags.append(token)
+    return flags
+
+
+def check_committed_folder(folder: Path, study: str, argv: Sequence[str], replace: bool):
+    """StudyArgumentError naming --out where a run would write into the committed results/
+    (the folder or one in it) that already holds files, unless it is one of `python -m
+    studies reproduce`'s runs into results/ itself (the same flags but `RUN_PLACE_FLAGS`) or
+    is given --replace-committed: a small run there replaced the committed tables without a
+    word (an audit, 2026-12). A new or empty folder in results/ (a new result) is taken."""
+    from .reproduce import COMMANDS  # reproduce builds on this module
+
+    resolved = folder.resolve()
+    inside = resolved == COMMITTED_RESULTS or COMMITTED_RESULTS in resolved.parents
+    if replace or not inside or not folder.is_dir() or not any(folder.iterdir()):
+        return
+    reproduced = [flags[1:] if flags and flags[0] == study else flags
+                  for name, flags in COMMANDS.items()
+                  if (flags[0] if flags and not flags[0].startswith("-") else name) == study]
+    flags = flags_of_run(argv)
+    if resolved == COMMITTED_RESULTS and flags in reproduced:
+        return
+    made_by = "; ".join(" ".join(each) or "no flags" for each in reproduced) or "none"
+    raise StudyArgumentError(
+        f"--out {folder}: holds committed results, which only `python -m studies reproduce` "
+        f"replaces (its runs of {study}, into results/ itself: {made_by}); this run's flags "
+        f"({' '.join(flags) or 'none'}) differ: give another --out, or --replace-committed to "
+        f"replace them")
 
 
 def check_future_folder(folder: Path, quick: bool, flag: str):

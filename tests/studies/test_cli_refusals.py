@@ -637,3 +637,62 @@ def test_a_run_too_large_for_memory_is_one_line_naming_the_flag(monkeypatch, tmp
     assert studies_main(["fig4c", "--out", str(out), *QUICK]) == 2
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and "would need about" in lines[0] and not out.exists()
+
+
+@pytest.fixture
+def committed(monkeypatch, tmp_path):
+    """A stand-in for the committed results/, holding one committed table."""
+    results = tmp_path / "results"
+    results.mkdir()
+    (results / "jacobians.csv").write_text("committed\n")
+    monkeypatch.setattr(cli, "COMMITTED_RESULTS", results.resolve())
+    return results
+
+
+def test_a_run_into_the_committed_results_with_other_flags_is_refused(no_compute, committed,
+                                                                      capsys):
+    """A small run with --out results/ replaced the committed tables without a word (an audit,
+    2026-12): refused before the folder is touched, one line naming --out and reproduce's own
+    flags for the study; the committed file is left as it was."""
+    argv = ["jacobians", "--batch", "1", "--duration", "0.001", "--out", str(committed)]
+    assert studies_main(argv) == 2
+    error = capsys.readouterr().err
+    assert len(error.strip().splitlines()) == 1 and "Traceback" not in error
+    assert (f"--out {committed}: holds committed results, which only `python -m studies "
+            f"reproduce` replaces (its runs of jacobians, into results/ itself: no flags); this "
+            f"run's flags (--batch 1 --duration 0.001) differ: give another --out, or "
+            f"--replace-committed to replace them") in error
+    assert [p.name for p in committed.iterdir()] == ["jacobians.csv"]
+    assert (committed / "jacobians.csv").read_text() == "committed\n"
+
+
+@pytest.mark.parametrize("study, flags, where, taken", [
+    # reproduce's own runs into results/ itself, whatever --out and --no-progress say
+    ("jacobians", [], ".", True),
+    ("jacobians", ["--no-progress"], ".", True),
+    ("fig4c", ["--preset", "accurate", "--prefix", "fig4c_accurate"], ".", True),
+    ("calibrate", ["--preset", "accurate", "--cross-validate"], ".", True),
+    # other flags, or reproduce's in another order (another command line), are refused
+    ("fig4c", ["--preset", "accurate"], ".", False),
+    ("fig4c", ["--prefix", "fig4c_accurate", "--preset", "accurate"], ".", False),
+    ("jacobians", ["--rounds", "1"], ".", False),
+    # with --replace-committed any run; a folder in results/ only when new or empty
+    ("jacobians", ["--rounds", "1", "--replace-committed"], ".", True),
+    ("jacobians", ["--rounds", "1"], "new", True),
+    ("jacobians", ["--rounds", "1"], "empty", True),
+    ("jacobians", [], "full", False),
+    ("jacobians", [], "../outside", True),
+])
+def test_only_reproduces_runs_or_a_run_that_means_it_write_into_committed_results(
+        committed, study, flags, where, taken):
+    (committed / "empty").mkdir()
+    (committed / "full").mkdir()
+    (committed / "full" / "table.csv").write_text("committed\n")
+    folder = committed / where
+    argv = [*flags, "--out", str(folder)]
+    replace = "--replace-committed" in flags
+    if taken:
+        cli.check_committed_folder(folder, study, argv, replace)
+    else:
+        with pytest.raises(cli.StudyArgumentError, match=r"holds committed results"):
+            cli.check_committed_folder(folder, study, argv, replace)
