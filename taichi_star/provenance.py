@@ -102,11 +102,14 @@ def taichi_version() -> str:
     return ".".join(map(str, version)) if isinstance(version, (tuple, list)) else str(version)
 
 
-RECORDED_LIBRARIES = ("numpy", "scipy", "pandas", "cma", "SALib")
+RECORDED_LIBRARIES = ("numpy", "scipy", "pandas", "cma", "SALib", "dask", "distributed",
+                      "gymnasium", "stable-baselines3", "torch")
 """The distributions whose versions a result records (`library_versions`): a CMA-ES run's
 samples are cma's for a given seed, L-BFGS-B's and least squares' steps scipy's, the Sobol
 design SALib's, and every table's arithmetic NumPy's and pandas'; a new version of one can move
-a result that the same commit and seed made before."""
+a result that the same commit and seed made before. The Dask cluster's (a timing of `scaling`
+on it) and the environments' and their client's (`env_bench`'s steps through Gymnasium, a
+policy trained by SB3 on torch) are recorded too (left out until an audit, 2026-12)."""
 
 
 def library_versions(names=RECORDED_LIBRARIES) -> Dict[str, Optional[str]]:
