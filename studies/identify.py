@@ -543,7 +543,9 @@ def evaluate_points(box: Sequence[ParameterRange], unit_points, base: StarParams
     (`taichi_star.batch.run_batch` with `run_kwargs`: run length, solver, arch, executor,
     chunk size) and return one row per point: u_<name> (unit coordinates), <name>
     (values), objective, n_direction_mismatches, mismatched_gaits, status (the first non-ok
-    status, else "ok"), then signed_speed_<gait> and speed_<gait> in mm/s."""
+    status, else "ok"), failed_gaits (each failed gait with its status and simulated time,
+    "A1+A2 newton_failed at 1.23 s", ";"-separated; empty when none failed), then
+    signed_speed_<gait> and speed_<gait> in mm/s."""
     unit_points = np.atleast_2d(np.asarray(unit_points, dtype=np.float64))
     gaits = list(measurements.index)
     values = box_values(box, unit_points)
@@ -562,6 +564,11 @@ def evaluate_points(box: Sequence[ParameterRange], unit_points, base: StarParams
     table["n_direction_mismatches"] = wrong.sum(axis=1)
     table["mismatched_gaits"] = [" ".join(np.asarray(gaits)[row]) for row in wrong]
     table["status"] = [next((s for s in row if s != "ok"), "ok") for row in status]
+    # which gait failed, and when: the status alone named neither (an audit, 2026-12)
+    failure_times = summary["failure_time_s"].to_numpy(dtype=float).reshape(shape)
+    table["failed_gaits"] = ["; ".join(f"{gait} {s} at {t:.4g} s"
+                                       for gait, s, t in zip(gaits, row, times) if s != "ok")
+                             for row, times in zip(status, failure_times)]
     for g, gait in enumerate(gaits):
         table[f"signed_speed_{gait}"] = signed[:, g]
     for g, gait in enumerate(gaits):

@@ -443,3 +443,34 @@ def test_a_sobol_seed_of_zero_is_refused_since_salib_seeds_nothing_for_it():
                  lambda: sensitivity.sobol_indices(["a", "b", "c"], y, seed=True)):
         with pytest.raises(ValueError, match=r"^seed must be an integer >= 1 \(SALib takes 0 "):
             call()
+
+
+def test_an_evaluated_point_names_each_failed_gait_and_when(monkeypatch):
+    """`evaluate_points` gave a failed point's status alone (an audit, 2026-12): which gait
+    failed, and when, are its `failed_gaits`; a point whose gaits all ran has none, and a failed
+    gait's speeds are NaN and its objective inf. The run is a stand-in: no simulation."""
+    gaits = ["A1", "A1+A2"]
+    measurements = experiment.measurement_table(gaits, "uniform")
+    box = [identify.parse_range_spec("alpha=0.2:1.2", "--vary")]
+    # two points of two gaits each, in run_batch's order (point-major): the second point's
+    # A1+A2 failed at 1.2345 s
+    summary = pd.DataFrame({"status": ["ok", "ok", "ok", "newton_failed"],
+                            "failure_time_s": [np.nan, np.nan, np.nan, 1.2345],
+                            "signed_speed_mm_s": [4.0, 3.0, 5.0, np.nan],
+                            "speed_mm_s": [4.0, 3.0, 5.0, np.nan]})
+
+    class Run:
+        pass
+
+    def fake_run_batch(params, **kwargs):
+        assert [p.gait for p in params] == gaits * 2
+        run = Run()
+        run.summary = summary
+        return run
+
+    monkeypatch.setattr(identify, "run_batch", fake_run_batch)
+    table = identify.evaluate_points(box, [[0.0], [1.0]], StarParams(), measurements, {})
+    assert table["status"].tolist() == ["ok", "newton_failed"]
+    assert table["failed_gaits"].tolist() == ["", "A1+A2 newton_failed at 1.234 s"]
+    assert np.isnan(table["signed_speed_A1+A2"].iloc[1]) and table["objective"].iloc[1] == np.inf
+    assert table["signed_speed_A1"].tolist() == [4.0, 5.0]
