@@ -904,8 +904,9 @@ def objective_residuals(simulated: Mapping[str, SimulatedRun],
     for gait, run in simulated.items():
         if gait not in trials:
             raise ValueError(f"no measured trial for gait {gait!r}; trials: {', '.join(trials)}")
-        fit, residual, jacobian = trial_residuals(run, derivatives[gait], trials[gait], cycles,
-                                                  samples, None if phases is None else phases[gait])
+        fit, residual, jacobian = trial_residuals(
+            run, gait_entry(derivatives, gait, "derivatives"), trials[gait], cycles, samples,
+            None if phases is None else gait_entry(phases, gait, "phases"))
         rows.append(dataclasses.asdict(fit))
         residuals.append(residual)
         jacobians.append(jacobian)
@@ -965,14 +966,23 @@ def objective_and_gradient(simulated: Mapping[str, SimulatedRun],
     return objective_of(table), gradient, table
 
 
+def gait_entry(per_gait: Mapping[str, object], gait: str, name: str):
+    """`per_gait[gait]`, or a ValueError naming `name` and the gaits it holds (a KeyError of
+    the gait alone named neither: an audit, 2026-12)."""
+    if gait not in per_gait:
+        raise ValueError(f"{name} has no entry for gait {gait!r}; {name}: "
+                         f"{', '.join(per_gait) or 'none'}")
+    return per_gait[gait]
+
+
 def phase_motion(simulated: Mapping[str, SimulatedRun], derivatives: Mapping[str, np.ndarray],
                  trials: Mapping[str, Trial], table: pd.DataFrame, cycles=TRAINING_CYCLES,
                  samples: int = SAMPLES_PER_CYCLE) -> np.ndarray:
     """The set's `trial_phase_motion`s (P,), averaged as the objective averages the gaits;
     `table`: the per-gait table of `objective_residuals` with the phases fitted there."""
     fits = {row["gait"]: TrialFit(**row) for row in table.to_dict("records")}
-    motions = [trial_phase_motion(run, derivatives[gait], trials[gait],
-                                  fits[Gait.parse(gait).name], cycles, samples)
+    motions = [trial_phase_motion(run, gait_entry(derivatives, gait, "derivatives"),
+                                  trials[gait], fits[Gait.parse(gait).name], cycles, samples)
                for gait, run in simulated.items()]
     return np.mean(motions, axis=0)
 
@@ -1167,6 +1177,11 @@ def prediction_uncertainty(residuals: np.ndarray, jacobian: np.ndarray,
     gradient = np.asarray(gradient, dtype=np.float64)
     if values.ndim != 1:
         raise ValueError(f"values must be a 1-D array (P,), got shape {values.shape}")
+    columns = np.shape(jacobian)[-1] if np.ndim(jacobian) == 2 else len(values)
+    if len(values) != columns:
+        # a wrong count of values was blamed on the gradient (an audit, 2026-12)
+        raise ValueError(f"values must hold one number per column of jacobian ({columns}), "
+                         f"got {len(values)}")
     if gradient.shape != values.shape or not np.isfinite(gradient).all():
         raise ValueError(f"gradient must hold one finite number per value; got shape "
                          f"{gradient.shape} for values of shape {values.shape}")
@@ -1299,7 +1314,8 @@ def _predictions(simulated, derivatives, trials, values, cycles, samples, rcond,
     speeds = {}
     for gait in dict.fromkeys(gait for gait, _, _ in cases):
         run = simulated[gait]
-        speed, gradient = window_speed(run, derivatives[gait], predicted)
+        speed, gradient = window_speed(run, gait_entry(derivatives, gait, "derivatives"),
+                                       predicted)
         ends = run.path.position(_window_ends(run.path, predicted))
         duration = (predicted[1] - predicted[0] + 1) * run.path.period_s
         measured_speed = math.nan

@@ -116,6 +116,16 @@ def test_values_that_are_not_one_dimensional_are_refused_as_values():
         ident.prediction_uncertainty(residuals, jacobian, values[None, :], np.ones(3))
 
 
+@pytest.mark.parametrize("count", [2, 4])
+def test_values_of_another_count_than_the_jacobians_columns_are_refused_as_values(count):
+    """One value too few or too many for the Jacobian's three columns, with a gradient that
+    matches the values: the values are named (the gradient was: an audit, 2026-12)."""
+    residuals, jacobian, _ = _linear_fit(np.random.default_rng(2))
+    with pytest.raises(ValueError, match=rf"^values must hold one number per column of "
+                                         rf"jacobian \(3\), got {count}$"):
+        ident.prediction_uncertainty(residuals, jacobian, np.ones(count), np.ones(count))
+
+
 def test_the_fit_is_checked_as_parameter_uncertainty_checks_it():
     residuals, jacobian, values = _linear_fit(np.random.default_rng(2))
     with pytest.raises(ValueError, match="^residuals, jacobian and values must be finite$"):
@@ -224,6 +234,12 @@ def test_gait_predictions_refuse_what_they_cannot_answer():
         ident.gait_predictions({"A1": runs["A1"]}, derivatives, trials, values)
     with pytest.raises(ValueError, match="at least two measured gaits"):
         ident.gait_predictions(runs, derivatives, {"A1": trials["A1"]}, values)
+    # a gait without its derivatives was a KeyError naming the gait alone (an audit, 2026-12)
+    partial = {gait: derivatives[gait] for gait in derivatives if gait != "A1+A2"}
+    with pytest.raises(ValueError, match=r"^derivatives has no entry for gait 'A1\+A2'; "
+                                         r"derivatives: " + ", ".join(partial).replace("+", r"\+")
+                                         + "$"):
+        ident.gait_predictions(runs, partial, trials, values)
 
 
 def test_gait_predictions_of_a_later_window_read_it_at_the_phase_fitted_on_the_fit_window():
