@@ -59,6 +59,30 @@ RUNS_FOLDER = Path("runs")
 """Default parent of the output folders: runs/<study>/<timestamp>/ (git-ignored)."""
 COMMITTED_RESULTS = Path(__file__).resolve().parent.parent / "results"
 """The committed results, written only by full runs (`python -m studies reproduce`)."""
+REPRODUCED_RESULTS = {
+    "fig4c": [],
+    "fig4c_accurate": ["fig4c", "--preset", "accurate", "--prefix", "fig4c_accurate"],
+    "convergence": [],
+    "gaits": ["--workers", "2"],
+    "sweep": ["--alpha", "0.2:1.2:6", "--added-mass", "0,0.5,1,2",
+              "--youngs-modulus", "2e6,5e6,1e7", "--workers", "2"],
+    "calibrate": ["--preset", "accurate"],
+    "crossval": ["calibrate", "--preset", "accurate", "--cross-validate"],
+    "animate": [],
+    "bench": ["--batch-sizes", "1,8,64,512,2048", "--repeats", "2"],
+    "jacobians": [],
+    "work_precision": [],
+    "stability": ["--workers", "2"],
+    "scaling": [],
+    "sensitivity": ["--preset", "accurate"],
+    "elasticities": ["--check", "alpha,drag_perpendicular,joint_radius,tip_radius,cylinder_drag,"
+                     "cylinder_diameter,fluid_density,limb_stiffness_ratio,youngs_modulus,"
+                     "added_mass_coeff,thickness"],
+    "elasticities_accurate": ["elasticities", "--preset", "accurate", "--prefix",
+                              "elasticities_accurate", "--check", "alpha,drag_perpendicular"],
+}
+"""The results `python -m studies reproduce` makes: result name -> the study's flags (the study
+is the name unless the flags start with it)."""
 MAX_INSTANCES = 1_000_000
 """The most instances one study run simulates (a sweep's product, a sensitivity's sample; a
 range's points): about 100 times the sensitivity study's default 10,240, days of a 2-core CPU."""
@@ -1075,14 +1099,12 @@ def check_committed_folder(folder: Path, study: str, argv: Sequence[str], replac
     studies reproduce`'s runs into results/ itself (the same flags but `RUN_PLACE_FLAGS`) or
     is given --replace-committed: a small run there replaced the committed tables without a
     word (an audit, 2026-12). A new or empty folder in results/ (a new result) is taken."""
-    from .reproduce import COMMANDS  # reproduce builds on this module
-
     resolved = folder.resolve()
     inside = resolved == COMMITTED_RESULTS or COMMITTED_RESULTS in resolved.parents
     if replace or not inside or not folder.is_dir() or not any(folder.iterdir()):
         return
     reproduced = [flags[1:] if flags and flags[0] == study else flags
-                  for name, flags in COMMANDS.items()
+                  for name, flags in REPRODUCED_RESULTS.items()
                   if (flags[0] if flags and not flags[0].startswith("-") else name) == study]
     flags = flags_of_run(argv)
     if resolved == COMMITTED_RESULTS and flags in reproduced:

@@ -44,6 +44,12 @@ def short_commit() -> str:
     return code["commit"][:7] + ("-dirty" if code["dirty"] else "")
 
 
+def timing_columns(arch: str) -> Dict[str, object]:
+    """The columns every timing table's rows carry beside their own batch, precision and
+    preset: the machine's (`machine_columns`) and the code's commit (`short_commit`)."""
+    return {**machine_columns(arch), "commit": short_commit()}
+
+
 def record(study: str, argv: Sequence[str], model: Optional[Mapping] = None,
            solver=None, extra: Optional[Mapping] = None) -> Dict[str, object]:
     """The provenance of one study run. `model`: the preset name and the base StarParams (or

@@ -16,38 +16,14 @@ import subprocess
 import sys
 from pathlib import Path
 
-from .cli import (COMMITTED_RESULTS, OneLineParser, StudyArgumentError, check_future_folder,
-                  parse_values)
+from .cli import (COMMITTED_RESULTS, REPRODUCED_RESULTS, OneLineParser, StudyArgumentError,
+                  check_future_folder, parse_values)
 
 DESCRIPTION = "Regenerate the main committed results/ with their studies' full runs (hours)."
 
-COMMANDS = {
-    "fig4c": [],
-    "fig4c_accurate": ["fig4c", "--preset", "accurate", "--prefix", "fig4c_accurate"],
-    "convergence": [],
-    "gaits": ["--workers", "2"],
-    "sweep": ["--alpha", "0.2:1.2:6", "--added-mass", "0,0.5,1,2",
-              "--youngs-modulus", "2e6,5e6,1e7", "--workers", "2"],
-    "calibrate": ["--preset", "accurate"],
-    "crossval": ["calibrate", "--preset", "accurate", "--cross-validate"],
-    "animate": [],
-    "bench": ["--batch-sizes", "1,8,64,512,2048", "--repeats", "2"],
-    "jacobians": [],
-    "work_precision": [],
-    "stability": ["--workers", "2"],
-    "scaling": [],
-    "sensitivity": ["--preset", "accurate"],
-    "elasticities": ["--check", "alpha,drag_perpendicular,joint_radius,tip_radius,cylinder_drag,"
-                     "cylinder_diameter,fluid_density,limb_stiffness_ratio,youngs_modulus,"
-                     "added_mass_coeff,thickness"],
-    "elasticities_accurate": ["elasticities", "--preset", "accurate", "--prefix",
-                              "elasticities_accurate", "--check", "alpha,drag_perpendicular"],
-}
-"""Result name -> the study's flags (the study is the name unless the flags start with it)."""
-
 
 def command(name: str, into: Path):
-    flags = COMMANDS[name]
+    flags = REPRODUCED_RESULTS[name]
     study, flags = (flags[0], flags[1:]) if flags and not flags[0].startswith("-") \
         else (name, flags)
     # the package this module runs in: `studies` in the checkout, `taichi_star.studies` once
@@ -59,16 +35,16 @@ def command(name: str, into: Path):
 def main(argv=None):
     parser = OneLineParser(prog="python -m studies reproduce", description=DESCRIPTION)
     parser.add_argument("--only", default=None,
-                        help=f"comma list of {', '.join(COMMANDS)}, each once (default all)")
+                        help=f"comma list of {', '.join(REPRODUCED_RESULTS)}, each once (default all)")
     parser.add_argument("--into", default=str(COMMITTED_RESULTS),
                         help="output folder (default the repository's results/)")
     parser.add_argument("--dry-run", action="store_true", help="print the commands only")
     args = parser.parse_args(argv)
-    names = list(COMMANDS) if args.only is None else parse_values(args.only, "--only", str)
-    unknown = [n for n in names if n not in COMMANDS]
+    names = list(REPRODUCED_RESULTS) if args.only is None else parse_values(args.only, "--only", str)
+    unknown = [n for n in names if n not in REPRODUCED_RESULTS]
     if unknown:
         raise StudyArgumentError(f"--only: unknown result {unknown[0]!r}; choose from "
-                                 f"{', '.join(COMMANDS)}")
+                                 f"{', '.join(REPRODUCED_RESULTS)}")
     if not args.into.strip():  # Path("") is the current folder
         raise StudyArgumentError("--into: an empty folder name (give a folder, e.g. runs/mine)")
     into = Path(args.into)

@@ -27,7 +27,7 @@ from taichi_star.extras import missing_extra
 from taichi_star.experiment import PAPER_GAITS
 from taichi_star.timegrid import steps_in
 
-from . import cli
+from . import cli, provenance
 
 DESCRIPTION = ("Wall time of one fixed sweep: in process against 1, 2, ... local worker "
                "processes and Dask workers.")
@@ -103,7 +103,10 @@ def main(argv=None):
                      "same_table_as_in_process": bool(summary.equals(reference)),
                      "load_1min_before": load})
         print(f"{mode:>10} workers={workers}: {wall:.2f} s (startup {startup:.2f} s)")
-    table = pd.DataFrame(rows)
+    # the machine, the code and the model timed, on every row (they were in the sidecar
+    # alone: an audit, 2026-12)
+    table = pd.DataFrame(rows).assign(preset="paper", precision=solver.precision,
+                                      **provenance.timing_columns(args.arch))
     table["speedup_vs_in_process"] = table["wall_s"].iloc[0] / table["wall_s"]
     out.write_csv(table, "scaling.csv")
     out.report()

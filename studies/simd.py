@@ -91,7 +91,7 @@ from taichi_star.profiling import matmul_gflops
 from taichi_star.provenance import cpu_model
 from taichi_star.runtime import PARALLEL_LOOP_MINIMUM, Runtime, check_host_memory
 
-from . import cli
+from . import cli, provenance
 
 DESCRIPTION = ("SIMD across instances: the Newton matrix's block LU in today's layout against "
                "lane-grouped forms, with the LLVM IR checked for vector instructions.")
@@ -1021,21 +1021,37 @@ def elimination_plans(presets: list[str]) -> dict:
     return plans
 
 
-def check_lu_memory(plans: dict, batch_sizes: list[int], lanes_list: list[int]):
+def kernel_words(kernel: str, plan) -> int:
+    """The numbers one instance of `plan` (an elimination plan of a preset) holds for timing
+    `kernel` (KERNELS): the LU's blocks and right-hand side, or an assembly's node state,
+    element values, residual and chain blocks (`LaneAssembly`; as many elements as nodes, at
+    most)."""
+    if kernel == "factor_solve":
+        return 4 * plan.n_slots + 2 * plan.n_nodes
+    assembly = ASSEMBLIES[kernel]
+    return (4 * len(chain_slots(plan.n_nodes)) + 2 * plan.n_nodes * (len(assembly.node_fields) + 1)
+            + plan.n_nodes * assembly.element_columns)
+
+
+def check_memory(plans: dict, batch_sizes: list[int], lanes_list: list[int],
+                 kernels: list[str]):
     """StudyArgumentError naming --batch-sizes, before any timing or output, where the largest
-    batch's systems would not fit in memory (1,048,576 of the paper robot's took 52 GiB for one
-    host copy and ended in NumPy's MemoryError: an audit, 2026-12): `measure` holds about three
-    float64 host copies of the blocks and right-hand sides and every form's two Taichi copies
-    at once, counted here in float64."""
+    batch's systems of a kernel would not fit in memory (1,048,576 of the paper robot's LU
+    systems took 52 GiB for one host copy and ended in NumPy's MemoryError, and the assemblies
+    were not checked at all: audits, 2026-12): a kernel's timing holds about three float64
+    host copies of its numbers (`kernel_words`) and every form's two Taichi copies at once,
+    counted here in float64; the kernels are timed one after the other."""
     forms = len(list(forms_of(lanes_list)))
     largest = max(batch_sizes)
-    for preset, plan in plans.items():
-        per_instance = 8 * (4 * plan.n_slots + 2 * plan.n_nodes) * (3 + 2 * forms)
-        try:
-            check_host_memory("--batch-sizes", f"{largest:,} {preset} systems in {forms} forms",
-                              largest * per_instance, "give smaller --batch-sizes")
-        except ValueError as error:
-            raise cli.StudyArgumentError(str(error)) from None
+    for kernel in kernels:
+        for preset, plan in plans.items():
+            per_instance = 8 * kernel_words(kernel, plan) * (3 + 2 * forms)
+            try:
+                check_host_memory("--batch-sizes", f"{largest:,} {preset} systems of {kernel} "
+                                  f"in {forms} forms", largest * per_instance,
+                                  "give smaller --batch-sizes")
+            except ValueError as error:
+                raise cli.StudyArgumentError(str(error)) from None
 
 
 def build_parser():
@@ -1077,8 +1093,7 @@ def main(argv=None):
         raise cli.StudyArgumentError(f"--matmul-size must be in [16, {MAX_MATMUL_SIZE}], got "
                                      f"{args.matmul_size}")
     plans = elimination_plans(presets)
-    if "factor_solve" in kernels:
-        check_lu_memory(plans, batch_sizes, lanes_list)
+    check_memory(plans, batch_sizes, lanes_list, kernels)
     out = cli.Output(args, argv or [], model={"presets": presets},
                      extra={"precisions": precisions, "batch_sizes": batch_sizes,
                             "lanes": lanes_list, "repeats": args.repeats,
@@ -1109,7 +1124,8 @@ def main(argv=None):
     if assembly_rows:
         tables["simd_assembly.csv"] = pd.DataFrame(assembly_rows)
     for name, table in tables.items():
-        csv_path = out.write_csv(table, name)
+        # the machine and the code on every row (in the sidecar alone before: an audit, 2026-12)
+        csv_path = out.write_csv(table.assign(**provenance.timing_columns("cpu")), name)
         out.wrote(plot_speedups(csv_path, out.path(name.replace(".csv", ".png"))))
     out.report()
     return next(iter(tables.values()))

@@ -14,18 +14,20 @@ with H (`taylor_step`) large enough that the remainder stands above the runs' Ne
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 import pandas as pd
 
+from .checks import warn_user
 from .params import SolverConfig, StarParams
-from .sensitivities import RELATIVE_STEP, Direction, parse_directions
+from .sensitivities import (RELATIVE_STEP, Direction, check_directions, instances_per_instance,
+                            parse_directions)
 from .simulation import simulate
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
 __all__ = ["check_sensitivities", "whole_run_differences", "extrapolated_difference",
-           "difference_step"]
+           "difference_step", "check_arguments", "instance_runs"]
 
 TAYLOR_MULTIPLE = 100.0
 """H of the Taylor test in multiples of the differences' h (1e-2 of the value for ε = 1e-4):
@@ -34,16 +36,27 @@ displacements of 1e-4 m)..."""
 TAYLOR_MOST = 0.1
 """... but H at most this share of a nonzero value (C∥, whose ε is 1e-2 of it, moves by 10 %)."""
 CHECK_COLUMNS = ("instance", "gait", "parameter", "value", "output", "sensitivity",
-                 "difference_h", "difference_2h", "difference_4h", "difference", "relative_error",
-                 "difference_spread", "taylor_ratio")
-"""Columns of `check_sensitivities`: difference = `extrapolated_difference`; relative_error =
-|sensitivity − difference| / |difference|; difference_spread = |D(h) − difference| /
-|difference| (how far the differences themselves scatter: where it is large the check is ill
-conditioned); taylor_ratio = r(2H) / r(H)."""
+                 "difference_h", "difference_2h", "difference_4h", "difference", "absolute_error",
+                 "relative_error", "difference_spread", "taylor_ratio", "status",
+                 "failure_time_s")
+"""Columns of `check_sensitivities`: difference = `extrapolated_difference`; absolute_error =
+|sensitivity − difference| (in the output's unit per the parameter's: where the difference is
+exactly 0, an actuator the gait never fires, the relative error is inf, or NaN with a
+sensitivity of 0 too, and the spread NaN; this alone measures a sensitivity that is not 0);
+relative_error = |sensitivity − difference| / |difference|;
+difference_spread = |D(h) − difference| / |difference| (how far the differences themselves
+scatter: where it is large the check is ill conditioned); taylor_ratio = r(2H) / r(H); status
+and failure_time_s (s): those of the first of the row's runs (the centre, then the moved and
+the Taylor runs) that did not finish "ok" (a failed run's metrics are NaN), else "ok" and
+NaN."""
+FAILED_ROWS_NAMED = 5
+"""Failed rows that `check_sensitivities`' warning names one by one (it counts them all)."""
 
 
 MULTIPLES = (1.0, -1.0, 2.0, -2.0, 4.0, -4.0)
 """The differences' runs, in multiples of h: ±h, ±2h and ±4h (`whole_run_differences`)."""
+TAYLOR_MULTIPLES = (1.0, 2.0)
+"""The Taylor test's runs, in multiples of its step H (`taylor_step`)."""
 
 
 def extrapolated_difference(small, large, largest):
@@ -78,30 +91,97 @@ def taylor_step(h: float, value: float) -> float:
     return min(step, TAYLOR_MOST * abs(value)) if value else step
 
 
-def whole_run_differences(params: Sequence[StarParams], duration_s: float, solver: SolverConfig,
-                          directions, output: str, arch: str = "cpu") -> np.ndarray:
-    """(D, B, 3): the central differences of `output` (a summary column) of whole runs at
-    ±h, ±2h and ±4h for every direction × instance, h each one's `difference_step`, from one
-    `simulate` batch of every moved run (`MULTIPLES`); `extrapolated_difference` of the last
-    axis is the derivative they give."""
-    params = list(params)
+def _moved_runs(params: Sequence[StarParams], steps: np.ndarray, directions, multiples,
+                duration_s: float, solver: SolverConfig, arch: str, progress) -> pd.DataFrame:
+    """The `simulate` summary of one batch of every instance moved along each direction by
+    each of `multiples` times its step (`steps`: (D, B), in the parameter's unit), in the order
+    direction, multiple, instance: D·M·B rows."""
+    moved = [direction.moved(p, direction.value(p) + multiple * step)
+             for direction, row in zip(directions, steps) for multiple in multiples
+             for p, step in zip(params, row)]
+    return simulate(moved, duration_s, solver, arch=arch, progress=progress).summary
+
+
+def _difference_runs(params: Sequence[StarParams], duration_s: float, solver: SolverConfig,
+                     directions, output: str, arch: str, progress):
+    """((D, B, 3) differences as `whole_run_differences` gives them, the summary of their D·6·B
+    moved runs in `_moved_runs`' order)."""
     steps = np.array([[difference_step(direction, p) for p in params]
                       for direction in directions])
-    moved = [direction.moved(p, direction.value(p) + multiple * h)
-             for direction, row in zip(directions, steps) for multiple in MULTIPLES
-             for p, h in zip(params, row)]
-    runs = simulate(moved, duration_s, solver, arch=arch).summary[output].to_numpy(dtype=float)
+    summary = _moved_runs(params, steps, directions, MULTIPLES, duration_s, solver, arch,
+                          progress)
+    runs = summary[output].to_numpy(dtype=float)
     plus, minus = runs.reshape(len(directions), len(MULTIPLES) // 2, 2, len(params)) \
         .transpose(2, 0, 3, 1)
-    return (plus - minus) / (2.0 * steps[..., None] * np.array([1.0, 2.0, 4.0]))
+    return (plus - minus) / (2.0 * steps[..., None] * np.array([1.0, 2.0, 4.0])), summary
+
+
+def whole_run_differences(params: Sequence[StarParams], duration_s: float, solver: SolverConfig,
+                          directions, output: str, arch: str = "cpu",
+                          progress: Optional[bool] = None) -> np.ndarray:
+    """(D, B, 3): the central differences of `output` (a summary column) of whole runs at
+    ±h, ±2h and ±4h for every direction × instance, h each one's `difference_step`, from one
+    `simulate` batch of every moved run (`MULTIPLES`; `progress` as simulate takes it);
+    `extrapolated_difference` of the last axis is the derivative they give. A failed moved run
+    gives NaN differences of a metric output (`simulate` leaves a failed instance's speeds,
+    displacements and heading NaN; the runs' statuses: `check_sensitivities`)."""
+    return _difference_runs(list(params), duration_s, solver, directions, output, arch,
+                            progress)[0]
+
+
+def first_failure(status: np.ndarray, failure_time_s: np.ndarray):
+    """(status, failure_time_s) of each row of (..., runs) arrays of runs' statuses and failure
+    times (s): those of the row's first run whose status is not "ok", else "ok" and NaN."""
+    failed = status != "ok"
+    # argmax: the first True; in a row of "ok" runs it picks the first, whose time is NaN
+    first = failed.argmax(axis=-1)[..., None]
+    return (np.take_along_axis(status, first, axis=-1)[..., 0],
+            np.take_along_axis(failure_time_s, first, axis=-1)[..., 0])
+
+
+def instance_runs(instances: int, directions: int) -> int:
+    """The instances `check_sensitivities` simulates for `instances` instances and `directions`
+    directions, each replica of the sensitivities counted as an instance (`simulate`'s count
+    of its work): the sensitivities' run (`instances_per_instance`), the differences' moved
+    runs (`MULTIPLES`) and the Taylor test's (`TAYLOR_MULTIPLES`)."""
+    return instances * (instances_per_instance(directions)
+                        + (len(MULTIPLES) + len(TAYLOR_MULTIPLES)) * directions)
+
+
+def check_arguments(params: Sequence[StarParams], solver: SolverConfig, names: Sequence[str],
+                    duration_s: float):
+    """ValueError, before any compute, where `simulate` would refuse the sensitivities `names`
+    of `check_sensitivities`: an unknown, repeated or non-differentiable name, sensitivities in
+    f32, a component height at 0 in any instance (`sensitivities.check_directions`, which also
+    warns of a delay on the step grid). For a caller that runs several checks and must refuse
+    a later one's names before the first computes (`python -m studies sensitivity_check`)."""
+    check_directions(parse_directions(names), list(params), solver, duration_s=duration_s)
+
+
+def warn_failed_rows(table: pd.DataFrame):
+    """One RuntimeWarning (`warn_user`) naming the rows of a `check_sensitivities` table whose
+    status is not "ok" (their metrics are NaN or rest on a frozen run): how many, and the
+    first few by gait, parameter, status and time. Silent where every row is ok."""
+    failed = table[table["status"] != "ok"]
+    if failed.empty:
+        return
+    named = "; ".join(f"{row.gait} {row.parameter} ({row.status} at {row.failure_time_s:g} s)"
+                      for row in failed.head(FAILED_ROWS_NAMED).itertuples())
+    more = f"; and {len(failed) - FAILED_ROWS_NAMED} more" \
+        if len(failed) > FAILED_ROWS_NAMED else ""
+    warn_user(f"check_sensitivities: {len(failed)} of {len(table)} rows rest on a run that did "
+              f"not finish ok, their differences unusable (columns status, failure_time_s): "
+              f"{named}{more}")
 
 
 def check_sensitivities(params: Sequence[StarParams], duration_s: float, solver: SolverConfig,
                         names: Sequence[str], output: str = "displacement_x_mm",
-                        arch: str = "cpu") -> pd.DataFrame:
+                        arch: str = "cpu", progress: Optional[bool] = None) -> pd.DataFrame:
     """One row per (instance, direction) of `names` (as `simulate` takes them), for `output` (a
-    summary column): see `CHECK_COLUMNS`. Three `simulate` calls: the sensitivities, the
-    differences' moved runs (`whole_run_differences`) and the Taylor test's (H and 2H).
+    summary column): see `CHECK_COLUMNS`. Three `simulate` calls (`progress` as it takes it):
+    the sensitivities, the differences' moved runs (`whole_run_differences`) and the Taylor
+    test's (H and 2H). A row whose runs did not all finish ok is kept, with the status of the
+    first that did not (`CHECK_COLUMNS`), and one warning names such rows (`warn_failed_rows`).
 
     With adaptive steps hold them: dt_min = dt_max = the step. The sensitivities are those of
     the instance's accepted step sequence, frozen; a moved run on free steps chooses its own,
@@ -114,32 +194,46 @@ def check_sensitivities(params: Sequence[StarParams], duration_s: float, solver:
     way, 2.4e-7 with dt_min = dt_max (an audit, 2026-12)."""
     params = list(params)
     directions = parse_directions(names)
-    result = simulate(params, duration_s, solver, arch=arch, sensitivities=names)
+    result = simulate(params, duration_s, solver, arch=arch, sensitivities=names,
+                      progress=progress)
     centre = result.summary[output].to_numpy(dtype=float)
-    differences = whole_run_differences(params, duration_s, solver, directions, output, arch)
-    taylor_steps = [[taylor_step(difference_step(direction, p), direction.value(p))
-                     for p in params] for direction in directions]
-    moved = [direction.moved(p, direction.value(p) + multiple * H)
-             for direction, row in zip(directions, taylor_steps) for multiple in (1.0, 2.0)
-             for p, H in zip(params, row)]
-    taylor_runs = simulate(moved, duration_s, solver, arch=arch).summary[output] \
-        .to_numpy(dtype=float).reshape(len(directions), 2, len(params))
+    differences, difference_runs = _difference_runs(params, duration_s, solver, directions,
+                                                    output, arch, progress)
+    taylor_steps = np.array([[taylor_step(difference_step(direction, p), direction.value(p))
+                              for p in params] for direction in directions])
+    taylor_summary = _moved_runs(params, taylor_steps, directions, TAYLOR_MULTIPLES,
+                                 duration_s, solver, arch, progress)
+    count, batch = len(directions), len(params)
+    taylor_runs = taylor_summary[output].to_numpy(dtype=float) \
+        .reshape(count, len(TAYLOR_MULTIPLES), batch)
+    # (D, B, runs) each: every row's runs in order, its centre run, then its moved runs and its
+    # Taylor runs
+    statuses, failure_times = first_failure(*(np.concatenate([
+        np.broadcast_to(result.summary[column].to_numpy(dtype=kind), (count, 1, batch)),
+        difference_runs[column].to_numpy(dtype=kind).reshape(count, len(MULTIPLES), batch),
+        taylor_summary[column].to_numpy(dtype=kind).reshape(count, len(TAYLOR_MULTIPLES), batch)],
+        axis=1).transpose(0, 2, 1) for column, kind in (("status", object),
+                                                         ("failure_time_s", float))))
     rows = []
     for j, direction in enumerate(directions):
         small, large, largest = differences[j].T
         taylor, taylor2 = taylor_runs[j]
         extrapolated = extrapolated_difference(small, large, largest)
         sensitivity = result.sensitivity(output, direction.label)
-        step = np.array(taylor_steps[j])
+        step = taylor_steps[j]
         remainder = np.abs(taylor - centre - step * sensitivity)
         remainder2 = np.abs(taylor2 - centre - 2 * step * sensitivity)
+        error = np.abs(sensitivity - extrapolated)
         with np.errstate(divide="ignore", invalid="ignore"):
             rows.append(pd.DataFrame({
                 "instance": np.arange(len(params)), "gait": [p.gait for p in params],
                 "parameter": direction.label, "value": [direction.value(p) for p in params],
                 "output": output, "sensitivity": sensitivity, "difference_h": small,
                 "difference_2h": large, "difference_4h": largest, "difference": extrapolated,
-                "relative_error": np.abs(sensitivity - extrapolated) / np.abs(extrapolated),
+                "absolute_error": error, "relative_error": error / np.abs(extrapolated),
                 "difference_spread": np.abs(small - extrapolated) / np.abs(extrapolated),
-                "taylor_ratio": remainder2 / remainder}))
-    return pd.concat(rows, ignore_index=True).reindex(columns=list(CHECK_COLUMNS))
+                "taylor_ratio": remainder2 / remainder, "status": statuses[j],
+                "failure_time_s": failure_times[j]}))
+    table = pd.concat(rows, ignore_index=True).reindex(columns=list(CHECK_COLUMNS))
+    warn_failed_rows(table)
+    return table

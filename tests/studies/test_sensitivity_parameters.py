@@ -82,11 +82,12 @@ def test_sensitivity_check_differentiates_each_setting_by_its_parameters(no_comp
         assert len(plain) == 40
     checked = {}
 
-    def check(params, duration_s, solver, names):
+    def check(params, duration_s, solver, names, progress=None):
         checked[(solver.integrator, solver.adaptive, params[0].damping_time,
                  params[0].hub_height)] = list(names)
-        return pd.DataFrame({"parameter": list(names), "relative_error": 1e-8,
-                             "difference_spread": 1e-9})
+        return pd.DataFrame({"parameter": list(names), "sensitivity": 1.0, "difference": 1.0,
+                             "relative_error": 1e-8, "difference_spread": 1e-9,
+                             "status": "ok"})
     monkeypatch.setattr(sensitivity_check, "check_sensitivities", check)
     assert studies_main(["sensitivity_check", "--no-progress", "--gaits", "A1", "--out",
                          str(tmp_path), *argv]) == 0

@@ -13,6 +13,7 @@ import pytest
 from taichi_star import EngineProfile, SolverConfig, StarParams
 from taichi_star.runtime import Runtime
 
+from studies import provenance as study_provenance
 from studies import simd
 from studies.__main__ import main as studies_main
 
@@ -54,6 +55,9 @@ def test_simd_quick(tmp_path):
     assert (table["gflops"] > 0).all() and (table["matmul_gflops"] > 0).all()
     assert not (tmp_path / "simd_assembly.csv").exists()
     assert (tmp_path / "simd.png").stat().st_size > 1000
+    # every row names the machine and the code (the sidecar alone did: an audit, 2026-12)
+    for column, value in study_provenance.timing_columns("cpu").items():
+        assert (table[column].fillna("") == value).all(), column
 
 
 @pytest.mark.slow

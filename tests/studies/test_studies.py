@@ -368,7 +368,7 @@ def _run_flags(command):
     return kept
 
 
-@pytest.mark.parametrize("name", [n for n in reproduce.COMMANDS if n != "animate"])
+@pytest.mark.parametrize("name", [n for n in cli.REPRODUCED_RESULTS if n != "animate"])
 def test_reproduce_runs_each_committed_result_as_its_sidecar_says_it_was_made(name):
     """`reproduce` regenerates what the docs quote only if it runs each study with the flags
     of the committed run (its elasticities check once named 2 of the 11 parameters whose
