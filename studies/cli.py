@@ -347,6 +347,15 @@ def check_steps(what: str, steps: float, batch=None):
         raise StudyArgumentError(str(error)) from None
 
 
+def check_robot_steps(what: str, robot_steps: float):
+    """`check_steps` of a whole run's robot-steps, every batch together (what `what` says gave
+    them): refused past what can finish, estimated when long. A study whose batches each stay
+    under the warning gives their sum here (a grid of 3.6e10 robot-steps started without a
+    word: an audit, 2026-12)."""
+    # as one-step instances: check_work counts round(steps) × batch, the sum exactly
+    check_steps(what, 1, round(robot_steps))
+
+
 def check_length(length: str, duration_s: float, step_s: float, step_name: str):
     """`check_steps` of a run of duration_s (s, what `length` says, e.g. "--cycles 3 (9.45
     s)") at steps of step_s (s, named `step_name`)."""

@@ -17,6 +17,9 @@ with adaptive steps (the accurate preset's), which take steps of their own lengt
 1-ms steps it was about 11 times the steps taken (an audit, 2026-12).
 
 --quick: 4 environments, one 0.2-s step at dt = 5 ms.
+
+The robot-steps of every setting together are refused past the library's limit, or estimated
+when long, before any environment is built.
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ import time
 
 import pandas as pd
 
-from taichi_star import JACOBIANS, PRESETS, SolverConfig, StarParams
+from taichi_star import JACOBIANS, PRESETS, SolverConfig, StarParams, fewest_steps
 from taichi_star.envs import StarSwimmerVectorEnv, control_period
 from taichi_star.provenance import cpu_model
 from taichi_star.runtime import check_batch_memory
@@ -94,6 +97,7 @@ def main(argv=None):
     if args.steps < 1:
         raise cli.StudyArgumentError(f"--steps must be >= 1, got {args.steps}")
     solvers = {}
+    robot_steps = 0.0
     for preset in presets:
         for jacobian in jacobians:
             try:
@@ -110,11 +114,18 @@ def main(argv=None):
             duration = (args.steps + 1) * period
             cli.check_run(f"--steps {args.steps} (+1 compiling) of --control-period {period:g} s "
                           f"({duration:.3g} s)", duration, solvers[preset, jacobian])
+            steps, _ = fewest_steps(solvers[preset, jacobian], duration, 0.0)
+            robot_steps += args.num_envs * steps
         try:  # a million robots' engine: 116 GiB, failed after two minutes (an audit)
             check_batch_memory([StarParams.preset(preset)] * args.num_envs,
                                solvers[preset, jacobians[0]].precision, args.arch)
         except ValueError as error:
             raise cli.StudyArgumentError(f"--num-envs: {error}") from None
+    # each setting's steps checked above; all settings' robots together refused or estimated
+    # here (--num-envs 65536 --steps 50000, 1.03e13 robot-steps, started without a word: an
+    # audit, 2026-12)
+    cli.check_robot_steps(f"--num-envs {args.num_envs} × --steps {args.steps} (+1 compiling) × "
+                          f"{len(solvers)} preset and Jacobian setting(s)", robot_steps)
     out = cli.Output(args, argv or [], model={"presets": presets},
                      solver={f"{preset}, {jacobian}": solver
                              for (preset, jacobian), solver in solvers.items()},
@@ -122,8 +133,9 @@ def main(argv=None):
                             "steps": args.steps})
     rows = []
     for (preset, jacobian), solver in solvers.items():
-        rows.append(measure(preset, solver, args.num_envs, args.steps, args.control_period,
-                            args.arch))
+        with cli.batch_work_told():  # told above for the whole run: not again for each step
+            rows.append(measure(preset, solver, args.num_envs, args.steps,
+                                args.control_period, args.arch))
         steps_rate = rows[-1]["robot_steps_per_s"]
         print(f"{preset}, {jacobian}: {rows[-1]['robot_seconds_per_s']:.1f} robot-s per wall s"
               + ("" if math.isnan(steps_rate) else f" ({steps_rate:,.0f} robot-steps/s)"))

@@ -10,8 +10,10 @@ The stress grid (default): dt ∈ {0.5, 1, 2, 5, 10, 20} ms × stiffness factor 
 10, 100} (youngs_modulus = factor × 5e6 Pa; E_limb/E stays 100, so limbs scale too) × α ∈ {0,
 0.8, 1.5} × C_a ∈ {0, 1, 5} × period ∈ {0.3, 3.15} s × gaits {A1, all eight, A1+A5} × precision
 {f64 (newton_tol 1e-10 m), f32 (newton_tol 1e-7 m)}, `--cycles` (2) cycles from rest each: 3,240
-instances. One `simulate` batch per (precision, dt, period); other settings are the defaults
-(implicit Euler, Newton Jacobian, max_newton 25, up to 4 substep halvings).
+instances. One `run_batch` batch per (precision, dt, period), in chunks of --chunk-size (by
+default fewer, to give every one of --workers about four; the results are the same bit for bit);
+other settings are the defaults (implicit Euler, Newton Jacobian, max_newton 25, up to 4 substep
+halvings). The whole grid's robot-steps are refused or estimated before any instance is built.
 
 Per instance, node positions are recorded about every 0.06 s (a divisor of the run's step count
 near 0.06 s / dt steps; the final shape is always a record) and checked with
@@ -41,6 +43,10 @@ Writes
   colour = the outcome colours mixed by their fractions among the cell's instances (C_a ×
   period × gait), text = counts ok / retried / insane / failed;
 - `stability_notes.txt`: the printed summary.
+
+A grid without the paper's parameters, or of one precision, has no rows for
+`stability_paper.csv` or `stability_f32.csv`: that file is not written, and an earlier run's
+left in --out is removed with its sidecar.
 """
 
 from __future__ import annotations
@@ -52,13 +58,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from taichi_star import SolverConfig, StarParams
-from taichi_star.batch import run_batch
+from taichi_star import SOLVER_RANGES, STAR_RANGES, SolverConfig, StarParams, allowed_values
+from taichi_star.batch import DEFAULT_CHUNK_SIZE, run_batch, write_atomic
 from taichi_star import metrics
 from taichi_star.metrics import shape_checks
 from taichi_star.timegrid import whole_steps
 
-from . import cli
+from . import cli, provenance
 
 DESCRIPTION = ("Numerical stability stress grid: dt x stiffness x alpha x C_a x period x gait x "
                "precision; status, retries, strain and shape sanity per instance; stable-region "
@@ -139,9 +145,32 @@ def grid_params(gaits, stiffness, alphas, added_mass, period, base: StarParams):
     return params, factors
 
 
+def check_step_and_stiffness_values(dts_ms, stiffness):
+    """StudyArgumentError naming the flag, its range in the flag's own unit and the first value
+    out of it: --dts-ms in ms (SolverConfig's dt range said "in (0, 0.05], got 1.0" for 1000
+    ms), --stiffness as a factor on BASE_MODULUS (youngs_modulus's range said Pa)."""
+    longest_ms = 1e3 * SOLVER_RANGES["dt"][1]
+    # the values to 10 digits: 2000.0001 shown as "2000" would read as inside the range
+    for dt_ms in dts_ms:
+        if not 0 < dt_ms <= longest_ms:
+            raise cli.StudyArgumentError(f"--dts-ms: every value must be in (0, {longest_ms:g}] "
+                                         f"ms, got {dt_ms:.10g}")
+    # the factor's range: youngs_modulus's declared one over the modulus at factor 1
+    lowest, highest, lowest_included = STAR_RANGES["youngs_modulus"]
+    lowest, highest = lowest / BASE_MODULUS, highest / BASE_MODULUS
+    for factor in stiffness:
+        above_lowest = factor >= lowest if lowest_included else factor > lowest
+        if not (above_lowest and factor <= highest):
+            raise cli.StudyArgumentError(
+                f"--stiffness: every factor must be in {'[' if lowest_included else '('}"
+                f"{lowest:g}, {highest:g}] (youngs_modulus = factor × {BASE_MODULUS:g} Pa must "
+                f"be in {allowed_values('youngs_modulus')} Pa), got {factor:.10g}")
+
+
 def plan(args):
     """Validated batches: a list of dicts (precision, dt_s, period, duration_s, n_steps, params,
-    factors, solver). Raises StudyArgumentError before any compute."""
+    factors, solver). Raises StudyArgumentError before any compute, the whole grid's
+    robot-steps refused or estimated before any instance is built."""
     quick = args.quick
     dts = cli.parse_values(args.dts_ms, "--dts-ms")
     stiffness = cli.parse_values(args.stiffness, "--stiffness")
@@ -150,9 +179,7 @@ def plan(args):
     periods = cli.parse_values(args.periods, "--periods")
     gaits = cli.resolve_gaits(args.gaits)
     precisions = cli.parse_values(args.precisions, "--precisions", str)
-    for name, values in (("--dts-ms", dts), ("--stiffness", stiffness)):
-        if any(v <= 0 for v in values):
-            raise cli.StudyArgumentError(f"{name}: every value must be > 0, got {values}")
+    check_step_and_stiffness_values(dts, stiffness)
     for precision in precisions:
         if precision not in TOLERANCE:
             raise cli.StudyArgumentError(f"--precisions: {precision!r} is not one of "
@@ -160,24 +187,17 @@ def plan(args):
     # counted before any instance is built (a grid of three million was built for a minute)
     axes = {"--dts-ms": dts, "--stiffness": stiffness, "--alphas": alphas, "--added-mass": added,
             "--periods": periods, "--gaits": gaits, "--precisions": precisions}
-    cli.check_instances(math.prod(len(values) for values in axes.values()),
-                             " × ".join(f"{flag} {len(values)}" for flag, values in axes.items()))
-    base = cli.base_params(args)
-    # each value on its own, named by its flag (the grid's refusal named none)
-    cli.check_axis_values(
-        {"gait": gaits, "youngs_modulus": [f * BASE_MODULUS for f in stiffness],
-         "alpha": alphas, "added_mass_coeff": added, "period": periods}, base,
-        {"gait": "--gaits", "youngs_modulus": "--stiffness", "alpha": "--alphas",
-         "added_mass_coeff": "--added-mass", "period": "--periods"})
-    batches = []
+    grid_text = " × ".join(f"{flag} {len(values)}" for flag, values in axes.items())
+    cli.check_instances(math.prod(len(values) for values in axes.values()), grid_text)
+    runs = []
     for precision in precisions:          # one precision after the other: one Taichi re-init
         for period in periods:
-            params, factors = grid_params(gaits, stiffness, alphas, added, period, base)
             duration = QUICK_DURATION_S if quick else args.cycles * period
+            length = (f"--quick ({duration:g} s)" if quick
+                      else f"--cycles {args.cycles:g} ({duration:.3g} s)")
             for dt_ms in dts:
                 dt = dt_ms * 1e-3
-                cli.check_length(f"--cycles {args.cycles:g} ({duration:.3g} s)", duration, dt,
-                                 "dt (--dts-ms)")
+                cli.check_length(length, duration, dt, "dt (--dts-ms)")
                 try:
                     solver = SolverConfig(dt=dt, precision=precision,
                                           newton_tol=TOLERANCE[precision])
@@ -188,14 +208,33 @@ def plan(args):
                     raise cli.StudyArgumentError(
                         f"--dts-ms: dt {dt_ms} ms does not divide the duration {duration:g} s "
                         f"(period {period:g} s)")
-                batches.append(dict(precision=precision, dt_s=dt, period=period,
-                                    duration_s=duration, n_steps=n_steps, params=params,
-                                    factors=factors, solver=solver))
-    return batches
+                runs.append(dict(precision=precision, dt_s=dt, period=period,
+                                 duration_s=duration, n_steps=n_steps, solver=solver))
+    # every batch's steps checked above; the grid's robot-steps, all batches together, refused
+    # or estimated here (each batch stayed under the warning: --cycles 10000 of the default
+    # grid, 3.6e10 robot-steps, started without a word; an audit, 2026-12)
+    per_batch = len(gaits) * len(stiffness) * len(alphas) * len(added)
+    grid_length = (f"--quick ({QUICK_DURATION_S:g} s)" if quick
+                   else f"--cycles {args.cycles:g} of each period")
+    cli.check_robot_steps(f"the grid of {per_batch * len(runs):,} instances ({grid_text}) for "
+                          f"{grid_length}", per_batch * sum(run["n_steps"] for run in runs))
+    base = cli.base_params(args)
+    # each value on its own, named by its flag (the grid's refusal named none)
+    cli.check_axis_values(
+        {"gait": gaits, "youngs_modulus": [f * BASE_MODULUS for f in stiffness],
+         "alpha": alphas, "added_mass_coeff": added, "period": periods}, base,
+        {"gait": "--gaits", "youngs_modulus": "--stiffness", "alpha": "--alphas",
+         "added_mass_coeff": "--added-mass", "period": "--periods"})
+    grids = {period: grid_params(gaits, stiffness, alphas, added, period, base)
+             for period in periods}
+    return [dict(run, params=grids[run["period"]][0], factors=grids[run["period"]][1])
+            for run in runs]
 
 
-def run_grid(batches, arch="cpu", executor=None, chunk_size=None, progress=True) -> pd.DataFrame:
-    """Simulate every batch with shape records and return the per-instance table."""
+def run_grid(batches, arch="cpu", executor=None, chunk_size=DEFAULT_CHUNK_SIZE,
+             progress=True) -> pd.DataFrame:
+    """Simulate every batch with shape records, in chunks of `chunk_size` instances, and
+    return the per-instance table (bitwise the same for any chunking)."""
     total = sum(len(b["params"]) * b["n_steps"] for b in batches)
     bar = None
     if progress:
@@ -212,7 +251,7 @@ def run_grid(batches, arch="cpu", executor=None, chunk_size=None, progress=True)
         result = run_batch(batch["params"], batch["duration_s"], solver=batch["solver"],
                            arch=arch, record_interval_s=stride * batch["dt_s"],
                            record_shapes=True, executor=executor,
-                           chunk_size=chunk_size or len(batch["params"]),
+                           chunk_size=chunk_size,
                            progress=False)  # the grid's own bar counts the robot-steps
         wall = time.perf_counter() - started
         checks = shape_checks(result.shapes, result.topology)
@@ -453,6 +492,24 @@ def report(table, summary, paper, f32) -> str:
 
 # --------------------------------------------------------------------------- CLI
 
+def remove_earlier_table(out: cli.Output, name: str):
+    """Remove the table `name` and its sidecar from the output folder: this run has no rows for
+    it (the paper's parameters outside the grid, a single precision), and an earlier run's
+    table left beside this run's files would read as this run's (an audit, 2026-12). Removed
+    rather than written empty: a CSV of no columns is no table pandas reads; no file means no
+    rows, as in the notes, which leave the part out. The table first, so that a kill between
+    leaves at worst a sidecar of no table, never a table under another run's description.
+    StudyOutputError naming the file where it cannot be removed."""
+    table = out.folder / name
+    for path in (table, provenance.sidecar_path(table)):
+        try:
+            path.unlink(missing_ok=True)
+        except OSError as error:
+            raise cli.StudyOutputError(f"--out {out.folder}: cannot remove the earlier run's "
+                                       f"{path.name} ({error.strerror or error}); the files "
+                                       f"written before are intact") from None
+
+
 def numbers(values) -> str:
     """A flag's text for a tuple of numbers: "0.5,1,2"."""
     return ",".join(f"{v:g}" for v in values)
@@ -488,23 +545,29 @@ def main(argv=None):
                                               "params": cli.base_params(args)},
                      solver={precision: {"newton_tol": tolerance} for precision, tolerance
                              in TOLERANCE.items()})
-    with cli.executor(args, out) as executor:
-        table = run_grid(batches, arch=args.arch, executor=executor, chunk_size=args.chunk_size,
+    # the plan told the grid's hours (`plan`): its batches' own estimates would repeat them
+    with cli.executor(args, out) as executor, cli.batch_work_told():
+        # every batch has as many instances; cut to about four chunks per worker (--chunk-size's
+        # help): a batch was one chunk, one worker busy and the others idle (an audit, 2026-12)
+        chunk_size = cli.chunk_size(args, len(batches[0]["params"]), executor.n_workers)
+        table = run_grid(batches, arch=args.arch, executor=executor, chunk_size=chunk_size,
                          progress=not args.no_progress)
     summary = outcome_summary(table)
     paper = paper_summary(table)
     f32 = f32_summary(table)
     csv = out.write_csv(table, "stability.csv")
     out.write_csv(summary, "stability_summary.csv")
-    if len(paper):
-        out.write_csv(paper, "stability_paper.csv")
-    if len(f32):
-        out.write_csv(f32, "stability_f32.csv")
+    for companion, name in ((paper, "stability_paper.csv"), (f32, "stability_f32.csv")):
+        if len(companion):
+            out.write_csv(companion, name)
+        else:
+            remove_earlier_table(out, name)
     # drawn from the table as written, so that the CSV redraws it
     out.wrote(plot_maps(pd.read_csv(csv), out.path("stability.png")))
     text = report(table, summary, paper, f32)
     notes = out.path("stability_notes.txt")
-    notes.write_text(text + "\n")
+    write_atomic(notes, (text + "\n").encode(), failure=lambda reason: cli.StudyOutputError(
+        f"--out {out.folder}: {reason}; the files written before are intact"))
     out.wrote(notes)
     print(text)
     out.report()

@@ -56,6 +56,9 @@ Writes
   continuum limit (ladder "continuum");
 - `work_precision.png`: total error against run time (Pareto fronts, paper and accurate
   marked), time error against h and against error_tol, space error against n_arc.
+
+The robot-steps of every configuration and of the presets' timing together (adaptive ones at
+their fewest) are refused past the library's limit, or estimated when long, before any run.
 """
 
 from __future__ import annotations
@@ -68,7 +71,7 @@ import numpy as np
 import pandas as pd
 
 import taichi_star
-from taichi_star import SolverConfig, StarParams, metrics
+from taichi_star import SolverConfig, StarParams, fewest_steps, metrics
 from taichi_star.profiling import interleaved_rounds
 
 from . import cli, provenance
@@ -273,6 +276,24 @@ def references(speeds, grid: Grid, gaits):
 
 
 # --------------------------------------------------------------------------- runs
+
+def check_whole_run(configs, n_gaits: int, timing_batch: int, duration_s: float,
+                    length: str):
+    """Refuse or estimate (`cli.check_steps`) the robot-steps of the whole study before any
+    run: each configuration's batch of the gaits (a one-step compiling call, then duration_s)
+    and the presets' timing (`time_presets`: timing_batch instances, a one-step call and
+    TIMING_ROUNDS runs each). Adaptive steps counted at their fewest (`fewest_steps`). Each
+    call stayed under the warning: --gaits all --cycles 1000 started 5.6e10 robot-steps without
+    a word (an audit, 2026-12)."""
+    def steps(solver):
+        return fewest_steps(solver, duration_s, 0.0)[0]
+    presets = [preset_config(model).solver for model in MODEL_PRESETS]
+    robot_steps = (n_gaits * sum(1 + steps(config.solver) for config in configs)
+                   + timing_batch * sum(1 + TIMING_ROUNDS * steps(solver) for solver in presets))
+    cli.check_robot_steps(f"{len(configs)} configurations × {n_gaits} gait(s) and the presets' "
+                          f"timing at {timing_batch} instances × {TIMING_ROUNDS} rounds, {length}",
+                          robot_steps)
+
 
 def run_config(config: Config, gaits, duration_s, arch):
     """(summary, run time s) of one batch of the gaits: a one-step call compiles, then the
@@ -546,6 +567,7 @@ def main(argv=None):
               else f"--cycles {args.cycles:g} ({duration:.3g} s)")
     cli.check_length(length, duration, min(fixed_steps), "the grid's finest step")
     cli.check_one_step(length, duration, max(fixed_steps), "the grid's coarsest step")
+    check_whole_run(configs, len(gaits), grid.timing_batch, duration, length)
     out = cli.Output(args, argv or [], model={"models": MODEL_PRESETS, "gaits": gaits},
                      solver={"grid": grid, "configurations": [c.label() for c in configs]})
     machine = provenance.machine_columns(args.arch)
@@ -563,14 +585,16 @@ def main(argv=None):
     for config in configs:
         if bar is not None:
             bar.set_postfix_str(f"{config.model} {config.label()}")
-        summary, run_time = run_config(config, gaits, duration, args.arch)
+        with cli.batch_work_told():  # told by `check_whole_run`: not again for each call
+            summary, run_time = run_config(config, gaits, duration, args.arch)
         speeds[config] = summary["signed_speed_mm_s"].to_numpy(dtype=float)
         parts.append(config_rows(config, grid, summary, run_time, duration))
         if bar is not None:
             bar.update()
     if bar is not None:
         bar.set_postfix_str(f"presets at B = {grid.timing_batch}")
-    run_times, load_average = time_presets(gaits, duration, grid.timing_batch, args.arch)
+    with cli.batch_work_told():
+        run_times, load_average = time_presets(gaits, duration, grid.timing_batch, args.arch)
     if bar is not None:
         bar.update()
         bar.close()

@@ -1,12 +1,14 @@
 """The Jacobian modes study: its --quick run against direct simulations, the error bound it
-states, and its argument checks."""
+states, and its argument checks (the whole run's work among them)."""
+
+import warnings
 
 import numpy as np
 import pandas as pd
 import pytest
 
 import taichi_star
-from taichi_star import SolverConfig, StarParams
+from taichi_star import SolverConfig, StarParams, timegrid
 from taichi_star.experiment import PAPER_GAITS
 
 from studies import cli, jacobians
@@ -69,3 +71,59 @@ def test_bad_arguments_are_one_line_errors_before_any_compute(no_compute, argv, 
 def test_quick_never_writes_into_the_committed_results():
     with pytest.raises(cli.StudyArgumentError, match="--quick"):
         jacobians.main(["--quick", "--out", str(cli.COMMITTED_RESULTS)])
+
+
+class PastTheChecks(Exception):
+    """The study got past its checks to the stubbed building of the batch."""
+
+
+def past_the_checks(*args, **kwargs):
+    raise PastTheChecks
+
+
+def test_the_whole_runs_hours_are_told_before_the_batch_is_built(no_compute, monkeypatch,
+                                                                 tmp_path):
+    """--batch 65536 --duration 100 --rounds 1 simulates 3.9e10 robot-steps in six
+    configurations (the five default modes and the reference), one call of 6.6e9 at a time,
+    each under the warning: it started without a word (an audit, 2026-12). Each configuration
+    runs --duration at 1 ms once per round after a one-step warm-up."""
+    monkeypatch.setattr(cli, "paper_gaits_batch", past_the_checks)
+    robot_steps = 65536 * 6 * (100_000 + 1)
+    with warnings.catch_warnings(record=True) as caught, pytest.raises(PastTheChecks):
+        warnings.simplefilter("always")
+        studies_main(["jacobians", "--batch", "65536", "--duration", "100", "--rounds", "1",
+                      "--out", str(tmp_path / "out")])
+    assert [str(w.message) for w in caught if w.category is taichi_star.LongWorkWarning] == [
+        f"--batch 65536 × 6 configurations × (--rounds 1 of --duration 100 s + a one-step "
+        f"warm-up) is {robot_steps:.3g} robot-steps: about {robot_steps / 5e4 / 3600:.3g} h at "
+        f"50000 robot-steps/s (on a 2-core CPU; a GPU or more cores run faster)"]
+
+
+QUICK_RUN = ("--batch 5 × 3 configurations × (--rounds 2 of --duration 0.05 s + a one-step "
+             "warm-up)")
+
+
+@pytest.mark.parametrize("limit, value, refused, told", [
+    ("REFUSE_ROBOT_STEPS", 1514, True, False), ("REFUSE_ROBOT_STEPS", 1515, False, False),
+    ("WARN_ROBOT_STEPS", 1514, False, True), ("WARN_ROBOT_STEPS", 1515, False, False)])
+def test_the_rounds_and_configurations_robot_steps_are_added_up(no_compute, monkeypatch,
+                                                                 tmp_path, capsys, limit, value,
+                                                                 refused, told):
+    """--quick's 5 instances in 3 configurations (newton and lagged at 1e-10 m, the
+    reference), 2 rounds of 50 steps and a warm-up step each: 5 × 3 × (2 × 50 + 1) = 1,515
+    robot-steps, refused or told past a limit of 1,514, not at 1,515 (the rule is "over")."""
+    monkeypatch.setattr(timegrid, limit, value)
+    monkeypatch.setattr(cli, "paper_gaits_batch", past_the_checks)
+    argv = ["jacobians", "--quick", "--rounds", "2", "--out", str(tmp_path / "out")]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        if refused:
+            assert studies_main(argv) == 2
+        else:
+            with pytest.raises(PastTheChecks):
+                studies_main(argv)
+    error = capsys.readouterr().err
+    assert (f"error: {QUICK_RUN} is 1.52e+03 robot-steps: about " in error) == refused, error
+    assert [str(w.message) for w in caught if w.category is taichi_star.LongWorkWarning] == (
+        [f"{QUICK_RUN} is 1.52e+03 robot-steps: about {1515 / 5e4 / 3600:.3g} h at 50000 "
+         f"robot-steps/s (on a 2-core CPU; a GPU or more cores run faster)"] if told else [])

@@ -3,6 +3,8 @@ mode (values against a direct simulation, outcome columns, plot). The shape chec
 tested in tests/unit/test_metrics.py."""
 
 import math
+import signal
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -11,9 +13,10 @@ import pytest
 
 import taichi_star
 from taichi_star import SolverConfig, StarParams
+from taichi_star import timegrid
 from taichi_star.metrics import shape_checks
 
-from studies import stability
+from studies import cli, stability
 from studies.__main__ import main as studies_main
 
 
@@ -223,3 +226,187 @@ def test_the_committed_notes_are_the_reports_of_the_committed_tables():
     tables = [pd.read_csv(results / f"stability{suffix}.csv")
               for suffix in ("", "_summary", "_paper", "_f32")]
     assert (results / "stability_notes.txt").read_text() == stability.report(*tables) + "\n"
+
+
+# ----------------------------------------------------------------------------- before any compute
+
+class PastTheChecks(Exception):
+    """The study got past its checks to the stubbed next step: nothing is built or run."""
+
+
+def past_the_checks(*args, **kwargs):
+    raise PastTheChecks
+
+
+def no_instances_built(*args, **kwargs):
+    raise AssertionError("the grid's instances were built before its work was checked")
+
+
+def test_the_whole_grids_robot_steps_are_refused_before_its_instances_are_built(
+        no_compute, monkeypatch, tmp_path, capsys):
+    """Each batch (precision × period × dt) was checked alone, so a grid past the library's
+    limit started (an audit, 2026-12): 100 α × the default grid for 100,000 cycles, every
+    batch under the limit, is 1.2e13 robot-steps in all, counted here batch by batch."""
+    monkeypatch.setattr(stability, "grid_params", no_instances_built)
+    out = tmp_path / "out"
+    argv = ["--cycles", "100000", "--alphas", "0:1.5:100", "--no-progress", "--out", str(out)]
+    assert studies_main(["stability", *argv]) == 2
+    per_batch = 3 * 5 * 100 * 3                    # gaits × stiffness × α × C_a
+    steps = sum(round(100000 * period / (dt_ms * 1e-3)) for period in (0.3, 3.15)
+                for dt_ms in (0.5, 1, 2, 5, 10, 20))
+    robot_steps = 2 * per_batch * steps            # f64 and f32
+    error = capsys.readouterr().err
+    assert (f"error: the grid of 108,000 instances (--dts-ms 6 × --stiffness 5 × --alphas 100 × "
+            f"--added-mass 3 × --periods 2 × --gaits 3 × --precisions 2) for --cycles 100000 of "
+            f"each period is {robot_steps:.3g} robot-steps: about ") in error
+    assert robot_steps == pytest.approx(1.2e13, rel=0.01) and len(error.splitlines()) == 1
+    assert not out.exists()
+
+
+QUICK_GRID = ("the grid of 4 instances (--dts-ms 2 × --stiffness 2 × --alphas 1 × --added-mass "
+              "1 × --periods 1 × --gaits 1 × --precisions 1) for --quick (0.05 s)")
+
+
+@pytest.mark.parametrize("limit, value, refused, told", [
+    ("REFUSE_ROBOT_STEPS", 109, True, False), ("REFUSE_ROBOT_STEPS", 110, False, False),
+    ("WARN_ROBOT_STEPS", 109, False, True), ("WARN_ROBOT_STEPS", 110, False, False)])
+def test_the_grids_robot_steps_are_summed_over_its_batches(no_compute, monkeypatch, tmp_path,
+                                                           capsys, limit, value, refused, told):
+    """--quick's two stiffnesses at dt 1 and 10 ms for 0.05 s: 2 × 50 + 2 × 5 = 110 robot-steps
+    in two batches of at most 100, refused or told past a limit of 109, not at 110 (the rule is
+    "over"); told before any instance is built (`cli.base_params` comes first)."""
+    monkeypatch.setattr(timegrid, limit, value)
+    monkeypatch.setattr(cli, "base_params", past_the_checks)
+    argv = ["stability", "--quick", "--no-progress", "--dts-ms", "1,10", "--out",
+            str(tmp_path / "out")]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        if refused:
+            assert studies_main(argv) == 2
+        else:
+            with pytest.raises(PastTheChecks):
+                studies_main(argv)
+    error = capsys.readouterr().err
+    assert (f"error: {QUICK_GRID} is 110 robot-steps: about " in error) == refused
+    assert [str(w.message) for w in caught if w.category is taichi_star.LongWorkWarning] == (
+        [f"{QUICK_GRID} is 110 robot-steps: about {110 / 5e4 / 3600:.3g} h at 50000 "
+         f"robot-steps/s (on a 2-core CPU; a GPU or more cores run faster)"] if told else [])
+
+
+DTS_RANGE = "--dts-ms: every value must be in (0, 50] ms, got "
+STIFFNESS_RANGE = ("--stiffness: every factor must be in [0.0002, 2000] (youngs_modulus = "
+                   "factor × 5e+06 Pa must be in [1000, 1e+10] Pa), got ")
+
+
+@pytest.mark.parametrize("argv, message", [
+    # a step in ms was refused in s ("dt must be a real number in (0, 0.05], got 1.0"), a
+    # factor by youngs_modulus's range in Pa (an audit, 2026-12)
+    (["--dts-ms", "1000"], DTS_RANGE + "1000"),
+    (["--dts-ms", "50.0001"], DTS_RANGE + "50.0001"),
+    (["--dts-ms", "1,0"], DTS_RANGE + "0"),
+    (["--stiffness", "1e12"], STIFFNESS_RANGE + "1e+12"),
+    (["--stiffness", "2000.0001"], STIFFNESS_RANGE + "2000.0001"),
+    (["--stiffness", "0.00019999"], STIFFNESS_RANGE + "0.00019999"),
+])
+def test_steps_and_stiffness_factors_are_refused_in_their_own_units(no_compute, tmp_path, capsys,
+                                                                    argv, message):
+    out = tmp_path / "out"
+    assert studies_main(["stability", "--quick", "--no-progress", "--out", str(out), *argv]) == 2
+    error = capsys.readouterr().err
+    assert error.strip().endswith(f"error: {message}") and len(error.splitlines()) == 1, error
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("argv", [["--dts-ms", "50"], ["--dts-ms", "0.001"],
+                                  ["--stiffness", "2000"], ["--stiffness", "0.0002"]])
+def test_steps_and_stiffness_factors_at_the_ends_of_their_ranges_are_accepted(
+        no_compute, monkeypatch, tmp_path, argv):
+    """The longest step (one of --quick's 0.05 s), a step far below a millisecond and the
+    factors at youngs_modulus's ends (1000 and 1e10 Pa) get past every check of the values,
+    youngs_modulus's own among them, to the building of the grid (stubbed)."""
+    monkeypatch.setattr(stability, "grid_params", past_the_checks)
+    with pytest.raises(PastTheChecks):
+        studies_main(["stability", "--quick", "--no-progress", "--out", str(tmp_path), *argv])
+
+
+@pytest.mark.parametrize("flags, chunk_size", [
+    ([], 2048), (["--workers", "1"], 2048), (["--workers", "2"], 17), (["--workers", "3"], 12),
+    (["--workers", "2", "--chunk-size", "5"], 5)])
+def test_a_batch_is_cut_to_give_every_worker_about_four_chunks(monkeypatch, tmp_path, flags,
+                                                               chunk_size):
+    """A batch of 135 instances (3 gaits × 5 stiffnesses × 3 α × 3 C_a) was one chunk, so
+    --workers 2 left a worker idle (an audit, 2026-12): ceil(135 / (4 × workers)) now, the
+    default chunk size (2048) for one, --chunk-size as given."""
+    chosen = []
+
+    def first_batch(params, duration_s, **options):
+        chosen.append((len(params), options["chunk_size"]))
+        raise PastTheChecks
+    monkeypatch.setattr(stability, "run_batch", first_batch)
+    with pytest.raises(PastTheChecks):
+        stability.main(["--dts-ms", "1", "--periods", "3.15", "--precisions", "f64",
+                        "--no-progress", "--out", str(tmp_path), *flags])
+    assert chosen == [(135, chunk_size)]
+
+
+def synthetic_grid(stiffness_factor: float, precisions) -> pd.DataFrame:
+    """A per-instance table as `run_grid` returns it (the columns the summaries, the notes and
+    the tables read): gait A1 at the paper's α, C_a and period, dt 1 and 2 ms, all ok."""
+    rows = [dict(instance=0, gait="A1", alpha=0.8, added_mass_coeff=1.0, period_s=3.15,
+                 stiffness_factor=stiffness_factor, dt_ms=dt, precision=precision,
+                 outcome="ok", substep_retries=0, speed_mm_s=1.0, status="ok", sane=True,
+                 max_strain=0.01, cycles=2.0)
+            for precision in precisions for dt in (1.0, 2.0)]
+    return pd.DataFrame(rows).assign(instance=lambda table: range(len(table)))
+
+
+def run_on(monkeypatch, table, out) -> int:
+    """The study's command line, its grid's run (and its plot) replaced by `table`."""
+    monkeypatch.setattr(stability, "run_grid", lambda batches, **options: table)
+    monkeypatch.setattr(stability, "plot_maps", lambda table, path: Path(path))
+    return studies_main(["stability", "--quick", "--no-progress", "--out", str(out)])
+
+
+COMPANIONS = ("stability_paper.csv", "stability_paper.csv.json", "stability_f32.csv",
+              "stability_f32.csv.json")
+
+
+def test_a_later_run_removes_the_companion_tables_it_has_no_rows_for(monkeypatch, tmp_path):
+    """A run at the paper's parameters in both precisions writes the paper and f32 tables with
+    their sidecars; a later run into the same folder at another stiffness in f64 alone has no
+    rows for either, and removes them (they were left beside its own tables, read as its
+    results: an audit, 2026-12)."""
+    assert run_on(monkeypatch, synthetic_grid(1.0, ["f64", "f32"]), tmp_path) == 0
+    assert all((tmp_path / name).is_file() for name in COMPANIONS)
+    assert run_on(monkeypatch, synthetic_grid(10.0, ["f64"]), tmp_path) == 0
+    assert [name for name in COMPANIONS if (tmp_path / name).exists()] == []
+    assert set(pd.read_csv(tmp_path / "stability.csv")["stiffness_factor"]) == {10.0}
+    assert "paper parameters" not in (tmp_path / "stability_notes.txt").read_text()
+
+
+def test_the_notes_are_written_whole_or_not_at_all(monkeypatch, tmp_path, capsys):
+    """Notes that cannot be written whole (past a file size limit here, as on a full disk)
+    leave the earlier run's as they were, and the study says so on one line; `write_text`
+    truncated them first, then failed with a traceback (an audit, 2026-12)."""
+    resource = pytest.importorskip("resource")
+    notes = tmp_path / "stability_notes.txt"
+    notes.write_text("the earlier run's notes\n")
+    limit = 4096
+    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+
+    def long_notes(*tables):  # the tables are written: from here on files stop at `limit`
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, hard))
+        return "x" * (2 * limit)
+    monkeypatch.setattr(stability, "report", long_notes)
+    handler = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past it fails instead
+    try:
+        code = run_on(monkeypatch, synthetic_grid(1.0, ["f64"]), tmp_path)
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+        signal.signal(signal.SIGXFSZ, handler)
+    assert code == 2
+    assert notes.read_text() == "the earlier run's notes\n"
+    error = capsys.readouterr().err
+    assert error.strip().endswith(f"error: --out {tmp_path}: cannot write stability_notes.txt "
+                                  f"(File too large); the files written before are intact")
+    assert [path.name for path in tmp_path.glob(".stability_notes*")] == []

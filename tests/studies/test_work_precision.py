@@ -1,16 +1,21 @@
 """The work-precision study in --quick mode: its speeds against a direct `simulate`, its
 Richardson limits and errors recomputed from the speeds in its own CSV, the summary against the
-rows; and the extrapolation helpers on exact power laws. No timing is asserted."""
+rows; and the extrapolation helpers on exact power laws. No timing is asserted. The whole
+run's robot-steps checked before any run."""
 
 import math
+import warnings
 
 import numpy as np
 import pandas as pd
 import pytest
 
 import taichi_star
+from taichi_star import timegrid
 
+from studies import cli
 from studies import work_precision as wp
+from studies.__main__ import main as studies_main
 
 FLOOR_MM_S = 0.5
 
@@ -179,3 +184,68 @@ def test_a_gaits_order_is_read_from_its_signed_changes():
     orders = table.set_index("gait")["gait_order"]
     assert np.isnan(orders["A1+A4"]) and np.isnan(orders["A1"])
     assert orders["A1+A2"] == pytest.approx(2.0, rel=1e-12)
+
+
+# ----------------------------------------------------------------------------- the whole run's work
+
+class PastTheChecks(Exception):
+    """The study got past its checks to its output folder (stubbed): nothing runs."""
+
+
+def past_the_checks(*args, **kwargs):
+    raise PastTheChecks
+
+
+def long_work_told(argv, monkeypatch):
+    """The LongWorkWarnings of the study's command line up to its output folder (stubbed)."""
+    monkeypatch.setattr(cli, "Output", past_the_checks)
+    with warnings.catch_warnings(record=True) as caught, pytest.raises(PastTheChecks):
+        warnings.simplefilter("always")
+        studies_main(["work_precision", *argv])
+    return [str(w.message) for w in caught if w.category is taichi_star.LongWorkWarning]
+
+
+def test_the_whole_studys_hours_are_told_before_any_run(no_compute, monkeypatch):
+    """--gaits all --cycles 1000: 55 configurations of 255 gaits and the presets' timing, each
+    call under the warning, 5.6e10 robot-steps in all, started without a word (an audit,
+    2026-12)."""
+    (told,) = long_work_told(["--gaits", "all", "--cycles", "1000"], monkeypatch)
+    start = ("55 configurations × 255 gait(s) and the presets' timing at 64 instances × 2 "
+             "rounds, --cycles 1000 (3.15e+03 s) is ")
+    assert told.startswith(start) and " robot-steps: about " in told
+    assert float(told[len(start):].split()[0]) == pytest.approx(5.63e10, rel=1e-3)
+
+
+QUICK_RUN = ("14 configurations × 2 gait(s) and the presets' timing at 8 instances × 2 rounds, "
+             "--quick (0.15 s)")
+QUICK_ROBOT_STEPS = 2 * (978 + 831 + 14) + 8 * (301 + 7)
+"""--quick's work, counted by hand (0.15 s; adaptive steps at their fewest, dt_max 0.05 s: 3).
+Undamped, 7 configurations: the preset's Euler at 1 ms (150 steps), BDF2 at 2, 1, 0.5 ms (75,
+150, 300), adaptive BDF2 (3), the space ladder's n_arc 9 and 36 at 1 ms (150 each; 18 is the
+time ladder's): 978. Damped, 7: the preset's adaptive BDF2 (3), BDF2 at 2, 1, 0.5 ms, adaptive
+BDF2 with Newton (3), n_arc 12 and 24 at 1 ms: 831. Each for the 2 gaits after a one-step call
+(14). The presets' timing, 8 instances each: a one-step call and 2 runs, 1 + 2 × 150 (paper)
+and 1 + 2 × 3 (accurate)."""
+
+
+@pytest.mark.parametrize("limit, value, refused, told", [
+    ("REFUSE_ROBOT_STEPS", QUICK_ROBOT_STEPS - 1, True, False),
+    ("REFUSE_ROBOT_STEPS", QUICK_ROBOT_STEPS, False, False),
+    ("WARN_ROBOT_STEPS", QUICK_ROBOT_STEPS - 1, False, True),
+    ("WARN_ROBOT_STEPS", QUICK_ROBOT_STEPS, False, False)])
+def test_every_configurations_and_the_timings_robot_steps_are_added_up(
+        no_compute, monkeypatch, tmp_path, capsys, limit, value, refused, told):
+    """Refused or told past a limit one under --quick's robot-steps, not at them (the rule is
+    "over"), before the output folder is made."""
+    monkeypatch.setattr(timegrid, limit, value)
+    argv = ["--quick", "--no-progress", "--out", str(tmp_path / "out")]
+    message = f"{QUICK_RUN} is {QUICK_ROBOT_STEPS:.3g} robot-steps: about "
+    if refused:
+        assert studies_main(["work_precision", *argv]) == 2
+        error = capsys.readouterr().err
+        assert f"error: {message}" in error and len(error.splitlines()) == 1, error
+        assert not (tmp_path / "out").exists()
+        return
+    assert long_work_told(argv, monkeypatch) == (
+        [f"{message}{QUICK_ROBOT_STEPS / 5e4 / 3600:.3g} h at 50000 robot-steps/s (on a 2-core "
+         f"CPU; a GPU or more cores run faster)"] if told else [])
