@@ -35,12 +35,14 @@ def command(name: str, into: Path):
 def main(argv=None):
     parser = OneLineParser(prog="python -m studies reproduce", description=DESCRIPTION)
     parser.add_argument("--only", default=None,
-                        help=f"comma list of {', '.join(REPRODUCED_RESULTS)}, each once (default all)")
+                        help=f"comma list of {', '.join(REPRODUCED_RESULTS)}, each once (default "
+                             f"all)")
     parser.add_argument("--into", default=str(COMMITTED_RESULTS),
                         help="output folder (default the repository's results/)")
     parser.add_argument("--dry-run", action="store_true", help="print the commands only")
     args = parser.parse_args(argv)
-    names = list(REPRODUCED_RESULTS) if args.only is None else parse_values(args.only, "--only", str)
+    names = (list(REPRODUCED_RESULTS) if args.only is None
+             else parse_values(args.only, "--only", str))
     unknown = [n for n in names if n not in REPRODUCED_RESULTS]
     if unknown:
         raise StudyArgumentError(f"--only: unknown result {unknown[0]!r}; choose from "
