@@ -116,16 +116,17 @@ def main(argv=None):
                           f"({duration:.3g} s)", duration, solvers[preset, jacobian])
             steps, _ = fewest_steps(solvers[preset, jacobian], duration, 0.0)
             robot_steps += args.num_envs * steps
+    # each setting's steps checked above; all settings' robots together refused or estimated
+    # here (--num-envs 65536 --steps 50000, 1.03e13 robot-steps, started without a word: an
+    # audit, 2026-12), before the memory (whose refusal depends on what the machine has free)
+    cli.check_robot_steps(f"--num-envs {args.num_envs} × --steps {args.steps} (+1 compiling) × "
+                          f"{len(solvers)} preset and Jacobian setting(s)", robot_steps)
+    for preset in presets:
         try:  # a million robots' engine: 116 GiB, failed after two minutes (an audit)
             check_batch_memory([StarParams.preset(preset)] * args.num_envs,
                                solvers[preset, jacobians[0]].precision, args.arch)
         except ValueError as error:
             raise cli.StudyArgumentError(f"--num-envs: {error}") from None
-    # each setting's steps checked above; all settings' robots together refused or estimated
-    # here (--num-envs 65536 --steps 50000, 1.03e13 robot-steps, started without a word: an
-    # audit, 2026-12)
-    cli.check_robot_steps(f"--num-envs {args.num_envs} × --steps {args.steps} (+1 compiling) × "
-                          f"{len(solvers)} preset and Jacobian setting(s)", robot_steps)
     out = cli.Output(args, argv or [], model={"presets": presets},
                      solver={f"{preset}, {jacobian}": solver
                              for (preset, jacobian), solver in solvers.items()},
