@@ -239,17 +239,20 @@ def test_chord_jacobian_reaches_the_same_solution():
 
 def test_factorisations_are_every_iteration_with_newton_and_the_first_with_the_chord():
     """Newton's Jacobian assembles and factors the matrix at every iteration; the chord keeps
-    the first iteration's factorisation at the second (`newton_update`: it always keeps after
-    one update), so solves of at most two iterations factor exactly once. The window is in the
-    heating pulse, where every step takes two iterations (checked), and the coast, one."""
+    the first iteration's factorisation while the updates contract at least 4× (`newton_update`:
+    it always keeps after one update), so these solves factor exactly once. The window is in
+    the heating pulse, where every step takes two or three iterations (checked: 2.54 and 2.66
+    on average, 3 at most), and the coast, one."""
     params = [ts.StarParams(gait="A1+A2"), ts.StarParams(gait="A1+A3+A5", alpha=1.2),
               ts.StarParams(gait="none")]
     summaries = {mode: ts.simulate(params, 0.05, ts.SolverConfig(jacobian=mode)).summary
                  for mode in ("newton", "chord")}
     newton, chord = summaries["newton"], summaries["chord"]
-    assert newton["newton_iterations_mean"].tolist() == [2.0, 2.0, 1.0]
+    assert (newton["newton_iterations_mean"].iloc[:2] >= 2.0).all()
+    assert newton["newton_iterations_max"].tolist() == [3, 3, 1]
+    assert newton["newton_iterations_mean"].iloc[2] == 1.0
     assert newton["factorisations_mean"].tolist() == newton["newton_iterations_mean"].tolist()
-    assert chord["newton_iterations_max"].max() == 2
+    assert chord["newton_iterations_max"].max() == 3
     assert chord["factorisations_mean"].tolist() == [1.0, 1.0, 1.0]
 
 

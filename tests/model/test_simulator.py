@@ -201,13 +201,14 @@ def test_a_firing_on_a_failed_step_never_happened_in_the_state():
     """A firing due at the end of a step that fails is recorded by the schedule but never
     drove the robot: state() reads the time since the firing before, as the bending term does
     (since_A1_s was time − the failed firing's time, < 0, until a fuzz audit, 2026-12). Fixed
-    20-ms steps of 5 Newton iterations, no substeps: A1 fired at 0.02 s runs; fired again at
+    20-ms steps of 6 Newton iterations (5 until Newton stopped only on an update within
+    newton_tol, 2026-12), no substeps: A1 fired at 0.02 s runs; fired again at
     0.2 s (τ = 0.18 s, the profile's trough, back to K̄(0)) the step fails, and the frozen state
     at 0.18 s is 0.16 s after the first firing. A robot whose first firing fails (one
     iteration) has fired nothing: NaN, on fixed steps and adaptive ones alike."""
     robot = [ts.StarParams(n_arc=6, n_limb=2)]
     a1 = [[True] + [False] * 7]
-    simulator = ts.Simulator(robot, ts.SolverConfig(dt=0.02, max_newton=5,
+    simulator = ts.Simulator(robot, ts.SolverConfig(dt=0.02, max_newton=6,
                                                     max_substep_halvings=0))
     simulator.fire(a1, at_s=0.02)
     simulator.advance(0.18)
@@ -698,13 +699,14 @@ def test_advance_names_ok_robots_whose_newton_solves_were_capped_once_until_rese
 
 
 def test_a_failed_robot_shows_its_failure_time_ignores_commands_and_has_no_derivative():
-    """A robot whose solve fails beside one that goes on (5-ms Newton capped at 5 iterations,
-    one halving, 50-ms steps): state() had no failure time (t_s is the last good state's),
+    """A robot whose solve fails beside one that goes on (50-ms steps, Newton capped at 7
+    iterations, no substeps: A1 fails at 0.15 s; 5 iterations and one halving did it until
+    Newton stopped only on an update within newton_tol, 2026-12): state() had no failure time (t_s is the last good state's),
     sensitivity() gave the frozen state's finite derivative where simulate gives NaN, and a
     fire() it is documented to ignore showed in since_A3_s (an audit, 2026-12). Each now as
     simulate has it."""
     params = ts.StarParams.preset("paper")
-    solver = ts.SolverConfig(dt=0.05, max_newton=5, max_substep_halvings=1)
+    solver = ts.SolverConfig(dt=0.05, max_newton=7, max_substep_halvings=0)
     reference = ts.simulate([params.replace(gait="A1"), params.replace(gait="A1+A2")], 1.0,
                             solver, sensitivities=["alpha"], progress=False)
     assert reference.summary["status"].tolist()[1] == "ok"
@@ -741,7 +743,7 @@ def test_a_failed_robots_records_are_at_the_record_times_with_nan_as_in_simulate
     failure time stay, also in a later advance (its clock stopped at the failure) and until a
     reset starts its clock again. The same robots and solver as the test above."""
     params = ts.StarParams.preset("paper")
-    solver = ts.SolverConfig(dt=0.05, max_newton=5, max_substep_halvings=1)
+    solver = ts.SolverConfig(dt=0.05, max_newton=7, max_substep_halvings=0)
     reference = ts.simulate([params.replace(gait="A1"), params.replace(gait="A1+A2")], 1.0,
                             solver, record_interval_s=0.2, progress=False)
     sim = ts.Simulator([params, params], solver)
@@ -774,7 +776,7 @@ def test_a_failed_robots_clock_goes_through_a_save_and_a_load(tmp_path):
     import json as json_module
 
     params = ts.StarParams.preset("paper")
-    solver = ts.SolverConfig(dt=0.05, max_newton=5, max_substep_halvings=1)
+    solver = ts.SolverConfig(dt=0.05, max_newton=7, max_substep_halvings=0)
 
     def started():
         sim = ts.Simulator([params, params], solver)
@@ -820,7 +822,7 @@ def test_an_interrupted_advance_counts_its_steps_and_knows_who_failed(monkeypatc
     from taichi_star import simulator as simulator_module
 
     params = ts.StarParams.preset("paper")
-    solver = ts.SolverConfig(dt=0.05, max_newton=5, max_substep_halvings=1)
+    solver = ts.SolverConfig(dt=0.05, max_newton=7, max_substep_halvings=0)
     sim = ts.Simulator([params, params], solver)
     sim.fire(["A1", "A1+A2"])
 

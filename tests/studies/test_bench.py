@@ -54,8 +54,9 @@ def test_bench_quick(tmp_path, monkeypatch):
         [StarParams(gait=PAPER_GAITS[i % 5]) for i in range(batch_size)],
         int(plain["steps"].iloc[0]) * bench.DT)
     assert plain["jacobian"].iloc[0] == taichi_star.SolverConfig().jacobian
+    # the CSV keeps 10 significant digits (5e-10 relative): 2.366666667 of 71/30 updates a step
     assert plain["newton_iterations_mean"].iloc[0] == pytest.approx(
-        default.summary["newton_iterations_mean"].mean(), rel=1e-12)
+        default.summary["newton_iterations_mean"].mean(), rel=1e-9)
     assert list(batch["batch_size"]) == [int(b) for b in bench.QUICK_BATCH_SIZES.split(",")]
     assert list(skip["scenario"]) == bench.QUICK_SCENARIOS.split(",")
     assert (table["arch"] == "cpu").all() and (table["precision"] == "f64").all()
