@@ -701,10 +701,10 @@ def test_advance_names_ok_robots_whose_newton_solves_were_capped_once_until_rese
 def test_a_failed_robot_shows_its_failure_time_ignores_commands_and_has_no_derivative():
     """A robot whose solve fails beside one that goes on (50-ms steps, Newton capped at 7
     iterations, no substeps: A1 fails at 0.15 s; 5 iterations and one halving did it until
-    Newton stopped only on an update within newton_tol, 2026-12): state() had no failure time (t_s is the last good state's),
-    sensitivity() gave the frozen state's finite derivative where simulate gives NaN, and a
-    fire() it is documented to ignore showed in since_A3_s (an audit, 2026-12). Each now as
-    simulate has it."""
+    Newton stopped only on an update within newton_tol, 2026-12): state() had no failure time
+    (t_s is the last good state's), sensitivity() gave the frozen state's finite derivative
+    where simulate gives NaN, and a fire() it is documented to ignore showed in since_A3_s (an
+    audit, 2026-12). Each now as simulate has it."""
     params = ts.StarParams.preset("paper")
     solver = ts.SolverConfig(dt=0.05, max_newton=7, max_substep_halvings=0)
     reference = ts.simulate([params.replace(gait="A1"), params.replace(gait="A1+A2")], 1.0,
