@@ -55,6 +55,7 @@ from typing import Dict, List, Optional
 
 import numpy as np
 import taichi as ti
+from taichi.lang import impl
 # Taichi imports its matrix functions at the first kernel compile, and their decorators inspect
 # frames inside a bare `except:`, which swallowed a Ctrl-C landing there (0.9 s into `python -m
 # studies fig4c`, which then ran whole: an audit, 2026-12): imported here, while the package's
@@ -457,6 +458,9 @@ class Runtime:
         self.forked_after_start = False
         """Whether this process is a fork of one in which Taichi had started (`_after_fork`):
         then it cannot run Taichi (`check_not_forked`)."""
+        self.taichi_program = None
+        """Taichi's runtime object as `ensure` last started it: a `ti.init` or `ti.reset` made
+        outside this package replaces it, and with it every engine built (`program_replaced`)."""
 
     @classmethod
     def _after_fork(cls):
@@ -465,6 +469,24 @@ class Runtime:
         a multiprocessing Pool after one `simulate`, gymnasium's AsyncVectorEnv)."""
         if cls._current is not None and cls._current.started:
             cls._current.forked_after_start = True
+
+    def program_replaced(self) -> bool:
+        """Whether Taichi was started again outside this package (a user's `ti.init` or
+        `ti.reset`) since `ensure` started it: the engines built before are gone with their
+        program, and running one aborted the process (an audit, 2026-12)."""
+        return self.started and impl.get_runtime() is not self.taichi_program
+
+    def check_engine_usable(self):
+        """RuntimeError before an engine built earlier runs (every use of a Simulator's engine):
+        where Taichi was started again outside this package since (`program_replaced`: the
+        engine is gone), or in a forked process (`check_not_forked`)."""
+        if self.program_replaced():
+            raise RuntimeError(
+                "Taichi was started again outside taichi_star (ti.init or ti.reset) after this "
+                "engine was built, which destroyed it with its program: build the Simulator "
+                "(or environment) again, and keep your own Taichi code in another process or "
+                "after taichi_star's")
+        self.check_not_forked()
 
     def check_not_forked(self):
         """RuntimeError in a process forked after Taichi had started in its parent (`ensure`,
@@ -497,6 +519,12 @@ class Runtime:
         """Initialise Taichi for arch and precision unless it already is (ValueError for an
         arch this machine does not have)."""
         check_arch(arch)
+        if self.program_replaced():
+            # the engines went with the program a user's ti.init replaced: start Taichi again
+            # for this run (a living Simulator's engine is gone: check_no_simulator_lives)
+            self.arch = None
+            self.restart_reason = ("Taichi was started again outside taichi_star (ti.init or "
+                                   "ti.reset), which destroyed their engines")
         self.check_not_forked()
         if self.arch == arch and self.precision == precision:
             return
@@ -514,6 +542,13 @@ class Runtime:
         # 2026-12); now that call starts Taichi again
         self.arch = self.precision = None
         self.engines.clear()
+        if not self.started and impl.get_runtime().prog is not None:
+            # a program started by the user (ti.init, or a field used): ti.init below destroys
+            # its fields and kernels, and using them afterwards crashed the process (an audit)
+            warn_user("Taichi was already started outside taichi_star: starting it for the "
+                      "simulation destroys that program's fields and kernels, and using them "
+                      "afterwards crashes the process; keep your own Taichi code in another "
+                      "process, or start it after taichi_star's last use")
         # ti.init prints "[Taichi] Starting on arch=..." unconditionally; warnings still go to
         # Taichi's logger, except a taken cache lock's (module docstring)
         with contextlib.redirect_stdout(io.StringIO()):
@@ -528,6 +563,7 @@ class Runtime:
         self.arch, self.precision = arch, precision
         self.restart_reason = None
         self.taichi_thread = threading.get_ident()
+        self.taichi_program = impl.get_runtime()
         self.started = True
 
     def build_here(self):

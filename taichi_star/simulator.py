@@ -250,9 +250,10 @@ class Simulator(NotCopied):
     @property
     def engine(self):
         """The engine that holds the robots (`engine.BatchEngine`). RuntimeError in a process
-        forked from the one that made the Simulator, where its kernels would wait for ever
-        (`runtime.Runtime.check_not_forked`)."""
-        Runtime.current().check_not_forked()
+        forked from the one that made the Simulator, where its kernels would wait for ever, or
+        after a `ti.init` outside this package destroyed it (`runtime.Runtime
+        .check_engine_usable`)."""
+        Runtime.current().check_engine_usable()
         return self._engine
 
     @property

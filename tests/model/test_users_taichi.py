@@ -1,0 +1,57 @@
+"""taichi_star beside a user's own Taichi code in one process: Taichi holds one program per
+process, and `ti.init` destroys the one before with its fields and kernels. A `simulate` after
+the user's `ti.init` warns that the user's program is destroyed; a `ti.init` after a
+simulation makes the next `simulate` start Taichi again instead of running engines of the
+destroyed program, and a Simulator built before it refuses to step (both aborted the process:
+an audit, 2026-12). Run in a fresh process, whose Taichi nothing else has started."""
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+
+SCRIPT = textwrap.dedent('''
+    import gc
+    import warnings
+
+    import taichi as ti
+    import taichi_star as ts
+
+    robot = [ts.StarParams(gait="A1", n_arc=6, n_limb=2)]
+    solver = ts.SolverConfig(dt=5e-3)
+    ti.init(arch=ti.cpu)
+    ti.field(ti.f32, shape=4).fill(1.0)  # the user's program, with a field in it
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        first = ts.simulate(robot, 0.02, solver, progress=False).summary
+    print("warned:", any("already started outside taichi_star" in str(w.message)
+                         for w in caught))
+    ti.init(arch=ti.cpu)  # the user's again: taichi_star's engines are gone
+    again = ts.simulate(robot, 0.02, solver, progress=False).summary
+    print("same bits:", again.drop(columns="actuator_profile").equals(
+        first.drop(columns="actuator_profile")))
+    simulator = ts.Simulator(robot, solver)
+    simulator.advance(0.01)
+    ti.init(arch=ti.cpu)
+    try:
+        simulator.advance(0.01)
+    except RuntimeError as error:
+        print("refused:", "build the Simulator (or environment) again" in str(error))
+    del simulator
+    gc.collect()
+    print("after:", ts.simulate(robot, 0.02, solver, progress=False).summary.status.tolist())
+''')
+
+
+def test_a_users_ti_init_before_or_after_a_simulation_is_warned_or_survived(tmp_path):
+    script = tmp_path / "users_taichi.py"
+    script.write_text(SCRIPT)
+    run = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True,
+                         text=True, timeout=600, env=dict(os.environ, PYTHONPATH=str(REPO)))
+    assert run.returncode == 0, run.stderr[-3000:]
+    lines = [line for line in run.stdout.splitlines() if not line.startswith("[Taichi]")]
+    assert lines == ["warned: True", "same bits: True", "refused: True", "after: ['ok']"], \
+        run.stdout + run.stderr[-3000:]
