@@ -50,7 +50,7 @@ class SimulationResult:
     | travel_direction_deg | degree | direction of the displacement, from +x |
     | heading_deg | degree | body rotation at the end, counter-clockwise |
     | max_strain | — | largest absolute axial strain of an edge in the final shape |
-    | shape_sane | — | final shape finite, no limbs crossing, no arc inverted, max_strain within `metrics.STRAIN_LIMIT` (False: not physical even if converged) |
+    | shape_sane | — | final shape finite, no limbs crossing, no arc inverted, max_strain within `metrics.STRAIN_LIMIT` (False: not physical even if converged; False for a failed instance too, whose run has no final shape) |
     | steady_speed_mm_s | mm/s | speed over cycles [steady_from_cycle, last full cycle) (NaN with fewer cycles, or cycle boundaries not whole steps) |
     | steady_signed_speed_mm_s | mm/s | signed speed over the same cycles |
     | steps | — | accepted time steps |
@@ -475,10 +475,23 @@ def _texts(values: Sequence, to_text) -> list:
     return [by_object[id(value)] for value in values]
 
 
-SUMMARY_STATE = ("status", "failure_time", "steps_done", "rejected_steps",
+SUMMARY_STATE = ("status", "failure_time", "failure_step", "steps_done", "rejected_steps",
                  "steps_over_tolerance", "newton_total", "newton_solves", "newton_max",
                  "factorisations", "substep_retries", "positions")
 """The state fields a run's summary reads at its end (`BatchState.read`)."""
+
+
+def failure_times(status: np.ndarray, failure_time: np.ndarray, failure_step: np.ndarray,
+                  solver: SolverConfig) -> np.ndarray:
+    """(B,) float64: when each failed instance stopped (s), NaN for the others; the engine's
+    `failure_time`, `failure_step` and `status` (B,) each. With fixed steps the failing step's
+    end in float64, failure_step × dt: the engine's own in the state's precision was an f32
+    rounding of it, and a record at the failing step's end read as before the failure (its
+    frozen position instead of NaN: an audit, 2026-12); in f64 the same number."""
+    failed = status != STATUS_OK
+    if solver.adaptive:
+        return np.where(failed, failure_time.astype(np.float64), np.nan)
+    return np.where(failed, failure_step.astype(np.float64) * solver.dt, np.nan)
 
 
 def newton_capped(newton_max: np.ndarray, solver: SolverConfig) -> np.ndarray:
@@ -544,7 +557,7 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
     final = engine.centroids_of(batch)
     counts = state.read(SUMMARY_STATE, batch)
     status = counts["status"]
-    failure_time = counts["failure_time"].astype(np.float64)
+    failure_time = failure_times(status, counts["failure_time"], counts["failure_step"], solver)
     newton_solves = counts["newton_solves"]
     params = model.params
     gaits = [p.gait for p in params]
@@ -578,11 +591,14 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
     rows["substep_retries"] = counts["substep_retries"]
     rows["newton_capped"] = newton_capped(rows["newton_iterations_max"], solver)
     rows["status"] = [STATUS_NAMES[s] for s in status]
-    rows["failure_time_s"] = np.where(failed, failure_time, np.nan)
+    rows["failure_time_s"] = failure_time
     summary = pd.DataFrame(rows)
-    metric_columns = [*metrics.SPEED_COLUMNS, "heading_deg", "steady_speed_mm_s",
+    metric_columns = [*metrics.SPEED_COLUMNS, "heading_deg", "max_strain", "steady_speed_mm_s",
                       "steady_signed_speed_mm_s"]
     summary.loc[failed, metric_columns] = np.nan
+    # the frozen last good shape is not the run's: a failed robot passed `shape_sane` filters
+    # with max_strain 0 (an audit, 2026-12)
+    summary.loc[failed, "shape_sane"] = False
 
     trajectory = pd.DataFrame({"instance": pd.Series(dtype=int), "t_s": pd.Series(dtype=float),
                                "x_mm": pd.Series(dtype=float), "y_mm": pd.Series(dtype=float),

@@ -47,7 +47,7 @@ from .params import SolverConfig, StarParams, check_precision
 from .provenance import file_path, write_atomic
 from .runtime import (RECORDS_REMEDY, Runtime, check_arch, check_batch_memory,
                       check_host_memory, one_call_at_a_time)
-from .simulation import newton_capped, warn_about_capped
+from .simulation import failure_times, newton_capped, warn_about_capped
 from .state import STATUS_INACTIVE, STATUS_NAMES, STATUS_OK
 from .timegrid import MAX_STEPS_PER_INSTANCE, check_work, multiples_within, whole_steps
 
@@ -542,7 +542,7 @@ class Simulator(NotCopied):
         record cost ~30 kB of overhead)."""
         values = self.engine.state.read(("positions", "velocities", "time", "fire_time",
                                          "previous_fire_time", "status", "failure_time",
-                                         "newton_max"), batch)
+                                         "failure_step", "newton_max"), batch)
         positions = values["positions"].astype(np.float64)
         velocities = values["velocities"].astype(np.float64)
         mass = self.model.mass[:batch]
@@ -579,8 +579,8 @@ class Simulator(NotCopied):
         for m, column in enumerate(ACTUATOR_COLUMNS):
             columns[column] = since[:, m]
         columns["status"] = np.array([STATUS_NAMES[s] for s in values["status"]], dtype=object)
-        columns["failure_time_s"] = np.where(values["status"] == STATUS_OK, np.nan,
-                                             values["failure_time"].astype(np.float64))
+        columns["failure_time_s"] = failure_times(values["status"], values["failure_time"],
+                                                  values["failure_step"], self.solver)
         columns["newton_capped"] = newton_capped(values["newton_max"], self.solver)
         return columns
 

@@ -754,3 +754,42 @@ def test_the_default_progress_follows_the_estimated_work_on_every_route(monkeypa
         call()
         assert ("robot" in capsys.readouterr().err) is shown
     envs.close()
+
+
+def test_an_f32_failure_time_is_its_steps_end_and_its_records_from_then_on_are_nan():
+    """In f32 the engine's failure time is the failing step's end rounded to f32 (0.05 s read
+    0.05000000074505806), and the record at that step's end compared as before the failure:
+    it showed the frozen position, not NaN, where f64 gives NaN (an audit, 2026-12). The
+    failure time is now failure_step × dt in float64: 0.05 exactly, and every record from it
+    on is NaN, shapes too; the record before it is finite."""
+    solver = ts.SolverConfig(dt=0.05, max_newton=3, max_substep_halvings=1, precision="f32",
+                             newton_tol=1e-7)
+    stiff = ts.StarParams(gait="A1+A2", youngs_modulus=1e10, limb_stiffness_ratio=1e4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the failure's own warning: expected here
+        result = ts.simulate([stiff], 0.2, solver, record_interval_s=0.05, record_shapes=True)
+    assert result.summary["status"].iloc[0] == "newton_failed"
+    assert result.summary["failure_time_s"].iloc[0] == 0.05
+    trajectory = result.trajectory
+    after = (trajectory["t_s"] >= 0.05).to_numpy()
+    assert trajectory["t_s"].tolist()[:2] == [0.0, 0.05]
+    assert trajectory.loc[after, ["x_mm", "y_mm"]].isna().all().all()
+    assert trajectory.loc[~after, ["x_mm", "y_mm"]].notna().all().all()
+    assert np.isnan(result.shapes[after]).all() and np.isfinite(result.shapes[~after]).all()
+
+
+def test_a_failed_instances_shape_metrics_are_not_its_frozen_shapes():
+    """A failed robot's max_strain is NaN and its shape_sane False, like its other metrics
+    (its frozen last good shape gave max_strain 0.0 and shape_sane True, and it passed a
+    `summary[summary.shape_sane]` filter: an audit, 2026-12); its running neighbour keeps its
+    own, and no warning of an unphysical ok shape counts the failed one."""
+    solver = ts.SolverConfig(dt=0.05, max_newton=3, max_substep_halvings=0)
+    robots = [ts.StarParams(gait="A1+A2", youngs_modulus=1e10, limb_stiffness_ratio=1e4),
+              ts.StarParams(gait="none")]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        summary = ts.simulate(robots, 0.1, solver).summary
+    assert summary["status"].tolist() == ["newton_failed", "ok"]
+    assert np.isnan(summary["max_strain"].iloc[0]) and not summary["shape_sane"].iloc[0]
+    assert summary["max_strain"].iloc[1] == 0.0 and summary["shape_sane"].iloc[1]
+    assert not any("not physical" in str(w.message) for w in caught)
