@@ -192,3 +192,16 @@ def test_a_run_estimated_at_thirty_seconds_or_more_shows_progress_by_default(ins
     assert shows_progress(not shown, robot_steps) is (not shown)
     with pytest.raises(ValueError, match="^progress must be True or False, got 'no'$"):
         shows_progress("no", robot_steps)
+
+
+@pytest.mark.parametrize("interval", [1e-310, 5e-324])
+@pytest.mark.parametrize("adaptive", [False, True])
+def test_a_subnormal_record_interval_is_refused_as_a_value_error(interval, adaptive):
+    """A record interval of a subnormal number of seconds made the count of records an
+    OverflowError (int of an infinite quotient) before the interval's own checks (an audit,
+    2026-12): refused by those, as ValueErrors naming record_interval_s."""
+    from taichi_star.driver import check_run
+
+    solver = SolverConfig(adaptive=adaptive)
+    with pytest.raises(ValueError, match=r"^record_interval_s must be "):
+        check_run(solver, 1.0, interval, 1)
