@@ -196,12 +196,13 @@ class SimulationResult:
                 f"shapes {'recorded' if self.shapes is not None else 'not recorded'}{timing})")
 
 
-def _check_real(name, value, lowest, allow_equal=False):
-    """`value` as a float, judged as the float it becomes (10**400 is not finite, a fraction
-    that rounds to the bound is at it); ValueError naming `name` otherwise."""
+def _check_seconds(name, value, allow_zero=False):
+    """`value` (s) as a float, judged as the float it becomes (10**400 is not finite, a
+    fraction that rounds to 0 is 0); ValueError naming `name`, the bound and its unit
+    otherwise."""
     number = float(value) if is_finite_real(value) else math.nan
-    if not (number > lowest or (allow_equal and number == lowest)):
-        bound = f">= {lowest}" if allow_equal else f"> {lowest}"
+    if not (number > 0.0 or (allow_zero and number == 0.0)):
+        bound = ">= 0 s" if allow_zero else "> 0 s"
         raise ValueError(f"{name} must be a finite number {bound}, got {shown(value)}")
     return number
 
@@ -261,11 +262,11 @@ def validate_call(params, duration_s, solver, record_interval_s, record_shapes, 
     record interval must be a whole number of steps. `replicas`: the instances simulated per
     instance asked for (sensitivities add replicas): the work and the records count them."""
     params = validate_batch(params)
-    duration_s = _check_real("duration_s", duration_s, 0.0)
+    duration_s = _check_seconds("duration_s", duration_s)
     if not isinstance(solver, SolverConfig):
         raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
     check_precision(params, solver)
-    record_interval_s = _check_real("record_interval_s", record_interval_s, 0.0, allow_equal=True)
+    record_interval_s = _check_seconds("record_interval_s", record_interval_s, allow_zero=True)
     check_run(solver, duration_s, record_interval_s, len(params) * replicas)
     if check_flag("record_shapes", record_shapes) and record_interval_s == 0:
         raise ValueError("record_shapes needs record_interval_s > 0 (the spacing of the records)")

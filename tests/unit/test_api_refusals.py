@@ -743,3 +743,16 @@ def test_fewest_steps_accepts_its_boundaries():
 def test_a_step_count_beyond_floats_range_is_too_many_steps():
     with pytest.raises(ValueError, match="is inf time steps per instance; the limit is"):
         check_work("duration_s = 1e400 s", HUGE)
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (dict(duration_s=-1.0), "duration_s must be a finite number > 0 s, got -1.0"),
+    (dict(duration_s=0.0), "duration_s must be a finite number > 0 s, got 0.0"),
+    (dict(duration_s=0.01, record_interval_s=-0.01),
+     "record_interval_s must be a finite number >= 0 s, got -0.01"),
+])
+def test_simulates_times_are_refused_in_seconds(no_compute, arguments, message):
+    """simulate's duration and record interval named their bound without its unit ("> 0.0",
+    where the rest of the API says "> 0 s": an audit, 2026-12)."""
+    with pytest.raises(ValueError, match="^" + re.escape(message) + "$"):
+        ts.simulate([P], **arguments)
