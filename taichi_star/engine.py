@@ -63,7 +63,8 @@ LAGGED_KEEP_MAX_UPDATES = 2
 factorisation for the next step. More say that the kept factorisation (or the step) no longer
 suits: in a heating pulse an old factorisation's first update rarely converges, and starting
 the next step with a fresh one saves the iterations it would waste (over a pulse of A1+A3,
-B = 512: 2.55 updates a step against 3.39 when every converged solve keeps it)."""
+B = 512: 2.55 updates a step against 3.39 when every converged solve keeps it, measured
+before Newton stopped only on an update within newton_tol, 2026-12)."""
 LAGGED_MAX_AGE = 100
 """Most solves that start with a kept factorisation of the lagged Jacobian before a step
 refactors anyway. Steps that converge after one update never measure how well an old

@@ -415,8 +415,8 @@ def test_damping_reshapes_the_elastic_elements_it_damps():
 
 
 def test_newton_stops_within_newton_tol_of_the_step_solution():
-    """The contraction estimate θ/(1 − θ)·|Δ_k| may stop Newton before an update is itself below
-    newton_tol; the step must still be solved to newton_tol. One step inside the first heating
+    """Newton stops on an update within newton_tol; the step it accepts must then be solved to
+    newton_tol. One step inside the first heating
     pulse (A1+A3, t = 0.1 s, where the updates are largest) by the reference's Newton at
     newton_tol 1e-8 m, against the same step at 1e-14 m (solved to round-off): within 1e-8 m,
     in fewer iterations (else the loose tolerance was not what stopped it)."""

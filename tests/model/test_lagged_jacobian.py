@@ -24,8 +24,8 @@ def _final_shapes(params, n_steps, solver):
 
 def test_lagged_jacobian_reaches_the_same_solution():
     """As the chord: another path to each step's solution, which both modes reach within
-    newton_tol = 1e-10 m (the kept factorisation contracts the update at least 4× when last
-    measured, so the error left after an update is at most a third of it), hence within
+    newton_tol = 1e-10 m (every step stops on an update within newton_tol, which left the
+    lagged Jacobian's steps at most 0.93·newton_tol off: docs/reliability.md), hence within
     300 × 1e-10 m after 300 steps (the steps' errors add at worst). A mode that converged to
     another point would be off by the step's motion, micrometres."""
     params = [ts.StarParams(gait="A1+A2"), ts.StarParams(gait="A1+A3+A5", alpha=1.2)]

@@ -94,12 +94,12 @@ def _engine_step(saved, newton_tol):
 @pytest.mark.parametrize("newton_tol", [1e-6, 1e-8, 1e-10])
 def test_engine_newton_stops_within_newton_tol_after_the_references_iterations(heating_state,
                                                                                newton_tol):
-    """The engine's own stopping rule (the error left, max|Δq| or θ/(1 − θ)·max|Δq| once the
-    updates contract): one step at newton_tol lands within newton_tol of the same step solved
-    to 1e-14 m, and takes exactly the iterations of the NumPy reference's Newton on the same
-    step (same start q_k + h(2v_k − v_{k−1}), same rule; the two assemble in another order, a
-    round-off of ~1e-16 relative, far from flipping a decision at these tolerances). A looser
-    or stricter rule, or a lost contraction estimate, changes the count."""
+    """The engine's own stopping rule (an update within newton_tol, max|Δq| ≤ newton_tol): one
+    step at newton_tol lands within newton_tol of the same step solved to 1e-14 m, and takes
+    exactly the iterations of the NumPy reference's Newton on the same step (same start
+    q_k + h(2v_k − v_{k−1}), same rule; the two assemble in another order, a round-off of
+    ~1e-16 relative, far from flipping a decision at these tolerances). A looser or stricter
+    rule, or a contraction estimate taken again, changes the count."""
     saved = heating_state
     positions, iterations = _engine_step(saved, newton_tol)
     exact, exact_iterations = _engine_step(saved, 1e-14)
