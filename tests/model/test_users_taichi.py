@@ -20,8 +20,10 @@ SCRIPT = textwrap.dedent('''
     import taichi as ti
     import taichi_star as ts
 
-    robot = [ts.StarParams(gait="A1", n_arc=6, n_limb=2)]
-    solver = ts.SolverConfig(dt=5e-3)
+    # the paper robot and solver: engines the other tests build, whose kernels the offline
+    # cache then holds (a robot of its own compiled for seconds)
+    robot = [ts.StarParams(gait="A1")]
+    solver = ts.SolverConfig()
     ti.init(arch=ti.cpu)
     ti.field(ti.f32, shape=4).fill(1.0)  # the user's program, with a field in it
     with warnings.catch_warnings(record=True) as caught:

@@ -805,6 +805,9 @@ def test_cold_folds_are_counted_as_whole_fits():
         assert model_select.planned_instances(work, plan, gaits) == fit // 3 * gaits
 
 
+# slow tier: four quick runs of the study, 11 s cold (the default tier's budget; the folds'
+# starts and counts are held in the default tier by the two tests above)
+@pytest.mark.slow
 def test_a_cold_fold_is_the_fit_on_the_other_gaits_from_the_start(tmp_path):
     """--folds cold: the fold that holds A1+A2 out is the fit a run on A1+A4 alone makes (the
     same start, settings and seed), so it moves from the start exactly as far as that fit's
