@@ -63,8 +63,20 @@ def on_grid(times_s, interval_s: float) -> np.ndarray:
     return np.abs(ratio - np.round(ratio)) <= STEP_TOLERANCE * np.maximum(1.0, np.abs(ratio))
 
 
+def _check_step_and_time(name: str, time_s, dt):
+    """ValueError naming dt unless it is a finite number > 0 s, or `name` unless time_s is a
+    finite number (s) (NaN and a step of 0 had given a bare ValueError or a ZeroDivisionError
+    in these public helpers: an audit, 2026-12)."""
+    if not _positive_number(dt):
+        raise ValueError(f"dt must be a finite number > 0 s, got {shown(dt)}")
+    if not is_finite_real(time_s):
+        raise ValueError(f"{name} must be a finite number of s, got {shown(time_s)}")
+
+
 def whole_steps(time_s: float, dt: float) -> Optional[int]:
-    """time_s / dt as an integer if it is one (`on_grid`), else None."""
+    """time_s / dt as an integer if it is one (`on_grid`), else None. ValueError naming dt
+    (a finite number > 0 s) or time_s (a finite number of s)."""
+    _check_step_and_time("time_s", time_s, dt)
     return int(round(time_s / dt)) if on_grid(time_s, dt) else None
 
 
@@ -76,7 +88,10 @@ def step_counts(times_s: np.ndarray, dt: float) -> np.ndarray:
 
 
 def steps_in(duration_s: float, dt: float) -> int:
-    """The steps a fixed-step run of duration_s takes: the duration rounded to whole steps."""
+    """The steps a fixed-step run of duration_s (s) takes at steps of dt (s): the duration
+    rounded to whole steps. ValueError naming dt (a finite number > 0 s) or duration_s (a
+    finite number of s)."""
+    _check_step_and_time("duration_s", duration_s, dt)
     return int(round(duration_s / dt))
 
 
@@ -156,7 +171,8 @@ def interval_for_count(duration_s: float, count: int, dt: float) -> float:
     duration_s or dt (each a finite number > 0 s)."""
     if not is_whole(count) or count < 1:
         raise ValueError(f"count must be an integer >= 1, got {count!r}")
-    return max(1, round(_steps_of("duration_s", duration_s, dt)) // count) * dt
+    # a Python float whatever the types of dt and count (np.int64 gave a NumPy float)
+    return float(max(1, round(_steps_of("duration_s", duration_s, dt)) // count) * dt)
 
 
 def check_work(name: str, steps: float, batch: Optional[int] = None):

@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 
 import taichi_star as ts
+from taichi_star import timegrid
 from taichi_star import (CurvatureProfile, experiment, identification, planner, primitives,
                          profiling, runtime)
 from taichi_star.batch import MAX_LOCAL_WORKERS, LocalProcesses, executor_for, run_batch
@@ -756,3 +757,25 @@ def test_simulates_times_are_refused_in_seconds(no_compute, arguments, message):
     where the rest of the API says "> 0 s": an audit, 2026-12)."""
     with pytest.raises(ValueError, match="^" + re.escape(message) + "$"):
         ts.simulate([P], **arguments)
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: timegrid.steps_in(math.nan, 1e-3), "^duration_s must be a finite number of s, got nan"),
+    (lambda: timegrid.steps_in(1.0, 0.0), "^dt must be a finite number > 0 s, got 0.0"),
+    (lambda: timegrid.whole_steps(0.01, 0.0), "^dt must be a finite number > 0 s, got 0.0"),
+    (lambda: timegrid.whole_steps(math.inf, 1e-3), "^time_s must be a finite number of s, got inf"),
+], ids=["steps_in nan", "steps_in dt 0", "whole_steps dt 0", "whole_steps inf"])
+def test_the_public_step_helpers_refuse_what_is_not_a_time(call, message):
+    """steps_in and whole_steps gave a bare ValueError (NaN), a ZeroDivisionError or None with
+    NumPy's warnings (dt = 0) (an audit, 2026-12): ValueErrors naming the argument."""
+    with pytest.raises(ValueError, match=message):
+        call()
+
+
+def test_the_public_step_helpers_keep_their_answers_at_their_edges():
+    # a time of 0 is no steps; a negative one is a count of steps back (whole_steps' own test)
+    assert timegrid.steps_in(0.0, 1e-3) == 0 and timegrid.whole_steps(0.0, 1e-3) == 0
+    assert timegrid.whole_steps(-0.002, 1e-3) == -2 and timegrid.whole_steps(0.0015, 1e-3) is None
+    # a Python float whatever the argument types (np.int64 count gave np.float64)
+    interval = timegrid.interval_for_count(1.0, np.int64(7), 1e-3)
+    assert type(interval) is float and interval == 142 * 1e-3
