@@ -58,3 +58,32 @@ def warnings_before_call(monkeypatch):
             patch.setattr(owner, name, spy)
             yield caught, seen
     return recording
+
+
+class PastTheChecks(Exception):
+    """A study got past its checks to a stubbed next step (`checked_run`): nothing ran."""
+
+
+@pytest.fixture
+def checked_run(capsys):
+    """(stub, run) for a study's checks alone: `stub` stands in for its first step after them
+    (it raises PastTheChecks); `run(argv, refused)` runs `python -m studies` on argv, asserting
+    exit status 2 where `refused` and that the stub was reached otherwise, and returns (its
+    stderr, the messages of its LongWorkWarnings)."""
+    from studies.__main__ import main as studies_main
+
+    def stub(*args, **kwargs):
+        raise PastTheChecks
+
+    def run(argv, refused):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            if refused:
+                assert studies_main(argv) == 2
+            else:
+                with pytest.raises(PastTheChecks):
+                    studies_main(argv)
+        return capsys.readouterr().err, [str(w.message) for w in caught
+                                         if w.category is taichi_star.LongWorkWarning]
+
+    return stub, run

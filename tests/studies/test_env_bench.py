@@ -3,23 +3,13 @@ and Jacobian setting together, refused past the library's limit or estimated whe
 setting's steps were checked alone, and --num-envs 65536 --steps 50000, 1.03e13 robot-steps,
 started without a word: an audit, 2026-12). Its quick run is in test_control_studies.py."""
 
-import warnings
 
 import pytest
 
-import taichi_star
 from taichi_star import SolverConfig, timegrid
 
 from studies import env_bench
 from studies.__main__ import main as studies_main
-
-
-class PastTheChecks(Exception):
-    """The study got past its checks to the stubbed measurement: nothing is built or run."""
-
-
-def past_the_checks(*args, **kwargs):
-    raise PastTheChecks
 
 
 def no_environments_built(*args, **kwargs):
@@ -59,24 +49,17 @@ QUICK_RUN = "--num-envs 4 × --steps 1 (+1 compiling) × 2 preset and Jacobian s
 @pytest.mark.parametrize("limit, value, refused, told", [
     ("REFUSE_ROBOT_STEPS", 639, True, False), ("REFUSE_ROBOT_STEPS", 640, False, False),
     ("WARN_ROBOT_STEPS", 639, False, True), ("WARN_ROBOT_STEPS", 640, False, False)])
-def test_the_settings_robot_steps_are_added_up(no_compute, monkeypatch, tmp_path, capsys, limit,
-                                                value, refused, told):
+def test_the_settings_robot_steps_are_added_up(no_compute, monkeypatch, tmp_path, checked_run,
+                                                limit, value, refused, told):
     """--quick's 4 robots, one timed and one compiling step of 0.2 s at 5 ms, with two Jacobian
     settings: 2 × 4 × 2 × 40 = 640 robot-steps, each setting's 320; refused or told past a limit
     of 639, not at 640 (the rule is "over"), before any environment is built."""
+    stub, run = checked_run
     monkeypatch.setattr(timegrid, limit, value)
-    monkeypatch.setattr(env_bench, "measure", past_the_checks)
-    argv = ["env_bench", "--quick", "--presets", "paper", "--jacobians", "newton,chord",
-            "--out", str(tmp_path / "out")]
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        if refused:
-            assert studies_main(argv) == 2
-        else:
-            with pytest.raises(PastTheChecks):
-                studies_main(argv)
-    error = capsys.readouterr().err
+    monkeypatch.setattr(env_bench, "measure", stub)
+    error, said = run(["env_bench", "--quick", "--presets", "paper", "--jacobians",
+                       "newton,chord", "--out", str(tmp_path / "out")], refused)
     assert (f"error: {QUICK_RUN} is 640 robot-steps: about " in error) == refused
-    assert [str(w.message) for w in caught if w.category is taichi_star.LongWorkWarning] == (
-        [f"{QUICK_RUN} is 640 robot-steps: about {640 / 5e4 / 3600:.3g} h at 50000 "
-         f"robot-steps/s (on a 2-core CPU; a GPU or more cores run faster)"] if told else [])
+    assert said == ([f"{QUICK_RUN} is 640 robot-steps: about {640 / 5e4 / 3600:.3g} h at 50000 "
+                     f"robot-steps/s (on a 2-core CPU; a GPU or more cores run faster)"]
+                    if told else [])

@@ -107,23 +107,17 @@ QUICK_RUN = ("--batch 5 × 3 configurations × (--rounds 2 of --duration 0.05 s 
     ("REFUSE_ROBOT_STEPS", 1514, True, False), ("REFUSE_ROBOT_STEPS", 1515, False, False),
     ("WARN_ROBOT_STEPS", 1514, False, True), ("WARN_ROBOT_STEPS", 1515, False, False)])
 def test_the_rounds_and_configurations_robot_steps_are_added_up(no_compute, monkeypatch,
-                                                                 tmp_path, capsys, limit, value,
-                                                                 refused, told):
+                                                                 tmp_path, checked_run, limit,
+                                                                 value, refused, told):
     """--quick's 5 instances in 3 configurations (newton and lagged at 1e-10 m, the
     reference), 2 rounds of 50 steps and a warm-up step each: 5 × 3 × (2 × 50 + 1) = 1,515
     robot-steps, refused or told past a limit of 1,514, not at 1,515 (the rule is "over")."""
+    stub, run = checked_run
     monkeypatch.setattr(timegrid, limit, value)
-    monkeypatch.setattr(cli, "paper_gaits_batch", past_the_checks)
-    argv = ["jacobians", "--quick", "--rounds", "2", "--out", str(tmp_path / "out")]
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        if refused:
-            assert studies_main(argv) == 2
-        else:
-            with pytest.raises(PastTheChecks):
-                studies_main(argv)
-    error = capsys.readouterr().err
+    monkeypatch.setattr(cli, "paper_gaits_batch", stub)
+    error, said = run(["jacobians", "--quick", "--rounds", "2", "--out",
+                       str(tmp_path / "out")], refused)
     assert (f"error: {QUICK_RUN} is 1.52e+03 robot-steps: about " in error) == refused, error
-    assert [str(w.message) for w in caught if w.category is taichi_star.LongWorkWarning] == (
-        [f"{QUICK_RUN} is 1.52e+03 robot-steps: about {1515 / 5e4 / 3600:.3g} h at 50000 "
-         f"robot-steps/s (on a 2-core CPU; a GPU or more cores run faster)"] if told else [])
+    assert said == ([f"{QUICK_RUN} is 1.52e+03 robot-steps: about {1515 / 5e4 / 3600:.3g} h at "
+                     f"50000 robot-steps/s (on a 2-core CPU; a GPU or more cores run faster)"]
+                    if told else [])

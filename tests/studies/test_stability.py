@@ -4,7 +4,6 @@ tested in tests/unit/test_metrics.py."""
 
 import math
 import signal
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -271,26 +270,20 @@ QUICK_GRID = ("the grid of 4 instances (--dts-ms 2 × --stiffness 2 × --alphas 
     ("REFUSE_ROBOT_STEPS", 109, True, False), ("REFUSE_ROBOT_STEPS", 110, False, False),
     ("WARN_ROBOT_STEPS", 109, False, True), ("WARN_ROBOT_STEPS", 110, False, False)])
 def test_the_grids_robot_steps_are_summed_over_its_batches(no_compute, monkeypatch, tmp_path,
-                                                           capsys, limit, value, refused, told):
+                                                           checked_run, limit, value, refused,
+                                                           told):
     """--quick's two stiffnesses at dt 1 and 10 ms for 0.05 s: 2 × 50 + 2 × 5 = 110 robot-steps
     in two batches of at most 100, refused or told past a limit of 109, not at 110 (the rule is
     "over"); told before any instance is built (`cli.base_params` comes first)."""
+    stub, run = checked_run
     monkeypatch.setattr(timegrid, limit, value)
-    monkeypatch.setattr(cli, "base_params", past_the_checks)
-    argv = ["stability", "--quick", "--no-progress", "--dts-ms", "1,10", "--out",
-            str(tmp_path / "out")]
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        if refused:
-            assert studies_main(argv) == 2
-        else:
-            with pytest.raises(PastTheChecks):
-                studies_main(argv)
-    error = capsys.readouterr().err
+    monkeypatch.setattr(cli, "base_params", stub)
+    error, said = run(["stability", "--quick", "--no-progress", "--dts-ms", "1,10", "--out",
+                       str(tmp_path / "out")], refused)
     assert (f"error: {QUICK_GRID} is 110 robot-steps: about " in error) == refused
-    assert [str(w.message) for w in caught if w.category is taichi_star.LongWorkWarning] == (
-        [f"{QUICK_GRID} is 110 robot-steps: about {110 / 5e4 / 3600:.3g} h at 50000 "
-         f"robot-steps/s (on a 2-core CPU; a GPU or more cores run faster)"] if told else [])
+    assert said == ([f"{QUICK_GRID} is 110 robot-steps: about {110 / 5e4 / 3600:.3g} h at 50000 "
+                     f"robot-steps/s (on a 2-core CPU; a GPU or more cores run faster)"]
+                    if told else [])
 
 
 DTS_RANGE = "--dts-ms: every value must be in (0, 50] ms, got "
