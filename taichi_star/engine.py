@@ -1053,8 +1053,9 @@ class BatchEngine:
 
     @ti.func
     def mirror_replicas(self, b):
-        """Give b's replicas its time, step count and status (a failed instance's tangents are
-        void: its outputs are NaN)."""
+        """Give b's replicas its time, step count, status and failure (a failed instance's
+        tangents are void: its outputs are NaN from its failure on, `simulation
+        .failure_times`, which reads the failing step)."""
         if ti.static(self.sensitive):
             for j in range(self.tangent_count[None]):
                 for sign in ti.static(range(2)):
@@ -1063,6 +1064,7 @@ class BatchEngine:
                     self.state.steps_done[r] = self.state.steps_done[b]
                     self.state.status[r] = self.state.status[b]
                     self.state.failure_time[r] = self.state.failure_time[b]
+                    self.state.failure_step[r] = self.state.failure_step[b]
 
     @ti.func
     def slot_group(self, slot):

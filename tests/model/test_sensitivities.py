@@ -493,6 +493,18 @@ def test_a_failed_instances_shapes_are_nan_from_its_failure_on(failed_beside_swi
     assert np.isfinite(shapes[:, 1]).all()
 
 
+def test_a_failed_instances_path_derivatives_are_nan_from_its_failure_on(failed_beside_swimming):
+    """The derivatives of a failed instance's path are finite before its failure (the record at
+    t = 0: 0) and NaN from it on; its replicas hold its failing step (until the fix the replicas
+    kept a failing step of −1, read as a failure at −dt, and every record's derivative was NaN,
+    t = 0 included: a review, 2026-12). The neighbour's stay finite."""
+    both = failed_beside_swimming
+    derivative = both.sensitivity("x_mm", "alpha")
+    assert derivative.shape == (2, 21)
+    assert derivative[0, 0] == 0.0 and np.isnan(derivative[0, 1:]).all()
+    assert np.isfinite(derivative[1]).all()
+
+
 def test_the_check_study_writes_what_it_measured(euler_run, tmp_path):
     import pandas as pd
 
