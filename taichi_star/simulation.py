@@ -607,8 +607,12 @@ def _collect(engine, model, solver, duration, record_times, start, centroids, ro
     shape_array = None
     if len(record_times):
         n_records = len(centroids)
-        # a frozen instance keeps its last good state: its records from the failure on are NaN
-        after_failure = failed[:, None] & (record_times[None, :] >= failure_time[:, None])
+        # a frozen instance keeps its last good state: its records from the failure on are NaN,
+        # compared in the state's precision (an adaptive f32 run's failure at a record's stop
+        # is that stop rounded to f32, 0.05000000074505806 for 0.05: a review, 2026-12)
+        real = counts["failure_time"].dtype.type
+        after_failure = failed[:, None] & (record_times[None, :].astype(real)
+                                           >= failure_time.astype(real)[:, None])
         relative = (np.stack(centroids, axis=1) - start[:, None, :]) * metrics.METERS_TO_MM
         relative[after_failure] = np.nan
         heading = np.degrees(np.stack(rotations, axis=1))

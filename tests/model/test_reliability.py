@@ -756,20 +756,26 @@ def test_the_default_progress_follows_the_estimated_work_on_every_route(monkeypa
     envs.close()
 
 
-def test_an_f32_failure_time_is_its_steps_end_and_its_records_from_then_on_are_nan():
+@pytest.mark.parametrize("adaptive, failure_time", [(False, 0.05),
+                                                    (True, float(np.float32(0.05)))])
+def test_an_f32_failure_time_is_its_steps_end_and_its_records_from_then_on_are_nan(
+        adaptive, failure_time):
     """In f32 the engine's failure time is the failing step's end rounded to f32 (0.05 s read
     0.05000000074505806), and the record at that step's end compared as before the failure:
-    it showed the frozen position, not NaN, where f64 gives NaN (an audit, 2026-12). The
-    failure time is now failure_step × dt in float64: 0.05 exactly, and every record from it
-    on is NaN, shapes too; the record before it is finite."""
+    it showed the frozen position, not NaN, where f64 gives NaN (an audit, 2026-12; the
+    adaptive path, a review). With fixed steps the failure time is now failure_step × dt in
+    float64, 0.05 exactly; with adaptive ones (held at 50 ms) the engine's own, and records
+    are compared with it in the state's precision: every record from it on is NaN, shapes
+    too; the record before it is finite."""
     solver = ts.SolverConfig(dt=0.05, max_newton=3, max_substep_halvings=1, precision="f32",
-                             newton_tol=1e-7)
+                             newton_tol=1e-7, adaptive=adaptive, dt_min=0.05, dt_max=0.05,
+                             error_tol=1e-3)
     stiff = ts.StarParams(gait="A1+A2", youngs_modulus=1e10, limb_stiffness_ratio=1e4)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the failure's own warning: expected here
         result = ts.simulate([stiff], 0.2, solver, record_interval_s=0.05, record_shapes=True)
     assert result.summary["status"].iloc[0] == "newton_failed"
-    assert result.summary["failure_time_s"].iloc[0] == 0.05
+    assert result.summary["failure_time_s"].iloc[0] == failure_time
     trajectory = result.trajectory
     after = (trajectory["t_s"] >= 0.05).to_numpy()
     assert trajectory["t_s"].tolist()[:2] == [0.0, 0.05]
