@@ -141,10 +141,19 @@ class EngineProfile:
         runtime.ensure(arch, solver.precision)
         # its own while it lives, as a Simulator's: a call or Simulator of the same batch drew
         # it too and moved its robots, a precision switch destroyed it (an audit, 2026-12)
-        self.engine = runtime.lease_engine(self.model, solver, self)
-        self.engine.load(self.model, solver)
+        self._engine = runtime.lease_engine(self.model, solver, self)
+        self._engine.load(self.model, solver)
         ti.sync()
         self.setup_s = time.perf_counter() - start
+
+    @property
+    def engine(self):
+        """The engine it times (`engine.BatchEngine`). RuntimeError where a `ti.init` outside
+        this package destroyed it, or in a forked process (`runtime.Runtime
+        .check_engine_usable`: it ran a destroyed engine, as a Simulator did: a review,
+        2026-12)."""
+        Runtime.current().check_engine_usable()
+        return self._engine
 
     @property
     def batch_size(self) -> int:

@@ -484,8 +484,8 @@ class Runtime:
             raise RuntimeError(
                 "Taichi was started again outside taichi_star (ti.init or ti.reset) after this "
                 "engine was built, which destroyed it with its program: build the Simulator "
-                "(or environment) again, and keep your own Taichi code in another process or "
-                "after taichi_star's")
+                "(environment, EngineProfile) again, and keep your own Taichi code in another "
+                "process or after taichi_star's")
         self.check_not_forked()
 
     def check_not_forked(self):
@@ -542,9 +542,11 @@ class Runtime:
         # 2026-12); now that call starts Taichi again
         self.arch = self.precision = None
         self.engines.clear()
-        if not self.started and impl.get_runtime().prog is not None:
-            # a program started by the user (ti.init, or a field used): ti.init below destroys
-            # its fields and kernels, and using them afterwards crashed the process (an audit)
+        current = impl.get_runtime()
+        if current is not self.taichi_program and current.prog is not None:
+            # a program started by the user (ti.init, or a field used), before the first
+            # simulation or since the last: ti.init below destroys its fields and kernels, and
+            # using them afterwards crashed the process (an audit; after a simulation, a review)
             warn_user("Taichi was already started outside taichi_star: starting it for the "
                       "simulation destroys that program's fields and kernels, and using them "
                       "afterwards crashes the process; keep your own Taichi code in another "

@@ -2,8 +2,8 @@
 process, and `ti.init` destroys the one before with its fields and kernels. A `simulate` after
 the user's `ti.init` warns that the user's program is destroyed; a `ti.init` after a
 simulation makes the next `simulate` start Taichi again instead of running engines of the
-destroyed program, and a Simulator built before it refuses to step (both aborted the process:
-an audit, 2026-12). Run in a fresh process, whose Taichi nothing else has started."""
+destroyed program (both aborted the process: an audit, 2026-12), and warn as the first did (a
+review), and a Simulator or an EngineProfile built before it refuses to step. Run in a fresh process, whose Taichi nothing else has started."""
 
 import os
 import subprocess
@@ -32,7 +32,11 @@ SCRIPT = textwrap.dedent('''
     print("warned:", any("already started outside taichi_star" in str(w.message)
                          for w in caught))
     ti.init(arch=ti.cpu)  # the user's again: taichi_star's engines are gone
-    again = ts.simulate(robot, 0.02, solver, progress=False).summary
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        again = ts.simulate(robot, 0.02, solver, progress=False).summary
+    print("warned again:", any("already started outside taichi_star" in str(w.message)
+                               for w in caught))
     print("same bits:", again.drop(columns="actuator_profile").equals(
         first.drop(columns="actuator_profile")))
     simulator = ts.Simulator(robot, solver)
@@ -41,8 +45,16 @@ SCRIPT = textwrap.dedent('''
     try:
         simulator.advance(0.01)
     except RuntimeError as error:
-        print("refused:", "build the Simulator (or environment) again" in str(error))
+        print("refused:", "build the Simulator (environment, EngineProfile) again" in str(error))
     del simulator
+    gc.collect()
+    profile = ts.EngineProfile(robot, solver)
+    ti.init(arch=ti.cpu)
+    try:
+        profile.advance(2)
+    except RuntimeError as error:
+        print("profile refused:", "build the Simulator (environment, EngineProfile) again" in str(error))
+    del profile
     gc.collect()
     print("after:", ts.simulate(robot, 0.02, solver, progress=False).summary.status.tolist())
 ''')
@@ -55,5 +67,6 @@ def test_a_users_ti_init_before_or_after_a_simulation_is_warned_or_survived(tmp_
                          text=True, timeout=600, env=dict(os.environ, PYTHONPATH=str(REPO)))
     assert run.returncode == 0, run.stderr[-3000:]
     lines = [line for line in run.stdout.splitlines() if not line.startswith("[Taichi]")]
-    assert lines == ["warned: True", "same bits: True", "refused: True", "after: ['ok']"], \
+    assert lines == ["warned: True", "warned again: True", "same bits: True", "refused: True",
+                     "profile refused: True", "after: ['ok']"], \
         run.stdout + run.stderr[-3000:]
