@@ -57,7 +57,7 @@ QUICK_CHUNK_SIZE = 8
 sizes share one compiled engine instead of compiling one per batch size."""
 RUNS_FOLDER = Path("runs")
 """Default parent of the output folders: runs/<study>/<timestamp>/ (git-ignored)."""
-COMMITTED_RESULTS = Path(__file__).resolve().parent.parent / "results"
+COMMITTED_RESULTS = (Path(__file__).resolve().parent.parent / "results").resolve()
 """The committed results, written only by full runs (`python -m studies reproduce`)."""
 REPRODUCED_RESULTS = {
     "fig4c": [],
@@ -1105,9 +1105,10 @@ def flags_of_run(argv: Sequence[str]) -> List[str]:
 def check_committed_folder(folder: Path, study: str, argv: Sequence[str], replace: bool):
     """StudyArgumentError naming --out where a run would write into the committed results/
     (the folder or one in it) that already holds files, unless it is one of `python -m
-    studies reproduce`'s runs into results/ itself (the same flags but `RUN_PLACE_FLAGS`) or
-    is given --replace-committed: a small run there replaced the committed tables without a
-    word (an audit, 2026-12). A new or empty folder in results/ (a new result) is taken."""
+    studies reproduce`'s runs (the same flags but `RUN_PLACE_FLAGS`, into results/ or a
+    folder in it: its later studies write beside its first's) or is given
+    --replace-committed: a small run there replaced the committed tables without a word (an
+    audit, 2026-12). A new or empty folder in results/ (a new result) is taken."""
     resolved = folder.resolve()
     inside = resolved == COMMITTED_RESULTS or COMMITTED_RESULTS in resolved.parents
     if replace or not inside or not folder.is_dir() or not any(folder.iterdir()):
@@ -1116,12 +1117,12 @@ def check_committed_folder(folder: Path, study: str, argv: Sequence[str], replac
                   for name, flags in REPRODUCED_RESULTS.items()
                   if (flags[0] if flags and not flags[0].startswith("-") else name) == study]
     flags = flags_of_run(argv)
-    if resolved == COMMITTED_RESULTS and flags in reproduced:
+    if flags in reproduced:
         return
     made_by = "; ".join(" ".join(each) or "no flags" for each in reproduced) or "none"
     raise StudyArgumentError(
         f"--out {folder}: holds committed results, which only `python -m studies reproduce` "
-        f"replaces (its runs of {study}, into results/ itself: {made_by}); this run's flags "
+        f"replaces (its runs of {study}: {made_by}); this run's flags "
         f"({' '.join(flags) or 'none'}) differ: give another --out, or --replace-committed to "
         f"replace them")
 

@@ -665,8 +665,8 @@ def test_a_run_into_the_committed_results_with_other_flags_is_refused(no_compute
     error = capsys.readouterr().err
     assert len(error.strip().splitlines()) == 1 and "Traceback" not in error
     assert (f"--out {committed}: holds committed results, which only `python -m studies "
-            f"reproduce` replaces (its runs of jacobians, into results/ itself: no flags); this "
-            f"run's flags (--batch 1 --duration 0.001) differ: give another --out, or "
+            f"reproduce` replaces (its runs of jacobians: no flags); this run's flags "
+            f"(--batch 1 --duration 0.001) differ: give another --out, or "
             f"--replace-committed to replace them") in error
     assert [p.name for p in committed.iterdir()] == ["jacobians.csv"]
     assert (committed / "jacobians.csv").read_text() == "committed\n"
@@ -682,11 +682,15 @@ def test_a_run_into_the_committed_results_with_other_flags_is_refused(no_compute
     ("fig4c", ["--preset", "accurate"], ".", False),
     ("fig4c", ["--prefix", "fig4c_accurate", "--preset", "accurate"], ".", False),
     ("jacobians", ["--rounds", "1"], ".", False),
-    # with --replace-committed any run; a folder in results/ only when new or empty
+    # with --replace-committed any run; another run into a folder in results/ only when it is
+    # new or empty; reproduce's into one that holds files (`reproduce --into results/sub`: its
+    # second study writes beside its first's, and was refused after the first's hours; a
+    # review, 2026-12)
     ("jacobians", ["--rounds", "1", "--replace-committed"], ".", True),
     ("jacobians", ["--rounds", "1"], "new", True),
     ("jacobians", ["--rounds", "1"], "empty", True),
-    ("jacobians", [], "full", False),
+    ("jacobians", ["--rounds", "1"], "full", False),
+    ("jacobians", [], "full", True),
     ("jacobians", [], "../outside", True),
 ])
 def test_only_reproduces_runs_or_a_run_that_means_it_write_into_committed_results(
