@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from taichi_star import SolverConfig, StarParams
+from taichi_star import SolverConfig, StarParams, fewest_steps
 from taichi_star.sensitivity_check import check_arguments, check_sensitivities, instance_runs
 
 from . import cli
@@ -188,17 +188,20 @@ def main(argv=None):
         cli.check_run(f"--duration {args.duration:g} s", args.duration, solver)
         check_parameters(name, params, solver, names, args.duration)
         plans.append((name, integrator, damping, adaptive, params, solver, names))
-    # the robot-steps of every setting's runs together, counted at the last setting's steps:
-    # every setting steps at 1 ms (fixed, or adaptive at dt_max), so any one's count serves
+    # the robot-steps of every setting's runs together, each setting's instance-runs at its
+    # own fewest steps (adaptive ones at dt_max: a lower bound, as simulate's own estimate)
     runs = sum(instance_runs(len(params), len(names)) for *_, params, _, names in plans)
-    cli.check_run(f"--duration {args.duration:g} s ({runs:,} instance-runs in {len(plans)} "
-                  f"settings)", args.duration, solver, batch=runs)
+    cli.check_robot_steps(
+        f"--duration {args.duration:g} s ({runs:,} instance-runs in {len(plans)} settings)",
+        sum(instance_runs(len(params), len(names)) * fewest_steps(solver, args.duration, 0.0)[0]
+            for *_, params, solver, names in plans))
     out = cli.Output(args, argv or [], model={"preset": "paper", "params": base},
                      extra={"duration_s": args.duration, "gaits": gaits})
     tables = []
     for name, integrator, damping, adaptive, params, solver, names in plans:
-        table = check_sensitivities(params, args.duration, solver, names,
-                                    progress=not args.no_progress)
+        with cli.batch_work_told():  # told above for every setting: not again for each call
+            table = check_sensitivities(params, args.duration, solver, names,
+                                        progress=not args.no_progress)
         tables.append(table.assign(setting=name, integrator=integrator, damping_time_s=damping,
                                    stepping="adaptive" if adaptive else "fixed"))
         # after every setting: a run killed in a later one keeps those it finished

@@ -92,7 +92,11 @@ def steps_in(duration_s: float, dt: float) -> int:
     rounded to whole steps. ValueError naming dt (a finite number > 0 s) or duration_s (a
     finite number of s)."""
     _check_step_and_time("duration_s", duration_s, dt)
-    return int(round(duration_s / dt))
+    steps = float(duration_s) / float(dt)
+    if not math.isfinite(steps):  # 1e308 s, or a subnormal step: no count of steps
+        raise ValueError(f"duration_s = {shown(duration_s)} s at dt = {shown(dt)} s is more "
+                         f"steps than a float holds")
+    return int(round(steps))
 
 
 def multiples_within(duration_s: float, interval_s: float) -> int:

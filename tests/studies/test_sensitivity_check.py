@@ -41,7 +41,7 @@ def test_the_work_of_every_setting_together_is_refused_before_the_output_folder(
     out = tmp_path / "out"
     assert studies_main(["sensitivity_check", "--duration", "2000000", "--out", str(out)]) == 2
     error = capsys.readouterr().err
-    assert "error: --duration 2e+06 s (6,478 instance-runs in 9 settings) at dt = 0.001 s is " \
+    assert "error: --duration 2e+06 s (6,478 instance-runs in 9 settings) is " \
            "1.3e+13 robot-steps" in error
     assert not out.exists()
 
@@ -56,7 +56,7 @@ def test_a_long_study_is_estimated_before_anything_runs(no_compute, monkeypatch,
         assert studies_main(["sensitivity_check", "--duration", "10000", "--out",
                              str(tmp_path)]) == 130
     assert [str(w.message).split(" robot-steps")[0] for w in told] == [
-        "--duration 10000 s (6,478 instance-runs in 9 settings) at dt = 0.001 s is 6.48e+10"]
+        "--duration 10000 s (6,478 instance-runs in 9 settings) is 6.48e+10"]
 
 
 @pytest.mark.parametrize("stop, code", [(KeyboardInterrupt, 130), (ValueError, None)])

@@ -79,7 +79,8 @@ BASE_ALPHA = 0.8
 def fake_simulate(calls):
     """A stand-in for `simulate`, recording each call's keyword arguments in `calls`: output
     SLOPE·α, whatever the gains; A1+A3's runs fail (its centre run first, at 0.005 s, by
-    step_limit; every moved run at 0.03 s), A1+A2's run at −4h (α below 0.8 − 3h) at 0.01 s and
+    step_limit; every moved run at 0.03 s), A1+A2's run at −4h (α below 0.8 − 3·10⁻⁴, between
+    −2h and −4h for α's h = 8·10⁻⁵) at 0.01 s and
     its Taylor run at +2H (α above 0.81) at 0.02 s, A1's none. A failed run's output is NaN,
     as `simulate` gives a failed instance's metrics."""
     def outcome(p, centre):
