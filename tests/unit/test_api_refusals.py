@@ -580,7 +580,7 @@ def test_engine_profile_refuses_before_building_the_engine(no_compute, params, s
 def bare_profile(monkeypatch):
     profile = profiling.EngineProfile.__new__(profiling.EngineProfile)
     profile.model = types.SimpleNamespace(batch_size=1)
-    profile.engine = types.SimpleNamespace(advance=lambda count: None)
+    profile._engine = types.SimpleNamespace(advance=lambda count: None)
     monkeypatch.setattr(profiling.ti, "sync", lambda: None)
     return profile
 
