@@ -669,6 +669,15 @@ class Runtime:
         self.cpu_cfg_optimisation = check_flag("cpu_cfg_optimisation", cpu_cfg_optimisation)
         self.arch = None
 
+    def adopt_program(self):
+        """Take the Taichi program now running for one this package started (a study that
+        started Taichi itself for kernels of its own, `studies.simd`), not a user's: the next
+        simulation starts Taichi again without the warning `ensure` gives for a user's
+        program. The engines built before went with the program they lived in."""
+        self.taichi_program = impl.get_runtime()
+        self.engines.clear()
+        self.arch = None
+
     def matrix_slots(self, model: BatchModel) -> int:
         """2×2 blocks of the Newton matrix's elimination pattern for this batch's engine (the
         symbolic factorisation, done once per topology and term set in this process)."""

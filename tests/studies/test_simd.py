@@ -4,13 +4,14 @@ to packed vector arithmetic; the random systems are what the study says they are
 flags fail before any compute. No timing is asserted."""
 
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
-from taichi_star import EngineProfile, SolverConfig, StarParams
+from taichi_star import EngineProfile, SolverConfig, StarParams, simulate
 from taichi_star.runtime import Runtime
 
 from studies import provenance as study_provenance
@@ -36,6 +37,11 @@ def test_simd_quick(tmp_path):
     simd.main(["--quick", "--batch-sizes", "8", "--kernels", "factor_solve", "--precisions",
                "f64", "--no-progress", "--out", str(tmp_path)])
     table = pd.read_csv(tmp_path / "simd.csv")
+    # its own Taichi program handed back: a simulation after it starts Taichi again without
+    # the warning for a user's program (the study's kernels are the package's own)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert simulate([StarParams()], 0.002, progress=False).summary["status"].iloc[0] == "ok"
     # one preset, one precision, one batch size, four forms (one lane count)
     assert len(table) == 4
     assert set(table["form"]) == set(simd.FORMS) and set(table["precision"]) == {"f64"}
