@@ -190,11 +190,12 @@ def main(argv=None):
         plans.append((name, integrator, damping, adaptive, params, solver, names))
     # the robot-steps of every setting's runs together, each setting's instance-runs at its
     # own fewest steps (adaptive ones at dt_max: a lower bound, as simulate's own estimate)
-    runs = sum(instance_runs(len(params), len(names)) for *_, params, _, names in plans)
+    runs = [(instance_runs(len(params), len(names)), solver)
+            for *_, params, solver, names in plans]
     cli.check_robot_steps(
-        f"--duration {args.duration:g} s ({runs:,} instance-runs in {len(plans)} settings)",
-        sum(instance_runs(len(params), len(names)) * fewest_steps(solver, args.duration, 0.0)[0]
-            for *_, params, solver, names in plans))
+        f"--duration {args.duration:g} s ({sum(count for count, _ in runs):,} instance-runs in "
+        f"{len(plans)} settings)",
+        sum(count * fewest_steps(solver, args.duration, 0.0)[0] for count, solver in runs))
     out = cli.Output(args, argv or [], model={"preset": "paper", "params": base},
                      extra={"duration_s": args.duration, "gaits": gaits})
     tables = []

@@ -63,21 +63,11 @@ def on_grid(times_s, interval_s: float) -> np.ndarray:
     return np.abs(ratio - np.round(ratio)) <= STEP_TOLERANCE * np.maximum(1.0, np.abs(ratio))
 
 
-def _check_step_and_time(name: str, time_s, dt):
-    """ValueError naming dt unless it is a finite number > 0 s, or `name` unless time_s is a
-    finite number (s) (NaN and a step of 0 had given a bare ValueError or a ZeroDivisionError
-    in these public helpers: an audit, 2026-12)."""
-    if not _positive_number(dt):
-        raise ValueError(f"dt must be a finite number > 0 s, got {shown(dt)}")
-    if not is_finite_real(time_s):
-        raise ValueError(f"{name} must be a finite number of s, got {shown(time_s)}")
-
-
 def whole_steps(time_s: float, dt: float) -> Optional[int]:
     """time_s / dt as an integer if it is one (`on_grid`), else None. ValueError naming dt
-    (a finite number > 0 s) or time_s (a finite number of s)."""
-    _check_step_and_time("time_s", time_s, dt)
-    return int(round(time_s / dt)) if on_grid(time_s, dt) else None
+    (a finite number > 0 s) or time_s (a finite number of s; `_steps_of`)."""
+    steps = _steps_of("time_s", time_s, dt, positive=False)
+    return int(round(steps)) if on_grid(time_s, dt) else None
 
 
 def step_counts(times_s: np.ndarray, dt: float) -> np.ndarray:
@@ -90,13 +80,8 @@ def step_counts(times_s: np.ndarray, dt: float) -> np.ndarray:
 def steps_in(duration_s: float, dt: float) -> int:
     """The steps a fixed-step run of duration_s (s) takes at steps of dt (s): the duration
     rounded to whole steps. ValueError naming dt (a finite number > 0 s) or duration_s (a
-    finite number of s)."""
-    _check_step_and_time("duration_s", duration_s, dt)
-    steps = float(duration_s) / float(dt)
-    if not math.isfinite(steps):  # 1e308 s, or a subnormal step: no count of steps
-        raise ValueError(f"duration_s = {shown(duration_s)} s at dt = {shown(dt)} s is more "
-                         f"steps than a float holds")
-    return int(round(steps))
+    finite number of s; `_steps_of`)."""
+    return int(round(_steps_of("duration_s", duration_s, dt, positive=False)))
 
 
 def multiples_within(duration_s: float, interval_s: float) -> int:
@@ -155,13 +140,18 @@ def _positive_number(value) -> bool:
     return is_finite_real(value) and float(value) > 0
 
 
-def _steps_of(name: str, time_s, dt) -> float:
+def _steps_of(name: str, time_s, dt, positive: bool = True) -> float:
     """time_s / dt, the steps of dt (s) in the time `name` gives (s), as a float; ValueError
-    naming `name` or dt unless each is a finite number > 0 s, and `name` where the quotient
+    naming `name` or dt unless each is a finite number > 0 s (with `positive` False, time_s
+    any finite number: NaN and a step of 0 had given `steps_in` and `whole_steps` a bare
+    ValueError or a ZeroDivisionError, an audit, 2026-12), and `name` where the quotient
     passes a float's range."""
-    for argument, value in ((name, time_s), ("dt", dt)):
-        if not _positive_number(value):
-            raise ValueError(f"{argument} must be a finite number > 0 s, got {shown(value)}")
+    if positive and not _positive_number(time_s):
+        raise ValueError(f"{name} must be a finite number > 0 s, got {shown(time_s)}")
+    if not positive and not is_finite_real(time_s):
+        raise ValueError(f"{name} must be a finite number of s, got {shown(time_s)}")
+    if not _positive_number(dt):
+        raise ValueError(f"dt must be a finite number > 0 s, got {shown(dt)}")
     steps = float(time_s) / float(dt)
     if not math.isfinite(steps):
         raise ValueError(f"{name} = {shown(time_s)} s is {steps} steps of dt = {shown(dt)} s")
