@@ -993,6 +993,24 @@ class Output:
         if self.made_folder and self.folder.is_dir() and not any(self.folder.iterdir()):
             self.folder.rmdir()
 
+    def remove_earlier(self, *names: str):
+        """Remove each file `names` names (relative to the folder) and a table's sidecar: this
+        run has no rows for it (stability's paper table outside its grid, simd's assemblies
+        in a run of the LU alone), and an earlier run's file left beside this run's would read
+        as this run's (an audit, 2026-12). Removed rather than written empty: a CSV of no
+        columns is no table pandas reads; no file means no rows. The file first, so that a
+        kill between leaves at worst a sidecar of no table, never a table under another run's
+        description. StudyOutputError naming the file where it cannot be removed."""
+        for name in names:
+            file = self.path(name)
+            for path in (file, provenance.sidecar_path(file)):
+                try:
+                    path.unlink(missing_ok=True)
+                except OSError as error:
+                    raise StudyOutputError(f"--out {self.folder}: cannot remove the earlier "
+                                           f"run's {path.name} ({error.strerror or error}); "
+                                           f"the files written before are intact") from None
+
     def path(self, name: str) -> Path:
         """A file of this run, `name` relative to the folder ("gaits.png",
         "animations/A1.gif"), its folder created. ValueError for a name that would leave the

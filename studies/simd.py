@@ -1125,6 +1125,10 @@ def main(argv=None):
     assembly_rows = [row for kernel in ASSEMBLIES if kernel in kernels for row in rows[kernel]]
     if assembly_rows:
         tables["simd_assembly.csv"] = pd.DataFrame(assembly_rows)
+    for name in {"simd.csv", "simd_assembly.csv"} - set(tables):
+        # a run of the LU alone left an earlier run's assembly table beside its own (an audit,
+        # 2026-12), and the other way round
+        out.remove_earlier(name, name.replace(".csv", ".png"))
     for name, table in tables.items():
         # the machine and the code on every row (in the sidecar alone before: an audit, 2026-12)
         csv_path = out.write_csv(table.assign(**provenance.timing_columns("cpu")), name)

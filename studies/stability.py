@@ -64,7 +64,7 @@ from taichi_star import metrics
 from taichi_star.metrics import shape_checks
 from taichi_star.timegrid import whole_steps
 
-from . import cli, provenance
+from . import cli
 
 DESCRIPTION = ("Numerical stability stress grid: dt x stiffness x alpha x C_a x period x gait x "
                "precision; status, retries, strain and shape sanity per instance; stable-region "
@@ -492,24 +492,6 @@ def report(table, summary, paper, f32) -> str:
 
 # --------------------------------------------------------------------------- CLI
 
-def remove_earlier_table(out: cli.Output, name: str):
-    """Remove the table `name` and its sidecar from the output folder: this run has no rows for
-    it (the paper's parameters outside the grid, a single precision), and an earlier run's
-    table left beside this run's files would read as this run's (an audit, 2026-12). Removed
-    rather than written empty: a CSV of no columns is no table pandas reads; no file means no
-    rows, as in the notes, which leave the part out. The table first, so that a kill between
-    leaves at worst a sidecar of no table, never a table under another run's description.
-    StudyOutputError naming the file where it cannot be removed."""
-    table = out.folder / name
-    for path in (table, provenance.sidecar_path(table)):
-        try:
-            path.unlink(missing_ok=True)
-        except OSError as error:
-            raise cli.StudyOutputError(f"--out {out.folder}: cannot remove the earlier run's "
-                                       f"{path.name} ({error.strerror or error}); the files "
-                                       f"written before are intact") from None
-
-
 def numbers(values) -> str:
     """A flag's text for a tuple of numbers: "0.5,1,2"."""
     return ",".join(f"{v:g}" for v in values)
@@ -561,7 +543,7 @@ def main(argv=None):
         if len(companion):
             out.write_csv(companion, name)
         else:
-            remove_earlier_table(out, name)
+            out.remove_earlier(name)
     # drawn from the table as written, so that the CSV redraws it
     out.wrote(plot_maps(pd.read_csv(csv), out.path("stability.png")))
     text = report(table, summary, paper, f32)

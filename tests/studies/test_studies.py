@@ -566,6 +566,22 @@ def test_a_study_csv_keeps_the_parameters_exact_and_rounds_the_other_floats(tmp_
     assert StarParams.from_row(back.iloc[0]) == robot
 
 
+def test_remove_earlier_takes_a_table_and_its_sidecar_and_names_what_it_cannot(tmp_path):
+    """`Output.remove_earlier` removes an earlier run's table with its sidecar and a plot,
+    passes over a file that is not there, and names the file it cannot remove (a folder of
+    that name here) in a StudyOutputError, leaving the others."""
+    out = cli.Output(SimpleNamespace(study="fig4c", out=str(tmp_path), quick=False), [])
+    for name in ("old.csv", "old.csv.json", "old.png", "kept.csv"):
+        (tmp_path / name).write_text("an earlier run's\n")
+    out.remove_earlier("old.csv", "old.png", "never_written.csv")
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["kept.csv"]
+    (tmp_path / "folder.csv").mkdir()
+    with pytest.raises(cli.StudyOutputError, match=r"cannot remove the earlier run's folder\.csv "
+                                                   r"\(.*\); the files written before are intact$"):
+        out.remove_earlier("folder.csv")
+    assert (tmp_path / "kept.csv").read_text() == "an earlier run's\n"
+
+
 def test_a_study_figure_names_the_study_command_and_commit_in_its_png(tmp_path):
     """A study's PNG carried nothing of what made it (an audit): its text entries name the
     study and command of the process's run (`provenance.record`), and the code version."""
