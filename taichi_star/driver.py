@@ -105,12 +105,14 @@ def shows_progress(progress, robot_steps: float) -> bool:
 
 
 def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float, batch: int,
-              steps_taken: Optional[int] = None):
+              steps_taken: Optional[int] = None, arch: Optional[str] = None):
     """ValueError before any compute unless a run of `batch` instances for duration_s (s) with
-    records every record_interval_s (s; 0 = none) can go: at most MAX_STEPS_PER_INSTANCE steps
-    in all (`timegrid.check_work`; `steps_taken`: the steps an instance has already taken,
-    None for a run from t = 0; adaptive steps: the fewest, at dt_max or at the record interval
-    if shorter, with a RuntimeWarning when the most, at dt_min, could pass the limit), with
+    records every record_interval_s (s; 0 = none) can go on `arch` (None: on some machine):
+    at most MAX_STEPS_PER_INSTANCE steps, and robot-steps that such a machine finishes in
+    `timegrid.REFUSE_DAYS` (`timegrid.check_work`; `steps_taken`: the steps an instance has
+    already taken, None for a run from t = 0; adaptive steps: the fewest, at dt_max or at the
+    record interval if shorter, with a RuntimeWarning when the most, at dt_min, could pass the
+    limit), with
     adaptive steps a record interval of at least dt_min, and with fixed steps at least one step
     and a record interval of whole steps. A record interval longer than the run warns: no
     record falls after its start."""
@@ -128,7 +130,7 @@ def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float,
                              f"{record_interval_s!r}")
         fewest, bound = fewest_steps(solver, duration_s, record_interval_s)
         check_work(f"duration_s = {duration_s:g} s at {bound} (the adaptive lower bound"
-                   f"{', ' + after if after else ''})", taken + fewest, batch)
+                   f"{', ' + after if after else ''})", taken + fewest, batch, arch)
         most = taken + duration_s / solver.dt_min
         if not most <= MAX_STEPS_PER_INSTANCE:
             warn_user(f"duration_s = {duration_s:g} s at dt_min = {solver.dt_min:g} s could "
@@ -137,7 +139,8 @@ def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float,
                       f"status step_limit")
     else:
         check_work(f"duration_s = {duration_s:g} s at dt = {solver.dt:g} s"
-                   f"{f' ({after})' if after else ''}", taken + duration_s / solver.dt, batch)
+                   f"{f' ({after})' if after else ''}", taken + duration_s / solver.dt, batch,
+                   arch)
         check_duration(duration_s, solver.dt)
         if record_interval_s:
             check_steps("record_interval_s", record_interval_s, solver.dt)

@@ -152,7 +152,7 @@ class EngineProfile:
         this package destroyed it, or in a forked process (`runtime.Runtime
         .check_engine_usable`: it ran a destroyed engine, as a Simulator did: a review,
         2026-12)."""
-        Runtime.current().check_engine_usable()
+        Runtime.current().check_engine_usable(self._engine)
         return self._engine
 
     @property

@@ -459,8 +459,12 @@ class Runtime:
         """Whether this process is a fork of one in which Taichi had started (`_after_fork`):
         then it cannot run Taichi (`check_not_forked`)."""
         self.taichi_program = None
-        """Taichi's runtime object as `ensure` last started it: a `ti.init` or `ti.reset` made
-        outside this package replaces it, and with it every engine built (`program_replaced`)."""
+        """Taichi's runtime object as `ensure` last started it, the program the engines of
+        `engines` live in: a `ti.init` or `ti.reset` made outside `ensure` replaces it, and
+        with it every engine built (`program_replaced`)."""
+        self.adopted_program = None
+        """A program this package started outside `ensure` for kernels of its own
+        (`adopt_program`): replaced as a user's is, but not warned of."""
 
     @classmethod
     def _after_fork(cls):
@@ -476,13 +480,19 @@ class Runtime:
         program, and running one aborted the process (an audit, 2026-12)."""
         return self.started and impl.get_runtime() is not self.taichi_program
 
-    def check_engine_usable(self):
-        """RuntimeError before an engine built earlier runs (every use of a Simulator's engine):
-        where Taichi was started again outside this package since (`program_replaced`: the
-        engine is gone), or in a forked process (`check_not_forked`)."""
-        if self.program_replaced():
+    def check_engine_usable(self, engine):
+        """RuntimeError before `engine`, built earlier, runs (every use of a Simulator's or an
+        EngineProfile's engine): where Taichi was started again since it was built, by a
+        `ti.init` outside this package (`program_replaced`) or by this package after one (the
+        engine is no longer among `engines`: a later `ensure` or `adopt_program` dropped the
+        engines of the destroyed program; the first check alone passed once `ensure` had
+        started Taichi again, and a Simulator that lived through a study's own `ti.init` ran
+        its destroyed engine: a review, 2026-12), or in a forked process (`check_not_forked`)."""
+        if self.program_replaced() or not any(slot.engine is engine
+                                               for slots in self.engines.values()
+                                               for slot in slots):
             raise RuntimeError(
-                "Taichi was started again outside taichi_star (ti.init or ti.reset) after this "
+                "Taichi was started again (ti.init or ti.reset outside taichi_star) after this "
                 "engine was built, which destroyed it with its program: build the Simulator "
                 "(environment, EngineProfile) again, and keep your own Taichi code in another "
                 "process or after taichi_star's")
@@ -519,21 +529,22 @@ class Runtime:
         """Initialise Taichi for arch and precision unless it already is (ValueError for an
         arch this machine does not have)."""
         check_arch(arch)
-        if self.program_replaced():
+        replaced = self.program_replaced()
+        if replaced:
             # the engines went with the program a user's ti.init replaced: start Taichi again
-            # for this run (a living Simulator's engine is gone: check_no_simulator_lives)
+            # for this run. A living Simulator's engine is gone with it and refuses to run
+            # (`check_engine_usable`), so it holds nothing back: it refused this run, saying
+            # that starting Taichi would destroy engines already destroyed (a review, 2026-12)
             self.arch = None
-            self.restart_reason = ("Taichi was started again outside taichi_star (ti.init or "
-                                   "ti.reset), which destroyed their engines")
         self.check_not_forked()
         if self.arch == arch and self.precision == precision:
             return
-        if self.restart_reason is None:
-            self.check_no_simulator_lives(arch, precision)
-        else:
+        if self.restart_reason is not None:
             self.check_no_simulator_lives(arch, precision, self.restart_reason,
                                           "restart the Python process (their engines cannot "
                                           "run either)")
+        elif not replaced:
+            self.check_no_simulator_lives(arch, precision)
         threads = {} if self.cpu_threads is None else {"cpu_max_num_threads": self.cpu_threads}
         memoise_source_positions()
         memoise_function_sources()
@@ -543,7 +554,8 @@ class Runtime:
         self.arch = self.precision = None
         self.engines.clear()
         current = impl.get_runtime()
-        if current is not self.taichi_program and current.prog is not None:
+        if current is not self.taichi_program and current is not self.adopted_program \
+                and current.prog is not None:
             # a program started by the user (ti.init, or a field used), before the first
             # simulation or since the last: ti.init below destroys its fields and kernels, and
             # using them afterwards crashed the process (an audit; after a simulation, a review)
@@ -566,6 +578,7 @@ class Runtime:
         self.restart_reason = None
         self.taichi_thread = threading.get_ident()
         self.taichi_program = impl.get_runtime()
+        self.adopted_program = None
         self.started = True
 
     def build_here(self):
@@ -673,8 +686,10 @@ class Runtime:
         """Take the Taichi program now running for one this package started (a study that
         started Taichi itself for kernels of its own, `studies.simd`), not a user's: the next
         simulation starts Taichi again without the warning `ensure` gives for a user's
-        program. The engines built before went with the program they lived in."""
-        self.taichi_program = impl.get_runtime()
+        program. The engines built before went with the program they lived in: dropped, and a
+        living Simulator's refuses to run (`check_engine_usable`; taking this program for the
+        engines' own let such a Simulator run its destroyed engine: a review, 2026-12)."""
+        self.adopted_program = impl.get_runtime()
         self.engines.clear()
         self.arch = None
 

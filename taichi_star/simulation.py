@@ -256,18 +256,20 @@ def check_tables_memory(params, duration_s: float, record_interval_s: float,
 
 
 def validate_call(params, duration_s, solver, record_interval_s, record_shapes, steady_from_cycle,
-                  replicas: int = 1):
+                  replicas: int = 1, arch: Optional[str] = None):
     """Check simulate's arguments before any compute; returns (params tuple, duration in s,
     record interval in s or 0). With fixed steps the duration is rounded to whole steps and the
     record interval must be a whole number of steps. `replicas`: the instances simulated per
-    instance asked for (sensitivities add replicas): the work and the records count them."""
+    instance asked for (sensitivities add replicas): the work and the records count them.
+    `arch`: where the call runs, for the work's bound (`driver.check_run`; None: a chunk that
+    may run on another machine, which holds it to its own bound there)."""
     params = validate_batch(params)
     duration_s = _check_seconds("duration_s", duration_s)
     if not isinstance(solver, SolverConfig):
         raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
     check_precision(params, solver)
     record_interval_s = _check_seconds("record_interval_s", record_interval_s, allow_zero=True)
-    check_run(solver, duration_s, record_interval_s, len(params) * replicas)
+    check_run(solver, duration_s, record_interval_s, len(params) * replicas, arch=arch)
     if check_flag("record_shapes", record_shapes) and record_interval_s == 0:
         raise ValueError("record_shapes needs record_interval_s > 0 (the spacing of the records)")
     check_tables_memory(params, duration_s, record_interval_s, record_shapes, replicas)
@@ -314,7 +316,7 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     per_instance = tangents.instances_per_instance(len(directions))
     params, duration_s, record_interval_s = validate_call(params, duration_s, solver,
                                                           record_interval_s, record_shapes,
-                                                          steady_from_cycle, per_instance)
+                                                          steady_from_cycle, per_instance, arch)
     progress = shows_progress(progress, fewest_steps(solver, duration_s, record_interval_s)[0]
                               * len(params) * per_instance)
     tangents.check_directions(directions, params, solver, duration_s=duration_s)

@@ -211,7 +211,8 @@ class Simulator(NotCopied):
         # its firings are commands: any actuator's delay may put a switch on a step end (the
         # warning followed the unread gait field: an audit, 2026-12)
         tangents.check_directions(self.directions, params, solver, commanded=True)
-        check_arch(arch)
+        self.arch = check_arch(arch)
+        """The arch the robots run on ("cpu", "gpu", ...)."""
         check_batch_memory(params, solver.precision, arch,
                            tangents.instances_per_instance(len(self.directions)))
         self.params = params
@@ -253,7 +254,7 @@ class Simulator(NotCopied):
         forked from the one that made the Simulator, where its kernels would wait for ever, or
         after a `ti.init` outside this package destroyed it (`runtime.Runtime
         .check_engine_usable`)."""
-        Runtime.current().check_engine_usable()
+        Runtime.current().check_engine_usable(self._engine)
         return self._engine
 
     @property
@@ -372,8 +373,8 @@ class Simulator(NotCopied):
             raise ValueError(f"record_interval_s must be a finite number > 0 s (or 0: no "
                              f"records), got {shown(record_interval_s)}")
         duration_s, record_interval_s = float(duration_s), float(record_interval_s)
-        check_run(self.solver, duration_s, record_interval_s, self.n_instances,
-                  steps_taken=int(self._steps().max(initial=0)))
+        check_run(self.solver, duration_s, record_interval_s, self.model.batch_size,
+                  steps_taken=int(self._steps().max(initial=0)), arch=self.arch)
         progress = shows_progress(progress, self.model.batch_size * fewest_steps(
             self.solver, duration_s, record_interval_s)[0])  # the replicas counted too
         if record_interval_s:

@@ -10,15 +10,16 @@ ValueError naming it); `nearest_interval` and `interval_for_count` give one that
 from __future__ import annotations
 
 import math
-from typing import Optional
+import os
+from typing import Optional, Tuple
 
 import numpy as np
 from .checks import is_finite_real, is_real, is_whole, shown, warn_user
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
 __all__ = ["nearest_interval", "interval_for_count", "whole_steps", "steps_in", "STEP_TOLERANCE",
-           "MAX_STEPS_PER_INSTANCE", "REFUSE_ROBOT_STEPS", "check_work", "warn_long_work",
-           "LongWorkWarning"]
+           "MAX_STEPS_PER_INSTANCE", "REFUSE_ROBOT_STEPS", "refuse_robot_steps", "check_work",
+           "warn_long_work", "LongWorkWarning"]
 
 STEP_TOLERANCE = 1e-9
 """Relative tolerance within which a time is taken to be a whole number of steps (and a
@@ -48,12 +49,48 @@ FASTEST_ROBOT_STEPS_PER_S = 3.6e6
 with the chord Jacobian at B = 65,536, 3,442,872 robot-steps/s (results/bench_gpu.csv; 3,564,046
 in a run cut off before its table, results/bench_gpu_cutoff.log). tests/unit/test_timegrid.py
 keeps it at least every rate in results/."""
+FASTEST_CPU_CORE_ROBOT_STEPS_PER_S = 2.5e5
+"""The fastest rate per CPU core measured, with room: 113,623 robot-steps/s a core (the plain
+call with the lagged Jacobian at B = 512 on a 2-core Intel Xeon,
+results/bench_lagged/e67d242/bench.csv), a little over twice that for faster cores and f32.
+tests/unit/test_timegrid.py keeps it at least every CPU row's rate per core in results/."""
 REFUSE_DAYS = 30
 REFUSE_ROBOT_STEPS = FASTEST_ROBOT_STEPS_PER_S * REFUSE_DAYS * 86400.0
-"""A call of more robot-steps (9.3e12) is refused before any compute, with its estimate: even
-the fastest machine measured would need more than REFUSE_DAYS for it (a 2-core CPU over four
-years). One call runs on one machine; `run_batch` only warns about its whole batch, whose
-chunks may run on many (each chunk is held to this)."""
+"""A call of more robot-steps (9.3e12) is refused before any compute on any machine, with its
+estimate: even the fastest machine measured would need more than REFUSE_DAYS for it (a 2-core
+CPU over four years). A call on the CPU is held to its cores' bound (`refuse_robot_steps`).
+One call runs on one machine; `run_batch` only warns about its whole batch, whose chunks may
+run on many (each chunk is held to its machine's bound where it runs)."""
+
+
+def usable_cores() -> int:
+    """The CPU cores this process may run on (its affinity where the system says, else every
+    core the machine has)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+def refusal_rate(arch: Optional[str] = None) -> Tuple[float, str]:
+    """(robot-steps/s, what it is): the rate no run on `arch` has been measured above. On
+    "cpu" FASTEST_CPU_CORE_ROBOT_STEPS_PER_S times this machine's `usable_cores`; on a GPU
+    arch, or None (a machine not known: a study's or a batch's work, which may be spread),
+    FASTEST_ROBOT_STEPS_PER_S."""
+    if isinstance(arch, str) and arch == "cpu":  # not yet checked: an array compares per item
+        cores = usable_cores()
+        return (FASTEST_CPU_CORE_ROBOT_STEPS_PER_S * cores,
+                f"this machine's {cores} CPU core{'' if cores == 1 else 's'} at "
+                f"{FASTEST_CPU_CORE_ROBOT_STEPS_PER_S:.3g} each, above the fastest measured "
+                f"per core")
+    return FASTEST_ROBOT_STEPS_PER_S, "the fastest measured, one H100 in f32"
+
+
+def refuse_robot_steps(arch: Optional[str] = None) -> float:
+    """The most robot-steps a call on `arch` may ask for (`refusal_rate` × REFUSE_DAYS):
+    REFUSE_ROBOT_STEPS for a GPU arch or None, 1.3e12 for "cpu" on 2 cores."""
+    if not (isinstance(arch, str) and arch == "cpu"):
+        return REFUSE_ROBOT_STEPS
+    return refusal_rate(arch)[0] * REFUSE_DAYS * 86400.0
 
 
 def on_grid(times_s, interval_s: float) -> np.ndarray:
@@ -169,15 +206,16 @@ def interval_for_count(duration_s: float, count: int, dt: float) -> float:
     return float(max(1, round(_steps_of("duration_s", duration_s, dt)) // count) * dt)
 
 
-def check_work(name: str, steps: float, batch: Optional[int] = None):
+def check_work(name: str, steps: float, batch: Optional[int] = None,
+               arch: Optional[str] = None):
     """ValueError when `steps` (time steps per instance, a float estimate: it may be inf),
     rounded to whole steps as the drivers round a duration, is over MAX_STEPS_PER_INSTANCE;
     `name` says which arguments gave it (e.g. "duration_s = 1e9 s at dt = 0.001 s"), the
     message the estimate (times `batch`, the number of instances, if given) and the limit.
     A RuntimeWarning with the estimated wall time when steps × batch is over WARN_ROBOT_STEPS;
-    ValueError with it past REFUSE_ROBOT_STEPS (work no machine measured finishes in
-    REFUSE_DAYS). ValueError naming `steps` (a real number >= 0) or `batch` (an integer >= 1)
-    otherwise."""
+    ValueError with it past `refuse_robot_steps(arch)` (work no machine of `arch` measured
+    finishes in REFUSE_DAYS; `arch` None: no machine at all). ValueError naming `steps` (a real
+    number >= 0) or `batch` (an integer >= 1) otherwise."""
     # steps != steps: NaN, named as steps (it was named as `name`'s count; an audit, 2026-12),
     # without a conversion that 10**400 would overflow
     if not is_real(steps) or steps != steps or steps < 0:
@@ -196,15 +234,20 @@ def check_work(name: str, steps: float, batch: Optional[int] = None):
         raise ValueError(f"{name} is {steps:.3g} time steps per instance{total}; the limit is "
                          f"{MAX_STEPS_PER_INSTANCE} steps per instance (the int32 step counter)")
     robot_steps = round(steps) * (batch or 1)
-    if robot_steps > REFUSE_ROBOT_STEPS:
-        days = robot_steps / FASTEST_ROBOT_STEPS_PER_S / 86400
+    rate, rated = refusal_rate(arch)
+    limit = refuse_robot_steps(arch)
+    # a CPU call was held to the H100's bound, so that work of years on this machine started
+    # with a warning only (an audit, 2026-12)
+    if robot_steps > limit:
+        days = robot_steps / rate / 86400
         years = robot_steps / ESTIMATE_ROBOT_STEPS_PER_S / (365.25 * 86400)
+        elsewhere = ("on a GPU (arch=\"gpu\"), " if limit < REFUSE_ROBOT_STEPS else "") + \
+            "or a run_batch spread over several machines"
         raise ValueError(f"{name} is {robot_steps:.3g} robot-steps: about {days:.3g} days even at "
-                         f"{FASTEST_ROBOT_STEPS_PER_S:.3g} robot-steps/s (the fastest measured, "
-                         f"one H100 in f32) and {years:.3g} years on a 2-core CPU; the limit is "
-                         f"{REFUSE_ROBOT_STEPS:.3g} robot-steps a call ({REFUSE_DAYS} days at that "
-                         f"rate): run fewer instances or a shorter duration, or a run_batch "
-                         f"spread over several machines")
+                         f"{rate:.3g} robot-steps/s ({rated}) and {years:.3g} years on a 2-core "
+                         f"CPU; the limit is {limit:.3g} robot-steps a "
+                         f"call ({REFUSE_DAYS} days at that rate): run fewer instances or a "
+                         f"shorter duration, {elsewhere}")
     warn_long_work(name, robot_steps)
 
 

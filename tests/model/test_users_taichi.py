@@ -3,8 +3,9 @@ process, and `ti.init` destroys the one before with its fields and kernels. A `s
 the user's `ti.init` warns that the user's program is destroyed; a `ti.init` after a
 simulation makes the next `simulate` start Taichi again instead of running engines of the
 destroyed program (both aborted the process: an audit, 2026-12), and warn as the first did (a
-review), and a Simulator or an EngineProfile built before it refuses to step. Run in a fresh
-process, whose Taichi nothing else has started."""
+review), and a Simulator or an EngineProfile built before it refuses to step, also once
+Taichi has been started again for a later simulation or by the package's own kernels. Run in
+a fresh process, whose Taichi nothing else has started."""
 
 import os
 import subprocess
@@ -53,6 +54,30 @@ SCRIPT = textwrap.dedent('''
         del held
         gc.collect()
     print("after:", ts.simulate(robot, 0.02, solver, progress=False).summary.status.tolist())
+    # a Simulator alive through Taichi started again, by the user or by the package's own
+    # kernels (the simd study's ti.init, then adopt_program): it refuses to step, before and
+    # after a simulate that starts Taichi again for itself, which the dead Simulator does not
+    # hold back (it was refused "would destroy them"; adopting ran the destroyed engine)
+    from taichi_star.runtime import Runtime
+    for name, restart in (("user's", lambda: None),
+                          ("package's", lambda: Runtime.current().adopt_program())):
+        held = ts.Simulator(robot, solver)
+        ti.init(arch=ti.cpu)
+        restart()
+        for when in ("before", "after"):
+            try:
+                held.advance(0.01)
+                print(name, when, "stepped")
+            except RuntimeError as error:
+                print(name, when, "refused:", "build the Simulator" in str(error))
+            if when == "before":
+                with warnings.catch_warnings(record=True) as caught:
+                    warnings.simplefilter("always")
+                    status = ts.simulate(robot, 0.02, solver, progress=False).summary.status
+                print(name, "simulate:", status.tolist(), "warned:",
+                      any("already started" in str(w.message) for w in caught))
+        del held
+        gc.collect()
 ''')
 
 
@@ -64,5 +89,10 @@ def test_a_users_ti_init_before_or_after_a_simulation_is_warned_or_survived(tmp_
     assert run.returncode == 0, run.stderr[-3000:]
     lines = [line for line in run.stdout.splitlines() if not line.startswith("[Taichi]")]
     assert lines == ["warned: True", "warned again: True", "same bits: True",
-                     "simulator refused: True", "profile refused: True", "after: ['ok']"], \
+                     "simulator refused: True", "profile refused: True", "after: ['ok']",
+                     "user's before refused: True", "user's simulate: ['ok'] warned: True",
+                     "user's after refused: True",
+                     "package's before refused: True",
+                     "package's simulate: ['ok'] warned: False",
+                     "package's after refused: True"], \
         run.stdout + run.stderr[-3000:]

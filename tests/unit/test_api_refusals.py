@@ -46,7 +46,8 @@ def bare_simulator():
     """A Simulator's argument checks without its engine (none compiled): the steps it has taken
     are 0."""
     sim = ts.Simulator.__new__(ts.Simulator)
-    sim.params, sim.solver = (P,), S
+    sim.params, sim.solver, sim.arch = (P,), S, "cpu"
+    sim.model = types.SimpleNamespace(batch_size=1)
     sim._steps = lambda: np.zeros(1, dtype=np.int64)
     return sim
 
@@ -582,6 +583,8 @@ def bare_profile(monkeypatch):
     profile.model = types.SimpleNamespace(batch_size=1)
     profile._engine = types.SimpleNamespace(advance=lambda count: None)
     monkeypatch.setattr(profiling.ti, "sync", lambda: None)
+    # no engine of the runtime's: its arguments' checks alone
+    monkeypatch.setattr(runtime.Runtime, "check_engine_usable", lambda self, engine: None)
     return profile
 
 
@@ -717,10 +720,42 @@ def test_cycles_whose_duration_overflows_are_refused_naming_cycles(no_compute):
 
 def test_a_call_no_machine_finishes_in_30_days_is_refused_before_compute(no_compute):
     """100,000 robots for 1e6 s are 1e14 robot-steps: about 322 days at the fastest rate
-    measured. It had started, with only a warning."""
+    measured (an H100's), the bound of a call on a GPU arch; the arch is checked after the
+    work, so the refusal comes on a machine without a GPU too. It had started, with only a
+    warning."""
     with pytest.raises(ValueError, match=r"^duration_s = 1e\+06 s at dt = 0\.001 s is 1e\+14 "
-                                         r"robot-steps: about 322 days even at"):
-        ts.simulate([P] * 100_000, 1e6)
+                                         r"robot-steps: about 322 days even at 3\.6e\+06 "):
+        ts.simulate([P] * 100_000, 1e6, arch="gpu")
+
+
+@pytest.fixture
+def two_cores(monkeypatch):
+    """This machine seen as 2 cores: the CPU's bound, 2 × 2.5e5 robot-steps/s × 30 days =
+    1.296e12 robot-steps, is then the same everywhere."""
+    monkeypatch.setattr(timegrid, "usable_cores", lambda: 2)
+
+
+def test_a_cpu_call_is_held_to_what_its_cores_finish_in_30_days(no_compute, two_cores):
+    """1,000 robots for 2e6 s on the CPU are 2e12 robot-steps, 46 days even at 2.5e5
+    robot-steps/s on each of 2 cores (a year and more at the rate measured): refused before
+    compute, naming the GPU as a way out. They had started with a warning, held to the
+    H100's bound (an audit, 2026-12). On a GPU arch the same call passes the work's check
+    (then the arch's, or compute: either means it was not refused for its work)."""
+    work = (r"is 2e\+12 robot-steps: about 46\.3 days even at 5e\+05 robot-steps/s \(this "
+            r"machine's 2 CPU cores at 2\.5e\+05 each, above the fastest measured per core\) "
+            r"and 1\.27 years on a 2-core CPU; the limit is 1\.3e\+12 robot-steps a call \(30 "
+            r"days at that rate\): run fewer instances or a shorter duration, on a GPU "
+            r"\(arch=\"gpu\"\), or a run_batch spread over several machines$")
+    with pytest.raises(ValueError, match=r"^duration_s = 2e\+06 s at dt = 0\.001 s " + work):
+        ts.simulate([P] * 1_000, 2e6)
+    sim = bare_simulator()
+    sim.model = types.SimpleNamespace(batch_size=1_000)
+    with pytest.raises(ValueError, match=r"^duration_s = 2e\+06 s at dt = 0\.001 s \(after the "
+                                         r"0 steps taken\) " + work):
+        sim.advance(2e6)
+    with pytest.warns(timegrid.LongWorkWarning), \
+            pytest.raises((ComputeStarted, ValueError), match=r"^(?!duration_s)"):
+        ts.simulate([P] * 1_000, 2e6, arch="gpu")
 
 
 @pytest.mark.parametrize("call, message", [

@@ -149,6 +149,63 @@ def test_work_no_machine_measured_finishes_in_30_days_is_refused_with_its_estima
         "or a run_batch spread over several machines")
 
 
+def test_a_cpu_calls_work_is_bounded_by_its_cores_to_the_step(monkeypatch):
+    """On the CPU the bound is 2.5e5 robot-steps/s a core × 30 days: with 2 cores exactly
+    1.296e12 robot-steps (648,000 steps × 2,000,000 instances) start, with the long-work
+    warning, and one step more is refused; on 3 cores the same work starts. A GPU arch and
+    None keep the H100's bound."""
+    from taichi_star import timegrid
+    from taichi_star.timegrid import REFUSE_ROBOT_STEPS, refuse_robot_steps
+
+    monkeypatch.setattr(timegrid, "usable_cores", lambda: 2)
+    assert refuse_robot_steps("cpu") == 1_296_000_000_000.0
+    assert refuse_robot_steps("gpu") == refuse_robot_steps(None) == REFUSE_ROBOT_STEPS
+    with pytest.warns(LongWorkWarning):
+        check_work("x", 648_000, 2_000_000, "cpu")
+    with pytest.raises(ValueError, match=r"^x is 1\.3e\+12 robot-steps: about 30 days even at "
+                                         r"5e\+05 robot-steps/s \(this machine's 2 CPU cores"):
+        check_work("x", 648_001, 2_000_000, "cpu")
+    with pytest.warns(LongWorkWarning):
+        check_work("x", 648_001, 2_000_000, "gpu")
+        check_work("x", 648_001, 2_000_000)
+    monkeypatch.setattr(timegrid, "usable_cores", lambda: 3)
+    with pytest.warns(LongWorkWarning):
+        check_work("x", 648_001, 2_000_000, "cpu")
+
+
+def test_usable_cores_counts_the_cores_this_process_may_run_on():
+    import os
+
+    from taichi_star.timegrid import usable_cores
+
+    expected = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") \
+        else os.cpu_count()
+    assert usable_cores() == expected and 1 <= usable_cores() <= os.cpu_count()
+
+
+def test_the_cpu_bound_per_core_is_at_least_every_cpu_rate_per_core_measured():
+    """No committed CPU benchmark row (arch cpu, with its cores) may run faster per core than
+    the CPU's refusal assumes."""
+    from pathlib import Path
+
+    import pandas as pd
+
+    from taichi_star.timegrid import FASTEST_CPU_CORE_ROBOT_STEPS_PER_S
+
+    results = Path(__file__).resolve().parents[2] / "results"
+    per_core = []
+    for path in results.rglob("*.csv"):
+        with path.open() as table:
+            columns = table.readline().strip().split(",")
+        if {"robot_steps_per_s", "arch", "cores"} <= set(columns):
+            rows = pd.read_csv(path, usecols=["robot_steps_per_s", "arch", "cores"])
+            rows = rows[rows["arch"] == "cpu"]
+            per_core.extend(rows["robot_steps_per_s"] / rows["cores"])
+    # the lagged Jacobian's plain call on 2 cores, 113,623 a core, is among them
+    assert len(per_core) > 100 and max(per_core) > 1.1e5
+    assert max(per_core) <= FASTEST_CPU_CORE_ROBOT_STEPS_PER_S
+
+
 def test_the_refusals_rate_is_at_least_every_rate_measured():
     """The refusal assumes the fastest machine measured: no committed benchmark row may be
     faster (else work that machine finishes within the 30 days would be refused)."""
