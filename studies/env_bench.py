@@ -2,21 +2,26 @@
 
     python -m studies env_bench [--num-envs 64] [--steps 2] [--presets paper,accurate]
                                 [--jacobians newton,chord] [--control-period S] [--dt S]
-                                [--arch cpu|gpu] [--out DIR] [--quick]
+                                [--rounds 3] [--arch cpu|gpu] [--out DIR] [--quick]
 
 For each preset (StarParams.preset and SolverConfig.preset of that name) and Jacobian mode
 (SolverConfig.jacobian: "chord" reuses a step's first LU; same converged solution) builds
-`StarSwimmerVectorEnv(num_envs)` (one Simulator), resets it, takes one untimed step (the
-engine compiles on the first advance) and then times --steps steps of seeded random actions
-(each actuator fired with probability 1/2). Writes `env_bench.csv` (one row per preset and
-Jacobian: preset, jacobian, num_envs, steps, control_period_s, dt_s, n_nodes, wall_s,
-robot_seconds_per_s, robot_steps_per_s, cores, load_average_1min (before the run), cpu_model,
-arch) with its provenance sidecar (`.csv.json`) into --out (default a fresh
+`StarSwimmerVectorEnv(num_envs)` (one Simulator), resets it with seed 0 and takes one untimed
+step (the engine compiles on the first advance); then --rounds interleaved rounds each time
+--steps steps of seeded random actions (each actuator fired with probability 1/2) of every
+setting in turn, the environments going on from where the round before left them
+(`profiling.interleaved_rounds`: the machine's drifts reach every setting alike). Writes
+`env_bench.csv` (one row per preset and Jacobian: preset, jacobian, num_envs, steps,
+control_period_s, dt_s, n_nodes, rounds, wall_s (the best round's), wall_s_median,
+wall_s_rounds (every round's, ";"-separated), robot_seconds_per_s and robot_steps_per_s (of the
+best round), robot_seconds_per_s_median, cores, load_average_1min (before the rounds),
+cpu_model, arch) with its provenance sidecar (`.csv.json`) into --out (default a fresh
 runs/env_bench/<timestamp>/). robot_steps_per_s counts steps of dt_s, so it is NaN for a solver
 with adaptive steps (the accurate preset's), which take steps of their own length: counted in
-1-ms steps it was about 11 times the steps taken (an audit, 2026-12).
+1-ms steps it was about 11 times the steps taken (an audit, 2026-12). Until 2026-12 each
+setting was timed once, one after the other (an audit).
 
---quick: 4 environments, one 0.2-s step at dt = 5 ms.
+--quick: 4 environments, one 0.2-s step at dt = 5 ms, one round.
 
 The robot-steps of every setting together are refused past the library's limit, or estimated
 when long, before any environment is built.
@@ -26,12 +31,13 @@ from __future__ import annotations
 
 import math
 import os
-import time
 
+import numpy as np
 import pandas as pd
 
 from taichi_star import JACOBIANS, PRESETS, SolverConfig, StarParams, fewest_steps
 from taichi_star.envs import StarSwimmerVectorEnv, control_period
+from taichi_star.profiling import interleaved_rounds
 from taichi_star.provenance import cpu_model
 from taichi_star.runtime import check_batch_memory
 
@@ -44,31 +50,50 @@ QUICK_CONTROL_PERIOD_S = 0.2
 QUICK_DT = 5e-3
 
 
-def measure(preset: str, solver: SolverConfig, num_envs: int, steps: int,
-            control_period_s=None, arch: str = "cpu") -> dict:
-    """One row of env_bench.csv (see the module docstring): the robots of `preset` stepped
-    with `solver`."""
-    envs = StarSwimmerVectorEnv(num_envs, params=StarParams.preset(preset), solver=solver,
-                                control_period_s=control_period_s, arch=arch,
-                                max_episode_steps=steps + 2)
-    envs.reset(seed=0)
-    envs.action_space.seed(0)
-    load = os.getloadavg()[0]
-    envs.step(envs.action_space.sample())  # compiles the engine
-    start = time.perf_counter()
-    for _ in range(steps):
-        envs.step(envs.action_space.sample())
-    wall = time.perf_counter() - start
-    period = envs.control_period_s
-    robot_seconds = num_envs * steps * period
-    return {"preset": preset, "jacobian": solver.jacobian, "num_envs": num_envs, "steps": steps,
-            "control_period_s": period, "dt_s": solver.dt,
-            "n_nodes": envs.simulator.n_nodes, "wall_s": wall,
-            "robot_seconds_per_s": robot_seconds / wall,
-            "robot_steps_per_s": (math.nan if solver.adaptive
-                                  else robot_seconds / solver.dt / wall),
-            "cores": os.cpu_count(),
-            "load_average_1min": load, "cpu_model": cpu_model(), "arch": arch}
+def measure(settings, num_envs: int, steps: int, control_period_s=None, arch: str = "cpu",
+            rounds: int = 1) -> list:
+    """The rows of env_bench.csv (see the module docstring), one per (preset, solver) of
+    `settings`: the robots of each preset stepped with its solver, timed in `rounds`
+    interleaved rounds."""
+    built = []
+
+    def prepare(preset: str, solver: SolverConfig):
+        envs = StarSwimmerVectorEnv(num_envs, params=StarParams.preset(preset), solver=solver,
+                                    control_period_s=control_period_s, arch=arch,
+                                    max_episode_steps=rounds * steps + 2)
+        envs.reset(seed=0)
+        envs.action_space.seed(0)
+        envs.step(envs.action_space.sample())  # compiles the engine
+        built.append(envs)
+
+    def timed(index: int):
+        envs = built[index]
+        for _ in range(steps):
+            envs.step(envs.action_space.sample())
+
+    load = []
+    _, times, _ = interleaved_rounds(
+        [lambda index=index: timed(index) for index in range(len(settings))], rounds,
+        [lambda preset=preset, solver=solver: prepare(preset, solver)
+         for preset, solver in settings],
+        before_rounds=lambda: load.append(os.getloadavg()[0]))
+    rows = []
+    for index, (preset, solver) in enumerate(settings):
+        period = built[index].control_period_s
+        robot_seconds = num_envs * steps * period
+        wall = float(times[:, index].min())
+        rows.append({"preset": preset, "jacobian": solver.jacobian, "num_envs": num_envs,
+                     "steps": steps, "control_period_s": period, "dt_s": solver.dt,
+                     "n_nodes": built[index].simulator.n_nodes, "rounds": rounds,
+                     "wall_s": wall, "wall_s_median": float(np.median(times[:, index])),
+                     "wall_s_rounds": ";".join(f"{t:.6g}" for t in times[:, index]),
+                     "robot_seconds_per_s": robot_seconds / wall,
+                     "robot_seconds_per_s_median": robot_seconds / np.median(times[:, index]),
+                     "robot_steps_per_s": (math.nan if solver.adaptive
+                                           else robot_seconds / solver.dt / wall),
+                     "cores": os.cpu_count(), "load_average_1min": load[0],
+                     "cpu_model": cpu_model(), "arch": arch})
+    return rows
 
 
 def build_parser():
@@ -86,6 +111,9 @@ def build_parser():
     parser.add_argument("--control-period", type=float, default=None,
                         quick=QUICK_CONTROL_PERIOD_S,
                         help="control period, s (none: the actuation period, 3.15)")
+    parser.add_argument("--rounds", type=int, default=3, quick=1,
+                        help="interleaved rounds, each timing every setting's --steps in turn "
+                             "(default 3)")
     return parser
 
 
@@ -96,6 +124,7 @@ def main(argv=None):
     cli.check_count(args.num_envs, "--num-envs", 1, cli.MAX_BATCH_SIZE)
     if args.steps < 1:
         raise cli.StudyArgumentError(f"--steps must be >= 1, got {args.steps}")
+    cli.check_count(args.rounds, "--rounds", 1, cli.MAX_REPEATS)
     solvers = {}
     robot_steps = 0.0
     for preset in presets:
@@ -110,17 +139,19 @@ def main(argv=None):
                                         args.control_period)
             except ValueError as error:
                 raise cli.StudyArgumentError(f"--control-period: {error}") from None
-            # the timed steps and the one that compiles, one control period each
-            duration = (args.steps + 1) * period
-            cli.check_run(f"--steps {args.steps} (+1 compiling) of --control-period {period:g} s "
-                          f"({duration:.3g} s)", duration, solvers[preset, jacobian])
+            # every round's timed steps and the one that compiles, one control period each
+            duration = (args.rounds * args.steps + 1) * period
+            cli.check_run(f"--rounds {args.rounds} × --steps {args.steps} (+1 compiling) of "
+                          f"--control-period {period:g} s ({duration:.3g} s)", duration,
+                          solvers[preset, jacobian])
             steps, _ = fewest_steps(solvers[preset, jacobian], duration, 0.0)
             robot_steps += args.num_envs * steps
     # each setting's steps checked above; all settings' robots together refused or estimated
     # here (--num-envs 65536 --steps 50000, 1.03e13 robot-steps, started without a word: an
     # audit, 2026-12), before the memory (whose refusal depends on what the machine has free)
-    cli.check_robot_steps(f"--num-envs {args.num_envs} × --steps {args.steps} (+1 compiling) × "
-                          f"{len(solvers)} preset and Jacobian setting(s)", robot_steps)
+    cli.check_robot_steps(f"--num-envs {args.num_envs} × --rounds {args.rounds} × --steps "
+                          f"{args.steps} (+1 compiling) × {len(solvers)} preset and Jacobian "
+                          f"setting(s)", robot_steps)
     for preset in presets:
         try:  # a million robots' engine: 116 GiB, failed after two minutes (an audit)
             check_batch_memory([StarParams.preset(preset)] * args.num_envs,
@@ -132,13 +163,13 @@ def main(argv=None):
                              for (preset, jacobian), solver in solvers.items()},
                      extra={"jacobians": jacobians, "num_envs": args.num_envs,
                             "steps": args.steps})
-    rows = []
-    for (preset, jacobian), solver in solvers.items():
-        with cli.batch_work_told():  # told above for the whole run: not again for each step
-            rows.append(measure(preset, solver, args.num_envs, args.steps,
-                                args.control_period, args.arch))
-        steps_rate = rows[-1]["robot_steps_per_s"]
-        print(f"{preset}, {jacobian}: {rows[-1]['robot_seconds_per_s']:.1f} robot-s per wall s"
+    with cli.batch_work_told():  # told above for the whole run: not again for each step
+        rows = measure([(preset, solver) for (preset, _), solver in solvers.items()],
+                       args.num_envs, args.steps, args.control_period, args.arch, args.rounds)
+    for row in rows:
+        steps_rate = row["robot_steps_per_s"]
+        print(f"{row['preset']}, {row['jacobian']}: {row['robot_seconds_per_s']:.1f} robot-s "
+              f"per wall s (best of {args.rounds})"
               + ("" if math.isnan(steps_rate) else f" ({steps_rate:,.0f} robot-steps/s)"))
     table = pd.DataFrame(rows)
     out.write_csv(table, "env_bench.csv")

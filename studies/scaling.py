@@ -1,17 +1,21 @@
 """Scaling: wall time of one fixed sweep in process, on local worker processes and on local Dask
 clusters of 1, 2, ... single-threaded workers.
 
-    python -m studies scaling [--workers-list 1,2] [--no-dask] [--out DIR] [--quick]
+    python -m studies scaling [--workers-list 1,2] [--no-dask] [--rounds 3] [--out DIR] [--quick]
 
 The sweep: the five paper gaits × 8 values of alpha (40 instances), one 3.15 s cycle at
 dt = 1 ms, in chunks of 5 (8 chunks; one compiled engine). Every mode first runs one chunk per
 worker (Taichi compiles or loads the engine there; not timed), then the whole sweep is timed
-(`wall_s`); starting the workers is timed apart (`startup_s`). In process, Taichi uses its own
-CPU threads (one per core); a worker is one process with one Taichi thread. Every mode's table
-is checked to be bitwise the in-process one.
+(`wall_s`); starting the workers is timed apart (`startup_s`). Every mode's executor is started
+first and kept, and the sweeps are timed in --rounds interleaved rounds, each timing every mode
+once in turn (`profiling.interleaved_rounds`), so that the machine's drifts reach every mode
+alike. In process, Taichi uses its own CPU threads (one per core); a worker is one process
+with one Taichi thread. Every mode's table is checked to be bitwise the in-process one.
 
-Writes `scaling.csv`: one row per mode with the load average before the run and the speed-up
-over in process (the machine and versions are in its provenance sidecar).
+Writes `scaling.csv`: one row per mode with its best round's wall time (`wall_s`), the median
+(`wall_s_median`), every round's (`wall_s_rounds`, ";"-separated, in order), the load average
+before the rounds, and the speed-up over in process as the median over rounds of the two
+modes' ratio in the same round (`speedup_vs_in_process`); machine, code and model on every row.
 """
 
 from __future__ import annotations
@@ -20,11 +24,13 @@ import contextlib
 import os
 import time
 
+import numpy as np
 import pandas as pd
 
 from taichi_star.batch import MAX_LOCAL_WORKERS, InProcess, LocalProcesses, run_batch
 from taichi_star.extras import missing_extra
 from taichi_star.experiment import PAPER_GAITS
+from taichi_star.profiling import interleaved_rounds
 from taichi_star.timegrid import steps_in
 
 from . import cli, provenance
@@ -51,6 +57,9 @@ def build_parser():
                         help="time local worker processes only, not Dask clusters")
     parser.add_argument("--chunk-size", type=int, default=CHUNK, quick=1,
                         help="instances per chunk")
+    parser.add_argument("--rounds", type=int, default=3, quick=1,
+                        help="interleaved rounds, each timing every mode's sweep once in turn "
+                             "(default 3)")
     cli.add_dt_flag(parser)
     return parser
 
@@ -78,36 +87,59 @@ def main(argv=None):
     cli.check_length(f"--quick ({duration:g} s)" if args.quick
                      else f"the sweep's cycle ({duration:g} s)", duration, solver.dt, "--dt")
     sweep = {"gait": sorted({p.gait for p in params}), "alpha": sorted({p.alpha for p in params})}
+    cli.check_count(args.rounds, "--rounds", 1, cli.MAX_REPEATS)
+    steps = steps_in(duration, solver.dt)
+    timed = list(modes(counts, dask=not args.no_dask))
+    warmup_instances = sum(min(max(workers, 1) * args.chunk_size, len(params))
+                           for _, workers, _ in timed)
+    cli.check_robot_steps(f"--rounds {args.rounds} × {len(timed)} modes × the sweep's "
+                          f"{len(params)} instances, and the warm-ups, of {steps} steps each",
+                          (args.rounds * len(timed) * len(params) + warmup_instances) * steps)
     out = cli.Output(args, argv or [], model={"sweep": sweep}, solver=solver)
     run_kwargs = dict(solver=solver, chunk_size=args.chunk_size, progress=False)  # timed runs
-    steps = steps_in(duration, solver.dt)
-    rows, reference = [], None
-    for mode, workers, context in modes(counts, dask=not args.no_dask):
-        load = os.getloadavg()[0]
-        start = time.perf_counter()
-        with context() as executor:
-            # untimed: start the workers and compile (or load) the engine in each
-            run_batch(params[:max(workers, 1) * args.chunk_size], duration, executor=executor,
-                      **run_kwargs)
-            startup = time.perf_counter() - start
+    load = []
+    with contextlib.ExitStack() as stack:
+        executors, started = [], []
+        for _, _, context in timed:
             start = time.perf_counter()
-            summary = run_batch(params, duration, executor=executor, **run_kwargs).summary
-            wall = time.perf_counter() - start
-        reference = summary if reference is None else reference
+            executors.append(stack.enter_context(context()))
+            started.append(time.perf_counter() - start)
+        # untimed: each executor's workers compile (or load) the engine on a chunk each
+        warmups = [lambda executor=executor, workers=workers: run_batch(
+            params[:max(workers, 1) * args.chunk_size], duration, executor=executor,
+            **run_kwargs) for executor, (_, workers, _) in zip(executors, timed)]
+        sweeps = [lambda executor=executor: run_batch(params, duration, executor=executor,
+                                                      **run_kwargs).summary
+                  for executor in executors]
+
+        def report(round_index: int, index: int, wall: float):
+            mode, workers, _ = timed[index]
+            print(f"round {round_index + 1}: {mode:>10} workers={workers}: {wall:.2f} s",
+                  flush=True)
+
+        summaries, times, warm = interleaved_rounds(
+            sweeps, args.rounds, warmups, before_rounds=lambda: load.append(os.getloadavg()[0]),
+            progress=report)
+    rows = []
+    for index, (mode, workers, _) in enumerate(timed):
+        wall = float(times[:, index].min())
         rows.append({"mode": mode, "workers": workers,
                      "taichi_threads_per_process": "default (one per core)" if not workers else 1,
                      "instances": len(params), "chunk_size": args.chunk_size,
                      "steps_per_instance": steps, "dt_s": solver.dt,
-                     "robot_steps": len(params) * steps, "startup_s": startup, "wall_s": wall,
+                     "robot_steps": len(params) * steps,
+                     "startup_s": started[index] + warm[index], "rounds": args.rounds,
+                     "wall_s": wall, "wall_s_median": float(np.median(times[:, index])),
+                     "wall_s_rounds": ";".join(f"{t:.6g}" for t in times[:, index]),
                      "robot_steps_per_s": len(params) * steps / wall,
-                     "same_table_as_in_process": bool(summary.equals(reference)),
-                     "load_1min_before": load})
-        print(f"{mode:>10} workers={workers}: {wall:.2f} s (startup {startup:.2f} s)")
+                     # the ratio of each round's pair, the machine's drifts reaching both alike
+                     "speedup_vs_in_process": float(np.median(times[:, 0] / times[:, index])),
+                     "same_table_as_in_process": bool(summaries[index].equals(summaries[0])),
+                     "load_1min_before": load[0]})
     # the machine, the code and the model timed, on every row (they were in the sidecar
     # alone: an audit, 2026-12)
     table = pd.DataFrame(rows).assign(preset="paper", precision=solver.precision,
                                       **provenance.timing_columns(args.arch))
-    table["speedup_vs_in_process"] = table["wall_s"].iloc[0] / table["wall_s"]
     out.write_csv(table, "scaling.csv")
     out.report()
     return table

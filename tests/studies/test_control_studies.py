@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 
 import taichi_star
+from taichi_star import profiling
 from taichi_star.primitives import glide_columns, measure_primitives, streak_step_columns
 
 from studies import cli, plan
@@ -216,8 +217,62 @@ def test_env_bench_counts_robot_steps_only_of_fixed_steps(monkeypatch):
     monkeypatch.setattr(env_bench, "StarSwimmerVectorEnv", FakeEnvs)
     adaptive = taichi_star.SolverConfig.preset("accurate")
     assert adaptive.adaptive
-    row = env_bench.measure("accurate", adaptive, num_envs=4, steps=3)
-    assert np.isnan(row["robot_steps_per_s"]) and row["robot_seconds_per_s"] > 0
     fixed = taichi_star.SolverConfig(dt=5e-3)
-    row = env_bench.measure("paper", fixed, num_envs=4, steps=3)
-    assert row["robot_steps_per_s"] == pytest.approx(4 * 3 * 0.5 / 5e-3 / row["wall_s"])
+    adaptive_row, fixed_row = env_bench.measure([("accurate", adaptive), ("paper", fixed)],
+                                                num_envs=4, steps=3)
+    assert np.isnan(adaptive_row["robot_steps_per_s"])
+    assert adaptive_row["robot_seconds_per_s"] > 0
+    assert fixed_row["robot_steps_per_s"] == pytest.approx(4 * 3 * 0.5 / 5e-3
+                                                           / fixed_row["wall_s"])
+
+
+def test_env_bench_times_its_settings_in_interleaved_rounds(monkeypatch):
+    """Each setting was timed once, one after the other (an audit, 2026-12): now every setting
+    is built and stepped once untimed, then each round steps every setting --steps times in
+    turn; a row's wall_s is its best round's, wall_s_median the median, and its rates are of
+    those. The stand-in environments' steps take set times (a clock moved by each step)."""
+    from studies import env_bench
+
+    clock = [0.0]
+    order = []
+    step_seconds = {"paper": [0.0, 2.0, 3.0, 1.0], "accurate": [0.0, 5.0, 4.0, 6.0]}
+
+    class Space:
+        def seed(self, seed):
+            pass
+
+        def sample(self):
+            return None
+
+    class FakeEnvs:
+        control_period_s = 0.5
+        action_space = Space()
+        simulator = type("Sim", (), {"n_nodes": 7})()
+
+        def __init__(self, num_envs, params, **kwargs):
+            self.preset = "paper" if params == taichi_star.StarParams.preset("paper") \
+                else "accurate"
+            self.steps = 0
+
+        def reset(self, seed):
+            pass
+
+        def step(self, action):  # the first step compiles; then one step per timed round
+            clock[0] += step_seconds[self.preset][self.steps]
+            order.append((self.preset, self.steps))
+            self.steps += 1
+
+    monkeypatch.setattr(env_bench, "StarSwimmerVectorEnv", FakeEnvs)
+    monkeypatch.setattr(profiling.time, "perf_counter", lambda: clock[0])
+    paper, accurate = env_bench.measure(
+        [("paper", taichi_star.SolverConfig(dt=5e-3)),
+         ("accurate", taichi_star.SolverConfig.preset("accurate"))],
+        num_envs=4, steps=1, rounds=3)
+    assert order == [("paper", 0), ("accurate", 0), ("paper", 1), ("accurate", 1),
+                     ("paper", 2), ("accurate", 2), ("paper", 3), ("accurate", 3)]
+    assert (paper["wall_s"], paper["wall_s_median"], paper["wall_s_rounds"]) == (1.0, 2.0,
+                                                                                "2;3;1")
+    assert (accurate["wall_s"], accurate["wall_s_median"]) == (4.0, 5.0)
+    assert paper["robot_seconds_per_s"] == 4 * 0.5 / 1.0
+    assert paper["robot_seconds_per_s_median"] == 4 * 0.5 / 2.0
+    assert paper["robot_steps_per_s"] == 4 * 0.5 / 5e-3 / 1.0 and paper["rounds"] == 3

@@ -22,28 +22,31 @@ ACCURATE_STEPS = 3.15 / SolverConfig.preset("accurate").dt_max
 """The fewest adaptive steps of one: at dt_max (0.05 s), the library's count."""
 
 
-@pytest.mark.parametrize("argv, settings, robot_steps", [
-    # the audit's run: paper and accurate, 65,536 robots, 50,000 steps and the compiling one
-    (["--num-envs", "65536", "--steps", "50000"], 2,
-     65536 * 50001 * (PAPER_STEPS + ACCURATE_STEPS)),
-    # each setting 6.2e12 robot-steps, under the limit alone, 1.2e13 together
+@pytest.mark.parametrize("argv, rounds, settings, robot_steps", [
+    # the audit's run: paper and accurate, 65,536 robots, 50,000 steps and the compiling one,
+    # in the default 3 rounds
+    (["--num-envs", "65536", "--steps", "50000"], 3, 2,
+     65536 * (3 * 50000 + 1) * (PAPER_STEPS + ACCURATE_STEPS)),
+    # in one round each setting 6.2e12 robot-steps, under the limit alone, 1.2e13 together
     (["--num-envs", "65536", "--steps", "30000", "--presets", "paper", "--jacobians",
-      "newton,chord"], 2, 2 * 65536 * 30001 * PAPER_STEPS),
+      "newton,chord", "--rounds", "1"], 1, 2, 2 * 65536 * 30001 * PAPER_STEPS),
 ])
 def test_the_robot_steps_of_every_setting_together_are_refused(no_compute, monkeypatch, tmp_path,
-                                                               capsys, argv, settings,
+                                                               capsys, argv, rounds, settings,
                                                                robot_steps):
     monkeypatch.setattr(env_bench, "measure", no_environments_built)
     out = tmp_path / "out"
     assert studies_main(["env_bench", *argv, "--out", str(out)]) == 2
     error = capsys.readouterr().err
-    assert (f"error: --num-envs 65536 × --steps {argv[3]} (+1 compiling) × {settings} preset and "
-            f"Jacobian setting(s) is {robot_steps:.3g} robot-steps: about ") in error, error
+    assert (f"error: --num-envs 65536 × --rounds {rounds} × --steps {argv[3]} (+1 compiling) × "
+            f"{settings} preset and Jacobian setting(s) is {robot_steps:.3g} robot-steps: "
+            f"about ") in error, error
     assert robot_steps > timegrid.REFUSE_ROBOT_STEPS and len(error.splitlines()) == 1
     assert not out.exists()
 
 
-QUICK_RUN = "--num-envs 4 × --steps 1 (+1 compiling) × 2 preset and Jacobian setting(s)"
+QUICK_RUN = ("--num-envs 4 × --rounds 1 × --steps 1 (+1 compiling) × 2 preset and Jacobian "
+             "setting(s)")
 
 
 @pytest.mark.parametrize("limit, value, refused, told", [

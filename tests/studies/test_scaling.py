@@ -1,9 +1,11 @@
-"""The scaling study's table: its ratios are its wall times' and every row names the machine,
-the code and the model timed. The executors are stood in by in-process ones (worker processes
-cost seconds each to start, and the executors are tested in tests/studies/test_batch.py)."""
+"""The scaling study's table: its ratios are its rounds' wall times' and every row names the
+machine, the code and the model timed. The executors are stood in by in-process ones (worker
+processes cost seconds each to start, and the executors are tested in
+tests/studies/test_batch.py)."""
 
 import contextlib
 
+import numpy as np
 import pandas as pd
 
 from taichi_star.batch import InProcess
@@ -19,14 +21,18 @@ def test_the_speedups_are_the_wall_times_ratios_and_rows_name_machine_and_code(m
                    lambda: contextlib.nullcontext(InProcess()))
 
     monkeypatch.setattr(scaling, "modes", in_process_modes)
-    scaling.main(["--quick", "--no-dask", "--workers-list", "1", "--no-progress", "--out",
-                  str(tmp_path)])
+    scaling.main(["--quick", "--no-dask", "--workers-list", "1", "--rounds", "3",
+                  "--no-progress", "--out", str(tmp_path)])
     table = pd.read_csv(tmp_path / "scaling.csv")
     assert table["mode"].tolist() == ["in-process", "stand-in"]
-    # the ratio is of the CSV's own wall times (10 significant digits each)
-    ratio = table["wall_s"].iloc[0] / table["wall_s"]
-    pd.testing.assert_series_equal(table["speedup_vs_in_process"], ratio, check_names=False,
-                                   rtol=1e-9)
+    # three interleaved rounds: the best, the median and the ratio (the median of each round's
+    # pair) are of the rounds' own wall times (6 significant digits in wall_s_rounds)
+    rounds = np.array([[float(t) for t in text.split(";")] for text in table["wall_s_rounds"]])
+    assert rounds.shape == (2, 3) and (table["rounds"] == 3).all()
+    np.testing.assert_allclose(table["wall_s"], rounds.min(axis=1), rtol=1e-5)
+    np.testing.assert_allclose(table["wall_s_median"], np.median(rounds, axis=1), rtol=1e-5)
+    np.testing.assert_allclose(table["speedup_vs_in_process"],
+                               np.median(rounds[0] / rounds, axis=1), rtol=2e-5)
     assert table["same_table_as_in_process"].all()
     assert (table["robot_steps"] == table["instances"] * table["steps_per_instance"]).all()
     assert (table["precision"] == "f64").all() and (table["preset"] == "paper").all()
