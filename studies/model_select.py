@@ -105,7 +105,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 import pandas as pd
 
-from taichi_star import SolverConfig, StarParams, identification
+from taichi_star import SolverConfig, StarParams, changed_fields, identification
 from taichi_star.batch import run_batch
 from taichi_star.gait import Gait
 from taichi_star.output import read_provenance
@@ -666,11 +666,8 @@ def definition_of(candidate: Candidate, args, settings, base: StarParams,
     base model (and --start's, where given) enters by its fields that differ from StarParams'
     defaults, so a field added to StarParams later (a new model option, off by default) leaves
     earlier results reusable."""
-    defaults = StarParams()
-
     def changes(model: StarParams) -> dict:
-        return {f.name: repr(getattr(model, f.name)) for f in dataclasses.fields(model)
-                if getattr(model, f.name) != getattr(defaults, f.name)}
+        return {name: repr(value) for name, value in changed_fields(model).items()}
     base_changes = changes(base)
     start = {} if start_model is None else {"start": changes(start_model)}
     # --phases enters only where it is not the default, which earlier results were made with
@@ -722,20 +719,59 @@ def fit_named(folder: Path, evaluations: str) -> str:
     return evaluations + (f", fitted at {commit}" if commit else "")
 
 
+RECORD_TABLES = ("parameters", "gaits", "folds")
+"""The tables of a fit's record in done/, each {column: list of values}."""
+
+
+def done_record_bytes(record: dict) -> bytes:
+    """A fit's record as done/ keeps it: the record's JSON text with its SHA-256, so that a
+    damaged one is known (a value changed by hand or by the disk was read back as the fit's
+    result without a word: an audit, 2026-12)."""
+    text = json.dumps(record, default=_json_value)
+    return json.dumps({"sha256": hashlib.sha256(text.encode()).hexdigest(),
+                       "record": text}).encode()
+
+
 def read_done(done: Path) -> Optional[dict]:
-    """A finished fit's record in done/ (`fit_or_read_back` writes it), None where there is
-    none or it cannot be read (a record damaged by hand, or left half-written before records
-    were written whole): that candidate is fitted again, which is said."""
+    """A finished fit's record in done/ (`done_record_bytes`), None where there is none or it
+    cannot be trusted (its checksum does not match, a table or a row's figure is missing, or
+    it cannot be read): that candidate is fitted again, which is said. A record from before
+    the checksums (the committed ones) is read on its shape alone."""
     if not done.exists():
         return None
     try:
         stored = json.loads(done.read_text())
-        if not isinstance(stored, dict) or not isinstance(stored.get("row"), dict):
-            raise ValueError("not a fit's record")
+        if isinstance(stored, dict) and set(stored) == {"sha256", "record"}:
+            text = stored["record"]
+            if not isinstance(text, str) or \
+                    hashlib.sha256(text.encode()).hexdigest() != stored["sha256"]:
+                raise ValueError("its record does not match its checksum")
+            stored = json.loads(text)
+        check_done_record(stored)
     except (OSError, ValueError) as error:
         print(f"{done}: unreadable ({str(error).splitlines()[0]}); its candidate is fitted again")
         return None
     return stored
+
+
+def check_done_record(stored) -> None:
+    """ValueError unless `stored` has a fit record's shape: a row (a dict with a status, and
+    for a fit that ended ok its parameter and sample counts) and its tables, each columns of
+    equal length (a record lacking one failed with a KeyError after the fits before it: an
+    audit, 2026-12)."""
+    if not isinstance(stored, dict) or not isinstance(stored.get("row"), dict) \
+            or "status" not in stored["row"]:
+        raise ValueError("not a fit's record")
+    if stored["row"]["status"] == "ok" and not all(
+            isinstance(stored["row"].get(key), (int, float)) for key in ("n_parameters",
+                                                                       "n_samples")):
+        raise ValueError("its row lacks the counts of parameters and samples")
+    for name in RECORD_TABLES:
+        table = stored.get(name)
+        if not isinstance(table, dict) or not all(isinstance(column, list)
+                                                  for column in table.values()) \
+                or len({len(column) for column in table.values()}) > 1:
+            raise ValueError(f"its {name} table is missing or not columns of equal length")
 
 
 def estimate_seconds(seconds_per_instance_cycle: float,
@@ -1105,11 +1141,11 @@ def main(argv=None):
         done.parent.mkdir(parents=True, exist_ok=True)
         # whole or not at all: a kill mid-write left a record --resume could not read (an
         # audit, 2026-12)
-        write_atomic(done, json.dumps({
+        write_atomic(done, done_record_bytes({
             "row": result["row"],
             "parameters": result["parameters"].to_dict(orient="list"),
             "gaits": result["gaits"].to_dict(orient="list"),
-            "folds": result["folds"].to_dict(orient="list")}, default=_json_value).encode(),
+            "folds": result["folds"].to_dict(orient="list")}),
             failure=lambda reason: cli.StudyOutputError(
                 f"{reason}; the fits recorded before are kept: --resume continues"))
 

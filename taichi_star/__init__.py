@@ -19,7 +19,7 @@ with deferred_interrupt():
     from .gait import Gait, symmetry_classes
     from .params import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS, JACOBIANS,
                          PER_ACTUATOR_FIELDS, PRESETS, SOLVER_RANGES, STAR_RANGES, SolverConfig,
-                         StarParams, allowed_values)
+                         StarParams, allowed_values, changed_fields)
     from .profiling import EngineProfile
     from .runtime import available_archs
     from .driver import RunTiming, fewest_steps
@@ -32,7 +32,7 @@ __version__ = "0.3.0"
 
 __all__ = ["simulate", "SimulationResult", "RunTiming", "MAX_STEPS_PER_INSTANCE", "check_work",
            "LongWorkWarning", "fewest_steps", "Simulator", "SimulatorSnapshot", "available_archs",
-           "StarParams",
-           "STAR_RANGES", "allowed_values", "SolverConfig", "SOLVER_RANGES", "PRESETS", "JACOBIANS",
+           "StarParams", "STAR_RANGES", "allowed_values", "changed_fields", "SolverConfig",
+           "SOLVER_RANGES", "PRESETS", "JACOBIANS",
            "PER_ACTUATOR_FIELDS", "COMPONENT_HEIGHTS", "DIFFERENTIABLE_FIELDS",
            "CurvatureProfile", "Gait", "symmetry_classes", "EngineProfile", "__version__"]

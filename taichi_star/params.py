@@ -737,6 +737,21 @@ newton_tol 1e-7 m): ratios 39 (the paper's robot), 98, 104, 202 and 315 (n_arc 1
 2,350 (joint_radius 1 mm, 10-cm limbs) 12× off. Beyond it f32 is refused."""
 
 
+def changed_fields(value) -> Dict[str, object]:
+    """{field: value} of the fields of a StarParams or SolverConfig whose value differs from
+    its class's default, in field order: what sets it apart. A record of these (a run folder's
+    definition, a model-selection result) stays that of the same model when a later version
+    adds a field whose default changes nothing, where a record of every field did not (an
+    unfinished run could no longer be resumed: an audit, 2026-12). ValueError for another
+    type."""
+    if type(value) not in (StarParams, SolverConfig):
+        raise ValueError(f"value must be a StarParams or a SolverConfig, got "
+                         f"{type(value).__name__}")
+    defaults = type(value)()
+    return {f.name: getattr(value, f.name) for f in dataclasses.fields(value)
+            if getattr(value, f.name) != getattr(defaults, f.name)}
+
+
 def shortest_rest_edge(params: StarParams) -> float:
     """Length of the shortest edge of the rest shape, m: a spoke (joint_radius), a limb edge
     ((tip_radius − joint_radius)/n_limb) or an arc edge (the arc of rest curvature K̄(0)

@@ -29,7 +29,7 @@ import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, Optional, Sequence, Tuple, Union
+from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import pandas as pd
@@ -94,6 +94,15 @@ def parameter_texts(params: Sequence[StarParams]) -> Tuple[Dict[str, str], ...]:
     return tuple({field.name: repr(getattr(p, field.name))
                   for field in dataclasses.fields(StarParams) if field.name != "gait"}
                  for p in params)
+
+
+def differing_fields(saved: Dict[str, str], own: Dict[str, str],
+                     defaults: Dict[str, str]) -> List[str]:
+    """The fields whose text in `saved` (a snapshot's record) is not `own`'s, a field the
+    record lacks counting as its text in `defaults`: a snapshot saved before a field was added
+    holds that field's default (it was refused as "not recorded" even where this side's value
+    is the default: an audit, 2026-12)."""
+    return [name for name in own if saved.get(name, defaults.get(name)) != own[name]]
 
 
 def solver_texts(solver: SolverConfig) -> Dict[str, str]:
@@ -660,21 +669,22 @@ class Simulator(NotCopied):
             # zip would compare the first instances alone (a damaged header)
             raise ValueError(f"the saved state records the parameters of {len(checked)} "
                              f"instances for its {snapshot.n_instances} (a damaged snapshot)")
+        default_params = parameter_texts([StarParams()])[0]
         for b, (saved, own) in enumerate(zip(checked or (), self._parameter_texts)):
-            changed = [name for name in own if saved.get(name) != own[name]]
+            changed = differing_fields(saved, own, default_params)
             if changed and self.directions:
                 # the replicas carry their tangents as offsets of ±ε of the saved parameters,
                 # and ε is a share of the value: under others every derivative came out
                 # mis-scaled (α 1.8 %, the joint radius 6.3 % off, no warning; an audit)
                 raise ValueError(
                     f"the saved state belongs to instances of other parameters (instance {b}'s "
-                    f"{changed[0]} is {saved.get(changed[0], 'not recorded')} there, "
+                    f"{changed[0]} is {saved.get(changed[0], 'not recorded: ' + default_params[changed[0]])} there, "
                     f"{own[changed[0]]} here): a Simulator with sensitivities continues only "
                     f"its own parameters' state (other_params=True is for one without)")
             if changed and not other_params:
                 raise ValueError(
                     f"the saved state belongs to instances of other parameters: instance "
-                    f"{b}'s {changed[0]} is {saved.get(changed[0], 'not recorded')} there, "
+                    f"{b}'s {changed[0]} is {saved.get(changed[0], 'not recorded: ' + default_params[changed[0]])} there, "
                     f"{own[changed[0]]} here ({len(changed)} field(s) differ); load(..., "
                     f"other_params=True) continues it under this simulator's parameters")
         if snapshot.behind and (len(snapshot.behind) != self.n_instances or not all(
@@ -691,11 +701,11 @@ class Simulator(NotCopied):
         # the saved run's capped solves are its history, shown in state(), not news
         self._capped_named = newton_capped(loaded["newton_max"], self.solver)
         own = solver_texts(self.solver)
-        changed = [name for name in own
-                   if snapshot.solver and snapshot.solver.get(name) != own[name]]
+        defaults = solver_texts(SolverConfig())
+        changed = differing_fields(snapshot.solver, own, defaults) if snapshot.solver else []
         if changed:
             warn_user(f"the saved state was stepped with {changed[0]} = "
-                      f"{snapshot.solver.get(changed[0], 'not recorded')}, this simulator's "
+                      f"{snapshot.solver.get(changed[0], 'not recorded: ' + defaults[changed[0]])}, this simulator's "
                       f"is {own[changed[0]]} ({len(changed)} setting(s) differ): it goes on "
                       f"under this simulator's settings, not bit for bit as the saved run "
                       f"would have")

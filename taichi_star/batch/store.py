@@ -2,7 +2,9 @@
 long batch can be resumed after a crash or a kill.
 
 - `manifest.json`: the run's *definition* (instance count, SHA-256 of every instance's
-  parameters, the chunk plan, duration or cycles, solver, arch, records, steady window), its
+  parameters that differ from their defaults, the chunk plan, duration or cycles, the solver's
+  settings that differ from theirs, arch, records, steady window: a field a later version adds
+  with a default that changes nothing leaves a run resumable, `params.changed_fields`), its
   SHA-256, and for information the code version of its latest opening (`code`), every code
   version that made its chunks with the chunks each made (`code_versions`, brought up to date
   as each chunk is stored), and the times.
@@ -17,9 +19,11 @@ long batch can be resumed after a crash or a kill.
 - Every file is written to a temporary name, flushed and renamed (`os.replace`): a kill leaves
   whole files or none.
 
-On resume, a chunk file that is unreadable, truncated, empty, undecodable in any way, from
-another run or whose content does not match its checksum is reported (a warning on the
-`taichi_star.batch` logger), deleted and recomputed, never loaded. A damaged manifest is an
+On resume, a chunk file that is truncated, empty, undecodable in any way, from another run,
+whose content does not match its checksum or that lacks the trajectory its run records is
+reported (a warning on the `taichi_star.batch` logger), deleted and recomputed, never loaded;
+one that is there but cannot be read (no permission, an I/O error) is a `RunStoreError` naming
+it, and nothing is deleted. A damaged manifest is an
 error (`RunStoreError`); a deleted one is not: resuming a folder of chunk files alone reuses the
 chunks whose own stamp (the run definition's SHA-256, the chunk's instances) matches the run,
 and refuses a folder holding a readable chunk of another run (without its manifest nothing says
@@ -44,15 +48,23 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 import pandas as pd
 
+try:
+    import fcntl
+except ImportError:  # Windows: the lock file's process decides alone
+    fcntl = None
+
 from ..actuation import CurvatureProfile
 from ..checks import is_whole, warn_user
 from ..extras import require
+from ..params import SolverConfig, changed_fields
 from ..provenance import code_version, is_temporary, write_atomic
 from .tasks import ChunkTask
 
 MANIFEST = "manifest.json"
-FORMAT = 2
-"""Version of the store's layout (2: Parquet chunks with checksums)."""
+FORMAT = 3
+"""Version of the store's layout (2: Parquet chunks with checksums; 3: a definition of the
+parameters and solver settings that differ from their defaults; a format-2 run was defined by
+every field, so a field added later made it unresumable: an audit, 2026-12)."""
 METADATA_KEY = b"taichi_star.chunk"
 VALUE_TYPES = {"CurvatureProfile": CurvatureProfile}
 """Value objects a summary column may hold; stored as JSON of their fields."""
@@ -79,6 +91,13 @@ def _sha256(text: str) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+def _changes(value) -> Dict:
+    """`params.changed_fields` of a StarParams or SolverConfig, JSON-ready (a value object as
+    the dict of its fields)."""
+    return {name: dataclasses.asdict(field) if dataclasses.is_dataclass(field) else field
+            for name, field in changed_fields(value).items()}
+
+
 def run_definition(params: Sequence, tasks: Sequence[ChunkTask], chunk_size: int,
                    cycles: Optional[float], duration_s: Optional[float]) -> Dict:
     """What defines a run: a resumed run must match it exactly. JSON-ready."""
@@ -86,13 +105,13 @@ def run_definition(params: Sequence, tasks: Sequence[ChunkTask], chunk_size: int
     return {
         "format": FORMAT,
         "n_instances": len(params),
-        "params_sha256": _sha256("\n".join(_canonical(dataclasses.asdict(p)) for p in params)),
+        "params_sha256": _sha256("\n".join(_canonical(_changes(p)) for p in params)),
         "chunk_size": int(chunk_size),
         "n_chunks": len(tasks),
         "chunks_sha256": _sha256(_canonical([list(map(int, t.members)) for t in tasks])),
         "cycles": None if cycles is None else float(cycles),
         "duration_s": None if duration_s is None else float(duration_s),
-        "solver": dataclasses.asdict(first.solver),
+        "solver": _changes(first.solver),
         "arch": first.arch,
         "record_interval_s": float(first.record_interval_s),
         "steady_from_cycle": int(first.steady_from_cycle),
@@ -100,12 +119,16 @@ def run_definition(params: Sequence, tasks: Sequence[ChunkTask], chunk_size: int
 
 
 def definition_differences(old: Dict, new: Dict) -> List[str]:
-    """Human-readable differences between two definitions ("solver.dt: 0.002 -> 0.001")."""
+    """Human-readable differences between two definitions ("solver.dt: 0.002 -> 0.001"; a
+    solver setting a definition leaves out is SolverConfig's default)."""
+    unset = {"solver": dataclasses.asdict(SolverConfig())}
     differences = []
     for key in sorted(set(old) | set(new)):
         a, b = old.get(key), new.get(key)
         if isinstance(a, dict) and isinstance(b, dict):
-            differences += [f"{key}.{k}: {a.get(k)!r} -> {b.get(k)!r}"
+            default = unset.get(key, {})
+            differences += [f"{key}.{k}: {a.get(k, default.get(k))!r} -> "
+                            f"{b.get(k, default.get(k))!r}"
                             for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
         elif a != b:
             differences.append("the instance parameters differ" if key == "params_sha256"
@@ -198,6 +221,8 @@ class RunStore:
         self.manifest: Dict = {}
         self.locked = False
         """Whether this run holds the folder (`LOCK`)."""
+        self._close_lock = None
+        """Closes the lock file held open (`lock`): by `release`, or when the store goes."""
 
     def chunk_path(self, index: int) -> Path:
         return self.path / f"chunk_{index:06d}.parquet"
@@ -217,7 +242,11 @@ class RunStore:
         if not path.exists():
             return None
         try:
-            manifest = json.loads(path.read_text())
+            raw = path.read_bytes()
+        except OSError as error:  # there but not readable: not damage (an audit, 2026-12)
+            raise _unreadable(path, error) from None
+        try:
+            manifest = json.loads(raw.decode())
             if not isinstance(manifest, dict) or not isinstance(manifest.get("definition"), dict):
                 raise ValueError("no run definition in it")
             # valid JSON of the wrong kinds failed later with a TypeError ("resumed": 5) or
@@ -287,6 +316,14 @@ class RunStore:
         if old is not None:
             finished = self._chunk_files()
             if resume:
+                if old["definition"].get("format") != self.definition.get("format"):
+                    raise RunStoreError(
+                        f"{self.flag} {self.path} holds a run in the store's format "
+                        f"{old['definition'].get('format')!r}, this version's is "
+                        f"{self.definition.get('format')!r} (a "
+                        f"run is now defined by the settings that differ from their defaults); "
+                        f"refusing to resume it: finish it with the version that started it, "
+                        f"or delete the folder")
                 differences = definition_differences(old["definition"], self.definition)
                 if differences:
                     raise RunStoreError(
@@ -471,6 +508,11 @@ class RunStore:
         cannot be trusted."""
         summary, stamp = self._load_table(self.chunk_path(task.index), task)
         if "trajectory_sha256" not in stamp:
+            if task.record_interval_s > 0:
+                # every run with records has one at its start at least: a chunk stored
+                # without one (by a store before trajectories were kept) would drop its
+                # instances' records from the result without a word (an audit, 2026-12)
+                raise ValueError("stored without its trajectory, which this run records")
             return summary, None
         trajectory, trajectory_stamp = self._load_table(self.trajectory_path(task.index), task,
                                                         "its trajectory ")
@@ -480,11 +522,15 @@ class RunStore:
 
     def _load_table(self, path: Path, task: ChunkTask, what: str = ""):
         """(table, stamp) of the file at `path` written for `task`; ValueError (its reason
-        prefixed by `what`) saying why it cannot be trusted."""
+        prefixed by `what`) saying why it cannot be trusted: missing or damaged. A file that
+        is there but cannot be read (no permission, an I/O error) is no sign of damage: a
+        RunStoreError naming it (such a file was deleted and recomputed: an audit, 2026-12)."""
         try:
             data = path.read_bytes()
-        except OSError as error:
+        except FileNotFoundError as error:
             raise ValueError(f"{what}unreadable ({error.strerror})") from None
+        except OSError as error:
+            raise _unreadable(path, error) from None
         try:
             return self.decode_chunk(data, task)
         except ValueError as error:
@@ -528,6 +574,8 @@ class RunStore:
             return False
         try:
             self._load(task)
+        except RunStoreError:
+            raise  # not damage: nothing is deleted
         except ValueError as error:
             log.warning("%s: %s; recomputing it", path, error)
             self._remove(path)
@@ -541,10 +589,12 @@ class RunStore:
 
     def read_chunk(self, task: ChunkTask) -> Tuple[pd.DataFrame, Optional[pd.DataFrame]]:
         """A stored chunk's (summary, trajectory), verified (RunStoreError if they changed
-        since `open`); the trajectory None where the chunk stored none (a run without records,
-        or a chunk stored before trajectories were)."""
+        since `open`, or if they cannot be read); the trajectory None where the run has no
+        records."""
         try:
             return self._load(task)
+        except RunStoreError:
+            raise
         except ValueError as error:
             raise RunStoreError(f"{self.chunk_path(task.index)}: {error}") from None
 
@@ -552,34 +602,48 @@ class RunStore:
         """Hold the folder for this run (`LOCK`, with this process and machine); RunStoreError
         naming the run that holds it where that run may still go on: a process of this machine
         that is alive (this one too: another call in it), or any process of another machine.
-        A lock whose process on this machine has ended (a killed run's) is taken over. A
-        folder where no file can be made is not locked: no run can write into it either."""
+        A lock whose process on this machine has ended (a killed run's) is taken over. Where
+        the system has it (POSIX) the lock file is also held open under `fcntl.flock` for the
+        run's life, which the system lets go of when the process ends, so that of two runs
+        taking over one ended run's lock at once only one gets it (each had read the ended
+        holder before the other wrote, and both ran: an audit, 2026-12). A folder where no
+        file can be made is not locked: no run can write into it either."""
+        if self.locked:
+            return
         path = self.path / LOCK
-        for _ in range(2):  # a second try after removing an ended process's lock
+        while True:
             try:
-                descriptor = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-            except FileExistsError:
-                holder = lock_holder(path)
-                if holder is not None and holder.endswith(OWN_PROCESS):
-                    held = _HOLDERS.get(self.path.resolve())
-                    holder = None if held is None or held() in (None, self) else holder
-                if holder is None:
-                    self._remove(path)
-                    continue
-                raise RunStoreError(f"{self.flag} {self.path} is in use by another run "
-                                    f"({holder}); wait for it to end or choose another "
-                                    f"{self.flag} (if no run uses the folder, delete {path})") \
-                    from None
+                descriptor = os.open(path, os.O_CREAT | os.O_RDWR, 0o644)
             except OSError:  # a read-only folder
                 return
-            with os.fdopen(descriptor, "w") as handle:
-                handle.write(f"{os.getpid()} {socket.gethostname()}")
+            if not _hold_exclusively(descriptor):
+                os.close(descriptor)
+                raise self._in_use(lock_holder(path) or "a run starting now", path)
+            if not _same_file(descriptor, path):  # let go of and removed since it was opened
+                os.close(descriptor)
+                continue
+            holder = lock_holder(path)
+            if holder is not None and holder.endswith(OWN_PROCESS):
+                held = _HOLDERS.get(self.path.resolve())
+                holder = None if held is None or held() in (None, self) else holder
+            if holder is not None:
+                os.close(descriptor)
+                raise self._in_use(holder, path)
+            os.ftruncate(descriptor, 0)
+            os.write(descriptor, f"{os.getpid()} {socket.gethostname()}".encode())
+            self._close_lock = weakref.finalize(self, os.close, descriptor)
             self.locked = True
             _HOLDERS[self.path.resolve()] = weakref.ref(self)
             return
 
+    def _in_use(self, holder: str, path: Path) -> RunStoreError:
+        return RunStoreError(f"{self.flag} {self.path} is in use by another run ({holder}); "
+                             f"wait for it to end or choose another {self.flag} (if no run uses "
+                             f"the folder, delete {path})")
+
     def release(self):
-        """Let go of the folder (remove this run's `LOCK`); nothing where it holds none."""
+        """Let go of the folder (remove this run's `LOCK`, then close it: a run that opened it
+        meanwhile finds it removed and opens the next); nothing where it holds none."""
         if self.locked:
             self.locked = False
             _HOLDERS.pop(self.path.resolve(), None)
@@ -587,6 +651,7 @@ class RunStore:
                 (self.path / LOCK).unlink(missing_ok=True)
             except OSError:  # the folder gone or read-only since: the next run takes it over
                 pass
+            self._close_lock()
 
     def finish(self):
         """Mark the run complete in its manifest and let go of the folder (`release`); a run
@@ -608,13 +673,46 @@ class RunStore:
 OWN_PROCESS = " (this one: another call in it holds the folder)"
 
 
+def _unreadable(path: Path, error: OSError) -> RunStoreError:
+    """The error for a store's file that is there but cannot be read: one line naming it and
+    the system's reason; nothing is deleted for it."""
+    return RunStoreError(f"{path}: cannot be read ({error.strerror or error}); the run folder is "
+                         f"left as it is: make the file readable, or choose another run folder")
+
+
+def _hold_exclusively(descriptor: int) -> bool:
+    """Whether this process now holds the open lock file `descriptor` exclusively
+    (`fcntl.flock`, not waiting): False where another open file holds it; True also where the
+    system or the file system has no such locks (the holder the file names decides alone)."""
+    if fcntl is None:
+        return True
+    try:
+        fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    except OSError:  # a file system without flock
+        return True
+    return True
+
+
+def _same_file(descriptor: int, path: Path) -> bool:
+    """Whether the open file `descriptor` is still the file at `path`."""
+    try:
+        return os.path.samestat(os.fstat(descriptor), os.stat(path))
+    except FileNotFoundError:
+        return False
+
+
 def lock_holder(path: Path) -> Optional[str]:
     """Who holds the run folder lock at `path` ("process N on this machine", "process N on
-    machine H"), None where its process on this machine has ended (or the lock names none)."""
+    machine H"), None where its process on this machine has ended (or the lock names none: an
+    empty file, a run that had not yet written itself in)."""
     try:
         process, _, machine = path.read_text().partition(" ")
     except OSError:
         return "a run whose lock cannot be read"
+    if not process:
+        return None
     if machine != socket.gethostname():
         return f"process {process} on machine {machine}"
     try:

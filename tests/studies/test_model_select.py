@@ -411,10 +411,10 @@ def test_a_reassessed_fit_gets_the_tables_of_a_fresh_run(tmp_path, monkeypatch, 
              ("model_select.csv", "model_select_gaits.csv", "model_select_folds.csv",
               "model_select_parameters.csv")}
     done = tmp_path / "done" / "paper.json"
-    record = json.loads(done.read_text())
+    record = model_select.read_done(done)
     record["row"]["train_objective"] = 99.0  # scored another way
     record["gaits"]["objective"] = [2 * value for value in record["gaits"]["objective"]]
-    done.write_text(json.dumps(record))
+    done.write_bytes(model_select.done_record_bytes(record))
 
     def forbidden(*args, **kwargs):
         raise AssertionError("the stored fit was run again")
@@ -460,7 +460,10 @@ class StoredFit:
                                           self.solver, ["A1"], **kwargs)
 
     def record(self, definition: str, status: str = "ok"):
-        self.done.write_text(json.dumps({"row": {"status": status, "definition": definition}}))
+        self.done.write_bytes(model_select.done_record_bytes(
+            {"row": {"status": status, "definition": definition, "n_parameters": 2,
+                     "n_samples": 10},
+             "parameters": {}, "gaits": {}, "folds": {}}))
 
     def name(self):
         found = model_select.stored_fit_of(self.done, self.folder, "fits/paper.csv",
@@ -605,8 +608,55 @@ def test_a_fit_record_that_cannot_be_read_is_fitted_again_not_a_traceback(tmp_pa
         done.write_text(text)
         assert model_select.read_done(done) is None
         assert capsys.readouterr().out.startswith(f"{done}: unreadable (")
-    done.write_text('{"row": {"status": "ok"}, "parameters": {}}')
-    assert model_select.read_done(done)["row"] == {"status": "ok"}
+    record = {"row": {"status": "ok", "n_parameters": 3, "n_samples": 240},
+              "parameters": {"parameter": ["alpha"], "value": [1.2345678901234567]},
+              "gaits": {"gait": ["A1", "A1+A3"], "objective": [0.5, 1.5]}, "folds": {}}
+    done.write_text(json.dumps(record))   # a record from before the checksums
+    assert model_select.read_done(done) == record
+    done.write_bytes(model_select.done_record_bytes(record))
+    assert model_select.read_done(done) == record
+    assert capsys.readouterr().out == ""
+
+
+@pytest.mark.parametrize("damage, reason", [
+    # a value changed by hand or by the disk: read back as the fit's result without a word
+    (lambda text: text.replace("1.2345678901234567", "1.2845678901234567"),
+     "its record does not match its checksum"),
+    # a table's name damaged: a KeyError after the fits before it (an audit, 2026-12)
+    (lambda text: text.replace("gaits", "gaitr"),
+     "its record does not match its checksum"),
+])
+def test_a_damaged_fit_record_is_fitted_again(tmp_path, capsys, damage, reason):
+    done = tmp_path / "paper.json"
+    record = {"row": {"status": "ok", "n_parameters": 3, "n_samples": 240},
+              "parameters": {"parameter": ["alpha"], "value": [1.2345678901234567]},
+              "gaits": {"gait": ["A1"], "objective": [0.5]}, "folds": {}}
+    done.write_text(damage(model_select.done_record_bytes(record).decode()))
+    assert model_select.read_done(done) is None
+    assert capsys.readouterr().out == (f"{done}: unreadable ({reason}); its candidate is "
+                                       f"fitted again\n")
+
+
+@pytest.mark.parametrize("record, reason", [
+    ({"row": {"status": "ok", "n_parameters": 3, "n_samples": 240}, "parameters": {},
+      "gaitr": {}, "folds": {}}, "its gaits table is missing or not columns of equal length"),
+    ({"row": {"status": "ok", "n_parameters": 3, "n_samples": 240}, "parameters": {},
+      "gaits": {"gait": ["A1"], "objective": []}, "folds": {}},
+     "its gaits table is missing or not columns of equal length"),
+    ({"row": {"status": "ok", "n_parameters": 3}, "parameters": {}, "gaits": {}, "folds": {}},
+     "its row lacks the counts of parameters and samples"),
+    ({"row": {"n_parameters": 3}, "parameters": {}, "gaits": {}, "folds": {}},
+     "not a fit's record"),
+])
+def test_a_fit_record_of_the_wrong_shape_is_fitted_again(tmp_path, capsys, record, reason):
+    """A record (with or without its checksum) lacking what --resume reads is fitted again
+    instead of failing with a KeyError."""
+    done = tmp_path / "paper.json"
+    for data in (json.dumps(record).encode(), model_select.done_record_bytes(record)):
+        done.write_bytes(data)
+        assert model_select.read_done(done) is None
+        assert capsys.readouterr().out == (f"{done}: unreadable ({reason}); its candidate is "
+                                           f"fitted again\n")
 
 
 def test_a_candidate_with_one_axis_is_refused_before_compute(no_compute, tmp_path, capsys):

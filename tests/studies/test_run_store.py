@@ -6,7 +6,9 @@ import errno
 import json
 import logging
 import os
+import re
 import socket
+import sys
 
 import numpy as np
 import pandas as pd
@@ -401,6 +403,36 @@ def test_a_lock_of_an_ended_process_is_taken_over_and_one_of_another_machine_ref
     with pytest.raises(RunStoreError, match=r"is in use by another run \(process 123 on machine "
                                             r"another-machine\)"):
         RunStore(folder, {"a": "definition"}).open([task], resume=True)
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="fcntl.flock is POSIX")
+def test_of_two_runs_taking_over_an_ended_runs_lock_only_one_gets_it(tmp_path):
+    """Two resumes of a killed run's folder each read the lock of the ended process, then
+    each removed it and made its own: both ran in one folder (an audit, 2026-12). A run that
+    takes the folder holds the lock file under flock before it reads who the file names, so
+    the second, whose flock fails, is refused even while the file still names the ended
+    process (the moment between the first's flock and its writing itself in); and once the
+    first lets go (its process ends: the system closes the file) the folder is taken."""
+    import fcntl
+    import subprocess
+    from taichi_star.batch.store import LOCK
+
+    task = ChunkTask(0, (0,), (ts.StarParams(),), DURATION, SOLVER)
+    folder = tmp_path / "run"
+    folder.mkdir()
+    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                           capture_output=True, text=True, check=True).stdout.strip()
+    (folder / LOCK).write_text(f"{ended} {socket.gethostname()}")
+    with open(folder / LOCK) as first:   # the first run's hold, not yet written in
+        fcntl.flock(first, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        with pytest.raises(RunStoreError, match=re.escape(
+                f"run_dir {folder} is in use by another run (a run starting now)")):
+            RunStore(folder, {"a": "definition"}).open([task], resume=True)
+    store = RunStore(folder, {"a": "definition"})
+    assert store.open([task], resume=True) == []
+    assert (folder / LOCK).read_text() == f"{os.getpid()} {socket.gethostname()}"
+    store.release()
+    assert not (folder / LOCK).exists()
 
 
 def test_run_batch_lets_go_of_its_folder_after_a_failure_and_reads_a_finished_run_back_read_only(

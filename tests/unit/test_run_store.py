@@ -2,7 +2,6 @@
 rule of the store (what a run's definition is, what makes a chunk file trusted, when a folder is
 refused, what the manifest records) is checked in milliseconds."""
 
-import dataclasses
 import errno
 import hashlib
 import json
@@ -89,12 +88,19 @@ def written(tmp_path):
 def test_definition_records_what_a_resumed_run_must_repeat():
     tasks = tasks_of(record_interval_s=0.02, steady_from_cycle=2)
     definition = run_definition(PARAMS, tasks, CHUNK, None, 0.1)
-    assert definition["format"] == 2
+    assert definition["format"] == 3
     assert definition["n_instances"] == 4 and definition["n_chunks"] == 2
     assert definition["chunk_size"] == CHUNK and type(definition["chunk_size"]) is int
     assert definition["cycles"] is None
     assert definition["duration_s"] == 0.1 and type(definition["duration_s"]) is float
-    assert definition["solver"] == dataclasses.asdict(SOLVER)
+    # the settings and parameters that differ from their defaults, so that a field added
+    # later with a default that changes nothing keeps a run resumable (an audit, 2026-12)
+    assert definition["solver"] == {"dt": 2e-3}
+    # (A1, 0.4), (A1, 0.8), (A1+A3, 0.4), (A1+A3, 0.8) against the defaults A1 and α = 0.8
+    changes = [{"alpha": 0.4}, {}, {"alpha": 0.4, "gait": "A1+A3"}, {"gait": "A1+A3"}]
+    assert definition["params_sha256"] == hashlib.sha256("\n".join(
+        json.dumps(change, sort_keys=True, separators=(",", ":")) for change in changes
+    ).encode()).hexdigest()
     assert definition["arch"] == "cpu"
     assert definition["record_interval_s"] == 0.02 and definition["steady_from_cycle"] == 2
     assert json.loads(json.dumps(definition)) == definition  # JSON-ready
@@ -899,3 +905,91 @@ def test_a_trajectory_changed_after_open_is_an_error_naming_the_chunk(tmp_path):
     with pytest.raises(RunStoreError, match=rf"^{re.escape(str(store.chunk_path(1)))}: its "
                                             rf"trajectory unreadable \("):
         store.read(tasks[1])
+
+
+# --- what a store of another version left, and files that cannot be read ---
+
+def test_a_run_of_the_format_before_is_refused_saying_why(written):
+    """Format 2 defined a run by every parameter field, so a field added later with its default
+    made its runs unresumable, blamed on "the instance parameters" (an audit, 2026-12); format 3
+    records the fields that differ from their defaults. A format-2 run is refused naming both
+    formats, its chunks kept."""
+    folder, tasks = written
+    manifest = manifest_of(folder)
+    manifest["definition"]["format"] = 2
+    manifest["definition_sha256"] = hashlib.sha256(json.dumps(
+        manifest["definition"], sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(RunStoreError, match=re.escape(
+            f"run_dir {folder} holds a run in the store's format 2, this version's is 3 (a run "
+            f"is now defined by the settings that differ from their defaults); refusing to "
+            f"resume it: finish it with the version that started it, or delete the folder")):
+        store_in(folder).open(tasks, resume=True)
+    assert len(list(folder.glob("chunk_*"))) == 2
+
+
+def test_a_parameter_at_its_default_leaves_the_definition_as_without_it():
+    """A field set to its default value is no change: the definition of instances that set
+    one is that of instances that leave it (so a field added with a default that changes
+    nothing keeps every run's definition)."""
+    explicit = [p.replace(cylinder_drag=ts.StarParams().cylinder_drag) for p in PARAMS]
+    assert definition_of(explicit) == definition_of()
+    assert definition_of(solver=SOLVER.replace(max_newton=ts.SolverConfig().max_newton)) \
+        == definition_of()
+
+
+@pytest.fixture
+def unreadable(monkeypatch):
+    """Files whose name is in the returned set cannot be read (EACCES), as a file of another
+    user or on a failing disk (root reads every file whatever its mode)."""
+    names = set()
+    read_bytes = Path.read_bytes
+
+    def refusing(path):
+        if path.name in names:
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+        return read_bytes(path)
+    monkeypatch.setattr(Path, "read_bytes", refusing)
+    return names
+
+
+@pytest.mark.parametrize("name", ["chunk_000000.parquet", "manifest.json"])
+def test_a_file_that_cannot_be_read_is_named_and_nothing_is_deleted(written, unreadable, name):
+    """An unreadable chunk was taken for a damaged one, deleted and recomputed, and an
+    unreadable manifest called damaged with the advice to delete it (an audit, 2026-12): the
+    run is refused naming the file, every file left."""
+    folder, tasks = written
+    unreadable.add(name)
+    def files():  # the lock is the holder's, whoever it is
+        return sorted(path.name for path in folder.iterdir() if path.name != LOCK)
+    before = files()
+    with pytest.raises(RunStoreError, match=re.escape(
+            f"{folder / name}: cannot be read (Permission denied); the run folder is left as "
+            f"it is: make the file readable, or choose another run folder")):
+        store_in(folder).open(tasks, resume=True)
+    assert files() == before and "chunk_000000.parquet" in before
+
+
+def test_a_chunk_stored_without_the_trajectory_its_run_records_is_recomputed(tmp_path, caplog):
+    """Every run with records has one at its start: a chunk stamped without a trajectory (as
+    a store before trajectories were kept wrote it) dropped its instances' records from the
+    result without a word (an audit, 2026-12); now it is recomputed."""
+    folder = tmp_path / "run"
+    tasks = tasks_of(record_interval_s=0.02)
+    store = RunStore(folder, definition_of(record_interval_s=0.02))
+    store.open(tasks, resume=False)
+    for task in tasks:
+        store.write(task, summary_of(task), trajectory_of(task))
+    store.release()
+    path = store.chunk_path(0)
+    rewrite(path, stamp_changes={})   # the same stamp ...
+    table = pq.read_table(path)
+    stamp = json.loads(table.schema.metadata[b"taichi_star.chunk"])
+    del stamp["trajectory_sha256"]    # ... without its trajectory's
+    pq.write_table(table.replace_schema_metadata(
+        {**table.schema.metadata, b"taichi_star.chunk": json.dumps(stamp).encode()}), path)
+    with caplog.at_level(logging.WARNING, logger="taichi_star.batch"):
+        assert RunStore(folder, definition_of(record_interval_s=0.02)).open(
+            tasks, resume=True) == [1]
+    assert [r.getMessage() for r in caplog.records] == [
+        f"{path}: stored without its trajectory, which this run records; recomputing it"]
