@@ -427,12 +427,14 @@ def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, reco
         for b, index in by_stop.get(stop, ()):
             boundaries[b, index] = now[b]
         if stop in record_set:
-            positions = state.positions.to_numpy()[:batch]
+            # in float64 as the summary's and the Simulator's headings are: an f32 heading
+            # differed from theirs by ~2 % at the same state (an audit, 2026-12)
+            positions = state.positions.to_numpy()[:batch].astype(np.float64)
             centroids.append(now)
             rotations.append(metrics.body_rotation(positions, model.rest_positions,
                                                    model.topology.joints, CENTRE))
             if record_shapes:
-                shapes.append(positions[:primal].astype(np.float64))
+                shapes.append(positions[:primal].copy())  # not a view of the replicas too
 
     start_centroids = engine.centroids_of(batch)
     # fixed steps never end a step early for a stop: only adaptive ones need each its own

@@ -117,8 +117,9 @@ class SimulatorSnapshot:
     """The whole state of a Simulator's batch (from `Simulator.save`): every device field as a
     NumPy array (padding included) and what the state belongs to: the engine, the batch size,
     the step, each instance's parameters (`parameter_texts`) and the solver's settings
-    (`solver_texts`), and how far each failed instance's clock lags (`behind`); the last
-    three empty in a snapshot written before they were recorded."""
+    (`solver_texts`), how far each failed instance's clock lags (`behind`, fixed steps) and,
+    with adaptive steps, the time each failed instance's clock would show (`shown_s`); those
+    empty in a snapshot written before they were recorded."""
 
     fields: Dict[str, np.ndarray]
     engine_key: str
@@ -128,8 +129,12 @@ class SimulatorSnapshot:
     solver: Dict[str, str] = dataclasses.field(default_factory=dict)
     behind: Tuple[float, ...] = ()
     """How far each failed instance's clock lags the others' (`Simulator._behind`: steps, or
-    seconds with adaptive steps), which its later records' times add; empty in a snapshot
-    written before it was recorded."""
+    in a snapshot of adaptive steps written before `shown_s` seconds), which its later
+    records' times add; empty in a snapshot written before it was recorded."""
+    shown_s: Tuple[float, ...] = ()
+    """With adaptive steps, the time each failed instance's clock would show, s, NaN for one
+    running (`Simulator._shown_s`); empty in a snapshot of fixed steps or one written before
+    it was recorded."""
 
     def write(self, path) -> Path:
         """Save to an .npz file (arrays plus a JSON header; ".npz" is added to a path without
@@ -142,7 +147,8 @@ class SimulatorSnapshot:
         path = path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
         header = json.dumps({"engine_key": self.engine_key, "n_instances": self.n_instances,
                              "dt": self.dt, "params": list(self.params),
-                             "solver": dict(self.solver), "behind": list(self.behind)})
+                             "solver": dict(self.solver), "behind": list(self.behind),
+                             "shown_s": list(self.shown_s)})
         archive = io.BytesIO()
         np.savez(archive, __header__=np.array(header), **self.fields)
         # an OSError all the same, but naming the file asked for, not the temporary beside it
@@ -170,7 +176,8 @@ class SimulatorSnapshot:
                                         for row in header.get("params", ())),
                            solver={str(name): str(text)
                                    for name, text in header.get("solver", {}).items()},
-                           behind=tuple(float(lag) for lag in header.get("behind", ())))
+                           behind=tuple(float(lag) for lag in header.get("behind", ())),
+                           shown_s=tuple(float(time) for time in header.get("shown_s", ())))
         except OSError as error:
             raise ValueError(f"snapshot {path}: cannot read it ({error.strerror or error})") \
                 from None
@@ -244,6 +251,12 @@ class Simulator(NotCopied):
         self._running = np.ones(self.n_instances, dtype=bool)
         """`ok` as of the last `advance`, `reset` or `load` (where a status can change), for
         `fire` to skip failed instances without reading the device at every command."""
+        self._shown_s = np.full(self.n_instances, np.nan)
+        """With adaptive steps, the time each failed instance's clock would show at the start
+        of the next `advance`, s (NaN for one running), kept as a running instance's is, the
+        state's precision of its start time + the stop: a lag added to its frozen time rounded
+        otherwise, so its records fell an ulp or two off its neighbours' times and a table
+        pivoted on t_s split them (an audit, 2026-12)."""
         self._behind = np.zeros(self.n_instances)
         """How far each instance's clock lags the one it would show had it run on (steps with
         fixed steps, s with adaptive ones): a failed instance's stops at its failure, and
@@ -437,7 +450,11 @@ class Simulator(NotCopied):
                    else after["steps_done"].astype(np.int64) - start_steps)
             reached = ((clock.time_of(clock.end) if clock.adaptive else clock.end) if whole
                        else ran[self._running].max() if self._running.any() else None)
-            if reached is not None:
+            if reached is not None and clock.adaptive:
+                real = np.float32 if self.solver.precision == "f32" else np.float64
+                clocks = self._shown_from(start_times)
+                self._shown_s[stopped] = real(clocks[stopped] + reached)
+            elif reached is not None:
                 self._behind[stopped] += reached - ran[stopped]
         capped = newton_capped(after["newton_max"], self.solver) & self._running \
             & ~self._capped_named
@@ -473,6 +490,7 @@ class Simulator(NotCopied):
         self._capped_named[rows] = False
         self._running[rows] = True
         self._behind[rows] = 0.0
+        self._shown_s[rows] = np.nan
         # each instance's replicas (every n_instances rows after it) go back with it
         copies = self.model.batch_size // self.n_instances
         rows = (rows[None, :] + self.n_instances * np.arange(copies)[:, None]).ravel()
@@ -534,13 +552,20 @@ class Simulator(NotCopied):
         if failed.any():
             real = np.float32 if self.solver.precision == "f32" else np.float64
             # the engine's own arithmetic: a fixed step's time is its number × dt, an adaptive
-            # run's stop its start time + the stop; from the clock it would show (`_behind`)
-            at = (real(start_times + self._behind + clock.time_of(stop)) if clock.adaptive
+            # run's stop its start time + the stop; from the clock it would show (`_behind`,
+            # `_shown_s`)
+            at = (real(self._shown_from(start_times) + clock.time_of(stop)) if clock.adaptive
                   else (start_steps + self._behind + stop).astype(real) * real(clock.dt))
             columns["t_s"] = np.where(failed, at.astype(np.float64), columns["t_s"])
             for name in (*DIFFERENTIABLE_STATE_COLUMNS, *ACTUATOR_COLUMNS):
                 columns[name] = np.where(failed, np.nan, columns[name])
         return columns
+
+    def _shown_from(self, start_times: np.ndarray) -> np.ndarray:
+        """(B,) with adaptive steps, the time each instance's clock shows at the start of an
+        advance that started at `start_times` (s): a failed instance's `_shown_s`, a running
+        one's own."""
+        return np.where(np.isnan(self._shown_s), start_times, self._shown_s)
 
     def _state_of(self, batch: int) -> pd.DataFrame:
         """`state()` of the engine's first `batch` instances (with sensitivities: the
@@ -619,7 +644,9 @@ class Simulator(NotCopied):
                                      n_instances=self.n_instances, dt=self.solver.dt,
                                      params=self._parameter_texts,
                                      solver=solver_texts(self.solver),
-                                     behind=tuple(self._behind.tolist()))
+                                     behind=tuple(self._behind.tolist()),
+                                     shown_s=tuple(self._shown_s.tolist())
+                                     if self.solver.adaptive else ())
         return snapshot.write(path) if path is not None else snapshot
 
     @one_call_at_a_time
@@ -692,12 +719,24 @@ class Simulator(NotCopied):
             raise ValueError(f"the saved state records {len(snapshot.behind)} clock lags for "
                              f"its {snapshot.n_instances} instances, or one not finite and >= 0 "
                              f"(a damaged snapshot)")
+        if snapshot.shown_s and (len(snapshot.shown_s) != self.n_instances or not all(
+                math.isnan(time) or (math.isfinite(time) and time >= 0.0)
+                for time in snapshot.shown_s)):
+            raise ValueError(f"the saved state records {len(snapshot.shown_s)} clock times for "
+                             f"its {snapshot.n_instances} instances, or one neither NaN nor "
+                             f"finite and >= 0 (a damaged snapshot)")
         self.engine.restore_state(snapshot.fields, check=self._check_saved_clocks)
         loaded = self.engine.state.read(("status", "newton_max"), self.n_instances)
         self._running = loaded["status"] == STATUS_OK
         # a failed instance's records go on at the clock it would show (they fell back to its
         # frozen clock after a load: an audit, 2026-12)
         self._behind[:] = snapshot.behind if snapshot.behind else 0.0
+        self._shown_s[:] = np.nan
+        if snapshot.shown_s:
+            self._shown_s[:] = snapshot.shown_s
+        elif self.solver.adaptive:  # a snapshot from before: its lags, in seconds
+            self._shown_s[:] = np.where(self._behind != 0.0, self.time_s + self._behind, np.nan)
+            self._behind[:] = 0.0
         # the saved run's capped solves are its history, shown in state(), not news
         self._capped_named = newton_capped(loaded["newton_max"], self.solver)
         own = solver_texts(self.solver)

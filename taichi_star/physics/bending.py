@@ -211,14 +211,16 @@ class Bending(StrainTerm):
         (s): its delay later, and 0 until then; within `actuation.SWITCH_SNAP` of the time of
         the profile's switch, the switch (a step that ends on it reads the cooling branch,
         whichever side the subtraction rounded to). Returns (τ, dτ/d(delay): −1, or 0 while it
-        waits)."""
+        waits: also at a delay of 0 on the firing itself, where a longer delay leaves τ at 0;
+        it was −1 there, so that every step ending on a firing gave a zero delay the heating
+        slope's derivative, 4–35 % off the differences by a period's end: an audit, 2026-12)."""
         delay = self.actuator_delay[b, m]
         tau = since
         slope = -1.0
+        if since - delay <= 0.0:
+            slope = 0.0
         if delay != 0.0:
             tau = ti.max(since - delay, 0.0)
-            if since - delay <= 0.0:
-                slope = 0.0
         switch = self.profile[b, 8]
         if ti.abs(tau - switch) <= SWITCH_SNAP * ti.max(ti.abs(time), 1.0):
             tau = switch

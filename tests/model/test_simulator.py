@@ -840,6 +840,32 @@ def test_a_failed_robots_clock_goes_through_a_save_and_a_load(tmp_path):
     assert json_module.loads(str(np.load(path)["__header__"]))["behind"] == list(header.behind)
 
 
+def test_an_adaptive_failed_robots_records_fall_on_its_neighbours_times(tmp_path):
+    """With adaptive steps a failed robot's clock was its frozen time plus a lag, summed in
+    another order than a running robot's start + stop: two advances after its failure its
+    record fell an ulp or two off (0.43000000000000005 against 0.42999999999999994), and a
+    table pivoted on t_s split the time (an audit, 2026-12). Its clock is now kept as a running
+    robot's is, also through a save and a load, from memory and from a file."""
+    params = ts.StarParams.preset("paper")
+    solver = ts.SolverConfig(adaptive=True, integrator="bdf2", dt=0.01, dt_min=0.01,
+                             dt_max=0.05, max_newton=5, max_substep_halvings=0, error_tol=1e-4)
+    sim = ts.Simulator([params, params], solver)
+    sim.fire(["A1", "none"])
+    sim.advance(0.03)
+    sim.advance(0.3)
+    assert sim.state()["status"].tolist() == ["newton_failed", "ok"]
+    saved, path = sim.save(), sim.save(tmp_path / "state.npz")
+    records = sim.advance(0.1, record_interval_s=0.1)
+    assert records["t_s"].iloc[0] == records["t_s"].iloc[1] == 0.03 + 0.3 + 0.1
+    for snapshot in (saved, path):
+        sim.load(snapshot)
+        pd.testing.assert_frame_equal(sim.advance(0.1, record_interval_s=0.1), records)
+    damaged = dataclasses.replace(saved, shown_s=saved.shown_s[:1])
+    with pytest.raises(ValueError, match=r"^the saved state records 1 clock times for its 2 "
+                                         r"instances"):
+        sim.load(damaged)
+
+
 def test_advances_off_the_step_grid_say_the_time_each_simulates():
     """Ten advance(0.0015) at 1-ms steps advance 0.02 s, not 0.015 (each rounded to 2 steps):
     each call says so, and one on the grid says nothing."""
