@@ -6,10 +6,10 @@ clusters of 1, 2, ... single-threaded workers.
 The sweep: the five paper gaits × 8 values of alpha (40 instances), one 3.15 s cycle at
 dt = 1 ms, in chunks of 5 (8 chunks; one compiled engine). Every mode first runs one chunk per
 worker (Taichi compiles or loads the engine there; not timed), then the whole sweep is timed
-(`wall_s`); starting the workers is timed apart (`startup_s`). Every mode's executor is started
-first and kept, and the sweeps are timed in --rounds interleaved rounds, each timing every mode
-once in turn (`profiling.interleaved_rounds`), so that the machine's drifts reach every mode
-alike. In process, Taichi uses its own CPU threads (one per core); a worker is one process
+(`wall_s`); starting the workers is timed apart (`startup_s`, the median of the rounds'). The
+sweeps are timed in --rounds interleaved rounds, each timing every mode once in turn, so that
+the machine's drifts reach every mode alike; a mode's workers are started for its turn and
+stopped after it, so that none idles beside another's sweep. In process, Taichi uses its own CPU threads (one per core); a worker is one process
 with one Taichi thread. Every mode's table is checked to be bitwise the in-process one.
 
 Writes `scaling.csv`: one row per mode with its best round's wall time (`wall_s`), the median
@@ -30,7 +30,6 @@ import pandas as pd
 from taichi_star.batch import MAX_LOCAL_WORKERS, InProcess, LocalProcesses, run_batch
 from taichi_star.extras import missing_extra
 from taichi_star.experiment import PAPER_GAITS
-from taichi_star.profiling import interleaved_rounds
 from taichi_star.timegrid import steps_in
 
 from . import cli, provenance
@@ -93,49 +92,47 @@ def main(argv=None):
     warmup_instances = sum(min(max(workers, 1) * args.chunk_size, len(params))
                            for _, workers, _ in timed)
     cli.check_robot_steps(f"--rounds {args.rounds} × {len(timed)} modes × the sweep's "
-                          f"{len(params)} instances, and the warm-ups, of {steps} steps each",
-                          (args.rounds * len(timed) * len(params) + warmup_instances) * steps)
+                          f"{len(params)} instances and the warm-ups, of {steps} steps each",
+                          args.rounds * (len(timed) * len(params) + warmup_instances) * steps)
     out = cli.Output(args, argv or [], model={"sweep": sweep}, solver=solver)
     run_kwargs = dict(solver=solver, chunk_size=args.chunk_size, progress=False)  # timed runs
-    load = []
-    with contextlib.ExitStack() as stack:
-        executors, started = [], []
-        for _, _, context in timed:
+    walls = np.empty((args.rounds, len(timed)))
+    startups = np.empty((args.rounds, len(timed)))
+    summaries = [None] * len(timed)
+    load = os.getloadavg()[0]
+    for round_index in range(args.rounds):
+        for index, (mode, workers, context) in enumerate(timed):
+            # each mode's workers alive only while it is timed (idle Dask workers beside
+            # another mode's sweep slowed it by ~8 %, measured)
             start = time.perf_counter()
-            executors.append(stack.enter_context(context()))
-            started.append(time.perf_counter() - start)
-        # untimed: each executor's workers compile (or load) the engine on a chunk each
-        warmups = [lambda executor=executor, workers=workers: run_batch(
-            params[:max(workers, 1) * args.chunk_size], duration, executor=executor,
-            **run_kwargs) for executor, (_, workers, _) in zip(executors, timed)]
-        sweeps = [lambda executor=executor: run_batch(params, duration, executor=executor,
-                                                      **run_kwargs).summary
-                  for executor in executors]
-
-        def report(round_index: int, index: int, wall: float):
-            mode, workers, _ = timed[index]
-            print(f"round {round_index + 1}: {mode:>10} workers={workers}: {wall:.2f} s",
-                  flush=True)
-
-        summaries, times, warm = interleaved_rounds(
-            sweeps, args.rounds, warmups, before_rounds=lambda: load.append(os.getloadavg()[0]),
-            progress=report)
+            with context() as executor:
+                # untimed: start the workers and compile (or load) the engine in each
+                run_batch(params[:max(workers, 1) * args.chunk_size], duration,
+                          executor=executor, **run_kwargs)
+                startups[round_index, index] = time.perf_counter() - start
+                start = time.perf_counter()
+                summaries[index] = run_batch(params, duration, executor=executor,
+                                             **run_kwargs).summary
+                walls[round_index, index] = time.perf_counter() - start
+            print(f"round {round_index + 1}: {mode:>10} workers={workers}: "
+                  f"{walls[round_index, index]:.2f} s (startup "
+                  f"{startups[round_index, index]:.2f} s)", flush=True)
     rows = []
     for index, (mode, workers, _) in enumerate(timed):
-        wall = float(times[:, index].min())
+        wall = float(walls[:, index].min())
         rows.append({"mode": mode, "workers": workers,
                      "taichi_threads_per_process": "default (one per core)" if not workers else 1,
                      "instances": len(params), "chunk_size": args.chunk_size,
                      "steps_per_instance": steps, "dt_s": solver.dt,
                      "robot_steps": len(params) * steps,
-                     "startup_s": started[index] + warm[index], "rounds": args.rounds,
-                     "wall_s": wall, "wall_s_median": float(np.median(times[:, index])),
-                     "wall_s_rounds": ";".join(f"{t:.6g}" for t in times[:, index]),
+                     "startup_s": float(np.median(startups[:, index])), "rounds": args.rounds,
+                     "wall_s": wall, "wall_s_median": float(np.median(walls[:, index])),
+                     "wall_s_rounds": ";".join(f"{t:.6g}" for t in walls[:, index]),
                      "robot_steps_per_s": len(params) * steps / wall,
                      # the ratio of each round's pair, the machine's drifts reaching both alike
-                     "speedup_vs_in_process": float(np.median(times[:, 0] / times[:, index])),
+                     "speedup_vs_in_process": float(np.median(walls[:, 0] / walls[:, index])),
                      "same_table_as_in_process": bool(summaries[index].equals(summaries[0])),
-                     "load_1min_before": load[0]})
+                     "load_1min_before": load})
     # the machine, the code and the model timed, on every row (they were in the sidecar
     # alone: an audit, 2026-12)
     table = pd.DataFrame(rows).assign(preset="paper", precision=solver.precision,

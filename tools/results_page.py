@@ -215,9 +215,11 @@ def scaling_table() -> str:
     labels = {("in-process", "0"): "in process (Taichi threads)", ("processes", "1"): "1 worker process",
               ("dask-local", "1"): "1 Dask worker", ("processes", "2"): "2 worker processes",
               ("dask-local", "2"): "2 Dask workers"}
-    lines = ["| mode | wall time | speed-up | same table as in process |", "|---|---|---|---|"]
+    lines = ["| mode | wall time, best round | median | speed-up, median of rounds | "
+             "same table as in process |", "|---|---|---|---|---|"]
     for _, row in read_table("scaling.csv").iterrows():
-        lines.append(f"| {labels[(row['mode'], row['workers'])]} | {float(row['wall_s']):.1f} s | "
+        lines.append(f"| {labels[(row['mode'], row['workers'])]} | {float(row['wall_s']):.2f} s | "
+                     f"{float(row['wall_s_median']):.2f} s | "
                      f"{float(row['speedup_vs_in_process']):.2f} | "
                      f"{'yes' if row['same_table_as_in_process'] == 'True' else '**no**'} |")
     return "\n".join(lines) + "\n"

@@ -148,11 +148,11 @@ def test_scaling_quick(tmp_path, monkeypatch):
     written = pd.read_csv(tmp_path / "scaling.csv")
     assert written["mode"].tolist() == ["in-process", "processes"]
     assert written["workers"].tolist() == [0, 2]
-    # every mode's untimed call on one chunk per worker (of 1 instance under --quick), then
-    # one round (--quick) timing every mode's sweep of 2 gaits × 2 alphas in turn
+    # one round (--quick): each mode in turn, an untimed call on one chunk per worker (of 1
+    # instance under --quick), then the timed sweep of 2 gaits × 2 alphas
     assert [(executor, len(params)) for executor, params, _, _ in calls] == [
-        ("InProcess", 1), ("LocalProcesses", 2), ("InProcess", 4), ("LocalProcesses", 4)]
-    params = calls[2][1]
+        ("InProcess", 1), ("InProcess", 4), ("LocalProcesses", 2), ("LocalProcesses", 4)]
+    params = calls[1][1]
     assert params == calls[3][1]
     assert sorted((p.gait, p.alpha) for p in params) == sorted(
         (gait, alpha) for gait in list(PAPER_GAITS)[:2] for alpha in (0.2, 0.4))
@@ -163,7 +163,7 @@ def test_scaling_quick(tmp_path, monkeypatch):
     # modes with each other only)
     reference = run_batch(params, cli.QUICK_DURATION_S, progress=False,
                           solver=SolverConfig.preset("paper", dt=cli.QUICK_DT)).summary
-    for _, _, _, summary in (calls[2], calls[3]):
+    for _, _, _, summary in (calls[1], calls[3]):
         pd.testing.assert_frame_equal(summary, reference, check_exact=True)
     assert written["same_table_as_in_process"].all()
     assert (written["wall_s"] > 0).all()
