@@ -96,6 +96,7 @@ def test_simd_quick_assemblies_in_f32(tmp_path):
     assert (tmp_path / "simd_assembly.png").stat().st_size > 1000
 
 
+@pytest.mark.slow  # the study's own kernels: compiled apart, Taichi started again
 def test_every_form_of_the_block_lu_solves_as_numpy_does(paper_plan, tmp_path):
     """The study's LaneSystem in each form, directly (not through its own error column): the
     paper pattern's random systems of 8 instances factored and solved equal
@@ -139,6 +140,7 @@ def assembled_in(assembly, n_nodes, batch, state, element, forms):
     return systems
 
 
+@pytest.mark.slow  # the study's own kernels: compiled apart, Taichi started again
 def test_the_bending_assembly_is_the_energys_derivatives_in_every_form():
     """On a 12-node chain, 8 instances: each form assembles the same bits; the gradient equals
     central differences of the NumPy energy and the Hessian blocks central differences of the
@@ -178,6 +180,7 @@ def test_the_bending_assembly_is_the_energys_derivatives_in_every_form():
             Runtime.current().adopt_program()  # as the study does: its own program, not a user's
 
 
+@pytest.mark.slow  # the study's own kernels: compiled apart, Taichi started again
 def test_the_rod_drag_assembly_is_the_numpy_residual_and_its_jacobian_in_every_form():
     """On a 12-node chain, 8 instances: each form assembles the same bits; the residual equals
     the NumPy copy's and the Jacobian its central differences (f64)."""
