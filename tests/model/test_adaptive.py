@@ -234,6 +234,7 @@ def _fired_robot_after_1_5_s(solver):
     return sim
 
 
+@pytest.mark.slow  # the f64 case above stays in the default tier (the suite's time)
 def test_with_dt_min_equal_to_dt_max_every_step_is_that_long_in_f32_too():
     """In f32 the time's roundings (~1e-7 of it) pass 1e-6 of the step: the slack is also 64 of
     them there (1,516 steps to 1.5 s before, a review)."""

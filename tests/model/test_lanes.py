@@ -36,6 +36,7 @@ def assert_same_bits(alone, together):
     pd.testing.assert_frame_equal(together.trajectory, alone.trajectory, check_exact=True)
 
 
+@pytest.mark.slow  # the lanes' other bitwise tests stay in the default tier (the suite's time)
 def test_lockstep_retries_and_freezes_as_each_instance_alone():
     """BDF2 with damping at 10 ms and at most 4 Newton iterations: in the heating pulse first
     attempts fail, and those instances retry (without BDF2's history, then in substeps) in

@@ -598,6 +598,7 @@ def test_held_out_scores_are_fresh_fits_of_the_start_and_each_best_point(monkeyp
     assert np.isinf(failed["objective"]).all() and failed["phase_s"].isna().all()
 
 
+@pytest.mark.slow  # a fit's run with sensitivities (the suite's time); its rule is unit-tested
 def test_a_run_with_sensitivities_leaves_out_the_axes_no_gait_moves(monkeypatch):
     """A4's gain with A1+A2 fitted: A4 never fires, so its Jacobian column is exactly zero and
     the run with sensitivities asks only for α's (the replicas counted for α alone). The
