@@ -9,8 +9,9 @@ worker (Taichi compiles or loads the engine there; not timed), then the whole sw
 (`wall_s`); starting the workers is timed apart (`startup_s`, the median of the rounds'). The
 sweeps are timed in --rounds interleaved rounds, each timing every mode once in turn, so that
 the machine's drifts reach every mode alike; a mode's workers are started for its turn and
-stopped after it, so that none idles beside another's sweep. In process, Taichi uses its own CPU threads (one per core); a worker is one process
-with one Taichi thread. Every mode's table is checked to be bitwise the in-process one.
+stopped after it, so that none idles beside another's sweep. In process, Taichi uses its own
+CPU threads (one per core); a worker is one process with one Taichi thread. Every mode's
+table is checked to be bitwise the in-process one.
 
 Writes `scaling.csv`: one row per mode with its best round's wall time (`wall_s`), the median
 (`wall_s_median`), every round's (`wall_s_rounds`, ";"-separated, in order), the load average

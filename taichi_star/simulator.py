@@ -699,19 +699,21 @@ class Simulator(NotCopied):
         default_params = parameter_texts([StarParams()])[0]
         for b, (saved, own) in enumerate(zip(checked or (), self._parameter_texts)):
             changed = differing_fields(saved, own, default_params)
+            there = saved.get(changed[0], "not recorded: " + default_params[changed[0]]) \
+                if changed else ""
             if changed and self.directions:
                 # the replicas carry their tangents as offsets of ±ε of the saved parameters,
                 # and ε is a share of the value: under others every derivative came out
                 # mis-scaled (α 1.8 %, the joint radius 6.3 % off, no warning; an audit)
                 raise ValueError(
                     f"the saved state belongs to instances of other parameters (instance {b}'s "
-                    f"{changed[0]} is {saved.get(changed[0], 'not recorded: ' + default_params[changed[0]])} there, "
+                    f"{changed[0]} is {there} there, "
                     f"{own[changed[0]]} here): a Simulator with sensitivities continues only "
                     f"its own parameters' state (other_params=True is for one without)")
             if changed and not other_params:
                 raise ValueError(
                     f"the saved state belongs to instances of other parameters: instance "
-                    f"{b}'s {changed[0]} is {saved.get(changed[0], 'not recorded: ' + default_params[changed[0]])} there, "
+                    f"{b}'s {changed[0]} is {there} there, "
                     f"{own[changed[0]]} here ({len(changed)} field(s) differ); load(..., "
                     f"other_params=True) continues it under this simulator's parameters")
         if snapshot.behind and (len(snapshot.behind) != self.n_instances or not all(
@@ -743,8 +745,8 @@ class Simulator(NotCopied):
         defaults = solver_texts(SolverConfig())
         changed = differing_fields(snapshot.solver, own, defaults) if snapshot.solver else []
         if changed:
-            warn_user(f"the saved state was stepped with {changed[0]} = "
-                      f"{snapshot.solver.get(changed[0], 'not recorded: ' + defaults[changed[0]])}, this simulator's "
+            saved = snapshot.solver.get(changed[0], "not recorded: " + defaults[changed[0]])
+            warn_user(f"the saved state was stepped with {changed[0]} = {saved}, this simulator's "
                       f"is {own[changed[0]]} ({len(changed)} setting(s) differ): it goes on "
                       f"under this simulator's settings, not bit for bit as the saved run "
                       f"would have")

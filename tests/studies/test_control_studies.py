@@ -187,34 +187,46 @@ def test_the_paths_are_recorded_as_often_as_whole_steps_allow(period, dt, frames
     assert plan.path_frames(period, dt) == frames
 
 
+class StandInSpace:
+    def seed(self, seed):
+        pass
+
+    def sample(self):
+        return None
+
+
+class StandInEnvs:
+    """env_bench's vector environment stood in for: control periods of 0.5 s, 7 nodes, and
+    each step moves `clock` (a one-item list) by the next of `step_seconds[preset]` (the
+    first: the untimed one), noting (preset, its number) in `order`."""
+
+    control_period_s = 0.5
+    action_space = StandInSpace()
+    simulator = type("Sim", (), {"n_nodes": 7})()
+    clock, order = [0.0], []
+    step_seconds = {"paper": [0.0] * 8, "accurate": [0.0] * 8}
+
+    def __init__(self, num_envs, params, **kwargs):
+        self.preset = "paper" if params == taichi_star.StarParams.preset("paper") \
+            else "accurate"
+        self.steps = 0
+
+    def reset(self, seed):
+        pass
+
+    def step(self, action):
+        self.clock[0] += self.step_seconds[self.preset][self.steps]
+        self.order.append((self.preset, self.steps))
+        self.steps += 1
+
+
 def test_env_bench_counts_robot_steps_only_of_fixed_steps(monkeypatch):
     """robot_steps_per_s counts steps of dt: with adaptive steps (the accurate preset's) that
     counted 1-ms steps the robots did not take, about 11 times too many (an audit, 2026-12):
     NaN there; with fixed steps robot-seconds / dt / wall."""
     from studies import env_bench
 
-    class Space:
-        def seed(self, seed):
-            pass
-
-        def sample(self):
-            return None
-
-    class FakeEnvs:
-        control_period_s = 0.5
-        action_space = Space()
-        simulator = type("Sim", (), {"n_nodes": 7})()
-
-        def __init__(self, num_envs, **kwargs):
-            pass
-
-        def reset(self, seed):
-            pass
-
-        def step(self, action):
-            pass
-
-    monkeypatch.setattr(env_bench, "StarSwimmerVectorEnv", FakeEnvs)
+    monkeypatch.setattr(env_bench, "StarSwimmerVectorEnv", StandInEnvs)
     adaptive = taichi_star.SolverConfig.preset("accurate")
     assert adaptive.adaptive
     fixed = taichi_star.SolverConfig(dt=5e-3)
@@ -233,36 +245,12 @@ def test_env_bench_times_its_settings_in_interleaved_rounds(monkeypatch):
     those. The stand-in environments' steps take set times (a clock moved by each step)."""
     from studies import env_bench
 
-    clock = [0.0]
-    order = []
-    step_seconds = {"paper": [0.0, 2.0, 3.0, 1.0], "accurate": [0.0, 5.0, 4.0, 6.0]}
-
-    class Space:
-        def seed(self, seed):
-            pass
-
-        def sample(self):
-            return None
-
-    class FakeEnvs:
-        control_period_s = 0.5
-        action_space = Space()
-        simulator = type("Sim", (), {"n_nodes": 7})()
-
-        def __init__(self, num_envs, params, **kwargs):
-            self.preset = "paper" if params == taichi_star.StarParams.preset("paper") \
-                else "accurate"
-            self.steps = 0
-
-        def reset(self, seed):
-            pass
-
-        def step(self, action):  # the first step compiles; then one step per timed round
-            clock[0] += step_seconds[self.preset][self.steps]
-            order.append((self.preset, self.steps))
-            self.steps += 1
-
-    monkeypatch.setattr(env_bench, "StarSwimmerVectorEnv", FakeEnvs)
+    clock, order = [0.0], []
+    monkeypatch.setattr(StandInEnvs, "clock", clock)
+    monkeypatch.setattr(StandInEnvs, "order", order)
+    monkeypatch.setattr(StandInEnvs, "step_seconds", {"paper": [0.0, 2.0, 3.0, 1.0],
+                                                      "accurate": [0.0, 5.0, 4.0, 6.0]})
+    monkeypatch.setattr(env_bench, "StarSwimmerVectorEnv", StandInEnvs)
     monkeypatch.setattr(profiling.time, "perf_counter", lambda: clock[0])
     paper, accurate = env_bench.measure(
         [("paper", taichi_star.SolverConfig(dt=5e-3)),

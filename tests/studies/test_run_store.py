@@ -382,19 +382,26 @@ def test_a_folder_in_use_by_another_run_is_refused_and_free_once_it_ends(tmp_pat
     second.release()
 
 
-def test_a_lock_of_an_ended_process_is_taken_over_and_one_of_another_machine_refused(tmp_path):
-    """A killed run leaves its lock: a process of this machine that has ended holds nothing
-    (taken over); one of another machine may still run (refused, named)."""
+def folder_of_a_killed_run(tmp_path):
+    """(run folder, its lock file, a one-instance task): the folder holds the lock a killed
+    run left, naming a process of this machine that has ended."""
     import subprocess
-    import sys
     from taichi_star.batch.store import LOCK
 
-    task = ChunkTask(0, (0,), (ts.StarParams(),), DURATION, SOLVER)
     folder = tmp_path / "run"
     folder.mkdir()
     ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
                            capture_output=True, text=True, check=True).stdout.strip()
     (folder / LOCK).write_text(f"{ended} {socket.gethostname()}")
+    return folder, folder / LOCK, ChunkTask(0, (0,), (ts.StarParams(),), DURATION, SOLVER)
+
+
+def test_a_lock_of_an_ended_process_is_taken_over_and_one_of_another_machine_refused(tmp_path):
+    """A killed run leaves its lock: a process of this machine that has ended holds nothing
+    (taken over); one of another machine may still run (refused, named)."""
+    from taichi_star.batch.store import LOCK
+
+    folder, _, task = folder_of_a_killed_run(tmp_path)
     store = RunStore(folder, {"a": "definition"})
     assert store.open([task], resume=False) == []
     assert (folder / LOCK).read_text() == f"{os.getpid()} {socket.gethostname()}"
@@ -414,16 +421,10 @@ def test_of_two_runs_taking_over_an_ended_runs_lock_only_one_gets_it(tmp_path):
     process (the moment between the first's flock and its writing itself in); and once the
     first lets go (its process ends: the system closes the file) the folder is taken."""
     import fcntl
-    import subprocess
     from taichi_star.batch.store import LOCK
 
-    task = ChunkTask(0, (0,), (ts.StarParams(),), DURATION, SOLVER)
-    folder = tmp_path / "run"
-    folder.mkdir()
-    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
-                           capture_output=True, text=True, check=True).stdout.strip()
-    (folder / LOCK).write_text(f"{ended} {socket.gethostname()}")
-    with open(folder / LOCK) as first:   # the first run's hold, not yet written in
+    folder, lock, task = folder_of_a_killed_run(tmp_path)
+    with open(lock) as first:   # the first run's hold, not yet written in
         fcntl.flock(first, fcntl.LOCK_EX | fcntl.LOCK_NB)
         with pytest.raises(RunStoreError, match=re.escape(
                 f"run_dir {folder} is in use by another run (a run starting now)")):
