@@ -614,7 +614,10 @@ class RunStore:
         while True:
             try:
                 descriptor = os.open(path, os.O_CREAT | os.O_RDWR, 0o644)
-            except OSError:  # a read-only folder
+            except OSError:  # a read-only folder, or another user's lock file
+                holder = lock_holder(path) if path.exists() else None
+                if holder is not None:
+                    raise self._in_use(holder, path) from None
                 return
             if not _hold_exclusively(descriptor):
                 os.close(descriptor)

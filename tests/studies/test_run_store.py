@@ -436,6 +436,32 @@ def test_of_two_runs_taking_over_an_ended_runs_lock_only_one_gets_it(tmp_path):
     assert not (folder / LOCK).exists()
 
 
+def test_a_live_runs_lock_that_cannot_be_opened_still_refuses_the_folder(tmp_path, monkeypatch):
+    """Another user's lock file cannot be opened for writing; the folder is then taken for a
+    read-only one (not locked) only where no live run holds it: a live holder is named and
+    the run refused, as when the lock is open."""
+    import subprocess
+    from taichi_star.batch import store as run_store
+
+    folder, lock, task = folder_of_a_killed_run(tmp_path)
+    holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        lock.write_text(f"{holder.pid} {socket.gethostname()}")
+        opener = os.open
+
+        def refused(path, *args, **kwargs):
+            if os.fspath(path) == os.fspath(lock):
+                raise PermissionError(errno.EACCES, "Permission denied", str(path))
+            return opener(path, *args, **kwargs)
+        monkeypatch.setattr(run_store.os, "open", refused)
+        with pytest.raises(RunStoreError, match=re.escape(
+                f"is in use by another run (process {holder.pid} on this machine)")):
+            RunStore(folder, {"a": "definition"}).open([task], resume=True)
+    finally:
+        holder.kill()
+        holder.wait()
+
+
 def test_run_batch_lets_go_of_its_folder_after_a_failure_and_reads_a_finished_run_back_read_only(
         tmp_path, monkeypatch):
     """A run_batch that fails lets go of its folder (a retry in the same process, a notebook's,
