@@ -584,6 +584,20 @@ def test_a_zero_or_tiny_delays_derivative_is_that_of_its_differences(taichi_cpu)
     np.testing.assert_allclose(exact, forward, rtol=1e-5)
 
 
+def test_the_check_takes_a_zero_delays_differences_forward(taichi_cpu):
+    """check_sensitivities differenced a delay at 0 centrally, through negative delays, where
+    τ = max(t − d, 0) continues the model along another slope: it reported the correct
+    derivative 1.9 % off, with a spread of 2.5e-6 that hid it (an audit, 2026-12). Forward
+    differences from the delay itself now: within 1e-5 (measured 4.2e-9 by the audit's forward
+    Richardson reference), A1 at a period of 0.4 s past its second firing."""
+    robot = BASE.replace(gait="A1", period=0.4)
+    table = check_sensitivities([robot], 0.5, SolverConfig(dt=2e-3, **TIGHT),
+                                ("actuator_delays[0]",))
+    row = table[table["output"] == "displacement_x_mm"].iloc[0]
+    assert abs(row["difference"]) > 1.0 and row["status"] == "ok"
+    assert row["relative_error"] < 1e-5, row["relative_error"]
+
+
 def test_recorded_shapes_are_the_callers_instances_alone(euler_run):
     """The shapes were a view of every instance's, the replicas' too (an audit: 4.7 MiB of
     result holding 80.5 MiB); now only the instances asked for are kept, in an array of their
