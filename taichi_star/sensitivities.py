@@ -49,7 +49,7 @@ from .timegrid import on_grid, steps_in
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
 __all__ = ["SUMMARY_OUTPUTS", "TRAJECTORY_OUTPUTS", "RELATIVE_STEP", "FIELD_RELATIVE_STEPS",
-           "delay_on_step_grid", "REPLICAS_PER_DIRECTION", "instances_per_instance",
+           "delay_on_step_grid", "delay_event", "REPLICAS_PER_DIRECTION", "instances_per_instance",
            "parse_directions"]
 
 RELATIVE_STEP = 1e-4
@@ -225,39 +225,74 @@ def check_directions(directions: Sequence[Direction], params: Sequence[StarParam
                 raise ValueError(f"sensitivities: {direction.field} is 0 (the 2.5-D model off) "
                                  f"for instance {at_zero[0]}; its derivative is defined only "
                                  f"with the component heights set (> 0)")
-        if direction.field == "actuator_delays" and not solver.adaptive:
-            # in whole steps (the switch is on the grid): the run's last step is the first that
-            # jumps when it ends on the switch itself
-            jumping = [b for b, p in enumerate(params)
-                       if delay_on_step_grid(p, direction.index, solver.dt, commanded)
-                       and (duration_s is None or steps_in(
-                           direction.value(p) + p.actuator_profile.switch_time, solver.dt)
-                           <= steps_in(duration_s, solver.dt))]
+        held = not solver.adaptive or solver.dt_min == solver.dt_max
+        if direction.field == "actuator_delays" and held:
+            # steps of one length (adaptive ones held at dt_min = dt_max too: an audit,
+            # 2026-12): the events of a delay fall on the step grid or not
+            dt = solver.dt if not solver.adaptive else solver.dt_max
+            events = [(b, delay_event(p, direction.index, dt, commanded, duration_s))
+                      for b, p in enumerate(params)]
+            jumping = [(b, event) for b, event in events if event is not None]
             if jumping:
-                p = params[jumping[0]]
+                b, (time, what) = jumping[0]
                 warn_user(
-                    f"sensitivities: {direction.label} = {direction.value(p):g} s (instance "
-                    f"{jumping[0]}, {len(jumping)} in all) puts the actuation profile's switch, "
-                    f"{p.actuator_profile.switch_time:g} s after a firing, where the fitted "
-                    f"curvature jumps by {p.actuator_profile.switch_jump:.2g} 1/m, on a step "
-                    f"end: the run jumps there as the delay passes, and its derivative by the "
-                    f"delay is not defined; move the delay off the step grid (e.g. by dt/2)",
-                    UserWarning)
+                    f"sensitivities: {direction.label} = {direction.value(params[b]):g} s "
+                    f"(instance {b}, {len(jumping)} in all) puts {what} on a step end (t = "
+                    f"{time:g} s): the run changes slope or jumps there as the delay passes, "
+                    f"and its derivative by the delay is not defined; move the delay off the "
+                    f"step grid (e.g. by dt/2)", UserWarning)
+
+
+def delay_event(params: StarParams, actuator: int, dt: float, commanded: bool = False,
+                duration_s: Optional[float] = None) -> Optional[Tuple[float, str]]:
+    """(time, s; what) of the first step end, up to `duration_s` (None: no end), at which a run
+    of `params` at steps of dt s has no derivative by the delay d of `actuator` (index k − 1
+    for A_k), None where it has none. The actuator must fire: the gait fires it, or with
+    `commanded` (a Simulator's run, whose firings are commands at step ends, the gait unread)
+    any actuator, from one firing at 0. A periodic run fires at k·period, also inside a step
+    where the period is no whole number of steps. After each firing the profile starts d
+    later, τ = max(t − d, 0), a kink where d > 0 (at d = 0 the derivative is one-sided, as
+    the delay's range starts there), and its branches switch t0 after that, a jump of
+    `CurvatureProfile.switch_jump` where they do not meet, but only before the next firing
+    restarts it (d + t0 < period). Either on a step end: moving the delay by any ε moves it
+    across that step end. Until 2026-12 only the first firing's switch was looked at (an
+    audit: the onset, later firings off the step grid, held adaptive steps and a switch past
+    the next firing were missed or warned of wrongly)."""
+    if not (commanded or Gait.parse(params.gait).mask[actuator] == 1):
+        return None
+    delay = params.actuator_delays[actuator]
+    profile = params.actuator_profile
+    offsets = []
+    if delay > 0.0:
+        offsets.append((delay, "the profile's onset, the delay after a firing,"))
+    if profile.switch_jump != 0.0 and (commanded or delay + profile.switch_time
+                                       < params.period):
+        offsets.append((delay + profile.switch_time,
+                        f"the actuation profile's switch, {profile.switch_time:g} s after the "
+                        f"onset, where the fitted curvature jumps by "
+                        f"{profile.switch_jump:.2g} 1/m,"))
+    if commanded or duration_s is None:
+        firings = np.zeros(1)
+    else:
+        firings = params.period * np.arange(int(np.ceil(duration_s / params.period)) + 1)
+        firings = firings[firings < duration_s]
+    found = []
+    for offset, what in offsets:
+        times = firings + offset
+        if duration_s is not None:
+            # the run's last step ends on its duration (the grid's, rounded as the drivers do)
+            times = times[times <= steps_in(duration_s, dt) * dt * (1 + 1e-12)]
+        hits = times[on_grid(times, dt)]
+        if hits.size:
+            found.append((float(hits[0]), what))
+    return min(found) if found else None
 
 
 def delay_on_step_grid(params: StarParams, actuator: int, dt: float,
                        commanded: bool = False) -> bool:
-    """Whether a fixed-step run of `params` (steps of dt s) has no derivative by the delay of
-    `actuator` (index k − 1 for A_k): the gait fires it (with `commanded`, a Simulator's run,
-    any actuator may be fired, whatever the gait: its firings are commands, the `gait` field
-    unread), the profile's branches do not meet at their switch
-    (`CurvatureProfile.switch_jump`), and the switch, delay + t0 after a firing (a step end),
-    falls on a step end. Moving the delay by any ε then moves the switch across that step end
-    and the curvature there by the jump."""
-    profile = params.actuator_profile
-    fired = commanded or Gait.parse(params.gait).mask[actuator] == 1
-    return bool(fired and profile.switch_jump != 0.0 and on_grid(
-        params.actuator_delays[actuator] + profile.switch_time, dt))
+    """Whether a run of `params` at steps of dt s that goes on past its first firing's events
+    has no derivative by the delay of `actuator` (`delay_event` with no end)."""
+    return delay_event(params, actuator, dt, commanded) is not None
 
 
 def replica_batch(params: Sequence[StarParams], directions: Sequence[Direction],

@@ -183,7 +183,11 @@ def test_a_delay_puts_the_switch_on_a_step_end_only_when_fired_and_on_the_grid()
     level = float(_logistic(meeting.heating, meeting.switch_time))
     smooth = dataclasses.replace(meeting, cooling=(0.0, 1.0, 0.0, level))
     assert smooth.switch_jump == 0.0
-    assert not sens.delay_on_step_grid(fired.replace(actuator_profile=smooth), 2, dt)
+    # at 1-ms steps t0 is whole steps: the onset, the delay after the firing, is on the grid
+    # too, a kink of τ = max(t − d, 0) whatever the profile; at 5 ms neither is
+    assert sens.delay_event(fired.replace(actuator_profile=smooth), 2, dt) == (
+        pytest.approx(delay), "the profile's onset, the delay after a firing,")
+    assert not sens.delay_on_step_grid(on_coarse.replace(actuator_profile=smooth), 2, coarse)
 
 
 def test_a_simulators_commanded_firings_make_any_actuators_delay_count():
@@ -206,17 +210,18 @@ def test_a_simulators_commanded_firings_make_any_actuators_delay_count():
         taichi_star.Simulator([quiet], SolverConfig(dt=dt), sensitivities=["actuator_delays[0]"])
 
 
-def test_a_delay_on_the_grid_warns_only_for_a_run_that_reaches_its_switch():
-    """The jump is at the first switch, delay + switch time after the start: a run that ends a
-    step before it has a derivative by the delay and no warning (every default setup warned,
-    however short the run); one whose last step ends on it warns, as a longer one does."""
+def test_a_delay_on_the_grid_warns_only_for_a_run_that_reaches_its_event():
+    """The first event on the grid is the onset, the delay after the start (at 1-ms steps the
+    switch, t0 later, is on it too): a run that ends a step before it has a derivative by the
+    delay and no warning (every default setup warned, however short the run); one whose last
+    step ends on it warns, as a longer one does."""
     dt = 1e-3
     on = BASE.replace(actuator_delays=(0.0, 0.0, on_grid_delay(dt, 400)) + (0.0,) * 5)
     directions = parse_directions(["actuator_delays[2]"])
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        sens.check_directions(directions, [on], SolverConfig(dt=dt), duration_s=0.399)
-    for duration_s in (0.4, 0.401):
+        sens.check_directions(directions, [on], SolverConfig(dt=dt), duration_s=0.236)
+    for duration_s in (0.237, 0.238, 0.4):
         with pytest.warns(UserWarning, match=r"^sensitivities: actuator_delays\[2\] = 0.237 s"):
             sens.check_directions(directions, [on], SolverConfig(dt=dt), duration_s=duration_s)
     # simulate passes its duration: two steps from rest, no warning
@@ -235,8 +240,9 @@ def test_a_delay_on_the_grid_warns_with_fixed_steps_only():
     directions = parse_directions(["actuator_delays[2]"])
     # the first such instance's delay is quoted (0.237 s = 400 ms − t0), the count is all
     with pytest.warns(UserWarning, match=r"^sensitivities: actuator_delays\[2\] = 0.237 s "
-                                         r"\(instance 1, 2 in all\) puts the actuation profile's "
-                                         r"switch, 0.163 s after a firing"):
+                                         r"\(instance 1, 2 in all\) puts the profile's onset, "
+                                         r"the delay after a firing, on a step end \(t = 0.237 "
+                                         r"s\)"):
         sens.check_directions(directions, [off, on, later], SolverConfig(dt=dt))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -245,6 +251,38 @@ def test_a_delay_on_the_grid_warns_with_fixed_steps_only():
         # another delay's direction does not look at A3's
         sens.check_directions(parse_directions(["actuator_delays[0]"]), [on.replace(
             actuator_delays=(0.0005,) + on.actuator_delays[1:])], SolverConfig(dt=dt))
+
+
+@pytest.mark.parametrize("period, delay, dt, adaptive, event", [
+    # the second firing's onset, 0.2505 + 0.0005 s, on a step end though the first's is not
+    # (a period of no whole number of steps fires inside a step)
+    (0.2505, 0.0005, 1e-3, False, 0.251),
+    (0.2505, 0.0002, 1e-3, False, None),
+    # the onset on a step end at 2-ms steps, where the switch (t0 = 81.5 steps) is not
+    (0.25, 0.010, 2e-3, False, 0.010),
+    (0.25, 0.0105, 2e-3, False, None),
+    # adaptive steps held at one length: the same grid
+    (3.15, 0.001, 1e-3, True, 0.001),
+    # a switch past the next firing never comes (it warned): 0.062 + t0 = 0.225 > 0.2
+    (0.2, 0.062, 5e-3, False, None),
+])
+def test_a_delays_events_on_the_grid_are_those_of_every_firing(period, delay, dt, adaptive,
+                                                                event):
+    """The warning looked at the first firing's switch alone (an audit, 2026-12): it missed
+    the onset (a kink of τ = max(t − d, 0)), later firings where the period is no whole number
+    of steps and adaptive steps held at dt_min = dt_max, and warned of a switch the next firing
+    pre-empts. A1 over 0.5 s; the event's time where it warns, silence where it does not."""
+    robot = BASE.replace(gait="A1", period=period, actuator_delays=(delay,) + (0.0,) * 7)
+    solver = SolverConfig(adaptive=True, integrator="bdf2", dt_min=dt, dt_max=dt) if adaptive \
+        else SolverConfig(dt=dt)
+    directions = parse_directions(["actuator_delays[0]"])
+    if event is None:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            sens.check_directions(directions, [robot], solver, duration_s=0.5)
+    else:
+        with pytest.warns(UserWarning, match=re.escape(f"on a step end (t = {event:g} s)")):
+            sens.check_directions(directions, [robot], solver, duration_s=0.5)
 
 
 def test_the_replicas_follow_their_instances_as_plus_then_minus_pairs():
