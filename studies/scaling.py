@@ -99,7 +99,7 @@ def main(argv=None):
     run_kwargs = dict(solver=solver, chunk_size=args.chunk_size, progress=False)  # timed runs
     walls = np.empty((args.rounds, len(timed)))
     startups = np.empty((args.rounds, len(timed)))
-    summaries = [None] * len(timed)
+    same = np.ones(len(timed), dtype=bool)  # each round's table the in-process one's
     load = os.getloadavg()[0]
     for round_index in range(args.rounds):
         for index, (mode, workers, context) in enumerate(timed):
@@ -112,9 +112,12 @@ def main(argv=None):
                           executor=executor, **run_kwargs)
                 startups[round_index, index] = time.perf_counter() - start
                 start = time.perf_counter()
-                summaries[index] = run_batch(params, duration, executor=executor,
-                                             **run_kwargs).summary
+                summary = run_batch(params, duration, executor=executor, **run_kwargs).summary
                 walls[round_index, index] = time.perf_counter() - start
+            if index == 0:
+                reference = summary  # the in-process sweep of this round
+            # every round's, not the last alone (a review, 2026-12)
+            same[index] &= bool(summary.equals(reference))
             print(f"round {round_index + 1}: {mode:>10} workers={workers}: "
                   f"{walls[round_index, index]:.2f} s (startup "
                   f"{startups[round_index, index]:.2f} s)", flush=True)
@@ -132,7 +135,7 @@ def main(argv=None):
                      "robot_steps_per_s": len(params) * steps / wall,
                      # the ratio of each round's pair, the machine's drifts reaching both alike
                      "speedup_vs_in_process": float(np.median(walls[:, 0] / walls[:, index])),
-                     "same_table_as_in_process": bool(summaries[index].equals(summaries[0])),
+                     "same_table_as_in_process": bool(same[index]),
                      "load_1min_before": load})
     # the machine, the code and the model timed, on every row (they were in the sidecar
     # alone: an audit, 2026-12)

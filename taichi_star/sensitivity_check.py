@@ -59,11 +59,13 @@ parameter at a one-sided end (`one_sided`) the −kh runs are made at the parame
 
 
 def one_sided(direction: Direction, params: StarParams) -> bool:
-    """Whether the differences of `direction` at `params` are taken forward only: a delay at
-    0, where τ = max(t − d, 0) has a kink, so that a negative delay continues the model along
-    another slope (central differences there averaged the two and reported a correct
-    derivative 1.9 % off: an audit, 2026-12)."""
-    return direction.field == "actuator_delays" and direction.value(params) == 0.0
+    """Whether the differences of `direction` at `params` are taken forward only: a delay
+    that its −4h run would take below 0, where τ = max(t − d, 0) has a kink, so that a
+    negative delay continues the model along another slope (central differences there
+    averaged the two and reported a correct derivative 1.9 % off at 0: an audit; and below
+    4h: a review, 2026-12)."""
+    return direction.field == "actuator_delays" and direction.value(params) \
+        - max(MULTIPLES) * difference_step(direction, params) < 0.0
 TAYLOR_MULTIPLES = (1.0, 2.0)
 """The Taylor test's runs, in multiples of its step H (`taylor_step`)."""
 

@@ -73,12 +73,14 @@ def usable_cores() -> int:
 
 def refusal_rate(arch: Optional[str] = None) -> Tuple[float, str]:
     """(robot-steps/s, what it is): the rate no run on `arch` has been measured above. On
-    "cpu" FASTEST_CPU_CORE_ROBOT_STEPS_PER_S times this machine's `usable_cores`; on a GPU
+    "cpu" FASTEST_CPU_CORE_ROBOT_STEPS_PER_S times this machine's `usable_cores`, at most
+    FASTEST_ROBOT_STEPS_PER_S; on a GPU
     arch, or None (a machine not known: a study's or a batch's work, which may be spread),
     FASTEST_ROBOT_STEPS_PER_S."""
     if isinstance(arch, str) and arch == "cpu":  # not yet checked: an array compares per item
         cores = usable_cores()
-        return (FASTEST_CPU_CORE_ROBOT_STEPS_PER_S * cores,
+        # never above any machine's bound (15 cores and more were: a review, 2026-12)
+        return (min(FASTEST_CPU_CORE_ROBOT_STEPS_PER_S * cores, FASTEST_ROBOT_STEPS_PER_S),
                 f"this machine's {cores} CPU core{'' if cores == 1 else 's'} at "
                 f"{FASTEST_CPU_CORE_ROBOT_STEPS_PER_S:.3g} each, above the fastest measured "
                 f"per core")
@@ -90,7 +92,7 @@ def refuse_robot_steps(arch: Optional[str] = None) -> float:
     REFUSE_ROBOT_STEPS for a GPU arch or None, 1.3e12 for "cpu" on 2 cores."""
     if not (isinstance(arch, str) and arch == "cpu"):
         return REFUSE_ROBOT_STEPS
-    return refusal_rate(arch)[0] * REFUSE_DAYS * 86400.0
+    return min(refusal_rate(arch)[0] * REFUSE_DAYS * 86400.0, REFUSE_ROBOT_STEPS)
 
 
 def on_grid(times_s, interval_s: float) -> np.ndarray:

@@ -584,13 +584,15 @@ def test_a_zero_or_tiny_delays_derivative_is_that_of_its_differences(taichi_cpu)
     np.testing.assert_allclose(exact, forward, rtol=1e-5)
 
 
-def test_the_check_takes_a_zero_delays_differences_forward(taichi_cpu):
+@pytest.mark.parametrize("delay", [0.0, 1e-9])
+def test_the_check_takes_a_zero_delays_differences_forward(taichi_cpu, delay):
     """check_sensitivities differenced a delay at 0 centrally, through negative delays, where
     τ = max(t − d, 0) continues the model along another slope: it reported the correct
-    derivative 1.9 % off, with a spread of 2.5e-6 that hid it (an audit, 2026-12). Forward
-    differences from the delay itself now: within 1e-5 (measured 4.2e-9 by the audit's forward
-    Richardson reference), A1 at a period of 0.4 s past its second firing."""
-    robot = BASE.replace(gait="A1", period=0.4)
+    derivative 1.9 % off, with a spread of 2.5e-6 that hid it (an audit, 2026-12), and a delay
+    below its −4h run's step so too (a review). Forward differences from the delay itself now:
+    within 1e-5 (measured 4.2e-9 at 0 by the audit's forward Richardson reference), A1 at a
+    period of 0.4 s past its second firing."""
+    robot = BASE.replace(gait="A1", period=0.4, actuator_delays=(delay,) + (0.0,) * 7)
     table = check_sensitivities([robot], 0.5, SolverConfig(dt=2e-3, **TIGHT),
                                 ("actuator_delays[0]",))
     row = table[table["output"] == "displacement_x_mm"].iloc[0]

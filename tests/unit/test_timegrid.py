@@ -171,6 +171,9 @@ def test_a_cpu_calls_work_is_bounded_by_its_cores_to_the_step(monkeypatch):
     monkeypatch.setattr(timegrid, "usable_cores", lambda: 3)
     with pytest.warns(LongWorkWarning):
         check_work("x", 648_001, 2_000_000, "cpu")
+    # never above any machine's bound: 16 cores × 2.5e5 would be 4e6 > the H100's 3.6e6
+    monkeypatch.setattr(timegrid, "usable_cores", lambda: 16)
+    assert refuse_robot_steps("cpu") == REFUSE_ROBOT_STEPS
 
 
 def test_usable_cores_counts_the_cores_this_process_may_run_on():
