@@ -4,7 +4,8 @@ long batch can be resumed after a crash or a kill.
 - `manifest.json`: the run's *definition* (instance count, SHA-256 of every instance's
   parameters that differ from their defaults, the chunk plan, duration or cycles, the solver's
   settings that differ from theirs, arch, records, steady window: a field a later version adds
-  with a default that changes nothing leaves a run resumable, `params.changed_fields`), its
+  with a default that changes nothing leaves a run resumable, `params.changed_fields`), the
+  defaults themselves (a resume under changed ones is refused), its
   SHA-256, and for information the code version of its latest opening (`code`), every code
   version that made its chunks with the chunks each made (`code_versions`, brought up to date
   as each chunk is stored), and the times.
@@ -56,7 +57,7 @@ except ImportError:  # Windows: the lock file's process decides alone
 from ..actuation import CurvatureProfile
 from ..checks import is_whole, warn_user
 from ..extras import require
-from ..params import SolverConfig, changed_fields
+from ..params import SolverConfig, StarParams, changed_fields
 from ..provenance import code_version, is_temporary, write_atomic
 from .tasks import ChunkTask
 
@@ -116,6 +117,29 @@ def run_definition(params: Sequence, tasks: Sequence[ChunkTask], chunk_size: int
         "record_interval_s": float(first.record_interval_s),
         "steady_from_cycle": int(first.steady_from_cycle),
     }
+
+
+def current_defaults() -> Dict:
+    """The defaults of StarParams' and SolverConfig's fields, JSON-ready: a manifest records
+    them beside its definition (which holds only what differs from them), so that a resume
+    under a version that changed a default is refused (`changed_defaults`)."""
+    return json.loads(_canonical({"params": dataclasses.asdict(StarParams()),
+                                  "solver": dataclasses.asdict(SolverConfig())}))
+
+
+def changed_defaults(recorded: Optional[Dict]) -> List[str]:
+    """The fields, present then and now, whose default differs from the one a manifest
+    recorded (`current_defaults`; None: a manifest from before they were): a run defined by
+    its changes from the defaults would otherwise go on under other values without a word (a
+    review, 2026-12). A field added since is not among them: the run's instances had its
+    default, the only value there was."""
+    if not isinstance(recorded, dict):
+        return []
+    now = current_defaults()
+    return [f"the default {kind}.{name}: {value!r} -> {now[kind][name]!r}"
+            for kind in ("params", "solver") if isinstance(recorded.get(kind), dict)
+            for name, value in recorded[kind].items()
+            if name in now[kind] and value != now[kind][name]]
 
 
 def definition_differences(old: Dict, new: Dict) -> List[str]:
@@ -324,7 +348,8 @@ class RunStore:
                         f"run is now defined by the settings that differ from their defaults); "
                         f"refusing to resume it: finish it with the version that started it, "
                         f"or delete the folder")
-                differences = definition_differences(old["definition"], self.definition)
+                differences = definition_differences(old["definition"], self.definition) \
+                    + changed_defaults(old.get("defaults"))
                 if differences:
                     raise RunStoreError(
                         f"{self.flag} {self.path} holds a run with another definition; refusing "
@@ -380,6 +405,7 @@ class RunStore:
                 self._remove(stale)
         self.manifest = {"definition": self.definition,
                          "definition_sha256": self.definition_sha256, "code": version,
+                         "defaults": current_defaults(),
                          "code_versions": makers_of_chunks(old, done),
                          "created": now, "complete": False, **history}
         self._write_manifest()
@@ -613,11 +639,24 @@ class RunStore:
         path = self.path / LOCK
         while True:
             try:
-                descriptor = os.open(path, os.O_CREAT | os.O_RDWR, 0o644)
-            except OSError:  # a read-only folder, or another user's lock file
-                holder = lock_holder(path) if path.exists() else None
+                # without flock (Windows) the lock is made exclusively, its holder deciding
+                descriptor = os.open(path, os.O_CREAT | os.O_RDWR
+                                     | (os.O_EXCL if fcntl is None else 0), 0o644)
+            except FileExistsError:
+                holder = self._live_holder(path)
                 if holder is not None:
                     raise self._in_use(holder, path) from None
+                self._remove(path)
+                continue
+            except OSError:  # a read-only folder, or another user's lock file
+                holder = self._live_holder(path) if path.exists() else None
+                if holder is not None:
+                    raise self._in_use(holder, path) from None
+                if path.exists() and os.access(self.path, os.W_OK):
+                    # an ended run's lock of another user, in a folder this run writes: taken
+                    # over (left, the folder went unlocked: a review, 2026-12)
+                    self._remove(path)
+                    continue
                 return
             if not _hold_exclusively(descriptor):
                 os.close(descriptor)
@@ -625,10 +664,7 @@ class RunStore:
             if not _same_file(descriptor, path):  # let go of and removed since it was opened
                 os.close(descriptor)
                 continue
-            holder = lock_holder(path)
-            if holder is not None and holder.endswith(OWN_PROCESS):
-                held = _HOLDERS.get(self.path.resolve())
-                holder = None if held is None or held() in (None, self) else holder
+            holder = self._live_holder(path) if fcntl is not None else None
             if holder is not None:
                 os.close(descriptor)
                 raise self._in_use(holder, path)
@@ -638,6 +674,16 @@ class RunStore:
             self.locked = True
             _HOLDERS[self.path.resolve()] = weakref.ref(self)
             return
+
+    def _live_holder(self, path: Path) -> Optional[str]:
+        """Who holds the lock at `path` and may still go on (`lock_holder`), None where no one
+        does: its process has ended, or it is this process's and the run that took it is gone
+        or is this one."""
+        holder = lock_holder(path)
+        if holder is not None and holder.endswith(OWN_PROCESS):
+            held = _HOLDERS.get(self.path.resolve())
+            holder = None if held is None or held() in (None, self) else holder
+        return holder
 
     def _in_use(self, holder: str, path: Path) -> RunStoreError:
         return RunStoreError(f"{self.flag} {self.path} is in use by another run ({holder}); "

@@ -462,6 +462,49 @@ def test_a_live_runs_lock_that_cannot_be_opened_still_refuses_the_folder(tmp_pat
         holder.wait()
 
 
+def test_an_ended_runs_lock_that_cannot_be_opened_is_taken_over(tmp_path, monkeypatch):
+    """Another user's lock file, of a run that has ended, in a folder this run may write: it
+    was left, and the run went on without a lock (a review, 2026-12); now it is removed and the
+    folder locked."""
+    from taichi_star.batch import store as run_store
+
+    folder, lock, task = folder_of_a_killed_run(tmp_path)
+    opener = os.open
+
+    def refused(path, *args, **kwargs):
+        if os.fspath(path) == os.fspath(lock) and lock.exists():
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+        return opener(path, *args, **kwargs)
+    monkeypatch.setattr(run_store.os, "open", refused)
+    store = RunStore(folder, {"a": "definition"})
+    assert store.open([task], resume=True) == []
+    assert store.locked and lock.read_text() == f"{os.getpid()} {socket.gethostname()}"
+    store.release()
+
+
+def test_without_flock_the_lock_is_made_exclusively(tmp_path, monkeypatch):
+    """Where the system has no flock (Windows) the lock file is created exclusively again, its
+    holder deciding: a live run's refuses the folder, an ended run's is taken over (without
+    O_EXCL, two new runs could both write themselves into an empty file: a review, 2026-12)."""
+    import subprocess
+    from taichi_star.batch import store as run_store
+
+    monkeypatch.setattr(run_store, "fcntl", None)
+    folder, lock, task = folder_of_a_killed_run(tmp_path)
+    store = RunStore(folder, {"a": "definition"})
+    assert store.open([task], resume=True) == []   # the ended run's lock taken over
+    store.release()
+    holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        lock.write_text(f"{holder.pid} {socket.gethostname()}")
+        with pytest.raises(RunStoreError, match=re.escape(
+                f"is in use by another run (process {holder.pid} on this machine)")):
+            RunStore(folder, {"a": "definition"}).open([task], resume=True)
+    finally:
+        holder.kill()
+        holder.wait()
+
+
 def test_run_batch_lets_go_of_its_folder_after_a_failure_and_reads_a_finished_run_back_read_only(
         tmp_path, monkeypatch):
     """A run_batch that fails lets go of its folder (a retry in the same process, a notebook's,

@@ -993,3 +993,25 @@ def test_a_chunk_stored_without_the_trajectory_its_run_records_is_recomputed(tmp
             tasks, resume=True) == [1]
     assert [r.getMessage() for r in caplog.records] == [
         f"{path}: stored without its trajectory, which this run records; recomputing it"]
+
+
+def test_a_resume_under_changed_defaults_is_refused_naming_them(written):
+    """A definition holds what differs from the defaults, so a version that changed a default
+    would have gone on under the new value without a word (a review, 2026-12): the manifest
+    records the defaults, and a resume where one differs is refused naming it; a field added
+    since (missing from the record) is no change."""
+    folder, tasks = written
+    manifest = manifest_of(folder)
+    assert manifest["defaults"] == run_store.current_defaults()
+    assert manifest["defaults"]["params"]["alpha"] == ts.StarParams().alpha
+    del manifest["defaults"]["params"]["cylinder_drag"]   # a field added since
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    store = store_in(folder)
+    assert store.open(tasks, resume=True) == [0, 1]
+    store.release()
+    manifest = manifest_of(folder)
+    manifest["defaults"]["solver"]["max_newton"] = 12   # started when the default was 12
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(RunStoreError, match=re.escape(
+            f"(the default solver.max_newton: 12 -> {ts.SolverConfig().max_newton})")):
+        store_in(folder).open(tasks, resume=True)
