@@ -2,6 +2,7 @@
 empty or from another run, and ends with the table of an uninterrupted run; a damaged manifest
 is a one-line error (exit 2 from the command line); a store refuses another definition."""
 
+import contextlib
 import errno
 import json
 import logging
@@ -396,6 +397,26 @@ def folder_of_a_killed_run(tmp_path):
     return folder, folder / LOCK, ChunkTask(0, (0,), (ts.StarParams(),), DURATION, SOLVER)
 
 
+@contextlib.contextmanager
+def held_by_a_live_process(lock):
+    """The lock file names a process of this machine that is alive (a sleeping child) while
+    the block runs; the refusal a run then meets names it (`refused_by`)."""
+    import subprocess
+
+    holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        lock.write_text(f"{holder.pid} {socket.gethostname()}")
+        yield holder.pid
+    finally:
+        holder.kill()
+        holder.wait()
+
+
+def refused_by(pid):
+    return pytest.raises(RunStoreError, match=re.escape(
+        f"is in use by another run (process {pid} on this machine)"))
+
+
 def test_a_lock_of_an_ended_process_is_taken_over_and_one_of_another_machine_refused(tmp_path):
     """A killed run leaves its lock: a process of this machine that has ended holds nothing
     (taken over); one of another machine may still run (refused, named)."""
@@ -440,13 +461,10 @@ def test_a_live_runs_lock_that_cannot_be_opened_still_refuses_the_folder(tmp_pat
     """Another user's lock file cannot be opened for writing; the folder is then taken for a
     read-only one (not locked) only where no live run holds it: a live holder is named and
     the run refused, as when the lock is open."""
-    import subprocess
     from taichi_star.batch import store as run_store
 
     folder, lock, task = folder_of_a_killed_run(tmp_path)
-    holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
-    try:
-        lock.write_text(f"{holder.pid} {socket.gethostname()}")
+    with held_by_a_live_process(lock) as pid:
         opener = os.open
 
         def refused(path, *args, **kwargs):
@@ -454,12 +472,8 @@ def test_a_live_runs_lock_that_cannot_be_opened_still_refuses_the_folder(tmp_pat
                 raise PermissionError(errno.EACCES, "Permission denied", str(path))
             return opener(path, *args, **kwargs)
         monkeypatch.setattr(run_store.os, "open", refused)
-        with pytest.raises(RunStoreError, match=re.escape(
-                f"is in use by another run (process {holder.pid} on this machine)")):
+        with refused_by(pid):
             RunStore(folder, {"a": "definition"}).open([task], resume=True)
-    finally:
-        holder.kill()
-        holder.wait()
 
 
 def test_an_ended_runs_lock_that_cannot_be_opened_is_taken_over(tmp_path, monkeypatch):
@@ -486,7 +500,6 @@ def test_without_flock_the_lock_is_made_exclusively(tmp_path, monkeypatch):
     """Where the system has no flock (Windows) the lock file is created exclusively again, its
     holder deciding: a live run's refuses the folder, an ended run's is taken over (without
     O_EXCL, two new runs could both write themselves into an empty file: a review, 2026-12)."""
-    import subprocess
     from taichi_star.batch import store as run_store
 
     monkeypatch.setattr(run_store, "fcntl", None)
@@ -494,15 +507,8 @@ def test_without_flock_the_lock_is_made_exclusively(tmp_path, monkeypatch):
     store = RunStore(folder, {"a": "definition"})
     assert store.open([task], resume=True) == []   # the ended run's lock taken over
     store.release()
-    holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
-    try:
-        lock.write_text(f"{holder.pid} {socket.gethostname()}")
-        with pytest.raises(RunStoreError, match=re.escape(
-                f"is in use by another run (process {holder.pid} on this machine)")):
-            RunStore(folder, {"a": "definition"}).open([task], resume=True)
-    finally:
-        holder.kill()
-        holder.wait()
+    with held_by_a_live_process(lock) as pid, refused_by(pid):
+        RunStore(folder, {"a": "definition"}).open([task], resume=True)
 
 
 def test_run_batch_lets_go_of_its_folder_after_a_failure_and_reads_a_finished_run_back_read_only(
