@@ -210,11 +210,11 @@ def check_directions(directions: Sequence[Direction], params: Sequence[StarParam
                      duration_s: Optional[float] = None):
     """ValueError, before any compute, where the sensitivities are not defined: in f32 (a
     central difference needs f64's digits) and for a component height at 0 (0 turns the 2.5-D
-    model off: no derivative across that switch). A warning (`delay_on_step_grid`) for a delay
-    at which the run has a jump, not a slope: where a run of `duration_s` reaches its first
-    switch, delay + switch time (a run that ends before it has none; None: a `Simulator`,
-    whose runs go on as long as it is told); with `commanded` (a `Simulator`, which fires what
-    it is told, whatever the `gait` field says) for any actuator's delay."""
+    model off: no derivative across that switch). A warning (`delay_event`) for a delay at
+    which the run has a jump or a kink, not a slope, within `duration_s` (None: a `Simulator`,
+    whose runs go on as long as it is told), with steps of one length (fixed, or adaptive ones
+    held at dt_min = dt_max); with `commanded` (a `Simulator`, which fires what it is told,
+    whatever the `gait` field says) for any actuator's delay."""
     if directions and solver.precision != "f64":
         raise ValueError(f"sensitivities need precision 'f64' (central differences lose f32's "
                          f"digits), got {solver.precision!r}")

@@ -57,15 +57,6 @@ MULTIPLES = (1.0, -1.0, 2.0, -2.0, 4.0, -4.0)
 """The differences' runs, in multiples of h: ±h, ±2h and ±4h (`whole_run_differences`); for a
 parameter at a one-sided end (`one_sided`) the −kh runs are made at the parameter itself."""
 
-
-def one_sided(direction: Direction, params: StarParams) -> bool:
-    """Whether the differences of `direction` at `params` are taken forward only: a delay
-    that its −4h run would take below 0, where τ = max(t − d, 0) has a kink, so that a
-    negative delay continues the model along another slope (central differences there
-    averaged the two and reported a correct derivative 1.9 % off at 0: an audit; and below
-    4h: a review, 2026-12)."""
-    return direction.field == "actuator_delays" and direction.value(params) \
-        - max(MULTIPLES) * difference_step(direction, params) < 0.0
 TAYLOR_MULTIPLES = (1.0, 2.0)
 """The Taylor test's runs, in multiples of its step H (`taylor_step`)."""
 
@@ -87,12 +78,22 @@ def difference_step(direction: Direction, params: StarParams) -> float:
     """h for one instance: the sensitivities' own ε (`Direction.step`) where the parameter is
     not 0. At 0, ten times the default ε there (RELATIVE_STEP of ZERO_VALUE_SCALE of its
     range's top) whatever the field's own: the runs at −h, −2h and −4h leave the parameter's
-    range, and the damping time's own 1e-3 gave −4h = −4e-4 s, a negative damping that the
+    range (a delay's are taken forward instead, `one_sided`), and the damping time's own 1e-3 gave −4h = −4e-4 s, a negative damping that the
     stiffest modes do not survive (BDF2 runs ended in NaN; Euler's differences spread by 1e-3
     where at the default step they agree within 2.3e-8; sensitivity_check, 0.2 s, measured)."""
     if direction.value(params):
         return direction.step(params)
     return 10.0 * direction.step(params) * RELATIVE_STEP / direction.relative_step
+
+
+def one_sided(direction: Direction, params: StarParams) -> bool:
+    """Whether the differences of `direction` at `params` are taken forward only: a delay
+    that its −4h run would take below 0, where τ = max(t − d, 0) has a kink, so that a
+    negative delay continues the model along another slope (central differences there
+    averaged the two and reported a correct derivative 1.9 % off at 0: an audit; and below
+    4h: a review, 2026-12)."""
+    return direction.field == "actuator_delays" and direction.value(params) \
+        - max(MULTIPLES) * difference_step(direction, params) < 0.0
 
 
 def taylor_step(h: float, value: float) -> float:
