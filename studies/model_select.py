@@ -784,13 +784,23 @@ def estimate_seconds(seconds_per_instance_cycle: float,
     candidate's population."""
     cycles = 0.0
     for candidate, settings in work:
-        dimension = len(candidate.fit.split())
-        cycles += settings.evaluations(dimension) * n_gaits * train_last
-        if fold_plan.generations and n_gaits > 1:
-            cycles += n_gaits * (fold_plan.settings(settings).evaluations(dimension)
-                                 * (n_gaits - 1) + 1) * train_last
+        cycles += fit_instances(candidate, settings, fold_plan, n_gaits) * train_last
         cycles += n_gaits * validate_last + 5 * train_last
     return cycles * seconds_per_instance_cycle
+
+
+def fit_instances(candidate: Candidate, settings: identify.CMASettings, fold_plan: FoldPlan,
+                  n_gaits: int) -> int:
+    """The instances one fit of `candidate` at `settings` simulates at most, each over the
+    training window: every generation of every restart on every gait, and with folds
+    (`leave_one_gait_out`, fitted as `fold_plan` says) each held-out gait's fit on the others
+    and its prediction; the assessment's runs of the best point aside."""
+    dimension = len(candidate.fit.split())
+    instances = settings.evaluations(dimension) * n_gaits
+    if fold_plan.generations and n_gaits > 1:
+        instances += n_gaits * (fold_plan.settings(settings).evaluations(dimension)
+                                * (n_gaits - 1) + 1)
+    return instances
 
 
 def planned_work(runnable: Sequence[Candidate], settings: identify.CMASettings,
@@ -807,18 +817,9 @@ def planned_work(runnable: Sequence[Candidate], settings: identify.CMASettings,
 def planned_instances(work: Sequence[Tuple[Candidate, identify.CMASettings]],
                       fold_plan: FoldPlan, n_gaits: int) -> int:
     """The instances the fits in `work` (`planned_work`) simulate at most, for the cap on a
-    study's work (`cli.check_instances`): every generation of every restart on every gait,
-    and with folds (`leave_one_gait_out`, fitted as `fold_plan` says) each held-out gait's fit on
-    the others and its prediction; the assessment's runs of the best point aside (a few per
-    fit)."""
-    instances = 0
-    for candidate, settings in work:
-        dimension = len(candidate.fit.split())
-        instances += settings.evaluations(dimension) * n_gaits
-        if fold_plan.generations and n_gaits > 1:
-            instances += n_gaits * (fold_plan.settings(settings).evaluations(dimension)
-                                    * (n_gaits - 1) + 1)
-    return instances
+    study's work (`cli.check_instances`): `fit_instances` summed over them."""
+    return sum(fit_instances(candidate, settings, fold_plan, n_gaits)
+               for candidate, settings in work)
 
 
 def measured_strokes(trials, last_cycle: int, flag: str = "--phases strokes"

@@ -125,7 +125,9 @@ class CurvatureProfile:
                              f"switch_time=number))") from None
 
     def as_array(self) -> np.ndarray:
-        """The nine constants (c1a..c4a, c1d..c4d, t0) in the order the kernels read them."""
+        """(9,) float64: the nine constants in the order the kernels read them, the heating
+        branch's c1a..c4a, the cooling branch's c1d..c4d (c1 and c4 in 1/m, c2 in 1/s, c3 in s:
+        `_logistic`), then the switch time t0 (s)."""
         return np.array([*self.heating, *self.cooling, self.switch_time], dtype=np.float64)
 
     def curvature(self, tau):

@@ -90,28 +90,29 @@ def streak_step_columns(fired: int) -> Tuple[str, str]:
     return f"step{fired}_x_mm", f"step{fired}_y_mm"
 
 
+def _widen(table: pd.DataFrame, by: str, values: Tuple[str, str], names) -> Dict[str, pd.Series]:
+    """A long table's two columns `values` (x, y) as columns of one row per gait: for each
+    value k of column `by`, the pair `names(k)` (a column name each, in order of k)."""
+    wide = table.pivot(index="gait", columns=by, values=list(values))
+    columns = {}
+    for key in sorted(table[by].unique()):
+        for value, name in zip(values, names(int(key))):
+            columns[name] = wide[(value, key)]
+    return columns
+
+
 def widen_steps(cycles: pd.DataFrame) -> pd.DataFrame:
     """A per-cycle table (`CYCLE_COLUMNS`) as one row per gait: gait, then
     `streak_step_columns(k)` for k = 1, 2, ... (cycle k - 1)."""
-    wide = cycles.pivot(index="gait", columns="cycle", values=["dx_body_mm", "dy_body_mm"])
-    columns = {}
-    for cycle in sorted(cycles["cycle"].unique()):
-        x, y = streak_step_columns(int(cycle) + 1)
-        columns[x] = wide[("dx_body_mm", cycle)]
-        columns[y] = wide[("dy_body_mm", cycle)]
+    columns = _widen(cycles, "cycle", ("dx_body_mm", "dy_body_mm"),
+                     lambda cycle: streak_step_columns(cycle + 1))
     return pd.DataFrame(columns).rename_axis("gait").reset_index()
 
 
 def widen_glides(glides: pd.DataFrame) -> pd.DataFrame:
     """A glide table (`GLIDE_COLUMNS`) as one row per gait: gait, then `glide_columns(k)` for
     k = 1, 2, ... firings, then glide_cycles."""
-    wide = glides.pivot(index="gait", columns="glide_fire_cycles",
-                        values=["glide_x_mm", "glide_y_mm"])
-    columns = {}
-    for fired in sorted(glides["glide_fire_cycles"].unique()):
-        x, y = glide_columns(int(fired))
-        columns[x] = wide[("glide_x_mm", fired)]
-        columns[y] = wide[("glide_y_mm", fired)]
+    columns = _widen(glides, "glide_fire_cycles", ("glide_x_mm", "glide_y_mm"), glide_columns)
     columns["glide_cycles"] = glides.groupby("gait")["glide_cycles"].first()
     return pd.DataFrame(columns).rename_axis("gait").reset_index()
 

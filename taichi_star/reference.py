@@ -511,7 +511,7 @@ class ReferenceSimulator:
         if p.period - since_firing <= FIRING_SNAP * p.period:
             # a step's end time summed in floats (k·h + h) can land a rounding below a cycle's
             # start k·T: it is that start, whose firing the step ending there already sees
-            # (the engine counts steps: `ActuationSchedule.fire_due`); fmod read the cooling
+            # (the engine counts steps: `actuation.Schedule.fire_due`); fmod read the cooling
             # tail K̄(T⁻) there instead of K̄(0) (an audit, 2026-12)
             since_firing = 0.0
         warming = 1.0

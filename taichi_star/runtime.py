@@ -780,7 +780,7 @@ class Runtime:
 
 
 def prepare_engine(params, solver: SolverConfig = SolverConfig(), arch: str = "cpu") -> BatchEngine:
-    """For tests and tools that drive the engine directly (benchmarks: `profiling.EngineProfile`):
+    """For the tests, which drive the engine directly (its kernels, fields and step counts):
     Taichi initialised, the batch's engine built (or reused from the cache) and loaded with the
     batch at rest."""
     model = build_model(params)

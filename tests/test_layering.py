@@ -3,10 +3,13 @@ API of taichi_star, taichi_star never imports studies, no study imports another,
 cycles between sibling modules."""
 
 import ast
+import importlib
+import inspect
 import os
 import shutil
 import subprocess
 import sys
+import types
 from pathlib import Path
 
 import pytest
@@ -136,3 +139,101 @@ def test_the_names_check_sees_imports_and_module_attributes(source, hidden):
     """The check above on one case each: a name re-exported by accident, a module without
     `__all__`, a module's attribute that is not public."""
     assert bool(hidden_names(ast.parse(source))) == hidden
+
+
+TAICHI_DECORATORS = ("ti.kernel", "ti.func", "ti.real_func")
+
+
+def kernel_global_reads(tree: ast.Module, module_names):
+    """(line, function, name) of each name that a @ti.kernel or @ti.func body of `tree` reads
+    and that is none of its arguments or locals but one of `module_names` (the module's own
+    top-level names)."""
+    for function in ast.walk(tree):
+        if not (isinstance(function, ast.FunctionDef) and any(
+                ast.unparse(decorator).split("(")[0] in TAICHI_DECORATORS
+                for decorator in function.decorator_list)):
+            continue
+        local = {argument.arg for argument in function.args.args + function.args.kwonlyargs}
+        local |= {node.id for node in ast.walk(function)
+                  if isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store)}
+        for node in (node for statement in function.body for node in ast.walk(statement)):
+            if isinstance(node, ast.Name) and isinstance(node.ctx, ast.Load) \
+                    and node.id in module_names and node.id not in local:
+                yield node.lineno, function.name, node.id
+
+
+def compile_time_constant(value) -> bool:
+    """Code (a function, a class, a module) or an immutable value (a number, a string, a tuple
+    of such): what Taichi may bake into a kernel when it compiles it."""
+    if callable(value) or inspect.ismodule(value):
+        return True
+    if isinstance(value, tuple):
+        return all(compile_time_constant(item) for item in value)
+    return isinstance(value, (bool, int, float, str))
+
+
+def mutable_kernel_globals(module, tree: ast.Module, rebound_names):
+    """"line function: name" of each module global a kernel of `module` reads that is not a
+    compile-time constant, or that the package rebinds (`rebound_names`): Taichi bakes the
+    value it finds at the kernel's first compilation into the kernel, so a later change would
+    be silently ignored."""
+    return [f"{line} {function}: {name}"
+            for line, function, name in kernel_global_reads(tree, set(vars(module)))
+            if name in rebound_names or not compile_time_constant(getattr(module, name))]
+
+
+def rebound_globals(trees) -> set:
+    """The names that any of `trees` declares `global` (to rebind them) or assigns as a
+    module's attribute (`module.NAME = ...`)."""
+    names = set()
+    for tree in trees:
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Global):
+                names.update(node.names)
+            elif isinstance(node, (ast.Assign, ast.AugAssign)):
+                targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+                names.update(target.attr for target in targets
+                             if isinstance(target, ast.Attribute)
+                             and isinstance(target.value, ast.Name)
+                             and target.value.id != "self")
+    return names
+
+
+def test_kernels_read_no_module_global_that_can_change():
+    """Kernels get what varies as arguments and fields; a module global a kernel reads must be
+    code or an immutable constant that nothing rebinds (the status codes, the terms' tuples,
+    N_ACTUATORS): Taichi compiles its value in."""
+    sources = sorted((REPO / "taichi_star").rglob("*.py"))
+    trees = {path: ast.parse(path.read_text()) for path in sources}
+    rebound = rebound_globals(trees.values())
+    found, read = [], set()
+    for path, tree in trees.items():
+        if not any(ast.unparse(decorator).split("(")[0] in TAICHI_DECORATORS
+                   for node in ast.walk(tree) if isinstance(node, ast.FunctionDef)
+                   for decorator in node.decorator_list):
+            continue                   # no kernel (and perhaps an optional extra's imports)
+        name = ".".join(path.relative_to(REPO).with_suffix("").parts).removesuffix(".__init__")
+        module = importlib.import_module(name)
+        read |= {global_name for _, _, global_name in kernel_global_reads(tree, set(vars(module)))}
+        found += [f"{name}:{item}" for item in mutable_kernel_globals(module, tree, rebound)]
+    assert found == []
+    # the check saw the kernels' constants (it would pass seeing nothing)
+    assert {"N_ACTUATORS", "STATUS_OK", "ALL_TERMS", "LAGGED_MAX_AGE"} <= read
+
+
+@pytest.mark.parametrize("source, flagged", [
+    ("LIMIT = 3.0\n@ti.func\ndef f(x):\n    return x * LIMIT", []),
+    ("GAINS = [1.0, 2.0]\n@ti.func\ndef f(x):\n    return x * GAINS[0]", ["4 f: GAINS"]),
+    ("LIMIT = 3.0\n@ti.kernel\ndef f(x: float):\n    return x * LIMIT\n"
+     "def g():\n    global LIMIT\n    LIMIT = 4.0", ["4 f: LIMIT"]),
+    # an argument or a local of the same name is not the global
+    ("GAINS = [1.0]\n@ti.func\ndef f(GAINS):\n    return GAINS[0]", []),
+    ("GAINS = [1.0]\n@ti.func\ndef f(x):\n    GAINS = x\n    return GAINS", []),
+    ("GAINS = [1.0]\ndef f(x):\n    return GAINS[0]", []),          # no kernel
+])
+def test_the_kernel_globals_check_on_one_case_each(source, flagged):
+    tree = ast.parse(source)
+    module = types.ModuleType("case")
+    module.ti = types.SimpleNamespace(kernel=lambda f: f, func=lambda f: f)
+    exec(compile(tree, "case", "exec"), vars(module))
+    assert mutable_kernel_globals(module, tree, rebound_globals([tree])) == flagged

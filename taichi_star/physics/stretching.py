@@ -11,7 +11,9 @@ from .strain import StrainTerm
 @ti.func
 def stretch_energy(edge, rest_length, stiffness, target_strain):
     """½·k·(ε − ε*)²·Δl̄ (J/m) for an edge vector (2,) m, k = E·r0 (N), target strain ε* (0 for
-    elasticity; the material damping uses the same form about a moving target)."""
+    elasticity; the material damping uses the same form about a moving target). The engine
+    needs only its derivatives (`stretch_gradient_hessian`); the tests difference this energy
+    to check them."""
     excess = edge.norm() / rest_length - 1.0 - target_strain
     return 0.5 * stiffness * excess * excess * rest_length
 
