@@ -285,7 +285,7 @@ def parse(parser: StudyParser, argv) -> argparse.Namespace:
         longest = SOLVER_RANGES["dt"][1]
         # both ends named (a zero step was told "> 0" alone, a huge one the range: an audit)
         if not (math.isfinite(args.dt) and 0 < args.dt <= longest):
-            raise StudyArgumentError(f"--dt must be in (0, {longest:g}] s, got {args.dt:g}")
+            raise StudyArgumentError(f"--dt must be in (0, {longest:g}] s, got {args.dt!r}")
     if getattr(args, "workers", None) is not None:
         check_count(args.workers, "--workers", 1, MAX_LOCAL_WORKERS)
     if getattr(args, "chunk_size", None) is not None and args.chunk_size < 1:
@@ -749,17 +749,25 @@ def check_axis_values(axes: Mapping[str, Sequence], base: StarParams = StarParam
     """StudyArgumentError for an axis of StarParams field values (`param_product`'s) that
     names an unknown field, is empty or holds a value the field refuses on top of `base`,
     naming the flag that gave it (`flags`: {field: flag}; the field's name where none is
-    given); each value alone, before any combination is built."""
+    given); each value alone, before any combination is built. A value that `base` refuses
+    but `base` with the other axes at their first values takes (a tip radius beyond a swept
+    joint radius, one of three swept component heights) is left to the combinations' check:
+    it depends on them (each value was checked on `base` alone, and such sweeps were refused:
+    an audit, 2026-12)."""
     for name in axes:
         field_kind(name, flags.get(name))
         if len(axes[name]) == 0:
             raise StudyArgumentError(f"empty product: parameter {name!r} has no values")
     for name in axes:
+        others = {other: values[0] for other, values in axes.items() if other != name}
         for value in axes[name]:
             try:
                 base.replace(**{name: value})
             except (ValueError, TypeError) as error:
-                raise StudyArgumentError(f"{flags.get(name, name)}: {error}") from None
+                try:
+                    base.replace(**{**others, name: value})
+                except (ValueError, TypeError):
+                    raise StudyArgumentError(f"{flags.get(name, name)}: {error}") from None
 
 
 def param_product(axes: Mapping[str, Sequence], base: StarParams = StarParams(),
@@ -783,8 +791,12 @@ def param_product(axes: Mapping[str, Sequence], base: StarParams = StarParams(),
 
 # --------------------------------------------------------------------------- model, solver, runs
 
-def base_params(args) -> StarParams:
-    """StarParams of --preset with the --set changes (StudyArgumentError naming --set)."""
+def base_params(args, axes: Mapping[str, Sequence] = {}) -> StarParams:
+    """StarParams of --preset with the --set changes (StudyArgumentError naming --set). A
+    study that sweeps fields gives its `axes` ({field: values}): --set changes that the
+    preset refuses but its first swept values take (actuator delays beyond the preset's
+    period, within a swept one) are then taken on top of those values, which every
+    combination of the sweep replaces."""
     overrides = {}
     for item in args.set:
         name, values = parse_assignment(item, "--set")
@@ -804,7 +816,11 @@ def base_params(args) -> StarParams:
     try:
         return StarParams.preset(args.preset, **overrides)
     except (ValueError, TypeError) as error:
-        raise StudyArgumentError(f"--set: {error}") from None
+        try:
+            return StarParams.preset(args.preset, **{name: values[0] for name, values
+                                                     in axes.items()}, **overrides)
+        except (ValueError, TypeError):
+            raise StudyArgumentError(f"--set: {error}") from None
 
 
 def solver(args, periods: Sequence[float] = ()) -> SolverConfig:

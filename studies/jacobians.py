@@ -91,7 +91,7 @@ def check_args(args):
     dt = SolverConfig().dt
     if not dt <= args.duration <= 100.0:
         raise cli.StudyArgumentError(f"--duration must be in [{dt:g}, 100] s, got "
-                                     f"{args.duration:g}")
+                                     f"{args.duration!r}")
 
 
 def check_whole_run(args, configurations):

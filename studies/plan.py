@@ -225,7 +225,7 @@ def main(argv=None):
     if args.tolerance >= nearest_goal:
         # every such goal counts as reached before the robot moves
         raise cli.StudyArgumentError(f"--tolerance must be below {flag} ({nearest_goal:g} mm), "
-                                     f"got {args.tolerance:g}")
+                                     f"got {args.tolerance!r}")
     base = cli.base_params(args)
     solver = cli.solver(args)
     goals = default_goals(args.distance, args.directions, args.far or None)

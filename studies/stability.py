@@ -169,7 +169,7 @@ def check_step_and_stiffness_values(dts_ms, stiffness):
 
 def plan(args):
     """Validated batches: a list of dicts (precision, dt_s, period, duration_s, n_steps, params,
-    factors, solver). Raises StudyArgumentError before any compute, the whole grid's
+    factors, solver, and base: the model the grid's values are set on). Raises StudyArgumentError before any compute, the whole grid's
     robot-steps refused or estimated before any instance is built."""
     quick = args.quick
     dts = cli.parse_values(args.dts_ms, "--dts-ms")
@@ -218,16 +218,17 @@ def plan(args):
                    else f"--cycles {args.cycles:g} of each period")
     cli.check_robot_steps(f"the grid of {per_batch * len(runs):,} instances ({grid_text}) for "
                           f"{grid_length}", per_batch * sum(run["n_steps"] for run in runs))
-    base = cli.base_params(args)
+    field_axes = {"gait": gaits, "youngs_modulus": [f * BASE_MODULUS for f in stiffness],
+                  "alpha": alphas, "added_mass_coeff": added, "period": periods}
+    base = cli.base_params(args, field_axes)
     # each value on its own, named by its flag (the grid's refusal named none)
     cli.check_axis_values(
-        {"gait": gaits, "youngs_modulus": [f * BASE_MODULUS for f in stiffness],
-         "alpha": alphas, "added_mass_coeff": added, "period": periods}, base,
+        field_axes, base,
         {"gait": "--gaits", "youngs_modulus": "--stiffness", "alpha": "--alphas",
          "added_mass_coeff": "--added-mass", "period": "--periods"})
     grids = {period: grid_params(gaits, stiffness, alphas, added, period, base)
              for period in periods}
-    return [dict(run, params=grids[run["period"]][0], factors=grids[run["period"]][1])
+    return [dict(run, params=grids[run["period"]][0], factors=grids[run["period"]][1], base=base)
             for run in runs]
 
 
@@ -524,7 +525,7 @@ def main(argv=None):
     args = cli.parse(build_parser(), argv)
     batches = plan(args)
     out = cli.Output(args, argv or [], model={"preset": args.preset,
-                                              "params": cli.base_params(args)},
+                                              "params": batches[0]["base"]},
                      solver={precision: {"newton_tol": tolerance} for precision, tolerance
                              in TOLERANCE.items()})
     # the plan told the grid's hours (`plan`): its batches' own estimates would repeat them

@@ -172,11 +172,11 @@ def main(argv=None):
     base = cli.base_params(args)
     if not (math.isfinite(args.window) and 0 < args.window <= base.period / 2):
         raise cli.StudyArgumentError(f"--window must be in (0, {base.period / 2:g}] s (half "
-                                     f"the period), got {args.window:g}")
+                                     f"the period), got {args.window!r}")
     first, last = identification.TRAINING_CYCLES
     if args.cycles < last or args.cycles != int(args.cycles):
         raise cli.StudyArgumentError(f"--cycles must be a whole number >= {last} (the fit's "
-                                     f"cycles {first}-{last}), got {args.cycles:g}")
+                                     f"cycles {first}-{last}), got {args.cycles!r}")
     gaits = list(QUICK_GAITS if args.quick else PAPER_GAITS)
     params = [base.replace(gait=gait) for gait in gaits]
     solver = cli.solver(args)

@@ -193,7 +193,7 @@ def main(argv=None):
     if size > args.max_instances:
         raise cli.StudyArgumentError(
             f"the product has {size} instances, more than --max-instances {args.max_instances}")
-    base = cli.base_params(args)
+    base = cli.base_params(args, axes)
     # checked before the grid is built: a swept period sets the longest and the shortest run
     solver = cli.solver(args, periods=axes.get("period", ()))
     cli.tell_batch_work(args, solver, size, periods=axes.get("period", ()))

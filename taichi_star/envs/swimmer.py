@@ -115,7 +115,7 @@ class SwimmerTask:
             # every drawn goal would start reached: each episode over at its first step,
             # whatever the agent does (an audit, 2026-12)
             raise ValueError(f"goal_distance_mm must exceed goal_tolerance_mm "
-                             f"({self.goal_tolerance_mm:g} mm), got {self.goal_distance_mm:g}")
+                             f"({self.goal_tolerance_mm!r} mm), got {self.goal_distance_mm!r}")
         steps = self.max_episode_steps
         if steps is not None:
             if not is_whole(steps) or steps < 1:

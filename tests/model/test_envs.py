@@ -151,14 +151,15 @@ def test_a_bad_seed_is_a_value_error_and_changes_no_robot(single):
     envs.close()
 
 
-@pytest.mark.parametrize("distance_mm, refused", [(4.0, True), (5.0, True), (5.5, False)])
+@pytest.mark.parametrize("distance_mm, refused", [(4.0, True), (5.0, True), (5.5, False),
+                                                  (5.000001, False), (4.9999999, True)])
 def test_a_task_whose_goals_would_start_reached_is_refused(distance_mm, refused):
     """Goals drawn at goal_distance_mm within goal_tolerance_mm (5 mm) of the start end every
     episode at its first step, whatever the agent does (accepted: an audit, 2026-12): refused
     at the tolerance itself too; just past it accepted."""
     if refused:
         with pytest.raises(ValueError, match=re.escape(
-                f"goal_distance_mm must exceed goal_tolerance_mm (5 mm), got {distance_mm:g}")):
+                f"goal_distance_mm must exceed goal_tolerance_mm (5.0 mm), got {distance_mm!r}")):
             SwimmerTask(goal_distance_mm=distance_mm)
     else:
         assert SwimmerTask(goal_distance_mm=distance_mm).goal_distance_mm == distance_mm

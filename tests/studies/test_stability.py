@@ -197,6 +197,20 @@ def test_bad_arguments_fail_before_compute(tmp_path, argv, match, monkeypatch, c
     assert not out.exists()
 
 
+def test_delays_set_beyond_the_presets_period_fit_the_swept_periods():
+    """--set actuator_delays past the preset's 3.15-s period, within every swept period: the
+    grid is built on them (refused, naming the preset's period, until 2026-12: an audit)."""
+    late = ["--set", "actuator_delays=0,0,0,0,0,0,0,4", "--gaits", "A1", "--dts-ms", "1"]
+    batches = stability.plan(cli.parse(stability.build_parser(),
+                                       ["--quick", "--periods", "5,6", *late]))
+    assert {p.actuator_delays[7] for batch in batches for p in batch["params"]} == {4.0}
+    assert sorted({p.period for batch in batches for p in batch["params"]}) == [5.0, 6.0]
+    assert batches[0]["base"].actuator_delays[7] == 4.0
+    with pytest.raises(cli.StudyArgumentError, match=r"actuator_delays\[7\]"):
+        stability.plan(cli.parse(stability.build_parser(), ["--quick", "--periods", "3.5,5",
+                                                            *late]))
+
+
 def test_the_notes_f32_median_is_over_the_pairs_not_the_cells_medians():
     """At one stiffness, a cell of three pairs that agree (relative difference 0) and a cell of
     one pair 100 % apart: the pairs' median is 0, the median of the cells' medians 0.5, which

@@ -99,6 +99,26 @@ def test_param_product_order_and_validation():
         cli.param_product({"alpha": [-1.0]}, flags={"alpha": "--alpha"})
 
 
+def test_values_that_fit_only_with_other_swept_values_are_left_to_the_combinations():
+    """A value the base model refuses but the other axes' values take is swept, not refused on
+    its own (a tip radius inside the base's joint radius, beyond the swept one; one of three
+    component heights, all set together; an audit, 2026-12); one no first value rescues is
+    refused on its own, naming its flag."""
+    grid = cli.param_product({"joint_radius": [0.02], "tip_radius": [0.021, 0.03]})
+    assert [(p.joint_radius, p.tip_radius) for p in grid] == [(0.02, 0.021), (0.02, 0.03)]
+    heights = cli.param_product({"hub_height": [0.01], "foam_height": [0.01, 0.02],
+                                 "actuator_height": [0.01]})
+    assert [(p.hub_height, p.foam_height, p.actuator_height) for p in heights] == [
+        (0.01, 0.01, 0.01), (0.01, 0.02, 0.01)]
+    # inside the base's joint radius and the swept one's too: refused alone, by its flag
+    with pytest.raises(cli.StudyArgumentError, match=r"^--tip: tip_radius must be .* got 0\.019"):
+        cli.param_product({"joint_radius": [0.02], "tip_radius": [0.019]},
+                          flags={"tip_radius": "--tip"})
+    # fits the first swept value, not the second: the combination is refused, naming both
+    with pytest.raises(cli.StudyArgumentError, match="joint_radius, tip_radius together"):
+        cli.param_product({"joint_radius": [0.02, 0.025], "tip_radius": [0.021]})
+
+
 def test_quick_defaults_and_presets():
     parser = cli.StudyParser("probe", "a test parser")
     parser.add_argument("--frames", type=int, default=60, quick=5, help="frames")
@@ -121,6 +141,14 @@ def test_quick_defaults_and_presets():
     # a value out of its range, each naming the field
     delays = cli.base_params(cli.parse(parser, ["--set", "actuator_delays=0,0.1,0,0,0,0,0,0.5"]))
     assert delays.actuator_delays == (0.0, 0.1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.5)
+    # delays beyond the preset's period fit a swept one: taken on top of the first swept value
+    late = ["--set", "actuator_delays=0,0,0,0,0,0,0,4"]
+    with pytest.raises(cli.StudyArgumentError, match=r"^--set: actuator_delays\[7\]"):
+        cli.base_params(cli.parse(parser, late))
+    swept = cli.base_params(cli.parse(parser, late), {"period": [5.0, 6.0]})
+    assert swept.period == 5.0 and swept.actuator_delays[7] == 4.0
+    with pytest.raises(cli.StudyArgumentError, match=r"^--set: actuator_delays\[7\]"):
+        cli.base_params(cli.parse(parser, late), {"period": [3.5, 5.0]})
     with pytest.raises(cli.StudyArgumentError, match="actuator_gains must have 8 entries"):
         cli.base_params(cli.parse(parser, ["--set", "actuator_gains=1,1,1,1,1,1,1"]))
     with pytest.raises(cli.StudyArgumentError, match=r"actuator_gains\[2\] \(A3\) must be"):
@@ -146,7 +174,9 @@ def test_quick_defaults_and_presets():
     ("fig4c", ["--set", "gait=A1"], "--set gait"),
     # both ends of the step's range named (a zero step was told "> 0" alone)
     ("fig4c", ["--dt", "0.5"], "--dt must be in (0, 0.05] s, got 0.5"),
-    ("fig4c", ["--dt", "0"], "--dt must be in (0, 0.05] s, got 0"),
+    ("fig4c", ["--dt", "0"], "--dt must be in (0, 0.05] s, got 0.0"),
+    # the value as given: a hair past the end was shown rounded onto it (an audit, 2026-12)
+    ("fig4c", ["--dt", "0.05000001"], "--dt must be in (0, 0.05] s, got 0.05000001"),
     # --quick runs 0.2 s instead of the cycles: a --cycles given with it was ignored
     ("fig4c", ["--cycles", "2"], "--cycles: not with --quick, which simulates a short time"),
     ("work_precision", ["--cycles", "2"], "--cycles: not with --quick"),
