@@ -360,31 +360,14 @@ class StarParams:
         if not isinstance(self.actuator_profile, CurvatureProfile):
             raise ValueError(f"actuator_profile must be a CurvatureProfile, got "
                              f"{type(self.actuator_profile).__name__}")
-        for name, (lowest, highest, included) in STAR_RANGES.items():
-            highest_included, reason = True, ""
+        for name in STAR_RANGES:
             # three ranges hang on other fields (checked before them, in declaration order),
             # so that one message states the whole range whichever end a value misses
-            if name == "period":
-                # a firing's heating phase must end within its period
-                lowest, included = self.actuator_profile.switch_time, False
-                reason = "longer than the heating phase t0"
-            elif name == "joint_radius":
-                # the rest shape's actuator arcs, of the profile's rest curvature, must reach
-                # from one joint to the next
-                rest = self.actuator_profile.rest_curvature
-                # the smaller of the two bounds: a profile of small rest curvature let the arc's
-                # bound replace the declared one (1.5 m was taken; an audit, 2026-12)
-                arc_bound = 1.0 / (rest * math.sin(math.pi / 8))
-                if arc_bound <= highest:
-                    highest, highest_included = arc_bound, False
-                    reason = (f"an actuator arc of rest curvature {rest:.5g} 1/m cannot span "
-                              f"joints further apart")
-            elif name == "tip_radius":
-                lowest, included = self.joint_radius, False
-                reason = "beyond joint_radius: the limbs point outwards"
+            lowest, highest, included, highest_included, reason = self._narrowed_range(name)
             if name in PROFILE_BOUNDED and not lowest < highest:
                 # the profile leaves the field no value at all: blame the profile, not the field
                 declared = _declared_range(type(self).__dataclass_fields__[name])
+                rest = self.actuator_profile.rest_curvature
                 bound = (f"its heating phase t0 = {lowest:g} s outlasts every period" if
                          name == "period" else f"a rest arc of its K̄(0) = {rest:.5g} 1/m spans "
                          f"joints at most {highest:.3g} m from the centre")
@@ -414,6 +397,38 @@ class StarParams:
             raise ValueError(f"jet_inflow must be 0 with jet_mode 'always' (its literal formula "
                              f"already jets while a space opens; an inflow would only cancel "
                              f"part of that), got {self.jet_inflow!r}: use jet_mode 'contract'")
+
+    def _narrowed_range(self, name: str) -> Tuple[float, float, bool, bool, str]:
+        """(lowest, highest, lowest included, highest included, the reason in words where the
+        other fields narrow it) of numeric field `name`: its declared range (`STAR_RANGES`) as
+        the fields it hangs on narrow it (read from `self`: those declared before it)."""
+        lowest, highest, included = STAR_RANGES[name]
+        if name == "period":
+            # a firing's heating phase must end within its period
+            return (self.actuator_profile.switch_time, highest, False, True,
+                    "longer than the heating phase t0")
+        if name == "joint_radius":
+            # the rest shape's actuator arcs, of the profile's rest curvature, must reach from
+            # one joint to the next
+            rest = self.actuator_profile.rest_curvature
+            # the smaller of the two bounds: a profile of small rest curvature let the arc's
+            # bound replace the declared one (1.5 m was taken; an audit, 2026-12)
+            arc_bound = 1.0 / (rest * math.sin(math.pi / 8))
+            if arc_bound <= highest:
+                return (lowest, arc_bound, included, False,
+                        f"an actuator arc of rest curvature {rest:.5g} 1/m cannot span joints "
+                        f"further apart")
+        if name == "tip_radius":
+            return (self.joint_radius, highest, False, True,
+                    "beyond joint_radius: the limbs point outwards")
+        return lowest, highest, included, True, ""
+
+    def allowed_range(self, name: str) -> Tuple[float, float, bool, bool]:
+        """(lowest, highest, lowest included, highest included) of numeric field `name` with
+        these parameters: its declared range (`STAR_RANGES`) narrowed by the fields it hangs
+        on (the joint radius by the profile's rest arc, the tip radius by the joint radius,
+        the period by the profile's heating phase)."""
+        return self._narrowed_range(name)[:4]
 
     @classmethod
     def preset(cls, name: str = "paper", **overrides) -> "StarParams":

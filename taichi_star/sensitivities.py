@@ -32,6 +32,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import difflib
+import math
 from dataclasses import dataclass
 from typing import Dict, List, Optional, Sequence, Tuple
 
@@ -120,8 +121,9 @@ class Direction:
 
     def moved(self, params: StarParams, value: float) -> StarParams:
         """A copy of params with this parameter set to `value`. Not validated: a replica of an
-        instance at the edge of a range lies ε beyond it, where the model's formulas continue
-        smoothly."""
+        instance at an included end of a range lies ε beyond it, where the model's formulas
+        continue smoothly (ε keeps clear of an excluded end, where the model is singular:
+        EXCLUDED_END_SHARE)."""
         replica = copy.copy(params)
         if self.index < 0:
             object.__setattr__(replica, self.field, float(value))
@@ -148,7 +150,29 @@ class Direction:
         elif value == 0.0:
             value = ZERO_VALUE_SCALE * (STAR_RANGES[self.field][1] if self.field in STAR_RANGES
                                         else 1.0)
-        return self.relative_step * value
+        return min(self.relative_step * value, EXCLUDED_END_SHARE * self.excluded_end_gap(params))
+
+    def excluded_end_gap(self, params: StarParams) -> float:
+        """How far the parameter lies from the nearer excluded end of its range as the other
+        fields narrow it (`StarParams.allowed_range`); inf where neither end is excluded (a
+        per-actuator field: none of their ends is singular in the model)."""
+        if self.field not in STAR_RANGES:
+            return math.inf
+        lowest, highest, lowest_included, highest_included = params.allowed_range(self.field)
+        value = self.value(params)
+        return min(math.inf if lowest_included else value - lowest,
+                   math.inf if highest_included else highest - value)
+
+
+EXCLUDED_END_SHARE = 0.01
+"""ε is at most this share of the parameter's distance to an excluded end of its range
+(`Direction.excluded_end_gap`): the model is singular there (the joint radius's actuator arcs
+stop reaching from joint to joint, their geometry a square root of the gap; the tip radius's
+limbs shrink to nothing), and the host's tables at ±2ε (`replica_model`) crossed it within 2ε
+of it, silently (the joint radius's derivative 17 times its differences 1.5e-4 of the value
+from the bound: an audit, 2026-12). The tables' fourth-order differences of a square root
+then carry a truncation of ~(ε/gap)⁴ ≈ 1e-8, and the differences' runs at up to 4ε
+(`sensitivity_check`) stay within 4 % of the gap."""
 
 
 def parse_directions(names, what: str = "sensitivities") -> Tuple[Direction, ...]:

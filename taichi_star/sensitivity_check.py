@@ -14,6 +14,7 @@ with H (`taylor_step`) large enough that the remainder stands above the runs' Ne
 
 from __future__ import annotations
 
+import math
 from typing import Optional, Sequence
 
 import numpy as np
@@ -35,6 +36,10 @@ its remainder, ~H² relative, stays far above the Newton noise of the runs (1e-1
 displacements of 1e-4 m)..."""
 TAYLOR_MOST = 0.1
 """... but H at most this share of a nonzero value (C∥, whose ε is 1e-2 of it, moves by 10 %)."""
+TAYLOR_GAP_SHARE = 0.25
+"""... and at most this share of the distance to an excluded end of the range, where the model
+is singular: the run at 2H stays half that distance from it (at 100·h it crossed it, where ε is
+held to 1e-2 of that distance: `sensitivities.EXCLUDED_END_SHARE`)."""
 CHECK_COLUMNS = ("instance", "gait", "parameter", "value", "output", "sensitivity",
                  "difference_h", "difference_2h", "difference_4h", "difference", "absolute_error",
                  "relative_error", "difference_spread", "taylor_ratio", "status",
@@ -96,10 +101,11 @@ def one_sided(direction: Direction, params: StarParams) -> bool:
         - max(MULTIPLES) * difference_step(direction, params) < 0.0
 
 
-def taylor_step(h: float, value: float) -> float:
+def taylor_step(h: float, value: float, gap: float = math.inf) -> float:
     """H of the Taylor test for differences of step h at a parameter value: TAYLOR_MULTIPLE·h,
-    at most TAYLOR_MOST·|value| where the value is not 0."""
-    step = TAYLOR_MULTIPLE * h
+    at most TAYLOR_MOST·|value| where the value is not 0, and at most TAYLOR_GAP_SHARE of its
+    distance `gap` to an excluded end of its range (`Direction.excluded_end_gap`)."""
+    step = min(TAYLOR_MULTIPLE * h, TAYLOR_GAP_SHARE * gap)
     return min(step, TAYLOR_MOST * abs(value)) if value else step
 
 
@@ -219,7 +225,8 @@ def check_sensitivities(params: Sequence[StarParams], duration_s: float, solver:
     centre = result.summary[output].to_numpy(dtype=float)
     differences, difference_runs = _difference_runs(params, duration_s, solver, directions,
                                                     output, arch, progress)
-    taylor_steps = np.array([[taylor_step(difference_step(direction, p), direction.value(p))
+    taylor_steps = np.array([[taylor_step(difference_step(direction, p), direction.value(p),
+                                          direction.excluded_end_gap(p))
                               for p in params] for direction in directions])
     taylor_summary = _moved_runs(params, taylor_steps, directions, TAYLOR_MULTIPLES,
                                  duration_s, solver, arch, progress)

@@ -182,12 +182,55 @@ def test_the_inflow_at_zero_has_a_zero_derivative(taichi_cpu):
     assert np.all(np.abs(run.summary["displacement_x_mm"]) > 1e-3)
 
 
+def test_a_joint_radius_near_its_arc_bound_keeps_its_steps_inside_it(taichi_cpu,
+                                                                   matches_differences):
+    """The joint radius's range ends (excluded) where an actuator arc of the profile's rest
+    curvature stops reaching from joint to joint; the arc's geometry is a square root of the
+    gap. 1e-3 and 1.5e-4 of the value below it, the replicas' tables at ±2ε and the Taylor
+    test's runs at 2H crossed it (the derivative 17 times the differences at 1.5e-4, over
+    0.2 s: an audit, 2026-12); ε is now held to 1e-2 of the gap
+    (`sensitivities.EXCLUDED_END_SHARE`), H to a quarter of it."""
+    arc_bound = BASE.allowed_range("joint_radius")[1]
+    assert BASE.allowed_range("joint_radius")[3] is False          # excluded
+    batch = [BASE.replace(gait="A1+A2", joint_radius=radius, tip_radius=radius + 0.028)
+             for radius in (arc_bound * (1 - 1e-3), arc_bound * (1 - 1.5e-4))]
+    # measured 9.5e-9 and 3.0e-8, the Taylor ratios 4.79 (the square root's higher orders):
+    # 1e-6, 30×
+    matches_differences(check_sensitivities(batch, DURATION_S, SolverConfig(**TIGHT),
+                                            ("joint_radius",)), 1e-6)
+    (direction,) = parse_directions(("joint_radius",))
+    for params in batch:
+        assert direction.step(params) == pytest.approx(
+            1e-2 * (arc_bound - params.joint_radius), rel=1e-9)
+    # far from it, ε's own rule (the paper's joint radius lies 6 % below the bound)
+    assert direction.step(BASE) == pytest.approx(1e-4 * BASE.joint_radius, rel=1e-15)
+
+
+def test_the_allowed_range_is_the_one_validation_holds_values_to():
+    """`StarParams.allowed_range` states the range `__post_init__` checks: each end taken or
+    refused as it says, for the three fields other fields narrow."""
+    for name in ("joint_radius", "tip_radius", "period"):
+        lowest, highest, lowest_included, highest_included = BASE.allowed_range(name)
+        for end, included in ((lowest, lowest_included), (highest, highest_included)):
+            if included:
+                assert getattr(BASE.replace(**{name: end}), name) == end
+            else:
+                with pytest.raises(ValueError, match=name):
+                    BASE.replace(**{name: end})
+    assert BASE.allowed_range("tip_radius")[0] == BASE.joint_radius
+    assert BASE.allowed_range("period")[0] == BASE.actuator_profile.switch_time
+
+
 def test_the_taylor_step_is_a_hundred_differences_steps_at_most_a_tenth_of_the_value():
     assert taylor_step(1e-5, 1.0) == pytest.approx(1e-3, rel=1e-15)
     assert taylor_step(1e-3, 1.0) == pytest.approx(0.1, rel=1e-15)  # both rules: equal
     assert taylor_step(2e-3, 1.0) == pytest.approx(0.1, rel=1e-15)  # a tenth of the value
     assert taylor_step(2e-3, -1.0) == pytest.approx(0.1, rel=1e-15)
     assert taylor_step(2e-3, 0.0) == pytest.approx(0.2, rel=1e-15)  # at 0: no value to bound
+    # a quarter of the distance to an excluded end at most, where that is the nearest bound
+    assert taylor_step(1e-5, 1.0, gap=1e-3) == pytest.approx(2.5e-4, rel=1e-15)
+    assert taylor_step(1e-5, 1.0, gap=4e-3) == pytest.approx(1e-3, rel=1e-15)  # both: equal
+    assert taylor_step(1e-5, 1.0, gap=1.0) == pytest.approx(1e-3, rel=1e-15)
 
 
 def test_an_actuator_the_gait_never_fires_has_no_influence(euler_run, matches_differences):
