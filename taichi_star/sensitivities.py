@@ -79,6 +79,11 @@ robot, whose replicas' offsets at RELATIVE_STEP are too few roundings of a posit
 cylinder's drag C_c 1e-2, the damping time τ 1e-3). Each multiplies its own force, so the
 residual is linear in it and a larger ε adds no truncation from the parameter itself (docs:
 numerics, sensitivities)."""
+FIELD_LEAST_STEPS = {field: step for term in TERMS
+                     for field, step in term.sensitivity_least_steps.items()}
+"""Fields whose ε has a least value, in the field's unit, gathered from the terms that own them
+(`physics.base.Term.sensitivity_least_steps`): the wake's exchange time τ_w, at least 1e-6 s
+(1e-4 of a short τ_w moved the replicas by a few roundings of their positions)."""
 REPLICAS_PER_DIRECTION = 2
 """Replica instances each direction adds per instance: the pair at ±ε."""
 
@@ -143,14 +148,17 @@ class Direction:
         least its ε at 0: the replicas are linear in a delay's offset (the profile expanded
         about the instance's delay), so a larger ε costs nothing, where ε = RELATIVE_STEP ×
         a tiny delay (1e-13 s at 1e-9 s) left the pair's offsets below the positions' rounding
-        (11 % off the differences at 1e-9 s, 1.2 % at 1e-8: an audit, 2026-12)."""
+        (11 % off the differences at 1e-9 s, 1.2 % at 1e-8: an audit, 2026-12). A field of
+        FIELD_LEAST_STEPS takes at least its least ε; and every ε keeps to EXCLUDED_END_SHARE
+        of the distance to an excluded end of the range."""
         value = abs(self.value(params))
         if self.field == "actuator_delays":
             value = max(value, ZERO_VALUE_SCALE * params.period)
         elif value == 0.0:
             value = ZERO_VALUE_SCALE * (STAR_RANGES[self.field][1] if self.field in STAR_RANGES
                                         else 1.0)
-        return min(self.relative_step * value, EXCLUDED_END_SHARE * self.excluded_end_gap(params))
+        step = max(self.relative_step * value, FIELD_LEAST_STEPS.get(self.field, 0.0))
+        return min(step, EXCLUDED_END_SHARE * self.excluded_end_gap(params))
 
     def excluded_end_gap(self, params: StarParams) -> float:
         """How far the parameter lies from the nearer excluded end of its range as the other

@@ -22,7 +22,8 @@ import pandas as pd
 
 from .checks import warn_user
 from .params import SolverConfig, StarParams
-from .sensitivities import (RELATIVE_STEP, Direction, check_directions, instances_per_instance,
+from .sensitivities import (FIELD_LEAST_STEPS, RELATIVE_STEP, Direction, check_directions,
+                            instances_per_instance,
                             parse_directions)
 from .simulation import simulate
 
@@ -36,6 +37,10 @@ its remainder, ~H² relative, stays far above the Newton noise of the runs (1e-1
 displacements of 1e-4 m)..."""
 TAYLOR_MOST = 0.1
 """... but H at most this share of a nonzero value (C∥, whose ε is 1e-2 of it, moves by 10 %)."""
+TAYLOR_LEAST_MULTIPLE = 30.0
+"""... but never below this many of a field's least ε (`sensitivities.FIELD_LEAST_STEPS`): a
+tenth of the wake's exchange time τ_w = 1e-9 s moved it by 1e-10 s, a remainder ~1e-23 m lost
+in the runs' Newton noise (Taylor ratios 0.3 to 100: measured, 2026-12)."""
 TAYLOR_GAP_SHARE = 0.25
 """... and at most this share of the distance to an excluded end of the range, where the model
 is singular: the run at 2H stays half that distance from it (at 100·h it crossed it, where ε is
@@ -101,12 +106,15 @@ def one_sided(direction: Direction, params: StarParams) -> bool:
         - max(MULTIPLES) * difference_step(direction, params) < 0.0
 
 
-def taylor_step(h: float, value: float, gap: float = math.inf) -> float:
+def taylor_step(h: float, value: float, gap: float = math.inf, least: float = 0.0) -> float:
     """H of the Taylor test for differences of step h at a parameter value: TAYLOR_MULTIPLE·h,
-    at most TAYLOR_MOST·|value| where the value is not 0, and at most TAYLOR_GAP_SHARE of its
-    distance `gap` to an excluded end of its range (`Direction.excluded_end_gap`)."""
+    at most TAYLOR_MOST·|value| where the value is not 0 (or TAYLOR_LEAST_MULTIPLE times the
+    field's least ε `least`, `sensitivities.FIELD_LEAST_STEPS`, where that is more), and at
+    most TAYLOR_GAP_SHARE of its distance `gap` to an excluded end of its range
+    (`Direction.excluded_end_gap`)."""
     step = min(TAYLOR_MULTIPLE * h, TAYLOR_GAP_SHARE * gap)
-    return min(step, TAYLOR_MOST * abs(value)) if value else step
+    return min(step, max(TAYLOR_MOST * abs(value), TAYLOR_LEAST_MULTIPLE * least)) if value \
+        else step
 
 
 def _moved_runs(params: Sequence[StarParams], steps: np.ndarray, directions, multiples,
@@ -226,7 +234,8 @@ def check_sensitivities(params: Sequence[StarParams], duration_s: float, solver:
     differences, difference_runs = _difference_runs(params, duration_s, solver, directions,
                                                     output, arch, progress)
     taylor_steps = np.array([[taylor_step(difference_step(direction, p), direction.value(p),
-                                          direction.excluded_end_gap(p))
+                                          direction.excluded_end_gap(p),
+                                          FIELD_LEAST_STEPS.get(direction.field, 0.0))
                               for p in params] for direction in directions])
     taylor_summary = _moved_runs(params, taylor_steps, directions, TAYLOR_MULTIPLES,
                                  duration_s, solver, arch, progress)

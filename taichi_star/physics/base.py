@@ -85,6 +85,11 @@ class Term:
     """StarParams fields of this term whose sensitivities' ε (relative to the value) departs
     from `sensitivities.RELATIVE_STEP`, with the ε and, in the subclass, why
     (`sensitivities.FIELD_RELATIVE_STEPS` gathers them from `physics.TERMS`)."""
+    sensitivity_least_steps: ClassVar[Dict[str, float]] = {}
+    """StarParams fields of this term whose sensitivities' ε has a least value (in the field's
+    unit) where the relative one would be too small a move, with why in the subclass
+    (`sensitivities.FIELD_LEAST_STEPS` gathers them): the term's force must then be smooth
+    through the field's value ± that ε, beyond its range too."""
     fired_columns: ClassVar[Tuple[str, ...]] = ()
     """Its coefficients of one column per actuator ((B, 8), column k for A(k+1)) whose column k
     it reads only once actuator k has fired. A sensitivities' replica that differs from its

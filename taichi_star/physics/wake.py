@@ -20,9 +20,12 @@ Discretisation: u advances by the nodes' integrator, implicitly within each step
 the integrator's rate gain and offset (the rate of u over the step is γ·(u' − u_k) + o), the
 step's end value u' solves γ·(u' − u_k) + o = (v' − u')/τ_w, so at a Newton iterate
 
-    u' = (γ·u_k − o + v'/τ_w)/(γ + 1/τ_w),   F = c_w·(u' − v') = c_w·(γ·(u_k − v') − o)/(γ + 1/τ_w),
+    u' = v' + s·A,   F = c_w·(u' − v') = c_w·s·A,   s = τ_w/(γ·τ_w + 1),   A = γ·(u_k − v') − o,
 
-and ∂F/∂x_hub = −c_w·γ²/(γ + 1/τ_w)·I (∂v'/∂x = γ). The water is thereby solved with the
+and ∂F/∂x_hub = −c_w·s·γ²·I (∂v'/∂x = γ). Written in τ_w, not its rate 1/τ_w, the force is
+smooth through τ_w = 0 (the water follows the hub: no force), and a sensitivity's replica
+expands s about its instance's τ_w (`exchange_share`), so its replicas may lie on either side of
+a tiny τ_w (`sensitivity_least_steps`). The water is thereby solved with the
 nodes, not lagged a step. u' is committed only when the engine accepts the step
 (`accept_step`; a rejected adaptive step leaves u_k), and kept with the positions in the
 engine's backup of a step redone in substeps (`copy_carried`). The NumPy reference solves the
@@ -42,12 +45,20 @@ from .base import Term
 class Wake(Term):
     name = "wake"
     carries_state: ClassVar[bool] = True
+    # ε = 1e-4·τ_w of a short exchange time moved the replicas by a few roundings of their
+    # positions or less (1e-13 s at τ_w = 1e-9 s: the derivative came out 0; 4.7e-3 and 1.6e-2
+    # off at 1e-6 s with Euler and BDF2, 2e-5 at 1e-3 s with BDF2: an audit, 2026-12). At least
+    # 1e-6 s: the pair's offsets then lie ~1e7 roundings apart, and the replicas, expanded
+    # about their instance (`exchange_share`), add no truncation; the whole-run differences
+    # that check them (`sensitivity_check`, at up to ±4ε) stay far from the pole γ·τ_w = −1 on
+    # steps down to ~1e-5 s.
+    sensitivity_least_steps = {"wake_time": 1e-6}
 
     @staticmethod
     def coefficients(params, topologies, topology):
-        """wake_coupling (B,) c_w, Pa·s; wake_rate (B,) 1/τ_w, 1/s."""
+        """wake_coupling (B,) c_w, Pa·s; wake_time (B,) τ_w, s."""
         return {"wake_coupling": np.array([p.wake_coupling for p in params]),
-                "wake_rate": np.array([1.0 / p.wake_time for p in params])}
+                "wake_time": np.array([p.wake_time for p in params])}
 
     @staticmethod
     def configuration(coefficients):
@@ -71,22 +82,34 @@ class Wake(Term):
                 self.water_velocity[b, c], self.water_previous[b, c], h, ratio, use_history)
 
     @ti.func
+    def exchange_share(self, b, rate_gain):
+        """s = τ_w/(γ·τ_w + 1), s: u' − v' = s·A and F = c_w·s·A, A = γ·(u_k − v') − o the
+        water's rate imbalance. A sensitivities' replica (`Assembly.primal_instance`) takes its
+        first-order expansion in τ_w about its instance's, s + (τ_w,replica − τ_w)/(γ·τ_w + 1)²:
+        linear in its offset, so the pair's difference has no truncation from τ_w's curvature
+        and its ε may reach past 0 (`sensitivity_least_steps`), where γ·τ_w + 1 has a zero."""
+        primal = self.assembly.primal_instance(b)
+        exchange_time = self.wake_time[primal]
+        denominator = rate_gain * exchange_time + 1.0
+        return (exchange_time / denominator
+                + (self.wake_time[b] - exchange_time) / (denominator * denominator))
+
+    @ti.func
     def water_and_force(self, b, hub_velocity, rate_gain):
         """(u' (2,) m/s, F (2,) N/m on the hub) for the hub's velocity v' (2,) m/s."""
         start = ti.Vector([self.water_velocity[b, 0], self.water_velocity[b, 1]])
         offset = ti.Vector([self.water_rate_offset[b, 0], self.water_rate_offset[b, 1]])
-        rate = self.wake_rate[b]
-        denominator = rate_gain + rate
-        water = (rate_gain * start - offset + rate * hub_velocity) / denominator
-        force = self.wake_coupling[b] * (rate_gain * (start - hub_velocity) - offset) / denominator
-        return water, force
+        share = self.exchange_share(b, rate_gain)
+        imbalance = rate_gain * (start - hub_velocity) - offset
+        return hub_velocity + share * imbalance, self.wake_coupling[b] * share * imbalance
 
     @ti.func
     def assemble(self, b, rate_gain, jacobian):
         hub_velocity = self.assembly.implicit_velocity(b, CENTRE, rate_gain)
         _, force = self.water_and_force(b, hub_velocity, rate_gain)
         self.assembly.add_residual(b, CENTRE, -force)
-        stiffness = self.wake_coupling[b] * rate_gain * rate_gain / (rate_gain + self.wake_rate[b])
+        stiffness = (self.wake_coupling[b] * self.exchange_share(b, rate_gain)
+                     * rate_gain * rate_gain)
         self.assembly.add_block(b, self.centre_slot, stiffness * ti.Matrix.identity(float, 2),
                                 jacobian)
 

@@ -135,6 +135,24 @@ def test_wake_sensitivities_equal_finite_differences(matches_differences):
     matches_differences(table, tolerance=2e-8)
 
 
+@pytest.mark.parametrize("integrator", ["euler", "bdf2"])
+def test_a_short_exchange_times_sensitivity_is_not_lost_to_rounding(matches_differences,
+                                                                     integrator):
+    """τ_w of 1e-9, 1e-6 and 1e-3 s with ε = 1e-4·τ_w moved the replicas by a few roundings of
+    their positions or less: d/dτ_w came out 0 at 1e-9 s, 4.7e-3 (Euler) and 1.6e-2 (BDF2) off
+    at 1e-6 s, 2e-5 (BDF2) at 1e-3 s (an audit, 2026-12). Now ε ≥ 1e-6 s, the replicas on both
+    sides of a tiny τ_w (expanded about their instance's: `Wake.exchange_share`), and the
+    Taylor test moves τ_w by 30 such steps at least. Measured at most 2.2e-6 (BDF2 at 1e-9 s;
+    the differences spread 2.4e-8), the Taylor ratios 3.99 to 4.01: 1e-5, the target. Not
+    here: c_w at τ_w ≪ h, whose derivative (~1e-10 mm per Pa·s at 1e-9 s) is below the
+    positions' rounding, reported as 0 (the differences spread by 10 % and more)."""
+    water = [WATERED[0].replace(wake_time=exchange_time) for exchange_time in (1e-9, 1e-6)]
+    solver = ts.SolverConfig(integrator=integrator, **TIGHT)
+    matches_differences(check_sensitivities(water, 0.1, solver, ("wake_time",)), 1e-5)
+    matches_differences(check_sensitivities([WATERED[0].replace(wake_time=1e-3)], 0.1, solver,
+                                            ("wake_time", "wake_coupling")), 1e-5)
+
+
 @pytest.mark.slow
 def test_wake_sensitivities_with_bdf2_and_adaptive_steps(matches_differences):
     """BDF2 (the water's rate from its last two values) with adaptive steps held at 1 ms, so
