@@ -169,8 +169,9 @@ def check_step_and_stiffness_values(dts_ms, stiffness):
 
 def plan(args):
     """Validated batches: a list of dicts (precision, dt_s, period, duration_s, n_steps, params,
-    factors, solver, and base: the model the grid's values are set on). Raises StudyArgumentError before any compute, the whole grid's
-    robot-steps refused or estimated before any instance is built."""
+    factors, solver, and base: the model the grid's values are set on). Raises
+    StudyArgumentError before any compute, the whole grid's robot-steps refused or estimated
+    before any instance is built."""
     quick = args.quick
     dts = cli.parse_values(args.dts_ms, "--dts-ms")
     stiffness = cli.parse_values(args.stiffness, "--stiffness")
