@@ -650,7 +650,10 @@ class SolverConfig:
     of newtons, and the round-off floor of the residual is the stiffness times the rounding of
     the positions: ~1e-9 N in f64, but newtons in f32 (stiff limbs), where it is unusable."""
     max_newton: int = parameter(25, "1", 1, 200)
-    """Newton iterations per step before the instance is declared newton_failed."""
+    """Newton iterations per step before the instance is declared newton_failed (after its
+    substep retries). At 1 every step that moves fails: a solve stops only on an update within
+    newton_tol, and the first update is the step's whole move (the tests use it to make
+    failures)."""
     precision: str = parameter("f64", choices=PRECISIONS)
     """Floating point type of the engine."""
     integrator: str = parameter("euler", choices=INTEGRATORS)
