@@ -331,7 +331,8 @@ class StarParams:
     (`physics.wake`)."""
     wake_time: float = parameter(1.0, "s", 1e-9, 1e3)
     """Exchange time τ_w of the entrained water, s: its mass per unit height is c_w·τ_w (at
-    least 1 ns: the term divides by it, and a subnormal τ_w made 1/τ_w infinite)."""
+    least 1 ns: 0 is no water, which c_w = 0 says; the term is smooth through 0, written in
+    τ_w, until 2026-12 in 1/τ_w, which a subnormal τ_w made infinite)."""
     stroke_warming: float = parameter(0.0, "1", 0.0, 10.0)
     """Warming w of the actuators' stroke (-): a firing's gain on its curvature change is
     multiplied by 1 + w·θ, θ the heat the actuator keeps from its earlier firings (each left

@@ -161,15 +161,26 @@ class Direction:
         return min(step, EXCLUDED_END_SHARE * self.excluded_end_gap(params))
 
     def excluded_end_gap(self, params: StarParams) -> float:
-        """How far the parameter lies from the nearer excluded end of its range as the other
-        fields narrow it (`StarParams.allowed_range`); inf where neither end is excluded (a
-        per-actuator field: none of their ends is singular in the model)."""
+        """How far the parameter lies from the nearest excluded end of a range it bounds: its
+        own, as the other fields narrow it (`StarParams.allowed_range`), and another field's
+        whose excluded end it is (the joint radius is the tip radius's lower end: a joint
+        radius 1e-7 m inside its tip radius took ε = 2.4e-6 m, and its replicas limbs of
+        negative length: a review, 2026-12); inf where there is none (a per-actuator field:
+        none of their ends is singular in the model)."""
         if self.field not in STAR_RANGES:
             return math.inf
-        lowest, highest, lowest_included, highest_included = params.allowed_range(self.field)
         value = self.value(params)
-        return min(math.inf if lowest_included else value - lowest,
-                   math.inf if highest_included else highest - value)
+        gap = math.inf
+        for name in STAR_RANGES:
+            lowest, highest, lowest_included, highest_included = params.allowed_range(name)
+            if name == self.field:
+                gap = min(gap, math.inf if lowest_included else value - lowest,
+                          math.inf if highest_included else highest - value)
+            elif not lowest_included and lowest == value:
+                gap = min(gap, getattr(params, name) - value)
+            elif not highest_included and highest == value:
+                gap = min(gap, value - getattr(params, name))
+        return gap
 
 
 EXCLUDED_END_SHARE = 0.01

@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from .checks import warn_user
-from .params import SolverConfig, StarParams
+from .params import STAR_RANGES, SolverConfig, StarParams
 from .sensitivities import (FIELD_LEAST_STEPS, RELATIVE_STEP, Direction, check_directions,
                             instances_per_instance,
                             parse_directions)
@@ -101,9 +101,13 @@ def one_sided(direction: Direction, params: StarParams) -> bool:
     that its −4h run would take below 0, where τ = max(t − d, 0) has a kink, so that a
     negative delay continues the model along another slope (central differences there
     averaged the two and reported a correct derivative 1.9 % off at 0: an audit; and below
-    4h: a review, 2026-12)."""
-    return direction.field == "actuator_delays" and direction.value(params) \
-        - max(MULTIPLES) * difference_step(direction, params) < 0.0
+    4h: a review, 2026-12); or a field with a least ε (`sensitivities.FIELD_LEAST_STEPS`)
+    that its −4h run would take below its range: the water's exchange time τ_w, whose force
+    has a pole at γ·τ_w = −1, which runs at −4h reached on steps of a few µs (failed runs and
+    differences 9–12 % off at τ_w = 1e-9 s: a review, 2026-12)."""
+    lowest = 0.0 if direction.field == "actuator_delays" else (
+        STAR_RANGES[direction.field][0] if direction.field in FIELD_LEAST_STEPS else -math.inf)
+    return direction.value(params) - max(MULTIPLES) * difference_step(direction, params) < lowest
 
 
 def taylor_step(h: float, value: float, gap: float = math.inf, least: float = 0.0) -> float:

@@ -49,9 +49,9 @@ class Wake(Term):
     # positions or less (1e-13 s at τ_w = 1e-9 s: the derivative came out 0; 4.7e-3 and 1.6e-2
     # off at 1e-6 s with Euler and BDF2, 2e-5 at 1e-3 s with BDF2: an audit, 2026-12). At least
     # 1e-6 s: the pair's offsets then lie ~1e7 roundings apart, and the replicas, expanded
-    # about their instance (`exchange_share`), add no truncation; the whole-run differences
-    # that check them (`sensitivity_check`, at up to ±4ε) stay far from the pole γ·τ_w = −1 on
-    # steps down to ~1e-5 s.
+    # about their instance (`exchange_share`), add no truncation and never meet the pole at
+    # γ·τ_w = −1; the whole-run differences that check them are taken forward where they would
+    # leave the range (`sensitivity_check.one_sided`).
     sensitivity_least_steps = {"wake_time": 1e-6}
 
     @staticmethod

@@ -10,7 +10,8 @@ import pytest
 
 from taichi_star import SolverConfig, StarParams, sensitivities, simulate
 from taichi_star.sensitivities import SUMMARY_OUTPUTS, parse_directions, sensitivity_column
-from taichi_star.sensitivity_check import check_sensitivities, difference_step, taylor_step
+from taichi_star.sensitivity_check import (check_sensitivities, difference_step, one_sided,
+                                           taylor_step)
 
 DURATION_S = 0.1
 """100 steps of 1 ms: the A1 pulse has begun to bend the arcs and the robot to move."""
@@ -231,6 +232,47 @@ def test_the_taylor_step_is_a_hundred_differences_steps_at_most_a_tenth_of_the_v
     assert taylor_step(1e-5, 1.0, gap=1e-3) == pytest.approx(2.5e-4, rel=1e-15)
     assert taylor_step(1e-5, 1.0, gap=4e-3) == pytest.approx(1e-3, rel=1e-15)  # both: equal
     assert taylor_step(1e-5, 1.0, gap=1.0) == pytest.approx(1e-3, rel=1e-15)
+    # a field with a least ε (the water's τ_w, 1e-6 s): at least 30 of those where a tenth of
+    # the value is less, a tenth of the value where that is more, and never past 100·h
+    assert taylor_step(1e-6, 1e-9, least=1e-6) == pytest.approx(3e-5, rel=1e-15)
+    assert taylor_step(1e-6, 3e-4, least=1e-6) == pytest.approx(3e-5, rel=1e-15)  # both
+    assert taylor_step(1e-6, 1e-3, least=1e-6) == pytest.approx(1e-4, rel=1e-15)
+    assert taylor_step(1e-7, 1e-9, least=1e-6) == pytest.approx(1e-5, rel=1e-15)
+
+
+def test_a_joint_radius_just_inside_its_tip_radius_keeps_its_steps_inside_it():
+    """The tip radius's lower end (excluded) is the joint radius: a joint radius 1e-7 m inside
+    it took ε = 2.4e-6 m, its replicas' limbs of negative length (a review, 2026-12). ε is
+    held to 1e-2 of the nearest excluded end of a range the parameter bounds, its own or
+    another field's; the tip radius's own is the same gap."""
+    (joint,) = parse_directions(("joint_radius",))
+    (tip,) = parse_directions(("tip_radius",))
+    close = BASE.replace(tip_radius=BASE.joint_radius + 1e-7)
+    gap = close.tip_radius - close.joint_radius
+    assert joint.step(close) == pytest.approx(1e-2 * gap, rel=1e-12)
+    assert tip.step(close) == pytest.approx(1e-2 * gap, rel=1e-12)
+    # far from every excluded end, ε's own rule (the paper's limbs are 28 mm long)
+    assert tip.step(BASE) == pytest.approx(1e-4 * BASE.tip_radius, rel=1e-15)
+
+
+@pytest.mark.parametrize("exchange_time, forward", [
+    (1e-9, True), (3.9e-6, True),
+    (4e-6 + 1.001e-9, False),  # its −4h run just above the range's lowest, 1e-9 s: central
+    (4e-6 + 0.999e-9, True),   # just below it: forward
+    (1.0, False)])
+def test_a_field_with_a_least_step_is_differenced_forward_where_it_would_leave_its_range(
+        exchange_time, forward):
+    """`check_sensitivities`' runs at −h, −2h and −4h of τ_w (ε at least 1e-6 s) went below
+    the range, to −4e-6 s at 1e-9 s, where on steps of a few µs the force's pole at
+    γ·τ_w = −1 failed the runs (a review, 2026-12): such rows are differenced forward. Other
+    fields at 0 are still differenced centrally through their negative values."""
+    (direction,) = parse_directions(("wake_time",))
+    watered = BASE.replace(wake_coupling=30.0, wake_time=exchange_time)
+    assert difference_step(direction, watered) == pytest.approx(
+        max(1e-6, 1e-4 * exchange_time), rel=1e-15)
+    assert one_sided(direction, watered) is forward
+    (alpha,) = parse_directions(("alpha",))
+    assert one_sided(alpha, BASE.replace(alpha=0.0)) is False
 
 
 def test_an_actuator_the_gait_never_fires_has_no_influence(euler_run, matches_differences):
