@@ -763,11 +763,32 @@ def check_axis_values(axes: Mapping[str, Sequence], base: StarParams = StarParam
         for value in axes[name]:
             try:
                 base.replace(**{name: value})
-            except (ValueError, TypeError) as error:
-                try:
-                    base.replace(**{**others, name: value})
-                except (ValueError, TypeError):
+            except (ValueError, TypeError) as alone:
+                if smallest_fitting(lambda chosen: base.replace(**chosen, **{name: value}),
+                                    others) is None:
+                    # the refusal with the other axes' first values where it is this field's
+                    # (joint 0.02 m, tip 0.019 m: "in (0.02, 2]", not the base's joint radius)
+                    try:
+                        base.replace(**others, **{name: value})
+                    except (ValueError, TypeError) as together:
+                        error = together if str(together).startswith(name) else alone
                     raise StudyArgumentError(f"{flags.get(name, name)}: {error}") from None
+
+
+def smallest_fitting(build, values: Mapping[str, object]) -> Optional[StarParams]:
+    """`build` ({field: value} -> StarParams, raising ValueError or TypeError) of the smallest
+    non-empty subset of `values` that it takes (fewest fields first, then in their order), or
+    None where none does: the swept values a refused model needs, and only those (all of
+    them, a provenance would record swept values as the base's, or a bad one among them
+    blame a --set that fits the others: a review, 2026-12)."""
+    names = list(values)
+    for size in range(1, len(names) + 1):
+        for subset in itertools.combinations(names, size):
+            try:
+                return build({name: values[name] for name in subset})
+            except (ValueError, TypeError):
+                continue
+    return None
 
 
 def param_product(axes: Mapping[str, Sequence], base: StarParams = StarParams(),
@@ -794,9 +815,9 @@ def param_product(axes: Mapping[str, Sequence], base: StarParams = StarParams(),
 def base_params(args, axes: Mapping[str, Sequence] = {}) -> StarParams:
     """StarParams of --preset with the --set changes (StudyArgumentError naming --set). A
     study that sweeps fields gives its `axes` ({field: values}): --set changes that the
-    preset refuses but its first swept values take (actuator delays beyond the preset's
-    period, within a swept one) are then taken on top of those values, which every
-    combination of the sweep replaces."""
+    preset refuses but some of the first swept values take (actuator delays beyond the
+    preset's period, within a swept one) are then taken on top of the fewest of those values
+    that do (`smallest_fitting`), which every combination of the sweep replaces."""
     overrides = {}
     for item in args.set:
         name, values = parse_assignment(item, "--set")
@@ -816,11 +837,12 @@ def base_params(args, axes: Mapping[str, Sequence] = {}) -> StarParams:
     try:
         return StarParams.preset(args.preset, **overrides)
     except (ValueError, TypeError) as error:
-        try:
-            return StarParams.preset(args.preset, **{name: values[0] for name, values
-                                                     in axes.items()}, **overrides)
-        except (ValueError, TypeError):
+        fitting = smallest_fitting(
+            lambda swept: StarParams.preset(args.preset, **swept, **overrides),
+            {name: values[0] for name, values in axes.items()})
+        if fitting is None:
             raise StudyArgumentError(f"--set: {error}") from None
+        return fitting
 
 
 def solver(args, periods: Sequence[float] = ()) -> SolverConfig:

@@ -110,8 +110,10 @@ def test_values_that_fit_only_with_other_swept_values_are_left_to_the_combinatio
                                  "actuator_height": [0.01]})
     assert [(p.hub_height, p.foam_height, p.actuator_height) for p in heights] == [
         (0.01, 0.01, 0.01), (0.01, 0.02, 0.01)]
-    # inside the base's joint radius and the swept one's too: refused alone, by its flag
-    with pytest.raises(cli.StudyArgumentError, match=r"^--tip: tip_radius must be .* got 0\.019"):
+    # inside the base's joint radius and the swept one's too: refused alone, by its flag, with
+    # the range the swept joint radius gives (the base's, (0.024, 2], was named: a review)
+    with pytest.raises(cli.StudyArgumentError,
+                       match=r"^--tip: tip_radius must be .* in \(0\.02, 2\] .* got 0\.019"):
         cli.param_product({"joint_radius": [0.02], "tip_radius": [0.019]},
                           flags={"tip_radius": "--tip"})
     # fits the first swept value, not the second: the combination is refused, naming both
@@ -149,6 +151,14 @@ def test_quick_defaults_and_presets():
     assert swept.period == 5.0 and swept.actuator_delays[7] == 4.0
     with pytest.raises(cli.StudyArgumentError, match=r"^--set: actuator_delays\[7\]"):
         cli.base_params(cli.parse(parser, late), {"period": [3.5, 5.0]})
+    # only the swept values the --set needs are the base's (all of them were recorded, and a
+    # bad one among them blamed the --set: a review, 2026-12); the bad one is its flag's
+    axes = {"gait": ["A3", "A1"], "alpha": [-1.0, 1.0], "period": [5.0, 6.0]}
+    needed = cli.base_params(cli.parse(parser, late), axes)
+    assert needed == StarParams.preset("paper", period=5.0,
+                                       actuator_delays=(0, 0, 0, 0, 0, 0, 0, 4.0))
+    with pytest.raises(cli.StudyArgumentError, match=r"^--alpha: alpha must be"):
+        cli.check_axis_values(axes, needed, {"alpha": "--alpha"})
     with pytest.raises(cli.StudyArgumentError, match="actuator_gains must have 8 entries"):
         cli.base_params(cli.parse(parser, ["--set", "actuator_gains=1,1,1,1,1,1,1"]))
     with pytest.raises(cli.StudyArgumentError, match=r"actuator_gains\[2\] \(A3\) must be"):
