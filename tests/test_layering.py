@@ -147,7 +147,8 @@ TAICHI_DECORATORS = ("ti.kernel", "ti.func", "ti.real_func")
 def kernel_global_reads(tree: ast.Module, module_names):
     """(line, function, name) of each name that a @ti.kernel or @ti.func body of `tree` reads
     and that is none of its arguments or locals but one of `module_names` (the module's own
-    top-level names)."""
+    top-level names), and of each attribute chain rooted at one ("Term.X", "physics.base.X";
+    dotted)."""
     for function in ast.walk(tree):
         if not (isinstance(function, ast.FunctionDef) and any(
                 ast.unparse(decorator).split("(")[0] in TAICHI_DECORATORS
@@ -156,10 +157,16 @@ def kernel_global_reads(tree: ast.Module, module_names):
         local = {argument.arg for argument in function.args.args + function.args.kwonlyargs}
         local |= {node.id for node in ast.walk(function)
                   if isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store)}
-        for node in (node for statement in function.body for node in ast.walk(statement)):
+        body = [node for statement in function.body for node in ast.walk(statement)]
+        inner = {id(node.value) for node in body if isinstance(node, ast.Attribute)}
+        for node in body:
+            chain = []
+            while isinstance(node, ast.Attribute) and id(node) not in inner:
+                chain, node = [node.attr, *chain], node.value
+                inner.add(id(node))
             if isinstance(node, ast.Name) and isinstance(node.ctx, ast.Load) \
                     and node.id in module_names and node.id not in local:
-                yield node.lineno, function.name, node.id
+                yield node.lineno, function.name, ".".join([node.id, *chain])
 
 
 def compile_time_constant(value) -> bool:
@@ -177,19 +184,32 @@ def mutable_kernel_globals(module, tree: ast.Module, rebound_names):
     compile-time constant, or that the package rebinds (`rebound_names`): Taichi bakes the
     value it finds at the kernel's first compilation into the kernel, so a later change would
     be silently ignored."""
-    return [f"{line} {function}: {name}"
-            for line, function, name in kernel_global_reads(tree, set(vars(module)))
-            if name in rebound_names or not compile_time_constant(getattr(module, name))]
+    found = []
+    for line, function, name in kernel_global_reads(tree, set(vars(module))):
+        value = module
+        for part in name.split("."):
+            value = getattr(value, part, MISSING)
+        if value is MISSING or name.split(".")[-1] in rebound_names \
+                or not compile_time_constant(value):
+            found.append(f"{line} {function}: {name}")
+    return found
+
+
+MISSING = object()
+"""An attribute a kernel reads that its module does not have at import (made later)."""
 
 
 def rebound_globals(trees) -> set:
-    """The names that any of `trees` declares `global` (to rebind them) or assigns as a
-    module's attribute (`module.NAME = ...`)."""
+    """The names that any of `trees` declares `global` (to rebind them), assigns as a
+    module's or a class's attribute (`module.NAME = ...`) or sets by `setattr(x, "NAME", ...)`."""
     names = set()
     for tree in trees:
         for node in ast.walk(tree):
             if isinstance(node, ast.Global):
                 names.update(node.names)
+            elif isinstance(node, ast.Call) and ast.unparse(node.func) == "setattr" \
+                    and len(node.args) > 1 and isinstance(node.args[1], ast.Constant):
+                names.add(node.args[1].value)
             elif isinstance(node, (ast.Assign, ast.AugAssign)):
                 targets = node.targets if isinstance(node, ast.Assign) else [node.target]
                 names.update(target.attr for target in targets
@@ -230,6 +250,11 @@ def test_kernels_read_no_module_global_that_can_change():
     ("GAINS = [1.0]\n@ti.func\ndef f(GAINS):\n    return GAINS[0]", []),
     ("GAINS = [1.0]\n@ti.func\ndef f(x):\n    GAINS = x\n    return GAINS", []),
     ("GAINS = [1.0]\ndef f(x):\n    return GAINS[0]", []),          # no kernel
+    # a class's mutable attribute, and an immutable one rebound by setattr
+    ("class C:\n    X = [1.0]\n@ti.func\ndef f(x):\n    return x * C.X[0]", ["5 f: C.X"]),
+    ("class C:\n    X = 1.0\n@ti.func\ndef f(x):\n    return x * C.X\n"
+     "def g():\n    setattr(C, 'X', 2.0)", ["5 f: C.X"]),
+    ("class C:\n    X = 1.0\n@ti.func\ndef f(x):\n    return x * C.X", []),
 ])
 def test_the_kernel_globals_check_on_one_case_each(source, flagged):
     tree = ast.parse(source)
