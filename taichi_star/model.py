@@ -141,6 +141,11 @@ def build_model(params: Sequence[StarParams], commanded: bool = False) -> BatchM
                       for name, table in distinct.coefficients.items()})
 
 
+MASS_FIELDS = ("actuator_density", "foam_density", "cylinder_mass_per_height")
+"""The StarParams fields the nodes' own masses are linear in (`_build_distinct`; the terms'
+added masses declare theirs: `physics.base.Term.linear_fields`)."""
+
+
 def _build_distinct(params: Tuple[StarParams, ...], commanded: bool) -> BatchModel:
     """`build_model` of a validated batch, instance by instance."""
     topologies = InstanceTopologies.of(params)

@@ -44,7 +44,7 @@ from .params import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS, PER_ACTUATOR_FIEL
                      SolverConfig, StarParams)
 from .gait import N_ACTUATORS, Gait
 from .metrics import wrap_degrees
-from .model import build_model
+from .model import MASS_FIELDS, build_model
 from .physics import TERMS
 from .timegrid import on_grid, steps_in
 
@@ -84,6 +84,13 @@ FIELD_LEAST_STEPS = {field: step for term in TERMS
 """Fields whose ε has a least value, in the field's unit, gathered from the terms that own them
 (`physics.base.Term.sensitivity_least_steps`): the wake's exchange time τ_w, at least 1e-6 s
 (1e-4 of a short τ_w moved the replicas by a few roundings of their positions)."""
+LINEAR_FIELDS = frozenset(MASS_FIELDS).union(*(term.linear_fields for term in TERMS))
+"""Fields the residual is linear or quadratic in, as coefficients scaling its forces and masses
+(`physics.base.Term.linear_fields`, `model.MASS_FIELDS`): a replica pair differences them
+exactly at any ε, so a value far below the field's usual scale takes the ε of that scale
+(`Direction.usual_scale`): ε = 1e-4 of a small value moved the replicas by less than the
+positions' rounding (α at 8e-4: 4–6 % off, C∥ at 1e-5 and the hub's linear drag at 1e-4:
+up to 1.8e-3, the differences' Taylor ratios 2: an audit, 2026-12)."""
 REPLICAS_PER_DIRECTION = 2
 """Replica instances each direction adds per instance: the pair at ±ε."""
 
@@ -155,10 +162,30 @@ class Direction:
         if self.field == "actuator_delays":
             value = max(value, ZERO_VALUE_SCALE * params.period)
         elif value == 0.0:
-            value = ZERO_VALUE_SCALE * (STAR_RANGES[self.field][1] if self.field in STAR_RANGES
-                                        else 1.0)
+            value = self.zero_scale()
+        elif self.field in LINEAR_FIELDS:
+            value = max(value, self.usual_scale())
         step = max(self.relative_step * value, FIELD_LEAST_STEPS.get(self.field, 0.0))
         return min(step, EXCLUDED_END_SHARE * self.excluded_end_gap(params))
+
+    def zero_scale(self) -> float:
+        """The value whose ε a parameter at 0 takes: ZERO_VALUE_SCALE of the top of its range
+        (of 1 for a per-actuator gain)."""
+        return ZERO_VALUE_SCALE * (STAR_RANGES[self.field][1] if self.field in STAR_RANGES
+                                   else 1.0)
+
+    def usual_scale(self) -> float:
+        """The smallest value whose own ε a field of LINEAR_FIELDS takes: its `zero_scale`, or
+        its default where that is less (and not 0), so that no preset's ε changes (C∥'s default,
+        0.01, lies below its zero scale, 1)."""
+        default = abs(self.value(StarParams()))
+        return min(self.zero_scale(), default) if default else self.zero_scale()
+
+    def least_step(self) -> float:
+        """The least ε the rules above give this field at any nonzero value, 0 where none
+        (what the Taylor test's step keeps above: `sensitivity_check.taylor_step`)."""
+        usual = self.relative_step * self.usual_scale() if self.field in LINEAR_FIELDS else 0.0
+        return max(usual, FIELD_LEAST_STEPS.get(self.field, 0.0))
 
     def excluded_end_gap(self, params: StarParams) -> float:
         """How far the parameter lies from the nearest excluded end of a range it bounds: its

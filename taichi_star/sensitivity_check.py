@@ -38,7 +38,7 @@ displacements of 1e-4 m)..."""
 TAYLOR_MOST = 0.1
 """... but H at most this share of a nonzero value (C∥, whose ε is 1e-2 of it, moves by 10 %)."""
 TAYLOR_LEAST_MULTIPLE = 30.0
-"""... but never below this many of a field's least ε (`sensitivities.FIELD_LEAST_STEPS`): a
+"""... but never below this many of a field's least ε (`Direction.least_step`): a
 tenth of the wake's exchange time τ_w = 1e-9 s moved it by 1e-10 s, a remainder ~1e-23 m lost
 in the runs' Newton noise (Taylor ratios 0.3 to 100: measured, 2026-12)."""
 TAYLOR_GAP_SHARE = 0.25
@@ -113,7 +113,7 @@ def one_sided(direction: Direction, params: StarParams) -> bool:
 def taylor_step(h: float, value: float, gap: float = math.inf, least: float = 0.0) -> float:
     """H of the Taylor test for differences of step h at a parameter value: TAYLOR_MULTIPLE·h,
     at most TAYLOR_MOST·|value| where the value is not 0 (or TAYLOR_LEAST_MULTIPLE times the
-    field's least ε `least`, `sensitivities.FIELD_LEAST_STEPS`, where that is more), and at
+    field's least ε `least`, `Direction.least_step`, where that is more), and at
     most TAYLOR_GAP_SHARE of its distance `gap` to an excluded end of its range
     (`Direction.excluded_end_gap`)."""
     step = min(TAYLOR_MULTIPLE * h, TAYLOR_GAP_SHARE * gap)
@@ -239,7 +239,7 @@ def check_sensitivities(params: Sequence[StarParams], duration_s: float, solver:
                                                     output, arch, progress)
     taylor_steps = np.array([[taylor_step(difference_step(direction, p), direction.value(p),
                                           direction.excluded_end_gap(p),
-                                          FIELD_LEAST_STEPS.get(direction.field, 0.0))
+                                          direction.least_step())
                               for p in params] for direction in directions])
     taylor_summary = _moved_runs(params, taylor_steps, directions, TAYLOR_MULTIPLES,
                                  duration_s, solver, arch, progress)

@@ -16,6 +16,7 @@ from .base import Term
 @ti.data_oriented
 class AddedMass(Term):
     name = "added_mass"
+    linear_fields = ("added_mass_coeff", "cylinder_added_mass_coeff", "fluid_density")
 
     @staticmethod
     def configuration(coefficients):

@@ -106,6 +106,9 @@ class Bending(StrainTerm):
 
     name = "bending"
     fired_columns = ("actuator_gain", "actuator_delay")  # read in actuator_curvature alone
+    # the natural curvature is the rest one plus gain·(1 + warming·heat) times the profile's
+    # change, and the bending force linear in it
+    linear_fields = ("actuator_gains", "stroke_warming")
 
     @staticmethod
     def coefficients(params, topologies, topology):

@@ -27,6 +27,7 @@ class CylinderDrag(Term):
     # found by a fuzz audit, 2026-12). The force is linear in C_c, so a larger ε adds no
     # truncation of its own
     sensitivity_steps = {"cylinder_drag": 1e-2}
+    linear_fields = ("cylinder_drag", "fluid_density")
 
     @staticmethod
     def coefficients(params, topologies, topology):

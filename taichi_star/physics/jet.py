@@ -157,6 +157,7 @@ def jet(centre, x1, x2, x3, x4, area_rate, rate_gain, alpha, fluid_density, alwa
 @ti.data_oriented
 class Jet(Term):
     name = "jet"
+    linear_fields = ("alpha", "jet_inflow", "fluid_density")  # α² and α_in²: quadratic
 
     @staticmethod
     def coefficients(params, topologies, topology):

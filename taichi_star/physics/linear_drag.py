@@ -24,6 +24,7 @@ from .rod_drag import RodEdgeTerm, rod_edges, rod_height_ratios
 @ti.data_oriented
 class LinearDrag(RodEdgeTerm):
     name = "linear_drag"
+    linear_fields = ("linear_drag", "hub_linear_drag")
 
     @staticmethod
     def coefficients(params, topologies, topology):

@@ -83,6 +83,7 @@ class RodDrag(RodEdgeTerm):
     # 1e-2 and 3e-2 of C∥, which agree with each other to 3e-7); at 1e-2 all six are within
     # 1e-6. The force is linear in C∥, so a larger ε adds no truncation of its own
     sensitivity_steps = {"drag_parallel": 1e-2}
+    linear_fields = ("drag_perpendicular", "drag_parallel", "fluid_density")
 
     @staticmethod
     def coefficients(params, topologies, topology):

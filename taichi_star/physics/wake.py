@@ -53,6 +53,7 @@ class Wake(Term):
     # γ·τ_w = −1; the whole-run differences that check them are taken forward where they would
     # leave the range (`sensitivity_check.one_sided`).
     sensitivity_least_steps = {"wake_time": 1e-6}
+    linear_fields = ("wake_coupling",)
 
     @staticmethod
     def coefficients(params, topologies, topology):

@@ -255,6 +255,32 @@ def test_a_joint_radius_just_inside_its_tip_radius_keeps_its_steps_inside_it():
     assert tip.step(BASE) == pytest.approx(1e-4 * BASE.tip_radius, rel=1e-15)
 
 
+def test_a_coefficient_far_below_its_usual_value_takes_the_usual_values_step(
+        taichi_cpu, matches_differences):
+    """ε = 1e-4 of a coefficient far below its usual value (C∥ at 1e-5, the hub's linear drag at
+    1e-4, A1's gain at 1e-3) moved the replicas by less than the positions' rounding: up to
+    1.8e-3 off the differences, Taylor ratios of 2 (an audit, 2026-12). The residual is linear
+    or quadratic in such a field (`sensitivities.LINEAR_FIELDS`), so the pair differences it
+    exactly at any ε: it takes the ε of its usual scale. Measured here at most 1.6e-6 (C∥;
+    the others within 2.7e-7): 1e-5, the target (the hub's linear drag, measured 1.7e-8, is
+    left to the audit's record: suite time)."""
+    small = [BASE.replace(gait="A1+A2", drag_parallel=1e-5),
+             BASE.replace(gait="A1+A2", actuator_gains=(1e-3,) + BASE.actuator_gains[1:])]
+    names = ("drag_parallel", "actuator_gains[0]")
+    matches_differences(check_sensitivities(
+        small, DURATION_S, SolverConfig(integrator="bdf2", **TIGHT), names), 1e-5)
+    for direction, params in zip(parse_directions(names), small):   # each small in its own
+        assert direction.step(params) == direction.relative_step * direction.usual_scale()
+        assert direction.step(params) > 10 * direction.relative_step * direction.value(params)
+    # no preset's ε changes: the usual scale lies at or below every preset's value
+    for preset in ("paper", "accurate", "identified"):
+        params = StarParams.preset(preset)
+        for direction in parse_directions(sorted(sensitivities.LINEAR_FIELDS)):
+            value = abs(direction.value(params))
+            if value:
+                assert direction.step(params) == direction.relative_step * value
+
+
 @pytest.mark.parametrize("exchange_time, forward", [
     (1e-9, True), (3.9e-6, True),
     (4e-6 + 1.001e-9, False),  # its −4h run just above the range's lowest, 1e-9 s: central
