@@ -145,6 +145,18 @@ class Direction:
             object.__setattr__(replica, self.field, tuple(values))
         return replica
 
+    def allowed(self, params: StarParams, value: float) -> bool:
+        """Whether StarParams takes `params` with this parameter at `value` (its range as the
+        other fields narrow it, a per-actuator field's too)."""
+        values = list(getattr(params, self.field)) if self.index >= 0 else None
+        if values is not None:
+            values[self.index] = value
+        try:
+            params.replace(**{self.field: value if values is None else tuple(values)})
+        except ValueError:
+            return False
+        return True
+
     @property
     def relative_step(self) -> float:
         """ε relative to the parameter's value (RELATIVE_STEP or FIELD_RELATIVE_STEPS)."""

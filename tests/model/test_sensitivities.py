@@ -10,8 +10,8 @@ import pytest
 
 from taichi_star import SolverConfig, StarParams, sensitivities, simulate
 from taichi_star.sensitivities import SUMMARY_OUTPUTS, parse_directions, sensitivity_column
-from taichi_star.sensitivity_check import (check_sensitivities, difference_step, one_sided,
-                                           taylor_step)
+from taichi_star.sensitivity_check import (check_sensitivities, difference_step, inward,
+                                           one_sided, taylor_step)
 
 DURATION_S = 0.1
 """100 steps of 1 ms: the A1 pulse has begun to bend the arcs and the robot to move."""
@@ -279,6 +279,21 @@ def test_a_coefficient_far_below_its_usual_value_takes_the_usual_values_step(
             value = abs(direction.value(params))
             if value:
                 assert direction.step(params) == direction.relative_step * value
+
+
+@pytest.mark.parametrize("gain, inwards", [
+    (5.0, True),           # at the top (included): the runs at +H and +2H would leave it
+    (4.9, False),          # +2H = 5.0 exactly: on the top, allowed
+    (4.9000001, True),     # +2H just past it
+    (1.0, False)])
+def test_the_taylor_test_steps_inward_at_the_top_of_a_range(gain, inwards):
+    """Past A1's top gain, 5, the model turns (the displacement's slope flips between 5.020 and
+    5.028), and the Taylor runs at 5.05 and 5.10 gave ratios of 0.8–1.1 for a derivative right
+    within 1e-9 (an audit, 2026-12): the Taylor step is taken inward where +2H would leave the
+    range and −2H would not."""
+    (direction,) = parse_directions(("actuator_gains[0]",))
+    params = BASE.replace(actuator_gains=(gain,) + BASE.actuator_gains[1:])
+    assert inward(direction, params, 0.05) == (-0.05 if inwards else 0.05)
 
 
 @pytest.mark.parametrize("exchange_time, forward", [
