@@ -193,9 +193,12 @@ class Direction:
         default = abs(self.value(StarParams()))
         return min(self.zero_scale(), default) if default else self.zero_scale()
 
-    def least_step(self) -> float:
-        """The least ε the rules above give this field at any nonzero value, 0 where none
-        (what the Taylor test's step keeps above: `sensitivity_check.taylor_step`)."""
+    def least_step(self, params: StarParams) -> float:
+        """The least ε the rules above give this field at `params` at any nonzero value, 0
+        where none (what the Taylor test's step keeps above: `sensitivity_check.taylor_step`;
+        a delay's, its ε at 0, was left out: a review, 2026-12)."""
+        if self.field == "actuator_delays":
+            return self.relative_step * ZERO_VALUE_SCALE * params.period
         usual = self.relative_step * self.usual_scale() if self.field in LINEAR_FIELDS else 0.0
         return max(usual, FIELD_LEAST_STEPS.get(self.field, 0.0))
 

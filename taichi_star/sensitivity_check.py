@@ -252,7 +252,7 @@ def check_sensitivities(params: Sequence[StarParams], duration_s: float, solver:
                                                     output, arch, progress)
     taylor_steps = np.array([[inward(direction, p, taylor_step(
         difference_step(direction, p), direction.value(p), direction.excluded_end_gap(p),
-        direction.least_step())) for p in params] for direction in directions])
+        direction.least_step(p))) for p in params] for direction in directions])
     taylor_summary = _moved_runs(params, taylor_steps, directions, TAYLOR_MULTIPLES,
                                  duration_s, solver, arch, progress)
     count, batch = len(directions), len(params)

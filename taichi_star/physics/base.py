@@ -87,9 +87,12 @@ class Term:
     (`sensitivities.FIELD_RELATIVE_STEPS` gathers them from `physics.TERMS`)."""
     linear_fields: ClassVar[Tuple[str, ...]] = ()
     """StarParams fields its forces are linear in (affine) or quadratic in, as a coefficient
-    that scales them (α, a drag coefficient, the fluid's density, an actuator's gain): a
-    replica pair differences such a force exactly at any ε, so a value far below the field's
-    usual one takes ε at least that of its usual scale (`sensitivities.LINEAR_FIELDS`)."""
+    that scales them (α, a drag coefficient, the fluid's density, an actuator's gain), with
+    no switch on the field's sign (a replica may lie below 0: the formulas must continue
+    linearly or evenly there): a replica pair differences such a force exactly at any ε, so a
+    value far below the field's usual one takes ε at least that of its usual scale
+    (`sensitivities.LINEAR_FIELDS`). Not the damping time: `damping_time > 0` switches the
+    damping on."""
     sensitivity_least_steps: ClassVar[Dict[str, float]] = {}
     """StarParams fields of this term whose sensitivities' ε has a least value (in the field's
     unit) where the relative one would be too small a move, with why in the subclass

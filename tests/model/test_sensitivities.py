@@ -238,6 +238,13 @@ def test_the_taylor_step_is_a_hundred_differences_steps_at_most_a_tenth_of_the_v
     assert taylor_step(1e-6, 3e-4, least=1e-6) == pytest.approx(3e-5, rel=1e-15)  # both
     assert taylor_step(1e-6, 1e-3, least=1e-6) == pytest.approx(1e-4, rel=1e-15)
     assert taylor_step(1e-7, 1e-9, least=1e-6) == pytest.approx(1e-5, rel=1e-15)
+    # each field's least ε: a delay's is its ε at 0 (it was left out: a review, 2026-12), a
+    # linear field's that of its usual scale, τ_w's its own, and a geometry field has none
+    least = {name: parse_directions((name,))[0].least_step(BASE) for name in (
+        "actuator_delays[0]", "drag_perpendicular", "wake_time", "thickness")}
+    assert least == pytest.approx({"actuator_delays[0]": 1e-4 * 0.01 * BASE.period,
+                                   "drag_perpendicular": 1e-4 * 1.0, "wake_time": 1e-6,
+                                   "thickness": 0.0}, rel=1e-15)
 
 
 def test_a_joint_radius_just_inside_its_tip_radius_keeps_its_steps_inside_it():

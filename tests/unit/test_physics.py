@@ -224,6 +224,19 @@ def test_jet_contract_mode_is_off_while_expanding(taichi_cpu):
     assert np.linalg.norm(_call_jet(points, *expanding, 1, 0.0, jet.HUB_DIRECTION)[:2]) > 0.0
 
 
+def test_the_inflow_is_even_in_its_coefficient(taichi_cpu):
+    """While a space opens the inflow pulls with α_in²: a sensitivities' replica about a small
+    α_in may lie below 0, and its force must be the same there, not switched off (it was, at
+    `inflow > 0`: the pair about α_in = 1e-6 gave 2.06 times the derivative: a review,
+    2026-12). Exactly the same bits: the strength is α_in·α_in."""
+    points = _jet_points()
+    opening = (_quad_area(points) * 0.999, 1e-3, 0.8, 1000.0, 0)
+    positive = _call_jet(points, *opening, 0.3, jet.HUB_DIRECTION)
+    assert np.linalg.norm(positive[:2]) > 0.0
+    np.testing.assert_array_equal(_call_jet(points, *opening, -0.3, jet.HUB_DIRECTION), positive)
+    assert np.all(_call_jet(points, *opening, 0.0, jet.HUB_DIRECTION) == 0.0)
+
+
 def _expected_direction(points, kind):
     """The jet's unit direction written out from the definitions (docs/model.md)."""
     centre, x1, x2, x3, x4 = points.reshape(5, 2)
