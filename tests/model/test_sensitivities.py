@@ -262,6 +262,7 @@ def test_a_joint_radius_just_inside_its_tip_radius_keeps_its_steps_inside_it():
     assert tip.step(BASE) == pytest.approx(1e-4 * BASE.tip_radius, rel=1e-15)
 
 
+@pytest.mark.slow      # suite time; `test_a_small_coefficients_step_is_its_usual_scales` stays
 def test_a_coefficient_far_below_its_usual_value_takes_the_usual_values_step(
         taichi_cpu, matches_differences):
     """ε = 1e-4 of a coefficient far below its usual value (C∥ at 1e-5, the hub's linear drag at
@@ -276,10 +277,17 @@ def test_a_coefficient_far_below_its_usual_value_takes_the_usual_values_step(
     names = ("drag_parallel", "actuator_gains[0]")
     matches_differences(check_sensitivities(
         small, DURATION_S, SolverConfig(integrator="bdf2", **TIGHT), names), 1e-5)
-    for direction, params in zip(parse_directions(names), small):   # each small in its own
+
+
+def test_a_small_coefficients_step_is_its_usual_scales():
+    """The rule of the test above, and that no preset's ε changes by it: the usual scale lies
+    at or below every preset's value of every field in LINEAR_FIELDS."""
+    small = [BASE.replace(drag_parallel=1e-5),
+             BASE.replace(actuator_gains=(1e-3,) + BASE.actuator_gains[1:])]
+    for direction, params in zip(parse_directions(("drag_parallel", "actuator_gains[0]")),
+                                 small):
         assert direction.step(params) == direction.relative_step * direction.usual_scale()
         assert direction.step(params) > 10 * direction.relative_step * direction.value(params)
-    # no preset's ε changes: the usual scale lies at or below every preset's value
     for preset in ("paper", "accurate", "identified"):
         params = StarParams.preset(preset)
         for direction in parse_directions(sorted(sensitivities.LINEAR_FIELDS)):
