@@ -190,7 +190,7 @@ class Direction:
         """The smallest value whose own ε a field of LINEAR_FIELDS takes: its `zero_scale`, or
         its default where that is less (and not 0), so that no preset's ε changes (C∥'s default,
         0.01, lies below its zero scale, 1)."""
-        default = abs(self.value(StarParams()))
+        default = abs(self.value(DEFAULT_PARAMS))
         return min(self.zero_scale(), default) if default else self.zero_scale()
 
     def least_step(self, params: StarParams) -> float:
@@ -213,7 +213,7 @@ class Direction:
             return math.inf
         value = self.value(params)
         gap = math.inf
-        for name in STAR_RANGES:
+        for name in {self.field, *NARROWED_FIELDS}:
             lowest, highest, lowest_included, highest_included = params.allowed_range(name)
             if name == self.field:
                 gap = min(gap, math.inf if lowest_included else value - lowest,
@@ -225,6 +225,12 @@ class Direction:
         return gap
 
 
+NARROWED_FIELDS = tuple(f.name for f in dataclasses.fields(StarParams)
+                        if "narrowed_by" in f.metadata)
+"""The fields whose range other fields narrow: the only ones whose excluded end another
+parameter can be (`Direction.excluded_end_gap`)."""
+DEFAULT_PARAMS = StarParams()
+"""The defaults, built once (`Direction.usual_scale`, called per instance and direction)."""
 EXCLUDED_END_SHARE = 0.01
 """ε is at most this share of the parameter's distance to an excluded end of its range
 (`Direction.excluded_end_gap`): the model is singular there (the joint radius's actuator arcs
