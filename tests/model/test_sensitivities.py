@@ -183,6 +183,7 @@ def test_the_inflow_at_zero_has_a_zero_derivative(taichi_cpu):
     assert np.all(np.abs(run.summary["displacement_x_mm"]) > 1e-3)
 
 
+@pytest.mark.slow      # suite time; its steps' rule stays in the default tier (below)
 def test_a_joint_radius_near_its_arc_bound_keeps_its_steps_inside_it(taichi_cpu,
                                                                    matches_differences):
     """The joint radius's range ends (excluded) where an actuator arc of the profile's rest
@@ -199,6 +200,14 @@ def test_a_joint_radius_near_its_arc_bound_keeps_its_steps_inside_it(taichi_cpu,
     # 1e-6, 30×
     matches_differences(check_sensitivities(batch, DURATION_S, SolverConfig(**TIGHT),
                                             ("joint_radius",)), 1e-6)
+
+
+def test_near_its_arc_bound_the_joint_radius_takes_a_hundredth_of_the_gap():
+    """The rule of the test above: ε is 1e-2 of the distance to the arc bound there, and the
+    joint radius's own ε far from it."""
+    arc_bound = BASE.allowed_range("joint_radius")[1]
+    batch = [BASE.replace(joint_radius=radius, tip_radius=radius + 0.028)
+             for radius in (arc_bound * (1 - 1e-3), arc_bound * (1 - 1.5e-4))]
     (direction,) = parse_directions(("joint_radius",))
     for params in batch:
         assert direction.step(params) == pytest.approx(
