@@ -750,10 +750,10 @@ def check_axis_values(axes: Mapping[str, Sequence], base: StarParams = StarParam
     names an unknown field, is empty or holds a value the field refuses on top of `base`,
     naming the flag that gave it (`flags`: {field: flag}; the field's name where none is
     given); each value alone, before any combination is built. A value that `base` refuses
-    but `base` with the other axes at their first values takes (a tip radius beyond a swept
-    joint radius, one of three swept component heights) is left to the combinations' check:
-    it depends on them (each value was checked on `base` alone, and such sweeps were refused:
-    an audit, 2026-12)."""
+    but `base` with some of the other axes at their first values takes (`smallest_fitting`:
+    a tip radius beyond a swept joint radius, one of three swept component heights) is left
+    to the combinations' check: it depends on them (each value was checked on `base` alone,
+    and such sweeps were refused: an audit, 2026-12)."""
     for name in axes:
         field_kind(name, flags.get(name))
         if len(axes[name]) == 0:

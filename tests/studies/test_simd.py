@@ -42,7 +42,7 @@ def test_simd_quick(tmp_path):
         (tmp_path / name).write_text("an earlier run's\n")
     simd.main(["--quick", "--batch-sizes", "8", "--kernels", "factor_solve", "--precisions",
                "f64", "--no-progress", "--out", str(tmp_path)])
-    table = pd.read_csv(tmp_path / "simd.csv")
+    table = pd.read_csv(tmp_path / "simd.csv", dtype={"commit": str})
     # its own Taichi program handed back: a simulation after it starts Taichi again without
     # the warning for a user's program (the study's kernels are the package's own)
     with warnings.catch_warnings():
@@ -83,7 +83,7 @@ def test_simd_quick_assemblies_in_f32(tmp_path):
         (tmp_path / name).write_text("an earlier run's\n")
     simd.main(["--quick", "--batch-sizes", "8", "--kernels", "bending", "--precisions",
                "f32", "--no-progress", "--out", str(tmp_path)])
-    assembly = pd.read_csv(tmp_path / "simd_assembly.csv")
+    assembly = pd.read_csv(tmp_path / "simd_assembly.csv", dtype={"commit": str})
     assert len(assembly) == 4 and set(assembly["term"]) == {"bending"}
     assert set(assembly["form"]) == set(simd.FORMS)
     # the paper robot's chain: 193 nodes, 191 triplets
