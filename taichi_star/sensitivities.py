@@ -115,6 +115,10 @@ def sensitivity_column(output: str, direction: str) -> str:
     return f"d({output})/d({direction})"
 
 
+DEFAULT_PARAMS = StarParams()
+"""The defaults, built once (`Direction.usual_scale`, called per instance and direction)."""
+
+
 @dataclass(frozen=True)
 class Direction:
     """One parameter to differentiate by: a field, and for a per-actuator field the actuator's
@@ -170,19 +174,15 @@ class Direction:
         (11 % off the differences at 1e-9 s, 1.2 % at 1e-8: an audit, 2026-12). A field of
         FIELD_LEAST_STEPS takes at least its least ε; and every ε keeps to EXCLUDED_END_SHARE
         of the distance to an excluded end of the range."""
-        value = abs(self.value(params))
-        if self.field == "actuator_delays":
-            value = max(value, ZERO_VALUE_SCALE * params.period)
-        elif value == 0.0:
-            value = self.zero_scale()
-        elif self.field in LINEAR_FIELDS:
-            value = max(value, self.usual_scale())
-        step = max(self.relative_step * value, FIELD_LEAST_STEPS.get(self.field, 0.0))
+        value = abs(self.value(params)) or self.zero_scale(params)
+        step = max(self.relative_step * value, self.least_step(params))
         return min(step, EXCLUDED_END_SHARE * self.excluded_end_gap(params))
 
-    def zero_scale(self) -> float:
+    def zero_scale(self, params: StarParams = DEFAULT_PARAMS) -> float:
         """The value whose ε a parameter at 0 takes: ZERO_VALUE_SCALE of the top of its range
-        (of 1 for a per-actuator gain)."""
+        (of 1 for a per-actuator gain, of the period for a delay)."""
+        if self.field == "actuator_delays":
+            return ZERO_VALUE_SCALE * params.period
         return ZERO_VALUE_SCALE * (STAR_RANGES[self.field][1] if self.field in STAR_RANGES
                                    else 1.0)
 
@@ -194,11 +194,12 @@ class Direction:
         return min(self.zero_scale(), default) if default else self.zero_scale()
 
     def least_step(self, params: StarParams) -> float:
-        """The least ε the rules above give this field at `params` at any nonzero value, 0
-        where none (what the Taylor test's step keeps above: `sensitivity_check.taylor_step`;
-        a delay's, its ε at 0, was left out: a review, 2026-12)."""
+        """The least ε of this field at `params`, 0 where none (`step` takes at least it; so
+        does the Taylor test's step, `sensitivity_check.taylor_step`): a delay's ε at 0, a
+        field of LINEAR_FIELDS that of its `usual_scale`, a field of FIELD_LEAST_STEPS its
+        own."""
         if self.field == "actuator_delays":
-            return self.relative_step * ZERO_VALUE_SCALE * params.period
+            return self.relative_step * self.zero_scale(params)
         usual = self.relative_step * self.usual_scale() if self.field in LINEAR_FIELDS else 0.0
         return max(usual, FIELD_LEAST_STEPS.get(self.field, 0.0))
 
@@ -229,8 +230,6 @@ NARROWED_FIELDS = tuple(f.name for f in dataclasses.fields(StarParams)
                         if "narrowed_by" in f.metadata)
 """The fields whose range other fields narrow: the only ones whose excluded end another
 parameter can be (`Direction.excluded_end_gap`)."""
-DEFAULT_PARAMS = StarParams()
-"""The defaults, built once (`Direction.usual_scale`, called per instance and direction)."""
 EXCLUDED_END_SHARE = 0.01
 """ε is at most this share of the parameter's distance to an excluded end of its range
 (`Direction.excluded_end_gap`): the model is singular there (the joint radius's actuator arcs

@@ -23,8 +23,7 @@ import pandas as pd
 from .checks import warn_user
 from .params import STAR_RANGES, SolverConfig, StarParams
 from .sensitivities import (FIELD_LEAST_STEPS, RELATIVE_STEP, Direction, check_directions,
-                            instances_per_instance,
-                            parse_directions)
+                            instances_per_instance, parse_directions)
 from .simulation import simulate
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
@@ -88,9 +87,10 @@ def difference_step(direction: Direction, params: StarParams) -> float:
     """h for one instance: the sensitivities' own ε (`Direction.step`) where the parameter is
     not 0. At 0, ten times the default ε there (RELATIVE_STEP of ZERO_VALUE_SCALE of its
     range's top) whatever the field's own: the runs at −h, −2h and −4h leave the parameter's
-    range (a delay's are taken forward instead, `one_sided`), and the damping time's own 1e-3 gave −4h = −4e-4 s, a negative damping that the
-    stiffest modes do not survive (BDF2 runs ended in NaN; Euler's differences spread by 1e-3
-    where at the default step they agree within 2.3e-8; sensitivity_check, 0.2 s, measured)."""
+    range (a delay's are taken forward instead, `one_sided`), and the damping time's own 1e-3
+    gave −4h = −4e-4 s, a negative damping that the stiffest modes do not survive (BDF2 runs
+    ended in NaN; Euler's differences spread by 1e-3 where at the default step they agree
+    within 2.3e-8; sensitivity_check, 0.2 s, measured)."""
     if direction.value(params):
         return direction.step(params)
     return 10.0 * direction.step(params) * RELATIVE_STEP / direction.relative_step

@@ -96,28 +96,29 @@ class Wake(Term):
                 + (self.wake_time[b] - exchange_time) / (denominator * denominator))
 
     @ti.func
-    def water_and_force(self, b, hub_velocity, rate_gain):
-        """(u' (2,) m/s, F (2,) N/m on the hub) for the hub's velocity v' (2,) m/s."""
+    def water_and_force(self, b, hub_velocity, rate_gain, share):
+        """(u' (2,) m/s, F (2,) N/m on the hub) for the hub's velocity v' (2,) m/s and the
+        `exchange_share` s (s)."""
         start = ti.Vector([self.water_velocity[b, 0], self.water_velocity[b, 1]])
         offset = ti.Vector([self.water_rate_offset[b, 0], self.water_rate_offset[b, 1]])
-        share = self.exchange_share(b, rate_gain)
         imbalance = rate_gain * (start - hub_velocity) - offset
         return hub_velocity + share * imbalance, self.wake_coupling[b] * share * imbalance
 
     @ti.func
     def assemble(self, b, rate_gain, jacobian):
         hub_velocity = self.assembly.implicit_velocity(b, CENTRE, rate_gain)
-        _, force = self.water_and_force(b, hub_velocity, rate_gain)
+        share = self.exchange_share(b, rate_gain)  # once for the force and its Jacobian
+        _, force = self.water_and_force(b, hub_velocity, rate_gain, share)
         self.assembly.add_residual(b, CENTRE, -force)
-        stiffness = (self.wake_coupling[b] * self.exchange_share(b, rate_gain)
-                     * rate_gain * rate_gain)
+        stiffness = self.wake_coupling[b] * share * rate_gain * rate_gain
         self.assembly.add_block(b, self.centre_slot, stiffness * ti.Matrix.identity(float, 2),
                                 jacobian)
 
     @ti.func
     def accept_step(self, b, rate_gain):
         water, _ = self.water_and_force(
-            b, self.assembly.implicit_velocity(b, CENTRE, rate_gain), rate_gain)
+            b, self.assembly.implicit_velocity(b, CENTRE, rate_gain), rate_gain,
+            self.exchange_share(b, rate_gain))
         for c in ti.static(range(2)):
             self.water_previous[b, c] = self.water_velocity[b, c]
             self.water_velocity[b, c] = water[c]
