@@ -90,7 +90,8 @@ def refusal_rate(arch: Optional[str] = None) -> Tuple[float, str]:
 def refuse_robot_steps(arch: Optional[str] = None) -> float:
     """The most robot-steps a call on `arch` may ask for (`refusal_rate` × REFUSE_DAYS):
     REFUSE_ROBOT_STEPS for a GPU arch or None, 1.3e12 for "cpu" on 2 cores."""
-    return refusal_rate(arch)[0] * REFUSE_DAYS * 86400.0
+    # REFUSE_ROBOT_STEPS itself for a GPU arch or None: the one constant that bound is read from
+    return min(refusal_rate(arch)[0] * REFUSE_DAYS * 86400.0, REFUSE_ROBOT_STEPS)
 
 
 def on_grid(times_s, interval_s: float) -> np.ndarray:
