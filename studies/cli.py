@@ -55,6 +55,10 @@ GPU_CHUNK_SIZE = 16384
 QUICK_CHUNK_SIZE = 8
 """--quick: instances per chunk, the smallest engine capacity, so that quick runs of different
 sizes share one compiled engine instead of compiling one per batch size."""
+EXACT_SETTING_COLUMNS = ("dt_s",)
+"""Float columns of a study's table, beside the parameters, that a reader compares with its
+own setting and `Output.write_csv` so writes exactly: plan's --primitives holds a table to its
+run's step (at 10 digits a step of 3.15/1100 s was refused as another: an audit)."""
 RUNS_FOLDER = Path("runs")
 """Default parent of the output folders: runs/<study>/<timestamp>/ (git-ignored)."""
 COMMITTED_RESULTS = (Path(__file__).resolve().parent.parent / "results").resolve()
@@ -1068,16 +1072,18 @@ class Output:
 
     def write_csv(self, frame: pd.DataFrame, name: str, extra: Optional[Mapping] = None) -> Path:
         """Write a table (no index) and its JSON sidecar, both whole or not at all
-        (`_write_described`): the parameter columns (`StarParams.columns()`) exact, each float
-        the shortest text that reads back to it, so that `StarParams.from_row` of a row gives
-        back the simulated robot (10 digits gave another: an audit); the other floats to 10
+        (`_write_described`): the parameter columns (`StarParams.columns()`) and the settings
+        a reader compares with its own (`EXACT_SETTING_COLUMNS`) exact, each float the shortest
+        text that reads back to it, so that `StarParams.from_row` of a row gives back the
+        simulated robot (10 digits gave another: an audit); the other floats to 10
         significant digits, which keeps a rerun's table from differing in the last bits
         another CPU changes."""
-        parameters = [column for column in StarParams.columns().values()
-                      if column in frame and frame[column].dtype.kind == "f"]
+        exact_columns = [column for column in (*StarParams.columns().values(),
+                                               *EXACT_SETTING_COLUMNS)
+                         if column in frame and frame[column].dtype.kind == "f"]
         # a float's text (str, as repr) is its shortest round-tripping one; NaN stays empty
         exact = frame.assign(**{column: frame[column].astype(str).where(frame[column].notna(), "")
-                                for column in parameters})
+                                for column in exact_columns})
         return self._write_described(
             self.path(name), exact.to_csv(index=False, float_format="%.10g").encode(), extra,
             frame)

@@ -1199,12 +1199,19 @@ def _json_value(value):
     return value.item() if isinstance(value, np.generic) else repr(value)
 
 
+def fitted_candidates(csv_path) -> pd.DataFrame:
+    """The rows of model_select.csv whose fit is "ok", in rank order, the candidates' names as
+    written: a name is the user's text (--candidates), and "NA" or "null" read by pandas'
+    defaults became NaN, two bars of the ranking labelled "nan" (an audit)."""
+    table = pd.read_csv(csv_path, keep_default_na=False, na_values=[""])
+    return table[table["status"] == "ok"]
+
+
 def plot_ranking(csv_path, png_path) -> Path:
     """Bars from model_select.csv: each fitted candidate's training, validation and held-out
     objective (log scale), in rank order (the refined forms first, labelled so)."""
     plt = cli.use_agg()
-    table = pd.read_csv(csv_path)
-    table = table[table["status"] == "ok"]
+    table = fitted_candidates(csv_path)
     fig, ax = plt.subplots(figsize=(max(5.0, 1.1 * len(table) + 2), 4.5))
     width = 0.27
     x = np.arange(len(table))

@@ -41,6 +41,23 @@ def test_the_summary_takes_each_builds_best_round_and_compares_the_bits(bench_bu
     assert summary.loc[("sensitivities", 64), "ratio_after_to_before"] == pytest.approx(1.6)
 
 
+def test_digests_and_hashes_of_digits_alone_stay_text_and_the_same_bits_agree(bench_builds,
+                                                                             tmp_path):
+    """A digest or short hash of digits alone was read as a number in the build whose table
+    held no other, and as text in the other's: the same bits came out as differing (an
+    audit). The rounds' tables are read with their text columns as text."""
+    before, after = tmp_path / "before.csv", tmp_path / "after.csv"
+    pd.DataFrame([_row("before", 1, 5, 100.0, "012345678901")]).assign(
+        commit="0813637").drop(columns=["build", "round"]).to_csv(before, index=False)
+    pd.DataFrame([_row("after", 1, 5, 110.0, "012345678901"),
+                  _row("after", 1, 64, 120.0, "abcdef012345")]).assign(
+        commit="1234e56").drop(columns=["build", "round"]).to_csv(after, index=False)
+    table = pd.concat([bench_builds.read_round(before, "before", 1),
+                       bench_builds.read_round(after, "after", 1)], ignore_index=True)
+    assert table["commit"].tolist() == ["0813637", "1234e56", "1234e56"]
+    assert bench_builds.summarise(table).set_index("batch_size").loc[5, "same_bits"] == "True"
+
+
 def test_the_summary_keeps_the_lanes_apart(bench_builds):
     """A bench run with `--lanes 1,8` measures each case twice per build: each lanes setting is
     compared with its own; a table without the column (before the setting) ran one at a time."""

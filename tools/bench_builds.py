@@ -39,6 +39,11 @@ SETTINGS = ["workers", "kernel_optimisation", "layout", "block_dim"]
 """More columns that tell cases apart where a table has them (one and two worker processes,
 the IR optimisation on and off, the GPU layouts and block sizes were merged into one row, and
 their best compared across settings: an audit, 2026-12)."""
+TEXT_COLUMNS = {"commit": str, "final_state": str}
+"""Columns of a bench table read as text: a short hash or a state's digest can be digits alone
+(one in 27 hashes, one in 280 digests), which pandas read as numbers, so that a digest read as
+a number in one build's table and as text in the other's made the same bits differ (an
+audit)."""
 COMMITTED_RESULTS = REPO / "results"
 """The committed results: a run with the bench's --quick never writes there (the studies'
 rule, `studies.cli.check_folder_name`)."""
@@ -115,6 +120,12 @@ def bench_command(build: str, bench_args, after_args, run_out: Path):
             "--out", str(run_out)]
 
 
+def read_round(path, build: str, round_number: int) -> pd.DataFrame:
+    """One bench run's table, its text columns as text (`TEXT_COLUMNS`), with its build and
+    round."""
+    return pd.read_csv(path, dtype=TEXT_COLUMNS).assign(build=build, round=round_number)
+
+
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
     split = argv.index("--") if "--" in argv else len(argv)
@@ -142,8 +153,7 @@ def main(argv=None):
                     print(f"round {round_number}, {build} ({builds[build]})", flush=True)
                     subprocess.run(command, cwd=tree, check=True, env={
                         **os.environ, "PYTHONPATH": str(tree)})
-                    frames.append(pd.read_csv(run_out / "bench.csv").assign(
-                        build=build, round=round_number))
+                    frames.append(read_round(run_out / "bench.csv", build, round_number))
                     runs.append(json.loads((run_out / "bench.csv.json").read_text()))
         finally:
             for tree in trees.values():

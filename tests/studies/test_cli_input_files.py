@@ -8,6 +8,7 @@ to the end: an audit, 2026-12); and the input just inside each limit accepted.""
 
 import json
 import warnings
+from types import SimpleNamespace
 
 import pandas as pd
 import pytest
@@ -114,6 +115,19 @@ def test_plan_reads_the_tables_just_inside_the_checks(tmp_path):
     assert "A4" not in plan.read_primitive_model(unsteady, 3.15, 1e-3).gaits
     one = primitives(tmp_path, [(slice(1, None), "status", "diverged")])
     assert plan.read_primitive_model(one, 3.15, 1e-3).gaits == ["none", "A1"]
+
+
+def test_plan_reads_a_primitives_table_a_study_wrote_at_a_step_of_many_digits(tmp_path):
+    """A study's table kept dt_s to 10 digits, so a table made at a step of 3.15/1100 s (a
+    whole number of steps per period, as plan asks) was refused as made at another step (an
+    audit): `Output.write_csv` now writes it exactly (`cli.EXACT_SETTING_COLUMNS`)."""
+    dt = 3.15 / 1100
+    assert float(f"{dt:.10g}") != dt  # the step the table lost
+    table = pd.read_csv(COMMITTED_PRIMITIVES).assign(dt_s=dt)
+    out = cli.Output(SimpleNamespace(study="primitives", out=str(tmp_path), quick=False), [])
+    path = out.write_csv(table, "primitives.csv")
+    assert pd.read_csv(path)["dt_s"].eq(dt).all()
+    assert len(plan.read_primitive_model(path, 3.15, dt).gaits) == 256
 
 
 @pytest.mark.parametrize("flags, flag", [

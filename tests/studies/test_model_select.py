@@ -892,3 +892,18 @@ def test_a_cold_fold_is_the_fit_on_the_other_gaits_from_the_start(tmp_path):
         "assessed again (--reassess), the fit read back from fits/paper.csv")
     pd.testing.assert_frame_equal(pd.read_csv(cold_dir / "model_select_folds.csv"),
                                   pd.read_csv(warm_dir / "model_select_folds.csv"), rtol=1e-6)
+
+
+def test_the_ranking_reads_candidates_named_as_pandas_missing_values_by_their_names(tmp_path):
+    """A candidate's name is the user's text: "NA", "null" and "nan" were read as NaN by the
+    ranking plot (two bars labelled "nan"); an empty objective stays NaN."""
+    path = tmp_path / "model_select.csv"
+    pd.DataFrame({"candidate": ["NA", "null", "nan", "paper"],
+                  "stage": ["screen", "screen", "refined", "screen"],
+                  "status": ["ok", "ok", "ok", "failed"],
+                  "train_objective": [1.0, 2.0, 3.0, np.nan]}).to_csv(path, index=False)
+    table = model_select.fitted_candidates(path)
+    assert table["candidate"].tolist() == ["NA", "null", "nan"]
+    assert table["train_objective"].tolist() == [1.0, 2.0, 3.0]
+    assert np.isnan(pd.read_csv(path, keep_default_na=False, na_values=[""])
+                    ["train_objective"].iloc[3])
