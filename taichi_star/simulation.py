@@ -26,7 +26,7 @@ from . import sensitivities as tangents
 from .runtime import (RECORDS_REMEDY, Runtime, check_arch, check_host_memory,
                       one_call_at_a_time, stream_chunk_size)
 from .state import STATUS_NAMES, STATUS_OK
-from .timegrid import multiples_within, whole_steps
+from .timegrid import multiples_within, steps_in, whole_steps
 
 
 @dataclass
@@ -278,6 +278,35 @@ def validate_call(params, duration_s, solver, record_interval_s, record_shapes, 
     return params, duration_s, record_interval_s
 
 
+def off_grid_periods(params: Sequence[StarParams], duration_s: float, solver: SolverConfig,
+                     steady_from_cycle: int) -> List[int]:
+    """The positions in `params` whose steady speeds a fixed-step run of duration_s (s) leaves
+    NaN only because the period is not a whole number of steps of dt: their cycles begin
+    between steps (each fired at its exact time), where no centroid is taken, though the run
+    holds a whole cycle after cycle `steady_from_cycle`. Empty with adaptive steps, which stop
+    at every cycle start."""
+    if solver.adaptive:
+        return []
+    simulated = steps_in(duration_s, solver.dt) * solver.dt
+    return [position for position, p in enumerate(params)
+            if whole_steps(p.period, solver.dt) is None
+            and multiples_within(simulated, p.period) > steady_from_cycle]
+
+
+def warn_off_grid_periods(positions: Sequence[int], params: Sequence[StarParams], dt: float):
+    """A RuntimeWarning (kind "off_grid_period") naming the instances of `off_grid_periods`
+    (`positions` in `params`, run at steps of dt s): their steady speeds came out NaN with
+    status ok and no word (an audit, 2026-12)."""
+    if positions:
+        first = params[positions[0]]
+        warn_user(f"{len(positions)} of {len(params)} instances (the first params[{positions[0]}],"
+                  f" period {first.period!r} s) have a period that is not a whole number of "
+                  f"steps (dt = {dt!r} s): their cycles begin between steps, and "
+                  f"steady_speed_mm_s and steady_signed_speed_mm_s, taken at cycle starts, are "
+                  f"NaN (a dt that divides the period, or adaptive steps, give them)",
+                  kind="off_grid_period")
+
+
 @one_call_at_a_time
 def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConfig = SolverConfig(),
              *, arch: str = "cpu", record_interval_s: float = 0.0, record_shapes: bool = False,
@@ -321,6 +350,8 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
                               * len(params) * per_instance)
     tangents.check_directions(directions, params, solver, duration_s=duration_s)
     check_arch(arch)
+    warn_off_grid_periods(off_grid_periods(params, duration_s, solver, steady_from_cycle), params,
+                          solver.dt)
     started = time.perf_counter()
     runtime = Runtime.current()
     runtime.ensure(arch, solver.precision)

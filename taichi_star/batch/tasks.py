@@ -16,14 +16,15 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 import pandas as pd
 
-from ..checks import is_finite_real, is_whole, shown, told_by_caller
+from ..checks import is_finite_real, is_whole, shown, told_by_caller, warn_user
 from ..driver import Clock, RunTiming, fewest_steps
 from ..geometry import Topology
 from ..model import instances_of
 from ..params import SolverConfig, StarParams
 from ..runtime import RECORDS_REMEDY, check_arch, check_host_memory
-from ..simulation import simulate, tables_bytes, validate_call
-from ..timegrid import steps_in, warn_long_work, warn_off_grid
+from ..simulation import (off_grid_periods, simulate, tables_bytes, validate_call,
+                          warn_off_grid_periods)
+from ..timegrid import on_grid, steps_in, warn_long_work, warn_off_grid
 
 
 @dataclass(frozen=True)
@@ -102,8 +103,7 @@ def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None
         groups.setdefault((p.topology_key, round(float(duration), 12)), []).append(position)
     tasks = []
     # a chunk's long-run warning tells one chunk's hours: the batch's are told below, and a
-    # duration_s off the step grid once for the batch (cycles off it are rounded as the
-    # summary's duration_s column says: a warning would name a duration_s not given)
+    # duration off the step grid (of duration_s or of cycles) once for the batch
     with told_by_caller("long_work", "off_grid_duration"):
         for (_, duration), positions in groups.items():
             for start in range(0, len(positions), chunk_size):
@@ -126,7 +126,28 @@ def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None
     check_batch_work(tasks, len(params))
     if duration_s is not None and not solver.adaptive:
         warn_off_grid(float(duration_s), solver.dt)
+    if duration_s is None and not solver.adaptive:
+        warn_off_grid_cycles(tasks, cycles, solver.dt)
+    warn_off_grid_periods(sorted(task.members[inside] for task in tasks
+                                 for inside in off_grid_periods(task.params, task.duration_s,
+                                                                solver, steady_from_cycle)),
+                          params, solver.dt)
     return tasks
+
+
+def warn_off_grid_cycles(tasks: Sequence[ChunkTask], cycles: float, dt: float):
+    """A RuntimeWarning (kind "off_grid_duration") where `cycles` periods of some instance are
+    not a whole number of steps of dt (s): the first such chunk's duration, and the time its
+    rounding to whole steps simulates (rounded silently until 2026-12, so that a "cycle" of a
+    period of 3.1505 s at 1-ms steps simulated 3.15 s: an audit)."""
+    for task in tasks:
+        if not on_grid(task.duration_s, dt):
+            steps = steps_in(task.duration_s, dt)
+            warn_user(f"cycles = {cycles!r} periods of params[{task.members[0]}] are "
+                      f"{task.duration_s!r} s, not a whole number of steps (dt = {dt:g} s): "
+                      f"{steps} steps, {steps * dt!r} s, are simulated (each instance's "
+                      f"duration_s in the summary)", kind="off_grid_duration")
+            return
 
 
 def batch_robot_steps(tasks: Sequence[ChunkTask]) -> float:
@@ -161,8 +182,8 @@ def run_chunk(task: ChunkTask, progress: bool = False) -> ChunkResult:
     warnings about "ok" instances are left to `run_batch`, which tells the batch's numbers
     once (a chunk's named its own rows, and on a worker process went to the worker's stderr)."""
     # the batch's long-run warning was told when it was planned (`check_batch_work`), and so
-    # was a duration off the step grid (`plan_chunks`)
-    with told_by_caller("ok_instances", "long_work", "off_grid_duration"):
+    # were a duration and periods off the step grid (`plan_chunks`)
+    with told_by_caller("ok_instances", "long_work", "off_grid_duration", "off_grid_period"):
         result = simulate(list(task.params), task.duration_s, task.solver, arch=task.arch,
                           record_interval_s=task.record_interval_s,
                           record_shapes=task.record_shapes,

@@ -268,9 +268,9 @@ def test_a_batchs_result_goes_to_xarray_by_its_instance_column(recorded, tmp_pat
 def test_a_batchs_files_record_its_call_and_an_off_grid_duration_is_told_once(tmp_path):
     """run_batch's arguments in its files (cycles or duration_s as given, the chunks), and a
     duration_s off the step grid told in one warning for the batch, not one per chunk (its
-    chunks are `simulate` calls, each of which would tell it); cycles off the grid are rounded
-    silently, as the summary's duration_s column says (a warning would name a duration_s the
-    call did not give)."""
+    chunks are `simulate` calls, each of which would tell it); cycles off the grid too, naming
+    the cycles and the first instance they put off it (rounded silently until 2026-12: a
+    "cycle" of a period of 3.1505 s at 1-ms steps simulated 3.15 s, an audit)."""
     import warnings
 
     from taichi_star.batch import run_batch
@@ -291,9 +291,46 @@ def test_a_batchs_files_record_its_call_and_an_off_grid_duration_is_told_once(tm
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         cycled = run_batch(short, cycles=0.02, solver=solver)
-    assert caught == []
+    assert [str(warning.message) for warning in caught] == [
+        "cycles = 0.02 periods of params[0] are 0.006674 s, not a whole number of steps "
+        "(dt = 0.002 s): 3 steps, 0.006 s, are simulated (each instance's duration_s in the "
+        "summary)"]
     assert cycled.summary["duration_s"].tolist() == [0.006, 0.006]  # 0.006674 s rounded
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        run_batch(short, cycles=1.0 / 0.3337 * 0.006, solver=solver)  # 0.006 s, 3 steps
+    assert caught == []
     assert cycled.arguments["cycles"] == 0.02 and cycled.arguments["duration_s"] is None
+
+
+def test_a_period_off_the_step_grid_is_told_once_with_its_nan_steady_speeds():
+    """With fixed steps a period that is not a whole number of steps has its cycles begin
+    between steps, where no centroid is taken: its steady speeds are NaN. They were NaN with
+    status ok and no word (an audit); now one warning per call or batch names them, and a
+    robot whose period is whole steps beside it keeps its steady speed."""
+    import warnings
+
+    from taichi_star.batch import run_batch
+
+    coarse = ts.StarParams(gait="A1+A2", n_arc=6, n_limb=2, period=0.1635)
+    batch = [coarse, coarse.replace(period=0.1645), coarse.replace(period=0.164)]
+    told = ("2 of 3 instances (the first params[0], period 0.1635 s) have a period that is not "
+            "a whole number of steps (dt = 0.001 s): their cycles begin between steps, and "
+            "steady_speed_mm_s and steady_signed_speed_mm_s, taken at cycle starts, are NaN (a "
+            "dt that divides the period, or adaptive steps, give them)")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        run = ts.simulate(batch, 0.33)
+    assert [str(warning.message) for warning in caught] == [told]
+    steady = run.summary["steady_speed_mm_s"]
+    assert steady.iloc[:2].isna().all() and np.isfinite(steady.iloc[2])
+    assert (run.summary["status"] == "ok").all()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        chunked = run_batch(batch, 0.33, chunk_size=1)
+    assert [str(warning.message) for warning in caught] == [told]
+    pd.testing.assert_frame_equal(chunked.summary.drop(columns=["instance", "duration_s"]),
+                                  run.summary, check_exact=True)
 
 
 def test_summary_of_dataset_refuses_what_is_not_a_result_dataset(recorded, tmp_path):

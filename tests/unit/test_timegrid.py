@@ -252,3 +252,27 @@ def test_a_nan_step_count_is_named_and_an_interval_is_a_python_float():
         check_work("x", math.nan)
     interval = nearest_interval(1e-3, np.float32(1e-3))
     assert type(interval) is float and interval == float(np.float32(1e-3))
+
+
+@pytest.mark.parametrize("duration_s, steady_from_cycle, solver, period, expected", [
+    (0.327, 1, None, 0.1635, [0]),  # two whole cycles: cycle 1 is whole, its speed defined
+    (0.326, 1, None, 0.1635, []),   # one whole cycle only: NaN whatever the grid
+    (0.327, 2, None, 0.1635, []),   # no whole cycle after cycle 2
+    (0.491, 2, None, 0.1635, [0]),  # three whole cycles (0.4905 s)
+    (0.327, 0, None, 0.1635, [0]),
+    (0.1635, 0, None, 0.1635, [0]),  # one cycle, from cycle 0; 0.1635 s rounds to 164 steps
+    (0.327, 1, None, 0.164, []),    # a period of whole steps (164)
+    (0.327, 1, "adaptive", 0.1635, []),  # adaptive steps stop at every cycle start
+])
+def test_off_grid_periods_are_those_whose_steady_speed_the_grid_alone_leaves_nan(
+        duration_s, steady_from_cycle, solver, period, expected):
+    """`simulation.off_grid_periods`: the instances whose period is not a whole number of
+    fixed steps, in a run that holds a whole cycle after `steady_from_cycle` (their steady
+    speeds came out NaN, status ok, without a warning: an audit)."""
+    from taichi_star import SolverConfig, StarParams
+    from taichi_star.simulation import off_grid_periods
+
+    config = SolverConfig(integrator="bdf2", adaptive=True) if solver else SolverConfig()
+    on_grid_robot = StarParams(period=0.164)
+    assert off_grid_periods([StarParams(period=period), on_grid_robot], duration_s, config,
+                            steady_from_cycle) == expected
