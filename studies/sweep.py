@@ -93,7 +93,16 @@ def sweep_axes(args) -> dict:
                 f" or vary one actuator's value with `sensitivity --vary {field}[K]=LOW:HIGH`")
         name, values = cli.parse_assignment(item, "--param")
         if name in axes:
-            raise cli.StudyArgumentError(f"--param {name}: parameter given twice")
+            # "given twice" where --gaits (a default) or a named flag gave the axis misled
+            # (an audit, 2026-12)
+            given_by = axis_flags(args, axes)[name]
+            if name == "gait":
+                raise cli.StudyArgumentError(f"--param gait: the gait axis is --gaits (e.g. "
+                                             f"--gaits {item.split('=', 1)[1].strip()})")
+            if given_by == f"--param {name}":
+                raise cli.StudyArgumentError(f"--param {name}: given twice")
+            raise cli.StudyArgumentError(f"--param {name}: swept by {given_by} already (give "
+                                         f"its values once)")
         axes[name] = values
     for item in args.set:
         name, _ = cli.parse_assignment(item, "--set")

@@ -306,6 +306,11 @@ class Simulator(NotCopied):
     def _command_mask(self, commands) -> np.ndarray:
         """(B, 8) bool from a (B, 8) boolean (or 0/1 integer) array or a list of B gait texts."""
         batch = self.n_instances
+        if isinstance(commands, (str, Gait)):
+            # read as an array of shape () before (an audit, 2026-12)
+            raise ValueError(f"commands must be a list of {batch} gaits, one per instance, got "
+                             f"the single gait {str(commands)!r}: [{str(commands)!r}] * {batch} "
+                             f"fires it on every instance")
         if isinstance(commands, (list, tuple)) and all(isinstance(c, (str, Gait)) for c in commands):
             if len(commands) != batch:
                 raise ValueError(f"commands must hold one gait per instance ({batch}), got "

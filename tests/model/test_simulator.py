@@ -683,6 +683,12 @@ def test_mixed_commands_and_a_missing_folder_are_named_in_plain_words(tmp_path):
     with pytest.raises(ValueError, match=r"^commands must be a \(3, 8\) boolean array or a list "
                                          r"of 3 gaits, got a mixture that is neither$"):
         sim.fire(["A1", np.zeros(8, dtype=bool), "A3"])
+    # a single gait was "got shape ()" (an audit, 2026-12)
+    for single in ("A1+A3", ts.Gait.parse("A1+A3")):
+        with pytest.raises(ValueError, match=r"^commands must be a list of 3 gaits, one per "
+                                             r"instance, got the single gait 'A1\+A3': "
+                                             r"\['A1\+A3'\] \* 3 fires it on every instance$"):
+            sim.fire(single)
     assert all(np.array_equal(sim.save().fields[name], before[name]) for name in before)
     with pytest.raises(OSError, match=r"^cannot write state.npz: its folder .*missing does not "
                                       r"exist$"):

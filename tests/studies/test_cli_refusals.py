@@ -66,6 +66,13 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
     ("sweep", ["--gaits", "A1", "--param", "actuator_gains=1,1,0.5,1,1,1,1,1"],
      "--param actuator_gains: a per-actuator field (eight values, A1..A8, a robot) is not an "
      "axis of a sweep: give it to every instance with --set actuator_gains=1,1,0.5,1,1,1,1,1"),
+    # each said "parameter given twice", the gait's when it was given once (an audit, 2026-12)
+    ("sweep", ["--param", "gait=A1,A1+A2"],
+     "--param gait: the gait axis is --gaits (e.g. --gaits A1,A1+A2)"),
+    ("sweep", ["--gaits", "A1", "--alpha", "0.5,0.6", "--param", "alpha=1,2"],
+     "--param alpha: swept by --alpha already (give its values once)"),
+    ("sweep", ["--gaits", "A1", "--param", "alpha=0.5", "--param", "alpha=1,2"],
+     "--param alpha: given twice"),
     ("sweep", ["--gaits", "A1", "--alpha", "0.5,0.6", "--set", "alpha=0.9"],
      "--set alpha: swept as well (fix it or sweep it, not both)"),
     ("sweep", ["--gaits", "A1+A2", "--set", "gait=A1"],
