@@ -26,6 +26,11 @@ STEP_TOLERANCE = 1e-9
 duration a whole number of record intervals): far above the rounding of a time built from
 decimal inputs (~1e-16 relative), far below any real difference of a step."""
 
+MOST_OFF_GRID_STEPS = 1e-3
+"""... and at most this share of one step, whatever the count: past 5·10⁸ steps the relative
+tolerance alone took a time half a step off the grid, or more, for a whole number of steps (an
+audit, 2026-12); a float's rounding of 2³¹ steps is ~5·10⁻⁷ of one."""
+
 STEPS_PER_LAUNCH = 50
 """Steps fused into one kernel launch: enough to hide launch cost, few enough for a live
 progress bar."""
@@ -96,9 +101,11 @@ def refuse_robot_steps(arch: Optional[str] = None) -> float:
 
 def on_grid(times_s, interval_s: float) -> np.ndarray:
     """Whether each time (s, array) is a whole number of `interval_s` (s), within
-    STEP_TOLERANCE of the count (relative, at least one step)."""
+    STEP_TOLERANCE of the count (relative, at least one step) and within MOST_OFF_GRID_STEPS of
+    one interval."""
     ratio = np.asarray(times_s) / interval_s
-    return np.abs(ratio - np.round(ratio)) <= STEP_TOLERANCE * np.maximum(1.0, np.abs(ratio))
+    tolerance = np.minimum(STEP_TOLERANCE * np.maximum(1.0, np.abs(ratio)), MOST_OFF_GRID_STEPS)
+    return np.abs(ratio - np.round(ratio)) <= tolerance
 
 
 def whole_steps(time_s: float, dt: float) -> Optional[int]:

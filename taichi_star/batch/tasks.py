@@ -22,8 +22,8 @@ from ..geometry import Topology
 from ..model import instances_of
 from ..params import SolverConfig, StarParams
 from ..runtime import RECORDS_REMEDY, check_arch, check_host_memory
-from ..simulation import (off_grid_periods, simulate, tables_bytes, validate_call,
-                          warn_off_grid_periods)
+from ..simulation import (cycles_cut_short, off_grid_periods, simulate, tables_bytes,
+                          validate_call, warn_cycles_cut_short, warn_off_grid_periods)
 from ..timegrid import on_grid, steps_in, warn_long_work, warn_off_grid
 
 
@@ -132,6 +132,9 @@ def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None
                                  for inside in off_grid_periods(task.params, task.duration_s,
                                                                 solver, steady_from_cycle)),
                           params, solver.dt)
+    if duration_s is not None:  # whole cycles end on their cycle's start
+        warn_cycles_cut_short(cycles_cut_short(params, duration_s, solver, steady_from_cycle),
+                              params, duration_s)
     return tasks
 
 
@@ -183,7 +186,8 @@ def run_chunk(task: ChunkTask, progress: bool = False) -> ChunkResult:
     once (a chunk's named its own rows, and on a worker process went to the worker's stderr)."""
     # the batch's long-run warning was told when it was planned (`check_batch_work`), and so
     # were a duration and periods off the step grid (`plan_chunks`)
-    with told_by_caller("ok_instances", "long_work", "off_grid_duration", "off_grid_period"):
+    with told_by_caller("ok_instances", "long_work", "off_grid_duration", "off_grid_period",
+                        "cycle_cut_short"):
         result = simulate(list(task.params), task.duration_s, task.solver, arch=task.arch,
                           record_interval_s=task.record_interval_s,
                           record_shapes=task.record_shapes,
@@ -195,7 +199,7 @@ def run_chunk(task: ChunkTask, progress: bool = False) -> ChunkResult:
     # rounded to whole steps (0.0126 s asked at 1-ms steps is 0.013 s)
     clock = Clock(task.solver, task.duration_s)
     summary.insert(summary.columns.get_loc("displacement_x_mm"), "duration_s",
-                   clock.time_of(clock.end))
+                   clock.simulated_s)
     trajectory = result.trajectory
     trajectory["instance"] = members[trajectory["instance"].to_numpy(dtype=int)]
     return ChunkResult(index=task.index, summary=summary, trajectory=trajectory,

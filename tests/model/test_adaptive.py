@@ -123,7 +123,9 @@ def test_a_cycle_boundary_a_rounding_past_the_end_is_the_end():
     a rounding past the end. Beside a 0.17-s robot the groups' last stops then differed and
     simulate refused the batch with an internal error; alone, the run took a last step of
     1e-16 s. The boundary is now the end: the batch runs, each robot bitwise as alone, and the
-    records end at 0.6 s (a fuzz audit, 2026-12). Coarse robots keep it quick."""
+    records end with the run (a fuzz audit, 2026-12), their times the multiples of the
+    interval, the last 3 × 0.2 s as every instance's third record is (`Clock.times_every`).
+    Coarse robots keep it quick."""
     solver = ts.SolverConfig(adaptive=True, dt=5e-3, dt_max=2e-2, error_tol=1e-6)
     robots = [ts.StarParams(gait="A1+A3", period=0.2, n_arc=6, n_limb=2),
               ts.StarParams(gait="A2", period=0.17, n_arc=6, n_limb=2)]
@@ -135,7 +137,8 @@ def test_a_cycle_boundary_a_rounding_past_the_end_is_the_end():
         pd.testing.assert_frame_equal(both.summary.iloc[[index]].reset_index(drop=True),
                                       alone.summary, check_exact=True)
     recorded = ts.simulate(robots[:1], 0.6, solver, record_interval_s=0.2)
-    assert recorded.trajectory.t_s.tolist() == [0.0, 0.2, 0.4, 0.6]
+    assert recorded.trajectory.t_s.tolist() == [0.0, 0.2, 0.4, 3 * 0.2]
+    assert recorded.summary.equals(ts.simulate(robots[:1], 0.6, solver).summary)
 
 
 def test_adaptive_steps_converge_to_the_fixed_step_solution_as_the_tolerance_shrinks():

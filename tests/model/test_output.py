@@ -333,6 +333,49 @@ def test_a_period_off_the_step_grid_is_told_once_with_its_nan_steady_speeds():
                                   run.summary, check_exact=True)
 
 
+def test_an_adaptive_run_a_hair_short_of_whole_periods_is_told_it_leaves_the_last_out():
+    """An adaptive run of 0.4 − 10⁻⁷ s of a 0.2-s robot ends before its second cycle does:
+    the steady speeds (from cycle 1) leave it out, here NaN; they did silently (an audit,
+    2026-12). One warning per call or batch; the whole two periods take it in."""
+    import warnings
+
+    from taichi_star.batch import run_batch
+
+    robot = ts.StarParams(gait="A1+A3", n_arc=6, n_limb=2, period=0.2)
+    solver = ts.SolverConfig(integrator="bdf2", adaptive=True, dt=0.005, dt_max=0.02)
+    told = ("duration_s = 0.3999999 s ends 1e-07 s short of 2 whole periods of 2 of 2 instances "
+            "(the first params[0], period 0.2 s): their steady speeds leave out the last of them "
+            "(duration_s = 0.4 s takes it in)")
+    for run in (lambda: ts.simulate([robot, robot], 0.4 - 1e-7, solver),
+                lambda: run_batch([robot, robot], 0.4 - 1e-7, solver=solver, chunk_size=1)):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            short = run()
+        assert [str(warning.message) for warning in caught] == [told]
+        assert short.summary["steady_speed_mm_s"].isna().all()
+    assert np.isfinite(ts.simulate([robot], 0.4, solver).summary["steady_speed_mm_s"]).all()
+
+
+def test_a_record_of_adaptive_runs_of_different_ends_has_one_time():
+    """Three cycles of a 0.2-s and a 0.25-s robot, recorded every 0.2 s with adaptive steps:
+    the first run ends at 0.6 s, where its last record stopped, the second ran past 3 × 0.2 =
+    0.6000000000000001 s; the record had two times, and the Dataset two half-empty columns
+    (an audit, 2026-12). A record's time is its multiple of the interval."""
+    from taichi_star.batch import run_batch
+
+    robot = ts.StarParams(gait="A1+A3", n_arc=6, n_limb=2, period=0.2)
+    solver = ts.SolverConfig(integrator="bdf2", adaptive=True, dt=0.005, dt_max=0.02)
+    batch = run_batch([robot, robot.replace(period=0.25)], cycles=3, solver=solver,
+                      record_interval_s=0.2)
+    assert batch.summary["duration_s"].tolist() == [0.6, 0.75]
+    times = [k * 0.2 for k in range(4)]
+    for instance in (0, 1):
+        assert batch.trajectory.query("instance == @instance")["t_s"].tolist() == times
+    dataset = batch.to_xarray()
+    assert dataset["time"].values.tolist() == times
+    assert np.isfinite(dataset["centroid_x_mm"].values).all()
+
+
 def test_summary_of_dataset_refuses_what_is_not_a_result_dataset(recorded, tmp_path):
     """A path, None or a foreign Dataset raised AttributeError or KeyError (an audit)."""
     import xarray as xr

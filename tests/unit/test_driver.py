@@ -51,7 +51,9 @@ def test_robots_label_counts_one_robot_in_the_singular():
 
 def test_a_record_interval_longer_than_the_run_warns_and_one_as_long_does_not():
     """Records fall at whole multiples of the interval: one as long as the run records its end
-    (no warning), a longer one only the start (warned, naming both); 0 asks for none."""
+    (no warning), a longer one only the start (warned, naming both); 0 asks for none. With
+    fixed steps the run is the duration rounded to whole steps: 0.0099 s at 5-ms steps runs
+    0.01 s and records it (it was warned as holding no record: an audit, 2026-12)."""
     from taichi_star.driver import check_run
 
     with warnings.catch_warnings():
@@ -59,10 +61,15 @@ def test_a_record_interval_longer_than_the_run_warns_and_one_as_long_does_not():
         check_run(SolverConfig(), 0.2, 0.2, 1)
         check_run(SolverConfig(), 0.2, 0.0, 1)
         check_run(SolverConfig(adaptive=True), 0.3, 0.1, 1)   # 0.3 / 0.1 = 2.9999999999999996
+        warnings.filterwarnings("ignore", message="duration_s = 0.0099 s is not a whole number")
+        check_run(SolverConfig(dt=0.005), 0.0099, 0.01, 1)
     with pytest.warns(RuntimeWarning, match=r"^record_interval_s = 0\.201 s is longer than "
-                                            r"duration_s = 0\.2 s: no record falls after the "
-                                            r"start"):
+                                            r"the 0\.2 s simulated \(duration_s = 0\.2 s\): no "
+                                            r"record falls after the start"):
         check_run(SolverConfig(), 0.2, 0.201, 1)
+    with pytest.warns(RuntimeWarning, match=r"^record_interval_s = 0\.01 s is longer than the "
+                                            r"0\.005 s simulated \(duration_s = 0\.0074 s\)"):
+        check_run(SolverConfig(dt=0.005), 0.0074, 0.01, 1)
 
 
 def test_a_fixed_step_run_is_checked_against_the_step_counter_before_any_compute():

@@ -37,6 +37,20 @@ def test_on_grid_tolerance_is_relative_but_at_least_one_step():
     assert on_grid(1000.0 + 5e-7, 1.0) and not on_grid(1000.0 + 1.5e-6, 1.0)
 
 
+def test_on_grid_tolerance_is_at_most_a_thousandth_of_a_step():
+    """Past 10⁶ steps the relative tolerance is capped at MOST_OFF_GRID_STEPS of one step: at
+    10⁹ steps it alone took half a step off for a whole number (an audit). Offsets of 2⁻¹⁰
+    and 2⁻⁹ steps are exact in binary beside 10⁹ (its float spacing is 2⁻²³): 2⁻¹⁰ (below
+    10⁻³) is on the grid, 2⁻⁹ (above) is not."""
+    from taichi_star.timegrid import MOST_OFF_GRID_STEPS
+
+    assert 2 ** -10 < MOST_OFF_GRID_STEPS < 2 ** -9
+    billion = 1e9
+    assert not on_grid(billion + 0.5, 1.0) and whole_steps(billion + 0.5, 1.0) is None
+    assert on_grid(billion + 2 ** -10, 1.0) and not on_grid(billion + 2 ** -9, 1.0)
+    assert on_grid(1e6 + 9e-4, 1.0)  # 1e-9 relative is 1e-3 of a step here: both rules agree
+
+
 def test_step_counts_match_whole_steps_and_mark_off_grid_with_zero():
     periods = np.array([3.15, 0.0015, 2.0, 0.0])
     assert step_counts(periods, 1e-3).tolist() == [3150, 0, 2000, 0]
@@ -275,4 +289,28 @@ def test_off_grid_periods_are_those_whose_steady_speed_the_grid_alone_leaves_nan
     config = SolverConfig(integrator="bdf2", adaptive=True) if solver else SolverConfig()
     on_grid_robot = StarParams(period=0.164)
     assert off_grid_periods([StarParams(period=period), on_grid_robot], duration_s, config,
+                            steady_from_cycle) == expected
+
+
+@pytest.mark.parametrize("duration_s, steady_from_cycle, adaptive, expected", [
+    (0.5 - 2 ** -20, 1, True, [0]),   # dt_min short of two periods: cycle 1 left out
+    (0.5 - 2 ** -19, 1, True, []),    # two dt_min short: an end the user chose
+    (0.5, 1, True, []),               # the whole two periods
+    (0.5 - 2 ** -20, 2, True, []),    # the window starts at cycle 2: NaN either way
+    (0.5 - 2 ** -20, 0, True, [0]),
+    (0.25 - 2 ** -20, 0, True, [0]),  # short of the first period, from cycle 0
+    (0.5 - 2 ** -20, 1, False, []),   # fixed steps round it to whole steps (and warn)
+])
+def test_cycles_cut_short_are_adaptive_runs_ending_within_dt_min_of_a_periods_end(
+        duration_s, steady_from_cycle, adaptive, expected):
+    """`simulation.cycles_cut_short`: an adaptive run that ends at most dt_min (here 2⁻²⁰ s,
+    every time exact in binary) before a whole number of periods leaves the last cycle out of
+    its steady speeds (a duration of 0.9 s held in float32 did, silently: an audit)."""
+    from taichi_star import SolverConfig, StarParams
+    from taichi_star.simulation import cycles_cut_short
+
+    solver = (SolverConfig(integrator="bdf2", adaptive=True, dt_min=2 ** -20) if adaptive
+              else SolverConfig(dt=2 ** -10))
+    other = StarParams(period=0.3)  # 0.5 s is far from a whole number of its periods
+    assert cycles_cut_short([StarParams(period=0.25), other], duration_s, solver,
                             steady_from_cycle) == expected
