@@ -80,6 +80,13 @@ class FieldArena:
             FieldStore({key: field for key, (field, _) in tables.items()}).write(
                 {key: values for key, (_, values) in tables.items()})
 
+    def destroy(self):
+        """Give the tree's memory back to the system; its fields (and the kernels that read
+        them) are unusable after."""
+        if self.tree is not None:
+            self.tree.destroy()
+            self.tree = None
+
     def tables(self) -> Dict[str, tuple]:
         """The index tables: name -> (field, values)."""
         return {f"table.{number}": entry for number, entry in enumerate(self.pending)}

@@ -273,6 +273,13 @@ CPU_ENGINE_BUDGET_BYTES = 512 * 2**20
 """Largest CPU engine `simulate` builds (bytes): a larger batch is streamed through one engine of
 at most this size, chunk by chunk (on the CPU the throughput stops growing with the batch at a
 few hundred instances, so chunking costs nothing and bounds the memory of any batch)."""
+FREE_ENGINES_BYTES = CPU_ENGINE_BUDGET_BYTES
+"""Fields (bytes) of the engines a process keeps for later calls, the one a call uses included
+(that one whatever its size): past it the least recently used engines that no Simulator holds
+are destroyed (`Runtime.free_engine`). Every engine was kept: a notebook's calls of 1,000,
+2,000 and 3,000 robots kept 150, 250 and 384 MB of fields, RSS 1.1 GB after the last (an
+audit, 2026-12). Small engines are kept all the same (a coarse robot's fields are a few MB;
+what stays of any engine, its compiled kernels, ~20 MB each, Taichi gives no way to free)."""
 
 
 def stream_chunk_size(params, precision: str, arch: str) -> int:
@@ -417,6 +424,8 @@ class EngineSlot:
 
     engine: BatchEngine
     holder: Optional[weakref.ref] = None
+    last_use: int = 0
+    """The runtime's count of engines handed out when this one last was (`free_engine`)."""
 
     def held(self) -> bool:
         """Whether a living Simulator holds the engine."""
@@ -442,6 +451,8 @@ class Runtime:
         self.engines: Dict[tuple, List[EngineSlot]] = {}
         """The engines built in this process, per `engine_key`: each free for the next call or
         Simulator, or held by a living Simulator (`free_engine`)."""
+        self.uses = 0
+        """Engines handed out so far (`free_engine`): the clock of `EngineSlot.last_use`."""
         self.slot_counts: Dict[tuple, int] = {}
         """Newton-matrix blocks per model engine key (`matrix_slots`)."""
         self.started = False
@@ -749,14 +760,43 @@ class Runtime:
         gone) compiles nothing."""
         lanes = self.engine_lanes(model.batch_size, solver, sensitive, robot_steps)
         key = self.engine_key(model, solver, sensitive, lanes)
-        for slot in self.engines.get(key, []):
-            if not slot.held():
-                return slot
-        self.build_here()
-        # may refuse: no entry
-        slot = EngineSlot(self.new_engine(model, solver, sensitive, lanes))
-        self.engines.setdefault(key, []).append(slot)
+        slot = next((slot for slot in self.engines.get(key, []) if not slot.held()), None)
+        if slot is None:
+            # room for it first: the engines kept and it within FREE_ENGINES_BYTES
+            self.release_engines(FREE_ENGINES_BYTES - engine_bytes(model, solver.precision))
+            self.build_here()
+            # may refuse: no entry
+            slot = EngineSlot(self.new_engine(model, solver, sensitive, lanes))
+            self.engines.setdefault(key, []).append(slot)
+        self.uses += 1
+        slot.last_use = self.uses
+        self.release_engines(FREE_ENGINES_BYTES - slot.engine.arena.nbytes, keep=slot)
         return slot
+
+    def release_engines(self, budget_bytes: float = 0.0,
+                        keep: Optional[EngineSlot] = None) -> int:
+        """Destroy the engines that no living Simulator holds, `keep` aside, least recently
+        used first, until the fields of those left take at most `budget_bytes` (default 0:
+        all of them); returns how many were destroyed. Their memory goes back to the system;
+        a later call of such a batch builds its engine again (seconds, its kernels mostly from
+        Taichi's offline cache). `free_engine` keeps FREE_ENGINES_BYTES."""
+        free = sorted((slot for slots in self.engines.values() for slot in slots
+                       if slot is not keep and not slot.held()), key=lambda slot: slot.last_use)
+        kept = sum(slot.engine.arena.nbytes for slot in free)
+        destroyed = 0
+        for slot in free:
+            if kept <= budget_bytes:
+                break
+            kept -= slot.engine.arena.nbytes
+            for key, slots in list(self.engines.items()):
+                others = [other for other in slots if other is not slot]
+                if others:
+                    self.engines[key] = others
+                else:
+                    del self.engines[key]
+            slot.engine.arena.destroy()
+            destroyed += 1
+        return destroyed
 
     def lease_engine(self, model: BatchModel, solver: SolverConfig, owner,
                      sensitive: bool = False) -> BatchEngine:

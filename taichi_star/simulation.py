@@ -369,7 +369,8 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     Memory: on the CPU a batch larger than one engine of `runtime.CPU_ENGINE_BUDGET_BYTES` is
     streamed through such an engine in equal chunks, one after the other; the result is the
     same, bit for bit, as in one engine (instances never interact), and the memory a batch
-    needs grows only with its tables."""
+    needs grows only with its tables. The engine stays for later calls, the process's kept
+    engines within `runtime.FREE_ENGINES_BYTES` (`Runtime.release_engines` gives them back)."""
     directions = tangents.parse_directions(sensitivities)
     # replicas travel in their instance's chunk: a chunk holds (1 + 2·directions) × its instances
     per_instance = tangents.instances_per_instance(len(directions))

@@ -3,6 +3,7 @@ the machine is refused with the way to run it (chunks) instead of exhausting mem
 
 import warnings
 
+import pandas as pd
 import pytest
 
 import taichi_star as ts
@@ -197,3 +198,38 @@ def test_a_batch_the_smallest_engine_holds_is_left_to_check_memory(monkeypatch, 
             runtime.check_batch_memory([ts.StarParams()] * count, "f64", "cpu")
     else:
         runtime.check_batch_memory([ts.StarParams()] * count, "f64", "cpu")
+
+
+def test_engines_past_the_budget_are_destroyed_least_recently_used_first(monkeypatch):
+    """Every engine a process built was kept: calls of 1,000, 2,000 and 3,000 robots kept
+    their fields, 1.1 GB (an audit). Past FREE_ENGINES_BYTES the least recently used engines
+    that no Simulator holds are destroyed, the one a call uses kept; a batch whose engine went
+    is built again, with the same bits; `release_engines` gives back all but those held.
+    Three capacities of one coarse robot (64, 128, 256: fields about 1 : 2 : 4) in a cache of
+    their own, with room for the two largest."""
+    current = runtime.Runtime.current()
+    monkeypatch.setattr(current, "engines", {})
+    robot = ts.StarParams(gait="A1", n_arc=6, n_limb=2)
+    small, middle, large = ([robot] * count for count in (1, 65, 129))
+    first = ts.simulate(small, 0.01)
+    ts.simulate(middle, 0.01)
+    sizes = {len(batch): engine_bytes(build_model(batch), "f64") for batch in (small, large)}
+    (middle_slot,) = (slot for slots in current.engines.values() for slot in slots
+                      if slot.engine.capacity == 128)
+    budget = middle_slot.engine.arena.nbytes + 1.1 * sizes[129]
+    monkeypatch.setattr(runtime, "FREE_ENGINES_BYTES", budget)
+
+    def capacities():
+        return sorted(slot.engine.capacity for slots in current.engines.values()
+                      for slot in slots)
+
+    assert capacities() == [64, 128]
+    ts.simulate(large, 0.01)
+    assert capacities() == [128, 256]  # the 64's, least recently used, went
+    again = ts.simulate(small, 0.01)   # built again: the 128's goes
+    assert capacities() == [64, 256]
+    pd.testing.assert_frame_equal(again.summary, first.summary, check_exact=True)
+    held = ts.Simulator(small)
+    assert current.release_engines() == 1 and capacities() == [64]  # the Simulator's
+    held.advance(0.002)
+    assert held.ok.all()
