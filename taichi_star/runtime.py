@@ -274,9 +274,9 @@ CPU_ENGINE_BUDGET_BYTES = 512 * 2**20
 at most this size, chunk by chunk (on the CPU the throughput stops growing with the batch at a
 few hundred instances, so chunking costs nothing and bounds the memory of any batch)."""
 FREE_ENGINES_BYTES = CPU_ENGINE_BUDGET_BYTES
-"""Fields (bytes) of the engines a process keeps for later calls, the one a call uses included
-(that one whatever its size): past it the least recently used engines that no Simulator holds
-are destroyed (`Runtime.free_engine`). Every engine was kept: a notebook's calls of 1,000,
+"""Fields (bytes) of the CPU engines a process keeps for later calls, the one a call uses
+included (that one whatever its size): past it the least recently used engines that no
+Simulator holds are destroyed (`Runtime.free_engine`). Every engine was kept: a notebook's calls of 1,000,
 2,000 and 3,000 robots kept 150, 250 and 384 MB of fields, RSS 1.1 GB after the last (an
 audit, 2026-12). Small engines are kept all the same (a coarse robot's fields are a few MB;
 what stays of any engine, its compiled kernels, ~20 MB each, Taichi gives no way to free)."""
@@ -760,17 +760,21 @@ class Runtime:
         gone) compiles nothing."""
         lanes = self.engine_lanes(model.batch_size, solver, sensitive, robot_steps)
         key = self.engine_key(model, solver, sensitive, lanes)
+        # the host's memory: a GPU's engines stay as they were (measured on none; a GPU's
+        # memory pool is Taichi's own)
+        bounded = self.arch == "cpu"
         slot = next((slot for slot in self.engines.get(key, []) if not slot.held()), None)
         if slot is None:
-            # room for it first: the engines kept and it within FREE_ENGINES_BYTES
-            self.release_engines(FREE_ENGINES_BYTES - engine_bytes(model, solver.precision))
+            if bounded:  # room for it first: the engines kept and it within the budget
+                self.release_engines(FREE_ENGINES_BYTES - engine_bytes(model, solver.precision))
             self.build_here()
             # may refuse: no entry
             slot = EngineSlot(self.new_engine(model, solver, sensitive, lanes))
             self.engines.setdefault(key, []).append(slot)
         self.uses += 1
         slot.last_use = self.uses
-        self.release_engines(FREE_ENGINES_BYTES - slot.engine.arena.nbytes, keep=slot)
+        if bounded:
+            self.release_engines(FREE_ENGINES_BYTES - slot.engine.arena.nbytes, keep=slot)
         return slot
 
     def release_engines(self, budget_bytes: float = 0.0,
