@@ -55,6 +55,10 @@ GPU_CHUNK_SIZE = 16384
 QUICK_CHUNK_SIZE = 8
 """--quick: instances per chunk, the smallest engine capacity, so that quick runs of different
 sizes share one compiled engine instead of compiling one per batch size."""
+NAMES_AS_WRITTEN = {"keep_default_na": False, "na_values": [""]}
+"""`pandas.read_csv` options that read a table's text as written, an empty cell alone missing: a
+gait, a parameter or a candidate a user named "NA", "null" or "nan" stays that name (pandas'
+defaults read them as NaN: an audit, 2026-12)."""
 EXACT_SETTING_COLUMNS = ("dt_s",)
 """Float columns of a study's table, beside the parameters, that a reader compares with its
 own setting and `Output.write_csv` so writes exactly: plan's --primitives holds a table to its

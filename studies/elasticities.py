@@ -164,7 +164,7 @@ def plot_elasticities(csv_path, png_path) -> Path:
     plt = cli.use_agg()
     from matplotlib.colors import SymLogNorm
 
-    table = pd.read_csv(csv_path, keep_default_na=False, na_values=[""])
+    table = pd.read_csv(csv_path, **cli.NAMES_AS_WRITTEN)
     gaits = list(dict.fromkeys(table["gait"]))
     parameters = list(dict.fromkeys(table["parameter"]))
     grid = table.pivot(index="gait", columns="parameter", values="elasticity").loc[

@@ -1201,9 +1201,9 @@ def _json_value(value):
 
 def fitted_candidates(csv_path) -> pd.DataFrame:
     """The rows of model_select.csv whose fit is "ok", in rank order, the candidates' names as
-    written: a name is the user's text (--candidates), and "NA" or "null" read by pandas'
-    defaults became NaN, two bars of the ranking labelled "nan" (an audit)."""
-    table = pd.read_csv(csv_path, keep_default_na=False, na_values=[""])
+    written (`cli.NAMES_AS_WRITTEN`: "NA" or "null" became NaN, two bars of the ranking
+    labelled "nan", an audit)."""
+    table = pd.read_csv(csv_path, **cli.NAMES_AS_WRITTEN)
     return table[table["status"] == "ok"]
 
 

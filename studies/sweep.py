@@ -92,13 +92,13 @@ def sweep_axes(args) -> dict:
                 f"axis of a sweep: give it to every instance with --set {field}=1,1,0.5,1,1,1,1,1,"
                 f" or vary one actuator's value with `sensitivity --vary {field}[K]=LOW:HIGH`")
         name, values = cli.parse_assignment(item, "--param")
+        # "given twice" where --gaits (a default) or a named flag gave the axis misled (an
+        # audit, 2026-12)
+        if name == "gait":
+            raise cli.StudyArgumentError(f"--param gait: the gait axis is --gaits (e.g. "
+                                         f"--gaits {item.split('=', 1)[1].strip()})")
         if name in axes:
-            # "given twice" where --gaits (a default) or a named flag gave the axis misled
-            # (an audit, 2026-12)
             given_by = axis_flags(args, axes)[name]
-            if name == "gait":
-                raise cli.StudyArgumentError(f"--param gait: the gait axis is --gaits (e.g. "
-                                             f"--gaits {item.split('=', 1)[1].strip()})")
             if given_by == f"--param {name}":
                 raise cli.StudyArgumentError(f"--param {name}: given twice")
             raise cli.StudyArgumentError(f"--param {name}: swept by {given_by} already (give "

@@ -274,12 +274,13 @@ CPU_ENGINE_BUDGET_BYTES = 512 * 2**20
 at most this size, chunk by chunk (on the CPU the throughput stops growing with the batch at a
 few hundred instances, so chunking costs nothing and bounds the memory of any batch)."""
 FREE_ENGINES_BYTES = CPU_ENGINE_BUDGET_BYTES
-"""Fields (bytes) of the CPU engines a process keeps for later calls, the one a call uses
-included (that one whatever its size): past it the least recently used engines that no
-Simulator holds are destroyed (`Runtime.free_engine`). Every engine was kept: a notebook's calls of 1,000,
-2,000 and 3,000 robots kept 150, 250 and 384 MB of fields, RSS 1.1 GB after the last (an
-audit, 2026-12). Small engines are kept all the same (a coarse robot's fields are a few MB;
-what stays of any engine, its compiled kernels, ~20 MB each, Taichi gives no way to free)."""
+"""Fields (bytes) of the CPU engines a process keeps for later calls, the one a call or a new
+Simulator takes included (that one whatever its size): past it the least recently used engines
+that no Simulator holds are destroyed (`Runtime.free_engine`). Every engine was kept: a
+notebook's calls of 1,000, 2,000 and 3,000 robots kept 150, 250 and 384 MB of fields, RSS
+1.1 GB after the last (an audit, 2026-12). A coarse robot's engine has a few MB of fields,
+so the budget holds dozens; what stays of an engine destroyed, its compiled kernels (~20 MB
+of the process each), Taichi gives no way to free."""
 
 
 def stream_chunk_size(params, precision: str, arch: str) -> int:
@@ -760,22 +761,27 @@ class Runtime:
         gone) compiles nothing."""
         lanes = self.engine_lanes(model.batch_size, solver, sensitive, robot_steps)
         key = self.engine_key(model, solver, sensitive, lanes)
-        # the host's memory: a GPU's engines stay as they were (measured on none; a GPU's
-        # memory pool is Taichi's own)
-        bounded = self.arch == "cpu"
         slot = next((slot for slot in self.engines.get(key, []) if not slot.held()), None)
         if slot is None:
-            if bounded:  # room for it first: the engines kept and it within the budget
-                self.release_engines(FREE_ENGINES_BYTES - engine_bytes(model, solver.precision))
             self.build_here()
+            # room for it first: the engines kept and it within the budget
+            self.bound_engines(engine_bytes(model, solver.precision))
             # may refuse: no entry
             slot = EngineSlot(self.new_engine(model, solver, sensitive, lanes))
             self.engines.setdefault(key, []).append(slot)
         self.uses += 1
         slot.last_use = self.uses
-        if bounded:
-            self.release_engines(FREE_ENGINES_BYTES - slot.engine.arena.nbytes, keep=slot)
+        self.bound_engines(slot.engine.arena.nbytes, keep=slot)
         return slot
+
+    def bound_engines(self, taken_bytes: int, keep: Optional[EngineSlot] = None):
+        """`release_engines` down to FREE_ENGINES_BYTES beside the `taken_bytes` of the engine
+        a call or Simulator takes (`keep`), on the CPU and on the thread that started Taichi
+        alone: a tree destroyed from another thread broke Taichi's own books, and every later
+        build of the process failed (a review, 2026-12); a GPU's engines stay as they were
+        (measured on none; a GPU's memory pool is Taichi's own)."""
+        if self.arch == "cpu" and self.taichi_thread == threading.get_ident():
+            self.release_engines(FREE_ENGINES_BYTES - taken_bytes, keep=keep)
 
     def release_engines(self, budget_bytes: float = 0.0,
                         keep: Optional[EngineSlot] = None) -> int:
@@ -783,7 +789,12 @@ class Runtime:
         used first, until the fields of those left take at most `budget_bytes` (default 0:
         all of them); returns how many were destroyed. Their memory goes back to the system;
         a later call of such a batch builds its engine again (seconds, its kernels mostly from
-        Taichi's offline cache). `free_engine` keeps FREE_ENGINES_BYTES."""
+        Taichi's offline cache). `free_engine` keeps FREE_ENGINES_BYTES. RuntimeError from
+        another thread than the one that started Taichi, the only one that may destroy its
+        fields (`build_here`)."""
+        if self.taichi_thread is not None and self.taichi_thread != threading.get_ident():
+            raise RuntimeError("release_engines must be called from the thread that started "
+                               "Taichi (the first to simulate): it alone may destroy fields")
         free = sorted((slot for slots in self.engines.values() for slot in slots
                        if slot is not keep and not slot.held()), key=lambda slot: slot.last_use)
         kept = sum(slot.engine.arena.nbytes for slot in free)

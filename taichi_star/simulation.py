@@ -26,7 +26,7 @@ from . import sensitivities as tangents
 from .runtime import (RECORDS_REMEDY, Runtime, check_arch, check_host_memory,
                       one_call_at_a_time, stream_chunk_size)
 from .state import STATUS_NAMES, STATUS_OK
-from .timegrid import multiples_within, steps_in, whole_steps
+from .timegrid import multiples_within, whole_steps
 
 
 @dataclass
@@ -70,7 +70,9 @@ class SimulationResult:
 
     `trajectory`: long table (instance, t_s, x_mm, y_mm, heading_deg): the centroid relative to
     its start and the body rotation at every record time (NaN from a failure on); empty without
-    records.
+    records. A record's t_s is its step count × dt, with adaptive steps its multiple
+    k·record_interval_s, the same for every instance (the last one a rounding past a duration
+    it ends: 3 × 0.2 s = 0.6000000000000001 s for 0.6 s).
 
     `shapes`: (n_records, B, N, 2) node positions in m at the record times, when requested.
 
@@ -287,7 +289,7 @@ def off_grid_periods(params: Sequence[StarParams], duration_s: float, solver: So
     at every cycle start."""
     if solver.adaptive:
         return []
-    simulated = steps_in(duration_s, solver.dt) * solver.dt
+    simulated = Clock(solver, duration_s).simulated_s
     return [position for position, p in enumerate(params)
             if whole_steps(p.period, solver.dt) is None
             and multiples_within(simulated, p.period) > steady_from_cycle]
@@ -318,10 +320,16 @@ def cycles_cut_short(params: Sequence[StarParams], duration_s: float, solver: So
         return []
     cut = []
     for position, p in enumerate(params):
-        cycle = multiples_within(duration_s, p.period) + 1
-        if cycle > steady_from_cycle and cycle * p.period - duration_s <= solver.dt_min:
+        begun = periods_begun(duration_s, p.period)
+        if begun > steady_from_cycle and begun * p.period - duration_s <= solver.dt_min:
             cut.append(position)
     return cut
+
+
+def periods_begun(duration_s: float, period: float) -> int:
+    """The periods (s) a run of duration_s (s) has begun: its whole ones and the one it ends in
+    (`timegrid.multiples_within` + 1)."""
+    return multiples_within(duration_s, period) + 1
 
 
 def warn_cycles_cut_short(positions: Sequence[int], params: Sequence[StarParams],
@@ -329,7 +337,7 @@ def warn_cycles_cut_short(positions: Sequence[int], params: Sequence[StarParams]
     """A RuntimeWarning (kind "cycle_cut_short") naming the instances of `cycles_cut_short`."""
     if positions:
         period = params[positions[0]].period
-        cycle = multiples_within(duration_s, period) + 1
+        cycle = periods_begun(duration_s, period)
         warn_user(f"duration_s = {duration_s!r} s ends {cycle * period - duration_s:.3g} s "
                   f"short of {cycle} whole periods of {len(positions)} of {len(params)} "
                   f"instances (the first params[{positions[0]}], period {period!r} s): their "

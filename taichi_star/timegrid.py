@@ -160,15 +160,18 @@ def check_duration(duration_s: float, dt: float) -> int:
     return steps
 
 
-def warn_off_grid(duration_s: float, dt: float):
+def warn_off_grid(duration_s: float, dt: float, subject: Optional[str] = None,
+                  advice: str = "timegrid.nearest_interval gives a duration on the grid") -> bool:
     """`check_duration`'s RuntimeWarning (kind "off_grid_duration") where duration_s (s) is
-    not a whole number of steps of dt (s)."""
-    if not on_grid(duration_s, dt):
-        steps = steps_in(duration_s, dt)
-        warn_user(f"duration_s = {duration_s!r} s is not a whole number of steps (dt = {dt:g} "
-                  f"s): {steps} steps, {steps * dt!r} s, are simulated "
-                  f"(timegrid.nearest_interval gives a duration on the grid)",
-                  kind="off_grid_duration")
+    not a whole number of steps of dt (s), naming it as `subject` (default "duration_s = ...
+    s") with `advice`; whether it warned."""
+    if on_grid(duration_s, dt):
+        return False
+    steps = steps_in(duration_s, dt)
+    warn_user(f"{subject or f'duration_s = {duration_s!r} s'} is not a whole number of steps "
+              f"(dt = {dt:g} s): {steps} steps, {steps * dt!r} s, are simulated ({advice})",
+              kind="off_grid_duration")
+    return True
 
 
 def nearest_interval(interval_s: float, dt: float) -> float:

@@ -16,7 +16,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 import pandas as pd
 
-from ..checks import is_finite_real, is_whole, shown, told_by_caller, warn_user
+from ..checks import is_finite_real, is_whole, shown, told_by_caller
 from ..driver import Clock, RunTiming, fewest_steps
 from ..geometry import Topology
 from ..model import instances_of
@@ -24,7 +24,7 @@ from ..params import SolverConfig, StarParams
 from ..runtime import RECORDS_REMEDY, check_arch, check_host_memory
 from ..simulation import (cycles_cut_short, off_grid_periods, simulate, tables_bytes,
                           validate_call, warn_cycles_cut_short, warn_off_grid_periods)
-from ..timegrid import on_grid, steps_in, warn_long_work, warn_off_grid
+from ..timegrid import steps_in, warn_long_work, warn_off_grid
 
 
 @dataclass(frozen=True)
@@ -144,12 +144,9 @@ def warn_off_grid_cycles(tasks: Sequence[ChunkTask], cycles: float, dt: float):
     rounding to whole steps simulates (rounded silently until 2026-12, so that a "cycle" of a
     period of 3.1505 s at 1-ms steps simulated 3.15 s: an audit)."""
     for task in tasks:
-        if not on_grid(task.duration_s, dt):
-            steps = steps_in(task.duration_s, dt)
-            warn_user(f"cycles = {cycles!r} periods of params[{task.members[0]}] are "
-                      f"{task.duration_s!r} s, not a whole number of steps (dt = {dt:g} s): "
-                      f"{steps} steps, {steps * dt!r} s, are simulated (each instance's "
-                      f"duration_s in the summary)", kind="off_grid_duration")
+        if warn_off_grid(task.duration_s, dt, f"cycles = {cycles!r} periods of "
+                         f"params[{task.members[0]}], {task.duration_s!r} s,",
+                         "each instance's duration_s in the summary"):
             return
 
 

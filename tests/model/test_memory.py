@@ -233,3 +233,38 @@ def test_engines_past_the_budget_are_destroyed_least_recently_used_first(monkeyp
     assert current.release_engines() == 1 and capacities() == [64]  # the Simulator's
     held.advance(0.002)
     assert held.ok.all()
+
+
+def test_engines_are_destroyed_on_the_thread_that_started_taichi_alone(monkeypatch):
+    """A call from another thread that reused an engine destroyed the others there, and every
+    later build of the process failed on Taichi's assertion (a review, 2026-12): such a call
+    leaves the engines for the next call on Taichi's thread, and `release_engines` from
+    another thread is refused."""
+    import threading
+
+    current = runtime.Runtime.current()
+    monkeypatch.setattr(current, "engines", {})
+    robot = ts.StarParams(gait="A1", n_arc=6, n_limb=2)
+    small, middle = [robot], [robot] * 65
+    ts.simulate(small, 0.004)
+    ts.simulate(middle, 0.004)
+    monkeypatch.setattr(runtime, "FREE_ENGINES_BYTES", 0)
+    outcome = {}
+
+    def on_another_thread():
+        outcome["summary"] = ts.simulate(small, 0.004).summary
+        try:
+            current.release_engines()
+        except RuntimeError as error:
+            outcome["refused"] = str(error)
+
+    worker = threading.Thread(target=on_another_thread)
+    worker.start()
+    worker.join()
+    assert (outcome["summary"]["status"] == "ok").all()
+    assert outcome["refused"].startswith("release_engines must be called from the thread that "
+                                         "started Taichi")
+    assert sum(len(slots) for slots in current.engines.values()) == 2  # both kept there
+    assert (ts.simulate(middle, 0.004).summary["status"] == "ok").all()
+    # on this thread the budget of 0 keeps the engine in use alone
+    assert [slot.engine.capacity for slots in current.engines.values() for slot in slots] == [128]

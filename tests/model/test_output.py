@@ -292,7 +292,7 @@ def test_a_batchs_files_record_its_call_and_an_off_grid_duration_is_told_once(tm
         warnings.simplefilter("always")
         cycled = run_batch(short, cycles=0.02, solver=solver)
     assert [str(warning.message) for warning in caught] == [
-        "cycles = 0.02 periods of params[0] are 0.006674 s, not a whole number of steps "
+        "cycles = 0.02 periods of params[0], 0.006674 s, is not a whole number of steps "
         "(dt = 0.002 s): 3 steps, 0.006 s, are simulated (each instance's duration_s in the "
         "summary)"]
     assert cycled.summary["duration_s"].tolist() == [0.006, 0.006]  # 0.006674 s rounded

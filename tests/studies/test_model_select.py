@@ -905,5 +905,4 @@ def test_the_ranking_reads_candidates_named_as_pandas_missing_values_by_their_na
     table = model_select.fitted_candidates(path)
     assert table["candidate"].tolist() == ["NA", "null", "nan"]
     assert table["train_objective"].tolist() == [1.0, 2.0, 3.0]
-    assert np.isnan(pd.read_csv(path, keep_default_na=False, na_values=[""])
-                    ["train_objective"].iloc[3])
+    assert np.isnan(pd.read_csv(path, **cli.NAMES_AS_WRITTEN)["train_objective"].iloc[3])
