@@ -18,7 +18,7 @@ EXTRA_OF_STUDY = {
     "animate": "plots", "bench": "plots", "calibrate": "studies", "convergence": "plots",
     "elasticities": "plots", "env_bench": "envs", "fig4c": "plots", "gait_design": "studies",
     "gaits": "plots", "gradient_fit": "studies", "jacobians": "plots", "model_select": "studies",
-    "plan": "plots", "predictability": "plots", "primitives": "plots", "reproduce": "studies",
+    "plan": "plots", "predictability": "plots", "primitives": "plots", "reproduce": None,
     "scaling": None,
     "sensitivity": "studies", "sensitivity_check": "plots", "simd": "plots", "stability": "plots",
     "strokes": "plots", "sweep": "studies",
@@ -26,8 +26,10 @@ EXTRA_OF_STUDY = {
 }
 """The extra of pyproject.toml each study needs beyond the core (None: the core alone), checked
 by the launcher before the study is imported. "plots" (matplotlib) keeps the main job, fig4c,
-light; a study that needs more than one extra names "studies", which holds them all (reproduce
-runs every study). scaling times Dask clusters unless --no-dask, and checks for it itself."""
+light; a study that needs more than one extra names "studies", which holds them all.
+reproduce runs every study, each in its own process that checks its own extra (its
+--dry-run, which prints them, needs none). scaling times Dask clusters unless --no-dask, and
+checks for it itself."""
 
 
 def study_names():

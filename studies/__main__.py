@@ -25,6 +25,7 @@ try:
         from . import EXTRA_OF_STUDY, study_names
         from . import cli
         from .cli import StudyArgumentError, StudyOutputError, configure_logging, interrupted
+        from .provenance import program
 except KeyboardInterrupt:
     # Ctrl-C while the libraries load (a second or more): one line, as during a study, not the
     # traceback of pandas' or pyarrow's import (an audit, 2026-12)
@@ -85,14 +86,6 @@ def one_line_warnings(name: str):
         yield
     finally:
         warnings.formatwarning = python_format
-
-
-def program() -> str:
-    """How the user called the studies: the installed `taichi-star` command, or `python -m
-    studies` in a checkout (`python -m taichi_star.studies` installed)."""
-    if Path(sys.argv[0]).name == "taichi-star":
-        return "taichi-star"
-    return f"python -m {__package__}"
 
 
 def description(name: str) -> str:

@@ -137,7 +137,7 @@ class StudyParser(OneLineParser):
     promises every flag's default)."""
 
     def __init__(self, study: str, description: str, archs=("cpu", "gpu")):
-        super().__init__(prog=f"python -m studies {study}", description=description,
+        super().__init__(prog=f"{provenance.program()} {study}", description=description,
                          allow_abbrev=False)
         self.quick_defaults: Dict[str, tuple] = {}
         self.set_defaults(study=study)
@@ -151,8 +151,8 @@ class StudyParser(OneLineParser):
         super().add_argument("--no-progress", action="store_true", help="no progress bars")
         super().add_argument("--replace-committed", action="store_true",
                              help="let --out in the committed results/ replace the files "
-                                  "there (without it only `python -m studies reproduce`'s "
-                                  "own runs do)")
+                                  f"there (without it only `{provenance.program()} "
+                                  f"reproduce`'s own runs do)")
 
     def add_argument(self, *names, quick=_UNSET, **kwargs):
         if quick is _UNSET:
@@ -368,6 +368,27 @@ def check_length(length: str, duration_s: float, step_s: float, step_name: str):
     """`check_steps` of a run of duration_s (s, what `length` says, e.g. "--cycles 3 (9.45
     s)") at steps of step_s (s, named `step_name`)."""
     check_steps(f"{length} at {step_name} {step_s:g} s", duration_s / step_s)
+
+
+def in_checkout() -> bool:
+    """Whether the studies run from a checkout of the repository (its pyproject.toml beside
+    the committed results/), not from an installed package (a results/ folder a run made in
+    site-packages does not make one)."""
+    return (COMMITTED_RESULTS.parent / "pyproject.toml").is_file()
+
+
+def committed_input(path, flag: str, made_by: str) -> str:
+    """`path`, a table a flag names, unless it lies in the committed results/ (a flag's default)
+    and is not there: an installed package holds no results/ (they come with a checkout of the
+    repository), and such a study failed naming a file in site-packages (an audit, 2026-12).
+    StudyArgumentError naming the flag and `made_by`, the study that makes the table."""
+    resolved = Path(path).resolve()
+    if not resolved.exists() and COMMITTED_RESULTS in resolved.parents and not in_checkout():
+        raise StudyArgumentError(
+            f"{flag} {path}: not here (the committed results/ come with a checkout of the "
+            f"repository, not with an installed package): make one with `{provenance.program()} "
+            f"{made_by}` and give its table as {flag}")
+    return str(path)
 
 
 def read_csv_file(path, flag: str, **options) -> pd.DataFrame:
@@ -1187,8 +1208,8 @@ def check_committed_folder(folder: Path, study: str, argv: Sequence[str], replac
         return
     made_by = "; ".join(" ".join(each) or "no flags" for each in reproduced) or "none"
     raise StudyArgumentError(
-        f"--out {folder}: holds committed results, which only `python -m studies reproduce` "
-        f"replaces (its runs of {study}: {made_by}); this run's flags "
+        f"--out {folder}: holds committed results, which only `{provenance.program()} "
+        f"reproduce` replaces (its runs of {study}: {made_by}); this run's flags "
         f"({' '.join(flags) or 'none'}) differ: give another --out, or --replace-committed to "
         f"replace them")
 

@@ -252,7 +252,7 @@ def main(argv=None):
         if direction(label).value(base) == 0.0:
             raise cli.StudyArgumentError(f"--check: {label} is 0 in this model; a relative "
                                          f"finite-difference step needs a non-zero value")
-    sobol_path = Path(args.sobol)
+    sobol_path = Path(cli.committed_input(args.sobol, "--sobol", "sensitivity"))
     if not sobol_path.is_file():
         raise cli.StudyArgumentError(f"--sobol: no such file {sobol_path}")
     sobol, sobol_preset = sobol_table(sobol_path)

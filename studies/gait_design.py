@@ -84,7 +84,7 @@ from .optimise import minimise_lbfgsb_batched
 
 DESCRIPTION = ("Firing offsets per actuator optimised by L-BFGS-B on the exact sensitivities "
                "for speed in a direction or turning, against the best synchronous gait.")
-DEFAULT_PRIMITIVES = Path(__file__).resolve().parent.parent / "results" / "primitives.csv"
+DEFAULT_PRIMITIVES = cli.COMMITTED_RESULTS / "primitives.csv"
 PRIMITIVE_NUMBERS = ["step_mm", "direction_deg", "step_x_mm", "step_y_mm", "turn_deg"]
 """The columns of the --primitives table this study reads besides gait: numbers, NaN where the
 table has none (a failed gait's steps, the direction of a step too short to have one)."""
@@ -514,8 +514,9 @@ def main(argv=None):
     # results/primitives.csv at 1 ms, serves --quick's 5 ms as well); another robot is said,
     # since it ranks the starts by its own steps (the no-jet run started from the jet
     # model's best gaits without a word; an audit, 2026-12)
-    primitives = cli.read_table(args.primitives, "--primitives", ["gait", *PRIMITIVE_NUMBERS],
-                                "a primitives table")
+    primitives = cli.read_table(cli.committed_input(args.primitives, "--primitives",
+                                                    "primitives"),
+                                "--primitives", ["gait", *PRIMITIVE_NUMBERS], "a primitives table")
     cli.numeric_columns(primitives, PRIMITIVE_NUMBERS, args.primitives, "--primitives")
     # its gaits are fired by name: one that names no gait, or twice, is refused here (it failed
     # with a traceback inside the optimisation, after the compute: an audit, 2026-12)

@@ -50,13 +50,23 @@ def timing_columns(arch: str) -> Dict[str, object]:
     return {**machine_columns(arch), "commit": short_commit()}
 
 
+def program() -> str:
+    """How the user called the studies: the installed `taichi-star` command, or `python -m
+    studies` in a checkout (`python -m taichi_star.studies` installed): what their usage, their
+    messages and the commands their files record say (an installed package's files recorded
+    `python -m studies`, which it does not have: an audit, 2026-12)."""
+    if Path(sys.argv[0]).name == "taichi-star":
+        return "taichi-star"
+    return f"python -m {__package__}"
+
+
 def record(study: str, argv: Sequence[str], model: Optional[Mapping] = None,
            solver=None, extra: Optional[Mapping] = None) -> Dict[str, object]:
     """The provenance of one study run. `model`: the preset name and the base StarParams (or
     any description of the instances); `solver`: a SolverConfig (or a description). A table's
     sidecar adds `elapsed_s`, the wall seconds the study had run when it was written. The
     process's figures are attributed to the study of its latest record (`figure_metadata`)."""
-    command = " ".join(["python -m studies", study, *map(shlex.quote, argv)])
+    command = " ".join([program(), study, *map(shlex.quote, argv)])
     LATEST_STUDY.update(study=study, command=command)
     return {
         "study": study,

@@ -17,7 +17,8 @@ import sys
 from pathlib import Path
 
 from .cli import (COMMITTED_RESULTS, REPRODUCED_RESULTS, OneLineParser, StudyArgumentError,
-                  check_future_folder, parse_values)
+                  check_future_folder, in_checkout, parse_values)
+from .provenance import program
 
 DESCRIPTION = "Regenerate the main committed results/ with their studies' full runs (hours)."
 
@@ -33,12 +34,12 @@ def command(name: str, into: Path):
 
 
 def main(argv=None):
-    parser = OneLineParser(prog="python -m studies reproduce", description=DESCRIPTION)
+    parser = OneLineParser(prog=f"{program()} reproduce", description=DESCRIPTION)
     parser.add_argument("--only", default=None,
                         help=f"comma list of {', '.join(REPRODUCED_RESULTS)}, each once (default "
                              f"all)")
-    parser.add_argument("--into", default=str(COMMITTED_RESULTS),
-                        help="output folder (default the repository's results/)")
+    parser.add_argument("--into", default=None,
+                        help="output folder (default the repository's results/, in a checkout)")
     parser.add_argument("--dry-run", action="store_true", help="print the commands only")
     args = parser.parse_args(argv)
     names = (list(REPRODUCED_RESULTS) if args.only is None
@@ -47,6 +48,14 @@ def main(argv=None):
     if unknown:
         raise StudyArgumentError(f"--only: unknown result {unknown[0]!r}; choose from "
                                  f"{', '.join(REPRODUCED_RESULTS)}")
+    if args.into is None:
+        # an installed package has no results/: its default wrote into site-packages, where
+        # an uninstall left it (an audit, 2026-12)
+        if not in_checkout():
+            raise StudyArgumentError(
+                f"--into: needed outside a checkout of the repository (the committed results/ "
+                f"are not here, {COMMITTED_RESULTS}): give a folder, e.g. --into runs/reproduce")
+        args.into = str(COMMITTED_RESULTS)
     if not args.into.strip():  # Path("") is the current folder
         raise StudyArgumentError("--into: an empty folder name (give a folder, e.g. runs/mine)")
     into = Path(args.into)

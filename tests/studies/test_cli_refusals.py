@@ -464,6 +464,55 @@ def test_reproduce_refuses_a_result_listed_twice(tmp_path, capsys):
     assert len(error.strip().splitlines()) == 1
 
 
+def test_an_installed_package_without_results_asks_for_into_and_names_inputs_to_make(
+        tmp_path, capsys, monkeypatch):
+    """An installed package has no committed results/ (`cli.COMMITTED_RESULTS` is then a folder
+    in site-packages that is not there): reproduce wrote into it by default, where an
+    uninstall left it, and elasticities and gait_design failed naming a default table there
+    (an audit, 2026-12). reproduce needs --into, also where such a run left a results/ folder
+    there, and a default table that is not there is refused naming the study that makes it;
+    --dry-run needs no extra."""
+    from studies import EXTRA_OF_STUDY, reproduce
+
+    missing = tmp_path / "site-packages" / "taichi_star" / "results"
+    monkeypatch.setattr(reproduce, "COMMITTED_RESULTS", missing)
+    monkeypatch.setattr(cli, "COMMITTED_RESULTS", missing)
+    assert cli.in_checkout() is False
+    assert studies_main(["reproduce", "--dry-run"]) == 2
+    missing.mkdir(parents=True)  # made by an earlier reproduce into site-packages
+    assert studies_main(["reproduce", "--dry-run"]) == 2
+    capsys.readouterr()
+    missing.rmdir()
+    assert studies_main(["reproduce", "--dry-run"]) == 2
+    error = capsys.readouterr().err.strip()
+    assert error == (f"python -m studies reproduce: error: --into: needed outside a checkout of "
+                     f"the repository (the committed results/ are not here, {missing}): give a "
+                     f"folder, e.g. --into runs/reproduce")
+    assert studies_main(["reproduce", "--dry-run", "--into", str(tmp_path / "into")]) == 0
+    assert not missing.exists() and EXTRA_OF_STUDY["reproduce"] is None
+    for flag, made_by in (("--sobol", "sensitivity"), ("--primitives", "primitives")):
+        default = missing / "table.csv"
+        with pytest.raises(cli.StudyArgumentError, match=(
+                rf"^{flag} {default}: not here \(the committed results/ come with a checkout "
+                rf"of the repository, not with an installed package\): make one with "
+                rf"`python -m studies {made_by}` and give its table as {flag}$")):
+            cli.committed_input(default, flag, made_by)
+    # a table the user names, wherever it is, is read (or refused) as it is
+    assert cli.committed_input(tmp_path / "mine.csv", "--sobol", "sensitivity") == \
+        str(tmp_path / "mine.csv")
+
+
+def test_an_installed_command_names_itself_in_usage_messages_and_recorded_commands(
+        monkeypatch):
+    """An installed package recorded `python -m studies ...` in its files and its usage, which
+    it does not have: the `taichi-star` command names itself (an audit, 2026-12)."""
+    from studies import provenance
+
+    monkeypatch.setattr("sys.argv", ["/usr/local/bin/taichi-star", "fig4c", "--quick"])
+    assert provenance.record("fig4c", ["--quick"])["command"] == "taichi-star fig4c --quick"
+    assert cli.StudyParser("fig4c", "the main job").prog == "taichi-star fig4c"
+
+
 def test_reproduce_refuses_an_into_that_is_a_file(tmp_path, capsys):
     """--into was not checked: the first study refused it, then reproduce added a traceback."""
     into = tmp_path / "a_file"

@@ -325,10 +325,31 @@ def test_the_studies_install_inside_taichi_star_with_their_data_and_command():
     assert setuptools["package-dir"] == {"taichi_star.studies": "studies"}
     assert project["project"]["scripts"]["taichi-star"] == "taichi_star.studies.__main__:main"
     for name in setuptools["package-data"]["taichi_star.studies"]:
-        assert (REPO / "studies" / name).exists(), name
+        assert list((REPO / "studies").glob(name)), name
     # every package with an __init__.py is listed (a new subpackage must be added), and the
     # data folders (package data, listed so that setuptools does not warn about them)
     found = {".".join(p.parent.relative_to(REPO).parts)
              for p in (REPO / "taichi_star").rglob("__init__.py")}
     data = {"taichi_star.data", "taichi_star.data.experiment"}
     assert found | data | {"taichi_star.studies"} == set(setuptools["packages"])
+
+
+@pytest.mark.parametrize("package, folder, pattern", [
+    # the candidate tables model_select's committed runs name (four of five were left out of
+    # the wheel: an audit, 2026-12)
+    ("taichi_star.studies", "studies", "*.csv"),
+    ("taichi_star", "taichi_star", "data/**/*"),
+])
+def test_every_data_file_of_a_package_folder_is_package_data(package, folder, pattern):
+    """The files beside a package's modules that its code reads are package data, so that a
+    wheel works outside the checkout."""
+    import fnmatch
+    import tomllib
+
+    globs = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"][
+        "package-data"][package]
+    files = [path.relative_to(REPO / folder).as_posix()
+             for path in (REPO / folder).glob(pattern)
+             if path.is_file() and path.suffix not in (".py", ".pyc")]
+    assert files, pattern
+    assert [name for name in files if not any(fnmatch.fnmatch(name, g) for g in globs)] == []
