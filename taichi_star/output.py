@@ -354,8 +354,10 @@ def summary_of_dataset(dataset) -> pd.DataFrame:
     """The per-instance table of a `to_xarray` Dataset (or one read from netCDF): every
     variable and coordinate along `instance` alone but the sensitivities, as columns (the
     `instance` coordinate first where the summary had it as a column: a `run_batch`
-    result's); `StarParams.from_row` reads its rows. ValueError for anything else (a path: open it with
-    `xarray.open_dataset` first)."""
+    result's; else the index, as `simulate`'s summary numbers its rows, so that the rows of a
+    selection, `isel(instance=[1, 3])`, keep their instances: they were numbered 0 and 1, an
+    audit, 2026-12); `StarParams.from_row` reads its rows. ValueError for anything else (a
+    path: open it with `xarray.open_dataset` first)."""
     xr = require("xarray", "io")
     if not isinstance(dataset, xr.Dataset) or "instance" not in dataset.coords:
         raise ValueError(f"dataset must be an xarray Dataset of `to_xarray` (or read from "
@@ -364,9 +366,13 @@ def summary_of_dataset(dataset) -> pd.DataFrame:
     names = [name for name in [*dataset.coords, *dataset.data_vars]
              if dataset[name].dims == ("instance",) and name != "instance"
              and not dataset[name].attrs.get("sensitivity")]
+    instances = dataset["instance"].to_numpy()
+    index = None
     if dataset["instance"].attrs.get("summary_column") == 1:
         names.insert(0, "instance")
-    return pd.DataFrame({name: dataset[name].to_numpy() for name in names})
+    elif not np.array_equal(instances, np.arange(len(instances))):
+        index = pd.Index(instances)
+    return pd.DataFrame({name: dataset[name].to_numpy() for name in names}, index=index)
 
 
 def _netcdf_units(name: str, values: np.ndarray) -> str:

@@ -257,6 +257,14 @@ def test_a_batchs_result_goes_to_xarray_by_its_instance_column(recorded, tmp_pat
     assert list(table.columns[:2]) == list(batch.summary.columns[:2])
     np.testing.assert_array_equal(table.instance, batch.summary.instance)
     assert "instance" not in summary_of_dataset(plain).columns
+    # a selection keeps its instances: the plain one's in the index, as simulate's summary
+    # numbers its rows (they were renumbered 0, 1, ...: an audit, 2026-12), the batch's in
+    # its column
+    picked = summary_of_dataset(plain.isel(instance=[1]))
+    assert picked.index.tolist() == [1]
+    pd.testing.assert_frame_equal(picked, recorded.summary.iloc[[1]][picked.columns],
+                                  check_exact=True, check_dtype=False)
+    assert summary_of_dataset(dataset.isel(instance=[1]))["instance"].tolist() == [1]
     first_only = dataclasses.replace(batch, trajectory=batch.trajectory[
         batch.trajectory.instance == 0])
     partial = first_only.to_xarray()
