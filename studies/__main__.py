@@ -29,6 +29,7 @@ try:
 except KeyboardInterrupt:
     # Ctrl-C while the libraries load (a second or more): one line, as during a study, not the
     # traceback of pandas' or pyarrow's import (an audit, 2026-12)
+    # provenance.program's rule, written here too: the interrupt may come before it loaded
     caller = ("taichi-star" if Path(sys.argv[0]).name == "taichi-star"
               else f"python -m {__package__}")
     print(f"{caller}: interrupted while loading; nothing was run", file=sys.stderr)

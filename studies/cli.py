@@ -43,7 +43,8 @@ from taichi_star.gait import Gait
 from taichi_star.output import column_unit, column_units, parquet_bytes, read_provenance
 from taichi_star.provenance import table_stamp
 from taichi_star.sensitivities import parse_directions
-from taichi_star.timegrid import LongWorkWarning, steps_in, warn_long_work
+from taichi_star.timegrid import (LongWorkWarning, SteadySpeedWarning, steps_in,
+                                  warn_long_work)
 
 from . import provenance
 
@@ -524,6 +525,16 @@ def batch_work_told():
     are the ones to change."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LongWorkWarning)
+        yield
+
+
+@contextlib.contextmanager
+def steady_speeds_unread():
+    """Within it, a `SteadySpeedWarning` says nothing: the study does not read the steady
+    speeds, and its grid of steps holds periods off the grid on purpose (stability's 20 ms
+    against 3.15 s said that "a dt that divides the period" gives them: a review, 2026-12)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SteadySpeedWarning)
         yield
 
 

@@ -218,7 +218,8 @@ def build_parser():
                              "actuator's gain and delay, less component heights at 0; all: "
                              "every differentiable field)")
     parser.add_argument("--sobol", default=str(SOBOL_TABLE), metavar="CSV",
-                        help="the Sobol indices to set beside (default results/sensitivity.csv)")
+                        help="the Sobol indices to set beside (default a checkout's "
+                             "results/sensitivity.csv)")
     parser.add_argument("--check", default=None, metavar="NAME,...",
                         help="also compare these parameters' derivatives with whole-run central "
                              "differences (<prefix>_check.csv; each must be non-zero; all: "

@@ -389,7 +389,8 @@ def build_parser():
                         help=f"L-BFGS-B iterations at most, in [1, {MAX_ITERATIONS}]")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random starts")
     parser.add_argument("--primitives", default=str(DEFAULT_PRIMITIVES),
-                        help="the synchronous gaits' primitives CSV")
+                        help="the synchronous gaits' primitives CSV (default a checkout's "
+                             "results/primitives.csv)")
     parser.add_argument("--sample", type=int, default=0,
                         help=f"random patterns simulated first, one batch, at most {MAX_SAMPLE}")
     parser.add_argument("--sample-starts", type=int, default=None,

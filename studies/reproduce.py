@@ -23,10 +23,17 @@ from .provenance import program
 DESCRIPTION = "Regenerate the main committed results/ with their studies' full runs (hours)."
 
 
-def command(name: str, into: Path):
+def command(name: str, into: Path, made_here=()):
+    """The command line of result `name` written into `into`, after the results `made_here`
+    this run wrote there before it: elasticities reads that run's Sobol table where it made
+    one elsewhere than in the committed results/ (it read the committed one, and outside a
+    checkout, which has none, failed after hours of the others: a review, 2026-12)."""
     flags = REPRODUCED_RESULTS[name]
     study, flags = (flags[0], flags[1:]) if flags and not flags[0].startswith("-") \
         else (name, flags)
+    if study == "elasticities" and "sensitivity" in made_here \
+            and into.resolve() != COMMITTED_RESULTS:
+        flags = [*flags, "--sobol", str(into / "sensitivity.csv")]
     # the package this module runs in: `studies` in the checkout, `taichi_star.studies` once
     # installed (`python -m studies` failed outside the checkout: an audit, 2026-12)
     return [sys.executable, "-m", __package__, study, *flags, "--no-progress", "--out",
@@ -60,8 +67,8 @@ def main(argv=None):
         raise StudyArgumentError("--into: an empty folder name (give a folder, e.g. runs/mine)")
     into = Path(args.into)
     check_future_folder(into, False, "--into")
-    for name in names:
-        line = command(name, into)
+    for number, name in enumerate(names):
+        line = command(name, into, names[:number])
         # as a user types it (the run itself uses this interpreter, `line[0]`)
         print(" ".join(map(shlex.quote, ["python", *line[1:]])), flush=True)
         if not args.dry_run:

@@ -24,14 +24,16 @@ with deferred_interrupt():
     from .runtime import available_archs
     from .driver import RunTiming, fewest_steps
     from .simulation import SimulationResult, simulate
-    from .timegrid import MAX_STEPS_PER_INSTANCE, LongWorkWarning, check_work
+    from .timegrid import (MAX_STEPS_PER_INSTANCE, LongWorkWarning, SteadySpeedWarning,
+                           check_work)
     from .simulator import Simulator, SimulatorSnapshot
 del deferred_interrupt  # the package's namespace is its public API (`__all__`)
 
 __version__ = "0.3.0"
 
 __all__ = ["simulate", "SimulationResult", "RunTiming", "MAX_STEPS_PER_INSTANCE", "check_work",
-           "LongWorkWarning", "fewest_steps", "Simulator", "SimulatorSnapshot", "available_archs",
+           "LongWorkWarning", "SteadySpeedWarning", "fewest_steps", "Simulator",
+           "SimulatorSnapshot", "available_archs",
            "StarParams", "STAR_RANGES", "allowed_values", "changed_fields", "SolverConfig",
            "SOLVER_RANGES", "PRESETS", "JACOBIANS",
            "PER_ACTUATOR_FIELDS", "COMPONENT_HEIGHTS", "DIFFERENTIABLE_FIELDS",

@@ -23,10 +23,10 @@ from .params import (PER_ACTUATOR_FIELDS, SolverConfig, StarParams, check_precis
 from .driver import (Clock, RunTiming, check_run, drive, fewest_steps, robots_label,
                      shows_progress)
 from . import sensitivities as tangents
-from .runtime import (RECORDS_REMEDY, Runtime, check_arch, check_host_memory,
+from .runtime import (RECORDS_REMEDY, Runtime, batch_capacity, check_arch, check_host_memory,
                       one_call_at_a_time, stream_chunk_size)
 from .state import STATUS_NAMES, STATUS_OK
-from .timegrid import multiples_within, whole_steps
+from .timegrid import SteadySpeedWarning, multiples_within, whole_steps
 
 
 @dataclass
@@ -308,7 +308,7 @@ def warn_off_grid_periods(positions: Sequence[int], params: Sequence[StarParams]
                   f"steps (dt = {dt!r} s): their cycles begin between steps, and "
                   f"steady_speed_mm_s and steady_signed_speed_mm_s, taken at cycle starts, are "
                   f"NaN (a dt that divides the period, or adaptive steps, give them)",
-                  kind="off_grid_period")
+                  kind="off_grid_period", category=SteadySpeedWarning)
 
 
 def cycles_cut_short(params: Sequence[StarParams], duration_s: float, solver: SolverConfig,
@@ -344,7 +344,8 @@ def warn_cycles_cut_short(positions: Sequence[int], params: Sequence[StarParams]
                   f"short of {cycle} whole periods of {len(positions)} of {len(params)} "
                   f"instances (the first params[{positions[0]}], period {period!r} s): their "
                   f"steady speeds leave out the last of them (duration_s = "
-                  f"{cycle * period:.12g} s takes it in)", kind="cycle_cut_short")
+                  f"{cycle * period:.12g} s takes it in)", kind="cycle_cut_short",
+                  category=SteadySpeedWarning)
 
 
 @one_call_at_a_time
@@ -401,13 +402,15 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     initialise_s = time.perf_counter() - started
     chunk = max(1, stream_chunk_size(params * per_instance, solver.precision, arch) // per_instance)
     starts = range(0, len(params), chunk)
+    # every chunk in the first's engine (the last, smaller, may fit a smaller one)
+    capacity = batch_capacity(min(chunk, len(params)) * per_instance)
     results = []
     for number, start in enumerate(starts):
         label = robots_label(min(chunk, len(params) - start)) + (
             f", chunk {number + 1}/{len(starts)}" if len(starts) > 1 else "")
         results.append(_simulate_chunk(params[start:start + chunk], duration_s, solver, runtime,
                                        record_interval_s, record_shapes, steady_from_cycle,
-                                       label if progress else None, directions))
+                                       label if progress else None, directions, capacity))
     result = results[0] if len(results) == 1 else _concatenate(results)
     # once for the whole batch, its rows renumbered (each chunk named its own rows)
     warn_about_ok_instances(result.summary, solver)
@@ -455,17 +458,19 @@ def _concatenate(results: Sequence[SimulationResult]) -> SimulationResult:
 
 
 def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, record_shapes,
-                    steady_from_cycle, progress_label, directions=()):
-    """`simulate` of one batch in one engine (arguments validated, Taichi initialised);
-    progress_label: the progress bar's description, None for no bar; `directions`: those of
-    the sensitivities (`sensitivities.parse_directions`). The result's `timing` has every
-    phase but Taichi's initialisation (`simulate` adds it)."""
+                    steady_from_cycle, progress_label, directions=(), least_capacity=0):
+    """`simulate` of one batch in one engine (arguments validated, Taichi initialised) of at
+    least `least_capacity` (`runtime.engine_capacity`); progress_label: the progress bar's
+    description, None for no bar; `directions`: those of the sensitivities
+    (`sensitivities.parse_directions`). The result's `timing` has every phase but Taichi's
+    initialisation (`simulate` adds it)."""
     started = time.perf_counter()
     model, steps = tangents.replica_model(params, directions)
     params = model.params
     clock = Clock(solver, duration_s)
     engine = runtime.engine_for(model, solver, tangents=len(directions),
-                                robot_steps=None if clock.adaptive else len(params) * clock.end)
+                                robot_steps=None if clock.adaptive else len(params) * clock.end,
+                                least_capacity=least_capacity)
     set_up = time.perf_counter()
     engine.compile_stepping(solver.adaptive)
     compiled = time.perf_counter()

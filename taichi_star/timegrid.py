@@ -19,7 +19,7 @@ from .checks import is_finite_real, is_real, is_whole, shown, warn_user
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
 __all__ = ["nearest_interval", "interval_for_count", "whole_steps", "steps_in", "STEP_TOLERANCE",
            "MAX_STEPS_PER_INSTANCE", "REFUSE_ROBOT_STEPS", "refuse_robot_steps", "check_work",
-           "warn_long_work", "LongWorkWarning"]
+           "warn_long_work", "LongWorkWarning", "SteadySpeedWarning"]
 
 STEP_TOLERANCE = 1e-9
 """Relative tolerance within which a time is taken to be a whole number of steps (and a
@@ -267,6 +267,15 @@ class LongWorkWarning(RuntimeWarning):
     category of its own, so that a script that means a long run can silence it alone
     (`warnings.simplefilter("ignore", LongWorkWarning)`) and a caller that told the estimate
     itself (a study, before it builds its instances) need not hear it twice."""
+
+
+class SteadySpeedWarning(RuntimeWarning):
+    """A run's steady speeds (steady_speed_mm_s, steady_signed_speed_mm_s) are NaN or leave out
+    its last cycle because of the time grid: a period off the fixed-step grid, an adaptive run
+    a hair short of whole periods (`simulation.off_grid_periods`, `cycles_cut_short`). A
+    category of its own, so that a caller that does not read them can silence it alone (the
+    stability and work_precision studies, whose grids of steps hold such periods on
+    purpose)."""
 
 
 def warn_long_work(name: str, robot_steps: float):

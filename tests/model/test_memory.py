@@ -268,3 +268,50 @@ def test_engines_are_destroyed_on_the_thread_that_started_taichi_alone(monkeypat
     assert (ts.simulate(middle, 0.004).summary["status"] == "ok").all()
     # on this thread the budget of 0 keeps the engine in use alone
     assert [slot.engine.capacity for slots in current.engines.values() for slot in slots] == [128]
+
+
+def test_a_streamed_batchs_chunks_share_the_first_chunks_engine(monkeypatch):
+    """129 robots in chunks of 65 and 64: the last chunk took an engine of its own (capacity 64
+    beside 128), and with the kept engines bounded each call destroyed and built both again (a
+    review, 2026-12). Every chunk now runs in the first one's engine: one build for two calls,
+    the same bits as one engine."""
+    current = runtime.Runtime.current()
+    monkeypatch.setattr(current, "engines", {})
+    robots = [ts.StarParams(gait=gait, n_arc=6, n_limb=2) for gait in ("A1", "A2", "A1+A3")] * 43
+    whole = ts.simulate(robots, 0.004)
+    probe = build_model(robots[:runtime.MIN_CAPACITY])
+    per_instance = engine_bytes(probe, "f64") / runtime.batch_capacity(probe.batch_size)
+    monkeypatch.setattr(runtime, "CPU_ENGINE_BUDGET_BYTES", 129 * per_instance)
+    monkeypatch.setattr(runtime, "FREE_ENGINES_BYTES", 0)
+    assert runtime.stream_chunk_size(robots, "f64", "cpu") == 65
+    built = []
+    new_engine = current.new_engine
+
+    def counted(*args):
+        built.append(args)
+        return new_engine(*args)
+
+    monkeypatch.setattr(current, "new_engine", counted)
+    for _ in range(2):
+        streamed = ts.simulate(robots, 0.004)
+        pd.testing.assert_frame_equal(streamed.summary, whole.summary, check_exact=True)
+    assert len(built) == 1
+
+
+def test_a_simulators_engine_counts_as_used_until_the_simulator_goes(monkeypatch):
+    """An engine a Simulator held for a while kept the stamp of its lease, and went before the
+    engines of calls made meanwhile (a review, 2026-12): it counts as used when the Simulator
+    goes."""
+    import gc
+
+    current = runtime.Runtime.current()
+    monkeypatch.setattr(current, "engines", {})
+    robot = ts.StarParams(gait="A1", n_arc=6, n_limb=2)
+    held = ts.Simulator([robot])
+    kept = held.engine.arena.nbytes  # capacity 64: half the other's
+    ts.simulate([robot] * 65, 0.004)  # another engine (capacity 128), used after the lease
+    del held
+    gc.collect()
+    # room for the Simulator's alone: the other goes first, as used before it
+    assert current.release_engines(kept) == 1
+    assert [slot.engine.capacity for slots in current.engines.values() for slot in slots] == [64]

@@ -417,3 +417,21 @@ def test_the_notes_are_written_whole_or_not_at_all(monkeypatch, tmp_path, capsys
     assert error.strip().endswith(f"error: --out {tmp_path}: cannot write stability_notes.txt "
                                   f"(File too large); the files written before are intact")
     assert [path.name for path in tmp_path.glob(".stability_notes*")] == []
+
+
+def test_a_grid_with_periods_off_its_steps_runs_without_the_steady_speeds_warning():
+    """stability's grid runs 3.15-s periods at 20-ms steps on purpose, and does not read the
+    steady speeds: their SteadySpeedWarning said "a dt that divides the period" gives them (a
+    review, 2026-12). Within `cli.steady_speeds_unread` it says nothing, and other warnings
+    still do."""
+    import warnings
+
+    robot = StarParams(gait="A1", n_arc=6, n_limb=2, period=0.1635)
+    with pytest.warns(taichi_star.SteadySpeedWarning, match="not a whole number of steps"):
+        taichi_star.simulate([robot], 0.33)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with cli.steady_speeds_unread():
+            taichi_star.simulate([robot], 0.33)
+            warnings.warn("another", RuntimeWarning)
+    assert [str(warning.message) for warning in caught] == ["another"]

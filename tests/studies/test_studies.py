@@ -392,6 +392,22 @@ def test_reproduce_lists_one_command_per_committed_result(capsys):
     assert any(line.startswith("python -m studies fig4c --preset accurate") for line in lines)
 
 
+def test_reproduce_elsewhere_gives_elasticities_the_sobol_table_it_made(capsys, tmp_path):
+    """Into another folder, elasticities read the committed Sobol table, not the one the same
+    run had just made there (and outside a checkout, which has none, failed after hours of the
+    others: a review, 2026-12); without that run's sensitivity, or into results/, the flags
+    are as committed."""
+    into = tmp_path / "into"
+    assert studies_main(["reproduce", "--dry-run", "--into", str(into), "--only",
+                         "sensitivity,elasticities,elasticities_accurate"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert [f"--sobol {into / 'sensitivity.csv'}" in line for line in lines] == [False, True, True]
+    for argv in (["--into", str(into), "--only", "elasticities"],
+                 ["--only", "sensitivity,elasticities"]):
+        assert studies_main(["reproduce", "--dry-run", *argv]) == 0
+        assert "--sobol" not in capsys.readouterr().out
+
+
 SIDECAR_OF = {"calibrate": "calibration"}
 """The committed table of a reproduce entry named otherwise."""
 

@@ -40,8 +40,8 @@ def test_on_grid_tolerance_is_relative_but_at_least_one_step():
 def test_on_grid_tolerance_is_at_most_a_thousandth_of_a_step():
     """Past 10⁶ steps the relative tolerance is capped at MOST_OFF_GRID_STEPS of one step: at
     10⁹ steps it alone took half a step off for a whole number (an audit). Offsets of 2⁻¹⁰
-    and 2⁻⁹ steps are exact in binary beside 10⁹ (its float spacing is 2⁻²³): 2⁻¹⁰ (below
-    10⁻³) is on the grid, 2⁻⁹ (above) is not."""
+    and 2⁻⁹ steps are exact in binary beside 10⁹ (its float spacing is 2⁻²³): 2⁻¹⁰
+    (below 10⁻³) is on the grid, 2⁻⁹ (above) is not."""
     from taichi_star.timegrid import MOST_OFF_GRID_STEPS
 
     assert 2 ** -10 < MOST_OFF_GRID_STEPS < 2 ** -9
