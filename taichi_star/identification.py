@@ -1557,8 +1557,22 @@ def _median_sigma(table: pd.DataFrame) -> float:
 def record_derivatives(trajectory_sensitivities: pd.DataFrame, instance: int,
                        parameters: Sequence[str]) -> np.ndarray:
     """(n_records, 2, P) d x_mm/dθ and d y_mm/dθ of one instance at its records, from
-    `SimulationResult.trajectory_sensitivities` (columns "d(x_mm)/d(<parameter>)")."""
+    `SimulationResult.trajectory_sensitivities` (columns "d(x_mm)/d(<parameter>)", a
+    per-actuator field's by its index, "actuator_gains[1]"). ValueError naming an instance
+    without records or a parameter the run was not differentiated by (a KeyError of a column
+    name, or an empty array for an instance it does not hold, before: an audit, 2026-12)."""
     part = trajectory_sensitivities[trajectory_sensitivities["instance"] == instance]
+    if part.empty:
+        raise ValueError(f"instance {instance!r}: no records of it in trajectory_sensitivities "
+                         f"(its instances: {sorted(set(trajectory_sensitivities['instance']))})")
+    prefix = "d(x_mm)/d("
+    differentiated = [column[len(prefix):-1] for column in part.columns
+                      if column.startswith(prefix)]
+    missing = [name for name in parameters if name not in differentiated]
+    if missing:
+        raise ValueError(f"parameters: {', '.join(map(repr, missing))} not among those the run "
+                         f"was differentiated by ({', '.join(differentiated)}; a per-actuator "
+                         f"field by its index, as actuator_gains[1])")
     return np.stack([np.stack([part[f"d({output})/d({name})"].to_numpy(dtype=np.float64)
                                for name in parameters], axis=-1)
                      for output in ("x_mm", "y_mm")], axis=1)

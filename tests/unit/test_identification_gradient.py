@@ -4,6 +4,7 @@ synthetic paths whose parameter derivatives are known in closed form (no simulat
 sensitivities themselves are tested in tests/model/test_sensitivities.py)."""
 
 import dataclasses
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -245,6 +246,16 @@ def test_record_derivatives_reads_the_sensitivity_columns():
              "d(y_mm)/d(actuator_gains[1])": [13.0, 14.0, 15.0, 16.0]}
     got = ident.record_derivatives(pd.DataFrame(table), 1, ["alpha", "actuator_gains[1]"])
     np.testing.assert_array_equal(got, [[[3.0, 11.0], [7.0, 15.0]], [[4.0, 12.0], [8.0, 16.0]]])
+    # a name the run was not differentiated by, or a whole per-actuator field, was a KeyError
+    # of a column; an instance it does not hold, an empty array (an audit, 2026-12)
+    for names in (["alpha", "drag_perpendicular"], ["actuator_gains"]):
+        with pytest.raises(ValueError, match=rf"^parameters: '{re.escape(names[-1])}' not "
+                                             rf"among those the run was differentiated by "
+                                             rf"\(alpha, actuator_gains\[1\]; "):
+            ident.record_derivatives(pd.DataFrame(table), 1, names)
+    with pytest.raises(ValueError, match=r"^instance 7: no records of it in "
+                                         r"trajectory_sensitivities \(its instances: \[0, 1\]\)"):
+        ident.record_derivatives(pd.DataFrame(table), 7, ["alpha"])
 
 
 def test_trial_residuals_refuse_derivatives_of_the_wrong_shape():
