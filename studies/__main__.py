@@ -22,7 +22,7 @@ try:
         from taichi_star.runtime import MemoryBudgetError
         from taichi_star.extras import missing_extra
 
-        from . import EXTRA_OF_STUDY, study_names
+        from . import EXTRA_OF_STUDY, STEADY_SPEED_STUDIES, study_names
         from . import cli
         from .cli import StudyArgumentError, StudyOutputError, configure_logging, interrupted
         from .provenance import program
@@ -138,7 +138,9 @@ def main(argv=None) -> int:
     cli.OPENED.clear()  # this run's output folders alone (`interrupted`)
     try:
         # the study's import inside: Ctrl-C while it loads its libraries is one line too
-        with sigterm_as_interrupt(), one_line_warnings(name):
+        with sigterm_as_interrupt(), one_line_warnings(name), (
+                contextlib.nullcontext() if name in STEADY_SPEED_STUDIES
+                else cli.steady_speeds_unread()):
             importlib.import_module(f"{__package__}.{name}").main(rest)
     except (StudyArgumentError, StudyOutputError, RunStoreError, MemoryBudgetError) as error:
         # a run too large for memory is refused before any compute, naming the argument

@@ -530,9 +530,9 @@ def batch_work_told():
 
 @contextlib.contextmanager
 def steady_speeds_unread():
-    """Within it, a `SteadySpeedWarning` says nothing: the study does not read the steady
-    speeds, and its grid of steps holds periods off the grid on purpose (stability's 20 ms
-    against 3.15 s said that "a dt that divides the period" gives them: a review, 2026-12)."""
+    """Within it, a `SteadySpeedWarning` says nothing: around a study that does not read the
+    steady speeds (`studies.STEADY_SPEED_STUDIES`; stability's 20-ms steps against 3.15-s
+    periods were told that "a dt that divides the period" gives them: a review, 2026-12)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SteadySpeedWarning)
         yield

@@ -530,7 +530,7 @@ def main(argv=None):
                      solver={precision: {"newton_tol": tolerance} for precision, tolerance
                              in TOLERANCE.items()})
     # the plan told the grid's hours (`plan`): its batches' own estimates would repeat them
-    with cli.executor(args, out) as executor, cli.batch_work_told(), cli.steady_speeds_unread():
+    with cli.executor(args, out) as executor, cli.batch_work_told():
         # every batch has as many instances; cut to about four chunks per worker (--chunk-size's
         # help): a batch was one chunk, one worker busy and the others idle (an audit, 2026-12)
         chunk_size = cli.chunk_size(args, len(batches[0]["params"]), executor.n_workers)

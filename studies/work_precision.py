@@ -585,8 +585,7 @@ def main(argv=None):
     for config in configs:
         if bar is not None:
             bar.set_postfix_str(f"{config.model} {config.label()}")
-        # told by `check_whole_run`: not again for each call
-        with cli.batch_work_told(), cli.steady_speeds_unread():
+        with cli.batch_work_told():  # told by `check_whole_run`: not again for each call
             summary, run_time = run_config(config, gaits, duration, args.arch)
         speeds[config] = summary["signed_speed_mm_s"].to_numpy(dtype=float)
         parts.append(config_rows(config, grid, summary, run_time, duration))

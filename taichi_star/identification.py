@@ -1561,6 +1561,10 @@ def record_derivatives(trajectory_sensitivities: pd.DataFrame, instance: int,
     per-actuator field's by its index, "actuator_gains[1]"). ValueError naming an instance
     without records or a parameter the run was not differentiated by (a KeyError of a column
     name, or an empty array for an instance it does not hold, before: an audit, 2026-12)."""
+    if not isinstance(trajectory_sensitivities, pd.DataFrame):
+        raise ValueError(f"trajectory_sensitivities must be a result's table of them (a run "
+                         f"with sensitivities and records), got "
+                         f"{type(trajectory_sensitivities).__name__}")
     part = trajectory_sensitivities[trajectory_sensitivities["instance"] == instance]
     if part.empty:
         raise ValueError(f"instance {instance!r}: no records of it in trajectory_sensitivities "

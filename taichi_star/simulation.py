@@ -400,17 +400,16 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
     runtime = Runtime.current()
     runtime.ensure(arch, solver.precision)
     initialise_s = time.perf_counter() - started
-    chunk = max(1, stream_chunk_size(params * per_instance, solver.precision, arch) // per_instance)
+    chunk = stream_chunk_size(params, solver.precision, arch, per_instance)
     starts = range(0, len(params), chunk)
-    # every chunk in the first's engine (the last, smaller, may fit a smaller one)
-    capacity = batch_capacity(min(chunk, len(params)) * per_instance)
     results = []
     for number, start in enumerate(starts):
         label = robots_label(min(chunk, len(params) - start)) + (
             f", chunk {number + 1}/{len(starts)}" if len(starts) > 1 else "")
         results.append(_simulate_chunk(params[start:start + chunk], duration_s, solver, runtime,
                                        record_interval_s, record_shapes, steady_from_cycle,
-                                       label if progress else None, directions, capacity))
+                                       label if progress else None, directions,
+                                       chunk * per_instance))
     result = results[0] if len(results) == 1 else _concatenate(results)
     # once for the whole batch, its rows renumbered (each chunk named its own rows)
     warn_about_ok_instances(result.summary, solver)
@@ -458,19 +457,23 @@ def _concatenate(results: Sequence[SimulationResult]) -> SimulationResult:
 
 
 def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, record_shapes,
-                    steady_from_cycle, progress_label, directions=(), least_capacity=0):
-    """`simulate` of one batch in one engine (arguments validated, Taichi initialised) of at
-    least `least_capacity` (`runtime.engine_capacity`); progress_label: the progress bar's
-    description, None for no bar; `directions`: those of the sensitivities
-    (`sensitivities.parse_directions`). The result's `timing` has every phase but Taichi's
-    initialisation (`simulate` adds it)."""
+                    steady_from_cycle, progress_label, directions=(), chunk_instances=0):
+    """`simulate` of one batch in one engine (arguments validated, Taichi initialised):
+    the engine of `chunk_instances` instances (replicas included) where that is more, so that
+    every chunk of a streamed call takes its first chunk's (its capacity and lanes,
+    `runtime.engine_capacity`, `Runtime.engine_lanes`: the last, smaller, took one of its own,
+    and with the kept engines bounded each call destroyed and built both again, a review,
+    2026-12); progress_label: the progress bar's description, None for no bar; `directions`:
+    those of the sensitivities (`sensitivities.parse_directions`). The result's `timing` has
+    every phase but Taichi's initialisation (`simulate` adds it)."""
     started = time.perf_counter()
     model, steps = tangents.replica_model(params, directions)
     params = model.params
     clock = Clock(solver, duration_s)
-    engine = runtime.engine_for(model, solver, tangents=len(directions),
-                                robot_steps=None if clock.adaptive else len(params) * clock.end,
-                                least_capacity=least_capacity)
+    engine_instances = max(len(params), chunk_instances)
+    work = None if clock.adaptive else engine_instances * clock.end
+    engine = runtime.engine_for(model, solver, tangents=len(directions), robot_steps=work,
+                                least_capacity=batch_capacity(engine_instances))
     set_up = time.perf_counter()
     engine.compile_stepping(solver.adaptive)
     compiled = time.perf_counter()

@@ -44,6 +44,20 @@ def test_a_large_batch_is_streamed_in_chunks_that_fit_the_memory(monkeypatch):
     assert len(range(0, 5000, chunk)) == -(-5000 // runtime.batch_capacity(chunk))
 
 
+def test_a_sensitive_batch_is_streamed_in_equal_chunks_of_whole_robots(monkeypatch):
+    """Each robot with one sensitivity is three instances: with room for 128 instances, 100
+    robots ran as 33, 33, 33 and 1 (the instances' chunks rounded down to whole robots: a
+    review, 2026-12); now as three chunks of 34 (102 instances), 33 and 33 alone one fewer."""
+    robots = [ts.StarParams(n_arc=6, n_limb=2)] * 100
+    probe = build_model(robots[:runtime.MIN_CAPACITY])
+    per_instance = engine_bytes(probe, "f64") / runtime.batch_capacity(probe.batch_size)
+    monkeypatch.setattr(runtime, "CPU_ENGINE_BUDGET_BYTES", 128 * per_instance)
+    assert runtime.stream_chunk_size(robots, "f64", "cpu", replicas=3) == 34
+    assert runtime.stream_chunk_size(robots[:84], "f64", "cpu", replicas=3) == 42  # 126
+    assert runtime.stream_chunk_size(robots, "f64", "cpu") == 100  # 100 instances fit
+    assert runtime.stream_chunk_size(robots[:21], "f64", "cpu", replicas=3) == 21  # 63
+
+
 def test_a_machine_without_room_for_the_smallest_engine_refuses_before_compute(monkeypatch):
     """With 1 MiB available even the 64-instance engine (~7 MB) does not fit: a ValueError
     naming the budget, and no engine is cached (a topology no other test builds, so that no
@@ -270,11 +284,14 @@ def test_engines_are_destroyed_on_the_thread_that_started_taichi_alone(monkeypat
     assert [slot.engine.capacity for slots in current.engines.values() for slot in slots] == [128]
 
 
-def test_a_streamed_batchs_chunks_share_the_first_chunks_engine(monkeypatch):
+@pytest.mark.parametrize("with_lanes", [False, pytest.param(True, marks=pytest.mark.slow)])
+def test_a_streamed_batchs_chunks_share_the_first_chunks_engine(monkeypatch, with_lanes):
     """129 robots in chunks of 65 and 64: the last chunk took an engine of its own (capacity 64
     beside 128), and with the kept engines bounded each call destroyed and built both again (a
     review, 2026-12). Every chunk now runs in the first one's engine: one build for two calls,
-    the same bits as one engine."""
+    the same bits as one engine. With lanes where the first chunk's work reaches their minimum
+    and the last's does not, the last took one of its own too (lanes are part of an engine's
+    key: a review; slow tier, the lanes' kernel compiles for ~7 s)."""
     current = runtime.Runtime.current()
     monkeypatch.setattr(current, "engines", {})
     robots = [ts.StarParams(gait=gait, n_arc=6, n_limb=2) for gait in ("A1", "A2", "A1+A3")] * 43
@@ -284,6 +301,9 @@ def test_a_streamed_batchs_chunks_share_the_first_chunks_engine(monkeypatch):
     monkeypatch.setattr(runtime, "CPU_ENGINE_BUDGET_BYTES", 129 * per_instance)
     monkeypatch.setattr(runtime, "FREE_ENGINES_BYTES", 0)
     assert runtime.stream_chunk_size(robots, "f64", "cpu") == 65
+    if with_lanes:
+        steps = 4  # 0.004 s at 1-ms steps
+        monkeypatch.setattr(runtime, "LANES_MINIMUM_WORK", 65 * steps)
     built = []
     new_engine = current.new_engine
 

@@ -419,6 +419,31 @@ def test_the_notes_are_written_whole_or_not_at_all(monkeypatch, tmp_path, capsys
     assert [path.name for path in tmp_path.glob(".stability_notes*")] == []
 
 
+@pytest.mark.parametrize("study, told", [("stability", False), ("sensitivity", False),
+                                         ("sweep", True), ("fig4c", True)])
+def test_the_steady_speeds_warning_is_told_by_the_studies_that_report_them(
+        monkeypatch, study, told):
+    """A study whose tables hold no steady speeds leaves their SteadySpeedWarning unsaid
+    (stability's grid, a varied period, a --dt: "a dt that divides the period" to no purpose,
+    a review, 2026-12); fig4c, gaits and sweep tell it. The study's run is a stand-in that
+    warns, then one other RuntimeWarning, which every study tells."""
+    import importlib
+    import warnings
+
+    module = importlib.import_module(f"studies.{study}")
+
+    def warning_run(argv):
+        warnings.warn("steady speeds NaN", taichi_star.SteadySpeedWarning)
+        warnings.warn("another", RuntimeWarning)
+
+    monkeypatch.setattr(module, "main", warning_run)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert studies_main([study]) == 0
+    said = [str(warning.message) for warning in caught]
+    assert said == (["steady speeds NaN", "another"] if told else ["another"])
+
+
 def test_a_grid_with_periods_off_its_steps_runs_without_the_steady_speeds_warning():
     """stability's grid runs 3.15-s periods at 20-ms steps on purpose, and does not read the
     steady speeds: their SteadySpeedWarning said "a dt that divides the period" gives them (a

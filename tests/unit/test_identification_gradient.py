@@ -256,6 +256,9 @@ def test_record_derivatives_reads_the_sensitivity_columns():
     with pytest.raises(ValueError, match=r"^instance 7: no records of it in "
                                          r"trajectory_sensitivities \(its instances: \[0, 1\]\)"):
         ident.record_derivatives(pd.DataFrame(table), 7, ["alpha"])
+    with pytest.raises(ValueError, match=r"^trajectory_sensitivities must be a result's table of "
+                                         r"them .*, got NoneType$"):
+        ident.record_derivatives(None, 0, ["alpha"])  # a run without sensitivities
 
 
 def test_trial_residuals_refuse_derivatives_of_the_wrong_shape():
