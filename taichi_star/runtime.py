@@ -772,10 +772,10 @@ class Runtime:
                     robot_steps: Optional[int] = None, least_capacity: int = 0) -> EngineSlot:
         """The slot of an engine for this batch (of at least `least_capacity`), run for
         `robot_steps` (None: not known ahead; `engine_lanes`), that no living Simulator holds
-        (one is built if there is none):
-        `simulate` calls and Simulators draw on the same engines, so a Simulator made after a
-        `simulate` of the same topology, terms and integrator (or after another Simulator is
-        gone) compiles nothing."""
+        (one is built if there is none): `simulate` calls and Simulators draw on the same
+        engines, so a Simulator made after a `simulate` of the same topology, terms and
+        integrator (or after another Simulator is gone) compiles nothing. The engines kept
+        stay within FREE_ENGINES_BYTES (`bound_engines`)."""
         lanes = self.engine_lanes(model.batch_size, solver, sensitive, robot_steps)
         key = self.engine_key(model, solver, sensitive, lanes, least_capacity)
         slot = next((slot for slot in self.engines.get(key, []) if not slot.held()), None)

@@ -273,9 +273,9 @@ class SteadySpeedWarning(RuntimeWarning):
     """A run's steady speeds (steady_speed_mm_s, steady_signed_speed_mm_s) are NaN or leave out
     its last cycle because of the time grid: a period off the fixed-step grid, an adaptive run
     a hair short of whole periods (`simulation.off_grid_periods`, `cycles_cut_short`). A
-    category of its own, so that a caller that does not read them can silence it alone (the
-    stability and work_precision studies, whose grids of steps hold such periods on
-    purpose)."""
+    category of its own, so that a caller that does not read them can silence it alone
+    (`warnings.simplefilter("ignore", SteadySpeedWarning)`, as the studies whose tables do not
+    report them do)."""
 
 
 def warn_long_work(name: str, robot_steps: float):
