@@ -33,10 +33,12 @@ checks for it itself."""
 
 
 STEADY_SPEED_STUDIES = ("fig4c", "gaits", "sweep")
-"""The studies whose tables report the steady speeds: a run whose time grid leaves them NaN or
-short of a cycle is told there (`taichi_star.SteadySpeedWarning`); the others do not read them,
-and their grids (stability's steps, a fitted or varied period, a --dt) said "a dt that divides
-the period" gives them to no purpose (a review, 2026-12): the launcher leaves it unsaid."""
+"""The studies that report the steady speeds: a run whose time grid leaves them NaN or short of
+a cycle is told there (`taichi_star.SteadySpeedWarning`). The others do not read them (stability
+keeps them in its table with the whole summary, NaN where its grid leaves them), and their
+grids (stability's steps, a fitted or varied period, a --dt) were told "a dt that divides the
+period" gives them, to no purpose (a review, 2026-12): the launcher leaves it unsaid around
+them (`cli.steady_speeds_unread`; a study's `main` called from Python says it)."""
 
 
 def study_names():

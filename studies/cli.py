@@ -531,8 +531,7 @@ def batch_work_told():
 @contextlib.contextmanager
 def steady_speeds_unread():
     """Within it, a `SteadySpeedWarning` says nothing: around a study that does not read the
-    steady speeds (`studies.STEADY_SPEED_STUDIES`; stability's 20-ms steps against 3.15-s
-    periods were told that "a dt that divides the period" gives them: a review, 2026-12)."""
+    steady speeds (`studies.STEADY_SPEED_STUDIES`)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SteadySpeedWarning)
         yield

@@ -1567,8 +1567,11 @@ def record_derivatives(trajectory_sensitivities: pd.DataFrame, instance: int,
                          f"{type(trajectory_sensitivities).__name__}")
     part = trajectory_sensitivities[trajectory_sensitivities["instance"] == instance]
     if part.empty:
+        instances = trajectory_sensitivities["instance"]
+        held = (f"its instances: {instances.min()}..{instances.max()}" if len(instances)
+                else "it holds no records: a run with record_interval_s > 0 has them")
         raise ValueError(f"instance {instance!r}: no records of it in trajectory_sensitivities "
-                         f"(its instances: {sorted(set(trajectory_sensitivities['instance']))})")
+                         f"({held})")
     prefix = "d(x_mm)/d("
     differentiated = [column[len(prefix):-1] for column in part.columns
                       if column.startswith(prefix)]

@@ -181,11 +181,11 @@ FIXED_BYTES_PER_INSTANCE = 512
 """Per-instance scalars (status, counters, times, actuator schedules), rounded up."""
 
 
-def engine_bytes(model: BatchModel, precision: str, least_capacity: int = 0) -> int:
-    """Memory (bytes) of an engine for this batch (of at least `least_capacity`,
-    `engine_capacity`): its capacity times, per instance, the Newton matrix (2×2 blocks of the
-    elimination pattern), the node vectors, the terms' coefficients and histories, and the
-    fixed scalars."""
+def engine_bytes(model: BatchModel, precision: str, least_batch: int = 0) -> int:
+    """Memory (bytes) of an engine for this batch (built as for at least `least_batch`
+    instances, `engine_capacity`): its capacity times, per instance, the Newton matrix (2×2
+    blocks of the elimination pattern), the node vectors, the terms' coefficients and
+    histories, and the fixed scalars."""
     scalar = 8 if precision == "f64" else 4
     slots = Runtime.current().matrix_slots(model)
     coefficients = sum(values[0].size for table in model.coefficients.values()
@@ -195,15 +195,14 @@ def engine_bytes(model: BatchModel, precision: str, least_capacity: int = 0) -> 
                     for shape in cls.history(model.topology, classes).values())
     per_instance = (scalar * (4 * slots + 2 * STATE_VECTORS_PER_NODE * model.topology.n_nodes
                               + coefficients + histories) + FIXED_BYTES_PER_INSTANCE)
-    return engine_capacity(model.batch_size, least_capacity) * per_instance
+    return engine_capacity(model.batch_size, least_batch) * per_instance
 
 
-def engine_capacity(batch_size: int, least_capacity: int = 0) -> int:
-    """The capacity of an engine for `batch_size` instances: `batch_capacity`, or
-    `least_capacity` where larger (`simulate` streams a batch's chunks through one engine, the
-    first chunk's: the last, smaller, took an engine of its own, and past
-    FREE_ENGINES_BYTES each call destroyed and built both again, a review, 2026-12)."""
-    return max(batch_capacity(batch_size), least_capacity)
+def engine_capacity(batch_size: int, least_batch: int = 0) -> int:
+    """The capacity of an engine for `batch_size` instances, built as for `least_batch` where
+    that is more: `simulate` streams a batch's chunks through its first chunk's engine
+    (`simulation._simulate_chunk`)."""
+    return batch_capacity(max(batch_size, least_batch))
 
 
 def available_memory_bytes() -> Optional[int]:
@@ -218,15 +217,15 @@ def available_memory_bytes() -> Optional[int]:
     return None
 
 
-def check_memory(model: BatchModel, precision: str, arch: str, least_capacity: int = 0):
-    """ValueError, before anything is allocated, when a CPU engine for this batch (of at least
-    `least_capacity`) would take more than MEMORY_SHARE of the available memory (`simulate`
-    streams a large batch in chunks that fit, so this refuses only a machine without room for
-    the smallest engine)."""
+def check_memory(model: BatchModel, precision: str, arch: str, least_batch: int = 0):
+    """ValueError, before anything is allocated, when a CPU engine for this batch (built as for
+    at least `least_batch` instances) would take more than MEMORY_SHARE of the available
+    memory (`simulate` streams a large batch in chunks that fit, so this refuses only a machine
+    without room for the smallest engine)."""
     if arch != "cpu":
         return
     available = available_memory_bytes()
-    needed = engine_bytes(model, precision, least_capacity)
+    needed = engine_bytes(model, precision, least_batch)
     if available is not None and needed > MEMORY_SHARE * available:
         raise ValueError(
             f"params: a batch of {model.batch_size} instances needs about {needed / 2**30:.2f} GiB "
@@ -737,12 +736,13 @@ class Runtime:
         return max(1, -(-PARALLEL_LOOP_MINIMUM // capacity))
 
     def new_engine(self, model: BatchModel, solver: SolverConfig, sensitive: bool = False,
-                   lanes: int = 1, least_capacity: int = 0) -> BatchEngine:
-        """A new engine (its own device state) for this batch (of at least `least_capacity`,
-        `engine_capacity`), `sensitive` if it is to carry tangents, with `lanes` on the CPU
-        (`engine.BatchEngine`). Taichi must be initialised (`ensure`)."""
-        check_memory(model, solver.precision, self.arch, least_capacity)
-        capacity = engine_capacity(model.batch_size, least_capacity)
+                   lanes: int = 1, least_batch: int = 0) -> BatchEngine:
+        """A new engine (its own device state) for this batch (built as for at least
+        `least_batch` instances, `engine_capacity`), `sensitive` if it is to carry tangents,
+        with `lanes` on the CPU (`engine.BatchEngine`). Taichi must be initialised
+        (`ensure`)."""
+        check_memory(model, solver.precision, self.arch, least_batch)
+        capacity = engine_capacity(model.batch_size, least_batch)
         gpu = self.arch != "cpu"
         try:
             return BatchEngine(model, capacity, INTEGRATORS[solver.integrator](),
@@ -760,31 +760,32 @@ class Runtime:
             raise
 
     def engine_key(self, model: BatchModel, solver: SolverConfig, sensitive: bool = False,
-                   lanes: int = 1, least_capacity: int = 0) -> tuple:
+                   lanes: int = 1, least_batch: int = 0) -> tuple:
         """What an engine is compiled for: topology and terms, integrator, capacity
         (`engine_capacity`), whether it carries tangents and, on a GPU, its launch and layout
         settings (on the CPU its `lanes`)."""
         gpu = (self.gpu_block_dim, self.gpu_instance_minor) if self.arch != "cpu" else (lanes,)
         return (model.engine_key, solver.integrator,
-                engine_capacity(model.batch_size, least_capacity), sensitive) + gpu
+                engine_capacity(model.batch_size, least_batch), sensitive) + gpu
 
     def free_engine(self, model: BatchModel, solver: SolverConfig, sensitive: bool = False,
-                    robot_steps: Optional[int] = None, least_capacity: int = 0) -> EngineSlot:
-        """The slot of an engine for this batch (of at least `least_capacity`), run for
-        `robot_steps` (None: not known ahead; `engine_lanes`), that no living Simulator holds
-        (one is built if there is none): `simulate` calls and Simulators draw on the same
-        engines, so a Simulator made after a `simulate` of the same topology, terms and
-        integrator (or after another Simulator is gone) compiles nothing. The engines kept
-        stay within FREE_ENGINES_BYTES (`bound_engines`)."""
-        lanes = self.engine_lanes(model.batch_size, solver, sensitive, robot_steps)
-        key = self.engine_key(model, solver, sensitive, lanes, least_capacity)
+                    robot_steps: Optional[int] = None, least_batch: int = 0) -> EngineSlot:
+        """The slot of an engine for this batch (built as for at least `least_batch` instances:
+        its capacity and lanes), run for `robot_steps` (None: not known ahead; `engine_lanes`),
+        that no living Simulator holds (one is built if there is none): `simulate` calls and
+        Simulators draw on the same engines, so a Simulator made after a `simulate` of the same
+        topology, terms and integrator (or after another Simulator is gone) compiles nothing.
+        The engines kept stay within FREE_ENGINES_BYTES (`bound_engines`)."""
+        lanes = self.engine_lanes(max(model.batch_size, least_batch), solver, sensitive,
+                                  robot_steps)
+        key = self.engine_key(model, solver, sensitive, lanes, least_batch)
         slot = next((slot for slot in self.engines.get(key, []) if not slot.held()), None)
         if slot is None:
             self.build_here()
             # room for it first: the engines kept and it within the budget
-            self.bound_engines(engine_bytes(model, solver.precision, least_capacity))
+            self.bound_engines(engine_bytes(model, solver.precision, least_batch))
             # may refuse: no entry
-            slot = EngineSlot(self.new_engine(model, solver, sensitive, lanes, least_capacity))
+            slot = EngineSlot(self.new_engine(model, solver, sensitive, lanes, least_batch))
             self.engines.setdefault(key, []).append(slot)
         self.uses += 1
         slot.last_use = self.uses
@@ -849,13 +850,13 @@ class Runtime:
         return slot.engine
 
     def engine_for(self, model: BatchModel, solver: SolverConfig, tangents: int = 0,
-                   robot_steps: Optional[int] = None, least_capacity: int = 0) -> BatchEngine:
-        """A free engine for this batch's topology, terms, integrator and capacity (at least
-        `least_capacity`; `free_engine`; `robot_steps`: the call's work, if known), loaded with
-        the batch at rest, its gaits firing every period. With `tangents` > 0 the batch is B
-        instances and their replicas (`BatchEngine.load`) and the engine a sensitive one. It
-        stays free: the next call may load it again."""
-        slot = self.free_engine(model, solver, tangents > 0, robot_steps, least_capacity)
+                   robot_steps: Optional[int] = None, least_batch: int = 0) -> BatchEngine:
+        """A free engine for this batch's topology, terms, integrator and capacity (built as
+        for at least `least_batch` instances; `free_engine`; `robot_steps`: the call's work, if
+        known), loaded with the batch at rest, its gaits firing every period. With `tangents`
+        > 0 the batch is B instances and their replicas (`BatchEngine.load`) and the engine a
+        sensitive one. It stays free: the next call may load it again."""
+        slot = self.free_engine(model, solver, tangents > 0, robot_steps, least_batch)
         slot.holder = None
         slot.engine.load(model, solver, tangents=tangents)
         return slot.engine

@@ -430,6 +430,9 @@ def test_the_steady_speeds_warning_is_told_by_the_studies_that_report_them(
     import importlib
     import warnings
 
+    from studies import STEADY_SPEED_STUDIES, study_names
+
+    assert set(STEADY_SPEED_STUDIES) <= set(study_names())  # a renamed one would go unsaid
     module = importlib.import_module(f"studies.{study}")
 
     def warning_run(argv):

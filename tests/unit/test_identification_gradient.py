@@ -254,8 +254,11 @@ def test_record_derivatives_reads_the_sensitivity_columns():
                                              rf"\(alpha, actuator_gains\[1\]; "):
             ident.record_derivatives(pd.DataFrame(table), 1, names)
     with pytest.raises(ValueError, match=r"^instance 7: no records of it in "
-                                         r"trajectory_sensitivities \(its instances: \[0, 1\]\)"):
+                                         r"trajectory_sensitivities \(its instances: 0\.\.1\)"):
         ident.record_derivatives(pd.DataFrame(table), 7, ["alpha"])
+    with pytest.raises(ValueError, match=r"\(it holds no records: a run with record_interval_s "
+                                         r"> 0 has them\)$"):
+        ident.record_derivatives(pd.DataFrame(table).iloc[:0], 0, ["alpha"])
     with pytest.raises(ValueError, match=r"^trajectory_sensitivities must be a result's table of "
                                          r"them .*, got NoneType$"):
         ident.record_derivatives(None, 0, ["alpha"])  # a run without sensitivities
