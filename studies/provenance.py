@@ -10,6 +10,7 @@ table.
 from __future__ import annotations
 
 import dataclasses
+import os
 import shlex
 import sys
 import time
@@ -50,6 +51,14 @@ def timing_columns(arch: str) -> Dict[str, object]:
     return {**machine_columns(arch), "commit": short_commit()}
 
 
+def shown_argv(argv: Sequence[str]) -> str:
+    """The command-line words as one shell line of valid text: a word the locale could not
+    decode (a non-ASCII path under LANG=C) holds lone surrogates, which no PNG text entry and
+    no strict JSON reader takes (a figure failed with a traceback: an audit, 2026-12), its
+    bytes shown as backslash escapes instead."""
+    return shlex.join(os.fsencode(word).decode("utf-8", "backslashreplace") for word in argv)
+
+
 def program() -> str:
     """How the user called the studies: the installed `taichi-star` command, or `python -m
     studies` in a checkout (`python -m taichi_star.studies` installed): what their usage, their
@@ -66,7 +75,7 @@ def record(study: str, argv: Sequence[str], model: Optional[Mapping] = None,
     any description of the instances); `solver`: a SolverConfig (or a description). A table's
     sidecar adds `elapsed_s`, the wall seconds the study had run when it was written. The
     process's figures are attributed to the study of its latest record (`figure_metadata`)."""
-    command = " ".join([program(), study, *map(shlex.quote, argv)])
+    command = f"{program()} {study} {shown_argv(argv)}".rstrip()
     LATEST_STUDY.update(study=study, command=command)
     return {
         "study": study,
@@ -93,7 +102,7 @@ def figure_metadata() -> Dict[str, str]:
     code = code_version()
     dirty = {True: "true", False: "false"}.get(code["dirty"], "unknown")
     return {"study": LATEST_STUDY.get("study", ""),
-            "command": LATEST_STUDY.get("command", shlex.join(sys.argv)),
+            "command": LATEST_STUDY.get("command", shown_argv(sys.argv)),
             "taichi_star_version": code["version"], "git_commit": code["commit"] or "unknown",
             "git_dirty": dirty,
             **({"git_changes_sha256": code["changes_sha256"]} if "changes_sha256" in code

@@ -6,8 +6,22 @@ ENABLE_TAICHI_HEADER_PRINT is set.
 """
 
 import os
+import sys
 
 os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "false")
+if "HOME" not in os.environ:
+    # Taichi's import aborts the process without it (a core dump: cron, `env -i`, systemd
+    # units; an audit, 2026-12): the user's home from the password database, else a temporary
+    # folder, said in one line
+    import pwd
+    import tempfile
+
+    try:
+        os.environ["HOME"] = pwd.getpwuid(os.getuid()).pw_dir or tempfile.gettempdir()
+    except KeyError:  # a user the password database does not know (a container's uid)
+        os.environ["HOME"] = tempfile.gettempdir()
+    print(f"taichi_star: HOME was not set (Taichi needs it); set to {os.environ['HOME']}",
+          file=sys.stderr)
 
 # the package's modules import taichi, which reads the variable above at its own import.
 # A Ctrl-C meanwhile is raised once they have loaded (`interrupts`: Taichi's import-time code

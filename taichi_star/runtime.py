@@ -48,6 +48,7 @@ import functools
 import gc
 import io
 import os
+import sys
 import threading
 import weakref
 from dataclasses import dataclass
@@ -428,7 +429,14 @@ def _quiet_exit():
     (the engines' kernels and fields keep it alive to the end) and nothing was written, so every
     process compiled every engine again (measured: an empty cache folder after a run)."""
     ti.set_logging_level(ti.ERROR)
-    ti.reset()
+    try:
+        ti.reset()
+    except (RuntimeError, OSError) as error:
+        # an offline cache folder it cannot write (a read-only HOME) gave a traceback at every
+        # exit, the run's results written (an audit, 2026-12): one line
+        print(f"taichi_star: Taichi's offline cache was not written ({error}): the next "
+              f"process compiles its kernels again; TI_OFFLINE_CACHE_FILE_PATH names a writable "
+              f"folder", file=sys.stderr)
 
 
 @dataclass

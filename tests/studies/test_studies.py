@@ -640,6 +640,20 @@ def test_remove_earlier_takes_a_table_and_its_sidecar_and_names_what_it_cannot(t
     assert (tmp_path / "kept.csv").read_text() == "an earlier run's\n"
 
 
+def test_a_command_line_the_locale_could_not_decode_is_recorded_as_valid_text():
+    """Under LANG=C a non-ASCII path reached sys.argv as lone surrogates, which no PNG text
+    entry (a study's figure failed with a traceback) and no strict JSON reader takes (an
+    audit, 2026-12): its bytes are recorded as UTF-8 text, or as escapes where they are none."""
+    import json
+
+    undecoded = "/tmp/r\udcc3\udca9sum\udcc3\udca9"  # b"/tmp/résumé" under LANG=C
+    assert study_provenance.shown_argv(["--out", undecoded]) == "--out '/tmp/résumé'"
+    assert study_provenance.shown_argv(["a\udcff b"]) == "'a\\xff b'"  # not UTF-8: an escape
+    command = study_provenance.record("fig4c", ["--out", undecoded])["command"]
+    assert command == "python -m studies fig4c --out '/tmp/résumé'"
+    json.dumps(command).encode("utf-8")  # no lone surrogate left
+
+
 def test_a_study_figure_names_the_study_command_and_commit_in_its_png(tmp_path):
     """A study's PNG carried nothing of what made it (an audit): its text entries name the
     study and command of the process's run (`provenance.record`), and the code version."""

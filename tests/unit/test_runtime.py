@@ -114,3 +114,38 @@ def test_probing_the_archs_prints_nothing_and_keeps_the_logging_level():
     assert archs_line.startswith("['cpu'")
     assert level_line == "True False"  # "info" as set before the probe, not the probe's ERROR
     assert not [line for line in probe.stderr.splitlines() if line.startswith("[W")]
+
+
+def test_taichi_star_imports_without_home_and_says_what_it_set():
+    """Taichi's import aborted the process when HOME was not set (a core dump under cron,
+    `env -i` or a systemd unit: an audit, 2026-12); the package sets it first, in one line."""
+    import os
+    import subprocess
+    import sys
+
+    environment = {key: value for key, value in os.environ.items() if key != "HOME"}
+    run = subprocess.run([sys.executable, "-c",
+                          "import taichi_star, os; print(os.environ['HOME'])"],
+                         capture_output=True, text=True, env=environment, timeout=120)
+    assert run.returncode == 0, run.stderr[-2000:]
+    home = run.stdout.strip().splitlines()[-1]
+    assert run.stderr.strip().splitlines()[-1] == (f"taichi_star: HOME was not set (Taichi needs "
+                                                   f"it); set to {home}")
+
+
+def test_an_exit_that_cannot_write_the_kernel_cache_says_so_in_one_line():
+    """An offline cache folder Taichi cannot write (a read-only HOME) gave a traceback at every
+    exit, after the run's results were written (an audit, 2026-12): one line, exit code 0."""
+    import subprocess
+    import sys
+
+    code = ("import taichi as ti\nfrom taichi_star import runtime\n"
+            "def refuse():\n    raise RuntimeError('filesystem error: cannot create directories')\n"
+            "ti.reset = refuse\nruntime._quiet_exit()\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.stderr.strip().splitlines()[-1] == (
+        "taichi_star: Taichi's offline cache was not written (filesystem error: cannot create "
+        "directories): the next process compiles its kernels again; TI_OFFLINE_CACHE_FILE_PATH "
+        "names a writable folder")
