@@ -74,6 +74,24 @@ def memory_budget(monkeypatch):
     return cases
 
 
+@pytest.fixture
+def simulated_chunks(monkeypatch):
+    """The robots of each chunk `simulate` runs from now on (`simulation._simulate_chunk`,
+    spied on: the chunk still runs), so that a batch run whole (equal to itself, bitwise)
+    cannot pass for a streamed one."""
+    from taichi_star import simulation
+
+    chunks = []
+    run_chunk = simulation._simulate_chunk
+
+    def spy(params, *args, **kwargs):
+        chunks.append(list(params))
+        return run_chunk(params, *args, **kwargs)
+
+    monkeypatch.setattr(simulation, "_simulate_chunk", spy)
+    return chunks
+
+
 def pytest_addoption(parser):
     parser.addoption("--arch", default="cpu",
                      help="Taichi arch for the engine tests that take the `arch` fixture "

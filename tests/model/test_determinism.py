@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 
 import taichi_star as ts
-from taichi_star import runtime, simulation
+from taichi_star import runtime
 from taichi_star.runtime import prepare_engine
 
 PARAMS = [ts.StarParams(gait="A1+A2", alpha=0.5), ts.StarParams(gait="A1+A3+A5"),
@@ -78,7 +78,7 @@ def test_an_instance_keeps_its_bits_beside_any_options_of_another():
     pd.testing.assert_frame_equal(beside, alone, check_exact=True)
 
 
-def test_a_batch_streamed_in_chunks_equals_one_engine_bitwise(monkeypatch):
+def test_a_batch_streamed_in_chunks_equals_one_engine_bitwise(monkeypatch, simulated_chunks):
     """A batch over the CPU engine budget runs as equal chunks through one engine: with a budget
     of one byte the 100 instances run as two chunks of 50 (the smallest engine holds 64), the
     second one alone compiling the damping term in; summary, trajectory (instances numbered in
@@ -89,19 +89,11 @@ def test_a_batch_streamed_in_chunks_equals_one_engine_bitwise(monkeypatch):
     whole = run()
     monkeypatch.setattr(runtime, "CPU_ENGINE_BUDGET_BYTES", 1)
     assert runtime.stream_chunk_size(PADDED, "f64", "cpu") == 50
-    # `simulate` runs each chunk through `_simulate_chunk`: spied on, so that a batch run whole
-    # (equal to itself, bitwise) cannot pass for a streamed one
-    chunks = []
-    chunk = simulation._simulate_chunk
-
-    def spy(params, *args, **kwargs):
-        chunks.append(list(params))
-        return chunk(params, *args, **kwargs)
-
-    monkeypatch.setattr(simulation, "_simulate_chunk", spy)
+    simulated_chunks.clear()  # the whole run's
     streamed = run()
-    assert chunks == [PADDED[:50], PADDED[50:]]
-    assert [[p.damping_time > 0 for p in params].count(True) for params in chunks] == [0, 1]
+    assert simulated_chunks == [PADDED[:50], PADDED[50:]]
+    assert [[p.damping_time > 0 for p in params].count(True)
+            for params in simulated_chunks] == [0, 1]
     pd.testing.assert_frame_equal(streamed.summary, whole.summary, check_exact=True)
     pd.testing.assert_frame_equal(streamed.trajectory, whole.trajectory, check_exact=True)
     np.testing.assert_array_equal(streamed.shapes, whole.shapes)

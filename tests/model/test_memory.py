@@ -337,7 +337,8 @@ def test_a_simulators_engine_counts_as_used_until_the_simulator_goes(monkeypatch
     assert [slot.engine.capacity for slots in current.engines.values() for slot in slots] == [64]
 
 
-def test_a_streamed_batch_is_cut_into_parts_as_equal_as_whole_robots_allow(monkeypatch):
+def test_a_streamed_batch_is_cut_into_parts_as_equal_as_whole_robots_allow(monkeypatch,
+                                                                           simulated_chunks):
     """Chunks taken in steps of the chunk size left the rest to a last sliver (421 robots as 20
     chunks of 21 and one: a review, 2026-12): 43 robots at most 21 to a chunk run as 14, 14 and
     15, in one engine, the same bits as one call."""
@@ -347,14 +348,7 @@ def test_a_streamed_batch_is_cut_into_parts_as_equal_as_whole_robots_allow(monke
     robots.append(ts.StarParams(gait="A3", n_arc=6, n_limb=2))
     whole = ts.simulate(robots, 0.002)
     monkeypatch.setattr(simulation, "stream_chunk_size", lambda *args: 21)
-    parts = []
-    chunk = simulation._simulate_chunk
-
-    def spy(params, *args, **kwargs):
-        parts.append(len(params))
-        return chunk(params, *args, **kwargs)
-
-    monkeypatch.setattr(simulation, "_simulate_chunk", spy)
+    simulated_chunks.clear()  # the whole run's
     streamed = ts.simulate(robots, 0.002)
-    assert parts == [14, 14, 15]
+    assert [len(chunk) for chunk in simulated_chunks] == [14, 14, 15]
     pd.testing.assert_frame_equal(streamed.summary, whole.summary, check_exact=True)
