@@ -1,6 +1,7 @@
 """The memory guard: an engine's size is known before it is allocated, and a batch too large for
 the machine is refused with the way to run it (chunks) instead of exhausting memory."""
 
+import gc
 import warnings
 
 import pandas as pd
@@ -218,15 +219,17 @@ def test_engines_past_the_budget_are_destroyed_least_recently_used_first(monkeyp
     """Every engine a process built was kept: calls of 1,000, 2,000 and 3,000 robots kept
     their fields, 1.1 GB (an audit). Past FREE_ENGINES_BYTES the least recently used engines
     that no Simulator holds are destroyed, the one a call uses kept; a batch whose engine went
-    is built again, with the same bits; `release_engines` gives back all but those held.
-    Three capacities of one coarse robot (64, 128, 256: fields about 1 : 2 : 4) in a cache of
-    their own, with room for the two largest."""
+    is built again, with the same bits; `release_engines` gives back all but those held. A
+    Simulator's engine counts as used when the Simulator goes (it kept its lease's stamp, and
+    went before the engines of calls made meanwhile: a review, 2026-12). Three capacities of
+    one coarse robot (64, 128, 256: fields about 1 : 2 : 4) in a cache of their own, with room
+    for the two largest."""
     current = runtime.Runtime.current()
     monkeypatch.setattr(current, "engines", {})
     robot = ts.StarParams(gait="A1", n_arc=6, n_limb=2)
     small, middle, large = ([robot] * count for count in (1, 65, 129))
-    first = ts.simulate(small, 0.01)
-    ts.simulate(middle, 0.01)
+    first = ts.simulate(small, 0.002)
+    ts.simulate(middle, 0.002)
     sizes = {len(batch): engine_bytes(build_model(batch), "f64") for batch in (small, large)}
     (middle_slot,) = (slot for slots in current.engines.values() for slot in slots
                       if slot.engine.capacity == 128)
@@ -238,15 +241,21 @@ def test_engines_past_the_budget_are_destroyed_least_recently_used_first(monkeyp
                       for slot in slots)
 
     assert capacities() == [64, 128]
-    ts.simulate(large, 0.01)
+    ts.simulate(large, 0.002)
     assert capacities() == [128, 256]  # the 64's, least recently used, went
-    again = ts.simulate(small, 0.01)   # built again: the 128's goes
+    again = ts.simulate(small, 0.002)  # built again: the 128's goes
     assert capacities() == [64, 256]
     pd.testing.assert_frame_equal(again.summary, first.summary, check_exact=True)
     held = ts.Simulator(small)
     assert current.release_engines() == 1 and capacities() == [64]  # the Simulator's
     held.advance(0.002)
     assert held.ok.all()
+    kept = held.engine.arena.nbytes  # capacity 64: half the 128's
+    ts.simulate(middle, 0.002)  # used after the lease
+    del held
+    gc.collect()
+    # room for the Simulator's engine alone: the other goes first, as used before it went
+    assert current.release_engines(kept) == 1 and capacities() == [64]
 
 
 def test_engines_are_destroyed_on_the_thread_that_started_taichi_alone(monkeypatch):
@@ -317,24 +326,6 @@ def test_a_streamed_batchs_chunks_share_the_first_chunks_engine(monkeypatch, wit
         pd.testing.assert_frame_equal(streamed.summary, whole.summary, check_exact=True)
     assert len(built) == 1
 
-
-def test_a_simulators_engine_counts_as_used_until_the_simulator_goes(monkeypatch):
-    """An engine a Simulator held for a while kept the stamp of its lease, and went before the
-    engines of calls made meanwhile (a review, 2026-12): it counts as used when the Simulator
-    goes."""
-    import gc
-
-    current = runtime.Runtime.current()
-    monkeypatch.setattr(current, "engines", {})
-    robot = ts.StarParams(gait="A1", n_arc=6, n_limb=2)
-    held = ts.Simulator([robot])
-    kept = held.engine.arena.nbytes  # capacity 64: half the other's
-    ts.simulate([robot] * 65, 0.004)  # another engine (capacity 128), used after the lease
-    del held
-    gc.collect()
-    # room for the Simulator's alone: the other goes first, as used before it
-    assert current.release_engines(kept) == 1
-    assert [slot.engine.capacity for slots in current.engines.values() for slot in slots] == [64]
 
 
 def test_a_streamed_batch_is_cut_into_parts_as_equal_as_whole_robots_allow(monkeypatch,
