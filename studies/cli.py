@@ -1053,7 +1053,7 @@ class Output:
         check_folder_name(self.folder, args.quick, "--out")
         check_committed_folder(self.folder, study, argv,
                                getattr(args, "replace_committed", False))
-        check_output_folder(self.folder, args.quick)
+        check_output_folder(self.folder, args.quick, "--out" if args.out is not None else None)
         self.provenance = provenance.record(study, list(argv), model=model, solver=solver,
                                             extra=extra)
         self.written: List[Path] = []
@@ -1240,19 +1240,23 @@ def check_future_folder(folder: Path, quick: bool, flag: str):
                                  f"({error.strerror})") from None
 
 
-def check_output_folder(folder: Path, quick: bool):
-    """Create the output folder or fail with a StudyArgumentError naming --out: not a folder,
-    cannot be created, not writable; --quick into the committed results/ or any folder in it."""
+def check_output_folder(folder: Path, quick: bool, flag: Optional[str] = "--out"):
+    """Create the output folder or fail with a StudyArgumentError naming `flag` (--out; None
+    for the default folder, named as such, under the current folder: it was named as an --out
+    the user had not given, an audit, 2026-12): not a folder, cannot be created, not writable;
+    --quick into the committed results/ or any folder in it."""
     check_folder_name(folder, quick, "--out")
+    named = (f"{flag} {folder}" if flag else
+             f"the default output folder {folder} (under {Path.cwd()}; --out DIR names another)")
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as error:
-        raise StudyArgumentError(f"--out {folder}: cannot create it ({error.strerror})") from None
+        raise StudyArgumentError(f"{named}: cannot create it ({error.strerror})") from None
     try:
         with tempfile.TemporaryFile(dir=folder):
             pass
     except OSError as error:
-        raise StudyArgumentError(f"--out {folder}: not writable ({error.strerror})") from None
+        raise StudyArgumentError(f"{named}: not writable ({error.strerror})") from None
 
 
 def use_agg():

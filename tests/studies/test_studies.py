@@ -6,6 +6,7 @@ packaged experiment data."""
 import hashlib
 import json
 import os
+import re
 import shlex
 import time
 from pathlib import Path
@@ -281,6 +282,19 @@ def test_bad_output_folder_fails_before_compute(no_compute, tmp_path, capsys, ta
     error = capsys.readouterr().err
     assert f"--out {out}: {message}" in error and len(error.strip().splitlines()) == 1
     assert (tmp_path / "a_file").read_text() == "mine"
+
+
+def test_a_default_output_folder_that_cannot_be_made_is_named_as_the_default(no_compute,
+                                                                            capsys, monkeypatch):
+    """Run from a folder where runs/ cannot be made (a read-only checkout), the refusal named
+    `--out`, which the user had not given (an audit, 2026-12): it names the default folder,
+    where it is, and --out."""
+    monkeypatch.chdir("/proc")
+    assert studies_main(["fig4c", *QUICK]) == 2
+    error = capsys.readouterr().err.strip()
+    assert re.search(r"error: the default output folder runs/fig4c/\S+ \(under /proc; --out DIR "
+                     r"names another\): cannot create it \(", error), error
+    assert len(error.splitlines()) == 1
 
 
 def test_an_unwritable_output_folder_fails_before_compute(no_compute, tmp_path, capsys,
