@@ -280,18 +280,23 @@ def validate_call(params, duration_s, solver, record_interval_s, record_shapes, 
     return params, duration_s, record_interval_s
 
 
+def cycle_starts_taken(period: float, solver: SolverConfig) -> bool:
+    """Whether a run takes the centroid at each cycle start of `period` (s), where the steady
+    speeds are measured: adaptive steps stop there, fixed ones where the period is a whole
+    number of steps."""
+    return solver.adaptive or whole_steps(period, solver.dt) is not None
+
+
 def off_grid_periods(params: Sequence[StarParams], duration_s: float, solver: SolverConfig,
                      steady_from_cycle: int) -> List[int]:
     """The positions in `params` whose steady speeds a fixed-step run of duration_s (s) leaves
     NaN only because the period is not a whole number of steps of dt: their cycles begin
     between steps (each fired at its exact time), where no centroid is taken, though the run
     holds a whole cycle after cycle `steady_from_cycle`. Empty with adaptive steps, which stop
-    at every cycle start."""
-    if solver.adaptive:
-        return []
+    at every cycle start (`cycle_starts_taken`)."""
     simulated = Clock(solver, duration_s).simulated_s
     # once per period: a batch has few (per instance it took 0.6 s for 100,000 robots)
-    left_nan = {period: whole_steps(period, solver.dt) is None
+    left_nan = {period: not cycle_starts_taken(period, solver)
                 and multiples_within(simulated, period) > steady_from_cycle
                 for period in {p.period for p in params}}
     return [position for position, p in enumerate(params) if left_nan[p.period]]
@@ -487,9 +492,8 @@ def _simulate_chunk(params, duration_s, solver, runtime, record_interval_s, reco
     stops_of_period = {}  # a batch has few periods
     for b, p in enumerate(params):
         if p.period not in stops_of_period:
-            stops_of_period[p.period] = (
-                clock.stops_every(p.period)
-                if clock.adaptive or whole_steps(p.period, solver.dt) is not None else None)
+            stops_of_period[p.period] = (clock.stops_every(p.period)
+                                         if cycle_starts_taken(p.period, solver) else None)
         boundary_stops = stops_of_period[p.period]
         if boundary_stops is not None:
             n_boundaries = max(n_boundaries, len(boundary_stops))
