@@ -13,6 +13,7 @@ import json
 import math
 import os
 import platform
+import re
 import subprocess
 import threading
 from pathlib import Path
@@ -59,6 +60,31 @@ def _untracked_package_files(root: Path) -> Optional[List[str]]:
                                         if name]
 
 
+COMMIT_ID = re.compile(r"[0-9a-f]{40}|[0-9a-f]{64}")
+"""A git object name: SHA-1 (40 hex digits) or SHA-256 (64)."""
+
+
+def _installed_commit(root: Path) -> Optional[str]:
+    """The git commit pip recorded for the distribution installed beside the package in `root`
+    (its dist-info's direct_url.json, PEP 610: `vcs_info.commit_id` of an install from a git
+    URL, `pip install git+https://...@REF`), None where there is none (a wheel, a folder, a
+    damaged record). That install is exactly the commit's tree, as far as pip knows."""
+    for distribution in importlib.metadata.distributions(path=[str(root)]):
+        name = (distribution.metadata["Name"] or "").lower().replace("-", "_")
+        if name != "taichi_star":
+            continue
+        try:
+            record = json.loads(distribution.read_text("direct_url.json") or "{}")
+        except (OSError, ValueError):
+            return None
+        vcs = record.get("vcs_info") if isinstance(record, dict) else None
+        if not isinstance(vcs, dict) or vcs.get("vcs") != "git":
+            return None
+        commit = vcs.get("commit_id")
+        return commit if isinstance(commit, str) and COMMIT_ID.fullmatch(commit) else None
+    return None
+
+
 def code_version() -> Dict[str, object]:
     """{"version": the package version, "commit": git HEAD of the package's own checkout or
     None, "dirty": whether its tracked files differ from that commit or untracked files lie in
@@ -66,13 +92,15 @@ def code_version() -> Dict[str, object]:
     SHA-256 of those differences (`git diff HEAD`, then each untracked file's path and
     content), so that two edits of one commit are two versions (a run resumed after another
     edit of a dirty checkout mixed the two codes' chunks without the warning a version change
-    gives; an audit). The commit is None where the folder above the package is not the top
-    of a checkout tracking it: a package installed inside another repository records that
-    repository's nothing, only its own version."""
+    gives; an audit). Outside its own checkout the commit is the one pip recorded where the
+    package was installed from a git URL, and clean (`_installed_commit`); otherwise None: a
+    package installed inside another repository records that repository's nothing, a wheel
+    only its own version."""
     from . import __version__
     root = Path(__file__).resolve().parents[1]
     commit = dirty = changes = None
-    head = _git(root, "rev-parse", "HEAD") if _source_checkout(root) else None
+    in_checkout = _source_checkout(root)
+    head = _git(root, "rev-parse", "HEAD") if in_checkout else None
     if head and head.strip():
         commit = head.decode().strip()
         status = _git(root, "status", "--porcelain", "--untracked-files=no")
@@ -90,6 +118,9 @@ def code_version() -> Dict[str, object]:
                         content = b""
                     digest.update(b"\0untracked\0" + name.encode() + b"\0" + content)
                 changes = digest.hexdigest()
+    elif not in_checkout:
+        commit = _installed_commit(root)
+        dirty = False if commit else None
     version = {"version": __version__, "commit": commit, "dirty": dirty}
     return version if changes is None else {**version, "changes_sha256": changes}
 

@@ -706,6 +706,46 @@ def test_a_package_inside_another_repository_records_no_commit(tmp_path, monkeyp
     assert provenance.code_version()["commit"] == git(other, "rev-parse", "HEAD")
 
 
+@pytest.mark.parametrize("record, commit", [
+    ({"url": "https://example.invalid/taichi_star.git",
+      "vcs_info": {"vcs": "git", "commit_id": "0123456789abcdef" * 2 + "01234567"}},
+     "0123456789abcdef" * 2 + "01234567"),
+    ({"url": "https://example.invalid/taichi_star",
+      "vcs_info": {"vcs": "hg", "commit_id": "0123456789ab"}}, None),
+    ({"url": "file:///home/someone/taichi_star", "dir_info": {}}, None),
+    ({"url": "https://example.invalid/x.git", "vcs_info": {"vcs": "git", "commit_id": "main"}},
+     None),
+    ("not json {", None),
+    (None, None),
+])
+def test_a_package_installed_from_a_git_url_records_the_commit_pip_recorded(
+        tmp_path, monkeypatch, record, commit):
+    """Outside a checkout no commit was recorded, even for `pip install git+URL@REF`, whose
+    dist-info names the commit it installed (direct_url.json, PEP 610): now that commit, clean.
+    Another version control, a folder's install, a branch name where a hash should be, a
+    damaged record or none: no commit, as before. A dist-info beside the package, no pip."""
+    site = tmp_path / "site-packages"
+    module = site / "taichi_star" / "provenance.py"
+    module.parent.mkdir(parents=True)
+    module.write_text("# the module\n")
+    (site / "taichi_star-0.1.dist-info").mkdir()
+    (site / "taichi_star-0.1.dist-info" / "METADATA").write_text(
+        "Metadata-Version: 2.1\nName: taichi-star\nVersion: 0.1\n")
+    if record is not None:
+        (site / "taichi_star-0.1.dist-info" / "direct_url.json").write_text(
+            record if isinstance(record, str) else json.dumps(record))
+    # another distribution's record beside it is not this package's
+    (site / "other-1.0.dist-info").mkdir()
+    (site / "other-1.0.dist-info" / "METADATA").write_text(
+        "Metadata-Version: 2.1\nName: other\nVersion: 1.0\n")
+    (site / "other-1.0.dist-info" / "direct_url.json").write_text(json.dumps(
+        {"url": "https://example.invalid/other.git",
+         "vcs_info": {"vcs": "git", "commit_id": "f" * 40}}))
+    monkeypatch.setattr(provenance, "__file__", str(module))
+    assert provenance.code_version() == {"version": ts.__version__, "commit": commit,
+                                        "dirty": False if commit else None}
+
+
 def test_code_version_with_a_damaged_git_index_names_the_commit_but_not_dirtiness(checkout):
     git(checkout, "add", "-A")
     git(checkout, "commit", "-q", "-m", "first")
