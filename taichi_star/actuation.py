@@ -30,7 +30,8 @@ NEVER = -1.0
 """fire_time of an actuator that has not fired; the due time of no firing."""
 SWITCH_SNAP = 1e-12
 """A time since firing τ within this share of max(|t|, 1 s) of the profile's switch t0 (t the
-time, s) is t0, on the cooling branch (Eq. 5: τ ≥ t0). Fixed steps end exactly on t0 after a
+time, s) is t0, on the cooling branch (our convention: Eq. 5 is written for τ < t0 and τ > t0,
+and leaves t0 open). Fixed steps end exactly on t0 after a
 firing on the step grid, but τ, a difference of two step ends (or the time modulo the period),
 rounds to either side of it, so the branch read there depended on the rounding: the engine
 read heating at 8 of the paper robot's first 20 cycles and the NumPy reference at 6, not the

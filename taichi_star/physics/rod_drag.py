@@ -1,4 +1,4 @@
-"""Quadratic drag on every rod edge (paper Eq. 1), spokes excepted (they are inside the hub).
+"""Quadratic drag on every rod edge (paper Eq. 1), spokes excepted (a choice: docs/model.md).
 
 Per edge, on the mean of its two nodes' implicit velocities v, with t its unit tangent:
 F = −½·ρ_f·Δl̄·(C∥|v∥|v∥ + C⊥|v⊥|v⊥), half to each node. The paper writes the drag per node; a
