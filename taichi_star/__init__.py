@@ -2,13 +2,18 @@
 
 Importing the package initialises nothing (no `ti.init`: `simulate` and `Simulator` initialise
 Taichi themselves) and prints nothing: it asks Taichi not to print its version banner unless
-ENABLE_TAICHI_HEADER_PRINT is set.
+ENABLE_TAICHI_HEADER_PRINT is set, nor to take over a notebook's output unless
+TI_ENABLE_PYBUF is.
 """
 
 import os
 import sys
 
 os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "false")
+# where sys.stdout is not the process's (a notebook, IDLE, captured output) Taichi logs
+# "Graphical python shell detected" at its import and flushes its kernels' print buffer after
+# every kernel call; no kernel here prints (an audit, 2026-12)
+os.environ.setdefault("TI_ENABLE_PYBUF", "0")
 if "HOME" not in os.environ:
     # Taichi's import aborts the process without it (a core dump: cron, `env -i`, systemd
     # units; an audit, 2026-12): the user's home from the password database, else a temporary

@@ -272,29 +272,33 @@ def drive(engine, clock: Clock, stops: Sequence, at_stop: Callable, batch: int,
     at_stop(stop) may read only the instances whose stop it is.
     progress_label: the description of a progress bar in simulated seconds, None for no
     bar."""
-    bar = progress_bar(clock, progress_label) if progress_label is not None else None
     if clock.adaptive and start_times is None:
         start_times = np.zeros(batch)
     next_own = None
     if clock.adaptive and stop_groups is not None:
         next_own = NextOwnStops(stops, *stop_groups)
     previous = 0
-    for index, stop in enumerate(stops):
-        if stop != previous:
-            if clock.adaptive:
-                engine.advance_adaptive_to(
-                    start_times + (stop if next_own is None else next_own.at(index)), batch)
-                if bar is not None:
-                    bar.update(clock.ticks(stop) - clock.ticks(previous))
-            else:
-                step = previous
-                while step < stop:
-                    count = min(STEPS_PER_LAUNCH, stop - step)
-                    engine.advance(count)
-                    step += count
+    bar = progress_bar(clock, progress_label) if progress_label is not None else None
+    try:
+        for index, stop in enumerate(stops):
+            if stop != previous:
+                if clock.adaptive:
+                    engine.advance_adaptive_to(
+                        start_times + (stop if next_own is None else next_own.at(index)), batch)
                     if bar is not None:
-                        bar.update(count)
-        at_stop(stop)
-        previous = stop
-    if bar is not None:
-        bar.close()
+                        bar.update(clock.ticks(stop) - clock.ticks(previous))
+                else:
+                    step = previous
+                    while step < stop:
+                        count = min(STEPS_PER_LAUNCH, stop - step)
+                        engine.advance(count)
+                        step += count
+                        if bar is not None:
+                            bar.update(count)
+            at_stop(stop)
+            previous = stop
+    finally:
+        # also on an interrupt or an error: a notebook's interrupted bar stayed open, and the
+        # next one was drawn below it, a line per update (an audit, 2026-12)
+        if bar is not None:
+            bar.close()

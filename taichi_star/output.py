@@ -614,9 +614,11 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
     matplotlib = require("matplotlib", "video")
     require("PIL", "video")
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    # a figure of its own on an Agg canvas, outside pyplot: `matplotlib.use("Agg")` switched a
+    # notebook's backend, and its later figures no longer showed (an audit, 2026-12)
     from matplotlib import animation
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
     path = file_path(path, "path of the .mp4 or .gif file")
     require_folder(path)
@@ -663,8 +665,9 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
     columns = int(np.ceil(np.sqrt(len(chosen))))
     rows = int(np.ceil(len(chosen) / columns))
     inches = size_px / 100
-    fig, axes = plt.subplots(rows, columns, figsize=(inches, inches * rows / columns), dpi=100,
-                             squeeze=False)
+    fig = Figure(figsize=(inches, inches * rows / columns), dpi=100)
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(rows, columns, squeeze=False)
     label = fig.suptitle("")
     heading = f"{title}\n" if title else ""
 
@@ -723,10 +726,7 @@ def animate(result, path, instances: Optional[Sequence[int]] = None, frame: str 
     # a full disk leaves a movie already there as it was (ffmpeg reports a full disk by its
     # exit status)
     with _scratch_file(path, (OSError, subprocess.CalledProcessError)) as scratch:
-        try:
-            movie.save(scratch, writer=writer)
-        finally:
-            plt.close(fig)
+        movie.save(scratch, writer=writer)
         data = scratch.read_bytes()
     write_atomic(path, data, failure=OSError, sidecar=_stale_csv_sidecar(path))
     return path

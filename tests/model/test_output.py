@@ -3,8 +3,8 @@
 
 import dataclasses
 import json
+import os
 import re
-
 import subprocess
 import sys
 
@@ -422,6 +422,26 @@ def test_animation_colours_the_heating_actuators_and_draws_the_path(recorded, tm
     assert (blue > 120).sum() > 0  # tab:blue path (lightsteelblue cylinder: difference < 80)
 
 
+def test_an_animation_leaves_the_plotting_backend_and_pyplots_figures_alone(recorded, tmp_path):
+    """animate switched matplotlib to Agg (`matplotlib.use`), also where it then refused the
+    call: in a notebook every later figure stopped showing (an audit, 2026-12). It draws on
+    a figure of its own, outside pyplot."""
+    import matplotlib
+    import matplotlib.pyplot as plt
+
+    before = matplotlib.get_backend()
+    matplotlib.use("svg")  # not Agg, as a notebook's inline backend is not
+    try:
+        figures = plt.get_fignums()
+        recorded.animate(tmp_path / "movie.gif", instances=[0], size_px=100)
+        with pytest.raises(ValueError, match="must end in .mp4 or .gif"):
+            recorded.animate(tmp_path / "movie.avi")
+        assert matplotlib.get_backend() == "svg"
+        assert plt.get_fignums() == figures
+    finally:
+        matplotlib.use(before)
+
+
 def test_a_movie_is_written_whole_or_leaves_the_previous_one(recorded, tmp_path, full_disk):
     """Drawing a movie over an earlier one fails at the disk (fsync reports it full): the earlier
     file is byte for byte as it was and nothing else is left in its folder."""
@@ -471,6 +491,18 @@ def test_import_prints_nothing():
     out = subprocess.run([sys.executable, "-c", "import taichi_star"], capture_output=True,
                          text=True, check=True)
     assert out.stdout == "" and "[Taichi]" not in out.stderr
+
+
+def test_import_prints_nothing_where_the_output_is_a_notebooks():
+    """Where sys.stdout is not the process's (a notebook's kernel), Taichi's import logged
+    "Graphical python shell detected, using wrapped sys.stdout" in every new kernel's first
+    cell (an audit, 2026-12); the package asks Taichi not to take over such an output."""
+    environment = {key: value for key, value in os.environ.items()
+                   if key != "TI_ENABLE_PYBUF"}
+    code = "import io, sys; sys.stdout = io.StringIO(); import taichi_star"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, env=environment)
+    assert out.stderr == ""
 
 
 def test_the_documented_result_columns_are_the_summary_columns_with_their_units(recorded):

@@ -45,6 +45,39 @@ def test_the_bar_ends_on_its_total_without_a_warning(capsys, adaptive, duration_
         assert engine.steps == 210
 
 
+class InterruptedEngine(CountingEngine):
+    """Raises KeyboardInterrupt at its second launch, as a notebook's "interrupt kernel" does
+    in the middle of a run."""
+
+    def advance(self, count):
+        if self.steps:
+            raise KeyboardInterrupt
+        super().advance(count)
+
+    def advance_adaptive_to(self, targets, batch):
+        if self.targets:
+            raise KeyboardInterrupt
+        super().advance_adaptive_to(targets, batch)
+
+
+@pytest.mark.parametrize("adaptive", [False, True])
+def test_an_interrupted_runs_bar_is_closed(capsys, adaptive):
+    """The bar was closed only after the last stop: an interrupted run's stayed open, and in a
+    notebook the next run's bar was drawn below it, a line per update (an audit, 2026-12)."""
+    from tqdm import tqdm
+
+    clock = Clock(SolverConfig(adaptive=adaptive), 0.3)
+    stops = clock.stops_every(0.1) if adaptive else [0, clock.end]  # 300 steps: 6 launches
+    open_before = len(tqdm._instances)
+    # the traceback kept, as IPython keeps the last one (its frames hold the bar)
+    with pytest.raises(KeyboardInterrupt) as interrupt:
+        drive(InterruptedEngine(), clock, stops, lambda stop: None, batch=1,
+              progress_label=robots_label(1))
+    assert interrupt.traceback and len(tqdm._instances) == open_before
+    # the first launch was counted before the interrupt
+    assert "1 robot:" in capsys.readouterr().err
+
+
 def test_robots_label_counts_one_robot_in_the_singular():
     assert [robots_label(n) for n in (1, 2, 64)] == ["1 robot", "2 robots", "64 robots"]
 
