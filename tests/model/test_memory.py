@@ -57,6 +57,24 @@ def test_a_sensitive_batch_is_streamed_in_equal_chunks_of_whole_robots(monkeypat
     assert runtime.stream_chunk_size(robots[:84], "f64", "cpu", replicas=3) == 42  # 126
     assert runtime.stream_chunk_size(robots, "f64", "cpu") == 100  # 100 instances fit
     assert runtime.stream_chunk_size(robots[:21], "f64", "cpu", replicas=3) == 21  # 63
+    # 43 robots are 129 instances, past the smallest engine's 64: cut, by their instances
+    assert runtime.stream_chunk_size(robots[:43], "f64", "cpu", replicas=3) == 22
+    # a robot of more instances than the room (64 directions) still runs, alone
+    assert runtime.stream_chunk_size(robots[:2], "f64", "cpu", replicas=129) == 1
+
+
+def test_the_memory_check_counts_the_engine_a_batch_is_built_in(monkeypatch):
+    """A streamed batch's last chunk runs in the first chunk's engine (`least_batch`): 64
+    robots built as for 65 take the engine of capacity 128, and that is the one the check
+    must find room for."""
+    model = build_model([ts.StarParams(n_arc=6, n_limb=2)] * 64)
+    own, shared = engine_bytes(model, "f64"), engine_bytes(model, "f64", 65)
+    assert shared > own
+    monkeypatch.setattr(runtime, "available_memory_bytes",
+                        lambda: (own + shared) / 2 / runtime.MEMORY_SHARE)
+    runtime.check_memory(model, "f64", "cpu")  # its own engine fits
+    with pytest.raises(ValueError, match="for its engine, more than"):
+        runtime.check_memory(model, "f64", "cpu", least_batch=65)
 
 
 def test_a_machine_without_room_for_the_smallest_engine_refuses_before_compute(monkeypatch):
@@ -219,17 +237,19 @@ def test_engines_past_the_budget_are_destroyed_least_recently_used_first(monkeyp
     """Every engine a process built was kept: calls of 1,000, 2,000 and 3,000 robots kept
     their fields, 1.1 GB (an audit). Past FREE_ENGINES_BYTES the least recently used engines
     that no Simulator holds are destroyed, the one a call uses kept; a batch whose engine went
-    is built again, with the same bits; `release_engines` gives back all but those held. A
-    Simulator's engine counts as used when the Simulator goes (it kept its lease's stamp, and
-    went before the engines of calls made meanwhile: a review, 2026-12). Three capacities of
-    one coarse robot (64, 128, 256: fields about 1 : 2 : 4) in a cache of their own, with room
-    for the two largest."""
+    is built again, with the same bits; `release_engines` gives back all but those held. An
+    engine a call reuses counts as used then, not when it was built. A Simulator's engine
+    counts as used when the Simulator goes (it kept its lease's stamp, and went before the
+    engines of calls made meanwhile: a review, 2026-12). Three capacities of one coarse robot
+    (64, 128, 256: fields about 1 : 2 : 4) in a cache of their own, with room for the two
+    largest."""
     current = runtime.Runtime.current()
     monkeypatch.setattr(current, "engines", {})
     robot = ts.StarParams(gait="A1", n_arc=6, n_limb=2)
     small, middle, large = ([robot] * count for count in (1, 65, 129))
-    first = ts.simulate(small, 0.002)
-    ts.simulate(middle, 0.002)
+    ts.simulate(small, 0.002)
+    first = ts.simulate(middle, 0.002)
+    ts.simulate(small, 0.002)  # reused: the 128's is now the least recently used
     sizes = {len(batch): engine_bytes(build_model(batch), "f64") for batch in (small, large)}
     (middle_slot,) = (slot for slots in current.engines.values() for slot in slots
                       if slot.engine.capacity == 128)
@@ -242,20 +262,20 @@ def test_engines_past_the_budget_are_destroyed_least_recently_used_first(monkeyp
 
     assert capacities() == [64, 128]
     ts.simulate(large, 0.002)
-    assert capacities() == [128, 256]  # the 64's, least recently used, went
-    again = ts.simulate(small, 0.002)  # built again: the 128's goes
-    assert capacities() == [64, 256]
+    assert capacities() == [64, 256]  # the 128's, least recently used, went
+    again = ts.simulate(middle, 0.002)  # built again: the 64's goes
+    assert capacities() == [128, 256]
     pd.testing.assert_frame_equal(again.summary, first.summary, check_exact=True)
-    held = ts.Simulator(small)
-    assert current.release_engines() == 1 and capacities() == [64]  # the Simulator's
+    held = ts.Simulator(middle)
+    assert current.release_engines() == 1 and capacities() == [128]  # the Simulator's
     held.advance(0.002)
     assert held.ok.all()
-    kept = held.engine.arena.nbytes  # capacity 64: half the 128's
-    ts.simulate(middle, 0.002)  # used after the lease
+    kept = held.engine.arena.nbytes  # capacity 128: twice the 64's
+    ts.simulate(small, 0.002)  # used after the lease
     del held
     gc.collect()
     # room for the Simulator's engine alone: the other goes first, as used before it went
-    assert current.release_engines(kept) == 1 and capacities() == [64]
+    assert current.release_engines(kept) == 1 and capacities() == [128]
 
 
 def test_engines_are_destroyed_on_the_thread_that_started_taichi_alone(monkeypatch):
@@ -293,14 +313,16 @@ def test_engines_are_destroyed_on_the_thread_that_started_taichi_alone(monkeypat
     assert [slot.engine.capacity for slots in current.engines.values() for slot in slots] == [128]
 
 
-@pytest.mark.parametrize("with_lanes", [False, pytest.param(True, marks=pytest.mark.slow)])
-def test_a_streamed_batchs_chunks_share_the_first_chunks_engine(monkeypatch, with_lanes):
+@pytest.mark.parametrize("lanes_by", [None, pytest.param("work", marks=pytest.mark.slow),
+                                      pytest.param("batch", marks=pytest.mark.slow)])
+def test_a_streamed_batchs_chunks_share_the_first_chunks_engine(monkeypatch, lanes_by):
     """129 robots in chunks of 65 and 64: the last chunk took an engine of its own (capacity 64
     beside 128), and with the kept engines bounded each call destroyed and built both again (a
     review, 2026-12). Every chunk now runs in the first one's engine: one build for two calls,
     the same bits as one engine. With lanes where the first chunk's work reaches their minimum
     and the last's does not, the last took one of its own too (lanes are part of an engine's
-    key: a review; slow tier, the lanes' kernel compiles for ~7 s)."""
+    key: a review), and so would it where the first chunk's size reaches the lanes' least
+    batch and the last's does not (slow tier, the lanes' kernel compiles for ~7 s)."""
     current = runtime.Runtime.current()
     monkeypatch.setattr(current, "engines", {})
     robots = [ts.StarParams(gait=gait, n_arc=6, n_limb=2) for gait in ("A1", "A2", "A1+A3")] * 43
@@ -310,14 +332,18 @@ def test_a_streamed_batchs_chunks_share_the_first_chunks_engine(monkeypatch, wit
     monkeypatch.setattr(runtime, "CPU_ENGINE_BUDGET_BYTES", 129 * per_instance)
     monkeypatch.setattr(runtime, "FREE_ENGINES_BYTES", 0)
     assert runtime.stream_chunk_size(robots, "f64", "cpu") == 65
-    if with_lanes:
+    if lanes_by == "work":
         steps = 4  # 0.004 s at 1-ms steps
         monkeypatch.setattr(runtime, "LANES_MINIMUM_WORK", 65 * steps)
-    built = []
+    elif lanes_by == "batch":
+        monkeypatch.setattr(runtime, "LANES_MINIMUM_WORK", 0)
+        monkeypatch.setattr(runtime, "LOCKSTEP_MINIMUM_BATCH", 65)
+    built, kept_then = [], []
     new_engine = current.new_engine
 
     def counted(*args):
         built.append(args)
+        kept_then.append(sum(len(slots) for slots in current.engines.values()))
         return new_engine(*args)
 
     monkeypatch.setattr(current, "new_engine", counted)
@@ -325,11 +351,15 @@ def test_a_streamed_batchs_chunks_share_the_first_chunks_engine(monkeypatch, wit
         streamed = ts.simulate(robots, 0.004)
         pd.testing.assert_frame_equal(streamed.summary, whole.summary, check_exact=True)
     assert len(built) == 1
+    # the whole batch's engine went before the chunks' was built, not after (at a budget of 0
+    # a process held both at once)
+    assert kept_then == [0]
 
 
 
 def test_a_streamed_batch_is_cut_into_parts_as_equal_as_whole_robots_allow(monkeypatch,
-                                                                           simulated_chunks):
+                                                                           simulated_chunks,
+                                                                           capsys):
     """Chunks taken in steps of the chunk size left the rest to a last sliver (421 robots as 20
     chunks of 21 and one: a review, 2026-12): 43 robots at most 21 to a chunk run as 14, 14 and
     15, in one engine, the same bits as one call."""
@@ -343,3 +373,9 @@ def test_a_streamed_batch_is_cut_into_parts_as_equal_as_whole_robots_allow(monke
     streamed = ts.simulate(robots, 0.002)
     assert [len(chunk) for chunk in simulated_chunks] == [14, 14, 15]
     pd.testing.assert_frame_equal(streamed.summary, whole.summary, check_exact=True)
+    # each part's progress bar says which of how many it is, from two parts on
+    monkeypatch.setattr(simulation, "stream_chunk_size", lambda *args: 1)
+    capsys.readouterr()
+    ts.simulate(robots[:2], 0.002, progress=True)
+    bars = capsys.readouterr().err
+    assert "1 robot, chunk 1/2:" in bars and "1 robot, chunk 2/2:" in bars

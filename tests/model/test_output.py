@@ -292,6 +292,13 @@ def test_a_batchs_files_record_its_call_and_an_off_grid_duration_is_told_once(tm
         "duration_s = 0.0051 s is not a whole number of steps (dt = 0.002 s): 3 steps, "
         "0.006 s, are simulated (timegrid.nearest_interval gives a duration on the grid)"]
     assert batch.summary["duration_s"].tolist() == [0.006, 0.006]
+    # the speed over the time simulated, as simulate records it
+    assert batch.summary["speed_mm_s"].to_numpy() == pytest.approx(np.hypot(
+        batch.summary["displacement_x_mm"], batch.summary["displacement_y_mm"]) / 0.006,
+        rel=1e-12)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert ts.simulate(RECORDED_PARAMS, 0.0051, solver).arguments["duration_s"] == 0.006
     assert read_provenance(batch.to_csv(tmp_path / "batch.csv"))["arguments"] == {
         "function": "run_batch", "duration_s": 0.0051, "cycles": None, "record_interval_s": 0.0,
         "record_shapes": False, "steady_from_cycle": 1, "sensitivities": [], "chunk_size": 1}

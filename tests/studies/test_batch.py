@@ -191,6 +191,40 @@ def test_instances_of_several_topologies_and_periods_are_grouped_in_input_order(
                                   .reset_index(drop=True), alone, check_exact=True)
 
 
+@pytest.mark.parametrize("periods, chunk_size, adaptive, told", [
+    # the first chunk's cycles on the grid (0.006 s), the second's off it: told (an audit of
+    # the tests: a rule that looked at the first chunk alone passed them)
+    ((0.3, 0.3337), 2048, False, "params[1], 0.006674 s"),
+    # once for the batch, naming the robot: the 4th robot is in the 3rd chunk, and the 5th's
+    # cycles are off the grid too
+    ((0.3, 0.3, 0.3, 0.3337, 0.3339), 2, False, "params[3], 0.006674 s"),
+    ((0.3337,), 2048, True, None),  # adaptive steps end where the cycles end
+])
+def test_cycles_off_the_step_grid_are_told_once_naming_the_first_such_robot(periods, chunk_size,
+                                                                            adaptive, told):
+    """Planning only (no compute): `cycles` periods that are not a whole number of steps."""
+    solver = ts.SolverConfig(integrator="bdf2", adaptive=True, dt=2e-3) if adaptive else SOLVER
+    params = [ts.StarParams(n_arc=6, n_limb=2, period=period) for period in periods]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        plan_chunks(params, cycles=0.02, solver=solver, chunk_size=chunk_size)
+    assert [str(warning.message) for warning in caught] == ([] if told is None else [
+        f"cycles = 0.02 periods of {told}, is not a whole number of steps (dt = 0.002 s): 3 "
+        f"steps, 0.006 s, are simulated (each instance's duration_s in the summary)"])
+
+
+def test_periods_off_the_step_grid_name_the_first_robot_in_input_order_across_topologies():
+    """The chunks come in groups of a topology (first appearance): robots 2 and 1 of the
+    batch, in that order; the warning names the first in the batch (planning only)."""
+    coarse = ts.StarParams(gait="A1+A2", n_arc=6, n_limb=2, period=0.164)  # 164 whole steps
+    params = [coarse, coarse.replace(n_arc=8, period=0.1635), coarse.replace(period=0.1645)]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        plan_chunks(params, 0.33, chunk_size=1, solver=ts.SolverConfig())
+    assert [str(warning.message)[:60] for warning in caught] == [
+        "2 of 3 instances (the first params[1], period 0.1635 s) have"]
+
+
 @pytest.mark.parametrize("kwargs, message", [
     (dict(duration_s=0.1, cycles=1), "exactly one of duration_s"),
     (dict(), "exactly one of duration_s"),

@@ -706,15 +706,35 @@ def test_a_package_inside_another_repository_records_no_commit(tmp_path, monkeyp
     assert provenance.code_version()["commit"] == git(other, "rev-parse", "HEAD")
 
 
+def installed_beside(site, record, name="taichi_star", version="0.1"):
+    """A dist-info of distribution `name` in `site`, with `record` (a dict, a text, or None for
+    none) as its direct_url.json."""
+    info = site / f"{name}-{version}.dist-info"
+    info.mkdir(parents=True)
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name.replace('_', '-')}\n"
+                                   f"Version: {version}\n")
+    if record is not None:
+        (info / "direct_url.json").write_text(
+            record if isinstance(record, str) else json.dumps(record))
+
+
+def git_record(commit_id, vcs="git"):
+    return {"url": "https://example.invalid/taichi_star.git",
+            "vcs_info": {"vcs": vcs, "commit_id": commit_id}}
+
+
+SHA1 = "0123456789abcdef" * 2 + "01234567"
+
+
 @pytest.mark.parametrize("record, commit", [
-    ({"url": "https://example.invalid/taichi_star.git",
-      "vcs_info": {"vcs": "git", "commit_id": "0123456789abcdef" * 2 + "01234567"}},
-     "0123456789abcdef" * 2 + "01234567"),
-    ({"url": "https://example.invalid/taichi_star",
-      "vcs_info": {"vcs": "hg", "commit_id": "0123456789ab"}}, None),
+    (git_record(SHA1), SHA1),
+    (git_record("0123456789abcdef" * 4), "0123456789abcdef" * 4),  # a SHA-256 repository
+    (git_record(SHA1, vcs="hg"), None),  # a Mercurial node is 40 hex digits too
     ({"url": "file:///home/someone/taichi_star", "dir_info": {}}, None),
-    ({"url": "https://example.invalid/x.git", "vcs_info": {"vcs": "git", "commit_id": "main"}},
-     None),
+    (git_record("main"), None),  # a branch where a hash should be
+    (git_record(SHA1 + "8"), None),  # 41 digits: no object name
+    (git_record(SHA1.upper()), None),  # git writes lower case
+    (git_record(123), None),
     ("not json {", None),
     (None, None),
 ])
@@ -722,28 +742,29 @@ def test_a_package_installed_from_a_git_url_records_the_commit_pip_recorded(
         tmp_path, monkeypatch, record, commit):
     """Outside a checkout no commit was recorded, even for `pip install git+URL@REF`, whose
     dist-info names the commit it installed (direct_url.json, PEP 610): now that commit, clean.
-    Another version control, a folder's install, a branch name where a hash should be, a
-    damaged record or none: no commit, as before. A dist-info beside the package, no pip."""
+    Another version control, a folder's install, what is not a git object name, a damaged
+    record or none: no commit, as before. A dist-info beside the package, no pip; another
+    distribution's record beside it is not this package's."""
     site = tmp_path / "site-packages"
     module = site / "taichi_star" / "provenance.py"
     module.parent.mkdir(parents=True)
     module.write_text("# the module\n")
-    (site / "taichi_star-0.1.dist-info").mkdir()
-    (site / "taichi_star-0.1.dist-info" / "METADATA").write_text(
-        "Metadata-Version: 2.1\nName: taichi-star\nVersion: 0.1\n")
-    if record is not None:
-        (site / "taichi_star-0.1.dist-info" / "direct_url.json").write_text(
-            record if isinstance(record, str) else json.dumps(record))
-    # another distribution's record beside it is not this package's
-    (site / "other-1.0.dist-info").mkdir()
-    (site / "other-1.0.dist-info" / "METADATA").write_text(
-        "Metadata-Version: 2.1\nName: other\nVersion: 1.0\n")
-    (site / "other-1.0.dist-info" / "direct_url.json").write_text(json.dumps(
-        {"url": "https://example.invalid/other.git",
-         "vcs_info": {"vcs": "git", "commit_id": "f" * 40}}))
+    installed_beside(site, record)
+    installed_beside(site, git_record("f" * 40), name="other", version="1.0")
     monkeypatch.setattr(provenance, "__file__", str(module))
     assert provenance.code_version() == {"version": ts.__version__, "commit": commit,
                                         "dirty": False if commit else None}
+
+
+def test_another_distributions_git_record_beside_the_package_is_not_its_own(tmp_path,
+                                                                           monkeypatch):
+    site = tmp_path / "site-packages"
+    module = site / "taichi_star" / "provenance.py"
+    module.parent.mkdir(parents=True)
+    module.write_text("# the module\n")
+    installed_beside(site, git_record("f" * 40), name="other", version="1.0")
+    monkeypatch.setattr(provenance, "__file__", str(module))
+    assert provenance.code_version()["commit"] is None
 
 
 def test_code_version_with_a_damaged_git_index_names_the_commit_but_not_dirtiness(checkout):

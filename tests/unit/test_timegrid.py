@@ -276,6 +276,7 @@ def test_a_nan_step_count_is_named_and_an_interval_is_a_python_float():
     (0.327, 0, None, 0.1635, [0]),
     (0.1635, 0, None, 0.1635, [0]),  # one cycle, from cycle 0; 0.1635 s rounds to 164 steps
     (0.327, 1, None, 0.164, []),    # a period of whole steps (164)
+    (0.3268, 1, None, 0.1635, [0]),  # simulates 0.327 s (whole 1-ms steps): two cycles
     (0.327, 1, "adaptive", 0.1635, []),  # adaptive steps stop at every cycle start
 ])
 def test_off_grid_periods_are_those_whose_steady_speed_the_grid_alone_leaves_nan(
