@@ -20,7 +20,8 @@ from gymnasium.vector.utils import batch_space
 import taichi_star as ts
 from taichi_star.envs import (DEFAULT_MAX_EPISODE_STEPS, ENV_ID, OBSERVATION_NAMES,
                               SB3VectorAdapter, StarSwimmerEnv, StarSwimmerVectorEnv, SwimmerTask,
-                              to_sb3)
+                              control_period, to_sb3)
+from taichi_star.metrics import rotate
 
 # the paper's actuation period at a coarse step: 630 steps per control period
 KWARGS = dict(solver=ts.SolverConfig(dt=5e-3))
@@ -606,3 +607,153 @@ def test_a_failed_robot_stepped_again_pays_no_firing_cost():
         _, reward, _, truncated, info = env.step(a1)
     assert reward == 0.0 and truncated and info["status"] == "newton_failed"
     env.close()
+
+
+# a mutation audit of the environments (2026-12): each test below failed a mutant the suite
+# let live. A coarse robot, 5-ms steps, a 0.05-s control period
+COARSE = ts.StarParams(n_arc=6, n_limb=2)
+FAST = dict(params=COARSE, solver=ts.SolverConfig(dt=5e-3), control_period_s=0.05)
+NO_FIRING = np.zeros(8, dtype=np.int8)
+
+
+@pytest.fixture
+def coarse_env():
+    made = StarSwimmerEnv(**FAST)
+    yield made
+    made.close()
+
+
+def test_the_lowest_end_of_each_task_range_is_in_or_out_as_its_bracket_says():
+    """firing_cost_mm's range [0, 1000] takes 0; goal_tolerance_mm (0, 1000] and
+    since_fired_cap_s (0, 1e6] refuse it."""
+    assert SwimmerTask(firing_cost_mm=0.0).firing_cost_mm == 0.0
+    for name, text in (("goal_tolerance_mm", r"\(0, 1000\]"),
+                       ("since_fired_cap_s", r"\(0, 1e\+06\]")):
+        with pytest.raises(ValueError, match=rf"^{name} must be a number in {text}, got 0.0$"):
+            SwimmerTask(**{name: 0.0})
+
+
+def test_a_control_period_of_zero_and_zero_robots_are_refused():
+    """Each refused at 0, its range's open end, before an engine is made."""
+    with pytest.raises(ValueError, match=r"^control_period_s must be a positive whole number"):
+        control_period(COARSE, ts.SolverConfig(dt=5e-3), 0.0)
+    with pytest.raises(ValueError, match=r"^num_envs must be an integer >= 1, got 0$"):
+        StarSwimmerVectorEnv(0, **FAST)
+
+
+def test_the_since_fired_bounds_start_at_zero(coarse_env):
+    """The times since each actuator fired are in [0, cap]; the other entries symmetric."""
+    space = coarse_env.observation_space
+    np.testing.assert_array_equal(space.low[7:], 0.0)
+    np.testing.assert_array_equal(space.high[7:], 10.0)
+    np.testing.assert_array_equal(space.low[:7], -space.high[:7])
+
+
+def test_drawn_goals_lie_in_every_direction(coarse_env):
+    """Goals of 16 seeds fall on both sides of both axes, all at goal_distance_mm."""
+    goals = np.array([coarse_env.reset(seed=seed)[1]["goal_mm"] for seed in range(16)])
+    assert (goals[:, 1] < 0).any() and (goals[:, 1] > 0).any()
+    assert (goals[:, 0] < 0).any() and (goals[:, 0] > 0).any()
+    np.testing.assert_allclose(np.hypot(*goals.T), 50.0)
+
+
+def test_an_off_axis_goals_distance_and_first_reward(coarse_env):
+    """A goal (0, 30) is 30 mm away (not its x distance), and an unfired robot's first step
+    earns ~0, not -30."""
+    _, info = coarse_env.reset(options={"goal": (0.0, 30.0)})
+    assert info["distance_mm"] == 30.0
+    _, reward, terminated, truncated, _ = coarse_env.step(NO_FIRING)
+    assert abs(reward) < 1e-9 and not terminated and not truncated
+
+
+def test_a_robot_exactly_at_the_tolerance_is_terminated():
+    """A tolerance equal to the distance an unfired step leaves (the same bits every time)
+    terminates the episode: within it means at most it."""
+    probe = StarSwimmerEnv(**FAST)
+    probe.reset(options={"goal": (30.0, 0.0)})
+    distance = probe.step(NO_FIRING)[4]["distance_mm"]
+    probe.close()
+    assert 29.0 < distance < 31.0
+    env = StarSwimmerEnv(**FAST, goal_tolerance_mm=distance)
+    env.reset(options={"goal": (30.0, 0.0)})
+    _, _, terminated, truncated, info = env.step(NO_FIRING)
+    env.close()
+    assert info["distance_mm"] == distance and terminated and not truncated
+
+
+def test_a_robot_failing_within_its_tolerance_is_terminated_not_truncated():
+    """A failure is a truncation only short of the goal; the coarse robot fails at its first
+    50-ms step (five Newton iterations) 2 mm from a goal it has then reached."""
+    env = StarSwimmerEnv(params=COARSE, solver=ts.SolverConfig(dt=0.05, max_newton=5,
+                                                               max_substep_halvings=1),
+                         control_period_s=0.4)
+    env.reset(options={"goal": (2.0, 0.0)})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        _, _, terminated, truncated, info = env.step(ts.Gait.parse("A1").mask)
+    env.close()
+    assert info["status"] == "newton_failed" and terminated and not truncated
+
+
+def test_the_goal_and_the_velocity_are_observed_in_the_body_frame(coarse_env):
+    """A chiral firing (A1+A2+A4) turns the robot; the observation's goal and velocity are
+    the world vectors turned by -heading."""
+    coarse_env.reset(options={"goal": (30.0, 20.0)})
+    observation, _, _, _, info = coarse_env.step(ts.Gait.parse("A1+A2+A4").mask)
+    heading = np.radians(info["heading_deg"])
+    assert abs(heading) > 1e-5
+    state = coarse_env.simulator.state()
+    velocity = state[["velocity_x_mm_s", "velocity_y_mm_s"]].to_numpy()[0]
+    goal = rotate((info["goal_mm"] - info["position_mm"])[None], np.array([-heading]))[0]
+    np.testing.assert_allclose(observation[:2], goal, rtol=0, atol=1e-5)
+    np.testing.assert_allclose(observation[4:6], rotate(velocity[None], np.array([-heading]))[0],
+                               rtol=0, atol=1e-6)
+
+
+def test_a_time_since_fired_past_its_cap_reads_the_cap():
+    """Fired 50 ms ago with since_fired_cap_s = 0.02, A1 reads 0.02."""
+    env = StarSwimmerEnv(**FAST, since_fired_cap_s=0.02)
+    env.reset(seed=0)
+    observation = env.step(ts.Gait.parse("A1").mask)[0]
+    env.close()
+    assert observation[7] == np.float32(0.02)
+    np.testing.assert_array_equal(observation[8:], np.float32(0.02))
+
+
+def test_vector_env_resets_and_steps_check_their_robots():
+    """A later reset leaves an earlier info's distances as they were (a copy, not the
+    batch's array); an integer reset_mask is refused; a robot never reset refuses the step,
+    though the other robot was."""
+    envs = StarSwimmerVectorEnv(2, **FAST)
+    try:
+        _, first = envs.reset(options={"goal": (10.0, 0.0)})
+        envs.reset(options={"goal": (0.0, 20.0)})
+        np.testing.assert_array_equal(first["distance_mm"], [10.0, 10.0])
+        with pytest.raises(ValueError, match=re.escape("options['reset_mask'] must be a (2,) "
+                                                       "bool array, got int64 (2,)")):
+            envs.reset(options={"reset_mask": np.array([0, 1])})
+    finally:
+        envs.close()
+    fresh = StarSwimmerVectorEnv(2, **FAST)
+    try:
+        fresh.reset(seed=0, options={"reset_mask": np.array([True, False])})
+        with pytest.raises(RuntimeError, match=r"robot 1 has no episode yet"):
+            fresh.step(np.zeros((2, 8), np.int8))
+        assert fresh.simulator.time_s.tolist() == [0.0, 0.0]
+    finally:
+        fresh.close()
+
+
+def test_an_sb3_seed_is_used_by_one_reset_only():
+    """The reset after the seeded one draws new goals (the generators go on), as SB3's
+    VecEnv.seed promises."""
+    adapter = SB3VectorAdapter(StarSwimmerVectorEnv(2, **FAST))
+    try:
+        adapter.seed(21)
+        first = adapter.reset()
+        second = adapter.reset()
+        assert not np.array_equal(first[:, :2], second[:, :2])
+        adapter.seed(21)
+        np.testing.assert_array_equal(adapter.reset(), first)
+    finally:
+        adapter.close()

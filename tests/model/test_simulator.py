@@ -935,3 +935,136 @@ def test_a_simulator_is_not_copied_or_pickled_and_save_refuses_a_folder(tmp_path
         sim.save(tmp_path)
     assert list(tmp_path.parent.glob(f"{tmp_path.name}.npz")) == []
     assert sim.save(tmp_path / "state").name == "state.npz"  # a name that is no folder
+
+
+# a mutation audit of this module (2026-12): each test below failed a mutant the suite let live
+COARSE = ts.StarParams(n_arc=6, n_limb=2)
+COARSE_SOLVER = ts.SolverConfig(dt=5e-3)
+
+
+@pytest.fixture
+def coarse_pair():
+    return ts.Simulator([COARSE] * 2, COARSE_SOLVER)
+
+
+def test_commands_with_one_number_other_than_0_or_1_are_refused(coarse_pair):
+    """A 2, a 0.5 or a -1 beside 0s is refused (not read as True), the state unchanged."""
+    before = coarse_pair.save().fields
+    for value in (2, 0.5, -1):
+        commands = np.zeros((2, 8))
+        commands[1, 3] = value
+        with pytest.raises(ValueError, match=r"^commands must be boolean \(or numbers that are "
+                                             r"exactly 0 or 1\)"):
+            coarse_pair.fire(commands)
+    after = coarse_pair.save().fields
+    for name, values in before.items():
+        np.testing.assert_array_equal(after[name], values, err_msg=name)
+
+
+def test_an_advance_past_its_last_record_reaches_its_end_and_counts_records_from_1(
+        coarse_pair):
+    """25 ms with records every 10 ms ends at 25 ms, past its last record at 20 ms, and the
+    `record` column counts the records from 1."""
+    table = coarse_pair.advance(0.025, record_interval_s=0.01)
+    np.testing.assert_allclose(coarse_pair.time_s, [0.025, 0.025], rtol=0, atol=1e-12)
+    assert table["record"].tolist() == [1, 1, 2, 2]
+    np.testing.assert_allclose(table["t_s"], [0.01, 0.01, 0.02, 0.02], rtol=0, atol=1e-12)
+
+
+def test_a_failed_robots_records_keep_the_batchs_times_over_several_advances():
+    """Robot 0 fails in its first 50-ms step (five Newton iterations), robot 1 runs on; two
+    advances later robot 0's records still carry robot 1's times (its clock's lag adds up
+    over the advances)."""
+    sim = ts.Simulator([COARSE] * 2, ts.SolverConfig(dt=0.05, max_newton=5,
+                                                     max_substep_halvings=1))
+    sim.fire(["A1", "none"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        sim.advance(0.1)
+        assert sim.ok.tolist() == [False, True]
+        sim.advance(0.1)
+        table = sim.advance(0.1, record_interval_s=0.05)
+    times = table.pivot(index="record", columns="instance", values="t_s")
+    np.testing.assert_array_equal(times[0], times[1])
+    np.testing.assert_allclose(times[1], [0.25, 0.3], rtol=0, atol=1e-12)
+
+
+def test_an_adaptive_advance_of_no_time_is_refused():
+    """An adaptive advance of 0 s is refused as fixed steps' is ("at least one step"), not
+    taken as a silent no-op."""
+    sim = ts.Simulator([COARSE], ts.SolverConfig(adaptive=True))
+    with pytest.raises(ValueError, match=r"^duration_s must be a finite number > 0 s, got 0.0"):
+        sim.advance(0.0)
+
+
+def test_a_snapshot_with_an_infinite_clock_lag_is_refused(coarse_pair):
+    """A damaged header's clock lag of inf is refused as NaN and -1 are, the state
+    unchanged."""
+    import math
+    snapshot = coarse_pair.save()
+    coarse_pair.advance(0.01)
+    before = coarse_pair.save().fields
+    for lag in (math.inf, math.nan, -1.0):
+        with pytest.raises(ValueError, match=r"^the saved state records 2 clock lags for its 2 "
+                                             r"instances, or one not finite and >= 0"):
+            coarse_pair.load(dataclasses.replace(snapshot, behind=(0.0, lag)))
+    after = coarse_pair.save().fields
+    for name, values in before.items():
+        np.testing.assert_array_equal(after[name], values, err_msg=name)
+
+
+def test_a_state_stepped_at_another_dt_is_refused(coarse_pair):
+    """A snapshot of 2.5-ms steps (the same engine) is refused by a Simulator of 5-ms steps,
+    naming both, the state unchanged."""
+    other = ts.Simulator([COARSE] * 2, ts.SolverConfig(dt=2.5e-3))
+    before = coarse_pair.save().fields
+    with pytest.raises(ValueError, match=r"^the saved state has 2 instances at dt = 0.0025 s; "
+                                         r"this simulator 2 at 0.005 s"):
+        coarse_pair.load(other.save())
+    after = coarse_pair.save().fields
+    for name, values in before.items():
+        np.testing.assert_array_equal(after[name], values, err_msg=name)
+
+
+def test_a_robot_that_failed_is_not_warned_about_as_capped():
+    """The capped-solve warning names robots still "ok"; a robot that failed (newton_failed,
+    its newton_capped True, said by its status) gives none."""
+    sim = ts.Simulator([COARSE] * 2, ts.SolverConfig(dt=0.05, max_newton=5,
+                                                     max_substep_halvings=1))
+    sim.fire(["A1", "none"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sim.advance(0.1)
+    state = sim.state()
+    assert state["status"].tolist() == ["newton_failed", "ok"]
+    assert state["newton_capped"].tolist() == [True, False]
+
+
+def test_reset_refuses_an_instance_just_outside_the_batch(coarse_pair):
+    """Instance B itself is refused with the ValueError naming the range, and -1 is refused,
+    not read as the last instance; the state unchanged."""
+    coarse_pair.advance(0.01)
+    for instances in (2, [0, 2], -1, [-1]):
+        with pytest.raises(ValueError, match=r"^instances must be an integer or a sequence of "
+                                             r"integers in \[0, 2\)"):
+            coarse_pair.reset(instances)
+    np.testing.assert_allclose(coarse_pair.time_s, [0.01, 0.01], rtol=0, atol=1e-12)
+
+
+def test_a_reset_robot_that_fails_again_records_its_own_times():
+    """Robot 0 fails, lags two advances, is reset and fails again: its records are at its own
+    clock's times (0.05, 0.1 s), not shifted by the lag of its earlier episode."""
+    sim = ts.Simulator([COARSE] * 2, ts.SolverConfig(dt=0.05, max_newton=5,
+                                                     max_substep_halvings=1))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        sim.fire(["A1", "none"])
+        sim.advance(0.1)
+        sim.advance(0.1)
+        sim.reset([0])
+        sim.fire(["A1", "none"])
+        table = sim.advance(0.1, record_interval_s=0.05)
+    assert sim.ok.tolist() == [False, True]
+    times = table.pivot(index="record", columns="instance", values="t_s")
+    np.testing.assert_allclose(times[0], [0.05, 0.1], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(times[1], [0.25, 0.3], rtol=0, atol=1e-12)
