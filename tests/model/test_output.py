@@ -391,6 +391,27 @@ def test_a_record_of_adaptive_runs_of_different_ends_has_one_time():
     assert np.isfinite(dataset["centroid_x_mm"].values).all()
 
 
+def test_a_float_column_without_a_unit_suffix_is_dimensionless_in_the_dataset(recorded):
+    """Every variable carries `units`: "1" for a number whose name tells no unit (a float as
+    well as a count), "" for text (a mutation audit: floats lost their "1" unnoticed)."""
+    units = {name: variable.attrs["units"]
+             for name, variable in recorded.to_xarray().variables.items()}
+    assert units["max_strain"] == units["newton_iterations_mean"] == units["steps"] == "1"
+    assert units["status"] == ""
+
+
+def test_a_damaged_file_with_an_upper_case_parquet_suffix_is_named_as_parquet(recorded,
+                                                                             tmp_path):
+    """A damaged file is read by its suffix, whatever its case: a ValueError naming the file,
+    not a missing CSV sidecar's FileNotFoundError."""
+    from taichi_star.output import read_provenance
+
+    path = recorded.to_parquet(tmp_path / "r.PARQUET")
+    path.write_bytes(b"not a parquet file at all")
+    with pytest.raises(ValueError, match=r"r\.PARQUET: no taichi_star provenance"):
+        read_provenance(path)
+
+
 def test_summary_of_dataset_refuses_what_is_not_a_result_dataset(recorded, tmp_path):
     """A path, None or a foreign Dataset raised AttributeError or KeyError (an audit)."""
     import xarray as xr

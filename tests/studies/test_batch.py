@@ -14,7 +14,7 @@ import pandas as pd
 import pytest
 
 import taichi_star as ts
-from taichi_star.batch import LocalProcesses, plan_chunks, run_batch
+from taichi_star.batch import InProcess, LocalProcesses, plan_chunks, run_batch
 
 REPO = Path(__file__).resolve().parents[2]
 SOLVER = ts.SolverConfig(dt=2e-3)
@@ -460,3 +460,135 @@ def test_more_workers_than_chunks_are_named_idle_before_any_starts(workers, chun
     assert said == ([f"{workers} worker processes for {chunks} chunk(s) to compute: {idle} stay "
                      f"idle (chunk_size=1; a smaller one gives each worker a share of the "
                      f"batch)"] if idle else [])
+
+
+# a mutation audit of run_batch and plan_chunks (2026-12): each test below failed a mutant
+# the suite let live. A coarse robot at 1-ms steps
+TINY = ts.StarParams(n_arc=6, n_limb=2)
+MS_SOLVER = ts.SolverConfig()
+
+
+def _forbidden(*args, **kwargs):
+    raise AssertionError("simulate was called despite invalid arguments")
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(workers=2, executor=InProcess()), "^give workers .* or executor, not both"),
+    (dict(record_interval_s=0.001, record_shapes=True, run_dir="RUN"),
+     r"^record_shapes cannot be combined with run_dir"),
+])
+def test_run_batch_refuses_before_compute(monkeypatch, tmp_path, kwargs, message):
+    monkeypatch.setattr("taichi_star.batch.tasks.simulate", _forbidden)
+    if kwargs.get("run_dir") == "RUN":
+        kwargs["run_dir"] = tmp_path / "run"
+    with pytest.raises(ValueError, match=message):
+        run_batch([TINY], 0.002, solver=MS_SOLVER, **kwargs)
+    assert not list(tmp_path.iterdir())
+
+
+def test_shapes_of_two_topologies_of_one_duration_are_refused_before_compute(monkeypatch):
+    """One duration, two topologies: refused for its topologies (the existing test's batch
+    differs in duration too, which the other half of the check refuses)."""
+    monkeypatch.setattr("taichi_star.batch.tasks.simulate", _forbidden)
+    with pytest.raises(ValueError, match="^record_shapes needs one topology"):
+        run_batch([TINY, ts.StarParams(n_arc=6, n_limb=3)], 0.002, solver=MS_SOLVER,
+                  record_interval_s=0.001, record_shapes=True)
+
+
+def test_a_resume_with_nothing_left_to_compute_names_no_idle_workers(tmp_path):
+    """Idle workers are named where some chunks are to compute, fewer than the workers; a
+    resumed run whose chunks are all stored computes none and says nothing of idle workers."""
+
+    class NoWorkers(LocalProcesses):
+        def run(self, tasks, progress=False):
+            assert not tasks
+            return iter([])
+
+    folder = tmp_path / "run"
+    first = run_batch([TINY], 0.002, solver=MS_SOLVER, run_dir=folder)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        again = run_batch([TINY], 0.002, solver=MS_SOLVER, run_dir=folder, resume=True,
+                          executor=NoWorkers(2))
+    assert [str(w.message) for w in caught if "stay idle" in str(w.message)] == []
+    pd.testing.assert_frame_equal(again.summary, first.summary)
+
+
+def test_a_resumed_runs_bar_of_chunks_starts_at_the_chunks_already_done(tmp_path, capsys):
+    """A resume's bar counts the stored chunks as done: 2/2 at the end of a run of two chunks
+    whose first was stored before (it said 1/2: the resumed chunk alone)."""
+
+    class Stop(Exception):
+        pass
+
+    class FirstOnly:
+        def run(self, tasks, progress=False):
+            yield from InProcess().run(tasks[:1])
+            raise Stop
+
+    class Elsewhere:  # not an InProcess: the bar of chunks is shown even for one chunk
+        def run(self, tasks, progress=False):
+            assert [task.index for task in tasks] == [1]
+            return InProcess().run(tasks)
+
+    folder, params = tmp_path / "run", [TINY, ts.StarParams(n_arc=6, n_limb=2, alpha=0.5)]
+    with pytest.raises(Stop):
+        run_batch(params, 0.002, solver=MS_SOLVER, chunk_size=1, run_dir=folder,
+                  executor=FirstOnly())
+    capsys.readouterr()
+    run_batch(params, 0.002, solver=MS_SOLVER, chunk_size=1, run_dir=folder, resume=True,
+              executor=Elsewhere(), progress=True)
+    bar = capsys.readouterr().err.split("\r")[-1]
+    assert "chunks" in bar and "2/2" in bar
+
+
+def test_a_batchs_trajectory_is_in_instance_order_whatever_its_chunks():
+    """Instances grouped into chunks out of input order (by duration: instance 1 apart from 0
+    and 2): the trajectory is sorted by instance and time all the same, numbered 0, 1, ..."""
+    params = [ts.StarParams(n_arc=6, n_limb=2, period=p) for p in (0.2, 0.3, 0.2)]
+    result = run_batch(params, cycles=0.01, solver=MS_SOLVER, record_interval_s=0.001)
+    trajectory = result.trajectory
+    assert sorted(set(trajectory["instance"])) == [0, 1, 2]
+    keys = list(zip(trajectory["instance"], trajectory["t_s"]))
+    assert keys == sorted(keys)
+    assert trajectory.index.equals(pd.RangeIndex(len(trajectory)))
+
+
+@pytest.mark.parametrize("timing", [dict(cycles=1), dict(duration_s=0.002)])
+def test_a_batch_with_no_solverconfig_is_refused_naming_solver(monkeypatch, timing):
+    """solver="x" with cycles: a ValueError naming solver, not an AttributeError from the
+    step-count check that reads solver.adaptive first."""
+    monkeypatch.setattr("taichi_star.batch.tasks.simulate", _forbidden)
+    with pytest.raises(ValueError, match="^solver must be a SolverConfig, got str"):
+        run_batch([TINY], solver="x", **timing)
+
+
+def test_a_batchs_duration_off_the_step_grid_is_told_once_as_it_is_planned():
+    """duration_s = 0.0015 s at 1-ms steps: the batch says so once (its chunks are told not
+    to); on the grid, nothing."""
+    with pytest.warns(RuntimeWarning) as caught:
+        plan_chunks([TINY, TINY], 0.0015, solver=MS_SOLVER, chunk_size=1)
+    said = [str(w.message) for w in caught if "whole number of steps" in str(w.message)]
+    assert len(said) == 1 and said[0].startswith("duration_s = 0.0015 s is not a whole number "
+                                                 "of steps (dt = 0.001 s): 2 steps")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        plan_chunks([TINY, TINY], 0.002, solver=MS_SOLVER, chunk_size=1)
+
+
+def test_an_adaptive_batch_whose_duration_ends_just_short_of_a_cycle_says_so():
+    """Three periods of 0.3 s held in float32 (0.8999999762 s) with adaptive steps leave out
+    the last cycle from the steady speed: the batch warns, as simulate does."""
+    adaptive = ts.SolverConfig(adaptive=True)
+    with pytest.warns(Warning, match=r"short of 3 whole periods of 1 of 1 instances"):
+        plan_chunks([ts.StarParams(n_arc=6, n_limb=2, period=0.3)], 0.8999999762,
+                    solver=adaptive)
+
+
+@pytest.mark.parametrize("cycles, shown", [
+    (-10 ** 38, "-1" + "0" * 38),             # 40 characters: shown whole
+    (-10 ** 39, "an integer of 40 digits")])  # 41: by its length
+def test_a_refused_numbers_text_is_whole_up_to_40_characters(cycles, shown):
+    with pytest.raises(ValueError) as error:
+        run_batch([TINY], cycles=cycles, solver=MS_SOLVER)
+    assert str(error.value) == f"cycles must be a finite number > 0, got {shown}"

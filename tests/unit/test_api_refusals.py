@@ -117,6 +117,13 @@ def test_executor_for_refuses_bad_retries_and_schedulers(keywords, name):
             pass
 
 
+def test_executor_for_refuses_workers_and_a_scheduler_together():
+    # refused before any connection (it would try the scheduler for ~30 s)
+    with pytest.raises(ValueError, match=r"^give workers \(local processes\) or scheduler"):
+        with executor_for(workers=2, scheduler="tcp://127.0.0.1:9"):
+            pass
+
+
 def test_executor_for_accepts_zero_retries():
     with executor_for(retries=0) as executor:
         assert executor.n_workers == 1
@@ -226,12 +233,69 @@ def recorded_result(instances=2):
     ({"instances": [0.5]}, "instances"), ({"instances": [True]}, "instances"),
     ({"instances": 0}, "instances"), ({"instances": ["a"]}, "instances"),
     ({"instances": [math.nan]}, "instances"), ({"instances": np.zeros((1, 1), int)}, "instances"),
-    ({"instances": "01"}, "instances")])
+    ({"instances": "01"}, "instances"),
+    # a 0-d array (a TypeError from list() without the check), a set (no order)
+    ({"instances": np.array(1)}, "instances"), ({"instances": {0, 1}}, "instances"),
+    ({"frame": "lab"}, "frame")])
 def test_animate_refuses_bad_frame_rates_sizes_and_instances(tmp_path, keywords, name):
     pytest.importorskip("matplotlib")
     with pytest.raises(ValueError, match=f"^{name} must be"):
         recorded_result().animate(tmp_path / "movie.gif", **keywords)
     assert not list(tmp_path.iterdir())
+
+
+def test_animate_refuses_a_gif_over_50_fps_whatever_the_suffixs_case(tmp_path):
+    pytest.importorskip("matplotlib")
+    with pytest.raises(ValueError, match="^fps must be at most 50 for a GIF"):
+        recorded_result().animate(tmp_path / "movie.GIF", fps=51, instances=[2])
+
+
+def test_animate_refuses_shapes_without_a_topology(tmp_path):
+    import dataclasses
+
+    pytest.importorskip("matplotlib")
+    with pytest.raises(ValueError, match="^animate needs recorded shapes of one topology"):
+        dataclasses.replace(recorded_result(), topology=None).animate(tmp_path / "movie.gif")
+    assert not list(tmp_path.iterdir())
+
+
+def test_animate_draws_the_first_16_instances_by_default(tmp_path, monkeypatch):
+    """instances=None: all, up to 16 (one panel each): 16 of a batch of 17, counted before any
+    figure is made."""
+    pytest.importorskip("matplotlib")
+    from taichi_star import output
+
+    class Drawn(Exception):
+        """Stops the call once the instances are chosen."""
+
+    drawn = []
+
+    def hot(times, *args):  # one call per chosen instance
+        drawn.append(args)
+        return np.zeros((len(times), 8), bool)
+
+    def stop(*args):
+        raise Drawn
+
+    monkeypatch.setattr(output.drawing, "periodic_hot_actuators", hot)
+    monkeypatch.setattr(output, "_fit_heading", stop)
+    with pytest.raises(Drawn):
+        recorded_result(17).animate(tmp_path / "movie.gif")
+    assert len(drawn) == 16
+
+
+def test_replay_refuses_a_node_held_twice():
+    """Every node of every frame of each gait once: a row repeated is refused (with a missing
+    row's check alone the later row won silently)."""
+    from taichi_star import output
+
+    result = recorded_result()
+    shapes, centroid = output.animation_tables(result, ["a", "b"])
+    output.replay(result, shapes, centroid)  # as written: accepted
+    doubled = pd.concat([shapes, shapes.iloc[[3]].assign(x_mm=123.0)], ignore_index=True)
+    with pytest.raises(ValueError, match="^shapes must hold every node of every frame of each "
+                                         "gait once"):
+        output.replay(result, doubled, centroid)
 
 
 @pytest.mark.parametrize("keywords, name", [
