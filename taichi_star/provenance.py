@@ -64,25 +64,34 @@ COMMIT_ID = re.compile(r"[0-9a-f]{40}|[0-9a-f]{64}")
 """A git object name: SHA-1 (40 hex digits) or SHA-256 (64)."""
 
 
-def _installed_commit(root: Path) -> Optional[str]:
-    """The git commit pip recorded for the distribution installed beside the package in `root`
-    (its dist-info's direct_url.json, PEP 610: `vcs_info.commit_id` of an install from a git
-    URL, `pip install git+https://...@REF`), None where there is none (a wheel, a folder, a
-    damaged record). That install is exactly the commit's tree, as far as pip knows."""
-    for distribution in importlib.metadata.distributions(path=[str(root)]):
-        name = (distribution.metadata["Name"] or "").lower().replace("-", "_")
-        if name != "taichi_star":
-            continue
-        try:
-            record = json.loads(distribution.read_text("direct_url.json") or "{}")
-        except (OSError, ValueError):
-            return None
-        vcs = record.get("vcs_info") if isinstance(record, dict) else None
-        if not isinstance(vcs, dict) or vcs.get("vcs") != "git":
-            return None
-        commit = vcs.get("commit_id")
-        return commit if isinstance(commit, str) and COMMIT_ID.fullmatch(commit) else None
-    return None
+def _installed_commit(root: Path, version: str) -> Optional[str]:
+    """The git commit pip recorded for the distribution of this package at `version` installed
+    beside it in `root` (its dist-info's direct_url.json, PEP 610: `vcs_info.commit_id` of an
+    install from a git URL, `pip install git+https://...@REF`), None where there is none (a
+    wheel, a folder, a damaged record) or where it is not the one distribution of that name
+    and version there. An upgrade by `pip install --target` leaves the older version's
+    dist-info beside the new one, and the first listed was taken: the new code recorded as
+    the old commit, clean (a review, 2026-12). That install is exactly the commit's tree, as
+    far as pip knows."""
+    ours = [distribution for distribution in importlib.metadata.distributions(path=[str(root)])
+            if _normalised(distribution.metadata.get("Name") or "") == "taichi_star"
+            and distribution.version == version]
+    if len(ours) != 1:
+        return None
+    try:
+        record = json.loads(ours[0].read_text("direct_url.json") or "{}")
+    except (OSError, ValueError):
+        return None
+    vcs = record.get("vcs_info") if isinstance(record, dict) else None
+    if not isinstance(vcs, dict) or vcs.get("vcs") != "git":
+        return None
+    commit = vcs.get("commit_id")
+    return commit if isinstance(commit, str) and COMMIT_ID.fullmatch(commit) else None
+
+
+def _normalised(name: str) -> str:
+    """A distribution's name as PEP 503 compares names, with "_" for the separators."""
+    return re.sub(r"[-_.]+", "_", name).lower()
 
 
 def code_version() -> Dict[str, object]:
@@ -119,7 +128,7 @@ def code_version() -> Dict[str, object]:
                     digest.update(b"\0untracked\0" + name.encode() + b"\0" + content)
                 changes = digest.hexdigest()
     elif not in_checkout:
-        commit = _installed_commit(root)
+        commit = _installed_commit(root, __version__)
         dirty = False if commit else None
     version = {"version": __version__, "commit": commit, "dirty": dirty}
     return version if changes is None else {**version, "changes_sha256": changes}

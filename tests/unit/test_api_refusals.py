@@ -260,8 +260,8 @@ def test_animate_refuses_shapes_without_a_topology(tmp_path):
 
 
 def test_animate_draws_the_first_16_instances_by_default(tmp_path, monkeypatch):
-    """instances=None: all, up to 16 (one panel each): 16 of a batch of 17, counted before any
-    figure is made."""
+    """instances=None: all, up to 16 (one panel each): 16 of a batch of 17, counted before
+    anything is drawn."""
     pytest.importorskip("matplotlib")
     from taichi_star import output
 

@@ -706,9 +706,9 @@ def test_a_package_inside_another_repository_records_no_commit(tmp_path, monkeyp
     assert provenance.code_version()["commit"] == git(other, "rev-parse", "HEAD")
 
 
-def installed_beside(site, record, name="taichi_star", version="0.1"):
-    """A dist-info of distribution `name` in `site`, with `record` (a dict, a text, or None for
-    none) as its direct_url.json."""
+def installed_beside(site, record, name="taichi_star", version=ts.__version__):
+    """A dist-info of distribution `name` at `version` (default: this package's) in `site`,
+    with `record` (a dict, a text, or None for none) as its direct_url.json."""
     info = site / f"{name}-{version}.dist-info"
     info.mkdir(parents=True)
     (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name.replace('_', '-')}\n"
@@ -756,15 +756,28 @@ def test_a_package_installed_from_a_git_url_records_the_commit_pip_recorded(
                                         "dirty": False if commit else None}
 
 
-def test_another_distributions_git_record_beside_the_package_is_not_its_own(tmp_path,
-                                                                           monkeypatch):
+@pytest.mark.parametrize("beside, commit", [
+    # another distribution's record is not this package's
+    ([(git_record("f" * 40), "other", "1.0")], None),
+    # an upgrade by `pip install --target` leaves the old version's dist-info: its record is
+    # not the new code's (taken when listed first: a review, 2026-12), whichever is listed first
+    ([(git_record("f" * 40), "taichi_star", "0.0.1"), (None, "taichi_star", None)], None),
+    ([(git_record("f" * 40), "taichi_star", "0.0.1")], None),
+    ([(git_record(SHA1), "taichi_star", None), (git_record("f" * 40), "taichi_star", "0.0.1")],
+     SHA1),
+    # the name as PEP 503 compares it
+    ([(git_record(SHA1), "Taichi.Star", None)], SHA1),
+])
+def test_only_this_versions_own_git_record_names_the_commit(tmp_path, monkeypatch, beside,
+                                                            commit):
     site = tmp_path / "site-packages"
     module = site / "taichi_star" / "provenance.py"
     module.parent.mkdir(parents=True)
     module.write_text("# the module\n")
-    installed_beside(site, git_record("f" * 40), name="other", version="1.0")
+    for record, name, version in beside:
+        installed_beside(site, record, name=name, version=version or ts.__version__)
     monkeypatch.setattr(provenance, "__file__", str(module))
-    assert provenance.code_version()["commit"] is None
+    assert provenance.code_version()["commit"] == commit
 
 
 def test_code_version_with_a_damaged_git_index_names_the_commit_but_not_dirtiness(checkout):
