@@ -74,8 +74,7 @@ def _installed_commit(root: Path, version: str) -> Optional[str]:
     the old commit, clean (a review, 2026-12). That install is exactly the commit's tree, as
     far as pip knows."""
     ours = [distribution for distribution in importlib.metadata.distributions(path=[str(root)])
-            if _normalised(distribution.metadata.get("Name") or "") == "taichi_star"
-            and distribution.version == version]
+            if _name_and_version(distribution) == ("taichi_star", version)]
     if len(ours) != 1:
         return None
     try:
@@ -89,9 +88,16 @@ def _installed_commit(root: Path, version: str) -> Optional[str]:
     return commit if isinstance(commit, str) and COMMIT_ID.fullmatch(commit) else None
 
 
-def _normalised(name: str) -> str:
-    """A distribution's name as PEP 503 compares names, with "_" for the separators."""
-    return re.sub(r"[-_.]+", "_", name).lower()
+def _name_and_version(distribution) -> Tuple[str, Optional[str]]:
+    """A distribution's name as PEP 503 compares names ("_" for the separators) and its
+    version; ("", None) for a dist-info without metadata (one a failed uninstall left: newer
+    Pythons give no metadata or raise for a missing field)."""
+    try:
+        metadata = distribution.metadata
+        name, version = metadata.get("Name"), metadata.get("Version")
+    except (AttributeError, KeyError, TypeError, ValueError):
+        return "", None
+    return re.sub(r"[-_.]+", "_", name or "").lower(), version
 
 
 def code_version() -> Dict[str, object]:

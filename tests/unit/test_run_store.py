@@ -767,6 +767,8 @@ def test_a_package_installed_from_a_git_url_records_the_commit_pip_recorded(
      SHA1),
     # the name as PEP 503 compares it
     ([(git_record(SHA1), "Taichi.Star", None)], SHA1),
+    # a dist-info without metadata (a failed uninstall's) beside it is passed over
+    ([(git_record(SHA1), "taichi_star", None), (None, None, None)], SHA1),
 ])
 def test_only_this_versions_own_git_record_names_the_commit(tmp_path, monkeypatch, beside,
                                                             commit):
@@ -775,6 +777,9 @@ def test_only_this_versions_own_git_record_names_the_commit(tmp_path, monkeypatc
     module.parent.mkdir(parents=True)
     module.write_text("# the module\n")
     for record, name, version in beside:
+        if name is None:
+            (site / "taichi_star-9.9.dist-info").mkdir()
+            continue
         installed_beside(site, record, name=name, version=version or ts.__version__)
     monkeypatch.setattr(provenance, "__file__", str(module))
     assert provenance.code_version()["commit"] == commit
