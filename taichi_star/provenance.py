@@ -91,11 +91,13 @@ def _installed_commit(root: Path, version: str) -> Optional[str]:
 def _name_and_version(distribution) -> Tuple[str, Optional[str]]:
     """A distribution's name as PEP 503 compares names ("_" for the separators) and its
     version; ("", None) for a dist-info without metadata (one a failed uninstall left: newer
-    Pythons give no metadata or raise for a missing field)."""
+    Pythons and the importlib_metadata backport, whose finders the stdlib's discovery also
+    asks, give none or raise MetadataNotFound, a FileNotFoundError, or KeyError for a missing
+    field)."""
     try:
         metadata = distribution.metadata
         name, version = metadata.get("Name"), metadata.get("Version")
-    except (AttributeError, KeyError, TypeError, ValueError):
+    except (AttributeError, KeyError, OSError, TypeError, ValueError):
         return "", None
     return re.sub(r"[-_.]+", "_", name or "").lower(), version
 
