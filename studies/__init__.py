@@ -10,6 +10,8 @@ tables and plots), `studies.identify` (parameter boxes and the calibration objec
 """
 
 import pkgutil
+import sys
+from pathlib import Path
 
 HELPERS = ("cli", "provenance", "figures", "identify", "optimise", "__main__")
 """Modules of this package that are not studies."""
@@ -39,6 +41,17 @@ keeps them in its table with the whole summary, NaN where its grid leaves them),
 grids (stability's steps, a fitted or varied period, a --dt) were told "a dt that divides the
 period" gives them, to no purpose (a review, 2026-12): the launcher leaves it unsaid around
 them (`cli.steady_speeds_unread`; a study's `main` called from Python says it)."""
+
+
+def program() -> str:
+    """How the user called the studies: the installed `taichi-star` command, or `python -m
+    studies` in a checkout (`python -m taichi_star.studies` installed): what their usage, their
+    messages and the commands their files record say (an installed package's files recorded
+    `python -m studies`, which it does not have: an audit, 2026-12). Here, in the package's
+    light first module, so that a Ctrl-C while the libraries load is told under it too."""
+    if Path(sys.argv[0]).name == "taichi-star":
+        return "taichi-star"
+    return f"python -m {__package__}"
 
 
 def study_names():

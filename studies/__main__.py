@@ -11,6 +11,8 @@ import threading
 import warnings
 from pathlib import Path
 
+from . import program  # the package's light first module, loaded already: never interrupted
+
 try:
     # taichi_star holds a Ctrl-C back while its libraries load (`interrupts`), and so do the
     # studies while theirs load: raised once they have, never lost nor turned into an ImportError
@@ -25,14 +27,10 @@ try:
         from . import EXTRA_OF_STUDY, STEADY_SPEED_STUDIES, study_names
         from . import cli
         from .cli import StudyArgumentError, StudyOutputError, configure_logging, interrupted
-        from .provenance import program
 except KeyboardInterrupt:
     # Ctrl-C while the libraries load (a second or more): one line, as during a study, not the
     # traceback of pandas' or pyarrow's import (an audit, 2026-12)
-    # provenance.program's rule, written here too: the interrupt may come before it loaded
-    caller = ("taichi-star" if Path(sys.argv[0]).name == "taichi-star"
-              else f"python -m {__package__}")
-    print(f"{caller}: interrupted while loading; nothing was run", file=sys.stderr)
+    print(f"{program()}: interrupted while loading; nothing was run", file=sys.stderr)
     raise SystemExit(130) from None
 
 

@@ -21,6 +21,8 @@ from typing import Dict, Mapping, Optional, Sequence
 from taichi_star.provenance import (code_record, code_version, machine, nvidia_smi,
                                     provenance_json)
 
+from . import program
+
 STARTED = time.monotonic()
 """When the study's process imported this module (the command line imports it first): a
 sidecar's `elapsed_s` counts from here."""
@@ -57,16 +59,6 @@ def shown_argv(argv: Sequence[str]) -> str:
     no strict JSON reader takes (a figure failed with a traceback: an audit, 2026-12), its
     bytes shown as backslash escapes instead."""
     return shlex.join(os.fsencode(word).decode("utf-8", "backslashreplace") for word in argv)
-
-
-def program() -> str:
-    """How the user called the studies: the installed `taichi-star` command, or `python -m
-    studies` in a checkout (`python -m taichi_star.studies` installed): what their usage, their
-    messages and the commands their files record say (an installed package's files recorded
-    `python -m studies`, which it does not have: an audit, 2026-12)."""
-    if Path(sys.argv[0]).name == "taichi-star":
-        return "taichi-star"
-    return f"python -m {__package__}"
 
 
 def record(study: str, argv: Sequence[str], model: Optional[Mapping] = None,

@@ -821,20 +821,20 @@ class Runtime:
         if self.taichi_thread is not None and self.taichi_thread != threading.get_ident():
             raise RuntimeError("release_engines must be called from the thread that started "
                                "Taichi (the first to simulate): it alone may destroy fields")
-        free = sorted((slot for slots in self.engines.values() for slot in slots
-                       if slot is not keep and not slot.held()), key=lambda slot: slot.last_use)
-        kept = sum(slot.engine.arena.nbytes for slot in free)
+        free = sorted(((key, slot) for key, slots in self.engines.items() for slot in slots
+                       if slot is not keep and not slot.held()),
+                      key=lambda entry: entry[1].last_use)
+        kept = sum(slot.engine.arena.nbytes for _, slot in free)
         destroyed = 0
-        for slot in free:
+        for key, slot in free:
             if kept <= budget_bytes:
                 break
             kept -= slot.engine.arena.nbytes
-            for key, slots in list(self.engines.items()):
-                others = [other for other in slots if other is not slot]
-                if others:
-                    self.engines[key] = others
-                else:
-                    del self.engines[key]
+            others = [other for other in self.engines[key] if other is not slot]
+            if others:
+                self.engines[key] = others
+            else:
+                del self.engines[key]
             slot.engine.arena.destroy()
             destroyed += 1
         return destroyed
