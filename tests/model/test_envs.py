@@ -540,12 +540,15 @@ def test_sb3_adapter_resets_in_the_same_step_and_keeps_the_final_observation():
     adapter.reset()  # the refused seed left nothing behind
 
 
-def test_ppo_runs_on_both_paths_without_warnings():
+def test_ppo_runs_on_both_paths_without_warnings(tmp_path, monkeypatch):
     """Optional (stable-baselines3 is not a test dependency; CI installs it where the machine
     keeps a CPU build of torch, .ci/run): PPO collects a rollout of 64 steps and trains on it,
     on the native vector env through `to_sb3` and on SB3's own `make_vec_env` of single envs,
-    with every episode of 4 control periods ending and resetting inside the rollout."""
+    with every episode of 4 control periods ending and resetting inside the rollout. SB3's
+    logger makes its folder even when it logs nothing, in the system's temporary folder unless
+    SB3_LOGDIR names one: each run of the suite left two empty folders in /tmp."""
     pytest.importorskip("stable_baselines3")
+    monkeypatch.setenv("SB3_LOGDIR", str(tmp_path))
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import VecMonitor
@@ -562,6 +565,7 @@ def test_ppo_runs_on_both_paths_without_warnings():
             model = PPO("MlpPolicy", envs, n_steps=n_steps, batch_size=64, n_epochs=1,
                         device="cpu", seed=0)
             model.learn(64)
+            assert model.logger.dir == str(tmp_path)
             assert model.num_timesteps == 64
             # 64 steps of 4-period episodes: every robot's episodes ended and restarted
             assert len(model.ep_info_buffer) == 64 // 4
