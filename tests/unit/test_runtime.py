@@ -1,6 +1,7 @@
 """The runtime's settings that need no engine: the compiler default and its environment
 variable, the offline cache's lock, the arch probe."""
 
+import os
 import subprocess
 import sys
 
@@ -149,3 +150,62 @@ def test_an_exit_that_cannot_write_the_kernel_cache_says_so_in_one_line():
         "taichi_star: Taichi's offline cache was not written (filesystem error: cannot create "
         "directories): the next process compiles its kernels again; TI_OFFLINE_CACHE_FILE_PATH "
         "names a writable folder")
+
+
+def test_a_read_only_cache_folder_is_noted_only_where_it_exists_and_cannot_be_written(
+        tmp_path, monkeypatch):
+    """Taichi loads no kernel from an offline cache folder it cannot lock (a read-only mount:
+    it fails to make the lock file), and the runtime silences the lock message, so a filled
+    read-only cache was used by no run and said by none. Tests run as root in CI, where a
+    chmod does not stop writing: the folder's writability is os.access's answer, patched."""
+    unwritable = {str(tmp_path / "read-only")}
+    real_access = os.access
+    monkeypatch.setattr(runtime.os, "access", lambda path, mode: (
+        False if mode == os.W_OK and str(path) in unwritable else real_access(path, mode)))
+    (tmp_path / "read-only").mkdir()
+    (tmp_path / "writable").mkdir()
+    note = runtime.read_only_cache_note(str(tmp_path / "read-only"))
+    assert note.startswith(f"Taichi's offline cache folder {tmp_path / 'read-only'} cannot be "
+                           f"written")
+    assert "Set TI_OFFLINE_CACHE_FILE_PATH to a writable folder" in note
+    assert runtime.read_only_cache_note(str(tmp_path / "writable")) is None
+    # a folder not made yet: Taichi makes it at exit (or says it could not, `_quiet_exit`)
+    assert runtime.read_only_cache_note(str(tmp_path / "missing")) is None
+
+
+READ_ONLY_CACHE_PROBE = """
+import os, sys, warnings
+folder = sys.argv[1]
+real_access = os.access
+os.access = lambda path, mode: (False if mode == os.W_OK and sys.argv[2] == "read-only"
+                                and str(path) == folder else real_access(path, mode))
+from taichi_star.runtime import Runtime
+warnings.simplefilter("always")
+Runtime.current().ensure("cpu")
+Runtime.current().configure()  # Taichi starts again at the next ensure, opening the cache again
+Runtime.current().ensure("cpu")
+"""
+
+
+@pytest.mark.parametrize("mode", ["read-only", "writable"])
+def test_a_process_says_once_that_its_cache_folder_cannot_be_written(tmp_path, mode):
+    """The note comes at the first start of Taichi in the process, a warning pointing at the
+    caller's line, and not again when Taichi starts again (a `configure`); a writable cache
+    folder gets none."""
+    import os
+
+    script = tmp_path / "probe.py"
+    script.write_text(READ_ONLY_CACHE_PROBE)
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    environment = {**os.environ, "TI_OFFLINE_CACHE_FILE_PATH": str(cache)}
+    run = subprocess.run([sys.executable, str(script), str(cache), mode], env=environment,
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr[-2000:]
+    notes = [line for line in run.stderr.splitlines() if "offline cache folder" in line]
+    if mode == "writable":
+        assert notes == []
+    else:
+        assert len(notes) == 1
+        assert notes[0].startswith(f"{script}:9: RuntimeWarning: Taichi's offline cache folder "
+                                   f"{cache} cannot be written")
