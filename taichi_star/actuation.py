@@ -13,7 +13,6 @@ engine ask its `fire_due` what fires in a step; `command` is the one way in for 
 
 import ast
 import functools
-import math
 from dataclasses import dataclass
 from typing import Dict, Optional, Tuple
 
@@ -21,7 +20,7 @@ import numpy as np
 import taichi as ti
 from taichi.lang.field import Field
 
-from .checks import check_not_subnormal, is_real
+from .checks import check_finite, check_not_subnormal, is_finite_real
 from .fields import FieldStore
 from .gait import N_ACTUATORS
 
@@ -55,15 +54,16 @@ def _logistic(constants, tau):
     return c1 / (1.0 + np.exp(-c2 * (np.asarray(tau, dtype=np.float64) - c3))) + c4
 
 
-def _real_numbers(values) -> bool:
-    """Whether `values` is a sequence of real numbers (NumPy's included), none a bool."""
-    return isinstance(values, (tuple, list, np.ndarray)) and all(is_real(v) for v in values)
+def _finite_numbers(values) -> bool:
+    """Whether `values` is a sequence of real numbers (NumPy's included, none a bool) that
+    floats hold as finite numbers (`is_finite_real`)."""
+    return isinstance(values, (tuple, list, np.ndarray)) and all(is_finite_real(v)
+                                                                 for v in values)
 
 
 def _check_period(period) -> None:
     """ValueError naming period unless it is a finite number > 0 s (0 gave NaN)."""
-    if not (is_real(period) and math.isfinite(period) and period > 0):
-        raise ValueError(f"period must be a finite number > 0 s, got {period!r}")
+    check_finite("period", period, 0.0, unit=" s")
 
 
 @dataclass(frozen=True)
@@ -85,8 +85,9 @@ class CurvatureProfile:
         for name in ("heating", "cooling"):
             given = getattr(self, name)
             # + 0.0: a zero as +0.0, as StarParams' numbers (equal profiles are the same bits)
-            values = tuple(float(v) + 0.0 for v in given) if _real_numbers(given) else ()
-            if len(values) != 4 or not all(math.isfinite(v) for v in values):
+            # checked before float(): 10**400 raised an OverflowError (an audit, 2026-12)
+            values = tuple(float(v) + 0.0 for v in given) if _finite_numbers(given) else ()
+            if len(values) != 4:
                 raise ValueError(f"CurvatureProfile.{name} must be 4 finite numbers, got "
                                  f"{given!r}")
             # as StarParams' fields: one number before Taichi's start and 0 after otherwise;
@@ -94,10 +95,7 @@ class CurvatureProfile:
             for index, value in enumerate(given):
                 check_not_subnormal(f"CurvatureProfile.{name}[{index}]", value)
             object.__setattr__(self, name, values)
-        if not (_real_numbers([self.switch_time]) and math.isfinite(self.switch_time)
-                and self.switch_time > 0):
-            raise ValueError(f"CurvatureProfile.switch_time must be a finite number > 0 s, got "
-                             f"{self.switch_time!r}")
+        check_finite("CurvatureProfile.switch_time", self.switch_time, 0.0, unit=" s")
         check_not_subnormal("CurvatureProfile.switch_time", self.switch_time)
         object.__setattr__(self, "switch_time", float(self.switch_time))
         if not self.rest_curvature > 0:

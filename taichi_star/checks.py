@@ -63,6 +63,20 @@ def is_finite_real(value) -> bool:
         return False
 
 
+def check_finite(name: str, value, lowest: float, lowest_included: bool = False,
+                 unit: str = ""):
+    """ValueError naming `name` unless `value` is a real number (`is_real`) that a float holds
+    as a finite number (`is_finite_real`) above `lowest`, or at it with `lowest_included`;
+    `unit` follows the bound in the message (" s"). Checked without float arithmetic on the
+    value first: math.isfinite(10**400) raised an OverflowError (an audit, 2026-12)."""
+    if is_finite_real(value) and (float(value) >= lowest if lowest_included
+                                  else float(value) > lowest):
+        return
+    relation = ">=" if lowest_included else ">"
+    raise ValueError(f"{name} must be a finite number {relation} {lowest:g}{unit}, got "
+                     f"{shown(value)}")
+
+
 def shown(value) -> str:
     """`value` as an error message shows it: its repr, a number too long to read by its length
     (10**400: "an integer of 401 digits"; a fraction of such numbers: its first characters and

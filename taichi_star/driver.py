@@ -17,7 +17,7 @@ from typing import Callable, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .checks import check_flag, is_finite_real, shown, warn_user
+from .checks import check_finite, check_flag, warn_user
 from .params import SolverConfig
 from .timegrid import (ESTIMATE_ROBOT_STEPS_PER_S, MAX_STEPS_PER_INSTANCE, STEPS_PER_LAUNCH,
                        check_duration, check_steps, check_work, multiples_within, steps_in,
@@ -78,8 +78,7 @@ def fewest_steps(solver: SolverConfig, duration_s: float, record_interval_s: flo
     if not isinstance(solver, SolverConfig):
         raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
     for name, value in (("duration_s", duration_s), ("record_interval_s", record_interval_s)):
-        if not (is_finite_real(value) and float(value) >= 0):
-            raise ValueError(f"{name} must be a finite number >= 0 s, got {shown(value)}")
+        check_finite(name, value, 0.0, lowest_included=True, unit=" s")
     if not solver.adaptive:
         return duration_s / solver.dt, f"dt = {solver.dt:g} s"
     if record_interval_s and record_interval_s < solver.dt_max:

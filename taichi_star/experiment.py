@@ -27,7 +27,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
-from .checks import check_flag, is_real
+from .checks import check_finite, check_flag, is_real
 from .gait import canonical_gait
 
 # every public name: docs/api.md documents the whole module
@@ -149,8 +149,7 @@ def cycle_speeds(t_s: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray,
 
 def _check_period(period_s):
     """ValueError naming period_s unless it is a finite real number > 0 (s)."""
-    if not is_real(period_s) or not (math.isfinite(period_s) and period_s > 0):
-        raise ValueError(f"period_s must be a finite number > 0 s, got {period_s!r}")
+    check_finite("period_s", period_s, 0.0, unit=" s")
 
 
 def experimental_cycle_speeds(period_s: float = EXPERIMENT_PERIOD_S) -> pd.DataFrame:

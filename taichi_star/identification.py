@@ -98,7 +98,7 @@ from typing import Mapping, Optional, Sequence, Tuple
 import numpy as np
 import pandas as pd
 
-from .checks import check_flag, is_real, is_whole
+from .checks import check_finite, check_flag, is_finite_real, is_real, is_whole, shown
 from .experiment import EXPERIMENT_PERIOD_S, PAPER_DIRECTIONS, PAPER_GAITS, experimental_trajectory
 from .gait import Gait
 
@@ -207,8 +207,7 @@ class CentroidPath:
             raise ValueError("t_s, x_mm and y_mm must be 1-D arrays of one length >= 2")
         if np.any(np.diff(arrays[0]) <= 0) or not all(np.isfinite(a).all() for a in arrays):
             raise ValueError("t_s must be strictly increasing and t_s, x_mm, y_mm finite")
-        if not (is_real(self.period_s) and math.isfinite(self.period_s) and self.period_s > 0):
-            raise ValueError(f"period_s must be a finite number > 0, got {self.period_s!r}")
+        check_finite("period_s", self.period_s, 0.0)
         for name, array in zip(("t_s", "x_mm", "y_mm"), arrays):
             object.__setattr__(self, name, array)
 
@@ -624,16 +623,15 @@ def strokes(path: CentroidPath, window_s: float = STROKE_WINDOW_S,
     than one period and one window, or one with a gap between samples longer than the window
     (a period's farthest move would be read across it)."""
     period = path.period_s
-    if not (is_real(window_s) and math.isfinite(window_s) and 0 < window_s <= period / 2):
+    # is_finite_real: math.isfinite(10**400) raised an OverflowError (an audit, 2026-12)
+    if not (is_finite_real(window_s) and 0 < window_s <= period / 2):
         raise ValueError(f"window_s must be in (0, {period / 2:g}] s (half the period), got "
-                         f"{window_s!r}")
-    if not (is_real(tolerance_s) and math.isfinite(tolerance_s)
-            and 0 <= tolerance_s <= period / 2):
+                         f"{shown(window_s)}")
+    if not (is_finite_real(tolerance_s) and 0 <= tolerance_s <= period / 2):
         raise ValueError(f"tolerance_s must be in [0, {period / 2:g}] s (half the period), got "
-                         f"{tolerance_s!r}")
+                         f"{shown(tolerance_s)}")
     from_rest = check_flag("from_rest", from_rest)
-    if not (is_real(min_jump_ratio) and math.isfinite(min_jump_ratio) and min_jump_ratio >= 1):
-        raise ValueError(f"min_jump_ratio must be a finite number >= 1, got {min_jump_ratio!r}")
+    check_finite("min_jump_ratio", min_jump_ratio, 1.0, lowest_included=True)
     if not (is_real(onset_share) and 0 < onset_share < 1):
         raise ValueError(f"onset_share must be in (0, 1), got {onset_share!r}")
     start = path.t_s[0]

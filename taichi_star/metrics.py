@@ -9,13 +9,12 @@ directions from their rest angles. Lengths in mm and times in s in every returne
 
 from __future__ import annotations
 
-import math
 from typing import Dict, Optional, Sequence
 
 import numpy as np
 import pandas as pd
 
-from .checks import is_real
+from .checks import check_finite
 from .gait import Gait
 from .geometry import CENTRE, Topology, edge_curvature
 
@@ -153,8 +152,7 @@ def speed_error(speed_mm_s, reference_mm_s, floor_mm_s: float = SPEED_ERROR_FLOO
     """|v − v_ref| / max(|v_ref|, floor), speeds in mm/s (arrays broadcast; NaN stays NaN).
     The default floor is the design's 0.5 mm/s; floor_mm_s = 0 gives the plain relative error
     |v − v_ref| / |v_ref|. ValueError for a negative or non-finite floor."""
-    if not (is_real(floor_mm_s) and math.isfinite(floor_mm_s) and floor_mm_s >= 0):
-        raise ValueError(f"floor_mm_s must be a finite number >= 0, got {floor_mm_s!r}")
+    check_finite("floor_mm_s", floor_mm_s, 0.0, lowest_included=True)
     reference = np.asarray(reference_mm_s, dtype=np.float64)
     return np.abs(np.asarray(speed_mm_s, dtype=np.float64) - reference) / np.maximum(
         np.abs(reference), floor_mm_s)
@@ -192,8 +190,7 @@ def richardson_limit(middle, fine, order, refinement: float = 2.0):
 def _check_refinement(refinement):
     """ValueError unless the refinement per level is a finite number > 1 (1 gave inf, 0.5 a
     negative order)."""
-    if not (is_real(refinement) and math.isfinite(refinement) and refinement > 1):
-        raise ValueError(f"refinement must be a finite number > 1, got {refinement!r}")
+    check_finite("refinement", refinement, 1.0)
 
 
 # --------------------------------------------------------------------------- shape checks

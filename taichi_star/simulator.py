@@ -37,7 +37,7 @@ import pandas as pd
 from . import metrics
 from . import sensitivities as tangents
 from .actuation import NEVER
-from .checks import check_flag, is_finite_real, shown, warn_user
+from .checks import check_finite, check_flag, is_finite_real, shown, warn_user
 from .driver import (Clock, RunTiming, check_run, drive, fewest_steps, robots_label,
                      shows_progress)
 from .gait import N_ACTUATORS, Gait
@@ -391,8 +391,7 @@ class Simulator(NotCopied):
         the instances still "ok" whose Newton solves first used all max_newton iterations in
         this call (`state()`'s newton_capped; as `simulate` warns: such a result can be far
         off)."""
-        if not (is_finite_real(duration_s) and float(duration_s) > 0):
-            raise ValueError(f"duration_s must be a finite number > 0 s, got {shown(duration_s)}")
+        check_finite("duration_s", duration_s, 0.0, unit=" s")
         # the kind first: an empty text or list, None or False is not 0, and an array has no
         # truth value
         if not (is_finite_real(record_interval_s)

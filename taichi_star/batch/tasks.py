@@ -16,7 +16,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 import pandas as pd
 
-from ..checks import is_finite_real, is_whole, shown, told_by_caller
+from ..checks import check_finite, is_whole, told_by_caller
 from ..driver import Clock, RunTiming, fewest_steps
 from ..geometry import Topology
 from ..model import instances_of
@@ -67,8 +67,7 @@ def _check_duration(duration_s, cycles):
         raise ValueError("give exactly one of duration_s (s, the same for every instance) and "
                          "cycles (actuation periods of each instance)")
     name, value = ("duration_s", duration_s) if duration_s is not None else ("cycles", cycles)
-    if not (is_finite_real(value) and float(value) > 0):
-        raise ValueError(f"{name} must be a finite number > 0, got {shown(value)}")
+    check_finite(name, value, 0.0)
 
 
 def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None, *,

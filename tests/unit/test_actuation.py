@@ -153,7 +153,9 @@ def test_a_numpy_or_integer_switch_time_is_stored_as_a_python_float(switch_time)
 
 @pytest.mark.parametrize("field, value", [
     ("switch_time", True), ("switch_time", "0.1"), ("heating", (True, 1.0, 1.0, 1.0)),
-    ("heating", "1234"), ("cooling", 5.0), ("cooling", (1.0, 2.0, 3.0, np.bool_(True)))])
+    ("heating", "1234"), ("cooling", 5.0), ("cooling", (1.0, 2.0, 3.0, np.bool_(True))),
+    # past a float's range: an OverflowError of float() and math.isfinite (an audit, 2026-12)
+    ("switch_time", 10**400), ("switch_time", -10**400), ("heating", (10**400, 1.0, 1.0, 1.0))])
 def test_bools_text_and_non_sequences_are_refused_naming_the_field(field, value):
     with pytest.raises(ValueError, match=rf"CurvatureProfile\.{field} must be "):
         CurvatureProfile(**{field: value})

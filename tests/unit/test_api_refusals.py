@@ -551,9 +551,10 @@ def test_trajectory_objective_names_a_gait_without_a_phase():
         identification.trajectory_objective({"A1+A2": simulated_run()}, trials, phases={})
 
 
-def test_a_path_period_of_true_is_refused():
+@pytest.mark.parametrize("period", [True, 10**400])
+def test_a_path_period_of_true_or_past_a_floats_range_is_refused(period):
     with pytest.raises(ValueError, match="^period_s must be a finite number > 0"):
-        identification.CentroidPath([0.0, 1.0], [0.0, 1.0], [0.0, 1.0], True)
+        identification.CentroidPath([0.0, 1.0], [0.0, 1.0], [0.0, 1.0], period)
 
 
 @pytest.mark.parametrize("t, x", [
@@ -565,7 +566,8 @@ def test_cycle_speeds_refuses_non_finite_or_shaped_paths(t, x):
         experiment.cycle_speeds(t, x, np.zeros_like(np.asarray(x, dtype=float)), 1.0)
 
 
-@pytest.mark.parametrize("period", ["1", True, math.nan, 0.0, -1.0])
+# 10**400: an integer past a float's range, an OverflowError of math.isfinite (an audit, 2026-12)
+@pytest.mark.parametrize("period", ["1", True, math.nan, 0.0, -1.0, 10**400])
 def test_cycle_speeds_refuses_a_period_that_is_not_a_time(period):
     with pytest.raises(ValueError, match="^period_s must be a finite number > 0 s"):
         experiment.cycle_speeds([0.0, 1.0, 2.0], [0.0, 1.0, 2.0], [0.0, 0.0, 0.0], period)
@@ -616,7 +618,7 @@ def test_experimental_cycle_speeds_needs_two_cycles_of_every_trial():
     assert (experiment.experimental_cycle_speeds(longest)["n_cycles"] >= 2).all()
     with pytest.raises(ValueError, match=rf"^period_s must be in \(0, {longest:g}\] s"):
         experiment.experimental_cycle_speeds(longest * (1 + 1e-6))
-    for period in ("3", True, math.nan):
+    for period in ("3", True, math.nan, 10**400):
         with pytest.raises(ValueError, match="^period_s must be a finite number > 0 s"):
             experiment.experimental_cycle_speeds(period)
 
@@ -722,7 +724,7 @@ def test_gait_transform_accepts_numpy_integers_and_bools_and_any_turn():
     assert Gait.parse("A1").transform(-1, False) == Gait.parse("A1").transform(7, False)
 
 
-@pytest.mark.parametrize("period", [0.0, -1.0, math.nan, math.inf, "3", True])
+@pytest.mark.parametrize("period", [0.0, -1.0, math.nan, math.inf, "3", True, 10**400])
 def test_cycle_curvature_refuses_a_period_that_is_not_a_time(period):
     """period = 0 gave NaN with the ramp closure; closure_gap alone answered every one of
     these (a gap of 0 for 0 s, NumPy read "3" as 3 s and True as 1 s)."""

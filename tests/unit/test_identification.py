@@ -645,10 +645,11 @@ def test_a_weaker_stroke_is_read_where_it_begins_as_a_strong_one():
 
 def test_strokes_refuse_windows_tolerances_and_paths_they_cannot_read():
     path = pulsed_path([0.7], 3.25)
-    for window in (0.0, -0.1, math.nan, np.nextafter(3.15 / 2, 4)):
+    # 10**400: past a float's range, an OverflowError of math.isfinite (an audit, 2026-12)
+    for window in (0.0, -0.1, math.nan, np.nextafter(3.15 / 2, 4), 10**400):
         with pytest.raises(ValueError, match=r"window_s must be in \(0, 1.575\] s"):
             ident.strokes(path, window)
-    for tolerance in (-1e-9, math.nan, 1.6):
+    for tolerance in (-1e-9, math.nan, 1.6, 10**400):
         with pytest.raises(ValueError, match=r"tolerance_s must be in \[0, 1.575\] s"):
             ident.strokes(path, tolerance_s=tolerance)
     with pytest.raises(ValueError, match=r"covers 3.1 s: strokes needs at least one period "
@@ -697,7 +698,7 @@ def test_a_period_has_a_stroke_only_where_its_farthest_move_stands_out():
     assert found.typical_mm == 1.0
     assert np.isfinite(found.cycle_phases_s).tolist() == [True, True, True, False, True]
     assert np.isfinite(ident.strokes(path, window, min_jump_ratio=1.0).cycle_phases_s).all()
-    for ratio in (np.nextafter(1.0, 0.0), math.inf, math.nan, "2"):
+    for ratio in (np.nextafter(1.0, 0.0), math.inf, math.nan, "2", 10**400):
         with pytest.raises(ValueError, match="min_jump_ratio must be a finite number >= 1"):
             ident.strokes(path, window, min_jump_ratio=ratio)
 

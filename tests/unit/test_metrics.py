@@ -953,7 +953,7 @@ def test_a_diverging_ladder_has_no_richardson_limit(order, limit):
         [1.0, 1.0], [1.04, 1.04], [-2.0, 2.0])), [True, False])
 
 
-@pytest.mark.parametrize("refinement", [1.0, 0.5, 0.0, -2.0, np.nan, np.inf, "2"])
+@pytest.mark.parametrize("refinement", [1.0, 0.5, 0.0, -2.0, np.nan, np.inf, "2", 10**400])
 def test_a_refinement_that_refines_nothing_is_refused(refinement):
     """A refinement of 1 gave inf and one of 0.5 a negative order: both helpers take only a
     finite number > 1."""
@@ -1099,7 +1099,7 @@ def test_angles_a_rounding_past_half_a_turn_stay_in_their_range():
     assert metrics.body_rotation(rest.rest_positions, rest.rest_positions, rest.joints) == 0.0
 
 
-@pytest.mark.parametrize("floor", [True, None, "0.5", -1.0, math.nan])
+@pytest.mark.parametrize("floor", [True, None, "0.5", -1.0, math.nan, 10**400])
 def test_a_speed_errors_floor_is_a_number(floor):
     """A bool was taken as a floor of 1, None or text a TypeError: ValueError naming it."""
     with pytest.raises(ValueError, match="^floor_mm_s must be a finite number >= 0"):
