@@ -63,11 +63,11 @@ from taichi.lang import impl
 # import holds Ctrl-C back (`interrupts`)
 import taichi.lang.matrix_ops  # noqa: F401
 
-from .checks import check_flag, warn_user
+from .checks import check_flag, is_whole, warn_user
 from .engine import LOCKSTEP_MINIMUM_BATCH, BatchEngine, elimination_plan
 from .integrators import INTEGRATORS
 from .model import BatchModel, build_model
-from .params import SolverConfig
+from .params import SolverConfig, check_number
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
 __all__ = ["Runtime", "available_archs", "CPU_LANES", "LANES_MINIMUM_WORK", "GPU_BLOCK_DIM",
@@ -91,6 +91,9 @@ def one_call_at_a_time(function):
 MIN_CAPACITY = 64
 PARALLEL_LOOP_MINIMUM = 1024
 """Taichi 1.7's CPU backend parallelises a range-for only from about this many iterations."""
+MAX_CPU_THREADS = 1024
+"""Most CPU threads `configure` gives Taichi: beyond any machine's cores here, a bound only
+against a mistyped number."""
 GPU_BLOCK_DIM = 32
 """Threads (one instance each) per GPU block; chosen by `python -m studies bench --arch gpu`."""
 GPU_INSTANCE_MINOR = True
@@ -572,7 +575,14 @@ class Runtime:
 
     def configure(self, cpu_threads: Optional[int] = None, log_level=None):
         """Settings for the next initialisation (a Dask worker or a worker process calls this
-        before its first simulation); forces a re-initialisation if Taichi is up."""
+        before its first simulation); forces a re-initialisation if Taichi is up.
+        `cpu_threads`: Taichi's CPU threads, an integer in [1, MAX_CPU_THREADS] (None: all
+        cores); ValueError naming it otherwise."""
+        if cpu_threads is not None:
+            # 0 made the first simulation kill the process (SIGFPE), -1 or 2.5 fail inside
+            # Taichi in its words, True count as 1 thread (an audit, 2026-12)
+            cpu_threads = check_number("cpu_threads", cpu_threads, 1, MAX_CPU_THREADS,
+                                       integer=True)
         self.cpu_threads = cpu_threads
         if log_level is not None:
             self.log_level = log_level
@@ -695,10 +705,12 @@ class Runtime:
     def configure_gpu(self, block_dim: int = GPU_BLOCK_DIM, instance_minor: bool = GPU_INSTANCE_MINOR):
         """GPU launch and layout settings of the engines built from now on (for benchmarks that
         compare them; the defaults are the measured best)."""
-        if block_dim < 1 or block_dim > 1024 or block_dim & (block_dim - 1):
-            raise ValueError(f"block_dim must be a power of two in [1, 1024], got {block_dim}")
+        # a bool or a float was taken as a number, a text or 2.0 a TypeError, and
+        # instance_minor="no" switched the layout on (an audit, 2026-12)
+        if not is_whole(block_dim) or not 1 <= block_dim <= 1024 or block_dim & (block_dim - 1):
+            raise ValueError(f"block_dim must be a power of two in [1, 1024], got {block_dim!r}")
         self.gpu_block_dim = int(block_dim)
-        self.gpu_instance_minor = bool(instance_minor)
+        self.gpu_instance_minor = check_flag("instance_minor", instance_minor)
 
     def configure_lanes(self, lanes: Optional[int] = None):
         """Lanes of the CPU engines used from now on: None, the default, where they pay

@@ -10,10 +10,15 @@ from taichi_star.runtime import CPU_CFG_OPTIMISATION, Runtime
 
 
 def test_taichi_runs_without_the_cfg_optimisation_on_the_cpu():
+    """And with the runtime's other settings as configured: the advanced optimisation as
+    `kernel_optimisation` says, and Taichi's warnings shown (the runtime starts Taichi at
+    ERROR, then sets the configured level: a mutation audit, 2026-12, found neither read)."""
     runtime = Runtime.current()
     runtime.ensure("cpu", "f64")
     assert CPU_CFG_OPTIMISATION is False and runtime.cpu_cfg_optimisation is False
     assert ti.lang.impl.current_cfg().cfg_optimization is False
+    assert ti.lang.impl.current_cfg().advanced_optimization is runtime.kernel_optimisation
+    assert ti._logging.is_logging_effective("warn")
 
 
 def test_configure_compiler_sets_both_settings_for_the_next_initialisation():

@@ -5,6 +5,7 @@ import os
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from taichi_star import runtime
@@ -182,8 +183,11 @@ os.access = lambda path, mode: (False if mode == os.W_OK and sys.argv[2] == "rea
 from taichi_star.runtime import Runtime
 warnings.simplefilter("always")
 Runtime.current().ensure("cpu")
-Runtime.current().configure()  # Taichi starts again at the next ensure, opening the cache again
+# Taichi starts again at the next ensure, opening the cache again, with one thread
+Runtime.current().configure(cpu_threads=1)
 Runtime.current().ensure("cpu")
+from taichi.lang import impl
+print("threads", impl.current_cfg().cpu_max_num_threads)
 """
 
 
@@ -202,6 +206,12 @@ def test_a_process_says_once_that_its_cache_folder_cannot_be_written(tmp_path, m
     run = subprocess.run([sys.executable, str(script), str(cache), mode], env=environment,
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr[-2000:]
+    # and what every start does (a mutation audit, 2026-12): the configured threads, Taichi's
+    # "[Taichi] Starting on arch=x64" kept from the output, and a restart by taichi_star itself
+    # not taken for a user's Taichi program
+    assert run.stdout.strip().splitlines()[-1] == "threads 1"
+    assert "Starting on arch" not in run.stdout
+    assert "already started outside" not in run.stderr
     notes = [line for line in run.stderr.splitlines() if "offline cache folder" in line]
     if mode == "writable":
         assert notes == []
@@ -209,3 +219,57 @@ def test_a_process_says_once_that_its_cache_folder_cannot_be_written(tmp_path, m
         assert len(notes) == 1
         assert notes[0].startswith(f"{script}:9: RuntimeWarning: Taichi's offline cache folder "
                                    f"{cache} cannot be written")
+
+
+@pytest.mark.parametrize("threads", [0, -1, 2.5, "4", True, runtime.MAX_CPU_THREADS + 1])
+def test_cpu_threads_are_a_whole_number_from_one(threads):
+    """0 made the first simulation kill the process with SIGFPE; -1, 2.5 and "4" failed inside
+    Taichi in its words; True counted as one thread (a mutation audit, 2026-12)."""
+    with pytest.raises(ValueError, match=rf"^cpu_threads must be an integer in \[1, "
+                                         rf"{runtime.MAX_CPU_THREADS}\], got "):
+        runtime.Runtime().configure(cpu_threads=threads)
+
+
+def test_cpu_threads_take_numpy_integers_and_none_for_every_core():
+    settings = runtime.Runtime()
+    settings.configure(cpu_threads=np.int64(runtime.MAX_CPU_THREADS))
+    assert settings.cpu_threads == runtime.MAX_CPU_THREADS and type(settings.cpu_threads) is int
+    settings.configure()
+    assert settings.cpu_threads is None
+
+
+@pytest.mark.parametrize("block_dim, instance_minor, message", [
+    (1000, True, "block_dim must be a power of two in [1, 1024], got 1000"),
+    (2048, True, "block_dim must be a power of two in [1, 1024], got 2048"),
+    (True, True, "block_dim must be a power of two in [1, 1024], got True"),
+    (32.0, True, "block_dim must be a power of two in [1, 1024], got 32.0"),
+    ("32", True, "block_dim must be a power of two in [1, 1024], got '32'"),
+    (64, "no", "instance_minor must be True or False, got 'no'")])
+def test_gpu_settings_are_refused_naming_the_argument(block_dim, instance_minor, message):
+    """A bool or a float block size was taken as a number, a text one a TypeError, and
+    instance_minor="no" switched the layout on (a mutation audit, 2026-12)."""
+    with pytest.raises(ValueError) as error:
+        runtime.Runtime().configure_gpu(block_dim, instance_minor)
+    assert str(error.value) == message
+
+
+@pytest.mark.parametrize("block_dim", [1, 1024])
+def test_gpu_settings_take_the_ends_of_the_range(block_dim):
+    settings = runtime.Runtime()
+    settings.configure_gpu(np.int64(block_dim), np.bool_(False))
+    assert (settings.gpu_block_dim, settings.gpu_instance_minor) == (block_dim, False)
+
+
+def test_the_calls_held_one_at_a_time_keep_their_names_signatures_and_docstrings():
+    """`one_call_at_a_time` wraps simulate and every Simulator method that uses Taichi: without
+    functools.wraps, help(), the API reference and IDEs would show the wrapper's (a mutation
+    audit, 2026-12)."""
+    import inspect
+
+    import taichi_star as ts
+
+    assert ts.simulate.__name__ == "simulate" and "duration_s" in inspect.signature(
+        ts.simulate).parameters
+    assert ts.Simulator.advance.__name__ == "advance"
+    assert ts.Simulator.advance.__doc__ == ts.Simulator.advance.__wrapped__.__doc__
+    assert ts.Simulator.advance.__doc__.strip()
