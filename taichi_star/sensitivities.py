@@ -361,17 +361,20 @@ def delay_event(params: StarParams, actuator: int, dt: float, commanded: bool = 
                         f"the actuation profile's switch, {profile.switch_time:g} s after the "
                         f"onset, where the fitted curvature jumps by "
                         f"{profile.switch_jump:.2g} 1/m,"))
-    if commanded or duration_s is None:
+    # the run's last step ends on its duration, the grid's (rounded as the drivers do), and
+    # the run fires up to that end: a firing past the duration asked for but inside the last
+    # step happens, and its events were left out (a mutation audit, 2026-12)
+    end = None if duration_s is None else steps_in(duration_s, dt) * dt
+    if commanded or end is None:
         firings = np.zeros(1)
     else:
-        firings = params.period * np.arange(int(np.ceil(duration_s / params.period)) + 1)
-        firings = firings[firings < duration_s]
+        firings = params.period * np.arange(int(np.ceil(end / params.period)) + 1)
+        firings = firings[firings < end]
     found = []
     for offset, what in offsets:
         times = firings + offset
-        if duration_s is not None:
-            # the run's last step ends on its duration (the grid's, rounded as the drivers do)
-            times = times[times <= steps_in(duration_s, dt) * dt * (1 + 1e-12)]
+        if end is not None:
+            times = times[times <= end * (1 + 1e-12)]
         hits = times[on_grid(times, dt)]
         if hits.size:
             found.append((float(hits[0]), what))

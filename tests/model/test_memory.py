@@ -379,3 +379,23 @@ def test_a_streamed_batch_is_cut_into_parts_as_equal_as_whole_robots_allow(monke
     ts.simulate(robots[:2], 0.002, progress=True)
     bars = capsys.readouterr().err
     assert "1 robot, chunk 1/2:" in bars and "1 robot, chunk 2/2:" in bars
+
+
+def test_a_sensitive_batch_is_streamed_by_its_instances_and_replicas(monkeypatch):
+    """A sensitive batch asks for chunks by the instances each robot takes with its replicas
+    (three with one direction), and its chunks' derivatives keep their robots' numbers: the
+    same tables as one call (a mutation audit, 2026-12: neither was tested past
+    `stream_chunk_size`)."""
+    from taichi_star import simulation
+
+    robots = [ts.StarParams(gait=gait, n_arc=6, n_limb=2) for gait in ("A1", "A3")]
+    whole = ts.simulate(robots, 0.004, record_interval_s=0.002, sensitivities=["alpha"])
+    asked = []
+    monkeypatch.setattr(simulation, "stream_chunk_size",
+                        lambda *args: asked.append(args[3]) or 1)  # a robot per chunk
+    streamed = ts.simulate(robots, 0.004, record_interval_s=0.002, sensitivities=["alpha"])
+    assert asked == [3]
+    pd.testing.assert_frame_equal(streamed.sensitivities, whole.sensitivities, check_exact=True)
+    pd.testing.assert_frame_equal(streamed.trajectory_sensitivities,
+                                  whole.trajectory_sensitivities, check_exact=True)
+    assert streamed.trajectory_sensitivities["instance"].tolist() == [0, 0, 0, 1, 1, 1]

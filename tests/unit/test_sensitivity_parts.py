@@ -41,7 +41,7 @@ def test_fields_and_actuator_numbers_become_directions_in_the_order_named():
 
 @pytest.mark.parametrize("name", ["actuator_gains[8]", "actuator_gains[-1]", "actuator_gains[1",
                                   "actuator_gains[]", "actuator_gains[x]", "actuator_gains[ 1]",
-                                  "actuator_gains[12]", "actuator_gains[10]",
+                                  "actuator_gains[12]", "actuator_gains[10]", "actuator_gains[12",
                                   "actuator_gains[01]", "actuator_gains[00]"])
 def test_an_actuator_index_outside_0_to_7_or_not_a_number_is_refused(name):
     with pytest.raises(ValueError) as error:
@@ -285,6 +285,44 @@ def test_a_delays_events_on_the_grid_are_those_of_every_firing(period, delay, dt
             sens.check_directions(directions, [robot], solver, duration_s=0.5)
 
 
+ONSET = "the profile's onset, the delay after a firing,"
+FALLING = dataclasses.replace(CurvatureProfile(), cooling=(94.777, 2.507, 1.019, 4.445 - 200.0))
+"""A profile whose curvature jumps down at the switch (the paper's jumps up)."""
+
+
+@pytest.mark.parametrize("fields, dt, commanded, duration, event", [
+    # a firing past the duration asked for (0.2507 s) but inside the run's last step, which
+    # ends at 0.251 s, happens: its onset on that step end was left out (a mutation audit)
+    (dict(period=0.2507, actuator_delays=(0.0003,) + (0.0,) * 7), 1e-3, False, 0.2507,
+     (0.251, ONSET)),
+    # the default delay of 0 has no onset kink (the delay's range starts there), and t0 is
+    # 32.6 steps of 5 ms: nothing
+    (dict(), 5e-3, False, 0.5, None),
+    # a switch whose curvature falls counts as one that rises: 0.002 + t0 = 33 steps of 5 ms
+    (dict(actuator_delays=(0.002,) + (0.0,) * 7, actuator_profile=FALLING), 5e-3, False, 0.5,
+     (0.165, "switch")),
+    # a Simulator's firing is no period's: a switch past the period still comes
+    (dict(period=0.2, actuator_delays=(0.062,) + (0.0,) * 7), 5e-3, True, None,
+     (0.225, "switch")),
+    # an onset on the run's last step end, the float sum 0.1 + 0.2 past 0.3
+    (dict(actuator_delays=(0.1 + 0.2,) + (0.0,) * 7), 1e-3, False, 0.3, (0.3, ONSET)),
+    # the first event in time, the switch at 0.165 s, not the first kind looked at (the
+    # second firing's onset at 0.255 s)
+    (dict(period=0.253, actuator_delays=(0.002,) + (0.0,) * 7), 5e-3, False, 0.5,
+     (0.165, "switch"))])
+def test_a_delays_first_event_on_the_grid_at_each_boundary(fields, dt, commanded, duration,
+                                                             event):
+    """`delay_event` for A1 of gait A1 at each boundary of its rules (a mutation audit,
+    2026-12, found these unchecked): (time, what) of the first event, None for none."""
+    found = sens.delay_event(BASE.replace(gait="A1", **fields), 0, dt, commanded, duration)
+    if event is None:
+        assert found is None
+    else:
+        assert found[0] == pytest.approx(event[0], rel=1e-12)
+        assert found[1] == event[1] if event[1] == ONSET else found[1].startswith(
+            "the actuation profile's switch")
+
+
 def test_the_replicas_follow_their_instances_as_plus_then_minus_pairs():
     batch = [BASE, BASE.replace(alpha=1.2), BASE.replace(alpha=0.5, drag_perpendicular=3.0)]
     directions = parse_directions(["alpha", "drag_perpendicular"])
@@ -376,8 +414,12 @@ def test_derivatives_are_the_pairs_central_differences_and_angles_go_the_short_w
     linear = sens.derivatives(values, directions, steps, "displacement_x_mm")
     np.testing.assert_array_equal(linear["alpha"], [(1.0 - 0.6) / 0.2, (2.0 - 1.0) / 0.4])
     np.testing.assert_array_equal(linear["drag_perpendicular"], [358.0 / 1.0, -358.0 / 2.0])
-    angles = sens.derivatives(values, directions, steps, "heading_deg")
-    np.testing.assert_allclose(angles["drag_perpendicular"], [-2.0 / 1.0, 2.0 / 2.0], rtol=1e-12)
+    # every angle output, the travel direction too (a robot swimming toward -x crosses
+    # ±180°; the rule tested on heading_deg alone passed with it unwrapped: a mutation audit)
+    for angle in ("heading_deg", "travel_direction_deg"):
+        angles = sens.derivatives(values, directions, steps, angle)
+        np.testing.assert_allclose(angles["drag_perpendicular"], [-2.0 / 1.0, 2.0 / 2.0],
+                                   rtol=1e-12)
     # a trajectory output: one row per instance, the records along the second axis
     records = np.arange(10 * 3, dtype=float).reshape(10, 3)
     by_record = sens.derivatives(records, directions, steps, "x_mm")
