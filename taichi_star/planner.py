@@ -69,8 +69,9 @@ CYCLE_COLUMNS = ["goal", "mode", "cycle", "gait", "x_mm", "y_mm", "heading_deg",
                  "distance_mm", "predicted_x_mm", "predicted_y_mm"]
 """Columns of `drive`'s per-cycle table: the state at the start of cycle `cycle` (so cycle
 c's row holds the result of the c cycles before), the gait fired in it ("none" after the
-controller stopped) and the position the model predicted for this boundary (open loop: from
-the start; closed loop: from the previous boundary)."""
+controller stopped) and the position the model's cycle steps predicted for this boundary
+(open loop: from the start; closed loop: from the previous boundary): a cycle of "none"
+moves nothing there, so after a stop they leave out the glide, which the plans allow for."""
 
 
 ALIGNED_DEG = 45.0

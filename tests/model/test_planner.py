@@ -149,3 +149,48 @@ def test_a_goal_within_the_reach_tolerance_is_refused_and_one_just_past_it_accep
     with pytest.raises(ValueError, match=r"reaches goal 0 \(5 mm"):
         check_drive([[0.0, 5.0]], params, solver, tolerance_mm=5.0)
     assert check_drive([[0.0, 5.000001]], params, solver, tolerance_mm=5.0).shape == (1, 2)
+
+
+def test_controllers_that_stop_at_different_cycles_fire_no_more_and_predict_each_cycle():
+    """Three goals whose controllers stop after 1, 2 and 4 cycles (the committed primitives at
+    dt = 5 ms, measured): a robot whose controller stopped fires nothing while the others go
+    on, is judged settle_cycles after its own stop, and each row's prediction is the model's
+    cycle from the row before (closed loop: from where the robot was; open loop: from the
+    model's own last prediction). The other drive tests stop every controller at once (a
+    mutation audit, 2026-12: firing on after a stop, a firing count, the judging time and the
+    predictions were all unchecked)."""
+    import math
+    from pathlib import Path
+
+    import pandas as pd
+
+    table = pd.read_csv(Path(__file__).resolve().parents[2] / "results" / "primitives.csv")
+    model = PrimitiveModel.from_table(table)
+    settle = 4  # the table's glides span 4 cycles
+    summary, cycles, _ = drive(model, [[40.0, 0.0], [0.0, 60.0], [-150.0, 0.0]],
+                               solver=ts.SolverConfig(dt=5e-3), max_cycles=4,
+                               frames_per_cycle=3, settle_cycles=settle)
+    assert sorted(summary["cycles_fired"]) == [1, 1, 2, 2, 4, 4]
+    for row in summary.itertuples():
+        rows = cycles[(cycles["goal"] == row.goal) & (cycles["mode"] == row.mode)]
+        gaits = rows.sort_values("cycle")["gait"].tolist()
+        fired = row.cycles_fired
+        assert "none" not in gaits[:fired] and set(gaits[fired:]) <= {"none"}
+        assert row.run_cycles == fired + settle
+        assert math.isnan(row.cycles_to_goal) == (not row.reached)
+        # the predictions, cycle by cycle, with the streak the drive keeps
+        index = [model.gaits.index(gait) for gait in gaits]
+        last, streak = np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64)
+        open_position, open_heading = np.zeros((1, 2)), np.zeros(1)
+        ordered = rows.sort_values("cycle")
+        for before, after, choice in zip(ordered.itertuples(), ordered.iloc[1:].itertuples(),
+                                         index):
+            choice = np.array([choice])
+            last, streak = choice, model.next_streak(last, streak, choice)
+            start = (np.array([[before.x_mm, before.y_mm]]), np.radians([before.heading_deg]))
+            closed, _ = model.predict(*start, choice, streak)
+            open_position, open_heading = model.predict(open_position, open_heading, choice,
+                                                        streak)
+            expected = closed if row.mode == "closed" else open_position
+            np.testing.assert_allclose([after.predicted_x_mm, after.predicted_y_mm],
+                                       expected[0], rtol=1e-12, atol=1e-12)

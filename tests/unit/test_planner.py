@@ -495,3 +495,49 @@ def test_drive_is_told_when_it_judges_off_the_tables_glide_horizon(monkeypatch):
             planner.drive(model, [[50.0, 0.0]], settle_cycles=12)
     with pytest.raises(ValueError, match="^glide_cycles must be None or an integer >= 1"):
         PrimitiveModel(["A1"], [(10, 0)], [0.0], glide_cycles=0)
+
+
+def test_closed_loop_gain_counts_goals_and_averages_over_those_both_modes_reached():
+    """Two goals: goal 0 reached by both modes (in 2 and 1 cycles), goal 1 by the closed loop
+    alone. Each figure computed by hand (a mutation audit, 2026-12, found only the refusals
+    tested: `any` for "both reached", the rows counted for the goals, the largest end error
+    for the mean, all survived)."""
+    from taichi_star.planner import closed_loop_gain
+
+    summary = pd.DataFrame({
+        "goal": [0, 0, 1, 1], "mode": ["open", "closed", "open", "closed"],
+        "reached": [True, True, False, True], "final_error_mm": [4.0, 2.0, 30.0, 3.0],
+        "end_error_mm": [1.0, 0.5, 20.0, 1.5], "cycles_to_goal": [2.0, 1.0, math.nan, 5.0]})
+    assert closed_loop_gain(summary) == {
+        "open_reached": 1, "open_mean_error_mm": 17.0, "open_max_error_mm": 30.0,
+        "open_mean_end_error_mm": 10.5,
+        "closed_reached": 2, "closed_mean_error_mm": 2.5, "closed_max_error_mm": 3.0,
+        "closed_mean_end_error_mm": 1.0,
+        "open_mean_cycles_both_reached": 2.0, "closed_mean_cycles_both_reached": 1.0,
+        "goals": 2}
+
+
+@pytest.mark.parametrize("change, message", [
+    (dict(streak_steps_mm=[[[math.nan, 0.0], [1.0, 0.0]]]),
+     "steps_mm, turns_deg, glides_mm and streak_steps_mm must be finite"),
+    (dict(glide_cycles=2.5), "glide_cycles must be None or an integer >= 1, got 2.5"),
+    (dict(glide_cycles=0), "glide_cycles must be None or an integer >= 1, got 0")])
+def test_a_model_refuses_a_non_finite_streak_and_a_fractional_glide_span(change, message):
+    """Each refusal named what it refuses (a mutation audit, 2026-12: a NaN streak step and
+    glide_cycles=2.5, silently 2, passed every test with the check removed)."""
+    arguments = dict(gaits=["A1", "A3"], steps_mm=[[1.0, 0.0], [0.0, 1.0]],
+                     turns_deg=[0.0, 0.0])
+    with pytest.raises(ValueError) as error:
+        PrimitiveModel(**arguments, **change)
+    assert str(error.value) == message
+
+
+@pytest.mark.parametrize("tolerance", [math.inf, 0.0, -1.0, math.nan, True])
+def test_plan_and_choose_refuse_a_tolerance_that_is_no_distance(tolerance):
+    """An infinite tolerance planned to stand still (every goal "reached")."""
+    model = PrimitiveModel(["A1"], [[1.0, 0.0]], [0.0])
+    goal = np.array([[10.0, 0.0]])
+    for call in (lambda: model.plan(goal, tolerance, 3),
+                 lambda: model.choose(np.zeros((1, 2)), np.zeros(1), goal, tolerance)):
+        with pytest.raises(ValueError, match=r"^tolerance_mm must be a number > 0, got "):
+            call()
