@@ -227,10 +227,15 @@ def cycle_displacements(trajectory: pd.DataFrame, period: float) -> pd.DataFrame
         part, cycle_of = part[on_boundary], cycle_of[on_boundary]
         gaps = np.flatnonzero(np.diff(cycle_of) != 1)
         if gaps.size:
-            raise ValueError(f"trajectory: instance {instance} has no record at the cycle "
-                             f"boundary after t = {cycle_of[gaps[0]] * period:g} s (records at "
-                             f"every boundary, each once, are needed: record_interval_s = "
-                             f"period or a divisor of it)")
+            # a boundary recorded twice was said to have no record after it (a mutation
+            # audit, 2026-12)
+            at = cycle_of[gaps[0]] * period
+            what = (f"two records at the cycle boundary t = {at:g} s"
+                    if cycle_of[gaps[0] + 1] == cycle_of[gaps[0]]
+                    else f"no record at the cycle boundary after t = {at:g} s")
+            raise ValueError(f"trajectory: instance {instance} has {what} (records at every "
+                             f"boundary, each once, are needed: record_interval_s = period or "
+                             f"a divisor of it)")
         xy = part[["x_mm", "y_mm"]].to_numpy()
         heading = np.radians(part["heading_deg"].to_numpy())
         # the displacement in the frame the body had when the cycle began

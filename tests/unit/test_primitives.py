@@ -133,6 +133,18 @@ def cycles_of(gait, steps, turns, status="ok"):
                          "rotation_deg": turns, "status": status})
 
 
+def test_a_summary_takes_the_mean_of_its_cycles_not_the_median():
+    """Four steady cycles of 9, 1, 2 and 6 mm and degrees: the mean 4.5, the median 4 (every
+    other test averages at most two cycles, where they agree: a mutation audit, 2026-12)."""
+    from taichi_star.primitives import summarise_cycles
+
+    values = [0.0, 9.0, 1.0, 2.0, 6.0]  # cycle 0 is not counted
+    cycles = cycles_of("A1", [(v, v) for v in values], values).assign(
+        class_representative="A1", symmetry_rotation=0, reflected=False)
+    row = summarise_cycles(cycles, 1, {"A1": ("A1", 0, False, 8)}).iloc[0]
+    assert (row.step_x_mm, row.step_y_mm, row.turn_deg) == (4.5, 4.5, 4.5)
+
+
 def test_expanded_cycles_are_the_sources_turned_and_mirrored():
     """A source's cycles read for an image gait: steps turned by rotation·45° (mirrored first
     when reflected), turns negated when reflected; rows sorted by gait then cycle."""
@@ -212,6 +224,17 @@ def test_the_cycle_helpers_refuse_what_would_read_wrong_cycles():
                                          r"boundary after t = 0 s"):
         cycle_displacements(skipping, 2.0)
     assert cycle_displacements(skipping, 4.0).cycle.tolist() == [0, 1]
+    # a boundary recorded twice is said to be so, not to lack the record after it (its
+    # zero-length "cycle" was taken for a gap: a mutation audit, 2026-12)
+    twice = pd.DataFrame({"instance": 0, "t_s": [0.0, 2.0, 2.0, 4.0], "y_mm": 0.0,
+                          "x_mm": [0.0, 10.0, 10.0, 20.0], "heading_deg": 0.0})
+    with pytest.raises(ValueError, match=r"^trajectory: instance 0 has two records at the "
+                                         r"cycle boundary t = 2 s \(records at every"):
+        cycle_displacements(twice, 2.0)
+    # boundaries written as rounded decimals (k·0.1 s to 10 digits) are each their cycle's
+    decimal = pd.DataFrame({"instance": 0, "t_s": [round(k * 0.1, 10) for k in range(31)],
+                            "x_mm": np.arange(31.0), "y_mm": 0.0, "heading_deg": 0.0})
+    assert cycle_displacements(decimal, 0.1).cycle.tolist() == list(range(30))
     cycles = cycles_of("A1", [(1.0, 0.0), (2.0, 0.0), (3.0, 0.0)], [0.0] * 3).assign(
         class_representative="A1", symmetry_rotation=0, reflected=False)
     sources = {"A1": ("A1", 0, False, 1)}
