@@ -300,3 +300,22 @@ def test_a_measurement_is_checked_at_the_ends_of_its_ranges_before_any_compute()
     with pytest.raises(ValueError, match=r"^period must be a whole number of steps \(dt = 0.001 "
                                          r"s\) to record every cycle boundary, got 3.1505$"):
         check_measurement(base.replace(period=3.1505), solver, cycles=2, first_cycle=1)
+
+
+@pytest.mark.parametrize("base, simulated", [(ts.StarParams(), 29),
+                                             (ts.StarParams.preset("identified"), 255)])
+def test_measuring_simulates_the_classes_or_every_gait_as_the_actuators_say(monkeypatch, base,
+                                                                             simulated):
+    """measure_primitives and measure_glides pass on the sources `actuators_equal` chooses: the
+    identified preset's robot, whose actuators differ, simulates every gait, not its mirror
+    images (either call with the reduced sources hard-coded passed every test: a mutation
+    audit, 2026-12). The measurement itself is replaced: nothing is simulated."""
+    from taichi_star import primitives
+
+    given = []
+    for name in ("primitives_from_sources", "glides_from_sources"):
+        monkeypatch.setattr(primitives, name, lambda base, solver, sources, *rest:
+                            given.append(primitives.simulated_gaits(sources)))
+    primitives.measure_primitives(base, ts.SolverConfig(dt=5e-3), cycles=2)
+    primitives.measure_glides(base, ts.SolverConfig(dt=5e-3), fire_cycles=1, glide_cycles=1)
+    assert [len(gaits) for gaits in given] == [simulated, simulated]
