@@ -4,6 +4,7 @@ resolve the robot, and the public doors of Simulator snapshots: tests that kill 
 hand-made engine mutants (`halvings <= max` → `<`, an under-counted substep_retries, a changed
 Newton stopping rule, a +20 % costlier Newton)."""
 
+import gc
 import math
 import multiprocessing
 import pickle
@@ -212,14 +213,26 @@ def test_a_precision_switch_is_refused_while_a_simulator_lives_and_allowed_once_
     for simulator in (robots, alone):
         simulator.advance(0.02)
     f32 = ts.SolverConfig(precision="f32", newton_tol=1e-7)
-    with pytest.raises(RuntimeError, match=r"2 living Simulator\(s\) \(or environments\) hold "
-                                           r"engines .* \(f64\)"):
+    with pytest.raises(RuntimeError, match=r"^cannot start Taichi for cpu in f32: 2 living "
+                                           r"Simulator\(s\) \(or environments\) hold "
+                                           r"engines .* \(f64\).* or make this run in f64 or "
+                                           r"in another process$"):
         ts.simulate([ts.StarParams()], 0.01, f32)
     for simulator in (robots, alone):
         simulator.advance(0.02)
     pd.testing.assert_frame_equal(robots.state(), alone.state())
-    del robots, alone, simulator  # the loop's name holds the last one too
-    assert ts.simulate([ts.StarParams()], 0.01, f32).summary.status.eq("ok").all()
+    # let go, one of them in a reference cycle that only the collector frees: the runtime
+    # collects before it counts (a mutation audit, 2026-12: its gc.collect was untested)
+    robots.own_cycle = [robots]
+    gc.disable()
+    try:
+        del robots, alone, simulator  # the loop's name holds the last one too
+        with warnings.catch_warnings():
+            # the runtime's own restart is not a user's Taichi program (a mutation audit)
+            warnings.simplefilter("error")
+            assert ts.simulate([ts.StarParams()], 0.01, f32).summary.status.eq("ok").all()
+    finally:
+        gc.enable()
 
 
 def _in_forked_child(work) -> str:
@@ -412,6 +425,13 @@ def test_an_engine_build_stopped_half_way_leaves_the_next_call_a_fresh_start(mon
     del robots
     pd.testing.assert_frame_equal(ts.simulate([ts.StarParams(gait="A1+A2")], 0.05).summary,
                                   before, check_exact=True)
+    # once Taichi has started again the half-way build is history: a later refusal beside a
+    # Simulator gives its own reason (it kept this one: a mutation audit, 2026-12)
+    robots = ts.Simulator([ts.StarParams(gait="A1+A2")])
+    with pytest.raises(RuntimeError) as refusal:
+        ts.simulate([ts.StarParams()], 0.01, ts.SolverConfig(precision="f32", newton_tol=1e-7))
+    assert "stopped half way" not in str(refusal.value)
+    assert "or make this run in f64 or in another process" in str(refusal.value)
 
 
 def test_an_engine_profile_holds_its_engine_while_it_lives():
