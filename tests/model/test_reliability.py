@@ -275,6 +275,10 @@ def test_a_process_forked_after_taichi_started_is_told_to_use_spawn_instead_of_h
         assert refused in message and "'spawn'" in message
     monkeypatch.setattr(Runtime.current(), "arch", None)  # as configure_compiler leaves it
     assert refused in _in_forked_child(lambda: ts.simulate([ts.StarParams()], 0.01))
+    # a runtime that exists but never started Taichi (configured only, e.g. its lanes) leaves
+    # a fork free to start it (a mutation audit, 2026-12: the `started` condition was untested)
+    monkeypatch.setattr(Runtime, "_current", Runtime())
+    assert _in_forked_child(lambda: Runtime.current().check_not_forked()) == "ran"
 
 
 @pytest.mark.skipif(sys.platform != "linux", reason="fork is the start method in question on Linux")
