@@ -32,3 +32,22 @@ def test_the_message_names_the_bound_its_unit_and_the_value_as_shown():
     with pytest.raises(ValueError) as error:
         check_finite("ratio", -10**400, 1.0, lowest_included=True)
     assert str(error.value) == "ratio must be a finite number >= 1, got an integer of 401 digits"
+
+
+def test_a_warning_from_a_file_whose_path_starts_like_the_packages_is_the_callers():
+    """`warn_user` attributes a warning to the first frame outside the package's folder: a
+    user's script beside it whose name starts with the folder's (taichi_star_demo.py) is
+    outside (the folder's path without its separator took it for the package's: a mutation
+    audit, 2026-12)."""
+    import warnings
+
+    from taichi_star.checks import PACKAGE_FOLDER, warn_user
+
+    script = PACKAGE_FOLDER.rstrip("/\\") + "_demo.py"
+    code = compile("def call():\n    warn('told')\n", script, "exec")
+    namespace = {"warn": warn_user}
+    exec(code, namespace)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        namespace["call"]()
+    assert [(w.filename, w.lineno, str(w.message)) for w in caught] == [(script, 2, "told")]
