@@ -779,6 +779,17 @@ def test_a_failed_robot_shows_its_failure_time_ignores_commands_and_has_no_deriv
     sim.load(failed)  # failed again, as saved: ignores them
     sim.fire(["A2", "none"])
     assert np.isnan(sim.state()["since_A2_s"].iloc[0])
+    # a heading's derivative goes the short way round ±180° (state() wraps headings there,
+    # and without the column's name the difference took the long way: a mutation audit,
+    # 2026-12): the replicas of the running robot read 179.9° and -179.9°
+    import pandas as pd
+
+    headings = np.array([0.0, 0.0, 179.9, 179.9, -179.9, -179.9])  # robots, +ε, −ε replicas
+    sim._state_of = lambda count: pd.DataFrame({"heading_deg": headings[:count]})
+    derivative = sim.sensitivity("heading_deg", "alpha")
+    assert np.isnan(derivative[0])
+    assert derivative[1] == pytest.approx(-0.2 / (2 * sim._steps_of_directions[0, 1]),
+                                          rel=1e-9)
 
 
 def test_a_failed_robots_records_are_at_the_record_times_with_nan_as_in_simulate():
