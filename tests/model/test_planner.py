@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import taichi_star as ts
-from taichi_star.metrics import rotate
+from taichi_star.metrics import rotate, wrap_degrees
 from taichi_star.planner import PrimitiveModel, default_goals, drive
 from taichi_star.primitives import (GLIDE_COLUMNS, measure_glides, measure_primitives,
                                     widen_glides)
@@ -81,11 +81,13 @@ def test_glides_per_streak_equal_a_robot_run_alone(quick_glides):
     interact: equal to round-off)."""
     params, solver = ts.StarParams(), ts.SolverConfig(dt=5e-3)
     glides = quick_glides.set_index(["gait", "glide_fire_cycles"])
-    simulator = ts.Simulator([params.replace(gait="none")] * 3, solver)
-    simulator.fire(["A1+A3", "A1+A3", "A1+A7"])
+    # and A1+A2+A4 twice, a gait that turns: its glide in the frame it had when it stopped,
+    # and its turn over the glide (neither was checked: a mutation audit, 2026-12)
+    simulator = ts.Simulator([params.replace(gait="none")] * 4, solver)
+    simulator.fire(["A1+A3", "A1+A3", "A1+A7", "A1+A2+A4"])
     simulator.advance(params.period)
     once = simulator.state()
-    simulator.fire(["none", "A1+A3", "A1+A7"])
+    simulator.fire(["none", "A1+A3", "A1+A7", "A1+A2+A4"])
     simulator.advance(params.period)
     twice = simulator.state()
     simulator.advance(params.period)
@@ -93,12 +95,18 @@ def test_glides_per_streak_equal_a_robot_run_alone(quick_glides):
     columns = ["centroid_x_mm", "centroid_y_mm"]
     for robot, stop, end, key in ((0, once, twice, ("A1+A3", 1)),
                                   (1, twice, after, ("A1+A3", 2)),
-                                  (2, twice, after, ("A1+A7", 2))):
+                                  (2, twice, after, ("A1+A7", 2)),
+                                  (3, twice, after, ("A1+A2+A4", 2))):
         heading = np.radians(stop["heading_deg"].to_numpy()[robot])
         moved = end[columns].to_numpy()[robot] - stop[columns].to_numpy()[robot]
         body = rotate(moved[None], -heading)[0]
         np.testing.assert_allclose(glides.loc[key, ["glide_x_mm", "glide_y_mm"]], body,
                                    rtol=1e-9, atol=1e-9, err_msg=str(key))
+        turn = wrap_degrees(end["heading_deg"].to_numpy()[robot]
+                            - stop["heading_deg"].to_numpy()[robot])
+        assert glides.loc[key, "glide_turn_deg"] == pytest.approx(turn, rel=1e-9, abs=1e-9)
+    assert abs(glides.loc[("A1+A2+A4", 2), "glide_turn_deg"]) > 1e-3  # it does turn
+    assert (quick_glides["glide_cycles"] == 1).all()
     # the robot builds up momentum: a longer glide after two firings than after one
     assert glides.loc[("A1+A3", 2), "glide_mm"] > glides.loc[("A1+A3", 1), "glide_mm"]
 
