@@ -23,16 +23,25 @@ BATCH = [BASE,
          StarParams(gait="A1+A3", alpha=1.3, hub_height=0.05, foam_height=0.02,
                     actuator_height=0.03, joint_stiffness="series"),
          StarParams(gait="A1", joint_radius=0.022, tip_radius=0.05, actuation_ends="shared"),
-         BASE]
-"""Five instances of three rest geometries (the first, third and fifth share one)."""
+         BASE,
+         StarParams(gait="A1", tip_radius=0.05),
+         StarParams(gait="A2", actuator_profile=dataclasses.replace(
+             StarParams().actuator_profile, heating=(-84.827, 62.724, 0.061, 104.040)))]
+"""Seven instances of four rest geometries (the first, third and fifth share one; the second
+and fourth another). The last two differ from the first in one of the rest shape's inputs
+each, the tip radius and the profile's rest curvature: every other instance moved the joint
+and the tip radius together, and a key of the shape without either passed every test (a
+mutation audit, 2026-12: such an instance took another's rest shape, 1.85 mm off)."""
 
 
 def test_instances_of_one_rest_geometry_share_one_topology():
     topologies = InstanceTopologies.of(BATCH)
     assert len(topologies) == len(BATCH)
-    assert len(topologies.distinct) == 2  # the component heights leave the rest shape alone
+    # the component heights leave the rest shape alone
+    assert len(topologies.distinct) == 4
     assert topologies[0] is topologies[2] is topologies[4]
     assert topologies[1] is topologies[3] and topologies[1] is not topologies[0]
+    assert len({id(topologies[b]) for b in (0, 1, 5, 6)}) == 4
 
 
 def test_stack_equals_the_instances_own_topologies_one_by_one():
@@ -60,6 +69,31 @@ def assert_rows_are_their_instances_own(model, batch):
 
 def test_an_instances_model_tables_do_not_depend_on_its_batch():
     assert_rows_are_their_instances_own(build_model(BATCH), BATCH)
+
+
+def test_the_engine_key_tells_apart_batches_whose_terms_are_switched_differently():
+    """A compiled engine is reused for every batch of its key: robots that fire nothing and
+    robots that fire, or a jet along the normal and the plain one, use their terms with other
+    switches and need other engines (with the switches out of the key, an A1+A2 run after a
+    gait "none" one reused its engine and moved -1.5e-14 mm instead of 0.136: a mutation
+    audit, 2026-12). Equal switches share a key, other parameters or not."""
+    def key(**fields):
+        return build_model([StarParams(**fields)]).engine_key
+    assert key(gait="none") != key(gait="A1")
+    assert key(jet_direction="normal") != key()
+    assert key(gait="A1", alpha=1.3) == key(gait="A1")
+
+
+def test_the_memory_of_a_model_counts_each_of_its_arrays():
+    model = build_model(BATCH)
+    arrays = [model.rest_positions, model.mass, model.inertia] + [
+        np.asarray(values) for table in model.coefficients.values() for values in table.values()]
+    assert model.nbytes == sum(array.nbytes for array in arrays)
+
+
+def test_a_batchs_topology_is_its_first_instances():
+    np.testing.assert_array_equal(build_model(BATCH[1:]).topology.rest_positions,
+                                  build_topology(BATCH[1]).rest_positions)
 
 
 def test_a_series_joints_stiffness_comes_from_its_own_rest_shape():
