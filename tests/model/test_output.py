@@ -96,6 +96,17 @@ def test_csv_parquet_and_netcdf_round_trip_with_the_same_provenance(recorded, tm
     assert facts[0]["taichi_star_version"] == ts.__version__
     assert facts[0]["solver"]["dt"] == 2e-3 and facts[0]["solver"]["integrator"] == "euler"
     assert facts[0]["parameters"]["youngs_modulus"] == 5e6  # equal in both robots
+    # an integer parameter stays an integer in every file (it came back as the text '18' with
+    # NumPy's integer left unconverted: a mutation audit, 2026-12)
+    for fact in facts:
+        assert type(fact["parameters"]["n_arc"]) is int and fact["parameters"]["n_arc"] == 18
+    # a result that more than one code version made says which made which chunks
+    versions = [{"code": {"version": "0.0.1"}, "chunks": [0]},
+                {"code": {"version": ts.__version__}, "chunks": [1]}]
+    mixed = dataclasses.replace(recorded, code_versions=versions)
+    for write, name in ((mixed.to_csv, "mixed.csv"), (mixed.to_parquet, "mixed.parquet"),
+                        (mixed.to_netcdf, "mixed.nc")):
+        assert read_provenance(write(tmp_path / name))["code_versions"] == versions, name
     assert set(facts[0]["varying_parameters"]) == {"gait", "alpha", "actuator_profile"}
     assert json.loads(json.dumps(facts[0])) == facts[0]  # plain JSON values
     with pytest.raises(ValueError, match="table"):
@@ -133,6 +144,13 @@ def test_xarray_holds_the_tables_with_units_and_survives_netcdf(recorded, tmp_pa
     np.testing.assert_array_equal(dataset.alpha, [0.8, 0.5])
     assert dataset.speed_mm_s.attrs["units"] == "mm/s"
     assert dataset.youngs_modulus_pa.attrs["units"] == "Pa"
+    # the shapes in metres, the parameters as coordinates, and how the run was made (each
+    # could be dropped or mislabelled unseen: a mutation audit, 2026-12)
+    assert dataset.positions.attrs["units"] == "m"
+    assert "alpha" in dataset.coords and "speed_mm_s" in dataset.data_vars
+    assert (dataset.attrs["dt_s"], dataset.attrs["adaptive"], dataset.attrs["precision"]) == (
+        2e-3, 0, "f64")
+    assert "git_commit" in dataset.attrs and "git_dirty" in dataset.attrs
     last = recorded.trajectory[recorded.trajectory.t_s == recorded.trajectory.t_s.max()]
     np.testing.assert_array_equal(dataset.centroid_x_mm.isel(time=-1), last.x_mm)
     np.testing.assert_array_equal(dataset.positions, recorded.shapes)

@@ -99,7 +99,9 @@ def test_replay_puts_the_tables_read_back_from_csv_into_the_result():
     digits) and the trajectory, NaN after the failure; the summary stays the run's."""
     run = recorded_run()
     written = [pd.read_csv(io.StringIO(table.to_csv(index=False, float_format="%.10g")))
-               for table in animation_tables(run, ["A1", "A1+A2"])]
+               # labels out of sorted order: each instance takes its own label's rows (taken
+               # sorted, instance 0 got instance 1's shapes: a mutation audit, 2026-12)
+               for table in animation_tables(run, ["B", "A"])]
     replayed = replay(run, *written)
     expected = np.round(run.shapes * 1e3, SHAPE_DECIMALS)
     np.testing.assert_array_equal(replayed.shapes * 1e3, expected)
@@ -116,4 +118,4 @@ def test_replay_puts_the_tables_read_back_from_csv_into_the_result():
     with pytest.raises(ValueError, match="^shapes must hold every node of every frame"):
         replay(run, shapes.iloc[1:], centroid)
     with pytest.raises(ValueError, match="^shapes hold 1 gaits, the result 2 instances$"):
-        replay(run, shapes[shapes["gait"] == "A1"], centroid)
+        replay(run, shapes[shapes["gait"] == "B"], centroid)
