@@ -304,8 +304,14 @@ def measurement_table(gaits: Sequence[str] = PAPER_GAITS,
 
 def relative_signed_errors(signed_speeds, measurements: pd.DataFrame) -> np.ndarray:
     """(u_g − s_g v_g) / v_g for simulated signed speeds (..., G) in mm/s, G = the rows of
-    `measurements` in order."""
+    `measurements` in order; ValueError unless the speeds' last axis is G long (one speed was
+    spread over every gait by broadcasting: a mutation audit, 2026-12)."""
     signed_speeds = np.asarray(signed_speeds, dtype=np.float64)
+    gaits = list(measurements.index)
+    if signed_speeds.ndim == 0 or signed_speeds.shape[-1] != len(gaits):
+        raise ValueError(f"signed_speeds must hold one speed per gait of measurements along "
+                         f"its last axis ({len(gaits)}: {', '.join(map(str, gaits))}), got "
+                         f"shape {signed_speeds.shape}")
     target = measurements["target_signed_mm_s"].to_numpy()
     return (signed_speeds - target) / measurements["exp_speed_mm_s"].to_numpy()
 

@@ -412,10 +412,9 @@ def trial_fit(simulated: SimulatedRun, trial: Trial, cycles=TRAINING_CYCLES,
     sim_curves = cycle_curves(simulated.path, 0.0, (first, last), samples)
     if phase_s is None:
         phase_s = align_phase(sim_curves, trial, (first, last), samples)
-    elif not is_real(phase_s) or not (
-            math.isfinite(phase_s) and 0.0 <= phase_s <= latest_phase(trial, cycles)):
+    elif not (is_finite_real(phase_s) and 0.0 <= phase_s <= latest_phase(trial, cycles)):
         raise ValueError(f"phase_s must be in [0, {latest_phase(trial, cycles):g}] s, got "
-                         f"{phase_s!r}")
+                         f"{shown(phase_s)}")
     measured = cycle_curves(trial.path, phase_s, (first, last), samples)
     spread = (math.sqrt(float(np.mean(np.var(measured, axis=0, ddof=1))))
               if len(measured) > 1 else 0.0)
@@ -856,10 +855,10 @@ def trial_rows(simulated: SimulatedRun, derivative_xy: np.ndarray, sigma_mm: flo
 
 def _check_sigma(value, name: str):
     """ValueError naming `name` unless value is a finite number >= DISPLACEMENT_FLOOR_MM."""
-    if not is_real(value) or not (math.isfinite(value) and value >= DISPLACEMENT_FLOOR_MM):
+    if not (is_finite_real(value) and value >= DISPLACEMENT_FLOOR_MM):
         raise ValueError(f"{name} must be a finite number of mm >= DISPLACEMENT_FLOOR_MM = "
                          f"{DISPLACEMENT_FLOOR_MM} (the tracking noise, where a measured "
-                         f"trial's spread is floored), got {value!r}")
+                         f"trial's spread is floored), got {shown(value)}")
 
 
 def trial_residuals(simulated: SimulatedRun, derivative_xy: np.ndarray, trial: Trial,
@@ -897,11 +896,16 @@ def objective_residuals(simulated: Mapping[str, SimulatedRun],
     """The set's objective as a sum of squares: every gait's `trial_residuals` over √(gaits),
     stacked (Σ r² = `objective_of` of the table, the mean of the gaits' objectives), their
     Jacobian (R, P) and the per-gait table. derivatives: gait -> (n_records, 2, P) record
-    derivatives of that gait's run (`record_derivatives`)."""
+    derivatives of that gait's run (`record_derivatives`). ValueError for a failed run (None,
+    as `result_runs` gives it), which has no derivative (`trajectory_objective` scores it inf;
+    here it was an AttributeError: a mutation audit, 2026-12)."""
     rows, residuals, jacobians = [], [], []
     for gait, run in simulated.items():
         if gait not in trials:
             raise ValueError(f"no measured trial for gait {gait!r}; trials: {', '.join(trials)}")
+        if run is None:
+            raise ValueError(f"simulated[{gait!r}] is None (a failed run): it has no "
+                             f"residuals or gradient; trajectory_objective scores it inf")
         fit, residual, jacobian = trial_residuals(
             run, gait_entry(derivatives, gait, "derivatives"), trials[gait], cycles, samples,
             None if phases is None else gait_entry(phases, gait, "phases"))

@@ -40,7 +40,7 @@ from typing import Optional, Sequence
 import numpy as np
 import pandas as pd
 
-from .checks import check_flag, is_real, is_whole, warn_user
+from .checks import check_flag, is_finite_real, is_whole, shown, warn_user
 from .gait import NO_GAIT, Gait
 from .metrics import MAX_GOAL_MM, rotate
 from .params import SolverConfig, StarParams
@@ -424,8 +424,8 @@ def _checked_goals(goals, name: str, count: Optional[int] = None) -> np.ndarray:
 
 
 def _check_tolerance(tolerance_mm):
-    if not is_real(tolerance_mm) or not math.isfinite(tolerance_mm) or tolerance_mm <= 0:
-        raise ValueError(f"tolerance_mm must be a number > 0, got {tolerance_mm!r}")
+    if not is_finite_real(tolerance_mm) or tolerance_mm <= 0:
+        raise ValueError(f"tolerance_mm must be a number > 0, got {shown(tolerance_mm)}")
 
 
 def _counts(values, name: str, count: int) -> np.ndarray:
@@ -456,9 +456,9 @@ def default_goals(distance_mm: float = 50.0, count: int = 8,
     for name, value in (("distance_mm", distance_mm), ("far_mm", far_mm)):
         if name == "far_mm" and value is None:
             continue
-        if not is_real(value) or not (math.isfinite(value) and 0 < value <= MAX_GOAL_MM):
+        if not (is_finite_real(value) and 0 < value <= MAX_GOAL_MM):
             raise ValueError(f"{name} must be a number in (0, {MAX_GOAL_MM:g}] mm"
-                             f"{' or None' if name == 'far_mm' else ''}, got {value!r}")
+                             f"{' or None' if name == 'far_mm' else ''}, got {shown(value)}")
     angles = np.radians(np.arange(count) * 360.0 / count)
     goals = distance_mm * np.stack([np.cos(angles), np.sin(angles)], axis=1)
     return goals if far_mm is None else np.vstack([goals, [[-far_mm, 0.0]]])

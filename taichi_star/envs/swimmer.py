@@ -49,7 +49,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from ..checks import is_real, is_whole
+from ..checks import is_finite_real, is_whole, shown
 from ..extras import require
 from ..gait import N_ACTUATORS
 from .. import drawing, metrics
@@ -105,11 +105,11 @@ class SwimmerTask:
                 ("firing_cost_mm", 0.0, MAX_GOAL_MM, True),
                 ("since_fired_cap_s", 0.0, 1e6, False)):
             value = getattr(self, name)
-            if not is_real(value) or not math.isfinite(value) or value > highest or value < lowest \
+            if not is_finite_real(value) or value > highest or value < lowest \
                     or (value == lowest and not lowest_allowed):
                 bracket = "[" if lowest_allowed else "("
                 raise ValueError(f"{name} must be a number in {bracket}{lowest:g}, {highest:g}], "
-                                 f"got {value!r}")
+                                 f"got {shown(value)}")
             object.__setattr__(self, name, float(value))
         if self.goal_distance_mm <= self.goal_tolerance_mm:
             # every drawn goal would start reached: each episode over at its first step,
@@ -192,7 +192,7 @@ def control_period(params: StarParams, solver: SolverConfig,
     naming duration_s). No compute: a command line checks its input with this before building
     an environment."""
     period = params.period if control_period_s is None else control_period_s
-    if not is_real(period) or not math.isfinite(period) or period <= 0 \
+    if not is_finite_real(period) or period <= 0 \
             or whole_steps(period, solver.dt) is None:
         raise ValueError(f"control_period_s must be a positive whole number of steps "
                          f"(dt = {solver.dt} s), got {control_period_s!r}")

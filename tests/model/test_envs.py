@@ -639,8 +639,14 @@ def test_the_lowest_end_of_each_task_range_is_in_or_out_as_its_bracket_says():
 
 def test_a_control_period_of_zero_and_zero_robots_are_refused():
     """Each refused at 0, its range's open end, before an engine is made."""
-    with pytest.raises(ValueError, match=r"^control_period_s must be a positive whole number"):
-        control_period(COARSE, ts.SolverConfig(dt=5e-3), 0.0)
+    # and past a float's range: an OverflowError of math.isfinite (an audit, 2026-12)
+    for period in (0.0, 10**400):
+        with pytest.raises(ValueError, match=r"^control_period_s must be a positive whole "
+                                             r"number"):
+            control_period(COARSE, ts.SolverConfig(dt=5e-3), period)
+    with pytest.raises(ValueError, match=r"^goal_distance_mm must be a number in \(0, 1000\], "
+                                         r"got an integer of 401 digits$"):
+        SwimmerTask(goal_distance_mm=10**400)
     with pytest.raises(ValueError, match=r"^num_envs must be an integer >= 1, got 0$"):
         StarSwimmerVectorEnv(0, **FAST)
 

@@ -487,7 +487,9 @@ def simulated_run(gait="A1+A2"):
     return identification.SimulatedRun(gait, path, (1.0, 0.0))
 
 
-@pytest.mark.parametrize("phase", ["0", True])
+# -0.5 before the trial's start (its lower bound was untested: a mutation audit); 10**400 past
+# a float's range (an OverflowError of math.isfinite, 2026-12)
+@pytest.mark.parametrize("phase", ["0", True, -0.5, 10**400])
 def test_trial_fit_refuses_a_phase_that_is_not_a_time_in_range(phase):
     trial = identification.measured_trial("A1+A2")
     with pytest.raises(ValueError, match=r"^phase_s must be in \[0, "):

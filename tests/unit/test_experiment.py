@@ -201,3 +201,18 @@ def test_the_modules_example_runs_as_a_doctest():
 
     result = doctest.testmod(experiment)
     assert result.attempted >= 2 and result.failed == 0
+
+
+@pytest.mark.parametrize("speeds", [[[2.85]], 2.85, np.zeros((3, 4)), np.zeros(6)])
+def test_the_objective_takes_one_speed_per_measured_gait(speeds):
+    """One speed was spread over all five gaits by broadcasting (objective 5.0 for [[2.85]]:
+    a mutation audit, 2026-12); a table of the five gaits' speeds per point is scored."""
+    from taichi_star.experiment import measurement_table, objective_values
+
+    table = measurement_table()
+    with pytest.raises(ValueError, match=r"^signed_speeds must hold one speed per gait of "
+                                         r"measurements along its last axis \(5: A1, "):
+        objective_values(speeds, table)
+    # at the measured speeds, each in the paper's direction, every error is 0
+    exact = table["target_signed_mm_s"].to_numpy()
+    np.testing.assert_array_equal(objective_values(np.stack([exact, exact]), table), [0.0, 0.0])

@@ -4,6 +4,7 @@ synthetic paths whose parameter derivatives are known in closed form (no simulat
 sensitivities themselves are tested in tests/model/test_sensitivities.py)."""
 
 import dataclasses
+import math
 import re
 from types import SimpleNamespace
 
@@ -370,3 +371,14 @@ def test_result_runs_drop_instances_whose_status_is_not_ok():
     assert runs[0].path.x_mm.tolist() == t.tolist() and runs[0].path.period_s == 3.15
     # the flagged instance's records alone would have made a run
     assert ident.simulated_runs(trajectory, ["A1+A2"] * 3, [3.15] * 3)[1] is not None
+
+
+def test_a_failed_run_has_no_gradient_and_says_so_naming_its_gait():
+    """`trajectory_objective` scores a failed run (None) inf; the residuals and the gradient
+    of one raised an AttributeError of NoneType (a mutation audit, 2026-12)."""
+    trials = {"A1+A2": measured_trial()}
+    run, derivative = model_path((2.5, 1.2, 0.1))
+    assert ident.objective_of(ident.trajectory_objective({"A1+A2": None}, trials)) == math.inf
+    for call in (ident.objective_residuals, ident.objective_and_gradient):
+        with pytest.raises(ValueError, match=r"^simulated\['A1\+A2'\] is None \(a failed run\)"):
+            call({"A1+A2": None}, {"A1+A2": derivative}, trials)

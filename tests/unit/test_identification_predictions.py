@@ -475,7 +475,7 @@ def test_trial_rows_are_the_cycle_curves_derivatives_over_sigma_and_the_sample_c
 
 
 @pytest.mark.parametrize("sigma", [0.0, -1.0, math.nan, math.inf, "1", True,
-                                   np.nextafter(ident.DISPLACEMENT_FLOOR_MM, 0.0)])
+                                   np.nextafter(ident.DISPLACEMENT_FLOOR_MM, 0.0), 10**400])
 def test_trial_rows_refuse_a_spread_below_the_tracking_floor_or_not_a_number(sigma):
     """A trial's spread is at least the floor `trial_fit` puts under a measured one (exactly
     the floor is allowed: ≥)."""

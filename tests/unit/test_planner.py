@@ -532,7 +532,7 @@ def test_a_model_refuses_a_non_finite_streak_and_a_fractional_glide_span(change,
     assert str(error.value) == message
 
 
-@pytest.mark.parametrize("tolerance", [math.inf, 0.0, -1.0, math.nan, True])
+@pytest.mark.parametrize("tolerance", [math.inf, 0.0, -1.0, math.nan, True, 10**400])
 def test_plan_and_choose_refuse_a_tolerance_that_is_no_distance(tolerance):
     """An infinite tolerance planned to stand still (every goal "reached")."""
     model = PrimitiveModel(["A1"], [[1.0, 0.0]], [0.0])
