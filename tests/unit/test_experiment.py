@@ -216,3 +216,20 @@ def test_the_objective_takes_one_speed_per_measured_gait(speeds):
     # at the measured speeds, each in the paper's direction, every error is 0
     exact = table["target_signed_mm_s"].to_numpy()
     np.testing.assert_array_equal(objective_values(np.stack([exact, exact]), table), [0.0, 0.0])
+
+
+def test_the_cycle_speeds_table_is_the_callers_copy_with_its_sample_spread():
+    """A caller's edit of the table changed the cached one every later call (and the
+    objective's weights) read, and the spread is the sample's (ddof 1); neither was tested (a
+    mutation audit, 2026-12)."""
+    from taichi_star.experiment import cycle_speeds
+
+    table = experimental_cycle_speeds()
+    table.loc["A1+A3", "cycle_speed_std_mm_s"] = 99.0
+    again = experimental_cycle_speeds()
+    assert again.loc["A1+A3", "cycle_speed_std_mm_s"] != 99.0
+    path = experimental_trajectory("A1+A3")
+    speeds = cycle_speeds(path["t_s"].to_numpy(), path["x_mm"].to_numpy(),
+                          path["y_mm"].to_numpy())
+    assert again.loc["A1+A3", "cycle_speed_std_mm_s"] == pytest.approx(np.std(speeds, ddof=1),
+                                                                         rel=1e-12)

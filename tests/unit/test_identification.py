@@ -885,3 +885,14 @@ def test_a_windows_stroke_aligned_phase_does_not_depend_on_how_long_the_simulati
     with pytest.raises(ValueError, match=r"A1\+A2: the simulation's strokes cover 3 periods, "
                                          r"the window ends at cycle 4"):
         ident.stroke_aligned_phase(shorter, trial, (2, 4))
+
+
+def test_residual_count_refuses_no_gaits_and_cycle_curves_a_path_starting_late():
+    """No gaits is no objective (it counted 0 residuals), and a window before a path's first
+    sample was clamped to it silently (both untested: a mutation audit, 2026-12)."""
+    with pytest.raises(ValueError, match=r"^gaits must be an integer >= 1"):
+        ident.residual_count(0)
+    times = np.linspace(0.5, 10.0, 200)
+    late = ident.CentroidPath(times, times, np.zeros_like(times), 3.15)
+    with pytest.raises(ValueError, match=r"^cycles 1-1 from 0 s need the path over"):
+        ident.cycle_curves(late, 0.0, (1, 1))
