@@ -306,9 +306,10 @@ def relative_signed_errors(signed_speeds, measurements: pd.DataFrame) -> np.ndar
     """(u_g − s_g v_g) / v_g for simulated signed speeds (..., G) in mm/s, G = the rows of
     `measurements` in order; ValueError unless the speeds' last axis is G long (one speed was
     spread over every gait by broadcasting: a mutation audit, 2026-12)."""
-    signed_speeds = np.asarray(signed_speeds, dtype=np.float64)
+    # a number alone is the speed of a table of one gait
+    signed_speeds = np.atleast_1d(np.asarray(signed_speeds, dtype=np.float64))
     gaits = list(measurements.index)
-    if signed_speeds.ndim == 0 or signed_speeds.shape[-1] != len(gaits):
+    if signed_speeds.shape[-1] != len(gaits):
         raise ValueError(f"signed_speeds must hold one speed per gait of measurements along "
                          f"its last axis ({len(gaits)}: {', '.join(map(str, gaits))}), got "
                          f"shape {signed_speeds.shape}")

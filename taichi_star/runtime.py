@@ -91,9 +91,9 @@ def one_call_at_a_time(function):
 MIN_CAPACITY = 64
 PARALLEL_LOOP_MINIMUM = 1024
 """Taichi 1.7's CPU backend parallelises a range-for only from about this many iterations."""
-MAX_CPU_THREADS = 1024
-"""Most CPU threads `configure` gives Taichi: beyond any machine's cores here, a bound only
-against a mistyped number."""
+MAX_CPU_THREADS = 4096
+"""Most CPU threads `configure` gives Taichi: above the cores of the largest servers, a bound
+against a mistyped number only."""
 GPU_BLOCK_DIM = 32
 """Threads (one instance each) per GPU block; chosen by `python -m studies bench --arch gpu`."""
 GPU_INSTANCE_MINOR = True
@@ -635,10 +635,6 @@ class Runtime:
                     offline_cache=True, log_level=ti.ERROR, **threads)
             _open_kernel_cache()
         ti.set_logging_level(self.log_level)
-        note = read_only_cache_note(impl.get_runtime().prog.config().offline_cache_file_path)
-        if note is not None and not self.told_read_only_cache:
-            self.told_read_only_cache = True  # once a process: each restart opens it again
-            warn_user(note)
         atexit.unregister(_quiet_exit)
         atexit.register(_quiet_exit)
         self.arch, self.precision = arch, precision
@@ -647,6 +643,13 @@ class Runtime:
         self.taichi_program = impl.get_runtime()
         self.adopted_program = None
         self.started = True
+        # last, once Taichi's start is recorded: a warning raised as an error (a user's
+        # filter) left a started program unrecorded, and every later call was refused as a
+        # user's program (a review, 2026-12)
+        note = read_only_cache_note(impl.get_runtime().prog.config().offline_cache_file_path)
+        if note is not None and not self.told_read_only_cache:
+            self.told_read_only_cache = True  # once a process: each restart opens it again
+            warn_user(note)
 
     def build_here(self):
         """Make this thread the one Taichi builds on, before an engine is built. Taichi builds

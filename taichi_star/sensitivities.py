@@ -320,7 +320,12 @@ def check_directions(directions: Sequence[Direction], params: Sequence[StarParam
             # steps of one length (adaptive ones held at dt_min = dt_max too: an audit,
             # 2026-12): the events of a delay fall on the step grid or not
             dt = solver.dt if not solver.adaptive else solver.dt_max
-            events = [(b, delay_event(p, direction.index, dt, commanded, duration_s))
+            # the run's last step end: fixed steps round the duration to whole steps, as the
+            # drivers do; adaptive ones end on it (a review, 2026-12: rounded, a held adaptive
+            # run was warned of a firing after its end)
+            end_s = (None if duration_s is None else duration_s if solver.adaptive
+                     else steps_in(duration_s, dt) * dt)
+            events = [(b, delay_event(p, direction.index, dt, commanded, end_s))
                       for b, p in enumerate(params)]
             jumping = [(b, event) for b, event in events if event is not None]
             if jumping:
@@ -334,8 +339,9 @@ def check_directions(directions: Sequence[Direction], params: Sequence[StarParam
 
 
 def delay_event(params: StarParams, actuator: int, dt: float, commanded: bool = False,
-                duration_s: Optional[float] = None) -> Optional[Tuple[float, str]]:
-    """(time, s; what) of the first step end, up to `duration_s` (None: no end), at which a run
+                end_s: Optional[float] = None) -> Optional[Tuple[float, str]]:
+    """(time, s; what) of the first step end, up to the run's last one at `end_s` (None: no
+    end; `check_directions` gives the duration as the run makes it), at which a run
     of `params` at steps of dt s has no derivative by the delay d of `actuator` (index k − 1
     for A_k), None where it has none. The actuator must fire: the gait fires it, or with
     `commanded` (a Simulator's run, whose firings are commands at step ends, the gait unread)
@@ -361,20 +367,18 @@ def delay_event(params: StarParams, actuator: int, dt: float, commanded: bool = 
                         f"the actuation profile's switch, {profile.switch_time:g} s after the "
                         f"onset, where the fitted curvature jumps by "
                         f"{profile.switch_jump:.2g} 1/m,"))
-    # the run's last step ends on its duration, the grid's (rounded as the drivers do), and
-    # the run fires up to that end: a firing past the duration asked for but inside the last
-    # step happens, and its events were left out (a mutation audit, 2026-12)
-    end = None if duration_s is None else steps_in(duration_s, dt) * dt
-    if commanded or end is None:
+    # the run fires up to its last step end: a firing past the duration asked for but inside
+    # the last fixed step happens, and its events were left out (a mutation audit, 2026-12)
+    if commanded or end_s is None:
         firings = np.zeros(1)
     else:
-        firings = params.period * np.arange(int(np.ceil(end / params.period)) + 1)
-        firings = firings[firings < end]
+        firings = params.period * np.arange(int(np.ceil(end_s / params.period)) + 1)
+        firings = firings[firings < end_s]
     found = []
     for offset, what in offsets:
         times = firings + offset
-        if end is not None:
-            times = times[times <= end * (1 + 1e-12)]
+        if end_s is not None:
+            times = times[times <= end_s * (1 + 1e-12)]
         hits = times[on_grid(times, dt)]
         if hits.size:
             found.append((float(hits[0]), what))

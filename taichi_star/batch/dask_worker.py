@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import click
 
+from ..runtime import MAX_CPU_THREADS
 from .dask_cluster import prepare_worker
 
 
@@ -20,7 +21,8 @@ from .dask_cluster import prepare_worker
 @click.option("--arch", type=click.Choice(["auto", "cpu", "gpu", "cuda", "vulkan", "metal"]),
               default="auto", show_default=True,
               help="Taichi backend of the chunks this worker runs (auto: the client's)")
-@click.option("--taichi-threads", type=click.IntRange(min=1), default=1, show_default=True,
+@click.option("--taichi-threads", type=click.IntRange(1, MAX_CPU_THREADS), default=1,
+              show_default=True,
               help="Taichi CPU threads in this worker process")
 def dask_setup(worker, arch, taichi_threads):
     prepare_worker(worker, arch=None if arch == "auto" else arch, cpu_threads=taichi_threads)

@@ -179,7 +179,9 @@ def test_controllers_that_stop_at_different_cycles_fire_no_more_and_predict_each
     summary, cycles, _ = drive(model, [[40.0, 0.0], [0.0, 60.0], [-150.0, 0.0]],
                                solver=ts.SolverConfig(dt=5e-3), max_cycles=4,
                                frames_per_cycle=3, settle_cycles=settle)
-    assert sorted(summary["cycles_fired"]) == [1, 1, 2, 2, 4, 4]
+    # 1, 2 and 4 cycles with today's table; a table measured again must still stop the
+    # controllers at different cycles, or the test tests nothing of it
+    assert summary["cycles_fired"].nunique() >= 2
     for row in summary.itertuples():
         rows = cycles[(cycles["goal"] == row.goal) & (cycles["mode"] == row.mode)]
         gaits = rows.sort_values("cycle")["gait"].tolist()

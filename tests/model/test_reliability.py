@@ -431,11 +431,13 @@ def test_an_engine_build_stopped_half_way_leaves_the_next_call_a_fresh_start(mon
                                   before, check_exact=True)
     # once Taichi has started again the half-way build is history: a later refusal beside a
     # Simulator gives its own reason (it kept this one: a mutation audit, 2026-12)
-    robots = ts.Simulator([ts.StarParams(gait="A1+A2")])
+    living = ts.Simulator([ts.StarParams(gait="A1+A2")])
     with pytest.raises(RuntimeError) as refusal:
         ts.simulate([ts.StarParams()], 0.01, ts.SolverConfig(precision="f32", newton_tol=1e-7))
     assert "stopped half way" not in str(refusal.value)
     assert "or make this run in f64 or in another process" in str(refusal.value)
+    living.advance(0.01)  # refused before anything was touched: it goes on
+    assert living.ok.all()
 
 
 def test_an_engine_profile_holds_its_engine_while_it_lives():

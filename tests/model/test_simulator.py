@@ -782,8 +782,6 @@ def test_a_failed_robot_shows_its_failure_time_ignores_commands_and_has_no_deriv
     # a heading's derivative goes the short way round ±180° (state() wraps headings there,
     # and without the column's name the difference took the long way: a mutation audit,
     # 2026-12): the replicas of the running robot read 179.9° and -179.9°
-    import pandas as pd
-
     headings = np.array([0.0, 0.0, 179.9, 179.9, -179.9, -179.9])  # robots, +ε, −ε replicas
     sim._state_of = lambda count: pd.DataFrame({"heading_deg": headings[:count]})
     derivative = sim.sensitivity("heading_deg", "alpha")

@@ -1,5 +1,6 @@
-"""`checks.check_finite`, the one check of "a finite number above a bound" that the public
-functions share: its bound included or not, and numbers a float cannot hold."""
+"""The argument checks the public functions share (`taichi_star.checks`): `check_finite`, the
+one check of "a finite number above a bound" (its bound included or not, numbers a float
+cannot hold), and the caller `warn_user` attributes a warning to."""
 
 import math
 

@@ -216,6 +216,9 @@ def test_the_objective_takes_one_speed_per_measured_gait(speeds):
     # at the measured speeds, each in the paper's direction, every error is 0
     exact = table["target_signed_mm_s"].to_numpy()
     np.testing.assert_array_equal(objective_values(np.stack([exact, exact]), table), [0.0, 0.0])
+    # a table of one gait takes its one speed as a number, as it did
+    one = measurement_table(["A1+A3"])
+    assert objective_values(float(one["target_signed_mm_s"].iloc[0]), one).tolist() == [0.0]
 
 
 def test_the_cycle_speeds_table_is_the_callers_copy_with_its_sample_spread():

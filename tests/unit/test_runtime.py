@@ -56,8 +56,6 @@ def test_a_taken_cache_lock_prints_no_advice_to_clean_the_cache(tmp_path):
     """Another process holding Taichi's offline-cache lock: plain Taichi prints "Lock ...
     failed. Please run 'ti cache clean'" when it opens the cache; taichi_star's runtime opens
     it at log level ERROR and prints nothing (its own private cache: HOME in tmp_path)."""
-    import os
-
     script = tmp_path / "probe.py"
     script.write_text(CACHE_PROBE)
     # the cache under HOME, even where the caller's environment names another cache folder
@@ -82,10 +80,6 @@ def test_a_process_that_exits_leaves_its_kernels_in_the_offline_cache(tmp_path):
     """A process that ran kernels through the runtime and exits without `ti.reset` writes them
     to the offline cache (at 10e264a it wrote nothing: Taichi's program was never finalized at
     exit, and every process compiled every engine again)."""
-    import os
-    import subprocess
-    import sys
-
     script = tmp_path / "probe.py"
     script.write_text(CACHE_PROBE)
     cache = tmp_path / "cache"
@@ -121,10 +115,6 @@ def test_probing_the_archs_prints_nothing_and_keeps_the_logging_level():
 def test_taichi_star_imports_without_home_and_says_what_it_set():
     """Taichi's import aborted the process when HOME was not set (a core dump under cron,
     `env -i` or a systemd unit: an audit, 2026-12); the package sets it first, in one line."""
-    import os
-    import subprocess
-    import sys
-
     environment = {key: value for key, value in os.environ.items() if key != "HOME"}
     run = subprocess.run([sys.executable, "-c",
                           "import taichi_star, os; print(os.environ['HOME'])"],
@@ -181,8 +171,12 @@ real_access = os.access
 os.access = lambda path, mode: (False if mode == os.W_OK and sys.argv[2] == "read-only"
                                 and str(path) == folder else real_access(path, mode))
 from taichi_star.runtime import Runtime
+warnings.simplefilter(sys.argv[3])
+try:
+    Runtime.current().ensure("cpu")
+except RuntimeWarning:  # raised as an error: the next start must still be taichi_star's own
+    print("raised", file=sys.stderr)
 warnings.simplefilter("always")
-Runtime.current().ensure("cpu")
 # Taichi starts again at the next ensure, opening the cache again, with one thread
 Runtime.current().configure(cpu_threads=1)
 Runtime.current().ensure("cpu")
@@ -191,20 +185,22 @@ print("threads", impl.current_cfg().cpu_max_num_threads)
 """
 
 
-@pytest.mark.parametrize("mode", ["read-only", "writable"])
-def test_a_process_says_once_that_its_cache_folder_cannot_be_written(tmp_path, mode):
+@pytest.mark.parametrize("mode, warnings_as", [("read-only", "always"), ("writable", "always"),
+                                               ("read-only", "error")])
+def test_a_process_says_once_that_its_cache_folder_cannot_be_written(tmp_path, mode,
+                                                                   warnings_as):
     """The note comes at the first start of Taichi in the process, a warning pointing at the
     caller's line, and not again when Taichi starts again (a `configure`); a writable cache
-    folder gets none."""
-    import os
-
+    folder gets none. Raised as an error by a user's filter, it leaves Taichi's start
+    recorded: the next start is not taken for a user's program (it was, and every later call
+    was refused: a review, 2026-12)."""
     script = tmp_path / "probe.py"
     script.write_text(READ_ONLY_CACHE_PROBE)
     cache = tmp_path / "cache"
     cache.mkdir()
     environment = {**os.environ, "TI_OFFLINE_CACHE_FILE_PATH": str(cache)}
-    run = subprocess.run([sys.executable, str(script), str(cache), mode], env=environment,
-                         capture_output=True, text=True, timeout=120)
+    run = subprocess.run([sys.executable, str(script), str(cache), mode, warnings_as],
+                         env=environment, capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr[-2000:]
     # and what every start does (a mutation audit, 2026-12): the configured threads, Taichi's
     # "[Taichi] Starting on arch=x64" kept from the output, and a restart by taichi_star itself
@@ -215,9 +211,11 @@ def test_a_process_says_once_that_its_cache_folder_cannot_be_written(tmp_path, m
     notes = [line for line in run.stderr.splitlines() if "offline cache folder" in line]
     if mode == "writable":
         assert notes == []
+    elif warnings_as == "error":
+        assert run.stderr.splitlines().count("raised") == 1 and notes == []
     else:
         assert len(notes) == 1
-        assert notes[0].startswith(f"{script}:9: RuntimeWarning: Taichi's offline cache folder "
+        assert notes[0].startswith(f"{script}:10: RuntimeWarning: Taichi's offline cache folder "
                                    f"{cache} cannot be written")
 
 

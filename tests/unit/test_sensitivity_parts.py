@@ -290,10 +290,10 @@ FALLING = dataclasses.replace(CurvatureProfile(), cooling=(94.777, 2.507, 1.019,
 """A profile whose curvature jumps down at the switch (the paper's jumps up)."""
 
 
-@pytest.mark.parametrize("fields, dt, commanded, duration, event", [
-    # a firing past the duration asked for (0.2507 s) but inside the run's last step, which
-    # ends at 0.251 s, happens: its onset on that step end was left out (a mutation audit)
-    (dict(period=0.2507, actuator_delays=(0.0003,) + (0.0,) * 7), 1e-3, False, 0.2507,
+@pytest.mark.parametrize("fields, dt, commanded, end, event", [
+    # a firing inside the run's last step (at 0.2507 s, the step ending at 0.251 s) happens:
+    # its onset on that step end counts
+    (dict(period=0.2507, actuator_delays=(0.0003,) + (0.0,) * 7), 1e-3, False, 0.251,
      (0.251, ONSET)),
     # the default delay of 0 has no onset kink (the delay's range starts there), and t0 is
     # 32.6 steps of 5 ms: nothing
@@ -310,17 +310,35 @@ FALLING = dataclasses.replace(CurvatureProfile(), cooling=(94.777, 2.507, 1.019,
     # second firing's onset at 0.255 s)
     (dict(period=0.253, actuator_delays=(0.002,) + (0.0,) * 7), 5e-3, False, 0.5,
      (0.165, "switch"))])
-def test_a_delays_first_event_on_the_grid_at_each_boundary(fields, dt, commanded, duration,
+def test_a_delays_first_event_on_the_grid_at_each_boundary(fields, dt, commanded, end,
                                                              event):
     """`delay_event` for A1 of gait A1 at each boundary of its rules (a mutation audit,
-    2026-12, found these unchecked): (time, what) of the first event, None for none."""
-    found = sens.delay_event(BASE.replace(gait="A1", **fields), 0, dt, commanded, duration)
+    2026-12, found these unchecked): (time, what) of the first event up to the run's last
+    step end `end`, None for none."""
+    found = sens.delay_event(BASE.replace(gait="A1", **fields), 0, dt, commanded, end)
     if event is None:
         assert found is None
     else:
         assert found[0] == pytest.approx(event[0], rel=1e-12)
         assert found[1] == event[1] if event[1] == ONSET else found[1].startswith(
             "the actuation profile's switch")
+
+
+def test_a_runs_end_is_its_duration_rounded_to_fixed_steps_and_the_duration_itself_held():
+    """With fixed steps a run of 0.2507 s takes 251 steps of 1 ms and fires at 0.2507 s inside
+    the last: that firing's onset on the step end at 0.251 s is warned of (it was left out:
+    a mutation audit, 2026-12). Adaptive steps held at one length end on the duration: a run
+    of 1.006 s at 10-ms steps never fires at 1.008 s (rounding its end to 1.01 s warned of
+    that firing: a review, 2026-12)."""
+    directions = parse_directions(["actuator_delays[0]"])
+    fixed = BASE.replace(gait="A1", period=0.2507, actuator_delays=(0.0003,) + (0.0,) * 7)
+    with pytest.warns(UserWarning, match=re.escape("on a step end (t = 0.251 s)")):
+        sens.check_directions(directions, [fixed], SolverConfig(dt=1e-3), duration_s=0.2507)
+    held = SolverConfig(dt=0.01, adaptive=True, dt_min=0.01, dt_max=0.01, integrator="bdf2")
+    late = BASE.replace(gait="A1", period=1.008, actuator_delays=(0.002,) + (0.0,) * 7)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sens.check_directions(directions, [late], held, duration_s=1.006)
 
 
 def test_the_replicas_follow_their_instances_as_plus_then_minus_pairs():
