@@ -40,13 +40,14 @@ import numpy as np
 import pandas as pd
 
 from .checks import warn_user
+from .driver import Clock
 from .params import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS, PER_ACTUATOR_FIELDS, STAR_RANGES,
                      SolverConfig, StarParams)
 from .gait import N_ACTUATORS, Gait
 from .metrics import wrap_degrees
 from .model import MASS_FIELDS, build_model
 from .physics import TERMS
-from .timegrid import on_grid, steps_in
+from .timegrid import on_grid
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
 __all__ = ["SUMMARY_OUTPUTS", "TRAJECTORY_OUTPUTS", "RELATIVE_STEP", "FIELD_RELATIVE_STEPS",
@@ -320,11 +321,10 @@ def check_directions(directions: Sequence[Direction], params: Sequence[StarParam
             # steps of one length (adaptive ones held at dt_min = dt_max too: an audit,
             # 2026-12): the events of a delay fall on the step grid or not
             dt = solver.dt if not solver.adaptive else solver.dt_max
-            # the run's last step end: fixed steps round the duration to whole steps, as the
-            # drivers do; adaptive ones end on it (a review, 2026-12: rounded, a held adaptive
-            # run was warned of a firing after its end)
-            end_s = (None if duration_s is None else duration_s if solver.adaptive
-                     else steps_in(duration_s, dt) * dt)
+            # the run's last step end, as its clock has it: fixed steps round the duration to
+            # whole steps, adaptive ones end on it (a review, 2026-12: rounded, a held
+            # adaptive run was warned of a firing after its end)
+            end_s = None if duration_s is None else Clock(solver, duration_s).simulated_s
             events = [(b, delay_event(p, direction.index, dt, commanded, end_s))
                       for b, p in enumerate(params)]
             jumping = [(b, event) for b, event in events if event is not None]
