@@ -88,9 +88,10 @@ def figure_metadata() -> Dict[str, str]:
     """The PNG text entries of a study's figure, as its tables' sidecars name them: study and
     command (of the process's latest `record`; the process's own command line where it made
     none), taichi_star_version, git_commit ("unknown" outside git), git_dirty ("true",
-    "false", "unknown") and for a dirty checkout git_changes_sha256. Inside the PNG, so that a
-    figure copied away from its folder still says what made it (figures carried nothing: an
-    audit); a few git calls, no machine survey."""
+    "false", "unknown"), for a dirty checkout git_changes_sha256 and where no commit is known
+    source_sha256 ("unknown" where a file could not be read). Inside the PNG, so that a figure
+    copied away from its folder still says what made it (figures carried nothing: an audit); a
+    few git calls, no machine survey."""
     code = code_version()
     dirty = {True: "true", False: "false"}.get(code["dirty"], "unknown")
     return {"study": LATEST_STUDY.get("study", ""),
@@ -98,6 +99,8 @@ def figure_metadata() -> Dict[str, str]:
             "taichi_star_version": code["version"], "git_commit": code["commit"] or "unknown",
             "git_dirty": dirty,
             **({"git_changes_sha256": code["changes_sha256"]} if "changes_sha256" in code
+               else {}),
+            **({"source_sha256": code["source_sha256"] or "unknown"} if "source_sha256" in code
                else {})}
 
 

@@ -60,6 +60,38 @@ def _untracked_package_files(root: Path) -> Optional[List[str]]:
                                         if name]
 
 
+def _source_files(root: Path) -> List[Tuple[str, Path]]:
+    """The package's files under `root` (the folder above it) as (path relative to `root`,
+    file), sorted by path: taichi_star/ (an installed package holds its studies there), and
+    for a folder's editable install the studies/ beside it; byte code left out (Python writes
+    it as it imports)."""
+    folders = [root / "taichi_star"]
+    if not (root / "taichi_star" / "studies").is_dir():
+        folders.append(root / "studies")
+    found = []
+    for folder in folders:
+        for where, subfolders, names in os.walk(folder):
+            subfolders[:] = [name for name in subfolders if name != "__pycache__"]
+            found += [(Path(where, name).relative_to(root).as_posix(), Path(where, name))
+                      for name in names if not name.endswith((".pyc", ".pyo"))]
+    return sorted(found)
+
+
+def _source_sha256(root: Path) -> Optional[str]:
+    """The SHA-256 of the package's files (`_source_files`: each file's path, its length and
+    its content, in order of path): what names the code where no commit does (a wheel, a
+    folder's install; two builds of one version were one version, and a run store resumed
+    with the other mixed their chunks unwarned: an audit). None where a file cannot be read."""
+    digest = hashlib.sha256()
+    try:
+        for name, path in _source_files(root):
+            content = path.read_bytes()
+            digest.update(f"{name}\0{len(content)}\0".encode() + content)
+    except OSError:
+        return None
+    return digest.hexdigest()
+
+
 COMMIT_ID = re.compile(r"[0-9a-f]{40}|[0-9a-f]{64}")
 """A git object name: SHA-1 (40 hex digits) or SHA-256 (64)."""
 
@@ -111,8 +143,9 @@ def code_version() -> Dict[str, object]:
     edit of a dirty checkout mixed the two codes' chunks without the warning a version change
     gives; an audit). Outside its own checkout the commit is the one pip recorded where the
     package was installed from a git URL, and clean (`_installed_commit`); otherwise None: a
-    package installed inside another repository records that repository's nothing, a wheel
-    only its own version."""
+    package installed inside another repository records that repository's nothing. Where no
+    commit names the code (a wheel, a folder's install, a checkout without commits),
+    "source_sha256" does: the hash of the package's files (`_source_sha256`)."""
     from . import __version__
     root = Path(__file__).resolve().parents[1]
     commit = dirty = changes = None
@@ -139,6 +172,8 @@ def code_version() -> Dict[str, object]:
         commit = _installed_commit(root, __version__)
         dirty = False if commit else None
     version = {"version": __version__, "commit": commit, "dirty": dirty}
+    if commit is None:
+        version["source_sha256"] = _source_sha256(root)
     return version if changes is None else {**version, "changes_sha256": changes}
 
 
@@ -181,14 +216,15 @@ def local_time() -> str:
 def code_record() -> Dict[str, object]:
     """What made a result, as every sidecar records it (`output.provenance`, the studies'
     `record`): taichi_star_version, git_commit, git_dirty (`code_version`), and for a dirty
-    checkout git_changes_sha256 (which edits of the commit, so that two are told apart);
-    taichi_version, python_version, library_versions (`library_versions`), and the date
-    (`local_time`)."""
+    checkout git_changes_sha256 (which edits of the commit, so that two are told apart), where
+    no commit is known source_sha256 (the hash of the package's files); taichi_version,
+    python_version, library_versions (`library_versions`), and the date (`local_time`)."""
     code = code_version()
     return {"taichi_star_version": code["version"], "git_commit": code["commit"],
             "git_dirty": code["dirty"],
             **({"git_changes_sha256": code["changes_sha256"]} if "changes_sha256" in code
                else {}),
+            **({"source_sha256": code["source_sha256"]} if "source_sha256" in code else {}),
             "taichi_version": taichi_version(), "python_version": platform.python_version(),
             "library_versions": library_versions(), "date": local_time()}
 

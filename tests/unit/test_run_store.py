@@ -580,6 +580,17 @@ def checkout(tmp_path, monkeypatch):
     return root
 
 
+def files_sha256(*files):
+    """The hash `code_version` gives a package of `files` ((path, bytes) pairs, in order of
+    path), written out by hand: each path, the content's length and the content."""
+    return hashlib.sha256(b"".join(f"{name}\0{len(content)}\0".encode() + content
+                                   for name, content in files)).hexdigest()
+
+
+THE_MODULE = files_sha256(("taichi_star/provenance.py", b"# the module\n"))
+"""The hash of a package of one module, "# the module" (the fixtures' provenance.py)."""
+
+
 def test_code_version_names_the_commit_and_whether_tracked_files_changed(checkout):
     git(checkout, "add", "-A")
     git(checkout, "commit", "-q", "-m", "first")
@@ -693,7 +704,8 @@ def test_a_package_inside_another_repository_records_no_commit(tmp_path, monkeyp
     module.parent.mkdir(parents=True)
     module.write_text("# the module\n")
     monkeypatch.setattr(provenance, "__file__", str(module))
-    unknown = {"version": ts.__version__, "commit": None, "dirty": None}
+    unknown = {"version": ts.__version__, "commit": None, "dirty": None,
+               "source_sha256": THE_MODULE}
     assert provenance.code_version() == unknown
     # at their top level but not in their commits (copied in, untracked): not its checkout
     vendored = other / "taichi_star" / "provenance.py"
@@ -752,8 +764,10 @@ def test_a_package_installed_from_a_git_url_records_the_commit_pip_recorded(
     installed_beside(site, record)
     installed_beside(site, git_record("f" * 40), name="other", version="1.0")
     monkeypatch.setattr(provenance, "__file__", str(module))
-    assert provenance.code_version() == {"version": ts.__version__, "commit": commit,
-                                        "dirty": False if commit else None}
+    named = {"version": ts.__version__, "commit": commit, "dirty": False if commit else None}
+    # where no commit names the code, the hash of its files does
+    assert provenance.code_version() == (named if commit else
+                                         {**named, "source_sha256": THE_MODULE})
 
 
 @pytest.mark.parametrize("beside, commit", [
@@ -797,7 +811,7 @@ def test_code_version_with_a_damaged_git_index_names_the_commit_but_not_dirtines
 def test_code_version_of_a_checkout_without_commits_names_none(checkout):
     # there `git rev-parse HEAD` fails yet prints "HEAD"
     assert provenance.code_version() == {"version": ts.__version__, "commit": None,
-                                        "dirty": None}
+                                        "dirty": None, "source_sha256": THE_MODULE}
 
 
 def test_code_version_without_git_names_none(checkout, monkeypatch):
@@ -805,7 +819,43 @@ def test_code_version_without_git_names_none(checkout, monkeypatch):
         raise FileNotFoundError("git")
     monkeypatch.setattr(provenance.subprocess, "run", no_git)
     assert provenance.code_version() == {"version": ts.__version__, "commit": None,
-                                        "dirty": None}
+                                        "dirty": None, "source_sha256": THE_MODULE}
+
+
+def test_without_a_commit_the_hash_of_the_packages_files_names_the_code(tmp_path, monkeypatch):
+    """A wheel or a folder's install recorded its version alone: two builds of one version,
+    or an edited install, were one code, and a run store resumed with the other mixed their
+    chunks unwarned (an audit). The hash covers every file of the package (data too) and, for
+    a folder's install, the studies beside it, not byte code; a package with its own studies
+    (an installed one) leaves a `studies` folder beside it (another distribution's) out; a
+    file that cannot be read gives no hash."""
+    site = tmp_path / "site-packages"
+    module = site / "taichi_star" / "provenance.py"
+    (site / "taichi_star" / "data").mkdir(parents=True)
+    module.write_text("# the module\n")
+    (site / "taichi_star" / "data" / "a.csv").write_bytes(b"t,x\n")
+    (site / "taichi_star" / "__pycache__").mkdir()
+    (site / "taichi_star" / "__pycache__" / "provenance.cpython-311.pyc").write_bytes(b"\0")
+    (site / "taichi_star" / "stale.pyc").write_bytes(b"\1")
+    (site / "studies").mkdir()
+    (site / "studies" / "fig4c.py").write_text("# a study\n")
+    monkeypatch.setattr(provenance, "__file__", str(module))
+    package = [("taichi_star/data/a.csv", b"t,x\n"),
+               ("taichi_star/provenance.py", b"# the module\n")]
+    # a folder's install: the studies beside the package are its code
+    assert provenance.code_version()["source_sha256"] == files_sha256(
+        ("studies/fig4c.py", b"# a study\n"), *package)
+    (site / "taichi_star" / "studies").mkdir()  # an installed package's own studies
+    (site / "taichi_star" / "studies" / "fig4c.py").write_text("# its study\n")
+    installed = files_sha256(*package, ("taichi_star/studies/fig4c.py", b"# its study\n"))
+    assert provenance.code_version()["source_sha256"] == installed
+    (site / "studies" / "fig4c.py").write_text("# someone else's\n")
+    assert provenance.code_version()["source_sha256"] == installed
+    (site / "taichi_star" / "data" / "a.csv").write_bytes(b"t,y\n")  # one byte of data
+    assert provenance.code_version()["source_sha256"] != installed
+    (site / "taichi_star" / "data" / "a.csv").unlink()
+    (site / "taichi_star" / "data" / "a.csv").symlink_to(site / "missing.csv")
+    assert provenance.code_version()["source_sha256"] is None
 
 
 def test_write_atomic_writes_whole_or_leaves_the_previous_file(tmp_path, full_disk):
