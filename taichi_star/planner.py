@@ -40,7 +40,7 @@ from typing import Optional, Sequence
 import numpy as np
 import pandas as pd
 
-from .checks import check_flag, is_finite_real, is_whole, shown, warn_user
+from .checks import check_finite, check_flag, is_finite_real, is_whole, shown, warn_user
 from .gait import NO_GAIT, Gait
 from .metrics import MAX_GOAL_MM, rotate
 from .params import SolverConfig, StarParams
@@ -203,8 +203,8 @@ class PrimitiveModel:
                 if wrong.any():
                     row = table[wrong].iloc[0]
                     value = row[column]
-                    shown = repr(value) if isinstance(value, str) else value  # a text quoted
-                    raise ValueError(f"table: {column} of gait {row['gait']} is {shown}, "
+                    quoted = repr(value) if isinstance(value, str) else value  # a text quoted
+                    raise ValueError(f"table: {column} of gait {row['gait']} is {quoted}, "
                                      f"{what}")
         usable = numbers[kept]
         model = cls(list(table["gait"][kept]), usable[["step_x_mm", "step_y_mm"]].to_numpy(),
@@ -310,7 +310,7 @@ class PrimitiveModel:
         count = len(position_mm)
         heading_rad = _finite_rows(heading_rad, "heading_rad", count, ())
         goal_mm = _checked_goals(goal_mm, "goal_mm", count)
-        _check_tolerance(tolerance_mm)
+        check_finite("tolerance_mm", tolerance_mm, 0, unit=" mm")
         last = np.zeros(count, dtype=np.int64) if last is None else self._indices(last, count)
         streak = (np.ones(count, dtype=np.int64) if streak is None
                   else _counts(streak, "streak", count))
@@ -351,7 +351,7 @@ class PrimitiveModel:
         MAX_GOAL_MM, a tolerance not > 0 or max_cycles not an integer >= 1 (a NaN goal planned
         "stop", a (2,) goal two goals; an audit, 2026-12)."""
         goal_mm = _checked_goals(goal_mm, "goal_mm")
-        _check_tolerance(tolerance_mm)
+        check_finite("tolerance_mm", tolerance_mm, 0, unit=" mm")
         if not is_whole(max_cycles) or max_cycles < 1:
             raise ValueError(f"max_cycles must be an integer >= 1, got {max_cycles!r}")
         max_cycles = int(max_cycles)
@@ -423,11 +423,6 @@ def _checked_goals(goals, name: str, count: Optional[int] = None) -> np.ndarray:
     return goals
 
 
-def _check_tolerance(tolerance_mm):
-    if not is_finite_real(tolerance_mm) or tolerance_mm <= 0:
-        raise ValueError(f"tolerance_mm must be a number > 0, got {shown(tolerance_mm)}")
-
-
 def _counts(values, name: str, count: int) -> np.ndarray:
     """`values` as (count,) integers >= 0; ValueError naming `name` otherwise."""
     array = np.asarray(values)
@@ -490,7 +485,7 @@ def check_drive(goals_mm, params: StarParams, solver: SolverConfig, tolerance_mm
         raise ValueError(f"max_cycles must be an integer >= 1, got {max_cycles!r}")
     if not is_whole(settle_cycles) or settle_cycles < 0:
         raise ValueError(f"settle_cycles must be an integer >= 0, got {settle_cycles!r}")
-    _check_tolerance(tolerance_mm)
+    check_finite("tolerance_mm", tolerance_mm, 0, unit=" mm")
     distances = np.hypot(goals[:, 0], goals[:, 1])
     if (distances <= tolerance_mm).any():
         # reached before the robot moves: a plan of nothing, counted as a success

@@ -412,7 +412,7 @@ def test_plans_and_choices_refuse_what_they_cannot_plan_with():
         with pytest.raises(ValueError, match="^goal_mm must be"):
             model.plan(goal, 0.5, 3)
     for tolerance in (0.0, -1.0, np.nan, "5"):
-        with pytest.raises(ValueError, match="^tolerance_mm must be a number > 0"):
+        with pytest.raises(ValueError, match="^tolerance_mm must be a finite number > 0 mm"):
             model.plan(good, tolerance, 3)
     for cycles in (0, 2.5, True):
         with pytest.raises(ValueError, match="^max_cycles must be an integer >= 1"):
@@ -454,8 +454,8 @@ def test_a_drive_is_checked_at_the_ends_of_its_ranges_before_any_compute():
         (dict(max_cycles=True), "max_cycles must be an integer >= 1, got True"),
         (dict(settle_cycles=-1), "settle_cycles must be an integer >= 0, got -1"),
         (dict(settle_cycles=1.0), "settle_cycles must be an integer >= 0, got 1.0"),
-        (dict(tolerance_mm=0.0), "tolerance_mm must be a number > 0, got 0.0"),
-        (dict(tolerance_mm=math.nan), "tolerance_mm must be a number > 0, got nan"),
+        (dict(tolerance_mm=0.0), "tolerance_mm must be a finite number > 0 mm, got 0.0"),
+        (dict(tolerance_mm=math.nan), "tolerance_mm must be a finite number > 0 mm, got nan"),
         (dict(frames_per_cycle=4), r"period / frames_per_cycle must be a whole number of steps "
                                    r"\(dt = 0.001 s\), got period 3.15 and 4 frames"),
         (dict(params=params.replace(period=3.1505), frames_per_cycle=1), "period / frames"),
@@ -539,7 +539,7 @@ def test_plan_and_choose_refuse_a_tolerance_that_is_no_distance(tolerance):
     goal = np.array([[10.0, 0.0]])
     for call in (lambda: model.plan(goal, tolerance, 3),
                  lambda: model.choose(np.zeros((1, 2)), np.zeros(1), goal, tolerance)):
-        with pytest.raises(ValueError, match=r"^tolerance_mm must be a number > 0, got "):
+        with pytest.raises(ValueError, match=r"^tolerance_mm must be a finite number > 0 mm, got "):
             call()
 
 
