@@ -90,8 +90,10 @@ QUICK_DURATION_S = 0.05
 
 RECORD_SPACING_S = 0.06
 
-PAPER = {"stiffness_factor": 1.0, "alpha": 0.8, "added_mass_coeff": 1.0, "period_s": 3.15}
-"""The paper's parameters within the grid."""
+PAPER = {"stiffness_factor": 1.0, "alpha": StarParams.preset("paper").alpha,
+         "added_mass_coeff": StarParams.preset("paper").added_mass_coeff,
+         "period_s": StarParams.preset("paper").period}
+"""The paper's parameters within the grid (its model's stiffness: a factor of 1)."""
 
 SPEED_FLOOR_MM_S = 0.01
 """Floor of the reference speed in f32-vs-f64 relative differences: the symmetric gaits (A1+A5,

@@ -54,9 +54,9 @@ SOLVER_SETTINGS = {"dt": float, "newton_tol": float, "residual_limit": float,
 """The solver settings the kernels read, with their field types (all SolverConfig attributes of
 the same name but `jacobian_mode`: the position of SolverConfig.jacobian in JACOBIANS)."""
 
-JACOBIAN_NEWTON, JACOBIAN_CHORD, JACOBIAN_LAGGED = (JACOBIANS.index(mode) for mode in
-                                                    ("newton", "chord", "lagged"))
-"""`jacobian_mode` of each SolverConfig.jacobian."""
+JACOBIAN_NEWTON, JACOBIAN_LAGGED = (JACOBIANS.index(mode) for mode in ("newton", "lagged"))
+"""`jacobian_mode` of SolverConfig.jacobian "newton" and "lagged" (the host tests the two; the
+chord's is the kernels' business alone)."""
 
 LAGGED_KEEP_MAX_UPDATES = 2
 """The most updates a converged solve may take for the lagged Jacobian to keep its
@@ -839,6 +839,7 @@ class BatchEngine:
 
     @ti.func
     def copy_instance_backup(self, b, save):
+        """`copy_backup` for instance (or replica) b alone, without its replicas."""
         for term in ti.static(self.terms):
             term.copy_carried(b, save)
         for n in range(self.n_nodes):

@@ -298,7 +298,9 @@ def check_samples(samples) -> int:
 
 
 def tau_grid(period_s: float, samples: int = SAMPLES_PER_CYCLE) -> np.ndarray:
-    """τ = T/M, 2T/M, ..., T (s), M = samples (`check_samples`)."""
+    """τ = T/M, 2T/M, ..., T (s), T = period_s (a finite number > 0), M = samples
+    (`check_samples`)."""
+    check_finite("period_s", period_s, 0.0, unit=" s")
     samples = check_samples(samples)
     return period_s * np.arange(1, samples + 1) / samples
 

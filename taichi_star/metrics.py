@@ -14,7 +14,7 @@ from typing import Dict, Optional, Sequence
 import numpy as np
 import pandas as pd
 
-from .checks import check_finite
+from .checks import check_finite, is_whole
 from .gait import Gait
 from .geometry import CENTRE, Topology, edge_curvature
 
@@ -40,13 +40,29 @@ SPEED_COLUMNS = ("displacement_x_mm", "displacement_y_mm", "speed_mm_s", "signed
 
 
 def centroid(positions: np.ndarray, mass: np.ndarray) -> np.ndarray:
-    """Mass-weighted mean of node positions: positions (..., N, 2), mass (..., N) -> (..., 2)."""
+    """Mass-weighted mean of node positions: positions (..., N, 2), mass (..., N) (leading axes
+    that broadcast against the positions') -> (..., 2). ValueError naming both shapes where
+    they do not fit."""
+    positions, mass = np.asarray(positions), np.asarray(mass)
+    try:
+        fits = (positions.ndim >= 2 and positions.shape[-1] == 2 and mass.ndim >= 1
+                and mass.shape[-1] == positions.shape[-2]
+                and np.broadcast_shapes(positions.shape[:-1], mass.shape) == positions.shape[:-1])
+    except ValueError:
+        fits = False
+    if not fits:
+        raise ValueError(f"positions must be (..., N, 2) and mass (..., N), got positions "
+                         f"{positions.shape} and mass {mass.shape}")
     return (positions * mass[..., None]).sum(-2) / mass.sum(-1)[..., None]
 
 
 def rotate(vectors: np.ndarray, angle_rad) -> np.ndarray:
     """(..., 2) vectors turned counter-clockwise by angle_rad (rad; a scalar or an array that
-    broadcasts against the vectors' leading axes)."""
+    broadcasts against the vectors' leading axes). ValueError where the vectors' last axis is
+    not 2 (a third component was dropped: an audit)."""
+    vectors = np.asarray(vectors)
+    if vectors.ndim < 1 or vectors.shape[-1] != 2:
+        raise ValueError(f"vectors must be (..., 2), got shape {vectors.shape}")
     cos, sin = np.cos(angle_rad), np.sin(angle_rad)
     return np.stack([cos * vectors[..., 0] - sin * vectors[..., 1],
                      sin * vectors[..., 0] + cos * vectors[..., 1]], axis=-1)
@@ -55,9 +71,13 @@ def rotate(vectors: np.ndarray, angle_rad) -> np.ndarray:
 def wrap_degrees(angle, include_180: bool = False):
     """Angles (deg, any shape) wrapped to [-180, 180) (+180 and every odd multiple go to -180),
     or with `include_180` to (-180, 180] (they go to +180: the gaits table's directions, where
-    a gait travelling straight back reads 180); NaN and ±inf give NaN."""
+    a gait travelling straight back reads 180); NaN and ±inf give NaN. ValueError for angles
+    that are not real numbers."""
+    angle = np.asarray(angle)
+    if angle.dtype.kind not in "biuf":
+        raise ValueError(f"angle must be real numbers (deg), got {angle.dtype} values")
     with np.errstate(invalid="ignore"):  # ±inf % 360 is NaN, as documented, not a warning
-        wrapped = (np.asarray(angle) + 180.0) % 360.0 - 180.0
+        wrapped = (angle + 180.0) % 360.0 - 180.0
     # (x + 180) % 360 rounds to 360 for an x a hair below -180 (-180.00000000000003 gave +180;
     # an audit, 2026-12)
     wrapped = np.where(wrapped >= 180.0, wrapped - 360.0, wrapped)
@@ -123,7 +143,11 @@ def cycle_window_speeds(boundary_centroids_m: np.ndarray, periods: np.ndarray, g
     boundary_centroids_m: (B, C + 1, 2) centroid at t = 0, T, ..., C·T (m; NaN where not
     recorded); periods (B,) s. `last` is each instance's last recorded boundary. Returns
     steady_speed_mm_s and steady_signed_speed_mm_s (B,), NaN where fewer than one cycle after
-    first_cycle was recorded."""
+    first_cycle was recorded. ValueError for a first_cycle that is not a whole number >= 0 (-1
+    counted from the end, a speed of 0: an audit)."""
+    if not is_whole(first_cycle) or first_cycle < 0:
+        raise ValueError(f"first_cycle must be a whole number >= 0, got {first_cycle!r}")
+    first_cycle = int(first_cycle)
     batch, n_boundaries = boundary_centroids_m.shape[:2]
     recorded = np.isfinite(boundary_centroids_m).all(axis=2)
     last = np.where(recorded.any(axis=1), n_boundaries - 1 - np.argmax(recorded[:, ::-1], axis=1), -1)

@@ -792,7 +792,8 @@ def check_precision(params, solver: SolverConfig):
     for index, p in enumerate(params):
         floor = F32_TOLERANCE_ROUNDOFFS * F32_UNIT_ROUNDOFF * p.tip_radius
         if solver.newton_tol < floor:
-            advice = (f"use a newton_tol in [{floor:.2g}, 1e-06] m" if floor <= 1e-6
+            highest = SOLVER_RANGES["newton_tol"][1]
+            advice = (f"use a newton_tol in [{floor:.2g}, {highest:g}] m" if floor <= highest
                       else "use precision 'f64'")
             raise ValueError(
                 f"newton_tol must be >= {floor:.2g} m with precision 'f32' for params[{index}] "

@@ -23,7 +23,7 @@ import taichi as ti
 
 from .checks import is_whole
 from .model import build_model, validate_batch
-from .params import SolverConfig, StarParams, check_precision
+from .params import PRECISIONS, SolverConfig, StarParams, check_precision
 from .runtime import Runtime, check_arch, one_call_at_a_time
 from .state import STATUS_OK
 from .timegrid import STEPS_PER_LAUNCH, check_work
@@ -62,8 +62,8 @@ def _profile_phases(engine: ti.template(), phases: ti.i32, calls: ti.i32, time_s
     otherwise). Changes the terms' step histories (not the positions). The instances (groups)
     are spread over the loop as the engine's own step spreads them (`slot_instance`,
     `slot_group`), so that the profile runs on as many cores as the step it splits."""
-    ti.loop_config(block_dim=engine.instances_per_block)
     jacobian = 1 if phases >= 1 else 0
+    ti.loop_config(block_dim=engine.instances_per_block)
     for slot in range(engine.capacity * engine.loop_spread):
         inertia_scale, rate_gain = engine.integrator.weights(engine.dt[None], 1.0, 0)
         if ti.static(engine.lanes > 1):
@@ -367,7 +367,14 @@ def interleaved_rounds(calls: Sequence[Callable[[], object]], rounds: int,
 def matmul_gflops(size: int, precision: str, rng: np.random.Generator) -> float:
     """NumPy's size × size matrix product in precision ("f64" or "f32"), GFLOP/s (best of 3, of
     random normal matrices from `rng`): the machine's attainable floating-point rate, the
-    reference a benchmark sets its kernels' GFLOP/s against."""
+    reference a benchmark sets its kernels' GFLOP/s against. ValueError for a size that is not
+    a whole number >= 1 or another precision (f16 ran in f32, a size of 0 gave 0 GFLOP/s: an
+    audit)."""
+    if not is_whole(size) or size < 1:
+        raise ValueError(f"size must be a whole number >= 1, got {size!r}")
+    if not isinstance(precision, str) or precision not in PRECISIONS:
+        raise ValueError(f"precision must be one of {list(PRECISIONS)}, got {precision!r}")
+    size = int(size)
     dtype = np.float64 if precision == "f64" else np.float32
     a, b = (rng.standard_normal((size, size)).astype(dtype) for _ in range(2))
     best = math.inf

@@ -14,8 +14,8 @@ import pytest
 
 import taichi_star as ts
 from taichi_star import timegrid
-from taichi_star import (CurvatureProfile, experiment, identification, planner, primitives,
-                         profiling, runtime)
+from taichi_star import (CurvatureProfile, experiment, identification, metrics, planner,
+                         primitives, profiling, runtime)
 from taichi_star.batch import MAX_LOCAL_WORKERS, LocalProcesses, executor_for, run_batch
 from taichi_star.gait import Gait
 from taichi_star.geometry import build_topology
@@ -887,3 +887,57 @@ def test_the_public_step_helpers_keep_their_answers_at_their_edges():
     # a Python float whatever the argument types (np.int64 count gave np.float64)
     interval = timegrid.interval_for_count(1.0, np.int64(7), 1e-3)
     assert type(interval) is float and interval == 142 * 1e-3
+
+
+@pytest.mark.parametrize("call, match", [
+    # -1 indexed the last boundary and gave a speed of 0
+    (lambda: metrics.cycle_window_speeds(ONE_CYCLE, [1.0], ["A1"], -1),
+     r"^first_cycle must be a whole number >= 0, got -1$"),
+    (lambda: metrics.cycle_window_speeds(ONE_CYCLE, [1.0], ["A1"], 0.5),
+     r"^first_cycle must be a whole number >= 0, got 0.5$"),
+    # a grid of negative times
+    (lambda: identification.tau_grid(-1.0), r"^period_s must be a finite number > 0 s, got -1"),
+    (lambda: identification.tau_grid(0.0), r"^period_s must be a finite number > 0 s, got 0"),
+    (lambda: identification.tau_grid(math.nan), r"^period_s must be a finite number > 0 s"),
+    # 0 GFLOP/s; f16 ran in f32
+    (lambda: profiling.matmul_gflops(0, "f64", np.random.default_rng(0)),
+     r"^size must be a whole number >= 1, got 0$"),
+    (lambda: profiling.matmul_gflops(2.5, "f64", np.random.default_rng(0)),
+     r"^size must be a whole number >= 1, got 2.5$"),
+    (lambda: profiling.matmul_gflops(4, "f16", np.random.default_rng(0)),
+     r"^precision must be one of \['f64', 'f32'\], got 'f16'$"),
+    # NumPy's UFuncTypeError, naming no argument
+    (lambda: metrics.wrap_degrees("abc"), r"^angle must be real numbers \(deg\), got <U3"),
+    # a third component was dropped
+    (lambda: metrics.rotate(np.zeros(3), 0.1), r"^vectors must be \(\.\.\., 2\), got shape \(3,\)"),
+    (lambda: metrics.rotate(np.float64(1.0), 0.1), r"^vectors must be \(\.\.\., 2\), got shape"),
+    # NumPy's broadcast error, or one mass for every node
+    (lambda: metrics.centroid(np.zeros((3, 2)), np.ones(4)),
+     r"^positions must be \(\.\.\., N, 2\) and mass \(\.\.\., N\), got positions \(3, 2\) and "
+     r"mass \(4,\)$"),
+    (lambda: metrics.centroid(np.zeros((3, 2)), np.ones(1)), r"^positions must be"),
+    (lambda: metrics.centroid(np.zeros((2, 3, 2)), np.ones((3, 3))), r"^positions must be"),
+    (lambda: metrics.centroid(np.zeros((3, 3)), np.ones(3)), r"^positions must be"),
+])
+def test_the_metrics_and_rate_helpers_refuse_what_they_cannot_compute(call, match):
+    """Each of these gave a number (a wrong one) or another library's error (an audit,
+    2026-12-07)."""
+    with pytest.raises(ValueError, match=match):
+        call()
+
+
+ONE_CYCLE = np.array([[[0.0, 0.0], [1e-3, 0.0]]])
+"""Centroids (m) at t = 0 and T of one robot that swam 1 mm along +x in its one cycle."""
+
+
+def test_the_metrics_and_rate_helpers_take_their_bounds():
+    """The lowest first_cycle, size, a tiny period, NumPy integers, booleans as angles, a mass
+    shared by every shape of a stack."""
+    speeds = metrics.cycle_window_speeds(ONE_CYCLE, [2.0], ["A1"], np.int64(0))
+    assert speeds["steady_speed_mm_s"].tolist() == [0.5]  # 1 mm over one 2-s cycle
+    assert identification.tau_grid(1e-300, 2).tolist() == [5e-301, 1e-300]
+    assert profiling.matmul_gflops(np.int64(1), "f32", np.random.default_rng(0)) > 0
+    assert metrics.wrap_degrees(np.array([True, 190])).tolist() == [1.0, -170.0]
+    shapes = np.array([[[0.0, 0.0], [2.0, 0.0]], [[0.0, 1.0], [0.0, 3.0]]])  # (2, 2, 2)
+    mass = np.array([1.0, 3.0])  # the heavier node last
+    assert metrics.centroid(shapes, mass).tolist() == [[1.5, 0.0], [0.0, 2.5]]
