@@ -74,12 +74,18 @@ def parameter(default, unit: str = "1", lowest=None, highest=None, lowest_includ
     return field(default=default, metadata=metadata)
 
 
-def per_actuator(default: float, unit: str, allowed: str):
+def per_actuator(default: float, unit: str, lowest: float, highest, highest_included: bool):
     """A StarParams field of one number per actuator, A_k at index k − 1 (a tuple of
-    `N_ACTUATORS` floats, all `default` by default), with its unit and its allowed values in
-    words (`PER_ACTUATOR_FIELDS`; each such field is validated in `StarParams.__post_init__`)."""
+    `N_ACTUATORS` floats, all `default` by default), with its unit and its range, declared here
+    once: each number in [lowest, highest] (or [lowest, highest) where not highest_included),
+    `highest` a number or the name of the field that bounds it ("period"). Its allowed values
+    in words follow (`allowed_values`); `StarParams.__post_init__` checks each such field
+    (`PER_ACTUATOR_FIELDS`, `PER_ACTUATOR_RANGES`)."""
+    top = highest if isinstance(highest, str) else f"{highest:g}"
+    allowed = f"{N_ACTUATORS} numbers in [{lowest:g}, {top}" + ("]" if highest_included else ")")
     return field(default=(float(default),) * N_ACTUATORS,
-                 metadata={"unit": unit, "allowed": allowed, "per_actuator": True})
+                 metadata={"unit": unit, "allowed": allowed, "per_actuator": True,
+                           "actuator_range": (lowest, highest, highest_included)})
 
 
 MAX_ACTUATOR_GAIN = 5.0
@@ -342,11 +348,10 @@ class StarParams:
     cooling_time: float = parameter(10.0, "s", 1e-9, 1e3)
     """Cooling time τ_c of the heat an actuator keeps between its firings, s (with
     `stroke_warming`; at least 1 ns: the term divides by it)."""
-    actuator_gains: Tuple[float, ...] = per_actuator(1.0, "1",
-                                                     f"8 numbers in [0, {MAX_ACTUATOR_GAIN:g}]")
+    actuator_gains: Tuple[float, ...] = per_actuator(1.0, "1", 0.0, MAX_ACTUATOR_GAIN, True)
     """Gain g_k (-) of actuator A_k (index k − 1) on its commanded curvature change: it follows
     K̄(0) + g_k·(K̄(τ) − K̄(0))."""
-    actuator_delays: Tuple[float, ...] = per_actuator(0.0, "s", "8 numbers in [0, period)")
+    actuator_delays: Tuple[float, ...] = per_actuator(0.0, "s", 0.0, "period", False)
     """Delay d_k of actuator A_k (index k − 1), s: its profile starts d_k after each firing
     (K̄(0) until then), K̄(max(τ − d_k, 0))."""
     actuation_origin: str = parameter("profile", choices=ACTUATION_ORIGINS)
@@ -379,10 +384,12 @@ class StarParams:
                 reason, highest_included))
         for name, choices in STAR_CHOICES.items():
             _check_choice(name, getattr(self, name), choices)
-        object.__setattr__(self, "actuator_gains", _check_actuator_values(
-            "actuator_gains", self.actuator_gains, 0.0, MAX_ACTUATOR_GAIN, True))
-        object.__setattr__(self, "actuator_delays", _check_actuator_values(
-            "actuator_delays", self.actuator_delays, 0.0, self.period, False))
+        for f in fields(self):
+            if f.metadata.get("per_actuator"):
+                lowest, highest, highest_included = f.metadata["actuator_range"]
+                top = getattr(self, highest) if isinstance(highest, str) else highest
+                object.__setattr__(self, f.name, _check_actuator_values(
+                    f.name, getattr(self, f.name), lowest, top, highest_included))
         heights = [getattr(self, name) for name in COMPONENT_HEIGHTS]
         tallest = STAR_RANGES[COMPONENT_HEIGHTS[0]][1]  # the heights share their declared range
         for name, height in zip(COMPONENT_HEIGHTS, heights):
@@ -535,6 +542,11 @@ STAR_RANGES: Dict[str, Tuple[float, float, bool]] = {
 the fields' declarations (`parameter`)."""
 PER_ACTUATOR_FIELDS = tuple(f.name for f in fields(StarParams) if f.metadata.get("per_actuator"))
 """The StarParams fields of one number per actuator (a tuple, A_k at index k − 1)."""
+PER_ACTUATOR_RANGES: Dict[str, Tuple[float, object, bool]] = {
+    name: StarParams.__dataclass_fields__[name].metadata["actuator_range"]
+    for name in PER_ACTUATOR_FIELDS}
+"""The range of each number of a per-actuator field (lowest, highest, highest included),
+highest a number or the name of the StarParams field that bounds it ("period")."""
 PARAMETER_UNITS: Dict[str, str] = {name: StarParams.__dataclass_fields__[name].metadata["unit"]
                                    for name in (*STAR_RANGES, *PER_ACTUATOR_FIELDS)}
 """Units of the numeric StarParams fields, per-actuator ones included ("1": dimensionless or a

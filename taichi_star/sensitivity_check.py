@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from .checks import warn_user
-from .params import STAR_RANGES, SolverConfig, StarParams
+from .params import PER_ACTUATOR_RANGES, STAR_RANGES, SolverConfig, StarParams
 from .sensitivities import (FIELD_LEAST_STEPS, RELATIVE_STEP, Direction, check_directions,
                             instances_per_instance, parse_directions)
 from .simulation import simulate
@@ -105,8 +105,11 @@ def one_sided(direction: Direction, params: StarParams) -> bool:
     that its −4h run would take below its range: the water's exchange time τ_w, whose force
     has a pole at γ·τ_w = −1, which runs at −4h reached on steps of a few µs (failed runs and
     differences 9–12 % off at τ_w = 1e-9 s: a review, 2026-12)."""
-    lowest = 0.0 if direction.field == "actuator_delays" else (
-        STAR_RANGES[direction.field][0] if direction.field in FIELD_LEAST_STEPS else -math.inf)
+    if direction.field == "actuator_delays":  # its kink lies at its range's lowest end, 0
+        lowest = PER_ACTUATOR_RANGES["actuator_delays"][0]
+    else:
+        lowest = (STAR_RANGES[direction.field][0] if direction.field in FIELD_LEAST_STEPS
+                  else -math.inf)
     return direction.value(params) - max(MULTIPLES) * difference_step(direction, params) < lowest
 
 

@@ -14,7 +14,8 @@ import taichi_star as ts
 from taichi_star.params import PARAMETER_UNITS
 from taichi_star.gait import Gait, symmetry_classes
 from taichi_star.geometry import build_topology
-from taichi_star.params import PER_ACTUATOR_FIELDS, SOLVER_RANGES
+from taichi_star.params import (PER_ACTUATOR_FIELDS, PER_ACTUATOR_RANGES, SOLVER_RANGES,
+                                allowed_values)
 
 
 @pytest.mark.parametrize("field,value", [
@@ -902,3 +903,26 @@ def test_the_joint_radius_keeps_its_declared_top_when_the_profile_allows_more():
         ts.StarParams(actuator_profile=flat, joint_radius=1.0000001, tip_radius=1.5)
     with pytest.raises(ValueError, match=r"cannot span joints further apart"):
         ts.StarParams(joint_radius=0.5, tip_radius=0.6)
+
+
+def test_a_per_actuator_range_declared_once_is_the_one_checked_and_shown():
+    """The gains' and delays' ranges were written three times (the field's words, the check,
+    the sensitivity check's kink): now declared with the field; the check, its words and the
+    table read that one declaration, the delays' top from the period of the same robot."""
+    assert PER_ACTUATOR_RANGES == {"actuator_gains": (0.0, 5.0, True),
+                                   "actuator_delays": (0.0, "period", False)}
+    assert allowed_values("actuator_gains") == "8 numbers in [0, 5]"
+    assert allowed_values("actuator_delays") == "8 numbers in [0, period)"
+    # each end: the gains' top included, the delays' (the robot's own period) excluded
+    assert ts.StarParams(actuator_gains=(5.0,) * 8).actuator_gains == (5.0,) * 8
+    with pytest.raises(ValueError, match=r"^actuator_gains\[0\] \(A1\) must be a real number "
+                                         r"in \[0, 5\], got 5.000000000000001$"):
+        ts.StarParams(actuator_gains=(float(np.nextafter(5.0, 6.0)),) * 8)
+    below = float(np.nextafter(2.0, 0.0))
+    assert ts.StarParams(period=2.0, actuator_delays=(below,) * 8).actuator_delays[0] == below
+    with pytest.raises(ValueError, match=r"^actuator_delays\[7\] \(A8\) must be a real number "
+                                         r"in \[0, 2\), got 2.0$"):
+        ts.StarParams(period=2.0, actuator_delays=(0.0,) * 7 + (2.0,))
+    with pytest.raises(ValueError, match=r"^actuator_delays\[0\] \(A1\) must be a real number "
+                                         r"in \[0, 2\), got -5e-324$"):
+        ts.StarParams(period=2.0, actuator_delays=(-5e-324,) + (0.0,) * 7)
