@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import taichi_star as ts
+from taichi_star.diagnostics import check_jet_solver
 from taichi_star.reference import ReferenceSimulator
 
 DT = 5e-3
@@ -80,3 +81,20 @@ def test_a_failed_instance_gets_nan_rows_and_other_runs_are_refused():
     with pytest.raises(ValueError, match="implicit Euler"):
         recorded(ts.StarParams(gait="A1"), 0.02,
                  solver=ts.SolverConfig(dt=DT, integrator="bdf2")).jet_impulses()
+
+
+def test_jet_impulses_refuse_adaptive_euler_too():
+    """adaptive implicit Euler's steps are not the records' spacing: refused, as BDF2 is."""
+    with pytest.raises(ValueError, match=r"implicit Euler with fixed steps.*adaptive=True"):
+        check_jet_solver(ts.SolverConfig(adaptive=True))
+    check_jet_solver(ts.SolverConfig())  # fixed-step Euler passes
+
+
+def test_jet_impulses_refuse_a_run_with_a_single_record(taichi_cpu):
+    """a run recorded once (at t = 0: record_interval_s past its duration) has no step to
+    recompute: a ValueError, not a table of zero impulses."""
+    result = ts.simulate([ts.StarParams(gait="A1", n_arc=6, n_limb=2)], 0.005, ts.SolverConfig(dt=0.005),
+                         record_interval_s=0.01, record_shapes=True, progress=False)
+    assert result.trajectory["t_s"].nunique() == 1
+    with pytest.raises(ValueError, match="record at every step"):
+        result.jet_impulses()

@@ -24,6 +24,7 @@ from taichi_star.profiling import EngineProfile
 from taichi_star.reference import ReferenceSimulator
 from taichi_star.runtime import Runtime, prepare_engine
 from taichi_star.state import STATUS_OK
+from taichi_star.stepping import SLIVER_ROUNDINGS
 
 
 def test_no_substep_halvings_still_takes_every_benign_step():
@@ -826,3 +827,17 @@ def test_a_failed_instances_shape_metrics_are_not_its_frozen_shapes():
     assert np.isnan(summary["max_strain"].iloc[0]) and not summary["shape_sane"].iloc[0]
     assert summary["max_strain"].iloc[1] == 0.0 and summary["shape_sane"].iloc[1]
     assert not any("not physical" in str(w.message) for w in caught)
+
+
+@pytest.mark.parametrize("precision, eps", [("f64", np.finfo(np.float64).eps),
+                                            ("f32", np.finfo(np.float32).eps)])
+def test_load_sets_the_slivers_bounds_of_the_precision_and_dt_min(precision, eps):
+    """`load` gives the kernels 64 roundings of the run's own precision and
+    1e-4 and 0.5 of dt_min as a sliver's bounds."""
+    solver = ts.SolverConfig(adaptive=True, precision=precision, dt_min=2e-6,
+                             newton_tol=1e-10 if precision == "f64" else 1e-6)
+    engine = prepare_engine([ts.StarParams(gait="A1", n_arc=6, n_limb=2)], solver)
+    assert engine.sliver_limit[None] == pytest.approx(SLIVER_ROUNDINGS * eps,
+                                                      rel=1e-6)
+    assert engine.sliver_least[None] == pytest.approx(1e-4 * 2e-6, rel=1e-6)
+    assert engine.sliver_most[None] == pytest.approx(0.5 * 2e-6, rel=1e-6)

@@ -177,3 +177,59 @@ def test_the_instance_runs_count_the_replicas_the_moved_and_the_taylor_runs():
     assert instance_runs(1, 0) == 1
     assert instance_runs(3, 2) == 3 * 21
     assert 8 * instance_runs(2, 40) + instance_runs(2, 3) == 6478
+
+
+def _failed_table(count):
+    return pd.DataFrame({"gait": [f"A{k + 1}" for k in range(count)], "parameter": "alpha",
+                         "status": "non_finite", "failure_time_s": 0.01})
+
+
+@pytest.mark.parametrize("count, tail", [(5, "A5 alpha (non_finite at 0.01 s)"),
+                                         (6, "A5 alpha (non_finite at 0.01 s); and 1 more")])
+def test_the_failed_rows_warning_names_five_and_counts_the_rest(count, tail):
+    """at most FAILED_ROWS_NAMED (5) rows named, "and N more" only where N > 0."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        sensitivity_check.warn_failed_rows(_failed_table(count))
+    (message,) = [str(w.message) for w in caught]
+    assert message.endswith(tail), message
+    assert "A6 alpha" not in message
+
+
+def test_the_spread_is_that_of_the_smallest_steps_difference(monkeypatch):
+    """for an output α³ the central differences are 3α² + (kh)², so the spread
+    |D(h) − D|/|D| is h²/(3α²) (that of D(2h) would be four times it)."""
+
+    def simulate(params, duration_s, solver, arch="cpu", **options):
+        summary = pd.DataFrame({"displacement_x_mm": [p.alpha ** 3 for p in params],
+                                "status": "ok", "failure_time_s": np.nan})
+        return SimpleNamespace(summary=summary, sensitivity=lambda output, label: np.array(
+            [3 * p.alpha ** 2 for p in params]))
+
+    monkeypatch.setattr(sensitivity_check, "simulate", simulate)
+    params = [StarParams.preset("paper", gait="A1")]
+    table = sensitivity_check.check_sensitivities(params, 0.02, SolverConfig(), ["alpha"])
+    alpha = params[0].alpha
+    h = sensitivity_check.difference_step(sensitivity_check.parse_directions(["alpha"])[0],
+                                          params[0])
+    assert table["difference_spread"].iloc[0] == pytest.approx(h ** 2 / (3 * alpha ** 2),
+                                                               rel=1e-3)
+
+
+def test_a_minus_4h_run_exactly_on_the_lowest_delay_is_central():
+    """one_sided's boundary: a delay whose −4h run lands exactly on 0 (allowed) is still
+    differenced centrally; a hair below, forward. (A stand-in direction with h = 1.)"""
+    on = SimpleNamespace(field="actuator_delays", value=lambda p: 4.0, step=lambda p: 1.0)
+    below = SimpleNamespace(field="actuator_delays", value=lambda p: float(np.nextafter(4.0, 0.0)),
+               step=lambda p: 1.0)
+    assert sensitivity_check.one_sided(on, None) is False
+    assert sensitivity_check.one_sided(below, None) is True
+
+
+def test_the_taylor_step_stays_outward_where_neither_side_is_allowed():
+    """`inward` turns the step only where +2·step leaves the range and −2·step does not;
+    where both leave it, the step is kept as it is."""
+    nowhere = SimpleNamespace(value=lambda p: 1.0, allowed=lambda p, v: False)
+    assert sensitivity_check.inward(nowhere, None, 0.05) == 0.05
+    below_only = SimpleNamespace(value=lambda p: 1.0, allowed=lambda p, v: v < 1.0)
+    assert sensitivity_check.inward(below_only, None, 0.05) == -0.05
