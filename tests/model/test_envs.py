@@ -767,3 +767,99 @@ def test_an_sb3_seed_is_used_by_one_reset_only():
         np.testing.assert_array_equal(adapter.reset(), first)
     finally:
         adapter.close()
+
+
+def test_the_observation_bounds_are_the_documented_ones():
+    """Goal entries +-1e4 mm (10 m), sin/cos +-1, velocity +-1e3 mm/s, angular +-1e4 deg/s (a
+    bound of 1e3 mm lived through the suite, clipping every goal past 1 m: a mutation audit,
+    2026-12-07)."""
+    env = StarSwimmerEnv(**SHORT)
+    try:
+        np.testing.assert_array_equal(env.observation_space.high[:7],
+                                      [1e4, 1e4, 1.0, 1.0, 1e3, 1e3, 1e4])
+    finally:
+        env.close()
+
+
+def test_the_firing_cost_is_paid_per_actuator_fired():
+    """Two actuators fired at firing_cost_mm = 100 cost 200 mm of reward, not 100 (a cost per
+    step that fired anything lived through the suite: a mutation audit, 2026-12-07); the
+    progress of one 50-ms period is well under 1 mm."""
+    env = StarSwimmerEnv(**SHORT, firing_cost_mm=100.0)
+    try:
+        env.reset(options={"goal": (30.0, 0.0)})
+        _, reward, _, _, info = env.step(ts.Gait.parse("A1+A2").mask)
+    finally:
+        env.close()
+    progress = 30.0 - info["distance_mm"]
+    assert abs(progress) < 1.0
+    assert reward == pytest.approx(progress - 200.0, abs=1e-9)
+
+
+def test_the_heading_is_observed_as_its_sine_then_its_cosine():
+    """OBSERVATION_NAMES: heading_sin, then heading_cos: (0, 1) at the start's heading 0 and
+    the turned robot's sin/cos after a chiral firing (the two swapped lived through the suite:
+    a mutation audit, 2026-12-07)."""
+    env = StarSwimmerEnv(**SHORT)
+    try:
+        first, _ = env.reset(options={"goal": (30.0, 20.0)})
+        np.testing.assert_array_equal(first[2:4], np.float32([0.0, 1.0]))
+        observation, _, _, _, info = env.step(ts.Gait.parse("A1+A2+A4").mask)
+    finally:
+        env.close()
+    heading = np.radians(info["heading_deg"])
+    assert abs(heading) > 1e-5
+    np.testing.assert_allclose(observation[2:4], [np.sin(heading), np.cos(heading)],
+                               rtol=0, atol=1e-7)
+
+
+def test_per_robot_scalar_goals_are_refused_not_read_as_one_point():
+    """SB3 options of a number each, {"goal": 5.0} and {"goal": 7.0}, are refused by name
+    (without the (2,) check they were stacked into the one goal (5, 7) of both robots: a
+    mutation audit, 2026-12-07)."""
+    adapter = SB3VectorAdapter(StarSwimmerVectorEnv(2, **SHORT))
+    try:
+        adapter.set_options([{"goal": 5.0}, {"goal": 7.0}])
+        with pytest.raises(ValueError, match=r"^set_options: the robots' options may differ "
+                                             r"only in their goals"):
+            adapter.reset()
+    finally:
+        adapter.close()
+
+
+def test_sb3_infos_hold_no_masks_and_an_autoreset_updates_reset_infos():
+    """The adapter's infos are the vector env's values row by row, without gymnasium's "_key"
+    masks; a robot reset within a step has its new episode's reset info in `reset_infos`, as
+    SB3's DummyVecEnv (the masks kept, or the first reset's infos kept, lived through the
+    suite: a mutation audit, 2026-12-07)."""
+    adapter = SB3VectorAdapter(StarSwimmerVectorEnv(2, **SHORT, max_episode_steps=1))
+    try:
+        adapter.seed(3)
+        adapter.reset()
+        assert not any(key.startswith("_") for info in adapter.reset_infos for key in info)
+        first_goals = [info["goal_mm"].copy() for info in adapter.reset_infos]
+        _, _, dones, infos = adapter.step(np.zeros((2, 8), np.int8))
+        assert dones.all()
+        assert not any(key.startswith("_") for info in infos for key in info)
+        for row in range(2):
+            new_goal = adapter.envs.batch.goals[row]
+            assert not np.array_equal(new_goal, first_goals[row])
+            np.testing.assert_array_equal(adapter.reset_infos[row]["goal_mm"], new_goal)
+            np.testing.assert_array_equal(infos[row]["goal_mm"], first_goals[row])
+    finally:
+        adapter.close()
+
+
+def test_sb3_options_are_used_by_one_reset_only():
+    """set_options' goal is the next reset's alone; the reset after draws goals at
+    goal_distance_mm (options kept for every later reset, the goal (10, 0) each time, lived
+    through the suite: a mutation audit, 2026-12-07)."""
+    adapter = SB3VectorAdapter(StarSwimmerVectorEnv(2, **SHORT))
+    try:
+        adapter.set_options({"goal": (10.0, 0.0)})
+        adapter.reset()
+        np.testing.assert_array_equal(adapter.envs.batch.goals, [[10.0, 0.0], [10.0, 0.0]])
+        adapter.reset()
+        np.testing.assert_allclose(np.hypot(*adapter.envs.batch.goals.T), [50.0, 50.0])
+    finally:
+        adapter.close()

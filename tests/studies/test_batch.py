@@ -592,3 +592,62 @@ def test_a_refused_numbers_text_is_whole_up_to_40_characters(cycles, shown):
     with pytest.raises(ValueError) as error:
         run_batch([TINY], cycles=cycles, solver=MS_SOLVER)
     assert str(error.value) == f"cycles must be a finite number > 0, got {shown}"
+
+
+@pytest.mark.parametrize("guard, guarded", [
+    ('if __name__ == "__main__":', True), ('if "__main__" == __name__:', True),
+    ('if __name__ == "__mian__":', False), ('if name == "__main__":', False)])
+def test_only_a_real_main_guard_counts(tmp_path, monkeypatch, guard, guarded):
+    """check_main_guard takes `__name__ == "__main__"` (either order) alone: any comparison
+    with __name__ or with "__main__", a misspelt guard among them, lived through the suite (a
+    mutation audit, 2026-12-07)."""
+    from taichi_star.batch.executors import check_main_guard
+
+    script = tmp_path / "script.py"
+    script.write_text(f"name = 1\n{guard}\n    pass\n")
+    monkeypatch.setattr(sys.modules["__main__"], "__file__", str(script), raising=False)
+    if guarded:
+        check_main_guard()
+    else:
+        with pytest.raises(RuntimeError, match="has no 'if __name__ == \"__main__\":' guard"):
+            check_main_guard()
+
+
+def test_one_chunk_in_this_process_shows_its_simulated_seconds_bar(capsys):
+    """progress=True with one chunk in this process: no bar of chunks, the chunk's own bar of
+    simulated seconds (InProcess dropping `progress`, nothing shown, lived through the suite:
+    a mutation audit, 2026-12-07)."""
+    run_batch([ts.StarParams(n_arc=6, n_limb=2)], 0.002, solver=ts.SolverConfig(),
+              progress=True)
+    err = capsys.readouterr().err
+    assert "s simulated" in err and "chunks" not in err
+
+
+def test_a_batch_warns_about_its_capped_ok_instances():
+    """run_batch keeps its chunks' warnings to itself and warns once about the batch's 'ok'
+    instances whose Newton solves ran out (its warning dropped lived through the suite: a
+    mutation audit, 2026-12-07); a coarse A1 robot at dt = 10 ms, max_newton = 3 is ok and
+    capped."""
+    with pytest.warns(RuntimeWarning, match=r"^1 of 1 \w+ instances \(the first"):
+        result = run_batch([ts.StarParams(n_arc=6, n_limb=2, gait="A1")], 0.1,
+                           solver=ts.SolverConfig(dt=0.01, max_newton=3))
+    assert result.summary["status"].tolist() == ["ok"]
+    assert result.summary["newton_capped"].tolist() == [True]
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_an_isolated_run_leaves_no_pool_running(deaths):
+    """After a run that went on isolated (a worker died), its one-worker pools are shut down
+    when the run ends, not left to the executor's shutdown (left running, each next run's
+    isolation replacing them without stopping them, lived through the suite: a mutation
+    audit, 2026-12-07)."""
+    dying, folder = deaths
+    (folder / "chunk_0").write_text("1")
+    coarse = ts.StarParams(n_arc=6, n_limb=2)
+    with dying(1, retries=1) as executor:
+        result = run_batch([coarse, coarse.replace(alpha=0.5)], 0.002, chunk_size=1,
+                           executor=executor)
+        assert (folder / "chunk_0").read_text() == "0"  # chunk 0's worker died once
+        assert executor._pools() == []
+    assert result.summary["status"].tolist() == ["ok", "ok"]

@@ -119,12 +119,12 @@ def test_a_run_interrupted_after_a_stored_chunk_resumes_to_the_uninterrupted_one
 
 
 PARENT_OF_A_POOL = """
-import concurrent.futures, multiprocessing, os, time
-from taichi_star.batch.executors import configure_worker_process
+import os, time
+from taichi_star.batch import LocalProcesses
 if __name__ == "__main__":
-    pool = concurrent.futures.ProcessPoolExecutor(
-        1, mp_context=multiprocessing.get_context("spawn"),
-        initializer=configure_worker_process, initargs=(os.getpid(),))
+    # the pool LocalProcesses itself makes: one built here by hand with the initialiser let a
+    # LocalProcesses that forgot to pass its pid live through the suite (a mutation audit)
+    pool = LocalProcesses(1)._new_pool(1)
     print(pool.submit(os.getpid).result(), flush=True)
     time.sleep(600)
 """
@@ -177,3 +177,20 @@ def test_a_pools_worker_started_from_a_thread_that_ended_lives_on():
         assert pool.submit(os.getpid).result(timeout=60) == first[0]
     finally:
         pool.shutdown()
+
+
+@pytest.mark.timeout(120)
+def test_an_error_in_the_with_block_stops_a_busy_worker_at_once():
+    """LocalProcesses' `with` block ending in an error terminates its workers, busy or not
+    (shutting them down instead, waiting for the running task, 60 s here, lived through the
+    suite: a mutation audit, 2026-12-07)."""
+    from taichi_star.batch import LocalProcesses
+
+    start = time.monotonic()
+    with pytest.raises(KeyError):
+        with LocalProcesses(1) as executor:
+            executor._pool = executor._new_pool(1)
+            executor._pool.submit(time.sleep, 60)
+            time.sleep(0.5)
+            raise KeyError("stop")
+    assert time.monotonic() - start < 30  # the task alone would take 60 s
