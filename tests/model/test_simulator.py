@@ -3,6 +3,7 @@ consistent with each other and with `simulate`; bad commands leave the state unc
 step_batch example runs."""
 
 import dataclasses
+import math
 import os
 import re
 import subprocess
@@ -1009,7 +1010,6 @@ def test_an_adaptive_advance_of_no_time_is_refused():
 def test_a_snapshot_with_an_infinite_clock_lag_is_refused(coarse_pair):
     """A damaged header's clock lag of inf is refused as NaN and -1 are, the state
     unchanged."""
-    import math
     snapshot = coarse_pair.save()
     coarse_pair.advance(0.01)
     before = coarse_pair.save().fields
@@ -1077,3 +1077,158 @@ def test_a_reset_robot_that_fails_again_records_its_own_times():
     times = table.pivot(index="record", columns="instance", values="t_s")
     np.testing.assert_allclose(times[0], [0.05, 0.1], rtol=0, atol=1e-12)
     np.testing.assert_allclose(times[1], [0.25, 0.3], rtol=0, atol=1e-12)
+
+
+# Found by a mutation audit of the Simulator (2026-12-07): each test below kills a change of
+# the code that the suite let live.
+
+
+
+def test_the_y_displacement_is_simulates_bit_for_bit():
+    """centroid_y_mm is measured from the start centroid's y (not its x: the start
+    centroid is ~1e-19 m from the origin, so only the bits tell): the same bits as simulate's
+    displacement_y_mm for an asymmetric gait that moves the robot along y."""
+    params = [COARSE.replace(gait="A1+A2", period=0.2)]
+    reference = ts.simulate(params, 0.02, ts.SolverConfig(dt=5e-3), progress=False)
+    sim = ts.Simulator(params, ts.SolverConfig(dt=5e-3))
+    sim.fire(["A1+A2"])
+    sim.advance(0.02)
+    state = sim.state()
+    assert reference.summary.displacement_y_mm.iloc[0] != 0.0
+    np.testing.assert_array_equal(state.centroid_x_mm, reference.summary.displacement_x_mm)
+    np.testing.assert_array_equal(state.centroid_y_mm, reference.summary.displacement_y_mm)
+
+
+def test_an_adaptive_reset_robot_that_fails_again_records_its_own_times():
+    """With adaptive steps a failed robot's records carry the time its clock would show
+    (`_shown_s`); a reset must forget it: robot 0 fails, is reset, fails again, and its record
+    after the second failure is at its own clock's time (0.04 + 0.1 s), not the lagged clock of
+    its first episode (0.24 + 0.1 s)."""
+    solver = ts.SolverConfig(adaptive=True, dt=0.02, dt_max=0.02, dt_min=5e-3, max_newton=1,
+                             error_tol=1e-3)
+    sim = ts.Simulator([COARSE] * 2, solver)
+    fire_0 = [[True] * 8, [False] * 8]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        sim.advance(0.04)
+        sim.fire(fire_0, at_s=0.1)
+        sim.advance(0.2)
+        assert sim.ok.tolist() == [False, True]
+        sim.reset([0])
+        sim.advance(0.04)
+        sim.fire(fire_0, at_s=0.1)
+        table = sim.advance(0.1, record_interval_s=0.05)
+    assert sim.ok.tolist() == [False, True]
+    times = table.pivot(index="record", columns="instance", values="t_s")
+    np.testing.assert_allclose(times[0], [0.09, 0.14], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(times[1], [0.33, 0.38], rtol=0, atol=1e-12)
+
+
+ADAPTIVE_FAILING = ts.SolverConfig(adaptive=True, dt=0.02, dt_max=0.02, dt_min=5e-3,
+                                   max_newton=1, error_tol=1e-3)
+
+
+def test_an_adaptive_snapshot_with_a_negative_clock_time_is_refused():
+    """A damaged header's shown_s of -1 s is refused as inf is (only NaN or a finite
+    time >= 0 belongs there), the state unchanged."""
+    sim = ts.Simulator([COARSE] * 2, ADAPTIVE_FAILING)
+    snapshot = sim.save()
+    assert len(snapshot.shown_s) == 2
+    before = sim.save().fields
+    for time in (-1.0, -1e-300, math.inf):
+        with pytest.raises(ValueError, match=r"^the saved state records 2 clock times for its 2 "
+                                             r"instances, or one neither NaN nor finite and >= 0"):
+            sim.load(dataclasses.replace(snapshot, shown_s=(math.nan, time)))
+    for name, values in before.items():
+        np.testing.assert_array_equal(sim.save().fields[name], values, err_msg=name)
+
+
+def test_an_old_adaptive_snapshot_of_a_failed_robot_keeps_its_lag():
+    """An adaptive snapshot written before `shown_s` was recorded holds a failed robot's
+    lag in s in `behind`: loaded, the robot's next records are at its frozen time + that lag +
+    the stop, the running robot's times (not its frozen time + the stop)."""
+    sim = ts.Simulator([COARSE] * 2, ADAPTIVE_FAILING)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        sim.advance(0.04)
+        sim.fire([[True] * 8, [False] * 8], at_s=0.1)
+        sim.advance(0.2)
+    assert sim.ok.tolist() == [False, True]
+    snapshot = sim.save()
+    frozen = sim.time_s[0]
+    assert frozen < 0.1
+    old = dataclasses.replace(snapshot, shown_s=(), behind=(0.24 - frozen, 0.0))
+    sim.load(old)
+    times = sim.advance(0.05, record_interval_s=0.05)["t_s"].to_numpy()
+    np.testing.assert_allclose(times, [0.29, 0.29], rtol=0, atol=1e-12)
+
+
+def test_an_adaptive_failed_robots_records_keep_the_batchs_times_over_several_advances():
+    """With adaptive steps the clock a failed robot would show adds up over advances
+    from the one it showed (not from its frozen time): two advances after its failure its
+    records are at the running robot's times."""
+    sim = ts.Simulator([COARSE] * 2, ADAPTIVE_FAILING)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        sim.advance(0.04)
+        sim.fire([[True] * 8, [False] * 8], at_s=0.1)
+        sim.advance(0.2)
+        sim.advance(0.05)
+        table = sim.advance(0.05, record_interval_s=0.05)
+    assert sim.ok.tolist() == [False, True]
+    np.testing.assert_allclose(table["t_s"], [0.34, 0.34], rtol=0, atol=1e-12)
+
+
+def test_saving_to_a_path_ending_in_npz_writes_that_file(tmp_path):
+    """save("state.npz") writes state.npz (".npz" is added only to a path without it),
+    and load reads it back by the name given."""
+    sim = ts.Simulator([COARSE])
+    path = sim.save(tmp_path / "state.npz")
+    assert path == tmp_path / "state.npz" and path.is_file()
+    assert [p.name for p in tmp_path.iterdir()] == ["state.npz"]
+    sim.load(tmp_path / "state.npz")
+
+
+def test_the_repr_shows_one_time_or_the_range_of_times():
+    """One time where every instance is at it, min..max where they differ."""
+    sim = ts.Simulator([COARSE] * 2, ts.SolverConfig(dt=5e-3))
+    sim.advance(0.01)
+    assert repr(sim) == "Simulator(2 instances, t = 0.01 s, 2 running)"
+    sim.reset(0)
+    assert repr(sim) == "Simulator(2 instances, t = 0..0.01 s, 2 running)"
+
+
+@pytest.mark.parametrize("at_s", [True, "0.01", float("nan"), float("inf")])
+def test_a_firing_time_that_is_not_a_finite_number_is_refused(at_s):
+    """at_s=True or the text "0.01" is refused naming at_s (without the check True was
+    read as 1 s and the text as 0.01 s: a firing scheduled from a slip), as NaN and inf are."""
+    sim = ts.Simulator([COARSE] * 2, ts.SolverConfig(dt=5e-3))
+    with pytest.raises(ValueError, match=r"^at_s must be a finite time in s, got "):
+        sim.fire(["A1", "A1"], at_s=at_s)
+    assert (sim.engine.state.schedule.pending_count.to_numpy()[:2] == 0).all()
+
+
+def test_a_state_of_another_batch_size_is_refused_naming_both():
+    """A 2-robot snapshot loaded into a 3-robot Simulator of the same engine is refused
+    by its batch size, in those words (without the check the parameters' count refused it as
+    "a damaged snapshot", and with other_params=True its clock lags did)."""
+    two = ts.Simulator([COARSE] * 2, ts.SolverConfig(dt=5e-3))
+    three = ts.Simulator([COARSE] * 3, ts.SolverConfig(dt=5e-3))
+    assert two.engine_key == three.engine_key
+    for other_params in (False, True):
+        with pytest.raises(ValueError, match=r"^the saved state has 2 instances at dt = 0.005 s; "
+                                             r"this simulator 3 at 0.005 s"):
+            three.load(two.save(), other_params=other_params)
+
+
+def test_a_firing_need_be_after_the_clocks_of_the_commanded_instances_alone():
+    """Robot 0 at 10 ms, robot 1 reset to 0: a firing at 5 ms for robot 1 alone is
+    accepted (robot 0, ahead of it, fires nothing) and happens at 5 ms."""
+    sim = ts.Simulator([COARSE] * 2, ts.SolverConfig(dt=5e-3))
+    sim.advance(0.01)
+    sim.reset(1)
+    sim.fire(["none", "A1"], at_s=0.005)
+    sim.advance(0.01)
+    since = sim.state()["since_A1_s"].to_numpy()
+    assert np.isnan(since[0])
+    np.testing.assert_allclose(since[1], 0.005, rtol=0, atol=1e-12)

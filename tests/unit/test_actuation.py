@@ -159,3 +159,34 @@ def test_a_numpy_or_integer_switch_time_is_stored_as_a_python_float(switch_time)
 def test_bools_text_and_non_sequences_are_refused_naming_the_field(field, value):
     with pytest.raises(ValueError, match=rf"CurvatureProfile\.{field} must be "):
         CurvatureProfile(**{field: value})
+
+
+# Found by a mutation audit of the actuation (2026-12-07): each test below kills a change of
+# the code that the suite let live.
+
+
+def test_the_switch_snap_is_one_part_in_1e12_of_the_time():
+    """The documented window, 1e-12 × max(|t|, 1 s): τ 5e-12 s from t0 at t = 0.5 s is
+    read as it comes (a window of 1e-11 read it as t0, on the cooling branch)."""
+    assert SWITCH_SNAP == 1e-12
+    t0 = CurvatureProfile().switch_time
+    for tau in (t0 - 5e-12, t0 + 5e-12):
+        assert snapped_to_switch(tau, t0, 0.5) == tau
+    assert snapped_to_switch(t0 + 5e-12, t0, 6.0) == t0  # the window of |t| = 6 s
+
+
+@pytest.mark.parametrize("field", ["heating", "cooling"])
+def test_five_constants_for_a_branch_are_refused_naming_the_field(field):
+    """Five numbers are refused as three are (the 5-tuple passed the length check and
+    failed later with NumPy's "too many values to unpack")."""
+    with pytest.raises(ValueError, match=rf"^CurvatureProfile\.{field} must be 4 finite numbers"):
+        CurvatureProfile(**{field: (1.0, 2.0, 3.0, 4.0, 5.0)})
+
+
+def test_a_negative_zero_constant_is_stored_as_plus_zero():
+    """-0.0 is stored as +0.0 (StarParams' rule): the two profiles have the same text,
+    which result tables store, and the same bits."""
+    plus = CurvatureProfile(heating=(-89.827, 62.724, 0.0, 104.04))
+    minus = CurvatureProfile(heating=(-89.827, 62.724, -0.0, 104.04))
+    assert minus.to_text() == plus.to_text()
+    assert np.array_equal(np.signbit(minus.as_array()), np.signbit(plus.as_array()))
