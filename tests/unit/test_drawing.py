@@ -3,7 +3,9 @@ actuator from its firing and its delay, checked at exactly representable times o
 of every edge of the window."""
 
 import numpy as np
+import pytest
 
+import taichi_star as ts
 from taichi_star.drawing import hot_actuators, periodic_hot_actuators
 
 PERIOD, HEATING = 4.0, 0.25  # s; binary fractions, so the window's edges are exact
@@ -45,3 +47,100 @@ def test_a_periodic_gait_heats_each_cycle_after_each_actuator_s_delay():
     phase = np.mod(times, PERIOD)
     assert (periodic_hot_actuators(times, fired, PERIOD, HEATING)
             == (phase < HEATING)[:, None] & fired[None, :]).all()
+
+
+# Found by a mutation audit of the drawing (2026-12-07): each test below kills a change of
+# the code that the suite let live.
+
+
+def drawn_robot(hot, shift_mm=(0.0, 0.0)):
+    """A coarse robot at rest, shifted by shift_mm, drawn by a RobotArtist with actuators `hot`
+    (8 bools): (artist, topology, positions in mm)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    from taichi_star.drawing import RobotArtist
+    from taichi_star.geometry import build_topology
+
+    topology = build_topology(ts.StarParams(n_arc=6, n_limb=2))
+    positions = topology.rest_positions * 1e3 + np.asarray(shift_mm)
+    ax = Figure().add_subplot()
+    artist = RobotArtist(ax, topology, 10.0)
+    artist.update(positions, np.asarray(hot, dtype=bool))
+    return artist, topology, positions
+
+
+
+def test_a_hot_actuator_colours_and_widens_its_own_arc_and_label_alone():
+    """A8 hot: its arc's edges red and wider, its label red, nothing else (limbs and spokes,
+    actuator -1, stay grey); the cylinder on the hub; A1's label beyond its arc's middle."""
+    from matplotlib.colors import to_rgba
+
+    from taichi_star.drawing import HOT_COLOUR, LABEL_OFFSET_MM, edge_actuators
+    from taichi_star.geometry import ARC, CENTRE
+
+    hot = np.zeros(8, dtype=bool)
+    hot[7] = True  # A8: the last actuator, which an index of -1 would name
+    artist, topology, positions = drawn_robot(hot, shift_mm=(30.0, -20.0))
+    colours = artist.lines.get_colors()
+    widths = np.broadcast_to(artist.lines.get_linewidths(), (len(topology.edges),))
+    actuator = edge_actuators(topology)
+    assert ((actuator >= 0) == (topology.edge_kind == ARC)).all()
+    red = np.all(np.isclose(colours, to_rgba(HOT_COLOUR)), axis=1)
+    assert red.tolist() == (actuator == 7).tolist() and red.any()
+    assert (widths[red] == 2.4).all() and not (widths[~red] == 2.4).any()
+    labels = [label.get_color() for label in artist.labels]
+    assert labels == ["0.25"] * 7 + [HOT_COLOUR]
+    # the cylinder follows the hub; A1's label sits LABEL_OFFSET_MM beyond its arc's middle node
+    assert artist.cylinder.center == pytest.approx(tuple(positions[CENTRE]))
+    arc = topology.arcs[0]
+    middle = positions[arc[len(arc) // 2]]
+    outward = (middle - positions[CENTRE]) / np.hypot(*(middle - positions[CENTRE]))
+    assert artist.labels[0].get_position() == pytest.approx(
+        tuple(middle + LABEL_OFFSET_MM * outward))
+
+
+
+def test_a_scale_bar_is_the_round_length_nearest_a_fifth_of_the_view():
+    """1, 2 or 5 times a power of ten, at most a fifth of the span."""
+    from taichi_star.drawing import nice_length
+
+    assert [nice_length(span) for span in (25.0, 36.0, 100.0, 0.3)] == \
+        pytest.approx([5.0, 5.0, 20.0, 0.05])
+
+
+
+def test_a_goal_far_from_the_robot_is_in_its_picture():
+    """A goal 300 mm away is inside the view: its green star is drawn."""
+    from taichi_star.drawing import robot_image
+    from taichi_star.geometry import build_topology
+
+    topology = build_topology(ts.StarParams(n_arc=6, n_limb=2))
+    positions = topology.rest_positions * 1e3
+    picture = robot_image(positions, topology, np.zeros(8, bool), 10.0,
+                          goal_mm=np.array([300.0, 0.0]), size_px=200)
+    green = (picture[..., 1] > 130) & (picture[..., 0] < 90) & (picture[..., 2] < 90)
+    assert green.sum() > 10
+
+
+
+def test_a_pictures_view_is_the_robot_and_its_goal_with_12_mm_around(monkeypatch):
+    """The view is a square about the robot, 12 mm beyond its largest extent, and its scale
+    bar `nice_length` of the view's width."""
+    from taichi_star import drawing
+    from taichi_star.geometry import build_topology
+
+    views = []
+    monkeypatch.setattr(drawing, "add_scale_bar",
+                        lambda ax, length: views.append((ax.get_xlim(), ax.get_ylim(), length)))
+    topology = build_topology(ts.StarParams(n_arc=6, n_limb=2))
+    positions = topology.rest_positions * 1e3
+    drawing.robot_image(positions, topology, np.zeros(8, bool), 10.0, size_px=100)
+    low, high = positions.min(axis=0), positions.max(axis=0)
+    half = 0.5 * (high - low).max() + 12.0
+    centre = 0.5 * (low + high)
+    (x, y, length), = views
+    assert x == pytest.approx((centre[0] - half, centre[0] + half))
+    assert y == pytest.approx((centre[1] - half, centre[1] + half))
+    assert length == drawing.nice_length(2 * half)
