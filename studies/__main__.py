@@ -166,6 +166,9 @@ def main(argv=None) -> int:
               f"{interrupted()}", file=sys.stderr)
         return 128 + (signal.SIGTERM if terminated else signal.SIGINT)
     except SystemExit as exit_:  # argparse's --help (its refusals are StudyArgumentError)
+        # as Python's own exit: None is success, a number its status, a message a failure
+        if exit_.code is None:
+            return 0
         return exit_.code if isinstance(exit_.code, int) else 2
     except Exception:
         # a fault's traceback is shown as it is, but leaves no empty folder the run made

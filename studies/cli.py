@@ -1154,8 +1154,11 @@ class Output:
         return path
 
     def wrote(self, *paths) -> None:
-        """Note files written otherwise (plots, notes); a file rewritten is listed once."""
-        self.written += [Path(p) for p in paths if Path(p) not in self.written]
+        """Note files written otherwise (plots, notes); a file rewritten is listed once, within
+        one call too."""
+        for path in map(Path, paths):
+            if path not in self.written:
+                self.written.append(path)
 
     def report(self):
         print("\n".join(f"  wrote {p}" for p in self.written))

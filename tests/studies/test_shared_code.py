@@ -1,0 +1,326 @@
+"""The studies' shared code (studies/cli.py, provenance.py, __main__.py and figures.py): flag
+refusals in one line, ranges and lists, the work estimate, run stores and output names, the
+launcher's exits and errors, the recorded command, machine and commit, and the Fig. 4b table.
+Found by a mutation audit (2026-12-07): each test kills a change of the code that the suite let
+live."""
+
+from types import SimpleNamespace
+
+import pytest
+
+from taichi_star import SolverConfig
+
+from studies import cli
+from studies.__main__ import main as studies_main
+
+QUICK = ["--quick", "--no-progress"]
+
+
+def one_line_refusal(argv, tmp_path, capsys) -> str:
+    """The launcher's one-line refusal (exit 2, no traceback, no output folder made)."""
+    out = tmp_path / "out"
+    assert studies_main([*argv, "--out", str(out), *QUICK]) == 2
+    error = capsys.readouterr().err
+    assert len(error.strip().splitlines()) == 1 and "Traceback" not in error, error
+    assert not out.exists()
+    return error
+
+
+# --------------------------------------------------------------------------- shared flags
+
+def test_an_out_of_blanks_is_an_empty_folder_name(no_compute, tmp_path, capsys, monkeypatch):
+    """--out "  " (blanks alone) is refused as an empty name, as --out "" is, not made as a
+    folder named by two blanks in the current folder."""
+    monkeypatch.chdir(tmp_path)
+    assert studies_main(["fig4c", "--out", "  ", *QUICK]) == 2
+    assert "--out: an empty folder name" in capsys.readouterr().err
+    assert not (tmp_path / "  ").exists()
+
+
+def test_a_prefix_with_a_backslash_is_refused_in_one_line(no_compute, tmp_path, capsys):
+    """A backslash in --prefix is refused by the flag's check (it reached Output.path's
+    ValueError, a traceback, after the output folder was made)."""
+    error = one_line_refusal(["fig4c", "--prefix", "a\\b"], tmp_path, capsys)
+    assert "--prefix: 'a\\\\b' is not a file name" in error
+
+
+def test_a_missing_gpu_is_refused_naming_the_arch(no_compute, tmp_path, capsys, monkeypatch):
+    """--arch gpu where Taichi has no GPU backend: one line naming the available archs."""
+    monkeypatch.setattr("taichi_star.runtime.available_archs", lambda: ["cpu"])
+    error = one_line_refusal(["fig4c", "--arch", "gpu"], tmp_path, capsys)
+    assert "--arch gpu: no such backend on this machine; available archs: cpu" in error
+
+
+def test_a_primitives_table_of_a_header_alone_is_refused_in_one_line(no_compute, tmp_path,
+                                                                      capsys):
+    """A primitives table with its columns and no rows: read_table's "no rows" (it reached
+    the planner's model, a TypeError traceback)."""
+    columns = ["gait", "status", "period_s", "dt_s", "step_x_mm", "step_y_mm", "turn_deg"]
+    table = tmp_path / "primitives.csv"
+    table.write_text(",".join(columns) + "\n")
+    error = one_line_refusal(["plan", "--primitives", str(table)], tmp_path, capsys)
+    assert f"--primitives {table}: not a primitives table" in error and "; no rows)" in error
+
+
+# --------------------------------------------------------------------------- ranges
+
+def test_a_log_range_takes_its_keyword_in_any_case():
+    assert cli.parse_values("1:100:3:LOG", "--alpha") == pytest.approx([1.0, 10.0, 100.0])
+
+
+def test_a_range_of_the_most_points_is_taken_and_one_more_refused():
+    assert len(cli.parse_range(f"0:1:{cli.MAX_INSTANCES}", "--alpha")) == cli.MAX_INSTANCES
+    with pytest.raises(cli.StudyArgumentError, match="at most 1000000"):
+        cli.parse_range(f"0:1:{cli.MAX_INSTANCES + 1}", "--alpha")
+
+
+def test_a_range_of_one_point_needs_equal_ends():
+    assert cli.parse_range("0.5:0.5:1", "--alpha") == [0.5]
+    with pytest.raises(cli.StudyArgumentError,
+                       match=r"^--alpha: range '0.5:0.6:1' has one point but start != stop$"):
+        cli.parse_range("0.5:0.6:1", "--alpha")
+
+
+@pytest.mark.parametrize("text", ["0:1e6:3:log", "1e6:0:3:log", "-1:1e6:3:log"])
+def test_a_log_range_from_zero_or_below_is_a_study_argument_error(text):
+    """numpy's geomspace raised its own ValueError (a traceback) for a zero end."""
+    with pytest.raises(cli.StudyArgumentError, match="log range .* needs start, stop > 0"):
+        cli.parse_range(text, "--youngs-modulus")
+
+
+# --------------------------------------------------------------------------- estimates
+
+def test_the_batch_estimate_shares_the_instances_among_the_periods():
+    """10 instances over two periods (5 each): 5 × 200 + 5 × 600 robot-steps at 10 ms for
+    --cycles 2 of 1 s and 3 s, not 10 × (200 + 600)."""
+    args = SimpleNamespace(quick=False, cycles=2.0)
+    config = SolverConfig(dt=0.01)
+    assert cli.tell_batch_work(args, config, 10, periods=[1.0, 3.0]) == pytest.approx(4000)
+
+
+@pytest.mark.parametrize("text, kind", [("1,,2", float), ("1,2,", int),
+                                        ("contract,,always", str)])
+def test_an_empty_item_of_a_list_is_named_as_such(text, kind):
+    """An empty item is "malformed" for every kind of list: a list of names took the empty
+    name, and a list of numbers was told "'' is not a number"."""
+    with pytest.raises(cli.StudyArgumentError,
+                       match=rf"^--x: malformed list '{text}' \(an empty item\)$"):
+        cli.parse_values(text, "--x", kind)
+
+
+def test_a_field_named_with_hyphens_is_the_field():
+    """--set youngs-modulus=5e6 (a flag's spelling) names youngs_modulus."""
+    assert cli.parse_assignment("youngs-modulus=5e6", "--set") == ("youngs_modulus", [5e6])
+    assert cli.parse_assignment(" added-mass-coeff =0,1", "--param") == \
+        ("added_mass_coeff", [0.0, 1.0])
+
+
+def test_all_gaits_are_the_255_non_empty_masks():
+    gaits = cli.resolve_gaits("all")
+    assert len(gaits) == len(set(gaits)) == 255
+    assert gaits[0] == "A1" and gaits[-1] == "A1+A2+A3+A4+A5+A6+A7+A8"
+
+
+# --------------------------------------------------------------------------- runs, output
+
+def test_only_a_resumed_run_takes_the_stored_chunk_size(monkeypatch, tmp_path):
+    """A fresh run into a run store holding a finished run (which it replaces) cuts its own
+    chunks; --resume alone reads the stored run's chunk size."""
+    monkeypatch.setattr(cli, "stored_chunk_size", lambda *args, **kwargs: 3)
+    out = SimpleNamespace(folder=tmp_path, run_store=None)
+    fresh = SimpleNamespace(run_dir=None, resume=False, chunk_size=None)
+    assert cli.run_store(fresh, out) == tmp_path / "chunks" == out.run_store
+    assert fresh.chunk_size is None
+    resumed = SimpleNamespace(run_dir=str(tmp_path / "store"), resume=True, chunk_size=None)
+    assert cli.run_store(resumed, out) == tmp_path / "store"
+    assert resumed.chunk_size == 3
+
+
+def test_an_interrupt_names_a_records_folder_only_when_it_holds_records(monkeypatch, tmp_path):
+    done = tmp_path / "done"
+    (done / "sub").mkdir(parents=True)
+    out = SimpleNamespace(remove_if_unused=lambda: None, run_store=None, resume_records=done)
+    monkeypatch.setattr(cli, "OPENED", [out])
+    assert cli.interrupted() == "the files written before are whole"
+    (done / "sub" / "a.json").write_text("{}")
+    assert cli.interrupted() == (f"the finished work in {done} is kept: the same command with "
+                                 f"--resume continues the run")
+
+
+@pytest.mark.parametrize("name", ["a\\b.csv", "../x.csv", "/abs.csv", ""])
+def test_an_output_name_that_could_leave_the_folder_is_refused(tmp_path, name):
+    with pytest.raises(ValueError, match="would leave the output folder"):
+        cli.Output.path(SimpleNamespace(folder=tmp_path), name)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_missing_parameter_or_step_is_an_empty_cell(tmp_path):
+    """NaN in an exact column (a parameter, dt_s) is written as an empty cell, which the
+    studies' readers (`NAMES_AS_WRITTEN`) read as missing, not as the text "nan"."""
+    import numpy as np
+    import pandas as pd
+    out = cli.Output(SimpleNamespace(study="fig4c", out=str(tmp_path), quick=False), [])
+    frame = pd.DataFrame({"alpha": [0.5, np.nan], "dt_s": [np.nan, 0.001],
+                          "speed_mm_s": [1.0, 2.0]})
+    assert out.write_csv(frame, "t.csv").read_text().splitlines() == \
+        ["alpha,dt_s,speed_mm_s", "0.5,,1", ",0.001,2"]
+    back = pd.read_csv(tmp_path / "t.csv", **cli.NAMES_AS_WRITTEN)
+    assert back["alpha"].isna().tolist() == [False, True]
+    assert back["dt_s"].isna().tolist() == [True, False]
+
+
+def test_a_tables_details_add_to_the_runs(tmp_path):
+    import json
+    import pandas as pd
+    out = cli.Output(SimpleNamespace(study="fig4c", out=str(tmp_path), quick=False), [],
+                     extra={"grid": "coarse"})
+    out.write_csv(pd.DataFrame({"x": [1]}), "t.csv", extra={"rows": "one"})
+    out.write_csv(pd.DataFrame({"x": [1]}), "u.csv")
+    assert json.loads((tmp_path / "t.csv.json").read_text())["details"] == \
+        {"grid": "coarse", "rows": "one"}
+    assert json.loads((tmp_path / "u.csv.json").read_text())["details"] == {"grid": "coarse"}
+
+
+def test_a_file_written_twice_is_reported_once(tmp_path, capsys):
+    """Once across calls, and once within one call (`wrote(c, c)` listed c twice: the check ran
+    against the list as it was before the call; an audit, 2026-12-07)."""
+    out = cli.Output(SimpleNamespace(study="fig4c", out=str(tmp_path), quick=False), [])
+    out.wrote(tmp_path / "a.png")
+    out.wrote(str(tmp_path / "a.png"), tmp_path / "b.png")
+    out.wrote(tmp_path / "c.png", tmp_path / "c.png")
+    out.report()
+    assert capsys.readouterr().out.splitlines() == [
+        f"  wrote {tmp_path / name}" for name in ("a.png", "b.png", "c.png")]
+
+
+def test_the_run_place_flags_are_left_out_in_either_spelling():
+    assert cli.flags_of_run(["--out=results", "--workers", "2", "--no-progress", "--out", "x",
+                             "--replace-committed", "--quick"]) == ["--workers", "2", "--quick"]
+
+
+# --------------------------------------------------------------------------- the launcher
+
+def test_h_alone_lists_the_studies(capsys):
+    assert studies_main(["-h"]) == 0
+    captured = capsys.readouterr()
+    assert captured.out.startswith("usage: ") and "\nstudies:\n" in captured.out
+    assert captured.err == ""
+
+
+@pytest.mark.parametrize("number", [28, 122])  # ENOSPC, EDQUOT (a quota full: no room either)
+def test_a_write_that_found_no_room_is_one_line(tmp_path, monkeypatch, capsys, number):
+    import errno
+    import os
+    assert number in (errno.ENOSPC, errno.EDQUOT)
+    plot = tmp_path / "out" / "fig4c.png"
+
+    def no_room(*args, **kwargs):
+        raise OSError(number, os.strerror(number), str(plot))
+    monkeypatch.setattr("studies.figures.run_fig4c", no_room)
+    assert studies_main(["fig4c", "--out", str(tmp_path / "out"), *QUICK]) == 2
+    error = capsys.readouterr().err.strip()
+    assert f"cannot write {plot} ({os.strerror(number)})" in error and len(error.splitlines()) == 1
+
+
+def test_another_os_error_keeps_its_traceback(tmp_path, monkeypatch):
+    """A fault (a permission refused where the checks let it by) is shown as it is, not as a
+    full disk."""
+    def refused(*args, **kwargs):
+        raise PermissionError(13, "Permission denied", "somewhere")
+    monkeypatch.setattr("studies.figures.run_fig4c", refused)
+    with pytest.raises(PermissionError):
+        studies_main(["fig4c", "--out", str(tmp_path / "out"), *QUICK])
+
+
+@pytest.mark.parametrize("code, status", [("stopped", 2), (None, 0), (3, 3), (0, 0)])
+def test_a_studys_exit_gives_its_status(tmp_path, monkeypatch, code, status):
+    """sys.exit with a message is a failure (2); sys.exit() or sys.exit(None) a success, as
+    Python's own exit (it was 2: an audit, 2026-12-07); a number is that status."""
+    def leaves(*args, **kwargs):
+        raise SystemExit(code)
+    monkeypatch.setattr("studies.figures.run_fig4c", leaves)
+    assert studies_main(["fig4c", "--out", str(tmp_path / "out"), *QUICK]) == status
+
+
+# --------------------------------------------------------------------------- provenance
+
+def test_a_cpu_runs_timing_columns_name_no_gpu(monkeypatch):
+    from studies import provenance
+    monkeypatch.setattr(provenance, "machine",
+                        lambda: {"cpu_model": "Some CPU", "cores": 16, "gpus": ["H100"]})
+    monkeypatch.setattr(provenance, "nvidia_smi", lambda field: ["550.1"])
+    assert provenance.machine_columns("cpu") == {
+        "machine": "Some CPU (16 cores)", "cpu_model": "Some CPU", "cores": 16, "gpu": "",
+        "gpu_driver": ""}
+    assert provenance.machine_columns("gpu") == {
+        "machine": "Some CPU (16 cores) + H100", "cpu_model": "Some CPU", "cores": 16,
+        "gpu": "H100", "gpu_driver": "550.1"}
+
+
+@pytest.mark.parametrize("code, shown", [
+    ({"commit": "0123456789abcdef", "dirty": True}, "0123456-dirty"),
+    ({"commit": "0123456789abcdef", "dirty": False}, "0123456"),
+    ({"commit": None, "dirty": None}, "unknown")])
+def test_the_short_commit_says_a_dirty_checkout(monkeypatch, code, shown):
+    from studies import provenance
+    monkeypatch.setattr(provenance, "code_version", lambda: code)
+    assert provenance.short_commit() == shown
+
+
+def test_resume_takes_a_run_dir_without_out(tmp_path):
+    """--resume needs the run's folder: --out, or --run-dir alone (the run store to continue)."""
+    parser = cli.StudyParser("sweep", "a study")
+    cli.add_execution_flags(parser)
+    cli.add_resume_flags(parser)
+    args = cli.parse(parser, ["--resume", "--run-dir", str(tmp_path / "store")])
+    assert args.resume and args.run_dir == str(tmp_path / "store") and args.out is None
+    with pytest.raises(cli.StudyArgumentError,
+                       match=r"^--resume: give --out \(the folder of the run to continue\) or "
+                             r"--run-dir$"):
+        cli.parse(parser, ["--resume"])
+
+
+def test_a_command_of_no_flags_ends_with_the_study(monkeypatch):
+    from studies import program, provenance
+    monkeypatch.setattr(provenance, "LATEST_STUDY", {})
+    assert provenance.record("fig4c", [])["command"] == f"{program()} fig4c"
+    assert provenance.record("fig4c", ["--quick"])["command"] == f"{program()} fig4c --quick"
+
+
+@pytest.mark.parametrize("dirty, said", [(True, "true"), (False, "false"), (None, "unknown")])
+def test_a_figure_says_whether_the_checkout_was_dirty(monkeypatch, dirty, said):
+    from studies import provenance
+    monkeypatch.setattr(provenance, "code_version",
+                        lambda: {"version": "1.0", "commit": "abc", "dirty": dirty})
+    assert provenance.figure_metadata()["git_dirty"] == said
+
+
+def test_a_source_hash_that_could_not_be_made_is_unknown(monkeypatch):
+    from studies import provenance
+    monkeypatch.setattr(provenance, "code_version", lambda: {
+        "version": "1.0", "commit": None, "dirty": None, "source_sha256": None})
+    assert provenance.figure_metadata()["source_sha256"] == "unknown"
+
+
+# --------------------------------------------------------------------------- figures
+
+def test_fig4b_cuts_the_experiment_at_the_simulated_span():
+    """The experiment's curve ends where the simulation's does (1 s here), and a gait with no
+    experiment has the simulation's curve alone."""
+    import pandas as pd
+    from studies import figures
+    summary = pd.DataFrame({"instance": [0, 1], "gait": ["A1+A3+A5", "A2"]})
+    trajectory = pd.DataFrame({"instance": [0, 0, 1, 1], "t_s": [0.0, 1.0, 0.0, 1.0],
+                               "x_mm": [0.0, 3.0, 0.0, 1.0], "y_mm": [0.0, 4.0, 0.0, 0.0]})
+    table = figures.fig4b_table(summary, trajectory, 1.0)
+    experiment = table[table["source"] == "experiment"]
+    assert len(experiment) > 2 and set(experiment["gait"]) == {"A1+A3+A5"}
+    assert experiment["t_s"].max() <= 1.0 + 1e-9
+    assert table[table["source"] == "simulation"]["displacement_mm"].tolist() == [0, 5, 0, 1]
+
+
+def test_the_fig4_titles_name_the_simulated_span():
+    from studies import figures
+    assert all("(the first 0.5 s from rest)" in title or "the first 0.5 s from rest" in title
+               for title in figures.fig4_titles(0.5))
+    assert all("the first" not in title for title in figures.fig4_titles())
