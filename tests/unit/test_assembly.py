@@ -455,3 +455,10 @@ def test_an_element_whose_nodes_repeat_is_refused_before_its_slot_table_is_built
     with pytest.raises(ValueError, match="triplet 1 repeats a Jacobian slot"):
         distinct_rows(triplet_rows, "triplet")
     assert distinct_rows(triplet_rows[:1], "triplet") == triplet_rows[:1]
+
+
+def test_a_row_that_repeats_one_slot_once_is_refused():
+    """`distinct_rows` refuses any repeated slot, also a single repeat in a longer row (a rule
+    of two or more lived through the suite: a mutation audit, 2026-12-07)."""
+    with pytest.raises(ValueError, match="pair 1 repeats a Jacobian slot"):
+        distinct_rows([[0, 1, 2, 3], [4, 5, 5, 6]], "pair")

@@ -479,3 +479,25 @@ def test_a_runs_tables_split_into_the_instances_and_their_derivatives():
     np.testing.assert_allclose(x, [(2 - 4) / 0.02, 3 * (2 - 4) / 0.02,
                                    (3 - 5) / 0.04, 3 * (3 - 5) / 0.04])
     assert trajectory_table["t_s"].tolist() == [0.0, 0.5, 0.0, 0.5]
+
+
+LINEAR = ["added_mass_coeff", "cylinder_added_mass_coeff", "drag_perpendicular", "drag_parallel",
+          "cylinder_drag", "linear_drag", "hub_linear_drag", "wake_coupling", "alpha",
+          "jet_inflow", "stroke_warming"]
+"""The scalar StarParams fields the terms declare their forces linear or quadratic in
+(`Term.linear_fields`; fluid_density's range excludes a value far below its usual one)."""
+
+
+@pytest.mark.parametrize("field", LINEAR)
+def test_each_declared_linear_coefficient_far_below_its_usual_value_takes_its_usual_step(field):
+    """The rule of test_sensitivities' `test_a_small_coefficients_step_is_its_usual_scales`,
+    for every coefficient a term declares linear (four missing from their terms' tables lived
+    through the suite: a mutation audit, 2026-12-07): a value of 1e-6 of the usual scale takes the
+    ε of that scale, not 1e-4 of itself (which leaves the replicas within the positions'
+    rounding)."""
+    (direction,) = parse_directions((field,))
+    tiny = 1e-6 * direction.usual_scale()
+    params = StarParams.preset("paper").replace(**{field: tiny})
+    assert field in sens.LINEAR_FIELDS
+    assert direction.step(params) == direction.relative_step * direction.usual_scale()
+    assert direction.step(params) > 10 * direction.relative_step * tiny
