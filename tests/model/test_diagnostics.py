@@ -93,8 +93,9 @@ def test_jet_impulses_refuse_adaptive_euler_too():
 def test_jet_impulses_refuse_a_run_with_a_single_record(taichi_cpu):
     """a run recorded once (at t = 0: record_interval_s past its duration) has no step to
     recompute: a ValueError, not a table of zero impulses."""
-    result = ts.simulate([ts.StarParams(gait="A1", n_arc=6, n_limb=2)], 0.005, ts.SolverConfig(dt=0.005),
-                         record_interval_s=0.01, record_shapes=True, progress=False)
+    result = ts.simulate([ts.StarParams(gait="A1", n_arc=6, n_limb=2)], 0.005,
+                         ts.SolverConfig(dt=0.005), record_interval_s=0.01, record_shapes=True,
+                         progress=False)
     assert result.trajectory["t_s"].nunique() == 1
     with pytest.raises(ValueError, match="record at every step"):
         result.jet_impulses()

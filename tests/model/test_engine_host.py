@@ -44,7 +44,8 @@ def test_the_lockstep_groups_are_spread_evenly_over_the_loop(taichi_cpu):
     """the groups of an engine with lanes sit `group_stride` = iterations // groups apart
     (as `slot_instance` places instances), not packed at the start of the loop (where
     Taichi's CPU backend would give them all to one thread)."""
-    params = [ts.StarParams(gait="A1", alpha=0.6 + 0.005 * i) for i in range(LOCKSTEP_MINIMUM_BATCH)]
+    params = [ts.StarParams(gait="A1", alpha=0.6 + 0.005 * i)
+              for i in range(LOCKSTEP_MINIMUM_BATCH)]
     Runtime.current().configure_lanes(8)
     try:
         engine = prepare_engine(params, ts.SolverConfig())
