@@ -84,14 +84,14 @@ def test_a_failed_instance_gets_nan_rows_and_other_runs_are_refused():
 
 
 def test_jet_impulses_refuse_adaptive_euler_too():
-    """adaptive implicit Euler's steps are not the records' spacing: refused, as BDF2 is."""
+    """Adaptive implicit Euler's steps are not the records' spacing: refused, as BDF2 is."""
     with pytest.raises(ValueError, match=r"implicit Euler with fixed steps.*adaptive=True"):
         check_jet_solver(ts.SolverConfig(adaptive=True))
     check_jet_solver(ts.SolverConfig())  # fixed-step Euler passes
 
 
 def test_jet_impulses_refuse_a_run_with_a_single_record(taichi_cpu):
-    """a run recorded once (at t = 0: record_interval_s past its duration) has no step to
+    """A run recorded once (at t = 0: record_interval_s past its duration) has no step to
     recompute: a ValueError, not a table of zero impulses."""
     result = ts.simulate([ts.StarParams(gait="A1", n_arc=6, n_limb=2)], 0.005,
                          ts.SolverConfig(dt=0.005), record_interval_s=0.01, record_shapes=True,

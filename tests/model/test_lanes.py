@@ -10,6 +10,7 @@ instance, which factors and solves its own system."""
 import numpy as np
 import pandas as pd
 import pytest
+import taichi as ti
 
 import taichi_star as ts
 import taichi_star.runtime as runtime_module
@@ -106,6 +107,31 @@ def test_lockstep_from_the_minimum_batch_and_only_with_newtons_jacobian(count, j
     assert (steps == 20).all() and (engine.state.status.to_numpy()[:count] == 0).all()
     # every instance of the batch advanced once per step, padding never
     assert (engine.state.steps_done.to_numpy()[count:] == saved["steps_done"][count:]).all()
+
+
+@ti.kernel
+def _slot_groups(engine: ti.template(), groups: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+    for slot in range(engine.capacity * engine.loop_spread):
+        groups[slot] = engine.slot_group(slot)
+
+
+def test_the_lockstep_groups_are_spread_evenly_over_the_loop(taichi_cpu):
+    """The groups of an engine with lanes sit `group_stride` = iterations // groups apart
+    (as `slot_instance` places instances), not packed at the start of the loop (where
+    Taichi's CPU backend would give them all to one thread)."""
+    params = BATCH[:LOCKSTEP_MINIMUM_BATCH]  # the engine of the test above
+    Runtime.current().configure_lanes(8)
+    try:
+        engine = prepare_engine(params, ts.SolverConfig())
+    finally:
+        Runtime.current().configure_lanes()
+    assert engine.lockstep[None] == 1
+    count = engine.group_count[None]
+    groups = np.empty(engine.capacity * engine.loop_spread, dtype=np.int32)
+    _slot_groups(engine, groups)
+    slots = np.flatnonzero(groups >= 0)
+    np.testing.assert_array_equal(groups[slots], np.arange(count))
+    np.testing.assert_array_equal(slots, np.arange(count) * (len(groups) // count))
 
 
 def test_the_phase_profile_of_an_engine_with_lanes_runs_its_groups_as_its_steps_do():

@@ -1,7 +1,8 @@
 """EngineProfile's bookkeeping with a fake engine and a fake clock: the timed window's restart
 and counts per instance-step, its refusal of a failed instance, the launches of `advance`, the
 first launch's compile time, the phase split's arithmetic and repetitions, and the bytes a
-Newton iteration moves. No Taichi, no real timing."""
+Newton iteration moves. No Taichi, no real timing. Found by a mutation audit (2026-12-07): each
+test kills a change of the code that the suite let live."""
 
 from types import SimpleNamespace
 
@@ -60,7 +61,7 @@ def _profile(monkeypatch, engine):
 
 
 def test_a_timed_window_restarts_and_counts_per_instance_step_of_its_own_steps(monkeypatch):
-    """from rest (a `load`), warm-up steps left out; (3 + 5)/2 = 4 iterations and
+    """From rest (a `load`), warm-up steps left out; (3 + 5)/2 = 4 iterations and
     (2 + 1)/2 = 1.5 factorisations per instance-step, whatever ran before."""
     engine = _FakeEngine()
     profile = _profile(monkeypatch, engine)
@@ -71,7 +72,7 @@ def test_a_timed_window_restarts_and_counts_per_instance_step_of_its_own_steps(m
 
 
 def test_a_timed_window_with_a_failed_instance_is_refused(monkeypatch):
-    """an instance that failed in the window makes its timing invalid."""
+    """An instance that failed in the window makes its timing invalid."""
     profile = _profile(monkeypatch, _FakeEngine(fail_at=6))
     with pytest.raises(RuntimeError, match="an instance failed during the benchmark"):
         profile.timed_window(2, 10)
@@ -86,7 +87,7 @@ def test_advance_launches_in_simulates_chunks(monkeypatch):
 
 
 def test_first_launch_never_reports_a_negative_compile_time(monkeypatch):
-    """a first launch faster than the second (noise) gives compile_s 0, not below."""
+    """A first launch faster than the second (noise) gives compile_s 0, not below."""
     clock = iter([0.0, 1.0, 10.0, 12.0])  # first launch 1 s, the second 2 s
     profile = _profile(monkeypatch, _FakeEngine())
     monkeypatch.setattr(profiling.time, "perf_counter", lambda: next(clock))
@@ -94,10 +95,10 @@ def test_first_launch_never_reports_a_negative_compile_time(monkeypatch):
 
 
 def test_phase_split_is_microseconds_per_instance_and_iteration_of_each_phase(monkeypatch):
-    """with launches whose time is exactly
-    calls × batch × the cumulative µs of their phases (residual 1, +Jacobian 3, +factor 10,
-    +solve 12), the split is residual 1, assembly 3, factor 7, solve 2 µs; each launch repeats
-    round(profile_seconds / iteration_s) times, at least 1 and at most MAX_PROFILE_CALLS."""
+    """With launches whose time is exactly calls × batch × the cumulative µs of their phases
+    (residual 1, +Jacobian 3, +factor 10, +solve 12), the split is residual 1, assembly 3,
+    factor 7, solve 2 µs; each launch repeats round(profile_seconds / iteration_s) times, at
+    least 1 and at most MAX_PROFILE_CALLS."""
     clock = [0.0]
     cumulative = {0: 1.0, 1: 3.0, 2: 10.0, 3: 12.0}
     seen = []

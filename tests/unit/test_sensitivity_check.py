@@ -187,7 +187,7 @@ def _failed_table(count):
 @pytest.mark.parametrize("count, tail", [(5, "A5 alpha (non_finite at 0.01 s)"),
                                          (6, "A5 alpha (non_finite at 0.01 s); and 1 more")])
 def test_the_failed_rows_warning_names_five_and_counts_the_rest(count, tail):
-    """at most FAILED_ROWS_NAMED (5) rows named, "and N more" only where N > 0."""
+    """At most FAILED_ROWS_NAMED (5) rows named, "and N more" only where N > 0."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         sensitivity_check.warn_failed_rows(_failed_table(count))
@@ -197,7 +197,7 @@ def test_the_failed_rows_warning_names_five_and_counts_the_rest(count, tail):
 
 
 def test_the_spread_is_that_of_the_smallest_steps_difference(monkeypatch):
-    """for an output α³ the central differences are 3α² + (kh)², so the spread
+    """For an output α³ the central differences are 3α² + (kh)², so the spread
     |D(h) − D|/|D| is h²/(3α²) (that of D(2h) would be four times it)."""
 
     def simulate(params, duration_s, solver, arch="cpu", **options):
