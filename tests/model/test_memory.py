@@ -278,6 +278,7 @@ def test_engines_past_the_budget_are_destroyed_least_recently_used_first(monkeyp
     assert current.release_engines(kept) == 1 and capacities() == [128]
 
 
+@pytest.mark.slow  # suite time (5-8 s); test_reliability's thread tests stay in the default tier
 def test_engines_are_destroyed_on_the_thread_that_started_taichi_alone(monkeypatch):
     """A call from another thread that reused an engine destroyed the others there, and every
     later build of the process failed on Taichi's assertion (a review, 2026-12): such a call

@@ -87,6 +87,7 @@ def test_c_parallel_takes_its_own_step_and_then_matches_its_differences(taichi_c
                                                    ("drag_parallel",)), 1e-5)
 
 
+@pytest.mark.slow  # suite time (7 s); the linear coefficients' steps stay in the unit tests
 def test_the_cylinders_drag_takes_its_own_step_and_then_matches_its_differences(
         taichi_cpu, matches_differences):
     """The hub's drag coefficient C_c barely moves the robot: a coarse A1 robot at C_c = 10,
