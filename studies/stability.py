@@ -90,9 +90,9 @@ QUICK_DURATION_S = 0.05
 
 RECORD_SPACING_S = 0.06
 
-PAPER = {"stiffness_factor": 1.0, "alpha": StarParams.preset("paper").alpha,
-         "added_mass_coeff": StarParams.preset("paper").added_mass_coeff,
-         "period_s": StarParams.preset("paper").period}
+PAPER_MODEL = StarParams.preset("paper")
+PAPER = {"stiffness_factor": 1.0, "alpha": PAPER_MODEL.alpha,
+         "added_mass_coeff": PAPER_MODEL.added_mass_coeff, "period_s": PAPER_MODEL.period}
 """The paper's parameters within the grid (its model's stiffness: a factor of 1)."""
 
 SPEED_FLOOR_MM_S = 0.01

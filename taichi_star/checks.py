@@ -89,6 +89,13 @@ def shown(value) -> str:
     return f"{text[:24]}... ({len(text)} characters)"
 
 
+def check_choice(name: str, value, choices):
+    """ValueError naming `name` and `choices` unless `value` is one of the words `choices`."""
+    # a word first: `in` on an array or a list of words would compare element-wise or fail
+    if not isinstance(value, str) or value not in choices:
+        raise ValueError(f"{name} must be one of {list(choices)}, got {value!r}")
+
+
 def check_flag(name: str, value) -> bool:
     """`value` as a bool if it is one (NumPy's included); else ValueError naming it (a text
     such as "no" would otherwise switch the option on)."""

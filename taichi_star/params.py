@@ -22,7 +22,7 @@ from typing import Dict, Optional, Tuple
 import numpy as np
 
 from .actuation import PROFILE_CLOSURES, CurvatureProfile
-from .checks import check_flag, check_not_subnormal, is_real, is_whole, shown
+from .checks import check_choice, check_flag, check_not_subnormal, is_real, is_whole, shown
 from .gait import N_ACTUATORS, Gait
 
 JET_MODES = ("contract", "always")
@@ -216,12 +216,6 @@ def _named_fields_only(cls):
     return cls
 
 
-def _check_choice(name, value, choices):
-    # a word first: `in` on an array or a list of words would compare element-wise or fail
-    if not isinstance(value, str) or value not in choices:
-        raise ValueError(f"{name} must be one of {list(choices)}, got {value!r}")
-
-
 @_named_fields_only
 @dataclass(frozen=True)
 class StarParams:
@@ -383,7 +377,7 @@ class StarParams:
                 name, getattr(self, name), lowest, highest, included, name in INTEGER_FIELDS,
                 reason, highest_included))
         for name, choices in STAR_CHOICES.items():
-            _check_choice(name, getattr(self, name), choices)
+            check_choice(name, getattr(self, name), choices)
         for f in fields(self):
             if f.metadata.get("per_actuator"):
                 lowest, highest, highest_included = f.metadata["actuator_range"]
@@ -447,7 +441,7 @@ class StarParams:
         the mesh, on n_arc 48 (N = 433). "identified": the best model form of the model
         selection study (`IDENTIFIED_FIELDS`), e.g. `StarParams.preset("identified",
         gait="A1+A4")`."""
-        _check_choice("preset", name, PRESETS)
+        check_choice("preset", name, PRESETS)
         return cls(**{**PRESET_FIELDS[name], **overrides})
 
     @property
@@ -718,7 +712,7 @@ class SolverConfig:
                              f"[{self.dt_min:g}, {self.dt_max:g}] s, got {self.dt!r}")
         for f in fields(self):
             if "choices" in f.metadata:
-                _check_choice(f.name, getattr(self, f.name), f.metadata["choices"])
+                check_choice(f.name, getattr(self, f.name), f.metadata["choices"])
         if self.precision == "f32" and self.newton_tol < F32_NEWTON_TOL_MIN:
             highest = SolverConfig.__dataclass_fields__["newton_tol"].metadata["range"][1]
             raise ValueError(f"newton_tol must be in [{F32_NEWTON_TOL_MIN:g}, {highest:g}] m with "
@@ -730,7 +724,7 @@ class SolverConfig:
         """Named solver settings: "paper" and "identified" (implicit Euler at 1 ms with Newton's
         method, the paper's scheme, with which the model selection study fits) or "accurate" (adaptive BDF2, error_tol 1e-6 m, the chord Jacobian:
         about 300 steps per 3.15-s cycle)."""
-        _check_choice("preset", name, PRESETS)
+        check_choice("preset", name, PRESETS)
         return cls(**{**SOLVER_PRESET_FIELDS[name], **overrides})
 
     @property

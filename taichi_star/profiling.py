@@ -21,7 +21,7 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 import taichi as ti
 
-from .checks import is_whole
+from .checks import check_choice, is_whole
 from .model import build_model, validate_batch
 from .params import PRECISIONS, SolverConfig, StarParams, check_precision
 from .runtime import Runtime, check_arch, one_call_at_a_time
@@ -372,8 +372,7 @@ def matmul_gflops(size: int, precision: str, rng: np.random.Generator) -> float:
     audit)."""
     if not is_whole(size) or size < 1:
         raise ValueError(f"size must be a whole number >= 1, got {size!r}")
-    if not isinstance(precision, str) or precision not in PRECISIONS:
-        raise ValueError(f"precision must be one of {list(PRECISIONS)}, got {precision!r}")
+    check_choice("precision", precision, PRECISIONS)
     size = int(size)
     dtype = np.float64 if precision == "f64" else np.float32
     a, b = (rng.standard_normal((size, size)).astype(dtype) for _ in range(2))
