@@ -694,16 +694,3 @@ def test_the_files_record_when_the_result_was_made_and_when_written(recorded, tm
     facts = ts.output.read_provenance(path)
     assert facts["date"] == "2020-01-02T03:04:05+00:00"
     assert facts["written"] != facts["date"] and facts["written"].startswith("20")
-
-
-def test_an_f32_runs_trajectory_heading_is_the_summarys_at_the_same_state():
-    """The trajectory's heading was computed from the f32 positions, the summary's and the
-    Simulator's from them in float64: at the same final state they differed by ~2 % of a
-    heading of 7e-5° (an audit, 2026-12). Now the same computation: equal to the bit."""
-    solver = ts.SolverConfig(dt=2e-3, precision="f32", newton_tol=1e-7)
-    robots = [ts.StarParams(gait=gait, period=0.2) for gait in ("A1+A2", "A3", "A1+A3+A5")]
-    result = ts.simulate(robots, 0.5, solver, record_interval_s=0.5)
-    last = result.trajectory[result.trajectory["t_s"] == 0.5].sort_values("instance")
-    assert (result.summary["heading_deg"].abs() > 1e-5).all()
-    np.testing.assert_array_equal(last["heading_deg"].to_numpy(),
-                                  result.summary["heading_deg"].to_numpy())

@@ -182,8 +182,8 @@ def test_f32_agrees_with_f64_or_flags_the_iteration_cap():
     (stiff limbs over long steps amplify its rounding): their Newton solves run out of
     iterations, the steps are rescued by substeps, and the results are far off (0.06 → 2.4
     mm/s); they come out "ok" but flagged newton_capped, with a RuntimeWarning, while f64
-    solves the same steps without reaching the cap. Last in this file: switching Taichi to
-    f32 drops the f64 engines compiled before."""
+    solves the same steps without reaching the cap. The file's f32 tests follow it: switching
+    Taichi to f32 drops the f64 engines compiled before, once for all of them."""
     batch = [ts.StarParams(gait="A1+A2", joint_radius=0.012, tip_radius=0.03),
              ts.StarParams(gait="A1+A2", tip_radius=0.25)]
     runs = {"fine": (1e-3, 0.1), "coarse": (0.05, 1.0)}
@@ -234,6 +234,114 @@ def test_a_precision_switch_is_refused_while_a_simulator_lives_and_allowed_once_
             assert ts.simulate([ts.StarParams()], 0.01, f32).summary.status.eq("ok").all()
     finally:
         gc.enable()
+
+
+def test_an_f32_simulator_refuses_a_firing_at_a_step_its_clock_cannot_hold():
+    """With fixed steps a pending firing is kept as its step number in the engine's float: f32
+    holds every whole number up to 2²⁴ (accepted), not 2²⁴ + 1 (refused, nothing changed).
+    dt = 2⁻¹⁰ s makes both times exact binary multiples of the step. After the f32 test above:
+    one switch of Taichi's precision."""
+    dt = 2.0 ** -10
+    sim = ts.Simulator([ts.StarParams()], ts.SolverConfig(dt=dt, precision="f32", newton_tol=1e-6))
+    sim.fire(["A1"], at_s=2 ** 24 * dt)
+    before = sim.save().fields
+    with pytest.raises(ValueError, match=r"at_s = 16384 s is step 16777217, past the steps the "
+                                         r"clock's float32 counts exactly \(at most step "
+                                         r"16777216\); use precision 'f64'"):
+        sim.fire(["A2"], at_s=(2 ** 24 + 1) * dt)
+    # an even step past 2^24 is a whole float32, but the step numbers, compared as float32,
+    # round there (a firing could come a step early): refused too (it was accepted, an audit)
+    with pytest.raises(ValueError, match=r"is step 16777226, past the steps the clock's "
+                                         r"float32 counts exactly \(at most step 16777216\)"):
+        sim.fire(["A2"], at_s=(2 ** 24 + 10) * dt)
+    after = sim.save().fields
+    assert all(np.array_equal(after[name], before[name]) for name in before)
+    assert sim.engine.state.schedule.pending_due.to_numpy()[0, 0] == 2 ** 24
+
+
+@pytest.fixture
+def bounded_time():
+    """A run that does not end fails the test after 300 s (these cases take a few seconds)
+    instead of hanging the suite: SIGALRM's handler raises between two kernel launches."""
+    if not hasattr(signal, "SIGALRM"):
+        pytest.skip("needs SIGALRM (POSIX)")
+
+    def expired(signum, frame):
+        raise TimeoutError("the run did not end within 300 s")
+
+    previous = signal.signal(signal.SIGALRM, expired)
+    signal.alarm(300)
+    yield
+    signal.alarm(0)
+    signal.signal(signal.SIGALRM, previous)
+
+
+def test_an_f32_adaptive_run_ends_at_a_stop_that_float32_rounds_down(bounded_time):
+    """float32(0.35) < 0.35: the f32 time reached the stop as the device holds it, and the host
+    compared it with the f64 stop, launching the kernel forever (an audit; `bounded_time` turns
+    that into a failure). After the f32 tests above: no further switch of Taichi's
+    precision."""
+    assert float(np.float32(0.35)) < 0.35
+    sim = ts.Simulator([ts.StarParams()], ts.SolverConfig(adaptive=True, precision="f32",
+                                                          newton_tol=1e-7))
+    sim.fire(["A1"])
+    sim.advance(0.35)
+    assert sim.time_s[0] == np.float32(0.35) and sim.state().status[0] == "ok"
+
+
+def test_f32_adaptive_steps_between_close_records_are_solved(bounded_time):
+    """64 f32 roundings are 7.6e-6 s: with records every 5e-6 s (allowed: at least dt_min)
+    every step landed within them and was crossed by the clock as a sliver, and the robot stood
+    still, status ok (an audit). A sliver is at most half of dt_min now: every step is solved
+    (f32 steps this short lose much of the velocities to rounding: docs, Precision)."""
+    result = ts.simulate([ts.StarParams(gait="A1")], 0.004, ts.SolverConfig(
+        adaptive=True, precision="f32", newton_tol=1e-7), record_interval_s=5e-6)
+    summary = result.summary
+    assert summary.status[0] == "ok" and summary.steps[0] >= 800  # one step per record at least
+    assert abs(summary.displacement_x_mm[0]) > 0
+
+
+@pytest.mark.parametrize("adaptive, failure_time", [(False, 0.05),
+                                                    (True, float(np.float32(0.05)))])
+def test_an_f32_failure_time_is_its_steps_end_and_its_records_from_then_on_are_nan(
+        adaptive, failure_time):
+    """In f32 the engine's failure time is the failing step's end rounded to f32 (0.05 s read
+    0.05000000074505806), and the record at that step's end compared as before the failure:
+    it showed the frozen position, not NaN, where f64 gives NaN (an audit, 2026-12; the
+    adaptive path, a review). With fixed steps the failure time is now failure_step × dt in
+    float64, 0.05 exactly; with adaptive ones (held at 50 ms) the engine's own, and records
+    are compared with it in the state's precision: every record from it on is NaN, shapes
+    too; the record before it is finite."""
+    solver = ts.SolverConfig(dt=0.05, max_newton=3, max_substep_halvings=1, precision="f32",
+                             newton_tol=1e-7, adaptive=adaptive, dt_min=0.05, dt_max=0.05,
+                             error_tol=1e-3)
+    stiff = ts.StarParams(gait="A1+A2", youngs_modulus=1e10, limb_stiffness_ratio=1e4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the failure's own warning: expected here
+        result = ts.simulate([stiff], 0.2, solver, record_interval_s=0.05, record_shapes=True)
+    assert result.summary["status"].iloc[0] == "newton_failed"
+    assert result.summary["failure_time_s"].iloc[0] == failure_time
+    trajectory = result.trajectory
+    after = (trajectory["t_s"] >= 0.05).to_numpy()
+    assert trajectory["t_s"].tolist()[:2] == [0.0, 0.05]
+    assert trajectory.loc[after, ["x_mm", "y_mm"]].isna().all().all()
+    assert trajectory.loc[~after, ["x_mm", "y_mm"]].notna().all().all()
+    assert np.isnan(result.shapes[after]).all() and np.isfinite(result.shapes[~after]).all()
+
+
+# the f32 cases of the output's metrics sit here too: beside the other f32 tests, Taichi
+# switches precision (and compiles its engines again) once for the file, not once for each
+def test_an_f32_runs_trajectory_heading_is_the_summarys_at_the_same_state():
+    """The trajectory's heading was computed from the f32 positions, the summary's and the
+    Simulator's from them in float64: at the same final state they differed by ~2 % of a
+    heading of 7e-5° (an audit, 2026-12). Now the same computation: equal to the bit."""
+    solver = ts.SolverConfig(dt=2e-3, precision="f32", newton_tol=1e-7)
+    robots = [ts.StarParams(gait=gait, period=0.2) for gait in ("A1+A2", "A3", "A1+A3+A5")]
+    result = ts.simulate(robots, 0.5, solver, record_interval_s=0.5)
+    last = result.trajectory[result.trajectory["t_s"] == 0.5].sort_values("instance")
+    assert (result.summary["heading_deg"].abs() > 1e-5).all()
+    np.testing.assert_array_equal(last["heading_deg"].to_numpy(),
+                                  result.summary["heading_deg"].to_numpy())
 
 
 def _in_forked_child(work) -> str:
@@ -560,71 +668,6 @@ def test_a_streamed_batchs_capped_instances_are_warned_about_once_with_its_numbe
     assert len(messages) == 1
 
 
-def test_an_f32_simulator_refuses_a_firing_at_a_step_its_clock_cannot_hold():
-    """With fixed steps a pending firing is kept as its step number in the engine's float: f32
-    holds every whole number up to 2²⁴ (accepted), not 2²⁴ + 1 (refused, nothing changed).
-    dt = 2⁻¹⁰ s makes both times exact binary multiples of the step. After the f32 test above:
-    one switch of Taichi's precision."""
-    dt = 2.0 ** -10
-    sim = ts.Simulator([ts.StarParams()], ts.SolverConfig(dt=dt, precision="f32", newton_tol=1e-6))
-    sim.fire(["A1"], at_s=2 ** 24 * dt)
-    before = sim.save().fields
-    with pytest.raises(ValueError, match=r"at_s = 16384 s is step 16777217, past the steps the "
-                                         r"clock's float32 counts exactly \(at most step "
-                                         r"16777216\); use precision 'f64'"):
-        sim.fire(["A2"], at_s=(2 ** 24 + 1) * dt)
-    # an even step past 2^24 is a whole float32, but the step numbers, compared as float32,
-    # round there (a firing could come a step early): refused too (it was accepted, an audit)
-    with pytest.raises(ValueError, match=r"is step 16777226, past the steps the clock's "
-                                         r"float32 counts exactly \(at most step 16777216\)"):
-        sim.fire(["A2"], at_s=(2 ** 24 + 10) * dt)
-    after = sim.save().fields
-    assert all(np.array_equal(after[name], before[name]) for name in before)
-    assert sim.engine.state.schedule.pending_due.to_numpy()[0, 0] == 2 ** 24
-
-
-@pytest.fixture
-def bounded_time():
-    """A run that does not end fails the test after 300 s (these cases take a few seconds)
-    instead of hanging the suite: SIGALRM's handler raises between two kernel launches."""
-    if not hasattr(signal, "SIGALRM"):
-        pytest.skip("needs SIGALRM (POSIX)")
-
-    def expired(signum, frame):
-        raise TimeoutError("the run did not end within 300 s")
-
-    previous = signal.signal(signal.SIGALRM, expired)
-    signal.alarm(300)
-    yield
-    signal.alarm(0)
-    signal.signal(signal.SIGALRM, previous)
-
-
-def test_an_f32_adaptive_run_ends_at_a_stop_that_float32_rounds_down(bounded_time):
-    """float32(0.35) < 0.35: the f32 time reached the stop as the device holds it, and the host
-    compared it with the f64 stop, launching the kernel forever (an audit; `bounded_time` turns
-    that into a failure). After the f32 tests above: no further switch of Taichi's
-    precision."""
-    assert float(np.float32(0.35)) < 0.35
-    sim = ts.Simulator([ts.StarParams()], ts.SolverConfig(adaptive=True, precision="f32",
-                                                          newton_tol=1e-7))
-    sim.fire(["A1"])
-    sim.advance(0.35)
-    assert sim.time_s[0] == np.float32(0.35) and sim.state().status[0] == "ok"
-
-
-def test_f32_adaptive_steps_between_close_records_are_solved(bounded_time):
-    """64 f32 roundings are 7.6e-6 s: with records every 5e-6 s (allowed: at least dt_min)
-    every step landed within them and was crossed by the clock as a sliver, and the robot stood
-    still, status ok (an audit). A sliver is at most half of dt_min now: every step is solved
-    (f32 steps this short lose much of the velocities to rounding: docs, Precision)."""
-    result = ts.simulate([ts.StarParams(gait="A1")], 0.004, ts.SolverConfig(
-        adaptive=True, precision="f32", newton_tol=1e-7), record_interval_s=5e-6)
-    summary = result.summary
-    assert summary.status[0] == "ok" and summary.steps[0] >= 800  # one step per record at least
-    assert abs(summary.displacement_x_mm[0]) > 0
-
-
 class _Accepted(Exception):
     """Raised by a stand-in model builder: the call passed every check before compute."""
 
@@ -782,34 +825,6 @@ def test_the_default_progress_follows_the_estimated_work_on_every_route(monkeypa
         call()
         assert ("robot" in capsys.readouterr().err) is shown
     envs.close()
-
-
-@pytest.mark.parametrize("adaptive, failure_time", [(False, 0.05),
-                                                    (True, float(np.float32(0.05)))])
-def test_an_f32_failure_time_is_its_steps_end_and_its_records_from_then_on_are_nan(
-        adaptive, failure_time):
-    """In f32 the engine's failure time is the failing step's end rounded to f32 (0.05 s read
-    0.05000000074505806), and the record at that step's end compared as before the failure:
-    it showed the frozen position, not NaN, where f64 gives NaN (an audit, 2026-12; the
-    adaptive path, a review). With fixed steps the failure time is now failure_step × dt in
-    float64, 0.05 exactly; with adaptive ones (held at 50 ms) the engine's own, and records
-    are compared with it in the state's precision: every record from it on is NaN, shapes
-    too; the record before it is finite."""
-    solver = ts.SolverConfig(dt=0.05, max_newton=3, max_substep_halvings=1, precision="f32",
-                             newton_tol=1e-7, adaptive=adaptive, dt_min=0.05, dt_max=0.05,
-                             error_tol=1e-3)
-    stiff = ts.StarParams(gait="A1+A2", youngs_modulus=1e10, limb_stiffness_ratio=1e4)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the failure's own warning: expected here
-        result = ts.simulate([stiff], 0.2, solver, record_interval_s=0.05, record_shapes=True)
-    assert result.summary["status"].iloc[0] == "newton_failed"
-    assert result.summary["failure_time_s"].iloc[0] == failure_time
-    trajectory = result.trajectory
-    after = (trajectory["t_s"] >= 0.05).to_numpy()
-    assert trajectory["t_s"].tolist()[:2] == [0.0, 0.05]
-    assert trajectory.loc[after, ["x_mm", "y_mm"]].isna().all().all()
-    assert trajectory.loc[~after, ["x_mm", "y_mm"]].notna().all().all()
-    assert np.isnan(result.shapes[after]).all() and np.isfinite(result.shapes[~after]).all()
 
 
 def test_a_failed_instances_shape_metrics_are_not_its_frozen_shapes():
