@@ -824,7 +824,14 @@ class Runtime:
         lanes = self.engine_lanes(max(model.batch_size, least_batch), solver, sensitive,
                                   robot_steps)
         key = self.engine_key(model, solver, sensitive, lanes, least_batch)
-        slot = next((slot for slot in self.engines.get(key, []) if not slot.held()), None)
+        slot = self.unheld_slot(key)
+        if slot is None and key in self.engines:
+            # each engine of the batch's key held: a Simulator let go but kept in a reference
+            # cycle (a caught exception's traceback holds the frames that made it) goes only
+            # when the collector runs, which takes milliseconds where a build takes seconds
+            # (the test suite built engines for Simulators in such cycles, 2026-12-07)
+            gc.collect()
+            slot = self.unheld_slot(key)
         if slot is None:
             self.build_here()
             # room for it first: the engines kept and it within the budget
@@ -836,6 +843,10 @@ class Runtime:
         slot.last_use = self.uses
         self.bound_engines(slot.engine.arena.nbytes, keep=slot)
         return slot
+
+    def unheld_slot(self, key: tuple) -> Optional[EngineSlot]:
+        """The first engine of `key` that no living Simulator holds; None if there is none."""
+        return next((slot for slot in self.engines.get(key, []) if not slot.held()), None)
 
     def bound_engines(self, taken_bytes: int, keep: Optional[EngineSlot] = None):
         """`release_engines` down to FREE_ENGINES_BYTES beside the `taken_bytes` of the engine

@@ -735,6 +735,7 @@ def test_an_adaptive_robot_stops_at_the_step_limit_or_a_step_that_cannot_advance
         np.testing.assert_allclose(sim.engine.state.failure_time.to_numpy()[:2], limit * 1e-3,
                                    rtol=1e-12)
         assert (sim.engine.state.steps_done.to_numpy()[:2] == limit).all()
+        del sim  # its engine goes on to the next Simulator (not a build: the suite's time)
     sim = ts.Simulator(params, solver)
     sim.advance(0.005)
     sizes = sim.engine.state.step_size.to_numpy()

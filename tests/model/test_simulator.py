@@ -3,6 +3,7 @@ consistent with each other and with `simulate`; bad commands leave the state unc
 step_batch example runs."""
 
 import dataclasses
+import gc
 import math
 import os
 import re
@@ -76,6 +77,38 @@ def test_simulate_and_simulators_share_engines_but_never_one_in_use():
     assert not any(slot.engine is engine and slot.held() for slot in slots)
 
 
+@pytest.mark.parametrize("in_a_cycle", [False, True])
+def test_a_simulator_let_go_hands_its_engine_on_without_a_build(monkeypatch, in_a_cycle):
+    """A Simulator dropped while a reference cycle still held it (a caught exception's
+    traceback keeps the frame that made it) held its engine until the collector ran, and the
+    next Simulator of its batch built another, seconds of compilation: the runtime collects
+    before it builds. Dropped plainly, it goes at once. The batch's engines are this one alone
+    (the file's other engines of its key, free, would take the next Simulator either way)."""
+    from taichi_star.model import build_model
+    from taichi_star.runtime import Runtime
+
+    runtime = Runtime.current()
+    first = commanded()
+    engine = first.engine
+    key = runtime.engine_key(build_model(PARAMS), ts.SolverConfig())
+    (slot,) = (slot for slot in runtime.engines[key] if slot.engine is engine)
+    monkeypatch.setattr(runtime, "engines", {key: [slot]})
+    built = []
+    new_engine = runtime.new_engine
+    monkeypatch.setattr(runtime, "new_engine",
+                        lambda *args: built.append(args) or new_engine(*args))
+    gc.disable()
+    try:
+        if in_a_cycle:
+            first.own_cycle = [first]
+        del first
+        assert slot.held() is in_a_cycle  # the collector has not run
+        second = commanded()
+    finally:
+        gc.enable()
+    assert second.engine is engine and built == []
+
+
 def test_one_advance_equals_pieces_equals_save_and_load():
     def run(pieces, snapshot_at=None):
         sim = commanded()
@@ -90,6 +123,7 @@ def test_one_advance_equals_pieces_equals_save_and_load():
     whole, _ = run([3 * PERIOD])
     pieces, snapshot = run([PERIOD, PERIOD, PERIOD], snapshot_at=0)
     np.testing.assert_array_equal(whole.shapes(), pieces.shapes())
+    del pieces  # its engine goes on to `fresh` (not a build: the suite's time)
     fresh = commanded()
     fresh.load(snapshot)
     fresh.advance(2 * PERIOD)
