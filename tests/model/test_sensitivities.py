@@ -102,6 +102,10 @@ def test_the_cylinders_drag_takes_its_own_step_and_then_matches_its_differences(
                                             ("cylinder_drag",)), 1.5e-7)
 
 
+# suite time (~4 s beside the engines it shares): its step's rule stays in the unit tests
+# (test_sensitivity_parts), τ's derivative against its differences in the default tier at
+# τ = 0 (below) and damped adaptive BDF2 sensitivities in test_bdf2_with_damping_chord_...
+@pytest.mark.slow
 def test_the_damping_time_takes_its_own_step_and_then_matches_its_differences(taichi_cpu, matches_differences):
     """τ barely moves the robot, so at the default ε of 1e-4 of its value its replicas are near
     the rounding of the positions: on the damped batch and adaptive BDF2 steps of the test

@@ -190,6 +190,11 @@ def test_a_sensitivities_row_records_the_parameters_it_differentiated_by(tmp_pat
         return [{"robot_steps_per_s": 1.0} for _ in configurations]
 
     monkeypatch.setattr(bench, "measure_plains", measured)
+    # the B sweep's and the scenario's measurements stand in too: the rows of the sensitivities
+    # section are what is asked (test_bench_quick, slow tier, measures them all; compiling two
+    # engines here took ~5 s of the suite)
+    monkeypatch.setattr(bench, "measure", lambda *args, **kwargs: {
+        "robot_steps_per_s": 1.0, "bytes_per_step": 1.0, "factor_gflops": 1.0})
     bench.main(["--quick", "--no-progress", "--out", str(tmp_path), "--scenarios", "none",
                 "--no-plain-call", "--sensitivity-parameters", "alpha,actuator_gains[1]",
                 "--sensitivity-counts", "0,2"])
