@@ -242,10 +242,12 @@ def test_engines_past_the_budget_are_destroyed_least_recently_used_first(monkeyp
     counts as used when the Simulator goes (it kept its lease's stamp, and went before the
     engines of calls made meanwhile: a review, 2026-12). Three capacities of one coarse robot
     (64, 128, 256: fields about 1 : 2 : 4) in a cache of their own, with room for the two
-    largest."""
+    largest. The robot has no fluid terms: its five builds compile ~20 % faster (the suite's
+    time; what is kept and destroyed does not depend on the terms)."""
     current = runtime.Runtime.current()
     monkeypatch.setattr(current, "engines", {})
-    robot = ts.StarParams(gait="A1", n_arc=6, n_limb=2)
+    robot = ts.StarParams(gait="A1", n_arc=6, n_limb=2, alpha=0.0, added_mass_coeff=0.0,
+                          drag_parallel=0.0, drag_perpendicular=0.0, cylinder_drag=0.0)
     small, middle, large = ([robot] * count for count in (1, 65, 129))
     ts.simulate(small, 0.002)
     first = ts.simulate(middle, 0.002)

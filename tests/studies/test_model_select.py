@@ -315,7 +315,10 @@ def test_a_candidate_whose_axes_no_fitted_gait_moves_is_skipped_and_none_left_is
     assert len(error.strip().splitlines()) == 1 and not out.exists()
 
 
-@pytest.mark.parametrize("periods", ["nominal", "strokes"])
+# the nominal periods' case in the slow tier (suite time: a quick run of the study, 4-7 s):
+# the study's other default-tier runs fit at the nominal periods
+@pytest.mark.parametrize("periods", [pytest.param("nominal", marks=pytest.mark.slow),
+                                     "strokes"])
 def test_phases_held_on_the_strokes_in_every_window(tmp_path, periods):
     """--phases strokes: no phase is fitted (k = the fitted axes), and each window's phases
     are where a direct simulation's strokes meet the measured ones, the validation window

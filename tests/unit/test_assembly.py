@@ -302,27 +302,39 @@ def test_wake_assembles_the_water_exchange_and_its_own_exact_jacobian(taichi_cpu
     assert Wake.configuration(Wake.coefficients([StarParams()], None, None)) is None
 
 
-def _replica_pair_difference(term_class, coefficients, instance_velocity, direction, step,
-                             replicated):
-    """Half the difference of the residuals of a replica pair of one instance of the toy chain,
-    over `step`: the instance at `deformed()` positions with node velocities
-    `instance_velocity` (N, 2) m/s (implicit Euler, h = 1 ms), its replicas at the same
-    positions from start states whose velocities are instance_velocity ± step·`direction`, with
-    their coefficients at c·(1 ± step) (a relative direction of a parameter the term is linear
-    in). `replicated`: the pair assembled as replicas of the instance (the engine's sensitive
-    assembly), else as three independent instances."""
-    h = 1e-3
+def _replica_pair_system(term_class, coefficients, replicated):
+    """A toy system of three instances of the chain with `term_class` alone: an instance and
+    its replica pair (`replicated`), else three independent instances. Built once for the
+    calls of `_replica_pair_difference`, which load their own coefficients and states (a
+    system per call compiled its kernels again: 6 s of the suite for the two drags)."""
     name = term_class.name
-    moved = {key: np.stack([values[0], values[0] * (1 + step), values[0] * (1 - step)])
-             for key, values in coefficients.items()}
-    terms, assembly = toy_system([term_class], {name: moved}, {name: ()}, capacity=3,
-                                 primal_count=1 if replicated else None)
+    three = {key: np.repeat(values[:1], 3, axis=0) for key, values in coefficients.items()}
+    return toy_system([term_class], {name: three}, {name: ()}, capacity=3,
+                      primal_count=1 if replicated else None)
+
+
+def _replica_pair_difference(system, term_class, coefficients, instance_velocity, direction,
+                             step):
+    """Half the difference of the residuals of the replica pair (or the second and third
+    independent instances) of `system` (`_replica_pair_system`), over `step`: the instance at
+    `deformed()` positions with node velocities `instance_velocity` (N, 2) m/s (implicit
+    Euler, h = 1 ms), the pair at the same positions from start states whose velocities are
+    instance_velocity ± step·`direction`, with their coefficients at c·(1 ± step) (a relative
+    direction of a parameter the term is linear in)."""
+    h = 1e-3
+    terms, assembly = system
+    term = terms[term_class.name]
+    for key, field in term.coefficient_fields().items():
+        values = coefficients[key]
+        load_field(field, np.stack([values[0], values[0] * (1 + step), values[0] * (1 - step)]))
     positions = deformed()
     velocities = np.stack([instance_velocity, instance_velocity + step * direction,
                            instance_velocity - step * direction])
     load_field(assembly.positions, np.stack([positions] * 3))
     load_field(assembly.previous, positions[None] - h * velocities)
-    _assemble_all(terms[name], 1.0 / h, 3)
+    assembly.rhs.fill(0.0)  # the terms add to the residual and the blocks
+    assembly.blocks.fill(0.0)
+    _assemble_all(term, 1.0 / h, 3)
     rhs = assembly.rhs.to_numpy()
     return (rhs[1] - rhs[2]).ravel() / (2 * step)
 
@@ -352,9 +364,12 @@ def test_a_replica_pair_differences_the_drags_derivative_exactly(taichi_cpu, ter
     moving = 0.03 * rng.normal(size=REST.shape)
     at_kink = 1e-12 * rng.normal(size=REST.shape)
 
+    systems = {replicated: _replica_pair_system(term_class, coefficients, replicated)
+               for replicated in (True, False)}
+
     def difference(velocity, step, replicated):
-        return _replica_pair_difference(term_class, coefficients, velocity, direction, step,
-                                        replicated)
+        return _replica_pair_difference(systems[replicated], term_class, coefficients,
+                                        velocity, direction, step)
 
     for velocity in (moving, at_kink):
         assert_close(difference(velocity, 1e-2, True), difference(velocity, 1e-5, True), 1e-7)
