@@ -26,7 +26,6 @@ Two markups tie a page's figures to the CSVs:
 from __future__ import annotations
 
 import argparse
-import csv
 import functools
 import json
 import math
@@ -34,7 +33,7 @@ import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Dict, List, Optional, Tuple
+from typing import Callable, Dict, List, Optional
 
 import numpy as np
 import pandas as pd
@@ -79,54 +78,8 @@ def read_table(name: str) -> pd.DataFrame:
     return _parsed_table(path, status.st_mtime_ns, status.st_size)
 
 
-def table_text(name: str) -> Tuple[List[str], List[List[str]]]:
-    """(column names, rows of cells) of results/<name> as `read_table` reads them, without a
-    DataFrame where the csv module reads the file (`_plain_rows`): the generated page lists
-    every CSV, and a frame costs ~2 ms each (~1,800 files)."""
-    path = RESULTS / name
-    status = path.stat()
-    rows = _plain_rows(path, status.st_mtime_ns, status.st_size)
-    if rows is not None:
-        return rows[0], rows[1:]
-    table = read_table(name)
-    return list(table.columns), table.to_numpy().tolist()
-
-
-QUICK_READ_BYTES = 64 * 1024
-"""A CSV of at most this size is read by the csv module when it is plain (a header of distinct,
-non-empty names and rows as long as it): pandas' reader costs ~3.5 ms a file whatever its size,
-and the generated page reads every CSV in results/ (~1,800 of them: 6.3 s of the check's 9 s,
-a 2-core Intel Xeon; 4.2 s in all since, 4.4 s with 16 KiB, 5.7 s with 4 KiB). Other files,
-and larger ones, which pandas' C reader reads faster, go to pandas."""
-
-
-@functools.lru_cache(maxsize=None)
-def _plain_rows(path: Path, mtime_ns: int, size: int) -> Optional[List[List[str]]]:
-    """The header and rows of a CSV of at most QUICK_READ_BYTES that the csv module reads as
-    pandas would (a header of distinct, non-empty names: pandas renames duplicates "a.1" and
-    blanks "Unnamed: 0"; every row as long as it: pandas pads short rows and takes an index
-    from long ones); None for any other file."""
-    if size > QUICK_READ_BYTES:
-        return None
-    # utf-8-sig drops a byte-order mark as pandas does; blank lines are skipped as pandas
-    # skips them (a line of commas is a row of empty cells in both)
-    with open(path, encoding="utf-8-sig", newline="") as handle:
-        rows = [row for row in csv.reader(handle) if row]
-    if not rows:
-        return None
-    header = rows[0]
-    if len(set(header)) != len(header) or not all(header):
-        return None
-    if any(len(row) != len(header) for row in rows[1:]):
-        return None
-    return rows
-
-
 @functools.lru_cache(maxsize=None)
 def _parsed_table(path: Path, mtime_ns: int, size: int) -> pd.DataFrame:
-    rows = _plain_rows(path, mtime_ns, size)
-    if rows is not None:
-        return pd.DataFrame(rows[1:], columns=rows[0], dtype=str)
     return pd.read_csv(path, dtype=str, keep_default_na=False)
 
 
@@ -345,17 +298,17 @@ def result_files_page() -> str:
         else:
             study = sidecar.get("study", "other")
             provenance = _provenance(sidecar) if sidecar else "no provenance sidecar"
-        header, rows = table_text(name)
+        table = read_table(name)
         units = sidecar.get("units", {})
         columns = ", ".join(f"{column} ({units[column]})" if units.get(column) else column
-                            for column in header)
+                            for column in table.columns)
         lines = [f"### `results/{name}`", "",
-                 f"{len(rows)} rows. Written by {provenance}.", "",
+                 f"{len(table)} rows. Written by {provenance}.", "",
                  f"Columns: {columns}.", ""]
-        if len(rows) <= SMALL_TABLE_ROWS and len(header) <= 12:
-            lines.append("| " + " | ".join(header) + " |")
-            lines.append("|" + "---|" * len(header))
-            for row in rows:
+        if len(table) <= SMALL_TABLE_ROWS and len(table.columns) <= 12:
+            lines.append("| " + " | ".join(table.columns) + " |")
+            lines.append("|" + "---|" * len(table.columns))
+            for _, row in table.iterrows():
                 lines.append("| " + " | ".join(_format_cell(value) for value in row) + " |")
             lines.append("")
         entries.setdefault(study, []).append("\n".join(lines))
