@@ -58,7 +58,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from taichi_star import SOLVER_RANGES, STAR_RANGES, SolverConfig, StarParams, allowed_values
+from taichi_star import (NEWTON_TOL_DEFAULTS, SOLVER_RANGES, STAR_RANGES, SolverConfig,
+                         StarParams, allowed_values)
 from taichi_star.batch import DEFAULT_CHUNK_SIZE, run_batch, write_atomic
 from taichi_star import metrics
 from taichi_star.metrics import shape_checks
@@ -77,8 +78,6 @@ ADDED_MASS = (0.0, 1.0, 5.0)
 PERIODS = (0.3, 3.15)
 GAITS = ("A1", "A1+A2+A3+A4+A5+A6+A7+A8", "A1+A5")
 PRECISIONS = ("f64", "f32")
-TOLERANCE = {"f64": 1e-10, "f32": 1e-7}
-"""newton_tol per precision: the default, and the smallest f32 accepts (SolverConfig)."""
 BASE_MODULUS = 5e6
 """youngs_modulus at stiffness factor 1 (the paper's E), Pa."""
 CYCLES = 2.0
@@ -184,9 +183,9 @@ def plan(args):
     precisions = cli.parse_values(args.precisions, "--precisions", str)
     check_step_and_stiffness_values(dts, stiffness)
     for precision in precisions:
-        if precision not in TOLERANCE:
+        if precision not in NEWTON_TOL_DEFAULTS:
             raise cli.StudyArgumentError(f"--precisions: {precision!r} is not one of "
-                                            f"{list(TOLERANCE)}")
+                                            f"{list(NEWTON_TOL_DEFAULTS)}")
     # counted before any instance is built (a grid of three million was built for a minute)
     axes = {"--dts-ms": dts, "--stiffness": stiffness, "--alphas": alphas, "--added-mass": added,
             "--periods": periods, "--gaits": gaits, "--precisions": precisions}
@@ -202,8 +201,7 @@ def plan(args):
                 dt = dt_ms * 1e-3
                 cli.check_length(length, duration, dt, "dt (--dts-ms)")
                 try:
-                    solver = SolverConfig(dt=dt, precision=precision,
-                                          newton_tol=TOLERANCE[precision])
+                    solver = SolverConfig(dt=dt, precision=precision)
                 except ValueError as error:
                     raise cli.StudyArgumentError(f"--dts-ms: {error}") from None
                 n_steps = whole_steps(duration, dt)
@@ -434,7 +432,7 @@ def plot_maps(table: pd.DataFrame, path) -> Path:
                 ax.set_xlabel("dt (ms)")
             if j == 0:
                 ax.set_ylabel("stiffness ×\n(E / 5 MPa)")
-            tol = TOLERANCE.get(precision, math.nan)
+            tol = NEWTON_TOL_DEFAULTS.get(precision, math.nan)
             ax.set_title(f"{precision} (tol {tol:g} m), α = {alpha:g}", fontsize=8)
     fig.legend(handles=[Patch(color=OUTCOME_COLOURS[o], label=o) for o in OUTCOMES],
                loc="outside lower center", ncol=len(OUTCOMES), fontsize=7)
@@ -530,7 +528,7 @@ def main(argv=None):
     out = cli.Output(args, argv or [], model={"preset": args.preset,
                                               "params": batches[0]["base"]},
                      solver={precision: {"newton_tol": tolerance} for precision, tolerance
-                             in TOLERANCE.items()})
+                             in NEWTON_TOL_DEFAULTS.items()})
     # the plan told the grid's hours (`plan`): its batches' own estimates would repeat them
     with cli.executor(args, out) as executor, cli.batch_work_told():
         # every batch has as many instances; cut to about four chunks per worker (--chunk-size's

@@ -37,8 +37,8 @@ with deferred_interrupt():
     from .actuation import CurvatureProfile
     from .gait import Gait, symmetry_classes
     from .params import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS, JACOBIANS,
-                         PER_ACTUATOR_FIELDS, PRESETS, SOLVER_RANGES, STAR_RANGES, SolverConfig,
-                         StarParams, allowed_values, changed_fields)
+                         NEWTON_TOL_DEFAULTS, PER_ACTUATOR_FIELDS, PRESETS, SOLVER_RANGES,
+                         STAR_RANGES, SolverConfig, StarParams, allowed_values, changed_fields)
     from .profiling import EngineProfile
     from .runtime import available_archs
     from .driver import RunTiming, fewest_steps
@@ -54,6 +54,6 @@ __all__ = ["simulate", "SimulationResult", "RunTiming", "MAX_STEPS_PER_INSTANCE"
            "LongWorkWarning", "SteadySpeedWarning", "fewest_steps", "Simulator",
            "SimulatorSnapshot", "available_archs",
            "StarParams", "STAR_RANGES", "allowed_values", "changed_fields", "SolverConfig",
-           "SOLVER_RANGES", "PRESETS", "JACOBIANS",
+           "SOLVER_RANGES", "NEWTON_TOL_DEFAULTS", "PRESETS", "JACOBIANS",
            "PER_ACTUATOR_FIELDS", "COMPONENT_HEIGHTS", "DIFFERENTIABLE_FIELDS",
            "CurvatureProfile", "Gait", "symmetry_classes", "EngineProfile", "__version__"]

@@ -52,7 +52,8 @@ def parameter_column(name: str) -> str:
 
 
 def parameter(default, unit: str = "1", lowest=None, highest=None, lowest_included=True,
-              choices=None, differentiable: bool = True, narrowed_by: str = ""):
+              choices=None, differentiable: bool = True, narrowed_by: str = "",
+              default_means: str = ""):
     """A StarParams (or SolverConfig) field with its unit and allowed values declared once, in
     its metadata: "unit" ("1": dimensionless or a count), "range" (lowest, highest, lowest
     included) for a number (an integer if the default is one), "choices" for a word.
@@ -61,8 +62,11 @@ def parameter(default, unit: str = "1", lowest=None, highest=None, lowest_includ
     read from it. `differentiable=False` marks a real number that
     `simulate(sensitivities=...)` refuses (one that moves events rather than coefficients).
     `narrowed_by`: how other fields narrow the declared range, in words, which the allowed
-    values state after it (the range itself, `STAR_RANGES`, stays the declared one)."""
+    values state after it (the range itself, `STAR_RANGES`, stays the declared one).
+    `default_means`: what a default of None stands for, in words, for the field table."""
     metadata = {"unit": unit}
+    if default_means:
+        metadata["default_means"] = default_means
     if narrowed_by:
         metadata["narrowed_by"] = narrowed_by
     if not differentiable:
@@ -586,6 +590,12 @@ def _default(f):
     return f.default if f.default is not dataclasses.MISSING else f.default_factory()
 
 
+def _shown_default(f) -> str:
+    """Field f's default for the table: its repr, and what None stands for where declared."""
+    meaning = f.metadata.get("default_means")
+    return f"{_default(f)!r}: {meaning}" if meaning else repr(_default(f))
+
+
 def _unit(f) -> str:
     """The unit of field `f` for the table: numeric fields' own, "—" for texts."""
     return f.metadata["unit"] if "range" in f.metadata or "per_actuator" in f.metadata else "—"
@@ -595,7 +605,8 @@ def _add_field_table(cls):
     """Append the table of `cls`'s fields (unit, allowed values, default), read from their
     declarations, to its docstring (what `help` and the API reference show)."""
     cls.__doc__ += "\n\n    | field | unit | allowed | default |\n    |---|---|---|---|\n" + "".join(
-        f"    | {f.name} | {_unit(f)} | {_allowed(f)} | {_default(f)!r} |\n" for f in fields(cls))
+        f"    | {f.name} | {_unit(f)} | {_allowed(f)} | {_shown_default(f)} |\n"
+        for f in fields(cls))
 
 
 _add_field_table(StarParams)
@@ -631,6 +642,10 @@ MAX_DT = 0.05
 
 F32_NEWTON_TOL_MIN = 1e-7
 """Smallest newton_tol in f32, m: its rounding of ~5 cm positions is ~4e-9 m."""
+NEWTON_TOL_DEFAULTS = {"f64": 1e-10, "f32": F32_NEWTON_TOL_MIN}
+"""newton_tol of each precision when SolverConfig is given none, m: f64's is what the presets
+have always used; f32's is the smallest it accepts (`F32_NEWTON_TOL_MIN`), which resolves the
+paper's robot (32 f32 roundings of its 5.2-cm tip_radius are 9.9e-8 m: `check_precision`)."""
 
 
 @_named_fields_only
@@ -640,10 +655,15 @@ class SolverConfig:
 
     dt: float = parameter(1e-3, "s", 0.0, MAX_DT, lowest_included=False)
     """Time step h, s (at most a third of the 0.163-s heating pulse: `MAX_DT`)."""
-    newton_tol: float = parameter(1e-10, "m", 1e-14, 1e-6)
+    newton_tol: Optional[float] = parameter(None, "m", 1e-14, 1e-6,
+                                            default_means=", ".join(
+                                                f"{tolerance:g} in {precision}" for precision,
+                                                tolerance in NEWTON_TOL_DEFAULTS.items()))
     """Convergence: a Newton solve stops once an update moves no node coordinate by more than
     this, m (at most a micrometre, 1e-5 of the robot's size: any looser and "converged" would
-    not mean the step was solved; in f32 at least `F32_NEWTON_TOL_MIN`). The position error
+    not mean the step was solved; in f32 at least `F32_NEWTON_TOL_MIN`). None (the default):
+    the precision's own, 1e-10 m in f64 and 1e-7 m in f32 (`NEWTON_TOL_DEFAULTS`), set in
+    its place when the config is made, so that a config reads and records a number. The position error
     left after that update is then below it: with Newton's quadratic convergence far below,
     and with the chord's and the lagged Jacobian's below in every step measured (the five
     Fig. 4c gaits at 1-, 5- and 10-ms steps: at most 0.93·newton_tol, docs/reliability.md).
@@ -713,6 +733,8 @@ class SolverConfig:
         for f in fields(self):
             if "choices" in f.metadata:
                 check_choice(f.name, getattr(self, f.name), f.metadata["choices"])
+        if self.newton_tol is None:
+            object.__setattr__(self, "newton_tol", NEWTON_TOL_DEFAULTS[self.precision])
         if self.precision == "f32" and self.newton_tol < F32_NEWTON_TOL_MIN:
             highest = SolverConfig.__dataclass_fields__["newton_tol"].metadata["range"][1]
             raise ValueError(f"newton_tol must be in [{F32_NEWTON_TOL_MIN:g}, {highest:g}] m with "
@@ -733,7 +755,13 @@ class SolverConfig:
         return math.inf if self.residual_tol is None else self.residual_tol
 
     def replace(self, **changes) -> "SolverConfig":
-        """A copy with some fields changed (validated again)."""
+        """A copy with some fields changed (validated again). A change of precision that leaves
+        newton_tol out takes the new precision's default tolerance where this config has the
+        old one's (`NEWTON_TOL_DEFAULTS`: f64's 1e-10 m is below what f32 accepts), and keeps
+        any other tolerance (refused where the new precision cannot use it)."""
+        if ("precision" in changes and "newton_tol" not in changes
+                and self.newton_tol == NEWTON_TOL_DEFAULTS[self.precision]):
+            changes["newton_tol"] = None
         return dataclasses.replace(self, **changes)
 
 

@@ -214,7 +214,9 @@ def invalid_solver_field(draw):
         value = draw(st.one_of(NOT_A_REAL, st.floats(max_value=0.0, allow_nan=False),
                                st.floats(min_value=1.0, exclude_min=True)))
     elif field == "newton_tol":
-        value = draw(st.one_of(NOT_A_REAL, st.floats(max_value=0.0, allow_nan=False)))
+        # None is its default: the precision's own tolerance
+        value = draw(st.one_of(NOT_A_REAL.filter(lambda v: v is not None),
+                               st.floats(max_value=0.0, allow_nan=False)))
     elif field in ("max_newton", "max_substep_halvings"):
         lowest = 1 if field == "max_newton" else 0
         value = draw(st.one_of(st.integers(max_value=lowest - 1),

@@ -335,7 +335,8 @@ def test_an_f32_runs_trajectory_heading_is_the_summarys_at_the_same_state():
     """The trajectory's heading was computed from the f32 positions, the summary's and the
     Simulator's from them in float64: at the same final state they differed by ~2 % of a
     heading of 7e-5° (an audit, 2026-12). Now the same computation: equal to the bit."""
-    solver = ts.SolverConfig(dt=2e-3, precision="f32", newton_tol=1e-7)
+    # no newton_tol: f32's own default (1e-7 m), as a plain script would leave it
+    solver = ts.SolverConfig(dt=2e-3, precision="f32")
     robots = [ts.StarParams(gait=gait, period=0.2) for gait in ("A1+A2", "A3", "A1+A3+A5")]
     result = ts.simulate(robots, 0.5, solver, record_interval_s=0.5)
     last = result.trajectory[result.trajectory["t_s"] == 0.5].sort_values("instance")

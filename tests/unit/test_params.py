@@ -64,6 +64,39 @@ def test_f32_needs_a_tolerance_it_can_resolve():
     assert ts.SolverConfig(precision="f32", newton_tol=1e-7).precision == "f32"
 
 
+def test_newton_tol_defaults_to_the_precisions_own():
+    """Left out, newton_tol is 1e-10 m in f64 (the presets' value since the start: their bits
+    are unchanged) and 1e-7 m in f32 (the smallest it accepts), stored as a number; given,
+    it is kept, also where it equals the other precision's default."""
+    assert ts.SolverConfig().newton_tol == 1e-10
+    assert ts.SolverConfig.preset("accurate").newton_tol == 1e-10
+    assert ts.SolverConfig(precision="f32").newton_tol == 1e-7
+    assert ts.SolverConfig.preset("accurate", precision="f32").newton_tol == 1e-7
+    assert ts.SolverConfig(precision="f32") == ts.SolverConfig(precision="f32", newton_tol=1e-7)
+    assert ts.SolverConfig(newton_tol=1e-7).newton_tol == 1e-7
+    assert ts.NEWTON_TOL_DEFAULTS == {"f64": 1e-10, "f32": 1e-7}
+    # the field table (help, the API page) says what the None stands for
+    assert "| newton_tol | m | [1e-14, 1e-06] | None: 1e-10 in f64, 1e-07 in f32 |" \
+        in ts.SolverConfig.__doc__
+    # a run store records the changes from SolverConfig(): f32's tolerance is among them
+    assert ts.changed_fields(ts.SolverConfig(precision="f32")) == {"newton_tol": 1e-7,
+                                                                  "precision": "f32"}
+
+
+def test_a_change_of_precision_takes_the_new_default_tolerance_only_from_the_old_default():
+    """replace(precision=...) without newton_tol: the old precision's default becomes the new
+    one's, both ways; any other tolerance is kept, and refused where f32 cannot use it."""
+    assert ts.SolverConfig().replace(precision="f32").newton_tol == 1e-7
+    assert ts.SolverConfig(precision="f32").replace(precision="f64").newton_tol == 1e-10
+    assert ts.SolverConfig(precision="f32", newton_tol=5e-7).replace(
+        precision="f64").newton_tol == 5e-7
+    assert ts.SolverConfig().replace(precision="f32", newton_tol=3e-7).newton_tol == 3e-7
+    # a hair off the default is another tolerance: kept, so f32 refuses it
+    with pytest.raises(ValueError, match=r"^newton_tol must be in \[1e-07, 1e-06\] m with "):
+        ts.SolverConfig(newton_tol=1e-10 * (1 + 1e-12)).replace(precision="f32")
+    assert ts.SolverConfig().replace(dt=2e-3).newton_tol == 1e-10
+
+
 def test_the_residual_test_is_opt_in():
     """None (the default) compares against infinity; a value is validated and used as is."""
     assert ts.SolverConfig().residual_tol is None
@@ -880,14 +913,15 @@ def test_a_float32_past_a_bound_as_a_float_is_refused_saying_what_it_became():
     assert ts.SolverConfig(dt=np.float32(0.04)).dt == float(np.float32(0.04))
 
 
-@pytest.mark.parametrize("name", sorted(set(SOLVER_RANGES) - {"residual_tol"}))
+@pytest.mark.parametrize("name", sorted(set(SOLVER_RANGES) - {"residual_tol", "newton_tol"}))
 def test_none_is_refused_where_it_is_not_the_default(name):
-    """None switches residual_tol's test off, and is no value of any other numeric field (the
-    first form of the declared ranges let None through for all of them: caught by the
-    hypothesis test of bad solver fields)."""
+    """None switches residual_tol's test off and gives newton_tol its precision's default, and
+    is no value of any other numeric field (the first form of the declared ranges let None
+    through for all of them: caught by the hypothesis test of bad solver fields)."""
     with pytest.raises(ValueError, match=f"^{name} must be .* got None$"):
         ts.SolverConfig(**{name: None})
     assert ts.SolverConfig(residual_tol=None).residual_tol is None
+    assert ts.SolverConfig(newton_tol=None).newton_tol == 1e-10
 
 
 def test_the_joint_radius_keeps_its_declared_top_when_the_profile_allows_more():
