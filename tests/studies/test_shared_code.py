@@ -319,6 +319,59 @@ def test_fig4b_cuts_the_experiment_at_the_simulated_span():
     assert table[table["source"] == "simulation"]["displacement_mm"].tolist() == [0, 5, 0, 1]
 
 
+def _drawn_fig4c(monkeypatch, tmp_path, caption):
+    """The texts of the Fig. 4c figure `plot_fig4c` draws from a three-gait table: a gait
+    swimming the paper's way, one swimming the other way, one whose run diverged. The figure
+    is kept from `cli.write_figure`, which still writes the PNG."""
+    import pandas as pd
+    from studies import figures
+    table = pd.DataFrame({
+        "gait": ["A1", "A1+A2", "A1+A3"], "sim_speed_mm_s": [0.5, 2.0, float("nan")],
+        "exp_speed_mm_s": [0.6, 1.5, 3.0], "exp_cycle_speed_std_mm_s": [0.1, 0.2, 0.3],
+        "status": ["ok", "ok", "diverged"], "sim_direction": ["forward", "reverse", None],
+        "paper_direction": ["forward", "forward", "reverse"],
+        "direction_matches": [True, False, None]})
+    table.to_csv(tmp_path / "fig4c.csv", index=False)
+    drawn = []
+    write = cli.write_figure
+    monkeypatch.setattr(cli, "write_figure", lambda fig, path, **kw: (drawn.append(fig),
+                                                                       write(fig, path, **kw))[1])
+    figures.plot_fig4c(tmp_path / "fig4c.csv", tmp_path / "fig4c.png", caption=caption)
+    assert (tmp_path / "fig4c.png").stat().st_size > 0
+    (fig,) = drawn
+    return fig
+
+
+def test_fig4c_labels_each_bar_with_its_direction_red_where_it_disagrees(monkeypatch, tmp_path):
+    """Over the simulated bars: "fwd" in black where the paper's direction is swum, "rev" in
+    red where it is not, a failed run's status in red at the bar's foot; over the measured
+    bars the paper's direction in black, above the error bar."""
+    from matplotlib.colors import to_rgba
+    fig = _drawn_fig4c(monkeypatch, tmp_path, caption="")
+    labels = {(round(t.get_position()[0], 2), t.get_text()): (t.get_color(), t.get_position()[1])
+              for t in fig.axes[0].texts}
+    black, red = to_rgba("black"), to_rgba("red")
+    assert {key: to_rgba(colour) for key, (colour, _) in labels.items()} == {
+        (-0.19, "fwd"): black, (0.81, "rev"): red, (1.81, "diverged"): red,
+        (0.19, "fwd"): black, (1.19, "fwd"): black, (2.19, "rev"): black}
+    assert labels[(0.81, "rev")][1] == 2.0 and labels[(1.81, "diverged")][1] == 0.0
+    assert labels[(2.19, "rev")][1] == pytest.approx(3.3)  # the measured bar and its std
+    assert fig.texts == []  # no caption asked for, none drawn
+
+
+def test_fig4c_writes_its_caption_small_and_gray_under_the_plot(monkeypatch, tmp_path):
+    """The caption (the model and solver, or a note given) is the figure's one text of its
+    own: at its bottom left, 7-point, gray, wrapped at 130 characters."""
+    from matplotlib.colors import to_rgba
+    note = "calibrated (alpha=0.8); paper preset, n_arc 24, euler h = 1 ms " + "x" * 100
+    fig = _drawn_fig4c(monkeypatch, tmp_path, caption=note)
+    (caption,) = fig.texts
+    assert caption.get_text().replace("\n", " ") == note
+    assert max(len(line) for line in caption.get_text().splitlines()) <= 130
+    assert caption.get_position() == (0.01, 0.01) and caption.get_fontsize() == 7
+    assert to_rgba(caption.get_color()) == to_rgba("0.35")
+
+
 def test_the_fig4_titles_name_the_simulated_span():
     from studies import figures
     assert all("(the first 0.5 s from rest)" in title or "the first 0.5 s from rest" in title
