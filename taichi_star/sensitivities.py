@@ -298,14 +298,18 @@ def parse_parameter(name) -> Tuple[Direction, ...]:
 
 def check_directions(directions: Sequence[Direction], params: Sequence[StarParams],
                      solver: SolverConfig, commanded: bool = False,
-                     duration_s: Optional[float] = None):
+                     duration_s: Optional[float] = None,
+                     positions: Optional[Sequence[int]] = None):
     """ValueError, before any compute, where the sensitivities are not defined: in f32 (a
     central difference needs f64's digits) and for a component height at 0 (0 turns the 2.5-D
-    model off: no derivative across that switch). A warning (`delay_event`) for a delay at
+    model off: no derivative across that switch). A warning (`delay_event`, kind
+    "delay_event") for a delay at
     which the run has a jump or a kink, not a slope, within `duration_s` (None: a `Simulator`,
     whose runs go on as long as it is told), with steps of one length (fixed, or adaptive ones
     held at dt_min = dt_max); with `commanded` (a `Simulator`, which fires what it is told,
-    whatever the `gait` field says) for any actuator's delay."""
+    whatever the `gait` field says) for any actuator's delay. `positions`: the instances'
+    numbers in the caller's batch, which the messages give (None: 0, 1, ...)."""
+    number = (lambda b: b) if positions is None else (lambda b: positions[b])
     if directions and solver.precision != "f64":
         raise ValueError(f"sensitivities need precision 'f64' (central differences lose f32's "
                          f"digits), got {solver.precision!r}")
@@ -314,7 +318,7 @@ def check_directions(directions: Sequence[Direction], params: Sequence[StarParam
             at_zero = [b for b, p in enumerate(params) if direction.value(p) == 0.0]
             if at_zero:
                 raise ValueError(f"sensitivities: {direction.field} is 0 (the 2.5-D model off) "
-                                 f"for instance {at_zero[0]}; its derivative is defined only "
+                                 f"for instance {number(at_zero[0])}; its derivative is defined only "
                                  f"with the component heights set (> 0)")
         held = not solver.adaptive or solver.dt_min == solver.dt_max
         if direction.field == "actuator_delays" and held:
@@ -332,10 +336,10 @@ def check_directions(directions: Sequence[Direction], params: Sequence[StarParam
                 b, (time, what) = jumping[0]
                 warn_user(
                     f"sensitivities: {direction.label} = {direction.value(params[b]):g} s "
-                    f"(instance {b}, {len(jumping)} in all) puts {what} on a step end (t = "
-                    f"{time:g} s): the run changes slope or jumps there as the delay passes, "
-                    f"and its derivative by the delay is not defined; move the delay off the "
-                    f"step grid (e.g. by dt/2)", UserWarning)
+                    f"(instance {number(b)}, {len(jumping)} in all) puts {what} on a step end "
+                    f"(t = {time:g} s): the run changes slope or jumps there as the delay "
+                    f"passes, and its derivative by the delay is not defined; move the delay off "
+                    f"the step grid (e.g. by dt/2)", UserWarning, kind="delay_event")
 
 
 def delay_event(params: StarParams, actuator: int, dt: float, commanded: bool = False,

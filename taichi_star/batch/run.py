@@ -17,6 +17,7 @@ from ..geometry import build_topology
 from ..model import instances_of
 from ..params import SolverConfig, StarParams
 from ..provenance import code_version
+from .. import sensitivities as tangents
 from ..simulation import SimulationResult, call_arguments, warn_about_ok_instances
 from .executors import DEFAULT_RETRIES, Executor, InProcess, LocalProcesses
 from .store import RunStore, run_definition
@@ -37,7 +38,8 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
               record_interval_s: float = 0.0, record_shapes: bool = False,
               steady_from_cycle: int = 1, workers: Optional[int] = None,
               executor: Optional[Executor] = None, run_dir=None, resume: bool = False,
-              progress: Optional[bool] = None, run_dir_flag: str = "run_dir") -> SimulationResult:
+              progress: Optional[bool] = None, run_dir_flag: str = "run_dir",
+              sensitivities: Sequence[str] = ()) -> SimulationResult:
     """Simulate any number of instances, each from rest, for `duration_s` seconds or for
     `cycles` of its own actuation period, and return one `SimulationResult`.
 
@@ -64,6 +66,12 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     trajectory are read back from the store (a chunk stored before the store kept trajectories
     has none). The store's chunks are Parquet files: `run_dir` needs pyarrow (the `io` extra).
     `run_dir_flag`: how the store's messages name `run_dir` (a command line's "--run-dir").
+
+    `sensitivities`: as `simulate`'s, computed in every chunk: the result's `sensitivities`
+    (one row per instance, in the summary's order) and `trajectory_sensitivities` (instance
+    and t_s as in the trajectory) are bitwise `simulate`'s for the same instances, and
+    `sensitivity(output, parameter)` reads them; a run store keeps them with each chunk (and
+    a resume must ask for the same ones).
 
     `timing` sums the `RunTiming` of the chunks computed by this call (not those a resume
     read back; chunks on worker processes overlap, so its phases add up to more than the
@@ -99,7 +107,8 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     params = instances_of(params)
     tasks = plan_chunks(params, duration_s, cycles=cycles, chunk_size=chunk_size, solver=solver,
                         arch=arch, record_interval_s=record_interval_s,
-                        record_shapes=record_shapes, steady_from_cycle=steady_from_cycle)
+                        record_shapes=record_shapes, steady_from_cycle=steady_from_cycle,
+                        sensitivities=sensitivities)
     topology_keys = {p.topology_key for p in params}
     if record_shapes and (len(topology_keys) > 1 or len({t.duration_s for t in tasks}) > 1):
         raise ValueError("record_shapes needs one topology (n_arc, n_limb) and one duration for "
@@ -179,6 +188,10 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     summary = pd.concat([summaries[task.index] for task in tasks], ignore_index=True)
     order = np.argsort(summary["instance"].to_numpy(), kind="stable")
     summary = summary.iloc[order].reset_index(drop=True)
+    labels = tasks[0].sensitivities
+    derivatives = trajectory_derivatives = None
+    if labels:
+        summary, derivatives = split_sensitivities(summary, [])
     warn_about_ok_instances(summary, solver)
     # no records: the empty table with simulate's column types (object columns before: an
     # audit, 2026-12)
@@ -187,6 +200,11 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
                                                        else np.float64)
                                      for column in TRAJECTORY_COLUMNS}))
     trajectory = trajectory.sort_values(["instance", "t_s"], kind="stable").reset_index(drop=True)
+    if labels:
+        trajectory, trajectory_derivatives = split_sensitivities(
+            trajectory, ["instance", "t_s"], [tangents.sensitivity_column(output, label)
+                                              for output in tangents.TRAJECTORY_OUTPUTS
+                                              for label in labels])
     shape_array = None
     if record_shapes:
         stacked = np.concatenate([shapes[task.index] for task in tasks], axis=1)
@@ -199,11 +217,27 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     current = code_version() if makers else None
     foreign = any(maker["code"] != current for maker in makers)
     arguments = call_arguments("run_batch", duration_s, cycles, record_interval_s,
-                               record_shapes, steady_from_cycle, [], chunk_size)
+                               record_shapes, steady_from_cycle, list(labels), chunk_size)
     return SimulationResult(summary=summary, trajectory=trajectory, shapes=shape_array,
-                            topology=topology, solver=solver, timing=timing, arch=arch,
+                            topology=topology, solver=solver, sensitivities=derivatives,
+                            trajectory_sensitivities=trajectory_derivatives,
+                            timing=timing, arch=arch,
                             code_versions=makers if len(makers) > 1 or foreign else None,
                             arguments=arguments)
+
+
+def split_sensitivities(table: pd.DataFrame, keys: Sequence[str],
+                        empty_columns: Sequence[str] = ()):
+    """(the table without its sensitivities' columns, those columns after `keys`' columns) of
+    a chunk's summary or trajectory (`ChunkResult`): the columns named "d(...)/d(...)"
+    (`sensitivities.sensitivity_column`), in the same rows; a table of no rows without them
+    (no records: the chunks' trajectories were not stored) gets `empty_columns`, float."""
+    named = [column for column in table.columns if column.startswith("d(")]
+    if not named and not len(table):
+        derivatives = table[list(keys)].assign(**{column: pd.Series(dtype=np.float64)
+                                                  for column in empty_columns})
+        return table, derivatives
+    return table.drop(columns=named), table[list(keys) + named]
 
 
 @contextlib.contextmanager

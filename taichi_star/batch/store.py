@@ -3,18 +3,21 @@ long batch can be resumed after a crash or a kill.
 
 - `manifest.json`: the run's *definition* (instance count, SHA-256 of every instance's
   parameters that differ from their defaults, the chunk plan, duration or cycles, the solver's
-  settings that differ from theirs, arch, records, steady window: a field a later version adds
+  settings that differ from theirs, arch, records, steady window, the sensitivities where
+  asked for: a field a later version adds
   with a default that changes nothing leaves a run resumable, `params.changed_fields`), the
   defaults themselves (a resume under changed ones is refused), its
   SHA-256, and for information the code version of its latest opening (`code`), every code
   version that made its chunks with the chunks each made (`code_versions`, brought up to date
   as each chunk is stored), and the times.
-- `chunk_<index>.parquet`: one finished chunk's summary table (Parquet: a portable format that
+- `chunk_<index>.parquet`: one finished chunk's summary table, with sensitivities their
+  columns too (`ChunkResult`; Parquet: a portable format that
   keeps every float bit and dtype; it needs pyarrow, the `io` extra, which `RunStore.open`
   asks for before any compute). Its schema metadata carries the definition's SHA-256, the
   chunk index, its instances and a SHA-256 of the table's content, and for a run with records
   the SHA-256 of its trajectory.
-- `trajectory_<index>.parquet`: that chunk's trajectory (a run with records), stamped the same
+- `trajectory_<index>.parquet`: that chunk's trajectory (a run with records; with
+  sensitivities, the records' derivatives as its columns), stamped the same
   way and written before the summary, whose file marks the chunk finished: a resumed run has
   every chunk's records, not only those it computed.
 - Every file is written to a temporary name, flushed and renamed (`os.replace`): a kill leaves
@@ -116,6 +119,9 @@ def run_definition(params: Sequence, tasks: Sequence[ChunkTask], chunk_size: int
         "arch": first.arch,
         "record_interval_s": float(first.record_interval_s),
         "steady_from_cycle": int(first.steady_from_cycle),
+        # only where asked for: the definitions (and SHA-256) of runs without them, stored
+        # before run_batch took sensitivities, stay what they were
+        **({"sensitivities": list(first.sensitivities)} if first.sensitivities else {}),
     }
 
 

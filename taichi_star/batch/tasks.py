@@ -22,6 +22,7 @@ from ..geometry import Topology
 from ..model import instances_of
 from ..params import SolverConfig, StarParams
 from ..runtime import RECORDS_REMEDY, check_arch, check_host_memory
+from .. import sensitivities as tangents
 from ..simulation import (cycles_cut_short, off_grid_periods, simulate, tables_bytes,
                           validate_call, warn_cycles_cut_short, warn_off_grid_periods)
 from ..timegrid import steps_in, warn_long_work, warn_off_grid
@@ -30,7 +31,9 @@ from ..timegrid import steps_in, warn_long_work, warn_off_grid
 @dataclass(frozen=True)
 class ChunkTask:
     """One `simulate` call of a chunked batch. `members`: the positions in the whole batch of
-    the instances `params` (same length, same order); durations and intervals in s."""
+    the instances `params` (same length, same order); durations and intervals in s;
+    `sensitivities`: the labels of the parameters to differentiate by ("alpha",
+    "actuator_gains[2]", ...: `sensitivities.Direction.label`)."""
 
     index: int
     members: Tuple[int, ...]
@@ -41,6 +44,12 @@ class ChunkTask:
     record_interval_s: float = 0.0
     record_shapes: bool = False
     steady_from_cycle: int = 1
+    sensitivities: Tuple[str, ...] = ()
+
+    @property
+    def replicas(self) -> int:
+        """Instances simulated per instance of the chunk (its sensitivities' replicas too)."""
+        return tangents.instances_per_instance(len(self.sensitivities))
 
     def on(self, arch: str) -> "ChunkTask":
         """The same task on another arch (a Dask worker started for one)."""
@@ -51,8 +60,10 @@ class ChunkTask:
 class ChunkResult:
     """What `run_chunk` returns. summary: simulate's summary with `instance` (position in the
     whole batch) first and `duration_s` added; trajectory: its instance column renumbered the
-    same way; shapes: (n_records, len(members), N, 2) m or None; timing: the chunk's
-    `simulate` call's."""
+    same way; with sensitivities, the summary has their columns after its own and the
+    trajectory its derivatives' (`sensitivities.sensitivity_column`: one table each, so that a
+    run store keeps and verifies them with the chunk); shapes: (n_records, len(members), N,
+    2) m or None; timing: the chunk's `simulate` call's."""
 
     index: int
     summary: pd.DataFrame
@@ -74,13 +85,19 @@ def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None
                 cycles: Optional[float] = None, chunk_size: int = 2048,
                 solver: SolverConfig = SolverConfig(), arch: str = "cpu",
                 record_interval_s: float = 0.0, record_shapes: bool = False,
-                steady_from_cycle: int = 1) -> List[ChunkTask]:
+                steady_from_cycle: int = 1, sensitivities: Sequence[str] = ()
+                ) -> List[ChunkTask]:
     """The chunks of a batch, deterministic: instances grouped by topology and duration
     (`duration_s`, or `cycles` × the instance's period), groups in order of first appearance,
     each cut into runs of at most `chunk_size` in input order. Every chunk's arguments are
     validated here, so a bad batch fails before any chunk is computed (ValueError naming the
-    argument); a single StarParams is a batch of one, as for `simulate`."""
+    argument); a single StarParams is a batch of one, as for `simulate`. `sensitivities`: as
+    simulate's (`sensitivities.parse_directions`), checked for each group of the batch, whose
+    messages number the instances by their positions in `params`."""
     params = instances_of(params)
+    directions = tangents.parse_directions(sensitivities)
+    labels = tuple(direction.label for direction in directions)
+    replicas = tangents.instances_per_instance(len(directions))
     if not is_whole(chunk_size) or chunk_size < 1:
         raise ValueError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")
     _check_duration(duration_s, cycles)
@@ -105,12 +122,14 @@ def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None
     # duration off the step grid (of duration_s or of cycles) once for the batch
     with told_by_caller("long_work", "off_grid_duration"):
         for (_, duration), positions in groups.items():
+            tangents.check_directions(directions, [params[m] for m in positions], solver,
+                                      duration_s=duration, positions=positions)
             for start in range(0, len(positions), chunk_size):
                 members = tuple(positions[start:start + chunk_size])
                 chunk = tuple(params[m] for m in members)
                 try:
                     validate_call(chunk, duration, solver, record_interval_s, record_shapes,
-                                  steady_from_cycle)
+                                  steady_from_cycle, replicas)
                 except ValueError as error:
                     if duration_s is not None or not str(error).startswith("duration_s"):
                         raise
@@ -121,7 +140,8 @@ def plan_chunks(params: Sequence[StarParams], duration_s: Optional[float] = None
                                        duration_s=duration, solver=solver, arch=arch,
                                        record_interval_s=record_interval_s,
                                        record_shapes=record_shapes,
-                                       steady_from_cycle=steady_from_cycle))
+                                       steady_from_cycle=steady_from_cycle,
+                                       sensitivities=labels))
     check_batch_work(tasks, len(params))
     if duration_s is not None and not solver.adaptive:
         warn_off_grid(float(duration_s), solver.dt)
@@ -151,8 +171,8 @@ def warn_off_grid_cycles(tasks: Sequence[ChunkTask], cycles: float, dt: float):
 
 def batch_robot_steps(tasks: Sequence[ChunkTask]) -> float:
     """The fewest robot-steps of a batch's chunks together (`driver.fewest_steps` of each
-    chunk × its instances)."""
-    return sum(len(task.params) * fewest_steps(task.solver, task.duration_s,
+    chunk × its instances, their sensitivities' replicas counted)."""
+    return sum(len(task.params) * task.replicas * fewest_steps(task.solver, task.duration_s,
                                                task.record_interval_s)[0] for task in tasks)
 
 
@@ -170,7 +190,8 @@ def check_batch_work(tasks: Sequence[ChunkTask], instances: int):
     # each chunk's run checks its own peak; what stays is its tables' rows (a chunk's
     # per-record overhead counted once per chunk refused small chunks, an audit)
     needed = sum(tables_bytes(task.params, task.duration_s, task.record_interval_s,
-                              task.record_shapes, per_call=False) for task in tasks)
+                              task.record_shapes, task.replicas, per_call=False)
+                 for task in tasks)
     check_host_memory("record_interval_s" if recorded else "params",
                       f"the tables of the batch of {instances:,} instances", needed,
                       RECORDS_REMEDY if recorded else "run the batch in parts")
@@ -182,12 +203,14 @@ def run_chunk(task: ChunkTask, progress: bool = False) -> ChunkResult:
     once (a chunk's named its own rows, and on a worker process went to the worker's stderr)."""
     # the batch's long-run warning was told when it was planned (`check_batch_work`), and so
     # were a duration and periods off the step grid (`plan_chunks`)
+    # and so were delays on the step grid (`plan_chunks`, numbering the batch's instances)
     with told_by_caller("ok_instances", "long_work", "off_grid_duration", "off_grid_period",
-                        "cycle_cut_short"):
+                        "cycle_cut_short", "delay_event"):
         result = simulate(list(task.params), task.duration_s, task.solver, arch=task.arch,
                           record_interval_s=task.record_interval_s,
                           record_shapes=task.record_shapes,
-                          steady_from_cycle=task.steady_from_cycle, progress=progress)
+                          steady_from_cycle=task.steady_from_cycle, progress=progress,
+                          sensitivities=task.sensitivities)
     members = np.asarray(task.members)
     summary = result.summary
     summary.insert(0, "instance", members)
@@ -198,5 +221,10 @@ def run_chunk(task: ChunkTask, progress: bool = False) -> ChunkResult:
                    clock.simulated_s)
     trajectory = result.trajectory
     trajectory["instance"] = members[trajectory["instance"].to_numpy(dtype=int)]
+    if task.sensitivities:
+        # the same rows in the same order (`sensitivities.split_result`)
+        summary = pd.concat([summary, result.sensitivities], axis=1)
+        trajectory = pd.concat([trajectory, result.trajectory_sensitivities.drop(
+            columns=["instance", "t_s"])], axis=1)
     return ChunkResult(index=task.index, summary=summary, trajectory=trajectory,
                        shapes=result.shapes, topology=result.topology, timing=result.timing)

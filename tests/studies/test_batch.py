@@ -468,21 +468,23 @@ TINY = ts.StarParams(n_arc=6, n_limb=2)
 MS_SOLVER = ts.SolverConfig()
 
 
-def _forbidden(*args, **kwargs):
-    raise AssertionError("simulate was called despite invalid arguments")
-
-
 @pytest.mark.parametrize("kwargs, message", [
     (dict(workers=2, executor=InProcess()), "^give workers .* or executor, not both"),
     (dict(record_interval_s=0.001, record_shapes=True, run_dir="RUN"),
      r"^record_shapes cannot be combined with run_dir"),
+    (dict(sensitivities=("alpah",)), r"^sensitivities: 'alpah' is not a StarParams field; "
+                                     r"did you mean alpha\?"),
+    (dict(sensitivities=("gait",)), r"^sensitivities: 'gait' is not differentiable"),
+    (dict(sensitivities="alpha"), r"^sensitivities must be a sequence of StarParams field"),
+    (dict(sensitivities=("alpha",), solver=ts.SolverConfig(precision="f32")),
+     r"^sensitivities need precision 'f64'"),
 ])
 def test_run_batch_refuses_before_compute(monkeypatch, tmp_path, kwargs, message):
     monkeypatch.setattr("taichi_star.batch.tasks.simulate", _forbidden)
     if kwargs.get("run_dir") == "RUN":
         kwargs["run_dir"] = tmp_path / "run"
     with pytest.raises(ValueError, match=message):
-        run_batch([TINY], 0.002, solver=MS_SOLVER, **kwargs)
+        run_batch([TINY], 0.002, **{"solver": MS_SOLVER, **kwargs})
     assert not list(tmp_path.iterdir())
 
 
@@ -651,3 +653,86 @@ def test_an_isolated_run_leaves_no_pool_running(deaths):
         assert (folder / "chunk_0").read_text() == "0"  # chunk 0's worker died once
         assert executor._pools() == []
     assert result.summary["status"].tolist() == ["ok", "ok"]
+
+
+# sensitivities: two coarse topologies, three robots, the middle one of its own topology
+SENSITIVE = [TINY.replace(gait="A1", period=0.3), TINY.replace(gait="A1+A2", period=0.3, n_arc=8),
+             TINY.replace(gait="A1+A3", period=0.3, alpha=1.2)]
+SENSITIVE_CALL = dict(solver=SOLVER, record_interval_s=0.02,
+                      sensitivities=("alpha", "actuator_gains[0]"))
+
+
+def test_a_batchs_sensitivities_are_simulates_whatever_its_chunks_and_its_store(tmp_path):
+    """run_batch(..., sensitivities=...): every instance's derivatives, of the summary and of
+    each record, are bitwise those of `simulate` on its topology's instances, in input order
+    across the groups; a run store keeps them with each chunk, a resume reads them back for the
+    chunks it did not compute, and a resume asking for others is another run (refused)."""
+    from taichi_star.batch import RunStoreError
+    same = ts.simulate([SENSITIVE[0], SENSITIVE[2]], 0.06, **SENSITIVE_CALL)
+    own = ts.simulate([SENSITIVE[1]], 0.06, **SENSITIVE_CALL)
+    order = [0, 2, 1]  # input positions of the rows of the two calls, concatenated
+
+    def in_input_order(first, second):
+        table = pd.concat([first, second], ignore_index=True)
+        if "instance" in table:  # a trajectory's: numbered by each call from 0
+            table["instance"] = np.repeat(order, len(table) // len(order))
+            return table.sort_values(["instance", "t_s"], kind="stable").reset_index(drop=True)
+        return table.iloc[np.argsort(order)].reset_index(drop=True)
+
+    expected = in_input_order(same.sensitivities, own.sensitivities)
+    expected_records = in_input_order(same.trajectory_sensitivities, own.trajectory_sensitivities)
+    # real derivatives, not zeros: α moves every gait, A1's gain every gait here (all fire A1)
+    assert (expected.filter(like="d(displacement_x_mm)").abs() > 1e-6).all().all()
+    run_dir = tmp_path / "run"
+    whole = run_batch(SENSITIVE, 0.06, chunk_size=1, run_dir=run_dir, **SENSITIVE_CALL)
+    (run_dir / "chunk_000001.parquet").unlink()   # as if killed before chunk 1 was stored
+    resumed = run_batch(SENSITIVE, 0.06, chunk_size=1, run_dir=run_dir, resume=True,
+                        **SENSITIVE_CALL)
+    for result in (whole, resumed):
+        pd.testing.assert_frame_equal(result.sensitivities, expected, check_exact=True)
+        pd.testing.assert_frame_equal(result.trajectory_sensitivities, expected_records,
+                                      check_exact=True)
+        assert not [column for column in result.summary if column.startswith("d(")]
+        assert result.trajectory.columns.tolist() == ["instance", "t_s", "x_mm", "y_mm",
+                                                      "heading_deg"]
+        assert result.arguments["sensitivities"] == ["alpha", "actuator_gains[0]"]
+    np.testing.assert_array_equal(resumed.sensitivity("signed_speed_mm_s", "alpha"),
+                                  expected["d(signed_speed_mm_s)/d(alpha)"].to_numpy())
+    assert resumed.timing.robot_steps == 30   # chunk 1 alone (its instance's 30 steps)
+    with pytest.raises(RunStoreError, match=r"\(sensitivities: \['alpha', 'actuator_gains\[0\]'\] "
+                                            r"-> \['alpha'\]\)"):
+        run_batch(SENSITIVE, 0.06, chunk_size=1, run_dir=run_dir, resume=True,
+                  **{**SENSITIVE_CALL, "sensitivities": ("alpha",)})
+
+
+def test_a_batchs_sensitivities_without_records_have_simulates_empty_record_table():
+    """No records: the trajectory sensitivities are simulate's empty table, column for column
+    and type for type (the chunks' trajectories, empty, carry no columns of their own)."""
+    call = {**SENSITIVE_CALL, "record_interval_s": 0.0}
+    direct = ts.simulate(SENSITIVE[:1], 0.02, **call)
+    batch = run_batch(SENSITIVE[:1], 0.02, **call)
+    pd.testing.assert_frame_equal(batch.trajectory_sensitivities,
+                                  direct.trajectory_sensitivities, check_exact=True)
+    pd.testing.assert_frame_equal(batch.sensitivities, direct.sensitivities, check_exact=True)
+
+
+def test_a_delay_on_the_step_grid_is_told_once_naming_its_place_in_the_batch():
+    """The delay warning comes as the batch is planned, naming the robot by its position in
+    the batch (a chunk's own check would name its place in the chunk, 0), once: the chunks'
+    own checks, in simulate, say nothing more. The engine of the test above (two directions,
+    chunks of one robot)."""
+    robots = [SENSITIVE[0].replace(actuator_delays=(delay,) + (0.0,) * 7)
+              for delay in (0.001, 0.003, 0.02)]   # the last on the 2-ms grid
+    with warnings.catch_warnings(record=True) as told:
+        warnings.simplefilter("always")
+        tasks = plan_chunks(robots, 0.06, solver=SOLVER, chunk_size=1,
+                            sensitivities=("alpha", "actuator_delays[0]"))
+        result = run_batch(robots, 0.06, solver=SOLVER, chunk_size=1,
+                           sensitivities=("alpha", "actuator_delays[0]"))
+    on_grid = [str(w.message) for w in told if "on a step end" in str(w.message)]
+    assert len(on_grid) == 2   # plan_chunks', then run_batch's own planning: one each
+    assert all(message.startswith("sensitivities: actuator_delays[0] = 0.02 s (instance 2, 1 in "
+                                  "all) puts the profile's onset") for message in on_grid)
+    assert [task.sensitivities for task in tasks] == [("alpha", "actuator_delays[0]")] * 3
+    assert [task.replicas for task in tasks] == [5, 5, 5]
+    assert result.sensitivity("displacement_x_mm", "actuator_delays[0]").shape == (3,)
