@@ -500,18 +500,19 @@ def primitives_robot_differences(path, base: StarParams) -> tuple:
 
 
 def tell_batch_work(args, config: SolverConfig, instances: int,
-                    periods: Sequence[float] = ()) -> float:
+                    periods: Sequence[float] = (), replicas: int = 1) -> float:
     """Warn (`LongWorkWarning`, with the hours) of a `run_batch` of `instances` robots, each run
     for `run_length(args)` with this solver, before the study builds them: `run_batch` tells
     its estimate only once it has them, and a product near the studies' million instances
     took about two minutes to build (an audit, 2026-12). `periods`: the actuation periods, s,
     that the instances share equally (a swept period's values; default: the model's).
+    `replicas`: instances simulated per robot (sensitivities add two per parameter).
     Returns the robot-steps (`fewest_steps` of each run, `run_batch`'s count). Run the batch
     within `batch_work_told()`, which keeps it from telling the same hours again."""
     periods = list(periods) or [base_params(args).period]
     durations = [duration_s(args, period) for period in periods]
     robot_steps = sum(fewest_steps(config, duration, 0.0)[0] for duration in durations) \
-        * instances / len(periods)
+        * instances * replicas / len(periods)
     length = (f"--quick ({QUICK_DURATION_S:g} s)" if args.quick else
               f"--cycles {args.cycles:g} of {'each' if len(periods) > 1 else 'its'} period")
     warn_long_work(f"the batch of {instances:,} instances ({length})", robot_steps)

@@ -5,6 +5,7 @@
                             [--param NAME=VALUES ...] [--preset paper|accurate] [--set NAME=VALUE]
                             [--out DIR] [--quick] [--resume] [--run-dir DIR]
                             [--workers N | --scheduler tcp://HOST:PORT] [--chunk-size N]
+                            [--sensitivities NAME,...]
 
 Values: a comma list (`0,0.5,1`) or a range `start:stop:n` (n points, both ends included) or
 `start:stop:n:log` (geometric). `--param NAME=VALUES` sweeps any other StarParams field.
@@ -13,6 +14,10 @@ Newton statistics, status), the same table as `sweep.parquet` (typed, full preci
 provenance in its metadata; `pandas.read_parquet`) and `sweep_<parameter>.png` for every swept
 parameter: speed against the parameter, one line per gait, the other swept parameters held at
 the value closest to the default.
+
+`--sensitivities alpha,drag_perpendicular` adds every instance's derivatives of its speeds,
+displacements and heading by those parameters (columns "d(OUTPUT)/d(PARAMETER)", exact for the
+discrete scheme: `simulate(..., sensitivities=...)`), each costing two more instances' work.
 
 Resumable: every finished chunk is stored, verified, in the run store (`--run-dir`, default
 `<out>/chunks/`). After a crash or a kill, the same command with `--out` of the killed run and
@@ -29,6 +34,7 @@ import pandas as pd
 
 from taichi_star import PER_ACTUATOR_FIELDS, StarParams
 from taichi_star.batch import run_batch
+from taichi_star.sensitivities import check_defined, instances_per_instance, parse_directions
 
 from . import cli
 
@@ -67,6 +73,11 @@ def build_parser():
                         help=cli.GAITS_HELP)
     parser.add_argument("--max-instances", type=int, default=cli.MAX_INSTANCES,
                         help=f"refuse larger products (default and most {cli.MAX_INSTANCES})")
+    parser.add_argument("--sensitivities", default=None, metavar="NAME,...",
+                        help="also differentiate every instance's outputs by these parameters, "
+                             "as simulate(sensitivities=...) names them, an actuator by its "
+                             "Python index (actuator_gains[0] is A1's); each costs two more "
+                             "instances' work (default: none)")
     cli.add_resume_flags(parser)
     cli.add_model_flags(parser, fixed=("gait",))
     cli.add_dt_flag(parser)
@@ -205,21 +216,34 @@ def main(argv=None):
     base = cli.base_params(args, axes)
     # checked before the grid is built: a swept period sets the longest and the shortest run
     solver = cli.solver(args, periods=axes.get("period", ()))
-    cli.tell_batch_work(args, solver, size, periods=axes.get("period", ()))
+    parameters = ([] if args.sensitivities is None
+                  else cli.sensitivity_parameters(args.sensitivities, "--sensitivities"))
+    cli.tell_batch_work(args, solver, size, periods=axes.get("period", ()),
+                        replicas=instances_per_instance(len(parameters)))
     grid = cli.param_product(axes, base=base, flags=axis_flags(args, axes))
+    try:
+        # before the output folder: where the grid's robots have no derivative (f32, a
+        # component height at 0)
+        check_defined(parse_directions(parameters), grid, solver)
+    except ValueError as error:
+        raise cli.StudyArgumentError(f"--sensitivities: {error}") from None
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
-                     solver=solver, extra={"axes": axes})
+                     solver=solver,
+                     extra={"axes": axes, **({"sensitivities": parameters} if parameters else {})})
     run_dir = cli.run_store(args, out)
     with cli.executor(args, out) as executor, cli.batch_work_told():
         result = run_batch(grid, **cli.run_length(args), solver=solver, arch=args.arch,
                            chunk_size=cli.chunk_size(args, len(grid), executor.n_workers),
                            executor=executor, run_dir=run_dir, run_dir_flag="--run-dir",
-                           resume=args.resume,
-                           progress=not args.no_progress)
-    csv = out.write_csv(result.summary, "sweep.csv")
-    out.write_parquet(result.summary, "sweep.parquet")
+                           resume=args.resume, progress=not args.no_progress,
+                           sensitivities=parameters)
+    table = result.summary
+    if parameters:  # the same rows, in the same order
+        table = pd.concat([table, result.sensitivities], axis=1)
+    csv = out.write_csv(table, "sweep.csv")
+    out.write_parquet(table, "sweep.parquet")
     out.wrote(*plot_sweep(csv, out))
     out.report()
     failed = (result.summary["status"] != "ok").sum()
     print(f"{len(result.summary)} instances, {failed} not ok")
-    return result.summary
+    return table

@@ -52,7 +52,7 @@ from .timegrid import on_grid
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
 __all__ = ["SUMMARY_OUTPUTS", "TRAJECTORY_OUTPUTS", "RELATIVE_STEP", "FIELD_RELATIVE_STEPS",
            "delay_on_step_grid", "delay_event", "REPLICAS_PER_DIRECTION", "instances_per_instance",
-           "parse_directions"]
+           "parse_directions", "check_defined"]
 
 RELATIVE_STEP = 1e-4
 """ε of a direction relative to the parameter's value. Each direction has one replica pair, at
@@ -309,17 +309,8 @@ def check_directions(directions: Sequence[Direction], params: Sequence[StarParam
     held at dt_min = dt_max); with `commanded` (a `Simulator`, which fires what it is told,
     whatever the `gait` field says) for any actuator's delay. `positions`: the instances'
     numbers in the caller's batch, which the messages give (None: 0, 1, ...)."""
-    number = (lambda b: b) if positions is None else (lambda b: positions[b])
-    if directions and solver.precision != "f64":
-        raise ValueError(f"sensitivities need precision 'f64' (central differences lose f32's "
-                         f"digits), got {solver.precision!r}")
+    check_defined(directions, params, solver, positions)
     for direction in directions:
-        if direction.field in COMPONENT_HEIGHTS:
-            at_zero = [b for b, p in enumerate(params) if direction.value(p) == 0.0]
-            if at_zero:
-                raise ValueError(f"sensitivities: {direction.field} is 0 (the 2.5-D model off) "
-                                 f"for instance {number(at_zero[0])}; its derivative is defined only "
-                                 f"with the component heights set (> 0)")
         held = not solver.adaptive or solver.dt_min == solver.dt_max
         if direction.field == "actuator_delays" and held:
             # steps of one length (adaptive ones held at dt_min = dt_max too: an audit,
@@ -334,12 +325,31 @@ def check_directions(directions: Sequence[Direction], params: Sequence[StarParam
             jumping = [(b, event) for b, event in events if event is not None]
             if jumping:
                 b, (time, what) = jumping[0]
+                number = b if positions is None else positions[b]
                 warn_user(
                     f"sensitivities: {direction.label} = {direction.value(params[b]):g} s "
-                    f"(instance {number(b)}, {len(jumping)} in all) puts {what} on a step end "
+                    f"(instance {number}, {len(jumping)} in all) puts {what} on a step end "
                     f"(t = {time:g} s): the run changes slope or jumps there as the delay "
                     f"passes, and its derivative by the delay is not defined; move the delay off "
                     f"the step grid (e.g. by dt/2)", UserWarning, kind="delay_event")
+
+
+def check_defined(directions: Sequence[Direction], params: Sequence[StarParams],
+                  solver: SolverConfig, positions: Optional[Sequence[int]] = None):
+    """`check_directions`' refusals alone (ValueError: f32; a component height at 0, naming the
+    first such instance by its number in `positions`, None: 0, 1, ...), for a caller that
+    checks before it runs and leaves the warnings to the run."""
+    if directions and solver.precision != "f64":
+        raise ValueError(f"sensitivities need precision 'f64' (central differences lose f32's "
+                         f"digits), got {solver.precision!r}")
+    for direction in directions:
+        if direction.field in COMPONENT_HEIGHTS:
+            at_zero = [b for b, p in enumerate(params) if direction.value(p) == 0.0]
+            if at_zero:
+                first = at_zero[0] if positions is None else positions[at_zero[0]]
+                raise ValueError(f"sensitivities: {direction.field} is 0 (the 2.5-D model off) "
+                                 f"for instance {first}; its derivative is defined only with "
+                                 f"the component heights set (> 0)")
 
 
 def delay_event(params: StarParams, actuator: int, dt: float, commanded: bool = False,

@@ -50,6 +50,11 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
     ("sweep", ["--gaits", "A1", "--alpha", "0.4,0.5", "--alpha", "0.8"],
      "--alpha given twice (the second would replace the first): give it once"),
     ("sweep", ["--gaits", "A1", "--alpha=0.4", "--alpha", "0.8"], "--alpha given twice"),
+    # the robots' derivatives are checked with the grid, before the output folder
+    ("sweep", ["--gaits", "A1", "--sensitivities", "alpah"],
+     "--sensitivities: sensitivities: 'alpah' is not a StarParams field; did you mean alpha?"),
+    ("sweep", ["--gaits", "A1", "--sensitivities", "alpha,hub_height"],
+     "--sensitivities: sensitivities: hub_height is 0 (the 2.5-D model off) for instance 0"),
     ("sensitivity", ["--seed", "1", "--seed", "2"], "--seed given twice"),
     ("gradient_fit", ["--sets", "6", "--sets", "20"], "--sets given twice"),
     # a setting of fits all left out was taken and unused without a word (an audit, 2026-12)

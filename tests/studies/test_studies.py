@@ -534,6 +534,33 @@ def test_sweep_quick(tmp_path):
         == ("period (s)", "alpha", "speed_mm_s (mm/s)")
 
 
+def test_sweep_quick_with_sensitivities(tmp_path):
+    """--sensitivities: each row of the sweep's table carries its instance's derivatives,
+    simulate's to the CSV's digits and bit for bit in the Parquet copy; the work told counts
+    the replicas; the sidecar names the parameters."""
+    from studies import sweep
+    names = ["alpha", "actuator_gains[0]"]
+    sweep.main(["--out", str(tmp_path), "--alpha", "0.4,1.2", "--gaits", "A1+A3",
+                "--sensitivities", ",".join(names), *QUICK])
+    grid = cli.param_product({"gait": ["A1+A3"], "alpha": [0.4, 1.2]})
+    direct = taichi_star.simulate(grid, cli.QUICK_DURATION_S, QUICK_SOLVER, sensitivities=names)
+    table = pd.read_csv(tmp_path / "sweep.csv")
+    parquet = pd.read_parquet(tmp_path / "sweep.parquet")
+    derivatives = [column for column in table if column.startswith("d(")]
+    assert derivatives == direct.sensitivities.columns.tolist() and len(derivatives) == 16
+    assert (direct.sensitivities["d(displacement_x_mm)/d(alpha)"].abs() > 1e-6).all()
+    for column in derivatives:
+        np.testing.assert_array_equal(table[column], as_csv_keeps(direct.sensitivities[column]))
+        np.testing.assert_array_equal(parquet[column], direct.sensitivities[column])
+    np.testing.assert_array_equal(table["speed_mm_s"], as_csv_keeps(direct.summary["speed_mm_s"]))
+    assert json.loads((tmp_path / "sweep.csv.json").read_text())["details"]["sensitivities"] \
+        == names
+    arguments = cli.parse(sweep.build_parser(), ["--gaits", "A1+A3", *QUICK])
+    # 5 instances' work per robot: itself and a pair per parameter
+    assert cli.tell_batch_work(arguments, QUICK_SOLVER, 2, replicas=5) \
+        == 5 * cli.tell_batch_work(arguments, QUICK_SOLVER, 2)
+
+
 def test_gaits_quick(tmp_path):
     gaits_study.main(["--out", str(tmp_path), *QUICK])
     table = pd.read_csv(tmp_path / "gaits.csv")
