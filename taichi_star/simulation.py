@@ -119,8 +119,10 @@ class SimulationResult:
     def sensitivity(self, output: str, parameter: str, trajectory: bool = False) -> np.ndarray:
         """d(output)/d(parameter) for every instance: (B,) for a summary output
         (`sensitivities.SUMMARY_OUTPUTS`), (B, n_records) for a trajectory one (x_mm, y_mm, and
-        heading_deg with `trajectory=True`: the summary has a heading_deg too). `parameter` as
-        named in `simulate` ("alpha"; "actuator_gains" gives (B, 8) or (B, 8, n_records),
+        heading_deg with `trajectory=True`: the summary has a heading_deg too; a `run_batch`
+        of several durations, whose instances have different records: (B, n_times) over every
+        record time of the batch in order, NaN where an instance has no record). `parameter`
+        as named in `simulate` ("alpha"; "actuator_gains" gives (B, 8) or (B, 8, n_records),
         "actuator_gains[2]" one actuator). ValueError for an output or parameter the run did
         not differentiate."""
         if self.sensitivities is None:
@@ -152,7 +154,15 @@ class SimulationResult:
                               if column.startswith(prefix)]
             raise ValueError(f"parameter {parameter!r} was not among this run's sensitivities "
                              f"{differentiated}")
-        values = np.stack([table[column].to_numpy().reshape(shape) for column in columns], axis=1)
+        if len(shape) == 2 and len(table) != shape[0] * shape[1]:
+            # records of several durations (`run_batch(cycles=...)` over several periods): on
+            # the union of their times, as `to_xarray` lays them out
+            values = np.stack([table.pivot(index="instance", columns="t_s", values=column)
+                               .reindex(index=range(shape[0])).to_numpy()
+                               for column in columns], axis=1)
+        else:
+            values = np.stack([table[column].to_numpy().reshape(shape) for column in columns],
+                              axis=1)
         return values if len(columns) > 1 else values[:, 0]
 
     def to_xarray(self):

@@ -736,3 +736,22 @@ def test_a_delay_on_the_step_grid_is_told_once_naming_its_place_in_the_batch():
     assert [task.sensitivities for task in tasks] == [("alpha", "actuator_delays[0]")] * 3
     assert [task.replicas for task in tasks] == [5, 5, 5]
     assert result.sensitivity("displacement_x_mm", "actuator_delays[0]").shape == (3,)
+
+
+def test_a_batch_of_several_durations_gives_its_record_derivatives_on_their_union():
+    """run_batch(cycles=...) over two periods (runs of 0.04 and 0.06 s): the instances have 3
+    and 4 records, so the result's `sensitivity` of a trajectory output cannot be (B,
+    n_records) (it failed to reshape); it lays them on the union of the record times, as
+    `to_xarray` does, NaN where an instance has no record, each instance's values its own
+    rows'."""
+    robots = [SENSITIVE[0].replace(period=0.2), SENSITIVE[2].replace(period=0.3)]
+    result = run_batch(robots, cycles=0.2, chunk_size=1, **SENSITIVE_CALL)
+    table = result.trajectory_sensitivities
+    for output in ("x_mm", "heading_deg"):
+        values = result.sensitivity(output, "actuator_gains[0]", trajectory=True)
+        assert values.shape == (2, 4)   # records at 0, 0.02, 0.04 and (the second's) 0.06 s
+        column = f"d({output})/d(actuator_gains[0])"
+        np.testing.assert_array_equal(values[0, :3], table[table["instance"] == 0][column])
+        assert np.isnan(values[0, 3])
+        np.testing.assert_array_equal(values[1], table[table["instance"] == 1][column])
+    assert result.sensitivity("x_mm", "alpha")[1, 3] != 0.0
