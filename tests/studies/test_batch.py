@@ -755,3 +755,15 @@ def test_a_batch_of_several_durations_gives_its_record_derivatives_on_their_unio
         assert np.isnan(values[0, 3])
         np.testing.assert_array_equal(values[1], table[table["instance"] == 1][column])
     assert result.sensitivity("x_mm", "alpha")[1, 3] != 0.0
+
+
+@pytest.mark.slow
+def test_a_batchs_sensitivities_on_worker_processes_are_the_in_process_ones():
+    """The chunks' tasks carry their sensitivities to worker processes (pickled) and back:
+    the same derivatives, bit for bit, as in this process."""
+    here = run_batch(SENSITIVE, 0.06, chunk_size=1, **SENSITIVE_CALL)
+    there = run_batch(SENSITIVE, 0.06, chunk_size=1, workers=2, **SENSITIVE_CALL)
+    pd.testing.assert_frame_equal(there.sensitivities, here.sensitivities, check_exact=True)
+    pd.testing.assert_frame_equal(there.trajectory_sensitivities, here.trajectory_sensitivities,
+                                  check_exact=True)
+    pd.testing.assert_frame_equal(there.summary, here.summary, check_exact=True)
