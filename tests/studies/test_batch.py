@@ -655,41 +655,52 @@ def test_an_isolated_run_leaves_no_pool_running(deaths):
     assert result.summary["status"].tolist() == ["ok", "ok"]
 
 
-# sensitivities: two coarse topologies, three robots, the middle one of its own topology
-SENSITIVE = [TINY.replace(gait="A1", period=0.3), TINY.replace(gait="A1+A2", period=0.3, n_arc=8),
+# sensitivities: three coarse robots, the middle one of a shorter period (a group of its own
+# under `cycles`: two durations, one topology, so one engine to build)
+SENSITIVE = [TINY.replace(gait="A1", period=0.3), TINY.replace(gait="A1+A2", period=0.2),
              TINY.replace(gait="A1+A3", period=0.3, alpha=1.2)]
 SENSITIVE_CALL = dict(solver=SOLVER, record_interval_s=0.02,
                       sensitivities=("alpha", "actuator_gains[0]"))
 
 
+def _renumbered(table: pd.DataFrame, positions) -> pd.DataFrame:
+    """A `simulate` call's sensitivities table with its instances numbered by their positions
+    in a batch: a trajectory's instance column, a summary's rows."""
+    table = table.copy()
+    if "instance" in table:
+        table["instance"] = np.asarray(positions)[table["instance"].to_numpy()]
+    else:
+        table.index = positions
+    return table
+
+
 def test_a_batchs_sensitivities_are_simulates_whatever_its_chunks_and_its_store(tmp_path):
-    """run_batch(..., sensitivities=...): every instance's derivatives, of the summary and of
-    each record, are bitwise those of `simulate` on its topology's instances, in input order
-    across the groups; a run store keeps them with each chunk, a resume reads them back for the
-    chunks it did not compute, and a resume asking for others is another run (refused)."""
+    """run_batch(..., sensitivities=...) over 0.2 cycles of two periods (runs of 0.06 and
+    0.04 s): every instance's derivatives, of the summary and of each record, are bitwise
+    those of `simulate` on its duration's instances, in input order across the groups; a run
+    store keeps them with each chunk, a resume reads them back for the chunks it did not
+    compute, and a resume asking for others is another run (refused). The records' derivatives
+    of instances with 4 and 3 records come from `sensitivity` on the union of their times, NaN
+    where an instance has no record (it failed to reshape them), as `to_xarray` lays them."""
     from taichi_star.batch import RunStoreError
     same = ts.simulate([SENSITIVE[0], SENSITIVE[2]], 0.06, **SENSITIVE_CALL)
-    own = ts.simulate([SENSITIVE[1]], 0.06, **SENSITIVE_CALL)
-    order = [0, 2, 1]  # input positions of the rows of the two calls, concatenated
-
-    def in_input_order(first, second):
-        table = pd.concat([first, second], ignore_index=True)
-        if "instance" in table:  # a trajectory's: numbered by each call from 0
-            table["instance"] = np.repeat(order, len(table) // len(order))
-            return table.sort_values(["instance", "t_s"], kind="stable").reset_index(drop=True)
-        return table.iloc[np.argsort(order)].reset_index(drop=True)
-
-    expected = in_input_order(same.sensitivities, own.sensitivities)
-    expected_records = in_input_order(same.trajectory_sensitivities, own.trajectory_sensitivities)
+    short = ts.simulate([SENSITIVE[1]], 0.04, **SENSITIVE_CALL)
+    expected = pd.concat([_renumbered(same.sensitivities, [0, 2]),
+                          _renumbered(short.sensitivities, [1])]).sort_index()
+    expected_records = pd.concat([
+        _renumbered(same.trajectory_sensitivities, [0, 2]),
+        _renumbered(short.trajectory_sensitivities, [1])]).sort_values(
+            ["instance", "t_s"], kind="stable").reset_index(drop=True)
     # real derivatives, not zeros: α moves every gait, A1's gain every gait here (all fire A1)
     assert (expected.filter(like="d(displacement_x_mm)").abs() > 1e-6).all().all()
     run_dir = tmp_path / "run"
-    whole = run_batch(SENSITIVE, 0.06, chunk_size=1, run_dir=run_dir, **SENSITIVE_CALL)
+    whole = run_batch(SENSITIVE, cycles=0.2, chunk_size=1, run_dir=run_dir, **SENSITIVE_CALL)
     (run_dir / "chunk_000001.parquet").unlink()   # as if killed before chunk 1 was stored
-    resumed = run_batch(SENSITIVE, 0.06, chunk_size=1, run_dir=run_dir, resume=True,
+    resumed = run_batch(SENSITIVE, cycles=0.2, chunk_size=1, run_dir=run_dir, resume=True,
                         **SENSITIVE_CALL)
     for result in (whole, resumed):
-        pd.testing.assert_frame_equal(result.sensitivities, expected, check_exact=True)
+        pd.testing.assert_frame_equal(result.sensitivities, expected.reset_index(drop=True),
+                                      check_exact=True)
         pd.testing.assert_frame_equal(result.trajectory_sensitivities, expected_records,
                                       check_exact=True)
         assert not [column for column in result.summary if column.startswith("d(")]
@@ -698,10 +709,18 @@ def test_a_batchs_sensitivities_are_simulates_whatever_its_chunks_and_its_store(
         assert result.arguments["sensitivities"] == ["alpha", "actuator_gains[0]"]
     np.testing.assert_array_equal(resumed.sensitivity("signed_speed_mm_s", "alpha"),
                                   expected["d(signed_speed_mm_s)/d(alpha)"].to_numpy())
-    assert resumed.timing.robot_steps == 30   # chunk 1 alone (its instance's 30 steps)
+    assert resumed.timing.robot_steps == 30   # chunk 1 alone (instance 2's 30 steps)
+    for output in ("x_mm", "heading_deg"):
+        column = f"d({output})/d(actuator_gains[0])"
+        values = resumed.sensitivity(output, "actuator_gains[0]", trajectory=True)
+        assert values.shape == (3, 4)   # records at 0, 0.02, 0.04 and (0 and 2 alone) 0.06 s
+        for b in range(3):
+            own = expected_records[expected_records["instance"] == b][column].to_numpy()
+            np.testing.assert_array_equal(values[b, :len(own)], own)
+        assert np.isnan(values[1, 3]) and not np.isnan(values[[0, 2], 3]).any()
     with pytest.raises(RunStoreError, match=r"\(sensitivities: \['alpha', 'actuator_gains\[0\]'\] "
                                             r"-> \['alpha'\]\)"):
-        run_batch(SENSITIVE, 0.06, chunk_size=1, run_dir=run_dir, resume=True,
+        run_batch(SENSITIVE, cycles=0.2, chunk_size=1, run_dir=run_dir, resume=True,
                   **{**SENSITIVE_CALL, "sensitivities": ("alpha",)})
 
 
@@ -736,25 +755,6 @@ def test_a_delay_on_the_step_grid_is_told_once_naming_its_place_in_the_batch():
     assert [task.sensitivities for task in tasks] == [("alpha", "actuator_delays[0]")] * 3
     assert [task.replicas for task in tasks] == [5, 5, 5]
     assert result.sensitivity("displacement_x_mm", "actuator_delays[0]").shape == (3,)
-
-
-def test_a_batch_of_several_durations_gives_its_record_derivatives_on_their_union():
-    """run_batch(cycles=...) over two periods (runs of 0.04 and 0.06 s): the instances have 3
-    and 4 records, so the result's `sensitivity` of a trajectory output cannot be (B,
-    n_records) (it failed to reshape); it lays them on the union of the record times, as
-    `to_xarray` does, NaN where an instance has no record, each instance's values its own
-    rows'."""
-    robots = [SENSITIVE[0].replace(period=0.2), SENSITIVE[2].replace(period=0.3)]
-    result = run_batch(robots, cycles=0.2, chunk_size=1, **SENSITIVE_CALL)
-    table = result.trajectory_sensitivities
-    for output in ("x_mm", "heading_deg"):
-        values = result.sensitivity(output, "actuator_gains[0]", trajectory=True)
-        assert values.shape == (2, 4)   # records at 0, 0.02, 0.04 and (the second's) 0.06 s
-        column = f"d({output})/d(actuator_gains[0])"
-        np.testing.assert_array_equal(values[0, :3], table[table["instance"] == 0][column])
-        assert np.isnan(values[0, 3])
-        np.testing.assert_array_equal(values[1], table[table["instance"] == 1][column])
-    assert result.sensitivity("x_mm", "alpha")[1, 3] != 0.0
 
 
 @pytest.mark.slow
