@@ -16,7 +16,7 @@ taken prints "Lock .../ticache.lock failed. Please run 'ti cache clean' and try 
 simply compiles without loading the cache, or leaves its new kernels out of it at exit.
 Nothing is wrong and nothing needs cleaning, so the runtime silences exactly those two moments:
 it opens the cache (a trivial kernel) and exits at log level ERROR; Taichi's warnings in between
-are shown as configured.
+are shown at the user's level (`taichi_log_level`: TI_LOG_LEVEL, else "warn").
 
 Compiling a kernel, Taichi's front end writes the source position of every statement and
 expression it meets (the line, and an excerpt with a caret line under it, each line passed
@@ -71,7 +71,8 @@ from .params import SolverConfig, check_number
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
 __all__ = ["Runtime", "available_archs", "CPU_LANES", "LANES_MINIMUM_WORK", "GPU_BLOCK_DIM",
-           "GPU_INSTANCE_MINOR", "kernel_optimisation_default", "check_batch_memory",
+           "GPU_INSTANCE_MINOR", "kernel_optimisation_default", "taichi_log_level",
+           "check_batch_memory",
            "MemoryBudgetError", "RUNTIME_LOCK", "one_call_at_a_time"]
 
 ARCHS = ("cpu", "gpu", "cuda", "vulkan", "metal")
@@ -426,6 +427,19 @@ def _open_kernel_cache():
     pass
 
 
+TAICHI_LOG_LEVELS = ("trace", "debug", "info", "warn", "error", "critical", "off")
+"""The levels of Taichi's logger, most verbose first (`ti.set_logging_level`)."""
+
+
+def taichi_log_level() -> str:
+    """Taichi's log level between the runtime's quiet moments (module docstring): the user's
+    TI_LOG_LEVEL where it names one of `TAICHI_LOG_LEVELS` (Taichi's import refuses any other
+    word), else "warn". The runtime gives ti.init a level of its own, which overrode the
+    variable for the whole process, with a warning line (an audit, 2026-12)."""
+    level = os.environ.get("TI_LOG_LEVEL", "")
+    return level if level in TAICHI_LOG_LEVELS else ti.WARN
+
+
 def _quiet_exit():
     """Taichi's exit, which writes the offline cache, at log level ERROR (module docstring).
     Called explicitly: left to the interpreter's shutdown, Taichi's program was never finalized
@@ -488,7 +502,7 @@ class Runtime:
         self.cpu_lanes: Optional[int] = None
         self.kernel_optimisation = kernel_optimisation_default()
         self.cpu_cfg_optimisation = CPU_CFG_OPTIMISATION
-        self.log_level = ti.WARN
+        self.log_level = taichi_log_level()
         self.engines: Dict[tuple, List[EngineSlot]] = {}
         """The engines built in this process, per `engine_key`: each free for the next call or
         Simulator, or held by a living Simulator (`free_engine`)."""
@@ -627,7 +641,10 @@ class Runtime:
                       "afterwards crashes the process; keep your own Taichi code in another "
                       "process, or start it after taichi_star's last use")
         # ti.init prints "[Taichi] Starting on arch=..." unconditionally; warnings still go to
-        # Taichi's logger, except a taken cache lock's (module docstring)
+        # Taichi's logger, except a taken cache lock's (module docstring) and the line it
+        # writes, before it takes log_level, where the user set TI_LOG_LEVEL ("overridden by
+        # ti.init argument"): the level after it is the user's (`taichi_log_level`)
+        ti.set_logging_level(ti.ERROR)
         with contextlib.redirect_stdout(io.StringIO()):
             ti.init(arch=getattr(ti, arch), default_fp=ti.f64 if precision == "f64" else ti.f32,
                     fast_math=False, advanced_optimization=self.kernel_optimisation,

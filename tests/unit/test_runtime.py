@@ -76,6 +76,41 @@ def test_a_taken_cache_lock_prints_no_advice_to_clean_the_cache(tmp_path):
     assert "ticache.lock" not in ours.stdout + ours.stderr
 
 
+LOG_PROBE = """
+from taichi._logging import is_logging_effective
+from taichi_star.runtime import Runtime
+Runtime.current().ensure("cpu")
+print("info", is_logging_effective("info"), "warn", is_logging_effective("warn"))
+"""
+
+
+@pytest.mark.parametrize("level, effective", [("warn", "info False warn True"),
+                                              ("info", "info True warn True")])
+def test_taichis_log_level_is_the_users_and_starting_taichi_says_nothing_of_it(tmp_path, level,
+                                                                              effective):
+    """TI_LOG_LEVEL set: starting Taichi wrote "Environment variable TI_LOG_LEVEL=warn
+    overridden by ti.init argument" to stderr, and the level after it was always "warn" (the
+    runtime's own); now nothing is written and the user's level holds."""
+    script = tmp_path / "probe.py"
+    script.write_text(LOG_PROBE)
+    run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                         timeout=120, env={**os.environ, "TI_LOG_LEVEL": level})
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip() == effective
+    assert "overridden" not in run.stderr, run.stderr
+
+
+@pytest.mark.parametrize("value, level", [(None, "warn"), ("", "warn"), ("error", "error"),
+                                          ("trace", "trace"), ("off", "off")])
+def test_the_runtimes_log_level_is_ti_log_level_else_warn(monkeypatch, value, level):
+    if value is None:
+        monkeypatch.delenv("TI_LOG_LEVEL", raising=False)
+    else:
+        monkeypatch.setenv("TI_LOG_LEVEL", value)
+    assert runtime.taichi_log_level() == level
+    assert runtime.Runtime().log_level == level
+
+
 def test_a_process_that_exits_leaves_its_kernels_in_the_offline_cache(tmp_path):
     """A process that ran kernels through the runtime and exits without `ti.reset` writes them
     to the offline cache (at 10e264a it wrote nothing: Taichi's program was never finalized at
