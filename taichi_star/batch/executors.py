@@ -230,7 +230,7 @@ class LocalProcesses:
             # inside the try: a worker that died while the pool stood idle between two runs
             # breaks it at the first submit
             for index, task in pending.items():
-                futures[self._pool.submit(self.chunk_function, task)] = index
+                futures[self._submit_shared(task)] = index
             for future in concurrent.futures.as_completed(futures):
                 result = future.result()
                 del pending[futures[future]]
@@ -243,6 +243,21 @@ class LocalProcesses:
                         and future.exception() is None:
                     del pending[index]
                     yield future.result()
+
+    def _submit_shared(self, task: ChunkTask) -> concurrent.futures.Future:
+        """The shared pool's submit of `task`. The pool starts its workers as tasks come: a
+        worker that dies while submit starts another breaks the pool under it, the new
+        worker's pipes closed, and submit raised OSError ("handle is closed", once in the
+        suite's worker-death test) where the pool's own check, a moment later, raises
+        BrokenProcessPool. A pool marked broken (its `_broken`, set before it closes its pipes)
+        raises BrokenProcessPool here too; another OSError is raised as it is."""
+        try:
+            return self._pool.submit(self.chunk_function, task)
+        except OSError as error:
+            broken = getattr(self._pool, "_broken", False)
+            if not broken:
+                raise
+            raise BrokenProcessPool(str(broken)) from error
 
     def _run_isolated(self, pending: Dict[int, ChunkTask]) -> Iterator[ChunkResult]:
         """The chunks `pending` after the shared pool broke (any of them may have caused it, so

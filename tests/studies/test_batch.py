@@ -165,6 +165,41 @@ def test_with_no_retries_the_first_worker_death_stops_the_run(deaths):
     assert (folder / "chunk_0").read_text() == "0"
 
 
+class PoolBrokenInSubmit:
+    """A process pool whose worker died while `submit` started another (the race behind an
+    OSError "handle is closed" in the slow worker-death test, 2026-12-07): submit raises that
+    OSError; `_broken` is what the pool's manager thread sets before it closes the pipes."""
+
+    _processes = None
+
+    def __init__(self, broken):
+        self._broken = broken
+
+    def submit(self, *args):
+        raise OSError("handle is closed")
+
+    def shutdown(self, wait=True, cancel_futures=False):
+        pass
+
+
+@pytest.mark.parametrize("broken", ["A child process terminated abruptly", False])
+def test_a_pool_broken_while_a_worker_starts_is_a_worker_death_not_an_oserror(monkeypatch,
+                                                                              broken):
+    """submit's OSError on a pool its manager marked broken is a worker's death: with
+    retries = 0 the run stops naming the chunks not done (it raised the OSError, a traceback
+    from multiprocessing's pipes); on a pool not marked broken the OSError is the caller's."""
+    processes = LocalProcesses(2, retries=0)
+    monkeypatch.setattr(processes, "_new_pool", lambda n_workers: PoolBrokenInSubmit(broken))
+    tasks = plan_chunks([TINY, TINY], 0.002, solver=MS_SOLVER, chunk_size=1)
+    expected = (pytest.raises(RuntimeError, match=r"^a worker process died \(out of memory or "
+                                                   r"killed\?\) with 2 chunk\(s\) not done "
+                                                   r"\(chunk 0, 1\)")
+                if broken else pytest.raises(OSError, match="^handle is closed$"))
+    with expected:
+        list(processes.run(tasks))
+    assert processes._pools() == []   # let go of, as after any failed run
+
+
 def test_a_run_with_no_chunks_left_starts_no_workers():
     """A resumed run whose chunks are all done hands the executor no task: no pool (the
     first pool's start spawns workers and reads the main script)."""
