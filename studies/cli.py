@@ -707,6 +707,13 @@ def sensitivity_parameters(text: str, flag: str, heights: str = "with") -> List[
         raise StudyArgumentError(f"{flag}: {error}") from None
 
 
+def heights_in_all(base: StarParams) -> str:
+    """`sensitivity_parameters`' `heights` for a study's model `base`: "with" where its
+    component heights are set (> 0), else "without" (a derivative across the 2.5-D switch at 0
+    is refused; the heights are all 0 or all set)."""
+    return "with" if base.hub_height > 0 else "without"
+
+
 def field_kind(name: str, flag: Optional[str] = None) -> type:
     """float, int or str: the type of a StarParams field (StudyArgumentError if unknown, naming
     `flag` when given and the closest fields)."""

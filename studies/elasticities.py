@@ -61,8 +61,7 @@ def default_parameters(base: StarParams) -> List[str]:
     """Every differentiable field, per-actuator ones as their eight numbers, less the component
     heights where they are 0 (`simulate` refuses a derivative across the 2.5-D switch; the
     heights are all 0 or all set)."""
-    return cli.sensitivity_parameters("all", "--parameters",
-                                      heights="with" if base.hub_height > 0 else "without")
+    return cli.sensitivity_parameters("all", "--parameters", heights=cli.heights_in_all(base))
 
 
 def direction(label: str):

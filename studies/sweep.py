@@ -76,8 +76,10 @@ def build_parser():
     parser.add_argument("--sensitivities", default=None, metavar="NAME,...",
                         help="also differentiate every instance's outputs by these parameters, "
                              "as simulate(sensitivities=...) names them, an actuator by its "
-                             "Python index (actuator_gains[0] is A1's); each costs two more "
-                             "instances' work (default: none)")
+                             "Python index (actuator_gains[0] is A1's), or all (every "
+                             "differentiable field, less the component heights where the model "
+                             "has them at 0); each costs two more instances' work (default: "
+                             "none)")
     cli.add_resume_flags(parser)
     cli.add_model_flags(parser, fixed=("gait",))
     cli.add_dt_flag(parser)
@@ -217,7 +219,8 @@ def main(argv=None):
     # checked before the grid is built: a swept period sets the longest and the shortest run
     solver = cli.solver(args, periods=axes.get("period", ()))
     parameters = ([] if args.sensitivities is None
-                  else cli.sensitivity_parameters(args.sensitivities, "--sensitivities"))
+                  else cli.sensitivity_parameters(args.sensitivities, "--sensitivities",
+                                                  heights=cli.heights_in_all(base)))
     cli.tell_batch_work(args, solver, size, periods=axes.get("period", ()),
                         replicas=instances_per_instance(len(parameters)))
     grid = cli.param_product(axes, base=base, flags=axis_flags(args, axes))

@@ -297,6 +297,32 @@ def test_study_flags_at_the_end_of_their_range_are_accepted(no_compute, monkeypa
     assert not out.exists()
 
 
+@pytest.mark.parametrize("heights, expected", [
+    ([], False),
+    (["--set", "hub_height=0.02", "--set", "foam_height=0.02", "--set", "actuator_height=0.02"],
+     True)])
+def test_sweep_sensitivities_all_are_the_models_differentiable_fields(no_compute, monkeypatch,
+                                                                     tmp_path, heights,
+                                                                     expected):
+    """`sweep --sensitivities all`: every differentiable field, per-actuator ones as their
+    eight, less the component heights where the model has them at 0 (with them, "all" was
+    refused for the paper's robot, whose heights are 0)."""
+    from taichi_star import DIFFERENTIABLE_FIELDS
+    from studies import sweep
+    asked = []
+
+    def stop(directions, grid, solver):
+        asked.extend(direction.label for direction in directions)
+        raise PastTheFlagChecks
+    monkeypatch.setattr(sweep, "check_defined", stop)
+    with pytest.raises(PastTheFlagChecks):
+        studies_main(["sweep", "--gaits", "A1", "--sensitivities", "all", *heights,
+                      "--out", str(tmp_path / "out"), *QUICK])
+    assert ("hub_height" in asked) is expected and "alpha" in asked
+    # the two per-actuator fields as eight numbers each, the three heights where set
+    assert len(asked) == len(DIFFERENTIABLE_FIELDS) - 2 + 2 * 8 - (0 if expected else 3)
+
+
 def test_an_engine_that_would_not_fit_is_refused_before_the_output_folder(no_compute, tmp_path,
                                                                           monkeypatch, capsys):
     """env_bench's most robots (1,048,576: ~116 GiB of engine) ran two minutes, then failed
