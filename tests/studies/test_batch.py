@@ -759,15 +759,20 @@ def test_a_batchs_sensitivities_are_simulates_whatever_its_chunks_and_its_store(
                   **{**SENSITIVE_CALL, "sensitivities": ("alpha",)})
 
 
-def test_a_batchs_sensitivities_without_records_have_simulates_empty_record_table():
+def test_a_batchs_sensitivities_without_records_have_simulates_empty_record_table(tmp_path):
     """No records: the trajectory sensitivities are simulate's empty table, column for column
-    and type for type (the chunks' trajectories, empty, carry no columns of their own)."""
+    and type for type (the chunks' trajectories, empty, carry no columns of their own, and a
+    run store keeps no trajectory file of them), also read back by a resume."""
     call = {**SENSITIVE_CALL, "record_interval_s": 0.0}
     direct = ts.simulate(SENSITIVE[:1], 0.02, **call)
-    batch = run_batch(SENSITIVE[:1], 0.02, **call)
-    pd.testing.assert_frame_equal(batch.trajectory_sensitivities,
-                                  direct.trajectory_sensitivities, check_exact=True)
-    pd.testing.assert_frame_equal(batch.sensitivities, direct.sensitivities, check_exact=True)
+    batch = run_batch(SENSITIVE[:1], 0.02, run_dir=tmp_path / "run", **call)
+    resumed = run_batch(SENSITIVE[:1], 0.02, run_dir=tmp_path / "run", resume=True, **call)
+    for result in (batch, resumed):
+        pd.testing.assert_frame_equal(result.trajectory_sensitivities,
+                                      direct.trajectory_sensitivities, check_exact=True)
+        pd.testing.assert_frame_equal(result.sensitivities, direct.sensitivities,
+                                      check_exact=True)
+    assert resumed.timing.robot_steps == 0   # read back, not computed
 
 
 def test_a_delay_on_the_step_grid_is_told_once_naming_its_place_in_the_batch():
