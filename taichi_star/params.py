@@ -663,10 +663,11 @@ class SolverConfig:
     this, m (at most a micrometre, 1e-5 of the robot's size: any looser and "converged" would
     not mean the step was solved; in f32 at least `F32_NEWTON_TOL_MIN`). None (the default):
     the precision's own, 1e-10 m in f64 and 1e-7 m in f32 (`NEWTON_TOL_DEFAULTS`), set in
-    its place when the config is made, so that a config reads and records a number. The position error
-    left after that update is then below it: with Newton's quadratic convergence far below,
-    and with the chord's and the lagged Jacobian's below in every step measured (the five
-    Fig. 4c gaits at 1-, 5- and 10-ms steps: at most 0.93·newton_tol, docs/reliability.md).
+    its place when the config is made, so that a config reads and records a number. The
+    position error left after that update is then below it: with Newton's quadratic
+    convergence far below, and with the chord's and the lagged Jacobian's below in every step
+    measured (the five Fig. 4c gaits at 1-, 5- and 10-ms steps: at most 0.93·newton_tol,
+    docs/reliability.md).
     Until 2026-12 a solve also stopped when the contraction estimate θ/(1 − θ)·max |Δq_k|
     (θ = max |Δq_k| / max |Δq_{k−1}|) was within it, which left errors of up to 34·newton_tol
     (131 with the lagged Jacobian)."""
