@@ -523,6 +523,18 @@ def test_run_batch_refuses_before_compute(monkeypatch, tmp_path, kwargs, message
     assert not list(tmp_path.iterdir())
 
 
+def test_a_height_at_zero_is_refused_naming_its_place_in_the_batch(monkeypatch, tmp_path):
+    """A batch of two topologies, the second robot's heights at 0: its group's check names it
+    by its position in the batch (1), not in its group (0), before any compute or folder."""
+    monkeypatch.setattr("taichi_star.batch.tasks.simulate", _forbidden)
+    tall = TINY.replace(n_arc=8, hub_height=0.02, foam_height=0.02, actuator_height=0.02)
+    with pytest.raises(ValueError, match=r"^sensitivities: hub_height is 0 \(the 2.5-D model "
+                                         r"off\) for instance 1;"):
+        run_batch([tall, TINY], 0.002, solver=MS_SOLVER, sensitivities=("hub_height",),
+                  run_dir=tmp_path / "run")
+    assert not list(tmp_path.iterdir())
+
+
 def test_shapes_of_two_topologies_of_one_duration_are_refused_before_compute(monkeypatch):
     """One duration, two topologies: refused for its topologies (the existing test's batch
     differs in duration too, which the other half of the check refuses)."""
