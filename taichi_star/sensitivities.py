@@ -303,11 +303,11 @@ def check_directions(directions: Sequence[Direction], params: Sequence[StarParam
     """ValueError, before any compute, where the sensitivities are not defined: in f32 (a
     central difference needs f64's digits) and for a component height at 0 (0 turns the 2.5-D
     model off: no derivative across that switch). A warning (`delay_event`, kind
-    "delay_event") for a delay at
-    which the run has a jump or a kink, not a slope, within `duration_s` (None: a `Simulator`,
-    whose runs go on as long as it is told), with steps of one length (fixed, or adaptive ones
-    held at dt_min = dt_max); with `commanded` (a `Simulator`, which fires what it is told,
-    whatever the `gait` field says) for any actuator's delay. `positions`: the instances'
+    "delay_event") for a delay at which the run has a jump or a kink, not a slope, within
+    `duration_s` (None: a `Simulator`, whose runs go on as long as it is told), with steps of
+    one length (fixed, or adaptive ones held at dt_min = dt_max); with `commanded` (a
+    `Simulator`, which fires what it is told, whatever the `gait` field says) for any
+    actuator's delay. `positions`: the instances'
     numbers in the caller's batch, which the messages give (None: 0, 1, ...)."""
     check_defined(directions, params, solver, positions)
     for direction in directions:

@@ -202,8 +202,8 @@ def run_chunk(task: ChunkTask, progress: bool = False) -> ChunkResult:
     warnings about "ok" instances are left to `run_batch`, which tells the batch's numbers
     once (a chunk's named its own rows, and on a worker process went to the worker's stderr)."""
     # the batch's long-run warning was told when it was planned (`check_batch_work`), and so
-    # were a duration and periods off the step grid (`plan_chunks`)
-    # and so were delays on the step grid (`plan_chunks`, numbering the batch's instances)
+    # were a duration, periods and the sensitivities' delays off or on the step grid
+    # (`plan_chunks`, numbering the batch's instances)
     with told_by_caller("ok_instances", "long_work", "off_grid_duration", "off_grid_period",
                         "cycle_cut_short", "delay_event"):
         result = simulate(list(task.params), task.duration_s, task.solver, arch=task.arch,
