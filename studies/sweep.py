@@ -17,7 +17,8 @@ the value closest to the default.
 
 `--sensitivities alpha,drag_perpendicular` adds every instance's derivatives of its speeds,
 displacements and heading by those parameters (columns "d(OUTPUT)/d(PARAMETER)", exact for the
-discrete scheme: `simulate(..., sensitivities=...)`), each costing two more instances' work.
+discrete scheme: `simulate(..., sensitivities=...)`), each costing two more instances' work;
+a swept parameter among them gets its exact slope drawn through every point of its plot.
 
 Resumable: every finished chunk is stored, verified, in the run store (`--run-dir`, default
 `<out>/chunks/`). After a crash or a kill, the same command with `--out` of the killed run and
@@ -140,9 +141,33 @@ def swept_parameters(table: pd.DataFrame):
             if name != "gait" and column in table and table[column].nunique(dropna=False) > 1}
 
 
+TANGENT_SHARE = 0.3
+"""A slope's segment on a sweep's plot spans this share of the spacing to the nearest swept
+value on each side of its point (so that neighbouring segments never meet)."""
+
+
+def draw_slopes(ax, x: np.ndarray, y: np.ndarray, slopes: np.ndarray, colour) -> int:
+    """Short segments through the points (x, y) with the exact slopes dy/dx of a sweep run with
+    --sensitivities (`TANGENT_SHARE` of the nearest spacing each side), where all three are
+    finite: the curve through the points should follow them. Returns how many were drawn."""
+    drawn = 0
+    for k in range(len(x)):
+        gaps = np.abs(np.delete(x, k) - x[k])
+        gaps = gaps[gaps > 0]
+        if not (len(gaps) and np.isfinite([x[k], y[k], slopes[k]]).all()):
+            continue
+        half = TANGENT_SHARE * gaps.min()
+        ax.plot([x[k] - half, x[k] + half], [y[k] - slopes[k] * half, y[k] + slopes[k] * half],
+                "-", color=colour, lw=2.2, alpha=0.5)
+        drawn += 1
+    return drawn
+
+
 def plot_sweep(csv_path, out: cli.Output, prefix: str = "sweep"):
     """One PNG per swept parameter from a sweep CSV: |speed| and signed speed against the
-    parameter, one line per gait, other swept parameters at the value nearest the default."""
+    parameter, one line per gait, other swept parameters at the value nearest the default;
+    where the table has the speeds' derivatives by that parameter (--sensitivities), each
+    point carries a short segment of its exact slope (`draw_slopes`)."""
     plt = cli.use_agg()
     table = pd.read_csv(csv_path)
     defaults = StarParams()
@@ -166,6 +191,7 @@ def plot_sweep(csv_path, out: cli.Output, prefix: str = "sweep"):
         fig, axes = plt.subplots(1, 2, figsize=(10, 4))
         categorical = not pd.api.types.is_numeric_dtype(selection[name])
         categories = sorted(selection[name].unique()) if categorical else None
+        slopes_drawn = 0
         for gait, part in selection.groupby("gait", sort=False):
             part = part.sort_values(name)
             x = ([categories.index(v) for v in part[name]] if categorical
@@ -173,7 +199,11 @@ def plot_sweep(csv_path, out: cli.Output, prefix: str = "sweep"):
             ok = (part["status"] == "ok").to_numpy()
             for ax, column in zip(axes, ("speed_mm_s", "signed_speed_mm_s")):
                 y = np.where(ok, part[column].to_numpy(dtype=float), np.nan)
-                ax.plot(x, y, "o-", label=gait, ms=3)
+                (line,) = ax.plot(x, y, "o-", label=gait, ms=3)
+                slope = f"d({column})/d({swept[name]})"
+                if not categorical and slope in part:
+                    slopes_drawn += draw_slopes(ax, x, y, part[slope].to_numpy(dtype=float),
+                                                line.get_color())
                 bad = ~ok
                 if bad.any():
                     ax.plot(np.asarray(x)[bad], np.zeros(bad.sum()), "rx")
@@ -194,7 +224,8 @@ def plot_sweep(csv_path, out: cli.Output, prefix: str = "sweep"):
         fig.suptitle(f"speed vs {swept[name]} over {duration:g} s from rest"
                      + (f"; {settings}" if settings else "")
                      + (f" ({', '.join(held)})" if held else "")
-                     + ("; x = failed" if (selection["status"] != "ok").any() else ""),
+                     + ("; x = failed" if (selection["status"] != "ok").any() else "")
+                     + ("; short lines: exact slopes" if slopes_drawn else ""),
                      fontsize=9)
         fig.tight_layout()
         path = out.path(f"{prefix}_{swept[name]}.png")

@@ -561,6 +561,42 @@ def test_sweep_quick_with_sensitivities(tmp_path):
         == 5 * cli.tell_batch_work(arguments, QUICK_SOLVER, 2)
 
 
+@pytest.mark.parametrize("with_slopes", [True, False])
+def test_a_sweeps_plot_draws_each_points_exact_slope_where_the_table_has_it(monkeypatch,
+                                                                            tmp_path,
+                                                                            with_slopes):
+    """A sweep table with the speeds' derivatives by its swept parameter (--sensitivities):
+    each ok point of both panels carries a segment through it of that slope, 0.3 of the
+    nearest spacing each side, in its gait's colour, and the title says so; a failed point,
+    and a table without them, none."""
+    from studies import sweep
+    table = pd.DataFrame({
+        "gait": "A1", "alpha": [0.4, 0.8, 1.2, 1.6], "status": ["ok", "ok", "ok", "diverged"],
+        "speed_mm_s": [1.0, 2.0, 4.0, 5.0], "signed_speed_mm_s": [1.0, -2.0, -4.0, -5.0],
+        "duration_s": 0.2})
+    slopes = {"speed_mm_s": [2.5, 3.75, 5.0, 1.0], "signed_speed_mm_s": [-2.5, -3.75, -5.0, -1.0]}
+    if with_slopes:
+        for column, values in slopes.items():
+            table[f"d({column})/d(alpha)"] = values
+    table.to_csv(tmp_path / "sweep.csv", index=False)
+    drawn = []
+    monkeypatch.setattr(cli, "write_figure", lambda fig, path, **kw: drawn.append(fig))
+    sweep.plot_sweep(tmp_path / "sweep.csv", SimpleNamespace(path=lambda name: tmp_path / name))
+    (fig,) = drawn
+    assert fig.texts[0].get_text().endswith("short lines: exact slopes") is with_slopes
+    for ax, column in zip(fig.axes, slopes):
+        curve = ax.lines[0]
+        segments = [line for line in ax.lines if line.get_alpha() == 0.5]
+        assert len(segments) == (3 if with_slopes else 0)
+        for k, segment in enumerate(segments):
+            (x0, x1), (y0, y1) = segment.get_xdata(), segment.get_ydata()
+            assert (x0 + x1) / 2 == pytest.approx(table["alpha"][k])
+            assert x1 - x0 == pytest.approx(2 * 0.3 * 0.4)
+            assert (y1 - y0) / (x1 - x0) == pytest.approx(slopes[column][k])
+            assert (y0 + y1) / 2 == pytest.approx(table[column][k])
+            assert segment.get_color() == curve.get_color()
+
+
 def test_gaits_quick(tmp_path):
     gaits_study.main(["--out", str(tmp_path), *QUICK])
     table = pd.read_csv(tmp_path / "gaits.csv")
