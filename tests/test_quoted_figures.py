@@ -66,9 +66,10 @@ def test_a_wrong_or_ambiguous_quote_is_reported(results_page):
 
 
 def test_every_marker_is_read_or_reported(results_page):
-    """A selector value with spaces is read in quotes and a column may hold '+'; a marker that
-    the pattern cannot read (no number right before it, two spaces, an unquoted value with
-    spaces) is reported, never skipped."""
+    """A selector value with spaces is read in quotes and a column may hold '+', or anything
+    in quotes; a marker that the pattern cannot read (no number right before it, two spaces,
+    an unquoted value with spaces, an unquoted column with a parenthesis) is reported, never
+    skipped."""
     polish = 'gradient_fit/set20fired_polish/gradient_fit.csv optimiser="CMA-ES + least-squares"'
     assert results_page.check_quotes("page", f"187.0<!-- {polish} objective -->") == []
     wrong = results_page.check_quotes("page", f"187.9<!-- {polish} objective -->")
@@ -77,7 +78,15 @@ def test_every_marker_is_read_or_reported(results_page):
     value = float(results_page.cell("calibration_best.csv", {}, "signed_speed_A1+A2"))
     assert results_page.check_quotes("page", f"{value:.3f}<!-- {plus} -->") == []
     assert len(results_page.check_quotes("page", f"{value + 1:.3f}<!-- {plus} -->")) == 1
-    for unreadable in ("0.796 <!-- fig4c.csv gait=A1+A4 sim_speed_mm_s -->",
+    # a column of other characters (a sensitivity's) in quotes; unquoted, it is unreadable
+    slope = 'sweep_slopes/sweep.csv gait=A1+A2 alpha=1.0 "d(signed_speed_mm_s)/d(alpha)"'
+    value = float(results_page.cell("sweep_slopes/sweep.csv", {"gait": "A1+A2", "alpha": "1.0"},
+                                    "d(signed_speed_mm_s)/d(alpha)"))
+    assert results_page.check_quotes("page", f"{value:.4f}<!-- {slope} -->") == []
+    assert [m.quoted for m in results_page.check_quotes(
+        "page", f"{value + 1:.4f}<!-- {slope} -->")] == [f"{value + 1:.4f}"]
+    for unreadable in (f"{value:.4f}<!-- {slope.replace(chr(34), '')} -->",
+                       "0.796 <!-- fig4c.csv gait=A1+A4 sim_speed_mm_s -->",
                        "0.796<!-- fig4c.csv  gait=A1+A4 sim_speed_mm_s -->",
                        "187.0<!-- gradient_fit/set20fired_polish/gradient_fit.csv "
                        "optimiser=CMA-ES + least-squares objective -->"):

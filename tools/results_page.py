@@ -16,7 +16,9 @@ Two markups tie a page's figures to the CSVs:
   cell, ``0.852<!-- fig4c_accurate.csv gait=A1+A4 sim_speed_mm_s -->``: the CSV (relative to
   results/), selectors COLUMN=VALUE that pick exactly one row (compared as the CSV's text;
   ``COLUMN="A VALUE"`` for one with spaces), the column, and optionally a transform of the
-  cell: ``abs``, ``neg`` (−value), ``x1000`` (any factor), ``%`` (×100). The number must be
+  cell: ``abs``, ``neg`` (−value), ``x1000`` (any factor), ``%`` (×100). A column whose name
+  holds other characters than letters, digits, ``_`` and ``+`` (a sensitivity's,
+  ``d(signed_speed_mm_s)/d(alpha)``) is written in quotes. The number must be
   the cell rounded to the number's decimals (thousands separators and the minus sign −
   allowed; a power of ten as ``5.5·10⁻⁷``).
   Readers see only the number. A comment that names a CSV but does not read as such a marker
@@ -46,7 +48,8 @@ BLOCK = re.compile(r"(<!-- generated: (?P<name>\w+) -->\n)(?P<body>.*?)(<!-- end
                    re.S)
 QUOTE = re.compile(
     r"(?P<number>[-−+]?\d[\d,]*(?:\.\d+)?(?:·10[⁻]?[⁰¹²³⁴⁵⁶⁷⁸⁹]+)?)<!-- (?P<file>[\w./-]+\.csv)"
-    r'(?P<selectors>(?: [\w.]+=(?:"[^"]*"|[^\s="]+))*) (?P<column>[\w+]+)'
+    r'(?P<selectors>(?: [\w.]+=(?:"[^"]*"|[^\s="]+))*) (?:"(?P<quoted_column>[^"]+)"|'
+    r'(?P<column>[\w+]+))'
     r"(?: (?P<transform>abs|neg|%|x[\d.]+))? -->")
 SELECTOR = re.compile(r'([\w.]+)=(?:"([^"]*)"|([^\s="]+))')
 """One selector of a marker: COLUMN=VALUE, or COLUMN="VALUE WITH SPACES"."""
@@ -135,13 +138,15 @@ def check_quotes(page: str, text: str) -> List[Mismatch]:
         if marker.start() not in read:
             problems.append(Mismatch(page, "unreadable marker", marker.group(),
                                      "NUMBER<!-- FILE.csv [COLUMN=VALUE ...] COLUMN "
-                                     "[abs|neg|%|xF] --> (a value with spaces in quotes)"))
+                                     "[abs|neg|%|xF] --> (a value with spaces, a column with "
+                                     "other characters than \\w and +, in quotes)"))
     for match in QUOTE.finditer(text):
         selectors = {key: quoted if quoted or not bare else bare
                      for key, quoted, bare in SELECTOR.findall(match["selectors"])}
-        what = f"{match['file']} {match['selectors'].strip()} {match['column']}".replace("  ", " ")
+        column = match["quoted_column"] or match["column"]
+        what = f"{match['file']} {match['selectors'].strip()} {column}".replace("  ", " ")
         try:
-            value = apply_transform(float(cell(match["file"], selectors, match["column"])),
+            value = apply_transform(float(cell(match["file"], selectors, column)),
                                     match["transform"])
         except (ValueError, FileNotFoundError) as error:
             problems.append(Mismatch(page, what, match["number"], str(error)))
