@@ -515,6 +515,8 @@ def tell_batch_work(args, config: SolverConfig, instances: int,
         * instances * replicas / len(periods)
     length = (f"--quick ({QUICK_DURATION_S:g} s)" if args.quick else
               f"--cycles {args.cycles:g} of {'each' if len(periods) > 1 else 'its'} period")
+    if replicas > 1:
+        length += f", each simulated {replicas} times over for its sensitivities"
     warn_long_work(f"the batch of {instances:,} instances ({length})", robot_steps)
     return robot_steps
 

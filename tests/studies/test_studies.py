@@ -534,7 +534,7 @@ def test_sweep_quick(tmp_path):
         == ("period (s)", "alpha", "speed_mm_s (mm/s)")
 
 
-def test_sweep_quick_with_sensitivities(tmp_path):
+def test_sweep_quick_with_sensitivities(tmp_path, monkeypatch):
     """--sensitivities: each row of the sweep's table carries its instance's derivatives,
     simulate's to the CSV's digits and bit for bit in the Parquet copy; the work told counts
     the replicas; the sidecar names the parameters."""
@@ -556,9 +556,15 @@ def test_sweep_quick_with_sensitivities(tmp_path):
     assert json.loads((tmp_path / "sweep.csv.json").read_text())["details"]["sensitivities"] \
         == names
     arguments = cli.parse(sweep.build_parser(), ["--gaits", "A1+A3", *QUICK])
-    # 5 instances' work per robot: itself and a pair per parameter
-    assert cli.tell_batch_work(arguments, QUICK_SOLVER, 2, replicas=5) \
-        == 5 * cli.tell_batch_work(arguments, QUICK_SOLVER, 2)
+    # 5 instances' work per robot: itself and a pair per parameter, and the warning says so
+    from taichi_star import timegrid
+    monkeypatch.setattr(timegrid, "WARN_ROBOT_STEPS", 0)
+    with pytest.warns(taichi_star.LongWorkWarning) as told:
+        assert cli.tell_batch_work(arguments, QUICK_SOLVER, 2, replicas=5) \
+            == 5 * cli.tell_batch_work(arguments, QUICK_SOLVER, 2)
+    assert [str(w.message).split(" is ")[0] for w in told] == [
+        "the batch of 2 instances (--quick (0.2 s), each simulated 5 times over for its "
+        "sensitivities)", "the batch of 2 instances (--quick (0.2 s))"]
 
 
 @pytest.mark.parametrize("with_slopes", [True, False])
