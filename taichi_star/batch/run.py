@@ -191,7 +191,8 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     labels = tasks[0].sensitivities
     derivatives = trajectory_derivatives = None
     if labels:
-        summary, derivatives = split_sensitivities(summary, [])
+        summary, derivatives = split_sensitivities(
+            summary, [], sensitivity_columns(tangents.SUMMARY_OUTPUTS, labels))
     warn_about_ok_instances(summary, solver)
     # no records: the empty table with simulate's column types (object columns before: an
     # audit, 2026-12)
@@ -202,9 +203,8 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     trajectory = trajectory.sort_values(["instance", "t_s"], kind="stable").reset_index(drop=True)
     if labels:
         trajectory, trajectory_derivatives = split_sensitivities(
-            trajectory, ["instance", "t_s"], [tangents.sensitivity_column(output, label)
-                                              for output in tangents.TRAJECTORY_OUTPUTS
-                                              for label in labels])
+            trajectory, ["instance", "t_s"], sensitivity_columns(tangents.TRAJECTORY_OUTPUTS,
+                                                                 labels))
     shape_array = None
     if record_shapes:
         stacked = np.concatenate([shapes[task.index] for task in tasks], axis=1)
@@ -226,18 +226,21 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
                             arguments=arguments)
 
 
-def split_sensitivities(table: pd.DataFrame, keys: Sequence[str],
-                        empty_columns: Sequence[str] = ()):
-    """(the table without its sensitivities' columns, those columns after `keys`' columns) of
-    a chunk's summary or trajectory (`ChunkResult`): the columns named "d(...)/d(...)"
-    (`sensitivities.sensitivity_column`), in the same rows; a table of no rows without them
-    (no records: the chunks' trajectories were not stored) gets `empty_columns`, float."""
-    named = [column for column in table.columns if column.startswith("d(")]
-    if not named and not len(table):
-        derivatives = table[list(keys)].assign(**{column: pd.Series(dtype=np.float64)
-                                                  for column in empty_columns})
-        return table, derivatives
-    return table.drop(columns=named), table[list(keys) + named]
+def sensitivity_columns(outputs: Sequence[str], labels: Sequence[str]) -> list:
+    """The columns of `outputs`' derivatives by the parameters `labels`, in the order a
+    `simulate` result's tables have them (`sensitivities.split_result`)."""
+    return [tangents.sensitivity_column(output, label) for output in outputs for label in labels]
+
+
+def split_sensitivities(table: pd.DataFrame, keys: Sequence[str], columns: Sequence[str]):
+    """(the table without the derivatives' `columns`, those columns after `keys`' columns) of
+    a batch's summary or trajectory gathered from its chunks (`ChunkResult`), in the same rows;
+    a table of no rows without them (no records: the chunks' trajectories were not stored)
+    gets them empty, float."""
+    if not len(table) and not set(columns) <= set(table.columns):
+        return table, table[list(keys)].assign(**{column: pd.Series(dtype=np.float64)
+                                                  for column in columns})
+    return table.drop(columns=list(columns)), table[list(keys) + list(columns)]
 
 
 @contextlib.contextmanager
