@@ -20,7 +20,8 @@ from ..provenance import code_version
 from .. import sensitivities as tangents
 from ..simulation import SimulationResult, call_arguments, warn_about_ok_instances
 from .executors import DEFAULT_RETRIES, Executor, InProcess, LocalProcesses
-from .store import RunStore, run_definition
+from .store import (RunStore, RunStoreError, StoredRun, current_defaults, read_stored,
+                    run_definition)
 from .tasks import batch_robot_steps, plan_chunks
 
 DEFAULT_CHUNK_SIZE = 2048
@@ -91,14 +92,8 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
     check_flag("resume", resume)
     if progress is not None:  # None: decided by the work, once the chunks to run are known
         check_flag("progress", progress)
-    if run_dir is not None and not isinstance(run_dir, (str, os.PathLike)):
-        raise ValueError(f"run_dir must be the path of the run store's folder, got "
-                         f"{type(run_dir).__name__}")
-    if isinstance(run_dir, str) and not run_dir.strip():
-        # "" was the current folder: a run's chunks written among the user's files, or a
-        # finished run there replaced (an audit, 2026-12)
-        raise ValueError(f"run_dir must be the path of the run store's folder, got "
-                         f"{run_dir!r} (the current folder is \".\")")
+    if run_dir is not None:
+        check_run_dir(run_dir)
     if resume and run_dir is None:
         raise ValueError("resume=True needs run_dir (the run store to continue)")
     # the worker processes (started at their first chunk) before the run store is opened: a
@@ -185,10 +180,120 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
         finally:
             store.release()
 
-    summary = pd.concat([summaries[task.index] for task in tasks], ignore_index=True)
+    shape_array = None
+    if record_shapes:
+        stacked = np.concatenate([shapes[task.index] for task in tasks], axis=1)
+        members = np.concatenate([task.members for task in tasks])
+        shape_array = stacked[:, np.argsort(members, kind="stable")]
+    # a store resumed under another code holds chunks of each, and one read back another's:
+    # the result files say which
+    makers = store.code_versions() if store is not None else []
+    return gathered_result(
+        [summaries[task.index] for task in tasks], trajectories, tasks[0].sensitivities,
+        solver=solver, arch=arch, timing=timing, makers=makers, shapes=shape_array,
+        topology=build_topology(params[0]) if len(topology_keys) == 1 else None,
+        arguments=call_arguments("run_batch", duration_s, cycles, record_interval_s,
+                                 record_shapes, steady_from_cycle, list(tasks[0].sensitivities),
+                                 chunk_size))
+
+
+def read_run(run_dir, *, partial: bool = False,
+             run_dir_flag: str = "run_dir") -> SimulationResult:
+    """The result of the run stored in the folder `run_dir` (a `run_batch(...,
+    run_dir=...)`'s run store), read back without the run's arguments: on another machine, in
+    a later session, or while the run is still going.
+
+    Its summary, trajectory and sensitivities are those `run_batch(..., resume=True)` with the
+    run's own arguments returns, bit for bit; `solver` and `arch` are the run's (from its
+    manifest), `arguments` those of the run (function "run_batch") and `code_versions` the
+    code that made its chunks where that is not this code; `timing` is zero (nothing is
+    computed), shapes None (a store keeps none), `topology` the batch's where it has one. Every
+    chunk is verified as a resume verifies it; nothing is written, locked or deleted (a store
+    on read-only media reads the same, and a run still going keeps its folder).
+
+    `partial`: a run not finished (or with a damaged chunk) is a RunStoreError naming its
+    missing chunks, unless partial=True: then the result holds the instances of the chunks
+    that are stored and verified, and a RuntimeWarning says how many chunks and instances are
+    left out. Raises RunStoreError (a ValueError) naming `run_dir_flag` for a folder that is
+    not a run store, ImportError naming the `io` extra without pyarrow; nothing is computed."""
+    check_run_dir(run_dir)
+    check_flag("partial", partial)
+    stored = read_stored(run_dir, flag=run_dir_flag)
+    definition = stored.definition
+    total = definition["n_chunks"]
+    if stored.unusable:
+        missing = sorted(stored.unusable)
+        listed = "; ".join(f"chunk {index}: {stored.unusable[index]}" for index in missing[:3])
+        more = f"; and {len(missing) - 3} more" if len(missing) > 3 else ""
+        if not partial:
+            raise RunStoreError(
+                f"{run_dir_flag} {stored.path}: {len(missing)} of {total} chunks are not "
+                f"stored or not usable ({listed}{more}); run_batch(..., resume=True) with the "
+                f"run's own arguments computes them, read_run(..., partial=True) reads the "
+                f"others")
+        if not stored.chunks:
+            raise RunStoreError(f"{run_dir_flag} {stored.path}: none of its {total} chunks is "
+                                f"stored and usable yet ({listed}{more})")
+        held = sum(len(members) for members, _, _ in stored.chunks.values())
+        warn_user(f"{run_dir_flag} {stored.path}: {len(missing)} of {total} chunks left out "
+                  f"({listed}{more}); the result holds {held} of the run's "
+                  f"{definition['n_instances']} instances")
+    order = sorted(stored.chunks)
+    summaries = [stored.chunks[index][1] for index in order]
+    trajectories = [stored.chunks[index][2] for index in order
+                    if stored.chunks[index][2] is not None]
+    labels = tuple(definition.get("sensitivities", ()))
+    return gathered_result(
+        summaries, trajectories, labels, solver=stored_solver(stored), arch=definition["arch"],
+        timing=RunTiming(setup_s=0.0, compile_s=0.0, run_s=0.0, collect_s=0.0, robot_steps=0),
+        makers=stored.code_versions(), shapes=None, topology=summary_topology(summaries),
+        arguments=call_arguments("run_batch", definition.get("duration_s"),
+                                 definition.get("cycles"), definition["record_interval_s"],
+                                 False, definition["steady_from_cycle"], list(labels),
+                                 definition["chunk_size"]))
+
+
+def stored_solver(stored: StoredRun) -> SolverConfig:
+    """The SolverConfig of a stored run: the defaults its manifest recorded (those of fields
+    this version has; today's where it recorded none) with its definition's changes from them;
+    RunStoreError where this version cannot take them (a value outside today's range)."""
+    recorded = (stored.manifest.get("defaults") or {}).get("solver")
+    recorded = recorded if isinstance(recorded, dict) else {}
+    today = current_defaults()["solver"]
+    settings = {name: value for name, value in recorded.items() if name in today}
+    settings.update(stored.definition["solver"])
+    try:
+        return SolverConfig(**settings)
+    except (TypeError, ValueError) as error:
+        raise RunStoreError(f"{stored.path}: its solver settings {settings} are not this "
+                            f"version's ({str(error).splitlines()[0]})") from None
+
+
+def summary_topology(summaries: Sequence[pd.DataFrame]):
+    """The topology of the instances of these summaries where they share one, else None
+    (also where their rows no longer make a StarParams: the topology serves only shapes,
+    which a store does not keep, so a convenience must not stop a table being read)."""
+    pairs = pd.concat([table[["n_arc", "n_limb"]] for table in summaries]).drop_duplicates()
+    if len(pairs) != 1:
+        return None
+    try:
+        return build_topology(StarParams.from_row(summaries[0].iloc[0]))
+    except ValueError:
+        return None
+
+
+def gathered_result(summaries: Sequence[pd.DataFrame], trajectories: Sequence[pd.DataFrame],
+                    labels: Sequence[str], *, solver: SolverConfig, arch: str,
+                    timing: RunTiming, makers: list, shapes, topology,
+                    arguments: dict) -> SimulationResult:
+    """One `SimulationResult` of a batch from its chunks' tables (`ChunkResult`'s or a run
+    store's): the summaries concatenated in input order of their `instance` column, the
+    trajectories by instance and time, the derivatives by the parameters `labels` split off
+    both (`split_sensitivities`); `makers` the code versions that made them (recorded where
+    one is not this code); "ok" instances that need a second look are warned about."""
+    summary = pd.concat(summaries, ignore_index=True)
     order = np.argsort(summary["instance"].to_numpy(), kind="stable")
     summary = summary.iloc[order].reset_index(drop=True)
-    labels = tasks[0].sensitivities
     derivatives = trajectory_derivatives = None
     if labels:
         summary, derivatives = split_sensitivities(
@@ -205,25 +310,26 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
         trajectory, trajectory_derivatives = split_sensitivities(
             trajectory, ["instance", "t_s"], sensitivity_columns(tangents.TRAJECTORY_OUTPUTS,
                                                                  labels))
-    shape_array = None
-    if record_shapes:
-        stacked = np.concatenate([shapes[task.index] for task in tasks], axis=1)
-        members = np.concatenate([task.members for task in tasks])
-        shape_array = stacked[:, np.argsort(members, kind="stable")]
-    topology = build_topology(params[0]) if len(topology_keys) == 1 else None
-    # a store resumed under another code holds chunks of each, and one read back another's:
-    # the result files say which
-    makers = store.code_versions() if store is not None else []
     current = code_version() if makers else None
     foreign = any(maker["code"] != current for maker in makers)
-    arguments = call_arguments("run_batch", duration_s, cycles, record_interval_s,
-                               record_shapes, steady_from_cycle, list(labels), chunk_size)
-    return SimulationResult(summary=summary, trajectory=trajectory, shapes=shape_array,
+    return SimulationResult(summary=summary, trajectory=trajectory, shapes=shapes,
                             topology=topology, solver=solver, sensitivities=derivatives,
                             trajectory_sensitivities=trajectory_derivatives,
                             timing=timing, arch=arch,
                             code_versions=makers if len(makers) > 1 or foreign else None,
                             arguments=arguments)
+
+
+def check_run_dir(run_dir):
+    """ValueError unless `run_dir` is the path of a folder (a text or a path, not empty)."""
+    if not isinstance(run_dir, (str, os.PathLike)):
+        raise ValueError(f"run_dir must be the path of the run store's folder, got "
+                         f"{type(run_dir).__name__}")
+    if isinstance(run_dir, str) and not run_dir.strip():
+        # "" was the current folder: a run's chunks written among the user's files, or a
+        # finished run there replaced (an audit, 2026-12)
+        raise ValueError(f"run_dir must be the path of the run store's folder, got "
+                         f"{run_dir!r} (the current folder is \".\")")
 
 
 def sensitivity_columns(outputs: Sequence[str], labels: Sequence[str]) -> list:

@@ -534,8 +534,9 @@ class RunStore:
         self._write(path, sink.getvalue().to_pybytes())
         return checksum
 
-    def _load(self, task: ChunkTask) -> Tuple[pd.DataFrame, Optional[pd.DataFrame]]:
-        """(the chunk's summary, its trajectory or None where it stored none), the trajectory
+    def _load(self, task: "ChunkTask | StoredChunk"
+              ) -> Tuple[pd.DataFrame, Optional[pd.DataFrame]]:
+        """(the chunk `task` (a ChunkTask or StoredChunk)'s summary, its trajectory or None where it stored none), the trajectory
         checked against the checksum the summary's stamp holds; ValueError saying why they
         cannot be trusted."""
         summary, stamp = self._load_table(self.chunk_path(task.index), task)
@@ -552,7 +553,7 @@ class RunStore:
             raise ValueError("its trajectory is another one than the summary's")
         return summary, trajectory
 
-    def _load_table(self, path: Path, task: ChunkTask, what: str = ""):
+    def _load_table(self, path: Path, task: "ChunkTask | StoredChunk", what: str = ""):
         """(table, stamp) of the file at `path` written for `task`; ValueError (its reason
         prefixed by `what`) saying why it cannot be trusted: missing or damaged. A file that
         is there but cannot be read (no permission, an I/O error) is no sign of damage: a
@@ -568,7 +569,7 @@ class RunStore:
         except ValueError as error:
             raise ValueError(f"{what}{error}") from None
 
-    def decode_chunk(self, data: bytes, task: ChunkTask):
+    def decode_chunk(self, data: bytes, task: "ChunkTask | StoredChunk"):
         """(the table, its stamp) in the bytes of a file written for `task`; ValueError saying
         why it cannot be trusted. Any failure to decode is such an error, whatever raised it (a
         damaged file can make pyarrow or pandas fail in any way: a bit flip in the pandas
@@ -806,6 +807,108 @@ def _with_chunks(makers: List[Dict], code: Optional[Dict], chunks: Sequence[int]
             entry["chunks"] = sorted(set(entry["chunks"]) | set(chunks))
             return makers
     return makers + [{"code": code, "chunks": sorted(set(chunks))}]
+
+
+@dataclasses.dataclass(frozen=True)
+class StoredChunk:
+    """Where a chunk of a run read back without its arguments (`read_stored`) belongs: its
+    index, the positions in the batch of its instances (from its own stamp, verified with its
+    content) and whether its run records (s; its trajectory must then be stored)."""
+
+    index: int
+    members: Tuple[int, ...]
+    record_interval_s: float
+
+
+@dataclasses.dataclass
+class StoredRun:
+    """A run store read back without the arguments of its run (`read_stored`).
+
+    `manifest`: its manifest (`definition`, `defaults`, `code_versions`, ...); `chunks`: every
+    stored and verified chunk by index, (members, summary, trajectory or None); `unusable`:
+    every other chunk of the run by index, with why (not stored, damaged, another run's)."""
+
+    path: Path
+    manifest: Dict
+    chunks: Dict[int, Tuple[Tuple[int, ...], pd.DataFrame, Optional[pd.DataFrame]]]
+    unusable: Dict[int, str]
+
+    @property
+    def definition(self) -> Dict:
+        return self.manifest["definition"]
+
+    def code_versions(self) -> List[Dict]:
+        """The code versions that made the chunks read (`makers_of_chunks`)."""
+        return makers_of_chunks(self.manifest, sorted(self.chunks))
+
+
+READ_BACK_KEYS = {"n_instances": int, "n_chunks": int, "chunks_sha256": str, "solver": dict,
+                  "arch": str, "record_interval_s": (int, float),
+                  "steady_from_cycle": int, "chunk_size": int}
+"""The entries of a run definition that reading a run back needs, with their JSON types."""
+
+
+def read_stored(path, flag: str = "run_dir") -> StoredRun:
+    """Every chunk of the run store in the folder `path`, read and verified without the run's
+    arguments (its parameters, durations): each chunk file's stamp names its instances and is
+    checked against the manifest's definition and the file's content, as a resume checks it.
+    Nothing is written, locked or deleted: a store on read-only media, or one a run is still
+    writing (its finished chunks are whole files), reads the same. A chunk not stored, damaged
+    or of another run is listed in `unusable` with why. RunStoreError naming `flag` for a
+    folder that is not a run store (no folder, no manifest, a damaged one, chunks whose
+    instances are not its run's); ImportError naming the `io` extra without pyarrow."""
+    _parquet()
+    folder = Path(path)
+    if not folder.is_dir():
+        raise RunStoreError(f"{flag} {folder}: "
+                            + ("is not a folder" if folder.exists() else "no such folder"))
+    manifest = RunStore(folder, {}, flag=flag).read_manifest()
+    if manifest is None:
+        raise RunStoreError(f"{flag} {folder}: has no {MANIFEST}, so it is not a run store "
+                            f"that can be read back alone (chunks whose manifest was lost are "
+                            f"read back by run_batch(..., resume=True) with the run's own "
+                            f"arguments)")
+    definition = manifest["definition"]
+    for key, kind in READ_BACK_KEYS.items():
+        value = definition.get(key)
+        if not isinstance(value, kind) or isinstance(value, bool):
+            raise RunStoreError(f"{flag} {folder}: {MANIFEST} is damaged (its definition's "
+                                f"{key} is {value!r}); the run cannot be read back alone")
+    store = RunStore(folder, definition, flag=flag)
+    chunks, unusable, owner = {}, {}, {}
+    for index in range(definition["n_chunks"]):
+        chunk_file = store.chunk_path(index)
+        if not chunk_file.is_file():
+            unusable[index] = "not stored"
+            continue
+        stamp = _readable_stamp(chunk_file) or {}
+        members = stamp.get("members")
+        if not (isinstance(members, list) and all(is_whole(m) for m in members)):
+            unusable[index] = "unreadable (no chunk metadata naming its instances)"
+            continue
+        chunk = StoredChunk(index, tuple(int(m) for m in members),
+                            float(definition["record_interval_s"]))
+        try:
+            summary, trajectory = store._load(chunk)
+            if list(summary["instance"]) != list(chunk.members):
+                raise ValueError("its table holds other instances than its stamp names")
+        except RunStoreError:
+            raise  # there but not readable: not damage
+        except (ValueError, KeyError) as error:
+            unusable[index] = str(error)
+            continue
+        for member in chunk.members:
+            if not 0 <= member < definition["n_instances"] or member in owner:
+                raise RunStoreError(f"{flag} {folder}: {chunk_file.name} holds instance "
+                                    f"{member}, which is not one of its run's or is another "
+                                    f"chunk's; the run cannot be read back")
+            owner[member] = index
+        chunks[index] = (chunk.members, summary, trajectory)
+    if not unusable and _sha256(_canonical([list(chunks[i][0]) for i in sorted(chunks)])) \
+            != definition["chunks_sha256"]:
+        raise RunStoreError(f"{flag} {folder}: its chunks' instances are not the chunk plan "
+                            f"its {MANIFEST} records; the run cannot be read back")
+    return StoredRun(folder, manifest, chunks, unusable)
 
 
 def stored_chunk_size(path, flag: str = "run_dir") -> Optional[int]:
