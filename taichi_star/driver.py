@@ -65,6 +65,10 @@ class RunTiming:
                            for name in dataclasses.fields(self)))
 
     def __str__(self) -> str:
+        if self.robot_steps == 0 and self.total_s == 0.0:
+            # a result read back from a run store (`batch.read_run`, a finished run resumed):
+            # "run 0.00 s (nan robot-steps/s)" read as a fault
+            return "nothing simulated by this call (its tables read back)"
         return (f"setup {self.setup_s:.2f} s, compile {self.compile_s:.2f} s, run "
                 f"{self.run_s:.2f} s ({self.robot_steps_per_s:,.0f} robot-steps/s), tables "
                 f"{self.collect_s:.2f} s")

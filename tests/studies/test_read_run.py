@@ -68,6 +68,8 @@ def test_a_finished_run_reads_back_as_run_batch_gave_it_and_nothing_is_written(s
     assert back.arguments == original.arguments
     assert back.code_versions is None  # made by this code
     assert back.timing.robot_steps == 0 and back.timing.run_s == 0.0
+    assert repr(back).endswith("; nothing simulated by this call (its tables read back))")
+    assert "nothing simulated" not in repr(original)  # its phases and rate
     assert back.topology is None  # two topologies, as run_batch's
     assert contents(folder) == before
     # the derivatives read back are the run's

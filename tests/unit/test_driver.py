@@ -6,7 +6,7 @@ import warnings
 import numpy as np
 import pytest
 
-from taichi_star.driver import Clock, drive, robots_label
+from taichi_star.driver import Clock, RunTiming, drive, robots_label
 from taichi_star.params import SolverConfig
 
 
@@ -254,3 +254,14 @@ def test_a_subnormal_record_interval_is_refused_as_a_value_error(interval, adapt
     solver = SolverConfig(adaptive=adaptive)
     with pytest.raises(ValueError, match=r"^record_interval_s must be "):
         check_run(solver, 1.0, interval, 1)
+
+
+@pytest.mark.parametrize("phases, steps, read_back", [
+    ((0.0, 0.0, 0.0, 0.0), 0, True),      # nothing done by the call: tables read back
+    ((0.0, 0.0, 0.0, 0.0), 1, False),     # a step counted: simulated (however fast)
+    ((0.5, 0.0, 0.0, 0.0), 0, False),     # set up, no step taken (every robot failed at once)
+])
+def test_a_timing_of_nothing_done_says_so_rather_than_a_rate_of_nan(phases, steps, read_back):
+    text = str(RunTiming(*phases, robot_steps=steps))
+    assert (text == "nothing simulated by this call (its tables read back)") is read_back
+    assert ("robot-steps/s" in text) is not read_back
