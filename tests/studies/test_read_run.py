@@ -10,6 +10,8 @@ import warnings
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import taichi_star as ts
 from taichi_star.batch import RunStoreError, read_run, run_batch
@@ -264,3 +266,27 @@ def test_what_is_not_a_run_store_is_one_line_naming_it(tmp_path):
         read_run("")
     with pytest.raises(ValueError, match=r"partial must be True or False, got 'yes'"):
         read_run(tmp_path / "empty", partial="yes")
+
+
+@settings(max_examples=20, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(gone=st.sets(st.integers(0, 2), max_size=2))
+def test_any_chunks_gone_leave_exactly_the_others_rows(stored, tmp_path_factory, gone):
+    """Whichever chunks are missing (none to all but one), partial=True gives the other
+    chunks' instances, their rows as the whole run's, in input order, and the count said."""
+    folder = copy_of(stored[0], tmp_path_factory.mktemp("gone") / "run")
+    members = {index: chunk[0] for index, chunk in run_store.read_stored(folder).chunks.items()}
+    for index in gone:
+        (folder / f"chunk_{index:06d}.parquet").unlink()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        back = read_run(folder, partial=True)
+    kept = sorted(m for index, chunk in members.items() if index not in gone for m in chunk)
+    full = stored[1]
+    for table in ("summary", "sensitivities"):
+        rows = getattr(full, table)[full.summary["instance"].isin(kept)].reset_index(drop=True)
+        pd.testing.assert_frame_equal(getattr(back, table), rows, check_exact=True)
+    said = [str(w.message) for w in caught if "left out" in str(w.message)]
+    assert len(said) == (1 if gone else 0)
+    if gone:
+        assert f"the result holds {len(kept)} of the run's 5 instances" in said[0]
