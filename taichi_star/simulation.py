@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import html
 import math
 import operator
 import time
@@ -27,6 +28,14 @@ from .runtime import (RECORDS_REMEDY, Runtime, check_arch, check_host_memory,
                       one_call_at_a_time, stream_chunk_size)
 from .state import STATUS_NAMES, STATUS_OK
 from .timegrid import SteadySpeedWarning, multiples_within, whole_steps
+
+
+NOTEBOOK_COLUMNS = ("instance", "gait", "signed_speed_mm_s", "travel_direction_deg",
+                    "heading_deg", "status", "failure_time_s")
+"""The summary columns a notebook shows of a result (`SimulationResult._repr_html_`; instance
+where it has one, a `run_batch` result's)."""
+NOTEBOOK_ROWS = 10
+"""The summary rows a notebook shows of a result; the rest are counted."""
 
 
 @dataclass
@@ -199,6 +208,24 @@ class SimulationResult:
         labels A1..A8, a scale bar, the centroid's path (see `output.animate`)."""
         return output.animate(self, path, instances=instances, frame=frame, fps=fps,
                               size_px=size_px, title=title)
+
+    def _repr_html_(self) -> str:
+        """A notebook cell's view of the result: the repr's line, the sensitivities' parameters
+        where it has them, and the first `NOTEBOOK_ROWS` rows of the summary's
+        `NOTEBOOK_COLUMNS` (which a robot, how fast and which way, whether it is right); the
+        whole table is `result.summary` (pandas draws that one itself)."""
+        shown_rows = self.summary[[column for column in NOTEBOOK_COLUMNS
+                                   if column in self.summary]].head(NOTEBOOK_ROWS)
+        parts = [f"<p><code>{html.escape(repr(self))}</code></p>"]
+        labels = (self.arguments or {}).get("sensitivities")
+        if labels:
+            parts.append(f"<p>differentiated by {html.escape(', '.join(labels))}: "
+                         f"<code>result.sensitivity(output, parameter)</code></p>")
+        parts.append(shown_rows.to_html())
+        hidden = len(self.summary) - len(shown_rows)
+        parts.append(f"<p>{f'{hidden} more rows; ' if hidden else ''}all "
+                     f"{len(self.summary.columns)} columns: <code>result.summary</code></p>")
+        return "\n".join(parts)
 
     def __repr__(self) -> str:
         status = self.summary["status"].value_counts().to_dict() if len(self.summary) else {}
