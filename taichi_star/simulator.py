@@ -475,33 +475,98 @@ class Simulator(NotCopied):
         """Put instances (all by default; one index or a sequence of them) back at rest in
         their rest shape at t = 0, nothing fired, no firing pending (those `fire` scheduled
         with at_s are dropped), status ok; the others are untouched."""
+        rows = self._instance_rows("instances", instances)
+        if rows.size == 0:  # no instance to reset (an RL loop where none finished)
+            return
+        self._capped_named[rows] = False
+        self._running[rows] = True
+        self._behind[rows] = 0.0
+        self._shown_s[rows] = np.nan
+        fields = self.engine.save_state()
+        replica_rows = self._with_replicas(rows)
+        for name, values in fields.items():
+            values[replica_rows] = self._initial[name][replica_rows]
+        self.engine.restore_state(fields)
+
+    @one_call_at_a_time
+    def copy_state(self, source: int, to: Union[None, int, Sequence[int]] = None, *,
+                   other_params: bool = False):
+        """Give instances `to` (every other one by default; one index or a sequence of them)
+        instance `source`'s present: its shape and velocities, the integrator's history, its
+        time and step count, the actuators fired and the firings pending, its status, what
+        the terms carry, with the lagged Jacobian its kept factorisation, with sensitivities
+        its tangents. Each keeps its own parameters, and `state()` measures its displacement
+        from its own start (the source's where their parameters agree). The batch so branches one robot's present into as many futures: advanced
+        under the same commands, each target gives the source's bits (a robot's results do
+        not depend on the other robots of the batch), and under others, say a candidate gait
+        each, what each would do from there (a lookahead controller's rollouts).
+
+        ValueError, state unchanged: `source` or `to` not instances of the batch, the source
+        among `to`, an instance named twice; a target whose parameters differ from the
+        source's (naming the first and the field), unless other_params=True: the state then
+        goes on under the target's parameters, as `load(..., other_params=True)` does (never
+        with sensitivities, whose tangents are scaled by the source's parameters)."""
+        check_flag("other_params", other_params)
+        if isinstance(source, (bool, np.bool_)) or not (
+                isinstance(source, (int, np.integer)) and 0 <= source < self.n_instances):
+            raise ValueError(f"source must be an instance of the batch, an integer in [0, "
+                             f"{self.n_instances}), got {source!r}")
+        source = int(source)
+        rows = (np.delete(np.arange(self.n_instances), source) if to is None
+                else self._instance_rows("to", to))
+        if source in rows:
+            raise ValueError(f"to names the source, instance {source}, among its targets")
+        if rows.size == 0:
+            return
+        if self.directions or not other_params:
+            texts = self._parameter_texts
+            for target in rows:
+                changed = differing_fields(texts[source], texts[target], texts[source])
+                if changed:
+                    remedy = ("a Simulator with sensitivities copies a state only between "
+                              "instances of the same parameters" if self.directions else
+                              "copy_state(..., other_params=True) continues it under the "
+                              "target's parameters")
+                    raise ValueError(f"instance {target}'s {changed[0]} is "
+                                     f"{texts[target][changed[0]]}, the source's (instance "
+                                     f"{source}) {texts[source][changed[0]]} "
+                                     f"({len(changed)} field(s) differ): {remedy}")
+        fields = self.engine.save_state(factorisations=self.solver.jacobian == "lagged")
+        # row k·B + b of the engine is instance b's k-th replica (k = 0: the instance)
+        targets = self._with_replicas(rows)
+        sources = np.repeat(self._with_replicas(np.array([source])), rows.size)
+        for values in fields.values():
+            values[targets] = values[sources]
+        self.engine.restore_state(fields)
+        for bookkeeping in (self._capped_named, self._running, self._behind, self._shown_s):
+            bookkeeping[rows] = bookkeeping[source]
+
+    def _instance_rows(self, name: str, instances) -> np.ndarray:
+        """`instances` (None: every instance; one index or a sequence of distinct ones) as a
+        1-D integer array; ValueError naming the argument `name`."""
         rows = (np.arange(self.n_instances) if instances is None
                 else np.atleast_1d(np.asarray(instances)))
-        if rows.size == 0:  # no instance to reset (an RL loop where none finished): [] is float
-            return
+        if rows.size == 0:  # none (an RL loop where none finished): [] is float
+            return rows.astype(np.int64)
         # a bool among integers is an int to NumPy ([0, True] reset instance 1: an audit)
         mixed = isinstance(instances, (list, tuple)) and any(
             isinstance(value, (bool, np.bool_)) for value in instances)
         if rows.ndim != 1 or rows.dtype.kind not in "iu" or mixed or (
                 rows.min() < 0 or rows.max() >= self.n_instances):
-            raise ValueError(f"instances must be an integer or a sequence of integers in [0, "
+            raise ValueError(f"{name} must be an integer or a sequence of integers in [0, "
                              f"{self.n_instances}), got {instances!r}")
         values, counts = np.unique(rows, return_counts=True)
         if (counts > 1).any():
             # a robot named twice is a slip in the caller's bookkeeping (accepted: an audit)
-            raise ValueError(f"instances names instance {values[counts > 1][0]} more than "
+            raise ValueError(f"{name} names instance {values[counts > 1][0]} more than "
                              f"once, got {instances!r}")
-        self._capped_named[rows] = False
-        self._running[rows] = True
-        self._behind[rows] = 0.0
-        self._shown_s[rows] = np.nan
-        # each instance's replicas (every n_instances rows after it) go back with it
+        return rows
+
+    def _with_replicas(self, rows: np.ndarray) -> np.ndarray:
+        """The engine's rows of instances `rows` and of their sensitivities' replicas (every
+        n_instances rows after each), grouped replica by replica ((copies · len(rows),))."""
         copies = self.model.batch_size // self.n_instances
-        rows = (rows[None, :] + self.n_instances * np.arange(copies)[:, None]).ravel()
-        fields = self.engine.save_state()
-        for name, values in fields.items():
-            values[rows] = self._initial[name][rows]
-        self.engine.restore_state(fields)
+        return (rows[None, :] + self.n_instances * np.arange(copies)[:, None]).ravel()
 
     # ---------------------------------------------------------------- observations
     @one_call_at_a_time

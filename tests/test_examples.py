@@ -97,3 +97,34 @@ def test_which_trial_next_prints_what_its_design_table_says(tmp_path):
         "A1+A2", "A1+A4", "A1+A3+A5"]
     assert output.strip().endswith("smallest sets that determine every held-out gait: none "
                                    "within two trials")
+
+
+def test_lookahead_chooses_the_nearest_candidate_and_its_path_is_the_robots_own(tmp_path):
+    """The gaits it chose, fired period by period on a robot of its own (no copies), give the
+    positions it wrote to the bit: each copied future is the robot's; and at every period the
+    chosen gait ends nearest the goal of the candidates simulated from that present."""
+    run_example("lookahead.py", tmp_path)
+    table = pd.read_csv(tmp_path / "lookahead.csv")
+    assert table["period"].tolist() == [1, 2]
+    params, solver = ts.StarParams.preset("paper"), ts.SolverConfig(dt=5e-3)
+    goal = np.array([-20.0, -30.0])
+    candidates = ["none"] + [f"A{m}" for m in range(1, 9)]
+    robot = ts.Simulator([params], solver)
+    for row in table.itertuples():
+        # the candidates from the robot's present, each on a robot that lived its history
+        ends = []
+        for gait in candidates:
+            alone = ts.Simulator([params], solver)
+            for earlier in table["gait"][:row.period - 1]:
+                alone.fire([earlier])
+                alone.advance(params.period)
+            alone.fire([gait])
+            alone.advance(params.period)
+            ends.append(alone.state()[["centroid_x_mm", "centroid_y_mm"]].to_numpy()[0])
+        distances = np.hypot(*(np.array(ends) - goal).T)
+        assert row.gait == candidates[int(np.argmin(distances))]
+        robot.fire([row.gait])
+        robot.advance(params.period)
+        state = robot.state().iloc[0]
+        assert (state.centroid_x_mm, state.centroid_y_mm) == (row.x_mm, row.y_mm)
+        assert row.distance_mm == distances.min()
