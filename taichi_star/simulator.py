@@ -496,10 +496,11 @@ class Simulator(NotCopied):
         time and step count, the actuators fired and the firings pending, its status, what
         the terms carry, with the lagged Jacobian its kept factorisation, with sensitivities
         its tangents. Each keeps its own parameters, and `state()` measures its displacement
-        from its own start (the source's where their parameters agree). The batch so branches one robot's present into as many futures: advanced
-        under the same commands, each target gives the source's bits (a robot's results do
-        not depend on the other robots of the batch), and under others, say a candidate gait
-        each, what each would do from there (a lookahead controller's rollouts).
+        from its own start (the source's where their parameters agree). The batch so branches
+        one robot's present into as many futures: advanced under the same commands, each
+        target gives the source's bits (a robot's results do not depend on the other robots of
+        the batch), and under others, say a candidate gait each, what each would do from there
+        (a lookahead controller's rollouts, `examples/lookahead.py`).
 
         ValueError, state unchanged: `source` or `to` not instances of the batch, the source
         among `to`, an instance named twice; a target whose parameters differ from the

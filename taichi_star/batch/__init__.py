@@ -23,7 +23,7 @@ from .store import (RunStore, RunStoreError, code_version, has_chunks, stored_ch
                     write_atomic)
 from .tasks import ChunkResult, ChunkTask, plan_chunks, run_chunk
 
-__all__ = ["run_batch", "read_run", "plan_chunks", "run_chunk", "ChunkTask", "ChunkResult", "Executor",
-           "InProcess", "LocalProcesses", "executor_for", "RunStore", "RunStoreError",
+__all__ = ["run_batch", "read_run", "plan_chunks", "run_chunk", "ChunkTask", "ChunkResult",
+           "Executor", "InProcess", "LocalProcesses", "executor_for", "RunStore", "RunStoreError",
            "code_version", "has_chunks", "stored_chunk_size", "write_atomic",
            "DEFAULT_CHUNK_SIZE", "DEFAULT_RETRIES", "MAX_LOCAL_WORKERS"]

@@ -536,9 +536,9 @@ class RunStore:
 
     def _load(self, task: "ChunkTask | StoredChunk"
               ) -> Tuple[pd.DataFrame, Optional[pd.DataFrame]]:
-        """(the chunk `task` (a ChunkTask or StoredChunk)'s summary, its trajectory or None where it stored none), the trajectory
-        checked against the checksum the summary's stamp holds; ValueError saying why they
-        cannot be trusted."""
+        """(the summary of the chunk `task` (a ChunkTask or StoredChunk), its trajectory or None
+        where it stored none), the trajectory checked against the checksum the summary's stamp
+        holds; ValueError saying why they cannot be trusted."""
         summary, stamp = self._load_table(self.chunk_path(task.index), task)
         if "trajectory_sha256" not in stamp:
             if task.record_interval_s > 0:
@@ -813,7 +813,8 @@ def _with_chunks(makers: List[Dict], code: Optional[Dict], chunks: Sequence[int]
 class StoredChunk:
     """Where a chunk of a run read back without its arguments (`read_stored`) belongs: its
     index, the positions in the batch of its instances (from its own stamp, verified with its
-    content) and whether its run records (s; its trajectory must then be stored)."""
+    content) and its run's record interval (s; 0: no records, else its trajectory must be
+    stored)."""
 
     index: int
     members: Tuple[int, ...]
