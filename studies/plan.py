@@ -5,8 +5,17 @@ motion primitives, open loop (a plan made at the start, fired blindly) and close
     python -m studies plan [--primitives CSV] [--distance 50] [--directions 8] [--far 150]
                            [--tolerance 5] [--max-cycles 25] [--cycles 5]
                            [--glide-cycles 4] [--settle-cycles 4]
+                           [--lookahead [--lookahead-gaits all|A1,A1+A2,...]]
                            [--preset paper|accurate|identified] [--set NAME=VALUE ...] [--dt S]
                            [--arch cpu|gpu] [--out DIR] [--quick]
+
+--lookahead also drives the same goals by the full model's lookahead
+(`taichi_star.lookahead.lookahead_drive`): every cycle each robot's present is copied into one
+robot per candidate (the glide and --lookahead-gaits, default all 255), each fires its gait,
+swims the cycle and coasts --settle-cycles cycles, and the robot takes the future that comes to
+rest nearest its goal (stopping where the glide does best); no primitives, judged as the
+planner's. It writes lookahead.csv, lookahead_cycles.csv, lookahead_paths.csv and
+controllers.csv (open, closed and lookahead side by side), and draws its paths in plan.png.
 
 Goals: --directions points at --distance mm in every direction (0°, 45°, ... for 8), plus one
 --far mm straight behind the robot (0: none). The primitive table is read from --primitives
@@ -48,6 +57,7 @@ import pandas as pd
 
 from taichi_star import StarParams
 from taichi_star.metrics import MAX_GOAL_MM
+from taichi_star.lookahead import check_lookahead, compare_controllers, lookahead_drive
 from taichi_star.planner import (MAX_DEFAULT_GOALS, SETTLE_CYCLES, PrimitiveModel, check_drive,
                                  closed_loop_gain, default_goals, drive)
 from taichi_star.primitives import GLIDE_CYCLES, measure_primitives
@@ -61,6 +71,7 @@ QUICK_DT = 5e-3
 QUICK_CYCLES = 2
 QUICK_MAX_CYCLES = 2
 QUICK_GLIDE_CYCLES = QUICK_SETTLE_CYCLES = 1
+QUICK_LOOKAHEAD_GAITS = "A1,A2,A3,A4,A5,A6,A7,A8"
 PRIMITIVES_FIRST_CYCLE = 1
 """Primitives measured here: statistics from the second cycle on."""
 
@@ -74,39 +85,50 @@ class MeasurementFlag(argparse.Action):
         namespace.measurement_flags = [*namespace.measurement_flags, option_string]
 
 
-def plot_paths(paths_csv, plan_csv, png_path) -> Path:
-    """The centroid paths of both controllers (open dashed, closed solid; where each stopped:
-    o reached, x not; then the glide, dotted) and the goals (stars), from plan_paths.csv and
-    plan.csv."""
+CONTROLLER_STYLES = {"open": "--", "closed": "-", "lookahead": "-."}
+"""How plan.png draws each controller's path."""
+
+
+def plot_paths(paths_csv, plan_csv, png_path, lookahead=None) -> Path:
+    """The centroid paths of the controllers (open dashed, closed solid, with --lookahead the
+    lookahead dash-dotted; where each stopped: o reached, x not; then the glide, dotted) and the
+    goals (stars), from plan_paths.csv and plan.csv, and lookahead = (lookahead_paths.csv,
+    lookahead.csv) where given."""
     plt = cli.use_agg()
     paths = pd.read_csv(paths_csv)
     plan = pd.read_csv(plan_csv)
+    if lookahead is not None:
+        paths = pd.concat([paths, pd.read_csv(lookahead[0])], ignore_index=True)
+        plan = pd.concat([plan, pd.read_csv(lookahead[1])], ignore_index=True)
+    modes = [mode for mode in CONTROLLER_STYLES if mode in set(plan["mode"])]
     fig, ax = plt.subplots(figsize=(7.0, 6.4))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     goals = plan.drop_duplicates("goal")
     for i, goal in enumerate(goals.itertuples()):
         colour = colours[i % len(colours)]
-        for mode, style in (("open", "--"), ("closed", "-")):
+        for mode in modes:
             path = paths[(paths["goal"] == goal.goal) & (paths["mode"] == mode)]
             row = plan[(plan["goal"] == goal.goal) & (plan["mode"] == mode)].iloc[0]
             controlled = path[path["controlled"]]
-            ax.plot(controlled["x_mm"], controlled["y_mm"], style, color=colour, lw=1.1,
-                    label=None if i else f"{mode} loop")
+            ax.plot(controlled["x_mm"], controlled["y_mm"], CONTROLLER_STYLES[mode],
+                    color=colour, lw=1.1, label=None if i else f"{mode}")
             ax.plot(controlled["x_mm"].iloc[-1], controlled["y_mm"].iloc[-1],
                     "o" if row["reached"] else "x", color=colour, ms=4)
             gliding = path[path["t_s"] >= controlled["t_s"].iloc[-1]]
             ax.plot(gliding["x_mm"], gliding["y_mm"], ":", color=colour, lw=0.7, alpha=0.6,
-                    label=None if i or mode == "open" else "gliding after the stop")
+                    label=None if i or mode != "closed" else "gliding after the stop")
         ax.plot(goal.goal_x_mm, goal.goal_y_mm, "*", color=colour, ms=11, mec="k", mew=0.5)
     ax.plot(0, 0, "k+", ms=10)
     ax.set_aspect("equal")
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
-    gain = plan.groupby("mode")["final_error_mm"].mean()
-    ax.set_title(f"Paths to {len(goals)} goals (stars): open loop dashed, closed loop solid, "
-                 f"gliding dotted\n"
-                 f"mean final error: open {gain.get('open', np.nan):.1f} mm, closed "
-                 f"{gain.get('closed', np.nan):.1f} mm; o = reached, x = not", fontsize=9)
+    errors = plan.groupby("mode")["final_error_mm"].mean()
+    styles = {"--": "dashed", "-": "solid", "-.": "dash-dotted"}
+    ax.set_title(f"Paths to {len(goals)} goals (stars): "
+                 + ", ".join(f"{mode} {styles[CONTROLLER_STYLES[mode]]}" for mode in modes)
+                 + ", gliding dotted\nmean final error: "
+                 + ", ".join(f"{mode} {errors.get(mode, np.nan):.1f} mm" for mode in modes)
+                 + "; o = reached, x = not", fontsize=9)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     return cli.save_figure(fig, png_path)
@@ -140,6 +162,14 @@ def build_parser():
     parser.add_argument("--settle-cycles", type=int, default=SETTLE_CYCLES,
                         quick=QUICK_SETTLE_CYCLES,
                         help="cycles the robots coast to rest after the last controller stops")
+    parser.add_argument("--lookahead", action="store_true",
+                        help="also drive the goals by the full model's lookahead (every "
+                             "candidate gait simulated from the robot's own state each cycle, "
+                             "to rest; no primitives): lookahead*.csv, controllers.csv")
+    parser.add_argument("--lookahead-gaits", default=None,
+                        help=f"the lookahead's candidates besides the glide: "
+                             f"{cli.GAITS_HELP} (default all; --quick: the eight single "
+                             f"actuators)")
     return parser
 
 
@@ -238,6 +268,18 @@ def main(argv=None):
                     frames_per_cycle=frames, settle_cycles=args.settle_cycles)
     except ValueError as error:
         raise cli.StudyArgumentError(f"--dt, --set period: {error}") from None
+    lookahead_gaits = None
+    if args.lookahead:
+        lookahead_gaits = cli.resolve_gaits(
+            args.lookahead_gaits or (QUICK_LOOKAHEAD_GAITS if args.quick else "all"),
+            "--lookahead-gaits")
+        try:
+            check_lookahead(goals, base, solver, args.tolerance, args.max_cycles,
+                            args.settle_cycles, lookahead_gaits, frames, args.arch)
+        except ValueError as error:
+            raise cli.StudyArgumentError(f"--lookahead: {error}") from None
+    elif args.lookahead_gaits is not None:
+        raise cli.StudyArgumentError("--lookahead-gaits: only with --lookahead")
     if args.primitives is not None:
         model = read_primitive_model(args.primitives, base.period, solver.dt, base)
     else:  # the primitives' longest run, as that study checks it
@@ -247,6 +289,7 @@ def main(argv=None):
                      solver=solver,
                      extra={"tolerance_mm": args.tolerance, "max_cycles": args.max_cycles,
                             "settle_cycles": args.settle_cycles,
+                            **({"lookahead_gaits": lookahead_gaits} if args.lookahead else {}),
                             "primitives": (str(Path(args.primitives).resolve())
                                            if args.primitives else "measured in this run"),
                             **({"primitives_sha256": hashlib.sha256(
@@ -270,9 +313,23 @@ def main(argv=None):
     out.write_csv(gain, "plan_gain.csv")
     out.write_csv(per_cycle, "plan_cycles.csv")
     paths_csv = out.write_csv(path, "plan_paths.csv")
-    out.wrote(plot_paths(paths_csv, plan_csv, out.path("plan.png")))
+    lookahead = None
+    if args.lookahead:
+        ahead, ahead_cycles, ahead_path = lookahead_drive(
+            goals, base, solver, tolerance_mm=args.tolerance, max_cycles=args.max_cycles,
+            settle_cycles=args.settle_cycles, gaits=lookahead_gaits, frames_per_cycle=frames,
+            arch=args.arch, progress=not args.no_progress)
+        lookahead = (out.write_csv(ahead_path, "lookahead_paths.csv"),
+                     out.write_csv(ahead, "lookahead.csv"))
+        out.write_csv(ahead_cycles, "lookahead_cycles.csv")
+        controllers = out.write_csv(compare_controllers(pd.concat([summary, ahead])),
+                                    "controllers.csv")
+    out.wrote(plot_paths(paths_csv, plan_csv, out.path("plan.png"), lookahead))
     out.report()
     with pd.option_context("display.width", 160, "display.max_columns", 20):
         print(summary.to_string(index=False))
         print(gain.T.to_string(header=False))
+        if args.lookahead:
+            print(ahead.to_string(index=False))
+            print(pd.read_csv(controllers).to_string(index=False))
     return summary

@@ -108,6 +108,11 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
     # --quick runs whole --cycles here, not --quick's 0.2 s
     ("gait_design", ["--cycles", "1000000000"], "--cycles 1000000000 (3.15e+09 s)"),
     ("plan", ["--max-cycles", "1000000000"], "--max-cycles 1000000000 + --settle-cycles 1"),
+    ("plan", ["--lookahead-gaits", "A1,A2"], "--lookahead-gaits: only with --lookahead"),
+    ("plan", ["--lookahead", "--lookahead-gaits", "A1,A9"], "--lookahead-gaits: "),
+    # within the planner's step counter, past it with the lookahead's coasts
+    ("plan", ["--lookahead", "--max-cycles", "2000000"],
+     "--lookahead: max_cycles = 2000000 decisions of 2 periods"),
     ("plan", ["--glide-cycles", "1000000000"], "--cycles 2 + --glide-cycles 1000000000"),
     ("primitives", ["--glide-cycles", "1000000000"], "--cycles 2 + --glide-cycles 1000000000"),
     ("calibrate", ["--restarts", "11"], "--restarts must be <= 10"),

@@ -12,6 +12,7 @@ import pytest
 
 import taichi_star
 from taichi_star import profiling
+from taichi_star.lookahead import lookahead_drive
 from taichi_star.primitives import glide_columns, measure_primitives, streak_step_columns
 
 from studies import cli, plan
@@ -112,6 +113,36 @@ def test_plan_quick_with_given_primitives(primitives_run, tmp_path):
         assert sidecar["details"]["primitives"] == str(Path(primitives).resolve())
         assert sidecar["details"]["primitives_sha256"] == hashlib.sha256(
             Path(primitives).read_bytes()).hexdigest() and sidecar["study"] == "plan"
+
+
+@pytest.mark.slow
+def test_plan_with_the_lookahead_drives_the_same_goals_and_compares_the_controllers(
+        primitives_run, tmp_path):
+    primitives = str(primitives_run / "primitives.csv")
+    code = studies_main(["plan", *QUICK, "--primitives", primitives, "--directions", "2",
+                         "--far", "0", "--lookahead", "--out", str(tmp_path)])
+    assert code == 0
+    plan = pd.read_csv(tmp_path / "plan.csv")
+    ahead = pd.read_csv(tmp_path / "lookahead.csv")
+    assert ahead["mode"].tolist() == ["lookahead"] * 2
+    assert ahead[["goal_x_mm", "goal_y_mm"]].equals(
+        plan[plan["mode"] == "closed"][["goal_x_mm", "goal_y_mm"]].reset_index(drop=True))
+    # the library's own run on the same goals: the same table to the CSV's digits
+    direct, _, _ = lookahead_drive(ahead[["goal_x_mm", "goal_y_mm"]].to_numpy(),
+                                   taichi_star.StarParams.preset("paper"),
+                                   taichi_star.SolverConfig(dt=5e-3), max_cycles=2,
+                                   settle_cycles=1, gaits=[f"A{m}" for m in range(1, 9)],
+                                   frames_per_cycle=10)
+    np.testing.assert_allclose(ahead["end_error_mm"], direct["end_error_mm"], rtol=1e-9)
+    controllers = pd.read_csv(tmp_path / "controllers.csv")
+    assert controllers["mode"].tolist() == ["open", "closed", "lookahead"]
+    assert controllers["reached"].tolist() == [int(plan[plan["mode"] == mode]["reached"].sum())
+                                               for mode in ("open", "closed")] \
+        + [int(ahead["reached"].sum())]
+    paths = pd.read_csv(tmp_path / "lookahead_paths.csv")
+    assert set(paths["goal"]) == {0, 1} and (tmp_path / "plan.png").stat().st_size > 1000
+    sidecar = json.loads((tmp_path / "lookahead.csv.json").read_text())
+    assert sidecar["details"]["lookahead_gaits"] == [f"A{m}" for m in range(1, 9)]
 
 
 @pytest.mark.slow

@@ -1,0 +1,253 @@
+"""Lookahead control with the full model: drive robots to goals by simulating, every actuation
+period, what each candidate gait would do from the robot's own present.
+
+Every period each controlled robot's state is copied into one robot per candidate
+(`Simulator.copy_state`): the glide ("none") and the gaits. Each candidate fires its gait, swims
+the period, then coasts `settle_cycles` periods, the horizon at which the planner judges a goal
+(`planner.drive`); the glide, a stop now, is judged `settle_cycles` periods from now, a period
+sooner. The robot stops firing once the glide comes to rest within the tolerance of its goal
+(as the planner's closed loop plans for the glide), and otherwise takes the future of the
+candidate that comes to rest nearest its goal (its state after the period, copied back), which
+may be the glide too. No table of motion primitives: a candidate is the robot's own state
+simulated, its momentum, turning and hot actuators included, so a goal between the gaits'
+directions is approached by whatever sequence the model itself finds best, one firing at a
+time. The price is 1 + settle_cycles periods of every candidate per decision: G goals and K
+candidates make a batch of G·(1 + K) robots.
+"""
+
+from __future__ import annotations
+
+from typing import Optional, Sequence
+
+import numpy as np
+import pandas as pd
+
+from .checks import check_flag
+from .gait import N_ACTUATORS, NO_GAIT, Gait
+from .params import SolverConfig, StarParams
+from .planner import PLAN_COLUMNS, SETTLE_CYCLES, check_drive
+from .runtime import check_arch
+from .simulator import Simulator
+from .timegrid import check_work
+
+__all__ = ["lookahead_drive", "check_lookahead", "compare_controllers", "every_gait",
+           "LOOKAHEAD_MODE", "LOOKAHEAD_CYCLE_COLUMNS", "CONTROLLER_COLUMNS"]
+
+LOOKAHEAD_MODE = "lookahead"
+"""The `mode` of `lookahead_drive`'s rows (`planner.drive`'s are "open" and "closed")."""
+LOOKAHEAD_CYCLE_COLUMNS = ["goal", "mode", "cycle", "gait", "x_mm", "y_mm", "heading_deg",
+                           "distance_mm", "predicted_rest_x_mm", "predicted_rest_y_mm",
+                           "predicted_rest_error_mm"]
+"""Columns of `lookahead_drive`'s per-cycle table: the robot's state at the start of cycle
+`cycle`, the gait chosen there ("none": the glide, and after the controller stopped) and where
+the chosen candidate came to rest, `settle_cycles` periods after this period (mm from the
+start; NaN after the stop), with its distance to the goal: the full model's own prediction."""
+
+
+CONTROLLER_COLUMNS = ["mode", "goals", "reached", "mean_end_error_mm", "max_end_error_mm",
+                      "mean_final_error_mm", "mean_cycles_fired", "mean_cycles_to_goal"]
+"""Columns of `compare_controllers`: per controller (mode) the goals, how many it reached, the
+mean and largest distance to the goal at rest (end_error_mm) and when it stopped firing
+(final_error_mm), the cycles it fired, and the mean cycles to the goal over the goals that
+every controller compared reached (NaN where there are none)."""
+
+
+def every_gait() -> list:
+    """The glide ("none") and the 255 gaits, A1 first: every candidate a lookahead can fire."""
+    masks = (np.arange(2 ** N_ACTUATORS)[:, None] >> np.arange(N_ACTUATORS)) & 1
+    return [Gait.from_mask(mask).name for mask in masks.astype(bool)]
+
+
+def _candidate_masks(gaits: Sequence[str]) -> tuple:
+    """(names, (K, 8) bool) of the candidates: "none" first, then the other gaits in order;
+    ValueError naming `gaits` for a text that is no gait, one given twice, or none at all."""
+    if isinstance(gaits, (str, Gait)) or not all(isinstance(g, (str, Gait)) for g in gaits):
+        raise ValueError(f"gaits must be a list of gaits such as ['A1+A3', 'A2'], got "
+                         f"{gaits!r}")
+    parsed = [Gait.parse(gait) for gait in gaits]
+    names = [gait.name for gait in parsed]
+    repeated = sorted({name for name in names if names.count(name) > 1})
+    if repeated:
+        raise ValueError(f"gaits names {repeated[0]} more than once")
+    fired = [gait for gait in parsed if gait.name != NO_GAIT]
+    if not fired:
+        raise ValueError("gaits must hold at least one gait that fires an actuator")
+    names = [NO_GAIT] + [gait.name for gait in fired]
+    return names, np.stack([np.zeros(N_ACTUATORS, bool)] + [gait.mask.astype(bool)
+                                                             for gait in fired])
+
+
+def check_lookahead(goals_mm, params: StarParams = StarParams(),
+                    solver: SolverConfig = SolverConfig(), tolerance_mm: float = 5.0,
+                    max_cycles: int = 25, settle_cycles: int = SETTLE_CYCLES,
+                    gaits: Optional[Sequence[str]] = None, frames_per_cycle: int = 10,
+                    arch: str = "cpu"):
+    """(goals (G, 2), candidate names, candidate masks (K, 8)) of a `lookahead_drive` with
+    these arguments, or ValueError naming the one it refuses (`planner.check_drive`'s, gaits),
+    and for work that cannot finish (`timegrid.check_work` on the whole batch's steps: every
+    decision simulates 1 + settle_cycles periods of G·(1 + K) robots). No compute: a command
+    line checks its input with this before starting."""
+    goals = check_drive(goals_mm, params, solver, tolerance_mm, max_cycles, frames_per_cycle,
+                        settle_cycles)
+    names, masks = _candidate_masks(every_gait() if gaits is None else gaits)
+    check_arch(arch)
+    step = solver.dt_max if solver.adaptive else solver.dt
+    check_work(f"max_cycles = {max_cycles} decisions of {1 + settle_cycles} periods of "
+               f"{params.period:g} s, then {settle_cycles} of coasting, at {step:g}-s steps",
+               (max_cycles * (1 + settle_cycles) + settle_cycles) * params.period / step,
+               len(goals) * (1 + len(masks)), arch)
+    return goals, names, masks
+
+
+def lookahead_drive(goals_mm, params: StarParams = StarParams(),
+                    solver: SolverConfig = SolverConfig(), tolerance_mm: float = 5.0,
+                    max_cycles: int = 25, settle_cycles: int = SETTLE_CYCLES,
+                    gaits: Optional[Sequence[str]] = None, frames_per_cycle: int = 10,
+                    arch: str = "cpu", progress: bool = False):
+    """Drive one robot per goal by a one-firing lookahead over `gaits` (default `every_gait()`;
+    the glide is always a candidate) with the full model (module docstring), in one Simulator of
+    G·(1 + K) robots, until every controller has stopped or max_cycles have run, then coast
+    `settle_cycles` cycles; a goal is reached, as `planner.drive` judges it, if the robot comes
+    to rest (settle_cycles after its own controller stopped) within tolerance_mm of it.
+
+    goals_mm: (G, 2) goal points relative to the start (the robot starts at rest, heading 0).
+    Returns (summary, cycles, path) as `planner.drive`'s, mode `LOOKAHEAD_MODE`: summary
+    `planner.PLAN_COLUMNS`, cycles `LOOKAHEAD_CYCLE_COLUMNS`, path (goal, mode, t_s,
+    controlled, x_mm, y_mm) recorded frames_per_cycle times per cycle. ValueError for bad
+    arguments or work that cannot finish (`check_lookahead`), before any compute."""
+    goals, names, masks = check_lookahead(goals_mm, params, solver, tolerance_mm, max_cycles,
+                                          settle_cycles, gaits, frames_per_cycle, arch)
+    check_flag("progress", progress)
+    count, candidates = len(goals), len(masks)
+    batch = count * (1 + candidates)
+    period = params.period
+    robots = np.arange(count)
+    # robot g's candidates: rows count + g·K ... count + g·K + K − 1 (candidate 0: the glide)
+    first = count + robots * candidates
+    simulator = Simulator([params.replace(gait=NO_GAIT)] * batch, solver, arch=arch)
+    commands = np.zeros((batch, N_ACTUATORS), dtype=bool)
+    commands[count:] = np.tile(masks, (count, 1))
+    stopped = np.zeros(count, dtype=bool)
+    stop_cycle = np.full(count, max_cycles)
+    final_error = np.full(count, np.nan)
+    fired = np.zeros(count, dtype=np.int64)
+    boundaries, cycle_rows, paths = [], [], []
+    interval = period / frames_per_cycle
+    for cycle in range(max_cycles + 1):
+        state = simulator.state().iloc[:count]
+        position = state[["centroid_x_mm", "centroid_y_mm"]].to_numpy()
+        boundaries.append(position)
+        distance = np.hypot(*(goals - position).T)
+        running = state["status"].to_numpy() == "ok"
+        controlled = ~stopped & running & (cycle < max_cycles)
+        choice = np.zeros(count, dtype=np.int64)
+        rest = np.full((count, 2), np.nan)
+        if controlled.any():
+            # the period and the coast after it, every candidate from its robot's present
+            for g in np.flatnonzero(controlled):
+                simulator.copy_state(int(g), to=first[g] + np.arange(candidates))
+            simulator.fire(commands)
+            frames = simulator.advance(period, record_interval_s=interval, progress=progress)
+            after_period = simulator.save()
+            # judged as a stop: a firing now comes to rest settle_cycles after the next cycle
+            # starts, the glide (a stop now) settle_cycles after this one, a period sooner
+            glide_rest = position
+            if settle_cycles:
+                if settle_cycles > 1:
+                    simulator.advance((settle_cycles - 1) * period, progress=progress)
+                glide_rest = _positions(simulator)[count::candidates]
+                simulator.advance(period, progress=progress)
+            ends = simulator.state()
+            at_rest = np.array(ends[["centroid_x_mm", "centroid_y_mm"]].to_numpy()[count:])
+            at_rest = at_rest.reshape(count, candidates, 2)
+            at_rest[:, 0] = glide_rest
+            ok = (ends["status"].to_numpy()[count:] == "ok").reshape(count, candidates)
+            misses = np.where(ok, np.hypot(*np.moveaxis(at_rest - goals[:, None], -1, 0)),
+                              np.inf)
+            # as the planner plans for the glide: no firing once coasting from now comes to
+            # rest within the tolerance (a firing that would land nearer is not worth a cycle)
+            best = np.where(misses[:, 0] <= tolerance_mm, 0, np.argmin(misses, axis=1))
+            # back to the end of the period: every robot has coasted it, its candidates swum it
+            simulator.load(after_period)
+            choice[controlled] = best[controlled]
+            rest[controlled] = at_rest[controlled, best[controlled]]
+        # a controller stops when it chooses the glide, its robot fails or the budget is spent
+        stopping = ~stopped & ((choice == 0) | ~running | (cycle == max_cycles))
+        final_error[stopping] = distance[stopping]
+        stop_cycle[stopping] = cycle
+        stopped |= stopping
+        cycle_rows.append(pd.DataFrame({
+            "goal": robots, "mode": LOOKAHEAD_MODE, "cycle": cycle,
+            "gait": np.asarray(names)[choice], "x_mm": position[:, 0], "y_mm": position[:, 1],
+            "heading_deg": state["heading_deg"].to_numpy(), "distance_mm": distance,
+            "predicted_rest_x_mm": rest[:, 0], "predicted_rest_y_mm": rest[:, 1],
+            "predicted_rest_error_mm": np.hypot(*(goals - rest).T)}))
+        if not controlled.any():
+            break  # every controller has stopped (the rule above stops the rest now)
+        # each robot's period: the chosen candidate's (its state copied back), or its own coast
+        source = np.where(choice > 0, first + choice, robots)
+        for g in np.flatnonzero(choice > 0):
+            simulator.copy_state(int(source[g]), to=int(g))
+        fired += choice > 0
+        paths.append(_relabelled(frames, source))
+    for _ in range(settle_cycles):  # the robots coast on to rest, no controller firing
+        frames = simulator.advance(period, record_interval_s=interval, progress=progress)
+        paths.append(_relabelled(frames, robots))
+        boundaries.append(simulator.state()[["centroid_x_mm", "centroid_y_mm"]]
+                          .to_numpy()[:count])
+    status = simulator.state()["status"].to_numpy()[:count]
+    run_cycles = stop_cycle + settle_cycles
+    at_rest = np.stack(boundaries)[run_cycles, robots]
+    end_error = np.hypot(*(goals - at_rest).T)
+    reached = (end_error <= tolerance_mm) & (status == "ok")
+    summary = pd.DataFrame({
+        "goal": robots, "goal_x_mm": goals[:, 0], "goal_y_mm": goals[:, 1],
+        "goal_distance_mm": np.hypot(*goals.T), "mode": LOOKAHEAD_MODE, "reached": reached,
+        "cycles_to_goal": np.where(reached, stop_cycle, np.nan), "cycles_fired": fired,
+        "final_error_mm": final_error, "end_error_mm": end_error, "run_cycles": run_cycles,
+        "status": status})[PLAN_COLUMNS]
+    start = pd.DataFrame({"goal": robots, "mode": LOOKAHEAD_MODE, "t_s": 0.0, "x_mm": 0.0,
+                          "y_mm": 0.0})
+    path = pd.concat([start, *paths], ignore_index=True)
+    path["controlled"] = path["t_s"] <= (stop_cycle[path["goal"].to_numpy()] * period
+                                         + solver.dt / 2)
+    path = path.sort_values(["goal", "t_s"], kind="stable").reset_index(drop=True)
+    return (summary, pd.concat(cycle_rows, ignore_index=True)[LOOKAHEAD_CYCLE_COLUMNS],
+            path[["goal", "mode", "t_s", "controlled", "x_mm", "y_mm"]])
+
+
+def _relabelled(frames: pd.DataFrame, source: np.ndarray) -> pd.DataFrame:
+    """The records of robots `source[g]` (a period's frames) as goal g's path rows."""
+    goal_of = {int(row): g for g, row in enumerate(source)}
+    kept = frames[frames["instance"].isin(goal_of)]
+    return pd.DataFrame({"goal": kept["instance"].map(goal_of).to_numpy(),
+                         "mode": LOOKAHEAD_MODE, "t_s": kept["t_s"].to_numpy(),
+                         "x_mm": kept["centroid_x_mm"].to_numpy(),
+                         "y_mm": kept["centroid_y_mm"].to_numpy()})
+
+
+def compare_controllers(summary: pd.DataFrame) -> pd.DataFrame:
+    """`CONTROLLER_COLUMNS`, one row per controller (mode, in order of appearance), from the
+    summaries of `planner.drive` and `lookahead_drive` concatenated (the same goals).
+    ValueError unless `summary` has their columns."""
+    needed = ("goal", "mode", "reached", "end_error_mm", "final_error_mm", "cycles_fired",
+              "cycles_to_goal")
+    if not isinstance(summary, pd.DataFrame) or not set(needed) <= set(summary.columns):
+        raise ValueError(f"summary must hold drive's or lookahead_drive's summaries (columns "
+                         f"{', '.join(needed)}), got {type(summary).__name__}")
+    every = summary.groupby("goal")["reached"].transform("all").to_numpy(dtype=bool)
+    rows = []
+    for mode, part in summary.groupby("mode", sort=False):
+        both = part[every[summary["mode"].to_numpy() == mode]]
+        rows.append({"mode": mode, "goals": len(part), "reached": int(part["reached"].sum()),
+                     "mean_end_error_mm": part["end_error_mm"].mean(),
+                     "max_end_error_mm": part["end_error_mm"].max(),
+                     "mean_final_error_mm": part["final_error_mm"].mean(),
+                     "mean_cycles_fired": part["cycles_fired"].mean(),
+                     "mean_cycles_to_goal": both["cycles_to_goal"].mean()})
+    return pd.DataFrame(rows, columns=CONTROLLER_COLUMNS)
+
+
+def _positions(simulator: Simulator) -> np.ndarray:
+    """(B, 2) every robot's centroid now, mm from its start."""
+    return simulator.state()[["centroid_x_mm", "centroid_y_mm"]].to_numpy()
