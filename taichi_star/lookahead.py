@@ -146,7 +146,10 @@ def lookahead_drive(goals_mm, params: StarParams = StarParams(),
             # the period and the coast after it, every candidate from its robot's present
             for g in np.flatnonzero(controlled):
                 simulator.copy_state(int(g), to=first[g] + np.arange(candidates))
-            simulator.fire(commands)
+            # the candidates of a stopped controller coast (their futures are not asked for)
+            firing = np.zeros(batch, dtype=bool)
+            firing[count:] = np.repeat(controlled, candidates)
+            simulator.fire(commands & firing[:, None])
             frames = simulator.advance(period, record_interval_s=interval, progress=progress)
             after_period = simulator.save()
             # judged as a stop: a firing now comes to rest settle_cycles after the next cycle
