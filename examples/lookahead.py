@@ -4,7 +4,9 @@ Every period the robot's present (shape, velocities, actuators still hot) is cop
 robot per candidate gait (`Simulator.copy_state`), each fires its gait and swims the period in
 the same batch, and the robot then takes the future of the candidate that ends nearest the goal
 (copied back): no table of motion primitives, every candidate simulated from the robot's own
-state. Writes lookahead.csv (one row per period: the gait chosen, where it ends).
+state. Writes lookahead.csv (one row per period: the gait chosen, where it ends). The library's
+controller, `taichi_star.lookahead.lookahead_drive` (`python -m studies plan --lookahead`),
+judges each candidate where it comes to rest and stops firing within a tolerance.
 
     python examples/lookahead.py                   # 255 gaits and a glide, 4 periods (~1 min)
     EXAMPLE_QUICK=1 python examples/lookahead.py   # 8 single actuators and a glide (seconds)
