@@ -122,7 +122,6 @@ import sys
 import tempfile
 import time
 from datetime import datetime, timezone
-from pathlib import Path
 from typing import List
 
 import numpy as np
@@ -445,19 +444,23 @@ def first_step_probe(arch: str, precision: str, batch_size: int, import_s: float
             "time_to_first_step_s": import_s + profile.setup_s + first}
 
 
+def import_path() -> str:
+    """A PYTHONPATH under which a fresh process imports what this one imports, from the same
+    places: this process's own sys.path (the empty entry as the current folder). The probe had
+    put the folder above its own file on PYTHONPATH, which installed is the taichi_star package
+    folder itself (its modules importable as top-level names: an audit, 2026-12)."""
+    return os.pathsep.join(os.path.abspath(entry or os.curdir) for entry in sys.path)
+
+
 def cache_probe(arch: str, precision: str, batch_size: int) -> dict:
     """{"cold_cache": probe, "warm_cache": probe}: two fresh processes sharing an empty
     temporary Taichi offline cache, so the first compiles everything and the second reuses it."""
-    root = Path(__file__).resolve().parents[1]
     results = {}
     with tempfile.TemporaryDirectory(prefix="taichi_star_cache_") as cache:
-        env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=cache,
-                   PYTHONPATH=os.pathsep.join(filter(None, [str(root),
-                                                            os.environ.get("PYTHONPATH")])))
+        env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=cache, PYTHONPATH=import_path())
         for label in ("cold_cache", "warm_cache"):
             run = subprocess.run([sys.executable, "-c", PROBE_CODE, arch, precision,
-                                  str(batch_size)], cwd=root, env=env, capture_output=True,
-                                 text=True)
+                                  str(batch_size)], env=env, capture_output=True, text=True)
             lines = [line for line in run.stdout.splitlines() if line.startswith("BENCH_PROBE ")]
             if run.returncode != 0 or not lines:
                 raise RuntimeError(f"compile probe ({label}) failed:\n{run.stderr[-2000:]}")

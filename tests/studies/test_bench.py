@@ -3,6 +3,10 @@ counts, plots), and the benchmark and work-precision studies' argument errors, r
 any computation (the work-precision study itself: test_work_precision.py). No timing is
 asserted."""
 
+import os
+import subprocess
+import sys
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -304,3 +308,20 @@ def test_engine_profile_refuses_an_adaptive_solver_before_compute(monkeypatch):
                                          r"adaptive solver \(profile it end to end with "
                                          r"simulate\)$"):
         taichi_star.EngineProfile([StarParams()], SolverConfig.preset("accurate"))
+
+
+def test_the_compile_probe_imports_the_study_from_where_this_process_does(tmp_path):
+    """A process started as `python -c` in the checkout (its path's first entry empty: the
+    current folder) gives a fresh process in another folder, under the probe's PYTHONPATH, the
+    bench study as it named it, from the same file. Installed, the probe had put the taichi_star
+    package folder itself on PYTHONPATH (an audit, 2026-12)."""
+    inner = f"import {bench.__name__} as b; print(b.__file__)"
+    outer = (f"import os, subprocess, sys; import {bench.__name__} as bench; "
+             f"run = subprocess.run([sys.executable, '-c', {inner!r}], cwd={str(tmp_path)!r}, "
+             f"env=dict(os.environ, PYTHONPATH=bench.import_path()), capture_output=True, "
+             f"text=True); print(run.stdout.strip() or run.stderr[-500:])")
+    environment = {name: value for name, value in os.environ.items() if name != "PYTHONPATH"}
+    run = subprocess.run([sys.executable, "-c", outer], cwd=Path(bench.__file__).parents[1],
+                         env=environment, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert Path(run.stdout.strip().splitlines()[-1]).resolve() == Path(bench.__file__).resolve()
