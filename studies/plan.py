@@ -13,8 +13,8 @@ motion primitives, open loop (a plan made at the start, fired blindly) and close
 (`taichi_star.lookahead.lookahead_drive`): every cycle each robot's present is copied into one
 robot per candidate (the glide and --lookahead-gaits, default all 255), each fires its gait,
 swims the cycle and coasts --settle-cycles cycles, and the robot takes the future that comes to
-rest nearest its goal (stopping where the glide does best); no primitives, judged as the
-planner's. It writes lookahead.csv, lookahead_cycles.csv, lookahead_paths.csv and
+rest nearest its goal, stopping once the glide comes to rest within --tolerance; no primitives,
+judged as the planner's. It writes lookahead.csv, lookahead_cycles.csv, lookahead_paths.csv and
 controllers.csv (open, closed and lookahead side by side), and draws its paths in plan.png.
 
 Goals: --directions points at --distance mm in every direction (0°, 45°, ... for 8), plus one
@@ -87,6 +87,7 @@ class MeasurementFlag(argparse.Action):
 
 CONTROLLER_STYLES = {"open": "--", "closed": "-", "lookahead": "-."}
 """How plan.png draws each controller's path."""
+CONTROLLER_LABELS = {"open": "open loop", "closed": "closed loop", "lookahead": "lookahead"}
 
 
 def plot_paths(paths_csv, plan_csv, png_path, lookahead=None) -> Path:
@@ -111,7 +112,7 @@ def plot_paths(paths_csv, plan_csv, png_path, lookahead=None) -> Path:
             row = plan[(plan["goal"] == goal.goal) & (plan["mode"] == mode)].iloc[0]
             controlled = path[path["controlled"]]
             ax.plot(controlled["x_mm"], controlled["y_mm"], CONTROLLER_STYLES[mode],
-                    color=colour, lw=1.1, label=None if i else f"{mode}")
+                    color=colour, lw=1.1, label=None if i else CONTROLLER_LABELS[mode])
             ax.plot(controlled["x_mm"].iloc[-1], controlled["y_mm"].iloc[-1],
                     "o" if row["reached"] else "x", color=colour, ms=4)
             gliding = path[path["t_s"] >= controlled["t_s"].iloc[-1]]
@@ -125,7 +126,8 @@ def plot_paths(paths_csv, plan_csv, png_path, lookahead=None) -> Path:
     errors = plan.groupby("mode")["final_error_mm"].mean()
     styles = {"--": "dashed", "-": "solid", "-.": "dash-dotted"}
     ax.set_title(f"Paths to {len(goals)} goals (stars): "
-                 + ", ".join(f"{mode} {styles[CONTROLLER_STYLES[mode]]}" for mode in modes)
+                 + ", ".join(f"{CONTROLLER_LABELS[mode]} {styles[CONTROLLER_STYLES[mode]]}"
+                             for mode in modes)
                  + ", gliding dotted\nmean final error: "
                  + ", ".join(f"{mode} {errors.get(mode, np.nan):.1f} mm" for mode in modes)
                  + "; o = reached, x = not", fontsize=9)
