@@ -17,22 +17,20 @@ import numpy as np
 import pandas as pd
 
 import taichi_star as ts
+from taichi_star.lookahead import every_gait
 
 quick = bool(os.environ.get("EXAMPLE_QUICK"))
 params = ts.StarParams.preset("paper")
 solver = ts.SolverConfig(dt=5e-3 if quick else 1e-3)
 goal_mm = np.array([-20.0, -30.0])                   # from the start, in the robot's frame
-# every gait as the actuators it fires (row k: the bits of k), the glide (k = 0) first
-masks = ((np.arange(256)[:, None] >> np.arange(8)) & 1).astype(bool)
-if quick:
-    masks = masks[[0, 1, 2, 4, 8, 16, 32, 64, 128]]
-names = ["+".join(f"A{m + 1}" for m in np.flatnonzero(mask)) or "none" for mask in masks]
+# the glide and every gait (quick: the glide and the eight single actuators)
+names = ["none"] + [f"A{m}" for m in range(1, 9)] if quick else every_gait()
 
-robots = ts.Simulator([params] * (1 + len(masks)), solver)   # the robot, then its candidates
+robots = ts.Simulator([params] * (1 + len(names)), solver)   # the robot, then its candidates
 rows = []
 for period in range(1, 3 if quick else 5):
     robots.copy_state(0)                                     # each candidate: the robot now
-    robots.fire(np.vstack([np.zeros(8, bool), masks]))       # its own gait (the robot: none)
+    robots.fire(["none"] + names)                            # its own gait (the robot: none)
     robots.advance(params.period)
     state = robots.state().iloc[1:]
     ends = state[["centroid_x_mm", "centroid_y_mm"]].to_numpy()

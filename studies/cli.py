@@ -39,7 +39,7 @@ from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, MAX_LOCAL_WO
                                executor_for, has_chunks, stored_chunk_size, write_atomic)
 from taichi_star.experiment import PAPER_GAITS
 from taichi_star.extras import require
-from taichi_star.gait import Gait
+from taichi_star.gait import Gait, all_gaits
 from taichi_star.output import column_unit, column_units, parquet_bytes, read_provenance
 from taichi_star.provenance import table_stamp
 from taichi_star.sensitivities import parse_directions
@@ -775,7 +775,7 @@ def resolve_gaits(text: str, flag: str = "--gaits") -> List[str]:
     if key == "paper":
         return list(PAPER_GAITS)
     if key == "all":
-        return [Gait.from_mask([bits >> m & 1 for m in range(8)]).name for bits in range(1, 256)]
+        return all_gaits()
     gaits = []
     for item in text.split(","):
         try:

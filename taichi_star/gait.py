@@ -17,7 +17,7 @@ import numpy as np
 from .checks import check_flag, is_whole
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
-__all__ = ["Gait", "symmetry_classes", "N_ACTUATORS"]
+__all__ = ["Gait", "all_gaits", "symmetry_classes", "N_ACTUATORS"]
 
 N_ACTUATORS = 8
 NO_GAIT = "none"
@@ -144,6 +144,12 @@ def canonical_gait(gait: Union[str, Gait]) -> str:
     return Gait.parse(gait).name
 
 
+def all_gaits() -> List[str]:
+    """The 255 non-empty gaits by their actuators' bits (A1, A2, A1+A2, A3, ...)."""
+    return [Gait.from_mask([(bits >> m) & 1 for m in range(N_ACTUATORS)]).name
+            for bits in range(1, 1 << N_ACTUATORS)]
+
+
 def symmetry_classes() -> List[Tuple[str, List[str]]]:
     """The 255 non-empty gaits grouped under the octagon's 16 symmetries (29 classes).
 
@@ -151,8 +157,8 @@ def symmetry_classes() -> List[Tuple[str, List[str]]]:
     (size, bits) order, members are sorted the same way."""
     seen = set()
     classes = []
-    for bits in range(1, 1 << N_ACTUATORS):
-        gait = Gait.from_mask([(bits >> m) & 1 for m in range(N_ACTUATORS)])
+    for name in all_gaits():
+        gait = Gait.parse(name)
         if gait in seen:
             continue
         members = gait.symmetric_images

@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 
 from .checks import check_flag
-from .gait import N_ACTUATORS, NO_GAIT, Gait
+from .gait import N_ACTUATORS, NO_GAIT, Gait, all_gaits
 from .params import SolverConfig, StarParams
 from .planner import PLAN_COLUMNS, SETTLE_CYCLES, check_drive
 from .runtime import check_arch
@@ -53,9 +53,9 @@ every controller compared reached (NaN where there are none)."""
 
 
 def every_gait() -> list:
-    """The glide ("none") and the 255 gaits, A1 first: every candidate a lookahead can fire."""
-    masks = (np.arange(2 ** N_ACTUATORS)[:, None] >> np.arange(N_ACTUATORS)) & 1
-    return [Gait.from_mask(mask).name for mask in masks.astype(bool)]
+    """The glide ("none") and the 255 gaits (`gait.all_gaits`): every candidate a lookahead
+    can fire."""
+    return [NO_GAIT] + all_gaits()
 
 
 def _candidate_masks(gaits: Sequence[str]) -> tuple:
