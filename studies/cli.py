@@ -1044,7 +1044,8 @@ def interrupted() -> str:
         return (f"the finished chunks in {stores[0]} are kept: the same command with --resume "
                 f"continues the run")
     records = [out.resume_records for out in OPENED if out.resume_records is not None
-               and out.resume_records.is_dir() and any(out.resume_records.rglob("*.json"))]
+               and out.resume_records.is_dir() and any(
+                   any(out.resume_records.rglob(pattern)) for pattern in ("*.json", "*.npz"))]
     if records:
         return (f"the finished work in {records[0]} is kept: the same command with --resume "
                 f"continues the run")
@@ -1070,8 +1071,9 @@ class Output:
         self.run_store: Optional[Path] = None
         """The run store of the run's finished chunks, if it has one (`run_store`)."""
         self.resume_records: Optional[Path] = None
-        """A folder of a study's own records of finished work (JSON files) that --resume
-        reads back (model_select's done/), if it keeps one: `interrupted` names it."""
+        """A folder of a study's own records of finished work (JSON files, or .npz
+        checkpoints) that --resume reads back (model_select's done/, plan's resume/), if it
+        keeps one: `interrupted` names it."""
         OPENED.append(self)
 
     def remove_if_unused(self):

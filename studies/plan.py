@@ -5,7 +5,7 @@ motion primitives, open loop (a plan made at the start, fired blindly) and close
     python -m studies plan [--primitives CSV] [--distance 50] [--directions 8] [--far 150]
                            [--tolerance 5] [--max-cycles 25] [--cycles 5]
                            [--glide-cycles 4] [--settle-cycles 4]
-                           [--lookahead [--lookahead-gaits all|A1,A1+A2,...]]
+                           [--lookahead [--lookahead-gaits all|A1,A1+A2,...] [--resume]]
                            [--preset paper|accurate|identified] [--set NAME=VALUE ...] [--dt S]
                            [--arch cpu|gpu] [--out DIR] [--quick]
 
@@ -16,6 +16,10 @@ swims the cycle and coasts --settle-cycles cycles, and the robot takes the futur
 rest nearest its goal, stopping once the glide comes to rest within --tolerance; no primitives,
 judged as the planner's. It writes lookahead.csv, lookahead_cycles.csv, lookahead_paths.csv and
 controllers.csv (open, closed and lookahead side by side), and draws its paths in plan.png.
+After every decision the lookahead so far is written to resume/lookahead.npz in --out (removed
+once its tables are written): a run killed or stopped with Ctrl-C is continued from its last
+decision, bit for bit, by the same command with --resume (the primitives' loops, minutes at
+most, run again to the same bits); without --resume a run into that folder is refused.
 
 Goals: --directions points at --distance mm in every direction (0°, 45°, ... for 8), plus one
 --far mm straight behind the robot (0: none). The primitive table is read from --primitives
@@ -48,6 +52,7 @@ one of settling.
 from __future__ import annotations
 
 import argparse
+import functools
 import hashlib
 from pathlib import Path
 from typing import Optional
@@ -172,7 +177,49 @@ def build_parser():
                         help=f"the lookahead's candidates besides the glide: "
                              f"{cli.GAITS_HELP} (default all; --quick: the eight single "
                              f"actuators)")
+    parser.add_argument("--resume", action="store_true",
+                        help="with --lookahead and --out: continue the lookahead of the run in "
+                             "--out from its last decision (resume/lookahead.npz)")
     return parser
+
+
+LOOKAHEAD_CHECKPOINT = "resume/lookahead.npz"
+"""Where in --out the lookahead keeps its checkpoint until its tables are written."""
+
+
+def open_checkpoint(out: "cli.Output", resume: bool, check) -> Path:
+    """The lookahead's checkpoint in the run's folder, checked before any compute: one there
+    (a run killed) is continued with --resume, whose lookahead `check(checkpoint=...)` must
+    accept (StudyArgumentError naming --resume otherwise), and refused without it, as the
+    fresh run would write over it; --resume with none says so and starts afresh."""
+    checkpoint = out.folder / LOOKAHEAD_CHECKPOINT
+    out.resume_records = checkpoint.parent
+    if checkpoint.exists() and not resume:
+        raise cli.StudyArgumentError(f"--out {out.folder} holds an unfinished lookahead "
+                                     f"({checkpoint}): --resume continues it; remove that file "
+                                     f"to start afresh")
+    if resume and checkpoint.exists():
+        try:
+            check(checkpoint=checkpoint)
+        except ValueError as error:
+            raise cli.StudyArgumentError(f"--resume: {error}") from None
+    elif resume:
+        print(f"--resume: no lookahead checkpoint in {out.folder} ({LOOKAHEAD_CHECKPOINT}): "
+              f"the lookahead starts from its first decision")
+    return checkpoint
+
+
+def close_checkpoint(checkpoint: Path):
+    """Remove the checkpoint and its folder once the lookahead's tables are written (a
+    leftover would refuse the next run into --out): a line says where that fails."""
+    try:
+        checkpoint.unlink(missing_ok=True)
+        if checkpoint.parent.is_dir() and not any(checkpoint.parent.iterdir()):
+            checkpoint.parent.rmdir()
+    except OSError as error:
+        print(f"could not remove the lookahead's checkpoint {checkpoint} "
+              f"({error.strerror or error}): its tables are written; remove it before the next "
+              f"run into this folder")
 
 
 def read_primitive_model(path, period: float, dt: float,
@@ -280,8 +327,9 @@ def main(argv=None):
                             args.settle_cycles, lookahead_gaits, frames, args.arch)
         except ValueError as error:
             raise cli.StudyArgumentError(f"--lookahead: {error}") from None
-    elif args.lookahead_gaits is not None:
-        raise cli.StudyArgumentError("--lookahead-gaits: only with --lookahead")
+    elif args.lookahead_gaits is not None or args.resume:
+        flag = "--lookahead-gaits" if args.lookahead_gaits is not None else "--resume"
+        raise cli.StudyArgumentError(f"{flag}: only with --lookahead")
     if args.primitives is not None:
         model = read_primitive_model(args.primitives, base.period, solver.dt, base)
     else:  # the primitives' longest run, as that study checks it
@@ -297,6 +345,10 @@ def main(argv=None):
                             **({"primitives_sha256": hashlib.sha256(
                                 Path(args.primitives).read_bytes()).hexdigest()}
                                if args.primitives else {})})
+    if args.lookahead:
+        checkpoint = open_checkpoint(out, args.resume, functools.partial(
+            check_lookahead, goals, base, solver, args.tolerance, args.max_cycles,
+            args.settle_cycles, lookahead_gaits, frames, args.arch))
     if args.primitives is None:
         primitives, _ = measure_primitives(base, solver, cycles=args.cycles,
                                            first_cycle=PRIMITIVES_FIRST_CYCLE, arch=args.arch,
@@ -320,12 +372,14 @@ def main(argv=None):
         ahead, ahead_cycles, ahead_path = lookahead_drive(
             goals, base, solver, tolerance_mm=args.tolerance, max_cycles=args.max_cycles,
             settle_cycles=args.settle_cycles, gaits=lookahead_gaits, frames_per_cycle=frames,
-            arch=args.arch, progress=not args.no_progress)
+            arch=args.arch, progress=not args.no_progress,
+            checkpoint=out.path(LOOKAHEAD_CHECKPOINT))
         lookahead = (out.write_csv(ahead_path, "lookahead_paths.csv"),
                      out.write_csv(ahead, "lookahead.csv"))
         out.write_csv(ahead_cycles, "lookahead_cycles.csv")
         controllers = out.write_csv(compare_controllers(pd.concat([summary, ahead])),
                                     "controllers.csv")
+        close_checkpoint(checkpoint)
     out.wrote(plot_paths(paths_csv, plan_csv, out.path("plan.png"), lookahead))
     out.report()
     with pd.option_context("display.width", 160, "display.max_columns", 20):

@@ -12,22 +12,28 @@ may be the glide too. No table of motion primitives: a candidate is the robot's 
 simulated, its momentum, turning and hot actuators included, so a goal between the gaits'
 directions is approached by whatever sequence the model itself finds best, one firing at a
 time. The price is 1 + settle_cycles periods of every candidate per decision: G goals and K
-candidates make a batch of G·(1 + K) robots.
+candidates make a batch of G·(1 + K) robots, and a run of many goals takes hours: with
+`checkpoint` the run so far is written to a file after every decision, and a call with the same
+arguments continues from it bit for bit.
 """
 
 from __future__ import annotations
 
-from typing import Optional, Sequence
+import io
+import json
+from dataclasses import dataclass
+from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 import pandas as pd
 
-from .checks import check_flag
+from .checks import check_flag, warn_user
 from .gait import N_ACTUATORS, NO_GAIT, Gait, all_gaits
 from .params import SolverConfig, StarParams
 from .planner import PLAN_COLUMNS, SETTLE_CYCLES, check_drive
+from .provenance import code_version, file_path, write_atomic
 from .runtime import check_arch
-from .simulator import Simulator
+from .simulator import Simulator, SimulatorSnapshot
 from .timegrid import check_work
 
 __all__ = ["lookahead_drive", "check_lookahead", "compare_controllers", "every_gait",
@@ -50,6 +56,12 @@ CONTROLLER_COLUMNS = ["mode", "goals", "reached", "mean_end_error_mm", "max_end_
 mean and largest distance to the goal at rest (end_error_mm) and when it stopped firing
 (final_error_mm), the cycles it fired, and the mean cycles to the goal over the goals that
 every controller compared reached (NaN where there are none)."""
+
+
+PATH_COLUMNS = ["goal", "mode", "t_s", "x_mm", "y_mm"]
+"""Columns of the path rows a lookahead gathers per period (`controlled` is added at the end)."""
+CHECKPOINT_FORMAT = 1
+"""The layout of a checkpoint file (`_write_checkpoint`); another is refused by name."""
 
 
 def every_gait() -> list:
@@ -81,16 +93,21 @@ def check_lookahead(goals_mm, params: StarParams = StarParams(),
                     solver: SolverConfig = SolverConfig(), tolerance_mm: float = 5.0,
                     max_cycles: int = 25, settle_cycles: int = SETTLE_CYCLES,
                     gaits: Optional[Sequence[str]] = None, frames_per_cycle: int = 10,
-                    arch: str = "cpu"):
+                    arch: str = "cpu", checkpoint=None):
     """(goals (G, 2), candidate names, candidate masks (K, 8)) of a `lookahead_drive` with
-    these arguments, or ValueError naming the one it refuses (`planner.check_drive`'s, gaits),
-    and for work that cannot finish (`timegrid.check_work` on the whole batch's steps: every
+    these arguments, or ValueError naming the one it refuses (`planner.check_drive`'s, gaits,
+    a checkpoint that is another lookahead's or none at all, or whose folder is missing), and
+    for work that cannot finish (`timegrid.check_work` on the whole batch's steps: every
     decision simulates 1 + settle_cycles periods of G·(1 + K) robots). No compute: a command
     line checks its input with this before starting."""
     goals = check_drive(goals_mm, params, solver, tolerance_mm, max_cycles, frames_per_cycle,
                         settle_cycles)
     names, masks = _candidate_masks(every_gait() if gaits is None else gaits)
     check_arch(arch)
+    if checkpoint is not None:
+        _read_checkpoint(checkpoint, _definition(goals, params, solver, tolerance_mm,
+                                                 max_cycles, settle_cycles, names,
+                                                 frames_per_cycle, arch), header_only=True)
     step = solver.dt_max if solver.adaptive else solver.dt
     check_work(f"max_cycles = {max_cycles} decisions of {1 + settle_cycles} periods of "
                f"{params.period:g} s, then {settle_cycles} of coasting, at {step:g}-s steps",
@@ -103,7 +120,7 @@ def lookahead_drive(goals_mm, params: StarParams = StarParams(),
                     solver: SolverConfig = SolverConfig(), tolerance_mm: float = 5.0,
                     max_cycles: int = 25, settle_cycles: int = SETTLE_CYCLES,
                     gaits: Optional[Sequence[str]] = None, frames_per_cycle: int = 10,
-                    arch: str = "cpu", progress: bool = False):
+                    arch: str = "cpu", progress: bool = False, checkpoint=None):
     """Drive one robot per goal by a one-firing lookahead over `gaits` (default `every_gait()`;
     the glide is always a candidate) with the full model (module docstring), in one Simulator of
     G·(1 + K) robots, until every controller has stopped or max_cycles have run, then coast
@@ -114,10 +131,25 @@ def lookahead_drive(goals_mm, params: StarParams = StarParams(),
     Returns (summary, cycles, path) as `planner.drive`'s, mode `LOOKAHEAD_MODE`: summary
     `planner.PLAN_COLUMNS`, cycles `LOOKAHEAD_CYCLE_COLUMNS`, path (goal, mode, t_s,
     controlled, x_mm, y_mm) recorded frames_per_cycle times per cycle. ValueError for bad
-    arguments or work that cannot finish (`check_lookahead`), before any compute."""
+    arguments or work that cannot finish (`check_lookahead`), before any compute.
+
+    checkpoint: the path of a file (.npz) the run so far is written to after every decision,
+    whole or not at all (the robots' states, the candidates' included, about 31 kB a robot of
+    the paper model, and the tables so far). Where it exists, the call continues from it,
+    bit for bit as the run it belongs to would have gone on; one of another lookahead (other
+    goals, parameters, solver or arguments) is refused naming what differs, one written by
+    another version of the code continues with a RuntimeWarning naming both. The file stays
+    after the run: remove it once the results are kept (a call with it again redoes only the
+    last decision's coast)."""
     goals, names, masks = check_lookahead(goals_mm, params, solver, tolerance_mm, max_cycles,
-                                          settle_cycles, gaits, frames_per_cycle, arch)
+                                          settle_cycles, gaits, frames_per_cycle, arch,
+                                          checkpoint)
     check_flag("progress", progress)
+    definition = saved = None
+    if checkpoint is not None:
+        definition = _definition(goals, params, solver, tolerance_mm, max_cycles,
+                                 settle_cycles, names, frames_per_cycle, arch)
+        saved = _read_checkpoint(checkpoint, definition)
     count, candidates = len(goals), len(masks)
     batch = count * (1 + candidates)
     period = params.period
@@ -133,7 +165,16 @@ def lookahead_drive(goals_mm, params: StarParams = StarParams(),
     fired = np.zeros(count, dtype=np.int64)
     boundaries, cycle_rows, paths = [], [], []
     interval = period / frames_per_cycle
-    for cycle in range(max_cycles + 1):
+    first_cycle = 0
+    if saved is not None:  # the run so far, as the checkpoint holds it
+        simulator.load(saved.snapshot)
+        first_cycle = saved.next_cycle
+        stopped, stop_cycle = saved.arrays["stopped"], saved.arrays["stop_cycle"]
+        final_error, fired = saved.arrays["final_error"], saved.arrays["fired"]
+        boundaries = list(saved.arrays["boundaries"])
+        cycle_rows = [saved.table("cycles", LOOKAHEAD_CYCLE_COLUMNS)]
+        paths = [saved.table("paths", PATH_COLUMNS)]
+    for cycle in range(first_cycle, max_cycles + 1):
         state = simulator.state().iloc[:count]
         position = state[["centroid_x_mm", "centroid_y_mm"]].to_numpy()
         boundaries.append(position)
@@ -193,6 +234,12 @@ def lookahead_drive(goals_mm, params: StarParams = StarParams(),
             simulator.copy_state(int(source[g]), to=int(g))
         fired += choice > 0
         paths.append(_relabelled(frames, source))
+        if checkpoint is not None:
+            _write_checkpoint(checkpoint, definition, cycle + 1, simulator.save(), {
+                "stopped": stopped, "stop_cycle": stop_cycle, "final_error": final_error,
+                "fired": fired, "boundaries": np.stack(boundaries),
+                **_columns("cycles", pd.concat(cycle_rows, ignore_index=True)),
+                **_columns("paths", pd.concat(paths, ignore_index=True))})
     for _ in range(settle_cycles):  # the robots coast on to rest, no controller firing
         frames = simulator.advance(period, record_interval_s=interval, progress=progress)
         paths.append(_relabelled(frames, robots))
@@ -217,6 +264,110 @@ def lookahead_drive(goals_mm, params: StarParams = StarParams(),
     path = path.sort_values(["goal", "t_s"], kind="stable").reset_index(drop=True)
     return (summary, pd.concat(cycle_rows, ignore_index=True)[LOOKAHEAD_CYCLE_COLUMNS],
             path[["goal", "mode", "t_s", "controlled", "x_mm", "y_mm"]])
+
+
+def _definition(goals: np.ndarray, params: StarParams, solver: SolverConfig,
+                tolerance_mm, max_cycles, settle_cycles, names: Sequence[str],
+                frames_per_cycle, arch: str) -> Dict:
+    """What a lookahead's result depends on, as JSON values read back (a checkpoint continues
+    only a run of the same; floats by repr, to the last bit)."""
+    return json.loads(json.dumps({
+        "goals_mm": goals.tolist(), "params": repr(params), "solver": repr(solver),
+        "tolerance_mm": float(tolerance_mm), "max_cycles": int(max_cycles),
+        "settle_cycles": int(settle_cycles), "gaits": list(names),
+        "frames_per_cycle": int(frames_per_cycle), "arch": arch}))
+
+
+def _columns(prefix: str, table: pd.DataFrame) -> Dict[str, np.ndarray]:
+    """A table's columns as checkpoint arrays "prefix:column" (text as NumPy text: no pickle)."""
+    return {f"{prefix}:{name}": table[name].to_numpy(
+        dtype=None if table[name].dtype.kind in "biuf" else str) for name in table.columns}
+
+
+@dataclass(frozen=True)
+class _Checkpoint:
+    """A checkpoint read back: the cycle the run goes on at, the Simulator's state, the
+    bookkeeping arrays (`_write_checkpoint`)."""
+
+    next_cycle: int
+    snapshot: Optional[SimulatorSnapshot]
+    arrays: Dict[str, np.ndarray]
+
+    def table(self, prefix: str, columns: List[str]) -> pd.DataFrame:
+        return pd.DataFrame({name: self.arrays[f"{prefix}:{name}"] for name in columns})
+
+
+def _write_checkpoint(path, definition: Dict, next_cycle: int, snapshot: SimulatorSnapshot,
+                      arrays: Dict[str, np.ndarray]):
+    """The run so far to `path`, whole or not at all (`provenance.write_atomic`): a JSON header
+    (format, definition, the code's version, next cycle, the snapshot's header) and the
+    snapshot's fields ("state:NAME") beside the bookkeeping arrays."""
+    header = {"format": CHECKPOINT_FORMAT, "definition": definition, "code": code_version(),
+              "next_cycle": next_cycle, "snapshot": snapshot.header()}
+    archive = io.BytesIO()
+    np.savez(archive, __lookahead__=np.array(json.dumps(header)), **arrays,
+             **{f"state:{name}": field for name, field in snapshot.fields.items()})
+    write_atomic(path, archive.getvalue(), failure=OSError)
+
+
+def _read_checkpoint(checkpoint, definition: Dict, header_only: bool = False
+                     ) -> Optional[_Checkpoint]:
+    """The checkpoint at `checkpoint` for a lookahead of `definition`, None where no file is
+    there (its folder must be); with header_only its arrays, state and code are not read.
+    ValueError naming `checkpoint`: not a path, a folder, no such folder, not a lookahead's
+    checkpoint (damaged, another file), another format or another lookahead (the first
+    entries that differ). A checkpoint of another code version: RuntimeWarning naming both."""
+    path = file_path(checkpoint, "path of the lookahead's checkpoint file (.npz)")
+    if path.is_dir():
+        raise ValueError(f"checkpoint {str(path)!r} is a folder: give the checkpoint's file, "
+                         f"e.g. {str(path / 'lookahead.npz')!r}")
+    if not path.exists():
+        if not path.parent.is_dir():
+            raise ValueError(f"checkpoint {str(path)!r}: its folder {str(path.parent)!r} does "
+                             f"not exist")
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            header = json.loads(str(archive["__lookahead__"]))
+            arrays = {} if header_only else {name: archive[name] for name in archive.files
+                                             if name != "__lookahead__"}
+        next_cycle = int(header["next_cycle"])
+        saved_format, saved, code = header["format"], dict(header["definition"]), header["code"]
+        snapshot = None if header_only else SimulatorSnapshot.from_header(
+            {name[len("state:"):]: field for name, field in arrays.items()
+             if name.startswith("state:")}, header["snapshot"])
+    except OSError as error:
+        raise ValueError(f"checkpoint {str(path)!r}: cannot read it "
+                         f"({error.strerror or error})") from None
+    except Exception as error:  # noqa: BLE001 -- whatever a foreign file makes numpy raise
+        raise ValueError(f"checkpoint {str(path)!r}: not a lookahead's checkpoint "
+                         f"({type(error).__name__}; a damaged file, or another's)") from None
+    if saved_format != CHECKPOINT_FORMAT:
+        raise ValueError(f"checkpoint {str(path)!r}: format {saved_format!r}, this version "
+                         f"reads {CHECKPOINT_FORMAT}")
+    differing = [key for key in definition if saved.get(key) != definition[key]]
+    if differing or set(saved) - set(definition):
+        named = differing[0] if differing else sorted(set(saved) - set(definition))[0]
+        raise ValueError(f"checkpoint {str(path)!r} belongs to another lookahead: {named} is "
+                         f"{saved.get(named)!r} there, {definition.get(named)!r} here (remove "
+                         f"it or give another file to start afresh)")
+    count = len(definition["goals_mm"])
+    shapes = {"stopped": (count,), "stop_cycle": (count,), "final_error": (count,),
+              "fired": (count,), "boundaries": (next_cycle, count, 2)}
+    missing = [] if header_only else [
+        name for name in [*shapes, *(f"cycles:{column}" for column in LOOKAHEAD_CYCLE_COLUMNS),
+                          *(f"paths:{column}" for column in PATH_COLUMNS)]
+        if name not in arrays or name in shapes and arrays[name].shape != shapes[name]]
+    if not 1 <= next_cycle <= definition["max_cycles"] or missing:
+        raise ValueError(f"checkpoint {str(path)!r}: a damaged file (next cycle {next_cycle} "
+                         f"of at most {definition['max_cycles']}"
+                         f"{', ' + missing[0] + ' missing or misshapen' if missing else ''})")
+    own = None if header_only else code_version()
+    if own is not None and code != own:
+        warn_user(f"checkpoint {str(path)!r} was written by another version of the code "
+                  f"({code}); it goes on under this one ({own}), so the run is not one code's "
+                  f"bit for bit")
+    return _Checkpoint(next_cycle, snapshot, arrays)
 
 
 def _relabelled(frames: pd.DataFrame, source: np.ndarray) -> pd.DataFrame:

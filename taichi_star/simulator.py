@@ -136,6 +136,25 @@ class SimulatorSnapshot:
     running (`Simulator._shown_s`); empty in a snapshot of fixed steps or one written before
     it was recorded."""
 
+    def header(self) -> Dict[str, object]:
+        """Everything but the fields, as JSON values (what `write` stores beside them)."""
+        return {"engine_key": self.engine_key, "n_instances": self.n_instances, "dt": self.dt,
+                "params": list(self.params), "solver": dict(self.solver),
+                "behind": list(self.behind), "shown_s": list(self.shown_s)}
+
+    @classmethod
+    def from_header(cls, fields: Dict[str, np.ndarray], header: Dict) -> "SimulatorSnapshot":
+        """The snapshot of `fields` and a `header()` read back (KeyError, TypeError or
+        ValueError for a header that is not one; `read` says which file)."""
+        return cls(fields=fields, engine_key=str(header["engine_key"]),
+                   n_instances=int(header["n_instances"]), dt=float(header["dt"]),
+                   params=tuple({str(name): str(text) for name, text in row.items()}
+                                for row in header.get("params", ())),
+                   solver={str(name): str(text)
+                           for name, text in header.get("solver", {}).items()},
+                   behind=tuple(float(lag) for lag in header.get("behind", ())),
+                   shown_s=tuple(float(time) for time in header.get("shown_s", ())))
+
     def write(self, path) -> Path:
         """Save to an .npz file (arrays plus a JSON header; ".npz" is added to a path without
         it), whole or not at all (`provenance.write_atomic`: a kill or a full disk leaves a
@@ -145,12 +164,8 @@ class SimulatorSnapshot:
             raise ValueError(f"path {str(path)!r} is a folder: give the snapshot's file, e.g. "
                              f"{str(path / 'state.npz')!r}")
         path = path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
-        header = json.dumps({"engine_key": self.engine_key, "n_instances": self.n_instances,
-                             "dt": self.dt, "params": list(self.params),
-                             "solver": dict(self.solver), "behind": list(self.behind),
-                             "shown_s": list(self.shown_s)})
         archive = io.BytesIO()
-        np.savez(archive, __header__=np.array(header), **self.fields)
+        np.savez(archive, __header__=np.array(json.dumps(self.header())), **self.fields)
         # an OSError all the same, but naming the file asked for, not the temporary beside it
         write_atomic(path, archive.getvalue(), failure=OSError)
         return path
@@ -170,14 +185,7 @@ class SimulatorSnapshot:
             with np.load(path, allow_pickle=False) as archive:
                 header = json.loads(str(archive["__header__"]))
                 fields = {name: archive[name] for name in archive.files if name != "__header__"}
-            snapshot = cls(fields=fields, engine_key=str(header["engine_key"]),
-                           n_instances=int(header["n_instances"]), dt=float(header["dt"]),
-                           params=tuple({str(name): str(text) for name, text in row.items()}
-                                        for row in header.get("params", ())),
-                           solver={str(name): str(text)
-                                   for name, text in header.get("solver", {}).items()},
-                           behind=tuple(float(lag) for lag in header.get("behind", ())),
-                           shown_s=tuple(float(time) for time in header.get("shown_s", ())))
+            snapshot = cls.from_header(fields, header)
         except OSError as error:
             raise ValueError(f"snapshot {path}: cannot read it ({error.strerror or error})") \
                 from None

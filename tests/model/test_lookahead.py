@@ -1,13 +1,18 @@
 """The full model's lookahead controller (`taichi_star.lookahead`): what it reports is what a
 robot firing its choices alone does, bit for bit; each choice is the candidate that comes to
-rest nearest the goal, as candidates simulated one by one from the same present say; its
-arguments are refused before compute; `compare_controllers` counts and averages as stated."""
+rest nearest the goal, as candidates simulated one by one from the same present say; a run
+killed after a decision continues from its checkpoint bit for bit, and a checkpoint of another
+run is refused; its arguments are refused before compute; `compare_controllers` counts and
+averages as stated."""
+
+import shutil
 
 import numpy as np
 import pandas as pd
 import pytest
 
 import taichi_star as ts
+import taichi_star.lookahead as lookahead_module
 from taichi_star.lookahead import (CONTROLLER_COLUMNS, LOOKAHEAD_CYCLE_COLUMNS,
                                    compare_controllers, every_gait, lookahead_drive)
 from taichi_star.planner import PLAN_COLUMNS
@@ -19,10 +24,46 @@ GOALS = np.array([[-8.0, -3.0], [6.0, 0.5]])
 SETTLE = 1
 
 
+ARGUMENTS = {"tolerance_mm": 1.0, "max_cycles": 3, "settle_cycles": SETTLE, "gaits": SINGLES,
+             "frames_per_cycle": 3}
+"""`driven`'s run: 3 decisions (2 advances each: the period, the coast), then a settling one."""
+
+
 @pytest.fixture(scope="module")
 def driven():
-    return lookahead_drive(GOALS, PARAMS, SOLVER, tolerance_mm=1.0, max_cycles=3,
-                           settle_cycles=SETTLE, gaits=SINGLES, frames_per_cycle=3)
+    return lookahead_drive(GOALS, PARAMS, SOLVER, **ARGUMENTS)
+
+
+def counted_run(checkpoint, monkeypatch, stop_at=None):
+    """(`driven`'s run with `checkpoint`, how many advances its Simulator made); with
+    `stop_at`, stopped by a KeyboardInterrupt at the start of that advance (a kill: nothing
+    after it runs)."""
+    real = ts.Simulator.advance
+    calls = []
+
+    def advance(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == stop_at:
+            raise KeyboardInterrupt
+        return real(self, *args, **kwargs)
+
+    with monkeypatch.context() as patch:
+        patch.setattr(ts.Simulator, "advance", advance)
+        return lookahead_drive(GOALS, PARAMS, SOLVER, checkpoint=checkpoint, **ARGUMENTS), \
+            len(calls)
+
+
+def killed_run(checkpoint, monkeypatch, advances: int):
+    with pytest.raises(KeyboardInterrupt):
+        counted_run(checkpoint, monkeypatch, stop_at=advances)
+
+
+@pytest.fixture(scope="module")
+def checkpoint_after_one_decision(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("checkpoint")
+    with pytest.MonkeyPatch.context() as patch:
+        killed_run(folder / "run.npz", patch, advances=3)
+    return folder / "run.npz"
 
 
 def replay(gaits, coast):
@@ -100,6 +141,95 @@ def test_it_stops_once_the_glide_comes_to_rest_within_the_tolerance(tolerance, s
     assert cycles["gait"].iloc[1] == ("none" if stops else "A1+A3")
 
 
+# killed in the second decision, and in the coast after the last (its checkpoint's decision
+# fires nothing: every controller stopped at max_cycles)
+@pytest.mark.parametrize("advances, next_cycle", [(3, 1), (7, 3)])
+def test_a_killed_run_continues_from_its_checkpoint_bit_for_bit(driven, tmp_path, monkeypatch,
+                                                                advances, next_cycle):
+    checkpoint = tmp_path / "run.npz"
+    killed_run(checkpoint, monkeypatch, advances)
+    with np.load(checkpoint) as archive:
+        assert f'"next_cycle": {next_cycle},' in str(archive["__lookahead__"])
+    continued, advanced = counted_run(checkpoint, monkeypatch)
+    for table, expected in zip(continued, driven):
+        pd.testing.assert_frame_equal(table, expected)
+    # the decisions before the checkpoint are not made again (7 advances in the whole run)
+    assert advanced == 7 - 2 * next_cycle
+
+
+def test_a_finished_runs_checkpoint_stays_and_gives_the_same_run_again(driven, tmp_path,
+                                                                       monkeypatch):
+    checkpoint = tmp_path / "run.npz"
+    _, advanced = counted_run(checkpoint, monkeypatch)
+    assert advanced == 7
+    with np.load(checkpoint) as archive:  # the last decision's, where every controller stopped
+        assert '"next_cycle": 3,' in str(archive["__lookahead__"])
+    again, advanced = counted_run(checkpoint, monkeypatch)
+    for table, expected in zip(again, driven):
+        pd.testing.assert_frame_equal(table, expected)
+    assert advanced == 1  # the settling coast alone
+
+
+def test_a_checkpoint_of_another_code_version_goes_on_with_a_warning(
+        driven, checkpoint_after_one_decision, tmp_path, monkeypatch):
+    checkpoint = shutil.copy(checkpoint_after_one_decision, tmp_path / "run.npz")
+    monkeypatch.setattr(lookahead_module, "code_version", lambda: {"version": "other"})
+    with pytest.warns(RuntimeWarning, match=r"another version of the code .*'commit'.* goes on "
+                                            r"under this one \({'version': 'other'}\)"):
+        continued = lookahead_drive(GOALS, PARAMS, SOLVER, checkpoint=checkpoint, **ARGUMENTS)
+    for table, expected in zip(continued, driven):
+        pd.testing.assert_frame_equal(table, expected)
+
+
+def without_entry(path, entry, tmp_path):
+    """A copy of the checkpoint whose archive lacks `entry` (the rest as it was)."""
+    with np.load(path) as archive:
+        arrays = {name: archive[name] for name in archive.files if name != entry}
+    copy = tmp_path / f"without_{entry.replace(':', '_')}.npz"
+    np.savez(copy, **arrays)
+    return copy
+
+
+@pytest.mark.parametrize("damage, message", [
+    ("cut", r"not a lookahead's checkpoint \(BadZipFile; a damaged file"),
+    ("fired", r"a damaged file \(next cycle 1 of at most 3, fired missing or misshapen\)"),
+    ("paths:t_s", r"paths:t_s missing"),
+    ("__lookahead__", r"not a lookahead's checkpoint \(KeyError"),
+])
+def test_a_damaged_checkpoint_is_refused_before_compute(checkpoint_after_one_decision, tmp_path,
+                                                        monkeypatch, damage, message):
+    if damage == "cut":  # the archive's directory, at its end, lost
+        checkpoint = tmp_path / "cut.npz"
+        checkpoint.write_bytes(checkpoint_after_one_decision.read_bytes()[:-100])
+    else:
+        checkpoint = without_entry(checkpoint_after_one_decision, damage, tmp_path)
+    monkeypatch.setattr(lookahead_module, "Simulator", forbidden_simulator)
+    with pytest.raises(ValueError, match=message):
+        lookahead_drive(GOALS, PARAMS, SOLVER, checkpoint=checkpoint, **ARGUMENTS)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"tolerance_mm": 1.5}, r"belongs to another lookahead: tolerance_mm is 1.0 there, 1.5 here"),
+    ({"gaits": SINGLES[:-1]}, r"belongs to another lookahead: gaits is \['none', 'A1', .*'A8'\] "
+                              r"there, \['none', .*'A7'\] here"),
+    ({"params": PARAMS.replace(alpha=PARAMS.alpha * (1 + 1e-16) + 1e-16)},
+     r"belongs to another lookahead: params is"),
+    ({"goals_mm": GOALS[::-1]}, r"belongs to another lookahead: goals_mm is"),
+])
+def test_a_checkpoint_of_another_run_is_refused_and_left_as_it_was(
+        checkpoint_after_one_decision, monkeypatch, kwargs, message):
+    before = checkpoint_after_one_decision.read_bytes()
+    monkeypatch.setattr(lookahead_module, "Simulator", forbidden_simulator)
+    arguments = {"goals_mm": GOALS, "params": PARAMS, "solver": SOLVER, **ARGUMENTS, **kwargs}
+    with pytest.raises(ValueError, match=message):
+        lookahead_drive(checkpoint=checkpoint_after_one_decision, **arguments)
+    assert checkpoint_after_one_decision.read_bytes() == before
+
+
+def forbidden_simulator(*args, **kwargs):
+    raise AssertionError("a Simulator was built")
+
+
 def test_every_gait_is_the_glide_and_the_255_gaits_once():
     gaits = every_gait()
     assert gaits[0] == "none" and len(gaits) == 256 == len(set(gaits))
@@ -117,11 +247,16 @@ def test_every_gait_is_the_glide_and_the_255_gaits_once():
     # past the step counter only with the lookahead's coasts (the planner's run is within it)
     ({"max_cycles": 2 * 10 ** 6}, r"max_cycles = 2000000 decisions of 2 periods .* the limit is"),
     ({"progress": "yes"}, r"progress must be True or False"),
+    ({"checkpoint": 3}, r"path must be the path of the lookahead's checkpoint file"),
+    ({"checkpoint": "{tmp}"}, r"checkpoint '.*' is a folder: give the checkpoint's file"),
+    ({"checkpoint": "{tmp}/no/run.npz"}, r"its folder '.*/no' does not exist"),
+    ({"checkpoint": "{tmp}/text.npz"}, r"not a lookahead's checkpoint \(ValueError; a damaged "),
 ])
-def test_arguments_are_refused_before_compute(monkeypatch, kwargs, message):
-    def forbidden(*args, **kw):
-        raise AssertionError("a Simulator was built")
-    monkeypatch.setattr("taichi_star.lookahead.Simulator", forbidden)
+def test_arguments_are_refused_before_compute(monkeypatch, tmp_path, kwargs, message):
+    monkeypatch.setattr(lookahead_module, "Simulator", forbidden_simulator)
+    (tmp_path / "text.npz").write_text("not an archive")
+    if isinstance(kwargs.get("checkpoint"), str):
+        kwargs = {"checkpoint": kwargs["checkpoint"].format(tmp=tmp_path)}
     arguments = {"params": PARAMS, "solver": SOLVER, "settle_cycles": SETTLE, **kwargs}
     with pytest.raises(ValueError, match=message):
         lookahead_drive(GOALS, **arguments)

@@ -109,6 +109,7 @@ STEP_LIMIT = "the limit is 2147483647 steps per instance"
     ("gait_design", ["--cycles", "1000000000"], "--cycles 1000000000 (3.15e+09 s)"),
     ("plan", ["--max-cycles", "1000000000"], "--max-cycles 1000000000 + --settle-cycles 1"),
     ("plan", ["--lookahead-gaits", "A1,A2"], "--lookahead-gaits: only with --lookahead"),
+    ("plan", ["--resume"], "--resume: only with --lookahead"),
     ("plan", ["--lookahead", "--lookahead-gaits", "A1,A9"], "--lookahead-gaits: "),
     # within the planner's step counter, past it with the lookahead's coasts
     ("plan", ["--lookahead", "--max-cycles", "2000000"],
@@ -490,6 +491,24 @@ def test_model_select_resume_needs_out(no_compute, tmp_path, monkeypatch, capsys
     error = capsys.readouterr().err
     assert "--resume: give --out (the folder of the run to continue)" in error, error
     assert "--run-dir" not in error and not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("resume", [False, True])
+def test_plan_keeps_a_lookahead_checkpoint_it_cannot_continue(no_compute, tmp_path, capsys,
+                                                               resume):
+    """A checkpoint in --out: without --resume it is not written over; with it, one the
+    lookahead refuses (here no checkpoint at all) is named. Both before any compute."""
+    checkpoint = tmp_path / "resume" / "lookahead.npz"
+    checkpoint.parent.mkdir()
+    checkpoint.write_bytes(b"not a checkpoint")
+    assert studies_main(["plan", "--lookahead", "--out", str(tmp_path), *QUICK,
+                         *(["--resume"] if resume else [])]) == 2
+    error = capsys.readouterr().err
+    expected = (f"--resume: checkpoint '{checkpoint}': not a lookahead's checkpoint" if resume
+                else f"--out {tmp_path} holds an unfinished lookahead ({checkpoint}): --resume "
+                     f"continues it; remove that file to start afresh")
+    assert expected in error and len(error.strip().splitlines()) == 1, error
+    assert checkpoint.read_bytes() == b"not a checkpoint"
 
 
 def test_reproduce_refuses_a_result_listed_twice(tmp_path, capsys):

@@ -115,13 +115,25 @@ def test_plan_quick_with_given_primitives(primitives_run, tmp_path):
             Path(primitives).read_bytes()).hexdigest() and sidecar["study"] == "plan"
 
 
+def lookahead_plan(primitives_run, out, *extra):
+    """`plan --quick --lookahead` on two goals into `out`: its exit code."""
+    return studies_main(["plan", *QUICK, "--primitives", str(primitives_run / "primitives.csv"),
+                         "--directions", "2", "--far", "0", "--lookahead", "--out", str(out),
+                         *extra])
+
+
+@pytest.fixture(scope="module")
+def lookahead_run(primitives_run, tmp_path_factory):
+    out = tmp_path_factory.mktemp("lookahead")
+    assert lookahead_plan(primitives_run, out) == 0
+    return out
+
+
 @pytest.mark.slow
 def test_plan_with_the_lookahead_drives_the_same_goals_and_compares_the_controllers(
-        primitives_run, tmp_path):
-    primitives = str(primitives_run / "primitives.csv")
-    code = studies_main(["plan", *QUICK, "--primitives", primitives, "--directions", "2",
-                         "--far", "0", "--lookahead", "--out", str(tmp_path)])
-    assert code == 0
+        lookahead_run):
+    tmp_path = lookahead_run
+    assert not (tmp_path / "resume").exists()  # the checkpoint is gone with its tables written
     plan = pd.read_csv(tmp_path / "plan.csv")
     ahead = pd.read_csv(tmp_path / "lookahead.csv")
     assert ahead["mode"].tolist() == ["lookahead"] * 2
@@ -143,6 +155,42 @@ def test_plan_with_the_lookahead_drives_the_same_goals_and_compares_the_controll
     assert set(paths["goal"]) == {0, 1} and (tmp_path / "plan.png").stat().st_size > 1000
     sidecar = json.loads((tmp_path / "lookahead.csv.json").read_text())
     assert sidecar["details"]["lookahead_gaits"] == [f"A{m}" for m in range(1, 9)]
+
+
+@pytest.mark.slow
+def test_plan_killed_in_the_lookahead_is_continued_by_resume_to_the_same_tables(
+        primitives_run, lookahead_run, tmp_path, monkeypatch, capsys):
+    import taichi_star.lookahead as lookahead_module
+    write = lookahead_module._write_checkpoint
+
+    def write_then_stop(*args, **kwargs):  # a kill right after the first decision is kept
+        write(*args, **kwargs)
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as patch:
+        patch.setattr(lookahead_module, "_write_checkpoint", write_then_stop)
+        assert lookahead_plan(primitives_run, tmp_path) == 130
+    error = capsys.readouterr().err
+    assert f"the finished work in {tmp_path / 'resume'} is kept: the same command with " \
+           f"--resume continues the run" in error, error
+    assert not (tmp_path / "lookahead.csv").exists()
+    # without --resume the checkpoint is not written over
+    assert lookahead_plan(primitives_run, tmp_path) == 2
+    assert "holds an unfinished lookahead" in capsys.readouterr().err
+    continued_from = []
+
+    def write_noting(path, definition, next_cycle, *args):
+        continued_from.append(next_cycle)
+        write(path, definition, next_cycle, *args)
+
+    with monkeypatch.context() as patch:
+        patch.setattr(lookahead_module, "_write_checkpoint", write_noting)
+        assert lookahead_plan(primitives_run, tmp_path, "--resume") == 0
+    assert continued_from[0] == 2  # from the first decision's checkpoint on
+    for name in ("lookahead.csv", "lookahead_cycles.csv", "lookahead_paths.csv",
+                 "controllers.csv", "plan.csv"):
+        assert (tmp_path / name).read_bytes() == (lookahead_run / name).read_bytes(), name
+    assert not (tmp_path / "resume").exists()
 
 
 @pytest.mark.slow
