@@ -28,6 +28,7 @@ import numpy as np
 import pandas as pd
 
 from .checks import check_flag, warn_user
+from .driver import robots_label
 from .gait import N_ACTUATORS, NO_GAIT, Gait, all_gaits
 from .params import SolverConfig, StarParams
 from .planner import PLAN_COLUMNS, SETTLE_CYCLES, check_drive
@@ -133,6 +134,8 @@ def lookahead_drive(goals_mm, params: StarParams = StarParams(),
     controlled, x_mm, y_mm) recorded frames_per_cycle times per cycle. ValueError for bad
     arguments or work that cannot finish (`check_lookahead`), before any compute.
 
+    progress: one bar over the run's periods (the whole batch's: 1 + settle_cycles a
+    decision), naming the decision and how many goals it still drives.
     checkpoint: the path of a file (.npz) the run so far is written to after every decision,
     whole or not at all (the robots' states, the candidates' included, about 31 kB a robot of
     the paper model, and the tables so far). Where it exists, the call continues from it,
@@ -165,10 +168,19 @@ def lookahead_drive(goals_mm, params: StarParams = StarParams(),
     fired = np.zeros(count, dtype=np.int64)
     boundaries, cycle_rows, paths = [], [], []
     interval = period / frames_per_cycle
-    first_cycle = 0
+    first_cycle = 0 if saved is None else saved.next_cycle
+    bar = _progress_bar(count, candidates, max_cycles, settle_cycles, first_cycle) \
+        if progress else None
+
+    def advance(periods: int, **records) -> pd.DataFrame:
+        """The whole batch `periods` periods on (the run's bar moved by as many)."""
+        frames = simulator.advance(periods * period, **records)
+        if bar is not None:
+            bar.update(periods)
+        return frames
+
     if saved is not None:  # the run so far, as the checkpoint holds it
         simulator.load(saved.snapshot)
-        first_cycle = saved.next_cycle
         stopped, stop_cycle = saved.arrays["stopped"], saved.arrays["stop_cycle"]
         final_error, fired = saved.arrays["final_error"], saved.arrays["fired"]
         boundaries = list(saved.arrays["boundaries"])
@@ -181,6 +193,8 @@ def lookahead_drive(goals_mm, params: StarParams = StarParams(),
         distance = np.hypot(*(goals - position).T)
         running = state["status"].to_numpy() == "ok"
         controlled = ~stopped & running & (cycle < max_cycles)
+        if bar is not None and controlled.any():
+            bar.set_postfix_str(f"decision {cycle + 1}, driving {controlled.sum()} of {count}")
         choice = np.zeros(count, dtype=np.int64)
         rest = np.full((count, 2), np.nan)
         if controlled.any():
@@ -191,16 +205,16 @@ def lookahead_drive(goals_mm, params: StarParams = StarParams(),
             firing = np.zeros(batch, dtype=bool)
             firing[count:] = np.repeat(controlled, candidates)
             simulator.fire(commands & firing[:, None])
-            frames = simulator.advance(period, record_interval_s=interval, progress=progress)
+            frames = advance(1, record_interval_s=interval)
             after_period = simulator.save()
             # judged as a stop: a firing now comes to rest settle_cycles after the next cycle
             # starts, the glide (a stop now) settle_cycles after this one, a period sooner
             glide_rest = position
             if settle_cycles:
                 if settle_cycles > 1:
-                    simulator.advance((settle_cycles - 1) * period, progress=progress)
+                    advance(settle_cycles - 1)
                 glide_rest = _positions(simulator)[count::candidates]
-                simulator.advance(period, progress=progress)
+                advance(1)
             ends = simulator.state()
             at_rest = np.array(ends[["centroid_x_mm", "centroid_y_mm"]].to_numpy()[count:])
             at_rest = at_rest.reshape(count, candidates, 2)
@@ -240,11 +254,16 @@ def lookahead_drive(goals_mm, params: StarParams = StarParams(),
                 "fired": fired, "boundaries": np.stack(boundaries),
                 **_columns("cycles", pd.concat(cycle_rows, ignore_index=True)),
                 **_columns("paths", pd.concat(paths, ignore_index=True))})
+    if bar is not None:  # the decisions the run did not need are not waited for
+        bar.total = bar.n + settle_cycles
+        bar.set_postfix_str("coasting to rest")
     for _ in range(settle_cycles):  # the robots coast on to rest, no controller firing
-        frames = simulator.advance(period, record_interval_s=interval, progress=progress)
+        frames = advance(1, record_interval_s=interval)
         paths.append(_relabelled(frames, robots))
         boundaries.append(simulator.state()[["centroid_x_mm", "centroid_y_mm"]]
                           .to_numpy()[:count])
+    if bar is not None:
+        bar.close()
     status = simulator.state()["status"].to_numpy()[:count]
     run_cycles = stop_cycle + settle_cycles
     at_rest = np.stack(boundaries)[run_cycles, robots]
@@ -264,6 +283,19 @@ def lookahead_drive(goals_mm, params: StarParams = StarParams(),
     path = path.sort_values(["goal", "t_s"], kind="stable").reset_index(drop=True)
     return (summary, pd.concat(cycle_rows, ignore_index=True)[LOOKAHEAD_CYCLE_COLUMNS],
             path[["goal", "mode", "t_s", "controlled", "x_mm", "y_mm"]])
+
+
+def _progress_bar(goals: int, candidates: int, max_cycles: int, settle_cycles: int,
+                  first_cycle: int):
+    """A tqdm bar over the run's periods, the whole batch's: 1 + settle_cycles a decision, at
+    most max_cycles of them, then the coast to rest; a run whose controllers all stop sooner
+    skips the rest (the time left it shows is the longest the run can take)."""
+    from tqdm.auto import tqdm
+    per_decision = 1 + settle_cycles
+    return tqdm(total=max_cycles * per_decision + settle_cycles,
+                initial=first_cycle * per_decision, unit="period",
+                desc=f"lookahead, {robots_label(goals, 'goal')} x {candidates} candidates",
+                bar_format="{l_bar}{bar}| {n}/{total} periods [{elapsed}<{remaining}{postfix}]")
 
 
 def _definition(goals: np.ndarray, params: StarParams, solver: SolverConfig,

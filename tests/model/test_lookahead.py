@@ -280,3 +280,27 @@ def test_controllers_are_compared_over_the_goals_each_reached():
     assert table["mean_cycles_to_goal"].tolist() == [2.0, 2.0]
     with pytest.raises(ValueError, match=r"summary must hold drive's"):
         compare_controllers(summary.drop(columns="cycles_fired"))
+
+
+def test_progress_is_one_bar_over_the_runs_periods(driven, capsys):
+    """`driven`'s run: 3 decisions of 2 periods, then 1 of coasting: 7 periods, the bar's
+    total shrunk to them where the run stops before max_cycles would allow more (none here)."""
+    lookahead_drive(GOALS, PARAMS, SOLVER, progress=True, **ARGUMENTS)
+    error = capsys.readouterr().err
+    assert "lookahead, 2 goals x 9 candidates" in error
+    assert "7/7 periods" in error and "decision 3, driving 2 of 2" in error
+    assert "coasting to rest" in error and "robots" not in error  # no bar of each advance
+
+
+def test_a_run_that_stops_early_ends_its_bar_at_the_periods_it_ran(capsys):
+    """The 15.5-mm tolerance case above with max_cycles 4 (a schedule of 9 periods): two
+    decisions of 2 periods, the second choosing the glide, then 1 of coasting."""
+    boundaries, _ = replay(["A1+A3"], SETTLE + 1)
+    rest = boundaries[1 + SETTLE]
+    goal = rest + 15.0 * rest / np.hypot(*rest)
+    lookahead_drive([goal], PARAMS, SOLVER, tolerance_mm=15.5, max_cycles=4,
+                    settle_cycles=SETTLE, gaits=["A1+A3", "A5"], frames_per_cycle=3,
+                    progress=True)
+    error = capsys.readouterr().err
+    assert "5/5 periods" in error and "/9 periods" in error
+    assert "decision 2, driving 1 of 1" in error and "decision 3" not in error
