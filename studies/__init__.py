@@ -21,6 +21,7 @@ EXTRA_OF_STUDY = {
     "elasticities": "plots", "env_bench": "envs", "fig4c": "plots", "gait_design": "studies",
     "gaits": "plots", "gradient_fit": "studies", "jacobians": "plots", "model_select": "studies",
     "plan": "plots", "predictability": "plots", "primitives": "plots", "reproduce": None,
+    "rl": "rl",
     "scaling": None,
     "sensitivity": "studies", "sensitivity_check": "plots", "simd": "plots", "stability": "plots",
     "strokes": "plots", "sweep": "studies",
@@ -28,7 +29,8 @@ EXTRA_OF_STUDY = {
 }
 """The extra of pyproject.toml each study needs beyond the core (None: the core alone), checked
 by the launcher before the study is imported. "plots" (matplotlib) keeps the main job, fig4c,
-light; a study that needs more than one extra names "studies", which holds them all.
+light; a study that needs more than one extra names "studies", which holds them all but rl's
+(stable-baselines3 and torch, gigabytes: the "rl" extra, in no other).
 reproduce runs every study, each in its own process that checks its own extra (its
 --dry-run, which prints them, needs none). scaling times Dask clusters unless --no-dask, and
 checks for it itself."""

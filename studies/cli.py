@@ -466,11 +466,11 @@ def check_cycles(cycles: Mapping[str, int], period: float, config: SolverConfig)
     check_run(f"{named} ({total * period:.3g} s)", total * period, config)
 
 
-def primitives_robot_differences(path, base: StarParams) -> tuple:
-    """(the robot's parameters a primitives table's sidecar records, the fields other than
-    gait in which `base` differs from them): a field the sidecar does not record came after
-    the table, and the robot had its default (skipped until 2026-12, so --set wake_coupling=5
-    planned with another robot's steps). (None, []) where the sidecar is missing or records no
+def robot_differences(path, base: StarParams, flag: str = "--primitives") -> tuple:
+    """(the robot's parameters the sidecar of a table (given by `flag`) records, the fields
+    other than gait in which `base` differs from them): a field the sidecar does not record
+    came after the table, and the robot had its default (skipped until 2026-12, so --set
+    wake_coupling=5 planned with another robot's steps). (None, []) where the sidecar is missing or records no
     robot, and a printed line says so (a table copied without its sidecar planned silently:
     an audit, 2026-12); one that cannot be read or no longer describes the table
     (`read_provenance`: its SHA-256 differs, the table edited since) records none either, said
@@ -478,7 +478,7 @@ def primitives_robot_differences(path, base: StarParams) -> tuple:
     sidecar = provenance.sidecar_path(path)
     not_compared = "the robot it was measured on is not compared with this run's"
     if not sidecar.is_file():
-        print(f"--primitives {path}: no sidecar {sidecar.name} beside it; {not_compared}")
+        print(f"{flag} {path}: no sidecar {sidecar.name} beside it; {not_compared}")
         return None, []
     try:
         recorded = read_provenance(path)["model"]["params"]
@@ -489,10 +489,10 @@ def primitives_robot_differences(path, base: StarParams) -> tuple:
         # out, say): no record of the robot, as without a sidecar, and said
         reason = (f"{sidecar}: cannot read it ({error.strerror or error})"
                   if isinstance(error, OSError) else str(error))
-        print(f"--primitives {reason}; {not_compared}")
+        print(f"{flag} {reason}; {not_compared}")
         return None, []
     if not isinstance(recorded, dict):
-        print(f"--primitives {path}: its sidecar records no robot; {not_compared}")
+        print(f"{flag} {path}: its sidecar records no robot; {not_compared}")
         return None, []
     recorded = {**provenance.plain(StarParams()), **recorded}
     own = provenance.plain(base)

@@ -536,7 +536,7 @@ def main(argv=None):
             raise cli.StudyArgumentError(f"{flag} must be in [1, {len(primitives)}] (the gaits "
                                          f"of --primitives {args.primitives}), got {value}")
     base = cli.base_params(args)
-    recorded, differing = cli.primitives_robot_differences(args.primitives, base)
+    recorded, differing = cli.robot_differences(args.primitives, base)
     if differing:
         warnings.warn(f"--primitives {args.primitives}: measured on a robot whose "
                       f"{differing[0]} is {recorded[differing[0]]} ({len(differing)} field(s) "

@@ -64,9 +64,8 @@ from taichi_star import StarParams
 from taichi_star.metrics import MAX_GOAL_MM
 from taichi_star.lookahead import check_lookahead, compare_controllers, lookahead_drive
 from taichi_star.planner import (MAX_DEFAULT_GOALS, SETTLE_CYCLES, PrimitiveModel, check_drive,
-                                 closed_loop_gain, default_goals, drive)
+                                 closed_loop_gain, default_goals, drive, path_frames)
 from taichi_star.primitives import GLIDE_CYCLES, measure_primitives
-from taichi_star.timegrid import whole_steps
 
 from . import cli, provenance
 
@@ -246,7 +245,7 @@ def read_primitive_model(path, period: float, dt: float,
                                      f"dt {row['dt_s']} s (gait {row['gait']}); this run has "
                                      f"{period} s, {dt} s")
     if base is not None:
-        recorded, differing = cli.primitives_robot_differences(path, base)
+        recorded, differing = cli.robot_differences(path, base)
         if differing:
             own = provenance.plain(base)
             raise cli.StudyArgumentError(
@@ -259,21 +258,6 @@ def read_primitive_model(path, period: float, dt: float,
     except ValueError as error:
         raise cli.StudyArgumentError(f"--primitives {path}: "
                                      f"{str(error).removeprefix('table: ')}") from None
-
-
-PATH_FRAMES = 10
-"""Path records per cycle in plan_paths.csv where the cycle's steps allow (`path_frames`)."""
-
-
-def path_frames(period: float, dt: float) -> int:
-    """Path records per cycle: the most, up to PATH_FRAMES, that split the cycle into whole
-    steps (3.15 s at 2 ms, 1,575 steps, was refused for 10 frames, naming the library's
-    frames_per_cycle: an audit, 2026-12; it takes 9); PATH_FRAMES where the period is not
-    whole steps (`check_drive` refuses that, naming the period)."""
-    steps = whole_steps(period, dt)
-    if steps is None:
-        return PATH_FRAMES
-    return next(frames for frames in range(PATH_FRAMES, 0, -1) if steps % frames == 0)
 
 
 def main(argv=None):

@@ -12,7 +12,7 @@ extra, named in the error a missing one raises:
 - ``video``: matplotlib, pillow, imageio-ffmpeg (`SimulationResult.animate`);
 - ``dask``: dask.distributed (`run_batch(..., scheduler=...)`);
 - ``docs``: mkdocs-material, mkdocstrings (building the documentation);
-- ``rl``: stable-baselines3 (its torch is large; not part of ``all``);
+- ``rl``: stable-baselines3 and torch (large; not part of ``all``), the environments and plots;
 - ``all``: every extra but ``rl``.
 """
 
@@ -33,6 +33,7 @@ EXTRA_MODULES = {
     "io": ("pyarrow", "xarray", "netCDF4"),
     "video": ("matplotlib", "PIL", "imageio_ffmpeg"),
     "dask": ("distributed",),
+    "rl": ("gymnasium", "matplotlib", "stable_baselines3", "torch"),
 }
 """The top-level modules each extra of pyproject.toml installs (those the code imports), by
 extra; `missing_extra` checks them."""

@@ -51,7 +51,7 @@ from .timegrid import check_work, whole_steps
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
 __all__ = ["PrimitiveModel", "drive", "check_drive", "default_goals", "closed_loop_gain",
-           "SETTLE_CYCLES", "MAX_DEFAULT_GOALS", "PLAN_COLUMNS", "CYCLE_COLUMNS"]
+           "path_frames", "SETTLE_CYCLES", "MAX_DEFAULT_GOALS", "PLAN_COLUMNS", "CYCLE_COLUMNS"]
 
 MODES = ("open", "closed")
 
@@ -463,6 +463,22 @@ SETTLE_CYCLES = 4
 """Cycles without firing after the last controller stops, for the robots to come to rest (they
 glide for several cycles after their last firing; the primitives' glide is measured over as
 many, `primitives.GLIDE_CYCLES`)."""
+
+
+PATH_FRAMES = 10
+"""Path records per cycle where the cycle's steps allow (`path_frames`)."""
+
+
+def path_frames(period: float, dt: float) -> int:
+    """Path records per cycle: the most, up to PATH_FRAMES, that split the cycle into whole
+    steps (3.15 s at 2 ms, 1,575 steps, was refused for 10 frames, naming the library's
+    frames_per_cycle: an audit, 2026-12; it takes 9); PATH_FRAMES where the period is not
+    whole steps (`check_drive` refuses that, naming the period). What the control studies
+    record (plan, rl)."""
+    steps = whole_steps(period, dt)
+    if steps is None:
+        return PATH_FRAMES
+    return next(frames for frames in range(PATH_FRAMES, 0, -1) if steps % frames == 0)
 
 
 def check_drive(goals_mm, params: StarParams, solver: SolverConfig, tolerance_mm: float = 5.0,

@@ -5,7 +5,9 @@
 - ``gymnasium.make_vec("StarSwimmer-v0", num_envs=64, **kwargs)``: 64 robots in one engine
   (`StarSwimmerVectorEnv`, the registered vector entry point);
 - ``to_sb3(envs)``: that vector env as a Stable-Baselines3 VecEnv (`taichi_star.envs.sb3`;
-  needs stable-baselines3, which taichi_star does not install).
+  needs stable-baselines3, which taichi_star does not install);
+- ``drive_policy(policy, goals)``: a policy (a trained agent) driven to given goals and judged
+  at rest as the planners judge theirs (`taichi_star.envs.rollout`).
 
 Both take ``render_mode="rgb_array"`` (a picture of the robot from `render()`).
 
@@ -21,6 +23,7 @@ from ..extras import require
 
 gymnasium = require("gymnasium", "envs")
 
+from .rollout import POLICY_COLUMNS, POLICY_CYCLE_COLUMNS, drive_policy
 from .sb3 import SB3VectorAdapter, to_sb3
 from .swimmer import (DEFAULT_MAX_EPISODE_STEPS, OBSERVATION_NAMES, RENDER_MODES,
                       GoalReachingBatch, StarSwimmerEnv, StarSwimmerVectorEnv, SwimmerTask,
@@ -34,6 +37,7 @@ if ENV_ID not in gymnasium.registry:
                        vector_entry_point="taichi_star.envs.swimmer:StarSwimmerVectorEnv",
                        max_episode_steps=DEFAULT_MAX_EPISODE_STEPS)
 
-__all__ = ["DEFAULT_MAX_EPISODE_STEPS", "ENV_ID", "OBSERVATION_NAMES", "RENDER_MODES",
-           "GoalReachingBatch", "SB3VectorAdapter", "StarSwimmerEnv", "StarSwimmerVectorEnv",
-           "SwimmerTask", "control_period", "to_sb3"]
+__all__ = ["DEFAULT_MAX_EPISODE_STEPS", "ENV_ID", "OBSERVATION_NAMES", "POLICY_COLUMNS",
+           "POLICY_CYCLE_COLUMNS", "RENDER_MODES", "GoalReachingBatch", "SB3VectorAdapter",
+           "StarSwimmerEnv", "StarSwimmerVectorEnv", "SwimmerTask", "control_period",
+           "drive_policy", "to_sb3"]

@@ -44,6 +44,7 @@ from typing import Mapping, Optional, Sequence
 
 import gymnasium as gym
 import numpy as np
+import pandas as pd
 from gymnasium import spaces
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
@@ -303,26 +304,34 @@ class GoalReachingBatch:
         raise ValueError(f"action must hold only 0 and 1 (boolean, integer or float), got "
                          f"dtype {array.dtype} with values {wrong[:4].tolist()}")
 
-    def step(self, fire: np.ndarray):
-        """Fire `fire` ((B, 8) bool) now and advance one control period. Returns rewards (B,)
-        float64, terminated (B,), truncated (B,). RuntimeError for a robot never reset: it
-        has no goal yet (a vector env stepped before reset ended every episode at once, at the
-        goal (0, 0) it starts on; gymnasium's wrappers enforce the order, a bare env did not)."""
+    def swim(self, fire: np.ndarray, record_interval_s: float = 0.0) -> pd.DataFrame:
+        """Fire `fire` ((B, 8) bool) now and advance one control period; the distances to the
+        goals and the episodes' steps follow. Returns the Simulator's records every
+        `record_interval_s` (none at 0). RuntimeError for a robot never reset: it has no goal
+        yet (a vector env stepped before reset ended every episode at once, at the goal (0, 0)
+        it starts on; gymnasium's wrappers enforce the order, a bare env did not)."""
         simulator = self.simulator  # a closed environment says so first (an audit, 2026-12)
         if not self.started.all():
             raise RuntimeError(f"call reset() before step(): robot "
                                f"{np.flatnonzero(~self.started)[0]} has no episode yet")
-        # a failed robot fires nothing (the Simulator ignores its commands), so pays nothing
-        # (it paid for firings that never happened: an audit, 2026-12)
-        fired = fire & simulator.ok[:, None]
         simulator.fire(fire)
         # no progress bar for a control period, however many robots: an agent steps many
-        simulator.advance(self.control_period_s, progress=False)
-        before = self.distances.copy()
+        frames = simulator.advance(self.control_period_s, record_interval_s=record_interval_s,
+                                   progress=False)
         state = simulator.state()
         position = state[["centroid_x_mm", "centroid_y_mm"]].to_numpy()
         self.distances = np.hypot(*(self.goals - position).T)
         self.episode_steps += 1
+        return frames
+
+    def step(self, fire: np.ndarray):
+        """`swim` one control period, judged as the task does. Returns rewards (B,) float64,
+        terminated (B,), truncated (B,)."""
+        # a failed robot fires nothing (the Simulator ignores its commands), so pays nothing
+        # (it paid for firings that never happened: an audit, 2026-12)
+        fired = fire & self.simulator.ok[:, None]
+        before = self.distances.copy()
+        self.swim(fire)
         rewards = before - self.distances - self.task.firing_cost_mm * fired.sum(axis=1)
         terminated = self.distances <= self.task.goal_tolerance_mm
         out_of_steps = (self.episode_steps >= self.task.max_episode_steps
@@ -331,7 +340,7 @@ class GoalReachingBatch:
         # the goal was reached on it (a reached goal was not truncated here, so `make_vec` and
         # a SyncVectorEnv of `make`'s envs differed; an audit, 2026-12); a failed solver
         # truncates an episode that did not end at its goal
-        truncated = out_of_steps | (~terminated & ~simulator.ok)
+        truncated = out_of_steps | (~terminated & ~self.simulator.ok)
         return rewards, terminated, truncated
 
     def observe(self, space: spaces.Box):

@@ -13,9 +13,10 @@ import pytest
 import taichi_star
 from taichi_star import profiling
 from taichi_star.lookahead import lookahead_drive
+from taichi_star.planner import path_frames
 from taichi_star.primitives import glide_columns, measure_primitives, streak_step_columns
 
-from studies import cli, plan
+from studies import cli
 from studies.__main__ import main as studies_main
 
 QUICK = ["--quick", "--no-progress"]
@@ -263,7 +264,7 @@ def test_the_paths_are_recorded_as_often_as_whole_steps_allow(period, dt, frames
     naming the library's frames_per_cycle (an audit, 2026-12); it records 9 frames a cycle
     there, 10 where they divide the cycle, and leaves a period off the step grid (3 s at 7 ms)
     to the library's refusal, which names the period."""
-    assert plan.path_frames(period, dt) == frames
+    assert path_frames(period, dt) == frames
 
 
 class StandInSpace:

@@ -1,0 +1,284 @@
+"""Reinforcement learning: train a PPO agent (Stable-Baselines3) on the goal-reaching
+environment and drive it to the planner's goals, judged as the planners are.
+
+    python -m studies rl [--timesteps 30000] [--num-envs 16] [--seed 0]
+                         [--max-episode-steps 16] [--distance 50] [--directions 7] [--far 0]
+                         [--tolerance 5] [--max-cycles 25] [--settle-cycles 4]
+                         [--compare PLAN_DIR] [--preset paper|accurate|identified]
+                         [--set NAME=VALUE ...] [--dt S] [--out DIR] [--quick]
+
+Training: `to_sb3(StarSwimmerVectorEnv(--num-envs))` (one Simulator; goals drawn at --distance
+mm in a uniform direction, an episode ends within --tolerance mm of its goal at a period
+boundary or after --max-episode-steps actuation periods; reward: progress in mm less 0.1 mm
+per actuator fired), PPO with an MLP policy and the hyperparameters `PPO_SETTINGS` (recorded
+in every sidecar), seeded by --seed, torch on one thread, --timesteps robot-periods in all.
+Then the deterministic policy drives one robot per goal (--directions at --distance mm, 0°,
+360/n°, ..., and --far mm behind: `planner.default_goals`) with
+`taichi_star.envs.drive_policy`: each stops where the environment would end its episode, then
+coasts --settle-cycles periods and is judged at rest, within --tolerance, as `plan`'s
+controllers are (its own success, within the tolerance in passing, is the `terminated`
+column).
+
+--compare PLAN_DIR sets a `plan` run's controllers beside it (its plan.csv and, where it ran
+with --lookahead, lookahead.csv): the same goals, tolerance, settling, robot and step, checked
+from its sidecar before training.
+
+Writes into --out (default a fresh runs/rl/<timestamp>/), each table with its provenance
+sidecar: `rl_training.csv` (per rollout of --num-envs × PPO_SETTINGS n_steps periods:
+timesteps, wall_s, episodes that ended in it, success_rate (the share within the tolerance),
+mean_return, mean_length in periods), `rl.csv` (`taichi_star.envs.POLICY_COLUMNS`, mode
+"ppo"), `rl_cycles.csv`, `rl_paths.csv`, `controllers.csv`
+(`taichi_star.lookahead.CONTROLLER_COLUMNS`: PPO and, with --compare, the plan run's
+controllers), `rl_policy.zip` (the trained model: `PPO.load`) and `rl.png` (the learning curve
+and the paths, drawn from the CSVs).
+
+--quick: dt = 5 ms, 4 robots, 64 timesteps of 4-period episodes, two goals, 2 cycles of
+driving and one of settling.
+"""
+
+from __future__ import annotations
+
+import io
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from taichi_star.envs import StarSwimmerVectorEnv, drive_policy, to_sb3
+from taichi_star.lookahead import compare_controllers
+from taichi_star.output import read_provenance
+from taichi_star.metrics import MAX_GOAL_MM
+from taichi_star.planner import (MAX_DEFAULT_GOALS, PLAN_COLUMNS, SETTLE_CYCLES, check_drive,
+                                 default_goals, path_frames)
+from taichi_star.provenance import write_atomic
+
+from . import cli, provenance
+
+DESCRIPTION = ("Train a PPO agent on the goal-reaching environment and drive it to the "
+               "planner's goals, judged as the planners are.")
+PPO_SETTINGS = {"n_steps": 32, "batch_size": 128, "n_epochs": 5, "learning_rate": 3e-4,
+                "gamma": 0.95, "ent_coef": 0.01}
+"""PPO's hyperparameters: short rollouts (32 periods of every robot), a discount that sees a
+few periods ahead (the goals are a few to a dozen periods away), a little entropy to keep
+trying gaits."""
+QUICK_DT = 5e-3
+QUICK_PPO = {"n_steps": 16, "batch_size": 64, "n_epochs": 1}
+"""--quick's smaller rollouts: 4 robots × 16 periods, one epoch."""
+TORCH_THREADS = 1
+"""torch's threads: the simulation takes the cores; one thread keeps a seed's run the same."""
+
+
+def build_parser():
+    parser = cli.StudyParser("rl", DESCRIPTION)
+    parser.add_argument("--timesteps", type=int, default=30000, quick=64,
+                        help="robot-periods of training in all (default 30000)")
+    parser.add_argument("--num-envs", type=int, default=16, quick=4,
+                        help="robots trained together in one Simulator (default 16)")
+    parser.add_argument("--seed", type=int, default=0, help="PPO's and the goals' seed")
+    parser.add_argument("--max-episode-steps", type=int, default=16, quick=4,
+                        help="actuation periods before a training episode is cut (default 16)")
+    parser.add_argument("--distance", type=float, default=50.0,
+                        help="mm from the start of the training goals and the goals driven to "
+                             "(default 50)")
+    parser.add_argument("--directions", type=int, default=7, quick=2,
+                        help="goals driven to, evenly in direction (default 7)")
+    parser.add_argument("--far", type=float, default=0.0,
+                        help="one more goal this far behind the robot, mm (default 0: none)")
+    parser.add_argument("--tolerance", type=float, default=5.0,
+                        help="mm from the goal that ends an episode and judges a goal reached")
+    parser.add_argument("--max-cycles", type=int, default=25, quick=2,
+                        help="periods a driven robot may fire before it is stopped")
+    parser.add_argument("--settle-cycles", type=int, default=SETTLE_CYCLES, quick=1,
+                        help="periods a stopped robot coasts before it is judged at rest")
+    parser.add_argument("--compare", default=None, metavar="PLAN_DIR",
+                        help="a plan run (same goals, tolerance, robot, step) whose controllers "
+                             "controllers.csv sets beside PPO")
+    cli.add_model_flags(parser, fixed=("gait",))
+    cli.add_dt_flag(parser, quick=QUICK_DT)
+    return parser
+
+
+def read_compared(folder: str, goals: np.ndarray, base, solver, tolerance: float,
+                  settle_cycles: int) -> pd.DataFrame:
+    """The controllers of the plan run in `folder` (plan.csv, and lookahead.csv where it ran
+    with --lookahead), checked against this run before any compute: the same goals (to the
+    CSV's 10 digits), and by plan.csv's sidecar the same tolerance, settling, step and robot;
+    StudyArgumentError naming --compare otherwise."""
+    tables = [cli.read_table(Path(folder) / "plan.csv", "--compare", PLAN_COLUMNS,
+                             "a plan run's plan.csv")]
+    if (Path(folder) / "lookahead.csv").is_file():
+        tables.append(cli.read_table(Path(folder) / "lookahead.csv", "--compare", PLAN_COLUMNS,
+                                     "a plan run's lookahead.csv"))
+    for table in tables:
+        for _, part in table.groupby("mode", sort=False):
+            made = part[["goal_x_mm", "goal_y_mm"]].to_numpy(dtype=float)
+            if made.shape != goals.shape or not np.allclose(made, goals, rtol=1e-9, atol=1e-9):
+                raise cli.StudyArgumentError(f"--compare {folder}: its goals are not this run's "
+                                             f"(--distance, --directions, --far)")
+    try:
+        record = read_provenance(Path(folder) / "plan.csv")
+    except (OSError, ValueError) as error:
+        raise cli.StudyArgumentError(f"--compare {folder}: its plan.csv's sidecar cannot be "
+                                     f"read ({error})") from None
+    details, made_solver = record.get("details", {}), record.get("solver", {})
+    for name, flag, own in (("tolerance_mm", "--tolerance", tolerance),
+                            ("settle_cycles", "--settle-cycles", settle_cycles)):
+        if details.get(name) != own:
+            raise cli.StudyArgumentError(f"--compare {folder}: made with {name} "
+                                         f"{details.get(name)!r}, this run's {flag} {own!r}")
+    if made_solver.get("dt") != solver.dt:
+        raise cli.StudyArgumentError(f"--compare {folder}: made at dt {made_solver.get('dt')!r} "
+                                     f"s, this run at {solver.dt!r} s")
+    recorded, differing = cli.robot_differences(Path(folder) / "plan.csv", base, "--compare")
+    if differing:
+        raise cli.StudyArgumentError(f"--compare {folder}: made with a robot whose "
+                                     f"{differing[0]} is {recorded[differing[0]]}, this run's "
+                                     f"{provenance.plain(base)[differing[0]]}")
+    return pd.concat(tables, ignore_index=True)
+
+
+def train(env_kwargs: dict, num_envs: int, timesteps: int, seed: int, settings: dict):
+    """(the trained PPO model, the training table: one row per rollout, `rl_training.csv`)."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.logger import Logger
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    torch.set_num_threads(TORCH_THREADS)
+    envs = VecMonitor(to_sb3(StarSwimmerVectorEnv(num_envs, **env_kwargs)))
+    started = time.perf_counter()
+    rows, ended = [], []
+
+    class Rollouts(BaseCallback):
+        """Each episode's end as it comes; a row of them at each rollout's end."""
+
+        def _on_step(self) -> bool:
+            for done, info in zip(self.locals["dones"], self.locals["infos"]):
+                if done:
+                    ended.append((info["episode"]["r"], info["episode"]["l"],
+                                  not info["TimeLimit.truncated"]))
+            return True
+
+        def _on_rollout_end(self):
+            returns, lengths, reached = (np.array(column, dtype=float) for column in
+                                         zip(*ended)) if ended else ([np.nan],) * 3
+            rows.append({"timesteps": self.num_timesteps,
+                         "wall_s": time.perf_counter() - started, "episodes": len(ended),
+                         "success_rate": np.mean(reached), "mean_return": np.mean(returns),
+                         "mean_length": np.mean(lengths)})
+            ended.clear()
+
+    model = PPO("MlpPolicy", envs, seed=seed, device="cpu", verbose=0, **settings)
+    # no log folder (SB3's default logger makes one in the temporary folder)
+    model.set_logger(Logger(folder=None, output_formats=[]))
+    model.learn(timesteps, callback=Rollouts())
+    envs.close()
+    return model, pd.DataFrame(rows)
+
+
+def plot(training_csv, paths_csv, summary_csv, png_path) -> Path:
+    """The learning curve (success rate and mean episode length against timesteps) and the
+    driven paths (goals as stars; o reached at rest, x not), from the CSVs."""
+    plt = cli.use_agg()
+    training, paths = pd.read_csv(training_csv), pd.read_csv(paths_csv)
+    summary = pd.read_csv(summary_csv)
+    fig, (curve, field) = plt.subplots(1, 2, figsize=(11, 4.6))
+    curve.plot(training["timesteps"], training["success_rate"], ".-", color="tab:blue")
+    curve.set_xlabel("timesteps (robot-periods)")
+    curve.set_ylabel("episodes within the tolerance", color="tab:blue")
+    curve.set_ylim(-0.02, 1.02)
+    length = curve.twinx()
+    length.plot(training["timesteps"], training["mean_length"], ".-", color="tab:orange")
+    length.set_ylabel("mean episode length (periods)", color="tab:orange")
+    for goal, part in paths.groupby("goal"):
+        row = summary[summary["goal"] == goal].iloc[0]
+        line, = field.plot(part["x_mm"], part["y_mm"], lw=1.2)
+        field.plot(row["goal_x_mm"], row["goal_y_mm"], "*", ms=12, color=line.get_color())
+        field.plot(part["x_mm"].iloc[-1], part["y_mm"].iloc[-1], "o" if row["reached"] else "x",
+                   color=line.get_color())
+    field.set_aspect("equal")
+    field.set_xlabel("x (mm)")
+    field.set_ylabel("y (mm)")
+    field.set_title(f"PPO: {int(summary['reached'].sum())} of {len(summary)} goals reached at "
+                    f"rest", fontsize=10)
+    fig.tight_layout()
+    cli.write_figure(fig, png_path, dpi=130)
+    plt.close(fig)
+    return Path(png_path)
+
+
+def main(argv=None):
+    args = cli.parse(build_parser(), argv)
+    for value, flag, lowest in ((args.timesteps, "--timesteps", 1),
+                                (args.max_episode_steps, "--max-episode-steps", 1),
+                                (args.max_cycles, "--max-cycles", 1),
+                                (args.settle_cycles, "--settle-cycles", 0),
+                                (args.seed, "--seed", 0)):
+        if value < lowest:
+            raise cli.StudyArgumentError(f"{flag} must be >= {lowest}, got {value}")
+    cli.check_count(args.num_envs, "--num-envs", 1, cli.MAX_BATCH_SIZE)
+    cli.check_count(args.directions, "--directions", 0, MAX_DEFAULT_GOALS)
+    if not (np.isfinite(args.distance) and 0 < args.distance <= MAX_GOAL_MM):
+        raise cli.StudyArgumentError(f"--distance must be in (0, {MAX_GOAL_MM:g}] mm, got "
+                                     f"{args.distance}")
+    if not (np.isfinite(args.far) and 0 <= args.far <= MAX_GOAL_MM):
+        raise cli.StudyArgumentError(f"--far must be in [0, {MAX_GOAL_MM:g}] mm, got {args.far}")
+    if args.directions == 0 and args.far == 0:
+        raise cli.StudyArgumentError("no goals: --directions 0 and --far 0")
+    cli.check_positive(args.tolerance, "--tolerance")
+    if args.tolerance >= args.distance:
+        raise cli.StudyArgumentError(f"--tolerance must be below --distance ({args.distance:g} "
+                                     f"mm), got {args.tolerance!r}")
+    base = cli.base_params(args)
+    solver = cli.solver(args)
+    goals = default_goals(args.distance, args.directions, args.far or None)
+    cli.check_cycles({"--max-cycles": args.max_cycles, "--settle-cycles": args.settle_cycles},
+                     base.period, solver)
+    frames = path_frames(base.period, solver.dt)
+    try:
+        check_drive(goals, base, solver, args.tolerance, args.max_cycles, frames,
+                    args.settle_cycles)
+    except ValueError as error:
+        raise cli.StudyArgumentError(f"--tolerance, --far: {error}") from None
+    env_kwargs = {"params": base, "solver": solver, "goal_distance_mm": args.distance,
+                  "goal_tolerance_mm": args.tolerance,
+                  "max_episode_steps": args.max_episode_steps}
+    compared = None if args.compare is None else read_compared(
+        args.compare, goals, base, solver, args.tolerance, args.settle_cycles)
+    settings = {**PPO_SETTINGS, **(QUICK_PPO if args.quick else {})}
+    cli.check_robot_steps(f"--timesteps {args.timesteps} periods of training",
+                          args.timesteps * round(base.period / solver.dt))
+    out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
+                     solver=solver,
+                     extra={"ppo": settings, "timesteps": args.timesteps,
+                            "num_envs": args.num_envs, "seed": args.seed,
+                            "max_episode_steps": args.max_episode_steps,
+                            "tolerance_mm": args.tolerance, "settle_cycles": args.settle_cycles,
+                            "torch_threads": TORCH_THREADS,
+                            "compared": (None if args.compare is None
+                                         else str(Path(args.compare).resolve()))})
+    model, training = train(env_kwargs, args.num_envs, args.timesteps, args.seed, settings)
+    summary, cycles, path = drive_policy(
+        lambda observation: model.predict(observation, deterministic=True)[0], goals, base,
+        solver, args.tolerance, args.max_cycles, args.settle_cycles, frames, mode="ppo",
+        arch=args.arch)
+    training_csv = out.write_csv(training, "rl_training.csv")
+    summary_csv = out.write_csv(summary, "rl.csv")
+    out.write_csv(cycles, "rl_cycles.csv")
+    paths_csv = out.write_csv(path, "rl_paths.csv")
+    controllers = compare_controllers(pd.concat(
+        [summary] if compared is None else [compared, summary], ignore_index=True))
+    out.write_csv(controllers, "controllers.csv")
+    policy = io.BytesIO()
+    model.save(policy)
+    write_atomic(out.path("rl_policy.zip"), policy.getvalue(),
+                 failure=lambda reason: cli.StudyOutputError(reason))
+    out.wrote(out.path("rl_policy.zip"))
+    out.wrote(plot(training_csv, paths_csv, summary_csv, out.path("rl.png")))
+    out.report()
+    with pd.option_context("display.width", 160, "display.max_columns", 20):
+        print(summary.to_string(index=False))
+        print(controllers.to_string(index=False))
+    return summary

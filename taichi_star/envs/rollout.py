@@ -1,0 +1,128 @@
+"""A policy of the goal-reaching task driven to given goals and judged as the planners judge
+theirs (`planner.drive`, `lookahead.lookahead_drive`), so that a trained agent's table sits
+beside theirs (`lookahead.compare_controllers`).
+
+Every robot sees what the environments show it (`GoalReachingBatch.observe`) and fires what
+the policy answers, one control period (the actuation period) at a time, all robots in one
+Simulator. A robot's controller stops when the task would end its episode: within the
+tolerance at a period boundary (the environment's `terminated`, its success), its solver
+failed, or after max_cycles; it then coasts, firing nothing, and is judged where it comes to
+rest, `settle_cycles` periods after its stop, as the planners' robots are: an agent trained
+to reach the tolerance in passing does not plan for the glide after it, and the table shows
+both.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+import pandas as pd
+
+from ..gait import Gait
+from ..params import SolverConfig, StarParams
+from ..planner import PLAN_COLUMNS, SETTLE_CYCLES, check_drive
+from .swimmer import GoalReachingBatch, SwimmerTask, observation_space
+
+__all__ = ["drive_policy", "POLICY_COLUMNS", "POLICY_CYCLE_COLUMNS"]
+
+POLICY_COLUMNS = [*PLAN_COLUMNS, "terminated"]
+"""Columns of `drive_policy`'s summary: `planner.PLAN_COLUMNS` (reached: at rest within the
+tolerance, settle_cycles after the stop) and terminated (within the tolerance at a period
+boundary while driven: the environment's success)."""
+POLICY_CYCLE_COLUMNS = ["goal", "mode", "cycle", "gait", "x_mm", "y_mm", "heading_deg",
+                        "distance_mm"]
+"""Columns of `drive_policy`'s per-cycle table: the robot's state at the start of cycle
+`cycle` and the gait the policy fired there ("none" after its controller stopped)."""
+
+
+def drive_policy(policy: Callable[[np.ndarray], np.ndarray], goals_mm,
+                 params: StarParams = StarParams(), solver: SolverConfig = SolverConfig(),
+                 tolerance_mm: float = 5.0, max_cycles: int = 25,
+                 settle_cycles: int = SETTLE_CYCLES, frames_per_cycle: int = 10,
+                 mode: str = "policy", arch: str = "cpu"):
+    """Drive one robot per goal by `policy` (module docstring) and judge it at rest.
+
+    policy: observations (G, 15) float32 (`swimmer.OBSERVATION_NAMES`) -> actions (G, 8) of 0
+    and 1 (`MultiBinary(8)`; a Stable-Baselines3 model: ``lambda obs: model.predict(obs,
+    deterministic=True)[0]``), asked once a period for every robot (the answers of robots whose
+    controller stopped are not fired). goals_mm: (G, 2) mm from the start (the robot starts at
+    rest, heading 0). mode: the summary's `mode` (a name for the policy).
+    Returns (summary `POLICY_COLUMNS`, cycles `POLICY_CYCLE_COLUMNS`, path (goal, mode, t_s,
+    controlled, x_mm, y_mm) recorded frames_per_cycle times a period). ValueError before any
+    compute for arguments `planner.drive` refuses, and naming the policy for an answer that
+    is no action."""
+    goals = check_drive(goals_mm, params, solver, tolerance_mm, max_cycles, frames_per_cycle,
+                        settle_cycles)
+    if not callable(policy):
+        raise ValueError(f"policy must be a callable from observations to actions, got "
+                         f"{type(policy).__name__}")
+    if not isinstance(mode, str) or not mode:
+        raise ValueError(f"mode must be a non-empty name, got {mode!r}")
+    count = len(goals)
+    robots = np.arange(count)
+    distances = np.hypot(*goals.T)
+    # a drawn goal is never asked for: the task's distance only has to exceed the tolerance
+    task = SwimmerTask(goal_distance_mm=float(distances.max()), goal_tolerance_mm=tolerance_mm)
+    batch = GoalReachingBatch(count, params, solver, None, task, arch)
+    space = observation_space(task)
+    batch.reset(robots, [], goals)
+    period = batch.control_period_s
+    interval = period / frames_per_cycle
+    driving = np.ones(count, dtype=bool)
+    terminated = np.zeros(count, dtype=bool)
+    stop_cycle = np.full(count, max_cycles)
+    final_error = np.full(count, np.nan)
+    fired = np.zeros(count, dtype=np.int64)
+    boundaries, cycle_rows, paths = [], [], []
+    for cycle in range(max_cycles + settle_cycles + 1):
+        observation, info = batch.observe(space)
+        position, distance = info["position_mm"], np.hypot(*(goals - info["position_mm"]).T)
+        boundaries.append(position)
+        # the environment's episode end: within the tolerance, a failed solver, the budget
+        within = distance <= tolerance_mm
+        stopping = driving & (within | (info["status"] != "ok") | (cycle == max_cycles))
+        terminated |= stopping & within
+        final_error[stopping] = distance[stopping]
+        stop_cycle[stopping] = cycle
+        driving &= ~stopping
+        actions = np.zeros((count, 8), dtype=bool)
+        if driving.any():
+            try:
+                answer = policy(observation)
+                actions = GoalReachingBatch.firing_mask(answer, (count, 8)) & driving[:, None]
+            except ValueError as error:
+                raise ValueError(f"policy: {error}") from None
+        if (driving | stopping).any():  # the cycles while any robot is driven, and its stop
+            cycle_rows.append(pd.DataFrame({
+                "goal": robots, "mode": mode, "cycle": cycle,
+                "gait": [Gait.from_mask(row).name for row in actions],
+                "x_mm": position[:, 0], "y_mm": position[:, 1],
+                "heading_deg": info["heading_deg"], "distance_mm": distance}))
+        if not driving.any() and cycle == stop_cycle.max() + settle_cycles:
+            break  # every robot has come to rest, settle_cycles after its stop
+        fired += actions.any(axis=1)
+        frames = batch.swim(actions, record_interval_s=interval)
+        paths.append(pd.DataFrame({
+            "goal": frames["instance"].to_numpy(), "mode": mode,
+            "t_s": frames["t_s"].to_numpy(), "x_mm": frames["centroid_x_mm"].to_numpy(),
+            "y_mm": frames["centroid_y_mm"].to_numpy()}))
+    status = batch.simulator.state()["status"].to_numpy()
+    run_cycles = stop_cycle + settle_cycles
+    at_rest = np.stack(boundaries)[run_cycles, robots]
+    end_error = np.hypot(*(goals - at_rest).T)
+    reached = (end_error <= tolerance_mm) & (status == "ok")
+    summary = pd.DataFrame({
+        "goal": robots, "goal_x_mm": goals[:, 0], "goal_y_mm": goals[:, 1],
+        "goal_distance_mm": distances, "mode": mode, "reached": reached,
+        "cycles_to_goal": np.where(reached, stop_cycle, np.nan), "cycles_fired": fired,
+        "final_error_mm": final_error, "end_error_mm": end_error, "run_cycles": run_cycles,
+        "status": status, "terminated": terminated})[POLICY_COLUMNS]
+    start = pd.DataFrame({"goal": robots, "mode": mode, "t_s": 0.0, "x_mm": 0.0, "y_mm": 0.0})
+    path = pd.concat([start, *paths], ignore_index=True)
+    path["controlled"] = path["t_s"] <= (stop_cycle[path["goal"].to_numpy()] * period
+                                         + solver.dt / 2)
+    path = path.sort_values(["goal", "t_s"], kind="stable").reset_index(drop=True)
+    batch.close()
+    return (summary, pd.concat(cycle_rows, ignore_index=True)[POLICY_CYCLE_COLUMNS],
+            path[["goal", "mode", "t_s", "controlled", "x_mm", "y_mm"]])

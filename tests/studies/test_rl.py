@@ -1,0 +1,80 @@
+"""The rl study: a PPO agent trained on the environment (--quick), driven to the goals and
+judged as the planners; the policy it saves is the one that drove; its flags and a plan run
+of other settings are refused before any compute. Needs stable-baselines3 (the `rl` extra;
+CI installs it where the machine keeps a CPU build of torch), skipped without it."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import taichi_star
+from taichi_star.envs import POLICY_COLUMNS, POLICY_CYCLE_COLUMNS, drive_policy
+from taichi_star.lookahead import CONTROLLER_COLUMNS
+
+from studies.__main__ import main as studies_main
+
+pytest.importorskip("stable_baselines3")
+
+QUICK = ["--quick", "--no-progress"]
+COMPARED = "results/plan_lookahead"
+"""A committed plan run: 7 goals at 50 mm, tolerance 5 mm, 4 cycles of settling, dt 5 ms."""
+
+
+@pytest.mark.slow
+def test_quick_run_trains_drives_and_saves_the_policy_that_drove(tmp_path, monkeypatch):
+    monkeypatch.setenv("SB3_LOGDIR", str(tmp_path / "sb3"))  # none is made: checked below
+    from stable_baselines3 import PPO
+
+    assert studies_main(["rl", *QUICK, "--out", str(tmp_path / "out")]) == 0
+    out = tmp_path / "out"
+    training = pd.read_csv(out / "rl_training.csv")
+    # 64 timesteps in rollouts of 4 robots x 16 periods: one rollout, 16 episodes of 4
+    assert training["timesteps"].tolist() == [64] and training["episodes"].tolist() == [16]
+    assert training["mean_length"].tolist() == [4.0]
+    summary = pd.read_csv(out / "rl.csv")
+    assert list(summary.columns) == POLICY_COLUMNS and (summary["mode"] == "ppo").all()
+    assert len(summary) == 2 and list(pd.read_csv(out / "controllers.csv").columns) \
+        == CONTROLLER_COLUMNS
+    cycles = pd.read_csv(out / "rl_cycles.csv")
+    assert list(cycles.columns) == POLICY_CYCLE_COLUMNS
+    # the saved policy, driven again to the same goals, fires the same gaits, bit for bit
+    model = PPO.load(out / "rl_policy.zip", device="cpu")
+    _, again, _ = drive_policy(lambda obs: model.predict(obs, deterministic=True)[0],
+                               summary[["goal_x_mm", "goal_y_mm"]].to_numpy(),
+                               taichi_star.StarParams.preset("paper"),
+                               taichi_star.SolverConfig(dt=5e-3), max_cycles=2, settle_cycles=1,
+                               mode="ppo")
+    assert again["gait"].tolist() == cycles["gait"].tolist()
+    np.testing.assert_allclose(again["x_mm"], cycles["x_mm"], rtol=1e-9)  # the CSV's digits
+    sidecar = json.loads((out / "rl.csv.json").read_text())
+    assert sidecar["details"]["ppo"]["n_steps"] == 16 and sidecar["details"]["timesteps"] == 64
+    assert (out / "rl.png").stat().st_size > 1000 and not (tmp_path / "sb3").exists()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--timesteps", "0"], "--timesteps must be >= 1, got 0"),
+    (["--num-envs", "0"], "--num-envs must be in [1, "),
+    (["--tolerance", "50"], "--tolerance must be below --distance (50 mm), got 50.0"),
+    (["--directions", "0"], "no goals: --directions 0 and --far 0"),
+    (["--compare", "nowhere"], "--compare nowhere/plan.csv"),
+    (["--directions", "8", "--compare", COMPARED],
+     f"--compare {COMPARED}: its goals are not this run's"),
+    (["--directions", "7", "--tolerance", "4", "--compare", COMPARED],
+     f"--compare {COMPARED}: made with tolerance_mm 5.0, this run's --tolerance 4.0"),
+    (["--directions", "7", "--settle-cycles", "3", "--compare", COMPARED],
+     f"--compare {COMPARED}: made with settle_cycles 4, this run's --settle-cycles 3"),
+    (["--directions", "7", "--dt", "0.002", "--compare", COMPARED],
+     f"--compare {COMPARED}: made at dt 0.005 s, this run at 0.002 s"),
+    (["--directions", "7", "--set", "alpha=0.9", "--compare", COMPARED],
+     f"--compare {COMPARED}: made with a robot whose alpha is 0.8, this run's 0.9"),
+])
+def test_flags_and_a_plan_run_of_other_settings_are_refused_before_compute(
+        no_compute, tmp_path, capsys, argv, message):
+    out = tmp_path / "out"
+    step = [] if "--dt" in argv else ["--dt", "0.005"]
+    assert studies_main(["rl", *step, *argv, "--out", str(out), "--no-progress"]) == 2
+    error = capsys.readouterr().err
+    assert message in error and len(error.strip().splitlines()) == 1, error
+    assert not out.exists()
