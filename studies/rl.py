@@ -26,7 +26,8 @@ from its sidecar before training.
 Writes into --out (default a fresh runs/rl/<timestamp>/), each table with its provenance
 sidecar: `rl_training.csv` (per rollout of --num-envs × PPO_SETTINGS n_steps periods:
 timesteps, wall_s, episodes that ended in it, success_rate (the share within the tolerance),
-mean_return, mean_length in periods), `rl.csv` (`taichi_star.envs.POLICY_COLUMNS`, mode
+mean_return, mean_length in periods, capped_episodes: those with a capped Newton solve, told
+in one line instead of a warning per robot), `rl.csv` (`taichi_star.envs.POLICY_COLUMNS`, mode
 "ppo"), `rl_cycles.csv`, `rl_paths.csv`, `controllers.csv`
 (`taichi_star.lookahead.CONTROLLER_COLUMNS`: PPO and, with --compare, the plan run's
 controllers), `rl_policy.zip` (the trained model: `PPO.load`) and `rl.png` (the learning curve
@@ -40,6 +41,7 @@ from __future__ import annotations
 
 import io
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -156,26 +158,37 @@ def train(env_kwargs: dict, num_envs: int, timesteps: int, seed: int, settings: 
 
         def _on_step(self) -> bool:
             for done, info in zip(self.locals["dones"], self.locals["infos"]):
-                if done:
+                if done:  # the info of the episode's last period, before the robot's reset
                     ended.append((info["episode"]["r"], info["episode"]["l"],
-                                  not info["TimeLimit.truncated"]))
+                                  not info["TimeLimit.truncated"], info["newton_capped"]))
             return True
 
         def _on_rollout_end(self):
-            returns, lengths, reached = (np.array(column, dtype=float) for column in
-                                         zip(*ended)) if ended else ([np.nan],) * 3
+            returns, lengths, reached, capped = (np.array(column, dtype=float) for column in
+                                                 zip(*ended)) if ended else ([np.nan],) * 4
             rows.append({"timesteps": self.num_timesteps,
                          "wall_s": time.perf_counter() - started, "episodes": len(ended),
                          "success_rate": np.mean(reached), "mean_return": np.mean(returns),
-                         "mean_length": np.mean(lengths)})
+                         "mean_length": np.mean(lengths),
+                         "capped_episodes": int(np.nansum(capped))})
             ended.clear()
 
     model = PPO("MlpPolicy", envs, seed=seed, device="cpu", verbose=0, **settings)
     # no log folder (SB3's default logger makes one in the temporary folder)
     model.set_logger(Logger(folder=None, output_formats=[]))
-    model.learn(timesteps, callback=Rollouts())
+    with warnings.catch_warnings():
+        # a policy trying gaits re-fires hot actuators, whose steps at 5 ms can end on a
+        # capped Newton solve: counted per rollout (capped_episodes) and told once below
+        # instead of a warning for every robot after each of its resets
+        warnings.filterwarnings("ignore", message=r".*newton_capped", category=RuntimeWarning)
+        model.learn(timesteps, callback=Rollouts())
     envs.close()
-    return model, pd.DataFrame(rows)
+    table = pd.DataFrame(rows)
+    if table["capped_episodes"].sum():
+        print(f"{table['capped_episodes'].sum()} of {table['episodes'].sum()} training "
+              f"episodes had a capped Newton solve (rl_training.csv's capped_episodes): a "
+              f"policy trying gaits re-fires hot actuators, which a smaller --dt resolves")
+    return model, table
 
 
 def plot(training_csv, paths_csv, summary_csv, png_path) -> Path:
