@@ -32,7 +32,8 @@ def test_quick_run_trains_drives_and_saves_the_policy_that_drove(tmp_path, monke
     training = pd.read_csv(out / "rl_training.csv")
     # 64 timesteps in rollouts of 4 robots x 16 periods: one rollout, 16 episodes of 4
     assert training["timesteps"].tolist() == [64] and training["episodes"].tolist() == [16]
-    assert training["mean_length"].tolist() == [4.0] and training["capped_episodes"].tolist() == [0]
+    assert training["mean_length"].tolist() == [4.0]
+    assert training["capped_episodes"].tolist() == [0]
     summary = pd.read_csv(out / "rl.csv")
     assert list(summary.columns) == POLICY_COLUMNS and (summary["mode"] == "ppo").all()
     assert len(summary) == 2 and list(pd.read_csv(out / "controllers.csv").columns) \
