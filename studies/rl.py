@@ -4,13 +4,13 @@ environment and drive it to the planner's goals, judged as the planners are.
     python -m studies rl [--timesteps 30000] [--num-envs 16] [--seed 0]
                          [--max-episode-steps 16] [--distance 50] [--directions 7] [--far 0]
                          [--tolerance 5] [--max-cycles 25] [--settle-cycles 4]
-                         [--compare PLAN_DIR] [--preset paper|accurate|identified]
+                         [--stop-speed MM_S] [--compare PLAN_DIR] [--preset paper|accurate|identified]
                          [--set NAME=VALUE ...] [--dt S] [--out DIR] [--quick]
 
 Training: `to_sb3(StarSwimmerVectorEnv(--num-envs))` (one Simulator; goals drawn at --distance
 mm in a uniform direction, an episode ends within --tolerance mm of its goal at a period
-boundary or after --max-episode-steps actuation periods; reward: progress in mm less 0.1 mm
-per actuator fired), PPO with an MLP policy and the hyperparameters `PPO_SETTINGS` (recorded
+boundary, with --stop-speed only at or below that speed, or after --max-episode-steps
+actuation periods; reward: progress in mm less 0.1 mm per actuator fired), PPO with an MLP policy and the hyperparameters `PPO_SETTINGS` (recorded
 in every sidecar), seeded by --seed, torch on one thread, --timesteps robot-periods in all.
 Then the deterministic policy drives one robot per goal (--directions at --distance mm, 0°,
 360/n°, ..., and --far mm behind: `planner.default_goals`) with
@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from taichi_star.envs import StarSwimmerVectorEnv, drive_policy, to_sb3
+from taichi_star.envs import StarSwimmerVectorEnv, SwimmerTask, drive_policy, to_sb3
 from taichi_star.lookahead import compare_controllers
 from taichi_star.output import read_provenance
 from taichi_star.metrics import MAX_GOAL_MM
@@ -93,6 +93,10 @@ def build_parser():
                         help="periods a driven robot may fire before it is stopped")
     parser.add_argument("--settle-cycles", type=int, default=SETTLE_CYCLES, quick=1,
                         help="periods a stopped robot coasts before it is judged at rest")
+    parser.add_argument("--stop-speed", type=float, default=None,
+                        help="mm/s: an episode ends within the tolerance only at or below this "
+                             "speed (the robot must stop there; default none: reaching the "
+                             "tolerance ends it)")
     parser.add_argument("--compare", default=None, metavar="PLAN_DIR",
                         help="a plan run (same goals, tolerance, robot, step) whose controllers "
                              "controllers.csv sets beside PPO")
@@ -257,7 +261,13 @@ def main(argv=None):
         raise cli.StudyArgumentError(f"--tolerance, --far: {error}") from None
     env_kwargs = {"params": base, "solver": solver, "goal_distance_mm": args.distance,
                   "goal_tolerance_mm": args.tolerance,
-                  "max_episode_steps": args.max_episode_steps}
+                  "max_episode_steps": args.max_episode_steps,
+                  "stop_speed_mm_s": args.stop_speed}
+    try:
+        SwimmerTask(**{name: value for name, value in env_kwargs.items()
+                       if name not in ("params", "solver")})
+    except ValueError as error:
+        raise cli.StudyArgumentError(f"--stop-speed: {error}") from None
     compared = None if args.compare is None else read_compared(
         args.compare, goals, base, solver, args.tolerance, args.settle_cycles)
     settings = {**PPO_SETTINGS, **(QUICK_PPO if args.quick else {})}
@@ -269,6 +279,7 @@ def main(argv=None):
                             "num_envs": args.num_envs, "seed": args.seed,
                             "max_episode_steps": args.max_episode_steps,
                             "tolerance_mm": args.tolerance, "settle_cycles": args.settle_cycles,
+                            "stop_speed_mm_s": args.stop_speed,
                             "torch_threads": TORCH_THREADS,
                             "compared": (None if args.compare is None
                                          else str(Path(args.compare).resolve()))})
@@ -276,7 +287,7 @@ def main(argv=None):
     summary, cycles, path = drive_policy(
         lambda observation: model.predict(observation, deterministic=True)[0], goals, base,
         solver, args.tolerance, args.max_cycles, args.settle_cycles, frames, mode="ppo",
-        arch=args.arch)
+        stop_speed_mm_s=args.stop_speed, arch=args.arch)
     training_csv = out.write_csv(training, "rl_training.csv")
     summary_csv = out.write_csv(summary, "rl.csv")
     out.write_csv(cycles, "rl_cycles.csv")

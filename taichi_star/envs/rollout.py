@@ -29,7 +29,7 @@ __all__ = ["drive_policy", "POLICY_COLUMNS", "POLICY_CYCLE_COLUMNS"]
 POLICY_COLUMNS = [*PLAN_COLUMNS, "terminated"]
 """Columns of `drive_policy`'s summary: `planner.PLAN_COLUMNS` (reached: at rest within the
 tolerance, settle_cycles after the stop) and terminated (within the tolerance at a period
-boundary while driven: the environment's success)."""
+boundary while driven, and as slow as the task asks: the environment's success)."""
 POLICY_CYCLE_COLUMNS = ["goal", "mode", "cycle", "gait", "x_mm", "y_mm", "heading_deg",
                         "distance_mm"]
 """Columns of `drive_policy`'s per-cycle table: the robot's state at the start of cycle
@@ -40,14 +40,16 @@ def drive_policy(policy: Callable[[np.ndarray], np.ndarray], goals_mm,
                  params: StarParams = StarParams(), solver: SolverConfig = SolverConfig(),
                  tolerance_mm: float = 5.0, max_cycles: int = 25,
                  settle_cycles: int = SETTLE_CYCLES, frames_per_cycle: int = 10,
-                 mode: str = "policy", arch: str = "cpu"):
+                 mode: str = "policy", stop_speed_mm_s=None, arch: str = "cpu"):
     """Drive one robot per goal by `policy` (module docstring) and judge it at rest.
 
     policy: observations (G, 15) float32 (`swimmer.OBSERVATION_NAMES`) -> actions (G, 8) of 0
     and 1 (`MultiBinary(8)`; a Stable-Baselines3 model: ``lambda obs: model.predict(obs,
     deterministic=True)[0]``), asked once a period for every robot (the answers of robots whose
     controller stopped are not fired). goals_mm: (G, 2) mm from the start (the robot starts at
-    rest, heading 0). mode: the summary's `mode` (a name for the policy).
+    rest, heading 0). mode: the summary's `mode` (a name for the policy). stop_speed_mm_s: the
+    task's (`swimmer.SwimmerTask`): with it a controller stops within the tolerance only once
+    its robot is that slow, as the environment it was trained in ends an episode.
     Returns (summary `POLICY_COLUMNS`, cycles `POLICY_CYCLE_COLUMNS`, path (goal, mode, t_s,
     controlled, x_mm, y_mm) recorded frames_per_cycle times a period). ValueError before any
     compute for arguments `planner.drive` refuses, and naming the policy for an answer that
@@ -63,7 +65,8 @@ def drive_policy(policy: Callable[[np.ndarray], np.ndarray], goals_mm,
     robots = np.arange(count)
     distances = np.hypot(*goals.T)
     # a drawn goal is never asked for: the task's distance only has to exceed the tolerance
-    task = SwimmerTask(goal_distance_mm=float(distances.max()), goal_tolerance_mm=tolerance_mm)
+    task = SwimmerTask(goal_distance_mm=float(distances.max()), goal_tolerance_mm=tolerance_mm,
+                       stop_speed_mm_s=stop_speed_mm_s)
     batch = GoalReachingBatch(count, params, solver, None, task, arch)
     space = observation_space(task)
     batch.reset(robots, [], goals)
@@ -79,10 +82,11 @@ def drive_policy(policy: Callable[[np.ndarray], np.ndarray], goals_mm,
         observation, info = batch.observe(space)
         position, distance = info["position_mm"], np.hypot(*(goals - info["position_mm"]).T)
         boundaries.append(position)
-        # the environment's episode end: within the tolerance, a failed solver, the budget
-        within = distance <= tolerance_mm
-        stopping = driving & (within | (info["status"] != "ok") | (cycle == max_cycles))
-        terminated |= stopping & within
+        # the environment's episode end: arrived (within the tolerance, and slow enough where
+        # the task asks it to stop), a failed solver, the budget
+        arrived = batch.arrived()
+        stopping = driving & (arrived | (info["status"] != "ok") | (cycle == max_cycles))
+        terminated |= stopping & arrived
         final_error[stopping] = distance[stopping]
         stop_cycle[stopping] = cycle
         driving &= ~stopping

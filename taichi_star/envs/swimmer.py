@@ -20,7 +20,8 @@ the space's bounds (a robot 10 m from its goal) are clipped to them.
 
 Reward per step: progress toward the goal (mm: distance before the step minus distance after)
 minus `firing_cost_mm` per actuator fired. Terminated when the centroid is within
-`goal_tolerance_mm` of the goal; truncated after `max_episode_steps` steps (the last one
+`goal_tolerance_mm` of the goal (with `stop_speed_mm_s`, and its speed at most that: the robot
+must arrive and stop, not swim through); truncated after `max_episode_steps` steps (the last one
 truncated even when it reached the goal, as gymnasium's TimeLimit), or when the instance's
 solver failed short of its goal (its robot is frozen; `info["status"]` says why). Made through
 `gymnasium.make`, the single env gets its step budget as gymnasium's TimeLimit wrapper
@@ -91,13 +92,17 @@ class SwimmerTask:
     firing_cost_mm: reward subtracted per fired actuator, mm of progress, [0, 1000];
     max_episode_steps: control periods before truncation, >= 1, or None (no budget);
     since_fired_cap_s: the largest time-since-fired observed (and that of a never-fired
-    actuator), s, (0, 1e6]."""
+    actuator), s, (0, 1e6];
+    stop_speed_mm_s: None (the episode ends within the tolerance, however fast the robot
+    swims through it) or the centroid speed, mm/s, (0, 1000], at or below which the robot must
+    be too (it must stop there: the judgement of the planners, who judge a goal at rest)."""
 
     goal_distance_mm: float = 50.0
     goal_tolerance_mm: float = 5.0
     firing_cost_mm: float = 0.1
     max_episode_steps: Optional[int] = None
     since_fired_cap_s: float = 10.0
+    stop_speed_mm_s: Optional[float] = None
 
     def __post_init__(self):
         for name, lowest, highest, lowest_allowed in (
@@ -117,6 +122,12 @@ class SwimmerTask:
             # whatever the agent does (an audit, 2026-12)
             raise ValueError(f"goal_distance_mm must exceed goal_tolerance_mm "
                              f"({self.goal_tolerance_mm!r} mm), got {self.goal_distance_mm!r}")
+        speed = self.stop_speed_mm_s
+        if speed is not None:
+            if not is_finite_real(speed) or not 0.0 < speed <= VELOCITY_BOUND_MM_S:
+                raise ValueError(f"stop_speed_mm_s must be None or a number in (0, "
+                                 f"{VELOCITY_BOUND_MM_S:g}] mm/s, got {shown(speed)}")
+            object.__setattr__(self, "stop_speed_mm_s", float(speed))
         steps = self.max_episode_steps
         if steps is not None:
             if not is_whole(steps) or steps < 1:
@@ -235,6 +246,8 @@ class GoalReachingBatch:
         self.n_robots = n_robots
         self.goals = np.zeros((n_robots, 2))
         self.distances = np.zeros(n_robots)
+        self.speeds = np.zeros(n_robots)
+        """Each robot's centroid speed at the last control period's end, mm/s."""
         self.episode_steps = np.zeros(n_robots, dtype=np.int64)
         self.started = np.zeros(n_robots, dtype=bool)
         """Whether each robot has had its first reset (a goal to swim to)."""
@@ -268,6 +281,7 @@ class GoalReachingBatch:
         self.simulator.reset(rows)
         self.goals[rows] = goals
         self.distances[rows] = np.hypot(goals[:, 0], goals[:, 1])
+        self.speeds[rows] = 0.0  # at rest at the start
         self.episode_steps[rows] = 0
         self.started[rows] = True
 
@@ -321,8 +335,17 @@ class GoalReachingBatch:
         state = simulator.state()
         position = state[["centroid_x_mm", "centroid_y_mm"]].to_numpy()
         self.distances = np.hypot(*(self.goals - position).T)
+        self.speeds = np.hypot(*state[["velocity_x_mm_s", "velocity_y_mm_s"]].to_numpy().T)
         self.episode_steps += 1
         return frames
+
+    def arrived(self) -> np.ndarray:
+        """(B,) bool: within the task's tolerance of the goal now, and with `stop_speed_mm_s`
+        at most that fast (the task's success, which ends an episode)."""
+        within = self.distances <= self.task.goal_tolerance_mm
+        if self.task.stop_speed_mm_s is None:
+            return within
+        return within & (self.speeds <= self.task.stop_speed_mm_s)
 
     def step(self, fire: np.ndarray):
         """`swim` one control period, judged as the task does. Returns rewards (B,) float64,
@@ -333,7 +356,7 @@ class GoalReachingBatch:
         before = self.distances.copy()
         self.swim(fire)
         rewards = before - self.distances - self.task.firing_cost_mm * fired.sum(axis=1)
-        terminated = self.distances <= self.task.goal_tolerance_mm
+        terminated = self.arrived()
         out_of_steps = (self.episode_steps >= self.task.max_episode_steps
                         if self.task.max_episode_steps is not None else False)
         # as gymnasium's TimeLimit: the step budget's last step is truncated whether or not
@@ -445,8 +468,8 @@ class StarSwimmerEnv(RobotsView, gym.Env):
     reward and episode ends). Keyword arguments: params (a StarParams; default the paper
     preset), solver (SolverConfig; default the paper preset), control_period_s, arch, and the
     SwimmerTask fields (goal_distance_mm=50, goal_tolerance_mm=5, firing_cost_mm=0.1,
-    max_episode_steps=None, since_fired_cap_s=10), and render_mode (None or "rgb_array":
-    `render()` then returns a (400, 400, 3) uint8 picture)."""
+    max_episode_steps=None, since_fired_cap_s=10, stop_speed_mm_s=None), and render_mode
+    (None or "rgb_array": `render()` then returns a (400, 400, 3) uint8 picture)."""
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": 4}
 

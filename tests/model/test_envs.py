@@ -863,3 +863,34 @@ def test_sb3_options_are_used_by_one_reset_only():
         np.testing.assert_allclose(np.hypot(*adapter.envs.batch.goals.T), [50.0, 50.0])
     finally:
         adapter.close()
+
+
+@pytest.mark.parametrize("speed, refused", [(None, False), (1000.0, False), (1e-9, False),
+                                            (0.0, True), (-1.0, True), (float("nan"), True),
+                                            (1000.5, True), ("1", True)])
+def test_the_stop_speed_is_none_or_in_its_range(speed, refused):
+    if refused:
+        with pytest.raises(ValueError, match=r"^stop_speed_mm_s must be None or a number in "
+                                             r"\(0, 1000\] mm/s"):
+            SwimmerTask(stop_speed_mm_s=speed)
+    else:
+        assert SwimmerTask(stop_speed_mm_s=speed).stop_speed_mm_s == speed
+
+
+@pytest.mark.parametrize("stop, ends", [(None, True), ("exact", True), ("below", False)])
+def test_with_a_stop_speed_an_episode_ends_only_once_the_robot_is_that_slow(stop, ends):
+    """A goal the robot reaches within the tolerance in one control period: without a stop
+    speed the episode ends there; with one, only if the robot's speed then is at most it (the
+    rule's boundary: its own speed, and the next number below)."""
+    probe = StarSwimmerVectorEnv(1, **SHORT)
+    probe.reset(options={"goal": (40.0, 0.0)})
+    probe.step(FORWARD[None])
+    state = probe.simulator.state()
+    position = state[["centroid_x_mm", "centroid_y_mm"]].to_numpy()[0]
+    speed = float(np.hypot(*state[["velocity_x_mm_s", "velocity_y_mm_s"]].to_numpy()[0]))
+    assert speed > 0.1  # still swimming at the period's end
+    stop_speed = {None: None, "exact": speed, "below": np.nextafter(speed, 0.0)}[stop]
+    env = StarSwimmerVectorEnv(1, **SHORT, goal_tolerance_mm=1.0, stop_speed_mm_s=stop_speed)
+    env.reset(options={"goal": position})
+    _, _, terminated, truncated, _ = env.step(FORWARD[None])
+    assert terminated.tolist() == [ends] and truncated.tolist() == [False]

@@ -143,3 +143,17 @@ def test_a_controller_stops_at_exactly_the_tolerance_and_not_a_hair_outside(belo
                                       settle_cycles=0, frames_per_cycle=FRAMES)
     assert summary["terminated"].iloc[0] == (not below)
     assert cycles["gait"].iloc[1] == ("A1+A3" if below else "none")
+
+
+def test_with_a_stop_speed_a_robot_swimming_through_is_driven_on():
+    """Goal 0's case of `driven`: within the tolerance at the first boundary, but still
+    swimming; with a stop speed below its speed the controller goes on to the budget."""
+    boundaries, _ = replay(1, 0)
+    goal = boundaries[1] + [0.0, 1.0]
+    for stop_speed, stop in ((None, 1), (1e-3, 2)):
+        summary, cycles, _ = drive_policy(lambda obs: np.tile(A1_A3, (1, 1)), [goal], PARAMS,
+                                          SOLVER, tolerance_mm=2.0, max_cycles=2,
+                                          settle_cycles=0, frames_per_cycle=FRAMES,
+                                          stop_speed_mm_s=stop_speed)
+        assert summary["run_cycles"].iloc[0] == stop
+        assert summary["terminated"].iloc[0] == (stop_speed is None)
