@@ -40,7 +40,9 @@ from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, MAX_LOCAL_WO
 from taichi_star.experiment import PAPER_GAITS
 from taichi_star.extras import require
 from taichi_star.gait import Gait, all_gaits
+from taichi_star.metrics import MAX_GOAL_MM
 from taichi_star.output import column_unit, column_units, parquet_bytes, read_provenance
+from taichi_star.planner import MAX_DEFAULT_GOALS, check_drive, default_goals, path_frames
 from taichi_star.provenance import table_stamp
 from taichi_star.sensitivities import parse_directions
 from taichi_star.timegrid import (LongWorkWarning, SteadySpeedWarning, steps_in,
@@ -470,11 +472,11 @@ def robot_differences(path, base: StarParams, flag: str = "--primitives") -> tup
     """(the robot's parameters the sidecar of a table (given by `flag`) records, the fields
     other than gait in which `base` differs from them): a field the sidecar does not record
     came after the table, and the robot had its default (skipped until 2026-12, so --set
-    wake_coupling=5 planned with another robot's steps). (None, []) where the sidecar is missing or records no
-    robot, and a printed line says so (a table copied without its sidecar planned silently:
-    an audit, 2026-12); one that cannot be read or no longer describes the table
-    (`read_provenance`: its SHA-256 differs, the table edited since) records none either, said
-    the same way."""
+    wake_coupling=5 planned with another robot's steps). (None, []) where the sidecar is
+    missing or records no robot, and a printed line says so (a table copied without its
+    sidecar planned silently: an audit, 2026-12); one that cannot be read or no longer
+    describes the table (`read_provenance`: its SHA-256 differs, the table edited since)
+    records none either, said the same way."""
     sidecar = provenance.sidecar_path(path)
     not_compared = "the robot it was measured on is not compared with this run's"
     if not sidecar.is_file():
@@ -497,6 +499,65 @@ def robot_differences(path, base: StarParams, flag: str = "--primitives") -> tup
     recorded = {**provenance.plain(StarParams()), **recorded}
     own = provenance.plain(base)
     return recorded, [name for name in own if name != "gait" and recorded.get(name) != own[name]]
+
+
+def add_goal_flags(parser: StudyParser, directions: int, far_mm: float,
+                   quick_directions: Optional[int] = None):
+    """--distance, --directions, --far and --tolerance: the goals a controller is driven to
+    (`planner.default_goals`) and when one is reached (`goals_from_flags` checks them)."""
+    parser.add_argument("--distance", type=float, default=50.0,
+                        help="distance of the goals around the robot, mm (default 50)")
+    quick = {} if quick_directions is None else {"quick": quick_directions}
+    parser.add_argument("--directions", type=int, default=directions, **quick,
+                        help=f"goals at --distance, equally spaced in direction (default "
+                             f"{directions}, at most {MAX_DEFAULT_GOALS})")
+    parser.add_argument("--far", type=float, default=far_mm,
+                        help=f"distance of the goal straight behind, mm (default {far_mm:g}; 0: "
+                             f"none)")
+    parser.add_argument("--tolerance", type=float, default=5.0,
+                        help="a goal is reached within this distance, mm (default 5)")
+
+
+def goals_from_flags(args) -> np.ndarray:
+    """The (G, 2) goals of `add_goal_flags`' flags, each refused naming it: --directions in [0,
+    MAX_DEFAULT_GOALS], --distance in (0, MAX_GOAL_MM] mm and --far in [0, MAX_GOAL_MM] mm
+    (1e308 ran every plan, then failed plotting: an audit), some goal, --tolerance > 0 and below
+    the nearest goal (every such goal counts as reached before the robot moves)."""
+    check_count(args.directions, "--directions", 0, MAX_DEFAULT_GOALS)
+    check_positive(args.tolerance, "--tolerance")
+    if not (math.isfinite(args.distance) and 0 < args.distance <= MAX_GOAL_MM):
+        raise StudyArgumentError(f"--distance must be in (0, {MAX_GOAL_MM:g}] mm, got "
+                                 f"{args.distance}")
+    if not (math.isfinite(args.far) and 0 <= args.far <= MAX_GOAL_MM):
+        raise StudyArgumentError(f"--far must be in [0, {MAX_GOAL_MM:g}] mm, got {args.far}")
+    if args.directions == 0 and args.far == 0:
+        raise StudyArgumentError("no goals: --directions 0 and --far 0")
+    nearest_goal, flag = min((args.distance, "--distance") if args.directions else (math.inf, ""),
+                             (args.far, "--far") if args.far else (math.inf, ""))
+    if args.tolerance >= nearest_goal:
+        raise StudyArgumentError(f"--tolerance must be below {flag} ({nearest_goal:g} mm), "
+                                 f"got {args.tolerance!r}")
+    return default_goals(args.distance, args.directions, args.far or None)
+
+
+def driving(args) -> tuple:
+    """(goals (G, 2) mm, the robot, the solver, path records per cycle) of a study that drives
+    robots to goals (`add_goal_flags`, --max-cycles, --settle-cycles, the model and --dt),
+    checked before any compute: the goals (`goals_from_flags`), the run's length named by its
+    flags (`check_cycles`), then what `planner.check_drive` refuses (a period off the step
+    grid), named --dt, --set period."""
+    goals = goals_from_flags(args)
+    base = base_params(args)
+    config = solver(args)
+    check_cycles({"--max-cycles": args.max_cycles, "--settle-cycles": args.settle_cycles},
+                 base.period, config)
+    frames = path_frames(base.period, config.dt)
+    try:
+        check_drive(goals, base, config, args.tolerance, args.max_cycles,
+                    frames_per_cycle=frames, settle_cycles=args.settle_cycles)
+    except ValueError as error:
+        raise StudyArgumentError(f"--dt, --set period: {error}") from None
+    return goals, base, config, frames
 
 
 def tell_batch_work(args, config: SolverConfig, instances: int,

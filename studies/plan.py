@@ -61,10 +61,8 @@ import numpy as np
 import pandas as pd
 
 from taichi_star import StarParams
-from taichi_star.metrics import MAX_GOAL_MM
 from taichi_star.lookahead import check_lookahead, compare_controllers, lookahead_drive
-from taichi_star.planner import (MAX_DEFAULT_GOALS, SETTLE_CYCLES, PrimitiveModel, check_drive,
-                                 closed_loop_gain, default_goals, drive, path_frames)
+from taichi_star.planner import (SETTLE_CYCLES, PrimitiveModel, closed_loop_gain, drive)
 from taichi_star.primitives import GLIDE_CYCLES, measure_primitives
 
 from . import cli, provenance
@@ -146,15 +144,7 @@ def build_parser():
     cli.add_dt_flag(parser, quick=QUICK_DT)
     parser.add_argument("--primitives", default=None, metavar="CSV",
                         help="primitive table to plan with (default: measure it first)")
-    parser.add_argument("--distance", type=float, default=50.0,
-                        help="distance of the goals around the robot, mm (default 50)")
-    parser.add_argument("--directions", type=int, default=8,
-                        help=f"goals at --distance, equally spaced in direction (default 8, at "
-                             f"most {MAX_DEFAULT_GOALS})")
-    parser.add_argument("--far", type=float, default=150.0,
-                        help="distance of the goal straight behind, mm (default 150; 0: none)")
-    parser.add_argument("--tolerance", type=float, default=5.0,
-                        help="a goal is reached within this distance, mm (default 5)")
+    cli.add_goal_flags(parser, directions=8, far_mm=150.0)
     parser.add_argument("--max-cycles", type=int, default=25, quick=QUICK_MAX_CYCLES,
                         help="cycle budget per goal")
     parser.add_argument("--cycles", type=int, default=5, quick=QUICK_CYCLES,
@@ -273,34 +263,7 @@ def main(argv=None):
                                 (args.settle_cycles, "--settle-cycles", 0)):
         if value < lowest:
             raise cli.StudyArgumentError(f"{flag} must be >= {lowest}, got {value}")
-    cli.check_count(args.directions, "--directions", 0, MAX_DEFAULT_GOALS)
-    cli.check_positive(args.tolerance, "--tolerance")
-    # within metrics.MAX_GOAL_MM: 1e308 ran every plan, then failed plotting (an audit)
-    if not (np.isfinite(args.distance) and 0 < args.distance <= MAX_GOAL_MM):
-        raise cli.StudyArgumentError(f"--distance must be in (0, {MAX_GOAL_MM:g}] mm, got "
-                                     f"{args.distance}")
-    if not (np.isfinite(args.far) and 0 <= args.far <= MAX_GOAL_MM):
-        raise cli.StudyArgumentError(f"--far must be in [0, {MAX_GOAL_MM:g}] mm, got {args.far}")
-    if args.directions == 0 and args.far == 0:
-        raise cli.StudyArgumentError("no goals: --directions 0 and --far 0")
-    nearest_goal, flag = min((args.distance, "--distance") if args.directions else (np.inf, ""),
-                             (args.far, "--far") if args.far else (np.inf, ""))
-    if args.tolerance >= nearest_goal:
-        # every such goal counts as reached before the robot moves
-        raise cli.StudyArgumentError(f"--tolerance must be below {flag} ({nearest_goal:g} mm), "
-                                     f"got {args.tolerance!r}")
-    base = cli.base_params(args)
-    solver = cli.solver(args)
-    goals = default_goals(args.distance, args.directions, args.far or None)
-    # named by its flags before check_drive refuses the same run in the library's words
-    cli.check_cycles({"--max-cycles": args.max_cycles, "--settle-cycles": args.settle_cycles},
-                     base.period, solver)
-    frames = path_frames(base.period, solver.dt)
-    try:
-        check_drive(goals, base, solver, args.tolerance, args.max_cycles,
-                    frames_per_cycle=frames, settle_cycles=args.settle_cycles)
-    except ValueError as error:
-        raise cli.StudyArgumentError(f"--dt, --set period: {error}") from None
+    goals, base, solver, frames = cli.driving(args)
     lookahead_gaits = None
     if args.lookahead:
         lookahead_gaits = cli.resolve_gaits(

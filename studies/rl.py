@@ -4,14 +4,16 @@ environment and drive it to the planner's goals, judged as the planners are.
     python -m studies rl [--timesteps 30000] [--num-envs 16] [--seed 0]
                          [--max-episode-steps 16] [--distance 50] [--directions 7] [--far 0]
                          [--tolerance 5] [--max-cycles 25] [--settle-cycles 4]
-                         [--stop-speed MM_S] [--compare PLAN_DIR] [--preset paper|accurate|identified]
-                         [--set NAME=VALUE ...] [--dt S] [--out DIR] [--quick]
+                         [--stop-speed MM_S] [--compare PLAN_DIR]
+                         [--preset paper|accurate|identified] [--set NAME=VALUE ...] [--dt S]
+                         [--out DIR] [--quick]
 
 Training: `to_sb3(StarSwimmerVectorEnv(--num-envs))` (one Simulator; goals drawn at --distance
 mm in a uniform direction, an episode ends within --tolerance mm of its goal at a period
 boundary, with --stop-speed only at or below that speed, or after --max-episode-steps
-actuation periods; reward: progress in mm less 0.1 mm per actuator fired), PPO with an MLP policy and the hyperparameters `PPO_SETTINGS` (recorded
-in every sidecar), seeded by --seed, torch on one thread, --timesteps robot-periods in all.
+actuation periods; reward: progress in mm less 0.1 mm per actuator fired), PPO with an MLP
+policy and the hyperparameters `PPO_SETTINGS` (recorded in every sidecar), seeded by --seed,
+torch on one thread, --timesteps robot-periods in all.
 Then the deterministic policy drives one robot per goal (--directions at --distance mm, 0°,
 360/n°, ..., and --far mm behind: `planner.default_goals`) with
 `taichi_star.envs.drive_policy`: each stops where the environment would end its episode, then
@@ -50,9 +52,7 @@ import pandas as pd
 from taichi_star.envs import StarSwimmerVectorEnv, SwimmerTask, drive_policy, to_sb3
 from taichi_star.lookahead import compare_controllers
 from taichi_star.output import read_provenance
-from taichi_star.metrics import MAX_GOAL_MM
-from taichi_star.planner import (MAX_DEFAULT_GOALS, PLAN_COLUMNS, SETTLE_CYCLES, check_drive,
-                                 default_goals, path_frames)
+from taichi_star.planner import (PLAN_COLUMNS, SETTLE_CYCLES)
 from taichi_star.provenance import write_atomic
 
 from . import cli, provenance
@@ -80,15 +80,8 @@ def build_parser():
     parser.add_argument("--seed", type=int, default=0, help="PPO's and the goals' seed")
     parser.add_argument("--max-episode-steps", type=int, default=16, quick=4,
                         help="actuation periods before a training episode is cut (default 16)")
-    parser.add_argument("--distance", type=float, default=50.0,
-                        help="mm from the start of the training goals and the goals driven to "
-                             "(default 50)")
-    parser.add_argument("--directions", type=int, default=7, quick=2,
-                        help="goals driven to, evenly in direction (default 7)")
-    parser.add_argument("--far", type=float, default=0.0,
-                        help="one more goal this far behind the robot, mm (default 0: none)")
-    parser.add_argument("--tolerance", type=float, default=5.0,
-                        help="mm from the goal that ends an episode and judges a goal reached")
+    # --distance is the training goals' distance too, --tolerance the episodes' end
+    cli.add_goal_flags(parser, directions=7, far_mm=0.0, quick_directions=2)
     parser.add_argument("--max-cycles", type=int, default=25, quick=2,
                         help="periods a driven robot may fire before it is stopped")
     parser.add_argument("--settle-cycles", type=int, default=SETTLE_CYCLES, quick=1,
@@ -236,29 +229,7 @@ def main(argv=None):
         if value < lowest:
             raise cli.StudyArgumentError(f"{flag} must be >= {lowest}, got {value}")
     cli.check_count(args.num_envs, "--num-envs", 1, cli.MAX_BATCH_SIZE)
-    cli.check_count(args.directions, "--directions", 0, MAX_DEFAULT_GOALS)
-    if not (np.isfinite(args.distance) and 0 < args.distance <= MAX_GOAL_MM):
-        raise cli.StudyArgumentError(f"--distance must be in (0, {MAX_GOAL_MM:g}] mm, got "
-                                     f"{args.distance}")
-    if not (np.isfinite(args.far) and 0 <= args.far <= MAX_GOAL_MM):
-        raise cli.StudyArgumentError(f"--far must be in [0, {MAX_GOAL_MM:g}] mm, got {args.far}")
-    if args.directions == 0 and args.far == 0:
-        raise cli.StudyArgumentError("no goals: --directions 0 and --far 0")
-    cli.check_positive(args.tolerance, "--tolerance")
-    if args.tolerance >= args.distance:
-        raise cli.StudyArgumentError(f"--tolerance must be below --distance ({args.distance:g} "
-                                     f"mm), got {args.tolerance!r}")
-    base = cli.base_params(args)
-    solver = cli.solver(args)
-    goals = default_goals(args.distance, args.directions, args.far or None)
-    cli.check_cycles({"--max-cycles": args.max_cycles, "--settle-cycles": args.settle_cycles},
-                     base.period, solver)
-    frames = path_frames(base.period, solver.dt)
-    try:
-        check_drive(goals, base, solver, args.tolerance, args.max_cycles, frames,
-                    args.settle_cycles)
-    except ValueError as error:
-        raise cli.StudyArgumentError(f"--tolerance, --far: {error}") from None
+    goals, base, solver, frames = cli.driving(args)
     env_kwargs = {"params": base, "solver": solver, "goal_distance_mm": args.distance,
                   "goal_tolerance_mm": args.tolerance,
                   "max_episode_steps": args.max_episode_steps,
@@ -267,7 +238,8 @@ def main(argv=None):
         SwimmerTask(**{name: value for name, value in env_kwargs.items()
                        if name not in ("params", "solver")})
     except ValueError as error:
-        raise cli.StudyArgumentError(f"--stop-speed: {error}") from None
+        raise cli.StudyArgumentError(f"--distance, --tolerance, --max-episode-steps, "
+                                     f"--stop-speed: {error}") from None
     compared = None if args.compare is None else read_compared(
         args.compare, goals, base, solver, args.tolerance, args.settle_cycles)
     settings = {**PPO_SETTINGS, **(QUICK_PPO if args.quick else {})}

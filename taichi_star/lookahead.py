@@ -31,7 +31,7 @@ from .checks import check_flag, warn_user
 from .driver import robots_label
 from .gait import N_ACTUATORS, NO_GAIT, Gait, all_gaits
 from .params import SolverConfig, StarParams
-from .planner import PLAN_COLUMNS, SETTLE_CYCLES, check_drive
+from .planner import SETTLE_CYCLES, check_drive, judged_at_rest
 from .provenance import code_version, file_path, write_atomic
 from .runtime import check_arch
 from .simulator import Simulator, SimulatorSnapshot
@@ -264,17 +264,9 @@ def lookahead_drive(goals_mm, params: StarParams = StarParams(),
                           .to_numpy()[:count])
     if bar is not None:
         bar.close()
-    status = simulator.state()["status"].to_numpy()[:count]
-    run_cycles = stop_cycle + settle_cycles
-    at_rest = np.stack(boundaries)[run_cycles, robots]
-    end_error = np.hypot(*(goals - at_rest).T)
-    reached = (end_error <= tolerance_mm) & (status == "ok")
-    summary = pd.DataFrame({
-        "goal": robots, "goal_x_mm": goals[:, 0], "goal_y_mm": goals[:, 1],
-        "goal_distance_mm": np.hypot(*goals.T), "mode": LOOKAHEAD_MODE, "reached": reached,
-        "cycles_to_goal": np.where(reached, stop_cycle, np.nan), "cycles_fired": fired,
-        "final_error_mm": final_error, "end_error_mm": end_error, "run_cycles": run_cycles,
-        "status": status})[PLAN_COLUMNS]
+    summary = judged_at_rest(goals, robots, LOOKAHEAD_MODE, boundaries, stop_cycle,
+                             settle_cycles, simulator.state()["status"].to_numpy()[:count],
+                             tolerance_mm, fired, final_error)
     start = pd.DataFrame({"goal": robots, "mode": LOOKAHEAD_MODE, "t_s": 0.0, "x_mm": 0.0,
                           "y_mm": 0.0})
     path = pd.concat([start, *paths], ignore_index=True)

@@ -51,7 +51,8 @@ from .timegrid import check_work, whole_steps
 
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
 __all__ = ["PrimitiveModel", "drive", "check_drive", "default_goals", "closed_loop_gain",
-           "path_frames", "SETTLE_CYCLES", "MAX_DEFAULT_GOALS", "PLAN_COLUMNS", "CYCLE_COLUMNS"]
+           "judged_at_rest", "path_frames", "SETTLE_CYCLES", "MAX_DEFAULT_GOALS", "PLAN_COLUMNS",
+           "CYCLE_COLUMNS"]
 
 MODES = ("open", "closed")
 
@@ -608,20 +609,8 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
         paths.append(frames[["instance", "t_s", "centroid_x_mm", "centroid_y_mm"]])
         state = simulator.state()
         boundaries.append(state[["centroid_x_mm", "centroid_y_mm"]].to_numpy())
-    # each robot is judged settle_cycles after its own stop, the horizon of the measured
-    # glides: a robot under quadratic drag slows down as 1/t and never quite stops
-    run_cycles = stop_cycle + settle_cycles
-    rest = np.stack(boundaries)[run_cycles, np.arange(len(target))]
-    distance = np.hypot(*(target - rest).T)
-    reached = (distance <= tolerance_mm) & (state["status"].to_numpy() == "ok")
-
-    summary = pd.DataFrame({
-        "goal": goal_index, "goal_x_mm": target[:, 0], "goal_y_mm": target[:, 1],
-        "goal_distance_mm": np.hypot(*target.T), "mode": modes,
-        "reached": reached, "cycles_to_goal": np.where(reached, stop_cycle, np.nan),
-        "cycles_fired": fired, "final_error_mm": final_error, "end_error_mm": distance,
-        "run_cycles": run_cycles,
-        "status": state["status"].to_numpy()})[PLAN_COLUMNS]
+    summary = judged_at_rest(target, goal_index, modes, boundaries, stop_cycle, settle_cycles,
+                             state["status"].to_numpy(), tolerance_mm, fired, final_error)
     start = pd.DataFrame({"instance": np.arange(len(target)), "t_s": 0.0, "centroid_x_mm": 0.0,
                           "centroid_y_mm": 0.0})
     path = pd.concat([start, *paths], ignore_index=True)
@@ -633,6 +622,32 @@ def drive(model: PrimitiveModel, goals_mm, params: StarParams = StarParams(),
                          "y_mm": path["centroid_y_mm"].to_numpy(dtype=float)})
     path = path.sort_values(["goal", "mode", "t_s"], kind="stable").reset_index(drop=True)
     return summary, pd.concat(cycle_rows, ignore_index=True)[CYCLE_COLUMNS], path
+
+
+def judged_at_rest(goals: np.ndarray, goal, mode, boundaries: Sequence[np.ndarray],
+                   stop_cycle: np.ndarray, settle_cycles: int, status: np.ndarray,
+                   tolerance_mm: float, fired: np.ndarray, final_error: np.ndarray
+                   ) -> pd.DataFrame:
+    """`PLAN_COLUMNS`, one row per driven robot, as every controller here is judged (`drive`,
+    `lookahead.lookahead_drive`, `envs.drive_policy`): each robot where it is settle_cycles
+    periods after its own controller stopped (stop_cycle), the horizon of the measured glides
+    (a robot under quadratic drag slows down as 1/t and never quite stops), reached within
+    tolerance_mm of its goal with its instance ok.
+
+    goals: (R, 2) mm, one per robot; goal, mode: each robot's goal number and controller (R,)
+    or one for all; boundaries: the robots' (R, 2) positions, mm, at every period boundary
+    from the start; status (R,); fired: periods each fired (R,); final_error: mm from the goal
+    when its controller stopped (R,)."""
+    run_cycles = stop_cycle + settle_cycles
+    rest = np.stack(boundaries)[run_cycles, np.arange(len(goals))]
+    end_error = np.hypot(*(goals - rest).T)
+    reached = (end_error <= tolerance_mm) & (status == "ok")
+    return pd.DataFrame({
+        "goal": goal, "goal_x_mm": goals[:, 0], "goal_y_mm": goals[:, 1],
+        "goal_distance_mm": np.hypot(*goals.T), "mode": mode,
+        "reached": reached, "cycles_to_goal": np.where(reached, stop_cycle, np.nan),
+        "cycles_fired": fired, "final_error_mm": final_error, "end_error_mm": end_error,
+        "run_cycles": run_cycles, "status": status})[PLAN_COLUMNS]
 
 
 def closed_loop_gain(summary: pd.DataFrame) -> dict:

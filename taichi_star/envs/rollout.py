@@ -21,7 +21,7 @@ import pandas as pd
 
 from ..gait import Gait
 from ..params import SolverConfig, StarParams
-from ..planner import PLAN_COLUMNS, SETTLE_CYCLES, check_drive
+from ..planner import PLAN_COLUMNS, SETTLE_CYCLES, check_drive, judged_at_rest
 from .swimmer import GoalReachingBatch, SwimmerTask, observation_space
 
 __all__ = ["drive_policy", "POLICY_COLUMNS", "POLICY_CYCLE_COLUMNS"]
@@ -63,9 +63,9 @@ def drive_policy(policy: Callable[[np.ndarray], np.ndarray], goals_mm,
         raise ValueError(f"mode must be a non-empty name, got {mode!r}")
     count = len(goals)
     robots = np.arange(count)
-    distances = np.hypot(*goals.T)
     # a drawn goal is never asked for: the task's distance only has to exceed the tolerance
-    task = SwimmerTask(goal_distance_mm=float(distances.max()), goal_tolerance_mm=tolerance_mm,
+    task = SwimmerTask(goal_distance_mm=float(np.hypot(*goals.T).max()),
+                       goal_tolerance_mm=tolerance_mm,
                        stop_speed_mm_s=stop_speed_mm_s)
     batch = GoalReachingBatch(count, params, solver, None, task, arch)
     space = observation_space(task)
@@ -111,17 +111,9 @@ def drive_policy(policy: Callable[[np.ndarray], np.ndarray], goals_mm,
             "goal": frames["instance"].to_numpy(), "mode": mode,
             "t_s": frames["t_s"].to_numpy(), "x_mm": frames["centroid_x_mm"].to_numpy(),
             "y_mm": frames["centroid_y_mm"].to_numpy()}))
-    status = batch.simulator.state()["status"].to_numpy()
-    run_cycles = stop_cycle + settle_cycles
-    at_rest = np.stack(boundaries)[run_cycles, robots]
-    end_error = np.hypot(*(goals - at_rest).T)
-    reached = (end_error <= tolerance_mm) & (status == "ok")
-    summary = pd.DataFrame({
-        "goal": robots, "goal_x_mm": goals[:, 0], "goal_y_mm": goals[:, 1],
-        "goal_distance_mm": distances, "mode": mode, "reached": reached,
-        "cycles_to_goal": np.where(reached, stop_cycle, np.nan), "cycles_fired": fired,
-        "final_error_mm": final_error, "end_error_mm": end_error, "run_cycles": run_cycles,
-        "status": status, "terminated": terminated})[POLICY_COLUMNS]
+    summary = judged_at_rest(goals, robots, mode, boundaries, stop_cycle, settle_cycles,
+                             batch.simulator.state()["status"].to_numpy(), tolerance_mm, fired,
+                             final_error).assign(terminated=terminated)[POLICY_COLUMNS]
     start = pd.DataFrame({"goal": robots, "mode": mode, "t_s": 0.0, "x_mm": 0.0, "y_mm": 0.0})
     path = pd.concat([start, *paths], ignore_index=True)
     path["controlled"] = path["t_s"] <= (stop_cycle[path["goal"].to_numpy()] * period

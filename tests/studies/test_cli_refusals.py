@@ -272,12 +272,12 @@ def past_the_flag_checks(*args, **kwargs):
 
 
 @pytest.mark.parametrize("study, argv, next_step", [
-    ("plan", ["--distance", "1000"], "studies.plan.default_goals"),
-    ("plan", ["--far", "1000"], "studies.plan.default_goals"),
+    ("plan", ["--distance", "1000"], "studies.cli.default_goals"),
+    ("plan", ["--far", "1000"], "studies.cli.default_goals"),
     ("animate", ["--frames", "10000"], "studies.cli.resolve_gaits"),
-    ("plan", ["--tolerance", "49.99", "--distance", "50"], "studies.plan.default_goals"),
+    ("plan", ["--tolerance", "49.99", "--distance", "50"], "studies.cli.default_goals"),
     ("plan", ["--tolerance", "29.99", "--directions", "0", "--far", "30"],
-     "studies.plan.default_goals"),
+     "studies.cli.default_goals"),
     ("gait_design", ["--direction=-360"], "studies.cli.check_cycles"),
     ("gait_design", ["--direction", "360"], "studies.cli.check_cycles"),
     ("model_select", ["--only", "ramp", "--gaits", "A1", "--popsize", "1000",
