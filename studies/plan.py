@@ -18,8 +18,9 @@ judged as the planner's. It writes lookahead.csv, lookahead_cycles.csv, lookahea
 controllers.csv (open, closed and lookahead side by side), and draws its paths in plan.png.
 After every decision the lookahead so far is written to resume/lookahead.npz in --out (removed
 once its tables are written): a run killed or stopped with Ctrl-C is continued from its last
-decision, bit for bit, by the same command with --resume (the primitives' loops, minutes at
-most, run again to the same bits); without --resume a run into that folder is refused.
+decision, bit for bit, by the same command with --resume (the primitives' loops run again to
+the same bits, and their measurement where no --primitives table is given); without --resume a
+run into that folder is refused.
 
 Goals: --directions points at --distance mm in every direction (0°, 45°, ... for 8), plus one
 --far mm straight behind the robot (0: none). The primitive table is read from --primitives
