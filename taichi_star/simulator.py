@@ -319,6 +319,11 @@ class Simulator(NotCopied):
             raise ValueError(f"commands must be a list of {batch} gaits, one per instance, got "
                              f"the single gait {str(commands)!r}: [{str(commands)!r}] * {batch} "
                              f"fires it on every instance")
+        if isinstance(commands, (list, tuple)) and any(c is None for c in commands):
+            # "no firing" as None read as an array of objects: "got shape (3,)" said nothing
+            first = next(b for b, c in enumerate(commands) if c is None)
+            raise ValueError(f"commands[{first}] is None: give every instance a gait, 'none' "
+                             f"for no firing (or a row of {N_ACTUATORS} booleans)")
         if isinstance(commands, (list, tuple)) and all(isinstance(c, (str, Gait)) for c in commands):
             if len(commands) != batch:
                 raise ValueError(f"commands must hold one gait per instance ({batch}), got "

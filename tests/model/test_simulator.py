@@ -726,6 +726,11 @@ def test_mixed_commands_and_a_missing_folder_are_named_in_plain_words(tmp_path):
                                              r"instance, got the single gait 'A1\+A3': "
                                              r"\['A1\+A3'\] \* 3 fires it on every instance$"):
             sim.fire(single)
+    # None for "no firing", the first one named (it was "got shape (3,)")
+    for commands, first in ((["A1", None, None], 1), ([None] * 3, 0)):
+        with pytest.raises(ValueError, match=rf"^commands\[{first}\] is None: give every "
+                                             rf"instance a gait, 'none' for no firing"):
+            sim.fire(commands)
     assert all(np.array_equal(sim.save().fields[name], before[name]) for name in before)
     with pytest.raises(OSError, match=r"^cannot write state.npz: its folder .*missing does not "
                                       r"exist$"):
