@@ -233,10 +233,10 @@ def main(argv=None):
     env_kwargs = {"params": base, "solver": solver, "goal_distance_mm": args.distance,
                   "goal_tolerance_mm": args.tolerance,
                   "max_episode_steps": args.max_episode_steps,
-                  "stop_speed_mm_s": args.stop_speed}
+                  "stop_speed_mm_s": args.stop_speed, "arch": args.arch}
     try:
         SwimmerTask(**{name: value for name, value in env_kwargs.items()
-                       if name not in ("params", "solver")})
+                       if name not in ("params", "solver", "arch")})
     except ValueError as error:
         raise cli.StudyArgumentError(f"--distance, --tolerance, --max-episode-steps, "
                                      f"--stop-speed: {error}") from None
@@ -256,22 +256,23 @@ def main(argv=None):
                             "compared": (None if args.compare is None
                                          else str(Path(args.compare).resolve()))})
     model, training = train(env_kwargs, args.num_envs, args.timesteps, args.seed, settings)
+    # the training's work kept before the evaluation runs
+    training_csv = out.write_csv(training, "rl_training.csv")
+    policy = io.BytesIO()
+    model.save(policy)
+    write_atomic(out.path("rl_policy.zip"), policy.getvalue(),
+                 failure=lambda reason: cli.StudyOutputError(reason))
+    out.wrote(out.path("rl_policy.zip"))
     summary, cycles, path = drive_policy(
         lambda observation: model.predict(observation, deterministic=True)[0], goals, base,
         solver, args.tolerance, args.max_cycles, args.settle_cycles, frames, mode="ppo",
         stop_speed_mm_s=args.stop_speed, arch=args.arch)
-    training_csv = out.write_csv(training, "rl_training.csv")
     summary_csv = out.write_csv(summary, "rl.csv")
     out.write_csv(cycles, "rl_cycles.csv")
     paths_csv = out.write_csv(path, "rl_paths.csv")
     controllers = compare_controllers(pd.concat(
         [summary] if compared is None else [compared, summary], ignore_index=True))
     out.write_csv(controllers, "controllers.csv")
-    policy = io.BytesIO()
-    model.save(policy)
-    write_atomic(out.path("rl_policy.zip"), policy.getvalue(),
-                 failure=lambda reason: cli.StudyOutputError(reason))
-    out.wrote(out.path("rl_policy.zip"))
     out.wrote(plot(training_csv, paths_csv, summary_csv, out.path("rl.png")))
     out.report()
     with pd.option_context("display.width", 160, "display.max_columns", 20):
