@@ -173,8 +173,9 @@ def lookahead_drive(goals_mm, params: StarParams = StarParams(),
         if progress else None
 
     def advance(periods: int, **records) -> pd.DataFrame:
-        """The whole batch `periods` periods on (the run's bar moved by as many)."""
-        frames = simulator.advance(periods * period, **records)
+        """The whole batch `periods` periods on (the run's bar moved by as many; no bar of
+        its own, which a long advance of a large batch shows by default)."""
+        frames = simulator.advance(periods * period, progress=False, **records)
         if bar is not None:
             bar.update(periods)
         return frames

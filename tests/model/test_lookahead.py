@@ -292,6 +292,16 @@ def test_progress_is_one_bar_over_the_runs_periods(driven, capsys):
     assert "coasting to rest" in error and "robots" not in error  # no bar of each advance
 
 
+def test_without_progress_no_bar_shows_however_long_its_advances(monkeypatch, capsys):
+    """A Simulator.advance left to decide shows a bar when it is estimated long (the batch of
+    every goal's candidates over a period, ~35 s with every gait): here every advance counts
+    as long, and the lookahead asked for no bar shows none."""
+    monkeypatch.setattr("taichi_star.driver.AUTO_PROGRESS_S", 0.0)
+    lookahead_drive(GOALS[:1], PARAMS, SOLVER, tolerance_mm=1.0, max_cycles=1,
+                    settle_cycles=SETTLE, gaits=["A1+A3"], frames_per_cycle=3)
+    assert capsys.readouterr().err == ""
+
+
 def test_a_run_that_stops_early_ends_its_bar_at_the_periods_it_ran(capsys):
     """The 15.5-mm tolerance case above with max_cycles 4 (a schedule of 9 periods): two
     decisions of 2 periods, the second choosing the glide, then 1 of coasting."""
