@@ -4,14 +4,16 @@ environment and drive it to the planner's goals, judged as the planners are.
     python -m studies rl [--timesteps 30000] [--num-envs 16] [--seed 0]
                          [--max-episode-steps 16] [--distance 50] [--directions 7] [--far 0]
                          [--tolerance 5] [--max-cycles 25] [--settle-cycles 4]
-                         [--stop-speed MM_S] [--compare PLAN_DIR]
+                         [--stop-speed MM_S] [--settled] [--compare PLAN_DIR]
                          [--preset paper|accurate|identified] [--set NAME=VALUE ...] [--dt S]
                          [--out DIR] [--quick]
 
 Training: `to_sb3(StarSwimmerVectorEnv(--num-envs))` (one Simulator; goals drawn at --distance
 mm in a uniform direction, an episode ends within --tolerance mm of its goal at a period
-boundary, with --stop-speed only at or below that speed, or after --max-episode-steps
-actuation periods; reward: progress in mm less 0.1 mm per actuator fired), PPO with an MLP
+boundary, with --stop-speed only at or below that speed, with --settled only after
+--settle-cycles periods unfired (the robot has coasted there: the drive's judgement; the
+observed times since firing then reach past that), or after --max-episode-steps actuation
+periods; reward: progress in mm less 0.1 mm per actuator fired), PPO with an MLP
 policy and the hyperparameters `PPO_SETTINGS` (recorded in every sidecar), seeded by --seed,
 torch on one thread, --timesteps robot-periods in all.
 Then the deterministic policy drives one robot per goal (--directions at --distance mm, 0°,
@@ -19,7 +21,7 @@ Then the deterministic policy drives one robot per goal (--directions at --dista
 `taichi_star.envs.drive_policy`: each stops where the environment would end its episode, then
 coasts --settle-cycles periods and is judged at rest, within --tolerance, as `plan`'s
 controllers are (its own success, within the tolerance in passing, is the `terminated`
-column).
+column; with --settled its episode's end is that judgement).
 
 --compare PLAN_DIR sets a `plan` run's controllers beside it (its plan.csv and, where it ran
 with --lookahead, lookahead.csv): the same goals, tolerance, settling, robot and step, checked
@@ -90,6 +92,10 @@ def build_parser():
                         help="mm/s: an episode ends within the tolerance only at or below this "
                              "speed (the robot must stop there; default none: reaching the "
                              "tolerance ends it)")
+    parser.add_argument("--settled", action="store_true",
+                        help="an episode ends within the tolerance only after --settle-cycles "
+                             "periods unfired (the robot must coast to the goal, as the drive "
+                             "judges it; default: reaching the tolerance ends it)")
     parser.add_argument("--compare", default=None, metavar="PLAN_DIR",
                         help="a plan run (same goals, tolerance, robot, step) whose controllers "
                              "controllers.csv sets beside PPO")
@@ -234,12 +240,17 @@ def main(argv=None):
                   "goal_tolerance_mm": args.tolerance,
                   "max_episode_steps": args.max_episode_steps,
                   "stop_speed_mm_s": args.stop_speed, "arch": args.arch}
+    if args.settled:
+        env_kwargs["settle_cycles"] = args.settle_cycles
+        # the observation tells a coast of settle_cycles periods from a shorter one
+        env_kwargs["since_fired_cap_s"] = max(SwimmerTask.since_fired_cap_s,
+                                              (args.settle_cycles + 1) * base.period)
     try:
         SwimmerTask(**{name: value for name, value in env_kwargs.items()
                        if name not in ("params", "solver", "arch")})
     except ValueError as error:
         raise cli.StudyArgumentError(f"--distance, --tolerance, --max-episode-steps, "
-                                     f"--stop-speed: {error}") from None
+                                     f"--stop-speed, --settled: {error}") from None
     compared = None if args.compare is None else read_compared(
         args.compare, goals, base, solver, args.tolerance, args.settle_cycles)
     settings = {**PPO_SETTINGS, **(QUICK_PPO if args.quick else {})}
@@ -251,7 +262,9 @@ def main(argv=None):
                             "num_envs": args.num_envs, "seed": args.seed,
                             "max_episode_steps": args.max_episode_steps,
                             "tolerance_mm": args.tolerance, "settle_cycles": args.settle_cycles,
-                            "stop_speed_mm_s": args.stop_speed,
+                            "stop_speed_mm_s": args.stop_speed, "settled": args.settled,
+                            "since_fired_cap_s": env_kwargs.get(
+                                "since_fired_cap_s", SwimmerTask.since_fired_cap_s),
                             "torch_threads": TORCH_THREADS,
                             "compared": (None if args.compare is None
                                          else str(Path(args.compare).resolve()))})
@@ -266,7 +279,9 @@ def main(argv=None):
     summary, cycles, path = drive_policy(
         lambda observation: model.predict(observation, deterministic=True)[0], goals, base,
         solver, args.tolerance, args.max_cycles, args.settle_cycles, frames, mode="ppo",
-        stop_speed_mm_s=args.stop_speed, arch=args.arch)
+        stop_speed_mm_s=args.stop_speed, settled=args.settled,
+        since_fired_cap_s=env_kwargs.get("since_fired_cap_s", SwimmerTask.since_fired_cap_s),
+        arch=args.arch)
     summary_csv = out.write_csv(summary, "rl.csv")
     out.write_csv(cycles, "rl_cycles.csv")
     paths_csv = out.write_csv(path, "rl_paths.csv")

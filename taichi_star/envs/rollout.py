@@ -40,7 +40,8 @@ def drive_policy(policy: Callable[[np.ndarray], np.ndarray], goals_mm,
                  params: StarParams = StarParams(), solver: SolverConfig = SolverConfig(),
                  tolerance_mm: float = 5.0, max_cycles: int = 25,
                  settle_cycles: int = SETTLE_CYCLES, frames_per_cycle: int = 10,
-                 mode: str = "policy", stop_speed_mm_s=None, arch: str = "cpu"):
+                 mode: str = "policy", stop_speed_mm_s=None, settled: bool = False,
+                 since_fired_cap_s: float = SwimmerTask.since_fired_cap_s, arch: str = "cpu"):
     """Drive one robot per goal by `policy` (module docstring) and judge it at rest.
 
     policy: observations (G, 15) float32 (`swimmer.OBSERVATION_NAMES`) -> actions (G, 8) of 0
@@ -49,7 +50,12 @@ def drive_policy(policy: Callable[[np.ndarray], np.ndarray], goals_mm,
     controller stopped are not fired). goals_mm: (G, 2) mm from the start (the robot starts at
     rest, heading 0). mode: the summary's `mode` (a name for the policy). stop_speed_mm_s: the
     task's (`swimmer.SwimmerTask`): with it a controller stops within the tolerance only once
-    its robot is that slow, as the environment it was trained in ends an episode.
+    its robot is that slow, as the environment it was trained in ends an episode. settled:
+    the task's `settle_cycles` is settle_cycles (a controller stops within the tolerance only
+    once its robot has fired nothing for settle_cycles periods), and a controller that stops
+    so is deemed to have stopped settle_cycles periods before: it is judged where its episode
+    ended, its `terminated` the same as its `reached` (an instance ok). since_fired_cap_s:
+    the task's (the largest time since firing observed), that of the policy's training.
     Returns (summary `POLICY_COLUMNS`, cycles `POLICY_CYCLE_COLUMNS`, path (goal, mode, t_s,
     controlled, x_mm, y_mm) recorded frames_per_cycle times a period). ValueError before any
     compute for arguments `planner.drive` refuses, and naming the policy for an answer that
@@ -61,12 +67,19 @@ def drive_policy(policy: Callable[[np.ndarray], np.ndarray], goals_mm,
                          f"{type(policy).__name__}")
     if not isinstance(mode, str) or not mode:
         raise ValueError(f"mode must be a non-empty name, got {mode!r}")
+    if not isinstance(settled, (bool, np.bool_)):
+        raise ValueError(f"settled must be True or False, got {settled!r}")
+    if settled and settle_cycles < 1:
+        raise ValueError(f"settled needs settle_cycles >= 1 (the periods a robot coasts before "
+                         f"its episode ends), got {settle_cycles!r}")
     count = len(goals)
     robots = np.arange(count)
     # a drawn goal is never asked for: the task's distance only has to exceed the tolerance
     task = SwimmerTask(goal_distance_mm=float(np.hypot(*goals.T).max()),
                        goal_tolerance_mm=tolerance_mm,
-                       stop_speed_mm_s=stop_speed_mm_s)
+                       stop_speed_mm_s=stop_speed_mm_s,
+                       settle_cycles=settle_cycles if settled else None,
+                       since_fired_cap_s=since_fired_cap_s)
     batch = GoalReachingBatch(count, params, solver, None, task, arch)
     space = observation_space(task)
     batch.reset(robots, [], goals)
@@ -87,8 +100,12 @@ def drive_policy(policy: Callable[[np.ndarray], np.ndarray], goals_mm,
         arrived = batch.arrived()
         stopping = driving & (arrived | (info["status"] != "ok") | (cycle == max_cycles))
         terminated |= stopping & arrived
-        final_error[stopping] = distance[stopping]
-        stop_cycle[stopping] = cycle
+        # a settled episode's end: its controller is deemed to have stopped settle_cycles
+        # periods before (it fired nothing since), so that it is judged where it ended
+        stopped_at = (cycle - np.where(arrived & settled, settle_cycles, 0))[stopping]
+        stop_cycle[stopping] = stopped_at
+        final_error[stopping] = np.hypot(
+            *(goals[stopping] - np.stack(boundaries)[stopped_at, robots[stopping]]).T)
         driving &= ~stopping
         actions = np.zeros((count, 8), dtype=bool)
         if driving.any():
@@ -103,7 +120,7 @@ def drive_policy(policy: Callable[[np.ndarray], np.ndarray], goals_mm,
                 "gait": [Gait.from_mask(row).name for row in actions],
                 "x_mm": position[:, 0], "y_mm": position[:, 1],
                 "heading_deg": info["heading_deg"], "distance_mm": distance}))
-        if not driving.any() and cycle == stop_cycle.max() + settle_cycles:
+        if not driving.any() and cycle >= stop_cycle.max() + settle_cycles:
             break  # every robot has come to rest, settle_cycles after its stop
         fired += actions.any(axis=1)
         frames = batch.swim(actions, record_interval_s=interval)

@@ -21,7 +21,9 @@ the space's bounds (a robot 10 m from its goal) are clipped to them.
 Reward per step: progress toward the goal (mm: distance before the step minus distance after)
 minus `firing_cost_mm` per actuator fired. Terminated when the centroid is within
 `goal_tolerance_mm` of the goal (with `stop_speed_mm_s`, and its speed at most that: the robot
-must arrive and stop, not swim through); truncated after `max_episode_steps` steps (the last one
+must arrive and stop, not swim through; with `settle_cycles`, and only once it has fired nothing
+for that many periods: it must have coasted to the goal, as the planners judge a robot where it
+is that long after its controller stopped); truncated after `max_episode_steps` steps (the last one
 truncated even when it reached the goal, as gymnasium's TimeLimit), or when the instance's
 solver failed short of its goal (its robot is frozen; `info["status"]` says why). Made through
 `gymnasium.make`, the single env gets its step budget as gymnasium's TimeLimit wrapper
@@ -95,7 +97,11 @@ class SwimmerTask:
     actuator), s, (0, 1e6];
     stop_speed_mm_s: None (the episode ends within the tolerance, however fast the robot
     swims through it) or the centroid speed, mm/s, (0, 1000], at or below which the robot must
-    be too (it must stop there: the judgement of the planners, who judge a goal at rest)."""
+    be too (it must stop there: the judgement of the planners, who judge a goal at rest);
+    settle_cycles: None, or the control periods, >= 1 (and below max_episode_steps), the robot
+    must have fired nothing when it is within the tolerance for its episode to end there (it
+    must have coasted there: the planners judge a robot where it is settle_cycles periods after
+    its controller stopped firing, its glide under quadratic drag lasting that long)."""
 
     goal_distance_mm: float = 50.0
     goal_tolerance_mm: float = 5.0
@@ -103,6 +109,7 @@ class SwimmerTask:
     max_episode_steps: Optional[int] = None
     since_fired_cap_s: float = 10.0
     stop_speed_mm_s: Optional[float] = None
+    settle_cycles: Optional[int] = None
 
     def __post_init__(self):
         for name, lowest, highest, lowest_allowed in (
@@ -134,6 +141,16 @@ class SwimmerTask:
                 raise ValueError(f"max_episode_steps must be an integer >= 1 or None, got "
                                  f"{steps!r}")
             object.__setattr__(self, "max_episode_steps", int(steps))
+        settle = self.settle_cycles
+        if settle is not None:
+            if not is_whole(settle) or settle < 1:
+                raise ValueError(f"settle_cycles must be an integer >= 1 or None, got "
+                                 f"{settle!r}")
+            if steps is not None and settle >= steps:
+                # no episode could end at its goal: it needs a period to fire in
+                raise ValueError(f"settle_cycles must be below max_episode_steps ({steps}), "
+                                 f"got {settle!r}")
+            object.__setattr__(self, "settle_cycles", int(settle))
 
 
 def observation_space(task: SwimmerTask) -> spaces.Box:
@@ -249,6 +266,8 @@ class GoalReachingBatch:
         self.speeds = np.zeros(n_robots)
         """Each robot's centroid speed at the last control period's end, mm/s."""
         self.episode_steps = np.zeros(n_robots, dtype=np.int64)
+        self.coasted = np.zeros(n_robots, dtype=np.int64)
+        """Control periods since each robot last fired (in this episode), at the last end."""
         self.started = np.zeros(n_robots, dtype=bool)
         """Whether each robot has had its first reset (a goal to swim to)."""
 
@@ -283,6 +302,7 @@ class GoalReachingBatch:
         self.distances[rows] = np.hypot(goals[:, 0], goals[:, 1])
         self.speeds[rows] = 0.0  # at rest at the start
         self.episode_steps[rows] = 0
+        self.coasted[rows] = 0
         self.started[rows] = True
 
     @staticmethod
@@ -337,15 +357,19 @@ class GoalReachingBatch:
         self.distances = np.hypot(*(self.goals - position).T)
         self.speeds = np.hypot(*state[["velocity_x_mm_s", "velocity_y_mm_s"]].to_numpy().T)
         self.episode_steps += 1
+        self.coasted = np.where(fire.any(axis=1), 0, self.coasted + 1)
         return frames
 
     def arrived(self) -> np.ndarray:
-        """(B,) bool: within the task's tolerance of the goal now, and with `stop_speed_mm_s`
-        at most that fast (the task's success, which ends an episode)."""
-        within = self.distances <= self.task.goal_tolerance_mm
-        if self.task.stop_speed_mm_s is None:
-            return within
-        return within & (self.speeds <= self.task.stop_speed_mm_s)
+        """(B,) bool: within the task's tolerance of the goal now, with `stop_speed_mm_s` at
+        most that fast, with `settle_cycles` having fired nothing for at least that many periods
+        (the task's success, which ends an episode)."""
+        arrived = self.distances <= self.task.goal_tolerance_mm
+        if self.task.stop_speed_mm_s is not None:
+            arrived &= self.speeds <= self.task.stop_speed_mm_s
+        if self.task.settle_cycles is not None:
+            arrived &= self.coasted >= self.task.settle_cycles
+        return arrived
 
     def step(self, fire: np.ndarray):
         """`swim` one control period, judged as the task does. Returns rewards (B,) float64,
@@ -468,7 +492,8 @@ class StarSwimmerEnv(RobotsView, gym.Env):
     reward and episode ends). Keyword arguments: params (a StarParams; default the paper
     preset), solver (SolverConfig; default the paper preset), control_period_s, arch, and the
     SwimmerTask fields (goal_distance_mm=50, goal_tolerance_mm=5, firing_cost_mm=0.1,
-    max_episode_steps=None, since_fired_cap_s=10, stop_speed_mm_s=None), and render_mode
+    max_episode_steps=None, since_fired_cap_s=10, stop_speed_mm_s=None, settle_cycles=None),
+    and render_mode
     (None or "rgb_array": `render()` then returns a (400, 400, 3) uint8 picture)."""
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": 4}

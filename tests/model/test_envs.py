@@ -894,3 +894,50 @@ def test_with_a_stop_speed_an_episode_ends_only_once_the_robot_is_that_slow(stop
     env.reset(options={"goal": position})
     _, _, terminated, truncated, _ = env.step(FORWARD[None])
     assert terminated.tolist() == [ends] and truncated.tolist() == [False]
+
+
+@pytest.mark.parametrize("settle, steps, refused", [
+    (None, None, False), (1, None, False), (3, 4, False), (4, 4, True), (0, None, True),
+    (-1, None, True), (1.5, None, True), (True, None, True), ("2", None, True)])
+def test_the_settling_is_none_or_a_count_below_the_step_budget(settle, steps, refused):
+    """settle_cycles: None or an integer >= 1, and below max_episode_steps where there is one
+    (the boundary: budget - 1 allowed, the budget itself refused: no period left to fire)."""
+    if refused:
+        with pytest.raises(ValueError, match=r"^settle_cycles must be (an integer >= 1 or None"
+                                             r"|below max_episode_steps \(4\))"):
+            SwimmerTask(settle_cycles=settle, max_episode_steps=steps)
+    else:
+        assert SwimmerTask(settle_cycles=settle, max_episode_steps=steps).settle_cycles == settle
+
+
+NONE = np.zeros(8, dtype=bool)
+
+
+@pytest.mark.parametrize("settle, actions, ends", [
+    (None, ["fire", "none", "none"], True), (2, ["fire", "none", "none"], True),
+    (3, ["fire", "none", "none"], False), (2, ["fire", "none", "fire"], False),
+    (1, ["fire", "fire", "none"], True), (2, ["fire", "fire", "none"], False)])
+def test_with_a_settling_an_episode_ends_only_after_that_many_periods_unfired(settle, actions,
+                                                                              ends):
+    """The goal is where the robot is after the three periods of `actions` (reached there
+    only): with settle_cycles the episode ends there only if the robot has fired nothing for
+    that many periods (the boundary: exactly settle_cycles periods ends it, one fewer does
+    not; a firing starts the count again)."""
+    fire = {"fire": FORWARD, "none": NONE}
+    probe = StarSwimmerVectorEnv(1, **SHORT)
+    probe.reset(options={"goal": (40.0, 0.0)})
+    positions = []
+    for name in actions:
+        probe.step(fire[name][None])
+        state = probe.simulator.state()
+        positions.append(state[["centroid_x_mm", "centroid_y_mm"]].to_numpy()[0])
+    goal = positions[2]
+    tolerance = 1e-6  # mm: reached at the third boundary only
+    assert min(np.hypot(*(position - goal)) for position in positions[:2]) > 1e3 * tolerance
+    env = StarSwimmerVectorEnv(1, **SHORT, goal_tolerance_mm=tolerance, settle_cycles=settle)
+    env.reset(options={"goal": goal})
+    said = []
+    for name in actions:
+        _, _, terminated, truncated, _ = env.step(fire[name][None])
+        said.append((bool(terminated[0]), bool(truncated[0])))
+    assert said == [(False, False), (False, False), (ends, False)]

@@ -157,3 +157,57 @@ def test_with_a_stop_speed_a_robot_swimming_through_is_driven_on():
                                           stop_speed_mm_s=stop_speed)
         assert summary["run_cycles"].iloc[0] == stop
         assert summary["terminated"].iloc[0] == (stop_speed is None)
+
+
+@pytest.mark.parametrize("settled, settle, max_cycles, terminated, stop, run", [
+    (True, 2, 5, True, 1, 3),    # coasted 2 periods at boundary 3: stopped at 1, judged at 3
+    (True, 3, 4, False, 4, 7),   # one period short of 3 there: on to the budget
+    (False, 2, 5, True, 3, 5)])  # in passing at boundary 3: judged 2 periods later
+def test_a_settled_controller_is_judged_where_its_episode_ended(settled, settle, max_cycles,
+                                                                terminated, stop, run):
+    """The policy fires A1+A3 once, then nothing; the goal lies 0.5 mm from where the robot
+    is 3 boundaries in (tolerance 1 mm, outside it at every other boundary). With `settled` the
+    task's episode ends there only after `settle` unfired periods, and the controller is deemed
+    to have stopped that long before: its judgement at rest is the environment's success."""
+    boundaries, _ = replay(1, 6)
+    goal = boundaries[3] + [0.0, 0.5]
+    others = np.delete(np.hypot(*(boundaries - goal).T), 3)
+    assert others.min() > 1.0  # the robot glides > 0.5 mm a period
+    answers = iter([A1_A3[None]])
+    summary, cycles, _ = drive_policy(lambda obs: next(answers, np.zeros((1, 8))), [goal],
+                                      PARAMS, SOLVER, tolerance_mm=1.0, max_cycles=max_cycles,
+                                      settle_cycles=settle, frames_per_cycle=FRAMES,
+                                      settled=settled)
+    row = summary.iloc[0]
+    assert row["terminated"] == terminated and row["run_cycles"] == run
+    assert row["cycles_fired"] == 1
+    assert row["final_error_mm"] == np.hypot(*(goal - boundaries[stop]))
+    assert row["end_error_mm"] == np.hypot(*(goal - boundaries[run]))
+    assert row["reached"] == (run == 3)
+    if settled:
+        assert row["reached"] == row["terminated"]
+    assert cycles["cycle"].max() == stop + (settle if settled and terminated else 0)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"settled": "yes"}, r"^settled must be True or False, got 'yes'"),
+    ({"settled": True, "settle_cycles": 0}, r"^settled needs settle_cycles >= 1"),
+])
+def test_a_settling_is_refused_before_compute(monkeypatch, kwargs, message):
+    monkeypatch.setattr(rollout, "GoalReachingBatch", forbidden_batch)
+    with pytest.raises(ValueError, match=message):
+        drive_policy(lambda obs: np.zeros((1, 8)), [[50.0, 0.0]], PARAMS, SOLVER, **kwargs)
+
+
+def test_the_policy_sees_the_times_since_firing_capped_as_it_was_trained():
+    """since_fired_cap_s is the task's: a never-fired actuator reads it (the observation's
+    last 8 entries), here 20 s instead of the default 10 s."""
+    observed = []
+
+    def policy(observation):
+        observed.append(observation.copy())
+        return np.zeros((len(observation), 8))
+
+    drive_policy(policy, [[50.0, 0.0]], PARAMS, SOLVER, max_cycles=1, settle_cycles=0,
+                 since_fired_cap_s=20.0)
+    np.testing.assert_array_equal(observed[0][0, -8:], np.full(8, 20.0, dtype=np.float32))

@@ -54,12 +54,43 @@ def test_quick_run_trains_drives_and_saves_the_policy_that_drove(tmp_path, monke
     assert (out / "rl.png").stat().st_size > 1000 and not (tmp_path / "sb3").exists()
 
 
+@pytest.mark.slow
+def test_a_settled_run_trains_and_drives_to_the_settled_task(tmp_path):
+    """--settled: the training's episodes and the drive end only after --settle-cycles periods
+    unfired (the sidecar says so); the saved policy driven again with settled=True gives the
+    study's table, and an episode's end there is its judgement at rest."""
+    from stable_baselines3 import PPO
+
+    out = tmp_path / "out"
+    assert studies_main(["rl", *QUICK, "--settled", "--settle-cycles", "3", "--out",
+                         str(out)]) == 0
+    details = json.loads((out / "rl.csv.json").read_text())["details"]
+    assert details["settled"] is True and details["settle_cycles"] == 3
+    # the observed times since firing reach past the settling: 4 periods of 3.15 s
+    assert details["since_fired_cap_s"] == 4 * 3.15
+    summary = pd.read_csv(out / "rl.csv")
+    model = PPO.load(out / "rl_policy.zip", device="cpu")
+    again, _, _ = drive_policy(lambda obs: model.predict(obs, deterministic=True)[0],
+                               summary[["goal_x_mm", "goal_y_mm"]].to_numpy(),
+                               taichi_star.StarParams.preset("paper"),
+                               taichi_star.SolverConfig(dt=5e-3), max_cycles=2, settle_cycles=3,
+                               mode="ppo", settled=True, since_fired_cap_s=4 * 3.15)
+    assert again["run_cycles"].tolist() == summary["run_cycles"].tolist()
+    np.testing.assert_allclose(again["end_error_mm"], summary["end_error_mm"], rtol=1e-9)
+    assert (summary["terminated"] <= summary["reached"]).all()
+
+
 @pytest.mark.parametrize("argv, message", [
     (["--timesteps", "0"], "--timesteps must be >= 1, got 0"),
     (["--num-envs", "0"], "--num-envs must be in [1, "),
     (["--tolerance", "50"], "--tolerance must be below --distance (50 mm), got 50.0"),
     (["--directions", "0"], "no goals: --directions 0 and --far 0"),
-    (["--stop-speed", "0"], "--stop-speed: stop_speed_mm_s must be None or a number in (0, "),
+    (["--stop-speed", "0"],
+     "--stop-speed, --settled: stop_speed_mm_s must be None or a number in (0, "),
+    (["--settled", "--settle-cycles", "0"],
+     "--settled: settle_cycles must be an integer >= 1 or None, got 0"),
+    (["--settled", "--max-episode-steps", "4"],
+     "--settled: settle_cycles must be below max_episode_steps (4), got 4"),
     (["--compare", "nowhere"], "--compare nowhere/plan.csv"),
     (["--directions", "8", "--compare", COMPARED],
      f"--compare {COMPARED}: its goals are not this run's"),
