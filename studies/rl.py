@@ -4,7 +4,8 @@ environment and drive it to the planner's goals, judged as the planners are.
     python -m studies rl [--timesteps 30000] [--num-envs 16] [--seed 0]
                          [--max-episode-steps 16] [--distance 50] [--directions 7] [--far 0]
                          [--tolerance 5] [--max-cycles 25] [--settle-cycles 4]
-                         [--stop-speed MM_S] [--settled] [--compare PLAN_DIR]
+                         [--stop-speed MM_S] [--settled] [--firing-cost 0.1]
+                         [--compare PLAN_DIR]
                          [--preset paper|accurate|identified] [--set NAME=VALUE ...] [--dt S]
                          [--out DIR] [--quick]
 
@@ -13,7 +14,7 @@ mm in a uniform direction, an episode ends within --tolerance mm of its goal at 
 boundary, with --stop-speed only at or below that speed, with --settled only after
 --settle-cycles periods unfired (the robot has coasted there: the drive's judgement; the
 observed times since firing then reach past that), or after --max-episode-steps actuation
-periods; reward: progress in mm less 0.1 mm per actuator fired), PPO with an MLP
+periods; reward: progress in mm less --firing-cost mm per actuator fired), PPO with an MLP
 policy and the hyperparameters `PPO_SETTINGS` (recorded in every sidecar), seeded by --seed,
 torch on one thread, --timesteps robot-periods in all.
 Then the deterministic policy drives one robot per goal (--directions at --distance mm, 0°,
@@ -96,6 +97,9 @@ def build_parser():
                         help="an episode ends within the tolerance only after --settle-cycles "
                              "periods unfired (the robot must coast to the goal, as the drive "
                              "judges it; default: reaching the tolerance ends it)")
+    parser.add_argument("--firing-cost", type=float, default=SwimmerTask.firing_cost_mm,
+                        help=f"mm of progress the reward takes per actuator fired (default "
+                             f"{SwimmerTask.firing_cost_mm:g})")
     parser.add_argument("--compare", default=None, metavar="PLAN_DIR",
                         help="a plan run (same goals, tolerance, robot, step) whose controllers "
                              "controllers.csv sets beside PPO")
@@ -239,7 +243,8 @@ def main(argv=None):
     env_kwargs = {"params": base, "solver": solver, "goal_distance_mm": args.distance,
                   "goal_tolerance_mm": args.tolerance,
                   "max_episode_steps": args.max_episode_steps,
-                  "stop_speed_mm_s": args.stop_speed, "arch": args.arch}
+                  "stop_speed_mm_s": args.stop_speed, "firing_cost_mm": args.firing_cost,
+                  "arch": args.arch}
     if args.settled:
         env_kwargs["settle_cycles"] = args.settle_cycles
         # the observation tells a coast of settle_cycles periods from a shorter one
@@ -250,7 +255,8 @@ def main(argv=None):
                        if name not in ("params", "solver", "arch")})
     except ValueError as error:
         raise cli.StudyArgumentError(f"--distance, --tolerance, --max-episode-steps, "
-                                     f"--stop-speed, --settled: {error}") from None
+                                     f"--stop-speed, --settled, --firing-cost: {error}"
+                                     ) from None
     compared = None if args.compare is None else read_compared(
         args.compare, goals, base, solver, args.tolerance, args.settle_cycles)
     settings = {**PPO_SETTINGS, **(QUICK_PPO if args.quick else {})}
@@ -263,6 +269,7 @@ def main(argv=None):
                             "max_episode_steps": args.max_episode_steps,
                             "tolerance_mm": args.tolerance, "settle_cycles": args.settle_cycles,
                             "stop_speed_mm_s": args.stop_speed, "settled": args.settled,
+                            "firing_cost_mm": args.firing_cost,
                             "since_fired_cap_s": env_kwargs.get(
                                 "since_fired_cap_s", SwimmerTask.since_fired_cap_s),
                             "torch_threads": TORCH_THREADS,

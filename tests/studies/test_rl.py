@@ -66,6 +66,7 @@ def test_a_settled_run_trains_and_drives_to_the_settled_task(tmp_path):
                          str(out)]) == 0
     details = json.loads((out / "rl.csv.json").read_text())["details"]
     assert details["settled"] is True and details["settle_cycles"] == 3
+    assert details["firing_cost_mm"] == 0.1
     # the observed times since firing reach past the settling: 4 periods of 3.15 s
     assert details["since_fired_cap_s"] == 4 * 3.15
     summary = pd.read_csv(out / "rl.csv")
@@ -86,11 +87,13 @@ def test_a_settled_run_trains_and_drives_to_the_settled_task(tmp_path):
     (["--tolerance", "50"], "--tolerance must be below --distance (50 mm), got 50.0"),
     (["--directions", "0"], "no goals: --directions 0 and --far 0"),
     (["--stop-speed", "0"],
-     "--stop-speed, --settled: stop_speed_mm_s must be None or a number in (0, "),
+     "--settled, --firing-cost: stop_speed_mm_s must be None or a number in (0, "),
+    (["--firing-cost", "-1"], "--firing-cost: firing_cost_mm must be a number in [0, 1000], "
+                              "got -1.0"),
     (["--settled", "--settle-cycles", "0"],
-     "--settled: settle_cycles must be an integer >= 1 or None, got 0"),
+     "--firing-cost: settle_cycles must be an integer >= 1 or None, got 0"),
     (["--settled", "--max-episode-steps", "4"],
-     "--settled: settle_cycles must be below max_episode_steps (4), got 4"),
+     "--firing-cost: settle_cycles must be below max_episode_steps (4), got 4"),
     (["--compare", "nowhere"], "--compare nowhere/plan.csv"),
     (["--directions", "8", "--compare", COMPARED],
      f"--compare {COMPARED}: its goals are not this run's"),
