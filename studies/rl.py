@@ -5,7 +5,7 @@ environment and drive it to the planner's goals, judged as the planners are.
                          [--max-episode-steps 16] [--distance 50] [--directions 7] [--far 0]
                          [--tolerance 5] [--max-cycles 25] [--settle-cycles 4]
                          [--stop-speed MM_S] [--settled] [--firing-cost 0.1]
-                         [--compare PLAN_DIR]
+                         [--firing-prior P] [--compare PLAN_DIR]
                          [--preset paper|accurate|identified] [--set NAME=VALUE ...] [--dt S]
                          [--out DIR] [--quick]
 
@@ -16,7 +16,9 @@ boundary, with --stop-speed only at or below that speed, with --settled only aft
 observed times since firing then reach past that), or after --max-episode-steps actuation
 periods; reward: progress in mm less --firing-cost mm per actuator fired), PPO with an MLP
 policy and the hyperparameters `PPO_SETTINGS` (recorded in every sidecar), seeded by --seed,
-torch on one thread, --timesteps robot-periods in all.
+torch on one thread, --timesteps robot-periods in all. --firing-prior P: the untrained policy
+fires each actuator with probability P (its action layer's bias; SB3's own start is 1/2, which
+leaves a whole period unfired to 1 in 256 of its tries).
 Then the deterministic policy drives one robot per goal (--directions at --distance mm, 0°,
 360/n°, ..., and --far mm behind: `planner.default_goals`) with
 `taichi_star.envs.drive_policy`: each stops where the environment would end its episode, then
@@ -45,6 +47,7 @@ driving and one of settling.
 from __future__ import annotations
 
 import io
+import math
 import time
 import warnings
 from pathlib import Path
@@ -100,6 +103,9 @@ def build_parser():
     parser.add_argument("--firing-cost", type=float, default=SwimmerTask.firing_cost_mm,
                         help=f"mm of progress the reward takes per actuator fired (default "
                              f"{SwimmerTask.firing_cost_mm:g})")
+    parser.add_argument("--firing-prior", type=float, default=None, metavar="P",
+                        help="the untrained policy's probability of firing each actuator, in "
+                             "(0, 1) (default SB3's: 1/2)")
     parser.add_argument("--compare", default=None, metavar="PLAN_DIR",
                         help="a plan run (same goals, tolerance, robot, step) whose controllers "
                              "controllers.csv sets beside PPO")
@@ -147,8 +153,11 @@ def read_compared(folder: str, goals: np.ndarray, base, solver, tolerance: float
     return pd.concat(tables, ignore_index=True)
 
 
-def train(env_kwargs: dict, num_envs: int, timesteps: int, seed: int, settings: dict):
-    """(the trained PPO model, the training table: one row per rollout, `rl_training.csv`)."""
+def train(env_kwargs: dict, num_envs: int, timesteps: int, seed: int, settings: dict,
+          firing_prior=None):
+    """(the trained PPO model, the training table: one row per rollout, `rl_training.csv`).
+    firing_prior: None (SB3's start) or the untrained policy's probability of firing each
+    actuator."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback
@@ -183,6 +192,11 @@ def train(env_kwargs: dict, num_envs: int, timesteps: int, seed: int, settings: 
     model = PPO("MlpPolicy", envs, seed=seed, device="cpu", verbose=0, **settings)
     # no log folder (SB3's default logger makes one in the temporary folder)
     model.set_logger(Logger(folder=None, output_formats=[]))
+    if firing_prior is not None:
+        # the Bernoulli logits are the action layer's output, ~0 at SB3's start (its weights
+        # are orthogonal with gain 0.01): the bias sets where every actuator starts
+        with torch.no_grad():
+            model.policy.action_net.bias.fill_(math.log(firing_prior / (1.0 - firing_prior)))
     with warnings.catch_warnings():
         # a policy trying gaits re-fires hot actuators, whose steps at 5 ms can end on a
         # capped Newton solve: counted per rollout (capped_episodes) and told once below
@@ -239,6 +253,9 @@ def main(argv=None):
         if value < lowest:
             raise cli.StudyArgumentError(f"{flag} must be >= {lowest}, got {value}")
     cli.check_count(args.num_envs, "--num-envs", 1, cli.MAX_BATCH_SIZE)
+    prior = args.firing_prior
+    if prior is not None and not 0.0 < prior < 1.0:  # NaN too
+        raise cli.StudyArgumentError(f"--firing-prior must be in (0, 1), got {prior}")
     goals, base, solver, frames = cli.driving(args)
     env_kwargs = {"params": base, "solver": solver, "goal_distance_mm": args.distance,
                   "goal_tolerance_mm": args.tolerance,
@@ -269,13 +286,14 @@ def main(argv=None):
                             "max_episode_steps": args.max_episode_steps,
                             "tolerance_mm": args.tolerance, "settle_cycles": args.settle_cycles,
                             "stop_speed_mm_s": args.stop_speed, "settled": args.settled,
-                            "firing_cost_mm": args.firing_cost,
+                            "firing_cost_mm": args.firing_cost, "firing_prior": prior,
                             "since_fired_cap_s": env_kwargs.get(
                                 "since_fired_cap_s", SwimmerTask.since_fired_cap_s),
                             "torch_threads": TORCH_THREADS,
                             "compared": (None if args.compare is None
                                          else str(Path(args.compare).resolve()))})
-    model, training = train(env_kwargs, args.num_envs, args.timesteps, args.seed, settings)
+    model, training = train(env_kwargs, args.num_envs, args.timesteps, args.seed, settings,
+                            prior)
     # the training's work kept before the evaluation runs
     training_csv = out.write_csv(training, "rl_training.csv")
     policy = io.BytesIO()

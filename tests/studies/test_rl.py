@@ -62,15 +62,20 @@ def test_a_settled_run_trains_and_drives_to_the_settled_task(tmp_path):
     from stable_baselines3 import PPO
 
     out = tmp_path / "out"
-    assert studies_main(["rl", *QUICK, "--settled", "--settle-cycles", "3", "--out",
-                         str(out)]) == 0
+    assert studies_main(["rl", *QUICK, "--settled", "--settle-cycles", "3", "--firing-prior",
+                         "0.1", "--out", str(out)]) == 0
     details = json.loads((out / "rl.csv.json").read_text())["details"]
     assert details["settled"] is True and details["settle_cycles"] == 3
-    assert details["firing_cost_mm"] == 0.1
+    assert details["firing_cost_mm"] == 0.1 and details["firing_prior"] == 0.1
     # the observed times since firing reach past the settling: 4 periods of 3.15 s
     assert details["since_fired_cap_s"] == 4 * 3.15
     summary = pd.read_csv(out / "rl.csv")
     model = PPO.load(out / "rl_policy.zip", device="cpu")
+    # the policy started firing each actuator with probability 0.1: its action layer's bias
+    # logit(0.1), moved since by one epoch of one 64-sample batch, an Adam step of at most
+    # the learning rate 3e-4
+    np.testing.assert_allclose(model.policy.action_net.bias.detach().numpy(),
+                               np.log(0.1 / 0.9), atol=1e-3)
     again, _, _ = drive_policy(lambda obs: model.predict(obs, deterministic=True)[0],
                                summary[["goal_x_mm", "goal_y_mm"]].to_numpy(),
                                taichi_star.StarParams.preset("paper"),
@@ -94,6 +99,9 @@ def test_a_settled_run_trains_and_drives_to_the_settled_task(tmp_path):
      "--firing-cost: settle_cycles must be an integer >= 1 or None, got 0"),
     (["--settled", "--max-episode-steps", "4"],
      "--firing-cost: settle_cycles must be below max_episode_steps (4), got 4"),
+    (["--firing-prior", "0"], "--firing-prior must be in (0, 1), got 0.0"),
+    (["--firing-prior", "1"], "--firing-prior must be in (0, 1), got 1.0"),
+    (["--firing-prior", "nan"], "--firing-prior must be in (0, 1), got nan"),
     (["--compare", "nowhere"], "--compare nowhere/plan.csv"),
     (["--directions", "8", "--compare", COMPARED],
      f"--compare {COMPARED}: its goals are not this run's"),
