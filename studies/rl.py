@@ -214,10 +214,13 @@ def train(env_kwargs: dict, num_envs: int, timesteps: int, seed: int, settings: 
 
 def plot(training_csv, paths_csv, summary_csv, png_path) -> Path:
     """The learning curve (success rate and mean episode length against timesteps) and the
-    driven paths (goals as stars; o reached at rest, x not), from the CSVs."""
+    driven paths (goals as stars; driven solid, then the glide dotted up to where each robot
+    is judged, run_cycles periods in (its sidecar's period): o reached at rest, x not), from
+    the CSVs."""
     plt = cli.use_agg()
     training, paths = pd.read_csv(training_csv), pd.read_csv(paths_csv)
     summary = pd.read_csv(summary_csv)
+    period = read_provenance(summary_csv)["model"]["params"]["period"]
     fig, (curve, field) = plt.subplots(1, 2, figsize=(11, 4.6))
     curve.plot(training["timesteps"], training["success_rate"], ".-", color="tab:blue")
     curve.set_xlabel("timesteps (robot-periods)")
@@ -228,15 +231,22 @@ def plot(training_csv, paths_csv, summary_csv, png_path) -> Path:
     length.set_ylabel("mean episode length (periods)", color="tab:orange")
     for goal, part in paths.groupby("goal"):
         row = summary[summary["goal"] == goal].iloc[0]
-        line, = field.plot(part["x_mm"], part["y_mm"], lw=1.2)
-        field.plot(row["goal_x_mm"], row["goal_y_mm"], "*", ms=12, color=line.get_color())
+        # the robots judged early glide on in the table until the last one is judged
+        judged = int(np.abs(part["t_s"] - row["run_cycles"] * period).argmin())
+        part = part.iloc[:judged + 1]
+        driven = part[part["controlled"]]
+        line, = field.plot(driven["x_mm"], driven["y_mm"], lw=1.2)
+        colour = line.get_color()
+        gliding = part[part["t_s"] >= driven["t_s"].iloc[-1]]
+        field.plot(gliding["x_mm"], gliding["y_mm"], ":", lw=1.0, color=colour)
+        field.plot(row["goal_x_mm"], row["goal_y_mm"], "*", ms=12, color=colour)
         field.plot(part["x_mm"].iloc[-1], part["y_mm"].iloc[-1], "o" if row["reached"] else "x",
-                   color=line.get_color())
+                   color=colour)
     field.set_aspect("equal")
     field.set_xlabel("x (mm)")
     field.set_ylabel("y (mm)")
     field.set_title(f"PPO: {int(summary['reached'].sum())} of {len(summary)} goals reached at "
-                    f"rest", fontsize=10)
+                    f"rest (driven solid, gliding dotted)", fontsize=10)
     fig.tight_layout()
     cli.write_figure(fig, png_path, dpi=130)
     plt.close(fig)
