@@ -8,6 +8,7 @@ environment and drive it to the planner's goals, judged as the planners are.
                          [--firing-prior P] [--compare PLAN_DIR]
                          [--preset paper|accurate|identified] [--set NAME=VALUE ...] [--dt S]
                          [--out DIR] [--quick]
+    python -m studies rl --replot DIR
 
 Training: `to_sb3(StarSwimmerVectorEnv(--num-envs))` (one Simulator; goals drawn at --distance
 mm in a uniform direction, an episode ends within --tolerance mm of its goal at a period
@@ -39,6 +40,9 @@ in one line instead of a warning per robot), `rl.csv` (`taichi_star.envs.POLICY_
 (`taichi_star.lookahead.CONTROLLER_COLUMNS`: PPO and, with --compare, the plan run's
 controllers), `rl_policy.zip` (the trained model: `PPO.load`) and `rl.png` (the learning curve
 and the paths, drawn from the CSVs).
+
+--replot DIR: draws DIR/rl.png again from DIR's rl_training.csv, rl_paths.csv and rl.csv (its
+sidecar's period), nothing else run; the picture records this command.
 
 --quick: dt = 5 ms, 4 robots, 64 timesteps of 4-period episodes, two goals, 2 cycles of
 driving and one of settling.
@@ -106,6 +110,9 @@ def build_parser():
     parser.add_argument("--firing-prior", type=float, default=None, metavar="P",
                         help="the untrained policy's probability of firing each actuator, in "
                              "(0, 1) (default SB3's: 1/2)")
+    parser.add_argument("--replot", default=None, metavar="DIR",
+                        help="draw DIR/rl.png again from the run's CSVs in DIR, and nothing "
+                             "else")
     parser.add_argument("--compare", default=None, metavar="PLAN_DIR",
                         help="a plan run (same goals, tolerance, robot, step) whose controllers "
                              "controllers.csv sets beside PPO")
@@ -253,8 +260,26 @@ def plot(training_csv, paths_csv, summary_csv, png_path) -> Path:
     return Path(png_path)
 
 
+def replot(folder: str, argv) -> Path:
+    """`plot` of the run in `folder` into folder/rl.png, the picture naming the command line
+    `argv`; StudyArgumentError naming --replot for a folder without the run's CSVs, before
+    anything is drawn."""
+    names = ("rl_training.csv", "rl_paths.csv", "rl.csv")
+    for name in names:
+        if not (Path(folder) / name).is_file():
+            raise cli.StudyArgumentError(f"--replot {folder}: no {name} there (give the folder "
+                                         f"of an rl run)")
+    provenance.record("rl", argv)  # the picture's study and command
+    png = plot(*(Path(folder) / name for name in names), Path(folder) / "rl.png")
+    print(f"  wrote {png}")
+    return png
+
+
 def main(argv=None):
     args = cli.parse(build_parser(), argv)
+    if args.replot is not None:
+        replot(args.replot, argv or [])
+        return None
     for value, flag, lowest in ((args.timesteps, "--timesteps", 1),
                                 (args.max_episode_steps, "--max-episode-steps", 1),
                                 (args.max_cycles, "--max-cycles", 1),

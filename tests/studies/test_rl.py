@@ -4,6 +4,7 @@ of other settings are refused before any compute. Needs stable-baselines3 (the `
 CI installs it where the machine keeps a CPU build of torch), skipped without it."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -122,3 +123,21 @@ def test_flags_and_a_plan_run_of_other_settings_are_refused_before_compute(
     error = capsys.readouterr().err
     assert message in error and len(error.strip().splitlines()) == 1, error
     assert not out.exists()
+
+
+def test_replot_draws_a_runs_picture_again_from_its_csvs(tmp_path):
+    """--replot DIR: rl.png drawn again from the committed run's CSVs (the picture names the
+    command), nothing trained or driven; a folder without the run's CSVs refused first."""
+    from PIL import Image
+
+    run = tmp_path / "run"
+    run.mkdir()
+    for name in ("rl_training.csv", "rl_paths.csv", "rl.csv", "rl.csv.json"):
+        (run / name).write_bytes((Path("results/rl_settled_longer") / name).read_bytes())
+    assert studies_main(["rl", "--replot", str(run)]) == 0
+    info = Image.open(run / "rl.png").info
+    assert info["study"] == "rl" and info["command"].endswith(f"rl --replot {run}")
+    assert sorted(path.name for path in run.iterdir()) == [
+        "rl.csv", "rl.csv.json", "rl.png", "rl_paths.csv", "rl_training.csv"]
+    (run / "rl_paths.csv").unlink()
+    assert studies_main(["rl", "--replot", str(run)]) == 2
