@@ -5,7 +5,7 @@ environment and drive it to the planner's goals, judged as the planners are.
                          [--max-episode-steps 16] [--distance 50] [--directions 7] [--far 0]
                          [--tolerance 5] [--max-cycles 25] [--settle-cycles 4]
                          [--stop-speed MM_S] [--settled] [--firing-cost 0.1]
-                         [--firing-prior P] [--compare PLAN_DIR]
+                         [--firing-prior P] [--policy ZIP] [--compare PLAN_DIR]
                          [--preset paper|accurate|identified] [--set NAME=VALUE ...] [--dt S]
                          [--out DIR] [--quick]
     python -m studies rl --replot DIR
@@ -41,6 +41,12 @@ in one line instead of a warning per robot), `rl.csv` (`taichi_star.envs.POLICY_
 controllers), `rl_policy.zip` (the trained model: `PPO.load`) and `rl.png` (the learning curve
 and the paths, drawn from the CSVs).
 
+--policy ZIP: drives the PPO policy an rl run saved (its rl_policy.zip) instead of training
+one, after checking from that run's rl.csv sidecar that it was trained on this run's task
+(--settled, --settle-cycles where settled, --stop-speed), step and robot; the goals, tolerance,
+--max-cycles and --compare are this run's (held-out goals: other distances and directions).
+No rl_training.csv or rl_policy.zip is written, and rl.png has no learning curve.
+
 --replot DIR: draws DIR/rl.png again from DIR's rl_training.csv, rl_paths.csv and rl.csv (its
 sidecar's period), nothing else run; the picture records this command.
 
@@ -50,6 +56,7 @@ driving and one of settling.
 
 from __future__ import annotations
 
+import hashlib
 import io
 import math
 import time
@@ -110,6 +117,9 @@ def build_parser():
     parser.add_argument("--firing-prior", type=float, default=None, metavar="P",
                         help="the untrained policy's probability of firing each actuator, in "
                              "(0, 1) (default SB3's: 1/2)")
+    parser.add_argument("--policy", default=None, metavar="ZIP",
+                        help="drive the policy an rl run saved (its rl_policy.zip) instead of "
+                             "training one")
     parser.add_argument("--replot", default=None, metavar="DIR",
                         help="draw DIR/rl.png again from the run's CSVs in DIR, and nothing "
                              "else")
@@ -158,6 +168,58 @@ def read_compared(folder: str, goals: np.ndarray, base, solver, tolerance: float
                                      f"{differing[0]} is {recorded[differing[0]]}, this run's "
                                      f"{provenance.plain(base)[differing[0]]}")
     return pd.concat(tables, ignore_index=True)
+
+
+def read_policy(path: str, args, base, solver, since_fired_cap_s: float):
+    """(the PPO model saved in `path`, its SHA-256), checked first against the record of the
+    run that saved it (rl.csv's sidecar beside it): the task it was trained on (settled, the
+    settling where settled, stop speed, the observation's cap on the time since firing), the
+    step and the robot must be this run's; StudyArgumentError naming --policy otherwise."""
+    policy = Path(path)
+    if not policy.is_file():
+        raise cli.StudyArgumentError(f"--policy {path}: no such file (give the rl_policy.zip of "
+                                     f"an rl run)")
+    try:
+        record = read_provenance(policy.parent / "rl.csv")
+    except (OSError, ValueError) as error:
+        raise cli.StudyArgumentError(f"--policy {path}: the record of its run (rl.csv and its "
+                                     f"sidecar beside it) cannot be read ({error}): the task it "
+                                     f"was trained on is not known") from None
+    trained = record.get("details") or {}
+    # runs before the settled task recorded neither: they were not settled, capped at 10 s
+    made = {"settled": trained.get("settled", False),
+            "stop_speed_mm_s": trained.get("stop_speed_mm_s"),
+            "since_fired_cap_s": trained.get("since_fired_cap_s", SwimmerTask.since_fired_cap_s)}
+    this = {"settled": args.settled, "stop_speed_mm_s": args.stop_speed}
+    if args.settled:
+        made["settle_cycles"], this["settle_cycles"] = trained.get("settle_cycles"), \
+            args.settle_cycles
+    this["since_fired_cap_s"] = since_fired_cap_s
+    flags = {"settled": "--settled", "stop_speed_mm_s": "--stop-speed",
+             "settle_cycles": "--settle-cycles",
+             "since_fired_cap_s": "--settled and --settle-cycles (the observation's cap)"}
+    for name, value in this.items():
+        if made[name] != value:
+            raise cli.StudyArgumentError(f"--policy {path}: trained with {name} {made[name]!r}, "
+                                         f"this run's {flags[name]} gives {value!r}")
+    made_dt = (record.get("solver") or {}).get("dt")
+    if made_dt != solver.dt:
+        raise cli.StudyArgumentError(f"--policy {path}: trained at dt {made_dt!r} s, this run "
+                                     f"at {solver.dt!r} s")
+    recorded, differing = cli.robot_differences(policy.parent / "rl.csv", base, "--policy")
+    if differing:
+        raise cli.StudyArgumentError(f"--policy {path}: trained on a robot whose "
+                                     f"{differing[0]} is {recorded[differing[0]]}, this run's "
+                                     f"{provenance.plain(base)[differing[0]]}")
+    from stable_baselines3 import PPO
+
+    data = policy.read_bytes()
+    try:
+        model = PPO.load(io.BytesIO(data), device="cpu")
+    except Exception as error:  # noqa: BLE001 - SB3 raises what its zip and torch readers do
+        raise cli.StudyArgumentError(f"--policy {path}: not a saved PPO policy ({error})"
+                                     ) from None
+    return model, hashlib.sha256(data).hexdigest()
 
 
 def train(env_kwargs: dict, num_envs: int, timesteps: int, seed: int, settings: dict,
@@ -219,16 +281,9 @@ def train(env_kwargs: dict, num_envs: int, timesteps: int, seed: int, settings: 
     return model, table
 
 
-def plot(training_csv, paths_csv, summary_csv, png_path) -> Path:
-    """The learning curve (success rate and mean episode length against timesteps) and the
-    driven paths (goals as stars; driven solid, then the glide dotted up to where each robot
-    is judged, run_cycles periods in (its sidecar's period): o reached at rest, x not), from
-    the CSVs."""
-    plt = cli.use_agg()
-    training, paths = pd.read_csv(training_csv), pd.read_csv(paths_csv)
-    summary = pd.read_csv(summary_csv)
-    period = read_provenance(summary_csv)["model"]["params"]["period"]
-    fig, (curve, field) = plt.subplots(1, 2, figsize=(11, 4.6))
+def plot_learning(curve, training: pd.DataFrame):
+    """The learning curve on the axes `curve`: success rate and mean episode length against
+    timesteps."""
     curve.plot(training["timesteps"], training["success_rate"], ".-", color="tab:blue")
     curve.set_xlabel("timesteps (robot-periods)")
     curve.set_ylabel("episodes within the tolerance", color="tab:blue")
@@ -236,6 +291,21 @@ def plot(training_csv, paths_csv, summary_csv, png_path) -> Path:
     length = curve.twinx()
     length.plot(training["timesteps"], training["mean_length"], ".-", color="tab:orange")
     length.set_ylabel("mean episode length (periods)", color="tab:orange")
+
+
+def plot(training_csv, paths_csv, summary_csv, png_path) -> Path:
+    """The learning curve (success rate and mean episode length against timesteps; none for
+    a run of a saved policy, training_csv None) and the driven paths (goals as stars; driven
+    solid, then the glide dotted up to where each robot is judged, run_cycles periods in (its
+    sidecar's period): o reached at rest, x not), from the CSVs."""
+    plt = cli.use_agg()
+    paths, summary = pd.read_csv(paths_csv), pd.read_csv(summary_csv)
+    period = read_provenance(summary_csv)["model"]["params"]["period"]
+    if training_csv is None:
+        fig, field = plt.subplots(figsize=(5.8, 4.6))
+    else:
+        fig, (curve, field) = plt.subplots(1, 2, figsize=(11, 4.6))
+        plot_learning(curve, pd.read_csv(training_csv))
     for goal, part in paths.groupby("goal"):
         row = summary[summary["goal"] == goal].iloc[0]
         # the robots judged early glide on in the table until the last one is judged
@@ -264,13 +334,14 @@ def replot(folder: str, argv) -> Path:
     """`plot` of the run in `folder` into folder/rl.png, the picture naming the command line
     `argv`; StudyArgumentError naming --replot for a folder without the run's CSVs, before
     anything is drawn."""
-    names = ("rl_training.csv", "rl_paths.csv", "rl.csv")
-    for name in names:
+    for name in ("rl_paths.csv", "rl.csv"):
         if not (Path(folder) / name).is_file():
             raise cli.StudyArgumentError(f"--replot {folder}: no {name} there (give the folder "
                                          f"of an rl run)")
+    training = Path(folder) / "rl_training.csv"  # none for a run of a saved policy
     provenance.record("rl", argv)  # the picture's study and command
-    png = plot(*(Path(folder) / name for name in names), Path(folder) / "rl.png")
+    png = plot(training if training.is_file() else None, Path(folder) / "rl_paths.csv",
+               Path(folder) / "rl.csv", Path(folder) / "rl.png")
     print(f"  wrote {png}")
     return png
 
@@ -311,9 +382,13 @@ def main(argv=None):
                                      ) from None
     compared = None if args.compare is None else read_compared(
         args.compare, goals, base, solver, args.tolerance, args.settle_cycles)
+    since_fired_cap_s = env_kwargs.get("since_fired_cap_s", SwimmerTask.since_fired_cap_s)
+    loaded, policy_sha256 = (None, None) if args.policy is None else read_policy(
+        args.policy, args, base, solver, since_fired_cap_s)
     settings = {**PPO_SETTINGS, **(QUICK_PPO if args.quick else {})}
-    cli.check_robot_steps(f"--timesteps {args.timesteps} periods of training",
-                          args.timesteps * round(base.period / solver.dt))
+    if args.policy is None:
+        cli.check_robot_steps(f"--timesteps {args.timesteps} periods of training",
+                              args.timesteps * round(base.period / solver.dt))
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver,
                      extra={"ppo": settings, "timesteps": args.timesteps,
@@ -322,26 +397,30 @@ def main(argv=None):
                             "tolerance_mm": args.tolerance, "settle_cycles": args.settle_cycles,
                             "stop_speed_mm_s": args.stop_speed, "settled": args.settled,
                             "firing_cost_mm": args.firing_cost, "firing_prior": prior,
-                            "since_fired_cap_s": env_kwargs.get(
-                                "since_fired_cap_s", SwimmerTask.since_fired_cap_s),
+                            "since_fired_cap_s": since_fired_cap_s,
+                            "policy": (None if args.policy is None
+                                       else str(Path(args.policy).resolve())),
+                            "policy_sha256": policy_sha256,
                             "torch_threads": TORCH_THREADS,
                             "compared": (None if args.compare is None
                                          else str(Path(args.compare).resolve()))})
-    model, training = train(env_kwargs, args.num_envs, args.timesteps, args.seed, settings,
-                            prior)
-    # the training's work kept before the evaluation runs
-    training_csv = out.write_csv(training, "rl_training.csv")
-    policy = io.BytesIO()
-    model.save(policy)
-    write_atomic(out.path("rl_policy.zip"), policy.getvalue(),
-                 failure=lambda reason: cli.StudyOutputError(reason))
-    out.wrote(out.path("rl_policy.zip"))
+    if loaded is None:
+        model, training = train(env_kwargs, args.num_envs, args.timesteps, args.seed, settings,
+                                prior)
+        # the training's work kept before the evaluation runs
+        training_csv = out.write_csv(training, "rl_training.csv")
+        policy = io.BytesIO()
+        model.save(policy)
+        write_atomic(out.path("rl_policy.zip"), policy.getvalue(),
+                     failure=lambda reason: cli.StudyOutputError(reason))
+        out.wrote(out.path("rl_policy.zip"))
+    else:
+        model, training_csv = loaded, None
     summary, cycles, path = drive_policy(
         lambda observation: model.predict(observation, deterministic=True)[0], goals, base,
         solver, args.tolerance, args.max_cycles, args.settle_cycles, frames, mode="ppo",
         stop_speed_mm_s=args.stop_speed, settled=args.settled,
-        since_fired_cap_s=env_kwargs.get("since_fired_cap_s", SwimmerTask.since_fired_cap_s),
-        arch=args.arch)
+        since_fired_cap_s=since_fired_cap_s, arch=args.arch)
     summary_csv = out.write_csv(summary, "rl.csv")
     out.write_csv(cycles, "rl_cycles.csv")
     paths_csv = out.write_csv(path, "rl_paths.csv")

@@ -21,6 +21,8 @@ pytest.importorskip("stable_baselines3")
 QUICK = ["--quick", "--no-progress"]
 COMPARED = "results/plan_lookahead"
 """A committed plan run: 7 goals at 50 mm, tolerance 5 mm, 4 cycles of settling, dt 5 ms."""
+POLICY = "results/rl_settled_longer/rl_policy.zip"
+"""A committed policy, trained with --settled (4 cycles) at dt 5 ms on the paper robot."""
 
 
 @pytest.mark.slow
@@ -103,6 +105,15 @@ def test_a_settled_run_trains_and_drives_to_the_settled_task(tmp_path):
     (["--firing-prior", "0"], "--firing-prior must be in (0, 1), got 0.0"),
     (["--firing-prior", "1"], "--firing-prior must be in (0, 1), got 1.0"),
     (["--firing-prior", "nan"], "--firing-prior must be in (0, 1), got nan"),
+    (["--policy", "nowhere.zip"], "--policy nowhere.zip: no such file"),
+    (["--policy", POLICY], f"--policy {POLICY}: trained with settled True, this run's "
+                           f"--settled gives False"),
+    (["--policy", POLICY, "--settled", "--settle-cycles", "3"],
+     f"--policy {POLICY}: trained with settle_cycles 4, this run's --settle-cycles gives 3"),
+    (["--policy", POLICY, "--settled", "--dt", "0.002"],
+     f"--policy {POLICY}: trained at dt 0.005 s, this run at 0.002 s"),
+    (["--policy", POLICY, "--settled", "--set", "alpha=0.9"],
+     f"--policy {POLICY}: trained on a robot whose alpha is 0.8, this run's 0.9"),
     (["--compare", "nowhere"], "--compare nowhere/plan.csv"),
     (["--directions", "8", "--compare", COMPARED],
      f"--compare {COMPARED}: its goals are not this run's"),
@@ -141,3 +152,38 @@ def test_replot_draws_a_runs_picture_again_from_its_csvs(tmp_path):
         "rl.csv", "rl.csv.json", "rl.png", "rl_paths.csv", "rl_training.csv"]
     (run / "rl_paths.csv").unlink()
     assert studies_main(["rl", "--replot", str(run)]) == 2
+
+
+def test_a_saved_policy_drives_again_to_its_runs_table(tmp_path):
+    """--policy: the committed agent driven again with its run's flags gives that run's rl.csv
+    (7 of 7 at rest), nothing trained and no training table or policy written; the sidecar
+    names the policy and its SHA-256."""
+    import hashlib
+
+    out = tmp_path / "out"
+    assert studies_main(["rl", "--dt", "0.005", "--settled", "--policy", POLICY, "--out",
+                         str(out), "--no-progress"]) == 0
+    pd.testing.assert_frame_equal(pd.read_csv(out / "rl.csv"),
+                                  pd.read_csv(Path(POLICY).parent / "rl.csv"))
+    assert not (out / "rl_training.csv").exists() and not (out / "rl_policy.zip").exists()
+    details = json.loads((out / "rl.csv.json").read_text())["details"]
+    assert details["policy_sha256"] == hashlib.sha256(Path(POLICY).read_bytes()).hexdigest()
+    assert (out / "rl.png").stat().st_size > 1000
+
+
+@pytest.mark.parametrize("beside, content, message", [
+    ((), None, "the record of its run (rl.csv and its sidecar beside it) cannot be read"),
+    (("rl.csv", "rl.csv.json"), b"not a zip", "not a saved PPO policy"),
+])
+def test_a_policy_without_its_runs_record_or_no_policy_is_refused(no_compute, tmp_path, capsys,
+                                                                  beside, content, message):
+    for name in beside:
+        (tmp_path / name).write_bytes((Path(POLICY).parent / name).read_bytes())
+    policy = tmp_path / "rl_policy.zip"
+    policy.write_bytes(Path(POLICY).read_bytes() if content is None else content)
+    out = tmp_path / "out"
+    assert studies_main(["rl", "--dt", "0.005", "--settled", "--policy", str(policy), "--out",
+                         str(out), "--no-progress"]) == 2
+    error = capsys.readouterr().err
+    assert f"--policy {policy}: {message}" in error and len(error.strip().splitlines()) == 1
+    assert not out.exists()
