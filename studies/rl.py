@@ -389,14 +389,17 @@ def main(argv=None):
     if args.policy is None:
         cli.check_robot_steps(f"--timesteps {args.timesteps} periods of training",
                               args.timesteps * round(base.period / solver.dt))
+    training_settings = {"ppo": settings, "timesteps": args.timesteps,
+                         "num_envs": args.num_envs, "seed": args.seed,
+                         "max_episode_steps": args.max_episode_steps,
+                         "firing_cost_mm": args.firing_cost, "firing_prior": prior}
+    if args.policy is not None:  # nothing trained: the policy's own run records its training
+        training_settings = dict.fromkeys(training_settings)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver,
-                     extra={"ppo": settings, "timesteps": args.timesteps,
-                            "num_envs": args.num_envs, "seed": args.seed,
-                            "max_episode_steps": args.max_episode_steps,
+                     extra={**training_settings,
                             "tolerance_mm": args.tolerance, "settle_cycles": args.settle_cycles,
                             "stop_speed_mm_s": args.stop_speed, "settled": args.settled,
-                            "firing_cost_mm": args.firing_cost, "firing_prior": prior,
                             "since_fired_cap_s": since_fired_cap_s,
                             "policy": (None if args.policy is None
                                        else str(Path(args.policy).resolve())),

@@ -168,6 +168,7 @@ def test_a_saved_policy_drives_again_to_its_runs_table(tmp_path):
     assert not (out / "rl_training.csv").exists() and not (out / "rl_policy.zip").exists()
     details = json.loads((out / "rl.csv.json").read_text())["details"]
     assert details["policy_sha256"] == hashlib.sha256(Path(POLICY).read_bytes()).hexdigest()
+    assert details["timesteps"] is None and details["ppo"] is None  # nothing trained here
     assert (out / "rl.png").stat().st_size > 1000
 
 
