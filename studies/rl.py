@@ -131,6 +131,29 @@ def build_parser():
     return parser
 
 
+def check_like_this_run(flag: str, source, verb: str, robot_phrase: str, table: Path,
+                        record: dict, checks, solver, base):
+    """The run that wrote `table` (`record`: its sidecar) against this one, before any compute:
+    each (name, its recorded value, this run's flag, its value) of `checks`, then the step and
+    the robot; StudyArgumentError "<flag> <source>: <verb> with <name> <value>, this run's
+    <its flag> <value>" (and "<verb> at dt ...", "<robot_phrase> whose ...") for the first that
+    differs."""
+    where = f"{flag} {source}"
+    for name, made, own_flag, own in checks:
+        if made != own:
+            raise cli.StudyArgumentError(f"{where}: {verb} with {name} {made!r}, this run's "
+                                         f"{own_flag} {own!r}")
+    made_dt = (record.get("solver") or {}).get("dt")
+    if made_dt != solver.dt:
+        raise cli.StudyArgumentError(f"{where}: {verb} at dt {made_dt!r} s, this run at "
+                                     f"{solver.dt!r} s")
+    recorded, differing = cli.robot_differences(table, base, flag)
+    if differing:
+        raise cli.StudyArgumentError(f"{where}: {robot_phrase} whose {differing[0]} is "
+                                     f"{recorded[differing[0]]}, this run's "
+                                     f"{provenance.plain(base)[differing[0]]}")
+
+
 def read_compared(folder: str, goals: np.ndarray, base, solver, tolerance: float,
                   settle_cycles: int) -> pd.DataFrame:
     """The controllers of the plan run in `folder` (plan.csv, and lookahead.csv where it ran
@@ -153,20 +176,12 @@ def read_compared(folder: str, goals: np.ndarray, base, solver, tolerance: float
     except (OSError, ValueError) as error:
         raise cli.StudyArgumentError(f"--compare {folder}: its plan.csv's sidecar cannot be "
                                      f"read ({error})") from None
-    details, made_solver = record.get("details", {}), record.get("solver", {})
-    for name, flag, own in (("tolerance_mm", "--tolerance", tolerance),
-                            ("settle_cycles", "--settle-cycles", settle_cycles)):
-        if details.get(name) != own:
-            raise cli.StudyArgumentError(f"--compare {folder}: made with {name} "
-                                         f"{details.get(name)!r}, this run's {flag} {own!r}")
-    if made_solver.get("dt") != solver.dt:
-        raise cli.StudyArgumentError(f"--compare {folder}: made at dt {made_solver.get('dt')!r} "
-                                     f"s, this run at {solver.dt!r} s")
-    recorded, differing = cli.robot_differences(Path(folder) / "plan.csv", base, "--compare")
-    if differing:
-        raise cli.StudyArgumentError(f"--compare {folder}: made with a robot whose "
-                                     f"{differing[0]} is {recorded[differing[0]]}, this run's "
-                                     f"{provenance.plain(base)[differing[0]]}")
+    details = record.get("details") or {}
+    check_like_this_run("--compare", folder, "made", "made with a robot",
+                        Path(folder) / "plan.csv", record,
+                        [("tolerance_mm", details.get("tolerance_mm"), "--tolerance", tolerance),
+                         ("settle_cycles", details.get("settle_cycles"), "--settle-cycles",
+                          settle_cycles)], solver, base)
     return pd.concat(tables, ignore_index=True)
 
 
@@ -187,30 +202,18 @@ def read_policy(path: str, args, base, solver, since_fired_cap_s: float):
                                      f"was trained on is not known") from None
     trained = record.get("details") or {}
     # runs before the settled task recorded neither: they were not settled, capped at 10 s
-    made = {"settled": trained.get("settled", False),
-            "stop_speed_mm_s": trained.get("stop_speed_mm_s"),
-            "since_fired_cap_s": trained.get("since_fired_cap_s", SwimmerTask.since_fired_cap_s)}
-    this = {"settled": args.settled, "stop_speed_mm_s": args.stop_speed}
+    checks = [("settled", trained.get("settled", False), "--settled gives", args.settled),
+              ("stop_speed_mm_s", trained.get("stop_speed_mm_s"), "--stop-speed gives",
+               args.stop_speed)]
     if args.settled:
-        made["settle_cycles"], this["settle_cycles"] = trained.get("settle_cycles"), \
-            args.settle_cycles
-    this["since_fired_cap_s"] = since_fired_cap_s
-    flags = {"settled": "--settled", "stop_speed_mm_s": "--stop-speed",
-             "settle_cycles": "--settle-cycles",
-             "since_fired_cap_s": "--settled and --settle-cycles (the observation's cap)"}
-    for name, value in this.items():
-        if made[name] != value:
-            raise cli.StudyArgumentError(f"--policy {path}: trained with {name} {made[name]!r}, "
-                                         f"this run's {flags[name]} gives {value!r}")
-    made_dt = (record.get("solver") or {}).get("dt")
-    if made_dt != solver.dt:
-        raise cli.StudyArgumentError(f"--policy {path}: trained at dt {made_dt!r} s, this run "
-                                     f"at {solver.dt!r} s")
-    recorded, differing = cli.robot_differences(policy.parent / "rl.csv", base, "--policy")
-    if differing:
-        raise cli.StudyArgumentError(f"--policy {path}: trained on a robot whose "
-                                     f"{differing[0]} is {recorded[differing[0]]}, this run's "
-                                     f"{provenance.plain(base)[differing[0]]}")
+        checks.append(("settle_cycles", trained.get("settle_cycles"), "--settle-cycles gives",
+                       args.settle_cycles))
+    checks.append(("since_fired_cap_s",
+                   trained.get("since_fired_cap_s", SwimmerTask.since_fired_cap_s),
+                   "--settled and --settle-cycles (the observation's cap) give",
+                   since_fired_cap_s))
+    check_like_this_run("--policy", path, "trained", "trained on a robot",
+                        policy.parent / "rl.csv", record, checks, solver, base)
     from stable_baselines3 import PPO
 
     data = policy.read_bytes()
@@ -368,11 +371,12 @@ def main(argv=None):
                   "max_episode_steps": args.max_episode_steps,
                   "stop_speed_mm_s": args.stop_speed, "firing_cost_mm": args.firing_cost,
                   "arch": args.arch}
+    # settled, the observation tells a coast of settle_cycles periods from a shorter one
+    since_fired_cap_s = (max(SwimmerTask.since_fired_cap_s,
+                             (args.settle_cycles + 1) * base.period) if args.settled
+                         else SwimmerTask.since_fired_cap_s)
     if args.settled:
-        env_kwargs["settle_cycles"] = args.settle_cycles
-        # the observation tells a coast of settle_cycles periods from a shorter one
-        env_kwargs["since_fired_cap_s"] = max(SwimmerTask.since_fired_cap_s,
-                                              (args.settle_cycles + 1) * base.period)
+        env_kwargs.update(settle_cycles=args.settle_cycles, since_fired_cap_s=since_fired_cap_s)
     try:
         SwimmerTask(**{name: value for name, value in env_kwargs.items()
                        if name not in ("params", "solver", "arch")})
@@ -382,7 +386,6 @@ def main(argv=None):
                                      ) from None
     compared = None if args.compare is None else read_compared(
         args.compare, goals, base, solver, args.tolerance, args.settle_cycles)
-    since_fired_cap_s = env_kwargs.get("since_fired_cap_s", SwimmerTask.since_fired_cap_s)
     loaded, policy_sha256 = (None, None) if args.policy is None else read_policy(
         args.policy, args, base, solver, since_fired_cap_s)
     settings = {**PPO_SETTINGS, **(QUICK_PPO if args.quick else {})}
