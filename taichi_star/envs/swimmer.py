@@ -101,7 +101,11 @@ class SwimmerTask:
     settle_cycles: None, or the control periods, >= 1 (and below max_episode_steps), the robot
     must have fired nothing when it is within the tolerance for its episode to end there (it
     must have coasted there: the planners judge a robot where it is settle_cycles periods after
-    its controller stopped firing, its glide under quadratic drag lasting that long)."""
+    its controller stopped firing, its glide under quadratic drag lasting that long). Checked
+    against the budget where the environment holds it (built with max_episode_steps, or by
+    `gymnasium.make_vec`, which hands it over); `gymnasium.make` keeps the budget in its
+    TimeLimit wrapper, which the environment never sees, so there keep settle_cycles below it
+    (DEFAULT_MAX_EPISODE_STEPS unless given): at or above it no episode ends at its goal."""
 
     goal_distance_mm: float = 50.0
     goal_tolerance_mm: float = 5.0

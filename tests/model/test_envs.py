@@ -910,6 +910,25 @@ def test_the_settling_is_none_or_a_count_below_the_step_budget(settle, steps, re
         assert SwimmerTask(settle_cycles=settle, max_episode_steps=steps).settle_cycles == settle
 
 
+@pytest.mark.parametrize("budget, refused", [(None, True), (DEFAULT_MAX_EPISODE_STEPS + 1, False)])
+def test_make_vec_checks_the_settling_against_the_budget_it_hands_over(budget, refused):
+    """gymnasium.make_vec passes its step budget (the registered one unless given) to the
+    vector env, whose task then refuses a settling as long as the budget (the boundary: the
+    registered budget itself refused, one period more allowed), before any robot is built."""
+    options = {} if budget is None else {"max_episode_steps": budget}
+    if refused:
+        with pytest.raises(ValueError, match=rf"^settle_cycles must be below max_episode_steps "
+                                             rf"\({DEFAULT_MAX_EPISODE_STEPS}\)"):
+            gym.make_vec(ENV_ID, num_envs=1, settle_cycles=DEFAULT_MAX_EPISODE_STEPS, **options)
+    else:
+        envs = gym.make_vec(ENV_ID, num_envs=1, settle_cycles=DEFAULT_MAX_EPISODE_STEPS, **options)
+        try:
+            assert envs.unwrapped.batch.task.settle_cycles == DEFAULT_MAX_EPISODE_STEPS
+            assert envs.unwrapped.batch.task.max_episode_steps == budget
+        finally:
+            envs.close()
+
+
 NONE = np.zeros(8, dtype=bool)
 
 
