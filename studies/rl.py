@@ -349,6 +349,14 @@ def replot(folder: str, argv) -> Path:
     return png
 
 
+TASK_FLAGS = {"goal_distance_mm": "--distance", "goal_tolerance_mm": "--tolerance",
+              "max_episode_steps": "--max-episode-steps", "stop_speed_mm_s": "--stop-speed",
+              "firing_cost_mm": "--firing-cost", "settle_cycles": "--settle-cycles",
+              "since_fired_cap_s": "--settle-cycles"}
+"""The flag of each SwimmerTask field that the study sets (`main`'s refusal names it): with
+--settled the observation's cap is --settle-cycles + 1 periods."""
+
+
 def main(argv=None):
     args = cli.parse(build_parser(), argv)
     if args.replot is not None:
@@ -381,9 +389,9 @@ def main(argv=None):
         SwimmerTask(**{name: value for name, value in env_kwargs.items()
                        if name not in ("params", "solver", "arch")})
     except ValueError as error:
-        raise cli.StudyArgumentError(f"--distance, --tolerance, --max-episode-steps, "
-                                     f"--stop-speed, --settled, --firing-cost: {error}"
-                                     ) from None
+        # SwimmerTask's messages begin with the field they refuse
+        field = str(error).split(" ", 1)[0]
+        raise cli.StudyArgumentError(f"{TASK_FLAGS[field]}: {error}") from None
     compared = None if args.compare is None else read_compared(
         args.compare, goals, base, solver, args.tolerance, args.settle_cycles)
     loaded, policy_sha256 = (None, None) if args.policy is None else read_policy(

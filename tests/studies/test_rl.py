@@ -94,14 +94,16 @@ def test_a_settled_run_trains_and_drives_to_the_settled_task(tmp_path):
     (["--num-envs", "0"], "--num-envs must be in [1, "),
     (["--tolerance", "50"], "--tolerance must be below --distance (50 mm), got 50.0"),
     (["--directions", "0"], "no goals: --directions 0 and --far 0"),
-    (["--stop-speed", "0"],
-     "--settled, --firing-cost: stop_speed_mm_s must be None or a number in (0, "),
-    (["--firing-cost", "-1"], "--firing-cost: firing_cost_mm must be a number in [0, 1000], "
-                              "got -1.0"),
+    (["--stop-speed", "0"], "rl: error: --stop-speed: stop_speed_mm_s must be None or a number "
+                            "in (0, "),
+    (["--firing-cost", "-1"], "rl: error: --firing-cost: firing_cost_mm must be a number in "
+                              "[0, 1000], got -1.0"),
     (["--settled", "--settle-cycles", "0"],
-     "--firing-cost: settle_cycles must be an integer >= 1 or None, got 0"),
+     "rl: error: --settle-cycles: settle_cycles must be an integer >= 1 or None, got 0"),
     (["--settled", "--max-episode-steps", "4"],
-     "--firing-cost: settle_cycles must be below max_episode_steps (4), got 4"),
+     "rl: error: --settle-cycles: settle_cycles must be below max_episode_steps (4), got 4"),
+    (["--settled", "--max-episode-steps", "1000000", "--settle-cycles", "400000"],
+     "rl: error: --settle-cycles: since_fired_cap_s must be a number in (0, 1e+06], got "),
     (["--firing-prior", "0"], "--firing-prior must be in (0, 1), got 0.0"),
     (["--firing-prior", "1"], "--firing-prior must be in (0, 1), got 1.0"),
     (["--firing-prior", "nan"], "--firing-prior must be in (0, 1), got nan"),
