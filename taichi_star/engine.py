@@ -37,7 +37,7 @@ from .model import BatchModel
 from .params import JACOBIANS, SolverConfig
 from .physics import coupled_node_pairs
 from .fields import FieldArena, FieldStore
-from .physics.assembly import KEEP_EXPANSION, Assembly
+from .physics.assembly import Assembly
 from .physics.base import connect_terms, load_field, numpy_to_field_type, pad_batch
 from . import stepping
 from .gait import N_ACTUATORS, Gait
@@ -202,22 +202,11 @@ class BatchEngine:
         scale 0: none to reuse) and the solves that have started with it since."""
         self._factorisation_store = None
         """The kept factorisations' FieldStore (`factorisation_store`), once built."""
-        term_classes = [cls for cls, _ in model.terms_used]
-        self.same_as_instance = arena.batch_field(ti.i32, (capacity, len(term_classes))) \
-            if sensitive else None
-        """Per replica and term: 1 where no term that reads the step's start reshapes it for
-        the replica or its instance (`Term.start_reshapers`, `Term.reshaping`) and its
-        coefficients are those of the replica's instance (the same whatever other instances
-        the batch holds), for both replicas of its pair (0 for the simulated instances). A
-        term that does not read the step's start then has the instance's residual at the
-        instance's positions, and `assemble` leaves it out of the pair's difference; one that
-        does, and expands a replica about its instance, reads the expansion the instance kept
-        (`Assembly.as_instance`)."""
         self.assembly = Assembly(topology, capacity, arena, self.plan.pattern_slot, integrator,
                                  self.state, self.system,
-                                 self.primal_count if sensitive else None,
-                                 self.same_as_instance, [cls.name for cls in term_classes])
+                                 self.primal_count if sensitive else None)
         """What the terms see of this engine (they never hold the engine itself)."""
+        term_classes = [cls for cls, _ in model.terms_used]
         self.terms = []
         for cls, configuration in model.terms_used:
             coefficients = model.coefficients[cls.name]
@@ -225,6 +214,14 @@ class BatchEngine:
                       for name, values in coefficients.items()}
             self.terms.append(cls(self.assembly, configuration, shapes, term_classes))
         connect_terms(self.terms)
+        self.same_as_instance = arena.batch_field(ti.i32, (capacity, len(self.terms))) \
+            if sensitive else None
+        """Per replica and term: 1 where the term does not read the step's start, no term that
+        does reshapes it for the replica or its instance (`Term.start_reshapers`,
+        `Term.reshaping`), and its coefficients are those of the replica's instance (the same
+        whatever other instances the batch holds); its residual at the instance's positions is
+        then the instance's, the same for both replicas of a pair, and `assemble` leaves it out
+        of their difference (0 for the simulated instances, which assemble every term)."""
         self.waiting_actuator = arena.batch_field(ti.i32, capacity) if sensitive else None
         """Per replica: the index k of the actuator A(k+1) whose first firing its direction
         waits for, or −1 (`replica_waiting`); −1 for the simulated instances."""
@@ -347,6 +344,8 @@ class BatchEngine:
         same = np.zeros((self.capacity, len(self.terms)), dtype=np.int32)
         replicas, instances, partner_rows = replica_rows(primal_count, model.batch_size)
         for k, term in enumerate(self.terms):
+            if term.reads_step_start:
+                continue
             equal = np.ones(len(replicas), dtype=bool)
             for name in term.coefficient_names:
                 values = model.coefficients[term.name][name]
@@ -972,11 +971,10 @@ class BatchEngine:
     def assemble_with_rigid_projector(self, b, inertia_scale, rate_gain, centre):
         """`assemble` instance b's residual and Jacobian in two parts, the inertia and the
         external terms, then the internal terms, building `rigid_projector[b]` (about the mass
-        centre `centre`) from each part as it is complete; the terms keep their expansions for
-        b's replicas (`KEEP_EXPANSION`)."""
-        self.assemble_forces(b, inertia_scale, rate_gain, KEEP_EXPANSION, EXTERNAL_TERMS)
+        centre `centre`) from each part as it is complete."""
+        self.assemble_forces(b, inertia_scale, rate_gain, 1, EXTERNAL_TERMS)
         self.rigid_projector_of(b, centre, True)
-        self.assemble_forces(b, inertia_scale, rate_gain, KEEP_EXPANSION, INTERNAL_TERMS)
+        self.assemble_forces(b, inertia_scale, rate_gain, 1, INTERNAL_TERMS)
         self.rigid_projector_of(b, centre, False)
 
     @ti.func

@@ -32,15 +32,6 @@ given: a term assembled through it computes the same arithmetic as one written i
 
 import taichi as ti
 
-KEEP_EXPANSION = 2
-"""The `jacobian` argument of a simulated instance's assembly at its converged state in a
-sensitive engine's tangent step (`engine.BatchEngine.tangent_step`): the Jacobian (it is
-truthy), and a term that expands its replicas about this instance (`Assembly.primal_instance`)
-keeps what that expansion reads, so that a replica whose coefficients are the instance's
-reads it instead of computing it again (the same arithmetic on the same inputs: the
-instance's velocity and the converged positions, which its replicas share). The replicas'
-assemblies follow it in the same step, before the instance's positions change."""
-
 
 def distinct_rows(rows, element: str):
     """`rows` (lists of Jacobian slots, one element each), checked to repeat no slot within a
@@ -67,12 +58,10 @@ class Assembly:
     `state.BatchState`; `system`: the fields `rhs` ((capacity, N) 2-vectors) and `blocks`
     ((capacity, slots) 2×2) of a `linsolve.BlockSystem`; `primal_count`: in an engine with
     sensitivities, the field holding how many of its instances are simulated (the rest are
-    their replicas, `engine.BatchEngine.replica`), else None; with it `same_as_instance`, the
-    (capacity, terms) i32 field of `engine.BatchEngine.same_as_instance`, and `term_names`,
-    the batch's terms in the order of its columns."""
+    their replicas, `engine.BatchEngine.replica`), else None."""
 
     def __init__(self, topology, capacity: int, arena, slot: dict, integrator, state, system,
-                 primal_count=None, same_as_instance=None, term_names=()):
+                 primal_count=None):
         self.topology = topology
         self.capacity = capacity
         self.arena = arena
@@ -89,9 +78,6 @@ class Assembly:
         self.replicated = primal_count is not None
         """Whether some instances are replicas of others (static: the terms' expansion of a
         replica about its instance is compiled only then)."""
-        self.same_as_instance = same_as_instance
-        self.term_column = {name: k for k, name in enumerate(term_names)}
-        """The column of each term (by name) in `same_as_instance`."""
 
     # ---------------------------------------------------------------- host side: tables
     def batch_field(self, dtype, shape) -> ti.Field:
@@ -140,15 +126,6 @@ class Assembly:
             # replica(b, j, sign) = count·(1 + 2j + sign) + b; a simulated b < count
             primal = b % self.primal_count[None]
         return primal
-
-    @ti.func
-    def as_instance(self, b, name: ti.template()):
-        """Whether b is a replica whose coefficients of the term `name` are its instance's
-        (`engine.BatchEngine.same_as_instance`): the term's expansion about the instance
-        (`primal_instance`) is then the one the instance kept at its converged state
-        (`KEEP_EXPANSION`), which such a term reads instead of computing it again. Only with
-        `replicated`."""
-        return self.same_as_instance[b, ti.static(self.term_column[name])] == 1
 
     @ti.func
     def rate_offset(self, value, previous, h, ratio, use_history):

@@ -9,7 +9,6 @@ import numpy as np
 import taichi as ti
 
 from ..geometry import ARC, SPOKE
-from .assembly import KEEP_EXPANSION
 from .base import Term
 
 
@@ -96,24 +95,9 @@ class RodDrag(RodEdgeTerm):
         return {"drag_parallel_coeff": wetted * np.array([p.drag_parallel for p in params])[:, None],
                 "drag_perpendicular_coeff": wetted * np.array([p.drag_perpendicular for p in params])[:, None]}
 
-    def build(self, topology):
-        super().build(topology)
-        if self.assembly.replicated:
-            self.expansion = self.assembly.batch_field(float, (self.assembly.capacity,
-                                                               self.n_rods, 6))
-            """(capacity, R, 6): for a simulated instance, each rod's drag and its velocity
-            derivative (F_x, F_y, then ∂F/∂v row by row) at its converged state, kept by its
-            tangent step's assembly (`KEEP_EXPANSION`) for its replicas (all four entries of
-            ∂F/∂v: its two off-diagonal ones are one number in exact arithmetic only)."""
-
     @ti.func
     def assemble(self, b, rate_gain, jacobian):
         primal = self.assembly.primal_instance(b)
-        # a replica whose drag coefficients are its instance's (its direction is not a drag's)
-        # reads the instance's expansion: `rod_drag` would compute the same numbers again
-        kept = False
-        if ti.static(self.assembly.replicated):
-            kept = self.assembly.as_instance(b, self.name)
         for r in range(self.n_rods):
             i, j = self.rods[r, 0], self.rods[r, 1]
             velocity = 0.5 * (self.assembly.implicit_velocity(b, i, rate_gain)
@@ -124,18 +108,9 @@ class RodDrag(RodEdgeTerm):
             if primal != b:
                 expansion_velocity = 0.5 * (self.assembly.implicit_velocity(primal, i, rate_gain)
                                             + self.assembly.implicit_velocity(primal, j, rate_gain))
-            force = ti.Vector.zero(float, 2)
-            d_velocity = ti.Matrix.zero(float, 2, 2)
-            d_edge = ti.Matrix.zero(float, 2, 2)  # a replica's assembly adds no blocks
-            if kept:
-                force, d_velocity = self.kept_expansion(primal, r)
-            else:
-                force, d_velocity, d_edge = rod_drag(
-                    expansion_velocity,
-                    self.assembly.positions[b, j] - self.assembly.positions[b, i],
-                    self.drag_parallel_coeff[b, r], self.drag_perpendicular_coeff[b, r])
-                if jacobian == KEEP_EXPANSION:
-                    self.keep_expansion(b, r, force, d_velocity)
+            force, d_velocity, d_edge = rod_drag(
+                expansion_velocity, self.assembly.positions[b, j] - self.assembly.positions[b, i],
+                self.drag_parallel_coeff[b, r], self.drag_perpendicular_coeff[b, r])
             if primal != b:
                 force += d_velocity @ (velocity - expansion_velocity)
             # half of F on each node; v is the mean of both, e = x_j − x_i
@@ -147,25 +122,3 @@ class RodDrag(RodEdgeTerm):
             self.assembly.add_block(b, self.rod_slot[r, 1], -d_second, jacobian)
             self.assembly.add_block(b, self.rod_slot[r, 2], -d_first, jacobian)
             self.assembly.add_block(b, self.rod_slot[r, 3], -d_second, jacobian)
-
-    @ti.func
-    def keep_expansion(self, b, r, force, d_velocity):
-        """Keep simulated instance b's drag on rod r and its velocity derivative (nothing is
-        compiled in an engine without replicas)."""
-        if ti.static(self.assembly.replicated):
-            self.expansion[b, r, 0] = force[0]
-            self.expansion[b, r, 1] = force[1]
-            for k in ti.static(range(4)):
-                self.expansion[b, r, 2 + k] = d_velocity[k // 2, k % 2]
-
-    @ti.func
-    def kept_expansion(self, primal, r):
-        """(force, ∂F/∂v) of rod r that simulated instance `primal` kept (`keep_expansion`;
-        zeros in an engine without replicas, which never reads them)."""
-        force = ti.Vector.zero(float, 2)
-        d_velocity = ti.Matrix.zero(float, 2, 2)
-        if ti.static(self.assembly.replicated):
-            force = ti.Vector([self.expansion[primal, r, 0], self.expansion[primal, r, 1]])
-            d_velocity = ti.Matrix([[self.expansion[primal, r, 2], self.expansion[primal, r, 3]],
-                                    [self.expansion[primal, r, 4], self.expansion[primal, r, 5]]])
-        return force, d_velocity

@@ -434,53 +434,6 @@ def test_waiting_pairs_keep_every_bit_of_pairs_that_do_not_wait(taichi_cpu, monk
     assert not waiting[2].any() and not waiting[6].any()
 
 
-
-@pytest.mark.parametrize("jacobian", ["newton", "lagged"])
-def test_replicas_reading_their_instances_drag_keep_every_bit_of_computing_it(
-        taichi_cpu, monkeypatch, jacobian):
-    """A replica whose drag coefficients are its instance's reads the rod drag and its velocity
-    derivative that the instance kept at its converged state (`KEEP_EXPANSION`) instead of
-    computing them again: the same bits in every sensitivity as with every replica computing
-    them (`replica_sameness` made to find no replica's drag like its instance's). The pairs of
-    α read them, those of C⊥ (whose drag differs) do not: what the recorded sameness shows."""
-    from taichi_star.engine import BatchEngine
-
-    params = [BASE.replace(gait="A1+A3", drag_perpendicular=1.2),
-              BASE.replace(gait="A1+A3+A5", alpha=1.1)]
-    names = ("alpha", "drag_perpendicular")
-    columns = [sensitivity_column(output, name) for output in SUMMARY_OUTPUTS for name in names]
-    seen = []
-    found = BatchEngine.replica_sameness
-
-    def recorded(self, model, primal_count):
-        same = found(self, model, primal_count)
-        seen.append((same, [term.name for term in self.terms]))
-        return same
-
-    def run():
-        result = simulate(params, 0.06, SolverConfig(jacobian=jacobian, **TIGHT),
-                          sensitivities=names, record_interval_s=0.02)
-        return result.sensitivities[columns], result.trajectory_sensitivities
-
-    monkeypatch.setattr(BatchEngine, "replica_sameness", recorded)
-    kept_summary, kept_path = run()
-    same, terms = seen[-1]
-    drag = same[:, terms.index("rod_drag")]
-    # rows: the 2 instances, α's +ε and −ε replicas, then C⊥'s
-    assert drag[:10].tolist() == [0, 0, 1, 1, 1, 1, 0, 0, 0, 0]
-    def drag_computed(self, model, primal_count):
-        same = found(self, model, primal_count)
-        same[:, [term.name for term in self.terms].index("rod_drag")] = 0
-        return same
-
-    monkeypatch.setattr(BatchEngine, "replica_sameness", drag_computed)
-    computed_summary, computed_path = run()
-    pd.testing.assert_frame_equal(kept_summary, computed_summary, check_exact=True)
-    pd.testing.assert_frame_equal(kept_path, computed_path, check_exact=True)
-    for name in names:  # every tangent moved (A1+A3+A5 along y, A1+A3 along x)
-        assert (np.hypot(kept_summary[sensitivity_column("displacement_x_mm", name)],
-                         kept_summary[sensitivity_column("displacement_y_mm", name)]) > 1e-3).all()
-
 def test_the_instances_rows_are_those_of_a_run_without_sensitivities(euler_run):
     plain = simulate(BATCH, DURATION_S, SolverConfig(**TIGHT), record_interval_s=0.05)
     for column in SUMMARY_OUTPUTS:
