@@ -497,8 +497,8 @@ class StarSwimmerEnv(RobotsView, gym.Env):
     preset), solver (SolverConfig; default the paper preset), control_period_s, arch, and the
     SwimmerTask fields (goal_distance_mm=50, goal_tolerance_mm=5, firing_cost_mm=0.1,
     max_episode_steps=None, since_fired_cap_s=10, stop_speed_mm_s=None, settle_cycles=None),
-    and render_mode
-    (None or "rgb_array": `render()` then returns a (400, 400, 3) uint8 picture)."""
+    and render_mode (None or "rgb_array": `render()` then returns a (400, 400, 3) uint8
+    picture)."""
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": 4}
 
