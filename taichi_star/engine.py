@@ -37,7 +37,7 @@ from .model import BatchModel
 from .params import JACOBIANS, SolverConfig
 from .physics import coupled_node_pairs
 from .fields import FieldArena, FieldStore
-from .physics.assembly import Assembly
+from .physics.assembly import KEEP_EXPANSION, Assembly
 from .physics.base import connect_terms, load_field, numpy_to_field_type, pad_batch
 from . import stepping
 from .gait import N_ACTUATORS, Gait
@@ -216,12 +216,14 @@ class BatchEngine:
         connect_terms(self.terms)
         self.same_as_instance = arena.batch_field(ti.i32, (capacity, len(self.terms))) \
             if sensitive else None
-        """Per replica and term: 1 where the term does not read the step's start, no term that
-        does reshapes it for the replica or its instance (`Term.start_reshapers`,
-        `Term.reshaping`), and its coefficients are those of the replica's instance (the same
-        whatever other instances the batch holds); its residual at the instance's positions is
-        then the instance's, the same for both replicas of a pair, and `assemble` leaves it out
-        of their difference (0 for the simulated instances, which assemble every term)."""
+        """Per replica and term: 1 where the term does not read the step's start or pairs
+        linearly (`Term.pairs_linearly`), no term that does read it reshapes it for the replica
+        or its instance (`Term.start_reshapers`, `Term.reshaping`), and its coefficients are
+        those of the replica's instance (the same whatever other instances the batch holds).
+        `assemble` then leaves it out of both replicas of the pair: its residual at the
+        instance's positions is the instance's for both, or for a term that pairs linearly the
+        tangent step adds the pair's difference itself (0 for the simulated instances, which
+        assemble every term)."""
         self.waiting_actuator = arena.batch_field(ti.i32, capacity) if sensitive else None
         """Per replica: the index k of the actuator A(k+1) whose first firing its direction
         waits for, or −1 (`replica_waiting`); −1 for the simulated instances."""
@@ -344,7 +346,7 @@ class BatchEngine:
         same = np.zeros((self.capacity, len(self.terms)), dtype=np.int32)
         replicas, instances, partner_rows = replica_rows(primal_count, model.batch_size)
         for k, term in enumerate(self.terms):
-            if term.reads_step_start:
+            if term.reads_step_start and not term.pairs_linearly:
                 continue
             equal = np.ones(len(replicas), dtype=bool)
             for name in term.coefficient_names:
@@ -421,7 +423,8 @@ class BatchEngine:
                 self.assembly.add_block(b, self.diagonal_slot[n], scaled_mass * identity, jacobian)
         for k, term in ti.static(enumerate(self.terms)):
             if ti.static(terms == ALL_TERMS or (terms == INTERNAL_TERMS) == term.internal):
-                if ti.static(self.sensitive and not term.reads_step_start):
+                if ti.static(self.sensitive and (not term.reads_step_start
+                                                 or term.pairs_linearly)):
                     if self.same_as_instance[b, k] == 0:
                         term.assemble(b, rate_gain, jacobian)
                 else:
@@ -918,6 +921,10 @@ class BatchEngine:
                 for n in range(self.n_nodes):
                     self.system.rhs[b, n] = 0.5 * (self.system.rhs[plus, n]
                                                    - self.system.rhs[minus, n])
+                for k, term in ti.static(enumerate(self.terms)):
+                    if ti.static(term.pairs_linearly):
+                        if self.same_as_instance[plus, k] == 1:
+                            term.pair_difference(b, plus, minus, rate_gain)
                 wanted_force, wanted_torque = self.rigid_parts(b, centre)
                 self.system.solve(b)
                 self.rigid_correction(b, centre, wanted_force, wanted_torque,
@@ -972,7 +979,7 @@ class BatchEngine:
         """`assemble` instance b's residual and Jacobian in two parts, the inertia and the
         external terms, then the internal terms, building `rigid_projector[b]` (about the mass
         centre `centre`) from each part as it is complete."""
-        self.assemble_forces(b, inertia_scale, rate_gain, 1, EXTERNAL_TERMS)
+        self.assemble_forces(b, inertia_scale, rate_gain, KEEP_EXPANSION, EXTERNAL_TERMS)
         self.rigid_projector_of(b, centre, True)
         self.assemble_forces(b, inertia_scale, rate_gain, 1, INTERNAL_TERMS)
         self.rigid_projector_of(b, centre, False)

@@ -32,6 +32,13 @@ given: a term assembled through it computes the same arithmetic as one written i
 
 import taichi as ti
 
+KEEP_EXPANSION = 2
+"""The `jacobian` argument of a simulated instance's assembly at its converged state in a
+sensitive engine's tangent step (`engine.BatchEngine.tangent_step`): the Jacobian (it is
+truthy), and a term that pairs linearly (`base.Term.pairs_linearly`) keeps the velocity
+derivative it expands its replicas with (`Assembly.primal_instance`), for the pairs that leave
+it out of their residuals (`base.Term.pair_difference`)."""
+
 
 def distinct_rows(rows, element: str):
     """`rows` (lists of Jacobian slots, one element each), checked to repeat no slot within a

@@ -81,6 +81,16 @@ class Term:
     (an elastic energy) gives a sensitivities' replica the residual of its instance wherever
     their coefficients agree and no term that reads it reshapes the two (`start_reshapers`,
     `reshaping`; `engine.BatchEngine.replica_sameness`)."""
+    pairs_linearly: ClassVar[bool] = False
+    """Whether a sensitivities' replica's residual from it is the term at its instance's state
+    plus a velocity derivative there times the replica's velocity offset (the expansion of
+    `assembly.Assembly.primal_instance`), and nothing else of the replica's start state. Where
+    the replica's coefficients of the term and its partner's are the instance's, the pair's
+    half difference is then that derivative times half the pair's velocity difference: both
+    replicas leave the term out (`engine.BatchEngine.replica_sameness`), and the tangent step
+    adds `pair_difference(b, plus, minus, rate_gain)` instead, from the derivative the
+    instance kept at its converged state (`assembly.KEEP_EXPANSION`). The same derivative
+    within rounding: the sums run in another order."""
     sensitivity_steps: ClassVar[Dict[str, float]] = {}
     """StarParams fields of this term whose sensitivities' ε (relative to the value) departs
     from `sensitivities.RELATIVE_STEP`, with the ε and, in the subclass, why

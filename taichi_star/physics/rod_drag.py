@@ -9,6 +9,7 @@ import numpy as np
 import taichi as ti
 
 from ..geometry import ARC, SPOKE
+from .assembly import KEEP_EXPANSION
 from .base import Term
 
 
@@ -84,6 +85,7 @@ class RodDrag(RodEdgeTerm):
     # 1e-6. The force is linear in C∥, so a larger ε adds no truncation of its own
     sensitivity_steps = {"drag_parallel": 1e-2}
     linear_fields = ("drag_perpendicular", "drag_parallel", "fluid_density")
+    pairs_linearly = True
 
     @staticmethod
     def coefficients(params, topologies, topology):
@@ -94,6 +96,15 @@ class RodDrag(RodEdgeTerm):
                   * rod_height_ratios(params, topology))
         return {"drag_parallel_coeff": wetted * np.array([p.drag_parallel for p in params])[:, None],
                 "drag_perpendicular_coeff": wetted * np.array([p.drag_perpendicular for p in params])[:, None]}
+
+    def build(self, topology):
+        super().build(topology)
+        if self.assembly.replicated:
+            self.kept_velocity_derivative = self.assembly.batch_field(
+                float, (self.assembly.capacity, self.n_rods, 4))
+            """(capacity, R, 4): for a simulated instance, ∂F/∂v of each rod's drag at its
+            converged state, row by row (kg/(m·s)), kept by its tangent step's assembly
+            (`KEEP_EXPANSION`) for `pair_difference`."""
 
     @ti.func
     def assemble(self, b, rate_gain, jacobian):
@@ -113,6 +124,10 @@ class RodDrag(RodEdgeTerm):
                 self.drag_parallel_coeff[b, r], self.drag_perpendicular_coeff[b, r])
             if primal != b:
                 force += d_velocity @ (velocity - expansion_velocity)
+            if ti.static(self.assembly.replicated):
+                if jacobian == KEEP_EXPANSION:
+                    for k in ti.static(range(4)):
+                        self.kept_velocity_derivative[b, r, k] = d_velocity[k // 2, k % 2]
             # half of F on each node; v is the mean of both, e = x_j − x_i
             d_first = 0.5 * (0.5 * rate_gain * d_velocity - d_edge)
             d_second = 0.5 * (0.5 * rate_gain * d_velocity + d_edge)
@@ -122,3 +137,24 @@ class RodDrag(RodEdgeTerm):
             self.assembly.add_block(b, self.rod_slot[r, 1], -d_second, jacobian)
             self.assembly.add_block(b, self.rod_slot[r, 2], -d_first, jacobian)
             self.assembly.add_block(b, self.rod_slot[r, 3], -d_second, jacobian)
+
+    @ti.func
+    def pair_difference(self, b, plus, minus, rate_gain):
+        """Add to rhs[b] half the difference of the residuals of replicas `plus` and `minus`
+        of simulated instance b (at b's converged positions, their drag coefficients b's):
+        each rod's kept ∂F/∂v times half the pair's difference of its mean velocity, the
+        rest of their expansions about b being the same (`Term.pairs_linearly`)."""
+        for r in range(self.n_rods):
+            i, j = self.rods[r, 0], self.rods[r, 1]
+            velocity_plus = 0.5 * (self.assembly.implicit_velocity(plus, i, rate_gain)
+                                   + self.assembly.implicit_velocity(plus, j, rate_gain))
+            velocity_minus = 0.5 * (self.assembly.implicit_velocity(minus, i, rate_gain)
+                                    + self.assembly.implicit_velocity(minus, j, rate_gain))
+            d_velocity = ti.Matrix([[self.kept_velocity_derivative[b, r, 0],
+                                     self.kept_velocity_derivative[b, r, 1]],
+                                    [self.kept_velocity_derivative[b, r, 2],
+                                     self.kept_velocity_derivative[b, r, 3]]])
+            force = d_velocity @ (0.5 * (velocity_plus - velocity_minus))
+            # as `assemble`: half of F on each node, with the residual's sign
+            self.assembly.add_residual(b, i, -0.5 * force)
+            self.assembly.add_residual(b, j, -0.5 * force)
