@@ -4,7 +4,6 @@ import numpy as np
 import taichi as ti
 
 from ..geometry import CENTRE
-from .assembly import KEEP_EXPANSION
 from .base import Term
 
 
@@ -29,7 +28,6 @@ class CylinderDrag(Term):
     # truncation of its own
     sensitivity_steps = {"cylinder_drag": 1e-2}
     linear_fields = ("cylinder_drag", "fluid_density")
-    pairs_linearly = True
 
     @staticmethod
     def coefficients(params, topologies, topology):
@@ -42,12 +40,6 @@ class CylinderDrag(Term):
 
     def build(self, topology):
         self.centre_slot = self.assembly.slot(CENTRE, CENTRE)
-        if self.assembly.replicated:
-            self.kept_velocity_derivative = self.assembly.batch_field(
-                float, (self.assembly.capacity, 4))
-            """(capacity, 4): for a simulated instance, ∂F/∂v of the hub's drag at its
-            converged state, row by row (kg/(m·s)), kept by its tangent step's assembly
-            (`KEEP_EXPANSION`) for `pair_difference`."""
 
     @ti.func
     def assemble(self, b, rate_gain, jacobian):
@@ -61,23 +53,5 @@ class CylinderDrag(Term):
         force, d_velocity = cylinder_drag(expansion_velocity, self.cylinder_drag_coeff[b])
         if primal != b:
             force += d_velocity @ (velocity - expansion_velocity)
-        if ti.static(self.assembly.replicated):
-            if jacobian == KEEP_EXPANSION:
-                for k in ti.static(range(4)):
-                    self.kept_velocity_derivative[b, k] = d_velocity[k // 2, k % 2]
         self.assembly.add_residual(b, CENTRE, -force)
         self.assembly.add_block(b, self.centre_slot, -rate_gain * d_velocity, jacobian)
-
-    @ti.func
-    def pair_difference(self, b, plus, minus, rate_gain):
-        """Add to rhs[b] half the difference of the residuals of replicas `plus` and `minus`
-        of simulated instance b (at b's converged positions, their drag coefficient b's): the
-        kept ∂F/∂v times half the pair's difference of the hub's velocity
-        (`Term.pairs_linearly`)."""
-        d_velocity = ti.Matrix([[self.kept_velocity_derivative[b, 0],
-                                 self.kept_velocity_derivative[b, 1]],
-                                [self.kept_velocity_derivative[b, 2],
-                                 self.kept_velocity_derivative[b, 3]]])
-        force = d_velocity @ (0.5 * (self.assembly.implicit_velocity(plus, CENTRE, rate_gain)
-                                     - self.assembly.implicit_velocity(minus, CENTRE, rate_gain)))
-        self.assembly.add_residual(b, CENTRE, -force)

@@ -46,7 +46,6 @@ import taichi as ti
 from ..gait import N_ACTUATORS
 from ..geometry import CENTRE
 from ..params import JET_APPLICATIONS, JET_DIRECTIONS
-from .assembly import KEEP_EXPANSION
 from .base import Term
 
 HUB_DIRECTION, NORMAL_DIRECTION, BISECTOR_DIRECTION = range(len(JET_DIRECTIONS))
@@ -162,7 +161,6 @@ def jet(centre, x1, x2, x3, x4, area_rate, rate_gain, alpha, fluid_density, alwa
 class Jet(Term):
     name = "jet"
     linear_fields = ("alpha", "jet_inflow", "fluid_density")  # α² and α_in²: quadratic
-    pairs_linearly = True
 
     @staticmethod
     def coefficients(params, topologies, topology):
@@ -216,12 +214,6 @@ class Jet(Term):
             # (8, 4·5): for corner a of each space, the slots of (a, c) and (a, x1..x4)
             self.corner_slot = self.assembly.index(
                 [[slot(a, n) for a in quad for n in (CENTRE, *quad)] for quad in topology.jet_quads])
-        if self.assembly.replicated:
-            self.kept_rate_derivative = self.assembly.batch_field(
-                float, (self.assembly.capacity, N_ACTUATORS, 2))
-            """(capacity, 8, 2): for a simulated instance, ∂f/∂Ṡ of each space's force at its
-            converged state (N·s/m³), kept by its tangent step's assembly (`KEEP_EXPANSION`)
-            for `pair_difference`."""
 
     @ti.func
     def area(self, b, k):
@@ -274,38 +266,13 @@ class Jet(Term):
                 direction_kind)
             if primal != b:
                 force += force_d_rate * (area_rate - expansion_rate)
-            if ti.static(self.assembly.replicated):
-                if jacobian == KEEP_EXPANSION:
-                    self.kept_rate_derivative[b, k, 0] = force_d_rate[0]
-                    self.kept_rate_derivative[b, k, 1] = force_d_rate[1]
-            self.apply(b, k, force, d_centre, d1, d2, d3, d4, jacobian)
-
-    @ti.func
-    def apply(self, b, k, force, d_centre, d1, d2, d3, d4, jacobian):
-        """Space k's force and its derivatives where instance b applies them (`jet_application`)."""
-        if ti.static("spread" in self.configuration_switches):
-            if self.jet_application[b] == SPREAD:
-                self.spread_on_corners(b, k, force, d_centre, d1, d2, d3, d4, jacobian)
+            if ti.static("spread" in self.configuration_switches):
+                if self.jet_application[b] == SPREAD:
+                    self.spread_on_corners(b, k, force, d_centre, d1, d2, d3, d4, jacobian)
+                else:
+                    self.apply_on_hub(b, k, force, d_centre, d1, d2, d3, d4, jacobian)
             else:
                 self.apply_on_hub(b, k, force, d_centre, d1, d2, d3, d4, jacobian)
-        else:
-            self.apply_on_hub(b, k, force, d_centre, d1, d2, d3, d4, jacobian)
-
-    @ti.func
-    def pair_difference(self, b, plus, minus, rate_gain):
-        """Add to rhs[b] half the difference of the residuals of replicas `plus` and `minus`
-        of simulated instance b (at b's converged positions, their jet coefficients b's):
-        each space's kept ∂f/∂Ṡ times half the pair's difference of its Ṡ (the areas at the
-        shared positions cancel), applied as b applies its force (`Term.pairs_linearly`)."""
-        zero = ti.Matrix.zero(float, 2, 2)
-        for k in range(N_ACTUATORS):
-            rate_change = 0.5 * (rate_gain * (self.previous_areas[minus, k]
-                                              - self.previous_areas[plus, k])
-                                 + (self.area_rate_offset[plus, k]
-                                    - self.area_rate_offset[minus, k]))
-            force = rate_change * ti.Vector([self.kept_rate_derivative[b, k, 0],
-                                             self.kept_rate_derivative[b, k, 1]])
-            self.apply(b, k, force, zero, zero, zero, zero, zero, 0)
 
     @ti.func
     def apply_on_hub(self, b, k, force, d_centre, d1, d2, d3, d4, jacobian):
