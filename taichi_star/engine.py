@@ -48,6 +48,11 @@ from .timegrid import MAX_STEPS_PER_INSTANCE, step_counts
 ALL_TERMS, EXTERNAL_TERMS, INTERNAL_TERMS = range(3)
 """Which terms `BatchEngine.assemble_forces` assembles (static)."""
 
+SAME_AS_INSTANCE, LINEAR_IN_DIFFERENCE = 1, 2
+"""Values of `BatchEngine.same_as_instance` for a replica that leaves a term out (0: it
+assembles it): its coefficients of the term are its instance's, or they differ only in the
+term's `linear_coefficients`, whose difference the tangent step adds (`replica_sameness`)."""
+
 SOLVER_SETTINGS = {"dt": float, "newton_tol": float, "residual_limit": float,
                    "max_newton": ti.i32, "max_substep_halvings": ti.i32, "jacobian_mode": ti.i32,
                    "error_tol": float, "dt_min": float, "dt_max": float}
@@ -216,14 +221,15 @@ class BatchEngine:
         connect_terms(self.terms)
         self.same_as_instance = arena.batch_field(ti.i32, (capacity, len(self.terms))) \
             if sensitive else None
-        """Per replica and term: 1 where the term does not read the step's start or pairs
-        linearly (`Term.pairs_linearly`), no term that does read it reshapes it for the replica
-        or its instance (`Term.start_reshapers`, `Term.reshaping`), and its coefficients are
-        those of the replica's instance (the same whatever other instances the batch holds).
-        `assemble` then leaves it out of both replicas of the pair: its residual at the
-        instance's positions is the instance's for both, or for a term that pairs linearly the
-        tangent step adds the pair's difference itself (0 for the simulated instances, which
-        assemble every term)."""
+        """Per replica and term: SAME_AS_INSTANCE where the term does not read the step's
+        start or pairs linearly (`Term.pairs_linearly`), no term that does read it reshapes it
+        for the replica or its instance (`Term.start_reshapers`, `Term.reshaping`), and its
+        coefficients are those of the replica's instance (the same whatever other instances
+        the batch holds); LINEAR_IN_DIFFERENCE where they differ only in the term's
+        `linear_coefficients` and no term reshapes it for either. `assemble` then leaves it
+        out of both replicas of the pair: its residual at the instance's positions is the
+        instance's for both, or the tangent step adds the pair's difference itself
+        (`pair_difference`; 0 for the simulated instances, which assemble every term)."""
         self.waiting_actuator = arena.batch_field(ti.i32, capacity) if sensitive else None
         """Per replica: the index k of the actuator A(k+1) whose first firing its direction
         waits for, or −1 (`replica_waiting`); −1 for the simulated instances."""
@@ -342,23 +348,37 @@ class BatchEngine:
         instances followed by their replicas; the two replicas of a pair always alike (a term
         left out of one replica's residual and not the other's would put its whole residual
         into their difference: a damping time at 0 reshapes the +ε replica and not the −ε
-        one)."""
+        one), LINEAR_IN_DIFFERENCE for both where either is (the difference of coefficients
+        alike is 0)."""
         same = np.zeros((self.capacity, len(self.terms)), dtype=np.int32)
         replicas, instances, partner_rows = replica_rows(primal_count, model.batch_size)
         for k, term in enumerate(self.terms):
             if term.reads_step_start and not term.pairs_linearly:
                 continue
-            equal = np.ones(len(replicas), dtype=bool)
+            others_equal = np.ones(len(replicas), dtype=bool)
+            linear_equal = np.ones(len(replicas), dtype=bool)
             for name in term.coefficient_names:
                 values = model.coefficients[term.name][name]
-                equal &= (values[replicas] == values[instances]).reshape(len(replicas), -1).all(1)
-            for reshaper in term.start_reshapers:
-                reshaped = reshaper.reshaping(model.coefficients[reshaper.name])
-                if reshaped is None:
-                    equal[:] = False
+                agree = (values[replicas] == values[instances]).reshape(len(replicas), -1).all(1)
+                if name in term.linear_coefficients:
+                    linear_equal &= agree
                 else:
-                    equal &= ~reshaped[replicas] & ~reshaped[instances]
-            same[replicas, k] = equal & equal[partner_rows]
+                    others_equal &= agree
+
+            def unreshaped(reshapers):
+                free = np.ones(len(replicas), dtype=bool)
+                for reshaper in reshapers:
+                    reshaped = reshaper.reshaping(model.coefficients[reshaper.name])
+                    free &= False if reshaped is None else ~reshaped[replicas] & ~reshaped[instances]
+                return free
+
+            value = np.where(others_equal & linear_equal & unreshaped(term.start_reshapers),
+                             SAME_AS_INSTANCE,
+                             np.where(others_equal & unreshaped(term.reshapers),
+                                      LINEAR_IN_DIFFERENCE, 0))
+            partner = value[partner_rows]
+            same[replicas, k] = np.where((value > 0) & (partner > 0),
+                                         np.maximum(value, partner), 0)
         return same
 
     def replica_waiting(self, model: BatchModel, primal_count: int) -> np.ndarray:
@@ -922,9 +942,11 @@ class BatchEngine:
                     self.system.rhs[b, n] = 0.5 * (self.system.rhs[plus, n]
                                                    - self.system.rhs[minus, n])
                 for k, term in ti.static(enumerate(self.terms)):
-                    if ti.static(term.pairs_linearly):
-                        if self.same_as_instance[plus, k] == 1:
-                            term.pair_difference(b, plus, minus, rate_gain)
+                    if ti.static(term.pairs_linearly or bool(term.linear_coefficients)):
+                        same = self.same_as_instance[plus, k]
+                        if same != 0:
+                            term.pair_difference(b, plus, minus, rate_gain,
+                                                 same == LINEAR_IN_DIFFERENCE)
                 wanted_force, wanted_torque = self.rigid_parts(b, centre)
                 self.system.solve(b)
                 self.rigid_correction(b, centre, wanted_force, wanted_torque,

@@ -37,7 +37,7 @@ KEEP_EXPANSION = 2
 sensitive engine's tangent step (`engine.BatchEngine.tangent_step`): the Jacobian (it is
 truthy), and a term that pairs linearly (`base.Term.pairs_linearly`) keeps the velocity
 derivative it expands its replicas with (`Assembly.primal_instance`), for the pairs that leave
-it out of their residuals (`base.Term.pair_difference`)."""
+it out of their residuals (their difference: the term's `pair_difference`)."""
 
 
 def distinct_rows(rows, element: str):

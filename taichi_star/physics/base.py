@@ -88,9 +88,20 @@ class Term:
     the replica's coefficients of the term and its partner's are the instance's, the pair's
     half difference is then that derivative times half the pair's velocity difference: both
     replicas leave the term out (`engine.BatchEngine.replica_sameness`), and the tangent step
-    adds `pair_difference(b, plus, minus, rate_gain)` instead, from the derivative the
-    instance kept at its converged state (`assembly.KEEP_EXPANSION`). The same derivative
-    within rounding: the sums run in another order."""
+    adds `pair_difference(b, plus, minus, rate_gain, coefficients_differ)` instead, from the
+    derivative the instance kept at its converged state (`assembly.KEEP_EXPANSION`). The same
+    derivative within rounding: the sums run in another order."""
+    linear_coefficients: ClassVar[Tuple[str, ...]] = ()
+    """Its coefficients (names of `coefficients`) its residual is linear in, the state and its
+    other coefficients given: each element's force is its value of them times a force of the
+    state (a stiffness, a drag coefficient), with no other use of them. Where a sensitivities'
+    replica pair differs from its instance in these alone (no term reshaping the elements of
+    either, and the term, if it reads the step's start, pairing linearly), both replicas leave
+    the term out too, and the tangent step's `pair_difference` (`coefficients_differ` 1) adds
+    half the pair's difference of them times that force at the instance's converged state,
+    besides any velocity part: the exact derivative, which the replicas' difference has to
+    O(ε²) (the force is linear in them) from two assemblies of the term
+    (`engine.BatchEngine.replica_sameness`)."""
     sensitivity_steps: ClassVar[Dict[str, float]] = {}
     """StarParams fields of this term whose sensitivities' ε (relative to the value) departs
     from `sensitivities.RELATIVE_STEP`, with the ε and, in the subclass, why

@@ -105,6 +105,7 @@ class Bending(StrainTerm):
     """Strain elements: the triplets, s = κ, k = E·r0³/12 (its energy ½·k·(κ − κ⁰)²·Δl)."""
 
     name = "bending"
+    linear_coefficients = ("bend_stiffness",)
     fired_columns = ("actuator_gain", "actuator_delay")  # read in actuator_curvature alone
     # the natural curvature is the rest one plus gain·(1 + warming·heat) times the profile's
     # change, and the bending force linear in it

@@ -86,6 +86,7 @@ class RodDrag(RodEdgeTerm):
     sensitivity_steps = {"drag_parallel": 1e-2}
     linear_fields = ("drag_perpendicular", "drag_parallel", "fluid_density")
     pairs_linearly = True
+    linear_coefficients = ("drag_parallel_coeff", "drag_perpendicular_coeff")
 
     @staticmethod
     def coefficients(params, topologies, topology):
@@ -139,11 +140,13 @@ class RodDrag(RodEdgeTerm):
             self.assembly.add_block(b, self.rod_slot[r, 3], -d_second, jacobian)
 
     @ti.func
-    def pair_difference(self, b, plus, minus, rate_gain):
+    def pair_difference(self, b, plus, minus, rate_gain, coefficients_differ):
         """Add to rhs[b] half the difference of the residuals of replicas `plus` and `minus`
-        of simulated instance b (at b's converged positions, their drag coefficients b's):
-        each rod's kept ∂F/∂v times half the pair's difference of its mean velocity, the
-        rest of their expansions about b being the same (`Term.pairs_linearly`)."""
+        of simulated instance b (at b's converged positions): each rod's kept ∂F/∂v times half
+        the pair's difference of its mean velocity, the rest of their expansions about b being
+        the same (`Term.pairs_linearly`), and where their drag coefficients differ from b's
+        (`coefficients_differ`, `Term.linear_coefficients`) the drag at b's velocity with
+        half the pair's difference of them as its coefficients."""
         for r in range(self.n_rods):
             i, j = self.rods[r, 0], self.rods[r, 1]
             velocity_plus = 0.5 * (self.assembly.implicit_velocity(plus, i, rate_gain)
@@ -155,6 +158,16 @@ class RodDrag(RodEdgeTerm):
                                     [self.kept_velocity_derivative[b, r, 2],
                                      self.kept_velocity_derivative[b, r, 3]]])
             force = d_velocity @ (0.5 * (velocity_plus - velocity_minus))
+            if coefficients_differ:
+                # F is linear in c∥ and c⊥: F(v, c+) − F(v, c−) = F(v, c+ − c−), exactly
+                velocity = 0.5 * (self.assembly.implicit_velocity(b, i, rate_gain)
+                                  + self.assembly.implicit_velocity(b, j, rate_gain))
+                scaled_force, _, _ = rod_drag(
+                    velocity, self.assembly.positions[b, j] - self.assembly.positions[b, i],
+                    0.5 * (self.drag_parallel_coeff[plus, r] - self.drag_parallel_coeff[minus, r]),
+                    0.5 * (self.drag_perpendicular_coeff[plus, r]
+                           - self.drag_perpendicular_coeff[minus, r]))
+                force += scaled_force
             # as `assemble`: half of F on each node, with the residual's sign
             self.assembly.add_residual(b, i, -0.5 * force)
             self.assembly.add_residual(b, j, -0.5 * force)

@@ -41,6 +41,7 @@ class Stretching(StrainTerm):
     """Strain elements: the edges, s = ε, k = E·r0 (its energy ½·k·(ε − ε⁰)²·Δl̄, ε⁰ = 0)."""
 
     name = "stretching"
+    linear_coefficients = ("edge_stiffness",)
 
     @staticmethod
     def coefficients(params, topologies, topology):

@@ -7,7 +7,8 @@ import pytest
 import taichi as ti
 
 import taichi_star as ts
-from taichi_star.engine import EXTERNAL_TERMS, BatchEngine
+from taichi_star.engine import (EXTERNAL_TERMS, LINEAR_IN_DIFFERENCE, SAME_AS_INSTANCE,
+                                BatchEngine)
 from taichi_star.integrators import INTEGRATORS
 from taichi_star.metrics import shape_checks
 from taichi_star.model import build_model
@@ -537,14 +538,16 @@ def _sensitive_engine(directions, params=TWO_GAITS):
 def test_replicas_leave_out_the_elastic_terms_their_instance_shares(taichi_cpu):
     """A replica pair moved along α or C⊥ has its instance's stretching and bending
     coefficients, so those terms add the same residual to both replicas and are left out of
-    their difference; along E or a gain they differ and are assembled; the simulated
-    instances assemble every term; for an instance with the material damping (which reads the
-    velocities) every term is assembled, and only for it: an undamped instance's replicas in a
-    batch with a damped one leave them out as they do alone (they assembled them until 2026-12,
-    and their derivatives moved by up to 6e-8 with the company). The rod drag, which pairs
-    linearly, is left out of every pair but C⊥'s (its own coefficient), damped or not; the
-    hub's drag and the jet of none. The derivatives themselves:
-    tests/model/test_sensitivities.py."""
+    their difference (SAME_AS_INSTANCE); along E they differ in the stiffnesses alone, which
+    the terms are linear in, so they are left out too and the tangent step adds their
+    difference (LINEAR_IN_DIFFERENCE); along a gain bending's differ otherwise and it is
+    assembled; the simulated instances assemble every term; for an instance with the material
+    damping (which reads the velocities) every elastic term is assembled, and only for it: an
+    undamped instance's replicas in a batch with a damped one leave them out as they do alone
+    (they assembled them until 2026-12, and their derivatives moved by up to 6e-8 with the
+    company). The rod drag, which pairs linearly, is left out of every pair, C⊥'s (its own
+    coefficient, which it is linear in) with its difference added; the hub's drag and the jet
+    of none. The derivatives themselves: tests/model/test_sensitivities.py."""
     directions = ["alpha", "drag_perpendicular", "youngs_modulus", "actuator_gains[0]"]
     engine, batch = _sensitive_engine(directions)
     names = [term.name for term in engine.terms]
@@ -555,8 +558,9 @@ def test_replicas_leave_out_the_elastic_terms_their_instance_shares(taichi_cpu):
     assert not same[:2].any()  # the simulated instances
     # replicas: direction j's pair at rows 2 + 4j .. 2 + 4j + 3 (+ε of both, then −ε of both)
     drag = names.index("rod_drag")
-    expected = {"alpha": (1, 1, 1), "drag_perpendicular": (1, 1, 0),
-                "youngs_modulus": (0, 0, 1), "actuator_gains[0]": (1, 0, 1)}
+    equal, linear = SAME_AS_INSTANCE, LINEAR_IN_DIFFERENCE
+    expected = {"alpha": (equal, equal, equal), "drag_perpendicular": (equal, equal, linear),
+                "youngs_modulus": (linear, linear, equal), "actuator_gains[0]": (equal, 0, equal)}
     for j, name in enumerate(directions):
         rows = same[2 + 4 * j:6 + 4 * j]
         np.testing.assert_array_equal(rows[:, [stretching, bending, drag]],
@@ -565,19 +569,60 @@ def test_replicas_leave_out_the_elastic_terms_their_instance_shares(taichi_cpu):
         assert not rows[:, others].any(), name
     # A1+A2 damped, A1+A3 not
     mixed = [TWO_GAITS[0].replace(damping_time=0.01), TWO_GAITS[1]]
-    engine, batch = _sensitive_engine(["alpha", "damping_time"], mixed)
+    engine, batch = _sensitive_engine(["alpha", "damping_time", "youngs_modulus"], mixed)
     names = [term.name for term in engine.terms]
     assert "damping" in names
     same = engine.same_as_instance.to_numpy()[:len(batch)]
     elastic = [names.index("stretching"), names.index("bending")]
-    # rows: the two instances; α's +ε of both, −ε of both; the damping time's likewise. At
-    # the undamped instance's τ = 0 the damping time's +ε replica is damped and its −ε one is
-    # not: both assemble the elastic terms (one left out of one replica only would put its
-    # whole residual into the pair's difference: 2,000 times the derivative, found so)
-    np.testing.assert_array_equal(same[:, elastic], [[0, 0], [0, 0], [0, 0], [1, 1], [0, 0],
-                                                     [1, 1], [0, 0], [0, 0], [0, 0], [0, 0]])
-    np.testing.assert_array_equal(same[:, names.index("rod_drag")], [0, 0] + [1] * 8)
+    # rows: the two instances; α's +ε of both, −ε of both; the damping time's likewise; E's.
+    # At the undamped instance's τ = 0 the damping time's +ε replica is damped and its −ε one
+    # is not: both assemble the elastic terms (one left out of one replica only would put its
+    # whole residual into the pair's difference: 2,000 times the derivative, found so). The
+    # damped instance's E pair assembles them (the damping reshapes its elements: k and s⁰
+    # move together), the undamped one's adds their difference
+    np.testing.assert_array_equal(same[:, elastic],
+                                  [[0, 0]] * 3 + [[equal] * 2, [0, 0], [equal] * 2]
+                                  + [[0, 0]] * 4 + [[0, 0], [linear] * 2] * 2)
+    np.testing.assert_array_equal(same[:, names.index("rod_drag")], [0, 0] + [equal] * 12)
     assert not np.delete(same, elastic + [names.index("rod_drag")], axis=1).any()
+
+
+def test_a_replica_pair_is_alike_in_what_it_leaves_out(taichi_cpu):
+    """`replica_sameness` on edited coefficients of E's pairs (rows 2..5: +ε of both
+    instances, then −ε): a −ε replica whose stiffnesses round to its instance's makes the pair
+    add the difference (both LINEAR_IN_DIFFERENCE: the +ε replica's stiffness minus the
+    instance's is the pair's half difference then, not zero); one whose rest length differs
+    too (not a coefficient the stretching is linear in) makes both assemble it (0; the other
+    instance's pair unchanged); both replicas' stiffnesses their instance's: both
+    SAME_AS_INSTANCE."""
+    engine, batch = _sensitive_engine(["youngs_modulus"])
+    model = build_model(batch)
+    stretching = [term.name for term in engine.terms].index("stretching")
+    coefficients = model.coefficients["stretching"]
+
+    def sameness(edit):
+        edited = {name: values.copy() for name, values in coefficients.items()}
+        edit(edited)
+        model.coefficients["stretching"] = edited
+        return engine.replica_sameness(model, len(TWO_GAITS))[2:6, stretching].tolist()
+
+    assert sameness(lambda values: None) == [LINEAR_IN_DIFFERENCE] * 4
+
+    def minus_rounds_to_instance(values):
+        values["edge_stiffness"][4] = values["edge_stiffness"][0]
+
+    assert sameness(minus_rounds_to_instance) == [LINEAR_IN_DIFFERENCE] * 4
+
+    def rest_length_too(values):
+        values["edge_stiffness"][4] = values["edge_stiffness"][0]
+        values["rest_length"][4, 0] *= 1.0 + 1e-9
+
+    assert sameness(rest_length_too) == [0, LINEAR_IN_DIFFERENCE, 0, LINEAR_IN_DIFFERENCE]
+
+    def both_instances(values):
+        values["edge_stiffness"][2:6] = values["edge_stiffness"][[0, 1, 0, 1]]
+
+    assert sameness(both_instances) == [SAME_AS_INSTANCE] * 4
 
 
 def test_a_replica_pair_waits_for_the_actuator_whose_gain_or_delay_alone_it_moves(taichi_cpu):

@@ -44,6 +44,16 @@ def test_euler_sensitivities_equal_finite_differences(arch, matches_differences)
                                1e-7)
 
 
+def test_the_stiffness_matches_its_differences(taichi_cpu, matches_differences):
+    """E moves the elastic terms' stiffnesses alone, which their forces are linear in: its
+    pairs leave those terms out and the tangent step adds their difference at the instance's
+    state (`Term.linear_coefficients`)."""
+    # measured 2.5e-7 at most (2.1e-7 with the replicas computing the elastic forces: the
+    # whole runs' differences' own error, E's derivative ~1e-10 mm/Pa): 1e-6, 4×
+    matches_differences(check_sensitivities(BATCH, DURATION_S, SolverConfig(**TIGHT),
+                                            ("youngs_modulus",)), 1e-6)
+
+
 def test_a_coast_after_the_pulse_keeps_its_sensitivities(taichi_cpu, matches_differences):
     """Over 0.84 s the A1 robot coasts after its pulse: many rod-edge velocity components creep
     past zero, within a replica pair's ε·v̇ of it, for many steps. A pair differencing the drag
@@ -435,18 +445,21 @@ def test_waiting_pairs_keep_every_bit_of_pairs_that_do_not_wait(taichi_cpu, monk
 
 
 @pytest.mark.parametrize("jacobian", ["newton", "lagged"])
-def test_pairs_that_add_their_rod_drag_difference_agree_with_replicas_computing_it(
+def test_pairs_that_add_their_difference_agree_with_replicas_computing_it(
         taichi_cpu, monkeypatch, jacobian):
-    """Where a pair's drag coefficients are its instance's (here α's, not C⊥'s), both replicas
+    """Where a pair's drag coefficients are its instance's (here α's and E's), both replicas
     leave the rod drag out of their residuals and the tangent step adds the pair's difference
-    from the ∂F/∂v the instance kept (`Term.pairs_linearly`): the same sensitivities, to the
-    rounding of sums taken in another order, as with every replica computing its drag
-    (`replica_sameness` made to find no pair like its instance in the drag)."""
-    from taichi_star.engine import BatchEngine
+    from the ∂F/∂v the instance kept (`Term.pairs_linearly`); where they differ in the drag
+    coefficients alone (C⊥'s), it adds the drag with their difference as well, and where the
+    stiffnesses alone differ (E's), the elastic terms' gradients with it
+    (`Term.linear_coefficients`): the same sensitivities, to the rounding of sums taken in
+    another order, as with every replica computing every term (`replica_sameness` made to
+    find no pair like its instance in the drag, nor any whose stiffnesses alone differ)."""
+    from taichi_star.engine import LINEAR_IN_DIFFERENCE, SAME_AS_INSTANCE, BatchEngine
 
     params = [BASE.replace(gait="A1+A3", drag_perpendicular=1.2),
               BASE.replace(gait="A1+A3+A5", alpha=1.1)]
-    names = ("alpha", "drag_perpendicular")
+    names = ("alpha", "drag_perpendicular", "youngs_modulus")
     columns = [sensitivity_column(output, name) for output in SUMMARY_OUTPUTS for name in names]
     seen = []
     found = BatchEngine.replica_sameness
@@ -459,6 +472,7 @@ def test_pairs_that_add_their_rod_drag_difference_agree_with_replicas_computing_
     def computed(self, model, primal_count):
         same = found(self, model, primal_count)
         same[:, [term.name for term in self.terms].index("rod_drag")] = 0
+        same[same == LINEAR_IN_DIFFERENCE] = 0
         return same
 
     def run(sameness):
@@ -469,22 +483,38 @@ def test_pairs_that_add_their_rod_drag_difference_agree_with_replicas_computing_
 
     paired_summary, paired_path = run(recorded)
     same, terms = seen[-1]
-    # rows: the 2 instances, α's +ε and −ε replicas, then C⊥'s
-    assert same[:10, terms.index("rod_drag")].tolist() == [0, 0, 1, 1, 1, 1, 0, 0, 0, 0]
+    # rows: the 2 instances, α's +ε and −ε replicas, then C⊥'s, then E's
+    equal, linear = SAME_AS_INSTANCE, LINEAR_IN_DIFFERENCE
+    by_direction = {"rod_drag": [equal, linear, equal], "stretching": [equal, equal, linear],
+                    "bending": [equal, equal, linear]}
+    for term, values in by_direction.items():
+        assert same[:14, terms.index(term)].tolist() == [0, 0] + np.repeat(values, 4).tolist()
     computed_summary, computed_path = run(computed)
-    # rounding apart: each difference within 1e-9 of its output's largest derivative. Over this
-    # window they are the same bits (a replica's position q* ± ε·q̇ rounds off the last bits of
-    # the tangent); over a second of four Fig. 4c gaits the derivatives moved by up to 3.3e-7
-    # relative (along E), as they do whenever a sum of the tangent step is reordered
-    # (docs/numerics.md)
+    positions = [column for column in paired_path if "heading" not in column] + [
+        sensitivity_column(output, name) for output in SUMMARY_OUTPUTS[:4] for name in names]
     for paired, reference in ((paired_summary, computed_summary), (paired_path, computed_path)):
         pd.testing.assert_frame_equal(paired.isna(), reference.isna())  # the steady speeds
-        bound = 1e-9 * reference.abs().max().fillna(0.0)
-        assert ((paired - reference).abs().fillna(0.0) <= bound).all().all()
+        # α's and C⊥'s, rounding apart: each difference within 1e-9 of its output's largest
+        # derivative. Over this window they are the same bits (a replica's position q* ± ε·q̇
+        # rounds off the last bits of the tangent); over a second of the five Fig. 4c gaits
+        # the drag's pairs moved by up to 1.3e-8 relative (C⊥) and 5.8e-8 (C∥)
+        drag = [column for column in reference if "youngs_modulus" not in column]
+        bound = 1e-9 * reference[drag].abs().max().fillna(0.0)
+        assert ((paired[drag] - reference[drag]).abs().fillna(0.0) <= bound).all().all()
+        # E's: the replicas' difference of the elastic forces, ~1e6 times the drag's and
+        # nearly balanced at each node, keeps their rounding over ε: measured up to 9e-7 of
+        # the largest derivative here (paired, no ε, exact), 9.4e-8 over a second of the five
+        # gaits; both within the whole runs' differences (2.5e-7 and 2.1e-7 off them over
+        # 0.1 s of A1+A2 and A1+A3): 5e-6. Headings and travel directions left out: along E
+        # they are rounding (~1e-17 deg/Pa, where the displacements' are ~1e-10 mm/Pa)
+        stiffness = [column for column in reference
+                     if "youngs_modulus" in column and column in positions]
+        bound = 5e-6 * reference[stiffness].abs().max()
+        assert ((paired[stiffness] - reference[stiffness]).abs() <= bound).all().all()
     for name in names:  # every tangent moved (A1+A3+A5 along y, A1+A3 along x)
         moved = np.hypot(paired_summary[sensitivity_column("displacement_x_mm", name)],
                          paired_summary[sensitivity_column("displacement_y_mm", name)])
-        assert (moved > 1e-3).all()
+        assert (moved > 1e-3 * moved.max()).all()
 
 
 def test_the_instances_rows_are_those_of_a_run_without_sensitivities(euler_run):
