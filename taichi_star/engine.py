@@ -369,7 +369,10 @@ class BatchEngine:
                 free = np.ones(len(replicas), dtype=bool)
                 for reshaper in reshapers:
                     reshaped = reshaper.reshaping(model.coefficients[reshaper.name])
-                    free &= False if reshaped is None else ~reshaped[replicas] & ~reshaped[instances]
+                    if reshaped is None:
+                        free[:] = False
+                    else:
+                        free &= ~reshaped[replicas] & ~reshaped[instances]
                 return free
 
             value = np.where(others_equal & linear_equal & unreshaped(term.start_reshapers),
