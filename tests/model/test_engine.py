@@ -590,8 +590,8 @@ def test_replicas_leave_out_the_elastic_terms_their_instance_shares(taichi_cpu):
 def test_a_replica_pair_is_alike_in_what_it_leaves_out(taichi_cpu):
     """`replica_sameness` on edited coefficients of E's pairs (rows 2..5: +ε of both
     instances, then −ε): a −ε replica whose stiffnesses round to its instance's makes the pair
-    add the difference (both LINEAR_IN_DIFFERENCE: the +ε replica's stiffness minus the
-    instance's is the pair's half difference then, not zero); one whose rest length differs
+    add the difference (both LINEAR_IN_DIFFERENCE: the pair's difference is then the +ε
+    replica's offset alone, not zero); one whose rest length differs
     too (not a coefficient the stretching is linear in) makes both assemble it (0; the other
     instance's pair unchanged); both replicas' stiffnesses their instance's: both
     SAME_AS_INSTANCE."""
