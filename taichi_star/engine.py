@@ -352,6 +352,17 @@ class BatchEngine:
         alike is 0)."""
         same = np.zeros((self.capacity, len(self.terms)), dtype=np.int32)
         replicas, instances, partner_rows = replica_rows(primal_count, model.batch_size)
+
+        def unreshaped(reshapers):
+            free = np.ones(len(replicas), dtype=bool)
+            for reshaper in reshapers:
+                reshaped = reshaper.reshaping(model.coefficients[reshaper.name])
+                if reshaped is None:
+                    free[:] = False
+                else:
+                    free &= ~reshaped[replicas] & ~reshaped[instances]
+            return free
+
         for k, term in enumerate(self.terms):
             if term.reads_step_start and not term.pairs_linearly:
                 continue
@@ -364,17 +375,6 @@ class BatchEngine:
                     linear_equal &= agree
                 else:
                     others_equal &= agree
-
-            def unreshaped(reshapers):
-                free = np.ones(len(replicas), dtype=bool)
-                for reshaper in reshapers:
-                    reshaped = reshaper.reshaping(model.coefficients[reshaper.name])
-                    if reshaped is None:
-                        free[:] = False
-                    else:
-                        free &= ~reshaped[replicas] & ~reshaped[instances]
-                return free
-
             value = np.where(others_equal & linear_equal & unreshaped(term.start_reshapers),
                              SAME_AS_INSTANCE,
                              np.where(others_equal & unreshaped(term.reshapers),

@@ -108,18 +108,23 @@ class RodDrag(RodEdgeTerm):
             (`KEEP_EXPANSION`) for `pair_difference`."""
 
     @ti.func
+    def edge_velocity(self, b, i, j, rate_gain):
+        """The mean of the implicit velocities of nodes i and j of instance b (2,) m/s: what
+        the drag of their edge acts on."""
+        return 0.5 * (self.assembly.implicit_velocity(b, i, rate_gain)
+                      + self.assembly.implicit_velocity(b, j, rate_gain))
+
+    @ti.func
     def assemble(self, b, rate_gain, jacobian):
         primal = self.assembly.primal_instance(b)
         for r in range(self.n_rods):
             i, j = self.rods[r, 0], self.rods[r, 1]
-            velocity = 0.5 * (self.assembly.implicit_velocity(b, i, rate_gain)
-                              + self.assembly.implicit_velocity(b, j, rate_gain))
+            velocity = self.edge_velocity(b, i, j, rate_gain)
             # a replica: the drag's Taylor expansion about its instance's velocity
             # (`Assembly.primal_instance`)
             expansion_velocity = velocity
             if primal != b:
-                expansion_velocity = 0.5 * (self.assembly.implicit_velocity(primal, i, rate_gain)
-                                            + self.assembly.implicit_velocity(primal, j, rate_gain))
+                expansion_velocity = self.edge_velocity(primal, i, j, rate_gain)
             force, d_velocity, d_edge = rod_drag(
                 expansion_velocity, self.assembly.positions[b, j] - self.assembly.positions[b, i],
                 self.drag_parallel_coeff[b, r], self.drag_perpendicular_coeff[b, r])
@@ -149,10 +154,8 @@ class RodDrag(RodEdgeTerm):
         half the pair's difference of them as its coefficients."""
         for r in range(self.n_rods):
             i, j = self.rods[r, 0], self.rods[r, 1]
-            velocity_plus = 0.5 * (self.assembly.implicit_velocity(plus, i, rate_gain)
-                                   + self.assembly.implicit_velocity(plus, j, rate_gain))
-            velocity_minus = 0.5 * (self.assembly.implicit_velocity(minus, i, rate_gain)
-                                    + self.assembly.implicit_velocity(minus, j, rate_gain))
+            velocity_plus = self.edge_velocity(plus, i, j, rate_gain)
+            velocity_minus = self.edge_velocity(minus, i, j, rate_gain)
             d_velocity = ti.Matrix([[self.kept_velocity_derivative[b, r, 0],
                                      self.kept_velocity_derivative[b, r, 1]],
                                     [self.kept_velocity_derivative[b, r, 2],
@@ -160,10 +163,9 @@ class RodDrag(RodEdgeTerm):
             force = d_velocity @ (0.5 * (velocity_plus - velocity_minus))
             if coefficients_differ:
                 # F is linear in c∥ and c⊥: F(v, c+) − F(v, c−) = F(v, c+ − c−), exactly
-                velocity = 0.5 * (self.assembly.implicit_velocity(b, i, rate_gain)
-                                  + self.assembly.implicit_velocity(b, j, rate_gain))
                 scaled_force, _, _ = rod_drag(
-                    velocity, self.assembly.positions[b, j] - self.assembly.positions[b, i],
+                    self.edge_velocity(b, i, j, rate_gain),
+                    self.assembly.positions[b, j] - self.assembly.positions[b, i],
                     0.5 * (self.drag_parallel_coeff[plus, r] - self.drag_parallel_coeff[minus, r]),
                     0.5 * (self.drag_perpendicular_coeff[plus, r]
                            - self.drag_perpendicular_coeff[minus, r]))
