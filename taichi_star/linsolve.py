@@ -361,3 +361,63 @@ class LaneBlocks(BlockElimination):
             y = self.rhs[g, node, 1]
             for lane in ti.static(range(self.lanes)):
                 system.rhs[members[lane], node] = ti.Vector([x[lane], y[lane]])
+
+
+@ti.data_oriented
+class RowSolves(BlockElimination):
+    """The solves of several right-hand sides of one factored instance of a `BlockSystem`, held
+    in other rows of its `rhs` (a sensitive engine's tangent directions, each in the row of
+    its +ε replica: `engine.BatchEngine.tangent_step`), `WIDTH` at a time. A unit is a
+    ti.Vector (instance, first row, row stride, rows in use); an entry of the right-hand side
+    is a ti.Vector of the `WIDTH` rows' values, so the generic `solve` loads each factor block
+    and index once and applies it to every row, with each row's arithmetic that of the
+    instance's own solve (the same bits). Rows past those in use read the first row's values
+    and are not written."""
+
+    WIDTH = 4
+    """Rows solved together (the f64 lanes of an AVX2 register)."""
+
+    def __init__(self, system: BlockSystem):
+        self.tables = system
+        self.system = system
+
+    @ti.func
+    def solve_rows(self, b, first_row, row_stride, count):
+        """Solve the right-hand sides in rows first_row + k·row_stride, k < count, with
+        instance b's factorisation."""
+        for group in range((count + self.WIDTH - 1) // self.WIDTH):
+            self.solve(ti.Vector([b, first_row + group * self.WIDTH * row_stride, row_stride,
+                                  ti.min(count - group * self.WIDTH, self.WIDTH)]))
+
+    @ti.func
+    def row(self, u, w: ti.template()):
+        """The rhs row of lane w of unit u (the first row's for a lane not in use)."""
+        lane = w if w < u[3] else 0
+        return u[1] + lane * u[2]
+
+    @ti.func
+    def entry(self, block, k):
+        return block[k]
+
+    @ti.func
+    def block_of(self, a00, a01, a10, a11):
+        return ti.Vector([a00, a01, a10, a11])
+
+    @ti.func
+    def block(self, u, slot):
+        return self.system.block(u[0], slot)
+
+    @ti.func
+    def put_block(self, u, slot, block):
+        self.system.put_block(u[0], slot, block)
+
+    @ti.func
+    def rhs_entry(self, u, node, k: ti.template()):
+        return ti.Vector([self.system.rhs[self.row(u, w), node][k]
+                          for w in ti.static(range(self.WIDTH))])
+
+    @ti.func
+    def put_rhs_entry(self, u, node, k: ti.template(), value):
+        for w in ti.static(range(self.WIDTH)):
+            if w < u[3]:
+                self.system.rhs[u[1] + w * u[2], node][k] = value[w]
