@@ -21,8 +21,8 @@ that it obeys the rigid-body equations, which the Jacobian's stiffness blocks ho
 rounding (`rigid_correction`). Any output is then a smooth function of the replicas' states,
 and its derivative is the central difference of the pair. A pair that moves only the gain or
 the delay of an actuator that b has not yet fired has b's residual, and a tangent exactly
-zero: it waits, its assembly skipped and its right-hand side zero, until that actuator first
-fires (`replica_waiting`, `tangent_moves`); the bits are those of the pair not waiting.
+zero: it waits, its assembly and solve skipped, until that actuator first fires
+(`replica_waiting`, `tangent_moves`); the bits are those of the pair not waiting.
 """
 
 
@@ -31,7 +31,7 @@ from typing import Dict
 import numpy as np
 import taichi as ti
 
-from .linsolve import (BlockSystem, EliminationPlan, LaneBlocks, RowSolves, minimum_degree_order,
+from .linsolve import (BlockSystem, EliminationPlan, LaneBlocks, minimum_degree_order,
                        plan_elimination)
 from .model import BatchModel
 from .params import JACOBIANS, SolverConfig
@@ -230,11 +230,6 @@ class BatchEngine:
         out of both replicas of the pair: its residual at the instance's positions is the
         instance's for both, or the tangent step adds the pair's difference itself
         (`pair_difference`; 0 for the simulated instances, which assemble every term)."""
-        self.tangent_rows = RowSolves(self.system) if sensitive else None
-        """The tangent step's solves of its directions together (`tangent_step`)."""
-        self.wanted_rigid = arena.batch_field(float, (capacity, 3)) if sensitive else None
-        """In the row of a pair's +ε replica, during the tangent step: the net force (2) and
-        torque of the pair's right-hand side before its solve (`rigid_parts`)."""
         self.waiting_actuator = arena.batch_field(ti.i32, capacity) if sensitive else None
         """Per replica: the index k of the actuator A(k+1) whose first firing its direction
         waits for, or −1 (`replica_waiting`); −1 for the simulated instances."""
@@ -920,9 +915,7 @@ class BatchEngine:
         their difference is ε·(∂r/∂S·Ṡ + ∂r/∂c·ċ) up to O(ε³). The implicit function theorem
         on r(q*) = 0 gives ε·q̇* = −J⁻¹ times it, J the Jacobian at q* (assembled and factored
         here, so a chord run gets the exact one too, and a lagged run's next step starts with
-        it; the directions' right-hand sides, each formed in its +ε replica's row, are solved
-        together, `linsolve.RowSolves`, each with the bits of its own solve), whose rigid
-        motion `rigid_correction` then makes obey the rigid-body equations
+        it), whose rigid motion `rigid_correction` then makes obey the rigid-body equations
         (net force and torque, by `rigid_projector_of`, from the inertia's and the external
         terms' blocks and the internal terms' residual). The replicas' positions become
         q* ± ε·q̇* and their velocities follow by the integrator's rate, which is linear in the
@@ -932,8 +925,7 @@ class BatchEngine:
         centre, total_mass, moment = self.mass_centre(b)
         self.assemble_with_rigid_projector(b, inertia_scale, rate_gain, centre)
         self.factor(b, inertia_scale, rate_gain)
-        count = self.tangent_count[None]
-        for j in range(count):
+        for j in range(self.tangent_count[None]):
             plus, minus = self.replica(b, j, 0), self.replica(b, j, 1)
             moving = self.tangent_moves(b, plus)
             # a loop, not unrolled: the replicas' preparation and assembly, every term inlined,
@@ -948,35 +940,25 @@ class BatchEngine:
                     self.state.positions[r, n] = self.state.positions[b, n]
                 if moving:
                     self.assemble(r, inertia_scale, rate_gain, 0)
-            # the pair's right-hand side, in its +ε replica's row (a waiting pair's is zero)
-            for n in range(self.n_nodes):
-                difference = ti.Vector.zero(float, 2)
-                if moving:
-                    difference = 0.5 * (self.system.rhs[plus, n] - self.system.rhs[minus, n])
-                self.system.rhs[plus, n] = difference
             if moving:
+                for n in range(self.n_nodes):
+                    self.system.rhs[b, n] = 0.5 * (self.system.rhs[plus, n]
+                                                   - self.system.rhs[minus, n])
                 for k, term in ti.static(enumerate(self.terms)):
                     if ti.static(term.pairs_linearly or bool(term.linear_coefficients)):
                         same = self.same_as_instance[plus, k]
                         if same != 0:
                             term.pair_difference(b, plus, minus, rate_gain,
                                                  same == LINEAR_IN_DIFFERENCE)
-            wanted_force, wanted_torque = self.rigid_parts(b, plus, centre)
-            self.wanted_rigid[plus, 0] = wanted_force[0]
-            self.wanted_rigid[plus, 1] = wanted_force[1]
-            self.wanted_rigid[plus, 2] = wanted_torque
-        first = self.replica(b, 0, 0)
-        self.tangent_rows.solve_rows(b, first, self.replica(b, 1, 0) - first, count)
-        for j in range(count):
-            plus, minus = self.replica(b, j, 0), self.replica(b, j, 1)
-            if self.tangent_moves(b, plus):
-                self.rigid_correction(b, plus, centre, ti.Vector([self.wanted_rigid[plus, 0],
-                                                                  self.wanted_rigid[plus, 1]]),
-                                      self.wanted_rigid[plus, 2], inertia_scale * total_mass,
-                                      inertia_scale * moment)
+                wanted_force, wanted_torque = self.rigid_parts(b, centre)
+                self.system.solve(b)
+                self.rigid_correction(b, centre, wanted_force, wanted_torque,
+                                      inertia_scale * total_mass, inertia_scale * moment)
             for n in range(self.n_nodes):
-                # a waiting pair's solution is exactly zero
-                shift = self.system.rhs[plus, n]
+                # a waiting pair's difference would be exactly zero, and so its solve
+                shift = ti.Vector.zero(float, 2)
+                if moving:
+                    shift = self.system.rhs[b, n]
                 self.state.positions[plus, n] = self.state.positions[b, n] - shift
                 self.state.positions[minus, n] = self.state.positions[b, n] + shift
                 self.state.velocities[plus, n] = self.implicit_velocity(plus, n, rate_gain)
@@ -1063,21 +1045,20 @@ class BatchEngine:
             self.rigid_projector[b, m] = self.rigid_projector[b, m] + share
 
     @ti.func
-    def rigid_parts(self, b, row, centre):
-        """Net force (2,) and torque about `centre` of the right-hand side in rhs[row] at
-        instance b's positions (N/m, N)."""
+    def rigid_parts(self, b, centre):
+        """Net force (2,) and torque about `centre` of instance b's right-hand side rhs[b]
+        (N/m, N)."""
         force = ti.Vector.zero(float, 2)
         torque = 0.0
         for n in range(self.n_nodes):
-            value = self.system.rhs[row, n]
+            value = self.system.rhs[b, n]
             force += value
             torque += (self.state.positions[b, n] - centre).cross(value)
         return force, torque
 
     @ti.func
-    def rigid_correction(self, b, row, centre, wanted_force, wanted_torque, mass, moment):
-        """Correct the rigid motion of the tangent step x of instance b in rhs[row] (J·x = ρ
-        solved, ρ's net
+    def rigid_correction(self, b, centre, wanted_force, wanted_torque, mass, moment):
+        """Correct the rigid motion of the tangent step x in rhs[b] (J·x = ρ solved, ρ's net
         force and torque about the mass centre `wanted_force`, `wanted_torque`) so that J·x has
         ρ's net force and torque as computed by `rigid_projector`, `mass` and `moment` being
         the inertia's share of J in the rigid motions (kg/(m·s²), kg/s²).
@@ -1093,14 +1074,14 @@ class BatchEngine:
         force = -wanted_force
         torque = -wanted_torque
         for m in range(self.n_nodes):
-            share = self.rigid_projector[b, m] @ self.system.rhs[row, m]
+            share = self.rigid_projector[b, m] @ self.system.rhs[b, m]
             force += ti.Vector([share[0], share[1]])
             torque += share[2]
         translation = force / mass
         rotation = torque / moment
         for n in range(self.n_nodes):
             arm = self.state.positions[b, n] - centre
-            self.system.rhs[row, n] = self.system.rhs[row, n] - (
+            self.system.rhs[b, n] = self.system.rhs[b, n] - (
                 translation + rotation * ti.Vector([-arm[1], arm[0]]))
 
     @ti.func

@@ -89,8 +89,7 @@ class Term:
     half difference is then that derivative times half the pair's velocity difference: both
     replicas leave the term out (`engine.BatchEngine.replica_sameness`), and the tangent step
     adds `pair_difference(b, plus, minus, rate_gain, coefficients_differ)` instead, from the
-    derivative the instance kept at its converged state (`assembly.KEEP_EXPANSION`), into the
-    pair's right-hand side in rhs[plus] (the + replica then holds b's positions). The same
+    derivative the instance kept at its converged state (`assembly.KEEP_EXPANSION`). The same
     derivative within rounding: the sums run in another order."""
     linear_coefficients: ClassVar[Tuple[str, ...]] = ()
     """Its coefficients (names of `coefficients`) its residual is linear in, the state and its

@@ -146,9 +146,8 @@ class RodDrag(RodEdgeTerm):
 
     @ti.func
     def pair_difference(self, b, plus, minus, rate_gain, coefficients_differ):
-        """Add to rhs[plus] (the pair's right-hand side) half the difference of the residuals
-        of replicas `plus` and `minus` of simulated instance b (at b's converged positions):
-        each rod's kept ∂F/∂v times half
+        """Add to rhs[b] half the difference of the residuals of replicas `plus` and `minus`
+        of simulated instance b (at b's converged positions): each rod's kept ∂F/∂v times half
         the pair's difference of its mean velocity, the rest of their expansions about b being
         the same (`Term.pairs_linearly`), and where their drag coefficients differ from b's
         (`coefficients_differ`, `Term.linear_coefficients`) the drag at b's velocity with
@@ -172,5 +171,5 @@ class RodDrag(RodEdgeTerm):
                            - self.drag_perpendicular_coeff[minus, r]))
                 force += scaled_force
             # as `assemble`: half of F on each node, with the residual's sign
-            self.assembly.add_residual(plus, i, -0.5 * force)
-            self.assembly.add_residual(plus, j, -0.5 * force)
+            self.assembly.add_residual(b, i, -0.5 * force)
+            self.assembly.add_residual(b, j, -0.5 * force)

@@ -55,15 +55,14 @@ class StrainTerm(Term):
 
     @ti.func
     def pair_difference(self, b, plus, minus, rate_gain, coefficients_differ):
-        """Add to rhs[plus] (the pair's right-hand side) half the difference of the residuals
-        of replicas `plus` and `minus` of simulated instance b, which differ from b in their
-        stiffnesses alone (`coefficients_differ`; else in nothing, and their difference is
-        zero): the energy is linear in k, so each element's gradient at b's positions and
-        target with half the pair's difference of k as its stiffness (no term reshapes the
-        elements of either: `Term.linear_coefficients`; the + replica holds b's positions and
-        its other coefficients)."""
+        """Add to rhs[b] half the difference of the residuals of replicas `plus` and `minus`
+        of simulated instance b, which differ from b in their stiffnesses alone
+        (`coefficients_differ`; else in nothing, and their difference is zero): the energy is
+        linear in k, so each element's gradient at b's positions and target with half the
+        pair's difference of k as its stiffness (no term reshapes the elements of either:
+        `Term.linear_coefficients`)."""
         if coefficients_differ:
             for e in range(self.n_elements):
                 half_difference = 0.5 * (self.stiffness(plus, e) - self.stiffness(minus, e))
                 if half_difference != 0.0:
-                    self.add_element(plus, e, half_difference, self.natural_strain(b, e, 0), 0)
+                    self.add_element(b, e, half_difference, self.natural_strain(b, e, 0), 0)

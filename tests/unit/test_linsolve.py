@@ -6,7 +6,7 @@ import taichi as ti
 
 from taichi_star.physics import coupled_node_pairs
 from taichi_star.geometry import build_topology
-from taichi_star.linsolve import BlockSystem, RowSolves, minimum_degree_order, plan_elimination
+from taichi_star.linsolve import BlockSystem, minimum_degree_order, plan_elimination
 from taichi_star.params import StarParams
 
 
@@ -53,51 +53,6 @@ def test_block_lu_matches_dense_solve(taichi_cpu, n_arc):
         expected = np.linalg.solve(matrices[b], rhs[b].ravel())
         # well-conditioned (diagonally dominant) systems: LU error is a few ulps × condition
         np.testing.assert_allclose(solution[b].ravel(), expected, rtol=0, atol=1e-12)
-
-
-@ti.kernel
-def _factor_units(system: ti.template(), first: ti.i32, last: ti.i32, solve: ti.i32):
-    for b in range(first, last):
-        system.factor(b)
-        if solve:
-            system.solve(b)
-
-
-@ti.kernel
-def _solve_rows(rows: ti.template(), b: ti.i32, first: ti.i32, stride: ti.i32, count: ti.i32):
-    for _ in range(1):
-        rows.solve_rows(b, first, stride, count)
-
-
-def test_rows_solved_together_have_the_bits_of_their_own_solves(taichi_cpu):
-    """Five right-hand sides in every other row after a factored instance (a group of four and
-    one of a single row in use), solved together with its factorisation (`RowSolves`): each
-    row gets the bits the instance's own solve gives it, and the rows between them, and
-    those past the last, keep theirs (a lane not in use writes nothing)."""
-    topology = build_topology(StarParams(n_arc=6, n_limb=3))
-    pairs = coupled_node_pairs(topology)
-    plan = plan_elimination(topology.n_nodes, pairs)
-    rng = np.random.default_rng(5)
-    count, stride, first, reference = 5, 2, 1, 11
-    batch = reference + count
-    blocks = np.zeros((batch, plan.n_slots, 2, 2))
-    blocks[0] = blocks[reference:] = _load_blocks(
-        plan, _random_system(pairs, topology.n_nodes, rng))
-    rhs = rng.standard_normal((batch, topology.n_nodes, 2))
-    rows = first + stride * np.arange(count)
-    rhs[reference:] = rhs[rows]
-    system = BlockSystem(plan, batch)
-    system.blocks.from_numpy(blocks)
-    system.rhs.from_numpy(rhs)
-    _factor_units(system, reference, batch, 1)  # each row's own solve, in a unit of its own
-    _factor_units(system, 0, 1, 0)
-    _solve_rows(RowSolves(system), 0, first, stride, count)
-    solved = system.rhs.to_numpy()
-    np.testing.assert_array_equal(solved[rows], solved[reference:])
-    untouched = np.setdiff1d(np.arange(reference), rows)
-    np.testing.assert_array_equal(solved[untouched], rhs[untouched])
-    # and the solutions solve the system (the own solves are checked against NumPy above)
-    assert not np.array_equal(solved[rows], rhs[rows])
 
 
 def test_minimum_degree_eliminates_chains_without_fill():
