@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import hashlib
+import io
 import json
 import re
 import subprocess
@@ -59,8 +60,8 @@ PANEL_TITLE_PAD_PT = 6.0
 shrinks with the title."""
 
 UNITS = {"_seconds_per_wall_s": "1", "_seconds_per_s": "1", "_per_wall_s": "1/s", "_per_s": "1/s",
-         "_gb_s": "GB/s", "_mm_s": "mm/s", "_mm": "mm", "_deg": "degree", "_ms": "ms", "_us": "us",
-         "_n_s_m": "N*s/m", "_s": "s", "_m": "m"}
+         "_gb_s": "GB/s", "_mm_s": "mm/s", "_mm": "mm", "_deg_s": "degree/s", "_deg": "degree",
+         "_ms": "ms", "_us": "us", "_n_s_m": "N*s/m", "_s": "s", "_m": "m"}
 """Units of result columns by name suffix, the longest match counting (`column_unit`):
 simulated seconds per wall second are a ratio, robot-steps per second a rate, a jet's impulse
 N·s per metre of height."""
@@ -85,7 +86,10 @@ def column_unit(name: str) -> str:
             return ""
         if field == "1":
             return output
-        return "/".join(f"({unit})" if "/" in unit else unit for unit in (output, field))
+        # a unit of more than one factor in brackets: "mm/Pa*s" reads as mm·s/Pa (as UDUNITS,
+        # which netCDF tools use, reads it), the derivative by a drag in Pa·s (an audit)
+        return "/".join(f"({unit})" if "/" in unit or "*" in unit else unit
+                        for unit in (output, field))
     if name in PARAMETER_COLUMN_UNITS:
         return PARAMETER_COLUMN_UNITS[name]
     # the longest first, whatever the table's order (the first match counted, and
@@ -205,15 +209,41 @@ def _stale_csv_sidecar(path: Path) -> Optional[Tuple[Path, None]]:
     return (sidecar, None) if isinstance(facts, dict) and TABLE_SHA256 in facts else None
 
 
+CSV_COMPRESSIONS = {".gz": "gzip", ".bz2": "bz2", ".xz": "xz", ".zip": "zip"}
+"""The compressions `to_csv` writes, by the path's suffix, as pandas' own `to_csv` chooses them
+(and `read_csv` reads them back by the same suffix): "run.csv.gz" held plain text, which
+`read_csv` refused as a damaged gzip file (an audit, 2026-12). pandas' other suffixes (.zst,
+.tar) are refused: their readers are not in the standard library."""
+CSV_REFUSED_SUFFIXES = (".zst", ".tar", ".tgz")
+
+
+def csv_bytes(frame: pd.DataFrame, path: Path) -> bytes:
+    """The bytes of `frame` as CSV, compressed as `path`'s suffix says (`CSV_COMPRESSIONS`),
+    the same bytes for the same table (a gzip stream's time stamp 0); ValueError naming the
+    path for a suffix of pandas' that `to_csv` does not write."""
+    suffix = path.suffix.lower()
+    if suffix in CSV_REFUSED_SUFFIXES:
+        raise ValueError(f"path {str(path)!r}: to_csv writes plain CSV or CSV compressed as "
+                         f"{', '.join(CSV_COMPRESSIONS)} say, not {suffix}")
+    method = CSV_COMPRESSIONS.get(suffix)
+    if method is None:
+        return frame.to_csv(index=False).encode()
+    options = {"gzip": {"mtime": 0}, "zip": {"archive_name": path.stem}}.get(method, {})
+    buffer = io.BytesIO()
+    frame.to_csv(buffer, index=False, compression={"method": method, **options})
+    return buffer.getvalue()
+
+
 def to_csv(result, path, table: str = "summary") -> Path:
     """Write the result's `table` as CSV (floats to the last bit: pandas' `read_csv` gives them
-    back exactly) and its `provenance` as the JSON sidecar `<path>.json`, with the table's
-    rows and SHA-256 (`read_provenance` checks them), both whole or not at all: a full disk
-    leaves the previous pair, a kill at worst the new table without a sidecar, never beside
-    the previous one's (`write_atomic`). Returns the path."""
+    back exactly; compressed where the path ends in .gz, .bz2, .xz or .zip, as pandas' own
+    `to_csv` would, `csv_bytes`) and its `provenance` as the JSON sidecar `<path>.json`, with
+    the table's rows and the file's SHA-256 (`read_provenance` checks them), both whole or not
+    at all: a full disk leaves the previous pair, a kill at worst the new table without a
+    sidecar, never beside the previous one's (`write_atomic`). Returns the path."""
     path = file_path(path, "path of the CSV file")
     frame = _table(result, table)
-    data = frame.to_csv(index=False).encode()
+    data = csv_bytes(frame, path)
     facts = {**provenance(result, frame.columns), **table_stamp(len(frame), data)}
     write_atomic(path, data, failure=OSError,
                  sidecar=(Path(f"{path}.json"),
@@ -316,6 +346,11 @@ def read_provenance(path) -> dict:
     path = file_path(path, "path of a result file")
     kind = _file_kind(path)
     source = path if kind in ("parquet", "netcdf") else Path(f"{path}.json")
+    if kind == "csv" and path.is_file() and not source.exists():
+        # a plain CSV, readable: no provenance, as a plain Parquet file has none (it raised
+        # FileNotFoundError for the sidecar, an OSError where the docstring says ValueError)
+        raise ValueError(f"{path}: no taichi_star provenance beside it (no sidecar "
+                         f"{source.name}: not written by to_csv)")
     try:
         if kind == "parquet":
             pq = require("pyarrow.parquet", "io")

@@ -44,7 +44,7 @@ from .gait import N_ACTUATORS, Gait
 from .geometry import CENTRE
 from .model import validate_batch
 from .params import SolverConfig, StarParams, check_precision
-from .provenance import file_path, write_atomic
+from .provenance import code_record, file_path, write_atomic
 from .runtime import (RECORDS_REMEDY, Runtime, check_arch, check_batch_memory,
                       check_host_memory, one_call_at_a_time)
 from .simulation import failure_times, newton_capped, warn_about_capped
@@ -112,6 +112,26 @@ def solver_texts(solver: SolverConfig) -> Dict[str, str]:
             for field in dataclasses.fields(SolverConfig)}
 
 
+SNAPSHOT_CODE_KEYS = ("taichi_star_version", "git_commit", "git_changes_sha256",
+                      "source_sha256", "taichi_version")
+"""The entries of a snapshot's `code` that `Simulator.load` compares with its own: where one
+differs, other code wrote the state (the continuation is bit for bit only with the same)."""
+
+
+def warn_about_other_code(saved: Dict[str, object]):
+    """A RuntimeWarning naming the first of `SNAPSHOT_CODE_KEYS` in which the code that wrote a
+    snapshot (`saved`, its `code`; empty: nothing to compare) differs from this process's."""
+    if not saved:
+        return
+    own = code_record()
+    changed = [key for key in SNAPSHOT_CODE_KEYS if saved.get(key) != own.get(key)]
+    if changed:
+        key = changed[0]
+        warn_user(f"the saved state was written by other code ({key} {saved.get(key)} there, "
+                  f"{own.get(key)} here; written {saved.get('date', 'at a time not recorded')}): "
+                  f"it goes on, but not necessarily bit for bit as the saved run would have")
+
+
 @dataclass(frozen=True)
 class SimulatorSnapshot:
     """The whole state of a Simulator's batch (from `Simulator.save`): every device field as a
@@ -135,12 +155,17 @@ class SimulatorSnapshot:
     """With adaptive steps, the time each failed instance's clock would show, s, NaN for one
     running (`Simulator._shown_s`); empty in a snapshot of fixed steps or one written before
     it was recorded."""
+    code: Dict[str, object] = dataclasses.field(default_factory=dict)
+    """The code that wrote the file (`provenance.code_record`: taichi_star's version and commit,
+    Taichi's version, the date), which `Simulator.load` compares with its own; empty for a
+    snapshot kept in memory (the same process's code) or one written before it was recorded."""
 
     def header(self) -> Dict[str, object]:
         """Everything but the fields, as JSON values (what `write` stores beside them)."""
         return {"engine_key": self.engine_key, "n_instances": self.n_instances, "dt": self.dt,
                 "params": list(self.params), "solver": dict(self.solver),
-                "behind": list(self.behind), "shown_s": list(self.shown_s)}
+                "behind": list(self.behind), "shown_s": list(self.shown_s),
+                "code": dict(self.code)}
 
     @classmethod
     def from_header(cls, fields: Dict[str, np.ndarray], header: Dict) -> "SimulatorSnapshot":
@@ -153,19 +178,22 @@ class SimulatorSnapshot:
                    solver={str(name): str(text)
                            for name, text in header.get("solver", {}).items()},
                    behind=tuple(float(lag) for lag in header.get("behind", ())),
-                   shown_s=tuple(float(time) for time in header.get("shown_s", ())))
+                   shown_s=tuple(float(time) for time in header.get("shown_s", ())),
+                   code=dict(header.get("code", {})))
 
     def write(self, path) -> Path:
         """Save to an .npz file (arrays plus a JSON header; ".npz" is added to a path without
         it), whole or not at all (`provenance.write_atomic`: a kill or a full disk leaves a
-        snapshot already there as it was). Returns the file's path."""
+        snapshot already there as it was), with the code that wrote it (`code`). Returns the
+        file's path."""
         path = file_path(path, "path of the snapshot's .npz file")
         if path.is_dir():  # "runs/mine" wrote runs/mine.npz beside the folder
             raise ValueError(f"path {str(path)!r} is a folder: give the snapshot's file, e.g. "
                              f"{str(path / 'state.npz')!r}")
         path = path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
         archive = io.BytesIO()
-        np.savez(archive, __header__=np.array(json.dumps(self.header())), **self.fields)
+        header = {**self.header(), "code": code_record()}
+        np.savez(archive, __header__=np.array(json.dumps(header)), **self.fields)
         # an OSError all the same, but naming the file asked for, not the temporary beside it
         write_atomic(path, archive.getvalue(), failure=OSError)
         return path
@@ -312,8 +340,13 @@ class Simulator(NotCopied):
 
     # ---------------------------------------------------------------- commands
     def _command_mask(self, commands) -> np.ndarray:
-        """(B, 8) bool from a (B, 8) boolean (or 0/1 integer) array or a list of B gait texts."""
+        """(B, 8) bool from a (B, 8) boolean (or 0/1 integer) array or B gait texts (a list, or
+        any one-dimensional sequence of them: a table's column, an array of texts)."""
         batch = self.n_instances
+        if not isinstance(commands, (str, Gait, list, tuple)) and np.ndim(commands) == 1:
+            # a pandas Series or a NumPy array of texts is the list it holds: read as an array,
+            # it was refused for its shape, (B,), which was right (an audit, 2026-12)
+            commands = list(commands)
         if isinstance(commands, (str, Gait)):
             # read as an array of shape () before (an audit, 2026-12)
             raise ValueError(f"commands must be a list of {batch} gaits, one per instance, got "
@@ -348,7 +381,7 @@ class Simulator(NotCopied):
     @one_call_at_a_time
     def fire(self, commands, at_s: Optional[float] = None):
         """Fire actuators: `commands` is a (B, 8) boolean array (column m = actuator A(m+1)) or
-        a list of B gait texts ("A1+A3", "none"). With at_s None they fire now (each instance
+        B gait texts ("A1+A3", "none"; a list, a table's column, an array). With at_s None they fire now (each instance
         at its own current time) and act on the steps after now; with at_s (s, after every
         commanded instance's current time, a whole number of steps ahead with fixed steps) they
         fire at that time, so the step ending then already sees K̄(0). Firings at different
@@ -824,6 +857,7 @@ class Simulator(NotCopied):
             self._behind[:] = 0.0
         # the saved run's capped solves are its history, shown in state(), not news
         self._capped_named = newton_capped(loaded["newton_max"], self.solver)
+        warn_about_other_code(snapshot.code)
         own = solver_texts(self.solver)
         defaults = solver_texts(SolverConfig())
         changed = differing_fields(snapshot.solver, own, defaults) if snapshot.solver else []

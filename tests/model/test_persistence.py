@@ -414,7 +414,7 @@ def test_a_csv_and_its_sidecar_are_replaced_as_a_pair(results, tmp_path, monkeyp
     pd.testing.assert_frame_equal(pd.read_csv(path), second.summary.reset_index(drop=True),
                                   check_dtype=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.csv"]
-    with pytest.raises(OSError):
+    with pytest.raises(ValueError, match=r"r.csv: no taichi_star provenance beside it"):
         read_provenance(path)
     # a folder where the sidecar goes: refused before the table changes
     monkeypatch.setattr(provenance.os, "replace", replace)
@@ -468,3 +468,73 @@ def test_the_provenance_of_a_damaged_or_foreign_file_is_a_value_error_naming_it(
                          ("truncated.nc", "truncated.nc"), ("r.csv", "r.csv.json")):
         with pytest.raises(ValueError, match=rf"{source}: no taichi_star provenance in it \("):
             read_provenance(tmp_path / name)
+    # a plain CSV, readable but with no sidecar, holds no provenance as a plain Parquet file
+    # does (it raised FileNotFoundError for the sidecar: an audit, 2026-12); a CSV that is not
+    # there cannot be read (an OSError still)
+    (tmp_path / "plain.csv").write_text("a\n1\n")
+    with pytest.raises(ValueError, match=r"plain.csv: no taichi_star provenance beside it \(no "
+                                         r"sidecar plain.csv.json: not written by to_csv\)"):
+        read_provenance(tmp_path / "plain.csv")
+    with pytest.raises(OSError):
+        read_provenance(tmp_path / "absent.csv")
+
+
+@pytest.mark.parametrize("suffix", [".gz", ".bz2", ".xz", ".zip", ".GZ"])  # pandas: any case
+def test_a_csv_named_compressed_is_compressed_as_pandas_reads_it(results, tmp_path, suffix):
+    """"run.csv.gz" held plain text, which pandas' read_csv (choosing the compression by the
+    suffix, as its to_csv does) refused as a damaged gzip file (an audit, 2026-12). The table
+    reads back exactly, the sidecar vouches for the compressed bytes, and the same table gives
+    the same bytes (a gzip stream's time stamp is 0)."""
+    plain = results[1].to_csv(tmp_path / "r.csv")
+    path = results[1].to_csv(tmp_path / f"r.csv{suffix}")
+    assert path.read_bytes() != plain.read_bytes()
+    pd.testing.assert_frame_equal(pd.read_csv(path), pd.read_csv(plain))
+    facts = read_provenance(path)
+    assert facts["table_sha256"] == provenance.table_stamp(0, path.read_bytes())["table_sha256"]
+    again = path.read_bytes()
+    results[1].to_csv(path)
+    assert path.read_bytes() == again
+
+
+def test_a_csv_named_in_a_compression_to_csv_does_not_write_is_refused(results, tmp_path):
+    """pandas' other suffixes (.zst, .tar) are refused before anything is written, naming the
+    path and the suffixes written."""
+    for name in ("r.csv.zst", "r.csv.tar", "r.tgz"):
+        with pytest.raises(ValueError, match=rf"path '.*{re.escape(name)}': to_csv writes plain "
+                                             rf"CSV or CSV compressed as .gz, .bz2, .xz, .zip "
+                                             rf"say"):
+            results[0].to_csv(tmp_path / name)
+        assert not list(tmp_path.iterdir())
+
+
+def test_a_snapshot_file_records_its_code_and_a_load_by_other_code_warns(simulator, tmp_path):
+    """A snapshot written to a file records the code that wrote it, as every result file
+    does; `load` compares it with its own code and warns where it differs (a continuation is
+    bit for bit only with the same code), naming what differs; a snapshot kept in memory
+    records none and loads silently (an audit, 2026-12: the files recorded no code)."""
+    import warnings
+
+    from taichi_star.simulator import SNAPSHOT_CODE_KEYS, SimulatorSnapshot
+
+    path = simulator.save(tmp_path / "state.npz")
+    saved = SimulatorSnapshot.read(path)
+    own = provenance.code_record()
+    assert {key: saved.code.get(key) for key in SNAPSHOT_CODE_KEYS} == \
+        {key: own.get(key) for key in SNAPSHOT_CODE_KEYS}
+    assert saved.code["taichi_star_version"] == ts.__version__ and saved.code["date"]
+    in_memory = simulator.save()
+    assert in_memory.code == {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        simulator.load(path)
+        simulator.load(in_memory)
+        simulator.load(dataclasses.replace(saved, code={}))  # written before it was recorded
+    for key in SNAPSHOT_CODE_KEYS:
+        other = dataclasses.replace(saved, code={**saved.code, key: "0other"})
+        with pytest.warns(RuntimeWarning, match=rf"written by other code \({key} 0other there, "
+                                                rf".* here; written "
+                                                rf"{re.escape(saved.code['date'])}\)"):
+            simulator.load(other)
+    assert simulator.save().fields.keys() == in_memory.fields.keys()
+    assert all(np.array_equal(simulator.save().fields[name], values)
+               for name, values in in_memory.fields.items())

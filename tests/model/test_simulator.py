@@ -397,26 +397,32 @@ def test_velocities_are_the_backward_differences_of_every_step():
     np.testing.assert_array_equal(np.sign(spin[turning]), np.sign(turn[turning]))
 
 
-def test_commands_of_zeros_and_ones_of_any_number_type_fire_as_booleans():
+def test_commands_of_zeros_and_ones_of_any_number_type_or_gaits_in_any_sequence_fire_alike():
     """NumPy's own arrays are floats (np.ones((B, 8))): they were refused, though the
-    environments take float 0./1. actions (an audit, 2026-12); each fires as its booleans."""
+    environments take float 0./1. actions (an audit, 2026-12); each fires as its booleans.
+    The gaits of a table's column (a pandas Series) or an array of texts were refused for
+    their shape, (B,), which was right (an audit, 2026-12): each fires as the list."""
     masks = np.array([[1, 0, 1, 0, 0, 0, 0, 0], [0, 1, 0, 0, 0, 0, 0, 0],
                       [1, 0, 1, 0, 1, 0, 0, 0]])
+    gaits = ["A1+A3", "A2", "A1+A3+A5"]
     shapes = []
-    for commands in (masks.astype(bool), masks.astype(np.float64), masks.astype(np.int8)):
+    for commands in (masks.astype(bool), masks.astype(np.float64), masks.astype(np.int8),
+                     gaits, pd.Series(gaits, index=[7, 8, 9]), np.array(gaits),
+                     np.array(gaits, dtype=object)):
         sim = commanded()
         sim.fire(commands)
         sim.advance(0.01)
         shapes.append(sim.shapes())
         del sim
-    np.testing.assert_array_equal(shapes[0], shapes[1])
-    np.testing.assert_array_equal(shapes[0], shapes[2])
+    for fired in shapes[1:]:
+        np.testing.assert_array_equal(fired, shapes[0])
 
 
 @pytest.mark.parametrize("commands,match", [
     (np.zeros((3, 7), dtype=bool), "shape"),
     (np.full((3, 8), 0.5), "dtype"),
     (["A1", "A2"], "one gait per instance"),
+    (pd.Series(["A1", "A2"]), "one gait per instance"),
     (["A1", "A9", "none"], "unknown actuator"),
 ])
 def test_bad_commands_are_refused_and_leave_the_state_unchanged(commands, match):

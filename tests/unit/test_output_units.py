@@ -21,7 +21,13 @@ from taichi_star.params import PARAMETER_UNITS, PER_ACTUATOR_FIELDS, StarParams
     ("d(speed_mm_s)/d(joint_radius)", "(mm/s)/m"),
     ("d(displacement_x_mm)/d(fluid_density)", "mm/(kg/m^3)"),
     ("d(x_mm)/d(actuator_delays[2])", "mm/s"), ("d(heading_deg)/d(actuator_gains[3])", "degree"),
-    ("d(status)/d(alpha)", ""), ("d(x_mm)/d(gait)", "")])
+    ("d(status)/d(alpha)", ""), ("d(x_mm)/d(gait)", ""),
+    # a rate of turn is degrees per second, not seconds (an audit, 2026-12); a unit of two
+    # factors in brackets: "mm/Pa*s" reads as mm·s/Pa
+    ("angular_velocity_deg_s", "degree/s"), ("heading_deg", "degree"),
+    ("d(x_mm)/d(hub_linear_drag)", "mm/(Pa*s)"),
+    ("d(speed_mm_s)/d(wake_coupling)", "(mm/s)/(Pa*s)"),
+    ("d(impulse_x_n_s_m)/d(alpha)", "N*s/m"), ("d(impulse_x_n_s_m)/d(joint_radius)", "(N*s/m)/m")])
 def test_column_unit_by_parameter_or_suffix(name, unit):
     assert column_unit(name) == unit
 
