@@ -381,15 +381,15 @@ class Simulator(NotCopied):
     @one_call_at_a_time
     def fire(self, commands, at_s: Optional[float] = None):
         """Fire actuators: `commands` is a (B, 8) boolean array (column m = actuator A(m+1)) or
-        B gait texts ("A1+A3", "none"; a list, a table's column, an array). With at_s None they fire now (each instance
-        at its own current time) and act on the steps after now; with at_s (s, after every
-        commanded instance's current time, a whole number of steps ahead with fixed steps) they
-        fire at that time, so the step ending then already sees K̄(0). Firings at different
-        times are all kept, each actuator any number of them (an instance holds
-        `actuation.PENDING_CAPACITY` distinct pending times); the same time again adds
-        actuators to that firing. Failed instances ignore commands (their `since_A*_s` stay
-        as they were). Raises ValueError (state unchanged) for a bad shape, dtype, gait or
-        time, or a full queue of pending firings."""
+        B gait texts ("A1+A3", "none"; a list, a table's column, an array). With at_s None
+        they fire now (each instance at its own current time) and act on the steps after now;
+        with at_s (s, after every commanded instance's current time, a whole number of steps
+        ahead with fixed steps) they fire at that time, so the step ending then already sees
+        K̄(0). Firings at different times are all kept, each actuator any number of them (an
+        instance holds `actuation.PENDING_CAPACITY` distinct pending times); the same time
+        again adds actuators to that firing. Failed instances ignore commands (their
+        `since_A*_s` stay as they were). Raises ValueError (state unchanged) for a bad shape,
+        dtype, gait or time, or a full queue of pending firings."""
         mask = self._command_mask(commands) & self._running[:, None]
         schedule = self.engine.state.schedule
         if at_s is None:
