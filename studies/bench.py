@@ -631,7 +631,8 @@ def parse_args(argv):
     cli.check_steps(f"the batch section (--batch-sizes summing to {sum(args.batch_sizes):,} "
                     f"robots, {WARMUP_STEPS} warm-up + --steps {args.steps}, --repeats "
                     f"{args.repeats}, {settings} setting(s))",
-                    (WARMUP_STEPS + args.steps) * args.repeats * settings, sum(args.batch_sizes))
+                    (WARMUP_STEPS + args.steps) * args.repeats * settings, sum(args.batch_sizes),
+                    cli.work_arch(args))
     args.cache_probe = not (args.no_cache_probe or args.quick)
     return args
 

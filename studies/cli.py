@@ -36,7 +36,8 @@ from taichi_star import (COMPONENT_HEIGHTS, DIFFERENTIABLE_FIELDS, JACOBIANS,
                          PER_ACTUATOR_FIELDS, PRESETS, SOLVER_RANGES, SolverConfig, StarParams,
                          allowed_values, check_work, fewest_steps)
 from taichi_star.batch import (DEFAULT_CHUNK_SIZE, DEFAULT_RETRIES, MAX_LOCAL_WORKERS,
-                               executor_for, has_chunks, stored_chunk_size, write_atomic)
+                               MAX_RETRIES, executor_for, has_chunks, stored_chunk_size,
+                               write_atomic)
 from taichi_star.experiment import PAPER_GAITS
 from taichi_star.extras import require
 from taichi_star.gait import Gait, all_gaits
@@ -45,8 +46,7 @@ from taichi_star.output import column_unit, column_units, parquet_bytes, read_pr
 from taichi_star.planner import MAX_DEFAULT_GOALS, check_drive, default_goals, path_frames
 from taichi_star.provenance import table_stamp
 from taichi_star.sensitivities import parse_directions
-from taichi_star.timegrid import (LongWorkWarning, SteadySpeedWarning, steps_in,
-                                  warn_long_work)
+from taichi_star.timegrid import LongWorkWarning, SteadySpeedWarning, steps_in
 
 from . import provenance
 
@@ -262,8 +262,8 @@ def add_execution_flags(parser: StudyParser, chunk_size: int = DEFAULT_CHUNK_SIZ
                              "the common flags)")
     parser.add_argument("--retries", type=int, default=DEFAULT_RETRIES,
                         help=f"extra tries of a chunk whose worker process died running it "
-                             f"alone (--workers) or whose Dask task raised (--scheduler) "
-                             f"(default {DEFAULT_RETRIES})")
+                             f"alone (--workers) or whose Dask task raised (--scheduler), at "
+                             f"most {MAX_RETRIES} (default {DEFAULT_RETRIES})")
     parser.add_argument("--chunk-size", type=int, default=None,
                         help=f"instances per chunk: one simulate call, one task (default "
                              f"{chunk_size} cpu, {GPU_CHUNK_SIZE} gpu, fewer to give every "
@@ -301,9 +301,14 @@ def parse(parser: StudyParser, argv) -> argparse.Namespace:
         check_count(args.workers, "--workers", 1, MAX_LOCAL_WORKERS)
     if getattr(args, "chunk_size", None) is not None and args.chunk_size < 1:
         raise StudyArgumentError(f"--chunk-size must be >= 1, got {args.chunk_size}")
-    if getattr(args, "retries", 0) < 0:
-        raise StudyArgumentError(f"--retries must be >= 0, got {args.retries}")
-    for flag in ("out", "run_dir"):
+    if hasattr(args, "retries"):
+        check_count(args.retries, "--retries", 0, MAX_RETRIES)
+        if args.retries != DEFAULT_RETRIES and args.workers is None and args.scheduler is None:
+            # taken without a word, and recorded as given (an audit, 2026-12)
+            raise StudyArgumentError("--retries: only with --workers or --scheduler (a chunk "
+                                     "run in this process is not tried again)")
+    # gait_design's --redraw '' read the current folder (an audit, 2026-12)
+    for flag in ("out", "run_dir", "redraw"):
         value = getattr(args, flag, None)
         if value is not None and not value.strip():
             raise StudyArgumentError(f"--{flag.replace('_', '-')}: an empty folder name (give "
@@ -347,24 +352,32 @@ def check_file_name(name: str, flag: str):
                                  f"'\\' or '..': files go into --out)")
 
 
-def check_steps(what: str, steps: float, batch=None):
+def work_arch(args) -> Optional[str]:
+    """The arch whose bound a study's work is held to (`check_work`'s `arch`): its --arch,
+    this machine's cores on the CPU; None (the fastest machine measured) where a Dask
+    --scheduler may spread it over several. The CLI held every study to one H100's bound, so
+    that a CPU run of years started with a warning (an audit, 2026-12)."""
+    return None if getattr(args, "scheduler", None) else getattr(args, "arch", None)
+
+
+def check_steps(what: str, steps: float, batch=None, arch: Optional[str] = None):
     """StudyArgumentError (one line) unless `steps` time steps per instance (what `what` says
     gave them, e.g. "--cycles 3 (9.45 s) at dt = 0.001 s") stay within the step counter and,
-    with `batch` instances, their robot-steps within what can finish (`check_work`, which also
-    warns with an estimate when it is long)."""
+    with `batch` instances, their robot-steps within what can finish on `arch` (`work_arch`;
+    `check_work`, which also warns with an estimate when it is long)."""
     try:
-        check_work(what, steps, batch)
+        check_work(what, steps, batch, arch)
     except ValueError as error:
         raise StudyArgumentError(str(error)) from None
 
 
-def check_robot_steps(what: str, robot_steps: float):
+def check_robot_steps(what: str, robot_steps: float, arch: Optional[str] = None):
     """`check_steps` of a whole run's robot-steps, every batch together (what `what` says gave
-    them): refused past what can finish, estimated when long. A study whose batches each stay
-    under the warning gives their sum here (a grid of 3.6e10 robot-steps started without a
-    word: an audit, 2026-12)."""
+    them): refused past what can finish on `arch`, estimated when long. A study whose batches
+    each stay under the warning gives their sum here (a grid of 3.6e10 robot-steps started
+    without a word: an audit, 2026-12)."""
     # as one-step instances: check_work counts round(steps) × batch, the sum exactly
-    check_steps(what, 1, round(robot_steps))
+    check_steps(what, 1, max(round(robot_steps), 1), arch)
 
 
 def check_length(length: str, duration_s: float, step_s: float, step_name: str):
@@ -438,16 +451,17 @@ def numeric_columns(table: pd.DataFrame, columns: Sequence[str], path, flag: str
 
 
 def check_run(length: str, duration_s: float, config: SolverConfig,
-              record_interval_s: float = 0.0, batch: Optional[int] = None):
+              record_interval_s: float = 0.0, batch: Optional[int] = None,
+              arch: Optional[str] = None):
     """`check_steps` of a run of duration_s (s, what `length` says, e.g. "--cycles 3 +
     --glide-cycles 4 (22 s)") with this solver and records every record_interval_s (s; 0 =
     none), counted by the library's rule (`fewest_steps`: the fixed steps; adaptive ones at
     dt_max, or one per record where records are closer), so that the command line refuses what
     the library would, before any folder is made; and at least one fixed step. With `batch`
     (the instances of such runs a study makes) their robot-steps too: refused, or estimated
-    when long (`check_work`)."""
+    when long (`check_work`), within what can finish on `arch` (`work_arch`)."""
     steps, bound = fewest_steps(config, duration_s, record_interval_s)
-    check_steps(f"{length} at {bound}", steps, batch)
+    check_steps(f"{length} at {bound}", steps, batch, arch)
     if not config.adaptive:
         check_one_step(length, duration_s, config.dt)
 
@@ -562,10 +576,13 @@ def driving(args) -> tuple:
 
 def tell_batch_work(args, config: SolverConfig, instances: int,
                     periods: Sequence[float] = (), replicas: int = 1) -> float:
-    """Warn (`LongWorkWarning`, with the hours) of a `run_batch` of `instances` robots, each run
-    for `run_length(args)` with this solver, before the study builds them: `run_batch` tells
-    its estimate only once it has them, and a product near the studies' million instances
-    took about two minutes to build (an audit, 2026-12). `periods`: the actuation periods, s,
+    """Refuse (StudyArgumentError, with the estimate) a `run_batch` of `instances` robots, each
+    run for `run_length(args)` with this solver, past what can finish (`check_robot_steps` on
+    `work_arch`), and warn of it (`LongWorkWarning`, with the hours) when long, before the
+    study builds them: `run_batch` tells its estimate only once it has them, and a product
+    near the studies' million instances took about two minutes to build (an audit, 2026-12);
+    its chunks, each checked alone, started a sweep of 13 years with a warning (an audit,
+    2026-12). `periods`: the actuation periods, s,
     that the instances share equally (a swept period's values; default: the model's).
     `replicas`: instances simulated per robot (sensitivities add two per parameter).
     Returns the robot-steps (`fewest_steps` of each run, `run_batch`'s count). Run the batch
@@ -578,7 +595,8 @@ def tell_batch_work(args, config: SolverConfig, instances: int,
               f"--cycles {args.cycles:g} of {'each' if len(periods) > 1 else 'its'} period")
     if replicas > 1:
         length += f", each simulated {replicas} times over for its sensitivities"
-    warn_long_work(f"the batch of {instances:,} instances ({length})", robot_steps)
+    check_robot_steps(f"the batch of {instances:,} instances ({length})", robot_steps,
+                      work_arch(args))
     return robot_steps
 
 
@@ -827,9 +845,11 @@ GAITS_HELP = ("paper (the five Fig. 4c gaits), all (the 255 non-empty gaits) or 
 """The help of a --gaits flag that `resolve_gaits` reads (every form it accepts)."""
 
 
-def resolve_gaits(text: str, flag: str = "--gaits") -> List[str]:
+def resolve_gaits(text: str, flag: str = "--gaits", firing: bool = False) -> List[str]:
     """"paper" -> the five Fig. 4 gaits; "all" -> all 255 non-empty gaits; otherwise a comma
-    list of gaits (validated, canonical names)."""
+    list of gaits (validated, canonical names). `firing`: "none" refused, for a study of the
+    speeds or their derivatives, which a robot that never fires has none of (its tables were
+    all empty, with NumPy's warnings: an audit, 2026-12)."""
     if text is None or not text.strip():
         raise StudyArgumentError(f"{flag}: empty gait list")
     key = text.strip().lower()
@@ -845,6 +865,10 @@ def resolve_gaits(text: str, flag: str = "--gaits") -> List[str]:
             raise StudyArgumentError(f"{flag}: {error}") from None
     if len(set(gaits)) != len(gaits):
         raise StudyArgumentError(f"{flag}: a gait is listed twice: {text}")
+    if firing and "none" in gaits:
+        raise StudyArgumentError(f"{flag}: 'none' fires no actuator, and this study's speeds "
+                                 f"and derivatives are of robots that swim: give gaits that "
+                                 f"fire")
     return gaits
 
 

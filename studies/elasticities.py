@@ -84,6 +84,8 @@ def sobol_table(path: Path) -> tuple:
     if missing:
         raise cli.StudyArgumentError(f"--sobol {path}: not a Sobol table with columns "
                                      f"{', '.join(columns)} (no {', '.join(missing)})")
+    if table.empty:  # a header alone left every row's S1 and ST empty (an audit, 2026-12)
+        raise cli.StudyArgumentError(f"--sobol {path}: no rows (a header alone)")
     sidecar = provenance.sidecar_path(path)
     if not sidecar.exists():
         return _by_sensitivity_name(table[columns]), ""
@@ -233,7 +235,7 @@ def build_parser():
 
 def main(argv=None):
     args = cli.parse(build_parser(), argv)
-    gaits = cli.resolve_gaits(args.gaits)
+    gaits = cli.resolve_gaits(args.gaits, firing=True)
     base = cli.base_params(args)
     solver = cli.solver(args)
     parameters = (default_parameters(base) if args.parameters is None

@@ -151,7 +151,7 @@ def main(argv=None):
     # audit, 2026-12), before the memory (whose refusal depends on what the machine has free)
     cli.check_robot_steps(f"--num-envs {args.num_envs} × --rounds {args.rounds} × --steps "
                           f"{args.steps} (+1 compiling) × {len(solvers)} preset and Jacobian "
-                          f"setting(s)", robot_steps)
+                          f"setting(s)", robot_steps, cli.work_arch(args))
     for preset in presets:
         try:  # a million robots' engine: 116 GiB, failed after two minutes (an audit)
             check_batch_memory([StarParams.preset(preset)] * args.num_envs,

@@ -1266,7 +1266,8 @@ def main(argv=None):
     cycles = max(train[1], validate[1])
     cli.check_run(f"--train-cycles {args.train_cycles} and --validate-cycles "
                   f"{args.validate_cycles} ({cycles:g} cycles, {cycles * base.period:.3g} s; "
-                  f"{total:,} instances)", cycles * base.period, solver, batch=total)
+                  f"{total:,} instances)", cycles * base.period, solver, batch=total,
+                  arch=cli.work_arch(args))
     for box in boxes.values():  # every corner of each group of CORNER_GROUP axes (2^20 is
         for group in range(0, len(box), CORNER_GROUP):  # too many; the groups share no limit)
             identify.check_box(box[group:group + CORNER_GROUP], base, "--sets")

@@ -104,7 +104,7 @@ def check_whole_run(args, configurations):
                                    0.0)[0] + 1 for mode, tol in configurations)
     cli.check_robot_steps(f"--batch {args.batch} × {len(configurations)} configurations × "
                           f"(--rounds {args.rounds} of --duration {args.duration:g} s + a "
-                          f"one-step warm-up)", robot_steps)
+                          f"one-step warm-up)", robot_steps, cli.work_arch(args))
 
 
 def final_state(result, mode: str, tol: float):

@@ -988,6 +988,8 @@ def main(argv=None):
             continue
         identify.check_unfired_axes("model_select", f"candidate {candidate.name}", box, gaits)
         runnable.append(candidate)
+    if not candidates:  # a header alone: rows[0] below was an IndexError (an audit, 2026-12)
+        raise cli.StudyArgumentError("--candidates: no candidates (the table has no rows)")
     if not runnable:  # tables of skipped rows, exit status 0, before
         raise cli.StudyArgumentError(f"--candidates: none can be fitted ({rows[0]['candidate']}:"
                                      f" {rows[0]['note']})")

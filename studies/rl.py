@@ -399,7 +399,8 @@ def main(argv=None):
     settings = {**PPO_SETTINGS, **(QUICK_PPO if args.quick else {})}
     if args.policy is None:
         cli.check_robot_steps(f"--timesteps {args.timesteps} periods of training",
-                              args.timesteps * round(base.period / solver.dt))
+                              args.timesteps * round(base.period / solver.dt),
+                              cli.work_arch(args))
     training_settings = {"ppo": settings, "timesteps": args.timesteps,
                          "num_envs": args.num_envs, "seed": args.seed,
                          "max_episode_steps": args.max_episode_steps,

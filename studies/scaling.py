@@ -94,7 +94,8 @@ def main(argv=None):
                            for _, workers, _ in timed)
     cli.check_robot_steps(f"--rounds {args.rounds} × {len(timed)} modes × the sweep's "
                           f"{len(params)} instances and the warm-ups, of {steps} steps each",
-                          args.rounds * (len(timed) * len(params) + warmup_instances) * steps)
+                          args.rounds * (len(timed) * len(params) + warmup_instances) * steps,
+                          cli.work_arch(args))
     out = cli.Output(args, argv or [], model={"sweep": sweep}, solver=solver)
     run_kwargs = dict(solver=solver, chunk_size=args.chunk_size, progress=False)  # timed runs
     walls = np.empty((args.rounds, len(timed)))

@@ -196,7 +196,7 @@ def main(argv=None):
     if args.seed < 1:
         # SALib seeds nothing for 0: another sample and other intervals at every run
         raise cli.StudyArgumentError(f"--seed must be >= 1, got {args.seed}")
-    gaits = cli.resolve_gaits(args.gaits)
+    gaits = cli.resolve_gaits(args.gaits, firing=True)
     box = [identify.parse_range_spec(text, "--vary") for text in (args.vary or DEFAULT_BOX)]
     instances = samples * (len(box) + 2) * len(gaits)
     if instances > cli.MAX_INSTANCES:

@@ -173,7 +173,7 @@ def build_parser():
 def main(argv=None):
     args = cli.parse(build_parser(), argv)
     cli.check_positive(args.duration, "--duration")
-    gaits = cli.resolve_gaits(args.gaits)
+    gaits = cli.resolve_gaits(args.gaits, firing=True)
     base = StarParams.preset("paper", actuator_delays=(OFF_GRID_DELAY_S,) * 8)
     # every setting's robots, solver and parameters, each checked before the output folder:
     # "all" is every differentiable field but the component heights, off in the paper robot,
@@ -195,7 +195,8 @@ def main(argv=None):
     cli.check_robot_steps(
         f"--duration {args.duration:g} s ({sum(count for count, _ in runs):,} instance-runs in "
         f"{len(plans)} settings)",
-        sum(count * fewest_steps(solver, args.duration, 0.0)[0] for count, solver in runs))
+        sum(count * fewest_steps(solver, args.duration, 0.0)[0] for count, solver in runs),
+        cli.work_arch(args))
     out = cli.Output(args, argv or [], model={"preset": "paper", "params": base},
                      extra={"duration_s": args.duration, "gaits": gaits})
     tables = []

@@ -66,6 +66,7 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 import pandas as pd
@@ -278,13 +279,13 @@ def references(speeds, grid: Grid, gaits):
 # --------------------------------------------------------------------------- runs
 
 def check_whole_run(configs, n_gaits: int, timing_batch: int, duration_s: float,
-                    length: str):
+                    length: str, arch: Optional[str] = None):
     """Refuse or estimate (`cli.check_steps`) the robot-steps of the whole study before any
     run: each configuration's batch of the gaits (a one-step compiling call, then duration_s)
     and the presets' timing (`time_presets`: timing_batch instances, a one-step call and
     TIMING_ROUNDS runs each). Adaptive steps counted at their fewest (`fewest_steps`). Each
     call stayed under the warning: --gaits all --cycles 1000 started 5.6e10 robot-steps without
-    a word (an audit, 2026-12)."""
+    a word (an audit, 2026-12). `arch`: whose bound (`cli.work_arch`)."""
     def steps(solver):
         return fewest_steps(solver, duration_s, 0.0)[0]
     presets = [preset_config(model).solver for model in MODEL_PRESETS]
@@ -292,7 +293,7 @@ def check_whole_run(configs, n_gaits: int, timing_batch: int, duration_s: float,
                    + timing_batch * sum(1 + TIMING_ROUNDS * steps(solver) for solver in presets))
     cli.check_robot_steps(f"{len(configs)} configurations × {n_gaits} gait(s) and the presets' "
                           f"timing at {timing_batch} instances × {TIMING_ROUNDS} rounds, {length}",
-                          robot_steps)
+                          robot_steps, arch)
 
 
 def run_config(config: Config, gaits, duration_s, arch):
@@ -567,7 +568,8 @@ def main(argv=None):
               else f"--cycles {args.cycles:g} ({duration:.3g} s)")
     cli.check_length(length, duration, min(fixed_steps), "the grid's finest step")
     cli.check_one_step(length, duration, max(fixed_steps), "the grid's coarsest step")
-    check_whole_run(configs, len(gaits), grid.timing_batch, duration, length)
+    check_whole_run(configs, len(gaits), grid.timing_batch, duration, length,
+                    cli.work_arch(args))
     out = cli.Output(args, argv or [], model={"models": MODEL_PRESETS, "gaits": gaits},
                      solver={"grid": grid, "configurations": [c.label() for c in configs]})
     machine = provenance.machine_columns(args.arch)

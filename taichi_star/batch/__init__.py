@@ -17,7 +17,8 @@
 Dask is imported only when a scheduler is used.
 """
 
-from .executors import DEFAULT_RETRIES, MAX_LOCAL_WORKERS, Executor, InProcess, LocalProcesses
+from .executors import (DEFAULT_RETRIES, MAX_LOCAL_WORKERS, MAX_RETRIES, Executor, InProcess,
+                        LocalProcesses)
 from .run import DEFAULT_CHUNK_SIZE, executor_for, read_run, run_batch
 from .store import (RunStore, RunStoreError, code_version, has_chunks, stored_chunk_size,
                     write_atomic)
@@ -26,4 +27,4 @@ from .tasks import ChunkResult, ChunkTask, plan_chunks, run_chunk
 __all__ = ["run_batch", "read_run", "plan_chunks", "run_chunk", "ChunkTask", "ChunkResult",
            "Executor", "InProcess", "LocalProcesses", "executor_for", "RunStore", "RunStoreError",
            "code_version", "has_chunks", "stored_chunk_size", "write_atomic",
-           "DEFAULT_CHUNK_SIZE", "DEFAULT_RETRIES", "MAX_LOCAL_WORKERS"]
+           "DEFAULT_CHUNK_SIZE", "DEFAULT_RETRIES", "MAX_LOCAL_WORKERS", "MAX_RETRIES"]

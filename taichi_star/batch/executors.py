@@ -33,6 +33,10 @@ DEFAULT_RETRIES = 2
 """Extra tries of a chunk. With `LocalProcesses`: after the worker process running it alone
 died (a chunk that raises is not retried there: its error is deterministic). On a Dask cluster:
 after its task raised (`DaskExecutor`; a worker's death is the scheduler's to rerun)."""
+MAX_RETRIES = 100
+"""Most extra tries of a chunk (`check_retries`): a chunk that kills its worker at every try is
+given up after them, not tried again without end (an audit, 2026-12: `--retries 1000000000`
+was taken)."""
 MAX_LOCAL_WORKERS = 256
 """The most local worker processes: each is a process with a single-threaded Taichi runtime
 (some 200 MB), so more than one per core only competes for the cores; 256 is 16 times the most
@@ -133,6 +137,13 @@ def _stop_now(pool: concurrent.futures.ProcessPoolExecutor):
     pool.shutdown(wait=True, cancel_futures=True)
 
 
+def check_retries(retries):
+    """ValueError naming `retries` unless it is an integer from 0 to MAX_RETRIES."""
+    if not is_whole(retries) or not 0 <= retries <= MAX_RETRIES:
+        raise ValueError(f"retries must be an integer from 0 to {MAX_RETRIES} (MAX_RETRIES), "
+                         f"got {retries!r}")
+
+
 class LocalProcesses:
     """`n_workers` worker processes on this machine, started on first use with the "spawn" start
     method (a fresh interpreter: no Taichi state is inherited), each configured by
@@ -155,8 +166,7 @@ class LocalProcesses:
         if not is_whole(n_workers) or not 1 <= n_workers <= MAX_LOCAL_WORKERS:
             raise ValueError(f"workers must be an integer from 1 to {MAX_LOCAL_WORKERS} "
                              f"(MAX_LOCAL_WORKERS), got {n_workers!r}")
-        if not is_whole(retries) or retries < 0:
-            raise ValueError(f"retries must be an integer >= 0, got {retries!r}")
+        check_retries(retries)
         self.n_workers = int(n_workers)
         self.retries = int(retries)
         self._pool: Optional[concurrent.futures.ProcessPoolExecutor] = None

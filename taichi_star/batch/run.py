@@ -10,7 +10,7 @@ from typing import Optional, Sequence
 import numpy as np
 import pandas as pd
 
-from ..checks import check_flag, is_whole, warn_user
+from ..checks import check_flag, warn_user
 from ..driver import RunTiming, shows_progress
 from ..extras import require
 from ..geometry import build_topology
@@ -19,7 +19,7 @@ from ..params import SolverConfig, StarParams
 from ..provenance import code_version
 from .. import sensitivities as tangents
 from ..simulation import SimulationResult, call_arguments, warn_about_ok_instances
-from .executors import DEFAULT_RETRIES, Executor, InProcess, LocalProcesses
+from .executors import DEFAULT_RETRIES, Executor, InProcess, LocalProcesses, check_retries
 from .store import (RunStore, RunStoreError, StoredRun, current_defaults, read_stored,
                     run_definition)
 from .tasks import batch_robot_steps, plan_chunks
@@ -357,8 +357,7 @@ def executor_for(workers: Optional[int] = None, scheduler: Optional[str] = None,
     closed on exit."""
     if workers is not None and scheduler is not None:
         raise ValueError("give workers (local processes) or scheduler (a Dask cluster), not both")
-    if not is_whole(retries) or retries < 0:
-        raise ValueError(f"retries must be an integer >= 0, got {retries!r}")
+    check_retries(retries)
     if scheduler is not None and not isinstance(scheduler, str):
         raise ValueError(f"scheduler must be an address like tcp://HOST:PORT, got {scheduler!r}")
     if scheduler is not None:

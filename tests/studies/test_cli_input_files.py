@@ -216,6 +216,16 @@ def test_a_header_alone_is_read_and_refused_as_a_table_without_rows(no_compute, 
     path.write_text("field,value\n")
     assert refusal(["gradient_fit", "--quick", "--start", str(path)], tmp_path, capsys) == \
         f"--start {path}: no rows"
+    # --candidates' header alone ended in an IndexError's traceback, --sobol's in a table whose
+    # every S1 and ST was empty (an audit, 2026-12)
+    candidates = tmp_path / "candidates.csv"
+    candidates.write_text("name,set,fit,description\n")
+    assert refusal(["model_select", "--quick", "--candidates", str(candidates)], tmp_path,
+                   capsys) == "--candidates: no candidates (the table has no rows)"
+    sobol = tmp_path / "sobol.csv"
+    sobol.write_text("gait,parameter,S1,S1_conf,ST,ST_conf\n")
+    assert refusal(["elasticities", "--quick", "--sobol", str(sobol)], tmp_path, capsys) == \
+        f"--sobol {sobol}: no rows (a header alone)"
 
 
 # --------------------------------------------------------------------------- elasticities --sobol

@@ -737,6 +737,23 @@ def test_every_gaits_flag_names_what_it_accepts(no_compute, tmp_path, capsys):
             assert all(form in text for form in ("paper", "all", "comma list")), (study, text)
 
 
+@pytest.mark.parametrize("study", ["elasticities", "sensitivity", "sensitivity_check"])
+def test_a_study_of_speeds_or_derivatives_refuses_the_gait_that_fires_nothing(no_compute,
+                                                                            tmp_path, capsys,
+                                                                            study):
+    """--gaits none ran to tables whose every speed, derivative and elasticity was empty,
+    with NumPy's and matplotlib's warnings (an audit, 2026-12); a list holding it is refused
+    too, and a gait that fires is taken (the same list without it)."""
+    for gaits in ("none", "A1+A3,none"):
+        out = tmp_path / study
+        assert studies_main([study, "--gaits", gaits, "--out", str(out), *QUICK]) == 2
+        error = capsys.readouterr().err
+        assert error.count("\n") == 1 and "--gaits: 'none' fires no actuator" in error, error
+        assert not out.exists()
+    assert cli.resolve_gaits("A1+A3", firing=True) == ["A1+A3"]
+    assert cli.resolve_gaits("none") == ["none"]  # where a resting robot is a case of its own
+
+
 def test_a_run_too_large_for_memory_is_one_line_naming_the_flag(monkeypatch, tmp_path, capsys):
     """animate with more frames than memory holds ended in the library's ValueError with a
     traceback and exit 1 (an audit, 2026-12): the memory refusal (`MemoryBudgetError`, before

@@ -86,7 +86,10 @@ def test_killed_dask_worker_costs_only_its_chunk(reference, cluster, tmp_path):
     # refused at once (it waited 31 s for the connection's timeout), and the port named
     (["--scheduler", "tcp://127.0.0.1:65536"],
      "--scheduler: the port of 'tcp://127.0.0.1:65536' must be in 1..65535"),
-    (["--retries", "-1"], "--retries must be >= 0"),
+    (["--retries", "-1"], "--retries must be in [0, 100], got -1"),
+    (["--workers", "2", "--retries", "101"], "--retries must be in [0, 100], got 101"),
+    # a chunk in this process is never tried again: --retries alone was taken without a word
+    (["--retries", "5"], "--retries: only with --workers or --scheduler"),
     (["--chunk-size", "0", "--workers", "2"], "--chunk-size must be >= 1"),
 ])
 @pytest.mark.parametrize("study", ["sweep", "gaits", "calibrate"])

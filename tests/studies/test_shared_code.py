@@ -37,6 +37,16 @@ def test_an_out_of_blanks_is_an_empty_folder_name(no_compute, tmp_path, capsys, 
     assert not (tmp_path / "  ").exists()
 
 
+@pytest.mark.parametrize("name", ["", "  "])
+def test_a_redraw_of_an_empty_folder_name_is_refused(no_compute, tmp_path, capsys, monkeypatch,
+                                                     name):
+    """gait_design --redraw '' read the current folder: a gait_design.csv there would have
+    been drawn again (an audit, 2026-12)."""
+    monkeypatch.chdir(tmp_path)
+    assert studies_main(["gait_design", "--redraw", name]) == 2
+    assert "--redraw: an empty folder name" in capsys.readouterr().err
+
+
 def test_a_prefix_with_a_backslash_is_refused_in_one_line(no_compute, tmp_path, capsys):
     """A backslash in --prefix is refused by the flag's check (it reached Output.path's
     ValueError, a traceback, after the output folder was made)."""
@@ -96,6 +106,35 @@ def test_the_batch_estimate_shares_the_instances_among_the_periods():
     args = SimpleNamespace(quick=False, cycles=2.0)
     config = SolverConfig(dt=0.01)
     assert cli.tell_batch_work(args, config, 10, periods=[1.0, 3.0]) == pytest.approx(4000)
+
+
+def test_a_batch_past_what_its_arch_finishes_is_refused_before_it_is_built(monkeypatch):
+    """A sweep of 13 years started with a warning: the study only warned of its batch, and
+    each chunk passed the library's check alone; the CLI held every study to one H100's bound
+    even on the CPU (an audit, 2026-12). On 2 CPU cores 1.296e12 robot-steps (2,000,000
+    instances × 648,000 steps) start with the long-work warning and 100 steps more each are
+    refused with the estimate; on a GPU, or spread by a Dask --scheduler, the same batch
+    starts (the fastest machine's bound)."""
+    from taichi_star import timegrid
+    from taichi_star.timegrid import LongWorkWarning
+
+    monkeypatch.setattr(timegrid, "usable_cores", lambda: 2)
+    config = SolverConfig(dt=0.01)
+
+    def batch(cycles, arch="cpu", scheduler=None):
+        args = SimpleNamespace(quick=False, cycles=cycles, arch=arch, scheduler=scheduler)
+        return cli.tell_batch_work(args, config, 2_000_000, periods=[1.0])
+
+    with pytest.warns(LongWorkWarning, match=r"1\.3e\+12 robot-steps: about"):
+        assert batch(6480) == 1_296_000_000_000
+    with pytest.raises(cli.StudyArgumentError,
+                       match=r"^the batch of 2,000,000 instances \(--cycles 6481 of its period\) "
+                             r"is 1\.3e\+12 robot-steps: about 30 days even at 5e\+05 "
+                             r"robot-steps/s \(this machine's 2 CPU cores"):
+        batch(6481)
+    for elsewhere in ({"arch": "gpu"}, {"scheduler": "tcp://cluster:8786"}):
+        with pytest.warns(LongWorkWarning):
+            assert batch(6481, **elsewhere) == 1_296_200_000_000
 
 
 @pytest.mark.parametrize("text, kind", [("1,,2", float), ("1,2,", int),

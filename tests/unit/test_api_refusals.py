@@ -110,7 +110,8 @@ def test_run_batch_refuses_a_run_dir_that_is_not_a_path(no_compute, tmp_path, mo
 
 @pytest.mark.parametrize("keywords, name", [
     ({"retries": -1}, "retries"), ({"retries": "2"}, "retries"), ({"retries": True}, "retries"),
-    ({"scheduler": 5}, "scheduler")])
+    # bounded: a chunk that kills its worker at every try was tried again without end
+    ({"retries": 101}, "retries"), ({"scheduler": 5}, "scheduler")])
 def test_executor_for_refuses_bad_retries_and_schedulers(keywords, name):
     with pytest.raises(ValueError, match=f"^{name} must be"):
         with executor_for(**keywords):
@@ -124,9 +125,18 @@ def test_executor_for_refuses_workers_and_a_scheduler_together():
             pass
 
 
-def test_executor_for_accepts_zero_retries():
-    with executor_for(retries=0) as executor:
-        assert executor.n_workers == 1
+def test_executor_for_accepts_zero_retries_and_the_most():
+    from taichi_star.batch import MAX_RETRIES
+    from taichi_star.batch.executors import LocalProcesses
+
+    assert MAX_RETRIES == 100
+    for retries in (0, MAX_RETRIES):
+        with executor_for(retries=retries) as executor:
+            assert executor.n_workers == 1
+    assert LocalProcesses(2, retries=MAX_RETRIES).retries == MAX_RETRIES
+    with pytest.raises(ValueError, match=r"^retries must be an integer from 0 to 100 "
+                                         r"\(MAX_RETRIES\), got 101$"):
+        LocalProcesses(2, retries=MAX_RETRIES + 1)
 
 
 def test_local_processes_are_bounded_before_any_starts():
