@@ -46,7 +46,8 @@ from taichi_star.output import column_unit, column_units, parquet_bytes, read_pr
 from taichi_star.planner import MAX_DEFAULT_GOALS, check_drive, default_goals, path_frames
 from taichi_star.provenance import table_stamp
 from taichi_star.sensitivities import parse_directions
-from taichi_star.timegrid import LongWorkWarning, SteadySpeedWarning, steps_in
+from taichi_star.timegrid import (LongWorkWarning, SteadySpeedWarning, steps_in,
+                                  warn_long_work)
 
 from . import provenance
 
@@ -577,8 +578,9 @@ def driving(args) -> tuple:
 def tell_batch_work(args, config: SolverConfig, instances: int,
                     periods: Sequence[float] = (), replicas: int = 1) -> float:
     """Refuse (StudyArgumentError, with the estimate) a `run_batch` of `instances` robots, each
-    run for `run_length(args)` with this solver, past what can finish (`check_robot_steps` on
-    `work_arch`), and warn of it (`LongWorkWarning`, with the hours) when long, before the
+    run for `run_length(args)` with this solver, past what can finish on this machine
+    (`check_robot_steps` on `work_arch`; not with a Dask --scheduler, whose machines share
+    it), and warn of it (`LongWorkWarning`, with the hours) when long, before the
     study builds them: `run_batch` tells its estimate only once it has them, and a product
     near the studies' million instances took about two minutes to build (an audit, 2026-12);
     its chunks, each checked alone, started a sweep of 13 years with a warning (an audit,
@@ -595,8 +597,11 @@ def tell_batch_work(args, config: SolverConfig, instances: int,
               f"--cycles {args.cycles:g} of {'each' if len(periods) > 1 else 'its'} period")
     if replicas > 1:
         length += f", each simulated {replicas} times over for its sensitivities"
-    check_robot_steps(f"the batch of {instances:,} instances ({length})", robot_steps,
-                      work_arch(args))
+    what = f"the batch of {instances:,} instances ({length})"
+    if getattr(args, "scheduler", None):  # a cluster's machines share it: no one machine's bound
+        warn_long_work(what, robot_steps)
+    else:
+        check_robot_steps(what, robot_steps, work_arch(args))
     return robot_steps
 
 

@@ -113,8 +113,9 @@ def test_a_batch_past_what_its_arch_finishes_is_refused_before_it_is_built(monke
     each chunk passed the library's check alone; the CLI held every study to one H100's bound
     even on the CPU (an audit, 2026-12). On 2 CPU cores 1.296e12 robot-steps (2,000,000
     instances × 648,000 steps) start with the long-work warning and 100 steps more each are
-    refused with the estimate; on a GPU, or spread by a Dask --scheduler, the same batch
-    starts (the fastest machine's bound)."""
+    refused with the estimate; on a GPU (the fastest machine's bound) the same batch starts,
+    and spread by a Dask --scheduler over machines a batch past any one machine's bound does
+    (with the warning)."""
     from taichi_star import timegrid
     from taichi_star.timegrid import LongWorkWarning
 
@@ -132,9 +133,12 @@ def test_a_batch_past_what_its_arch_finishes_is_refused_before_it_is_built(monke
                              r"is 1\.3e\+12 robot-steps: about 30 days even at 5e\+05 "
                              r"robot-steps/s \(this machine's 2 CPU cores"):
         batch(6481)
-    for elsewhere in ({"arch": "gpu"}, {"scheduler": "tcp://cluster:8786"}):
-        with pytest.warns(LongWorkWarning):
-            assert batch(6481, **elsewhere) == 1_296_200_000_000
+    with pytest.warns(LongWorkWarning):
+        assert batch(6481, arch="gpu") == 1_296_200_000_000
+    with pytest.raises(cli.StudyArgumentError, match=r"about 30 days even at 3\.6e\+06"):
+        batch(46_657, arch="gpu")   # 9.3314e12 robot-steps: past one H100's 9.3312e12
+    with pytest.warns(LongWorkWarning, match=r"9\.33e\+12 robot-steps: about"):
+        assert batch(46_657, scheduler="tcp://cluster:8786") == 9_331_400_000_000
 
 
 @pytest.mark.parametrize("text, kind", [("1,,2", float), ("1,2,", int),
