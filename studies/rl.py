@@ -226,10 +226,13 @@ def read_policy(path: str, args, base, solver, since_fired_cap_s: float):
 
 
 def train(env_kwargs: dict, num_envs: int, timesteps: int, seed: int, settings: dict,
-          firing_prior=None):
+          firing_prior=None, keep=None, progress: bool = True):
     """(the trained PPO model, the training table: one row per rollout, `rl_training.csv`).
     firing_prior: None (SB3's start) or the untrained policy's probability of firing each
-    actuator."""
+    actuator. `keep(model, table)`: called before each rollout but the first with the model
+    updated from the rollouts so far and their table, so that an interrupted training keeps
+    them (a Ctrl-C after half an hour lost all
+    of it: an audit, 2026-12). `progress`: a bar of the timesteps trained (robot-periods)."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback
@@ -240,11 +243,17 @@ def train(env_kwargs: dict, num_envs: int, timesteps: int, seed: int, settings: 
     envs = VecMonitor(to_sb3(StarSwimmerVectorEnv(num_envs, **env_kwargs)))
     started = time.perf_counter()
     rows, ended = [], []
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+        bar = tqdm(total=timesteps, unit="period", desc="rl training")
 
     class Rollouts(BaseCallback):
         """Each episode's end as it comes; a row of them at each rollout's end."""
 
         def _on_step(self) -> bool:
+            if bar is not None:
+                bar.update(len(self.locals["dones"]))
             for done, info in zip(self.locals["dones"], self.locals["infos"]):
                 if done:  # the info of the episode's last period, before the robot's reset
                     ended.append((info["episode"]["r"], info["episode"]["l"],
@@ -260,6 +269,13 @@ def train(env_kwargs: dict, num_envs: int, timesteps: int, seed: int, settings: 
                          "mean_length": np.mean(lengths),
                          "capped_episodes": int(np.nansum(capped))})
             ended.clear()
+            if bar is not None:
+                bar.set_postfix_str(f"success {rows[-1]['success_rate']:.2f}")
+
+        def _on_rollout_start(self):
+            # after the update from the rollouts so far: the policy their rows led to
+            if keep is not None and rows:
+                keep(self.model, pd.DataFrame(rows))
 
     model = PPO("MlpPolicy", envs, seed=seed, device="cpu", verbose=0, **settings)
     # no log folder (SB3's default logger makes one in the temporary folder)
@@ -274,7 +290,11 @@ def train(env_kwargs: dict, num_envs: int, timesteps: int, seed: int, settings: 
         # capped Newton solve: counted per rollout (capped_episodes) and told once below
         # instead of a warning for every robot after each of its resets
         warnings.filterwarnings("ignore", message=r".*newton_capped", category=RuntimeWarning)
-        model.learn(timesteps, callback=Rollouts())
+        try:
+            model.learn(timesteps, callback=Rollouts())
+        finally:
+            if bar is not None:
+                bar.close()
     envs.close()
     table = pd.DataFrame(rows)
     if table["capped_episodes"].sum():
@@ -420,15 +440,20 @@ def main(argv=None):
                             "compared": (None if args.compare is None
                                          else str(Path(args.compare).resolve()))})
     if loaded is None:
+        def keep(trained, table) -> Path:
+            """The learning curve and the policy so far, each whole (`write_atomic`)."""
+            policy = io.BytesIO()
+            trained.save(policy)
+            write_atomic(out.path("rl_policy.zip"), policy.getvalue(),
+                         failure=lambda reason: cli.StudyOutputError(reason))
+            out.wrote(out.path("rl_policy.zip"))
+            return out.write_csv(table, "rl_training.csv")
+
+        # kept after each update (an interrupted run keeps the rollouts it trained on) and
+        # once trained, before the evaluation runs
         model, training = train(env_kwargs, args.num_envs, args.timesteps, args.seed, settings,
-                                prior)
-        # the training's work kept before the evaluation runs
-        training_csv = out.write_csv(training, "rl_training.csv")
-        policy = io.BytesIO()
-        model.save(policy)
-        write_atomic(out.path("rl_policy.zip"), policy.getvalue(),
-                     failure=lambda reason: cli.StudyOutputError(reason))
-        out.wrote(out.path("rl_policy.zip"))
+                                prior, keep=keep, progress=not args.no_progress)
+        training_csv = keep(model, training)
     else:
         model, training_csv = loaded, None
     summary, cycles, path = drive_policy(

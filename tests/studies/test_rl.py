@@ -58,6 +58,36 @@ def test_quick_run_trains_drives_and_saves_the_policy_that_drove(tmp_path, monke
 
 
 @pytest.mark.slow
+def test_an_interrupted_training_keeps_the_rollouts_it_finished(tmp_path, monkeypatch, capsys):
+    """A Ctrl-C after half an hour of training left nothing (an audit, 2026-12): the learning
+    curve and the policy are kept after each update. Stopped in the second of two quick
+    rollouts (64 periods each), the first rollout's row and the policy updated from it stay,
+    whole, and the policy loads."""
+    from stable_baselines3 import PPO
+
+    from taichi_star.envs import StarSwimmerVectorEnv
+
+    steps = []
+    step = StarSwimmerVectorEnv.step
+
+    def interrupted(self, actions):
+        steps.append(1)
+        if len(steps) > 20:  # a rollout is 16 steps of the 4 robots
+            raise KeyboardInterrupt
+        return step(self, actions)
+
+    monkeypatch.setattr(StarSwimmerVectorEnv, "step", interrupted)
+    out = tmp_path / "out"
+    assert studies_main(["rl", *QUICK, "--timesteps", "128", "--out", str(out)]) == 130
+    assert "interrupted" in capsys.readouterr().err
+    training = pd.read_csv(out / "rl_training.csv")
+    assert training["timesteps"].tolist() == [64] and training["episodes"].tolist() == [16]
+    assert json.loads((out / "rl_training.csv.json").read_text())["details"]["timesteps"] == 128
+    assert PPO.load(out / "rl_policy.zip", device="cpu").num_timesteps == 64
+    assert not (out / "rl.csv").exists()
+
+
+@pytest.mark.slow
 def test_a_settled_run_trains_and_drives_to_the_settled_task(tmp_path):
     """--settled: the training's episodes and the drive end only after --settle-cycles periods
     unfired (the sidecar says so); the saved policy driven again with settled=True gives the
