@@ -22,6 +22,7 @@ import io
 import itertools
 import logging
 import math
+import re
 import sys
 import tempfile
 import typing
@@ -143,6 +144,10 @@ class StudyParser(OneLineParser):
     def __init__(self, study: str, description: str, archs=("cpu", "gpu")):
         super().__init__(prog=f"{provenance.program()} {study}", description=description,
                          allow_abbrev=False)
+        # a value that starts with a minus and a digit is a value ("--alpha -1:1:3", a range,
+        # was read as an unknown flag, "expected one argument", naming neither the value nor
+        # its range: an audit, 2026-12); argparse's own rule takes plain numbers alone
+        self._negative_number_matcher = re.compile(r"^-\.?\d")
         self.quick_defaults: Dict[str, tuple] = {}
         self.set_defaults(study=study)
         super().add_argument("--out", default=None, metavar="DIR",

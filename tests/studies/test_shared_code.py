@@ -37,6 +37,18 @@ def test_an_out_of_blanks_is_an_empty_folder_name(no_compute, tmp_path, capsys, 
     assert not (tmp_path / "  ").exists()
 
 
+@pytest.mark.parametrize("value", ["-1:1:3", "-1", "-.5"])
+def test_a_value_that_starts_with_a_minus_is_refused_for_its_range(no_compute, tmp_path, capsys,
+                                                                    value):
+    """"--alpha -1:1:3" was read as an unknown flag: argparse's "expected one argument" named
+    neither the value nor the range (an audit, 2026-12); the value's own check now speaks."""
+    assert studies_main(["sweep", "--quick", "--alpha", value, "--out",
+                         str(tmp_path / "out")]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and "--alpha: alpha must be a real number in [0, 10], got -" \
+        in error, error
+
+
 @pytest.mark.parametrize("name", ["", "  "])
 def test_a_redraw_of_an_empty_folder_name_is_refused(no_compute, tmp_path, capsys, monkeypatch,
                                                      name):
