@@ -585,12 +585,12 @@ def tell_batch_work(args, config: SolverConfig, instances: int,
     """Refuse (StudyArgumentError, with the estimate) a `run_batch` of `instances` robots, each
     run for `run_length(args)` with this solver, past what can finish on this machine
     (`check_robot_steps` on `work_arch`; not with a Dask --scheduler, whose machines share
-    it), and warn of it (`LongWorkWarning`, with the hours) when long, before the
-    study builds them: `run_batch` tells its estimate only once it has them, and a product
-    near the studies' million instances took about two minutes to build (an audit, 2026-12);
-    its chunks, each checked alone, started a sweep of 13 years with a warning (an audit,
-    2026-12). `periods`: the actuation periods, s,
-    that the instances share equally (a swept period's values; default: the model's).
+    it), and warn of it (`LongWorkWarning`, with the hours) when long, before the study builds
+    them: `run_batch` tells its estimate only once it has them, and a product near the
+    studies' million instances took about two minutes to build (an audit, 2026-12); its
+    chunks, each checked alone, started a sweep of 13 years with a warning (an audit,
+    2026-12). `periods`: the actuation periods, s, that the instances share equally (a swept
+    period's values; default: the model's).
     `replicas`: instances simulated per robot (sensitivities add two per parameter).
     Returns the robot-steps (`fewest_steps` of each run, `run_batch`'s count). Run the batch
     within `batch_work_told()`, which keeps it from telling the same hours again."""

@@ -231,8 +231,8 @@ def train(env_kwargs: dict, num_envs: int, timesteps: int, seed: int, settings: 
     firing_prior: None (SB3's start) or the untrained policy's probability of firing each
     actuator. `keep(model, table)`: called before each rollout but the first with the model
     updated from the rollouts so far and their table, so that an interrupted training keeps
-    them (a Ctrl-C after half an hour lost all
-    of it: an audit, 2026-12). `progress`: a bar of the timesteps trained (robot-periods)."""
+    them (a Ctrl-C after half an hour lost all of it: an audit, 2026-12). `progress`: a bar of
+    the timesteps trained (robot-periods)."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback

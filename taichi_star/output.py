@@ -214,18 +214,20 @@ CSV_COMPRESSIONS = {".gz": "gzip", ".bz2": "bz2", ".xz": "xz", ".zip": "zip"}
 (and `read_csv` reads them back by the same suffix): "run.csv.gz" held plain text, which
 `read_csv` refused as a damaged gzip file (an audit, 2026-12). pandas' other suffixes (.zst,
 .tar) are refused: their readers are not in the standard library."""
-CSV_REFUSED_SUFFIXES = (".zst", ".tar", ".tgz")
+CSV_REFUSED_SUFFIXES = (".zst", ".tar", ".tar.gz", ".tar.bz2", ".tar.xz")
+"""pandas' names of the compressions `to_csv` refuses ("x.tar.gz" is a tar archive to pandas,
+not a gzip stream)."""
 
 
 def csv_bytes(frame: pd.DataFrame, path: Path) -> bytes:
     """The bytes of `frame` as CSV, compressed as `path`'s suffix says (`CSV_COMPRESSIONS`),
     the same bytes for the same table (a gzip stream's time stamp 0); ValueError naming the
     path for a suffix of pandas' that `to_csv` does not write."""
-    suffix = path.suffix.lower()
-    if suffix in CSV_REFUSED_SUFFIXES:
+    refused = [end for end in CSV_REFUSED_SUFFIXES if path.name.lower().endswith(end)]
+    if refused:
         raise ValueError(f"path {str(path)!r}: to_csv writes plain CSV or CSV compressed as "
-                         f"{', '.join(CSV_COMPRESSIONS)} say, not {suffix}")
-    method = CSV_COMPRESSIONS.get(suffix)
+                         f"{', '.join(CSV_COMPRESSIONS)} say, not {refused[-1]}")
+    method = CSV_COMPRESSIONS.get(path.suffix.lower())
     if method is None:
         return frame.to_csv(index=False).encode()
     options = {"gzip": {"mtime": 0}, "zip": {"archive_name": path.stem}}.get(method, {})

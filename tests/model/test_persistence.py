@@ -497,9 +497,9 @@ def test_a_csv_named_compressed_is_compressed_as_pandas_reads_it(results, tmp_pa
 
 
 def test_a_csv_named_in_a_compression_to_csv_does_not_write_is_refused(results, tmp_path):
-    """pandas' other suffixes (.zst, .tar) are refused before anything is written, naming the
-    path and the suffixes written."""
-    for name in ("r.csv.zst", "r.csv.tar", "r.tgz"):
+    """pandas' other suffixes (.zst, .tar, a tar archive compressed) are refused before
+    anything is written, naming the path and the suffixes written."""
+    for name in ("r.csv.zst", "r.csv.tar", "r.csv.tar.gz", "R.TAR.XZ"):
         with pytest.raises(ValueError, match=rf"path '.*{re.escape(name)}': to_csv writes plain "
                                              rf"CSV or CSV compressed as .gz, .bz2, .xz, .zip "
                                              rf"say"):
