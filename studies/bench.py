@@ -7,6 +7,7 @@
                             [--presets paper,accurate] [--accurate-duration 3.15]
                             [--gpu-block-dims 64] [--layouts instance_minor,instance_major]
                             [--kernel-optimisation on,off] [--lanes 1,8]
+                            [--meshes 2,6,18,48,144,400]
 
 Gait A1+A3, the paper's discretisation (N = 193 nodes), h = 1 ms, implicit Euler. For every batch
 size B and precision: a fresh engine is compiled (its first launch, timed apart as `compile_s`),
@@ -37,6 +38,11 @@ assemble the Jacobian and factor only `factorisations_mean` times a step); the p
 "processes": the end-to-end throughput of `run_batch` on N local worker processes (one chunk
 per worker) at one batch size, f64 (worker processes are how a machine with few cores is used:
 Taichi's own CPU threads gained only ~1.25× on two cores).
+
+Section "mesh" (`--meshes`, n_arc values; off by default): the benchmark robot on other meshes,
+measured as the B sweep is at --scenario-batch instances (the first precision): what a step
+costs against the robot's nodes (`n_nodes`), the rule the work estimates weigh a step by
+(`timegrid.step_work`).
 
 "Skip what a scene does not need": at one batch size, the same measurement with all terms and
 with α = 0 (no jet), C_a = 0 (no added mass), drag 0 (rod and cylinder drag off), gait "none"
@@ -93,8 +99,8 @@ modes' calls in the same rounds.
 In both sections `time_to_first_step_s` is the first call's (one step, compilation included).
 
 Writes `bench.csv` (`bench_gpu.csv` for --arch gpu): one row per measurement; `section` is
-"batch" (B sweep), "skip" (terms at one B), "plain", "sensitivities", "processes" or "compile"
-(cold/warm cache); columns: machine,
+"batch" (B sweep), "skip" (terms at one B), "mesh" (n_arc at one B), "plain",
+"sensitivities", "processes" or "compile" (cold/warm cache); columns: machine,
 cpu_model, cores, gpu, gpu_driver, arch, preset, layout, block_dim, lanes (the CPU's vector
 lanes per group of instances, `--lanes`), section, scenario, terms, batch_size, precision, n_nodes, dt_s,
 gait, warmup_steps, steps, repeats, commit, timestamp, import_s, setup_s, compile_s,
@@ -127,7 +133,7 @@ from typing import List
 import numpy as np
 import pandas as pd
 
-from taichi_star import SolverConfig, StarParams, simulate
+from taichi_star import STAR_RANGES, SolverConfig, StarParams, simulate
 from taichi_star.batch import MAX_LOCAL_WORKERS, LocalProcesses, run_batch
 from taichi_star.profiling import (EngineProfile, device_bandwidth, interleaved_rounds,
                                    matmul_gflops, step_phases)
@@ -485,6 +491,10 @@ def build_parser():
     parser.add_argument("--scenarios", default=",".join(SCENARIOS), quick=QUICK_SCENARIOS,
                         help=f"comma list of {', '.join(SCENARIOS)} measured at the scenario "
                              f"batch size in the first precision, or none")
+    parser.add_argument("--meshes", default="none", quick="none",
+                        help="comma list of n_arc for the mesh section (the benchmark robot on "
+                             "other meshes at --scenario-batch instances, the first precision), "
+                             "or none to skip it")
     parser.add_argument("--scenario-batch", type=int, default=SCENARIO_BATCH,
                         quick=QUICK_SCENARIO_BATCH,
                         help=f"batch size of the scenarios, at most {cli.MAX_BATCH_SIZE}")
@@ -575,6 +585,16 @@ def optional_list(text: str, flag: str, parse):
     return [] if text.strip().lower() == "none" else parse(text, flag)
 
 
+def parse_meshes(text: str, flag: str) -> List[int]:
+    """A comma list of n_arc values, each within StarParams' range for n_arc."""
+    lowest, highest, _ = STAR_RANGES["n_arc"]
+    values = cli.parse_counts(text, flag, highest)
+    if min(values) < lowest:
+        raise cli.StudyArgumentError(f"{flag}: every n_arc must be in [{lowest}, {highest}], "
+                                     f"got {min(values)}")
+    return values
+
+
 def parse_args(argv):
     """Parsed and validated arguments (StudyArgumentError before any computation)."""
     args = cli.parse(build_parser(), argv)
@@ -584,6 +604,7 @@ def parse_args(argv):
     args.plain_jacobians = solver_choices(args.plain_jacobians, "--plain-jacobians", "jacobian")
     args.scenarios = optional_list(args.scenarios, "--scenarios",
                                    lambda text, flag: cli.parse_choices(text, flag, SCENARIOS))
+    args.meshes = optional_list(args.meshes, "--meshes", parse_meshes)
     args.workers_list = optional_list(
         args.workers_list, "--workers-list",
         lambda text, flag: cli.parse_counts(text, flag, MAX_LOCAL_WORKERS))
@@ -632,7 +653,16 @@ def parse_args(argv):
                     f"robots, {WARMUP_STEPS} warm-up + --steps {args.steps}, --repeats "
                     f"{args.repeats}, {settings} setting(s))",
                     (WARMUP_STEPS + args.steps) * args.repeats * settings, sum(args.batch_sizes),
-                    cli.work_arch(args))
+                    cli.work_arch(args),
+                    np.mean([StarParams.preset(preset).n_nodes for preset in args.presets]))
+    if args.meshes:  # the mesh section's robots weigh their nodes (`timegrid.step_work`)
+        cli.check_steps(f"the mesh section (--meshes {len(args.meshes)} n_arc value(s) × "
+                        f"--scenario-batch {args.scenario_batch} robots, {WARMUP_STEPS} warm-up + "
+                        f"--steps {args.steps}, --repeats {args.repeats})",
+                        (WARMUP_STEPS + args.steps) * args.repeats * len(args.meshes),
+                        args.scenario_batch, cli.work_arch(args),
+                        np.mean([StarParams.node_count(n_arc, StarParams().n_limb)
+                                 for n_arc in args.meshes]))
     args.cache_probe = not (args.no_cache_probe or args.quick)
     return args
 
@@ -714,6 +744,12 @@ def run_bench(args, on_table=None) -> pd.DataFrame:
                 add({"section": "skip", "scenario": scenario, "batch_size": args.scenario_batch,
                      "precision": precision, "kernel_optimisation": on_off(optimise),
                      **figures})
+            for n_arc in args.meshes:
+                figures = measure([StarParams(gait=GAIT, n_arc=n_arc)] * args.scenario_batch,
+                                  args.arch, precision, args.steps, args.repeats, profile_seconds)
+                add({"section": "mesh", "scenario": f"n_arc_{n_arc}",
+                     "batch_size": args.scenario_batch, "precision": precision,
+                     "kernel_optimisation": on_off(optimise), **figures})
     Runtime.current().configure_compiler()
     if args.plain_call and not gpu:
         for lanes in args.lanes:

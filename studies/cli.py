@@ -366,24 +366,27 @@ def work_arch(args) -> Optional[str]:
     return None if getattr(args, "scheduler", None) else getattr(args, "arch", None)
 
 
-def check_steps(what: str, steps: float, batch=None, arch: Optional[str] = None):
+def check_steps(what: str, steps: float, batch=None, arch: Optional[str] = None,
+                nodes: Optional[float] = None):
     """StudyArgumentError (one line) unless `steps` time steps per instance (what `what` says
     gave them, e.g. "--cycles 3 (9.45 s) at dt = 0.001 s") stay within the step counter and,
-    with `batch` instances, their robot-steps within what can finish on `arch` (`work_arch`;
-    `check_work`, which also warns with an estimate when it is long)."""
+    with `batch` instances of robots of `nodes` nodes (None: the paper robot's), their
+    robot-steps within what can finish on `arch` (`work_arch`; `check_work`, which also warns
+    with an estimate when it is long)."""
     try:
-        check_work(what, steps, batch, arch)
+        check_work(what, steps, batch, arch, nodes)
     except ValueError as error:
         raise StudyArgumentError(str(error)) from None
 
 
-def check_robot_steps(what: str, robot_steps: float, arch: Optional[str] = None):
+def check_robot_steps(what: str, robot_steps: float, arch: Optional[str] = None,
+                      nodes: Optional[float] = None):
     """`check_steps` of a whole run's robot-steps, every batch together (what `what` says gave
-    them): refused past what can finish on `arch`, estimated when long. A study whose batches
-    each stay under the warning gives their sum here (a grid of 3.6e10 robot-steps started
-    without a word: an audit, 2026-12)."""
+    them), of robots of `nodes` nodes (`check_steps`): refused past what can finish on `arch`,
+    estimated when long. A study whose batches each stay under the warning gives their sum
+    here (a grid of 3.6e10 robot-steps started without a word: an audit, 2026-12)."""
     # as one-step instances: check_work counts round(steps) × batch, the sum exactly
-    check_steps(what, 1, max(round(robot_steps), 1), arch)
+    check_steps(what, 1, max(round(robot_steps), 1), arch, nodes)
 
 
 def check_length(length: str, duration_s: float, step_s: float, step_name: str):
@@ -458,16 +461,17 @@ def numeric_columns(table: pd.DataFrame, columns: Sequence[str], path, flag: str
 
 def check_run(length: str, duration_s: float, config: SolverConfig,
               record_interval_s: float = 0.0, batch: Optional[int] = None,
-              arch: Optional[str] = None):
+              arch: Optional[str] = None, nodes: Optional[float] = None):
     """`check_steps` of a run of duration_s (s, what `length` says, e.g. "--cycles 3 +
     --glide-cycles 4 (22 s)") with this solver and records every record_interval_s (s; 0 =
     none), counted by the library's rule (`fewest_steps`: the fixed steps; adaptive ones at
     dt_max, or one per record where records are closer), so that the command line refuses what
     the library would, before any folder is made; and at least one fixed step. With `batch`
     (the instances of such runs a study makes) their robot-steps too: refused, or estimated
-    when long (`check_work`), within what can finish on `arch` (`work_arch`)."""
+    when long (`check_work`), within what can finish on `arch` (`work_arch`), for robots of
+    `nodes` nodes (None: the paper robot's)."""
     steps, bound = fewest_steps(config, duration_s, record_interval_s)
-    check_steps(f"{length} at {bound}", steps, batch, arch)
+    check_steps(f"{length} at {bound}", steps, batch, arch, nodes)
     if not config.adaptive:
         check_one_step(length, duration_s, config.dt)
 
@@ -581,7 +585,8 @@ def driving(args) -> tuple:
 
 
 def tell_batch_work(args, config: SolverConfig, instances: int,
-                    periods: Sequence[float] = (), replicas: int = 1) -> float:
+                    periods: Sequence[float] = (), replicas: int = 1,
+                    nodes: Optional[float] = None) -> float:
     """Refuse (StudyArgumentError, with the estimate) a `run_batch` of `instances` robots, each
     run for `run_length(args)` with this solver, past what can finish on this machine
     (`check_robot_steps` on `work_arch`; not with a Dask --scheduler, whose machines share
@@ -592,6 +597,8 @@ def tell_batch_work(args, config: SolverConfig, instances: int,
     2026-12). `periods`: the actuation periods, s, that the instances share equally (a swept
     period's values; default: the model's).
     `replicas`: instances simulated per robot (sensitivities add two per parameter).
+    `nodes`: the robots' nodes, their mean where the batch has several meshes (`mean_nodes`;
+    None: the paper robot's).
     Returns the robot-steps (`fewest_steps` of each run, `run_batch`'s count). Run the batch
     within `batch_work_told()`, which keeps it from telling the same hours again."""
     periods = list(periods) or [base_params(args).period]
@@ -604,10 +611,19 @@ def tell_batch_work(args, config: SolverConfig, instances: int,
         length += f", each simulated {replicas} times over for its sensitivities"
     what = f"the batch of {instances:,} instances ({length})"
     if getattr(args, "scheduler", None):  # a cluster's machines share it: no one machine's bound
-        warn_long_work(what, robot_steps)
+        warn_long_work(what, robot_steps, nodes)
     else:
-        check_robot_steps(what, robot_steps, work_arch(args))
+        check_robot_steps(what, robot_steps, work_arch(args), nodes)
     return robot_steps
+
+
+def mean_nodes(base: StarParams, axes: Mapping[str, Sequence]) -> float:
+    """The mean nodes of the robots of a product of `axes` ({field: values}, `param_product`'s)
+    on top of `base`: over the swept n_arc and n_limb, `base`'s where not swept (every
+    combination of a product takes each mesh equally often, whatever else is swept)."""
+    n_arc, n_limb = (np.asarray(axes.get(name, [getattr(base, name)]), dtype=float)
+                     for name in ("n_arc", "n_limb"))
+    return float(StarParams.node_count(n_arc[:, None], n_limb[None, :]).mean())
 
 
 @contextlib.contextmanager

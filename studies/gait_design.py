@@ -562,7 +562,8 @@ def main(argv=None):
     cli.check_run(f"--cycles {args.cycles} ({args.cycles * base.period:.3g} s) for the study's "
                   f"{instances:,} instances (each start's --iterations {args.iterations} + 3 "
                   f"evaluations × {per_evaluation}, the sample, the synchronous gaits)",
-                  args.cycles * base.period, solver, batch=instances, arch=cli.work_arch(args))
+                  args.cycles * base.period, solver, batch=instances, arch=cli.work_arch(args),
+                  nodes=base.n_nodes)
     fastest = usable.loc[usable["step_mm"].idxmax()]
     direction = float(fastest["direction_deg"]) if args.direction is None else args.direction
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},

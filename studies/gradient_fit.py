@@ -1267,7 +1267,7 @@ def main(argv=None):
     cli.check_run(f"--train-cycles {args.train_cycles} and --validate-cycles "
                   f"{args.validate_cycles} ({cycles:g} cycles, {cycles * base.period:.3g} s; "
                   f"{total:,} instances)", cycles * base.period, solver, batch=total,
-                  arch=cli.work_arch(args))
+                  arch=cli.work_arch(args), nodes=base.n_nodes)
     for box in boxes.values():  # every corner of each group of CORNER_GROUP axes (2^20 is
         for group in range(0, len(box), CORNER_GROUP):  # too many; the groups share no limit)
             identify.check_box(box[group:group + CORNER_GROUP], base, "--sets")

@@ -420,7 +420,7 @@ def main(argv=None):
     if args.policy is None:
         cli.check_robot_steps(f"--timesteps {args.timesteps} periods of training",
                               args.timesteps * round(base.period / solver.dt),
-                              cli.work_arch(args))
+                              cli.work_arch(args), base.n_nodes)
     training_settings = {"ppo": settings, "timesteps": args.timesteps,
                          "num_envs": args.num_envs, "seed": args.seed,
                          "max_episode_steps": args.max_episode_steps,

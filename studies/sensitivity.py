@@ -216,7 +216,7 @@ def main(argv=None):
     # the batch's hours before its instances are built (as sweep: a million took minutes)
     periods = [values[:, d] for d, spec in enumerate(box) if spec.name == "period"]
     cli.tell_batch_work(args, solver_config, len(units) * len(gaits),
-                        periods=periods[0] if periods else ())
+                        periods=periods[0] if periods else (), nodes=base.n_nodes)
     params = identify.box_params(box, values, base, gaits)
     # each axis by its own label and columns: two elements of one field (actuator_gains[1],
     # actuator_gains[2]) shared the field's name, and one's range and column overwrote the

@@ -217,12 +217,12 @@ def plan(args):
     per_batch = len(gaits) * len(stiffness) * len(alphas) * len(added)
     grid_length = (f"--quick ({QUICK_DURATION_S:g} s)" if quick
                    else f"--cycles {args.cycles:g} of each period")
-    cli.check_robot_steps(f"the grid of {per_batch * len(runs):,} instances ({grid_text}) for "
-                          f"{grid_length}", per_batch * sum(run["n_steps"] for run in runs),
-                          cli.work_arch(args))
     field_axes = {"gait": gaits, "youngs_modulus": [f * BASE_MODULUS for f in stiffness],
                   "alpha": alphas, "added_mass_coeff": added, "period": periods}
     base = cli.base_params(args, field_axes)
+    cli.check_robot_steps(f"the grid of {per_batch * len(runs):,} instances ({grid_text}) for "
+                          f"{grid_length}", per_batch * sum(run["n_steps"] for run in runs),
+                          cli.work_arch(args), base.n_nodes)
     # each value on its own, named by its flag (the grid's refusal named none)
     cli.check_axis_values(
         field_axes, base,

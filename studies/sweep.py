@@ -253,7 +253,8 @@ def main(argv=None):
                   else cli.sensitivity_parameters(args.sensitivities, "--sensitivities",
                                                   heights=cli.heights_in_all(base)))
     cli.tell_batch_work(args, solver, size, periods=axes.get("period", ()),
-                        replicas=instances_per_instance(len(parameters)))
+                        replicas=instances_per_instance(len(parameters)),
+                        nodes=cli.mean_nodes(base, axes))
     grid = cli.param_product(axes, base=base, flags=axis_flags(args, axes))
     try:
         # before the output folder: where the grid's robots have no derivative (f32, a

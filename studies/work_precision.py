@@ -74,6 +74,7 @@ import pandas as pd
 import taichi_star
 from taichi_star import SolverConfig, StarParams, fewest_steps, metrics
 from taichi_star.profiling import interleaved_rounds
+from taichi_star.timegrid import weighted_nodes
 
 from . import cli, provenance
 
@@ -149,6 +150,11 @@ class Config:
         """One instance per gait."""
         return [StarParams.preset(MODEL_PRESETS[self.model], gait=g, n_arc=self.n_arc)
                 for g in gaits]
+
+    @property
+    def nodes(self) -> int:
+        """The robot's nodes (`StarParams.n_nodes`)."""
+        return StarParams.preset(MODEL_PRESETS[self.model], n_arc=self.n_arc).n_nodes
 
     @property
     def preset_mesh(self) -> int:
@@ -285,15 +291,19 @@ def check_whole_run(configs, n_gaits: int, timing_batch: int, duration_s: float,
     and the presets' timing (`time_presets`: timing_batch instances, a one-step call and
     TIMING_ROUNDS runs each). Adaptive steps counted at their fewest (`fewest_steps`). Each
     call stayed under the warning: --gaits all --cycles 1000 started 5.6e10 robot-steps without
-    a word (an audit, 2026-12). `arch`: whose bound (`cli.work_arch`)."""
+    a word (an audit, 2026-12), each configuration's weighed by its mesh (`nodes`; the space
+    ladder's finest, n_arc 144, six times the paper robot's). `arch`: whose bound
+    (`cli.work_arch`)."""
     def steps(solver):
         return fewest_steps(solver, duration_s, 0.0)[0]
-    presets = [preset_config(model).solver for model in MODEL_PRESETS]
-    robot_steps = (n_gaits * sum(1 + steps(config.solver) for config in configs)
-                   + timing_batch * sum(1 + TIMING_ROUNDS * steps(solver) for solver in presets))
+    presets = [preset_config(model) for model in MODEL_PRESETS]
+    # (robot-steps, nodes) of each part: the configurations' batches, the presets' timing
+    parts = ([(n_gaits * (1 + steps(config.solver)), config.nodes) for config in configs]
+             + [(timing_batch * (1 + TIMING_ROUNDS * steps(config.solver)), config.nodes)
+                for config in presets])
     cli.check_robot_steps(f"{len(configs)} configurations × {n_gaits} gait(s) and the presets' "
                           f"timing at {timing_batch} instances × {TIMING_ROUNDS} rounds, {length}",
-                          robot_steps, arch)
+                          sum(count for count, _ in parts), arch, weighted_nodes(parts))
 
 
 def run_config(config: Config, gaits, duration_s, arch):

@@ -20,8 +20,8 @@ import numpy as np
 from .checks import check_finite, check_flag, warn_user
 from .params import SolverConfig
 from .timegrid import (ESTIMATE_ROBOT_STEPS_PER_S, MAX_STEPS_PER_INSTANCE, STEPS_PER_LAUNCH,
-                       check_duration, check_steps, check_work, multiples_within, steps_in,
-                       whole_steps)
+                       check_duration, check_steps, check_work, multiples_within, step_work,
+                       steps_in, whole_steps)
 
 
 @dataclass(frozen=True)
@@ -98,17 +98,19 @@ estimated at this many wall seconds or more (its fewest robot-steps at
 run said nothing about where it was unless asked (an audit, 2026-12)."""
 
 
-def shows_progress(progress, robot_steps: float) -> bool:
+def shows_progress(progress, robot_steps: float, nodes: Optional[float] = None) -> bool:
     """Whether a run of `robot_steps` (its fewest: `fewest_steps` × its instances, replicas
-    included) shows a progress bar: `progress` if a bool (ValueError otherwise), for None
-    whether the run is estimated at AUTO_PROGRESS_S or more."""
+    included) of robots of `nodes` nodes (None: the paper robot's; `timegrid.step_work`) shows
+    a progress bar: `progress` if a bool (ValueError otherwise), for None whether the run is
+    estimated at AUTO_PROGRESS_S or more."""
     if progress is None:
-        return robot_steps / ESTIMATE_ROBOT_STEPS_PER_S >= AUTO_PROGRESS_S
+        return robot_steps * step_work(nodes) / ESTIMATE_ROBOT_STEPS_PER_S >= AUTO_PROGRESS_S
     return check_flag("progress", progress)
 
 
 def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float, batch: int,
-              steps_taken: Optional[int] = None, arch: Optional[str] = None):
+              steps_taken: Optional[int] = None, arch: Optional[str] = None,
+              nodes: Optional[int] = None):
     """ValueError before any compute unless a run of `batch` instances for duration_s (s) with
     records every record_interval_s (s; 0 = none) can go on `arch` (None: on some machine):
     at most MAX_STEPS_PER_INSTANCE steps, and robot-steps that such a machine finishes in
@@ -118,7 +120,8 @@ def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float,
     limit), with
     adaptive steps a record interval of at least dt_min, and with fixed steps at least one step
     and a record interval of whole steps. A record interval longer than the run warns: no
-    record falls after its start."""
+    record falls after its start. `nodes`: the robots' nodes (None: the paper robot's), which
+    weigh their steps in the work (`timegrid.step_work`)."""
     after = "" if steps_taken is None else f"after the {steps_taken} steps taken"
     taken = steps_taken or 0
     if solver.adaptive:
@@ -133,7 +136,7 @@ def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float,
                              f"{record_interval_s!r}")
         fewest, bound = fewest_steps(solver, duration_s, record_interval_s)
         check_work(f"duration_s = {duration_s:g} s at {bound} (the adaptive lower bound"
-                   f"{', ' + after if after else ''})", taken + fewest, batch, arch)
+                   f"{', ' + after if after else ''})", taken + fewest, batch, arch, nodes)
         most = taken + duration_s / solver.dt_min
         if not most <= MAX_STEPS_PER_INSTANCE:
             warn_user(f"duration_s = {duration_s:g} s at dt_min = {solver.dt_min:g} s could "
@@ -143,7 +146,7 @@ def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float,
     else:
         check_work(f"duration_s = {duration_s:g} s at dt = {solver.dt:g} s"
                    f"{f' ({after})' if after else ''}", taken + duration_s / solver.dt, batch,
-                   arch)
+                   arch, nodes)
         check_duration(duration_s, solver.dt)
         if record_interval_s:
             check_steps("record_interval_s", record_interval_s, solver.dt)

@@ -113,7 +113,7 @@ def check_lookahead(goals_mm, params: StarParams = StarParams(),
     check_work(f"max_cycles = {max_cycles} decisions of {1 + settle_cycles} periods of "
                f"{params.period:g} s, then {settle_cycles} of coasting, at {step:g}-s steps",
                (max_cycles * (1 + settle_cycles) + settle_cycles) * params.period / step,
-               len(goals) * (1 + len(masks)), arch)
+               len(goals) * (1 + len(masks)), arch, params.n_nodes)
     return goals, names, masks
 
 

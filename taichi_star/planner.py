@@ -518,7 +518,8 @@ def check_drive(goals_mm, params: StarParams, solver: SolverConfig, tolerance_mm
     step, step_name = (solver.dt_max, "dt_max") if solver.adaptive else (solver.dt, "dt")
     check_work(f"max_cycles + settle_cycles = {max_cycles + settle_cycles} cycles of "
                f"{period:g} s at {step_name} = {step:g} s",
-               (max_cycles + settle_cycles) * period / step, len(goals) * len(MODES))
+               (max_cycles + settle_cycles) * period / step, len(goals) * len(MODES),
+               nodes=params.n_nodes)
     if whole_steps(period, solver.dt) is None or \
             whole_steps(period / frames_per_cycle, solver.dt) is None:
         raise ValueError(f"period / frames_per_cycle must be a whole number of steps (dt = "

@@ -106,12 +106,12 @@ def _profile_phases(engine: ti.template(), phases: ti.i32, calls: ti.i32, time_s
                         engine.system.solve(b)
 
 
-def _check_steps(name: str, value, lowest: int, batch: int):
+def _check_steps(name: str, value, lowest: int, batch: int, nodes: int):
     """ValueError naming `name` unless `value` is an integer >= lowest and within the step
-    counter (`timegrid.check_work` for `batch` instances)."""
+    counter (`timegrid.check_work` for `batch` instances of `nodes` nodes)."""
     if not is_whole(value) or value < lowest:
         raise ValueError(f"{name} must be an integer >= {lowest}, got {value!r}")
-    check_work(f"{name} = {value}", value, batch)
+    check_work(f"{name} = {value}", value, batch, nodes=nodes)
 
 
 class EngineProfile:
@@ -210,7 +210,7 @@ class EngineProfile:
         """n_steps steps of every live instance, in launches of `simulate`'s size; finished
         (synchronised) when this returns. ValueError naming n_steps unless it is an integer >= 0
         within the step counter (`timegrid.check_work`)."""
-        _check_steps("n_steps", n_steps, 0, self.batch_size)
+        _check_steps("n_steps", n_steps, 0, self.batch_size, self.n_nodes)
         done = 0
         while done < n_steps:
             count = min(STEPS_PER_LAUNCH, n_steps - done)
@@ -253,10 +253,10 @@ class EngineProfile:
         an instance failed (the timing would not be valid). ValueError naming warmup_steps
         (an integer >= 0) or steps (>= 1) otherwise, or the two together past the step
         counter."""
-        _check_steps("warmup_steps", warmup_steps, 0, self.batch_size)
-        _check_steps("steps", steps, 1, self.batch_size)
+        _check_steps("warmup_steps", warmup_steps, 0, self.batch_size, self.n_nodes)
+        _check_steps("steps", steps, 1, self.batch_size, self.n_nodes)
         check_work(f"warmup_steps + steps = {warmup_steps + steps}", warmup_steps + steps,
-                   self.batch_size)
+                   self.batch_size, nodes=self.n_nodes)
         self.restart()
         self.advance(warmup_steps)
         iterations, factorisations = self.newton_iterations().sum(), self.factorisations().sum()

@@ -308,7 +308,8 @@ def validate_call(params, duration_s, solver, record_interval_s, record_shapes, 
         raise ValueError(f"solver must be a SolverConfig, got {type(solver).__name__}")
     check_precision(params, solver)
     record_interval_s = _check_seconds("record_interval_s", record_interval_s, allow_zero=True)
-    check_run(solver, duration_s, record_interval_s, len(params) * replicas, arch=arch)
+    check_run(solver, duration_s, record_interval_s, len(params) * replicas, arch=arch,
+              nodes=params[0].n_nodes)
     if check_flag("record_shapes", record_shapes) and record_interval_s == 0:
         raise ValueError("record_shapes needs record_interval_s > 0 (the spacing of the records)")
     check_tables_memory(params, duration_s, record_interval_s, record_shapes, replicas)
@@ -431,7 +432,7 @@ def simulate(params: Sequence[StarParams], duration_s: float, solver: SolverConf
                                                           record_interval_s, record_shapes,
                                                           steady_from_cycle, per_instance, arch)
     progress = shows_progress(progress, fewest_steps(solver, duration_s, record_interval_s)[0]
-                              * len(params) * per_instance)
+                              * len(params) * per_instance, params[0].n_nodes)
     tangents.check_directions(directions, params, solver, duration_s=duration_s)
     check_arch(arch)
     warn_off_grid_periods(off_grid_periods(params, duration_s, solver, steady_from_cycle), params,

@@ -446,9 +446,10 @@ class Simulator(NotCopied):
                              f"records), got {shown(record_interval_s)}")
         duration_s, record_interval_s = float(duration_s), float(record_interval_s)
         check_run(self.solver, duration_s, record_interval_s, self.model.batch_size,
-                  steps_taken=int(self._steps().max(initial=0)), arch=self.arch)
+                  steps_taken=int(self._steps().max(initial=0)), arch=self.arch,
+                  nodes=self.n_nodes)
         progress = shows_progress(progress, self.model.batch_size * fewest_steps(
-            self.solver, duration_s, record_interval_s)[0])  # the replicas counted too
+            self.solver, duration_s, record_interval_s)[0], self.n_nodes)  # replicas counted
         if record_interval_s:
             records = multiples_within(duration_s, record_interval_s)
             check_host_memory("record_interval_s", f"{records:,} records of "

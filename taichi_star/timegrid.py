@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 import os
-from typing import Optional, Tuple
+from typing import Optional, Sequence, Tuple
 
 import numpy as np
 from .checks import is_finite_real, is_real, is_whole, shown, warn_user
@@ -19,7 +19,8 @@ from .checks import is_finite_real, is_real, is_whole, shown, warn_user
 # the public names (docs/api.md), those the studies use among them (tests/test_layering.py)
 __all__ = ["nearest_interval", "interval_for_count", "whole_steps", "steps_in", "STEP_TOLERANCE",
            "MAX_STEPS_PER_INSTANCE", "REFUSE_ROBOT_STEPS", "refuse_robot_steps", "check_work",
-           "warn_long_work", "LongWorkWarning", "SteadySpeedWarning"]
+           "PAPER_NODES", "step_work", "weighted_nodes", "warn_long_work", "LongWorkWarning",
+           "SteadySpeedWarning"]
 
 STEP_TOLERANCE = 1e-9
 """Relative tolerance within which a time is taken to be a whole number of steps (and a
@@ -59,6 +60,51 @@ FASTEST_CPU_CORE_ROBOT_STEPS_PER_S = 2.5e5
 call with the lagged Jacobian at B = 512 on a 2-core Intel Xeon,
 results/bench_lagged/e67d242/bench.csv), a little over twice that for faster cores and f32.
 tests/unit/test_timegrid.py keeps it at least every CPU row's rate per core in results/."""
+PAPER_NODES = 193
+"""Nodes of the paper's robot (n_arc 18, n_limb 6: `StarParams.node_count`), whose steps the
+rates above count."""
+
+
+def step_work(nodes: Optional[float] = None) -> float:
+    """The work of one time step of a robot of `nodes` nodes, in steps of the paper's robot
+    (PAPER_NODES; None: that robot, 1.0): proportional to the nodes, as the engine's assembly,
+    banded factorisation and solve are. Measured (results/bench_meshes/bench.csv, section
+    "mesh", B = 64; tests/unit/test_timegrid.py keeps every row within 25 % of this rule), a
+    step of 65 nodes costs 0.28 of the paper robot's (the rule: 0.34) and one of 3,249 nodes
+    18.3 of them (the rule: 16.8).
+    The rates and bounds above count the paper robot's steps: a fine mesh (n_arc = 1000: 8,049
+    nodes, 42 times the work) was estimated and bounded as the paper robot (an audit, 2026-12).
+    A batch of several meshes gives its nodes as `weighted_nodes` does. ValueError naming
+    nodes unless a finite number >= 1 or None."""
+    if nodes is None:
+        return 1.0
+    if not is_finite_real(nodes) or nodes < 1:
+        raise ValueError(f"nodes must be a finite number >= 1 (a robot's nodes) or None, got "
+                         f"{shown(nodes)}")
+    return float(nodes) / PAPER_NODES
+
+
+def weighted_nodes(parts: Sequence[Tuple[float, float]]) -> Optional[float]:
+    """The nodes of a batch whose parts are (robot-steps, nodes) pairs: their mean weighted by
+    the robot-steps, which gives the batch's work (`step_work`); exactly the nodes where every
+    part has the same (no rounding of the paper robot's); None for no work."""
+    total = sum(steps for steps, _ in parts)
+    if not total:
+        return None
+    if len({nodes for _, nodes in parts}) == 1:
+        return parts[0][1]
+    return sum(steps * nodes for steps, nodes in parts) / total
+
+
+def _mesh_words(nodes: Optional[float]) -> str:
+    """What an estimate says of a mesh other than the paper robot's ("" for that one)."""
+    work = step_work(nodes)
+    if work == 1.0:
+        return ""
+    return (f" of robots of {nodes:,.0f} nodes{'' if float(nodes).is_integer() else ' on average'}"
+            f" (a step {work:.3g} times the work of one of the paper robot's {PAPER_NODES})")
+
+
 REFUSE_DAYS = 30
 REFUSE_ROBOT_STEPS = FASTEST_ROBOT_STEPS_PER_S * REFUSE_DAYS * 86400.0
 """A call of more robot-steps (9.3e12) is refused before any compute on any machine, with its
@@ -218,15 +264,17 @@ def interval_for_count(duration_s: float, count: int, dt: float) -> float:
 
 
 def check_work(name: str, steps: float, batch: Optional[int] = None,
-               arch: Optional[str] = None):
+               arch: Optional[str] = None, nodes: Optional[float] = None):
     """ValueError when `steps` (time steps per instance, a float estimate: it may be inf),
     rounded to whole steps as the drivers round a duration, is over MAX_STEPS_PER_INSTANCE;
     `name` says which arguments gave it (e.g. "duration_s = 1e9 s at dt = 0.001 s"), the
     message the estimate (times `batch`, the number of instances, if given) and the limit.
     A RuntimeWarning with the estimated wall time when steps × batch is over WARN_ROBOT_STEPS;
     ValueError with it past `refuse_robot_steps(arch)` (work no machine of `arch` measured
-    finishes in REFUSE_DAYS; `arch` None: no machine at all). ValueError naming `steps` (a real
-    number >= 0) or `batch` (an integer >= 1) otherwise."""
+    finishes in REFUSE_DAYS; `arch` None: no machine at all). `nodes`: the robots' nodes (None:
+    the paper robot's), whose steps weigh `step_work(nodes)` of the paper robot's in both
+    bounds and the estimates. ValueError naming `steps` (a real number >= 0), `batch` (an
+    integer >= 1) or `nodes` (`step_work`) otherwise."""
     # steps != steps: NaN, named as steps (it was named as `name`'s count; an audit, 2026-12),
     # without a conversion that 10**400 would overflow
     if not is_real(steps) or steps != steps or steps < 0:
@@ -239,6 +287,7 @@ def check_work(name: str, steps: float, batch: Optional[int] = None,
     if batch is not None and (not is_whole(batch)
                               or batch < 1):
         raise ValueError(f"batch must be an integer >= 1 (instances) or None, got {batch!r}")
+    work = step_work(nodes)
     if not (math.isfinite(steps) and round(steps) <= MAX_STEPS_PER_INSTANCE):
         total = "" if batch is None else \
             f" ({steps * batch:.3g} robot-steps for {batch} instance{'' if batch == 1 else 's'})"
@@ -249,17 +298,19 @@ def check_work(name: str, steps: float, batch: Optional[int] = None,
     limit = refuse_robot_steps(arch)
     # a CPU call was held to the H100's bound, so that work of years on this machine started
     # with a warning only (an audit, 2026-12)
-    if robot_steps > limit:
-        days = robot_steps / rate / 86400
-        years = robot_steps / ESTIMATE_ROBOT_STEPS_PER_S / (365.25 * 86400)
+    if robot_steps * work > limit:
+        days = robot_steps * work / rate / 86400
+        years = robot_steps * work / ESTIMATE_ROBOT_STEPS_PER_S / (365.25 * 86400)
         elsewhere = ("on a GPU (arch=\"gpu\"), " if limit < REFUSE_ROBOT_STEPS else "") + \
             "or a run_batch spread over several machines"
-        raise ValueError(f"{name} is {robot_steps:.3g} robot-steps: about {days:.3g} days even at "
-                         f"{rate:.3g} robot-steps/s ({rated}) and {years:.3g} years on a 2-core "
-                         f"CPU; the limit is {limit:.3g} robot-steps a "
-                         f"call ({REFUSE_DAYS} days at that rate): run fewer instances or a "
-                         f"shorter duration, {elsewhere}")
-    warn_long_work(name, robot_steps)
+        mesh = _mesh_words(nodes)
+        raise ValueError(f"{name} is {robot_steps:.3g} robot-steps{mesh}: about {days:.3g} days "
+                         f"even at {rate / work:.3g} robot-steps/s ({rated}"
+                         f"{'; divided by the work of a step' if mesh else ''}) and "
+                         f"{years:.3g} years on a 2-core CPU; the limit is {limit / work:.3g} "
+                         f"robot-steps a call ({REFUSE_DAYS} days at that rate): run fewer "
+                         f"instances or a shorter duration, {elsewhere}")
+    warn_long_work(name, robot_steps, nodes)
 
 
 class LongWorkWarning(RuntimeWarning):
@@ -278,13 +329,18 @@ class SteadySpeedWarning(RuntimeWarning):
     report them do)."""
 
 
-def warn_long_work(name: str, robot_steps: float):
+def warn_long_work(name: str, robot_steps: float, nodes: Optional[float] = None):
     """A LongWorkWarning with the estimated wall time when `robot_steps` (steps × instances,
-    a real number >= 0) is over WARN_ROBOT_STEPS; `name` says which arguments gave them. Of
+    a real number >= 0) of robots of `nodes` nodes (None: the paper robot's; `step_work`) are
+    over WARN_ROBOT_STEPS of the paper robot's work; `name` says which arguments gave them. Of
     kind "long_work" (a caller that tells a whole batch's hours keeps its parts' to itself:
     `told_by_caller`)."""
-    if robot_steps > WARN_ROBOT_STEPS:
-        hours = robot_steps / ESTIMATE_ROBOT_STEPS_PER_S / 3600
-        warn_user(f"{name} is {robot_steps:.3g} robot-steps: about {hours:.3g} h at "
-                  f"{ESTIMATE_ROBOT_STEPS_PER_S:g} robot-steps/s (on a 2-core CPU; a GPU or "
+    work = step_work(nodes)
+    if robot_steps * work > WARN_ROBOT_STEPS:
+        hours = robot_steps * work / ESTIMATE_ROBOT_STEPS_PER_S / 3600
+        mesh = _mesh_words(nodes)
+        rate = f"{ESTIMATE_ROBOT_STEPS_PER_S / work:.3g}" if mesh else \
+            f"{ESTIMATE_ROBOT_STEPS_PER_S:g}"
+        warn_user(f"{name} is {robot_steps:.3g} robot-steps{mesh}: about {hours:.3g} h at "
+                  f"{rate} robot-steps/s (on a 2-core CPU; a GPU or "
                   f"more cores run faster)", LongWorkWarning, kind="long_work")

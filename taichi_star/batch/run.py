@@ -22,7 +22,7 @@ from ..simulation import SimulationResult, call_arguments, warn_about_ok_instanc
 from .executors import DEFAULT_RETRIES, Executor, InProcess, LocalProcesses, check_retries
 from .store import (RunStore, RunStoreError, StoredRun, current_defaults, read_stored,
                     run_definition)
-from .tasks import batch_robot_steps, plan_chunks
+from .tasks import batch_nodes, batch_robot_steps, plan_chunks
 
 DEFAULT_CHUNK_SIZE = 2048
 """Instances per chunk on the CPU: one compiled engine's worth, large enough to keep a process
@@ -133,7 +133,7 @@ def run_batch(params: Sequence[StarParams], duration_s: Optional[float] = None, 
             warn_user(f"{executor.n_workers} worker processes for {len(todo)} chunk(s) to "
                       f"compute: {executor.n_workers - len(todo)} stay idle (chunk_size="
                       f"{chunk_size}; a smaller one gives each worker a share of the batch)")
-        progress = shows_progress(progress, batch_robot_steps(todo))
+        progress = shows_progress(progress, batch_robot_steps(todo), batch_nodes(todo))
         # a bar of chunks where the chunks' own bars are not shown (worker processes), even
         # for one chunk: nothing was shown there (an audit, 2026-12)
         if progress and (len(tasks) > 1 or not isinstance(executor, InProcess)):

@@ -25,7 +25,7 @@ from ..runtime import RECORDS_REMEDY, check_arch, check_host_memory
 from .. import sensitivities as tangents
 from ..simulation import (cycles_cut_short, off_grid_periods, simulate, tables_bytes,
                           validate_call, warn_cycles_cut_short, warn_off_grid_periods)
-from ..timegrid import steps_in, warn_long_work, warn_off_grid
+from ..timegrid import steps_in, warn_long_work, warn_off_grid, weighted_nodes
 
 
 @dataclass(frozen=True)
@@ -169,11 +169,22 @@ def warn_off_grid_cycles(tasks: Sequence[ChunkTask], cycles: float, dt: float):
             return
 
 
+def chunk_robot_steps(task: ChunkTask) -> float:
+    """The fewest robot-steps of a chunk (`driver.fewest_steps` × its instances, their
+    sensitivities' replicas counted)."""
+    return len(task.params) * task.replicas * fewest_steps(task.solver, task.duration_s,
+                                                           task.record_interval_s)[0]
+
+
 def batch_robot_steps(tasks: Sequence[ChunkTask]) -> float:
-    """The fewest robot-steps of a batch's chunks together (`driver.fewest_steps` of each
-    chunk × its instances, their sensitivities' replicas counted)."""
-    return sum(len(task.params) * task.replicas * fewest_steps(task.solver, task.duration_s,
-                                               task.record_interval_s)[0] for task in tasks)
+    """The fewest robot-steps of a batch's chunks together (`chunk_robot_steps`)."""
+    return sum(chunk_robot_steps(task) for task in tasks)
+
+
+def batch_nodes(tasks: Sequence[ChunkTask]) -> Optional[float]:
+    """The robots' nodes of a batch's chunks (`timegrid.weighted_nodes` by their robot-steps);
+    None for no work."""
+    return weighted_nodes([(chunk_robot_steps(task), task.params[0].n_nodes) for task in tasks])
 
 
 def check_batch_work(tasks: Sequence[ChunkTask], instances: int):
@@ -183,7 +194,8 @@ def check_batch_work(tasks: Sequence[ChunkTask], instances: int):
     it gathers, its summary and records (`simulation.tables_bytes` of each chunk;
     `runtime.check_host_memory`: a million instances recorded every millisecond for three
     cycles are 1.4 TiB)."""
-    warn_long_work(f"the batch of {instances:,} instances", batch_robot_steps(tasks))
+    warn_long_work(f"the batch of {instances:,} instances", batch_robot_steps(tasks),
+                   batch_nodes(tasks))
     if not tasks:
         return
     recorded = tasks[0].record_interval_s

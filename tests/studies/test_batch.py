@@ -450,6 +450,29 @@ def test_a_sweep_tells_its_batchs_hours_once_before_it_builds_the_instances(
     assert table["duration_s"].tolist() == [0.5, 1.0]
 
 
+def test_a_batch_of_several_meshes_weighs_each_chunks_steps_by_its_nodes(monkeypatch):
+    """run_batch's estimate of a batch of several meshes: the nodes of its chunks weighted by
+    their robot-steps, which gives the batch's work exactly (a step's work is proportional to
+    the nodes: `timegrid.step_work`). One cycle of 0.5 s at n_arc 18 (193 nodes, 500 steps)
+    and of 1 s at n_arc 48 (433 nodes, 1,000 steps): 353 nodes; one robot of 193 and two of
+    201 nodes for the same time: 198.3, said "on average"."""
+    from taichi_star import timegrid
+    from taichi_star.batch.tasks import batch_nodes, batch_robot_steps, check_batch_work
+
+    tasks = plan_chunks([ts.StarParams(period=0.5), ts.StarParams(n_arc=48, period=1.0)],
+                        cycles=1)
+    assert batch_robot_steps(tasks) == 1500 and batch_nodes(tasks) == 353.0
+    tasks = plan_chunks([ts.StarParams(), ts.StarParams(n_arc=19), ts.StarParams(n_arc=19)],
+                        cycles=1)
+    assert batch_nodes(tasks) == pytest.approx((193 + 2 * 201) / 3, rel=1e-15)
+    assert batch_nodes([]) is None
+    monkeypatch.setattr(timegrid, "WARN_ROBOT_STEPS", 1)
+    with pytest.warns(ts.LongWorkWarning, match=r"^the batch of 3 instances is 9\.45e\+03 "
+                                                r"robot-steps of robots of 198 nodes on average "
+                                                r"\(a step 1\.03 times the work"):
+        check_batch_work(tasks, 3)
+
+
 def test_chunks_on_workers_show_a_bar_even_one_and_no_records_keep_simulates_types(tmp_path,
                                                                                    capsys):
     """With an executor that runs chunks elsewhere (worker processes show no bar of their own)

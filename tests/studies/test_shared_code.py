@@ -153,6 +153,53 @@ def test_a_batch_past_what_its_arch_finishes_is_refused_before_it_is_built(monke
         assert batch(46_657, scheduler="tcp://cluster:8786") == 9_331_400_000_000
 
 
+def test_a_batch_of_other_meshes_is_weighed_by_their_mean_nodes(monkeypatch):
+    """A product's robots' mean nodes: the base's mesh where n_arc and n_limb are not swept,
+    the mean over their combinations where they are (193, 241, 433 and 481 nodes: 337), the
+    other axes aside. A batch of 386-node robots (twice the paper robot's work a step) is
+    held to half the robot-steps on 2 CPU cores: 6.48e11 start, 100 steps more each are
+    refused naming the mesh; the paper robot's same batch starts."""
+    from taichi_star import StarParams, timegrid
+    from taichi_star.timegrid import LongWorkWarning
+
+    base = StarParams()
+    assert cli.mean_nodes(base, {}) == 193.0
+    assert cli.mean_nodes(base.replace(n_arc=1000), {"alpha": [0.1, 0.2]}) == 8049.0
+    assert cli.mean_nodes(base, {"n_arc": [18, 48]}) == (193 + 433) / 2
+    assert cli.mean_nodes(base, {"n_arc": [18, 48], "n_limb": [6, 12],
+                                 "alpha": [0.1, 0.2, 0.3]}) == (193 + 241 + 433 + 481) / 4
+    monkeypatch.setattr(timegrid, "usable_cores", lambda: 2)
+    args = SimpleNamespace(quick=False, cycles=3240, arch="cpu", scheduler=None)
+    config = SolverConfig(dt=0.01)
+    with pytest.warns(LongWorkWarning, match=r"6\.48e\+11 robot-steps of robots of 386 nodes"):
+        assert cli.tell_batch_work(args, config, 2_000_000, periods=[1.0], nodes=386) \
+            == 648_000_000_000
+    args.cycles = 3241
+    with pytest.raises(cli.StudyArgumentError,
+                       match=r"^the batch of 2,000,000 instances \(--cycles 3241 of its period\) "
+                             r"is 6\.48e\+11 robot-steps of robots of 386 nodes \(a step 2 "
+                             r"times the work of one of the paper robot's 193\): about 30 days"):
+        cli.tell_batch_work(args, config, 2_000_000, periods=[1.0], nodes=386)
+    with pytest.warns(LongWorkWarning, match=r"6\.48e\+11 robot-steps: about"):
+        cli.tell_batch_work(args, config, 2_000_000, periods=[1.0])
+
+
+def test_a_sweep_of_a_fine_mesh_is_refused_by_its_nodes(no_compute, tmp_path, capsys,
+                                                         monkeypatch):
+    """The sweep's own check weighs its robots' nodes (`--set n_arc=1000`: 8,049, 41.7 times
+    the work of a step): 2,000 robots for 10,000 periods are refused on 2 cores in one line
+    before any compute, as the paper robot's would not be (6.3e10 robot-steps of 1.296e12)."""
+    from taichi_star import timegrid
+
+    monkeypatch.setattr(timegrid, "usable_cores", lambda: 2)
+    out = tmp_path / "out"
+    code = studies_main(["sweep", "--gaits", "A1", "--alpha", "0:1:2000", "--cycles", "10000",
+                         "--set", "n_arc=1000", "--dt", "0.001", "--out", str(out)])
+    error = capsys.readouterr().err
+    assert code == 2 and len(error.strip().splitlines()) == 1, error
+    assert "of robots of 8,049 nodes (a step 41.7 times the work" in error and not out.exists()
+
+
 @pytest.mark.parametrize("text, kind", [("1,,2", float), ("1,2,", int),
                                         ("contract,,always", str)])
 def test_an_empty_item_of_a_list_is_named_as_such(text, kind):

@@ -212,7 +212,8 @@ def test_the_whole_studys_hours_are_told_before_any_run(no_compute, monkeypatch)
     (told,) = long_work_told(["--gaits", "all", "--cycles", "1000"], monkeypatch)
     start = ("55 configurations × 255 gait(s) and the presets' timing at 64 instances × 2 "
              "rounds, --cycles 1000 (3.15e+03 s) is ")
-    assert told.startswith(start) and " robot-steps: about " in told
+    # the space ladder's meshes (up to n_arc 144) and the accurate preset's weigh their nodes
+    assert told.startswith(start) and " robot-steps of robots of " in told and "): about " in told
     assert float(told[len(start):].split()[0]) == pytest.approx(5.63e10, rel=1e-3)
 
 
@@ -226,20 +227,30 @@ time ladder's): 978. Damped, 7: the preset's adaptive BDF2 (3), BDF2 at 2, 1, 0.
 BDF2 with Newton (3), n_arc 12 and 24 at 1 ms: 831. Each for the 2 gaits after a one-step call
 (14). The presets' timing, 8 instances each: a one-step call and 2 runs, 1 + 2 × 150 (paper)
 and 1 + 2 × 3 (accurate)."""
+QUICK_NODE_STEPS = (2 * (193 * (150 + 75 + 150 + 300 + 3 + 5) + 121 * 151 + 337 * 151
+                         + 433 * (3 + 75 + 150 + 300 + 3 + 5) + 145 * 151 + 241 * 151)
+                    + 8 * (193 * 301 + 433 * 7))
+"""... each weighed by its robots' nodes (`timegrid.step_work`), counted by hand: the paper
+preset's mesh 193 nodes, n_arc 9 121 and 36 337; the accurate preset's 433, n_arc 12 145 and
+24 241 (each configuration's one-step call with it): 1,471,694 node-steps."""
+QUICK_WORK = QUICK_NODE_STEPS / 193
+"""--quick's work in steps of the paper robot: 7,625.4, on 241 nodes on average."""
 
 
 @pytest.mark.parametrize("limit, value, refused, told", [
-    ("REFUSE_ROBOT_STEPS", QUICK_ROBOT_STEPS - 1, True, False),
-    ("REFUSE_ROBOT_STEPS", QUICK_ROBOT_STEPS, False, False),
-    ("WARN_ROBOT_STEPS", QUICK_ROBOT_STEPS - 1, False, True),
-    ("WARN_ROBOT_STEPS", QUICK_ROBOT_STEPS, False, False)])
+    ("REFUSE_ROBOT_STEPS", math.floor(QUICK_WORK), True, False),
+    ("REFUSE_ROBOT_STEPS", math.ceil(QUICK_WORK), False, False),
+    ("WARN_ROBOT_STEPS", math.floor(QUICK_WORK), False, True),
+    ("WARN_ROBOT_STEPS", math.ceil(QUICK_WORK), False, False)])
 def test_every_configurations_and_the_timings_robot_steps_are_added_up(
         no_compute, monkeypatch, tmp_path, capsys, limit, value, refused, told):
-    """Refused or told past a limit one under --quick's robot-steps, not at them (the rule is
-    "over"), before the output folder is made."""
+    """Refused or told past a limit just under --quick's work (its robot-steps weighed by
+    their nodes), not just over it (the rule is "over"), before the output folder is made."""
+    assert QUICK_NODE_STEPS == 1_471_694
     monkeypatch.setattr(timegrid, limit, value)
     argv = ["--quick", "--no-progress", "--out", str(tmp_path / "out")]
-    message = f"{QUICK_RUN} is {QUICK_ROBOT_STEPS:.3g} robot-steps: about "
+    message = (f"{QUICK_RUN} is {QUICK_ROBOT_STEPS:.3g} robot-steps of robots of 241 nodes on "
+               f"average (a step 1.25 times the work of one of the paper robot's 193): about ")
     if refused:
         assert studies_main(["work_precision", *argv]) == 2
         error = capsys.readouterr().err
@@ -247,5 +258,6 @@ def test_every_configurations_and_the_timings_robot_steps_are_added_up(
         assert not (tmp_path / "out").exists()
         return
     assert long_work_told(argv, monkeypatch) == (
-        [f"{message}{QUICK_ROBOT_STEPS / 5e4 / 3600:.3g} h at 50000 robot-steps/s (on a 2-core "
-         f"CPU; a GPU or more cores run faster)"] if told else [])
+        [f"{message}{QUICK_WORK / 5e4 / 3600:.3g} h at "
+         f"{5e4 * QUICK_ROBOT_STEPS / QUICK_WORK:.3g} robot-steps/s (on a 2-core CPU; a GPU or "
+         f"more cores run faster)"] if told else [])

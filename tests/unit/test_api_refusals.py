@@ -47,7 +47,8 @@ def bare_simulator():
     are 0."""
     sim = ts.Simulator.__new__(ts.Simulator)
     sim.params, sim.solver, sim.arch = (P,), S, "cpu"
-    sim.model = types.SimpleNamespace(batch_size=1)
+    sim.model = types.SimpleNamespace(batch_size=1,
+                                      topology=types.SimpleNamespace(n_nodes=P.n_nodes))
     sim._steps = lambda: np.zeros(1, dtype=np.int64)
     return sim
 
@@ -659,7 +660,7 @@ def test_engine_profile_refuses_before_building_the_engine(no_compute, params, s
 def bare_profile(monkeypatch):
     profile = profiling.EngineProfile.__new__(profiling.EngineProfile)
     profile.model = types.SimpleNamespace(batch_size=1)
-    profile._engine = types.SimpleNamespace(advance=lambda count: None)
+    profile._engine = types.SimpleNamespace(advance=lambda count: None, n_nodes=P.n_nodes)
     monkeypatch.setattr(profiling.ti, "sync", lambda: None)
     # no engine of the runtime's: its arguments' checks alone
     monkeypatch.setattr(runtime.Runtime, "check_engine_usable", lambda self, engine: None)
@@ -827,13 +828,36 @@ def test_a_cpu_call_is_held_to_what_its_cores_finish_in_30_days(no_compute, two_
     with pytest.raises(ValueError, match=r"^duration_s = 2e\+06 s at dt = 0\.001 s " + work):
         ts.simulate([P] * 1_000, 2e6)
     sim = bare_simulator()
-    sim.model = types.SimpleNamespace(batch_size=1_000)
+    sim.model.batch_size = 1_000
     with pytest.raises(ValueError, match=r"^duration_s = 2e\+06 s at dt = 0\.001 s \(after the "
                                          r"0 steps taken\) " + work):
         sim.advance(2e6)
     with pytest.warns(timegrid.LongWorkWarning), \
             pytest.raises((ComputeStarted, ValueError), match=r"^(?!duration_s)"):
         ts.simulate([P] * 1_000, 2e6, arch="gpu")
+
+
+def test_a_fine_meshs_call_is_weighed_by_its_nodes(no_compute, two_cores):
+    """n_arc 1000 (8,049 nodes) steps at 41.7 times the work of the paper robot's 193: 1,000
+    such robots for 4e4 s (4e10 robot-steps) are 38.6 days even at the 2 cores' bound and are
+    refused before compute, by simulate and by a Simulator; the paper robot's same call passes
+    the work's check. They were estimated as the paper robot's (an audit, 2026-12)."""
+    fine = ts.StarParams(n_arc=1000)
+    assert fine.n_nodes == 8049
+    work = (r"is 4e\+10 robot-steps of robots of 8,049 nodes \(a step 41\.7 times the work "
+            r"of one of the paper robot's 193\): about 38\.6 days even at 1\.2e\+04 "
+            r"robot-steps/s \(this machine's 2 CPU cores .*; divided by the work of a step\) "
+            r"and 1\.06 years on a 2-core CPU; the limit is 3\.11e\+10 robot-steps a call")
+    with pytest.raises(ValueError, match=r"^duration_s = 40000 s at dt = 0\.001 s " + work):
+        ts.simulate([fine] * 1_000, 4e4)
+    sim = bare_simulator()
+    sim.model.batch_size, sim.model.topology.n_nodes = 1_000, fine.n_nodes
+    with pytest.raises(ValueError, match=r"^duration_s = 40000 s at dt = 0\.001 s \(after the "
+                                         r"0 steps taken\) " + work):
+        sim.advance(4e4)
+    with pytest.warns(timegrid.LongWorkWarning), \
+            pytest.raises((ComputeStarted, ValueError), match=r"^(?!duration_s)"):
+        ts.simulate([P] * 1_000, 4e4)
 
 
 @pytest.mark.parametrize("call, message", [

@@ -26,6 +26,8 @@ class _FakeEngine:
     and 2 and 1 factorisations; `load` puts the counters back to 0; instance 1 fails at step
     `fail_at` (never by default)."""
 
+    n_nodes = 193  # the paper robot's: the work checks weigh it (timegrid.step_work)
+
     def __init__(self, fail_at=None):
         self.loads, self.launches, self.fail_at = 0, [], fail_at
         self.state = SimpleNamespace(newton_total=_Array([0, 0, 0]),

@@ -315,3 +315,110 @@ def test_cycles_cut_short_are_adaptive_runs_ending_within_dt_min_of_a_periods_en
     other = StarParams(period=0.3)  # 0.5 s is far from a whole number of its periods
     assert cycles_cut_short([StarParams(period=0.25), other], duration_s, solver,
                             steady_from_cycle) == expected
+
+
+# --------------------------------------------------------------------------- the mesh's work
+
+def test_a_steps_work_is_the_robots_nodes_over_the_paper_robots():
+    """The rates count the paper robot's steps (193 nodes, StarParams' defaults); a robot of N
+    nodes weighs N / 193 of them: exactly 1 for the paper robot and for None, 2 for 386 nodes,
+    41.7 for n_arc 1000 (8,049 nodes). A count of nodes is a finite number >= 1 (the
+    boundary included), anything else is refused naming nodes."""
+    from taichi_star import StarParams
+    from taichi_star.timegrid import PAPER_NODES, step_work
+
+    assert PAPER_NODES == StarParams().n_nodes == 193
+    assert step_work(None) == step_work(PAPER_NODES) == 1.0
+    assert step_work(386) == 2.0
+    assert step_work(StarParams(n_arc=1000).n_nodes) == pytest.approx(8049 / 193, rel=1e-15)
+    assert step_work(1) == 1 / 193
+    for bad in (0.999, 0, -193, math.nan, math.inf, "193", True):
+        with pytest.raises(ValueError, match=r"^nodes must be a finite number >= 1"):
+            step_work(bad)
+
+
+def test_work_of_a_finer_mesh_is_refused_where_the_paper_robots_would_start():
+    """At 386 nodes (twice the work of a step) the bound of 9.3312e12 paper-robot steps holds
+    4.6656e12 robot-steps: 466,560 steps × 10,000,000 instances start (with the long-work
+    warning), one step more each is refused, naming the mesh, its work, the rate and the limit
+    for it; the paper robot's same work starts. A nodes count too far off is refused by name."""
+    from taichi_star.timegrid import REFUSE_ROBOT_STEPS
+
+    with pytest.warns(LongWorkWarning):
+        check_work("x", 466_560, 10_000_000, None, 386)
+    with pytest.raises(ValueError) as error:
+        check_work("x", 466_561, 10_000_000, None, 386)
+    assert str(error.value) == (
+        "x is 4.67e+12 robot-steps of robots of 386 nodes (a step 2 times the work of one of "
+        "the paper robot's 193): about 30 days even at 1.8e+06 robot-steps/s (the fastest "
+        "measured, one H100 in f32; divided by the work of a step) and 5.91 years on a 2-core "
+        "CPU; the limit is 4.67e+12 robot-steps a call (30 days at that rate): run fewer "
+        "instances or a shorter duration, or a run_batch spread over several machines")
+    assert 466_561 * 10_000_000 * 2 > REFUSE_ROBOT_STEPS >= 466_560 * 10_000_000 * 2
+    with pytest.warns(LongWorkWarning):
+        check_work("x", 466_561, 10_000_000, None, 193)
+        check_work("x", 466_561, 10_000_000)
+    with pytest.raises(ValueError, match=r"^nodes must be a finite number >= 1"):
+        check_work("x", 10, 10, None, 0)
+
+
+def test_the_long_work_warning_and_the_progress_bar_weigh_the_mesh():
+    """5e9 robot-steps of 386-node robots are the warning's 1e10 paper-robot steps exactly: no
+    warning; one step more warns, with the hours at the rate for that mesh (25,000
+    robot-steps/s: 55.6 h). The progress bar's automatic choice (30 s at 5e4 paper-robot
+    steps/s) weighs them the same: 750,000 robot-steps of 386 nodes are 30 s (a bar),
+    749,999 are not."""
+    from taichi_star.driver import AUTO_PROGRESS_S, shows_progress
+    from taichi_star.timegrid import warn_long_work
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        warn_long_work("x", 5e9, 386)
+    with pytest.warns(LongWorkWarning, match=r"^x is 5e\+09 robot-steps of robots of 386 nodes "
+                                             r"\(a step 2 times .*\): about 55\.6 h at "
+                                             r"2\.5e\+04 robot-steps/s"):
+        warn_long_work("x", 5e9 + 1, 386)
+    assert AUTO_PROGRESS_S == 30.0
+    assert shows_progress(None, 750_000, 386) and not shows_progress(None, 749_999, 386)
+    assert not shows_progress(None, 1_499_999) and shows_progress(None, 1_500_000)
+
+
+MESH_WORK_TOLERANCE = 0.25
+"""How far a measured step's cost, relative to the paper robot's in the same run, may be from
+`step_work` (a fraction of the measured): the engine has a part of a step that does not grow
+with the nodes (the step loop, the convergence test), which makes a coarse mesh dearer and a
+fine one cheaper than proportional; measured within 0.2 of it from 65 to 3,249 nodes."""
+
+
+def test_the_rule_for_a_steps_work_holds_on_every_mesh_measured():
+    """results/bench_meshes/bench.csv (section "mesh": the benchmark robot on n_arc 2 to 400
+    at B = 64): each mesh's µs per robot-step over the paper mesh's is within
+    MESH_WORK_TOLERANCE of step_work(n_nodes)."""
+    from pathlib import Path
+
+    import pandas as pd
+
+    from taichi_star.timegrid import PAPER_NODES, step_work
+
+    path = Path(__file__).resolve().parents[2] / "results" / "bench_meshes" / "bench.csv"
+    rows = pd.read_csv(path)
+    rows = rows[rows["section"] == "mesh"]
+    paper = rows.loc[rows["n_nodes"] == PAPER_NODES, "step_us"]
+    assert len(paper) == 1 and len(rows) >= 5 and rows["n_nodes"].max() > 3000
+    measured = rows["step_us"] / paper.iloc[0]
+    rule = rows["n_nodes"].map(step_work)
+    assert ((rule - measured).abs() <= MESH_WORK_TOLERANCE * measured).all(), \
+        pd.DataFrame({"n_nodes": rows["n_nodes"], "measured": measured, "rule": rule})
+
+
+def test_a_batchs_nodes_are_its_parts_weighted_by_their_robot_steps():
+    """500 robot-steps of 193 nodes and 1,000 of 433: 353 (what gives their work under
+    `step_work`); one mesh gives its nodes exactly, where the weighted sum would round
+    (25.2 × 193 × 2 / 50.4 is not 193 in floats: the paper robot's estimates named a mesh "of
+    193 nodes on average"); no work gives None."""
+    from taichi_star.timegrid import weighted_nodes
+
+    assert weighted_nodes([(500, 193), (1000, 433)]) == 353.0
+    assert (25.2 * 193 + 25.2 * 193) / 50.4 != 193
+    assert weighted_nodes([(25.2, 193), (25.2, 193)]) == 193
+    assert weighted_nodes([]) is None and weighted_nodes([(0, 193)]) is None
