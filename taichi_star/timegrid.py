@@ -69,9 +69,8 @@ def step_work(nodes: Optional[float] = None) -> float:
     """The work of one time step of a robot of `nodes` nodes, in steps of the paper's robot
     (PAPER_NODES; None: that robot, 1.0): proportional to the nodes, as the engine's assembly,
     banded factorisation and solve are. Measured (results/bench_meshes/bench.csv, section
-    "mesh", B = 64; tests/unit/test_timegrid.py keeps every row within 25 % of this rule), a
-    step of 65 nodes costs 0.28 of the paper robot's (the rule: 0.34) and one of 3,249 nodes
-    18.3 of them (the rule: 16.8).
+    "mesh", B = 64, f64), a step costs 0.20 to 0.27 µs per node from 65 to 3,249 nodes, within
+    21 % of their median (tests/unit/test_timegrid.py keeps every row within 25 %).
     The rates and bounds above count the paper robot's steps: a fine mesh (n_arc = 1000: 8,049
     nodes, 42 times the work) was estimated and bounded as the paper robot (an audit, 2026-12).
     A batch of several meshes gives its nodes as `weighted_nodes` does. ValueError naming

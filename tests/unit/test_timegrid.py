@@ -384,31 +384,33 @@ def test_the_long_work_warning_and_the_progress_bar_weigh_the_mesh():
 
 
 MESH_WORK_TOLERANCE = 0.25
-"""How far a measured step's cost, relative to the paper robot's in the same run, may be from
-`step_work` (a fraction of the measured): the engine has a part of a step that does not grow
-with the nodes (the step loop, the convergence test), which makes a coarse mesh dearer and a
-fine one cheaper than proportional; measured within 0.2 of it from 65 to 3,249 nodes."""
+"""How far a mesh's measured cost of a step per node may be from the median over the meshes
+(a fraction of it): `step_work` holds it constant; a part of a step does not grow with the
+nodes (the step loop, the convergence test) and the caches favour some sizes, and this
+machine's speed drifts by up to 20 % between measurements minutes apart (docs/performance.md),
+which one row alone can carry; measured within 0.21 of it from 65 to 3,249 nodes."""
 
 
 def test_the_rule_for_a_steps_work_holds_on_every_mesh_measured():
     """results/bench_meshes/bench.csv (section "mesh": the benchmark robot on n_arc 2 to 400
-    at B = 64): each mesh's µs per robot-step over the paper mesh's is within
-    MESH_WORK_TOLERANCE of step_work(n_nodes)."""
+    at B = 64, 65 to 3,249 nodes, the paper robot's among them): each mesh's µs per robot-step
+    per node is within MESH_WORK_TOLERANCE of their median, as a work proportional to the nodes
+    (`step_work`) makes it."""
     from pathlib import Path
 
     import pandas as pd
 
-    from taichi_star.timegrid import PAPER_NODES, step_work
+    from taichi_star.timegrid import PAPER_NODES
 
     path = Path(__file__).resolve().parents[2] / "results" / "bench_meshes" / "bench.csv"
     rows = pd.read_csv(path)
     rows = rows[rows["section"] == "mesh"]
-    paper = rows.loc[rows["n_nodes"] == PAPER_NODES, "step_us"]
-    assert len(paper) == 1 and len(rows) >= 5 and rows["n_nodes"].max() > 3000
-    measured = rows["step_us"] / paper.iloc[0]
-    rule = rows["n_nodes"].map(step_work)
-    assert ((rule - measured).abs() <= MESH_WORK_TOLERANCE * measured).all(), \
-        pd.DataFrame({"n_nodes": rows["n_nodes"], "measured": measured, "rule": rule})
+    assert len(rows) >= 5 and rows["n_nodes"].min() < 100 and rows["n_nodes"].max() > 3000
+    assert PAPER_NODES in set(rows["n_nodes"])
+    per_node = rows["step_us"] / rows["n_nodes"]
+    deviation = per_node / per_node.median() - 1
+    assert (deviation.abs() <= MESH_WORK_TOLERANCE).all(), \
+        pd.DataFrame({"n_nodes": rows["n_nodes"], "per_node_us": per_node})
 
 
 def test_a_batchs_nodes_are_its_parts_weighted_by_their_robot_steps():
