@@ -110,7 +110,7 @@ def shows_progress(progress, robot_steps: float, nodes: Optional[float] = None) 
 
 def check_run(solver: SolverConfig, duration_s: float, record_interval_s: float, batch: int,
               steps_taken: Optional[int] = None, arch: Optional[str] = None,
-              nodes: Optional[int] = None):
+              nodes: Optional[float] = None):
     """ValueError before any compute unless a run of `batch` instances for duration_s (s) with
     records every record_interval_s (s; 0 = none) can go on `arch` (None: on some machine):
     at most MAX_STEPS_PER_INSTANCE steps, and robot-steps that such a machine finishes in

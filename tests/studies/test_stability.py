@@ -288,10 +288,11 @@ def test_the_grids_robot_steps_are_summed_over_its_batches(no_compute, monkeypat
                                                            told):
     """--quick's two stiffnesses at dt 1 and 10 ms for 0.05 s: 2 × 50 + 2 × 5 = 110 robot-steps
     in two batches of at most 100, refused or told past a limit of 109, not at 110 (the rule is
-    "over"); told before any instance is built (`cli.base_params` comes first)."""
+    "over"); told before any instance is built (`grid_params` builds them; the robot's
+    parameters, whose mesh weighs the work, are read first)."""
     stub, run = checked_run
     monkeypatch.setattr(timegrid, limit, value)
-    monkeypatch.setattr(cli, "base_params", stub)
+    monkeypatch.setattr(stability, "grid_params", stub)
     error, said = run(["stability", "--quick", "--no-progress", "--dts-ms", "1,10", "--out",
                        str(tmp_path / "out")], refused)
     assert (f"error: {QUICK_GRID} is 110 robot-steps: about " in error) == refused

@@ -546,16 +546,18 @@ def test_plan_and_choose_refuse_a_tolerance_that_is_no_distance(tolerance):
 def test_check_drive_counts_a_robot_per_goal_and_mode_and_names_the_first_near_goal(
         monkeypatch):
     """The work refused before compute is that of two robots per goal (open and closed loop),
-    and a tolerance that reaches goals before the robot moves names the first of them (a
-    mutation audit, 2026-12: a count of goals and the last near goal both passed)."""
+    of the robot's nodes (n_arc 48: 433), and a tolerance that reaches goals before the robot
+    moves names the first of them (a mutation audit, 2026-12: a count of goals and the last
+    near goal both passed)."""
     import taichi_star as ts
     from taichi_star import planner
 
     asked = []
-    monkeypatch.setattr(planner, "check_work", lambda what, steps, batch=None: asked.append(batch))
+    monkeypatch.setattr(planner, "check_work",
+                        lambda what, steps, batch=None, nodes=None: asked.append((batch, nodes)))
     goals = [[50.0, 0.0], [0.0, 60.0], [-70.0, 0.0]]
-    planner.check_drive(goals, ts.StarParams(), ts.SolverConfig(dt=5e-3))
-    assert asked == [2 * len(goals)]
+    planner.check_drive(goals, ts.StarParams(n_arc=48), ts.SolverConfig(dt=5e-3))
+    assert asked == [(2 * len(goals), 433)]
     near = [[50.0, 0.0], [3.0, 0.0], [0.0, 4.0]]
     with pytest.raises(ValueError, match=r"^tolerance_mm = 5 mm reaches goal 1 \(3 mm from the "
                                          r"start\) before the robot moves"):
