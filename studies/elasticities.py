@@ -263,7 +263,8 @@ def main(argv=None):
         # joined without a word; an audit, 2026-12)
         warnings.warn(f"--sobol {sobol_path}: its indices are of the {sobol_preset} preset, "
                       f"these elasticities of the {args.preset} preset (the column "
-                      f"sobol_preset says so in the table)", RuntimeWarning, stacklevel=2)
+                      f"sobol_preset says so in the table; --preset {sobol_preset} gives "
+                      f"elasticities of its model)", RuntimeWarning, stacklevel=2)
     out = cli.Output(args, argv or [], model={"preset": args.preset, "params": base},
                      solver=solver,
                      extra={"gaits": gaits, "parameters": parameters, "output": OUTPUT,
