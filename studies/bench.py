@@ -815,7 +815,7 @@ def lanes_note(lanes) -> str:
 def plot_bench(csv_path, png_path):
     """Three panels from a bench CSV: throughput against B (log-log, one line per precision,
     the target dashed, real-time factor on the right axis); the phase split per
-    instance-step of the B sweep; the scenarios' throughput."""
+    instance-step of the B sweep; that of the scenarios and the other meshes."""
     plt = cli.use_agg()
     table = pd.read_csv(csv_path, dtype={"commit": str})  # a hash like 83e1667 reads as a float
     if "kernel_optimisation" not in table:
@@ -825,7 +825,8 @@ def plot_bench(csv_path, png_path):
     compilers = table["kernel_optimisation"].dropna().unique()
     arch = str(table["arch"].iloc[0])
     sweep = table[table["section"] == "batch"]
-    skip = table[table["section"] == "skip"]
+    # the scenarios and the meshes: each at --scenario-batch, the same split per instance-step
+    skip = table[table["section"].isin(["skip", "mesh"])]
     fig, axes = plt.subplots(1, 3, figsize=(18, 5.5), layout="constrained")
     fig.get_layout_engine().set(wspace=0.12)  # room for the real-time factor axis
 
@@ -893,9 +894,9 @@ def plot_bench(csv_path, png_path):
             ax.annotate(f"{rate:,.0f}/s", (x, total), ha="center", va="bottom", fontsize=6)
     axes[1].set_title("phase split of the B sweep (bar labels: robot-steps/s)", fontsize=8)
     axes[1].legend(fontsize=7)
-    axes[2].set_title("skip what a scene does not need", fontsize=8)
+    axes[2].set_title("skip what a scene does not need; other meshes (n_arc)", fontsize=8)
     if skip.empty:
-        axes[2].text(0.5, 0.5, "no scenarios in this run", ha="center", va="center",
+        axes[2].text(0.5, 0.5, "no scenarios or meshes in this run", ha="center", va="center",
                      transform=axes[2].transAxes)
         axes[2].set_axis_off()
     cli.write_figure(fig, png_path, dpi=120)
