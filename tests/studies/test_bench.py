@@ -270,6 +270,8 @@ def test_matmul_rate_is_the_products_flops_over_its_best_time(monkeypatch):
     ("bench", ["--scenario-batch", "-1"], "--scenario-batch must be in [1, 1048576], got -1"),
     ("bench", ["--workers-list", "0"], "--workers-list: every value must be >= 1"),
     ("bench", ["--kernel-optimisation", "fast"], "--kernel-optimisation: unknown value 'fast'"),
+    ("bench", ["--meshes", "1"], "--meshes: every n_arc must be in [2, 1000], got 1"),
+    ("bench", ["--meshes", "18,1001"], "--meshes: every value must be in [1, 1000], got 1001"),
     ("work_precision", ["--cycles", "0"], "--cycles must be > 0"),
     ("work_precision", ["--gaits", "A1,A9"], "unknown actuator 'A9'"),
     ("work_precision", ["--gaits", "A1,A1"], "listed twice"),
@@ -285,6 +287,33 @@ def test_invalid_arguments_fail_before_compute(monkeypatch, tmp_path, capsys, st
     error = capsys.readouterr().err
     assert message in error, error
     assert not out.exists()  # nothing written
+
+
+def test_the_mesh_section_measures_the_robot_on_each_n_arc_at_the_scenario_batch(monkeypatch):
+    """--meshes 2,1000 (both ends of n_arc's range): one row per n_arc, section "mesh", of
+    --scenario-batch robots of the benchmark gait on that mesh (65 and 8,049 nodes), measured
+    as the B sweep is; none without the flag."""
+    measured = []
+
+    def fake_measure(params, arch, precision, steps, repeats, profile_seconds,
+                     jacobian="newton"):
+        measured.append(params)
+        return {"n_nodes": params[0].n_nodes, "robot_steps_per_s": 1.0, "factor_gflops": 1.0,
+                "bytes_per_step": 1.0}
+
+    monkeypatch.setattr(bench, "measure", fake_measure)
+    monkeypatch.setattr(bench, "matmul_gflops", lambda *args: 1.0)
+    flags = ["--quick", "--no-progress", "--no-plain-call", "--scenarios", "none",
+             "--scenario-batch", "3"]
+    table = bench.run_bench(bench.parse_args([*flags, "--meshes", "2,1000"]))
+    mesh = table[table["section"] == "mesh"]
+    assert list(mesh["scenario"]) == ["n_arc_2", "n_arc_1000"]
+    assert list(mesh["n_nodes"]) == [65, 8049] and (mesh["batch_size"] == 3).all()
+    robots = measured[-2:]
+    assert [len(params) for params in robots] == [3, 3]
+    assert [{(p.n_arc, p.gait) for p in params} for params in robots] == \
+        [{(2, bench.GAIT)}, {(1000, bench.GAIT)}]
+    assert "mesh" not in set(bench.run_bench(bench.parse_args(flags))["section"])
 
 
 def test_gpu_arch_without_a_gpu_lists_the_available_archs(monkeypatch, tmp_path, capsys):
