@@ -789,6 +789,17 @@ rest edge (`shortest_rest_edge`). Measured, A1+A2 for 0.3 s against f64 (speeds;
 newton_tol 1e-7 m): ratios 39 (the paper's robot), 98, 104, 202 and 315 (n_arc 144) within
 0.7 %; 406 (joint_radius 3 mm) 4.2 % off, 700 (n_arc 320) 4.4 % off at the iteration cap,
 2,350 (joint_radius 1 mm, 10-cm limbs) 12× off. Beyond it f32 is refused."""
+F64_UNIT_ROUNDOFF = 2.0 ** -53
+"""Relative rounding of an f64 number (half its ulp at most)."""
+F64_MAX_SIZE_TO_EDGE = F32_MAX_SIZE_TO_EDGE * F32_UNIT_ROUNDOFF / F64_UNIT_ROUNDOFF
+"""With precision "f64", the largest ratio of the robot's size to its shortest rest edge:
+the f32 bound's share of rounding (F32_MAX_SIZE_TO_EDGE roundings of the size in an edge), in
+f64's, 1.7e11. Past it the rest shape itself is rounding: a tip_radius of joint_radius ×
+(1 + 1e-15) gave limb edges of one ulp and a rest curvature of 0/0 (NaN, with NumPy's bare
+warnings), ×(1 + 1e-13) a run reported "ok" (an audit, 2026-12). Well under it a stiff short
+edge can still make Newton fail, which the instance's status reports (the paper robot's
+limbs 1.001 × its joint radius long, a ratio of 6,000, ran with capped iterations; 12,000
+failed at the first step, newton_failed)."""
 
 
 def changed_fields(value) -> Dict[str, object]:
@@ -818,13 +829,22 @@ def shortest_rest_edge(params: StarParams) -> float:
 
 
 def check_precision(params, solver: SolverConfig):
-    """ValueError, before any compute, where f32 cannot resolve an instance of the batch
-    (`params`: validated StarParams): newton_tol under `F32_TOLERANCE_ROUNDOFFS` roundings of
-    its size, or a size more than `F32_MAX_SIZE_TO_EDGE` times its shortest edge. Names the
-    instance and the fields; nothing to check in f64."""
-    if solver.precision != "f32":
-        return
+    """ValueError, before any compute, where the solver's precision cannot resolve an instance
+    of the batch (`params`: validated StarParams): in f32 newton_tol under
+    `F32_TOLERANCE_ROUNDOFFS` roundings of its size, or a size more than `F32_MAX_SIZE_TO_EDGE`
+    times its shortest edge; in f64 a size more than `F64_MAX_SIZE_TO_EDGE` times it. Names the
+    instance and the fields."""
     for index, p in enumerate(params):
+        if solver.precision == "f64":
+            edge = shortest_rest_edge(p)
+            if p.tip_radius > F64_MAX_SIZE_TO_EDGE * edge:
+                raise ValueError(
+                    f"params[{index}]'s rest shape is below f64's rounding: its tip_radius "
+                    f"{p.tip_radius:g} m is {p.tip_radius / edge:.3g} times its shortest rest "
+                    f"edge ({edge:.3g} m, from joint_radius, tip_radius, n_arc and n_limb), "
+                    f"more than {F64_MAX_SIZE_TO_EDGE:.3g}: lengthen that edge (a tip_radius "
+                    f"further beyond joint_radius, fewer n_limb or n_arc)")
+            continue
         floor = F32_TOLERANCE_ROUNDOFFS * F32_UNIT_ROUNDOFF * p.tip_radius
         if solver.newton_tol < floor:
             highest = SOLVER_RANGES["newton_tol"][1]

@@ -6,6 +6,7 @@ import math
 import re
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -839,6 +840,43 @@ def test_f32s_refusals_at_their_boundaries():
     check_precision([small.replace(tip_radius=size)], f32)
     with pytest.raises(ValueError, match=r"^precision 'f32' cannot resolve params\[0\]"):
         check_precision([small.replace(tip_radius=size * (1 + 1e-12))], f32)
+
+
+def test_a_rest_shape_below_f64s_rounding_is_refused_before_it_is_built():
+    """A limb edge of one ulp (tip_radius = joint_radius × (1 + 1e-15)) made the rest curvature
+    0/0, NaN, with NumPy's bare warnings, and × (1 + 1e-13) ran "ok" (an audit, 2026-12): in
+    f64 a robot more than F64_MAX_SIZE_TO_EDGE (the f32 bound's share of rounding, 1.7e11)
+    times its shortest rest edge is refused naming the instance and the fields, before any
+    warning; a thousandth under the bound passes the check, a thousandth over is refused
+    (the limb edge's own rounding is ~4e-6 of it). The finest meshes the ranges allow stay far
+    under it (n_arc 1000 on a 1-mm joint radius: 6.7e4)."""
+    from taichi_star.params import (F32_MAX_SIZE_TO_EDGE, F32_UNIT_ROUNDOFF,
+                                    F64_MAX_SIZE_TO_EDGE, check_precision, shortest_rest_edge)
+
+    assert F64_MAX_SIZE_TO_EDGE == F32_MAX_SIZE_TO_EDGE * F32_UNIT_ROUNDOFF / 2.0 ** -53
+    f64 = ts.SolverConfig()
+    base = ts.StarParams()
+    for share, refused in ((1 - 1e-3, False), (1 + 1e-3, True)):
+        robot = base.replace(tip_radius=base.joint_radius
+                             * (1 + base.n_limb / (F64_MAX_SIZE_TO_EDGE * share)))
+        ratio = robot.tip_radius / shortest_rest_edge(robot)
+        assert (ratio > F64_MAX_SIZE_TO_EDGE) is refused
+        if refused:
+            with pytest.raises(ValueError, match=r"^params\[1\]'s rest shape is below f64's "
+                                                 r"rounding: its tip_radius 0\.024 m is "
+                                                 r"1\.72e\+11 times its shortest rest edge"):
+                check_precision([base, robot], f64)
+        else:
+            check_precision([base, robot], f64)
+    degenerate = base.replace(tip_radius=base.joint_radius * (1 + 1e-15))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match=r"lengthen that edge \(a tip_radius further beyond "
+                                             r"joint_radius, fewer n_limb or n_arc\)$"):
+            ts.simulate([degenerate], 0.002, progress=False)
+    fine = ts.StarParams(joint_radius=1e-3, n_arc=1000)
+    assert 6e4 < fine.tip_radius / shortest_rest_edge(fine) < 7e4
+    check_precision([fine], f64)
 
 
 @pytest.mark.parametrize("cls, field, value", [
