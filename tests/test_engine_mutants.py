@@ -26,3 +26,22 @@ def test_every_named_test_exists(engine_mutants):
         for test in tests:
             module, _, name = test.partition("::")
             assert f"def {name}(" in (REPO / module).read_text(), (ident, test)
+
+
+def test_the_tables_sidecar_quotes_the_command_and_stamps_the_table(engine_mutants, tmp_path):
+    """An argument with a space stays one when the command is read back (it was joined with
+    spaces: an audit, 2026-12); the sidecar records whether the checkout was dirty and the
+    SHA-256 of the very bytes written."""
+    import hashlib
+    import json
+    import shlex
+
+    out = tmp_path / "mutants.csv"
+    rows = [{"mutant": "m1", "what": "a b"}, {"mutant": "m2", "what": "c"}]
+    argv = ["--only", "m1,m2", "--out", "a folder/mutants.csv"]
+    engine_mutants.write_table(rows, out, argv)
+    sidecar = json.loads(out.with_name("mutants.csv.json").read_text())
+    assert shlex.split(sidecar["command"])[2:] == argv
+    assert sidecar["git_dirty"] in (True, False) and sidecar["git_commit"]
+    assert sidecar["table_sha256"] == hashlib.sha256(out.read_bytes()).hexdigest()
+    assert sidecar["table_rows"] == 2

@@ -19,13 +19,14 @@ import io
 import json
 import os
 import re
+import shlex
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from taichi_star.provenance import write_atomic
+from taichi_star.provenance import code_record, table_stamp, write_atomic
 
 REPO = Path(__file__).resolve().parents[1]
 RELIABILITY = "tests/model/test_reliability.py::"
@@ -236,20 +237,24 @@ def first_failure(output: str) -> str:
     return raised.group(1) if raised else "unknown"
 
 
-def write_table(rows, out: Path):
+def write_table(rows, out: Path, argv=None):
     """The rows so far as a CSV at out, with its provenance sidecar, each written whole or not
-    at all (a kill while the table is rewritten leaves the previous one)."""
+    at all (a kill while the table is rewritten leaves the previous one). The sidecar: the
+    command (`argv`, default this process's, quoted as a shell reads it back: it was joined
+    with spaces, so that an argument with a space read as two; an audit, 2026-12), the code
+    record (commit, whether the checkout was dirty, the date) and the table's stamp."""
     out.parent.mkdir(parents=True, exist_ok=True)
     table = io.StringIO(newline="")
     writer = csv.DictWriter(table, fieldnames=list(rows[0]))
     writer.writeheader()
     writer.writerows(rows)
-    write_atomic(out, table.getvalue().encode())
-    sidecar = {"command": "python tools/engine_mutants.py " + " ".join(sys.argv[1:]),
-               "git_commit": subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO,
-                                            capture_output=True, text=True).stdout.strip(),
-               "date": time.strftime("%Y-%m-%dT%H:%M:%S+00:00", time.gmtime())}
-    write_atomic(out.with_name(out.name + ".json"), (json.dumps(sidecar, indent=2) + "\n").encode())
+    data = table.getvalue().encode()
+    write_atomic(out, data)
+    argv = sys.argv[1:] if argv is None else argv
+    sidecar = {"command": "python tools/engine_mutants.py " + shlex.join(argv), **code_record(),
+               **table_stamp(len(rows), data)}
+    write_atomic(out.with_name(out.name + ".json"),
+                 (json.dumps(sidecar, indent=2, default=str) + "\n").encode())
 
 
 def main():
