@@ -46,8 +46,9 @@ def drive_policy(policy: Callable[[np.ndarray], np.ndarray], goals_mm,
 
     policy: observations (G, 15) float32 (`swimmer.OBSERVATION_NAMES`) -> actions (G, 8) of 0
     and 1 (`MultiBinary(8)`; a Stable-Baselines3 model: ``lambda obs: model.predict(obs,
-    deterministic=True)[0]``), asked once a period for every robot (the answers of robots whose
-    controller stopped are not fired). goals_mm: (G, 2) mm from the start (the robot starts at
+    deterministic=True)[0]``), asked once an actuation period for every robot (the answers of
+    robots whose controller stopped are not fired): the environments' default control
+    period; a policy trained at a shorter `control_period_s` is not asked at its own. goals_mm: (G, 2) mm from the start (the robot starts at
     rest, heading 0). mode: the summary's `mode` (a name for the policy). stop_speed_mm_s: the
     task's (`swimmer.SwimmerTask`): with it a controller stops within the tolerance only once
     its robot is that slow, as the environment it was trained in ends an episode. settled:
