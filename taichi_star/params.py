@@ -834,19 +834,14 @@ def check_precision(params, solver: SolverConfig):
     `F32_TOLERANCE_ROUNDOFFS` roundings of its size, or a size more than `F32_MAX_SIZE_TO_EDGE`
     times its shortest edge; in f64 a size more than `F64_MAX_SIZE_TO_EDGE` times it. Names the
     instance and the fields."""
+    f32 = solver.precision == "f32"
+    bound = F32_MAX_SIZE_TO_EDGE if f32 else F64_MAX_SIZE_TO_EDGE
+    remedy = ("use precision 'f64'" if f32 else
+              "lengthen that edge (a tip_radius further beyond joint_radius, fewer n_limb or "
+              "n_arc)")
     for index, p in enumerate(params):
-        if solver.precision == "f64":
-            edge = shortest_rest_edge(p)
-            if p.tip_radius > F64_MAX_SIZE_TO_EDGE * edge:
-                raise ValueError(
-                    f"params[{index}]'s rest shape is below f64's rounding: its tip_radius "
-                    f"{p.tip_radius:g} m is {p.tip_radius / edge:.3g} times its shortest rest "
-                    f"edge ({edge:.3g} m, from joint_radius, tip_radius, n_arc and n_limb), "
-                    f"more than {F64_MAX_SIZE_TO_EDGE:.3g}: lengthen that edge (a tip_radius "
-                    f"further beyond joint_radius, fewer n_limb or n_arc)")
-            continue
         floor = F32_TOLERANCE_ROUNDOFFS * F32_UNIT_ROUNDOFF * p.tip_radius
-        if solver.newton_tol < floor:
+        if f32 and solver.newton_tol < floor:
             highest = SOLVER_RANGES["newton_tol"][1]
             advice = (f"use a newton_tol in [{floor:.2g}, {highest:g}] m" if floor <= highest
                       else "use precision 'f64'")
@@ -855,12 +850,12 @@ def check_precision(params, solver: SolverConfig):
                 f"({F32_TOLERANCE_ROUNDOFFS} f32 roundings of its tip_radius {p.tip_radius:g} "
                 f"m), got {solver.newton_tol!r}: {advice}")
         edge = shortest_rest_edge(p)
-        if p.tip_radius > F32_MAX_SIZE_TO_EDGE * edge:
+        if p.tip_radius > bound * edge:
             raise ValueError(
-                f"precision 'f32' cannot resolve params[{index}]: its tip_radius "
-                f"{p.tip_radius:g} m is {p.tip_radius / edge:.0f} times its shortest rest edge "
-                f"({edge:.3g} m, from joint_radius, n_arc and n_limb), more than "
-                f"{F32_MAX_SIZE_TO_EDGE:g}: use precision 'f64'")
+                f"precision '{solver.precision}' cannot resolve params[{index}]: its tip_radius "
+                f"{p.tip_radius:g} m is {p.tip_radius / edge:.4g} times its shortest rest edge "
+                f"({edge:.3g} m, from joint_radius, tip_radius, n_arc and n_limb), more than "
+                f"{bound:.4g}: {remedy}")
 
 SOLVER_PRESET_FIELDS = {
     "paper": {},

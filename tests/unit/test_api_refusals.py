@@ -814,6 +814,19 @@ def two_cores(monkeypatch):
     monkeypatch.setattr(timegrid, "usable_cores", lambda: 2)
 
 
+def refused_by_simulate_and_a_simulator(robot, duration_s: float, shown: str, work: str):
+    """1,000 robots like `robot` for duration_s at dt = 1 ms are refused, the message ending in
+    `work` (a pattern), by simulate and by a Simulator's advance (`shown`: the duration as the
+    message writes it, a pattern)."""
+    with pytest.raises(ValueError, match=rf"^duration_s = {shown} s at dt = 0\.001 s " + work):
+        ts.simulate([robot] * 1_000, duration_s)
+    sim = bare_simulator()
+    sim.model.batch_size, sim.model.topology.n_nodes = 1_000, robot.n_nodes
+    with pytest.raises(ValueError, match=rf"^duration_s = {shown} s at dt = 0\.001 s \(after "
+                                         rf"the 0 steps taken\) " + work):
+        sim.advance(duration_s)
+
+
 def test_a_cpu_call_is_held_to_what_its_cores_finish_in_30_days(no_compute, two_cores):
     """1,000 robots for 2e6 s on the CPU are 2e12 robot-steps, 46 days even at 2.5e5
     robot-steps/s on each of 2 cores (a year and more at the rate measured): refused before
@@ -825,13 +838,7 @@ def test_a_cpu_call_is_held_to_what_its_cores_finish_in_30_days(no_compute, two_
             r"and 1\.27 years on a 2-core CPU; the limit is 1\.3e\+12 robot-steps a call \(30 "
             r"days at that rate\): run fewer instances or a shorter duration, on a GPU "
             r"\(arch=\"gpu\"\), or a run_batch spread over several machines$")
-    with pytest.raises(ValueError, match=r"^duration_s = 2e\+06 s at dt = 0\.001 s " + work):
-        ts.simulate([P] * 1_000, 2e6)
-    sim = bare_simulator()
-    sim.model.batch_size = 1_000
-    with pytest.raises(ValueError, match=r"^duration_s = 2e\+06 s at dt = 0\.001 s \(after the "
-                                         r"0 steps taken\) " + work):
-        sim.advance(2e6)
+    refused_by_simulate_and_a_simulator(P, 2e6, r"2e\+06", work)
     with pytest.warns(timegrid.LongWorkWarning), \
             pytest.raises((ComputeStarted, ValueError), match=r"^(?!duration_s)"):
         ts.simulate([P] * 1_000, 2e6, arch="gpu")
@@ -848,13 +855,7 @@ def test_a_fine_meshs_call_is_weighed_by_its_nodes(no_compute, two_cores):
             r"of one of the paper robot's 193\): about 38\.6 days even at 1\.2e\+04 "
             r"robot-steps/s \(this machine's 2 CPU cores .*; divided by the work of a step\) "
             r"and 1\.06 years on a 2-core CPU; the limit is 3\.11e\+10 robot-steps a call")
-    with pytest.raises(ValueError, match=r"^duration_s = 40000 s at dt = 0\.001 s " + work):
-        ts.simulate([fine] * 1_000, 4e4)
-    sim = bare_simulator()
-    sim.model.batch_size, sim.model.topology.n_nodes = 1_000, fine.n_nodes
-    with pytest.raises(ValueError, match=r"^duration_s = 40000 s at dt = 0\.001 s \(after the "
-                                         r"0 steps taken\) " + work):
-        sim.advance(4e4)
+    refused_by_simulate_and_a_simulator(fine, 4e4, "40000", work)
     with pytest.warns(timegrid.LongWorkWarning), \
             pytest.raises((ComputeStarted, ValueError), match=r"^(?!duration_s)"):
         ts.simulate([P] * 1_000, 4e4)
