@@ -48,7 +48,7 @@ from taichi_star.planner import MAX_DEFAULT_GOALS, check_drive, default_goals, p
 from taichi_star.provenance import table_stamp
 from taichi_star.sensitivities import parse_directions
 from taichi_star.timegrid import (LongWorkWarning, SteadySpeedWarning, steps_in,
-                                  warn_long_work)
+                                  warn_long_work, weighted_nodes)
 
 from . import provenance
 
@@ -621,9 +621,9 @@ def mean_nodes(base: StarParams, axes: Mapping[str, Sequence]) -> float:
     """The mean nodes of the robots of a product of `axes` ({field: values}, `param_product`'s)
     on top of `base`: over the swept n_arc and n_limb, `base`'s where not swept (every
     combination of a product takes each mesh equally often, whatever else is swept)."""
-    n_arc, n_limb = (np.asarray(axes.get(name, [getattr(base, name)]), dtype=float)
-                     for name in ("n_arc", "n_limb"))
-    return float(StarParams.node_count(n_arc[:, None], n_limb[None, :]).mean())
+    return weighted_nodes([(1, StarParams.node_count(n_arc, n_limb))
+                           for n_arc in axes.get("n_arc", [base.n_arc])
+                           for n_limb in axes.get("n_limb", [base.n_limb])])
 
 
 @contextlib.contextmanager

@@ -127,7 +127,7 @@ def main(argv=None):
         raise cli.StudyArgumentError(f"--steps must be >= 1, got {args.steps}")
     cli.check_count(args.rounds, "--rounds", 1, cli.MAX_REPEATS)
     solvers = {}
-    robot_steps, parts = 0.0, []
+    parts = []  # (robot-steps, nodes) of each setting
     for preset in presets:
         for jacobian in jacobians:
             try:
@@ -146,14 +146,13 @@ def main(argv=None):
                           f"--control-period {period:g} s ({duration:.3g} s)", duration,
                           solvers[preset, jacobian])
             steps, _ = fewest_steps(solvers[preset, jacobian], duration, 0.0)
-            robot_steps += args.num_envs * steps
             parts.append((args.num_envs * steps, StarParams.preset(preset).n_nodes))
     # each setting's steps checked above; all settings' robots together refused or estimated
     # here (--num-envs 65536 --steps 50000, 1.03e13 robot-steps, started without a word: an
     # audit, 2026-12), before the memory (whose refusal depends on what the machine has free)
     cli.check_robot_steps(f"--num-envs {args.num_envs} × --rounds {args.rounds} × --steps "
                           f"{args.steps} (+1 compiling) × {len(solvers)} preset and Jacobian "
-                          f"setting(s)", robot_steps, cli.work_arch(args),
+                          f"setting(s)", sum(count for count, _ in parts), cli.work_arch(args),
                           weighted_nodes(parts))
     for preset in presets:
         try:  # a million robots' engine: 116 GiB, failed after two minutes (an audit)
